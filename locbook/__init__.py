@@ -1,0 +1,31 @@
+"""locbook: rerun, check and extend published RSSI indoor localization and tracking experiments.
+
+The public API, by role:
+
+- channel: :class:`PathLossModel`, register conversions, quantisation, correlated shadowing
+- calibration: :func:`fit_path_loss`, :func:`calibrate_path_loss` (cvxpy and closed form)
+- localization: linearized / weighted / box-constrained lateration, RSS maximum likelihood, grid ML
+- motion and filters: :class:`KinematicModel`, :func:`kalman_filter`
+- bounds: static RSS CRLB (correct and Ozkaya's printed form)
+- metrics and Monte-Carlo helpers
+- report: :class:`Report`, what a notebook records
+"""
+__version__ = "0.1.0"
+
+from .bounds import CRLB_FORMS, crlb_rms_over_area_m, rss_crlb_m, rss_fisher_information
+from .calibration import CALIBRATION_MODES, PathLossFit, calibrate_path_loss, fit_path_loss, fit_path_loss_closed_form
+from .channel import (AT86RF230_ED_OFFSET_DB, CC2420_RSSI_OFFSET_DB, PathLossModel, correlated_shadowing_db,
+                      dbm_to_register, pairwise_distance_m, quantize_db, register_to_dbm)
+from .errors import ConvergenceError, DegenerateGeometryError, LocbookError, ParameterError
+from .filters import KF_VARIANTS, KalmanResult, kalman_filter
+from .localization import (LocalizationResult, check_anchor_geometry, grid_ml_position, lateration_box_ls,
+                           lateration_ls, lateration_system, lateration_wls, rss_ml_position)
+from .metrics import (empirical_cdf, error_std_m, error_summary, mean_error_m, median_error_m, percentile_error_m,
+                      position_error_m, reduction_pct, rmse_m)
+from .montecarlo import mc_standard_error, spawn_generators, streams
+from .motion import KinematicModel, constant_acceleration, constant_velocity
+from .report import Report
+
+__all__ = [name for name in dir() if not name.startswith("_") and name not in {
+    "bounds", "calibration", "channel", "errors", "filters", "localization", "metrics", "montecarlo",
+    "motion", "report"}]

@@ -1,0 +1,55 @@
+"""Cramer-Rao lower bound for static RSS localization.
+
+With received powers ``P_j ~ N(P_0 - 10 n log10 d_j, sigma^2)``, independent across anchors, the Fisher
+information of the position p is (Patwari et al. 2003, Eq. (5); Ozkaya 2011, Appendix A, corrected)
+
+    J(p) = (10 n / (sigma ln 10))^2  sum_j (p - a_j)(p - a_j)^T / d_j^4,
+
+and any unbiased estimator has ``E|p_hat - p|^2 >= tr J^{-1}`` (Ozkaya Eq. (A.5): (F_xx + F_yy) / det F).
+
+Ozkaya's Appendix A prints ``d_j^2`` in the denominators (Eqs. (A.10)-(A.12)), which makes the bound
+dimensionless and scale-invariant; it is kept as ``form="ozkaya_printed"`` (flagged; note 004, section
+3.9) because the thesis's CRLB numbers were computed with it (with n = 2).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .errors import DegenerateGeometryError
+from .localization import check_anchor_geometry
+
+__all__ = ["rss_fisher_information", "rss_crlb_m", "crlb_rms_over_area_m", "CRLB_FORMS"]
+
+CRLB_FORMS = ("correct", "ozkaya_printed")
+
+
+def rss_fisher_information(position_m, anchors_m, path_loss_exp, sigma_db, form: str = "correct"):
+    """Fisher information ``(..., 2, 2)`` of the position from RSS at ``position_m`` ``(..., 2)``.
+
+    ``path_loss_exp`` and ``sigma_db`` may be scalars or per-anchor arrays ``(m,)``.
+    """
+    if form not in CRLB_FORMS:
+        raise ValueError(f"form must be one of {CRLB_FORMS}, got {form!r}")
+    anchors_m = check_anchor_geometry(anchors_m)
+    diff = np.asarray(position_m, dtype=float)[..., None, :] - anchors_m  # (..., m, 2)
+    d2 = np.einsum("...i,...i->...", diff, diff)
+    if np.any(d2 == 0):
+        raise DegenerateGeometryError("the RSS Fisher information is undefined at an anchor position (d = 0)")
+    gain = (10.0 * np.asarray(path_loss_exp, float) / (np.asarray(sigma_db, float) * np.log(10.0))) ** 2
+    gain = np.broadcast_to(gain, d2.shape)
+    denom = d2**2 if form == "correct" else d2     # d^4 (correct) or d^2 (as printed in Ozkaya A.10-A.12)
+    return np.einsum("...j,...ji,...jk->...ik", gain / denom, diff, diff)
+
+
+def rss_crlb_m(position_m, anchors_m, path_loss_exp, sigma_db, form: str = "correct"):
+    """Position RMSE bound ``sqrt(tr J^{-1})`` (m) at each position ``(..., 2)`` -> ``(...)``."""
+    info = rss_fisher_information(position_m, anchors_m, path_loss_exp, sigma_db, form)
+    det = info[..., 0, 0] * info[..., 1, 1] - info[..., 0, 1] ** 2
+    return np.sqrt((info[..., 0, 0] + info[..., 1, 1]) / det)   # (F_xx + F_yy) / (F_xx F_yy - F_xy^2)
+
+
+def crlb_rms_over_area_m(points_m, anchors_m, path_loss_exp, sigma_db, form: str = "correct"):
+    """RMS of the bound over target positions ``(P, 2)``: ``sqrt(mean_p tr J(p)^{-1})``, the
+    area-average used by Ozkaya (2011) for Fig. 7.1 and the CRLB columns."""
+    bound = rss_crlb_m(points_m, anchors_m, path_loss_exp, sigma_db, form)
+    return float(np.sqrt(np.mean(bound**2)))

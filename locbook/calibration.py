@@ -1,0 +1,228 @@
+"""Calibration of the log-distance path-loss model by least squares (cvxpy and closed form).
+
+For measurements ``(d_i, P_i)`` the model ``P_i = P_0 - 10 n log10(d_i/d0) + e_i`` is linear in
+``T = [P_0, n]``; the least-squares fit is ``T = (M^T M)^{-1} M^T P`` with rows
+``M_i = [1, -10 log10(d_i/d0)]``.
+
+This is Eq. (6) of George and Vadivukkarasi (document 003) with the sign of the second column
+corrected: the paper prints ``+10 log d_i``, which, read literally, returns ``-n``
+(note 003, section 2.3, point 1). The literal form is kept as ``sign_convention="literal_003"``.
+It is also Eq. (5.1) of Dogan (2015) and the per-reader fit of Ozkaya (2011), Eq. (6.4)-(6.6),
+whose bounded variant (alpha in [-55, -40] dBm, n in [1.5, 3]) is the ``*_bounds_*`` arguments.
+
+Problems carry leading batch axes: ``distance_m`` and ``power_dbm`` of shape ``(..., N)`` are
+``prod(...)`` independent fits, stacked into one cvxpy problem. NaN powers are missing samples.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import cvxpy as cp
+import numpy as np
+
+from .errors import ConvergenceError, DegenerateGeometryError
+
+__all__ = [
+    "PathLossFit",
+    "path_loss_design_matrix",
+    "fit_path_loss",
+    "fit_path_loss_closed_form",
+    "calibrate_path_loss",
+    "CALIBRATION_MODES",
+]
+
+CALIBRATION_MODES = ("per_location_mean", "pooled", "per_anchor")
+
+
+@dataclass(frozen=True)
+class PathLossFit:
+    """Result of a path-loss fit; arrays carry the batch shape of the problems.
+
+    ``covariance`` is the least-squares parameter covariance ``s^2 (M^T M)^{-1}`` (ordering
+    ``[ref_power_dbm, path_loss_exp]``) estimated from the residuals, for standard errors.
+    """
+
+    ref_power_dbm: np.ndarray
+    path_loss_exp: np.ndarray
+    residual_sigma_db: np.ndarray
+    covariance: np.ndarray
+    n_samples: np.ndarray
+    status: str
+    per_location: "PathLossFit | None" = None
+
+    @property
+    def std_error(self) -> np.ndarray:
+        """Standard errors of ``[ref_power_dbm, path_loss_exp]``, shape ``batch + (2,)``."""
+        return np.sqrt(np.diagonal(self.covariance, axis1=-2, axis2=-1))
+
+
+def path_loss_design_matrix(distance_m, ref_distance_m: float = 1.0,
+                            sign_convention: str = "corrected"):
+    """Rows ``[1, -10 log10(d/d0)]`` (corrected) or ``[1, +10 log10 d]`` as printed in Eq. (6)
+    of document 003 (``"literal_003"``; its second unknown is then ``-n``)."""
+    distance_m = np.asarray(distance_m, dtype=float)
+    if np.any(distance_m <= 0):
+        raise ValueError("calibration distances must be positive")
+    log_term = 10.0 * np.log10(distance_m / ref_distance_m)
+    if sign_convention == "corrected":
+        second = -log_term
+    elif sign_convention == "literal_003":
+        second = log_term
+    else:
+        raise ValueError(f"sign_convention must be 'corrected' or 'literal_003', got {sign_convention!r}")
+    return np.stack([np.ones_like(log_term), second], axis=-1)
+
+
+def _prepare(distance_m, power_dbm, ref_distance_m):
+    distance_m = np.asarray(distance_m, dtype=float)
+    power_dbm = np.asarray(power_dbm, dtype=float)
+    distance_m, power_dbm = np.broadcast_arrays(distance_m, power_dbm)
+    if distance_m.ndim == 0 or distance_m.shape[-1] < 2:
+        raise DegenerateGeometryError("a path-loss fit needs at least two measurements per problem")
+    mask = np.isfinite(power_dbm) & np.isfinite(distance_m)
+    if np.any(distance_m[mask] <= 0):
+        raise ValueError("calibration distances must be positive")
+    log_d = np.where(mask, 10.0 * np.log10(np.where(mask, distance_m, 1.0) / ref_distance_m), 0.0)
+    _check_distinct_distances(log_d, mask)
+    return log_d, np.where(mask, power_dbm, 0.0), mask
+
+
+def _check_distinct_distances(log_d, mask):
+    """Two unknowns need at least two distinct distances in every problem."""
+    big, small = np.where(mask, log_d, -np.inf), np.where(mask, log_d, np.inf)
+    spread = big.max(axis=-1) - small.min(axis=-1)
+    bad = ~(spread > 1e-9 * np.maximum(1.0, np.abs(small.min(axis=-1))))
+    if np.any(bad):
+        where = np.argwhere(np.atleast_1d(bad))[:5].tolist()
+        raise DegenerateGeometryError(
+            "path-loss calibration needs at least two distinct distances per problem; "
+            f"problem(s) {where} have all distances equal (e.g. a point at the same distance from "
+            "every anchor, like the centre of a rectangle of anchors), so the exponent is not identifiable"
+        )
+
+
+def _finish(log_d, power, mask, ref, exp, status):
+    resid = np.where(mask, power - (ref[..., None] - exp[..., None] * log_d), 0.0)
+    n = mask.sum(axis=-1)
+    dof = np.maximum(n - 2, 1)
+    s2 = (resid**2).sum(axis=-1) / dof
+    m = np.stack([np.where(mask, 1.0, 0.0), np.where(mask, -log_d, 0.0)], axis=-1)
+    mtm = np.einsum("...ni,...nj->...ij", m, m)
+    cov = s2[..., None, None] * np.linalg.inv(mtm)
+    return PathLossFit(ref, exp, np.sqrt(s2), cov, n, status)
+
+
+def fit_path_loss_closed_form(distance_m, power_dbm, ref_distance_m: float = 1.0) -> PathLossFit:
+    """Unconstrained least squares by the normal equations ``(M^T M)^{-1} M^T P`` (Eq. (6),
+    document 003, sign corrected), batched over leading axes. Missing powers are NaN."""
+    log_d, power, mask = _prepare(distance_m, power_dbm, ref_distance_m)
+    w = mask.astype(float)
+    # normal equations of P = a - n L:  [[N, -sum L], [-sum L, sum L^2]] [a, n] = [sum P, -sum L P]
+    s0, s1, s2 = w.sum(-1), (w * log_d).sum(-1), (w * log_d**2).sum(-1)
+    p0, p1 = (w * power).sum(-1), (w * log_d * power).sum(-1)
+    det = s0 * s2 - s1 * s1
+    ref = (s2 * p0 - s1 * p1) / det
+    exp = (s1 * p0 - s0 * p1) / det
+    return _finish(log_d, power, mask, ref, exp, "closed_form")
+
+
+@lru_cache(maxsize=32)
+def _stacked_problem(shape, ref_bounds, exp_bounds):
+    """One cvxpy problem for ``prod(shape[:-1])`` stacked fits, built once per shape (DPP)."""
+    k, n = shape
+    # the mask multiplies the data in numpy: a product of two parameters would break DPP
+    w_log_d = cp.Parameter((k, n), name="masked_log_d")
+    w_power = cp.Parameter((k, n), name="masked_power_dbm")
+    weight = cp.Parameter((k, n), nonneg=True, name="mask")
+    ref = cp.Variable((k, 1), name="ref_power_dbm")
+    exp = cp.Variable((k, 1), name="path_loss_exp")
+    ones = np.ones((1, n))
+    # masked residual w * (P - (P0 - n * 10 log10 d))
+    resid = w_power - cp.multiply(weight, ref @ ones) + cp.multiply(w_log_d, exp @ ones)
+    constraints = []
+    if ref_bounds is not None:
+        constraints += [ref >= ref_bounds[0], ref <= ref_bounds[1]]
+    if exp_bounds is not None:
+        constraints += [exp >= exp_bounds[0], exp <= exp_bounds[1]]
+    problem = cp.Problem(cp.Minimize(cp.sum_squares(resid)), constraints)
+    return problem, (w_log_d, w_power, weight), (ref, exp)
+
+
+def fit_path_loss(distance_m, power_dbm, *, ref_distance_m: float = 1.0,
+                  ref_power_bounds_dbm: tuple[float, float] | None = None,
+                  path_loss_exp_bounds: tuple[float, float] | None = None,
+                  solver: str = "cvxpy") -> PathLossFit:
+    """Least-squares fit of ``(ref_power_dbm, path_loss_exp)`` for every problem in the batch.
+
+    ``distance_m, power_dbm``: shape ``(..., N)``, one problem per leading index. Bounds, if given,
+    constrain every problem (Ozkaya 2011, Sec. 6.2: alpha in [-55, -40] dBm, n in [1.5, 3]).
+    ``solver="cvxpy"`` solves all problems as one stacked convex QP; ``"closed_form"`` uses the
+    normal equations and is only valid without bounds.
+
+    Raises :class:`DegenerateGeometryError` when a problem has fewer than two distinct distances
+    and :class:`ConvergenceError` when the solver does not reach an optimum.
+    """
+    if solver == "closed_form":
+        if ref_power_bounds_dbm is not None or path_loss_exp_bounds is not None:
+            raise ValueError("bounds need solver='cvxpy'; the closed form is unconstrained")
+        return fit_path_loss_closed_form(distance_m, power_dbm, ref_distance_m)
+    if solver != "cvxpy":
+        raise ValueError(f"solver must be 'cvxpy' or 'closed_form', got {solver!r}")
+    log_d, power, mask = _prepare(distance_m, power_dbm, ref_distance_m)
+    batch, n = log_d.shape[:-1], log_d.shape[-1]
+    k = int(np.prod(batch))
+    problem, (p_log_d, p_power, p_weight), (v_ref, v_exp) = _stacked_problem(
+        (k, n),
+        None if ref_power_bounds_dbm is None else tuple(map(float, ref_power_bounds_dbm)),
+        None if path_loss_exp_bounds is None else tuple(map(float, path_loss_exp_bounds)),
+    )
+    w = mask.reshape(k, n).astype(float)
+    p_log_d.value = w * log_d.reshape(k, n)
+    p_power.value = w * power.reshape(k, n)
+    p_weight.value = w
+    problem.solve(solver=cp.CLARABEL)
+    if problem.status not in (cp.OPTIMAL,):
+        raise ConvergenceError(f"path-loss calibration: cvxpy finished with status {problem.status!r}")
+    ref = v_ref.value.reshape(batch)
+    exp = v_exp.value.reshape(batch)
+    return _finish(log_d, power, mask, ref, exp, problem.status)
+
+
+def calibrate_path_loss(distance_m, power_dbm, mode: str = "per_location_mean", **fit_kwargs) -> PathLossFit:
+    """Calibrate one shared ``(P_0, n)`` from measurements at known locations.
+
+    ``distance_m, power_dbm``: shape ``(..., L, m)``, location ``l`` at distance ``d_lj`` from anchor
+    ``j``, with ``power_dbm`` the mean received power of that link; leading axes are independent
+    calibrations (e.g. Monte-Carlo runs).
+
+    Modes
+    -----
+    ``"per_location_mean"``  (document 003, Simulation Results): fit each location's m links, then
+        average the L estimates; ``per_location`` holds the L fits. The covariance is that of the mean
+        of L independent fits.
+    ``"pooled"``: one fit over all ``L*m`` pairs.
+    ``"per_anchor"``: one fit per anchor over its L links (column-wise), giving arrays of length m.
+    """
+    distance_m = np.asarray(distance_m, dtype=float)
+    power_dbm = np.asarray(power_dbm, dtype=float)
+    if distance_m.ndim < 2 or distance_m.shape != power_dbm.shape:
+        raise ValueError(
+            f"distance_m and power_dbm must both have shape (..., locations, anchors); got "
+            f"{distance_m.shape} and {power_dbm.shape}"
+        )
+    if mode == "per_location_mean":
+        per = fit_path_loss(distance_m, power_dbm, **fit_kwargs)
+        n_loc = distance_m.shape[-2]
+        cov = per.covariance.sum(axis=-3) / n_loc**2
+        return PathLossFit(
+            per.ref_power_dbm.mean(axis=-1), per.path_loss_exp.mean(axis=-1),
+            np.sqrt(np.mean(per.residual_sigma_db**2, axis=-1)), cov, per.n_samples.sum(axis=-1),
+            per.status, per,
+        )
+    if mode == "pooled":
+        return fit_path_loss(distance_m.reshape(distance_m.shape[:-2] + (-1,)),
+                             power_dbm.reshape(power_dbm.shape[:-2] + (-1,)), **fit_kwargs)
+    if mode == "per_anchor":
+        return fit_path_loss(np.swapaxes(distance_m, -1, -2), np.swapaxes(power_dbm, -1, -2), **fit_kwargs)
+    raise ValueError(f"calibration mode must be one of {CALIBRATION_MODES}, got {mode!r}")

@@ -1,0 +1,163 @@
+"""Radio channel models: log-distance path loss, log-normal shadowing, register conversions.
+
+The log-distance path-loss model (LDPM) in the dB domain, with reference distance d0,
+
+    P_r(d) = P_0 - 10 n log10(d / d0) - n_W * WAF + w,     w ~ N(0, sigma^2)  [dB]
+
+is Eq. (5) of George and Vadivukkarasi (document 003), Eq. (2.2) of Dogan (2015, where the
+exponent is called alpha), and Eq. (6.3) of Ozkaya (2011, where the reference power is called
+alpha and walls attenuate by WAF each). Names in code are explicit to avoid that clash:
+``ref_power_dbm`` (P_0), ``path_loss_exp`` (n), ``ref_distance_m`` (d0).
+
+Every anchor may have its own reference power and exponent: parameters broadcast against the
+last (anchor) axis of a distance array.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = [
+    "PathLossModel",
+    "CC2420_RSSI_OFFSET_DB",
+    "AT86RF230_ED_OFFSET_DB",
+    "register_to_dbm",
+    "dbm_to_register",
+    "quantize_db",
+    "pairwise_distance_m",
+]
+
+#: CC2420 RSSI register offset: P = RSSI_VAL - 45 dBm (Eq. (3) in George and Vadivukkarasi,
+#: from the CC2420 datasheet rev 1.3).
+CC2420_RSSI_OFFSET_DB = -45.0
+#: AT86RF230 energy-detect offset: P = ED - 91 dBm (Gudipati 2017, Sec. 3.3, after the datasheet).
+AT86RF230_ED_OFFSET_DB = -91.0
+
+
+def register_to_dbm(register, offset_db: float = CC2420_RSSI_OFFSET_DB):
+    """Received power in dBm from a radio's RSSI register value: ``P = register + offset``.
+
+    Eq. (3) in George and Vadivukkarasi (``P_r = RSSI - 45``) with the CC2420 default; pass
+    ``AT86RF230_ED_OFFSET_DB`` for the AT86RF230 energy-detect value used by Gudipati (2017).
+    """
+    return np.asarray(register, dtype=float) + offset_db
+
+
+def dbm_to_register(power_dbm, offset_db: float = CC2420_RSSI_OFFSET_DB):
+    """Inverse of :func:`register_to_dbm` (no rounding; see :func:`quantize_db`)."""
+    return np.asarray(power_dbm, dtype=float) - offset_db
+
+
+def quantize_db(power_dbm, step_db: float = 1.0, floor_dbm: float | None = None):
+    """Round powers to the radio's resolution (1 dB for CC2420, AT86RF230 ED and the
+    Ozkaya readers) and optionally clip at a sensitivity floor (e.g. -90 dBm in Ozkaya 2011).
+    """
+    if step_db <= 0:
+        raise ValueError(f"step_db must be positive, got {step_db}")
+    q = np.round(np.asarray(power_dbm, dtype=float) / step_db) * step_db
+    if floor_dbm is not None:
+        q = np.maximum(q, floor_dbm)
+    return q
+
+
+def pairwise_distance_m(points_m, anchors_m):
+    """Euclidean distances between points ``(..., dim)`` and anchors ``(m, dim)`` -> ``(..., m)``."""
+    points_m = np.asarray(points_m, dtype=float)
+    anchors_m = np.asarray(anchors_m, dtype=float)
+    if points_m.shape[-1] != anchors_m.shape[-1]:
+        raise ValueError(
+            f"points have dimension {points_m.shape[-1]} but anchors have {anchors_m.shape[-1]}"
+        )
+    diff = points_m[..., None, :] - anchors_m
+    return np.sqrt(np.einsum("...i,...i->...", diff, diff))
+
+
+@dataclass(frozen=True)
+class PathLossModel:
+    """Log-distance path loss with i.i.d. log-normal shadowing.
+
+    Fields broadcast against the anchor axis: a scalar means one value shared by all anchors,
+    an array of length m gives each anchor its own value (per-anchor calibration).
+
+    Attributes
+    ----------
+    ref_power_dbm : float or array (m,)
+        Mean received power at the reference distance, P_0 (dBm). Called A in document 003,
+        P0 in 000, alpha in 004.
+    path_loss_exp : float or array (m,)
+        Path-loss exponent n (alpha in document 000).
+    sigma_db : float or array (m,)
+        Standard deviation of the shadowing term w (dB).
+    ref_distance_m : float
+        Reference distance d0 (1 m in every source document).
+    wall_attenuation_db : float
+        Attenuation per wall (WAF, Ozkaya Eq. (6.3)); multiplied by a wall count.
+    """
+
+    ref_power_dbm: float | np.ndarray = -45.0
+    path_loss_exp: float | np.ndarray = 2.0
+    sigma_db: float | np.ndarray = 0.0
+    ref_distance_m: float = 1.0
+    wall_attenuation_db: float = 0.0
+
+    def __post_init__(self):
+        if self.ref_distance_m <= 0:
+            raise ValueError(f"ref_distance_m must be positive, got {self.ref_distance_m}")
+        if np.any(np.asarray(self.sigma_db) < 0):
+            raise ValueError(f"sigma_db must be non-negative, got {self.sigma_db}")
+
+    def mean_power_dbm(self, distance_m, n_walls=0):
+        """Mean received power, ``P_0 - 10 n log10(d/d0) - n_W WAF`` (Eq. (5) in document 003,
+        Eq. (6.4) in Ozkaya 2011)."""
+        distance_m = np.asarray(distance_m, dtype=float)
+        if np.any(distance_m <= 0):
+            raise ValueError("distances must be positive for the log-distance model")
+        return (
+            np.asarray(self.ref_power_dbm)
+            - 10.0 * np.asarray(self.path_loss_exp) * np.log10(distance_m / self.ref_distance_m)
+            - np.asarray(n_walls) * self.wall_attenuation_db
+        )
+
+    def sample_power_dbm(self, distance_m, rng: np.random.Generator, n_walls=0):
+        """Mean power plus i.i.d. Gaussian shadowing ``w ~ N(0, sigma_db^2)``, one draw per entry."""
+        mean = self.mean_power_dbm(distance_m, n_walls)
+        return mean + np.asarray(self.sigma_db) * rng.standard_normal(mean.shape)
+
+    def range_m(self, power_dbm, n_walls=0):
+        """Invert the mean model: ``d = d0 10^((P_0 - P_r - n_W WAF) / (10 n))``.
+
+        Eq. (7) in George and Vadivukkarasi; Eq. (2.3) in Dogan (2015). The estimate is median
+        unbiased but mean biased by ``exp((sigma ln10 / (10 n))^2 / 2)`` under shadowing.
+        """
+        power_dbm = np.asarray(power_dbm, dtype=float)
+        exponent = (
+            np.asarray(self.ref_power_dbm) - power_dbm - np.asarray(n_walls) * self.wall_attenuation_db
+        ) / (10.0 * np.asarray(self.path_loss_exp))
+        return self.ref_distance_m * 10.0**exponent
+
+    def range_bias_factor(self):
+        """Mean bias of :meth:`range_m` under shadowing: ``E[d_hat]/d = exp((sigma ln10/(10 n))^2/2)``
+        (note 000, section 2.2)."""
+        s = np.asarray(self.sigma_db) * np.log(10.0) / (10.0 * np.asarray(self.path_loss_exp))
+        return np.exp(0.5 * s**2)
+
+
+def correlated_shadowing_db(points_m, sigma_db: float, decorrelation_m: float,
+                            rng: np.random.Generator, size: tuple[int, ...] = ()):
+    """Spatially correlated log-normal shadowing at fixed points (Gudmundson model).
+
+    Covariance ``sigma^2 exp(-|p_i - p_j| / d_c)`` between points ``(P, dim)``; returns draws of
+    shape ``size + (P,)``. Used where a source needs shadowing that averaging over packets does not
+    remove (note 001, F5.1; note 004, synthetic testbed). ``decorrelation_m = 0`` gives i.i.d. draws.
+    """
+    points_m = np.atleast_2d(np.asarray(points_m, dtype=float))
+    n_points = points_m.shape[0]
+    z = rng.standard_normal(size + (n_points,))
+    if decorrelation_m <= 0:
+        return sigma_db * z
+    dist = pairwise_distance_m(points_m, points_m)
+    cov = np.exp(-dist / decorrelation_m)
+    # small jitter: the exponential kernel is positive definite, but near-duplicate points are not
+    chol = np.linalg.cholesky(cov + 1e-12 * np.eye(n_points))
+    return sigma_db * z @ chol.T

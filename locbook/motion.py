@@ -1,0 +1,155 @@
+"""Kinematic motion models: nearly constant velocity (CV) and nearly constant acceleration (CA).
+
+Per axis, a chain of ``order + 1`` derivatives (position, velocity[, acceleration]) propagates with
+``F_axis = expm(dt * shift)`` and is driven by white noise on the next derivative, piecewise constant
+over a step (the "discrete white noise" model, Bar-Shalom et al. 2001, Sec. 6.3.2):
+
+    x_k = F x_{k-1} + G w_k,   w_k ~ N(0, q I_dim),   Q = q G G^T.
+
+For CV, ``G_axis = [dt^2/2, dt]^T``: the two-axis generalisation of B_KF in Eq. (9) of George and
+Vadivukkarasi (document 003, note section 2.6 point 5). ``noise="continuous"`` gives the integrated
+continuous white-noise form instead (``q`` then is a power spectral density).
+
+State layout is explicit, because the sources differ:
+- ``"derivative_major"``: ``[x, y, vx, vy]`` (document 003, Eq. (9));
+- ``"axis_major"``: ``[x, vx, y, vy]`` or ``[x, vx, ax, y, vy, ay]`` (Dogan 2015, Eqs. (3.8), (3.10)).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from math import factorial
+
+import numpy as np
+
+__all__ = ["KinematicModel", "constant_velocity", "constant_acceleration", "STATE_LAYOUTS"]
+
+STATE_LAYOUTS = ("derivative_major", "axis_major")
+
+
+@dataclass(frozen=True)
+class KinematicModel:
+    """Linear kinematic model with ``dim`` axes and ``order`` derivatives beyond position.
+
+    Attributes
+    ----------
+    dt_s : step length (s; or one "step" where a source gives no time base).
+    q : process-noise intensity: variance of the white driving noise per step (``noise="discrete"``,
+        units m^2/s^(2 order + 2)) or its power spectral density (``noise="continuous"``).
+    order : 1 for constant velocity, 2 for constant acceleration.
+    dim : number of spatial axes.
+    layout : ``"derivative_major"`` or ``"axis_major"`` (see module docstring).
+    noise : ``"discrete"`` (Q = q G G^T) or ``"continuous"``.
+    """
+
+    dt_s: float
+    q: float
+    order: int = 1
+    dim: int = 2
+    layout: str = "derivative_major"
+    noise: str = "discrete"
+
+    def __post_init__(self):
+        if self.dt_s <= 0:
+            raise ValueError(f"dt_s must be positive, got {self.dt_s}")
+        if self.q < 0:
+            raise ValueError(f"process noise q must be non-negative, got {self.q}")
+        if self.order not in (1, 2):
+            raise ValueError(f"order must be 1 (constant velocity) or 2 (constant acceleration), got {self.order}")
+        if self.layout not in STATE_LAYOUTS:
+            raise ValueError(f"layout must be one of {STATE_LAYOUTS}, got {self.layout!r}")
+        if self.noise not in ("discrete", "continuous"):
+            raise ValueError(f"noise must be 'discrete' or 'continuous', got {self.noise!r}")
+
+    @property
+    def n_state(self) -> int:
+        return self.dim * (self.order + 1)
+
+    def _axis_blocks(self):
+        k, dt = self.order + 1, self.dt_s
+        f = np.array([[dt ** (j - i) / factorial(j - i) if j >= i else 0.0 for j in range(k)] for i in range(k)])
+        g = np.array([[dt ** (k - i) / factorial(k - i)] for i in range(k)])
+        if self.noise == "discrete":
+            q = self.q * (g @ g.T)
+        else:
+            # integral of F(t) e e^T F(t)^T over one step, e the unit vector of the highest derivative
+            q = np.array([[self.q * dt ** (2 * k - 1 - i - j) / ((2 * k - 1 - i - j) * factorial(k - 1 - i)
+                                                                * factorial(k - 1 - j))
+                           for j in range(k)] for i in range(k)])
+        return f, g, q
+
+    def _permutation(self) -> np.ndarray:
+        """Index map from axis-major order to this layout: state[layout] = axis_major[perm]."""
+        k = self.order + 1
+        if self.layout == "axis_major":
+            return np.arange(self.n_state)
+        return np.array([axis * k + deriv for deriv in range(k) for axis in range(self.dim)])
+
+    def _assemble(self, block):
+        full = np.kron(np.eye(self.dim), block)
+        perm = self._permutation()
+        return full[np.ix_(perm, perm)] if block.shape[1] == block.shape[0] else full[perm]
+
+    @property
+    def F(self) -> np.ndarray:
+        """Transition matrix (n_state, n_state)."""
+        return self._assemble(self._axis_blocks()[0])
+
+    @property
+    def G(self) -> np.ndarray:
+        """Noise gain (n_state, dim): ``[dt^2/2, dt]`` per axis for CV."""
+        f, g, _ = self._axis_blocks()
+        full = np.kron(np.eye(self.dim), g)
+        return full[self._permutation()]
+
+    @property
+    def Q(self) -> np.ndarray:
+        """Process-noise covariance (n_state, n_state)."""
+        return self._assemble(self._axis_blocks()[2])
+
+    def index(self, derivative: int) -> np.ndarray:
+        """State indices of a derivative (0 position, 1 velocity, 2 acceleration), one per axis."""
+        if not 0 <= derivative <= self.order:
+            raise ValueError(f"derivative {derivative} not in this order-{self.order} model")
+        k = self.order + 1
+        if self.layout == "axis_major":
+            return np.array([axis * k + derivative for axis in range(self.dim)])
+        return np.arange(self.dim) + derivative * self.dim
+
+    @property
+    def position_index(self) -> np.ndarray:
+        return self.index(0)
+
+    @property
+    def velocity_index(self) -> np.ndarray:
+        return self.index(1)
+
+    def position(self, state):
+        """Positions ``(..., dim)`` from states ``(..., n_state)``."""
+        return np.asarray(state)[..., self.position_index]
+
+    def position_measurement_matrix(self) -> np.ndarray:
+        """H with ``z = position + v`` (document 003: H = [[1,0,0,0],[0,1,0,0]], note 2.6 point 3)."""
+        h = np.zeros((self.dim, self.n_state))
+        h[np.arange(self.dim), self.position_index] = 1.0
+        return h
+
+    def state_from(self, position, velocity=None, acceleration=None):
+        """Assemble states ``(..., n_state)`` from per-derivative arrays ``(..., dim)`` (missing = 0)."""
+        position = np.asarray(position, dtype=float)
+        out = np.zeros(position.shape[:-1] + (self.n_state,))
+        for deriv, value in enumerate((position, velocity, acceleration)):
+            if value is not None and deriv <= self.order:
+                out[..., self.index(deriv)] = value
+        return out
+
+
+def constant_velocity(dt_s: float, q: float, dim: int = 2, layout: str = "derivative_major",
+                      noise: str = "discrete") -> KinematicModel:
+    """Nearly constant velocity model (document 003 Eq. (9); Dogan Eq. (3.9))."""
+    return KinematicModel(dt_s, q, order=1, dim=dim, layout=layout, noise=noise)
+
+
+def constant_acceleration(dt_s: float, q: float, dim: int = 2, layout: str = "axis_major",
+                          noise: str = "discrete") -> KinematicModel:
+    """Nearly constant acceleration model (Dogan Eq. (3.11), Gudipati Sec. 3.2)."""
+    return KinematicModel(dt_s, q, order=2, dim=dim, layout=layout, noise=noise)

@@ -1,0 +1,139 @@
+"""The declarative experiment list (``notebooks/experiments.toml``).
+
+Schema::
+
+    [documents.<key>]            # key: dogan2015, gudipati2017, palvai2008, george, ozkaya2011
+    title, authors, year, source  # source: the file in ../shared/seeds, note: the reading note
+
+    [[experiment]]
+    id = "<key>-<name>"           # prefixed by its document key
+    document = "<key>"
+    title, section                # section: which table/figure/section of the source
+    notebook = "<path relative to the TOML file>"
+    [experiment.profiles.quick]   # parameters per profile (every profile must be present)
+    [experiment.profiles.full]
+"""
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ..errors import ParameterError
+from .params import NotebookParameter, read_parameters, resolve_parameters
+
+__all__ = ["Suite", "Experiment", "Document", "PROFILES", "DOCUMENT_KEYS", "load_suite", "find_suite_file"]
+
+PROFILES = ("quick", "full")
+DOCUMENT_KEYS = ("dogan2015", "gudipati2017", "palvai2008", "george", "ozkaya2011")
+SUITE_FILE = Path("notebooks") / "experiments.toml"
+
+
+class SuiteError(ParameterError):
+    """The experiment list is malformed."""
+
+
+@dataclass(frozen=True)
+class Document:
+    key: str
+    title: str
+    authors: str
+    year: str
+    source: str
+    note: str
+
+
+@dataclass(frozen=True)
+class Experiment:
+    id: str
+    document: Document
+    title: str
+    section: str
+    notebook: Path
+    profiles: dict[str, dict] = field(hash=False)
+
+    def declared_parameters(self) -> dict[str, NotebookParameter]:
+        return read_parameters(self.notebook)
+
+    def parameters(self, profile: str, overrides: dict[str, str] | None = None) -> dict:
+        """Checked parameters for a profile with ``-p`` overrides (text) applied."""
+        if profile not in self.profiles:
+            raise SuiteError(f"experiment {self.id!r} has no profile {profile!r}")
+        return resolve_parameters(self.notebook, self.declared_parameters(), self.profiles[profile],
+                                  overrides or {}, f"experiment {self.id!r}, profile {profile!r}")
+
+
+@dataclass(frozen=True)
+class Suite:
+    path: Path
+    documents: dict[str, Document]
+    experiments: list[Experiment]
+
+    @property
+    def root(self) -> Path:
+        """The repository root (the folder holding ``notebooks/``)."""
+        return self.path.parent.parent
+
+    def select(self, ids: list[str]) -> list[Experiment]:
+        """Experiments by exact id or by document key / id prefix (``george`` selects all of 003)."""
+        if not ids:
+            return list(self.experiments)
+        chosen, unknown = [], []
+        for wanted in ids:
+            hits = [e for e in self.experiments if e.id == wanted or e.id.startswith(wanted + "-")]
+            if not hits:
+                unknown.append(wanted)
+            chosen += [e for e in hits if e not in chosen]
+        if unknown:
+            raise SuiteError(f"unknown experiment(s) {', '.join(unknown)}; `locbook list` shows the ids")
+        return chosen
+
+
+def find_suite_file(start: Path | None = None) -> Path:
+    """``notebooks/experiments.toml`` in the current folder or a parent, else beside the package."""
+    here = (start or Path.cwd()).resolve()
+    for folder in (here, *here.parents):
+        if (folder / SUITE_FILE).is_file():
+            return folder / SUITE_FILE
+    fallback = Path(__file__).resolve().parents[2] / SUITE_FILE
+    if fallback.is_file():
+        return fallback
+    raise SuiteError(f"cannot find {SUITE_FILE} from {here}; run locbook inside the repository or pass --suite")
+
+
+def load_suite(path: Path | None = None) -> Suite:
+    path = Path(path) if path else find_suite_file()
+    with open(path, "rb") as fh:
+        try:
+            data = tomllib.load(fh)
+        except tomllib.TOMLDecodeError as exc:
+            raise SuiteError(f"{path}: {exc}") from exc
+    documents = {}
+    for key, doc in data.get("documents", {}).items():
+        if key not in DOCUMENT_KEYS:
+            raise SuiteError(f"{path}: unknown document key {key!r}; expected one of {DOCUMENT_KEYS}")
+        missing = {"title", "authors", "year", "source", "note"} - set(doc)
+        if missing:
+            raise SuiteError(f"{path}: document {key!r} lacks {sorted(missing)}")
+        documents[key] = Document(key, doc["title"], doc["authors"], str(doc["year"]), doc["source"], doc["note"])
+    experiments, seen = [], set()
+    for raw in data.get("experiment", []):
+        missing = {"id", "document", "title", "section", "notebook", "profiles"} - set(raw)
+        if missing:
+            raise SuiteError(f"{path}: experiment {raw.get('id', '?')!r} lacks {sorted(missing)}")
+        eid, dkey = raw["id"], raw["document"]
+        if dkey not in documents:
+            raise SuiteError(f"{path}: experiment {eid!r} names undeclared document {dkey!r}")
+        if not eid.startswith(dkey + "-"):
+            raise SuiteError(f"{path}: experiment id {eid!r} must start with its document key '{dkey}-'")
+        if eid in seen:
+            raise SuiteError(f"{path}: duplicate experiment id {eid!r}")
+        seen.add(eid)
+        if set(raw["profiles"]) != set(PROFILES):
+            raise SuiteError(f"{path}: experiment {eid!r} must define exactly the profiles {PROFILES}")
+        notebook = (path.parent / raw["notebook"]).resolve()
+        if not notebook.is_file():
+            raise SuiteError(f"{path}: experiment {eid!r}: notebook {raw['notebook']} does not exist")
+        experiments.append(Experiment(eid, documents[dkey], raw["title"], raw["section"], notebook,
+                                      {p: dict(raw["profiles"][p]) for p in PROFILES}))
+    return Suite(path.resolve(), documents, experiments)

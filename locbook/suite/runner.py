@@ -119,10 +119,14 @@ def _execute(task: dict) -> dict:
     from nbconvert import HTMLExporter
 
     os.environ.update(_SINGLE_THREAD)
-    os.environ.update({"MPLBACKEND": "Agg", "LOCBOOK_OUTPUT_DIR": task["staging"],
+    os.environ.update({"LOCBOOK_OUTPUT_DIR": task["staging"],
                        "LOCBOOK_EXPERIMENT": task["id"], "PYDEVD_DISABLE_FILE_VALIDATION": "1"})
     staging = Path(task["staging"])
     out_nb = staging / f"{task['id']}.ipynb"
+    # the kernel inherits this process's stderr: keep its chatter in a log beside the report
+    log_fd = os.open(staging / "kernel-stderr.log", os.O_WRONLY | os.O_CREAT | os.O_TRUNC)
+    os.dup2(log_fd, 2)
+    os.close(log_fd)
     start = time.perf_counter()
     error = ""
     try:

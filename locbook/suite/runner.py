@@ -351,4 +351,5 @@ def run_suite(suite: Suite, experiments: list[Experiment], profile: str, *, jobs
                 finish(Outcome(exp.id, "ok", res["seconds"]))
     shutil.rmtree(report_dir / ".staging", ignore_errors=True)
     write_suite_reports(suite, report_dir)
-    return outcomes
+    order = {exp.id: i for i, exp in enumerate(experiments)}
+    return sorted(outcomes, key=lambda o: order[o.id])

@@ -1,0 +1,70 @@
+"""CRLB against a closed form, numerical Fisher information and the printed thesis values; metrics; RNG."""
+import numpy as np
+import pytest
+
+import locbook as lb
+
+SQUARE = np.array([[0.0, 0.0], [4.0, 0.0], [0.0, 4.0], [4.0, 4.0]])
+
+
+def test_crlb_closed_form_at_square_centre():
+    # centre of a square: J = 2c/d^2 I with c = (10 n / (sigma ln10))^2, so the bound is d / sqrt(c)
+    n, sigma = 2.3, 4.0
+    c = (10 * n / (sigma * np.log(10))) ** 2
+    d = np.sqrt(8.0)
+    assert lb.rss_crlb_m([2.0, 2.0], SQUARE, n, sigma) == pytest.approx(d / np.sqrt(c), rel=1e-12)
+
+
+def test_fisher_information_equals_numerical_jacobian():
+    model = lb.PathLossModel(-45.0, 2.1843, 3.0)
+    p = np.array([0.7, 2.9])
+    eps = 1e-6
+    jac = np.stack([(model.mean_power_dbm(lb.pairwise_distance_m(p + eps * e, SQUARE))
+                     - model.mean_power_dbm(lb.pairwise_distance_m(p - eps * e, SQUARE))) / (2 * eps)
+                    for e in np.eye(2)], axis=1)
+    np.testing.assert_allclose(lb.rss_fisher_information(p, SQUARE, 2.1843, 3.0), jac.T @ jac / 9.0, rtol=1e-6)
+
+
+def test_ml_attains_bound_at_high_snr():
+    model = lb.PathLossModel(-45.0, 2.5, 0.5)
+    p = np.array([1.3, 2.6])
+    power = model.sample_power_dbm(np.broadcast_to(lb.pairwise_distance_m(p, SQUARE), (20000, 4)),
+                                   np.random.default_rng(11))
+    err2 = np.sum((lb.rss_ml_position(SQUARE, power, model).position_m - p) ** 2, axis=-1)
+    bound = lb.rss_crlb_m(p, SQUARE, 2.5, 0.5)
+    se = err2.std() / np.sqrt(err2.size)
+    assert abs(err2.mean() - bound**2) < 4 * se + 0.02 * bound**2
+
+
+@pytest.mark.parametrize("anchors, printed", [([[0, 0], [5, 0], [0, 8]], 0.80), ([[0, 0], [5, 0], [0, 8], [5, 8]], 0.64)])
+def test_ozkaya_printed_form_reproduces_thesis_crlb(anchors, printed):
+    # Ozkaya (2011), Fig. 7.1 / Appendix A: 5 m x 8 m room, sigma 5.2 dB, printed 1/d^2 form with n = 2
+    xs, ys = np.meshgrid(np.linspace(0.025, 4.975, 100), np.linspace(0.025, 7.975, 160))
+    pts = np.stack([xs.ravel(), ys.ravel()], -1)
+    assert lb.crlb_rms_over_area_m(pts, np.array(anchors, float), 2.0, 5.2, form="ozkaya_printed") == pytest.approx(printed, abs=0.02)
+
+
+def test_crlb_at_anchor_raises():
+    with pytest.raises(lb.DegenerateGeometryError):
+        lb.rss_crlb_m([0.0, 0.0], SQUARE, 2.0, 4.0)
+
+
+def test_metrics():
+    assert round(float(lb.reduction_pct(2.2867, 1.0378)), 2) == 54.62      # document 003's three numbers agree
+    e = np.random.default_rng(0).rayleigh(size=1000)
+    assert lb.rmse_m(e) ** 2 == pytest.approx(lb.mean_error_m(e) ** 2 + lb.error_std_m(e) ** 2, rel=1e-12)
+    assert lb.mean_error_m(lb.position_error_m([[3.0, 4.0], [0.0, 1.0]], [[0.0, 0.0], [0.0, 0.0]])) == 3.0
+    x, f = lb.empirical_cdf([3.0, 1.0, 2.0])
+    np.testing.assert_array_equal(x, [1, 2, 3]); np.testing.assert_allclose(f, [1 / 3, 2 / 3, 1])
+    assert lb.percentile_error_m(np.arange(11.0), 90) == 9.0
+
+
+def test_streams_are_reproducible_independent_and_prefix_stable():
+    a, b = lb.streams(5, "calibration", "tracking"), lb.streams(5, "calibration", "tracking")
+    np.testing.assert_array_equal(a["tracking"].normal(size=10), b["tracking"].normal(size=10))
+    c = lb.streams(5, "calibration", "tracking")
+    assert not np.allclose(c["calibration"].normal(size=10), c["tracking"].normal(size=10))
+    small = lb.streams(1, "x")["x"].standard_normal((3, 4))
+    big = lb.streams(1, "x")["x"].standard_normal((10, 4))
+    np.testing.assert_array_equal(small, big[:3])     # run i's draws do not depend on the number of runs
+    assert lb.mc_standard_error(np.array([1.0, 3.0])) == pytest.approx(1.0)

@@ -1,0 +1,142 @@
+"""Channel model and path-loss calibration against closed forms and an independent solver (scipy)."""
+import cvxpy as cp
+import numpy as np
+import pytest
+from scipy.optimize import lsq_linear
+
+import locbook as lb
+from locbook.calibration import _stacked_problem, path_loss_design_matrix
+
+
+def test_mean_power_and_range_inversion():
+    model = lb.PathLossModel(-45.0, 2.1843, 0.0)
+    d = np.array([1.0, 2.0, 10.0])
+    # 10 n log10(10) = 21.843 dB below the 1 m power
+    np.testing.assert_allclose(model.mean_power_dbm(d), [-45.0, -45.0 - 21.843 * np.log10(2), -66.843], atol=1e-12)
+    np.testing.assert_allclose(model.range_m(model.mean_power_dbm(d)), d, rtol=1e-12)
+
+
+def test_per_anchor_parameters_broadcast_on_last_axis():
+    model = lb.PathLossModel(np.array([-40.0, -50.0]), np.array([2.0, 3.0]))
+    p = model.mean_power_dbm(np.full((3, 2), 10.0))
+    np.testing.assert_allclose(p, np.tile([-60.0, -80.0], (3, 1)))
+
+
+def test_range_bias_factor_matches_lognormal_mean():
+    model = lb.PathLossModel(-52.0, 1.8, 6.0)
+    rng = np.random.default_rng(1)
+    d_hat = model.range_m(model.sample_power_dbm(np.full(400_000, 3.0), rng))
+    ratio = d_hat / 3.0
+    se = ratio.std() / np.sqrt(ratio.size)
+    assert abs(ratio.mean() - model.range_bias_factor()) < 4 * se
+    assert model.range_bias_factor() == pytest.approx(1.34, abs=0.01)  # note 000, sec. 2.2
+
+
+def test_register_conversions_and_quantisation():
+    assert lb.register_to_dbm(0) == -45.0                      # Eq. (3), document 003
+    assert lb.register_to_dbm(40, lb.AT86RF230_ED_OFFSET_DB) == -51.0
+    np.testing.assert_allclose(lb.dbm_to_register(lb.register_to_dbm([-3.0, 7.0])), [-3.0, 7.0])
+    np.testing.assert_array_equal(lb.quantize_db([-60.4, -60.6, -95.2], floor_dbm=-90.0), [-60.0, -61.0, -90.0])
+
+
+def test_correlated_shadowing_covariance():
+    pts = np.array([[0.0, 0.0], [1.0, 0.0], [3.0, 0.0]])
+    draws = lb.correlated_shadowing_db(pts, 4.0, 2.0, np.random.default_rng(3), size=(200_000,))
+    expected = 16.0 * np.exp(-lb.pairwise_distance_m(pts, pts) / 2.0)
+    np.testing.assert_allclose(np.cov(draws.T), expected, atol=0.25)  # MC s.e. of a covariance ~ 16*sqrt(2/N) = 0.05
+
+
+@pytest.fixture
+def cal_data():
+    rng = np.random.default_rng(0)
+    d = rng.uniform(1.0, 8.0, (6, 4))
+    p = -45.0 - 21.843 * np.log10(d) + rng.normal(0.0, 2.0, d.shape)
+    return d, p
+
+
+def test_cvxpy_fit_equals_normal_equations_and_lstsq(cal_data):
+    d, p = cal_data
+    fit = lb.fit_path_loss(d, p)
+    closed = lb.fit_path_loss_closed_form(d, p)
+    for i in range(d.shape[0]):
+        m = path_loss_design_matrix(d[i])
+        t = np.linalg.lstsq(m, p[i], rcond=None)[0]     # independent: LAPACK least squares
+        np.testing.assert_allclose([closed.ref_power_dbm[i], closed.path_loss_exp[i]], t, atol=1e-10)
+        np.testing.assert_allclose([fit.ref_power_dbm[i], fit.path_loss_exp[i]], t, atol=1e-6)
+        # LS covariance s^2 (M^T M)^-1 with s^2 = SSR / (N - 2)
+        s2 = np.sum((p[i] - m @ t) ** 2) / (d.shape[1] - 2)
+        np.testing.assert_allclose(closed.covariance[i], s2 * np.linalg.inv(m.T @ m), rtol=1e-10)
+
+
+def test_stacked_problem_is_dpp():
+    problem, _, _ = _stacked_problem((3, 4), None, (1.5, 3.0))
+    assert problem.is_dpp()
+
+
+def test_noiseless_recovery_every_mode():
+    d = np.array([[1.0, 2.0, 4.0, 8.0], [1.5, 3.0, 5.0, 6.0]])
+    p = -50.0 - 23.0 * np.log10(d)
+    for mode in lb.CALIBRATION_MODES:
+        fit = lb.calibrate_path_loss(d, p, mode=mode)
+        np.testing.assert_allclose(fit.path_loss_exp, 2.3, atol=1e-6)
+        np.testing.assert_allclose(fit.ref_power_dbm, -50.0, atol=1e-5)
+
+
+def test_bounded_fit_equals_scipy_lsq_linear(cal_data):
+    d, p = cal_data
+    bounds = ((-55.0, -46.0), (1.5, 2.0))   # tight enough that some fits are active at a bound
+    fit = lb.fit_path_loss(d, p, ref_power_bounds_dbm=bounds[0], path_loss_exp_bounds=bounds[1])
+    for i in range(d.shape[0]):
+        ref = lsq_linear(path_loss_design_matrix(d[i]), p[i], bounds=([bounds[0][0], bounds[1][0]],
+                                                                       [bounds[0][1], bounds[1][1]]), tol=1e-12)
+        np.testing.assert_allclose([fit.ref_power_dbm[i], fit.path_loss_exp[i]], ref.x, atol=1e-5)
+
+
+def test_bounded_fit_equals_brute_force_grid():
+    rng = np.random.default_rng(5)
+    d = np.array([1.0, 2.5, 4.0, 6.0])
+    p = -47.0 - 26.0 * np.log10(d) + rng.normal(0, 3.0, 4)
+    fit = lb.fit_path_loss(d, p, ref_power_bounds_dbm=(-55, -40), path_loss_exp_bounds=(1.5, 3.0))
+    a, n = np.meshgrid(np.linspace(-55, -40, 1501), np.linspace(1.5, 3.0, 1501), indexing="ij")
+    cost = ((p - (a[..., None] - 10 * n[..., None] * np.log10(d))) ** 2).sum(-1)
+    i, j = np.unravel_index(np.argmin(cost), cost.shape)
+    assert abs(fit.ref_power_dbm - a[i, j]) <= 0.011 and abs(fit.path_loss_exp - n[i, j]) <= 0.0011
+
+
+def test_per_location_mean_is_mean_of_fits(cal_data):
+    d, p = cal_data
+    fit = lb.calibrate_path_loss(d, p, mode="per_location_mean", solver="closed_form")
+    single = [lb.fit_path_loss_closed_form(d[i], p[i]).path_loss_exp for i in range(d.shape[0])]
+    assert fit.path_loss_exp == pytest.approx(np.mean(single), abs=1e-12)
+
+
+def test_literal_sign_returns_minus_n():
+    d = np.array([1.0, 2.0, 4.0, 8.0])
+    p = -45.0 - 21.843 * np.log10(d)
+    t = np.linalg.lstsq(path_loss_design_matrix(d, sign_convention="literal_003"), p, rcond=None)[0]
+    assert t[1] == pytest.approx(-2.1843, abs=1e-10)
+
+
+@pytest.mark.parametrize("distances", [[4.039] * 4, [3.0, 3.0]])
+def test_degenerate_calibration_raises(distances):
+    with pytest.raises(lb.DegenerateGeometryError, match="distinct distances"):
+        lb.fit_path_loss(np.array(distances), np.full(len(distances), -60.0))
+
+
+def test_corridor_centre_is_degenerate_but_centre_line_is_not():
+    from locbook.scenarios import george
+    centre = lb.pairwise_distance_m([[1.05, 3.9]], george.ANCHORS_M)
+    with pytest.raises(lb.DegenerateGeometryError):
+        lb.calibrate_path_loss(centre, -45 - 21.843 * np.log10(centre))
+    line = lb.pairwise_distance_m([[1.05, 1.0]], george.ANCHORS_M)
+    fit = lb.calibrate_path_loss(line, -45 - 21.843 * np.log10(line))
+    assert fit.path_loss_exp == pytest.approx(2.1843, abs=1e-9)
+
+
+def test_missing_samples_are_ignored(cal_data):
+    d, p = cal_data
+    p_nan = p.copy()
+    p_nan[0, 1] = np.nan
+    fit = lb.fit_path_loss(d[0], p_nan[0])
+    ref = lb.fit_path_loss_closed_form(np.delete(d[0], 1), np.delete(p[0], 1))
+    assert fit.path_loss_exp == pytest.approx(ref.path_loss_exp, abs=1e-6)

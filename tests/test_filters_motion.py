@@ -1,0 +1,123 @@
+"""Motion models and the Kalman filter against filterpy, scipy and closed forms."""
+import numpy as np
+import pytest
+from filterpy.kalman import KalmanFilter
+from scipy.linalg import expm, solve_discrete_are
+
+import locbook as lb
+from locbook.scenarios import george
+
+
+def test_transition_is_matrix_exponential_of_the_derivative_chain():
+    for model in (lb.constant_velocity(0.7, 1.0, layout="axis_major"), lb.constant_acceleration(0.05, 1.0)):
+        k = model.order + 1
+        shift = np.kron(np.eye(model.dim), np.eye(k, k, 1))
+        np.testing.assert_allclose(model.F, expm(shift * model.dt_s), atol=1e-14)
+
+
+def test_continuous_q_equals_van_loan():
+    model = lb.constant_velocity(0.4, 2.5, layout="axis_major", noise="continuous")
+    a = np.kron(np.eye(2), np.eye(2, 2, 1))
+    l = np.kron(np.eye(2), np.array([[0.0], [1.0]]))
+    n = a.shape[0]
+    big = np.zeros((2 * n, 2 * n))
+    big[:n, :n], big[:n, n:], big[n:, n:] = -a, l @ l.T * 2.5, a.T
+    e = expm(big * 0.4)
+    np.testing.assert_allclose(model.Q, e[n:, n:].T @ e[:n, n:], atol=1e-12)   # Van Loan (1978)
+
+
+def test_layouts_are_permutations_and_document_003_matrices():
+    dm = lb.constant_velocity(1.0, 0.3)
+    am = lb.constant_velocity(1.0, 0.3, layout="axis_major")
+    perm = [0, 2, 1, 3]   # [x, y, vx, vy] from [x, vx, y, vy]
+    np.testing.assert_allclose(dm.F, am.F[np.ix_(perm, perm)])
+    np.testing.assert_allclose(dm.Q, am.Q[np.ix_(perm, perm)])
+    np.testing.assert_allclose(dm.F, [[1, 0, 1, 0], [0, 1, 0, 1], [0, 0, 1, 0], [0, 0, 0, 1]])   # Eq. (9), doc 003
+    np.testing.assert_allclose(dm.G, [[0.5, 0], [0, 0.5], [1, 0], [0, 1]])
+    np.testing.assert_allclose(dm.position_measurement_matrix(), [[1, 0, 0, 0], [0, 1, 0, 0]])
+    ca = lb.constant_acceleration(0.05, 1.0)
+    np.testing.assert_array_equal(ca.index(2), [2, 5])   # Dogan's per-axis ordering
+
+
+def _scenario(batch=3, steps=30, seed=0):
+    model = lb.constant_velocity(1.0, 0.01)
+    rng = np.random.default_rng(seed)
+    z = rng.normal(size=(batch, steps, 2)) + np.arange(steps)[:, None] * [0.1, 0.3]
+    R = np.diag([8.6, 0.66])
+    return model, model.position_measurement_matrix(), z, R, np.zeros(4), np.diag([8.6, 0.66, 1, 1])
+
+
+@pytest.mark.parametrize("joseph", [True, False])
+def test_kalman_equals_filterpy(joseph):
+    model, H, z, R, x0, P0 = _scenario()
+    res = lb.kalman_filter(z, model.F, H, model.Q, R, x0, P0, joseph=joseph)
+    for b in range(z.shape[0]):
+        kf = KalmanFilter(dim_x=4, dim_z=2)
+        kf.F, kf.H, kf.Q, kf.R, kf.x, kf.P = model.F, H, model.Q, R, x0.copy(), P0.copy()
+        xs, ps = [], []
+        for zz in z[b]:
+            kf.predict()
+            kf.update(zz)
+            xs.append(kf.x.copy()); ps.append(kf.P.copy())
+        np.testing.assert_allclose(res.x[b], xs, atol=1e-10)
+        np.testing.assert_allclose(res.P[b], ps, atol=1e-10)
+
+
+def test_batched_per_run_R_equals_loop():
+    model, H, z, _, x0, _ = _scenario(batch=4)
+    Rs = np.array([np.diag([a, b]) for a, b in [(1, 2), (3, 0.5), (8.6, 0.66), (0.1, 0.1)]])
+    P0 = np.eye(4)
+    batched = lb.kalman_filter(z, model.F, H, model.Q, Rs, x0, P0).x
+    for b in range(4):
+        np.testing.assert_allclose(batched[b], lb.kalman_filter(z[b], model.F, H, model.Q, Rs[b], x0, P0).x, atol=1e-13)
+
+
+def test_static_model_filter_is_recursive_least_squares():
+    # F = I, Q = 0, flat prior: the filtered state is the batch least-squares mean of all measurements
+    z = np.random.default_rng(3).normal(size=(40, 2))
+    res = lb.kalman_filter(z, np.eye(2), np.eye(2), np.zeros((2, 2)), np.eye(2), np.zeros(2), 1e12 * np.eye(2),
+                           predict_first=False)
+    np.testing.assert_allclose(res.x, np.cumsum(z, 0) / np.arange(1, 41)[:, None], atol=1e-9)
+    np.testing.assert_allclose(res.P[-1], np.eye(2) / 40, atol=1e-12)
+
+
+def test_covariance_converges_to_riccati_solution():
+    model = lb.constant_velocity(1.0, 0.05)
+    H, R = model.position_measurement_matrix(), np.diag([2.0, 0.5])
+    res = lb.kalman_filter(np.zeros((300, 2)), model.F, H, model.Q, R, np.zeros(4), np.eye(4))
+    p_pred = solve_discrete_are(model.F.T, H.T, model.Q, R)     # steady-state prediction covariance
+    np.testing.assert_allclose(res.P_pred[-1], p_pred, rtol=1e-8)
+
+
+def test_gain_limits():
+    model, H, z, _, x0, P0 = _scenario(batch=1)
+    follow = lb.kalman_filter(z, model.F, H, model.Q, 1e-12 * np.eye(2), x0, P0)
+    np.testing.assert_allclose(model.position(follow.x), z, atol=1e-6)      # R -> 0 follows the fixes
+    keep = lb.kalman_filter(z, model.F, H, model.Q, 1e12 * np.eye(2), x0, P0)
+    np.testing.assert_allclose(keep.x, 0.0, atol=1e-6)                       # R -> inf keeps the prediction
+
+
+def test_missing_measurements_predict_only():
+    model, H, z, R, x0, P0 = _scenario(batch=1, steps=5)
+    z = z.copy()
+    z[0, 2] = np.nan
+    res = lb.kalman_filter(z, model.F, H, model.Q, R, x0, P0)
+    np.testing.assert_allclose(res.x[0, 2], model.F @ res.x[0, 1])
+
+
+def test_literal_003_variant_is_running_average():
+    # Eqs. (11)-(13) as printed drop the prediction: P shrinks as 1/k and x is the running mean
+    z = np.random.default_rng(7).normal(size=(20, 2)) + 5.0
+    model = lb.constant_velocity(1.0, 1.0)
+    res = lb.kalman_filter(z, model.F, model.position_measurement_matrix(), model.Q, np.eye(2),
+                           np.r_[z[0], 0, 0], np.diag([1.0, 1.0, 1.0, 1.0]), variant="literal_003")
+    k = np.arange(2, 22)[:, None]
+    np.testing.assert_allclose(res.x[:, :2], (z[0] + np.cumsum(z, 0)) / k, atol=1e-12)
+
+
+def test_corridor_kf_first_fix_start():
+    fixes = np.random.default_rng(1).normal(size=(2, 25, 2))
+    truth = george.trajectory_m()
+    out = george.track_with_kalman(fixes, truth, q=1e-3)
+    np.testing.assert_array_equal(out[:, 0], fixes[:, 0])
+    assert out.shape == fixes.shape

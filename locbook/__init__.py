@@ -26,6 +26,23 @@ from .montecarlo import mc_standard_error, spawn_generators, streams
 from .motion import KinematicModel, constant_acceleration, constant_velocity
 from .report import Report
 
-__all__ = [name for name in dir() if not name.startswith("_") and name not in {
-    "bounds", "calibration", "channel", "errors", "filters", "localization", "metrics", "montecarlo",
-    "motion", "report"}]
+__all__ = [
+    "__version__",
+    # channel
+    "PathLossModel", "CC2420_RSSI_OFFSET_DB", "AT86RF230_ED_OFFSET_DB", "register_to_dbm", "dbm_to_register",
+    "quantize_db", "pairwise_distance_m", "correlated_shadowing_db",
+    # calibration
+    "PathLossFit", "fit_path_loss", "fit_path_loss_closed_form", "calibrate_path_loss", "CALIBRATION_MODES",
+    # static localization
+    "LocalizationResult", "check_anchor_geometry", "lateration_system", "lateration_ls", "lateration_wls",
+    "lateration_box_ls", "rss_ml_position", "grid_ml_position",
+    # motion and filters
+    "KinematicModel", "constant_velocity", "constant_acceleration", "KalmanResult", "kalman_filter", "KF_VARIANTS",
+    # bounds
+    "rss_fisher_information", "rss_crlb_m", "crlb_rms_over_area_m", "CRLB_FORMS",
+    # metrics and Monte Carlo
+    "position_error_m", "mean_error_m", "rmse_m", "median_error_m", "percentile_error_m", "error_std_m",
+    "empirical_cdf", "reduction_pct", "error_summary", "spawn_generators", "streams", "mc_standard_error",
+    # errors and reports
+    "LocbookError", "DegenerateGeometryError", "ConvergenceError", "ParameterError", "Report",
+]

@@ -21,7 +21,8 @@ from functools import lru_cache
 import cvxpy as cp
 import numpy as np
 
-from .errors import ConvergenceError, DegenerateGeometryError
+from ._cvx import solve
+from .errors import DegenerateGeometryError
 
 __all__ = [
     "PathLossFit",
@@ -181,9 +182,7 @@ def fit_path_loss(distance_m, power_dbm, *, ref_distance_m: float = 1.0,
     p_log_d.value = w * log_d.reshape(k, n)
     p_power.value = w * power.reshape(k, n)
     p_weight.value = w
-    problem.solve(solver=cp.CLARABEL)
-    if problem.status not in (cp.OPTIMAL,):
-        raise ConvergenceError(f"path-loss calibration: cvxpy finished with status {problem.status!r}")
+    solve(problem, "path-loss calibration")
     ref = v_ref.value.reshape(batch)
     exp = v_exp.value.reshape(batch)
     return _finish(log_d, power, mask, ref, exp, problem.status)

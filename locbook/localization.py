@@ -20,6 +20,7 @@ from functools import lru_cache
 import cvxpy as cp
 import numpy as np
 
+from ._cvx import solve
 from .channel import PathLossModel, pairwise_distance_m
 from .errors import ConvergenceError, DegenerateGeometryError
 
@@ -143,10 +144,7 @@ def lateration_box_ls(anchors_m, distance_m, lower_m, upper_m, ref_index: int = 
         raise ValueError(f"empty box: lower {lower} > upper {upper}")
     problem, b_par, p_var = _box_problem(k, tuple(map(tuple, a_mat.tolist())), lower, upper)
     b_par.value = b.reshape(k, -1)
-    # the matrix-variable product is canonicalised by the SciPy backend (cvxpy's C++ one lacks it)
-    problem.solve(solver=cp.CLARABEL, canon_backend=cp.SCIPY_CANON_BACKEND)
-    if problem.status != cp.OPTIMAL:
-        raise ConvergenceError(f"box-constrained lateration: cvxpy finished with status {problem.status!r}")
+    solve(problem, "box-constrained lateration")
     pos = p_var.value.reshape(batch + (a_mat.shape[1],))
     return LocalizationResult(pos, np.ones(batch, bool), None, 0, "lateration_box_ls")
 

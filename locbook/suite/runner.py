@@ -204,8 +204,11 @@ def _summary_markdown(exp: Experiment, profile: str, params: dict, folder: Path,
         lines.append(Table([{c: r.get(c, "") for c in cols} for r in numbers]).to_markdown())
     else:
         lines.append("The source prints no number for this experiment; its figures are qualitative.")
-    lines += ["", "## Parameters", "", Table([{"name": k, "value": json.dumps(v)} for k, v in params.items()]
-                                             ).to_markdown() if params else "Notebook defaults.", ""]
+    declared = exp.declared_parameters()
+    rows = [{"name": name, "value": json.dumps(params.get(name, p.default)),
+             "set by": "profile / -p" if name in params else "notebook default", "meaning": p.help}
+            for name, p in declared.items()]
+    lines += ["", "## Parameters", "", Table(rows).to_markdown(), ""]
     if assumptions:
         lines += ["## Assumptions", "", Table(assumptions).to_markdown(), ""]
     if manifest.get("figures"):

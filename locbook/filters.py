@@ -70,7 +70,8 @@ def kalman_filter(z, F, H, Q, R, x0, P0, *, predict_first: bool = True,
         raise ValueError(f"measurements have dimension {z.shape[-1]} but H has {m} rows")
     if x.shape[-1] != n or P.shape[-2:] != (n, n):
         raise ValueError(f"x0 must end in ({n},) and P0 in ({n}, {n}); got {x.shape} and {P.shape}")
-    batch = np.broadcast_shapes(z.shape[:-2], x.shape[:-1], P.shape[:-2], R.shape[:-2])
+    batch = np.broadcast_shapes(z.shape[:-2], x.shape[:-1], P.shape[:-2], F.shape[:-2], H.shape[:-2],
+                                Q.shape[:-2], R.shape[:-2])
     T = z.shape[-2]
     x = np.broadcast_to(x, batch + (n,)).copy()
     P = np.broadcast_to(P, batch + (n, n)).copy()

@@ -200,11 +200,11 @@ def rss_ml_position(anchors_m, power_dbm, model: PathLossModel, initial_m=None, 
     eye = np.eye(anchors_m.shape[1])
     it = 0
     for it in range(1, max_iter + 1):
-        jtj = _newton_matrix(resid, jac, d2, pos, anchors_m, model)
+        hess = _newton_matrix(resid, jac, d2, pos, anchors_m, model)
         jtr = np.einsum("...ki,...k->...i", jac, resid)
-        # LM step: (J^T J + lam diag(J^T J)) delta = -J^T r
-        damp = lam[..., None, None] * (eye * np.diagonal(jtj, axis1=-2, axis2=-1)[..., None, :] + 1e-12 * eye)
-        step = -np.linalg.solve(jtj + damp, jtr[..., None])[..., 0]
+        # damped step: (H + lam diag(H)) delta = -J^T r
+        damp = lam[..., None, None] * (eye * np.diagonal(hess, axis1=-2, axis2=-1)[..., None, :] + 1e-12 * eye)
+        step = -np.linalg.solve(hess + damp, jtr[..., None])[..., 0]
         step = np.where(converged[..., None], 0.0, step)
         trial = pos + step
         r_new, j_new, d2_new = _rss_residual_jacobian(trial, anchors_m, power_dbm, model, min_distance_m)

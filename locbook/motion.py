@@ -85,9 +85,10 @@ class KinematicModel:
         return np.array([axis * k + deriv for deriv in range(k) for axis in range(self.dim)])
 
     def _assemble(self, block):
+        """Square per-axis block -> full matrix in this layout."""
         full = np.kron(np.eye(self.dim), block)
         perm = self._permutation()
-        return full[np.ix_(perm, perm)] if block.shape[1] == block.shape[0] else full[perm]
+        return full[np.ix_(perm, perm)]
 
     @property
     def F(self) -> np.ndarray:
@@ -97,8 +98,7 @@ class KinematicModel:
     @property
     def G(self) -> np.ndarray:
         """Noise gain (n_state, dim): ``[dt^2/2, dt]`` per axis for CV."""
-        f, g, _ = self._axis_blocks()
-        full = np.kron(np.eye(self.dim), g)
+        full = np.kron(np.eye(self.dim), self._axis_blocks()[1])
         return full[self._permutation()]
 
     @property

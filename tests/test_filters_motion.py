@@ -121,3 +121,14 @@ def test_corridor_kf_first_fix_start():
     out = george.track_with_kalman(fixes, truth, q=1e-3)
     np.testing.assert_array_equal(out[:, 0], fixes[:, 0])
     assert out.shape == fixes.shape
+
+
+def test_batched_process_noise_equals_loop():
+    # one q per leading index (e.g. a q grid): F/H/Q batch axes broadcast like the measurements'
+    model, H, z, R, x0, P0 = _scenario(batch=1)
+    qs = [1e-4, 1e-2, 1.0]
+    Qs = np.stack([lb.constant_velocity(1.0, q).Q for q in qs])
+    batched = lb.kalman_filter(z[0], model.F, H, Qs, R, x0, P0).x
+    assert batched.shape == (3, z.shape[1], 4)
+    for i, Q in enumerate(Qs):
+        np.testing.assert_allclose(batched[i], lb.kalman_filter(z[0], model.F, H, Q, R, x0, P0).x, atol=1e-13)

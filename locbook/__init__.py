@@ -6,43 +6,62 @@ The public API, by role:
 - calibration: :func:`fit_path_loss`, :func:`calibrate_path_loss` (cvxpy and closed form)
 - localization: linearized / weighted / box-constrained lateration, RSS maximum likelihood, grid ML
 - motion and filters: :class:`KinematicModel`, :func:`kalman_filter`
+- fingerprinting: weighted k-NN over pattern or model RSSI maps
+- Bayes filters: grid-based Bayes and (improved) SIR particle filters, systematic resampling
+- reference tags: online bounded calibration, pooled sigma, RSSI smoothing
 - bounds: static RSS CRLB (correct and Ozkaya's printed form)
 - metrics and Monte-Carlo helpers
 - report: :class:`Report`, what a notebook records
 """
 __version__ = "0.1.0"
 
+from .bayes_filters import (RESAMPLING_CDFS, WEIGHT_SMOOTHINGS, GridFilterResult, ParticleFilterResult,
+                            RssMeasurementModel, effective_sample_size, grid_bayes_filter, grid_transition_matrix,
+                            particle_filter, systematic_resample)
 from .bounds import CRLB_FORMS, crlb_rms_over_area_m, rss_crlb_m, rss_fisher_information
 from .calibration import CALIBRATION_MODES, PathLossFit, calibrate_path_loss, fit_path_loss, fit_path_loss_closed_form
 from .channel import (AT86RF230_ED_OFFSET_DB, CC2420_RSSI_OFFSET_DB, PathLossModel, correlated_shadowing_db,
-                      dbm_to_register, pairwise_distance_m, quantize_db, register_to_dbm)
+                      dbm_to_register, pairwise_distance_m, quantize_db, register_to_dbm, wall_crossings)
 from .errors import ConvergenceError, DegenerateGeometryError, LocbookError, ParameterError
+from .fingerprint import KNN_WEIGHTINGS, knn_position, model_fingerprints, pattern_fingerprints
 from .filters import KF_VARIANTS, KalmanResult, kalman_filter
 from .localization import (LocalizationResult, check_anchor_geometry, grid_ml_position, lateration_box_ls,
                            lateration_ls, lateration_system, lateration_wls, rss_ml_position)
 from .metrics import (empirical_cdf, error_std_m, error_summary, mean_error_m, median_error_m, percentile_error_m,
-                      position_error_m, reduction_pct, rmse_m)
+                      position_error_m, reduction_pct, rmse_m, rmse_standard_error_m)
 from .montecarlo import mc_standard_error, spawn_generators, streams
-from .motion import KinematicModel, constant_acceleration, constant_velocity
+from .motion import KinematicModel, constant_acceleration, constant_velocity, reflect_into_box
+from .reference_tags import (OZKAYA_PATH_LOSS_EXP_BOUNDS, OZKAYA_REF_POWER_BOUNDS_DBM, OnlineCalibration,
+                             calibrate_from_reference_tags, pooled_sigma_db, smooth_rssi)
 from .report import Report
 
 __all__ = [
     "__version__",
     # channel
     "PathLossModel", "CC2420_RSSI_OFFSET_DB", "AT86RF230_ED_OFFSET_DB", "register_to_dbm", "dbm_to_register",
-    "quantize_db", "pairwise_distance_m", "correlated_shadowing_db",
+    "quantize_db", "pairwise_distance_m", "correlated_shadowing_db", "wall_crossings",
     # calibration
     "PathLossFit", "fit_path_loss", "fit_path_loss_closed_form", "calibrate_path_loss", "CALIBRATION_MODES",
     # static localization
     "LocalizationResult", "check_anchor_geometry", "lateration_system", "lateration_ls", "lateration_wls",
     "lateration_box_ls", "rss_ml_position", "grid_ml_position",
+    # fingerprinting
+    "knn_position", "model_fingerprints", "pattern_fingerprints", "KNN_WEIGHTINGS",
     # motion and filters
-    "KinematicModel", "constant_velocity", "constant_acceleration", "KalmanResult", "kalman_filter", "KF_VARIANTS",
+    "KinematicModel", "constant_velocity", "constant_acceleration", "reflect_into_box", "KalmanResult",
+    "kalman_filter", "KF_VARIANTS",
+    # Bayes filters
+    "RssMeasurementModel", "GridFilterResult", "grid_bayes_filter", "grid_transition_matrix",
+    "ParticleFilterResult", "particle_filter", "systematic_resample", "effective_sample_size",
+    "RESAMPLING_CDFS", "WEIGHT_SMOOTHINGS",
+    # reference tags
+    "OnlineCalibration", "calibrate_from_reference_tags", "pooled_sigma_db", "smooth_rssi",
+    "OZKAYA_REF_POWER_BOUNDS_DBM", "OZKAYA_PATH_LOSS_EXP_BOUNDS",
     # bounds
     "rss_fisher_information", "rss_crlb_m", "crlb_rms_over_area_m", "CRLB_FORMS",
     # metrics and Monte Carlo
     "position_error_m", "mean_error_m", "rmse_m", "median_error_m", "percentile_error_m", "error_std_m",
-    "empirical_cdf", "reduction_pct", "error_summary", "spawn_generators", "streams", "mc_standard_error",
+    "empirical_cdf", "reduction_pct", "error_summary", "rmse_standard_error_m", "spawn_generators", "streams", "mc_standard_error",
     # errors and reports
     "LocbookError", "DegenerateGeometryError", "ConvergenceError", "ParameterError", "Report",
 ]

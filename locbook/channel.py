@@ -26,6 +26,8 @@ __all__ = [
     "dbm_to_register",
     "quantize_db",
     "pairwise_distance_m",
+    "wall_crossings",
+    "correlated_shadowing_db",
 ]
 
 #: CC2420 RSSI register offset: P = RSSI_VAL - 45 dBm (Eq. (3) in George and Vadivukkarasi,
@@ -161,3 +163,27 @@ def correlated_shadowing_db(points_m, sigma_db: float, decorrelation_m: float,
     # small jitter: the exponential kernel is positive definite, but near-duplicate points are not
     chol = np.linalg.cholesky(cov + 1e-12 * np.eye(n_points))
     return sigma_db * z @ chol.T
+
+
+def wall_crossings(points_m, anchors_m, walls_m):
+    """Number of walls crossed by the straight path from each point to each anchor (``n_W`` in
+    Ozkaya 2011, Eq. (6.3)): ``points (..., 2)``, anchors ``(m, 2)``, walls ``(W, 2, 2)`` as segments
+    ``[[x1, y1], [x2, y2]]`` -> integer counts ``(..., m)``.
+
+    A path crosses a wall when the two segments properly intersect (orientation test); a path that only
+    touches a wall's end point or runs along it is not counted.
+    """
+    points_m = np.asarray(points_m, dtype=float)
+    anchors_m = np.asarray(anchors_m, dtype=float)
+    walls_m = np.asarray(walls_m, dtype=float).reshape(-1, 2, 2)
+    count = np.zeros(points_m.shape[:-1] + (anchors_m.shape[0],), dtype=int)
+
+    def cross(o, a, b):   # z of (a - o) x (b - o)
+        return (a[..., 0] - o[..., 0]) * (b[..., 1] - o[..., 1]) - (a[..., 1] - o[..., 1]) * (b[..., 0] - o[..., 0])
+
+    p = points_m[..., None, :]       # (..., 1, 2)
+    for w0, w1 in walls_m:
+        side_p, side_a = cross(w0, w1, p), cross(w0, w1, anchors_m)            # which side of the wall line
+        side_w0, side_w1 = cross(p, anchors_m, w0), cross(p, anchors_m, w1)    # which side of the path line
+        count += ((side_p * side_a < 0) & (side_w0 * side_w1 < 0)).astype(int)
+    return count

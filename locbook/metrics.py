@@ -10,7 +10,7 @@ import numpy as np
 
 __all__ = [
     "position_error_m", "mean_error_m", "rmse_m", "median_error_m", "percentile_error_m",
-    "error_std_m", "empirical_cdf", "reduction_pct", "error_summary",
+    "error_std_m", "empirical_cdf", "reduction_pct", "error_summary", "rmse_standard_error_m",
 ]
 
 
@@ -28,6 +28,15 @@ def mean_error_m(error_m, axis=None):
 def rmse_m(error_m, axis=None):
     """Root mean square of the Euclidean errors."""
     return np.sqrt(np.mean(np.square(error_m), axis=axis))
+
+
+def rmse_standard_error_m(error_m, axis=None):
+    """Monte-Carlo standard error of :func:`rmse_m` by the delta method:
+    ``SE(sqrt(m2)) = SE(m2) / (2 sqrt(m2))`` with ``m2`` the mean squared error."""
+    e2 = np.square(np.asarray(error_m, float))
+    n = e2.size if axis is None else e2.shape[axis]
+    se_m2 = np.std(e2, axis=axis, ddof=1) / np.sqrt(n)
+    return se_m2 / (2.0 * np.sqrt(np.mean(e2, axis=axis)))
 
 
 def median_error_m(error_m, axis=None):

@@ -21,7 +21,7 @@ from math import factorial
 
 import numpy as np
 
-__all__ = ["KinematicModel", "constant_velocity", "constant_acceleration", "STATE_LAYOUTS"]
+__all__ = ["KinematicModel", "constant_velocity", "constant_acceleration", "STATE_LAYOUTS", "reflect_into_box"]
 
 STATE_LAYOUTS = ("derivative_major", "axis_major")
 
@@ -153,3 +153,16 @@ def constant_acceleration(dt_s: float, q: float, dim: int = 2, layout: str = "ax
                           noise: str = "discrete") -> KinematicModel:
     """Nearly constant acceleration model (Dogan Eq. (3.11), Gudipati Sec. 3.2)."""
     return KinematicModel(dt_s, q, order=2, dim=dim, layout=layout, noise=noise)
+
+
+def reflect_into_box(position_m, lower_m, upper_m):
+    """Fold positions ``(..., dim)`` back into the box ``[lower, upper]`` by mirror reflection at its
+    walls (repeatedly, for steps longer than the box). Used for targets and particles confined to a room
+    (Ozkaya 2011 simulations; note 004, section 4.3: "kept inside the room by reflection").
+    """
+    lower = np.asarray(lower_m, dtype=float)
+    width = np.asarray(upper_m, dtype=float) - lower
+    if np.any(width <= 0):
+        raise ValueError(f"the box needs upper > lower on every axis, got {lower_m} and {upper_m}")
+    folded = np.mod(np.asarray(position_m, dtype=float) - lower, 2.0 * width)
+    return lower + np.where(folded > width, 2.0 * width - folded, folded)

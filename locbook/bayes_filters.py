@@ -1,0 +1,277 @@
+"""Nonparametric Bayes filters for RSSI tracking: grid-based Bayes (Markov localization) and particle filters.
+
+Both run the recursion of Ozkaya (2011), Eqs. (4.1)-(4.5),
+
+    p(L_t | s_1:t)  ~  p(s_t | L_t)  integral p(L_t | L_t-1) p(L_t-1 | s_1:t-1) dL_t-1,
+
+with the RSS likelihood of independent readers (Sec. 5, Eq. (5.11) sign corrected; note 004, section 3.1)
+
+    p(s | L) = prod_j N(s_j; alpha_j - 10 n_j log10(d_j(L)/d0) - nW_j(L) WAF, sigma^2),
+
+and the process model ``L_t = L_t-1 + v_t + N(0, D^2 I)`` (Eq. (4.2); ``v`` a known velocity, D = inf a
+uniform transition). Everything is vectorized over a leading Monte-Carlo axis ``R`` (runs) and over cells or
+particles; the only Python loop is over time steps.
+
+Conventions: ``rss_dbm`` has shape ``(R, T, m)``. At step 0 the prior is uniform over the region (or
+concentrated at a known initial location) and no prediction is made; from step 1 on each step predicts,
+then updates. Estimates: MMSE (posterior mean, Eq. (4.8)) and MAP (Eq. (4.9): the most probable cell, or
+the highest-weight particle, since a particle set has no density).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .channel import pairwise_distance_m, wall_crossings
+from .motion import reflect_into_box
+
+__all__ = [
+    "RssMeasurementModel", "GridFilterResult", "grid_bayes_filter", "grid_transition_matrix",
+    "ParticleFilterResult", "particle_filter", "systematic_resample", "effective_sample_size",
+    "RESAMPLING_CDFS", "WEIGHT_SMOOTHINGS",
+]
+
+RESAMPLING_CDFS = ("standard", "literal_004")
+WEIGHT_SMOOTHINGS = ("none", "sqrt", "sqrt_corrected")
+
+
+@dataclass(frozen=True)
+class RssMeasurementModel:
+    """Log-distance RSS likelihood with walls, per-reader and optionally per-run-and-step parameters.
+
+    ``ref_power_dbm`` (alpha) and ``path_loss_exp`` (n) are scalars, per-reader arrays ``(m,)``, or
+    ``(R, T, m)`` arrays (online calibration gives new values every step). ``sigma_db`` is a scalar or
+    ``(R, T)`` (the pooled online sigma of Eq. (6.7)). ``walls_m`` are wall segments ``(W, 2, 2)``.
+    Distances below ``min_distance_m`` are clipped so that log10(0) never occurs (note 004, section 4.3).
+    """
+
+    readers_m: np.ndarray
+    ref_power_dbm: float | np.ndarray = -52.0
+    path_loss_exp: float | np.ndarray = 2.3
+    sigma_db: float | np.ndarray = 5.2
+    wall_attenuation_db: float = 0.0
+    walls_m: np.ndarray | None = None
+    ref_distance_m: float = 1.0
+    min_distance_m: float = 0.1
+
+    @staticmethod
+    def _per_step(value, step: int, per_reader: bool):
+        value = np.asarray(value, dtype=float)
+        if per_reader:
+            return value[:, step, None, :] if value.ndim == 3 else value          # (R, 1, m) or (m,)
+        return value[:, step, None] if value.ndim == 2 else value                   # (R, 1) or scalar
+
+    def mean_rss_dbm(self, positions_m, step: int = 0):
+        """Mean RSS at positions ``(P, 2)`` or ``(R, P, 2)`` -> ``(R or 1, P, m)``."""
+        positions_m = np.asarray(positions_m, dtype=float)
+        distance = np.maximum(pairwise_distance_m(positions_m, self.readers_m), self.min_distance_m)
+        mean = (self._per_step(self.ref_power_dbm, step, True)
+                - 10.0 * self._per_step(self.path_loss_exp, step, True) * np.log10(distance / self.ref_distance_m))
+        if self.walls_m is not None and self.wall_attenuation_db != 0.0:
+            mean = mean - self.wall_attenuation_db * wall_crossings(positions_m, self.readers_m, self.walls_m)
+        return mean if mean.ndim == 3 else mean[None]
+
+    def log_likelihood(self, rss_dbm, positions_m, step: int = 0):
+        """``log p(s | L)`` up to a constant per run, ``rss_dbm (R, m)``, positions ``(P, 2)`` or ``(R, P, 2)``
+        -> ``(R, P)``. Readers with a NaN RSS (no packet) are left out of the product."""
+        resid = np.asarray(rss_dbm, dtype=float)[:, None, :] - self.mean_rss_dbm(positions_m, step)
+        resid = np.where(np.isnan(resid), 0.0, resid)
+        sigma = self._per_step(self.sigma_db, step, False)
+        return -0.5 * np.einsum("rpm,rpm->rp", resid, resid) / np.square(sigma)
+
+
+def _normalise_log(logw):
+    """Weights proportional to ``exp(logw)`` along the last axis, computed without overflow."""
+    w = np.exp(logw - logw.max(axis=-1, keepdims=True))
+    return w / w.sum(axis=-1, keepdims=True)
+
+
+def _velocity_schedule(velocity_m, n_steps):
+    v = np.zeros(2) if velocity_m is None else np.asarray(velocity_m, dtype=float)
+    return np.broadcast_to(v, (n_steps, 2)) if v.ndim == 1 else v
+
+
+# -- grid-based Bayes --------------------------------------------------------------------------------
+def grid_transition_matrix(cells_m, spread_m: float, velocity_m=(0.0, 0.0)):
+    """Transition ``T[l, l'] = P(L_t = c_l | L_t-1 = c_l')``: a Gaussian of std ``spread_m`` (D) centred on
+    ``c_l' + v``, normalised over the grid for each ``l'`` (note 004, section 3.7). ``spread_m = inf``
+    gives the uniform transition (no motion prior)."""
+    cells_m = np.asarray(cells_m, dtype=float)
+    n = cells_m.shape[0]
+    if np.isinf(spread_m):
+        return np.full((n, n), 1.0 / n)
+    if spread_m <= 0:
+        raise ValueError(f"the transition spread D must be positive (or inf), got {spread_m}")
+    diff = cells_m[:, None, :] - cells_m[None, :, :] - np.asarray(velocity_m, dtype=float)
+    log_t = -0.5 * np.einsum("abi,abi->ab", diff, diff) / spread_m**2
+    t = np.exp(log_t - log_t.max(axis=0, keepdims=True))
+    return t / t.sum(axis=0, keepdims=True)
+
+
+@dataclass(frozen=True)
+class GridFilterResult:
+    """``mmse_m``, ``map_m``: ``(R, T, 2)``; ``belief``: final posterior ``(R, C)``."""
+
+    mmse_m: np.ndarray
+    map_m: np.ndarray
+    belief: np.ndarray
+
+
+def grid_bayes_filter(rss_dbm, cells_m, model: RssMeasurementModel, spread_m: float = 0.5, *,
+                      velocity_m=None, initial_belief=None) -> GridFilterResult:
+    """Grid-based Bayes filter (Ozkaya 2011, Eqs. (4.10)-(4.15)) over runs ``R`` and steps ``T``.
+
+    ``Bel_t(l) ~ p(s_t | c_l) sum_l' T[l, l'] Bel_t-1(l')`` with :func:`grid_transition_matrix`.
+    ``velocity_m``: a known displacement per step, ``(2,)`` or ``(T, 2)`` (the mean of the process model
+    in the thesis's constant-velocity experiment). ``initial_belief``: ``(C,)`` or ``(R, C)``; uniform if None.
+    """
+    rss_dbm = np.asarray(rss_dbm, dtype=float)
+    cells_m = np.asarray(cells_m, dtype=float)
+    n_runs, n_steps, _ = rss_dbm.shape
+    n_cells = cells_m.shape[0]
+    velocity = _velocity_schedule(velocity_m, n_steps)
+    belief = (np.full((n_runs, n_cells), 1.0 / n_cells) if initial_belief is None
+              else np.broadcast_to(np.asarray(initial_belief, float), (n_runs, n_cells)).copy())
+    mmse = np.empty((n_runs, n_steps, 2))
+    best = np.empty((n_runs, n_steps, 2))
+    transition, last_v = None, None
+    for t in range(n_steps):
+        if t > 0:
+            if transition is None or not np.array_equal(velocity[t], last_v):
+                transition, last_v = grid_transition_matrix(cells_m, spread_m, velocity[t]), velocity[t]
+            belief = belief @ transition.T
+        log_post = np.log(np.maximum(belief, 1e-300)) + model.log_likelihood(rss_dbm[:, t], cells_m, t)
+        belief = _normalise_log(log_post)
+        mmse[:, t] = belief @ cells_m
+        best[:, t] = cells_m[np.argmax(belief, axis=-1)]
+    return GridFilterResult(mmse, best, belief)
+
+
+# -- particle filters -------------------------------------------------------------------------------
+def effective_sample_size(weights):
+    """``N_eff = 1 / sum_j w_j^2`` of normalised weights along the last axis (Ozkaya 2011, Eq. (4.28))."""
+    weights = np.asarray(weights, dtype=float)
+    return 1.0 / np.einsum("...n,...n->...", weights, weights)
+
+
+def systematic_resample(weights, uniforms, cdf: str = "standard"):
+    """Systematic resampling (Ozkaya 2011, Table 4.2) of every row of ``weights (..., N)``.
+
+    ``uniforms (...)`` are the single draws ``u_1 ~ U[0, 1)``, scaled here to ``U[0, 1/N)``; the sample
+    points are ``u_i = (u_1 + i - 1) / N`` and particle ``j`` is copied for each ``u_i`` with
+    ``c_j-1 < u_i <= c_j``. ``cdf="standard"`` uses ``c_j = w_1 + ... + w_j``. The table prints ``c_1 = 0``,
+    ``c_j = c_j-1 + w_j``, which drops ``w_1`` and shifts every particle's interval; that is kept as the
+    flagged ``"literal_004"`` (indices beyond the last particle are clipped to it).
+    Returns integer indices ``(..., N)``.
+    """
+    if cdf not in RESAMPLING_CDFS:
+        raise ValueError(f"cdf must be one of {RESAMPLING_CDFS}, got {cdf!r}")
+    weights = np.asarray(weights, dtype=float)
+    batch, n = weights.shape[:-1], weights.shape[-1]
+    w = weights.reshape(-1, n)
+    c = np.cumsum(w, axis=-1)
+    c /= c[:, -1:]
+    if cdf == "literal_004":
+        c = np.concatenate([np.zeros((c.shape[0], 1)), c[:, 1:] - c[:, :1]], axis=-1)
+    else:
+        c[:, -1] = 1.0                                     # guard against round-off below the last u_i
+    u = (np.asarray(uniforms, dtype=float).reshape(-1, 1) + np.arange(n)) / n
+    # one searchsorted over all rows: offset row r by 2r so the rows' CDFs do not overlap
+    offset = 2.0 * np.arange(c.shape[0])[:, None]
+    idx = np.searchsorted((c + offset).ravel(), (u + offset).ravel(), side="left").reshape(c.shape)
+    idx = np.minimum(idx - n * np.arange(c.shape[0])[:, None], n - 1)
+    return idx.reshape(batch + (n,))
+
+
+@dataclass(frozen=True)
+class ParticleFilterResult:
+    """``mmse_m``, ``map_m`` (highest-weight particle): ``(R, T, 2)``; ``n_eff``: ``(R, T)`` before any
+    resampling; ``resampled``: ``(R, T)`` bool; ``particles_m (R, N, 2)`` and ``weights (R, N)`` at the end."""
+
+    mmse_m: np.ndarray
+    map_m: np.ndarray
+    n_eff: np.ndarray
+    resampled: np.ndarray
+    particles_m: np.ndarray
+    weights: np.ndarray
+
+
+def particle_filter(rss_dbm, model: RssMeasurementModel, rng: np.random.Generator, *, n_particles: int,
+                    region_m, spread_m: float = 0.5, velocity_m=None, initial_position_m=None,
+                    resample_threshold: float | None = None, weight_smoothing: str = "none",
+                    resampling_cdf: str = "standard") -> ParticleFilterResult:
+    """SIR particle filter and the thesis's improved SIR (Ozkaya 2011, Tables 4.3-4.4, Sec. 7.1.4).
+
+    Proposal = process model (bootstrap, Eq. (4.33)): ``L_t = L_t-1 + v_t + N(0, D^2 I)``, reflected into
+    ``region_m = (lower, upper)`` (the room, or the accessible part of it: Table 7.22); ``spread_m = inf``
+    draws a fresh uniform proposal over the region (Tables 7.18-7.19). Weights ``w_t ~ w_t-1 p(s_t | L_t)``
+    (Eq. (4.34)). Particles start uniform in the region, or all at ``initial_position_m (R, 2)`` when the
+    initial location is known (Table 7.21).
+
+    Resampling (systematic, :func:`systematic_resample`): every step when ``resample_threshold`` is None
+    (basic SIR, Table 4.4); otherwise only when ``N_eff < resample_threshold * N`` (the thesis's "N_t = 0.5",
+    read as a fraction of N since N_eff >= 1; note 004, section 11.6).
+
+    ``weight_smoothing``: ``"sqrt"`` replaces the normalised weights by ``sqrt(w)`` renormalised before the
+    estimate, the N_eff test and the resampling, and carries them forward (the interpretation validated in
+    note 004, section 3.7; it tempers the likelihood). ``"sqrt_corrected"`` is the literature's generalised
+    resampling: draw with ``a = sqrt(w)`` and reweight the copies by ``w / a``. Both estimates use the
+    current weights (MMSE = weighted mean; MAP = the highest-weight particle).
+    """
+    if weight_smoothing not in WEIGHT_SMOOTHINGS:
+        raise ValueError(f"weight_smoothing must be one of {WEIGHT_SMOOTHINGS}, got {weight_smoothing!r}")
+    if n_particles < 1:
+        raise ValueError(f"n_particles must be positive, got {n_particles}")
+    if resample_threshold is not None and not 0.0 < resample_threshold <= 1.0:
+        raise ValueError(f"resample_threshold is a fraction of N in (0, 1], got {resample_threshold}")
+    rss_dbm = np.asarray(rss_dbm, dtype=float)
+    n_runs, n_steps, _ = rss_dbm.shape
+    lower, upper = (np.asarray(b, dtype=float) for b in region_m)
+    velocity = _velocity_schedule(velocity_m, n_steps)
+    shape = (n_runs, n_particles, 2)
+
+    def uniform():
+        return lower + (upper - lower) * rng.random(shape)
+
+    if initial_position_m is None:
+        particles = uniform()
+    else:
+        particles = np.broadcast_to(np.asarray(initial_position_m, float)[:, None, :], shape).copy()
+    log_w = np.full((n_runs, n_particles), -np.log(n_particles))
+    mmse = np.empty((n_runs, n_steps, 2))
+    best = np.empty((n_runs, n_steps, 2))
+    n_eff = np.empty((n_runs, n_steps))
+    resampled = np.zeros((n_runs, n_steps), dtype=bool)
+    for t in range(n_steps):
+        if t > 0:
+            if np.isinf(spread_m):
+                particles = uniform()
+            else:
+                particles = reflect_into_box(particles + velocity[t] + spread_m * rng.standard_normal(shape),
+                                             lower, upper)
+        w = _normalise_log(log_w + model.log_likelihood(rss_dbm[:, t], particles, t))
+        if weight_smoothing == "sqrt":
+            w = np.sqrt(w)
+            w /= w.sum(axis=-1, keepdims=True)
+        mmse[:, t] = np.einsum("rn,rnd->rd", w, particles)
+        best[:, t] = particles[np.arange(n_runs), np.argmax(w, axis=-1)]
+        draw_w = w
+        if weight_smoothing == "sqrt_corrected":
+            draw_w = np.sqrt(w)
+            draw_w /= draw_w.sum(axis=-1, keepdims=True)
+        n_eff[:, t] = effective_sample_size(draw_w)
+        do = (np.ones(n_runs, dtype=bool) if resample_threshold is None
+              else n_eff[:, t] < resample_threshold * n_particles)
+        resampled[:, t] = do
+        u = rng.random(n_runs)              # drawn for every run so the stream does not depend on `do`
+        if np.any(do):
+            idx = systematic_resample(draw_w[do], u[do], resampling_cdf)
+            particles[do] = particles[do][np.arange(idx.shape[0])[:, None], idx]
+            if weight_smoothing == "sqrt_corrected":
+                new_w = np.take_along_axis(w[do], idx, -1) / np.take_along_axis(draw_w[do], idx, -1)
+                w[do] = new_w / new_w.sum(axis=-1, keepdims=True)
+            else:
+                w[do] = 1.0 / n_particles
+        log_w = np.log(np.maximum(w, 1e-300))
+    return ParticleFilterResult(mmse, best, n_eff, resampled, particles, np.exp(log_w))

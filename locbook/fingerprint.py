@@ -1,0 +1,87 @@
+"""Nearest-neighbour fingerprinting in RSSI space (RADAR / LANDMARC style).
+
+A fingerprint map holds one RSSI vector per cell (``(C, m)`` for ``m`` readers). The target's RSSI vector
+``s`` is compared with every cell by the Euclidean distance in RSSI space (Ozkaya 2011, Eq. (3.1))
+
+    E_j = || R_j - s ||,
+
+the ``k`` nearest cells are kept, and the estimate is their weighted centroid (Eqs. (3.2)-(3.3))
+
+    x = sum_i w_i x_i,   w_i = (1/E_i^2) / sum_j (1/E_j^2).
+
+Eq. (3.3) as printed divides by ``sum_j E_j^2`` instead, which does not normalise the weights (a typo;
+note 004, section 3.5, validated against the simulation tables); it is kept as ``weighting="literal_004"``.
+
+Two ways to build the map (Ozkaya 2011, Sec. 3.1):
+- pattern based: the stored mean RSSI vector measured at each training location (:func:`pattern_fingerprints`);
+- parameter based: the path-loss model evaluated at each cell centre (:func:`model_fingerprints`),
+  Eq. (3.4) (printed as "3.14"), ``R_ij = alpha_i - 10 n_i log10(d_ij/d0) - c_ij WAF``.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .channel import PathLossModel, pairwise_distance_m, wall_crossings
+
+__all__ = ["KNN_WEIGHTINGS", "knn_position", "model_fingerprints", "pattern_fingerprints"]
+
+KNN_WEIGHTINGS = ("inverse_square", "literal_004", "uniform")
+
+
+def model_fingerprints(cells_m, readers_m, model: PathLossModel, walls_m=None, min_distance_m: float = 0.1):
+    """Parameter-based map: mean RSSI ``(..., C, m)`` of the model at cell centres ``(C, 2)``.
+
+    Model parameters broadcast against the reader axis; a leading batch axis on them (e.g. online
+    calibration per step, shape ``(..., m)``) gives one map per batch entry. Distances below
+    ``min_distance_m`` are clipped (a cell centre on a reader).
+    """
+    cells_m = np.asarray(cells_m, dtype=float)
+    distance = np.maximum(pairwise_distance_m(cells_m, readers_m), min_distance_m)
+    n_walls = 0 if walls_m is None else wall_crossings(cells_m, readers_m, walls_m)
+    ref = np.asarray(model.ref_power_dbm, float)[..., None, :] if np.ndim(model.ref_power_dbm) else model.ref_power_dbm
+    exp = np.asarray(model.path_loss_exp, float)[..., None, :] if np.ndim(model.path_loss_exp) else model.path_loss_exp
+    return (ref - 10.0 * exp * np.log10(distance / model.ref_distance_m)
+            - np.asarray(n_walls) * model.wall_attenuation_db)
+
+
+def pattern_fingerprints(rss_dbm, axis: int = -2):
+    """Pattern-based map: the mean RSSI vector of the training samples at each location.
+
+    ``rss_dbm`` has the samples on ``axis`` (default: shape ``(C, samples, m)``); Ozkaya keeps only the
+    mean of 40 vectors per location (Sec. 6.3).
+    """
+    return np.mean(np.asarray(rss_dbm, dtype=float), axis=axis)
+
+
+def knn_position(rss_dbm, fingerprints_dbm, cells_m, k: int, weighting: str = "inverse_square"):
+    """Weighted k-nearest-neighbour position, Eqs. (3.1)-(3.3) of Ozkaya (2011), weights corrected.
+
+    ``rss_dbm``: ``(..., m)`` target RSSI vectors; ``fingerprints_dbm``: ``(C, m)`` or ``(..., C, m)``
+    (one map per batch entry); ``cells_m``: ``(C, 2)``. Returns positions ``(..., 2)``.
+    ``k = C`` (all cells) is the weighted centroid used in the thesis's experiments.
+    """
+    if weighting not in KNN_WEIGHTINGS:
+        raise ValueError(f"weighting must be one of {KNN_WEIGHTINGS}, got {weighting!r}")
+    rss_dbm = np.asarray(rss_dbm, dtype=float)
+    fingerprints_dbm = np.asarray(fingerprints_dbm, dtype=float)
+    cells_m = np.asarray(cells_m, dtype=float)
+    n_cells = cells_m.shape[0]
+    if fingerprints_dbm.shape[-2] != n_cells:
+        raise ValueError(f"the map has {fingerprints_dbm.shape[-2]} cells but {n_cells} cell centres were given")
+    if not 1 <= k <= n_cells:
+        raise ValueError(f"k must be between 1 and the number of cells ({n_cells}), got {k}")
+    diff = fingerprints_dbm - rss_dbm[..., None, :]
+    dist2 = np.einsum("...ci,...ci->...c", diff, diff)                  # E_j^2, (..., C)
+    nearest = np.argpartition(dist2, k - 1, axis=-1)[..., :k] if k < n_cells else \
+        np.broadcast_to(np.arange(n_cells), dist2.shape)
+    e2 = np.take_along_axis(dist2, nearest, axis=-1)
+    if weighting == "uniform":
+        w = np.full(e2.shape, 1.0 / k)
+    else:
+        # an exact match (E = 0) takes all the weight: floor E^2 far below any real RSSI distance
+        inv = 1.0 / np.maximum(e2, 1e-300)
+        if weighting == "inverse_square":
+            w = inv / inv.sum(axis=-1, keepdims=True)
+        else:   # literal Eq. (3.3): (1/E_i^2) / sum_j E_j^2, not normalised
+            w = inv / e2.sum(axis=-1, keepdims=True)
+    return np.einsum("...k,...kd->...d", w, cells_m[nearest])

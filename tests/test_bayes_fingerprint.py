@@ -1,0 +1,229 @@
+"""Fingerprinting, grid Bayes and particle filters, reference-tag calibration and smoothing (document 004),
+against closed forms, brute force, independent loops and filterpy's resampler."""
+import numpy as np
+import pytest
+from scipy.stats import norm
+
+import locbook as lb
+
+READERS = np.array([[0.0, 0.0], [5.0, 0.0], [0.0, 8.0]])
+ROOM = (np.zeros(2), np.array([5.0, 8.0]))
+
+
+def _cells(step):
+    xs, ys = np.arange(step / 2, 5.0, step), np.arange(step / 2, 8.0, step)
+    gx, gy = np.meshgrid(xs, ys, indexing="ij")
+    return np.column_stack([gx.ravel(), gy.ravel()])
+
+
+# -- geometry helpers ----------------------------------------------------------------------------------
+def test_wall_crossings_counts_a_wall_between_rooms():
+    walls = [[[3.0, 0.0], [3.0, 4.0]]]
+    readers = np.array([[0.0, 0.0], [9.0, 4.0]])
+    pts = np.array([[1.0, 1.0], [5.0, 2.0], [3.0, 5.0]])       # small room, large room, beyond the wall's end
+    np.testing.assert_array_equal(lb.wall_crossings(pts, readers, walls), [[0, 1], [1, 0], [0, 0]])
+
+
+def test_reflect_into_box_folds_long_steps():
+    lo, hi = np.zeros(2), np.array([5.0, 8.0])
+    p = np.array([[-1.0, 9.0], [11.5, -17.0], [2.0, 3.0]])
+    # -1 -> 1; 9 -> 7; 11.5 -> 10 - 11.5 = -1.5 -> 1.5; -17 -> 17 - 16 = 1 (period 16)
+    np.testing.assert_allclose(lb.reflect_into_box(p, lo, hi), [[1.0, 7.0], [1.5, 1.0], [2.0, 3.0]])
+
+
+# -- nearest neighbour ---------------------------------------------------------------------------------
+def test_knn_inverse_square_weights_by_hand():
+    cells = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [5.0, 5.0]])
+    fp = np.array([[-50.0, -60.0], [-52.0, -60.0], [-50.0, -63.0], [-80.0, -80.0]])
+    s = np.array([-51.0, -60.0])
+    # E^2 = 1, 1, 10, ...: weights (1, 1, 0.1) / 2.1
+    expected = (cells[0] + cells[1] + 0.1 * cells[2]) / 2.1
+    np.testing.assert_allclose(lb.knn_position(s, fp, cells, k=3), expected, rtol=1e-12)
+    np.testing.assert_allclose(lb.knn_position(s, fp, cells, k=1)[0] in (0.0, 1.0), True)
+    # literal Eq. (3.3): (1/E^2) / sum E^2 = (1, 1, 0.1) / 12
+    np.testing.assert_allclose(lb.knn_position(s, fp, cells, k=3, weighting="literal_004"), 2.1 * expected / 12)
+
+
+def test_knn_exact_match_and_batched_maps():
+    cells = np.array([[0.0, 0.0], [1.0, 2.0], [3.0, 1.0]])
+    fp = np.array([[-40.0, -50.0], [-45.0, -55.0], [-60.0, -45.0]])
+    np.testing.assert_allclose(lb.knn_position(fp[1], fp, cells, k=3), cells[1])
+    maps = np.stack([fp, fp[::-1]])                    # one map per batch entry
+    out = lb.knn_position(np.stack([fp[0], fp[0]]), maps, cells, k=1)
+    np.testing.assert_allclose(out, [cells[0], cells[2]])
+    with pytest.raises(ValueError, match="k must be"):
+        lb.knn_position(fp[0], fp, cells, k=4)
+
+
+def test_model_fingerprints_match_path_loss_model():
+    model = lb.PathLossModel(np.array([-42.0, -52.0, -45.0]), np.array([2.3, 2.3, 2.5]), wall_attenuation_db=2.0)
+    cells = np.array([[1.0, 1.0], [4.0, 3.0]])
+    walls = [[[3.0, -1.0], [3.0, 9.0]]]
+    fp = lb.model_fingerprints(cells, READERS, model, walls)
+    expected = model.mean_power_dbm(lb.pairwise_distance_m(cells, READERS),
+                                    lb.wall_crossings(cells, READERS, walls))
+    np.testing.assert_allclose(fp, expected)
+
+
+# -- grid Bayes ----------------------------------------------------------------------------------------
+def _independent_likelihood(rss, cells, sigma):
+    d = np.maximum(np.linalg.norm(cells[:, None, :] - READERS[None], axis=-1), 0.1)
+    mean = -52.0 - 23.0 * np.log10(d)
+    return np.prod(norm.pdf(rss[None, :], mean, sigma), axis=-1)
+
+
+def test_grid_filter_with_uniform_transition_is_the_normalised_likelihood():
+    cells = _cells(1.0)
+    model = lb.RssMeasurementModel(READERS, -52.0, 2.3, 5.2)
+    rss = np.random.default_rng(3).normal(-70.0, 4.0, (2, 4, 3))
+    res = lb.grid_bayes_filter(rss, cells, model, spread_m=np.inf)
+    for r in range(2):
+        lik = _independent_likelihood(rss[r, -1], cells, 5.2)
+        np.testing.assert_allclose(res.belief[r], lik / lik.sum(), rtol=1e-10)
+        np.testing.assert_allclose(res.mmse_m[r, -1], (lik / lik.sum()) @ cells, rtol=1e-10)
+
+
+def test_grid_filter_recursion_equals_explicit_loop():
+    cells = _cells(1.0)
+    model = lb.RssMeasurementModel(READERS, -52.0, 2.3, 4.0)
+    rss = np.random.default_rng(4).normal(-68.0, 5.0, (1, 5, 3))
+    v = np.array([0.0, 0.5])
+    res = lb.grid_bayes_filter(rss, cells, model, spread_m=0.7, velocity_m=v)
+    bel = np.full(len(cells), 1.0 / len(cells))
+    for t in range(5):
+        if t:
+            new = np.zeros_like(bel)
+            for j, cj in enumerate(cells):                    # from cell j
+                k = norm.pdf(cells[:, 0], cj[0] + v[0], 0.7) * norm.pdf(cells[:, 1], cj[1] + v[1], 0.7)
+                new += bel[j] * k / k.sum()
+            bel = new
+        bel = bel * _independent_likelihood(rss[0, t], cells, 4.0)
+        bel /= bel.sum()
+    np.testing.assert_allclose(res.belief[0], bel, rtol=1e-9)
+    np.testing.assert_allclose(res.map_m[0, -1], cells[np.argmax(bel)])
+
+
+# -- resampling and particle filters --------------------------------------------------------------------
+def test_systematic_resample_matches_table_4_2_loop_and_filterpy(monkeypatch):
+    from filterpy.monte_carlo import resampling
+    rng = np.random.default_rng(5)
+    for _ in range(20):
+        n = int(rng.integers(2, 40))
+        w = rng.random(n) ** 3
+        w /= w.sum()
+        u = rng.random()
+        ours = lb.systematic_resample(w, u)
+        c, j, loop = np.cumsum(w), 0, []
+        for i in range(n):                                   # Table 4.2 with the standard CDF
+            ui = (u + i) / n
+            while ui > c[j]:
+                j += 1
+            loop.append(j)
+        np.testing.assert_array_equal(ours, loop)
+        monkeypatch.setattr(resampling, "random", lambda: u)
+        np.testing.assert_array_equal(ours, resampling.systematic_resample(w))
+
+
+def test_systematic_resample_rows_are_independent_and_literal_cdf_is_shifted():
+    w = np.array([[0.5, 0.25, 0.25], [0.1, 0.1, 0.8]])
+    np.testing.assert_array_equal(lb.systematic_resample(w, [0.0, 0.5]), [[0, 0, 1], [1, 2, 2]])   # u = 1/6, 1/2, 5/6 against c = .1, .2, 1
+    # printed CDF: c = (0, 0.25, 0.5): u = 0, 1/3, 2/3 -> first c_j >= u_i: 0, 2, past the end (clipped)
+    np.testing.assert_array_equal(lb.systematic_resample(w[0], 0.0, cdf="literal_004"), [0, 2, 2])
+
+
+def test_sir_converges_to_the_grid_posterior_mean():
+    # one update from a uniform prior: the grid posterior on a fine grid is the continuous one
+    model = lb.RssMeasurementModel(READERS, -52.0, 2.3, 5.2)
+    rss = np.array([[[-66.0, -70.0, -72.0]]])
+    grid = lb.grid_bayes_filter(rss, _cells(0.02), model, spread_m=np.inf)
+    pf = lb.particle_filter(np.repeat(rss, 20, axis=0), model, np.random.default_rng(6),
+                            n_particles=50_000, region_m=ROOM)
+    spread = np.sqrt(grid.belief[0] @ np.sum((_cells(0.02) - grid.mmse_m[0, 0]) ** 2, axis=-1))
+    se = spread / np.sqrt(50_000 * 20)
+    np.testing.assert_allclose(pf.mmse_m[:, 0].mean(axis=0), grid.mmse_m[0, 0], atol=6 * se + 2e-3)
+
+
+def test_sir_with_gaussian_prior_converges_to_the_grid_filter_over_steps():
+    # target mid-room with small noise: the posterior stays far from the walls, where reflection (PF) and
+    # truncation (grid) differ; a 0.1 m grid keeps discretisation (about 0.1^2/12 in variance) below the MC error
+    model = lb.RssMeasurementModel(READERS, -52.0, 2.3, 2.0)
+    truth = np.array([2.5, 4.0])
+    mean = model.mean_rss_dbm(truth[None])[0, 0]
+    rss = (mean + np.random.default_rng(7).normal(0, 2.0, (4, 3)))[None]
+    grid = lb.grid_bayes_filter(rss, _cells(0.1), model, spread_m=0.3)
+    pf = lb.particle_filter(np.repeat(rss, 40, axis=0), model, np.random.default_rng(8), n_particles=20_000,
+                            region_m=ROOM, spread_m=0.3, resample_threshold=0.5)
+    np.testing.assert_allclose(pf.mmse_m[:, -1].mean(axis=0), grid.mmse_m[0, -1], atol=0.01)   # D = 0.6 is 0.06 off
+
+
+def test_particle_filter_options_and_invariants():
+    model = lb.RssMeasurementModel(READERS, -52.0, 2.3, 5.2)
+    rss = np.random.default_rng(9).normal(-68.0, 5.0, (30, 6, 3))
+    kw = dict(n_particles=200, region_m=ROOM)
+    basic = lb.particle_filter(rss, model, np.random.default_rng(1), **kw)
+    assert basic.resampled.all()
+    again = lb.particle_filter(rss, model, np.random.default_rng(1), **kw)
+    np.testing.assert_array_equal(basic.mmse_m, again.mmse_m)        # same stream, same numbers
+    improved = lb.particle_filter(rss, model, np.random.default_rng(1), resample_threshold=0.5,
+                                  weight_smoothing="sqrt", **kw)
+    np.testing.assert_allclose(improved.weights.sum(-1), 1.0)
+    assert (improved.n_eff[improved.resampled] < 100).all() and (improved.n_eff[~improved.resampled] >= 100).all()
+    inner = (np.ones(2), np.array([4.0, 7.0]))
+    con = lb.particle_filter(rss, model, np.random.default_rng(1), n_particles=200, region_m=inner)
+    assert (con.particles_m >= 1.0).all() and (con.particles_m[..., 0] <= 4.0).all()
+    start = np.tile([2.0, 3.0], (30, 1))
+    known = lb.particle_filter(rss[:, :1], model, np.random.default_rng(1), initial_position_m=start, **kw)
+    np.testing.assert_allclose(known.mmse_m[:, 0], start)
+    with pytest.raises(ValueError, match="fraction of N"):
+        lb.particle_filter(rss, model, np.random.default_rng(1), resample_threshold=5.0, **kw)
+
+
+# -- reference tags --------------------------------------------------------------------------------------
+TAGS = np.array([[1.5, 1.5], [2.0, 3.0], [4.5, 1.5], [5.0, 3.0]])
+TB_READERS = np.array([[0.0, 0.0], [9.0, 4.0], [9.0, 0.0]])
+WALL = [[[3.0, 0.0], [3.0, 4.0]]]
+
+
+def test_online_calibration_equals_brute_force_grid_search():
+    rng = np.random.default_rng(10)
+    d = lb.pairwise_distance_m(TAGS, TB_READERS)
+    nw = lb.wall_crossings(TAGS, TB_READERS, WALL)
+    truth = np.array([-45.0, -49.0, -42.0]) - 10 * np.array([2.3, 2.7, 2.5]) * np.log10(d) - 2.0 * nw
+    obs = np.round(truth + rng.normal(0, 5.2, (3,) + truth.shape))              # 3 steps, 1 dB readers
+    cal = lb.calibrate_from_reference_tags(obs, TAGS, TB_READERS, walls_m=WALL, wall_attenuation_db=2.0)
+    alpha, n = np.meshgrid(np.arange(-55, -40 + 1e-9, 0.01), np.arange(1.5, 3 + 1e-9, 0.001), indexing="ij")
+    for s in range(3):
+        for j in range(3):
+            y = obs[s, :, j] + 2.0 * nw[:, j]
+            cost = ((y[None, None, :] - (alpha[..., None] - 10 * n[..., None] * np.log10(d[:, j]))) ** 2).sum(-1)
+            best = np.unravel_index(np.argmin(cost), cost.shape)
+            ours = ((y - (cal.ref_power_dbm[s, j] - 10 * cal.path_loss_exp[s, j] * np.log10(d[:, j]))) ** 2).sum()
+            assert ours <= cost[best] + 1e-6                                 # never worse than the grid
+            assert abs(cal.ref_power_dbm[s, j] - alpha[best]) <= 0.02
+            assert abs(cal.path_loss_exp[s, j] - n[best]) <= 0.002
+            assert -55 - 1e-7 <= cal.ref_power_dbm[s, j] <= -40 + 1e-7 and 1.5 - 1e-7 <= cal.path_loss_exp[s, j] <= 3 + 1e-7
+    resid = obs - cal.expected_dbm
+    np.testing.assert_allclose(cal.sigma_db, np.sqrt((resid**2).sum(axis=(-2, -1)) / 12))   # Eq. (6.7)
+
+
+def test_unbounded_online_calibration_is_the_closed_form():
+    d = lb.pairwise_distance_m(TAGS, TB_READERS)
+    obs = -50.0 - 22.0 * np.log10(d) + np.random.default_rng(11).normal(0, 3.0, d.shape)
+    cal = lb.calibrate_from_reference_tags(obs, TAGS, TB_READERS, ref_power_bounds_dbm=None, path_loss_exp_bounds=None)
+    cf = lb.fit_path_loss_closed_form(d.T, obs.T)
+    np.testing.assert_allclose(cal.ref_power_dbm, cf.ref_power_dbm, atol=1e-6)
+    np.testing.assert_allclose(cal.path_loss_exp, cf.path_loss_exp, atol=1e-6)
+
+
+def test_smooth_rssi_by_hand():
+    s = np.array([-60.0, -70.0, -65.0])
+    refs = np.array([[-60.0, -71.0, -65.0], [-80.0, -50.0, -70.0], [-75.0, -75.0, -75.0]])
+    expected = refs - np.array([[2.0, -1.0, 0.5], [0.0, 0.0, 0.0], [1.0, 1.0, 1.0]])
+    inv = 1.0 / np.array([1.0, 400 + 400 + 25, 225 + 25 + 100])
+    w = inv / inv.sum()
+    out, nearest, applied = lb.smooth_rssi(s, refs, expected)
+    assert nearest == 0 and applied
+    np.testing.assert_allclose(out, s - w[0] * np.array([2.0, -1.0, 0.5]))
+    same, _, applied = lb.smooth_rssi(s, refs, expected, threshold=0.999)
+    assert not applied
+    np.testing.assert_array_equal(same, s)

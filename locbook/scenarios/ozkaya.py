@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from ..bayes_filters import RssMeasurementModel, grid_bayes_filter, particle_filter
-from ..bounds import crlb_rms_over_area_m
+from ..bounds import crlb_rms_over_area_m, rss_crlb_m
 from ..fingerprint import knn_position, model_fingerprints
 from ..channel import PathLossModel
 from ..metrics import error_summary, position_error_m, rmse_standard_error_m
@@ -34,7 +34,9 @@ __all__ = [
     "ROOM_M", "LARGE_ROOM_M", "LAYOUTS", "CELL_PATTERNS", "ALPHA_DBM", "PATH_LOSS_EXP", "SIGMA_DB",
     "STATISTICS", "SimCase", "cell_centres", "readers_for", "room_for", "printed_tables", "printed_value",
     "simulate_truth_and_rss", "run_case", "simulation_cases", "thesis_crlb_m", "correct_crlb_m",
-    "case_seed_sequence",
+    "case_seed_sequence", "summarize", "run_tables", "record_tables", "table_view", "KNOWN_MISSES",
+    "GRID_RT_BY_SIGMA", "SIR_RT_BY_SIGMA", "RMSE_TOLERANCE_M", "CRLB_TOLERANCE_M", "miss_table",
+    "settling_step",
 ]
 
 ROOM_M = (5.0, 8.0)
@@ -133,6 +135,8 @@ class SimCase:
     resample_threshold: float | None = None
     weight_smoothing: str = "none"
     velocity_m: float = 0.5
+    alpha_dbm: float = ALPHA_DBM
+    path_loss_exp: float = PATH_LOSS_EXP
 
     def describe(self) -> str:
         base = SimCase(self.method)
@@ -147,10 +151,18 @@ def _region(kind: str, room_m):
     raise ValueError(f"region must be 'room' or 'inner', got {kind!r}")
 
 
+_TRUTH_FIELDS = ("target", "layout", "sigma0_db", "motion_m", "target_region", "velocity_m", "alpha_dbm",
+                 "path_loss_exp")
+
+
 def case_seed_sequence(seed: int, case: SimCase) -> np.random.SeedSequence:
-    """An independent stream per distinct setting: identical settings in different tables share numbers
-    (as the thesis's repeated rows do), and adding a case never shifts another's."""
-    digest = int.from_bytes(hashlib.sha256(repr(sorted(asdict(case).items())).encode()).digest()[:8], "little")
+    """The stream of a setting, keyed by what draws the truth and the RSSI (target protocol, layout, noise,
+    steps). Settings that differ only in the estimator (k_NN, cells, D, N, resampling, weights) therefore see
+    the same targets and noise: common random numbers, so a sweep's rows differ by the method alone, as the
+    thesis's repeated rows do. Adding a setting never shifts another's numbers."""
+    key = {f: getattr(case, f) for f in _TRUTH_FIELDS}
+    key["steps"] = 1 if case.method == "nn" else case.rt
+    digest = int.from_bytes(hashlib.sha256(repr(sorted(key.items())).encode()).digest()[:8], "little")
     return np.random.SeedSequence([seed, digest])
 
 
@@ -176,7 +188,7 @@ def simulate_truth_and_rss(case: SimCase, n_runs: int, rng: np.random.Generator)
             truth = np.broadcast_to(start[:, None, :], (n_runs, steps, 2))
         else:
             raise ValueError(f"unknown target protocol {case.target!r}")
-    model = RssMeasurementModel(readers, ALPHA_DBM, PATH_LOSS_EXP, case.sigma0_db)
+    model = RssMeasurementModel(readers, case.alpha_dbm, case.path_loss_exp, case.sigma0_db)
     mean = np.stack([model.mean_rss_dbm(truth[:, t:t + 1, :])[:, 0] for t in range(steps)], axis=1)
     noise_shape = (n_runs, 1 if case.target == "fixed" else steps, readers.shape[0])
     rss = mean + case.sigma0_db * rng.standard_normal(noise_shape)
@@ -190,11 +202,11 @@ def run_case(case: SimCase, n_runs: int, seed: int, *, return_all: bool = False)
     truth, rss = simulate_truth_and_rss(case, n_runs, rng)
     room = room_for(case.layout)
     readers = readers_for(case.layout)
-    filter_model = RssMeasurementModel(readers, ALPHA_DBM, PATH_LOSS_EXP, case.sigma_db)
+    filter_model = RssMeasurementModel(readers, case.alpha_dbm, case.path_loss_exp, case.sigma_db)
     if case.method in ("nn", "grid"):
         cells = cell_centres(room, *CELL_PATTERNS[case.k_cell])
     if case.method == "nn":
-        fp = model_fingerprints(cells, readers, PathLossModel(ALPHA_DBM, PATH_LOSS_EXP))
+        fp = model_fingerprints(cells, readers, PathLossModel(case.alpha_dbm, case.path_loss_exp))
         estimate = knn_position(rss, fp, cells, case.k_nn)
     elif case.method == "grid":
         velocity = (0.0, case.velocity_m) if case.known_velocity else None
@@ -233,11 +245,23 @@ def _area_points(room_m, step_m: float = 0.05):
     return np.column_stack([gx.ravel(), gy.ravel()])
 
 
-def thesis_crlb_m(layout: str, sigma_db: float, path_loss_exp: float = 2.0) -> float:
-    """The thesis's CRLB columns: Eqs. (A.10)-(A.13) as printed (1/d^2, flagged ``ozkaya_printed``) with
-    n = 2, RMS over the room (note 004, section 3.9, validated to 0.80 / 0.64 m)."""
+def thesis_crlb_m(layout: str, sigma_db: float, path_loss_exp: float = 2.0, average: str = "cells_mean") -> float:
+    """The thesis's CRLB columns: Eqs. (A.10)-(A.13) as printed (1/d^2, flagged ``ozkaya_printed``) with n = 2
+    (note 004, section 3.9).
+
+    How the thesis averaged the bound over target positions is not stated. ``"cells_mean"`` (default) is the
+    mean of the per-position bound over the 1 m grid cells of the layout's room (28 cells in 5 x 8 m); it gives
+    0.7999 / 0.6392 m for 3 / 4 corner readers at 5.2 dB, and 0.1538 m per dB, i.e. every printed value
+    0.15 / 0.46 / 0.80 / 1.08 / 1.38 / 1.70. ``"area_rms"`` is the note's reading (RMS over uniformly spread
+    positions; 0.818 / 0.640 m).
+    """
     room = room_for(layout)
-    return crlb_rms_over_area_m(_area_points(room), readers_for(layout), path_loss_exp, sigma_db, "ozkaya_printed")
+    if average == "cells_mean":
+        points = cell_centres(room, int(room[0]) - 1, int(room[1]) - 1)
+        return float(np.mean(rss_crlb_m(points, readers_for(layout), path_loss_exp, sigma_db, "ozkaya_printed")))
+    if average == "area_rms":
+        return crlb_rms_over_area_m(_area_points(room), readers_for(layout), path_loss_exp, sigma_db, "ozkaya_printed")
+    raise ValueError(f"average must be 'cells_mean' or 'area_rms', got {average!r}")
 
 
 def correct_crlb_m(layout: str, sigma_db: float, path_loss_exp: float = PATH_LOSS_EXP) -> float:
@@ -328,3 +352,136 @@ def simulation_cases() -> list[tuple[str, str, str | None, SimCase]]:
     add(("7.46", "Basic SIR", None, _SIR))
     add(("7.46", "Improved SIR", None, replace(_SIR, **_IMPROVED)))
     return cases
+
+
+# -- running and recording tables -------------------------------------------------------------------
+#: Acceptance for the simulation tables (issue 3): the protocol is a reconstruction (note 004, section 4.3:
+#: "within about 0.1 m"), and both the thesis's and our 1000-run RMSEs carry a Monte-Carlo standard error of
+#: about 0.02-0.04 m; 0.15 m covers the two together.
+RMSE_TOLERANCE_M = 0.15
+#: The thesis prints its CRLB to 0.01 m; the printed-form bound is deterministic here.
+CRLB_TOLERANCE_M = 0.02
+_BASIS = ("protocol reconstructed in note 004 s.4.3 (about 0.1 m) plus Monte-Carlo error of 1000-run "
+          "statistics in the thesis and here (about 0.03 m each)")
+
+#: Why a printed simulation cell is expected to be missed (empty for cells that should match).
+KNOWN_MISSES = {
+    ("7.5", "Half of default (2.5 m, 4 m)"): (
+        "reader positions of Fig. 7.6 are not printed; the guessed layout (note 004 s.4.2) is not the thesis's, and "
+        "its printed CRLB 0.76 cannot come from the scale-invariant printed formula either"),
+    ("7.19", "Uniform over the area"): (
+        "the thesis's 'uniform proposal' is not a memoryless uniform draw (which ignores all motion and gives about "
+        "1.75 m; note 004 s.11.8); its exact form is not stated"),
+    ("7.20", "Gaussian, zero mean, D = 0.5 / const. vel."): (
+        "constant-velocity protocol not fully stated (start x range, whether particles start uniform, step count); "
+        "note 004 s.11.9 gets the same 1.6 m"),
+    ("7.20", "Gaussian, mean = known velocity, D = 0.5 / const. vel."): (
+        "constant-velocity protocol not fully stated (note 004 s.11.9: about 0.97 m with the same reading)"),
+    ("7.21", "Gaussian, mean = known velocity, D = 0.5 / const. vel."): (
+        "same case as Table 7.20 row 1 (constant-velocity protocol not fully stated)"),
+    ("7.21", "same + initial location known / const. vel."): (
+        "constant-velocity protocol not fully stated; with a known start this reading beats the thesis"),
+}
+_NN_LARGE_K = ("weighted-centroid NN with many neighbours: our error rises with k faster than the thesis's (the "
+               "thesis's curve is flat beyond k = 10). Target sampling (whole room; the cell core gives the opposite "
+               "trend) and weights (normalised 1/E^2, validated at k = 4 and k = 68) do not explain it")
+for _k in ("15", "20", "23", "25", "28"):
+    KNOWN_MISSES[("7.4", _k)] = _NN_LARGE_K
+for _s in ("3", "5.2", "7", "9"):
+    KNOWN_MISSES[("7.3", _s)] = ("parameter-based NN errors come out 0.05-0.15 m below the thesis's at every sigma_0 "
+                                 "(the reading note found the same: 1.36/1.87/2.19/2.49 vs 1.38/1.95/2.29/2.57); the "
+                                 "thesis's NN has some extra error source that is not described")
+for _k in ("1", "2", "3", "4", "5", "6", "7"):
+    KNOWN_MISSES[("7.4", _k)] = ("few-neighbour NN errors come out 0.1-0.2 m below the thesis's (note 004 s.4.3: "
+                                  "k = 1 gives 1.97 vs 2.17); the cause is not known")
+
+
+def run_tables(tables, n_runs: int, seed: int, **overrides) -> list[dict]:
+    """Run every case of the given tables (e.g. ``["7.1", "7.2"]``) and return long-form rows
+    ``table, row, column, printed, reproduced, rmse_se_m, case`` for every printed statistic. Identical
+    settings are simulated once. ``overrides`` replace :class:`SimCase` fields in every case (e.g.
+    ``n_particles=500``); fields a case does not use are ignored by it."""
+    wanted = {str(t) for t in tables}
+    cache: dict = {}
+    rows = []
+    for table, row, column, case in simulation_cases():
+        if table not in wanted:
+            continue
+        case = replace(case, **overrides)
+        if case not in cache:
+            cache[case] = summarize(run_case(case, n_runs, seed))
+        res = cache[case]
+        columns = [column] if column else [c for c in STATISTICS if printed_value(table, row, c) is not None]
+        for col in columns:
+            stat = "rmse_m" if col.startswith("rmse_m") else col
+            rows.append({"table": table, "row": row, "column": col, "printed": printed_value(table, row, col),
+                         "reproduced": res[stat], "rmse_se_m": res["rmse_se_m"] if stat == "rmse_m" else None,
+                         "case": case})
+        crlb = printed_value(table, row, "crlb_m")
+        if crlb is not None:
+            rows.append({"table": table, "row": row, "column": "crlb_m", "printed": crlb,
+                         "reproduced": thesis_crlb_m(case.layout, case.sigma0_db), "rmse_se_m": None, "case": case})
+    for table in ("7.7", "7.14"):
+        if table in wanted:
+            for s in (1.0, 3.0, 5.2):
+                col = f"rmse_m@sigma={s:g}"
+                rows.append({"table": table, "row": "CRLB", "column": col, "printed": printed_value(table, "CRLB", col),
+                             "reproduced": thesis_crlb_m("corners3", s), "rmse_se_m": None, "case": None})
+    return rows
+
+
+def record_tables(report, rows) -> dict:
+    """Record every row in the report (``where`` = table, row, column) and return the RMSE-cell score."""
+    n_rmse = n_within = 0
+    rmse_by_row = {(r["table"], r["row"]): r for r in rows if r["column"] == "rmse_m"}
+    for r in rows:
+        is_crlb = r["column"] == "crlb_m" or r["row"] == "CRLB"
+        tol = CRLB_TOLERANCE_M if is_crlb else RMSE_TOLERANCE_M
+        note = KNOWN_MISSES.get((r["table"], r["row"]), "") if not is_crlb else (
+            "thesis-compatible CRLB: printed Eqs. (A.10)-(A.12) (1/d^2, flagged) with n = 2")
+        if is_crlb and r["reproduced"] is not None and abs(r["reproduced"] - r["printed"]) > tol:
+            note = ("not reproducible: the printed CRLB formula is scale-invariant, so this value cannot come from it "
+                    "(note 004 s.3.9); layout or formula unknown")
+        if not is_crlb and not note and not r["column"].startswith("rmse_m"):
+            rmse = rmse_by_row.get((r["table"], r["row"]))
+            if rmse is not None and abs(rmse["reproduced"] - rmse["printed"]) <= RMSE_TOLERANCE_M:
+                note = ("the row's RMSE is within tolerance; the shape of the error distribution differs (here "
+                        "typically a higher median and a lower 90th percentile than printed, i.e. fewer large "
+                        "errors); the thesis does not say how it computed percentiles")
+        row = report.number(
+            "CRLB (thesis form)" if is_crlb else r["column"], f"Table {r['table']}, row {r['row']}, column {r['column']}",
+            r["printed"], r["reproduced"], unit="m", tolerance=tol,
+            tolerance_basis="the thesis prints two decimals" if is_crlb else _BASIS,
+            mc_std_error=r["rmse_se_m"], note=note)
+        if r["column"].startswith("rmse_m") and not is_crlb:
+            n_rmse += 1
+            n_within += bool(row["within_tolerance"])
+    return {"rmse_cells": n_rmse, "within": n_within, "fraction": n_within / n_rmse if n_rmse else float("nan")}
+
+
+def table_view(rows, table: str) -> list[dict]:
+    """One display row per printed row: printed / reproduced side by side for each column."""
+    out: dict = {}
+    for r in rows:
+        if r["table"] != table:
+            continue
+        d = out.setdefault(r["row"], {"row": r["row"]})
+        d[r["column"] + " printed"] = r["printed"]
+        d[r["column"] + " ours"] = round(r["reproduced"], 2)
+    return list(out.values())
+
+
+def miss_table(report) -> list[dict]:
+    """Every recorded number outside its tolerance, with the reason (or "unexplained")."""
+    return [{"where": r["where"], "printed": r["reported"], "reproduced": round(r["reproduced"], 3),
+             "reason": r["note"] or "unexplained"}
+            for r in report.numbers if r["within_tolerance"] is False]
+
+
+def settling_step(mean_error_m, tolerance_m: float = 0.1) -> int:
+    """First recursion (1-based) from which the mean error stays within ``tolerance_m`` of its final value:
+    the thesis reads settling times off Figs. 7.7-7.9 and 7.12-7.14 without defining them."""
+    e = np.asarray(mean_error_m, float)
+    inside = np.abs(e - e[-1]) <= tolerance_m
+    outside = np.flatnonzero(~inside)
+    return int(outside[-1] + 2) if outside.size else 1

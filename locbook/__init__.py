@@ -21,7 +21,7 @@ from .bayes_filters import (RESAMPLING_CDFS, WEIGHT_SMOOTHINGS, GridFilterResult
 from .bounds import CRLB_FORMS, crlb_rms_over_area_m, rss_crlb_m, rss_fisher_information
 from .calibration import CALIBRATION_MODES, PathLossFit, calibrate_path_loss, fit_path_loss, fit_path_loss_closed_form
 from .channel import (AT86RF230_ED_OFFSET_DB, CC2420_RSSI_OFFSET_DB, PathLossModel, correlated_shadowing_db,
-                      dbm_to_register, pairwise_distance_m, quantize_db, register_to_dbm, wall_crossings)
+                      dbm_to_register, pairwise_distance_m, quantize_db, register_to_dbm, small_scale_fading_db, wall_crossings)
 from .errors import ConvergenceError, DegenerateGeometryError, LocbookError, ParameterError
 from .fingerprint import KNN_WEIGHTINGS, knn_position, model_fingerprints, pattern_fingerprints
 from .filters import KF_VARIANTS, KalmanResult, kalman_filter
@@ -39,7 +39,7 @@ __all__ = [
     "__version__",
     # channel
     "PathLossModel", "CC2420_RSSI_OFFSET_DB", "AT86RF230_ED_OFFSET_DB", "register_to_dbm", "dbm_to_register",
-    "quantize_db", "pairwise_distance_m", "correlated_shadowing_db", "wall_crossings",
+    "quantize_db", "pairwise_distance_m", "correlated_shadowing_db", "wall_crossings", "small_scale_fading_db",
     # calibration
     "PathLossFit", "fit_path_loss", "fit_path_loss_closed_form", "calibrate_path_loss", "CALIBRATION_MODES",
     # static localization

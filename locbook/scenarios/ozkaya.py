@@ -36,7 +36,8 @@ __all__ = [
     "simulate_truth_and_rss", "run_case", "simulation_cases", "thesis_crlb_m", "correct_crlb_m",
     "case_seed_sequence", "summarize", "run_tables", "record_tables", "table_view", "KNOWN_MISSES",
     "GRID_RT_BY_SIGMA", "SIR_RT_BY_SIGMA", "RMSE_TOLERANCE_M", "CRLB_TOLERANCE_M", "miss_table",
-    "settling_step",
+    "settling_step", "LITERATURE_TABLES", "OFFLINE_PARAMETERS", "AUTO_PARAMETERS", "R3_CALIBRATION_DISTANCES_M",
+    "TESTBED_SIZE_M", "TESTBED_WALLS_M", "TESTBED_READERS_M", "REFERENCE_TAGS_M", "READER_SENSITIVITY_DBM", "WAF_DB",
 ]
 
 ROOM_M = (5.0, 8.0)
@@ -485,3 +486,45 @@ def settling_step(mean_error_m, tolerance_m: float = 0.1) -> int:
     inside = np.abs(e - e[-1]) <= tolerance_m
     outside = np.flatnonzero(~inside)
     return int(outside[-1] + 2) if outside.size else 1
+
+
+# -- Chapters 5-6: literature constants, calibration, the test bed -----------------------------------
+#: Tables 5.1-5.3 (from Rappaport and Seidel & Rappaport, quoted in the thesis).
+LITERATURE_TABLES = {
+    "5.1": [
+        {"environment": "Retail store", "frequency_mhz": 914, "path_loss_exp": 2.2, "sigma_db": 8.7},
+        {"environment": "Office, hard partition", "frequency_mhz": 1500, "path_loss_exp": 3.0, "sigma_db": 7.0},
+        {"environment": "Office, soft partition", "frequency_mhz": 1900, "path_loss_exp": 2.6, "sigma_db": 14.1},
+        {"environment": "Chemical factory (obstructed)", "frequency_mhz": 4000, "path_loss_exp": 2.1, "sigma_db": 9.7},
+        {"environment": "Chemical factory (LOS)", "frequency_mhz": 4000, "path_loss_exp": 2.1, "sigma_db": 7.0},
+        {"environment": "Suburban home", "frequency_mhz": 900, "path_loss_exp": 3.0, "sigma_db": 7.0},
+    ],
+    "5.2": [
+        {"floors": "one", "building_1_db": 16.2, "building_2_db": 12.9},
+        {"floors": "two", "building_1_db": 27.5, "building_2_db": 18.7},
+        {"floors": "three", "building_1_db": 31.6, "building_2_db": 24.4},
+    ],
+    "5.3": [
+        {"partition": "elevator", "attenuation_db": 23.0}, {"partition": "building wall", "attenuation_db": 3.0},
+        {"partition": "wooden door with windows", "attenuation_db": 1.0},
+        {"partition": "separating floors", "attenuation_db": 22.0},
+    ],
+}
+#: Table 6.1, offline calibration per reader: alpha (dBm), n, WAF (dB), sigma (dB).
+OFFLINE_PARAMETERS = {"alpha_dbm": (-42.0, -52.0, -45.0), "path_loss_exp": (2.3, 2.3, 2.5), "waf_db": 2.0,
+                      "sigma_db": (5.3, 5.2, 5.0)}
+#: Table 6.2, automatic calibration with the reference tags (static environment): one pooled sigma.
+AUTO_PARAMETERS = {"alpha_dbm": (-45.0, -49.0, -42.0), "path_loss_exp": (2.3, 2.7, 2.5), "sigma_db": 5.3}
+#: Fig. 6.6 (Reader 3): same-room distances, then other-room distances (one wall).
+R3_CALIBRATION_DISTANCES_M = ((1.0, 1.5, 2.0, 2.5, 3.0), (3.8, 5.0, 6.0))
+READER_SENSITIVITY_DBM = -90.0
+WAF_DB = 2.0
+
+#: Synthetic two-room test bed (note 004 s.6.1, every coordinate ASSUMED: the plan exists only in figures):
+#: small room x in [0, 3], large room x in [3, 9], both y in [0, 4], brick wall at x = 3.
+TESTBED_SIZE_M = (9.0, 4.0)
+TESTBED_WALLS_M = (((3.0, 0.0), (3.0, 4.0)),)
+#: R1, R2 in the large room, R3 in the small room, at corners (Sec. 6.1).
+TESTBED_READERS_M = ((9.0, 4.0), (9.0, 0.0), (0.0, 0.0))
+#: T1, T2 in the small room and T3, T4 in the large room, toward the centre of the area (Sec. 7.3.1).
+REFERENCE_TAGS_M = ((1.5, 1.5), (2.0, 3.0), (4.5, 1.5), (5.0, 3.0))

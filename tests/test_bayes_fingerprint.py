@@ -227,3 +227,24 @@ def test_smooth_rssi_by_hand():
     same, _, applied = lb.smooth_rssi(s, refs, expected, threshold=0.999)
     assert not applied
     np.testing.assert_array_equal(same, s)
+
+
+# -- document 004 scenario facts ---------------------------------------------------------------------------
+def test_thesis_crlb_sweep_reproduces_every_printed_value():
+    from locbook.scenarios import ozkaya as oz
+    printed = {1.0: 0.15, 3.0: 0.46, 5.2: 0.80, 7.0: 1.08, 9.0: 1.38, 11.0: 1.70}
+    for sigma, value in printed.items():
+        assert abs(oz.thesis_crlb_m("corners3", sigma) - value) <= 0.02
+    assert abs(oz.thesis_crlb_m("corners4", 5.2) - 0.64) <= 0.02
+    # the correct bound is several times larger (note 004 s.3.9: about 3.4-3.7 m)
+    assert 3.0 < oz.correct_crlb_m("corners3", 5.2) < 4.0
+
+
+def test_small_scale_fading_has_unit_mean_power_and_deep_fades():
+    rng = np.random.default_rng(12)
+    x = np.linspace(0, 50, 20000)
+    rayleigh = lb.small_scale_fading_db(x, 0.33, rng)
+    assert np.mean(10 ** (rayleigh / 10)) == pytest.approx(1.0, abs=0.1)
+    assert rayleigh.min() < -20.0                      # Rayleigh: fades beyond 20 dB over many wavelengths
+    rician = lb.small_scale_fading_db(x, 0.33, rng, k_factor=10.0)
+    assert rician.min() > rayleigh.min()

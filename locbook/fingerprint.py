@@ -19,6 +19,8 @@ Two ways to build the map (Ozkaya 2011, Sec. 3.1):
 """
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from .channel import PathLossModel, pairwise_distance_m, wall_crossings
@@ -38,10 +40,12 @@ def model_fingerprints(cells_m, readers_m, model: PathLossModel, walls_m=None, m
     cells_m = np.asarray(cells_m, dtype=float)
     distance = np.maximum(pairwise_distance_m(cells_m, readers_m), min_distance_m)
     n_walls = 0 if walls_m is None else wall_crossings(cells_m, readers_m, walls_m)
-    ref = np.asarray(model.ref_power_dbm, float)[..., None, :] if np.ndim(model.ref_power_dbm) else model.ref_power_dbm
-    exp = np.asarray(model.path_loss_exp, float)[..., None, :] if np.ndim(model.path_loss_exp) else model.path_loss_exp
-    return (ref - 10.0 * exp * np.log10(distance / model.ref_distance_m)
-            - np.asarray(n_walls) * model.wall_attenuation_db)
+
+    def per_cell(value):   # (..., m) parameters -> (..., 1, m), so they broadcast over the cell axis
+        return np.asarray(value, float)[..., None, :] if np.ndim(value) else value
+
+    batched = replace(model, ref_power_dbm=per_cell(model.ref_power_dbm), path_loss_exp=per_cell(model.path_loss_exp))
+    return batched.mean_power_dbm(distance, n_walls)
 
 
 def pattern_fingerprints(rss_dbm, axis: int = -2):

@@ -22,7 +22,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .calibration import PathLossFit, fit_path_loss
-from .channel import pairwise_distance_m, wall_crossings
+from .channel import PathLossModel, pairwise_distance_m, wall_crossings
+from .fingerprint import model_fingerprints
 
 __all__ = ["OnlineCalibration", "calibrate_from_reference_tags", "pooled_sigma_db", "smooth_rssi",
            "OZKAYA_REF_POWER_BOUNDS_DBM", "OZKAYA_PATH_LOSS_EXP_BOUNDS"]
@@ -67,7 +68,8 @@ def calibrate_from_reference_tags(ref_rss_dbm, ref_positions_m, readers_m, *, wa
                         np.swapaxes(compensated, -1, -2),
                         ref_power_bounds_dbm=ref_power_bounds_dbm, path_loss_exp_bounds=path_loss_exp_bounds)
     ref, exp = fit.ref_power_dbm, fit.path_loss_exp                                 # (..., m)
-    expected = ref[..., None, :] - 10.0 * exp[..., None, :] * np.log10(distance) - wall_loss
+    expected = model_fingerprints(ref_positions_m, readers_m, PathLossModel(ref, exp, wall_attenuation_db=wall_attenuation_db),
+                                  walls_m)
     sigma = pooled_sigma_db(ref_rss_dbm - expected)
     return OnlineCalibration(ref, exp, sigma, expected, fit)
 

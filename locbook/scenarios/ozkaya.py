@@ -190,7 +190,7 @@ def simulate_truth_and_rss(case: SimCase, n_runs: int, rng: np.random.Generator)
         else:
             raise ValueError(f"unknown target protocol {case.target!r}")
     model = RssMeasurementModel(readers, case.alpha_dbm, case.path_loss_exp, case.sigma0_db)
-    mean = np.stack([model.mean_rss_dbm(truth[:, t:t + 1, :])[:, 0] for t in range(steps)], axis=1)
+    mean = model.mean_rss_dbm(truth)                                    # (R, T, m): steps as positions
     noise_shape = (n_runs, 1 if case.target == "fixed" else steps, readers.shape[0])
     rss = mean + case.sigma0_db * rng.standard_normal(noise_shape)
     return np.asarray(truth), rss

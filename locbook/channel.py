@@ -182,11 +182,15 @@ def wall_crossings(points_m, anchors_m, walls_m):
     def cross(o, a, b):   # z of (a - o) x (b - o)
         return (a[..., 0] - o[..., 0]) * (b[..., 1] - o[..., 1]) - (a[..., 1] - o[..., 1]) * (b[..., 0] - o[..., 0])
 
-    p = points_m[..., None, :]       # (..., 1, 2)
+    px, py = points_m[..., 0, None], points_m[..., 1, None]      # (..., 1)
     for w0, w1 in walls_m:
-        side_p, side_a = cross(w0, w1, p), cross(w0, w1, anchors_m)            # which side of the wall line
-        side_w0, side_w1 = cross(p, anchors_m, w0), cross(p, anchors_m, w1)    # which side of the path line
-        count += ((side_p * side_a < 0) & (side_w0 * side_w1 < 0)).astype(int)
+        side_p, side_a = cross(w0, w1, points_m)[..., None], cross(w0, w1, anchors_m)   # which side of the wall line
+        # which side of the path line each wall end lies on: (a - p) x (w - p) = a x w + p x (a - w), linear in p
+        sides = []
+        for w in (w0, w1):
+            aw = anchors_m - w
+            sides.append((anchors_m[:, 0] * w[1] - anchors_m[:, 1] * w[0]) + px * aw[:, 1] - py * aw[:, 0])
+        count += (sides[0] * sides[1] < 0) & (side_p * side_a < 0)
     return count
 
 

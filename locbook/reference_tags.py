@@ -45,19 +45,27 @@ class OnlineCalibration:
     fit: PathLossFit
 
 
-def pooled_sigma_db(residual_db, axis=(-2, -1)):
-    """Eq. (6.7) of Ozkaya (2011): root mean square of all tag-reader residuals (divides by K m)."""
-    return np.sqrt(np.mean(np.square(residual_db), axis=axis))
+def pooled_sigma_db(residual_db, axis=(-2, -1), ddof: int = 0):
+    """Eq. (6.7) of Ozkaya (2011): root mean square of all tag-reader residuals, dividing by ``K m`` as printed
+    (``ddof = 0``). With 4 tags and 2 fitted parameters per reader this estimates ``sigma / sqrt(2)`` for
+    Gaussian residuals; ``ddof = 2 m`` (the fitted parameters) gives the degrees-of-freedom-corrected variant."""
+    sq = np.square(np.asarray(residual_db, float))
+    count = np.prod([sq.shape[a] for a in np.atleast_1d(axis)])
+    if count - ddof <= 0:
+        raise ValueError(f"ddof = {ddof} leaves no degrees of freedom for {count} residuals")
+    return np.sqrt(np.sum(sq, axis=axis) / (count - ddof))
 
 
 def calibrate_from_reference_tags(ref_rss_dbm, ref_positions_m, readers_m, *, walls_m=None,
                                   wall_attenuation_db: float = 0.0,
                                   ref_power_bounds_dbm=OZKAYA_REF_POWER_BOUNDS_DBM,
-                                  path_loss_exp_bounds=OZKAYA_PATH_LOSS_EXP_BOUNDS) -> OnlineCalibration:
+                                  path_loss_exp_bounds=OZKAYA_PATH_LOSS_EXP_BOUNDS,
+                                  sigma_ddof: int = 0) -> OnlineCalibration:
     """Fit every reader at every step from the reference tags' RSSI ``(..., K, m)`` (K tags, m readers).
 
     WAF stays at its a-priori value (Sec. 6.2); the known wall loss ``nW_ij WAF`` is added back to the
-    observations before the fit. Pass ``None`` bounds for the unconstrained fit.
+    observations before the fit. Pass ``None`` bounds for the unconstrained fit. ``sigma_ddof``: see
+    :func:`pooled_sigma_db` (0 = Eq. (6.7) as printed).
     """
     ref_rss_dbm = np.asarray(ref_rss_dbm, dtype=float)
     distance = pairwise_distance_m(ref_positions_m, readers_m)                     # (K, m)
@@ -70,7 +78,7 @@ def calibrate_from_reference_tags(ref_rss_dbm, ref_positions_m, readers_m, *, wa
     ref, exp = fit.ref_power_dbm, fit.path_loss_exp                                 # (..., m)
     expected = model_fingerprints(ref_positions_m, readers_m, PathLossModel(ref, exp, wall_attenuation_db=wall_attenuation_db),
                                   walls_m)
-    sigma = pooled_sigma_db(ref_rss_dbm - expected)
+    sigma = pooled_sigma_db(ref_rss_dbm - expected, ddof=sigma_ddof)
     return OnlineCalibration(ref, exp, sigma, expected, fit)
 
 

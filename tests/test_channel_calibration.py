@@ -5,7 +5,7 @@ import pytest
 from scipy.optimize import lsq_linear
 
 import locbook as lb
-from locbook.calibration import _stacked_problem, path_loss_design_matrix
+from locbook.calibration import path_loss_design_matrix
 
 
 def test_mean_power_and_range_inversion():
@@ -68,9 +68,18 @@ def test_cvxpy_fit_equals_normal_equations_and_lstsq(cal_data):
         np.testing.assert_allclose(closed.covariance[i], s2 * np.linalg.inv(m.T @ m), rtol=1e-10)
 
 
-def test_stacked_problem_is_dpp():
-    problem, _, _ = _stacked_problem((3, 4), None, (1.5, 3.0))
-    assert problem.is_dpp()
+def test_stacked_fit_drops_missing_samples():
+    # NaN powers are left out of their own problem only: each problem equals LAPACK on its observed samples
+    rng = np.random.default_rng(5)
+    d = rng.uniform(1.0, 8.0, (3, 5))
+    p = -48.0 - 22.0 * np.log10(d) + rng.normal(0.0, 2.0, d.shape)
+    p[0, 1] = p[2, 4] = np.nan
+    fit = lb.fit_path_loss(d, p)
+    for i in range(3):
+        keep = np.isfinite(p[i])
+        t = np.linalg.lstsq(path_loss_design_matrix(d[i, keep]), p[i, keep], rcond=None)[0]
+        np.testing.assert_allclose([fit.ref_power_dbm[i], fit.path_loss_exp[i]], t, atol=1e-6)
+    assert fit.n_samples.tolist() == [4, 5, 4]
 
 
 def test_noiseless_recovery_every_mode():

@@ -351,7 +351,9 @@ class ExperimentResult:
 
 def _run_experiment(name, testbed, truth_m, methods, settings, pattern_map, rng_ss: np.random.SeedSequence, *,
                     velocity_m=None, burst_probability=None, extra_loss_db=None) -> ExperimentResult:
-    meas_ss, *method_ss = rng_ss.spawn(1 + len(methods))
+    # one stream per method name, so running a subset of methods does not change any method's numbers
+    meas_ss, *children = rng_ss.spawn(1 + len(METHODS))
+    method_ss = dict(zip(METHODS, children))
     target, tags = measure_sessions(testbed, truth_m, np.random.default_rng(meas_ss),
                                     burst_probability=burst_probability, extra_loss_db=extra_loss_db)
     z, s, t, m = target.shape
@@ -364,8 +366,8 @@ def _run_experiment(name, testbed, truth_m, methods, settings, pattern_map, rng_
     result = ExperimentResult(name, np.asarray(truth_m, float), online_sigma_db=cal.sigma_db.reshape(z, s, t),
                               online_alpha_dbm=cal.ref_power_dbm.reshape(z, s, t, m),
                               online_path_loss_exp=cal.path_loss_exp.reshape(z, s, t, m), target_rss_dbm=target)
-    for key, ss in zip(methods, method_ss):
-        est = _estimate(METHODS[key], rss, tag_rss, cal, settings, fp, velocity_m, ss).reshape(z, s, t, 2)
+    for key in methods:
+        est = _estimate(METHODS[key], rss, tag_rss, cal, settings, fp, velocity_m, method_ss[key]).reshape(z, s, t, 2)
         result.estimates[key] = est
         result.errors[key] = position_error_m(est, result.truth_m)
     return result
@@ -417,9 +419,9 @@ def run_testbed(n_realizations: int, seed: int, *, channel: TestbedChannel = Tes
                 replace(channel, noise_scale=channel.noise_scale * monopole_noise_scale), n_realizations,
                 np.random.default_rng(mono_ss))
             subs = []
-            for i, (path_name, path) in enumerate(MOBILE_PATHS_M.items()):
+            for path, path_ss in zip(MOBILE_PATHS_M.values(), exp_ss[name].spawn(len(MOBILE_PATHS_M))):
                 truth = np.repeat(path[None], mobile_passes, axis=0)
-                subs.append(_run_experiment(name, bed, truth, pick(name), settings, None, exp_ss[name].spawn(2)[i],
+                subs.append(_run_experiment(name, bed, truth, pick(name), settings, None, path_ss,
                                             velocity_m=MOBILE_VELOCITY_M))
             out[name] = _merge_paths(name, subs)
             continue

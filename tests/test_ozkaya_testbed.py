@@ -1,0 +1,122 @@
+"""The synthetic test bed of Ozkaya (2011) Sec. 7.3: the channel's noise structure, the reference-tag wiring,
+and the mapping of printed cells, checked against the model's definition and least-squares theory."""
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+import locbook as lb
+from locbook.scenarios import ozkaya as oz
+from locbook.scenarios import ozkaya_testbed as tb
+
+QUIET = tb.TestbedChannel(static_sigma_db=0.0, orientation_sigma_db=0.0, dynamic_sigma_db=0.0, burst_probability=0.0,
+                          resolution_db=None, floor_dbm=-np.inf)
+
+
+def test_pooled_sigma_eq_6_7_is_half_the_variance_and_the_dof_variant_is_unbiased():
+    # linear LS theory: E[SSR] = sigma^2 (N - p). Four tags, three readers, two parameters per reader:
+    # Eq. (6.7) (divide by 12) estimates sigma^2 / 2; dividing by 12 - 6 is unbiased.
+    rng = np.random.default_rng(3)
+    sigma, steps = 3.0, 5000
+    tags, readers = np.asarray(oz.REFERENCE_TAGS_M), np.asarray(oz.TESTBED_READERS_M)
+    mean = lb.model_fingerprints(tags, readers, lb.PathLossModel(-45.0, 2.3))
+    obs = mean + sigma * rng.standard_normal((steps,) + mean.shape)
+    kw = dict(ref_power_bounds_dbm=None, path_loss_exp_bounds=None)
+    printed = lb.calibrate_from_reference_tags(obs, tags, readers, **kw).sigma_db ** 2
+    corrected = lb.calibrate_from_reference_tags(obs, tags, readers, sigma_ddof=6, **kw).sigma_db ** 2
+    se = sigma**2 * np.sqrt(2 / 6) / np.sqrt(steps)          # sigma_hat^2 ~ sigma^2 chi2_6 / 6
+    assert abs(corrected.mean() - sigma**2) < 4 * se
+    assert abs(printed.mean() - sigma**2 / 2) < 4 * se / 2
+    with pytest.raises(ValueError, match="degrees of freedom"):
+        lb.pooled_sigma_db(np.zeros((4, 3)), ddof=12)
+
+
+def test_channel_variance_components_match_the_model():
+    # static field shared by visits of the same point, orientation per visit, dynamic per reading
+    ch = replace(QUIET, static_sigma_db=4.0, orientation_sigma_db=1.5, dynamic_sigma_db=3.0)
+    z, t = 3000, 6
+    bed = tb.draw_testbed(ch, z, np.random.default_rng(1))
+    a, b = (1.0, 1.0), (2.75, 1.0)                            # two fixed points 1.75 m apart
+    positions = np.repeat(np.array([a, a, b])[:, None, :], t, axis=1)     # visits: a twice, then b
+    target, tags = tb.measure_sessions(bed, positions, np.random.default_rng(2))
+    resid = target - ch.mean_rss_dbm(positions.reshape(-1, 2)).reshape(3, t, 3)
+    within = resid.var(axis=2, ddof=1).mean()
+    assert within == pytest.approx(9.0, rel=0.03)                         # dynamic^2
+    visit_mean = resid.mean(axis=2)                                       # (Z, 3 visits, m)
+    cov = lambda u, v: np.mean((u - u.mean(0)) * (v - v.mean(0)))
+    var_visit = 16.0 + 1.5**2 + 9.0 / t
+    assert visit_mean[:, 0].var() == pytest.approx(var_visit, rel=0.05)
+    assert cov(visit_mean[:, 0], visit_mean[:, 1]) == pytest.approx(16.0, rel=0.08)                 # same point
+    assert cov(visit_mean[:, 0], visit_mean[:, 2]) == pytest.approx(16.0 * np.exp(-1.75 / 1.5), rel=0.15)
+    tag_resid = tags - ch.mean_rss_dbm(oz.REFERENCE_TAGS_M)
+    assert tag_resid.var() == pytest.approx(ch.total_sigma_db**2, rel=0.05)
+    assert ch.total_sigma_db == pytest.approx(np.sqrt(16 + 2.25 + 9))
+
+
+def test_bursts_hit_every_tag_of_a_reader_at_once():
+    ch = replace(QUIET, burst_probability=0.5)
+    bed = tb.draw_testbed(ch, 50, np.random.default_rng(4))
+    positions = np.repeat(np.asarray(tb.FIXED_POINTS_M)[:, None, :], 4, axis=1)
+    target, tags = tb.measure_sessions(bed, positions, np.random.default_rng(5))
+    loss = target - ch.mean_rss_dbm(positions.reshape(-1, 2)).reshape(positions.shape[:2] + (3,))
+    tag_loss = tags - ch.mean_rss_dbm(oz.REFERENCE_TAGS_M)
+    np.testing.assert_allclose(tag_loss, np.broadcast_to(loss[..., None, :], tag_loss.shape), atol=1e-9)
+    hit = loss < 0
+    assert 0.45 < hit.mean() < 0.55
+    assert np.all((loss[hit] <= -5.0) & (loss[hit] >= -10.0))
+
+
+def test_noise_free_online_calibration_recovers_the_channel_and_absorbs_an_obstruction():
+    bed = tb.draw_testbed(QUIET, 2, np.random.default_rng(0))
+    positions = np.repeat(np.array([[4.5, 2.5]])[:, None, :], 3, axis=1)
+    extra = np.array([[3.0, 0.0, 1.0], [0.0, 2.0, 0.0]])
+    _, tags = tb.measure_sessions(bed, positions, np.random.default_rng(1), extra_loss_db=extra)
+    cal = lb.calibrate_from_reference_tags(tags, oz.REFERENCE_TAGS_M, oz.TESTBED_READERS_M,
+                                           walls_m=oz.TESTBED_WALLS_M, wall_attenuation_db=oz.WAF_DB)
+    alpha = np.asarray(oz.OFFLINE_PARAMETERS["alpha_dbm"]) - extra                # still inside [-55, -40]
+    np.testing.assert_allclose(cal.ref_power_dbm, np.broadcast_to(alpha[:, None, None], cal.ref_power_dbm.shape), atol=1e-4)
+    np.testing.assert_allclose(cal.path_loss_exp, np.broadcast_to(oz.OFFLINE_PARAMETERS["path_loss_exp"],
+                                                                  cal.path_loss_exp.shape), atol=1e-5)
+    np.testing.assert_allclose(cal.sigma_db, 0.0, atol=1e-4)
+    # without noise the online map is the offline map, so online NN = offline NN
+    res = tb.run_testbed(2, 7, channel=QUIET, experiments=["fixed"], methods=["offline_nn", "online_nn"], fixed_steps=2)
+    np.testing.assert_allclose(res["fixed"].estimates["online_nn"], res["fixed"].estimates["offline_nn"], atol=1e-4)
+
+
+def test_every_printed_cell_maps_to_a_method_the_experiment_runs():
+    printed = [r for r in oz.printed_tables() if len(r["table"]) == 4 and "7.26" <= r["table"] <= "7.44"]
+    # counted from note 004 s.7: 10+15+14+15+15+3+10+10+2+10+2+10+2+15+49 (7.40 lacks one std)+35+35+6+4
+    assert len(tb.TABLE_CELLS) == len(printed) == 262
+    for (table, row, column), (experiment, method, stat) in tb.TABLE_CELLS.items():
+        base = "fixed" if experiment == "fixed_near_tags" else experiment
+        assert method in tb.EXPERIMENTS[base], (table, row)
+        assert stat == column
+    assert tb.TABLE_CELLS[("7.40", "monopole / Grid Bayes", "rmse_m")] == ("monopole", "grid", "rmse_m")
+    assert tb.TABLE_CELLS[("7.28", "Offline NN obstructed readers", "mean_m")] == ("obstructed", "offline_nn", "mean_m")
+    for where, better, worse, experiment, stat in tb.RANKINGS:
+        assert better != worse and stat in oz.STATISTICS
+
+
+def test_near_tag_points_by_hand():
+    mask = tb.near_tag_mask(np.array([[1.5, 2.9], [3.0, 3.0], [8.0, 1.0], [6.25, 1.0]]))
+    # (1.5, 2.9): 0.64 m from T2; (3, 3): 1 m from T2; (8, 1): 3.5 m from T3; (6.25, 1): 1.82 m from T3
+    assert mask.tolist() == [True, True, False, False]
+
+
+def test_run_testbed_is_reproducible_and_subsets_do_not_change_numbers():
+    settings = tb.MethodSettings(n_particles=200)
+    kw = dict(settings=settings, fixed_steps=4, mobile_passes=2, pattern_samples=5)
+    full = tb.run_testbed(2, 11, **kw)
+    again = tb.run_testbed(2, 11, **kw)
+    part = tb.run_testbed(2, 11, experiments=["mobile", "obstructed"], methods=["sir", "grid"], **kw)
+    for name, res in full.items():
+        for key, est in res.estimates.items():
+            np.testing.assert_array_equal(est, again[name].estimates[key])
+    for name in ("mobile", "obstructed"):
+        for key, est in part[name].estimates.items():
+            np.testing.assert_array_equal(est, full[name].estimates[key])
+    rows = tb.table_rows(full)
+    assert {r["table"] for r in rows} == {t for t, _, _ in tb.TABLE_CELLS}
+    assert all(np.isfinite(r["reproduced"]) and r["tolerance_m"] > 0 for r in rows)
+    with pytest.raises(ValueError, match="unknown experiments"):
+        tb.run_testbed(1, 0, experiments=["fixd"])

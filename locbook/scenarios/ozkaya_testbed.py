@@ -38,7 +38,8 @@ __all__ = [
     "TESTBED_CELLS_M", "FIXED_POINTS_M", "PATTERN_EXCLUDED_CELLS_M", "PATTERN_LOCATIONS_M", "MOBILE_PATHS_M",
     "DYNAMIC_POINTS_M", "OBSTRUCTION_POINTS_M", "NEAR_TAG_RADIUS_M", "MONOPOLE_NOISE_SCALE",
     "Testbed", "draw_testbed", "measure_sessions", "measure_pattern_map", "ExperimentResult", "run_testbed",
-    "per_realization_statistics", "table_rows", "ranking_rows", "TESTBED_TOLERANCE_BASIS",
+    "per_realization_statistics", "table_rows", "ranking_rows", "TESTBED_TOLERANCE_BASIS", "miss_note", "ranking_note",
+    "near_tag_mask", "METHOD_LABELS", "MOBILE_VELOCITY_M",
 ]
 
 #: 36 cells of 1 m (k_CELL = 36, Sec. 7.3.1): centres (i + 0.5, j + 0.5), i = 0..8, j = 0..3.
@@ -618,3 +619,77 @@ def _ranking_row(where, claim, experiment, stat, printed, diff):
     return {"where": where, "claim": claim, "experiment": experiment, "statistic": stat,
             "printed_difference_m": round(printed, 4), "reproduced_difference_m": mean, "se_m": se,
             "holds": mean > 0, "significant": bool(abs(mean) > 2 * se)}
+
+
+# -- why printed numbers and rankings are missed ------------------------------------------------------------
+_FILTER_FIXED = ("fixed target: the thesis's Bayesian filters are its worst fixed-target methods (grid Bayes 2.04 m), while "
+                 "here they average 30 readings with fresh dynamic noise and beat NN. A real home's static errors are not "
+                 "a log-distance mean plus a smooth Gaussian field (furniture, multipath nulls, orientation), so the "
+                 "filters' 5.2 dB Gaussian likelihood accumulates evidence for a wrong cell; the synthetic channel has "
+                 "no such model error. Whether the thesis restarted the filter at each point is not stated either")
+_SMALL_K = ("few neighbours: the thesis's k = 4 and 18 errors have heavy tails (90 % at 3.6 / 2.95 m) that the synthetic "
+            "Gaussian-plus-burst noise does not produce; one outlying link moves a few-neighbour estimate to a wrong cell")
+_PATTERN = ("pattern NN median 0.9 m against a mean of 1.16 m means many estimates land on a training location; a weighted "
+            "centroid over all 32 locations (k_NN = 36 capped at 32) cannot do that. The thesis may have used fewer neighbours "
+            "for the pattern method")
+_NEAR_TAGS = ("points near the reference tags: the thesis's grid Bayes is worse there (2.13 m) than overall (1.77 m mean), ours "
+              "is not; the tag and test-point coordinates are assumed, and the filters' fixed-target gap applies as well")
+_MONOPOLE = ("monopole antennas are modelled only by scaling the noise (7.5 / 5.3); the real change (vertical polarisation, "
+             "more multipath, different pattern) is not a scaled copy of the patch channel")
+_DYNAMIC = ("the dynamic-noise experiment's disturbance (people around target and readers) is modelled as reader-wide "
+            "bursts with probability 0.3 per step; its size and kind are assumed")
+_SIGMA = ("online sigma of Eq. (6.7) (no degrees-of-freedom correction) is about 3.7 dB here for a true 5.2 dB, so the "
+          "online-sigma filters are overconfident; the thesis's online sigma was 5.3 dB (Table 6.2)")
+
+
+def miss_note(experiment: str, method: str, column: str) -> str:
+    """Likely reason a printed cell of Tables 7.26-7.44 falls outside the single-test-bed tolerance."""
+    est = METHODS[method].estimator
+    if experiment == "fixed_near_tags":
+        return _NEAR_TAGS
+    if experiment == "monopole":
+        return _MONOPOLE
+    if experiment == "dynamic":
+        return _DYNAMIC
+    if method == "pattern_nn":
+        return _PATTERN
+    if method in ("offline_nn_k4", "offline_nn_k18"):
+        return _SMALL_K
+    if experiment == "fixed" and est in ("grid", "sir"):
+        return _FILTER_FIXED
+    if METHODS[method].online_sigma:
+        return _SIGMA
+    return "unexplained: the synthetic test bed differs from the home in a way this model does not capture"
+
+
+_RANKING_NOTES = (
+    ("Table 7.27", "here the error is lowest near k = 18 (about k_CELL / 2), as in the thesis's own simulations; the "
+                   "thesis's test bed found k = 36 better by 0.02 m, and the thesis itself remarks that this contradicts "
+                   "its simulation"),
+    ("Table 7.28", "the synthetic home's mean channel is Table 6.1 itself, so the offline map is exact and the per-step "
+                   "4-tag fits only add noise; online calibration wins where reader-wide offsets occur (dynamic noise, "
+                   "obstruction: both hold). The thesis's home differed from its offline calibration (Table 6.2 vs 6.1 "
+                   "differ by about 3 dB per reader): see the sensitivity run with the home set to Table 6.2"),
+    ("Table 7.29", _FILTER_FIXED),
+    ("Table 7.30", "grid Bayes and improved SIR are within a few centimetres here; the thesis's own simulations also rank "
+                   "improved SIR behind grid Bayes for a mobile target (1.37 vs 1.22 m, Sec. 7.2.3), so this ranking is "
+                   "not reproduced in simulation by the thesis either"),
+    ("Table 7.31", "within a few centimetres here (see Table 7.30); " + _DYNAMIC),
+    ("Table 7.32", _SIGMA), ("Table 7.33", _SIGMA), ("Table 7.34", _SIGMA), ("Table 7.39", _SIGMA),
+    ("Table 7.40 (monopole)", _SIGMA + "; with the monopole the true spread is 7.4 dB, yet Eq. (6.7) gives about 5.5 dB, "
+                              "close to the fixed 5.2 dB, so online sigma gains nothing"),
+    ("Table 7.42", _SIGMA),
+    ("Table 7.35", "smoothing subtracts a nearby tag's error; the error a target shares with a tag here is the static field "
+                   "(correlation exp(-d / 1.5 m)) and reader-wide bursts. The thesis's gains (0.17-0.58 m) imply errors "
+                   "shared far more strongly near the tags than this model has"),
+)
+
+
+def ranking_note(where: str, claim: str) -> str:
+    """Likely reason a printed ranking does not hold on the synthetic test bed."""
+    if "smoothing" in claim and "sigma" not in claim:
+        return dict(_RANKING_NOTES)["Table 7.35"]
+    for prefix, note in _RANKING_NOTES:
+        if where.startswith(prefix):
+            return note
+    return "unexplained"

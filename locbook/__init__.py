@@ -9,7 +9,7 @@ The public API, by role:
 - fingerprinting: weighted k-NN over pattern or model RSSI maps
 - Bayes filters: grid-based Bayes and (improved) SIR particle filters, systematic resampling
 - reference tags: online bounded calibration, pooled sigma, RSSI smoothing
-- bounds: static RSS CRLB (correct and Ozkaya's printed form)
+- bounds: static RSS CRLB (correct and Ozkaya's printed form); posterior CRLB for filtering (Tichavsky)
 - metrics and Monte-Carlo helpers
 - report: :class:`Report`, what a notebook records
 """
@@ -29,6 +29,8 @@ from .localization import (LocalizationResult, check_anchor_geometry, grid_ml_po
                            lateration_ls, lateration_system, lateration_wls, rss_ml_position)
 from .metrics import (empirical_cdf, error_std_m, error_summary, mean_error_m, median_error_m, percentile_error_m,
                       position_error_m, reduction_pct, rmse_m, rmse_standard_error_m)
+from .pcrlb import (PCRLB_FORMS, linear_measurement_information, position_bound_m, posterior_crlb,
+                    rss_state_information)
 from .montecarlo import mc_standard_error, spawn_generators, streams
 from .motion import KinematicModel, constant_acceleration, constant_velocity, reflect_into_box
 from .reference_tags import (OZKAYA_PATH_LOSS_EXP_BOUNDS, OZKAYA_REF_POWER_BOUNDS_DBM, OnlineCalibration,
@@ -58,6 +60,7 @@ __all__ = [
     "OnlineCalibration", "calibrate_from_reference_tags", "pooled_sigma_db", "smooth_rssi",
     "OZKAYA_REF_POWER_BOUNDS_DBM", "OZKAYA_PATH_LOSS_EXP_BOUNDS",
     # bounds
+    "posterior_crlb", "position_bound_m", "rss_state_information", "linear_measurement_information", "PCRLB_FORMS",
     "rss_fisher_information", "rss_crlb_m", "crlb_rms_over_area_m", "CRLB_FORMS",
     # metrics and Monte Carlo
     "position_error_m", "mean_error_m", "rmse_m", "median_error_m", "percentile_error_m", "error_std_m",

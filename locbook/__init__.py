@@ -18,7 +18,7 @@ __version__ = "0.1.0"
 from .bayes_filters import (RESAMPLING_CDFS, WEIGHT_SMOOTHINGS, GridFilterResult, ParticleFilterResult,
                             RssMeasurementModel, effective_sample_size, grid_bayes_filter, grid_transition_matrix,
                             particle_filter, systematic_resample)
-from .bounds import CRLB_FORMS, crlb_rms_over_area_m, rss_crlb_m, rss_fisher_information
+from .bounds import CRLB_FORMS, crlb_rms_over_area_m, rss_crlb_m, rss_fisher_information, rss_position_information
 from .calibration import CALIBRATION_MODES, PathLossFit, calibrate_path_loss, fit_path_loss, fit_path_loss_closed_form
 from .channel import (AT86RF230_ED_OFFSET_DB, CC2420_RSSI_OFFSET_DB, PathLossModel, correlated_shadowing_db,
                       dbm_to_register, pairwise_distance_m, quantize_db, register_to_dbm, small_scale_fading_db, wall_crossings)
@@ -61,7 +61,7 @@ __all__ = [
     "OZKAYA_REF_POWER_BOUNDS_DBM", "OZKAYA_PATH_LOSS_EXP_BOUNDS",
     # bounds
     "posterior_crlb", "position_bound_m", "rss_state_information", "linear_measurement_information", "PCRLB_FORMS",
-    "rss_fisher_information", "rss_crlb_m", "crlb_rms_over_area_m", "CRLB_FORMS",
+    "rss_fisher_information", "rss_position_information", "rss_crlb_m", "crlb_rms_over_area_m", "CRLB_FORMS",
     # metrics and Monte Carlo
     "position_error_m", "mean_error_m", "rmse_m", "median_error_m", "percentile_error_m", "error_std_m",
     "empirical_cdf", "reduction_pct", "error_summary", "rmse_standard_error_m", "spawn_generators", "streams", "mc_standard_error",

@@ -18,26 +18,43 @@ import numpy as np
 from .errors import DegenerateGeometryError
 from .localization import check_anchor_geometry
 
-__all__ = ["rss_fisher_information", "rss_crlb_m", "crlb_rms_over_area_m", "CRLB_FORMS"]
+__all__ = ["rss_fisher_information", "rss_position_information", "rss_crlb_m", "crlb_rms_over_area_m", "CRLB_FORMS"]
 
 CRLB_FORMS = ("correct", "ozkaya_printed")
 
 
-def rss_fisher_information(position_m, anchors_m, path_loss_exp, sigma_db, form: str = "correct"):
+def rss_fisher_information(position_m, anchors_m, path_loss_exp, sigma_db, form: str = "correct", *,
+                           min_distance_m: float = 0.0, height_offset_m: float = 0.0):
     """Fisher information ``(..., 2, 2)`` of the position from RSS at ``position_m`` ``(..., 2)``.
 
-    ``path_loss_exp`` and ``sigma_db`` may be scalars or per-anchor arrays ``(m,)``.
+    ``path_loss_exp`` and ``sigma_db`` may be scalars or per-anchor arrays ``(m,)``. The anchors must resolve a
+    position on their own (at least 3, not collinear); :func:`rss_position_information` is the same formula
+    without that check, for bounds where a prior or a motion model supplies the rest (the posterior CRLB).
+    """
+    return rss_position_information(position_m, check_anchor_geometry(anchors_m), path_loss_exp, sigma_db, form,
+                                    min_distance_m=min_distance_m, height_offset_m=height_offset_m)
+
+
+def rss_position_information(position_m, anchors_m, path_loss_exp, sigma_db, form: str = "correct", *,
+                             min_distance_m: float = 0.0, height_offset_m: float = 0.0):
+    """``beta^2 sum_j (p - a_j)(p - a_j)^T / d_j^4``, ``beta = 10 n / (sigma ln 10)``, for any anchors ``(m, 2)``.
+
+    ``E[1/d^2]`` diverges for position densities positive at an anchor (note 000 s.2.10), so two regularisations
+    are offered: ``height_offset_m`` (antenna height difference, ``d^2 = |p - a|^2 + h^2``, the exact information
+    of that model) and ``min_distance_m`` (the gradient's ``1/d`` factor capped at ``1/d_min``, the model's
+    validity limit). ``form="ozkaya_printed"`` uses ``d^2`` in the denominator (flagged, see module docstring).
     """
     if form not in CRLB_FORMS:
         raise ValueError(f"form must be one of {CRLB_FORMS}, got {form!r}")
-    anchors_m = check_anchor_geometry(anchors_m)
-    diff = np.asarray(position_m, dtype=float)[..., None, :] - anchors_m  # (..., m, 2)
-    d2 = np.einsum("...i,...i->...", diff, diff)
+    diff = np.asarray(position_m, dtype=float)[..., None, :] - np.asarray(anchors_m, dtype=float)  # (..., m, 2)
+    d2 = np.einsum("...i,...i->...", diff, diff) + height_offset_m**2
     if np.any(d2 == 0):
-        raise DegenerateGeometryError("the RSS Fisher information is undefined at an anchor position (d = 0)")
+        raise DegenerateGeometryError("the RSS Fisher information is undefined at an anchor position (d = 0); "
+                                      "give height_offset_m (antenna height difference)")
     gain = (10.0 * np.asarray(path_loss_exp, float) / (np.asarray(sigma_db, float) * np.log(10.0))) ** 2
     gain = np.broadcast_to(gain, d2.shape)
-    denom = d2**2 if form == "correct" else d2     # d^4 (correct) or d^2 (as printed in Ozkaya A.10-A.12)
+    capped = np.maximum(d2, min_distance_m**2)     # the gradient's 1/d capped at 1/d_min; its direction kept
+    denom = d2 * capped if form == "correct" else capped   # d^4 (correct) or d^2 (as printed in Ozkaya A.10-A.12)
     return np.einsum("...j,...ji,...jk->...ik", gain / denom, diff, diff)
 
 

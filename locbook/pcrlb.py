@@ -20,6 +20,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from .bounds import rss_position_information
+from .filters import _mT
+
 __all__ = ["posterior_crlb", "position_bound_m", "rss_state_information", "linear_measurement_information",
            "PCRLB_FORMS"]
 
@@ -28,10 +31,6 @@ PCRLB_FORMS = ("tichavsky", "riccati")
 
 def _inv(a):
     return np.linalg.inv(a)
-
-
-def _mT(a):
-    return np.swapaxes(a, -1, -2)
 
 
 def posterior_crlb(prior_information, F, Q, measurement_information, *, form: str = "tichavsky"):
@@ -84,24 +83,13 @@ def rss_state_information(states, anchors_m, path_loss_exp, sigma_db, position_i
                           min_distance_m: float = 0.0, height_offset_m: float = 0.0):
     """Fisher information of RSS from every anchor about the full state, ``(..., n, n)`` for states ``(..., n)``.
 
-    ``Lambda(x) = H(x)^T R^{-1} H(x)`` (Dogan Eq. (4.19)) with ``H`` the Jacobian of
-    ``P0 - 10 alpha log10 d_j`` and ``R = sigma^2 I``: ``beta^2 sum_j (p - a_j)(p - a_j)^T / d_j^4`` in the position
-    block, ``beta = 10 alpha / (sigma ln 10)``. ``E[1/d^2]`` diverges for densities positive at an anchor (note 000
-    s.2.10), so two regularisations are offered: ``height_offset_m`` (antenna height difference,
-    ``d^2 = |p - a|^2 + h^2``, the exact Jacobian of that model) and ``min_distance_m`` (the gradient's ``1/d``
-    factor is capped at ``1/d_min``, the model's validity limit).
+    ``Lambda(x) = H(x)^T R^{-1} H(x)`` (Dogan Eq. (4.19)), ``R = sigma^2 I``: the static RSS information
+    (:func:`locbook.bounds.rss_position_information`, with its near-anchor regularisations) in the position block.
     """
     states = np.asarray(states, dtype=float)
     idx = np.asarray(position_index)
-    diff = states[..., None, idx] - np.asarray(anchors_m, dtype=float)                # (..., m, 2)
-    d2 = np.einsum("...i,...i->...", diff, diff) + height_offset_m**2
-    if np.any(d2 == 0):
-        raise ValueError("RSS information is infinite at an anchor; give height_offset_m or min_distance_m")
-    # gradient of h_j wrt position: -(10 alpha / ln 10) (p - a_j) / d^2, with 1/d capped at 1/d_min
-    scale = np.minimum(1.0 / np.sqrt(d2), 1.0 / min_distance_m if min_distance_m > 0 else np.inf)
-    grad = diff / np.sqrt(d2)[..., None] * scale[..., None]                            # u_j / max(d, d_min)
-    beta2 = (10.0 * np.asarray(path_loss_exp, float) / (np.asarray(sigma_db, float) * np.log(10.0))) ** 2
-    block = np.einsum("...j,...ji,...jk->...ik", np.broadcast_to(beta2, d2.shape), grad, grad)
+    block = rss_position_information(states[..., idx], anchors_m, path_loss_exp, sigma_db,
+                                     min_distance_m=min_distance_m, height_offset_m=height_offset_m)
     out = np.zeros(states.shape + (states.shape[-1],))
     out[..., idx[:, None], idx[None, :]] = block
     return out

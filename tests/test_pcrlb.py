@@ -130,5 +130,5 @@ def test_rss_information_regularisations():
     lifted = lb.rss_state_information(state, anchors, 3.0, 6.0, idx, height_offset_m=1.2)
     d2 = 0.25 + 1.44
     np.testing.assert_allclose(lifted[np.ix_(idx, idx)], beta2 * np.outer([0.3, 0.4], [0.3, 0.4]) / d2**2)
-    with pytest.raises(ValueError, match="infinite at an anchor"):
+    with pytest.raises(lb.DegenerateGeometryError, match="undefined at an anchor"):
         lb.rss_state_information(np.zeros(6), anchors, 3.0, 6.0, idx)

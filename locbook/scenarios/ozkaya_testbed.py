@@ -27,7 +27,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..bayes_filters import RssMeasurementModel, grid_bayes_filter, particle_filter
-from ..channel import PathLossModel, correlated_shadowing_db, pairwise_distance_m, quantize_db, wall_crossings
+from ..channel import PathLossModel, correlated_shadowing_db, pairwise_distance_m, quantize_db
 from ..fingerprint import knn_position, model_fingerprints
 from ..metrics import position_error_m
 from ..reference_tags import calibrate_from_reference_tags, smooth_rssi
@@ -123,12 +123,9 @@ class TestbedChannel:
 
     def mean_rss_dbm(self, points_m):
         """Mean RSSI ``(P, m)`` at points ``(P, 2)``: Eq. (6.3)/(6.4) with the wall at x = 3 m."""
-        readers = np.asarray(oz.TESTBED_READERS_M)
-        walls = np.asarray(oz.TESTBED_WALLS_M)
-        distance = np.maximum(pairwise_distance_m(points_m, readers), 0.1)
         model = PathLossModel(np.asarray(self.ref_power_dbm, float), np.asarray(self.path_loss_exp, float),
                               wall_attenuation_db=self.waf_db)
-        return model.mean_power_dbm(distance, wall_crossings(points_m, readers, walls))
+        return model_fingerprints(points_m, oz.TESTBED_READERS_M, model, oz.TESTBED_WALLS_M)
 
 
 @dataclass(frozen=True)

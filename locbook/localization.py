@@ -160,6 +160,26 @@ def _rss_residual_jacobian(pos, anchors, power, model: PathLossModel, min_distan
     return resid, jac, d2
 
 
+def _min_eigenvalue(a):
+    """Smallest eigenvalue of symmetric ``(..., k, k)`` matrices (closed form for 2 x 2, which is
+    an order of magnitude faster than batched LAPACK on tiny matrices)."""
+    if a.shape[-1] == 2:
+        half_tr = 0.5 * (a[..., 0, 0] + a[..., 1, 1])
+        half_diff = 0.5 * (a[..., 0, 0] - a[..., 1, 1])
+        return half_tr - np.sqrt(half_diff**2 + a[..., 0, 1] ** 2)
+    return np.linalg.eigvalsh(a)[..., 0]
+
+
+def _solve_small(a, b):
+    """Solve ``a x = b`` for ``(..., k, k)`` and ``(..., k)`` (Cramer's rule for 2 x 2)."""
+    if a.shape[-1] == 2:
+        det = a[..., 0, 0] * a[..., 1, 1] - a[..., 0, 1] * a[..., 1, 0]
+        x0 = (a[..., 1, 1] * b[..., 0] - a[..., 0, 1] * b[..., 1]) / det
+        x1 = (a[..., 0, 0] * b[..., 1] - a[..., 1, 0] * b[..., 0]) / det
+        return np.stack([x0, x1], axis=-1)
+    return np.linalg.solve(a, b[..., None])[..., 0]
+
+
 def _newton_matrix(resid, jac, d2, pos, anchors, model):
     """Hessian of 0.5 |r|^2: J^T J + sum_j r_j grad^2 r_j, with
     grad^2 r_j = c (I / d_j^2 - 2 (p - a_j)(p - a_j)^T / d_j^4), c = 10 n / ln 10. Falls back to the
@@ -172,7 +192,7 @@ def _newton_matrix(resid, jac, d2, pos, anchors, model):
     hr = c[..., None, None] * (eye / d2[..., None, None]
                                 - 2.0 * diff[..., :, None] * diff[..., None, :] / (d2**2)[..., None, None])
     full = jtj + np.einsum("...k,...kij->...ij", resid, hr)
-    eig_min = np.linalg.eigvalsh(full)[..., 0]
+    eig_min = _min_eigenvalue(full)
     return np.where((eig_min > 1e-9 * np.trace(jtj, axis1=-2, axis2=-1))[..., None, None], full, jtj)
 
 
@@ -185,50 +205,56 @@ def rss_ml_position(anchors_m, power_dbm, model: PathLossModel, initial_m=None, 
     up to the factor ``(10 n)^{-2}`` (note 000, section 2.3). The problem is non-convex; every problem
     starts from ``initial_m`` or, by default, the linearized LS fix on the model's ranges (the convex
     initialiser), and is refined by damped Newton steps (Levenberg-Marquardt with the exact Hessian where it is
-    positive definite), vectorized over the batch. Problems that do
-    not converge in ``max_iter`` steps are flagged in ``converged`` (or raise if asked).
+    positive definite), vectorized over the batch; each iteration works only on the problems that have not
+    converged yet. Problems that do not converge in ``max_iter`` steps are flagged in ``converged``
+    (or raise if asked). The model's parameters must be scalars or per-anchor ``(m,)`` arrays.
     """
     anchors_m = check_anchor_geometry(anchors_m)
     power_dbm = np.asarray(power_dbm, dtype=float)
     if initial_m is None:
         initial_m = lateration_ls(anchors_m, model.range_m(power_dbm)).position_m
-    pos = np.array(np.broadcast_to(initial_m, power_dbm.shape[:-1] + (anchors_m.shape[1],)), dtype=float)
-    resid, jac, d2 = _rss_residual_jacobian(pos, anchors_m, power_dbm, model, min_distance_m)
+    batch, dim = power_dbm.shape[:-1], anchors_m.shape[1]
+    pos = np.array(np.broadcast_to(initial_m, batch + (dim,)), dtype=float).reshape(-1, dim)
+    power = power_dbm.reshape(-1, power_dbm.shape[-1])
+    resid, jac, d2 = _rss_residual_jacobian(pos, anchors_m, power, model, min_distance_m)
     cost = np.sum(resid**2, axis=-1)
     lam = np.full(cost.shape, 1e-3)
     converged = np.zeros(cost.shape, bool)
-    eye = np.eye(anchors_m.shape[1])
+    eye = np.eye(dim)
+    active = np.arange(cost.size)          # indices of problems still iterating
     it = 0
     for it in range(1, max_iter + 1):
-        hess = _newton_matrix(resid, jac, d2, pos, anchors_m, model)
-        jtr = np.einsum("...ki,...k->...i", jac, resid)
+        p_a, r_a, j_a, d2_a, c_a, l_a = (a[active] for a in (pos, resid, jac, d2, cost, lam))
+        hess = _newton_matrix(r_a, j_a, d2_a, p_a, anchors_m, model)
+        jtr = np.einsum("...ki,...k->...i", j_a, r_a)
         # damped step: (H + lam diag(H)) delta = -J^T r
-        damp = lam[..., None, None] * (eye * np.diagonal(hess, axis1=-2, axis2=-1)[..., None, :] + 1e-12 * eye)
-        step = -np.linalg.solve(hess + damp, jtr[..., None])[..., 0]
-        step = np.where(converged[..., None], 0.0, step)
-        trial = pos + step
-        r_new, j_new, d2_new = _rss_residual_jacobian(trial, anchors_m, power_dbm, model, min_distance_m)
+        damp = l_a[:, None, None] * (eye * np.diagonal(hess, axis1=-2, axis2=-1)[:, None, :] + 1e-12 * eye)
+        step = -_solve_small(hess + damp, jtr)
+        trial = p_a + step
+        r_new, j_new, d2_new = _rss_residual_jacobian(trial, anchors_m, power[active], model, min_distance_m)
         c_new = np.sum(r_new**2, axis=-1)
-        better = (c_new <= cost) & ~converged
-        step_small = np.linalg.norm(step, axis=-1) <= tol_m * (1.0 + np.linalg.norm(pos, axis=-1))
-        gain_small = (cost - c_new) <= 1e-12 * (1.0 + cost)
-        pos = np.where(better[..., None], trial, pos)
-        resid = np.where(better[..., None], r_new, resid)
-        jac = np.where(better[..., None, None], j_new, jac)
-        d2 = np.where(better[..., None], d2_new, d2)
-        cost = np.where(better, c_new, cost)
-        converged |= better & (step_small | gain_small)
-        lam = np.clip(np.where(better, lam * 0.3, lam * 10.0), 1e-12, 1e16)
-        # no descent even with a vanishing step: at a (local) minimum
-        converged |= lam >= 1e16
-        if np.all(converged):
+        better = c_new <= c_a
+        step_small = np.linalg.norm(step, axis=-1) <= tol_m * (1.0 + np.linalg.norm(p_a, axis=-1))
+        gain_small = (c_a - c_new) <= 1e-12 * (1.0 + c_a)
+        acc = active[better]
+        pos[acc], resid[acc], jac[acc], d2[acc], cost[acc] = (trial[better], r_new[better], j_new[better],
+                                                              d2_new[better], c_new[better])
+        l_a = np.clip(np.where(better, l_a * 0.3, l_a * 10.0), 1e-12, 1e16)
+        lam[active] = l_a
+        # converged: an accepted step that is tiny or gains nothing, or no descent even with a
+        # vanishing step (a local minimum)
+        done = (better & (step_small | gain_small)) | (l_a >= 1e16)
+        converged[active[done]] = True
+        active = active[~done]
+        if active.size == 0:
             break
     if raise_on_failure and not np.all(converged):
         raise ConvergenceError(
             f"RSS maximum likelihood: {int(np.sum(~converged))} of {converged.size} problems did not "
             f"converge in {max_iter} Levenberg-Marquardt iterations"
         )
-    return LocalizationResult(pos, converged, cost, it, "rss_ml_lm")
+    return LocalizationResult(pos.reshape(batch + (dim,)), converged.reshape(batch), cost.reshape(batch),
+                              it, "rss_ml_lm")
 
 
 def grid_ml_position(anchors_m, power_dbm, model: PathLossModel, grid_m, *,

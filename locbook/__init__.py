@@ -5,7 +5,8 @@ The public API, by role:
 - channel: :class:`PathLossModel`, register conversions, quantisation, correlated shadowing
 - calibration: :func:`fit_path_loss`, :func:`calibrate_path_loss` (cvxpy and closed form)
 - localization: linearized / weighted / box-constrained lateration, RSS maximum likelihood, grid ML
-- motion and filters: :class:`KinematicModel`, :func:`kalman_filter`
+- motion and filters: :class:`KinematicModel`, :func:`kalman_filter`, :func:`extended_kalman_filter` (parallel and
+  serial RSS EKF, multi-rate fusion)
 - fingerprinting: weighted k-NN over pattern or model RSSI maps
 - Bayes filters: grid-based Bayes and (improved) SIR particle filters, systematic resampling
 - reference tags: online bounded calibration, pooled sigma, RSSI smoothing
@@ -24,7 +25,8 @@ from .channel import (AT86RF230_ED_OFFSET_DB, CC2420_RSSI_OFFSET_DB, PathLossMod
                       dbm_to_register, pairwise_distance_m, quantize_db, register_to_dbm, small_scale_fading_db, wall_crossings)
 from .errors import ConvergenceError, DegenerateGeometryError, LocbookError, ParameterError
 from .fingerprint import KNN_WEIGHTINGS, knn_position, model_fingerprints, pattern_fingerprints
-from .filters import KF_VARIANTS, KalmanResult, kalman_filter
+from .filters import (KF_VARIANTS, RSS_UPDATE_MODES, SERIAL_ORDERS, KalmanResult, LinearMeasurement, RssMeasurement,
+                      TrackResult, extended_kalman_filter, kalman_filter, rss_measurement_jacobian)
 from .localization import (LocalizationResult, check_anchor_geometry, grid_ml_position, lateration_box_ls,
                            lateration_ls, lateration_system, lateration_wls, rss_ml_position)
 from .metrics import (empirical_cdf, error_std_m, error_summary, mean_error_m, median_error_m, percentile_error_m,
@@ -32,7 +34,7 @@ from .metrics import (empirical_cdf, error_std_m, error_summary, mean_error_m, m
 from .pcrlb import (PCRLB_FORMS, linear_measurement_information, position_bound_m, posterior_crlb,
                     rss_state_information)
 from .montecarlo import mc_standard_error, spawn_generators, streams
-from .motion import KinematicModel, constant_acceleration, constant_velocity, reflect_into_box
+from .motion import NOISE_MODELS, STATE_LAYOUTS, KinematicModel, constant_acceleration, constant_velocity, reflect_into_box
 from .reference_tags import (OZKAYA_PATH_LOSS_EXP_BOUNDS, OZKAYA_REF_POWER_BOUNDS_DBM, OnlineCalibration,
                              calibrate_from_reference_tags, pooled_sigma_db, smooth_rssi)
 from .report import Report
@@ -51,7 +53,8 @@ __all__ = [
     "knn_position", "model_fingerprints", "pattern_fingerprints", "KNN_WEIGHTINGS",
     # motion and filters
     "KinematicModel", "constant_velocity", "constant_acceleration", "reflect_into_box", "KalmanResult",
-    "kalman_filter", "KF_VARIANTS",
+    "kalman_filter", "KF_VARIANTS", "NOISE_MODELS", "STATE_LAYOUTS", "extended_kalman_filter", "LinearMeasurement",
+    "RssMeasurement", "TrackResult", "rss_measurement_jacobian", "RSS_UPDATE_MODES", "SERIAL_ORDERS",
     # Bayes filters
     "RssMeasurementModel", "GridFilterResult", "grid_bayes_filter", "grid_transition_matrix",
     "ParticleFilterResult", "particle_filter", "systematic_resample", "effective_sample_size",

@@ -18,7 +18,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["KalmanResult", "kalman_filter", "KF_VARIANTS"]
+from .channel import PathLossModel
+
+__all__ = ["KalmanResult", "kalman_filter", "KF_VARIANTS", "LinearMeasurement", "RssMeasurement", "TrackResult",
+           "extended_kalman_filter", "rss_measurement_jacobian", "RSS_UPDATE_MODES", "SERIAL_ORDERS"]
 
 KF_VARIANTS = ("standard", "literal_003")
 
@@ -110,3 +113,220 @@ def kalman_filter(z, F, H, Q, R, x0, P0, *, predict_first: bool = True,
         out_xp[..., k, :], out_Pp[..., k, :, :] = x_use, P_use
         out_nu[..., k, :] = np.where(valid[..., None], nu, np.nan)
     return KalmanResult(out_x, out_P, out_xp, out_Pp, out_nu, variant)
+
+
+# --------------------------------------------------------------------------------------------------
+# Extended Kalman filter with RSS measurements and multi-rate sequential updates (Dogan 2015, Ch. 3)
+# --------------------------------------------------------------------------------------------------
+
+RSS_UPDATE_MODES = ("parallel", "serial")
+SERIAL_ORDERS = ("descending", "given")
+
+
+@dataclass(frozen=True)
+class LinearMeasurement:
+    """A linear-Gaussian measurement stream ``z_k = H x_k + v_k``, ``v_k ~ N(0, R)``.
+
+    ``z``: ``batch + (T, m)``; a NaN entry is a missing component (that row is left out of the
+    update, the others are used), so streams at different rates share one time grid.
+    ``R``: ``(m, m)`` or with batch axes ``batch + (m, m)``.
+    """
+
+    z: np.ndarray
+    H: np.ndarray
+    R: np.ndarray
+
+
+@dataclass(frozen=True)
+class RssMeasurement:
+    """Received powers from fixed anchors, ``z_kj = P_0 - 10 alpha log10 |p_k - a_j| + e_kj``
+    (Dogan Eq. (2.2)), ``e ~ N(0, sigma_db^2)`` i.i.d., for the EKF.
+
+    ``power_dbm``: ``batch + (T, m)``, NaN where an anchor gave no reading (a step without any reading is
+    prediction only). ``channel``: its ``ref_power_dbm``, ``path_loss_exp`` and ``sigma_db`` may be scalars,
+    per-anchor ``(m,)`` arrays, or carry batch axes ``batch + (1,)`` (several settings run as one batch).
+    ``mode``: ``"parallel"`` (one stacked update, Table 3.4) or ``"serial"`` (scalar updates, each
+    re-linearised at the state updated so far, Table 3.3, in ``order`` ``"descending"`` RSS as printed or
+    the ``"given"`` anchor order). ``min_distance_m`` keeps the Jacobian finite at an anchor.
+    """
+
+    power_dbm: np.ndarray
+    anchors_m: np.ndarray
+    channel: PathLossModel
+    position_index: np.ndarray
+    mode: str = "parallel"
+    order: str = "descending"
+    min_distance_m: float = 1e-3
+
+    def __post_init__(self):
+        if self.mode not in RSS_UPDATE_MODES:
+            raise ValueError(f"mode must be one of {RSS_UPDATE_MODES}, got {self.mode!r}")
+        if self.order not in SERIAL_ORDERS:
+            raise ValueError(f"order must be one of {SERIAL_ORDERS}, got {self.order!r}")
+
+
+@dataclass(frozen=True)
+class TrackResult:
+    """Posterior means ``batch + (S, n)`` and covariances ``batch + (S, n, n)`` at the recorded ``steps`` (S,)."""
+
+    x: np.ndarray
+    P: np.ndarray
+    steps: np.ndarray
+
+
+def rss_measurement_jacobian(positions_m, anchors_m, path_loss_exp, *, min_distance_m: float = 1e-3):
+    """Predicted-power gradient w.r.t. position, ``(..., m, dim)``:
+    ``dh_j/dp = -(10 alpha / ln 10) (p - a_j) / d_j^2`` (note 000, section 2.6; not printed in the thesis).
+    Also returns the distances ``(..., m)`` (at least ``min_distance_m``)."""
+    diff = np.asarray(positions_m, dtype=float)[..., None, :] - np.asarray(anchors_m, dtype=float)
+    d2 = np.maximum(np.einsum("...i,...i->...", diff, diff), min_distance_m**2)
+    slope = 10.0 * np.asarray(path_loss_exp) / np.log(10.0)
+    return -(slope / d2)[..., None] * diff, np.sqrt(d2)
+
+
+def _joseph(P, K, H, R):
+    """(I - K H) P (I - K H)^T + K R K^T, symmetrised."""
+    ikh = np.eye(P.shape[-1]) - K @ H
+    out = ikh @ P @ _mT(ikh) + K @ R @ _mT(K)
+    return 0.5 * (out + _mT(out))
+
+
+def _inv_small(S):
+    """Inverse of symmetric 1 x 1 or 2 x 2 matrices in closed form (batched LAPACK is slow on tiny matrices)."""
+    if S.shape[-1] == 1:
+        return 1.0 / S
+    det = S[..., 0, 0] * S[..., 1, 1] - S[..., 0, 1] * S[..., 1, 0]
+    inv = np.stack([np.stack([S[..., 1, 1], -S[..., 0, 1]], -1), np.stack([-S[..., 1, 0], S[..., 0, 0]], -1)], -2)
+    return inv / det[..., None, None]
+
+
+def _linear_update(x, P, z, H, R):
+    """Kalman update with missing rows: a NaN component gets a zero row in H, a zero innovation and a unit
+    decoupled noise, so its gain column is exactly zero and the other rows update as usual."""
+    valid = np.isfinite(z)
+    if not valid.any():
+        return x, P
+    if not valid.all():
+        H = np.where(valid[..., :, None], H, 0.0)
+        pair = valid[..., :, None] & valid[..., None, :]
+        R = np.where(pair, R, np.eye(z.shape[-1]))
+    nu = np.where(valid, z, 0.0) - (H @ x[..., None])[..., 0]
+    nu = np.where(valid, nu, 0.0)
+    HP = H @ P
+    S = HP @ _mT(H) + R
+    if S.shape[-1] <= 2:                                      # K = P H^T S^{-1}, closed-form inverse
+        K = _mT(HP) @ _inv_small(S)
+    else:
+        K = _mT(np.linalg.solve(S, HP))
+    return x + (K @ nu[..., None])[..., 0], _joseph(P, K, H, R)
+
+
+def _rss_parallel_update(x, P, z, meas: RssMeasurement):
+    """Table 3.4: one update with the stacked Jacobian at the predicted state, R = sigma^2 I."""
+    idx = np.asarray(meas.position_index)
+    ch = meas.channel
+    grad, d = rss_measurement_jacobian(x[..., idx], meas.anchors_m, ch.path_loss_exp,
+                                       min_distance_m=meas.min_distance_m)
+    m = z.shape[-1]
+    H = np.zeros(grad.shape[:-1] + (x.shape[-1],))
+    H[..., idx] = grad
+    h = ch.mean_power_dbm(d)
+    sigma2 = np.broadcast_to(np.asarray(ch.sigma_db, dtype=float) ** 2, z.shape)
+    R = sigma2[..., :, None] * np.eye(m)
+    valid = np.isfinite(z)
+    # the linear update on the innovation's linearisation: z - h(x) = H (x_true - x) + e
+    return _linear_update(x, P, np.where(valid, z - h + (H @ x[..., None])[..., 0], np.nan), H, R)
+
+
+def _rss_serial_update(x, P, z, meas: RssMeasurement):
+    """Table 3.3: scalar updates in descending RSS order (strongest anchor first), each re-linearised at the
+    state updated so far; loop bound j <= N (the print's j < N is corrected, note 000 A11)."""
+    idx = np.asarray(meas.position_index)
+    ch = meas.channel
+    m = z.shape[-1]
+    anchors = np.asarray(meas.anchors_m, dtype=float)
+    p0 = np.broadcast_to(np.asarray(ch.ref_power_dbm, dtype=float), z.shape)
+    ple = np.broadcast_to(np.asarray(ch.path_loss_exp, dtype=float), z.shape)
+    sigma2 = np.broadcast_to(np.asarray(ch.sigma_db, dtype=float) ** 2, z.shape)
+    if meas.order == "descending":
+        order = np.argsort(-np.where(np.isfinite(z), z, -np.inf), axis=-1, kind="stable")
+    else:
+        order = np.broadcast_to(np.arange(m), z.shape)
+    n = x.shape[-1]
+    for j in range(m):
+        a = order[..., j]
+        zj = np.take_along_axis(z, a[..., None], -1)[..., 0]
+        valid = np.isfinite(zj)
+        if not valid.any():
+            continue
+        pick = lambda arr: np.take_along_axis(arr, a[..., None], -1)[..., 0]
+        diff = x[..., idx] - anchors[a]
+        d2 = np.maximum(np.einsum("...i,...i->...", diff, diff), meas.min_distance_m**2)
+        slope = 10.0 * pick(ple) / np.log(10.0)
+        h_row = np.zeros(x.shape)
+        h_row[..., idx] = -(slope / d2)[..., None] * diff
+        hx = pick(p0) - 0.5 * slope * np.log(d2)              # P0 - 10 alpha log10 d
+        nu = np.where(valid, zj - hx, 0.0)
+        ph = (P @ h_row[..., None])[..., 0]                   # P H^T
+        s = np.einsum("...i,...i->...", h_row, ph) + pick(sigma2)
+        K = np.where(valid[..., None], ph / s[..., None], 0.0)
+        x = x + K * nu[..., None]
+        P = _joseph(P, K[..., :, None], h_row[..., None, :], pick(sigma2)[..., None, None])
+    return x, P
+
+
+def extended_kalman_filter(F, Q, x0, P0, measurements, *, record=None,
+                           predict_first: bool = True) -> TrackResult:
+    """Multi-rate (extended) Kalman filter on one time grid, vectorized over leading Monte-Carlo axes.
+
+    At every step: predict with ``x = F x``, ``P = F P F^T + Q`` (linear motion, so the EKF's F is F), then apply
+    the ``measurements`` in the given order, each update starting from the previous one's posterior (Dogan
+    Table 3.5: acceleration first, then RSS at RSS epochs). Each entry is a :class:`LinearMeasurement` (KF,
+    e.g. accelerometer or MLE position fixes) or a :class:`RssMeasurement` (parallel or serial EKF). Covariance
+    updates use the Joseph form (Tables 3.1-3.4 print ``P - K S K^T``; equal in exact arithmetic).
+
+    ``x0``, ``P0``: ``batch + (n,)``, ``batch + (n, n)``; with ``predict_first`` (filterpy's convention) they
+    are the posterior one step before step 0, else the prior at step 0. ``record``: step indices to return
+    (default all).
+    """
+    F = np.asarray(F, dtype=float)
+    Q = np.asarray(Q, dtype=float)
+    streams = [m.z if isinstance(m, LinearMeasurement) else m.power_dbm for m in measurements]
+    if not streams:
+        raise ValueError("extended_kalman_filter needs at least one measurement stream")
+    T = {np.shape(s)[-2] for s in streams}
+    if len(T) != 1:
+        raise ValueError(f"measurement streams must share one time grid, got lengths {sorted(T)}")
+    T = T.pop()
+    x = np.asarray(x0, dtype=float)
+    P = np.asarray(P0, dtype=float)
+    n = F.shape[-1]
+    batch = np.broadcast_shapes(x.shape[:-1], P.shape[:-2], *(np.shape(s)[:-2] for s in streams))
+    x = np.broadcast_to(x, batch + (n,)).copy()
+    P = np.broadcast_to(P, batch + (n, n)).copy()
+    steps = np.arange(T) if record is None else np.asarray(record, dtype=int)
+    slot = np.full(T, -1)
+    slot[steps] = np.arange(steps.size)
+    out_x = np.empty(batch + (steps.size, n))
+    out_P = np.empty(batch + (steps.size, n, n))
+    zs = [np.broadcast_to(np.asarray(s, dtype=float), batch + np.shape(s)[-2:]) for s in streams]
+    active = [np.isfinite(z).any(axis=tuple(i for i in range(z.ndim) if i != z.ndim - 2)) for z in zs]
+    Ft = _mT(F)
+    for k in range(T):
+        if predict_first or k > 0:
+            x = x @ Ft
+            P = F @ P @ Ft + Q
+        for meas, z, act in zip(measurements, zs, active):
+            if not act[k]:
+                continue
+            zk = z[..., k, :]
+            if isinstance(meas, LinearMeasurement):
+                x, P = _linear_update(x, P, zk, np.asarray(meas.H, float), np.asarray(meas.R, float))
+            elif meas.mode == "parallel":
+                x, P = _rss_parallel_update(x, P, zk, meas)
+            else:
+                x, P = _rss_serial_update(x, P, zk, meas)
+        if slot[k] >= 0:
+            out_x[..., slot[k], :] = x
+            out_P[..., slot[k], :, :] = P
+    return TrackResult(out_x, out_P, steps)

@@ -6,6 +6,10 @@ over a step (the "discrete white noise" model, Bar-Shalom et al. 2001, Sec. 6.3.
 
     x_k = F x_{k-1} + G w_k,   w_k ~ N(0, q I_dim),   Q = q G G^T.
 
+``noise="isotropic"`` instead gives the full-rank per-step ``Q = q I`` that Dogan (2015) actually uses
+(Eq. (3.24), q = 2.3e-5), which the Tichavsky form of the posterior CRLB needs (its Q must be invertible).
+Any other Q can be passed to the filters directly.
+
 For CV, ``G_axis = [dt^2/2, dt]^T``: the two-axis generalisation of B_KF in Eq. (9) of George and
 Vadivukkarasi (document 003, note section 2.6 point 5). ``noise="continuous"`` gives the integrated
 continuous white-noise form instead (``q`` then is a power spectral density).
@@ -21,9 +25,11 @@ from math import factorial
 
 import numpy as np
 
-__all__ = ["KinematicModel", "constant_velocity", "constant_acceleration", "STATE_LAYOUTS", "reflect_into_box"]
+__all__ = ["KinematicModel", "constant_velocity", "constant_acceleration", "STATE_LAYOUTS", "NOISE_MODELS",
+           "reflect_into_box"]
 
 STATE_LAYOUTS = ("derivative_major", "axis_major")
+NOISE_MODELS = ("discrete", "continuous", "isotropic")
 
 
 @dataclass(frozen=True)
@@ -38,7 +44,7 @@ class KinematicModel:
     order : 1 for constant velocity, 2 for constant acceleration.
     dim : number of spatial axes.
     layout : ``"derivative_major"`` or ``"axis_major"`` (see module docstring).
-    noise : ``"discrete"`` (Q = q G G^T) or ``"continuous"``.
+    noise : ``"discrete"`` (Q = q G G^T), ``"continuous"`` or ``"isotropic"`` (Q = q I, units per state).
     """
 
     dt_s: float
@@ -57,8 +63,8 @@ class KinematicModel:
             raise ValueError(f"order must be 1 (constant velocity) or 2 (constant acceleration), got {self.order}")
         if self.layout not in STATE_LAYOUTS:
             raise ValueError(f"layout must be one of {STATE_LAYOUTS}, got {self.layout!r}")
-        if self.noise not in ("discrete", "continuous"):
-            raise ValueError(f"noise must be 'discrete' or 'continuous', got {self.noise!r}")
+        if self.noise not in NOISE_MODELS:
+            raise ValueError(f"noise must be one of {NOISE_MODELS}, got {self.noise!r}")
 
     @property
     def n_state(self) -> int:
@@ -70,6 +76,8 @@ class KinematicModel:
         g = np.array([[dt ** (k - i) / factorial(k - i)] for i in range(k)])
         if self.noise == "discrete":
             q = self.q * (g @ g.T)
+        elif self.noise == "isotropic":
+            q = self.q * np.eye(k)
         else:
             # integral of F(t) e e^T F(t)^T over one step, e the unit vector of the highest derivative
             q = np.array([[self.q * dt ** (2 * k - 1 - i - j) / ((2 * k - 1 - i - j) * factorial(k - 1 - i)
@@ -123,15 +131,24 @@ class KinematicModel:
     def velocity_index(self) -> np.ndarray:
         return self.index(1)
 
+    @property
+    def acceleration_index(self) -> np.ndarray:
+        return self.index(2)
+
+    def derivative_measurement_matrix(self, derivative: int) -> np.ndarray:
+        """H picking one derivative on every axis (0: position fixes; 2: an accelerometer as a linear
+        measurement of the acceleration states, Dogan Eq. (3.18))."""
+        h = np.zeros((self.dim, self.n_state))
+        h[np.arange(self.dim), self.index(derivative)] = 1.0
+        return h
+
     def position(self, state):
         """Positions ``(..., dim)`` from states ``(..., n_state)``."""
         return np.asarray(state)[..., self.position_index]
 
     def position_measurement_matrix(self) -> np.ndarray:
         """H with ``z = position + v`` (document 003: H = [[1,0,0,0],[0,1,0,0]], note 2.6 point 3)."""
-        h = np.zeros((self.dim, self.n_state))
-        h[np.arange(self.dim), self.position_index] = 1.0
-        return h
+        return self.derivative_measurement_matrix(0)
 
     def state_from(self, position, velocity=None, acceleration=None):
         """Assemble states ``(..., n_state)`` from per-derivative arrays ``(..., dim)`` (missing = 0)."""

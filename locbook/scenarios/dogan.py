@@ -1,0 +1,363 @@
+"""Document 000: Dogan (2015), "Indoor Localization and Tracking Based on RSSI and Accelerometer
+Measurements", M.Sc. thesis, METU.
+
+One blindfolded node tracked from RSS at four corner anchors with a nearly-constant-acceleration model:
+static MLE, a KF on the MLE fixes ("KF (MLE)"), parallel and serial EKFs on the raw RSS, each fused with a
+20 Hz accelerometer used as a linear measurement of the acceleration states (Table 3.5), and the posterior
+CRLB (Ch. 4).
+
+The thesis prints neither the room of Ch. 3, nor the trajectory, nor the time step. Every such value is a
+named default here, with its reason from ``shared/notes/000_dogan.md`` (sections 3.1, 5 and 7):
+the room is the test-bed room 7.6 m x 9.2 m (A1, inferred), the trajectory a 24 m polyline walked at
+0.3 m/s in 80 s (A1), one 20 Hz grid for every filter with RSS at every 10th step (A2), the per-step
+Q = 2.3e-5 I (Eq. (3.24), A3), and the MLE an unconstrained grid + Levenberg-Marquardt search (A8).
+"""
+from __future__ import annotations
+
+import csv
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..channel import PathLossModel, pairwise_distance_m
+from ..errors import ParameterError
+from ..filters import LinearMeasurement, RssMeasurement, TrackResult, extended_kalman_filter
+from ..localization import grid_ml_position, rss_ml_position
+from ..motion import KinematicModel, constant_acceleration
+
+__all__ = [
+    "ROOM_M", "ANCHORS_M", "REF_POWER_DBM", "PATH_LOSS_EXP", "SIGMA_RSS_DB", "SIGMA_ACC_MPS2", "Q_PER_STEP",
+    "DT_S", "RSS_EVERY", "P00_VEL_VAR", "P00_ACC_VAR", "WAYPOINTS_M", "SPEED_MPS", "MC_RUNS", "START_MODES",
+    "FILTERS", "Trajectory", "polyline_trajectory", "motion_model", "simulate_rss", "simulate_acceleration",
+    "mle_positions", "initial_state", "run_filter", "ChannelRun", "run_channel", "printed_tables",
+    "TABLE_SETTINGS", "Setting", "table_channels", "CHANNELS", "run_tables", "table_rows",
+]
+
+#: Room of Ch. 3, inferred to be the test-bed room of Sec. 5.4 (note 000 s.3.1: the Fig 3.1 axes, "the same
+#: trajectory", and only this room reproduces the MLE column of Tables 3.7/3.11).
+ROOM_M = (7.6, 9.2)
+#: Anchors A1-A4 at the corners (Sec. 5.4).
+ANCHORS_M = np.array([[0.0, 0.0], [7.6, 0.0], [7.6, 9.2], [0.0, 9.2]])
+#: Table 3.6: first-meter power P0 (dBm), path-loss exponent alpha, sigma_RSS (dB), sigma_ACC (m/s^2).
+REF_POWER_DBM = -48.0
+PATH_LOSS_EXP = 3.0
+SIGMA_RSS_DB = 6.0
+SIGMA_ACC_MPS2 = 0.0152
+#: Eq. (3.24): Q = 0.000023 I_6 per step, full rank, not scaled with T ("standard deviation of the process
+#: noise is 0.0048", Sec. 4.1.2).
+Q_PER_STEP = 2.3e-5
+#: Step of the common grid (A2): the accelerometer rate, 20 Hz. Not printed.
+DT_S = 0.05
+#: RSS at 2 Hz ("2 RSS measurements are taken each second"): every 10th step of the 20 Hz grid.
+RSS_EVERY = 10
+#: Eq. (3.20): initial velocity and acceleration variances of P_{0|0}.
+P00_VEL_VAR = 0.0065
+P00_ACC_VAR = 0.00023
+#: Default trajectory (A1; not printed): a 24 m polyline with sharp 90-degree turns inside the room.
+WAYPOINTS_M = ((1.0, 1.0), (1.0, 8.2), (6.6, 8.2), (6.6, 1.0), (2.6, 1.0))
+#: Walking speed (A1): 24 m in 80 s; Fig 3.2's "24 meter after 80 seconds" ONLY-ACC drift is what an
+#: unobserved initial speed of 0.3 m/s gives (note 000 s.7).
+SPEED_MPS = 0.3
+#: Monte-Carlo runs (Sec. 3.5).
+MC_RUNS = 500
+#: ``"moving"``: the node walks at SPEED_MPS from t = 0 (A1 default); ``"rest"``: it starts from rest and
+#: accelerates uniformly over ``ramp_s`` (A1 variant; the fusion results depend on it, note 000 s.7).
+START_MODES = ("moving", "rest")
+#: Filter columns of Tables 3.7-3.12.
+FILTERS = ("parallel_ekf", "serial_ekf", "kalman_filter")
+#: MLE search grid (A8): the room +- 3 m at 0.5 m, then Levenberg-Marquardt, unconstrained.
+MLE_GRID_STEP_M = 0.5
+MLE_GRID_MARGIN_M = 3.0
+
+_DATA = Path(__file__).with_name("data") / "dogan2015_printed.csv"
+
+
+@dataclass(frozen=True)
+class Trajectory:
+    """A true trajectory on the filter grid: ``state`` ``(T, 6)`` in the thesis's per-axis layout
+    ``[x, vx, ax, y, vy, ay]`` (Eq. (3.10)), ``time_s`` ``(T,)`` and the RSS epochs ``rss_steps``."""
+
+    time_s: np.ndarray
+    state: np.ndarray
+    rss_steps: np.ndarray
+    waypoints_m: tuple
+    start: str
+
+    @property
+    def position_m(self) -> np.ndarray:
+        return self.state[:, [0, 3]]
+
+    @property
+    def acceleration_mps2(self) -> np.ndarray:
+        return self.state[:, [2, 5]]
+
+
+def polyline_trajectory(waypoints_m=WAYPOINTS_M, speed_mps: float = SPEED_MPS, dt_s: float = DT_S, *,
+                        start: str = "moving", ramp_s: float = 2.0, rss_every: int = RSS_EVERY) -> Trajectory:
+    """Walk the polyline at constant speed, sampled every ``dt_s`` (note 000, A1).
+
+    The velocity turns within one step at each corner, so the true acceleration (what a bias-free, perfectly
+    oriented accelerometer reads, Eq. (3.17)) is the backward difference ``(v_k - v_{k-1}) / dt``: zero on the
+    straight segments and an impulse at the turns (and during the ramp for ``start="rest"``).
+    """
+    if start not in START_MODES:
+        raise ParameterError(f"start must be one of {START_MODES}, got {start!r}")
+    if speed_mps <= 0 or dt_s <= 0 or rss_every < 1:
+        raise ParameterError("speed_mps and dt_s must be positive and rss_every at least 1")
+    pts = np.asarray(waypoints_m, dtype=float)
+    if pts.ndim != 2 or pts.shape[1] != 2 or len(pts) < 2:
+        raise ParameterError(f"waypoints_m must be at least two (x, y) points, got shape {pts.shape}")
+    seg = np.diff(pts, axis=0)
+    seg_len = np.linalg.norm(seg, axis=1)
+    if np.any(seg_len == 0):
+        raise ParameterError("waypoints_m has repeated consecutive points")
+    length = seg_len.sum()
+    ramp = ramp_s if start == "rest" else 0.0
+    accel = speed_mps / ramp if ramp > 0 else 0.0
+    duration = length / speed_mps + 0.5 * ramp
+    n = int(round(duration / dt_s))
+    t = np.arange(n) * dt_s
+    # arc length and speed as functions of time
+    s = np.where(t < ramp, 0.5 * accel * t**2, 0.5 * accel * ramp**2 + speed_mps * (t - ramp))
+    speed = np.where(t < ramp, accel * t, speed_mps)
+    cum = np.concatenate([[0.0], np.cumsum(seg_len)])
+    i = np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(seg) - 1)
+    direction = seg[i] / seg_len[i, None]
+    pos = pts[i] + direction * (s - cum[i])[:, None]
+    vel = direction * speed[:, None]
+    acc = np.zeros_like(vel)
+    acc[1:] = np.diff(vel, axis=0) / dt_s
+    state = np.stack([pos[:, 0], vel[:, 0], acc[:, 0], pos[:, 1], vel[:, 1], acc[:, 1]], axis=1)
+    return Trajectory(t, state, np.arange(0, n, rss_every), tuple(map(tuple, pts.tolist())), start)
+
+
+def motion_model(dt_s: float = DT_S, q_per_step: float = Q_PER_STEP) -> KinematicModel:
+    """The CA model of Eq. (3.11) in the thesis's layout with Q = q I (Eq. (3.24))."""
+    return constant_acceleration(dt_s, q_per_step, layout="axis_major", noise="isotropic")
+
+
+def simulate_rss(trajectory: Trajectory, channel: PathLossModel, n_runs: int, rng: np.random.Generator,
+                 anchors_m=ANCHORS_M) -> np.ndarray:
+    """RSS ``(n_runs, E, m)`` at the RSS epochs from Eq. (2.2), i.i.d. N(0, sigma^2) across anchors, time
+    and runs (note 000 s.2.2)."""
+    d = pairwise_distance_m(trajectory.position_m[trajectory.rss_steps], anchors_m)
+    noise = rng.standard_normal((n_runs,) + d.shape)
+    return channel.mean_power_dbm(d) + np.asarray(channel.sigma_db) * noise
+
+
+def simulate_acceleration(trajectory: Trajectory, sigma_acc_mps2: float, n_runs: int,
+                          rng: np.random.Generator) -> np.ndarray:
+    """Accelerometer readings ``(n_runs, T, 2)``: true world-frame acceleration plus white noise, Eq. (3.17)
+    (no bias, perfect orientation)."""
+    a = trajectory.acceleration_mps2
+    return a + sigma_acc_mps2 * rng.standard_normal((n_runs,) + a.shape)
+
+
+def mle_positions(rss_dbm, channel: PathLossModel, anchors_m=ANCHORS_M, *, room_m=ROOM_M,
+                  grid_step_m: float = MLE_GRID_STEP_M, margin_m: float = MLE_GRID_MARGIN_M):
+    """Static MLE (Eq. (2.4)) of every RSS vector ``(..., m)``: the best point of a grid over the room +- margin,
+    refined by Levenberg-Marquardt without bounds (note 000, A8). Returns a LocalizationResult."""
+    xs = np.arange(-margin_m, room_m[0] + margin_m + 1e-9, grid_step_m)
+    ys = np.arange(-margin_m, room_m[1] + margin_m + 1e-9, grid_step_m)
+    grid = np.stack(np.meshgrid(xs, ys, indexing="ij"), axis=-1).reshape(-1, 2)
+    start = grid_ml_position(anchors_m, rss_dbm, channel, grid).position_m
+    return rss_ml_position(anchors_m, rss_dbm, channel, start)
+
+
+def initial_state(first_fix_m, mse_mle_m2):
+    """Eqs. (3.19)-(3.20): ``x_0 = [x_MLE, 0, 0, y_MLE, 0, 0]`` and
+    ``P_0 = diag(MSE_x, 0.0065, 0.00023, MSE_y, 0.0065, 0.00023)``."""
+    first_fix_m = np.asarray(first_fix_m, dtype=float)
+    x0 = np.zeros(first_fix_m.shape[:-1] + (6,))
+    x0[..., 0], x0[..., 3] = first_fix_m[..., 0], first_fix_m[..., 1]
+    mse = np.asarray(mse_mle_m2, dtype=float)
+    diag = np.stack([mse[..., 0], np.full(mse.shape[:-1], P00_VEL_VAR), np.full(mse.shape[:-1], P00_ACC_VAR),
+                     mse[..., 1], np.full(mse.shape[:-1], P00_VEL_VAR), np.full(mse.shape[:-1], P00_ACC_VAR)], -1)
+    return x0, diag[..., :, None] * np.eye(6)
+
+
+def run_filter(name: str, trajectory: Trajectory, rss_dbm, mle_fix_m, mse_mle_m2, channel: PathLossModel, *,
+               acc_mps2=None, sigma_acc_mps2: float | None = None, model: KinematicModel | None = None,
+               serial_order: str = "descending", anchors_m=ANCHORS_M) -> TrackResult:
+    """One filter of Tables 3.7-3.12 on all runs at once, recorded at the RSS epochs.
+
+    ``rss_dbm`` ``(..., E, m)`` and ``mle_fix_m`` ``(..., E, 2)`` are at ``trajectory.rss_steps``; the filter starts
+    at the first epoch from the MLE fix (Eqs. (3.19)-(3.20)) and runs on the 20 Hz grid. ``"kalman_filter"`` is
+    KF (MLE): the fixes as linear position measurements with R = diag(MSE_MLE) (Eq. (3.21)); ``"parallel_ekf"``
+    and ``"serial_ekf"`` use the raw RSS with R = sigma^2 I (Eq. (3.22)). With ``acc_mps2`` ``(..., T, 2)`` the
+    accelerometer updates every step before the RSS (Table 3.5, R_acc = sigma_acc^2 I, Eq. (3.23)).
+    """
+    if name not in FILTERS:
+        raise ParameterError(f"filter must be one of {FILTERS}, got {name!r}")
+    model = model or motion_model()
+    steps = trajectory.rss_steps
+    n_steps = trajectory.time_s.size
+    rss_dbm = np.asarray(rss_dbm, dtype=float)
+    batch = rss_dbm.shape[:-2]
+    x0, P0 = initial_state(np.asarray(mle_fix_m)[..., 0, :], np.asarray(mse_mle_m2))
+    measurements = []
+    if acc_mps2 is not None:
+        if sigma_acc_mps2 is None:
+            raise ParameterError("fusion needs sigma_acc_mps2 for R_acc")
+        acc = np.asarray(acc_mps2, dtype=float)[..., steps[0] + 1:, :]
+        measurements.append(LinearMeasurement(acc, model.derivative_measurement_matrix(2),
+                                              np.asarray(sigma_acc_mps2, float)[..., None, None] ** 2 * np.eye(2)))
+    grid_shape = batch + (n_steps - steps[0] - 1,)
+    at = steps[1:] - steps[0] - 1                  # RSS epochs after the first, on the grid after step 0
+    if name == "kalman_filter":
+        z = np.full(grid_shape + (2,), np.nan)
+        z[..., at, :] = np.asarray(mle_fix_m)[..., 1:, :]
+        mse = np.asarray(mse_mle_m2, dtype=float)
+        measurements.append(LinearMeasurement(z, model.position_measurement_matrix(), mse[..., :, None] * np.eye(2)))
+    else:
+        z = np.full(grid_shape + (rss_dbm.shape[-1],), np.nan)
+        z[..., at, :] = rss_dbm[..., 1:, :]
+        mode = "parallel" if name == "parallel_ekf" else "serial"
+        measurements.append(RssMeasurement(z, anchors_m, channel, model.position_index, mode=mode,
+                                           order=serial_order))
+    track = extended_kalman_filter(model.F, model.Q, x0, P0, measurements, record=at)
+    x = np.concatenate([np.broadcast_to(x0[..., None, :], track.x.shape[:-2] + (1, 6)), track.x], axis=-2)
+    P = np.concatenate([np.broadcast_to(P0[..., None, :, :], track.P.shape[:-3] + (1, 6, 6)), track.P], axis=-3)
+    return TrackResult(x, P, steps)
+
+
+@dataclass
+class ChannelRun:
+    """All filters for one channel setting (sigma_RSS, alpha): errors ``(runs, E)`` at the RSS epochs, keyed
+    ``"static_mle"`` and ``(filter, sigma_acc or None)``; ``mse_mle_m2`` the per-axis MSE used for R and P_0."""
+
+    sigma_rss_db: float
+    path_loss_exp: float
+    mse_mle_m2: np.ndarray
+    errors: dict = field(default_factory=dict)
+    converged_fraction: float = 1.0
+
+
+def run_channel(trajectory: Trajectory, sigma_rss_db: float, path_loss_exp: float, n_runs: int,
+                rng: np.random.Generator, *, sigma_acc_values=(), only_rss: bool = True, filters=FILTERS,
+                ref_power_dbm: float = REF_POWER_DBM, serial_order: str = "descending",
+                model: KinematicModel | None = None, keep_estimates: bool = False) -> ChannelRun:
+    """Simulate one channel setting and run the MLE and the requested filters, ONLY RSS and/or fused with an
+    accelerometer of each ``sigma_acc_values``; all cases share the same RSS draws (common random numbers, so
+    the fusion gain is measured on identical RSS). The MLE's per-axis MSE sets R and P_0 of KF (MLE) and
+    P_0 of every filter (Eqs. (3.20), (3.21), A6)."""
+    channel = PathLossModel(ref_power_dbm, path_loss_exp, sigma_rss_db)
+    truth = trajectory.position_m[trajectory.rss_steps]
+    rss = simulate_rss(trajectory, channel, n_runs, rng)
+    mle = mle_positions(rss, channel)
+    fix = mle.position_m
+    mse = np.mean((fix - truth) ** 2, axis=(0, 1))
+    out = ChannelRun(sigma_rss_db, path_loss_exp, mse, converged_fraction=float(np.mean(mle.converged)))
+    out.errors["static_mle"] = np.linalg.norm(fix - truth, axis=-1)
+    if keep_estimates:
+        out.errors[("estimates", "static_mle")] = fix
+    # one accelerometer noise draw, scaled for each sigma_ACC (common random numbers across the sweep)
+    unit_noise = rng.standard_normal((n_runs,) + trajectory.acceleration_mps2.shape)
+    cases = ([None] if only_rss else []) + list(sigma_acc_values)
+    for sigma_acc in cases:
+        acc = None if sigma_acc is None else trajectory.acceleration_mps2 + sigma_acc * unit_noise
+        for name in filters:
+            track = run_filter(name, trajectory, rss, fix, mse, channel, acc_mps2=acc, sigma_acc_mps2=sigma_acc,
+                               model=model, serial_order=serial_order)
+            pos = track.x[..., [0, 3]]
+            out.errors[(name, sigma_acc)] = np.linalg.norm(pos - truth, axis=-1)
+            if keep_estimates:
+                out.errors[("estimates", name, sigma_acc)] = pos
+    return out
+
+
+@dataclass(frozen=True)
+class Setting:
+    """One printed cell's setting: channel (sigma_RSS, alpha) and accelerometer (None for ONLY RSS)."""
+
+    sigma_rss_db: float
+    path_loss_exp: float
+    sigma_acc_mps2: float | None
+
+
+def _table_settings():
+    """Printed row -> setting for Tables 3.7-3.12 (captions, note 000 s.3.3). sigma_ACC in the tables is
+    written 0.015 (Table 3.6: 0.0152)."""
+    out = {}
+    for s in (6, 5, 4, 3):
+        out[("3.7", f"sigma_rss_db={s}")] = Setting(s, 3.0, None)
+        out[("3.8", f"sigma_rss_db={s}")] = Setting(s, 3.0, 0.015)
+    for a in ("0.015", "0.0075", "0.0015", "0.00075"):
+        out[("3.9", f"sigma_acc={a}")] = Setting(6, 3.0, float(a))
+    for a in ("0.0075", "0.0015"):
+        out[("3.10", f"sigma_acc={a}")] = Setting(3, 3.0, float(a))
+    for p in ("4", "3.5", "3", "2.5", "2", "1.5"):
+        out[("3.11", f"ple={p}")] = Setting(6, float(p), None)
+        out[("3.12", f"ple={p}")] = Setting(6, float(p), 0.015)
+    return out
+
+
+TABLE_SETTINGS = _table_settings()
+
+
+def printed_tables() -> tuple[dict, ...]:
+    """Printed cells of Tables 3.7-3.12: dicts with table, row, column, value (float)."""
+    with open(_DATA, newline="") as fh:
+        rows = list(csv.DictReader(line for line in fh if not line.startswith("#")))
+    for r in rows:
+        r["value"] = float(r["value"])
+    return tuple(rows)
+
+
+def table_channels(settings=None) -> dict:
+    """Channel settings (sigma_RSS, alpha) needed by the printed cells, each with the sorted sigma_ACC values of
+    its fusion rows and whether an ONLY-RSS row uses it."""
+    settings = TABLE_SETTINGS if settings is None else settings
+    out: dict = {}
+    for s in settings.values():
+        only, accs = out.get((s.sigma_rss_db, s.path_loss_exp), (False, set()))
+        if s.sigma_acc_mps2 is None:
+            only = True
+        else:
+            accs = accs | {s.sigma_acc_mps2}
+        out[(s.sigma_rss_db, s.path_loss_exp)] = (only, accs)
+    return {k: (v[0], tuple(sorted(v[1], reverse=True))) for k, v in sorted(out.items(), reverse=True)}
+
+
+#: Canonical channel order; channel i draws from child i of the seed, so any subset gives the same numbers.
+CHANNELS = tuple(table_channels())
+
+
+def run_tables(trajectory: Trajectory, n_runs: int, seed: int, *, channels=None, filters=FILTERS,
+               serial_order: str = "descending", model: KinematicModel | None = None) -> dict:
+    """Every channel setting of Tables 3.7-3.12 (or the ``channels`` subset of :data:`CHANNELS`), each with its
+    own random stream spawned from ``seed``; returns ``{(sigma_RSS, alpha): ChannelRun}``."""
+    plan = table_channels()
+    chosen = CHANNELS if channels is None else tuple(channels)
+    unknown = [c for c in chosen if c not in plan]
+    if unknown:
+        raise ParameterError(f"unknown channel settings {unknown}; known: {list(plan)}")
+    children = np.random.SeedSequence(seed).spawn(len(CHANNELS))
+    out = {}
+    for key in chosen:
+        only, accs = plan[key]
+        rng = np.random.default_rng(children[CHANNELS.index(key)])
+        out[key] = run_channel(trajectory, key[0], key[1], n_runs, rng, sigma_acc_values=accs, only_rss=only,
+                               filters=filters, serial_order=serial_order, model=model)
+    return out
+
+
+def table_rows(runs: dict) -> list[dict]:
+    """Printed cells beside the reproduced RMSE (over runs and RSS epochs, note 000 A7) with its Monte-Carlo
+    standard error; cells whose setting was not run are left out."""
+    from ..metrics import rmse_m
+    rows = []
+    for cell in printed_tables():
+        s = TABLE_SETTINGS[(cell["table"], cell["row"])]
+        run = runs.get((s.sigma_rss_db, s.path_loss_exp))
+        key = "static_mle" if cell["column"] == "static_mle" else (cell["column"], s.sigma_acc_mps2)
+        if run is None or key not in run.errors:
+            continue
+        err = run.errors[key]
+        per_run = np.mean(err**2, axis=1)          # runs are independent; epochs within a run are not
+        value = float(rmse_m(err))
+        se = float(np.std(per_run, ddof=1) / np.sqrt(per_run.size) / (2.0 * value))
+        rows.append(dict(table=cell["table"], row=cell["row"], column=cell["column"], printed=cell["value"],
+                         reproduced=value, mc_se=se))
+    return rows

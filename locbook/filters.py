@@ -130,11 +130,21 @@ class LinearMeasurement:
     ``z``: ``batch + (T, m)``; a NaN entry is a missing component (that row is left out of the
     update, the others are used), so streams at different rates share one time grid.
     ``R``: ``(m, m)`` or with batch axes ``batch + (m, m)``.
+    ``mode``: ``"parallel"`` (one stacked update) or ``"serial"`` (one scalar update per row in the given order;
+    needs a diagonal R, and then equals the parallel update exactly, note 000 s.2.6).
     """
 
     z: np.ndarray
     H: np.ndarray
     R: np.ndarray
+    mode: str = "parallel"
+
+    def __post_init__(self):
+        if self.mode not in RSS_UPDATE_MODES:
+            raise ValueError(f"mode must be one of {RSS_UPDATE_MODES}, got {self.mode!r}")
+        R = np.asarray(self.R, dtype=float)
+        if self.mode == "serial" and np.any(R - R * np.eye(R.shape[-1])):
+            raise ValueError("serial linear updates need a diagonal R (independent measurement components)")
 
 
 @dataclass(frozen=True)
@@ -321,7 +331,12 @@ def extended_kalman_filter(F, Q, x0, P0, measurements, *, record=None,
                 continue
             zk = z[..., k, :]
             if isinstance(meas, LinearMeasurement):
-                x, P = _linear_update(x, P, zk, np.asarray(meas.H, float), np.asarray(meas.R, float))
+                H, R = np.asarray(meas.H, float), np.asarray(meas.R, float)
+                if meas.mode == "parallel":
+                    x, P = _linear_update(x, P, zk, H, R)
+                else:
+                    for j in range(zk.shape[-1]):
+                        x, P = _linear_update(x, P, zk[..., j:j + 1], H[..., j:j + 1, :], R[..., j:j + 1, j:j + 1])
             elif meas.mode == "parallel":
                 x, P = _rss_parallel_update(x, P, zk, meas)
             else:

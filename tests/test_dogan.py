@@ -1,0 +1,171 @@
+"""Document 000 (Dogan 2015): EKF variants and multi-rate fusion against filterpy, serial = parallel = KF on a
+linear model, the default trajectory, and the Tables 3.7-3.12 plan."""
+import numpy as np
+import pytest
+from filterpy.kalman import ExtendedKalmanFilter, KalmanFilter
+
+import locbook as lb
+from locbook.scenarios import dogan as dg
+
+ANCHORS = dg.ANCHORS_M
+
+
+def _scenario(seed=0, runs=3, steps=240):
+    """Random CA trajectories (the model itself), RSS every 10th step, accelerometer every step."""
+    rng = np.random.default_rng(seed)
+    model = dg.motion_model()
+    F, Q = model.F, model.Q
+    truth = np.zeros((runs, steps, 6))
+    truth[:, 0] = model.state_from(rng.uniform(1, 6, (runs, 2)), rng.normal(0, 0.3, (runs, 2)))
+    for k in range(1, steps):
+        truth[:, k] = truth[:, k - 1] @ F.T + rng.multivariate_normal(np.zeros(6), Q, runs)
+    channel = lb.PathLossModel(-48.0, 3.0, 6.0)
+    power = channel.sample_power_dbm(lb.pairwise_distance_m(truth[..., model.position_index], ANCHORS), rng)
+    power[:, np.arange(steps) % 10 != 0] = np.nan
+    acc = truth[..., model.acceleration_index] + 0.015 * rng.standard_normal((runs, steps, 2))
+    x0 = truth[:, 0] + rng.normal(0, 1, (runs, 6)) * [1, 0.08, 0.015, 1, 0.08, 0.015]
+    P0 = np.diag([4, 0.0065, 0.00023, 4, 0.0065, 0.00023])
+    return model, channel, power, acc, x0, P0
+
+
+def _filterpy_track(model, channel, power, acc, x0, P0, mode, fusion):
+    """Per-run filterpy ExtendedKalmanFilter with the RSS model written from Eq. (2.2) alone."""
+    idx = model.position_index
+    p0, ple, s2 = channel.ref_power_dbm, channel.path_loss_exp, channel.sigma_db**2
+    h_acc = model.derivative_measurement_matrix(2)
+
+    def h(x, j):
+        return np.array([p0 - 10 * ple * np.log10(np.linalg.norm(x[idx] - ANCHORS[j]))])
+
+    def jac(x, j):
+        diff = x[idx] - ANCHORS[j]
+        out = np.zeros((1, 6))
+        out[0, idx] = -10 * ple / np.log(10) * diff / (diff @ diff)
+        return out
+
+    xs, Ps = np.empty(power.shape[:2] + (6,)), np.empty(power.shape[:2] + (6, 6))
+    for b in range(power.shape[0]):
+        f = ExtendedKalmanFilter(6, 1)
+        f.x, f.P, f.F, f.Q = x0[b].copy(), P0.copy(), model.F, model.Q
+        for k in range(power.shape[1]):
+            f.predict()
+            if fusion:
+                f.update(acc[b, k], lambda x: h_acc, lambda x: h_acc @ x, R=0.015**2 * np.eye(2))
+            z = power[b, k]
+            if np.isfinite(z[0]):
+                if mode == "parallel":
+                    f.update(z, lambda x: np.vstack([jac(x, j) for j in range(4)]),
+                             lambda x: np.concatenate([h(x, j) for j in range(4)]), R=s2 * np.eye(4))
+                else:
+                    for j in np.argsort(-z):          # Table 3.3: strongest anchor first
+                        f.update(z[j:j + 1], lambda x, j=j: jac(x, j), lambda x, j=j: h(x, j), R=np.array([[s2]]))
+            xs[b, k], Ps[b, k] = f.x, f.P
+    return xs, Ps
+
+
+@pytest.mark.parametrize("mode", ["parallel", "serial"])
+@pytest.mark.parametrize("fusion", [False, True])
+def test_rss_ekf_equals_filterpy(mode, fusion):
+    model, channel, power, acc, x0, P0 = _scenario()
+    meas = ([lb.LinearMeasurement(acc, model.derivative_measurement_matrix(2), 0.015**2 * np.eye(2))] if fusion
+            else []) + [lb.RssMeasurement(power, ANCHORS, channel, model.position_index, mode=mode)]
+    ours = lb.extended_kalman_filter(model.F, model.Q, x0, P0, meas)
+    xs, Ps = _filterpy_track(model, channel, power, acc, x0, P0, mode, fusion)
+    np.testing.assert_allclose(ours.x, xs, atol=1e-9)
+    np.testing.assert_allclose(ours.P, Ps, atol=1e-9)
+
+
+def test_serial_order_matters_for_rss():
+    """The serial EKF re-linearises after each scalar update, so unlike the linear case its result depends
+    on the order (note 000 s.2.6)."""
+    model, channel, power, acc, x0, P0 = _scenario(seed=3)
+    runs = [lb.extended_kalman_filter(model.F, model.Q, x0, P0, [lb.RssMeasurement(
+        power, ANCHORS, channel, model.position_index, mode="serial", order=o)]).x for o in ("descending", "given")]
+    assert np.max(np.abs(runs[0] - runs[1])) > 1e-3
+
+
+def test_serial_parallel_and_kf_agree_on_a_linear_model():
+    """Serial and parallel updates of a linear measurement with diagonal R equal filterpy's KalmanFilter and
+    locbook's kalman_filter; and a stream with missing rows equals updating with the present rows only."""
+    rng = np.random.default_rng(7)
+    model = dg.motion_model()
+    H = np.vstack([model.position_measurement_matrix(), model.derivative_measurement_matrix(2)])
+    R = np.diag([2.0, 3.0, 0.01, 0.02])
+    T = 60
+    z = rng.normal(0, 1, (2, T, 4)).cumsum(axis=1)
+    x0, P0 = np.zeros(6), np.eye(6)
+    par = lb.extended_kalman_filter(model.F, model.Q, x0, P0, [lb.LinearMeasurement(z, H, R)])
+    ser = lb.extended_kalman_filter(model.F, model.Q, x0, P0, [lb.LinearMeasurement(z, H, R, mode="serial")])
+    kf = lb.kalman_filter(z, model.F, H, model.Q, R, x0, P0)
+    np.testing.assert_allclose(ser.x, par.x, atol=1e-9)
+    np.testing.assert_allclose(ser.P, par.P, atol=1e-12)
+    np.testing.assert_allclose(par.x, kf.x, atol=1e-9)
+    f = KalmanFilter(6, 4)
+    f.x, f.P, f.F, f.Q, f.H, f.R = x0.copy(), P0.copy(), model.F, model.Q, H, R
+    for k in range(T):
+        f.predict()
+        f.update(z[0, k])
+        np.testing.assert_allclose(par.x[0, k], f.x, atol=1e-9)
+        np.testing.assert_allclose(par.P[0, k], f.P, atol=1e-9)
+    # position rows only every 10th step: identical to a two-stream filter (acc every step, position sometimes)
+    zm = z.copy()
+    zm[:, np.arange(T) % 10 != 0, :2] = np.nan
+    one = lb.extended_kalman_filter(model.F, model.Q, x0, P0, [lb.LinearMeasurement(zm, H, R)])
+    two = lb.extended_kalman_filter(model.F, model.Q, x0, P0, [
+        lb.LinearMeasurement(zm[..., 2:], H[2:], R[2:, 2:]), lb.LinearMeasurement(zm[..., :2], H[:2], R[:2, :2])])
+    np.testing.assert_allclose(one.x, two.x, atol=1e-9)
+    with pytest.raises(ValueError, match="diagonal R"):
+        lb.LinearMeasurement(z, H, R + 0.1, mode="serial")
+
+
+def test_default_trajectory():
+    """A1: 24 m at 0.3 m/s -> 80 s = 1600 steps of 50 ms and 160 RSS epochs; the accelerometer truth
+    integrates to the velocity; the rest start ramps up over 2 s."""
+    tr = dg.polyline_trajectory()
+    assert tr.time_s.size == 1600 and tr.rss_steps.size == 160
+    speed = np.hypot(tr.state[:, 1], tr.state[:, 4])
+    np.testing.assert_allclose(speed, 0.3, atol=1e-12)
+    vel = tr.state[:, [1, 4]]
+    np.testing.assert_allclose(vel[0] + np.cumsum(tr.acceleration_mps2[1:], axis=0) * dg.DT_S, vel[1:], atol=1e-12)
+    assert np.sum(np.linalg.norm(tr.acceleration_mps2, axis=1) > 1) == 3      # three sharp turns
+    np.testing.assert_allclose(tr.position_m[0], dg.WAYPOINTS_M[0])
+    path = np.sum(np.linalg.norm(np.diff(tr.position_m, axis=0), axis=1))
+    assert abs(path - (24.0 - 0.3 * dg.DT_S)) < 0.02          # corners are cut by at most one step
+    rest = dg.polyline_trajectory(start="rest")
+    assert rest.time_s.size == 1620 and rest.state[0, 1] == 0.0 and rest.state[0, 4] == 0.0
+    np.testing.assert_allclose(rest.acceleration_mps2[1:40, 1], 0.15, atol=1e-9)
+    with pytest.raises(lb.ParameterError, match="start"):
+        dg.polyline_trajectory(start="standing")
+
+
+def test_table_plan_covers_every_printed_cell():
+    """88 printed cells (16 + 12 + 12 + 6 + 24 + 18, note 000 s.3.3), 9 channel settings."""
+    cells = dg.printed_tables()
+    assert len(cells) == 88
+    assert all((c["table"], c["row"]) in dg.TABLE_SETTINGS for c in cells)
+    assert len(dg.CHANNELS) == 9
+    assert dg.table_channels()[(6, 3.0)] == (True, (0.015, 0.0075, 0.0015, 0.00075))
+
+
+def test_channel_runs_are_reproducible_and_subset_invariant():
+    tr = dg.polyline_trajectory(waypoints_m=((1, 1), (1, 4), (4, 4)), speed_mps=0.6)
+    a = dg.run_tables(tr, 6, seed=5, channels=[(5, 3.0), (4, 3.0)])
+    b = dg.run_tables(tr, 6, seed=5, channels=[(4, 3.0)])
+    for key, err in b[(4, 3.0)].errors.items():
+        np.testing.assert_array_equal(err, a[(4, 3.0)].errors[key])
+    rows = dg.table_rows(a)
+    assert {r["table"] for r in rows} == {"3.7", "3.8"} and len(rows) == 2 * 4 + 2 * 3
+
+
+def test_mle_reaches_the_grid_optimum():
+    """The grid + LM estimate's RSS-domain cost is never above the best point of a fine 5 cm grid."""
+    rng = np.random.default_rng(11)
+    channel = lb.PathLossModel(-48.0, 3.0, 6.0)
+    truth = rng.uniform([0, 0], [7.6, 9.2], (40, 2))
+    power = channel.sample_power_dbm(lb.pairwise_distance_m(truth, ANCHORS), rng)
+    est = dg.mle_positions(power, channel)
+    xs, ys = np.arange(-3, 10.6, 0.05), np.arange(-3, 12.2, 0.05)
+    fine = np.stack(np.meshgrid(xs, ys, indexing="ij"), -1).reshape(-1, 2)
+    best = lb.grid_ml_position(ANCHORS, power, channel, fine)
+    cost = np.sum((power - channel.mean_power_dbm(lb.pairwise_distance_m(est.position_m, ANCHORS))) ** 2, -1)
+    assert np.all(cost <= best.cost + 1e-9) and np.all(est.converged)

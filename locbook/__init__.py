@@ -34,7 +34,8 @@ from .metrics import (empirical_cdf, error_std_m, error_summary, mean_error_m, m
 from .pcrlb import (PCRLB_FORMS, linear_measurement_information, position_bound_m, posterior_crlb,
                     rss_state_information)
 from .montecarlo import mc_standard_error, spawn_generators, streams
-from .motion import NOISE_MODELS, STATE_LAYOUTS, KinematicModel, constant_acceleration, constant_velocity, reflect_into_box
+from .motion import (NOISE_MODELS, STATE_LAYOUTS, KinematicModel, constant_acceleration, constant_velocity, reflect_into_box,
+                     simulate_states)
 from .reference_tags import (OZKAYA_PATH_LOSS_EXP_BOUNDS, OZKAYA_REF_POWER_BOUNDS_DBM, OnlineCalibration,
                              calibrate_from_reference_tags, pooled_sigma_db, smooth_rssi)
 from .report import Report
@@ -52,7 +53,7 @@ __all__ = [
     # fingerprinting
     "knn_position", "model_fingerprints", "pattern_fingerprints", "KNN_WEIGHTINGS",
     # motion and filters
-    "KinematicModel", "constant_velocity", "constant_acceleration", "reflect_into_box", "KalmanResult",
+    "KinematicModel", "constant_velocity", "constant_acceleration", "reflect_into_box", "simulate_states", "KalmanResult",
     "kalman_filter", "KF_VARIANTS", "NOISE_MODELS", "STATE_LAYOUTS", "extended_kalman_filter", "LinearMeasurement",
     "RssMeasurement", "TrackResult", "rss_measurement_jacobian", "RSS_UPDATE_MODES", "SERIAL_ORDERS",
     # Bayes filters

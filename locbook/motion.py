@@ -26,7 +26,7 @@ from math import factorial
 import numpy as np
 
 __all__ = ["KinematicModel", "constant_velocity", "constant_acceleration", "STATE_LAYOUTS", "NOISE_MODELS",
-           "reflect_into_box"]
+           "reflect_into_box", "simulate_states"]
 
 STATE_LAYOUTS = ("derivative_major", "axis_major")
 NOISE_MODELS = ("discrete", "continuous", "isotropic")
@@ -183,3 +183,21 @@ def reflect_into_box(position_m, lower_m, upper_m):
         raise ValueError(f"the box needs upper > lower on every axis, got {lower_m} and {upper_m}")
     folded = np.mod(np.asarray(position_m, dtype=float) - lower, 2.0 * width)
     return lower + np.where(folded > width, 2.0 * width - folded, folded)
+
+
+def simulate_states(F, Q, initial_state, n_steps: int, rng: np.random.Generator):
+    """Sample trajectories of ``x_k = F x_{k-1} + w_k``, ``w_k ~ N(0, Q)``: ``(..., n_steps + 1, n)`` from initial
+    states ``(..., n)`` (the "trajectories that exactly follow the constant acceleration model" of Dogan's
+    Sec. 4.1.2). ``Q`` may be singular (it is factored by eigen-decomposition)."""
+    F = np.asarray(F, dtype=float)
+    Q = np.asarray(Q, dtype=float)
+    x = np.asarray(initial_state, dtype=float)
+    w, v = np.linalg.eigh(Q)
+    root = v * np.sqrt(np.clip(w, 0.0, None))              # Q = root root^T
+    noise = rng.standard_normal((n_steps,) + x.shape) @ root.T
+    out = np.empty(x.shape[:-1] + (n_steps + 1, x.shape[-1]))
+    out[..., 0, :] = x
+    for k in range(n_steps):
+        x = x @ F.T + noise[k]
+        out[..., k + 1, :] = x
+    return out

@@ -24,14 +24,15 @@ from ..channel import PathLossModel, pairwise_distance_m
 from ..errors import ParameterError
 from ..filters import LinearMeasurement, RssMeasurement, TrackResult, extended_kalman_filter
 from ..localization import grid_ml_position, rss_ml_position
-from ..motion import KinematicModel, constant_acceleration
+from ..motion import KinematicModel, constant_acceleration, simulate_states
+from ..pcrlb import linear_measurement_information, position_bound_m, posterior_crlb, rss_state_information
 
 __all__ = [
     "ROOM_M", "ANCHORS_M", "REF_POWER_DBM", "PATH_LOSS_EXP", "SIGMA_RSS_DB", "SIGMA_ACC_MPS2", "Q_PER_STEP",
     "DT_S", "RSS_EVERY", "P00_VEL_VAR", "P00_ACC_VAR", "WAYPOINTS_M", "SPEED_MPS", "MC_RUNS", "START_MODES",
     "FILTERS", "Trajectory", "polyline_trajectory", "motion_model", "simulate_rss", "simulate_acceleration",
     "mle_positions", "initial_state", "run_filter", "ChannelRun", "run_channel", "printed_tables",
-    "TABLE_SETTINGS", "Setting", "table_channels", "CHANNELS", "run_tables", "table_rows",
+    "TABLE_SETTINGS", "Setting", "table_channels", "BOUND_KINDS", "pcrlb_m", "smc_trajectories", "CHANNELS", "run_tables", "table_rows",
 ]
 
 #: Room of Ch. 3, inferred to be the test-bed room of Sec. 5.4 (note 000 s.3.1: the Fig 3.1 axes, "the same
@@ -361,3 +362,69 @@ def table_rows(runs: dict) -> list[dict]:
         rows.append(dict(table=cell["table"], row=cell["row"], column=cell["column"], printed=cell["value"],
                          reproduced=value, mc_se=se))
     return rows
+
+
+#: ``"smc"``: Eq. (4.22), the RSS information averaged over simulated CA trajectories (Figs 4.1/4.3);
+#: ``"linear"``: MLE fixes as linear measurements with R = diag(MSE_MLE) (Figs 4.2/4.4, trajectory-free);
+#: ``"truth"``: the RSS information along one known trajectory (truth-conditioned, Stone Soup's convention),
+#: the bound to set beside filters run on that trajectory (note 000 X2).
+BOUND_KINDS = ("smc", "linear", "truth")
+
+
+def smc_trajectories(n_trajectories: int, n_steps: int, rng: np.random.Generator, *,
+                     model: KinematicModel | None = None, room_m=ROOM_M):
+    """Sec. 4.1.2: trajectories "that exactly follow the constant acceleration model", each beginning at a point
+    "selected arbitrarily in the area": uniform in the room, v_0 ~ N(0, 0.0065 I), a_0 ~ N(0, 0.00023 I) (the
+    P_{0|0} blocks, note 000 A4), propagated with the per-step Q. Shape ``(N, n_steps, 6)``."""
+    model = model or motion_model()
+    start = model.state_from(rng.uniform((0.0, 0.0), room_m, (n_trajectories, 2)),
+                             np.sqrt(P00_VEL_VAR) * rng.standard_normal((n_trajectories, 2)),
+                             np.sqrt(P00_ACC_VAR) * rng.standard_normal((n_trajectories, 2)))
+    return simulate_states(model.F, model.Q, start, n_steps - 1, rng)
+
+
+def pcrlb_m(kind: str, *, fusion: bool, sigma_rss_db: float, mse_mle_m2, n_steps: int,
+            path_loss_exp: float = PATH_LOSS_EXP, sigma_acc_mps2: float = SIGMA_ACC_MPS2,
+            rng: np.random.Generator | None = None, n_trajectories: int = MC_RUNS, trajectory: Trajectory | None = None,
+            acc_at_rss_epochs: bool = False, min_distance_m: float = 0.0, height_offset_m: float = 0.0,
+            rss_every: int = RSS_EVERY, model: KinematicModel | None = None, anchors_m=ANCHORS_M) -> np.ndarray:
+    """Position PCRLB (Eq. (4.23), m) at steps ``0 .. n_steps - 1`` of the 20 Hz grid, by Table 4.1.
+
+    J_0 = P_{0|0}^{-1} (Eqs. (3.20), (4.11)); the Tichavsky recursion (4.7) with D22 = Q^{-1} + J_z, where J_z at
+    RSS epochs (every ``rss_every``-th step) is the RSS information of ``kind`` (see :data:`BOUND_KINDS`), and for
+    ``fusion`` the accelerometer's ``H_acc^T R_acc^{-1} H_acc`` at the other steps. Table 4.1 leaves the
+    acceleration out at RSS epochs although the fusion filter uses it there; ``acc_at_rss_epochs=True`` adds it
+    (the FIX of note 000 A5). ``min_distance_m`` / ``height_offset_m`` regularise the near-anchor 1/d^2 singularity
+    of E[J_z] (note 000 s.2.10); the thesis uses neither.
+    """
+    if kind not in BOUND_KINDS:
+        raise ParameterError(f"kind must be one of {BOUND_KINDS}, got {kind!r}")
+    model = model or motion_model()
+    idx = model.position_index
+    mse = np.asarray(mse_mle_m2, dtype=float)
+    _, P0 = initial_state(np.zeros(2), mse)
+    rss_steps = np.arange(rss_every, n_steps, rss_every)
+    jz = np.zeros((n_steps - 1, 6, 6))
+    if fusion:
+        acc_info = linear_measurement_information(model.derivative_measurement_matrix(2),
+                                                  sigma_acc_mps2**2 * np.eye(2))
+        jz[:] = acc_info
+        if not acc_at_rss_epochs:
+            jz[rss_steps - 1] = 0.0
+    regularise = dict(min_distance_m=min_distance_m, height_offset_m=height_offset_m)
+    if kind == "linear":
+        rss_info = linear_measurement_information(model.position_measurement_matrix(), np.diag(mse))
+    elif kind == "truth":
+        if trajectory is None or trajectory.time_s.size < n_steps:
+            raise ParameterError("the truth-conditioned bound needs a trajectory of at least n_steps steps")
+        rss_info = rss_state_information(trajectory.state[rss_steps], anchors_m, path_loss_exp, sigma_rss_db, idx,
+                                         **regularise)
+    else:
+        if rng is None:
+            raise ParameterError("the Monte-Carlo (smc) bound needs rng")
+        states = smc_trajectories(n_trajectories, n_steps, rng, model=model)
+        rss_info = rss_state_information(states[:, rss_steps], anchors_m, path_loss_exp, sigma_rss_db, idx,
+                                         **regularise).mean(axis=0)               # Eq. (4.22)
+    jz[rss_steps - 1] += rss_info
+    info = posterior_crlb(np.linalg.inv(P0), model.F, model.Q, jz)
+    return position_bound_m(info, idx)

@@ -99,13 +99,22 @@ class Report:
     # -- numbers ---------------------------------------------------------------------------------
     def number(self, quantity: str, where: str, reported, reproduced, *, unit: str = "",
                tolerance: float | None = None, lower: float | None = None, upper: float | None = None,
-               tolerance_basis: str = "", mc_std_error: float | None = None, note: str = "") -> dict:
+               tolerance_basis: str = "", mc_std_error: float | None = None, note: str = "",
+               interval_holds: str = "reproduced") -> dict:
         """Record a reproduced value beside the value the source printed.
 
         Give either ``tolerance`` (accept ``|reproduced - reported| <= tolerance``) or an acceptance
         interval ``lower``/``upper``; ``tolerance_basis`` says where it comes from. With none of them the
         row is shown without a verdict (``within_tolerance`` empty).
+
+        ``interval_holds="reported"`` turns ``lower``/``upper`` into a prediction interval from the reproduction
+        (e.g. the spread of single simulated runs, when the source printed one measured run): the verdict is
+        then whether the *printed* value lies inside it.
         """
+        if interval_holds not in ("reproduced", "reported"):
+            raise ValueError(f"interval_holds must be 'reproduced' or 'reported', got {interval_holds!r}")
+        if interval_holds == "reported" and (tolerance is not None or reported is None):
+            raise ValueError("a prediction interval needs lower/upper and a reported value, not a tolerance")
         reproduced = float(reproduced)
         reported = float(reported) if reported is not None else None
         if tolerance is not None and (lower is not None or upper is not None):
@@ -118,7 +127,8 @@ class Report:
         if lower is not None or upper is not None:
             lo = -math.inf if lower is None else float(lower)
             hi = math.inf if upper is None else float(upper)
-            verdict = bool(lo <= reproduced <= hi)
+            tested = reproduced if interval_holds == "reproduced" else float(reported)
+            verdict = bool(lo <= tested <= hi)
         row = {
             "experiment": self.experiment, "quantity": quantity, "where": where, "unit": unit,
             "reported": reported, "reproduced": reproduced, "tolerance": tolerance,

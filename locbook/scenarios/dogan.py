@@ -31,7 +31,7 @@ __all__ = [
     "ROOM_M", "ANCHORS_M", "REF_POWER_DBM", "PATH_LOSS_EXP", "SIGMA_RSS_DB", "SIGMA_ACC_MPS2", "Q_PER_STEP",
     "DT_S", "RSS_EVERY", "P00_VEL_VAR", "P00_ACC_VAR", "WAYPOINTS_M", "SPEED_MPS", "MC_RUNS", "START_MODES",
     "FILTERS", "Trajectory", "polyline_trajectory", "motion_model", "simulate_rss", "simulate_acceleration",
-    "mle_positions", "initial_state", "run_filter", "ChannelRun", "run_channel", "printed_tables",
+    "mle_positions", "mle_cost_eq24", "initial_state", "run_filter", "ChannelRun", "run_channel", "printed_tables",
     "TABLE_SETTINGS", "Setting", "table_channels", "record_tables", "bound_rows", "STATIC_TOLERANCE", "FILTER_TOLERANCE",
     "fusion_reduction_rows", "ordering_rows", "table_view", "miss_table", "BOUND_KINDS", "pcrlb_m", "smc_trajectories", "smc_trajectory", "CHANNELS", "run_tables", "table_rows",
 ]
@@ -166,6 +166,17 @@ def mle_positions(rss_dbm, channel: PathLossModel, anchors_m=ANCHORS_M, *, room_
     grid = np.stack(np.meshgrid(xs, ys, indexing="ij"), axis=-1).reshape(-1, 2)
     start = grid_ml_position(anchors_m, rss_dbm, channel, grid).position_m
     return rss_ml_position(anchors_m, rss_dbm, channel, start)
+
+
+def mle_cost_eq24(points_m, rss_dbm, channel: PathLossModel, anchors_m=ANCHORS_M):
+    """The MLE cost of Eq. (2.4) as printed, ``sum_j (log10 d_hat_j - log10 d_j(p))^2`` with ``d_hat`` from Eq. (2.3),
+    for every candidate ``points_m`` ``(G, 2)`` and RSS vector ``rss_dbm`` ``(..., m)``: shape ``(..., G)``.
+
+    It equals ``(10 alpha)^-2 sum_j (P_j - P(d_j))^2``, the Gaussian RSS-domain likelihood that
+    :func:`locbook.rss_ml_position` minimises (note 000 s.2.3, derived), so both have the same minimiser."""
+    log_d = np.log10(np.maximum(pairwise_distance_m(np.asarray(points_m, float), anchors_m), 1e-9))   # (G, m)
+    log_d_hat = np.log10(channel.range_m(np.asarray(rss_dbm, float)))                                  # (..., m)
+    return np.sum((log_d_hat[..., None, :] - log_d) ** 2, axis=-1)
 
 
 def initial_state(first_fix_m, mse_mle_m2):

@@ -1,0 +1,77 @@
+"""Document 000 (Dogan 2015), Ch. 2 and Ch. 5: the printed MLE cost (2.4) against the RSS-domain likelihood, the
+calibration LS (5.1) against its closed-form sampling law, the test-bed time grid and the single-walk window."""
+import numpy as np
+import pytest
+
+import locbook as lb
+from locbook.scenarios import dogan as dg
+from locbook.scenarios import dogan_testbed as tb
+
+
+def test_eq24_cost_is_the_rss_likelihood_scaled_and_has_the_grid_ml_minimiser():
+    rng = np.random.default_rng(3)
+    channel = lb.PathLossModel(-48.0, 3.0, 6.0)
+    # off the anchors (the cost clips d at 1e-9 there)
+    grid = np.stack(np.meshgrid(np.arange(-2.95, 10.6, 0.1), np.arange(-2.95, 12.2, 0.1)), -1).reshape(-1, 2)
+    truth = rng.uniform((0, 0), dg.ROOM_M, (20, 2))
+    rss = channel.sample_power_dbm(lb.pairwise_distance_m(truth, dg.ANCHORS_M), rng)
+    cost = dg.mle_cost_eq24(grid, rss, channel)                                        # (20, G)
+    rss_domain = np.sum((rss[:, None, :] - channel.mean_power_dbm(lb.pairwise_distance_m(grid, dg.ANCHORS_M))) ** 2, -1)
+    np.testing.assert_allclose(cost * 30.0**2, rss_domain, rtol=1e-9)                # (10 alpha)^2 = 900
+    np.testing.assert_array_equal(grid[np.argmin(cost, axis=1)],
+                                  lb.grid_ml_position(dg.ANCHORS_M, rss, channel, grid).position_m)
+
+
+def test_calibration_ls_matches_cvxpy_and_its_sampling_law():
+    points = tb.calibration_points_m()
+    assert points.shape == (24, 2)
+    channel = lb.PathLossModel(tb.TESTBED_REF_POWER_DBM, tb.TESTBED_PATH_LOSS_EXP, tb.TESTBED_FIT_SIGMA_DB)
+    power, distance = tb.simulate_calibration(points, channel, tb.CALIBRATION_PACKETS, np.random.default_rng(1))
+    one = tb.fit_calibration(power[0], distance)                                          # cvxpy
+    d = np.broadcast_to(distance[:, None, :], power[0].shape).ravel()
+    design = np.stack([np.ones(d.size), -10 * np.log10(d)], -1)
+    normal = np.linalg.solve(design.T @ design, design.T @ power[0].ravel())           # Eq. (5.1) directly
+    np.testing.assert_allclose([one.ref_power_dbm, one.path_loss_exp], normal, rtol=1e-6, atol=1e-6)
+    assert d.size == 2880 != tb.PRINTED_MEASUREMENT_COUNT                               # note 000 A12
+    # repeated calibrations: unbiased, with the OLS covariance sigma^2 (M^T M)^-1
+    n_runs = 4000
+    study = tb.calibration_study(points, channel, tb.CALIBRATION_PACKETS, n_runs, np.random.default_rng(2))
+    law_sd = channel.sigma_db * np.sqrt(np.diag(np.linalg.inv(design.T @ design)))
+    for est, true, sd in ((study.ref_power_dbm, -52.0, law_sd[0]), (study.path_loss_exp, 1.8, law_sd[1])):
+        assert abs(est.mean() - true) < 4 * sd / np.sqrt(n_runs)
+        assert est.std(ddof=1) == pytest.approx(sd, rel=4 / np.sqrt(2 * n_runs))      # sd of a sample sd
+    # E[s^2] = sigma^2 with n - 2 degrees of freedom
+    assert np.mean(study.residual_sigma_db**2) == pytest.approx(5.8**2, rel=4 * np.sqrt(2 / 2878) / np.sqrt(n_runs))
+
+
+def test_orientation_gain_averages_to_zero_over_the_circle():
+    theta = np.arange(0, 360, 15.0)
+    assert abs(tb.orientation_gain_db(theta).mean()) < 1e-12                            # cos(t), cos(2t + phi)
+    g = tb.orientation_gain_db(np.array([0.0, 180.0]), quadrupole_db=0.0, dipole_db=2.0)
+    np.testing.assert_allclose(g, [2.0, -2.0])
+
+
+def test_testbed_grid_and_single_walk_window():
+    traj = dg.polyline_trajectory(rss_every=tb.TESTBED_RSS_EVERY)
+    assert traj.rss_steps.size == 40 and np.allclose(np.diff(traj.time_s[traj.rss_steps]), 2.0)   # 1 packet / 2 s
+    lo, hi = tb.single_run_interval(np.linspace(0, 1, 100001), 0.9)
+    assert (lo, hi) == pytest.approx((0.05, 0.95))
+    with pytest.raises(lb.ParameterError):
+        tb.single_run_interval([1.0, 2.0], 1.0)
+    run = dg.run_channel(traj, 6.0, 1.8, 30, np.random.default_rng(4), sigma_acc_values=(0.0152,), ref_power_dbm=-52.0)
+    rows = tb.testbed_rows(run, 0.0152)
+    assert len(rows) == len(tb.PRINTED_TESTBED_RMSE_M) + 4
+    for r in rows:
+        assert r["lower"] <= r["median_single_run"] <= r["upper"]
+        assert r["within"] == (r["lower"] <= r["printed"] <= r["upper"])
+
+
+def test_report_prediction_interval_tests_the_printed_value(tmp_path, monkeypatch):
+    monkeypatch.setenv("LOCBOOK_OUTPUT_DIR", str(tmp_path))
+    report = lb.Report("x")
+    # the reproduction (median 4.9) is outside, but the printed single run (3.2) lies in the simulated spread
+    assert report.number("a", "w", 3.2, 4.9, lower=3.0, upper=6.0, interval_holds="reported")["within_tolerance"] is True
+    assert report.number("b", "w", 2.0, 4.9, lower=3.0, upper=6.0, interval_holds="reported")["within_tolerance"] is False
+    assert report.number("c", "w", 2.0, 4.9, lower=3.0, upper=6.0)["within_tolerance"] is True
+    with pytest.raises(ValueError):
+        report.number("d", "w", 2.0, 4.9, tolerance=1.0, interval_holds="reported")

@@ -78,8 +78,8 @@ def simulate_calibration(points_m, channel: PathLossModel, n_packets: int, rng: 
     if n_packets < 1 or n_runs < 1:
         raise ParameterError("n_packets and n_runs must be at least 1")
     distance = pairwise_distance_m(np.asarray(points_m, float), anchors_m)
-    mean = channel.mean_power_dbm(distance)[None, :, None, :]
-    power = mean + channel.sigma_db * rng.standard_normal((n_runs, distance.shape[0], n_packets, distance.shape[1]))
+    shape = (n_runs, distance.shape[0], n_packets, distance.shape[1])
+    power = channel.sample_power_dbm(np.broadcast_to(distance[None, :, None, :], shape), rng)
     if quantize_step_db:
         power = quantize_db(power, quantize_step_db)
     return power, distance

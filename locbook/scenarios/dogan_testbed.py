@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..calibration import PathLossFit, fit_path_loss, fit_path_loss_closed_form
+from ..calibration import PathLossFit, calibrate_path_loss
 from ..channel import PathLossModel, pairwise_distance_m, quantize_db
 from ..errors import ParameterError
 from ..metrics import reduction_pct, rmse_m
@@ -101,7 +101,7 @@ class CalibrationStudy:
                                 ("sigma (dB)", self.residual_sigma_db, truth.sigma_db)):
             rows.append(dict(parameter=name, truth=float(true), mean=float(est.mean()),
                              bias=float(est.mean() - true), std=float(est.std(ddof=1)),
-                             rmse=float(np.sqrt(np.mean((est - true) ** 2)))))
+                             rmse=float(rmse_m(est - true))))
         return rows
 
 
@@ -115,9 +115,10 @@ def calibration_study(points_m, channel: PathLossModel, n_packets: int, n_runs: 
                                            quantize_step_db=quantize_step_db)
     if average_packets:
         power = power.mean(axis=2, keepdims=True)
-    d = np.broadcast_to(distance[None, :, None, :], power.shape).reshape(n_runs, -1)
-    fit = fit_path_loss_closed_form(d, power.reshape(n_runs, -1))
-    return CalibrationStudy(fit.ref_power_dbm, fit.path_loss_exp, fit.residual_sigma_db, int(d.shape[1]))
+    d = np.broadcast_to(distance[None, :, None, :], power.shape)
+    fit = calibrate_path_loss(d.reshape(n_runs, -1, d.shape[-1]), power.reshape(n_runs, -1, d.shape[-1]), "pooled",
+                              solver="closed_form")
+    return CalibrationStudy(fit.ref_power_dbm, fit.path_loss_exp, fit.residual_sigma_db, int(fit.n_samples[0]))
 
 
 def fit_calibration(power_dbm, distance_m) -> PathLossFit:
@@ -125,7 +126,7 @@ def fit_calibration(power_dbm, distance_m) -> PathLossFit:
     over every packet of ``power_dbm`` ``(P, packets, m)`` at ``distance_m`` ``(P, m)``."""
     power_dbm = np.asarray(power_dbm, float)
     d = np.broadcast_to(np.asarray(distance_m, float)[:, None, :], power_dbm.shape)
-    return fit_path_loss(d.ravel(), power_dbm.ravel())
+    return calibrate_path_loss(d.reshape(-1, d.shape[-1]), power_dbm.reshape(-1, d.shape[-1]), "pooled")
 
 
 def orientation_gain_db(theta_deg, *, quadrupole_db: float = 4.0, dipole_db: float = 3.0,
@@ -168,15 +169,15 @@ def testbed_rows(run: ChannelRun, sigma_acc_mps2: float, *, coverage: float = 0.
     for (name, case), printed in PRINTED_TESTBED_RMSE_M.items():
         key = "static_mle" if name == "static_mle" else (name, None if case is None else sigma_acc_mps2)
         err = run.errors[key]
-        per_run = np.sqrt(np.mean(err**2, axis=1))
+        per_run = rmse_m(err, axis=1)
         lo, hi = single_run_interval(per_run, coverage)
         rows.append(dict(filter=name, case="ONLY RSS" if case is None else "RSS/IMU", where=_FIGURE[name],
                          printed=printed, mc_rmse=float(rmse_m(err)), median_single_run=float(np.median(per_run)),
                          lower=lo, upper=hi, within=bool(lo <= printed <= hi)))
     per_filter = []
     for name in FILTERS:
-        only = np.sqrt(np.mean(run.errors[(name, None)] ** 2, axis=1))
-        fused = np.sqrt(np.mean(run.errors[(name, sigma_acc_mps2)] ** 2, axis=1))
+        only = rmse_m(run.errors[(name, None)], axis=1)
+        fused = rmse_m(run.errors[(name, sigma_acc_mps2)], axis=1)
         per_filter.append(reduction_pct(only, fused))
         lo, hi = single_run_interval(per_filter[-1], coverage)
         # derived from the printed pair; the thesis prints only the ~15 % summary (last row)

@@ -72,3 +72,7 @@ __all__ = [
     # errors and reports
     "LocbookError", "DegenerateGeometryError", "ConvergenceError", "ParameterError", "Report",
 ]
+
+from ._datalog import install_from_environment as _install_data_log
+
+_install_data_log()   # records the data files read under `locbook run` (no-op otherwise)

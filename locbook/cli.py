@@ -1,7 +1,12 @@
-"""``locbook`` command line: list the experiments and run the notebook suite."""
+"""``locbook`` command line: list the experiments and run the notebook suite.
+
+Exit status: 0 all good; 1 some experiment failed; 2 bad input (parameters, experiment list, folders);
+130 / 143 interrupted by SIGINT / SIGTERM (finished reports are kept).
+"""
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 from pathlib import Path
 
@@ -15,9 +20,46 @@ def _parse_overrides(items: list[str]) -> dict[str, str]:
     for item in items:
         name, sep, value = item.partition("=")
         if not sep or not name.strip():
-            raise ParameterError(f"-p expects NAME=VALUE, got {item!r}")
+            raise ParameterError(f"-p expects NAME=VALUE (VALUE a TOML value, e.g. q_grid=[0.1, 0.2]), got {item!r}")
         out[name.strip()] = value
     return out
+
+
+def _positive_seconds(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expects a number of seconds, got {text!r}") from None
+    if not value > 0 or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"must be a positive, finite number of seconds, got {text!r}")
+    return value
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expects a whole number, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
+    return value
+
+
+def _print_summary(run) -> None:
+    names = {"ok": "executed", "cached": "cached", "failed": "failed", "interrupted": "interrupted",
+             "not run": "not started"}
+    counts = ", ".join(f"{run.count(s)} {w}" for s, w in names.items() if run.count(s) or s in ("ok", "cached", "failed"))
+    print(f"done: {counts}; see {run.report_dir / 'index.html'}")
+    if run.interrupted_by is not None:
+        sig = signal.Signals(run.interrupted_by).name
+        print(f"interrupted by {sig}: finished reports are kept; nothing else was changed.", file=sys.stderr)
+        for status in ("interrupted", "not run"):
+            ids = [o.id for o in run.outcomes if o.status == status]
+            if ids:
+                print(f"  {names[status]}: {', '.join(ids)}", file=sys.stderr)
+    failed = [o for o in run.outcomes if o.status == "failed"]
+    if failed:
+        print("failed: " + ", ".join(f"{o.id} ({o.error})" for o in failed), file=sys.stderr)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -28,12 +70,14 @@ def main(argv: list[str] | None = None) -> int:
     run = sub.add_parser("run", help="execute experiments and write reports/<profile>/")
     run.add_argument("ids", nargs="*", help="experiment ids or document keys (default: all)")
     run.add_argument("--profile", choices=("quick", "full"), default="quick", help=PROFILE_HELP)
-    run.add_argument("--jobs", "-j", type=int, default=2, help="notebooks run in parallel processes (default 2)")
+    run.add_argument("--jobs", "-j", type=_positive_int, default=2, help="notebooks run in parallel processes (default 2)")
     run.add_argument("--force", action="store_true", help="execute even when a cached report is up to date")
     run.add_argument("-p", "--parameter", action="append", default=[], metavar="NAME=VALUE",
-                     help="override a notebook parameter (checked against its type)")
+                     help="override a notebook parameter (a TOML value, checked against its type and range); "
+                          "the reports go to their own folder, never to reports/<profile>/")
     run.add_argument("--reports", type=Path, help="reports folder (default: <repository>/reports)")
-    run.add_argument("--timeout", type=int, default=1800, help="seconds allowed per notebook cell")
+    run.add_argument("--out", type=Path, help="write this run's reports to this folder ([a-z0-9-] name)")
+    run.add_argument("--timeout", type=_positive_seconds, default=1800, help="seconds allowed per notebook cell")
     args = parser.parse_args(argv)
 
     from .suite import load_suite, run_suite
@@ -47,24 +91,22 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"{'':34s} {exp.title}")
                 print(f"{'':34s} parameters: {', '.join(f'{p.name}: {p.annotation}' for p in params.values())}")
             return 0
-        if args.jobs < 1:
-            raise ParameterError(f"--jobs must be at least 1, got {args.jobs}")
         experiments = suite.select(args.ids)
-        outcomes = run_suite(suite, experiments, args.profile, jobs=args.jobs, force=args.force,
-                             overrides=_parse_overrides(args.parameter), report_root=args.reports,
-                             timeout_s=args.timeout)
+        result = run_suite(suite, experiments, args.profile, jobs=args.jobs, force=args.force,
+                           overrides=_parse_overrides(args.parameter), report_root=args.reports,
+                           out_dir=args.out, timeout_s=args.timeout)
     except ParameterError as exc:
         print(f"locbook: error: {exc}", file=sys.stderr)
         return 2
-    report_dir = (args.reports or suite.root / "reports") / args.profile
-    failed = [o for o in outcomes if o.status == "failed"]
-    counts = {s: sum(o.status == s for o in outcomes) for s in ("ok", "cached", "failed")}
-    print(f"done: {counts['ok']} executed, {counts['cached']} cached, {counts['failed']} failed; "
-          f"see {report_dir / 'index.html'}")
-    if failed:
-        print("failed: " + ", ".join(f"{o.id} ({o.error})" for o in failed), file=sys.stderr)
-        return 1
-    return 0
+    except OSError as exc:   # a read-only or full disk while writing the suite files
+        print(f"locbook: error: {exc.strerror or exc}: {exc.filename or ''}", file=sys.stderr)
+        return 2
+    if result.report_dir.name != args.profile:
+        print(f"reports of this run: {result.report_dir} (reports/{args.profile}/ is unchanged)")
+    _print_summary(result)
+    if result.interrupted_by is not None:
+        return 128 + int(result.interrupted_by)
+    return 1 if result.count("failed") else 0
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -1,5 +1,6 @@
 """Every notebook of the suite, executed at the quick profile, produces its reports."""
 import csv
+import json
 
 import pytest
 
@@ -7,6 +8,7 @@ from locbook.report import NUMBER_COLUMNS
 from locbook.suite import load_suite, read_parameters, run_suite
 
 SUITE = load_suite()
+pytestmark = pytest.mark.notebooks
 
 
 def test_every_notebook_declares_typed_parameters_and_is_committed_without_outputs():
@@ -14,6 +16,7 @@ def test_every_notebook_declares_typed_parameters_and_is_committed_without_outpu
     for exp in SUITE.experiments:
         params = read_parameters(exp.notebook)            # raises on a missing annotation
         assert "seed" in params, exp.id
+        assert exp.unruled_numeric_parameters() == [], exp.id   # every number has a declared range
         for profile in ("quick", "full"):
             exp.parameters(profile)                        # profile values match the declared types
         nb = nbformat.read(str(exp.notebook), as_version=4)
@@ -23,8 +26,8 @@ def test_every_notebook_declares_typed_parameters_and_is_committed_without_outpu
 @pytest.fixture(scope="module")
 def quick_reports(tmp_path_factory):
     root = tmp_path_factory.mktemp("reports")
-    outcomes = run_suite(SUITE, SUITE.experiments, "quick", jobs=2, report_root=root, log=lambda *_: None)
-    return root / "quick", outcomes
+    run = run_suite(SUITE, SUITE.experiments, "quick", jobs=2, report_root=root, log=lambda *_: None)
+    return run.report_dir, run.outcomes
 
 
 def test_quick_profile_runs_every_notebook(quick_reports):
@@ -35,6 +38,11 @@ def test_quick_profile_runs_every_notebook(quick_reports):
         assert (folder / exp.id / f"{exp.id}.html").exists()
         assert (folder / exp.id / "summary.md").exists()
         assert list((folder / exp.id).glob("*.png")), exp.id
+    # the data files each experiment read are recorded with their hashes (the printed-value tables)
+    data = {exp.id: json.loads((folder / exp.id / "run.json").read_text())["data"] for exp in SUITE.experiments}
+    assert any(p.endswith("scenarios/data/ozkaya2011_printed.csv") for p in data["ozkaya2011-nn-sim"])
+    assert any(p.endswith("scenarios/data/dogan2015_printed.csv") for p in data["dogan2015-tracking"])
+    assert data["george-tracking"] == {}
 
 
 def test_numbers_csv_holds_the_printed_numbers(quick_reports):

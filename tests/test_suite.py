@@ -6,20 +6,34 @@ import csv
 import json
 import textwrap
 
+import os
+import signal
+import subprocess
+import sys
+import time
+
 import nbformat
 import pytest
 from nbformat.v4 import new_code_cell, new_notebook
 
 from locbook.cli import main
 from locbook.errors import ParameterError
-from locbook.suite import load_suite, read_parameters
+from locbook.suite import SuiteError, load_suite, read_parameters, run_suite
+from locbook.suite.runner import _validate_report
+
+pytestmark = pytest.mark.notebooks   # these tests execute (toy) notebooks with papermill
 
 GOOD = """\
+import os, time
 import numpy as np
 import locbook as lb
 report = lb.Report("toy")
+offset = float(open("../../shared/data/offset.csv").read().split()[-1]) if read_data else 0.0
 x = lb.streams(seed, "a")["a"].normal(size=n)
-report.number("mean", "Table 1", 0.0, float(x.mean()), tolerance=1.0, tolerance_basis="test")
+report.number("mean", "Table 1", offset, float(x.mean()) + offset, tolerance=1.0, tolerance_basis="test")
+time.sleep(sleep_s)
+if kill_worker:
+    os.kill(os.getppid(), 9)          # the kernel's parent is the worker process: simulate an OOM kill
 if fail:
     raise RuntimeError("deliberate failure")
 """
@@ -34,11 +48,21 @@ def _notebook(path, params_src, body=GOOD):
     nbformat.write(nb, str(path))
 
 
+PARAMS = ('seed: int = 1  # seed\nn: int = 10  # samples\nfail: bool = False  # raise\n'
+          'mode: Literal["a", "b"] = "a"  # a mode\nsleep_s: float = 0.0  # wait\n'
+          'kill_worker: bool = False  # die\nread_data: bool = False  # read ../shared/data/offset.csv\n'
+          'weights: list[float] = [1.0]  # a list\n')
+
+
 @pytest.fixture
 def toy(tmp_path):
+    """A repository at tmp_path/repo with two toy notebooks, and tmp_path/shared/data beside it."""
+    (tmp_path / "shared" / "data").mkdir(parents=True)
+    (tmp_path / "shared" / "data" / "offset.csv").write_text("offset\n0.0\n")
+    tmp_path = tmp_path / "repo"
     nbdir = tmp_path / "notebooks"
-    nbdir.mkdir()
-    params = 'seed: int = 1  # seed\nn: int = 10  # samples\nfail: bool = False  # raise\nmode: Literal["a", "b"] = "a"  # a mode\n'
+    nbdir.mkdir(parents=True)
+    params = PARAMS
     _notebook(nbdir / "one.ipynb", params)
     _notebook(nbdir / "two.ipynb", params)
     (nbdir / "experiments.toml").write_text(textwrap.dedent("""
@@ -66,6 +90,9 @@ def toy(tmp_path):
         notebook = "two.ipynb"
         [experiment.profiles.quick]
         [experiment.profiles.full]
+        [parameter_rules]
+        n = { ge = 1 }
+        sleep_s = { ge = 0 }
         """))
     return tmp_path
 
@@ -77,7 +104,9 @@ def run(toy, *args):
 def test_parameters_are_read_with_types(toy):
     params = read_parameters(toy / "notebooks" / "one.ipynb")
     assert {p: params[p].annotation for p in params} == {"seed": "int", "n": "int", "fail": "bool",
-                                                         "mode": "Literal['a', 'b']"}
+                                                         "mode": "Literal['a', 'b']", "sleep_s": "float",
+                                                         "kill_worker": "bool", "read_data": "bool",
+                                                         "weights": "list[float]"}
     assert params["n"].help == "samples"
 
 
@@ -92,13 +121,23 @@ def test_unannotated_parameter_is_rejected(tmp_path):
     ("n=abc", "parameter 'n' expects int"),
     ("mode=c", "parameter 'mode' expects Literal"),
     ("fail=maybe", "parameter 'fail' expects bool"),
+    ("n=0", "parameter 'n' = 0 is not allowed: must be >= 1"),
+    ("n=-5", "parameter 'n' = -5 is not allowed: must be >= 1"),
+    ("sleep_s=nan", "parameter 'sleep_s' = nan is not allowed: NaN is not a value"),
+    ("sleep_s=inf", "parameter 'sleep_s' = inf is not allowed: must be finite"),
+    ("n", "-p expects NAME=VALUE"),
+    ("weights=0.1,0.2", "parameter 'weights' expects list[float], got '0.1,0.2'"),
+    ("weights=[]", None),   # allowed: no rule on the length
 ])
 def test_bad_parameter_stops_before_execution(toy, capsys, override, message):
     assert run(toy, "george-one") == 0
     report = toy / "reports" / "quick" / "george-one" / "george-one.ipynb"
     before = report.read_bytes()
-    assert run(toy, "george-one", "-p", override) == 2
-    assert message in capsys.readouterr().err
+    if message is None:
+        assert run(toy, "george-one", "-p", override) == 0
+    else:
+        assert run(toy, "george-one", "-p", override) == 2
+        assert message in capsys.readouterr().err
     assert report.read_bytes() == before               # the existing report is untouched
 
 
@@ -151,3 +190,224 @@ def test_forced_runs_give_identical_numbers(toy):
 def test_unknown_experiment_is_an_error(toy, capsys):
     assert run(toy, "george-nope") == 2
     assert "unknown experiment" in capsys.readouterr().err
+
+
+def test_cli_values_are_toml(toy):
+    exp = load_suite(toy / "notebooks" / "experiments.toml").experiments[0]
+    values = exp.parameters("quick", {"weights": "[0.1, 2]", "sleep_s": "3", "mode": "b", "fail": "true"})
+    assert values == {"n": 5, "weights": [0.1, 2.0], "sleep_s": 3.0, "mode": "b", "fail": True}
+    assert type(values["sleep_s"]) is float and type(values["weights"][1]) is float
+
+
+# -- processes: concurrency, data files, dying workers, signals --------------------------------------------
+def cli(toy, *args):
+    return subprocess.Popen([sys.executable, "-m", "locbook.cli", "--suite", str(toy / "notebooks" / "experiments.toml"),
+                             "run", "--reports", str(toy / "reports"), *args],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def processes_mentioning(text: str) -> dict[int, str]:
+    """Live processes whose command line or environment mentions ``text`` (the runner and its workers carry the
+    toy's paths; kernels inherit LOCBOOK_OUTPUT_DIR), and all their descendants."""
+    info = {}
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit() or int(entry) == os.getpid():
+            continue
+        try:
+            with open(f"/proc/{entry}/cmdline", "rb") as fh:
+                cmd = fh.read().replace(b"\0", b" ").decode(errors="replace")
+            with open(f"/proc/{entry}/environ", "rb") as fh:
+                env = fh.read().decode(errors="replace")
+            with open(f"/proc/{entry}/stat") as fh:
+                fields = fh.read().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if fields[0] != "Z":
+            info[int(entry)] = (int(fields[1]), cmd, text in env)
+    chosen = {pid for pid, (_, cmd, in_env) in info.items() if text in cmd or in_env}
+    grew = True
+    while grew:
+        more = {pid for pid, (ppid, *_) in info.items() if ppid in chosen} - chosen
+        chosen |= more
+        grew = bool(more)
+    return {pid: info[pid][1] for pid in sorted(chosen)}
+
+
+def alive(pids) -> list[int]:
+    """The pids of ``pids`` still running (zombies count as gone)."""
+    out = []
+    for pid in pids:
+        try:
+            with open(f"/proc/{pid}/stat") as fh:
+                if fh.read().rsplit(")", 1)[1].split()[0] != "Z":
+                    out.append(pid)
+        except OSError:
+            pass
+    return out
+
+
+def wait_for(predicate, timeout_s: float):
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        time.sleep(0.1)
+    return predicate()
+
+
+def set_profile(toy, experiment: str, text: str):
+    toml = toy / "notebooks" / "experiments.toml"
+    marker = f'id = "{experiment}"'
+    head, tail = toml.read_text().split(marker)
+    tail = tail.replace("[experiment.profiles.quick]\n", "[experiment.profiles.quick]\n" + text + "\n", 1)
+    toml.write_text(head + marker + tail)
+
+
+def test_concurrent_runs_leave_every_report_complete(toy):
+    first = cli(toy, "--force")
+    assert wait_for(lambda: (toy / "reports" / "quick" / ".lock").exists(), 30)
+    second = cli(toy, "--force")
+    out1, err1 = first.communicate(timeout=300)
+    out2, err2 = second.communicate(timeout=300)
+    assert first.returncode == 0 and second.returncode == 0, (err1, err2)
+    assert "waiting for it to finish" in out2
+    folder = toy / "reports" / "quick"
+    for eid in ("george-one", "george-two"):
+        assert _validate_report(folder / eid, eid) == ""
+        assert json.loads((folder / eid / "run.json").read_text())["status"] == "ok"
+    rows = list(csv.DictReader((folder / "numbers.csv").read_text().splitlines()))
+    assert [r["experiment"] for r in rows] == ["george-one", "george-two"]
+    assert not list((folder / ".staging").glob("*/*"))
+
+
+def test_editing_a_data_file_reruns_exactly_its_readers(toy, capsys):
+    set_profile(toy, "george-one", "read_data = true")
+    assert run(toy) == 0
+    record = json.loads((toy / "reports" / "quick" / "george-one" / "run.json").read_text())
+    assert list(record["data"]) == [str((toy.parent / "shared" / "data" / "offset.csv").resolve())]
+    assert json.loads((toy / "reports" / "quick" / "george-two" / "run.json").read_text())["data"] == {}
+    capsys.readouterr()
+    assert run(toy) == 0
+    assert "0 executed, 2 cached" in capsys.readouterr().out
+    (toy.parent / "shared" / "data" / "offset.csv").write_text("offset\n0.5\n")
+    assert run(toy) == 0
+    out = capsys.readouterr().out
+    assert "george-one: ok" in out and "george-two: cached" in out and "1 executed, 1 cached" in out
+    row = next(csv.DictReader((toy / "reports" / "quick" / "george-one" / "numbers.csv").read_text().splitlines()))
+    assert float(row["reported"]) == 0.5
+
+
+def test_a_killed_worker_fails_only_its_experiment(toy, capsys):
+    assert run(toy) == 0
+    good = (toy / "reports" / "quick" / "george-one" / "numbers.csv").read_bytes()
+    set_profile(toy, "george-one", "kill_worker = true")
+    assert run(toy, "--jobs", "2") == 1
+    captured = capsys.readouterr()
+    assert "george-one: worker process died (SIGKILL); retrying once" in captured.out
+    assert "failed: george-one (worker process died (SIGKILL))" in captured.err
+    assert "george-two" not in captured.err
+    assert (toy / "reports" / "quick" / "george-one" / "numbers.csv").read_bytes() == good
+    status = json.loads((toy / "reports" / "quick" / "status.json").read_text())
+    assert status["george-one"]["status"] == "failed" and status["george-two"]["status"] == "cached"
+    assert wait_for(lambda: not processes_mentioning(str(toy)), 5), processes_mentioning(str(toy))
+
+
+def test_sigint_stops_the_run_cleanly_and_keeps_finished_reports(toy, request):
+    set_profile(toy, "george-two", "sleep_s = 120.0")
+    proc = cli(toy, "--jobs", "2")
+    request.addfinalizer(proc.kill)
+    assert wait_for(lambda: (toy / "reports" / "quick" / "george-one" / "summary.md").exists(), 120)
+    assert wait_for(lambda: any("ipykernel" in c for c in processes_mentioning(str(toy)).values()), 60)
+    started = processes_mentioning(str(toy))          # runner, workers and kernels
+    sent = time.monotonic()
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=30)
+    assert time.monotonic() - sent < 10
+    assert proc.returncode == 130
+    assert "Traceback" not in err and "Traceback" not in out
+    assert "interrupted by SIGINT" in err and "interrupted: george-two" in err
+    assert (toy / "reports" / "quick" / "george-one" / "summary.md").exists()
+    assert not (toy / "reports" / "quick" / "george-two").exists()
+    assert wait_for(lambda: not alive(started), 3), [started[p] for p in alive(started)]
+    status = json.loads((toy / "reports" / "quick" / "status.json").read_text())
+    assert status["george-two"]["status"] == "interrupted"
+
+
+def test_sigkill_of_the_runner_leaves_no_worker_or_kernel(toy, request):
+    set_profile(toy, "george-one", "sleep_s = 120.0")
+    proc = cli(toy, "george-one")
+    request.addfinalizer(proc.kill)
+    assert wait_for(lambda: any("ipykernel" in c for c in processes_mentioning(str(toy)).values()), 60)
+    started = processes_mentioning(str(toy))
+    assert len(started) == 3                            # runner, worker, kernel
+    proc.kill()
+    proc.communicate()
+    assert wait_for(lambda: not alive(started), 5), [started[p] for p in alive(started)]
+    # the next run recovers the folder (the lock died with its holder; the stale staging is removed)
+    assert run(toy, "george-two") == 0
+    assert not list((toy / "reports" / "quick" / ".staging").glob("*"))
+
+
+def test_partial_run_keeps_the_other_experiments_rows(toy):
+    assert run(toy) == 0
+    folder = toy / "reports" / "quick"
+    before = [r for r in csv.DictReader((folder / "numbers.csv").read_text().splitlines())]
+    (folder / "george-two" / "run.json").unlink()           # as in a fresh clone: run.json is not committed
+    set_profile(toy, "george-one", "seed = 5")
+    assert run(toy, "george-one") == 0
+    after = [r for r in csv.DictReader((folder / "numbers.csv").read_text().splitlines())]
+    assert [r for r in after if r["experiment"] == "george-two"] == [r for r in before if r["experiment"] == "george-two"]
+    assert [r for r in after if r["experiment"] == "george-one"] != [r for r in before if r["experiment"] == "george-one"]
+    index = (folder / "index.md").read_text()
+    assert "not run" not in index and "[summary](george-two/summary.md)" in index
+
+
+def snapshot(folder):
+    return {p.relative_to(folder): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def test_override_run_writes_its_own_folder(toy, capsys):
+    assert run(toy) == 0
+    before = snapshot(toy / "reports" / "quick")
+    capsys.readouterr()
+    assert run(toy, "george-one", "-p", "n=7") == 0
+    out = capsys.readouterr().out
+    assert snapshot(toy / "reports" / "quick") == before
+    made = [p.name for p in (toy / "reports").iterdir() if p.name.startswith("quick-")]
+    assert len(made) == 1 and made[0].startswith("quick-n-7-") and f"reports of this run: {toy / 'reports' / made[0]}" in out
+    index = (toy / "reports" / made[0] / "index.md").read_text()
+    assert "george-one" in index and "george-two" not in index
+    assert run(toy, "george-one", "-p", "n=7", "--out", str(toy / "reports" / "My_Run")) == 2
+
+
+def test_bad_suite_inputs_get_one_clear_line(toy, capsys):
+    toml = toy / "notebooks" / "experiments.toml"
+    original = toml.read_text()
+    toml.write_text(original.replace('id = "george-one"', 'id = "george-../one"'))
+    with pytest.raises(SuiteError, match=r"experiment id 'george-../one' must be lower-case letters"):
+        load_suite(toml)
+    toml.write_text(original)
+    for bad in ("0", "-1", "nan"):
+        with pytest.raises(SystemExit) as exc:
+            run(toy, "--timeout", bad)
+        assert exc.value.code == 2
+        assert "--timeout: must be a positive, finite number of seconds" in capsys.readouterr().err
+    assert run(toy, "george-two") == 0
+    good = (toy / "reports" / "quick" / "george-two" / "george-two.ipynb").read_bytes()
+    (toy / "notebooks" / "two.ipynb").write_text("{ this is not JSON")
+    assert run(toy, "george-two") == 2
+    err = capsys.readouterr().err
+    assert "two.ipynb: not a readable Jupyter notebook" in err and "Traceback" not in err
+    assert (toy / "reports" / "quick" / "george-two" / "george-two.ipynb").read_bytes() == good
+    suite = load_suite(toml)
+    with pytest.raises(SuiteError, match="no Jupyter kernel named 'no-such-kernel'"):
+        run_suite(suite, suite.experiments[:1], "quick", report_root=toy / "reports", kernel_name="no-such-kernel")
+
+
+def test_unwritable_reports_folder_is_one_clear_line(toy, capsys):
+    target = "/sys/fs/locbook-reports"         # sysfs refuses new folders even to root
+    if not os.path.isdir("/sys/fs"):
+        pytest.skip("needs /sys/fs")
+    assert main(["--suite", str(toy / "notebooks" / "experiments.toml"), "run", "--reports", target, "george-one"]) == 2
+    err = capsys.readouterr().err
+    assert "cannot write to the reports folder /sys/fs/locbook-reports/quick" in err and "Traceback" not in err

@@ -1,56 +1,87 @@
-"""Execute the notebook suite with papermill: validation, caching, parallel processes, reports.
+"""Execute the notebook suite with papermill: validation, locking, caching, worker processes, reports.
 
-Layout of ``reports/<profile>/``::
+Layout of a reports folder (``reports/<profile>/``, or its own folder for a run with ``-p`` overrides)::
 
     index.html, index.md, numbers.csv        the whole suite (numbers.csv: every printed number)
     <id>/<id>.ipynb, <id>.html               the executed notebook and its HTML page
     <id>/summary.md, *.png, *.csv            lightweight results (committed for the full profile)
-    <id>/run.json                            cache key, parameters, status and time of the last good run
-    .staging/<id>/                           a run in progress
+    <id>/report.json                         stamp and parameters of the report (committed)
+    <id>/run.json                            cache record: key, data files read and their hashes, time
+    .lock                                    held by the run writing this folder
+    .staging/<run>/<id>/                     experiments in progress, one folder per run
     .failed/<id>/                            the last failed attempt, kept for inspection
     status.json                              the last attempt of each experiment
 
-A run executes into ``.staging``; only a successful run replaces ``<id>/``, so a failure never removes
-the last good report.
+Guarantees (README, "Interrupts, concurrent runs and the cache"):
+
+- one run at a time per folder: a second run waits for the lock and says so;
+- each experiment runs in its own worker process; a worker that dies fails only its experiment (retried
+  once, as is a kernel that dies on start); every other experiment finishes;
+- a finished experiment is validated (notebook readable, every file in its manifest present, numbers.csv
+  well formed) and then promoted by renames; only then is its cache record written, so a failed,
+  interrupted or concurrent run never replaces or corrupts a good report;
+- SIGINT / SIGTERM: no new experiment starts, running ones are stopped (worker and kernel), finished ones
+  are kept, and :class:`SuiteRun` says what ran and what did not;
+- the suite files (index, numbers.csv) are rebuilt from every experiment folder present, so a partial run
+  keeps the other experiments' previous results, each with its own stamp.
 """
 from __future__ import annotations
 
 import csv
 import hashlib
+import io
 import json
-import multiprocessing
 import os
+import re
 import shutil
+import signal
 import subprocess
 import sys
+import threading
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import dataclass
+import uuid
+from collections import deque
+from dataclasses import dataclass, field
 from html import escape
 from importlib import metadata
 from pathlib import Path
 
-import nbformat
-
 from ..report import NUMBER_COLUMNS, Table
-from .spec import Experiment, Suite
+from .params import read_notebook
+from .spec import SAFE_NAME, Experiment, Suite, SuiteError
 
-__all__ = ["KERNEL_NAME", "run_suite", "cache_key", "Outcome", "write_suite_reports"]
+__all__ = ["KERNEL_NAME", "run_suite", "cache_key", "Outcome", "SuiteRun", "write_suite_reports",
+           "override_folder_name"]
 
 #: Every notebook runs on this kernel; jupyter_client maps it to the running interpreter.
 KERNEL_NAME = "python3"
 _DEPENDENCIES = ("numpy", "scipy", "cvxpy", "clarabel", "osqp", "scs", "matplotlib", "papermill",
                  "nbclient", "nbconvert", "nbformat", "ipykernel")
-_SINGLE_THREAD = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
-                  "BLIS_NUM_THREADS": "1", "VECLIB_MAXIMUM_THREADS": "1", "NUMEXPR_NUM_THREADS": "1"}
+_WORKER_FILES = (".runtime", ".result.json", ".result.json.tmp", ".task.json", ".data-read.log")
+_STOP_GRACE_S = 5.0
 
 
 @dataclass
 class Outcome:
     id: str
-    status: str  # "ok", "cached" or "failed"
+    status: str  # "ok", "cached", "failed", "interrupted" or "not run"
     seconds: float
     error: str = ""
+    attempts: int = 0
+
+
+@dataclass
+class SuiteRun:
+    """What a run did: one :class:`Outcome` per selected experiment, the folder written, and the signal that
+    stopped the run (``None`` if it ran to the end)."""
+
+    outcomes: list[Outcome]
+    report_dir: Path
+    interrupted_by: int | None = None
+    notices: list[str] = field(default_factory=list)
+
+    def count(self, status: str) -> int:
+        return sum(o.status == status for o in self.outcomes)
 
 
 def locbook_version() -> str:
@@ -58,8 +89,13 @@ def locbook_version() -> str:
     return __version__
 
 
+def _package_dir() -> Path:
+    return Path(__file__).resolve().parents[1]
+
+
 def _source_fingerprint() -> str:
-    package = Path(__file__).resolve().parents[1]
+    """Every Python source of the package (data files are tracked per experiment, by what it reads)."""
+    package = _package_dir()
     h = hashlib.sha256()
     for path in sorted(package.rglob("*.py")):
         h.update(str(path.relative_to(package)).encode())
@@ -78,7 +114,7 @@ def _dependency_versions() -> dict[str, str]:
 
 
 def _notebook_fingerprint(path: Path) -> str:
-    nb = nbformat.read(str(path), as_version=4)
+    nb = read_notebook(path)
     h = hashlib.sha256()
     for cell in nb.cells:  # sources and tags only: outputs and execution counts do not matter
         h.update(cell.cell_type.encode())
@@ -89,7 +125,8 @@ def _notebook_fingerprint(path: Path) -> str:
 
 def cache_key(exp: Experiment, profile: str, params: dict, *, source: str | None = None,
               versions: dict | None = None) -> str:
-    """Hash of everything that can change a report: notebook, parameters, profile, locbook, dependencies."""
+    """Hash of notebook, parameters, profile, locbook source and dependency versions. The data files an
+    experiment reads are checked separately, by their hashes recorded in ``run.json``."""
     payload = {
         "experiment": exp.id, "profile": profile, "parameters": params,
         "notebook": _notebook_fingerprint(exp.notebook),
@@ -97,6 +134,14 @@ def cache_key(exp: Experiment, profile: str, params: dict, *, source: str | None
         "versions": versions or _dependency_versions(),
     }
     return hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()
+
+
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
 
 
 def _git_stamp(root: Path) -> str:
@@ -110,45 +155,17 @@ def _git_stamp(root: Path) -> str:
     return f"{rev}{' + uncommitted changes' if dirty else ''}" if rev else ""
 
 
-# ---------------------------------------------------------------------------------------------------
-# worker side
-
-def _execute(task: dict) -> dict:
-    """Run one notebook with papermill in this (worker) process; never raises."""
-    import papermill as pm
-    from nbconvert import HTMLExporter
-
-    os.environ.update(_SINGLE_THREAD)
-    os.environ.update({"LOCBOOK_OUTPUT_DIR": task["staging"],
-                       "LOCBOOK_EXPERIMENT": task["id"], "PYDEVD_DISABLE_FILE_VALIDATION": "1"})
-    staging = Path(task["staging"])
-    out_nb = staging / f"{task['id']}.ipynb"
-    # the kernel inherits this process's stderr: keep its chatter in a log beside the report
-    log_fd = os.open(staging / "kernel-stderr.log", os.O_WRONLY | os.O_CREAT | os.O_TRUNC)
-    os.dup2(log_fd, 2)
-    os.close(log_fd)
-    start = time.perf_counter()
-    error = ""
-    try:
-        pm.execute_notebook(task["notebook"], str(out_nb), parameters=task["parameters"],
-                            kernel_name=KERNEL_NAME, cwd=str(Path(task["notebook"]).parent),
-                            progress_bar=False, log_output=False, execution_timeout=task["timeout"])
-    except pm.PapermillExecutionError as exc:
-        error = f"{exc.ename}: {exc.evalue}"
-    except Exception as exc:  # kernel death, timeout, I/O: the run fails, the suite goes on
-        error = f"{type(exc).__name__}: {exc}"
-    seconds = time.perf_counter() - start
-    if out_nb.exists():
-        try:
-            body, _ = HTMLExporter(template_name="lab").from_filename(str(out_nb))
-            (staging / f"{task['id']}.html").write_text(body, encoding="utf-8")
-        except Exception as exc:  # an HTML failure must not hide the notebook's own result
-            error = error or f"HTML export failed: {exc}"
-    return {"id": task["id"], "error": error, "seconds": seconds}
+def override_folder_name(profile: str, overrides: dict[str, str]) -> str:
+    """Folder of a run with ``-p`` overrides: the profile, the overrides in words, and a hash of them
+    (``quick-sigma-db-2-5-a1b2c3d4``), ``[a-z0-9-]`` only."""
+    words = "-".join(f"{k}-{overrides[k]}" for k in sorted(overrides))
+    slug = re.sub(r"[^a-z0-9]+", "-", words.lower()).strip("-")[:60].strip("-")
+    digest = hashlib.sha256(json.dumps(overrides, sort_keys=True).encode()).hexdigest()[:8]
+    return "-".join(p for p in (profile, slug, digest) if p)
 
 
 # ---------------------------------------------------------------------------------------------------
-# main process
+# small file helpers: every suite-level file is written to a temporary name, then renamed
 
 def _read_json(path: Path, default):
     try:
@@ -157,14 +174,22 @@ def _read_json(path: Path, default):
         return default
 
 
-def _is_cached(report_dir: Path, exp: Experiment, key: str) -> bool:
-    run = _read_json(report_dir / exp.id / "run.json", {})
-    return (run.get("cache_key") == key and run.get("status") == "ok"
-            and (report_dir / exp.id / f"{exp.id}.ipynb").exists())
+def _write_atomic(path: Path, text: str) -> None:
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    tmp.write_text(text, encoding="utf-8")
+    os.replace(tmp, path)
+
+
+def _read_csv(path: Path) -> list[dict]:
+    if not path.exists():
+        return []
+    with open(path, newline="") as fh:
+        return list(csv.DictReader(fh))
 
 
 def _replace_dir(new: Path, final: Path):
-    """Swap ``new`` into place of ``final`` with renames, removing the old copy afterwards."""
+    """Swap ``new`` into place of ``final``: ``final -> .old-<name>``, ``new -> final``, remove the old copy.
+    A crash between the two renames leaves ``.old-<name>``, which :func:`_recover` puts back."""
     old = final.with_name(f".old-{final.name}")
     if old.exists():
         shutil.rmtree(old)
@@ -175,12 +200,69 @@ def _replace_dir(new: Path, final: Path):
         shutil.rmtree(old)
 
 
-def _read_csv(path: Path) -> list[dict]:
-    if not path.exists():
-        return []
-    with open(path, newline="") as fh:
-        return list(csv.DictReader(fh))
+def _recover(report_dir: Path) -> None:
+    """Undo what an interrupted run left (called under the lock, so no other run is using these)."""
+    for old in report_dir.glob(".old-*"):
+        final = report_dir / old.name[len(".old-"):]
+        if final.exists():
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            old.rename(final)
+    shutil.rmtree(report_dir / ".staging", ignore_errors=True)
+    for tmp in report_dir.glob(".*.tmp"):
+        tmp.unlink(missing_ok=True)
 
+
+def _validate_report(folder: Path, exp_id: str) -> str:
+    """'' if ``folder`` holds a complete report of ``exp_id``, else what is wrong."""
+    try:
+        read_notebook(folder / f"{exp_id}.ipynb")
+    except Exception as exc:
+        return f"executed notebook unreadable ({exc})"
+    manifest = _read_json(folder / "manifest.json", None)
+    if not isinstance(manifest, dict):
+        return "manifest.json missing or malformed (the notebook did not create a locbook Report)"
+    for item in manifest.get("figures", []) + manifest.get("tables", []):
+        if not (folder / item["file"]).is_file():
+            return f"{item['file']} is listed in the manifest but missing"
+    numbers = folder / "numbers.csv"
+    if numbers.exists():
+        with open(numbers, newline="") as fh:
+            reader = csv.DictReader(fh)
+            if tuple(reader.fieldnames or ()) != NUMBER_COLUMNS:
+                return f"numbers.csv has columns {reader.fieldnames}, expected {list(NUMBER_COLUMNS)}"
+            rows = list(reader)
+        if len(rows) != manifest.get("n_numbers", len(rows)):
+            return f"numbers.csv has {len(rows)} rows, the manifest says {manifest.get('n_numbers')}"
+        if any(r["experiment"] != exp_id for r in rows):
+            return "numbers.csv holds rows of another experiment"
+    return ""
+
+
+def _data_hashes(staging: Path, roots: list[Path]) -> dict[str, str]:
+    logged = (staging / ".data-read.log")
+    paths = sorted(set(logged.read_text().split())) if logged.exists() else []
+    return {p: _sha256(Path(p)) for p in paths if Path(p).is_file()}
+
+
+def _data_unchanged(recorded: dict[str, str]) -> bool:
+    for path, digest in recorded.items():
+        try:
+            if _sha256(Path(path)) != digest:
+                return False
+        except OSError:
+            return False
+    return True
+
+
+def _cached(report_dir: Path, exp: Experiment, key: str) -> bool:
+    run = _read_json(report_dir / exp.id / "run.json", {})
+    return (run.get("cache_key") == key and run.get("status") == "ok"
+            and _data_unchanged(run.get("data", {})) and not _validate_report(report_dir / exp.id, exp.id))
+
+
+# ---------------------------------------------------------------------------------------------------
+# reports
 
 def _summary_markdown(exp: Experiment, profile: str, params: dict, folder: Path, stamp: str) -> str:
     manifest = _read_json(folder / "manifest.json", {"figures": [], "tables": []})
@@ -222,137 +304,317 @@ def _summary_markdown(exp: Experiment, profile: str, params: dict, folder: Path,
     return "\n".join(lines)
 
 
-def write_suite_reports(suite: Suite, report_dir: Path) -> None:
-    """Rebuild ``numbers.csv``, ``index.html`` and ``index.md`` from the experiment folders present."""
+def write_suite_reports(suite: Suite, report_dir: Path, *, list_all: bool = True) -> None:
+    """Rebuild ``numbers.csv``, ``index.html`` and ``index.md`` from the experiment folders present.
+
+    An experiment's rows come from its own folder, whatever run wrote it, so a partial run leaves the
+    others' results as they were. ``list_all=False`` (folders of ``-p`` runs) lists only the experiments
+    present."""
     status = _read_json(report_dir / "status.json", {})
     rows, entries = [], []
     for exp in suite.experiments:
         folder = report_dir / exp.id
-        run = _read_json(folder / "run.json", {})
-        numbers = _read_csv(folder / "numbers.csv") if run else []
+        present = (folder / "summary.md").is_file()
+        if not present and not list_all:
+            continue
+        numbers = _read_csv(folder / "numbers.csv") if present else []
         rows += numbers
-        last = status.get(exp.id, {})
         verdicts = [n["within_tolerance"] for n in numbers if n.get("within_tolerance") not in ("", None)]
-        entries.append({"exp": exp, "run": run, "last": last, "n_numbers": len(numbers),
+        entries.append({"exp": exp, "present": present, "report": _read_json(folder / "report.json", {}),
+                        "run": _read_json(folder / "run.json", {}), "last": status.get(exp.id, {}),
                         "n_within": sum(v == "True" for v in verdicts), "n_judged": len(verdicts)})
-    with open(report_dir / "numbers.csv", "w", newline="") as fh:
-        writer = csv.DictWriter(fh, fieldnames=NUMBER_COLUMNS)
-        writer.writeheader()
-        for r in rows:
-            writer.writerow({c: r.get(c, "") for c in NUMBER_COLUMNS})
-    (report_dir / "index.html").write_text(_index_html(suite, report_dir, entries), encoding="utf-8")
-    (report_dir / "index.md").write_text(_index_md(suite, report_dir, entries), encoding="utf-8")
+    out = io.StringIO()
+    writer = csv.DictWriter(out, fieldnames=NUMBER_COLUMNS)
+    writer.writeheader()
+    for r in rows:
+        writer.writerow({c: r.get(c, "") for c in NUMBER_COLUMNS})
+    _write_atomic(report_dir / "numbers.csv", out.getvalue())
+    _write_atomic(report_dir / "index.html", _index_html(report_dir, entries))
+    _write_atomic(report_dir / "index.md", _index_md(report_dir, entries))
 
 
-def _index_md(suite: Suite, report_dir: Path, entries) -> str:
-    lines = [f"# locbook reports, profile `{report_dir.name}`", "",
+def _index_md(report_dir: Path, entries) -> str:
+    lines = [f"# locbook reports, `{report_dir.name}`", "",
              "Every printed number beside its reproduction: [numbers.csv](numbers.csv).", "",
-             "| experiment | source | reproduces | numbers within tolerance | report |", "|---|---|---|---|---|"]
+             "| experiment | source | reproduces | numbers within tolerance | report | generated by |",
+             "|---|---|---|---|---|---|"]
     for e in entries:
         exp = e["exp"]
-        link = f"[summary]({exp.id}/summary.md)" if e["run"] else "not run"
+        link = f"[summary]({exp.id}/summary.md)" if e["present"] else "not run"
         judged = f"{e['n_within']} / {e['n_judged']}" if e["n_judged"] else "-"
-        lines.append(f"| `{exp.id}` | {exp.document.authors} ({exp.document.year}) | {exp.section} | {judged} | {link} |")
+        stamp = e["report"].get("locbook", "")
+        lines.append(f"| `{exp.id}` | {exp.document.authors} ({exp.document.year}) | {exp.section} | {judged} "
+                     f"| {link} | {stamp} |")
     return "\n".join(lines) + "\n"
 
 
-def _index_html(suite: Suite, report_dir: Path, entries) -> str:
+def _index_html(report_dir: Path, entries) -> str:
     rows = []
     for e in entries:
         exp, run, last = e["exp"], e["run"], e["last"]
-        state = last.get("status", "not run")
+        state = last.get("status", "ok" if e["present"] else "not run")
         links = []
-        if run:
+        if e["present"]:
             links += [f'<a href="{exp.id}/{exp.id}.html">report</a>', f'<a href="{exp.id}/{exp.id}.ipynb">notebook</a>',
                       f'<a href="{exp.id}/summary.md">summary</a>', f'<a href="{exp.id}/numbers.csv">numbers</a>']
         if state == "failed":
             links.append(f'<a href=".failed/{exp.id}/{exp.id}.ipynb">failed notebook</a>')
         judged = f"{e['n_within']} / {e['n_judged']}" if e["n_judged"] else "-"
-        err = f'<div class="err">{escape(last.get("error", ""))}</div>' if state == "failed" else ""
-        shown = " (showing the last good report)" if state == "failed" and run else ""
+        err = f'<div class="err">{escape(last.get("error", ""))}</div>' if last.get("error") else ""
+        shown = " (showing the last good report)" if state in ("failed", "interrupted") and e["present"] else ""
+        seconds = last.get("seconds", run.get("seconds", 0)) or 0
         rows.append(
-            f"<tr class='{escape(state)}'><td><code>{escape(exp.id)}</code><br>{escape(exp.title)}</td>"
+            f"<tr class='{escape(state.replace(' ', '-'))}'><td><code>{escape(exp.id)}</code><br>{escape(exp.title)}</td>"
             f"<td>{escape(exp.document.authors)} ({escape(exp.document.year)})<br>{escape(exp.section)}</td>"
-            f"<td>{escape(state)}{shown}{err}</td><td>{last.get('seconds', run.get('seconds', 0)):.1f} s</td>"
-            f"<td>{judged}</td><td>{' · '.join(links)}</td></tr>")
+            f"<td>{escape(state)}{shown}{err}</td><td>{seconds:.1f} s</td>"
+            f"<td>{judged}</td><td>{escape(e['report'].get('locbook', ''))}</td><td>{' · '.join(links)}</td></tr>")
     return f"""<!doctype html><html><head><meta charset="utf-8"><title>locbook reports ({escape(report_dir.name)})</title>
 <style>body{{font-family:sans-serif;margin:2em}}table{{border-collapse:collapse}}td,th{{border:1px solid #ccc;padding:4px 8px;vertical-align:top}}
-tr.failed{{background:#fdd}}tr.ok,tr.cached{{background:#efe}}.err{{font-family:monospace;font-size:small;color:#900}}</style></head>
-<body><h1>locbook reports, profile <code>{escape(report_dir.name)}</code></h1>
+tr.failed,tr.interrupted{{background:#fdd}}tr.ok,tr.cached{{background:#efe}}.err{{font-family:monospace;font-size:small;color:#900}}</style></head>
+<body><h1>locbook reports, <code>{escape(report_dir.name)}</code></h1>
 <p>locbook {escape(locbook_version())}. All printed numbers beside their reproductions: <a href="numbers.csv">numbers.csv</a>.</p>
-<table><thead><tr><th>experiment</th><th>source</th><th>last run</th><th>time</th><th>numbers within tolerance</th><th>outputs</th></tr></thead>
+<table><thead><tr><th>experiment</th><th>source</th><th>last run</th><th>time</th><th>numbers within tolerance</th><th>generated by</th><th>outputs</th></tr></thead>
 <tbody>{''.join(rows)}</tbody></table></body></html>
 """
 
 
+# ---------------------------------------------------------------------------------------------------
+# the run
+
+class _Stop:
+    """SIGINT / SIGTERM while the suite runs: remember the first signal; the loop stops at its next turn."""
+
+    def __init__(self):
+        self.signum: int | None = None
+        self._previous = {}
+
+    def __enter__(self):
+        if threading.current_thread() is threading.main_thread():
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                self._previous[sig] = signal.signal(sig, self._handle)
+        return self
+
+    def _handle(self, signum, _frame):
+        if self.signum is None:
+            self.signum = signum
+
+    def __exit__(self, *exc):
+        for sig, handler in self._previous.items():
+            signal.signal(sig, handler)
+        return False
+
+
+def _check_kernel(kernel_name: str) -> None:
+    from jupyter_client.kernelspec import KernelSpecManager, NoSuchKernel
+    try:
+        KernelSpecManager().get_kernel_spec(kernel_name)
+    except NoSuchKernel:
+        raise SuiteError(f"no Jupyter kernel named {kernel_name!r} is installed; install ipykernel in this "
+                         "environment (pip install ipykernel)") from None
+
+
+def _acquire(lock, report_dir: Path, stop: _Stop, log) -> bool:
+    from filelock import Timeout
+    try:
+        lock.acquire(timeout=0)
+        return True
+    except Timeout:
+        log(f"another locbook run is writing {report_dir}; waiting for it to finish (Ctrl-C to give up)")
+    while stop.signum is None:
+        try:
+            lock.acquire(timeout=0.5)
+            return True
+        except Timeout:
+            continue
+    return False
+
+
 def run_suite(suite: Suite, experiments: list[Experiment], profile: str, *, jobs: int = 1, force: bool = False,
               overrides: dict[str, str] | None = None, report_root: Path | None = None,
-              timeout_s: int = 1800, log=print) -> list[Outcome]:
-    """Run experiments; parameters of all of them are checked before any executes (raises ParameterError)."""
-    report_dir = Path(report_root or suite.root / "reports") / profile
-    report_dir.mkdir(parents=True, exist_ok=True)
+              out_dir: Path | None = None, timeout_s: float = 1800, retries: int = 1,
+              kernel_name: str = KERNEL_NAME, log=print) -> SuiteRun:
+    """Run experiments and write their reports; see the module docstring for the guarantees.
+
+    Parameters of every selected experiment are checked before any executes (raises ParameterError).
+    The reports go to ``<report_root>/<profile>/``, or, with ``overrides``, to their own folder
+    (:func:`override_folder_name`) so that the profile's default report is never touched; ``out_dir``
+    names the folder explicitly. ``retries``: further attempts for an experiment whose worker or kernel died.
+    """
+    from filelock import FileLock
+
+    overrides = overrides or {}
+    if not timeout_s > 0:
+        raise SuiteError(f"the timeout must be a positive number of seconds, got {timeout_s}")
+    if jobs < 1:
+        raise SuiteError(f"jobs must be at least 1, got {jobs}")
+    root = Path(report_root or suite.root / "reports")
+    if out_dir is not None:
+        report_dir = Path(out_dir)
+        if not SAFE_NAME.match(report_dir.name):
+            raise SuiteError(f"output folder name {report_dir.name!r} must be lower-case letters, digits and "
+                             "hyphens ([a-z0-9-])")
+    elif overrides:
+        report_dir = root / override_folder_name(profile, overrides)
+    else:
+        report_dir = root / profile
     resolved = {exp.id: exp.parameters(profile, overrides) for exp in experiments}  # validation first
+    _check_kernel(kernel_name)
+    try:
+        report_dir.mkdir(parents=True, exist_ok=True)
+        probe = report_dir / f".write-test-{os.getpid()}"
+        probe.write_text("")
+        probe.unlink()
+    except OSError as exc:
+        raise SuiteError(f"cannot write to the reports folder {report_dir}: {exc.strerror}") from None
+    data_roots = [str(_package_dir()), str(suite.root.parent / "shared")]
+    run = SuiteRun([], report_dir)
+    with _Stop() as stop:
+        lock = FileLock(str(report_dir / ".lock"))
+        if not _acquire(lock, report_dir, stop, log):
+            run.interrupted_by = stop.signum
+            run.outcomes = [Outcome(e.id, "not run", 0.0) for e in experiments]
+            return run
+        try:
+            _recover(report_dir)
+            _run_locked(suite, experiments, profile, resolved, report_dir, data_roots, jobs, force, timeout_s,
+                        retries, kernel_name, bool(overrides) or out_dir is not None, stop, run, log)
+        finally:
+            lock.release()
+    run.interrupted_by = stop.signum
+    order = {exp.id: i for i, exp in enumerate(experiments)}
+    run.outcomes.sort(key=lambda o: order[o.id])
+    return run
+
+
+def _run_locked(suite, experiments, profile, resolved, report_dir, data_roots, jobs, force, timeout_s, retries,
+                kernel_name, custom_folder, stop, run, log):
     source, versions = _source_fingerprint(), _dependency_versions()
     git = _git_stamp(suite.root)
     stamp = locbook_version() + (f" (source {git})" if git else "")
     status_path = report_dir / "status.json"
     status = _read_json(status_path, {})
-    outcomes: list[Outcome] = []
-    todo, keys = [], {}
+    by_id = {e.id: e for e in experiments}
+    keys = {exp.id: cache_key(exp, profile, resolved[exp.id], source=source, versions=versions)
+            for exp in experiments}
     start = time.perf_counter()
     total = len(experiments)
 
     def finish(outcome: Outcome):
-        outcomes.append(outcome)
-        status[outcome.id] = {"status": outcome.status, "seconds": round(outcome.seconds, 2), "error": outcome.error}
-        status_path.write_text(json.dumps(status, indent=1, sort_keys=True))
-        log(f"[{len(outcomes)}/{total}] {outcome.id}: {outcome.status} in {outcome.seconds:.1f} s"
+        run.outcomes.append(outcome)
+        if outcome.status != "not run":
+            status[outcome.id] = {"status": outcome.status, "seconds": round(outcome.seconds, 2),
+                                  "error": outcome.error}
+            _write_atomic(status_path, json.dumps(status, indent=1, sort_keys=True))
+        log(f"[{len(run.outcomes)}/{total}] {outcome.id}: {outcome.status}"
+            f"{f' in {outcome.seconds:.1f} s' if outcome.status in ('ok', 'failed') else ''}"
             f" (elapsed {time.perf_counter() - start:.0f} s){'  ' + outcome.error if outcome.error else ''}")
 
+    queue: deque = deque()
     for exp in experiments:
-        keys[exp.id] = cache_key(exp, profile, resolved[exp.id], source=source, versions=versions)
-        if not force and _is_cached(report_dir, exp, keys[exp.id]):
+        if not force and _cached(report_dir, exp, keys[exp.id]):
             finish(Outcome(exp.id, "cached", 0.0))
         else:
-            todo.append(exp)
+            queue.append((exp.id, 1))
+    staging_root = report_dir / ".staging" / f"{os.getpid()}-{uuid.uuid4().hex[:8]}"
+    running: dict[str, tuple] = {}     # id -> (process, staging, attempt, started)
 
-    by_id = {e.id: e for e in experiments}
-    tasks = []
-    for exp in todo:
-        staging = report_dir / ".staging" / exp.id
-        if staging.exists():
-            shutil.rmtree(staging)
+    def launch(eid: str, attempt: int):
+        staging = staging_root / f"{eid}-{attempt}"
         staging.mkdir(parents=True)
-        tasks.append({"id": exp.id, "notebook": str(exp.notebook), "parameters": resolved[exp.id],
-                      "staging": str(staging), "timeout": timeout_s})
-    if tasks:
-        ctx = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(max_workers=max(1, min(jobs, len(tasks))), mp_context=ctx) as pool:
-            futures = {}
-            for task in tasks:
-                log(f"running {task['id']} ...")
-                futures[pool.submit(_execute, task)] = task
-            for fut in as_completed(futures):
-                task = futures[fut]
-                try:
-                    res = fut.result()
-                except Exception as exc:  # a crashed worker process
-                    res = {"id": task["id"], "error": f"{type(exc).__name__}: {exc}", "seconds": 0.0}
-                exp, staging = by_id[task["id"]], Path(task["staging"])
-                if res["error"]:
-                    failed = report_dir / ".failed" / exp.id
-                    failed.parent.mkdir(exist_ok=True)
-                    _replace_dir(staging, failed)
-                    finish(Outcome(exp.id, "failed", res["seconds"], res["error"]))
-                    continue
-                (staging / "summary.md").write_text(
-                    _summary_markdown(exp, profile, resolved[exp.id], staging, stamp), encoding="utf-8")
-                (staging / "run.json").write_text(json.dumps({
-                    "cache_key": keys[exp.id], "status": "ok", "seconds": round(res["seconds"], 2),
-                    "profile": profile, "parameters": resolved[exp.id], "locbook": stamp}, indent=1))
-                _replace_dir(staging, report_dir / exp.id)
-                finish(Outcome(exp.id, "ok", res["seconds"]))
-    shutil.rmtree(report_dir / ".staging", ignore_errors=True)
-    write_suite_reports(suite, report_dir)
-    order = {exp.id: i for i, exp in enumerate(experiments)}
-    return sorted(outcomes, key=lambda o: order[o.id])
+        task = {"id": eid, "notebook": str(by_id[eid].notebook), "parameters": resolved[eid],
+                "staging": str(staging), "timeout": timeout_s, "kernel": kernel_name,
+                "data_roots": data_roots, "runner_pid": os.getpid()}
+        (staging / ".task.json").write_text(json.dumps(task))
+        proc = subprocess.Popen([sys.executable, "-m", "locbook.suite.worker", str(staging / ".task.json")],
+                                start_new_session=True, stdin=subprocess.DEVNULL,
+                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        running[eid] = (proc, staging, attempt, time.perf_counter())
+        log(f"running {eid}{f' (attempt {attempt})' if attempt > 1 else ''} ...")
+
+    def complete(eid: str, proc, staging: Path, attempt: int, started: float):
+        seconds = time.perf_counter() - started
+        result = _read_json(staging / ".result.json", None)
+        if result is None:
+            code = proc.returncode
+            why = (f"worker process died ({signal.Signals(-code).name})" if code and code < 0
+                   else f"worker process exited with status {code} without a result")
+            result = {"error": why, "kernel_failure": True, "seconds": seconds}
+        if result["error"] and result.get("kernel_failure") and attempt <= retries and stop.signum is None:
+            log(f"{eid}: {result['error']}; retrying once")
+            queue.appendleft((eid, attempt + 1))
+            return
+        error = result["error"] or _validate_report(staging, eid)
+        if not error:
+            try:
+                _promote(by_id[eid], profile, resolved[eid], staging, report_dir, stamp, keys[eid], result,
+                         data_roots)
+            except OSError as exc:
+                error = f"could not write the report: {exc.strerror or exc}"
+        if error:
+            try:
+                _keep_failed(staging, report_dir / ".failed" / eid)
+            except OSError:
+                pass
+            finish(Outcome(eid, "failed", result["seconds"], error, attempt))
+        else:
+            finish(Outcome(eid, "ok", result["seconds"], "", attempt))
+
+    try:
+        while queue or running:
+            if stop.signum is not None:
+                break
+            while queue and len(running) < jobs:
+                launch(*queue.popleft())
+            time.sleep(0.1)
+            for eid in [e for e, (p, *_rest) in running.items() if p.poll() is not None]:
+                proc, staging, attempt, started = running.pop(eid)
+                complete(eid, proc, staging, attempt, started)
+    finally:
+        # an interrupt (or an unexpected error here): stop the workers, keep everything finished
+        for eid, (proc, staging, attempt, started) in running.items():
+            if proc.poll() is None:
+                proc.send_signal(signal.SIGTERM)
+        deadline = time.perf_counter() + _STOP_GRACE_S
+        for eid, (proc, staging, attempt, started) in running.items():
+            try:
+                proc.wait(max(0.0, deadline - time.perf_counter()))
+            except subprocess.TimeoutExpired:
+                os.killpg(proc.pid, signal.SIGKILL)
+                proc.wait()
+            finish(Outcome(eid, "interrupted", time.perf_counter() - started,
+                           f"stopped by {signal.Signals(stop.signum).name}" if stop.signum else "stopped", attempt))
+        for eid, _attempt in queue:
+            finish(Outcome(eid, "not run", 0.0))
+        shutil.rmtree(staging_root, ignore_errors=True)
+        write_suite_reports(suite, report_dir, list_all=not custom_folder)
+
+
+def _strip_worker_files(staging: Path) -> None:
+    for name in _WORKER_FILES:
+        path = staging / name
+        if path.is_dir():
+            shutil.rmtree(path, ignore_errors=True)
+        else:
+            path.unlink(missing_ok=True)
+
+
+def _keep_failed(staging: Path, failed: Path) -> None:
+    _strip_worker_files(staging)
+    failed.parent.mkdir(exist_ok=True)
+    _replace_dir(staging, failed)
+
+
+def _promote(exp, profile, params, staging: Path, report_dir: Path, stamp: str, key: str, result: dict,
+             data_roots) -> None:
+    """Write the summary and the records into the validated staging folder, then swap it into place. The cache
+    record (run.json) is written before the swap, inside the new folder, so it only ever describes a
+    complete report."""
+    data = _data_hashes(staging, data_roots)
+    _strip_worker_files(staging)
+    (staging / "summary.md").write_text(_summary_markdown(exp, profile, params, staging, stamp), encoding="utf-8")
+    (staging / "report.json").write_text(json.dumps(
+        {"experiment": exp.id, "profile": profile, "parameters": params, "locbook": stamp}, indent=1,
+        sort_keys=True) + "\n")
+    (staging / "run.json").write_text(json.dumps({
+        "cache_key": key, "status": "ok", "seconds": round(result["seconds"], 2), "data": data}, indent=1))
+    _replace_dir(staging, report_dir / exp.id)

@@ -12,21 +12,30 @@ Schema::
     notebook = "<path relative to the TOML file>"
     [experiment.profiles.quick]   # parameters per profile (every profile must be present)
     [experiment.profiles.full]
+    [experiment.parameter_rules]  # optional: rules for this experiment's parameters (override the suite's)
+
+    [parameter_rules]             # allowed values by parameter name, for every experiment declaring it
+    n_runs = { ge = 2 }           # keys: ge, gt, le, lt, allow_inf, min_items, max_items (ParameterRule)
+
+Experiment ids are ``[a-z0-9-]`` only (they name folders under ``reports/``).
 """
 from __future__ import annotations
 
+import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import ParameterError
-from .params import NotebookParameter, read_parameters, resolve_parameters
+from .params import NotebookParameter, ParameterRule, is_numeric_annotation, read_parameters, resolve_parameters
 
 __all__ = ["Suite", "Experiment", "Document", "PROFILES", "DOCUMENT_KEYS", "load_suite", "find_suite_file"]
 
 PROFILES = ("quick", "full")
 DOCUMENT_KEYS = ("dogan2015", "gudipati2017", "palvai2008", "george", "ozkaya2011")
 SUITE_FILE = Path("notebooks") / "experiments.toml"
+#: experiment ids and report folder names: lower-case letters, digits and single hyphens
+SAFE_NAME = re.compile(r"^[a-z0-9]+(-[a-z0-9]+)*$")
 
 
 class SuiteError(ParameterError):
@@ -51,6 +60,7 @@ class Experiment:
     section: str
     notebook: Path
     profiles: dict[str, dict] = field(hash=False)
+    rules: dict[str, ParameterRule] = field(default_factory=dict, hash=False)
 
     def declared_parameters(self) -> dict[str, NotebookParameter]:
         return read_parameters(self.notebook)
@@ -60,7 +70,12 @@ class Experiment:
         if profile not in self.profiles:
             raise SuiteError(f"experiment {self.id!r} has no profile {profile!r}")
         return resolve_parameters(self.notebook, self.declared_parameters(), self.profiles[profile],
-                                  overrides or {}, f"experiment {self.id!r}, profile {profile!r}")
+                                  overrides or {}, f"experiment {self.id!r}, profile {profile!r}", self.rules)
+
+    def unruled_numeric_parameters(self) -> list[str]:
+        """Numeric parameters without a range rule (the suite's test requires none)."""
+        return [p.name for p in self.declared_parameters().values()
+                if is_numeric_annotation(p.annotation) and p.name not in self.rules]
 
 
 @dataclass(frozen=True)
@@ -101,13 +116,21 @@ def find_suite_file(start: Path | None = None) -> Path:
     raise SuiteError(f"cannot find {SUITE_FILE} from {here}; run locbook inside the repository or pass --suite")
 
 
+def _rules(raw: dict, where: str) -> dict[str, ParameterRule]:
+    if not isinstance(raw, dict):
+        raise SuiteError(f"{where} must be a table of rules by parameter name")
+    return {name: ParameterRule.from_toml(name, rule, where) for name, rule in raw.items()}
+
+
 def load_suite(path: Path | None = None) -> Suite:
     path = Path(path) if path else find_suite_file()
-    with open(path, "rb") as fh:
-        try:
+    try:
+        with open(path, "rb") as fh:
             data = tomllib.load(fh)
-        except tomllib.TOMLDecodeError as exc:
-            raise SuiteError(f"{path}: {exc}") from exc
+    except OSError as exc:
+        raise SuiteError(f"cannot read the experiment list {path}: {exc.strerror}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise SuiteError(f"{path}: {exc}") from None
     documents = {}
     for key, doc in data.get("documents", {}).items():
         if key not in DOCUMENT_KEYS:
@@ -116,12 +139,16 @@ def load_suite(path: Path | None = None) -> Suite:
         if missing:
             raise SuiteError(f"{path}: document {key!r} lacks {sorted(missing)}")
         documents[key] = Document(key, doc["title"], doc["authors"], str(doc["year"]), doc["source"], doc["note"])
+    suite_rules = _rules(data.get("parameter_rules", {}), f"{path}: [parameter_rules]")
     experiments, seen = [], set()
     for raw in data.get("experiment", []):
         missing = {"id", "document", "title", "section", "notebook", "profiles"} - set(raw)
         if missing:
             raise SuiteError(f"{path}: experiment {raw.get('id', '?')!r} lacks {sorted(missing)}")
         eid, dkey = raw["id"], raw["document"]
+        if not isinstance(eid, str) or not SAFE_NAME.match(eid):
+            raise SuiteError(f"{path}: experiment id {eid!r} must be lower-case letters, digits and hyphens "
+                             "([a-z0-9-], e.g. 'george-tracking'); it names a folder under reports/")
         if dkey not in documents:
             raise SuiteError(f"{path}: experiment {eid!r} names undeclared document {dkey!r}")
         if not eid.startswith(dkey + "-"):
@@ -134,6 +161,7 @@ def load_suite(path: Path | None = None) -> Suite:
         notebook = (path.parent / raw["notebook"]).resolve()
         if not notebook.is_file():
             raise SuiteError(f"{path}: experiment {eid!r}: notebook {raw['notebook']} does not exist")
+        rules = {**suite_rules, **_rules(raw.get("parameter_rules", {}), f"{path}: experiment {eid!r}")}
         experiments.append(Experiment(eid, documents[dkey], raw["title"], raw["section"], notebook,
-                                      {p: dict(raw["profiles"][p]) for p in PROFILES}))
+                                      {p: dict(raw["profiles"][p]) for p in PROFILES}, rules))
     return Suite(path.resolve(), documents, experiments)

@@ -98,6 +98,9 @@ def main(argv: list[str] | None = None) -> int:
     except ParameterError as exc:
         print(f"locbook: error: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:  # before the run started its own handling (loading, checking parameters)
+        print("locbook: interrupted before any experiment started; nothing was changed", file=sys.stderr)
+        return 130
     except OSError as exc:   # a read-only or full disk while writing the suite files
         print(f"locbook: error: {exc.strerror or exc}: {exc.filename or ''}", file=sys.stderr)
         return 2

@@ -101,13 +101,14 @@ def main(task_path: str) -> int:
     signal.signal(signal.SIGTERM, _kill_kernels_and_exit)
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the runner decides what an interrupt means
     staging = Path(task["staging"])
-    runtime = staging / ".runtime"                # own connection files: no port race with other kernels
+    runtime = staging / ".runtime"     # own folder for the kernel's connection file and temporary files
     runtime.mkdir(exist_ok=True)
     os.environ.update(SINGLE_THREAD)
     os.environ.update({"LOCBOOK_OUTPUT_DIR": str(staging), "LOCBOOK_EXPERIMENT": task["id"],
                        "LOCBOOK_DATA_LOG": str(staging / ".data-read.log"),
                        "LOCBOOK_DATA_ROOTS": os.pathsep.join(task["data_roots"]),
-                       "JUPYTER_RUNTIME_DIR": str(runtime), "PYDEVD_DISABLE_FILE_VALIDATION": "1"})
+                       "JUPYTER_RUNTIME_DIR": str(runtime), "TMPDIR": str(runtime),
+                       "PYDEVD_DISABLE_FILE_VALIDATION": "1"})
     # the kernel inherits stderr: keep its chatter in a log beside the report
     log_fd = os.open(staging / "kernel-stderr.log", os.O_WRONLY | os.O_CREAT | os.O_TRUNC)
     os.dup2(log_fd, 2)

@@ -11,16 +11,25 @@ axes ``(..., m)``, and returns a :class:`LocalizationResult` whose ``position_m`
 - :func:`rss_ml_position`: maximum likelihood in the RSS domain (Gaussian shadowing), i.e. Eq. (2.4) of
   Dogan (2015), solved by batched Levenberg-Marquardt from a convex (linear LS) initialiser.
 - :func:`grid_ml_position`: exhaustive maximum likelihood over candidate points.
+
+Missing readings (the library's one rule): a NaN received power or range means "not heard" (the anchor got
+no packet in that epoch). Each problem uses the anchors heard in it; problems are grouped by their pattern of
+heard anchors and each group is solved with that subset, so a problem with no NaN goes through exactly the
+computation it always did. A problem with fewer than ``min_anchors`` heard anchors (default ``dim + 1``), or
+whose heard anchors are collinear, gets a NaN position, ``converged=False`` and a ``status`` saying why,
+alone: its batch is unaffected. If the reference anchor of the linearized system is not heard, the first
+heard anchor serves as reference for that problem. Infinite readings are rejected.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 
 import cvxpy as cp
 import numpy as np
 
 from ._cvx import solve
+from ._validate import as_array, check_scalar
 from .channel import PathLossModel, pairwise_distance_m
 from .errors import ConvergenceError, DegenerateGeometryError
 
@@ -33,18 +42,33 @@ __all__ = [
     "lateration_box_ls",
     "rss_ml_position",
     "grid_ml_position",
+    "LOCALIZATION_STATUSES",
 ]
+
+#: values of :attr:`LocalizationResult.status`
+LOCALIZATION_STATUSES = ("ok", "too_few_anchors", "degenerate_geometry", "solver_failed", "not_converged")
 
 
 @dataclass(frozen=True)
 class LocalizationResult:
-    """Estimated positions ``(..., 2)`` with per-problem solver information."""
+    """Estimated positions ``(..., dim)`` with per-problem solver information.
+
+    ``converged`` is True only for a problem whose estimate is what the method promises. ``status`` (same
+    batch shape) says why not: one of :data:`LOCALIZATION_STATUSES` (``"too_few_anchors"`` heard,
+    ``"degenerate_geometry"`` of the heard anchors, ``"solver_failed"``, ``"not_converged"`` in the iteration
+    limit); such problems have a NaN position unless the solver returned its last iterate (``not_converged``).
+    """
 
     position_m: np.ndarray
     converged: np.ndarray
     cost: np.ndarray | None
     n_iter: int
     method: str
+    status: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.status is None:
+            object.__setattr__(self, "status", np.where(self.converged, "ok", "not_converged").astype("<U19"))
 
 
 def check_anchor_geometry(anchors_m) -> np.ndarray:
@@ -52,14 +76,19 @@ def check_anchor_geometry(anchors_m) -> np.ndarray:
 
     Raises :class:`DegenerateGeometryError` naming the problem.
     """
-    anchors_m = np.asarray(anchors_m, dtype=float)
-    if anchors_m.ndim != 2:
-        raise ValueError(f"anchors must have shape (m, dim), got {anchors_m.shape}")
+    anchors_m = as_array("anchors_m", anchors_m, ndim=2)
     m, dim = anchors_m.shape
+    if dim < 1:
+        raise ValueError(f"anchors_m must have shape (m, dim) with dim >= 1, got {anchors_m.shape}")
     if m < dim + 1:
         raise DegenerateGeometryError(
             f"{dim}-D localization needs at least {dim + 1} anchors, got {m}"
         )
+    gaps = np.where(np.eye(m, dtype=bool), np.inf, pairwise_distance_m(anchors_m, anchors_m))
+    if np.any(gaps <= 1e-9):
+        i, j = np.argwhere(gaps <= 1e-9)[0]
+        raise DegenerateGeometryError(f"anchors {i} and {j} coincide at {anchors_m[i].tolist()}: "
+                                      "two anchors at one point are one anchor")
     centred = anchors_m - anchors_m.mean(axis=0)
     sv = np.linalg.svd(centred, compute_uv=False)
     if sv[dim - 1] <= 1e-9 * max(sv[0], 1.0):
@@ -70,6 +99,72 @@ def check_anchor_geometry(anchors_m) -> np.ndarray:
     return anchors_m
 
 
+# -- missing readings ---------------------------------------------------------------------------------
+def _readings(name: str, values, m: int) -> np.ndarray:
+    """Measurements ``(..., m)``: NaN = not heard; infinities and a wrong anchor axis are errors."""
+    values = as_array(name, values, min_ndim=1, nan_ok=True)
+    if values.shape[-1] != m:
+        raise ValueError(f"{name} must have shape (..., {m}), one value per anchor ({m} anchors), "
+                         f"got shape {values.shape}")
+    return values
+
+
+def _ref_in_subset(ref_index: int, heard: np.ndarray) -> int:
+    """Position of the reference anchor among the heard ones; the first heard anchor if it was not heard."""
+    hit = np.flatnonzero(heard == ref_index)
+    return int(hit[0]) if hit.size else 0
+
+
+def _model_subset(model: PathLossModel, heard: np.ndarray, m: int) -> PathLossModel:
+    """The channel restricted to the heard anchors (per-anchor parameters are subset, scalars kept)."""
+    def pick(value):
+        value = np.asarray(value)
+        return value[..., heard] if value.ndim and value.shape[-1] == m else value
+    return replace(model, ref_power_dbm=pick(model.ref_power_dbm), path_loss_exp=pick(model.path_loss_exp),
+                   sigma_db=pick(model.sigma_db))
+
+
+def _by_heard_anchors(anchors_m, readings, min_anchors, solve_subset, method: str) -> LocalizationResult:
+    """Solve every problem with the anchors it heard: group the problems by their pattern of heard anchors,
+    call ``solve_subset(heard_indices, problem_indices)`` once per group, and mark the groups that heard too
+    few anchors, or collinear ones, as NaN with their status."""
+    m, dim = anchors_m.shape
+    batch = readings.shape[:-1]
+    flat = readings.reshape(-1, m)
+    k = flat.shape[0]
+    pos = np.full((k, dim), np.nan)
+    converged = np.zeros(k, bool)
+    cost = np.full(k, np.nan)
+    status = np.full(k, "too_few_anchors", dtype="<U19")
+    patterns, inverse = np.unique(~np.isnan(flat), axis=0, return_inverse=True)
+    inverse = inverse.reshape(-1)
+    n_iter = 0
+    for g, pattern in enumerate(patterns):
+        sel = np.flatnonzero(inverse == g)
+        heard = np.flatnonzero(pattern)
+        if heard.size < min_anchors:
+            continue
+        try:
+            check_anchor_geometry(anchors_m[heard])
+        except DegenerateGeometryError:
+            status[sel] = "degenerate_geometry"
+            continue
+        res = solve_subset(heard, sel)
+        pos[sel], converged[sel], status[sel] = res.position_m, res.converged, res.status
+        if res.cost is not None:
+            cost[sel] = res.cost
+        n_iter = max(n_iter, res.n_iter)
+    return LocalizationResult(pos.reshape(batch + (dim,)), converged.reshape(batch), cost.reshape(batch), n_iter,
+                              method, status.reshape(batch))
+
+
+def _min_anchors(min_anchors, dim: int) -> int:
+    if min_anchors is None:
+        return dim + 1
+    check_scalar("min_anchors", min_anchors, ge=dim + 1, integer=True)
+    return int(min_anchors)
+
+
 def lateration_system(anchors_m, distance_m, ref_index: int = 0):
     """Matrices of the linearized lateration system ``A p = b`` (Eq. (8), document 003).
 
@@ -77,12 +172,12 @@ def lateration_system(anchors_m, distance_m, ref_index: int = 0):
     ``(..., m-1)`` (``d_i^2 - d_r^2 - |a_i|^2 + |a_r|^2``).
     """
     anchors_m = check_anchor_geometry(anchors_m)
-    distance_m = np.asarray(distance_m, dtype=float)
     m = anchors_m.shape[0]
-    if distance_m.shape[-1] != m:
-        raise ValueError(f"distances have {distance_m.shape[-1]} anchors on the last axis, anchors have {m}")
-    if not -m <= ref_index < m:
-        raise ValueError(f"ref_index {ref_index} out of range for {m} anchors")
+    distance_m = _readings("distance_m", distance_m, m)
+    if np.any(distance_m < 0):
+        raise ValueError(f"distance_m must be non-negative (NaN = not heard), got {distance_m[distance_m < 0][0]!r}")
+    if isinstance(ref_index, (bool, np.bool_)) or not isinstance(ref_index, (int, np.integer)) or not -m <= ref_index < m:
+        raise ValueError(f"ref_index must be an anchor index in [-{m}, {m - 1}], got {ref_index!r}")
     ref_index %= m
     others = np.array([i for i in range(m) if i != ref_index])
     a_r = anchors_m[ref_index]
@@ -93,25 +188,59 @@ def lateration_system(anchors_m, distance_m, ref_index: int = 0):
     return a_mat, b
 
 
-def lateration_ls(anchors_m, distance_m, ref_index: int = 0) -> LocalizationResult:
+def lateration_ls(anchors_m, distance_m, ref_index: int = 0, *, min_anchors: int | None = None) -> LocalizationResult:
     """Linearized least squares ``p = (A^T A)^{-1} A^T b`` (Eq. (8), George and Vadivukkarasi).
 
     Unconstrained: estimates may leave the room, as the paper observes ("some of the results go
     beyond the boundaries"). The result depends slightly on ``ref_index`` (anchor 1 in the paper).
+    NaN distances are anchors not heard (module docstring).
     """
     a_mat, b = lateration_system(anchors_m, distance_m, ref_index)
+    min_anchors = _min_anchors(min_anchors, a_mat.shape[1])
+    if np.isnan(b).any():
+        anchors_m, distance_m = np.asarray(anchors_m, float), np.asarray(distance_m, float)
+        m = anchors_m.shape[0]
+        flat = distance_m.reshape(-1, m)
+        return _by_heard_anchors(
+            anchors_m, distance_m, min_anchors,
+            lambda heard, sel: lateration_ls(anchors_m[heard], flat[np.ix_(sel, heard)],
+                                             _ref_in_subset(ref_index % m, heard)),
+            f"lateration_ls(ref={ref_index})")
     pos = b @ np.linalg.pinv(a_mat).T
     ok = np.all(np.isfinite(pos), axis=-1)
     return LocalizationResult(pos, ok, None, 0, f"lateration_ls(ref={ref_index})")
 
 
-def lateration_wls(anchors_m, distance_m, weights, ref_index: int = 0) -> LocalizationResult:
+def lateration_wls(anchors_m, distance_m, weights, ref_index: int = 0, *,
+                   min_anchors: int | None = None) -> LocalizationResult:
     """Weighted linearized least squares ``p = (A^T W A)^{-1} A^T W b`` with diagonal weights
-    ``(..., m-1)`` (one per differenced equation), batched."""
+    ``(..., m-1)`` (one per differenced equation, i.e. per non-reference anchor in anchor order), batched.
+    NaN distances are anchors not heard; a problem then keeps the weights of its heard anchors."""
     a_mat, b = lateration_system(anchors_m, distance_m, ref_index)
-    w = np.broadcast_to(np.asarray(weights, dtype=float), b.shape)
+    min_anchors = _min_anchors(min_anchors, a_mat.shape[1])
+    weights = as_array("weights", weights)
+    try:
+        w = np.broadcast_to(weights, b.shape)
+    except ValueError:
+        raise ValueError(f"weights must broadcast to the differenced equations {b.shape} (..., m-1), "
+                         f"got shape {weights.shape}") from None
     if np.any(w < 0):
         raise ValueError("weights must be non-negative")
+    if np.isnan(b).any():
+        anchors_m, distance_m = np.asarray(anchors_m, float), np.asarray(distance_m, float)
+        m = anchors_m.shape[0]
+        ref = ref_index % m
+        flat = distance_m.reshape(-1, m)
+        per_anchor = np.zeros((flat.shape[0], m))
+        per_anchor[:, [i for i in range(m) if i != ref]] = w.reshape(-1, m - 1)
+
+        def solve_subset(heard, sel):
+            sub_ref = _ref_in_subset(ref, heard)
+            rows = np.delete(heard, sub_ref)
+            return lateration_wls(anchors_m[heard], flat[np.ix_(sel, heard)], per_anchor[np.ix_(sel, rows)], sub_ref)
+
+        return _by_heard_anchors(anchors_m, distance_m, min_anchors,
+                                 solve_subset, "lateration_wls")
     ata = np.einsum("ki,...k,kj->...ij", a_mat, w, a_mat)
     atb = np.einsum("ki,...k,...k->...i", a_mat, w, b)
     pos = np.linalg.solve(ata, atb[..., None])[..., 0]
@@ -128,25 +257,58 @@ def _box_problem(n_problems, a_key, lower, upper):
     return problem, b, p
 
 
-def lateration_box_ls(anchors_m, distance_m, lower_m, upper_m, ref_index: int = 0) -> LocalizationResult:
+def _solve_box_batch(a_mat, b, lower, upper):
+    """Box-constrained LS of every row of ``b`` ``(k, rows)`` in one stacked QP. If that solve fails, the
+    batch is halved and each half solved again, so a problem the solver cannot handle is marked alone
+    (NaN, not converged) and never costs its batch. Returns positions ``(k, dim)`` and success flags."""
+    k, dim = b.shape[0], a_mat.shape[1]
+    problem, b_par, p_var = _box_problem(k, tuple(map(tuple, a_mat.tolist())), lower, upper)
+    b_par.value = b
+    try:
+        solve(problem, "box-constrained lateration")
+        return p_var.value, np.ones(k, bool)
+    except (ConvergenceError, cp.error.SolverError):
+        if k == 1:
+            return np.full((1, dim), np.nan), np.zeros(1, bool)
+    half = k // 2
+    (p1, ok1), (p2, ok2) = (_solve_box_batch(a_mat, part, lower, upper) for part in (b[:half], b[half:]))
+    return np.concatenate([p1, p2]), np.concatenate([ok1, ok2])
+
+
+def lateration_box_ls(anchors_m, distance_m, lower_m, upper_m, ref_index: int = 0, *,
+                      min_anchors: int | None = None) -> LocalizationResult:
     """Linearized least squares constrained to the box ``lower_m <= p <= upper_m``.
 
     All problems are stacked into one cvxpy QP, built once per (batch size, anchors, box) with the
     right-hand sides as a Parameter and re-solved by setting its value. An optional extension to
-    document 003 (which does not constrain its estimates).
+    document 003 (which does not constrain its estimates). A problem the solver fails on gets a NaN
+    position and ``status="solver_failed"``; the others are kept. NaN distances are anchors not heard.
     """
     a_mat, b = lateration_system(anchors_m, distance_m, ref_index)
-    batch = b.shape[:-1]
-    k = int(np.prod(batch))
-    lower = tuple(np.broadcast_to(np.asarray(lower_m, float), (a_mat.shape[1],)).tolist())
-    upper = tuple(np.broadcast_to(np.asarray(upper_m, float), (a_mat.shape[1],)).tolist())
+    dim = a_mat.shape[1]
+    min_anchors = _min_anchors(min_anchors, dim)
+    bounds = []
+    for name, value in (("lower_m", lower_m), ("upper_m", upper_m)):
+        value = as_array(name, value)
+        if value.ndim > 1 or value.size not in (1, dim):
+            raise ValueError(f"{name} must be a scalar or have shape ({dim},), got shape {value.shape}")
+        bounds.append(tuple(np.broadcast_to(value, (dim,)).tolist()))
+    lower, upper = bounds
     if any(lo > hi for lo, hi in zip(lower, upper)):
         raise ValueError(f"empty box: lower {lower} > upper {upper}")
-    problem, b_par, p_var = _box_problem(k, tuple(map(tuple, a_mat.tolist())), lower, upper)
-    b_par.value = b.reshape(k, -1)
-    solve(problem, "box-constrained lateration")
-    pos = p_var.value.reshape(batch + (a_mat.shape[1],))
-    return LocalizationResult(pos, np.ones(batch, bool), None, 0, "lateration_box_ls")
+    if np.isnan(b).any():
+        anchors_m, distance_m = np.asarray(anchors_m, float), np.asarray(distance_m, float)
+        m = anchors_m.shape[0]
+        flat = distance_m.reshape(-1, m)
+        return _by_heard_anchors(
+            anchors_m, distance_m, min_anchors,
+            lambda heard, sel: lateration_box_ls(anchors_m[heard], flat[np.ix_(sel, heard)], lower, upper,
+                                                 _ref_in_subset(ref_index % m, heard)),
+            "lateration_box_ls")
+    batch = b.shape[:-1]
+    pos, ok = _solve_box_batch(a_mat, b.reshape(-1, b.shape[-1]), lower, upper)
+    return LocalizationResult(pos.reshape(batch + (dim,)), ok.reshape(batch), None, 0, "lateration_box_ls",
+                              np.where(ok, "ok", "solver_failed").reshape(batch))
 
 
 def _rss_residual_jacobian(pos, anchors, power, model: PathLossModel, min_distance_m):
@@ -198,7 +360,7 @@ def _newton_matrix(resid, jac, d2, pos, anchors, model):
 
 def rss_ml_position(anchors_m, power_dbm, model: PathLossModel, initial_m=None, *,
                     max_iter: int = 100, tol_m: float = 1e-7, min_distance_m: float = 1e-3,
-                    raise_on_failure: bool = False) -> LocalizationResult:
+                    raise_on_failure: bool = False, min_anchors: int | None = None) -> LocalizationResult:
     """Maximum-likelihood position from received powers ``(..., m)`` under Gaussian shadowing.
 
     Minimises ``sum_j (P_j - P_0 + 10 n log10 |p - a_j|)^2``, which equals Dogan's MLE cost (2.4)
@@ -208,9 +370,37 @@ def rss_ml_position(anchors_m, power_dbm, model: PathLossModel, initial_m=None, 
     positive definite), vectorized over the batch; each iteration works only on the problems that have not
     converged yet. Problems that do not converge in ``max_iter`` steps are flagged in ``converged``
     (or raise if asked). The model's parameters must be scalars or per-anchor ``(m,)`` arrays.
+    A NaN power is an anchor not heard (module docstring): the problem is solved on the anchors it heard.
     """
     anchors_m = check_anchor_geometry(anchors_m)
-    power_dbm = np.asarray(power_dbm, dtype=float)
+    m, dim = anchors_m.shape
+    power_dbm = _readings("power_dbm", power_dbm, m)
+    _check_model(model, m)
+    check_scalar("max_iter", max_iter, ge=1, integer=True)
+    check_scalar("tol_m", tol_m, gt=0)
+    check_scalar("min_distance_m", min_distance_m, gt=0)
+    min_anchors = _min_anchors(min_anchors, dim)
+    if initial_m is not None:
+        initial_m = as_array("initial_m", initial_m)
+        try:
+            initial_m = np.broadcast_to(initial_m, power_dbm.shape[:-1] + (dim,))
+        except ValueError:
+            raise ValueError(f"initial_m must broadcast to {power_dbm.shape[:-1] + (dim,)}, got shape "
+                             f"{initial_m.shape}") from None
+    if np.isnan(power_dbm).any():
+        flat = power_dbm.reshape(-1, m)
+        start = None if initial_m is None else initial_m.reshape(-1, dim)
+        res = _by_heard_anchors(
+            anchors_m, power_dbm, min_anchors,
+            lambda heard, sel: rss_ml_position(
+                anchors_m[heard], flat[np.ix_(sel, heard)], _model_subset(model, heard, m),
+                None if start is None else start[sel], max_iter=max_iter, tol_m=tol_m,
+                min_distance_m=min_distance_m),
+            "rss_ml_lm")
+        if raise_on_failure and not np.all(res.converged):
+            raise ConvergenceError(f"RSS maximum likelihood: {int(np.sum(~res.converged))} of {res.converged.size} "
+                                   f"problems did not converge (statuses: {sorted(set(res.status.ravel()) - {'ok'})})")
+        return res
     if initial_m is None:
         initial_m = lateration_ls(anchors_m, model.range_m(power_dbm)).position_m
     batch, dim = power_dbm.shape[:-1], anchors_m.shape[1]
@@ -257,13 +447,40 @@ def rss_ml_position(anchors_m, power_dbm, model: PathLossModel, initial_m=None, 
                               it, "rss_ml_lm")
 
 
+def _check_model(model, m: int) -> None:
+    """The channel's parameters are scalars or per-anchor ``(m,)`` arrays, finite."""
+    if not isinstance(model, PathLossModel):
+        raise ValueError(f"model must be a PathLossModel, got {type(model).__name__}")
+    for name in ("ref_power_dbm", "path_loss_exp", "sigma_db"):
+        value = as_array(f"model.{name}", getattr(model, name))
+        if value.ndim > 1 or value.size not in (1, m):
+            raise ValueError(f"model.{name} must be a scalar or have shape ({m},) (one per anchor), "
+                             f"got shape {value.shape}")
+    if np.any(np.asarray(model.path_loss_exp) <= 0):
+        raise ValueError(f"model.path_loss_exp must be positive, got {model.path_loss_exp!r}")
+
+
 def grid_ml_position(anchors_m, power_dbm, model: PathLossModel, grid_m, *,
-                     chunk: int = 2048) -> LocalizationResult:
+                     chunk: int = 2048, min_anchors: int | None = None) -> LocalizationResult:
     """Grid maximum likelihood: the candidate point of ``grid_m`` ``(G, 2)`` with the smallest
-    RSS-domain squared residual, for every problem; evaluated in chunks to bound memory."""
+    RSS-domain squared residual, for every problem; evaluated in chunks to bound memory.
+    A NaN power is an anchor not heard (module docstring): the residual runs over the heard anchors."""
     anchors_m = check_anchor_geometry(anchors_m)
-    grid_m = np.asarray(grid_m, dtype=float)
-    power = np.asarray(power_dbm, dtype=float)
+    m, dim = anchors_m.shape
+    grid_m = as_array("grid_m", grid_m, ndim=2, trailing=(dim,))
+    if grid_m.shape[0] < 1:
+        raise ValueError("grid_m must hold at least one candidate point")
+    power = _readings("power_dbm", power_dbm, m)
+    _check_model(model, m)
+    check_scalar("chunk", chunk, ge=1, integer=True)
+    min_anchors = _min_anchors(min_anchors, dim)
+    if np.isnan(power).any():
+        flat_power = power.reshape(-1, m)
+        return _by_heard_anchors(
+            anchors_m, power, min_anchors,
+            lambda heard, sel: grid_ml_position(anchors_m[heard], flat_power[np.ix_(sel, heard)],
+                                                _model_subset(model, heard, m), grid_m, chunk=chunk),
+            "grid_ml")
     batch = power.shape[:-1]
     flat = power.reshape(-1, power.shape[-1])
     mean_grid = model.mean_power_dbm(np.maximum(pairwise_distance_m(grid_m, anchors_m), 1e-6))  # (G, m)

@@ -23,11 +23,11 @@ from .bounds import CRLB_FORMS, crlb_rms_over_area_m, rss_crlb_m, rss_fisher_inf
 from .calibration import CALIBRATION_MODES, PathLossFit, calibrate_path_loss, fit_path_loss, fit_path_loss_closed_form
 from .channel import (AT86RF230_ED_OFFSET_DB, CC2420_RSSI_OFFSET_DB, PathLossModel, correlated_shadowing_db,
                       dbm_to_register, pairwise_distance_m, quantize_db, register_to_dbm, small_scale_fading_db, wall_crossings)
-from .errors import ConvergenceError, DegenerateGeometryError, LocbookError, ParameterError
+from .errors import ConvergenceError, DegenerateGeometryError, LocbookError, ParameterError, SingularCovarianceError
 from .fingerprint import KNN_WEIGHTINGS, knn_position, model_fingerprints, pattern_fingerprints
 from .filters import (KF_VARIANTS, RSS_UPDATE_MODES, SERIAL_ORDERS, KalmanResult, LinearMeasurement, RssMeasurement,
                       TrackResult, extended_kalman_filter, kalman_filter, rss_measurement_jacobian)
-from .localization import (LocalizationResult, check_anchor_geometry, grid_ml_position, lateration_box_ls,
+from .localization import (LOCALIZATION_STATUSES, LocalizationResult, check_anchor_geometry, grid_ml_position, lateration_box_ls,
                            lateration_ls, lateration_system, lateration_wls, rss_ml_position)
 from .metrics import (empirical_cdf, error_std_m, error_summary, mean_error_m, median_error_m, percentile_error_m,
                       position_error_m, reduction_pct, rmse_m, rmse_standard_error_m)
@@ -48,7 +48,7 @@ __all__ = [
     # calibration
     "PathLossFit", "fit_path_loss", "fit_path_loss_closed_form", "calibrate_path_loss", "CALIBRATION_MODES",
     # static localization
-    "LocalizationResult", "check_anchor_geometry", "lateration_system", "lateration_ls", "lateration_wls",
+    "LocalizationResult", "LOCALIZATION_STATUSES", "check_anchor_geometry", "lateration_system", "lateration_ls", "lateration_wls",
     "lateration_box_ls", "rss_ml_position", "grid_ml_position",
     # fingerprinting
     "knn_position", "model_fingerprints", "pattern_fingerprints", "KNN_WEIGHTINGS",
@@ -70,7 +70,8 @@ __all__ = [
     "position_error_m", "mean_error_m", "rmse_m", "median_error_m", "percentile_error_m", "error_std_m",
     "empirical_cdf", "reduction_pct", "error_summary", "rmse_standard_error_m", "spawn_generators", "streams", "mc_standard_error",
     # errors and reports
-    "LocbookError", "DegenerateGeometryError", "ConvergenceError", "ParameterError", "Report",
+    "LocbookError", "DegenerateGeometryError", "ConvergenceError", "ParameterError", "SingularCovarianceError",
+    "Report",
 ]
 
 from ._datalog import install_from_environment as _install_data_log

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ._validate import as_array, check_choice, check_scalar
 from .channel import pairwise_distance_m, wall_crossings
 from .motion import reflect_into_box
 
@@ -55,6 +56,25 @@ class RssMeasurementModel:
     ref_distance_m: float = 1.0
     min_distance_m: float = 0.1
 
+    def __post_init__(self):
+        readers = as_array("readers_m", self.readers_m, ndim=2, trailing=(None, 2))
+        m = readers.shape[0]
+        for name in ("ref_power_dbm", "path_loss_exp"):      # NaN parameters are errors, never "not heard"
+            value = as_array(name, getattr(self, name))
+            if value.ndim not in (0, 1, 3) or (value.ndim and value.shape[-1] != m):
+                raise ValueError(f"{name} must be a scalar, ({m},) or (R, T, {m}), got shape {value.shape}")
+        sigma = as_array("sigma_db", self.sigma_db)
+        if sigma.ndim not in (0, 2) or np.any(sigma <= 0):
+            raise ValueError(f"sigma_db must be a positive scalar or (R, T) array of positive values, got "
+                             f"{self.sigma_db!r}")
+        if np.any(np.asarray(self.path_loss_exp) <= 0):
+            raise ValueError(f"path_loss_exp must be positive, got {self.path_loss_exp!r}")
+        check_scalar("wall_attenuation_db", self.wall_attenuation_db)
+        check_scalar("ref_distance_m", self.ref_distance_m, gt=0)
+        check_scalar("min_distance_m", self.min_distance_m, gt=0)
+        if self.walls_m is not None:
+            as_array("walls_m", np.reshape(self.walls_m, (-1, 2, 2)))
+
     @staticmethod
     def _per_step(value, step: int, per_reader: bool):
         value = np.asarray(value, dtype=float)
@@ -74,11 +94,29 @@ class RssMeasurementModel:
 
     def log_likelihood(self, rss_dbm, positions_m, step: int = 0):
         """``log p(s | L)`` up to a constant per run, ``rss_dbm (R, m)``, positions ``(P, 2)`` or ``(R, P, 2)``
-        -> ``(R, P)``. Readers with a NaN RSS (no packet) are left out of the product."""
-        resid = np.asarray(rss_dbm, dtype=float)[:, None, :] - self.mean_rss_dbm(positions_m, step)
-        resid = np.where(np.isnan(resid), 0.0, resid)
+        -> ``(R, P)``. Readers with a NaN RSS (no packet: not heard) are left out of the product; a run where no
+        reader heard anything gets a flat likelihood (that step is a prediction only). The model's parameters
+        are checked finite at construction, so only readings can be missing."""
+        rss = np.asarray(rss_dbm, dtype=float)
+        if np.isinf(rss).any():
+            raise ValueError("rss_dbm must be finite or NaN (not heard); got an infinite value")
+        resid = rss[:, None, :] - self.mean_rss_dbm(positions_m, step)
+        resid = np.where(np.isnan(rss)[:, None, :], 0.0, resid)
         sigma = self._per_step(self.sigma_db, step, False)
         return -0.5 * np.einsum("rpm,rpm->rp", resid, resid) / np.square(sigma)
+
+
+def _check_inputs(rss_dbm, model: RssMeasurementModel, *, cells_m=None):
+    """``rss_dbm (R, T, m)`` against the model's ``m`` readers (NaN = not heard); cells ``(C, 2)``."""
+    if not isinstance(model, RssMeasurementModel):
+        raise ValueError(f"model must be an RssMeasurementModel, got {type(model).__name__}")
+    m = np.shape(model.readers_m)[0]
+    rss_dbm = as_array("rss_dbm", rss_dbm, ndim=3, nan_ok=True)
+    if rss_dbm.shape[-1] != m:
+        raise ValueError(f"rss_dbm must have shape (runs, steps, {m}) for the model's {m} readers, got {rss_dbm.shape}")
+    if cells_m is not None:
+        cells_m = as_array("cells_m", cells_m, ndim=2, trailing=(None, 2))
+    return rss_dbm, cells_m
 
 
 def _normalise_log(logw):
@@ -97,12 +135,12 @@ def grid_transition_matrix(cells_m, spread_m: float, velocity_m=(0.0, 0.0)):
     """Transition ``T[l, l'] = P(L_t = c_l | L_t-1 = c_l')``: a Gaussian of std ``spread_m`` (D) centred on
     ``c_l' + v``, normalised over the grid for each ``l'`` (note 004, section 3.7). ``spread_m = inf``
     gives the uniform transition (no motion prior)."""
-    cells_m = np.asarray(cells_m, dtype=float)
+    cells_m = as_array("cells_m", cells_m, ndim=2, trailing=(None, 2))
     n = cells_m.shape[0]
+    check_scalar("spread_m", spread_m, gt=0, allow_inf=True)
+    as_array("velocity_m", velocity_m, trailing=(2,))
     if np.isinf(spread_m):
         return np.full((n, n), 1.0 / n)
-    if spread_m <= 0:
-        raise ValueError(f"the transition spread D must be positive (or inf), got {spread_m}")
     diff = cells_m[:, None, :] - cells_m[None, :, :] - np.asarray(velocity_m, dtype=float)
     log_t = -0.5 * np.einsum("abi,abi->ab", diff, diff) / spread_m**2
     t = np.exp(log_t - log_t.max(axis=0, keepdims=True))
@@ -126,8 +164,8 @@ def grid_bayes_filter(rss_dbm, cells_m, model: RssMeasurementModel, spread_m: fl
     ``velocity_m``: a known displacement per step, ``(2,)`` or ``(T, 2)`` (the mean of the process model
     in the thesis's constant-velocity experiment). ``initial_belief``: ``(C,)`` or ``(R, C)``; uniform if None.
     """
-    rss_dbm = np.asarray(rss_dbm, dtype=float)
-    cells_m = np.asarray(cells_m, dtype=float)
+    rss_dbm, cells_m = _check_inputs(rss_dbm, model, cells_m=cells_m)
+    check_scalar("spread_m", spread_m, gt=0, allow_inf=True)
     n_runs, n_steps, _ = rss_dbm.shape
     n_cells = cells_m.shape[0]
     velocity = _velocity_schedule(velocity_m, n_steps)
@@ -205,7 +243,8 @@ def particle_filter(rss_dbm, model: RssMeasurementModel, rng: np.random.Generato
 
     Proposal = process model (bootstrap, Eq. (4.33)): ``L_t = L_t-1 + v_t + N(0, D^2 I)``, reflected into
     ``region_m = (lower, upper)`` (the room, or the accessible part of it: Table 7.22); ``spread_m = inf``
-    draws a fresh uniform proposal over the region (Tables 7.18-7.19). Weights ``w_t ~ w_t-1 p(s_t | L_t)``
+    draws a fresh uniform proposal over the region (Tables 7.18-7.19), whose particles start from equal
+    weights (the previous weights belonged to the particles that were replaced). Weights ``w_t ~ w_t-1 p(s_t | L_t)``
     (Eq. (4.34)). Particles start uniform in the region, or all at ``initial_position_m (R, 2)`` when the
     initial location is known (Table 7.21).
 
@@ -219,15 +258,20 @@ def particle_filter(rss_dbm, model: RssMeasurementModel, rng: np.random.Generato
     resampling: draw with ``a = sqrt(w)`` and reweight the copies by ``w / a``. Both estimates use the
     current weights (MMSE = weighted mean; MAP = the highest-weight particle).
     """
-    if weight_smoothing not in WEIGHT_SMOOTHINGS:
-        raise ValueError(f"weight_smoothing must be one of {WEIGHT_SMOOTHINGS}, got {weight_smoothing!r}")
-    if n_particles < 1:
-        raise ValueError(f"n_particles must be positive, got {n_particles}")
+    check_choice("weight_smoothing", weight_smoothing, WEIGHT_SMOOTHINGS)
+    check_scalar("n_particles", n_particles, ge=1, integer=True)
+    check_scalar("spread_m", spread_m, gt=0, allow_inf=True)
+    if not isinstance(rng, np.random.Generator):
+        raise ValueError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
     if resample_threshold is not None and not 0.0 < resample_threshold <= 1.0:
         raise ValueError(f"resample_threshold is a fraction of N in (0, 1], got {resample_threshold}")
-    rss_dbm = np.asarray(rss_dbm, dtype=float)
+    rss_dbm, _ = _check_inputs(rss_dbm, model)
     n_runs, n_steps, _ = rss_dbm.shape
-    lower, upper = (np.asarray(b, dtype=float) for b in region_m)
+    if len(region_m) != 2:
+        raise ValueError(f"region_m must be (lower, upper) corners, got {region_m!r}")
+    lower, upper = (as_array(name, b, trailing=(2,)) for name, b in zip(("region lower", "region upper"), region_m))
+    if np.any(upper <= lower):
+        raise ValueError(f"region_m needs upper > lower on both axes, got {lower.tolist()} and {upper.tolist()}")
     velocity = _velocity_schedule(velocity_m, n_steps)
     shape = (n_runs, n_particles, 2)
 
@@ -246,7 +290,9 @@ def particle_filter(rss_dbm, model: RssMeasurementModel, rng: np.random.Generato
     for t in range(n_steps):
         if t > 0:
             if np.isinf(spread_m):
+                # fresh draws from the uniform proposal: the old weights belonged to the old particles
                 particles = uniform()
+                log_w = np.full((n_runs, n_particles), -np.log(n_particles))
             else:
                 particles = reflect_into_box(particles + velocity[t] + spread_m * rng.standard_normal(shape),
                                              lower, upper)

@@ -1,6 +1,6 @@
 """Exceptions that name what is wrong with the input, so a notebook run stops with a clear message."""
 
-__all__ = ["LocbookError", "DegenerateGeometryError", "ConvergenceError", "ParameterError"]
+__all__ = ["LocbookError", "DegenerateGeometryError", "ConvergenceError", "ParameterError", "SingularCovarianceError"]
 
 
 class LocbookError(Exception):
@@ -18,3 +18,9 @@ class ConvergenceError(LocbookError, RuntimeError):
 
 class ParameterError(LocbookError, ValueError):
     """A notebook parameter that does not exist, or a value of the wrong type."""
+
+
+class SingularCovarianceError(LocbookError, ArithmeticError):
+    """A filter's innovation covariance ``S = H P H^T + R`` is singular or not positive definite at some step
+    (e.g. a zero measurement noise with a zero prior covariance). The message names the step and the first
+    affected run; the filter never continues with NaN."""

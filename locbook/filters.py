@@ -18,7 +18,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ._validate import as_array, check_choice, check_scalar
 from .channel import PathLossModel
+from .errors import SingularCovarianceError
 
 __all__ = ["KalmanResult", "kalman_filter", "KF_VARIANTS", "LinearMeasurement", "RssMeasurement", "TrackResult",
            "extended_kalman_filter", "rss_measurement_jacobian", "RSS_UPDATE_MODES", "SERIAL_ORDERS"]
@@ -46,13 +48,53 @@ def _mT(a):
     return np.swapaxes(a, -1, -2)
 
 
+def _matrix(name: str, value, rows: int, cols: int) -> np.ndarray:
+    """A finite ``(rows, cols)`` matrix, possibly with leading batch axes; never a silently broadcast vector."""
+    value = as_array(name, value)
+    if value.ndim < 2 or value.shape[-2:] != (rows, cols):
+        raise ValueError(f"{name} must have shape ({rows}, {cols}) or batch + ({rows}, {cols}), got {value.shape}")
+    return value
+
+
+def _first_bad(bad) -> str:
+    """'run (i, j)' of the first True entry of a batch mask ('' for an unbatched filter)."""
+    bad = np.asarray(bad)
+    return f" (run index {tuple(int(i) for i in np.argwhere(bad)[0])})" if bad.ndim else ""
+
+
+def _not_positive_definite(S):
+    """Batch mask of innovation covariances that are not positive definite (closed form for 1 x 1 and 2 x 2;
+    larger ones are caught by the finiteness check of the updated state)."""
+    if S.shape[-1] == 1:
+        return ~(S[..., 0, 0] > 0)
+    if S.shape[-1] == 2:
+        det = S[..., 0, 0] * S[..., 1, 1] - S[..., 0, 1] * S[..., 1, 0]
+        return ~((S[..., 0, 0] > 0) & (det > 0))
+    return np.zeros(S.shape[:-2], bool)
+
+
+class _Singular(Exception):
+    """Raised inside an update; the time loop turns it into a SingularCovarianceError naming the step."""
+
+    def __init__(self, bad):
+        super().__init__()
+        self.bad = bad
+
+
+def _raise_singular(step: int, bad, what: str = "innovation covariance"):
+    raise SingularCovarianceError(
+        f"the {what} S = H P H^T + R is singular or not positive definite at step {step}{_first_bad(bad)}; "
+        "the measurement noise (R, sigma_db) must be positive where the prior covariance gives no spread")
+
+
 def kalman_filter(z, F, H, Q, R, x0, P0, *, predict_first: bool = True,
                   variant: str = "standard", joseph: bool = True) -> KalmanResult:
     """Run a linear Kalman filter over measurements ``z`` of shape ``batch + (T, m)``.
 
     Parameters
     ----------
-    z : measurements; a time step whose entries are all NaN is skipped (prediction only).
+    z : measurements; a NaN entry is a missing component: the update uses the components present (the
+        missing rows are left out of H and R) and a step whose entries are all NaN is prediction only.
     F, H, Q : model matrices ``(n, n)``, ``(m, n)``, ``(n, n)``; may carry batch axes.
     R : measurement covariance ``(m, m)`` or ``batch + (m, m)`` (e.g. an empirical R per run).
     x0, P0 : initial state ``batch + (n,)`` and covariance.
@@ -62,16 +104,21 @@ def kalman_filter(z, F, H, Q, R, x0, P0, *, predict_first: bool = True,
     variant : ``"standard"`` or ``"literal_003"`` (Eqs. (11)-(13) of document 003 as printed).
     joseph : use the Joseph-form covariance update (keeps P symmetric positive definite).
     """
-    if variant not in KF_VARIANTS:
-        raise ValueError(f"variant must be one of {KF_VARIANTS}, got {variant!r}")
-    z = np.asarray(z, dtype=float)
-    F, H, Q, R = (np.asarray(a, dtype=float) for a in (F, H, Q, R))
-    x = np.asarray(x0, dtype=float)
-    P = np.asarray(P0, dtype=float)
-    n, m = F.shape[-1], H.shape[-2]
+    check_choice("variant", variant, KF_VARIANTS)
+    z = as_array("z", z, min_ndim=2, nan_ok=True)
+    F = as_array("F", F)
+    if F.ndim < 2 or F.shape[-1] != F.shape[-2]:
+        raise ValueError(f"F must be square (n, n) or batch + (n, n), got {F.shape}")
+    n = F.shape[-1]
+    H = as_array("H", H)
+    if H.ndim < 2 or H.shape[-1] != n:
+        raise ValueError(f"H must have shape (m, {n}) or batch + (m, {n}), got {H.shape}")
+    m = H.shape[-2]
+    Q, R = _matrix("Q", Q, n, n), _matrix("R", R, m, m)
     if z.shape[-1] != m:
         raise ValueError(f"measurements have dimension {z.shape[-1]} but H has {m} rows")
-    if x.shape[-1] != n or P.shape[-2:] != (n, n):
+    x, P = as_array("x0", x0), as_array("P0", P0)
+    if x.ndim < 1 or x.shape[-1] != n or P.ndim < 2 or P.shape[-2:] != (n, n):
         raise ValueError(f"x0 must end in ({n},) and P0 in ({n}, {n}); got {x.shape} and {P.shape}")
     batch = np.broadcast_shapes(z.shape[:-2], x.shape[:-1], P.shape[:-2], F.shape[:-2], H.shape[:-2],
                                 Q.shape[:-2], R.shape[:-2])
@@ -93,11 +140,19 @@ def kalman_filter(z, F, H, Q, R, x0, P0, *, predict_first: bool = True,
             x_pred, P_pred = x, P
         # the printed update of document 003 uses the previous posterior, not the prediction
         x_use, P_use = (x, P) if variant == "literal_003" else (x_pred, P_pred)
-        zk = z[..., k, :]
-        valid = np.all(np.isfinite(zk), axis=-1)
-        zk = np.where(valid[..., None], zk, 0.0)
+        z_raw = z[..., k, :]
+        finite = np.isfinite(z_raw)
+        valid = np.all(finite, axis=-1)
+        partial = np.any(finite, axis=-1) & ~valid
+        zk = np.where(valid[..., None], z_raw, 0.0)
         S = H @ P_use @ _mT(H) + R                   # S = H P H' + R
-        K = np.linalg.solve(S, H @ P_use)            # K' = S^{-1} H P  (S, P symmetric)
+        singular = valid & _not_positive_definite(S)
+        if singular.any():
+            _raise_singular(k, singular)
+        try:
+            K = np.linalg.solve(S, H @ P_use)        # K' = S^{-1} H P  (S, P symmetric)
+        except np.linalg.LinAlgError:
+            _raise_singular(k, np.ones(S.shape[:-2], bool))
         K = _mT(K)
         nu = zk - x_use @ _mT(H)                     # innovation z - H x
         x_new = x_use + (K @ nu[..., None])[..., 0]
@@ -107,8 +162,28 @@ def kalman_filter(z, F, H, Q, R, x0, P0, *, predict_first: bool = True,
         else:
             P_new = IKH @ P_use                                # P = (I-KH)P
         P_new = 0.5 * (P_new + _mT(P_new))
+        if partial.any():
+            # missing components: zero rows of H, zero innovation and a decoupled unit noise give them an
+            # exactly zero gain column, so the present components update as they would alone
+            Hm = np.where(finite[..., :, None], H, 0.0)
+            Rm = np.where(finite[..., :, None] & finite[..., None, :], R, np.eye(m))
+            nu_p = np.where(finite, np.where(finite, z_raw, 0.0) - x_use @ _mT(H), 0.0)
+            Sp = Hm @ P_use @ _mT(Hm) + Rm
+            if (partial & _not_positive_definite(Sp)).any():
+                _raise_singular(k, partial & _not_positive_definite(Sp))
+            Kp = _mT(np.linalg.solve(Sp, Hm @ P_use))
+            xp_new = x_use + (Kp @ nu_p[..., None])[..., 0]
+            IKHp = eye - Kp @ Hm
+            Pp_new = (IKHp @ P_use @ _mT(IKHp) + Kp @ Rm @ _mT(Kp)) if joseph else IKHp @ P_use
+            x_new = np.where(partial[..., None], xp_new, x_new)
+            P_new = np.where(partial[..., None, None], 0.5 * (Pp_new + _mT(Pp_new)), P_new)
+            nu = np.where(partial[..., None], np.where(finite, nu_p, np.nan), nu)
+            valid = valid | partial
         x = np.where(valid[..., None], x_new, x_pred)
         P = np.where(valid[..., None, None], P_new, P_pred)
+        bad = valid & ~np.all(np.isfinite(x), axis=-1)
+        if bad.any():
+            _raise_singular(k, bad)
         out_x[..., k, :], out_P[..., k, :, :] = x, P
         out_xp[..., k, :], out_Pp[..., k, :, :] = x_use, P_use
         out_nu[..., k, :] = np.where(valid[..., None], nu, np.nan)
@@ -140,9 +215,13 @@ class LinearMeasurement:
     mode: str = "parallel"
 
     def __post_init__(self):
-        if self.mode not in RSS_UPDATE_MODES:
-            raise ValueError(f"mode must be one of {RSS_UPDATE_MODES}, got {self.mode!r}")
-        R = np.asarray(self.R, dtype=float)
+        check_choice("mode", self.mode, RSS_UPDATE_MODES)
+        z = as_array("LinearMeasurement.z", self.z, min_ndim=2, nan_ok=True)
+        H = as_array("LinearMeasurement.H", self.H)
+        m = z.shape[-1]
+        if H.ndim < 2 or H.shape[-2] != m:
+            raise ValueError(f"LinearMeasurement.H must have {m} rows (one per component of z), got shape {H.shape}")
+        R = _matrix("LinearMeasurement.R", self.R, m, m)
         if self.mode == "serial" and np.any(R - R * np.eye(R.shape[-1])):
             raise ValueError("serial linear updates need a diagonal R (independent measurement components)")
 
@@ -169,10 +248,20 @@ class RssMeasurement:
     min_distance_m: float = 1e-3
 
     def __post_init__(self):
-        if self.mode not in RSS_UPDATE_MODES:
-            raise ValueError(f"mode must be one of {RSS_UPDATE_MODES}, got {self.mode!r}")
-        if self.order not in SERIAL_ORDERS:
-            raise ValueError(f"order must be one of {SERIAL_ORDERS}, got {self.order!r}")
+        check_choice("mode", self.mode, RSS_UPDATE_MODES)
+        check_choice("order", self.order, SERIAL_ORDERS)
+        power = as_array("RssMeasurement.power_dbm", self.power_dbm, min_ndim=2, nan_ok=True)
+        anchors = as_array("RssMeasurement.anchors_m", self.anchors_m, ndim=2)
+        if power.shape[-1] != anchors.shape[0]:
+            raise ValueError(f"RssMeasurement.power_dbm has {power.shape[-1]} anchors on its last axis, "
+                             f"anchors_m has {anchors.shape[0]}")
+        idx = np.asarray(self.position_index)
+        if idx.shape != (anchors.shape[1],):
+            raise ValueError(f"RssMeasurement.position_index must hold {anchors.shape[1]} state indices (one per "
+                             f"axis of the anchors), got {self.position_index!r}")
+        for name in ("ref_power_dbm", "path_loss_exp", "sigma_db"):
+            as_array(f"RssMeasurement.channel.{name}", getattr(self.channel, name))
+        check_scalar("min_distance_m", self.min_distance_m, gt=0)
 
 
 @dataclass(frozen=True)
@@ -224,11 +313,21 @@ def _linear_update(x, P, z, H, R):
     nu = np.where(valid, nu, 0.0)
     HP = H @ P
     S = HP @ _mT(H) + R
+    bad = valid.any(axis=-1) & _not_positive_definite(S)
+    if bad.any():
+        raise _Singular(bad)
     if S.shape[-1] <= 2:                                      # K = P H^T S^{-1}, closed-form inverse
         K = _mT(HP) @ _inv_small(S)
     else:
-        K = _mT(np.linalg.solve(S, HP))
-    return x + (K @ nu[..., None])[..., 0], _joseph(P, K, H, R)
+        try:
+            K = _mT(np.linalg.solve(S, HP))
+        except np.linalg.LinAlgError:
+            raise _Singular(valid.any(axis=-1) & (np.linalg.eigvalsh(S)[..., 0] <= 0)) from None
+    x_new = x + (K @ nu[..., None])[..., 0]
+    bad = ~np.all(np.isfinite(x_new), axis=-1)
+    if bad.any():                                             # a larger S that is not positive definite
+        raise _Singular(bad)
+    return x_new, _joseph(P, K, H, R)
 
 
 def _rss_parallel_update(x, P, z, meas: RssMeasurement):
@@ -279,6 +378,8 @@ def _rss_serial_update(x, P, z, meas: RssMeasurement):
         nu = np.where(valid, zj - hx, 0.0)
         ph = (P @ h_row[..., None])[..., 0]                   # P H^T
         s = np.einsum("...i,...i->...", h_row, ph) + pick(sigma2)
+        if (valid & ~(s > 0)).any():
+            raise _Singular(valid & ~(s > 0))
         K = np.where(valid[..., None], ph / s[..., None], 0.0)
         x = x + K * nu[..., None]
         P = _joseph(P, K[..., :, None], h_row[..., None, :], pick(sigma2)[..., None, None])
@@ -299,8 +400,18 @@ def extended_kalman_filter(F, Q, x0, P0, measurements, *, record=None,
     are the posterior one step before step 0, else the prior at step 0. ``record``: step indices to return
     (default all).
     """
-    F = np.asarray(F, dtype=float)
-    Q = np.asarray(Q, dtype=float)
+    F = as_array("F", F)
+    if F.ndim < 2 or F.shape[-1] != F.shape[-2]:
+        raise ValueError(f"F must be square (n, n) or batch + (n, n), got {F.shape}")
+    Q = _matrix("Q", Q, F.shape[-1], F.shape[-1])
+    if not all(isinstance(m, (LinearMeasurement, RssMeasurement)) for m in measurements):
+        raise ValueError("measurements must be LinearMeasurement or RssMeasurement streams, got "
+                         f"{[type(m).__name__ for m in measurements]}")
+    for meas in measurements:
+        if isinstance(meas, LinearMeasurement) and np.shape(meas.H)[-1] != F.shape[-1]:
+            raise ValueError(f"a LinearMeasurement's H has {np.shape(meas.H)[-1]} columns, the state has {F.shape[-1]}")
+        if isinstance(meas, RssMeasurement) and np.max(meas.position_index) >= F.shape[-1]:
+            raise ValueError(f"RssMeasurement.position_index {meas.position_index} is outside the {F.shape[-1]}-state")
     streams = [m.z if isinstance(m, LinearMeasurement) else m.power_dbm for m in measurements]
     if not streams:
         raise ValueError("extended_kalman_filter needs at least one measurement stream")
@@ -308,9 +419,11 @@ def extended_kalman_filter(F, Q, x0, P0, measurements, *, record=None,
     if len(T) != 1:
         raise ValueError(f"measurement streams must share one time grid, got lengths {sorted(T)}")
     T = T.pop()
-    x = np.asarray(x0, dtype=float)
-    P = np.asarray(P0, dtype=float)
+    x = as_array("x0", x0)
+    P = as_array("P0", P0)
     n = F.shape[-1]
+    if x.ndim < 1 or x.shape[-1] != n or P.ndim < 2 or P.shape[-2:] != (n, n):
+        raise ValueError(f"x0 must end in ({n},) and P0 in ({n}, {n}); got {x.shape} and {P.shape}")
     batch = np.broadcast_shapes(x.shape[:-1], P.shape[:-2], *(np.shape(s)[:-2] for s in streams))
     x = np.broadcast_to(x, batch + (n,)).copy()
     P = np.broadcast_to(P, batch + (n, n)).copy()
@@ -330,17 +443,21 @@ def extended_kalman_filter(F, Q, x0, P0, measurements, *, record=None,
             if not act[k]:
                 continue
             zk = z[..., k, :]
-            if isinstance(meas, LinearMeasurement):
-                H, R = np.asarray(meas.H, float), np.asarray(meas.R, float)
-                if meas.mode == "parallel":
-                    x, P = _linear_update(x, P, zk, H, R)
+            try:
+                if isinstance(meas, LinearMeasurement):
+                    H, R = np.asarray(meas.H, float), np.asarray(meas.R, float)
+                    if meas.mode == "parallel":
+                        x, P = _linear_update(x, P, zk, H, R)
+                    else:
+                        for j in range(zk.shape[-1]):
+                            x, P = _linear_update(x, P, zk[..., j:j + 1], H[..., j:j + 1, :],
+                                                  R[..., j:j + 1, j:j + 1])
+                elif meas.mode == "parallel":
+                    x, P = _rss_parallel_update(x, P, zk, meas)
                 else:
-                    for j in range(zk.shape[-1]):
-                        x, P = _linear_update(x, P, zk[..., j:j + 1], H[..., j:j + 1, :], R[..., j:j + 1, j:j + 1])
-            elif meas.mode == "parallel":
-                x, P = _rss_parallel_update(x, P, zk, meas)
-            else:
-                x, P = _rss_serial_update(x, P, zk, meas)
+                    x, P = _rss_serial_update(x, P, zk, meas)
+            except _Singular as exc:
+                _raise_singular(k, exc.bad, f"innovation covariance of the {type(meas).__name__} update")
         if slot[k] >= 0:
             out_x[..., slot[k], :] = x
             out_P[..., slot[k], :, :] = P

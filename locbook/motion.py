@@ -25,6 +25,8 @@ from math import factorial
 
 import numpy as np
 
+from ._validate import as_array, check_choice, check_scalar
+
 __all__ = ["KinematicModel", "constant_velocity", "constant_acceleration", "STATE_LAYOUTS", "NOISE_MODELS",
            "reflect_into_box", "simulate_states"]
 
@@ -55,16 +57,13 @@ class KinematicModel:
     noise: str = "discrete"
 
     def __post_init__(self):
-        if self.dt_s <= 0:
-            raise ValueError(f"dt_s must be positive, got {self.dt_s}")
-        if self.q < 0:
-            raise ValueError(f"process noise q must be non-negative, got {self.q}")
+        check_scalar("dt_s", self.dt_s, gt=0)                    # NaN is rejected too (nan <= 0 is False)
+        check_scalar("process noise q", self.q, ge=0)
         if self.order not in (1, 2):
             raise ValueError(f"order must be 1 (constant velocity) or 2 (constant acceleration), got {self.order}")
-        if self.layout not in STATE_LAYOUTS:
-            raise ValueError(f"layout must be one of {STATE_LAYOUTS}, got {self.layout!r}")
-        if self.noise not in NOISE_MODELS:
-            raise ValueError(f"noise must be one of {NOISE_MODELS}, got {self.noise!r}")
+        check_scalar("dim", self.dim, ge=1, integer=True)
+        check_choice("layout", self.layout, STATE_LAYOUTS)
+        check_choice("noise", self.noise, NOISE_MODELS)
 
     @property
     def n_state(self) -> int:
@@ -177,8 +176,8 @@ def reflect_into_box(position_m, lower_m, upper_m):
     walls (repeatedly, for steps longer than the box). Used for targets and particles confined to a room
     (Ozkaya 2011 simulations; note 004, section 4.3: "kept inside the room by reflection").
     """
-    lower = np.asarray(lower_m, dtype=float)
-    width = np.asarray(upper_m, dtype=float) - lower
+    lower = as_array("lower_m", lower_m)
+    width = as_array("upper_m", upper_m) - lower
     if np.any(width <= 0):
         raise ValueError(f"the box needs upper > lower on every axis, got {lower_m} and {upper_m}")
     folded = np.mod(np.asarray(position_m, dtype=float) - lower, 2.0 * width)
@@ -189,10 +188,18 @@ def simulate_states(F, Q, initial_state, n_steps: int, rng: np.random.Generator)
     """Sample trajectories of ``x_k = F x_{k-1} + w_k``, ``w_k ~ N(0, Q)``: ``(..., n_steps + 1, n)`` from initial
     states ``(..., n)`` (the "trajectories that exactly follow the constant acceleration model" of Dogan's
     Sec. 4.1.2). ``Q`` may be singular (it is factored by eigen-decomposition)."""
-    F = np.asarray(F, dtype=float)
-    Q = np.asarray(Q, dtype=float)
-    x = np.asarray(initial_state, dtype=float)
+    F = as_array("F", F, ndim=2)
+    n = F.shape[0]
+    if F.shape != (n, n):
+        raise ValueError(f"F must be square (n, n), got {F.shape}")
+    Q = as_array("Q", Q, ndim=2)
+    if Q.shape != (n, n):
+        raise ValueError(f"Q must have shape ({n}, {n}) like F, got {Q.shape}")
+    x = as_array("initial_state", initial_state, trailing=(n,))
+    check_scalar("n_steps", n_steps, ge=0, integer=True)
     w, v = np.linalg.eigh(Q)
+    if w.min(initial=0.0) < -1e-9 * max(1.0, w.max(initial=0.0)):
+        raise ValueError(f"Q must be positive semi-definite, its smallest eigenvalue is {w.min()}")
     root = v * np.sqrt(np.clip(w, 0.0, None))              # Q = root root^T
     noise = rng.standard_normal((n_steps,) + x.shape) @ root.T
     out = np.empty(x.shape[:-1] + (n_steps + 1, x.shape[-1]))

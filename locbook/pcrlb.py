@@ -20,6 +20,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ._validate import as_array, check_choice
+
 from .bounds import rss_position_information
 from .filters import _mT
 
@@ -41,12 +43,19 @@ def posterior_crlb(prior_information, F, Q, measurement_information, *, form: st
     ``form="tichavsky"`` is Eq. (4.7) as printed (needs an invertible Q); ``"riccati"`` is the equivalent
     information-filter form.
     """
-    if form not in PCRLB_FORMS:
-        raise ValueError(f"form must be one of {PCRLB_FORMS}, got {form!r}")
-    j = np.asarray(prior_information, dtype=float)
-    F = np.asarray(F, dtype=float)
-    Q = np.asarray(Q, dtype=float)
-    jz = np.asarray(measurement_information, dtype=float)
+    check_choice("form", form, PCRLB_FORMS)
+    F = as_array("F", F)
+    if F.ndim < 2 or F.shape[-1] != F.shape[-2]:
+        raise ValueError(f"F must be square (n, n) or batch + (n, n), got {F.shape}")
+    n = F.shape[-1]
+    shapes = {}
+    for name, value, lead in (("prior_information", prior_information, 0), ("Q", Q, 0),
+                              ("measurement_information", measurement_information, 1)):
+        value = as_array(name, value)
+        if value.ndim < 2 + lead or value.shape[-2:] != (n, n):
+            raise ValueError(f"{name} must have shape {'(K, ...' if lead else '(...'}, {n}, {n}), got {value.shape}")
+        shapes[name] = value
+    j, Q, jz = shapes["prior_information"], shapes["Q"], shapes["measurement_information"]
     if form == "tichavsky":
         try:
             q_inv = _inv(Q)
@@ -68,15 +77,21 @@ def posterior_crlb(prior_information, F, Q, measurement_information, *, form: st
 
 def position_bound_m(information, position_index):
     """Dogan Eq. (4.23): ``sqrt(sum_i [J^{-1}]_{ii})`` over the position indices -> ``(...)``."""
-    cov = _inv(np.asarray(information, dtype=float))
+    information = as_array("information", information, min_ndim=2)
+    if information.shape[-1] != information.shape[-2]:
+        raise ValueError(f"information must be square (..., n, n), got {information.shape}")
+    cov = _inv(information)
     idx = np.asarray(position_index)
     return np.sqrt(cov[..., idx, idx].sum(axis=-1))
 
 
 def linear_measurement_information(H, R):
     """``H^T R^{-1} H`` for a linear-Gaussian measurement (Dogan Eq. (4.16))."""
-    H = np.asarray(H, dtype=float)
-    return _mT(H) @ _inv(np.asarray(R, dtype=float)) @ H
+    H = as_array("H", H, min_ndim=2)
+    R = as_array("R", R, min_ndim=2)
+    if R.shape[-2:] != (H.shape[-2],) * 2:
+        raise ValueError(f"R must have shape ({H.shape[-2]}, {H.shape[-2]}) for H with {H.shape[-2]} rows, got {R.shape}")
+    return _mT(H) @ _inv(R) @ H
 
 
 def rss_state_information(states, anchors_m, path_loss_exp, sigma_db, position_index, *,
@@ -86,8 +101,10 @@ def rss_state_information(states, anchors_m, path_loss_exp, sigma_db, position_i
     ``Lambda(x) = H(x)^T R^{-1} H(x)`` (Dogan Eq. (4.19)), ``R = sigma^2 I``: the static RSS information
     (:func:`locbook.bounds.rss_position_information`, with its near-anchor regularisations) in the position block.
     """
-    states = np.asarray(states, dtype=float)
+    states = as_array("states", states, min_ndim=1)
     idx = np.asarray(position_index)
+    if idx.ndim != 1 or idx.size == 0 or idx.max() >= states.shape[-1]:
+        raise ValueError(f"position_index must index the {states.shape[-1]} state entries, got {position_index!r}")
     block = rss_position_information(states[..., idx], anchors_m, path_loss_exp, sigma_db,
                                      min_distance_m=min_distance_m, height_offset_m=height_offset_m)
     out = np.zeros(states.shape + (states.shape[-1],))

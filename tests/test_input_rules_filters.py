@@ -1,0 +1,129 @@
+"""Missing components, singular covariances and input checks of the filters (issue 12).
+
+Independent references: filterpy's KalmanFilter updated with the rows present (H and R reduced by hand),
+and the RSS likelihood recomputed with the silent reader removed.
+"""
+import numpy as np
+import pytest
+from filterpy.kalman import KalmanFilter
+from hypothesis import given, settings
+from hypothesis.extra.numpy import arrays
+from hypothesis import strategies as st
+
+import locbook as lb
+
+MODEL = lb.constant_velocity(1.0, 0.05)
+H = MODEL.position_measurement_matrix()
+R = np.array([[0.5, 0.1], [0.1, 0.8]])
+X0, P0 = np.array([0.0, 0.0, 1.0, 0.5]), np.eye(4)
+
+
+def filterpy_reference(z):
+    """filterpy, updating at every step with only the components present (reduced H and R)."""
+    kf = KalmanFilter(dim_x=4, dim_z=2)
+    kf.F, kf.Q, kf.x, kf.P = MODEL.F, MODEL.Q, X0.copy(), P0.copy()
+    xs, Ps = [], []
+    for zk in z:
+        kf.predict()
+        keep = np.isfinite(zk)
+        if keep.any():
+            kf.update(zk[keep], R=R[np.ix_(keep, keep)], H=H[keep])
+        xs.append(kf.x.copy())
+        Ps.append(kf.P.copy())
+    return np.array(xs), np.array(Ps)
+
+
+def _track(seed=0, T=15):
+    rng = np.random.default_rng(seed)
+    return np.cumsum(rng.normal(size=(T, 2)), axis=0) + rng.normal(scale=0.7, size=(T, 2))
+
+
+def test_kalman_filter_updates_with_the_components_present():
+    z = _track()
+    z[3, 0] = np.nan                  # one component missing: the other must still update
+    z[7, 1] = np.nan
+    z[10] = np.nan                    # all missing: prediction only
+    res = lb.kalman_filter(z, MODEL.F, H, MODEL.Q, R, X0, P0)
+    x_ref, P_ref = filterpy_reference(z)
+    np.testing.assert_allclose(res.x, x_ref, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(res.P, P_ref, rtol=0, atol=1e-9)
+    assert np.isnan(res.innovation[3, 0]) and np.isfinite(res.innovation[3, 1])
+
+
+@settings(max_examples=50, deadline=None, derandomize=True)
+@given(mask=arrays(bool, (12, 2)))
+def test_property_random_masks_kf_and_ekf_agree_with_filterpy(mask):
+    z = np.where(mask, np.nan, _track(3, 12))
+    x_ref, P_ref = filterpy_reference(z)
+    kf = lb.kalman_filter(z, MODEL.F, H, MODEL.Q, R, X0, P0)
+    np.testing.assert_allclose(kf.x, x_ref, rtol=0, atol=1e-9)
+    ekf = lb.extended_kalman_filter(MODEL.F, MODEL.Q, X0, P0, [lb.LinearMeasurement(z, H, R)])
+    np.testing.assert_allclose(ekf.x, x_ref, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(ekf.P, P_ref, rtol=0, atol=1e-9)
+
+
+def test_singular_innovation_covariance_is_an_error_naming_the_step():
+    z = _track()
+    with pytest.raises(lb.SingularCovarianceError, match="at step 0"):
+        lb.kalman_filter(z, MODEL.F, H, np.zeros((4, 4)), np.zeros((2, 2)), X0, np.zeros((4, 4)))
+    anchors = np.array([[0.0, 0.0], [10.0, 0.0], [0.0, 10.0]])
+    power = np.full((2, 5, 3), -60.0)
+    power[:, 0] = np.nan                              # no reading at step 0: the failure comes at step 1
+    for mode in ("parallel", "serial"):
+        meas = lb.RssMeasurement(power, anchors, lb.PathLossModel(-40.0, 2.0, 0.0), MODEL.position_index, mode=mode)
+        with pytest.raises(lb.SingularCovarianceError, match=r"at step 1 \(run index \(0,\)\)"):
+            lb.extended_kalman_filter(MODEL.F, np.zeros((4, 4)), np.zeros((2, 4)) + 3.0, np.zeros((4, 4)), [meas])
+
+
+@pytest.mark.parametrize("call, message", [
+    (lambda: lb.kalman_filter(_track(), MODEL.F, H, np.ones(4), R, X0, P0), r"Q must have shape \(4, 4\)"),
+    (lambda: lb.kalman_filter(_track(), MODEL.F, H, MODEL.Q, np.ones(2), X0, P0), r"R must have shape \(2, 2\)"),
+    (lambda: lb.kalman_filter(_track(), MODEL.F, H, MODEL.Q, R, X0[:3], P0), "x0 must end in"),
+    (lambda: lb.kalman_filter(_track(), MODEL.F * np.nan, H, MODEL.Q, R, X0, P0), "F must be finite"),
+    (lambda: lb.kalman_filter(np.full((3, 2), np.inf), MODEL.F, H, MODEL.Q, R, X0, P0), "z must be finite"),
+    (lambda: lb.extended_kalman_filter(MODEL.F, np.ones(4), X0, P0, [lb.LinearMeasurement(_track(), H, R)]),
+     r"Q must have shape \(4, 4\)"),
+    (lambda: lb.LinearMeasurement(_track(), H[:1], R), "H must have 2 rows"),
+    (lambda: lb.RssMeasurement(np.zeros((3, 4)), np.zeros((3, 2)), lb.PathLossModel(), [0, 1]), "has 4 anchors"),
+    (lambda: lb.constant_velocity(float("nan"), 1.0), "dt_s must be finite"),
+    (lambda: lb.constant_velocity(1.0, float("nan")), "process noise q must be finite"),
+    (lambda: lb.grid_transition_matrix(np.zeros((3, 2)), float("nan")), "spread_m must be finite"),
+    (lambda: lb.RssMeasurementModel(np.zeros((3, 2)), ref_power_dbm=np.nan), "ref_power_dbm must be finite"),
+    (lambda: lb.RssMeasurementModel(np.zeros((3, 2)), path_loss_exp=[2.0, np.nan, 2.0]), "path_loss_exp must be finite"),
+    (lambda: lb.RssMeasurementModel(np.zeros((3, 2)), sigma_db=0.0), "sigma_db must be a positive"),
+    (lambda: lb.grid_bayes_filter(np.zeros((2, 3, 4)), np.zeros((5, 2)), lb.RssMeasurementModel(np.zeros((3, 2)))),
+     r"rss_dbm must have shape \(runs, steps, 3\)"),
+    (lambda: lb.simulate_states(MODEL.F, np.diag([1.0, 1.0, -1.0, 1.0]), X0, 3, np.random.default_rng(0)),
+     "Q must be positive semi-definite"),
+    (lambda: lb.posterior_crlb(np.eye(4), MODEL.F, np.ones(4), np.zeros((3, 4, 4))), r"Q must have shape"),
+])
+def test_bad_input_names_the_argument(call, message):
+    with pytest.raises(ValueError, match=message):
+        call()
+
+
+def test_likelihood_leaves_out_a_silent_reader_only():
+    readers = np.array([[0.0, 0.0], [8.0, 0.0], [0.0, 6.0], [8.0, 6.0]])
+    model = lb.RssMeasurementModel(readers, ref_power_dbm=[-50.0, -52.0, -51.0, -49.0], path_loss_exp=2.2, sigma_db=4.0)
+    cells = np.array([[1.0, 1.0], [4.0, 3.0], [7.0, 5.0]])
+    rss = np.array([[-60.0, np.nan, -63.0, -65.0]])
+    reduced = lb.RssMeasurementModel(readers[[0, 2, 3]], ref_power_dbm=[-50.0, -51.0, -49.0], path_loss_exp=2.2,
+                                     sigma_db=4.0)
+    np.testing.assert_allclose(model.log_likelihood(rss, cells), reduced.log_likelihood(rss[:, [0, 2, 3]], cells),
+                               rtol=1e-12)
+    flat = model.log_likelihood(np.full((1, 4), np.nan), cells)
+    np.testing.assert_array_equal(flat, np.zeros((1, 3)))            # nobody heard: flat, a prediction only
+
+
+def test_uniform_proposal_starts_from_equal_weights():
+    """spread_m = inf draws new particles: their weights must be this step's likelihood alone."""
+    readers = np.array([[0.0, 0.0], [8.0, 0.0], [0.0, 6.0]])
+    model = lb.RssMeasurementModel(readers, sigma_db=3.0)
+    rng = np.random.default_rng(5)
+    rss = model.mean_rss_dbm(np.array([[2.0, 3.0]]))[0, 0] + rng.normal(scale=3.0, size=(2, 4, 3))
+    res = lb.particle_filter(rss, model, np.random.default_rng(1), n_particles=200, region_m=([0, 0], [8, 6]),
+                             spread_m=np.inf, resample_threshold=1e-6)       # never resamples
+    assert not res.resampled.any()
+    loglik = model.log_likelihood(rss[:, -1], res.particles_m, 3)
+    expected = np.exp(loglik - loglik.max(axis=1, keepdims=True))
+    np.testing.assert_allclose(res.weights, expected / expected.sum(axis=1, keepdims=True), rtol=1e-9)

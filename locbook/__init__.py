@@ -33,7 +33,7 @@ from .metrics import (empirical_cdf, error_std_m, error_summary, mean_error_m, m
                       position_error_m, reduction_pct, rmse_m, rmse_standard_error_m)
 from .pcrlb import (PCRLB_FORMS, linear_measurement_information, position_bound_m, posterior_crlb,
                     rss_state_information)
-from .montecarlo import mc_standard_error, spawn_generators, streams
+from .montecarlo import canonical_encoding, mc_standard_error, seed_from_values, spawn_generators, streams
 from .motion import (NOISE_MODELS, STATE_LAYOUTS, KinematicModel, constant_acceleration, constant_velocity, reflect_into_box,
                      simulate_states)
 from .reference_tags import (OZKAYA_PATH_LOSS_EXP_BOUNDS, OZKAYA_REF_POWER_BOUNDS_DBM, OnlineCalibration,
@@ -68,7 +68,7 @@ __all__ = [
     "rss_fisher_information", "rss_position_information", "rss_crlb_m", "crlb_rms_over_area_m", "CRLB_FORMS",
     # metrics and Monte Carlo
     "position_error_m", "mean_error_m", "rmse_m", "median_error_m", "percentile_error_m", "error_std_m",
-    "empirical_cdf", "reduction_pct", "error_summary", "rmse_standard_error_m", "spawn_generators", "streams", "mc_standard_error",
+    "empirical_cdf", "reduction_pct", "error_summary", "rmse_standard_error_m", "spawn_generators", "streams", "mc_standard_error", "seed_from_values", "canonical_encoding",
     # errors and reports
     "LocbookError", "DegenerateGeometryError", "ConvergenceError", "ParameterError", "SingularCovarianceError",
     "Report",

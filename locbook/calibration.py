@@ -11,7 +11,12 @@ It is also Eq. (5.1) of Dogan (2015) and the per-reader fit of Ozkaya (2011), Eq
 whose bounded variant (alpha in [-55, -40] dBm, n in [1.5, 3]) is the ``*_bounds_*`` arguments.
 
 Problems carry leading batch axes: ``distance_m`` and ``power_dbm`` of shape ``(..., N)`` are
-``prod(...)`` independent fits, stacked into one cvxpy problem. NaN powers are missing samples.
+``prod(...)`` independent fits. NaN powers are missing samples (a reading not heard).
+
+Solvers: the unconstrained least-squares fit is the closed form (normal equations from running sums: time and
+memory linear in the samples, any size); cvxpy solves the constrained (bounded) and robust (Huber) variants,
+all problems stacked into one convex problem, and is the oracle for the closed form. A cvxpy fit that does not
+reach an optimum returns NaN parameters with the solver's status in ``PathLossFit.status``; it never raises.
 """
 from __future__ import annotations
 
@@ -22,7 +27,8 @@ import numpy as np
 import scipy.sparse as sp
 
 from ._cvx import solve
-from .errors import DegenerateGeometryError
+from ._validate import as_array, check_choice, check_scalar
+from .errors import ConvergenceError, DegenerateGeometryError
 
 __all__ = [
     "PathLossFit",
@@ -31,9 +37,15 @@ __all__ = [
     "fit_path_loss_closed_form",
     "calibrate_path_loss",
     "CALIBRATION_MODES",
+    "CALIBRATION_SOLVERS",
+    "CALIBRATION_LOSSES",
 ]
 
 CALIBRATION_MODES = ("per_location_mean", "pooled", "per_anchor")
+CALIBRATION_SOLVERS = ("auto", "closed_form", "cvxpy")
+CALIBRATION_LOSSES = ("squared", "huber")
+#: statuses of a fit whose parameters can be used
+USABLE_STATUSES = ("closed_form", "optimal")
 
 
 @dataclass(frozen=True)
@@ -41,7 +53,12 @@ class PathLossFit:
     """Result of a path-loss fit; arrays carry the batch shape of the problems.
 
     ``covariance`` is the least-squares parameter covariance ``s^2 (M^T M)^{-1}`` (ordering
-    ``[ref_power_dbm, path_loss_exp]``) estimated from the residuals, for standard errors.
+    ``[ref_power_dbm, path_loss_exp]``) estimated from the residuals, for standard errors (NaN for the Huber
+    fit, whose covariance this formula does not give).
+
+    ``status``: ``"closed_form"``, or the cvxpy status of the stacked solve (``"optimal"``); any other status
+    (``"optimal_inaccurate"``, ``"infeasible"``, ``"solver_error"``...) comes with NaN parameters, so a failed
+    fit is never mistaken for a result. :attr:`ok` says whether the parameters can be used.
     """
 
     ref_power_dbm: np.ndarray
@@ -51,6 +68,10 @@ class PathLossFit:
     n_samples: np.ndarray
     status: str
     per_location: "PathLossFit | None" = None
+
+    @property
+    def ok(self) -> bool:
+        return self.status in USABLE_STATUSES
 
     @property
     def std_error(self) -> np.ndarray:
@@ -76,9 +97,19 @@ def path_loss_design_matrix(distance_m, ref_distance_m: float = 1.0,
 
 
 def _prepare(distance_m, power_dbm, ref_distance_m):
-    distance_m = np.asarray(distance_m, dtype=float)
-    power_dbm = np.asarray(power_dbm, dtype=float)
-    distance_m, power_dbm = np.broadcast_arrays(distance_m, power_dbm)
+    distance_m = as_array("distance_m", distance_m)
+    power_dbm = as_array("power_dbm", power_dbm, nan_ok=True)
+    check_scalar("ref_distance_m", ref_distance_m, gt=0)
+    if distance_m.shape != power_dbm.shape:
+        # the one broadcast allowed: distances shared by all problems, powers with the full shape (..., N)
+        try:
+            shared = np.broadcast_shapes(distance_m.shape, power_dbm.shape) == power_dbm.shape
+        except ValueError:
+            shared = False
+        if not shared:
+            raise ValueError(f"distance_m {distance_m.shape} must have the shape of power_dbm {power_dbm.shape} "
+                             "(..., N), or be shared by all its problems")
+        distance_m = np.broadcast_to(distance_m, power_dbm.shape)
     if distance_m.ndim == 0 or distance_m.shape[-1] < 2:
         raise DegenerateGeometryError("a path-loss fit needs at least two measurements per problem")
     mask = np.isfinite(power_dbm) & np.isfinite(distance_m)
@@ -103,14 +134,16 @@ def _check_distinct_distances(log_d, mask):
         )
 
 
-def _finish(log_d, power, mask, ref, exp, status):
+def _finish(log_d, power, mask, ref, exp, status, *, covariance: bool = True):
+    """Residual sigma and the LS covariance ``s^2 (M^T M)^{-1}`` from running sums (memory linear in N)."""
     resid = np.where(mask, power - (ref[..., None] - exp[..., None] * log_d), 0.0)
     n = mask.sum(axis=-1)
     dof = np.maximum(n - 2, 1)
     s2 = (resid**2).sum(axis=-1) / dof
-    m = np.stack([np.where(mask, 1.0, 0.0), np.where(mask, -log_d, 0.0)], axis=-1)
-    mtm = np.einsum("...ni,...nj->...ij", m, m)
-    cov = s2[..., None, None] * np.linalg.inv(mtm)
+    del resid
+    sum_l, sum_l2 = log_d.sum(-1), (log_d**2).sum(-1)          # M^T M = [[n, -sum L], [-sum L, sum L^2]]
+    mtm = np.stack([np.stack([n.astype(float), -sum_l], -1), np.stack([-sum_l, sum_l2], -1)], -2)
+    cov = s2[..., None, None] * np.linalg.inv(mtm) if covariance else np.full(mtm.shape, np.nan)
     return PathLossFit(ref, exp, np.sqrt(s2), cov, n, status)
 
 
@@ -118,17 +151,17 @@ def fit_path_loss_closed_form(distance_m, power_dbm, ref_distance_m: float = 1.0
     """Unconstrained least squares by the normal equations ``(M^T M)^{-1} M^T P`` (Eq. (6),
     document 003, sign corrected), batched over leading axes. Missing powers are NaN."""
     log_d, power, mask = _prepare(distance_m, power_dbm, ref_distance_m)
-    w = mask.astype(float)
-    # normal equations of P = a - n L:  [[N, -sum L], [-sum L, sum L^2]] [a, n] = [sum P, -sum L P]
-    s0, s1, s2 = w.sum(-1), (w * log_d).sum(-1), (w * log_d**2).sum(-1)
-    p0, p1 = (w * power).sum(-1), (w * log_d * power).sum(-1)
+    # normal equations of P = a - n L:  [[N, -sum L], [-sum L, sum L^2]] [a, n] = [sum P, -sum L P];
+    # log_d and power are 0 at missing samples, so the plain sums run over the observed ones
+    s0, s1, s2 = mask.sum(-1).astype(float), log_d.sum(-1), (log_d**2).sum(-1)
+    p0, p1 = power.sum(-1), (log_d * power).sum(-1)
     det = s0 * s2 - s1 * s1
     ref = (s2 * p0 - s1 * p1) / det
     exp = (s1 * p0 - s0 * p1) / det
     return _finish(log_d, power, mask, ref, exp, "closed_form")
 
 
-def _stacked_problem(log_d, power, mask, ref_bounds, exp_bounds):
+def _stacked_problem(log_d, power, mask, ref_bounds, exp_bounds, loss="squared", huber_delta_db=None):
     """One cvxpy problem for all ``k`` fits: ``min sum_i ||P_i - P0_i + n_i L_i||^2`` over the observed samples.
 
     The data enter as constants of one sparse matrix, so building it costs time and memory linear in ``k``.
@@ -146,42 +179,69 @@ def _stacked_problem(log_d, power, mask, ref_bounds, exp_bounds):
         constraints += [ref >= ref_bounds[0], ref <= ref_bounds[1]]
     if exp_bounds is not None:
         constraints += [exp >= exp_bounds[0], exp <= exp_bounds[1]]
-    problem = cp.Problem(cp.Minimize(cp.sum_squares(design @ cp.hstack([ref, exp]) - power[mask])), constraints)
+    resid = design @ cp.hstack([ref, exp]) - power[mask]
+    # Huber: quadratic within delta of the model, linear beyond, so a gross outlier pulls with bounded force
+    objective = cp.sum_squares(resid) if loss == "squared" else cp.sum(cp.huber(resid, huber_delta_db))
+    problem = cp.Problem(cp.Minimize(objective), constraints)
     return problem, (ref, exp)
 
 
 def fit_path_loss(distance_m, power_dbm, *, ref_distance_m: float = 1.0,
                   ref_power_bounds_dbm: tuple[float, float] | None = None,
                   path_loss_exp_bounds: tuple[float, float] | None = None,
-                  solver: str = "cvxpy") -> PathLossFit:
+                  solver: str = "auto", loss: str = "squared", huber_delta_db: float = 6.0) -> PathLossFit:
     """Least-squares fit of ``(ref_power_dbm, path_loss_exp)`` for every problem in the batch.
 
-    ``distance_m, power_dbm``: shape ``(..., N)``, one problem per leading index. Bounds, if given,
-    constrain every problem (Ozkaya 2011, Sec. 6.2: alpha in [-55, -40] dBm, n in [1.5, 3]).
-    ``solver="cvxpy"`` solves all problems as one stacked convex QP; ``"closed_form"`` uses the
-    normal equations and is only valid without bounds.
+    ``distance_m, power_dbm``: shape ``(..., N)``, one problem per leading index (distances may be shared by
+    all problems). Bounds, if given, constrain every problem (Ozkaya 2011, Sec. 6.2: alpha in [-55, -40] dBm,
+    n in [1.5, 3]). ``loss="huber"`` is the robust variant: residuals beyond ``huber_delta_db`` count
+    linearly (cvxpy's ``huber``), so a few gross outliers (a blocked link) do not drag the fit.
 
-    Raises :class:`DegenerateGeometryError` when a problem has fewer than two distinct distances
-    and :class:`ConvergenceError` when the solver does not reach an optimum.
+    ``solver``: ``"auto"`` (default) uses the closed form for the unconstrained least-squares fit and cvxpy
+    otherwise; ``"closed_form"`` insists on the normal equations (unconstrained squared loss only);
+    ``"cvxpy"`` solves all problems as one stacked convex problem (the oracle). A cvxpy solve that does not
+    reach an optimum gives NaN parameters and its status (``PathLossFit.status``, ``PathLossFit.ok``).
+
+    Raises :class:`DegenerateGeometryError` when a problem has fewer than two distinct distances.
     """
+    check_choice("solver", solver, CALIBRATION_SOLVERS)
+    check_choice("loss", loss, CALIBRATION_LOSSES)
+    bounded = ref_power_bounds_dbm is not None or path_loss_exp_bounds is not None
+    bounds = []
+    for name, pair in (("ref_power_bounds_dbm", ref_power_bounds_dbm), ("path_loss_exp_bounds", path_loss_exp_bounds)):
+        if pair is None:
+            bounds.append(None)
+            continue
+        pair = as_array(name, pair)
+        if pair.shape != (2,) or not pair[0] <= pair[1]:
+            raise ValueError(f"{name} must be (lower, upper) with lower <= upper, got {pair.tolist()}")
+        bounds.append(tuple(map(float, pair)))
+    if loss == "huber":
+        check_scalar("huber_delta_db", huber_delta_db, gt=0)
+    if solver == "auto":
+        solver = "cvxpy" if bounded or loss != "squared" else "closed_form"
     if solver == "closed_form":
-        if ref_power_bounds_dbm is not None or path_loss_exp_bounds is not None:
-            raise ValueError("bounds need solver='cvxpy'; the closed form is unconstrained")
+        if bounded or loss != "squared":
+            raise ValueError("the closed form is the unconstrained least-squares fit; bounds and loss='huber' "
+                             "need solver='cvxpy' (or 'auto')")
         return fit_path_loss_closed_form(distance_m, power_dbm, ref_distance_m)
-    if solver != "cvxpy":
-        raise ValueError(f"solver must be 'cvxpy' or 'closed_form', got {solver!r}")
     log_d, power, mask = _prepare(distance_m, power_dbm, ref_distance_m)
     batch, n = log_d.shape[:-1], log_d.shape[-1]
     k = int(np.prod(batch))
     problem, (v_ref, v_exp) = _stacked_problem(
-        log_d.reshape(k, n), power.reshape(k, n), mask.reshape(k, n),
-        None if ref_power_bounds_dbm is None else tuple(map(float, ref_power_bounds_dbm)),
-        None if path_loss_exp_bounds is None else tuple(map(float, path_loss_exp_bounds)),
-    )
-    solve(problem, "path-loss calibration")
-    ref = v_ref.value.reshape(batch)
-    exp = v_exp.value.reshape(batch)
-    return _finish(log_d, power, mask, ref, exp, problem.status)
+        log_d.reshape(k, n), power.reshape(k, n), mask.reshape(k, n), bounds[0], bounds[1], loss, huber_delta_db)
+    try:
+        solve(problem, "path-loss calibration")
+        status = problem.status
+    except ConvergenceError:
+        status = str(problem.status)
+    except cp.error.SolverError:
+        status = "solver_error"
+    if status == cp.OPTIMAL:
+        ref, exp = v_ref.value.reshape(batch), v_exp.value.reshape(batch)
+    else:
+        ref, exp = np.full(batch, np.nan), np.full(batch, np.nan)
+    return _finish(log_d, power, mask, ref, exp, status, covariance=loss == "squared")
 
 
 def calibrate_path_loss(distance_m, power_dbm, mode: str = "per_location_mean", **fit_kwargs) -> PathLossFit:
@@ -199,8 +259,9 @@ def calibrate_path_loss(distance_m, power_dbm, mode: str = "per_location_mean", 
     ``"pooled"``: one fit over all ``L*m`` pairs.
     ``"per_anchor"``: one fit per anchor over its L links (column-wise), giving arrays of length m.
     """
-    distance_m = np.asarray(distance_m, dtype=float)
-    power_dbm = np.asarray(power_dbm, dtype=float)
+    check_choice("mode", mode, CALIBRATION_MODES)
+    distance_m = as_array("distance_m", distance_m)
+    power_dbm = as_array("power_dbm", power_dbm, nan_ok=True)
     if distance_m.ndim < 2 or distance_m.shape != power_dbm.shape:
         raise ValueError(
             f"distance_m and power_dbm must both have shape (..., locations, anchors); got "

@@ -18,6 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ._validate import as_array, check_scalar
+
 __all__ = [
     "PathLossModel",
     "CC2420_RSSI_OFFSET_DB",
@@ -56,9 +58,8 @@ def quantize_db(power_dbm, step_db: float = 1.0, floor_dbm: float | None = None)
     """Round powers to the radio's resolution (1 dB for CC2420, AT86RF230 ED and the
     Ozkaya readers) and optionally clip at a sensitivity floor (e.g. -90 dBm in Ozkaya 2011).
     """
-    if step_db <= 0:
-        raise ValueError(f"step_db must be positive, got {step_db}")
-    q = np.round(np.asarray(power_dbm, dtype=float) / step_db) * step_db
+    check_scalar("step_db", step_db, gt=0)
+    q = np.round(as_array("power_dbm", power_dbm, nan_ok=True) / step_db) * step_db
     if floor_dbm is not None:
         q = np.maximum(q, floor_dbm)
     return q
@@ -66,8 +67,8 @@ def quantize_db(power_dbm, step_db: float = 1.0, floor_dbm: float | None = None)
 
 def pairwise_distance_m(points_m, anchors_m):
     """Euclidean distances between points ``(..., dim)`` and anchors ``(m, dim)`` -> ``(..., m)``."""
-    points_m = np.asarray(points_m, dtype=float)
-    anchors_m = np.asarray(anchors_m, dtype=float)
+    points_m = as_array("points_m", points_m, min_ndim=1)
+    anchors_m = as_array("anchors_m", anchors_m, ndim=2)
     if points_m.shape[-1] != anchors_m.shape[-1]:
         raise ValueError(
             f"points have dimension {points_m.shape[-1]} but anchors have {anchors_m.shape[-1]}"
@@ -105,15 +106,18 @@ class PathLossModel:
     wall_attenuation_db: float = 0.0
 
     def __post_init__(self):
-        if self.ref_distance_m <= 0:
-            raise ValueError(f"ref_distance_m must be positive, got {self.ref_distance_m}")
+        check_scalar("ref_distance_m", self.ref_distance_m, gt=0)
+        check_scalar("wall_attenuation_db", self.wall_attenuation_db)
+        for name in ("ref_power_dbm", "path_loss_exp", "sigma_db"):
+            as_array(name, getattr(self, name))                 # NaN or infinite parameters are errors
         if np.any(np.asarray(self.sigma_db) < 0):
             raise ValueError(f"sigma_db must be non-negative, got {self.sigma_db}")
+
 
     def mean_power_dbm(self, distance_m, n_walls=0):
         """Mean received power, ``P_0 - 10 n log10(d/d0) - n_W WAF`` (Eq. (5) in document 003,
         Eq. (6.4) in Ozkaya 2011)."""
-        distance_m = np.asarray(distance_m, dtype=float)
+        distance_m = as_array("distance_m", distance_m)
         if np.any(distance_m <= 0):
             raise ValueError("distances must be positive for the log-distance model")
         return (
@@ -124,6 +128,8 @@ class PathLossModel:
 
     def sample_power_dbm(self, distance_m, rng: np.random.Generator, n_walls=0):
         """Mean power plus i.i.d. Gaussian shadowing ``w ~ N(0, sigma_db^2)``, one draw per entry."""
+        if not isinstance(rng, np.random.Generator):
+            raise ValueError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
         mean = self.mean_power_dbm(distance_m, n_walls)
         return mean + np.asarray(self.sigma_db) * rng.standard_normal(mean.shape)
 
@@ -132,8 +138,9 @@ class PathLossModel:
 
         Eq. (7) in George and Vadivukkarasi; Eq. (2.3) in Dogan (2015). The estimate is median
         unbiased but mean biased by ``exp((sigma ln10 / (10 n))^2 / 2)`` under shadowing.
+        A NaN power (not heard) gives a NaN range (still not heard).
         """
-        power_dbm = np.asarray(power_dbm, dtype=float)
+        power_dbm = as_array("power_dbm", power_dbm, nan_ok=True)
         exponent = (
             np.asarray(self.ref_power_dbm) - power_dbm - np.asarray(n_walls) * self.wall_attenuation_db
         ) / (10.0 * np.asarray(self.path_loss_exp))
@@ -154,7 +161,9 @@ def correlated_shadowing_db(points_m, sigma_db: float, decorrelation_m: float,
     shape ``size + (P,)``. Used where a source needs shadowing that averaging over packets does not
     remove (note 001, F5.1; note 004, synthetic testbed). ``decorrelation_m = 0`` gives i.i.d. draws.
     """
-    points_m = np.atleast_2d(np.asarray(points_m, dtype=float))
+    points_m = np.atleast_2d(as_array("points_m", points_m))
+    check_scalar("sigma_db", sigma_db, ge=0)
+    check_scalar("decorrelation_m", decorrelation_m, ge=0)
     n_points = points_m.shape[0]
     z = rng.standard_normal(size + (n_points,))
     if decorrelation_m <= 0:

@@ -3,10 +3,16 @@
 All functions take estimates and truths of shape ``(..., dim)`` or precomputed errors, and reduce
 over ``axis`` (default: all axes), so a ``(runs, steps)`` error array gives one number, or one per run
 with ``axis=-1``.
+
+Missing estimates: a problem an estimator could not solve has a NaN position (the library's missing-reading
+rule), and NaN propagates through these summaries on purpose, so a statistic is never silently computed over
+fewer problems than it claims. Drop them explicitly (``e[np.isfinite(e)]``) and report how many were dropped.
 """
 from __future__ import annotations
 
 import numpy as np
+
+from ._validate import as_array
 
 __all__ = [
     "position_error_m", "mean_error_m", "rmse_m", "median_error_m", "percentile_error_m",
@@ -16,7 +22,11 @@ __all__ = [
 
 def position_error_m(estimate_m, truth_m):
     """Euclidean distance between estimates and truths, ``(..., dim) -> (...)``."""
-    diff = np.asarray(estimate_m, float) - np.asarray(truth_m, float)
+    estimate_m = np.asarray(estimate_m, float)
+    truth_m = as_array("truth_m", truth_m, min_ndim=1)
+    if estimate_m.ndim < 1 or estimate_m.shape[-1] != truth_m.shape[-1]:
+        raise ValueError(f"estimate_m {estimate_m.shape} and truth_m {truth_m.shape} must end in the same dimension")
+    diff = estimate_m - truth_m
     return np.sqrt(np.sum(diff**2, axis=-1))
 
 

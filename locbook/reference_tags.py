@@ -21,7 +21,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ._validate import as_array, check_scalar
 from .calibration import PathLossFit, fit_path_loss
+from .errors import ConvergenceError
 from .channel import PathLossModel, pairwise_distance_m, wall_crossings
 from .fingerprint import model_fingerprints
 
@@ -49,7 +51,7 @@ def pooled_sigma_db(residual_db, axis=(-2, -1), ddof: int = 0):
     """Eq. (6.7) of Ozkaya (2011): root mean square of all tag-reader residuals, dividing by ``K m`` as printed
     (``ddof = 0``). With 4 tags and 2 fitted parameters per reader this estimates ``sigma / sqrt(2)`` for
     Gaussian residuals; ``ddof = 2 m`` (the fitted parameters) gives the degrees-of-freedom-corrected variant."""
-    sq = np.square(np.asarray(residual_db, float))
+    sq = np.square(as_array("residual_db", residual_db))
     count = np.prod([sq.shape[a] for a in np.atleast_1d(axis)])
     if count - ddof <= 0:
         raise ValueError(f"ddof = {ddof} leaves no degrees of freedom for {count} residuals")
@@ -67,7 +69,10 @@ def calibrate_from_reference_tags(ref_rss_dbm, ref_positions_m, readers_m, *, wa
     observations before the fit. Pass ``None`` bounds for the unconstrained fit. ``sigma_ddof``: see
     :func:`pooled_sigma_db` (0 = Eq. (6.7) as printed).
     """
-    ref_rss_dbm = np.asarray(ref_rss_dbm, dtype=float)
+    readers_m = as_array("readers_m", readers_m, ndim=2, trailing=(None, 2))
+    ref_positions_m = as_array("ref_positions_m", ref_positions_m, ndim=2, trailing=(None, 2))
+    ref_rss_dbm = as_array("ref_rss_dbm", ref_rss_dbm, min_ndim=2, nan_ok=True,
+                           trailing=(ref_positions_m.shape[0], readers_m.shape[0]))
     distance = pairwise_distance_m(ref_positions_m, readers_m)                     # (K, m)
     wall_loss = (0.0 if walls_m is None
                  else wall_attenuation_db * wall_crossings(ref_positions_m, readers_m, walls_m))
@@ -75,6 +80,9 @@ def calibrate_from_reference_tags(ref_rss_dbm, ref_positions_m, readers_m, *, wa
     fit = fit_path_loss(np.broadcast_to(distance.T, compensated.shape[:-2] + distance.T.shape),
                         np.swapaxes(compensated, -1, -2),
                         ref_power_bounds_dbm=ref_power_bounds_dbm, path_loss_exp_bounds=path_loss_exp_bounds)
+    if not fit.ok:
+        raise ConvergenceError(f"reference-tag calibration: the stacked path-loss fit ended with status "
+                               f"{fit.status!r}; no calibration is returned")
     ref, exp = fit.ref_power_dbm, fit.path_loss_exp                                 # (..., m)
     expected = model_fingerprints(ref_positions_m, readers_m, PathLossModel(ref, exp, wall_attenuation_db=wall_attenuation_db),
                                   walls_m)
@@ -91,8 +99,10 @@ def smooth_rssi(rss_dbm, ref_rss_dbm, ref_expected_dbm, threshold: float = 0.4):
     close to that tag and ``s' = s - w_k* e_k*``, otherwise ``s`` is returned unchanged.
     Returns ``(smoothed (..., m), nearest tag index (...), applied (...) bool)``.
     """
-    rss_dbm = np.asarray(rss_dbm, dtype=float)
-    ref_rss_dbm = np.asarray(ref_rss_dbm, dtype=float)
+    rss_dbm = as_array("rss_dbm", rss_dbm, min_ndim=1)
+    ref_rss_dbm = as_array("ref_rss_dbm", ref_rss_dbm, min_ndim=2, trailing=(None, rss_dbm.shape[-1]))
+    as_array("ref_expected_dbm", ref_expected_dbm, trailing=ref_rss_dbm.shape[-2:])
+    check_scalar("threshold", threshold, ge=0, le=1)
     diff = ref_rss_dbm - rss_dbm[..., None, :]
     inv = 1.0 / np.maximum(np.einsum("...ki,...ki->...k", diff, diff), 1e-300)
     w = inv / inv.sum(axis=-1, keepdims=True)

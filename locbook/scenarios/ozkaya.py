@@ -16,7 +16,6 @@ Every printed simulation result (Tables 7.1-7.25, 7.45, 7.46) is mapped to a :cl
 from __future__ import annotations
 
 import csv
-import hashlib
 from dataclasses import asdict, dataclass, replace
 from functools import lru_cache
 from pathlib import Path
@@ -28,6 +27,7 @@ from ..bounds import crlb_rms_over_area_m, rss_crlb_m
 from ..fingerprint import knn_position, model_fingerprints
 from ..channel import PathLossModel
 from ..metrics import error_summary, position_error_m, rmse_standard_error_m
+from ..montecarlo import seed_from_values
 from ..motion import reflect_into_box
 
 __all__ = [
@@ -163,8 +163,7 @@ def case_seed_sequence(seed: int, case: SimCase) -> np.random.SeedSequence:
     thesis's repeated rows do. Adding a setting never shifts another's numbers."""
     key = {f: getattr(case, f) for f in _TRUTH_FIELDS}
     key["steps"] = 1 if case.method == "nn" else case.rt
-    digest = int.from_bytes(hashlib.sha256(repr(sorted(key.items())).encode()).digest()[:8], "little")
-    return np.random.SeedSequence([seed, digest])
+    return np.random.SeedSequence([seed, seed_from_values(key)])
 
 
 def simulate_truth_and_rss(case: SimCase, n_runs: int, rng: np.random.Generator):

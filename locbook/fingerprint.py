@@ -23,6 +23,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from ._validate import as_array, check_choice, check_scalar
 from .channel import PathLossModel, pairwise_distance_m, wall_crossings
 
 __all__ = ["KNN_WEIGHTINGS", "knn_position", "model_fingerprints", "pattern_fingerprints"]
@@ -57,23 +58,31 @@ def pattern_fingerprints(rss_dbm, axis: int = -2):
     return np.mean(np.asarray(rss_dbm, dtype=float), axis=axis)
 
 
-def knn_position(rss_dbm, fingerprints_dbm, cells_m, k: int, weighting: str = "inverse_square"):
+def knn_position(rss_dbm, fingerprints_dbm, cells_m, k: int, weighting: str = "inverse_square", *,
+                 min_readers: int = 3):
     """Weighted k-nearest-neighbour position, Eqs. (3.1)-(3.3) of Ozkaya (2011), weights corrected.
 
     ``rss_dbm``: ``(..., m)`` target RSSI vectors; ``fingerprints_dbm``: ``(C, m)`` or ``(..., C, m)``
     (one map per batch entry); ``cells_m``: ``(C, 2)``. Returns positions ``(..., 2)``.
     ``k = C`` (all cells) is the weighted centroid used in the thesis's experiments.
+
+    Missing readings: a NaN in ``rss_dbm`` is a reader not heard; that query is compared with the map over the
+    readers it heard, and with fewer than ``min_readers`` heard its position is NaN. The map itself must be
+    complete (a cell a reader never heard has no fingerprint to compare: fill it, or drop that reader).
     """
-    if weighting not in KNN_WEIGHTINGS:
-        raise ValueError(f"weighting must be one of {KNN_WEIGHTINGS}, got {weighting!r}")
-    rss_dbm = np.asarray(rss_dbm, dtype=float)
-    fingerprints_dbm = np.asarray(fingerprints_dbm, dtype=float)
-    cells_m = np.asarray(cells_m, dtype=float)
+    check_choice("weighting", weighting, KNN_WEIGHTINGS)
+    fingerprints_dbm = as_array("fingerprints_dbm", fingerprints_dbm, min_ndim=2)
+    m = fingerprints_dbm.shape[-1]
+    rss_dbm = as_array("rss_dbm", rss_dbm, min_ndim=1, nan_ok=True, trailing=(m,))
+    cells_m = as_array("cells_m", cells_m, ndim=2)
     n_cells = cells_m.shape[0]
     if fingerprints_dbm.shape[-2] != n_cells:
         raise ValueError(f"the map has {fingerprints_dbm.shape[-2]} cells but {n_cells} cell centres were given")
-    if not 1 <= k <= n_cells:
+    if isinstance(k, (bool, np.bool_)) or not isinstance(k, (int, np.integer)) or not 1 <= k <= n_cells:
         raise ValueError(f"k must be between 1 and the number of cells ({n_cells}), got {k}")
+    check_scalar("min_readers", min_readers, ge=1, integer=True)
+    if np.isnan(rss_dbm).any():
+        return _knn_by_heard_readers(rss_dbm, fingerprints_dbm, cells_m, k, weighting, int(min_readers))
     diff = fingerprints_dbm - rss_dbm[..., None, :]
     dist2 = np.einsum("...ci,...ci->...c", diff, diff)                  # E_j^2, (..., C)
     nearest = np.argpartition(dist2, k - 1, axis=-1)[..., :k] if k < n_cells else \
@@ -89,3 +98,21 @@ def knn_position(rss_dbm, fingerprints_dbm, cells_m, k: int, weighting: str = "i
         else:   # literal Eq. (3.3): (1/E_i^2) / sum_j E_j^2, not normalised
             w = inv / e2.sum(axis=-1, keepdims=True)
     return np.einsum("...k,...kd->...d", w, cells_m[nearest])
+
+
+def _knn_by_heard_readers(rss_dbm, fingerprints_dbm, cells_m, k, weighting, min_readers):
+    """Group the queries by their pattern of heard readers and compare each group over those readers."""
+    m = rss_dbm.shape[-1]
+    batch = np.broadcast_shapes(rss_dbm.shape[:-1], fingerprints_dbm.shape[:-2])
+    flat = np.broadcast_to(rss_dbm, batch + (m,)).reshape(-1, m)
+    maps = np.broadcast_to(fingerprints_dbm, batch + fingerprints_dbm.shape[-2:]).reshape((-1,) + fingerprints_dbm.shape[-2:])
+    out = np.full((flat.shape[0], cells_m.shape[1]), np.nan)
+    patterns, inverse = np.unique(~np.isnan(flat), axis=0, return_inverse=True)
+    inverse = inverse.reshape(-1)
+    for g, heard in enumerate(patterns):
+        if heard.sum() < min_readers:
+            continue
+        sel = np.flatnonzero(inverse == g)
+        out[sel] = knn_position(flat[np.ix_(sel, heard)], maps[sel][..., heard], cells_m, k, weighting,
+                                min_readers=min_readers)
+    return out.reshape(batch + (cells_m.shape[1],))

@@ -170,3 +170,23 @@ def test_property_random_missing_masks(mask, name):
         np.testing.assert_allclose(res.position_m[i], sub.position_m[0], atol=1e-9)
         assert res.converged[i] == sub.converged[0]
     assert not np.any(res.converged & np.isnan(res.position_m).any(-1))
+
+
+def test_knn_compares_over_the_heard_readers():
+    rng = np.random.default_rng(8)
+    cells = rng.uniform(0, 10, (30, 2))
+    fp = rng.normal(-60, 8, (30, 4))
+    query = rng.normal(-60, 8, (6, 4))
+    holed = query.copy()
+    holed[1, 2] = np.nan
+    holed[4, [0, 1]] = np.nan                       # two readers heard: fewer than the default minimum of 3
+    res = lb.knn_position(holed, fp, cells, k=4)
+    full = lb.knn_position(query, fp, cells, k=4)
+    keep = [0, 2, 3, 5]
+    np.testing.assert_array_equal(res[keep], full[keep])
+    np.testing.assert_allclose(res[1], lb.knn_position(query[1, [0, 1, 3]], fp[:, [0, 1, 3]], cells, k=4), rtol=1e-12)
+    assert np.isnan(res[4]).all()
+    np.testing.assert_allclose(lb.knn_position(holed[4], fp, cells, k=4, min_readers=2),
+                               lb.knn_position(query[4, [2, 3]], fp[:, [2, 3]], cells, k=4), rtol=1e-12)
+    with pytest.raises(ValueError, match="fingerprints_dbm must be finite"):
+        lb.knn_position(query, np.where(fp > -50, np.nan, fp), cells, k=4)

@@ -105,7 +105,8 @@ def _knn_by_heard_readers(rss_dbm, fingerprints_dbm, cells_m, k, weighting, min_
     m = rss_dbm.shape[-1]
     batch = np.broadcast_shapes(rss_dbm.shape[:-1], fingerprints_dbm.shape[:-2])
     flat = np.broadcast_to(rss_dbm, batch + (m,)).reshape(-1, m)
-    maps = np.broadcast_to(fingerprints_dbm, batch + fingerprints_dbm.shape[-2:]).reshape((-1,) + fingerprints_dbm.shape[-2:])
+    maps = (None if fingerprints_dbm.ndim == 2 else
+            np.broadcast_to(fingerprints_dbm, batch + fingerprints_dbm.shape[-2:]).reshape((-1,) + fingerprints_dbm.shape[-2:]))
     out = np.full((flat.shape[0], cells_m.shape[1]), np.nan)
     patterns, inverse = np.unique(~np.isnan(flat), axis=0, return_inverse=True)
     inverse = inverse.reshape(-1)
@@ -113,6 +114,6 @@ def _knn_by_heard_readers(rss_dbm, fingerprints_dbm, cells_m, k, weighting, min_
         if heard.sum() < min_readers:
             continue
         sel = np.flatnonzero(inverse == g)
-        out[sel] = knn_position(flat[np.ix_(sel, heard)], maps[sel][..., heard], cells_m, k, weighting,
-                                min_readers=min_readers)
+        group_maps = fingerprints_dbm[:, heard] if fingerprints_dbm.ndim == 2 else maps[sel][..., heard]
+        out[sel] = knn_position(flat[np.ix_(sel, heard)], group_maps, cells_m, k, weighting, min_readers=min_readers)
     return out.reshape(batch + (cells_m.shape[1],))

@@ -16,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from .errors import DegenerateGeometryError
+from ._validate import as_array, check_choice, check_scalar
 from .localization import check_anchor_geometry
 
 __all__ = ["rss_fisher_information", "rss_position_information", "rss_crlb_m", "crlb_rms_over_area_m", "CRLB_FORMS"]
@@ -44,9 +45,17 @@ def rss_position_information(position_m, anchors_m, path_loss_exp, sigma_db, for
     of that model) and ``min_distance_m`` (the gradient's ``1/d`` factor capped at ``1/d_min``, the model's
     validity limit). ``form="ozkaya_printed"`` uses ``d^2`` in the denominator (flagged, see module docstring).
     """
-    if form not in CRLB_FORMS:
-        raise ValueError(f"form must be one of {CRLB_FORMS}, got {form!r}")
-    diff = np.asarray(position_m, dtype=float)[..., None, :] - np.asarray(anchors_m, dtype=float)  # (..., m, 2)
+    check_choice("form", form, CRLB_FORMS)
+    anchors_m = as_array("anchors_m", anchors_m, ndim=2)
+    m = anchors_m.shape[0]
+    position_m = as_array("position_m", position_m, min_ndim=1, trailing=(anchors_m.shape[1],))
+    for name, value in (("path_loss_exp", path_loss_exp), ("sigma_db", sigma_db)):
+        value = as_array(name, value)
+        if value.ndim > 1 or value.size not in (1, m) or np.any(value <= 0):
+            raise ValueError(f"{name} must be a positive scalar or ({m},) array (one per anchor), got {value.tolist()}")
+    check_scalar("min_distance_m", min_distance_m, ge=0)
+    check_scalar("height_offset_m", height_offset_m, ge=0)
+    diff = position_m[..., None, :] - anchors_m  # (..., m, 2)
     d2 = np.einsum("...i,...i->...", diff, diff) + height_offset_m**2
     if np.any(d2 == 0):
         raise DegenerateGeometryError("the RSS Fisher information is undefined at an anchor position (d = 0); "

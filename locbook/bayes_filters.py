@@ -64,9 +64,8 @@ class RssMeasurementModel:
             if value.ndim not in (0, 1, 3) or (value.ndim and value.shape[-1] != m):
                 raise ValueError(f"{name} must be a scalar, ({m},) or (R, T, {m}), got shape {value.shape}")
         sigma = as_array("sigma_db", self.sigma_db)
-        if sigma.ndim not in (0, 2) or np.any(sigma <= 0):
-            raise ValueError(f"sigma_db must be a positive scalar or (R, T) array of positive values, got "
-                             f"{self.sigma_db!r}")
+        if sigma.ndim not in (0, 2) or np.any(sigma < 0):
+            raise ValueError(f"sigma_db must be a non-negative scalar or (R, T) array, got {self.sigma_db!r}")
         if np.any(np.asarray(self.path_loss_exp) <= 0):
             raise ValueError(f"path_loss_exp must be positive, got {self.path_loss_exp!r}")
         check_scalar("wall_attenuation_db", self.wall_attenuation_db)
@@ -103,6 +102,8 @@ class RssMeasurementModel:
         resid = rss[:, None, :] - self.mean_rss_dbm(positions_m, step)
         resid = np.where(np.isnan(rss)[:, None, :], 0.0, resid)
         sigma = self._per_step(self.sigma_db, step, False)
+        if np.any(np.asarray(sigma) <= 0):     # a model with sigma 0 can give mean RSS, not a likelihood
+            raise ValueError(f"the likelihood needs sigma_db > 0, got {self.sigma_db!r} at step {step}")
         return -0.5 * np.einsum("rpm,rpm->rp", resid, resid) / np.square(sigma)
 
 

@@ -83,8 +83,9 @@ class _Singular(Exception):
 
 def _raise_singular(step: int, bad, what: str = "innovation covariance"):
     raise SingularCovarianceError(
-        f"the {what} S = H P H^T + R is singular or not positive definite at step {step}{_first_bad(bad)}; "
-        "the measurement noise (R, sigma_db) must be positive where the prior covariance gives no spread")
+        f"the {what} S = H P H^T + R is singular, not positive definite or not finite at step {step}{_first_bad(bad)}; "
+        "the measurement noise (R, sigma_db) must be positive where the prior covariance gives no spread, and "
+        "measurements and covariances finite (an overflow, e.g. fixes of 1e120 m, ends here too)")
 
 
 def kalman_filter(z, F, H, Q, R, x0, P0, *, predict_first: bool = True,

@@ -369,7 +369,11 @@ def rss_ml_position(anchors_m, power_dbm, model: PathLossModel, initial_m=None, 
     initialiser), and is refined by damped Newton steps (Levenberg-Marquardt with the exact Hessian where it is
     positive definite), vectorized over the batch; each iteration works only on the problems that have not
     converged yet. Problems that do not converge in ``max_iter`` steps are flagged in ``converged``
-    (or raise if asked). The model's parameters must be scalars or per-anchor ``(m,)`` arrays.
+    (or raise if asked). ``converged`` (status ``"ok"``) means a local minimum of the cost was reached, not
+    necessarily the global one: from the default convex start a problem can stop in another basin (Dogan's
+    initialiser study, ``dogan2015-models``: about 3 % of draws). For the global minimum start from a grid
+    (``initial_m=grid_ml_position(...).position_m``), as the Dogan scenarios do.
+    The model's parameters must be scalars or per-anchor ``(m,)`` arrays.
     A NaN power is an anchor not heard (module docstring): the problem is solved on the anchors it heard.
     """
     anchors_m = check_anchor_geometry(anchors_m)

@@ -33,11 +33,18 @@ def draw_path(ax, path_m, *, numbered: bool = False, **style):
             ax.annotate(str(i), (x, y), textcoords="offset points", xytext=(4, -3), fontsize=7)
 
 
-def mean_with_band(ax, x, samples, *, axis: int = 0, z: float = 1.96, label: str = "", **style):
-    """Plot the mean of ``samples`` along ``axis`` with a +-z standard-error band (Monte-Carlo CI)."""
+def mean_with_band(ax, x, samples, *, axis: int = 0, z: float = 1.96, label: str = "", omit_nan: bool = False,
+                   **style):
+    """Plot the mean of ``samples`` along ``axis`` with a +-z standard-error band (Monte-Carlo CI).
+    ``omit_nan``: leave out NaN samples (runs that produced no estimate; the caller reports how many)."""
     samples = np.asarray(samples, float)
-    mean = samples.mean(axis=axis)
-    se = samples.std(axis=axis, ddof=1) / np.sqrt(samples.shape[axis])
+    if omit_nan:
+        count = np.sum(np.isfinite(samples), axis=axis)
+        mean = np.nanmean(samples, axis=axis)
+        se = np.nanstd(samples, axis=axis, ddof=1) / np.sqrt(count)
+    else:
+        mean = samples.mean(axis=axis)
+        se = samples.std(axis=axis, ddof=1) / np.sqrt(samples.shape[axis])
     line, = ax.plot(x, mean, label=label, **style)
     ax.fill_between(x, mean - z * se, mean + z * se, color=line.get_color(), alpha=0.2, lw=0)
     return mean, se

@@ -39,7 +39,14 @@ def test_knn_inverse_square_weights_by_hand():
     # E^2 = 1, 1, 10, ...: weights (1, 1, 0.1) / 2.1
     expected = (cells[0] + cells[1] + 0.1 * cells[2]) / 2.1
     np.testing.assert_allclose(lb.knn_position(s, fp, cells, k=3), expected, rtol=1e-12)
-    np.testing.assert_allclose(lb.knn_position(s, fp, cells, k=1)[0] in (0.0, 1.0), True)
+    # k = 1 with a tie (E^2 = 1 for cells 0 and 1): exactly one of the tied cells, not a blend or another cell
+    assert lb.knn_position(s, fp, cells, k=1).tolist() in (cells[0].tolist(), cells[1].tolist())
+    # k = 1 without a tie is the nearest cell itself (E^2 = 2.25, 0.25, 11.25, ...)
+    np.testing.assert_array_equal(lb.knn_position(np.array([-51.5, -60.0]), fp, cells, k=1), cells[1])
+    np.testing.assert_array_equal(lb.knn_position(np.array([-50.0, -62.0]), fp, cells, k=1), cells[2])
+    # k = 2: cells 1 and 0 with weights (1/0.25, 1/2.25) normalised = (0.9, 0.1)
+    np.testing.assert_allclose(lb.knn_position(np.array([-51.5, -60.0]), fp, cells, k=2),
+                               0.9 * cells[1] + 0.1 * cells[0], rtol=1e-12)
     # literal Eq. (3.3): (1/E^2) / sum E^2 = (1, 1, 0.1) / 12
     np.testing.assert_allclose(lb.knn_position(s, fp, cells, k=3, weighting="literal_004"), 2.1 * expected / 12)
 
@@ -81,6 +88,41 @@ def test_grid_filter_with_uniform_transition_is_the_normalised_likelihood():
         lik = _independent_likelihood(rss[r, -1], cells, 5.2)
         np.testing.assert_allclose(res.belief[r], lik / lik.sum(), rtol=1e-10)
         np.testing.assert_allclose(res.mmse_m[r, -1], (lik / lik.sum()) @ cells, rtol=1e-10)
+
+
+def test_log_likelihood_is_the_gaussian_log_density_up_to_a_constant_per_run():
+    # per-reader alpha and n, per-run-and-step alpha and sigma, a wall with its attenuation, a cell on a reader
+    # (distance clipped at 0.1 m), positions per run, and a NaN (reader 2 not heard in run 1)
+    walls = np.array([[[2.5, -1.0], [2.5, 9.0]]])                          # x = 2.5, longer than the room
+    rng = np.random.default_rng(13)
+    R, T, P = 2, 3, 40
+    alpha = rng.uniform(-55.0, -40.0, (R, T, 3))
+    sigma = rng.uniform(3.0, 7.0, (R, T))
+    n = np.array([2.1, 2.6, 1.9])
+    model = lb.RssMeasurementModel(READERS, alpha, n, sigma, wall_attenuation_db=3.5, walls_m=walls)
+    pos = rng.uniform([0.0, 0.0], [5.0, 8.0], (R, P, 2))
+    pos[0, 0] = READERS[0] + [0.03, 0.04]                                   # 0.05 m from reader 0
+    rss = rng.normal(-65.0, 6.0, (R, 3))
+    rss[1, 2] = np.nan
+    for step in range(T):
+        ll = model.log_likelihood(rss, pos, step)
+        assert ll.shape == (R, P)
+        for r in range(R):
+            d = np.maximum(np.hypot(*(pos[r][:, None, :] - READERS[None]).transpose(2, 0, 1)), 0.1)   # (P, m)
+            crosses = (pos[r][:, 0] < 2.5)[:, None] != (READERS[:, 0] < 2.5)[None]        # opposite sides of x = 2.5
+            mean = alpha[r, step] - 10 * n * np.log10(d) - 3.5 * crosses
+            heard = ~np.isnan(rss[r])
+            ref = norm.logpdf(rss[r][heard], mean[:, heard], sigma[r, step]).sum(-1)
+            gap = ll[r] - ref
+            np.testing.assert_allclose(gap, gap[0], rtol=0, atol=1e-9 * np.abs(ref).max())    # one constant per run
+    # the likelihood ratio between two positions is what enters the filters: pin one by hand
+    one = lb.RssMeasurementModel(READERS, -50.0, 2.0, 4.0)
+    a, b = np.array([[1.0, 0.0]]), np.array([[0.0, 2.0]])                 # distances (1, 4, sqrt 65), (2, sqrt 29, 6)
+    s = np.array([[-52.0, -62.0, -66.0]])
+    ma = -50.0 - 20 * np.log10([1.0, 4.0, np.sqrt(65.0)])
+    mb = -50.0 - 20 * np.log10([2.0, np.sqrt(29.0), 6.0])
+    expected = (np.sum((s[0] - mb) ** 2) - np.sum((s[0] - ma) ** 2)) / (2 * 16.0)
+    assert (one.log_likelihood(s, a) - one.log_likelihood(s, b))[0, 0] == pytest.approx(expected, rel=1e-12)
 
 
 def test_grid_filter_recursion_equals_explicit_loop():
@@ -168,9 +210,11 @@ def test_particle_filter_options_and_invariants():
                                   weight_smoothing="sqrt", **kw)
     np.testing.assert_allclose(improved.weights.sum(-1), 1.0)
     assert (improved.n_eff[improved.resampled] < 100).all() and (improved.n_eff[~improved.resampled] >= 100).all()
+    assert improved.resampled.any() and not improved.resampled.all()          # both branches above are exercised
     inner = (np.ones(2), np.array([4.0, 7.0]))
     con = lb.particle_filter(rss, model, np.random.default_rng(1), n_particles=200, region_m=inner)
     assert (con.particles_m >= 1.0).all() and (con.particles_m[..., 0] <= 4.0).all()
+    assert (con.particles_m[..., 1] <= 7.0).all() and (con.mmse_m >= 1.0).all() and (con.mmse_m <= [4.0, 7.0]).all()
     start = np.tile([2.0, 3.0], (30, 1))
     known = lb.particle_filter(rss[:, :1], model, np.random.default_rng(1), initial_position_m=start, **kw)
     np.testing.assert_allclose(known.mmse_m[:, 0], start)

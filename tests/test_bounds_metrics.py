@@ -59,6 +59,44 @@ def test_metrics():
     assert lb.percentile_error_m(np.arange(11.0), 90) == 9.0
 
 
+def test_metrics_by_hand():
+    # errors 1, 2, 2, 5 (sum 10, sum of squares 34): every statistic written out, not derived from another one
+    e = np.array([1.0, 2.0, 2.0, 5.0])
+    assert lb.mean_error_m(e) == 2.5
+    assert lb.rmse_m(e) == pytest.approx(np.sqrt(34 / 4), rel=1e-15)
+    assert lb.error_std_m(e) == pytest.approx(1.5, rel=1e-15)                        # sqrt(34/4 - 2.5^2)
+    assert lb.error_std_m(e, ddof=1) == pytest.approx(np.sqrt(9 / 3), rel=1e-15)      # squared deviations 9 in all
+    assert lb.median_error_m(e) == 2.0
+    assert lb.percentile_error_m(e, 90) == pytest.approx(4.1, rel=1e-15)            # rank 0.9 * 3 = 2.7: 2 + 0.7 * 3
+    assert lb.percentile_error_m(e, 25) == pytest.approx(1.75, rel=1e-15)           # rank 0.75: 1 + 0.75 * 1
+    # delta method: squared errors 1, 4, 4, 25 (mean 8.5, sample variance 369 / 3 = 123)
+    assert lb.rmse_standard_error_m(e) == pytest.approx(np.sqrt(123 / 4) / (2 * np.sqrt(8.5)), rel=1e-14)
+    assert lb.reduction_pct(4.0, 3.0) == 25.0 and lb.reduction_pct(2.0, 3.0) == -50.0
+    summary = lb.error_summary(e.reshape(2, 2))
+    assert summary == pytest.approx({"mean_m": 2.5, "rmse_m": np.sqrt(8.5), "median_m": 2.0, "p90_m": 4.1,
+                                     "std_m": 1.5, "n": 4}, rel=1e-15)
+    # axis: one value per row of a (runs, steps) array
+    two = np.array([[3.0, 4.0], [0.0, 2.0]])
+    np.testing.assert_allclose(lb.rmse_m(two, axis=-1), [np.sqrt(12.5), np.sqrt(2.0)], rtol=1e-15)
+    np.testing.assert_allclose(lb.mean_error_m(two, axis=0), [1.5, 3.0], rtol=1e-15)
+    np.testing.assert_allclose(lb.error_std_m(two, axis=1), [0.5, 1.0], rtol=1e-15)
+    # 3-D Euclidean error, batched: |(1, 2, 2)| = 3, |(2, 3, 6)| = 7
+    est, truth = [[1.0, 2.0, 2.0], [3.0, 3.0, 6.0]], [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]
+    np.testing.assert_allclose(lb.position_error_m(est, truth), [3.0, 7.0], rtol=1e-15)
+    x, f = lb.empirical_cdf(np.array([[2.0, 2.0], [1.0, 4.0]]))
+    np.testing.assert_array_equal(x, [1.0, 2.0, 2.0, 4.0]); np.testing.assert_allclose(f, [0.25, 0.5, 0.75, 1.0])
+
+
+def test_rmse_standard_error_matches_the_spread_of_the_rmse():
+    # the delta-method SE must be the actual Monte-Carlo spread of the RMSE of n errors
+    rng = np.random.default_rng(21)
+    n = 400
+    samples = rng.rayleigh(size=(4000, n))
+    spread = np.std(lb.rmse_m(samples, axis=-1), ddof=1)
+    se = lb.rmse_standard_error_m(samples, axis=-1)
+    assert np.mean(se) == pytest.approx(spread, rel=0.05)       # SE of a sample sd over 4000 repeats is ~1.1 %
+
+
 def test_streams_are_reproducible_independent_and_prefix_stable():
     a, b = lb.streams(5, "calibration", "tracking"), lb.streams(5, "calibration", "tracking")
     np.testing.assert_array_equal(a["tracking"].normal(size=10), b["tracking"].normal(size=10))

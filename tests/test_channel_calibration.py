@@ -30,6 +30,9 @@ def test_range_bias_factor_matches_lognormal_mean():
     se = ratio.std() / np.sqrt(ratio.size)
     assert abs(ratio.mean() - model.range_bias_factor()) < 4 * se
     assert model.range_bias_factor() == pytest.approx(1.34, abs=0.01)  # note 000, sec. 2.2
+    # lognormal mean: d_hat / d = 10^(-e / (10 n)) = exp(-e ln10 / (10 n)) with e ~ N(0, 6^2): exp(s^2 / 2)
+    s = 6.0 * np.log(10.0) / 18.0
+    assert model.range_bias_factor() == pytest.approx(np.exp(s**2 / 2), rel=1e-14)
 
 
 def test_register_conversions_and_quantisation():
@@ -56,7 +59,7 @@ def cal_data():
 
 def test_cvxpy_fit_equals_normal_equations_and_lstsq(cal_data):
     d, p = cal_data
-    fit = lb.fit_path_loss(d, p)
+    fit = lb.fit_path_loss(d, p, solver="cvxpy")          # the stacked convex problem, not the default closed form
     closed = lb.fit_path_loss_closed_form(d, p)
     for i in range(d.shape[0]):
         m = path_loss_design_matrix(d[i])
@@ -74,17 +77,19 @@ def test_stacked_fit_drops_missing_samples():
     d = rng.uniform(1.0, 8.0, (3, 5))
     p = -48.0 - 22.0 * np.log10(d) + rng.normal(0.0, 2.0, d.shape)
     p[0, 1] = p[2, 4] = np.nan
-    fit = lb.fit_path_loss(d, p)
-    for i in range(3):
-        keep = np.isfinite(p[i])
-        t = np.linalg.lstsq(path_loss_design_matrix(d[i, keep]), p[i, keep], rcond=None)[0]
-        np.testing.assert_allclose([fit.ref_power_dbm[i], fit.path_loss_exp[i]], t, atol=1e-6)
-    assert fit.n_samples.tolist() == [4, 5, 4]
+    for solver in ("cvxpy", "closed_form"):                # both paths; the default (auto) is the closed form
+        fit = lb.fit_path_loss(d, p, solver=solver)
+        for i in range(3):
+            keep = np.isfinite(p[i])
+            t = np.linalg.lstsq(path_loss_design_matrix(d[i, keep]), p[i, keep], rcond=None)[0]
+            np.testing.assert_allclose([fit.ref_power_dbm[i], fit.path_loss_exp[i]], t, atol=1e-6)
+        assert fit.n_samples.tolist() == [4, 5, 4]
 
 
 def test_noiseless_recovery_every_mode():
     d = np.array([[1.0, 2.0, 4.0, 8.0], [1.5, 3.0, 5.0, 6.0]])
     p = -50.0 - 23.0 * np.log10(d)
+    assert {"per_location_mean", "pooled", "per_anchor"} <= set(lb.CALIBRATION_MODES)
     for mode in lb.CALIBRATION_MODES:
         fit = lb.calibrate_path_loss(d, p, mode=mode)
         np.testing.assert_allclose(fit.path_loss_exp, 2.3, atol=1e-6)
@@ -117,6 +122,18 @@ def test_per_location_mean_is_mean_of_fits(cal_data):
     fit = lb.calibrate_path_loss(d, p, mode="per_location_mean", solver="closed_form")
     single = [lb.fit_path_loss_closed_form(d[i], p[i]).path_loss_exp for i in range(d.shape[0])]
     assert fit.path_loss_exp == pytest.approx(np.mean(single), abs=1e-12)
+    # independently: LAPACK least squares at each location, then the mean of the 6 estimates
+    each = np.array([np.linalg.lstsq(path_loss_design_matrix(d[i]), p[i], rcond=None)[0] for i in range(d.shape[0])])
+    assert fit.ref_power_dbm == pytest.approx(each[:, 0].mean(), abs=1e-10)
+    assert fit.path_loss_exp == pytest.approx(each[:, 1].mean(), abs=1e-10)
+    # pooled: one LAPACK fit over all 24 links; per anchor: one fit per column
+    pooled = lb.calibrate_path_loss(d, p, mode="pooled")
+    t = np.linalg.lstsq(path_loss_design_matrix(d.ravel()), p.ravel(), rcond=None)[0]
+    np.testing.assert_allclose([pooled.ref_power_dbm, pooled.path_loss_exp], t, atol=1e-10)
+    per_anchor = lb.calibrate_path_loss(d, p, mode="per_anchor")
+    for j in range(d.shape[1]):
+        t = np.linalg.lstsq(path_loss_design_matrix(d[:, j]), p[:, j], rcond=None)[0]
+        np.testing.assert_allclose([per_anchor.ref_power_dbm[j], per_anchor.path_loss_exp[j]], t, atol=1e-10)
 
 
 def test_literal_sign_returns_minus_n():
@@ -149,3 +166,9 @@ def test_missing_samples_are_ignored(cal_data):
     fit = lb.fit_path_loss(d[0], p_nan[0])
     ref = lb.fit_path_loss_closed_form(np.delete(d[0], 1), np.delete(p[0], 1))
     assert fit.path_loss_exp == pytest.approx(ref.path_loss_exp, abs=1e-6)
+    # against LAPACK on the three observed samples (the default fit is the closed form itself), both solvers
+    t = np.linalg.lstsq(path_loss_design_matrix(np.delete(d[0], 1)), np.delete(p[0], 1), rcond=None)[0]
+    for solver in ("closed_form", "cvxpy"):
+        fit = lb.fit_path_loss(d[0], p_nan[0], solver=solver)
+        np.testing.assert_allclose([fit.ref_power_dbm, fit.path_loss_exp], t, atol=1e-6)
+        assert fit.n_samples == 3

@@ -61,9 +61,71 @@ def test_testbed_grid_and_single_walk_window():
     run = dg.run_channel(traj, 6.0, 1.8, 30, np.random.default_rng(4), sigma_acc_values=(0.0152,), ref_power_dbm=-52.0)
     rows = tb.testbed_rows(run, 0.0152)
     assert len(rows) == len(tb.PRINTED_TESTBED_RMSE_M) + 4
-    for r in rows:
+    # every row recomputed from the raw errors: per-walk RMSE, hand-interpolated 5 % / 95 % order statistics
+    per_walk = {key: np.sqrt(np.mean(err**2, axis=1)) for key, err in run.errors.items()}
+    only = {f: per_walk[(f, None)] for f in ("parallel_ekf", "serial_ekf", "kalman_filter")}
+    reduction = {f: 100.0 * (only[f] - per_walk[(f, 0.0152)]) / only[f] for f in only}
+    expected = [per_walk["static_mle"], per_walk[("serial_ekf", None)], per_walk[("serial_ekf", 0.0152)],
+                per_walk[("parallel_ekf", None)], per_walk[("parallel_ekf", 0.0152)],
+                per_walk[("kalman_filter", None)], per_walk[("kalman_filter", 0.0152)],
+                reduction["parallel_ekf"], reduction["serial_ekf"], reduction["kalman_filter"],
+                (reduction["parallel_ekf"] + reduction["serial_ekf"] + reduction["kalman_filter"]) / 3]
+    printed = [3.16, 1.93, 1.54, 1.78, 1.52, 2.04, 1.85, 100 * 0.26 / 1.78, 100 * 0.39 / 1.93, 100 * 0.19 / 2.04, 15.0]
+    for r, values, value in zip(rows, expected, printed, strict=True):
         assert r["lower"] <= r["median_single_run"] <= r["upper"]
-        assert r["within"] == (r["lower"] <= r["printed"] <= r["upper"])
+        lo, hi = _central_interval(values, 0.90)
+        assert r["printed"] == pytest.approx(value, rel=1e-12)
+        assert r["lower"] == pytest.approx(lo, rel=1e-12) and r["upper"] == pytest.approx(hi, rel=1e-12)
+        assert r["median_single_run"] == pytest.approx(np.sort(values)[14:16].mean(), rel=1e-12)   # 30 walks
+        assert r["within"] == (lo <= value <= hi)
+    # the seeded case exercises both verdicts (a printed value inside and one outside the single-walk window)
+    assert {r["within"] for r in rows} == {True, False}
+
+
+def _central_interval(values, coverage):
+    """Order statistics with linear interpolation at (n - 1) q, written out (numpy's default definition)."""
+    x = np.sort(np.asarray(values, float))
+    out = []
+    for q in (0.5 * (1 - coverage), 1 - 0.5 * (1 - coverage)):
+        h = (x.size - 1) * q
+        j = int(np.floor(h))
+        out.append(x[j] + (h - j) * (x[min(j + 1, x.size - 1)] - x[j]))
+    return tuple(out)
+
+
+def test_testbed_rows_on_hand_made_walks():
+    # 21 walks whose per-walk RMSEs are known exactly: errors constant over the epochs of a walk
+    k = np.arange(21.0)
+    walks = lambda rmse: np.repeat(np.asarray(rmse, float)[:, None], 7, axis=1)       # (21 runs, 7 epochs)
+    errors = {"static_mle": walks(2.0 + 0.1 * k)}
+    offsets = {"parallel_ekf": 0.0, "serial_ekf": 3.0, "kalman_filter": 10.0}          # reductions 10+k, 13+k, 20+k %
+    for name, off in offsets.items():
+        before = 1.0 + 0.05 * k
+        errors[(name, None)] = walks(before)
+        errors[(name, 0.5)] = walks(before * (1 - (10.0 + off + k) / 100))
+    run = dg.ChannelRun(6.0, 1.8, np.zeros(2), errors)
+    rows = {(r["filter"], r["case"]): r for r in tb.testbed_rows(run, 0.5)}
+    # h = 20 * 0.05 = 1 and 20 * 0.95 = 19: the 2nd and 20th smallest walks, exactly
+    static = rows[("static_mle", "ONLY RSS")]
+    assert (static["lower"], static["median_single_run"], static["upper"]) == pytest.approx((2.1, 3.0, 3.9), abs=1e-12)
+    assert static["mc_rmse"] == pytest.approx(np.sqrt(np.mean((2.0 + 0.1 * k) ** 2)), rel=1e-12)
+    assert static["within"] is True                                                    # 3.16 in [2.1, 3.9]
+    serial = rows[("serial_ekf", "ONLY RSS")]
+    assert (serial["lower"], serial["upper"]) == pytest.approx((1.05, 1.95), abs=1e-12)
+    assert serial["within"] is True                                                    # 1.93 in [1.05, 1.95]
+    assert rows[("kalman_filter", "ONLY RSS")]["within"] is False                      # 2.04 > 1.95
+    red = rows[("kalman_filter", "reduction % (derived)")]                            # 20 + k: [21, 39], median 30
+    assert (red["lower"], red["median_single_run"], red["upper"]) == pytest.approx((21.0, 30.0, 39.0), abs=1e-9)
+    assert red["printed"] == pytest.approx(9.3137, abs=1e-4) and red["within"] is False
+    pooled = lambda v: np.sqrt(np.mean(v**2))
+    before, after = 1.0 + 0.05 * k, (1.0 + 0.05 * k) * (1 - (20.0 + k) / 100)
+    assert red["mc_rmse"] == pytest.approx(100 * (pooled(before) - pooled(after)) / pooled(before), rel=1e-12)
+    par = rows[("parallel_ekf", "reduction % (derived)")]                             # 10 + k: [11, 29]
+    assert par["printed"] == pytest.approx(14.6067, abs=1e-4) and par["within"] is True
+    mean = rows[("mean of the three", "reduction %")]                                 # 14.33 + k: [15.33, 33.33]
+    assert (mean["lower"], mean["median_single_run"], mean["upper"]) == pytest.approx(
+        (1 + 43 / 3, 10 + 43 / 3, 19 + 43 / 3), abs=1e-9)
+    assert mean["within"] is False                                                    # 15 < 15.33
 
 
 def test_report_prediction_interval_tests_the_printed_value(tmp_path, monkeypatch):

@@ -103,6 +103,7 @@ def test_missing_measurements_predict_only():
     z[0, 2] = np.nan
     res = lb.kalman_filter(z, model.F, H, model.Q, R, x0, P0)
     np.testing.assert_allclose(res.x[0, 2], model.F @ res.x[0, 1])
+    np.testing.assert_allclose(res.P[0, 2], model.F @ res.P[0, 1] @ model.F.T + model.Q, rtol=1e-12)   # no update
 
 
 def test_literal_003_variant_is_running_average():
@@ -121,6 +122,48 @@ def test_corridor_kf_first_fix_start():
     out = george.track_with_kalman(fixes, truth, q=1e-3)
     np.testing.assert_array_equal(out[:, 0], fixes[:, 0])
     assert out.shape == fixes.shape
+
+
+def _corridor_filterpy(fixes, truth, q, R, start, update_first):
+    """Document 003's KF written out in filterpy: state [x, y, vx, vy], dt = 1 s, F of Eq. (9),
+    Q = q G G^T with G = [[1/2, 0], [0, 1/2], [1, 0], [0, 1]], P0 = diag(R_xx, R_yy, 1, 1)."""
+    g = np.array([[0.5, 0.0], [0.0, 0.5], [1.0, 0.0], [0.0, 1.0]])
+    kf = KalmanFilter(dim_x=4, dim_z=2)
+    kf.F = np.array([[1.0, 0, 1, 0], [0, 1, 0, 1], [0, 0, 1, 0], [0, 0, 0, 1]])
+    kf.H = np.array([[1.0, 0, 0, 0], [0, 1, 0, 0]])
+    kf.Q, kf.R = q * g @ g.T, R
+    kf.x, kf.P = np.r_[start, 0.0, 0.0], np.diag([R[0, 0], R[1, 1], 1.0, 1.0])
+    out = []
+    for t, z in enumerate(fixes):
+        if t or not update_first:
+            kf.predict()
+        kf.update(z)
+        out.append(kf.x[:2].copy())
+    return np.array(out)
+
+
+@pytest.mark.parametrize("r_mode", ["empirical", "isotropic"])
+def test_corridor_kf_equals_filterpy(r_mode):
+    # fixes scattered about the centreline with a different spread per axis, so R is not isotropic
+    truth = george.trajectory_m()
+    rng = np.random.default_rng(1)
+    fixes = truth + rng.normal(size=(3, 25, 2)) * [0.8, 1.5] + [0.2, -0.1]
+    q = 0.05
+    first = george.track_with_kalman(fixes, truth, q=q, r_mode=r_mode)
+    true_start = george.track_with_kalman(fixes, truth, q=q, r_mode=r_mode, init="true_start")
+    for b in range(fixes.shape[0]):
+        # R "obtained from experiments": the sample covariance (ddof 1) of fix - truth over the 25 points
+        R = np.cov((fixes[b] - truth).T) if r_mode == "empirical" else 3.3 * np.eye(2)
+        # first-fix start: the first output is the first fix, then predict + update on fixes 2..25
+        ref = _corridor_filterpy(fixes[b, 1:], truth, q, R, fixes[b, 0], update_first=False)
+        np.testing.assert_array_equal(first[b, 0], fixes[b, 0])
+        np.testing.assert_allclose(first[b, 1:], ref, atol=1e-10)
+        # true start: update with fix 1 at the true start (no prediction first), then predict + update
+        ref = _corridor_filterpy(fixes[b], truth, q, R, truth[0], update_first=True)
+        np.testing.assert_allclose(true_start[b], ref, atol=1e-10)
+    # the filter smooths: its error is well below that of the fixes it filters
+    err = lambda p: np.sqrt(np.mean(np.sum((p - truth) ** 2, -1)))
+    assert err(first) < 0.8 * err(fixes)
 
 
 def test_batched_process_noise_equals_loop():

@@ -41,17 +41,44 @@ def test_box_ls_equals_scipy_lsq_linear(points):
     d = lb.pairwise_distance_m(points, ANCHORS) * np.random.default_rng(1).uniform(0.6, 1.6, (50, 4))
     box = lb.lateration_box_ls(ANCHORS, d, [0, 0], [2.1, 7.8]).position_m
     a_mat, b = lb.lateration_system(ANCHORS, d)
+    active = 0
     for i in range(0, 50, 7):
         ref = lsq_linear(a_mat, b[i], bounds=([0, 0], [2.1, 7.8]), tol=1e-12).x
         np.testing.assert_allclose(box[i], ref, atol=1e-5)
+        active += bool(np.any(np.isclose(ref, [0, 0]) | np.isclose(ref, [2.1, 7.8])))
+    assert active >= 2                  # the box binds on some of the compared problems (else this is plain LS)
 
 
-def test_rss_ml_noiseless_and_against_scipy(points):
-    model = lb.PathLossModel(-45.0, 2.1843, 3.0)
+ML_MODEL = lb.PathLossModel(-45.0, 2.1843, 3.0)
+
+
+@pytest.fixture(scope="module")
+def ml_problems():
+    """50 noisy RSS problems and their global minima found without locbook: a brute-force grid of the cost over
+    the corridor and 3 m around it, then scipy's least_squares from the true position and the 3 best grid points."""
+    points = np.random.default_rng(2).uniform([0, 0], [2.1, 7.8], (50, 2))
+    power = ML_MODEL.sample_power_dbm(lb.pairwise_distance_m(points, ANCHORS), np.random.default_rng(4))
+    xs, ys = np.meshgrid(np.arange(-2.95, 5.1, 0.3), np.arange(-2.95, 10.8, 0.3))    # never on an anchor
+    grid = np.stack([xs.ravel(), ys.ravel()], -1)
+    grid_mean = ML_MODEL.mean_power_dbm(lb.pairwise_distance_m(grid, ANCHORS))
+    best_cells = np.argsort(np.sum((power[:, None, :] - grid_mean[None]) ** 2, -1), axis=1)[:, :3]
+    best_x, best_cost = np.empty((50, 2)), np.empty(50)
+    for i in range(50):
+        resid = lambda p: power[i] - ML_MODEL.mean_power_dbm(lb.pairwise_distance_m(p, ANCHORS))
+        runs = [least_squares(resid, start, xtol=1e-12, ftol=1e-12, gtol=1e-12)
+                for start in [points[i], *grid[best_cells[i]]]]
+        best = min(runs, key=lambda r: r.cost)
+        best_x[i], best_cost[i] = best.x, 2 * best.cost          # scipy's cost is half the sum of squares
+    return dict(points=points, power=power, grid_start=grid[best_cells[:, 0]], best_x=best_x, best_cost=best_cost)
+
+
+def test_rss_ml_noiseless_and_against_scipy(points, ml_problems):
+    model = ML_MODEL
     d = lb.pairwise_distance_m(points, ANCHORS)
     exact = lb.rss_ml_position(ANCHORS, model.mean_power_dbm(d), model)
     np.testing.assert_allclose(exact.position_m, points, atol=1e-6)
     power = model.sample_power_dbm(d, np.random.default_rng(4))
+    np.testing.assert_array_equal(power, ml_problems["power"])
     ml = lb.rss_ml_position(ANCHORS, power, model)
     assert ml.converged.all()
     for i in range(0, 50, 5):
@@ -60,6 +87,37 @@ def test_rss_ml_noiseless_and_against_scipy(points):
         # same local minimum, and scipy cannot improve on locbook's cost
         np.testing.assert_allclose(ml.position_m[i], ref.x, atol=1e-4)
         assert ml.cost[i] <= 2 * ref.cost + 1e-9
+    # locbook's cost is the sum of squared residuals at its position, recomputed here
+    resid = power - model.mean_power_dbm(lb.pairwise_distance_m(ml.position_m[:, None, :], ANCHORS)[:, 0])
+    np.testing.assert_allclose(ml.cost, np.sum(resid**2, -1), rtol=1e-9)
+    # started in the global basin (the best brute-force grid point, not locbook's answer), locbook's iteration
+    # reaches the global minimum that scipy found from independent starts, for every problem
+    best_x, best_cost = ml_problems["best_x"], ml_problems["best_cost"]
+    from_grid = lb.rss_ml_position(ANCHORS, power, model, initial_m=ml_problems["grid_start"])
+    assert from_grid.converged.all()
+    assert np.all(from_grid.cost <= best_cost * (1 + 1e-9) + 1e-9)
+    np.testing.assert_allclose(from_grid.position_m, best_x, atol=1e-4)
+
+
+def test_rss_ml_converged_means_a_stationary_point_of_the_cost(ml_problems):
+    """The estimator is local, as its docstring says: from the default convex (linearized-LS) start it may stop in
+    a local minimum (here some problems do: their cost exceeds the global one scipy finds from independent
+    starts). What ``converged`` promises is a local minimum: the cost's gradient, taken here by central
+    differences (independent of locbook's Jacobian), vanishes, and no nearby point is lower."""
+    power = ml_problems["power"]
+    ml = lb.rss_ml_position(ANCHORS, power, ML_MODEL)
+    assert ml.converged.all()
+    cost = lambda p: np.sum((power - ML_MODEL.mean_power_dbm(lb.pairwise_distance_m(p[:, None, :], ANCHORS)[:, 0])) ** 2, -1)
+    h = 1e-6
+    for axis in (0, 1):
+        step = np.zeros(2)
+        step[axis] = h
+        grad = (cost(ml.position_m + step) - cost(ml.position_m - step)) / (2 * h)
+        assert np.all(np.abs(grad) <= 1e-4 * (1 + ml.cost)), np.abs(grad).max()
+    for angle in np.linspace(0, 2 * np.pi, 8, endpoint=False):
+        assert np.all(cost(ml.position_m + 1e-3 * np.array([np.cos(angle), np.sin(angle)])) >= ml.cost - 1e-12)
+    local = ml.cost > ml_problems["best_cost"] * (1 + 1e-9) + 1e-9
+    assert local.any()          # the fixture holds problems where the convex start is not in the global basin
 
 
 def test_grid_ml_noiseless_picks_true_grid_point():

@@ -93,8 +93,55 @@ def test_every_printed_cell_maps_to_a_method_the_experiment_runs():
         assert stat == column
     assert tb.TABLE_CELLS[("7.40", "monopole / Grid Bayes", "rmse_m")] == ("monopole", "grid", "rmse_m")
     assert tb.TABLE_CELLS[("7.28", "Offline NN obstructed readers", "mean_m")] == ("obstructed", "offline_nn", "mean_m")
+
+
+def test_every_ranking_is_what_its_table_prints():
+    # each claim "better beats worse" names a table; both methods must have a printed cell of that statistic in
+    # that table (found through the printed rows, not through the ranking code), and the printed value of the
+    # worse method must exceed the better one's: a swapped pair, a wrong table or statistic fails here
+    printed = {(r["table"], r["row"], r["column"]): r["value"] for r in oz.printed_tables()}
+    assert len(tb.RANKINGS) == 27
     for where, better, worse, experiment, stat in tb.RANKINGS:
         assert better != worse and stat in oz.STATISTICS
+        table, _, qualifier = where.removeprefix("Table ").partition(" ")
+        # the label's qualifier names the experiment or, for "(90 %)", the statistic
+        if qualifier == "(90 %)":
+            assert stat == "p90_m", where
+        elif qualifier:
+            assert experiment == qualifier.strip("()"), where
+        value = {}
+        for method in (better, worse):
+            cells = [key for key, cell in tb.TABLE_CELLS.items()
+                     if key[0] == table and cell == (experiment, method, stat)]
+            assert len(cells) == 1, (where, method, cells)
+            value[method] = printed[cells[0]]
+        assert value[worse] > value[better], (where, better, worse, value)
+
+
+def test_ranking_rows_on_hand_made_errors():
+    # per-realization errors constant over sessions and steps: every statistic but std equals that constant,
+    # so the reproduced differences are known by hand
+    from locbook.scenarios.ozkaya_testbed import ExperimentResult
+    level = {"offline_nn": (2.0, 2.2), "online_nn": (1.5, 1.9), "grid": (1.2, 1.0), "grid_sigma": (1.1, 1.3),
+             "grid_smoothing": (1.3, 1.3), "sir": (1.0, 1.4), "sir_sigma_smoothing": (0.9, 1.3)}     # 2 realizations
+    res = ExperimentResult("mobile", np.zeros((1, 5, 2)))
+    for method, (z0, z1) in level.items():
+        res.errors[method] = np.stack([np.full((1, 5), z0), np.full((1, 5), z1)])             # (Z=2, S=1, T=5)
+    rows = tb.ranking_rows({"mobile": res})
+    expected = [r for r in tb.RANKINGS if r[3] == "mobile"]
+    assert len(rows) == len(expected) == 7
+    printed = {(r["table"], r["row"], r["column"]): r["value"] for r in oz.printed_tables()}
+    for row, (where, better, worse, experiment, stat) in zip(rows, expected, strict=True):
+        assert row["where"] == where and row["statistic"] == stat == "rmse_m"
+        diff = np.subtract(level[worse], level[better])
+        assert row["reproduced_difference_m"] == pytest.approx(diff.mean(), abs=1e-12)
+        assert row["se_m"] == pytest.approx(abs(diff[0] - diff[1]) / 2, abs=1e-12)    # sd(ddof 1) / sqrt(2)
+        assert row["holds"] == (diff.mean() > 0)
+        table = where.split()[1]
+        cell = lambda m: next(k for k, c in tb.TABLE_CELLS.items() if k[0] == table and c == (experiment, m, stat))
+        assert row["printed_difference_m"] == pytest.approx(printed[cell(worse)] - printed[cell(better)], abs=1e-4)
+    holds = {(r[1], r[2]): row["holds"] for r, row in zip(expected, rows)}
+    assert holds[("sir", "grid")] is False and holds[("grid", "online_nn")] is True     # 1.1 - 1.2 < 0; 1.7 - 1.1 > 0
 
 
 def test_near_tag_points_by_hand():
@@ -109,14 +156,40 @@ def test_run_testbed_is_reproducible_and_subsets_do_not_change_numbers():
     full = tb.run_testbed(2, 11, **kw)
     again = tb.run_testbed(2, 11, **kw)
     part = tb.run_testbed(2, 11, experiments=["mobile", "obstructed"], methods=["sir", "grid"], **kw)
+    # the loops below must not run over empty collections
+    assert set(full) == set(again) == set(tb.EXPERIMENTS) and set(part) == {"mobile", "obstructed"}
     for name, res in full.items():
+        assert set(res.estimates) == set(res.errors) == set(tb.EXPERIMENTS[name])
         for key, est in res.estimates.items():
             np.testing.assert_array_equal(est, again[name].estimates[key])
     for name in ("mobile", "obstructed"):
+        assert set(part[name].estimates) == {"sir", "grid"} & set(tb.EXPERIMENTS[name])
         for key, est in part[name].estimates.items():
             np.testing.assert_array_equal(est, full[name].estimates[key])
     rows = tb.table_rows(full)
     assert {r["table"] for r in rows} == {t for t, _, _ in tb.TABLE_CELLS}
     assert all(np.isfinite(r["reproduced"]) and r["tolerance_m"] > 0 for r in rows)
+    # every row recomputed from the estimates: Euclidean error, the statistic per realization (near-tag
+    # rows keep the fixed points within 1.5 m of a tag, by distance), mean and 2 x hypot(spread, its MC error)
+    printed = {(r["table"], r["row"], r["column"]): r["value"] for r in oz.printed_tables()}
+    tags = np.asarray(oz.REFERENCE_TAGS_M)
+    points = np.asarray(tb.FIXED_POINTS_M)
+    near = np.min(np.linalg.norm(points[:, None] - tags[None], axis=-1), axis=1) <= tb.NEAR_TAG_RADIUS_M
+    assert 0 < near.sum() < near.size
+    stat = {"rmse_m": lambda e: np.sqrt(np.mean(e**2, 1)), "mean_m": lambda e: e.mean(1),
+            "median_m": lambda e: np.median(e, 1), "p90_m": lambda e: np.quantile(e, 0.9, axis=1),
+            "std_m": lambda e: np.sqrt(np.mean((e - e.mean(1, keepdims=True)) ** 2, 1))}
+    assert len(rows) == len(tb.TABLE_CELLS)
+    for r in rows:
+        base = "fixed" if r["experiment"] == "fixed_near_tags" else r["experiment"]
+        res = full[base]
+        err = np.linalg.norm(res.estimates[r["method"]] - res.truth_m, axis=-1)               # (Z, S, T)
+        if r["experiment"] == "fixed_near_tags":
+            err = err[:, near]
+        values = stat[r["column"]](err.reshape(err.shape[0], -1))
+        spread = np.std(values, ddof=1)
+        assert r["printed"] == printed[(r["table"], r["row"], r["column"])]
+        assert r["reproduced"] == pytest.approx(values.mean(), rel=1e-12, abs=1e-12)
+        assert r["tolerance_m"] == pytest.approx(2 * np.sqrt(spread**2 + spread**2 / values.size), rel=1e-9)
     with pytest.raises(ValueError, match="unknown experiments"):
         tb.run_testbed(1, 0, experiments=["fixd"])

@@ -25,7 +25,7 @@ from ..motion import constant_velocity
 
 __all__ = [
     "ANCHORS_M", "CORRIDOR_SIZE_M", "PRINTED", "CC2420_PA_LEVEL_DBM", "DEFAULT_CALIBRATION_POINTS_M",
-    "trajectory_m", "CorridorRuns", "simulate_corridor", "empirical_fix_covariance", "track_with_kalman",
+    "trajectory_m", "MIN_PLAUSIBLE_PATH_LOSS_EXP", "CorridorRuns", "simulate_corridor", "empirical_fix_covariance", "track_with_kalman",
     "TRAJECTORIES", "R_MODES", "INIT_MODES",
 ]
 
@@ -72,12 +72,19 @@ def trajectory_m(kind: str = "centerline", n_points: int = 25) -> np.ndarray:
     return np.stack([x, y], axis=-1)
 
 
+#: A calibration whose fitted exponent falls below this has failed: shadowing swamped the 1-8 m spread of the
+#: calibration distances (weaker decay than free space, or an inverted slope), and its ranges overflow. Such a
+#: run's fixes are NaN and counted, never averaged in (issue 12: a 6 dB sweep had averaged fixes of 1e121 m).
+MIN_PLAUSIBLE_PATH_LOSS_EXP = 1.0
+
+
 @dataclass(frozen=True)
 class CorridorRuns:
     """Monte-Carlo runs of the paper's pipeline up to the unfiltered fixes (leading axis: runs).
 
     truth_m (T, 2); calibration_power_dbm (runs, L, 4); fitted ref_power_dbm, path_loss_exp (runs,);
-    power_dbm (runs, T, 4) the per-point mean received powers; fixes_m (runs, T, 2) from Eq. (8).
+    power_dbm (runs, T, 4) the per-point mean received powers; fixes_m (runs, T, 2) from Eq. (8), NaN for a
+    run whose calibration failed (``calibration_ok`` False, see :data:`MIN_PLAUSIBLE_PATH_LOSS_EXP`).
     """
 
     truth_m: np.ndarray
@@ -87,6 +94,11 @@ class CorridorRuns:
     path_loss_exp: np.ndarray
     power_dbm: np.ndarray
     fixes_m: np.ndarray
+    calibration_ok: np.ndarray
+
+    @property
+    def n_failed_calibrations(self) -> int:
+        return int(np.sum(~self.calibration_ok))
 
     @property
     def fix_error_m(self) -> np.ndarray:
@@ -96,7 +108,7 @@ class CorridorRuns:
 def simulate_corridor(n_runs: int, truth_m, true_model: PathLossModel, *, rng_calibration: np.random.Generator,
                       rng_tracking: np.random.Generator, calibration_points_m=DEFAULT_CALIBRATION_POINTS_M,
                       calib_mode: str = "per_location_mean", use_calibrated_model: bool = True,
-                      ref_anchor: int = 0) -> CorridorRuns:
+                      ref_anchor: int = 0, min_path_loss_exp: float = MIN_PLAUSIBLE_PATH_LOSS_EXP) -> CorridorRuns:
     """Simulate ``n_runs`` independent repetitions of the experiment (Secs. 5-6 of the paper).
 
     1. calibration: mean received power at each calibration point from each anchor, LDPM plus
@@ -105,6 +117,9 @@ def simulate_corridor(n_runs: int, truth_m, true_model: PathLossModel, *, rng_ca
     2. tracking: the same channel at each trajectory point, ranging by Eq. (7) with the fitted
        (or, if ``use_calibrated_model=False``, the true) model, then Eq. (8) with anchor ``ref_anchor``
        as the reference row; fixes are not constrained to the corridor, as in the paper.
+
+    A run whose calibrated exponent is below ``min_path_loss_exp`` has failed calibration: its fixes are NaN
+    (``calibration_ok`` False). With the calibrated model only; the true model never fails.
     """
     truth_m = np.asarray(truth_m, float)
     cal_pts = np.asarray(calibration_points_m, float)
@@ -118,9 +133,13 @@ def simulate_corridor(n_runs: int, truth_m, true_model: PathLossModel, *, rng_ca
         ref, exp = fit.ref_power_dbm[:, None, None], fit.path_loss_exp[:, None, None]
     dist = pairwise_distance_m(truth_m, ANCHORS_M)                              # (T, 4)
     power = true_model.sample_power_dbm(np.broadcast_to(dist, (n_runs,) + dist.shape), rng_tracking)
-    ranging = PathLossModel(ref, exp) if use_calibrated_model else true_model
-    fixes = lateration_ls(ANCHORS_M, ranging.range_m(power), ref_index=ref_anchor).position_m
-    return CorridorRuns(truth_m, cal_pts, cal_power, fit.ref_power_dbm, fit.path_loss_exp, power, fixes)
+    ok = np.all(fit.path_loss_exp.reshape(n_runs, -1) >= min_path_loss_exp, axis=-1) if use_calibrated_model \
+        else np.ones(n_runs, bool)
+    ranging = PathLossModel(ref, np.where(ok.reshape((n_runs,) + (1,) * (exp.ndim - 1)), exp, 1.0)) \
+        if use_calibrated_model else true_model
+    ranges = np.where(ok[:, None, None], ranging.range_m(power), np.nan)     # a failed run: nothing heard
+    fixes = lateration_ls(ANCHORS_M, ranges, ref_index=ref_anchor).position_m
+    return CorridorRuns(truth_m, cal_pts, cal_power, fit.ref_power_dbm, fit.path_loss_exp, power, fixes, ok)
 
 
 def empirical_fix_covariance(fixes_m, truth_m) -> np.ndarray:
@@ -148,6 +167,13 @@ def track_with_kalman(fixes_m, truth_m, *, q: float, dt_s: float = 1.0, r_mode: 
     if init not in INIT_MODES:
         raise ValueError(f"init must be one of {INIT_MODES}, got {init!r}")
     fixes_m = np.asarray(fixes_m, float)
+    usable = np.all(np.isfinite(fixes_m), axis=(-2, -1))
+    if not usable.all():          # runs without fixes (failed calibration) stay NaN; the others are filtered
+        out = np.full(fixes_m.shape, np.nan)
+        if usable.any():
+            out[usable] = track_with_kalman(fixes_m[usable], truth_m, q=q, dt_s=dt_s, r_mode=r_mode, r_iso_m2=r_iso_m2,
+                                            init=init, init_velocity_var=init_velocity_var, variant=variant)
+        return out
     model = constant_velocity(dt_s, q)
     H = model.position_measurement_matrix()
     if r_mode == "empirical":

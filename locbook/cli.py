@@ -25,23 +25,14 @@ def _parse_overrides(items: list[str]) -> dict[str, str]:
     return out
 
 
-def _positive_seconds(text: str) -> float:
+def _positive(kind, text: str):
+    """argparse type: a positive, finite number (``kind`` float) or whole number (``kind`` int)."""
     try:
-        value = float(text)
+        value = kind(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expects a number of seconds, got {text!r}") from None
+        raise argparse.ArgumentTypeError(f"expects a {'whole ' if kind is int else ''}number, got {text!r}") from None
     if not value > 0 or value == float("inf"):
-        raise argparse.ArgumentTypeError(f"must be a positive, finite number of seconds, got {text!r}")
-    return value
-
-
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expects a whole number, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
+        raise argparse.ArgumentTypeError(f"must be a positive, finite number, got {text!r}")
     return value
 
 
@@ -70,14 +61,14 @@ def main(argv: list[str] | None = None) -> int:
     run = sub.add_parser("run", help="execute experiments and write reports/<profile>/")
     run.add_argument("ids", nargs="*", help="experiment ids or document keys (default: all)")
     run.add_argument("--profile", choices=("quick", "full"), default="quick", help=PROFILE_HELP)
-    run.add_argument("--jobs", "-j", type=_positive_int, default=2, help="notebooks run in parallel processes (default 2)")
+    run.add_argument("--jobs", "-j", type=lambda t: _positive(int, t), default=2, help="notebooks run in parallel processes (default 2)")
     run.add_argument("--force", action="store_true", help="execute even when a cached report is up to date")
     run.add_argument("-p", "--parameter", action="append", default=[], metavar="NAME=VALUE",
                      help="override a notebook parameter (a TOML value, checked against its type and range); "
                           "the reports go to their own folder, never to reports/<profile>/")
     run.add_argument("--reports", type=Path, help="reports folder (default: <repository>/reports)")
     run.add_argument("--out", type=Path, help="write this run's reports to this folder ([a-z0-9-] name)")
-    run.add_argument("--timeout", type=_positive_seconds, default=1800, help="seconds allowed per notebook cell")
+    run.add_argument("--timeout", type=lambda t: _positive(float, t), default=1800, help="seconds allowed per notebook cell")
     args = parser.parse_args(argv)
 
     from .suite import load_suite, run_suite

@@ -158,6 +158,18 @@ def _by_heard_anchors(anchors_m, readings, min_anchors, solve_subset, method: st
                               method, status.reshape(batch))
 
 
+def _lateration_by_heard(anchors_m, distance_m, ref_index: int, min_anchors: int, solve, method: str):
+    """:func:`_by_heard_anchors` for the linearized systems: ``solve(anchors, distances, ref_index)`` on each
+    group's heard anchors, the reference kept if heard."""
+    anchors_m, distance_m = np.asarray(anchors_m, float), np.asarray(distance_m, float)
+    m = anchors_m.shape[0]
+    flat = distance_m.reshape(-1, m)
+    return _by_heard_anchors(
+        anchors_m, distance_m, min_anchors,
+        lambda heard, sel: solve(anchors_m[heard], flat[np.ix_(sel, heard)], _ref_in_subset(ref_index % m, heard)),
+        method)
+
+
 def _min_anchors(min_anchors, dim: int) -> int:
     if min_anchors is None:
         return dim + 1
@@ -198,14 +210,8 @@ def lateration_ls(anchors_m, distance_m, ref_index: int = 0, *, min_anchors: int
     a_mat, b = lateration_system(anchors_m, distance_m, ref_index)
     min_anchors = _min_anchors(min_anchors, a_mat.shape[1])
     if np.isnan(b).any():
-        anchors_m, distance_m = np.asarray(anchors_m, float), np.asarray(distance_m, float)
-        m = anchors_m.shape[0]
-        flat = distance_m.reshape(-1, m)
-        return _by_heard_anchors(
-            anchors_m, distance_m, min_anchors,
-            lambda heard, sel: lateration_ls(anchors_m[heard], flat[np.ix_(sel, heard)],
-                                             _ref_in_subset(ref_index % m, heard)),
-            f"lateration_ls(ref={ref_index})")
+        return _lateration_by_heard(anchors_m, distance_m, ref_index, min_anchors, lateration_ls,
+                                    f"lateration_ls(ref={ref_index})")
     pos = b @ np.linalg.pinv(a_mat).T
     ok = np.all(np.isfinite(pos), axis=-1)
     return LocalizationResult(pos, ok, None, 0, f"lateration_ls(ref={ref_index})")
@@ -297,14 +303,8 @@ def lateration_box_ls(anchors_m, distance_m, lower_m, upper_m, ref_index: int = 
     if any(lo > hi for lo, hi in zip(lower, upper)):
         raise ValueError(f"empty box: lower {lower} > upper {upper}")
     if np.isnan(b).any():
-        anchors_m, distance_m = np.asarray(anchors_m, float), np.asarray(distance_m, float)
-        m = anchors_m.shape[0]
-        flat = distance_m.reshape(-1, m)
-        return _by_heard_anchors(
-            anchors_m, distance_m, min_anchors,
-            lambda heard, sel: lateration_box_ls(anchors_m[heard], flat[np.ix_(sel, heard)], lower, upper,
-                                                 _ref_in_subset(ref_index % m, heard)),
-            "lateration_box_ls")
+        return _lateration_by_heard(anchors_m, distance_m, ref_index, min_anchors,
+                                    lambda a, d, ref: lateration_box_ls(a, d, lower, upper, ref), "lateration_box_ls")
     batch = b.shape[:-1]
     pos, ok = _solve_box_batch(a_mat, b.reshape(-1, b.shape[-1]), lower, upper)
     return LocalizationResult(pos.reshape(batch + (dim,)), ok.reshape(batch), None, 0, "lateration_box_ls",

@@ -312,7 +312,8 @@ def test_a_killed_worker_fails_only_its_experiment(toy, capsys):
     assert wait_for(lambda: not processes_mentioning(str(toy)), 5), processes_mentioning(str(toy))
 
 
-def test_sigint_stops_the_run_cleanly_and_keeps_finished_reports(toy, request):
+@pytest.mark.parametrize("sig, code", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+def test_interrupt_stops_the_run_cleanly_and_keeps_finished_reports(toy, request, sig, code):
     set_profile(toy, "george-two", "sleep_s = 120.0")
     proc = cli(toy, "--jobs", "2")
     request.addfinalizer(proc.kill)
@@ -320,12 +321,12 @@ def test_sigint_stops_the_run_cleanly_and_keeps_finished_reports(toy, request):
     assert wait_for(lambda: any("ipykernel" in c for c in processes_mentioning(str(toy)).values()), 60)
     started = processes_mentioning(str(toy))          # runner, workers and kernels
     sent = time.monotonic()
-    proc.send_signal(signal.SIGINT)
+    proc.send_signal(sig)
     out, err = proc.communicate(timeout=30)
     assert time.monotonic() - sent < 10
-    assert proc.returncode == 130
+    assert proc.returncode == code
     assert "Traceback" not in err and "Traceback" not in out
-    assert "interrupted by SIGINT" in err and "interrupted: george-two" in err
+    assert f"interrupted by {sig.name}" in err and "interrupted: george-two" in err
     assert (toy / "reports" / "quick" / "george-one" / "summary.md").exists()
     assert not (toy / "reports" / "quick" / "george-two").exists()
     assert wait_for(lambda: not alive(started), 3), [started[p] for p in alive(started)]

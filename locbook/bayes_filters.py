@@ -74,6 +74,22 @@ class RssMeasurementModel:
         if self.walls_m is not None:
             as_array("walls_m", np.reshape(self.walls_m, (-1, 2, 2)))
 
+    def _check_step(self, step) -> None:
+        """``step`` must index the per-step parameters ``(R, T, m)`` / ``(R, T)`` (no negative wrap-around)."""
+        n_steps = [np.shape(v)[1] for v in (self.ref_power_dbm, self.path_loss_exp) if np.ndim(v) == 3]
+        n_steps += [np.shape(self.sigma_db)[1]] if np.ndim(self.sigma_db) == 2 else []
+        if isinstance(step, (bool, np.bool_)) or not isinstance(step, (int, np.integer)) or step < 0 or (
+                n_steps and step >= min(n_steps)):
+            raise ValueError(f"step must be an integer in [0, {min(n_steps) if n_steps else 'inf'}), got {step!r}")
+
+    def _runs(self):
+        """The number of runs of per-run-and-step parameters (None when every parameter is shared)."""
+        runs = {np.shape(v)[0] for v in (self.ref_power_dbm, self.path_loss_exp) if np.ndim(v) == 3}
+        runs |= {np.shape(self.sigma_db)[0]} if np.ndim(self.sigma_db) == 2 else set()
+        if len(runs) > 1:
+            raise ValueError(f"per-run parameters disagree on the number of runs: {sorted(runs)}")
+        return runs.pop() if runs else None
+
     @staticmethod
     def _per_step(value, step: int, per_reader: bool):
         value = np.asarray(value, dtype=float)
@@ -83,7 +99,10 @@ class RssMeasurementModel:
 
     def mean_rss_dbm(self, positions_m, step: int = 0):
         """Mean RSS at positions ``(P, 2)`` or ``(R, P, 2)`` -> ``(R or 1, P, m)``."""
-        positions_m = np.asarray(positions_m, dtype=float)
+        positions_m = as_array("positions_m", positions_m, trailing=(None, 2))
+        if positions_m.ndim not in (2, 3):
+            raise ValueError(f"positions_m must have shape (P, 2) or (R, P, 2), got {positions_m.shape}")
+        self._check_step(step)
         distance = np.maximum(pairwise_distance_m(positions_m, self.readers_m), self.min_distance_m)
         mean = (self._per_step(self.ref_power_dbm, step, True)
                 - 10.0 * self._per_step(self.path_loss_exp, step, True) * np.log10(distance / self.ref_distance_m))
@@ -96,9 +115,15 @@ class RssMeasurementModel:
         -> ``(R, P)``. Readers with a NaN RSS (no packet: not heard) are left out of the product; a run where no
         reader heard anything gets a flat likelihood (that step is a prediction only). The model's parameters
         are checked finite at construction, so only readings can be missing."""
-        rss = np.asarray(rss_dbm, dtype=float)
-        if np.isinf(rss).any():
-            raise ValueError("rss_dbm must be finite or NaN (not heard); got an infinite value")
+        m = np.shape(self.readers_m)[0]
+        rss = as_array("rss_dbm", rss_dbm, ndim=2, trailing=(m,), nan_ok=True)
+        if np.ndim(positions_m) == 3 and np.shape(positions_m)[0] != rss.shape[0]:
+            raise ValueError(f"positions_m per run {np.shape(positions_m)} must have the {rss.shape[0]} runs of rss_dbm "
+                             f"{rss.shape} on its first axis (no silent broadcasting)")
+        runs = self._runs()
+        if runs is not None and runs != rss.shape[0]:
+            raise ValueError(f"the model's per-run parameters have {runs} runs, rss_dbm has {rss.shape[0]} "
+                             f"(shape {rss.shape})")
         resid = rss[:, None, :] - self.mean_rss_dbm(positions_m, step)
         resid = np.where(np.isnan(rss)[:, None, :], 0.0, resid)
         sigma = self._per_step(self.sigma_db, step, False)
@@ -117,6 +142,11 @@ def _check_inputs(rss_dbm, model: RssMeasurementModel, *, cells_m=None):
         raise ValueError(f"rss_dbm must have shape (runs, steps, {m}) for the model's {m} readers, got {rss_dbm.shape}")
     if cells_m is not None:
         cells_m = as_array("cells_m", cells_m, ndim=2, trailing=(None, 2))
+    runs = model._runs()
+    if runs is not None and runs != rss_dbm.shape[0]:
+        raise ValueError(f"the model's per-run parameters have {runs} runs, rss_dbm has {rss_dbm.shape[0]}")
+    if rss_dbm.shape[1]:
+        model._check_step(rss_dbm.shape[1] - 1)     # per-step parameters must cover every step
     return rss_dbm, cells_m
 
 
@@ -127,7 +157,9 @@ def _normalise_log(logw):
 
 
 def _velocity_schedule(velocity_m, n_steps):
-    v = np.zeros(2) if velocity_m is None else np.asarray(velocity_m, dtype=float)
+    v = np.zeros(2) if velocity_m is None else as_array("velocity_m", velocity_m)
+    if v.shape not in ((2,), (n_steps, 2)):
+        raise ValueError(f"velocity_m must have shape (2,) or (steps, 2) = ({n_steps}, 2), got {v.shape}")
     return np.broadcast_to(v, (n_steps, 2)) if v.ndim == 1 else v
 
 
@@ -170,6 +202,13 @@ def grid_bayes_filter(rss_dbm, cells_m, model: RssMeasurementModel, spread_m: fl
     n_runs, n_steps, _ = rss_dbm.shape
     n_cells = cells_m.shape[0]
     velocity = _velocity_schedule(velocity_m, n_steps)
+    if initial_belief is not None:
+        initial_belief = as_array("initial_belief", initial_belief)
+        if initial_belief.shape not in ((n_cells,), (n_runs, n_cells)):
+            raise ValueError(f"initial_belief must have shape ({n_cells},) or ({n_runs}, {n_cells}), "
+                             f"got {initial_belief.shape}")
+        if np.any(initial_belief < 0) or np.any(initial_belief.sum(axis=-1) <= 0):
+            raise ValueError("initial_belief must be non-negative with a positive sum over the cells")
     belief = (np.full((n_runs, n_cells), 1.0 / n_cells) if initial_belief is None
               else np.broadcast_to(np.asarray(initial_belief, float), (n_runs, n_cells)).copy())
     mmse = np.empty((n_runs, n_steps, 2))
@@ -190,7 +229,7 @@ def grid_bayes_filter(rss_dbm, cells_m, model: RssMeasurementModel, spread_m: fl
 # -- particle filters -------------------------------------------------------------------------------
 def effective_sample_size(weights):
     """``N_eff = 1 / sum_j w_j^2`` of normalised weights along the last axis (Ozkaya 2011, Eq. (4.28))."""
-    weights = np.asarray(weights, dtype=float)
+    weights = as_array("weights", weights, min_ndim=1)
     return 1.0 / np.einsum("...n,...n->...", weights, weights)
 
 
@@ -206,8 +245,14 @@ def systematic_resample(weights, uniforms, cdf: str = "standard"):
     """
     if cdf not in RESAMPLING_CDFS:
         raise ValueError(f"cdf must be one of {RESAMPLING_CDFS}, got {cdf!r}")
-    weights = np.asarray(weights, dtype=float)
+    weights = as_array("weights", weights, min_ndim=1)
     batch, n = weights.shape[:-1], weights.shape[-1]
+    if n == 0 or np.any(weights < 0) or np.any(weights.sum(axis=-1) <= 0):
+        raise ValueError(f"weights must be non-negative with a positive sum in every row, got shape {weights.shape}")
+    uniforms_arr = as_array("uniforms", uniforms)
+    if uniforms_arr.shape != batch or np.any(uniforms_arr < 0) or np.any(uniforms_arr >= 1):
+        raise ValueError(f"uniforms must be draws in [0, 1) of shape {batch} (one per row of weights), "
+                         f"got shape {uniforms_arr.shape}")
     w = weights.reshape(-1, n)
     c = np.cumsum(w, axis=-1)
     c /= c[:, -1:]
@@ -282,6 +327,10 @@ def particle_filter(rss_dbm, model: RssMeasurementModel, rng: np.random.Generato
     if initial_position_m is None:
         particles = uniform()
     else:
+        initial_position_m = as_array("initial_position_m", initial_position_m)
+        if initial_position_m.shape != (n_runs, 2):
+            raise ValueError(f"initial_position_m must have shape (runs, 2) = ({n_runs}, 2), "
+                             f"got {initial_position_m.shape}")
         particles = np.broadcast_to(np.asarray(initial_position_m, float)[:, None, :], shape).copy()
     log_w = np.full((n_runs, n_particles), -np.log(n_particles))
     mmse = np.empty((n_runs, n_steps, 2))

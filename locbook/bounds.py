@@ -58,8 +58,10 @@ def rss_position_information(position_m, anchors_m, path_loss_exp, sigma_db, for
     diff = position_m[..., None, :] - anchors_m  # (..., m, 2)
     d2 = np.einsum("...i,...i->...", diff, diff) + height_offset_m**2
     if np.any(d2 == 0):
-        raise DegenerateGeometryError("the RSS Fisher information is undefined at an anchor position (d = 0); "
-                                      "give height_offset_m (antenna height difference)")
+        where = tuple(int(i) for i in np.argwhere(d2 == 0)[0])
+        raise DegenerateGeometryError(f"the RSS Fisher information is undefined at an anchor position (d = 0): "
+                                      f"position_m{list(where[:-1])} = {position_m[where[:-1]].tolist()} is anchor "
+                                      f"{where[-1]}; give height_offset_m (antenna height difference)")
     gain = (10.0 * np.asarray(path_loss_exp, float) / (np.asarray(sigma_db, float) * np.log(10.0))) ** 2
     gain = np.broadcast_to(gain, d2.shape)
     capped = np.maximum(d2, min_distance_m**2)     # the gradient's 1/d capped at 1/d_min; its direction kept
@@ -68,8 +70,13 @@ def rss_position_information(position_m, anchors_m, path_loss_exp, sigma_db, for
 
 
 def rss_crlb_m(position_m, anchors_m, path_loss_exp, sigma_db, form: str = "correct"):
-    """Position RMSE bound ``sqrt(tr J^{-1})`` (m) at each position ``(..., 2)`` -> ``(...)``."""
+    """Position RMSE bound ``sqrt(tr J^{-1})`` (m) at each position ``(..., 2)`` -> ``(...)``.
+
+    In 2-D by Ozkaya's closed form (A.5); for anchors in another dimension ``(m, dim)`` (positions
+    ``(..., dim)``) by the trace of the inverse. Positions must be finite and off the anchors."""
     info = rss_fisher_information(position_m, anchors_m, path_loss_exp, sigma_db, form)
+    if info.shape[-1] != 2:
+        return np.sqrt(np.trace(np.linalg.inv(info), axis1=-2, axis2=-1))
     det = info[..., 0, 0] * info[..., 1, 1] - info[..., 0, 1] ** 2
     return np.sqrt((info[..., 0, 0] + info[..., 1, 1]) / det)   # (F_xx + F_yy) / (F_xx F_yy - F_xy^2)
 
@@ -77,5 +84,8 @@ def rss_crlb_m(position_m, anchors_m, path_loss_exp, sigma_db, form: str = "corr
 def crlb_rms_over_area_m(points_m, anchors_m, path_loss_exp, sigma_db, form: str = "correct"):
     """RMS of the bound over target positions ``(P, 2)``: ``sqrt(mean_p tr J(p)^{-1})``, the
     area-average used by Ozkaya (2011) for Fig. 7.1 and the CRLB columns."""
+    points_m = as_array("points_m", points_m, min_ndim=1)
+    if points_m.size == 0:
+        raise ValueError(f"points_m must hold at least one position, got shape {points_m.shape}")
     bound = rss_crlb_m(points_m, anchors_m, path_loss_exp, sigma_db, form)
     return float(np.sqrt(np.mean(bound**2)))

@@ -83,16 +83,12 @@ def path_loss_design_matrix(distance_m, ref_distance_m: float = 1.0,
                             sign_convention: str = "corrected"):
     """Rows ``[1, -10 log10(d/d0)]`` (corrected) or ``[1, +10 log10 d]`` as printed in Eq. (6)
     of document 003 (``"literal_003"``; its second unknown is then ``-n``)."""
-    distance_m = np.asarray(distance_m, dtype=float)
-    if np.any(distance_m <= 0):
-        raise ValueError("calibration distances must be positive")
+    check_choice("sign_convention", sign_convention, ("corrected", "literal_003"))
+    check_scalar("ref_distance_m", ref_distance_m, gt=0)
+    distance_m = as_array("distance_m", distance_m)
+    _positive_distances(distance_m)
     log_term = 10.0 * np.log10(distance_m / ref_distance_m)
-    if sign_convention == "corrected":
-        second = -log_term
-    elif sign_convention == "literal_003":
-        second = log_term
-    else:
-        raise ValueError(f"sign_convention must be 'corrected' or 'literal_003', got {sign_convention!r}")
+    second = -log_term if sign_convention == "corrected" else log_term
     return np.stack([np.ones_like(log_term), second], axis=-1)
 
 
@@ -113,11 +109,15 @@ def _prepare(distance_m, power_dbm, ref_distance_m):
     if distance_m.ndim == 0 or distance_m.shape[-1] < 2:
         raise DegenerateGeometryError("a path-loss fit needs at least two measurements per problem")
     mask = np.isfinite(power_dbm) & np.isfinite(distance_m)
-    if np.any(distance_m[mask] <= 0):
-        raise ValueError("calibration distances must be positive")
+    _positive_distances(distance_m[mask])
     log_d = np.where(mask, 10.0 * np.log10(np.where(mask, distance_m, 1.0) / ref_distance_m), 0.0)
     _check_distinct_distances(log_d, mask)
     return log_d, np.where(mask, power_dbm, 0.0), mask
+
+
+def _positive_distances(distance_m):
+    if np.any(distance_m <= 0):
+        raise ValueError(f"distance_m must be positive (calibration distances), got a minimum of {distance_m.min()}")
 
 
 def _check_distinct_distances(log_d, mask):

@@ -45,20 +45,26 @@ def register_to_dbm(register, offset_db: float = CC2420_RSSI_OFFSET_DB):
 
     Eq. (3) in George and Vadivukkarasi (``P_r = RSSI - 45``) with the CC2420 default; pass
     ``AT86RF230_ED_OFFSET_DB`` for the AT86RF230 energy-detect value used by Gudipati (2017).
+    A NaN register value (no packet) stays NaN.
     """
-    return np.asarray(register, dtype=float) + offset_db
+    check_scalar("offset_db", offset_db)
+    return as_array("register", register, nan_ok=True) + offset_db
 
 
 def dbm_to_register(power_dbm, offset_db: float = CC2420_RSSI_OFFSET_DB):
-    """Inverse of :func:`register_to_dbm` (no rounding; see :func:`quantize_db`)."""
-    return np.asarray(power_dbm, dtype=float) - offset_db
+    """Inverse of :func:`register_to_dbm` (no rounding; see :func:`quantize_db`). NaN (not heard) stays NaN."""
+    check_scalar("offset_db", offset_db)
+    return as_array("power_dbm", power_dbm, nan_ok=True) - offset_db
 
 
 def quantize_db(power_dbm, step_db: float = 1.0, floor_dbm: float | None = None):
     """Round powers to the radio's resolution (1 dB for CC2420, AT86RF230 ED and the
     Ozkaya readers) and optionally clip at a sensitivity floor (e.g. -90 dBm in Ozkaya 2011).
+    A NaN power (not heard) stays NaN; it is not clipped to the floor.
     """
     check_scalar("step_db", step_db, gt=0)
+    if floor_dbm is not None:
+        check_scalar("floor_dbm", floor_dbm)
     q = np.round(as_array("power_dbm", power_dbm, nan_ok=True) / step_db) * step_db
     if floor_dbm is not None:
         q = np.maximum(q, floor_dbm)
@@ -113,6 +119,10 @@ class PathLossModel:
         if np.any(np.asarray(self.sigma_db) < 0):
             raise ValueError(f"sigma_db must be non-negative, got {self.sigma_db}")
 
+    def _positive_exponent(self, where: str) -> None:
+        """``path_loss_exp`` divides in Eq. (7); a non-positive exponent has no inverse."""
+        if np.any(np.asarray(self.path_loss_exp) <= 0):
+            raise ValueError(f"{where} divides by path_loss_exp, which must be > 0; got {self.path_loss_exp}")
 
     def mean_power_dbm(self, distance_m, n_walls=0):
         """Mean received power, ``P_0 - 10 n log10(d/d0) - n_W WAF`` (Eq. (5) in document 003,
@@ -120,6 +130,7 @@ class PathLossModel:
         distance_m = as_array("distance_m", distance_m)
         if np.any(distance_m <= 0):
             raise ValueError("distances must be positive for the log-distance model")
+        _check_walls_count(n_walls)
         return (
             np.asarray(self.ref_power_dbm)
             - 10.0 * np.asarray(self.path_loss_exp) * np.log10(distance_m / self.ref_distance_m)
@@ -141,6 +152,8 @@ class PathLossModel:
         A NaN power (not heard) gives a NaN range (still not heard).
         """
         power_dbm = as_array("power_dbm", power_dbm, nan_ok=True)
+        self._positive_exponent("range_m")
+        _check_walls_count(n_walls)
         exponent = (
             np.asarray(self.ref_power_dbm) - power_dbm - np.asarray(n_walls) * self.wall_attenuation_db
         ) / (10.0 * np.asarray(self.path_loss_exp))
@@ -149,8 +162,16 @@ class PathLossModel:
     def range_bias_factor(self):
         """Mean bias of :meth:`range_m` under shadowing: ``E[d_hat]/d = exp((sigma ln10/(10 n))^2/2)``
         (note 000, section 2.2)."""
+        self._positive_exponent("range_bias_factor")
         s = np.asarray(self.sigma_db) * np.log(10.0) / (10.0 * np.asarray(self.path_loss_exp))
         return np.exp(0.5 * s**2)
+
+
+def _check_walls_count(n_walls) -> None:
+    """Wall counts ``n_W`` (Eq. (6.3), Ozkaya 2011) are finite and non-negative."""
+    counts = as_array("n_walls", n_walls)
+    if np.any(counts < 0):
+        raise ValueError(f"n_walls must be non-negative wall counts, got a minimum of {counts.min()}")
 
 
 def correlated_shadowing_db(points_m, sigma_db: float, decorrelation_m: float,
@@ -183,9 +204,16 @@ def wall_crossings(points_m, anchors_m, walls_m):
     A path crosses a wall when the two segments properly intersect (orientation test); a path that only
     touches a wall's end point or runs along it is not counted.
     """
-    points_m = np.asarray(points_m, dtype=float)
-    anchors_m = np.asarray(anchors_m, dtype=float)
-    walls_m = np.asarray(walls_m, dtype=float).reshape(-1, 2, 2)
+    points_m = as_array("points_m", points_m, min_ndim=1, trailing=(2,))
+    anchors_m = as_array("anchors_m", anchors_m, ndim=2, trailing=(None, 2))
+    walls_m = as_array("walls_m", walls_m)
+    if walls_m.shape == (2, 2):                                   # one wall
+        walls_m = walls_m[None]
+    elif walls_m.size == 0:                                       # no walls
+        walls_m = walls_m.reshape(0, 2, 2)
+    if walls_m.ndim != 3 or walls_m.shape[1:] != (2, 2):
+        raise ValueError(f"walls_m must have shape (W, 2, 2) (segments [[x1, y1], [x2, y2]]) or (2, 2) for one "
+                         f"wall, got {walls_m.shape}")
     count = np.zeros(points_m.shape[:-1] + (anchors_m.shape[0],), dtype=int)
 
     def cross(o, a, b):   # z of (a - o) x (b - o)
@@ -212,7 +240,10 @@ def small_scale_fading_db(distance_m, wavelength_m: float, rng: np.random.Genera
     otherwise (Ozkaya 2011, Sec. 5.1.1; Rappaport 2002, Ch. 5). Fades of 20-40 dB within a fraction of a
     wavelength are what the thesis illustrates at 910 MHz (lambda about 33 cm).
     """
-    x = np.asarray(distance_m, dtype=float)
+    x = as_array("distance_m", distance_m)
+    check_scalar("wavelength_m", wavelength_m, gt=0)
+    check_scalar("n_paths", n_paths, ge=1, integer=True)
+    check_scalar("k_factor", k_factor, ge=0)
     k = 2.0 * np.pi / wavelength_m
     angles = rng.uniform(0.0, 2.0 * np.pi, n_paths)
     phases = rng.uniform(0.0, 2.0 * np.pi, n_paths)

@@ -59,7 +59,28 @@ def _matrix(name: str, value, rows: int, cols: int) -> np.ndarray:
 def _first_bad(bad) -> str:
     """'run (i, j)' of the first True entry of a batch mask ('' for an unbatched filter)."""
     bad = np.asarray(bad)
-    return f" (run index {tuple(int(i) for i in np.argwhere(bad)[0])})" if bad.ndim else ""
+    return f" (run index {tuple(int(i) for i in np.argwhere(bad)[0])})" if bad.ndim and bad.any() else ""
+
+
+def _singular_runs(S, active):
+    """After LAPACK found a singular matrix in the batch ``S``: the ``active`` entries whose smallest
+    eigenvalue is not clearly positive (all ``active`` ones if round-off hides it). Error path only."""
+    eig = np.linalg.eigvalsh(np.where(np.isfinite(S), S, 0.0))
+    tol = S.shape[-1] * np.finfo(float).eps * np.abs(eig).max(axis=-1)
+    bad = active & ~(eig[..., 0] > tol) | active & ~np.all(np.isfinite(S), axis=(-2, -1))
+    return bad if bad.any() else np.asarray(active)
+
+
+def _solve_active(S, B, active):
+    """``S^{-1} B`` for the batch entries that update; the others get an identity S (their result is not
+    used), so a singular S of a missing row cannot stop the batch. With every entry active, ``S`` is used
+    unchanged (bit-identical to a plain solve)."""
+    if not np.all(active):
+        S = np.where(np.asarray(active)[..., None, None], S, np.eye(S.shape[-1]))
+    try:
+        return np.linalg.solve(S, B)
+    except np.linalg.LinAlgError:
+        raise _Singular(_singular_runs(S, active)) from None
 
 
 def _not_positive_definite(S):
@@ -151,9 +172,9 @@ def kalman_filter(z, F, H, Q, R, x0, P0, *, predict_first: bool = True,
         if singular.any():
             _raise_singular(k, singular)
         try:
-            K = np.linalg.solve(S, H @ P_use)        # K' = S^{-1} H P  (S, P symmetric)
-        except np.linalg.LinAlgError:
-            _raise_singular(k, np.ones(S.shape[:-2], bool))
+            K = _solve_active(S, H @ P_use, valid)   # K' = S^{-1} H P  (S, P symmetric)
+        except _Singular as exc:
+            _raise_singular(k, exc.bad)
         K = _mT(K)
         nu = zk - x_use @ _mT(H)                     # innovation z - H x
         x_new = x_use + (K @ nu[..., None])[..., 0]
@@ -172,7 +193,10 @@ def kalman_filter(z, F, H, Q, R, x0, P0, *, predict_first: bool = True,
             Sp = Hm @ P_use @ _mT(Hm) + Rm
             if (partial & _not_positive_definite(Sp)).any():
                 _raise_singular(k, partial & _not_positive_definite(Sp))
-            Kp = _mT(np.linalg.solve(Sp, Hm @ P_use))
+            try:
+                Kp = _mT(_solve_active(Sp, Hm @ P_use, partial))
+            except _Singular as exc:
+                _raise_singular(k, exc.bad)
             xp_new = x_use + (Kp @ nu_p[..., None])[..., 0]
             IKHp = eye - Kp @ Hm
             Pp_new = (IKHp @ P_use @ _mT(IKHp) + Kp @ Rm @ _mT(Kp)) if joseph else IKHp @ P_use
@@ -260,8 +284,12 @@ class RssMeasurement:
         if idx.shape != (anchors.shape[1],):
             raise ValueError(f"RssMeasurement.position_index must hold {anchors.shape[1]} state indices (one per "
                              f"axis of the anchors), got {self.position_index!r}")
+        m = anchors.shape[0]
         for name in ("ref_power_dbm", "path_loss_exp", "sigma_db"):
-            as_array(f"RssMeasurement.channel.{name}", getattr(self.channel, name))
+            value = as_array(f"RssMeasurement.channel.{name}", getattr(self.channel, name))
+            if value.ndim and value.shape[-1] not in (1, m):
+                raise ValueError(f"RssMeasurement.channel.{name} must be a scalar or end in (1,) or ({m},) "
+                                 f"(one per anchor), got shape {value.shape}")
         check_scalar("min_distance_m", self.min_distance_m, gt=0)
 
 
@@ -277,7 +305,22 @@ class TrackResult:
 def rss_measurement_jacobian(positions_m, anchors_m, path_loss_exp, *, min_distance_m: float = 1e-3):
     """Predicted-power gradient w.r.t. position, ``(..., m, dim)``:
     ``dh_j/dp = -(10 alpha / ln 10) (p - a_j) / d_j^2`` (note 000, section 2.6; not printed in the thesis).
-    Also returns the distances ``(..., m)`` (at least ``min_distance_m``)."""
+    Also returns the distances ``(..., m)`` (at least ``min_distance_m``).
+
+    ``positions_m (..., dim)``, ``anchors_m (m, dim)``, ``path_loss_exp`` a scalar, ``(m,)`` or broadcastable
+    to ``(..., m)``; all finite, ``min_distance_m > 0``."""
+    anchors = as_array("anchors_m", anchors_m, ndim=2)
+    as_array("positions_m", positions_m, min_ndim=1, trailing=(anchors.shape[1],))
+    ple = as_array("path_loss_exp", path_loss_exp)
+    if ple.ndim and ple.shape[-1] not in (1, anchors.shape[0]):
+        raise ValueError(f"path_loss_exp must be a scalar or end in ({anchors.shape[0]},) (one per anchor), "
+                         f"got shape {ple.shape}")
+    check_scalar("min_distance_m", min_distance_m, gt=0)
+    return _rss_jacobian(positions_m, anchors_m, path_loss_exp, min_distance_m)
+
+
+def _rss_jacobian(positions_m, anchors_m, path_loss_exp, min_distance_m):
+    """:func:`rss_measurement_jacobian` without the input checks (the EKF's inner loop)."""
     diff = np.asarray(positions_m, dtype=float)[..., None, :] - np.asarray(anchors_m, dtype=float)
     d2 = np.maximum(np.einsum("...i,...i->...", diff, diff), min_distance_m**2)
     slope = 10.0 * np.asarray(path_loss_exp) / np.log(10.0)
@@ -320,10 +363,7 @@ def _linear_update(x, P, z, H, R):
     if S.shape[-1] <= 2:                                      # K = P H^T S^{-1}, closed-form inverse
         K = _mT(HP) @ _inv_small(S)
     else:
-        try:
-            K = _mT(np.linalg.solve(S, HP))
-        except np.linalg.LinAlgError:
-            raise _Singular(valid.any(axis=-1) & (np.linalg.eigvalsh(S)[..., 0] <= 0)) from None
+        K = _mT(_solve_active(S, HP, valid.any(axis=-1)))
     x_new = x + (K @ nu[..., None])[..., 0]
     bad = ~np.all(np.isfinite(x_new), axis=-1)
     if bad.any():                                             # a larger S that is not positive definite
@@ -335,8 +375,7 @@ def _rss_parallel_update(x, P, z, meas: RssMeasurement):
     """Table 3.4: one update with the stacked Jacobian at the predicted state, R = sigma^2 I."""
     idx = np.asarray(meas.position_index)
     ch = meas.channel
-    grad, d = rss_measurement_jacobian(x[..., idx], meas.anchors_m, ch.path_loss_exp,
-                                       min_distance_m=meas.min_distance_m)
+    grad, d = _rss_jacobian(x[..., idx], meas.anchors_m, ch.path_loss_exp, meas.min_distance_m)
     m = z.shape[-1]
     H = np.zeros(grad.shape[:-1] + (x.shape[-1],))
     H[..., idx] = grad
@@ -428,7 +467,10 @@ def extended_kalman_filter(F, Q, x0, P0, measurements, *, record=None,
     batch = np.broadcast_shapes(x.shape[:-1], P.shape[:-2], *(np.shape(s)[:-2] for s in streams))
     x = np.broadcast_to(x, batch + (n,)).copy()
     P = np.broadcast_to(P, batch + (n, n)).copy()
-    steps = np.arange(T) if record is None else np.asarray(record, dtype=int)
+    steps = np.arange(T) if record is None else np.asarray(record)
+    if record is not None and (steps.ndim != 1 or not np.issubdtype(steps.dtype, np.integer)
+                               or np.any(steps < 0) or np.any(steps >= T) or np.unique(steps).size != steps.size):
+        raise ValueError(f"record must be distinct integer step indices in [0, {T}), got {record!r}")
     slot = np.full(T, -1)
     slot[steps] = np.arange(steps.size)
     out_x = np.empty(batch + (steps.size, n))

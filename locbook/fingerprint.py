@@ -36,9 +36,27 @@ def model_fingerprints(cells_m, readers_m, model: PathLossModel, walls_m=None, m
 
     Model parameters broadcast against the reader axis; a leading batch axis on them (e.g. online
     calibration per step, shape ``(..., m)``) gives one map per batch entry. Distances below
-    ``min_distance_m`` are clipped (a cell centre on a reader).
+    ``min_distance_m`` (> 0) are clipped (a cell centre on a reader). ``readers_m`` ``(m, 2)`` and ``walls_m``
+    ``(W, 2, 2)`` (segments) must be finite, like the cells.
     """
-    cells_m = np.asarray(cells_m, dtype=float)
+    if not isinstance(model, PathLossModel):
+        raise ValueError(f"model must be a PathLossModel, got {type(model).__name__}")
+    readers_m = as_array("readers_m", readers_m, ndim=2)
+    m, dim = readers_m.shape
+    cells_m = as_array("cells_m", cells_m, ndim=2, trailing=(dim,))
+    for name in ("ref_power_dbm", "path_loss_exp"):
+        value = np.asarray(getattr(model, name))
+        if value.ndim and value.shape[-1] != m:
+            raise ValueError(f"model.{name} must be a scalar or have shape (..., {m}) (one per reader), "
+                             f"got shape {value.shape}")
+    check_scalar("min_distance_m", min_distance_m, gt=0)
+    if walls_m is not None:
+        walls_m = as_array("walls_m", walls_m)
+        if walls_m.size and walls_m.shape != (2, 2) and (walls_m.ndim != 3 or walls_m.shape[1:] != (2, 2)):
+            raise ValueError(f"walls_m must have shape (W, 2, 2) (segments [[x1, y1], [x2, y2]]) or (2, 2) for one "
+                             f"wall, got {walls_m.shape}")
+        if dim != 2:
+            raise ValueError(f"walls need 2-D cells and readers, got dimension {dim}")
     distance = np.maximum(pairwise_distance_m(cells_m, readers_m), min_distance_m)
     n_walls = 0 if walls_m is None else wall_crossings(cells_m, readers_m, walls_m)
 
@@ -54,8 +72,25 @@ def pattern_fingerprints(rss_dbm, axis: int = -2):
 
     ``rss_dbm`` has the samples on ``axis`` (default: shape ``(C, samples, m)``); Ozkaya keeps only the
     mean of 40 vectors per location (Sec. 6.3).
+
+    Missing readings: a NaN sample is a packet the reader did not hear; each entry is the mean of the samples
+    heard. A reader that heard none of a location's samples leaves NaN in the map: :func:`knn_position`
+    rejects such a map, so fill that entry (e.g. with the reader's sensitivity floor) or drop the reader.
     """
-    return np.mean(np.asarray(rss_dbm, dtype=float), axis=axis)
+    rss_dbm = as_array("rss_dbm", rss_dbm, min_ndim=2, nan_ok=True)
+    if isinstance(axis, (bool, np.bool_)) or not isinstance(axis, (int, np.integer)) or \
+            not -rss_dbm.ndim <= axis < rss_dbm.ndim or axis % rss_dbm.ndim == rss_dbm.ndim - 1:
+        raise ValueError(f"axis must be a sample axis of rss_dbm (shape {rss_dbm.shape}), not the reader axis "
+                         f"(the last), got {axis!r}")
+    mean = np.mean(rss_dbm, axis=axis)
+    missing = np.isnan(mean)
+    if missing.any():      # the mean over the heard samples, only where some sample was not heard
+        heard = ~np.isnan(rss_dbm)
+        n_heard = heard.sum(axis=axis)
+        total = np.where(heard, rss_dbm, 0.0).sum(axis=axis)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            mean[missing] = np.where(n_heard > 0, total / n_heard, np.nan)[missing]
+    return mean
 
 
 def knn_position(rss_dbm, fingerprints_dbm, cells_m, k: int, weighting: str = "inverse_square", *,
@@ -67,22 +102,32 @@ def knn_position(rss_dbm, fingerprints_dbm, cells_m, k: int, weighting: str = "i
     ``k = C`` (all cells) is the weighted centroid used in the thesis's experiments.
 
     Missing readings: a NaN in ``rss_dbm`` is a reader not heard; that query is compared with the map over the
-    readers it heard, and with fewer than ``min_readers`` heard its position is NaN. The map itself must be
-    complete (a cell a reader never heard has no fingerprint to compare: fill it, or drop that reader).
+    readers it heard, and with fewer than ``min(min_readers, m)`` heard its position is NaN (a query that heard
+    every reader is always compared). The map itself must be complete (a cell a reader never heard has no
+    fingerprint to compare: fill it, or drop that reader); a NaN in it is an error naming the cell and reader.
+    The batch axes of ``rss_dbm`` and of a batched map must broadcast against each other.
     """
     check_choice("weighting", weighting, KNN_WEIGHTINGS)
+    _check_complete_map(fingerprints_dbm)
     fingerprints_dbm = as_array("fingerprints_dbm", fingerprints_dbm, min_ndim=2)
     m = fingerprints_dbm.shape[-1]
     rss_dbm = as_array("rss_dbm", rss_dbm, min_ndim=1, nan_ok=True, trailing=(m,))
     cells_m = as_array("cells_m", cells_m, ndim=2)
     n_cells = cells_m.shape[0]
     if fingerprints_dbm.shape[-2] != n_cells:
-        raise ValueError(f"the map has {fingerprints_dbm.shape[-2]} cells but {n_cells} cell centres were given")
+        raise ValueError(f"fingerprints_dbm has {fingerprints_dbm.shape[-2]} cells (shape {fingerprints_dbm.shape}) "
+                         f"but cells_m has {n_cells} cell centres (shape {cells_m.shape})")
+    try:
+        np.broadcast_shapes(rss_dbm.shape[:-1], fingerprints_dbm.shape[:-2])
+    except ValueError:
+        raise ValueError(f"the batch axes of rss_dbm {rss_dbm.shape[:-1]} (shape {rss_dbm.shape}) and of "
+                         f"fingerprints_dbm {fingerprints_dbm.shape[:-2]} (shape {fingerprints_dbm.shape}) must "
+                         "broadcast against each other") from None
     if isinstance(k, (bool, np.bool_)) or not isinstance(k, (int, np.integer)) or not 1 <= k <= n_cells:
         raise ValueError(f"k must be between 1 and the number of cells ({n_cells}), got {k}")
     check_scalar("min_readers", min_readers, ge=1, integer=True)
     if np.isnan(rss_dbm).any():
-        return _knn_by_heard_readers(rss_dbm, fingerprints_dbm, cells_m, k, weighting, int(min_readers))
+        return _knn_by_heard_readers(rss_dbm, fingerprints_dbm, cells_m, k, weighting, min(int(min_readers), m))
     diff = fingerprints_dbm - rss_dbm[..., None, :]
     dist2 = np.einsum("...ci,...ci->...c", diff, diff)                  # E_j^2, (..., C)
     nearest = np.argpartition(dist2, k - 1, axis=-1)[..., :k] if k < n_cells else \
@@ -98,6 +143,20 @@ def knn_position(rss_dbm, fingerprints_dbm, cells_m, k: int, weighting: str = "i
         else:   # literal Eq. (3.3): (1/E_i^2) / sum_j E_j^2, not normalised
             w = inv / e2.sum(axis=-1, keepdims=True)
     return np.einsum("...k,...kd->...d", w, cells_m[nearest])
+
+
+def _check_complete_map(fingerprints_dbm) -> None:
+    """A NaN in the map (a cell a reader never heard) is an error naming the cell and the reader."""
+    try:
+        raw = np.asarray(fingerprints_dbm, dtype=float)
+    except (TypeError, ValueError):
+        return                                   # as_array names the problem
+    missing = np.isnan(raw)
+    if raw.ndim >= 2 and missing.any():
+        where = tuple(int(i) for i in np.argwhere(missing)[0])
+        raise ValueError(f"fingerprints_dbm must be finite (the map must be complete); got {int(missing.sum())} NaN "
+                         f"value(s), the first at index {where} (cell {where[-2]}, reader {where[-1]}): fill the "
+                         "entries a reader never heard (e.g. with its sensitivity floor) or drop that reader")
 
 
 def _knn_by_heard_readers(rss_dbm, fingerprints_dbm, cells_m, k, weighting, min_readers):

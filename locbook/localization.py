@@ -15,10 +15,17 @@ axes ``(..., m)``, and returns a :class:`LocalizationResult` whose ``position_m`
 Missing readings (the library's one rule): a NaN received power or range means "not heard" (the anchor got
 no packet in that epoch). Each problem uses the anchors heard in it; problems are grouped by their pattern of
 heard anchors and each group is solved with that subset, so a problem with no NaN goes through exactly the
-computation it always did. A problem with fewer than ``min_anchors`` heard anchors (default ``dim + 1``), or
-whose heard anchors are collinear, gets a NaN position, ``converged=False`` and a ``status`` saying why,
-alone: its batch is unaffected. If the reference anchor of the linearized system is not heard, the first
-heard anchor serves as reference for that problem. Infinite readings are rejected.
+computation it always did (and a problem with one anchor missing gets exactly what the estimator gives on the
+anchors it heard). A problem with fewer than ``min_anchors`` heard anchors (default ``dim + 1``; at most the
+number of anchors), or whose heard anchors are collinear or coincide, gets a NaN position, ``converged=False``
+and a ``status`` saying why (:class:`LocalizationResult`), alone: its batch is unaffected. If the reference
+anchor of the linearized system is not heard, the first heard anchor serves as reference for that problem.
+
+Failures are per problem too: a problem the solver fails on, or whose finite readings overflow the arithmetic
+(ranges whose squares are infinite), gets NaN and ``status="solver_failed"``; no estimator raises for its
+batch (except :func:`rss_ml_position` when asked to, ``raise_on_failure=True``). Infinite readings, and
+non-finite anchors, model parameters, grids, boxes and weights, are rejected with a ``ValueError`` naming the
+argument; so are shapes that do not match (nothing is broadcast silently).
 """
 from __future__ import annotations
 
@@ -54,9 +61,18 @@ class LocalizationResult:
     """Estimated positions ``(..., dim)`` with per-problem solver information.
 
     ``converged`` is True only for a problem whose estimate is what the method promises. ``status`` (same
-    batch shape) says why not: one of :data:`LOCALIZATION_STATUSES` (``"too_few_anchors"`` heard,
-    ``"degenerate_geometry"`` of the heard anchors, ``"solver_failed"``, ``"not_converged"`` in the iteration
-    limit); such problems have a NaN position unless the solver returned its last iterate (``not_converged``).
+    batch shape) says why not: one of :data:`LOCALIZATION_STATUSES`:
+
+    - ``"ok"``: converged;
+    - ``"too_few_anchors"``: fewer than ``min_anchors`` anchors heard (module docstring, "Missing readings");
+    - ``"degenerate_geometry"``: the anchors the problem uses are collinear or coincide (for
+      :func:`lateration_wls` also: the anchors with a positive weight);
+    - ``"solver_failed"``: the solver did not reach an optimum, or the arithmetic did not give a finite
+      estimate (e.g. ranges so large that their squares overflow, or no finite start for the iterations);
+    - ``"not_converged"``: the iteration limit was reached (the last iterate is returned).
+
+    Problems with any status but ``"ok"`` and ``"not_converged"`` have a NaN position. ``cost`` is NaN where
+    no cost was evaluated.
     """
 
     position_m: np.ndarray
@@ -72,9 +88,11 @@ class LocalizationResult:
 
 
 def check_anchor_geometry(anchors_m) -> np.ndarray:
-    """Validate anchors ``(m, dim)``: at least ``dim + 1`` anchors, not all on one line (plane).
+    """Validate anchors ``(m, dim)``: finite, at least ``dim + 1`` anchors, no two at one point (closer than
+    1 nm), not all on one line (plane).
 
-    Raises :class:`DegenerateGeometryError` naming the problem.
+    Raises :class:`DegenerateGeometryError` naming the problem (``ValueError`` for a wrong shape or a
+    non-finite coordinate).
     """
     anchors_m = as_array("anchors_m", anchors_m, ndim=2)
     m, dim = anchors_m.shape
@@ -107,6 +125,24 @@ def _readings(name: str, values, m: int) -> np.ndarray:
         raise ValueError(f"{name} must have shape (..., {m}), one value per anchor ({m} anchors), "
                          f"got shape {values.shape}")
     return values
+
+
+def _has_missing(values) -> bool:
+    """Whether any reading is NaN (not heard). Decided on the readings themselves, never on quantities derived
+    from them (a linearized right-hand side can be NaN from overflow with every anchor heard)."""
+    return bool(np.isnan(np.asarray(values, dtype=float)).any())
+
+
+def _status(ok: np.ndarray, failure: str = "solver_failed") -> np.ndarray:
+    """Per-problem status: ``"ok"`` where ``ok``, else ``failure``."""
+    return np.where(ok, "ok", failure).astype("<U19")
+
+
+def _raise_if_failed(res: LocalizationResult, raise_on_failure: bool) -> LocalizationResult:
+    if raise_on_failure and not np.all(res.converged):
+        raise ConvergenceError(f"RSS maximum likelihood: {int(np.sum(~res.converged))} of {res.converged.size} "
+                               f"problems did not converge (statuses: {sorted(set(res.status.ravel().tolist()) - {'ok'})})")
+    return res
 
 
 def _ref_in_subset(ref_index: int, heard: np.ndarray) -> int:
@@ -170,10 +206,14 @@ def _lateration_by_heard(anchors_m, distance_m, ref_index: int, min_anchors: int
         method)
 
 
-def _min_anchors(min_anchors, dim: int) -> int:
+def _min_anchors(min_anchors, dim: int, m: int) -> int:
+    """``min_anchors`` checked: an integer from ``dim + 1`` (the default) to the number of anchors ``m``."""
     if min_anchors is None:
         return dim + 1
     check_scalar("min_anchors", min_anchors, ge=dim + 1, integer=True)
+    if min_anchors > m:
+        raise ValueError(f"min_anchors must be <= the number of anchors ({m}), got {min_anchors!r}: "
+                         "no problem could ever be solved")
     return int(min_anchors)
 
 
@@ -181,13 +221,14 @@ def lateration_system(anchors_m, distance_m, ref_index: int = 0):
     """Matrices of the linearized lateration system ``A p = b`` (Eq. (8), document 003).
 
     Returns ``A`` of shape ``(m-1, dim)`` (``2 (a_r - a_i)``, rows for i != r) and ``b`` of shape
-    ``(..., m-1)`` (``d_i^2 - d_r^2 - |a_i|^2 + |a_r|^2``).
+    ``(..., m-1)`` (``d_i^2 - d_r^2 - |a_i|^2 + |a_r|^2``). A NaN distance (not heard) gives NaN in the rows
+    that use it: its own row, or every row of its problem if it is the reference's.
     """
     anchors_m = check_anchor_geometry(anchors_m)
     m = anchors_m.shape[0]
     distance_m = _readings("distance_m", distance_m, m)
     if np.any(distance_m < 0):
-        raise ValueError(f"distance_m must be non-negative (NaN = not heard), got {distance_m[distance_m < 0][0]!r}")
+        raise ValueError(f"distance_m must be non-negative (NaN = not heard), got {float(distance_m[distance_m < 0][0])!r}")
     if isinstance(ref_index, (bool, np.bool_)) or not isinstance(ref_index, (int, np.integer)) or not -m <= ref_index < m:
         raise ValueError(f"ref_index must be an anchor index in [-{m}, {m - 1}], got {ref_index!r}")
     ref_index %= m
@@ -208,31 +249,41 @@ def lateration_ls(anchors_m, distance_m, ref_index: int = 0, *, min_anchors: int
     NaN distances are anchors not heard (module docstring).
     """
     a_mat, b = lateration_system(anchors_m, distance_m, ref_index)
-    min_anchors = _min_anchors(min_anchors, a_mat.shape[1])
-    if np.isnan(b).any():
+    min_anchors = _min_anchors(min_anchors, a_mat.shape[1], a_mat.shape[0] + 1)
+    if _has_missing(distance_m):
         return _lateration_by_heard(anchors_m, distance_m, ref_index, min_anchors, lateration_ls,
                                     f"lateration_ls(ref={ref_index})")
     pos = b @ np.linalg.pinv(a_mat).T
-    ok = np.all(np.isfinite(pos), axis=-1)
-    return LocalizationResult(pos, ok, None, 0, f"lateration_ls(ref={ref_index})")
+    ok = np.all(np.isfinite(pos), axis=-1)     # not finite: the squared ranges overflowed
+    return LocalizationResult(pos, ok, None, 0, f"lateration_ls(ref={ref_index})", _status(ok))
 
 
 def lateration_wls(anchors_m, distance_m, weights, ref_index: int = 0, *,
                    min_anchors: int | None = None) -> LocalizationResult:
     """Weighted linearized least squares ``p = (A^T W A)^{-1} A^T W b`` with diagonal weights
     ``(..., m-1)`` (one per differenced equation, i.e. per non-reference anchor in anchor order), batched.
-    NaN distances are anchors not heard; a problem then keeps the weights of its heard anchors."""
+
+    ``weights`` has shape ``(m-1,)`` (shared) or ``(..., m-1)`` with batch axes that broadcast to those of
+    ``distance_m`` (a scalar is not accepted); finite and non-negative. A zero weight removes its equation: a
+    problem whose positively weighted anchors (with the reference) are too few or collinear gets NaN and
+    ``status="degenerate_geometry"``. NaN distances are anchors not heard; a problem then keeps the weights of
+    its heard anchors (if the reference was not heard, the first heard anchor's weight is unused)."""
     a_mat, b = lateration_system(anchors_m, distance_m, ref_index)
-    min_anchors = _min_anchors(min_anchors, a_mat.shape[1])
+    min_anchors = _min_anchors(min_anchors, a_mat.shape[1], a_mat.shape[0] + 1)
     weights = as_array("weights", weights)
+    batch = b.shape[:-1]
     try:
-        w = np.broadcast_to(weights, b.shape)
+        fits = weights.ndim >= 1 and weights.shape[-1] == b.shape[-1] and \
+            np.broadcast_shapes(weights.shape[:-1], batch) == batch
     except ValueError:
-        raise ValueError(f"weights must broadcast to the differenced equations {b.shape} (..., m-1), "
-                         f"got shape {weights.shape}") from None
+        fits = False
+    if not fits:
+        raise ValueError(f"weights must have shape (..., {b.shape[-1]}) (one per non-reference anchor) with batch "
+                         f"axes that broadcast to the distances' batch {batch}; got shape {weights.shape}")
+    w = np.broadcast_to(weights, b.shape)
     if np.any(w < 0):
-        raise ValueError("weights must be non-negative")
-    if np.isnan(b).any():
+        raise ValueError(f"weights must be non-negative, got {float(w[w < 0][0])!r}")
+    if _has_missing(distance_m):
         anchors_m, distance_m = np.asarray(anchors_m, float), np.asarray(distance_m, float)
         m = anchors_m.shape[0]
         ref = ref_index % m
@@ -247,10 +298,47 @@ def lateration_wls(anchors_m, distance_m, weights, ref_index: int = 0, *,
 
         return _by_heard_anchors(anchors_m, distance_m, min_anchors,
                                  solve_subset, "lateration_wls")
+    if not np.all(w > 0):     # zero weights: the equations left may not fix a position
+        degenerate = _zero_weights_degenerate(np.asarray(anchors_m, float), ref_index, w)
+        if degenerate.any():
+            return _wls_partly_degenerate(a_mat, b, w, degenerate)
     ata = np.einsum("ki,...k,kj->...ij", a_mat, w, a_mat)
     atb = np.einsum("ki,...k,...k->...i", a_mat, w, b)
     pos = np.linalg.solve(ata, atb[..., None])[..., 0]
-    return LocalizationResult(pos, np.all(np.isfinite(pos), axis=-1), None, 0, "lateration_wls")
+    ok = np.all(np.isfinite(pos), axis=-1)
+    return LocalizationResult(pos, ok, None, 0, "lateration_wls", _status(ok))
+
+
+def _zero_weights_degenerate(anchors_m, ref_index: int, w) -> np.ndarray:
+    """Per problem (flattened): whether the reference and the anchors with a positive weight fail
+    :func:`check_anchor_geometry` (too few, coincident or collinear)."""
+    m = anchors_m.shape[0]
+    ref = ref_index % m
+    others = np.array([i for i in range(m) if i != ref])
+    patterns, inverse = np.unique(w.reshape(-1, m - 1) > 0, axis=0, return_inverse=True)
+    bad = np.zeros(len(patterns), bool)
+    for g, pattern in enumerate(patterns):
+        try:
+            check_anchor_geometry(anchors_m[np.r_[ref, others[pattern]]])
+        except DegenerateGeometryError:
+            bad[g] = True
+    return bad[inverse.reshape(-1)]
+
+
+def _wls_partly_degenerate(a_mat, b, w, degenerate) -> LocalizationResult:
+    """Weighted LS of the problems whose weighted equations fix a position; NaN and
+    ``"degenerate_geometry"`` for the others (whose normal matrix is singular)."""
+    batch, dim = b.shape[:-1], a_mat.shape[1]
+    flat_b, flat_w = b.reshape(-1, b.shape[-1]), w.reshape(-1, w.shape[-1])
+    good = ~degenerate
+    pos = np.full((flat_b.shape[0], dim), np.nan)
+    ata = np.einsum("ki,...k,kj->...ij", a_mat, flat_w[good], a_mat)
+    atb = np.einsum("ki,...k,...k->...i", a_mat, flat_w[good], flat_b[good])
+    pos[good] = np.linalg.solve(ata, atb[..., None])[..., 0]
+    ok = np.all(np.isfinite(pos), axis=-1)
+    status = np.where(degenerate, "degenerate_geometry", _status(ok))
+    return LocalizationResult(pos.reshape(batch + (dim,)), ok.reshape(batch), None, 0, "lateration_wls",
+                              status.reshape(batch))
 
 
 @lru_cache(maxsize=16)
@@ -268,6 +356,8 @@ def _solve_box_batch(a_mat, b, lower, upper):
     batch is halved and each half solved again, so a problem the solver cannot handle is marked alone
     (NaN, not converged) and never costs its batch. Returns positions ``(k, dim)`` and success flags."""
     k, dim = b.shape[0], a_mat.shape[1]
+    if k == 0:
+        return np.empty((0, dim)), np.ones(0, bool)
     problem, b_par, p_var = _box_problem(k, tuple(map(tuple, a_mat.tolist())), lower, upper)
     b_par.value = b
     try:
@@ -292,7 +382,7 @@ def lateration_box_ls(anchors_m, distance_m, lower_m, upper_m, ref_index: int = 
     """
     a_mat, b = lateration_system(anchors_m, distance_m, ref_index)
     dim = a_mat.shape[1]
-    min_anchors = _min_anchors(min_anchors, dim)
+    min_anchors = _min_anchors(min_anchors, dim, a_mat.shape[0] + 1)
     bounds = []
     for name, value in (("lower_m", lower_m), ("upper_m", upper_m)):
         value = as_array(name, value)
@@ -302,13 +392,30 @@ def lateration_box_ls(anchors_m, distance_m, lower_m, upper_m, ref_index: int = 
     lower, upper = bounds
     if any(lo > hi for lo, hi in zip(lower, upper)):
         raise ValueError(f"empty box: lower {lower} > upper {upper}")
-    if np.isnan(b).any():
+    if _has_missing(distance_m):
         return _lateration_by_heard(anchors_m, distance_m, ref_index, min_anchors,
                                     lambda a, d, ref: lateration_box_ls(a, d, lower, upper, ref), "lateration_box_ls")
     batch = b.shape[:-1]
-    pos, ok = _solve_box_batch(a_mat, b.reshape(-1, b.shape[-1]), lower, upper)
+    flat_b = b.reshape(-1, b.shape[-1])
+    finite = np.all(np.isfinite(flat_b), axis=-1)
+    if finite.all():
+        pos, ok = _solve_box_batch(a_mat, flat_b, lower, upper)
+    else:    # squared ranges that overflow: those problems fail alone, the solver never sees them
+        pos, ok = np.full((flat_b.shape[0], dim), np.nan), np.zeros(flat_b.shape[0], bool)
+        pos[finite], ok[finite] = _solve_box_batch(a_mat, flat_b[finite], lower, upper)
     return LocalizationResult(pos.reshape(batch + (dim,)), ok.reshape(batch), None, 0, "lateration_box_ls",
-                              np.where(ok, "ok", "solver_failed").reshape(batch))
+                              _status(ok).reshape(batch))
+
+
+def _default_start(anchors_m, power_dbm, model: PathLossModel) -> np.ndarray:
+    """The convex start of :func:`rss_ml_position`: the linearized LS fix on the model's ranges. A problem
+    whose ranges overflow (infinite) has no such fix: NaN."""
+    with np.errstate(over="ignore"):
+        ranges = model.range_m(power_dbm)
+    if np.all(np.isfinite(ranges)):
+        return lateration_ls(anchors_m, ranges).position_m
+    with np.errstate(over="ignore", invalid="ignore"):
+        return lateration_ls(anchors_m, np.where(np.isinf(ranges).any(axis=-1, keepdims=True), np.nan, ranges)).position_m
 
 
 def _rss_residual_jacobian(pos, anchors, power, model: PathLossModel, min_distance_m):
@@ -375,6 +482,12 @@ def rss_ml_position(anchors_m, power_dbm, model: PathLossModel, initial_m=None, 
     (``initial_m=grid_ml_position(...).position_m``), as the Dogan scenarios do.
     The model's parameters must be scalars or per-anchor ``(m,)`` arrays.
     A NaN power is an anchor not heard (module docstring): the problem is solved on the anchors it heard.
+
+    ``initial_m`` has shape ``(dim,)`` or ``(..., dim)`` broadcasting to the batch; a row that is all NaN
+    means "no start given" and gets the default start (so a grid fix that was NaN for too few heard anchors can
+    be passed on as it is). A problem without a finite start (its ranges overflow, e.g. for a tiny exponent)
+    gets NaN and ``status="solver_failed"`` alone; ``raise_on_failure`` raises :class:`ConvergenceError` if any
+    problem of the batch did not converge, whatever the reason.
     """
     anchors_m = check_anchor_geometry(anchors_m)
     m, dim = anchors_m.shape
@@ -383,14 +496,18 @@ def rss_ml_position(anchors_m, power_dbm, model: PathLossModel, initial_m=None, 
     check_scalar("max_iter", max_iter, ge=1, integer=True)
     check_scalar("tol_m", tol_m, gt=0)
     check_scalar("min_distance_m", min_distance_m, gt=0)
-    min_anchors = _min_anchors(min_anchors, dim)
+    min_anchors = _min_anchors(min_anchors, dim, m)
     if initial_m is not None:
-        initial_m = as_array("initial_m", initial_m)
+        initial_m = as_array("initial_m", initial_m, min_ndim=1, nan_ok=True)
         try:
             initial_m = np.broadcast_to(initial_m, power_dbm.shape[:-1] + (dim,))
         except ValueError:
             raise ValueError(f"initial_m must broadcast to {power_dbm.shape[:-1] + (dim,)}, got shape "
                              f"{initial_m.shape}") from None
+        no_start = np.isnan(initial_m)
+        if np.any(no_start.any(axis=-1) & ~no_start.all(axis=-1)):
+            raise ValueError("initial_m must be finite, or all NaN in a problem's row (no start: the default), got "
+                             f"a partly NaN row {initial_m[no_start.any(axis=-1) & ~no_start.all(axis=-1)][0].tolist()}")
     if np.isnan(power_dbm).any():
         flat = power_dbm.reshape(-1, m)
         start = None if initial_m is None else initial_m.reshape(-1, dim)
@@ -401,14 +518,29 @@ def rss_ml_position(anchors_m, power_dbm, model: PathLossModel, initial_m=None, 
                 None if start is None else start[sel], max_iter=max_iter, tol_m=tol_m,
                 min_distance_m=min_distance_m),
             "rss_ml_lm")
-        if raise_on_failure and not np.all(res.converged):
-            raise ConvergenceError(f"RSS maximum likelihood: {int(np.sum(~res.converged))} of {res.converged.size} "
-                                   f"problems did not converge (statuses: {sorted(set(res.status.ravel()) - {'ok'})})")
-        return res
+        return _raise_if_failed(res, raise_on_failure)
     if initial_m is None:
-        initial_m = lateration_ls(anchors_m, model.range_m(power_dbm)).position_m
+        initial_m = _default_start(anchors_m, power_dbm, model)
+    elif np.isnan(initial_m).any():     # rows without a start get the default one
+        initial_m = np.array(initial_m)
+        no_start = np.isnan(initial_m).all(axis=-1)
+        initial_m[no_start] = _default_start(anchors_m, power_dbm[no_start], model)
     batch, dim = power_dbm.shape[:-1], anchors_m.shape[1]
     pos = np.array(np.broadcast_to(initial_m, batch + (dim,)), dtype=float).reshape(-1, dim)
+    startable = np.all(np.isfinite(pos), axis=-1)
+    if not startable.all():           # no finite start: those problems fail alone
+        flat = power_dbm.reshape(-1, m)
+        k = flat.shape[0]
+        out, converged, cost = np.full((k, dim), np.nan), np.zeros(k, bool), np.full(k, np.nan)
+        status, n_iter = np.full(k, "solver_failed", dtype="<U19"), 0
+        if startable.any():
+            sub = rss_ml_position(anchors_m, flat[startable], model, pos[startable], max_iter=max_iter, tol_m=tol_m,
+                                  min_distance_m=min_distance_m)
+            out[startable], converged[startable], cost[startable] = sub.position_m, sub.converged, sub.cost
+            status[startable], n_iter = sub.status, sub.n_iter
+        res = LocalizationResult(out.reshape(batch + (dim,)), converged.reshape(batch), cost.reshape(batch), n_iter,
+                                 "rss_ml_lm", status.reshape(batch))
+        return _raise_if_failed(res, raise_on_failure)
     power = power_dbm.reshape(-1, power_dbm.shape[-1])
     resid, jac, d2 = _rss_residual_jacobian(pos, anchors_m, power, model, min_distance_m)
     cost = np.sum(resid**2, axis=-1)
@@ -466,9 +598,11 @@ def _check_model(model, m: int) -> None:
 
 def grid_ml_position(anchors_m, power_dbm, model: PathLossModel, grid_m, *,
                      chunk: int = 2048, min_anchors: int | None = None) -> LocalizationResult:
-    """Grid maximum likelihood: the candidate point of ``grid_m`` ``(G, 2)`` with the smallest
-    RSS-domain squared residual, for every problem; evaluated in chunks to bound memory.
-    A NaN power is an anchor not heard (module docstring): the residual runs over the heard anchors."""
+    """Grid maximum likelihood: the candidate point of ``grid_m`` ``(G, dim)`` with the smallest
+    RSS-domain squared residual, for every problem; evaluated in chunks to bound memory. ``cost`` is that
+    residual; a grid point on an anchor is taken 1 micrometre from it.
+    A NaN power is an anchor not heard (module docstring): the residual runs over the heard anchors; with fewer
+    than ``min_anchors`` heard the problem gets a NaN position, NaN cost and ``converged=False``."""
     anchors_m = check_anchor_geometry(anchors_m)
     m, dim = anchors_m.shape
     grid_m = as_array("grid_m", grid_m, ndim=2, trailing=(dim,))
@@ -477,7 +611,7 @@ def grid_ml_position(anchors_m, power_dbm, model: PathLossModel, grid_m, *,
     power = _readings("power_dbm", power_dbm, m)
     _check_model(model, m)
     check_scalar("chunk", chunk, ge=1, integer=True)
-    min_anchors = _min_anchors(min_anchors, dim)
+    min_anchors = _min_anchors(min_anchors, dim, m)
     if np.isnan(power).any():
         flat_power = power.reshape(-1, m)
         return _by_heard_anchors(
@@ -498,4 +632,9 @@ def grid_ml_position(anchors_m, power_dbm, model: PathLossModel, grid_m, *,
         best[start:start + chunk] = idx
         best_cost[start:start + chunk] = cost[np.arange(len(idx)), idx] + (block**2).sum(1)
     pos = grid_m[best].reshape(batch + (grid_m.shape[1],))
-    return LocalizationResult(pos, np.ones(batch, bool), best_cost.reshape(batch), 0, "grid_ml")
+    ok = np.isfinite(best_cost)
+    if ok.all():
+        return LocalizationResult(pos, np.ones(batch, bool), best_cost.reshape(batch), 0, "grid_ml")
+    # a cost that overflowed (powers of absurd size) has no meaningful minimum
+    pos = np.where(ok.reshape(batch)[..., None], pos, np.nan)
+    return LocalizationResult(pos, ok.reshape(batch), best_cost.reshape(batch), 0, "grid_ml", _status(ok).reshape(batch))

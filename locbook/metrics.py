@@ -7,12 +7,14 @@ with ``axis=-1``.
 Missing estimates: a problem an estimator could not solve has a NaN position (the library's missing-reading
 rule), and NaN propagates through these summaries on purpose, so a statistic is never silently computed over
 fewer problems than it claims. Drop them explicitly (``e[np.isfinite(e)]``) and report how many were dropped.
+Infinite errors are never valid (an overflowed estimate is a failure to mark NaN, not a distance): they raise
+``ValueError`` naming the argument, as do empty inputs and out-of-range options.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from ._validate import as_array
+from ._validate import as_array, check_scalar
 
 __all__ = [
     "position_error_m", "mean_error_m", "rmse_m", "median_error_m", "percentile_error_m",
@@ -20,63 +22,97 @@ __all__ = [
 ]
 
 
+def _check_errors(name: str, error_m, *, min_size: int = 1) -> None:
+    """Errors are finite or NaN (a missing estimate); the reducers keep their own arithmetic on the original."""
+    arr = as_array(name, error_m, nan_ok=True)
+    if arr.size < min_size:
+        raise ValueError(f"{name} must hold at least {min_size} value(s), got shape {arr.shape}")
+
+
 def position_error_m(estimate_m, truth_m):
-    """Euclidean distance between estimates and truths, ``(..., dim) -> (...)``."""
-    estimate_m = np.asarray(estimate_m, float)
+    """Euclidean distance between estimates and truths, ``(..., dim) -> (...)``.
+
+    ``truth_m`` may be shared by leading axes of ``estimate_m`` (e.g. ``(runs, T, 2)`` against ``(T, 2)``);
+    the last (coordinate) axis must match. A NaN estimate (not solved) gives a NaN error."""
+    estimate_m = as_array("estimate_m", estimate_m, min_ndim=1, nan_ok=True)
     truth_m = as_array("truth_m", truth_m, min_ndim=1)
-    if estimate_m.ndim < 1 or estimate_m.shape[-1] != truth_m.shape[-1]:
+    if estimate_m.shape[-1] != truth_m.shape[-1]:
         raise ValueError(f"estimate_m {estimate_m.shape} and truth_m {truth_m.shape} must end in the same dimension")
+    try:
+        np.broadcast_shapes(estimate_m.shape, truth_m.shape)
+    except ValueError:
+        raise ValueError(f"estimate_m {estimate_m.shape} and truth_m {truth_m.shape} do not pair up: truth_m must "
+                         "have the shape of estimate_m or of its trailing axes") from None
     diff = estimate_m - truth_m
     return np.sqrt(np.sum(diff**2, axis=-1))
 
 
 def mean_error_m(error_m, axis=None):
     """Mean Euclidean error, ``C = (1/N) sum_i |p_i - p_hat_i|`` (Eq. (15), document 003)."""
+    _check_errors("error_m", error_m)
     return np.mean(error_m, axis=axis)
 
 
 def rmse_m(error_m, axis=None):
     """Root mean square of the Euclidean errors."""
+    _check_errors("error_m", error_m)
     return np.sqrt(np.mean(np.square(error_m), axis=axis))
 
 
 def rmse_standard_error_m(error_m, axis=None):
     """Monte-Carlo standard error of :func:`rmse_m` by the delta method:
     ``SE(sqrt(m2)) = SE(m2) / (2 sqrt(m2))`` with ``m2`` the mean squared error."""
+    _check_errors("error_m", error_m)
     e2 = np.square(np.asarray(error_m, float))
     n = e2.size if axis is None else e2.shape[axis]
+    if n < 2:
+        raise ValueError(f"a standard error needs at least two errors along axis {axis}, got {n}")
     se_m2 = np.std(e2, axis=axis, ddof=1) / np.sqrt(n)
     return se_m2 / (2.0 * np.sqrt(np.mean(e2, axis=axis)))
 
 
 def median_error_m(error_m, axis=None):
+    """Median of the errors."""
+    _check_errors("error_m", error_m)
     return np.median(error_m, axis=axis)
 
 
 def percentile_error_m(error_m, q: float = 90.0, axis=None):
     """``q``-th percentile of the errors (linear interpolation, numpy's default)."""
+    _check_errors("error_m", error_m)
+    check_scalar("q", q, ge=0, le=100)
     return np.percentile(error_m, q, axis=axis)
 
 
 def error_std_m(error_m, axis=None, ddof: int = 0):
     """Standard deviation of the error magnitudes (population form by default; RMSE^2 = mean^2 + std^2)."""
+    _check_errors("error_m", error_m)
+    check_scalar("ddof", ddof, ge=0, integer=True)
     return np.std(error_m, axis=axis, ddof=ddof)
 
 
 def empirical_cdf(error_m):
-    """Sorted errors and their empirical CDF values ``i/N``, for plotting."""
+    """Sorted errors and their empirical CDF values ``i/N``, for plotting (NaN errors sort last)."""
+    _check_errors("error_m", error_m, min_size=0)
     x = np.sort(np.ravel(error_m))
     return x, np.arange(1, x.size + 1) / x.size
 
 
 def reduction_pct(before, after):
     """Relative reduction ``100 (before - after) / before`` (document 003: 2.2867 -> 1.0378 m is 54.62 %)."""
+    before_arr, after_arr = as_array("before", before, nan_ok=True), as_array("after", after, nan_ok=True)
+    if before_arr.ndim and after_arr.ndim and before_arr.shape != after_arr.shape:
+        raise ValueError(f"before {before_arr.shape} and after {after_arr.shape} must have the same shape "
+                         "(or one be a scalar)")
+    if np.any(before_arr == 0):
+        raise ValueError("before must be non-zero: a reduction is relative to it")
     before = np.asarray(before, float)
     return 100.0 * (before - np.asarray(after, float)) / before
 
 
 def error_summary(error_m) -> dict[str, float]:
     """All summary statistics of a set of errors, as plain floats."""
+    _check_errors("error_m", error_m)
     e = np.ravel(error_m)
     return {
         "mean_m": float(mean_error_m(e)), "rmse_m": float(rmse_m(e)),

@@ -21,11 +21,14 @@ from numbers import Integral, Real
 
 import numpy as np
 
+from ._validate import check_scalar
+
 __all__ = ["spawn_generators", "streams", "mc_standard_error", "seed_from_values", "canonical_encoding"]
 
 
 def spawn_generators(seed: int | np.random.SeedSequence, n: int) -> list[np.random.Generator]:
     """``n`` statistically independent generators from one seed."""
+    check_scalar("n", n, ge=0, integer=True)
     ss = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
     return [np.random.default_rng(child) for child in ss.spawn(n)]
 

@@ -151,10 +151,16 @@ class KinematicModel:
 
     def state_from(self, position, velocity=None, acceleration=None):
         """Assemble states ``(..., n_state)`` from per-derivative arrays ``(..., dim)`` (missing = 0)."""
-        position = np.asarray(position, dtype=float)
+        position = as_array("position", position, min_ndim=1, trailing=(self.dim,))
+        if acceleration is not None and self.order < 2:
+            raise ValueError("acceleration given to a constant-velocity (order 1) model")
         out = np.zeros(position.shape[:-1] + (self.n_state,))
-        for deriv, value in enumerate((position, velocity, acceleration)):
+        for deriv, (name, value) in enumerate((("position", position), ("velocity", velocity),
+                                               ("acceleration", acceleration))):
             if value is not None and deriv <= self.order:
+                value = as_array(name, value, trailing=(self.dim,))
+                if np.broadcast_shapes(value.shape, position.shape) != position.shape:
+                    raise ValueError(f"{name} of shape {value.shape} does not fit positions of shape {position.shape}")
                 out[..., self.index(deriv)] = value
         return out
 
@@ -180,7 +186,10 @@ def reflect_into_box(position_m, lower_m, upper_m):
     width = as_array("upper_m", upper_m) - lower
     if np.any(width <= 0):
         raise ValueError(f"the box needs upper > lower on every axis, got {lower_m} and {upper_m}")
-    folded = np.mod(np.asarray(position_m, dtype=float) - lower, 2.0 * width)
+    if lower.shape != width.shape or lower.ndim > 1:
+        raise ValueError(f"lower_m and upper_m must be corners of the same dimension, got {lower_m} and {upper_m}")
+    position_m = as_array("position_m", position_m, trailing=lower.shape)
+    folded = np.mod(position_m - lower, 2.0 * width)
     return lower + np.where(folded > width, 2.0 * width - folded, folded)
 
 

@@ -4,13 +4,17 @@ channel input checks and canonical seeds (issue 12).
 Independent oracles: numpy's lstsq, scipy's least_squares with its Huber loss (the same function as cvxpy's
 huber: r^2 within delta, 2 delta |r| - delta^2 beyond), closed-form facts about float encodings.
 """
+import re
+
 import cvxpy as cp
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy.optimize import least_squares
 
 import locbook as lb
-from locbook import calibration
+from locbook import calibration, reference_tags
 
 
 def _samples(n=60, seed=2, outliers=0):
@@ -71,11 +75,25 @@ def test_huber_fit_equals_scipy_and_resists_outliers():
     np.testing.assert_allclose(wide.path_loss_exp, lb.fit_path_loss(clean_d, clean_p).path_loss_exp, atol=1e-6)
 
 
-def test_a_solver_that_stops_early_is_reported_not_raised(monkeypatch):
+def _crashing_solve(problem, what):
+    raise cp.error.SolverError("Clarabel crashed")
+
+
+@pytest.mark.filterwarnings("ignore:Solution may be inaccurate")
+@pytest.mark.parametrize("how", ["bare_solve", "library_solve", "crash"])
+def test_a_solver_that_stops_early_is_reported_not_raised(monkeypatch, how):
     d, p = _samples()
-    monkeypatch.setattr(calibration, "solve", lambda problem, what: problem.solve(solver=cp.CLARABEL, max_iter=1))
+    if how == "bare_solve":          # the solve returns with a non-optimal status
+        monkeypatch.setattr(calibration, "solve", lambda problem, what: problem.solve(solver=cp.CLARABEL, max_iter=1))
+    elif how == "library_solve":     # the library's own solve raises ConvergenceError on a non-optimal status
+        from locbook import _cvx
+        monkeypatch.setitem(_cvx._CLARABEL_TIGHT, "max_iter", 1)
+    else:                            # the solver itself fails
+        monkeypatch.setattr(calibration, "solve", _crashing_solve)
     fit = lb.fit_path_loss(np.broadcast_to(d, (3, d.size)), np.tile(p, (3, 1)), path_loss_exp_bounds=(1.5, 3.0))
     assert not fit.ok and fit.status not in ("optimal", "closed_form")
+    if how == "crash":
+        assert fit.status == "solver_error"
     assert np.isnan(fit.ref_power_dbm).all() and np.isnan(fit.path_loss_exp).all()
 
 
@@ -93,6 +111,8 @@ def test_a_solver_that_stops_early_is_reported_not_raised(monkeypatch):
     (lambda: lb.quantize_db([1.0], step_db=float("nan")), "step_db must be finite"),
     (lambda: lb.pairwise_distance_m(np.zeros((2, 3)), np.zeros((4, 2))), "points have dimension 3"),
     (lambda: lb.smooth_rssi(np.zeros(3), np.zeros((4, 2)), np.zeros((4, 2))), r"ref_rss_dbm must have shape"),
+    (lambda: lb.smooth_rssi(np.zeros(2), np.zeros((4, 2)), np.zeros((3, 2))),
+     r"ref_expected_dbm must have shape \(\.\.\., 4, 2\), got \(3, 2\)"),
 ])
 def test_bad_input_names_the_argument(call, message):
     with pytest.raises(ValueError, match=message):
@@ -115,3 +135,207 @@ def test_seeds_come_from_a_canonical_encoding():
     assert (0.1).hex().encode() in lb.canonical_encoding(0.1)
     with pytest.raises(ValueError, match="NaN"):
         lb.seed_from_values(float("nan"))
+    with pytest.raises(ValueError, match="n must be >= 0"):
+        lb.spawn_generators(1, -2)
+
+
+# --- channel: the exponent divides in Eq. (7); walls, fading and register conversions are checked --------------
+
+@pytest.mark.parametrize("exponent", [0.0, -1.5, [2.0, 0.0]])
+def test_ranging_needs_a_positive_exponent(exponent):
+    model = lb.PathLossModel(-45.0, exponent, sigma_db=2.0)
+    with pytest.raises(ValueError, match="divides by path_loss_exp, which must be > 0"):
+        model.range_m([-60.0, -65.0])
+    with pytest.raises(ValueError, match="range_bias_factor divides by path_loss_exp"):
+        model.range_bias_factor()
+    # the forward model has no division: a zero exponent is a flat channel, P = P0
+    if np.ndim(exponent) == 0 and exponent == 0.0:
+        np.testing.assert_array_equal(model.mean_power_dbm([2.0, 7.0]), [-45.0, -45.0])
+
+
+def test_wall_counts_are_checked():
+    with pytest.raises(ValueError, match="n_walls must be non-negative"):
+        lb.PathLossModel(-45.0, 2.0).mean_power_dbm([2.0], n_walls=-1)
+    with pytest.raises(ValueError, match="n_walls must be finite"):
+        lb.PathLossModel(-45.0, 2.0, wall_attenuation_db=3.0).range_m([-60.0], n_walls=np.nan)
+
+
+def test_wall_crossings_shapes_and_counts():
+    wall = [[3.0, -1.0], [3.0, 5.0]]                                 # the line x = 3
+    anchors = [[0.0, 0.0], [6.0, 0.0]]
+    points = [[1.0, 1.0], [5.0, 2.0]]
+    # independent fact: a path crosses x = 3 iff its ends lie on opposite sides
+    expected = [[0, 1], [1, 0]]
+    np.testing.assert_array_equal(lb.wall_crossings(points, anchors, [wall]), expected)
+    np.testing.assert_array_equal(lb.wall_crossings(points, anchors, wall), expected)          # one wall (2, 2)
+    np.testing.assert_array_equal(lb.wall_crossings(points, anchors, [wall, wall]), 2 * np.array(expected))
+    np.testing.assert_array_equal(lb.wall_crossings(points, anchors, np.zeros((0, 2, 2))), np.zeros((2, 2)))
+    np.testing.assert_array_equal(lb.wall_crossings(points, anchors, []), np.zeros((2, 2)))              # no walls
+    with pytest.raises(ValueError, match=r"walls_m must have shape \(W, 2, 2\).*got \(1, 4\)"):
+        lb.wall_crossings(points, anchors, [[3.0, -1.0, 3.0, 5.0]])
+    with pytest.raises(ValueError, match=r"points_m must have shape \(\.\.\., 2\), got \(2, 3\)"):
+        lb.wall_crossings(np.zeros((2, 3)), anchors, [wall])
+    with pytest.raises(ValueError, match="anchors_m must be finite"):
+        lb.wall_crossings(points, [[0.0, np.nan], [6.0, 0.0]], [wall])
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    (dict(wavelength_m=0.0), "wavelength_m must be > 0"),
+    (dict(n_paths=0), "n_paths must be >= 1"),
+    (dict(n_paths=2.5), "n_paths must be an integer"),
+    (dict(k_factor=-1.0), "k_factor must be >= 0"),
+])
+def test_fading_arguments_are_checked(kwargs, message):
+    args = dict(wavelength_m=0.33) | kwargs
+    with pytest.raises(ValueError, match=message):
+        lb.small_scale_fading_db(np.linspace(0, 1, 5), args.pop("wavelength_m"), np.random.default_rng(0), **args)
+
+
+def test_register_conversions_keep_missing_readings():
+    np.testing.assert_array_equal(lb.register_to_dbm([-20.0, np.nan]), [-65.0, np.nan])
+    np.testing.assert_array_equal(lb.dbm_to_register([-65.0, np.nan]), [-20.0, np.nan])
+    np.testing.assert_array_equal(lb.quantize_db([-65.4, np.nan], 1.0, -90.0), [-65.0, np.nan])   # NaN not floored
+    with pytest.raises(ValueError, match="register must be finite"):
+        lb.register_to_dbm([np.inf])
+    with pytest.raises(ValueError, match="floor_dbm must be finite"):
+        lb.quantize_db([-65.0], 1.0, np.nan)
+
+
+# --- metrics ---------------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("call, message", [
+    (lambda: lb.rmse_m([1.0, np.inf]), "error_m must be finit"),
+    (lambda: lb.mean_error_m([]), r"error_m must hold at least 1 value\(s\), got shape \(0,\)"),
+    (lambda: lb.percentile_error_m([1.0, 2.0], q=101), "q must be <= 100"),
+    (lambda: lb.error_std_m([1.0, 2.0], ddof=-1), "ddof must be >= 0"),
+    (lambda: lb.rmse_standard_error_m([1.0]), "at least two errors"),
+    (lambda: lb.reduction_pct([1.0, 2.0], [1.0, 2.0, 3.0]), r"before \(2,\) and after \(3,\) must have the same shape"),
+    (lambda: lb.reduction_pct(0.0, 1.0), "before must be non-zero"),
+    (lambda: lb.position_error_m([[1.0, 2.0]], [[0.0, 0.0, 0.0]]), "must end in the same dimension"),
+    (lambda: lb.position_error_m(np.zeros((3, 2)), np.zeros((4, 2))), r"estimate_m \(3, 2\) and truth_m \(4, 2\) do not pair up"),
+    (lambda: lb.position_error_m([[np.inf, 0.0]], [[0.0, 0.0]]), "estimate_m must be finite"),
+])
+def test_metric_inputs_are_checked(call, message):
+    with pytest.raises(ValueError, match=message):
+        call()
+
+
+def test_a_missing_estimate_is_a_missing_error():
+    e = lb.position_error_m([[3.0, 4.0], [np.nan, np.nan]], [0.0, 0.0])       # truth shared by both estimates
+    assert e[0] == 5.0 and np.isnan(e[1])
+    assert np.isnan(lb.rmse_m(e))                                              # never silently over fewer problems
+
+
+# --- reference tags: NaN readings are not heard ----------------------------------------------------------------
+
+def test_pooled_sigma_leaves_out_readings_not_heard():
+    r = np.array([[1.0, -2.0, np.nan], [2.0, np.nan, 1.0]])
+    # Eq. (6.7) over the four heard residuals: sqrt((1 + 4 + 4 + 1) / 4), and with ddof = 1: / 3
+    assert reference_tags.pooled_sigma_db(r) == pytest.approx(np.sqrt(10 / 4), rel=1e-15)
+    assert reference_tags.pooled_sigma_db(r, ddof=1) == pytest.approx(np.sqrt(10 / 3), rel=1e-15)
+    rows = reference_tags.pooled_sigma_db(r, axis=-1, ddof=2)
+    assert np.isnan(rows).all()                                    # two heard, two fitted: no degrees of freedom
+    with pytest.raises(ValueError, match="ddof must be an integer"):
+        reference_tags.pooled_sigma_db(r, ddof=0.5)
+
+
+def test_reference_tag_calibration_with_a_tag_not_heard():
+    tags = np.array([[1.0, 1.0], [4.0, 1.0], [1.0, 6.0], [5.0, 5.0]])
+    readers = np.array([[0.0, 0.0], [6.0, 0.0], [0.0, 8.0]])
+    rss = lb.model_fingerprints(tags, readers, lb.PathLossModel(-45.0, 2.2)) \
+        + np.random.default_rng(4).normal(0.0, 2.0, (2, 4, 3))
+    rss[1, 2, 0] = np.nan                                                # step 1: reader 0 did not hear tag 2
+    cal = lb.calibrate_from_reference_tags(rss, tags, readers, ref_power_bounds_dbm=None, path_loss_exp_bounds=None)
+    d = lb.pairwise_distance_m(tags, readers)
+    heard = [0, 1, 3]
+    design = np.c_[np.ones(3), -10 * np.log10(d[heard, 0])]
+    ref = np.linalg.lstsq(design, rss[1, heard, 0], rcond=None)[0]       # the fit over the three tags it heard
+    np.testing.assert_allclose([cal.ref_power_dbm[1, 0], cal.path_loss_exp[1, 0]], ref, rtol=0, atol=1e-9)
+    resid = rss[1] - cal.expected_dbm[1]
+    assert cal.sigma_db[1] == pytest.approx(np.sqrt(np.nansum(resid**2) / 11), rel=1e-12)   # 11 heard readings
+    assert np.isfinite(cal.sigma_db).all()
+
+
+def test_smoothing_a_target_that_missed_a_reader_uses_the_others():
+    rng = np.random.default_rng(8)
+    ref_rss = rng.normal(-60.0, 6.0, (4, 3))
+    expected = ref_rss + rng.normal(0.0, 2.0, (4, 3))
+    target = ref_rss[2] + rng.normal(0.0, 0.5, 3)                        # close to tag 2 in RSSI space
+    holed = target.copy()
+    holed[1] = np.nan
+    got, nearest, applied = lb.smooth_rssi(holed, ref_rss, expected)
+    # the same smoothing on readers 0 and 2 only (a common factor m / 2 on every E_k^2 leaves the weights alone)
+    keep = [0, 2]
+    want, want_nearest, want_applied = lb.smooth_rssi(target[keep], ref_rss[:, keep], expected[:, keep])
+    assert nearest == want_nearest == 2 and applied == want_applied
+    np.testing.assert_allclose(got[keep], want, rtol=0, atol=1e-12)
+    assert np.isnan(got[1])
+    # a fifth tag that heard only reader 1 (which the target missed) shares nothing with the target: no weight
+    extra = np.vstack([ref_rss, [np.nan, -50.0, np.nan]])
+    got5, nearest5, applied5 = lb.smooth_rssi(holed, extra, np.vstack([expected, [0.0, -52.0, 0.0]]))
+    assert nearest5 == 2 and applied5
+    np.testing.assert_allclose(got5, got, rtol=0, atol=1e-12)
+    # a tag that heard no reader the target heard carries no weight; with none in common nothing is applied
+    lonely = ref_rss.copy()
+    lonely[:, [0, 2]] = np.nan
+    out, _, none = lb.smooth_rssi(holed, lonely, expected)
+    assert not none and np.array_equal(out, holed, equal_nan=True)
+
+
+def test_smoothing_distances_over_fewer_readers_are_rescaled():
+    # target (0, 0); tag 0 heard both readers at (3, 4): E^2 = 25; tag 1 heard reader 0 only at 4: 16 over one of
+    # two readers, rescaled to 32. Weights (1/25, 1/32) / (1/25 + 1/32) = (32, 25) / 57: tag 0 is nearest.
+    target = np.array([0.0, 0.0])
+    ref_rss = np.array([[3.0, 4.0], [4.0, np.nan]])
+    expected = np.array([[2.0, 2.0], [0.0, 0.0]])                          # tag 0's errors (1, 2)
+    got, nearest, applied = lb.smooth_rssi(target, ref_rss, expected, threshold=0.5)
+    assert nearest == 0 and applied
+    np.testing.assert_allclose(got, target - 32 / 57 * np.array([1.0, 2.0]), rtol=1e-14)
+    # the nearest tag missed reader 1, which the target heard: that component is left as it is. Tag 0 (1, -, 1):
+    # E^2 = 2 * 3 / 2 = 3; tag 1 (5, 5, 5): E^2 = 75; weights (25, 1) / 26; tag 0's errors (1, -, 1)
+    got, nearest, applied = lb.smooth_rssi(np.zeros(3), np.array([[1.0, np.nan, 1.0], [5.0, 5.0, 5.0]]), np.zeros((2, 3)))
+    assert nearest == 0 and applied
+    np.testing.assert_allclose(got, [-25 / 26, 0.0, -25 / 26], rtol=1e-14)
+
+
+# --- Hypothesis: random missing masks in a path-loss fit -------------------------------------------------------
+
+@settings(max_examples=60, deadline=None, derandomize=True)
+@given(st.lists(st.booleans(), min_size=40, max_size=40))
+def test_any_missing_mask_fits_the_heard_samples(heard):
+    d, p = _samples(n=40, seed=11)
+    heard = np.array(heard)
+    heard[:2] = True                                         # two samples at distinct distances always heard
+    holed = np.where(heard, p, np.nan)
+    fit = lb.fit_path_loss(d, holed)
+    design = np.c_[np.ones(heard.sum()), -10 * np.log10(d[heard])]
+    ref = np.linalg.lstsq(design, p[heard], rcond=None)[0]
+    np.testing.assert_allclose([fit.ref_power_dbm, fit.path_loss_exp], ref, rtol=0, atol=1e-8)
+    assert fit.n_samples == heard.sum()
+
+
+@settings(max_examples=40, deadline=None, derandomize=True)
+@given(st.sampled_from(["distance_m", "power_dbm"]), st.integers(0, 2), st.integers(1, 4))
+def test_wrong_shapes_name_the_argument(which, axis, size):
+    good = np.ones((2, 3, 5))
+    shape = list(good.shape)
+    shape[axis] = shape[axis] + size
+    bad = np.ones(shape)
+    args = {"distance_m": good, "power_dbm": good} | {which: bad}
+    got = re.escape(f"got {args['distance_m'].shape} and {args['power_dbm'].shape}")
+    with pytest.raises(ValueError, match=r"distance_m and power_dbm must both have shape .*" + got):
+        lb.calibrate_path_loss(args["distance_m"], args["power_dbm"], mode="pooled")
+
+
+def test_ozkaya_setting_streams_are_keyed_by_values_not_their_spelling():
+    from dataclasses import replace
+    from locbook.scenarios import ozkaya as oz
+    case = next(row[-1] for row in oz.simulation_cases() if row[-1].method != "nn")
+    entropy = lambda c: oz.case_seed_sequence(2011, c).entropy
+    base = replace(case, sigma0_db=0.30000000000000004)
+    assert entropy(replace(case, sigma0_db=0.1 + 0.2)) == entropy(base) != entropy(replace(case, sigma0_db=0.3))
+    assert entropy(replace(base, motion_m=np.float64(base.motion_m))) == entropy(base)
+    assert entropy(replace(base, rt=float(base.rt))) == entropy(base)                       # 10 and 10.0: one value
+    assert entropy(replace(base, k_nn=base.k_nn + 1)) == entropy(base)     # estimator only: common random numbers
+    assert entropy(replace(base, rt=base.rt + 1)) != entropy(base)         # more steps: another stream
+    assert entropy(base) == [2011, lb.seed_from_values({f: getattr(base, f) for f in oz._TRUTH_FIELDS} | {"steps": base.rt})]

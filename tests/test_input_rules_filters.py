@@ -75,6 +75,81 @@ def test_singular_innovation_covariance_is_an_error_naming_the_step():
             lb.extended_kalman_filter(MODEL.F, np.zeros((4, 4)), np.zeros((2, 4)) + 3.0, np.zeros((4, 4)), [meas])
 
 
+def test_a_missing_component_with_zero_noise_does_not_stop_the_filter():
+    """R = diag(0, 0.8), no x-spread in the prior and Q = 0: the full S = diag(0, .) is singular, but component 0
+    is never heard, so every update uses component 1 alone (filterpy with the reduced H/R); an all-missing step is
+    prediction only."""
+    z = _track()
+    z[:, 0] = np.nan
+    z[4] = np.nan
+    r_zero, p0, q0 = np.diag([0.0, 0.8]), np.diag([0.0, 1.0, 0.0, 1.0]), np.zeros((4, 4))
+    res = lb.kalman_filter(z, MODEL.F, H, q0, r_zero, X0, p0)
+    kf = KalmanFilter(dim_x=4, dim_z=2)
+    kf.F, kf.Q, kf.x, kf.P = MODEL.F, q0, X0.copy(), p0.copy()
+    for k, zk in enumerate(z):
+        kf.predict()
+        assert kf.P[0, 0] == 0.0                          # the full S really is singular at every step
+        if np.isfinite(zk[1]):
+            kf.update(zk[1:], R=r_zero[1:, 1:], H=H[1:])
+        np.testing.assert_allclose(res.x[k], kf.x, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(res.P[k], kf.P, rtol=0, atol=1e-9)
+    ekf = lb.extended_kalman_filter(MODEL.F, q0, X0, p0, [lb.LinearMeasurement(z, H, r_zero)])
+    np.testing.assert_allclose(ekf.x, res.x, rtol=0, atol=1e-9)
+
+
+def test_singular_three_component_update_names_the_offending_run():
+    """Run 1's third component has zero noise and the prior zero spread; run 0 is fine: the error names run 1."""
+    H3 = np.vstack([H, [[0.0, 0.0, 1.0, 0.0]]])
+    R3 = np.stack([np.eye(3), np.diag([1.0, 1.0, 0.0])])
+    z = np.ones((2, 4, 3))
+    with pytest.raises(lb.SingularCovarianceError, match=r"at step 0 \(run index \(1,\)\)"):
+        lb.kalman_filter(z, MODEL.F, H3, np.zeros((4, 4)), R3, X0, np.zeros((4, 4)))
+    with pytest.raises(lb.SingularCovarianceError, match=r"at step 0 \(run index \(1,\)\)"):
+        lb.extended_kalman_filter(MODEL.F, np.zeros((4, 4)), X0, np.zeros((4, 4)), [lb.LinearMeasurement(z, H3, R3)])
+
+
+_READERS = np.array([[0.0, 0.0], [8.0, 0.0], [0.0, 6.0]])
+_BAYES = lb.RssMeasurementModel(_READERS, sigma_db=3.0)
+
+
+@pytest.mark.parametrize("call, message", [
+    (lambda: lb.kalman_filter(_track(), MODEL.F, H[:, :3], MODEL.Q, R, X0, P0), r"H must have shape \(m, 4\)"),
+    (lambda: lb.kalman_filter(_track(), MODEL.F, H, MODEL.Q, R, X0, np.ones(4)), r"P0 in \(4, 4\)"),
+    (lambda: lb.extended_kalman_filter(MODEL.F, MODEL.Q, X0, P0, [lb.LinearMeasurement(_track(), H, R)], record=[20]),
+     r"record must be distinct integer step indices in \[0, 15\)"),
+    (lambda: lb.RssMeasurement(np.zeros((3, 3)), _READERS, lb.PathLossModel(sigma_db=[3.0, 4.0]), [0, 1]),
+     r"channel.sigma_db must be a scalar or end in \(1,\) or \(3,\)"),
+    (lambda: lb.rss_measurement_jacobian(np.zeros((5, 3)), _READERS, 2.0), r"positions_m must have shape \(\.\.\., 2\)"),
+    (lambda: lb.particle_filter(np.zeros((2, 3, 3)), _BAYES, np.random.default_rng(0), n_particles=10,
+                                region_m=([0, 0], [8, 6]), spread_m=float("nan")), "spread_m must be finite"),
+    (lambda: lb.particle_filter(np.zeros((2, 3, 3)), _BAYES, np.random.default_rng(0), n_particles=10,
+                                region_m=([0, 0], [8, -6])), "region_m needs upper > lower"),
+    (lambda: lb.particle_filter(np.zeros((2, 3, 4)), _BAYES, np.random.default_rng(0), n_particles=10,
+                                region_m=([0, 0], [8, 6])), r"rss_dbm must have shape \(runs, steps, 3\)"),
+    (lambda: lb.particle_filter(np.zeros((2, 3, 3)), _BAYES, np.random.default_rng(0), n_particles=10,
+                                region_m=([0, 0], [8, 6]), initial_position_m=[1.0, 1.0]),
+     r"initial_position_m must have shape \(runs, 2\)"),
+    (lambda: lb.grid_bayes_filter(np.zeros((2, 3, 3)), np.zeros((5, 3)), _BAYES), r"cells_m must have shape \(\.\.\., \*, 2\)"),
+    (lambda: lb.grid_bayes_filter(np.zeros((2, 3, 3)), np.zeros((5, 2)), _BAYES, float("nan")), "spread_m must be finite"),
+    (lambda: lb.grid_bayes_filter(np.zeros((2, 3, 3)), np.zeros((5, 2)), _BAYES, velocity_m=np.zeros((4, 2))),
+     r"velocity_m must have shape \(2,\) or \(steps, 2\)"),
+    (lambda: lb.grid_bayes_filter(np.zeros((2, 3, 3)), np.zeros((5, 2)), _BAYES, initial_belief=np.ones(4)),
+     r"initial_belief must have shape \(5,\) or \(2, 5\)"),
+    (lambda: _BAYES.log_likelihood(np.zeros((2, 4)), np.zeros((5, 2))), r"rss_dbm must have shape \(\.\.\., 3\)"),
+    (lambda: _BAYES.log_likelihood(np.zeros((2, 3)), np.zeros((1, 5, 2))), "no silent broadcasting"),
+    (lambda: _BAYES.log_likelihood(np.zeros((2, 3)), np.full((5, 2), np.nan)), "positions_m must be finite"),
+    (lambda: lb.RssMeasurementModel(_READERS, ref_power_dbm=np.zeros((2, 4, 3))).log_likelihood(
+        np.zeros((2, 3)), np.zeros((5, 2)), step=-1), r"step must be an integer in \[0, 4\)"),
+    (lambda: lb.systematic_resample([0.5, -0.1, 0.6], 0.3), "weights must be non-negative"),
+    (lambda: lb.systematic_resample([[0.5, 0.5]], [0.3, 0.2]), r"uniforms must be draws in \[0, 1\)"),
+    (lambda: lb.reflect_into_box([[np.nan, 1.0]], [0, 0], [5, 5]), "position_m must be finite"),
+    (lambda: MODEL.state_from(np.zeros((3, 3))), r"position must have shape \(\.\.\., 2\)"),
+])
+def test_bad_input_names_the_argument_more(call, message):
+    with pytest.raises(ValueError, match=message):
+        call()
+
+
 @pytest.mark.parametrize("call, message", [
     (lambda: lb.kalman_filter(_track(), MODEL.F, H, np.ones(4), R, X0, P0), r"Q must have shape \(4, 4\)"),
     (lambda: lb.kalman_filter(_track(), MODEL.F, H, MODEL.Q, np.ones(2), X0, P0), r"R must have shape \(2, 2\)"),

@@ -1,7 +1,9 @@
 """The missing-reading rule and input checks of the static estimators (issue 12).
 
 Independent facts used: a problem with a missing anchor equals the same estimator run on the heard anchors
-only; problems of a batch are independent, so a NaN in one leaves the others bit-identical.
+only; problems of a batch are independent, so a NaN in one (or a failure in one) leaves the others bit-identical;
+a zero weight removes its equation; the CRLB is the trace of the inverse of the numerical Fisher information;
+noiseless ranges give the true position; a pattern-map entry is the plain mean of the samples heard.
 """
 import numpy as np
 import pytest
@@ -130,7 +132,32 @@ def test_one_failing_box_problem_does_not_cost_its_batch(monkeypatch):
     (lambda: lb.lateration_ls(ANCHORS, np.ones(5), ref_index=5), "ref_index must be an anchor index"),
     (lambda: lb.lateration_ls(np.r_[ANCHORS, [[np.nan, 1.0]]], np.ones(6)), "anchors_m must be finite"),
     (lambda: lb.lateration_ls(np.r_[ANCHORS, [[10.0, 8.0]]], np.ones(6)), "anchors 2 and 5 coincide"),
-    (lambda: lb.lateration_wls(ANCHORS, np.ones(5), np.ones(3)), "weights must broadcast"),
+    (lambda: lb.lateration_wls(ANCHORS, np.ones(5), np.ones(3)), r"weights must have shape \(\.\.\., 4\)"),
+    (lambda: lb.lateration_wls(ANCHORS, np.ones((2, 5)), 1.0), r"weights must have shape \(\.\.\., 4\).*got shape \(\)"),
+    (lambda: lb.lateration_wls(ANCHORS, np.ones((2, 5)), np.ones((2, 1))), r"weights must have shape.*got shape \(2, 1\)"),
+    (lambda: lb.lateration_wls(ANCHORS, np.ones((2, 5)), np.ones((3, 4))), r"weights must have shape.*got shape \(3, 4\)"),
+    (lambda: lb.lateration_wls(ANCHORS, np.ones(5), [1.0, -1.0, 1.0, 1.0]), "weights must be non-negative, got -1.0"),
+    (lambda: lb.lateration_ls(ANCHORS, np.ones(5), min_anchors=6), r"min_anchors must be <= the number of anchors \(5\)"),
+    (lambda: lb.lateration_box_ls(ANCHORS, np.ones(5), 0.0, 10.0, min_anchors=3.5), "min_anchors must be an integer"),
+    (lambda: lb.rss_ml_position(ANCHORS, -60 * np.ones((2, 5)), MODEL, initial_m=[[np.nan, 1.0], [2.0, 2.0]]),
+     r"initial_m must be finite, or all NaN.*\[nan, 1.0\]"),
+    (lambda: lb.rss_ml_position(ANCHORS, -60 * np.ones(5), MODEL, initial_m=[np.inf, 1.0]), "initial_m must be finite"),
+    (lambda: lb.grid_ml_position(ANCHORS, -60 * np.ones(5), MODEL, [[1.0, np.nan]]), "grid_m must be finite"),
+    (lambda: lb.knn_position(np.zeros((5, 4)), np.zeros((3, 10, 4)), np.zeros((10, 2)), 2),
+     r"batch axes of rss_dbm \(5,\).*fingerprints_dbm \(3,\)"),
+    (lambda: lb.knn_position(np.zeros(3), np.zeros((10, 4)), np.zeros((10, 2)), 2), r"rss_dbm must have shape \(\.\.\., 4\)"),
+    (lambda: lb.knn_position(np.zeros(4), np.zeros((10, 4)), np.zeros((9, 2)), 2), "fingerprints_dbm has 10 cells.*cells_m has 9"),
+    (lambda: lb.model_fingerprints(np.zeros((5, 3)), ANCHORS, MODEL), r"cells_m must have shape \(\.\.\., 2\), got \(5, 3\)"),
+    (lambda: lb.model_fingerprints(np.zeros((5, 2)), ANCHORS, lb.PathLossModel(np.zeros(3))),
+     r"model.ref_power_dbm must be a scalar or have shape \(\.\.\., 5\)"),
+    (lambda: lb.model_fingerprints(np.zeros((5, 2)), ANCHORS, MODEL, np.zeros((2, 3))), r"walls_m must have shape"),
+    (lambda: lb.model_fingerprints(ANCHORS, ANCHORS, MODEL, min_distance_m=0.0), "min_distance_m must be > 0"),
+    (lambda: lb.pattern_fingerprints(np.zeros((6, 40, 4)), axis=-1), "axis must be a sample axis"),
+    (lambda: lb.pattern_fingerprints(np.full((6, 40, 4), np.inf)), "rss_dbm must be finite"),
+    (lambda: lb.rss_crlb_m(np.zeros((4, 3)), ANCHORS, 2.0, 4.0), r"position_m must have shape \(\.\.\., 2\)"),
+    (lambda: lb.rss_crlb_m([1.0, np.nan], ANCHORS, 2.0, 4.0), "position_m must be finite"),
+    (lambda: lb.rss_crlb_m([1.0, 1.0], ANCHORS, [2.0, 2.0], 4.0), r"path_loss_exp must be a positive scalar or \(5,\)"),
+    (lambda: lb.crlb_rms_over_area_m(np.zeros((0, 2)), ANCHORS, 2.0, 4.0), "points_m must hold at least one"),
     (lambda: lb.lateration_box_ls(ANCHORS, np.ones(5), [0, 0, 0], [1, 1]), r"lower_m must be a scalar or have shape \(2,\)"),
     (lambda: lb.rss_ml_position(ANCHORS, np.ones(5), lb.PathLossModel(np.zeros(3))), r"model.ref_power_dbm must be a scalar or have shape \(5,\)"),
     (lambda: lb.rss_ml_position(ANCHORS, -60 * np.ones(5), MODEL, initial_m=np.zeros(3)), "initial_m must broadcast"),
@@ -190,3 +217,239 @@ def test_knn_compares_over_the_heard_readers():
                                lb.knn_position(query[4, [2, 3]], fp[:, [2, 3]], cells, k=4), rtol=1e-12)
     with pytest.raises(ValueError, match="fingerprints_dbm must be finite"):
         lb.knn_position(query, np.where(fp > -50, np.nan, fp), cells, k=4)
+
+
+# -- zero weights, overflow, empty batches: failures stay with their problem ------------------------------------
+def test_zero_weights_drop_their_equations_and_a_degenerate_problem_fails_alone():
+    truth = np.array([[3.0, 4.0], [6.0, 7.0], [2.0, 9.0]])
+    d = lb.pairwise_distance_m(truth, ANCHORS) + np.array([0.1, -0.2, 0.3, 0.05, -0.1])
+    w = np.array([[1.0, 0.0, 0.0, 0.0],      # reference 0 and anchor 1 only: two anchors, no 2-D fix
+                  [2.0, 0.0, 0.0, 5.0],      # anchors 0, 1, 4: two equations, two unknowns
+                  [1.0, 1.0, 1.0, 1.0]])     # equal weights: ordinary least squares
+    res = lb.lateration_wls(ANCHORS, d, w)
+    assert res.status.tolist() == ["degenerate_geometry", "ok", "ok"] and np.isnan(res.position_m[0]).all()
+    assert res.converged.tolist() == [False, True, True]
+    # independent facts: a zero weight removes its equation; a square system is solved exactly; equal weights = LS
+    np.testing.assert_allclose(res.position_m[1], lb.lateration_ls(ANCHORS[[0, 1, 4]], d[1, [0, 1, 4]]).position_m,
+                               atol=1e-12)
+    np.testing.assert_allclose(res.position_m[2], lb.lateration_ls(ANCHORS, d[2]).position_m, atol=1e-12)
+    np.testing.assert_array_equal(res.position_m[1:], lb.lateration_wls(ANCHORS, d[1:], w[1:]).position_m)
+
+
+def _with_overflow(values, row, cols, value):
+    values = values.copy()
+    values[row, cols] = value
+    return values
+
+
+@pytest.mark.parametrize("name", ["ls", "wls", "box"])
+def test_ranges_that_overflow_fail_their_problem_alone(name):
+    """Finite ranges of 1e200 m square to infinity; before, the NaN they made in the linear system was taken for a
+    missing reading and the estimator recursed on the same problem without end."""
+    est = {"ls": lambda d: lb.lateration_ls(ANCHORS, d),
+           "wls": lambda d: lb.lateration_wls(ANCHORS, d, np.arange(1.0, 5.0)),
+           "box": lambda d: lb.lateration_box_ls(ANCHORS, d, *BOX)}[name]
+    _, power = _batch(6)
+    d = _with_overflow(MODEL.range_m(power), 2, [0, 1], 1e200)
+    with np.errstate(over="ignore", invalid="ignore"):
+        res = est(d)
+    keep = [0, 1, 3, 4, 5]
+    assert res.status[2] == "solver_failed" and not res.converged[2] and np.isnan(res.position_m[2]).all()
+    assert res.converged[keep].all()
+    alone = est(d[keep])
+    if name == "box":
+        np.testing.assert_allclose(res.position_m[keep], alone.position_m, atol=1e-6)
+    else:
+        np.testing.assert_array_equal(res.position_m[keep], alone.position_m)
+
+
+def test_rss_ml_without_a_finite_start_fails_alone():
+    """A power of -20000 dBm is finite, but its range overflows, so the linearized start does not exist."""
+    _, power = _batch(6)
+    holed = _with_overflow(power, 1, 0, -20000.0)
+    res = lb.rss_ml_position(ANCHORS, holed, MODEL)
+    keep = [0, 2, 3, 4, 5]
+    assert res.status[1] == "solver_failed" and not res.converged[1] and np.isnan(res.position_m[1]).all()
+    np.testing.assert_array_equal(res.position_m[keep], lb.rss_ml_position(ANCHORS, power[keep], MODEL).position_m)
+    assert res.converged[keep].all()
+    with pytest.raises(lb.ConvergenceError, match="solver_failed"):
+        lb.rss_ml_position(ANCHORS, holed, MODEL, raise_on_failure=True)
+
+
+def test_grid_ml_with_an_overflowing_cost_fails_alone():
+    _, power = _batch(4)
+    grid = ANCHORS + 0.5
+    holed = _with_overflow(power, 2, 0, 1e300)
+    with np.errstate(over="ignore"):
+        res = lb.grid_ml_position(ANCHORS, holed, MODEL, grid)
+    assert res.status.tolist() == ["ok", "ok", "solver_failed", "ok"] and np.isnan(res.position_m[2]).all()
+    np.testing.assert_array_equal(res.position_m[[0, 1, 3]],
+                                  lb.grid_ml_position(ANCHORS, power[[0, 1, 3]], MODEL, grid).position_m)
+
+
+@pytest.mark.parametrize("name", list(ESTIMATORS))
+def test_an_empty_batch_gives_an_empty_answer(name):
+    res = ESTIMATORS[name](ANCHORS, np.zeros((0, 5)) - 60.0)
+    assert res.position_m.shape == (0, 2) and res.converged.shape == (0,) and res.status.shape == (0,)
+
+
+def test_nan_start_rows_take_the_default_start_so_a_grid_fix_chains():
+    """The Dogan recipe, a grid fix refined by ML, with a problem that heard two anchors: the grid gives NaN there,
+    which ``rss_ml_position`` takes as "no start" (before, it refused the whole batch)."""
+    _, power = _batch(6)
+    holed = _with_overflow(power, 3, [0, 1, 2], np.nan)
+    grid = np.stack(np.meshgrid(np.arange(-1, 11.5, 0.5), np.arange(-1, 13.5, 0.5)), -1).reshape(-1, 2)
+    start = lb.grid_ml_position(ANCHORS, holed, MODEL, grid).position_m
+    assert np.isnan(start[3]).all()
+    res = lb.rss_ml_position(ANCHORS, holed, MODEL, start)
+    keep = [0, 1, 2, 4, 5]
+    assert res.status[3] == "too_few_anchors" and res.converged[keep].all()
+    np.testing.assert_array_equal(res.position_m[keep],
+                                  lb.rss_ml_position(ANCHORS, power[keep], MODEL, start[keep]).position_m)
+    # all heard, some rows without a start: those rows equal the default-start answer
+    mixed = start.copy()
+    mixed[3] = start[0]
+    mixed[[0, 4]] = np.nan
+    res = lb.rss_ml_position(ANCHORS, power, MODEL, mixed)
+    np.testing.assert_allclose(res.position_m[[0, 4]], lb.rss_ml_position(ANCHORS, power[[0, 4]], MODEL).position_m,
+                               rtol=0, atol=1e-9)
+    np.testing.assert_array_equal(res.position_m[[1, 2, 3, 5]],
+                                  lb.rss_ml_position(ANCHORS, power[[1, 2, 3, 5]], MODEL, mixed[[1, 2, 3, 5]]).position_m)
+
+
+@pytest.mark.parametrize("name", ["ls", "wls", "box", "grid"])
+def test_target_on_an_anchor_with_another_anchor_missing(name):
+    """Zero distance to anchor 2 (and anchor 4 not heard): the estimate is anchor 2 itself."""
+    d = lb.pairwise_distance_m(ANCHORS[2], ANCHORS)[None]
+    for holed in (d, _with_overflow(d, 0, 4, np.nan)):
+        if name == "grid":    # noiseless powers at the grid's own distance floor (1e-6 m) for the anchor
+            power = MODEL.mean_power_dbm(np.maximum(np.nan_to_num(holed, nan=1.0), 1e-6))
+            power[np.isnan(holed)] = np.nan
+            grid = np.stack(np.meshgrid(np.arange(0, 10.5, 0.5), np.arange(0, 12.5, 0.5)), -1).reshape(-1, 2)
+            res = lb.grid_ml_position(ANCHORS, power, MODEL, grid)
+        else:
+            res = {"ls": lambda: lb.lateration_ls(ANCHORS, holed),
+                   "wls": lambda: lb.lateration_wls(ANCHORS, holed, [1.0, 2.0, 3.0, 4.0]),
+                   "box": lambda: lb.lateration_box_ls(ANCHORS, holed, *BOX)}[name]()
+        np.testing.assert_allclose(res.position_m[0], ANCHORS[2], atol=1e-6 if name == "box" else 1e-9)
+        assert res.converged[0] and res.status[0] == "ok"
+
+
+# -- k-NN and the maps -------------------------------------------------------------------------------------------
+def test_knn_minimum_is_capped_at_the_readers_of_the_map():
+    """With a two-reader map a query that heard both readers is always compared (default min_readers 3), in a batch
+    with missing readings too; one reader heard is too few."""
+    fp = np.array([[-50.0, -60.0], [-52.0, -60.0], [-50.0, -62.0]])
+    cells = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
+    res = lb.knn_position(np.array([[-51.6, -60.0], [-50.0, np.nan]]), fp, cells, k=1)
+    np.testing.assert_array_equal(res[0], cells[1])              # E^2 = 0.16 to cell 1, 2.56 to cell 0
+    assert np.isnan(res[1]).all()
+
+
+def test_knn_names_the_incomplete_map_entry():
+    fp = np.full((5, 3), -60.0)
+    fp[3, 1] = np.nan
+    with pytest.raises(ValueError, match=r"cell 3, reader 1.*fill"):
+        lb.knn_position(np.full(3, -60.0), fp, np.zeros((5, 2)), k=2)
+
+
+def test_pattern_map_averages_the_heard_samples():
+    rng = np.random.default_rng(4)
+    samples = rng.normal(-60, 5, (4, 6, 3))
+    samples[1, [0, 2], 0] = np.nan                 # two packets missed by reader 0 at location 1
+    samples[2, :, 2] = np.nan                      # reader 2 never heard location 2
+    fp = lb.pattern_fingerprints(samples)
+    for c in range(4):
+        for r in range(3):
+            heard = [v for v in samples[c, :, r] if not np.isnan(v)]
+            if heard:
+                assert fp[c, r] == pytest.approx(sum(heard) / len(heard), rel=1e-14)
+            else:
+                assert np.isnan(fp[c, r])
+    np.testing.assert_array_equal(fp[[0, 3]], np.mean(samples[[0, 3]], axis=-2))   # complete locations untouched
+    with pytest.raises(ValueError, match="cell 2, reader 2"):
+        lb.knn_position(np.full(3, -60.0), fp, np.zeros((4, 2)), k=2)
+
+
+# -- the CRLB in any dimension -----------------------------------------------------------------------------------
+def test_crlb_in_3d_is_the_trace_of_the_inverse_numerical_fisher_information():
+    anchors = np.array([[0.0, 0.0, 0.0], [6.0, 0.0, 0.5], [0.0, 5.0, 1.0], [5.0, 5.0, 3.0], [2.0, 1.0, 3.0]])
+    model = lb.PathLossModel(-45.0, 2.3, 4.0)
+    p = np.array([2.1, 1.7, 0.9])
+    eps = 1e-6
+    jac = np.stack([(model.mean_power_dbm(lb.pairwise_distance_m(p + eps * e, anchors))
+                     - model.mean_power_dbm(lb.pairwise_distance_m(p - eps * e, anchors))) / (2 * eps)
+                    for e in np.eye(3)], axis=1)
+    expected = np.sqrt(np.trace(np.linalg.inv(jac.T @ jac / 16.0)))
+    assert lb.rss_crlb_m(p, anchors, 2.3, 4.0) == pytest.approx(expected, rel=1e-6)
+
+
+# -- properties: random masks with a minimum, collinear subsets, degenerate anchors ------------------------------
+@settings(max_examples=60, deadline=None, derandomize=True)
+@given(mask=arrays(bool, (10, 5)), name=st.sampled_from(["ls", "grid", "ml"]), min_anchors=st.sampled_from([4, 5]))
+def test_property_random_masks_with_a_minimum(mask, name, min_anchors):
+    _, power = _batch(10, seed=5)
+    res = ESTIMATORS[name](ANCHORS, np.where(mask, np.nan, power), min_anchors=min_anchors)
+    for i in range(10):
+        heard = np.flatnonzero(~mask[i])
+        if heard.size < min_anchors:
+            assert res.status[i] == "too_few_anchors" and not res.converged[i] and np.isnan(res.position_m[i]).all()
+        else:
+            sub = ESTIMATORS[name](ANCHORS[heard], power[i:i + 1, heard])
+            np.testing.assert_allclose(res.position_m[i], sub.position_m[0], atol=1e-9)
+            assert res.status[i] == sub.status[0]
+
+
+COLLINEAR3 = np.array([[0.0, 0.0], [5.0, 0.0], [10.0, 0.0], [5.0, 8.0], [0.0, 8.0]])   # anchors 0, 1, 2 on a line
+
+
+@settings(max_examples=60, deadline=None, derandomize=True)
+@given(mask=arrays(bool, (10, 5)), name=st.sampled_from(["ls", "wls", "grid"]))
+def test_property_collinear_heard_subsets_are_degenerate(mask, name):
+    truth = np.random.default_rng(2).uniform([1, 1], [9, 7], (10, 2))
+    power = MODEL.mean_power_dbm(lb.pairwise_distance_m(truth, COLLINEAR3))
+    res = ESTIMATORS[name](COLLINEAR3, np.where(mask, np.nan, power))
+    for i in range(10):
+        heard = np.flatnonzero(~mask[i])
+        expected = ("too_few_anchors" if heard.size < 3 else
+                    "degenerate_geometry" if set(heard) <= {0, 1, 2} else "ok")
+        assert res.status[i] == expected
+        assert res.converged[i] == (expected == "ok") and np.isnan(res.position_m[i]).all() == (expected != "ok")
+        if expected == "ok" and name != "grid":     # noiseless ranges: the exact position
+            np.testing.assert_allclose(res.position_m[i], truth[i], atol=1e-8)
+
+
+@settings(max_examples=80, deadline=None, derandomize=True)
+@given(anchors=arrays(float, (4, 2), elements=st.floats(-50, 50)), which=st.integers(0, 3),
+       t=arrays(float, 4, elements=st.floats(-20, 20), unique=True), kind=st.sampled_from(["coincident", "collinear"]))
+def test_property_degenerate_anchors_are_rejected(anchors, which, t, kind):
+    if kind == "coincident":
+        bad = np.vstack([anchors, anchors[which]])
+        match = "coincide"
+    else:    # points a + t u on one line; distinct t, at least 1e-3 apart
+        if np.min(np.diff(np.sort(t))) < 1e-3:
+            return
+        bad = anchors[which] + t[:, None] * np.array([0.6, -0.8])
+        match = "collinear"
+    with pytest.raises(lb.DegenerateGeometryError, match=match):
+        lb.check_anchor_geometry(bad)
+    with pytest.raises(lb.DegenerateGeometryError):
+        lb.lateration_ls(bad, np.ones(len(bad)))
+
+
+@settings(max_examples=40, deadline=None, derandomize=True)
+@given(mask=arrays(bool, (8, 5)))
+def test_property_box_random_masks(mask):
+    """Box LS over random masks: each problem is the box LS of its heard anchors (to the solver's tolerance), too few
+    heard gives NaN, and the box holds."""
+    _, power = _batch(8, seed=6)
+    res = ESTIMATORS["box"](ANCHORS, np.where(mask, np.nan, power))
+    for i in range(8):
+        heard = np.flatnonzero(~mask[i])
+        if heard.size < 3:
+            assert res.status[i] == "too_few_anchors" and np.isnan(res.position_m[i]).all()
+            continue
+        sub = ESTIMATORS["box"](ANCHORS[heard], power[i:i + 1, heard])
+        np.testing.assert_allclose(res.position_m[i], sub.position_m[0], atol=1e-6)
+        assert res.status[i] == "ok" and np.all(res.position_m[i] >= np.array(BOX[0]) - 1e-7) \
+            and np.all(res.position_m[i] <= np.array(BOX[1]) + 1e-7)

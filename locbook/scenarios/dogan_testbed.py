@@ -126,7 +126,8 @@ def fit_calibration(power_dbm, distance_m) -> PathLossFit:
     over every packet of ``power_dbm`` ``(P, packets, m)`` at ``distance_m`` ``(P, m)``."""
     power_dbm = np.asarray(power_dbm, float)
     d = np.broadcast_to(np.asarray(distance_m, float)[:, None, :], power_dbm.shape)
-    return calibrate_path_loss(d.reshape(-1, d.shape[-1]), power_dbm.reshape(-1, d.shape[-1]), "pooled")
+    return calibrate_path_loss(d.reshape(-1, d.shape[-1]), power_dbm.reshape(-1, d.shape[-1]), "pooled",
+                               solver="cvxpy")
 
 
 def orientation_gain_db(theta_deg, *, quadrupole_db: float = 4.0, dipole_db: float = 3.0,

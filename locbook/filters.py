@@ -185,24 +185,16 @@ def kalman_filter(z, F, H, Q, R, x0, P0, *, predict_first: bool = True,
             P_new = IKH @ P_use                                # P = (I-KH)P
         P_new = 0.5 * (P_new + _mT(P_new))
         if partial.any():
-            # missing components: zero rows of H, zero innovation and a decoupled unit noise give them an
-            # exactly zero gain column, so the present components update as they would alone
-            Hm = np.where(finite[..., :, None], H, 0.0)
-            Rm = np.where(finite[..., :, None] & finite[..., None, :], R, np.eye(m))
-            nu_p = np.where(finite, np.where(finite, z_raw, 0.0) - x_use @ _mT(H), 0.0)
-            Sp = Hm @ P_use @ _mT(Hm) + Rm
-            if (partial & _not_positive_definite(Sp)).any():
-                _raise_singular(k, partial & _not_positive_definite(Sp))
+            # missing components: the EKF's masked update (their gain columns are exactly zero), so the present
+            # components update as they would alone
             try:
-                Kp = _mT(_solve_active(Sp, Hm @ P_use, partial))
+                xp_new, Pp_new = _linear_update(x_use, P_use, np.where(partial[..., None], z_raw, np.nan), H, R,
+                                                joseph=joseph)
             except _Singular as exc:
                 _raise_singular(k, exc.bad)
-            xp_new = x_use + (Kp @ nu_p[..., None])[..., 0]
-            IKHp = eye - Kp @ Hm
-            Pp_new = (IKHp @ P_use @ _mT(IKHp) + Kp @ Rm @ _mT(Kp)) if joseph else IKHp @ P_use
             x_new = np.where(partial[..., None], xp_new, x_new)
-            P_new = np.where(partial[..., None, None], 0.5 * (Pp_new + _mT(Pp_new)), P_new)
-            nu = np.where(partial[..., None], np.where(finite, nu_p, np.nan), nu)
+            P_new = np.where(partial[..., None, None], Pp_new, P_new)
+            nu = np.where(partial[..., None], np.where(finite, z_raw - x_use @ _mT(H), np.nan), nu)
             valid = valid | partial
         x = np.where(valid[..., None], x_new, x_pred)
         P = np.where(valid[..., None, None], P_new, P_pred)
@@ -343,9 +335,10 @@ def _inv_small(S):
     return inv / det[..., None, None]
 
 
-def _linear_update(x, P, z, H, R):
+def _linear_update(x, P, z, H, R, *, joseph: bool = True):
     """Kalman update with missing rows: a NaN component gets a zero row in H, a zero innovation and a unit
-    decoupled noise, so its gain column is exactly zero and the other rows update as usual."""
+    decoupled noise, so its gain column is exactly zero and the other rows update as usual. ``joseph=False``:
+    the short covariance form ``(I - K H) P`` (symmetrised)."""
     valid = np.isfinite(z)
     if not valid.any():
         return x, P
@@ -368,7 +361,10 @@ def _linear_update(x, P, z, H, R):
     bad = ~np.all(np.isfinite(x_new), axis=-1)
     if bad.any():                                             # a larger S that is not positive definite
         raise _Singular(bad)
-    return x_new, _joseph(P, K, H, R)
+    if joseph:
+        return x_new, _joseph(P, K, H, R)
+    short = (np.eye(P.shape[-1]) - K @ H) @ P
+    return x_new, 0.5 * (short + _mT(short))
 
 
 def _rss_parallel_update(x, P, z, meas: RssMeasurement):

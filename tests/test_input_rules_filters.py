@@ -43,10 +43,11 @@ def test_kalman_filter_updates_with_the_components_present():
     z[3, 0] = np.nan                  # one component missing: the other must still update
     z[7, 1] = np.nan
     z[10] = np.nan                    # all missing: prediction only
-    res = lb.kalman_filter(z, MODEL.F, H, MODEL.Q, R, X0, P0)
     x_ref, P_ref = filterpy_reference(z)
-    np.testing.assert_allclose(res.x, x_ref, rtol=0, atol=1e-9)
-    np.testing.assert_allclose(res.P, P_ref, rtol=0, atol=1e-9)
+    for joseph in (True, False):      # the short form (I - K H) P equals Joseph's in exact arithmetic
+        res = lb.kalman_filter(z, MODEL.F, H, MODEL.Q, R, X0, P0, joseph=joseph)
+        np.testing.assert_allclose(res.x, x_ref, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(res.P, P_ref, rtol=0, atol=1e-9)
     assert np.isnan(res.innovation[3, 0]) and np.isfinite(res.innovation[3, 1])
 
 

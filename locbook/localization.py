@@ -194,6 +194,23 @@ def _by_heard_anchors(anchors_m, readings, min_anchors, solve_subset, method: st
                               method, status.reshape(batch))
 
 
+def _solve_where(usable, batch, dim: int, solve, method: str, failure: str) -> LocalizationResult:
+    """Solve the problems where the flat mask ``usable`` holds with ``solve(indices) -> LocalizationResult`` of
+    those problems; the others get NaN, ``converged=False`` and status ``failure``, alone."""
+    k = usable.size
+    pos, converged, cost = np.full((k, dim), np.nan), np.zeros(k, bool), np.full(k, np.nan)
+    status, n_iter = np.full(k, failure, dtype="<U19"), 0
+    if usable.any():
+        sel = np.flatnonzero(usable)
+        res = solve(sel)
+        pos[sel], converged[sel], status[sel] = res.position_m.reshape(-1, dim), res.converged.ravel(), res.status.ravel()
+        if res.cost is not None:
+            cost[sel] = res.cost.ravel()
+        n_iter = res.n_iter
+    return LocalizationResult(pos.reshape(batch + (dim,)), converged.reshape(batch), cost.reshape(batch), n_iter,
+                              method, status.reshape(batch))
+
+
 def _lateration_by_heard(anchors_m, distance_m, ref_index: int, min_anchors: int, solve, method: str):
     """:func:`_by_heard_anchors` for the linearized systems: ``solve(anchors, distances, ref_index)`` on each
     group's heard anchors, the reference kept if heard."""
@@ -301,7 +318,11 @@ def lateration_wls(anchors_m, distance_m, weights, ref_index: int = 0, *,
     if not np.all(w > 0):     # zero weights: the equations left may not fix a position
         degenerate = _zero_weights_degenerate(np.asarray(anchors_m, float), ref_index, w)
         if degenerate.any():
-            return _wls_partly_degenerate(a_mat, b, w, degenerate)
+            m = a_mat.shape[0] + 1
+            flat_d, flat_w = np.asarray(distance_m, float).reshape(-1, m), w.reshape(-1, m - 1)
+            return _solve_where(~degenerate, batch, a_mat.shape[1],
+                                lambda sel: lateration_wls(anchors_m, flat_d[sel], flat_w[sel], ref_index),
+                                "lateration_wls", "degenerate_geometry")
     ata = np.einsum("ki,...k,kj->...ij", a_mat, w, a_mat)
     atb = np.einsum("ki,...k,...k->...i", a_mat, w, b)
     pos = np.linalg.solve(ata, atb[..., None])[..., 0]
@@ -323,22 +344,6 @@ def _zero_weights_degenerate(anchors_m, ref_index: int, w) -> np.ndarray:
         except DegenerateGeometryError:
             bad[g] = True
     return bad[inverse.reshape(-1)]
-
-
-def _wls_partly_degenerate(a_mat, b, w, degenerate) -> LocalizationResult:
-    """Weighted LS of the problems whose weighted equations fix a position; NaN and
-    ``"degenerate_geometry"`` for the others (whose normal matrix is singular)."""
-    batch, dim = b.shape[:-1], a_mat.shape[1]
-    flat_b, flat_w = b.reshape(-1, b.shape[-1]), w.reshape(-1, w.shape[-1])
-    good = ~degenerate
-    pos = np.full((flat_b.shape[0], dim), np.nan)
-    ata = np.einsum("ki,...k,kj->...ij", a_mat, flat_w[good], a_mat)
-    atb = np.einsum("ki,...k,...k->...i", a_mat, flat_w[good], flat_b[good])
-    pos[good] = np.linalg.solve(ata, atb[..., None])[..., 0]
-    ok = np.all(np.isfinite(pos), axis=-1)
-    status = np.where(degenerate, "degenerate_geometry", _status(ok))
-    return LocalizationResult(pos.reshape(batch + (dim,)), ok.reshape(batch), None, 0, "lateration_wls",
-                              status.reshape(batch))
 
 
 @lru_cache(maxsize=16)
@@ -398,11 +403,12 @@ def lateration_box_ls(anchors_m, distance_m, lower_m, upper_m, ref_index: int = 
     batch = b.shape[:-1]
     flat_b = b.reshape(-1, b.shape[-1])
     finite = np.all(np.isfinite(flat_b), axis=-1)
-    if finite.all():
-        pos, ok = _solve_box_batch(a_mat, flat_b, lower, upper)
-    else:    # squared ranges that overflow: those problems fail alone, the solver never sees them
-        pos, ok = np.full((flat_b.shape[0], dim), np.nan), np.zeros(flat_b.shape[0], bool)
-        pos[finite], ok[finite] = _solve_box_batch(a_mat, flat_b[finite], lower, upper)
+    if not finite.all():     # squared ranges that overflow: those problems fail alone, the solver never sees them
+        flat_d = np.asarray(distance_m, float).reshape(-1, a_mat.shape[0] + 1)
+        return _solve_where(finite, batch, dim,
+                            lambda sel: lateration_box_ls(anchors_m, flat_d[sel], lower, upper, ref_index),
+                            "lateration_box_ls", "solver_failed")
+    pos, ok = _solve_box_batch(a_mat, flat_b, lower, upper)
     return LocalizationResult(pos.reshape(batch + (dim,)), ok.reshape(batch), None, 0, "lateration_box_ls",
                               _status(ok).reshape(batch))
 
@@ -530,16 +536,10 @@ def rss_ml_position(anchors_m, power_dbm, model: PathLossModel, initial_m=None, 
     startable = np.all(np.isfinite(pos), axis=-1)
     if not startable.all():           # no finite start: those problems fail alone
         flat = power_dbm.reshape(-1, m)
-        k = flat.shape[0]
-        out, converged, cost = np.full((k, dim), np.nan), np.zeros(k, bool), np.full(k, np.nan)
-        status, n_iter = np.full(k, "solver_failed", dtype="<U19"), 0
-        if startable.any():
-            sub = rss_ml_position(anchors_m, flat[startable], model, pos[startable], max_iter=max_iter, tol_m=tol_m,
-                                  min_distance_m=min_distance_m)
-            out[startable], converged[startable], cost[startable] = sub.position_m, sub.converged, sub.cost
-            status[startable], n_iter = sub.status, sub.n_iter
-        res = LocalizationResult(out.reshape(batch + (dim,)), converged.reshape(batch), cost.reshape(batch), n_iter,
-                                 "rss_ml_lm", status.reshape(batch))
+        res = _solve_where(startable, batch, dim,
+                           lambda sel: rss_ml_position(anchors_m, flat[sel], model, pos[sel], max_iter=max_iter,
+                                                       tol_m=tol_m, min_distance_m=min_distance_m),
+                           "rss_ml_lm", "solver_failed")
         return _raise_if_failed(res, raise_on_failure)
     power = power_dbm.reshape(-1, power_dbm.shape[-1])
     resid, jac, d2 = _rss_residual_jacobian(pos, anchors_m, power, model, min_distance_m)

@@ -41,7 +41,7 @@ import threading
 import time
 import uuid
 from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from html import escape
 from importlib import metadata
 from pathlib import Path
@@ -78,7 +78,6 @@ class SuiteRun:
     outcomes: list[Outcome]
     report_dir: Path
     interrupted_by: int | None = None
-    notices: list[str] = field(default_factory=list)
 
     def count(self, status: str) -> int:
         return sum(o.status == status for o in self.outcomes)
@@ -239,9 +238,10 @@ def _validate_report(folder: Path, exp_id: str) -> str:
     return ""
 
 
-def _data_hashes(staging: Path, roots: list[Path]) -> dict[str, str]:
-    logged = (staging / ".data-read.log")
-    paths = sorted(set(logged.read_text().split())) if logged.exists() else []
+def _data_hashes(staging: Path) -> dict[str, str]:
+    """SHA-256 of every data file the worker logged as read (see locbook._datalog)."""
+    logged = staging / ".data-read.log"
+    paths = sorted(set(logged.read_text(encoding="utf-8").splitlines())) if logged.exists() else []
     return {p: _sha256(Path(p)) for p in paths if Path(p).is_file()}
 
 
@@ -546,8 +546,7 @@ def _run_locked(suite, experiments, profile, resolved, report_dir, data_roots, j
         error = result["error"] or _validate_report(staging, eid)
         if not error:
             try:
-                _promote(by_id[eid], profile, resolved[eid], staging, report_dir, stamp, keys[eid], result,
-                         data_roots)
+                _promote(by_id[eid], profile, resolved[eid], staging, report_dir, stamp, keys[eid], result)
             except OSError as exc:
                 error = f"could not write the report: {exc.strerror or exc}"
         if error:
@@ -604,12 +603,11 @@ def _keep_failed(staging: Path, failed: Path) -> None:
     _replace_dir(staging, failed)
 
 
-def _promote(exp, profile, params, staging: Path, report_dir: Path, stamp: str, key: str, result: dict,
-             data_roots) -> None:
+def _promote(exp, profile, params, staging: Path, report_dir: Path, stamp: str, key: str, result: dict) -> None:
     """Write the summary and the records into the validated staging folder, then swap it into place. The cache
     record (run.json) is written before the swap, inside the new folder, so it only ever describes a
     complete report."""
-    data = _data_hashes(staging, data_roots)
+    data = _data_hashes(staging)
     _strip_worker_files(staging)
     (staging / "summary.md").write_text(_summary_markdown(exp, profile, params, staging, stamp), encoding="utf-8")
     (staging / "report.json").write_text(json.dumps(

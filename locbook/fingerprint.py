@@ -108,8 +108,8 @@ def knn_position(rss_dbm, fingerprints_dbm, cells_m, k: int, weighting: str = "i
     The batch axes of ``rss_dbm`` and of a batched map must broadcast against each other.
     """
     check_choice("weighting", weighting, KNN_WEIGHTINGS)
+    fingerprints_dbm = as_array("fingerprints_dbm", fingerprints_dbm, min_ndim=2, nan_ok=True)
     _check_complete_map(fingerprints_dbm)
-    fingerprints_dbm = as_array("fingerprints_dbm", fingerprints_dbm, min_ndim=2)
     m = fingerprints_dbm.shape[-1]
     rss_dbm = as_array("rss_dbm", rss_dbm, min_ndim=1, nan_ok=True, trailing=(m,))
     cells_m = as_array("cells_m", cells_m, ndim=2)
@@ -145,14 +145,10 @@ def knn_position(rss_dbm, fingerprints_dbm, cells_m, k: int, weighting: str = "i
     return np.einsum("...k,...kd->...d", w, cells_m[nearest])
 
 
-def _check_complete_map(fingerprints_dbm) -> None:
+def _check_complete_map(fingerprints_dbm: np.ndarray) -> None:
     """A NaN in the map (a cell a reader never heard) is an error naming the cell and the reader."""
-    try:
-        raw = np.asarray(fingerprints_dbm, dtype=float)
-    except (TypeError, ValueError):
-        return                                   # as_array names the problem
-    missing = np.isnan(raw)
-    if raw.ndim >= 2 and missing.any():
+    missing = np.isnan(fingerprints_dbm)
+    if missing.any():
         where = tuple(int(i) for i in np.argwhere(missing)[0])
         raise ValueError(f"fingerprints_dbm must be finite (the map must be complete); got {int(missing.sum())} NaN "
                          f"value(s), the first at index {where} (cell {where[-2]}, reader {where[-1]}): fill the "

@@ -36,8 +36,8 @@ def model_fingerprints(cells_m, readers_m, model: PathLossModel, walls_m=None, m
 
     Model parameters broadcast against the reader axis; a leading batch axis on them (e.g. online
     calibration per step, shape ``(..., m)``) gives one map per batch entry. Distances below
-    ``min_distance_m`` (> 0) are clipped (a cell centre on a reader). ``readers_m`` ``(m, 2)`` and ``walls_m``
-    ``(W, 2, 2)`` (segments) must be finite, like the cells.
+    ``min_distance_m`` (> 0) are clipped (a cell centre on a reader). ``readers_m`` ``(m, 2)`` must be finite,
+    like the cells; ``walls_m`` is checked by :func:`locbook.wall_crossings`.
     """
     if not isinstance(model, PathLossModel):
         raise ValueError(f"model must be a PathLossModel, got {type(model).__name__}")
@@ -50,13 +50,6 @@ def model_fingerprints(cells_m, readers_m, model: PathLossModel, walls_m=None, m
             raise ValueError(f"model.{name} must be a scalar or have shape (..., {m}) (one per reader), "
                              f"got shape {value.shape}")
     check_scalar("min_distance_m", min_distance_m, gt=0)
-    if walls_m is not None:
-        walls_m = as_array("walls_m", walls_m)
-        if walls_m.size and walls_m.shape != (2, 2) and (walls_m.ndim != 3 or walls_m.shape[1:] != (2, 2)):
-            raise ValueError(f"walls_m must have shape (W, 2, 2) (segments [[x1, y1], [x2, y2]]) or (2, 2) for one "
-                             f"wall, got {walls_m.shape}")
-        if dim != 2:
-            raise ValueError(f"walls need 2-D cells and readers, got dimension {dim}")
     distance = np.maximum(pairwise_distance_m(cells_m, readers_m), min_distance_m)
     n_walls = 0 if walls_m is None else wall_crossings(cells_m, readers_m, walls_m)
 

@@ -16,29 +16,29 @@ The public API, by role:
 """
 __version__ = "0.1.0"
 
-from .bayes_filters import (RESAMPLING_CDFS, WEIGHT_SMOOTHINGS, GridFilterResult, ParticleFilterResult,
+from .tracking.bayes import (RESAMPLING_CDFS, WEIGHT_SMOOTHINGS, GridFilterResult, ParticleFilterResult,
                             RssMeasurementModel, effective_sample_size, grid_bayes_filter, grid_transition_matrix,
                             particle_filter, systematic_resample)
-from .bounds import CRLB_FORMS, crlb_rms_over_area_m, rss_crlb_m, rss_fisher_information, rss_position_information
-from .calibration import CALIBRATION_MODES, PathLossFit, calibrate_path_loss, fit_path_loss, fit_path_loss_closed_form
-from .channel import (AT86RF230_ED_OFFSET_DB, CC2420_RSSI_OFFSET_DB, PathLossModel, correlated_shadowing_db,
+from .bounds.crlb import CRLB_FORMS, crlb_rms_over_area_m, rss_crlb_m, rss_fisher_information, rss_position_information
+from .static.calibration import CALIBRATION_MODES, PathLossFit, calibrate_path_loss, fit_path_loss, fit_path_loss_closed_form
+from .models.channel import (AT86RF230_ED_OFFSET_DB, CC2420_RSSI_OFFSET_DB, PathLossModel, correlated_shadowing_db,
                       dbm_to_register, pairwise_distance_m, quantize_db, register_to_dbm, small_scale_fading_db, wall_crossings)
 from .errors import ConvergenceError, DegenerateGeometryError, LocbookError, ParameterError, SingularCovarianceError
-from .fingerprint import KNN_WEIGHTINGS, knn_position, model_fingerprints, pattern_fingerprints
-from .filters import (KF_VARIANTS, RSS_UPDATE_MODES, SERIAL_ORDERS, KalmanResult, LinearMeasurement, RssMeasurement,
+from .static.fingerprint import KNN_WEIGHTINGS, knn_position, model_fingerprints, pattern_fingerprints
+from .tracking.kalman import (KF_VARIANTS, RSS_UPDATE_MODES, SERIAL_ORDERS, KalmanResult, LinearMeasurement, RssMeasurement,
                       TrackResult, extended_kalman_filter, kalman_filter, rss_measurement_jacobian)
-from .localization import (LOCALIZATION_STATUSES, LocalizationResult, check_anchor_geometry, grid_ml_position, lateration_box_ls,
+from .static.localization import (LOCALIZATION_STATUSES, LocalizationResult, check_anchor_geometry, grid_ml_position, lateration_box_ls,
                            lateration_ls, lateration_system, lateration_wls, rss_ml_position)
 from .metrics import (empirical_cdf, error_std_m, error_summary, mean_error_m, median_error_m, percentile_error_m,
                       position_error_m, reduction_pct, rmse_m, rmse_standard_error_m)
-from .pcrlb import (PCRLB_FORMS, linear_measurement_information, position_bound_m, posterior_crlb,
+from .bounds.pcrlb import (PCRLB_FORMS, linear_measurement_information, position_bound_m, posterior_crlb,
                     rss_state_information)
 from .montecarlo import canonical_encoding, mc_standard_error, seed_from_values, spawn_generators, streams
-from .motion import (NOISE_MODELS, STATE_LAYOUTS, KinematicModel, constant_acceleration, constant_velocity, reflect_into_box,
+from .models.motion import (NOISE_MODELS, STATE_LAYOUTS, KinematicModel, constant_acceleration, constant_velocity, reflect_into_box,
                      simulate_states)
-from .reference_tags import (OZKAYA_PATH_LOSS_EXP_BOUNDS, OZKAYA_REF_POWER_BOUNDS_DBM, OnlineCalibration,
+from .static.reference_tags import (OZKAYA_PATH_LOSS_EXP_BOUNDS, OZKAYA_REF_POWER_BOUNDS_DBM, OnlineCalibration,
                              calibrate_from_reference_tags, pooled_sigma_db, smooth_rssi)
-from .report import Report
+from .suite.report import Report
 
 __all__ = [
     "__version__",

@@ -5,7 +5,7 @@ import pytest
 from scipy.optimize import lsq_linear
 
 import locbook as lb
-from locbook.calibration import path_loss_design_matrix
+from locbook.static.calibration import path_loss_design_matrix
 
 
 def test_mean_power_and_range_inversion():

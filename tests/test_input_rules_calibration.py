@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 from scipy.optimize import least_squares
 
 import locbook as lb
-from locbook import calibration, reference_tags
+from locbook.static import calibration, reference_tags
 
 
 def _samples(n=60, seed=2, outliers=0):

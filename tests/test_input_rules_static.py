@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 import locbook as lb
-from locbook import localization
+from locbook.static import localization
 
 ANCHORS = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 8.0], [0.0, 8.0], [5.0, 12.0]])
 MODEL = lb.PathLossModel(-45.0, 2.5, 4.0)

@@ -4,7 +4,7 @@ import json
 
 import pytest
 
-from locbook.report import NUMBER_COLUMNS
+from locbook.suite.report import NUMBER_COLUMNS
 from locbook.suite import load_suite, read_parameters, run_suite
 
 SUITE = load_suite()
@@ -40,8 +40,8 @@ def test_quick_profile_runs_every_notebook(quick_reports):
         assert list((folder / exp.id).glob("*.png")), exp.id
     # the data files each experiment read are recorded with their hashes (the printed-value tables)
     data = {exp.id: json.loads((folder / exp.id / "run.json").read_text())["data"] for exp in SUITE.experiments}
-    assert any(p.endswith("scenarios/data/ozkaya2011_printed.csv") for p in data["ozkaya2011-nn-sim"])
-    assert any(p.endswith("scenarios/data/dogan2015_printed.csv") for p in data["dogan2015-tracking"])
+    assert any(p.endswith("data/printed/ozkaya2011.csv") for p in data["ozkaya2011-nn-sim"])
+    assert any(p.endswith("data/printed/dogan2015.csv") for p in data["dogan2015-tracking"])
     assert data["george-tracking"] == {}
 
 

@@ -16,7 +16,7 @@ import nbformat
 import pytest
 from nbformat.v4 import new_code_cell, new_notebook
 
-from locbook.cli import main
+from locbook.suite.cli import main
 from locbook.errors import ParameterError
 from locbook.suite import SuiteError, load_suite, read_parameters, run_suite
 from locbook.suite.runner import _validate_report
@@ -201,7 +201,7 @@ def test_cli_values_are_toml(toy):
 
 # -- processes: concurrency, data files, dying workers, signals --------------------------------------------
 def cli(toy, *args):
-    return subprocess.Popen([sys.executable, "-m", "locbook.cli", "--suite", str(toy / "notebooks" / "experiments.toml"),
+    return subprocess.Popen([sys.executable, "-m", "locbook.suite.cli", "--suite", str(toy / "notebooks" / "experiments.toml"),
                              "run", "--reports", str(toy / "reports"), *args],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 

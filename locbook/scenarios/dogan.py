@@ -20,12 +20,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ..channel import PathLossModel, pairwise_distance_m
+from ..models.channel import PathLossModel, pairwise_distance_m
 from ..errors import ParameterError
-from ..filters import LinearMeasurement, RssMeasurement, TrackResult, extended_kalman_filter
-from ..localization import grid_ml_position, rss_ml_position
-from ..motion import KinematicModel, constant_acceleration, simulate_states
-from ..pcrlb import linear_measurement_information, position_bound_m, posterior_crlb, rss_state_information
+from ..tracking.kalman import LinearMeasurement, RssMeasurement, TrackResult, extended_kalman_filter
+from ..static.localization import grid_ml_position, rss_ml_position
+from ..models.motion import KinematicModel, constant_acceleration, simulate_states
+from ..bounds.pcrlb import linear_measurement_information, position_bound_m, posterior_crlb, rss_state_information
 
 __all__ = [
     "ROOM_M", "ANCHORS_M", "REF_POWER_DBM", "PATH_LOSS_EXP", "SIGMA_RSS_DB", "SIGMA_ACC_MPS2", "Q_PER_STEP",
@@ -72,7 +72,7 @@ FILTERS = ("parallel_ekf", "serial_ekf", "kalman_filter")
 MLE_GRID_STEP_M = 0.5
 MLE_GRID_MARGIN_M = 3.0
 
-_DATA = Path(__file__).with_name("data") / "dogan2015_printed.csv"
+_DATA = Path(__file__).parents[1] / "data" / "printed" / "dogan2015.csv"
 
 
 @dataclass(frozen=True)

@@ -18,8 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..calibration import PathLossFit, calibrate_path_loss
-from ..channel import PathLossModel, pairwise_distance_m, quantize_db
+from ..static.calibration import PathLossFit, calibrate_path_loss
+from ..models.channel import PathLossModel, pairwise_distance_m, quantize_db
 from ..errors import ParameterError
 from ..metrics import reduction_pct, rmse_m
 from .dogan import ANCHORS_M, FILTERS, ChannelRun

@@ -16,12 +16,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..calibration import calibrate_path_loss
-from ..channel import PathLossModel, pairwise_distance_m
-from ..filters import kalman_filter
-from ..localization import lateration_ls
+from ..static.calibration import calibrate_path_loss
+from ..models.channel import PathLossModel, pairwise_distance_m
+from ..tracking.kalman import kalman_filter
+from ..static.localization import lateration_ls
 from ..metrics import position_error_m
-from ..motion import constant_velocity
+from ..models.motion import constant_velocity
 
 __all__ = [
     "ANCHORS_M", "CORRIDOR_SIZE_M", "PRINTED", "CC2420_PA_LEVEL_DBM", "DEFAULT_CALIBRATION_POINTS_M",

@@ -22,13 +22,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ..bayes_filters import RssMeasurementModel, grid_bayes_filter, particle_filter
-from ..bounds import crlb_rms_over_area_m, rss_crlb_m
-from ..fingerprint import knn_position, model_fingerprints
-from ..channel import PathLossModel
+from ..tracking.bayes import RssMeasurementModel, grid_bayes_filter, particle_filter
+from ..bounds.crlb import crlb_rms_over_area_m, rss_crlb_m
+from ..static.fingerprint import knn_position, model_fingerprints
+from ..models.channel import PathLossModel
 from ..metrics import error_summary, position_error_m, rmse_standard_error_m
 from ..montecarlo import seed_from_values
-from ..motion import reflect_into_box
+from ..models.motion import reflect_into_box
 
 __all__ = [
     "ROOM_M", "LARGE_ROOM_M", "LAYOUTS", "CELL_PATTERNS", "ALPHA_DBM", "PATH_LOSS_EXP", "SIGMA_DB",
@@ -61,7 +61,7 @@ LAYOUTS = {
 #: thesis; 8, 28, 112 are: 2 m, 1 m and 0.5 m spacing). 135 is the 10 x 16 m room.
 CELL_PATTERNS = {6: (2, 3), 8: (2, 4), 16: (4, 4), 28: (4, 7), 56: (7, 8), 98: (7, 14), 112: (8, 14), 135: (9, 15)}
 
-_DATA = Path(__file__).with_name("data") / "ozkaya2011_printed.csv"
+_DATA = Path(__file__).parents[1] / "data" / "printed" / "ozkaya2011.csv"
 
 
 def room_for(layout: str):

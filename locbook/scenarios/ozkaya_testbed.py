@@ -26,11 +26,11 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..bayes_filters import RssMeasurementModel, grid_bayes_filter, particle_filter
-from ..channel import PathLossModel, correlated_shadowing_db, pairwise_distance_m, quantize_db
-from ..fingerprint import knn_position, model_fingerprints
+from ..tracking.bayes import RssMeasurementModel, grid_bayes_filter, particle_filter
+from ..models.channel import PathLossModel, correlated_shadowing_db, pairwise_distance_m, quantize_db
+from ..static.fingerprint import knn_position, model_fingerprints
 from ..metrics import position_error_m
-from ..reference_tags import calibrate_from_reference_tags, smooth_rssi
+from ..static.reference_tags import calibrate_from_reference_tags, smooth_rssi
 from . import ozkaya as oz
 
 __all__ = [

@@ -46,7 +46,7 @@ from html import escape
 from importlib import metadata
 from pathlib import Path
 
-from ..report import NUMBER_COLUMNS, Table
+from .report import NUMBER_COLUMNS, Table
 from .params import read_notebook
 from .spec import SAFE_NAME, Experiment, Suite, SuiteError
 

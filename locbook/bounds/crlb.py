@@ -15,9 +15,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .errors import DegenerateGeometryError
-from ._validate import as_array, check_choice, check_scalar
-from .localization import check_anchor_geometry
+from ..errors import DegenerateGeometryError
+from .._validate import as_array, check_choice, check_scalar
+from ..static.localization import check_anchor_geometry
 
 __all__ = ["rss_fisher_information", "rss_position_information", "rss_crlb_m", "crlb_rms_over_area_m", "CRLB_FORMS"]
 

@@ -25,7 +25,7 @@ from math import factorial
 
 import numpy as np
 
-from ._validate import as_array, check_choice, check_scalar
+from .._validate import as_array, check_choice, check_scalar
 
 __all__ = ["KinematicModel", "constant_velocity", "constant_acceleration", "STATE_LAYOUTS", "NOISE_MODELS",
            "reflect_into_box", "simulate_states"]

@@ -26,9 +26,9 @@ import cvxpy as cp
 import numpy as np
 import scipy.sparse as sp
 
-from ._cvx import solve
-from ._validate import as_array, check_choice, check_scalar
-from .errors import ConvergenceError, DegenerateGeometryError
+from .._cvx import solve
+from .._validate import as_array, check_choice, check_scalar
+from ..errors import ConvergenceError, DegenerateGeometryError
 
 __all__ = [
     "PathLossFit",

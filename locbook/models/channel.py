@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._validate import as_array, check_scalar
+from .._validate import as_array, check_scalar
 
 __all__ = [
     "PathLossModel",

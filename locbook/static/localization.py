@@ -35,10 +35,10 @@ from functools import lru_cache
 import cvxpy as cp
 import numpy as np
 
-from ._cvx import solve
-from ._validate import as_array, check_scalar
-from .channel import PathLossModel, pairwise_distance_m
-from .errors import ConvergenceError, DegenerateGeometryError
+from .._cvx import solve
+from .._validate import as_array, check_scalar
+from ..models.channel import PathLossModel, pairwise_distance_m
+from ..errors import ConvergenceError, DegenerateGeometryError
 
 __all__ = [
     "LocalizationResult",

@@ -20,10 +20,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._validate import as_array, check_choice
+from .._validate import as_array, check_choice
 
-from .bounds import rss_position_information
-from .filters import _mT
+from .crlb import rss_position_information
+from ..tracking.kalman import _mT
 
 __all__ = ["posterior_crlb", "position_bound_m", "rss_state_information", "linear_measurement_information",
            "PCRLB_FORMS"]
@@ -99,7 +99,7 @@ def rss_state_information(states, anchors_m, path_loss_exp, sigma_db, position_i
     """Fisher information of RSS from every anchor about the full state, ``(..., n, n)`` for states ``(..., n)``.
 
     ``Lambda(x) = H(x)^T R^{-1} H(x)`` (Dogan Eq. (4.19)), ``R = sigma^2 I``: the static RSS information
-    (:func:`locbook.bounds.rss_position_information`, with its near-anchor regularisations) in the position block.
+    (:func:`locbook.bounds.crlb.rss_position_information`, with its near-anchor regularisations) in the position block.
     """
     states = as_array("states", states, min_ndim=1)
     idx = np.asarray(position_index)

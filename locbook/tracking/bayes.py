@@ -23,9 +23,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._validate import as_array, check_choice, check_scalar
-from .channel import pairwise_distance_m, wall_crossings
-from .motion import reflect_into_box
+from .._validate import as_array, check_choice, check_scalar
+from ..models.channel import pairwise_distance_m, wall_crossings
+from ..models.motion import reflect_into_box
 
 __all__ = [
     "RssMeasurementModel", "GridFilterResult", "grid_bayes_filter", "grid_transition_matrix",

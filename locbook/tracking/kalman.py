@@ -18,9 +18,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._validate import as_array, check_choice, check_scalar
-from .channel import PathLossModel
-from .errors import SingularCovarianceError
+from .._validate import as_array, check_choice, check_scalar
+from ..models.channel import PathLossModel
+from ..errors import SingularCovarianceError
 
 __all__ = ["KalmanResult", "kalman_filter", "KF_VARIANTS", "LinearMeasurement", "RssMeasurement", "TrackResult",
            "extended_kalman_filter", "rss_measurement_jacobian", "RSS_UPDATE_MODES", "SERIAL_ORDERS"]

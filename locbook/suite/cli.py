@@ -10,7 +10,7 @@ import signal
 import sys
 from pathlib import Path
 
-from .errors import ParameterError
+from ..errors import ParameterError
 
 PROFILE_HELP = "quick: reduced Monte-Carlo counts (default); full: the source's own counts"
 
@@ -71,7 +71,7 @@ def main(argv: list[str] | None = None) -> int:
     run.add_argument("--timeout", type=lambda t: _positive(float, t), default=1800, help="seconds allowed per notebook cell")
     args = parser.parse_args(argv)
 
-    from .suite import load_suite, run_suite
+    from . import load_suite, run_suite
 
     try:
         suite = load_suite(args.suite)

@@ -23,8 +23,8 @@ from dataclasses import replace
 
 import numpy as np
 
-from ._validate import as_array, check_choice, check_scalar
-from .channel import PathLossModel, pairwise_distance_m, wall_crossings
+from .._validate import as_array, check_choice, check_scalar
+from ..models.channel import PathLossModel, pairwise_distance_m, wall_crossings
 
 __all__ = ["KNN_WEIGHTINGS", "knn_position", "model_fingerprints", "pattern_fingerprints"]
 

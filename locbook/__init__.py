@@ -12,7 +12,8 @@ The public API, by role:
 - reference tags: online bounded calibration, pooled sigma, RSSI smoothing
 - bounds: static RSS CRLB (correct and Ozkaya's printed form); posterior CRLB for filtering (Tichavsky)
 - metrics and Monte-Carlo helpers
-- report: :class:`Report`, what a notebook records
+- report: :class:`Report`, what a notebook records; :func:`printed` (the numbers each source printed,
+  from package data) and :class:`Ambiguity` (a named protocol ambiguity that widens a window)
 """
 __version__ = "0.1.0"
 
@@ -38,7 +39,9 @@ from .models.motion import (NOISE_MODELS, STATE_LAYOUTS, KinematicModel, constan
                      simulate_states)
 from .static.reference_tags import (OZKAYA_PATH_LOSS_EXP_BOUNDS, OZKAYA_REF_POWER_BOUNDS_DBM, OnlineCalibration,
                              calibrate_from_reference_tags, pooled_sigma_db, smooth_rssi)
+from .data.printed_values import Printed, PrintedValues, printed
 from .suite.report import Report
+from .suite.scoring import Ambiguity
 
 __all__ = [
     "__version__",
@@ -71,7 +74,7 @@ __all__ = [
     "empirical_cdf", "reduction_pct", "error_summary", "rmse_standard_error_m", "spawn_generators", "streams", "mc_standard_error", "seed_from_values", "canonical_encoding",
     # errors and reports
     "LocbookError", "DegenerateGeometryError", "ConvergenceError", "ParameterError", "SingularCovarianceError",
-    "Report",
+    "Report", "Ambiguity", "Printed", "PrintedValues", "printed",
 ]
 
 from ._datalog import install_from_environment as _install_data_log

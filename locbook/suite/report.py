@@ -5,11 +5,10 @@ A notebook creates one :class:`Report` and calls :meth:`Report.number`, :meth:`R
 experiment's staging folder (environment variable ``LOCBOOK_OUTPUT_DIR``); run interactively they go to
 a scratch folder in the system's temporary directory, so exploring never touches ``reports/``.
 
-Each number row carries the columns of ``numbers.csv``:
-``experiment, quantity, where, unit, reported, reproduced, tolerance, lower, upper, within_tolerance,
-mc_std_error, tolerance_basis, note``. The tolerance is either symmetric (``tolerance``) or an
-acceptance interval (``lower``, ``upper``); its basis (Monte-Carlo standard error, a stated ambiguity)
-is written beside it.
+Each number row compares one printed quantity (:class:`locbook.data.Printed`, read from the document's
+printed-values file) with our number, under the rules of :mod:`locbook.suite.scoring`: its ``kind``
+(reproduction, calibrated, arithmetic, claim, shown), its window (printed rounding + 2 Monte-Carlo standard
+errors + a named ambiguity) and its verdict (within, loose, miss). The columns are :data:`NUMBER_COLUMNS`.
 """
 from __future__ import annotations
 
@@ -24,11 +23,15 @@ from pathlib import Path
 
 import numpy as np
 
+from ..data.printed_values import Printed
+from .scoring import KINDS, Ambiguity, score
+
 __all__ = ["Report", "NUMBER_COLUMNS", "Table"]
 
 NUMBER_COLUMNS = (
-    "experiment", "quantity", "where", "unit", "reported", "reproduced", "tolerance", "lower", "upper",
-    "within_tolerance", "mc_std_error", "tolerance_basis", "note",
+    "experiment", "document", "printed_id", "quantity", "where", "unit", "kind", "printed", "reproduced",
+    "verdict", "window_low", "window_high", "rounding", "mc_std_error", "ambiguity", "ambiguity_basis",
+    "relation", "calibrated_from", "same_as", "note",
 )
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
 
@@ -97,43 +100,61 @@ class Report:
         self._save_manifest()
 
     # -- numbers ---------------------------------------------------------------------------------
-    def number(self, quantity: str, where: str, reported, reproduced, *, unit: str = "",
-               tolerance: float | None = None, lower: float | None = None, upper: float | None = None,
-               tolerance_basis: str = "", mc_std_error: float | None = None, note: str = "",
-               interval_holds: str = "reproduced") -> dict:
-        """Record a reproduced value beside the value the source printed.
+    def number(self, quantity: str, printed: Printed, reproduced=None, *, kind: str,
+               mc_std_error: float | None = None, ambiguity: Ambiguity | None = None,
+               relation: str | None = None, threshold: float | None = None, calibrated_from: str = "",
+               same_as: Printed | None = None, note: str = "") -> dict:
+        """Record our value of one printed quantity, with its kind, window and verdict.
 
-        Give either ``tolerance`` (accept ``|reproduced - reported| <= tolerance``) or an acceptance
-        interval ``lower``/``upper``; ``tolerance_basis`` says where it comes from. With none of them the
-        row is shown without a verdict (``within_tolerance`` empty).
-
-        ``interval_holds="reported"`` turns ``lower``/``upper`` into a prediction interval from the reproduction
-        (e.g. the spread of single simulated runs, when the source printed one measured run): the verdict is
-        then whether the *printed* value lies inside it.
+        ``printed`` comes from the document's printed-values file (``lb.printed(document).get(...)``), never
+        typed in. ``kind`` is one of ``reproduction``, ``calibrated``, ``arithmetic``, ``claim``, ``shown``
+        (:mod:`locbook.suite.scoring`). ``mc_std_error`` is the Monte-Carlo standard error of ``reproduced``
+        from run-level values; ``ambiguity`` names a protocol ambiguity, its size (in the unit) and source.
+        A ``calibrated`` row says in ``calibrated_from`` which input was chosen from which printed number. A
+        ``claim`` gives ``relation`` (``>``, ``>=``, ``<``, ``<=``) against the printed threshold. ``same_as``
+        marks a quantity the source prints again: the row is kept for reading but compared (and counted)
+        only at the printed quantity it names.
         """
-        if interval_holds not in ("reproduced", "reported"):
-            raise ValueError(f"interval_holds must be 'reproduced' or 'reported', got {interval_holds!r}")
-        if interval_holds == "reported" and (tolerance is not None or reported is None):
-            raise ValueError("a prediction interval needs lower/upper and a reported value, not a tolerance")
-        reproduced = float(reproduced)
-        reported = float(reported) if reported is not None else None
-        if tolerance is not None and (lower is not None or upper is not None):
-            raise ValueError("give either a symmetric tolerance or an interval (lower, upper), not both")
-        if tolerance is not None:
-            if tolerance < 0 or reported is None:
-                raise ValueError("a symmetric tolerance needs a reported value and tolerance >= 0")
-            lower, upper = reported - tolerance, reported + tolerance
-        verdict = ""
-        if lower is not None or upper is not None:
-            lo = -math.inf if lower is None else float(lower)
-            hi = math.inf if upper is None else float(upper)
-            tested = reproduced if interval_holds == "reproduced" else float(reported)
-            verdict = bool(lo <= tested <= hi)
+        if not isinstance(printed, Printed):
+            raise TypeError("printed must be a locbook.data.Printed from the document's printed-values file, "
+                            f"got {type(printed).__name__}")
+        if kind not in KINDS:
+            raise ValueError(f"kind must be one of {KINDS}, got {kind!r}")
+        if kind == "calibrated" and not calibrated_from.strip():
+            raise ValueError("a calibrated row must say which input was chosen from which printed number "
+                             "(calibrated_from)")
+        if kind != "calibrated" and calibrated_from:
+            raise ValueError("calibrated_from belongs to calibrated rows only")
+        if same_as is not None and (same_as.document != printed.document or same_as.id == printed.id):
+            raise ValueError("same_as must name another printed quantity of the same document")
+        if kind == "shown" and reproduced is not None:
+            raise ValueError("a shown row has nothing to compare; record our value with another kind")
+        ours = None if reproduced is None else float(reproduced)
+        s = score(kind, printed.text, ours, mc_std_error=mc_std_error, ambiguity=ambiguity,
+                  relation=relation, threshold=threshold, linked=same_as is not None)
+        low = s.low
+        if printed.unit == "m" and math.isfinite(low):
+            low = max(low, 0.0)                      # distances and errors are not negative
+        if s.verdict == "loose" and not note:
+            part = {"rounding": s.rounding, "2 Monte-Carlo standard errors": s.half_width - s.rounding
+                    - (ambiguity.size if ambiguity else 0.0)}
+            if ambiguity:
+                part[ambiguity.what] = ambiguity.size
+            widest = max(part, key=part.get)
+            note = (f"the window is +-{s.relative_half_width:.0%} of the printed value (more than +-25 %), "
+                    f"mostly {widest}") if kind != "claim" else (
+                    "the claim holds for our estimate but not beyond 2 Monte-Carlo standard errors")
+        if same_as is not None and not note:
+            note = f"the source prints this quantity again at {same_as.where}; compared there"
         row = {
-            "experiment": self.experiment, "quantity": quantity, "where": where, "unit": unit,
-            "reported": reported, "reproduced": reproduced, "tolerance": tolerance,
-            "lower": lower, "upper": upper, "within_tolerance": verdict,
-            "mc_std_error": mc_std_error, "tolerance_basis": tolerance_basis, "note": note,
+            "experiment": self.experiment, "document": printed.document, "printed_id": printed.id,
+            "quantity": quantity, "where": printed.where, "unit": printed.unit, "kind": kind,
+            "printed": printed.text, "reproduced": ours, "verdict": s.verdict, "window_low": low,
+            "window_high": s.high, "rounding": s.rounding, "mc_std_error": mc_std_error,
+            "ambiguity": ambiguity.size if ambiguity else None,
+            "ambiguity_basis": ambiguity.describe() if ambiguity else "", "relation": relation or "",
+            "calibrated_from": calibrated_from, "same_as": same_as.id if same_as is not None else "",
+            "note": note,
         }
         self.numbers.append(row)
         Table(self.numbers).write_csv(self.output_dir / "numbers.csv")
@@ -142,8 +163,8 @@ class Report:
 
     def numbers_table(self) -> Table:
         """The recorded numbers, for display at the end of a notebook."""
-        cols = ("quantity", "where", "unit", "reported", "reproduced", "lower", "upper",
-                "within_tolerance", "mc_std_error", "tolerance_basis")
+        cols = ("quantity", "where", "unit", "kind", "printed", "reproduced", "window_low", "window_high",
+                "verdict", "note")
         return Table([{c: r[c] for c in cols} for r in self.numbers], "Reproduced versus printed")
 
     # -- figures, tables, assumptions -------------------------------------------------------------

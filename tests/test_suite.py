@@ -30,7 +30,9 @@ import locbook as lb
 report = lb.Report("toy")
 offset = float(open("../../shared/data/offset.csv").read().split()[-1]) if read_data else 0.0
 x = lb.streams(seed, "a")["a"].normal(size=n)
-report.number("mean", "Table 1", offset, float(x.mean()) + offset, tolerance=1.0, tolerance_basis="test")
+printed = lb.Printed("toy", "Table 1", "mean", "", "", repr(offset))
+report.number("mean", printed, float(x.mean()) + offset, kind="reproduction",
+              ambiguity=lb.Ambiguity(1.0, "test window", "toy Sec. 1"))
 time.sleep(sleep_s)
 if kill_worker:
     os.kill(os.getppid(), 9)          # the kernel's parent is the worker process: simulate an OOM kill
@@ -184,7 +186,7 @@ def test_forced_runs_give_identical_numbers(toy):
     assert (toy / "reports" / "quick" / "numbers.csv").read_text() == first
     rows = list(csv.DictReader(first.splitlines()))
     assert [r["experiment"] for r in rows] == ["george-one", "george-two"]
-    assert rows[0]["where"] == "Table 1" and rows[0]["within_tolerance"] == "True"
+    assert rows[0]["where"] == "Table 1, mean" and rows[0]["verdict"] in ("within", "loose")
 
 
 def test_unknown_experiment_is_an_error(toy, capsys):
@@ -294,7 +296,7 @@ def test_editing_a_data_file_reruns_exactly_its_readers(toy, capsys):
     out = capsys.readouterr().out
     assert "george-one: ok" in out and "george-two: cached" in out and "1 executed, 1 cached" in out
     row = next(csv.DictReader((toy / "reports" / "quick" / "george-one" / "numbers.csv").read_text().splitlines()))
-    assert float(row["reported"]) == 0.5
+    assert row["printed"] == "0.5"
 
 
 def test_a_killed_worker_fails_only_its_experiment(toy, capsys):

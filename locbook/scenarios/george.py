@@ -20,26 +20,30 @@ from ..static.calibration import calibrate_path_loss
 from ..models.channel import PathLossModel, pairwise_distance_m
 from ..tracking.kalman import kalman_filter
 from ..static.localization import lateration_ls
+from ..data.printed_values import printed
 from ..metrics import position_error_m
 from ..models.motion import constant_velocity
 
 __all__ = [
-    "ANCHORS_M", "CORRIDOR_SIZE_M", "PRINTED", "CC2420_PA_LEVEL_DBM", "DEFAULT_CALIBRATION_POINTS_M",
+    "ANCHORS_M", "CORRIDOR_SIZE_M", "PRINTED", "PRINTED_N", "PRINTED_C_RAW", "PRINTED_C_KF",
+    "PRINTED_REDUCTION", "PRINTED_REDUCTION_CLAIM", "CC2420_PA_LEVEL_DBM", "DEFAULT_CALIBRATION_POINTS_M",
     "trajectory_m", "MIN_PLAUSIBLE_PATH_LOSS_EXP", "CorridorRuns", "simulate_corridor", "empirical_fix_covariance", "track_with_kalman",
     "TRAJECTORIES", "R_MODES", "INIT_MODES",
 ]
 
-#: Anchor coordinates, Sec. 5 ("(0,0),(2.1,0),(0,7.8),(2.1,7.8)"), in the listed order (anchor 1 first).
-ANCHORS_M = np.array([[0.0, 0.0], [2.1, 0.0], [0.0, 7.8], [2.1, 7.8]])
-CORRIDOR_SIZE_M = (2.1, 7.8)
-
-#: Numbers the paper prints: (value, unit, where).
-PRINTED = {
-    "path_loss_exp": (2.1843, "", "Sec. 6 text (mean of 5 calibration locations)"),
-    "mean_error_no_filter_m": (2.2867, "m", "Fig. 5 text (Eq. 15, 25 points)"),
-    "mean_error_kalman_m": (1.0378, "m", "Fig. 6 text (Eq. 15, 25 points)"),
-    "error_reduction_pct": (54.62, "%", "Fig. 6 text; abstract: 'more than 50%'"),
-}
+#: Everything the paper prints (locbook/data/printed/george.csv).
+PRINTED = printed("george")
+#: The corridor, Sec. 5 ("2.1 m wide and 7.8 m long").
+CORRIDOR_SIZE_M = (PRINTED.get("Sec. 5", "corridor", "width").value, PRINTED.get("Sec. 5", "corridor", "length").value)
+#: Anchor coordinates, Sec. 5 ("fixed at corners of the corridor with coordinates (0,0),(2.1,0),(0,7.8),(2.1,7.8)"),
+#: in the listed order (anchor 1 first).
+ANCHORS_M = np.array([[0.0, 0.0], [CORRIDOR_SIZE_M[0], 0.0], [0.0, CORRIDOR_SIZE_M[1]], list(CORRIDOR_SIZE_M)])
+#: The printed results compared by the notebooks.
+PRINTED_N = PRINTED.get("Sec. 6 text", "path-loss exponent n", "mean of 5 calibration locations")
+PRINTED_C_RAW = PRINTED.get("Fig. 5 text", "mean error C without filter", "Eq. (15), 25 points")
+PRINTED_C_KF = PRINTED.get("Fig. 6 text", "mean error C with Kalman filter", "Eq. (15), 25 points")
+PRINTED_REDUCTION = PRINTED.get("Fig. 6 text", "error reduction", "C without filter to C with Kalman filter")
+PRINTED_REDUCTION_CLAIM = PRINTED.get("Abstract", "error reduction", "claim")
 
 #: CC2420 PA_LEVEL -> output power (dBm), CC2420 datasheet rev 1.3, Table 9 (external to the paper;
 #: the paper names levels 3 to 31 only).

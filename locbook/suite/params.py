@@ -167,6 +167,10 @@ def _annotation_checker(annotation: str):
     node = ast.parse(annotation, mode="eval").body
 
     def build(n):
+        if (isinstance(n, ast.BinOp) and isinstance(n.op, ast.BitOr) and isinstance(n.right, ast.Constant)
+                and n.right.value is None):
+            inner = build(n.left)                 # ``float | None``: None means "the source's printed value"
+            return lambda v: v is None or inner(v)
         if isinstance(n, ast.Name):
             simple = {
                 "int": lambda v: isinstance(v, int) and not isinstance(v, bool),
@@ -199,7 +203,7 @@ def _annotation_checker(annotation: str):
 
 def _to_float(value, annotation):
     """ints where floats are declared become floats (TOML ``2`` for a float parameter)."""
-    if annotation == "float" and isinstance(value, int) and not isinstance(value, bool):
+    if annotation in ("float", "float | None") and isinstance(value, int) and not isinstance(value, bool):
         return float(value)
     if annotation in ("list[float]", "tuple[float, ...]") and isinstance(value, (list, tuple)):
         return [float(v) if isinstance(v, int) and not isinstance(v, bool) else v for v in value]

@@ -110,7 +110,7 @@ def test_singular_three_component_update_names_the_offending_run():
 
 
 _READERS = np.array([[0.0, 0.0], [8.0, 0.0], [0.0, 6.0]])
-_BAYES = lb.RssMeasurementModel(_READERS, sigma_db=3.0)
+_BAYES = lb.RssMeasurementModel(_READERS, -52.0, 2.3, sigma_db=3.0)
 
 
 @pytest.mark.parametrize("call, message", [
@@ -118,7 +118,7 @@ _BAYES = lb.RssMeasurementModel(_READERS, sigma_db=3.0)
     (lambda: lb.kalman_filter(_track(), MODEL.F, H, MODEL.Q, R, X0, np.ones(4)), r"P0 in \(4, 4\)"),
     (lambda: lb.extended_kalman_filter(MODEL.F, MODEL.Q, X0, P0, [lb.LinearMeasurement(_track(), H, R)], record=[20]),
      r"record must be distinct integer step indices in \[0, 15\)"),
-    (lambda: lb.RssMeasurement(np.zeros((3, 3)), _READERS, lb.PathLossModel(sigma_db=[3.0, 4.0]), [0, 1]),
+    (lambda: lb.RssMeasurement(np.zeros((3, 3)), _READERS, lb.PathLossModel(-40.0, 2.0, sigma_db=[3.0, 4.0]), [0, 1]),
      r"channel.sigma_db must be a scalar or end in \(1,\) or \(3,\)"),
     (lambda: lb.rss_measurement_jacobian(np.zeros((5, 3)), _READERS, 2.0), r"positions_m must have shape \(\.\.\., 2\)"),
     (lambda: lb.particle_filter(np.zeros((2, 3, 3)), _BAYES, np.random.default_rng(0), n_particles=10,
@@ -139,7 +139,7 @@ _BAYES = lb.RssMeasurementModel(_READERS, sigma_db=3.0)
     (lambda: _BAYES.log_likelihood(np.zeros((2, 4)), np.zeros((5, 2))), r"rss_dbm must have shape \(\.\.\., 3\)"),
     (lambda: _BAYES.log_likelihood(np.zeros((2, 3)), np.zeros((1, 5, 2))), "no silent broadcasting"),
     (lambda: _BAYES.log_likelihood(np.zeros((2, 3)), np.full((5, 2), np.nan)), "positions_m must be finite"),
-    (lambda: lb.RssMeasurementModel(_READERS, ref_power_dbm=np.zeros((2, 4, 3))).log_likelihood(
+    (lambda: lb.RssMeasurementModel(_READERS, ref_power_dbm=np.zeros((2, 4, 3)), path_loss_exp=2.3, sigma_db=5.0).log_likelihood(
         np.zeros((2, 3)), np.zeros((5, 2)), step=-1), r"step must be an integer in \[0, 4\)"),
     (lambda: lb.systematic_resample([0.5, -0.1, 0.6], 0.3), "weights must be non-negative"),
     (lambda: lb.systematic_resample([[0.5, 0.5]], [0.3, 0.2]), r"uniforms must be draws in \[0, 1\)"),
@@ -160,16 +160,16 @@ def test_bad_input_names_the_argument_more(call, message):
     (lambda: lb.extended_kalman_filter(MODEL.F, np.ones(4), X0, P0, [lb.LinearMeasurement(_track(), H, R)]),
      r"Q must have shape \(4, 4\)"),
     (lambda: lb.LinearMeasurement(_track(), H[:1], R), "H must have 2 rows"),
-    (lambda: lb.RssMeasurement(np.zeros((3, 4)), np.zeros((3, 2)), lb.PathLossModel(), [0, 1]), "has 4 anchors"),
+    (lambda: lb.RssMeasurement(np.zeros((3, 4)), np.zeros((3, 2)), lb.PathLossModel(-40.0, 2.0), [0, 1]), "has 4 anchors"),
     (lambda: lb.constant_velocity(float("nan"), 1.0), "dt_s must be finite"),
     (lambda: lb.constant_velocity(1.0, float("nan")), "process noise q must be finite"),
     (lambda: lb.grid_transition_matrix(np.zeros((3, 2)), float("nan")), "spread_m must be finite"),
-    (lambda: lb.RssMeasurementModel(np.zeros((3, 2)), ref_power_dbm=np.nan), "ref_power_dbm must be finite"),
-    (lambda: lb.RssMeasurementModel(np.zeros((3, 2)), path_loss_exp=[2.0, np.nan, 2.0]), "path_loss_exp must be finite"),
-    (lambda: lb.RssMeasurementModel(np.zeros((3, 2)), sigma_db=-1.0), "sigma_db must be a non-negative"),
-    (lambda: lb.RssMeasurementModel(np.ones((3, 2)), sigma_db=0.0).log_likelihood(np.zeros((1, 3)), np.zeros((2, 2))),
+    (lambda: lb.RssMeasurementModel(np.zeros((3, 2)), ref_power_dbm=np.nan, path_loss_exp=2.3, sigma_db=5.0), "ref_power_dbm must be finite"),
+    (lambda: lb.RssMeasurementModel(np.zeros((3, 2)), -52.0, path_loss_exp=[2.0, np.nan, 2.0], sigma_db=5.0), "path_loss_exp must be finite"),
+    (lambda: lb.RssMeasurementModel(np.zeros((3, 2)), -52.0, 2.3, sigma_db=-1.0), "sigma_db must be a non-negative"),
+    (lambda: lb.RssMeasurementModel(np.ones((3, 2)), -52.0, 2.3, sigma_db=0.0).log_likelihood(np.zeros((1, 3)), np.zeros((2, 2))),
      "the likelihood needs sigma_db > 0"),
-    (lambda: lb.grid_bayes_filter(np.zeros((2, 3, 4)), np.zeros((5, 2)), lb.RssMeasurementModel(np.zeros((3, 2)))),
+    (lambda: lb.grid_bayes_filter(np.zeros((2, 3, 4)), np.zeros((5, 2)), lb.RssMeasurementModel(np.zeros((3, 2)), -52.0, 2.3, 5.0)),
      r"rss_dbm must have shape \(runs, steps, 3\)"),
     (lambda: lb.simulate_states(MODEL.F, np.diag([1.0, 1.0, -1.0, 1.0]), X0, 3, np.random.default_rng(0)),
      "Q must be positive semi-definite"),
@@ -196,7 +196,7 @@ def test_likelihood_leaves_out_a_silent_reader_only():
 def test_uniform_proposal_starts_from_equal_weights():
     """spread_m = inf draws new particles: their weights must be this step's likelihood alone."""
     readers = np.array([[0.0, 0.0], [8.0, 0.0], [0.0, 6.0]])
-    model = lb.RssMeasurementModel(readers, sigma_db=3.0)
+    model = lb.RssMeasurementModel(readers, -52.0, 2.3, sigma_db=3.0)
     rng = np.random.default_rng(5)
     rss = model.mean_rss_dbm(np.array([[2.0, 3.0]]))[0, 0] + rng.normal(scale=3.0, size=(2, 4, 3))
     res = lb.particle_filter(rss, model, np.random.default_rng(1), n_particles=200, region_m=([0, 0], [8, 6]),

@@ -135,7 +135,7 @@ def test_degenerate_anchor_geometry_raises(anchors, message):
     with pytest.raises(lb.DegenerateGeometryError, match=message):
         lb.lateration_ls(anchors, np.ones(len(anchors)))
     with pytest.raises(lb.DegenerateGeometryError, match=message):
-        lb.rss_ml_position(anchors, np.full(len(anchors), -60.0), lb.PathLossModel())
+        lb.rss_ml_position(anchors, np.full(len(anchors), -60.0), lb.PathLossModel(-40.0, 2.0))
 
 
 def test_wrong_number_of_ranges_raises():

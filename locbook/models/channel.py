@@ -22,6 +22,8 @@ from .._validate import as_array, check_scalar
 
 __all__ = [
     "PathLossModel",
+    "log_distance_mean_dbm",
+    "log_distance_gradient",
     "CC2420_RSSI_OFFSET_DB",
     "AT86RF230_ED_OFFSET_DB",
     "register_to_dbm",
@@ -83,6 +85,35 @@ def pairwise_distance_m(points_m, anchors_m):
     return np.sqrt(np.einsum("...i,...i->...", diff, diff))
 
 
+def log_distance_mean_dbm(distance_m, ref_power_dbm, path_loss_exp, *, ref_distance_m: float = 1.0,
+                          min_distance_m: float = 0.0, n_walls=0, wall_attenuation_db: float = 0.0):
+    """The log-distance mean power, ``P_0 - 10 n log10(max(d, d_min) / d0) - n_W WAF`` (dBm): the one place
+    the model is written (Eq. (5) in George and Vadivukkarasi, Eq. (2.2) in Dogan 2015, Eqs. (6.3)-(6.4) in
+    Ozkaya 2011). Every estimator, filter and fingerprint map of locbook calls it.
+
+    ``min_distance_m`` is the near-field clamp: the far-field model is not meant to hold within about a
+    wavelength of the antenna (0.125 m at 2.4 GHz), and ``log10(0)`` must never occur; 0 means no clamp.
+    Parameters broadcast against ``distance_m``; no input checks (callers check once, outside hot loops)."""
+    d = np.maximum(distance_m, min_distance_m) if min_distance_m > 0 else distance_m
+    mean = ref_power_dbm - 10.0 * path_loss_exp * np.log10(d / ref_distance_m)
+    if wall_attenuation_db != 0.0:
+        mean = mean - n_walls * wall_attenuation_db
+    return mean
+
+
+def log_distance_gradient(offset_m, path_loss_exp, *, min_distance_m: float = 0.0):
+    """Gradient of :func:`log_distance_mean_dbm` w.r.t. the position, ``-(10 n / ln 10) (p - a) / d^2``, from
+    the offsets ``p - a`` ``(..., m, dim)`` -> ``(gradient (..., m, dim), d^2 (..., m))`` (note 000, section
+    2.6; the thesis does not print it). Within ``min_distance_m`` the ``1/d`` factor is capped at ``1/d_min``
+    and the direction kept (a continuous extension that keeps filters and Newton steps finite at an anchor);
+    the returned ``d^2`` is the capped one."""
+    d2 = np.einsum("...i,...i->...", offset_m, offset_m)
+    if min_distance_m > 0:
+        d2 = np.maximum(d2, min_distance_m**2)
+    slope = 10.0 * np.asarray(path_loss_exp) / np.log(10.0)
+    return -(slope / d2)[..., None] * offset_m, d2
+
+
 @dataclass(frozen=True)
 class PathLossModel:
     """Log-distance path loss with i.i.d. log-normal shadowing.
@@ -103,17 +134,23 @@ class PathLossModel:
         Reference distance d0 (1 m in every source document).
     wall_attenuation_db : float
         Attenuation per wall (WAF, Ozkaya Eq. (6.3)); multiplied by a wall count.
+    min_distance_m : float
+        Near-field clamp of :func:`log_distance_mean_dbm` (0: none, and distances must be positive).
+
+    No field has a default taken from one document: the reference power and the exponent are always given.
     """
 
-    ref_power_dbm: float | np.ndarray = -45.0
-    path_loss_exp: float | np.ndarray = 2.0
+    ref_power_dbm: float | np.ndarray
+    path_loss_exp: float | np.ndarray
     sigma_db: float | np.ndarray = 0.0
     ref_distance_m: float = 1.0
     wall_attenuation_db: float = 0.0
+    min_distance_m: float = 0.0
 
     def __post_init__(self):
         check_scalar("ref_distance_m", self.ref_distance_m, gt=0)
         check_scalar("wall_attenuation_db", self.wall_attenuation_db)
+        check_scalar("min_distance_m", self.min_distance_m, ge=0)
         for name in ("ref_power_dbm", "path_loss_exp", "sigma_db"):
             as_array(name, getattr(self, name))                 # NaN or infinite parameters are errors
         if np.any(np.asarray(self.sigma_db) < 0):
@@ -128,14 +165,12 @@ class PathLossModel:
         """Mean received power, ``P_0 - 10 n log10(d/d0) - n_W WAF`` (Eq. (5) in document 003,
         Eq. (6.4) in Ozkaya 2011)."""
         distance_m = as_array("distance_m", distance_m)
-        if np.any(distance_m <= 0):
-            raise ValueError("distances must be positive for the log-distance model")
+        if np.any(distance_m < 0) or (self.min_distance_m == 0 and np.any(distance_m == 0)):
+            raise ValueError("distances must be positive for the log-distance model (or give min_distance_m)")
         _check_walls_count(n_walls)
-        return (
-            np.asarray(self.ref_power_dbm)
-            - 10.0 * np.asarray(self.path_loss_exp) * np.log10(distance_m / self.ref_distance_m)
-            - np.asarray(n_walls) * self.wall_attenuation_db
-        )
+        return log_distance_mean_dbm(distance_m, np.asarray(self.ref_power_dbm), np.asarray(self.path_loss_exp),
+                                     ref_distance_m=self.ref_distance_m, min_distance_m=self.min_distance_m,
+                                     n_walls=np.asarray(n_walls), wall_attenuation_db=self.wall_attenuation_db)
 
     def sample_power_dbm(self, distance_m, rng: np.random.Generator, n_walls=0):
         """Mean power plus i.i.d. Gaussian shadowing ``w ~ N(0, sigma_db^2)``, one draw per entry."""

@@ -14,13 +14,12 @@ Q = 2.3e-5 I (Eq. (3.24), A3), and the MLE an unconstrained grid + Levenberg-Mar
 """
 from __future__ import annotations
 
-import csv
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
 from ..models.channel import PathLossModel, pairwise_distance_m
+from ..data.printed_values import printed
 from ..errors import ParameterError
 from ..tracking.kalman import LinearMeasurement, RssMeasurement, TrackResult, extended_kalman_filter
 from ..static.localization import grid_ml_position, rss_ml_position
@@ -72,7 +71,6 @@ FILTERS = ("parallel_ekf", "serial_ekf", "kalman_filter")
 MLE_GRID_STEP_M = 0.5
 MLE_GRID_MARGIN_M = 3.0
 
-_DATA = Path(__file__).parents[1] / "data" / "printed" / "dogan2015.csv"
 
 
 @dataclass(frozen=True)
@@ -311,12 +309,11 @@ TABLE_SETTINGS = _table_settings()
 
 
 def printed_tables() -> tuple[dict, ...]:
-    """Printed cells of Tables 3.7-3.12: dicts with table, row, column, value (float)."""
-    with open(_DATA, newline="") as fh:
-        rows = list(csv.DictReader(line for line in fh if not line.startswith("#")))
-    for r in rows:
-        r["value"] = float(r["value"])
-    return tuple(rows)
+    """Printed cells of Tables 3.7-3.12 (locbook/data/printed/dogan2015.csv): dicts with table, row, column,
+    value (float) and the :class:`~locbook.data.Printed` itself (``printed``)."""
+    return tuple({"table": p.location.removeprefix("Table "), "row": p.item, "column": p.statistic,
+                  "value": p.value, "printed": p}
+                 for p in printed("dogan2015") if p.location.startswith("Table 3."))
 
 
 def table_channels(settings=None) -> dict:

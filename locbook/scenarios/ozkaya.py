@@ -15,10 +15,7 @@ Every printed simulation result (Tables 7.1-7.25, 7.45, 7.46) is mapped to a :cl
 """
 from __future__ import annotations
 
-import csv
 from dataclasses import asdict, dataclass, replace
-from functools import lru_cache
-from pathlib import Path
 
 import numpy as np
 
@@ -26,6 +23,7 @@ from ..tracking.bayes import RssMeasurementModel, grid_bayes_filter, particle_fi
 from ..bounds.crlb import crlb_rms_over_area_m, rss_crlb_m
 from ..static.fingerprint import knn_position, model_fingerprints
 from ..models.channel import PathLossModel
+from ..data.printed_values import printed
 from ..metrics import error_summary, position_error_m, rmse_standard_error_m
 from ..montecarlo import seed_from_values
 from ..models.motion import reflect_into_box
@@ -61,7 +59,6 @@ LAYOUTS = {
 #: thesis; 8, 28, 112 are: 2 m, 1 m and 0.5 m spacing). 135 is the 10 x 16 m room.
 CELL_PATTERNS = {6: (2, 3), 8: (2, 4), 16: (4, 4), 28: (4, 7), 56: (7, 8), 98: (7, 14), 112: (8, 14), 135: (9, 15)}
 
-_DATA = Path(__file__).parents[1] / "data" / "printed" / "ozkaya2011.csv"
 
 
 def room_for(layout: str):
@@ -87,22 +84,21 @@ def cell_centres(room_m, nx: int, ny: int, margin_m: float = 0.5) -> np.ndarray:
     return np.column_stack([gx.ravel(), gy.ravel()])
 
 
-@lru_cache(maxsize=1)
-def _printed_rows():
-    with open(_DATA, newline="") as fh:
-        return tuple(csv.DictReader(line for line in fh if not line.startswith("#")))
-
-
 def printed_tables() -> list[dict]:
-    """Every printed number of Tables 7.1-7.46: dicts with ``table, row, column, value`` (float)."""
-    return [{**r, "value": float(r["value"])} for r in _printed_rows()]
+    """Every printed number of Tables 7.1-7.46 (locbook/data/printed/ozkaya2011.csv): dicts with
+    ``table, row, column, value`` (float) and the :class:`~locbook.data.Printed` itself (``printed``)."""
+    return [{"table": p.location.removeprefix("Table "), "row": p.item, "column": p.statistic, "value": p.value,
+             "printed": p} for p in printed("ozkaya2011") if p.location.startswith("Table 7.")]
+
+
+def printed_cell(table: str, row: str, column: str):
+    """The :class:`~locbook.data.Printed` of a cell of Tables 7.1-7.46, or None where the thesis prints none."""
+    return printed("ozkaya2011").find(f"Table {table}", row, column)
 
 
 def printed_value(table: str, row: str, column: str) -> float | None:
-    for r in _printed_rows():
-        if r["table"] == table and r["row"] == row and r["column"] == column:
-            return float(r["value"])
-    return None
+    cell = printed_cell(table, row, column)
+    return None if cell is None else cell.value
 
 
 @dataclass(frozen=True)

@@ -50,13 +50,14 @@ def model_fingerprints(cells_m, readers_m, model: PathLossModel, walls_m=None, m
             raise ValueError(f"model.{name} must be a scalar or have shape (..., {m}) (one per reader), "
                              f"got shape {value.shape}")
     check_scalar("min_distance_m", min_distance_m, gt=0)
-    distance = np.maximum(pairwise_distance_m(cells_m, readers_m), min_distance_m)
+    distance = pairwise_distance_m(cells_m, readers_m)
     n_walls = 0 if walls_m is None else wall_crossings(cells_m, readers_m, walls_m)
 
     def per_cell(value):   # (..., m) parameters -> (..., 1, m), so they broadcast over the cell axis
         return np.asarray(value, float)[..., None, :] if np.ndim(value) else value
 
-    batched = replace(model, ref_power_dbm=per_cell(model.ref_power_dbm), path_loss_exp=per_cell(model.path_loss_exp))
+    batched = replace(model, ref_power_dbm=per_cell(model.ref_power_dbm), path_loss_exp=per_cell(model.path_loss_exp),
+                      min_distance_m=max(model.min_distance_m, min_distance_m))
     return batched.mean_power_dbm(distance, n_walls)
 
 

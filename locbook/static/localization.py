@@ -37,7 +37,7 @@ import numpy as np
 
 from .._cvx import solve
 from .._validate import as_array, check_scalar
-from ..models.channel import PathLossModel, pairwise_distance_m
+from ..models.channel import PathLossModel, log_distance_gradient, log_distance_mean_dbm, pairwise_distance_m
 from ..errors import ConvergenceError, DegenerateGeometryError
 
 __all__ = [
@@ -426,13 +426,9 @@ def _default_start(anchors_m, power_dbm, model: PathLossModel) -> np.ndarray:
 
 def _rss_residual_jacobian(pos, anchors, power, model: PathLossModel, min_distance_m):
     diff = pos[..., None, :] - anchors  # (..., m, 2)
-    d2 = np.maximum(np.einsum("...i,...i->...", diff, diff), min_distance_m**2)
-    d = np.sqrt(d2)
-    resid = power - model.mean_power_dbm(d)  # (..., m)
-    slope = 10.0 * np.asarray(model.path_loss_exp) / np.log(10.0)
-    # d resid / d p = +10 n / ln10 * (p - a_j) / d_j^2
-    jac = (np.broadcast_to(slope, d.shape) / d2)[..., None] * diff
-    return resid, jac, d2
+    grad, d2 = log_distance_gradient(diff, np.asarray(model.path_loss_exp), min_distance_m=min_distance_m)
+    resid = power - model.mean_power_dbm(np.sqrt(d2))  # (..., m)
+    return resid, -grad, d2                             # d resid / d p = - d mean / d p
 
 
 def _min_eigenvalue(a):
@@ -621,7 +617,9 @@ def grid_ml_position(anchors_m, power_dbm, model: PathLossModel, grid_m, *,
             "grid_ml")
     batch = power.shape[:-1]
     flat = power.reshape(-1, power.shape[-1])
-    mean_grid = model.mean_power_dbm(np.maximum(pairwise_distance_m(grid_m, anchors_m), 1e-6))  # (G, m)
+    mean_grid = log_distance_mean_dbm(pairwise_distance_m(grid_m, anchors_m), np.asarray(model.ref_power_dbm),
+                                      np.asarray(model.path_loss_exp), ref_distance_m=model.ref_distance_m,
+                                      min_distance_m=max(model.min_distance_m, 1e-6))  # (G, m); a node may sit on an anchor
     best = np.empty(flat.shape[0], dtype=int)
     best_cost = np.empty(flat.shape[0])
     for start in range(0, flat.shape[0], chunk):

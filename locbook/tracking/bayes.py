@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._validate import as_array, check_choice, check_scalar
-from ..models.channel import pairwise_distance_m, wall_crossings
+from ..models.channel import log_distance_mean_dbm, pairwise_distance_m, wall_crossings
 from ..models.motion import reflect_into_box
 
 __all__ = [
@@ -48,9 +48,9 @@ class RssMeasurementModel:
     """
 
     readers_m: np.ndarray
-    ref_power_dbm: float | np.ndarray = -52.0
-    path_loss_exp: float | np.ndarray = 2.3
-    sigma_db: float | np.ndarray = 5.2
+    ref_power_dbm: float | np.ndarray
+    path_loss_exp: float | np.ndarray
+    sigma_db: float | np.ndarray
     wall_attenuation_db: float = 0.0
     walls_m: np.ndarray | None = None
     ref_distance_m: float = 1.0
@@ -103,9 +103,10 @@ class RssMeasurementModel:
         if positions_m.ndim not in (2, 3):
             raise ValueError(f"positions_m must have shape (P, 2) or (R, P, 2), got {positions_m.shape}")
         self._check_step(step)
-        distance = np.maximum(pairwise_distance_m(positions_m, self.readers_m), self.min_distance_m)
-        mean = (self._per_step(self.ref_power_dbm, step, True)
-                - 10.0 * self._per_step(self.path_loss_exp, step, True) * np.log10(distance / self.ref_distance_m))
+        mean = log_distance_mean_dbm(pairwise_distance_m(positions_m, self.readers_m),
+                                     self._per_step(self.ref_power_dbm, step, True),
+                                     self._per_step(self.path_loss_exp, step, True),
+                                     ref_distance_m=self.ref_distance_m, min_distance_m=self.min_distance_m)
         if self.walls_m is not None and self.wall_attenuation_db != 0.0:
             mean = mean - self.wall_attenuation_db * wall_crossings(positions_m, self.readers_m, self.walls_m)
         return mean if mean.ndim == 3 else mean[None]

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._validate import as_array, check_choice, check_scalar
-from ..models.channel import PathLossModel
+from ..models.channel import PathLossModel, log_distance_gradient, log_distance_mean_dbm
 from ..errors import SingularCovarianceError
 
 __all__ = ["KalmanResult", "kalman_filter", "KF_VARIANTS", "LinearMeasurement", "RssMeasurement", "TrackResult",
@@ -314,9 +314,8 @@ def rss_measurement_jacobian(positions_m, anchors_m, path_loss_exp, *, min_dista
 def _rss_jacobian(positions_m, anchors_m, path_loss_exp, min_distance_m):
     """:func:`rss_measurement_jacobian` without the input checks (the EKF's inner loop)."""
     diff = np.asarray(positions_m, dtype=float)[..., None, :] - np.asarray(anchors_m, dtype=float)
-    d2 = np.maximum(np.einsum("...i,...i->...", diff, diff), min_distance_m**2)
-    slope = 10.0 * np.asarray(path_loss_exp) / np.log(10.0)
-    return -(slope / d2)[..., None] * diff, np.sqrt(d2)
+    grad, d2 = log_distance_gradient(diff, path_loss_exp, min_distance_m=min_distance_m)
+    return grad, np.sqrt(d2)
 
 
 def _joseph(P, K, H, R):
@@ -406,11 +405,10 @@ def _rss_serial_update(x, P, z, meas: RssMeasurement):
             continue
         pick = lambda arr: np.take_along_axis(arr, a[..., None], -1)[..., 0]
         diff = x[..., idx] - anchors[a]
-        d2 = np.maximum(np.einsum("...i,...i->...", diff, diff), meas.min_distance_m**2)
-        slope = 10.0 * pick(ple) / np.log(10.0)
+        grad, d2 = log_distance_gradient(diff, pick(ple), min_distance_m=meas.min_distance_m)
         h_row = np.zeros(x.shape)
-        h_row[..., idx] = -(slope / d2)[..., None] * diff
-        hx = pick(p0) - 0.5 * slope * np.log(d2)              # P0 - 10 alpha log10 d
+        h_row[..., idx] = grad
+        hx = log_distance_mean_dbm(np.sqrt(d2), pick(p0), pick(ple), ref_distance_m=ch.ref_distance_m)
         nu = np.where(valid, zj - hx, 0.0)
         ph = (P @ h_row[..., None])[..., 0]                   # P H^T
         s = np.einsum("...i,...i->...", h_row, ph) + pick(sigma2)

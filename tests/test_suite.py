@@ -30,7 +30,7 @@ import locbook as lb
 report = lb.Report("toy")
 offset = float(open("../../shared/data/offset.csv").read().split()[-1]) if read_data else 0.0
 x = lb.streams(seed, "a")["a"].normal(size=n)
-printed = lb.Printed("toy", "Table 1", "mean", "", "", repr(offset))
+printed = lb.Printed("george", "Table 1", "mean", "", "", repr(offset))
 report.number("mean", printed, float(x.mean()) + offset, kind="reproduction",
               ambiguity=lb.Ambiguity(1.0, "test window", "toy Sec. 1"))
 time.sleep(sleep_s)
@@ -414,3 +414,41 @@ def test_unwritable_reports_folder_is_one_clear_line(toy, capsys):
     assert main(["--suite", str(toy / "notebooks" / "experiments.toml"), "run", "--reports", target, "george-one"]) == 2
     err = capsys.readouterr().err
     assert "cannot write to the reports folder /sys/fs/locbook-reports/quick" in err and "Traceback" not in err
+
+
+def test_the_index_opens_with_the_kind_by_verdict_tables(toy, capsys):
+    assert run(toy) == 0
+    index = (toy / "reports" / "quick" / "index.md").read_text()
+    # printed 0.0 with a +-1 window: wider than +-25 % of the printed value, so loose, never within
+    assert "Independent reproductions: 0 within, 2 loose, 0 missed, of 2" in index
+    assert "### a (2015), `george`" in index and "| kind | loose | rows |" in index
+    assert "| reproduction | 2 | 2 |" in index
+    summary = (toy / "reports" / "quick" / "george-one" / "summary.md").read_text()
+    assert "| loose | 1 | the window is +-inf% of the printed value" in summary
+    page = (toy / "reports" / "quick" / "george-one" / "report.md").read_text()
+    assert "| mean | Table 1, mean |" in page and "test window (toy Sec. 1)" in page
+    html = (toy / "reports" / "quick" / "index.html").read_text()
+    assert "class='n v-loose'" in html
+
+
+def test_committed_reports_are_never_written_from_a_dirty_tree(toy, capsys):
+    git = lambda *a: subprocess.run(["git", "-C", str(toy), *a], check=True, capture_output=True)
+    git("init", "-q")
+    git("add", "-A")
+    git("-c", "user.email=t@t", "-c", "user.name=t", "commit", "-q", "-m", "source")
+    assert run(toy) == 0
+    git("add", "-A")
+    git("-c", "user.email=t@t", "-c", "user.name=t", "commit", "-q", "-m", "reports")
+    stamp = json.loads((toy / "reports" / "quick" / "george-one" / "report.json").read_text())["locbook"]
+    assert "uncommitted" not in stamp and "(source " in stamp
+    before = (toy / "reports" / "quick" / "george-one" / "numbers.csv").read_bytes()
+    _notebook(toy / "notebooks" / "one.ipynb", PARAMS.replace("n: int = 10", "n: int = 11"))
+    capsys.readouterr()
+    assert run(toy, "--force") == 2
+    err = capsys.readouterr().err
+    assert "holds committed reports" in err and "notebooks/one.ipynb" in err and "Traceback" not in err
+    assert (toy / "reports" / "quick" / "george-one" / "numbers.csv").read_bytes() == before
+    # an uncommitted folder may be written; its stamp says the source was dirty
+    assert run(toy, "--out", str(toy / "scratch")) == 0
+    stamp = json.loads((toy / "scratch" / "george-one" / "report.json").read_text())["locbook"]
+    assert stamp.endswith("+ uncommitted changes)")

@@ -149,9 +149,9 @@ def _git_state(root: Path) -> tuple[str, str]:
     """``(short commit, uncommitted changes under locbook/ and notebooks/)``; ``("", "")`` outside git."""
     def git(*args):
         return subprocess.run(["git", "-C", str(root), *args], capture_output=True, text=True,
-                              timeout=10).stdout.strip()
+                              timeout=10).stdout.rstrip()     # porcelain lines start with a status column
     try:
-        rev = git("rev-parse", "--short", "HEAD")
+        rev = git("rev-parse", "--short", "HEAD").strip()
         dirty = git("status", "--porcelain", "--", "locbook", "notebooks") if rev else ""
     except (OSError, subprocess.SubprocessError):
         return "", ""

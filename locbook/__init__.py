@@ -21,7 +21,8 @@ from .tracking.bayes import (RESAMPLING_CDFS, WEIGHT_SMOOTHINGS, GridFilterResul
                             RssMeasurementModel, effective_sample_size, grid_bayes_filter, grid_transition_matrix,
                             particle_filter, systematic_resample)
 from .bounds.crlb import CRLB_FORMS, crlb_rms_over_area_m, rss_crlb_m, rss_fisher_information, rss_position_information
-from .static.calibration import CALIBRATION_MODES, PathLossFit, calibrate_path_loss, fit_path_loss, fit_path_loss_closed_form
+from .static.calibration import (CALIBRATION_MODES, PathLossFit, calibrate_path_loss, fit_path_loss, fit_path_loss_closed_form,
+                                 fix_error_covariance)
 from .models.channel import (AT86RF230_ED_OFFSET_DB, CC2420_RSSI_OFFSET_DB, PathLossModel, correlated_shadowing_db,
                       dbm_to_register, pairwise_distance_m, quantize_db, register_to_dbm, small_scale_fading_db, wall_crossings)
 from .errors import ConvergenceError, DegenerateGeometryError, LocbookError, ParameterError, SingularCovarianceError
@@ -49,7 +50,7 @@ __all__ = [
     "PathLossModel", "CC2420_RSSI_OFFSET_DB", "AT86RF230_ED_OFFSET_DB", "register_to_dbm", "dbm_to_register",
     "quantize_db", "pairwise_distance_m", "correlated_shadowing_db", "wall_crossings", "small_scale_fading_db",
     # calibration
-    "PathLossFit", "fit_path_loss", "fit_path_loss_closed_form", "calibrate_path_loss", "CALIBRATION_MODES",
+    "PathLossFit", "fit_path_loss", "fit_path_loss_closed_form", "calibrate_path_loss", "CALIBRATION_MODES", "fix_error_covariance",
     # static localization
     "LocalizationResult", "LOCALIZATION_STATUSES", "check_anchor_geometry", "lateration_system", "lateration_ls", "lateration_wls",
     "lateration_box_ls", "rss_ml_position", "grid_ml_position",

@@ -172,3 +172,12 @@ def test_missing_samples_are_ignored(cal_data):
         fit = lb.fit_path_loss(d[0], p_nan[0], solver=solver)
         np.testing.assert_allclose([fit.ref_power_dbm, fit.path_loss_exp], t, atol=1e-6)
         assert fit.n_samples == 3
+
+
+def test_fix_error_covariance_is_numpy_cov_of_the_errors_per_run():
+    rng = np.random.default_rng(11)
+    truth = rng.uniform(0, 5, size=(40, 2))
+    fixes = truth + rng.normal(size=(3, 40, 2)) * [0.5, 2.0] + [1.0, -1.0]     # a bias does not enter
+    R = lb.fix_error_covariance(fixes, truth)
+    for k in range(3):
+        np.testing.assert_allclose(R[k], np.cov((fixes[k] - truth).T), rtol=1e-12)

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..static.calibration import calibrate_path_loss
+from ..static.calibration import calibrate_path_loss, fix_error_covariance
 from ..models.channel import PathLossModel, pairwise_distance_m
 from ..tracking.kalman import kalman_filter
 from ..static.localization import lateration_ls
@@ -27,7 +27,7 @@ from ..models.motion import constant_velocity
 __all__ = [
     "ANCHORS_M", "CORRIDOR_SIZE_M", "PRINTED", "PRINTED_N", "PRINTED_C_RAW", "PRINTED_C_KF",
     "PRINTED_REDUCTION", "PRINTED_REDUCTION_CLAIM", "CC2420_PA_LEVEL_DBM", "DEFAULT_CALIBRATION_POINTS_M",
-    "trajectory_m", "MIN_PLAUSIBLE_PATH_LOSS_EXP", "CorridorRuns", "simulate_corridor", "empirical_fix_covariance", "track_with_kalman",
+    "trajectory_m", "MIN_PLAUSIBLE_PATH_LOSS_EXP", "CorridorRuns", "simulate_corridor", "track_with_kalman",
     "TRAJECTORIES", "R_MODES", "INIT_MODES",
 ]
 
@@ -146,15 +146,6 @@ def simulate_corridor(n_runs: int, truth_m, true_model: PathLossModel, *, rng_ca
     return CorridorRuns(truth_m, cal_pts, cal_power, fit.ref_power_dbm, fit.path_loss_exp, power, fixes, ok)
 
 
-def empirical_fix_covariance(fixes_m, truth_m) -> np.ndarray:
-    """R "obtained from experiments" (paper, Conclusion): sample covariance of fix - truth over the
-    marked points of each run, ``(runs, 2, 2)``. It uses the ground truth, as a test-bed calibration
-    of R would."""
-    err = np.asarray(fixes_m) - np.asarray(truth_m)
-    err = err - err.mean(axis=-2, keepdims=True)
-    return np.einsum("...ti,...tj->...ij", err, err) / (err.shape[-2] - 1)
-
-
 def track_with_kalman(fixes_m, truth_m, *, q: float, dt_s: float = 1.0, r_mode: str = "empirical",
                       r_iso_m2: float = 3.3, init: str = "first_measurement", init_velocity_var: float = 1.0,
                       variant: str = "standard") -> np.ndarray:
@@ -181,7 +172,7 @@ def track_with_kalman(fixes_m, truth_m, *, q: float, dt_s: float = 1.0, r_mode: 
     model = constant_velocity(dt_s, q)
     H = model.position_measurement_matrix()
     if r_mode == "empirical":
-        R = empirical_fix_covariance(fixes_m, truth_m)
+        R = fix_error_covariance(fixes_m, truth_m)
     else:
         R = np.broadcast_to(r_iso_m2 * np.eye(2), fixes_m.shape[:-2] + (2, 2))
     P0 = np.zeros(R.shape[:-2] + (4, 4))

@@ -34,6 +34,7 @@ __all__ = [
     "PathLossFit",
     "path_loss_design_matrix",
     "fit_path_loss",
+    "fix_error_covariance",
     "fit_path_loss_closed_form",
     "calibrate_path_loss",
     "CALIBRATION_MODES",
@@ -282,3 +283,17 @@ def calibrate_path_loss(distance_m, power_dbm, mode: str = "per_location_mean", 
     if mode == "per_anchor":
         return fit_path_loss(np.swapaxes(distance_m, -1, -2), np.swapaxes(power_dbm, -1, -2), **fit_kwargs)
     raise ValueError(f"calibration mode must be one of {CALIBRATION_MODES}, got {mode!r}")
+
+
+def fix_error_covariance(fixes_m, truth_m) -> np.ndarray:
+    """Measurement-noise covariance of position fixes calibrated against ground truth: the sample covariance
+    of ``fix - truth`` over the points of each run, ``fixes_m (..., T, dim)``, ``truth_m (T, dim)`` ->
+    ``(..., dim, dim)``. This is how a test bed obtains a tracker's R "from experiments" (George and
+    Vadivukkarasi, Conclusion); it needs the truth, so it is a calibration, not an online estimate."""
+    fixes_m = as_array("fixes_m", fixes_m, min_ndim=2, nan_ok=True)
+    truth_m = as_array("truth_m", truth_m, ndim=2, trailing=(fixes_m.shape[-2], fixes_m.shape[-1]))
+    if fixes_m.shape[-2] < 2:
+        raise ValueError(f"a covariance needs at least 2 points per run, got {fixes_m.shape[-2]}")
+    err = fixes_m - truth_m
+    err = err - err.mean(axis=-2, keepdims=True)
+    return np.einsum("...ti,...tj->...ij", err, err) / (err.shape[-2] - 1)

@@ -19,7 +19,7 @@ def _scenario(seed=0, runs=3, steps=240):
     truth[:, 0] = model.state_from(rng.uniform(1, 6, (runs, 2)), rng.normal(0, 0.3, (runs, 2)))
     for k in range(1, steps):
         truth[:, k] = truth[:, k - 1] @ F.T + rng.multivariate_normal(np.zeros(6), Q, runs)
-    channel = lb.PathLossModel(-48.0, 3.0, 6.0)
+    channel = lb.PathLossModel(dg.REF_POWER_DBM, dg.PATH_LOSS_EXP, dg.SIGMA_RSS_DB)
     power = channel.sample_power_dbm(lb.pairwise_distance_m(truth[..., model.position_index], ANCHORS), rng)
     power[:, np.arange(steps) % 10 != 0] = np.nan
     acc = truth[..., model.acceleration_index] + 0.015 * rng.standard_normal((runs, steps, 2))
@@ -121,7 +121,7 @@ def test_serial_parallel_and_kf_agree_on_a_linear_model():
 def test_default_trajectory():
     """A1: 24 m at 0.3 m/s -> 80 s = 1600 steps of 50 ms and 160 RSS epochs; the accelerometer truth
     integrates to the velocity; the rest start ramps up over 2 s."""
-    tr = dg.polyline_trajectory()
+    tr = dg.polyline_trajectory(start="moving")
     assert tr.time_s.size == 1600 and tr.rss_steps.size == 160
     speed = np.hypot(tr.state[:, 1], tr.state[:, 4])
     np.testing.assert_allclose(speed, 0.3, atol=1e-12)
@@ -131,8 +131,8 @@ def test_default_trajectory():
     np.testing.assert_allclose(tr.position_m[0], dg.WAYPOINTS_M[0])
     path = np.sum(np.linalg.norm(np.diff(tr.position_m, axis=0), axis=1))
     assert abs(path - (24.0 - 0.3 * dg.DT_S)) < 0.02          # corners are cut by at most one step
-    rest = dg.polyline_trajectory(start="rest")
-    assert rest.time_s.size == 1620 and rest.state[0, 1] == 0.0 and rest.state[0, 4] == 0.0
+    rest = dg.polyline_trajectory()                                # the default start: from rest, 2 s ramp
+    assert rest.start == "rest" and rest.time_s.size == 1620 and rest.state[0, 1] == 0.0 and rest.state[0, 4] == 0.0
     np.testing.assert_allclose(rest.acceleration_mps2[1:40, 1], 0.15, atol=1e-9)
     with pytest.raises(lb.ParameterError, match="start"):
         dg.polyline_trajectory(start="standing")

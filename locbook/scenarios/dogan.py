@@ -365,25 +365,36 @@ class Setting:
 
 
 def _table_settings():
-    """Printed row -> setting for Tables 3.7-3.12 (captions, note 000 s.3.3). sigma_ACC in the tables is
-    written 0.015 (Table 3.6: 0.0152)."""
+    """Printed row -> setting for Tables 3.7-3.12, from the row labels and the captions in dogan2015.csv (note 000
+    s.3.3): 3.7 sweeps sigma_RSS ONLY RSS at Table 3.6's alpha; 3.8 the same fused at its caption's sigma_ACC
+    (0.015, Table 3.6: 0.0152); 3.9 / 3.10 sweep sigma_ACC at their caption's sigma_RSS; 3.11 / 3.12 sweep alpha at
+    their caption's sigma_RSS, ONLY RSS and fused at Table 3.12's caption's sigma_ACC."""
+    acc = _value("Table 3.8 caption", "sigma_ACC")
+    fixed_rss = {t: _value(f"Table {t} caption", "sigma_RSS") for t in ("3.9", "3.10", "3.11", "3.12")}
+    acc_312 = _value("Table 3.12 caption", "sigma_ACC")
     out = {}
-    for s in (6, 5, 4, 3):
-        out[("3.7", f"sigma_rss_db={s}")] = Setting(s, 3.0, None)
-        out[("3.8", f"sigma_rss_db={s}")] = Setting(s, 3.0, 0.015)
-    for a in ("0.015", "0.0075", "0.0015", "0.00075"):
-        out[("3.9", f"sigma_acc={a}")] = Setting(6, 3.0, float(a))
-    for a in ("0.0075", "0.0015"):
-        out[("3.10", f"sigma_acc={a}")] = Setting(3, 3.0, float(a))
-    for p in ("4", "3.5", "3", "2.5", "2", "1.5"):
-        out[("3.11", f"ple={p}")] = Setting(6, float(p), None)
-        out[("3.12", f"ple={p}")] = Setting(6, float(p), 0.015)
+    for p in PRINTED:
+        table = p.location.removeprefix("Table ")
+        if p.location not in RMSE_TABLES or (table, p.item) in out:
+            continue
+        label = float(p.item.partition("=")[2])
+        setting = {"3.7": lambda: Setting(label, PATH_LOSS_EXP, None),
+                   "3.8": lambda: Setting(label, PATH_LOSS_EXP, acc),
+                   "3.9": lambda: Setting(fixed_rss["3.9"], PATH_LOSS_EXP, label),
+                   "3.10": lambda: Setting(fixed_rss["3.10"], PATH_LOSS_EXP, label),
+                   "3.11": lambda: Setting(fixed_rss["3.11"], label, None),
+                   "3.12": lambda: Setting(fixed_rss["3.12"], label, acc_312)}[table]()
+        out[(table, p.item)] = setting
     return out
 
 
-TABLE_SETTINGS = _table_settings()
 #: The printed RMSE tables of Ch. 3.
 RMSE_TABLES = tuple(f"Table 3.{i}" for i in range(7, 13))
+TABLE_SETTINGS = _table_settings()
+#: sigma_ACC of the fused rows of Tables 3.8, 3.11-3.12 as the captions write it (Table 3.6: 0.0152).
+TABLE_SIGMA_ACC_MPS2 = TABLE_SETTINGS[("3.8", "sigma_rss_db=6")].sigma_acc_mps2
+#: sigma_ACC of the fused rows of Tables 3.8, 3.11-3.12 as the captions write it (Table 3.6: 0.0152).
+TABLE_SIGMA_ACC_MPS2 = TABLE_SETTINGS[("3.8", "sigma_rss_db=6")].sigma_acc_mps2
 
 
 def printed_tables() -> tuple[dict, ...]:
@@ -609,7 +620,7 @@ def _miss_reason(row, variants: dict) -> str:
                     "printed." + tested)
         return ("ONLY RSS filters: they depend on the unprinted path, speed and start (A1) through how often the "
                 "constant-acceleration model meets a turn; no reading of the fusion settings changes ONLY RSS." + tested)
-    if s.sigma_acc_mps2 >= 0.015:
+    if s.sigma_acc_mps2 >= TABLE_SIGMA_ACC_MPS2:
         return ("sigma_ACC = 0.015: no reading tried reproduces this row (start from rest or moving, Q printed or "
                 "from sigma_ACC; at 0.015 both Q readings coincide): from rest every fused filter is better than "
                 "printed, the moving start makes the EKFs diverge in a tail of runs and worse than printed, so the "
@@ -624,19 +635,18 @@ def _miss_reason(row, variants: dict) -> str:
 
 
 def fusion_reduction_rows(runs: dict) -> list[dict]:
-    """Fusion gain at sigma_ACC = 0.015 for each filter and channel: Table 3.7 -> 3.8 and 3.11 -> 3.12."""
+    """Fusion gain at the tables' sigma_ACC for each filter and channel: Table 3.7 -> 3.8 and 3.11 -> 3.12."""
     from ..metrics import reduction_pct, rmse_m
     printed = {(c["table"], c["row"], c["column"]): c["value"] for c in printed_tables()}
     out = []
-    for (t_only, t_fus), rows in ((("3.7", "3.8"), [f"sigma_rss_db={s}" for s in (6, 5, 4, 3)]),
-                                  (("3.11", "3.12"), [f"ple={p}" for p in ("4", "3.5", "3", "2.5", "2", "1.5")])):
-        for row in rows:
+    for (t_only, t_fus) in (("3.7", "3.8"), ("3.11", "3.12")):
+        for row in [r for (t, r) in TABLE_SETTINGS if t == t_only]:
             s = TABLE_SETTINGS[(t_only, row)]
             run = runs.get((s.sigma_rss_db, s.path_loss_exp))
             if run is None:
                 continue
             for name in FILTERS:
-                ours = reduction_pct(rmse_m(run.errors[(name, None)]), rmse_m(run.errors[(name, 0.015)]))
+                ours = reduction_pct(rmse_m(run.errors[(name, None)]), rmse_m(run.errors[(name, TABLE_SIGMA_ACC_MPS2)]))
                 theirs = reduction_pct(printed[(t_only, row, name)], printed[(t_fus, row, name)])
                 out.append(dict(tables=f"{t_only} -> {t_fus}", row=row, filter=name, printed_pct=theirs,
                                 reproduced_pct=float(ours)))

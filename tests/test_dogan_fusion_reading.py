@@ -138,3 +138,24 @@ def test_thesis_repeat_error_from_the_printed_re_runs():
 def test_jackknife_standard_error_of_a_mean_is_the_usual_one():
     x = np.random.default_rng(0).normal(size=50)
     assert dg.jackknife_standard_error(np.mean, x) == pytest.approx(x.std(ddof=1) / np.sqrt(x.size), rel=1e-12)
+
+
+def test_fusion_gain_and_mean_level_by_hand():
+    """The fusion reduction of pooled RMSEs and the mean level of the three filters, recomputed by hand; the jackknife
+    standard error of one pooled RMSE agrees with the delta method, SE(MSE) / (2 RMSE)."""
+    rng = np.random.default_rng(5)
+    errors = {}
+    for f in dg.FILTERS:
+        errors[(f, None)] = rng.gamma(2.0, 1.0, (300, 7))
+        errors[(f, 0.5)] = 0.7 * errors[(f, None)] * rng.uniform(0.8, 1.2, (300, 7))
+    run = dg.ChannelRun(6.0, 3.0, np.zeros(2), errors)
+    rmse = {k: np.sqrt(np.mean(v**2)) for k, v in errors.items()}
+    gain, gain_se, each = dg.fusion_gain_pct(run, 0.5)
+    for f in dg.FILTERS:
+        assert each[f] == pytest.approx(100 * (1 - rmse[(f, 0.5)] / rmse[(f, None)]), rel=1e-12)
+    assert gain == pytest.approx(np.mean(list(each.values())), rel=1e-12) and 0 < gain_se < 2
+    level, _, levels = dg.mean_rmse_m(run, 0.5)
+    assert level == pytest.approx(np.mean([rmse[(f, 0.5)] for f in dg.FILTERS]), rel=1e-12)
+    one, one_se, _ = dg.mean_rmse_m(run, None, filters=("kalman_filter",))
+    per_run = np.mean(errors[("kalman_filter", None)] ** 2, axis=1)
+    assert one_se == pytest.approx(per_run.std(ddof=1) / np.sqrt(per_run.size) / (2 * one), rel=0.02)

@@ -41,6 +41,8 @@ __all__ = [
     "table_channels", "record_tables", "bound_rows", "thesis_repeat_error", "per_run_rms_m", "tail_rows",
     "fusion_reduction_rows", "ordering_rows", "table_view", "miss_table", "BOUND_KINDS", "pcrlb_m",
     "smc_trajectories", "smc_trajectory", "CHANNELS", "run_tables", "table_rows", "only_acc_errors",
+    "jackknife_standard_error", "fusion_gain_pct", "mean_rmse_m", "printed_fusion_gains_pct", "REPEATED_ROWS",
+    "RMSE_TABLES", "TABLE_SIGMA_ACC_MPS2", "ACCELERATION_INDEX",
 ]
 
 #: Everything the thesis prints (locbook/data/printed/dogan2015.csv).
@@ -608,7 +610,8 @@ def record_tables(report, rows, *, variants: dict | None = None, label: str = ""
 def _miss_reason(row, variants: dict) -> str:
     s = TABLE_SETTINGS[(row["table"], row["row"])]
     tested = "; ".join(f"{k}: {v:.3f}" for k, v in variants.items())
-    tested = f" Tested readings of the same cell: {tested}." if tested else ""
+    tested = (f" Tested readings of the same cell: {tested}." if tested else
+              " The other readings were run on the 6 dB and 3 dB channels (the readings table), not on this one.")
     ours, printed_value = row["reproduced"], row["printed"]
     if row["column"] == "static_mle":
         return ("STATIC (MLE): the room, anchors and MLE are those of note 000 s.3.1/A8; the residual gap is the "
@@ -676,6 +679,19 @@ def fusion_gain_pct(run: ChannelRun, sigma_acc_mps2: float, filters=FILTERS) -> 
     arrays = [mse[(f, c)] for f in filters for c in (None, sigma_acc_mps2)]
     each = {f: 100.0 * (1.0 - np.sqrt(mse[(f, sigma_acc_mps2)].mean() / mse[(f, None)].mean())) for f in filters}
     return mean_gain(*arrays), jackknife_standard_error(mean_gain, *arrays), each
+
+
+def mean_rmse_m(run: ChannelRun, sigma_acc_mps2: float | None, filters=FILTERS) -> tuple[float, float, dict]:
+    """The mean over ``filters`` of their pooled RMSE in one case (the one level the text reads off three curves,
+    "errors are near 1.5 meter", Fig. 3.4), its jackknife standard error over runs (the filters share the runs'
+    RSS, so their errors are correlated), and each filter's RMSE."""
+    arrays = [np.mean(run.errors[(f, sigma_acc_mps2)] ** 2, axis=1) for f in filters]
+
+    def level(*per_run):
+        return float(np.mean([np.sqrt(a.mean()) for a in per_run]))
+
+    each = {f: float(np.sqrt(a.mean())) for f, a in zip(filters, arrays)}
+    return level(*arrays), jackknife_standard_error(level, *arrays), each
 
 
 def printed_fusion_gains_pct() -> list[float]:

@@ -159,3 +159,23 @@ def test_fusion_gain_and_mean_level_by_hand():
     one, one_se, _ = dg.mean_rmse_m(run, None, filters=("kalman_filter",))
     per_run = np.mean(errors[("kalman_filter", None)] ** 2, axis=1)
     assert one_se == pytest.approx(per_run.std(ddof=1) / np.sqrt(per_run.size) / (2 * one), rel=0.02)
+
+
+@pytest.mark.parametrize("fusion", [False, True])
+def test_per_epoch_r_with_equal_epochs_equals_the_constant_r(fusion):
+    """KF (MLE) with a per-epoch R (Table 4.1's R_{k+1}, run segment by segment) equals the one-pass filter when every
+    epoch has the same R: segmenting the multi-rate filter changes nothing."""
+    tr = dg.polyline_trajectory(waypoints_m=((1.0, 1.0), (1.0, 4.0), (4.0, 4.0)), speed_mps=0.5)
+    rng = np.random.default_rng(2)
+    channel = lb.PathLossModel(dg.REF_POWER_DBM, 3.0, 6.0)
+    rss = dg.simulate_rss(tr, channel, 4, rng)
+    fix = dg.mle_positions(rss, channel).position_m
+    mse = np.mean((fix - tr.position_m[tr.rss_steps]) ** 2, axis=(0, 1))
+    acc = dg.simulate_acceleration(tr, 0.0075, 4, rng) if fusion else None
+    kw = dict(acc_mps2=acc, sigma_acc_mps2=0.0075 if fusion else None)
+    one = dg.run_filter("kalman_filter", tr, rss, fix, mse, channel, **kw)
+    seg = dg.run_filter("kalman_filter", tr, rss, fix, np.tile(mse, (tr.rss_steps.size, 1)), channel, **kw)
+    np.testing.assert_allclose(seg.x, one.x, atol=1e-10)
+    np.testing.assert_allclose(seg.P, np.broadcast_to(one.P, seg.P.shape), atol=1e-12)
+    with pytest.raises(lb.ParameterError, match="per-epoch"):
+        dg.run_filter("serial_ekf", tr, rss, fix, np.tile(mse, (tr.rss_steps.size, 1)), channel)

@@ -42,7 +42,7 @@ __all__ = [
     "fusion_reduction_rows", "ordering_rows", "table_view", "miss_table", "BOUND_KINDS", "pcrlb_m",
     "smc_trajectories", "smc_trajectory", "CHANNELS", "run_tables", "table_rows", "only_acc_errors",
     "jackknife_standard_error", "fusion_gain_pct", "mean_rmse_m", "printed_fusion_gains_pct", "REPEATED_ROWS",
-    "RMSE_TABLES", "TABLE_SIGMA_ACC_MPS2", "ACCELERATION_INDEX",
+    "RMSE_TABLES", "TABLE_SIGMA_ACC_MPS2", "ACCELERATION_INDEX", "MLE_R_READINGS",
 ]
 
 #: Everything the thesis prints (locbook/data/printed/dogan2015.csv).
@@ -121,6 +121,10 @@ NOISE_READINGS = ("sigma_acc", "printed")
 DEFAULT_NOISE_READING = "sigma_acc"
 #: Q per step over sigma_ACC^2 in the ``"sigma_acc"`` reading (0.000023 / 0.0152^2 = 0.0996).
 Q_PER_ACC_VARIANCE = 0.1
+#: KF (MLE)'s R = diag(MSE_MLE) (Eq. (3.21), A6): ``"constant"``, the MSE per axis averaged over runs and epochs
+#: ("averaging Mean Squared Error (MSE) of static localization over 500 Monte Carlo runs", Sec. 3.5; default), or
+#: ``"per_epoch"``, averaged over runs at each epoch (Table 4.1 indexes R_{RSS-MLE,k+1} by time; variant).
+MLE_R_READINGS = ("constant", "per_epoch")
 #: Filter columns of Tables 3.7-3.12.
 FILTERS = ("parallel_ekf", "serial_ekf", "kalman_filter")
 #: MLE search grid (A8): the room +- 3 m at 0.5 m, then Levenberg-Marquardt, unconstrained.
@@ -272,6 +276,8 @@ def run_filter(name: str, trajectory: Trajectory, rss_dbm, mle_fix_m, mse_mle_m2
     and ``"serial_ekf"`` use the raw RSS with R = sigma^2 I (Eq. (3.22)). With ``acc_mps2`` ``(..., T, 2)`` the
     accelerometer updates every step before the RSS (Table 3.5, R_acc = sigma_acc^2 I, Eq. (3.23)). ``model``
     carries Q (:func:`motion_model`), ``p0_acc_var`` the acceleration variance of P_0 (:func:`filter_noise`).
+    ``mse_mle_m2`` is ``(2,)`` (one MSE per axis, the default reading of Eq. (3.21), A6) or ``(E, 2)``: one per RSS
+    epoch, Table 4.1's R_{k+1} (A6 variant; KF (MLE) only, P_0 from the first epoch's).
     """
     if name not in FILTERS:
         raise ParameterError(f"filter must be one of {FILTERS}, got {name!r}")
@@ -280,7 +286,12 @@ def run_filter(name: str, trajectory: Trajectory, rss_dbm, mle_fix_m, mse_mle_m2
     n_steps = trajectory.time_s.size
     rss_dbm = np.asarray(rss_dbm, dtype=float)
     batch = rss_dbm.shape[:-2]
-    x0, P0 = initial_state(np.asarray(mle_fix_m)[..., 0, :], np.asarray(mse_mle_m2), acc_var=p0_acc_var)
+    mse = np.asarray(mse_mle_m2, dtype=float)
+    per_epoch = mse.ndim == 2
+    if per_epoch and (name != "kalman_filter" or mse.shape != (steps.size, 2)):
+        raise ParameterError(f"a per-epoch MSE must be (epochs, 2) = ({steps.size}, 2) and is used by KF (MLE) only, "
+                             f"got shape {mse.shape} for {name}")
+    x0, P0 = initial_state(np.asarray(mle_fix_m)[..., 0, :], mse[0] if per_epoch else mse, acc_var=p0_acc_var)
     measurements = []
     if acc_mps2 is not None:
         if sigma_acc_mps2 is None:
@@ -293,7 +304,8 @@ def run_filter(name: str, trajectory: Trajectory, rss_dbm, mle_fix_m, mse_mle_m2
     if name == "kalman_filter":
         z = np.full(grid_shape + (2,), np.nan)
         z[..., at, :] = np.asarray(mle_fix_m)[..., 1:, :]
-        mse = np.asarray(mse_mle_m2, dtype=float)
+        if per_epoch:
+            return _per_epoch_kf(model, x0, P0, measurements, z, mse, at, steps)
         measurements.append(LinearMeasurement(z, model.position_measurement_matrix(), mse[..., :, None] * np.eye(2)))
     else:
         z = np.full(grid_shape + (rss_dbm.shape[-1],), np.nan)
@@ -305,6 +317,25 @@ def run_filter(name: str, trajectory: Trajectory, rss_dbm, mle_fix_m, mse_mle_m2
     x = np.concatenate([np.broadcast_to(x0[..., None, :], track.x.shape[:-2] + (1, 6)), track.x], axis=-2)
     P = np.concatenate([np.broadcast_to(P0[..., None, :, :], track.P.shape[:-3] + (1, 6, 6)), track.P], axis=-3)
     return TrackResult(x, P, steps)
+
+
+def _per_epoch_kf(model, x0, P0, acc_streams, z, mse, at, steps) -> TrackResult:
+    """KF (MLE) with R = diag(MSE_MLE) of each epoch (Table 4.1's R_{k+1}): the same multi-rate filter
+    (:func:`locbook.extended_kalman_filter`) run one inter-epoch segment at a time, each segment with its epoch's R,
+    continuing from the previous segment's posterior."""
+    H = model.position_measurement_matrix()
+    x, P = x0, np.broadcast_to(P0, x0.shape[:-1] + P0.shape[-2:])
+    xs, Ps = [x], [P]
+    start = 0
+    for e, end in enumerate(at, start=1):
+        segment = [LinearMeasurement(m.z[..., start:end + 1, :], m.H, m.R) for m in acc_streams]
+        segment.append(LinearMeasurement(z[..., start:end + 1, :], H, mse[e][:, None] * np.eye(2)))
+        track = extended_kalman_filter(model.F, model.Q, x, P, segment, record=[end - start])
+        x, P = track.x[..., 0, :], track.P[..., 0, :, :]
+        xs.append(x)
+        Ps.append(P)
+        start = end + 1
+    return TrackResult(np.stack(xs, axis=-2), np.stack(Ps, axis=-3), steps)
 
 
 @dataclass
@@ -322,13 +353,17 @@ class ChannelRun:
 def run_channel(trajectory: Trajectory, sigma_rss_db: float, path_loss_exp: float, n_runs: int,
                 rng: np.random.Generator, *, sigma_acc_values=(), only_rss: bool = True, filters=FILTERS,
                 ref_power_dbm: float = REF_POWER_DBM, serial_order: str = "descending",
-                noise_reading: str = DEFAULT_NOISE_READING, anchors_m=ANCHORS_M,
+                noise_reading: str = DEFAULT_NOISE_READING, anchors_m=ANCHORS_M, mle_r: str = "constant",
                 keep_estimates: bool = False) -> ChannelRun:
     """Simulate one channel setting and run the MLE and the requested filters, ONLY RSS and/or fused with an
     accelerometer of each ``sigma_acc_values``; all cases share the same RSS draws (common random numbers, so
     the fusion gain is measured on identical RSS). The MLE's per-axis MSE sets R and P_0 of KF (MLE) and
     P_0 of every filter (Eqs. (3.20), (3.21), A6). Each case's Q and P_0 acceleration variance follow
-    ``noise_reading`` (:func:`filter_noise`); the filter grid is the trajectory's."""
+    ``noise_reading`` (:func:`filter_noise`); the filter grid is the trajectory's. ``mle_r`` (:data:`MLE_R_READINGS`):
+    KF (MLE)'s R from the MSE per axis over runs and epochs (``"constant"``) or per epoch over runs
+    (``"per_epoch"``)."""
+    if mle_r not in MLE_R_READINGS:
+        raise ParameterError(f"mle_r must be one of {MLE_R_READINGS}, got {mle_r!r}")
     channel = PathLossModel(ref_power_dbm, path_loss_exp, sigma_rss_db)
     dt_s = float(trajectory.time_s[1] - trajectory.time_s[0])
     truth = trajectory.position_m[..., trajectory.rss_steps, :]
@@ -348,7 +383,8 @@ def run_channel(trajectory: Trajectory, sigma_rss_db: float, path_loss_exp: floa
         q, p0_acc = filter_noise(noise_reading, sigma_acc)
         model = motion_model(dt_s, q)
         for name in filters:
-            track = run_filter(name, trajectory, rss, fix, mse, channel, acc_mps2=acc, sigma_acc_mps2=sigma_acc,
+            r_mse = np.mean((fix - truth) ** 2, axis=0) if (mle_r == "per_epoch" and name == "kalman_filter") else mse
+            track = run_filter(name, trajectory, rss, fix, r_mse, channel, acc_mps2=acc, sigma_acc_mps2=sigma_acc,
                                model=model, p0_acc_var=p0_acc, serial_order=serial_order, anchors_m=anchors_m)
             pos = track.x[..., model.position_index]
             out.errors[(name, sigma_acc)] = np.linalg.norm(pos - truth, axis=-1)
@@ -428,7 +464,7 @@ CHANNELS = tuple(table_channels())
 
 def run_tables(trajectory: Trajectory, n_runs: int, seed: int, *, channels=None, filters=FILTERS,
                serial_order: str = "descending", noise_reading: str = DEFAULT_NOISE_READING,
-               anchors_m=ANCHORS_M) -> dict:
+               anchors_m=ANCHORS_M, mle_r: str = "constant") -> dict:
     """Every channel setting of Tables 3.7-3.12 (or the ``channels`` subset of :data:`CHANNELS`), each with its
     own random stream spawned from ``seed``; returns ``{(sigma_RSS, alpha): ChannelRun}``."""
     plan = table_channels()
@@ -443,7 +479,7 @@ def run_tables(trajectory: Trajectory, n_runs: int, seed: int, *, channels=None,
         rng = np.random.default_rng(children[CHANNELS.index(key)])
         out[key] = run_channel(trajectory, key[0], key[1], n_runs, rng, sigma_acc_values=accs, only_rss=only,
                                filters=filters, serial_order=serial_order, noise_reading=noise_reading,
-                               anchors_m=anchors_m)
+                               anchors_m=anchors_m, mle_r=mle_r)
     return out
 
 
@@ -619,10 +655,11 @@ def _miss_reason(row, variants: dict) -> str:
     if s.sigma_acc_mps2 is None:
         if row["column"] == "kalman_filter" and s.path_loss_exp <= 2.5:
             return ("KF (MLE) at low alpha: far-out MLE fixes make R = diag(MSE_MLE) large and our KF beats the "
-                    "printed one; R's form (constant or per epoch, A6) and any bound on the MLE (A8) are not "
-                    "printed." + tested)
+                    "printed one; R per epoch (Table 4.1's R_k+1, the other reading of A6) beats it too, and any bound "
+                    "on the MLE (A8) is not printed." + tested)
         return ("ONLY RSS filters: they depend on the unprinted path, speed and start (A1) through how often the "
-                "constant-acceleration model meets a turn; no reading of the fusion settings changes ONLY RSS." + tested)
+                "constant-acceleration model meets a turn; the fusion readings barely change ONLY RSS, and for KF "
+                "(MLE) R per epoch (A6) moves it further from the printed value." + tested)
     if s.sigma_acc_mps2 >= TABLE_SIGMA_ACC_MPS2:
         return ("sigma_ACC = 0.015: no reading tried reproduces this row (start from rest or moving, Q printed or "
                 "from sigma_ACC; at 0.015 both Q readings coincide): from rest every fused filter is better than "

@@ -42,7 +42,7 @@ __all__ = [
     "fusion_reduction_rows", "ordering_rows", "table_view", "miss_table", "BOUND_KINDS", "pcrlb_m",
     "smc_trajectories", "smc_trajectory", "CHANNELS", "run_tables", "table_rows", "only_acc_errors",
     "jackknife_standard_error", "fusion_gain_pct", "mean_rmse_m", "printed_fusion_gains_pct", "REPEATED_ROWS",
-    "RMSE_TABLES", "TABLE_SIGMA_ACC_MPS2", "ACCELERATION_INDEX", "MLE_R_READINGS",
+    "RMSE_TABLES", "TABLE_SIGMA_ACC_MPS2", "TABLE_36_CHANNEL", "SIGMA_ACC_SWEEP_CHANNELS", "ACCELERATION_INDEX", "MLE_R_READINGS",
 ]
 
 #: Everything the thesis prints (locbook/data/printed/dogan2015.csv).
@@ -429,8 +429,16 @@ def _table_settings():
 #: The printed RMSE tables of Ch. 3.
 RMSE_TABLES = tuple(f"Table 3.{i}" for i in range(7, 13))
 TABLE_SETTINGS = _table_settings()
+#: The channel (sigma_RSS, alpha) of Table 3.6, and the channels of the sigma_ACC sweeps (Tables 3.9 and 3.10).
+TABLE_36_CHANNEL = (SIGMA_RSS_DB, PATH_LOSS_EXP)
+SIGMA_ACC_SWEEP_CHANNELS = tuple(dict.fromkeys((st.sigma_rss_db, st.path_loss_exp) for (t, _), st in TABLE_SETTINGS.items()
+                                               if t in ("3.9", "3.10")))
 #: sigma_ACC of the fused rows of Tables 3.8, 3.11-3.12 as the captions write it (Table 3.6: 0.0152).
 TABLE_SIGMA_ACC_MPS2 = TABLE_SETTINGS[("3.8", "sigma_rss_db=6")].sigma_acc_mps2
+#: The channel (sigma_RSS, alpha) of Table 3.6, and the channels of the sigma_ACC sweeps (Tables 3.9 and 3.10).
+TABLE_36_CHANNEL = (SIGMA_RSS_DB, PATH_LOSS_EXP)
+SIGMA_ACC_SWEEP_CHANNELS = tuple(dict.fromkeys((st.sigma_rss_db, st.path_loss_exp) for (t, _), st in TABLE_SETTINGS.items()
+                                               if t in ("3.9", "3.10")))
 #: sigma_ACC of the fused rows of Tables 3.8, 3.11-3.12 as the captions write it (Table 3.6: 0.0152).
 TABLE_SIGMA_ACC_MPS2 = TABLE_SETTINGS[("3.8", "sigma_rss_db=6")].sigma_acc_mps2
 

@@ -169,3 +169,29 @@ def test_mle_reaches_the_grid_optimum():
     best = lb.grid_ml_position(ANCHORS, power, channel, fine)
     cost = np.sum((power - channel.mean_power_dbm(lb.pairwise_distance_m(est.position_m, ANCHORS))) ** 2, -1)
     assert np.all(cost <= best.cost + 1e-9) and np.all(est.converged)
+
+
+def test_record_tables_kinds_repeats_and_miss_notes(tmp_path, monkeypatch):
+    """The MLE column is a reproduction, every filter column calibrated from the Fig. 3.2 drift (the walking speed);
+    the repeats of one setting link to the cell they repeat and get no verdict; a miss names the readings tested."""
+    monkeypatch.setenv("LOCBOOK_OUTPUT_DIR", str(tmp_path))
+    report = lb.Report("x")
+    cells = {(c["table"], c["row"], c["column"]): c for c in dg.printed_tables()}
+    keys = [("3.7", "sigma_rss_db=6", "static_mle"), ("3.8", "sigma_rss_db=6", "serial_ekf"),
+            ("3.9", "sigma_acc=0.015", "serial_ekf"), ("3.11", "ple=3", "static_mle"), ("3.9", "sigma_acc=0.0015", "kalman_filter")]
+    rows = [dict(table=k[0], row=k[1], column=k[2], printed=cells[k]["value"], printed_value=cells[k]["printed"],
+                 reproduced=cells[k]["value"] * (2.0 if k[1] == "sigma_acc=0.0015" else 1.0), mc_se=0.001) for k in keys]
+    counts = dg.record_tables(report, rows, variants={keys[-1]: {"start moving, Q printed": 1.5}})
+    out = {r["where"]: r for r in report.numbers}
+    mle = out["Table 3.7, sigma_rss_db=6, static_mle"]
+    assert mle["kind"] == "reproduction" and mle["verdict"] == "within" and not mle["calibrated_from"]
+    serial = out["Table 3.8, sigma_rss_db=6, serial_ekf"]
+    assert serial["kind"] == "calibrated" and "24 meter" in serial["calibrated_from"]
+    # the thesis's Monte-Carlo error widens the window: 2 x its relative standard error of the printed value
+    assert serial["ambiguity"] == pytest.approx(2 * dg.thesis_repeat_error() * 1.47114, rel=1e-12)
+    repeat = out["Table 3.9, sigma_acc=0.015, serial_ekf"]
+    assert repeat["same_as"] == "Table 3.8 | sigma_rss_db=6 | serial_ekf" and repeat["verdict"] == ""
+    assert out["Table 3.11, ple=3, static_mle"]["same_as"] == "Table 3.7 | sigma_rss_db=6 | static_mle"
+    miss = out["Table 3.9, sigma_acc=0.0015, kalman_filter"]
+    assert miss["verdict"] == "miss" and "start moving, Q printed: 1.500" in miss["note"]
+    assert counts == {"within": 2, "linked": 2, "miss": 1}

@@ -35,7 +35,8 @@ from .metrics import (empirical_cdf, error_std_m, error_summary, mean_error_m, m
                       position_error_m, reduction_pct, rmse_m, rmse_standard_error_m)
 from .bounds.pcrlb import (PCRLB_FORMS, linear_measurement_information, position_bound_m, posterior_crlb,
                     rss_state_information)
-from .montecarlo import canonical_encoding, mc_standard_error, seed_from_values, spawn_generators, streams
+from .montecarlo import (bootstrap_standard_error, canonical_encoding, mc_standard_error, seed_from_values,
+                         spawn_generators, streams)
 from .models.motion import (NOISE_MODELS, STATE_LAYOUTS, KinematicModel, constant_acceleration, constant_velocity, reflect_into_box,
                      simulate_states)
 from .static.reference_tags import (OZKAYA_PATH_LOSS_EXP_BOUNDS, OZKAYA_REF_POWER_BOUNDS_DBM, OnlineCalibration,
@@ -72,7 +73,7 @@ __all__ = [
     "rss_fisher_information", "rss_position_information", "rss_crlb_m", "crlb_rms_over_area_m", "CRLB_FORMS",
     # metrics and Monte Carlo
     "position_error_m", "mean_error_m", "rmse_m", "median_error_m", "percentile_error_m", "error_std_m",
-    "empirical_cdf", "reduction_pct", "error_summary", "rmse_standard_error_m", "spawn_generators", "streams", "mc_standard_error", "seed_from_values", "canonical_encoding",
+    "empirical_cdf", "reduction_pct", "error_summary", "rmse_standard_error_m", "spawn_generators", "streams", "mc_standard_error", "bootstrap_standard_error", "seed_from_values", "canonical_encoding",
     # errors and reports
     "LocbookError", "DegenerateGeometryError", "ConvergenceError", "ParameterError", "SingularCovarianceError",
     "Report", "Ambiguity", "Printed", "PrintedValues", "printed",

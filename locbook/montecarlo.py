@@ -23,7 +23,7 @@ import numpy as np
 
 from ._validate import check_scalar
 
-__all__ = ["spawn_generators", "streams", "mc_standard_error", "seed_from_values", "canonical_encoding"]
+__all__ = ["spawn_generators", "streams", "mc_standard_error", "bootstrap_standard_error", "seed_from_values", "canonical_encoding"]
 
 
 def spawn_generators(seed: int | np.random.SeedSequence, n: int) -> list[np.random.Generator]:
@@ -47,6 +47,21 @@ def mc_standard_error(samples, axis: int = 0) -> np.ndarray:
     if n < 2:
         raise ValueError("a standard error needs at least two Monte-Carlo samples")
     return np.std(samples, axis=axis, ddof=1) / np.sqrt(n)
+
+
+def bootstrap_standard_error(samples, statistic, rng: np.random.Generator, n_resamples: int = 200) -> float:
+    """Bootstrap standard error of ``statistic`` over independent run-level ``samples`` (1-D).
+
+    ``statistic(x, axis=-1)`` is evaluated on ``n_resamples`` resamples drawn with replacement, all in one
+    array; the standard error is their standard deviation. For statistics without a simple closed form
+    (median, percentiles); the samples must be independent (one value per Monte-Carlo run, not per step).
+    """
+    x = np.asarray(samples, float).ravel()
+    check_scalar("n_resamples", n_resamples, ge=2, integer=True)
+    if x.size < 2:
+        raise ValueError("a standard error needs at least two Monte-Carlo samples")
+    resamples = x[rng.integers(0, x.size, size=(n_resamples, x.size))]
+    return float(np.std(statistic(resamples, axis=-1), ddof=1))
 
 
 def _canonical(value):

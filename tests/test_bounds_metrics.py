@@ -106,3 +106,21 @@ def test_streams_are_reproducible_independent_and_prefix_stable():
     big = lb.streams(1, "x")["x"].standard_normal((10, 4))
     np.testing.assert_array_equal(small, big[:3])     # run i's draws do not depend on the number of runs
     assert lb.mc_standard_error(np.array([1.0, 3.0])) == pytest.approx(1.0)
+
+
+def test_bootstrap_standard_error_matches_closed_forms():
+    """Averaged over 20 Gaussian samples, the bootstrap SE of the mean equals sigma / sqrt(n) and that of the
+    median the asymptotic sqrt(pi / 2) sigma / sqrt(n) (a single sample's bootstrap SE of a median scatters by
+    about 10 %, so one sample is not a test)."""
+    n, sigma = 1000, 2.0
+    ratios = {np.mean: [], np.median: []}
+    closed = {np.mean: sigma / np.sqrt(n), np.median: np.sqrt(np.pi / 2) * sigma / np.sqrt(n)}
+    for k in range(20):
+        x = np.random.default_rng(k).normal(3.0, sigma, n)
+        for stat in ratios:
+            se = lb.bootstrap_standard_error(x, stat, np.random.default_rng(1000 + k), n_resamples=400)
+            ratios[stat].append(se / closed[stat])
+    assert np.mean(ratios[np.mean]) == pytest.approx(1.0, abs=0.04)
+    assert np.mean(ratios[np.median]) == pytest.approx(1.0, abs=0.08)
+    with pytest.raises(ValueError, match="two"):
+        lb.bootstrap_standard_error([1.0], np.mean, np.random.default_rng(0))

@@ -13,8 +13,18 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def _significant_digits(text: str) -> int:
-    digits = text.lower().split("e")[0].replace("-", "").replace("+", "").replace(".", "").lstrip("0")
+    """Significant digits of a printed number: ``2.2867`` 5, ``0.0152`` 3, ``1000`` 1 (an integer's trailing
+    zeros are not significant: 1000 runs is a round count, not a measured value)."""
+    mantissa = text.lower().split("e")[0].replace("-", "").replace("+", "")
+    digits = mantissa.replace(".", "").lstrip("0")
+    if "." not in mantissa:
+        digits = digits.rstrip("0")
     return len(digits)
+
+
+def test_significant_digits():
+    assert [_significant_digits(t) for t in ("2.2867", "0.0152", "1000", "1500", "914", "-0.00023", "1.50")] == [
+        5, 3, 1, 2, 3, 2, 3]
 
 
 def _printed_literals() -> dict[float, str]:

@@ -39,7 +39,7 @@ __all__ = [
     "polyline_trajectory", "motion_model", "simulate_rss", "simulate_acceleration", "mle_positions", "mle_cost_eq24",
     "initial_state", "run_filter", "ChannelRun", "run_channel", "printed_tables", "TABLE_SETTINGS", "Setting",
     "table_channels", "record_tables", "bound_rows", "thesis_repeat_error", "per_run_rms_m", "tail_rows",
-    "fusion_reduction_rows", "ordering_rows", "table_view", "miss_table", "BOUND_KINDS", "pcrlb_m",
+    "fusion_reduction_rows", "ordering_rows", "table_view", "BOUND_KINDS", "pcrlb_m",
     "smc_trajectories", "smc_trajectory", "CHANNELS", "run_tables", "table_rows", "only_acc_errors",
     "jackknife_standard_error", "fusion_gain_pct", "mean_rmse_m", "printed_fusion_gains_pct", "REPEATED_ROWS",
     "RMSE_TABLES", "TABLE_SIGMA_ACC_MPS2", "TABLE_36_CHANNEL", "SIGMA_ACC_SWEEP_CHANNELS", "ACCELERATION_INDEX", "MLE_R_READINGS",
@@ -838,10 +838,3 @@ def table_view(rows, table: str) -> list[dict]:
         if r["table"] == table:
             out.setdefault(r["row"], {"row": r["row"]})[r["column"]] = f"{r['printed']:.3f} / {r['reproduced']:.3f}"
     return list(out.values())
-
-
-def miss_table(report) -> list[dict]:
-    """Every recorded number that misses or is loose, with the reason."""
-    return [{"where": r["where"], "kind": r["kind"], "printed": r["printed"], "reproduced": r["reproduced"],
-             "verdict": r["verdict"], "reason": r["note"]}
-            for r in report.numbers if r["verdict"] in ("miss", "loose")]

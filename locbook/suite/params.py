@@ -205,7 +205,7 @@ def _to_float(value, annotation):
     """ints where floats are declared become floats (TOML ``2`` for a float parameter)."""
     if annotation in ("float", "float | None") and isinstance(value, int) and not isinstance(value, bool):
         return float(value)
-    if annotation in ("list[float]", "tuple[float, ...]") and isinstance(value, (list, tuple)):
+    if annotation in ("list[float]", "list[float] | None", "tuple[float, ...]") and isinstance(value, (list, tuple)):
         return [float(v) if isinstance(v, int) and not isinstance(v, bool) else v for v in value]
     if annotation == "list[list[float]]" and isinstance(value, (list, tuple)):
         return [_to_float(v, "list[float]") for v in value]

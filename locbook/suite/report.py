@@ -135,15 +135,16 @@ class Report:
         low = s.low
         if printed.unit == "m" and math.isfinite(low):
             low = max(low, 0.0)                      # distances and errors are not negative
-        if s.verdict == "loose" and not note:
+        if s.verdict == "loose":                     # say why it is loose, before any other note
             part = {"rounding": s.rounding, "2 Monte-Carlo standard errors": s.half_width - s.rounding
                     - (ambiguity.size if ambiguity else 0.0)}
             if ambiguity:
                 part[ambiguity.what] = ambiguity.size
             widest = max(part, key=part.get)
-            note = (f"the window is +-{s.relative_half_width:.0%} of the printed value (more than +-25 %), "
-                    f"mostly {widest}") if kind != "claim" else (
-                    "the claim holds for our estimate but not beyond 2 Monte-Carlo standard errors")
+            why = (f"the window is +-{s.relative_half_width:.0%} of the printed value (more than +-25 %), "
+                   f"mostly {widest}") if kind != "claim" else (
+                   "the claim holds for our estimate but not beyond 2 Monte-Carlo standard errors")
+            note = f"{why}; {note}" if note else why
         if same_as is not None and not note:
             note = f"the source prints this quantity again at {same_as.where}; compared there"
         row = {
@@ -166,6 +167,14 @@ class Report:
         cols = ("quantity", "where", "unit", "kind", "printed", "reproduced", "window_low", "window_high",
                 "verdict", "note")
         return Table([{c: r[c] for c in cols} for r in self.numbers], "Reproduced versus printed")
+
+    def misses_table(self) -> Table:
+        """The recorded rows judged ``miss``, ``loose`` or ``inconsistent``, each with its note (the likely
+        reason), for display beside the full table."""
+        rows = [{"where": r["where"], "kind": r["kind"], "printed": r["printed"], "reproduced": r["reproduced"],
+                 "verdict": r["verdict"], "reason": r["note"]}
+                for r in self.numbers if r["verdict"] in ("miss", "loose", "inconsistent")]
+        return Table(rows, "Misses and loose agreements, with the likely reason")
 
     # -- figures, tables, assumptions -------------------------------------------------------------
     def figure(self, fig, name: str, caption: str = "", dpi: int = 110) -> Path:

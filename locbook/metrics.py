@@ -18,7 +18,8 @@ from ._validate import as_array, check_scalar
 
 __all__ = [
     "position_error_m", "mean_error_m", "rmse_m", "median_error_m", "percentile_error_m",
-    "error_std_m", "empirical_cdf", "reduction_pct", "error_summary", "rmse_standard_error_m",
+    "error_std_m", "empirical_cdf", "reduction_pct", "error_summary", "error_summary_per_run",
+    "rmse_standard_error_m",
 ]
 
 
@@ -119,3 +120,21 @@ def error_summary(error_m) -> dict[str, float]:
         "median_m": float(median_error_m(e)), "p90_m": float(percentile_error_m(e, 90)),
         "std_m": float(error_std_m(e)), "n": int(e.size),
     }
+
+
+def error_summary_per_run(error_m) -> dict[str, np.ndarray]:
+    """The statistics of :func:`error_summary` for each run separately: errors ``(R, ...)`` (one row per
+    independent run, e.g. a synthetic test bed or a Monte-Carlo replicate, with any number of estimates each)
+    -> ``{"rmse_m", "mean_m", "median_m", "p90_m", "std_m"}``, each an ``(R,)`` array taken over all axes but
+    the first (std in population form, percentiles by linear interpolation, as in :func:`error_summary`).
+
+    Their spread across runs gives a standard error of their mean over runs (``std(ddof=1) / sqrt(R)``), and
+    says how far the statistic of one run may fall from that mean."""
+    _check_errors("error_m", error_m)
+    e = np.asarray(error_m, float)
+    if e.ndim < 2 or e[0].size == 0:
+        raise ValueError(f"error_m must have shape (runs, estimates, ...) with at least one estimate per run, "
+                         f"got {e.shape}")
+    e = e.reshape(e.shape[0], -1)
+    return {"rmse_m": rmse_m(e, axis=-1), "mean_m": mean_error_m(e, axis=-1), "median_m": median_error_m(e, axis=-1),
+            "p90_m": percentile_error_m(e, 90, axis=-1), "std_m": error_std_m(e, axis=-1)}

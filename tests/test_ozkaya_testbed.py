@@ -1,5 +1,6 @@
 """The synthetic test bed of Ozkaya (2011) Sec. 7.3: the channel's noise structure, the reference-tag wiring,
-and the mapping of printed cells, checked against the model's definition and least-squares theory."""
+the mapping of printed cells and how they go on the scoreboard, checked against the model's definition,
+least-squares theory, the printed-values file and the thesis's text."""
 from dataclasses import replace
 
 import numpy as np
@@ -102,7 +103,7 @@ def test_every_ranking_is_what_its_table_prints():
     printed = {(r["table"], r["row"], r["column"]): r["value"] for r in oz.printed_tables()}
     assert len(tb.RANKINGS) == 27
     for where, better, worse, experiment, stat in tb.RANKINGS:
-        assert better != worse and stat in oz.STATISTICS
+        assert better != worse and stat in tb.STATISTICS
         table, _, qualifier = where.removeprefix("Table ").partition(" ")
         # the label's qualifier names the experiment or, for "(90 %)", the statistic
         if qualifier == "(90 %)":
@@ -168,10 +169,10 @@ def test_run_testbed_is_reproducible_and_subsets_do_not_change_numbers():
             np.testing.assert_array_equal(est, full[name].estimates[key])
     rows = tb.table_rows(full)
     assert {r["table"] for r in rows} == {t for t, _, _ in tb.TABLE_CELLS}
-    assert all(np.isfinite(r["reproduced"]) and r["tolerance_m"] > 0 for r in rows)
+    assert all(np.isfinite(r["reproduced"]) and r["spread_m"] > 0 for r in rows)
     # every row recomputed from the estimates: Euclidean error, the statistic per realization (near-tag
-    # rows keep the fixed points within 1.5 m of a tag, by distance), mean and 2 x hypot(spread, its MC error)
-    printed = {(r["table"], r["row"], r["column"]): r["value"] for r in oz.printed_tables()}
+    # rows keep the fixed points within 1.5 m of a tag, by distance), their mean, sd and sd / sqrt(Z)
+    printed = {(r["table"], r["row"], r["column"]): r["printed"] for r in oz.printed_tables()}
     tags = np.asarray(oz.REFERENCE_TAGS_M)
     points = np.asarray(tb.FIXED_POINTS_M)
     near = np.min(np.linalg.norm(points[:, None] - tags[None], axis=-1), axis=1) <= tb.NEAR_TAG_RADIUS_M
@@ -190,6 +191,124 @@ def test_run_testbed_is_reproducible_and_subsets_do_not_change_numbers():
         spread = np.std(values, ddof=1)
         assert r["printed"] == printed[(r["table"], r["row"], r["column"])]
         assert r["reproduced"] == pytest.approx(values.mean(), rel=1e-12, abs=1e-12)
-        assert r["tolerance_m"] == pytest.approx(2 * np.sqrt(spread**2 + spread**2 / values.size), rel=1e-9)
+        assert r["spread_m"] == pytest.approx(spread, rel=1e-9)
+        assert r["mc_se_m"] == pytest.approx(spread / np.sqrt(values.size), rel=1e-9)
+        assert tb.testbed_ambiguity(r["per_testbed"]).size == pytest.approx(2 * spread, rel=1e-9)
     with pytest.raises(ValueError, match="unknown experiments"):
         tb.run_testbed(1, 0, experiments=["fixd"])
+
+
+def test_printed_inputs_are_read_from_the_printed_file():
+    # the printed-values file itself (not the scenario's constants): Sec. 7.3.2.6's 7.5 dB over Table 6.2's 5.3 dB,
+    # Sec. 7.3.1.3's sigma = 5.2 and CRLB = 0.76
+    P = lb.printed("ozkaya2011")
+    mono = P.get("Sec. 7.3.2.6 text", "monopole reader antennas", "auto_calibrated_sigma_db")
+    patch = P.get("Table 6.2", "all readers (pooled)", "sigma_db")
+    assert (mono.text, patch.text) == ("7.5", "5.3")
+    assert tb.MONOPOLE_NOISE_SCALE == pytest.approx(mono.value / patch.value, rel=1e-15)
+    assert mono.text in tb.MONOPOLE_CALIBRATED_FROM and patch.text in tb.MONOPOLE_CALIBRATED_FROM
+    assert tb.MethodSettings().sigma_db == P.get("Sec. 7.3.1.3 text", "test bed methods", "sigma_db").value == 5.2
+    assert tb.TESTBED_CRLB_PRINTED.text == "0.76"
+    assert tb.run_testbed.__kwdefaults__["monopole_noise_scale"] == tb.MONOPOLE_NOISE_SCALE
+
+
+def test_testbed_crlb_is_the_printed_form_bound_averaged_over_the_cells():
+    # independent: the printed-form bound (1/d^2 Fisher information, Ozkaya A.10-A.12) written out by hand
+    readers = np.asarray(oz.TESTBED_READERS_M)
+    cells = np.asarray(tb.TESTBED_CELLS_M)
+    assert cells.shape == (36, 2)
+    n, sigma = 2.0, tb.TESTBED_SIGMA_DB
+    b = (10 * n / (sigma * np.log(10))) ** 2
+    bounds = []
+    for p in cells:
+        diff = p - readers
+        d2 = np.sum(diff**2, -1)
+        fxx = b * np.sum(diff[:, 0] ** 2 / d2)          # printed form: d^2 where d^4 belongs (note 004 s.3.9)
+        fyy = b * np.sum(diff[:, 1] ** 2 / d2)
+        fxy = b * np.sum(diff[:, 0] * diff[:, 1] / d2)
+        bounds.append(np.sqrt((fxx + fyy) / (fxx * fyy - fxy**2)))
+    assert tb.testbed_crlb_m() == pytest.approx(np.mean(bounds), rel=1e-9)
+    # the correct bound (1/d^4) is larger than the printed form wherever every reader is more than 1 m away
+    assert tb.testbed_crlb_m(np.asarray(oz.OFFLINE_PARAMETERS["path_loss_exp"]), form="correct") > tb.testbed_crlb_m()
+
+
+def test_first_printings_follow_the_thesis_order():
+    P = lb.printed("ozkaya2011")
+    for (table, row, column), cell in tb.TABLE_CELLS.items():
+        first = tb.first_printing(*cell)
+        me = P.get(f"Table {table}", row, column)
+        # the first printing is this cell or one in an earlier table of the same experiment, method and statistic
+        assert first.location <= me.location
+        key = (first.location.removeprefix("Table "), first.item, first.statistic)
+        assert tb.TABLE_CELLS[key] == cell
+    # the thesis's own cross-references: the summary tables repeat Tables 7.26-7.40 ...
+    assert tb.first_printing(*tb.TABLE_CELLS[("7.41", "Pattern-based NN", "rmse_m")]).location == "Table 7.26"
+    assert tb.first_printing(*tb.TABLE_CELLS[("7.41", "Grid Bayes", "rmse_m")]).location == "Table 7.29"
+    assert tb.first_printing(*tb.TABLE_CELLS[("7.43", "Offline NN", "std_m")]).location == "Table 7.28"
+    assert tb.first_printing(*tb.TABLE_CELLS[("7.40", "patch / Grid Bayes", "rmse_m")]).location == "Table 7.30"
+    # ... except the offline-NN mobile row, printed only in Table 7.42 (note 004 s.7)
+    offline_mobile = tb.TABLE_CELLS[("7.42", "Parameter-based offline NN", "rmse_m")]
+    assert tb.first_printing(*offline_mobile).location == "Table 7.42"
+    # every cell of Table 7.41 (all methods, fixed target) was printed before
+    assert all(tb.first_printing(*c).location < "Table 7.41" for k, c in tb.TABLE_CELLS.items() if k[0] == "7.41")
+
+
+def _hand_made_results(levels: dict, experiments=("fixed", "mobile", "monopole")):
+    """Results whose per-test-bed statistics are known by hand: errors constant within a test bed (so rmse = mean =
+    median = p90 = that constant, std = 0), one constant per test bed."""
+    res = {}
+    for name in experiments:
+        r = tb.ExperimentResult(name, np.zeros((25, 2, 2)))
+        for method in tb.EXPERIMENTS[name]:
+            r.errors[method] = np.stack([np.full((25, 2), v) for v in levels[method]])        # (Z, S, T)
+        res[name] = r
+    return res
+
+
+def test_recorded_rows_have_kinds_links_windows_and_notes(tmp_path, monkeypatch):
+    monkeypatch.setenv("LOCBOOK_OUTPUT_DIR", str(tmp_path))
+    monkeypatch.setenv("LOCBOOK_EXPERIMENT", "ozkaya2011-testbed")
+    report = lb.Report()
+    levels = {m: (1.2, 1.5, 1.8) for m in tb.METHODS}                 # Z = 3: mean 1.5, sd 0.3
+    rows = tb.table_rows(_hand_made_results(levels))
+    recorded = tb.record_table_rows(report, rows)
+    assert len(recorded) == len(rows) > 0
+    judged = [n["printed_id"] for n in recorded if n["verdict"]]
+    assert len(judged) == len(set(judged))                           # each printed quantity judged once
+    ids = set(judged)
+    for r, n in zip(rows, recorded, strict=True):
+        assert n["printed"] == r["printed"].text
+        if r["experiment"] == "monopole":
+            assert n["kind"] == "calibrated" and n["calibrated_from"] == tb.MONOPOLE_CALIBRATED_FROM
+        else:
+            assert n["kind"] == "reproduction" and not n["calibrated_from"]
+        if r["first_printed"].id != r["printed"].id:
+            assert n["same_as"] == r["first_printed"].id and n["same_as"] in ids and n["verdict"] == ""
+            continue
+        assert not n["same_as"]
+        # window: rounding + 2 sd / sqrt(3) + 2 sd with sd = 0.3 (std rows: every test bed 0, window = rounding)
+        sd = 0.0 if r["column"] == "std_m" else 0.3
+        half = r["printed"].rounding + 2 * sd / np.sqrt(3) + 2 * sd
+        assert n["window_high"] == pytest.approx(r["printed"].value + half, rel=1e-9)
+        assert n["ambiguity"] == pytest.approx(2 * sd, abs=1e-12)
+        assert n["ambiguity_basis"].startswith(tb.TESTBED_AMBIGUITY_WHAT)
+        if n["verdict"] in ("miss", "loose"):
+            assert n["note"].strip()
+        if n["verdict"] == "within":
+            assert half <= 0.25 * r["printed"].value
+    # the window is wide (about 0.9 m): most statistics near 1.5 m are loose, none of them "within"
+    assert any(n["verdict"] == "loose" for n in recorded)
+    # a hand-set monopole noise scale is not chosen from printed numbers: reproductions then
+    again = tb.record_table_rows(report, [r for r in rows if r["experiment"] == "monopole"], monopole_calibrated_from=None)
+    assert again and all(n["kind"] == "reproduction" for n in again)
+
+
+def test_a_repeat_printed_with_another_text_is_compared_and_says_so(tmp_path, monkeypatch):
+    monkeypatch.setenv("LOCBOOK_OUTPUT_DIR", str(tmp_path))
+    report = lb.Report()
+    rows = tb.table_rows(_hand_made_results({m: (1.2, 1.5, 1.8) for m in tb.METHODS}, ("fixed",)))
+    first = next(r for r in rows if r["first_printed"].id != r["printed"].id)
+    altered = replace(first["printed"], text=first["printed"].text + "1")       # a different printed text
+    (n,) = tb.record_table_rows(report, [{**first, "printed": altered}])
+    assert n["verdict"] and not n["same_as"]
+    assert first["first_printed"].where in n["note"] and "both printed values are compared" in n["note"]

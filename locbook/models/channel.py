@@ -32,6 +32,7 @@ __all__ = [
     "pairwise_distance_m",
     "wall_crossings",
     "correlated_shadowing_db",
+    "attenuation_bursts_db",
     "small_scale_fading_db",
 ]
 
@@ -229,6 +230,28 @@ def correlated_shadowing_db(points_m, sigma_db: float, decorrelation_m: float,
     # small jitter: the exponential kernel is positive definite, but near-duplicate points are not
     chol = np.linalg.cholesky(cov + 1e-12 * np.eye(n_points))
     return sigma_db * z @ chol.T
+
+
+def attenuation_bursts_db(shape, probability: float, loss_range_db: tuple[float, float], rng: np.random.Generator):
+    """Intermittent attenuation bursts (dB, <= 0): at each entry, with probability ``probability``, a loss drawn
+    uniformly from ``loss_range_db = (low, high)`` (both >= 0), else no loss.
+
+    A burst drawn per (receiver, step) and added to every transmitter that receiver hears at that step models a
+    body or object next to the receiver shading it as a whole ("reader-wide" attenuation: note 004, s.9, the
+    synthetic test bed of Ozkaya 2011); the caller broadcasts the ``shape`` draw over the transmitters. Returns
+    an array of ``shape``: ``-U(low, high)`` where a burst occurs, ``0`` elsewhere. The expected value is
+    ``-probability (low + high) / 2``.
+    """
+    check_scalar("probability", probability, ge=0, le=1)
+    if len(loss_range_db) != 2:
+        raise ValueError(f"loss_range_db must be (low, high), got {loss_range_db!r}")
+    low, high = (float(v) for v in loss_range_db)
+    check_scalar("loss_range_db low", low, ge=0)
+    check_scalar("loss_range_db high", high, ge=low)
+    if not isinstance(rng, np.random.Generator):
+        raise ValueError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
+    hit = rng.random(shape) < probability
+    return -np.where(hit, low + (high - low) * rng.random(shape), 0.0)
 
 
 def wall_crossings(points_m, anchors_m, walls_m):

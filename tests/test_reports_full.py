@@ -1,0 +1,68 @@
+"""The committed scoreboard (reports/full) follows the rules of locbook/suite/scoring.py (issue 13)."""
+import csv
+import json
+from pathlib import Path
+
+import pytest
+
+import locbook as lb
+from locbook.suite import load_suite
+from locbook.suite.report import NUMBER_COLUMNS
+from locbook.suite.scoring import JUDGED_KINDS, KINDS, WITHIN_LIMIT
+from locbook.suite.site import double_counted
+
+FULL = Path(__file__).resolve().parents[1] / "reports" / "full"
+
+
+@pytest.fixture(scope="module")
+def rows():
+    with open(FULL / "numbers.csv", newline="") as fh:
+        reader = csv.DictReader(fh)
+        assert tuple(reader.fieldnames) == NUMBER_COLUMNS
+        return list(reader)
+
+
+def test_every_row_has_a_kind_and_calibrated_rows_name_their_input(rows):
+    assert rows
+    for r in rows:
+        assert r["kind"] in KINDS, r
+        if r["kind"] == "calibrated":
+            assert r["calibrated_from"].strip(), r
+        if r["verdict"] in ("within", "loose", "miss"):
+            assert r["kind"] in JUDGED_KINDS, r
+
+
+def test_printed_values_appear_exactly_as_printed(rows):
+    for r in rows:
+        p = lb.printed(r["document"]).get(*r["printed_id"].split(" | "))
+        assert r["printed"] == p.text and r["where"] == p.where, r
+
+
+def test_no_within_window_is_wider_than_a_quarter_of_the_printed_value(rows):
+    for r in rows:
+        if r["verdict"] == "within" and r["kind"] != "claim":
+            value = lb.printed(r["document"]).get(*r["printed_id"].split(" | ")).value
+            # window_low may be clipped at 0 for errors in metres: use the upper half-width
+            half = float(r["window_high"]) - value
+            assert half <= WITHIN_LIMIT * abs(value) * (1 + 1e-9), r
+
+
+def test_each_printed_quantity_is_counted_once_and_links_resolve(rows):
+    assert double_counted(rows) == []
+    judged = {(r["document"], r["printed_id"]) for r in rows if r["verdict"] and not r["same_as"]}
+    for r in rows:
+        if r["same_as"]:
+            assert (r["document"], r["same_as"]) in judged, r
+
+
+def test_every_miss_and_loose_row_has_a_note(rows):
+    for r in rows:
+        if r["verdict"] in ("miss", "loose", "inconsistent"):
+            assert r["note"].strip(), r
+
+
+def test_committed_reports_are_stamped_with_a_commit_and_never_from_a_dirty_tree():
+    suite = load_suite()
+    for exp in suite.experiments:
+        stamp = json.loads((FULL / exp.id / "report.json").read_text())["locbook"]
+        assert "(source " in stamp and "uncommitted" not in stamp, (exp.id, stamp)

@@ -6,7 +6,7 @@ The public API, by role:
 - calibration: :func:`fit_path_loss`, :func:`calibrate_path_loss` (cvxpy and closed form)
 - localization: linearized / weighted / box-constrained lateration, RSS maximum likelihood, grid ML
 - motion and filters: :class:`KinematicModel`, :func:`kalman_filter`, :func:`extended_kalman_filter` (parallel and
-  serial RSS EKF, multi-rate fusion)
+  serial RSS EKF, multi-rate fusion), :func:`unscented_kalman_filter`
 - fingerprinting: weighted k-NN over pattern or model RSSI maps
 - Bayes filters: grid-based Bayes and (improved) SIR particle filters, systematic resampling
 - reference tags: online bounded calibration, pooled sigma, RSSI smoothing
@@ -27,8 +27,11 @@ from .models.channel import (AT86RF230_ED_OFFSET_DB, CC2420_RSSI_OFFSET_DB, Path
                       dbm_to_register, pairwise_distance_m, quantize_db, register_to_dbm, small_scale_fading_db, wall_crossings)
 from .errors import ConvergenceError, DegenerateGeometryError, LocbookError, ParameterError, SingularCovarianceError
 from .static.fingerprint import KNN_WEIGHTINGS, knn_position, model_fingerprints, pattern_fingerprints
-from .tracking.kalman import (KF_VARIANTS, RSS_UPDATE_MODES, SERIAL_ORDERS, KalmanResult, LinearMeasurement, RssMeasurement,
-                      TrackResult, extended_kalman_filter, kalman_filter, rss_measurement_jacobian)
+from .tracking.kalman import (KF_VARIANTS, RSS_UPDATE_MODES, SERIAL_ORDERS, KalmanResult, LinearMeasurement,
+                              NonlinearMeasurement, RssMeasurement, TrackResult, extended_kalman_filter, kalman_filter,
+                              rss_measurement_jacobian)
+from .tracking.unscented import (UKF_WEIGHTS, UkfResult, UnscentedWeights, sigma_points, unscented_kalman_filter,
+                                 unscented_transform, unscented_weights)
 from .static.localization import (LOCALIZATION_STATUSES, LocalizationResult, check_anchor_geometry, grid_ml_position, lateration_box_ls,
                            lateration_ls, lateration_system, lateration_wls, rss_ml_position)
 from .metrics import (empirical_cdf, error_std_m, error_summary, mean_error_m, median_error_m, percentile_error_m,
@@ -60,7 +63,9 @@ __all__ = [
     # motion and filters
     "KinematicModel", "constant_velocity", "constant_acceleration", "reflect_into_box", "simulate_states", "KalmanResult",
     "kalman_filter", "KF_VARIANTS", "NOISE_MODELS", "STATE_LAYOUTS", "extended_kalman_filter", "LinearMeasurement",
-    "RssMeasurement", "TrackResult", "rss_measurement_jacobian", "RSS_UPDATE_MODES", "SERIAL_ORDERS",
+    "RssMeasurement", "NonlinearMeasurement", "TrackResult", "rss_measurement_jacobian", "RSS_UPDATE_MODES",
+    "SERIAL_ORDERS", "unscented_kalman_filter", "UkfResult", "unscented_weights", "UnscentedWeights", "sigma_points",
+    "unscented_transform", "UKF_WEIGHTS",
     # Bayes filters
     "RssMeasurementModel", "GridFilterResult", "grid_bayes_filter", "grid_transition_matrix",
     "ParticleFilterResult", "particle_filter", "systematic_resample", "effective_sample_size",

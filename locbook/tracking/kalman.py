@@ -22,7 +22,8 @@ from .._validate import as_array, check_choice, check_scalar
 from ..models.channel import PathLossModel, log_distance_gradient, log_distance_mean_dbm
 from ..errors import SingularCovarianceError
 
-__all__ = ["KalmanResult", "kalman_filter", "KF_VARIANTS", "LinearMeasurement", "RssMeasurement", "TrackResult",
+__all__ = ["KalmanResult", "kalman_filter", "KF_VARIANTS", "LinearMeasurement", "RssMeasurement", "NonlinearMeasurement",
+           "TrackResult", "run_recursive_filter",
            "extended_kalman_filter", "rss_measurement_jacobian", "RSS_UPDATE_MODES", "SERIAL_ORDERS"]
 
 KF_VARIANTS = ("standard", "literal_003")
@@ -97,12 +98,15 @@ def _not_positive_definite(S):
 class _Singular(Exception):
     """Raised inside an update; the time loop turns it into a SingularCovarianceError naming the step."""
 
-    def __init__(self, bad):
+    def __init__(self, bad, message: str = ""):
         super().__init__()
         self.bad = bad
+        self.message = message      # "": the innovation covariance; else the text of the failure ({step} filled in)
 
 
-def _raise_singular(step: int, bad, what: str = "innovation covariance"):
+def _raise_singular(step: int, bad, what: str = "innovation covariance", message: str = ""):
+    if message:
+        raise SingularCovarianceError(message.format(step=step) + _first_bad(bad))
     raise SingularCovarianceError(
         f"the {what} S = H P H^T + R is singular, not positive definite or not finite at step {step}{_first_bad(bad)}; "
         "the measurement noise (R, sigma_db) must be positive where the prior covariance gives no spread, and "
@@ -286,6 +290,36 @@ class RssMeasurement:
 
 
 @dataclass(frozen=True)
+class NonlinearMeasurement:
+    """A nonlinear measurement stream ``z_k = h(x_k) + v_k``, ``v_k ~ N(0, R)`` (e.g. a body-frame accelerometer,
+    whose reading depends on the heading state; Gudipati 2017, Eqs. (3.9), (3.11)).
+
+    ``z``: ``batch + (T, m)``, NaN = a missing component (left out of the update). ``h``: maps states
+    ``(..., n)`` to ``(..., m)`` over any leading axes: the EKF calls it with ``batch + (n,)``, the UKF with the
+    sigma points ``batch + (2n + 1, n)``. ``jacobian``: states ``(..., n)`` to ``(..., m, n)``; the EKF needs it,
+    the UKF does not. ``R``: ``(m, m)`` or ``batch + (m, m)``. ``name`` names the stream in error messages.
+    """
+
+    z: np.ndarray
+    h: object
+    R: np.ndarray
+    jacobian: object = None
+    name: str = "nonlinear measurement"
+
+    def __post_init__(self):
+        z = as_array(f"{self.name}: z", self.z, min_ndim=2, nan_ok=True)
+        if not callable(self.h):
+            raise ValueError(f"{self.name}: h must be a function of the state, got {type(self.h).__name__}")
+        if self.jacobian is not None and not callable(self.jacobian):
+            raise ValueError(f"{self.name}: jacobian must be a function of the state or None, got "
+                             f"{type(self.jacobian).__name__}")
+        _matrix(f"{self.name}: R", self.R, z.shape[-1], z.shape[-1])
+
+
+MEASUREMENT_TYPES = (LinearMeasurement, RssMeasurement, NonlinearMeasurement)
+
+
+@dataclass(frozen=True)
 class TrackResult:
     """Posterior means ``batch + (S, n)`` and covariances ``batch + (S, n, n)`` at the recorded ``steps`` (S,)."""
 
@@ -396,7 +430,6 @@ def _rss_serial_update(x, P, z, meas: RssMeasurement):
         order = np.argsort(-np.where(np.isfinite(z), z, -np.inf), axis=-1, kind="stable")
     else:
         order = np.broadcast_to(np.arange(m), z.shape)
-    n = x.shape[-1]
     for j in range(m):
         a = order[..., j]
         zj = np.take_along_axis(z, a[..., None], -1)[..., 0]
@@ -420,35 +453,64 @@ def _rss_serial_update(x, P, z, meas: RssMeasurement):
     return x, P
 
 
-def extended_kalman_filter(F, Q, x0, P0, measurements, *, record=None,
-                           predict_first: bool = True) -> TrackResult:
-    """Multi-rate (extended) Kalman filter on one time grid, vectorized over leading Monte-Carlo axes.
+def _nonlinear_ekf_update(x, P, z, meas: NonlinearMeasurement):
+    """EKF update of a :class:`NonlinearMeasurement`: linearised at the predicted state."""
+    if meas.jacobian is None:
+        raise ValueError(f"{meas.name}: the EKF needs its jacobian (the UKF does not)")
+    H = np.asarray(meas.jacobian(x), dtype=float)
+    if H.shape != x.shape[:-1] + (z.shape[-1], x.shape[-1]):
+        raise ValueError(f"{meas.name}: jacobian returned shape {H.shape}, expected "
+                         f"{x.shape[:-1] + (z.shape[-1], x.shape[-1])}")
+    h = np.asarray(meas.h(x), dtype=float)
+    valid = np.isfinite(z)
+    return _linear_update(x, P, np.where(valid, z - h + (H @ x[..., None])[..., 0], np.nan), H,
+                          np.asarray(meas.R, dtype=float))
 
-    At every step: predict with ``x = F x``, ``P = F P F^T + Q`` (linear motion, so the EKF's F is F), then apply
-    the ``measurements`` in the given order, each update starting from the previous one's posterior (Dogan
-    Table 3.5: acceleration first, then RSS at RSS epochs). Each entry is a :class:`LinearMeasurement` (KF,
-    e.g. accelerometer or MLE position fixes) or a :class:`RssMeasurement` (parallel or serial EKF). Covariance
-    updates use the Joseph form (Tables 3.1-3.4 print ``P - K S K^T``; equal in exact arithmetic).
 
-    ``x0``, ``P0``: ``batch + (n,)``, ``batch + (n, n)``; with ``predict_first`` (filterpy's convention) they
-    are the posterior one step before step 0, else the prior at step 0. ``record``: step indices to return
-    (default all).
-    """
+def _linear_stream_update(x, P, z, meas: LinearMeasurement):
+    H, R = np.asarray(meas.H, float), np.asarray(meas.R, float)
+    if meas.mode == "parallel":
+        return _linear_update(x, P, z, H, R)
+    for j in range(z.shape[-1]):
+        x, P = _linear_update(x, P, z[..., j:j + 1], H[..., j:j + 1, :], R[..., j:j + 1, j:j + 1])
+    return x, P
+
+
+def _ekf_update(x, P, z, meas):
+    if isinstance(meas, LinearMeasurement):
+        return _linear_stream_update(x, P, z, meas)
+    if isinstance(meas, NonlinearMeasurement):
+        return _nonlinear_ekf_update(x, P, z, meas)
+    if meas.mode == "parallel":
+        return _rss_parallel_update(x, P, z, meas)
+    return _rss_serial_update(x, P, z, meas)
+
+
+def _stream_name(meas) -> str:
+    return meas.name if isinstance(meas, NonlinearMeasurement) else type(meas).__name__
+
+
+def run_recursive_filter(F, Q, x0, P0, measurements, update, *, record=None, predict_first: bool = True,
+                         filter_name: str = "filter") -> TrackResult:
+    """The time loop shared by the EKF and the UKF: at every step predict with the linear motion
+    ``x = F x``, ``P = F P F^T + Q``, then apply the ``measurements`` present at that step in the given order with
+    ``update(x, P, z_k, stream)`` (each starts from the previous update's posterior). Checks the inputs; see
+    :func:`extended_kalman_filter` for the arguments."""
     F = as_array("F", F)
     if F.ndim < 2 or F.shape[-1] != F.shape[-2]:
         raise ValueError(f"F must be square (n, n) or batch + (n, n), got {F.shape}")
     Q = _matrix("Q", Q, F.shape[-1], F.shape[-1])
-    if not all(isinstance(m, (LinearMeasurement, RssMeasurement)) for m in measurements):
-        raise ValueError("measurements must be LinearMeasurement or RssMeasurement streams, got "
+    if not all(isinstance(m, MEASUREMENT_TYPES) for m in measurements):
+        raise ValueError("measurements must be LinearMeasurement, RssMeasurement or NonlinearMeasurement streams, got "
                          f"{[type(m).__name__ for m in measurements]}")
     for meas in measurements:
         if isinstance(meas, LinearMeasurement) and np.shape(meas.H)[-1] != F.shape[-1]:
             raise ValueError(f"a LinearMeasurement's H has {np.shape(meas.H)[-1]} columns, the state has {F.shape[-1]}")
         if isinstance(meas, RssMeasurement) and np.max(meas.position_index) >= F.shape[-1]:
             raise ValueError(f"RssMeasurement.position_index {meas.position_index} is outside the {F.shape[-1]}-state")
-    streams = [m.z if isinstance(m, LinearMeasurement) else m.power_dbm for m in measurements]
+    streams = [m.power_dbm if isinstance(m, RssMeasurement) else m.z for m in measurements]
     if not streams:
-        raise ValueError("extended_kalman_filter needs at least one measurement stream")
+        raise ValueError(f"{filter_name} needs at least one measurement stream")
     T = {np.shape(s)[-2] for s in streams}
     if len(T) != 1:
         raise ValueError(f"measurement streams must share one time grid, got lengths {sorted(T)}")
@@ -479,23 +541,30 @@ def extended_kalman_filter(F, Q, x0, P0, measurements, *, record=None,
         for meas, z, act in zip(measurements, zs, active):
             if not act[k]:
                 continue
-            zk = z[..., k, :]
             try:
-                if isinstance(meas, LinearMeasurement):
-                    H, R = np.asarray(meas.H, float), np.asarray(meas.R, float)
-                    if meas.mode == "parallel":
-                        x, P = _linear_update(x, P, zk, H, R)
-                    else:
-                        for j in range(zk.shape[-1]):
-                            x, P = _linear_update(x, P, zk[..., j:j + 1], H[..., j:j + 1, :],
-                                                  R[..., j:j + 1, j:j + 1])
-                elif meas.mode == "parallel":
-                    x, P = _rss_parallel_update(x, P, zk, meas)
-                else:
-                    x, P = _rss_serial_update(x, P, zk, meas)
+                x, P = update(x, P, z[..., k, :], meas)
             except _Singular as exc:
-                _raise_singular(k, exc.bad, f"innovation covariance of the {type(meas).__name__} update")
+                _raise_singular(k, exc.bad, f"innovation covariance of the {_stream_name(meas)} update", exc.message)
         if slot[k] >= 0:
             out_x[..., slot[k], :] = x
             out_P[..., slot[k], :, :] = P
     return TrackResult(out_x, out_P, steps)
+
+
+def extended_kalman_filter(F, Q, x0, P0, measurements, *, record=None,
+                           predict_first: bool = True) -> TrackResult:
+    """Multi-rate (extended) Kalman filter on one time grid, vectorized over leading Monte-Carlo axes.
+
+    At every step: predict with ``x = F x``, ``P = F P F^T + Q`` (linear motion, so the EKF's F is F), then apply
+    the ``measurements`` in the given order, each update starting from the previous one's posterior (Dogan
+    Table 3.5: acceleration first, then RSS at RSS epochs). Each entry is a :class:`LinearMeasurement` (KF,
+    e.g. accelerometer or MLE position fixes), a :class:`RssMeasurement` (parallel or serial EKF) or a
+    :class:`NonlinearMeasurement` with its Jacobian. Covariance updates use the Joseph form (Tables 3.1-3.4
+    print ``P - K S K^T``; equal in exact arithmetic).
+
+    ``x0``, ``P0``: ``batch + (n,)``, ``batch + (n, n)``; with ``predict_first`` (filterpy's convention) they
+    are the posterior one step before step 0, else the prior at step 0. ``record``: step indices to return
+    (default all).
+    """
+    return run_recursive_filter(F, Q, x0, P0, measurements, _ekf_update, record=record, predict_first=predict_first,
+                                filter_name="extended_kalman_filter")

@@ -7,6 +7,8 @@ The public API, by role:
 - localization: linearized / weighted / box-constrained lateration, RSS maximum likelihood, grid ML
 - motion and filters: :class:`KinematicModel`, :func:`kalman_filter`, :func:`extended_kalman_filter` (parallel and
   serial RSS EKF, multi-rate fusion), :func:`unscented_kalman_filter`
+- inertial sensors: accelerometer and gyroscope models, stationary bias calibration, dead reckoning; waypoint
+  trajectories; covariance-weighted fusion of two estimates
 - fingerprinting: weighted k-NN over pattern or model RSSI maps
 - Bayes filters: grid-based Bayes and (improved) SIR particle filters, systematic resampling
 - reference tags: online bounded calibration, pooled sigma, RSSI smoothing
@@ -22,7 +24,12 @@ from .tracking.bayes import (RESAMPLING_CDFS, WEIGHT_SMOOTHINGS, GridFilterResul
                             particle_filter, systematic_resample)
 from .bounds.crlb import CRLB_FORMS, crlb_rms_over_area_m, rss_crlb_m, rss_fisher_information, rss_position_information
 from .static.calibration import (CALIBRATION_MODES, PathLossFit, calibrate_path_loss, fit_path_loss, fit_path_loss_closed_form,
-                                 fix_error_covariance)
+                                 fix_error_covariance, path_loss_exp_given_ref_power, path_loss_exp_ratio_estimate)
+from .models.imu import (IMU_FRAMES, INTEGRATION_RULES, accelerometer_readings, body_to_world, dead_reckon,
+                         gyroscope_readings, inertial_measurement_function, inertial_measurement_jacobian, integrate,
+                         rotation_2d, stationary_bias, world_to_body)
+from .models.trajectory import Trajectory, waypoint_trajectory
+from .tracking.fusion import FUSION_READINGS, fuse_estimates
 from .models.channel import (AT86RF230_ED_OFFSET_DB, CC2420_RSSI_OFFSET_DB, PathLossModel, correlated_shadowing_db,
                       dbm_to_register, pairwise_distance_m, quantize_db, register_to_dbm, small_scale_fading_db, wall_crossings)
 from .errors import ConvergenceError, DegenerateGeometryError, LocbookError, ParameterError, SingularCovarianceError
@@ -40,8 +47,8 @@ from .bounds.pcrlb import (PCRLB_FORMS, linear_measurement_information, position
                     rss_state_information)
 from .montecarlo import (bootstrap_standard_error, canonical_encoding, mc_standard_error, seed_from_values,
                          spawn_generators, streams)
-from .models.motion import (NOISE_MODELS, STATE_LAYOUTS, KinematicModel, constant_acceleration, constant_velocity, reflect_into_box,
-                     simulate_states)
+from .models.motion import (HEADING_MODELS, NOISE_MODELS, STATE_LAYOUTS, HeadingKinematicModel, KinematicModel,
+                            constant_acceleration, constant_velocity, reflect_into_box, simulate_states)
 from .static.reference_tags import (OZKAYA_PATH_LOSS_EXP_BOUNDS, OZKAYA_REF_POWER_BOUNDS_DBM, OnlineCalibration,
                              calibrate_from_reference_tags, pooled_sigma_db, smooth_rssi)
 from .data.printed_values import Printed, PrintedValues, printed
@@ -55,6 +62,7 @@ __all__ = [
     "quantize_db", "pairwise_distance_m", "correlated_shadowing_db", "wall_crossings", "small_scale_fading_db",
     # calibration
     "PathLossFit", "fit_path_loss", "fit_path_loss_closed_form", "calibrate_path_loss", "CALIBRATION_MODES", "fix_error_covariance",
+    "path_loss_exp_ratio_estimate", "path_loss_exp_given_ref_power",
     # static localization
     "LocalizationResult", "LOCALIZATION_STATUSES", "check_anchor_geometry", "lateration_system", "lateration_ls", "lateration_wls",
     "lateration_box_ls", "rss_ml_position", "grid_ml_position",
@@ -62,6 +70,11 @@ __all__ = [
     "knn_position", "model_fingerprints", "pattern_fingerprints", "KNN_WEIGHTINGS",
     # motion and filters
     "KinematicModel", "constant_velocity", "constant_acceleration", "reflect_into_box", "simulate_states", "KalmanResult",
+    "HeadingKinematicModel", "HEADING_MODELS", "Trajectory", "waypoint_trajectory",
+    # inertial sensors and fusion
+    "accelerometer_readings", "gyroscope_readings", "stationary_bias", "rotation_2d", "world_to_body", "body_to_world",
+    "integrate", "dead_reckon", "inertial_measurement_function", "inertial_measurement_jacobian", "IMU_FRAMES",
+    "INTEGRATION_RULES", "fuse_estimates", "FUSION_READINGS",
     "kalman_filter", "KF_VARIANTS", "NOISE_MODELS", "STATE_LAYOUTS", "extended_kalman_filter", "LinearMeasurement",
     "RssMeasurement", "NonlinearMeasurement", "TrackResult", "rss_measurement_jacobian", "RSS_UPDATE_MODES",
     "SERIAL_ORDERS", "unscented_kalman_filter", "UkfResult", "unscented_weights", "UnscentedWeights", "sigma_points",

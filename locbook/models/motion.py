@@ -6,6 +6,10 @@ over a step (the "discrete white noise" model, Bar-Shalom et al. 2001, Sec. 6.3.
 
     x_k = F x_{k-1} + G w_k,   w_k ~ N(0, q I_dim),   Q = q G G^T.
 
+``noise="wiener"`` drives the highest derivative itself with white increments of variance ``q`` per step
+(the "discrete Wiener process acceleration" model, Bar-Shalom et al. 2001, Sec. 6.3.3): ``G_axis = [dt^2/2, dt,
+1]^T`` for CA, exactly the Q printed as Eq. (3.3) in Gudipati (2017).
+
 ``noise="isotropic"`` instead gives the full-rank per-step ``Q = q I`` that Dogan (2015) actually uses
 (Eq. (3.24), q = 2.3e-5), which the Tichavsky form of the posterior CRLB needs (its Q must be invertible).
 Any other Q can be passed to the filters directly.
@@ -28,10 +32,10 @@ import numpy as np
 from .._validate import as_array, check_choice, check_scalar
 
 __all__ = ["KinematicModel", "constant_velocity", "constant_acceleration", "STATE_LAYOUTS", "NOISE_MODELS",
-           "reflect_into_box", "simulate_states"]
+           "reflect_into_box", "simulate_states", "HeadingKinematicModel", "HEADING_MODELS"]
 
 STATE_LAYOUTS = ("derivative_major", "axis_major")
-NOISE_MODELS = ("discrete", "continuous", "isotropic")
+NOISE_MODELS = ("discrete", "continuous", "isotropic", "wiener")
 
 
 @dataclass(frozen=True)
@@ -46,7 +50,8 @@ class KinematicModel:
     order : 1 for constant velocity, 2 for constant acceleration.
     dim : number of spatial axes.
     layout : ``"derivative_major"`` or ``"axis_major"`` (see module docstring).
-    noise : ``"discrete"`` (Q = q G G^T), ``"continuous"`` or ``"isotropic"`` (Q = q I, units per state).
+    noise : ``"discrete"`` (Q = q G G^T), ``"wiener"`` (Q = q G G^T with the highest derivative's increment
+        white), ``"continuous"`` or ``"isotropic"`` (Q = q I, units per state).
     """
 
     dt_s: float
@@ -73,7 +78,9 @@ class KinematicModel:
         k, dt = self.order + 1, self.dt_s
         f = np.array([[dt ** (j - i) / factorial(j - i) if j >= i else 0.0 for j in range(k)] for i in range(k)])
         g = np.array([[dt ** (k - i) / factorial(k - i)] for i in range(k)])
-        if self.noise == "discrete":
+        if self.noise == "wiener":                # the highest derivative takes white increments
+            g = np.array([[dt ** (k - 1 - i) / factorial(k - 1 - i)] for i in range(k)])
+        if self.noise in ("discrete", "wiener"):
             q = self.q * (g @ g.T)
         elif self.noise == "isotropic":
             q = self.q * np.eye(k)
@@ -104,7 +111,7 @@ class KinematicModel:
 
     @property
     def G(self) -> np.ndarray:
-        """Noise gain (n_state, dim): ``[dt^2/2, dt]`` per axis for CV."""
+        """Noise gain (n_state, dim): ``[dt^2/2, dt]`` per axis for CV (``[dt, 1]`` with ``noise="wiener"``)."""
         full = np.kron(np.eye(self.dim), self._axis_blocks()[1])
         return full[self._permutation()]
 
@@ -175,6 +182,96 @@ def constant_acceleration(dt_s: float, q: float, dim: int = 2, layout: str = "ax
                           noise: str = "discrete") -> KinematicModel:
     """Nearly constant acceleration model (Dogan Eq. (3.11), Gudipati Sec. 3.2)."""
     return KinematicModel(dt_s, q, order=2, dim=dim, layout=layout, noise=noise)
+
+
+HEADING_MODELS = ("yaw_rate", "literal_001")
+
+
+@dataclass(frozen=True)
+class HeadingKinematicModel:
+    """Planar nearly-constant-acceleration motion with two angular states (Gudipati 2017, Sec. 3.2).
+
+    The thesis prints an 8-D state ``[x, y, vx, vy, ax, ay, theta_x, theta_y]`` but 6 x 6 matrices A (3.2) and
+    Q (3.3) (note 001, s.5 point 1). The 6-D block is :class:`KinematicModel` (order 2, derivative-major as
+    printed, ``noise="wiener"``: ``Q = q G G^T`` with ``G = [dt^2/2, dt, 1]`` per axis, Eq. (3.3); ``q`` is the
+    variance of the acceleration increment per step, (m/s^2)^2). The angular block is
+
+    - ``heading="yaw_rate"`` (default): heading ``psi`` and yaw rate ``omega``, ``psi_k = psi_{k-1} + omega dt``,
+      ``omega`` a random walk with increments of variance ``q_angular`` (rad/s)^2 per step (the same form:
+      ``Q = q_angular g g^T``, ``g = [dt, 1]``). Planar motion has one rotation axis; the gyroscope measures
+      ``omega`` and the heading rotates body-frame accelerations into the world frame.
+    - ``heading="literal_001"`` (flagged): ``theta_x``, ``theta_y`` "angular velocities along x and y" as
+      printed, each a random walk (A block ``I_2``, Q block ``q_angular dt I_2``).
+
+    State indices: position 0-1, velocity 2-3, acceleration 4-5, angular 6-7 (``heading_index``,
+    ``yaw_rate_index`` for ``"yaw_rate"``).
+    """
+
+    dt_s: float
+    q: float
+    q_angular: float
+    heading: str = "yaw_rate"
+
+    def __post_init__(self):
+        check_scalar("q_angular", self.q_angular, ge=0)
+        check_choice("heading", self.heading, HEADING_MODELS)
+        KinematicModel(self.dt_s, self.q, order=2, dim=2)           # checks dt_s and q
+
+    @property
+    def translation(self) -> KinematicModel:
+        """The 6-D constant-acceleration block of Eqs. (3.2)-(3.3)."""
+        return KinematicModel(self.dt_s, self.q, order=2, dim=2, layout="derivative_major", noise="wiener")
+
+    n_state = 8
+    position_index = np.array([0, 1])
+    velocity_index = np.array([2, 3])
+    acceleration_index = np.array([4, 5])
+    angular_index = np.array([6, 7])
+    heading_index = 6
+    yaw_rate_index = 7
+
+    def _angular_blocks(self):
+        dt = self.dt_s
+        if self.heading == "yaw_rate":
+            g = np.array([[dt], [1.0]])
+            return np.array([[1.0, dt], [0.0, 1.0]]), self.q_angular * (g @ g.T)
+        return np.eye(2), self.q_angular * dt * np.eye(2)
+
+    @property
+    def F(self) -> np.ndarray:
+        out = np.zeros((8, 8))
+        out[:6, :6] = self.translation.F
+        out[6:, 6:] = self._angular_blocks()[0]
+        return out
+
+    @property
+    def Q(self) -> np.ndarray:
+        out = np.zeros((8, 8))
+        out[:6, :6] = self.translation.Q
+        out[6:, 6:] = self._angular_blocks()[1]
+        return out
+
+    def position(self, state):
+        return np.asarray(state)[..., self.position_index]
+
+    def position_measurement_matrix(self) -> np.ndarray:
+        """H = [I_2 0] (a position fix as the measurement, note 001 s.5 point 13)."""
+        h = np.zeros((2, 8))
+        h[[0, 1], [0, 1]] = 1.0
+        return h
+
+    def state_from(self, position, velocity=None, acceleration=None, angular=None):
+        """States ``(..., 8)`` from ``(..., 2)`` arrays (missing = 0); ``angular`` is ``(psi, omega)`` or
+        ``(theta_x, theta_y)``."""
+        position = as_array("position", position, min_ndim=1, trailing=(2,))
+        out = np.zeros(position.shape[:-1] + (8,))
+        out[..., :2] = position
+        for idx, name, value in ((self.velocity_index, "velocity", velocity),
+                                 (self.acceleration_index, "acceleration", acceleration),
+                                 (self.angular_index, "angular", angular)):
+            if value is not None:
+                out[..., idx] = as_array(name, value, trailing=(2,))
+        return out
 
 
 def reflect_into_box(position_m, lower_m, upper_m):

@@ -40,6 +40,8 @@ __all__ = [
     "CALIBRATION_MODES",
     "CALIBRATION_SOLVERS",
     "CALIBRATION_LOSSES",
+    "path_loss_exp_ratio_estimate",
+    "path_loss_exp_given_ref_power",
 ]
 
 CALIBRATION_MODES = ("per_location_mean", "pooled", "per_anchor")
@@ -283,6 +285,53 @@ def calibrate_path_loss(distance_m, power_dbm, mode: str = "per_location_mean", 
     if mode == "per_anchor":
         return fit_path_loss(np.swapaxes(distance_m, -1, -2), np.swapaxes(power_dbm, -1, -2), **fit_kwargs)
     raise ValueError(f"calibration mode must be one of {CALIBRATION_MODES}, got {mode!r}")
+
+
+def _exponent_inputs(distance_m, power_dbm, ref_power_dbm, ref_distance_m):
+    distance_m = as_array("distance_m", distance_m)
+    power_dbm = as_array("power_dbm", power_dbm, nan_ok=True)
+    try:
+        shape = np.broadcast_shapes(distance_m.shape, power_dbm.shape)
+    except ValueError:
+        raise ValueError(f"distance_m {distance_m.shape} and power_dbm {power_dbm.shape} do not broadcast") from None
+    if not shape:
+        raise ValueError("distance_m and power_dbm need a sample axis (the last one)")
+    if np.any(distance_m <= 0):
+        raise ValueError("distances must be positive")
+    ref = as_array("ref_power_dbm", ref_power_dbm)
+    check_scalar("ref_distance_m", ref_distance_m, gt=0)
+    log_d = np.broadcast_to(np.log10(distance_m / ref_distance_m), shape)
+    excess = np.broadcast_to(power_dbm - ref[..., None], shape)
+    return log_d, excess
+
+
+def path_loss_exp_ratio_estimate(distance_m, power_dbm, ref_power_dbm, *, ref_distance_m: float = 1.0):
+    """The thesis-literal exponent estimator, Eq. (3.8) in Gudipati 2017 (flagged: an average of ratios):
+    ``C = -(1/N) sum_s (M_s - S) / (10 log10(D_s / d0))`` with ``S = ref_power_dbm`` measured at ``d0``.
+
+    The term at ``D = d0`` is 0/0 and is left out (note 001, s.5 point 6), as are missing (NaN) powers; near
+    ``d0`` the ratio's denominator is small, so those points dominate its variance (compare
+    :func:`path_loss_exp_given_ref_power`). ``(..., N)`` -> ``(...)``."""
+    log_d, excess = _exponent_inputs(distance_m, power_dbm, ref_power_dbm, ref_distance_m)
+    use = np.isfinite(excess) & (np.abs(log_d) > 1e-12)
+    if np.any(use.sum(axis=-1) == 0):
+        raise DegenerateGeometryError("the ratio estimator needs at least one heard point away from the reference "
+                                      "distance (D = d0 is 0/0)")
+    ratio = np.where(use, -excess / (10.0 * np.where(use, log_d, 1.0)), 0.0)
+    return ratio.sum(axis=-1) / use.sum(axis=-1)
+
+
+def path_loss_exp_given_ref_power(distance_m, power_dbm, ref_power_dbm, *, ref_distance_m: float = 1.0):
+    """Least-squares exponent with the reference power fixed at its measured value: minimises
+    ``sum_s (M_s - S + 10 C log10(D_s/d0))^2``, so ``C = -sum L (M - S) / (10 sum L^2)``, ``L = log10(D/d0)``.
+    The convex reformulation of Eq. (3.8) (note 001, s.2.4; the full two-parameter fit is :func:`fit_path_loss`).
+    Missing (NaN) powers are left out. ``(..., N)`` -> ``(...)``."""
+    log_d, excess = _exponent_inputs(distance_m, power_dbm, ref_power_dbm, ref_distance_m)
+    use = np.isfinite(excess)
+    l2 = np.where(use, log_d**2, 0.0).sum(axis=-1)
+    if np.any(l2 <= 0):
+        raise DegenerateGeometryError("the exponent needs at least one heard point away from the reference distance")
+    return -np.where(use, log_d * excess, 0.0).sum(axis=-1) / (10.0 * l2)
 
 
 def fix_error_covariance(fixes_m, truth_m) -> np.ndarray:

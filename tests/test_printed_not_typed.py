@@ -31,6 +31,8 @@ def _printed_literals() -> dict[float, str]:
     out = {}
     for path in PRINTED_DIR.glob("*.csv"):
         for p in lb.printed(path.stem):
+            if not any(c.isdigit() for c in p.text):
+                continue                            # a quoted statement without a number
             number = next(tok for tok in p.text.replace("%", " ").split() if any(c.isdigit() for c in tok))
             if _significant_digits(number) >= 4:
                 out[p.value] = f"{p.document}: {p.where} = {p.text}"

@@ -122,6 +122,8 @@ def test_every_printed_values_file_is_well_formed():
         values = lb.printed(path.stem)
         assert len(values) > 0
         for p in values:
+            if p.statistic == "claim" and not any(c.isdigit() for c in p.text):
+                continue                            # a quoted statement: the row that checks it gives the threshold
             printed_number(p.text)                  # each printed text holds exactly one number
     with pytest.raises(KeyError, match="known"):
         lb.printed("nobody2099")

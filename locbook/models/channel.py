@@ -223,7 +223,7 @@ def correlated_shadowing_db(points_m, sigma_db: float, decorrelation_m: float,
     check_scalar("decorrelation_m", decorrelation_m, ge=0)
     n_points = points_m.shape[0]
     z = rng.standard_normal(size + (n_points,))
-    if decorrelation_m <= 0:
+    if decorrelation_m <= 0 or sigma_db == 0:
         return sigma_db * z
     dist = pairwise_distance_m(points_m, points_m)
     cov = np.exp(-dist / decorrelation_m)

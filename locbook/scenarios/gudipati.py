@@ -34,7 +34,8 @@ __all__ = [
     "PATH_LOSS_EXP", "REPORT_SPACING_M", "PATHS", "UKF_ALPHA", "UKF_BETA", "CALIBRATION_STEP_M",
     "CALIBRATION_SPAN_M", "CALIBRATION_SAMPLES", "CALIBRATION_TERMS", "WalkSettings", "channel_model",
     "path_trajectory", "Walk", "simulate_walk", "rss_only_fixes", "METHODS", "track", "WalkErrors", "walk_errors",
-    "table_5_1", "calibration_distances_m", "simulate_calibration_walk",
+    "table_5_1", "calibration_distances_m", "simulate_calibration_walk", "rss_only_mean_error", "calibrate_shadowing",
+    "fix_covariance_from", "inertial_only", "anchors_m",
 ]
 
 DOCUMENT = "gudipati2017"
@@ -188,15 +189,19 @@ def simulate_walk(path: str, n_anchors: int, settings: WalkSettings, n_runs: int
 
 
 def rss_only_fixes(walk: Walk, *, box: bool = False) -> np.ndarray:
-    """"Without fusion" (Sec. 4.2): at each report point, the RSS averaged over the packets since the previous
-    report point, ranged by Eq. (4.1) and trilaterated by linear least squares with the last anchor as the
-    reference (Eqs. (4.5)-(4.7)). ``box=True``: the box-constrained LS over the hall (a locbook extension).
-    Returns fixes ``(R, K, 2)`` at ``walk.report_steps``."""
+    """"Without fusion" (Sec. 4.2): at each report point, the RSS averaged over the packets received within half a
+    report spacing of it along the path ("the average ... computed at each position", Sec. 5.3; centred, so the
+    average does not lag the point), ranged by Eq. (4.1) and trilaterated by linear least squares with the last
+    anchor as the reference (Eqs. (4.5)-(4.7)). ``box=True``: the box-constrained LS over the hall (a locbook
+    extension). Returns fixes ``(R, K, 2)`` at ``walk.report_steps``."""
     steps = walk.report_steps
-    edges = np.concatenate([[0], steps[:-1] + 1])
+    s = walk.truth.arc_length_m
+    half = REPORT_SPACING_M / 2
+    first = np.searchsorted(s, s[steps] - half, side="left")
+    last = np.searchsorted(s, s[steps] + half, side="right")            # exclusive
     csum = np.concatenate([np.zeros(walk.rss_dbm.shape[:1] + (1,) + walk.rss_dbm.shape[2:]),
                            np.cumsum(walk.rss_dbm, axis=1)], axis=1)
-    avg = (csum[:, steps + 1] - csum[:, edges]) / (steps + 1 - edges)[None, :, None]
+    avg = (csum[:, last] - csum[:, first]) / (last - first)[None, :, None]
     distance = channel_model(walk.anchor_ids).range_m(avg)
     a = walk.anchors_m
     if box:
@@ -245,7 +250,8 @@ def _rss_stream(walk: Walk, model) -> RssMeasurement:
 METHODS = ("rss_only", "inertial_only", "kf", "ekf", "ukf")
 
 
-def track(walk: Walk, method: str, *, fix_covariance=None, ukf_alpha: float = UKF_ALPHA) -> np.ndarray:
+def track(walk: Walk, method: str, *, fix_covariance=None, ukf_alpha: float = UKF_ALPHA, ukf_weights: str = "corrected",
+          ukf_innovation_noise: bool = True) -> np.ndarray:
     """Position estimates ``(R, K, 2)`` at the report points for one method (Sec. 2.10 of note 001):
 
     - ``rss_only``: :func:`rss_only_fixes`;
@@ -256,7 +262,8 @@ def track(walk: Walk, method: str, *, fix_covariance=None, ukf_alpha: float = UK
       frame by the integrated gyroscope as linear measurements at every step;
     - ``ekf`` / ``ukf``: the 8-D model with heading and yaw rate (:class:`HeadingKinematicModel`), the RSS of every
       packet (Eq. (3.12) sign corrected) and the inertial readings (body frame) stacked at every step; the UKF with
-      the thesis's alpha, beta = 2, kappa = 0 and the corrected equations of Sec. 3.6.
+      the thesis's alpha, beta = 2, kappa = 0 and the corrected equations of Sec. 3.6 (``ukf_weights="literal_001"``
+      and ``ukf_innovation_noise=False``: the printed Eqs. (3.22) and (3.26), flagged).
     """
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
@@ -289,7 +296,7 @@ def track(walk: Walk, method: str, *, fix_covariance=None, ukf_alpha: float = UK
         res = extended_kalman_filter(model.F, model.Q, x0, P0, streams, record=steps)
     else:
         res = unscented_kalman_filter(model.F, model.Q, x0, P0, streams, alpha=ukf_alpha, beta=UKF_BETA, kappa=0.0,
-                                      record=steps)
+                                      weights=ukf_weights, innovation_noise=ukf_innovation_noise, record=steps)
     return res.x[..., :2]
 
 
@@ -356,3 +363,28 @@ def simulate_calibration_walk(anchor_id: str, distances_m, *, shadowing_sigma_db
     ref_mean = ch.mean_power_dbm(np.array([1.0]))[0] + shadowing_sigma_db * rng.standard_normal(n_runs)
     ref = quantize_db(ref_mean[:, None] + fast_sigma_db * rng.standard_normal((n_runs, samples)), 1.0)
     return packets.mean(axis=-1), ref.mean(axis=-1)
+
+
+def rss_only_mean_error(path: str, n_anchors: int, settings: WalkSettings, n_runs: int, seed) -> float:
+    """Mean over runs of the RSS-only mean error at the report points, with the streams of ``seed`` (an int or a
+    ``SeedSequence``): the same seed gives the same normal draws at every shadowing level (common random numbers)."""
+    walk = simulate_walk(path, n_anchors, settings, n_runs, np.random.default_rng(seed))
+    return float(walk_errors(walk, rss_only_fixes(walk)).mean_m.mean())
+
+
+def calibrate_shadowing(target_mean_error_m: float, path: str, n_anchors: int, settings: WalkSettings, n_runs: int,
+                        seed, *, bounds_db=(0.05, 8.0), tol_db: float = 1e-3) -> float:
+    """The shadowing sigma (dB) at which the RSS-only mean error of :func:`rss_only_mean_error` equals
+    ``target_mean_error_m`` (bisection with common random numbers; the error grows with sigma). A calibration: the
+    result is chosen from a printed number, and rows that use it must say so."""
+    lo, hi = bounds_db
+
+    def f(sig):
+        return rss_only_mean_error(path, n_anchors, replace(settings, shadowing_sigma_db=sig), n_runs, seed)
+    if not f(lo) < target_mean_error_m < f(hi):
+        raise ValueError(f"no shadowing sigma in {bounds_db} dB gives a mean RSS-only error of {target_mean_error_m} m "
+                         f"on the {path} path with {n_anchors} anchors")
+    while hi - lo > tol_db:
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if f(mid) < target_mean_error_m else (lo, mid)
+    return 0.5 * (lo + hi)

@@ -232,6 +232,19 @@ def unscented_kalman_filter(F, Q, x0, P0, measurements, *, alpha: float = 1e-3, 
     guard = [0]
 
     def update(x, P, z, meas):
+        try:
+            return _update(x, P, z, meas)
+        except _Singular as exc:
+            if exc.message:                  # the state covariance: already says what failed
+                raise
+            name = meas.name if isinstance(meas, NonlinearMeasurement) else type(meas).__name__
+            form = "P_zz + R" if innovation_noise else "P_zz without R (Eq. (3.26) as printed)"
+            printed_weights = " with the printed weights of Eq. (3.22)" if weights == "literal_001" else ""
+            raise _Singular(exc.bad, f"the unscented innovation covariance S = {form} of the {name} update"
+                                     f"{printed_weights} is singular, not positive definite or not finite at step "
+                                     "{step}") from None
+
+    def _update(x, P, z, meas):
         if isinstance(meas, LinearMeasurement):
             H, R = np.asarray(meas.H, float), np.asarray(meas.R, float)
             if meas.mode == "parallel":

@@ -1,0 +1,106 @@
+"""Gudipati 2017 scenario: printed tables, the walk simulation and the 8-D fusion UKF against an independent
+filterpy loop."""
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
+
+import locbook as lb
+from locbook.scenarios import gudipati as gu
+
+
+def test_table_5_1_average_row_arithmetic():
+    labels, dist, cells, avg = gu.table_5_1()
+    assert labels == ["n = 1.03", "n = 3.1", "n = 1.72", "n = 1.2"]
+    np.testing.assert_allclose(dist, np.arange(1, 10))
+    mean = cells.mean(axis=0)
+    assert mean[-1] == pytest.approx(7.535)                 # the printed 7.77 is the thesis's error (note 001 s.3.4)
+    assert np.all(np.abs(mean[:-1] - avg[:-1]) <= 0.0075 + 1e-12)
+
+
+def test_table_5_2_and_the_anchor_layout():
+    assert gu.ANCHOR_IDS == ("12", "13", "14", "15", "16", "17")
+    assert gu.ROOM_M == (30.0, 10.0)
+    ch = gu.channel_model(("13",))
+    # Eq. (3.7) at 10 m for anchor 13: S - 10 C
+    assert ch.mean_power_dbm(np.array([10.0]))[0] == pytest.approx(gu.REF_POWER_DBM[1] - 10 * gu.PATH_LOSS_EXP[1])
+    assert len(gu.calibration_distances_m("span")) == 20 and len(gu.calibration_distances_m("sixty")) == 60
+
+
+def _quiet(settings):
+    return replace(settings, shadowing_sigma_db=0.0, fast_sigma_db=0.0, accel_sigma_m_s2=0.0, gyro_sigma_rad_s=0.0,
+                   accel_residual_bias_m_s2=0.0, gyro_residual_bias_rad_s=0.0)
+
+
+def test_noise_free_inertial_only_error_is_the_integration_rule_only():
+    # the acceleration jumps at the ramp and arc ends, so the trapezoid rule converges at first order in dt
+    worst = {}
+    for dt in (0.02, 0.01):
+        w = gu.simulate_walk("u", 4, _quiet(gu.WalkSettings(dt_s=dt)), 2, np.random.default_rng(0))
+        worst[dt] = gu.walk_errors(w, gu.track(w, "inertial_only")).per_point_m.max()
+    assert worst[0.01] / worst[0.02] == pytest.approx(0.5, abs=0.05)
+    assert worst[0.01] < 0.25
+
+
+def test_noise_free_rss_only_error_is_the_register_quantisation_only():
+    s = _quiet(gu.WalkSettings())
+    w = gu.simulate_walk("linear", 6, s, 2, np.random.default_rng(0))
+    err = gu.walk_errors(w, gu.track(w, "rss_only")).mean_m
+    w_fine = replace(w, rss_dbm=gu.channel_model(w.anchor_ids).mean_power_dbm(
+        lb.pairwise_distance_m(w.truth.position_m, w.anchors_m))[None].repeat(2, 0))
+    exact = gu.walk_errors(w_fine, gu.track(w_fine, "rss_only")).per_point_m
+    # averaging dB over the centred window costs little inside; the end points' windows are one-sided
+    assert exact[:, 1:-1].max() < 0.01 and exact.max() < 0.25
+    assert err[0] == err[1] and err[0] > exact.mean()        # no randomness: both runs equal; 1 dB steps cost
+
+
+def test_kf_needs_the_fix_covariance():
+    w = gu.simulate_walk("linear", 4, gu.WalkSettings(), 2, np.random.default_rng(0))
+    with pytest.raises(ValueError, match="fix_covariance"):
+        gu.track(w, "kf")
+
+
+def test_shadowing_calibration_hits_its_target_with_the_same_streams():
+    s = gu.WalkSettings()
+    target = 3.0
+    sig = gu.calibrate_shadowing(target, "linear", 6, s, 10, 42, tol_db=1e-4)
+    got = gu.rss_only_mean_error("linear", 6, replace(s, shadowing_sigma_db=sig), 10, 42)
+    assert got == pytest.approx(target, abs=0.05)
+
+
+def test_fusion_ukf_equals_an_independent_filterpy_loop():
+    """The 8-D model, body-frame inertial stream then RSS stream at every step, against filterpy's UKF with the
+    sigma points redrawn around the current estimate before each update (Gudipati Eq. (3.18))."""
+    s = gu.WalkSettings()
+    w = gu.simulate_walk("u", 6, s, 1, np.random.default_rng(3))
+    T = 60
+    w = replace(w, rss_dbm=w.rss_dbm[:, :T], acc_m_s2=w.acc_m_s2[:, :T], gyro_rad_s=w.gyro_rad_s[:, :T],
+                report_steps=np.arange(T))
+    model = lb.HeadingKinematicModel(s.dt_s, s.q, s.q_angular)
+    x0, P0 = gu._initial(w, model, 8)
+    imu, rss = gu._imu_stream(w, False), gu._rss_stream(w, model)
+    alpha = 0.5
+    ours = lb.unscented_kalman_filter(model.F, model.Q, x0, P0, [imu, rss], alpha=alpha, beta=2.0, kappa=0.0)
+    points = MerweScaledSigmaPoints(8, alpha=alpha, beta=2.0, kappa=0.0)
+    a, ch = w.anchors_m, rss.channel
+
+    def h_rss(x):
+        return ch.ref_power_dbm - 10 * ch.path_loss_exp * np.log10(np.linalg.norm(x[:2] - a, axis=1))
+
+    def h_imu(x):
+        c, sn = np.cos(x[6]), np.sin(x[6])
+        return np.array([c * x[4] + sn * x[5], -sn * x[4] + c * x[5], x[7]])
+
+    f = UnscentedKalmanFilter(8, 3, s.dt_s, h_imu, lambda x, dt: model.F @ x, points)
+    f.x, f.P, f.Q = x0.copy(), P0.copy(), model.Q
+    z_imu = np.concatenate([w.acc_m_s2[0], w.gyro_rad_s[0, :, None]], axis=-1)
+    r_rss = ch.sigma_db**2 * np.eye(6)
+    for k in range(T):
+        f.predict()
+        f.sigmas_f = points.sigma_points(f.x, f.P)
+        f.update(z_imu[k], R=imu.R, hx=h_imu)
+        f.sigmas_f = points.sigma_points(f.x, f.P)
+        f.update(w.rss_dbm[0, k], R=r_rss, hx=h_rss)
+        np.testing.assert_allclose(ours.x[0, k], f.x, atol=1e-6, err_msg=f"step {k}")
+        np.testing.assert_allclose(ours.P[0, k], f.P, atol=1e-6, err_msg=f"step {k}")

@@ -30,7 +30,7 @@ def main():
     rng = np.random.default_rng(args.seed)
     dt, speed = 0.1, 0.8
     lap = [[3.0, 3.0], [27.0, 3.0], [27.0, 7.0], [3.0, 7.0]]
-    laps = int(np.ceil(args.steps * dt * speed / 56.0)) + 2
+    laps = int(np.ceil(args.steps * dt * speed / 50.0)) + 2     # a lap is about 54 m with its rounded corners
     waypoints = np.array(lap * laps + [lap[0]])
     truth = lb.waypoint_trajectory(waypoints, speed_m_s=speed, accel_m_s2=0.5, dt_s=dt, turn_radius_m=1.0)
     T = min(args.steps, truth.time_s.size)

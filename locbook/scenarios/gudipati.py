@@ -26,6 +26,7 @@ from ..models.motion import HeadingKinematicModel, KinematicModel
 from ..models.trajectory import Trajectory, waypoint_trajectory
 from ..static.calibration import fix_error_covariance
 from ..static.localization import lateration_box_ls, lateration_ls
+from ..tracking.fusion import fuse_estimates
 from ..tracking.kalman import LinearMeasurement, NonlinearMeasurement, RssMeasurement, extended_kalman_filter
 from ..tracking.unscented import unscented_kalman_filter
 
@@ -35,7 +36,7 @@ __all__ = [
     "CALIBRATION_SPAN_M", "CALIBRATION_SAMPLES", "CALIBRATION_TERMS", "WalkSettings", "channel_model",
     "path_trajectory", "Walk", "simulate_walk", "rss_only_fixes", "METHODS", "track", "WalkErrors", "walk_errors",
     "table_5_1", "calibration_distances_m", "simulate_calibration_walk", "rss_only_mean_error", "calibrate_shadowing",
-    "fix_covariance_from", "inertial_only", "anchors_m",
+    "fix_covariance_from", "inertial_only", "anchors_m", "ins_drift_covariance", "position_fusion", "RSS_SIGNS",
 ]
 
 DOCUMENT = "gudipati2017"
@@ -242,20 +243,65 @@ def _imu_stream(walk: Walk, with_jacobian: bool) -> NonlinearMeasurement:
                                 name="accelerometer + gyroscope")
 
 
-def _rss_stream(walk: Walk, model) -> RssMeasurement:
+RSS_SIGNS = ("corrected", "printed_3_12")
+
+
+def _rss_stream(walk: Walk, model, sign: str = "corrected"):
+    """The RSS stream of the EKF/UKF: Eq. (3.12) with the sign of (3.7) (``"corrected"``), or as printed with its
+    leading minus, ``h = -[S_i - 10 C_i log10 d_i]`` (``"printed_3_12"``, flagged; its Jacobian (3.13) carries the
+    same minus)."""
+    if sign not in RSS_SIGNS:
+        raise ValueError(f"rss sign must be one of {RSS_SIGNS}, got {sign!r}")
     ch = replace(channel_model(walk.anchor_ids), sigma_db=walk.settings.rss_sigma_db)
-    return RssMeasurement(walk.rss_dbm, walk.anchors_m, ch, model.position_index)
+    meas = RssMeasurement(walk.rss_dbm, walk.anchors_m, ch, model.position_index)
+    if sign == "corrected":
+        return meas
+    a, idx = walk.anchors_m, model.position_index
+
+    def h(x):
+        return -ch.mean_power_dbm(np.linalg.norm(x[..., None, idx] - a, axis=-1))
+
+    def jacobian(x):
+        diff = x[..., None, idx] - a
+        grad = -(10 * ch.path_loss_exp / np.log(10))[:, None] * diff / np.sum(diff**2, axis=-1)[..., None]
+        H = np.zeros(x.shape[:-1] + (a.shape[0], x.shape[-1]))
+        H[..., idx] = -grad
+        return H
+    return NonlinearMeasurement(walk.rss_dbm, h, ch.sigma_db**2 * np.eye(a.shape[0]), jacobian=jacobian,
+                                name="RSS with the printed sign of Eq. (3.12)")
 
 
-METHODS = ("rss_only", "inertial_only", "kf", "ekf", "ukf")
+METHODS = ("rss_only", "inertial_only", "position_fusion", "kf", "ekf", "ukf")
+
+
+def ins_drift_covariance(walk: Walk) -> np.ndarray:
+    """Covariance ``(K, 2, 2)`` of the dead-reckoned position at the report points, isotropic, from the error
+    sources of :class:`WalkSettings`: a residual accelerometer bias (``s_b^2 t^4 / 4``), white accelerometer noise
+    (``sigma^2 t^3 / (3 f_s)``) and a residual gyroscope bias turning the velocity (``(v s_g)^2 t^4 / 4``, v the
+    cruise speed); ``t`` is the time since the start (the last known position)."""
+    s = walk.settings
+    t = walk.truth.time_s[walk.report_steps]
+    var = (s.accel_residual_bias_m_s2**2 * t**4 / 4 + s.accel_sigma_m_s2**2 * t**3 / (3 * s.imu_rate_hz)
+           + (s.speed_m_s * s.gyro_residual_bias_rad_s) ** 2 * t**4 / 4)
+    return var[:, None, None] * np.eye(2)
+
+
+def position_fusion(walk: Walk, fix_covariance) -> tuple[np.ndarray, np.ndarray]:
+    """The "position" reading of Eqs. (4.8)-(4.9) (note 001 s.2.9): at each report point, the RSS-only fix
+    (covariance ``fix_covariance``) fused with the dead-reckoned position (covariance :func:`ins_drift_covariance`,
+    growing with the time since the start). Returns the fused positions ``(R, K, 2)`` and covariances ``(K, 2, 2)``."""
+    ins = inertial_only(walk)[:, walk.report_steps]
+    z, R = fuse_estimates(rss_only_fixes(walk), np.asarray(fix_covariance, float), ins, ins_drift_covariance(walk))
+    return z, R[0] if R.ndim == 4 else R
 
 
 def track(walk: Walk, method: str, *, fix_covariance=None, ukf_alpha: float = UKF_ALPHA, ukf_weights: str = "corrected",
-          ukf_innovation_noise: bool = True) -> np.ndarray:
+          ukf_innovation_noise: bool = True, rss_sign: str = "corrected") -> np.ndarray:
     """Position estimates ``(R, K, 2)`` at the report points for one method (Sec. 2.10 of note 001):
 
     - ``rss_only``: :func:`rss_only_fixes`;
     - ``inertial_only``: :func:`inertial_only`;
+    - ``position_fusion``: :func:`position_fusion` (Eqs. (4.8)-(4.9) on two position estimates, no filter);
     - ``kf``: linear KF on the 6-D constant-acceleration model (Eqs. (3.1)-(3.3)): the RSS-only fixes as position
       measurements at the report points (R = ``fix_covariance``, the fixes' error covariance measured on an
       independent calibration walk, see :func:`fix_covariance_from`) and the accelerations rotated to the world
@@ -263,7 +309,8 @@ def track(walk: Walk, method: str, *, fix_covariance=None, ukf_alpha: float = UK
     - ``ekf`` / ``ukf``: the 8-D model with heading and yaw rate (:class:`HeadingKinematicModel`), the RSS of every
       packet (Eq. (3.12) sign corrected) and the inertial readings (body frame) stacked at every step; the UKF with
       the thesis's alpha, beta = 2, kappa = 0 and the corrected equations of Sec. 3.6 (``ukf_weights="literal_001"``
-      and ``ukf_innovation_noise=False``: the printed Eqs. (3.22) and (3.26), flagged).
+      and ``ukf_innovation_noise=False``: the printed Eqs. (3.22) and (3.26), flagged; ``rss_sign="printed_3_12"``:
+      h with the printed leading minus, flagged).
     """
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
@@ -273,6 +320,11 @@ def track(walk: Walk, method: str, *, fix_covariance=None, ukf_alpha: float = UK
         return rss_only_fixes(walk)
     if method == "inertial_only":
         return inertial_only(walk)[:, steps]
+    if method == "position_fusion":
+        if fix_covariance is None:
+            raise ValueError("position fusion needs fix_covariance (the RSS fixes' error covariance, from a "
+                             "calibration walk: fix_covariance_from)")
+        return position_fusion(walk, fix_covariance)[0]
     if method == "kf":
         if fix_covariance is None:
             raise ValueError("the linear KF needs fix_covariance (the RSS fixes' error covariance, from a "
@@ -291,7 +343,7 @@ def track(walk: Walk, method: str, *, fix_covariance=None, ukf_alpha: float = UK
         return res.x[..., :2]
     model = HeadingKinematicModel(s.dt_s, s.q, s.q_angular)
     x0, P0 = _initial(walk, model, 8)
-    streams = [_imu_stream(walk, method == "ekf"), _rss_stream(walk, model)]
+    streams = [_imu_stream(walk, method == "ekf"), _rss_stream(walk, model, rss_sign)]
     if method == "ekf":
         res = extended_kalman_filter(model.F, model.Q, x0, P0, streams, record=steps)
     else:

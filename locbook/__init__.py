@@ -30,6 +30,10 @@ from .models.imu import (IMU_FRAMES, INTEGRATION_RULES, accelerometer_readings, 
                          rotation_2d, stationary_bias, world_to_body)
 from .models.trajectory import Trajectory, waypoint_trajectory
 from .tracking.fusion import FUSION_READINGS, fuse_estimates
+from .static.least_squares import (LATERATION_REFERENCES, LATERATION_VARIANTS, RlsResult, lateration_rows,
+                                   least_squares_position, recursive_least_squares)
+from .models.channel import RANGE_BIAS_TARGETS, correct_range_bias, log_normal_range_moments
+from .tracking.resampling import RESAMPLING_METHODS, counts_to_indices, resample, resample_where
 from .models.channel import (AT86RF230_ED_OFFSET_DB, CC2420_RSSI_OFFSET_DB, PathLossModel, correlated_shadowing_db,
                       dbm_to_register, pairwise_distance_m, quantize_db, register_to_dbm, small_scale_fading_db, wall_crossings)
 from .errors import ConvergenceError, DegenerateGeometryError, LocbookError, ParameterError, SingularCovarianceError
@@ -65,7 +69,9 @@ __all__ = [
     "path_loss_exp_ratio_estimate", "path_loss_exp_given_ref_power",
     # static localization
     "LocalizationResult", "LOCALIZATION_STATUSES", "check_anchor_geometry", "lateration_system", "lateration_ls", "lateration_wls",
-    "lateration_box_ls", "rss_ml_position", "grid_ml_position",
+    "lateration_box_ls", "rss_ml_position", "grid_ml_position", "lateration_rows", "least_squares_position",
+    "recursive_least_squares", "RlsResult", "LATERATION_REFERENCES", "LATERATION_VARIANTS",
+    "log_normal_range_moments", "correct_range_bias", "RANGE_BIAS_TARGETS",
     # fingerprinting
     "knn_position", "model_fingerprints", "pattern_fingerprints", "KNN_WEIGHTINGS",
     # motion and filters
@@ -82,7 +88,7 @@ __all__ = [
     # Bayes filters
     "RssMeasurementModel", "GridFilterResult", "grid_bayes_filter", "grid_transition_matrix",
     "ParticleFilterResult", "particle_filter", "systematic_resample", "effective_sample_size",
-    "RESAMPLING_CDFS", "WEIGHT_SMOOTHINGS",
+    "RESAMPLING_CDFS", "WEIGHT_SMOOTHINGS", "resample", "resample_where", "counts_to_indices", "RESAMPLING_METHODS",
     # reference tags
     "OnlineCalibration", "calibrate_from_reference_tags", "pooled_sigma_db", "smooth_rssi",
     "OZKAYA_REF_POWER_BOUNDS_DBM", "OZKAYA_PATH_LOSS_EXP_BOUNDS",

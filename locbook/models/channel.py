@@ -34,6 +34,9 @@ __all__ = [
     "correlated_shadowing_db",
     "attenuation_bursts_db",
     "small_scale_fading_db",
+    "RANGE_BIAS_TARGETS",
+    "log_normal_range_moments",
+    "correct_range_bias",
 ]
 
 #: CC2420 RSSI register offset: P = RSSI_VAL - 45 dBm (Eq. (3) in George and Vadivukkarasi,
@@ -201,6 +204,35 @@ class PathLossModel:
         self._positive_exponent("range_bias_factor")
         s = np.asarray(self.sigma_db) * np.log(10.0) / (10.0 * np.asarray(self.path_loss_exp))
         return np.exp(0.5 * s**2)
+
+
+RANGE_BIAS_TARGETS = ("median", "mean", "squared")
+
+
+def log_normal_range_moments(sigma_db, path_loss_exp) -> dict:
+    """Moments of the range inverted from a log-normally shadowed power, ``d = d_0 exp(k)``, ``k ~ N(0, sigma_k^2)``,
+    ``sigma_k = ln(10) sigma / (10 n)`` (Palvai 2008, Eqs. (2.35)-(2.38); note 002 s.2.7): ``sigma_k``,
+    ``mean_ratio`` ``E[d]/d_0 = exp(sigma_k^2 / 2)``, ``mean_square_ratio`` ``E[d^2]/d_0^2 = exp(2 sigma_k^2)`` and
+    ``sd_ratio`` ``sd(d)/d_0 = sqrt(exp(2 sigma_k^2) - exp(sigma_k^2))``. Arrays broadcast."""
+    sigma = as_array("sigma_db", sigma_db)
+    n = as_array("path_loss_exp", path_loss_exp)
+    if np.any(sigma < 0) or np.any(n <= 0):
+        raise ValueError("sigma_db must be >= 0 and path_loss_exp > 0")
+    sk = np.log(10.0) * sigma / (10.0 * n)
+    return {"sigma_k": sk, "mean_ratio": np.exp(sk**2 / 2), "mean_square_ratio": np.exp(2 * sk**2),
+            "sd_ratio": np.sqrt(np.exp(2 * sk**2) - np.exp(sk**2))}
+
+
+def correct_range_bias(distance_m, sigma_db, path_loss_exp, target: str = "mean"):
+    """Ranges inverted from shadowed powers, corrected for the log-normal bias (note 002 s.2.7): ``"median"``
+    leaves them (already median-unbiased), ``"mean"`` divides by ``exp(sigma_k^2 / 2)`` (mean-unbiased ``d``),
+    ``"squared"`` divides by ``exp(sigma_k^2)`` so that ``d^2`` is mean-unbiased (what linearised lateration
+    uses). NaN (not heard) stays NaN."""
+    if target not in RANGE_BIAS_TARGETS:
+        raise ValueError(f"target must be one of {RANGE_BIAS_TARGETS}, got {target!r}")
+    d = as_array("distance_m", distance_m, nan_ok=True)
+    sk2 = log_normal_range_moments(sigma_db, path_loss_exp)["sigma_k"] ** 2
+    return d * {"median": 1.0, "mean": np.exp(-sk2 / 2), "squared": np.exp(-sk2)}[target]
 
 
 def _check_walls_count(n_walls) -> None:

@@ -258,6 +258,12 @@ class RssMeasurement:
     ``mode``: ``"parallel"`` (one stacked update, Table 3.4) or ``"serial"`` (scalar updates, each
     re-linearised at the state updated so far, Table 3.3, in ``order`` ``"descending"`` RSS as printed or
     the ``"given"`` anchor order). ``min_distance_m`` keeps the Jacobian finite at an anchor.
+
+    ``anchors_m``: fixed anchors ``(m, dim)``, or receiver positions per step ``batch + (T, m, dim)`` (a moving
+    receiver, or measurement locations drawn per Monte-Carlo run: Palvai 2008, Eq. (4.28)). ``anchor_sigma_m``:
+    the anchors' positions are known only to this standard deviation (e.g. GPS, Palvai's sigma_3); the
+    measurement variance is then inflated to ``sigma^2 + (10 n / ln 10)^2 anchor_sigma^2 / d^2`` at the
+    linearisation point (first-order propagation of the position error; note 002 A8).
     """
 
     power_dbm: np.ndarray
@@ -267,20 +273,38 @@ class RssMeasurement:
     mode: str = "parallel"
     order: str = "descending"
     min_distance_m: float = 1e-3
+    anchor_sigma_m: float = 0.0
+
+    def anchors_at(self, step: int) -> np.ndarray:
+        """Anchor positions at ``step``: ``(m, dim)`` or ``batch + (m, dim)``."""
+        a = np.asarray(self.anchors_m, dtype=float)
+        return a if a.ndim == 2 else a[..., min(step, a.shape[-3] - 1), :, :]
+
+    def variance_db2(self, distance_m, path_loss_exp, sigma_db):
+        """Measurement variance per reading: ``sigma^2``, inflated for ``anchor_sigma_m`` (class docstring)."""
+        var = np.asarray(sigma_db, dtype=float) ** 2
+        if self.anchor_sigma_m > 0:
+            slope = 10.0 * np.asarray(path_loss_exp, dtype=float) / np.log(10.0)
+            var = var + (slope * self.anchor_sigma_m / np.maximum(distance_m, self.min_distance_m)) ** 2
+        return var
 
     def __post_init__(self):
         check_choice("mode", self.mode, RSS_UPDATE_MODES)
         check_choice("order", self.order, SERIAL_ORDERS)
         power = as_array("RssMeasurement.power_dbm", self.power_dbm, min_ndim=2, nan_ok=True)
-        anchors = as_array("RssMeasurement.anchors_m", self.anchors_m, ndim=2)
-        if power.shape[-1] != anchors.shape[0]:
+        anchors = as_array("RssMeasurement.anchors_m", self.anchors_m, min_ndim=2)
+        m, dim = anchors.shape[-2], anchors.shape[-1]
+        if power.shape[-1] != m:
             raise ValueError(f"RssMeasurement.power_dbm has {power.shape[-1]} anchors on its last axis, "
-                             f"anchors_m has {anchors.shape[0]}")
+                             f"anchors_m has {m}")
+        if anchors.ndim > 2 and anchors.shape[-3] not in (1, power.shape[-2]):
+            raise ValueError(f"RssMeasurement.anchors_m per step must have shape batch + (T, m, dim) with T = "
+                             f"{power.shape[-2]} steps (or 1), got {anchors.shape}")
         idx = np.asarray(self.position_index)
-        if idx.shape != (anchors.shape[1],):
-            raise ValueError(f"RssMeasurement.position_index must hold {anchors.shape[1]} state indices (one per "
+        if idx.shape != (dim,):
+            raise ValueError(f"RssMeasurement.position_index must hold {dim} state indices (one per "
                              f"axis of the anchors), got {self.position_index!r}")
-        m = anchors.shape[0]
+        check_scalar("anchor_sigma_m", self.anchor_sigma_m, ge=0)
         for name in ("ref_power_dbm", "path_loss_exp", "sigma_db"):
             value = as_array(f"RssMeasurement.channel.{name}", getattr(self.channel, name))
             if value.ndim and value.shape[-1] not in (1, m):
@@ -400,29 +424,38 @@ def _linear_update(x, P, z, H, R, *, joseph: bool = True):
     return x_new, 0.5 * (short + _mT(short))
 
 
-def _rss_parallel_update(x, P, z, meas: RssMeasurement):
-    """Table 3.4: one update with the stacked Jacobian at the predicted state, R = sigma^2 I."""
+def _rss_parallel_update(x, P, z, meas: RssMeasurement, step: int = 0):
+    """Table 3.4: one update with the stacked Jacobian at the predicted state, R = sigma^2 I (inflated for
+    uncertain anchor positions, :class:`RssMeasurement`)."""
     idx = np.asarray(meas.position_index)
     ch = meas.channel
-    grad, d = _rss_jacobian(x[..., idx], meas.anchors_m, ch.path_loss_exp, meas.min_distance_m)
+    grad, d = _rss_jacobian(x[..., idx], meas.anchors_at(step), ch.path_loss_exp, meas.min_distance_m)
     m = z.shape[-1]
     H = np.zeros(grad.shape[:-1] + (x.shape[-1],))
     H[..., idx] = grad
     h = ch.mean_power_dbm(d)
-    sigma2 = np.broadcast_to(np.asarray(ch.sigma_db, dtype=float) ** 2, z.shape)
+    sigma2 = np.broadcast_to(meas.variance_db2(d, ch.path_loss_exp, ch.sigma_db), z.shape)
     R = sigma2[..., :, None] * np.eye(m)
     valid = np.isfinite(z)
     # the linear update on the innovation's linearisation: z - h(x) = H (x_true - x) + e
     return _linear_update(x, P, np.where(valid, z - h + (H @ x[..., None])[..., 0], np.nan), H, R)
 
 
-def _rss_serial_update(x, P, z, meas: RssMeasurement):
+def _pick_anchor(anchors, a):
+    """The anchor ``a`` (batch indices) of fixed ``(m, dim)`` or per-run ``batch + (m, dim)`` anchors."""
+    if anchors.ndim == 2:
+        return anchors[a]
+    anchors = np.broadcast_to(anchors, a.shape + anchors.shape[-2:])
+    return np.take_along_axis(anchors, a[..., None, None], -2)[..., 0, :]
+
+
+def _rss_serial_update(x, P, z, meas: RssMeasurement, step: int = 0):
     """Table 3.3: scalar updates in descending RSS order (strongest anchor first), each re-linearised at the
     state updated so far; loop bound j <= N (the print's j < N is corrected, note 000 A11)."""
     idx = np.asarray(meas.position_index)
     ch = meas.channel
     m = z.shape[-1]
-    anchors = np.asarray(meas.anchors_m, dtype=float)
+    anchors = meas.anchors_at(step)
     p0 = np.broadcast_to(np.asarray(ch.ref_power_dbm, dtype=float), z.shape)
     ple = np.broadcast_to(np.asarray(ch.path_loss_exp, dtype=float), z.shape)
     sigma2 = np.broadcast_to(np.asarray(ch.sigma_db, dtype=float) ** 2, z.shape)
@@ -437,19 +470,20 @@ def _rss_serial_update(x, P, z, meas: RssMeasurement):
         if not valid.any():
             continue
         pick = lambda arr: np.take_along_axis(arr, a[..., None], -1)[..., 0]
-        diff = x[..., idx] - anchors[a]
+        diff = x[..., idx] - _pick_anchor(anchors, a)
         grad, d2 = log_distance_gradient(diff, pick(ple), min_distance_m=meas.min_distance_m)
         h_row = np.zeros(x.shape)
         h_row[..., idx] = grad
         hx = log_distance_mean_dbm(np.sqrt(d2), pick(p0), pick(ple), ref_distance_m=ch.ref_distance_m)
+        var = meas.variance_db2(np.sqrt(d2), pick(ple), np.sqrt(pick(sigma2)))
         nu = np.where(valid, zj - hx, 0.0)
         ph = (P @ h_row[..., None])[..., 0]                   # P H^T
-        s = np.einsum("...i,...i->...", h_row, ph) + pick(sigma2)
+        s = np.einsum("...i,...i->...", h_row, ph) + var
         if (valid & ~(s > 0)).any():
             raise _Singular(valid & ~(s > 0))
         K = np.where(valid[..., None], ph / s[..., None], 0.0)
         x = x + K * nu[..., None]
-        P = _joseph(P, K[..., :, None], h_row[..., None, :], pick(sigma2)[..., None, None])
+        P = _joseph(P, K[..., :, None], h_row[..., None, :], var[..., None, None])
     return x, P
 
 
@@ -476,14 +510,14 @@ def _linear_stream_update(x, P, z, meas: LinearMeasurement):
     return x, P
 
 
-def _ekf_update(x, P, z, meas):
+def _ekf_update(x, P, z, meas, step):
     if isinstance(meas, LinearMeasurement):
         return _linear_stream_update(x, P, z, meas)
     if isinstance(meas, NonlinearMeasurement):
         return _nonlinear_ekf_update(x, P, z, meas)
     if meas.mode == "parallel":
-        return _rss_parallel_update(x, P, z, meas)
-    return _rss_serial_update(x, P, z, meas)
+        return _rss_parallel_update(x, P, z, meas, step)
+    return _rss_serial_update(x, P, z, meas, step)
 
 
 def _stream_name(meas) -> str:
@@ -494,7 +528,7 @@ def run_recursive_filter(F, Q, x0, P0, measurements, update, *, record=None, pre
                          filter_name: str = "filter") -> TrackResult:
     """The time loop shared by the EKF and the UKF: at every step predict with the linear motion
     ``x = F x``, ``P = F P F^T + Q``, then apply the ``measurements`` present at that step in the given order with
-    ``update(x, P, z_k, stream)`` (each starts from the previous update's posterior). Checks the inputs; see
+    ``update(x, P, z_k, stream, k)`` (each starts from the previous update's posterior). Checks the inputs; see
     :func:`extended_kalman_filter` for the arguments."""
     F = as_array("F", F)
     if F.ndim < 2 or F.shape[-1] != F.shape[-2]:
@@ -542,7 +576,7 @@ def run_recursive_filter(F, Q, x0, P0, measurements, update, *, record=None, pre
             if not act[k]:
                 continue
             try:
-                x, P = update(x, P, z[..., k, :], meas)
+                x, P = update(x, P, z[..., k, :], meas, k)
             except _Singular as exc:
                 _raise_singular(k, exc.bad, f"innovation covariance of the {_stream_name(meas)} update", exc.message)
         if slot[k] >= 0:

@@ -40,7 +40,7 @@ import numpy as np
 from .._validate import check_choice, check_scalar
 from ..models.channel import log_distance_mean_dbm
 from .kalman import (LinearMeasurement, NonlinearMeasurement, RssMeasurement, TrackResult, _mT, _not_positive_definite,
-                     _Singular, _solve_active, run_recursive_filter)
+                     _pick_anchor, _Singular, _solve_active, run_recursive_filter)
 
 __all__ = ["UKF_WEIGHTS", "UnscentedWeights", "unscented_weights", "sigma_points", "unscented_transform",
            "unscented_kalman_filter", "UkfResult"]
@@ -170,33 +170,39 @@ def _anchor_axis(value):
     return value[..., None, :] if value.ndim >= 2 else value
 
 
-def _rss_function(meas: RssMeasurement, anchor=None):
+def _rss_function(meas: RssMeasurement, step: int, anchor=None):
     """``h`` of an RSS stream over sigma points: the log-distance mean power at each anchor (or at the one anchor
     per run ``anchor`` ``batch``, for serial updates)."""
     idx = np.asarray(meas.position_index)
-    anchors = np.asarray(meas.anchors_m, dtype=float)
+    anchors = meas.anchors_at(step)
     ch = meas.channel
     p0, ple = _anchor_axis(ch.ref_power_dbm), _anchor_axis(ch.path_loss_exp)
 
     def h(X):
         pos = X[..., idx]
         if anchor is None:
-            diff = pos[..., None, :] - anchors                          # batch + (N, m, dim)
+            a = anchors if anchors.ndim == 2 else anchors[..., None, :, :]        # batch + (1, m, dim)
+            diff = pos[..., None, :] - a                                        # batch + (N, m, dim)
             d = np.sqrt(np.einsum("...i,...i->...", diff, diff))
             return log_distance_mean_dbm(d, p0, ple, ref_distance_m=ch.ref_distance_m,
                                          min_distance_m=meas.min_distance_m)
-        a = anchor[..., None]                                          # batch + (1,)
-        diff = pos - anchors[a]                                          # batch + (N, dim)
+        diff = pos - _pick_anchor(anchors, anchor)[..., None, :]                 # batch + (N, dim)
         d = np.sqrt(np.einsum("...i,...i->...", diff, diff))
-        pick = lambda v: np.take_along_axis(np.broadcast_to(np.asarray(v, float), anchor.shape + (anchors.shape[0],)),
+        pick = lambda v: np.take_along_axis(np.broadcast_to(np.asarray(v, float), anchor.shape + (anchors.shape[-2],)),
                                             anchor[..., None], -1)      # batch + (1,)
         return log_distance_mean_dbm(d, pick(ch.ref_power_dbm), pick(ch.path_loss_exp), ref_distance_m=ch.ref_distance_m,
                                      min_distance_m=meas.min_distance_m)[..., None]
     return h
 
 
-def _rss_noise(meas: RssMeasurement, shape):
-    return np.broadcast_to(np.asarray(meas.channel.sigma_db, dtype=float) ** 2, shape)
+def _rss_noise(meas: RssMeasurement, x, z, step: int):
+    """Per-reading variance ``batch + (m,)`` at the predicted mean (inflated for uncertain anchor positions)."""
+    idx = np.asarray(meas.position_index)
+    anchors = meas.anchors_at(step)
+    diff = x[..., None, idx] - anchors
+    d = np.sqrt(np.einsum("...i,...i->...", diff, diff))
+    ch = meas.channel
+    return np.broadcast_to(meas.variance_db2(d, ch.path_loss_exp, ch.sigma_db), z.shape)
 
 
 @dataclass(frozen=True)
@@ -231,9 +237,9 @@ def unscented_kalman_filter(F, Q, x0, P0, measurements, *, alpha: float = 1e-3, 
     w = unscented_weights(F_arr.shape[-1], alpha, beta, kappa, weights)
     guard = [0]
 
-    def update(x, P, z, meas):
+    def update(x, P, z, meas, step):
         try:
-            return _update(x, P, z, meas)
+            return _update(x, P, z, meas, step)
         except _Singular as exc:
             if exc.message:                  # the state covariance: already says what failed
                 raise
@@ -244,7 +250,7 @@ def unscented_kalman_filter(F, Q, x0, P0, measurements, *, alpha: float = 1e-3, 
                                      f"{printed_weights} is singular, not positive definite or not finite at step "
                                      "{step}") from None
 
-    def _update(x, P, z, meas):
+    def _update(x, P, z, meas, step):
         if isinstance(meas, LinearMeasurement):
             H, R = np.asarray(meas.H, float), np.asarray(meas.R, float)
             if meas.mode == "parallel":
@@ -258,10 +264,10 @@ def unscented_kalman_filter(F, Q, x0, P0, measurements, *, alpha: float = 1e-3, 
         if isinstance(meas, NonlinearMeasurement):
             return _ukf_update(x, P, z, meas.h, np.asarray(meas.R, float), w, innovation_noise, guard)
         m = z.shape[-1]
-        sigma2 = _rss_noise(meas, z.shape)
+        sigma2 = _rss_noise(meas, x, z, step)
         if meas.mode == "parallel":
-            return _ukf_update(x, P, z, _rss_function(meas), sigma2[..., :, None] * np.eye(m), w, innovation_noise,
-                               guard)
+            return _ukf_update(x, P, z, _rss_function(meas, step), sigma2[..., :, None] * np.eye(m), w,
+                               innovation_noise, guard)
         if meas.order == "descending":
             order = np.argsort(-np.where(np.isfinite(z), z, -np.inf), axis=-1, kind="stable")
         else:
@@ -269,7 +275,8 @@ def unscented_kalman_filter(F, Q, x0, P0, measurements, *, alpha: float = 1e-3, 
         for j in range(m):
             a = order[..., j]
             zj = np.take_along_axis(z, a[..., None], -1)
-            x, P = _ukf_update(x, P, zj, _rss_function(meas, a), np.take_along_axis(sigma2, a[..., None], -1)[..., None],
+            x, P = _ukf_update(x, P, zj, _rss_function(meas, step, a),
+                               np.take_along_axis(_rss_noise(meas, x, z, step), a[..., None], -1)[..., None],
                                w, innovation_noise, guard)
         return x, P
 

@@ -33,6 +33,7 @@ from .tracking.fusion import FUSION_READINGS, fuse_estimates
 from .static.least_squares import (LATERATION_REFERENCES, LATERATION_VARIANTS, RlsResult, lateration_rows,
                                    least_squares_position, recursive_least_squares)
 from .models.channel import RANGE_BIAS_TARGETS, correct_range_bias, log_normal_range_moments
+from .tracking.particle import SirResult, kernel_map_estimate, rss_log_likelihood, sir_particle_filter
 from .tracking.resampling import RESAMPLING_METHODS, counts_to_indices, resample, resample_where
 from .models.channel import (AT86RF230_ED_OFFSET_DB, CC2420_RSSI_OFFSET_DB, PathLossModel, correlated_shadowing_db,
                       dbm_to_register, pairwise_distance_m, quantize_db, register_to_dbm, small_scale_fading_db, wall_crossings)
@@ -89,6 +90,7 @@ __all__ = [
     "RssMeasurementModel", "GridFilterResult", "grid_bayes_filter", "grid_transition_matrix",
     "ParticleFilterResult", "particle_filter", "systematic_resample", "effective_sample_size",
     "RESAMPLING_CDFS", "WEIGHT_SMOOTHINGS", "resample", "resample_where", "counts_to_indices", "RESAMPLING_METHODS",
+    "sir_particle_filter", "SirResult", "rss_log_likelihood", "kernel_map_estimate",
     # reference tags
     "OnlineCalibration", "calibrate_from_reference_tags", "pooled_sigma_db", "smooth_rssi",
     "OZKAYA_REF_POWER_BOUNDS_DBM", "OZKAYA_PATH_LOSS_EXP_BOUNDS",

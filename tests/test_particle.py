@@ -30,9 +30,10 @@ def test_sir_posterior_of_a_linear_gaussian_problem_equals_the_kalman_posterior(
     assert res.resampled.all()
 
 
-def test_rss_log_likelihood_leaves_out_missing_readings():
+@pytest.mark.parametrize("ref_distance_m", [1.0, 2.0])
+def test_rss_log_likelihood_leaves_out_missing_readings(ref_distance_m):
     rng = np.random.default_rng(1)
-    ch = lb.PathLossModel(-20.0, 4.0, 6.0)
+    ch = lb.PathLossModel(-20.0, 4.0, 6.0, ref_distance_m=ref_distance_m)
     x = rng.uniform(0, 50, (2, 7, 3))
     s = rng.uniform(0, 50, (2, 4, 3))
     z = rng.uniform(-90, -50, (2, 4))
@@ -41,7 +42,7 @@ def test_rss_log_likelihood_leaves_out_missing_readings():
     for r in range(2):
         for i in range(7):
             d = np.linalg.norm(x[r, i] - s[r], axis=-1)
-            h = -20 - 40 * np.log10(d)
+            h = -20 - 40 * np.log10(d / ref_distance_m)
             keep = np.isfinite(z[r])
             assert ours[r, i] == pytest.approx(-np.sum((z[r, keep] - h[keep]) ** 2) / 72.0)
 

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._validate import as_array, check_scalar
-from ..models.channel import PathLossModel, log_distance_mean_dbm
+from ..models.channel import PathLossModel
 from .resampling import RESAMPLING_METHODS, resample
 
 __all__ = ["SirResult", "sir_particle_filter", "rss_log_likelihood", "kernel_map_estimate"]
@@ -70,10 +70,12 @@ def rss_log_likelihood(particles_m, receivers_m, power_dbm, channel: PathLossMod
             continue
         sj = s[..., j, :] if s.ndim == 2 else s[:, j, :]
         diff = x - (sj if s.ndim == 2 else sj[:, None, :])
-        d = np.sqrt(np.einsum("...i,...i->...", diff, diff))
-        h = log_distance_mean_dbm(d, p0[j], ple[j], ref_distance_m=channel.ref_distance_m, min_distance_m=min_distance_m)
-        term = (np.where(heard, zj, 0.0)[:, None] - h) ** 2 / (2 * var[j])
-        out -= np.where(heard[:, None], term, 0.0)
+        d2 = np.einsum("...i,...i->...", diff, diff)
+        # the log-distance mean from d^2 (log10 d = log10(d^2) / 2; the same clamp), without a square root
+        d2 = np.maximum(d2, min_distance_m**2) if min_distance_m > 0 else d2
+        resid = np.where(heard, zj - p0[j] - 10 * ple[j] * np.log10(channel.ref_distance_m), 0.0)[:, None] \
+            + 5.0 * ple[j] * np.log10(d2)
+        out -= np.where(heard[:, None], resid**2, 0.0) / (2 * var[j])
     return out
 
 

@@ -21,7 +21,7 @@ from ..tracking.particle import rss_log_likelihood, sir_particle_filter
 
 __all__ = [
     "DOCUMENT", "PRINTED", "SIGMA1_DB", "ETA", "SIGMA2_M", "SIGMA3_M", "N_LOCATIONS", "AREA_M", "Setup",
-    "draw_locations", "measure", "observed_locations", "lsf_by_count", "rlsf_path", "ekf_path", "EKF_VARIANTS",
+    "draw_locations", "measure", "observed_locations", "lsf_by_count", "rlsf_path", "ekf_path", "EKF_VARIANTS", "EKF_SCHEDULES",
     "SCHEDULES", "SHADOWING", "pf_run", "printed_jacobian", "corrected_jacobian", "crlb_m", "errors_m",
 ]
 
@@ -119,18 +119,30 @@ def printed_jacobian(x, receivers_m, path_loss_exp):
     return 10 * path_loss_exp * diff / np.linalg.norm(diff, axis=-1)[..., None]
 
 
+EKF_SCHEDULES = ("sequential", "batch")
+
+
 def ekf_path(setup: Setup, receivers_m, power_dbm, x0, P0, *, process_sd_m: float = SIGMA2_M,
-             variant: str = "corrected", inflate: bool = False) -> np.ndarray:
+             variant: str = "corrected", inflate: bool = False, schedule: str = "sequential") -> np.ndarray:
     """The EKF of Sec. 4.3 over the sequential schedule (A5a: step k assimilates location k): random-walk state
     ``X_k = X_{k-1} + w``, ``Q = sigma_2^2 I`` (Eq. (4.25), A6); measurement (4.28). ``variant="corrected"``: the
     nonlinear innovation, the corrected Jacobian and ``R = sigma_1^2`` (optionally ``inflate``d for the GPS noise
     sigma_3, A8); ``"literal_002"`` (flagged): the printed Jacobian (4.43) and ``R = I`` as printed.
-    Returns the estimates ``(R, N, dim)`` after each location."""
+    ``schedule="batch"``: all N readings in one update (the corrected EKF only). Returns the estimates
+    ``(R, N, dim)`` after each location (``(R, 1, dim)`` for the batch schedule)."""
     if variant not in EKF_VARIANTS:
         raise ValueError(f"variant must be one of {EKF_VARIANTS}, got {variant!r}")
+    if schedule not in EKF_SCHEDULES:
+        raise ValueError(f"schedule must be one of {EKF_SCHEDULES}, got {schedule!r}")
     s = np.asarray(receivers_m, float)
     R_, N, dim = s.shape
     F, Q = np.eye(dim), process_sd_m**2 * np.eye(dim)
+    if schedule == "batch":
+        if variant != "corrected":
+            raise ValueError("the batch schedule is offered for the corrected EKF only")
+        meas = RssMeasurement(np.asarray(power_dbm)[:, None, :], s[:, None], setup.channel, np.arange(dim),
+                              anchor_sigma_m=setup.receiver_sigma_m if inflate else 0.0, min_distance_m=1.0)
+        return extended_kalman_filter(F, Q, x0, P0, [meas]).x
     if variant == "corrected":
         meas = RssMeasurement(np.asarray(power_dbm)[..., None], s[:, :, None, :], setup.channel, np.arange(dim),
                               anchor_sigma_m=setup.receiver_sigma_m if inflate else 0.0, min_distance_m=1.0)

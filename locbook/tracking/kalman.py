@@ -441,6 +441,13 @@ def _rss_parallel_update(x, P, z, meas: RssMeasurement, step: int = 0):
     return _linear_update(x, P, np.where(valid, z - h + (H @ x[..., None])[..., 0], np.nan), H, R)
 
 
+def _serial_order(z, order: str):
+    """Anchor order of serial updates per run ``batch + (m,)``: strongest reading first (missing last) or as given."""
+    if order == "descending":
+        return np.argsort(-np.where(np.isfinite(z), z, -np.inf), axis=-1, kind="stable")
+    return np.broadcast_to(np.arange(z.shape[-1]), z.shape)
+
+
 def _pick_anchor(anchors, a):
     """The anchor ``a`` (batch indices) of fixed ``(m, dim)`` or per-run ``batch + (m, dim)`` anchors."""
     if anchors.ndim == 2:
@@ -459,10 +466,7 @@ def _rss_serial_update(x, P, z, meas: RssMeasurement, step: int = 0):
     p0 = np.broadcast_to(np.asarray(ch.ref_power_dbm, dtype=float), z.shape)
     ple = np.broadcast_to(np.asarray(ch.path_loss_exp, dtype=float), z.shape)
     sigma2 = np.broadcast_to(np.asarray(ch.sigma_db, dtype=float) ** 2, z.shape)
-    if meas.order == "descending":
-        order = np.argsort(-np.where(np.isfinite(z), z, -np.inf), axis=-1, kind="stable")
-    else:
-        order = np.broadcast_to(np.arange(m), z.shape)
+    order = _serial_order(z, meas.order)
     for j in range(m):
         a = order[..., j]
         zj = np.take_along_axis(z, a[..., None], -1)[..., 0]

@@ -40,7 +40,7 @@ import numpy as np
 from .._validate import check_choice, check_scalar
 from ..models.channel import log_distance_mean_dbm
 from .kalman import (LinearMeasurement, NonlinearMeasurement, RssMeasurement, TrackResult, _mT, _not_positive_definite,
-                     _pick_anchor, _Singular, _solve_active, run_recursive_filter)
+                     _pick_anchor, _serial_order, _Singular, _solve_active, run_recursive_filter)
 
 __all__ = ["UKF_WEIGHTS", "UnscentedWeights", "unscented_weights", "sigma_points", "unscented_transform",
            "unscented_kalman_filter", "UkfResult"]
@@ -264,14 +264,11 @@ def unscented_kalman_filter(F, Q, x0, P0, measurements, *, alpha: float = 1e-3, 
         if isinstance(meas, NonlinearMeasurement):
             return _ukf_update(x, P, z, meas.h, np.asarray(meas.R, float), w, innovation_noise, guard)
         m = z.shape[-1]
-        sigma2 = _rss_noise(meas, x, z, step)
         if meas.mode == "parallel":
+            sigma2 = _rss_noise(meas, x, z, step)
             return _ukf_update(x, P, z, _rss_function(meas, step), sigma2[..., :, None] * np.eye(m), w,
                                innovation_noise, guard)
-        if meas.order == "descending":
-            order = np.argsort(-np.where(np.isfinite(z), z, -np.inf), axis=-1, kind="stable")
-        else:
-            order = np.broadcast_to(np.arange(m), z.shape)
+        order = _serial_order(z, meas.order)
         for j in range(m):
             a = order[..., j]
             zj = np.take_along_axis(z, a[..., None], -1)

@@ -1,5 +1,6 @@
 """Gudipati 2017 scenario: printed tables, the walk simulation and the 8-D fusion UKF against an independent
 filterpy loop."""
+import warnings
 from dataclasses import replace
 
 import numpy as np
@@ -16,7 +17,8 @@ def test_table_5_1_average_row_arithmetic():
     np.testing.assert_allclose(dist, np.arange(1, 10))
     mean = cells.mean(axis=0)
     assert mean[-1] == pytest.approx(7.535)                 # the printed 7.77 is the thesis's error (note 001 s.3.4)
-    assert np.all(np.abs(mean[:-1] - avg[:-1]) <= 0.0075 + 1e-12)
+    # the printed average's rounding (0.005) plus that of the mean of four cells printed to 0.01 (0.005)
+    assert np.all(np.abs(mean[:-1] - avg[:-1]) <= 0.01 + 1e-12)
 
 
 def test_table_5_2_and_the_anchor_layout():
@@ -52,7 +54,7 @@ def test_noise_free_rss_only_error_is_the_register_quantisation_only():
     exact = gu.walk_errors(w_fine, gu.track(w_fine, "rss_only")).per_point_m
     # averaging dB over the centred window costs little inside; the end points' windows are one-sided
     assert exact[:, 1:-1].max() < 0.01 and exact.max() < 0.25
-    assert err[0] == err[1] and err[0] > exact.mean()        # no randomness: both runs equal; 1 dB steps cost
+    assert err[0] > exact.mean()                             # the 1 dB register steps cost accuracy
 
 
 def test_kf_needs_the_fix_covariance():
@@ -69,7 +71,8 @@ def test_shadowing_calibration_hits_its_target_with_the_same_streams():
     assert got == pytest.approx(target, abs=0.05)
 
 
-def test_fusion_ukf_equals_an_independent_filterpy_loop():
+@pytest.mark.parametrize("alpha", [1e-3, 0.5])
+def test_fusion_ukf_equals_an_independent_filterpy_loop(alpha):
     """The 8-D model, body-frame inertial stream then RSS stream at every step, against filterpy's UKF with the
     sigma points redrawn around the current estimate before each update (Gudipati Eq. (3.18))."""
     s = gu.WalkSettings()
@@ -80,7 +83,6 @@ def test_fusion_ukf_equals_an_independent_filterpy_loop():
     model = lb.HeadingKinematicModel(s.dt_s, s.q, s.q_angular)
     x0, P0 = gu._initial(w, model, 8)
     imu, rss = gu._imu_stream(w, False), gu._rss_stream(w, model)
-    alpha = 0.5
     ours = lb.unscented_kalman_filter(model.F, model.Q, x0, P0, [imu, rss], alpha=alpha, beta=2.0, kappa=0.0)
     points = MerweScaledSigmaPoints(8, alpha=alpha, beta=2.0, kappa=0.0)
     a, ch = w.anchors_m, rss.channel
@@ -95,12 +97,63 @@ def test_fusion_ukf_equals_an_independent_filterpy_loop():
     f = UnscentedKalmanFilter(8, 3, s.dt_s, h_imu, lambda x, dt: model.F @ x, points)
     f.x, f.P, f.Q = x0.copy(), P0.copy(), model.Q
     z_imu = np.concatenate([w.acc_m_s2[0], w.gyro_rad_s[0, :, None]], axis=-1)
-    r_rss = ch.sigma_db**2 * np.eye(6)
+    r_rss = (s.shadowing_sigma_db**2 + s.fast_sigma_db**2) * np.eye(6)        # the settings' total RSS variance
+    per_step = s.imu_rate_hz * s.dt_s
+    r_imu = np.diag([s.accel_sigma_m_s2**2 / per_step + s.accel_residual_bias_m_s2**2] * 2
+                    + [s.gyro_sigma_rad_s**2 / per_step + s.gyro_residual_bias_rad_s**2])
     for k in range(T):
         f.predict()
         f.sigmas_f = points.sigma_points(f.x, f.P)
-        f.update(z_imu[k], R=imu.R, hx=h_imu)
+        f.update(z_imu[k], R=r_imu, hx=h_imu)
         f.sigmas_f = points.sigma_points(f.x, f.P)
         f.update(w.rss_dbm[0, k], R=r_rss, hx=h_rss)
-        np.testing.assert_allclose(ours.x[0, k], f.x, atol=1e-6, err_msg=f"step {k}")
-        np.testing.assert_allclose(ours.P[0, k], f.P, atol=1e-6, err_msg=f"step {k}")
+        np.testing.assert_allclose(ours.x[0, k], f.x, atol=1e-5, err_msg=f"step {k}")
+        np.testing.assert_allclose(ours.P[0, k], f.P, atol=1e-5, err_msg=f"step {k}")
+
+
+def test_report_windows_equal_a_brute_force_average_and_unheard_packets_are_left_out():
+    s = gu.WalkSettings()
+    w = gu.simulate_walk("u", 6, s, 2, np.random.default_rng(0))
+    rss = w.rss_dbm.copy()
+    rss[0, 100:140, 1] = np.nan                              # anchor 1 not heard for 4 s
+    w = replace(w, rss_dbm=rss)
+    arc = w.truth.arc_length_m
+    ref = []
+    for k in w.report_steps:
+        win = (arc >= arc[k] - 0.5) & (arc <= arc[k] + 0.5)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)      # a window with nothing heard: NaN, as expected
+            ref.append(np.nanmean(np.where(np.isfinite(rss[:, win]), rss[:, win], np.nan), axis=1))
+    ref = np.stack(ref, 1)
+    expected = lb.lateration_ls(w.anchors_m, gu.channel_model(w.anchor_ids).range_m(ref), ref_index=5).position_m
+    np.testing.assert_allclose(gu.rss_only_fixes(w), expected, atol=1e-9)
+
+
+def test_the_ed_floor_is_not_heard_and_the_ceiling_saturates():
+    out = gu.ed_register_dbm(np.array([-95.0, -91.4, -90.6, -3.0]))
+    assert np.isnan(out[0]) and out[1] == -91.0 and out[2] == -91.0 and out[3] == -7.0
+
+
+def test_printed_sign_stream_jacobian_and_the_ins_drift_covariance():
+    s = replace(gu.WalkSettings(), shadowing_sigma_db=1.5)
+    w = gu.simulate_walk("linear", 6, s, 300, np.random.default_rng(0))
+    model = lb.HeadingKinematicModel(s.dt_s, s.q, s.q_angular)
+    m = gu._rss_stream(w, model, "printed_3_12")
+    x = np.random.default_rng(1).standard_normal((4, 8))
+    x[:, :2] += [10, 4]
+    num = np.stack([(m.h(x + 1e-6 * e) - m.h(x - 1e-6 * e)) / 2e-6 for e in np.eye(8)], -1)
+    np.testing.assert_allclose(m.jacobian(x), num, atol=1e-6)
+    np.testing.assert_allclose(m.h(x), -gu._rss_stream(w, model).channel.mean_power_dbm(
+        np.linalg.norm(x[:, None, :2] - w.anchors_m, axis=-1)), atol=1e-12)
+    # the closed-form drift variance against the dead-reckoning errors of 300 walks (per axis, pooled)
+    e = gu.inertial_only(w)[:, w.report_steps] - w.truth.position_m[w.report_steps]
+    mc = (e**2).mean(axis=(0, 2))
+    cf = gu.ins_drift_covariance(w)[:, 0, 0]
+    k = slice(10, None)
+    np.testing.assert_allclose(mc[k], cf[k], rtol=0.15)
+    # position fusion is Eqs. (4.8)-(4.9) of the two estimates
+    cov = np.diag([4.0, 9.0])
+    z, R = gu.position_fusion(w, cov)
+    ref_z, ref_R = lb.fuse_estimates(gu.rss_only_fixes(w), cov, gu.inertial_only(w)[:, w.report_steps],
+                                     gu.ins_drift_covariance(w))
+    np.testing.assert_allclose(z, ref_z)

@@ -13,6 +13,7 @@ read from ``locbook/data/printed/gudipati2017.csv``.
 """
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -35,7 +36,7 @@ __all__ = [
     "PATH_LOSS_EXP", "REPORT_SPACING_M", "PATHS", "UKF_ALPHA", "UKF_BETA", "CALIBRATION_STEP_M",
     "CALIBRATION_SPAN_M", "CALIBRATION_SAMPLES", "CALIBRATION_TERMS", "WalkSettings", "channel_model",
     "path_trajectory", "Walk", "simulate_walk", "rss_only_fixes", "METHODS", "track", "WalkErrors", "walk_errors",
-    "table_5_1", "calibration_distances_m", "simulate_calibration_walk", "rss_only_mean_error", "calibrate_shadowing",
+    "table_5_1", "calibration_distances_m", "ed_register_dbm", "simulate_calibration_walk", "rss_only_mean_error", "calibrate_shadowing",
     "fix_covariance_from", "inertial_only", "anchors_m", "ins_drift_covariance", "position_fusion", "RSS_SIGNS",
 ]
 
@@ -74,6 +75,15 @@ CALIBRATION_TERMS = int(PRINTED.get("Eq. (3.8)", "calibration walk", "terms in t
 #: AT86RF230 energy detect: M = RSS - 91 (Sec. 3.3), 1 dB steps over ED 0..84 (datasheet; note 001 s.2.4).
 ED_OFFSET_DB = -PRINTED.get("Sec. 3.3 text", "register conversion", "subtracted from RSS").value
 ED_RANGE = (0, 84)
+
+
+def ed_register_dbm(power_dbm):
+    """What the AT86RF230 energy detect reports: 1 dB steps over ED 0..84 (M = ED - 91 dBm). A power below ED 0 is
+    not a reading (NaN = not heard, the library's missing rule: the floor value -91 dBm would be a confident wrong
+    reading); above ED 84 it saturates."""
+    q = quantize_db(power_dbm, 1.0)
+    q = np.where(q < ED_OFFSET_DB + ED_RANGE[0], np.nan, q)
+    return np.minimum(q, ED_OFFSET_DB + ED_RANGE[1])
 
 
 def channel_model(anchor_ids, sigma_db: float = 0.0) -> PathLossModel:
@@ -176,8 +186,9 @@ def simulate_walk(path: str, n_anchors: int, settings: WalkSettings, n_runs: int
     shadow = correlated_shadowing_db(truth.position_m, settings.shadowing_sigma_db, settings.decorrelation_m, rng,
                                      size=(n_runs, m))                             # (R, m, T)
     rss = mean + np.swapaxes(shadow, -1, -2) + settings.fast_sigma_db * rng.standard_normal((n_runs, T, m))
-    # the ED register: 1 dB steps, ED 0..84 (M = ED - 91); nothing here falls outside it (note 001 s.3.5)
-    rss = np.clip(quantize_db(rss, 1.0), ED_OFFSET_DB + ED_RANGE[0], ED_OFFSET_DB + ED_RANGE[1])
+    # the ED register (note 001 s.2.4); packets below its floor are not heard (anchor 13, C = 3.1, reaches it at the
+    # far end of the hall)
+    rss = ed_register_dbm(rss)
     per_step = np.sqrt(settings.imu_samples_per_step)
     acc_bias = settings.accel_residual_bias_m_s2 * rng.standard_normal((n_runs, 1, 2))
     gyro_bias = settings.gyro_residual_bias_rad_s * rng.standard_normal((n_runs, 1))
@@ -192,17 +203,22 @@ def simulate_walk(path: str, n_anchors: int, settings: WalkSettings, n_runs: int
 def rss_only_fixes(walk: Walk, *, box: bool = False) -> np.ndarray:
     """"Without fusion" (Sec. 4.2): at each report point, the RSS averaged over the packets received within half a
     report spacing of it along the path ("the average ... computed at each position", Sec. 5.3; centred, so the
-    average does not lag the point), ranged by Eq. (4.1) and trilaterated by linear least squares with the last
-    anchor as the reference (Eqs. (4.5)-(4.7)). ``box=True``: the box-constrained LS over the hall (a locbook
+    average does not lag the point; packets not heard are left out), ranged by Eq. (4.1) and trilaterated by linear
+    least squares with the last anchor as the reference (Eqs. (4.5)-(4.7)); an anchor heard in no packet of the
+    window is left out of that fix. ``box=True``: the box-constrained LS over the hall (a locbook
     extension). Returns fixes ``(R, K, 2)`` at ``walk.report_steps``."""
     steps = walk.report_steps
     s = walk.truth.arc_length_m
     half = REPORT_SPACING_M / 2
     first = np.searchsorted(s, s[steps] - half, side="left")
     last = np.searchsorted(s, s[steps] + half, side="right")            # exclusive
-    csum = np.concatenate([np.zeros(walk.rss_dbm.shape[:1] + (1,) + walk.rss_dbm.shape[2:]),
-                           np.cumsum(walk.rss_dbm, axis=1)], axis=1)
-    avg = (csum[:, last] - csum[:, first]) / (last - first)[None, :, None]
+    heard = np.isfinite(walk.rss_dbm)
+    zero = np.zeros(walk.rss_dbm.shape[:1] + (1,) + walk.rss_dbm.shape[2:])
+    csum = np.concatenate([zero, np.cumsum(np.where(heard, walk.rss_dbm, 0.0), axis=1)], axis=1)
+    ccount = np.concatenate([zero, np.cumsum(heard, axis=1)], axis=1)
+    count = ccount[:, last] - ccount[:, first]
+    with np.errstate(invalid="ignore", divide="ignore"):      # no packet heard in a window: NaN (not heard)
+        avg = np.where(count > 0, (csum[:, last] - csum[:, first]) / count, np.nan)
     distance = channel_model(walk.anchor_ids).range_m(avg)
     a = walk.anchors_m
     if box:
@@ -303,7 +319,8 @@ def track(walk: Walk, method: str, *, fix_covariance=None, ukf_alpha: float = UK
     - ``inertial_only``: :func:`inertial_only`;
     - ``position_fusion``: :func:`position_fusion` (Eqs. (4.8)-(4.9) on two position estimates, no filter);
     - ``kf``: linear KF on the 6-D constant-acceleration model (Eqs. (3.1)-(3.3)): the RSS-only fixes as position
-      measurements at the report points (R = ``fix_covariance``, the fixes' error covariance measured on an
+      measurements at the report points (their centred windows use packets up to half a spacing ahead, so the KF
+      is a fixed-lag smoother of about 1 s on them) (R = ``fix_covariance``, the fixes' error covariance measured on an
       independent calibration walk, see :func:`fix_covariance_from`) and the accelerations rotated to the world
       frame by the integrated gyroscope as linear measurements at every step;
     - ``ekf`` / ``ukf``: the 8-D model with heading and yaw rate (:class:`HeadingKinematicModel`), the RSS of every
@@ -405,16 +422,19 @@ def simulate_calibration_walk(anchor_id: str, distances_m, *, shadowing_sigma_db
     """Averaged received power ``(R, N)`` (dBm) at each calibration distance: the anchor's Table 5.2 model plus
     correlated shadowing along the walk and ``samples`` per-packet noise draws, each quantised to the ED register's
     1 dB, averaged (note 001, F5.1 recipe). Also returns the 1 m reference power ``(R,)`` averaged the same way
-    (S is "measured at 1 m", Sec. 3.3), drawn with its own shadowing."""
+    (S is "measured at 1 m", Sec. 3.3), drawn with its own shadowing. Packets below the ED floor are not heard and
+    left out of the averages (a step with none heard is NaN)."""
     d = np.asarray(distances_m, dtype=float)
     ch = channel_model((anchor_id,))
     pts = np.stack([d, np.zeros_like(d)], -1)
     shadow = correlated_shadowing_db(pts, shadowing_sigma_db, decorrelation_m, rng, size=(n_runs,))
     mean = ch.mean_power_dbm(d[:, None])[:, 0] + shadow
-    packets = quantize_db(mean[..., None] + fast_sigma_db * rng.standard_normal(mean.shape + (samples,)), 1.0)
+    packets = ed_register_dbm(mean[..., None] + fast_sigma_db * rng.standard_normal(mean.shape + (samples,)))
     ref_mean = ch.mean_power_dbm(np.array([1.0]))[0] + shadowing_sigma_db * rng.standard_normal(n_runs)
-    ref = quantize_db(ref_mean[:, None] + fast_sigma_db * rng.standard_normal((n_runs, samples)), 1.0)
-    return packets.mean(axis=-1), ref.mean(axis=-1)
+    ref = ed_register_dbm(ref_mean[:, None] + fast_sigma_db * rng.standard_normal((n_runs, samples)))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)          # a step with no packet heard stays NaN
+        return np.nanmean(packets, axis=-1), np.nanmean(ref, axis=-1)
 
 
 def rss_only_mean_error(path: str, n_anchors: int, settings: WalkSettings, n_runs: int, seed) -> float:

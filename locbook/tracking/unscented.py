@@ -185,13 +185,13 @@ def _rss_function(meas: RssMeasurement, step: int, anchor=None):
             diff = pos[..., None, :] - a                                        # batch + (N, m, dim)
             d = np.sqrt(np.einsum("...i,...i->...", diff, diff))
             return log_distance_mean_dbm(d, p0, ple, ref_distance_m=ch.ref_distance_m,
-                                         min_distance_m=meas.min_distance_m)
+                                         min_distance_m=max(meas.min_distance_m, ch.min_distance_m))
         diff = pos - _pick_anchor(anchors, anchor)[..., None, :]                 # batch + (N, dim)
         d = np.sqrt(np.einsum("...i,...i->...", diff, diff))
         pick = lambda v: np.take_along_axis(np.broadcast_to(np.asarray(v, float), anchor.shape + (anchors.shape[-2],)),
                                             anchor[..., None], -1)      # batch + (1,)
         return log_distance_mean_dbm(d, pick(ch.ref_power_dbm), pick(ch.path_loss_exp), ref_distance_m=ch.ref_distance_m,
-                                     min_distance_m=meas.min_distance_m)[..., None]
+                                     min_distance_m=max(meas.min_distance_m, ch.min_distance_m))[..., None]
     return h
 
 

@@ -140,3 +140,20 @@ def test_exponent_estimators_on_noise_free_data_and_least_squares_against_cvxpy(
     assert lb.path_loss_exp_given_ref_power(d, noisy, S) == pytest.approx(float(c.value), rel=1e-6)
     with pytest.raises(lb.DegenerateGeometryError, match="0/0"):
         lb.path_loss_exp_ratio_estimate(np.ones(3), np.full(3, -40.0), -40.0)
+
+
+def test_ratio_estimator_is_unbiased_with_its_closed_form_variance():
+    """C_hat = -(1/N) sum (M_s - S_hat) / (10 L_s) with M_s = S - 10 C L_s + e_s and S_hat = S + e_0 is unbiased, with
+    Var = sigma^2 / N^2 * sum 1 / (10 L_s)^2 + sigma_0^2 * (mean 1 / (10 L_s))^2."""
+    rng = np.random.default_rng(4)
+    d = np.arange(0.5, 10.01, 0.5)
+    d = d[d != 1.0]
+    L = np.log10(d)
+    S, C, sigma, sigma0 = -40.42, 1.72, 1.0, 0.3
+    R = 200_000
+    M = S - 10 * C * L + sigma * rng.standard_normal((R, d.size))
+    S_hat = S + sigma0 * rng.standard_normal(R)
+    est = lb.path_loss_exp_ratio_estimate(np.broadcast_to(d, M.shape), M, S_hat)
+    var = sigma**2 / d.size**2 * np.sum(1 / (10 * L) ** 2) + sigma0**2 * np.mean(1 / (10 * L)) ** 2
+    assert abs(est.mean() - C) < 4 * np.sqrt(var / R)
+    assert est.var() == pytest.approx(var, rel=0.02)

@@ -191,3 +191,78 @@ def test_a_covariance_that_is_not_positive_definite_is_named():
     with pytest.raises(lb.SingularCovarianceError, match="state covariance P is not positive definite at step 0"):
         lb.unscented_kalman_filter(np.eye(4), np.zeros((4, 4)), start, P0,
                                    [lb.RssMeasurement(z, ANCHORS, channel, model.position_index)])
+
+
+def _stonesoup_ukf(z, x0, P0, anchors, channel, alpha, dt=1.0, q=0.05):
+    """Stone Soup's UnscentedKalmanPredictor + UnscentedKalmanUpdater on the same RSS scenario (axis-major CV
+    model from Stone Soup itself); returns its F, Q and the posterior means and covariances."""
+    from datetime import datetime, timedelta
+    from stonesoup.models.measurement.nonlinear import NonLinearGaussianMeasurement
+    from stonesoup.models.transition.linear import CombinedLinearGaussianTransitionModel, ConstantVelocity
+    from stonesoup.predictor.kalman import UnscentedKalmanPredictor
+    from stonesoup.types.array import CovarianceMatrix, StateVector, StateVectors
+    from stonesoup.types.detection import Detection
+    from stonesoup.types.hypothesis import SingleHypothesis
+    from stonesoup.types.state import GaussianState
+    from stonesoup.updater.kalman import UnscentedKalmanUpdater
+
+    class Rss(NonLinearGaussianMeasurement):
+        @property
+        def ndim_meas(self):
+            return anchors.shape[0]
+
+        def function(self, state, noise=False, **kwargs):
+            pos = np.asarray(state.state_vector, float)[[0, 2]]             # (2, N sigma points)
+            d = np.linalg.norm(pos.T[:, None, :] - anchors, axis=-1)        # (N, m)
+            out = (channel.ref_power_dbm - 10 * channel.path_loss_exp * np.log10(d)).T   # (m, N)
+            return StateVector(out) if out.shape[1] == 1 else StateVectors(out)
+
+    transition = CombinedLinearGaussianTransitionModel([ConstantVelocity(q), ConstantVelocity(q)])
+    meas = Rss(ndim_state=4, mapping=(0, 2), noise_covar=CovarianceMatrix(channel.sigma_db**2 * np.eye(anchors.shape[0])))
+    predictor = UnscentedKalmanPredictor(transition, alpha=alpha, beta=2.0, kappa=0.0)
+    updater = UnscentedKalmanUpdater(meas, alpha=alpha, beta=2.0, kappa=0.0)
+    t0 = datetime(2026, 1, 1)
+    state = GaussianState(StateVector(x0), CovarianceMatrix(P0), timestamp=t0)
+    xs, Ps = [], []
+    for k, zk in enumerate(z):
+        pred = predictor.predict(state, timestamp=t0 + timedelta(seconds=dt * (k + 1)))
+        state = updater.update(SingleHypothesis(pred, Detection(StateVector(zk), measurement_model=meas,
+                                                                timestamp=pred.timestamp)))
+        xs.append(np.asarray(state.state_vector, float).ravel())
+        Ps.append(np.asarray(state.covar, float))
+    F = transition.matrix(time_interval=timedelta(seconds=dt))
+    Q = transition.covar(time_interval=timedelta(seconds=dt))
+    return np.asarray(F, float), np.asarray(Q, float), np.array(xs), np.array(Ps)
+
+
+@pytest.mark.parametrize("alpha", [1e-3, 0.5])
+def test_rss_ukf_equals_stone_soup(alpha):
+    rng = np.random.default_rng(8)
+    channel = lb.PathLossModel(np.array([-40.0, -45.0, -42.0, -38.0]), np.array([1.8, 3.1, 1.7, 1.2]), 4.0)
+    truth = np.stack([np.linspace(3, 20, 25), np.full(25, 4.0)], -1) + 0.2 * rng.standard_normal((25, 2))
+    z = channel.sample_power_dbm(lb.pairwise_distance_m(truth, ANCHORS), rng)
+    x0 = np.array([4.0, 0.5, 3.0, 0.0])                                   # axis-major [x, vx, y, vy]
+    P0 = np.diag([2.0, 0.5, 2.0, 0.5])
+    F, Q, ref_x, ref_P = _stonesoup_ukf(z, x0, P0, ANCHORS, channel, alpha)
+    ours = lb.unscented_kalman_filter(F, Q, x0, P0, [lb.RssMeasurement(z, ANCHORS, channel, np.array([0, 2]))],
+                                      alpha=alpha, beta=2.0, kappa=0.0)
+    np.testing.assert_allclose(ours.x, ref_x, atol=1e-8)
+    np.testing.assert_allclose(ours.P, ref_P, atol=1e-8)
+
+
+def test_covariance_stays_symmetric_positive_definite_over_1e5_steps_at_alpha_1e_3():
+    rng = np.random.default_rng(0)
+    T = 100_000
+    model = lb.constant_velocity(0.1, 0.01)
+    anchors = np.array([[0.0, 0.0], [20.0, 0.0], [10.0, 15.0]])
+    t = np.arange(T) * 0.1
+    pos = np.stack([10 + 5 * np.cos(0.05 * t), 6 + 4 * np.sin(0.05 * t)], -1)       # laps around the anchors
+    ch = lb.PathLossModel(-40.0, 2.5, 3.0)
+    z = ch.sample_power_dbm(lb.pairwise_distance_m(pos, anchors), rng)
+    res = lb.unscented_kalman_filter(model.F, model.Q, np.r_[pos[0], 0.0, 0.0], np.eye(4),
+                                     [lb.RssMeasurement(z, anchors, ch, model.position_index)], alpha=1e-3)
+    assert np.linalg.eigvalsh(res.P).min() > 0
+    np.testing.assert_array_equal(res.P, np.swapaxes(res.P, -1, -2))
+    assert res.floored_updates == 0
+    err = np.linalg.norm(res.x[:, :2] - pos, axis=-1)
+    assert err[-10_000:].mean() < 2.0 and np.isfinite(res.x).all()

@@ -18,6 +18,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ..bounds.crlb import rss_crlb_m
+from ..bounds.pcrlb import position_bound_m, posterior_crlb, rss_state_information
 from ..data.printed_values import printed
 from ..metrics import position_error_m
 from ..models.channel import PathLossModel, correlated_shadowing_db, pairwise_distance_m, quantize_db
@@ -37,7 +39,8 @@ __all__ = [
     "CALIBRATION_SPAN_M", "CALIBRATION_SAMPLES", "CALIBRATION_TERMS", "WalkSettings", "channel_model",
     "path_trajectory", "Walk", "simulate_walk", "rss_only_fixes", "METHODS", "track", "WalkErrors", "walk_errors",
     "table_5_1", "calibration_distances_m", "ed_register_dbm", "simulate_calibration_walk", "rss_only_mean_error", "calibrate_shadowing",
-    "fix_covariance_from", "inertial_only", "anchors_m", "ins_drift_covariance", "position_fusion", "RSS_SIGNS",
+    "fix_covariance_from", "inertial_only", "anchors_m", "ins_drift_covariance", "position_fusion", "RSS_SIGNS", "STATE_MODELS",
+    "posterior_crlb_m", "crlb_map_m",
 ]
 
 DOCUMENT = "gudipati2017"
@@ -311,8 +314,11 @@ def position_fusion(walk: Walk, fix_covariance) -> tuple[np.ndarray, np.ndarray]
     return z, R[0] if R.ndim == 4 else R
 
 
+STATE_MODELS = ("heading", "literal_001")
+
+
 def track(walk: Walk, method: str, *, fix_covariance=None, ukf_alpha: float = UKF_ALPHA, ukf_weights: str = "corrected",
-          ukf_innovation_noise: bool = True, rss_sign: str = "corrected") -> np.ndarray:
+          ukf_innovation_noise: bool = True, rss_sign: str = "corrected", state_model: str = "heading") -> np.ndarray:
     """Position estimates ``(R, K, 2)`` at the report points for one method (Sec. 2.10 of note 001):
 
     - ``rss_only``: :func:`rss_only_fixes`;
@@ -327,7 +333,9 @@ def track(walk: Walk, method: str, *, fix_covariance=None, ukf_alpha: float = UK
       packet (Eq. (3.12) sign corrected) and the inertial readings (body frame) stacked at every step; the UKF with
       the thesis's alpha, beta = 2, kappa = 0 and the corrected equations of Sec. 3.6 (``ukf_weights="literal_001"``
       and ``ukf_innovation_noise=False``: the printed Eqs. (3.22) and (3.26), flagged; ``rss_sign="printed_3_12"``:
-      h with the printed leading minus, flagged).
+      h with the printed leading minus, flagged; ``state_model="literal_001"``: the 8-D state as printed, theta_x and
+      theta_y random walks, with Z^2 = [a_x, a_y, theta_x, theta_y] a linear measurement and the readings taken as
+      world-frame (the gyroscope's yaw rate as theta_x, theta_y never measured), flagged).
     """
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
@@ -358,15 +366,58 @@ def track(walk: Walk, method: str, *, fix_covariance=None, ukf_alpha: float = UK
             LinearMeasurement(acc, model.derivative_measurement_matrix(2), r_acc),
             LinearMeasurement(fixes, model.position_measurement_matrix(), fix_covariance)], record=steps)
         return res.x[..., :2]
-    model = HeadingKinematicModel(s.dt_s, s.q, s.q_angular)
+    if state_model not in STATE_MODELS:
+        raise ValueError(f"state_model must be one of {STATE_MODELS}, got {state_model!r}")
+    model = HeadingKinematicModel(s.dt_s, s.q, s.q_angular, heading="yaw_rate" if state_model == "heading" else "literal_001")
     x0, P0 = _initial(walk, model, 8)
-    streams = [_imu_stream(walk, method == "ekf"), _rss_stream(walk, model, rss_sign)]
+    if state_model == "heading":
+        imu = _imu_stream(walk, method == "ekf")
+    else:
+        z = np.concatenate([walk.acc_m_s2, walk.gyro_rad_s[..., None], np.full(walk.gyro_rad_s.shape + (1,), np.nan)], -1)
+        H = np.zeros((4, 8))
+        H[np.arange(4), [4, 5, 6, 7]] = 1.0
+        r3 = np.diag(_imu_stream(walk, False).R)
+        imu = LinearMeasurement(z, H, np.diag(np.r_[r3, r3[2]]))
+    streams = [imu, _rss_stream(walk, model, rss_sign)]
     if method == "ekf":
         res = extended_kalman_filter(model.F, model.Q, x0, P0, streams, record=steps)
     else:
         res = unscented_kalman_filter(model.F, model.Q, x0, P0, streams, alpha=ukf_alpha, beta=UKF_BETA, kappa=0.0,
                                       weights=ukf_weights, innovation_noise=ukf_innovation_noise, record=steps)
     return res.x[..., :2]
+
+
+def posterior_crlb_m(walk: Walk) -> np.ndarray:
+    """Posterior CRLB of the position ``(K,)`` at the report points for the EKF/UKF's model and measurements (an
+    extension): the 8-D :class:`HeadingKinematicModel`, the RSS of every anchor (sigma = the filters' RSS sigma) and the
+    inertial readings (their R), each step's information evaluated at the true state (Tichavsky et al. 1998, information
+    form; Q is singular, so the Riccati form). Prior: the filters' P_0."""
+    s = walk.settings
+    model = HeadingKinematicModel(s.dt_s, s.q, s.q_angular)
+    tr = walk.truth
+    states = np.zeros((tr.time_s.size, 8))
+    states[:, :2], states[:, 2:4], states[:, 4:6] = tr.position_m, tr.velocity_m_s, tr.acceleration_m_s2
+    states[:, 6], states[:, 7] = tr.heading_rad, tr.yaw_rate_rad_s
+    ch = channel_model(walk.anchor_ids)
+    j_rss = rss_state_information(states, walk.anchors_m, ch.path_loss_exp, s.rss_sigma_db, model.position_index,
+                                  min_distance_m=ch.min_distance_m)
+    H = inertial_measurement_jacobian(8, s.imu_frame)(states)
+    R_inv = np.linalg.inv(_imu_stream(walk, False).R)
+    j_imu = np.swapaxes(H, -1, -2) @ R_inv @ H
+    _, P0 = _initial(walk, model, 8)
+    info = posterior_crlb(np.linalg.inv(P0), model.F, model.Q, (j_rss + j_imu)[1:], form="riccati")
+    return position_bound_m(info, model.position_index)[walk.report_steps]
+
+
+def crlb_map_m(n_anchors: int, sigma_db: float, spacing_m: float = 0.25):
+    """The static RSS CRLB ``sqrt(tr J^{-1})`` from one reading of every anchor (Table 5.2's exponents) over the hall:
+    ``(x (X,), y (Y,), bound (Y, X))`` (an extension: where the anchor placement of Sec. 5.1 helps)."""
+    x = np.arange(spacing_m / 2, ROOM_M[0], spacing_m)
+    y = np.arange(spacing_m / 2, ROOM_M[1], spacing_m)
+    grid = np.stack(np.meshgrid(x, y), -1)
+    ids = ANCHOR_SETS[n_anchors]
+    ch = channel_model(ids)
+    return x, y, rss_crlb_m(grid, anchors_m(ids), ch.path_loss_exp, sigma_db)
 
 
 def fix_covariance_from(walk: Walk) -> np.ndarray:

@@ -41,8 +41,9 @@ def rss_position_information(position_m, anchors_m, path_loss_exp, sigma_db, for
     """``beta^2 sum_j (p - a_j)(p - a_j)^T / d_j^4``, ``beta = 10 n / (sigma ln 10)``, for any anchors ``(m, 2)``.
 
     ``E[1/d^2]`` diverges for position densities positive at an anchor (note 000 s.2.10), so two regularisations
-    are offered: ``height_offset_m`` (antenna height difference, ``d^2 = |p - a|^2 + h^2``, the exact information
-    of that model) and ``min_distance_m`` (the gradient's ``1/d`` factor capped at ``1/d_min``, the model's
+    are offered: ``height_offset_m`` (antenna height difference, a scalar or one per anchor,
+    ``d^2 = |p - a|^2 + h^2``, the exact information of that model, e.g. anchors near the ceiling and a tag at a
+    known height) and ``min_distance_m`` (the gradient's ``1/d`` factor capped at ``1/d_min``, the model's
     validity limit). ``form="ozkaya_printed"`` uses ``d^2`` in the denominator (flagged, see module docstring).
     """
     check_choice("form", form, CRLB_FORMS)
@@ -54,9 +55,12 @@ def rss_position_information(position_m, anchors_m, path_loss_exp, sigma_db, for
         if value.ndim > 1 or value.size not in (1, m) or np.any(value <= 0):
             raise ValueError(f"{name} must be a positive scalar or ({m},) array (one per anchor), got {value.tolist()}")
     check_scalar("min_distance_m", min_distance_m, ge=0)
-    check_scalar("height_offset_m", height_offset_m, ge=0)
+    height = as_array("height_offset_m", height_offset_m)
+    if height.ndim > 1 or height.size not in (1, m):
+        raise ValueError(f"height_offset_m must be a scalar or ({m},) array (one per anchor: anchor height minus tag "
+                         f"height), got shape {height.shape}")
     diff = position_m[..., None, :] - anchors_m  # (..., m, 2)
-    d2 = np.einsum("...i,...i->...", diff, diff) + height_offset_m**2
+    d2 = np.einsum("...i,...i->...", diff, diff) + height**2
     if np.any(d2 == 0):
         where = tuple(int(i) for i in np.argwhere(d2 == 0)[0])
         raise DegenerateGeometryError(f"the RSS Fisher information is undefined at an anchor position (d = 0): "

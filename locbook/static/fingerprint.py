@@ -26,7 +26,7 @@ import numpy as np
 from .._validate import as_array, check_choice, check_scalar
 from ..models.channel import PathLossModel, pairwise_distance_m, wall_crossings
 
-__all__ = ["KNN_WEIGHTINGS", "knn_position", "model_fingerprints", "pattern_fingerprints"]
+__all__ = ["KNN_WEIGHTINGS", "KNN_BLOCK_BYTES", "knn_position", "model_fingerprints", "pattern_fingerprints"]
 
 KNN_WEIGHTINGS = ("inverse_square", "literal_004", "uniform")
 
@@ -87,8 +87,12 @@ def pattern_fingerprints(rss_dbm, axis: int = -2):
     return mean
 
 
+#: memory of one block of RSSI-space differences in :func:`knn_position` (queries x cells x readers doubles)
+KNN_BLOCK_BYTES = 64 * 2**20
+
+
 def knn_position(rss_dbm, fingerprints_dbm, cells_m, k: int, weighting: str = "inverse_square", *,
-                 min_readers: int = 3):
+                 min_readers: int = 3, chunk: int | None = None):
     """Weighted k-nearest-neighbour position, Eqs. (3.1)-(3.3) of Ozkaya (2011), weights corrected.
 
     ``rss_dbm``: ``(..., m)`` target RSSI vectors; ``fingerprints_dbm``: ``(C, m)`` or ``(..., C, m)``
@@ -100,6 +104,10 @@ def knn_position(rss_dbm, fingerprints_dbm, cells_m, k: int, weighting: str = "i
     every reader is always compared). The map itself must be complete (a cell a reader never heard has no
     fingerprint to compare: fill it, or drop that reader); a NaN in it is an error naming the cell and reader.
     The batch axes of ``rss_dbm`` and of a batched map must broadcast against each other.
+
+    Memory is bounded whatever the sizes: the queries are compared with the map in blocks of ``chunk`` queries
+    (default: as many as fit :data:`KNN_BLOCK_BYTES` of differences, 64 MiB), each query's arithmetic being the
+    same in any block, so the result does not depend on ``chunk``.
     """
     check_choice("weighting", weighting, KNN_WEIGHTINGS)
     fingerprints_dbm = as_array("fingerprints_dbm", fingerprints_dbm, min_ndim=2, nan_ok=True)
@@ -120,8 +128,28 @@ def knn_position(rss_dbm, fingerprints_dbm, cells_m, k: int, weighting: str = "i
     if isinstance(k, (bool, np.bool_)) or not isinstance(k, (int, np.integer)) or not 1 <= k <= n_cells:
         raise ValueError(f"k must be between 1 and the number of cells ({n_cells}), got {k}")
     check_scalar("min_readers", min_readers, ge=1, integer=True)
+    if chunk is not None:
+        check_scalar("chunk", chunk, ge=1, integer=True)
     if np.isnan(rss_dbm).any():
-        return _knn_by_heard_readers(rss_dbm, fingerprints_dbm, cells_m, k, weighting, min(int(min_readers), m))
+        return _knn_by_heard_readers(rss_dbm, fingerprints_dbm, cells_m, k, weighting, min(int(min_readers), m),
+                                     chunk)
+    batch = np.broadcast_shapes(rss_dbm.shape[:-1], fingerprints_dbm.shape[:-2])
+    n_queries = int(np.prod(batch, dtype=np.int64))
+    block = int(chunk) if chunk is not None else max(1, KNN_BLOCK_BYTES // (8 * n_cells * max(m, 1)))
+    queries = np.broadcast_to(rss_dbm, batch + (m,)).reshape(-1, m)
+    maps = (fingerprints_dbm if fingerprints_dbm.ndim == 2 else
+            np.broadcast_to(fingerprints_dbm, batch + fingerprints_dbm.shape[-2:]).reshape((-1,) + fingerprints_dbm.shape[-2:]))
+    out = np.empty((n_queries, cells_m.shape[1]))
+    for start in range(0, n_queries, block):
+        stop = min(start + block, n_queries)
+        out[start:stop] = _knn_block(queries[start:stop], maps if maps.ndim == 2 else maps[start:stop], cells_m, k,
+                                     weighting)
+    return out.reshape(batch + (cells_m.shape[1],))
+
+
+def _knn_block(rss_dbm, fingerprints_dbm, cells_m, k, weighting):
+    """Eqs. (3.1)-(3.3) for queries ``(Q, m)`` against a map ``(C, m)`` or ``(Q, C, m)``, no missing readings."""
+    n_cells = cells_m.shape[0]
     diff = fingerprints_dbm - rss_dbm[..., None, :]
     dist2 = np.einsum("...ci,...ci->...c", diff, diff)                  # E_j^2, (..., C)
     nearest = np.argpartition(dist2, k - 1, axis=-1)[..., :k] if k < n_cells else \
@@ -149,7 +177,7 @@ def _check_complete_map(fingerprints_dbm: np.ndarray) -> None:
                          "entries a reader never heard (e.g. with its sensitivity floor) or drop that reader")
 
 
-def _knn_by_heard_readers(rss_dbm, fingerprints_dbm, cells_m, k, weighting, min_readers):
+def _knn_by_heard_readers(rss_dbm, fingerprints_dbm, cells_m, k, weighting, min_readers, chunk):
     """Group the queries by their pattern of heard readers and compare each group over those readers."""
     m = rss_dbm.shape[-1]
     batch = np.broadcast_shapes(rss_dbm.shape[:-1], fingerprints_dbm.shape[:-2])
@@ -164,5 +192,6 @@ def _knn_by_heard_readers(rss_dbm, fingerprints_dbm, cells_m, k, weighting, min_
             continue
         sel = np.flatnonzero(inverse == g)
         group_maps = fingerprints_dbm[:, heard] if fingerprints_dbm.ndim == 2 else maps[sel][..., heard]
-        out[sel] = knn_position(flat[np.ix_(sel, heard)], group_maps, cells_m, k, weighting, min_readers=min_readers)
+        out[sel] = knn_position(flat[np.ix_(sel, heard)], group_maps, cells_m, k, weighting, min_readers=min_readers,
+                                chunk=chunk)
     return out.reshape(batch + (cells_m.shape[1],))

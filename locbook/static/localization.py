@@ -26,6 +26,13 @@ Failures are per problem too: a problem the solver fails on, or whose finite rea
 batch (except :func:`rss_ml_position` when asked to, ``raise_on_failure=True``). Infinite readings, and
 non-finite anchors, model parameters, grids, boxes and weights, are rejected with a ``ValueError`` naming the
 argument; so are shapes that do not match (nothing is broadcast silently).
+
+Anchor heights (measured data, e.g. anchors near the ceiling and a tag carried at 1.3 m): every estimator takes
+``tag_height_m``. Then ``anchors_m`` is ``(m, 3)`` (x, y, height), the tag moves in the plane
+``z = tag_height_m``, positions are ``(..., 2)`` and every range and power is that of the 3-D distance
+``sqrt(|p - a_xy|^2 + (a_z - tag_height_m)^2)``. The linearized systems stay exact (the known height moves to the
+right-hand side: ``|p - a_xy|^2 = d^2 - (a_z - h)^2``); the geometry checks apply to the anchors' plan positions.
+Without ``tag_height_m`` the anchors' dimension is the position's (2-D or 3-D alike).
 """
 from __future__ import annotations
 
@@ -160,6 +167,24 @@ def _model_subset(model: PathLossModel, heard: np.ndarray, m: int) -> PathLossMo
                    sigma_db=pick(model.sigma_db))
 
 
+def _planar(anchors_m, tag_height_m):
+    """``(anchors the positions live with, vertical offsets a_z - h (m,) or None)``: with a known tag height the
+    anchors must be ``(m, 3)`` and the estimators work on their plan positions ``(m, 2)``."""
+    if tag_height_m is None:
+        return anchors_m, None
+    check_scalar("tag_height_m", tag_height_m)
+    anchors = as_array("anchors_m", anchors_m, ndim=2)
+    if anchors.shape[1] != 3:
+        raise ValueError(f"with tag_height_m the anchors must be (m, 3) (x, y, height), got shape {anchors.shape}")
+    return anchors[:, :2], anchors[:, 2] - float(tag_height_m)
+
+
+def _lift(positions_m, vertical_m):
+    """Offsets ``p - a`` ``(..., m, 3)`` of plan positions ``(..., 2)`` from anchors at heights ``-vertical``
+    (the z component is the constant ``-(a_z - h)``)."""
+    return None if vertical_m is None else np.broadcast_to(-vertical_m, positions_m.shape[:-1] + vertical_m.shape)
+
+
 def _by_heard_anchors(anchors_m, readings, min_anchors, solve_subset, method: str) -> LocalizationResult:
     """Solve every problem with the anchors it heard: group the problems by their pattern of heard anchors,
     call ``solve_subset(heard_indices, problem_indices)`` once per group, and mark the groups that heard too
@@ -211,14 +236,16 @@ def _solve_where(usable, batch, dim: int, solve, method: str, failure: str) -> L
                               method, status.reshape(batch))
 
 
-def _lateration_by_heard(anchors_m, distance_m, ref_index: int, min_anchors: int, solve, method: str):
+def _lateration_by_heard(anchors_m, distance_m, ref_index: int, min_anchors: int, solve, method: str,
+                         tag_height_m=None):
     """:func:`_by_heard_anchors` for the linearized systems: ``solve(anchors, distances, ref_index)`` on each
-    group's heard anchors, the reference kept if heard."""
+    group's heard anchors, the reference kept if heard (geometry judged on the plan positions with a known
+    tag height)."""
     anchors_m, distance_m = np.asarray(anchors_m, float), np.asarray(distance_m, float)
     m = anchors_m.shape[0]
     flat = distance_m.reshape(-1, m)
     return _by_heard_anchors(
-        anchors_m, distance_m, min_anchors,
+        _planar(anchors_m, tag_height_m)[0], distance_m, min_anchors,
         lambda heard, sel: solve(anchors_m[heard], flat[np.ix_(sel, heard)], _ref_in_subset(ref_index % m, heard)),
         method)
 
@@ -234,14 +261,17 @@ def _min_anchors(min_anchors, dim: int, m: int) -> int:
     return int(min_anchors)
 
 
-def lateration_system(anchors_m, distance_m, ref_index: int = 0):
+def lateration_system(anchors_m, distance_m, ref_index: int = 0, *, tag_height_m: float | None = None):
     """Matrices of the linearized lateration system ``A p = b`` (Eq. (8), document 003).
 
     Returns ``A`` of shape ``(m-1, dim)`` (``2 (a_r - a_i)``, rows for i != r) and ``b`` of shape
     ``(..., m-1)`` (``d_i^2 - d_r^2 - |a_i|^2 + |a_r|^2``). A NaN distance (not heard) gives NaN in the rows
     that use it: its own row, or every row of its problem if it is the reference's.
+    With ``tag_height_m`` (anchors ``(m, 3)``) the system is the plan one, exact: ``d^2`` becomes
+    ``d^2 - (a_z - h)^2`` and ``a`` the anchors' ``(x, y)`` (module docstring).
     """
-    anchors_m = check_anchor_geometry(anchors_m)
+    plan, vertical = _planar(anchors_m, tag_height_m)
+    anchors_m = check_anchor_geometry(plan)
     m = anchors_m.shape[0]
     distance_m = _readings("distance_m", distance_m, m)
     if np.any(distance_m < 0):
@@ -253,30 +283,34 @@ def lateration_system(anchors_m, distance_m, ref_index: int = 0):
     a_r = anchors_m[ref_index]
     a_mat = 2.0 * (a_r - anchors_m[others])
     norms = np.sum(anchors_m**2, axis=1)
+    if vertical is not None:
+        norms = norms + vertical**2           # |p - a_xy|^2 = d^2 - v^2: the known height joins the anchor terms
     b = (distance_m[..., others] ** 2 - distance_m[..., [ref_index]] ** 2
          - norms[others] + norms[ref_index])
     return a_mat, b
 
 
-def lateration_ls(anchors_m, distance_m, ref_index: int = 0, *, min_anchors: int | None = None) -> LocalizationResult:
+def lateration_ls(anchors_m, distance_m, ref_index: int = 0, *, min_anchors: int | None = None,
+                  tag_height_m: float | None = None) -> LocalizationResult:
     """Linearized least squares ``p = (A^T A)^{-1} A^T b`` (Eq. (8), George and Vadivukkarasi).
 
     Unconstrained: estimates may leave the room, as the paper observes ("some of the results go
     beyond the boundaries"). The result depends slightly on ``ref_index`` (anchor 1 in the paper).
-    NaN distances are anchors not heard (module docstring).
+    NaN distances are anchors not heard; ``tag_height_m``: anchors with heights (module docstring).
     """
-    a_mat, b = lateration_system(anchors_m, distance_m, ref_index)
+    a_mat, b = lateration_system(anchors_m, distance_m, ref_index, tag_height_m=tag_height_m)
     min_anchors = _min_anchors(min_anchors, a_mat.shape[1], a_mat.shape[0] + 1)
     if _has_missing(distance_m):
-        return _lateration_by_heard(anchors_m, distance_m, ref_index, min_anchors, lateration_ls,
-                                    f"lateration_ls(ref={ref_index})")
+        return _lateration_by_heard(anchors_m, distance_m, ref_index, min_anchors,
+                                    lambda a, d, ref: lateration_ls(a, d, ref, tag_height_m=tag_height_m),
+                                    f"lateration_ls(ref={ref_index})", tag_height_m)
     pos = b @ np.linalg.pinv(a_mat).T
     ok = np.all(np.isfinite(pos), axis=-1)     # not finite: the squared ranges overflowed
     return LocalizationResult(pos, ok, None, 0, f"lateration_ls(ref={ref_index})", _status(ok))
 
 
 def lateration_wls(anchors_m, distance_m, weights, ref_index: int = 0, *,
-                   min_anchors: int | None = None) -> LocalizationResult:
+                   min_anchors: int | None = None, tag_height_m: float | None = None) -> LocalizationResult:
     """Weighted linearized least squares ``p = (A^T W A)^{-1} A^T W b`` with diagonal weights
     ``(..., m-1)`` (one per differenced equation, i.e. per non-reference anchor in anchor order), batched.
 
@@ -284,8 +318,9 @@ def lateration_wls(anchors_m, distance_m, weights, ref_index: int = 0, *,
     ``distance_m`` (a scalar is not accepted); finite and non-negative. A zero weight removes its equation: a
     problem whose positively weighted anchors (with the reference) are too few or collinear gets NaN and
     ``status="degenerate_geometry"``. NaN distances are anchors not heard; a problem then keeps the weights of
-    its heard anchors (if the reference was not heard, the first heard anchor's weight is unused)."""
-    a_mat, b = lateration_system(anchors_m, distance_m, ref_index)
+    its heard anchors (if the reference was not heard, the first heard anchor's weight is unused).
+    ``tag_height_m``: anchors with heights (module docstring)."""
+    a_mat, b = lateration_system(anchors_m, distance_m, ref_index, tag_height_m=tag_height_m)
     min_anchors = _min_anchors(min_anchors, a_mat.shape[1], a_mat.shape[0] + 1)
     weights = as_array("weights", weights)
     batch = b.shape[:-1]
@@ -311,17 +346,19 @@ def lateration_wls(anchors_m, distance_m, weights, ref_index: int = 0, *,
         def solve_subset(heard, sel):
             sub_ref = _ref_in_subset(ref, heard)
             rows = np.delete(heard, sub_ref)
-            return lateration_wls(anchors_m[heard], flat[np.ix_(sel, heard)], per_anchor[np.ix_(sel, rows)], sub_ref)
+            return lateration_wls(anchors_m[heard], flat[np.ix_(sel, heard)], per_anchor[np.ix_(sel, rows)], sub_ref,
+                                  tag_height_m=tag_height_m)
 
-        return _by_heard_anchors(anchors_m, distance_m, min_anchors,
+        return _by_heard_anchors(_planar(anchors_m, tag_height_m)[0], distance_m, min_anchors,
                                  solve_subset, "lateration_wls")
     if not np.all(w > 0):     # zero weights: the equations left may not fix a position
-        degenerate = _zero_weights_degenerate(np.asarray(anchors_m, float), ref_index, w)
+        degenerate = _zero_weights_degenerate(np.asarray(_planar(anchors_m, tag_height_m)[0], float), ref_index, w)
         if degenerate.any():
             m = a_mat.shape[0] + 1
             flat_d, flat_w = np.asarray(distance_m, float).reshape(-1, m), w.reshape(-1, m - 1)
             return _solve_where(~degenerate, batch, a_mat.shape[1],
-                                lambda sel: lateration_wls(anchors_m, flat_d[sel], flat_w[sel], ref_index),
+                                lambda sel: lateration_wls(anchors_m, flat_d[sel], flat_w[sel], ref_index,
+                                                           tag_height_m=tag_height_m),
                                 "lateration_wls", "degenerate_geometry")
     ata = np.einsum("ki,...k,kj->...ij", a_mat, w, a_mat)
     atb = np.einsum("ki,...k,...k->...i", a_mat, w, b)
@@ -377,15 +414,16 @@ def _solve_box_batch(a_mat, b, lower, upper):
 
 
 def lateration_box_ls(anchors_m, distance_m, lower_m, upper_m, ref_index: int = 0, *,
-                      min_anchors: int | None = None) -> LocalizationResult:
+                      min_anchors: int | None = None, tag_height_m: float | None = None) -> LocalizationResult:
     """Linearized least squares constrained to the box ``lower_m <= p <= upper_m``.
 
     All problems are stacked into one cvxpy QP, built once per (batch size, anchors, box) with the
     right-hand sides as a Parameter and re-solved by setting its value. An optional extension to
     document 003 (which does not constrain its estimates). A problem the solver fails on gets a NaN
-    position and ``status="solver_failed"``; the others are kept. NaN distances are anchors not heard.
+    position and ``status="solver_failed"``; the others are kept. NaN distances are anchors not heard;
+    ``tag_height_m``: anchors with heights, the box on ``(x, y)`` (module docstring).
     """
-    a_mat, b = lateration_system(anchors_m, distance_m, ref_index)
+    a_mat, b = lateration_system(anchors_m, distance_m, ref_index, tag_height_m=tag_height_m)
     dim = a_mat.shape[1]
     min_anchors = _min_anchors(min_anchors, dim, a_mat.shape[0] + 1)
     bounds = []
@@ -399,36 +437,44 @@ def lateration_box_ls(anchors_m, distance_m, lower_m, upper_m, ref_index: int = 
         raise ValueError(f"empty box: lower {lower} > upper {upper}")
     if _has_missing(distance_m):
         return _lateration_by_heard(anchors_m, distance_m, ref_index, min_anchors,
-                                    lambda a, d, ref: lateration_box_ls(a, d, lower, upper, ref), "lateration_box_ls")
+                                    lambda a, d, ref: lateration_box_ls(a, d, lower, upper, ref,
+                                                                        tag_height_m=tag_height_m),
+                                    "lateration_box_ls", tag_height_m)
     batch = b.shape[:-1]
     flat_b = b.reshape(-1, b.shape[-1])
     finite = np.all(np.isfinite(flat_b), axis=-1)
     if not finite.all():     # squared ranges that overflow: those problems fail alone, the solver never sees them
         flat_d = np.asarray(distance_m, float).reshape(-1, a_mat.shape[0] + 1)
         return _solve_where(finite, batch, dim,
-                            lambda sel: lateration_box_ls(anchors_m, flat_d[sel], lower, upper, ref_index),
+                            lambda sel: lateration_box_ls(anchors_m, flat_d[sel], lower, upper, ref_index,
+                                                          tag_height_m=tag_height_m),
                             "lateration_box_ls", "solver_failed")
     pos, ok = _solve_box_batch(a_mat, flat_b, lower, upper)
     return LocalizationResult(pos.reshape(batch + (dim,)), ok.reshape(batch), None, 0, "lateration_box_ls",
                               _status(ok).reshape(batch))
 
 
-def _default_start(anchors_m, power_dbm, model: PathLossModel) -> np.ndarray:
+def _default_start(anchors_m, power_dbm, model: PathLossModel, tag_height_m=None) -> np.ndarray:
     """The convex start of :func:`rss_ml_position`: the linearized LS fix on the model's ranges. A problem
     whose ranges overflow (infinite) has no such fix: NaN."""
     with np.errstate(over="ignore"):
         ranges = model.range_m(power_dbm)
     if np.all(np.isfinite(ranges)):
-        return lateration_ls(anchors_m, ranges).position_m
+        return lateration_ls(anchors_m, ranges, tag_height_m=tag_height_m).position_m
     with np.errstate(over="ignore", invalid="ignore"):
-        return lateration_ls(anchors_m, np.where(np.isinf(ranges).any(axis=-1, keepdims=True), np.nan, ranges)).position_m
+        return lateration_ls(anchors_m, np.where(np.isinf(ranges).any(axis=-1, keepdims=True), np.nan, ranges),
+                             tag_height_m=tag_height_m).position_m
 
 
-def _rss_residual_jacobian(pos, anchors, power, model: PathLossModel, min_distance_m):
-    diff = pos[..., None, :] - anchors  # (..., m, 2)
+def _rss_residual_jacobian(pos, anchors, power, model: PathLossModel, min_distance_m, vertical_m=None):
+    """Residuals, their Jacobian w.r.t. the position and the squared distances; with ``vertical_m`` (anchor
+    heights above the tag's plane) the distances are 3-D and the Jacobian keeps the plan columns."""
+    diff = pos[..., None, :] - anchors  # (..., m, dim)
+    if vertical_m is not None:
+        diff = np.concatenate([diff, _lift(pos, vertical_m)[..., None]], axis=-1)
     grad, d2 = log_distance_gradient(diff, np.asarray(model.path_loss_exp), min_distance_m=min_distance_m)
     resid = power - model.mean_power_dbm(np.sqrt(d2))  # (..., m)
-    return resid, -grad, d2                             # d resid / d p = - d mean / d p
+    return resid, -grad[..., :anchors.shape[-1]], d2    # d resid / d p = - d mean / d p
 
 
 def _min_eigenvalue(a):
@@ -469,7 +515,8 @@ def _newton_matrix(resid, jac, d2, pos, anchors, model):
 
 def rss_ml_position(anchors_m, power_dbm, model: PathLossModel, initial_m=None, *,
                     max_iter: int = 100, tol_m: float = 1e-7, min_distance_m: float = 1e-3,
-                    raise_on_failure: bool = False, min_anchors: int | None = None) -> LocalizationResult:
+                    raise_on_failure: bool = False, min_anchors: int | None = None,
+                    tag_height_m: float | None = None) -> LocalizationResult:
     """Maximum-likelihood position from received powers ``(..., m)`` under Gaussian shadowing.
 
     Minimises ``sum_j (P_j - P_0 + 10 n log10 |p - a_j|)^2``, which equals Dogan's MLE cost (2.4)
@@ -490,8 +537,11 @@ def rss_ml_position(anchors_m, power_dbm, model: PathLossModel, initial_m=None, 
     be passed on as it is). A problem without a finite start (its ranges overflow, e.g. for a tiny exponent)
     gets NaN and ``status="solver_failed"`` alone; ``raise_on_failure`` raises :class:`ConvergenceError` if any
     problem of the batch did not converge, whatever the reason.
+    ``tag_height_m``: anchors ``(m, 3)`` with heights and plan positions (module docstring).
     """
-    anchors_m = check_anchor_geometry(anchors_m)
+    plan, vertical = _planar(anchors_m, tag_height_m)
+    anchors_full = np.asarray(anchors_m, dtype=float)        # with heights: what recursive calls are given
+    anchors_m = check_anchor_geometry(plan)
     m, dim = anchors_m.shape
     power_dbm = _readings("power_dbm", power_dbm, m)
     _check_model(model, m)
@@ -516,29 +566,30 @@ def rss_ml_position(anchors_m, power_dbm, model: PathLossModel, initial_m=None, 
         res = _by_heard_anchors(
             anchors_m, power_dbm, min_anchors,
             lambda heard, sel: rss_ml_position(
-                anchors_m[heard], flat[np.ix_(sel, heard)], _model_subset(model, heard, m),
+                anchors_full[heard], flat[np.ix_(sel, heard)], _model_subset(model, heard, m),
                 None if start is None else start[sel], max_iter=max_iter, tol_m=tol_m,
-                min_distance_m=min_distance_m),
+                min_distance_m=min_distance_m, tag_height_m=tag_height_m),
             "rss_ml_lm")
         return _raise_if_failed(res, raise_on_failure)
     if initial_m is None:
-        initial_m = _default_start(anchors_m, power_dbm, model)
+        initial_m = _default_start(anchors_full, power_dbm, model, tag_height_m)
     elif np.isnan(initial_m).any():     # rows without a start get the default one
         initial_m = np.array(initial_m)
         no_start = np.isnan(initial_m).all(axis=-1)
-        initial_m[no_start] = _default_start(anchors_m, power_dbm[no_start], model)
+        initial_m[no_start] = _default_start(anchors_full, power_dbm[no_start], model, tag_height_m)
     batch, dim = power_dbm.shape[:-1], anchors_m.shape[1]
     pos = np.array(np.broadcast_to(initial_m, batch + (dim,)), dtype=float).reshape(-1, dim)
     startable = np.all(np.isfinite(pos), axis=-1)
     if not startable.all():           # no finite start: those problems fail alone
         flat = power_dbm.reshape(-1, m)
         res = _solve_where(startable, batch, dim,
-                           lambda sel: rss_ml_position(anchors_m, flat[sel], model, pos[sel], max_iter=max_iter,
-                                                       tol_m=tol_m, min_distance_m=min_distance_m),
+                           lambda sel: rss_ml_position(anchors_full, flat[sel], model, pos[sel], max_iter=max_iter,
+                                                       tol_m=tol_m, min_distance_m=min_distance_m,
+                                                       tag_height_m=tag_height_m),
                            "rss_ml_lm", "solver_failed")
         return _raise_if_failed(res, raise_on_failure)
     power = power_dbm.reshape(-1, power_dbm.shape[-1])
-    resid, jac, d2 = _rss_residual_jacobian(pos, anchors_m, power, model, min_distance_m)
+    resid, jac, d2 = _rss_residual_jacobian(pos, anchors_m, power, model, min_distance_m, vertical)
     cost = np.sum(resid**2, axis=-1)
     lam = np.full(cost.shape, 1e-3)
     converged = np.zeros(cost.shape, bool)
@@ -553,7 +604,8 @@ def rss_ml_position(anchors_m, power_dbm, model: PathLossModel, initial_m=None, 
         damp = l_a[:, None, None] * (eye * np.diagonal(hess, axis1=-2, axis2=-1)[:, None, :] + 1e-12 * eye)
         step = -_solve_small(hess + damp, jtr)
         trial = p_a + step
-        r_new, j_new, d2_new = _rss_residual_jacobian(trial, anchors_m, power[active], model, min_distance_m)
+        r_new, j_new, d2_new = _rss_residual_jacobian(trial, anchors_m, power[active], model, min_distance_m,
+                                                      vertical)
         c_new = np.sum(r_new**2, axis=-1)
         better = c_new <= c_a
         step_small = np.linalg.norm(step, axis=-1) <= tol_m * (1.0 + np.linalg.norm(p_a, axis=-1))
@@ -593,13 +645,17 @@ def _check_model(model, m: int) -> None:
 
 
 def grid_ml_position(anchors_m, power_dbm, model: PathLossModel, grid_m, *,
-                     chunk: int = 2048, min_anchors: int | None = None) -> LocalizationResult:
+                     chunk: int = 2048, min_anchors: int | None = None,
+                     tag_height_m: float | None = None) -> LocalizationResult:
     """Grid maximum likelihood: the candidate point of ``grid_m`` ``(G, dim)`` with the smallest
     RSS-domain squared residual, for every problem; evaluated in chunks to bound memory. ``cost`` is that
     residual; a grid point on an anchor is taken 1 micrometre from it.
     A NaN power is an anchor not heard (module docstring): the residual runs over the heard anchors; with fewer
-    than ``min_anchors`` heard the problem gets a NaN position, NaN cost and ``converged=False``."""
-    anchors_m = check_anchor_geometry(anchors_m)
+    than ``min_anchors`` heard the problem gets a NaN position, NaN cost and ``converged=False``.
+    ``tag_height_m``: anchors ``(m, 3)`` with heights, a plan grid ``(G, 2)`` (module docstring)."""
+    plan, vertical = _planar(anchors_m, tag_height_m)
+    anchors_full = np.asarray(anchors_m, dtype=float)
+    anchors_m = check_anchor_geometry(plan)
     m, dim = anchors_m.shape
     grid_m = as_array("grid_m", grid_m, ndim=2, trailing=(dim,))
     if grid_m.shape[0] < 1:
@@ -612,12 +668,16 @@ def grid_ml_position(anchors_m, power_dbm, model: PathLossModel, grid_m, *,
         flat_power = power.reshape(-1, m)
         return _by_heard_anchors(
             anchors_m, power, min_anchors,
-            lambda heard, sel: grid_ml_position(anchors_m[heard], flat_power[np.ix_(sel, heard)],
-                                                _model_subset(model, heard, m), grid_m, chunk=chunk),
+            lambda heard, sel: grid_ml_position(anchors_full[heard], flat_power[np.ix_(sel, heard)],
+                                                _model_subset(model, heard, m), grid_m, chunk=chunk,
+                                                tag_height_m=tag_height_m),
             "grid_ml")
     batch = power.shape[:-1]
     flat = power.reshape(-1, power.shape[-1])
-    mean_grid = log_distance_mean_dbm(pairwise_distance_m(grid_m, anchors_m), np.asarray(model.ref_power_dbm),
+    distance = pairwise_distance_m(grid_m, anchors_m)
+    if vertical is not None:
+        distance = np.sqrt(distance**2 + vertical**2)
+    mean_grid = log_distance_mean_dbm(distance, np.asarray(model.ref_power_dbm),
                                       np.asarray(model.path_loss_exp), ref_distance_m=model.ref_distance_m,
                                       min_distance_m=max(model.min_distance_m, 1e-6))  # (G, m); a node may sit on an anchor
     best = np.empty(flat.shape[0], dtype=int)

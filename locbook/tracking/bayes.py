@@ -30,7 +30,7 @@ from ..models.motion import reflect_into_box
 __all__ = [
     "RssMeasurementModel", "GridFilterResult", "grid_bayes_filter", "grid_transition_matrix",
     "ParticleFilterResult", "particle_filter", "systematic_resample", "effective_sample_size",
-    "RESAMPLING_CDFS", "WEIGHT_SMOOTHINGS",
+    "RESAMPLING_CDFS", "WEIGHT_SMOOTHINGS", "GRID_TRANSITIONS",
 ]
 
 RESAMPLING_CDFS = ("standard", "literal_004")
@@ -45,6 +45,8 @@ class RssMeasurementModel:
     ``(R, T, m)`` arrays (online calibration gives new values every step). ``sigma_db`` is a scalar or
     ``(R, T)`` (the pooled online sigma of Eq. (6.7)). ``walls_m`` are wall segments ``(W, 2, 2)``.
     Distances below ``min_distance_m`` are clipped so that log10(0) never occurs (note 004, section 4.3).
+    ``tag_height_m``: the readers are ``(m, 3)`` (x, y, height), the tag moves in the plane ``z = tag_height_m``
+    and distances are 3-D (positions, cells, particles and walls stay 2-D).
     """
 
     readers_m: np.ndarray
@@ -55,9 +57,13 @@ class RssMeasurementModel:
     walls_m: np.ndarray | None = None
     ref_distance_m: float = 1.0
     min_distance_m: float = 0.1
+    tag_height_m: float | None = None
 
     def __post_init__(self):
-        readers = as_array("readers_m", self.readers_m, ndim=2, trailing=(None, 2))
+        if self.tag_height_m is not None:
+            check_scalar("tag_height_m", self.tag_height_m)
+        readers = as_array("readers_m", self.readers_m, ndim=2,
+                           trailing=(None, 2 if self.tag_height_m is None else 3))
         m = readers.shape[0]
         for name in ("ref_power_dbm", "path_loss_exp"):      # NaN parameters are errors, never "not heard"
             value = as_array(name, getattr(self, name))
@@ -103,12 +109,17 @@ class RssMeasurementModel:
         if positions_m.ndim not in (2, 3):
             raise ValueError(f"positions_m must have shape (P, 2) or (R, P, 2), got {positions_m.shape}")
         self._check_step(step)
-        mean = log_distance_mean_dbm(pairwise_distance_m(positions_m, self.readers_m),
+        plan = np.asarray(self.readers_m, dtype=float)[:, :2]
+        distance = pairwise_distance_m(positions_m, plan)
+        if self.tag_height_m is not None:
+            vertical = np.asarray(self.readers_m, dtype=float)[:, 2] - self.tag_height_m
+            distance = np.sqrt(distance**2 + vertical**2)
+        mean = log_distance_mean_dbm(distance,
                                      self._per_step(self.ref_power_dbm, step, True),
                                      self._per_step(self.path_loss_exp, step, True),
                                      ref_distance_m=self.ref_distance_m, min_distance_m=self.min_distance_m)
         if self.walls_m is not None and self.wall_attenuation_db != 0.0:
-            mean = mean - self.wall_attenuation_db * wall_crossings(positions_m, self.readers_m, self.walls_m)
+            mean = mean - self.wall_attenuation_db * wall_crossings(positions_m, plan, self.walls_m)
         return mean if mean.ndim == 3 else mean[None]
 
     def log_likelihood(self, rss_dbm, positions_m, step: int = 0):
@@ -181,6 +192,62 @@ def grid_transition_matrix(cells_m, spread_m: float, velocity_m=(0.0, 0.0)):
     return t / t.sum(axis=0, keepdims=True)
 
 
+#: how :func:`grid_bayes_filter` applies the transition
+GRID_TRANSITIONS = ("auto", "dense", "separable")
+
+
+class _SeparableTransition:
+    """The transition of :func:`grid_transition_matrix` applied without the ``C x C`` matrix.
+
+    The cells are a subset of the lattice ``xs x ys`` of their distinct coordinates. The Gaussian kernel factors,
+    ``K(c_l - c_l' - v) = Kx(x_l - x_l' - v_x) Ky(y_l - y_l' - v_y)``, so with the normaliser
+    ``Z_l' = sum_l K(...)`` over the cells (the lattice's other points weigh 0)
+
+        (T b)(l) = sum_l' K(c_l - c_l' - v) b(l') / Z_l' = [Ky (B / Z) Kx^T](l),
+
+    with ``B`` the belief placed on the lattice: memory ``O(lattice + nx^2 + ny^2)`` instead of ``O(C^2)`` and the
+    same numbers up to rounding (no truncation of the kernel). Each column of ``Kx`` and ``Ky`` is scaled by its
+    largest entry before use (a factor that cancels between numerator and ``Z``), as the dense matrix subtracts
+    its column maxima, so that a narrow kernel does not underflow."""
+
+    def __init__(self, cells_m: np.ndarray, spread_m: float):
+        self.xs, self.ix = np.unique(cells_m[:, 0], return_inverse=True)
+        self.ys, self.iy = np.unique(cells_m[:, 1], return_inverse=True)
+        self.spread_m = spread_m
+        self.n_cells = cells_m.shape[0]
+        self.mask = np.zeros((self.ys.size, self.xs.size))
+        self.mask[self.iy, self.ix] = 1.0
+        self._v, self._kx, self._ky, self._z = None, None, None, None
+
+    @staticmethod
+    def lattice_size(cells_m: np.ndarray) -> int:
+        return int(np.unique(cells_m[:, 0]).size) * int(np.unique(cells_m[:, 1]).size)
+
+    def _kernel(self, coords, shift):
+        """``K[i, j] = exp(-(c_i - c_j - shift)^2 / (2 D^2))`` scaled so that each column's maximum is 1."""
+        log_k = -0.5 * np.square(coords[:, None] - coords[None, :] - shift) / self.spread_m**2
+        return np.exp(log_k - log_k.max(axis=0, keepdims=True))
+
+    def _prepare(self, velocity_m) -> bool:
+        v = np.asarray(velocity_m, dtype=float)
+        if self._v is None or not np.array_equal(v, self._v):
+            self._kx, self._ky = self._kernel(self.xs, v[0]), self._kernel(self.ys, v[1])
+            self._z = (self._ky.T @ self.mask @ self._kx)[self.iy, self.ix]      # Z_l' at each cell
+            self._v = v
+        return bool(np.all(self._z > 0))
+
+    def predict(self, belief: np.ndarray, velocity_m) -> np.ndarray | None:
+        """``belief (R, C)`` -> predicted belief, or None where the kernel underflowed on every cell of some column
+        (the caller then uses the dense matrix, which handles it)."""
+        if np.isinf(self.spread_m):
+            return np.broadcast_to(belief.sum(axis=-1, keepdims=True) / self.n_cells, belief.shape).copy()
+        if not self._prepare(velocity_m):
+            return None
+        lattice = np.zeros((belief.shape[0],) + self.mask.shape)
+        lattice[:, self.iy, self.ix] = belief / self._z
+        return np.matmul(np.matmul(self._ky, lattice), self._kx.T)[:, self.iy, self.ix]
+
+
 @dataclass(frozen=True)
 class GridFilterResult:
     """``mmse_m``, ``map_m``: ``(R, T, 2)``; ``belief``: final posterior ``(R, C)``."""
@@ -191,15 +258,22 @@ class GridFilterResult:
 
 
 def grid_bayes_filter(rss_dbm, cells_m, model: RssMeasurementModel, spread_m: float = 0.5, *,
-                      velocity_m=None, initial_belief=None) -> GridFilterResult:
+                      velocity_m=None, initial_belief=None, transition: str = "auto") -> GridFilterResult:
     """Grid-based Bayes filter (Ozkaya 2011, Eqs. (4.10)-(4.15)) over runs ``R`` and steps ``T``.
 
     ``Bel_t(l) ~ p(s_t | c_l) sum_l' T[l, l'] Bel_t-1(l')`` with :func:`grid_transition_matrix`.
     ``velocity_m``: a known displacement per step, ``(2,)`` or ``(T, 2)`` (the mean of the process model
     in the thesis's constant-velocity experiment). ``initial_belief``: ``(C,)`` or ``(R, C)``; uniform if None.
+
+    ``transition``: ``"dense"`` builds the ``C x C`` matrix (memory quadratic in the cells: 2 GB at 16,000
+    cells); ``"separable"`` applies the same transition as two small matrix products on the lattice of the cells'
+    distinct x and y coordinates (memory linear in the cells for a grid, possibly masked by a floor outline;
+    equal to the dense one up to rounding); ``"auto"`` (default) takes the separable form when that lattice
+    has at most 4 points per cell, which every regular grid has.
     """
     rss_dbm, cells_m = _check_inputs(rss_dbm, model, cells_m=cells_m)
     check_scalar("spread_m", spread_m, gt=0, allow_inf=True)
+    check_choice("transition", transition, GRID_TRANSITIONS)
     n_runs, n_steps, _ = rss_dbm.shape
     n_cells = cells_m.shape[0]
     velocity = _velocity_schedule(velocity_m, n_steps)
@@ -214,12 +288,19 @@ def grid_bayes_filter(rss_dbm, cells_m, model: RssMeasurementModel, spread_m: fl
               else np.broadcast_to(np.asarray(initial_belief, float), (n_runs, n_cells)).copy())
     mmse = np.empty((n_runs, n_steps, 2))
     best = np.empty((n_runs, n_steps, 2))
-    transition, last_v = None, None
+    separable = None
+    if transition == "separable" or (
+            transition == "auto" and _SeparableTransition.lattice_size(cells_m) <= 4 * n_cells):
+        separable = _SeparableTransition(cells_m, spread_m)
+    dense, last_v = None, None
     for t in range(n_steps):
         if t > 0:
-            if transition is None or not np.array_equal(velocity[t], last_v):
-                transition, last_v = grid_transition_matrix(cells_m, spread_m, velocity[t]), velocity[t]
-            belief = belief @ transition.T
+            predicted = None if separable is None else separable.predict(belief, velocity[t])
+            if predicted is None:
+                if dense is None or not np.array_equal(velocity[t], last_v):
+                    dense, last_v = grid_transition_matrix(cells_m, spread_m, velocity[t]), velocity[t]
+                predicted = belief @ dense.T
+            belief = predicted
         log_post = np.log(np.maximum(belief, 1e-300)) + model.log_likelihood(rss_dbm[:, t], cells_m, t)
         belief = _normalise_log(log_post)
         mmse[:, t] = belief @ cells_m

@@ -264,6 +264,9 @@ class RssMeasurement:
     the anchors' positions are known only to this standard deviation (e.g. GPS, Palvai's sigma_3); the
     measurement variance is then inflated to ``sigma^2 + (10 n / ln 10)^2 anchor_sigma^2 / d^2`` at the
     linearisation point (first-order propagation of the position error; note 002 A8).
+
+    ``tag_height_m``: the anchors are ``(m, 3)`` (x, y, height), the tag moves in the plane ``z = tag_height_m``
+    and ``position_index`` names the state's x and y only; the distances are 3-D.
     """
 
     power_dbm: np.ndarray
@@ -274,6 +277,13 @@ class RssMeasurement:
     order: str = "descending"
     min_distance_m: float = 1e-3
     anchor_sigma_m: float = 0.0
+    tag_height_m: float | None = None
+
+    def lift(self, positions_m):
+        """Positions ``(..., k)`` from the state, with the known tag height appended when there is one."""
+        if self.tag_height_m is None:
+            return positions_m
+        return np.concatenate([positions_m, np.full(positions_m.shape[:-1] + (1,), float(self.tag_height_m))], -1)
 
     def anchors_at(self, step: int) -> np.ndarray:
         """Anchor positions at ``step``: ``(m, dim)`` or ``batch + (m, dim)``."""
@@ -301,9 +311,15 @@ class RssMeasurement:
             raise ValueError(f"RssMeasurement.anchors_m per step must have shape batch + (T, m, dim) with T = "
                              f"{power.shape[-2]} steps (or 1), got {anchors.shape}")
         idx = np.asarray(self.position_index)
-        if idx.shape != (dim,):
-            raise ValueError(f"RssMeasurement.position_index must hold {dim} state indices (one per "
-                             f"axis of the anchors), got {self.position_index!r}")
+        if self.tag_height_m is not None:
+            check_scalar("tag_height_m", self.tag_height_m)
+            if dim != 3:
+                raise ValueError(f"RssMeasurement with tag_height_m needs anchors (m, 3) (x, y, height), got {anchors.shape}")
+        n_free = dim - (self.tag_height_m is not None)
+        if idx.shape != (n_free,):
+            raise ValueError(f"RssMeasurement.position_index must hold {n_free} state indices (one per "
+                             f"axis of the anchors{', the height known' if n_free < dim else ''}), got "
+                             f"{self.position_index!r}")
         check_scalar("anchor_sigma_m", self.anchor_sigma_m, ge=0)
         for name in ("ref_power_dbm", "path_loss_exp", "sigma_db"):
             value = as_array(f"RssMeasurement.channel.{name}", getattr(self.channel, name))
@@ -429,10 +445,10 @@ def _rss_parallel_update(x, P, z, meas: RssMeasurement, step: int = 0):
     uncertain anchor positions, :class:`RssMeasurement`)."""
     idx = np.asarray(meas.position_index)
     ch = meas.channel
-    grad, d = _rss_jacobian(x[..., idx], meas.anchors_at(step), ch.path_loss_exp, meas.min_distance_m)
+    grad, d = _rss_jacobian(meas.lift(x[..., idx]), meas.anchors_at(step), ch.path_loss_exp, meas.min_distance_m)
     m = z.shape[-1]
     H = np.zeros(grad.shape[:-1] + (x.shape[-1],))
-    H[..., idx] = grad
+    H[..., idx] = grad[..., :idx.size]
     h = ch.mean_power_dbm(d)
     sigma2 = np.broadcast_to(meas.variance_db2(d, ch.path_loss_exp, ch.sigma_db), z.shape)
     R = sigma2[..., :, None] * np.eye(m)
@@ -474,10 +490,10 @@ def _rss_serial_update(x, P, z, meas: RssMeasurement, step: int = 0):
         if not valid.any():
             continue
         pick = lambda arr: np.take_along_axis(arr, a[..., None], -1)[..., 0]
-        diff = x[..., idx] - _pick_anchor(anchors, a)
+        diff = meas.lift(x[..., idx]) - _pick_anchor(anchors, a)
         grad, d2 = log_distance_gradient(diff, pick(ple), min_distance_m=meas.min_distance_m)
         h_row = np.zeros(x.shape)
-        h_row[..., idx] = grad
+        h_row[..., idx] = grad[..., :idx.size]
         hx = log_distance_mean_dbm(np.sqrt(d2), pick(p0), pick(ple), ref_distance_m=ch.ref_distance_m)
         var = meas.variance_db2(np.sqrt(d2), pick(ple), np.sqrt(pick(sigma2)))
         nu = np.where(valid, zj - hx, 0.0)

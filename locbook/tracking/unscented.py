@@ -179,7 +179,7 @@ def _rss_function(meas: RssMeasurement, step: int, anchor=None):
     p0, ple = _anchor_axis(ch.ref_power_dbm), _anchor_axis(ch.path_loss_exp)
 
     def h(X):
-        pos = X[..., idx]
+        pos = meas.lift(X[..., idx])
         if anchor is None:
             a = anchors if anchors.ndim == 2 else anchors[..., None, :, :]        # batch + (1, m, dim)
             diff = pos[..., None, :] - a                                        # batch + (N, m, dim)
@@ -199,7 +199,7 @@ def _rss_noise(meas: RssMeasurement, x, z, step: int):
     """Per-reading variance ``batch + (m,)`` at the predicted mean (inflated for uncertain anchor positions)."""
     idx = np.asarray(meas.position_index)
     anchors = meas.anchors_at(step)
-    diff = x[..., None, idx] - anchors
+    diff = meas.lift(x[..., None, idx]) - anchors
     d = np.sqrt(np.einsum("...i,...i->...", diff, diff))
     ch = meas.channel
     return np.broadcast_to(meas.variance_db2(d, ch.path_loss_exp, ch.sigma_db), z.shape)

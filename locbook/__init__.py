@@ -13,7 +13,8 @@ The public API, by role:
 - Bayes filters: grid-based Bayes and (improved) SIR particle filters, systematic resampling
 - reference tags: online bounded calibration, pooled sigma, RSSI smoothing
 - bounds: static RSS CRLB (correct and Ozkaya's printed form); posterior CRLB for filtering (Tichavsky)
-- metrics and Monte-Carlo helpers
+- metrics (with the ISO/IEC 18305 accuracy table) and Monte-Carlo helpers
+- measured data: the long format and its validation, the Kolakowski (2021) BLE data set; floor outlines
 - report: :class:`Report`, what a notebook records; :func:`printed` (the numbers each source printed,
   from package data) and :class:`Ambiguity` (a named protocol ambiguity that widens a window)
 """
@@ -57,6 +58,13 @@ from .models.motion import (HEADING_MODELS, NOISE_MODELS, STATE_LAYOUTS, Heading
 from .static.reference_tags import (OZKAYA_PATH_LOSS_EXP_BOUNDS, OZKAYA_REF_POWER_BOUNDS_DBM, OnlineCalibration,
                              calibrate_from_reference_tags, pooled_sigma_db, smooth_rssi)
 from .data.printed_values import Printed, PrintedValues, printed
+from .data.measured import (KOLAKOWSKI2021_ATTRIBUTION, DataFormatError, Epochs, MeasuredData, epochs,
+                            kolakowski2021, read_anchors, read_outline, read_path_segments, read_readings,
+                            regular_epochs, validate_readings)
+from .geometry import distance_to_segments, grid_in_outline, inside_outline, outline_box
+from .metrics import ACCURACY_STATISTICS, accuracy_metrics
+from .tracking.bayes import GRID_TRANSITIONS
+from .static.fingerprint import KNN_BLOCK_BYTES
 from .suite.report import Report
 from .suite.scoring import Ambiguity
 
@@ -100,6 +108,11 @@ __all__ = [
     # metrics and Monte Carlo
     "position_error_m", "mean_error_m", "rmse_m", "median_error_m", "percentile_error_m", "error_std_m",
     "empirical_cdf", "reduction_pct", "error_summary", "rmse_standard_error_m", "spawn_generators", "streams", "mc_standard_error", "bootstrap_standard_error", "seed_from_values", "canonical_encoding",
+    "accuracy_metrics", "ACCURACY_STATISTICS",
+    # measured data and floor geometry
+    "MeasuredData", "Epochs", "DataFormatError", "read_readings", "read_anchors", "read_outline", "read_path_segments",
+    "validate_readings", "epochs", "regular_epochs", "kolakowski2021", "KOLAKOWSKI2021_ATTRIBUTION",
+    "inside_outline", "grid_in_outline", "outline_box", "distance_to_segments", "GRID_TRANSITIONS", "KNN_BLOCK_BYTES",
     # errors and reports
     "LocbookError", "DegenerateGeometryError", "ConvergenceError", "ParameterError", "SingularCovarianceError",
     "Report", "Ambiguity", "Printed", "PrintedValues", "printed",

@@ -12,6 +12,8 @@ Infinite errors are never valid (an overflowed estimate is a failure to mark NaN
 """
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 
 from ._validate import as_array, check_scalar
@@ -19,7 +21,7 @@ from ._validate import as_array, check_scalar
 __all__ = [
     "position_error_m", "mean_error_m", "rmse_m", "median_error_m", "percentile_error_m",
     "error_std_m", "empirical_cdf", "reduction_pct", "error_summary", "error_summary_per_run",
-    "rmse_standard_error_m",
+    "rmse_standard_error_m", "accuracy_metrics", "ACCURACY_STATISTICS",
 ]
 
 
@@ -138,3 +140,55 @@ def error_summary_per_run(error_m) -> dict[str, np.ndarray]:
     e = e.reshape(e.shape[0], -1)
     return {"rmse_m": rmse_m(e, axis=-1), "mean_m": mean_error_m(e, axis=-1), "median_m": median_error_m(e, axis=-1),
             "p90_m": percentile_error_m(e, 90, axis=-1), "std_m": error_std_m(e, axis=-1)}
+
+
+#: the statistics of :func:`accuracy_metrics`, in the conventions of ISO/IEC 18305 and the EvAAL/IPIN competitions
+ACCURACY_STATISTICS = ("mean_m", "median_m", "rmse_m", "p75_m", "p90_m", "ce95_m", "max_m")
+
+
+def _accuracy_stats(e, axis=-1):
+    """The statistics of :data:`ACCURACY_STATISTICS` over ``axis``, NaN entries (no estimate) left out."""
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)       # an all-NaN resample gives NaN, said by coverage
+        return {
+            "mean_m": np.nanmean(e, axis=axis), "median_m": np.nanmedian(e, axis=axis),
+            "rmse_m": np.sqrt(np.nanmean(np.square(e), axis=axis)),
+            "p75_m": np.nanpercentile(e, 75, axis=axis), "p90_m": np.nanpercentile(e, 90, axis=axis),
+            "ce95_m": np.nanpercentile(e, 95, axis=axis), "max_m": np.nanmax(e, axis=axis),
+        }
+
+
+def accuracy_metrics(error_m, rng: np.random.Generator, *, n_bootstrap: int = 1000, level: float = 0.95,
+                     block_length: int = 1) -> dict:
+    """Point-accuracy statistics of one method on one data set, with bootstrap intervals.
+
+    ``error_m``: horizontal errors ``(n,)`` of every epoch scored, NaN where the method gave no estimate (too few
+    anchors heard, a failed solve). The statistics (:data:`ACCURACY_STATISTICS`: mean, median, RMSE, 75th and 90th
+    percentile, CE95 = the 95th percentile of the horizontal error, and the maximum; ISO/IEC 18305 and EvAAL/IPIN)
+    are taken over the epochs with an estimate, and ``coverage`` says what fraction that is (a method is never
+    scored silently on fewer epochs than it claims). Intervals: percentile bootstrap at ``level`` over
+    ``n_bootstrap`` resamples of the epochs; ``block_length > 1`` resamples blocks of consecutive epochs (the
+    moving-block bootstrap), needed for a track whose errors are correlated in time. Returns
+    ``{stat: value, stat + "_low": ..., stat + "_high": ..., "coverage": ..., "n": ...}``."""
+    e = as_array("error_m", error_m, ndim=1, nan_ok=True)
+    if e.size < 2:
+        raise ValueError(f"error_m needs at least 2 epochs, got {e.size}")
+    if np.any(e[np.isfinite(e)] < 0):
+        raise ValueError("error_m must be non-negative distances (NaN = no estimate)")
+    if not isinstance(rng, np.random.Generator):
+        raise ValueError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
+    check_scalar("n_bootstrap", n_bootstrap, ge=2, integer=True)
+    check_scalar("level", level, gt=0, lt=1)
+    check_scalar("block_length", block_length, ge=1, integer=True)
+    n, length = e.size, min(int(block_length), e.size)
+    n_blocks = -(-n // length)
+    starts = rng.integers(0, n - length + 1, size=(int(n_bootstrap), n_blocks))
+    idx = (starts[..., None] + np.arange(length)).reshape(int(n_bootstrap), -1)[:, :n]
+    point, boot = _accuracy_stats(e), _accuracy_stats(e[idx], axis=-1)
+    tail = 50.0 * (1.0 - level)
+    out = {"n": int(n), "coverage": float(np.mean(np.isfinite(e)))}
+    for name in ACCURACY_STATISTICS:
+        out[name] = float(point[name])
+        low, high = np.nanpercentile(boot[name], [tail, 100.0 - tail]) if np.isfinite(boot[name]).any() else (np.nan,) * 2
+        out[name + "_low"], out[name + "_high"] = float(low), float(high)
+    return out

@@ -2,8 +2,9 @@
 
 Schema::
 
-    [documents.<key>]            # key: dogan2015, gudipati2017, palvai2008, george, ozkaya2011
-    title, authors, year, source  # source: the file in ../shared/seeds, note: the reading note
+    [documents.<key>]            # key: dogan2015, gudipati2017, palvai2008, george, ozkaya2011, kolakowski2021
+    title, authors, year, source  # source: the file in ../shared/seeds (or the data set's folder), note: the
+                                  # reading note (or the data set's README)
 
     [[experiment]]
     id = "<key>-<name>"           # prefixed by its document key
@@ -32,7 +33,7 @@ from .params import NotebookParameter, ParameterRule, is_numeric_annotation, rea
 __all__ = ["Suite", "Experiment", "Document", "PROFILES", "DOCUMENT_KEYS", "load_suite", "find_suite_file"]
 
 PROFILES = ("quick", "full")
-DOCUMENT_KEYS = ("dogan2015", "gudipati2017", "palvai2008", "george", "ozkaya2011")
+DOCUMENT_KEYS = ("dogan2015", "gudipati2017", "palvai2008", "george", "ozkaya2011", "kolakowski2021")
 SUITE_FILE = Path("notebooks") / "experiments.toml"
 #: experiment ids and report folder names: lower-case letters, digits and single hyphens
 SAFE_NAME = re.compile(r"^[a-z0-9]+(-[a-z0-9]+)*$")

@@ -48,8 +48,7 @@ def main():
     ranges = model.range_m(rss)
     cells, fingerprints, _ = ko.radio_map(data, model)
     reg, ticks = lb.regular_epochs(data.epochs("robot"), ko.EPOCH_S, tolerance_s=0.1 * ko.EPOCH_S)
-    bayes_model = lb.RssMeasurementModel(anchors, model.ref_power_dbm, model.path_loss_exp,
-                                         float(np.sqrt(np.mean(np.square(model.sigma_db)))), tag_height_m=h)
+    bayes_model = ko.bayes_measurement_model(data, model)
     fix_cov = ko.fix_covariance_from_calibration(data, model)
     motion = lb.constant_velocity(ko.EPOCH_S, 0.05)
     x0, P0 = np.r_[truth[0], 0.0, 0.0], np.diag([4.0, 4.0, 1.0, 1.0])

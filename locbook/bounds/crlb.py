@@ -37,7 +37,7 @@ def rss_fisher_information(position_m, anchors_m, path_loss_exp, sigma_db, form:
 
 
 def rss_position_information(position_m, anchors_m, path_loss_exp, sigma_db, form: str = "correct", *,
-                             min_distance_m: float = 0.0, height_offset_m: float = 0.0):
+                             min_distance_m: float = 0.0, height_offset_m: float = 0.0, heard=None):
     """``beta^2 sum_j (p - a_j)(p - a_j)^T / d_j^4``, ``beta = 10 n / (sigma ln 10)``, for any anchors ``(m, 2)``.
 
     ``E[1/d^2]`` diverges for position densities positive at an anchor (note 000 s.2.10), so two regularisations
@@ -45,6 +45,8 @@ def rss_position_information(position_m, anchors_m, path_loss_exp, sigma_db, for
     ``d^2 = |p - a|^2 + h^2``, the exact information of that model, e.g. anchors near the ceiling and a tag at a
     known height) and ``min_distance_m`` (the gradient's ``1/d`` factor capped at ``1/d_min``, the model's
     validity limit). ``form="ozkaya_printed"`` uses ``d^2`` in the denominator (flagged, see module docstring).
+    ``heard``: booleans broadcastable to ``(..., m)``, False where an anchor gave no reading (NaN = not heard, the
+    library's rule): a reading that is not there carries no information, so its term is left out.
     """
     check_choice("form", form, CRLB_FORMS)
     anchors_m = as_array("anchors_m", anchors_m, ndim=2)
@@ -68,6 +70,14 @@ def rss_position_information(position_m, anchors_m, path_loss_exp, sigma_db, for
                                       f"{where[-1]}; give height_offset_m (antenna height difference)")
     gain = (10.0 * np.asarray(path_loss_exp, float) / (np.asarray(sigma_db, float) * np.log(10.0))) ** 2
     gain = np.broadcast_to(gain, d2.shape)
+    if heard is not None:
+        heard = np.asarray(heard)
+        if heard.dtype != bool:
+            raise ValueError(f"heard must be booleans (False = not heard), got dtype {heard.dtype}")
+        try:
+            gain = gain * np.broadcast_to(heard, d2.shape)
+        except ValueError:
+            raise ValueError(f"heard must broadcast to (..., {m}) = {d2.shape}, got shape {heard.shape}") from None
     capped = np.maximum(d2, min_distance_m**2)     # the gradient's 1/d capped at 1/d_min; its direction kept
     denom = d2 * capped if form == "correct" else capped   # d^4 (correct) or d^2 (as printed in Ozkaya A.10-A.12)
     return np.einsum("...j,...ji,...jk->...ik", gain / denom, diff, diff)

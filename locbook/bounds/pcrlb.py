@@ -95,18 +95,19 @@ def linear_measurement_information(H, R):
 
 
 def rss_state_information(states, anchors_m, path_loss_exp, sigma_db, position_index, *,
-                          min_distance_m: float = 0.0, height_offset_m: float = 0.0):
+                          min_distance_m: float = 0.0, height_offset_m: float = 0.0, heard=None):
     """Fisher information of RSS from every anchor about the full state, ``(..., n, n)`` for states ``(..., n)``.
 
     ``Lambda(x) = H(x)^T R^{-1} H(x)`` (Dogan Eq. (4.19)), ``R = sigma^2 I``: the static RSS information
-    (:func:`locbook.bounds.crlb.rss_position_information`, with its near-anchor regularisations) in the position block.
+    (:func:`locbook.bounds.crlb.rss_position_information`, with its near-anchor regularisations and its ``heard``
+    mask for readings that are not there) in the position block.
     """
     states = as_array("states", states, min_ndim=1)
     idx = np.asarray(position_index)
     if idx.ndim != 1 or idx.size == 0 or idx.max() >= states.shape[-1]:
         raise ValueError(f"position_index must index the {states.shape[-1]} state entries, got {position_index!r}")
     block = rss_position_information(states[..., idx], anchors_m, path_loss_exp, sigma_db,
-                                     min_distance_m=min_distance_m, height_offset_m=height_offset_m)
+                                     min_distance_m=min_distance_m, height_offset_m=height_offset_m, heard=heard)
     out = np.zeros(states.shape + (states.shape[-1],))
     out[..., idx[:, None], idx[None, :]] = block
     return out

@@ -37,7 +37,8 @@ from ..tracking.unscented import unscented_kalman_filter
 
 __all__ = ["TAG_HEIGHT_M", "EPOCH_S", "PATH_LOSS_EXP_BOUNDS", "REF_POWER_BOUNDS_DBM", "HUBER_DELTA_DB",
            "STATIC_METHODS", "TRACKERS", "load", "calibration_set", "calibrate", "channel", "ranging_errors",
-           "radio_map", "static_fixes", "crlb_m", "tracks", "Drive"]
+           "radio_map", "static_fixes", "crlb_m", "tracks", "Drive", "bayes_measurement_model",
+           "fix_covariance_from_calibration", "outside_fraction"]
 
 #: the tag's height above the floor (data set README: "about 1.3 m"); not in the files
 TAG_HEIGHT_M = KOLAKOWSKI2021_TAG_HEIGHT_M
@@ -191,14 +192,20 @@ def tracks(data: MeasuredData, model: PathLossModel, recording: str, rng: np.ran
     rss_stream = RssMeasurement(rss, anchors, model, np.array([0, 1]), tag_height_m=TAG_HEIGHT_M)
     out["ekf"] = extended_kalman_filter(motion.F, motion.Q, x0, P0, [rss_stream]).x[:, :2]
     out["ukf"] = unscented_kalman_filter(motion.F, motion.Q, x0, P0, [rss_stream], alpha=ukf_alpha).x[:, :2]
-    bayes_model = RssMeasurementModel(anchors, np.asarray(model.ref_power_dbm), np.asarray(model.path_loss_exp),
-                                      float(np.sqrt(np.mean(np.square(model.sigma_db)))), tag_height_m=TAG_HEIGHT_M)
+    bayes_model = bayes_measurement_model(data, model)
     runs = np.broadcast_to(rss, (particle_runs,) + rss.shape)
     out["particle"] = particle_filter(runs, bayes_model, rng, n_particles=n_particles, region_m=(lower, upper),
                                       spread_m=spread_m, resample_threshold=0.5).mmse_m
     out["grid_bayes"] = grid_bayes_filter(rss[None], grid, bayes_model, spread_m).mmse_m[0]
     out["rss_ml"] = ml
     return reg, ticks, out
+
+
+def bayes_measurement_model(data: MeasuredData, model: PathLossModel) -> RssMeasurementModel:
+    """The fitted channel as the likelihood of the particle and grid Bayes filters (per-anchor sigma, 3-D distances)."""
+    return RssMeasurementModel(data.anchors_m, np.asarray(model.ref_power_dbm, float),
+                               np.asarray(model.path_loss_exp, float), np.asarray(model.sigma_db, float),
+                               tag_height_m=TAG_HEIGHT_M)
 
 
 def fix_covariance_from_calibration(data: MeasuredData, model: PathLossModel, *, grid_spacing_m: float = 0.1):

@@ -33,7 +33,8 @@ from .params import NotebookParameter, ParameterRule, is_numeric_annotation, rea
 __all__ = ["Suite", "Experiment", "Document", "PROFILES", "DOCUMENT_KEYS", "load_suite", "find_suite_file"]
 
 PROFILES = ("quick", "full")
-DOCUMENT_KEYS = ("dogan2015", "gudipati2017", "palvai2008", "george", "ozkaya2011", "kolakowski2021")
+#: the five source documents, the measured data set, and the cross-document benchmark (issue 16)
+DOCUMENT_KEYS = ("dogan2015", "gudipati2017", "palvai2008", "george", "ozkaya2011", "kolakowski2021", "benchmark")
 SUITE_FILE = Path("notebooks") / "experiments.toml"
 #: experiment ids and report folder names: lower-case letters, digits and single hyphens
 SAFE_NAME = re.compile(r"^[a-z0-9]+(-[a-z0-9]+)*$")

@@ -42,8 +42,8 @@ class RssMeasurementModel:
     """Log-distance RSS likelihood with walls, per-reader and optionally per-run-and-step parameters.
 
     ``ref_power_dbm`` (alpha) and ``path_loss_exp`` (n) are scalars, per-reader arrays ``(m,)``, or
-    ``(R, T, m)`` arrays (online calibration gives new values every step). ``sigma_db`` is a scalar or
-    ``(R, T)`` (the pooled online sigma of Eq. (6.7)). ``walls_m`` are wall segments ``(W, 2, 2)``.
+    ``(R, T, m)`` arrays (online calibration gives new values every step). ``sigma_db`` is a scalar, per-reader
+    ``(m,)`` (a per-anchor fit), or ``(R, T)`` (the pooled online sigma of Eq. (6.7)). ``walls_m`` are wall segments ``(W, 2, 2)``.
     Distances below ``min_distance_m`` are clipped so that log10(0) never occurs (note 004, section 4.3).
     ``tag_height_m``: the readers are ``(m, 3)`` (x, y, height), the tag moves in the plane ``z = tag_height_m``
     and distances are 3-D (positions, cells, particles and walls stay 2-D).
@@ -70,8 +70,9 @@ class RssMeasurementModel:
             if value.ndim not in (0, 1, 3) or (value.ndim and value.shape[-1] != m):
                 raise ValueError(f"{name} must be a scalar, ({m},) or (R, T, {m}), got shape {value.shape}")
         sigma = as_array("sigma_db", self.sigma_db)
-        if sigma.ndim not in (0, 2) or np.any(sigma < 0):
-            raise ValueError(f"sigma_db must be a non-negative scalar or (R, T) array, got {self.sigma_db!r}")
+        if sigma.ndim not in (0, 1, 2) or (sigma.ndim == 1 and sigma.shape != (m,)) or np.any(sigma < 0):
+            raise ValueError(f"sigma_db must be a non-negative scalar, ({m},) (one per reader) or (R, T) array, "
+                             f"got {self.sigma_db!r}")
         if np.any(np.asarray(self.path_loss_exp) <= 0):
             raise ValueError(f"path_loss_exp must be positive, got {self.path_loss_exp!r}")
         check_scalar("wall_attenuation_db", self.wall_attenuation_db)
@@ -141,6 +142,9 @@ class RssMeasurementModel:
         sigma = self._per_step(self.sigma_db, step, False)
         if np.any(np.asarray(sigma) <= 0):     # a model with sigma 0 can give mean RSS, not a likelihood
             raise ValueError(f"the likelihood needs sigma_db > 0, got {self.sigma_db!r} at step {step}")
+        if np.ndim(sigma) == 1:                # one sigma per reader
+            resid = resid / sigma
+            return -0.5 * np.einsum("rpm,rpm->rp", resid, resid)
         return -0.5 * np.einsum("rpm,rpm->rp", resid, resid) / np.square(sigma)
 
 
@@ -364,7 +368,7 @@ class ParticleFilterResult:
 
 
 def particle_filter(rss_dbm, model: RssMeasurementModel, rng: np.random.Generator, *, n_particles: int,
-                    region_m, spread_m: float = 0.5, velocity_m=None, initial_position_m=None,
+                    region_m, spread_m: float = 0.5, velocity_m=None, initial_position_m=None, initial_sd_m: float = 0.0,
                     resample_threshold: float | None = None, weight_smoothing: str = "none",
                     resampling_cdf: str = "standard") -> ParticleFilterResult:
     """SIR particle filter and the thesis's improved SIR (Ozkaya 2011, Tables 4.3-4.4, Sec. 7.1.4).
@@ -374,7 +378,9 @@ def particle_filter(rss_dbm, model: RssMeasurementModel, rng: np.random.Generato
     draws a fresh uniform proposal over the region (Tables 7.18-7.19), whose particles start from equal
     weights (the previous weights belonged to the particles that were replaced). Weights ``w_t ~ w_t-1 p(s_t | L_t)``
     (Eq. (4.34)). Particles start uniform in the region, or all at ``initial_position_m (R, 2)`` when the
-    initial location is known (Table 7.21).
+    initial location is known (Table 7.21); with ``initial_sd_m > 0`` they are drawn from
+    ``N(initial_position_m, initial_sd_m^2 I)`` reflected into the region (a Gaussian prior on the start, the one
+    the posterior CRLB assumes).
 
     Resampling (systematic, :func:`systematic_resample`): every step when ``resample_threshold`` is None
     (basic SIR, Table 4.4); otherwise only when ``N_eff < resample_threshold * N`` (the thesis's "N_t = 0.5",
@@ -389,6 +395,9 @@ def particle_filter(rss_dbm, model: RssMeasurementModel, rng: np.random.Generato
     check_choice("weight_smoothing", weight_smoothing, WEIGHT_SMOOTHINGS)
     check_scalar("n_particles", n_particles, ge=1, integer=True)
     check_scalar("spread_m", spread_m, gt=0, allow_inf=True)
+    check_scalar("initial_sd_m", initial_sd_m, ge=0)
+    if initial_sd_m > 0 and initial_position_m is None:
+        raise ValueError("initial_sd_m spreads the particles around initial_position_m; give initial_position_m too")
     if not isinstance(rng, np.random.Generator):
         raise ValueError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
     if resample_threshold is not None and not 0.0 < resample_threshold <= 1.0:
@@ -414,6 +423,8 @@ def particle_filter(rss_dbm, model: RssMeasurementModel, rng: np.random.Generato
             raise ValueError(f"initial_position_m must have shape (runs, 2) = ({n_runs}, 2), "
                              f"got {initial_position_m.shape}")
         particles = np.broadcast_to(np.asarray(initial_position_m, float)[:, None, :], shape).copy()
+        if initial_sd_m > 0:
+            particles = reflect_into_box(particles + initial_sd_m * rng.standard_normal(shape), lower, upper)
     log_w = np.full((n_runs, n_particles), -np.log(n_particles))
     mmse = np.empty((n_runs, n_steps, 2))
     best = np.empty((n_runs, n_steps, 2))

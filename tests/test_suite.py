@@ -64,6 +64,9 @@ def toy(tmp_path):
     tmp_path = tmp_path / "repo"
     nbdir = tmp_path / "notebooks"
     nbdir.mkdir(parents=True)
+    # a clone: notebooks/ beside a locbook package, so the suite knows its repository (git checks, default reports)
+    (tmp_path / "locbook").mkdir()
+    (tmp_path / "locbook" / "__init__.py").write_text("")
     params = PARAMS
     _notebook(nbdir / "one.ipynb", params)
     _notebook(nbdir / "two.ipynb", params)

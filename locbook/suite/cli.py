@@ -54,10 +54,23 @@ def _print_summary(run) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from .. import __version__
+
     parser = argparse.ArgumentParser(prog="locbook", description="Rerun published RSSI localization experiments.")
-    parser.add_argument("--suite", type=Path, help="experiment list (default: notebooks/experiments.toml)")
+    parser.add_argument("--version", action="version", version=f"locbook {__version__}")
+    parser.add_argument("--suite", type=Path, help="experiment list (default: notebooks/experiments.toml here or in "
+                                                   "a parent folder, else the one installed with locbook)")
     sub = parser.add_subparsers(dest="command", required=True)
-    sub.add_parser("list", help="list the experiments and their parameters")
+    lst = sub.add_parser("list", help="list the experiments (with KEY: every parameter of those experiments)")
+    lst.add_argument("key", nargs="?", help="an experiment id or document key")
+    lst.add_argument("--reports", type=Path, help="reports folder the run times are read from")
+    show = sub.add_parser("show", help="every parameter of an experiment (type, default, range, description) and "
+                                       "its last result")
+    show.add_argument("key", help="an experiment id or document key")
+    show.add_argument("--reports", type=Path, help="reports folder the last results are read from")
+    nbs = sub.add_parser("notebooks", help="copy the notebooks and the experiment list to DEST for Jupyter")
+    nbs.add_argument("dest", type=Path, help="destination folder (created)")
+    nbs.add_argument("--force", action="store_true", help="overwrite notebooks already in DEST")
     run = sub.add_parser("run", help="execute experiments and write reports/<profile>/")
     run.add_argument("ids", nargs="*", help="experiment ids or document keys (default: all)")
     run.add_argument("--profile", choices=("quick", "full"), default="quick", help=PROFILE_HELP)
@@ -75,12 +88,16 @@ def main(argv: list[str] | None = None) -> int:
 
     try:
         suite = load_suite(args.suite)
-        if args.command == "list":
-            for exp in suite.experiments:
-                params = exp.declared_parameters()
-                print(f"{exp.id:34s} {exp.section}")
-                print(f"{'':34s} {exp.title}")
-                print(f"{'':34s} parameters: {', '.join(f'{p.name}: {p.annotation}' for p in params.values())}")
+        if args.command in ("list", "show"):
+            from .catalog import list_text, show_text
+            reports = args.reports or suite.default_reports()
+            print(show_text(suite, args.key, reports) if args.key else list_text(suite, reports))
+            return 0
+        if args.command == "notebooks":
+            from .catalog import copy_notebooks
+            dest = copy_notebooks(suite, args.dest, force=args.force)
+            print(f"copied {len(suite.experiments)} notebooks and experiments.toml to {dest}; open them with "
+                  f"`jupyter lab {dest}`, or run them with `locbook run --suite {dest / 'experiments.toml'}`")
             return 0
         experiments = suite.select(args.ids)
         result = run_suite(suite, experiments, args.profile, jobs=args.jobs, force=args.force,

@@ -6,7 +6,7 @@ Layout of a reports folder (``reports/<profile>/``, or its own folder for a run 
     <id>/<id>.ipynb, <id>.html               the executed notebook and its HTML page
     <id>/summary.md, report.md, *.png, *.csv lightweight results (committed for the full profile)
     <id>/report.html                         the whole page in HTML
-    <id>/report.json                         stamp and parameters of the report (committed)
+    <id>/report.json                         stamp, parameters and run time of the report (committed)
     <id>/run.json                            cache record: key, data files read and their hashes, time
     .lock                                    held by the run writing this folder
     .staging/<run>/<id>/                     experiments in progress, one folder per run
@@ -145,8 +145,12 @@ def _sha256(path: Path) -> str:
     return h.hexdigest()
 
 
-def _git_state(root: Path) -> tuple[str, str]:
-    """``(short commit, uncommitted changes under locbook/ and notebooks/)``; ``("", "")`` outside git."""
+def _git_state(root: Path | None) -> tuple[str, str]:
+    """``(short commit, uncommitted changes under locbook/ and notebooks/)`` of a locbook clone; ``("", "")``
+    outside git or for an installed package (whose folder may sit inside someone else's repository)."""
+    if root is None:
+        return "", ""
+
     def git(*args):
         return subprocess.run(["git", "-C", str(root), *args], capture_output=True, text=True,
                               timeout=10).stdout.rstrip()     # porcelain lines start with a status column
@@ -361,7 +365,7 @@ def run_suite(suite: Suite, experiments: list[Experiment], profile: str, *, jobs
         raise SuiteError(f"the timeout must be a positive number of seconds, got {timeout_s}")
     if jobs < 1:
         raise SuiteError(f"jobs must be at least 1, got {jobs}")
-    root = Path(report_root or suite.root / "reports")
+    root = Path(report_root) if report_root else suite.default_reports()
     if out_dir is not None:
         report_dir = Path(out_dir)
         if not SAFE_NAME.match(report_dir.name):
@@ -372,8 +376,8 @@ def run_suite(suite: Suite, experiments: list[Experiment], profile: str, *, jobs
     else:
         report_dir = root / profile
     resolved = {exp.id: exp.parameters(profile, overrides) for exp in experiments}  # validation first
-    rev, dirty = _git_state(suite.root)
-    if dirty and _committed_reports(suite.root, report_dir):
+    rev, dirty = _git_state(suite.repository)
+    if dirty and _committed_reports(suite.repository, report_dir):
         changed = ", ".join(line[3:] for line in dirty.splitlines()[:5])
         raise SuiteError(f"{report_dir} holds committed reports, which are stamped with the commit that produced "
                          f"them; commit (or set aside) the changes under locbook/ and notebooks/ first ({changed})")
@@ -408,7 +412,7 @@ def run_suite(suite: Suite, experiments: list[Experiment], profile: str, *, jobs
 def _run_locked(suite, experiments, profile, resolved, report_dir, data_roots, jobs, force, timeout_s, retries,
                 kernel_name, custom_folder, stop, run, log):
     source, versions = _source_fingerprint(), _dependency_versions()
-    rev, dirty = _git_state(suite.root)
+    rev, dirty = _git_state(suite.repository)
     stamp = locbook_version() + (f" (source {rev}{' + uncommitted changes' if dirty else ''})" if rev else "")
     status_path = report_dir / "status.json"
     status = _read_json(status_path, {})
@@ -535,7 +539,8 @@ def _promote(exp, profile, params, staging: Path, report_dir: Path, stamp: str, 
     (staging / "report.html").write_text(site.page_html(exp, profile, params, staging, numbers, stamp),
                                          encoding="utf-8")
     (staging / "report.json").write_text(json.dumps(
-        {"experiment": exp.id, "profile": profile, "parameters": params, "locbook": stamp}, indent=1,
+        {"experiment": exp.id, "profile": profile, "parameters": params, "locbook": stamp,
+         "seconds": round(result["seconds"], 1)}, indent=1,
         sort_keys=True) + "\n")
     (staging / "run.json").write_text(json.dumps({
         "cache_key": key, "status": "ok", "seconds": round(result["seconds"], 2), "data": data}, indent=1))

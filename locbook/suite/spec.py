@@ -30,7 +30,8 @@ from pathlib import Path
 from ..errors import ParameterError
 from .params import NotebookParameter, ParameterRule, is_numeric_annotation, read_parameters, resolve_parameters
 
-__all__ = ["Suite", "Experiment", "Document", "PROFILES", "DOCUMENT_KEYS", "load_suite", "find_suite_file"]
+__all__ = ["Suite", "Experiment", "Document", "PROFILES", "DOCUMENT_KEYS", "load_suite", "find_suite_file",
+           "packaged_suite_file"]
 
 PROFILES = ("quick", "full")
 #: the five source documents, the measured data set, and the cross-document benchmark (issue 16)
@@ -88,8 +89,19 @@ class Suite:
 
     @property
     def root(self) -> Path:
-        """The repository root (the folder holding ``notebooks/``)."""
+        """The folder holding ``notebooks/`` (the repository root in a clone)."""
         return self.path.parent.parent
+
+    @property
+    def repository(self) -> Path | None:
+        """The locbook source tree the suite belongs to (a clone: ``notebooks/`` beside ``locbook/``), or None for
+        the suite shipped inside an installed package or a copy made by ``locbook notebooks``."""
+        root = self.root
+        return root if (self.path.parent.name == "notebooks" and (root / "locbook" / "__init__.py").is_file()) else None
+
+    def default_reports(self) -> Path:
+        """Where reports go without ``--reports``: ``<repository>/reports`` in a clone, else ``./reports``."""
+        return (self.repository or Path.cwd()) / "reports"
 
     def select(self, ids: list[str]) -> list[Experiment]:
         """Experiments by exact id or by document key / id prefix (``george`` selects all of 003)."""
@@ -106,16 +118,25 @@ class Suite:
         return chosen
 
 
+def packaged_suite_file() -> Path:
+    """The experiment list locbook ships with: the source tree's ``notebooks/`` (a clone or an editable install),
+    else the copy inside the installed package (``locbook/notebooks/``, put there by the wheel)."""
+    package = Path(__file__).resolve().parents[1]
+    for candidate in (package.parent / SUITE_FILE, package / "notebooks" / SUITE_FILE.name):
+        if candidate.is_file():
+            return candidate
+    raise SuiteError(f"the installed locbook has no experiment list (looked for {package.parent / SUITE_FILE} and "
+                     f"{package / 'notebooks' / SUITE_FILE.name}); reinstall locbook or pass --suite")
+
+
 def find_suite_file(start: Path | None = None) -> Path:
-    """``notebooks/experiments.toml`` in the current folder or a parent, else beside the package."""
+    """``notebooks/experiments.toml`` in the current folder or a parent (a clone, or notebooks copied out with
+    ``locbook notebooks``), else the one locbook ships with (:func:`packaged_suite_file`)."""
     here = (start or Path.cwd()).resolve()
     for folder in (here, *here.parents):
         if (folder / SUITE_FILE).is_file():
             return folder / SUITE_FILE
-    fallback = Path(__file__).resolve().parents[2] / SUITE_FILE
-    if fallback.is_file():
-        return fallback
-    raise SuiteError(f"cannot find {SUITE_FILE} from {here}; run locbook inside the repository or pass --suite")
+    return packaged_suite_file()
 
 
 def _rules(raw: dict, where: str) -> dict[str, ParameterRule]:

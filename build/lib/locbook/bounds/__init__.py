@@ -1,0 +1,1 @@
+"""Bounds: static CRLB and the posterior CRLB."""

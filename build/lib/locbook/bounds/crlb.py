@@ -1,0 +1,105 @@
+"""Cramer-Rao lower bound for static RSS localization.
+
+With received powers ``P_j ~ N(P_0 - 10 n log10 d_j, sigma^2)``, independent across anchors, the Fisher
+information of the position p is (Patwari et al. 2003, Eq. (5); Ozkaya 2011, Appendix A, corrected)
+
+    J(p) = (10 n / (sigma ln 10))^2  sum_j (p - a_j)(p - a_j)^T / d_j^4,
+
+and any unbiased estimator has ``E|p_hat - p|^2 >= tr J^{-1}`` (Ozkaya Eq. (A.5): (F_xx + F_yy) / det F).
+
+Ozkaya's Appendix A prints ``d_j^2`` in the denominators (Eqs. (A.10)-(A.12)), which makes the bound
+dimensionless and scale-invariant; it is kept as ``form="ozkaya_printed"`` (flagged; note 004, section
+3.9) because the thesis's CRLB numbers were computed with it (with n = 2).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import DegenerateGeometryError
+from .._validate import as_array, check_choice, check_scalar
+from ..static.localization import check_anchor_geometry
+
+__all__ = ["rss_fisher_information", "rss_position_information", "rss_crlb_m", "crlb_rms_over_area_m", "CRLB_FORMS"]
+
+CRLB_FORMS = ("correct", "ozkaya_printed")
+
+
+def rss_fisher_information(position_m, anchors_m, path_loss_exp, sigma_db, form: str = "correct", *,
+                           min_distance_m: float = 0.0, height_offset_m: float = 0.0):
+    """Fisher information ``(..., 2, 2)`` of the position from RSS at ``position_m`` ``(..., 2)``.
+
+    ``path_loss_exp`` and ``sigma_db`` may be scalars or per-anchor arrays ``(m,)``. The anchors must resolve a
+    position on their own (at least 3, not collinear); :func:`rss_position_information` is the same formula
+    without that check, for bounds where a prior or a motion model supplies the rest (the posterior CRLB).
+    """
+    return rss_position_information(position_m, check_anchor_geometry(anchors_m), path_loss_exp, sigma_db, form,
+                                    min_distance_m=min_distance_m, height_offset_m=height_offset_m)
+
+
+def rss_position_information(position_m, anchors_m, path_loss_exp, sigma_db, form: str = "correct", *,
+                             min_distance_m: float = 0.0, height_offset_m: float = 0.0, heard=None):
+    """``beta^2 sum_j (p - a_j)(p - a_j)^T / d_j^4``, ``beta = 10 n / (sigma ln 10)``, for any anchors ``(m, 2)``.
+
+    ``E[1/d^2]`` diverges for position densities positive at an anchor (note 000 s.2.10), so two regularisations
+    are offered: ``height_offset_m`` (antenna height difference, a scalar or one per anchor,
+    ``d^2 = |p - a|^2 + h^2``, the exact information of that model, e.g. anchors near the ceiling and a tag at a
+    known height) and ``min_distance_m`` (the gradient's ``1/d`` factor capped at ``1/d_min``, the model's
+    validity limit). ``form="ozkaya_printed"`` uses ``d^2`` in the denominator (flagged, see module docstring).
+    ``heard``: booleans broadcastable to ``(..., m)``, False where an anchor gave no reading (NaN = not heard, the
+    library's rule): a reading that is not there carries no information, so its term is left out.
+    """
+    check_choice("form", form, CRLB_FORMS)
+    anchors_m = as_array("anchors_m", anchors_m, ndim=2)
+    m = anchors_m.shape[0]
+    position_m = as_array("position_m", position_m, min_ndim=1, trailing=(anchors_m.shape[1],))
+    for name, value in (("path_loss_exp", path_loss_exp), ("sigma_db", sigma_db)):
+        value = as_array(name, value)
+        if value.ndim > 1 or value.size not in (1, m) or np.any(value <= 0):
+            raise ValueError(f"{name} must be a positive scalar or ({m},) array (one per anchor), got {value.tolist()}")
+    check_scalar("min_distance_m", min_distance_m, ge=0)
+    height = as_array("height_offset_m", height_offset_m)
+    if height.ndim > 1 or height.size not in (1, m):
+        raise ValueError(f"height_offset_m must be a scalar or ({m},) array (one per anchor: anchor height minus tag "
+                         f"height), got shape {height.shape}")
+    diff = position_m[..., None, :] - anchors_m  # (..., m, 2)
+    d2 = np.einsum("...i,...i->...", diff, diff) + height**2
+    if np.any(d2 == 0):
+        where = tuple(int(i) for i in np.argwhere(d2 == 0)[0])
+        raise DegenerateGeometryError(f"the RSS Fisher information is undefined at an anchor position (d = 0): "
+                                      f"position_m{list(where[:-1])} = {position_m[where[:-1]].tolist()} is anchor "
+                                      f"{where[-1]}; give height_offset_m (antenna height difference)")
+    gain = (10.0 * np.asarray(path_loss_exp, float) / (np.asarray(sigma_db, float) * np.log(10.0))) ** 2
+    gain = np.broadcast_to(gain, d2.shape)
+    if heard is not None:
+        heard = np.asarray(heard)
+        if heard.dtype != bool:
+            raise ValueError(f"heard must be booleans (False = not heard), got dtype {heard.dtype}")
+        try:
+            gain = gain * np.broadcast_to(heard, d2.shape)
+        except ValueError:
+            raise ValueError(f"heard must broadcast to (..., {m}) = {d2.shape}, got shape {heard.shape}") from None
+    capped = np.maximum(d2, min_distance_m**2)     # the gradient's 1/d capped at 1/d_min; its direction kept
+    denom = d2 * capped if form == "correct" else capped   # d^4 (correct) or d^2 (as printed in Ozkaya A.10-A.12)
+    return np.einsum("...j,...ji,...jk->...ik", gain / denom, diff, diff)
+
+
+def rss_crlb_m(position_m, anchors_m, path_loss_exp, sigma_db, form: str = "correct"):
+    """Position RMSE bound ``sqrt(tr J^{-1})`` (m) at each position ``(..., 2)`` -> ``(...)``.
+
+    In 2-D by Ozkaya's closed form (A.5); for anchors in another dimension ``(m, dim)`` (positions
+    ``(..., dim)``) by the trace of the inverse. Positions must be finite and off the anchors."""
+    info = rss_fisher_information(position_m, anchors_m, path_loss_exp, sigma_db, form)
+    if info.shape[-1] != 2:
+        return np.sqrt(np.trace(np.linalg.inv(info), axis1=-2, axis2=-1))
+    det = info[..., 0, 0] * info[..., 1, 1] - info[..., 0, 1] ** 2
+    return np.sqrt((info[..., 0, 0] + info[..., 1, 1]) / det)   # (F_xx + F_yy) / (F_xx F_yy - F_xy^2)
+
+
+def crlb_rms_over_area_m(points_m, anchors_m, path_loss_exp, sigma_db, form: str = "correct"):
+    """RMS of the bound over target positions ``(P, 2)``: ``sqrt(mean_p tr J(p)^{-1})``, the
+    area-average used by Ozkaya (2011) for Fig. 7.1 and the CRLB columns."""
+    points_m = as_array("points_m", points_m, min_ndim=1)
+    if points_m.size == 0:
+        raise ValueError(f"points_m must hold at least one position, got shape {points_m.shape}")
+    bound = rss_crlb_m(points_m, anchors_m, path_loss_exp, sigma_db, form)
+    return float(np.sqrt(np.mean(bound**2)))

@@ -1,0 +1,1 @@
+"""Package data: the numbers each source document printed (``printed/<document>.csv``)."""

@@ -1,0 +1,1 @@
+"""Channel, motion (and later inertial) models."""

@@ -1,0 +1,58 @@
+"""Plotting helpers shared by the notebooks (kept out of the notebooks, as in the filterpy book)."""
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["draw_room", "draw_path", "mean_with_band", "error_cdf"]
+
+
+def draw_room(ax, size_m, anchors_m=None, *, label_anchors: bool = True, margin_m: float = 0.0):
+    """Outline a rectangular room ``(width, length)`` with anchors as squares."""
+    w, h = size_m
+    ax.plot([0, w, w, 0, 0], [0, 0, h, h, 0], color="0.3", lw=1.5)
+    if anchors_m is not None:
+        anchors_m = np.asarray(anchors_m)
+        ax.plot(anchors_m[:, 0], anchors_m[:, 1], "s", color="tab:red", ms=8, label="anchors")
+        if label_anchors:
+            for i, (x, y) in enumerate(anchors_m, start=1):
+                ax.annotate(f"A{i}", (x, y), textcoords="offset points", xytext=(5, 5), color="tab:red")
+    ax.set_aspect("equal")
+    ax.set_xlabel("X (m)")
+    ax.set_ylabel("Y (m)")
+    if margin_m:
+        ax.set_xlim(-margin_m, w + margin_m)
+        ax.set_ylim(-margin_m, h + margin_m)
+
+
+def draw_path(ax, path_m, *, numbered: bool = False, **style):
+    """A path as a line with markers; ``numbered`` labels the points 1..N (the paper's crosses)."""
+    path_m = np.asarray(path_m)
+    ax.plot(path_m[:, 0], path_m[:, 1], **style)
+    if numbered:
+        for i, (x, y) in enumerate(path_m, start=1):
+            ax.annotate(str(i), (x, y), textcoords="offset points", xytext=(4, -3), fontsize=7)
+
+
+def mean_with_band(ax, x, samples, *, axis: int = 0, z: float = 1.96, label: str = "", omit_nan: bool = False,
+                   **style):
+    """Plot the mean of ``samples`` along ``axis`` with a +-z standard-error band (Monte-Carlo CI).
+    ``omit_nan``: leave out NaN samples (runs that produced no estimate; the caller reports how many)."""
+    samples = np.asarray(samples, float)
+    if omit_nan:
+        count = np.sum(np.isfinite(samples), axis=axis)
+        mean = np.nanmean(samples, axis=axis)
+        se = np.nanstd(samples, axis=axis, ddof=1) / np.sqrt(count)
+    else:
+        mean = samples.mean(axis=axis)
+        se = samples.std(axis=axis, ddof=1) / np.sqrt(samples.shape[axis])
+    line, = ax.plot(x, mean, label=label, **style)
+    ax.fill_between(x, mean - z * se, mean + z * se, color=line.get_color(), alpha=0.2, lw=0)
+    return mean, se
+
+
+def error_cdf(ax, errors_m, label: str = "", **style):
+    """Empirical CDF of errors."""
+    x = np.sort(np.ravel(errors_m))
+    ax.plot(x, np.arange(1, x.size + 1) / x.size, label=label, **style)
+    ax.set_xlabel("error (m)")
+    ax.set_ylabel("CDF")

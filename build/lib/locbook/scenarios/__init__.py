@@ -1,0 +1,1 @@
+"""Per-document scenarios: the geometry, printed numbers and simulation protocol of each source."""

@@ -1,0 +1,217 @@
+"""Document 002: Palvai (2008), "Passive RF Localization Based on RSSI Using Non-linear Bayesian Estimation", M.S.
+thesis, George Mason University.
+
+A static emitter is located from RSS recorded by a receiver at N random measurement locations whose positions come
+from GPS (sigma_3 = 5 m): linearised least squares (LSF) and its recursive form (RLSF), an EKF with a random-walk
+state, and a SIR particle filter. The thesis prints no numeric result, only parameters and claims; every unprinted
+choice below follows note 002 s.5 (A1-A16) and is a named argument. The note's own sanity numbers (its s.7) are
+orientation, never scored.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..data.printed_values import printed
+from ..models.channel import PathLossModel, correct_range_bias
+from ..static.least_squares import lateration_rows, least_squares_position, recursive_least_squares
+from ..tracking.kalman import NonlinearMeasurement, RssMeasurement, extended_kalman_filter
+from ..tracking.particle import rss_log_likelihood, sir_particle_filter
+
+__all__ = [
+    "DOCUMENT", "PRINTED", "SIGMA1_DB", "ETA", "SIGMA2_M", "SIGMA3_M", "N_LOCATIONS", "AREA_M", "Setup",
+    "draw_locations", "measure", "observed_locations", "lsf_by_count", "rlsf_path", "ekf_path", "EKF_VARIANTS", "EKF_SCHEDULES",
+    "SCHEDULES", "SHADOWING", "pf_run", "printed_jacobian", "corrected_jacobian", "crlb_m", "errors_m",
+]
+
+DOCUMENT = "palvai2008"
+#: Everything the thesis prints (locbook/data/printed/palvai2008.csv).
+PRINTED = printed(DOCUMENT)
+#: Sec. 2.6 / 4.4: shadowing sigma_1, path-loss exponent eta; Sec. 4.4: sigma_2, sigma_3 and 25 locations.
+SIGMA1_DB = PRINTED.get("Sec. 4.4 text", "EKF simulation", "shadowing sigma_1").value
+ETA = PRINTED.get("Sec. 4.4 text", "EKF simulation", "path loss exponent").value
+SIGMA2_M = PRINTED.get("Sec. 4.4 text", "EKF simulation", "process noise sigma_2").value
+SIGMA3_M = PRINTED.get("Sec. 4.4 text", "EKF simulation", "location measurement sigma_3").value
+N_LOCATIONS = int(PRINTED.get("Sec. 4.4 text", "EKF simulation", "number of locations").value)
+#: Sec. 5.4: the particles' prior is "Uniform in [0,50] for three coordinates": the area is taken as that cube.
+AREA_M = 50.0
+
+
+@dataclass(frozen=True)
+class Setup:
+    """The simulated world (note 002 A1-A4, A9): ``dim`` 3 (the thesis's equations) or 2; the target at the
+    area's centre (A2, not printed); the link budget ``ref_power_dbm`` at ``1 m`` (A4: K = -20 dBm, known to every
+    estimator); shadowing ``sigma_db`` and exponent ``path_loss_exp`` (Secs. 2.6, 4.4); receiver positions observed
+    with GPS noise ``receiver_sigma_m`` (sigma_3; 0 = exact, as for the LSF of Sec. 2.6)."""
+
+    dim: int = 3
+    target_m: tuple | None = None
+    ref_power_dbm: float = -20.0
+    path_loss_exp: float = ETA
+    sigma_db: float = SIGMA1_DB
+    receiver_sigma_m: float = 0.0
+
+    @property
+    def target(self) -> np.ndarray:
+        return np.full(self.dim, AREA_M / 2) if self.target_m is None else np.asarray(self.target_m, float)
+
+    @property
+    def channel(self) -> PathLossModel:
+        return PathLossModel(self.ref_power_dbm, self.path_loss_exp, self.sigma_db, min_distance_m=1.0)
+
+
+def draw_locations(n_runs: int, n_locations: int, dim: int, rng: np.random.Generator) -> np.ndarray:
+    """Measurement locations "random selected points within the coverage area" (A3): uniform in the area, redrawn
+    per run, ``(R, N, dim)``."""
+    return rng.uniform(0.0, AREA_M, (n_runs, n_locations, dim))
+
+
+def measure(setup: Setup, locations_m, rng: np.random.Generator) -> np.ndarray:
+    """Received powers ``(R, N)`` (Eq. (4.28)): the log-distance mean (distances below 1 m clamped, A2) plus
+    shadowing ``N(0, sigma_1^2)``."""
+    d = np.linalg.norm(np.asarray(locations_m) - setup.target, axis=-1)
+    return setup.channel.sample_power_dbm(d, rng)
+
+
+def observed_locations(setup: Setup, locations_m, rng: np.random.Generator) -> np.ndarray:
+    """The receiver positions the estimators see: the true ones plus GPS noise ``N(0, sigma_3^2 I)`` (A9)."""
+    loc = np.asarray(locations_m, float)
+    return loc + setup.receiver_sigma_m * rng.standard_normal(loc.shape) if setup.receiver_sigma_m > 0 else loc
+
+
+def _ranges(setup: Setup, power_dbm, bias_correction: str):
+    d = setup.channel.range_m(power_dbm)
+    return correct_range_bias(d, setup.sigma_db, setup.path_loss_exp, bias_correction)
+
+
+def lsf_by_count(setup: Setup, locations_m, power_dbm, counts, *, reference: str = "consecutive",
+                 variant: str = "corrected", bias_correction: str = "median") -> np.ndarray:
+    """Batch LSF (Eqs. (2.27)-(2.29), corrected) on the first ``n`` locations for each ``n`` in ``counts``:
+    positions ``(R, len(counts), dim)``. ``bias_correction="median"`` is the thesis's plain inversion (2.34);
+    ``"squared"`` removes the log-normal bias of ``d^2`` (note 002 s.2.7, an extension)."""
+    d = _ranges(setup, power_dbm, bias_correction)
+    out = [least_squares_position(locations_m[:, :n], d[:, :n], reference=reference, variant=variant).position_m
+           for n in counts]
+    return np.stack(out, axis=1)
+
+
+def rlsf_path(setup: Setup, locations_m, power_dbm, *, bias_correction: str = "median", prior_cov=None):
+    """RLSF (Eqs. (2.49)-(2.58), corrected) over the consecutive rows: estimates ``(R, N - 1, dim)`` after locations
+    2..N (row i needs locations i and i + 1), prior mean 0 and ``Pi_0 = 1e6 I`` by default (note 002 s.2.8)."""
+    d = _ranges(setup, power_dbm, bias_correction)
+    H, Y = lateration_rows(locations_m, d, reference="consecutive")
+    return recursive_least_squares(H, Y, prior_cov=prior_cov).x
+
+
+EKF_VARIANTS = ("corrected", "literal_002")
+
+
+def corrected_jacobian(x, receivers_m, path_loss_exp):
+    """``dh_i/dX = (10 eta / ln 10) (s_i - X)^T / d_i^2`` (Eq. (4.43) corrected, note 002 s.2.11): ``(..., N, dim)``."""
+    diff = np.asarray(receivers_m) - np.asarray(x)[..., None, :]
+    return 10 * path_loss_exp / np.log(10) * diff / np.sum(diff**2, axis=-1)[..., None]
+
+
+def printed_jacobian(x, receivers_m, path_loss_exp):
+    """Eq. (4.43) as printed (flagged): ``10 eta (s_i - X)^T / d_i`` (no 1/ln 10, one factor 1/d_i missing)."""
+    diff = np.asarray(receivers_m) - np.asarray(x)[..., None, :]
+    return 10 * path_loss_exp * diff / np.linalg.norm(diff, axis=-1)[..., None]
+
+
+EKF_SCHEDULES = ("sequential", "batch")
+
+
+def ekf_path(setup: Setup, receivers_m, power_dbm, x0, P0, *, process_sd_m: float = SIGMA2_M,
+             variant: str = "corrected", inflate: bool = False, schedule: str = "sequential") -> np.ndarray:
+    """The EKF of Sec. 4.3 over the sequential schedule (A5a: step k assimilates location k): random-walk state
+    ``X_k = X_{k-1} + w``, ``Q = sigma_2^2 I`` (Eq. (4.25), A6); measurement (4.28). ``variant="corrected"``: the
+    nonlinear innovation, the corrected Jacobian and ``R = sigma_1^2`` (optionally ``inflate``d for the GPS noise
+    sigma_3, A8); ``"literal_002"`` (flagged): the printed Jacobian (4.43) and ``R = I`` as printed.
+    ``schedule="batch"``: all N readings in one update (the corrected EKF only). Returns the estimates
+    ``(R, N, dim)`` after each location (``(R, 1, dim)`` for the batch schedule)."""
+    if variant not in EKF_VARIANTS:
+        raise ValueError(f"variant must be one of {EKF_VARIANTS}, got {variant!r}")
+    if schedule not in EKF_SCHEDULES:
+        raise ValueError(f"schedule must be one of {EKF_SCHEDULES}, got {schedule!r}")
+    s = np.asarray(receivers_m, float)
+    R_, N, dim = s.shape
+    F, Q = np.eye(dim), process_sd_m**2 * np.eye(dim)
+    if schedule == "batch":
+        if variant != "corrected":
+            raise ValueError("the batch schedule is offered for the corrected EKF only")
+        meas = RssMeasurement(np.asarray(power_dbm)[:, None, :], s[:, None], setup.channel, np.arange(dim),
+                              anchor_sigma_m=setup.receiver_sigma_m if inflate else 0.0, min_distance_m=1.0)
+        return extended_kalman_filter(F, Q, x0, P0, [meas]).x
+    if variant == "corrected":
+        meas = RssMeasurement(np.asarray(power_dbm)[..., None], s[:, :, None, :], setup.channel, np.arange(dim),
+                              anchor_sigma_m=setup.receiver_sigma_m if inflate else 0.0, min_distance_m=1.0)
+        return extended_kalman_filter(F, Q, x0, P0, [meas]).x
+    # printed form: one location per step through the "diagonal" of an (N, N) stream (NaN off the diagonal)
+    z = np.full((R_, N, N), np.nan)
+    z[:, np.arange(N), np.arange(N)] = power_dbm
+    ch = setup.channel
+
+    def h(x):
+        return ch.mean_power_dbm(np.linalg.norm(x[..., None, :] - s, axis=-1))
+
+    meas = NonlinearMeasurement(z, h, np.eye(N), jacobian=lambda x: printed_jacobian(x, s, setup.path_loss_exp),
+                                name="RSS with the printed Jacobian (4.43) and R = I")
+    return extended_kalman_filter(F, Q, x0, P0, [meas]).x
+
+
+SCHEDULES = ("all", "sequential", "cyclic")
+SHADOWING = ("frozen", "iid")
+
+
+def pf_run(setup: Setup, receivers_m, power_dbm, rng: np.random.Generator, *, n_particles: int, n_iterations: int,
+           schedule: str = "all", shadowing: str = "frozen", true_locations_m=None, process_sd_m: float = SIGMA2_M,
+           likelihood_sigma_db: float | None = None, resampling: str = "systematic", cloud_steps=()):
+    """The SIR-PF of Sec. 5.3.1 (bootstrap proposal, resampling at every iteration, A12), particles drawn uniform in
+    the area (Sec. 5.4). ``schedule`` (A5): ``"all"`` assimilates every location's reading at each iteration,
+    ``"sequential"`` location k at iteration k (needs ``n_iterations <= N``), ``"cyclic"`` location ``k mod N``.
+    ``shadowing``: ``"frozen"`` reuses the recorded readings (A5 b2, default), ``"iid"`` draws fresh shadowing at
+    every iteration at the ``true_locations_m`` (A5 b1). ``likelihood_sigma_db``: the filter's sigma (default
+    sigma_1; A10 uses 1 dB for a noise-free channel)."""
+    if schedule not in SCHEDULES:
+        raise ValueError(f"schedule must be one of {SCHEDULES}, got {schedule!r}")
+    if shadowing not in SHADOWING:
+        raise ValueError(f"shadowing must be one of {SHADOWING}, got {shadowing!r}")
+    s = np.asarray(receivers_m, float)
+    R_, N, dim = s.shape
+    if schedule == "sequential" and n_iterations > N:
+        raise ValueError(f"the sequential schedule has one iteration per location: n_iterations <= {N}")
+    if shadowing == "iid" and true_locations_m is None:
+        raise ValueError("fresh shadowing per iteration needs true_locations_m to measure at")
+    sigma = setup.sigma_db if likelihood_sigma_db is None else likelihood_sigma_db
+    ch = PathLossModel(setup.ref_power_dbm, setup.path_loss_exp, sigma)
+    data_rng = np.random.default_rng(rng.integers(2**63))
+    z0 = np.asarray(power_dbm, float)
+
+    def loglik(particles, k):
+        z = measure(setup, true_locations_m, data_rng) if shadowing == "iid" else z0
+        if schedule == "all":
+            return rss_log_likelihood(particles, s, z, ch, min_distance_m=1.0)
+        j = k if schedule == "sequential" else k % N
+        return rss_log_likelihood(particles, s[:, j:j + 1], z[:, j:j + 1], ch, min_distance_m=1.0)
+
+    init = rng.uniform(0.0, AREA_M, (R_, n_particles, dim))
+    return sir_particle_filter(init, loglik, n_iterations, rng, process_sd_m=process_sd_m, resampling=resampling,
+                               cloud_steps=cloud_steps)
+
+
+def crlb_m(setup: Setup, locations_m) -> np.ndarray:
+    """The CRLB ``sqrt(tr J^{-1})`` ``(R,)`` of the static position from the N readings (an extension): ``J =
+    sum_i (10 eta / ln 10)^2 u_i u_i^T / (d_i^2 v_i)``, ``v_i = sigma_1^2 + (10 eta / ln 10)^2 sigma_3^2 / d_i^2``
+    (the GPS noise propagated to first order, as in the EKF's inflation; ``sigma_3 = 0`` gives the standard bound)."""
+    diff = np.asarray(locations_m, float) - setup.target
+    d2 = np.maximum(np.sum(diff**2, axis=-1), 1.0)
+    slope2 = (10 * setup.path_loss_exp / np.log(10)) ** 2
+    v = setup.sigma_db**2 + slope2 * setup.receiver_sigma_m**2 / d2
+    J = np.einsum("rn,rni,rnj->rij", slope2 / (d2**2 * v), diff, diff)
+    return np.sqrt(np.trace(np.linalg.inv(J), axis1=-2, axis2=-1))
+
+
+def errors_m(estimates_m, target_m) -> np.ndarray:
+    """Euclidean error ``|X_hat - X|`` (A15)."""
+    return np.linalg.norm(np.asarray(estimates_m) - np.asarray(target_m), axis=-1)

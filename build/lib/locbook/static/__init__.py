@@ -1,0 +1,1 @@
+"""Static localization: lateration, RSS maximum likelihood, fingerprinting, calibration."""

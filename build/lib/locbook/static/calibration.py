@@ -1,0 +1,348 @@
+"""Calibration of the log-distance path-loss model by least squares (cvxpy and closed form).
+
+For measurements ``(d_i, P_i)`` the model ``P_i = P_0 - 10 n log10(d_i/d0) + e_i`` is linear in
+``T = [P_0, n]``; the least-squares fit is ``T = (M^T M)^{-1} M^T P`` with rows
+``M_i = [1, -10 log10(d_i/d0)]``.
+
+This is Eq. (6) of George and Vadivukkarasi (document 003) with the sign of the second column
+corrected: the paper prints ``+10 log d_i``, which, read literally, returns ``-n``
+(note 003, section 2.3, point 1). The literal form is kept as ``sign_convention="literal_003"``.
+It is also Eq. (5.1) of Dogan (2015) and the per-reader fit of Ozkaya (2011), Eq. (6.4)-(6.6),
+whose bounded variant (alpha in [-55, -40] dBm, n in [1.5, 3]) is the ``*_bounds_*`` arguments.
+
+Problems carry leading batch axes: ``distance_m`` and ``power_dbm`` of shape ``(..., N)`` are
+``prod(...)`` independent fits. NaN powers are missing samples (a reading not heard).
+
+Solvers: the unconstrained least-squares fit is the closed form (normal equations from running sums: time and
+memory linear in the samples, any size); cvxpy solves the constrained (bounded) and robust (Huber) variants,
+all problems stacked into one convex problem, and is the oracle for the closed form. A cvxpy fit that does not
+reach an optimum returns NaN parameters with the solver's status in ``PathLossFit.status``; it never raises.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cvxpy as cp
+import numpy as np
+import scipy.sparse as sp
+
+from .._cvx import solve
+from .._validate import as_array, check_choice, check_scalar
+from ..errors import ConvergenceError, DegenerateGeometryError
+
+__all__ = [
+    "PathLossFit",
+    "path_loss_design_matrix",
+    "fit_path_loss",
+    "fix_error_covariance",
+    "fit_path_loss_closed_form",
+    "calibrate_path_loss",
+    "CALIBRATION_MODES",
+    "CALIBRATION_SOLVERS",
+    "CALIBRATION_LOSSES",
+    "path_loss_exp_ratio_estimate",
+    "path_loss_exp_given_ref_power",
+]
+
+CALIBRATION_MODES = ("per_location_mean", "pooled", "per_anchor")
+CALIBRATION_SOLVERS = ("auto", "closed_form", "cvxpy")
+CALIBRATION_LOSSES = ("squared", "huber")
+#: statuses of a fit whose parameters can be used
+USABLE_STATUSES = ("closed_form", "optimal")
+
+
+@dataclass(frozen=True)
+class PathLossFit:
+    """Result of a path-loss fit; arrays carry the batch shape of the problems.
+
+    ``covariance`` is the least-squares parameter covariance ``s^2 (M^T M)^{-1}`` (ordering
+    ``[ref_power_dbm, path_loss_exp]``) estimated from the residuals, for standard errors (NaN for the Huber
+    fit, whose covariance this formula does not give).
+
+    ``status``: ``"closed_form"``, or the cvxpy status of the stacked solve (``"optimal"``); any other status
+    (``"optimal_inaccurate"``, ``"infeasible"``, ``"solver_error"``...) comes with NaN parameters, so a failed
+    fit is never mistaken for a result. :attr:`ok` says whether the parameters can be used.
+    """
+
+    ref_power_dbm: np.ndarray
+    path_loss_exp: np.ndarray
+    residual_sigma_db: np.ndarray
+    covariance: np.ndarray
+    n_samples: np.ndarray
+    status: str
+    per_location: "PathLossFit | None" = None
+
+    @property
+    def ok(self) -> bool:
+        return self.status in USABLE_STATUSES
+
+    @property
+    def std_error(self) -> np.ndarray:
+        """Standard errors of ``[ref_power_dbm, path_loss_exp]``, shape ``batch + (2,)``."""
+        return np.sqrt(np.diagonal(self.covariance, axis1=-2, axis2=-1))
+
+
+def path_loss_design_matrix(distance_m, ref_distance_m: float = 1.0,
+                            sign_convention: str = "corrected"):
+    """Rows ``[1, -10 log10(d/d0)]`` (corrected) or ``[1, +10 log10 d]`` as printed in Eq. (6)
+    of document 003 (``"literal_003"``; its second unknown is then ``-n``)."""
+    check_choice("sign_convention", sign_convention, ("corrected", "literal_003"))
+    check_scalar("ref_distance_m", ref_distance_m, gt=0)
+    distance_m = as_array("distance_m", distance_m)
+    _positive_distances(distance_m)
+    log_term = 10.0 * np.log10(distance_m / ref_distance_m)
+    second = -log_term if sign_convention == "corrected" else log_term
+    return np.stack([np.ones_like(log_term), second], axis=-1)
+
+
+def _prepare(distance_m, power_dbm, ref_distance_m):
+    distance_m = as_array("distance_m", distance_m)
+    power_dbm = as_array("power_dbm", power_dbm, nan_ok=True)
+    check_scalar("ref_distance_m", ref_distance_m, gt=0)
+    if distance_m.shape != power_dbm.shape:
+        # the one broadcast allowed: distances shared by all problems, powers with the full shape (..., N)
+        try:
+            shared = np.broadcast_shapes(distance_m.shape, power_dbm.shape) == power_dbm.shape
+        except ValueError:
+            shared = False
+        if not shared:
+            raise ValueError(f"distance_m {distance_m.shape} must have the shape of power_dbm {power_dbm.shape} "
+                             "(..., N), or be shared by all its problems")
+        distance_m = np.broadcast_to(distance_m, power_dbm.shape)
+    if distance_m.ndim == 0 or distance_m.shape[-1] < 2:
+        raise DegenerateGeometryError("a path-loss fit needs at least two measurements per problem")
+    mask = np.isfinite(power_dbm) & np.isfinite(distance_m)
+    _positive_distances(distance_m[mask])
+    log_d = np.where(mask, 10.0 * np.log10(np.where(mask, distance_m, 1.0) / ref_distance_m), 0.0)
+    _check_distinct_distances(log_d, mask)
+    return log_d, np.where(mask, power_dbm, 0.0), mask
+
+
+def _positive_distances(distance_m):
+    if np.any(distance_m <= 0):
+        raise ValueError(f"distance_m must be positive (calibration distances), got a minimum of {distance_m.min()}")
+
+
+def _check_distinct_distances(log_d, mask):
+    """Two unknowns need at least two distinct distances in every problem."""
+    big, small = np.where(mask, log_d, -np.inf), np.where(mask, log_d, np.inf)
+    spread = big.max(axis=-1) - small.min(axis=-1)
+    bad = ~(spread > 1e-9 * np.maximum(1.0, np.abs(small.min(axis=-1))))
+    if np.any(bad):
+        where = np.argwhere(np.atleast_1d(bad))[:5].tolist()
+        raise DegenerateGeometryError(
+            "path-loss calibration needs at least two distinct distances per problem; "
+            f"problem(s) {where} have all distances equal (e.g. a point at the same distance from "
+            "every anchor, like the centre of a rectangle of anchors), so the exponent is not identifiable"
+        )
+
+
+def _finish(log_d, power, mask, ref, exp, status, *, covariance: bool = True):
+    """Residual sigma and the LS covariance ``s^2 (M^T M)^{-1}`` from running sums (memory linear in N)."""
+    resid = np.where(mask, power - (ref[..., None] - exp[..., None] * log_d), 0.0)
+    n = mask.sum(axis=-1)
+    dof = np.maximum(n - 2, 1)
+    s2 = (resid**2).sum(axis=-1) / dof
+    del resid
+    sum_l, sum_l2 = log_d.sum(-1), (log_d**2).sum(-1)          # M^T M = [[n, -sum L], [-sum L, sum L^2]]
+    mtm = np.stack([np.stack([n.astype(float), -sum_l], -1), np.stack([-sum_l, sum_l2], -1)], -2)
+    cov = s2[..., None, None] * np.linalg.inv(mtm) if covariance else np.full(mtm.shape, np.nan)
+    return PathLossFit(ref, exp, np.sqrt(s2), cov, n, status)
+
+
+def fit_path_loss_closed_form(distance_m, power_dbm, ref_distance_m: float = 1.0) -> PathLossFit:
+    """Unconstrained least squares by the normal equations ``(M^T M)^{-1} M^T P`` (Eq. (6),
+    document 003, sign corrected), batched over leading axes. Missing powers are NaN."""
+    log_d, power, mask = _prepare(distance_m, power_dbm, ref_distance_m)
+    # normal equations of P = a - n L:  [[N, -sum L], [-sum L, sum L^2]] [a, n] = [sum P, -sum L P];
+    # log_d and power are 0 at missing samples, so the plain sums run over the observed ones
+    s0, s1, s2 = mask.sum(-1).astype(float), log_d.sum(-1), (log_d**2).sum(-1)
+    p0, p1 = power.sum(-1), (log_d * power).sum(-1)
+    det = s0 * s2 - s1 * s1
+    ref = (s2 * p0 - s1 * p1) / det
+    exp = (s1 * p0 - s0 * p1) / det
+    return _finish(log_d, power, mask, ref, exp, "closed_form")
+
+
+def _stacked_problem(log_d, power, mask, ref_bounds, exp_bounds, loss="squared", huber_delta_db=None):
+    """One cvxpy problem for all ``k`` fits: ``min sum_i ||P_i - P0_i + n_i L_i||^2`` over the observed samples.
+
+    The data enter as constants of one sparse matrix, so building it costs time and memory linear in ``k``.
+    (A parameterized, cached DPP form was tried first: its canonicalisation grows quadratically with the
+    number of stacked fits, about 9 GB at 4000 fits, and the test bed of Ozkaya 2011 needs ~10^5.)
+    """
+    k = log_d.shape[0]
+    problem_of, _ = np.nonzero(mask)                                  # sample -> problem, row-major
+    rows = np.arange(problem_of.size)
+    pick = sp.csr_matrix((np.ones(rows.size), (rows, problem_of)), shape=(rows.size, k))
+    design = sp.hstack([pick, sp.diags(-log_d[mask]) @ pick], format="csr")   # rows [1, -L] per sample
+    ref, exp = cp.Variable(k, name="ref_power_dbm"), cp.Variable(k, name="path_loss_exp")
+    constraints = []
+    if ref_bounds is not None:
+        constraints += [ref >= ref_bounds[0], ref <= ref_bounds[1]]
+    if exp_bounds is not None:
+        constraints += [exp >= exp_bounds[0], exp <= exp_bounds[1]]
+    resid = design @ cp.hstack([ref, exp]) - power[mask]
+    # Huber: quadratic within delta of the model, linear beyond, so a gross outlier pulls with bounded force
+    objective = cp.sum_squares(resid) if loss == "squared" else cp.sum(cp.huber(resid, huber_delta_db))
+    problem = cp.Problem(cp.Minimize(objective), constraints)
+    return problem, (ref, exp)
+
+
+def fit_path_loss(distance_m, power_dbm, *, ref_distance_m: float = 1.0,
+                  ref_power_bounds_dbm: tuple[float, float] | None = None,
+                  path_loss_exp_bounds: tuple[float, float] | None = None,
+                  solver: str = "auto", loss: str = "squared", huber_delta_db: float = 6.0) -> PathLossFit:
+    """Least-squares fit of ``(ref_power_dbm, path_loss_exp)`` for every problem in the batch.
+
+    ``distance_m, power_dbm``: shape ``(..., N)``, one problem per leading index (distances may be shared by
+    all problems). Bounds, if given, constrain every problem (Ozkaya 2011, Sec. 6.2: alpha in [-55, -40] dBm,
+    n in [1.5, 3]). ``loss="huber"`` is the robust variant: residuals beyond ``huber_delta_db`` count
+    linearly (cvxpy's ``huber``), so a few gross outliers (a blocked link) do not drag the fit.
+
+    ``solver``: ``"auto"`` (default) uses the closed form for the unconstrained least-squares fit and cvxpy
+    otherwise; ``"closed_form"`` insists on the normal equations (unconstrained squared loss only);
+    ``"cvxpy"`` solves all problems as one stacked convex problem (the oracle). A cvxpy solve that does not
+    reach an optimum gives NaN parameters and its status (``PathLossFit.status``, ``PathLossFit.ok``).
+
+    Raises :class:`DegenerateGeometryError` when a problem has fewer than two distinct distances.
+    """
+    check_choice("solver", solver, CALIBRATION_SOLVERS)
+    check_choice("loss", loss, CALIBRATION_LOSSES)
+    bounded = ref_power_bounds_dbm is not None or path_loss_exp_bounds is not None
+    bounds = []
+    for name, pair in (("ref_power_bounds_dbm", ref_power_bounds_dbm), ("path_loss_exp_bounds", path_loss_exp_bounds)):
+        if pair is None:
+            bounds.append(None)
+            continue
+        pair = as_array(name, pair)
+        if pair.shape != (2,) or not pair[0] <= pair[1]:
+            raise ValueError(f"{name} must be (lower, upper) with lower <= upper, got {pair.tolist()}")
+        bounds.append(tuple(map(float, pair)))
+    if loss == "huber":
+        check_scalar("huber_delta_db", huber_delta_db, gt=0)
+    if solver == "auto":
+        solver = "cvxpy" if bounded or loss != "squared" else "closed_form"
+    if solver == "closed_form":
+        if bounded or loss != "squared":
+            raise ValueError("the closed form is the unconstrained least-squares fit; bounds and loss='huber' "
+                             "need solver='cvxpy' (or 'auto')")
+        return fit_path_loss_closed_form(distance_m, power_dbm, ref_distance_m)
+    log_d, power, mask = _prepare(distance_m, power_dbm, ref_distance_m)
+    batch, n = log_d.shape[:-1], log_d.shape[-1]
+    k = int(np.prod(batch))
+    problem, (v_ref, v_exp) = _stacked_problem(
+        log_d.reshape(k, n), power.reshape(k, n), mask.reshape(k, n), bounds[0], bounds[1], loss, huber_delta_db)
+    try:
+        solve(problem, "path-loss calibration")
+        status = problem.status
+    except ConvergenceError:
+        status = str(problem.status)
+    except cp.error.SolverError:
+        status = "solver_error"
+    if status == cp.OPTIMAL:
+        ref, exp = v_ref.value.reshape(batch), v_exp.value.reshape(batch)
+    else:
+        ref, exp = np.full(batch, np.nan), np.full(batch, np.nan)
+    return _finish(log_d, power, mask, ref, exp, status, covariance=loss == "squared")
+
+
+def calibrate_path_loss(distance_m, power_dbm, mode: str = "per_location_mean", **fit_kwargs) -> PathLossFit:
+    """Calibrate one shared ``(P_0, n)`` from measurements at known locations.
+
+    ``distance_m, power_dbm``: shape ``(..., L, m)``, location ``l`` at distance ``d_lj`` from anchor
+    ``j``, with ``power_dbm`` the mean received power of that link; leading axes are independent
+    calibrations (e.g. Monte-Carlo runs).
+
+    Modes
+    -----
+    ``"per_location_mean"``  (document 003, Simulation Results): fit each location's m links, then
+        average the L estimates; ``per_location`` holds the L fits. The covariance is that of the mean
+        of L independent fits.
+    ``"pooled"``: one fit over all ``L*m`` pairs.
+    ``"per_anchor"``: one fit per anchor over its L links (column-wise), giving arrays of length m.
+    """
+    check_choice("mode", mode, CALIBRATION_MODES)
+    distance_m = as_array("distance_m", distance_m)
+    power_dbm = as_array("power_dbm", power_dbm, nan_ok=True)
+    if distance_m.ndim < 2 or distance_m.shape != power_dbm.shape:
+        raise ValueError(
+            f"distance_m and power_dbm must both have shape (..., locations, anchors); got "
+            f"{distance_m.shape} and {power_dbm.shape}"
+        )
+    if mode == "per_location_mean":
+        per = fit_path_loss(distance_m, power_dbm, **fit_kwargs)
+        n_loc = distance_m.shape[-2]
+        cov = per.covariance.sum(axis=-3) / n_loc**2
+        return PathLossFit(
+            per.ref_power_dbm.mean(axis=-1), per.path_loss_exp.mean(axis=-1),
+            np.sqrt(np.mean(per.residual_sigma_db**2, axis=-1)), cov, per.n_samples.sum(axis=-1),
+            per.status, per,
+        )
+    if mode == "pooled":
+        return fit_path_loss(distance_m.reshape(distance_m.shape[:-2] + (-1,)),
+                             power_dbm.reshape(power_dbm.shape[:-2] + (-1,)), **fit_kwargs)
+    if mode == "per_anchor":
+        return fit_path_loss(np.swapaxes(distance_m, -1, -2), np.swapaxes(power_dbm, -1, -2), **fit_kwargs)
+    raise ValueError(f"calibration mode must be one of {CALIBRATION_MODES}, got {mode!r}")
+
+
+def _exponent_inputs(distance_m, power_dbm, ref_power_dbm, ref_distance_m):
+    distance_m = as_array("distance_m", distance_m)
+    power_dbm = as_array("power_dbm", power_dbm, nan_ok=True)
+    try:
+        shape = np.broadcast_shapes(distance_m.shape, power_dbm.shape)
+    except ValueError:
+        raise ValueError(f"distance_m {distance_m.shape} and power_dbm {power_dbm.shape} do not broadcast") from None
+    if not shape:
+        raise ValueError("distance_m and power_dbm need a sample axis (the last one)")
+    if np.any(distance_m <= 0):
+        raise ValueError("distances must be positive")
+    ref = as_array("ref_power_dbm", ref_power_dbm)
+    check_scalar("ref_distance_m", ref_distance_m, gt=0)
+    log_d = np.broadcast_to(np.log10(distance_m / ref_distance_m), shape)
+    excess = np.broadcast_to(power_dbm - ref[..., None], shape)
+    return log_d, excess
+
+
+def path_loss_exp_ratio_estimate(distance_m, power_dbm, ref_power_dbm, *, ref_distance_m: float = 1.0):
+    """The thesis-literal exponent estimator, Eq. (3.8) in Gudipati 2017 (flagged: an average of ratios):
+    ``C = -(1/N) sum_s (M_s - S) / (10 log10(D_s / d0))`` with ``S = ref_power_dbm`` measured at ``d0``.
+
+    The term at ``D = d0`` is 0/0 and is left out (note 001, s.5 point 6), as are missing (NaN) powers; near
+    ``d0`` the ratio's denominator is small, so those points dominate its variance (compare
+    :func:`path_loss_exp_given_ref_power`). ``(..., N)`` -> ``(...)``."""
+    log_d, excess = _exponent_inputs(distance_m, power_dbm, ref_power_dbm, ref_distance_m)
+    use = np.isfinite(excess) & (np.abs(log_d) > 1e-12)
+    if np.any(use.sum(axis=-1) == 0):
+        raise DegenerateGeometryError("the ratio estimator needs at least one heard point away from the reference "
+                                      "distance (D = d0 is 0/0)")
+    ratio = np.where(use, -excess / (10.0 * np.where(use, log_d, 1.0)), 0.0)
+    return ratio.sum(axis=-1) / use.sum(axis=-1)
+
+
+def path_loss_exp_given_ref_power(distance_m, power_dbm, ref_power_dbm, *, ref_distance_m: float = 1.0):
+    """Least-squares exponent with the reference power fixed at its measured value: minimises
+    ``sum_s (M_s - S + 10 C log10(D_s/d0))^2``, so ``C = -sum L (M - S) / (10 sum L^2)``, ``L = log10(D/d0)``.
+    The convex reformulation of Eq. (3.8) (note 001, s.2.4; the full two-parameter fit is :func:`fit_path_loss`).
+    Missing (NaN) powers are left out. ``(..., N)`` -> ``(...)``."""
+    log_d, excess = _exponent_inputs(distance_m, power_dbm, ref_power_dbm, ref_distance_m)
+    use = np.isfinite(excess)
+    l2 = np.where(use, log_d**2, 0.0).sum(axis=-1)
+    if np.any(l2 <= 0):
+        raise DegenerateGeometryError("the exponent needs at least one heard point away from the reference distance")
+    return -np.where(use, log_d * excess, 0.0).sum(axis=-1) / (10.0 * l2)
+
+
+def fix_error_covariance(fixes_m, truth_m) -> np.ndarray:
+    """Measurement-noise covariance of position fixes calibrated against ground truth: the sample covariance
+    of ``fix - truth`` over the points of each run, ``fixes_m (..., T, dim)``, ``truth_m (T, dim)`` ->
+    ``(..., dim, dim)``. This is how a test bed obtains a tracker's R "from experiments" (George and
+    Vadivukkarasi, Conclusion); it needs the truth, so it is a calibration, not an online estimate."""
+    fixes_m = as_array("fixes_m", fixes_m, min_ndim=2, nan_ok=True)
+    truth_m = as_array("truth_m", truth_m, ndim=2, trailing=(fixes_m.shape[-2], fixes_m.shape[-1]))
+    if fixes_m.shape[-2] < 2:
+        raise ValueError(f"a covariance needs at least 2 points per run, got {fixes_m.shape[-2]}")
+    err = fixes_m - truth_m
+    err = err - err.mean(axis=-2, keepdims=True)
+    return np.einsum("...ti,...tj->...ij", err, err) / (err.shape[-2] - 1)

@@ -1,0 +1,197 @@
+"""Nearest-neighbour fingerprinting in RSSI space (RADAR / LANDMARC style).
+
+A fingerprint map holds one RSSI vector per cell (``(C, m)`` for ``m`` readers). The target's RSSI vector
+``s`` is compared with every cell by the Euclidean distance in RSSI space (Ozkaya 2011, Eq. (3.1))
+
+    E_j = || R_j - s ||,
+
+the ``k`` nearest cells are kept, and the estimate is their weighted centroid (Eqs. (3.2)-(3.3))
+
+    x = sum_i w_i x_i,   w_i = (1/E_i^2) / sum_j (1/E_j^2).
+
+Eq. (3.3) as printed divides by ``sum_j E_j^2`` instead, which does not normalise the weights (a typo;
+note 004, section 3.5, validated against the simulation tables); it is kept as ``weighting="literal_004"``.
+
+Two ways to build the map (Ozkaya 2011, Sec. 3.1):
+- pattern based: the stored mean RSSI vector measured at each training location (:func:`pattern_fingerprints`);
+- parameter based: the path-loss model evaluated at each cell centre (:func:`model_fingerprints`),
+  Eq. (3.4) (printed as "3.14"), ``R_ij = alpha_i - 10 n_i log10(d_ij/d0) - c_ij WAF``.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from .._validate import as_array, check_choice, check_scalar
+from ..models.channel import PathLossModel, pairwise_distance_m, wall_crossings
+
+__all__ = ["KNN_WEIGHTINGS", "KNN_BLOCK_BYTES", "knn_position", "model_fingerprints", "pattern_fingerprints"]
+
+KNN_WEIGHTINGS = ("inverse_square", "literal_004", "uniform")
+
+
+def model_fingerprints(cells_m, readers_m, model: PathLossModel, walls_m=None, min_distance_m: float = 0.1):
+    """Parameter-based map: mean RSSI ``(..., C, m)`` of the model at cell centres ``(C, 2)``.
+
+    Model parameters broadcast against the reader axis; a leading batch axis on them (e.g. online
+    calibration per step, shape ``(..., m)``) gives one map per batch entry. Distances below
+    ``min_distance_m`` (> 0) are clipped (a cell centre on a reader). ``readers_m`` ``(m, 2)`` must be finite,
+    like the cells; ``walls_m`` is checked by :func:`locbook.wall_crossings`.
+    """
+    if not isinstance(model, PathLossModel):
+        raise ValueError(f"model must be a PathLossModel, got {type(model).__name__}")
+    readers_m = as_array("readers_m", readers_m, ndim=2)
+    m, dim = readers_m.shape
+    cells_m = as_array("cells_m", cells_m, ndim=2, trailing=(dim,))
+    for name in ("ref_power_dbm", "path_loss_exp"):
+        value = np.asarray(getattr(model, name))
+        if value.ndim and value.shape[-1] != m:
+            raise ValueError(f"model.{name} must be a scalar or have shape (..., {m}) (one per reader), "
+                             f"got shape {value.shape}")
+    check_scalar("min_distance_m", min_distance_m, gt=0)
+    distance = pairwise_distance_m(cells_m, readers_m)
+    n_walls = 0 if walls_m is None else wall_crossings(cells_m, readers_m, walls_m)
+
+    def per_cell(value):   # (..., m) parameters -> (..., 1, m), so they broadcast over the cell axis
+        return np.asarray(value, float)[..., None, :] if np.ndim(value) else value
+
+    batched = replace(model, ref_power_dbm=per_cell(model.ref_power_dbm), path_loss_exp=per_cell(model.path_loss_exp),
+                      min_distance_m=max(model.min_distance_m, min_distance_m))
+    return batched.mean_power_dbm(distance, n_walls)
+
+
+def pattern_fingerprints(rss_dbm, axis: int = -2):
+    """Pattern-based map: the mean RSSI vector of the training samples at each location.
+
+    ``rss_dbm`` has the samples on ``axis`` (default: shape ``(C, samples, m)``); Ozkaya keeps only the
+    mean of 40 vectors per location (Sec. 6.3).
+
+    Missing readings: a NaN sample is a packet the reader did not hear; each entry is the mean of the samples
+    heard. A reader that heard none of a location's samples leaves NaN in the map: :func:`knn_position`
+    rejects such a map, so fill that entry (e.g. with the reader's sensitivity floor) or drop the reader.
+    """
+    rss_dbm = as_array("rss_dbm", rss_dbm, min_ndim=2, nan_ok=True)
+    if isinstance(axis, (bool, np.bool_)) or not isinstance(axis, (int, np.integer)) or \
+            not -rss_dbm.ndim <= axis < rss_dbm.ndim or axis % rss_dbm.ndim == rss_dbm.ndim - 1:
+        raise ValueError(f"axis must be a sample axis of rss_dbm (shape {rss_dbm.shape}), not the reader axis "
+                         f"(the last), got {axis!r}")
+    mean = np.mean(rss_dbm, axis=axis)
+    missing = np.isnan(mean)
+    if missing.any():      # the mean over the heard samples, only where some sample was not heard
+        heard = ~np.isnan(rss_dbm)
+        n_heard = heard.sum(axis=axis)
+        total = np.where(heard, rss_dbm, 0.0).sum(axis=axis)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            mean[missing] = np.where(n_heard > 0, total / n_heard, np.nan)[missing]
+    return mean
+
+
+#: memory of one block of RSSI-space differences in :func:`knn_position` (queries x cells x readers doubles)
+KNN_BLOCK_BYTES = 64 * 2**20
+
+
+def knn_position(rss_dbm, fingerprints_dbm, cells_m, k: int, weighting: str = "inverse_square", *,
+                 min_readers: int = 3, chunk: int | None = None):
+    """Weighted k-nearest-neighbour position, Eqs. (3.1)-(3.3) of Ozkaya (2011), weights corrected.
+
+    ``rss_dbm``: ``(..., m)`` target RSSI vectors; ``fingerprints_dbm``: ``(C, m)`` or ``(..., C, m)``
+    (one map per batch entry); ``cells_m``: ``(C, 2)``. Returns positions ``(..., 2)``.
+    ``k = C`` (all cells) is the weighted centroid used in the thesis's experiments.
+
+    Missing readings: a NaN in ``rss_dbm`` is a reader not heard; that query is compared with the map over the
+    readers it heard, and with fewer than ``min(min_readers, m)`` heard its position is NaN (a query that heard
+    every reader is always compared). The map itself must be complete (a cell a reader never heard has no
+    fingerprint to compare: fill it, or drop that reader); a NaN in it is an error naming the cell and reader.
+    The batch axes of ``rss_dbm`` and of a batched map must broadcast against each other.
+
+    Memory is bounded whatever the sizes: the queries are compared with the map in blocks of ``chunk`` queries
+    (default: as many as fit :data:`KNN_BLOCK_BYTES` of differences, 64 MiB), each query's arithmetic being the
+    same in any block, so the result does not depend on ``chunk``.
+    """
+    check_choice("weighting", weighting, KNN_WEIGHTINGS)
+    fingerprints_dbm = as_array("fingerprints_dbm", fingerprints_dbm, min_ndim=2, nan_ok=True)
+    _check_complete_map(fingerprints_dbm)
+    m = fingerprints_dbm.shape[-1]
+    rss_dbm = as_array("rss_dbm", rss_dbm, min_ndim=1, nan_ok=True, trailing=(m,))
+    cells_m = as_array("cells_m", cells_m, ndim=2)
+    n_cells = cells_m.shape[0]
+    if fingerprints_dbm.shape[-2] != n_cells:
+        raise ValueError(f"fingerprints_dbm has {fingerprints_dbm.shape[-2]} cells (shape {fingerprints_dbm.shape}) "
+                         f"but cells_m has {n_cells} cell centres (shape {cells_m.shape})")
+    try:
+        np.broadcast_shapes(rss_dbm.shape[:-1], fingerprints_dbm.shape[:-2])
+    except ValueError:
+        raise ValueError(f"the batch axes of rss_dbm {rss_dbm.shape[:-1]} (shape {rss_dbm.shape}) and of "
+                         f"fingerprints_dbm {fingerprints_dbm.shape[:-2]} (shape {fingerprints_dbm.shape}) must "
+                         "broadcast against each other") from None
+    if isinstance(k, (bool, np.bool_)) or not isinstance(k, (int, np.integer)) or not 1 <= k <= n_cells:
+        raise ValueError(f"k must be between 1 and the number of cells ({n_cells}), got {k}")
+    check_scalar("min_readers", min_readers, ge=1, integer=True)
+    if chunk is not None:
+        check_scalar("chunk", chunk, ge=1, integer=True)
+    if np.isnan(rss_dbm).any():
+        return _knn_by_heard_readers(rss_dbm, fingerprints_dbm, cells_m, k, weighting, min(int(min_readers), m),
+                                     chunk)
+    batch = np.broadcast_shapes(rss_dbm.shape[:-1], fingerprints_dbm.shape[:-2])
+    n_queries = int(np.prod(batch, dtype=np.int64))
+    block = int(chunk) if chunk is not None else max(1, KNN_BLOCK_BYTES // (8 * n_cells * max(m, 1)))
+    queries = np.broadcast_to(rss_dbm, batch + (m,)).reshape(-1, m)
+    maps = (fingerprints_dbm if fingerprints_dbm.ndim == 2 else
+            np.broadcast_to(fingerprints_dbm, batch + fingerprints_dbm.shape[-2:]).reshape((-1,) + fingerprints_dbm.shape[-2:]))
+    out = np.empty((n_queries, cells_m.shape[1]))
+    for start in range(0, n_queries, block):
+        stop = min(start + block, n_queries)
+        out[start:stop] = _knn_block(queries[start:stop], maps if maps.ndim == 2 else maps[start:stop], cells_m, k,
+                                     weighting)
+    return out.reshape(batch + (cells_m.shape[1],))
+
+
+def _knn_block(rss_dbm, fingerprints_dbm, cells_m, k, weighting):
+    """Eqs. (3.1)-(3.3) for queries ``(Q, m)`` against a map ``(C, m)`` or ``(Q, C, m)``, no missing readings."""
+    n_cells = cells_m.shape[0]
+    diff = fingerprints_dbm - rss_dbm[..., None, :]
+    dist2 = np.einsum("...ci,...ci->...c", diff, diff)                  # E_j^2, (..., C)
+    nearest = np.argpartition(dist2, k - 1, axis=-1)[..., :k] if k < n_cells else \
+        np.broadcast_to(np.arange(n_cells), dist2.shape)
+    e2 = np.take_along_axis(dist2, nearest, axis=-1)
+    if weighting == "uniform":
+        w = np.full(e2.shape, 1.0 / k)
+    else:
+        # an exact match (E = 0) takes all the weight: floor E^2 far below any real RSSI distance
+        inv = 1.0 / np.maximum(e2, 1e-300)
+        if weighting == "inverse_square":
+            w = inv / inv.sum(axis=-1, keepdims=True)
+        else:   # literal Eq. (3.3): (1/E_i^2) / sum_j E_j^2, not normalised
+            w = inv / e2.sum(axis=-1, keepdims=True)
+    return np.einsum("...k,...kd->...d", w, cells_m[nearest])
+
+
+def _check_complete_map(fingerprints_dbm: np.ndarray) -> None:
+    """A NaN in the map (a cell a reader never heard) is an error naming the cell and the reader."""
+    missing = np.isnan(fingerprints_dbm)
+    if missing.any():
+        where = tuple(int(i) for i in np.argwhere(missing)[0])
+        raise ValueError(f"fingerprints_dbm must be finite (the map must be complete); got {int(missing.sum())} NaN "
+                         f"value(s), the first at index {where} (cell {where[-2]}, reader {where[-1]}): fill the "
+                         "entries a reader never heard (e.g. with its sensitivity floor) or drop that reader")
+
+
+def _knn_by_heard_readers(rss_dbm, fingerprints_dbm, cells_m, k, weighting, min_readers, chunk):
+    """Group the queries by their pattern of heard readers and compare each group over those readers."""
+    m = rss_dbm.shape[-1]
+    batch = np.broadcast_shapes(rss_dbm.shape[:-1], fingerprints_dbm.shape[:-2])
+    flat = np.broadcast_to(rss_dbm, batch + (m,)).reshape(-1, m)
+    maps = (None if fingerprints_dbm.ndim == 2 else
+            np.broadcast_to(fingerprints_dbm, batch + fingerprints_dbm.shape[-2:]).reshape((-1,) + fingerprints_dbm.shape[-2:]))
+    out = np.full((flat.shape[0], cells_m.shape[1]), np.nan)
+    patterns, inverse = np.unique(~np.isnan(flat), axis=0, return_inverse=True)
+    inverse = inverse.reshape(-1)
+    for g, heard in enumerate(patterns):
+        if heard.sum() < min_readers:
+            continue
+        sel = np.flatnonzero(inverse == g)
+        group_maps = fingerprints_dbm[:, heard] if fingerprints_dbm.ndim == 2 else maps[sel][..., heard]
+        out[sel] = knn_position(flat[np.ix_(sel, heard)], group_maps, cells_m, k, weighting, min_readers=min_readers,
+                                chunk=chunk)
+    return out.reshape(batch + (cells_m.shape[1],))

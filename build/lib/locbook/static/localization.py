@@ -1,0 +1,698 @@
+"""Static localization from ranges or received powers, batched over many problems.
+
+Every estimator takes anchors ``(m, 2)`` shared by all problems and measurements with leading batch
+axes ``(..., m)``, and returns a :class:`LocalizationResult` whose ``position_m`` has shape ``(..., 2)``.
+
+- :func:`lateration_ls`: linearized least squares, Eq. (8) of George and Vadivukkarasi (document 003):
+  subtracting the circle of a reference anchor r from circle i gives the linear system
+  ``2 (a_r - a_i)^T p = d_i^2 - d_r^2 - |a_i|^2 + |a_r|^2``.
+- :func:`lateration_wls`: the same system with weights.
+- :func:`lateration_box_ls`: the same objective with a box constraint, one stacked cvxpy problem.
+- :func:`rss_ml_position`: maximum likelihood in the RSS domain (Gaussian shadowing), i.e. Eq. (2.4) of
+  Dogan (2015), solved by batched Levenberg-Marquardt from a convex (linear LS) initialiser.
+- :func:`grid_ml_position`: exhaustive maximum likelihood over candidate points.
+
+Missing readings (the library's one rule): a NaN received power or range means "not heard" (the anchor got
+no packet in that epoch). Each problem uses the anchors heard in it; problems are grouped by their pattern of
+heard anchors and each group is solved with that subset, so a problem with no NaN goes through exactly the
+computation it always did (and a problem with one anchor missing gets exactly what the estimator gives on the
+anchors it heard). A problem with fewer than ``min_anchors`` heard anchors (default ``dim + 1``; at most the
+number of anchors), or whose heard anchors are collinear or coincide, gets a NaN position, ``converged=False``
+and a ``status`` saying why (:class:`LocalizationResult`), alone: its batch is unaffected. If the reference
+anchor of the linearized system is not heard, the first heard anchor serves as reference for that problem.
+
+Failures are per problem too: a problem the solver fails on, or whose finite readings overflow the arithmetic
+(ranges whose squares are infinite), gets NaN and ``status="solver_failed"``; no estimator raises for its
+batch (except :func:`rss_ml_position` when asked to, ``raise_on_failure=True``). Infinite readings, and
+non-finite anchors, model parameters, grids, boxes and weights, are rejected with a ``ValueError`` naming the
+argument; so are shapes that do not match (nothing is broadcast silently).
+
+Anchor heights (measured data, e.g. anchors near the ceiling and a tag carried at 1.3 m): every estimator takes
+``tag_height_m``. Then ``anchors_m`` is ``(m, 3)`` (x, y, height), the tag moves in the plane
+``z = tag_height_m``, positions are ``(..., 2)`` and every range and power is that of the 3-D distance
+``sqrt(|p - a_xy|^2 + (a_z - tag_height_m)^2)``. The linearized systems stay exact (the known height moves to the
+right-hand side: ``|p - a_xy|^2 = d^2 - (a_z - h)^2``); the geometry checks apply to the anchors' plan positions.
+Without ``tag_height_m`` the anchors' dimension is the position's (2-D or 3-D alike).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from functools import lru_cache
+
+import cvxpy as cp
+import numpy as np
+
+from .._cvx import solve
+from .._validate import as_array, check_scalar
+from ..models.channel import PathLossModel, log_distance_gradient, log_distance_mean_dbm, pairwise_distance_m
+from ..errors import ConvergenceError, DegenerateGeometryError
+
+__all__ = [
+    "LocalizationResult",
+    "check_anchor_geometry",
+    "lateration_system",
+    "lateration_ls",
+    "lateration_wls",
+    "lateration_box_ls",
+    "rss_ml_position",
+    "grid_ml_position",
+    "LOCALIZATION_STATUSES",
+]
+
+#: values of :attr:`LocalizationResult.status`
+LOCALIZATION_STATUSES = ("ok", "too_few_anchors", "degenerate_geometry", "solver_failed", "not_converged")
+
+
+@dataclass(frozen=True)
+class LocalizationResult:
+    """Estimated positions ``(..., dim)`` with per-problem solver information.
+
+    ``converged`` is True only for a problem whose estimate is what the method promises. ``status`` (same
+    batch shape) says why not: one of :data:`LOCALIZATION_STATUSES`:
+
+    - ``"ok"``: converged;
+    - ``"too_few_anchors"``: fewer than ``min_anchors`` anchors heard (module docstring, "Missing readings");
+    - ``"degenerate_geometry"``: the anchors the problem uses are collinear or coincide (for
+      :func:`lateration_wls` also: the anchors with a positive weight);
+    - ``"solver_failed"``: the solver did not reach an optimum, or the arithmetic did not give a finite
+      estimate (e.g. ranges so large that their squares overflow, or no finite start for the iterations);
+    - ``"not_converged"``: the iteration limit was reached (the last iterate is returned).
+
+    Problems with any status but ``"ok"`` and ``"not_converged"`` have a NaN position. ``cost`` is NaN where
+    no cost was evaluated.
+    """
+
+    position_m: np.ndarray
+    converged: np.ndarray
+    cost: np.ndarray | None
+    n_iter: int
+    method: str
+    status: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.status is None:
+            object.__setattr__(self, "status", np.where(self.converged, "ok", "not_converged").astype("<U19"))
+
+
+def check_anchor_geometry(anchors_m) -> np.ndarray:
+    """Validate anchors ``(m, dim)``: finite, at least ``dim + 1`` anchors, no two at one point (closer than
+    1 nm), not all on one line (plane).
+
+    Raises :class:`DegenerateGeometryError` naming the problem (``ValueError`` for a wrong shape or a
+    non-finite coordinate).
+    """
+    anchors_m = as_array("anchors_m", anchors_m, ndim=2)
+    m, dim = anchors_m.shape
+    if dim < 1:
+        raise ValueError(f"anchors_m must have shape (m, dim) with dim >= 1, got {anchors_m.shape}")
+    if m < dim + 1:
+        raise DegenerateGeometryError(
+            f"{dim}-D localization needs at least {dim + 1} anchors, got {m}"
+        )
+    gaps = np.where(np.eye(m, dtype=bool), np.inf, pairwise_distance_m(anchors_m, anchors_m))
+    if np.any(gaps <= 1e-9):
+        i, j = np.argwhere(gaps <= 1e-9)[0]
+        raise DegenerateGeometryError(f"anchors {i} and {j} coincide at {anchors_m[i].tolist()}: "
+                                      "two anchors at one point are one anchor")
+    centred = anchors_m - anchors_m.mean(axis=0)
+    sv = np.linalg.svd(centred, compute_uv=False)
+    if sv[dim - 1] <= 1e-9 * max(sv[0], 1.0):
+        raise DegenerateGeometryError(
+            f"the {m} anchors are collinear (rank {np.sum(sv > 1e-9 * max(sv[0], 1.0))} < {dim}); "
+            "their position cannot be resolved across the line they lie on"
+        )
+    return anchors_m
+
+
+# -- missing readings ---------------------------------------------------------------------------------
+def _readings(name: str, values, m: int) -> np.ndarray:
+    """Measurements ``(..., m)``: NaN = not heard; infinities and a wrong anchor axis are errors."""
+    values = as_array(name, values, min_ndim=1, nan_ok=True)
+    if values.shape[-1] != m:
+        raise ValueError(f"{name} must have shape (..., {m}), one value per anchor ({m} anchors), "
+                         f"got shape {values.shape}")
+    return values
+
+
+def _has_missing(values) -> bool:
+    """Whether any reading is NaN (not heard). Decided on the readings themselves, never on quantities derived
+    from them (a linearized right-hand side can be NaN from overflow with every anchor heard)."""
+    return bool(np.isnan(np.asarray(values, dtype=float)).any())
+
+
+def _status(ok: np.ndarray, failure: str = "solver_failed") -> np.ndarray:
+    """Per-problem status: ``"ok"`` where ``ok``, else ``failure``."""
+    return np.where(ok, "ok", failure).astype("<U19")
+
+
+def _raise_if_failed(res: LocalizationResult, raise_on_failure: bool) -> LocalizationResult:
+    if raise_on_failure and not np.all(res.converged):
+        raise ConvergenceError(f"RSS maximum likelihood: {int(np.sum(~res.converged))} of {res.converged.size} "
+                               f"problems did not converge (statuses: {sorted(set(res.status.ravel().tolist()) - {'ok'})})")
+    return res
+
+
+def _ref_in_subset(ref_index: int, heard: np.ndarray) -> int:
+    """Position of the reference anchor among the heard ones; the first heard anchor if it was not heard."""
+    hit = np.flatnonzero(heard == ref_index)
+    return int(hit[0]) if hit.size else 0
+
+
+def _model_subset(model: PathLossModel, heard: np.ndarray, m: int) -> PathLossModel:
+    """The channel restricted to the heard anchors (per-anchor parameters are subset, scalars kept)."""
+    def pick(value):
+        value = np.asarray(value)
+        return value[..., heard] if value.ndim and value.shape[-1] == m else value
+    return replace(model, ref_power_dbm=pick(model.ref_power_dbm), path_loss_exp=pick(model.path_loss_exp),
+                   sigma_db=pick(model.sigma_db))
+
+
+def _planar(anchors_m, tag_height_m):
+    """``(anchors the positions live with, vertical offsets a_z - h (m,) or None)``: with a known tag height the
+    anchors must be ``(m, 3)`` and the estimators work on their plan positions ``(m, 2)``."""
+    if tag_height_m is None:
+        return anchors_m, None
+    check_scalar("tag_height_m", tag_height_m)
+    anchors = as_array("anchors_m", anchors_m, ndim=2)
+    if anchors.shape[1] != 3:
+        raise ValueError(f"with tag_height_m the anchors must be (m, 3) (x, y, height), got shape {anchors.shape}")
+    return anchors[:, :2], anchors[:, 2] - float(tag_height_m)
+
+
+def _lift(positions_m, vertical_m):
+    """Offsets ``p - a`` ``(..., m, 3)`` of plan positions ``(..., 2)`` from anchors at heights ``-vertical``
+    (the z component is the constant ``-(a_z - h)``)."""
+    return None if vertical_m is None else np.broadcast_to(-vertical_m, positions_m.shape[:-1] + vertical_m.shape)
+
+
+def _by_heard_anchors(anchors_m, readings, min_anchors, solve_subset, method: str) -> LocalizationResult:
+    """Solve every problem with the anchors it heard: group the problems by their pattern of heard anchors,
+    call ``solve_subset(heard_indices, problem_indices)`` once per group, and mark the groups that heard too
+    few anchors, or collinear ones, as NaN with their status."""
+    m, dim = anchors_m.shape
+    batch = readings.shape[:-1]
+    flat = readings.reshape(-1, m)
+    k = flat.shape[0]
+    pos = np.full((k, dim), np.nan)
+    converged = np.zeros(k, bool)
+    cost = np.full(k, np.nan)
+    status = np.full(k, "too_few_anchors", dtype="<U19")
+    patterns, inverse = np.unique(~np.isnan(flat), axis=0, return_inverse=True)
+    inverse = inverse.reshape(-1)
+    n_iter = 0
+    for g, pattern in enumerate(patterns):
+        sel = np.flatnonzero(inverse == g)
+        heard = np.flatnonzero(pattern)
+        if heard.size < min_anchors:
+            continue
+        try:
+            check_anchor_geometry(anchors_m[heard])
+        except DegenerateGeometryError:
+            status[sel] = "degenerate_geometry"
+            continue
+        res = solve_subset(heard, sel)
+        pos[sel], converged[sel], status[sel] = res.position_m, res.converged, res.status
+        if res.cost is not None:
+            cost[sel] = res.cost
+        n_iter = max(n_iter, res.n_iter)
+    return LocalizationResult(pos.reshape(batch + (dim,)), converged.reshape(batch), cost.reshape(batch), n_iter,
+                              method, status.reshape(batch))
+
+
+def _solve_where(usable, batch, dim: int, solve, method: str, failure: str) -> LocalizationResult:
+    """Solve the problems where the flat mask ``usable`` holds with ``solve(indices) -> LocalizationResult`` of
+    those problems; the others get NaN, ``converged=False`` and status ``failure``, alone."""
+    k = usable.size
+    pos, converged, cost = np.full((k, dim), np.nan), np.zeros(k, bool), np.full(k, np.nan)
+    status, n_iter = np.full(k, failure, dtype="<U19"), 0
+    if usable.any():
+        sel = np.flatnonzero(usable)
+        res = solve(sel)
+        pos[sel], converged[sel], status[sel] = res.position_m.reshape(-1, dim), res.converged.ravel(), res.status.ravel()
+        if res.cost is not None:
+            cost[sel] = res.cost.ravel()
+        n_iter = res.n_iter
+    return LocalizationResult(pos.reshape(batch + (dim,)), converged.reshape(batch), cost.reshape(batch), n_iter,
+                              method, status.reshape(batch))
+
+
+def _lateration_by_heard(anchors_m, distance_m, ref_index: int, min_anchors: int, solve, method: str,
+                         tag_height_m=None):
+    """:func:`_by_heard_anchors` for the linearized systems: ``solve(anchors, distances, ref_index)`` on each
+    group's heard anchors, the reference kept if heard (geometry judged on the plan positions with a known
+    tag height)."""
+    anchors_m, distance_m = np.asarray(anchors_m, float), np.asarray(distance_m, float)
+    m = anchors_m.shape[0]
+    flat = distance_m.reshape(-1, m)
+    return _by_heard_anchors(
+        _planar(anchors_m, tag_height_m)[0], distance_m, min_anchors,
+        lambda heard, sel: solve(anchors_m[heard], flat[np.ix_(sel, heard)], _ref_in_subset(ref_index % m, heard)),
+        method)
+
+
+def _min_anchors(min_anchors, dim: int, m: int) -> int:
+    """``min_anchors`` checked: an integer from ``dim + 1`` (the default) to the number of anchors ``m``."""
+    if min_anchors is None:
+        return dim + 1
+    check_scalar("min_anchors", min_anchors, ge=dim + 1, integer=True)
+    if min_anchors > m:
+        raise ValueError(f"min_anchors must be <= the number of anchors ({m}), got {min_anchors!r}: "
+                         "no problem could ever be solved")
+    return int(min_anchors)
+
+
+def lateration_system(anchors_m, distance_m, ref_index: int = 0, *, tag_height_m: float | None = None):
+    """Matrices of the linearized lateration system ``A p = b`` (Eq. (8), document 003).
+
+    Returns ``A`` of shape ``(m-1, dim)`` (``2 (a_r - a_i)``, rows for i != r) and ``b`` of shape
+    ``(..., m-1)`` (``d_i^2 - d_r^2 - |a_i|^2 + |a_r|^2``). A NaN distance (not heard) gives NaN in the rows
+    that use it: its own row, or every row of its problem if it is the reference's.
+    With ``tag_height_m`` (anchors ``(m, 3)``) the system is the plan one, exact: ``d^2`` becomes
+    ``d^2 - (a_z - h)^2`` and ``a`` the anchors' ``(x, y)`` (module docstring).
+    """
+    plan, vertical = _planar(anchors_m, tag_height_m)
+    anchors_m = check_anchor_geometry(plan)
+    m = anchors_m.shape[0]
+    distance_m = _readings("distance_m", distance_m, m)
+    if np.any(distance_m < 0):
+        raise ValueError(f"distance_m must be non-negative (NaN = not heard), got {float(distance_m[distance_m < 0][0])!r}")
+    if isinstance(ref_index, (bool, np.bool_)) or not isinstance(ref_index, (int, np.integer)) or not -m <= ref_index < m:
+        raise ValueError(f"ref_index must be an anchor index in [-{m}, {m - 1}], got {ref_index!r}")
+    ref_index %= m
+    others = np.array([i for i in range(m) if i != ref_index])
+    a_r = anchors_m[ref_index]
+    a_mat = 2.0 * (a_r - anchors_m[others])
+    norms = np.sum(anchors_m**2, axis=1)
+    if vertical is not None:
+        norms = norms + vertical**2           # |p - a_xy|^2 = d^2 - v^2: the known height joins the anchor terms
+    b = (distance_m[..., others] ** 2 - distance_m[..., [ref_index]] ** 2
+         - norms[others] + norms[ref_index])
+    return a_mat, b
+
+
+def lateration_ls(anchors_m, distance_m, ref_index: int = 0, *, min_anchors: int | None = None,
+                  tag_height_m: float | None = None) -> LocalizationResult:
+    """Linearized least squares ``p = (A^T A)^{-1} A^T b`` (Eq. (8), George and Vadivukkarasi).
+
+    Unconstrained: estimates may leave the room, as the paper observes ("some of the results go
+    beyond the boundaries"). The result depends slightly on ``ref_index`` (anchor 1 in the paper).
+    NaN distances are anchors not heard; ``tag_height_m``: anchors with heights (module docstring).
+    """
+    a_mat, b = lateration_system(anchors_m, distance_m, ref_index, tag_height_m=tag_height_m)
+    min_anchors = _min_anchors(min_anchors, a_mat.shape[1], a_mat.shape[0] + 1)
+    if _has_missing(distance_m):
+        return _lateration_by_heard(anchors_m, distance_m, ref_index, min_anchors,
+                                    lambda a, d, ref: lateration_ls(a, d, ref, tag_height_m=tag_height_m),
+                                    f"lateration_ls(ref={ref_index})", tag_height_m)
+    pos = b @ np.linalg.pinv(a_mat).T
+    ok = np.all(np.isfinite(pos), axis=-1)     # not finite: the squared ranges overflowed
+    return LocalizationResult(pos, ok, None, 0, f"lateration_ls(ref={ref_index})", _status(ok))
+
+
+def lateration_wls(anchors_m, distance_m, weights, ref_index: int = 0, *,
+                   min_anchors: int | None = None, tag_height_m: float | None = None) -> LocalizationResult:
+    """Weighted linearized least squares ``p = (A^T W A)^{-1} A^T W b`` with diagonal weights
+    ``(..., m-1)`` (one per differenced equation, i.e. per non-reference anchor in anchor order), batched.
+
+    ``weights`` has shape ``(m-1,)`` (shared) or ``(..., m-1)`` with batch axes that broadcast to those of
+    ``distance_m`` (a scalar is not accepted); finite and non-negative. A zero weight removes its equation: a
+    problem whose positively weighted anchors (with the reference) are too few or collinear gets NaN and
+    ``status="degenerate_geometry"``. NaN distances are anchors not heard; a problem then keeps the weights of
+    its heard anchors (if the reference was not heard, the first heard anchor's weight is unused).
+    ``tag_height_m``: anchors with heights (module docstring)."""
+    a_mat, b = lateration_system(anchors_m, distance_m, ref_index, tag_height_m=tag_height_m)
+    min_anchors = _min_anchors(min_anchors, a_mat.shape[1], a_mat.shape[0] + 1)
+    weights = as_array("weights", weights)
+    batch = b.shape[:-1]
+    try:
+        fits = weights.ndim >= 1 and weights.shape[-1] == b.shape[-1] and \
+            np.broadcast_shapes(weights.shape[:-1], batch) == batch
+    except ValueError:
+        fits = False
+    if not fits:
+        raise ValueError(f"weights must have shape (..., {b.shape[-1]}) (one per non-reference anchor) with batch "
+                         f"axes that broadcast to the distances' batch {batch}; got shape {weights.shape}")
+    w = np.broadcast_to(weights, b.shape)
+    if np.any(w < 0):
+        raise ValueError(f"weights must be non-negative, got {float(w[w < 0][0])!r}")
+    if _has_missing(distance_m):
+        anchors_m, distance_m = np.asarray(anchors_m, float), np.asarray(distance_m, float)
+        m = anchors_m.shape[0]
+        ref = ref_index % m
+        flat = distance_m.reshape(-1, m)
+        per_anchor = np.zeros((flat.shape[0], m))
+        per_anchor[:, [i for i in range(m) if i != ref]] = w.reshape(-1, m - 1)
+
+        def solve_subset(heard, sel):
+            sub_ref = _ref_in_subset(ref, heard)
+            rows = np.delete(heard, sub_ref)
+            return lateration_wls(anchors_m[heard], flat[np.ix_(sel, heard)], per_anchor[np.ix_(sel, rows)], sub_ref,
+                                  tag_height_m=tag_height_m)
+
+        return _by_heard_anchors(_planar(anchors_m, tag_height_m)[0], distance_m, min_anchors,
+                                 solve_subset, "lateration_wls")
+    if not np.all(w > 0):     # zero weights: the equations left may not fix a position
+        degenerate = _zero_weights_degenerate(np.asarray(_planar(anchors_m, tag_height_m)[0], float), ref_index, w)
+        if degenerate.any():
+            m = a_mat.shape[0] + 1
+            flat_d, flat_w = np.asarray(distance_m, float).reshape(-1, m), w.reshape(-1, m - 1)
+            return _solve_where(~degenerate, batch, a_mat.shape[1],
+                                lambda sel: lateration_wls(anchors_m, flat_d[sel], flat_w[sel], ref_index,
+                                                           tag_height_m=tag_height_m),
+                                "lateration_wls", "degenerate_geometry")
+    ata = np.einsum("ki,...k,kj->...ij", a_mat, w, a_mat)
+    atb = np.einsum("ki,...k,...k->...i", a_mat, w, b)
+    pos = np.linalg.solve(ata, atb[..., None])[..., 0]
+    ok = np.all(np.isfinite(pos), axis=-1)
+    return LocalizationResult(pos, ok, None, 0, "lateration_wls", _status(ok))
+
+
+def _zero_weights_degenerate(anchors_m, ref_index: int, w) -> np.ndarray:
+    """Per problem (flattened): whether the reference and the anchors with a positive weight fail
+    :func:`check_anchor_geometry` (too few, coincident or collinear)."""
+    m = anchors_m.shape[0]
+    ref = ref_index % m
+    others = np.array([i for i in range(m) if i != ref])
+    patterns, inverse = np.unique(w.reshape(-1, m - 1) > 0, axis=0, return_inverse=True)
+    bad = np.zeros(len(patterns), bool)
+    for g, pattern in enumerate(patterns):
+        try:
+            check_anchor_geometry(anchors_m[np.r_[ref, others[pattern]]])
+        except DegenerateGeometryError:
+            bad[g] = True
+    return bad[inverse.reshape(-1)]
+
+
+@lru_cache(maxsize=16)
+def _box_problem(n_problems, a_key, lower, upper):
+    a_mat = np.array(a_key)
+    b = cp.Parameter((n_problems, a_mat.shape[0]), name="b")
+    p = cp.Variable((n_problems, a_mat.shape[1]), name="position_m")
+    constraints = [p >= np.array(lower), p <= np.array(upper)]
+    problem = cp.Problem(cp.Minimize(cp.sum_squares(p @ a_mat.T - b)), constraints)
+    return problem, b, p
+
+
+def _solve_box_batch(a_mat, b, lower, upper):
+    """Box-constrained LS of every row of ``b`` ``(k, rows)`` in one stacked QP. If that solve fails, the
+    batch is halved and each half solved again, so a problem the solver cannot handle is marked alone
+    (NaN, not converged) and never costs its batch. Returns positions ``(k, dim)`` and success flags."""
+    k, dim = b.shape[0], a_mat.shape[1]
+    if k == 0:
+        return np.empty((0, dim)), np.ones(0, bool)
+    problem, b_par, p_var = _box_problem(k, tuple(map(tuple, a_mat.tolist())), lower, upper)
+    b_par.value = b
+    try:
+        solve(problem, "box-constrained lateration")
+        return p_var.value, np.ones(k, bool)
+    except (ConvergenceError, cp.error.SolverError):
+        if k == 1:
+            return np.full((1, dim), np.nan), np.zeros(1, bool)
+    half = k // 2
+    (p1, ok1), (p2, ok2) = (_solve_box_batch(a_mat, part, lower, upper) for part in (b[:half], b[half:]))
+    return np.concatenate([p1, p2]), np.concatenate([ok1, ok2])
+
+
+def lateration_box_ls(anchors_m, distance_m, lower_m, upper_m, ref_index: int = 0, *,
+                      min_anchors: int | None = None, tag_height_m: float | None = None) -> LocalizationResult:
+    """Linearized least squares constrained to the box ``lower_m <= p <= upper_m``.
+
+    All problems are stacked into one cvxpy QP, built once per (batch size, anchors, box) with the
+    right-hand sides as a Parameter and re-solved by setting its value. An optional extension to
+    document 003 (which does not constrain its estimates). A problem the solver fails on gets a NaN
+    position and ``status="solver_failed"``; the others are kept. NaN distances are anchors not heard;
+    ``tag_height_m``: anchors with heights, the box on ``(x, y)`` (module docstring).
+    """
+    a_mat, b = lateration_system(anchors_m, distance_m, ref_index, tag_height_m=tag_height_m)
+    dim = a_mat.shape[1]
+    min_anchors = _min_anchors(min_anchors, dim, a_mat.shape[0] + 1)
+    bounds = []
+    for name, value in (("lower_m", lower_m), ("upper_m", upper_m)):
+        value = as_array(name, value)
+        if value.ndim > 1 or value.size not in (1, dim):
+            raise ValueError(f"{name} must be a scalar or have shape ({dim},), got shape {value.shape}")
+        bounds.append(tuple(np.broadcast_to(value, (dim,)).tolist()))
+    lower, upper = bounds
+    if any(lo > hi for lo, hi in zip(lower, upper)):
+        raise ValueError(f"empty box: lower {lower} > upper {upper}")
+    if _has_missing(distance_m):
+        return _lateration_by_heard(anchors_m, distance_m, ref_index, min_anchors,
+                                    lambda a, d, ref: lateration_box_ls(a, d, lower, upper, ref,
+                                                                        tag_height_m=tag_height_m),
+                                    "lateration_box_ls", tag_height_m)
+    batch = b.shape[:-1]
+    flat_b = b.reshape(-1, b.shape[-1])
+    finite = np.all(np.isfinite(flat_b), axis=-1)
+    if not finite.all():     # squared ranges that overflow: those problems fail alone, the solver never sees them
+        flat_d = np.asarray(distance_m, float).reshape(-1, a_mat.shape[0] + 1)
+        return _solve_where(finite, batch, dim,
+                            lambda sel: lateration_box_ls(anchors_m, flat_d[sel], lower, upper, ref_index,
+                                                          tag_height_m=tag_height_m),
+                            "lateration_box_ls", "solver_failed")
+    pos, ok = _solve_box_batch(a_mat, flat_b, lower, upper)
+    return LocalizationResult(pos.reshape(batch + (dim,)), ok.reshape(batch), None, 0, "lateration_box_ls",
+                              _status(ok).reshape(batch))
+
+
+def _default_start(anchors_m, power_dbm, model: PathLossModel, tag_height_m=None) -> np.ndarray:
+    """The convex start of :func:`rss_ml_position`: the linearized LS fix on the model's ranges. A problem
+    whose ranges overflow (infinite) has no such fix: NaN."""
+    with np.errstate(over="ignore"):
+        ranges = model.range_m(power_dbm)
+    if np.all(np.isfinite(ranges)):
+        return lateration_ls(anchors_m, ranges, tag_height_m=tag_height_m).position_m
+    with np.errstate(over="ignore", invalid="ignore"):
+        return lateration_ls(anchors_m, np.where(np.isinf(ranges).any(axis=-1, keepdims=True), np.nan, ranges),
+                             tag_height_m=tag_height_m).position_m
+
+
+def _rss_residual_jacobian(pos, anchors, power, model: PathLossModel, min_distance_m, vertical_m=None):
+    """Residuals, their Jacobian w.r.t. the position and the squared distances; with ``vertical_m`` (anchor
+    heights above the tag's plane) the distances are 3-D and the Jacobian keeps the plan columns."""
+    diff = pos[..., None, :] - anchors  # (..., m, dim)
+    if vertical_m is not None:
+        diff = np.concatenate([diff, _lift(pos, vertical_m)[..., None]], axis=-1)
+    grad, d2 = log_distance_gradient(diff, np.asarray(model.path_loss_exp), min_distance_m=min_distance_m)
+    resid = power - model.mean_power_dbm(np.sqrt(d2))  # (..., m)
+    return resid, -grad[..., :anchors.shape[-1]], d2    # d resid / d p = - d mean / d p
+
+
+def _min_eigenvalue(a):
+    """Smallest eigenvalue of symmetric ``(..., k, k)`` matrices (closed form for 2 x 2, which is
+    an order of magnitude faster than batched LAPACK on tiny matrices)."""
+    if a.shape[-1] == 2:
+        half_tr = 0.5 * (a[..., 0, 0] + a[..., 1, 1])
+        half_diff = 0.5 * (a[..., 0, 0] - a[..., 1, 1])
+        return half_tr - np.sqrt(half_diff**2 + a[..., 0, 1] ** 2)
+    return np.linalg.eigvalsh(a)[..., 0]
+
+
+def _solve_small(a, b):
+    """Solve ``a x = b`` for ``(..., k, k)`` and ``(..., k)`` (Cramer's rule for 2 x 2)."""
+    if a.shape[-1] == 2:
+        det = a[..., 0, 0] * a[..., 1, 1] - a[..., 0, 1] * a[..., 1, 0]
+        x0 = (a[..., 1, 1] * b[..., 0] - a[..., 0, 1] * b[..., 1]) / det
+        x1 = (a[..., 0, 0] * b[..., 1] - a[..., 1, 0] * b[..., 0]) / det
+        return np.stack([x0, x1], axis=-1)
+    return np.linalg.solve(a, b[..., None])[..., 0]
+
+
+def _newton_matrix(resid, jac, d2, pos, anchors, model):
+    """Hessian of 0.5 |r|^2: J^T J + sum_j r_j grad^2 r_j, with
+    grad^2 r_j = c (I / d_j^2 - 2 (p - a_j)(p - a_j)^T / d_j^4), c = 10 n / ln 10. Falls back to the
+    Gauss-Newton matrix J^T J where the full Hessian is not positive definite. The second-order
+    term matters: shadowing leaves large residuals, where Gauss-Newton converges only linearly."""
+    jtj = np.einsum("...ki,...kj->...ij", jac, jac)
+    diff = pos[..., None, :] - anchors
+    c = np.broadcast_to(10.0 * np.asarray(model.path_loss_exp) / np.log(10.0), d2.shape)
+    eye = np.eye(pos.shape[-1])
+    hr = c[..., None, None] * (eye / d2[..., None, None]
+                                - 2.0 * diff[..., :, None] * diff[..., None, :] / (d2**2)[..., None, None])
+    full = jtj + np.einsum("...k,...kij->...ij", resid, hr)
+    eig_min = _min_eigenvalue(full)
+    return np.where((eig_min > 1e-9 * np.trace(jtj, axis1=-2, axis2=-1))[..., None, None], full, jtj)
+
+
+def rss_ml_position(anchors_m, power_dbm, model: PathLossModel, initial_m=None, *,
+                    max_iter: int = 100, tol_m: float = 1e-7, min_distance_m: float = 1e-3,
+                    raise_on_failure: bool = False, min_anchors: int | None = None,
+                    tag_height_m: float | None = None) -> LocalizationResult:
+    """Maximum-likelihood position from received powers ``(..., m)`` under Gaussian shadowing.
+
+    Minimises ``sum_j (P_j - P_0 + 10 n log10 |p - a_j|)^2``, which equals Dogan's MLE cost (2.4)
+    up to the factor ``(10 n)^{-2}`` (note 000, section 2.3). The problem is non-convex; every problem
+    starts from ``initial_m`` or, by default, the linearized LS fix on the model's ranges (the convex
+    initialiser), and is refined by damped Newton steps (Levenberg-Marquardt with the exact Hessian where it is
+    positive definite), vectorized over the batch; each iteration works only on the problems that have not
+    converged yet. Problems that do not converge in ``max_iter`` steps are flagged in ``converged``
+    (or raise if asked). ``converged`` (status ``"ok"``) means a local minimum of the cost was reached, not
+    necessarily the global one: from the default convex start a problem can stop in another basin (Dogan's
+    initialiser study, ``dogan2015-models``: about 3 % of draws). For the global minimum start from a grid
+    (``initial_m=grid_ml_position(...).position_m``), as the Dogan scenarios do.
+    The model's parameters must be scalars or per-anchor ``(m,)`` arrays.
+    A NaN power is an anchor not heard (module docstring): the problem is solved on the anchors it heard.
+
+    ``initial_m`` has shape ``(dim,)`` or ``(..., dim)`` broadcasting to the batch; a row that is all NaN
+    means "no start given" and gets the default start (so a grid fix that was NaN for too few heard anchors can
+    be passed on as it is). A problem without a finite start (its ranges overflow, e.g. for a tiny exponent)
+    gets NaN and ``status="solver_failed"`` alone; ``raise_on_failure`` raises :class:`ConvergenceError` if any
+    problem of the batch did not converge, whatever the reason.
+    ``tag_height_m``: anchors ``(m, 3)`` with heights and plan positions (module docstring).
+    """
+    plan, vertical = _planar(anchors_m, tag_height_m)
+    anchors_full = np.asarray(anchors_m, dtype=float)        # with heights: what recursive calls are given
+    anchors_m = check_anchor_geometry(plan)
+    m, dim = anchors_m.shape
+    power_dbm = _readings("power_dbm", power_dbm, m)
+    _check_model(model, m)
+    check_scalar("max_iter", max_iter, ge=1, integer=True)
+    check_scalar("tol_m", tol_m, gt=0)
+    check_scalar("min_distance_m", min_distance_m, gt=0)
+    min_anchors = _min_anchors(min_anchors, dim, m)
+    if initial_m is not None:
+        initial_m = as_array("initial_m", initial_m, min_ndim=1, nan_ok=True)
+        try:
+            initial_m = np.broadcast_to(initial_m, power_dbm.shape[:-1] + (dim,))
+        except ValueError:
+            raise ValueError(f"initial_m must broadcast to {power_dbm.shape[:-1] + (dim,)}, got shape "
+                             f"{initial_m.shape}") from None
+        no_start = np.isnan(initial_m)
+        if np.any(no_start.any(axis=-1) & ~no_start.all(axis=-1)):
+            raise ValueError("initial_m must be finite, or all NaN in a problem's row (no start: the default), got "
+                             f"a partly NaN row {initial_m[no_start.any(axis=-1) & ~no_start.all(axis=-1)][0].tolist()}")
+    if np.isnan(power_dbm).any():
+        flat = power_dbm.reshape(-1, m)
+        start = None if initial_m is None else initial_m.reshape(-1, dim)
+        res = _by_heard_anchors(
+            anchors_m, power_dbm, min_anchors,
+            lambda heard, sel: rss_ml_position(
+                anchors_full[heard], flat[np.ix_(sel, heard)], _model_subset(model, heard, m),
+                None if start is None else start[sel], max_iter=max_iter, tol_m=tol_m,
+                min_distance_m=min_distance_m, tag_height_m=tag_height_m),
+            "rss_ml_lm")
+        return _raise_if_failed(res, raise_on_failure)
+    if initial_m is None:
+        initial_m = _default_start(anchors_full, power_dbm, model, tag_height_m)
+    elif np.isnan(initial_m).any():     # rows without a start get the default one
+        initial_m = np.array(initial_m)
+        no_start = np.isnan(initial_m).all(axis=-1)
+        initial_m[no_start] = _default_start(anchors_full, power_dbm[no_start], model, tag_height_m)
+    batch, dim = power_dbm.shape[:-1], anchors_m.shape[1]
+    pos = np.array(np.broadcast_to(initial_m, batch + (dim,)), dtype=float).reshape(-1, dim)
+    startable = np.all(np.isfinite(pos), axis=-1)
+    if not startable.all():           # no finite start: those problems fail alone
+        flat = power_dbm.reshape(-1, m)
+        res = _solve_where(startable, batch, dim,
+                           lambda sel: rss_ml_position(anchors_full, flat[sel], model, pos[sel], max_iter=max_iter,
+                                                       tol_m=tol_m, min_distance_m=min_distance_m,
+                                                       tag_height_m=tag_height_m),
+                           "rss_ml_lm", "solver_failed")
+        return _raise_if_failed(res, raise_on_failure)
+    power = power_dbm.reshape(-1, power_dbm.shape[-1])
+    resid, jac, d2 = _rss_residual_jacobian(pos, anchors_m, power, model, min_distance_m, vertical)
+    cost = np.sum(resid**2, axis=-1)
+    lam = np.full(cost.shape, 1e-3)
+    converged = np.zeros(cost.shape, bool)
+    eye = np.eye(dim)
+    active = np.arange(cost.size)          # indices of problems still iterating
+    it = 0
+    for it in range(1, max_iter + 1):
+        p_a, r_a, j_a, d2_a, c_a, l_a = (a[active] for a in (pos, resid, jac, d2, cost, lam))
+        hess = _newton_matrix(r_a, j_a, d2_a, p_a, anchors_m, model)
+        jtr = np.einsum("...ki,...k->...i", j_a, r_a)
+        # damped step: (H + lam diag(H)) delta = -J^T r
+        damp = l_a[:, None, None] * (eye * np.diagonal(hess, axis1=-2, axis2=-1)[:, None, :] + 1e-12 * eye)
+        step = -_solve_small(hess + damp, jtr)
+        trial = p_a + step
+        r_new, j_new, d2_new = _rss_residual_jacobian(trial, anchors_m, power[active], model, min_distance_m,
+                                                      vertical)
+        c_new = np.sum(r_new**2, axis=-1)
+        better = c_new <= c_a
+        step_small = np.linalg.norm(step, axis=-1) <= tol_m * (1.0 + np.linalg.norm(p_a, axis=-1))
+        gain_small = (c_a - c_new) <= 1e-12 * (1.0 + c_a)
+        acc = active[better]
+        pos[acc], resid[acc], jac[acc], d2[acc], cost[acc] = (trial[better], r_new[better], j_new[better],
+                                                              d2_new[better], c_new[better])
+        l_a = np.clip(np.where(better, l_a * 0.3, l_a * 10.0), 1e-12, 1e16)
+        lam[active] = l_a
+        # converged: an accepted step that is tiny or gains nothing, or no descent even with a
+        # vanishing step (a local minimum)
+        done = (better & (step_small | gain_small)) | (l_a >= 1e16)
+        converged[active[done]] = True
+        active = active[~done]
+        if active.size == 0:
+            break
+    if raise_on_failure and not np.all(converged):
+        raise ConvergenceError(
+            f"RSS maximum likelihood: {int(np.sum(~converged))} of {converged.size} problems did not "
+            f"converge in {max_iter} Levenberg-Marquardt iterations"
+        )
+    return LocalizationResult(pos.reshape(batch + (dim,)), converged.reshape(batch), cost.reshape(batch),
+                              it, "rss_ml_lm")
+
+
+def _check_model(model, m: int) -> None:
+    """The channel's parameters are scalars or per-anchor ``(m,)`` arrays, finite."""
+    if not isinstance(model, PathLossModel):
+        raise ValueError(f"model must be a PathLossModel, got {type(model).__name__}")
+    for name in ("ref_power_dbm", "path_loss_exp", "sigma_db"):
+        value = as_array(f"model.{name}", getattr(model, name))
+        if value.ndim > 1 or value.size not in (1, m):
+            raise ValueError(f"model.{name} must be a scalar or have shape ({m},) (one per anchor), "
+                             f"got shape {value.shape}")
+    if np.any(np.asarray(model.path_loss_exp) <= 0):
+        raise ValueError(f"model.path_loss_exp must be positive, got {model.path_loss_exp!r}")
+
+
+def grid_ml_position(anchors_m, power_dbm, model: PathLossModel, grid_m, *,
+                     chunk: int = 2048, min_anchors: int | None = None,
+                     tag_height_m: float | None = None) -> LocalizationResult:
+    """Grid maximum likelihood: the candidate point of ``grid_m`` ``(G, dim)`` with the smallest
+    RSS-domain squared residual, for every problem; evaluated in chunks to bound memory. ``cost`` is that
+    residual; a grid point on an anchor is taken 1 micrometre from it.
+    A NaN power is an anchor not heard (module docstring): the residual runs over the heard anchors; with fewer
+    than ``min_anchors`` heard the problem gets a NaN position, NaN cost and ``converged=False``.
+    ``tag_height_m``: anchors ``(m, 3)`` with heights, a plan grid ``(G, 2)`` (module docstring)."""
+    plan, vertical = _planar(anchors_m, tag_height_m)
+    anchors_full = np.asarray(anchors_m, dtype=float)
+    anchors_m = check_anchor_geometry(plan)
+    m, dim = anchors_m.shape
+    grid_m = as_array("grid_m", grid_m, ndim=2, trailing=(dim,))
+    if grid_m.shape[0] < 1:
+        raise ValueError("grid_m must hold at least one candidate point")
+    power = _readings("power_dbm", power_dbm, m)
+    _check_model(model, m)
+    check_scalar("chunk", chunk, ge=1, integer=True)
+    min_anchors = _min_anchors(min_anchors, dim, m)
+    if np.isnan(power).any():
+        flat_power = power.reshape(-1, m)
+        return _by_heard_anchors(
+            anchors_m, power, min_anchors,
+            lambda heard, sel: grid_ml_position(anchors_full[heard], flat_power[np.ix_(sel, heard)],
+                                                _model_subset(model, heard, m), grid_m, chunk=chunk,
+                                                tag_height_m=tag_height_m),
+            "grid_ml")
+    batch = power.shape[:-1]
+    flat = power.reshape(-1, power.shape[-1])
+    distance = pairwise_distance_m(grid_m, anchors_m)
+    if vertical is not None:
+        distance = np.sqrt(distance**2 + vertical**2)
+    mean_grid = log_distance_mean_dbm(distance, np.asarray(model.ref_power_dbm),
+                                      np.asarray(model.path_loss_exp), ref_distance_m=model.ref_distance_m,
+                                      min_distance_m=max(model.min_distance_m, 1e-6))  # (G, m); a node may sit on an anchor
+    best = np.empty(flat.shape[0], dtype=int)
+    best_cost = np.empty(flat.shape[0])
+    for start in range(0, flat.shape[0], chunk):
+        block = flat[start:start + chunk]
+        # |P - mu_g|^2 = |P|^2 - 2 P.mu_g + |mu_g|^2; the first term does not change the argmin
+        cost = (mean_grid**2).sum(1) - 2.0 * block @ mean_grid.T
+        idx = np.argmin(cost, axis=1)
+        best[start:start + chunk] = idx
+        best_cost[start:start + chunk] = cost[np.arange(len(idx)), idx] + (block**2).sum(1)
+    pos = grid_m[best].reshape(batch + (grid_m.shape[1],))
+    ok = np.isfinite(best_cost)
+    if ok.all():
+        return LocalizationResult(pos, np.ones(batch, bool), best_cost.reshape(batch), 0, "grid_ml")
+    # a cost that overflowed (powers of absurd size) has no meaningful minimum
+    pos = np.where(ok.reshape(batch)[..., None], pos, np.nan)
+    return LocalizationResult(pos, ok.reshape(batch), best_cost.reshape(batch), 0, "grid_ml", _status(ok).reshape(batch))

@@ -1,0 +1,124 @@
+"""``locbook`` command line: list the experiments and run the notebook suite.
+
+Exit status: 0 all good; 1 some experiment failed; 2 bad input (parameters, experiment list, folders);
+130 / 143 interrupted by SIGINT / SIGTERM (finished reports are kept).
+"""
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+from pathlib import Path
+
+from ..errors import ParameterError
+
+PROFILE_HELP = "quick: reduced Monte-Carlo counts (default); full: the source's own counts"
+
+
+def _parse_overrides(items: list[str]) -> dict[str, str]:
+    out = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        if not sep or not name.strip():
+            raise ParameterError(f"-p expects NAME=VALUE (VALUE a TOML value, e.g. q_grid=[0.1, 0.2]), got {item!r}")
+        out[name.strip()] = value
+    return out
+
+
+def _positive(kind, text: str):
+    """argparse type: a positive, finite number (``kind`` float) or whole number (``kind`` int)."""
+    try:
+        value = kind(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expects a {'whole ' if kind is int else ''}number, got {text!r}") from None
+    if not value > 0 or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"must be a positive, finite number, got {text!r}")
+    return value
+
+
+def _print_summary(run) -> None:
+    names = {"ok": "executed", "cached": "cached", "failed": "failed", "interrupted": "interrupted",
+             "not run": "not started"}
+    counts = ", ".join(f"{run.count(s)} {w}" for s, w in names.items() if run.count(s) or s in ("ok", "cached", "failed"))
+    print(f"done: {counts}; see {run.report_dir / 'index.html'}")
+    if run.interrupted_by is not None:
+        sig = signal.Signals(run.interrupted_by).name
+        print(f"interrupted by {sig}: finished reports are kept; nothing else was changed.", file=sys.stderr)
+        for status in ("interrupted", "not run"):
+            ids = [o.id for o in run.outcomes if o.status == status]
+            if ids:
+                print(f"  {names[status]}: {', '.join(ids)}", file=sys.stderr)
+    failed = [o for o in run.outcomes if o.status == "failed"]
+    if failed:
+        print("failed: " + ", ".join(f"{o.id} ({o.error})" for o in failed), file=sys.stderr)
+
+
+def main(argv: list[str] | None = None) -> int:
+    from .. import __version__
+
+    parser = argparse.ArgumentParser(prog="locbook", description="Rerun published RSSI localization experiments.")
+    parser.add_argument("--version", action="version", version=f"locbook {__version__}")
+    parser.add_argument("--suite", type=Path, help="experiment list (default: notebooks/experiments.toml here or in "
+                                                   "a parent folder, else the one installed with locbook)")
+    sub = parser.add_subparsers(dest="command", required=True)
+    lst = sub.add_parser("list", help="list the experiments (with KEY: every parameter of those experiments)")
+    lst.add_argument("key", nargs="?", help="an experiment id or document key")
+    lst.add_argument("--reports", type=Path, help="reports folder the run times are read from")
+    show = sub.add_parser("show", help="every parameter of an experiment (type, default, range, description) and "
+                                       "its last result")
+    show.add_argument("key", help="an experiment id or document key")
+    show.add_argument("--reports", type=Path, help="reports folder the last results are read from")
+    nbs = sub.add_parser("notebooks", help="copy the notebooks and the experiment list to DEST for Jupyter")
+    nbs.add_argument("dest", type=Path, help="destination folder (created)")
+    nbs.add_argument("--force", action="store_true", help="overwrite notebooks already in DEST")
+    run = sub.add_parser("run", help="execute experiments and write reports/<profile>/")
+    run.add_argument("ids", nargs="*", help="experiment ids or document keys (default: all)")
+    run.add_argument("--profile", choices=("quick", "full"), default="quick", help=PROFILE_HELP)
+    run.add_argument("--jobs", "-j", type=lambda t: _positive(int, t), default=2, help="notebooks run in parallel processes (default 2)")
+    run.add_argument("--force", action="store_true", help="execute even when a cached report is up to date")
+    run.add_argument("-p", "--parameter", action="append", default=[], metavar="NAME=VALUE",
+                     help="override a notebook parameter (a TOML value, checked against its type and range); "
+                          "the reports go to their own folder, never to reports/<profile>/")
+    run.add_argument("--reports", type=Path, help="reports folder (default: <repository>/reports)")
+    run.add_argument("--out", type=Path, help="write this run's reports to this folder ([a-z0-9-] name)")
+    run.add_argument("--timeout", type=lambda t: _positive(float, t), default=1800, help="seconds allowed per notebook cell")
+    args = parser.parse_args(argv)
+
+    from . import load_suite, run_suite
+
+    try:
+        suite = load_suite(args.suite)
+        if args.command in ("list", "show"):
+            from .catalog import list_text, show_text
+            reports = args.reports or suite.default_reports()
+            print(show_text(suite, args.key, reports) if args.key else list_text(suite, reports))
+            return 0
+        if args.command == "notebooks":
+            from .catalog import copy_notebooks
+            dest = copy_notebooks(suite, args.dest, force=args.force)
+            print(f"copied {len(suite.experiments)} notebooks and experiments.toml to {dest}; open them with "
+                  f"`jupyter lab {dest}`, or run them with `locbook run --suite {dest / 'experiments.toml'}`")
+            return 0
+        experiments = suite.select(args.ids)
+        result = run_suite(suite, experiments, args.profile, jobs=args.jobs, force=args.force,
+                           overrides=_parse_overrides(args.parameter), report_root=args.reports,
+                           out_dir=args.out, timeout_s=args.timeout)
+    except ParameterError as exc:
+        print(f"locbook: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:  # before the run started its own handling (loading, checking parameters)
+        print("locbook: interrupted before any experiment started; nothing was changed", file=sys.stderr)
+        return 130
+    except OSError as exc:   # a read-only or full disk while writing the suite files
+        print(f"locbook: error: {exc.strerror or exc}: {exc.filename or ''}", file=sys.stderr)
+        return 2
+    if result.report_dir.name != args.profile:
+        print(f"reports of this run: {result.report_dir} (reports/{args.profile}/ is unchanged)")
+    _print_summary(result)
+    if result.interrupted_by is not None:
+        return 128 + int(result.interrupted_by)
+    return 1 if result.count("failed") else 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,220 @@
+"""What a notebook records: reproduced-versus-printed numbers, figures, tables and assumptions.
+
+A notebook creates one :class:`Report` and calls :meth:`Report.number`, :meth:`Report.figure`,
+:meth:`Report.table` and :meth:`Report.assumption`. Under ``locbook run`` the files go to the
+experiment's staging folder (environment variable ``LOCBOOK_OUTPUT_DIR``); run interactively they go to
+a scratch folder in the system's temporary directory, so exploring never touches ``reports/``.
+
+Each number row compares one printed quantity (:class:`locbook.data.Printed`, read from the document's
+printed-values file) with our number, under the rules of :mod:`locbook.suite.scoring`: its ``kind``
+(reproduction, calibrated, arithmetic, claim, shown), its window (printed rounding + 2 Monte-Carlo standard
+errors + a named ambiguity) and its verdict (within, loose, miss). The columns are :data:`NUMBER_COLUMNS`.
+"""
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+import re
+import tempfile
+from html import escape
+from pathlib import Path
+
+import numpy as np
+
+from ..data.printed_values import Printed
+from .scoring import KINDS, Ambiguity, score
+
+__all__ = ["Report", "NUMBER_COLUMNS", "Table"]
+
+NUMBER_COLUMNS = (
+    "experiment", "document", "printed_id", "quantity", "where", "unit", "kind", "printed", "reproduced",
+    "verdict", "window_low", "window_high", "rounding", "mc_std_error", "ambiguity", "ambiguity_basis",
+    "relation", "calibrated_from", "same_as", "note",
+)
+_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
+
+
+def _fmt(value, digits=4):
+    if value is None or value == "":
+        return ""
+    if isinstance(value, (bool, np.bool_)):
+        return str(bool(value))
+    if isinstance(value, (int, np.integer)):
+        return str(int(value))
+    if isinstance(value, (float, np.floating)):
+        return "" if not math.isfinite(value) else f"{float(value):.{digits}g}"
+    return str(value)
+
+
+class Table:
+    """Rows of a table (list of dicts) that display as HTML in Jupyter and save as CSV."""
+
+    def __init__(self, rows: list[dict], caption: str = ""):
+        self.rows = [dict(r) for r in rows]
+        self.caption = caption
+        self.columns = list(dict.fromkeys(k for r in self.rows for k in r))
+
+    def _repr_html_(self):
+        head = "".join(f"<th>{escape(c)}</th>" for c in self.columns)
+        body = "".join(
+            "<tr>" + "".join(f"<td>{escape(_fmt(r.get(c, '')))}</td>" for c in self.columns) + "</tr>"
+            for r in self.rows
+        )
+        cap = f"<caption>{escape(self.caption)}</caption>" if self.caption else ""
+        return f"<table>{cap}<thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
+
+    def to_markdown(self) -> str:
+        lines = ["| " + " | ".join(self.columns) + " |", "|" + "---|" * len(self.columns)]
+        for r in self.rows:
+            lines.append("| " + " | ".join(_fmt(r.get(c, "")).replace("|", "\\|") for c in self.columns) + " |")
+        return "\n".join(lines)
+
+    def write_csv(self, path: Path):
+        with open(path, "w", newline="") as fh:
+            writer = csv.DictWriter(fh, fieldnames=self.columns)
+            writer.writeheader()
+            for r in self.rows:
+                writer.writerow({c: _fmt(r.get(c, ""), 10) for c in self.columns})
+
+    def __repr__(self):
+        return self.to_markdown()
+
+
+class Report:
+    """Collects one experiment's outputs. ``experiment`` defaults to ``LOCBOOK_EXPERIMENT``."""
+
+    def __init__(self, experiment: str | None = None):
+        self.experiment = os.environ.get("LOCBOOK_EXPERIMENT") or experiment or "interactive"
+        out = os.environ.get("LOCBOOK_OUTPUT_DIR")
+        if out:
+            self.output_dir = Path(out)
+        else:
+            self.output_dir = Path(tempfile.gettempdir()) / "locbook-interactive" / self.experiment
+        self.output_dir.mkdir(parents=True, exist_ok=True)
+        self.numbers: list[dict] = []
+        self.figures: list[dict] = []
+        self.tables: list[dict] = []
+        self.assumptions: list[dict] = []
+        self._save_manifest()
+
+    # -- numbers ---------------------------------------------------------------------------------
+    def number(self, quantity: str, printed: Printed, reproduced=None, *, kind: str,
+               mc_std_error: float | None = None, ambiguity: Ambiguity | None = None,
+               relation: str | None = None, threshold: float | None = None, calibrated_from: str = "",
+               same_as: Printed | None = None, note: str = "") -> dict:
+        """Record our value of one printed quantity, with its kind, window and verdict.
+
+        ``printed`` comes from the document's printed-values file (``lb.printed(document).get(...)``), never
+        typed in. ``kind`` is one of ``reproduction``, ``calibrated``, ``arithmetic``, ``claim``, ``shown``
+        (:mod:`locbook.suite.scoring`). ``mc_std_error`` is the Monte-Carlo standard error of ``reproduced``
+        from run-level values; ``ambiguity`` names a protocol ambiguity, its size (in the unit) and source.
+        A ``calibrated`` row says in ``calibrated_from`` which input was chosen from which printed number. A
+        ``claim`` gives ``relation`` (``>``, ``>=``, ``<``, ``<=``) against the printed threshold. ``same_as``
+        marks a quantity the source prints again: the row is kept for reading but compared (and counted)
+        only at the printed quantity it names.
+        """
+        if not isinstance(printed, Printed):
+            raise TypeError("printed must be a locbook.data.Printed from the document's printed-values file, "
+                            f"got {type(printed).__name__}")
+        if kind not in KINDS:
+            raise ValueError(f"kind must be one of {KINDS}, got {kind!r}")
+        if kind == "calibrated" and not calibrated_from.strip():
+            raise ValueError("a calibrated row must say which input was chosen from which printed number "
+                             "(calibrated_from)")
+        if kind != "calibrated" and calibrated_from:
+            raise ValueError("calibrated_from belongs to calibrated rows only")
+        if same_as is not None and (same_as.document != printed.document or same_as.id == printed.id):
+            raise ValueError("same_as must name another printed quantity of the same document")
+        if kind == "shown" and reproduced is not None:
+            raise ValueError("a shown row has nothing to compare; record our value with another kind")
+        ours = None if reproduced is None else float(reproduced)
+        s = score(kind, printed.text, ours, mc_std_error=mc_std_error, ambiguity=ambiguity,
+                  relation=relation, threshold=threshold, linked=same_as is not None)
+        low = s.low
+        if printed.unit == "m" and math.isfinite(low):
+            low = max(low, 0.0)                      # distances and errors are not negative
+        if s.verdict == "loose":                     # say why it is loose, before any other note
+            part = {"rounding": s.rounding, "2 Monte-Carlo standard errors": s.half_width - s.rounding
+                    - (ambiguity.size if ambiguity else 0.0)}
+            if ambiguity:
+                part[ambiguity.what] = ambiguity.size
+            widest = max(part, key=part.get)
+            why = (f"the window is +-{s.relative_half_width:.0%} of the printed value (more than +-25 %), "
+                   f"mostly {widest}") if kind != "claim" else (
+                   "the claim holds for our estimate but not beyond 2 Monte-Carlo standard errors")
+            note = f"{why}; {note}" if note else why
+        if same_as is not None and not note:
+            note = f"the source prints this quantity again at {same_as.where}; compared there"
+        row = {
+            "experiment": self.experiment, "document": printed.document, "printed_id": printed.id,
+            "quantity": quantity, "where": printed.where, "unit": printed.unit, "kind": kind,
+            "printed": printed.text, "reproduced": ours, "verdict": s.verdict, "window_low": low,
+            "window_high": s.high, "rounding": s.rounding, "mc_std_error": mc_std_error,
+            "ambiguity": ambiguity.size if ambiguity else None,
+            "ambiguity_basis": ambiguity.describe() if ambiguity else "", "relation": relation or "",
+            "calibrated_from": calibrated_from, "same_as": same_as.id if same_as is not None else "",
+            "note": note,
+        }
+        self.numbers.append(row)
+        Table(self.numbers).write_csv(self.output_dir / "numbers.csv")
+        self._save_manifest()
+        return row
+
+    def numbers_table(self) -> Table:
+        """The recorded numbers, for display at the end of a notebook."""
+        cols = ("quantity", "where", "unit", "kind", "printed", "reproduced", "window_low", "window_high",
+                "verdict", "note")
+        return Table([{c: r[c] for c in cols} for r in self.numbers], "Reproduced versus printed")
+
+    def misses_table(self) -> Table:
+        """The recorded rows judged ``miss``, ``loose`` or ``inconsistent``, each with its note (the likely
+        reason), for display beside the full table."""
+        rows = [{"where": r["where"], "kind": r["kind"], "printed": r["printed"], "reproduced": r["reproduced"],
+                 "verdict": r["verdict"], "reason": r["note"]}
+                for r in self.numbers if r["verdict"] in ("miss", "loose", "inconsistent")]
+        return Table(rows, "Misses and loose agreements, with the likely reason")
+
+    # -- figures, tables, assumptions -------------------------------------------------------------
+    def figure(self, fig, name: str, caption: str = "", dpi: int = 110) -> Path:
+        """Save a matplotlib figure as ``<name>.png``; the caption says what it reproduces."""
+        self._check_name(name)
+        path = self.output_dir / f"{name}.png"
+        # fixed metadata keeps PNG bytes identical between identical runs
+        fig.savefig(path, dpi=dpi, bbox_inches="tight", metadata={"Software": None})
+        self.figures = [f for f in self.figures if f["name"] != name]
+        self.figures.append({"name": name, "file": path.name, "caption": caption})
+        self._save_manifest()
+        return path
+
+    def table(self, name: str, rows: list[dict], caption: str = "") -> Table:
+        """Save rows (list of dicts) as ``<name>.csv`` and return them for display."""
+        self._check_name(name)
+        table = Table(rows, caption)
+        table.write_csv(self.output_dir / f"{name}.csv")
+        self.tables = [t for t in self.tables if t["name"] != name]
+        self.tables.append({"name": name, "file": f"{name}.csv", "caption": caption})
+        self._save_manifest()
+        return table
+
+    def assumption(self, name: str, value, reason: str) -> None:
+        """Record an assumed value (a parameter the source never printed) and why it was chosen."""
+        self.assumptions = [a for a in self.assumptions if a["name"] != name]
+        self.assumptions.append({"name": name, "value": value if isinstance(value, (int, float, str, bool))
+                                 else json.dumps(value), "reason": reason})
+        Table(self.assumptions).write_csv(self.output_dir / "assumptions.csv")
+        self._save_manifest()
+
+    def assumptions_table(self) -> Table:
+        return Table(self.assumptions, "Assumptions (values the source does not print)")
+
+    @staticmethod
+    def _check_name(name):
+        if not _NAME.match(name):
+            raise ValueError(f"output name {name!r} must be letters, digits, '_', '-' or '.'")
+
+    def _save_manifest(self):
+        manifest = {"experiment": self.experiment, "figures": self.figures, "tables": self.tables,
+                    "n_numbers": len(self.numbers), "n_assumptions": len(self.assumptions)}
+        (self.output_dir / "manifest.json").write_text(json.dumps(manifest, indent=1))

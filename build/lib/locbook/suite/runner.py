@@ -1,0 +1,547 @@
+"""Execute the notebook suite with papermill: validation, locking, caching, worker processes, reports.
+
+Layout of a reports folder (``reports/<profile>/``, or its own folder for a run with ``-p`` overrides)::
+
+    index.html, index.md, numbers.csv        the whole suite (numbers.csv: every printed number)
+    <id>/<id>.ipynb, <id>.html               the executed notebook and its HTML page
+    <id>/summary.md, report.md, *.png, *.csv lightweight results (committed for the full profile)
+    <id>/report.html                         the whole page in HTML
+    <id>/report.json                         stamp, parameters and run time of the report (committed)
+    <id>/run.json                            cache record: key, data files read and their hashes, time
+    .lock                                    held by the run writing this folder
+    .staging/<run>/<id>/                     experiments in progress, one folder per run
+    .failed/<id>/                            the last failed attempt, kept for inspection
+    status.json                              the last attempt of each experiment
+
+Guarantees (README, "Interrupts, concurrent runs and the cache"):
+
+- one run at a time per folder: a second run waits for the lock and says so;
+- each experiment runs in its own worker process; a worker that dies fails only its experiment (retried
+  once, as is a kernel that dies on start); every other experiment finishes;
+- a finished experiment is validated (notebook readable, every file in its manifest present, numbers.csv
+  well formed) and then promoted by renames; only then is its cache record written, so a failed,
+  interrupted or concurrent run never replaces or corrupts a good report;
+- SIGINT / SIGTERM: no new experiment starts, running ones are stopped (worker and kernel), finished ones
+  are kept, and :class:`SuiteRun` says what ran and what did not;
+- the suite files (index, numbers.csv) are rebuilt from every experiment folder present, so a partial run
+  keeps the other experiments' previous results, each with its own stamp.
+"""
+from __future__ import annotations
+
+import csv
+import hashlib
+import io
+import json
+import os
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import threading
+import time
+import uuid
+from collections import deque
+from dataclasses import dataclass
+from importlib import metadata
+from pathlib import Path
+
+from . import site
+from .report import NUMBER_COLUMNS
+from .params import read_notebook
+from .site import _read_csv, _read_json
+from .spec import SAFE_NAME, Experiment, Suite, SuiteError
+
+__all__ = ["KERNEL_NAME", "run_suite", "cache_key", "Outcome", "SuiteRun", "write_suite_reports",
+           "override_folder_name"]
+
+#: Every notebook runs on this kernel; jupyter_client maps it to the running interpreter.
+KERNEL_NAME = "python3"
+_DEPENDENCIES = ("numpy", "scipy", "cvxpy", "clarabel", "osqp", "scs", "matplotlib", "papermill",
+                 "nbclient", "nbconvert", "nbformat", "ipykernel")
+_WORKER_FILES = (".runtime", ".result.json", ".result.json.tmp", ".task.json", ".data-read.log")
+_STOP_GRACE_S = 5.0
+
+
+@dataclass
+class Outcome:
+    id: str
+    status: str  # "ok", "cached", "failed", "interrupted" or "not run"
+    seconds: float
+    error: str = ""
+    attempts: int = 0
+
+
+@dataclass
+class SuiteRun:
+    """What a run did: one :class:`Outcome` per selected experiment, the folder written, and the signal that
+    stopped the run (``None`` if it ran to the end)."""
+
+    outcomes: list[Outcome]
+    report_dir: Path
+    interrupted_by: int | None = None
+
+    def count(self, status: str) -> int:
+        return sum(o.status == status for o in self.outcomes)
+
+
+def locbook_version() -> str:
+    from .. import __version__
+    return __version__
+
+
+def _package_dir() -> Path:
+    return Path(__file__).resolve().parents[1]
+
+
+def _source_fingerprint() -> str:
+    """Every Python source of the package (data files are tracked per experiment, by what it reads)."""
+    package = _package_dir()
+    h = hashlib.sha256()
+    for path in sorted(package.rglob("*.py")):
+        h.update(str(path.relative_to(package)).encode())
+        h.update(path.read_bytes())
+    return h.hexdigest()
+
+
+def _dependency_versions() -> dict[str, str]:
+    versions = {"python": sys.version.split()[0]}
+    for name in _DEPENDENCIES:
+        try:
+            versions[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            versions[name] = "absent"
+    return versions
+
+
+def _notebook_fingerprint(path: Path) -> str:
+    nb = read_notebook(path)
+    h = hashlib.sha256()
+    for cell in nb.cells:  # sources and tags only: outputs and execution counts do not matter
+        h.update(cell.cell_type.encode())
+        h.update(cell.source.encode())
+        h.update(json.dumps(cell.get("metadata", {}).get("tags", [])).encode())
+    return h.hexdigest()
+
+
+def cache_key(exp: Experiment, profile: str, params: dict, *, source: str | None = None,
+              versions: dict | None = None) -> str:
+    """Hash of notebook, parameters, profile, locbook source and dependency versions. The data files an
+    experiment reads are checked separately, by their hashes recorded in ``run.json``."""
+    payload = {
+        "experiment": exp.id, "profile": profile, "parameters": params,
+        "notebook": _notebook_fingerprint(exp.notebook),
+        "locbook": source or _source_fingerprint(),
+        "versions": versions or _dependency_versions(),
+    }
+    return hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()
+
+
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def _git_state(root: Path | None) -> tuple[str, str]:
+    """``(short commit, uncommitted changes under locbook/ and notebooks/)`` of a locbook clone; ``("", "")``
+    outside git or for an installed package (whose folder may sit inside someone else's repository)."""
+    if root is None:
+        return "", ""
+
+    def git(*args):
+        return subprocess.run(["git", "-C", str(root), *args], capture_output=True, text=True,
+                              timeout=10).stdout.rstrip()     # porcelain lines start with a status column
+    try:
+        rev = git("rev-parse", "--short", "HEAD").strip()
+        dirty = git("status", "--porcelain", "--", "locbook", "notebooks") if rev else ""
+    except (OSError, subprocess.SubprocessError):
+        return "", ""
+    return rev, dirty
+
+
+def _committed_reports(root: Path, report_dir: Path) -> bool:
+    """True when git tracks files in ``report_dir`` (the committed ``reports/full``)."""
+    try:
+        out = subprocess.run(["git", "-C", str(root), "ls-files", "--", str(report_dir.resolve())],
+                             capture_output=True, text=True, timeout=10).stdout
+    except (OSError, subprocess.SubprocessError):
+        return False
+    return bool(out.strip())
+
+
+def override_folder_name(profile: str, overrides: dict[str, str]) -> str:
+    """Folder of a run with ``-p`` overrides: the profile, the overrides in words, and a hash of them
+    (``quick-sigma-db-2-5-a1b2c3d4``), ``[a-z0-9-]`` only."""
+    words = "-".join(f"{k}-{overrides[k]}" for k in sorted(overrides))
+    slug = re.sub(r"[^a-z0-9]+", "-", words.lower()).strip("-")[:60].strip("-")
+    digest = hashlib.sha256(json.dumps(overrides, sort_keys=True).encode()).hexdigest()[:8]
+    return "-".join(p for p in (profile, slug, digest) if p)
+
+
+# ---------------------------------------------------------------------------------------------------
+# small file helpers: every suite-level file is written to a temporary name, then renamed
+
+def _write_atomic(path: Path, text: str) -> None:
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    tmp.write_text(text, encoding="utf-8")
+    os.replace(tmp, path)
+
+
+def _replace_dir(new: Path, final: Path):
+    """Swap ``new`` into place of ``final``: ``final -> .old-<name>``, ``new -> final``, remove the old copy.
+    A crash between the two renames leaves ``.old-<name>``, which :func:`_recover` puts back."""
+    old = final.with_name(f".old-{final.name}")
+    if old.exists():
+        shutil.rmtree(old)
+    if final.exists():
+        final.rename(old)
+    new.rename(final)
+    if old.exists():
+        shutil.rmtree(old)
+
+
+def _recover(report_dir: Path) -> None:
+    """Undo what an interrupted run left (called under the lock, so no other run is using these)."""
+    for old in report_dir.glob(".old-*"):
+        final = report_dir / old.name[len(".old-"):]
+        if final.exists():
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            old.rename(final)
+    shutil.rmtree(report_dir / ".staging", ignore_errors=True)
+    for tmp in report_dir.glob(".*.tmp"):
+        tmp.unlink(missing_ok=True)
+
+
+def _validate_report(folder: Path, exp_id: str) -> str:
+    """'' if ``folder`` holds a complete report of ``exp_id``, else what is wrong."""
+    try:
+        read_notebook(folder / f"{exp_id}.ipynb")
+    except Exception as exc:
+        return f"executed notebook unreadable ({exc})"
+    manifest = _read_json(folder / "manifest.json", None)
+    if not isinstance(manifest, dict):
+        return "manifest.json missing or malformed (the notebook did not create a locbook Report)"
+    for item in manifest.get("figures", []) + manifest.get("tables", []):
+        if not (folder / item["file"]).is_file():
+            return f"{item['file']} is listed in the manifest but missing"
+    numbers = folder / "numbers.csv"
+    if numbers.exists():
+        with open(numbers, newline="") as fh:
+            reader = csv.DictReader(fh)
+            if tuple(reader.fieldnames or ()) != NUMBER_COLUMNS:
+                return f"numbers.csv has columns {reader.fieldnames}, expected {list(NUMBER_COLUMNS)}"
+            rows = list(reader)
+        if len(rows) != manifest.get("n_numbers", len(rows)):
+            return f"numbers.csv has {len(rows)} rows, the manifest says {manifest.get('n_numbers')}"
+        if any(r["experiment"] != exp_id for r in rows):
+            return "numbers.csv holds rows of another experiment"
+    return ""
+
+
+def _data_hashes(staging: Path) -> dict[str, str]:
+    """SHA-256 of every data file the worker logged as read (see locbook._datalog)."""
+    logged = staging / ".data-read.log"
+    paths = sorted(set(logged.read_text(encoding="utf-8").splitlines())) if logged.exists() else []
+    return {p: _sha256(Path(p)) for p in paths if Path(p).is_file()}
+
+
+def _data_unchanged(recorded: dict[str, str]) -> bool:
+    for path, digest in recorded.items():
+        try:
+            if _sha256(Path(path)) != digest:
+                return False
+        except OSError:
+            return False
+    return True
+
+
+def _cached(report_dir: Path, exp: Experiment, key: str) -> bool:
+    run = _read_json(report_dir / exp.id / "run.json", {})
+    return (run.get("cache_key") == key and run.get("status") == "ok"
+            and _data_unchanged(run.get("data", {})) and not _validate_report(report_dir / exp.id, exp.id))
+
+
+# ---------------------------------------------------------------------------------------------------
+# reports
+
+def write_suite_reports(suite: Suite, report_dir: Path, *, list_all: bool = True) -> None:
+    """Rebuild ``numbers.csv``, ``index.html`` and ``index.md`` from the experiment folders present.
+
+    An experiment's rows come from its own folder, whatever run wrote it, so a partial run leaves the
+    others' results as they were. ``list_all=False`` (folders of ``-p`` runs) lists only the experiments
+    present."""
+    status = _read_json(report_dir / "status.json", {})
+    rows, entries = [], []
+    for exp in suite.experiments:
+        folder = report_dir / exp.id
+        present = (folder / "summary.md").is_file()
+        if not present and not list_all:
+            continue
+        numbers = _read_csv(folder / "numbers.csv") if present else []
+        rows += numbers
+        entries.append({"exp": exp, "present": present, "report": _read_json(folder / "report.json", {}),
+                        "run": _read_json(folder / "run.json", {}), "last": status.get(exp.id, {}),
+                        "numbers": numbers})
+    out = io.StringIO()
+    writer = csv.DictWriter(out, fieldnames=NUMBER_COLUMNS)
+    writer.writeheader()
+    for r in rows:
+        writer.writerow({c: r.get(c, "") for c in NUMBER_COLUMNS})
+    _write_atomic(report_dir / "numbers.csv", out.getvalue())
+    _write_atomic(report_dir / "index.html", site.index_html(report_dir, entries, rows, locbook_version()))
+    _write_atomic(report_dir / "index.md", site.index_markdown(report_dir, entries, rows))
+
+
+# ---------------------------------------------------------------------------------------------------
+# the run
+
+class _Stop:
+    """SIGINT / SIGTERM while the suite runs: remember the first signal; the loop stops at its next turn."""
+
+    def __init__(self):
+        self.signum: int | None = None
+        self._previous = {}
+
+    def __enter__(self):
+        if threading.current_thread() is threading.main_thread():
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                self._previous[sig] = signal.signal(sig, self._handle)
+        return self
+
+    def _handle(self, signum, _frame):
+        if self.signum is None:
+            self.signum = signum
+
+    def __exit__(self, *exc):
+        for sig, handler in self._previous.items():
+            signal.signal(sig, handler)
+        return False
+
+
+def _check_kernel(kernel_name: str) -> None:
+    from jupyter_client.kernelspec import KernelSpecManager, NoSuchKernel
+    try:
+        KernelSpecManager().get_kernel_spec(kernel_name)
+    except NoSuchKernel:
+        raise SuiteError(f"no Jupyter kernel named {kernel_name!r} is installed; install ipykernel in this "
+                         "environment (pip install ipykernel)") from None
+
+
+def _acquire(lock, report_dir: Path, stop: _Stop, log) -> bool:
+    from filelock import Timeout
+    try:
+        lock.acquire(timeout=0)
+        return True
+    except Timeout:
+        log(f"another locbook run is writing {report_dir}; waiting for it to finish (Ctrl-C to give up)")
+    while stop.signum is None:
+        try:
+            lock.acquire(timeout=0.5)
+            return True
+        except Timeout:
+            continue
+    return False
+
+
+def run_suite(suite: Suite, experiments: list[Experiment], profile: str, *, jobs: int = 1, force: bool = False,
+              overrides: dict[str, str] | None = None, report_root: Path | None = None,
+              out_dir: Path | None = None, timeout_s: float = 1800, retries: int = 1,
+              kernel_name: str = KERNEL_NAME, log=print) -> SuiteRun:
+    """Run experiments and write their reports; see the module docstring for the guarantees.
+
+    Parameters of every selected experiment are checked before any executes (raises ParameterError).
+    The reports go to ``<report_root>/<profile>/``, or, with ``overrides``, to their own folder
+    (:func:`override_folder_name`) so that the profile's default report is never touched; ``out_dir``
+    names the folder explicitly. ``retries``: further attempts for an experiment whose worker or kernel died.
+    """
+    from filelock import FileLock
+
+    overrides = overrides or {}
+    if not timeout_s > 0:
+        raise SuiteError(f"the timeout must be a positive number of seconds, got {timeout_s}")
+    if jobs < 1:
+        raise SuiteError(f"jobs must be at least 1, got {jobs}")
+    root = Path(report_root) if report_root else suite.default_reports()
+    if out_dir is not None:
+        report_dir = Path(out_dir)
+        if not SAFE_NAME.match(report_dir.name):
+            raise SuiteError(f"output folder name {report_dir.name!r} must be lower-case letters, digits and "
+                             "hyphens ([a-z0-9-])")
+    elif overrides:
+        report_dir = root / override_folder_name(profile, overrides)
+    else:
+        report_dir = root / profile
+    resolved = {exp.id: exp.parameters(profile, overrides) for exp in experiments}  # validation first
+    rev, dirty = _git_state(suite.repository)
+    if dirty and _committed_reports(suite.repository, report_dir):
+        changed = ", ".join(line[3:] for line in dirty.splitlines()[:5])
+        raise SuiteError(f"{report_dir} holds committed reports, which are stamped with the commit that produced "
+                         f"them; commit (or set aside) the changes under locbook/ and notebooks/ first ({changed})")
+    _check_kernel(kernel_name)
+    try:
+        report_dir.mkdir(parents=True, exist_ok=True)
+        probe = report_dir / f".write-test-{os.getpid()}"
+        probe.write_text("")
+        probe.unlink()
+    except OSError as exc:
+        raise SuiteError(f"cannot write to the reports folder {report_dir}: {exc.strerror}") from None
+    data_roots = [str(_package_dir()), str(suite.root.parent / "shared")]
+    run = SuiteRun([], report_dir)
+    with _Stop() as stop:
+        lock = FileLock(str(report_dir / ".lock"))
+        if not _acquire(lock, report_dir, stop, log):
+            run.interrupted_by = stop.signum
+            run.outcomes = [Outcome(e.id, "not run", 0.0) for e in experiments]
+            return run
+        try:
+            _recover(report_dir)
+            _run_locked(suite, experiments, profile, resolved, report_dir, data_roots, jobs, force, timeout_s,
+                        retries, kernel_name, bool(overrides) or out_dir is not None, stop, run, log)
+        finally:
+            lock.release()
+    run.interrupted_by = stop.signum
+    order = {exp.id: i for i, exp in enumerate(experiments)}
+    run.outcomes.sort(key=lambda o: order[o.id])
+    return run
+
+
+def _run_locked(suite, experiments, profile, resolved, report_dir, data_roots, jobs, force, timeout_s, retries,
+                kernel_name, custom_folder, stop, run, log):
+    source, versions = _source_fingerprint(), _dependency_versions()
+    rev, dirty = _git_state(suite.repository)
+    stamp = locbook_version() + (f" (source {rev}{' + uncommitted changes' if dirty else ''})" if rev else "")
+    status_path = report_dir / "status.json"
+    status = _read_json(status_path, {})
+    by_id = {e.id: e for e in experiments}
+    keys = {exp.id: cache_key(exp, profile, resolved[exp.id], source=source, versions=versions)
+            for exp in experiments}
+    start = time.perf_counter()
+    total = len(experiments)
+
+    def finish(outcome: Outcome):
+        run.outcomes.append(outcome)
+        if outcome.status != "not run":
+            status[outcome.id] = {"status": outcome.status, "seconds": round(outcome.seconds, 2),
+                                  "error": outcome.error}
+            _write_atomic(status_path, json.dumps(status, indent=1, sort_keys=True))
+        log(f"[{len(run.outcomes)}/{total}] {outcome.id}: {outcome.status}"
+            f"{f' in {outcome.seconds:.1f} s' if outcome.status in ('ok', 'failed') else ''}"
+            f" (elapsed {time.perf_counter() - start:.0f} s){'  ' + outcome.error if outcome.error else ''}")
+
+    queue: deque = deque()
+    for exp in experiments:
+        if not force and _cached(report_dir, exp, keys[exp.id]):
+            finish(Outcome(exp.id, "cached", 0.0))
+        else:
+            queue.append((exp.id, 1))
+    staging_root = report_dir / ".staging" / f"{os.getpid()}-{uuid.uuid4().hex[:8]}"
+    running: dict[str, tuple] = {}     # id -> (process, staging, attempt, started)
+
+    def launch(eid: str, attempt: int):
+        staging = staging_root / f"{eid}-{attempt}"
+        staging.mkdir(parents=True)
+        task = {"id": eid, "notebook": str(by_id[eid].notebook), "parameters": resolved[eid],
+                "staging": str(staging), "timeout": timeout_s, "kernel": kernel_name,
+                "data_roots": data_roots, "runner_pid": os.getpid()}
+        (staging / ".task.json").write_text(json.dumps(task))
+        proc = subprocess.Popen([sys.executable, "-m", "locbook.suite.worker", str(staging / ".task.json")],
+                                start_new_session=True, stdin=subprocess.DEVNULL,
+                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        running[eid] = (proc, staging, attempt, time.perf_counter())
+        log(f"running {eid}{f' (attempt {attempt})' if attempt > 1 else ''} ...")
+
+    def complete(eid: str, proc, staging: Path, attempt: int, started: float):
+        seconds = time.perf_counter() - started
+        result = _read_json(staging / ".result.json", None)
+        if result is None:
+            code = proc.returncode
+            why = (f"worker process died ({signal.Signals(-code).name})" if code and code < 0
+                   else f"worker process exited with status {code} without a result")
+            result = {"error": why, "kernel_failure": True, "seconds": seconds}
+        if result["error"] and result.get("kernel_failure") and attempt <= retries and stop.signum is None:
+            log(f"{eid}: {result['error']}; retrying once")
+            queue.appendleft((eid, attempt + 1))
+            return
+        error = result["error"] or _validate_report(staging, eid)
+        if not error:
+            try:
+                _promote(by_id[eid], profile, resolved[eid], staging, report_dir, stamp, keys[eid], result)
+            except OSError as exc:
+                error = f"could not write the report: {exc.strerror or exc}"
+        if error:
+            try:
+                _keep_failed(staging, report_dir / ".failed" / eid)
+            except OSError:
+                pass
+            finish(Outcome(eid, "failed", result["seconds"], error, attempt))
+        else:
+            finish(Outcome(eid, "ok", result["seconds"], "", attempt))
+
+    try:
+        while queue or running:
+            if stop.signum is not None:
+                break
+            while queue and len(running) < jobs:
+                launch(*queue.popleft())
+            time.sleep(0.1)
+            for eid in [e for e, (p, *_rest) in running.items() if p.poll() is not None]:
+                proc, staging, attempt, started = running.pop(eid)
+                complete(eid, proc, staging, attempt, started)
+    finally:
+        # an interrupt (or an unexpected error here): stop the workers, keep everything finished
+        for eid, (proc, staging, attempt, started) in running.items():
+            if proc.poll() is None:
+                proc.send_signal(signal.SIGTERM)
+        deadline = time.perf_counter() + _STOP_GRACE_S
+        for eid, (proc, staging, attempt, started) in running.items():
+            try:
+                proc.wait(max(0.0, deadline - time.perf_counter()))
+            except subprocess.TimeoutExpired:
+                os.killpg(proc.pid, signal.SIGKILL)
+                proc.wait()
+            finish(Outcome(eid, "interrupted", time.perf_counter() - started,
+                           f"stopped by {signal.Signals(stop.signum).name}" if stop.signum else "stopped", attempt))
+        for eid, _attempt in queue:
+            finish(Outcome(eid, "not run", 0.0))
+        shutil.rmtree(staging_root, ignore_errors=True)
+        write_suite_reports(suite, report_dir, list_all=not custom_folder)
+
+
+def _strip_worker_files(staging: Path) -> None:
+    for name in _WORKER_FILES:
+        path = staging / name
+        if path.is_dir():
+            shutil.rmtree(path, ignore_errors=True)
+        else:
+            path.unlink(missing_ok=True)
+
+
+def _keep_failed(staging: Path, failed: Path) -> None:
+    _strip_worker_files(staging)
+    failed.parent.mkdir(exist_ok=True)
+    _replace_dir(staging, failed)
+
+
+def _promote(exp, profile, params, staging: Path, report_dir: Path, stamp: str, key: str, result: dict) -> None:
+    """Write the summary and the records into the validated staging folder, then swap it into place. The cache
+    record (run.json) is written before the swap, inside the new folder, so it only ever describes a
+    complete report."""
+    data = _data_hashes(staging)
+    _strip_worker_files(staging)
+    numbers = _read_csv(staging / "numbers.csv")
+    (staging / "summary.md").write_text(site.summary_markdown(exp, profile, numbers, stamp), encoding="utf-8")
+    (staging / "report.md").write_text(site.page_markdown(exp, profile, params, staging, numbers, stamp),
+                                       encoding="utf-8")
+    (staging / "report.html").write_text(site.page_html(exp, profile, params, staging, numbers, stamp),
+                                         encoding="utf-8")
+    (staging / "report.json").write_text(json.dumps(
+        {"experiment": exp.id, "profile": profile, "parameters": params, "locbook": stamp,
+         "seconds": round(result["seconds"], 1)}, indent=1,
+        sort_keys=True) + "\n")
+    (staging / "run.json").write_text(json.dumps({
+        "cache_key": key, "status": "ok", "seconds": round(result["seconds"], 2), "data": data}, indent=1))
+    _replace_dir(staging, report_dir / exp.id)

@@ -1,0 +1,190 @@
+"""The declarative experiment list (``notebooks/experiments.toml``).
+
+Schema::
+
+    [documents.<key>]            # key: dogan2015, gudipati2017, palvai2008, george, ozkaya2011, kolakowski2021
+    title, authors, year, source  # source: the file in ../shared/seeds (or the data set's folder), note: the
+                                  # reading note (or the data set's README)
+
+    [[experiment]]
+    id = "<key>-<name>"           # prefixed by its document key
+    document = "<key>"
+    title, section                # section: which table/figure/section of the source
+    notebook = "<path relative to the TOML file>"
+    [experiment.profiles.quick]   # parameters per profile (every profile must be present)
+    [experiment.profiles.full]
+    [experiment.parameter_rules]  # optional: rules for this experiment's parameters (override the suite's)
+
+    [parameter_rules]             # allowed values by parameter name, for every experiment declaring it
+    n_runs = { ge = 2 }           # keys: ge, gt, le, lt, allow_inf, min_items, max_items (ParameterRule)
+
+Experiment ids are ``[a-z0-9-]`` only (they name folders under ``reports/``).
+"""
+from __future__ import annotations
+
+import re
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ..errors import ParameterError
+from .params import NotebookParameter, ParameterRule, is_numeric_annotation, read_parameters, resolve_parameters
+
+__all__ = ["Suite", "Experiment", "Document", "PROFILES", "DOCUMENT_KEYS", "load_suite", "find_suite_file",
+           "packaged_suite_file"]
+
+PROFILES = ("quick", "full")
+#: the five source documents, the measured data set, and the cross-document benchmark (issue 16)
+DOCUMENT_KEYS = ("dogan2015", "gudipati2017", "palvai2008", "george", "ozkaya2011", "kolakowski2021", "benchmark")
+SUITE_FILE = Path("notebooks") / "experiments.toml"
+#: experiment ids and report folder names: lower-case letters, digits and single hyphens
+SAFE_NAME = re.compile(r"^[a-z0-9]+(-[a-z0-9]+)*$")
+
+
+class SuiteError(ParameterError):
+    """The experiment list is malformed."""
+
+
+@dataclass(frozen=True)
+class Document:
+    key: str
+    title: str
+    authors: str
+    year: str
+    source: str
+    note: str
+
+
+@dataclass(frozen=True)
+class Experiment:
+    id: str
+    document: Document
+    title: str
+    section: str
+    notebook: Path
+    profiles: dict[str, dict] = field(hash=False)
+    rules: dict[str, ParameterRule] = field(default_factory=dict, hash=False)
+
+    def declared_parameters(self) -> dict[str, NotebookParameter]:
+        return read_parameters(self.notebook)
+
+    def parameters(self, profile: str, overrides: dict[str, str] | None = None) -> dict:
+        """Checked parameters for a profile with ``-p`` overrides (text) applied."""
+        if profile not in self.profiles:
+            raise SuiteError(f"experiment {self.id!r} has no profile {profile!r}")
+        return resolve_parameters(self.notebook, self.declared_parameters(), self.profiles[profile],
+                                  overrides or {}, f"experiment {self.id!r}, profile {profile!r}", self.rules)
+
+    def unruled_numeric_parameters(self) -> list[str]:
+        """Numeric parameters without a range rule (the suite's test requires none)."""
+        return [p.name for p in self.declared_parameters().values()
+                if is_numeric_annotation(p.annotation) and p.name not in self.rules]
+
+
+@dataclass(frozen=True)
+class Suite:
+    path: Path
+    documents: dict[str, Document]
+    experiments: list[Experiment]
+
+    @property
+    def root(self) -> Path:
+        """The folder holding ``notebooks/`` (the repository root in a clone)."""
+        return self.path.parent.parent
+
+    @property
+    def repository(self) -> Path | None:
+        """The locbook source tree the suite belongs to (a clone: ``notebooks/`` beside ``locbook/``), or None for
+        the suite shipped inside an installed package or a copy made by ``locbook notebooks``."""
+        root = self.root
+        return root if (self.path.parent.name == "notebooks" and (root / "locbook" / "__init__.py").is_file()) else None
+
+    def default_reports(self) -> Path:
+        """Where reports go without ``--reports``: ``<repository>/reports`` in a clone, else ``./reports``."""
+        return (self.repository or Path.cwd()) / "reports"
+
+    def select(self, ids: list[str]) -> list[Experiment]:
+        """Experiments by exact id or by document key / id prefix (``george`` selects all of 003)."""
+        if not ids:
+            return list(self.experiments)
+        chosen, unknown = [], []
+        for wanted in ids:
+            hits = [e for e in self.experiments if e.id == wanted or e.id.startswith(wanted + "-")]
+            if not hits:
+                unknown.append(wanted)
+            chosen += [e for e in hits if e not in chosen]
+        if unknown:
+            raise SuiteError(f"unknown experiment(s) {', '.join(unknown)}; `locbook list` shows the ids")
+        return chosen
+
+
+def packaged_suite_file() -> Path:
+    """The experiment list locbook ships with: the source tree's ``notebooks/`` (a clone or an editable install),
+    else the copy inside the installed package (``locbook/notebooks/``, put there by the wheel)."""
+    package = Path(__file__).resolve().parents[1]
+    for candidate in (package.parent / SUITE_FILE, package / "notebooks" / SUITE_FILE.name):
+        if candidate.is_file():
+            return candidate
+    raise SuiteError(f"the installed locbook has no experiment list (looked for {package.parent / SUITE_FILE} and "
+                     f"{package / 'notebooks' / SUITE_FILE.name}); reinstall locbook or pass --suite")
+
+
+def find_suite_file(start: Path | None = None) -> Path:
+    """``notebooks/experiments.toml`` in the current folder or a parent (a clone, or notebooks copied out with
+    ``locbook notebooks``), else the one locbook ships with (:func:`packaged_suite_file`)."""
+    here = (start or Path.cwd()).resolve()
+    for folder in (here, *here.parents):
+        if (folder / SUITE_FILE).is_file():
+            return folder / SUITE_FILE
+    return packaged_suite_file()
+
+
+def _rules(raw: dict, where: str) -> dict[str, ParameterRule]:
+    if not isinstance(raw, dict):
+        raise SuiteError(f"{where} must be a table of rules by parameter name")
+    return {name: ParameterRule.from_toml(name, rule, where) for name, rule in raw.items()}
+
+
+def load_suite(path: Path | None = None) -> Suite:
+    path = Path(path) if path else find_suite_file()
+    try:
+        with open(path, "rb") as fh:
+            data = tomllib.load(fh)
+    except OSError as exc:
+        raise SuiteError(f"cannot read the experiment list {path}: {exc.strerror}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise SuiteError(f"{path}: {exc}") from None
+    documents = {}
+    for key, doc in data.get("documents", {}).items():
+        if key not in DOCUMENT_KEYS:
+            raise SuiteError(f"{path}: unknown document key {key!r}; expected one of {DOCUMENT_KEYS}")
+        missing = {"title", "authors", "year", "source", "note"} - set(doc)
+        if missing:
+            raise SuiteError(f"{path}: document {key!r} lacks {sorted(missing)}")
+        documents[key] = Document(key, doc["title"], doc["authors"], str(doc["year"]), doc["source"], doc["note"])
+    suite_rules = _rules(data.get("parameter_rules", {}), f"{path}: [parameter_rules]")
+    experiments, seen = [], set()
+    for raw in data.get("experiment", []):
+        missing = {"id", "document", "title", "section", "notebook", "profiles"} - set(raw)
+        if missing:
+            raise SuiteError(f"{path}: experiment {raw.get('id', '?')!r} lacks {sorted(missing)}")
+        eid, dkey = raw["id"], raw["document"]
+        if not isinstance(eid, str) or not SAFE_NAME.match(eid):
+            raise SuiteError(f"{path}: experiment id {eid!r} must be lower-case letters, digits and hyphens "
+                             "([a-z0-9-], e.g. 'george-tracking'); it names a folder under reports/")
+        if dkey not in documents:
+            raise SuiteError(f"{path}: experiment {eid!r} names undeclared document {dkey!r}")
+        if not eid.startswith(dkey + "-"):
+            raise SuiteError(f"{path}: experiment id {eid!r} must start with its document key '{dkey}-'")
+        if eid in seen:
+            raise SuiteError(f"{path}: duplicate experiment id {eid!r}")
+        seen.add(eid)
+        if set(raw["profiles"]) != set(PROFILES):
+            raise SuiteError(f"{path}: experiment {eid!r} must define exactly the profiles {PROFILES}")
+        notebook = (path.parent / raw["notebook"]).resolve()
+        if not notebook.is_file():
+            raise SuiteError(f"{path}: experiment {eid!r}: notebook {raw['notebook']} does not exist")
+        rules = {**suite_rules, **_rules(raw.get("parameter_rules", {}), f"{path}: experiment {eid!r}")}
+        experiments.append(Experiment(eid, documents[dkey], raw["title"], raw["section"], notebook,
+                                      {p: dict(raw["profiles"][p]) for p in PROFILES}, rules))
+    return Suite(path.resolve(), documents, experiments)

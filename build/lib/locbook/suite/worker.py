@@ -1,0 +1,124 @@
+"""One experiment in its own process: ``python -m locbook.suite.worker TASK.json``.
+
+The runner starts one worker per notebook, each in its own session, so a worker that dies (SIGKILL, out of
+memory) fails only its experiment. The worker executes the notebook with papermill into the task's staging
+folder and writes ``result.json`` there; it never touches the report itself.
+
+Clean-up guarantees: if the runner dies (even by SIGKILL) the worker gets SIGTERM from the kernel
+(``PR_SET_PDEATHSIG`` on Linux; a parent watch elsewhere); on SIGTERM the worker kills its Jupyter kernel and
+exits. A kernel whose worker vanished exits by itself (ipykernel's parent poller, ``JPY_PARENT_PID``).
+"""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import sys
+import threading
+import time
+from pathlib import Path
+
+SINGLE_THREAD = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
+                 "BLIS_NUM_THREADS": "1", "VECLIB_MAXIMUM_THREADS": "1", "NUMEXPR_NUM_THREADS": "1"}
+#: failures worth one more attempt: the kernel died or never answered (the papermill/ipykernel port race)
+KERNEL_FAILURES = ("DeadKernelError", "ZMQError", "Kernel died", "kernel_info", "Kernel didn't respond")
+
+
+def _children(pid: int) -> list[int]:
+    """Direct children of ``pid`` (Linux /proc; empty elsewhere)."""
+    out = []
+    for entry in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = entry.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid:
+            out.append(int(entry.parent.name))
+    return out
+
+
+def _kill_kernels_and_exit(signum=signal.SIGTERM, _frame=None):
+    for child in _children(os.getpid()):
+        try:
+            os.killpg(child, signal.SIGKILL)      # the kernel leads its own session
+        except OSError:
+            try:
+                os.kill(child, signal.SIGKILL)
+            except OSError:
+                pass
+    os._exit(128 + int(signum))
+
+
+def _die_with_parent(parent: int):
+    try:  # Linux: the kernel signals us the moment the runner dies
+        import ctypes
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)   # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass
+    if os.getppid() != parent:                    # the runner died before prctl took effect
+        _kill_kernels_and_exit()
+
+    def watch():
+        while True:
+            if os.getppid() != parent:
+                _kill_kernels_and_exit()
+            time.sleep(0.5)
+
+    threading.Thread(target=watch, daemon=True).start()
+
+
+def execute(task: dict) -> dict:
+    """Run the notebook; return ``{"error", "kernel_failure", "seconds"}``; never raises."""
+    import papermill as pm
+    from nbconvert import HTMLExporter
+
+    staging = Path(task["staging"])
+    out_nb = staging / f"{task['id']}.ipynb"
+    start = time.perf_counter()
+    error, kernel_failure = "", False
+    try:
+        pm.execute_notebook(task["notebook"], str(out_nb), parameters=task["parameters"],
+                            kernel_name=task["kernel"], cwd=str(Path(task["notebook"]).parent),
+                            progress_bar=False, log_output=False, execution_timeout=task["timeout"])
+    except pm.PapermillExecutionError as exc:
+        error = f"{exc.ename}: {exc.evalue}"
+    except Exception as exc:  # kernel death, timeout, missing kernel, I/O: the run fails, the suite goes on
+        error = f"{type(exc).__name__}: {str(exc).strip().splitlines()[0] if str(exc).strip() else ''}"
+        kernel_failure = any(k in error for k in KERNEL_FAILURES)
+    seconds = time.perf_counter() - start
+    if out_nb.exists() and not error:
+        try:
+            body, _ = HTMLExporter(template_name="lab").from_filename(str(out_nb))
+            (staging / f"{task['id']}.html").write_text(body, encoding="utf-8")
+        except Exception as exc:  # an HTML failure must not hide the notebook's own result
+            error = f"HTML export failed: {type(exc).__name__}: {exc}"
+    return {"error": error, "kernel_failure": kernel_failure, "seconds": seconds}
+
+
+def main(task_path: str) -> int:
+    task = json.loads(Path(task_path).read_text())
+    _die_with_parent(task["runner_pid"])
+    signal.signal(signal.SIGTERM, _kill_kernels_and_exit)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the runner decides what an interrupt means
+    staging = Path(task["staging"])
+    runtime = staging / ".runtime"     # own folder for the kernel's connection file and temporary files
+    runtime.mkdir(exist_ok=True)
+    os.environ.update(SINGLE_THREAD)
+    os.environ.update({"LOCBOOK_OUTPUT_DIR": str(staging), "LOCBOOK_EXPERIMENT": task["id"],
+                       "LOCBOOK_DATA_LOG": str(staging / ".data-read.log"),
+                       "LOCBOOK_DATA_ROOTS": os.pathsep.join(task["data_roots"]),
+                       "JUPYTER_RUNTIME_DIR": str(runtime), "TMPDIR": str(runtime),
+                       "PYDEVD_DISABLE_FILE_VALIDATION": "1"})
+    # the kernel inherits stderr: keep its chatter in a log beside the report
+    log_fd = os.open(staging / "kernel-stderr.log", os.O_WRONLY | os.O_CREAT | os.O_TRUNC)
+    os.dup2(log_fd, 2)
+    os.close(log_fd)
+    result = execute(task)
+    tmp = staging / ".result.json.tmp"
+    tmp.write_text(json.dumps(result))
+    os.replace(tmp, staging / ".result.json")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1]))

@@ -1,0 +1,1 @@
+"""Tracking filters: the Kalman family, grid Bayes and particle filters."""

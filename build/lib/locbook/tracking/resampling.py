@@ -1,0 +1,92 @@
+"""Particle resampling schemes, vectorized over leading axes (Douc, Cappe and Moulines 2005; Arulampalam et al.
+2002, Alg. 2 for systematic resampling).
+
+Every scheme returns ancestor indices ``(..., N)`` whose expected counts are ``N w_j`` (unbiased); they differ in
+variance: multinomial > stratified > systematic in general, residual in between. ``N_eff``-triggered
+resampling (resample only where ``N_eff < threshold``) is :func:`resample_where`.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .._validate import as_array, check_choice
+from .bayes import effective_sample_size, systematic_resample
+
+__all__ = ["RESAMPLING_METHODS", "resample", "counts_to_indices", "resample_where"]
+
+RESAMPLING_METHODS = ("systematic", "stratified", "multinomial", "residual")
+
+
+def _check_weights(weights) -> np.ndarray:
+    w = as_array("weights", weights, min_ndim=1)
+    if w.shape[-1] == 0 or np.any(w < 0) or np.any(w.sum(axis=-1) <= 0):
+        raise ValueError(f"weights must be non-negative with a positive sum in every row, got shape {w.shape}")
+    return w / w.sum(axis=-1, keepdims=True)
+
+
+def _search_rows(cdf, points):
+    """Row-wise ``searchsorted(cdf_r, points_r, side="left")`` for ``(B, N)`` arrays with values in [0, 1], in one
+    call (row r is shifted by 2r so the rows do not overlap)."""
+    n_rows, n = cdf.shape
+    offset = 2.0 * np.arange(n_rows)[:, None]
+    idx = np.searchsorted((cdf + offset).ravel(), (points + offset).ravel(), side="left").reshape(points.shape)
+    return np.minimum(idx - n * np.arange(n_rows)[:, None], n - 1)
+
+
+def counts_to_indices(counts):
+    """Offspring counts ``(..., N)`` (non-negative integers summing to N per row) -> sorted ancestor indices."""
+    counts = np.asarray(counts)
+    batch, n = counts.shape[:-1], counts.shape[-1]
+    c = np.cumsum(counts.reshape(-1, n), axis=-1).astype(float)
+    if np.any(c[:, -1] != n):
+        raise ValueError("offspring counts must sum to the number of particles in every row")
+    # ancestor of slot i: the first j with cumsum_j > i (scaled to [0, 1] for the row-wise search)
+    return _search_rows(c / n, np.broadcast_to((np.arange(n) + 0.5) / n, c.shape)).reshape(batch + (n,))
+
+
+def resample(weights, rng: np.random.Generator, method: str = "systematic"):
+    """Ancestor indices ``(..., N)`` for every row of ``weights (..., N)`` (normalised here).
+
+    - ``"systematic"``: one uniform per row, points ``(u + i) / N`` (:func:`locbook.systematic_resample`);
+    - ``"stratified"``: one uniform per stratum, points ``(u_i + i) / N``;
+    - ``"multinomial"``: N independent draws from the weights;
+    - ``"residual"``: ``floor(N w_j)`` copies of each particle, the remaining ``N - sum floor(N w)`` drawn
+      multinomially from the residual weights.
+    """
+    check_choice("method", method, RESAMPLING_METHODS)
+    if not isinstance(rng, np.random.Generator):
+        raise ValueError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
+    w = _check_weights(weights)
+    batch, n = w.shape[:-1], w.shape[-1]
+    if method == "systematic":
+        return systematic_resample(w, rng.random(batch))
+    flat = w.reshape(-1, n)
+    if method == "stratified":
+        cdf = np.cumsum(flat, axis=-1)
+        cdf[:, -1] = 1.0
+        points = (np.arange(n) + rng.random(flat.shape)) / n
+        return _search_rows(cdf, points).reshape(batch + (n,))
+    if method == "multinomial":
+        counts = rng.multinomial(n, flat)
+        return counts_to_indices(counts).reshape(batch + (n,))
+    scaled = n * flat
+    det = np.floor(scaled).astype(np.int64)
+    rest = n - det.sum(axis=-1)
+    resid = scaled - det
+    total = resid.sum(axis=-1, keepdims=True)
+    pvals = np.where(total > 0, resid / np.where(total > 0, total, 1.0), 1.0 / n)
+    extra = rng.multinomial(rest, pvals)
+    return counts_to_indices(det + extra).reshape(batch + (n,))
+
+
+def resample_where(weights, rng: np.random.Generator, method: str = "systematic", *, threshold=None):
+    """Resample only the rows whose effective sample size ``1 / sum w^2`` is below ``threshold`` (default: always,
+    the SIR filter's every-step resampling). Returns ``(indices (..., N), resampled (...) bool)``; rows not
+    resampled keep the identity indices (and the caller keeps their weights)."""
+    w = _check_weights(weights)
+    n = w.shape[-1]
+    idx = resample(w, rng, method)
+    if threshold is None:
+        return idx, np.ones(w.shape[:-1], bool)
+    do = effective_sample_size(w) < threshold
+    return np.where(do[..., None], idx, np.arange(n)), do

@@ -1,0 +1,282 @@
+"""Unscented Kalman filter (scaled unscented transform), vectorized over leading Monte-Carlo axes.
+
+Gudipati 2017, Sec. 3.6, Eqs. (3.18)-(3.30), corrected (note 001, s.2.7 and s.5 point 4):
+
+    lambda = alpha^2 (n + kappa) - n
+    X^0 = x-,  X^i = x- + (sqrt((n + lambda) P-))_i,  X^{n+i} = x- - (sqrt((n + lambda) P-))_i     (3.18)-(3.20)
+    W_m^0 = lambda / (n + lambda)        [printed n / (n + lambda), Eq. (3.22)]
+    W_c^0 = W_m^0 + 1 - alpha^2 + beta,  W_m^i = W_c^i = 1 / (2 (n + lambda))                          (3.23)
+    gamma^i = h(X^i), i = 0..2n          [printed i = 1..2n, Eq. (3.24)]
+    z^ = sum W_m^i gamma^i,   P_zz = sum W_c^i (gamma^i - z^)(gamma^i - z^)^T + R   [printed without R, (3.26)]
+    P_xz = sum W_c^i (X^i - x-)(gamma^i - z^)^T,  K = P_xz P_zz^{-1},  x+ = x- + K (z - z^)
+    P+ = P- - K P_zz K^T                 [printed P- - K P_xz K^T, dimensionally impossible, Eq. (3.30)]
+
+The motion model is linear (Eqs. (3.1), (3.16)), so the prediction is the Kalman one; sigma points are drawn
+around the predicted state at every update (Eq. (3.18)), as the thesis does.
+
+Numerical guard. At the thesis's alpha = 1e-3 the weights are about -1e6 and 6e4 (n = 8), and
+``P- - K P_zz K^T`` is a difference of nearly equal matrices. The covariance update is therefore written in the
+equivalent Joseph form with the statistically linearised measurement matrix ``H~ = P_xz^T P-^{-1}`` and noise
+``R~ = P_zz - H~ P- H~^T``:
+
+    P+ = (I - K H~) P- (I - K H~)^T + K R~ K^T,
+
+which equals ``P- - K P_zz K^T`` in exact arithmetic (``K P_zz K^T = K P_xz^T``) and is symmetric positive
+semi-definite whenever ``R~`` is. ``R~`` is symmetrised and its eigenvalues floored at 0 (the guard); the number
+of floored updates is returned, so a run can show it is rarely or never needed.
+
+The thesis-literal forms are flagged variants: ``weights="literal_001"`` (Eq. (3.22) as printed; the weights then
+sum to ``2n / (n + lambda)``) and ``innovation_noise=False`` (Eq. (3.26) without R). Eq. (3.30) as printed cannot
+be evaluated (an ``n x m`` times ``n x m`` product) and has no variant.
+
+Missing readings follow the library's rule: a NaN component is left out of the update (zero gain column).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .._validate import check_choice, check_scalar
+from ..models.channel import log_distance_mean_dbm
+from .kalman import (LinearMeasurement, NonlinearMeasurement, RssMeasurement, TrackResult, _mT, _not_positive_definite,
+                     _pick_anchor, _serial_order, _Singular, _solve_active, run_recursive_filter)
+
+__all__ = ["UKF_WEIGHTS", "UnscentedWeights", "unscented_weights", "sigma_points", "unscented_transform",
+           "unscented_kalman_filter", "UkfResult"]
+
+UKF_WEIGHTS = ("corrected", "literal_001")
+
+
+@dataclass(frozen=True)
+class UnscentedWeights:
+    """Mean and covariance weights ``(2n + 1,)`` and the scaling ``lam`` of the scaled unscented transform."""
+
+    mean: np.ndarray
+    cov: np.ndarray
+    lam: float
+
+    @property
+    def n(self) -> int:
+        return (self.mean.size - 1) // 2
+
+
+def unscented_weights(n: int, alpha: float = 1e-3, beta: float = 2.0, kappa: float = 0.0,
+                      variant: str = "corrected") -> UnscentedWeights:
+    """Weights of Eqs. (3.21)-(3.23) in Gudipati 2017 (van der Merwe's scaled sigma points).
+
+    ``variant="corrected"``: ``W_m^0 = lambda / (n + lambda)`` (the weights sum to 1). ``"literal_001"``: the
+    printed ``W_m^0 = n / (n + lambda)`` (flagged: the mean weights then sum to ``2n / (n + lambda)``, about 2e6
+    at the thesis's alpha = 1e-3 and n = 8). ``n + lambda = alpha^2 (n + kappa)`` must be positive."""
+    check_scalar("n", n, ge=1, integer=True)
+    check_scalar("alpha", alpha, gt=0)
+    check_scalar("beta", beta)
+    check_scalar("kappa", kappa)
+    check_choice("variant", variant, UKF_WEIGHTS)
+    n = int(n)
+    c = alpha**2 * (n + kappa)           # n + lambda, computed directly (lambda = c - n cancels at small alpha)
+    if not c > 0:
+        raise ValueError(f"n + lambda = alpha^2 (n + kappa) must be positive, got {c} (n = {n}, kappa = {kappa})")
+    lam = c - n
+    w_i = 1.0 / (2.0 * c)
+    w_m0 = 1.0 - n / c if variant == "corrected" else n / c      # lambda / (n + lambda) = 1 - n / (n + lambda)
+    mean = np.full(2 * n + 1, w_i)
+    cov = mean.copy()
+    mean[0] = w_m0
+    cov[0] = w_m0 + 1.0 - alpha**2 + beta
+    return UnscentedWeights(mean, cov, float(lam))
+
+
+_P_NOT_PD = ("the state covariance P is not positive definite at step {step}, so its Cholesky factor (the "
+             "sigma-point spread of Eqs. (3.19)-(3.20)) does not exist; check P0, Q and the measurement noise")
+
+
+def sigma_points(x, P, lam: float):
+    """Sigma points ``batch + (2n + 1, n)`` around ``x`` ``batch + (n,)``: ``x``, ``x +- columns of
+    chol((n + lam) P)`` (Eqs. (3.18)-(3.20) with the column index the print leaves out)."""
+    n = x.shape[-1]
+    try:
+        L = np.linalg.cholesky((n + lam) * P)
+    except np.linalg.LinAlgError:
+        eig = np.linalg.eigvalsh(np.where(np.isfinite(P), P, 0.0))
+        raise _Singular(~(eig[..., 0] > 0), _P_NOT_PD) from None
+    cols = _mT(L)                                    # row i = column i of L
+    x = x[..., None, :]
+    return np.concatenate([x, x + cols, x - cols], axis=-2)
+
+
+def unscented_transform(points, values, weights: UnscentedWeights):
+    """Weighted mean ``(..., m)``, covariance ``(..., m, m)`` of ``values`` ``(..., 2n+1, m)`` and the
+    cross-covariance ``(..., n, m)`` with ``points`` ``(..., 2n+1, n)`` (Eqs. (3.25)-(3.27), without R)."""
+    mean = np.einsum("k,...km->...m", weights.mean, values)
+    dv = values - mean[..., None, :]
+    dx = points - points[..., :1, :]                 # X^0 is the mean of the sigma points
+    cov = np.einsum("k,...ki,...kj->...ij", weights.cov, dv, dv)
+    cross = np.einsum("k,...ki,...kj->...ij", weights.cov, dx, dv)
+    return mean, 0.5 * (cov + _mT(cov)), cross
+
+
+def _ukf_update(x, P, z, h, R, weights: UnscentedWeights, innovation_noise: bool, guard: list):
+    """One unscented update with measurement function ``h`` (sigma points -> values); NaN rows of ``z`` are left
+    out. ``guard[0]`` counts the updates whose ``R~`` needed flooring."""
+    valid = np.isfinite(z)
+    if not valid.any():
+        return x, P
+    X = sigma_points(x, P, weights.lam)
+    Y = h(X)
+    z_hat, Pzz, Pxz = unscented_transform(X, Y, weights)
+    m = z.shape[-1]
+    S = Pzz + R if innovation_noise else Pzz
+    S = np.broadcast_to(S, x.shape[:-1] + (m, m))
+    row_ok = valid.any(axis=-1)
+    if not valid.all():
+        Pxz = np.where(valid[..., None, :], Pxz, 0.0)
+        pair = valid[..., :, None] & valid[..., None, :]
+        S = np.where(pair, S, np.eye(m))
+    bad = row_ok & _not_positive_definite(S)
+    if m > 2:      # larger S: a tiny eigenvalue (e.g. P_zz without R, Eq. (3.26) as printed) would give a huge gain
+        eig = np.linalg.eigvalsh(S)
+        bad = bad | row_ok & ~(eig[..., 0] > 1e3 * m * np.finfo(float).eps * np.abs(eig[..., -1]))
+    if bad.any():
+        raise _Singular(bad)
+    nu = np.where(valid, z - z_hat, 0.0)
+    K = _mT(_solve_active(S, _mT(Pxz), row_ok))      # K = P_xz S^{-1}
+    x_new = x + (K @ nu[..., None])[..., 0]
+    if not np.all(np.isfinite(x_new)):
+        raise _Singular(~np.all(np.isfinite(x_new), axis=-1))
+    # Joseph form with the statistically linearised H~ = P_xz^T P^{-1} and R~ = S - H~ P H~^T (module docstring)
+    Ht = _mT(np.linalg.solve(P, Pxz))
+    Rt = S - Ht @ Pxz
+    Rt = 0.5 * (Rt + _mT(Rt))
+    w, v = np.linalg.eigh(Rt)
+    floor = w < 0
+    if floor.any():
+        guard[0] += int(np.any(floor, axis=-1).sum())
+        Rt = (v * np.maximum(w, 0.0)[..., None, :]) @ _mT(v)
+    ikh = np.eye(x.shape[-1]) - K @ Ht
+    P_new = ikh @ P @ _mT(ikh) + K @ Rt @ _mT(K)
+    P_new = 0.5 * (P_new + _mT(P_new))
+    keep = ~row_ok
+    if keep.any():
+        x_new = np.where(keep[..., None], x, x_new)
+        P_new = np.where(keep[..., None, None], P, P_new)
+    return x_new, P_new
+
+
+def _anchor_axis(value):
+    """A channel parameter (scalar, ``(m,)`` or ``batch + (1 or m,)``) made to broadcast against sigma-point
+    values ``batch + (2n + 1, m)``."""
+    value = np.asarray(value, dtype=float)
+    return value[..., None, :] if value.ndim >= 2 else value
+
+
+def _rss_function(meas: RssMeasurement, step: int, anchor=None):
+    """``h`` of an RSS stream over sigma points: the log-distance mean power at each anchor (or at the one anchor
+    per run ``anchor`` ``batch``, for serial updates)."""
+    idx = np.asarray(meas.position_index)
+    anchors = meas.anchors_at(step)
+    ch = meas.channel
+    p0, ple = _anchor_axis(ch.ref_power_dbm), _anchor_axis(ch.path_loss_exp)
+
+    def h(X):
+        pos = meas.lift(X[..., idx])
+        if anchor is None:
+            a = anchors if anchors.ndim == 2 else anchors[..., None, :, :]        # batch + (1, m, dim)
+            diff = pos[..., None, :] - a                                        # batch + (N, m, dim)
+            d = np.sqrt(np.einsum("...i,...i->...", diff, diff))
+            return log_distance_mean_dbm(d, p0, ple, ref_distance_m=ch.ref_distance_m,
+                                         min_distance_m=max(meas.min_distance_m, ch.min_distance_m))
+        diff = pos - _pick_anchor(anchors, anchor)[..., None, :]                 # batch + (N, dim)
+        d = np.sqrt(np.einsum("...i,...i->...", diff, diff))
+        pick = lambda v: np.take_along_axis(np.broadcast_to(np.asarray(v, float), anchor.shape + (anchors.shape[-2],)),
+                                            anchor[..., None], -1)      # batch + (1,)
+        return log_distance_mean_dbm(d, pick(ch.ref_power_dbm), pick(ch.path_loss_exp), ref_distance_m=ch.ref_distance_m,
+                                     min_distance_m=max(meas.min_distance_m, ch.min_distance_m))[..., None]
+    return h
+
+
+def _rss_noise(meas: RssMeasurement, x, z, step: int):
+    """Per-reading variance ``batch + (m,)`` at the predicted mean (inflated for uncertain anchor positions)."""
+    idx = np.asarray(meas.position_index)
+    anchors = meas.anchors_at(step)
+    diff = meas.lift(x[..., None, idx]) - anchors
+    d = np.sqrt(np.einsum("...i,...i->...", diff, diff))
+    ch = meas.channel
+    return np.broadcast_to(meas.variance_db2(d, ch.path_loss_exp, ch.sigma_db), z.shape)
+
+
+@dataclass(frozen=True)
+class UkfResult(TrackResult):
+    """:class:`TrackResult` plus the sigma-point settings and ``floored_updates``, the number of (run, update)
+    pairs whose ``R~`` had a negative eigenvalue floored by the guard (see the module docstring)."""
+
+    weights: UnscentedWeights = None
+    floored_updates: int = 0
+
+
+def unscented_kalman_filter(F, Q, x0, P0, measurements, *, alpha: float = 1e-3, beta: float = 2.0,
+                            kappa: float = 0.0, weights: str = "corrected", innovation_noise: bool = True,
+                            record=None, predict_first: bool = True) -> UkfResult:
+    """Unscented Kalman filter with linear motion, vectorized over leading Monte-Carlo axes (Gudipati 2017,
+    Sec. 3.6, corrected; see the module docstring for the printed errors and the covariance guard).
+
+    Same arguments and time loop as :func:`locbook.extended_kalman_filter`. :class:`RssMeasurement` and
+    :class:`NonlinearMeasurement` streams are updated by the unscented transform (serial RSS streams one anchor
+    at a time, each with fresh sigma points); :class:`LinearMeasurement` streams go through the unscented
+    transform too, which is exact for them (so the UKF equals the KF on a linear model, a tested invariant).
+
+    ``alpha``, ``beta``, ``kappa``: sigma-point spread; defaults are the thesis's (alpha = 1e-3, beta = 2,
+    kappa = 0). ``weights``: ``"corrected"`` or the flagged ``"literal_001"`` (Eq. (3.22) as printed).
+    ``innovation_noise=False``: Eq. (3.26) as printed, without R (flagged: with more measurements than the
+    state's spread can explain, P_zz is singular and the update stops with a clear error).
+    """
+    check_choice("weights", weights, UKF_WEIGHTS)
+    F_arr = np.asarray(F)
+    if F_arr.ndim < 2:
+        raise ValueError(f"F must be square (n, n) or batch + (n, n), got {F_arr.shape}")
+    w = unscented_weights(F_arr.shape[-1], alpha, beta, kappa, weights)
+    guard = [0]
+
+    def update(x, P, z, meas, step):
+        try:
+            return _update(x, P, z, meas, step)
+        except _Singular as exc:
+            if exc.message:                  # the state covariance: already says what failed
+                raise
+            name = meas.name if isinstance(meas, NonlinearMeasurement) else type(meas).__name__
+            form = "P_zz + R" if innovation_noise else "P_zz without R (Eq. (3.26) as printed)"
+            printed_weights = " with the printed weights of Eq. (3.22)" if weights == "literal_001" else ""
+            raise _Singular(exc.bad, f"the unscented innovation covariance S = {form} of the {name} update"
+                                     f"{printed_weights} is singular, not positive definite or not finite at step "
+                                     "{step}") from None
+
+    def _update(x, P, z, meas, step):
+        if isinstance(meas, LinearMeasurement):
+            H, R = np.asarray(meas.H, float), np.asarray(meas.R, float)
+            if meas.mode == "parallel":
+                return _ukf_update(x, P, z, lambda X: X @ _mT(H) if H.ndim == 2 else np.einsum("...mn,...kn->...km", H, X),
+                                   R, w, innovation_noise, guard)
+            for j in range(z.shape[-1]):
+                Hj = H[..., j:j + 1, :]
+                x, P = _ukf_update(x, P, z[..., j:j + 1], lambda X: np.einsum("...mn,...kn->...km", Hj, X),
+                                   R[..., j:j + 1, j:j + 1], w, innovation_noise, guard)
+            return x, P
+        if isinstance(meas, NonlinearMeasurement):
+            return _ukf_update(x, P, z, meas.h, np.asarray(meas.R, float), w, innovation_noise, guard)
+        m = z.shape[-1]
+        if meas.mode == "parallel":
+            sigma2 = _rss_noise(meas, x, z, step)
+            return _ukf_update(x, P, z, _rss_function(meas, step), sigma2[..., :, None] * np.eye(m), w,
+                               innovation_noise, guard)
+        order = _serial_order(z, meas.order)
+        for j in range(m):
+            a = order[..., j]
+            zj = np.take_along_axis(z, a[..., None], -1)
+            x, P = _ukf_update(x, P, zj, _rss_function(meas, step, a),
+                               np.take_along_axis(_rss_noise(meas, x, z, step), a[..., None], -1)[..., None],
+                               w, innovation_noise, guard)
+        return x, P
+
+    res = run_recursive_filter(F, Q, x0, P0, measurements, update, record=record, predict_first=predict_first,
+                               filter_name="unscented_kalman_filter")
+    return UkfResult(res.x, res.P, res.steps, weights=w, floored_updates=guard[0])

@@ -1,0 +1,95 @@
+"""A real package (issue 17): the wheel ships the notebooks, the experiment list and the data; an installed
+locbook runs its experiments from any folder, copies its notebooks out, and tells its version and parameters."""
+import os
+import subprocess
+import sys
+import sysconfig
+import tomllib
+from pathlib import Path
+
+import pytest
+from setuptools import find_packages
+
+from locbook import __version__
+from locbook.suite import load_suite
+from locbook.suite.catalog import copy_notebooks, list_text, show_text
+from locbook.suite.cli import main
+from locbook.suite.spec import SuiteError
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def test_the_package_list_is_every_package_on_disk_plus_the_notebooks():
+    config = tomllib.loads((REPO / "pyproject.toml").read_text())["tool"]["setuptools"]
+    on_disk = set(find_packages(str(REPO), include=["locbook", "locbook.*"]))
+    assert set(config["packages"]) == on_disk | {"locbook.notebooks"}
+    assert config["package-dir"] == {"locbook.notebooks": "notebooks"}
+
+
+def test_version_list_and_show(capsys):
+    with pytest.raises(SystemExit) as exit_:
+        main(["--version"])
+    assert exit_.value.code == 0 and capsys.readouterr().out.strip() == f"locbook {__version__}"
+    suite = load_suite(REPO / "notebooks" / "experiments.toml")
+    text = list_text(suite, REPO / "reports")
+    assert all(exp.id in text for exp in suite.experiments)
+    shown = show_text(suite, "george-tracking", REPO / "reports")
+    # the type, the default, the profile values, the rule of experiments.toml and the cell's comment
+    assert "n_monte_carlo: int = 200   [quick 300, full 10000]   allowed: >= 2, finite" in shown
+    assert "repetitions of the whole experiment" in shown
+    assert "trajectory: Literal['centerline', 'zigzag']" in shown
+    with pytest.raises(SuiteError, match="unknown experiment"):
+        show_text(suite, "no-such-experiment", REPO / "reports")
+
+
+def test_copy_notebooks_never_overwrites_without_force(tmp_path):
+    suite = load_suite(REPO / "notebooks" / "experiments.toml")
+    dest = copy_notebooks(suite, tmp_path / "notebooks")
+    copied = load_suite(dest / "experiments.toml")           # the copy is a complete suite
+    assert [e.id for e in copied.experiments] == [e.id for e in suite.experiments]
+    assert copied.repository is None and copied.default_reports() == Path.cwd() / "reports"
+    (dest / "george" / "tracking.ipynb").write_text("my edits")
+    with pytest.raises(SuiteError, match="already exist"):
+        copy_notebooks(suite, dest)
+    assert (dest / "george" / "tracking.ipynb").read_text() == "my edits"
+    copy_notebooks(suite, dest, force=True)
+    assert (dest / "george" / "tracking.ipynb").read_bytes() == (REPO / "notebooks/george/tracking.ipynb").read_bytes()
+
+
+@pytest.mark.notebooks
+def test_a_wheel_installed_in_a_fresh_venv_runs_george_from_an_empty_folder(tmp_path):
+    """Build the wheel, install it (without dependencies) into a new virtual environment whose dependencies come
+    from this one, and run the george experiments from an empty folder: reports land in ./reports."""
+    wheels = tmp_path / "wheels"
+    subprocess.run([sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "-w", str(wheels), str(REPO)],
+                   check=True, capture_output=True)
+    wheel = next(wheels.glob("locbook-*.whl"))
+    venv = tmp_path / "venv"
+    subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True)
+    python = venv / "bin" / "python"
+    site = Path(subprocess.run([str(python), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
+                               check=True, capture_output=True, text=True).stdout.strip())
+    # this environment's packages after the fresh one's own (a plain path line: its editable locbook is not loaded)
+    (site / "deps.pth").write_text(sysconfig.get_paths()["purelib"] + "\n")
+    subprocess.run([sys.executable, "-m", "pip", "--python", str(python), "install", "-q", "--no-deps", str(wheel)],
+                   check=True, capture_output=True)
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "VIRTUAL_ENV")}
+    env["PATH"] = f"{venv / 'bin'}:{env['PATH']}"
+    env["JUPYTER_PATH"] = str(Path(sys.prefix) / "share" / "jupyter")     # nbconvert's templates of the borrowed deps
+    where = subprocess.run([str(python), "-c", "import locbook; print(locbook.__file__)"], cwd=empty, env=env,
+                           check=True, capture_output=True, text=True).stdout.strip()
+    assert where.startswith(str(site)), where                       # the wheel's locbook, not the clone's
+    run = subprocess.run([str(venv / "bin" / "locbook"), "run", "george"], cwd=empty, env=env,
+                         capture_output=True, text=True, timeout=1800)
+    assert run.returncode == 0, run.stdout + run.stderr
+    reports = empty / "reports" / "quick"
+    suite = load_suite(REPO / "notebooks" / "experiments.toml")
+    for exp in suite.select(["george"]):
+        assert (reports / exp.id / "report.md").is_file(), exp.id
+    assert (reports / "index.html").is_file()
+    copied = subprocess.run([str(venv / "bin" / "locbook"), "notebooks", "mine"], cwd=empty, env=env,
+                            capture_output=True, text=True)
+    assert copied.returncode == 0, copied.stderr
+    assert (empty / "mine" / "experiments.toml").is_file() and (empty / "mine" / "george" / "tracking.ipynb").is_file()

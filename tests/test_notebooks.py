@@ -26,7 +26,7 @@ def test_every_notebook_declares_typed_parameters_and_is_committed_without_outpu
 @pytest.fixture(scope="module")
 def quick_reports(tmp_path_factory):
     root = tmp_path_factory.mktemp("reports")
-    run = run_suite(SUITE, SUITE.experiments, "quick", jobs=2, report_root=root, log=lambda *_: None)
+    run = run_suite(SUITE, SUITE.experiments, "quick", jobs=2, report_root=root, progress="quiet")
     return run.report_dir, run.outcomes
 
 

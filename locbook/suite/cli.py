@@ -36,10 +36,12 @@ def _positive(kind, text: str):
     return value
 
 
-def _print_summary(run) -> None:
+def _print_summary(run, progress: str = "plain") -> None:
     names = {"ok": "executed", "cached": "cached", "failed": "failed", "interrupted": "interrupted",
              "not run": "not started"}
     counts = ", ".join(f"{run.count(s)} {w}" for s, w in names.items() if run.count(s) or s in ("ok", "cached", "failed"))
+    from .progress import print_scoreboard
+    print_scoreboard(run, progress)
     print(f"done: {counts}; see {run.report_dir / 'index.html'}")
     if run.interrupted_by is not None:
         sig = signal.Signals(run.interrupted_by).name
@@ -82,6 +84,15 @@ def main(argv: list[str] | None = None) -> int:
     run.add_argument("--reports", type=Path, help="reports folder (default: <repository>/reports)")
     run.add_argument("--out", type=Path, help="write this run's reports to this folder ([a-z0-9-] name)")
     run.add_argument("--timeout", type=lambda t: _positive(float, t), default=1800, help="seconds allowed per notebook cell")
+    run.add_argument("--progress", choices=("auto", "live", "plain", "quiet"), default="auto",
+                     help="auto (default): a live table on a terminal, one line per event otherwise; plain: one "
+                          "line per event; quiet: only the end")
+    run.add_argument("--quiet", "-q", dest="progress", action="store_const", const="quiet", help="--progress quiet")
+    run.add_argument("--executor", choices=("local", "dask"), default="local",
+                     help="local: worker processes here (default); dask: each experiment a task on dask.distributed")
+    run.add_argument("--scheduler", metavar="ADDRESS",
+                     help="with --executor dask: a scheduler address (tcp://host:8786) or scheduler file; default: "
+                          "a LocalCluster of --jobs workers")
     args = parser.parse_args(argv)
 
     from . import load_suite, run_suite
@@ -102,7 +113,8 @@ def main(argv: list[str] | None = None) -> int:
         experiments = suite.select(args.ids)
         result = run_suite(suite, experiments, args.profile, jobs=args.jobs, force=args.force,
                            overrides=_parse_overrides(args.parameter), report_root=args.reports,
-                           out_dir=args.out, timeout_s=args.timeout)
+                           out_dir=args.out, timeout_s=args.timeout, progress=args.progress,
+                           executor=args.executor, scheduler=args.scheduler)
     except ParameterError as exc:
         print(f"locbook: error: {exc}", file=sys.stderr)
         return 2
@@ -114,7 +126,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     if result.report_dir.name != args.profile:
         print(f"reports of this run: {result.report_dir} (reports/{args.profile}/ is unchanged)")
-    _print_summary(result)
+    _print_summary(result, args.progress)
     if result.interrupted_by is not None:
         return 128 + int(result.interrupted_by)
     return 1 if result.count("failed") else 0

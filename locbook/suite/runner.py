@@ -50,6 +50,8 @@ from . import site
 from .report import NUMBER_COLUMNS
 from .params import read_notebook
 from .site import _read_csv, _read_json
+from .executors import make_executor
+from .progress import expected_seconds, make_progress
 from .spec import SAFE_NAME, Experiment, Suite, SuiteError
 
 __all__ = ["KERNEL_NAME", "run_suite", "cache_key", "Outcome", "SuiteRun", "write_suite_reports",
@@ -59,7 +61,7 @@ __all__ = ["KERNEL_NAME", "run_suite", "cache_key", "Outcome", "SuiteRun", "writ
 KERNEL_NAME = "python3"
 _DEPENDENCIES = ("numpy", "scipy", "cvxpy", "clarabel", "osqp", "scs", "matplotlib", "papermill",
                  "nbclient", "nbconvert", "nbformat", "ipykernel")
-_WORKER_FILES = (".runtime", ".result.json", ".result.json.tmp", ".task.json", ".data-read.log")
+_WORKER_FILES = (".runtime", ".result.json", ".result.json.tmp", ".task.json", ".data-read.log", ".stop")
 _STOP_GRACE_S = 5.0
 
 
@@ -331,13 +333,13 @@ def _check_kernel(kernel_name: str) -> None:
                          "environment (pip install ipykernel)") from None
 
 
-def _acquire(lock, report_dir: Path, stop: _Stop, log) -> bool:
+def _acquire(lock, report_dir: Path, stop: _Stop, progress) -> bool:
     from filelock import Timeout
     try:
         lock.acquire(timeout=0)
         return True
     except Timeout:
-        log(f"another locbook run is writing {report_dir}; waiting for it to finish (Ctrl-C to give up)")
+        progress.message(f"another locbook run is writing {report_dir}; waiting for it to finish (Ctrl-C to give up)")
     while stop.signum is None:
         try:
             lock.acquire(timeout=0.5)
@@ -350,13 +352,18 @@ def _acquire(lock, report_dir: Path, stop: _Stop, log) -> bool:
 def run_suite(suite: Suite, experiments: list[Experiment], profile: str, *, jobs: int = 1, force: bool = False,
               overrides: dict[str, str] | None = None, report_root: Path | None = None,
               out_dir: Path | None = None, timeout_s: float = 1800, retries: int = 1,
-              kernel_name: str = KERNEL_NAME, log=print) -> SuiteRun:
+              kernel_name: str = KERNEL_NAME, progress="plain", executor: str = "local",
+              scheduler: str | None = None) -> SuiteRun:
     """Run experiments and write their reports; see the module docstring for the guarantees.
 
     Parameters of every selected experiment are checked before any executes (raises ParameterError).
     The reports go to ``<report_root>/<profile>/``, or, with ``overrides``, to their own folder
     (:func:`override_folder_name`) so that the profile's default report is never touched; ``out_dir``
     names the folder explicitly. ``retries``: further attempts for an experiment whose worker or kernel died.
+    ``progress``: a mode of :func:`locbook.suite.progress.make_progress` ("auto", "live", "plain", "quiet") or
+    a view object. ``executor``: "local" (worker processes on this machine, ``jobs`` at a time) or "dask"
+    (each experiment a task on dask.distributed: the cluster at ``scheduler``, or a LocalCluster of ``jobs``
+    workers); both run the same worker, so caching, locking, retries and numbers are the same.
     """
     from filelock import FileLock
 
@@ -365,6 +372,12 @@ def run_suite(suite: Suite, experiments: list[Experiment], profile: str, *, jobs
         raise SuiteError(f"the timeout must be a positive number of seconds, got {timeout_s}")
     if jobs < 1:
         raise SuiteError(f"jobs must be at least 1, got {jobs}")
+    if executor not in ("local", "dask"):
+        raise SuiteError(f"executor must be 'local' or 'dask', got {executor!r}")
+    if scheduler and executor != "dask":
+        raise SuiteError("a scheduler address needs --executor dask")
+    if isinstance(progress, str):
+        progress = make_progress(progress)
     root = Path(report_root) if report_root else suite.default_reports()
     if out_dir is not None:
         report_dir = Path(out_dir)
@@ -393,14 +406,20 @@ def run_suite(suite: Suite, experiments: list[Experiment], profile: str, *, jobs
     run = SuiteRun([], report_dir)
     with _Stop() as stop:
         lock = FileLock(str(report_dir / ".lock"))
-        if not _acquire(lock, report_dir, stop, log):
+        if not _acquire(lock, report_dir, stop, progress):
             run.interrupted_by = stop.signum
             run.outcomes = [Outcome(e.id, "not run", 0.0) for e in experiments]
             return run
         try:
             _recover(report_dir)
-            _run_locked(suite, experiments, profile, resolved, report_dir, data_roots, jobs, force, timeout_s,
-                        retries, kernel_name, bool(overrides) or out_dir is not None, stop, run, log)
+            progress.begin([e.id for e in experiments], expected_seconds(report_dir, [e.id for e in experiments]))
+            try:
+                with make_executor(executor, jobs, scheduler) as pool:
+                    _run_locked(suite, experiments, profile, resolved, report_dir, data_roots, force, timeout_s,
+                                retries, kernel_name, bool(overrides) or out_dir is not None, stop, run, progress,
+                                pool)
+            finally:
+                progress.end(run)
         finally:
             lock.release()
     run.interrupted_by = stop.signum
@@ -409,8 +428,8 @@ def run_suite(suite: Suite, experiments: list[Experiment], profile: str, *, jobs
     return run
 
 
-def _run_locked(suite, experiments, profile, resolved, report_dir, data_roots, jobs, force, timeout_s, retries,
-                kernel_name, custom_folder, stop, run, log):
+def _run_locked(suite, experiments, profile, resolved, report_dir, data_roots, force, timeout_s, retries,
+                kernel_name, custom_folder, stop, run, progress, pool):
     source, versions = _source_fingerprint(), _dependency_versions()
     rev, dirty = _git_state(suite.repository)
     stamp = locbook_version() + (f" (source {rev}{' + uncommitted changes' if dirty else ''})" if rev else "")
@@ -419,18 +438,13 @@ def _run_locked(suite, experiments, profile, resolved, report_dir, data_roots, j
     by_id = {e.id: e for e in experiments}
     keys = {exp.id: cache_key(exp, profile, resolved[exp.id], source=source, versions=versions)
             for exp in experiments}
-    start = time.perf_counter()
-    total = len(experiments)
-
     def finish(outcome: Outcome):
         run.outcomes.append(outcome)
         if outcome.status != "not run":
             status[outcome.id] = {"status": outcome.status, "seconds": round(outcome.seconds, 2),
                                   "error": outcome.error}
             _write_atomic(status_path, json.dumps(status, indent=1, sort_keys=True))
-        log(f"[{len(run.outcomes)}/{total}] {outcome.id}: {outcome.status}"
-            f"{f' in {outcome.seconds:.1f} s' if outcome.status in ('ok', 'failed') else ''}"
-            f" (elapsed {time.perf_counter() - start:.0f} s){'  ' + outcome.error if outcome.error else ''}")
+        progress.finished(outcome)
 
     queue: deque = deque()
     for exp in experiments:
@@ -439,7 +453,7 @@ def _run_locked(suite, experiments, profile, resolved, report_dir, data_roots, j
         else:
             queue.append((exp.id, 1))
     staging_root = report_dir / ".staging" / f"{os.getpid()}-{uuid.uuid4().hex[:8]}"
-    running: dict[str, tuple] = {}     # id -> (process, staging, attempt, started)
+    running: dict[str, tuple] = {}     # id -> (executor handle, staging, attempt, started or None)
 
     def launch(eid: str, attempt: int):
         staging = staging_root / f"{eid}-{attempt}"
@@ -448,22 +462,23 @@ def _run_locked(suite, experiments, profile, resolved, report_dir, data_roots, j
                 "staging": str(staging), "timeout": timeout_s, "kernel": kernel_name,
                 "data_roots": data_roots, "runner_pid": os.getpid()}
         (staging / ".task.json").write_text(json.dumps(task))
-        proc = subprocess.Popen([sys.executable, "-m", "locbook.suite.worker", str(staging / ".task.json")],
-                                start_new_session=True, stdin=subprocess.DEVNULL,
-                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-        running[eid] = (proc, staging, attempt, time.perf_counter())
-        log(f"running {eid}{f' (attempt {attempt})' if attempt > 1 else ''} ...")
+        running[eid] = (pool.submit(eid, staging / ".task.json"), staging, attempt, None)
 
-    def complete(eid: str, proc, staging: Path, attempt: int, started: float):
-        seconds = time.perf_counter() - started
+    def mark_started():
+        """An experiment is running once its worker has made its runtime folder (on a cluster, a submitted
+        task may wait for a free worker); the elapsed time counts from then."""
+        for eid, (handle, staging, attempt, started) in running.items():
+            if started is None and (pool.is_local or (staging / ".runtime").exists()):
+                running[eid] = (handle, staging, attempt, time.perf_counter())
+                progress.started(eid, attempt)
+
+    def complete(eid: str, handle, staging: Path, attempt: int, started: float | None):
+        seconds = time.perf_counter() - started if started is not None else 0.0
         result = _read_json(staging / ".result.json", None)
         if result is None:
-            code = proc.returncode
-            why = (f"worker process died ({signal.Signals(-code).name})" if code and code < 0
-                   else f"worker process exited with status {code} without a result")
-            result = {"error": why, "kernel_failure": True, "seconds": seconds}
+            result = {"error": pool.why_no_result(handle), "kernel_failure": True, "seconds": seconds}
         if result["error"] and result.get("kernel_failure") and attempt <= retries and stop.signum is None:
-            log(f"{eid}: {result['error']}; retrying once")
+            progress.message(f"{eid}: {result['error']}; retrying once")
             queue.appendleft((eid, attempt + 1))
             return
         error = result["error"] or _validate_report(staging, eid)
@@ -485,25 +500,23 @@ def _run_locked(suite, experiments, profile, resolved, report_dir, data_roots, j
         while queue or running:
             if stop.signum is not None:
                 break
-            while queue and len(running) < jobs:
+            while queue and len(running) < pool.capacity:
                 launch(*queue.popleft())
+            mark_started()
             time.sleep(0.1)
-            for eid in [e for e, (p, *_rest) in running.items() if p.poll() is not None]:
-                proc, staging, attempt, started = running.pop(eid)
-                complete(eid, proc, staging, attempt, started)
+            for eid in [e for e, (h, *_rest) in running.items() if pool.done(h)]:
+                handle, staging, attempt, started = running.pop(eid)
+                if started is None:
+                    progress.started(eid, attempt)
+                complete(eid, handle, staging, attempt, started)
     finally:
         # an interrupt (or an unexpected error here): stop the workers, keep everything finished
-        for eid, (proc, staging, attempt, started) in running.items():
-            if proc.poll() is None:
-                proc.send_signal(signal.SIGTERM)
+        for eid, (handle, staging, attempt, started) in running.items():
+            pool.stop(handle, staging)
         deadline = time.perf_counter() + _STOP_GRACE_S
-        for eid, (proc, staging, attempt, started) in running.items():
-            try:
-                proc.wait(max(0.0, deadline - time.perf_counter()))
-            except subprocess.TimeoutExpired:
-                os.killpg(proc.pid, signal.SIGKILL)
-                proc.wait()
-            finish(Outcome(eid, "interrupted", time.perf_counter() - started,
+        for eid, (handle, staging, attempt, started) in running.items():
+            pool.wait_or_kill(handle, max(0.0, deadline - time.perf_counter()))
+            finish(Outcome(eid, "interrupted", time.perf_counter() - started if started is not None else 0.0,
                            f"stopped by {signal.Signals(stop.signum).name}" if stop.signum else "stopped", attempt))
         for eid, _attempt in queue:
             finish(Outcome(eid, "not run", 0.0))

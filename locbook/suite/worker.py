@@ -95,9 +95,10 @@ def execute(task: dict) -> dict:
     return {"error": error, "kernel_failure": kernel_failure, "seconds": seconds}
 
 
-def main(task_path: str) -> int:
+def main(task_path: str, parent: int | None = None) -> int:
+    """``parent``: the process that started this worker (the runner, or a Dask task on a cluster node)."""
     task = json.loads(Path(task_path).read_text())
-    _die_with_parent(task["runner_pid"])
+    _die_with_parent(parent if parent is not None else task["runner_pid"])
     signal.signal(signal.SIGTERM, _kill_kernels_and_exit)
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the runner decides what an interrupt means
     staging = Path(task["staging"])
@@ -121,4 +122,4 @@ def main(task_path: str) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main(sys.argv[1]))
+    sys.exit(main(sys.argv[1], int(sys.argv[2]) if len(sys.argv) > 2 else None))

@@ -1,0 +1,182 @@
+"""Where the experiments' worker processes run: on this machine, or as tasks on a Dask cluster.
+
+Both executors start the same worker (``python -m locbook.suite.worker TASK.json``) on the same task file in
+the run's staging folder, and the runner reads the same ``.result.json`` back, so the caching, locking,
+validation, promotion and retries of :mod:`locbook.suite.runner` do not depend on the executor, and neither do
+the numbers. On a cluster the reports folder must be on a file system the workers share (the usual home or
+project file system of an HPC cluster), and every worker needs locbook installed.
+
+The Dask executor runs one experiment per task: the task starts the worker process, waits for it, and stops
+it when the runner writes ``.stop`` into the staging folder (an interrupt of the run).
+"""
+from __future__ import annotations
+
+import logging
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+from .spec import SuiteError
+
+__all__ = ["LocalExecutor", "DaskExecutor", "make_executor", "run_worker_process"]
+
+_STOP_GRACE_S = 5.0
+
+
+def _worker_command(task_path: Path | str, parent: int | None = None) -> list[str]:
+    cmd = [sys.executable, "-m", "locbook.suite.worker", str(task_path)]
+    return cmd + [str(parent)] if parent is not None else cmd
+
+
+def _why(code: int | None) -> str:
+    if code is not None and code < 0:
+        return f"worker process died ({signal.Signals(-code).name})"
+    return f"worker process exited with status {code} without a result"
+
+
+def _spawn(task_path, parent=None) -> subprocess.Popen:
+    # own session: a terminal's Ctrl-C reaches the runner only, which decides what it means
+    return subprocess.Popen(_worker_command(task_path, parent), start_new_session=True, stdin=subprocess.DEVNULL,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+
+
+def _wait_or_kill(proc: subprocess.Popen, timeout_s: float) -> int:
+    try:
+        return proc.wait(timeout_s)
+    except subprocess.TimeoutExpired:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except OSError:
+            pass
+        return proc.wait()
+
+
+class LocalExecutor:
+    """Worker processes on this machine, ``jobs`` at a time."""
+
+    is_local = True
+
+    def __init__(self, jobs: int):
+        self.capacity = jobs
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        return False
+
+    def submit(self, eid: str, task_path: Path) -> subprocess.Popen:
+        return _spawn(task_path)
+
+    def done(self, proc) -> bool:
+        return proc.poll() is not None
+
+    def why_no_result(self, proc) -> str:
+        return _why(proc.returncode)
+
+    def stop(self, proc, staging: Path) -> None:
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGTERM)
+
+    def wait_or_kill(self, proc, timeout_s: float) -> None:
+        _wait_or_kill(proc, timeout_s)
+
+
+def run_worker_process(task_path: str) -> int:
+    """The Dask task: run one experiment's worker process to its end and return its exit status. The runner
+    asks it to stop by writing ``.stop`` beside the task file; the worker then gets SIGTERM (it stops its
+    kernel), and SIGKILL after a grace period."""
+    proc = _spawn(task_path, parent=os.getpid())
+    stop = Path(task_path).parent / ".stop"
+    while True:
+        try:
+            return proc.wait(0.2)
+        except subprocess.TimeoutExpired:
+            pass
+        if stop.exists():
+            proc.send_signal(signal.SIGTERM)
+            return _wait_or_kill(proc, _STOP_GRACE_S)
+
+
+class DaskExecutor:
+    """Each experiment a task on dask.distributed: the scheduler at ``scheduler`` (``tcp://host:8786``, or a
+    scheduler file path), or a LocalCluster of ``jobs`` single-threaded worker processes."""
+
+    is_local = False
+
+    def __init__(self, jobs: int, scheduler: str | None = None):
+        try:
+            from distributed import Client, LocalCluster
+        except ImportError:
+            raise SuiteError("--executor dask needs dask.distributed: pip install 'locbook[dask]'") from None
+        self.cluster = None
+        try:
+            if scheduler:
+                if Path(scheduler).is_file():
+                    self.client = Client(scheduler_file=scheduler, timeout="30s")
+                else:
+                    self.client = Client(scheduler, timeout="30s")
+            else:
+                self.cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True,
+                                            dashboard_address=None, silence_logs=logging.ERROR)
+                self.client = Client(self.cluster)
+        except OSError as exc:
+            self.close()
+            raise SuiteError(f"cannot reach the Dask scheduler {scheduler or '(local cluster)'}: {exc}") from None
+        # every queued experiment is submitted at once; the cluster runs as many as it has workers
+        self.capacity = 1 << 30
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+        return False
+
+    def close(self) -> None:
+        for thing in (getattr(self, "client", None), self.cluster):
+            if thing is not None:
+                try:
+                    thing.close()
+                except Exception:  # closing a cluster that is already gone: nothing left to do
+                    pass
+
+    def submit(self, eid: str, task_path: Path):
+        # pure=False and a unique key per attempt: an experiment's attempts are never deduplicated or cached
+        return self.client.submit(run_worker_process, str(task_path), key=f"locbook-{task_path.parent.name}-"
+                                  f"{os.urandom(4).hex()}", pure=False, retries=0)
+
+    def done(self, future) -> bool:
+        return future.done()
+
+    def why_no_result(self, future) -> str:
+        if future.status == "finished":
+            return _why(future.result())
+        if future.status == "cancelled":
+            return "Dask task cancelled"
+        exc = future.exception()
+        return f"Dask task failed: {type(exc).__name__}: {exc}"
+
+    def stop(self, future, staging: Path) -> None:
+        if not future.done():
+            try:
+                (staging / ".stop").write_text("")
+            except OSError:
+                pass
+
+    def wait_or_kill(self, future, timeout_s: float) -> None:
+        try:
+            future.result(timeout=timeout_s + _STOP_GRACE_S)
+        except Exception:  # timed out, cancelled or failed: the run is stopping either way
+            pass
+        future.cancel()
+
+
+def make_executor(kind: str, jobs: int, scheduler: str | None = None):
+    if kind == "local":
+        return LocalExecutor(jobs)
+    if kind == "dask":
+        return DaskExecutor(jobs, scheduler)
+    raise SuiteError(f"executor must be 'local' or 'dask', got {kind!r}")

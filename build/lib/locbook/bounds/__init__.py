@@ -1,1 +1,0 @@
-"""Bounds: static CRLB and the posterior CRLB."""

@@ -1,1 +1,0 @@
-"""Package data: the numbers each source document printed (``printed/<document>.csv``)."""

@@ -1,1 +1,0 @@
-"""Channel, motion (and later inertial) models."""

@@ -1,1 +1,0 @@
-"""Per-document scenarios: the geometry, printed numbers and simulation protocol of each source."""

@@ -1,1 +1,0 @@
-"""Static localization: lateration, RSS maximum likelihood, fingerprinting, calibration."""

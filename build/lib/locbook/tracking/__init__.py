@@ -1,1 +1,0 @@
-"""Tracking filters: the Kalman family, grid Bayes and particle filters."""

@@ -102,7 +102,7 @@ def run_worker_process(task_path: str) -> int:
 
 class DaskExecutor:
     """Each experiment a task on dask.distributed: the scheduler at ``scheduler`` (``tcp://host:8786``, or a
-    scheduler file path), or a LocalCluster of ``jobs`` single-threaded worker processes."""
+    scheduler file path), or a LocalCluster of ``jobs`` single-threaded workers."""
 
     is_local = False
 
@@ -119,7 +119,11 @@ class DaskExecutor:
                 else:
                     self.client = Client(scheduler, timeout="30s")
             else:
-                self.cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True,
+                # In-process workers (one thread each): a task only starts a worker process and waits for it,
+                # so nothing is gained by worker processes, and without them a Ctrl-C in the terminal reaches
+                # the runner alone, which stops the tasks' workers itself. The scheduler, the workers and the
+                # task protocol are those of any dask.distributed cluster.
+                self.cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=False,
                                             dashboard_address=None, silence_logs=logging.ERROR)
                 self.client = Client(self.cluster)
         except OSError as exc:

@@ -97,10 +97,11 @@ def _package_dir() -> Path:
 
 
 def _source_fingerprint() -> str:
-    """Every Python source of the package (data files are tracked per experiment, by what it reads)."""
+    """Every Python source of the package and the report site's templates (data files are tracked per
+    experiment, by what it reads)."""
     package = _package_dir()
     h = hashlib.sha256()
-    for path in sorted(package.rglob("*.py")):
+    for path in sorted([*package.rglob("*.py"), *(package / "suite" / "templates").glob("*")]):
         h.update(str(path.relative_to(package)).encode())
         h.update(path.read_bytes())
     return h.hexdigest()

@@ -9,12 +9,20 @@
 
 Printed values are shown exactly as printed (the text of the printed-values file). Every table is built from
 ``numbers.csv`` rows, so a partial run shows the rows of the folders present.
+
+The HTML pages render from the Jinja2 templates in ``templates/`` (autoescaped; ``base.html`` inlines the one
+stylesheet, ``site.css``, so that a page opened from file:// needs nothing beside it). Cells are coloured by
+verdict, never by how a run went (the run status is text). A page links only to files present in its folder
+(the executed notebook as HTML, else as .ipynb; figures and tables of the manifest), so the site has no broken
+link; tests/test_site_browser.py opens it in headless Chromium to check that.
 """
 from __future__ import annotations
 
+import functools
 import json
+import math
+import re
 from collections import Counter, defaultdict
-from html import escape
 from pathlib import Path
 
 from .report import Table
@@ -25,12 +33,6 @@ __all__ = ["VERDICT_COLUMNS", "scoreboard_counts", "summary_markdown", "page_mar
 
 #: verdict columns of the kind-by-verdict tables ("linked": repeats of a quantity compared elsewhere)
 VERDICT_COLUMNS = ("within", "loose", "miss", "consistent", "inconsistent", "no verdict", "linked")
-_COLORS = {"within": "#d8f0d8", "loose": "#fff1c2", "miss": "#f8d0d0", "consistent": "#d8f0d8",
-           "inconsistent": "#f8d0d0"}
-_STYLE = ("body{font-family:sans-serif;margin:2em;max-width:90em}table{border-collapse:collapse;margin:0.5em 0}"
-          "td,th{border:1px solid #ccc;padding:3px 7px;vertical-align:top}td.n{text-align:right}"
-          + "".join(f".v-{v}{{background:{c}}}" for v, c in _COLORS.items())
-          + ".err{font-family:monospace;font-size:small;color:#900}.failed,.interrupted{background:#fdd}")
 
 
 def _column(row: dict) -> str:
@@ -154,48 +156,133 @@ def page_markdown(exp, profile: str, params: dict, folder: Path, numbers: list[d
     return "\n".join(lines)
 
 
-def _html_table(rows: list[dict], verdict_key: str | None = "verdict") -> str:
-    if not rows:
-        return ""
-    cols = list(dict.fromkeys(k for r in rows for k in r))
-    head = "".join(f"<th>{escape(c)}</th>" for c in cols)
-    body = []
-    for r in rows:
-        cls = f" class='v-{escape(str(r.get(verdict_key, '')))}'" if verdict_key and r.get(verdict_key) in _COLORS else ""
-        body.append(f"<tr{cls}>" + "".join(f"<td>{escape(str(r.get(c, '')))}</td>" for c in cols) + "</tr>")
-    return f"<table><thead><tr>{head}</tr></thead><tbody>{''.join(body)}</tbody></table>"
+# -- HTML: rendered from the Jinja2 templates in templates/ (one stylesheet, site.css, inlined in every page so
+# that each page works on its own from file://); every href and src names a file that exists ----------------
+
+_TEMPLATES = Path(__file__).with_name("templates")
+#: verdicts whose cells are coloured (site.css, ``.v-<verdict>``); "no verdict" and "linked" stay plain
+_COLORED = ("within", "loose", "miss", "consistent", "inconsistent")
+#: a table a notebook saved is shown inline up to this many rows (longer ones: the link to the CSV file)
+_INLINE_TABLE_ROWS = 200
 
 
-def _counts_html(counts: dict[str, Counter]) -> str:
+@functools.lru_cache(maxsize=1)
+def _environment():
+    from jinja2 import Environment, FileSystemLoader, StrictUndefined
+    env = Environment(loader=FileSystemLoader(str(_TEMPLATES)), autoescape=True, undefined=StrictUndefined,
+                      trim_blocks=True, lstrip_blocks=True, keep_trailing_newline=True)
+    env.globals["colored"] = _COLORED
+    return env
+
+
+def _render(template: str, **context) -> str:
+    return _environment().get_template(template).render(**context)
+
+
+def _counts_table(counts: dict[str, Counter]) -> dict:
+    """A kind-by-verdict table for the ``counts_table`` macro: its verdict columns and its rows."""
     rows = _counts_rows(counts)
-    cols = [c for c in rows[0] if c != "kind"]
-    head = "<th>kind</th>" + "".join(f"<th>{escape(c)}</th>" for c in cols)
-    body = []
-    for r in rows:
-        cells = [f"<th>{escape(r['kind'])}</th>"]
-        for c in cols:
-            cls = f" v-{c}" if c in _COLORS and r[c] else ""
-            cells.append(f"<td class='n{cls}'>{r[c]}</td>")
-        body.append("<tr>" + "".join(cells) + "</tr>")
-    return f"<table><thead><tr>{head}</tr></thead><tbody>{''.join(body)}</tbody></table>"
+    return {"columns": [c for c in rows[0] if c not in ("kind", "rows")], "rows": rows}
+
+
+def _headline_counts(rows) -> dict:
+    rep = Counter(r["verdict"] for r in rows if r.get("kind") == "reproduction" and not r.get("same_as"))
+    return {"within": rep["within"], "loose": rep["loose"], "miss": rep["miss"], "n": sum(rep.values())}
+
+
+def _worst(counter: Counter) -> str:
+    """The verdict a cell counting within / loose / miss is coloured by: its worst verdict."""
+    return next((v for v in ("miss", "inconsistent", "loose", "within", "consistent") if counter[v]), "")
+
+
+def _chips(rows) -> list[tuple[str, int]]:
+    c = Counter(_column(r) for r in rows)
+    return [(v, c[v]) for v in VERDICT_COLUMNS if c[v]]
+
+
+def _number(value, digits: int) -> str:
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        return "" if value is None else str(value)
+    return f"{x:.{digits}g}" if math.isfinite(x) else str(value)
+
+
+def _rel(folder: Path, *names: str) -> str | None:
+    """The first of ``names`` (paths relative to ``folder``) that is a file, as a link; ``None`` if none is."""
+    return next((name for name in names if (folder / name).is_file()), None)
+
+
+def _md_captions(folder: Path) -> dict[str, str]:
+    """Captions of figures and tables as report.md states them (for a folder without its manifest)."""
+    try:
+        text = (folder / "report.md").read_text(encoding="utf-8")
+    except OSError:
+        return {}
+    out = {f: c for c, f in re.findall(r"^!\[(.*)\]\(([^)\s]+)\)\s*$", text, re.M)}
+    out.update({f: c for f, c in re.findall(r"^- \[[^\]]*\]\(([^)\s]+)\): (.*)$", text, re.M)})
+    return out
+
+
+def _page_outputs(folder: Path, manifest: dict) -> tuple[list[dict], list[dict]]:
+    """Figures and tables of the page, each a file present in ``folder``. From manifest.json; a folder
+    without one (committed reports: the manifest is not committed) shows the PNG and CSV files it holds."""
+    if (folder / "manifest.json").is_file():
+        figures = [dict(f) for f in manifest.get("figures", [])]
+        tables = [dict(t) for t in manifest.get("tables", [])]
+    else:
+        captions = _md_captions(folder)
+        order = list(captions)            # the order report.md shows them in, then the others by name
+        figures = [{"name": p.stem, "file": p.name, "caption": captions.get(p.name, "")}
+                   for p in sorted(folder.glob("*.png"),
+                                   key=lambda p: (order.index(p.name) if p.name in order else len(order), p.name))]
+        tables = [{"name": p.stem, "file": p.name, "caption": captions.get(p.name, "")}
+                  for p in sorted(folder.glob("*.csv")) if p.name not in ("numbers.csv", "assumptions.csv")]
+    figures = [f for f in figures if f.get("file") and (folder / f["file"]).is_file()]
+    tables = [t for t in tables if t.get("file") and (folder / t["file"]).is_file()]
+    for item in figures + tables:
+        item.setdefault("name", Path(item["file"]).stem)
+        item["caption"] = item.get("caption") or ""
+    for t in tables:
+        rows = _read_csv(folder / t["file"])
+        t["columns"] = list(dict.fromkeys(k for r in rows for k in r if k is not None))
+        t["rows"] = ([{c: r.get(c) or "" for c in t["columns"]} for r in rows]
+                     if len(rows) <= _INLINE_TABLE_ROWS else [])
+        t["too_long"] = len(rows) if len(rows) > _INLINE_TABLE_ROWS else 0
+    return figures, tables
 
 
 def page_html(exp, profile: str, params: dict, folder: Path, numbers: list[dict], stamp: str) -> str:
+    """``<id>/report.html``, rendered in ``folder`` (the staging folder, before it is promoted): links to the
+    files present there and to ``../index.html``, which every run (re)writes."""
+    folder = Path(folder)
     shown, parameters, assumptions, manifest = _page_parts(exp, params, folder, numbers)
-    figs = "".join(f"<figure><img src='{escape(f['file'])}' style='max-width:100%'><figcaption>"
-                   f"{escape(f['caption'])}</figcaption></figure>" for f in manifest.get("figures", []))
-    tables = "".join(f"<li><a href='{escape(t['file'])}'>{escape(t['file'])}</a>: {escape(t['caption'])}</li>"
-                     for t in manifest.get("tables", []))
-    doc = exp.document
-    return f"""<!doctype html><html><head><meta charset="utf-8"><title>{escape(exp.id)}</title><style>{_STYLE}</style></head>
-<body><h1>{escape(exp.title)}</h1><p>Experiment <code>{escape(exp.id)}</code>, reproducing <b>{escape(exp.section)}</b> of
-{escape(doc.authors)}, <i>{escape(doc.title)}</i> ({escape(doc.year)}). Profile <code>{escape(profile)}</code>; generated by
-locbook {escape(stamp)}. <a href="{escape(exp.id)}.ipynb">Executed notebook</a>.</p>
-<h2>Scoreboard</h2><p>{escape(_headline(numbers).replace('**', ''))}</p>{_counts_html(scoreboard_counts(numbers)) if numbers else ''}
-<h2>Reproduced versus printed</h2>{_html_table(shown) or '<p>No printed number is compared here.</p>'}
-<h2>Parameters</h2>{_html_table(parameters, None)}<h2>Assumptions</h2>{_html_table(assumptions, None)}
-<h2>Figures</h2>{figs}<h2>Tables</h2><ul>{tables}</ul></body></html>
-"""
+    for row in shown:
+        for c in ("window_low", "window_high"):
+            row[c] = _number(row[c], 6)
+        for c in _PAGE_COLUMNS:
+            row[c] = "" if row[c] is None else row[c]
+    figures, tables = _page_outputs(folder, manifest)
+    links = []
+    notebook = _rel(folder, f"{exp.id}.html", f"{exp.id}.ipynb")
+    if notebook:
+        links.append(("executed notebook" + (" (.ipynb)" if notebook.endswith(".ipynb") else ""), notebook))
+        if notebook.endswith(".html") and _rel(folder, f"{exp.id}.ipynb"):
+            links.append(("notebook file (.ipynb)", f"{exp.id}.ipynb"))
+    for label, name in (("summary (Markdown)", "summary.md"), ("this page in Markdown", "report.md"),
+                        ("numbers.csv", "numbers.csv"), ("assumptions.csv", "assumptions.csv")):
+        if _rel(folder, name):
+            links.append((label, name))
+    assumption_columns = list(dict.fromkeys(k for r in assumptions for k in r if k is not None))
+    return _render(
+        "report.html", version=stamp, exp=exp, doc=exp.document, profile=profile, stamp=stamp,
+        notebook=f"notebooks/{exp.notebook.relative_to(exp.notebook.parents[1]).as_posix()}", links=links,
+        headline=_headline_counts(numbers),
+        counts=_counts_table(scoreboard_counts(numbers)) if numbers else None,
+        reasons=[{k: g[k] for k in ("verdict", "rows", "reason", "where")} for g in _reasons(numbers)],
+        numbers=shown, page_columns=_PAGE_COLUMNS, parameters=parameters,
+        assumptions=[{c: r.get(c) or "" for c in assumption_columns} for r in assumptions],
+        assumption_columns=assumption_columns, figures=figures, tables=tables)
 
 
 # -- the suite -----------------------------------------------------------------------------------------------
@@ -250,48 +337,58 @@ def index_markdown(report_dir: Path, entries, rows) -> str:
     return "\n".join(lines)
 
 
+def _index_entry(report_dir: Path, e) -> dict:
+    exp, last, present = e["exp"], e["last"], e["present"]
+    folder = report_dir / exp.id
+    state = last.get("status") or ("ok" if present else "not run")
+    if not present and state in ("ok", "cached"):
+        state = "not run"                      # recorded as run, but its folder is gone
+    flagged = state in ("failed", "interrupted")
+    seconds = last.get("seconds") if state in ("ok", "failed", "interrupted") else None
+    if not seconds and present:
+        seconds = e["report"].get("seconds") or e["run"].get("seconds")
+    links = []
+    if present:
+        for label, names in (("report", ("report.html",)), ("notebook", (f"{exp.id}.html", f"{exp.id}.ipynb")),
+                             ("summary", ("summary.md",)), ("numbers", ("numbers.csv",))):
+            name = _rel(folder, *names)
+            if name:
+                links.append((label, f"{exp.id}/{name}"))
+    if state == "failed":
+        name = _rel(report_dir / ".failed" / exp.id, f"{exp.id}.html", f"{exp.id}.ipynb")
+        if name:
+            links.append(("failed notebook", f".failed/{exp.id}/{name}"))
+    rows = e["numbers"]
+    counts = scoreboard_counts(rows)
+    line = _experiment_line(e)
+    doc = exp.document
+    return {"id": exp.id, "title": exp.title, "section": exp.section, "doc_key": doc.key,
+            "doc_authors": doc.authors, "doc_year": doc.year, "profile": e["report"].get("profile", ""),
+            "page": f"{exp.id}/report.html" if present and (folder / "report.html").is_file() else None,
+            "reproductions": line["reproductions within / loose / miss"],
+            "rep_verdict": _worst(counts.get("reproduction", Counter())),
+            "calibrated": line["calibrated within / loose / miss"],
+            "cal_verdict": _worst(counts.get("calibrated", Counter())),
+            "other": line["other rows"], "chips": _chips(rows),
+            "state": state, "flagged": flagged, "shown_last_good": flagged and present,
+            "error": last.get("error", ""), "time": f"{float(seconds):.1f} s" if seconds else "-",
+            "stamp": e["report"].get("locbook", ""), "links": links}
+
+
 def index_html(report_dir: Path, entries, rows, version: str) -> str:
-    docs = "".join(f"<h3>{escape(doc.authors)} ({escape(doc.year)}), <code>{escape(key)}</code></h3>"
-                   f"{_counts_html(scoreboard_counts(doc_rows))}"
-                   for key, doc, doc_rows in _by_document(entries, rows) if doc_rows)
-    total = f"<h3>All documents</h3>{_counts_html(scoreboard_counts(rows))}" if rows else ""
-    exp_rows = []
-    for e in entries:
-        exp, run, last = e["exp"], e["run"], e["last"]
-        state = last.get("status", "ok" if e["present"] else "not run")
-        links = []
-        if e["present"]:
-            links += [f'<a href="{exp.id}/report.html">report</a>', f'<a href="{exp.id}/{exp.id}.ipynb">notebook</a>',
-                      f'<a href="{exp.id}/summary.md">summary</a>', f'<a href="{exp.id}/numbers.csv">numbers</a>']
-        if state == "failed":
-            links.append(f'<a href=".failed/{exp.id}/{exp.id}.ipynb">failed notebook</a>')
-        err = f'<div class="err">{escape(last.get("error", ""))}</div>' if last.get("error") else ""
-        shown = " (showing the last good report)" if state in ("failed", "interrupted") and e["present"] else ""
-        seconds = last.get("seconds", run.get("seconds", 0)) or 0
-        counts = scoreboard_counts(e["numbers"]).get("reproduction", Counter())
-        verdict = "miss" if counts["miss"] else "loose" if counts["loose"] else "within" if counts["within"] else ""
-        line = _experiment_line(e)
-        exp_rows.append(
-            f"<tr><td><code>{escape(exp.id)}</code><br>{escape(exp.title)}</td><td>{escape(exp.section)}</td>"
-            f"<td class='n v-{verdict}'>{escape(line['reproductions within / loose / miss'])}</td>"
-            f"<td class='n'>{escape(line['calibrated within / loose / miss'])}</td><td class='n'>{line['other rows']}</td>"
-            f"<td class='{escape(state.replace(' ', '-'))}'>{escape(state)}{shown}{err}</td><td>{seconds:.1f} s</td>"
-            f"<td>{escape(e['report'].get('locbook', ''))}</td><td>{' · '.join(links)}</td></tr>")
-    reasons = _html_table(_reasons(rows))
-    twice = double_counted(rows)
-    warn = ("<p class='err'>Counted more than once: " + escape("; ".join(f"{d} {p} in {', '.join(e)}" for d, p, e in twice))
-            + "</p>") if twice else ""
-    return f"""<!doctype html><html><head><meta charset="utf-8"><title>locbook reports ({escape(report_dir.name)})</title>
-<style>{_STYLE}</style></head>
-<body><h1>locbook reports, <code>{escape(report_dir.name)}</code></h1>
-<p>locbook {escape(version)}. Every printed number beside ours: <a href="numbers.csv">numbers.csv</a>.</p>
-<p>{escape(_headline(rows).replace('**', ''))}</p>{warn}
-<h2>By document</h2>{docs}{total}
-<h2>Experiments</h2><table><thead><tr><th>experiment</th><th>reproduces</th><th>reproductions within / loose / miss</th>
-<th>calibrated within / loose / miss</th><th>other rows</th><th>last run</th><th>time</th><th>generated by</th><th>outputs</th></tr></thead>
-<tbody>{''.join(exp_rows)}</tbody></table>
-<h2>Misses and loose rows, by reason</h2>{reasons or '<p>None.</p>'}</body></html>
-"""
+    """``index.html`` of a reports folder: links only to the files present in it."""
+    report_dir = Path(report_dir)
+    experiments = [_index_entry(report_dir, e) for e in entries]
+    pages = {x["id"]: x["page"] for x in experiments}
+    reasons = [{**g, "page": pages.get(g["experiment"])} for g in _reasons(rows)]
+    documents = [{"key": key, "authors": doc.authors, "year": doc.year, "title": doc.title,
+                  "table": _counts_table(scoreboard_counts(doc_rows))}
+                 for key, doc, doc_rows in _by_document(entries, rows) if doc_rows]
+    return _render(
+        "index.html", version=version, folder=report_dir.name, numbers_csv=(report_dir / "numbers.csv").is_file(),
+        headline=_headline_counts(rows), twice=double_counted(rows),
+        total=_counts_table(scoreboard_counts(rows)) if rows else None, documents=documents,
+        experiments=experiments, n_present=sum(1 for e in entries if e["present"]), reasons=reasons)
 
 
 def _read_json(path: Path, default):

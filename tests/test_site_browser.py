@@ -1,0 +1,253 @@
+"""The report site in a real browser: every link and image of index.html and of each page it links resolves.
+
+A toy suite (three notebooks: one that records a number, a figure, a table and an assumption; one that fails;
+one never run) is run with papermill into a temporary reports folder. Headless Chromium (Debian's
+``chromium`` and ``chromium-driver``, driven by selenium) then opens ``index.html`` from file://, follows every
+link to a local HTML page, and checks on each page that every ``a[href]`` and ``img[src]`` names a file that
+exists and that every image loaded. A screenshot of the index goes to ``$LOCBOOK_SCREENSHOT_DIR`` (default
+``.ci/artifacts/``, git-ignored).
+"""
+from __future__ import annotations
+
+import os
+import shutil
+import textwrap
+import urllib.parse
+import urllib.request
+from pathlib import Path
+
+import nbformat
+import pytest
+from nbformat.v4 import new_code_cell, new_notebook
+
+from locbook.suite import load_suite, run_suite
+
+pytestmark = pytest.mark.notebooks   # executes (toy) notebooks with papermill
+
+REPO = Path(__file__).resolve().parents[1]
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+CHROMEDRIVER = shutil.which("chromedriver")
+
+PARAMS = "seed: int = 1  # seed\nn: int = 12  # samples\nfail: bool = False  # raise at the end\n"
+BODY = """\
+import matplotlib
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import locbook as lb
+report = lb.Report("toy")
+x = lb.streams(seed, "a")["a"].normal(size=n)
+printed = lb.Printed("george", "Table 1", "mean", "", "", "0.0")
+report.number("mean", printed, float(x.mean()), kind="reproduction",
+              ambiguity=lb.Ambiguity(1.0, "test window", "toy Sec. 1"))
+fig, ax = plt.subplots(figsize=(3, 2))
+ax.plot(x)
+report.figure(fig, "trace", "the <toy> samples & their order")
+report.table("samples", [{"i": i, "x": float(v)} for i, v in enumerate(x)], "the samples")
+report.assumption("n", n, "small, to keep the test fast")
+if fail:
+    raise RuntimeError("deliberate failure")
+"""
+TOML = """
+[documents.george]
+title = "A toy document"
+authors = "A. Author"
+year = "2015"
+source = "s"
+note = "n"
+[[experiment]]
+id = "george-good"
+document = "george"
+title = "A good experiment"
+section = "Table 1"
+notebook = "toy.ipynb"
+[experiment.profiles.quick]
+[experiment.profiles.full]
+[[experiment]]
+id = "george-failed"
+document = "george"
+title = "A failing experiment"
+section = "Table 2"
+notebook = "toy.ipynb"
+[experiment.profiles.quick]
+fail = true
+[experiment.profiles.full]
+fail = true
+[[experiment]]
+id = "george-absent"
+document = "george"
+title = "An experiment not run"
+section = "Table 3"
+notebook = "toy.ipynb"
+[experiment.profiles.quick]
+[experiment.profiles.full]
+[parameter_rules]
+n = { ge = 1 }
+"""
+
+
+def _toy_suite(root: Path):
+    nbdir = root / "notebooks"
+    nbdir.mkdir(parents=True)
+    nb = new_notebook()
+    nb.metadata["kernelspec"] = {"name": "python3", "display_name": "Python 3", "language": "python"}
+    params = new_code_cell(PARAMS)
+    params.metadata["tags"] = ["parameters"]
+    nb.cells = [params, new_code_cell(BODY)]
+    nbformat.write(nb, str(nbdir / "toy.ipynb"))
+    (nbdir / "experiments.toml").write_text(textwrap.dedent(TOML))
+    return load_suite(nbdir / "experiments.toml")
+
+
+@pytest.fixture(scope="module")
+def browser():
+    if not (CHROMIUM and CHROMEDRIVER):
+        pytest.skip("needs Debian's chromium and chromium-driver (apt-get install chromium chromium-driver; "
+                    ".ci/run installs them): " + ", ".join(n for n, p in (("chromium", CHROMIUM),
+                                                                         ("chromedriver", CHROMEDRIVER)) if not p)
+                    + " not found")
+    from selenium import webdriver
+    from selenium.webdriver.chrome.service import Service
+    options = webdriver.ChromeOptions()
+    for arg in ("--headless=new", "--no-sandbox", "--disable-gpu", "--window-size=1400,1000",
+                "--allow-file-access-from-files"):
+        options.add_argument(arg)
+    options.binary_location = CHROMIUM
+    driver = webdriver.Chrome(options=options, service=Service(CHROMEDRIVER))
+    driver.set_page_load_timeout(60)
+    try:
+        yield driver
+    finally:
+        driver.quit()
+
+
+@pytest.fixture(scope="module")
+def site_dir(tmp_path_factory):
+    root = tmp_path_factory.mktemp("site")
+    suite = _toy_suite(root / "repo")
+    chosen = [e for e in suite.experiments if e.id != "george-absent"]
+    run = run_suite(suite, chosen, "quick", report_root=root / "reports", jobs=2, progress="quiet")
+    assert {o.id: o.status for o in run.outcomes} == {"george-good": "ok", "george-failed": "failed"}
+    return run.report_dir
+
+
+def _local_file(url: str) -> Path | None:
+    """The file a file:// URL names (query and fragment dropped); ``None`` for any other scheme."""
+    parts = urllib.parse.urlsplit(url)
+    if parts.scheme != "file":
+        return None
+    return Path(urllib.request.url2pathname(parts.path))
+
+
+def check_page(driver, page: Path) -> tuple[list[str], list[str], list[Path]]:
+    """Open ``page`` from file:// and return ``(broken, external, linked pages)``: the ``href`` / ``src`` values
+    (as written) whose local file is missing, and the images that did not load; the links that leave the
+    machine; the local HTML pages it links to."""
+    driver.get(page.as_uri())
+    refs = driver.execute_script("""
+        return [].concat(
+            Array.from(document.querySelectorAll('a[href]'), a => [a.getAttribute('href'), a.href]),
+            Array.from(document.querySelectorAll('img[src]'), i => [i.getAttribute('src'), i.src]));""")
+    broken, external, pages = [], [], []
+    for raw, resolved in refs:
+        target = _local_file(resolved)
+        if target is None:
+            if not resolved.startswith("data:"):
+                external.append(raw)
+        elif not target.is_file():
+            broken.append(raw)
+        elif target.suffix == ".html" and target != page:
+            pages.append(target)
+    not_loaded = driver.execute_script(
+        "return Array.from(document.images).filter(i => !(i.complete && i.naturalWidth > 0))"
+        ".map(i => i.getAttribute('src'));")
+    broken += [f"image not loaded: {src}" for src in not_loaded]
+    return broken, external, pages
+
+
+def crawl(driver, start: Path, inside: Path) -> dict[Path, tuple[list[str], list[str]]]:
+    """Every local HTML page reachable from ``start`` within the folder ``inside``: its broken and its external
+    references."""
+    seen, todo = {}, [start.resolve()]
+    while todo:
+        page = todo.pop()
+        if page in seen:
+            continue
+        broken, external, pages = check_page(driver, page)
+        seen[page] = (broken, external)
+        todo += [p.resolve() for p in pages if p.resolve().is_relative_to(inside.resolve())]
+    return seen
+
+
+def _screenshot_dir() -> Path:
+    folder = Path(os.environ.get("LOCBOOK_SCREENSHOT_DIR") or REPO / ".ci" / "artifacts")
+    folder.mkdir(parents=True, exist_ok=True)
+    return folder
+
+
+def test_the_checker_finds_a_broken_link_and_a_broken_image(browser, tmp_path):
+    (tmp_path / "there.html").write_text("<!doctype html><title>there</title><p>here")
+    page = tmp_path / "page.html"
+    page.write_text('<!doctype html><title>t</title><a href="there.html">ok</a> <a href="#top">self</a> '
+                    '<a href="missing.html">gone</a> <a href="sub/missing.csv?x=1#y">gone too</a> '
+                    '<img src="missing.png" alt="gone"> <a href="https://example.org/">out</a>')
+    broken, external, pages = check_page(browser, page)
+    assert broken == ["missing.html", "sub/missing.csv?x=1#y", "missing.png", "image not loaded: missing.png"]
+    assert external == ["https://example.org/"]
+    assert [p.resolve() for p in pages] == [(tmp_path / "there.html").resolve()]
+
+
+def test_every_link_and_image_of_the_site_resolves(browser, site_dir, tmp_path):
+    from selenium.webdriver.common.by import By
+
+    index = site_dir / "index.html"
+    pages = crawl(browser, index, site_dir)
+    problems = {str(p.relative_to(site_dir.resolve())): b for p, (b, _e) in pages.items() if b}
+    assert problems == {}
+    visited = {p.relative_to(site_dir.resolve()).as_posix() for p in pages}
+    assert visited == {"index.html", "george-good/report.html", "george-good/george-good.html"}
+    for name in ("index.html", "george-good/report.html"):             # the site itself never leaves the machine
+        assert pages[(site_dir / name).resolve()][1] == [], name
+
+    # the index: kind-by-verdict tables coloured by verdict, one row per experiment, run status as text
+    browser.get(index.as_uri())
+    shots = [tmp_path / "site-index.png", _screenshot_dir() / "site-index.png"]
+    for shot in shots:
+        assert browser.save_screenshot(str(shot)) and shot.stat().st_size > 0
+    counts = browser.find_element(By.CSS_SELECTOR, "table.counts")
+    assert [c.text for c in counts.find_elements(By.CSS_SELECTOR, "thead th")] == ["kind", "loose", "rows"]
+    reproduction = counts.find_element(By.XPATH, ".//tr[th='reproduction']")
+    assert "v-loose" in reproduction.find_element(By.TAG_NAME, "td").get_attribute("class")
+    assert "Independent reproductions: 0 within, 1 loose, 0 missed, of 1" in browser.find_element(By.TAG_NAME, "body").text
+    rows = {r.get_attribute("id"): r for r in browser.find_elements(By.CSS_SELECTOR, "table.experiments tbody tr")}
+    assert list(rows) == ["george-good", "george-failed", "george-absent"]
+    good = [a.get_attribute("href") for a in rows["george-good"].find_elements(By.TAG_NAME, "a")]
+    assert (site_dir / "george-good" / "report.html").resolve().as_uri() in good
+    assert (site_dir / "george-good" / "george-good.html").resolve().as_uri() in good
+    assert "ok" in rows["george-good"].find_element(By.CSS_SELECTOR, "td.status").text
+    assert "v-loose" in rows["george-good"].find_element(By.CSS_SELECTOR, "td.n").get_attribute("class")
+    failed = rows["george-failed"]
+    assert "failed" in failed.find_element(By.CSS_SELECTOR, ".flag").text
+    assert "deliberate failure" in failed.find_element(By.CSS_SELECTOR, ".err").text
+    assert [a.text for a in failed.find_elements(By.TAG_NAME, "a")] == ["failed notebook"]
+    assert "v-" not in failed.find_element(By.CSS_SELECTOR, "td.status").get_attribute("class")
+    assert "not run" in rows["george-absent"].text and rows["george-absent"].find_elements(By.TAG_NAME, "a") == []
+
+    # an experiment's page: back link, parameters, the figure (loaded), the table, numbers coloured by verdict
+    page = site_dir / "george-good" / "report.html"
+    browser.get(page.as_uri())
+    browser.save_screenshot(str(_screenshot_dir() / "site-page.png"))
+    text = browser.find_element(By.TAG_NAME, "body").text
+    assert "A good experiment" in text and "A. Author" in text and "Table 1" in text
+    assert "the <toy> samples & their order" in text                       # escaped, shown as written
+    assert browser.find_elements(By.TAG_NAME, "toy") == []
+    links = {a.text: a.get_attribute("href") for a in browser.find_elements(By.TAG_NAME, "a")}
+    assert any(href.endswith("/index.html") for href in links.values())
+    assert links["executed notebook"].endswith("/george-good/george-good.html")
+    img = browser.find_element(By.CSS_SELECTOR, "figure img")
+    assert img.get_attribute("src").endswith("/george-good/trace.png")
+    assert browser.execute_script("return arguments[0].complete && arguments[0].naturalWidth > 0", img)
+    verdict = browser.find_element(By.XPATH, "//h2[text()='Reproduced versus printed']/following::table[1]"
+                                             "//td[text()='loose']")
+    assert "v-loose" in verdict.get_attribute("class")
+    assert "test window (toy Sec. 1)" in text and "small, to keep the test fast" in text
+    assert "samples.csv" in links

@@ -108,7 +108,7 @@ def test_wls_keeps_the_weights_of_the_heard_anchors():
 def test_one_failing_box_problem_does_not_cost_its_batch(monkeypatch):
     _, power = _batch(8)
     ranges = MODEL.range_m(power)
-    good = lb.lateration_box_ls(ANCHORS, ranges, *BOX)
+    good = lb.lateration_box_ls(ANCHORS, ranges, *BOX, solver="cvxpy")   # the stacked QP's failure isolation
     real_solve = localization.solve
 
     def flaky(problem, what):                     # the solver fails on any batch holding problem 3's data
@@ -118,7 +118,7 @@ def test_one_failing_box_problem_does_not_cost_its_batch(monkeypatch):
         real_solve(problem, what)
 
     monkeypatch.setattr(localization, "solve", flaky)
-    res = lb.lateration_box_ls(ANCHORS, ranges, *BOX)
+    res = lb.lateration_box_ls(ANCHORS, ranges, *BOX, solver="cvxpy")
     others = np.setdiff1d(np.arange(8), [3])
     np.testing.assert_allclose(res.position_m[others], good.position_m[others], atol=1e-6)
     assert res.status[3] == "solver_failed" and not res.converged[3] and np.isnan(res.position_m[3]).all()

@@ -1,4 +1,4 @@
-"""Calibration of the log-distance path-loss model by least squares (cvxpy and closed form).
+"""Calibration of the log-distance path-loss model by least squares (closed forms, and cvxpy).
 
 For measurements ``(d_i, P_i)`` the model ``P_i = P_0 - 10 n log10(d_i/d0) + e_i`` is linear in
 ``T = [P_0, n]``; the least-squares fit is ``T = (M^T M)^{-1} M^T P`` with rows
@@ -14,9 +14,12 @@ Problems carry leading batch axes: ``distance_m`` and ``power_dbm`` of shape ``(
 ``prod(...)`` independent fits. NaN powers are missing samples (a reading not heard).
 
 Solvers: the unconstrained least-squares fit is the closed form (normal equations from running sums: time and
-memory linear in the samples, any size); cvxpy solves the constrained (bounded) and robust (Huber) variants,
-all problems stacked into one convex problem, and is the oracle for the closed form. A cvxpy fit that does not
-reach an optimum returns NaN parameters with the solver's status in ``PathLossFit.status``; it never raises.
+memory linear in the samples, any size). The bounded least-squares fit is exact too: the two-parameter box QP
+solved by KKT enumeration over the running sums (the unconstrained fit if it is inside the bounds, else the
+best of the four edges, each a one-parameter closed form clipped to its bounds), see :func:`fit_path_loss`.
+cvxpy solves the robust (Huber) variant, which needs an iterative solver, and is the oracle for the closed
+forms (``solver="cvxpy"``: all problems stacked into one convex problem). A cvxpy fit that does not reach an
+optimum returns NaN parameters with the solver's status in ``PathLossFit.status``; it never raises.
 """
 from __future__ import annotations
 
@@ -45,7 +48,7 @@ __all__ = [
 ]
 
 CALIBRATION_MODES = ("per_location_mean", "pooled", "per_anchor")
-CALIBRATION_SOLVERS = ("auto", "closed_form", "cvxpy")
+CALIBRATION_SOLVERS = ("auto", "closed_form", "exact", "cvxpy")
 CALIBRATION_LOSSES = ("squared", "huber")
 #: statuses of a fit whose parameters can be used
 USABLE_STATUSES = ("closed_form", "optimal")
@@ -59,7 +62,8 @@ class PathLossFit:
     ``[ref_power_dbm, path_loss_exp]``) estimated from the residuals, for standard errors (NaN for the Huber
     fit, whose covariance this formula does not give).
 
-    ``status``: ``"closed_form"``, or the cvxpy status of the stacked solve (``"optimal"``); any other status
+    ``status``: ``"closed_form"`` (the unconstrained normal equations), ``"optimal"`` (a bounded or robust fit at
+    its optimum: the exact bounded fit, or cvxpy's status of the stacked solve); any other cvxpy status
     (``"optimal_inaccurate"``, ``"infeasible"``, ``"solver_error"``...) comes with NaN parameters, so a failed
     fit is never mistaken for a result. :attr:`ok` says whether the parameters can be used.
     """
@@ -164,6 +168,46 @@ def fit_path_loss_closed_form(distance_m, power_dbm, ref_distance_m: float = 1.0
     return _finish(log_d, power, mask, ref, exp, "closed_form")
 
 
+def _bounded_closed_form(log_d, power, mask, ref_bounds, exp_bounds):
+    """Exact bounded least squares of ``P = a - n L``, ``a`` in ``ref_bounds``, ``n`` in ``exp_bounds`` (either
+    may be None: unbounded), batched, from the running sums.
+
+    KKT enumeration of the two-parameter box QP (strictly convex: two distinct distances per problem). If the
+    unconstrained minimiser is inside the box it is the answer. Otherwise the minimum lies on the boundary, i.e.
+    on one of the four edges; on the edge ``n = c`` the objective is a convex parabola in ``a`` whose minimiser
+    ``a = (sum P + c sum L) / N`` is clipped to the bounds of ``a`` (the corners are those clips), and on
+    ``a = c`` likewise ``n = (c sum L - sum L P) / sum L^2``. The answer is the candidate of least objective,
+    compared as the exact excess over the unconstrained minimum ``|M (t - t*)|^2 = N (da - dn Lbar)^2 + S_LL dn^2``
+    (``Lbar`` the mean log-distance, ``S_LL`` the centred sum of squares), which has no cancellation.
+    Returns ``(ref, exp)`` with the batch shape.
+    """
+    lo = np.array([-np.inf if b is None else b[0] for b in (ref_bounds, exp_bounds)])
+    hi = np.array([np.inf if b is None else b[1] for b in (ref_bounds, exp_bounds)])
+    # the unconstrained fit, the arithmetic of fit_path_loss_closed_form (so inactive bounds give its answer)
+    s0, s1, s2 = mask.sum(-1).astype(float), log_d.sum(-1), (log_d**2).sum(-1)
+    p0, p1 = power.sum(-1), (log_d * power).sum(-1)
+    det = s0 * s2 - s1 * s1
+    ref = (s2 * p0 - s1 * p1) / det
+    exp = (s1 * p0 - s0 * p1) / det
+    mean_l = s1 / s0
+    s_ll = (np.where(mask, log_d - mean_l[..., None], 0.0) ** 2).sum(-1)
+    cand_ref, cand_exp = [ref], [exp]
+    for c in (lo[1], hi[1]):                 # edges n = c: the best intercept, clipped (an infinite bound: none)
+        if np.isfinite(c):
+            cand_exp.append(np.full_like(ref, c))
+            cand_ref.append(np.clip((p0 + c * s1) / s0, lo[0], hi[0]))
+    for c in (lo[0], hi[0]):                 # edges a = c: the best exponent, clipped
+        if np.isfinite(c):
+            cand_ref.append(np.full_like(ref, c))
+            cand_exp.append(np.clip((c * s1 - p1) / s2, lo[1], hi[1]))
+    cand_ref, cand_exp = np.stack(cand_ref), np.stack(cand_exp)          # (candidates, ...)
+    feasible = (cand_ref >= lo[0]) & (cand_ref <= hi[0]) & (cand_exp >= lo[1]) & (cand_exp <= hi[1])
+    da, dn = cand_ref - ref, cand_exp - exp
+    excess = np.where(feasible, s0 * (da - dn * mean_l) ** 2 + s_ll * dn**2, np.inf)
+    best = np.argmin(excess, axis=0)[None]
+    return np.take_along_axis(cand_ref, best, 0)[0], np.take_along_axis(cand_exp, best, 0)[0]
+
+
 def _stacked_problem(log_d, power, mask, ref_bounds, exp_bounds, loss="squared", huber_delta_db=None):
     """One cvxpy problem for all ``k`` fits: ``min sum_i ||P_i - P0_i + n_i L_i||^2`` over the observed samples.
 
@@ -200,10 +244,17 @@ def fit_path_loss(distance_m, power_dbm, *, ref_distance_m: float = 1.0,
     n in [1.5, 3]). ``loss="huber"`` is the robust variant: residuals beyond ``huber_delta_db`` count
     linearly (cvxpy's ``huber``), so a few gross outliers (a blocked link) do not drag the fit.
 
-    ``solver``: ``"auto"`` (default) uses the closed form for the unconstrained least-squares fit and cvxpy
-    otherwise; ``"closed_form"`` insists on the normal equations (unconstrained squared loss only);
-    ``"cvxpy"`` solves all problems as one stacked convex problem (the oracle). A cvxpy solve that does not
-    reach an optimum gives NaN parameters and its status (``PathLossFit.status``, ``PathLossFit.ok``).
+    ``solver``: ``"auto"`` (default) uses the closed form for the unconstrained least-squares fit, the exact
+    bounded fit when bounds are given, and cvxpy for ``loss="huber"``;
+    ``"closed_form"`` insists on the normal equations (unconstrained squared loss only);
+    ``"exact"``: the bounded least-squares fit in closed form with the box handled exactly (KKT enumeration:
+    the unconstrained fit if it is inside the bounds, else the best edge, one parameter at a bound and the other
+    in closed form, clipped; no iterations, no tolerance; without bounds it is the closed form), status
+    ``"optimal"``; squared loss only: the Huber fit has no closed form and genuinely needs an iterative solver,
+    so it stays on cvxpy;
+    ``"cvxpy"`` solves all problems as one stacked convex problem (the oracle, Clarabel at tight tolerances). A
+    cvxpy solve that does not reach an optimum gives NaN parameters and its status (``PathLossFit.status``,
+    ``PathLossFit.ok``).
 
     Raises :class:`DegenerateGeometryError` when a problem has fewer than two distinct distances.
     """
@@ -222,13 +273,22 @@ def fit_path_loss(distance_m, power_dbm, *, ref_distance_m: float = 1.0,
     if loss == "huber":
         check_scalar("huber_delta_db", huber_delta_db, gt=0)
     if solver == "auto":
-        solver = "cvxpy" if bounded or loss != "squared" else "closed_form"
+        solver = "cvxpy" if loss != "squared" else "exact" if bounded else "closed_form"
     if solver == "closed_form":
         if bounded or loss != "squared":
             raise ValueError("the closed form is the unconstrained least-squares fit; bounds and loss='huber' "
-                             "need solver='cvxpy' (or 'auto')")
+                             "need solver='cvxpy' (or 'auto'; bounds alone also solver='exact')")
         return fit_path_loss_closed_form(distance_m, power_dbm, ref_distance_m)
+    if solver == "exact":
+        if loss != "squared":
+            raise ValueError("solver='exact' is the (bounded) least-squares fit; loss='huber' has no closed form "
+                             "and needs solver='cvxpy' (or 'auto')")
+        if not bounded:
+            return fit_path_loss_closed_form(distance_m, power_dbm, ref_distance_m)
     log_d, power, mask = _prepare(distance_m, power_dbm, ref_distance_m)
+    if solver == "exact":
+        ref, exp = _bounded_closed_form(log_d, power, mask, bounds[0], bounds[1])
+        return _finish(log_d, power, mask, ref, exp, "optimal")     # the optimum, as cvxpy would report it
     batch, n = log_d.shape[:-1], log_d.shape[-1]
     k = int(np.prod(batch))
     problem, (v_ref, v_exp) = _stacked_problem(

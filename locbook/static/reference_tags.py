@@ -81,7 +81,8 @@ def calibrate_from_reference_tags(ref_rss_dbm, ref_positions_m, readers_m, *, wa
 
     A NaN tag reading is one not heard: the reader's fit at that step uses the tags it heard (at least two at
     distinct distances, else :class:`DegenerateGeometryError`), and the pooled sigma the heard residuals.
-    Raises :class:`ConvergenceError` if the stacked bounded fit does not reach an optimum.
+    The bounded fit is the exact closed form with the box handled by its KKT cases (:func:`locbook.fit_path_loss`);
+    raises :class:`ConvergenceError` if a fit does not reach an optimum.
     """
     check_scalar("wall_attenuation_db", wall_attenuation_db)
     readers_m = as_array("readers_m", readers_m, ndim=2, trailing=(None, 2))
@@ -96,7 +97,7 @@ def calibrate_from_reference_tags(ref_rss_dbm, ref_positions_m, readers_m, *, wa
                         np.swapaxes(compensated, -1, -2),
                         ref_power_bounds_dbm=ref_power_bounds_dbm, path_loss_exp_bounds=path_loss_exp_bounds)
     if not fit.ok:
-        raise ConvergenceError(f"reference-tag calibration: the stacked path-loss fit ended with status "
+        raise ConvergenceError(f"reference-tag calibration: the path-loss fit ended with status "
                                f"{fit.status!r}; no calibration is returned")
     ref, exp = fit.ref_power_dbm, fit.path_loss_exp                                 # (..., m)
     expected = model_fingerprints(ref_positions_m, readers_m, PathLossModel(ref, exp, wall_attenuation_db=wall_attenuation_db),

@@ -1,7 +1,23 @@
-"""One place for how locbook solves its stacked cvxpy problems."""
-import cvxpy as cp
+"""One place for how locbook solves its cvxpy problems, and for importing cvxpy.
+
+cvxpy is imported on first use (``cp`` below), not with locbook: the exact solvers are the defaults, and the
+import costs every notebook kernel about a second at start-up.
+"""
+from __future__ import annotations
+
+import importlib
 
 from .errors import ConvergenceError
+
+
+class _LazyCvxpy:
+    """``cp.Variable`` etc.: the cvxpy module, imported when an attribute is first asked for."""
+
+    def __getattr__(self, name):
+        return getattr(importlib.import_module("cvxpy"), name)
+
+
+cp = _LazyCvxpy()
 
 # Stacked problems sum thousands of independent objectives; Clarabel's default gap tolerances are
 # relative to that sum, which leaves about 1e-3 m per problem. These keep each problem near 1e-6.

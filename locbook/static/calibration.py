@@ -25,11 +25,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import cvxpy as cp
 import numpy as np
 import scipy.sparse as sp
 
-from .._cvx import solve
+from .._cvx import cp, solve
 from .._validate import as_array, check_choice, check_scalar
 from ..errors import ConvergenceError, DegenerateGeometryError
 

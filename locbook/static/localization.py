@@ -41,10 +41,9 @@ from dataclasses import dataclass, replace
 from functools import lru_cache
 from itertools import product
 
-import cvxpy as cp
 import numpy as np
 
-from .._cvx import solve
+from .._cvx import cp, solve
 from .._validate import as_array, check_choice, check_scalar
 from ..models.channel import PathLossModel, log_distance_gradient, log_distance_mean_dbm, pairwise_distance_m
 from ..errors import ConvergenceError, DegenerateGeometryError

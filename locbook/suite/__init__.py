@@ -1,8 +1,27 @@
-"""The notebook suite: experiment list, typed parameters, papermill execution and reports."""
-from .params import NotebookParameter, ParameterRule, read_parameters
-from .runner import KERNEL_NAME, Outcome, SuiteRun, cache_key, override_folder_name, run_suite, write_suite_reports
-from .spec import DOCUMENT_KEYS, PROFILES, Experiment, Suite, SuiteError, load_suite
+"""The notebook suite: experiment list, typed parameters, papermill execution and reports.
 
-__all__ = ["NotebookParameter", "ParameterRule", "read_parameters", "KERNEL_NAME", "Outcome", "SuiteRun",
-           "cache_key", "override_folder_name", "run_suite", "write_suite_reports", "DOCUMENT_KEYS", "PROFILES",
-           "Experiment", "Suite", "SuiteError", "load_suite"]
+Names are imported on first use (PEP 562): a notebook's ``import locbook`` needs only ``suite.report``, and the
+runner's dependencies (papermill, nbformat, jinja2) would cost every kernel seconds at start-up.
+"""
+from importlib import import_module
+
+_EXPORTS = {
+    "NotebookParameter": "params", "ParameterRule": "params", "read_parameters": "params",
+    "KERNEL_NAME": "runner", "Outcome": "runner", "SuiteRun": "runner", "cache_key": "runner",
+    "override_folder_name": "runner", "run_suite": "runner", "write_suite_reports": "runner",
+    "DOCUMENT_KEYS": "spec", "PROFILES": "spec", "Experiment": "spec", "Suite": "spec", "SuiteError": "spec",
+    "load_suite": "spec",
+}
+__all__ = list(_EXPORTS)
+
+
+def __getattr__(name):
+    if name in _EXPORTS:
+        value = getattr(import_module(f".{_EXPORTS[name]}", __name__), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(__all__)

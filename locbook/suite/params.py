@@ -19,8 +19,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import nbformat
-
 from ..errors import ParameterError
 
 __all__ = ["NotebookParameter", "ParameterRule", "read_parameters", "check_value", "parse_cli_value",
@@ -111,6 +109,7 @@ def _parameters_cell(nb):
 def read_notebook(notebook_path: str | Path):
     """The notebook, or a :class:`ParameterError` naming the file if it is missing or not a notebook."""
     try:
+        import nbformat   # here, not at import: nbformat's schema checks cost a notebook kernel a second
         return nbformat.read(str(notebook_path), as_version=4)
     except FileNotFoundError:
         raise ParameterError(f"{notebook_path}: notebook does not exist") from None

@@ -60,8 +60,9 @@ def main(argv: list[str] | None = None) -> int:
 
     parser = argparse.ArgumentParser(prog="locbook", description="Rerun published RSSI localization experiments.")
     parser.add_argument("--version", action="version", version=f"locbook {__version__}")
-    parser.add_argument("--suite", type=Path, help="experiment list (default: notebooks/experiments.toml here or in "
-                                                   "a parent folder, else the one installed with locbook)")
+    suite_help = ("experiment list (default: notebooks/experiments.toml here or in a parent folder, else the one "
+                  "installed with locbook); accepted before or after the command")
+    parser.add_argument("--suite", type=Path, help=suite_help)
     sub = parser.add_subparsers(dest="command", required=True)
     lst = sub.add_parser("list", help="list the experiments (with KEY: every parameter of those experiments)")
     lst.add_argument("key", nargs="?", help="an experiment id or document key")
@@ -82,8 +83,10 @@ def main(argv: list[str] | None = None) -> int:
                      help="override a notebook parameter (a TOML value, checked against its type and range); "
                           "the reports go to their own folder, never to reports/<profile>/")
     run.add_argument("--reports", type=Path, help="reports folder (default: <repository>/reports)")
-    run.add_argument("--out", type=Path, help="write this run's reports to this folder ([a-z0-9-] name)")
-    run.add_argument("--timeout", type=lambda t: _positive(float, t), default=1800, help="seconds allowed per notebook cell")
+    run.add_argument("--out", type=Path, help="write this run's reports to this folder (a path; its last part "
+                                                "[a-z0-9-] only)")
+    run.add_argument("--timeout", type=lambda t: _positive(int, t), default=1800,
+                     help="whole seconds allowed per notebook cell (default 1800)")
     run.add_argument("--progress", choices=("auto", "live", "plain", "quiet"), default="auto",
                      help="auto (default): a live table on a terminal, one line per event otherwise; plain: one "
                           "line per event; quiet: only the end")
@@ -93,6 +96,8 @@ def main(argv: list[str] | None = None) -> int:
     run.add_argument("--scheduler", metavar="ADDRESS",
                      help="with --executor dask: a scheduler address (tcp://host:8786) or scheduler file; default: "
                           "a LocalCluster of --jobs workers")
+    for command in (lst, show, nbs, run):   # --suite after the command too; SUPPRESS keeps one given before it
+        command.add_argument("--suite", type=Path, default=argparse.SUPPRESS, help=suite_help)
     args = parser.parse_args(argv)
 
     from . import load_suite, run_suite
@@ -125,7 +130,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"locbook: error: {exc.strerror or exc}: {exc.filename or ''}", file=sys.stderr)
         return 2
     if result.report_dir.name != args.profile:
-        print(f"reports of this run: {result.report_dir} (reports/{args.profile}/ is unchanged)")
+        print(f"reports of this run: {result.report_dir.resolve()} (reports/{args.profile}/ is unchanged)")
     _print_summary(result, args.progress)
     if result.interrupted_by is not None:
         return 128 + int(result.interrupted_by)

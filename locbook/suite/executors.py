@@ -23,6 +23,8 @@ from .spec import SuiteError
 __all__ = ["LocalExecutor", "DaskExecutor", "make_executor", "run_worker_process"]
 
 _STOP_GRACE_S = 5.0
+#: how long to try reaching a scheduler (a cluster being brought up by a batch system may need a few seconds)
+_CONNECT_TIMEOUT = "10s"
 
 
 def _worker_command(task_path: Path | str, parent: int | None = None) -> list[str]:
@@ -115,9 +117,9 @@ class DaskExecutor:
         try:
             if scheduler:
                 if Path(scheduler).is_file():
-                    self.client = Client(scheduler_file=scheduler, timeout="30s")
+                    self.client = Client(scheduler_file=scheduler, timeout=_CONNECT_TIMEOUT)
                 else:
-                    self.client = Client(scheduler, timeout="30s")
+                    self.client = Client(scheduler, timeout=_CONNECT_TIMEOUT)
             else:
                 # In-process workers (one thread each): a task only starts a worker process and waits for it,
                 # so nothing is gained by worker processes, and without them a Ctrl-C in the terminal reaches
@@ -126,9 +128,13 @@ class DaskExecutor:
                 self.cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=False,
                                             dashboard_address=None, silence_logs=logging.ERROR)
                 self.client = Client(self.cluster)
-        except OSError as exc:
+        except OSError as exc:     # refused, timed out, unknown host
             self.close()
             raise SuiteError(f"cannot reach the Dask scheduler {scheduler or '(local cluster)'}: {exc}") from None
+        except (ValueError, TypeError) as exc:
+            self.close()
+            raise SuiteError(f"--scheduler {scheduler!r} is neither a scheduler address (tcp://HOST:PORT) nor an "
+                             f"existing scheduler file ({exc})") from None
         # every queued experiment is submitted at once; the cluster runs as many as it has workers
         self.capacity = 1 << 30
 

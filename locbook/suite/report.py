@@ -82,6 +82,15 @@ class Table:
         return self.to_markdown()
 
 
+def _user() -> str:
+    import getpass
+    try:
+        name = getpass.getuser()
+    except Exception:        # no user name in the environment or the password database
+        name = str(os.getuid()) if hasattr(os, "getuid") else "user"
+    return re.sub(r"[^A-Za-z0-9_.-]", "_", name)
+
+
 class Report:
     """Collects one experiment's outputs. ``experiment`` defaults to ``LOCBOOK_EXPERIMENT``."""
 
@@ -91,7 +100,8 @@ class Report:
         if out:
             self.output_dir = Path(out)
         else:
-            self.output_dir = Path(tempfile.gettempdir()) / "locbook-interactive" / self.experiment
+            # one scratch folder per user: a shared machine's users never write into each other's
+            self.output_dir = (Path(tempfile.gettempdir()) / f"locbook-interactive-{_user()}" / self.experiment)
         self.output_dir.mkdir(parents=True, exist_ok=True)
         self.numbers: list[dict] = []
         self.figures: list[dict] = []

@@ -93,3 +93,16 @@ def test_a_failing_notebook_on_dask_fails_alone(toy, capsys):
     assert "failed: george-one (RuntimeError: deliberate failure)" in captured.err
     status = json.loads((_folder(toy) / "status.json").read_text())
     assert status["george-one"]["status"] == "failed" and status["george-two"]["status"] == "ok"
+
+
+def test_suite_option_after_the_command_and_a_malformed_scheduler(toy, capsys):
+    from locbook.suite.cli import main
+    suite = str(toy / "notebooks" / "experiments.toml")
+    assert main(["run", "george-two", "--suite", suite, "--reports", str(toy / "reports"), "--quiet"]) == 0
+    assert "done: 1 executed" in capsys.readouterr().out
+    assert main(["list", "--suite", suite]) == 0 and "george-one" in capsys.readouterr().out
+    pytest.importorskip("distributed")
+    assert run(toy, "--executor", "dask", "--scheduler", "bogus:addr") == 2
+    err = capsys.readouterr().err
+    assert "neither a scheduler address (tcp://HOST:PORT) nor an existing scheduler file" in err
+    assert "Traceback" not in err

@@ -1,28 +1,65 @@
 """Time the grid Bayes filter and the SIR particle filter on one Ozkaya (2011) table setting.
 
-    python benchmarks/bench_bayes_filters.py [--runs 1000] [--particles 250] [--steps 10]
+    python benchmarks/bench_bayes_filters.py [--runs 1000] [--particles 250] [--steps 10] [--loop-runs 50] [--size tiny]
 
 One setting = the mobile-target protocol of Table 7.16 (sigma = 5.2 dB, D = 0.5 m, rt = 10): ``runs``
-Monte-Carlo runs, each filtered over ``steps`` recursions, all runs in one vectorized call. Prints seconds per
+Monte-Carlo runs, each filtered over ``steps`` recursions, all runs in one vectorized call. Reports seconds per
 setting (best of 3), the particle-steps (or cell-steps) per second, and for comparison a per-run Python loop of
 the same filter on a subset of runs, scaled to the full count.
 """
+from __future__ import annotations
+
 import argparse
-import time
+import sys
+from pathlib import Path
 
 import numpy as np
 
-import locbook as lb
-from locbook.scenarios import ozkaya as oz
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import _harness as hx  # noqa: E402
+
+import locbook as lb  # noqa: E402
+from locbook.scenarios import ozkaya as oz  # noqa: E402
 
 
-def timed(fn, repeat=3):
-    best = np.inf
-    for _ in range(repeat):
-        t = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - t)
-    return best
+def measure(runs: int = 1000, particles: int = 250, steps: int = 10, loop_runs: int = 50, repeat: int = 3) -> list[dict]:
+    case = oz.SimCase("sir", "mobile", rt=steps, n_particles=particles)
+    truth, rss = oz.simulate_truth_and_rss(case, runs, np.random.default_rng(1))
+    readers = oz.readers_for("corners3")
+    model = lb.RssMeasurementModel(readers, -52.0, 2.3, 5.2)
+    region = (np.zeros(2), np.array(oz.ROOM_M))
+    cells = oz.cell_centres(oz.ROOM_M, 4, 7)
+
+    def sir(r):
+        return lb.particle_filter(r, model, np.random.default_rng(2), n_particles=particles, region_m=region)
+
+    def improved(r):
+        return lb.particle_filter(r, model, np.random.default_rng(2), n_particles=particles, region_m=region,
+                                  resample_threshold=0.5, weight_smoothing="sqrt")
+
+    def grid(r):
+        return lb.grid_bayes_filter(r, cells, model, 0.5)
+
+    n = min(loop_runs, runs)
+    sub = rss[:n]
+    rows = []
+    for name, fn, units, unit in [(f"grid Bayes filter ({len(cells)} cells)", grid, len(cells), "cell"),
+                                  (f"SIR particle filter ({particles} particles)", sir, particles, "particle"),
+                                  (f"improved SIR ({particles} particles)", improved, particles, "particle")]:
+        t, _, _ = hx.timed(lambda: fn(rss), repeat)
+        t_loop, _, _ = hx.timed(lambda: [fn(sub[i:i + 1]) for i in range(n)])
+        rate = runs * steps * units / t
+        rows.append(hx.row(name, f"Ozkaya Table 7.16 setting, {runs} runs x {steps} recursions", t,
+                           "locbook per-run loop" + ("" if n == runs else f" ({n} runs, scaled)"), t_loop * runs / n,
+                           hx.peak_mb(lambda: fn(rss)), f"{rate:.3g} {unit}-steps/s"))
+    return rows
+
+
+def run(size: str = "full") -> list[dict]:
+    """The benchmark protocol (benchmarks/run_all.py): full = 1000 runs x 250 particles; tiny = 20 runs x 50."""
+    if hx.check_size(size) == "tiny":
+        return measure(runs=20, particles=50, loop_runs=4, repeat=1)
+    return measure()
 
 
 def main():
@@ -31,33 +68,10 @@ def main():
     ap.add_argument("--particles", type=int, default=250)
     ap.add_argument("--steps", type=int, default=10)
     ap.add_argument("--loop-runs", type=int, default=50)
+    ap.add_argument("--size", choices=hx.SIZES, default=None, help="the run(size) preset instead of the options")
     args = ap.parse_args()
-    case = oz.SimCase("sir", "mobile", rt=args.steps, n_particles=args.particles)
-    truth, rss = oz.simulate_truth_and_rss(case, args.runs, np.random.default_rng(1))
-    readers = oz.readers_for("corners3")
-    model = lb.RssMeasurementModel(readers, -52.0, 2.3, 5.2)
-    region = (np.zeros(2), np.array(oz.ROOM_M))
-    cells = oz.cell_centres(oz.ROOM_M, 4, 7)
-
-    def sir(r):
-        return lb.particle_filter(r, model, np.random.default_rng(2), n_particles=args.particles, region_m=region)
-
-    def improved(r):
-        return lb.particle_filter(r, model, np.random.default_rng(2), n_particles=args.particles, region_m=region,
-                                  resample_threshold=0.5, weight_smoothing="sqrt")
-
-    def grid(r):
-        return lb.grid_bayes_filter(r, cells, model, 0.5)
-
-    print(f"one setting: {args.runs} runs x {args.steps} recursions; {args.particles} particles; {len(cells)} cells")
-    for name, fn, units in [("grid Bayes (28 cells)", grid, len(cells)), ("SIR", sir, args.particles),
-                            ("improved SIR", improved, args.particles)]:
-        t = timed(lambda: fn(rss))
-        sub = rss[: args.loop_runs]
-        t_loop = timed(lambda: [fn(sub[i:i + 1]) for i in range(sub.shape[0])], repeat=1) * args.runs / args.loop_runs
-        rate = args.runs * args.steps * units / t
-        print(f"{name:22s} vectorized {t:7.3f} s/setting  {rate:11.3e} {'cell' if 'grid' in name else 'particle'}-steps/s"
-              f"   per-run loop {t_loop:7.2f} s (extrapolated from {args.loop_runs} runs)  speed-up {t_loop / t:5.1f}x")
+    rows = run(args.size) if args.size else measure(args.runs, args.particles, args.steps, args.loop_runs)
+    hx.print_rows(rows)
 
 
 if __name__ == "__main__":

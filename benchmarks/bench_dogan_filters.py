@@ -1,24 +1,77 @@
-"""Time one Dogan (2015) table setting with locbook's batched EKF and with a per-run filterpy loop.
+"""Time one Dogan (2015) table setting with locbook's batched KF and EKFs and with per-run filterpy loops.
 
-    python benchmarks/bench_dogan_filters.py [--runs 500] [--filterpy-runs 50] [--filter serial_ekf]
+    python benchmarks/bench_dogan_filters.py [--runs 500] [--filterpy-runs 50] [--filter serial_ekf ...] [--size tiny]
 
 One setting = Table 3.8's first row (sigma_RSS = 6 dB, alpha = 3, the tables' sigma_ACC, RSS/IMU fusion) on the default
-trajectory at 20 Hz under the default fusion reading (start from rest, Q and P_0 from sigma_ACC, scenarios/dogan.py): ``runs`` Monte-Carlo runs in one vectorized call, against filterpy's
-ExtendedKalmanFilter looped over runs and steps on the same inputs (a subset of ``filterpy-runs`` runs, scaled to
-the full count). Prints both times, their ratio, and the largest state difference on the common runs.
+trajectory at 20 Hz under the default fusion reading (start from rest, Q and P_0 from sigma_ACC, scenarios/dogan.py):
+``runs`` Monte-Carlo runs of 1620 steps in one vectorized call, against filterpy's KalmanFilter (KF (MLE)) or
+ExtendedKalmanFilter (parallel and serial EKF) looped over runs and steps on the same inputs (a subset of
+``filterpy-runs`` runs, scaled to the full count). Reports both times, their ratio and the largest state difference on
+the common runs. With numba installed, locbook's EKFs run compiled; each EKF is then also timed on the numpy path
+(``LOCBOOK_NUMBA=0``).
 """
+from __future__ import annotations
+
 import argparse
-import time
+import sys
+from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
-from filterpy.kalman import ExtendedKalmanFilter
+from filterpy.kalman import ExtendedKalmanFilter, KalmanFilter
 
-import locbook as lb
-from locbook.scenarios import dogan as dg
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import _harness as hx  # noqa: E402
+
+import locbook as lb  # noqa: E402
+from locbook.scenarios import dogan as dg  # noqa: E402
+from locbook.tracking import kalman as _kalman  # noqa: E402
+
+FILTERS = ("kalman_filter", "parallel_ekf", "serial_ekf")
+LABELS = {"kalman_filter": "KF (MLE fixes + accelerometer)", "parallel_ekf": "parallel EKF (RSS + accelerometer)",
+          "serial_ekf": "serial EKF (RSS + accelerometer)"}
+
+
+def setting(runs: int, seed: int = 1, steps: int | None = None) -> dict:
+    """The inputs of the timed setting: trajectory (its first ``steps`` steps, default all 1620), channel, RSS at the
+    epochs, accelerometer, MLE fixes and their MSE."""
+    tr = dg.polyline_trajectory()
+    if steps is not None:
+        tr = replace(tr, time_s=tr.time_s[:steps], state=tr.state[:steps], rss_steps=tr.rss_steps[tr.rss_steps < steps])
+    sigma_acc = dg.TABLE_SIGMA_ACC_MPS2
+    q, p0_acc = dg.filter_noise(dg.DEFAULT_NOISE_READING, sigma_acc)
+    model = dg.motion_model(dg.DT_S, q)
+    rng = np.random.default_rng(seed)
+    channel = lb.PathLossModel(dg.REF_POWER_DBM, dg.PATH_LOSS_EXP, dg.SIGMA_RSS_DB)
+    rss = dg.simulate_rss(tr, channel, runs, rng)
+    acc = dg.simulate_acceleration(tr, sigma_acc, runs, rng)
+    fix = dg.mle_positions(rss, channel).position_m
+    mse = np.mean((fix - tr.position_m[tr.rss_steps]) ** 2, axis=(0, 1))
+    return dict(tr=tr, model=model, channel=channel, rss=rss, acc=acc, fix=fix, mse=mse, sigma_acc=sigma_acc,
+                p0_acc=p0_acc)
+
+
+def locbook_filter(name: str, s: dict):
+    """locbook's batched filter on all runs (recorded at the RSS epochs, scenarios/dogan.py run_filter)."""
+    return dg.run_filter(name, s["tr"], s["rss"], s["fix"], s["mse"], s["channel"], acc_mps2=s["acc"],
+                         sigma_acc_mps2=s["sigma_acc"], model=s["model"], p0_acc_var=s["p0_acc"])
+
+
+def filterpy_inputs(s: dict, n: int):
+    """The same inputs for the first ``n`` runs on the grid after step 0 (the filter starts at the first epoch):
+    RSS and fixes at the later epochs (NaN elsewhere), the accelerometer from step 1, x0 and P0 from the first fix."""
+    tr = s["tr"]
+    rss = np.full((n, tr.time_s.size - 1, 4), np.nan)
+    rss[:, tr.rss_steps[1:] - 1] = s["rss"][:n, 1:]
+    fix = np.full((n, tr.time_s.size - 1, 2), np.nan)
+    fix[:, tr.rss_steps[1:] - 1] = s["fix"][:n, 1:]
+    x0, P0 = dg.initial_state(s["fix"][:n, 0], np.broadcast_to(s["mse"], (n, 2)), acc_var=s["p0_acc"])
+    return rss, fix, s["acc"][:n, 1:], x0, P0
 
 
 def filterpy_track(model, channel, rss_grid, acc, x0, P0, serial, sigma_acc):
-    """filterpy per run: predict, accelerometer update, RSS update(s) at RSS epochs (Table 3.5)."""
+    """filterpy's ExtendedKalmanFilter per run: predict, accelerometer update, RSS update(s) at RSS epochs (Table 3.5).
+    Returns the states and covariances at every step, ``(runs, T, 6)`` and ``(runs, T, 6, 6)``."""
     idx, a = model.position_index, dg.ANCHORS_M
     h_acc, r_acc = model.derivative_measurement_matrix(2), sigma_acc**2 * np.eye(2)
     p0, ple, s2 = channel.ref_power_dbm, channel.path_loss_exp, channel.sigma_db**2
@@ -33,7 +86,7 @@ def filterpy_track(model, channel, rss_grid, acc, x0, P0, serial, sigma_acc):
         out[:, idx] = -10 * ple / np.log(10) * diff / np.sum(diff**2, axis=1, keepdims=True)
         return out
 
-    out = np.empty(rss_grid.shape[:2] + (6,))
+    xs, Ps = np.empty(rss_grid.shape[:2] + (6,)), np.empty(rss_grid.shape[:2] + (6, 6))
     for b in range(rss_grid.shape[0]):
         f = ExtendedKalmanFilter(6, 1)
         f.x, f.P, f.F, f.Q = x0[b].copy(), P0[b].copy(), model.F, model.Q
@@ -48,46 +101,89 @@ def filterpy_track(model, channel, rss_grid, acc, x0, P0, serial, sigma_acc):
                                  R=np.array([[s2]]))
                 else:
                     f.update(z, lambda x: jac(x, np.arange(4)), lambda x: hx(x, np.arange(4)), R=s2 * np.eye(4))
-            out[b, k] = f.x
-    return out
+            xs[b, k], Ps[b, k] = f.x, f.P
+    return xs, Ps
+
+
+def filterpy_kf_track(model, fix_grid, acc, x0, P0, sigma_acc, mse):
+    """filterpy's KalmanFilter per run: predict, accelerometer update, MLE-fix update at RSS epochs with
+    R = diag(MSE_MLE) (KF (MLE), Eq. (3.21)). Returns the states and covariances at every step."""
+    h_acc, r_acc = model.derivative_measurement_matrix(2), sigma_acc**2 * np.eye(2)
+    h_pos, r_pos = model.position_measurement_matrix(), np.diag(mse)
+    xs, Ps = np.empty(fix_grid.shape[:2] + (6,)), np.empty(fix_grid.shape[:2] + (6, 6))
+    for b in range(fix_grid.shape[0]):
+        f = KalmanFilter(dim_x=6, dim_z=2)
+        f.x, f.P, f.F, f.Q = x0[b].copy(), P0[b].copy(), model.F, model.Q
+        for k in range(fix_grid.shape[1]):
+            f.predict()
+            f.update(acc[b, k], R=r_acc, H=h_acc)
+            if np.isfinite(fix_grid[b, k, 0]):
+                f.update(fix_grid[b, k], R=r_pos, H=h_pos)
+            xs[b, k], Ps[b, k] = f.x, f.P
+    return xs, Ps
+
+
+def filterpy_filter(name: str, s: dict, n: int):
+    """The filterpy loop of ``name`` on the first ``n`` runs (states and covariances at every grid step)."""
+    rss, fix, acc, x0, P0 = filterpy_inputs(s, n)
+    if name == "kalman_filter":
+        return filterpy_kf_track(s["model"], fix, acc, x0, P0, s["sigma_acc"], s["mse"])
+    return filterpy_track(s["model"], s["channel"], rss, acc, x0, P0, name == "serial_ekf", s["sigma_acc"])
+
+
+def max_difference(s: dict, ours, ref_x, ref_P) -> tuple[float, float]:
+    """Largest |state| and |covariance| difference on the common runs, at the recorded RSS epochs."""
+    n, at = ref_x.shape[0], s["tr"].rss_steps[1:] - 1
+    return (float(np.max(np.abs(ours.x[:n, 1:] - ref_x[:, at]))), float(np.max(np.abs(ours.P[:n, 1:] - ref_P[:, at]))))
+
+
+def measure(runs: int = 500, filterpy_runs: int = 50, filters=FILTERS, repeat: int = 3) -> list[dict]:
+    s = setting(runs)
+    T = s["tr"].time_s.size
+    n = min(filterpy_runs, runs)
+    workload = f"{runs} runs x {T} steps"
+    paths = [("numba", True), ("numpy", False)] if _kalman._numba_ready() and _kalman._NUMBA_ENABLED else \
+        [("numpy", False)]
+    rows = []
+    for name in filters:
+        t_ref, cpu_ref, (ref_x, ref_P) = hx.timed(lambda: filterpy_filter(name, s, n))
+        reference = "filterpy per-run loop" + ("" if n == runs else f" ({n} runs, scaled)")
+        for path, numba in paths:
+            if name == "kalman_filter" and path == "numpy" and len(paths) > 1:
+                continue                                    # KF (MLE) never takes the compiled path (shared covariance)
+            saved = _kalman._NUMBA_ENABLED, _kalman._NUMBA_MIN_WORK
+            _kalman._NUMBA_ENABLED, _kalman._NUMBA_MIN_WORK = numba, 0    # the named path, whatever the size
+            try:
+                locbook_filter(name, s)                     # warm-up (numba: load or compile the kernel)
+                t, cpu, ours = hx.timed(lambda: locbook_filter(name, s), repeat)
+                peak = hx.peak_mb(lambda: locbook_filter(name, s))
+            finally:
+                _kalman._NUMBA_ENABLED, _kalman._NUMBA_MIN_WORK = saved
+            dx, dP = max_difference(s, ours, ref_x, ref_P)
+            scale = runs / n
+            label = LABELS[name] + ("" if name == "kalman_filter" else f", {path}")
+            rows.append(hx.row(label, workload, t, reference, t_ref * scale, peak,
+                               f"max |x - filterpy| {dx:.1e}, |P - filterpy| {dP:.1e} on {n} runs; "
+                               f"CPU-time ratio x{cpu_ref * scale / cpu:.0f}"))
+    return rows
+
+
+def run(size: str = "full") -> list[dict]:
+    """The benchmark protocol (benchmarks/run_all.py): full = 500 runs (filterpy on 50), tiny = 4 runs (filterpy on 2)."""
+    if hx.check_size(size) == "tiny":
+        return measure(runs=4, filterpy_runs=2, repeat=1)
+    return measure()
 
 
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--runs", type=int, default=500)
     ap.add_argument("--filterpy-runs", type=int, default=50)
-    ap.add_argument("--filter", choices=["serial_ekf", "parallel_ekf"], default="serial_ekf")
+    ap.add_argument("--filter", choices=FILTERS, nargs="+", default=list(FILTERS))
+    ap.add_argument("--size", choices=hx.SIZES, default=None, help="the run(size) preset instead of --runs")
     args = ap.parse_args()
-    tr = dg.polyline_trajectory()
-    sigma_acc = dg.TABLE_SIGMA_ACC_MPS2
-    q, p0_acc = dg.filter_noise(dg.DEFAULT_NOISE_READING, sigma_acc)
-    model = dg.motion_model(dg.DT_S, q)
-    rng = np.random.default_rng(1)
-    channel = lb.PathLossModel(dg.REF_POWER_DBM, dg.PATH_LOSS_EXP, dg.SIGMA_RSS_DB)
-    rss = dg.simulate_rss(tr, channel, args.runs, rng)
-    acc = dg.simulate_acceleration(tr, sigma_acc, args.runs, rng)
-    t = time.perf_counter()
-    fix = dg.mle_positions(rss, channel).position_m
-    t_mle = time.perf_counter() - t
-    mse = np.mean((fix - tr.position_m[tr.rss_steps]) ** 2, axis=(0, 1))
-    t = time.perf_counter()
-    ours = dg.run_filter(args.filter, tr, rss, fix, mse, channel, acc_mps2=acc, sigma_acc_mps2=sigma_acc, model=model,
-                         p0_acc_var=p0_acc)
-    t_ours = time.perf_counter() - t
-    # the same inputs for filterpy: the RSS on the grid after step 0, the accelerometer from step 1
-    n = args.filterpy_runs
-    grid = np.full((n, tr.time_s.size - 1, 4), np.nan)
-    grid[:, tr.rss_steps[1:] - 1] = rss[:n, 1:]
-    x0, P0 = dg.initial_state(fix[:n, 0], np.broadcast_to(mse, (n, 2)), acc_var=p0_acc)
-    t = time.perf_counter()
-    ref = filterpy_track(model, channel, grid, acc[:n, 1:], x0, P0, args.filter == "serial_ekf", sigma_acc)
-    t_ref = (time.perf_counter() - t) * args.runs / n
-    diff = np.max(np.abs(ours.x[:n, 1:] - ref[:, tr.rss_steps[1:] - 1]))
-    print(f"setting: Table 3.8, sigma_RSS 6 dB, fused {args.filter}, {args.runs} runs x {tr.time_s.size} steps")
-    print(f"MLE (grid + LM, {args.runs} x {tr.rss_steps.size} problems): {t_mle:.2f} s")
-    print(f"locbook batched {args.filter}: {t_ours:.2f} s")
-    print(f"filterpy per-run loop: {t_ref:.1f} s (measured on {n} runs, scaled to {args.runs})")
-    print(f"ratio filterpy / locbook: {t_ref / t_ours:.0f}x; max |state difference| on common runs: {diff:.1e}")
+    rows = run(args.size) if args.size else measure(args.runs, args.filterpy_runs, args.filter)
+    hx.print_rows(rows)
 
 
 if __name__ == "__main__":

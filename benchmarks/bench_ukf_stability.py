@@ -1,23 +1,75 @@
 """The UKF at Gudipati's alpha = 1e-3 over a long run: is the covariance still symmetric positive definite?
 
-    python benchmarks/bench_ukf_stability.py [--steps 100000] [--alpha 1e-3] [--runs 1]
+    python benchmarks/bench_ukf_stability.py [--steps 100000] [--alpha 1e-3] [--runs 1] [--size tiny]
 
 An 8-D constant-acceleration + heading model (HeadingKinematicModel) travels laps around a 30 m x 10 m hall at
 10 Hz; six anchors (Gudipati Table 5.2's S and C, corner and mid-wall positions) give RSS with 4 dB shadowing at
 every step and a body-frame accelerometer + gyroscope every step. At alpha = 1e-3 and n = 8 the sigma-point
-weights are -1e6 and 6.25e4. Prints the time per step, the smallest eigenvalue of P over all steps, the largest
+weights are -1e6 and 6.25e4. Reports the time per step, the smallest eigenvalue of P over all steps, the largest
 asymmetry, how often the guard (R~ floored) acted, and the position error over the last lap.
 """
+from __future__ import annotations
+
 import argparse
-import time
+import sys
+from pathlib import Path
 
 import numpy as np
 
-import locbook as lb
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import _harness as hx  # noqa: E402
+
+import locbook as lb  # noqa: E402
 
 ANCHORS = np.array([[0.0, 0.0], [30.0, 0.0], [30.0, 10.0], [0.0, 10.0], [15.0, 0.0], [15.0, 10.0]])
 S_DBM = np.array([-31.79, -43.64, -40.42, -30.9, -42.4, -34.55])
 C = np.array([1.84, 3.1, 1.72, 1.2, 1.34, 1.5])
+
+
+def measure(steps: int = 100_000, alpha: float = 1e-3, runs: int = 1, seed: int = 1) -> list[dict]:
+    rng = np.random.default_rng(seed)
+    dt, speed = 0.1, 0.8
+    lap = [[3.0, 3.0], [27.0, 3.0], [27.0, 7.0], [3.0, 7.0]]
+    laps = int(np.ceil(steps * dt * speed / 50.0)) + 2     # a lap is about 54 m with its rounded corners
+    waypoints = np.array(lap * laps + [lap[0]])
+    truth = lb.waypoint_trajectory(waypoints, speed_m_s=speed, accel_m_s2=0.5, dt_s=dt, turn_radius_m=1.0)
+    T = min(steps, truth.time_s.size)
+    sl = slice(0, T)
+    channel = lb.PathLossModel(S_DBM, C, 4.0)
+    d = lb.pairwise_distance_m(truth.position_m[sl], ANCHORS)
+    rss = channel.sample_power_dbm(np.broadcast_to(d, (runs,) + d.shape), rng)
+    acc = lb.accelerometer_readings(truth.acceleration_m_s2[sl], truth.heading_rad[sl], bias_m_s2=0.0,
+                                    sigma_m_s2=0.05, rng=rng) + np.zeros((runs, 1, 1))
+    gyro = lb.gyroscope_readings(truth.yaw_rate_rad_s[sl], bias_rad_s=0.0, sigma_rad_s=0.01, rng=rng)
+    z_imu = np.concatenate([acc, np.broadcast_to(gyro[:, None], (runs, T, 1))], axis=-1)
+    model = lb.HeadingKinematicModel(dt, q=0.05, q_angular=0.01)
+    imu = lb.NonlinearMeasurement(z_imu, lb.inertial_measurement_function("body"), np.diag([0.05**2, 0.05**2, 0.01**2]),
+                                  name="accelerometer + gyroscope")
+    x0 = model.state_from(truth.position_m[0], angular=(truth.heading_rad[0], 0.0))
+    P0 = np.diag([1.0, 1.0, 0.1, 0.1, 0.1, 0.1, 0.01, 0.01])
+
+    def ukf():
+        return lb.unscented_kalman_filter(model.F, model.Q, x0, P0,
+                                          [imu, lb.RssMeasurement(rss, ANCHORS, channel, model.position_index)],
+                                          alpha=alpha)
+
+    elapsed, _, res = hx.timed(ukf)
+    P = res.P
+    min_eig = np.linalg.eigvalsh(P).min()
+    asym = np.abs(P - np.swapaxes(P, -1, -2)).max()
+    err = np.linalg.norm(res.x[..., :2] - truth.position_m[sl], axis=-1)
+    last = slice(max(0, T - int(56.0 / (speed * dt))), T)
+    return [hx.row(f"UKF long run, alpha = {alpha:g}", f"{runs} run(s) x {T:,} steps (inertial + 6-anchor RSS)",
+                   elapsed, peak=hx.peak_mb(ukf),
+                   note=f"{1e6 * elapsed / T:.0f} us per step; smallest eigenvalue of P {min_eig:.2e}, largest "
+                        f"|P - P^T| {asym:.1e}; guard floored R~ in {res.floored_updates} of {2 * T * runs} updates; "
+                        f"position error mean {err.mean():.3f} m, last lap {err[..., last].mean():.3f} m; "
+                        "no reference")]
+
+
+def run(size: str = "full") -> list[dict]:
+    """The benchmark protocol (benchmarks/run_all.py): full = 100,000 steps, tiny = 1,000."""
+    return measure(1_000 if hx.check_size(size) == "tiny" else 100_000)
 
 
 def main():
@@ -26,43 +78,9 @@ def main():
     ap.add_argument("--alpha", type=float, default=1e-3)
     ap.add_argument("--runs", type=int, default=1)
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--size", choices=hx.SIZES, default=None, help="the run(size) preset instead of the options")
     args = ap.parse_args()
-    rng = np.random.default_rng(args.seed)
-    dt, speed = 0.1, 0.8
-    lap = [[3.0, 3.0], [27.0, 3.0], [27.0, 7.0], [3.0, 7.0]]
-    laps = int(np.ceil(args.steps * dt * speed / 50.0)) + 2     # a lap is about 54 m with its rounded corners
-    waypoints = np.array(lap * laps + [lap[0]])
-    truth = lb.waypoint_trajectory(waypoints, speed_m_s=speed, accel_m_s2=0.5, dt_s=dt, turn_radius_m=1.0)
-    T = min(args.steps, truth.time_s.size)
-    sl = slice(0, T)
-    channel = lb.PathLossModel(S_DBM, C, 4.0)
-    d = lb.pairwise_distance_m(truth.position_m[sl], ANCHORS)
-    rss = channel.sample_power_dbm(np.broadcast_to(d, (args.runs,) + d.shape), rng)
-    acc = lb.accelerometer_readings(truth.acceleration_m_s2[sl], truth.heading_rad[sl], bias_m_s2=0.0,
-                                    sigma_m_s2=0.05, rng=rng) + np.zeros((args.runs, 1, 1))
-    gyro = lb.gyroscope_readings(truth.yaw_rate_rad_s[sl], bias_rad_s=0.0, sigma_rad_s=0.01, rng=rng)
-    z_imu = np.concatenate([acc, np.broadcast_to(gyro[:, None], (args.runs, T, 1))], axis=-1)
-    model = lb.HeadingKinematicModel(dt, q=0.05, q_angular=0.01)
-    imu = lb.NonlinearMeasurement(z_imu, lb.inertial_measurement_function("body"), np.diag([0.05**2, 0.05**2, 0.01**2]),
-                                  name="accelerometer + gyroscope")
-    x0 = model.state_from(truth.position_m[0], angular=(truth.heading_rad[0], 0.0))
-    P0 = np.diag([1.0, 1.0, 0.1, 0.1, 0.1, 0.1, 0.01, 0.01])
-    t0 = time.perf_counter()
-    res = lb.unscented_kalman_filter(model.F, model.Q, x0, P0,
-                                     [imu, lb.RssMeasurement(rss, ANCHORS, channel, model.position_index)],
-                                     alpha=args.alpha)
-    elapsed = time.perf_counter() - t0
-    P = res.P
-    min_eig = np.linalg.eigvalsh(P).min()
-    asym = np.abs(P - np.swapaxes(P, -1, -2)).max()
-    err = np.linalg.norm(res.x[..., :2] - truth.position_m[sl], axis=-1)
-    last = slice(max(0, T - int(56.0 / (speed * dt))), T)
-    print(f"UKF alpha={args.alpha:g} (weights {res.weights.mean[0]:.4g}, {res.weights.mean[1]:.4g}), "
-          f"{args.runs} run(s) x {T} steps: {elapsed:.1f} s, {1e6 * elapsed / T:.0f} us per step")
-    print(f"smallest eigenvalue of P over all steps: {min_eig:.3e}; largest |P - P^T|: {asym:.1e}; "
-          f"guard floored R~ in {res.floored_updates} of {2 * T * args.runs} updates")
-    print(f"position error: mean {err.mean():.3f} m over all steps, {err[..., last].mean():.3f} m over the last lap, "
-          f"max {err.max():.3f} m")
+    hx.print_rows(run(args.size) if args.size else measure(args.steps, args.alpha, args.runs, args.seed))
 
 
 if __name__ == "__main__":

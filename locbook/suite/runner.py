@@ -60,7 +60,7 @@ __all__ = ["KERNEL_NAME", "run_suite", "cache_key", "Outcome", "SuiteRun", "writ
 #: Every notebook runs on this kernel; jupyter_client maps it to the running interpreter.
 KERNEL_NAME = "python3"
 _DEPENDENCIES = ("numpy", "scipy", "cvxpy", "clarabel", "osqp", "scs", "matplotlib", "papermill",
-                 "nbclient", "nbconvert", "nbformat", "ipykernel")
+                 "nbclient", "nbconvert", "nbformat", "ipykernel", "numba")
 _WORKER_FILES = (".runtime", ".result.json", ".result.json.tmp", ".task.json", ".data-read.log", ".stop")
 _STOP_GRACE_S = 5.0
 

@@ -11,9 +11,18 @@ Document 003 (George and Vadivukkarasi, Eqs. (9)-(13)) prints the update with ``
 ``P_{k-1}`` in place of the predicted quantities, so the prediction of Eqs. (9)-(10) is computed and
 then discarded. That literal form is available as ``variant="literal_003"`` (flagged; note 003,
 section 2.6 point 1): it reduces to a running average of the measurements.
+
+Speed (issue 18). The filters are vectorized over leading Monte-Carlo axes. When the covariance recursion is the same
+in every run (a linear filter whose P0, F, Q, H and R have no batch axes, with the same components missing in every
+run) it is computed once per step and only the states are batched. Otherwise the EKF runs, when numba is installed,
+in compiled loops over blocks of runs (``_nb_ekf``; ``LOCBOOK_NUMBA=0`` turns them off); without numba, or for
+streams the kernel does not cover (NonlinearMeasurement, batched F or Q), the numpy loop runs. All paths give the same
+numbers to round-off (tests/test_filter_speed_equality.py), and every error is raised by the numpy loop.
 """
 from __future__ import annotations
 
+import os
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -150,8 +159,11 @@ def kalman_filter(z, F, H, Q, R, x0, P0, *, predict_first: bool = True,
                                 Q.shape[:-2], R.shape[:-2])
     T = z.shape[-2]
     x = np.broadcast_to(x, batch + (n,)).copy()
-    P = np.broadcast_to(P, batch + (n, n)).copy()
     z = np.broadcast_to(z, batch + (T, m))
+    pattern = _shared_pattern(z)
+    if pattern is not None and all(a.ndim == 2 for a in (F, H, Q, R, P)):
+        return _kalman_filter_shared(z, F, H, Q, R, x, P, pattern, predict_first, variant, joseph)
+    P = np.broadcast_to(P, batch + (n, n)).copy()
     eye = np.eye(n)
     out_x = np.empty(batch + (T, n))
     out_P = np.empty(batch + (T, n, n))
@@ -209,6 +221,101 @@ def kalman_filter(z, F, H, Q, R, x0, P0, *, predict_first: bool = True,
         out_xp[..., k, :], out_Pp[..., k, :, :] = x_use, P_use
         out_nu[..., k, :] = np.where(valid[..., None], nu, np.nan)
     return KalmanResult(out_x, out_P, out_xp, out_Pp, out_nu, variant)
+
+
+def _shared_pattern(z):
+    """The missing-component pattern ``(T, m)`` of measurements ``batch + (T, m)`` when it is the same in every run
+    (then a linear filter's covariance recursion is the same in every run too), else None."""
+    finite = np.isfinite(z)
+    flat = finite.reshape((-1,) + finite.shape[-2:])
+    if flat.shape[0] == 0 or not (flat == flat[0]).all():
+        return None
+    return flat[0]
+
+
+def _kalman_filter_shared(z, F, H, Q, R, x, P, pattern, predict_first, variant, joseph) -> KalmanResult:
+    """:func:`kalman_filter` when F, H, Q, R and P0 have no batch axes and the same components are missing in every
+    run: P, S and K are computed once per step (unbatched) and only the states are batched. Same recursion and
+    formulas as the batched loop (equal to round-off)."""
+    batch, n, (T, m) = x.shape[:-1], x.shape[-1], z.shape[-2:]
+    Ft, Ht = np.ascontiguousarray(F.T), np.ascontiguousarray(H.T)
+    eye = np.eye(n)
+    everyone = np.ones(batch, bool)
+    out_x = np.empty(batch + (T, n))
+    out_P = np.empty(batch + (T, n, n))
+    out_xp = np.empty(batch + (T, n))
+    out_Pp = np.empty(batch + (T, n, n))
+    out_nu = np.full(batch + (T, m), np.nan)
+    for k in range(T):
+        if predict_first or k > 0:
+            x_pred = x @ Ft
+            P_pred = F @ P @ Ft + Q
+        else:
+            x_pred, P_pred = x, P
+        x_use, P_use = (x, P) if variant == "literal_003" else (x_pred, P_pred)
+        present = pattern[k]
+        if present.all():
+            S = H @ P_use @ Ht + R
+            if _not_positive_definite(S):
+                _raise_singular(k, everyone)
+            try:
+                K = np.linalg.solve(S, H @ P_use).T          # K' = S^{-1} H P
+            except np.linalg.LinAlgError:
+                _raise_singular(k, everyone)
+            nu = z[..., k, :] - x_use @ Ht
+            x_new = x_use + nu @ K.T
+            IKH = eye - K @ H
+            P_new = IKH @ P_use @ IKH.T + K @ R @ K.T if joseph else IKH @ P_use
+            P_new = 0.5 * (P_new + P_new.T)
+        elif present.any():
+            try:
+                x_new, P_new = _linear_update_shared(x_use, P_use, z[..., k, :], present, H, R, joseph=joseph)
+            except _Singular as exc:
+                _raise_singular(k, exc.bad)
+            nu = np.where(present, z[..., k, :] - x_use @ Ht, np.nan)
+        else:
+            x_new = nu = None
+        if x_new is None:
+            x, P = x_pred, P_pred
+        else:
+            x, P = x_new, P_new
+            if not np.isfinite(x).all():
+                _raise_singular(k, ~np.all(np.isfinite(x), axis=-1))
+            out_nu[..., k, :] = nu
+        out_x[..., k, :], out_P[..., k, :, :] = x, P
+        out_xp[..., k, :], out_Pp[..., k, :, :] = x_use, P_use
+    return KalmanResult(out_x, out_P, out_xp, out_Pp, out_nu, variant)
+
+
+def _linear_update_shared(x, P, z, present, H, R, *, joseph: bool = True):
+    """:func:`_linear_update` with one covariance ``P (n, n)`` and one ``H``, ``R`` for every run, the components
+    ``present (m,)`` the same in every run; ``x`` and ``z`` batched."""
+    if not present.any():
+        return x, P
+    m = present.size
+    if not present.all():
+        H = np.where(present[:, None], H, 0.0)
+        R = np.where(present[:, None] & present[None, :], R, np.eye(m))
+    nu = z - x @ H.T if present.all() else np.where(present, np.where(present, z, 0.0) - x @ H.T, 0.0)
+    HP = H @ P
+    S = HP @ H.T + R
+    everyone = np.ones(x.shape[:-1], bool)
+    if _not_positive_definite(S):
+        raise _Singular(everyone)
+    if m <= 2:
+        K = HP.T @ _inv_small(S)
+    else:
+        try:
+            K = np.linalg.solve(S, HP).T
+        except np.linalg.LinAlgError:
+            raise _Singular(everyone) from None
+    x_new = x + nu @ K.T
+    if not np.isfinite(x_new).all():
+        raise _Singular(~np.all(np.isfinite(x_new), axis=-1))
+    if joseph:
+        return x_new, _joseph(P, K, H, R)
+    short = (np.eye(P.shape[-1]) - K @ H) @ P
+    return x_new, 0.5 * (short + short.T)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -396,7 +503,9 @@ def _joseph(P, K, H, R):
     """(I - K H) P (I - K H)^T + K R K^T, symmetrised."""
     ikh = np.eye(P.shape[-1]) - K @ H
     out = ikh @ P @ _mT(ikh) + K @ R @ _mT(K)
-    return 0.5 * (out + _mT(out))
+    out += _mT(out)
+    out *= 0.5
+    return out
 
 
 def _inv_small(S):
@@ -404,8 +513,11 @@ def _inv_small(S):
     if S.shape[-1] == 1:
         return 1.0 / S
     det = S[..., 0, 0] * S[..., 1, 1] - S[..., 0, 1] * S[..., 1, 0]
-    inv = np.stack([np.stack([S[..., 1, 1], -S[..., 0, 1]], -1), np.stack([-S[..., 1, 0], S[..., 0, 0]], -1)], -2)
-    return inv / det[..., None, None]
+    inv = np.empty(S.shape)
+    inv[..., 0, 0], inv[..., 0, 1] = S[..., 1, 1], -S[..., 0, 1]
+    inv[..., 1, 0], inv[..., 1, 1] = -S[..., 1, 0], S[..., 0, 0]
+    inv /= det[..., None, None]
+    return inv
 
 
 def _linear_update(x, P, z, H, R, *, joseph: bool = True):
@@ -419,10 +531,13 @@ def _linear_update(x, P, z, H, R, *, joseph: bool = True):
         H = np.where(valid[..., :, None], H, 0.0)
         pair = valid[..., :, None] & valid[..., None, :]
         R = np.where(pair, R, np.eye(z.shape[-1]))
-    nu = np.where(valid, z, 0.0) - (H @ x[..., None])[..., 0]
-    nu = np.where(valid, nu, 0.0)
+    Ht = np.ascontiguousarray(H.T) if H.ndim == 2 else _mT(H)     # one H for all runs: a contiguous H^T
+    if valid.all():
+        nu = z - (x @ Ht if H.ndim == 2 else (H @ x[..., None])[..., 0])
+    else:
+        nu = np.where(valid, np.where(valid, z, 0.0) - (H @ x[..., None])[..., 0], 0.0)
     HP = H @ P
-    S = HP @ _mT(H) + R
+    S = HP @ Ht + R
     bad = valid.any(axis=-1) & _not_positive_definite(S)
     if bad.any():
         raise _Singular(bad)
@@ -431,9 +546,8 @@ def _linear_update(x, P, z, H, R, *, joseph: bool = True):
     else:
         K = _mT(_solve_active(S, HP, valid.any(axis=-1)))
     x_new = x + (K @ nu[..., None])[..., 0]
-    bad = ~np.all(np.isfinite(x_new), axis=-1)
-    if bad.any():                                             # a larger S that is not positive definite
-        raise _Singular(bad)
+    if not np.isfinite(x_new).all():                          # a larger S that is not positive definite
+        raise _Singular(~np.all(np.isfinite(x_new), axis=-1))
     if joseph:
         return x_new, _joseph(P, K, H, R)
     short = (np.eye(P.shape[-1]) - K @ H) @ P
@@ -544,12 +658,26 @@ def _stream_name(meas) -> str:
     return meas.name if isinstance(meas, NonlinearMeasurement) else type(meas).__name__
 
 
-def run_recursive_filter(F, Q, x0, P0, measurements, update, *, record=None, predict_first: bool = True,
-                         filter_name: str = "filter") -> TrackResult:
-    """The time loop shared by the EKF and the UKF: at every step predict with the linear motion
-    ``x = F x``, ``P = F P F^T + Q``, then apply the ``measurements`` present at that step in the given order with
-    ``update(x, P, z_k, stream, k)`` (each starts from the previous update's posterior). Checks the inputs; see
-    :func:`extended_kalman_filter` for the arguments."""
+@dataclass
+class _Setup:
+    """The checked inputs of a recursive filter: ``x`` ``batch + (n,)`` (a copy), ``P`` as given (possibly without
+    the batch axes), the streams' measurements ``zs`` broadcast to the batch, the steps with any reading
+    ``active`` per stream, and the recorded ``steps`` with their output ``slot`` per step (-1: not recorded)."""
+
+    F: np.ndarray
+    Q: np.ndarray
+    x: np.ndarray
+    P: np.ndarray
+    batch: tuple
+    T: int
+    steps: np.ndarray
+    slot: np.ndarray
+    zs: list
+    active: list
+
+
+def _setup(F, Q, x0, P0, measurements, record, filter_name) -> _Setup:
+    """The input checks of :func:`run_recursive_filter` (once, before the time loop)."""
     F = as_array("F", F)
     if F.ndim < 2 or F.shape[-1] != F.shape[-2]:
         raise ValueError(f"F must be square (n, n) or batch + (n, n), got {F.shape}")
@@ -576,26 +704,51 @@ def run_recursive_filter(F, Q, x0, P0, measurements, update, *, record=None, pre
         raise ValueError(f"x0 must end in ({n},) and P0 in ({n}, {n}); got {x.shape} and {P.shape}")
     batch = np.broadcast_shapes(x.shape[:-1], P.shape[:-2], *(np.shape(s)[:-2] for s in streams))
     x = np.broadcast_to(x, batch + (n,)).copy()
-    P = np.broadcast_to(P, batch + (n, n)).copy()
     steps = np.arange(T) if record is None else np.asarray(record)
     if record is not None and (steps.ndim != 1 or not np.issubdtype(steps.dtype, np.integer)
                                or np.any(steps < 0) or np.any(steps >= T) or np.unique(steps).size != steps.size):
         raise ValueError(f"record must be distinct integer step indices in [0, {T}), got {record!r}")
     slot = np.full(T, -1)
     slot[steps] = np.arange(steps.size)
+    zs = [np.broadcast_to(np.asarray(s, dtype=float), batch + np.shape(s)[-2:]) for s in streams]
+    active = [_steps_with_readings(z) for z in zs]
+    return _Setup(F, Q, x, P, batch, T, steps, slot, zs, active)
+
+
+def _steps_with_readings(z):
+    """``(T,)``: the steps at which ``z`` ``batch + (T, m)`` has a reading in some run (batch axes reduced first:
+    one pass over contiguous memory)."""
+    finite = np.isfinite(z).reshape(-1, z.shape[-2] * z.shape[-1])
+    return finite.any(axis=0).reshape(z.shape[-2:]).any(axis=-1)
+
+
+def _time_loop(setup: _Setup, measurements, update, predict_first: bool, *, shared: bool = False) -> TrackResult:
+    """The time loop of :func:`run_recursive_filter`. ``shared``: while the covariance is the same in every run
+    (P0, F and Q without batch axes, linear streams whose H and R have none and whose missing components are the
+    same in every run) it is kept unbatched and updated once per step (:func:`_shared_linear_update`); the first
+    update that differs between runs broadcasts it and continues batched."""
+    F, Q, x, batch, n = setup.F, setup.Q, setup.x, setup.batch, setup.F.shape[-1]
+    shared = shared and F.ndim == 2 and Q.ndim == 2 and setup.P.ndim == 2
+    P = setup.P.copy() if shared else np.broadcast_to(setup.P, batch + (n, n)).copy()
+    steps, slot = setup.steps, setup.slot
     out_x = np.empty(batch + (steps.size, n))
     out_P = np.empty(batch + (steps.size, n, n))
-    zs = [np.broadcast_to(np.asarray(s, dtype=float), batch + np.shape(s)[-2:]) for s in streams]
-    active = [np.isfinite(z).any(axis=tuple(i for i in range(z.ndim) if i != z.ndim - 2)) for z in zs]
-    Ft = _mT(F)
-    for k in range(T):
+    Ft = np.ascontiguousarray(_mT(F))
+    for k in range(setup.T):
         if predict_first or k > 0:
             x = x @ Ft
             P = F @ P @ Ft + Q
-        for meas, z, act in zip(measurements, zs, active):
+        for meas, z, act in zip(measurements, setup.zs, setup.active):
             if not act[k]:
                 continue
             try:
+                if shared:
+                    out = _shared_linear_update(x, P, z[..., k, :], meas)
+                    if out is not None:
+                        x, P = out
+                        continue
+                    shared = False
+                    P = np.broadcast_to(P, batch + (n, n)).copy()
                 x, P = update(x, P, z[..., k, :], meas, k)
             except _Singular as exc:
                 _raise_singular(k, exc.bad, f"innovation covariance of the {_stream_name(meas)} update", exc.message)
@@ -603,6 +756,37 @@ def run_recursive_filter(F, Q, x0, P0, measurements, update, *, record=None, pre
             out_x[..., slot[k], :] = x
             out_P[..., slot[k], :, :] = P
     return TrackResult(out_x, out_P, steps)
+
+
+def _shared_linear_update(x, P, z, meas):
+    """The update of a :class:`LinearMeasurement` on an unbatched covariance ``P (n, n)`` when H and R have no batch
+    axes and the same components are present in every run; else None (the caller goes batched)."""
+    if not isinstance(meas, LinearMeasurement):
+        return None
+    H, R = np.asarray(meas.H, float), np.asarray(meas.R, float)
+    if H.ndim != 2 or R.ndim != 2:
+        return None
+    finite = np.isfinite(z)
+    m = finite.shape[-1]
+    flat = finite.reshape(-1, m)
+    if flat.shape[0] == 0 or not (flat == flat[0]).all():
+        return None
+    present = flat[0]
+    if meas.mode == "parallel":
+        return _linear_update_shared(x, P, z, present, H, R)
+    for j in range(m):
+        x, P = _linear_update_shared(x, P, z[..., j:j + 1], present[j:j + 1], H[j:j + 1], R[j:j + 1, j:j + 1])
+    return x, P
+
+
+def run_recursive_filter(F, Q, x0, P0, measurements, update, *, record=None, predict_first: bool = True,
+                         filter_name: str = "filter") -> TrackResult:
+    """The time loop shared by the EKF and the UKF: at every step predict with the linear motion
+    ``x = F x``, ``P = F P F^T + Q``, then apply the ``measurements`` present at that step in the given order with
+    ``update(x, P, z_k, stream, k)`` (each starts from the previous update's posterior). Checks the inputs; see
+    :func:`extended_kalman_filter` for the arguments."""
+    setup = _setup(F, Q, x0, P0, measurements, record, filter_name)
+    return _time_loop(setup, measurements, update, predict_first)
 
 
 def extended_kalman_filter(F, Q, x0, P0, measurements, *, record=None,
@@ -620,5 +804,424 @@ def extended_kalman_filter(F, Q, x0, P0, measurements, *, record=None,
     are the posterior one step before step 0, else the prior at step 0. ``record``: step indices to return
     (default all).
     """
-    return run_recursive_filter(F, Q, x0, P0, measurements, _ekf_update, record=record, predict_first=predict_first,
-                                filter_name="extended_kalman_filter")
+    setup = _setup(F, Q, x0, P0, measurements, record, "extended_kalman_filter")
+    if not _covariance_shared_throughout(setup, measurements):
+        compiled = _compiled_ekf(setup, measurements, predict_first)
+        if compiled is not None:
+            return compiled
+    return _time_loop(setup, measurements, _ekf_update, predict_first, shared=True)
+
+
+def _covariance_shared_throughout(setup: _Setup, measurements) -> bool:
+    """True when the covariance recursion is the same in every run at every step (a linear filter with P0, F, Q, H
+    and R without batch axes and the same components missing in every run): the numpy loop then updates one
+    covariance per step, which beats running the runs one by one."""
+    if setup.F.ndim != 2 or setup.Q.ndim != 2 or setup.P.ndim != 2:
+        return False
+    return all(isinstance(meas, LinearMeasurement) and np.ndim(meas.H) == 2 and np.ndim(meas.R) == 2
+               and _shared_pattern(z) is not None for meas, z in zip(measurements, setup.zs))
+
+
+# --------------------------------------------------------------------------------------------------
+# Optional compiled EKF (numba): the same recursion run by run in compiled loops
+# --------------------------------------------------------------------------------------------------
+#: The EKF uses compiled loops when numba is installed, this is True (environment variable LOCBOOK_NUMBA=0 turns them
+#: off) and the problem has at least ``_NUMBA_MIN_WORK`` run-steps (smaller problems stay in numpy, with no
+#: compilation wait). Either way the results are the same to round-off (tests/test_filter_speed_equality.py).
+_NUMBA_ENABLED = os.environ.get("LOCBOOK_NUMBA", "1").strip().lower() not in ("0", "false", "no", "off")
+_NUMBA_MIN_WORK = int(os.environ.get("LOCBOOK_NUMBA_MIN_WORK", "20000").strip() or 20000)
+_NUMBA_STATE = {"ready": None}
+_LINEAR_PARALLEL, _LINEAR_SERIAL, _RSS_PARALLEL, _RSS_SERIAL = 0, 1, 2, 3
+_KERNELS = ("_nb_predict", "_nb_update", "_nb_rss_row", "_nb_ekf")
+_LANES = 64     # runs per block of the compiled EKF: the innermost axis, long enough for LLVM to vectorise it
+
+
+def _numba_ready() -> bool:
+    """Compile (lazily, once; numba caches the machine code on disk) the kernels below, if numba is installed."""
+    if _NUMBA_STATE["ready"] is None:
+        try:
+            import numba
+        except ImportError:
+            _NUMBA_STATE["ready"] = False
+        else:
+            space = globals()
+            for name in _KERNELS:          # jitted callers bind to the jitted callees through the module globals
+                try:
+                    space[name] = numba.njit(cache=True, nogil=True, error_model="numpy")(space[name])
+                except RuntimeError:       # no writable cache location: compile in memory at each session
+                    space[name] = numba.njit(nogil=True, error_model="numpy")(space[name])
+            _NUMBA_STATE["ready"] = True
+    return _NUMBA_STATE["ready"]
+
+
+def _nb_predict(Fi, Fj, Fv, Q, x, P, xt, T1):
+    """x = F x, P = (F P) F^T + Q in place for the lanes (last axis), F given by its nonzero entries (rows Fi,
+    columns Fj, values Fv); P symmetric in, symmetric out (the upper triangle is computed and mirrored)."""
+    n = x.shape[0]
+    for i in range(n):
+        for w in range(_LANES):
+            xt[i, w] = 0.0
+        for c in range(n):
+            for w in range(_LANES):
+                T1[i, c, w] = 0.0
+    for e in range(Fi.shape[0]):
+        i, j, v = Fi[e], Fj[e], Fv[e]
+        for w in range(_LANES):
+            xt[i, w] += v * x[j, w]
+        for c in range(n):
+            for w in range(_LANES):
+                T1[i, c, w] += v * P[j, c, w]
+    for i in range(n):
+        for w in range(_LANES):
+            x[i, w] = xt[i, w]
+        for c in range(i + 1):
+            for w in range(_LANES):
+                P[c, i, w] = 0.0
+    for e in range(Fi.shape[0]):                          # (F P) F^T, upper triangle: P[a, i] for a <= i
+        i, j, v = Fi[e], Fj[e], Fv[e]
+        for a in range(i + 1):
+            for w in range(_LANES):
+                P[a, i, w] += v * T1[a, j, w]
+    for a in range(n):
+        for c in range(a, n):
+            for w in range(_LANES):
+                P[a, c, w] += Q[a, c]
+                P[c, a, w] = P[a, c, w]
+
+
+def _nb_update(x, P, c, nz, nnz, H, nu, R, HP, HPH, S, L, KT, PH, D, t, u):
+    """Kalman update in place, lane by lane (last axis), with the rows ``H[:c]`` (nonzero only in the columns
+    ``nz[:nnz]``), innovations ``nu[:c]`` and noise ``R[:c, :c]``; a missing reading is a zero row with zero
+    innovation and unit decoupled noise (its gain column is then exactly zero). K = P H^T S^{-1} (Cholesky of
+    S = H P H^T + R), x += K nu, and the Joseph form (I - K H) P (I - K H)^T + K R K^T, symmetrised, written as
+    P - K (H P) + (K S - P H^T) K^T (equal for any K). False when some S is not positive definite or some state not
+    finite."""
+    n = x.shape[0]
+    for r in range(c):                                    # HP = H P, PH = P H^T
+        for j in range(n):
+            for w in range(_LANES):
+                HP[r, j, w] = 0.0
+                PH[j, r, w] = 0.0
+        for e in range(nnz):
+            i = nz[e]
+            for j in range(n):
+                for w in range(_LANES):
+                    HP[r, j, w] += H[r, i, w] * P[i, j, w]
+                    PH[j, r, w] += P[j, i, w] * H[r, i, w]
+    for r in range(c):                                    # S = H P H^T + R
+        for q in range(c):
+            for w in range(_LANES):
+                HPH[r, q, w] = 0.0
+            for e in range(nnz):
+                j = nz[e]
+                for w in range(_LANES):
+                    HPH[r, q, w] += HP[r, j, w] * H[q, j, w]
+            for w in range(_LANES):
+                S[r, q, w] = HPH[r, q, w] + R[r, q, w]
+    for j in range(c):                                    # S = L L^T
+        for w in range(_LANES):
+            t[w] = S[j, j, w]
+        for i in range(j):
+            for w in range(_LANES):
+                t[w] -= L[j, i, w] * L[j, i, w]
+        good = True
+        for w in range(_LANES):
+            good = good and t[w] > 0.0
+        if not good:
+            return False
+        for w in range(_LANES):
+            L[j, j, w] = np.sqrt(t[w])
+        for i in range(j + 1, c):
+            for w in range(_LANES):
+                t[w] = S[i, j, w]
+            for q in range(j):
+                for w in range(_LANES):
+                    t[w] -= L[i, q, w] * L[j, q, w]
+            for w in range(_LANES):
+                L[i, j, w] = t[w] / L[j, j, w]
+    for j in range(n):                                    # K^T = S^{-1} H P
+        for i in range(c):
+            for w in range(_LANES):
+                KT[i, j, w] = HP[i, j, w]
+            for q in range(i):
+                for w in range(_LANES):
+                    KT[i, j, w] -= L[i, q, w] * KT[q, j, w]
+            for w in range(_LANES):
+                KT[i, j, w] /= L[i, i, w]
+        for i in range(c - 1, -1, -1):
+            for q in range(i + 1, c):
+                for w in range(_LANES):
+                    KT[i, j, w] -= L[q, i, w] * KT[q, j, w]
+            for w in range(_LANES):
+                KT[i, j, w] /= L[i, i, w]
+    good = True
+    for i in range(n):                                    # x += K nu
+        for w in range(_LANES):
+            t[w] = 0.0
+        for r in range(c):
+            for w in range(_LANES):
+                t[w] += KT[r, i, w] * nu[r, w]
+        for w in range(_LANES):
+            x[i, w] += t[w]
+            good = good and np.isfinite(x[i, w])
+    if not good:
+        return False
+    for i in range(n):                                    # D = K S - P H^T
+        for r in range(c):
+            for w in range(_LANES):
+                D[i, r, w] = -PH[i, r, w]
+            for q in range(c):
+                for w in range(_LANES):
+                    D[i, r, w] += KT[q, i, w] * S[q, r, w]
+    for i in range(n):                                    # P - K (H P) + D K^T, symmetrised
+        for j in range(i, n):
+            for w in range(_LANES):
+                t[w] = P[i, j, w]
+                u[w] = P[j, i, w]
+            for r in range(c):
+                for w in range(_LANES):
+                    t[w] += D[i, r, w] * KT[r, j, w] - KT[r, i, w] * HP[r, j, w]
+                    u[w] += D[j, r, w] * KT[r, i, w] - KT[r, j, w] * HP[r, i, w]
+            for w in range(_LANES):
+                P[i, j, w] = 0.5 * (t[w] + u[w])
+                P[j, i, w] = P[i, j, w]
+    return True
+
+
+def _nb_rss_row(x, w, pidx, npos, tag_h, anchor, p0, ple, sigma, ref_d, ch_min, meas_min, anchor_sigma, z, parallel):
+    """One RSS reading of lane ``w`` linearised at its state: (innovation z - h(x), variance, the Jacobian's entries
+    at the ``npos`` position indices), as :func:`_rss_parallel_update` (``parallel``: the channel's near-field
+    clamp in h) and :func:`_rss_serial_update`."""
+    d2 = 0.0
+    for i in range(anchor.shape[0]):
+        u = (x[pidx[i], w] if i < npos else tag_h) - anchor[i]
+        d2 += u * u
+    if d2 < meas_min * meas_min:
+        d2 = meas_min * meas_min
+    slope = 10.0 * ple / np.log(10.0)
+    g0 = -(slope / d2) * (x[pidx[0], w] - anchor[0])
+    g1 = -(slope / d2) * (x[pidx[1], w] - anchor[1]) if npos > 1 else 0.0
+    g2 = -(slope / d2) * (x[pidx[2], w] - anchor[2]) if npos > 2 else 0.0
+    d = np.sqrt(d2)
+    dh = d
+    if parallel and ch_min > 0.0 and dh < ch_min:
+        dh = ch_min
+    h = p0 - 10.0 * ple * np.log10(dh / ref_d)
+    var = sigma * sigma
+    if anchor_sigma > 0.0:
+        u = slope * anchor_sigma / (d if d > meas_min else meas_min)
+        var += u * u
+    return z - h, var, g0, g1, g2
+
+
+def _nb_ekf(Fi, Fj, Fv, Q, x0, P0, predict_first, slot, active, kind, col, nz, nnz, Z, H, R, A, P0c, PLE, SIG, dims,
+            ref_d, ch_min, meas_min, anchor_sigma, tag_h, pidx, npos, descending, out_x, out_P):
+    """The EKF time loop of :func:`_time_loop` with :func:`_ekf_update`, over blocks of ``_LANES`` runs (the last
+    block padded with copies of the last run). Returns 0, or 1 + a run whose update failed (the caller then redoes
+    the filter in numpy, which raises the library's error)."""
+    T, B, n, ns = Z.shape[0], Z.shape[1], x0.shape[1], kind.shape[0]
+    mmax = 1
+    for s in range(ns):
+        mmax = max(mmax, col[s + 1] - col[s])
+    x, xt = np.empty((n, _LANES)), np.empty((n, _LANES))
+    P, T1 = np.empty((n, n, _LANES)), np.empty((n, n, _LANES))
+    Hr, HP, KT = np.zeros((mmax, n, _LANES)), np.empty((mmax, n, _LANES)), np.empty((mmax, n, _LANES))
+    nu, var, key = np.empty((mmax, _LANES)), np.empty((mmax, _LANES)), np.empty((mmax, _LANES))
+    Rr, S, L = np.zeros((mmax, mmax, _LANES)), np.empty((mmax, mmax, _LANES)), np.zeros((mmax, mmax, _LANES))
+    HPH, PH, D = np.empty((mmax, mmax, _LANES)), np.empty((n, mmax, _LANES)), np.empty((n, mmax, _LANES))
+    t, t2 = np.empty(_LANES), np.empty(_LANES)
+    valid = np.zeros((mmax, _LANES), np.bool_)
+    sel = np.empty((mmax, _LANES), np.int64)
+    run = np.empty(_LANES, np.int64)
+    for b0 in range(0, B, _LANES):
+        for w in range(_LANES):
+            b = min(b0 + w, B - 1)
+            run[w] = b
+            for i in range(n):
+                x[i, w] = x0[b, i]
+                for j in range(n):
+                    P[i, j, w] = P0[min(b, P0.shape[0] - 1), i, j]
+        for k in range(T):
+            if predict_first or k > 0:
+                _nb_predict(Fi, Fj, Fv, Q, x, P, xt, T1)
+            ta = min(k, A.shape[1] - 1)
+            for s in range(ns):
+                if not active[s, k]:                      # no reading of this stream at this step in any run
+                    continue
+                c0, m, kd = col[s], col[s + 1] - col[s], kind[s]
+                serial = kd == 1 or kd == 3
+                for w in range(_LANES):                   # the update order: as given, or by descending RSS
+                    for j in range(m):
+                        sel[j, w] = j
+                    if kd == 3 and descending[s]:         # stable: ties (and the missing, last) keep their order
+                        for j in range(m):
+                            zj = Z[k, run[w], c0 + j]
+                            key[j, w] = zj if np.isfinite(zj) else -np.inf
+                        for j in range(1, m):
+                            i = j
+                            while i > 0 and key[sel[i - 1, w], w] < key[sel[i, w], w]:
+                                sel[i - 1, w], sel[i, w] = sel[i, w], sel[i - 1, w]
+                                i -= 1
+                for u in range(m if serial else 1):       # serial: one scalar update per reading
+                    rows = 1 if serial else m
+                    present = False
+                    for r in range(rows):
+                        for w in range(_LANES):
+                            b = run[w]
+                            j = sel[u, w] if serial else r
+                            zj = Z[k, b, c0 + j]
+                            valid[r, w] = np.isfinite(zj)
+                            for e in range(nnz[s]):
+                                Hr[r, nz[s, e], w] = 0.0
+                            nu[r, w] = 0.0
+                            var[r, w] = 1.0
+                            if not valid[r, w]:
+                                continue
+                            present = True
+                            if kd <= 1:
+                                bh = min(b, H.shape[0] - 1)
+                                q = 0.0
+                                for e in range(nnz[s]):
+                                    Hr[r, nz[s, e], w] = H[bh, c0 + j, nz[s, e]]
+                                    q += H[bh, c0 + j, nz[s, e]] * x[nz[s, e], w]
+                                nu[r, w] = zj - q
+                            else:
+                                bc = min(b, P0c.shape[0] - 1)
+                                nu[r, w], var[r, w], g0, g1, g2 = _nb_rss_row(
+                                    x, w, pidx[s], npos[s], tag_h[s], A[min(b, A.shape[0] - 1), ta, c0 + j, :dims[s]],
+                                    P0c[bc, c0 + j], PLE[bc, c0 + j], SIG[bc, c0 + j], ref_d[s], ch_min[s], meas_min[s],
+                                    anchor_sigma[s], zj, not serial)
+                                Hr[r, pidx[s, 0], w] = g0
+                                if npos[s] > 1:
+                                    Hr[r, pidx[s, 1], w] = g1
+                                if npos[s] > 2:
+                                    Hr[r, pidx[s, 2], w] = g2
+                    if not present:
+                        continue
+                    for r in range(rows):                 # R of the readings present, unit decoupled noise elsewhere
+                        for q in range(rows):
+                            for w in range(_LANES):
+                                if not (valid[r, w] and valid[q, w]):
+                                    Rr[r, q, w] = 1.0 if r == q else 0.0
+                                elif kd <= 1:
+                                    jr = sel[u, w] if serial else r
+                                    jq = sel[u, w] if serial else q
+                                    Rr[r, q, w] = R[min(run[w], R.shape[0] - 1), c0 + jr, c0 + jq]
+                                else:
+                                    Rr[r, q, w] = var[r, w] if r == q else 0.0
+                    if not _nb_update(x, P, rows, nz[s], nnz[s], Hr, nu, Rr, HP, HPH, S, L, KT, PH, D, t, t2):
+                        return b0 + 1
+            if slot[k] >= 0:
+                for w in range(min(_LANES, B - b0)):
+                    for i in range(n):
+                        out_x[b0 + w, slot[k], i] = x[i, w]
+                        for j in range(n):
+                            out_P[b0 + w, slot[k], i, j] = P[i, j, w]
+    return 0
+
+
+def _leading(value, batch, B, tail):
+    """``value`` (``tail`` or ``batch + tail`` after broadcasting) as ``(1 or B,) + tail``, contiguous."""
+    value = np.asarray(value, dtype=float)
+    if value.ndim <= len(tail):
+        return np.ascontiguousarray(np.broadcast_to(value, tail)[None])
+    return np.ascontiguousarray(np.broadcast_to(value, batch + tail).reshape((B,) + tail))
+
+
+def _pack_streams(setup: _Setup, measurements, B):
+    """The streams as the kernel's flat arrays (readings side by side on one axis), or None if one is not supported
+    (a NonlinearMeasurement: its h and Jacobian are Python functions)."""
+    batch, T, n = setup.batch, setup.T, setup.F.shape[-1]
+    kinds, cols, lin, rss, scal = [], [0], [], [], []
+    Z = np.empty((T, B, sum(z.shape[-1] for z in setup.zs)))       # time first: a step's readings side by side
+    by_time = Z.reshape((T,) + batch + Z.shape[-1:])
+    for meas, z in zip(measurements, setup.zs):
+        m = z.shape[-1]
+        c0 = cols[-1]
+        cols.append(c0 + m)
+        by_time[..., c0:c0 + m] = np.moveaxis(z, -2, 0)
+        if isinstance(meas, LinearMeasurement):
+            kinds.append(_LINEAR_PARALLEL if meas.mode == "parallel" else _LINEAR_SERIAL)
+            lin.append((c0, m, _leading(meas.H, batch, B, (m, n)), _leading(meas.R, batch, B, (m, m))))
+            scal.append((2, 1.0, 0.0, 1.0, 0.0, 0.0, (0, 0, 0), 0, False))
+        elif isinstance(meas, RssMeasurement):
+            ch = meas.channel
+            anchors = np.asarray(meas.anchors_m, dtype=float)
+            dim = anchors.shape[-1]
+            if dim > 3 or not np.isfinite(ch.wall_attenuation_db):
+                return None
+            if anchors.ndim == 2:
+                a = anchors[None, None]
+            elif anchors.ndim == 3:
+                a = anchors[None]
+            else:
+                a = np.broadcast_to(anchors, batch + anchors.shape[-3:]).reshape((B,) + anchors.shape[-3:])
+            kinds.append(_RSS_PARALLEL if meas.mode == "parallel" else _RSS_SERIAL)
+            rss.append((c0, m, dim, a, *(_leading(v, batch, B, (m,)) for v in (ch.ref_power_dbm, ch.path_loss_exp,
+                                                                                ch.sigma_db))))
+            idx = np.asarray(meas.position_index, dtype=np.int64)
+            tag = np.nan if meas.tag_height_m is None else float(meas.tag_height_m)
+            scal.append((dim, float(ch.ref_distance_m), float(ch.min_distance_m), float(meas.min_distance_m),
+                         float(meas.anchor_sigma_m), tag, tuple(idx) + (0,) * (3 - idx.size), idx.size,
+                         meas.order == "descending"))
+        else:
+            return None
+    M = cols[-1]
+    BH = max([h.shape[0] for _, _, h, _ in lin] + [1])
+    BR = max([r.shape[0] for _, _, _, r in lin] + [1])
+    H, R = np.zeros((BH, M, n)), np.zeros((BR, M, M))
+    for c0, m, h, r in lin:
+        H[:, c0:c0 + m] = h
+        R[:, c0:c0 + m, c0:c0 + m] = r
+    BA = max([e[3].shape[0] for e in rss] + [1])
+    TA = max([e[3].shape[1] for e in rss] + [1])
+    BC = max([max(e[4].shape[0], e[5].shape[0], e[6].shape[0]) for e in rss] + [1])
+    A, P0c, PLE, SIG = np.zeros((BA, TA, M, 3)), np.zeros((BC, M)), np.zeros((BC, M)), np.zeros((BC, M))
+    for c0, m, dim, a, p0, ple, sigma in rss:
+        A[:, :, c0:c0 + m, :dim] = a
+        P0c[:, c0:c0 + m], PLE[:, c0:c0 + m], SIG[:, c0:c0 + m] = p0, ple, sigma
+    dims, ref_d, ch_min, meas_min, anchor_sigma, tag_h, pidx, npos, desc = (np.array(v) for v in zip(*scal))
+    nz, nnz = np.zeros((len(kinds), n), np.int64), np.zeros(len(kinds), np.int64)
+    for s, (kind, c0, c1) in enumerate(zip(kinds, cols[:-1], cols[1:])):     # the columns a row can use
+        used = np.flatnonzero(np.any(H[:, c0:c1] != 0, axis=(0, 1))) if kind <= _LINEAR_SERIAL else \
+            np.asarray(pidx[s][:npos[s]], np.int64)
+        nz[s, :used.size], nnz[s] = used, used.size
+    return (np.array(kinds, np.int64), np.array(cols, np.int64), nz, nnz, Z, H, R, A, P0c, PLE, SIG, dims.astype(np.int64),
+            ref_d.astype(float), ch_min.astype(float), meas_min.astype(float), anchor_sigma.astype(float),
+            tag_h.astype(float), pidx.astype(np.int64).reshape(-1, 3), npos.astype(np.int64), desc.astype(np.bool_))
+
+
+def _compiled_ekf(setup: _Setup, measurements, predict_first: bool):
+    """:func:`extended_kalman_filter` by the compiled kernel when it applies (numba installed and enabled, F and Q
+    without batch axes, linear and RSS streams, a large enough problem), else None: the numpy loop then runs. It also
+    returns None when an update fails (a covariance that is not positive definite, a state that is not finite): the
+    numpy loop then redoes the filter and raises the library's error for it."""
+    global _NUMBA_ENABLED
+    F, Q, batch, T = setup.F, setup.Q, setup.batch, setup.T
+    B = int(np.prod(batch, dtype=np.int64))
+    if not _NUMBA_ENABLED or F.ndim != 2 or Q.ndim != 2 or B * T < _NUMBA_MIN_WORK or B == 0:
+        return None
+    if not all(isinstance(m, (LinearMeasurement, RssMeasurement)) for m in measurements):
+        return None
+    if not (np.array_equal(Q, Q.T) and np.array_equal(setup.P, _mT(setup.P))):
+        return None                 # the kernel keeps P exactly symmetric (it computes one triangle of F P F^T + Q)
+    packed = _pack_streams(setup, measurements, B)
+    if packed is None or not _numba_ready():
+        return None
+    n, S = F.shape[-1], setup.steps.size
+    Fi, Fj = np.nonzero(F)
+    P0 = setup.P[None] if setup.P.ndim == 2 else np.broadcast_to(setup.P, batch + (n, n)).reshape(B, n, n)
+    out_x, out_P = np.empty((B, S, n)), np.empty((B, S, n, n))
+    try:
+        status = _nb_ekf(Fi.astype(np.int64), Fj.astype(np.int64), np.ascontiguousarray(F[Fi, Fj]),
+                         np.ascontiguousarray(Q), np.ascontiguousarray(setup.x.reshape(B, n)), np.ascontiguousarray(P0),
+                         bool(predict_first), setup.slot.astype(np.int64),
+                         np.array(setup.active, dtype=np.bool_).reshape(-1, T), *packed, out_x, out_P)
+    except Exception as exc:        # numba could not compile or run the kernel here: numpy from now on
+        _NUMBA_ENABLED = False
+        warnings.warn(f"locbook: the compiled EKF failed ({type(exc).__name__}: {exc}); using the numpy loop "
+                      "(set LOCBOOK_NUMBA=0 to skip the attempt)", RuntimeWarning, stacklevel=3)
+        return None
+    if status:
+        return None
+    return TrackResult(out_x.reshape(batch + (S, n)), out_P.reshape(batch + (S, n, n)), setup.steps)

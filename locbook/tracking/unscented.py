@@ -39,8 +39,9 @@ import numpy as np
 
 from .._validate import check_choice, check_scalar
 from ..models.channel import log_distance_mean_dbm
-from .kalman import (LinearMeasurement, NonlinearMeasurement, RssMeasurement, TrackResult, _mT, _not_positive_definite,
-                     _pick_anchor, _serial_order, _Singular, _solve_active, run_recursive_filter)
+from .kalman import (LinearMeasurement, NonlinearMeasurement, RssMeasurement, TrackResult, _inv_small, _mT,
+                     _not_positive_definite, _pick_anchor, _serial_order, _Singular, _singular_runs,
+                     run_recursive_filter)
 
 __all__ = ["UKF_WEIGHTS", "UnscentedWeights", "unscented_weights", "sigma_points", "unscented_transform",
            "unscented_kalman_filter", "UkfResult"]
@@ -94,6 +95,11 @@ _P_NOT_PD = ("the state covariance P is not positive definite at step {step}, so
 def sigma_points(x, P, lam: float):
     """Sigma points ``batch + (2n + 1, n)`` around ``x`` ``batch + (n,)``: ``x``, ``x +- columns of
     chol((n + lam) P)`` (Eqs. (3.18)-(3.20) with the column index the print leaves out)."""
+    return _sigma_points(x, P, lam)[0]
+
+
+def _sigma_points(x, P, lam: float):
+    """:func:`sigma_points` and the Cholesky factor ``L`` of ``(n + lam) P`` whose columns spread them."""
     n = x.shape[-1]
     try:
         L = np.linalg.cholesky((n + lam) * P)
@@ -101,18 +107,22 @@ def sigma_points(x, P, lam: float):
         eig = np.linalg.eigvalsh(np.where(np.isfinite(P), P, 0.0))
         raise _Singular(~(eig[..., 0] > 0), _P_NOT_PD) from None
     cols = _mT(L)                                    # row i = column i of L
-    x = x[..., None, :]
-    return np.concatenate([x, x + cols, x - cols], axis=-2)
+    X = np.empty(np.broadcast_shapes(x.shape[:-1], L.shape[:-2]) + (2 * n + 1, n))
+    X[..., 0, :] = x
+    np.add(x[..., None, :], cols, out=X[..., 1:n + 1, :])
+    np.subtract(x[..., None, :], cols, out=X[..., n + 1:, :])
+    return X, L
 
 
 def unscented_transform(points, values, weights: UnscentedWeights):
     """Weighted mean ``(..., m)``, covariance ``(..., m, m)`` of ``values`` ``(..., 2n+1, m)`` and the
     cross-covariance ``(..., n, m)`` with ``points`` ``(..., 2n+1, n)`` (Eqs. (3.25)-(3.27), without R)."""
-    mean = np.einsum("k,...km->...m", weights.mean, values)
+    mean = weights.mean @ values                     # sum_k W_m^k values^k (matmul, not einsum: BLAS over the batch)
     dv = values - mean[..., None, :]
     dx = points - points[..., :1, :]                 # X^0 is the mean of the sigma points
-    cov = np.einsum("k,...ki,...kj->...ij", weights.cov, dv, dv)
-    cross = np.einsum("k,...ki,...kj->...ij", weights.cov, dx, dv)
+    wdv = _mT(weights.cov[:, None] * dv)             # (..., m, 2n+1): W_c^k (values^k - mean)
+    cov = wdv @ dv
+    cross = _mT(dx) @ _mT(wdv)
     return mean, 0.5 * (cov + _mT(cov)), cross
 
 
@@ -122,45 +132,81 @@ def _ukf_update(x, P, z, h, R, weights: UnscentedWeights, innovation_noise: bool
     valid = np.isfinite(z)
     if not valid.any():
         return x, P
-    X = sigma_points(x, P, weights.lam)
+    X, L = _sigma_points(x, P, weights.lam)
     Y = h(X)
-    z_hat, Pzz, Pxz = unscented_transform(X, Y, weights)
-    m = z.shape[-1]
+    n, m = x.shape[-1], z.shape[-1]
+    c = n + weights.lam                              # L L^T = c P
+    z_hat = weights.mean @ Y                         # Eq. (3.25)
+    dv = Y - z_hat[..., None, :]
+    Pzz = _mT(weights.cov[:, None] * dv) @ dv        # Eq. (3.26) without R
+    Pzz = 0.5 * (Pzz + _mT(Pzz))
+    # P_xz = sum_i W_c^i (X^i - x-)(gamma^i - z^)^T (Eq. (3.27)) = L D: X^i - x- = +-(column i of L) and W_c^i is the
+    # same for i >= 1, so D = W_c^1 (dv_i - dv_{n+i}) = L^{-1} P_xz
+    D = weights.cov[1] * (dv[..., 1:n + 1, :] - dv[..., n + 1:, :])
     S = Pzz + R if innovation_noise else Pzz
     S = np.broadcast_to(S, x.shape[:-1] + (m, m))
     row_ok = valid.any(axis=-1)
     if not valid.all():
-        Pxz = np.where(valid[..., None, :], Pxz, 0.0)
+        D = np.where(valid[..., None, :], D, 0.0)
         pair = valid[..., :, None] & valid[..., None, :]
         S = np.where(pair, S, np.eye(m))
+    Pxz = L @ D
     bad = row_ok & _not_positive_definite(S)
-    if m > 2:      # larger S: a tiny eigenvalue (e.g. P_zz without R, Eq. (3.26) as printed) would give a huge gain
+    if m > 2 and not _clearly_well_conditioned(S, 2e3 * m * np.finfo(float).eps):
+        # larger S: a tiny eigenvalue (e.g. P_zz without R, Eq. (3.26) as printed) would give a huge gain
         eig = np.linalg.eigvalsh(S)
         bad = bad | row_ok & ~(eig[..., 0] > 1e3 * m * np.finfo(float).eps * np.abs(eig[..., -1]))
     if bad.any():
         raise _Singular(bad)
     nu = np.where(valid, z - z_hat, 0.0)
-    K = _mT(_solve_active(S, _mT(Pxz), row_ok))      # K = P_xz S^{-1}
+    S_use = S if row_ok.all() else np.where(row_ok[..., None, None], S, np.eye(m))
+    K = Pxz @ _inverse(S_use, row_ok)                # K = P_xz S^{-1}
     x_new = x + (K @ nu[..., None])[..., 0]
     if not np.all(np.isfinite(x_new)):
         raise _Singular(~np.all(np.isfinite(x_new), axis=-1))
-    # Joseph form with the statistically linearised H~ = P_xz^T P^{-1} and R~ = S - H~ P H~^T (module docstring)
-    Ht = _mT(np.linalg.solve(P, Pxz))
-    Rt = S - Ht @ Pxz
+    # Joseph form with the statistically linearised H~ = P_xz^T P^{-1} and R~ = S - H~ P H~^T (module docstring),
+    # through L: H~ P H~^T = c D^T D and (I - K H~) P (I - K H~)^T = M M^T / c with M = (I - K H~) L = L - c K D^T
+    Rt = S - c * (_mT(D) @ D)
     Rt = 0.5 * (Rt + _mT(Rt))
-    w, v = np.linalg.eigh(Rt)
-    floor = w < 0
-    if floor.any():
-        guard[0] += int(np.any(floor, axis=-1).sum())
-        Rt = (v * np.maximum(w, 0.0)[..., None, :]) @ _mT(v)
-    ikh = np.eye(x.shape[-1]) - K @ Ht
-    P_new = ikh @ P @ _mT(ikh) + K @ Rt @ _mT(K)
+    if not _clearly_well_conditioned(Rt, 1e3 * m * np.finfo(float).eps):
+        # R~ may have a negative eigenvalue: the guard (eigen-decomposition, floored at 0)
+        w, v = np.linalg.eigh(Rt)
+        floor = w < 0
+        if floor.any():
+            guard[0] += int(np.any(floor, axis=-1).sum())
+            Rt = (v * np.maximum(w, 0.0)[..., None, :]) @ _mT(v)
+    M = L - c * (K @ _mT(D))
+    P_new = (M @ _mT(M)) / c + K @ Rt @ _mT(K)
     P_new = 0.5 * (P_new + _mT(P_new))
     keep = ~row_ok
     if keep.any():
         x_new = np.where(keep[..., None], x, x_new)
         P_new = np.where(keep[..., None, None], P, P_new)
     return x_new, P_new
+
+
+def _inverse(A, active):
+    """Inverse of a batch of small matrices (closed form for 1 x 1 and 2 x 2, else LAPACK's inv, which is faster than
+    its batched solve on such matrices); a singular one raises _Singular naming the ``active`` runs concerned."""
+    if A.shape[-1] <= 2:
+        return _inv_small(A)
+    try:
+        return np.linalg.inv(A)
+    except np.linalg.LinAlgError:
+        raise _Singular(_singular_runs(A, active)) from None
+
+
+def _clearly_well_conditioned(A, rel):
+    """True when ``A - rel * bound * I`` has a Cholesky factor for every symmetric matrix of the batch ``A`` (``bound``
+    its largest absolute row sum, at least its largest |eigenvalue|): then every smallest eigenvalue is above about
+    ``rel`` times the largest. A cheap sufficient test that lets the common case skip an eigen-decomposition; False
+    means "compute the eigenvalues" (the callers' margins are twice the round-off of either computation)."""
+    bound = np.abs(A).sum(axis=-1).max(axis=-1)
+    try:
+        np.linalg.cholesky(A - (rel * bound)[..., None, None] * np.eye(A.shape[-1]))
+    except np.linalg.LinAlgError:
+        return False
+    return True
 
 
 def _anchor_axis(value):

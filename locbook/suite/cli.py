@@ -85,8 +85,8 @@ def main(argv: list[str] | None = None) -> int:
     run.add_argument("--reports", type=Path, help="reports folder (default: <repository>/reports)")
     run.add_argument("--out", type=Path, help="write this run's reports to this folder (a path; its last part "
                                                 "[a-z0-9-] only)")
-    run.add_argument("--timeout", type=lambda t: _positive(int, t), default=1800,
-                     help="whole seconds allowed per notebook cell (default 1800)")
+    run.add_argument("--timeout", type=lambda t: _positive(float, t), default=1800,
+                     help="seconds allowed per notebook cell (default 1800; rounded up to whole seconds)")
     run.add_argument("--progress", choices=("auto", "live", "plain", "quiet"), default="auto",
                      help="auto (default): a live table on a terminal, one line per event otherwise; plain: one "
                           "line per event; quiet: only the end")

@@ -11,6 +11,7 @@ exits. A kernel whose worker vanished exits by itself (ipykernel's parent poller
 from __future__ import annotations
 
 import json
+import math
 import os
 import signal
 import sys
@@ -79,7 +80,7 @@ def execute(task: dict) -> dict:
     try:
         pm.execute_notebook(task["notebook"], str(out_nb), parameters=task["parameters"],
                             kernel_name=task["kernel"], cwd=str(Path(task["notebook"]).parent),
-                            progress_bar=False, log_output=False, execution_timeout=task["timeout"])
+                            progress_bar=False, log_output=False, execution_timeout=math.ceil(task["timeout"]))   # nbclient wants whole seconds
     except pm.PapermillExecutionError as exc:
         error = f"{exc.ename}: {exc.evalue}"
     except Exception as exc:  # kernel death, timeout, missing kernel, I/O: the run fails, the suite goes on

@@ -16,11 +16,10 @@ import urllib.parse
 import urllib.request
 from pathlib import Path
 
-import nbformat
 import pytest
-from nbformat.v4 import new_code_cell, new_notebook
 
 from locbook.suite import load_suite, run_suite
+from test_suite import _notebook   # the toy notebook writer of the suite tests
 
 pytestmark = pytest.mark.notebooks   # executes (toy) notebooks with papermill
 
@@ -88,12 +87,7 @@ n = { ge = 1 }
 def _toy_suite(root: Path):
     nbdir = root / "notebooks"
     nbdir.mkdir(parents=True)
-    nb = new_notebook()
-    nb.metadata["kernelspec"] = {"name": "python3", "display_name": "Python 3", "language": "python"}
-    params = new_code_cell(PARAMS)
-    params.metadata["tags"] = ["parameters"]
-    nb.cells = [params, new_code_cell(BODY)]
-    nbformat.write(nb, str(nbdir / "toy.ipynb"))
+    _notebook(nbdir / "toy.ipynb", PARAMS, BODY)
     (nbdir / "experiments.toml").write_text(textwrap.dedent(TOML))
     return load_suite(nbdir / "experiments.toml")
 

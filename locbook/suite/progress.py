@@ -22,8 +22,6 @@ from .site import _read_csv, _read_json, scoreboard_counts
 __all__ = ["MODES", "make_progress", "expected_seconds", "scoreboard_rows", "scoreboard_text", "print_scoreboard"]
 
 MODES = ("auto", "live", "plain", "quiet")
-_ABBREV = {"within": "within", "loose": "loose", "miss": "miss", "consistent": "consistent",
-           "inconsistent": "inconsistent", "no verdict": "no verdict", "linked": "linked"}
 
 
 def expected_seconds(report_dir: Path, ids) -> dict[str, float]:
@@ -44,7 +42,7 @@ def _fmt_s(seconds: float | None) -> str:
 
 
 def _counts_text(counts) -> str:
-    return ", ".join(f"{n} {_ABBREV.get(v, v)}" for v, n in counts.most_common() if n)
+    return ", ".join(f"{n} {verdict}" for verdict, n in counts.most_common() if n)
 
 
 def scoreboard_rows(run) -> list[dict]:
@@ -58,7 +56,7 @@ def scoreboard_rows(run) -> list[dict]:
         counts = scoreboard_counts(numbers)
         seconds = o.seconds if o.status in ("ok", "failed", "interrupted") else \
             _read_json(folder / "report.json", {}).get("seconds")
-        status = o.status if o.status != "cached" else "cached"
+        status = o.status
         if o.status in ("failed", "interrupted") and numbers:
             status += " (last good report kept)"
         rows.append({"experiment": o.id, "status": status, "time": _fmt_s(seconds),

@@ -50,7 +50,7 @@ from . import site
 from .report import NUMBER_COLUMNS
 from .params import read_notebook
 from .site import _read_csv, _read_json
-from .executors import make_executor
+from .executors import _STOP_GRACE_S, make_executor
 from .progress import expected_seconds, make_progress
 from .spec import SAFE_NAME, Experiment, Suite, SuiteError
 
@@ -62,7 +62,6 @@ KERNEL_NAME = "python3"
 _DEPENDENCIES = ("numpy", "scipy", "cvxpy", "clarabel", "osqp", "scs", "matplotlib", "papermill",
                  "nbclient", "nbconvert", "nbformat", "ipykernel", "numba")
 _WORKER_FILES = (".runtime", ".result.json", ".result.json.tmp", ".task.json", ".data-read.log", ".stop")
-_STOP_GRACE_S = 5.0
 
 
 @dataclass

@@ -64,3 +64,37 @@ def test_neff_triggered_resampling_keeps_rows_above_the_threshold():
     np.testing.assert_array_equal(idx[0], np.arange(N))
     with pytest.raises(ValueError, match="non-negative"):
         lb.resample(np.array([0.5, -0.1, 0.6]), np.random.default_rng(0))
+
+
+SIZES = sorted(set(range(1, 300)) | {20, 49, 500, 999, 1000, 1024, 2000, 4096, 10000})
+
+
+def test_residual_resampling_of_uniform_weights_is_deterministic_like_filterpy(monkeypatch):
+    """Issue 26, item 11: with equal weights every particle gets exactly floor(N w) = 1 copy and nothing is drawn.
+    N w computed in floating point can land one ulp under 1 (N = 20, 49, 1000, ...), which made the scheme draw at
+    random; filterpy's residual_resample (given weights that do sum to 1) and Stone Soup copy each particle once."""
+    gen = np.random.default_rng(5)
+    monkeypatch.setattr(fp_resampling, "random", lambda size=None: gen.random(size))
+    for n in SIZES:
+        expected = np.arange(n)
+        ones = np.ones(n)
+        if n * (1.0 / n) == 1.0:      # weights summing to 1 whose N w is exactly 1: filterpy copies each particle once
+            with np.errstate(invalid="ignore", divide="ignore"):
+                np.testing.assert_array_equal(fp_resampling.residual_resample(np.full(n, 1.0 / n)), expected)
+        for weights in (ones, np.full(n, 1.0 / n), np.full((3, n), 7.3)):
+            for seed in (0, 1):
+                idx = lb.resample(weights, np.random.default_rng(seed), "residual")
+                np.testing.assert_array_equal(idx, np.broadcast_to(expected, np.shape(weights)), err_msg=f"N = {n}")
+
+
+def test_residual_resampling_counts_never_exceed_n_near_integers():
+    """The tolerance that rounds N w up to an integer must not create more than N offspring: weights just above and
+    below k / N in alternation still give exactly N particles, each at least floor(N w) - 0 and within one of N w."""
+    rng = np.random.default_rng(6)
+    for n in (2, 3, 20, 49, 1000):
+        eps = np.finfo(float).eps
+        w = np.full(n, 1.0 / n) * (1 + eps * np.where(np.arange(n) % 2, -4, 4))
+        idx = lb.resample(w, rng, "residual")
+        counts = np.bincount(idx, minlength=n)
+        assert counts.sum() == n
+        assert np.all(np.abs(counts - n * w / w.sum()) < 1 + 1e-9)

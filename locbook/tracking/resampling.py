@@ -16,6 +16,10 @@ __all__ = ["RESAMPLING_METHODS", "resample", "counts_to_indices", "resample_wher
 
 RESAMPLING_METHODS = ("systematic", "stratified", "multinomial", "residual")
 
+#: relative round-off allowed in ``N w`` before the residual scheme's floor (normalising N weights and scaling by N
+#: err by a few ulps; 64 ulps is far below any weight difference that matters)
+_FLOOR_RTOL = 64 * np.finfo(float).eps
+
 
 def _check_weights(weights) -> np.ndarray:
     w = as_array("weights", weights, min_ndim=1)
@@ -51,7 +55,8 @@ def resample(weights, rng: np.random.Generator, method: str = "systematic"):
     - ``"stratified"``: one uniform per stratum, points ``(u_i + i) / N``;
     - ``"multinomial"``: N independent draws from the weights;
     - ``"residual"``: ``floor(N w_j)`` copies of each particle, the remaining ``N - sum floor(N w)`` drawn
-      multinomially from the residual weights.
+      multinomially from the residual weights (``N w_j`` within 64 ulps under an integer counts as that integer, so
+      equal weights are resampled deterministically, as by filterpy and Stone Soup).
     """
     check_choice("method", method, RESAMPLING_METHODS)
     if not isinstance(rng, np.random.Generator):
@@ -70,9 +75,14 @@ def resample(weights, rng: np.random.Generator, method: str = "systematic"):
         counts = rng.multinomial(n, flat)
         return counts_to_indices(counts).reshape(batch + (n,))
     scaled = n * flat
-    det = np.floor(scaled).astype(np.int64)
+    # N w computed in floating point can land a few ulps under an integer (equal weights at N = 20, 49, 1000): round
+    # such a value up, as exact arithmetic would, so equal weights copy each particle once with nothing drawn
+    det = np.floor(scaled * (1.0 + _FLOOR_RTOL)).astype(np.int64)
+    over = det.sum(axis=-1) > n                 # the tolerance never creates more than N offspring in a row
+    if over.any():
+        det[over] = np.floor(scaled[over]).astype(np.int64)
     rest = n - det.sum(axis=-1)
-    resid = scaled - det
+    resid = np.maximum(scaled - det, 0.0)
     total = resid.sum(axis=-1, keepdims=True)
     pvals = np.where(total > 0, resid / np.where(total > 0, total, 1.0), 1.0 / n)
     extra = rng.multinomial(rest, pvals)

@@ -17,20 +17,32 @@ column         required meaning
 ``heading_rad``no       true heading of the transmitter (rad), where known
 ============== ======== ========================================================================================
 
-Other columns are kept and ignored. A reading must lie in ``[-150, 20]`` dBm (a received power outside it is a
-unit or sign error, never a reading); infinite values are errors anywhere. The same (time, transmitter,
-receiver) may appear once only.
+Other columns are kept and ignored. Every row has exactly the header's number of fields: an empty value is an
+empty field (``0.5,tag,A,`` = not heard), while a row with a field missing (``0.5,tag,A``) or one too many is
+refused. In the number columns an empty field, ``NaN``, ``NA`` or ``N/A`` is missing; ids are text, so ``NA`` is
+an id and only an empty field is no id. ``time_s`` is in seconds: a magnitude of :data:`MAX_TIME_S` (1e11 s) or
+more is milli-, micro- or nanoseconds since 1970 and is refused (as 64-bit floats such values also lose the
+differences between readings). A reading must lie in ``valid_range_dbm`` (default :data:`RSSI_RANGE_DBM`,
+``[-150, 20]`` dBm: outside it is a unit or sign error, never a reading); infinite values are errors anywhere.
+Values a data set writes for "invalid reading" (e.g. 0, 2, 4 dBm) are declared with ``invalid_values_dbm`` and
+become NaN (not heard); readings at or above 0 dBm with neither option given load with one
+:class:`MeasuredDataWarning` (implausible beyond a few centimetres from an antenna). The same (time,
+transmitter, receiver) may appear once only; ``sort=True`` reorders a file by time (stably) before the checks.
+Files are UTF-8 (a byte-order mark is allowed).
 
 **Anchors** (CSV): ``id, x, y, z`` in metres (``z`` is the anchor height; required, so that ranges are
-three-dimensional). Ids are unique; coordinates finite.
+three-dimensional). Ids are unique; coordinates finite; no two anchors within :data:`ANCHOR_MIN_SEPARATION_M`
+(1 mm) of each other.
 
 **Floor outline** (CSV, optional): ``x, y`` vertices of a closed polygon in metres (at least 3 vertices, the
 closing vertex may repeat the first).
 
 Every rule failure raises :class:`DataFormatError` naming the file, the line (as a text editor counts it, the
-header being line 1) and the column. :func:`epochs` turns a validated recording into the arrays the estimators
-take: one row per (time, transmitter) epoch, one column per anchor, NaN where the anchor heard nothing
-(the library's one rule for missing readings, README).
+header being line 1, blank lines included) and the column (or the byte, for a file that is not UTF-8).
+:func:`epochs` turns a validated recording into the arrays the estimators take: one row per (time, transmitter)
+epoch, one column per anchor, NaN where the anchor heard nothing (the library's one rule for missing readings,
+README). :func:`regular_epochs` puts one transmitter on a fixed clock, refusing a clock jump that would need
+more than ``max_epochs`` ticks.
 
 Adapter: :func:`kolakowski2021` reads the BLE data set of Kolakowski (2021) shipped in
 ``locbook/data/measured/kolakowski2021`` (CC BY 4.0; attribution in :data:`KOLAKOWSKI2021_ATTRIBUTION` and that
@@ -39,17 +51,22 @@ folder's README.md and LICENSE.md) into this format.
 from __future__ import annotations
 
 import csv
+import io
 import math
+import warnings
 from dataclasses import dataclass, field
+from datetime import datetime, timezone
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from scipy.spatial import cKDTree
 
-from ..errors import LocbookError
+from ..errors import LocbookError, ParameterError
 
 __all__ = [
-    "DataFormatError", "READING_COLUMNS", "OPTIONAL_READING_COLUMNS", "RSSI_RANGE_DBM", "MeasuredData", "Epochs",
+    "DataFormatError", "MeasuredDataWarning", "READING_COLUMNS", "OPTIONAL_READING_COLUMNS", "RSSI_RANGE_DBM",
+    "MAX_TIME_S", "ANCHOR_MIN_SEPARATION_M", "MAX_REGULAR_EPOCHS", "MeasuredData", "Epochs",
     "read_readings", "read_anchors", "read_outline", "read_path_segments", "validate_readings", "epochs",
     "regular_epochs", "kolakowski2021", "KOLAKOWSKI2021_ATTRIBUTION", "KOLAKOWSKI2021_TAG_HEIGHT_M",
     "measured_data_dir",
@@ -59,6 +76,12 @@ READING_COLUMNS = ("time_s", "transmitter", "receiver", "rssi_dbm")
 OPTIONAL_READING_COLUMNS = ("x_m", "y_m", "z_m", "heading_rad")
 #: a received power outside this interval (dBm) is a unit or sign error, never a reading
 RSSI_RANGE_DBM = (-150.0, 20.0)
+#: a time_s of this magnitude or more (3,169 years) is not seconds: milli-, micro- or nanoseconds since 1970
+MAX_TIME_S = 1e11
+#: two anchors closer than this (m) are the same point: refused (the geometry would be degenerate)
+ANCHOR_MIN_SEPARATION_M = 1e-3
+#: the default bound on the ticks :func:`regular_epochs` creates (a clock jump would otherwise fill the memory)
+MAX_REGULAR_EPOCHS = 1_000_000
 _MISSING_TEXT = {"", "nan", "NaN", "NAN", "NA", "N/A"}
 
 KOLAKOWSKI2021_ATTRIBUTION = (
@@ -75,6 +98,10 @@ class DataFormatError(LocbookError, ValueError):
     """A measured-data file that breaks a rule of the long format; the message names file, line and column."""
 
 
+class MeasuredDataWarning(UserWarning):
+    """Measured data that loads but looks wrong (e.g. readings at or above 0 dBm with no sentinel declared)."""
+
+
 def measured_data_dir(name: str) -> Path:
     """The folder of a data set shipped with locbook (``locbook/data/measured/<name>``)."""
     path = Path(__file__).with_name("measured") / name
@@ -85,26 +112,75 @@ def measured_data_dir(name: str) -> Path:
 
 
 # -- reading and checking CSV text ---------------------------------------------------------------------------
-def _read_text_table(path, required: tuple[str, ...], what: str) -> pd.DataFrame:
-    """The CSV as text (nothing converted yet), with every required column present."""
+def _decode_utf8(data: bytes, path: Path, what: str) -> str:
+    """The file's text; a byte that is not UTF-8 is an error naming its line and its byte in the line."""
+    bom = data.startswith(b"\xef\xbb\xbf")             # a UTF-8 byte-order mark (Excel writes one): not data
+    try:
+        return data[3:].decode("utf-8") if bom else data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        offset = exc.start + (3 if bom else 0)
+        line_start = data.rfind(b"\n", 0, offset) + 1
+        line_end = data.find(b"\n", offset)
+        line_text = data[line_start:len(data) if line_end < 0 else line_end].decode("utf-8", errors="replace")
+        line = data.count(b"\n", 0, offset) + 1
+        raise DataFormatError(
+            f"{what} file {path}, line {line}, byte {offset - line_start + 1} of the "
+            f"line (byte {offset + 1} of the file): 0x{data[offset]:02x} is not UTF-8 ({line_text.rstrip()!r}); "
+            "locbook reads UTF-8 only: re-save the file as UTF-8 (e.g. iconv -f cp1252 -t utf-8)") from None
+
+
+def _read_text_table(path, required: tuple[str, ...], what: str) -> tuple[pd.DataFrame, np.ndarray]:
+    """The CSV as text (nothing converted yet), with every required column present, and each row's line in the
+    file (as an editor counts it: blank lines count, a quoted field over several lines gives its first line).
+
+    Every row must have exactly as many fields as the header: a missing field is never read as empty (an empty
+    field is written ``,,``) and an extra one never shifts the columns."""
     path = Path(path)
     if not path.is_file():
         raise DataFormatError(f"{what} file {path} does not exist")
+    text = _decode_utf8(path.read_bytes(), path, what)
+    reader = csv.reader(io.StringIO(text, newline=""), skipinitialspace=True, strict=True)
+    rows, lines, header, end, wrong = [], [], None, 0, None
     try:
-        table = pd.read_csv(path, dtype=str, keep_default_na=False, skipinitialspace=True)
-    except (pd.errors.ParserError, UnicodeDecodeError, pd.errors.EmptyDataError) as exc:
-        raise DataFormatError(f"{what} file {path} is not a readable CSV table: {exc}") from None
-    with open(path, newline="", encoding="utf-8", errors="replace") as fh:
-        header = [c.strip() for c in next(csv.reader(fh), [])]
+        for row in reader:
+            first, end = end + 1, reader.line_num
+            if not row:                                          # a blank line
+                continue
+            if header is None:
+                header = [c.strip() for c in row]
+                continue
+            if len(row) != len(header) and wrong is None:
+                wrong = (first, row)                             # reported after the header's own checks
+            rows.append(row)
+            lines.append(first)
+    except csv.Error as exc:
+        raise DataFormatError(f"{what} file {path}, line {reader.line_num}: not a readable CSV row ({exc})") from None
+    if header is None:
+        raise DataFormatError(f"{what} file {path} is empty (no header line)")
     duplicated = sorted({c for c in header if header.count(c) > 1})
     if duplicated:
         raise DataFormatError(f"{what} file {path}: column(s) {duplicated} appear more than once in the header")
-    table.columns = [str(c).strip() for c in table.columns]
-    missing = [c for c in required if c not in table.columns]
+    missing = [c for c in required if c not in header]
     if missing:
-        raise DataFormatError(f"{what} file {path}: missing column(s) {missing}; the header has {list(table.columns)} "
+        raise DataFormatError(f"{what} file {path}: missing column(s) {missing}; the header has {header} "
                               f"(required: {list(required)})")
-    return table
+    if wrong is not None:
+        _wrong_field_count(path, what, *wrong, header)
+    names = [c if c else f"Unnamed: {j}" for j, c in enumerate(header)]     # pandas' name for a blank header
+    table = pd.DataFrame(rows, columns=names, dtype=object) if rows else pd.DataFrame(
+        {c: pd.Series([], dtype=object) for c in names})
+    return table, np.asarray(lines, dtype=int)
+
+
+def _wrong_field_count(path, what: str, line: int, row: list[str], header: list[str]):
+    if len(row) < len(header):
+        absent = header[len(row):]
+        raise DataFormatError(f"{what} file {path}, line {line}, column(s) {absent}: the row has {len(row)} field(s), "
+                              f"the header {len(header)}: {'it is' if len(absent) == 1 else 'they are'} missing "
+                              "(an empty value is written as an empty field, e.g. '0.5,tag,A,' for not heard)")
+    raise DataFormatError(f"{what} file {path}, line {line}: the row has {len(row)} fields, the header {len(header)} "
+                          f"fields ({header}); a value with a comma must be quoted, and an extra column needs a "
+                          "name in the header")
 
 
 def _numeric(table: pd.DataFrame, column: str, source: str, lines, *, missing_ok: bool) -> np.ndarray:
@@ -135,38 +211,111 @@ def _file_lines(n_rows: int) -> np.ndarray:
 
 
 # -- the long format ----------------------------------------------------------------------------------------
-def validate_readings(table: pd.DataFrame, *, source: str, lines=None, anchor_ids=None) -> pd.DataFrame:
+def _seconds(value) -> str:
+    """A time with every digit it has (``repr``): ``1581250000.25 s``, never ``1.58125e+09 s``."""
+    return f"{float(value)!r} s"
+
+
+def _reading_options(invalid_values_dbm, valid_range_dbm):
+    """The checked sentinel values (a float array) and range ``(low, high)`` of :func:`validate_readings`."""
+    try:
+        sentinels = np.asarray(() if invalid_values_dbm is None else invalid_values_dbm, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        raise ParameterError(f"invalid_values_dbm must be a sequence of numbers (dBm), got {invalid_values_dbm!r}") \
+            from None
+    if not np.isfinite(sentinels).all():
+        raise ParameterError(f"invalid_values_dbm must hold finite numbers (dBm), got {invalid_values_dbm!r}")
+    rng = RSSI_RANGE_DBM if valid_range_dbm is None else valid_range_dbm
+    try:
+        low, high = (float(v) for v in rng)
+    except (TypeError, ValueError):
+        raise ParameterError(f"valid_range_dbm must be a pair (low, high) of numbers (dBm), got {rng!r}") from None
+    if not low < high:           # NaN fails too
+        raise ParameterError(f"valid_range_dbm must be (low, high) with low < high (dBm), got {rng!r}")
+    return sentinels, (low, high)
+
+
+def _check_time_unit(time_s: np.ndarray, raw: pd.Series, source: str, lines) -> None:
+    """Refuse times that are not seconds: beyond :data:`MAX_TIME_S` they are milli-, micro- or nanoseconds (a
+    common export), which as 64-bit floats also lose their differences (1.6e18 ns are 256 ns apart at best) and
+    would surface as "repeats line ..."."""
+    huge = np.abs(time_s) >= MAX_TIME_S
+    if not huge.any():
+        return
+    i = int(np.flatnonzero(huge)[0])
+    t = float(time_s[i])
+    guess = ""
+    for scale, unit in ((1e3, "milliseconds"), (1e6, "microseconds"), (1e9, "nanoseconds")):
+        if 1e8 <= abs(t) / scale < MAX_TIME_S:   # 1973 .. 5138 as seconds since 1970
+            when = datetime.fromtimestamp(t / scale, tz=timezone.utc).isoformat(timespec="seconds")
+            guess = (f"; it looks like {unit} since 1970 ({t / scale!r} s = {when}): convert the column to seconds "
+                     f"(divide by {scale:.0e}, after subtracting the first time to keep the small differences)")
+            break
+    raise DataFormatError(f"{source}, line {lines[i]}, column 'time_s': {str(raw.iloc[i]).strip()!r} is not a time in "
+                          f"seconds ({abs(t) / 3.15576e7:.3g} years; time_s is at most {MAX_TIME_S:.0e} s in "
+                          f"magnitude){guess} ({int(huge.sum())} such value(s) in the column)")
+
+
+def validate_readings(table: pd.DataFrame, *, source: str, lines=None, anchor_ids=None, invalid_values_dbm=None,
+                      valid_range_dbm=None, sort: bool = False) -> pd.DataFrame:
     """Check a readings table of the long format (module docstring) and return it typed: ``time_s``,
     ``rssi_dbm`` and the optional position columns as floats (NaN = missing), ids as text.
 
     ``table`` holds text or numbers; ``source`` names it in messages and ``lines`` gives each row's line in that
-    source (default: row ``i`` is line ``i + 2``). With ``anchor_ids`` every receiver must be one of them."""
+    source (default: row ``i`` is line ``i + 2``). With ``anchor_ids`` every receiver must be one of them.
+
+    ``invalid_values_dbm``: values a data set writes for "no valid reading" (e.g. ``(0, 2, 4)``); they become
+    NaN (not heard) before any other check. ``valid_range_dbm``: the plausible interval of a reading (default
+    :data:`RSSI_RANGE_DBM`); a value outside it is refused. With neither given, readings at or above 0 dBm (not
+    plausible beyond a few centimetres from the antenna) load but raise one :class:`MeasuredDataWarning` with
+    their count. ``sort=True`` reorders the rows by time (stable: rows of equal time keep their order) before
+    the checks, so a file that is not in time order loads; messages still name the source's lines."""
+    sentinels, (low, high) = _reading_options(invalid_values_dbm, valid_range_dbm)
     lines = _file_lines(len(table)) if lines is None else np.asarray(lines)
+    if lines.shape != (len(table),):
+        raise ParameterError(f"lines must give one line number per row of the table ({len(table)}), "
+                             f"got shape {lines.shape}")
     missing_cols = [c for c in READING_COLUMNS if c not in table.columns]
     if missing_cols:
         raise DataFormatError(f"{source}: missing column(s) {missing_cols}; it has {list(table.columns)} "
                               f"(required: {list(READING_COLUMNS)})")
-    text = table
-    out = pd.DataFrame(index=table.index)
-    out["time_s"] = _numeric(text, "time_s", source, lines, missing_ok=False)
+    time_s = _numeric(table, "time_s", source, lines, missing_ok=False)
+    _check_time_unit(time_s, table["time_s"], source, lines)
+    if sort:
+        order = np.argsort(time_s, kind="stable")
+        table, lines, time_s = table.iloc[order], lines[order], time_s[order]
+    text = table.reset_index(drop=True)
+    out = pd.DataFrame(index=text.index)
+    out["time_s"] = time_s
     for col in ("transmitter", "receiver"):
+        # ids are text: "NA", "N/A" or "nan" are ids, only an empty field is no id
         ids = text[col].astype(object).where(text[col].notna(), "").astype(str).str.strip()
-        empty = ids.isin(_MISSING_TEXT).to_numpy()
+        empty = (ids == "").to_numpy()
         if empty.any():
             i = int(np.flatnonzero(empty)[0])
             raise DataFormatError(f"{source}, line {lines[i]}, column {col!r}: the id is empty")
         out[col] = ids.to_numpy()
     rssi = _numeric(text, "rssi_dbm", source, lines, missing_ok=True)
-    low, high = RSSI_RANGE_DBM
+    rssi = np.where(np.isin(rssi, sentinels), np.nan, rssi)     # declared sentinels: not heard
     outside = np.isfinite(rssi) & ((rssi < low) | (rssi > high))
     if outside.any():
         i = int(np.flatnonzero(outside)[0])
         raise DataFormatError(f"{source}, line {lines[i]}, column 'rssi_dbm': {rssi[i]:g} dBm is outside "
-                              f"[{low:g}, {high:g}] dBm (a unit or sign error, not a reading; empty = not heard)")
+                              f"[{low:g}, {high:g}] dBm (a unit or sign error, not a reading; empty = not heard; "
+                              f"{int(outside.sum())} such value(s))")
+    if invalid_values_dbm is None and valid_range_dbm is None:
+        high_power = np.flatnonzero(rssi >= 0.0)          # NaN compares False
+        if high_power.size:
+            values = ", ".join(f"{v:g}" for v in np.unique(rssi[high_power])[:6])
+            warnings.warn(f"{source}: {high_power.size} reading(s) at or above 0 dBm (values {values}; the first on "
+                          f"line {lines[high_power[0]]}), implausible beyond a few centimetres from an antenna. If the "
+                          "data set writes such values for invalid readings, declare them: invalid_values_dbm=(...) "
+                          "makes them NaN (not heard); to keep them as readings, give valid_range_dbm explicitly",
+                          MeasuredDataWarning, stacklevel=3)
     out["rssi_dbm"] = rssi
     for col in OPTIONAL_READING_COLUMNS:
-        out[col] = (_numeric(text, col, source, lines, missing_ok=True) if col in table.columns
-                    else np.full(len(table), np.nan))
+        out[col] = (_numeric(text, col, source, lines, missing_ok=True) if col in text.columns
+                    else np.full(len(text), np.nan))
     half = np.isnan(out["x_m"].to_numpy()) != np.isnan(out["y_m"].to_numpy())
     if half.any():
         i = int(np.flatnonzero(half)[0])
@@ -185,37 +334,52 @@ def validate_readings(table: pd.DataFrame, *, source: str, lines=None, anchor_id
     if dup.any():
         i = int(np.flatnonzero(dup)[0])
         first = int(np.flatnonzero((key == key.iloc[i]).all(axis=1).to_numpy())[0])
+        written = [str(text["time_s"].iloc[k]).strip() for k in (first, i)]
+        note = ("" if written[0] == written[1] else
+                f" (the source has times {written[0]!r} and {written[1]!r}: equal as 64-bit floats, which hold about "
+                "16 significant digits; give times from a nearer origin, e.g. seconds since the first reading)")
         raise DataFormatError(f"{source}, line {lines[i]}, columns 'time_s','transmitter','receiver': the reading "
-                              f"({out['time_s'].iloc[i]:g} s, {out['transmitter'].iloc[i]!r}, "
-                              f"{out['receiver'].iloc[i]!r}) repeats line {lines[first]}")
-    for tx, rows in out.groupby("transmitter", sort=False).groups.items():
-        pos = out.index.get_indexer(rows)
-        back = np.flatnonzero(np.diff(out["time_s"].to_numpy()[pos]) < 0)
-        if back.size:
-            i = pos[back[0] + 1]
-            raise DataFormatError(f"{source}, line {lines[i]}, column 'time_s': time goes back for transmitter {tx!r} "
-                                  f"({out['time_s'].iloc[i]:g} s after {out['time_s'].iloc[pos[back[0]]]:g} s); "
-                                  "sort the file by time")
-    extra = [c for c in table.columns if c not in out.columns]
+                              f"({_seconds(out['time_s'].iloc[i])}, {out['transmitter'].iloc[i]!r}, "
+                              f"{out['receiver'].iloc[i]!r}) repeats line {lines[first]}{note}")
+    # time non-decreasing within each transmitter: group the rows by transmitter (stable), compare neighbours
+    codes = pd.factorize(out["transmitter"])[0]
+    by_tx = np.argsort(codes, kind="stable")
+    back = (np.diff(time_s[by_tx]) < 0) & (np.diff(codes[by_tx]) == 0)
+    if back.any():
+        k = np.flatnonzero(back)
+        i = int(by_tx[k + 1].min())                                        # the first such row of the source
+        prev = int(by_tx[k[by_tx[k + 1] == i][0]])
+        raise DataFormatError(f"{source}, line {lines[i]}, column 'time_s': time goes back for transmitter "
+                              f"{out['transmitter'].iloc[i]!r} ({_seconds(time_s[i])} after {_seconds(time_s[prev])} "
+                              f"on line {lines[prev]}); sort the file by time, or read it with sort=True (rows "
+                              "reordered by time, stably)")
+    extra = [c for c in text.columns if c not in out.columns]
     for col in extra:
-        out[col] = table[col].to_numpy()
-    return out.reset_index(drop=True)
+        out[col] = text[col].to_numpy()
+    return out
 
 
-def read_readings(path, *, anchor_ids=None) -> pd.DataFrame:
-    """Read and check a readings CSV of the long format (module docstring)."""
-    table = _read_text_table(path, READING_COLUMNS, "readings")
-    return validate_readings(table, source=f"readings file {path}", anchor_ids=anchor_ids)
+def read_readings(path, *, anchor_ids=None, invalid_values_dbm=None, valid_range_dbm=None,
+                  sort: bool = False) -> pd.DataFrame:
+    """Read and check a readings CSV of the long format (module docstring); the options are those of
+    :func:`validate_readings` (sentinel values, plausible range, sorting by time)."""
+    table, lines = _read_text_table(path, READING_COLUMNS, "readings")
+    return validate_readings(table, source=f"readings file {path}", lines=lines, anchor_ids=anchor_ids,
+                             invalid_values_dbm=invalid_values_dbm, valid_range_dbm=valid_range_dbm, sort=sort)
 
 
-def read_anchors(path) -> pd.DataFrame:
-    """Read and check an anchors CSV: ``id, x, y, z`` (metres), ids unique, coordinates finite."""
-    table = _read_text_table(path, ("id", "x", "y", "z"), "anchors")
-    source, lines = f"anchors file {path}", _file_lines(len(table))
+def read_anchors(path, *, min_separation_m: float = ANCHOR_MIN_SEPARATION_M) -> pd.DataFrame:
+    """Read and check an anchors CSV: ``id, x, y, z`` (metres), ids unique (text: ``NA`` is an id), coordinates
+    finite, no two anchors closer than ``min_separation_m`` (default 1 mm: two ids at one point are a copy-paste
+    error, and would make the geometry degenerate)."""
+    if not (isinstance(min_separation_m, (int, float)) and math.isfinite(min_separation_m) and min_separation_m >= 0):
+        raise ParameterError(f"min_separation_m must be a finite number of metres >= 0, got {min_separation_m!r}")
+    table, lines = _read_text_table(path, ("id", "x", "y", "z"), "anchors")
+    source = f"anchors file {path}"
     if len(table) == 0:
         raise DataFormatError(f"{source}: no anchors")
     ids = table["id"].astype(str).str.strip()
-    for i in np.flatnonzero(ids.isin(_MISSING_TEXT).to_numpy())[:1]:
+    for i in np.flatnonzero((ids == "").to_numpy())[:1]:
         raise DataFormatError(f"{source}, line {lines[i]}, column 'id': the id is empty")
     dup = ids.duplicated().to_numpy()
     if dup.any():
@@ -224,14 +388,24 @@ def read_anchors(path) -> pd.DataFrame:
     out = pd.DataFrame({"id": ids.to_numpy()})
     for col in ("x", "y", "z"):
         out[col] = _numeric(table, col, source, lines, missing_ok=False)
+    xyz = out[["x", "y", "z"]].to_numpy(float)
+    pairs = cKDTree(xyz).query_pairs(min_separation_m, output_type="ndarray") if len(xyz) > 1 else np.zeros((0, 2))
+    if len(pairs):
+        pairs = np.sort(pairs, axis=1)
+        i, j = (int(v) for v in pairs[np.lexsort((pairs[:, 0], pairs[:, 1]))[0]])   # the first in file order
+        raise DataFormatError(
+            f"{source}, lines {lines[i]} and {lines[j]}, columns 'x','y','z': anchors {ids.iloc[i]!r} and "
+            f"{ids.iloc[j]!r} are at the same position ({', '.join(f'{v:g}' for v in xyz[i])}) m (within "
+            f"{min_separation_m:g} m; {len(pairs)} such pair(s)); two receivers at one point are a copy error or one "
+            "device: fix the coordinates or keep one id")
     return out
 
 
 def read_outline(path) -> np.ndarray:
     """Read and check a floor outline CSV (``x, y`` vertices of a closed polygon, metres) -> ``(V, 2)``,
     without a repeated closing vertex."""
-    table = _read_text_table(path, ("x", "y"), "outline")
-    source, lines = f"outline file {path}", _file_lines(len(table))
+    table, lines = _read_text_table(path, ("x", "y"), "outline")
+    source = f"outline file {path}"
     xy = np.column_stack([_numeric(table, c, source, lines, missing_ok=False) for c in ("x", "y")])
     if len(xy) > 1 and np.array_equal(xy[0], xy[-1]):
         xy = xy[:-1]
@@ -245,8 +419,8 @@ def read_outline(path) -> np.ndarray:
 
 def read_path_segments(path) -> np.ndarray:
     """Read a reference path: ``x0, y0, x1, y1`` per straight segment (metres) -> ``(S, 2, 2)``."""
-    table = _read_text_table(path, ("x0", "y0", "x1", "y1"), "path")
-    source, lines = f"path file {path}", _file_lines(len(table))
+    table, lines = _read_text_table(path, ("x0", "y0", "x1", "y1"), "path")
+    source = f"path file {path}"
     cols = [_numeric(table, c, source, lines, missing_ok=False) for c in ("x0", "y0", "x1", "y1")]
     if len(table) == 0:
         raise DataFormatError(f"{source}: no segments")
@@ -303,32 +477,64 @@ def epochs(readings: pd.DataFrame, anchor_ids) -> Epochs:
     differ = ~((per_epoch == again) | (np.isnan(per_epoch) & np.isnan(again)))
     if differ.any():
         e = int(np.flatnonzero(differ.any(axis=1))[0])
-        raise DataFormatError(f"epoch at {uniques[order[e]][0]:g} s of transmitter {uniques[order[e]][1]!r} has different "
-                              "true positions or headings on its rows")
+        raise DataFormatError(f"epoch at {_seconds(uniques[order[e]][0])} of transmitter {uniques[order[e]][1]!r} has "
+                              "different true positions or headings on its rows")
     time_s = uniques.get_level_values(0).to_numpy(float)[order]
     tx = uniques.get_level_values(1).to_numpy(object)[order]
     return Epochs(time_s, rss, per_epoch[:, :3], per_epoch[:, 3], tx, anchor_ids)
 
 
-def regular_epochs(ep: Epochs, dt_s: float, *, tolerance_s: float | None = None) -> tuple[Epochs, np.ndarray]:
+def regular_epochs(ep: Epochs, dt_s: float, *, tolerance_s: float | None = None,
+                   max_epochs: int = MAX_REGULAR_EPOCHS) -> tuple[Epochs, np.ndarray]:
     """Put one transmitter's epochs on a regular clock of period ``dt_s`` for the filters, which step at a fixed
     rate: each epoch goes to the nearest tick (within ``tolerance_s``, default ``dt_s / 2``) and a tick without an
     epoch is all NaN (nothing heard: the filters predict through it, by the library's rule). Returns the regular
-    epochs and, per original epoch, its tick index."""
+    epochs and, per original epoch, its tick index. No epochs give no ticks (as :func:`epochs` of no readings).
+
+    The clock has ``round((t_last - t_first) / dt_s) + 1`` ticks; more than ``max_epochs`` (default
+    :data:`MAX_REGULAR_EPOCHS`, 1,000,000: 28 h at 0.1 s) is refused before anything is allocated, naming the
+    largest gap, since it is nearly always a clock jump (one bad timestamp). Split the recording at the gap
+    (``ep.select(ep.time_s < t)``, ``ep.select(ep.time_s >= t)``) and regularise each part, or raise
+    ``max_epochs`` for a recording that really is that long."""
     if not (isinstance(dt_s, (int, float)) and math.isfinite(dt_s) and dt_s > 0):
-        raise ValueError(f"dt_s must be a positive finite number of seconds, got {dt_s!r}")
-    if len(set(ep.transmitter.tolist())) > 1:
-        raise ValueError("regular_epochs takes one transmitter's epochs; select them first")
+        raise ParameterError(f"dt_s must be a positive finite number of seconds, got {dt_s!r}")
+    if not (isinstance(max_epochs, (int, np.integer)) and not isinstance(max_epochs, bool) and max_epochs >= 1):
+        raise ParameterError(f"max_epochs must be a positive integer, got {max_epochs!r}")
     tol = 0.5 * dt_s if tolerance_s is None else tolerance_s
-    t0 = ep.time_s[0]
-    tick = np.rint((ep.time_s - t0) / dt_s).astype(int)
-    off = np.abs(ep.time_s - t0 - tick * dt_s)
+    if not (isinstance(tol, (int, float)) and math.isfinite(tol) and tol >= 0):
+        raise ParameterError(f"tolerance_s must be a finite number of seconds >= 0, got {tolerance_s!r}")
+    if len(ep) == 0:
+        return ep.select(np.zeros(0, dtype=int)), np.zeros(0, dtype=int)
+    if len(set(ep.transmitter.tolist())) > 1:
+        raise ParameterError("regular_epochs takes one transmitter's epochs; select them first")
+    time_s = np.asarray(ep.time_s, dtype=float)
+    if not np.isfinite(time_s).all():
+        i = int(np.flatnonzero(~np.isfinite(time_s))[0])
+        raise ParameterError(f"epoch {i} has time {time_s[i]!r} s; times must be finite")
+    t0 = time_s[0]
+    tick_f = np.rint((time_s - t0) / dt_s)        # float: a huge tick count must not overflow an int cast
+    n_needed = float(tick_f.max()) + 1.0
+    if n_needed > max_epochs:
+        gaps = np.diff(time_s)
+        i = int(np.argmax(gaps))
+        gap, cut = float(gaps[i]), float(time_s[i + 1])
+        raise ParameterError(
+            f"regular_epochs: the {dt_s:g} s clock would need {n_needed:,.0f} epochs, more than max_epochs = "
+            f"{max_epochs:,}; the largest gap is {gap!r} s, between the epochs at {_seconds(time_s[i])} and "
+            f"{_seconds(time_s[i + 1])} (epochs {i} and {i + 1} of {len(time_s)}), {gap / dt_s:,.0f} empty ticks. "
+            f"A clock jump? Then split the recording there (ep.select(ep.time_s < {cut!r}) and "
+            f"ep.select(ep.time_s >= {cut!r})) and put each part on the clock, or raise max_epochs if "
+            "the recording really is that long")
+    tick = tick_f.astype(int)
+    off = np.abs(time_s - t0 - tick * dt_s)
     if np.any(off > tol + 1e-12 * dt_s):
         i = int(np.argmax(off))
-        raise ValueError(f"epoch at {ep.time_s[i]:g} s is {off[i]:g} s off the {dt_s:g} s clock (tolerance {tol:g} s)")
+        raise ParameterError(f"epoch at {time_s[i]:g} s is {off[i]:g} s off the {dt_s:g} s clock "
+                             f"(tolerance {tol:g} s)")
     if np.any(np.diff(tick) <= 0):
         i = int(np.flatnonzero(np.diff(tick) <= 0)[0])
-        raise ValueError(f"epochs at {ep.time_s[i]:g} s and {ep.time_s[i + 1]:g} s fall on the same {dt_s:g} s tick")
+        raise ParameterError(f"epochs at {_seconds(time_s[i])} and {_seconds(time_s[i + 1])} fall on the same "
+                             f"{dt_s:g} s tick or are out of time order")
     n = int(tick[-1]) + 1
     m = ep.rss_dbm.shape[1]
 
@@ -373,10 +579,13 @@ class MeasuredData:
         return epochs(self.recordings[recording], self.anchor_ids)
 
     @classmethod
-    def from_files(cls, name: str, anchors, recordings: dict, *, attribution: str, outline=None, path=None):
-        """A data set from files of the long format: ``recordings`` maps names to readings CSVs."""
+    def from_files(cls, name: str, anchors, recordings: dict, *, attribution: str, outline=None, path=None,
+                   invalid_values_dbm=None, valid_range_dbm=None, sort: bool = False):
+        """A data set from files of the long format: ``recordings`` maps names to readings CSVs, read with the
+        options of :func:`validate_readings` (sentinel values, plausible range, sorting by time)."""
         anchor_table = read_anchors(anchors)
-        recs = {k: read_readings(p, anchor_ids=anchor_table["id"]) for k, p in recordings.items()}
+        recs = {k: read_readings(p, anchor_ids=anchor_table["id"], invalid_values_dbm=invalid_values_dbm,
+                                 valid_range_dbm=valid_range_dbm, sort=sort) for k, p in recordings.items()}
         return cls(name, anchor_table, recs, attribution, None if outline is None else read_outline(outline),
                    None if path is None else read_path_segments(path))
 
@@ -386,8 +595,8 @@ def _kolakowski_wide(path: Path, anchor_ids, *, tag_height_m: float, with_truth:
     checked by the long format's rules with messages pointing at the wide file's lines and columns."""
     rssi_cols = [f"rssi_{a}" for a in anchor_ids]
     required = ("ts",) + (("x", "y", "heading") if with_truth else ()) + tuple(rssi_cols)
-    table = _read_text_table(path, required, "Kolakowski 2021")
-    source, lines = f"Kolakowski 2021 file {path}", _file_lines(len(table))
+    table, lines = _read_text_table(path, required, "Kolakowski 2021")
+    source = f"Kolakowski 2021 file {path}"
     ts_ns = _numeric(table, "ts", source, lines, missing_ok=False)
     n, m = len(table), len(anchor_ids)
     rssi = np.column_stack([_numeric(table, c, source, lines, missing_ok=True) for c in rssi_cols])

@@ -67,8 +67,15 @@ def test_extra_field_on_every_row_is_not_taken_for_an_index(tmp_path):
 
 
 def test_blank_lines_do_not_shift_line_numbers(tmp_path):
-    path = write(tmp_path, HEADER + "0,t,A1,-60\n\n0.5,t,A2,-61x\n")
+    path = write(tmp_path, HEADER + "0,t,A1,-60\n\n  \r\n0.5,t,A2,-61x\n")
+    refused(path, "line 5", "'rssi_dbm'", "'-61x'")
+
+
+def test_quoted_field_over_two_lines_counts_both(tmp_path):
+    path = write(tmp_path, HEADER.rstrip() + ",note\n0,t,A1,-60,\"a, b\nc\"\n0.5,t,A2,-61x,\n")
     refused(path, "line 4", "'rssi_dbm'", "'-61x'")
+    assert read_readings(write(tmp_path, HEADER.rstrip() + ",note\n0,t,A1,-60,\"a, b\nc\"\n", "ok.csv"))[
+        "note"].tolist() == ["a, b\nc"]
 
 
 # -- encoding ------------------------------------------------------------------------------------------------

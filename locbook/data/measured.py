@@ -144,7 +144,7 @@ def _read_text_table(path, required: tuple[str, ...], what: str) -> tuple[pd.Dat
     try:
         for row in reader:
             first, end = end + 1, reader.line_num
-            if not row:                                          # a blank line
+            if not row or (len(row) == 1 and not row[0].strip()):   # a blank (or whitespace) line
                 continue
             if header is None:
                 header = [c.strip() for c in row]

@@ -8,8 +8,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from locbook.data.measured import (DataFormatError, Epochs, MeasuredData, epochs, read_anchors, read_readings,
-                                   regular_epochs)
+from locbook.data.measured import (DataFormatError, Epochs, MeasuredData, MeasuredDataWarning, epochs, read_anchors,
+                                   read_readings, regular_epochs)
 from locbook.errors import ParameterError
 
 HEADER = "time_s,transmitter,receiver,rssi_dbm\n"
@@ -172,6 +172,8 @@ def test_readings_at_or_above_0_dbm_warn_once_without_sentinels(tmp_path):
     message = str(ours[0].message)
     assert "3" in message and "invalid_values_dbm" in message and str(path) in message
     assert table["rssi_dbm"].tolist()[2] == -70.0           # a warning, not a refusal: the values stay
+    with pytest.warns(MeasuredDataWarning):
+        read_readings(path, invalid_values_dbm=())             # no sentinel declared: still warned
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         read_readings(path, invalid_values_dbm=(0, 2, 4))   # declared: silent

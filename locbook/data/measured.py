@@ -25,7 +25,7 @@ more is milli-, micro- or nanoseconds since 1970 and is refused (as 64-bit float
 differences between readings). A reading must lie in ``valid_range_dbm`` (default :data:`RSSI_RANGE_DBM`,
 ``[-150, 20]`` dBm: outside it is a unit or sign error, never a reading); infinite values are errors anywhere.
 Values a data set writes for "invalid reading" (e.g. 0, 2, 4 dBm) are declared with ``invalid_values_dbm`` and
-become NaN (not heard); readings at or above 0 dBm with neither option given load with one
+become NaN (not heard); readings at or above 0 dBm with no sentinel declared and the default range load with one
 :class:`MeasuredDataWarning` (implausible beyond a few centimetres from an antenna). The same (time,
 transmitter, receiver) may appear once only; ``sort=True`` reorders a file by time (stably) before the checks.
 Files are UTF-8 (a byte-order mark is allowed).
@@ -266,10 +266,11 @@ def validate_readings(table: pd.DataFrame, *, source: str, lines=None, anchor_id
 
     ``invalid_values_dbm``: values a data set writes for "no valid reading" (e.g. ``(0, 2, 4)``); they become
     NaN (not heard) before any other check. ``valid_range_dbm``: the plausible interval of a reading (default
-    :data:`RSSI_RANGE_DBM`); a value outside it is refused. With neither given, readings at or above 0 dBm (not
-    plausible beyond a few centimetres from the antenna) load but raise one :class:`MeasuredDataWarning` with
-    their count. ``sort=True`` reorders the rows by time (stable: rows of equal time keep their order) before
-    the checks, so a file that is not in time order loads; messages still name the source's lines."""
+    :data:`RSSI_RANGE_DBM`); a value outside it is refused. With no sentinel declared and the default range,
+    readings at or above 0 dBm (not plausible beyond a few centimetres from the antenna) load but raise one
+    :class:`MeasuredDataWarning` with their count. ``sort=True`` reorders the rows by time (stable: rows of
+    equal time keep their order) before the checks, so a file that is not in time order loads; messages still
+    name the source's lines."""
     sentinels, (low, high) = _reading_options(invalid_values_dbm, valid_range_dbm)
     lines = _file_lines(len(table)) if lines is None else np.asarray(lines)
     if lines.shape != (len(table),):
@@ -303,7 +304,7 @@ def validate_readings(table: pd.DataFrame, *, source: str, lines=None, anchor_id
         raise DataFormatError(f"{source}, line {lines[i]}, column 'rssi_dbm': {rssi[i]:g} dBm is outside "
                               f"[{low:g}, {high:g}] dBm (a unit or sign error, not a reading; empty = not heard; "
                               f"{int(outside.sum())} such value(s))")
-    if invalid_values_dbm is None and valid_range_dbm is None:
+    if sentinels.size == 0 and valid_range_dbm is None:
         high_power = np.flatnonzero(rssi >= 0.0)          # NaN compares False
         if high_power.size:
             values = ", ".join(f"{v:g}" for v in np.unique(rssi[high_power])[:6])

@@ -58,7 +58,8 @@ from .models.motion import (HEADING_MODELS, NOISE_MODELS, STATE_LAYOUTS, Heading
 from .static.reference_tags import (OZKAYA_PATH_LOSS_EXP_BOUNDS, OZKAYA_REF_POWER_BOUNDS_DBM, OnlineCalibration,
                              calibrate_from_reference_tags, pooled_sigma_db, smooth_rssi)
 from .data.printed_values import Printed, PrintedValues, printed
-from .data.measured import (KOLAKOWSKI2021_ATTRIBUTION, DataFormatError, Epochs, MeasuredData, epochs,
+from .data.measured import (ANCHOR_MIN_SEPARATION_M, KOLAKOWSKI2021_ATTRIBUTION, MAX_REGULAR_EPOCHS, MAX_TIME_S,
+                            DataFormatError, MeasuredDataWarning, Epochs, MeasuredData, epochs,
                             kolakowski2021, read_anchors, read_outline, read_path_segments, read_readings,
                             regular_epochs, validate_readings)
 from .geometry import distance_to_segments, grid_in_outline, inside_outline, outline_box
@@ -112,6 +113,7 @@ __all__ = [
     # measured data and floor geometry
     "MeasuredData", "Epochs", "DataFormatError", "read_readings", "read_anchors", "read_outline", "read_path_segments",
     "validate_readings", "epochs", "regular_epochs", "kolakowski2021", "KOLAKOWSKI2021_ATTRIBUTION",
+    "MeasuredDataWarning", "MAX_TIME_S", "ANCHOR_MIN_SEPARATION_M", "MAX_REGULAR_EPOCHS",
     "inside_outline", "grid_in_outline", "outline_box", "distance_to_segments", "GRID_TRANSITIONS", "KNN_BLOCK_BYTES",
     # errors and reports
     "LocbookError", "DegenerateGeometryError", "ConvergenceError", "ParameterError", "SingularCovarianceError",

@@ -277,9 +277,10 @@ def test_rss_ml_without_a_finite_start_fails_alone():
 
 
 def test_grid_ml_with_an_overflowing_cost_fails_alone():
+    """A power of -1e160 dBm is finite and not implausibly high (a tag very far away), but its square overflows."""
     _, power = _batch(4)
     grid = ANCHORS + 0.5
-    holed = _with_overflow(power, 2, 0, 1e300)
+    holed = _with_overflow(power, 2, 0, -1e160)
     with np.errstate(over="ignore"):
         res = lb.grid_ml_position(ANCHORS, holed, MODEL, grid)
     assert res.status.tolist() == ["ok", "ok", "solver_failed", "ok"] and np.isnan(res.position_m[2]).all()
@@ -453,3 +454,98 @@ def test_property_box_random_masks(mask):
         np.testing.assert_allclose(res.position_m[i], sub.position_m[0], atol=1e-6)
         assert res.status[i] == "ok" and np.all(res.position_m[i] >= np.array(BOX[0]) - 1e-7) \
             and np.all(res.position_m[i] <= np.array(BOX[1]) + 1e-7)
+
+
+# -- issue 26, item 7: no confident answer from garbage ----------------------------------------------------------
+SQUARE = np.array([[0.0, 0.0], [10.0, 0.0], [0.0, 10.0], [10.0, 10.0]])
+SQUARE_MODEL = lb.PathLossModel(-40.0, 2.0, 4.0)
+
+
+@pytest.mark.parametrize("value", [1e300, 500.0])
+@pytest.mark.parametrize("name", ["ml", "grid"])
+def test_physically_impossible_powers_get_their_own_status(name, value):
+    """+500 dBm (1e47 W) or 1e300 dBm: no position explains it (the model's mean power never exceeds its value at
+    the near-field clamp, here P_0 + 60 n dB at 1 mm, and 10 sigma above that has probability < 1e-23). Before, the
+    ML returned the centre of the square with converged=True (cost inf at 1e300) and the grid a grid point."""
+    grid = np.stack(np.meshgrid(np.arange(0, 10.5, 0.5), np.arange(0, 10.5, 0.5)), -1).reshape(-1, 2)
+    est = {"ml": lambda p: lb.rss_ml_position(SQUARE, p, SQUARE_MODEL),
+           "grid": lambda p: lb.grid_ml_position(SQUARE, p, SQUARE_MODEL, grid)}[name]
+    truth = np.array([[2.0, 3.0], [7.0, 6.0], [4.0, 8.0]])
+    power = SQUARE_MODEL.mean_power_dbm(lb.pairwise_distance_m(truth, SQUARE))
+    bad = power.copy()
+    bad[1] = value                                   # every reading of problem 1
+    bad[2, 3] = value                                # one reading of problem 2
+    with np.errstate(over="ignore", invalid="ignore"):
+        res = est(bad)
+    assert res.status.tolist() == ["ok", "implausible_reading", "implausible_reading"]
+    assert res.converged.tolist() == [True, False, False] and np.isnan(res.position_m[1:]).all()
+    np.testing.assert_array_equal(res.position_m[0], est(power[:1]).position_m[0])
+    # the bound is the model's: just below it a reading is taken (and the estimate is finite)
+    clamp = 1e-3 if name == "ml" else 1e-6
+    top = SQUARE_MODEL.ref_power_dbm - 10 * SQUARE_MODEL.path_loss_exp * np.log10(clamp) + 10 * SQUARE_MODEL.sigma_db
+    edge = np.array([[top - 1e-6, *power[0, 1:]], [top + 1e-6, *power[0, 1:]]])
+    res = est(edge)
+    assert res.status[1] == "implausible_reading" and res.status[0] != "implausible_reading"
+    assert np.isfinite(res.position_m[0]).all()
+
+
+def test_an_infinite_cost_is_never_converged():
+    """A start at 1e300 m: every distance squares to infinity, the cost is infinite and the step NaN; before, the
+    damping grew to its cap and the problem was declared converged at the start with cost inf."""
+    truth = np.array([[2.0, 3.0], [7.0, 6.0]])
+    power = SQUARE_MODEL.mean_power_dbm(lb.pairwise_distance_m(truth, SQUARE))
+    with np.errstate(over="ignore", invalid="ignore"):
+        res = lb.rss_ml_position(SQUARE, power, SQUARE_MODEL, initial_m=[[np.nan, np.nan], [1e300, 1e300]])
+    assert res.status.tolist() == ["ok", "solver_failed"] and res.converged.tolist() == [True, False]
+    assert np.isnan(res.position_m[1]).all()
+    np.testing.assert_allclose(res.position_m[0], truth[0], atol=1e-9)
+    assert not np.any(res.converged & ~np.isfinite(res.cost))
+
+
+NEARLY_COLLINEAR = np.array([[0.0, 0.0], [5.0, 1e-7], [10.0, 0.0], [20.0, 0.0]])
+
+
+@pytest.mark.parametrize("scale", [1e-3, 1.0, 1e4])
+def test_nearly_collinear_anchors_are_degenerate_at_any_scale(scale):
+    """The issue's layout (anchor 1 off the line by 1e-7 m) passed the old check (singular values relative to
+    max(largest, 1 m) against 1e-9) and lateration_ls returned -4.55e8 m with status ok. The criterion is now the
+    smallest singular value of the centred anchors relative to the largest, against 1e-6: scale-invariant."""
+    with pytest.raises(lb.DegenerateGeometryError, match="collinear"):
+        lb.check_anchor_geometry(scale * NEARLY_COLLINEAR)
+    with pytest.raises(lb.DegenerateGeometryError, match="collinear"):
+        lb.lateration_ls(scale * NEARLY_COLLINEAR, scale * np.array([5.0, 1.0, 5.0, 15.0]))
+    # a tilted layout with a ratio of about 1e-4 is well within the bound at every scale (and in 3-D)
+    tilted = np.array([[0.0, 0.0], [5.0, 1e-3], [10.0, 0.0], [20.0, 0.0]]) @ np.array([[0.6, 0.8], [-0.8, 0.6]])
+    lb.check_anchor_geometry(scale * tilted)
+
+
+def test_nearly_collinear_heard_anchors_fail_their_problem_alone():
+    """Four anchors; a problem that did not hear the one off the line keeps three nearly collinear ones."""
+    anchors = np.r_[NEARLY_COLLINEAR[:3], [[5.0, 8.0]]]
+    truth = np.array([[3.0, 2.0], [6.0, 4.0]])
+    d = lb.pairwise_distance_m(truth, anchors)
+    holed = d.copy()
+    holed[1, 3] = np.nan
+    for res in (lb.lateration_ls(anchors, holed), lb.lateration_wls(anchors, holed, [1.0, 1.0, 1.0]),
+                lb.lateration_box_ls(anchors, holed, -1.0, 11.0),
+                lb.rss_ml_position(anchors, np.where(np.isnan(holed), np.nan, SQUARE_MODEL.mean_power_dbm(d)),
+                                   SQUARE_MODEL)):
+        assert res.status.tolist() == ["ok", "degenerate_geometry"] and np.isnan(res.position_m[1]).all()
+        np.testing.assert_allclose(res.position_m[0], truth[0], atol=1e-6)
+
+
+def test_the_notebooks_anchor_layouts_are_far_from_the_conditioning_bound():
+    """Every layout the scenarios use (and each of its subsets of three) has a singular-value ratio at least
+    1000 times the bound, so the check never rejects them; the least is the corridor (0.27)."""
+    from itertools import combinations
+
+    from locbook.scenarios import dogan, george, gudipati, ozkaya
+    layouts = [george.ANCHORS_M, dogan.ANCHORS_M, np.array(ozkaya.TESTBED_READERS_M)]
+    layouts += [gudipati.anchors_m(ids) for ids in gudipati.ANCHOR_SETS.values()]
+    for layout in layouts:
+        for sub in combinations(range(len(layout)), 3):
+            a = layout[list(sub)]
+            sv = np.linalg.svd(a - a.mean(0), compute_uv=False)
+            if sv[1] / sv[0] > 1e-12:        # an exactly collinear subset is rejected anyway, as before
+                assert sv[1] / sv[0] >= 1000 * localization.ANCHOR_CONDITION_RTOL, (layout, sub)
+        lb.check_anchor_geometry(layout)

@@ -56,16 +56,26 @@ __all__ = [
     "lateration_wls",
     "lateration_box_ls",
     "BOX_LS_SOLVERS",
+    "ANCHOR_CONDITION_RTOL",
     "rss_ml_position",
     "grid_ml_position",
     "LOCALIZATION_STATUSES",
+    "IMPLAUSIBLE_SIGMAS",
+    "implausible_powers",
 ]
 
 #: values of ``solver`` in :func:`lateration_box_ls`
 BOX_LS_SOLVERS = ("exact", "cvxpy")
 
 #: values of :attr:`LocalizationResult.status`
-LOCALIZATION_STATUSES = ("ok", "too_few_anchors", "degenerate_geometry", "solver_failed", "not_converged")
+LOCALIZATION_STATUSES = ("ok", "too_few_anchors", "degenerate_geometry", "solver_failed", "not_converged",
+                         "implausible_reading")
+
+#: A received power more than this many shadowing standard deviations above the largest mean power the model
+#: gives (its value at the near-field clamp) is not a reading of that channel: :func:`rss_ml_position` and
+#: :func:`grid_ml_position` give its problem ``status="implausible_reading"``. At 10 sigma the probability of such
+#: a reading is below 1e-23 at every position, so no real reading is refused.
+IMPLAUSIBLE_SIGMAS = 10.0
 
 
 @dataclass(frozen=True)
@@ -81,7 +91,12 @@ class LocalizationResult:
       :func:`lateration_wls` also: the anchors with a positive weight);
     - ``"solver_failed"``: the solver did not reach an optimum, or the arithmetic did not give a finite
       estimate (e.g. ranges so large that their squares overflow, or no finite start for the iterations);
-    - ``"not_converged"``: the iteration limit was reached (the last iterate is returned).
+    - ``"not_converged"``: the iteration limit was reached (the last iterate is returned);
+    - ``"implausible_reading"`` (RSS estimators): a heard power that no position explains, more than
+      :data:`IMPLAUSIBLE_SIGMAS` shadowing standard deviations above the model's largest mean power (at its
+      near-field clamp), e.g. +500 dBm or 1e300 dBm (:func:`implausible_powers`).
+
+    ``converged`` is never True with an infinite or NaN ``cost``.
 
     Problems with any status but ``"ok"`` and ``"not_converged"`` have a NaN position. ``cost`` is NaN where
     no cost was evaluated.
@@ -99,9 +114,22 @@ class LocalizationResult:
             object.__setattr__(self, "status", np.where(self.converged, "ok", "not_converged").astype("<U19"))
 
 
+#: Anchors whose centred coordinates have a smallest singular value below this fraction of the largest are
+#: treated as collinear (coplanar in 3-D): :func:`check_anchor_geometry`. Why 1e-6: the ratio ``r`` is how far
+#: the layout is from a line, relative to its size, and a fix across that line moves by about ``1/r`` times the
+#: range errors (the linearized system's smallest singular value is ``r`` times its largest); at ``r = 1e-6`` a
+#: millimetre of range error is already a kilometre across the line, so no layout below it can give an answer
+#: worth reporting. It is scale-invariant, lies well above float64 round-off (the squared ranges' rounding alone
+#: moves the fix by about ``eps / r`` of the layout's size, 2e-10 at the bound) and far below every layout the
+#: notebooks use (the least, a 2.1 m x 7.8 m corridor, has 0.27; a real-data subset of three anchors 0.02).
+ANCHOR_CONDITION_RTOL = 1e-6
+
+
 def check_anchor_geometry(anchors_m) -> np.ndarray:
     """Validate anchors ``(m, dim)``: finite, at least ``dim + 1`` anchors, no two at one point (closer than
-    1 nm), not all on one line (plane).
+    1 nm), not on one line (plane), nor nearly so: the smallest singular value of the centred anchor matrix must
+    exceed :data:`ANCHOR_CONDITION_RTOL` (1e-6) times the largest (a scale-invariant conditioning criterion; the
+    constant's comment says why 1e-6).
 
     Raises :class:`DegenerateGeometryError` naming the problem (``ValueError`` for a wrong shape or a
     non-finite coordinate).
@@ -120,11 +148,15 @@ def check_anchor_geometry(anchors_m) -> np.ndarray:
         raise DegenerateGeometryError(f"anchors {i} and {j} coincide at {anchors_m[i].tolist()}: "
                                       "two anchors at one point are one anchor")
     centred = anchors_m - anchors_m.mean(axis=0)
-    sv = np.linalg.svd(centred, compute_uv=False)
-    if sv[dim - 1] <= 1e-9 * max(sv[0], 1.0):
+    # the ratio is scale-invariant: normalise first, so coordinates near 1e300 do not overflow inside the SVD
+    sv = np.linalg.svd(centred / np.max(np.abs(centred)), compute_uv=False)
+    ratio = sv[dim - 1] / sv[0]
+    if not ratio > ANCHOR_CONDITION_RTOL:
+        rank = int(np.sum(sv > ANCHOR_CONDITION_RTOL * sv[0]))
         raise DegenerateGeometryError(
-            f"the {m} anchors are collinear (rank {np.sum(sv > 1e-9 * max(sv[0], 1.0))} < {dim}); "
-            "their position cannot be resolved across the line they lie on"
+            f"the {m} anchors are collinear{' (coplanar)' if dim == 3 else ''} or nearly so: the smallest singular "
+            f"value of the centred anchors is {ratio:.3g} of the largest (numerical rank {rank} < {dim}; the bound "
+            f"is {ANCHOR_CONDITION_RTOL:g}), so a position across the line they lie on cannot be resolved"
         )
     return anchors_m
 
@@ -148,6 +180,18 @@ def _has_missing(values) -> bool:
 def _status(ok: np.ndarray, failure: str = "solver_failed") -> np.ndarray:
     """Per-problem status: ``"ok"`` where ``ok``, else ``failure``."""
     return np.where(ok, "ok", failure).astype("<U19")
+
+
+def implausible_powers(power_dbm, model: PathLossModel, clamp_m: float) -> np.ndarray:
+    """Per problem ``(...)``: whether some heard power of ``power_dbm (..., m)`` exceeds the largest mean power
+    the model gives, ``P_0 - 10 n log10(clamp_m / d0)`` (the log-distance mean at the near-field clamp
+    ``clamp_m``; walls and antenna heights only lower it), by more than :data:`IMPLAUSIBLE_SIGMAS` times the
+    anchor's shadowing sigma. Such a reading has probability below 1e-23 wherever the tag is: not a reading of this
+    channel (a unit error, a sentinel, an overflow). NaN (not heard) is never implausible."""
+    top = (np.asarray(model.ref_power_dbm, float)
+           - 10.0 * np.asarray(model.path_loss_exp, float) * np.log10(clamp_m / model.ref_distance_m)
+           + IMPLAUSIBLE_SIGMAS * np.asarray(model.sigma_db, float))
+    return np.any(power_dbm > top, axis=-1)
 
 
 def _raise_if_failed(res: LocalizationResult, raise_on_failure: bool) -> LocalizationResult:
@@ -631,7 +675,9 @@ def _rss_residual_jacobian(pos, anchors, power, model: PathLossModel, min_distan
     if vertical_m is not None:
         diff = np.concatenate([diff, _lift(pos, vertical_m)[..., None]], axis=-1)
     grad, d2 = log_distance_gradient(diff, np.asarray(model.path_loss_exp), min_distance_m=min_distance_m)
-    resid = power - model.mean_power_dbm(np.sqrt(d2))  # (..., m)
+    # the model's mean (no walls) without its input checks: a distance that overflowed to inf is a valid state here
+    resid = power - log_distance_mean_dbm(np.sqrt(d2), np.asarray(model.ref_power_dbm), np.asarray(model.path_loss_exp),
+                                          ref_distance_m=model.ref_distance_m, min_distance_m=model.min_distance_m)
     return resid, -grad[..., :anchors.shape[-1]], d2    # d resid / d p = - d mean / d p
 
 
@@ -696,6 +742,11 @@ def rss_ml_position(anchors_m, power_dbm, model: PathLossModel, initial_m=None, 
     gets NaN and ``status="solver_failed"`` alone; ``raise_on_failure`` raises :class:`ConvergenceError` if any
     problem of the batch did not converge, whatever the reason.
     ``tag_height_m``: anchors ``(m, 3)`` with heights and plan positions (module docstring).
+
+    Garbage never gives a confident answer: a problem with a physically impossible power (more than
+    :data:`IMPLAUSIBLE_SIGMAS` sigma above the model's mean at ``max(min_distance_m, model.min_distance_m)``, e.g.
+    +500 dBm) gets NaN and ``status="implausible_reading"`` before any iteration, and a problem whose cost is
+    infinite or NaN (at the start or at the end) gets NaN and ``status="solver_failed"``, never ``converged``.
     """
     plan, vertical = _planar(anchors_m, tag_height_m)
     anchors_full = np.asarray(anchors_m, dtype=float)        # with heights: what recursive calls are given
@@ -718,6 +769,17 @@ def rss_ml_position(anchors_m, power_dbm, model: PathLossModel, initial_m=None, 
         if np.any(no_start.any(axis=-1) & ~no_start.all(axis=-1)):
             raise ValueError("initial_m must be finite, or all NaN in a problem's row (no start: the default), got "
                              f"a partly NaN row {initial_m[no_start.any(axis=-1) & ~no_start.all(axis=-1)][0].tolist()}")
+    implausible = implausible_powers(power_dbm, model, max(float(min_distance_m), model.min_distance_m)).reshape(-1)
+    if implausible.any():             # those problems fail alone, before any arithmetic on their readings
+        flat, batch = power_dbm.reshape(-1, m), power_dbm.shape[:-1]
+        start = None if initial_m is None else initial_m.reshape(-1, dim)
+        res = _solve_where(~implausible, batch, dim,
+                           lambda sel: rss_ml_position(anchors_full, flat[sel], model,
+                                                       None if start is None else start[sel], max_iter=max_iter,
+                                                       tol_m=tol_m, min_distance_m=min_distance_m,
+                                                       min_anchors=min_anchors, tag_height_m=tag_height_m),
+                           "rss_ml_lm", "implausible_reading")
+        return _raise_if_failed(res, raise_on_failure)
     if np.isnan(power_dbm).any():
         flat = power_dbm.reshape(-1, m)
         start = None if initial_m is None else initial_m.reshape(-1, dim)
@@ -747,12 +809,13 @@ def rss_ml_position(anchors_m, power_dbm, model: PathLossModel, initial_m=None, 
                            "rss_ml_lm", "solver_failed")
         return _raise_if_failed(res, raise_on_failure)
     power = power_dbm.reshape(-1, power_dbm.shape[-1])
-    resid, jac, d2 = _rss_residual_jacobian(pos, anchors_m, power, model, min_distance_m, vertical)
-    cost = np.sum(resid**2, axis=-1)
+    with np.errstate(over="ignore", invalid="ignore"):     # a start so far away that its distances overflow
+        resid, jac, d2 = _rss_residual_jacobian(pos, anchors_m, power, model, min_distance_m, vertical)
+        cost = np.sum(resid**2, axis=-1)
     lam = np.full(cost.shape, 1e-3)
     converged = np.zeros(cost.shape, bool)
     eye = np.eye(dim)
-    active = np.arange(cost.size)          # indices of problems still iterating
+    active = np.flatnonzero(np.isfinite(cost))   # problems still iterating; an infinite cost has nowhere to go
     it = 0
     for it in range(1, max_iter + 1):
         p_a, r_a, j_a, d2_a, c_a, l_a = (a[active] for a in (pos, resid, jac, d2, cost, lam))
@@ -780,13 +843,17 @@ def rss_ml_position(anchors_m, power_dbm, model: PathLossModel, initial_m=None, 
         active = active[~done]
         if active.size == 0:
             break
+    status = np.where(converged, "ok", "not_converged").astype("<U19")
+    broken = ~(np.isfinite(cost) & np.all(np.isfinite(pos), axis=-1))   # no minimum: never converged
+    converged[broken], status[broken], pos[broken] = False, "solver_failed", np.nan
     if raise_on_failure and not np.all(converged):
         raise ConvergenceError(
             f"RSS maximum likelihood: {int(np.sum(~converged))} of {converged.size} problems did not "
-            f"converge in {max_iter} Levenberg-Marquardt iterations"
+            f"converge in {max_iter} Levenberg-Marquardt iterations (statuses: "
+            f"{sorted(set(status.tolist()) - {'ok'})})"
         )
     return LocalizationResult(pos.reshape(batch + (dim,)), converged.reshape(batch), cost.reshape(batch),
-                              it, "rss_ml_lm")
+                              it, "rss_ml_lm", status.reshape(batch))
 
 
 def _check_model(model, m: int) -> None:
@@ -809,7 +876,10 @@ def grid_ml_position(anchors_m, power_dbm, model: PathLossModel, grid_m, *,
     RSS-domain squared residual, for every problem; evaluated in chunks to bound memory. ``cost`` is that
     residual; a grid point on an anchor is taken 1 micrometre from it.
     A NaN power is an anchor not heard (module docstring): the residual runs over the heard anchors; with fewer
-    than ``min_anchors`` heard the problem gets a NaN position, NaN cost and ``converged=False``.
+    than ``min_anchors`` heard the problem gets a NaN position, NaN cost and ``converged=False``. A physically
+    impossible power (above the model's mean at its clamp, ``max(model.min_distance_m, 1e-6)``, by more than
+    :data:`IMPLAUSIBLE_SIGMAS` sigma) gives NaN and ``status="implausible_reading"``; a cost that overflows NaN
+    and ``status="solver_failed"``.
     ``tag_height_m``: anchors ``(m, 3)`` with heights, a plan grid ``(G, 2)`` (module docstring)."""
     plan, vertical = _planar(anchors_m, tag_height_m)
     anchors_full = np.asarray(anchors_m, dtype=float)
@@ -822,6 +892,13 @@ def grid_ml_position(anchors_m, power_dbm, model: PathLossModel, grid_m, *,
     _check_model(model, m)
     check_scalar("chunk", chunk, ge=1, integer=True)
     min_anchors = _min_anchors(min_anchors, dim, m)
+    implausible = implausible_powers(power, model, max(model.min_distance_m, 1e-6)).reshape(-1)
+    if implausible.any():
+        flat_power = power.reshape(-1, m)
+        return _solve_where(~implausible, power.shape[:-1], dim,
+                            lambda sel: grid_ml_position(anchors_full, flat_power[sel], model, grid_m, chunk=chunk,
+                                                         min_anchors=min_anchors, tag_height_m=tag_height_m),
+                            "grid_ml", "implausible_reading")
     if np.isnan(power).any():
         flat_power = power.reshape(-1, m)
         return _by_heard_anchors(

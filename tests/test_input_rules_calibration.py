@@ -340,3 +340,108 @@ def test_ozkaya_setting_streams_are_keyed_by_values_not_their_spelling():
     assert entropy(replace(base, k_nn=base.k_nn + 1)) == entropy(base)     # estimator only: common random numbers
     assert entropy(replace(base, rt=base.rt + 1)) != entropy(base)         # more steps: another stream
     assert entropy(base) == [2011, lb.seed_from_values({f: getattr(base, f) for f in oz._TRUTH_FIELDS} | {"steps": base.rt})]
+
+
+# --- issue 26, items 9 and 10: a fit's batch is isolated; an empty batch is an empty answer in every mode ---------
+FIT_MODES = {
+    "closed_form": {},
+    "exact": {"path_loss_exp_bounds": (1.5, 2.2)},
+    "cvxpy": {"solver": "cvxpy"},
+    "huber": {"loss": "huber", "huber_delta_db": 3.0},
+}
+
+
+def _isolated_batch():
+    d, p = _samples(n=30, seed=5)
+    powers = np.stack([p, p + 1.5, p - 2.0, p + 0.5])
+    powers[1] = np.nan                                      # heard nothing
+    powers[3, 1:] = np.nan                                  # heard one sample: one distance
+    return d, powers
+
+
+@pytest.mark.parametrize("mode", list(FIT_MODES))
+def test_a_problem_that_heard_too_little_fails_alone(mode):
+    """Before, one all-NaN problem raised DegenerateGeometryError for its whole batch; the static estimators give
+    NaN and a status for that problem alone, and so does the fit now. The others equal fitting them alone (bit for
+    bit: per-problem closed forms, and cvxpy is given the same stacked problem)."""
+    d, powers = _isolated_batch()
+    with np.errstate(invalid="ignore", divide="ignore"):
+        fit = lb.fit_path_loss(d, powers, **FIT_MODES[mode])
+    alone = lb.fit_path_loss(d, powers[[0, 2]], **FIT_MODES[mode])
+    assert fit.problem_status.tolist() == ["ok", "too_few_distances", "ok", "too_few_distances"]
+    assert fit.problem_ok.tolist() == [True, False, True, False] and not fit.ok and alone.ok
+    for name in ("ref_power_dbm", "path_loss_exp", "residual_sigma_db"):
+        got = getattr(fit, name)
+        np.testing.assert_array_equal(got[[0, 2]], getattr(alone, name))
+        assert np.isnan(got[[1, 3]]).all(), name
+    assert np.isnan(fit.covariance[[1, 3]]).all()
+    np.testing.assert_array_equal(fit.covariance[[0, 2]], alone.covariance)
+    assert fit.n_samples.tolist() == [30, 0, 30, 1]
+    # the closed forms against numpy's lstsq, the problem heard at one distance is not fitted on its one sample
+    if mode == "closed_form":
+        design = np.c_[np.ones_like(d), -10 * np.log10(d)]
+        np.testing.assert_allclose([fit.ref_power_dbm[2], fit.path_loss_exp[2]],
+                                   np.linalg.lstsq(design, powers[2], rcond=None)[0], rtol=0, atol=1e-10)
+
+
+def test_a_design_that_cannot_identify_the_exponent_still_raises():
+    """Missing readings are data (a status); the distances are the design: all equal, no batch can use them."""
+    with pytest.raises(lb.DegenerateGeometryError, match="distinct distances"):
+        lb.fit_path_loss(np.full((2, 4), 3.0), np.full((2, 4), -60.0))
+    with pytest.raises(lb.DegenerateGeometryError, match=r"distance_m and power_dbm must hold at least two"):
+        lb.fit_path_loss(np.ones((3, 1)), np.ones((3, 1)))
+
+
+def test_per_location_mean_carries_a_failed_location_to_its_calibration_alone():
+    rng = np.random.default_rng(3)
+    dist = rng.uniform(1.0, 9.0, (2, 5, 4))                 # 2 calibrations, 5 locations, 4 anchors
+    power = -45.0 - 22.0 * np.log10(dist) + rng.normal(0, 2, dist.shape)
+    holed = power.copy()
+    holed[1, 2] = np.nan                                    # calibration 1: location 2 heard nothing
+    cal = lb.calibrate_path_loss(dist, holed)
+    alone = lb.calibrate_path_loss(dist[:1], power[:1])
+    assert cal.problem_status.tolist() == ["ok", "too_few_distances"] and not cal.ok
+    np.testing.assert_array_equal(cal.ref_power_dbm[:1], alone.ref_power_dbm)
+    np.testing.assert_array_equal(cal.path_loss_exp[:1], alone.path_loss_exp)
+    assert np.isnan([cal.ref_power_dbm[1], cal.path_loss_exp[1]]).all()
+
+
+@pytest.mark.parametrize("value", [1e300, -1e300])
+def test_powers_whose_sums_overflow_fail_their_problem_alone(value):
+    """Finite powers of 1e300 dBm overflow the normal equations' sums; before, the fit returned inf or NaN
+    parameters with status closed_form and ok True."""
+    d, p = _samples(n=20, seed=6)
+    powers = np.stack([p, np.full_like(p, value), p - 1.0])
+    with np.errstate(over="ignore", invalid="ignore"):
+        fit = lb.fit_path_loss(d, powers)
+    assert fit.problem_status.tolist() == ["ok", "not_finite", "ok"] and not fit.ok
+    assert np.isnan([fit.ref_power_dbm[1], fit.path_loss_exp[1], fit.residual_sigma_db[1]]).all()
+    alone = lb.fit_path_loss(d, powers[[0, 2]])
+    np.testing.assert_array_equal(fit.path_loss_exp[[0, 2]], alone.path_loss_exp)
+
+
+@pytest.mark.parametrize("mode", list(FIT_MODES))
+def test_an_empty_batch_is_an_empty_fit_in_every_mode(mode):
+    """Before, the Huber fit of an empty batch raised cvxpy's 'Cannot combine empty list of tensors', while the
+    closed form and the exact fit returned empty results."""
+    fit = lb.fit_path_loss(np.ones((0, 3)), np.zeros((0, 3)), **FIT_MODES[mode])
+    assert fit.ref_power_dbm.shape == fit.path_loss_exp.shape == fit.problem_status.shape == (0,)
+    assert fit.covariance.shape == (0, 2, 2) and fit.ok
+    assert fit.status == ("closed_form" if mode == "closed_form" else "optimal")
+
+
+def test_reference_tags_a_reader_that_heard_one_tag_is_named():
+    """The reference-tag calibration still refuses a step at which a reader heard fewer than two tags (its fit has
+    no parameters, and the maps built from it would have none), naming the step and the reader."""
+    tags = np.array([[1.0, 1.0], [4.0, 1.0], [1.0, 6.0], [5.0, 5.0]])
+    readers = np.array([[0.0, 0.0], [6.0, 0.0], [0.0, 8.0]])
+    rss = np.broadcast_to(lb.model_fingerprints(tags, readers, lb.PathLossModel(-45.0, 2.2)), (3, 4, 3)).copy()
+    rss[2, 1:, 1] = np.nan                                   # step 2: reader 1 heard tag 0 only
+    with pytest.raises(lb.DegenerateGeometryError, match=r"ref_rss_dbm.*step \(2,\).*reader 1.*fewer than two"):
+        lb.calibrate_from_reference_tags(rss, tags, readers)
+    with pytest.raises(ValueError, match=r"ref_rss_dbm.*step \(1,\).*reader 0.*not finite"):
+        big = rss.copy()
+        big[2, 1:, 1] = -50.0
+        big[1, :, 0] = 1e300
+        with np.errstate(over="ignore", invalid="ignore"):
+            lb.calibrate_from_reference_tags(big, tags, readers, ref_power_bounds_dbm=None, path_loss_exp_bounds=None)

@@ -13,6 +13,13 @@ whose bounded variant (alpha in [-55, -40] dBm, n in [1.5, 3]) is the ``*_bounds
 Problems carry leading batch axes: ``distance_m`` and ``power_dbm`` of shape ``(..., N)`` are
 ``prod(...)`` independent fits. NaN powers are missing samples (a reading not heard).
 
+A batch is isolated: the distances are the design (chosen by the experimenter), so a problem whose given
+distances are all equal cannot identify the exponent whatever was heard, and raises
+:class:`DegenerateGeometryError`; the powers are data, so a problem that heard too little (fewer than two
+distinct distances among its heard samples) or whose arithmetic overflows (powers of 1e300 dBm) gets NaN
+parameters and its own ``PathLossFit.problem_status``, and every other problem of the batch is what fitting it
+alone gives.
+
 Solvers: the unconstrained least-squares fit is the closed form (normal equations from running sums: time and
 memory linear in the samples, any size). The bounded least-squares fit is exact too: the two-parameter box QP
 solved by KKT enumeration over the running sums (the unconstrained fit if it is inside the bounds, else the
@@ -42,6 +49,7 @@ __all__ = [
     "CALIBRATION_MODES",
     "CALIBRATION_SOLVERS",
     "CALIBRATION_LOSSES",
+    "FIT_PROBLEM_STATUSES",
     "path_loss_exp_ratio_estimate",
     "path_loss_exp_given_ref_power",
 ]
@@ -49,6 +57,8 @@ __all__ = [
 CALIBRATION_MODES = ("per_location_mean", "pooled", "per_anchor")
 CALIBRATION_SOLVERS = ("auto", "closed_form", "exact", "cvxpy")
 CALIBRATION_LOSSES = ("squared", "huber")
+#: values of :attr:`PathLossFit.problem_status`
+FIT_PROBLEM_STATUSES = ("ok", "too_few_distances", "not_finite", "solver_failed")
 #: statuses of a fit whose parameters can be used
 USABLE_STATUSES = ("closed_form", "optimal")
 
@@ -64,7 +74,14 @@ class PathLossFit:
     ``status``: ``"closed_form"`` (the unconstrained normal equations), ``"optimal"`` (a bounded or robust fit at
     its optimum: the exact bounded fit, or cvxpy's status of the stacked solve); any other cvxpy status
     (``"optimal_inaccurate"``, ``"infeasible"``, ``"solver_error"``...) comes with NaN parameters, so a failed
-    fit is never mistaken for a result. :attr:`ok` says whether the parameters can be used.
+    fit is never mistaken for a result.
+
+    ``problem_status`` (the batch shape; one of :data:`FIT_PROBLEM_STATUSES`) says per problem whether its
+    parameters can be used: ``"ok"``; ``"too_few_distances"`` (fewer than two distinct distances among the samples
+    it heard); ``"not_finite"`` (the arithmetic overflowed, e.g. powers of 1e300 dBm); ``"solver_failed"`` (the
+    solve of the batch did not reach an optimum, ``status`` says how). Every problem not ``"ok"`` has NaN
+    parameters, residual sigma and covariance. :attr:`problem_ok` is that per problem, :attr:`ok` whether the
+    whole batch can be used (the solver's status is usable and every problem is ``"ok"``).
     """
 
     ref_power_dbm: np.ndarray
@@ -74,10 +91,24 @@ class PathLossFit:
     n_samples: np.ndarray
     status: str
     per_location: "PathLossFit | None" = None
+    problem_status: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.problem_status is None:      # derived: a usable status and finite parameters
+            finite = np.isfinite(self.ref_power_dbm) & np.isfinite(self.path_loss_exp)
+            derived = np.where(finite, "ok", "not_finite") if self.status in USABLE_STATUSES else \
+                np.full(np.shape(finite), "solver_failed")
+            object.__setattr__(self, "problem_status", np.asarray(derived).astype("<U17"))
+
+    @property
+    def problem_ok(self) -> np.ndarray:
+        """Per problem (the batch shape): whether its parameters can be used."""
+        return (self.problem_status == "ok") & (self.status in USABLE_STATUSES)
 
     @property
     def ok(self) -> bool:
-        return self.status in USABLE_STATUSES
+        """Whether every problem's parameters can be used (:attr:`problem_ok` for each problem)."""
+        return self.status in USABLE_STATUSES and bool(np.all(self.problem_status == "ok"))
 
     @property
     def std_error(self) -> np.ndarray:
@@ -113,12 +144,15 @@ def _prepare(distance_m, power_dbm, ref_distance_m):
                              "(..., N), or be shared by all its problems")
         distance_m = np.broadcast_to(distance_m, power_dbm.shape)
     if distance_m.ndim == 0 or distance_m.shape[-1] < 2:
-        raise DegenerateGeometryError("a path-loss fit needs at least two measurements per problem")
+        raise DegenerateGeometryError("distance_m and power_dbm must hold at least two measurements per problem "
+                                      f"(on the last axis) for a path-loss fit, got shape {power_dbm.shape}")
     mask = np.isfinite(power_dbm) & np.isfinite(distance_m)
     _positive_distances(distance_m[mask])
+    # the design (every given distance, heard or not): all equal is an error whatever was heard
+    given = distance_m > 0
+    _check_distinct_distances(np.where(given, np.log10(np.where(given, distance_m, 1.0)), 0.0), given)
     log_d = np.where(mask, 10.0 * np.log10(np.where(mask, distance_m, 1.0) / ref_distance_m), 0.0)
-    _check_distinct_distances(log_d, mask)
-    return log_d, np.where(mask, power_dbm, 0.0), mask
+    return log_d, np.where(mask, power_dbm, 0.0), mask, _distinct(log_d, mask)
 
 
 def _positive_distances(distance_m):
@@ -126,11 +160,17 @@ def _positive_distances(distance_m):
         raise ValueError(f"distance_m must be positive (calibration distances), got a minimum of {distance_m.min()}")
 
 
+def _distinct(log_d, mask) -> np.ndarray:
+    """Per problem: whether the samples of ``mask`` span at least two distinct (log-)distances."""
+    big, small = np.where(mask, log_d, -np.inf), np.where(mask, log_d, np.inf)
+    low = small.min(axis=-1)
+    with np.errstate(invalid="ignore"):          # no sample: -inf - inf
+        return (big.max(axis=-1) - low) > 1e-9 * np.maximum(1.0, np.abs(low))
+
+
 def _check_distinct_distances(log_d, mask):
     """Two unknowns need at least two distinct distances in every problem."""
-    big, small = np.where(mask, log_d, -np.inf), np.where(mask, log_d, np.inf)
-    spread = big.max(axis=-1) - small.min(axis=-1)
-    bad = ~(spread > 1e-9 * np.maximum(1.0, np.abs(small.min(axis=-1))))
+    bad = ~_distinct(log_d, mask)
     if np.any(bad):
         where = np.argwhere(np.atleast_1d(bad))[:5].tolist()
         raise DegenerateGeometryError(
@@ -140,31 +180,45 @@ def _check_distinct_distances(log_d, mask):
         )
 
 
-def _finish(log_d, power, mask, ref, exp, status, *, covariance: bool = True):
-    """Residual sigma and the LS covariance ``s^2 (M^T M)^{-1}`` from running sums (memory linear in N)."""
-    resid = np.where(mask, power - (ref[..., None] - exp[..., None] * log_d), 0.0)
-    n = mask.sum(axis=-1)
-    dof = np.maximum(n - 2, 1)
-    s2 = (resid**2).sum(axis=-1) / dof
+def _finish(log_d, power, mask, ref, exp, status, usable, *, covariance: bool = True):
+    """Residual sigma and the LS covariance ``s^2 (M^T M)^{-1}`` from running sums (memory linear in N); the
+    problems that are not ``usable`` (too few distinct distances heard), or whose numbers are not finite, get NaN
+    and their status (:attr:`PathLossFit.problem_status`)."""
+    with np.errstate(over="ignore", invalid="ignore"):     # overflow is caught below, per problem
+        resid = np.where(mask, power - (ref[..., None] - exp[..., None] * log_d), 0.0)
+        n = mask.sum(axis=-1)
+        dof = np.maximum(n - 2, 1)
+        s2 = (resid**2).sum(axis=-1) / dof
     del resid
     sum_l, sum_l2 = log_d.sum(-1), (log_d**2).sum(-1)          # M^T M = [[n, -sum L], [-sum L, sum L^2]]
     mtm = np.stack([np.stack([n.astype(float), -sum_l], -1), np.stack([-sum_l, sum_l2], -1)], -2)
-    cov = s2[..., None, None] * np.linalg.inv(mtm) if covariance else np.full(mtm.shape, np.nan)
-    return PathLossFit(ref, exp, np.sqrt(s2), cov, n, status)
+    if status not in USABLE_STATUSES:
+        problem_status = np.full(np.shape(usable), "solver_failed", dtype="<U17")
+    else:
+        finite = np.isfinite(ref) & np.isfinite(exp) & np.isfinite(s2)
+        problem_status = np.where(usable, np.where(finite, "ok", "not_finite"), "too_few_distances").astype("<U17")
+    ok = problem_status == "ok"
+    if not ok.all():       # a singular M^T M (too few distances heard) must not reach inv; the others are untouched
+        mtm = np.where(ok[..., None, None], mtm, np.eye(2))
+        ref, exp, s2 = (np.where(ok, v, np.nan) for v in (ref, exp, s2))
+    with np.errstate(over="ignore", invalid="ignore"):
+        cov = s2[..., None, None] * np.linalg.inv(mtm) if covariance else np.full(mtm.shape, np.nan)
+    return PathLossFit(ref, exp, np.sqrt(s2), cov, n, status, problem_status=problem_status)
 
 
 def fit_path_loss_closed_form(distance_m, power_dbm, ref_distance_m: float = 1.0) -> PathLossFit:
     """Unconstrained least squares by the normal equations ``(M^T M)^{-1} M^T P`` (Eq. (6),
     document 003, sign corrected), batched over leading axes. Missing powers are NaN."""
-    log_d, power, mask = _prepare(distance_m, power_dbm, ref_distance_m)
+    log_d, power, mask, usable = _prepare(distance_m, power_dbm, ref_distance_m)
     # normal equations of P = a - n L:  [[N, -sum L], [-sum L, sum L^2]] [a, n] = [sum P, -sum L P];
     # log_d and power are 0 at missing samples, so the plain sums run over the observed ones
-    s0, s1, s2 = mask.sum(-1).astype(float), log_d.sum(-1), (log_d**2).sum(-1)
-    p0, p1 = power.sum(-1), (log_d * power).sum(-1)
-    det = s0 * s2 - s1 * s1
-    ref = (s2 * p0 - s1 * p1) / det
-    exp = (s1 * p0 - s0 * p1) / det
-    return _finish(log_d, power, mask, ref, exp, "closed_form")
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):   # per problem: _finish marks them
+        s0, s1, s2 = mask.sum(-1).astype(float), log_d.sum(-1), (log_d**2).sum(-1)
+        p0, p1 = power.sum(-1), (log_d * power).sum(-1)
+        det = s0 * s2 - s1 * s1
+        ref = (s2 * p0 - s1 * p1) / det
+        exp = (s1 * p0 - s0 * p1) / det
+    return _finish(log_d, power, mask, ref, exp, "closed_form", usable)
 
 
 def _bounded_closed_form(log_d, power, mask, ref_bounds, exp_bounds):
@@ -255,7 +309,10 @@ def fit_path_loss(distance_m, power_dbm, *, ref_distance_m: float = 1.0,
     cvxpy solve that does not reach an optimum gives NaN parameters and its status (``PathLossFit.status``,
     ``PathLossFit.ok``).
 
-    Raises :class:`DegenerateGeometryError` when a problem has fewer than two distinct distances.
+    Raises :class:`DegenerateGeometryError` when a problem's given distances (heard or not) are all equal: the
+    design cannot identify the exponent. A problem that heard fewer than two distinct distances, or whose
+    arithmetic overflows, gets NaN parameters and its ``problem_status``, alone (module docstring). An empty batch
+    gives an empty fit in every mode (status ``"closed_form"`` or ``"optimal"``).
     """
     check_choice("solver", solver, CALIBRATION_SOLVERS)
     check_choice("loss", loss, CALIBRATION_LOSSES)
@@ -284,26 +341,31 @@ def fit_path_loss(distance_m, power_dbm, *, ref_distance_m: float = 1.0,
                              "and needs solver='cvxpy' (or 'auto')")
         if not bounded:
             return fit_path_loss_closed_form(distance_m, power_dbm, ref_distance_m)
-    log_d, power, mask = _prepare(distance_m, power_dbm, ref_distance_m)
+    log_d, power, mask, usable = _prepare(distance_m, power_dbm, ref_distance_m)
     if solver == "exact":
-        ref, exp = _bounded_closed_form(log_d, power, mask, bounds[0], bounds[1])
-        return _finish(log_d, power, mask, ref, exp, "optimal")     # the optimum, as cvxpy would report it
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):   # per problem: _finish marks them
+            ref, exp = _bounded_closed_form(log_d, power, mask, bounds[0], bounds[1])
+        return _finish(log_d, power, mask, ref, exp, "optimal", usable)     # the optimum, as cvxpy would report it
     batch, n = log_d.shape[:-1], log_d.shape[-1]
     k = int(np.prod(batch))
-    problem, (v_ref, v_exp) = _stacked_problem(
-        log_d.reshape(k, n), power.reshape(k, n), mask.reshape(k, n), bounds[0], bounds[1], loss, huber_delta_db)
-    try:
-        solve(problem, "path-loss calibration")
-        status = problem.status
-    except ConvergenceError:
-        status = str(problem.status)
-    except cp.error.SolverError:
-        status = "solver_error"
-    if status == cp.OPTIMAL:
-        ref, exp = v_ref.value.reshape(batch), v_exp.value.reshape(batch)
-    else:
-        ref, exp = np.full(batch, np.nan), np.full(batch, np.nan)
-    return _finish(log_d, power, mask, ref, exp, status, covariance=loss == "squared")
+    use = usable.reshape(k)
+    ref, exp = np.full(k, np.nan), np.full(k, np.nan)
+    status = "optimal"             # nothing to solve (an empty batch, or no problem heard enough): nothing failed
+    if use.any():                  # only the problems that can be fitted enter the stacked problem
+        pick = (lambda a: a.reshape(k, n)) if use.all() else (lambda a: a.reshape(k, n)[use])
+        problem, (v_ref, v_exp) = _stacked_problem(pick(log_d), pick(power), pick(mask), bounds[0], bounds[1], loss,
+                                                   huber_delta_db)
+        try:
+            solve(problem, "path-loss calibration")
+            status = problem.status
+        except ConvergenceError:
+            status = str(problem.status)
+        except cp.error.SolverError:
+            status = "solver_error"
+        if status == cp.OPTIMAL:
+            ref[use], exp[use] = v_ref.value, v_exp.value
+    return _finish(log_d, power, mask, ref.reshape(batch), exp.reshape(batch), status, usable,
+                   covariance=loss == "squared")
 
 
 def calibrate_path_loss(distance_m, power_dbm, mode: str = "per_location_mean", **fit_kwargs) -> PathLossFit:
@@ -329,14 +391,20 @@ def calibrate_path_loss(distance_m, power_dbm, mode: str = "per_location_mean", 
             f"distance_m and power_dbm must both have shape (..., locations, anchors); got "
             f"{distance_m.shape} and {power_dbm.shape}"
         )
+    if distance_m.shape[-2] < 1 or distance_m.shape[-1] < 1:
+        raise ValueError(f"distance_m and power_dbm must hold at least one location and one anchor, got shape "
+                         f"{distance_m.shape}")
     if mode == "per_location_mean":
         per = fit_path_loss(distance_m, power_dbm, **fit_kwargs)
         n_loc = distance_m.shape[-2]
         cov = per.covariance.sum(axis=-3) / n_loc**2
+        # a calibration is the mean of all its locations' fits: a failed location fails it (NaN already propagates)
+        worst = np.take_along_axis(per.problem_status, np.argmin(per.problem_status == "ok", axis=-1)[..., None],
+                                   -1)[..., 0]
         return PathLossFit(
             per.ref_power_dbm.mean(axis=-1), per.path_loss_exp.mean(axis=-1),
             np.sqrt(np.mean(per.residual_sigma_db**2, axis=-1)), cov, per.n_samples.sum(axis=-1),
-            per.status, per,
+            per.status, per, worst,
         )
     if mode == "pooled":
         return fit_path_loss(distance_m.reshape(distance_m.shape[:-2] + (-1,)),

@@ -23,7 +23,7 @@ import numpy as np
 
 from .._validate import as_array, check_scalar
 from .calibration import PathLossFit, fit_path_loss
-from ..errors import ConvergenceError
+from ..errors import ConvergenceError, DegenerateGeometryError
 from ..models.channel import PathLossModel, pairwise_distance_m, wall_crossings
 from .fingerprint import model_fingerprints
 
@@ -80,7 +80,8 @@ def calibrate_from_reference_tags(ref_rss_dbm, ref_positions_m, readers_m, *, wa
     :func:`locbook.fit_path_loss`). ``sigma_ddof``: see :func:`pooled_sigma_db` (0 = Eq. (6.7) as printed).
 
     A NaN tag reading is one not heard: the reader's fit at that step uses the tags it heard (at least two at
-    distinct distances, else :class:`DegenerateGeometryError`), and the pooled sigma the heard residuals.
+    distinct distances, else :class:`DegenerateGeometryError` naming the step and the reader), and the pooled sigma
+    the heard residuals. Readings whose fit overflows (e.g. 1e300 dBm) raise ``ValueError`` naming them.
     The bounded fit is the exact closed form with the box handled by its KKT cases (:func:`locbook.fit_path_loss`);
     raises :class:`ConvergenceError` if a fit does not reach an optimum.
     """
@@ -96,6 +97,14 @@ def calibrate_from_reference_tags(ref_rss_dbm, ref_positions_m, readers_m, *, wa
     fit = fit_path_loss(np.broadcast_to(distance.T, compensated.shape[:-2] + distance.T.shape),
                         np.swapaxes(compensated, -1, -2),
                         ref_power_bounds_dbm=ref_power_bounds_dbm, path_loss_exp_bounds=path_loss_exp_bounds)
+    for bad, error, why in (("too_few_distances", DegenerateGeometryError,
+                             "heard fewer than two reference tags at distinct distances"),
+                            ("not_finite", ValueError, "has a fit that is not finite (readings too large to fit)")):
+        hit = np.argwhere(np.atleast_1d(fit.problem_status == bad))
+        if hit.size:
+            step, reader = tuple(int(i) for i in hit[0][:-1]), int(hit[0][-1])
+            raise error(f"ref_rss_dbm: at step {step} reader {reader} {why} ({len(hit)} reader-step(s) in all); "
+                        "no calibration is returned")
     if not fit.ok:
         raise ConvergenceError(f"reference-tag calibration: the path-loss fit ended with status "
                                f"{fit.status!r}; no calibration is returned")

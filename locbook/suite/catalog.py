@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import csv
 import json
+import math
 import shutil
 from pathlib import Path
 
@@ -18,9 +19,10 @@ __all__ = ["last_result", "list_text", "show_text", "copy_notebooks"]
 
 def _read_json(path: Path) -> dict:
     try:
-        return json.loads(path.read_text())
+        value = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, ValueError):
         return {}
+    return value if isinstance(value, dict) else {}
 
 
 def last_result(exp: Experiment, reports_root: Path, profile: str) -> dict:
@@ -28,9 +30,10 @@ def last_result(exp: Experiment, reports_root: Path, profile: str) -> dict:
     folder = reports_root / profile / exp.id
     report = _read_json(folder / "report.json")
     status = _read_json(reports_root / profile / "status.json").get(exp.id, {})
+    status = status if isinstance(status, dict) else {}
     out = {}
     seconds = report.get("seconds", status.get("seconds"))
-    if seconds is not None:
+    if isinstance(seconds, (int, float)) and not isinstance(seconds, bool) and math.isfinite(seconds):
         out["seconds"] = float(seconds)
     if status.get("status"):
         out["status"] = status["status"]
@@ -39,9 +42,9 @@ def last_result(exp: Experiment, reports_root: Path, profile: str) -> dict:
     if report.get("locbook"):
         out["stamp"] = report["locbook"]
     try:
-        with open(folder / "numbers.csv", newline="") as fh:
+        with open(folder / "numbers.csv", newline="", encoding="utf-8") as fh:
             out["counts"] = scoreboard_counts(list(csv.DictReader(fh)))
-    except OSError:
+    except (OSError, ValueError, csv.Error):      # missing or damaged (not UTF-8): no counts to show
         pass
     return out
 

@@ -232,11 +232,18 @@ def _validate_report(folder: Path, exp_id: str) -> str:
             return f"{item['file']} is listed in the manifest but missing"
     numbers = folder / "numbers.csv"
     if numbers.exists():
-        with open(numbers, newline="") as fh:
-            reader = csv.DictReader(fh)
-            if tuple(reader.fieldnames or ()) != NUMBER_COLUMNS:
-                return f"numbers.csv has columns {reader.fieldnames}, expected {list(NUMBER_COLUMNS)}"
-            rows = list(reader)
+        try:
+            with open(numbers, newline="", encoding="utf-8") as fh:
+                reader = csv.DictReader(fh)
+                if tuple(reader.fieldnames or ()) != NUMBER_COLUMNS:
+                    return f"numbers.csv has columns {reader.fieldnames}, expected {list(NUMBER_COLUMNS)}"
+                rows = list(reader)
+        except UnicodeDecodeError as exc:
+            return f"numbers.csv is not UTF-8 text (byte {exc.start}: {exc.reason})"
+        except csv.Error as exc:
+            return f"numbers.csv is not well-formed CSV ({exc})"
+        except OSError as exc:
+            return f"numbers.csv unreadable ({exc.strerror or exc})"
         if len(rows) != manifest.get("n_numbers", len(rows)):
             return f"numbers.csv has {len(rows)} rows, the manifest says {manifest.get('n_numbers')}"
         if any(r["experiment"] != exp_id for r in rows):
@@ -256,15 +263,48 @@ def _data_unchanged(recorded: dict[str, str]) -> bool:
         try:
             if _sha256(Path(path)) != digest:
                 return False
-        except OSError:
+        except (OSError, TypeError, ValueError):     # gone, unreadable, or a damaged record
             return False
     return True
 
 
-def _cached(report_dir: Path, exp: Experiment, key: str) -> bool:
+def _validate_promoted(folder: Path, exp_id: str) -> str:
+    """'' if ``folder`` holds a complete promoted report of ``exp_id`` (:func:`_validate_report` plus the files
+    :func:`_promote` writes), else what is wrong."""
+    why = _validate_report(folder, exp_id)
+    if why:
+        return why
+    try:
+        record = json.loads((folder / "report.json").read_text(encoding="utf-8"))
+    except UnicodeDecodeError as exc:
+        return f"report.json is not UTF-8 text (byte {exc.start})"
+    except ValueError as exc:
+        return f"report.json is not JSON ({exc})"
+    except OSError as exc:
+        return f"report.json unreadable ({exc.strerror or exc})"
+    if not isinstance(record, dict) or record.get("experiment") != exp_id:
+        return f"report.json does not describe {exp_id}"
+    for name in ("summary.md", "report.md", "report.html"):
+        try:
+            (folder / name).read_text(encoding="utf-8")
+        except UnicodeDecodeError as exc:
+            return f"{name} is not UTF-8 text (byte {exc.start})"
+        except OSError as exc:
+            return f"{name} unreadable ({exc.strerror or exc})"
+    return ""
+
+
+def _cached(report_dir: Path, exp: Experiment, key: str) -> tuple[bool, str]:
+    """``(True, "")`` when the report in ``report_dir`` is up to date and intact; ``(False, why)`` when it
+    would be up to date but is damaged (``why`` says what is wrong), ``(False, "")`` when it is stale or absent.
+    A damaged report is never served: it is executed again."""
     run = _read_json(report_dir / exp.id / "run.json", {})
-    return (run.get("cache_key") == key and run.get("status") == "ok"
-            and _data_unchanged(run.get("data", {})) and not _validate_report(report_dir / exp.id, exp.id))
+    data = run.get("data", {})
+    if not (run.get("cache_key") == key and run.get("status") == "ok" and isinstance(data, dict)
+            and _data_unchanged(data)):
+        return False, ""
+    why = _validate_promoted(report_dir / exp.id, exp.id)
+    return not why, why
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -349,6 +389,11 @@ def _acquire(lock, report_dir: Path, stop: _Stop, progress) -> bool:
     return False
 
 
+def _absolute(path) -> Path:
+    """``path`` (``~`` expanded) as an absolute path, without resolving symbolic links."""
+    return Path(os.path.abspath(Path(path).expanduser()))
+
+
 def run_suite(suite: Suite, experiments: list[Experiment], profile: str, *, jobs: int = 1, force: bool = False,
               overrides: dict[str, str] | None = None, report_root: Path | None = None,
               out_dir: Path | None = None, timeout_s: float = 1800, retries: int = 1,
@@ -378,9 +423,11 @@ def run_suite(suite: Suite, experiments: list[Experiment], profile: str, *, jobs
         raise SuiteError("a scheduler address needs --executor dask")
     if isinstance(progress, str):
         progress = make_progress(progress)
-    root = Path(report_root) if report_root else suite.default_reports()
+    # every user path made absolute here, once: the workers and kernels run in other folders (a kernel runs in
+    # its notebook's folder), so a relative staging path would point elsewhere there
+    root = _absolute(report_root) if report_root else _absolute(suite.default_reports())
     if out_dir is not None:
-        report_dir = Path(out_dir)
+        report_dir = _absolute(out_dir)
         if not SAFE_NAME.match(report_dir.name):
             raise SuiteError(f"output folder name {report_dir.name!r} must be lower-case letters, digits and "
                              "hyphens ([a-z0-9-])")
@@ -448,9 +495,12 @@ def _run_locked(suite, experiments, profile, resolved, report_dir, data_roots, f
 
     queue: deque = deque()
     for exp in experiments:
-        if not force and _cached(report_dir, exp, keys[exp.id]):
+        cached, damaged = (False, "") if force else _cached(report_dir, exp, keys[exp.id])
+        if cached:
             finish(Outcome(exp.id, "cached", 0.0))
         else:
+            if damaged:
+                progress.message(f"{exp.id}: the cached report is damaged ({damaged}); executing it again")
             queue.append((exp.id, 1))
     staging_root = report_dir / ".staging" / f"{os.getpid()}-{uuid.uuid4().hex[:8]}"
     running: dict[str, tuple] = {}     # id -> (executor handle, staging, attempt, started or None)

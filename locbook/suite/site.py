@@ -19,6 +19,7 @@ link; tests/test_site_browser.py opens it in headless Chromium to check that.
 from __future__ import annotations
 
 import functools
+import html
 import json
 import math
 import re
@@ -142,7 +143,9 @@ def page_markdown(exp, profile: str, params: dict, folder: Path, numbers: list[d
     lines = _header(exp, profile, stamp) + ["[Summary](summary.md).", ""]
     lines += ["## Reproduced versus printed", ""]
     lines.append(Table(shown).to_markdown() if shown else "No printed number is compared here.")
-    lines += ["", "## Parameters", "", Table(parameters).to_markdown(), ""]
+    # a -p value is any text the user typed: escaped, so a Markdown viewer shows it instead of rendering it as HTML
+    escaped = [{**p, "value": html.escape(p["value"], quote=False)} for p in parameters]
+    lines += ["", "## Parameters", "", Table(escaped).to_markdown(), ""]
     if assumptions:
         lines += ["## Assumptions", "", Table(assumptions).to_markdown(), ""]
     if manifest.get("figures"):
@@ -337,6 +340,15 @@ def index_markdown(report_dir: Path, entries, rows) -> str:
     return "\n".join(lines)
 
 
+def _seconds(value) -> float | None:
+    """A run time read from a record (``None`` unless a finite number: records may be damaged)."""
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        return None
+    return x if math.isfinite(x) else None
+
+
 def _index_entry(report_dir: Path, e) -> dict:
     exp, last, present = e["exp"], e["last"], e["present"]
     folder = report_dir / exp.id
@@ -344,9 +356,9 @@ def _index_entry(report_dir: Path, e) -> dict:
     if not present and state in ("ok", "cached"):
         state = "not run"                      # recorded as run, but its folder is gone
     flagged = state in ("failed", "interrupted")
-    seconds = last.get("seconds") if state in ("ok", "failed", "interrupted") else None
+    seconds = _seconds(last.get("seconds")) if state in ("ok", "failed", "interrupted") else None
     if not seconds and present:
-        seconds = e["report"].get("seconds") or e["run"].get("seconds")
+        seconds = _seconds(e["report"].get("seconds")) or _seconds(e["run"].get("seconds"))
     links = []
     if present:
         for label, names in (("report", ("report.html",)), ("notebook", (f"{exp.id}.html", f"{exp.id}.ipynb")),
@@ -392,15 +404,23 @@ def index_html(report_dir: Path, entries, rows, version: str) -> str:
 
 
 def _read_json(path: Path, default):
+    """The JSON in ``path``, or ``default`` when the file is missing, unreadable, not UTF-8, not JSON, or (for a
+    dict or list ``default``) JSON of another type: a damaged file reads as an absent one, never as a crash."""
     try:
-        return json.loads(path.read_text())
-    except (OSError, ValueError):
+        value = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):      # UnicodeDecodeError is a ValueError
         return default
+    if isinstance(default, (dict, list)) and not isinstance(value, type(default)):
+        return default
+    return value
 
 
 def _read_csv(path: Path) -> list[dict]:
+    """Rows of a CSV file written by locbook (UTF-8); ``[]`` when it is missing or damaged (not UTF-8, NUL
+    bytes): the runner's validation says what is wrong with it, the pages show what can be read."""
     import csv
-    if not path.exists():
+    try:
+        with open(path, newline="", encoding="utf-8") as fh:
+            return list(csv.DictReader(fh))
+    except (OSError, ValueError, csv.Error):
         return []
-    with open(path, newline="") as fh:
-        return list(csv.DictReader(fh))

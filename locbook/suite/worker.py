@@ -112,7 +112,8 @@ def main(task_path: str, parent: int | None = None) -> int:
                        "JUPYTER_RUNTIME_DIR": str(runtime), "TMPDIR": str(runtime),
                        "PYDEVD_DISABLE_FILE_VALIDATION": "1"})
     # the kernel inherits stderr: keep its chatter in a log beside the report
-    log_fd = os.open(staging / "kernel-stderr.log", os.O_WRONLY | os.O_CREAT | os.O_TRUNC)
+    # mode 0o666 before the umask, as open() creates every other report file (os.open's default is 0o777)
+    log_fd = os.open(staging / "kernel-stderr.log", os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o666)
     os.dup2(log_fd, 2)
     os.close(log_fd)
     result = execute(task)

@@ -115,7 +115,7 @@ _BAYES = lb.RssMeasurementModel(_READERS, -52.0, 2.3, sigma_db=3.0)
 
 @pytest.mark.parametrize("call, message", [
     (lambda: lb.kalman_filter(_track(), MODEL.F, H[:, :3], MODEL.Q, R, X0, P0), r"H must have shape \(m, 4\)"),
-    (lambda: lb.kalman_filter(_track(), MODEL.F, H, MODEL.Q, R, X0, np.ones(4)), r"P0 in \(4, 4\)"),
+    (lambda: lb.kalman_filter(_track(), MODEL.F, H, MODEL.Q, R, X0, np.ones(4)), r"P0 must have shape \(4, 4\)"),
     (lambda: lb.extended_kalman_filter(MODEL.F, MODEL.Q, X0, P0, [lb.LinearMeasurement(_track(), H, R)], record=[20]),
      r"record must be distinct integer step indices in \[0, 15\)"),
     (lambda: lb.RssMeasurement(np.zeros((3, 3)), _READERS, lb.PathLossModel(-40.0, 2.0, sigma_db=[3.0, 4.0]), [0, 1]),

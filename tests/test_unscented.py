@@ -187,9 +187,13 @@ def test_printed_innovation_covariance_without_r_is_singular_with_four_anchors()
 def test_a_covariance_that_is_not_positive_definite_is_named():
     rng = np.random.default_rng(4)
     model, channel, start, z = _rss_data(rng)
-    P0 = np.diag([2.0, -1.0, 0.5, 0.5])
+    # a P0 that is no covariance is refused up front, naming P0 (issue 26, item 10)
+    with pytest.raises(ValueError, match="P0 must be positive semi-definite.*-1"):
+        lb.unscented_kalman_filter(np.eye(4), np.zeros((4, 4)), start, np.diag([2.0, -1.0, 0.5, 0.5]),
+                                   [lb.RssMeasurement(z, ANCHORS, channel, model.position_index)])
+    # a singular one is a covariance, but has no Cholesky factor for the sigma points: named at the step
     with pytest.raises(lb.SingularCovarianceError, match="state covariance P is not positive definite at step 0"):
-        lb.unscented_kalman_filter(np.eye(4), np.zeros((4, 4)), start, P0,
+        lb.unscented_kalman_filter(np.eye(4), np.zeros((4, 4)), start, np.diag([2.0, 0.0, 0.5, 0.5]),
                                    [lb.RssMeasurement(z, ANCHORS, channel, model.position_index)])
 
 

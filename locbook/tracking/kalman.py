@@ -18,12 +18,32 @@ run) it is computed once per step and only the states are batched. Otherwise the
 in compiled loops over blocks of runs (``_nb_ekf``; ``LOCBOOK_NUMBA=0`` turns them off); without numba, or for
 streams the kernel does not cover (NonlinearMeasurement, batched F or Q), the numpy loop runs. All paths give the same
 numbers to round-off (tests/test_filter_speed_equality.py), and every error is raised by the numpy loop.
+
+Consistency guard (issue 26). Every Kalman-family filter (this module's :func:`kalman_filter` and
+:func:`extended_kalman_filter`, numpy and compiled paths, and :func:`locbook.unscented_kalman_filter`) returns the
+normalised innovation squared of each run and step,
+
+    NIS_k = sum over the updates u of step k of  nu_u^T S_u^{-1} nu_u,      dof_k = sum of their dimensions,
+
+(``nu`` the innovation, ``S`` its covariance, the components present only; NaN where step k has no update). It is a
+by-product of the update (the solve or Cholesky of S that gives the gain also gives ``S^{-1} nu``). Under the filter's
+own model the innovations of one step are independent Gaussians (the sequential updates of one step, e.g. the serial
+EKF's scalar updates or several streams, are each conditioned on the previous ones, so their innovations are
+independent), so ``NIS_k ~ chi^2(dof_k)``, and the NIS of different steps are independent. A run is flagged
+``diverged`` when its NIS exceeds ``chi2.ppf(divergence_probability, dof_k)`` at ``divergence_window`` consecutive
+updates (steps without an update neither count nor break the streak); ``diverged_step`` is the first step of the
+first such window (-1 where not diverged). On a consistent filter the chance of a flag is at most
+``(T - w + 1) (1 - p)^w`` per run of T updates (``(1 - p)^w = 1e-60`` at the defaults w = 20, p = 0.999; the
+window is long so that a filter that is merely optimistic, e.g. with sigma underestimated by half, is not called
+diverged); a filter that has lost track (an error far beyond its reported covariance) exceeds the bound at every
+update. ``divergence_window=0`` (or None) turns the guard off (nothing is flagged; NIS is still returned). The flags
+never change the estimates; a diverged run is the caller's to count and show, not to average silently.
 """
 from __future__ import annotations
 
 import os
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -31,19 +51,35 @@ from .._validate import as_array, check_choice, check_scalar
 from ..models.channel import PathLossModel, log_distance_gradient, log_distance_mean_dbm
 from ..errors import SingularCovarianceError
 
-__all__ = ["KalmanResult", "kalman_filter", "KF_VARIANTS", "LinearMeasurement", "RssMeasurement", "NonlinearMeasurement",
+__all__ = ["KalmanResult", "kalman_filter", "nis_divergence", "DIVERGENCE_WINDOW", "DIVERGENCE_PROBABILITY", "KF_VARIANTS", "LinearMeasurement", "RssMeasurement", "NonlinearMeasurement",
            "TrackResult", "run_recursive_filter",
            "extended_kalman_filter", "rss_measurement_jacobian", "RSS_UPDATE_MODES", "SERIAL_ORDERS"]
 
 KF_VARIANTS = ("standard", "literal_003")
 
+#: defaults of the consistency guard (module docstring): consecutive updates, and the chi-square probability
+DIVERGENCE_WINDOW = 20
+DIVERGENCE_PROBABILITY = 0.999
+
+
+class _Divergence:
+    """The consistency guard's fields, shared by every Kalman-family result (module docstring): ``nis``
+    ``batch + (T,)`` over every step (NaN where no update), ``nis_dof`` ``batch + (T,)`` (0 there), ``diverged``
+    ``batch`` and ``diverged_step`` ``batch`` (-1 where not diverged). None when the result was built by hand."""
+
+    @property
+    def n_diverged(self) -> int:
+        """The number of runs flagged ``diverged``."""
+        return 0 if self.diverged is None else int(np.count_nonzero(self.diverged))
+
 
 @dataclass(frozen=True)
-class KalmanResult:
+class KalmanResult(_Divergence):
     """Filter output; shapes ``batch + (T, n)`` and ``batch + (T, n, n)``.
 
     ``x_pred``/``P_pred`` are the one-step predictions used at each update (for ``literal_003`` the
-    quantities that the printed update actually uses, i.e. the previous posterior).
+    quantities that the printed update actually uses, i.e. the previous posterior). ``nis``, ``nis_dof``,
+    ``diverged``, ``diverged_step``: the consistency guard (module docstring).
     """
 
     x: np.ndarray
@@ -52,6 +88,85 @@ class KalmanResult:
     P_pred: np.ndarray
     innovation: np.ndarray
     variant: str
+    nis: np.ndarray = None
+    nis_dof: np.ndarray = None
+    diverged: np.ndarray = None
+    diverged_step: np.ndarray = None
+
+
+def _check_guard(window, probability):
+    """The guard's arguments: ``window`` a non-negative integer (0 or None: off), ``probability`` in (0, 1)."""
+    if window is not None:
+        check_scalar("divergence_window", window, ge=0, integer=True)
+    check_scalar("divergence_probability", probability, gt=0, lt=1)
+    return 0 if window is None else int(window), float(probability)
+
+
+def nis_divergence(nis, nis_dof, window: int | None = DIVERGENCE_WINDOW,
+                   probability: float = DIVERGENCE_PROBABILITY):
+    """The consistency guard of the module docstring: ``(diverged batch, diverged_step batch)`` from the normalised
+    innovation squared ``nis`` ``batch + (T,)`` (NaN: no update) and its degrees of freedom ``nis_dof``.
+
+    A run diverged when ``nis > chi2.ppf(probability, dof)`` at ``window`` consecutive updates (steps with
+    ``dof == 0`` are skipped); ``diverged_step`` is the first step of the first such window, -1 where none.
+    Vectorized over runs (no loop over runs or steps)."""
+    window, probability = _check_guard(window, probability)
+    nis = np.asarray(nis, dtype=float)
+    dof = np.broadcast_to(np.asarray(nis_dof), nis.shape)
+    batch = nis.shape[:-1]
+    if window == 0 or nis.shape[-1] < window or nis.size == 0:
+        return np.zeros(batch, bool), np.full(batch, -1, np.int64)
+    from scipy.special import chdtri            # lazy: keeps `import locbook` fast
+    updated = dof > 0
+    bound = np.full(nis.shape, np.inf)
+    for d in np.unique(dof[updated]):           # a few distinct dimensions: one quantile each
+        bound[dof == d] = chdtri(float(d), 1.0 - probability)
+    exceed = updated & (nis > bound)            # NaN NIS (a non-finite innovation) never counts as an exceedance
+    # the length of the current streak of exceedances among the updates: count minus the count at the last update
+    # that stayed within the bound
+    count = np.cumsum(exceed, axis=-1)
+    reset = np.maximum.accumulate(np.where(updated & ~exceed, count, 0), axis=-1)
+    hit = (count - reset) >= window
+    diverged = hit.any(axis=-1)
+    end = np.argmax(hit, axis=-1)               # the update that completes the first window
+    first = np.take_along_axis(count, end[..., None], -1) - window + 1
+    start = np.argmax(count >= first, axis=-1)  # the first exceedance of that window
+    return diverged, np.where(diverged, start, -1).astype(np.int64)
+
+
+_SYM_RTOL = 1e-8       # relative to the matrix's largest |entry|: round-off of products such as F P F^T, not a typo
+
+
+def _covariance(name: str, value, rows: int, *, batch_ok: bool = True) -> np.ndarray:
+    """A finite, symmetric, positive semi-definite ``(rows, rows)`` matrix (possibly with batch axes), checked up
+    front with an error naming ``name``: asymmetry and negative eigenvalues are allowed up to ``_SYM_RTOL`` times the
+    matrix's largest absolute entry (round-off)."""
+    A = _matrix(name, value, rows, rows)
+    if A.size == 0:
+        return A
+    scale = np.abs(A).max(axis=(-2, -1))
+    tol = _SYM_RTOL * scale
+    asym = np.abs(A - _mT(A)).max(axis=(-2, -1))
+    if np.any(asym > tol):
+        at = _first_bad(asym > tol)
+        raise ValueError(f"{name} must be symmetric (a covariance); the largest |{name} - {name}^T| is "
+                         f"{float(asym.max()):.3g}{at}")
+    sym = 0.5 * (A + _mT(A))
+    try:                                         # the common case: one Cholesky of A + tol I proves A >= -tol I
+        np.linalg.cholesky(sym + (2 * tol + np.finfo(float).tiny)[..., None, None] * np.eye(rows))
+        return A
+    except np.linalg.LinAlgError:
+        pass
+    low = np.linalg.eigvalsh(sym)[..., 0]
+    if np.any(low < -tol):
+        raise ValueError(f"{name} must be positive semi-definite (a covariance); its smallest eigenvalue is "
+                         f"{float(low.min()):.3g}{_first_bad(low < -tol)}")
+    return A
+
+
+def _apply(M, x):
+    """``M x`` for matrices ``(r, c)`` or ``batch + (r, c)`` and states ``batch + (c,)``."""
+    return x @ _mT(M) if M.ndim == 2 else (M @ x[..., None])[..., 0]
 
 
 def _mT(a):
@@ -123,23 +238,31 @@ def _raise_singular(step: int, bad, what: str = "innovation covariance", message
 
 
 def kalman_filter(z, F, H, Q, R, x0, P0, *, predict_first: bool = True,
-                  variant: str = "standard", joseph: bool = True) -> KalmanResult:
+                  variant: str = "standard", joseph: bool = True,
+                  divergence_window: int | None = DIVERGENCE_WINDOW,
+                  divergence_probability: float = DIVERGENCE_PROBABILITY) -> KalmanResult:
     """Run a linear Kalman filter over measurements ``z`` of shape ``batch + (T, m)``.
 
     Parameters
     ----------
     z : measurements; a NaN entry is a missing component: the update uses the components present (the
         missing rows are left out of H and R) and a step whose entries are all NaN is prediction only.
-    F, H, Q : model matrices ``(n, n)``, ``(m, n)``, ``(n, n)``; may carry batch axes.
-    R : measurement covariance ``(m, m)`` or ``batch + (m, m)`` (e.g. an empirical R per run).
-    x0, P0 : initial state ``batch + (n,)`` and covariance.
+        ``T = 0`` steps give an empty result (shapes ``batch + (0, n)``).
+    F, H : model matrices ``(n, n)``, ``(m, n)``; may carry batch axes (one per run).
+    Q, R : process and measurement covariances ``(n, n)``, ``(m, m)``, or with batch axes (e.g. an empirical R per
+        run); symmetric positive semi-definite (checked up front, the error names the argument).
+    x0, P0 : initial state ``batch + (n,)`` and covariance (symmetric positive semi-definite).
         With ``predict_first=True`` they are the posterior one step *before* ``z[..., 0, :]``
         (filterpy's convention: predict, then update, at every step). With ``predict_first=False``
         they are the prior at the time of ``z[..., 0, :]``, which is used without a prediction.
     variant : ``"standard"`` or ``"literal_003"`` (Eqs. (11)-(13) of document 003 as printed).
     joseph : use the Joseph-form covariance update (keeps P symmetric positive definite).
+    divergence_window, divergence_probability : the consistency guard (module docstring): a run whose NIS exceeds
+        ``chi2.ppf(divergence_probability, dof)`` at ``divergence_window`` consecutive updates is flagged in
+        ``diverged`` / ``diverged_step``; 0 or None turns it off.
     """
     check_choice("variant", variant, KF_VARIANTS)
+    window, probability = _check_guard(divergence_window, divergence_probability)
     z = as_array("z", z, min_ndim=2, nan_ok=True)
     F = as_array("F", F)
     if F.ndim < 2 or F.shape[-1] != F.shape[-2]:
@@ -149,20 +272,44 @@ def kalman_filter(z, F, H, Q, R, x0, P0, *, predict_first: bool = True,
     if H.ndim < 2 or H.shape[-1] != n:
         raise ValueError(f"H must have shape (m, {n}) or batch + (m, {n}), got {H.shape}")
     m = H.shape[-2]
-    Q, R = _matrix("Q", Q, n, n), _matrix("R", R, m, m)
+    Q, R = _covariance("Q", Q, n), _covariance("R", R, m)
     if z.shape[-1] != m:
         raise ValueError(f"measurements have dimension {z.shape[-1]} but H has {m} rows")
-    x, P = as_array("x0", x0), as_array("P0", P0)
-    if x.ndim < 1 or x.shape[-1] != n or P.ndim < 2 or P.shape[-2:] != (n, n):
-        raise ValueError(f"x0 must end in ({n},) and P0 in ({n}, {n}); got {x.shape} and {P.shape}")
-    batch = np.broadcast_shapes(z.shape[:-2], x.shape[:-1], P.shape[:-2], F.shape[:-2], H.shape[:-2],
-                                Q.shape[:-2], R.shape[:-2])
+    x = as_array("x0", x0)
+    if x.ndim < 1 or x.shape[-1] != n:
+        raise ValueError(f"x0 must end in ({n},); got {x.shape}")
+    P = _covariance("P0", P0, n)
+    batch = _batch_shape(("z", z.shape[:-2]), ("x0", x.shape[:-1]), ("P0", P.shape[:-2]), ("F", F.shape[:-2]),
+                         ("H", H.shape[:-2]), ("Q", Q.shape[:-2]), ("R", R.shape[:-2]))
     T = z.shape[-2]
     x = np.broadcast_to(x, batch + (n,)).copy()
     z = np.broadcast_to(z, batch + (T, m))
+    if T == 0:
+        empty = np.empty(batch + (0, n))
+        return KalmanResult(empty, np.empty(batch + (0, n, n)), empty.copy(), np.empty(batch + (0, n, n)),
+                            np.empty(batch + (0, m)), variant, np.empty(batch + (0,)), np.zeros(batch + (0,), np.int64),
+                            np.zeros(batch, bool), np.full(batch, -1, np.int64))
     pattern = _shared_pattern(z)
     if pattern is not None and all(a.ndim == 2 for a in (F, H, Q, R, P)):
-        return _kalman_filter_shared(z, F, H, Q, R, x, P, pattern, predict_first, variant, joseph)
+        res = _kalman_filter_shared(z, F, H, Q, R, x, P, pattern, predict_first, variant, joseph)
+    else:
+        res = _kalman_filter_batched(z, F, H, Q, R, x, P, batch, predict_first, variant, joseph)
+    diverged, step = nis_divergence(res.nis, res.nis_dof, window, probability)
+    return replace(res, diverged=diverged, diverged_step=step)
+
+
+def _batch_shape(*named):
+    """The broadcast batch shape of the arguments' leading axes ``(name, shape)``; an error naming them if none."""
+    try:
+        return np.broadcast_shapes(*(shape for _, shape in named))
+    except ValueError:
+        raise ValueError("the run (batch) axes of the arguments do not broadcast: " +
+                         ", ".join(f"{name} {shape}" for name, shape in named if shape)) from None
+
+
+def _kalman_filter_batched(z, F, H, Q, R, x, P, batch, predict_first, variant, joseph) -> KalmanResult:
+    """:func:`kalman_filter`'s loop with batched covariances (and possibly batched F, H, Q, R)."""
+    n, (T, m) = x.shape[-1], z.shape[-2:]
     P = np.broadcast_to(P, batch + (n, n)).copy()
     eye = np.eye(n)
     out_x = np.empty(batch + (T, n))
@@ -170,9 +317,11 @@ def kalman_filter(z, F, H, Q, R, x0, P0, *, predict_first: bool = True,
     out_xp = np.empty(batch + (T, n))
     out_Pp = np.empty(batch + (T, n, n))
     out_nu = np.full(batch + (T, m), np.nan)
+    out_nis = np.full(batch + (T,), np.nan)
+    out_dof = np.zeros(batch + (T,), np.int64)
     for k in range(T):
         if predict_first or k > 0:
-            x_pred = x @ _mT(F)                      # x- = F x
+            x_pred = _apply(F, x)                    # x- = F x
             P_pred = F @ P @ _mT(F) + Q              # P- = F P F' + Q
         else:
             x_pred, P_pred = x, P
@@ -187,12 +336,14 @@ def kalman_filter(z, F, H, Q, R, x0, P0, *, predict_first: bool = True,
         singular = valid & _not_positive_definite(S)
         if singular.any():
             _raise_singular(k, singular)
-        try:
-            K = _solve_active(S, H @ P_use, valid)   # K' = S^{-1} H P  (S, P symmetric)
+        nu = zk - _apply(H, x_use)                   # innovation z - H x
+        HP = np.broadcast_to(H @ P_use, batch + (m, n))
+        try:                                         # K' = S^{-1} H P and S^{-1} nu from one solve (S, P symmetric)
+            sol = _solve_active(S, np.concatenate([HP, nu[..., None]], axis=-1), valid)
         except _Singular as exc:
             _raise_singular(k, exc.bad)
-        K = _mT(K)
-        nu = zk - x_use @ _mT(H)                     # innovation z - H x
+        K = _mT(sol[..., :n])
+        nis = np.where(valid, np.einsum("...i,...i->...", nu, sol[..., n]), 0.0)
         x_new = x_use + (K @ nu[..., None])[..., 0]
         IKH = eye - K @ H
         if joseph:
@@ -200,17 +351,20 @@ def kalman_filter(z, F, H, Q, R, x0, P0, *, predict_first: bool = True,
         else:
             P_new = IKH @ P_use                                # P = (I-KH)P
         P_new = 0.5 * (P_new + _mT(P_new))
+        dof = np.where(valid, m, 0)
         if partial.any():
             # missing components: the EKF's masked update (their gain columns are exactly zero), so the present
             # components update as they would alone
             try:
-                xp_new, Pp_new = _linear_update(x_use, P_use, np.where(partial[..., None], z_raw, np.nan), H, R,
-                                                joseph=joseph)
+                xp_new, Pp_new, nis_p, dof_p = _linear_update(x_use, P_use, np.where(partial[..., None], z_raw, np.nan),
+                                                              H, R, joseph=joseph)
             except _Singular as exc:
                 _raise_singular(k, exc.bad)
             x_new = np.where(partial[..., None], xp_new, x_new)
             P_new = np.where(partial[..., None, None], Pp_new, P_new)
-            nu = np.where(partial[..., None], np.where(finite, z_raw - x_use @ _mT(H), np.nan), nu)
+            nu = np.where(partial[..., None], np.where(finite, z_raw - _apply(H, x_use), np.nan), nu)
+            nis = np.where(partial, nis_p, nis)
+            dof = np.where(partial, dof_p, dof)
             valid = valid | partial
         x = np.where(valid[..., None], x_new, x_pred)
         P = np.where(valid[..., None, None], P_new, P_pred)
@@ -220,7 +374,9 @@ def kalman_filter(z, F, H, Q, R, x0, P0, *, predict_first: bool = True,
         out_x[..., k, :], out_P[..., k, :, :] = x, P
         out_xp[..., k, :], out_Pp[..., k, :, :] = x_use, P_use
         out_nu[..., k, :] = np.where(valid[..., None], nu, np.nan)
-    return KalmanResult(out_x, out_P, out_xp, out_Pp, out_nu, variant)
+        out_nis[..., k] = np.where(valid, nis, np.nan)
+        out_dof[..., k] = dof
+    return KalmanResult(out_x, out_P, out_xp, out_Pp, out_nu, variant, out_nis, out_dof)
 
 
 def _shared_pattern(z):
@@ -246,6 +402,8 @@ def _kalman_filter_shared(z, F, H, Q, R, x, P, pattern, predict_first, variant, 
     out_xp = np.empty(batch + (T, n))
     out_Pp = np.empty(batch + (T, n, n))
     out_nu = np.full(batch + (T, m), np.nan)
+    out_nis = np.full(batch + (T,), np.nan)
+    out_dof = np.zeros(batch + (T,), np.int64)
     for k in range(T):
         if predict_first or k > 0:
             x_pred = x @ Ft
@@ -258,18 +416,23 @@ def _kalman_filter_shared(z, F, H, Q, R, x, P, pattern, predict_first, variant, 
             S = H @ P_use @ Ht + R
             if _not_positive_definite(S):
                 _raise_singular(k, everyone)
-            try:
-                K = np.linalg.solve(S, H @ P_use).T          # K' = S^{-1} H P
+            nu = z[..., k, :] - x_use @ Ht
+            flat = nu.reshape(-1, m)
+            try:                                             # K' = S^{-1} H P and S^{-1} nu^T in one solve
+                sol = np.linalg.solve(S, np.concatenate([H @ P_use, flat.T], axis=-1))
             except np.linalg.LinAlgError:
                 _raise_singular(k, everyone)
-            nu = z[..., k, :] - x_use @ Ht
+            K = sol[:, :n].T
+            nis = np.einsum("bi,ib->b", flat, sol[:, n:]).reshape(batch)
+            dof = m
             x_new = x_use + nu @ K.T
             IKH = eye - K @ H
             P_new = IKH @ P_use @ IKH.T + K @ R @ K.T if joseph else IKH @ P_use
             P_new = 0.5 * (P_new + P_new.T)
         elif present.any():
             try:
-                x_new, P_new = _linear_update_shared(x_use, P_use, z[..., k, :], present, H, R, joseph=joseph)
+                x_new, P_new, nis, dof = _linear_update_shared(x_use, P_use, z[..., k, :], present, H, R,
+                                                               joseph=joseph)
             except _Singular as exc:
                 _raise_singular(k, exc.bad)
             nu = np.where(present, z[..., k, :] - x_use @ Ht, np.nan)
@@ -282,16 +445,18 @@ def _kalman_filter_shared(z, F, H, Q, R, x, P, pattern, predict_first, variant, 
             if not np.isfinite(x).all():
                 _raise_singular(k, ~np.all(np.isfinite(x), axis=-1))
             out_nu[..., k, :] = nu
+            out_nis[..., k] = nis
+            out_dof[..., k] = dof
         out_x[..., k, :], out_P[..., k, :, :] = x, P
         out_xp[..., k, :], out_Pp[..., k, :, :] = x_use, P_use
-    return KalmanResult(out_x, out_P, out_xp, out_Pp, out_nu, variant)
+    return KalmanResult(out_x, out_P, out_xp, out_Pp, out_nu, variant, out_nis, out_dof)
 
 
 def _linear_update_shared(x, P, z, present, H, R, *, joseph: bool = True):
     """:func:`_linear_update` with one covariance ``P (n, n)`` and one ``H``, ``R`` for every run, the components
-    ``present (m,)`` the same in every run; ``x`` and ``z`` batched."""
+    ``present (m,)`` the same in every run; ``x`` and ``z`` batched. Also returns the NIS ``batch`` and its dof."""
     if not present.any():
-        return x, P
+        return x, P, np.zeros(x.shape[:-1]), 0
     m = present.size
     if not present.all():
         H = np.where(present[:, None], H, 0.0)
@@ -302,20 +467,26 @@ def _linear_update_shared(x, P, z, present, H, R, *, joseph: bool = True):
     everyone = np.ones(x.shape[:-1], bool)
     if _not_positive_definite(S):
         raise _Singular(everyone)
+    flat = nu.reshape(-1, m)
     if m <= 2:
-        K = HP.T @ _inv_small(S)
+        S_inv = _inv_small(S)
+        K = HP.T @ S_inv
+        nis = np.einsum("bi,ij,bj->b", flat, S_inv, flat)
     else:
-        try:
-            K = np.linalg.solve(S, HP).T
+        try:                                    # K' = S^{-1} H P and S^{-1} nu^T in one solve
+            sol = np.linalg.solve(S, np.concatenate([HP, flat.T], axis=-1))
         except np.linalg.LinAlgError:
             raise _Singular(everyone) from None
+        K = sol[:, :P.shape[-1]].T
+        nis = np.einsum("bi,ib->b", flat, sol[:, P.shape[-1]:])
+    nis, dof = nis.reshape(x.shape[:-1]), int(present.sum())
     x_new = x + nu @ K.T
     if not np.isfinite(x_new).all():
         raise _Singular(~np.all(np.isfinite(x_new), axis=-1))
     if joseph:
-        return x_new, _joseph(P, K, H, R)
+        return x_new, _joseph(P, K, H, R), nis, dof
     short = (np.eye(P.shape[-1]) - K @ H) @ P
-    return x_new, 0.5 * (short + short.T)
+    return x_new, 0.5 * (short + short.T), nis, dof
 
 
 # --------------------------------------------------------------------------------------------------
@@ -467,12 +638,18 @@ MEASUREMENT_TYPES = (LinearMeasurement, RssMeasurement, NonlinearMeasurement)
 
 
 @dataclass(frozen=True)
-class TrackResult:
-    """Posterior means ``batch + (S, n)`` and covariances ``batch + (S, n, n)`` at the recorded ``steps`` (S,)."""
+class TrackResult(_Divergence):
+    """Posterior means ``batch + (S, n)`` and covariances ``batch + (S, n, n)`` at the recorded ``steps`` (S,);
+    the consistency guard's ``nis`` and ``nis_dof`` ``batch + (T,)`` at every step (recorded or not), ``diverged``
+    and ``diverged_step`` ``batch`` (module docstring)."""
 
     x: np.ndarray
     P: np.ndarray
     steps: np.ndarray
+    nis: np.ndarray = None
+    nis_dof: np.ndarray = None
+    diverged: np.ndarray = None
+    diverged_step: np.ndarray = None
 
 
 def rss_measurement_jacobian(positions_m, anchors_m, path_loss_exp, *, min_distance_m: float = 1e-3):
@@ -523,10 +700,12 @@ def _inv_small(S):
 def _linear_update(x, P, z, H, R, *, joseph: bool = True):
     """Kalman update with missing rows: a NaN component gets a zero row in H, a zero innovation and a unit
     decoupled noise, so its gain column is exactly zero and the other rows update as usual. ``joseph=False``:
-    the short covariance form ``(I - K H) P`` (symmetrised)."""
+    the short covariance form ``(I - K H) P`` (symmetrised). Also returns the NIS ``nu^T S^{-1} nu`` of the rows
+    present ``batch`` and their number (the dof) ``batch``."""
     valid = np.isfinite(z)
+    dof = valid.sum(axis=-1)
     if not valid.any():
-        return x, P
+        return x, P, np.zeros(np.broadcast_shapes(x.shape[:-1], z.shape[:-1])), dof
     if not valid.all():
         H = np.where(valid[..., :, None], H, 0.0)
         pair = valid[..., :, None] & valid[..., None, :]
@@ -542,16 +721,24 @@ def _linear_update(x, P, z, H, R, *, joseph: bool = True):
     if bad.any():
         raise _Singular(bad)
     if S.shape[-1] <= 2:                                      # K = P H^T S^{-1}, closed-form inverse
-        K = _mT(HP) @ _inv_small(S)
-    else:
-        K = _mT(_solve_active(S, HP, valid.any(axis=-1)))
+        S_inv = _inv_small(S)
+        K = _mT(HP) @ S_inv
+        nis = np.einsum("...i,...i->...", nu, (S_inv @ nu[..., None])[..., 0])
+    else:                                                     # K' = S^{-1} H P and S^{-1} nu from one solve
+        n = P.shape[-1]
+        both = np.broadcast_shapes(nu.shape[:-1], HP.shape[:-2])
+        rhs = np.concatenate([np.broadcast_to(HP, both + HP.shape[-2:]), np.broadcast_to(nu, both + nu.shape[-1:])[..., None]],
+                             axis=-1)
+        sol = _solve_active(S, rhs, valid.any(axis=-1))
+        K = _mT(sol[..., :n])
+        nis = np.einsum("...i,...i->...", nu, sol[..., n])
     x_new = x + (K @ nu[..., None])[..., 0]
     if not np.isfinite(x_new).all():                          # a larger S that is not positive definite
         raise _Singular(~np.all(np.isfinite(x_new), axis=-1))
     if joseph:
-        return x_new, _joseph(P, K, H, R)
+        return x_new, _joseph(P, K, H, R), nis, dof
     short = (np.eye(P.shape[-1]) - K @ H) @ P
-    return x_new, 0.5 * (short + _mT(short))
+    return x_new, 0.5 * (short + _mT(short)), nis, dof
 
 
 def _rss_parallel_update(x, P, z, meas: RssMeasurement, step: int = 0):
@@ -597,6 +784,9 @@ def _rss_serial_update(x, P, z, meas: RssMeasurement, step: int = 0):
     ple = np.broadcast_to(np.asarray(ch.path_loss_exp, dtype=float), z.shape)
     sigma2 = np.broadcast_to(np.asarray(ch.sigma_db, dtype=float) ** 2, z.shape)
     order = _serial_order(z, meas.order)
+    # the scalar innovations of one step are independent under the model (each is conditioned on the previous
+    # updates), so their NIS add up to a chi-square with one dof per reading
+    nis, dof = np.zeros(x.shape[:-1]), np.isfinite(z).sum(axis=-1)
     for j in range(m):
         a = order[..., j]
         zj = np.take_along_axis(z, a[..., None], -1)[..., 0]
@@ -616,9 +806,10 @@ def _rss_serial_update(x, P, z, meas: RssMeasurement, step: int = 0):
         if (valid & ~(s > 0)).any():
             raise _Singular(valid & ~(s > 0))
         K = np.where(valid[..., None], ph / s[..., None], 0.0)
+        nis = nis + np.where(valid, nu * nu / np.where(valid, s, 1.0), 0.0)
         x = x + K * nu[..., None]
         P = _joseph(P, K[..., :, None], h_row[..., None, :], var[..., None, None])
-    return x, P
+    return x, P, nis, dof
 
 
 def _nonlinear_ekf_update(x, P, z, meas: NonlinearMeasurement):
@@ -639,9 +830,11 @@ def _linear_stream_update(x, P, z, meas: LinearMeasurement):
     H, R = np.asarray(meas.H, float), np.asarray(meas.R, float)
     if meas.mode == "parallel":
         return _linear_update(x, P, z, H, R)
+    nis, dof = 0.0, 0
     for j in range(z.shape[-1]):
-        x, P = _linear_update(x, P, z[..., j:j + 1], H[..., j:j + 1, :], R[..., j:j + 1, j:j + 1])
-    return x, P
+        x, P, nis_j, dof_j = _linear_update(x, P, z[..., j:j + 1], H[..., j:j + 1, :], R[..., j:j + 1, j:j + 1])
+        nis, dof = nis + nis_j, dof + dof_j
+    return x, P, nis, dof
 
 
 def _ekf_update(x, P, z, meas, step):
@@ -681,7 +874,12 @@ def _setup(F, Q, x0, P0, measurements, record, filter_name) -> _Setup:
     F = as_array("F", F)
     if F.ndim < 2 or F.shape[-1] != F.shape[-2]:
         raise ValueError(f"F must be square (n, n) or batch + (n, n), got {F.shape}")
-    Q = _matrix("Q", Q, F.shape[-1], F.shape[-1])
+    Q = _covariance("Q", Q, F.shape[-1])
+    try:
+        measurements = list(measurements)
+    except TypeError:
+        raise ValueError(f"measurements must be a list of measurement streams, got {type(measurements).__name__}") \
+            from None
     if not all(isinstance(m, MEASUREMENT_TYPES) for m in measurements):
         raise ValueError("measurements must be LinearMeasurement, RssMeasurement or NonlinearMeasurement streams, got "
                          f"{[type(m).__name__ for m in measurements]}")
@@ -698,11 +896,14 @@ def _setup(F, Q, x0, P0, measurements, record, filter_name) -> _Setup:
         raise ValueError(f"measurement streams must share one time grid, got lengths {sorted(T)}")
     T = T.pop()
     x = as_array("x0", x0)
-    P = as_array("P0", P0)
     n = F.shape[-1]
-    if x.ndim < 1 or x.shape[-1] != n or P.ndim < 2 or P.shape[-2:] != (n, n):
-        raise ValueError(f"x0 must end in ({n},) and P0 in ({n}, {n}); got {x.shape} and {P.shape}")
-    batch = np.broadcast_shapes(x.shape[:-1], P.shape[:-2], *(np.shape(s)[:-2] for s in streams))
+    if x.ndim < 1 or x.shape[-1] != n:
+        raise ValueError(f"x0 must end in ({n},); got {x.shape}")
+    P = _covariance("P0", P0, n)
+    # every argument with run axes sets the batch (a batched Q alone runs one filter per Q)
+    batch = _batch_shape(("x0", x.shape[:-1]), ("P0", P.shape[:-2]), ("F", F.shape[:-2]), ("Q", Q.shape[:-2]),
+                         *((_stream_name(m), shape) for m, s in zip(measurements, streams)
+                           for shape in _stream_batch_shapes(m, s)))
     x = np.broadcast_to(x, batch + (n,)).copy()
     steps = np.arange(T) if record is None else np.asarray(record)
     if record is not None and (steps.ndim != 1 or not np.issubdtype(steps.dtype, np.integer)
@@ -715,9 +916,26 @@ def _setup(F, Q, x0, P0, measurements, record, filter_name) -> _Setup:
     return _Setup(F, Q, x, P, batch, T, steps, slot, zs, active)
 
 
+def _stream_batch_shapes(meas, z):
+    """The run axes that a stream's arrays carry: its readings ``batch + (T, m)`` and its parameters (H, R, anchors
+    per step ``batch + (T, m, dim)``, channel parameters ``batch + (1 or m,)``)."""
+    shapes = [np.shape(z)[:-2]]
+    if isinstance(meas, (LinearMeasurement, NonlinearMeasurement)):
+        shapes.append(np.shape(meas.R)[:-2])
+    if isinstance(meas, LinearMeasurement):
+        shapes.append(np.shape(meas.H)[:-2])
+    if isinstance(meas, RssMeasurement):
+        shapes.append(np.shape(meas.anchors_m)[:-3])
+        ch = meas.channel
+        shapes += [np.shape(v)[:-1] for v in (ch.ref_power_dbm, ch.path_loss_exp, ch.sigma_db)]
+    return shapes
+
+
 def _steps_with_readings(z):
     """``(T,)``: the steps at which ``z`` ``batch + (T, m)`` has a reading in some run (batch axes reduced first:
     one pass over contiguous memory)."""
+    if z.size == 0:
+        return np.zeros(z.shape[-2], bool)
     finite = np.isfinite(z).reshape(-1, z.shape[-2] * z.shape[-1])
     return finite.any(axis=0).reshape(z.shape[-2:]).any(axis=-1)
 
@@ -733,29 +951,39 @@ def _time_loop(setup: _Setup, measurements, update, predict_first: bool, *, shar
     steps, slot = setup.steps, setup.slot
     out_x = np.empty(batch + (steps.size, n))
     out_P = np.empty(batch + (steps.size, n, n))
+    out_nis = np.full(batch + (setup.T,), np.nan)
+    out_dof = np.zeros(batch + (setup.T,), np.int64)
     Ft = np.ascontiguousarray(_mT(F))
     for k in range(setup.T):
         if predict_first or k > 0:
-            x = x @ Ft
+            x = x @ Ft if F.ndim == 2 else _apply(F, x)
             P = F @ P @ Ft + Q
+        nis, dof = 0.0, 0
         for meas, z, act in zip(measurements, setup.zs, setup.active):
             if not act[k]:
                 continue
             try:
+                out = None
                 if shared:
                     out = _shared_linear_update(x, P, z[..., k, :], meas)
-                    if out is not None:
-                        x, P = out
-                        continue
-                    shared = False
-                    P = np.broadcast_to(P, batch + (n, n)).copy()
-                x, P = update(x, P, z[..., k, :], meas, k)
+                    if out is None:
+                        shared = False
+                        P = np.broadcast_to(P, batch + (n, n)).copy()
+                if out is None:
+                    out = update(x, P, z[..., k, :], meas, k)
             except _Singular as exc:
                 _raise_singular(k, exc.bad, f"innovation covariance of the {_stream_name(meas)} update", exc.message)
+            x, P = out[0], out[1]
+            if len(out) == 4:        # the update's NIS and dof (a foreign update function may return x and P only)
+                nis, dof = nis + out[2], dof + out[3]
+            else:
+                nis = nis + np.nan
+        out_nis[..., k] = np.where(np.asarray(dof) > 0, nis, np.nan)
+        out_dof[..., k] = dof
         if slot[k] >= 0:
             out_x[..., slot[k], :] = x
             out_P[..., slot[k], :, :] = P
-    return TrackResult(out_x, out_P, steps)
+    return TrackResult(out_x, out_P, steps, out_nis, out_dof)
 
 
 def _shared_linear_update(x, P, z, meas):
@@ -774,23 +1002,36 @@ def _shared_linear_update(x, P, z, meas):
     present = flat[0]
     if meas.mode == "parallel":
         return _linear_update_shared(x, P, z, present, H, R)
+    nis, dof = 0.0, 0
     for j in range(m):
-        x, P = _linear_update_shared(x, P, z[..., j:j + 1], present[j:j + 1], H[j:j + 1], R[j:j + 1, j:j + 1])
-    return x, P
+        x, P, nis_j, dof_j = _linear_update_shared(x, P, z[..., j:j + 1], present[j:j + 1], H[j:j + 1],
+                                                   R[j:j + 1, j:j + 1])
+        nis, dof = nis + nis_j, dof + dof_j
+    return x, P, nis, dof
 
 
 def run_recursive_filter(F, Q, x0, P0, measurements, update, *, record=None, predict_first: bool = True,
-                         filter_name: str = "filter") -> TrackResult:
+                         filter_name: str = "filter", divergence_window: int | None = DIVERGENCE_WINDOW,
+                         divergence_probability: float = DIVERGENCE_PROBABILITY) -> TrackResult:
     """The time loop shared by the EKF and the UKF: at every step predict with the linear motion
     ``x = F x``, ``P = F P F^T + Q``, then apply the ``measurements`` present at that step in the given order with
-    ``update(x, P, z_k, stream, k)`` (each starts from the previous update's posterior). Checks the inputs; see
-    :func:`extended_kalman_filter` for the arguments."""
+    ``update(x, P, z_k, stream, k)`` (each starts from the previous update's posterior), which returns ``(x, P)`` or
+    ``(x, P, nis, dof)`` (the update's normalised innovation squared and its dimension per run, for the consistency
+    guard of the module docstring). Checks the inputs; see :func:`extended_kalman_filter` for the arguments."""
+    window, probability = _check_guard(divergence_window, divergence_probability)
     setup = _setup(F, Q, x0, P0, measurements, record, filter_name)
-    return _time_loop(setup, measurements, update, predict_first)
+    return _flag(_time_loop(setup, measurements, update, predict_first), window, probability)
 
 
-def extended_kalman_filter(F, Q, x0, P0, measurements, *, record=None,
-                           predict_first: bool = True) -> TrackResult:
+def _flag(res: TrackResult, window: int, probability: float) -> TrackResult:
+    """``res`` with the guard's ``diverged`` and ``diverged_step`` (module docstring)."""
+    diverged, step = nis_divergence(res.nis, res.nis_dof, window, probability)
+    return replace(res, diverged=diverged, diverged_step=step)
+
+
+def extended_kalman_filter(F, Q, x0, P0, measurements, *, record=None, predict_first: bool = True,
+                           divergence_window: int | None = DIVERGENCE_WINDOW,
+                           divergence_probability: float = DIVERGENCE_PROBABILITY) -> TrackResult:
     """Multi-rate (extended) Kalman filter on one time grid, vectorized over leading Monte-Carlo axes.
 
     At every step: predict with ``x = F x``, ``P = F P F^T + Q`` (linear motion, so the EKF's F is F), then apply
@@ -802,14 +1043,22 @@ def extended_kalman_filter(F, Q, x0, P0, measurements, *, record=None,
 
     ``x0``, ``P0``: ``batch + (n,)``, ``batch + (n, n)``; with ``predict_first`` (filterpy's convention) they
     are the posterior one step before step 0, else the prior at step 0. ``record``: step indices to return
-    (default all).
+    (default all). ``F``, ``Q``, ``P0`` and the streams' H, R and anchors may carry run axes (the batch is the
+    broadcast of all run axes); Q, P0 and R must be symmetric positive semi-definite (checked up front).
+
+    ``divergence_window``, ``divergence_probability``: the consistency guard (module docstring). The result's
+    ``nis`` ``batch + (T,)`` sums the NIS of the step's updates (for a serial stream, its scalar updates, whose
+    innovations are independent under the model, so the sum is chi-square with one dof per reading); a run whose NIS
+    exceeds ``chi2.ppf(divergence_probability, dof)`` at ``divergence_window`` consecutive updates is flagged in
+    ``diverged`` with its ``diverged_step``; 0 or None turns the flag off.
     """
+    window, probability = _check_guard(divergence_window, divergence_probability)
     setup = _setup(F, Q, x0, P0, measurements, record, "extended_kalman_filter")
     if not _covariance_shared_throughout(setup, measurements):
         compiled = _compiled_ekf(setup, measurements, predict_first)
         if compiled is not None:
-            return compiled
-    return _time_loop(setup, measurements, _ekf_update, predict_first, shared=True)
+            return _flag(compiled, window, probability)
+    return _flag(_time_loop(setup, measurements, _ekf_update, predict_first, shared=True), window, probability)
 
 
 def _covariance_shared_throughout(setup: _Setup, measurements) -> bool:
@@ -889,13 +1138,13 @@ def _nb_predict(Fi, Fj, Fv, Q, x, P, xt, T1):
                 P[c, a, w] = P[a, c, w]
 
 
-def _nb_update(x, P, c, nz, nnz, H, nu, R, HP, HPH, S, L, KT, PH, D, t, u):
+def _nb_update(x, P, c, nz, nnz, H, nu, R, HP, HPH, S, L, KT, PH, D, t, u, Y, nis):
     """Kalman update in place, lane by lane (last axis), with the rows ``H[:c]`` (nonzero only in the columns
     ``nz[:nnz]``), innovations ``nu[:c]`` and noise ``R[:c, :c]``; a missing reading is a zero row with zero
     innovation and unit decoupled noise (its gain column is then exactly zero). K = P H^T S^{-1} (Cholesky of
     S = H P H^T + R), x += K nu, and the Joseph form (I - K H) P (I - K H)^T + K R K^T, symmetrised, written as
-    P - K (H P) + (K S - P H^T) K^T (equal for any K). False when some S is not positive definite or some state not
-    finite."""
+    P - K (H P) + (K S - P H^T) K^T (equal for any K). Adds each lane's NIS nu^T S^{-1} nu = |L^{-1} nu|^2 to
+    ``nis`` (a missing row adds 0). False when some S is not positive definite or some state not finite."""
     n = x.shape[0]
     for r in range(c):                                    # HP = H P, PH = P H^T
         for j in range(n):
@@ -939,6 +1188,15 @@ def _nb_update(x, P, c, nz, nnz, H, nu, R, HP, HPH, S, L, KT, PH, D, t, u):
                     t[w] -= L[i, q, w] * L[j, q, w]
             for w in range(_LANES):
                 L[i, j, w] = t[w] / L[j, j, w]
+    for i in range(c):                                    # NIS = |Y|^2, L Y = nu (forward substitution)
+        for w in range(_LANES):
+            Y[i, w] = nu[i, w]
+        for q in range(i):
+            for w in range(_LANES):
+                Y[i, w] -= L[i, q, w] * Y[q, w]
+        for w in range(_LANES):
+            Y[i, w] /= L[i, i, w]
+            nis[w] += Y[i, w] * Y[i, w]
     for j in range(n):                                    # K^T = S^{-1} H P
         for i in range(c):
             for w in range(_LANES):
@@ -1015,10 +1273,11 @@ def _nb_rss_row(x, w, pidx, npos, tag_h, anchor, p0, ple, sigma, ref_d, ch_min, 
 
 
 def _nb_ekf(Fi, Fj, Fv, Q, x0, P0, predict_first, slot, active, kind, col, nz, nnz, Z, H, R, A, P0c, PLE, SIG, dims,
-            ref_d, ch_min, meas_min, anchor_sigma, tag_h, pidx, npos, descending, out_x, out_P):
+            ref_d, ch_min, meas_min, anchor_sigma, tag_h, pidx, npos, descending, out_x, out_P, out_nis, out_dof):
     """The EKF time loop of :func:`_time_loop` with :func:`_ekf_update`, over blocks of ``_LANES`` runs (the last
-    block padded with copies of the last run). Returns 0, or 1 + a run whose update failed (the caller then redoes
-    the filter in numpy, which raises the library's error)."""
+    block padded with copies of the last run), with each run's NIS and its dof at every step (``out_nis``,
+    ``out_dof`` ``(B, T)``; NaN and 0 where no update). Returns 0, or 1 + a run whose update failed (the caller then
+    redoes the filter in numpy, which raises the library's error)."""
     T, B, n, ns = Z.shape[0], Z.shape[1], x0.shape[1], kind.shape[0]
     mmax = 1
     for s in range(ns):
@@ -1030,6 +1289,7 @@ def _nb_ekf(Fi, Fj, Fv, Q, x0, P0, predict_first, slot, active, kind, col, nz, n
     Rr, S, L = np.zeros((mmax, mmax, _LANES)), np.empty((mmax, mmax, _LANES)), np.zeros((mmax, mmax, _LANES))
     HPH, PH, D = np.empty((mmax, mmax, _LANES)), np.empty((n, mmax, _LANES)), np.empty((n, mmax, _LANES))
     t, t2 = np.empty(_LANES), np.empty(_LANES)
+    Y, nis, dof = np.empty((mmax, _LANES)), np.zeros(_LANES), np.zeros(_LANES, np.int64)
     valid = np.zeros((mmax, _LANES), np.bool_)
     sel = np.empty((mmax, _LANES), np.int64)
     run = np.empty(_LANES, np.int64)
@@ -1044,6 +1304,9 @@ def _nb_ekf(Fi, Fj, Fv, Q, x0, P0, predict_first, slot, active, kind, col, nz, n
         for k in range(T):
             if predict_first or k > 0:
                 _nb_predict(Fi, Fj, Fv, Q, x, P, xt, T1)
+            for w in range(_LANES):
+                nis[w] = 0.0
+                dof[w] = 0
             ta = min(k, A.shape[1] - 1)
             for s in range(ns):
                 if not active[s, k]:                      # no reading of this stream at this step in any run
@@ -1078,6 +1341,7 @@ def _nb_ekf(Fi, Fj, Fv, Q, x0, P0, predict_first, slot, active, kind, col, nz, n
                             if not valid[r, w]:
                                 continue
                             present = True
+                            dof[w] += 1
                             if kd <= 1:
                                 bh = min(b, H.shape[0] - 1)
                                 q = 0.0
@@ -1109,8 +1373,11 @@ def _nb_ekf(Fi, Fj, Fv, Q, x0, P0, predict_first, slot, active, kind, col, nz, n
                                     Rr[r, q, w] = R[min(run[w], R.shape[0] - 1), c0 + jr, c0 + jq]
                                 else:
                                     Rr[r, q, w] = var[r, w] if r == q else 0.0
-                    if not _nb_update(x, P, rows, nz[s], nnz[s], Hr, nu, Rr, HP, HPH, S, L, KT, PH, D, t, t2):
+                    if not _nb_update(x, P, rows, nz[s], nnz[s], Hr, nu, Rr, HP, HPH, S, L, KT, PH, D, t, t2, Y, nis):
                         return b0 + 1
+            for w in range(min(_LANES, B - b0)):
+                out_nis[b0 + w, k] = nis[w] if dof[w] > 0 else np.nan
+                out_dof[b0 + w, k] = dof[w]
             if slot[k] >= 0:
                 for w in range(min(_LANES, B - b0)):
                     for i in range(n):
@@ -1212,11 +1479,13 @@ def _compiled_ekf(setup: _Setup, measurements, predict_first: bool):
     Fi, Fj = np.nonzero(F)
     P0 = setup.P[None] if setup.P.ndim == 2 else np.broadcast_to(setup.P, batch + (n, n)).reshape(B, n, n)
     out_x, out_P = np.empty((B, S, n)), np.empty((B, S, n, n))
+    out_nis, out_dof = np.empty((B, T)), np.empty((B, T), np.int64)
     try:
         status = _nb_ekf(Fi.astype(np.int64), Fj.astype(np.int64), np.ascontiguousarray(F[Fi, Fj]),
                          np.ascontiguousarray(Q), np.ascontiguousarray(setup.x.reshape(B, n)), np.ascontiguousarray(P0),
                          bool(predict_first), setup.slot.astype(np.int64),
-                         np.array(setup.active, dtype=np.bool_).reshape(-1, T), *packed, out_x, out_P)
+                         np.array(setup.active, dtype=np.bool_).reshape(-1, T), *packed, out_x, out_P, out_nis,
+                         out_dof)
     except Exception as exc:        # numba could not compile or run the kernel here: numpy from now on
         _NUMBA_ENABLED = False
         warnings.warn(f"locbook: the compiled EKF failed ({type(exc).__name__}: {exc}); using the numpy loop "
@@ -1224,4 +1493,5 @@ def _compiled_ekf(setup: _Setup, measurements, predict_first: bool):
         return None
     if status:
         return None
-    return TrackResult(out_x.reshape(batch + (S, n)), out_P.reshape(batch + (S, n, n)), setup.steps)
+    return TrackResult(out_x.reshape(batch + (S, n)), out_P.reshape(batch + (S, n, n)), setup.steps,
+                       out_nis.reshape(batch + (T,)), out_dof.reshape(batch + (T,)))

@@ -39,7 +39,8 @@ import numpy as np
 
 from .._validate import check_choice, check_scalar
 from ..models.channel import log_distance_mean_dbm
-from .kalman import (LinearMeasurement, NonlinearMeasurement, RssMeasurement, TrackResult, _inv_small, _mT,
+from .kalman import (DIVERGENCE_PROBABILITY, DIVERGENCE_WINDOW, LinearMeasurement, NonlinearMeasurement,
+                     RssMeasurement, TrackResult, _inv_small, _mT,
                      _not_positive_definite, _pick_anchor, _serial_order, _Singular, _singular_runs,
                      run_recursive_filter)
 
@@ -128,10 +129,12 @@ def unscented_transform(points, values, weights: UnscentedWeights):
 
 def _ukf_update(x, P, z, h, R, weights: UnscentedWeights, innovation_noise: bool, guard: list):
     """One unscented update with measurement function ``h`` (sigma points -> values); NaN rows of ``z`` are left
-    out. ``guard[0]`` counts the updates whose ``R~`` needed flooring."""
+    out. ``guard[0]`` counts the updates whose ``R~`` needed flooring. Returns ``(x, P, nis, dof)``: the NIS
+    ``nu^T S^{-1} nu`` of the components present (from the inverse that gives the gain) and their number."""
     valid = np.isfinite(z)
+    dof = valid.sum(axis=-1)
     if not valid.any():
-        return x, P
+        return x, P, np.zeros(x.shape[:-1]), dof
     X, L = _sigma_points(x, P, weights.lam)
     Y = h(X)
     n, m = x.shape[-1], z.shape[-1]
@@ -160,7 +163,9 @@ def _ukf_update(x, P, z, h, R, weights: UnscentedWeights, innovation_noise: bool
         raise _Singular(bad)
     nu = np.where(valid, z - z_hat, 0.0)
     S_use = S if row_ok.all() else np.where(row_ok[..., None, None], S, np.eye(m))
-    K = Pxz @ _inverse(S_use, row_ok)                # K = P_xz S^{-1}
+    S_inv = _inverse(S_use, row_ok)
+    K = Pxz @ S_inv                                  # K = P_xz S^{-1}
+    nis = np.where(row_ok, np.einsum("...i,...i->...", nu, (S_inv @ nu[..., None])[..., 0]), 0.0)
     x_new = x + (K @ nu[..., None])[..., 0]
     if not np.all(np.isfinite(x_new)):
         raise _Singular(~np.all(np.isfinite(x_new), axis=-1))
@@ -182,7 +187,7 @@ def _ukf_update(x, P, z, h, R, weights: UnscentedWeights, innovation_noise: bool
     if keep.any():
         x_new = np.where(keep[..., None], x, x_new)
         P_new = np.where(keep[..., None, None], P, P_new)
-    return x_new, P_new
+    return x_new, P_new, nis, dof
 
 
 def _inverse(A, active):
@@ -262,7 +267,9 @@ class UkfResult(TrackResult):
 
 def unscented_kalman_filter(F, Q, x0, P0, measurements, *, alpha: float = 1e-3, beta: float = 2.0,
                             kappa: float = 0.0, weights: str = "corrected", innovation_noise: bool = True,
-                            record=None, predict_first: bool = True) -> UkfResult:
+                            record=None, predict_first: bool = True,
+                            divergence_window: int | None = DIVERGENCE_WINDOW,
+                            divergence_probability: float = DIVERGENCE_PROBABILITY) -> UkfResult:
     """Unscented Kalman filter with linear motion, vectorized over leading Monte-Carlo axes (Gudipati 2017,
     Sec. 3.6, corrected; see the module docstring for the printed errors and the covariance guard).
 
@@ -275,6 +282,12 @@ def unscented_kalman_filter(F, Q, x0, P0, measurements, *, alpha: float = 1e-3, 
     kappa = 0). ``weights``: ``"corrected"`` or the flagged ``"literal_001"`` (Eq. (3.22) as printed).
     ``innovation_noise=False``: Eq. (3.26) as printed, without R (flagged: with more measurements than the
     state's spread can explain, P_zz is singular and the update stops with a clear error).
+
+    ``divergence_window``, ``divergence_probability``: the consistency guard of :mod:`locbook.tracking.kalman` (its
+    module docstring). The UKF can lose track while its covariance stays symmetric positive definite (a sigma-point
+    spread far beyond the measurement's linear range, e.g. sigma = 1e-3 dB with Q = 1e4 at alpha = 1; or the
+    round-off of alpha = 1e-3 over 1e5 steps): its error then grows far beyond the reported covariance, the NIS
+    exceeds the chi-square bound at every update and the run is flagged ``diverged`` (with ``diverged_step``).
     """
     check_choice("weights", weights, UKF_WEIGHTS)
     F_arr = np.asarray(F)
@@ -302,11 +315,13 @@ def unscented_kalman_filter(F, Q, x0, P0, measurements, *, alpha: float = 1e-3, 
             if meas.mode == "parallel":
                 return _ukf_update(x, P, z, lambda X: X @ _mT(H) if H.ndim == 2 else np.einsum("...mn,...kn->...km", H, X),
                                    R, w, innovation_noise, guard)
+            nis, dof = 0.0, 0
             for j in range(z.shape[-1]):
                 Hj = H[..., j:j + 1, :]
-                x, P = _ukf_update(x, P, z[..., j:j + 1], lambda X: np.einsum("...mn,...kn->...km", Hj, X),
-                                   R[..., j:j + 1, j:j + 1], w, innovation_noise, guard)
-            return x, P
+                x, P, nis_j, dof_j = _ukf_update(x, P, z[..., j:j + 1], lambda X: np.einsum("...mn,...kn->...km", Hj, X),
+                                                 R[..., j:j + 1, j:j + 1], w, innovation_noise, guard)
+                nis, dof = nis + nis_j, dof + dof_j
+            return x, P, nis, dof
         if isinstance(meas, NonlinearMeasurement):
             return _ukf_update(x, P, z, meas.h, np.asarray(meas.R, float), w, innovation_noise, guard)
         m = z.shape[-1]
@@ -315,14 +330,18 @@ def unscented_kalman_filter(F, Q, x0, P0, measurements, *, alpha: float = 1e-3, 
             return _ukf_update(x, P, z, _rss_function(meas, step), sigma2[..., :, None] * np.eye(m), w,
                                innovation_noise, guard)
         order = _serial_order(z, meas.order)
+        nis, dof = 0.0, 0          # scalar innovations of one step: independent under the model, their NIS add up
         for j in range(m):
             a = order[..., j]
             zj = np.take_along_axis(z, a[..., None], -1)
-            x, P = _ukf_update(x, P, zj, _rss_function(meas, step, a),
-                               np.take_along_axis(_rss_noise(meas, x, z, step), a[..., None], -1)[..., None],
-                               w, innovation_noise, guard)
-        return x, P
+            x, P, nis_j, dof_j = _ukf_update(x, P, zj, _rss_function(meas, step, a),
+                                             np.take_along_axis(_rss_noise(meas, x, z, step), a[..., None], -1)[..., None],
+                                             w, innovation_noise, guard)
+            nis, dof = nis + nis_j, dof + dof_j
+        return x, P, nis, dof
 
     res = run_recursive_filter(F, Q, x0, P0, measurements, update, record=record, predict_first=predict_first,
-                               filter_name="unscented_kalman_filter")
-    return UkfResult(res.x, res.P, res.steps, weights=w, floored_updates=guard[0])
+                               filter_name="unscented_kalman_filter", divergence_window=divergence_window,
+                               divergence_probability=divergence_probability)
+    return UkfResult(res.x, res.P, res.steps, res.nis, res.nis_dof, res.diverged, res.diverged_step, weights=w,
+                     floored_updates=guard[0])

@@ -1,0 +1,280 @@
+"""Issue 26, item 2: the consistency guard of every Kalman-family filter.
+
+The normalised innovation squared NIS = nu^T S^{-1} nu is checked against filterpy (its ``mahalanobis`` is
+sqrt(NIS)); on a linear-Gaussian model simulated from the filter's own model NIS ~ chi^2(dof) and the false-alarm
+fraction stays below the bound (T - w + 1) (1 - p)^w of a window of w consecutive exceedances at probability p; the
+UKF scenarios of the issue (sigma = 1e-3 dB, Q = 1e4, alpha = 1; a run that lost track at alpha = 1e-3 with 20 % of
+the readings missing) are flagged while the EKF on the same data is not; numpy and the compiled EKF agree on the
+flags; the window rule is checked against a plain per-run loop.
+"""
+import numpy as np
+import pytest
+from filterpy.kalman import KalmanFilter
+from scipy.stats import chi2
+
+import locbook as lb
+from locbook.tracking import kalman as K
+
+try:
+    import numba  # noqa: F401
+    HAVE_NUMBA = True
+except ImportError:
+    HAVE_NUMBA = False
+
+MODEL = lb.constant_velocity(1.0, 0.1)
+H = MODEL.position_measurement_matrix()
+R = np.array([[0.5, 0.1], [0.1, 0.3]])
+ANCHORS = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]])
+
+
+def _simulate(runs, steps, seed, missing=0.0):
+    """States and position fixes drawn from the filter's own model (x0 ~ N(X0, P0), w ~ N(0, Q), v ~ N(0, R))."""
+    rng = np.random.default_rng(seed)
+    x0, P0 = np.array([1.0, 2.0, 0.5, -0.3]), np.eye(4)
+    x = x0 + rng.multivariate_normal(np.zeros(4), P0, runs)
+    xs = np.empty((runs, steps, 4))
+    for k in range(steps):
+        x = x @ MODEL.F.T + rng.multivariate_normal(np.zeros(4), MODEL.Q, runs)
+        xs[:, k] = x
+    z = xs @ H.T + rng.multivariate_normal(np.zeros(2), R, (runs, steps))
+    z[rng.random(z.shape) < missing] = np.nan
+    return xs, z, x0, P0
+
+
+def _filterpy_nis(z, x0, P0):
+    """filterpy's KalmanFilter per run with the components present: NIS = mahalanobis^2, NaN where no update."""
+    nis = np.full(z.shape[:2], np.nan)
+    for b in range(z.shape[0]):
+        f = KalmanFilter(dim_x=4, dim_z=2)
+        f.F, f.Q, f.x, f.P = MODEL.F, MODEL.Q, x0.copy(), P0.copy()
+        for k in range(z.shape[1]):
+            f.predict()
+            keep = np.isfinite(z[b, k])
+            if keep.any():
+                f.update(z[b, k, keep], R=R[np.ix_(keep, keep)], H=H[keep])
+                nis[b, k] = f.mahalanobis ** 2
+    return nis
+
+
+@pytest.fixture
+def numba_path(request, monkeypatch):
+    monkeypatch.setattr(K, "_NUMBA_ENABLED", request.param == "numba")
+    monkeypatch.setattr(K, "_NUMBA_MIN_WORK", 0)
+    return request.param
+
+
+PATHS = ["numpy"] + (["numba"] if HAVE_NUMBA else [])
+
+
+def _filters(z, x0, P0, **kw):
+    """Every Kalman-family filter on the same linear model (serial streams: one scalar update per component)."""
+    diag_R = np.diag(np.diag(R))
+    return {
+        "kalman_filter": lb.kalman_filter(z, MODEL.F, H, MODEL.Q, R, x0, P0, **kw),
+        "ekf parallel": lb.extended_kalman_filter(MODEL.F, MODEL.Q, x0, P0, [lb.LinearMeasurement(z, H, R)], **kw),
+        "ukf": lb.unscented_kalman_filter(MODEL.F, MODEL.Q, x0, P0, [lb.LinearMeasurement(z, H, R)], alpha=1.0, **kw),
+        "ekf serial (diagonal R)": lb.extended_kalman_filter(
+            MODEL.F, MODEL.Q, x0, P0, [lb.LinearMeasurement(z, H, diag_R, mode="serial")], **kw),
+    }
+
+
+@pytest.mark.parametrize("numba_path", PATHS, indirect=True)
+@pytest.mark.parametrize("missing", [0.0, 0.3])
+def test_nis_equals_filterpy_mahalanobis_squared(numba_path, missing):
+    _, z, x0, P0 = _simulate(6, 40, 1, missing)
+    z[2, 5] = np.nan                                    # a step without any update: NaN NIS and dof 0
+    ref = _filterpy_nis(z, x0, P0)
+    for name, res in _filters(z, x0, P0).items():
+        if name.startswith("ekf serial"):
+            continue                                    # another R: checked below
+        np.testing.assert_allclose(res.nis, ref, rtol=1e-9, atol=1e-12, err_msg=name)
+        np.testing.assert_array_equal(res.nis_dof, np.isfinite(z).sum(-1), err_msg=name)
+        assert np.isnan(res.nis[2, 5]) and res.nis_dof[2, 5] == 0
+    # serial scalar updates of one step: their NIS add up to the stacked update's (a diagonal R, exact)
+    diag = np.diag(np.diag(R))
+    par = lb.extended_kalman_filter(MODEL.F, MODEL.Q, x0, P0, [lb.LinearMeasurement(z, H, diag)])
+    ser = lb.extended_kalman_filter(MODEL.F, MODEL.Q, x0, P0, [lb.LinearMeasurement(z, H, diag, mode="serial")])
+    np.testing.assert_allclose(ser.nis, par.nis, rtol=1e-9, atol=1e-12)
+
+
+def test_nis_of_the_rss_ekf_numpy_and_compiled_agree_with_a_direct_computation(monkeypatch):
+    """The RSS EKF (parallel and serial): the NIS from the numpy loop and the compiled kernel equal
+    nu^T S^{-1} nu computed from the filter's own prior (x, P) at each step (one step, independently)."""
+    rng = np.random.default_rng(3)
+    ch = lb.PathLossModel(-40.0, 2.2, 2.0)
+    model = lb.constant_velocity(1.0, 0.05)
+    pos = 5 + np.cumsum(0.1 * rng.standard_normal((30, 12, 2)), axis=1)
+    z = ch.sample_power_dbm(np.linalg.norm(pos[:, :, None] - ANCHORS, axis=-1), rng)
+    z[rng.random(z.shape) < 0.2] = np.nan
+    x0, P0 = model.state_from(np.array([5.0, 5.0])), np.eye(4)
+    monkeypatch.setattr(K, "_NUMBA_MIN_WORK", 0)
+    for mode in ("parallel", "serial"):
+        meas = lb.RssMeasurement(z, ANCHORS, ch, model.position_index, mode=mode, order="given")
+        out = {}
+        for path in PATHS:
+            monkeypatch.setattr(K, "_NUMBA_ENABLED", path == "numba")
+            out[path] = lb.extended_kalman_filter(model.F, model.Q, x0, P0, [meas])
+        res = out["numpy"]
+        k = 7                                               # step k from the posterior of step k - 1
+        x, P = res.x[:, k - 1] @ model.F.T, model.F @ res.P[:, k - 1] @ model.F.T + model.Q
+        for b in range(z.shape[0]):
+            heard = np.isfinite(z[b, k])
+            if mode == "parallel":
+                d = np.linalg.norm(x[b, :2] - ANCHORS[heard], axis=-1)
+                Hb = np.zeros((heard.sum(), 4))
+                Hb[:, :2] = -(10 * 2.2 / np.log(10)) * (x[b, :2] - ANCHORS[heard]) / d[:, None] ** 2
+                nu = z[b, k, heard] - ch.mean_power_dbm(d)
+                S = Hb @ P[b] @ Hb.T + 4.0 * np.eye(heard.sum())
+                expected = nu @ np.linalg.solve(S, nu)
+            else:                                           # scalar updates, each at the state updated so far
+                xb, Pb, expected = x[b].copy(), P[b].copy(), 0.0
+                for j in np.flatnonzero(heard):
+                    d = np.linalg.norm(xb[:2] - ANCHORS[j])
+                    h = np.zeros(4)
+                    h[:2] = -(10 * 2.2 / np.log(10)) * (xb[:2] - ANCHORS[j]) / d**2
+                    nu, s = z[b, k, j] - ch.mean_power_dbm(d), h @ Pb @ h + 4.0
+                    expected += nu**2 / s
+                    gain = Pb @ h / s
+                    xb, Pb = xb + gain * nu, Pb - np.outer(gain, gain) * s
+            assert res.nis[b, k] == pytest.approx(expected, rel=1e-9), (mode, b)
+        for path in PATHS[1:]:
+            np.testing.assert_allclose(out[path].nis, res.nis, rtol=1e-9, equal_nan=True)
+            np.testing.assert_array_equal(out[path].nis_dof, res.nis_dof)
+
+
+def test_false_alarms_on_the_filters_own_model_stay_below_the_chi_square_bound():
+    """Simulated from the filter's own model, NIS ~ chi^2(dof) independently over steps. A window of w consecutive
+    exceedances at probability p then starts at a given update with probability (1 - p)^w, so a run of T updates is
+    flagged with probability at most (T - w + 1) (1 - p)^w. Checked at the defaults (bound 1e-58: no flag) and at a
+    loose setting (w = 2, p = 0.9: bound 0.39 per run; the fraction must stay under it with a binomial margin)."""
+    runs, steps = 400, 100
+    _, z, x0, P0 = _simulate(runs, steps, 2, missing=0.1)
+    for name, res in _filters(z, x0, P0).items():
+        assert res.n_diverged == 0, name
+        assert np.all(res.diverged_step == -1)
+        # the NIS is chi-square: mean = dof, and the tail beyond the 0.999 quantile is rare
+        nis, dof = res.nis[res.nis_dof == 2], 2
+        assert abs(nis.mean() - dof) < 4 * np.sqrt(2 * dof / nis.size), name
+        assert (nis > chi2.ppf(0.999, dof)).mean() < 0.003, name
+    w, p = 2, 0.9
+    bound = (steps - w + 1) * (1 - p) ** w
+    for name, res in _filters(z, x0, P0, divergence_window=w, divergence_probability=p).items():
+        frac = res.diverged.mean()
+        assert frac <= bound + 3 * np.sqrt(bound * (1 - bound) / runs), (name, frac, bound)
+        assert res.n_diverged > 0, name              # the loose setting does flag some runs: the guard is live
+
+
+def _ukf_scenario_1(runs=6, steps=60, seed=0):
+    """Issue 26: sigma = 1e-3 dB, a random walk with Q = 1e4 I, 4 anchors; the UKF at alpha = 1."""
+    rng = np.random.default_rng(seed)
+    ch = lb.PathLossModel(-40.0, 2.0, 1e-3)
+    pos = 5 + np.cumsum(0.05 * rng.standard_normal((runs, steps, 2)), axis=1)
+    z = ch.sample_power_dbm(np.linalg.norm(pos[:, :, None] - ANCHORS, axis=-1), rng)
+    return pos, lb.RssMeasurement(z, ANCHORS, ch, [0, 1]), np.eye(2), 1e4 * np.eye(2)
+
+
+def test_ukf_that_loses_track_at_alpha_1_is_flagged_and_the_ekf_is_not():
+    pos, meas, F, Q = _ukf_scenario_1()
+    x0, P0 = np.array([5.0, 5.0]), np.eye(2)
+    ukf = lb.unscented_kalman_filter(F, Q, x0, P0, [meas], alpha=1.0)
+    ekf = lb.extended_kalman_filter(F, Q, x0, P0, [meas])
+    err_u = np.linalg.norm(ukf.x - pos, axis=-1)
+    err_e = np.linalg.norm(ekf.x - pos, axis=-1)
+    sd_u = np.sqrt(np.trace(ukf.P, axis1=-2, axis2=-1))
+    assert err_u.max(axis=-1).min() > 1e4 * sd_u.min()             # every run lost, far beyond its covariance
+    assert np.all(ukf.diverged) and ukf.n_diverged == 6
+    assert np.all((ukf.diverged_step >= 0) & (ukf.diverged_step < 10))
+    assert err_e.max() < 0.05 and ekf.n_diverged == 0
+    # the guard off: nothing flagged, the same estimates
+    off = lb.unscented_kalman_filter(F, Q, x0, P0, [meas], alpha=1.0, divergence_window=0)
+    assert off.n_diverged == 0 and np.all(off.diverged_step == -1)
+    np.testing.assert_array_equal(off.x, ukf.x)
+
+
+def test_ukf_at_the_default_alpha_with_missing_readings_is_flagged_once_it_lost_track():
+    """The second scenario of the issue (alpha = 1e-3, 20 % of readings missing) after a long run: the estimate is
+    1e4 reported standard deviations from the truth while P stays symmetric positive definite. Runs started in that
+    state are flagged within the window; runs started consistently are not."""
+    rng = np.random.default_rng(5)
+    model = lb.constant_velocity(0.1, 0.05)
+    ch = lb.PathLossModel(-40.0, 2.0, 2.0)
+    runs, steps = 8, 80
+    pos = 5 + np.cumsum(0.02 * rng.standard_normal((runs, steps, 2)), axis=1)
+    z = ch.sample_power_dbm(np.linalg.norm(pos[:, :, None] - ANCHORS, axis=-1), rng)
+    z[rng.random(z.shape) < 0.2] = np.nan
+    x0 = np.zeros((runs, 4))
+    x0[:, :2] = 5.0
+    lost = np.arange(runs) % 2 == 1
+    x0[lost, :2] += 2e3                                             # 1e4 sd of P0 = 0.04 I away
+    P0 = np.diag([0.04, 0.04, 0.01, 0.01])
+    res = lb.unscented_kalman_filter(model.F, model.Q, x0, P0,
+                                     [lb.RssMeasurement(z, ANCHORS, ch, model.position_index)])
+    assert np.all(np.linalg.eigvalsh(res.P)[..., 0] > 0)             # no existing guard notices
+    np.testing.assert_array_equal(res.diverged, lost)
+    assert np.all(res.diverged_step[lost] == 0)
+
+
+def test_numpy_and_compiled_ekf_agree_on_the_flags(monkeypatch):
+    """Half the runs get readings 30 times noisier than the filter's model (an inconsistent filter): flagged on both
+    paths, the same runs and steps."""
+    rng = np.random.default_rng(8)
+    ch = lb.PathLossModel(-40.0, 2.2, 1.0)
+    model = lb.constant_velocity(1.0, 0.05)
+    runs, steps = 70, 60
+    pos = 5 + np.cumsum(0.05 * rng.standard_normal((runs, steps, 2)), axis=1)
+    mean = ch.mean_power_dbm(np.linalg.norm(pos[:, :, None] - ANCHORS, axis=-1))
+    noisy = np.arange(runs) % 2 == 0
+    z = mean + np.where(noisy, 30.0, 1.0)[:, None, None] * rng.standard_normal(mean.shape)
+    x0, P0 = model.state_from(np.array([5.0, 5.0])), np.eye(4)
+    monkeypatch.setattr(K, "_NUMBA_MIN_WORK", 0)
+    for mode in ("parallel", "serial"):
+        meas = lb.RssMeasurement(z, ANCHORS, ch, model.position_index, mode=mode)
+        out = {}
+        for path in PATHS:
+            monkeypatch.setattr(K, "_NUMBA_ENABLED", path == "numba")
+            out[path] = lb.extended_kalman_filter(model.F, model.Q, x0, P0, [meas], divergence_window=5)
+        ref = out["numpy"]
+        assert ref.diverged[noisy].mean() > 0.9 and not ref.diverged[~noisy].any()
+        for path in PATHS[1:]:
+            np.testing.assert_array_equal(out[path].diverged, ref.diverged)
+            np.testing.assert_array_equal(out[path].diverged_step, ref.diverged_step)
+
+
+def _reference_flags(nis, dof, window, probability):
+    """The window rule as a plain loop over runs and steps (the independent reference)."""
+    flat_nis, flat_dof = nis.reshape(-1, nis.shape[-1]), dof.reshape(-1, nis.shape[-1])
+    diverged, first = np.zeros(flat_nis.shape[0], bool), np.full(flat_nis.shape[0], -1)
+    for b in range(flat_nis.shape[0]):
+        streak, start = 0, -1
+        for k in range(flat_nis.shape[1]):
+            if flat_dof[b, k] == 0:
+                continue
+            if flat_nis[b, k] > chi2.ppf(probability, flat_dof[b, k]):
+                start = k if streak == 0 else start
+                streak += 1
+                if streak >= window:
+                    diverged[b], first[b] = True, start
+                    break
+            else:
+                streak = 0
+    return diverged.reshape(nis.shape[:-1]), first.reshape(nis.shape[:-1])
+
+
+def test_window_rule_equals_a_per_run_loop():
+    rng = np.random.default_rng(11)
+    dof = rng.integers(0, 4, (5, 7, 40))
+    nis = np.where(dof > 0, rng.chisquare(np.maximum(dof, 1)) * rng.choice([0.5, 40.0], dof.shape, p=[0.5, 0.5]),
+                   np.nan)
+    for window, p in ((1, 0.99), (3, 0.9), (4, 0.999), (41, 0.5)):
+        got = lb.tracking.kalman.nis_divergence(nis, dof, window, p)
+        ref = _reference_flags(nis, dof, window, p)
+        np.testing.assert_array_equal(got[0], ref[0])
+        np.testing.assert_array_equal(got[1], ref[1])
+        if window == 3:
+            assert 0 < ref[0].sum() < ref[0].size           # the pattern exercises both outcomes
+    off = lb.tracking.kalman.nis_divergence(nis, dof, 0)
+    assert not off[0].any() and np.all(off[1] == -1)
+    with pytest.raises(ValueError, match="divergence_probability"):
+        lb.tracking.kalman.nis_divergence(nis, dof, 3, 1.0)
+    with pytest.raises(ValueError, match="divergence_window"):
+        lb.kalman_filter(np.zeros((3, 2)), MODEL.F, H, MODEL.Q, R, np.zeros(4), np.eye(4), divergence_window=2.5)

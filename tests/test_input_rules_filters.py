@@ -205,3 +205,105 @@ def test_uniform_proposal_starts_from_equal_weights():
     loglik = model.log_likelihood(rss[:, -1], res.particles_m, 3)
     expected = np.exp(loglik - loglik.max(axis=1, keepdims=True))
     np.testing.assert_allclose(res.weights, expected / expected.sum(axis=1, keepdims=True), rtol=1e-9)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Issue 26, item 10: covariances checked up front, zero steps, run axes on F, H and Q
+# ---------------------------------------------------------------------------------------------------------------
+ANCHORS = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]])
+CHANNEL = lb.PathLossModel(-40.0, 2.0, 2.0)
+
+
+def _rss(T=6):
+    rng = np.random.default_rng(4)
+    pos = 5 + np.cumsum(0.2 * rng.standard_normal((T, 2)), axis=0)
+    return CHANNEL.sample_power_dbm(np.linalg.norm(pos[:, None] - ANCHORS, axis=-1), rng)
+
+
+def _every_filter(Q=MODEL.Q, R_=R, P=P0):
+    """Each filter with the given Q, R and P0 (the RSS filters take R through a LinearMeasurement stream)."""
+    z = _track()
+    rss = lb.RssMeasurement(_rss(z.shape[0]), ANCHORS, CHANNEL, MODEL.position_index)
+    yield lambda: lb.kalman_filter(z, MODEL.F, H, Q, R_, X0, P)
+    for flt in (lb.extended_kalman_filter, lb.unscented_kalman_filter):
+        yield lambda flt=flt: flt(MODEL.F, Q, X0, P, [lb.LinearMeasurement(z, H, R_), rss])
+
+
+NOT_SYMMETRIC = np.array([[0.5, 0.3], [0.1, 0.8]])
+Q_NOT_PSD = MODEL.Q - 0.2 * np.eye(4)          # a negative eigenvalue, still symmetric
+
+
+@pytest.mark.parametrize("kw, message", [
+    (dict(R_=NOT_SYMMETRIC), r"R must be symmetric"),
+    (dict(P=np.eye(4) + np.triu(np.ones((4, 4)), 1)), r"P0 must be symmetric"),
+    (dict(Q=MODEL.Q + 0.1 * np.triu(np.ones((4, 4)), 1)), r"Q must be symmetric"),
+    (dict(Q=Q_NOT_PSD), r"Q must be positive semi-definite"),
+    (dict(P=np.diag([1.0, -1.0, 1.0, 1.0])), r"P0 must be positive semi-definite.*-1"),
+    (dict(R_=np.array([[1.0, 2.0], [2.0, 1.0]])), r"R must be positive semi-definite.*-1"),
+])
+def test_covariances_are_checked_up_front_naming_the_argument(kw, message):
+    """A non-symmetric R or P0 used to be accepted; a Q that is not positive semi-definite surfaced steps later as an
+    innovation-covariance error blaming R. Each is now refused before the first step, naming the argument."""
+    for call in _every_filter(**kw):
+        with pytest.raises(ValueError, match=message):
+            call()
+
+
+def test_round_off_asymmetry_is_accepted():
+    P = MODEL.F @ np.diag([1.0, 2.0, 0.3, 0.4]) @ MODEL.F.T      # symmetric to round-off only
+    P[0, 1] *= 1 + 1e-14
+    for call in _every_filter(P=P, Q=MODEL.G @ MODEL.G.T * 0.05):      # rank 2: eigenvalues 0 to round-off
+        call()
+
+
+def test_kalman_filter_with_zero_steps_returns_an_empty_result():
+    """Used to end in numpy's "cannot reshape array of size 0"."""
+    for z in (np.empty((0, 2)), np.empty((3, 0, 2))):
+        res = lb.kalman_filter(z, MODEL.F, H, MODEL.Q, R, X0, P0)
+        batch = z.shape[:-2]
+        assert res.x.shape == batch + (0, 4) and res.P.shape == batch + (0, 4, 4)
+        assert res.innovation.shape == batch + (0, 2) and res.nis.shape == batch + (0,)
+        assert res.diverged.shape == batch and res.n_diverged == 0
+    for flt in (lb.extended_kalman_filter, lb.unscented_kalman_filter):
+        res = flt(MODEL.F, MODEL.Q, X0, P0, [lb.LinearMeasurement(np.empty((3, 0, 2)), H, R)])
+        assert res.x.shape == (3, 0, 4) and res.diverged.shape == (3,) and res.n_diverged == 0
+
+
+def _per_run_filterpy(z, Fs, Hs, Qs, x0, P):
+    """filterpy's KalmanFilter, one filter per run with that run's F, H and Q."""
+    out = np.empty(z.shape[:-1] + (4,))
+    for b in range(z.shape[0]):
+        kf = KalmanFilter(dim_x=4, dim_z=2)
+        kf.F, kf.H, kf.Q, kf.R, kf.x, kf.P = Fs[b], Hs[b], Qs[b], R, x0.copy(), P.copy()
+        for k in range(z.shape[1]):
+            kf.predict()
+            kf.update(z[b, k])
+            out[b, k] = kf.x
+    return out
+
+
+def test_run_axes_on_F_H_and_Q_equal_one_filter_per_run():
+    """Batched F (and H in kalman_filter) used to crash with a raw broadcast error although the docstrings allow run
+    axes; the EKF and UKF crashed with a batched Q when x0, P0 and z carried none. Each run now equals filterpy with
+    that run's matrices."""
+    runs = 3
+    Fs = np.stack([lb.constant_velocity(dt, 0.05).F for dt in (0.5, 1.0, 2.0)])
+    Qs = np.stack([lb.constant_velocity(1.0, q).Q for q in (0.01, 0.1, 1.0)])
+    Hs = np.stack([H, 2.0 * H, np.array([[1.0, 0, 0, 0], [0, 1.0, 0, 1.0]])])
+    z = _track(5, 10)
+    zb = np.broadcast_to(z, (runs,) + z.shape)
+    ref = _per_run_filterpy(zb, Fs, Hs, Qs, X0, P0)
+    res = lb.kalman_filter(z, Fs, Hs, Qs, R, X0, P0)                   # run axes on F, H, Q only
+    np.testing.assert_allclose(res.x, ref, rtol=0, atol=1e-9)
+    Hb = np.broadcast_to(H, (runs,) + H.shape)
+    ref = _per_run_filterpy(zb, Fs, Hb, Qs, X0, P0)
+    for flt in (lb.extended_kalman_filter, lb.unscented_kalman_filter):
+        out = flt(Fs, Qs, X0, P0, [lb.LinearMeasurement(z, H, R)])
+        np.testing.assert_allclose(out.x, ref, rtol=0, atol=1e-8)
+        out = flt(MODEL.F, Qs, X0, P0, [lb.LinearMeasurement(z, H, R)])  # a batched Q alone
+        np.testing.assert_allclose(out.x, _per_run_filterpy(zb, [MODEL.F] * runs, Hb, Qs, X0, P0), rtol=0, atol=1e-8)
+
+
+def test_run_axes_that_do_not_broadcast_are_named():
+    with pytest.raises(ValueError, match=r"run \(batch\) axes.*z \(3,\).*Q \(2,\)"):
+        lb.kalman_filter(np.zeros((3, 5, 2)), MODEL.F, H, np.stack([MODEL.Q] * 2), R, X0, P0)

@@ -382,6 +382,8 @@ def _kalman_filter_batched(z, F, H, Q, R, x, P, batch, predict_first, variant, j
 def _shared_pattern(z):
     """The missing-component pattern ``(T, m)`` of measurements ``batch + (T, m)`` when it is the same in every run
     (then a linear filter's covariance recursion is the same in every run too), else None."""
+    if z.size == 0:
+        return None
     finite = np.isfinite(z)
     flat = finite.reshape((-1,) + finite.shape[-2:])
     if flat.shape[0] == 0 or not (flat == flat[0]).all():
@@ -520,7 +522,7 @@ class LinearMeasurement:
         m = z.shape[-1]
         if H.ndim < 2 or H.shape[-2] != m:
             raise ValueError(f"LinearMeasurement.H must have {m} rows (one per component of z), got shape {H.shape}")
-        R = _matrix("LinearMeasurement.R", self.R, m, m)
+        R = _covariance("LinearMeasurement.R", self.R, m)
         if self.mode == "serial" and np.any(R - R * np.eye(R.shape[-1])):
             raise ValueError("serial linear updates need a diagonal R (independent measurement components)")
 
@@ -631,7 +633,7 @@ class NonlinearMeasurement:
         if self.jacobian is not None and not callable(self.jacobian):
             raise ValueError(f"{self.name}: jacobian must be a function of the state or None, got "
                              f"{type(self.jacobian).__name__}")
-        _matrix(f"{self.name}: R", self.R, z.shape[-1], z.shape[-1])
+        _covariance(f"{self.name}: R", self.R, z.shape[-1])
 
 
 MEASUREMENT_TYPES = (LinearMeasurement, RssMeasurement, NonlinearMeasurement)

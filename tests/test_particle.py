@@ -56,3 +56,94 @@ def test_kernel_map_finds_the_mode_and_neff_triggers_resampling():
     res = lb.sir_particle_filter(rng.normal(0, 1, (3, 500, 1)), lambda p, k: -0.5 * p[..., 0] ** 2 * (k + 1), 4, rng,
                                  resample_threshold=250.0)
     np.testing.assert_array_equal(res.resampled, res.n_eff < 250.0)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Issue 26, item 9: a run whose likelihoods all collapse is isolated (flagged, NaN from that step), not fatal
+# ---------------------------------------------------------------------------------------------------------------
+READERS = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]])
+BAYES_MODEL = lb.RssMeasurementModel(READERS, -40.0, 2.0, 3.0)
+
+
+def _rss_runs(runs=4, steps=8, seed=3):
+    rng = np.random.default_rng(seed)
+    pos = 5 + np.cumsum(0.3 * rng.standard_normal((runs, steps, 2)), axis=1)
+    return BAYES_MODEL.mean_rss_dbm(pos.reshape(-1, 2))[0].reshape(runs, steps, 4) + 3 * rng.standard_normal(
+        (runs, steps, 4))
+
+
+@pytest.mark.parametrize("threshold", [None, 0.5])
+def test_particle_filter_isolates_a_run_whose_likelihood_collapses(threshold):
+    """A reading of 1e300 dBm overflows every particle's likelihood to -inf: that run used to abort the whole batch
+    with "weights must be finite" naming no run or step. Now that run is flagged degenerate at that step with NaN
+    estimates from there on, and every other run is bit-identical to the batch where that reading was sane."""
+    good = _rss_runs()
+    bad = good.copy()
+    bad[2, 5, 1] = 1e300
+    kw = dict(n_particles=300, region_m=([0.0, 0.0], [10.0, 10.0]), resample_threshold=threshold)
+    ref = lb.particle_filter(good, BAYES_MODEL, np.random.default_rng(7), **kw)
+    res = lb.particle_filter(bad, BAYES_MODEL, np.random.default_rng(7), **kw)
+    assert res.degenerate.tolist() == [False, False, True, False]
+    assert res.degenerate_step.tolist() == [-1, -1, 5, -1]
+    assert ref.n_degenerate == 0 and res.n_degenerate == 1
+    others = [0, 1, 3]
+    for name in ("mmse_m", "map_m", "n_eff", "resampled", "particles_m", "weights"):
+        np.testing.assert_array_equal(getattr(res, name)[others], getattr(ref, name)[others], err_msg=name)
+    np.testing.assert_array_equal(res.mmse_m[2, :5], ref.mmse_m[2, :5])
+    assert np.isnan(res.mmse_m[2, 5:]).all() and np.isnan(res.map_m[2, 5:]).all() and np.isnan(res.n_eff[2, 5:]).all()
+    assert np.isnan(res.weights[2]).all() and np.isnan(res.particles_m[2]).all()
+
+
+@pytest.mark.parametrize("method", ["systematic", "stratified"])
+@pytest.mark.parametrize("collapse", [-np.inf, np.nan, np.inf])
+def test_sir_particle_filter_isolates_a_run_whose_likelihood_collapses(method, collapse):
+    """A log-likelihood that is -inf for every particle, NaN for some or +inf (garbage) flags that run at that step;
+    the others are bit-identical to the run with a sane likelihood (with these schemes the random draws do not depend
+    on the weights)."""
+    rng0 = np.random.default_rng(0)
+    start = rng0.normal(0, 1, (3, 200, 2))
+    z = rng0.normal(0, 1, (3, 6, 2))
+
+    def loglik(x, k, broken=False):
+        out = -0.5 * np.sum((z[:, k, None, :] - x) ** 2, axis=-1)
+        if broken and k == 3:
+            if np.isnan(collapse):
+                out[1, :5] = np.nan           # NaN for a few particles only: still garbage
+            else:
+                out[1] = collapse
+        return out
+
+    ref = lb.sir_particle_filter(start, loglik, 6, np.random.default_rng(1), process_sd_m=0.1, resampling=method)
+    res = lb.sir_particle_filter(start, lambda x, k: loglik(x, k, True), 6, np.random.default_rng(1),
+                                 process_sd_m=0.1, resampling=method)
+    assert res.degenerate.tolist() == [False, True, False] and res.degenerate_step.tolist() == [-1, 3, -1]
+    for name in ("mean", "variance", "max_weight", "n_eff", "resampled", "particles", "weights"):
+        np.testing.assert_array_equal(getattr(res, name)[[0, 2]], getattr(ref, name)[[0, 2]], err_msg=name)
+    np.testing.assert_array_equal(res.mean[1, :3], ref.mean[1, :3])
+    assert np.isnan(res.mean[1, 3:]).all() and np.isnan(res.variance[1, 3:]).all()
+    assert np.isnan(res.weights[1]).all() and not res.resampled[1, 3:].any()
+
+
+def test_sir_particles_with_minus_inf_likelihood_are_only_dropped():
+    """-inf for some particles is a legitimate zero weight (an impossible state), not a collapse."""
+    rng = np.random.default_rng(2)
+    start = rng.normal(0, 1, (2, 400, 1))
+    res = lb.sir_particle_filter(start, lambda x, k: np.where(x[..., 0] > 0, 0.0, -np.inf), 1, rng)
+    assert not res.degenerate.any()
+    assert np.all(res.mean[:, 0, 0] > 0)
+
+
+def test_grid_bayes_filter_isolates_a_run_whose_likelihood_collapses():
+    """The grid filter had the same fault silently: a collapsed run's belief became NaN with no flag."""
+    good = _rss_runs(3, 6, seed=4)
+    bad = good.copy()
+    bad[1, 2, 0] = 1e300
+    cells = np.stack(np.meshgrid(np.arange(0.5, 10, 1.0), np.arange(0.5, 10, 1.0)), -1).reshape(-1, 2)
+    ref = lb.grid_bayes_filter(good, cells, BAYES_MODEL, 1.0)
+    res = lb.grid_bayes_filter(bad, cells, BAYES_MODEL, 1.0)
+    assert res.degenerate.tolist() == [False, True, False] and res.degenerate_step.tolist() == [-1, 2, -1]
+    assert ref.n_degenerate == 0 and res.n_degenerate == 1
+    for name in ("mmse_m", "map_m", "belief"):
+        np.testing.assert_array_equal(getattr(res, name)[[0, 2]], getattr(ref, name)[[0, 2]])
+    np.testing.assert_array_equal(res.mmse_m[1, :2], ref.mmse_m[1, :2])
+    assert np.isnan(res.mmse_m[1, 2:]).all() and np.isnan(res.belief[1]).all()

@@ -254,11 +254,19 @@ class _SeparableTransition:
 
 @dataclass(frozen=True)
 class GridFilterResult:
-    """``mmse_m``, ``map_m``: ``(R, T, 2)``; ``belief``: final posterior ``(R, C)``."""
+    """``mmse_m``, ``map_m``: ``(R, T, 2)``; ``belief``: final posterior ``(R, C)``; ``degenerate`` ``(R,)`` and
+    ``degenerate_step`` ``(R,)`` (-1 where not): runs whose likelihood collapsed (:func:`grid_bayes_filter`)."""
 
     mmse_m: np.ndarray
     map_m: np.ndarray
     belief: np.ndarray
+    degenerate: np.ndarray = None
+    degenerate_step: np.ndarray = None
+
+    @property
+    def n_degenerate(self) -> int:
+        """The number of runs whose likelihood collapsed."""
+        return 0 if self.degenerate is None else int(np.count_nonzero(self.degenerate))
 
 
 def grid_bayes_filter(rss_dbm, cells_m, model: RssMeasurementModel, spread_m: float = 0.5, *,
@@ -274,6 +282,10 @@ def grid_bayes_filter(rss_dbm, cells_m, model: RssMeasurementModel, spread_m: fl
     distinct x and y coordinates (memory linear in the cells for a grid, possibly masked by a floor outline;
     equal to the dense one up to rounding); ``"auto"`` (default) takes the separable form when that lattice
     has at most 4 points per cell, which every regular grid has.
+
+    A run whose posterior collapses at a step (the likelihood is -inf, or NaN, on every cell the belief allows, e.g.
+    a reading of 1e300 dBm) is flagged ``degenerate`` with that ``degenerate_step``; its estimates and final belief
+    are NaN from that step on, and the other runs are unaffected.
     """
     rss_dbm, cells_m = _check_inputs(rss_dbm, model, cells_m=cells_m)
     check_scalar("spread_m", spread_m, gt=0, allow_inf=True)
@@ -297,6 +309,8 @@ def grid_bayes_filter(rss_dbm, cells_m, model: RssMeasurementModel, spread_m: fl
             transition == "auto" and _SeparableTransition.lattice_size(cells_m) <= 4 * n_cells):
         separable = _SeparableTransition(cells_m, spread_m)
     dense, last_v = None, None
+    dead = np.zeros(n_runs, bool)
+    dead_step = np.full(n_runs, -1, np.int64)
     for t in range(n_steps):
         if t > 0:
             predicted = None if separable is None else separable.predict(belief, velocity[t])
@@ -306,10 +320,21 @@ def grid_bayes_filter(rss_dbm, cells_m, model: RssMeasurementModel, spread_m: fl
                 predicted = belief @ dense.T
             belief = predicted
         log_post = np.log(np.maximum(belief, 1e-300)) + model.log_likelihood(rss_dbm[:, t], cells_m, t)
+        top = log_post.max(axis=-1)
+        collapsed = ~dead & (np.isnan(top) | np.isinf(top))
+        dead_step[collapsed] = t
+        dead |= collapsed
+        if dead.any():              # a collapsed run goes on with a uniform belief (NaN outputs): others unaffected
+            log_post[dead] = 0.0
         belief = _normalise_log(log_post)
         mmse[:, t] = belief @ cells_m
         best[:, t] = cells_m[np.argmax(belief, axis=-1)]
-    return GridFilterResult(mmse, best, belief)
+        if dead.any():
+            mmse[dead, t], best[dead, t] = np.nan, np.nan
+    if dead.any():
+        belief = belief.copy()
+        belief[dead] = np.nan
+    return GridFilterResult(mmse, best, belief, dead, dead_step)
 
 
 # -- particle filters -------------------------------------------------------------------------------
@@ -357,7 +382,9 @@ def systematic_resample(weights, uniforms, cdf: str = "standard"):
 @dataclass(frozen=True)
 class ParticleFilterResult:
     """``mmse_m``, ``map_m`` (highest-weight particle): ``(R, T, 2)``; ``n_eff``: ``(R, T)`` before any
-    resampling; ``resampled``: ``(R, T)`` bool; ``particles_m (R, N, 2)`` and ``weights (R, N)`` at the end."""
+    resampling; ``resampled``: ``(R, T)`` bool; ``particles_m (R, N, 2)`` and ``weights (R, N)`` at the end;
+    ``degenerate`` ``(R,)`` and ``degenerate_step`` ``(R,)`` (-1 where not): the runs whose likelihood collapsed
+    (:func:`particle_filter`), NaN from that step on."""
 
     mmse_m: np.ndarray
     map_m: np.ndarray
@@ -365,6 +392,13 @@ class ParticleFilterResult:
     resampled: np.ndarray
     particles_m: np.ndarray
     weights: np.ndarray
+    degenerate: np.ndarray = None
+    degenerate_step: np.ndarray = None
+
+    @property
+    def n_degenerate(self) -> int:
+        """The number of runs whose likelihood collapsed."""
+        return 0 if self.degenerate is None else int(np.count_nonzero(self.degenerate))
 
 
 def particle_filter(rss_dbm, model: RssMeasurementModel, rng: np.random.Generator, *, n_particles: int,
@@ -391,6 +425,11 @@ def particle_filter(rss_dbm, model: RssMeasurementModel, rng: np.random.Generato
     note 004, section 3.7; it tempers the likelihood). ``"sqrt_corrected"`` is the literature's generalised
     resampling: draw with ``a = sqrt(w)`` and reweight the copies by ``w / a``. Both estimates use the
     current weights (MMSE = weighted mean; MAP = the highest-weight particle).
+
+    A run whose likelihood collapses at a step (every particle's log-likelihood -inf, e.g. a reading of 1e300 dBm
+    that overflows the Gaussian, or NaN) is isolated: it is flagged ``degenerate`` with that ``degenerate_step``,
+    its estimates are NaN from that step on and its final particles and weights NaN; it goes on internally with
+    equal weights, so the other runs' random draws, and hence their results, are those of a batch without the fault.
     """
     check_choice("weight_smoothing", weight_smoothing, WEIGHT_SMOOTHINGS)
     check_scalar("n_particles", n_particles, ge=1, integer=True)
@@ -430,6 +469,8 @@ def particle_filter(rss_dbm, model: RssMeasurementModel, rng: np.random.Generato
     best = np.empty((n_runs, n_steps, 2))
     n_eff = np.empty((n_runs, n_steps))
     resampled = np.zeros((n_runs, n_steps), dtype=bool)
+    dead = np.zeros(n_runs, bool)
+    dead_step = np.full(n_runs, -1, np.int64)
     for t in range(n_steps):
         if t > 0:
             if np.isinf(spread_m):
@@ -439,7 +480,14 @@ def particle_filter(rss_dbm, model: RssMeasurementModel, rng: np.random.Generato
             else:
                 particles = reflect_into_box(particles + velocity[t] + spread_m * rng.standard_normal(shape),
                                              lower, upper)
-        w = _normalise_log(log_w + model.log_likelihood(rss_dbm[:, t], particles, t))
+        logits = log_w + model.log_likelihood(rss_dbm[:, t], particles, t)
+        top = logits.max(axis=-1)
+        collapsed = ~dead & (np.isnan(top) | np.isinf(top))     # -inf for every particle, or NaN / +inf anywhere
+        dead_step[collapsed] = t
+        dead |= collapsed
+        if dead.any():              # a collapsed run goes on with equal weights (NaN outputs): others unaffected
+            logits[dead] = 0.0
+        w = _normalise_log(logits)
         if weight_smoothing == "sqrt":
             w = np.sqrt(w)
             w /= w.sum(axis=-1, keepdims=True)
@@ -463,4 +511,11 @@ def particle_filter(rss_dbm, model: RssMeasurementModel, rng: np.random.Generato
             else:
                 w[do] = 1.0 / n_particles
         log_w = np.log(np.maximum(w, 1e-300))
-    return ParticleFilterResult(mmse, best, n_eff, resampled, particles, np.exp(log_w))
+        if dead.any():
+            mmse[dead, t], best[dead, t], n_eff[dead, t] = np.nan, np.nan, np.nan
+            resampled[dead, t] = False
+    weights = np.exp(log_w)
+    if dead.any():
+        particles, weights = particles.copy(), weights.copy()
+        particles[dead], weights[dead] = np.nan, np.nan
+    return ParticleFilterResult(mmse, best, n_eff, resampled, particles, weights, dead, dead_step)

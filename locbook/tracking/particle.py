@@ -14,6 +14,13 @@ missing readings (NaN = not heard) left out.
 
 Estimates per step: the weighted mean (MMSE) and variance, the highest-weight particle; at the end, a kernel
 density MAP (:func:`kernel_map_estimate`).
+
+A collapsed run is isolated (issue 26): where a run's log-likelihood is -inf for every particle (no particle
+explains the reading), or NaN or +inf for any particle (garbage), its weights cannot be normalised. That run is
+flagged ``degenerate`` with the first such step (``degenerate_step``, -1 elsewhere), its estimates are NaN from that
+step on and its final particles and weights are NaN; the other runs go on as if that run were sane (its particles are
+still propagated and resampled with equal weights, so with systematic or stratified resampling, whose random draws
+do not depend on the weights, the other runs are bit-identical). -inf for some particles only is a zero weight.
 """
 from __future__ import annotations
 
@@ -33,7 +40,8 @@ class SirResult:
     """Per run and step: ``mean`` and ``variance`` ``(R, K, dim)`` of the weighted particles, ``max_weight``
     ``(R, K, dim)`` the highest-weight particle, ``n_eff`` ``(R, K)`` before resampling and ``resampled``
     ``(R, K)``; the final ``particles`` ``(R, Ns, dim)`` and ``weights`` ``(R, Ns)``; ``clouds``: the particles
-    (after the update, before resampling) at the steps asked for, ``{k: (R, Ns, dim)}``."""
+    (after the update, before resampling) at the steps asked for, ``{k: (R, Ns, dim)}``; ``degenerate`` ``(R,)`` and
+    ``degenerate_step`` ``(R,)``: runs whose likelihood collapsed, and the step (module docstring)."""
 
     mean: np.ndarray
     variance: np.ndarray
@@ -43,6 +51,13 @@ class SirResult:
     particles: np.ndarray
     weights: np.ndarray
     clouds: dict
+    degenerate: np.ndarray = None
+    degenerate_step: np.ndarray = None
+
+    @property
+    def n_degenerate(self) -> int:
+        """The number of runs whose likelihood collapsed (module docstring)."""
+        return 0 if self.degenerate is None else int(np.count_nonzero(self.degenerate))
 
 
 def rss_log_likelihood(particles_m, receivers_m, power_dbm, channel: PathLossModel, *, min_distance_m: float = 1e-3):
@@ -130,6 +145,8 @@ def sir_particle_filter(initial_particles_m, log_likelihood, n_steps: int, rng: 
     n_eff = np.empty((R, n_steps))
     did = np.zeros((R, n_steps), bool)
     clouds = {}
+    dead = np.zeros(R, bool)
+    dead_step = np.full(R, -1, np.int64)
     for k in range(int(n_steps)):
         if np.any(sd > 0):
             x = x + sd * rng.standard_normal(x.shape)
@@ -137,6 +154,12 @@ def sir_particle_filter(initial_particles_m, log_likelihood, n_steps: int, rng: 
         if ll.shape != (R, n):
             raise ValueError(f"log_likelihood must return ({R}, {n}), got {ll.shape}")
         logw = logw + ll
+        top = logw.max(axis=-1)
+        collapsed = ~dead & (np.isnan(top) | np.isinf(top))      # NaN anywhere, +inf anywhere, or -inf everywhere
+        dead_step[collapsed] = k
+        dead |= collapsed
+        if dead.any():              # a collapsed run goes on with equal weights (its outputs are NaN): others unaffected
+            logw[dead] = 0.0
         logw = logw - logw.max(axis=-1, keepdims=True)
         w = np.exp(logw)
         w /= w.sum(axis=-1, keepdims=True)
@@ -152,7 +175,16 @@ def sir_particle_filter(initial_particles_m, log_likelihood, n_steps: int, rng: 
             idx = resample(w, rng, resampling)
             x = np.where(do[:, None, None], np.take_along_axis(x, idx[..., None], axis=1), x)
             logw = np.where(do[:, None], -np.log(n), logw)
-        did[:, k] = do
+        did[:, k] = do & ~dead
+        if dead.any():
+            for out in (mean, var, best):
+                out[dead, k] = np.nan
+            n_eff[dead, k] = np.nan
+            if k in cloud_steps:
+                clouds[k][dead] = np.nan
     w = np.exp(logw)
     w /= w.sum(axis=-1, keepdims=True)
-    return SirResult(mean, var, best, n_eff, did, x, w, clouds)
+    if dead.any():
+        x, w = x.copy(), w.copy()
+        x[dead], w[dead] = np.nan, np.nan
+    return SirResult(mean, var, best, n_eff, did, x, w, clouds, dead, dead_step)

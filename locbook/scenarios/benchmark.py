@@ -45,7 +45,7 @@ from ..static.localization import (grid_ml_position, lateration_box_ls, laterati
 from ..tracking.bayes import RssMeasurementModel, grid_bayes_filter, particle_filter
 from ..tracking.kalman import LinearMeasurement, RssMeasurement, extended_kalman_filter
 from ..tracking.unscented import unscented_kalman_filter
-from . import dogan, george, gudipati, kolakowski, ozkaya, palvai
+from . import DivergenceFlags, dogan, george, gudipati, kolakowski, ozkaya, palvai
 
 __all__ = ["Setting", "StaticScenario", "TrackingScenario", "STATIC_SCENARIOS", "TRACKING_SCENARIOS",
            "STATIC_METHODS", "TRACKERS", "NOT_APPLICABLE", "TrackerSettings", "static_scenario", "tracking_scenario",
@@ -566,27 +566,31 @@ TRACKERS = {
 
 
 def run_trackers(sc: TrackingScenario, rss_dbm, x0, ts: TrackerSettings, rng: np.random.Generator, *,
-                 trackers=None) -> dict[str, np.ndarray]:
-    """Every declared tracker on readings ``(R, T, m)`` from initial states ``(R, 4)`` -> positions ``(R, T, 2)``."""
+                 trackers=None, with_divergence: bool = False):
+    """Every declared tracker on readings ``(R, T, m)`` from initial states ``(R, 4)`` -> positions ``(R, T, 2)``.
+    ``with_divergence=True`` returns ``(positions, {tracker: flags})``, the NIS guard per run of each Kalman-family
+    tracker (:class:`locbook.scenarios.DivergenceFlags`, steps of the scenario's clock)."""
     rss = np.asarray(rss_dbm, float)
     rng_cov, rng_pf = rng.spawn(2)
     chosen = tuple(TRACKERS if trackers is None else trackers)
     motion = constant_velocity(sc.dt_s, ts.q, dim=2)
     P0 = np.broadcast_to(ts.P0, (len(x0), 4, 4))
     idx = np.array([0, 1])
-    out = {}
+    out, flags = {}, {}
     if "kf_on_ml" in chosen:
         H = np.hstack([np.eye(2), np.zeros((2, 2))])
         fixes = _ml_fixes(sc, rss, ts)
-        out["kf_on_ml"] = extended_kalman_filter(motion.F, motion.Q, x0, P0,
-                                                 [LinearMeasurement(fixes, H, _fix_cov(sc, ts, rng_cov))]).x[..., :2]
+        res = extended_kalman_filter(motion.F, motion.Q, x0, P0, [LinearMeasurement(fixes, H, _fix_cov(sc, ts, rng_cov))])
+        out["kf_on_ml"], flags["kf_on_ml"] = res.x[..., :2], DivergenceFlags.of(res)
     for name, mode in (("ekf", "parallel"), ("ekf_serial", "serial")):
         if name in chosen:
             stream = RssMeasurement(rss, sc.anchors_m, sc.channel, idx, mode=mode, tag_height_m=sc.tag_height_m)
-            out[name] = extended_kalman_filter(motion.F, motion.Q, x0, P0, [stream]).x[..., :2]
+            res = extended_kalman_filter(motion.F, motion.Q, x0, P0, [stream])
+            out[name], flags[name] = res.x[..., :2], DivergenceFlags.of(res)
     if "ukf" in chosen:
         stream = RssMeasurement(rss, sc.anchors_m, sc.channel, idx, tag_height_m=sc.tag_height_m)
-        out["ukf"] = unscented_kalman_filter(motion.F, motion.Q, x0, P0, [stream], alpha=ts.ukf_alpha).x[..., :2]
+        res = unscented_kalman_filter(motion.F, motion.Q, x0, P0, [stream], alpha=ts.ukf_alpha)
+        out["ukf"], flags["ukf"] = res.x[..., :2], DivergenceFlags.of(res)
     model = _bayes_model(sc)
     if "particle" in chosen:
         out["particle"] = particle_filter(rss, model, rng_pf, n_particles=ts.n_particles, region_m=sc.box_m,
@@ -596,7 +600,8 @@ def run_trackers(sc: TrackingScenario, rss_dbm, x0, ts: TrackerSettings, rng: np
         cells = grid_in_outline(sc.outline_m, sc.grid_spacing_m)
         out["grid_bayes"] = grid_bayes_filter(rss, cells, model, sc.spread_m,
                                               initial_belief=_gaussian_belief(cells, x0, ts.P0[:2, :2])).mmse_m
-    return {k: out[k] for k in chosen}
+    out = {k: out[k] for k in chosen}
+    return (out, flags) if with_divergence else out
 
 
 def tracking_bound_m(sc: TrackingScenario, ts: TrackerSettings) -> np.ndarray:
@@ -681,14 +686,16 @@ def static_cells(sc: StaticScenario, n_runs: int, rng: np.random.Generator, *, k
 
 
 def tracking_cells(sc: TrackingScenario, ts: TrackerSettings, n_runs: int, rng: np.random.Generator, *,
-                   n_bootstrap: int, block_length: int = 30) -> tuple[list[dict], dict, np.ndarray]:
+                   n_bootstrap: int, block_length: int = 30, with_divergence: bool = False):
     """Every tracker on one scenario: ``n_runs`` runs (fresh readings for synthetic data; for measured data the one
     recording, the runs differing in the prior draw and the particles), scored at the scored ticks beside the
-    PCRLB. Returns the rows, the estimates ``{tracker: (R, T, 2)}`` and the bound ``(T,)``."""
+    PCRLB. Returns the rows, the estimates ``{tracker: (R, T, 2)}`` and the bound ``(T,)``; with
+    ``with_divergence`` also ``{tracker: flags}`` of the Kalman-family trackers (:func:`run_trackers`). Every cell
+    keeps every run."""
     rng_rss, rng_x0, rng_filters, rng_boot = rng.spawn(4)
     rss = sc.rss_dbm(n_runs, rng_rss)
     x0 = initial_states(sc, ts, n_runs, rng_x0)
-    est = run_trackers(sc, rss, x0, ts, rng_filters)
+    est, flags = run_trackers(sc, rss, x0, ts, rng_filters, with_divergence=True)
     bound = tracking_bound_m(sc, ts)
     steps = sc.scored_steps
     common = f"q = {ts.q:g} m^2/s^3, dt = {sc.dt_s:g} s, P0 sd {ts.initial_position_sd_m:g} m / {ts.initial_velocity_sd_m_s:g} m/s"
@@ -701,7 +708,7 @@ def tracking_cells(sc: TrackingScenario, ts: TrackerSettings, n_runs: int, rng: 
         cell = score(position_error_m(f[:, steps], sc.truth_m[steps]), bound[steps], measured=sc.measured,
                      rng=rng_boot, n_bootstrap=n_bootstrap, block_length=block_length)
         rows.append(_row("tracking", sc, name, cell, knobs[name], n_runs, len(steps), "PCRLB"))
-    return rows, est, bound
+    return (rows, est, bound, flags) if with_divergence else (rows, est, bound)
 
 
 def settings_rows(scenarios) -> list[dict]:

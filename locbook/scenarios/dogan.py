@@ -19,7 +19,7 @@ The fusion reading (how the filter's Q and P_0 relate to sigma_ACC, and how the 
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -30,6 +30,7 @@ from ..tracking.kalman import LinearMeasurement, RssMeasurement, TrackResult, ex
 from ..static.localization import grid_ml_position, rss_ml_position
 from ..models.motion import KinematicModel, constant_acceleration, simulate_states
 from ..bounds.pcrlb import linear_measurement_information, position_bound_m, posterior_crlb, rss_state_information
+from . import DivergenceFlags
 
 __all__ = [
     "PRINTED", "ROOM_M", "ANCHORS_M", "corner_anchors", "STATE_LAYOUT", "POSITION_INDEX", "REF_POWER_DBM",
@@ -280,6 +281,11 @@ def run_filter(name: str, trajectory: Trajectory, rss_dbm, mle_fix_m, mse_mle_m2
     carries Q (:func:`motion_model`), ``p0_acc_var`` the acceleration variance of P_0 (:func:`filter_noise`).
     ``mse_mle_m2`` is ``(2,)`` (one MSE per axis, the default reading of Eq. (3.21), A6) or ``(E, 2)``: one per RSS
     epoch, Table 4.1's R_{k+1} (A6 variant; KF (MLE) only, P_0 from the first epoch's).
+
+    The result is the filter's own :class:`~locbook.TrackResult` with the NIS guard's fields on the trajectory's grid:
+    ``nis``/``nis_dof`` ``(..., T)`` (NaN / 0 up to the first epoch, where the filter starts), ``diverged`` and
+    ``diverged_step`` (a step of ``trajectory.time_s``); with a per-epoch MSE the segments are judged as one filter
+    (:meth:`locbook.scenarios.DivergenceFlags.from_nis` on their concatenated NIS).
     """
     if name not in FILTERS:
         raise ParameterError(f"filter must be one of {FILTERS}, got {name!r}")
@@ -307,7 +313,7 @@ def run_filter(name: str, trajectory: Trajectory, rss_dbm, mle_fix_m, mse_mle_m2
         z = np.full(grid_shape + (2,), np.nan)
         z[..., at, :] = np.asarray(mle_fix_m)[..., 1:, :]
         if per_epoch:
-            return _per_epoch_kf(model, x0, P0, measurements, z, mse, at, steps)
+            return _per_epoch_kf(model, x0, P0, measurements, z, mse, at, steps, n_steps)
         measurements.append(LinearMeasurement(z, model.position_measurement_matrix(), mse[..., :, None] * np.eye(2)))
     else:
         z = np.full(grid_shape + (rss_dbm.shape[-1],), np.nan)
@@ -318,16 +324,28 @@ def run_filter(name: str, trajectory: Trajectory, rss_dbm, mle_fix_m, mse_mle_m2
     track = extended_kalman_filter(model.F, model.Q, x0, P0, measurements, record=at)
     x = np.concatenate([np.broadcast_to(x0[..., None, :], track.x.shape[:-2] + (1, 6)), track.x], axis=-2)
     P = np.concatenate([np.broadcast_to(P0[..., None, :, :], track.P.shape[:-3] + (1, 6, 6)), track.P], axis=-3)
-    return TrackResult(x, P, steps)
+    return _on_trajectory_grid(TrackResult(x, P, steps), track.nis, track.nis_dof, n_steps)
 
 
-def _per_epoch_kf(model, x0, P0, acc_streams, z, mse, at, steps) -> TrackResult:
+def _on_trajectory_grid(result: TrackResult, nis, nis_dof, n_steps: int) -> TrackResult:
+    """``result`` with the NIS guard of the filter grid after the first RSS epoch (steps ``steps[0] + 1 ..``; NIS
+    ``nis``, ``nis_dof``) put on the trajectory's grid of ``n_steps`` steps: no update before the filter starts."""
+    offset = n_steps - nis.shape[-1]
+    pad = nis.shape[:-1] + (offset,)
+    flags = DivergenceFlags.from_nis(nis, nis_dof, step_offset=offset)
+    return replace(result, nis=np.concatenate([np.full(pad, np.nan), nis], axis=-1),
+                   nis_dof=np.concatenate([np.zeros(pad, np.int64), nis_dof], axis=-1),
+                   diverged=flags.diverged, diverged_step=flags.diverged_step)
+
+
+def _per_epoch_kf(model, x0, P0, acc_streams, z, mse, at, steps, n_steps) -> TrackResult:
     """KF (MLE) with R = diag(MSE_MLE) of each epoch (Table 4.1's R_{k+1}): the same multi-rate filter
     (:func:`locbook.extended_kalman_filter`) run one inter-epoch segment at a time, each segment with its epoch's R,
-    continuing from the previous segment's posterior."""
+    continuing from the previous segment's posterior. A segment holds one RSS update (fewer than the guard's window),
+    so the guard judges the segments' concatenated NIS, as for one filter."""
     H = model.position_measurement_matrix()
     x, P = x0, np.broadcast_to(P0, x0.shape[:-1] + P0.shape[-2:])
-    xs, Ps = [x], [P]
+    xs, Ps, nis, dof = [x], [P], [], []
     start = 0
     for e, end in enumerate(at, start=1):
         segment = [LinearMeasurement(m.z[..., start:end + 1, :], m.H, m.R) for m in acc_streams]
@@ -336,20 +354,33 @@ def _per_epoch_kf(model, x0, P0, acc_streams, z, mse, at, steps) -> TrackResult:
         x, P = track.x[..., 0, :], track.P[..., 0, :, :]
         xs.append(x)
         Ps.append(P)
+        nis.append(track.nis)
+        dof.append(np.broadcast_to(track.nis_dof, track.nis.shape))
         start = end + 1
-    return TrackResult(np.stack(xs, axis=-2), np.stack(Ps, axis=-3), steps)
+    grid = z.shape[-2]
+    if start < grid:            # steps after the last RSS epoch: the acceleration updates only, outputs not recorded
+        segment = [LinearMeasurement(m.z[..., start:, :], m.H, m.R) for m in acc_streams]
+        segment.append(LinearMeasurement(z[..., start:, :], H, mse[-1][:, None] * np.eye(2)))
+        track = extended_kalman_filter(model.F, model.Q, x, P, segment)
+        nis.append(track.nis)
+        dof.append(np.broadcast_to(track.nis_dof, track.nis.shape))
+    return _on_trajectory_grid(TrackResult(np.stack(xs, axis=-2), np.stack(Ps, axis=-3), steps),
+                               np.concatenate(nis, axis=-1), np.concatenate(dof, axis=-1), n_steps)
 
 
 @dataclass
 class ChannelRun:
     """All filters for one channel setting (sigma_RSS, alpha): errors ``(runs, E)`` at the RSS epochs, keyed
-    ``"static_mle"`` and ``(filter, sigma_acc or None)``; ``mse_mle_m2`` the per-axis MSE used for R and P_0."""
+    ``"static_mle"`` and ``(filter, sigma_acc or None)``; ``mse_mle_m2`` the per-axis MSE used for R and P_0;
+    ``divergence``: the NIS guard's :class:`~locbook.scenarios.DivergenceFlags` of every filter case, keyed like
+    ``errors`` (the errors keep every run: the thesis averaged all its runs)."""
 
     sigma_rss_db: float
     path_loss_exp: float
     mse_mle_m2: np.ndarray
     errors: dict = field(default_factory=dict)
     converged_fraction: float = 1.0
+    divergence: dict = field(default_factory=dict)
 
 
 def run_channel(trajectory: Trajectory, sigma_rss_db: float, path_loss_exp: float, n_runs: int,
@@ -390,6 +421,7 @@ def run_channel(trajectory: Trajectory, sigma_rss_db: float, path_loss_exp: floa
                                model=model, p0_acc_var=p0_acc, serial_order=serial_order, anchors_m=anchors_m)
             pos = track.x[..., model.position_index]
             out.errors[(name, sigma_acc)] = np.linalg.norm(pos - truth, axis=-1)
+            out.divergence[(name, sigma_acc)] = DivergenceFlags.of(track)
             if keep_estimates:
                 out.errors[("estimates", name, sigma_acc)] = pos
     return out
@@ -816,10 +848,13 @@ def tail_rows(runs: dict, threshold_m: float = 4.0) -> list[dict]:
 
 
 def only_acc_errors(trajectory: Trajectory, sigma_acc_mps2: float, n_runs: int, rng: np.random.Generator, *,
-                    noise_reading: str = DEFAULT_NOISE_READING) -> np.ndarray:
+                    noise_reading: str = DEFAULT_NOISE_READING, with_divergence: bool = False):
     """Fig. 3.2, tracking with ONLY ACC: the KF of Table 3.5 with the accelerometer alone (Eq. (3.18),
     R_acc = sigma_ACC^2 I), started at the true position with zero velocity and acceleration (Eq. (3.19) with a
-    perfect position). Returns the position error ``(n_runs, T - 1)`` at steps 1 .. T-1."""
+    perfect position). Returns the position error ``(n_runs, T - 1)`` at steps 1 .. T-1; with ``with_divergence``
+    ``(errors, flags)``, the KF's NIS guard per run (:class:`locbook.scenarios.DivergenceFlags`, steps of the
+    trajectory's grid). The guard sees the accelerometer's innovations only: the position is not observed, so its
+    drift is no inconsistency of the filter."""
     dt_s = float(trajectory.time_s[1] - trajectory.time_s[0])
     q, p0_acc = filter_noise(noise_reading, sigma_acc_mps2)
     model = motion_model(dt_s, q)
@@ -828,7 +863,8 @@ def only_acc_errors(trajectory: Trajectory, sigma_acc_mps2: float, n_runs: int, 
     _, P0 = initial_state(np.zeros(2), np.full(2, 1e-6), acc_var=p0_acc)
     track = extended_kalman_filter(model.F, model.Q, x0, P0, [LinearMeasurement(
         acc[:, 1:], model.derivative_measurement_matrix(2), sigma_acc_mps2**2 * np.eye(2))])
-    return np.linalg.norm(track.x[..., model.position_index] - trajectory.position_m[1:], axis=-1)
+    err = np.linalg.norm(track.x[..., model.position_index] - trajectory.position_m[1:], axis=-1)
+    return (err, DivergenceFlags.of(track, step_offset=1)) if with_divergence else err
 
 
 def table_view(rows, table: str) -> list[dict]:

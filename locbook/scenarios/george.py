@@ -23,6 +23,7 @@ from ..static.localization import lateration_ls
 from ..data.printed_values import printed
 from ..metrics import position_error_m
 from ..models.motion import constant_velocity
+from . import DivergenceFlags
 
 __all__ = [
     "ANCHORS_M", "CORRIDOR_SIZE_M", "PRINTED", "PRINTED_N", "PRINTED_C_RAW", "PRINTED_C_KF",
@@ -148,7 +149,7 @@ def simulate_corridor(n_runs: int, truth_m, true_model: PathLossModel, *, rng_ca
 
 def track_with_kalman(fixes_m, truth_m, *, q: float, dt_s: float = 1.0, r_mode: str = "empirical",
                       r_iso_m2: float = 3.3, init: str = "first_measurement", init_velocity_var: float = 1.0,
-                      variant: str = "standard") -> np.ndarray:
+                      variant: str = "standard", with_divergence: bool = False):
     """Filter the fixes with the constant-velocity KF of Eqs. (9)-(13); returns positions (runs, T, 2).
 
     Q = q G G^T (white acceleration, note 003 sec. 2.6 point 5), H = [I 0], U = 0. R is the empirical
@@ -156,6 +157,10 @@ def track_with_kalman(fixes_m, truth_m, *, q: float, dt_s: float = 1.0, r_mode: 
     003 sec. 7). Initial state (Sec. 4 steps 5.2-5.3, "set the initial position", "initial velocity to
     zero"): the first fix (``"first_measurement"``) or the true start (``"true_start"``), with
     P0 = diag(R_xx, R_yy, v, v). With the first-fix start the first output is that fix.
+
+    ``with_divergence=True`` returns ``(positions, flags)``, ``flags`` the KF's NIS guard per run
+    (:class:`locbook.scenarios.DivergenceFlags`, steps indexed by marked point): runs without fixes (failed
+    calibration) are not filtered, so neither flagged nor counted.
     """
     if r_mode not in R_MODES:
         raise ValueError(f"r_mode must be one of {R_MODES}, got {r_mode!r}")
@@ -165,10 +170,12 @@ def track_with_kalman(fixes_m, truth_m, *, q: float, dt_s: float = 1.0, r_mode: 
     usable = np.all(np.isfinite(fixes_m), axis=(-2, -1))
     if not usable.all():          # runs without fixes (failed calibration) stay NaN; the others are filtered
         out = np.full(fixes_m.shape, np.nan)
+        flags = DivergenceFlags(np.zeros(0, bool), np.zeros(0, np.int64))
         if usable.any():
-            out[usable] = track_with_kalman(fixes_m[usable], truth_m, q=q, dt_s=dt_s, r_mode=r_mode, r_iso_m2=r_iso_m2,
-                                            init=init, init_velocity_var=init_velocity_var, variant=variant)
-        return out
+            out[usable], flags = track_with_kalman(fixes_m[usable], truth_m, q=q, dt_s=dt_s, r_mode=r_mode,
+                                                   r_iso_m2=r_iso_m2, init=init, init_velocity_var=init_velocity_var,
+                                                   variant=variant, with_divergence=True)
+        return (out, flags.scatter(usable)) if with_divergence else out
     model = constant_velocity(dt_s, q)
     H = model.position_measurement_matrix()
     if r_mode == "empirical":
@@ -181,7 +188,10 @@ def track_with_kalman(fixes_m, truth_m, *, q: float, dt_s: float = 1.0, r_mode: 
     if init == "first_measurement":
         x0 = model.state_from(fixes_m[..., 0, :])
         res = kalman_filter(fixes_m[..., 1:, :], model.F, H, model.Q, R, x0, P0, predict_first=True, variant=variant)
-        return np.concatenate([fixes_m[..., :1, :], model.position(res.x)], axis=-2)
+        out = np.concatenate([fixes_m[..., :1, :], model.position(res.x)], axis=-2)
+        # the filter's step k is marked point k + 1 (point 0 is the first fix)
+        return (out, DivergenceFlags.of(res, step_offset=1)) if with_divergence else out
     x0 = model.state_from(np.broadcast_to(np.asarray(truth_m, float)[0], fixes_m.shape[:-2] + (2,)))
     res = kalman_filter(fixes_m, model.F, H, model.Q, R, x0, P0, predict_first=False, variant=variant)
-    return model.position(res.x)
+    out = model.position(res.x)
+    return (out, DivergenceFlags.of(res)) if with_divergence else out

@@ -32,6 +32,7 @@ from ..static.localization import lateration_box_ls, lateration_ls
 from ..tracking.fusion import fuse_estimates
 from ..tracking.kalman import LinearMeasurement, NonlinearMeasurement, RssMeasurement, extended_kalman_filter
 from ..tracking.unscented import unscented_kalman_filter
+from . import DivergenceFlags
 
 __all__ = [
     "DOCUMENT", "PRINTED", "ROOM_M", "ANCHOR_IDS", "ANCHOR_POSITIONS_M", "ANCHOR_SETS", "REF_POWER_DBM",
@@ -318,7 +319,8 @@ STATE_MODELS = ("heading", "literal_001")
 
 
 def track(walk: Walk, method: str, *, fix_covariance=None, ukf_alpha: float = UKF_ALPHA, ukf_weights: str = "corrected",
-          ukf_innovation_noise: bool = True, rss_sign: str = "corrected", state_model: str = "heading") -> np.ndarray:
+          ukf_innovation_noise: bool = True, rss_sign: str = "corrected", state_model: str = "heading",
+          with_divergence: bool = False):
     """Position estimates ``(R, K, 2)`` at the report points for one method (Sec. 2.10 of note 001):
 
     - ``rss_only``: :func:`rss_only_fixes`;
@@ -336,20 +338,18 @@ def track(walk: Walk, method: str, *, fix_covariance=None, ukf_alpha: float = UK
       h with the printed leading minus, flagged; ``state_model="literal_001"``: the 8-D state as printed, theta_x and
       theta_y random walks, with Z^2 = [a_x, a_y, theta_x, theta_y] a linear measurement and the readings taken as
       world-frame (the gyroscope's yaw rate as theta_x, theta_y never measured), flagged).
+
+    ``with_divergence=True`` returns ``(estimates, flags)``: for ``kf``, ``ekf`` and ``ukf`` the filter's NIS guard
+    per walk (:class:`locbook.scenarios.DivergenceFlags`, steps of the walk's filter grid ``walk.truth.time_s``), None
+    for the methods that run no Kalman-family filter.
     """
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
     s = walk.settings
     steps = walk.report_steps
-    if method == "rss_only":
-        return rss_only_fixes(walk)
-    if method == "inertial_only":
-        return inertial_only(walk)[:, steps]
-    if method == "position_fusion":
-        if fix_covariance is None:
-            raise ValueError("position fusion needs fix_covariance (the RSS fixes' error covariance, from a "
-                             "calibration walk: fix_covariance_from)")
-        return position_fusion(walk, fix_covariance)[0]
+    if method in ("rss_only", "inertial_only", "position_fusion"):
+        out = _untracked(walk, method, fix_covariance)
+        return (out, None) if with_divergence else out
     if method == "kf":
         if fix_covariance is None:
             raise ValueError("the linear KF needs fix_covariance (the RSS fixes' error covariance, from a "
@@ -365,7 +365,7 @@ def track(walk: Walk, method: str, *, fix_covariance=None, ukf_alpha: float = UK
         res = extended_kalman_filter(model.F, model.Q, x0, P0, [
             LinearMeasurement(acc, model.derivative_measurement_matrix(2), r_acc),
             LinearMeasurement(fixes, model.position_measurement_matrix(), fix_covariance)], record=steps)
-        return res.x[..., :2]
+        return (res.x[..., :2], DivergenceFlags.of(res)) if with_divergence else res.x[..., :2]
     if state_model not in STATE_MODELS:
         raise ValueError(f"state_model must be one of {STATE_MODELS}, got {state_model!r}")
     model = HeadingKinematicModel(s.dt_s, s.q, s.q_angular, heading="yaw_rate" if state_model == "heading" else "literal_001")
@@ -384,7 +384,19 @@ def track(walk: Walk, method: str, *, fix_covariance=None, ukf_alpha: float = UK
     else:
         res = unscented_kalman_filter(model.F, model.Q, x0, P0, streams, alpha=ukf_alpha, beta=UKF_BETA, kappa=0.0,
                                       weights=ukf_weights, innovation_noise=ukf_innovation_noise, record=steps)
-    return res.x[..., :2]
+    return (res.x[..., :2], DivergenceFlags.of(res)) if with_divergence else res.x[..., :2]
+
+
+def _untracked(walk: Walk, method: str, fix_covariance) -> np.ndarray:
+    """The methods of :func:`track` that run no Kalman-family filter."""
+    if method == "rss_only":
+        return rss_only_fixes(walk)
+    if method == "inertial_only":
+        return inertial_only(walk)[:, walk.report_steps]
+    if fix_covariance is None:
+        raise ValueError("position fusion needs fix_covariance (the RSS fixes' error covariance, from a "
+                         "calibration walk: fix_covariance_from)")
+    return position_fusion(walk, fix_covariance)[0]
 
 
 def posterior_crlb_m(walk: Walk) -> np.ndarray:

@@ -34,6 +34,7 @@ from ..static.localization import (grid_ml_position, lateration_box_ls, laterati
 from ..tracking.bayes import RssMeasurementModel, grid_bayes_filter, particle_filter
 from ..tracking.kalman import LinearMeasurement, RssMeasurement, extended_kalman_filter
 from ..tracking.unscented import unscented_kalman_filter
+from . import DivergenceFlags
 
 __all__ = ["TAG_HEIGHT_M", "EPOCH_S", "PATH_LOSS_EXP_BOUNDS", "REF_POWER_BOUNDS_DBM", "HUBER_DELTA_DB",
            "STATIC_METHODS", "TRACKERS", "load", "calibration_set", "calibrate", "channel", "ranging_errors",
@@ -157,7 +158,7 @@ def crlb_m(data: MeasuredData, model: PathLossModel, positions_m):
 
 def tracks(data: MeasuredData, model: PathLossModel, recording: str, rng: np.random.Generator, *, q: float,
            fix_cov_m2, spread_m: float, n_particles: int, particle_runs: int, grid_spacing_m: float = 0.1,
-           ukf_alpha: float = 0.5):
+           ukf_alpha: float = 0.5, with_divergence: bool = False):
     """Every tracker on one recording (``"robot"`` or ``"walk"``) put on the :data:`EPOCH_S` clock (a tick without
     an epoch is all NaN: the filters predict through it). Returns ``(ticks of the recording's epochs, {tracker:
     plan positions at every tick (T, 2)})``; the particle filter's entry is ``(particle_runs, T, 2)`` (independent
@@ -170,7 +171,10 @@ def tracks(data: MeasuredData, model: PathLossModel, recording: str, rng: np.ran
     - ``particle``: SIR, ``L_t = L_t-1 + N(0, spread_m^2 I)`` reflected into the outline's box, resampled when
       ``N_eff < N / 2``;
     - ``grid_bayes``: the same random walk on a grid inside the outline (separable transition).
-    The starting state of the Kalman filters is the first RSS-ML fix with a 2 m standard deviation, at rest."""
+    The starting state of the Kalman filters is the first RSS-ML fix with a 2 m standard deviation, at rest.
+
+    ``with_divergence=True`` appends ``{tracker: flags}`` for ``kf_on_ml``, ``ekf`` and ``ukf``: the NIS guard of the
+    one run on the recording (:class:`locbook.scenarios.DivergenceFlags`, steps of the regular clock)."""
     ep = data.epochs(recording)
     reg, ticks = regular_epochs(ep, EPOCH_S, tolerance_s=0.1 * EPOCH_S)
     rss = reg.rss_dbm
@@ -186,18 +190,20 @@ def tracks(data: MeasuredData, model: PathLossModel, recording: str, rng: np.ran
     x0 = np.r_[first, 0.0, 0.0]
     P0 = np.diag([4.0, 4.0, 1.0, 1.0])
     H = np.hstack([np.eye(2), np.zeros((2, 2))])
-    out = {}
-    out["kf_on_ml"] = extended_kalman_filter(motion.F, motion.Q, x0, P0,
-                                             [LinearMeasurement(ml, H, np.asarray(fix_cov_m2, float))]).x[:, :2]
     rss_stream = RssMeasurement(rss, anchors, model, np.array([0, 1]), tag_height_m=TAG_HEIGHT_M)
-    out["ekf"] = extended_kalman_filter(motion.F, motion.Q, x0, P0, [rss_stream]).x[:, :2]
-    out["ukf"] = unscented_kalman_filter(motion.F, motion.Q, x0, P0, [rss_stream], alpha=ukf_alpha).x[:, :2]
+    kalman = {"kf_on_ml": extended_kalman_filter(motion.F, motion.Q, x0, P0,
+                                                 [LinearMeasurement(ml, H, np.asarray(fix_cov_m2, float))]),
+              "ekf": extended_kalman_filter(motion.F, motion.Q, x0, P0, [rss_stream]),
+              "ukf": unscented_kalman_filter(motion.F, motion.Q, x0, P0, [rss_stream], alpha=ukf_alpha)}
+    out = {name: res.x[:, :2] for name, res in kalman.items()}
     bayes_model = bayes_measurement_model(data, model)
     runs = np.broadcast_to(rss, (particle_runs,) + rss.shape)
     out["particle"] = particle_filter(runs, bayes_model, rng, n_particles=n_particles, region_m=(lower, upper),
                                       spread_m=spread_m, resample_threshold=0.5).mmse_m
     out["grid_bayes"] = grid_bayes_filter(rss[None], grid, bayes_model, spread_m).mmse_m[0]
     out["rss_ml"] = ml
+    if with_divergence:
+        return reg, ticks, out, {name: DivergenceFlags.of(res) for name, res in kalman.items()}
     return reg, ticks, out
 
 

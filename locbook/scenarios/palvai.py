@@ -17,6 +17,7 @@ from ..data.printed_values import printed
 from ..models.channel import PathLossModel, correct_range_bias
 from ..static.least_squares import lateration_rows, least_squares_position, recursive_least_squares
 from ..tracking.kalman import NonlinearMeasurement, RssMeasurement, extended_kalman_filter
+from . import DivergenceFlags
 from ..tracking.particle import rss_log_likelihood, sir_particle_filter
 
 __all__ = [
@@ -123,13 +124,16 @@ EKF_SCHEDULES = ("sequential", "batch")
 
 
 def ekf_path(setup: Setup, receivers_m, power_dbm, x0, P0, *, process_sd_m: float = SIGMA2_M,
-             variant: str = "corrected", inflate: bool = False, schedule: str = "sequential") -> np.ndarray:
+             variant: str = "corrected", inflate: bool = False, schedule: str = "sequential",
+             with_divergence: bool = False):
     """The EKF of Sec. 4.3 over the sequential schedule (A5a: step k assimilates location k): random-walk state
     ``X_k = X_{k-1} + w``, ``Q = sigma_2^2 I`` (Eq. (4.25), A6); measurement (4.28). ``variant="corrected"``: the
     nonlinear innovation, the corrected Jacobian and ``R = sigma_1^2`` (optionally ``inflate``d for the GPS noise
     sigma_3, A8); ``"literal_002"`` (flagged): the printed Jacobian (4.43) and ``R = I`` as printed.
     ``schedule="batch"``: all N readings in one update (the corrected EKF only). Returns the estimates
-    ``(R, N, dim)`` after each location (``(R, 1, dim)`` for the batch schedule)."""
+    ``(R, N, dim)`` after each location (``(R, 1, dim)`` for the batch schedule); with ``with_divergence``
+    ``(estimates, flags)``, the EKF's NIS guard per run (:class:`locbook.scenarios.DivergenceFlags`, step k =
+    location k; the batch schedule has one update, fewer than the guard's window, and is never flagged)."""
     if variant not in EKF_VARIANTS:
         raise ValueError(f"variant must be one of {EKF_VARIANTS}, got {variant!r}")
     if schedule not in EKF_SCHEDULES:
@@ -142,11 +146,11 @@ def ekf_path(setup: Setup, receivers_m, power_dbm, x0, P0, *, process_sd_m: floa
             raise ValueError("the batch schedule is offered for the corrected EKF only")
         meas = RssMeasurement(np.asarray(power_dbm)[:, None, :], s[:, None], setup.channel, np.arange(dim),
                               anchor_sigma_m=setup.receiver_sigma_m if inflate else 0.0, min_distance_m=1.0)
-        return extended_kalman_filter(F, Q, x0, P0, [meas]).x
+        return _with_flags(extended_kalman_filter(F, Q, x0, P0, [meas]), with_divergence)
     if variant == "corrected":
         meas = RssMeasurement(np.asarray(power_dbm)[..., None], s[:, :, None, :], setup.channel, np.arange(dim),
                               anchor_sigma_m=setup.receiver_sigma_m if inflate else 0.0, min_distance_m=1.0)
-        return extended_kalman_filter(F, Q, x0, P0, [meas]).x
+        return _with_flags(extended_kalman_filter(F, Q, x0, P0, [meas]), with_divergence)
     # printed form: one location per step through the "diagonal" of an (N, N) stream (NaN off the diagonal)
     z = np.full((R_, N, N), np.nan)
     z[:, np.arange(N), np.arange(N)] = power_dbm
@@ -157,7 +161,11 @@ def ekf_path(setup: Setup, receivers_m, power_dbm, x0, P0, *, process_sd_m: floa
 
     meas = NonlinearMeasurement(z, h, np.eye(N), jacobian=lambda x: printed_jacobian(x, s, setup.path_loss_exp),
                                 name="RSS with the printed Jacobian (4.43) and R = I")
-    return extended_kalman_filter(F, Q, x0, P0, [meas]).x
+    return _with_flags(extended_kalman_filter(F, Q, x0, P0, [meas]), with_divergence)
+
+
+def _with_flags(result, with_divergence: bool):
+    return (result.x, DivergenceFlags.of(result)) if with_divergence else result.x
 
 
 SCHEDULES = ("all", "sequential", "cyclic")

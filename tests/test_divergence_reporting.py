@@ -215,3 +215,34 @@ def test_kolakowski_tracks_return_flags_of_the_kalman_trackers():
                              min_distance_m=model.min_distance_m)
     *_, bad = ko.tracks(data, tight, "robot", np.random.default_rng(13), with_divergence=True, **kw)
     assert bad["ekf"].n_diverged == 1
+
+
+# ------------------------------------------------------------------------------------------------ Dogan's tables
+
+def _fabricated_channel():
+    """A 6 dB, alpha = 3 channel (Table 3.7's 6 dB row) with hand-made errors: the parallel EKF flags 2 of 4 runs."""
+    e = np.ones((4, 5))
+    none = DivergenceFlags(np.zeros(4, bool), np.full(4, -1))
+    two = DivergenceFlags(np.array([True, False, True, False]), np.array([30, -1, 50, -1]))
+    run = dg.ChannelRun(6.0, 3.0, np.ones(2), errors={"static_mle": e, **{(f, None): e for f in dg.FILTERS}},
+                        divergence={(f, None): (two if f == "parallel_ekf" else none) for f in dg.FILTERS})
+    return {(6.0, 3.0): run}
+
+
+def test_dogan_table_rows_and_notes_carry_the_flags():
+    runs = _fabricated_channel()
+    rows = dg.table_rows(runs)
+    by = {(r["table"], r["column"]): r for r in rows}
+    assert by[("3.7", "static_mle")]["divergence"] is None
+    assert by[("3.7", "parallel_ekf")]["divergence"].n_diverged == 2
+    report = lb.Report()
+    dg.record_tables(report, rows)
+    notes = {r["quantity"]: r["note"] for r in report.numbers if r["where"].startswith("Table 3.7")}
+    assert "2 of 4 runs flagged diverged by the NIS guard" in notes["RMSE parallel_ekf"]
+    assert "flagged" not in notes["RMSE serial_ekf"] and "flagged" not in notes["RMSE static_mle"]
+    table = dg.divergence_table(runs, dt_s=0.05)
+    assert [(r["filter"], r["runs flagged"], r["runs"]) for r in table] == [("parallel_ekf", 2, 4), ("serial_ekf", 0, 4),
+                                                                           ("kalman_filter", 0, 4)]
+    assert table[0]["median first time (s)"] == pytest.approx(2.0)
+    tails = {t["filter"]: t for t in dg.tail_rows(runs)}
+    assert tails["parallel_ekf"]["runs flagged diverged"] == 2 and tails["static_mle"]["runs flagged diverged"] == ""

@@ -30,7 +30,7 @@ from ..tracking.kalman import LinearMeasurement, RssMeasurement, TrackResult, ex
 from ..static.localization import grid_ml_position, rss_ml_position
 from ..models.motion import KinematicModel, constant_acceleration, simulate_states
 from ..bounds.pcrlb import linear_measurement_information, position_bound_m, posterior_crlb, rss_state_information
-from . import DivergenceFlags
+from . import DivergenceFlags, divergence_note, divergence_rows
 
 __all__ = [
     "PRINTED", "ROOM_M", "ANCHORS_M", "corner_anchors", "STATE_LAYOUT", "POSITION_INDEX", "REF_POWER_DBM",
@@ -44,6 +44,7 @@ __all__ = [
     "smc_trajectories", "smc_trajectory", "CHANNELS", "run_tables", "table_rows", "only_acc_errors",
     "jackknife_standard_error", "fusion_gain_pct", "mean_rmse_m", "printed_fusion_gains_pct", "REPEATED_ROWS",
     "RMSE_TABLES", "TABLE_SIGMA_ACC_MPS2", "TABLE_36_CHANNEL", "SIGMA_ACC_SWEEP_CHANNELS", "ACCELERATION_INDEX", "MLE_R_READINGS",
+    "divergence_table",
 ]
 
 #: Everything the thesis prints (locbook/data/printed/dogan2015.csv).
@@ -526,8 +527,9 @@ def run_tables(trajectory: Trajectory, n_runs: int, seed: int, *, channels=None,
 
 
 def table_rows(runs: dict) -> list[dict]:
-    """Printed cells beside the reproduced RMSE (over runs and RSS epochs, note 000 A7) with its Monte-Carlo
-    standard error; cells whose setting was not run are left out."""
+    """Printed cells beside the reproduced RMSE (over runs and RSS epochs, note 000 A7, every run as the thesis
+    averaged every run) with its Monte-Carlo standard error and, for a filter column, the NIS guard's flags of its
+    runs (``divergence``, None for the MLE); cells whose setting was not run are left out."""
     from ..metrics import rmse_m
     rows = []
     for cell in printed_tables():
@@ -541,7 +543,8 @@ def table_rows(runs: dict) -> list[dict]:
         value = float(rmse_m(err))
         se = float(np.std(per_run, ddof=1) / np.sqrt(per_run.size) / (2.0 * value))
         rows.append(dict(table=cell["table"], row=cell["row"], column=cell["column"], printed=cell["value"],
-                         printed_value=cell["printed"], reproduced=value, mc_se=se))
+                         printed_value=cell["printed"], reproduced=value, mc_se=se,
+                         divergence=run.divergence.get(key) if key != "static_mle" else None))
     return rows
 
 
@@ -661,7 +664,8 @@ def record_tables(report, rows, *, variants: dict | None = None, label: str = ""
     + the thesis's own Monte-Carlo error (:func:`thesis_repeat_error`, 2 standard errors of the printed cell).
     ``variants`` maps ``(table, row, column)`` to ``{reading: value}``: what the other readings give, quoted in
     the note of every miss (the reading was tested before the miss is attributed). Loose rows keep the automatic
-    note (which part of the window is wide)."""
+    note (which part of the window is wide). A filter cell whose runs the NIS guard flagged says how many in its note
+    (the RMSE keeps them, as the thesis averaged every run)."""
     from ..suite.scoring import Ambiguity, score
     rel = thesis_repeat_error()
     by_key = {(r["table"], r["row"], r["column"]): r for r in rows}
@@ -678,6 +682,7 @@ def record_tables(report, rows, *, variants: dict | None = None, label: str = ""
                         linked=same is not None).verdict
         note = (_miss_reason(r, (variants or {}).get((r["table"], r["row"], r["column"]), {}))
                 if verdict == "miss" else "")
+        note = divergence_note(note, r.get("divergence"))
         row = report.number(f"RMSE {r['column']}{label}", p, r["reproduced"], kind=kind, mc_std_error=r["mc_se"],
                             ambiguity=amb, calibrated_from=SPEED_CALIBRATED_FROM if kind == "calibrated" else "",
                             same_as=same["printed_value"] if same else None, note=note)
@@ -819,6 +824,8 @@ def bound_rows(runs: dict, trajectory: Trajectory, *, noise_reading: str = DEFAU
             bound = pcrlb_m("truth", trajectory=trajectory, **common)[trajectory.rss_steps]
             row = dict(sigma_rss_db=sigma, ple=ple, sigma_acc=sigma_acc, filter=name, rmse_m=float(rmse_m(err)),
                        pcrlb_m=float(np.sqrt(np.mean(bound**2))))
+            if key in run.divergence:
+                row["runs flagged diverged"] = run.divergence[key].n_diverged
             if name == "kalman_filter":
                 lin = pcrlb_m("linear", **common)[trajectory.rss_steps]
                 row["linear_pcrlb_m"] = float(np.sqrt(np.mean(lin**2)))
@@ -829,7 +836,8 @@ def bound_rows(runs: dict, trajectory: Trajectory, *, noise_reading: str = DEFAU
 
 def tail_rows(runs: dict, threshold_m: float = 4.0) -> list[dict]:
     """For every filter case of every channel: the RMSE, the median (typical-run) and 90th percentile of the
-    per-run RMS error (:func:`per_run_rms_m`), the fraction of runs beyond ``threshold_m`` and the worst run."""
+    per-run RMS error (:func:`per_run_rms_m`), the fraction of runs beyond ``threshold_m``, the worst run, and the
+    runs the NIS guard flagged diverged (blank for the MLE)."""
     from ..metrics import rmse_m
     out = []
     for (sigma, ple), run in runs.items():
@@ -838,13 +846,25 @@ def tail_rows(runs: dict, threshold_m: float = 4.0) -> list[dict]:
                 continue
             name, sigma_acc = (key, None) if key == "static_mle" else key
             per = per_run_rms_m(err)
+            flags = run.divergence.get(key) if key != "static_mle" else None
             out.append(dict(sigma_rss_db=sigma, ple=ple, filter=name,
                             case="ONLY RSS" if sigma_acc is None else f"RSS/IMU {sigma_acc:g}",
                             rmse_m=float(rmse_m(err)), median_run_m=float(np.median(per)),
                             p90_run_m=float(np.percentile(per, 90)),
                             fraction_beyond=float(np.mean(per > threshold_m)), worst_run_m=float(per.max()),
-                            runs=int(per.size)))
+                            runs=int(per.size), **{"runs flagged diverged": "" if flags is None else flags.n_diverged}))
     return out
+
+
+def divergence_table(runs: dict, *, dt_s: float = DT_S) -> list[dict]:
+    """The NIS guard's count for every filter case of every channel of ``runs`` (``{(sigma_RSS, alpha): ChannelRun}``):
+    runs flagged / runs and the median time of the first flagged step (``dt_s`` per step of the trajectory grid)."""
+    flags = {}
+    for (sigma, ple), run in runs.items():
+        for (name, sigma_acc), f in run.divergence.items():
+            case = "ONLY RSS" if sigma_acc is None else f"RSS/IMU {sigma_acc:g}"
+            flags[(name, f"sigma_RSS {sigma:g} dB, alpha {ple:g}, {case}")] = f
+    return divergence_rows(flags, step_s=dt_s)
 
 
 def only_acc_errors(trajectory: Trajectory, sigma_acc_mps2: float, n_runs: int, rng: np.random.Generator, *,

@@ -445,3 +445,30 @@ def test_reference_tags_a_reader_that_heard_one_tag_is_named():
         big[1, :, 0] = 1e300
         with np.errstate(over="ignore", invalid="ignore"):
             lb.calibrate_from_reference_tags(big, tags, readers, ref_power_bounds_dbm=None, path_loss_exp_bounds=None)
+
+
+@pytest.mark.parametrize("mode", lb.CALIBRATION_MODES)
+def test_calibrating_an_empty_batch_is_an_empty_calibration(mode):
+    """Found by tests/test_fuzz_static.py: the pooled mode reshaped an empty batch with -1 (numpy: 'cannot reshape
+    array of size 0 into shape (0,newaxis)')."""
+    cal = lb.calibrate_path_loss(np.ones((0, 3, 4)), np.zeros((0, 3, 4)), mode)
+    assert cal.ref_power_dbm.shape == ((0, 4) if mode == "per_anchor" else (0,)) and cal.ok
+
+
+@pytest.mark.parametrize("mode", ["cvxpy", "huber"])
+@pytest.mark.parametrize("value", [-1e300, 1e150])
+def test_a_problem_the_solver_cannot_handle_fails_alone_in_a_stacked_fit(mode, value):
+    """Found by tests/test_fuzz_static.py: one problem with powers of -1e300 dBm made the stacked cvxpy solve fail
+    and every problem of the batch came back NaN with status solver_failed. Now a problem whose data overflow the
+    objective is not_finite before the solve, and a failed stacked solve is halved until the failing problems are
+    alone (as the box-constrained lateration does); the others are their own fits."""
+    d, p = _samples(n=12, seed=7)
+    powers = np.stack([p, p + 1.0, np.full_like(p, value), p - 1.0])
+    with np.errstate(over="ignore", invalid="ignore"):
+        fit = lb.fit_path_loss(d, powers, **FIT_MODES[mode])
+    assert fit.problem_ok.tolist() == [True, True, False, True]
+    assert fit.problem_status[2] in ("not_finite", "solver_failed") and np.isnan(fit.path_loss_exp[2])
+    for i in (0, 1, 3):
+        alone = lb.fit_path_loss(d, powers[i], **FIT_MODES[mode])
+        np.testing.assert_allclose([fit.ref_power_dbm[i], fit.path_loss_exp[i]],
+                                   [alone.ref_power_dbm, alone.path_loss_exp], rtol=0, atol=1e-5)

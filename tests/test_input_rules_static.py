@@ -549,3 +549,14 @@ def test_the_notebooks_anchor_layouts_are_far_from_the_conditioning_bound():
             if sv[1] / sv[0] > 1e-12:        # an exactly collinear subset is rejected anyway, as before
                 assert sv[1] / sv[0] >= 1000 * localization.ANCHOR_CONDITION_RTOL, (layout, sub)
         lb.check_anchor_geometry(layout)
+
+
+@pytest.mark.parametrize("name", ["ls", "wls"])
+def test_a_single_overflowing_range_gives_nan_not_infinity(name):
+    """Found by tests/test_fuzz_static.py: one range of 1e300 m squares to inf; the fix came out (inf, -inf) with
+    status solver_failed, a failed problem with a position. A failed problem's position is NaN."""
+    d = lb.pairwise_distance_m(np.array([3.0, 4.0]), ANCHORS)
+    d[1] = 1e300
+    with np.errstate(over="ignore", invalid="ignore"):
+        res = (lb.lateration_ls(ANCHORS, d) if name == "ls" else lb.lateration_wls(ANCHORS, d, [1.0, 2.0, 3.0, 4.0]))
+    assert res.status == "solver_failed" and not res.converged and np.isnan(res.position_m).all()

@@ -82,3 +82,11 @@ def test_log_normal_range_moments_against_monte_carlo_and_the_note():
     assert np.median(lb.correct_range_bias(ratio, 6.0, 4.0, "median")) == pytest.approx(1.0, abs=0.01)
     assert lb.correct_range_bias(ratio, 6.0, 4.0, "mean").mean() == pytest.approx(1.0, abs=4 * se)
     assert (lb.correct_range_bias(ratio, 6.0, 4.0, "squared") ** 2).mean() == pytest.approx(1.0, abs=0.01)
+
+
+@pytest.mark.parametrize("n", [0, 1])
+def test_too_few_receivers_names_the_argument(n):
+    """Found by tests/test_fuzz_static.py: the message said "lateration needs at least two receiver positions"
+    without naming receivers_m or its shape."""
+    with pytest.raises(ValueError, match=rf"receivers_m must hold at least two receiver positions.*\(3, {n}, 2\)"):
+        lb.least_squares_position(np.zeros((3, n, 2)), np.ones((3, n)))

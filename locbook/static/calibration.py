@@ -78,8 +78,9 @@ class PathLossFit:
 
     ``problem_status`` (the batch shape; one of :data:`FIT_PROBLEM_STATUSES`) says per problem whether its
     parameters can be used: ``"ok"``; ``"too_few_distances"`` (fewer than two distinct distances among the samples
-    it heard); ``"not_finite"`` (the arithmetic overflowed, e.g. powers of 1e300 dBm); ``"solver_failed"`` (the
-    solve of the batch did not reach an optimum, ``status`` says how). Every problem not ``"ok"`` has NaN
+    it heard); ``"not_finite"`` (the arithmetic overflowed, e.g. powers of 1e300 dBm); ``"solver_failed"`` (cvxpy
+    did not reach an optimum for it: a failed stacked solve is halved until the failing problems are alone, and
+    ``status`` is then the first failure's). Every problem not ``"ok"`` has NaN
     parameters, residual sigma and covariance. :attr:`problem_ok` is that per problem, :attr:`ok` whether the
     whole batch can be used (the solver's status is usable and every problem is ``"ok"``).
     """
@@ -103,7 +104,7 @@ class PathLossFit:
     @property
     def problem_ok(self) -> np.ndarray:
         """Per problem (the batch shape): whether its parameters can be used."""
-        return (self.problem_status == "ok") & (self.status in USABLE_STATUSES)
+        return self.problem_status == "ok"
 
     @property
     def ok(self) -> bool:
@@ -180,10 +181,11 @@ def _check_distinct_distances(log_d, mask):
         )
 
 
-def _finish(log_d, power, mask, ref, exp, status, usable, *, covariance: bool = True):
+def _finish(log_d, power, mask, ref, exp, status, usable, *, covariance: bool = True, solved=None):
     """Residual sigma and the LS covariance ``s^2 (M^T M)^{-1}`` from running sums (memory linear in N); the
-    problems that are not ``usable`` (too few distinct distances heard), or whose numbers are not finite, get NaN
-    and their status (:attr:`PathLossFit.problem_status`)."""
+    problems that are not ``usable`` (too few distinct distances heard), whose numbers are not finite, or that the
+    solver did not solve (``solved`` False; by default every problem if ``status`` is not usable) get NaN and
+    their status (:attr:`PathLossFit.problem_status`)."""
     with np.errstate(over="ignore", invalid="ignore"):     # overflow is caught below, per problem
         resid = np.where(mask, power - (ref[..., None] - exp[..., None] * log_d), 0.0)
         n = mask.sum(axis=-1)
@@ -192,11 +194,12 @@ def _finish(log_d, power, mask, ref, exp, status, usable, *, covariance: bool = 
     del resid
     sum_l, sum_l2 = log_d.sum(-1), (log_d**2).sum(-1)          # M^T M = [[n, -sum L], [-sum L, sum L^2]]
     mtm = np.stack([np.stack([n.astype(float), -sum_l], -1), np.stack([-sum_l, sum_l2], -1)], -2)
-    if status not in USABLE_STATUSES:
-        problem_status = np.full(np.shape(usable), "solver_failed", dtype="<U17")
-    else:
-        finite = np.isfinite(ref) & np.isfinite(exp) & np.isfinite(s2)
-        problem_status = np.where(usable, np.where(finite, "ok", "not_finite"), "too_few_distances").astype("<U17")
+    if solved is None:
+        solved = np.full(np.shape(usable), status in USABLE_STATUSES)
+    finite = np.isfinite(ref) & np.isfinite(exp) & np.isfinite(s2)
+    problem_status = np.where(~usable, "too_few_distances", np.where(~solved, "solver_failed",
+                                                                     np.where(finite, "ok", "not_finite")))
+    problem_status = np.asarray(problem_status).astype("<U17")
     ok = problem_status == "ok"
     if not ok.all():       # a singular M^T M (too few distances heard) must not reach inv; the others are untouched
         mtm = np.where(ok[..., None, None], mtm, np.eye(2))
@@ -348,24 +351,43 @@ def fit_path_loss(distance_m, power_dbm, *, ref_distance_m: float = 1.0,
         return _finish(log_d, power, mask, ref, exp, "optimal", usable)     # the optimum, as cvxpy would report it
     batch, n = log_d.shape[:-1], log_d.shape[-1]
     k = int(np.prod(batch))
-    use = usable.reshape(k)
-    ref, exp = np.full(k, np.nan), np.full(k, np.nan)
+    with np.errstate(over="ignore"):    # data whose squares overflow: no solver can use them (not_finite)
+        finite = np.isfinite(np.sum(power.reshape(k, n) ** 2, axis=-1))
+    use = usable.reshape(k) & finite
+    ref, exp, solved = np.full(k, np.nan), np.full(k, np.nan), np.zeros(k, bool)
     status = "optimal"             # nothing to solve (an empty batch, or no problem heard enough): nothing failed
     if use.any():                  # only the problems that can be fitted enter the stacked problem
         pick = (lambda a: a.reshape(k, n)) if use.all() else (lambda a: a.reshape(k, n)[use])
-        problem, (v_ref, v_exp) = _stacked_problem(pick(log_d), pick(power), pick(mask), bounds[0], bounds[1], loss,
-                                                   huber_delta_db)
-        try:
-            solve(problem, "path-loss calibration")
-            status = problem.status
-        except ConvergenceError:
-            status = str(problem.status)
-        except cp.error.SolverError:
-            status = "solver_error"
-        if status == cp.OPTIMAL:
-            ref[use], exp[use] = v_ref.value, v_exp.value
+        ref[use], exp[use], solved[use], status = _solve_stacked(pick(log_d), pick(power), pick(mask), bounds, loss,
+                                                                 huber_delta_db)
     return _finish(log_d, power, mask, ref.reshape(batch), exp.reshape(batch), status, usable,
-                   covariance=loss == "squared")
+                   covariance=loss == "squared", solved=(solved | ~use).reshape(batch))
+
+
+def _solve_stacked(log_d, power, mask, bounds, loss, huber_delta_db):
+    """The problems ``(k, N)`` as one stacked cvxpy problem; if that solve fails the batch is halved and each half
+    solved again, so a problem the solver cannot handle fails alone (as in the box-constrained lateration).
+    Returns ``(ref, exp, solved, status)``: NaN where not solved, and cvxpy's status (the first failure's if some
+    part of the batch failed)."""
+    k = log_d.shape[0]
+    problem, (v_ref, v_exp) = _stacked_problem(log_d, power, mask, bounds[0], bounds[1], loss, huber_delta_db)
+    try:
+        solve(problem, "path-loss calibration")
+        status = problem.status
+    except ConvergenceError:
+        status = str(problem.status)
+    except cp.error.SolverError:
+        status = "solver_error"
+    if status == cp.OPTIMAL:
+        return v_ref.value, v_exp.value, np.ones(k, bool), status
+    if k == 1:
+        return np.full(1, np.nan), np.full(1, np.nan), np.zeros(1, bool), status
+    half = k // 2
+    parts = [_solve_stacked(log_d[sl], power[sl], mask[sl], bounds, loss, huber_delta_db)
+             for sl in (slice(0, half), slice(half, k))]
+    failed = [p[3] for p in parts if p[3] != cp.OPTIMAL]
+    return (np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts]),
+            np.concatenate([p[2] for p in parts]), failed[0] if failed else cp.OPTIMAL)
 
 
 def calibrate_path_loss(distance_m, power_dbm, mode: str = "per_location_mean", **fit_kwargs) -> PathLossFit:
@@ -407,8 +429,8 @@ def calibrate_path_loss(distance_m, power_dbm, mode: str = "per_location_mean", 
             per.status, per, worst,
         )
     if mode == "pooled":
-        return fit_path_loss(distance_m.reshape(distance_m.shape[:-2] + (-1,)),
-                             power_dbm.reshape(power_dbm.shape[:-2] + (-1,)), **fit_kwargs)
+        pooled = distance_m.shape[:-2] + (distance_m.shape[-2] * distance_m.shape[-1],)   # not -1: empty batches
+        return fit_path_loss(distance_m.reshape(pooled), power_dbm.reshape(pooled), **fit_kwargs)
     if mode == "per_anchor":
         return fit_path_loss(np.swapaxes(distance_m, -1, -2), np.swapaxes(power_dbm, -1, -2), **fit_kwargs)
     raise ValueError(f"calibration mode must be one of {CALIBRATION_MODES}, got {mode!r}")

@@ -51,7 +51,7 @@ def lateration_rows(receivers_m, distance_m, *, reference: str = "consecutive", 
     if d.shape[-1] != n:
         raise ValueError(f"distance_m has {d.shape[-1]} readings on its last axis, receivers_m has {n} positions")
     if n < 2:
-        raise ValueError("lateration needs at least two receiver positions")
+        raise ValueError(f"receivers_m must hold at least two receiver positions (axis -2), got shape {s.shape}")
     if np.any(d < 0):
         raise ValueError("distances must be non-negative (NaN = not heard)")
     i, j = _pairs(n, reference)

@@ -353,8 +353,11 @@ def lateration_ls(anchors_m, distance_m, ref_index: int = 0, *, min_anchors: int
         return _lateration_by_heard(anchors_m, distance_m, ref_index, min_anchors,
                                     lambda a, d, ref: lateration_ls(a, d, ref, tag_height_m=tag_height_m),
                                     f"lateration_ls(ref={ref_index})", tag_height_m)
-    pos = b @ np.linalg.pinv(a_mat).T
+    with np.errstate(over="ignore", invalid="ignore"):
+        pos = b @ np.linalg.pinv(a_mat).T
     ok = np.all(np.isfinite(pos), axis=-1)     # not finite: the squared ranges overflowed
+    if not ok.all():                           # a failed problem has no position (not +-inf)
+        pos = np.where(ok[..., None], pos, np.nan)
     return LocalizationResult(pos, ok, None, 0, f"lateration_ls(ref={ref_index})", _status(ok))
 
 
@@ -413,6 +416,8 @@ def lateration_wls(anchors_m, distance_m, weights, ref_index: int = 0, *,
     atb = np.einsum("ki,...k,...k->...i", a_mat, w, b)
     pos = np.linalg.solve(ata, atb[..., None])[..., 0]
     ok = np.all(np.isfinite(pos), axis=-1)
+    if not ok.all():                           # a failed problem has no position (not +-inf)
+        pos = np.where(ok[..., None], pos, np.nan)
     return LocalizationResult(pos, ok, None, 0, "lateration_wls", _status(ok))
 
 

@@ -219,6 +219,10 @@ def _not_positive_definite(S):
     return np.zeros(S.shape[:-2], bool)
 
 
+_STATE_NOT_FINITE = ("the state is not finite, or so far from the anchors that its distance overflows, at step {step}: "
+                     "the filter ran away (an overflow, e.g. after a reading of 1e300 dBm or a huge F or Q)")
+
+
 class _Singular(Exception):
     """Raised inside an update; the time loop turns it into a SingularCovarianceError naming the step."""
 
@@ -226,6 +230,16 @@ class _Singular(Exception):
         super().__init__()
         self.bad = bad
         self.message = message      # "": the innovation covariance; else the text of the failure ({step} filled in)
+
+
+def _check_state(step: int, x, P):
+    """A SingularCovarianceError naming the step and run when a state or covariance is no longer finite (an overflow:
+    huge F, Q, P0 or readings); the filter never returns them."""
+    if np.isfinite(x).all() and np.isfinite(P).all():
+        return
+    bad = ~np.all(np.isfinite(x), axis=-1) | ~np.all(np.isfinite(P), axis=(-2, -1))
+    _raise_singular(step, bad, message=_STATE_NOT_FINITE.replace("the state is not finite", "the state or its "
+                                                                 "covariance is not finite"))
 
 
 def _raise_singular(step: int, bad, what: str = "innovation covariance", message: str = ""):
@@ -371,6 +385,7 @@ def _kalman_filter_batched(z, F, H, Q, R, x, P, batch, predict_first, variant, j
         bad = valid & ~np.all(np.isfinite(x), axis=-1)
         if bad.any():
             _raise_singular(k, bad)
+        _check_state(k, x, P)
         out_x[..., k, :], out_P[..., k, :, :] = x, P
         out_xp[..., k, :], out_Pp[..., k, :, :] = x_use, P_use
         out_nu[..., k, :] = np.where(valid[..., None], nu, np.nan)
@@ -449,6 +464,7 @@ def _kalman_filter_shared(z, F, H, Q, R, x, P, pattern, predict_first, variant, 
             out_nu[..., k, :] = nu
             out_nis[..., k] = nis
             out_dof[..., k] = dof
+        _check_state(k, x, P)
         out_x[..., k, :], out_P[..., k, :, :] = x, P
         out_xp[..., k, :], out_Pp[..., k, :, :] = x_use, P_use
     return KalmanResult(out_x, out_P, out_xp, out_Pp, out_nu, variant, out_nis, out_dof)
@@ -752,6 +768,9 @@ def _rss_parallel_update(x, P, z, meas: RssMeasurement, step: int = 0):
     m = z.shape[-1]
     H = np.zeros(grad.shape[:-1] + (x.shape[-1],))
     H[..., idx] = grad[..., :idx.size]
+    far = ~np.all(np.isfinite(d), axis=-1)
+    if far.any():                   # the state ran away (an overflow, e.g. after a reading of 1e300 dBm)
+        raise _Singular(far, _STATE_NOT_FINITE)
     h = ch.mean_power_dbm(d)
     sigma2 = np.broadcast_to(meas.variance_db2(d, ch.path_loss_exp, ch.sigma_db), z.shape)
     R = sigma2[..., :, None] * np.eye(m)
@@ -980,6 +999,7 @@ def _time_loop(setup: _Setup, measurements, update, predict_first: bool, *, shar
                 nis, dof = nis + out[2], dof + out[3]
             else:
                 nis = nis + np.nan
+        _check_state(k, x, P)
         out_nis[..., k] = np.where(np.asarray(dof) > 0, nis, np.nan)
         out_dof[..., k] = dof
         if slot[k] >= 0:
@@ -1377,6 +1397,17 @@ def _nb_ekf(Fi, Fj, Fv, Q, x0, P0, predict_first, slot, active, kind, col, nz, n
                                     Rr[r, q, w] = var[r, w] if r == q else 0.0
                     if not _nb_update(x, P, rows, nz[s], nnz[s], Hr, nu, Rr, HP, HPH, S, L, KT, PH, D, t, t2, Y, nis):
                         return b0 + 1
+            for w in range(_LANES):                       # a state or covariance that overflowed: numpy names it
+                t[w] = 0.0                                # (v - v is NaN exactly when v is not finite)
+            for i in range(n):
+                for w in range(_LANES):
+                    t[w] += x[i, w] - x[i, w]
+                for j in range(i, n):
+                    for w in range(_LANES):
+                        t[w] += P[i, j, w] - P[i, j, w]
+            for w in range(_LANES):
+                if not t[w] == 0.0:
+                    return b0 + 1
             for w in range(min(_LANES, B - b0)):
                 out_nis[b0 + w, k] = nis[w] if dof[w] > 0 else np.nan
                 out_dof[b0 + w, k] = dof[w]
@@ -1468,7 +1499,7 @@ def _compiled_ekf(setup: _Setup, measurements, predict_first: bool):
     global _NUMBA_ENABLED
     F, Q, batch, T = setup.F, setup.Q, setup.batch, setup.T
     B = int(np.prod(batch, dtype=np.int64))
-    if not _NUMBA_ENABLED or F.ndim != 2 or Q.ndim != 2 or B * T < _NUMBA_MIN_WORK or B == 0:
+    if not _NUMBA_ENABLED or F.ndim != 2 or Q.ndim != 2 or B * T < _NUMBA_MIN_WORK or B == 0 or T == 0:
         return None
     if not all(isinstance(m, (LinearMeasurement, RssMeasurement)) for m in measurements):
         return None
@@ -1482,12 +1513,12 @@ def _compiled_ekf(setup: _Setup, measurements, predict_first: bool):
     P0 = setup.P[None] if setup.P.ndim == 2 else np.broadcast_to(setup.P, batch + (n, n)).reshape(B, n, n)
     out_x, out_P = np.empty((B, S, n)), np.empty((B, S, n, n))
     out_nis, out_dof = np.empty((B, T)), np.empty((B, T), np.int64)
-    try:
-        status = _nb_ekf(Fi.astype(np.int64), Fj.astype(np.int64), np.ascontiguousarray(F[Fi, Fj]),
-                         np.ascontiguousarray(Q), np.ascontiguousarray(setup.x.reshape(B, n)), np.ascontiguousarray(P0),
-                         bool(predict_first), setup.slot.astype(np.int64),
-                         np.array(setup.active, dtype=np.bool_).reshape(-1, T), *packed, out_x, out_P, out_nis,
-                         out_dof)
+    args = (Fi.astype(np.int64), Fj.astype(np.int64), np.ascontiguousarray(F[Fi, Fj]), np.ascontiguousarray(Q),
+            np.ascontiguousarray(setup.x.reshape(B, n)), np.ascontiguousarray(P0), bool(predict_first),
+            setup.slot.astype(np.int64), np.array(setup.active, dtype=np.bool_).reshape(-1, T), *packed, out_x, out_P,
+            out_nis, out_dof)
+    try:                            # only the kernel here: an error of ours must not turn numba off for the session
+        status = _nb_ekf(*args)
     except Exception as exc:        # numba could not compile or run the kernel here: numpy from now on
         _NUMBA_ENABLED = False
         warnings.warn(f"locbook: the compiled EKF failed ({type(exc).__name__}: {exc}); using the numpy loop "

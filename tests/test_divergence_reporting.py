@@ -37,6 +37,8 @@ def test_flags_count_scatter_and_note():
     assert f.clause().startswith("2 of 3 runs flagged diverged by the NIS guard (20 updates beyond chi2 0.999)")
     assert divergence_note("", f).endswith("averaged here as the source averaged every run")
     assert divergence_note("why", f).startswith("why; 2 of 3 runs")
+    assert divergence_note("", f, averaged="kept in the mean").endswith("chi2 0.999); kept in the mean")
+    assert divergence_note("", f, averaged=False).endswith("chi2 0.999)")
     none = DivergenceFlags(np.zeros(4, bool), np.full(4, -1))
     assert divergence_note("why", none) == "why" and np.isnan(none.median_first_step)
     assert divergence_note("", {"EKF": f, "KF": none, "RSS only": None}).startswith("EKF: 2 of 3 runs")

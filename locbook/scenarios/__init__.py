@@ -119,18 +119,19 @@ class DivergenceFlags:
         return row
 
 
-def divergence_note(note: str, flags, *, averaged: bool = True) -> str:
+def divergence_note(note: str, flags, *, averaged: bool | str = True) -> str:
     """``note`` followed by the divergence clause of ``flags`` (one :class:`DivergenceFlags`, or ``{filter name:
-    DivergenceFlags}`` for a statistic that combines several filters; None entries are skipped). ``averaged``: the
-    statistic keeps every run, as the source averaged every run (said in the clause). Unchanged when nothing is
-    flagged."""
+    DivergenceFlags}`` for a statistic that combines several filters; None entries are skipped). ``averaged``: True
+    says the statistic keeps every run, as the source averaged every run; a string says so in its own words; False
+    adds nothing (e.g. a maximum over runs). Unchanged when nothing is flagged."""
     if flags is None:
         return note
     items = flags.items() if isinstance(flags, dict) else [("", flags)]
     parts = [f"{name}: {f.clause()}" if name else f.clause() for name, f in items if f is not None and f.clause()]
     if not parts:
         return note
-    clause = "; ".join(parts) + ("; averaged here as the source averaged every run" if averaged else "")
+    tail = "averaged here as the source averaged every run" if averaged is True else (averaged or "")
+    clause = "; ".join(parts) + (f"; {tail}" if tail else "")
     return f"{note}; {clause}" if note else clause
 
 

@@ -24,7 +24,7 @@ from .tracking.bayes import (RESAMPLING_CDFS, WEIGHT_SMOOTHINGS, GridFilterResul
                             RssMeasurementModel, effective_sample_size, grid_bayes_filter, grid_transition_matrix,
                             particle_filter, systematic_resample)
 from .bounds.crlb import CRLB_FORMS, crlb_rms_over_area_m, rss_crlb_m, rss_fisher_information, rss_position_information
-from .static.calibration import (CALIBRATION_MODES, PathLossFit, calibrate_path_loss, fit_path_loss, fit_path_loss_closed_form,
+from .static.calibration import (CALIBRATION_MODES, FIT_PROBLEM_STATUSES, PathLossFit, calibrate_path_loss, fit_path_loss, fit_path_loss_closed_form,
                                  fix_error_covariance, path_loss_exp_given_ref_power, path_loss_exp_ratio_estimate)
 from .models.imu import (IMU_FRAMES, INTEGRATION_RULES, accelerometer_readings, body_to_world, dead_reckon,
                          gyroscope_readings, inertial_measurement_function, inertial_measurement_jacobian, integrate,
@@ -45,7 +45,8 @@ from .tracking.kalman import (KF_VARIANTS, RSS_UPDATE_MODES, SERIAL_ORDERS, Kalm
                               rss_measurement_jacobian)
 from .tracking.unscented import (UKF_WEIGHTS, UkfResult, UnscentedWeights, sigma_points, unscented_kalman_filter,
                                  unscented_transform, unscented_weights)
-from .static.localization import (LOCALIZATION_STATUSES, LocalizationResult, check_anchor_geometry, grid_ml_position, lateration_box_ls,
+from .static.localization import (ANCHOR_CONDITION_RTOL, IMPLAUSIBLE_SIGMAS, LOCALIZATION_STATUSES, LocalizationResult,
+                                  implausible_powers, check_anchor_geometry, grid_ml_position, lateration_box_ls,
                            lateration_ls, lateration_system, lateration_wls, rss_ml_position)
 from .metrics import (empirical_cdf, error_std_m, error_summary, mean_error_m, median_error_m, percentile_error_m,
                       position_error_m, reduction_pct, rmse_m, rmse_standard_error_m)
@@ -75,10 +76,10 @@ __all__ = [
     "PathLossModel", "CC2420_RSSI_OFFSET_DB", "AT86RF230_ED_OFFSET_DB", "register_to_dbm", "dbm_to_register",
     "quantize_db", "pairwise_distance_m", "correlated_shadowing_db", "wall_crossings", "small_scale_fading_db",
     # calibration
-    "PathLossFit", "fit_path_loss", "fit_path_loss_closed_form", "calibrate_path_loss", "CALIBRATION_MODES", "fix_error_covariance",
+    "PathLossFit", "FIT_PROBLEM_STATUSES", "fit_path_loss", "fit_path_loss_closed_form", "calibrate_path_loss", "CALIBRATION_MODES", "fix_error_covariance",
     "path_loss_exp_ratio_estimate", "path_loss_exp_given_ref_power",
     # static localization
-    "LocalizationResult", "LOCALIZATION_STATUSES", "check_anchor_geometry", "lateration_system", "lateration_ls", "lateration_wls",
+    "LocalizationResult", "LOCALIZATION_STATUSES", "ANCHOR_CONDITION_RTOL", "IMPLAUSIBLE_SIGMAS", "implausible_powers", "check_anchor_geometry", "lateration_system", "lateration_ls", "lateration_wls",
     "lateration_box_ls", "rss_ml_position", "grid_ml_position", "lateration_rows", "least_squares_position",
     "recursive_least_squares", "RlsResult", "LATERATION_REFERENCES", "LATERATION_VARIANTS",
     "log_normal_range_moments", "correct_range_bias", "RANGE_BIAS_TARGETS",

@@ -118,10 +118,9 @@ def nis_divergence(nis, nis_dof, window: int | None = DIVERGENCE_WINDOW,
         return np.zeros(batch, bool), np.full(batch, -1, np.int64)
     from scipy.special import chdtri            # lazy: keeps `import locbook` fast
     updated = dof > 0
-    bound = np.full(nis.shape, np.inf)
-    for d in np.unique(dof[updated]):           # a few distinct dimensions: one quantile each
-        bound[dof == d] = chdtri(float(d), 1.0 - probability)
-    exceed = updated & (nis > bound)            # NaN NIS (a non-finite innovation) never counts as an exceedance
+    # the dimensions are small integers: one quantile each, looked up (inf for dof 0: never exceeded)
+    table = np.concatenate([[np.inf], chdtri(np.arange(1, max(int(dof.max()), 1) + 1, dtype=float), 1.0 - probability)])
+    exceed = nis > table[dof]                   # NaN NIS (a non-finite innovation) never counts as an exceedance
     # the length of the current streak of exceedances among the updates: count minus the count at the last update
     # that stayed within the bound
     count = np.cumsum(exceed, axis=-1)
@@ -489,7 +488,7 @@ def _linear_update_shared(x, P, z, present, H, R, *, joseph: bool = True):
     if m <= 2:
         S_inv = _inv_small(S)
         K = HP.T @ S_inv
-        nis = np.einsum("bi,ij,bj->b", flat, S_inv, flat)
+        nis = np.einsum("bi,bi->b", flat @ S_inv, flat)
     else:
         try:                                    # K' = S^{-1} H P and S^{-1} nu^T in one solve
             sol = np.linalg.solve(S, np.concatenate([HP, flat.T], axis=-1))

@@ -147,3 +147,9 @@ def test_grid_bayes_filter_isolates_a_run_whose_likelihood_collapses():
         np.testing.assert_array_equal(getattr(res, name)[[0, 2]], getattr(ref, name)[[0, 2]])
     np.testing.assert_array_equal(res.mmse_m[1, :2], ref.mmse_m[1, :2])
     assert np.isnan(res.mmse_m[1, 2:]).all() and np.isnan(res.belief[1]).all()
+
+
+def test_sir_without_particles_is_a_clear_error():
+    """Used to end in numpy's "zero-size array to reduction operation maximum"."""
+    with pytest.raises(ValueError, match=r"initial_particles_m must hold at least one particle.*\(2, 0, 2\)"):
+        lb.sir_particle_filter(np.zeros((2, 0, 2)), lambda x, k: np.zeros(x.shape[:2]), 2, np.random.default_rng(0))

@@ -135,6 +135,8 @@ def sir_particle_filter(initial_particles_m, log_likelihood, n_steps: int, rng: 
     if not isinstance(rng, np.random.Generator):
         raise ValueError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
     R, n, dim = x.shape
+    if n == 0:
+        raise ValueError(f"initial_particles_m must hold at least one particle per run, got shape {x.shape}")
     sd = np.broadcast_to(as_array("process_sd_m", process_sd_m), (dim,))
     if np.any(sd < 0):
         raise ValueError("process_sd_m must be >= 0")

@@ -51,7 +51,8 @@ from .._validate import as_array, check_choice, check_scalar
 from ..models.channel import PathLossModel, log_distance_gradient, log_distance_mean_dbm
 from ..errors import SingularCovarianceError
 
-__all__ = ["KalmanResult", "kalman_filter", "nis_divergence", "DIVERGENCE_WINDOW", "DIVERGENCE_PROBABILITY", "KF_VARIANTS", "LinearMeasurement", "RssMeasurement", "NonlinearMeasurement",
+__all__ = ["KalmanResult", "kalman_filter", "nis_divergence", "DIVERGENCE_WINDOW", "DIVERGENCE_PROBABILITY",
+           "KF_VARIANTS", "LinearMeasurement", "RssMeasurement", "NonlinearMeasurement",
            "TrackResult", "run_recursive_filter",
            "extended_kalman_filter", "rss_measurement_jacobian", "RSS_UPDATE_MODES", "SERIAL_ORDERS"]
 
@@ -133,10 +134,12 @@ def nis_divergence(nis, nis_dof, window: int | None = DIVERGENCE_WINDOW,
     return diverged, np.where(diverged, start, -1).astype(np.int64)
 
 
-_SYM_RTOL = 1e-8       # relative to the matrix's largest |entry|: round-off of products such as F P F^T, not a typo
+#: asymmetry and negative eigenvalues a covariance may have, relative to its largest |entry| (the round-off of
+#: products such as F P F^T is some 1e-16; a matrix typed or built wrong is off by far more)
+_SYM_RTOL = 1e-8
 
 
-def _covariance(name: str, value, rows: int, *, batch_ok: bool = True) -> np.ndarray:
+def _covariance(name: str, value, rows: int) -> np.ndarray:
     """A finite, symmetric, positive semi-definite ``(rows, rows)`` matrix (possibly with batch axes), checked up
     front with an error naming ``name``: asymmetry and negative eigenvalues are allowed up to ``_SYM_RTOL`` times the
     matrix's largest absolute entry (round-off)."""

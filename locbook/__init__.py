@@ -40,7 +40,7 @@ from .models.channel import (AT86RF230_ED_OFFSET_DB, CC2420_RSSI_OFFSET_DB, Path
                       dbm_to_register, pairwise_distance_m, quantize_db, register_to_dbm, small_scale_fading_db, wall_crossings)
 from .errors import ConvergenceError, DegenerateGeometryError, LocbookError, ParameterError, SingularCovarianceError
 from .static.fingerprint import KNN_WEIGHTINGS, knn_position, model_fingerprints, pattern_fingerprints
-from .tracking.kalman import (KF_VARIANTS, RSS_UPDATE_MODES, SERIAL_ORDERS, KalmanResult, LinearMeasurement,
+from .tracking.kalman import (DIVERGENCE_PROBABILITY, DIVERGENCE_WINDOW, KF_VARIANTS, nis_divergence, RSS_UPDATE_MODES, SERIAL_ORDERS, KalmanResult, LinearMeasurement,
                               NonlinearMeasurement, RssMeasurement, TrackResult, extended_kalman_filter, kalman_filter,
                               rss_measurement_jacobian)
 from .tracking.unscented import (UKF_WEIGHTS, UkfResult, UnscentedWeights, sigma_points, unscented_kalman_filter,
@@ -92,7 +92,7 @@ __all__ = [
     "accelerometer_readings", "gyroscope_readings", "stationary_bias", "rotation_2d", "world_to_body", "body_to_world",
     "integrate", "dead_reckon", "inertial_measurement_function", "inertial_measurement_jacobian", "IMU_FRAMES",
     "INTEGRATION_RULES", "fuse_estimates", "FUSION_READINGS",
-    "kalman_filter", "KF_VARIANTS", "NOISE_MODELS", "STATE_LAYOUTS", "extended_kalman_filter", "LinearMeasurement",
+    "kalman_filter", "KF_VARIANTS", "nis_divergence", "DIVERGENCE_WINDOW", "DIVERGENCE_PROBABILITY", "NOISE_MODELS", "STATE_LAYOUTS", "extended_kalman_filter", "LinearMeasurement",
     "RssMeasurement", "NonlinearMeasurement", "TrackResult", "rss_measurement_jacobian", "RSS_UPDATE_MODES",
     "SERIAL_ORDERS", "unscented_kalman_filter", "UkfResult", "unscented_weights", "UnscentedWeights", "sigma_points",
     "unscented_transform", "UKF_WEIGHTS",

@@ -110,3 +110,16 @@ def test_block_bootstrap_widens_the_interval_of_correlated_errors():
     blocks = lb.accuracy_metrics(e, np.random.default_rng(3), n_bootstrap=500, block_length=100)
     width = lambda m: m["mean_m_high"] - m["mean_m_low"]
     assert width(blocks) > 2.5 * width(iid)       # variance inflation ~(1 + phi) / (1 - phi) = 39, ratio ~6
+
+
+def test_a_calibration_that_cannot_fit_an_anchor_names_it(monkeypatch):
+    """An anchor that heard nothing on the calibration points is named with its status, not blamed on the solver."""
+    from locbook.errors import ConvergenceError
+    from locbook.scenarios import kolakowski as k
+    data = lb.kolakowski2021()
+    xy, distance, rss = k.calibration_set(data)
+    rss = rss.copy()
+    rss[:, 2] = np.nan
+    monkeypatch.setattr(k, "calibration_set", lambda _data: (xy, distance, rss))
+    with pytest.raises(ConvergenceError, match=rf"{data.anchor_ids[2]}: too_few_distances"):
+        k.calibrate(data)

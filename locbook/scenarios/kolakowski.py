@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..bounds.crlb import rss_position_information
+from ..errors import ConvergenceError
 from ..data.measured import KOLAKOWSKI2021_TAG_HEIGHT_M, MeasuredData, kolakowski2021, regular_epochs
 from ..geometry import grid_in_outline, inside_outline, outline_box
 from ..models.channel import PathLossModel
@@ -85,7 +86,13 @@ def calibrate(data: MeasuredData, *, mode: str = "per_anchor", fit: str = "close
         raise ValueError(f"fit must be one of {sorted(kwargs)}, got {fit!r}")
     result = calibrate_path_loss(distance, rss, mode, **kwargs[fit])
     if not result.ok:
-        raise RuntimeError(f"the {fit} {mode} path-loss fit did not reach an optimum: status {result.status}")
+        # a fit is not ok when the solver failed or when some anchor's problem could not be fitted (too few
+        # distances, non-finite sums): name which, per anchor
+        status = np.atleast_1d(result.problem_status)
+        names = list(data.anchor_ids) if status.size == len(data.anchor_ids) else [str(i) for i in range(status.size)]
+        failed = ", ".join(f"{n}: {s}" for n, s in zip(names, status) if s != "ok") or "none"
+        raise ConvergenceError(f"the {fit} {mode} path-loss fit failed (solver status {result.status}); "
+                               f"not fitted: {failed}")
     return result
 
 

@@ -560,3 +560,69 @@ def test_a_single_overflowing_range_gives_nan_not_infinity(name):
     with np.errstate(over="ignore", invalid="ignore"):
         res = (lb.lateration_ls(ANCHORS, d) if name == "ls" else lb.lateration_wls(ANCHORS, d, [1.0, 2.0, 3.0, 4.0]))
     assert res.status == "solver_failed" and not res.converged and np.isnan(res.position_m).all()
+
+
+# -- issue 26 follow-up: readings impossible together, a goodness-of-fit status ----------------------------------
+SQUARE_GRID = np.stack(np.meshgrid(np.arange(0, 10.25, 0.25), np.arange(0, 10.25, 0.25)), -1).reshape(-1, 2)
+ML_ESTIMATORS = {"ml": lambda a, p, model, **kw: lb.rss_ml_position(a, p, model, **kw),
+                 "grid": lambda a, p, model, **kw: lb.grid_ml_position(a, p, model, SQUARE_GRID, **kw)}
+
+
+@pytest.mark.parametrize("name", ["ml", "grid"])
+@pytest.mark.parametrize("power, model", [(100.0, lb.PathLossModel(-45.0, 3.5, 8.0)),
+                                          (39.0, lb.PathLossModel(-40.0, 2.0, 2.0))])
+def test_readings_impossible_together_are_a_poor_fit(name, power, model):
+    """The reviewer's cases: each reading alone is below the implausibility bound (the mean at 1 mm plus 10 sigma),
+    but four equal powers that high would need the tag within millimetres of all four corners of a 10 m square at
+    once. The ML answer (the centre) leaves about 48 sigma per anchor: sum r^2 / sigma^2 is far beyond
+    chi2.ppf(1 - 1e-9, 4 - 2) = 2 ln(1e9) = 41.4 (closed form for 2 degrees of freedom). Before, status ok."""
+    from scipy.stats import chi2
+    res = ML_ESTIMATORS[name](SQUARE, np.full(4, power), model)
+    assert res.status == "poor_fit"
+    assert res.cost / model.sigma_db**2 > chi2.ppf(1 - localization.GOODNESS_OF_FIT_ALPHA, 2)
+    # the ML answer is kept: position and converged flag as they were (the status says the readings do not fit)
+    assert res.converged and np.isfinite(res.position_m).all()
+    if name == "ml":     # the reviewer's answer: the centre (the grid's best point is a corner, at the 1 um clamp)
+        np.testing.assert_allclose(res.position_m, [5.0, 5.0], atol=1e-6)
+
+
+@pytest.mark.parametrize("name", ["ml", "grid"])
+@pytest.mark.parametrize("sigma_db", [4.0, np.array([2.0, 3.0, 4.0, 6.0])])
+def test_model_consistent_readings_are_never_a_poor_fit(name, sigma_db):
+    """2,000 problems whose readings are the model's mean plus its own shadowing: the statistic is (about) chi-square
+    with m - 2 = 2 degrees of freedom, beyond the bound with probability 1e-9, so none is flagged (and with
+    per-anchor sigma the cost divided by the largest sigma^2 is at most the weighted cost's minimum)."""
+    model = lb.PathLossModel(-40.0, 2.5, sigma_db)
+    rng = np.random.default_rng(26)
+    truth = rng.uniform(0.5, 9.5, (2000, 2))
+    power = model.sample_power_dbm(lb.pairwise_distance_m(truth, SQUARE), rng)
+    res = ML_ESTIMATORS[name](SQUARE, power, model)
+    assert "poor_fit" not in set(res.status.tolist())
+    assert res.converged.all()
+
+
+@pytest.mark.parametrize("name", ["ml", "grid"])
+def test_a_poor_fit_is_flagged_alone_in_its_batch(name):
+    """A batch of noisy model-consistent problems, one (row 3) that hears -30 dBm at all four corners (the model's
+    mean at 0.3 m: no position is that close to all four; at the centre each reading is 27 dB = 6.8 sigma too
+    strong, cost / sigma^2 about 180 > 41.4) and one (row 5) that heard only three anchors (1 degree of freedom,
+    still testable): only row 3 is flagged, every position equals the problem solved alone, and a sigma of 0 (no
+    shadowing model) flags nothing."""
+    rng = np.random.default_rng(5)
+    truth = rng.uniform(1, 9, (8, 2))
+    power = SQUARE_MODEL.sample_power_dbm(lb.pairwise_distance_m(truth, SQUARE), rng)
+    power[3] = -30.0
+    power[5, 2] = np.nan
+    res = ML_ESTIMATORS[name](SQUARE, power, SQUARE_MODEL)
+    assert res.status.tolist() == ["ok"] * 3 + ["poor_fit"] + ["ok"] * 4
+    assert res.converged.all()
+    for i in range(8):
+        np.testing.assert_allclose(res.position_m[i], ML_ESTIMATORS[name](SQUARE, power[i], SQUARE_MODEL).position_m,
+                                   rtol=0, atol=1e-9)
+    noiseless_model = lb.PathLossModel(SQUARE_MODEL.ref_power_dbm, SQUARE_MODEL.path_loss_exp, 0.0)
+    assert set(ML_ESTIMATORS[name](SQUARE, power, noiseless_model).status.tolist()) == {"ok"}
+
+
+def test_poor_fit_is_a_documented_status():
+    assert "poor_fit" in lb.LOCALIZATION_STATUSES and "poor_fit" in lb.LocalizationResult.__doc__
+    assert 0 < localization.GOODNESS_OF_FIT_ALPHA <= 1e-6

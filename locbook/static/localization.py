@@ -62,6 +62,7 @@ __all__ = [
     "LOCALIZATION_STATUSES",
     "IMPLAUSIBLE_SIGMAS",
     "implausible_powers",
+    "GOODNESS_OF_FIT_ALPHA",
 ]
 
 #: values of ``solver`` in :func:`lateration_box_ls`
@@ -69,13 +70,23 @@ BOX_LS_SOLVERS = ("exact", "cvxpy")
 
 #: values of :attr:`LocalizationResult.status`
 LOCALIZATION_STATUSES = ("ok", "too_few_anchors", "degenerate_geometry", "solver_failed", "not_converged",
-                         "implausible_reading")
+                         "implausible_reading", "poor_fit")
 
 #: A received power more than this many shadowing standard deviations above the largest mean power the model
 #: gives (its value at the near-field clamp) is not a reading of that channel: :func:`rss_ml_position` and
 #: :func:`grid_ml_position` give its problem ``status="implausible_reading"``. At 10 sigma the probability of such
 #: a reading is below 1e-23 at every position, so no real reading is refused.
 IMPLAUSIBLE_SIGMAS = 10.0
+
+#: False-alarm probability of the ML estimators' goodness-of-fit test (the static analogue of the filters' NIS
+#: guard): a converged problem whose minimised cost over the shadowing variance, ``sum_j r_j^2 / sigma^2``, exceeds
+#: ``chi2.ppf(1 - GOODNESS_OF_FIT_ALPHA, m_heard - dim)`` gets ``status="poor_fit"``. Under the model the statistic
+#: is chi-square with ``m_heard - dim`` degrees of freedom (to first order: the residual sum of squares of a linear
+#: Gaussian model fitted by least squares, Cochran's theorem), so a reading set drawn from the model is flagged once
+#: in a billion problems, while readings that no single position explains (four corners of a 10 m square all at
+#: +100 dBm: about 48 sigma per anchor) are flagged at any sigma. Why so small: the flag must say "these readings are not this
+#: channel", not "an unlucky draw"; real mismodelling (walls, a sentinel, a wrong P_0) is many sigma away.
+GOODNESS_OF_FIT_ALPHA = 1e-9
 
 
 @dataclass(frozen=True)
@@ -94,11 +105,15 @@ class LocalizationResult:
     - ``"not_converged"``: the iteration limit was reached (the last iterate is returned);
     - ``"implausible_reading"`` (RSS estimators): a heard power that no position explains, more than
       :data:`IMPLAUSIBLE_SIGMAS` shadowing standard deviations above the model's largest mean power (at its
-      near-field clamp), e.g. +500 dBm or 1e300 dBm (:func:`implausible_powers`).
+      near-field clamp), e.g. +500 dBm or 1e300 dBm (:func:`implausible_powers`);
+    - ``"poor_fit"`` (RSS estimators, model with ``sigma_db > 0``): converged, but the readings do not fit the model
+      together: the minimised cost over the shadowing variance exceeds the chi-square bound of
+      :data:`GOODNESS_OF_FIT_ALPHA` with ``m_heard - dim`` degrees of freedom (e.g. four equal powers of +100 dBm
+      around a 10 m square). The position (the ML answer for those readings) and ``converged=True`` are kept.
 
     ``converged`` is never True with an infinite or NaN ``cost``.
 
-    Problems with any status but ``"ok"`` and ``"not_converged"`` have a NaN position. ``cost`` is NaN where
+    Problems with any status but ``"ok"``, ``"not_converged"`` and ``"poor_fit"`` have a NaN position. ``cost`` is NaN where
     no cost was evaluated.
     """
 
@@ -192,6 +207,27 @@ def implausible_powers(power_dbm, model: PathLossModel, clamp_m: float) -> np.nd
            - 10.0 * np.asarray(model.path_loss_exp, float) * np.log10(clamp_m / model.ref_distance_m)
            + IMPLAUSIBLE_SIGMAS * np.asarray(model.sigma_db, float))
     return np.any(power_dbm > top, axis=-1)
+
+
+def _goodness_of_fit(status: np.ndarray, cost: np.ndarray, model: PathLossModel, m: int, dim: int) -> np.ndarray:
+    """``status`` with ``"ok"`` turned into ``"poor_fit"`` where ``cost / sigma^2`` exceeds the chi-square
+    quantile ``chi2.ppf(1 - GOODNESS_OF_FIT_ALPHA, m - dim)`` (:data:`GOODNESS_OF_FIT_ALPHA`; ``m`` heard anchors).
+
+    ``cost`` is the unweighted ``sum_j r_j^2`` (dB^2) the estimators minimise. With one sigma it is divided by
+    ``sigma^2``: the ML residual statistic, chi-square with ``m - dim`` degrees of freedom under the model
+    (linearised). With per-anchor sigma it is divided by the largest ``sigma_j^2``: then
+    ``min_p sum r_j^2 / max sigma^2 <= min_p sum (r_j / sigma_j)^2``, the weighted ML residual statistic, so the
+    test never flags more often than ``alpha`` (it is conservative). No test without shadowing (all sigma 0) or
+    without redundancy (``m <= dim``)."""
+    sigma_max = float(np.max(np.asarray(model.sigma_db, float)))
+    dof = m - dim
+    if not sigma_max > 0 or dof <= 0:
+        return status
+    from scipy.special import chdtri            # lazy: keeps `import locbook` fast
+    bound = chdtri(dof, GOODNESS_OF_FIT_ALPHA)  # upper quantile: P(chi2_dof > bound) = alpha
+    with np.errstate(over="ignore"):            # a huge finite cost over a tiny sigma is inf: still beyond the bound
+        poor = (status == "ok") & (np.asarray(cost) / sigma_max**2 > bound)
+    return np.where(poor, "poor_fit", status).astype("<U19")
 
 
 def _raise_if_failed(res: LocalizationResult, raise_on_failure: bool) -> LocalizationResult:
@@ -752,6 +788,9 @@ def rss_ml_position(anchors_m, power_dbm, model: PathLossModel, initial_m=None, 
     :data:`IMPLAUSIBLE_SIGMAS` sigma above the model's mean at ``max(min_distance_m, model.min_distance_m)``, e.g.
     +500 dBm) gets NaN and ``status="implausible_reading"`` before any iteration, and a problem whose cost is
     infinite or NaN (at the start or at the end) gets NaN and ``status="solver_failed"``, never ``converged``.
+    Readings that are each possible but impossible together get ``status="poor_fit"`` (position and ``converged``
+    kept): a converged problem whose cost over ``sigma^2`` exceeds ``chi2.ppf(1 - alpha, m_heard - dim)``,
+    :data:`GOODNESS_OF_FIT_ALPHA` (model with ``sigma_db > 0`` only).
     """
     plan, vertical = _planar(anchors_m, tag_height_m)
     anchors_full = np.asarray(anchors_m, dtype=float)        # with heights: what recursive calls are given
@@ -851,6 +890,7 @@ def rss_ml_position(anchors_m, power_dbm, model: PathLossModel, initial_m=None, 
     status = np.where(converged, "ok", "not_converged").astype("<U19")
     broken = ~(np.isfinite(cost) & np.all(np.isfinite(pos), axis=-1))   # no minimum: never converged
     converged[broken], status[broken], pos[broken] = False, "solver_failed", np.nan
+    status = _goodness_of_fit(status, cost, model, m, dim)   # converged on readings no position explains
     if raise_on_failure and not np.all(converged):
         raise ConvergenceError(
             f"RSS maximum likelihood: {int(np.sum(~converged))} of {converged.size} problems did not "
@@ -884,7 +924,10 @@ def grid_ml_position(anchors_m, power_dbm, model: PathLossModel, grid_m, *,
     than ``min_anchors`` heard the problem gets a NaN position, NaN cost and ``converged=False``. A physically
     impossible power (above the model's mean at its clamp, ``max(model.min_distance_m, 1e-6)``, by more than
     :data:`IMPLAUSIBLE_SIGMAS` sigma) gives NaN and ``status="implausible_reading"``; a cost that overflows NaN
-    and ``status="solver_failed"``.
+    and ``status="solver_failed"``. A best cost beyond the chi-square bound of :data:`GOODNESS_OF_FIT_ALPHA`
+    (``m_heard - dim`` degrees of freedom, cost over sigma^2; model with ``sigma_db > 0``) gives
+    ``status="poor_fit"``, position and ``converged`` kept; the cost at a grid point includes the grid's
+    discretisation, so a grid far coarser than the shadowing can be flagged too (no grid point fits the readings).
     ``tag_height_m``: anchors ``(m, 3)`` with heights, a plan grid ``(G, 2)`` (module docstring)."""
     plan, vertical = _planar(anchors_m, tag_height_m)
     anchors_full = np.asarray(anchors_m, dtype=float)
@@ -931,8 +974,7 @@ def grid_ml_position(anchors_m, power_dbm, model: PathLossModel, grid_m, *,
         best_cost[start:start + chunk] = cost[np.arange(len(idx)), idx] + (block**2).sum(1)
     pos = grid_m[best].reshape(batch + (grid_m.shape[1],))
     ok = np.isfinite(best_cost)
-    if ok.all():
-        return LocalizationResult(pos, np.ones(batch, bool), best_cost.reshape(batch), 0, "grid_ml")
     # a cost that overflowed (powers of absurd size) has no meaningful minimum
     pos = np.where(ok.reshape(batch)[..., None], pos, np.nan)
-    return LocalizationResult(pos, ok.reshape(batch), best_cost.reshape(batch), 0, "grid_ml", _status(ok).reshape(batch))
+    status = _goodness_of_fit(_status(ok), best_cost, model, m, dim)
+    return LocalizationResult(pos, ok.reshape(batch), best_cost.reshape(batch), 0, "grid_ml", status.reshape(batch))

@@ -5,6 +5,8 @@ only; problems of a batch are independent, so a NaN in one (or a failure in one)
 a zero weight removes its equation; the CRLB is the trace of the inverse of the numerical Fisher information;
 noiseless ranges give the true position; a pattern-map entry is the plain mean of the samples heard.
 """
+import warnings
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -626,3 +628,31 @@ def test_a_poor_fit_is_flagged_alone_in_its_batch(name):
 def test_poor_fit_is_a_documented_status():
     assert "poor_fit" in lb.LOCALIZATION_STATUSES and "poor_fit" in lb.LocalizationResult.__doc__
     assert 0 < localization.GOODNESS_OF_FIT_ALPHA <= 1e-6
+
+
+@pytest.mark.parametrize("clamp_m", [0.0, -1e-3, np.inf, np.nan])
+def test_implausible_powers_checks_its_clamp(clamp_m):
+    """clamp_m = 0 gave numpy's divide warning and an infinite bound (every reading plausible), NaN a bound that
+    refuses nothing silently: the clamp must be a positive finite distance, and the error names it."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(ValueError, match="clamp_m"):
+            lb.implausible_powers(np.full(4, -60.0), SQUARE_MODEL, clamp_m)
+
+
+def test_implausible_reading_states_its_physical_assumption():
+    """The rule refuses a power above the mean at the 1 mm clamp (plus 10 sigma), so a REAL noise-free reading of a
+    tag 0.5 mm from an anchor of a model without shadowing (sigma 0, min_distance_m 0) is refused: the docstrings
+    must say that a reading implying a tag closer than 1 mm to an antenna is taken as implausible, and must not
+    claim that no real reading is refused."""
+    model = lb.PathLossModel(-40.0, 2.0)                      # sigma_db = 0, min_distance_m = 0 (the defaults)
+    truth = np.array([5e-4, 0.0])                             # 0.5 mm from anchor 0
+    power = model.mean_power_dbm(lb.pairwise_distance_m(truth, SQUARE))
+    assert lb.rss_ml_position(SQUARE, power, model).status == "implausible_reading"
+    far = model.mean_power_dbm(lb.pairwise_distance_m(np.array([2e-3, 0.0]), SQUARE))   # 2 mm: taken
+    assert lb.rss_ml_position(SQUARE, far, model).status != "implausible_reading"
+    import inspect
+    source = inspect.getsource(localization)
+    assert "no real reading is refused" not in source
+    for doc in (lb.implausible_powers.__doc__, lb.rss_ml_position.__doc__, lb.LocalizationResult.__doc__):
+        assert "closer than 1 mm" in " ".join(doc.split()), doc

@@ -72,10 +72,15 @@ BOX_LS_SOLVERS = ("exact", "cvxpy")
 LOCALIZATION_STATUSES = ("ok", "too_few_anchors", "degenerate_geometry", "solver_failed", "not_converged",
                          "implausible_reading", "poor_fit")
 
-#: A received power more than this many shadowing standard deviations above the largest mean power the model
-#: gives (its value at the near-field clamp) is not a reading of that channel: :func:`rss_ml_position` and
-#: :func:`grid_ml_position` give its problem ``status="implausible_reading"``. At 10 sigma the probability of such
-#: a reading is below 1e-23 at every position, so no real reading is refused.
+#: A received power more than this many shadowing standard deviations above the model's mean at the estimator's
+#: near-field clamp is taken as not a reading of that channel: :func:`rss_ml_position` (clamp
+#: ``max(min_distance_m, model.min_distance_m)``, 1 mm by default) and :func:`grid_ml_position` (clamp
+#: ``max(model.min_distance_m, 1e-6)``) give its problem ``status="implausible_reading"``. The physical assumption:
+#: a reading that implies a tag closer than the clamp (1 mm) to an anchor's antenna is implausible (a unit error, a
+#: sentinel, an overflow), not a tag touching the antenna. It is an assumption, not a certainty: a real reading of a
+#: tag closer than the clamp can be refused (the model's own ``min_distance_m`` being 0): with ``sigma_db = 0`` (the
+#: default) any power above the clamp mean is, e.g. the noise-free reading of a tag 0.5 mm from an anchor. For a tag
+#: at least the clamp away, a reading 10 sigma above the clamp mean has probability below 1e-23.
 IMPLAUSIBLE_SIGMAS = 10.0
 
 #: False-alarm probability of the ML estimators' goodness-of-fit test (the static analogue of the filters' NIS
@@ -103,9 +108,10 @@ class LocalizationResult:
     - ``"solver_failed"``: the solver did not reach an optimum, or the arithmetic did not give a finite
       estimate (e.g. ranges so large that their squares overflow, or no finite start for the iterations);
     - ``"not_converged"``: the iteration limit was reached (the last iterate is returned);
-    - ``"implausible_reading"`` (RSS estimators): a heard power that no position explains, more than
-      :data:`IMPLAUSIBLE_SIGMAS` shadowing standard deviations above the model's largest mean power (at its
-      near-field clamp), e.g. +500 dBm or 1e300 dBm (:func:`implausible_powers`);
+    - ``"implausible_reading"`` (RSS estimators): a heard power more than :data:`IMPLAUSIBLE_SIGMAS` shadowing
+      standard deviations above the model's mean at the estimator's near-field clamp, e.g. +500 dBm or 1e300 dBm
+      (:func:`implausible_powers`): a reading implying a tag closer than 1 mm (the RSS ML's default clamp) to an
+      anchor's antenna is taken as implausible;
     - ``"poor_fit"`` (RSS estimators, model with ``sigma_db > 0``): converged, but the readings do not fit the model
       together: the minimised cost over the shadowing variance exceeds the chi-square bound of
       :data:`GOODNESS_OF_FIT_ALPHA` with ``m_heard - dim`` degrees of freedom (e.g. four equal powers of +100 dBm
@@ -198,11 +204,16 @@ def _status(ok: np.ndarray, failure: str = "solver_failed") -> np.ndarray:
 
 
 def implausible_powers(power_dbm, model: PathLossModel, clamp_m: float) -> np.ndarray:
-    """Per problem ``(...)``: whether some heard power of ``power_dbm (..., m)`` exceeds the largest mean power
-    the model gives, ``P_0 - 10 n log10(clamp_m / d0)`` (the log-distance mean at the near-field clamp
-    ``clamp_m``; walls and antenna heights only lower it), by more than :data:`IMPLAUSIBLE_SIGMAS` times the
-    anchor's shadowing sigma. Such a reading has probability below 1e-23 wherever the tag is: not a reading of this
-    channel (a unit error, a sentinel, an overflow). NaN (not heard) is never implausible."""
+    """Per problem ``(...)``: whether some heard power of ``power_dbm (..., m)`` exceeds the model's mean at the
+    near-field clamp ``clamp_m`` (a positive finite distance), ``P_0 - 10 n log10(clamp_m / d0)`` (walls and
+    antenna heights only lower it), by more than :data:`IMPLAUSIBLE_SIGMAS` times the anchor's shadowing sigma.
+
+    The physical assumption: a reading that implies a tag closer than ``clamp_m`` to an anchor's antenna (closer
+    than 1 mm at the RSS ML's default clamp) is implausible, a unit error, a sentinel or an overflow rather than a
+    tag touching the antenna. A real reading of a tag that close IS refused (with ``sigma_db = 0``, any power above
+    the clamp mean); for a tag at least ``clamp_m`` away the model gives such a reading probability below 1e-23.
+    NaN (not heard) is never implausible."""
+    check_scalar("clamp_m", clamp_m, gt=0)     # 0 would give an infinite bound (nothing refused), NaN no bound
     top = (np.asarray(model.ref_power_dbm, float)
            - 10.0 * np.asarray(model.path_loss_exp, float) * np.log10(clamp_m / model.ref_distance_m)
            + IMPLAUSIBLE_SIGMAS * np.asarray(model.sigma_db, float))
@@ -784,9 +795,10 @@ def rss_ml_position(anchors_m, power_dbm, model: PathLossModel, initial_m=None, 
     problem of the batch did not converge, whatever the reason.
     ``tag_height_m``: anchors ``(m, 3)`` with heights and plan positions (module docstring).
 
-    Garbage never gives a confident answer: a problem with a physically impossible power (more than
+    Garbage never gives a confident answer: a problem with an implausible power (more than
     :data:`IMPLAUSIBLE_SIGMAS` sigma above the model's mean at ``max(min_distance_m, model.min_distance_m)``, e.g.
-    +500 dBm) gets NaN and ``status="implausible_reading"`` before any iteration, and a problem whose cost is
+    +500 dBm; the assumption: a reading implying a tag closer than 1 mm, the default clamp, to an anchor's antenna
+    is not a reading of this channel) gets NaN and ``status="implausible_reading"`` before any iteration, and a problem whose cost is
     infinite or NaN (at the start or at the end) gets NaN and ``status="solver_failed"``, never ``converged``.
     Readings that are each possible but impossible together get ``status="poor_fit"`` (position and ``converged``
     kept): a converged problem whose cost over ``sigma^2`` exceeds ``chi2.ppf(1 - alpha, m_heard - dim)``,
@@ -921,9 +933,10 @@ def grid_ml_position(anchors_m, power_dbm, model: PathLossModel, grid_m, *,
     RSS-domain squared residual, for every problem; evaluated in chunks to bound memory. ``cost`` is that
     residual; a grid point on an anchor is taken 1 micrometre from it.
     A NaN power is an anchor not heard (module docstring): the residual runs over the heard anchors; with fewer
-    than ``min_anchors`` heard the problem gets a NaN position, NaN cost and ``converged=False``. A physically
-    impossible power (above the model's mean at its clamp, ``max(model.min_distance_m, 1e-6)``, by more than
-    :data:`IMPLAUSIBLE_SIGMAS` sigma) gives NaN and ``status="implausible_reading"``; a cost that overflows NaN
+    than ``min_anchors`` heard the problem gets a NaN position, NaN cost and ``converged=False``. An implausible
+    power (above the model's mean at its clamp, ``max(model.min_distance_m, 1e-6)``, by more than
+    :data:`IMPLAUSIBLE_SIGMAS` sigma: a reading implying a tag closer than 1 micrometre to an anchor's antenna)
+    gives NaN and ``status="implausible_reading"``; a cost that overflows NaN
     and ``status="solver_failed"``. A best cost beyond the chi-square bound of :data:`GOODNESS_OF_FIT_ALPHA`
     (``m_heard - dim`` degrees of freedom, cost over sigma^2; model with ``sigma_db > 0``) gives
     ``status="poor_fit"``, position and ``converged`` kept; the cost at a grid point includes the grid's

@@ -656,3 +656,20 @@ def test_implausible_reading_states_its_physical_assumption():
     assert "no real reading is refused" not in source
     for doc in (lb.implausible_powers.__doc__, lb.rss_ml_position.__doc__, lb.LocalizationResult.__doc__):
         assert "closer than 1 mm" in " ".join(doc.split()), doc
+
+
+@pytest.mark.parametrize("value", [-1e300, -1e160])
+def test_grid_ml_overflow_is_consistent_with_rss_ml_and_silent(value):
+    """A reading of -1e300 dBm is finite and not implausibly high, but its square overflows: grid ML leaked
+    'RuntimeWarning: overflow encountered in square' and returned cost inf, where rss_ml_position gives NaN with
+    solver_failed. Both now give NaN position and cost and status solver_failed, with no warning, the others alone."""
+    _, power = _batch(4)
+    holed = _with_overflow(power, 2, 0, value)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        grid = lb.grid_ml_position(ANCHORS, holed, MODEL, ANCHORS + 0.5)
+        ml = lb.rss_ml_position(ANCHORS, holed, MODEL)
+    for res in (grid, ml):
+        assert res.status[2] == "solver_failed" and not res.converged[2]
+        assert np.isnan(res.position_m[2]).all() and np.isnan(res.cost[2])
+        assert res.converged[[0, 1, 3]].all() and np.isfinite(res.cost[[0, 1, 3]]).all()

@@ -936,8 +936,8 @@ def grid_ml_position(anchors_m, power_dbm, model: PathLossModel, grid_m, *,
     than ``min_anchors`` heard the problem gets a NaN position, NaN cost and ``converged=False``. An implausible
     power (above the model's mean at its clamp, ``max(model.min_distance_m, 1e-6)``, by more than
     :data:`IMPLAUSIBLE_SIGMAS` sigma: a reading implying a tag closer than 1 micrometre to an anchor's antenna)
-    gives NaN and ``status="implausible_reading"``; a cost that overflows NaN
-    and ``status="solver_failed"``. A best cost beyond the chi-square bound of :data:`GOODNESS_OF_FIT_ALPHA`
+    gives NaN and ``status="implausible_reading"``; a cost that overflows (e.g. a reading of -1e300 dBm) NaN
+    position and cost and ``status="solver_failed"``, without a warning, like :func:`rss_ml_position`. A best cost beyond the chi-square bound of :data:`GOODNESS_OF_FIT_ALPHA`
     (``m_heard - dim`` degrees of freedom, cost over sigma^2; model with ``sigma_db > 0``) gives
     ``status="poor_fit"``, position and ``converged`` kept; the cost at a grid point includes the grid's
     discretisation, so a grid far coarser than the shadowing can be flagged too (no grid point fits the readings).
@@ -978,16 +978,20 @@ def grid_ml_position(anchors_m, power_dbm, model: PathLossModel, grid_m, *,
                                       min_distance_m=max(model.min_distance_m, 1e-6))  # (G, m); a node may sit on an anchor
     best = np.empty(flat.shape[0], dtype=int)
     best_cost = np.empty(flat.shape[0])
-    for start in range(0, flat.shape[0], chunk):
-        block = flat[start:start + chunk]
-        # |P - mu_g|^2 = |P|^2 - 2 P.mu_g + |mu_g|^2; the first term does not change the argmin
-        cost = (mean_grid**2).sum(1) - 2.0 * block @ mean_grid.T
-        idx = np.argmin(cost, axis=1)
-        best[start:start + chunk] = idx
-        best_cost[start:start + chunk] = cost[np.arange(len(idx)), idx] + (block**2).sum(1)
+    # a finite power of absurd size (-1e300 dBm: a tag very far away is not implausible) overflows its squares; that
+    # problem is marked failed below, so the overflow is expected, not a warning for the caller
+    with np.errstate(over="ignore", invalid="ignore"):
+        for start in range(0, flat.shape[0], chunk):
+            block = flat[start:start + chunk]
+            # |P - mu_g|^2 = |P|^2 - 2 P.mu_g + |mu_g|^2; the first term does not change the argmin
+            cost = (mean_grid**2).sum(1) - 2.0 * block @ mean_grid.T
+            idx = np.argmin(cost, axis=1)
+            best[start:start + chunk] = idx
+            best_cost[start:start + chunk] = cost[np.arange(len(idx)), idx] + (block**2).sum(1)
     pos = grid_m[best].reshape(batch + (grid_m.shape[1],))
     ok = np.isfinite(best_cost)
-    # a cost that overflowed (powers of absurd size) has no meaningful minimum
+    # a cost that overflowed has no meaningful minimum: NaN position and cost, as rss_ml_position gives
     pos = np.where(ok.reshape(batch)[..., None], pos, np.nan)
+    best_cost = np.where(ok, best_cost, np.nan)
     status = _goodness_of_fit(_status(ok), best_cost, model, m, dim)
     return LocalizationResult(pos, ok.reshape(batch), best_cost.reshape(batch), 0, "grid_ml", status.reshape(batch))

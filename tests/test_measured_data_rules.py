@@ -253,3 +253,41 @@ def test_time_going_back_is_checked_per_transmitter(tmp_path):
     assert len(read_readings(write(tmp_path, ok))) == 4
     bad = HEADER + "0,t,A1,-60\n0.5,u,A1,-61\n0.7,t,A1,-62\n0.25,u,A1,-63\n0.1,t,A1,-64\n"
     refused(write(tmp_path, bad, "bad.csv"), "line 5", "transmitter 'u'", "0.25 s after 0.5 s on line 3")
+
+
+# -- issue 26 follow-up: clear messages for a header's trailing comma, CR-only files, huge tick counts -----------
+def test_a_trailing_comma_on_the_header_only_is_named(tmp_path):
+    """'...,rssi_dbm,' over 4-field rows was refused as "column(s) ['']: ... missing", naming a column nobody wrote."""
+    path = write(tmp_path, HEADER.rstrip("\n") + ",\n0,t,A1,-60\n0.5,t,A2,-61\n")
+    message = refused(path, "line 1", "the header ends with an empty column name (a trailing comma?)")
+    assert "['']" not in message, message
+    refused(write(tmp_path, "\n" + HEADER.rstrip("\n") + ",\n0,t,A1,-60\n", "blank_first.csv"), "line 2: the header")
+    # a trailing comma on every line is consistent: it loads, the empty column is an extra one
+    table = read_readings(write(tmp_path, HEADER.rstrip("\n") + ",\n0,t,A1,-60,\n0.5,t,A2,-61,\n", "every.csv"))
+    assert table["rssi_dbm"].tolist() == [-60.0, -61.0]
+
+
+@pytest.mark.parametrize("newline", ["\r", "\r\n", "\n"])
+def test_non_utf8_line_number_counts_lines_as_the_csv_reader_does(tmp_path, newline):
+    """A CR-only file (old Mac export) has no '\\n' at all: the message said line 1 for a byte on line 4. The line is
+    the one Python's csv reader reports for the row holding the byte (it ends lines at CR, LF and CRLF)."""
+    import csv
+    import io
+    text = newline.join([HEADER.rstrip("\n"), "0,t,A1,-60", "", "0,t\xe9,A2,-61", "0.5,t,A1,-62"]) + newline
+    data = text.encode("cp1252")
+    reader = csv.reader(io.StringIO(text, newline=""))
+    line = next(reader.line_num for row in reader if any("\xe9" in f for f in row))     # independent: csv's count
+    assert line == 4
+    message = refused(write(tmp_path, data), f"line {line},", "0xe9", "byte 4 of the line")
+    assert "'0,t\\ufffd,A2,-61'" in message or "0,t\ufffd,A2,-61'" in message, message   # just that line's text
+
+
+def test_regular_epochs_prints_a_huge_tick_count_briefly():
+    """A time of 1e300 s made the message print the tick count with about 300 digits ({:,.0f})."""
+    ep = _epochs([0.0, 0.1, 1e300])
+    with pytest.raises(ValueError) as info:
+        regular_epochs(ep, 0.1)
+    message = str(info.value)
+    assert not re.search(r"\d[\d,]{40,}", message), message
+    assert "1e+301 epochs" in message and "1e+301 empty ticks" in message, message
+    assert len(message) < 800, len(message)

@@ -119,10 +119,13 @@ def _decode_utf8(data: bytes, path: Path, what: str) -> str:
         return data[3:].decode("utf-8") if bom else data.decode("utf-8")
     except UnicodeDecodeError as exc:
         offset = exc.start + (3 if bom else 0)
-        line_start = data.rfind(b"\n", 0, offset) + 1
-        line_end = data.find(b"\n", offset)
-        line_text = data[line_start:len(data) if line_end < 0 else line_end].decode("utf-8", errors="replace")
-        line = data.count(b"\n", 0, offset) + 1
+        # lines end at LF, CR or CRLF, as the csv reader counts them (a CR-only file has no LF at all)
+        line_start = max(data.rfind(b"\n", 0, offset), data.rfind(b"\r", 0, offset)) + 1
+        ends = [i for i in (data.find(b"\n", offset), data.find(b"\r", offset)) if i >= 0]
+        line_end = min(ends) if ends else len(data)
+        line_text = data[line_start:line_end].decode("utf-8", errors="replace")
+        before = data[:offset]
+        line = before.count(b"\n") + before.count(b"\r") - before.count(b"\r\n") + 1
         raise DataFormatError(
             f"{what} file {path}, line {line}, byte {offset - line_start + 1} of the "
             f"line (byte {offset + 1} of the file): 0x{data[offset]:02x} is not UTF-8 ({line_text.rstrip()!r}); "
@@ -140,14 +143,14 @@ def _read_text_table(path, required: tuple[str, ...], what: str) -> tuple[pd.Dat
         raise DataFormatError(f"{what} file {path} does not exist")
     text = _decode_utf8(path.read_bytes(), path, what)
     reader = csv.reader(io.StringIO(text, newline=""), skipinitialspace=True, strict=True)
-    rows, lines, header, end, wrong = [], [], None, 0, None
+    rows, lines, header, header_line, end, wrong = [], [], None, 0, 0, None
     try:
         for row in reader:
             first, end = end + 1, reader.line_num
             if not row or (len(row) == 1 and not row[0].strip()):   # a blank (or whitespace) line
                 continue
             if header is None:
-                header = [c.strip() for c in row]
+                header, header_line = [c.strip() for c in row], first
                 continue
             if len(row) != len(header) and wrong is None:
                 wrong = (first, row)                             # reported after the header's own checks
@@ -165,14 +168,21 @@ def _read_text_table(path, required: tuple[str, ...], what: str) -> tuple[pd.Dat
         raise DataFormatError(f"{what} file {path}: missing column(s) {missing}; the header has {header} "
                               f"(required: {list(required)})")
     if wrong is not None:
-        _wrong_field_count(path, what, *wrong, header)
+        _wrong_field_count(path, what, *wrong, header, header_line)
     names = [c if c else f"Unnamed: {j}" for j, c in enumerate(header)]     # pandas' name for a blank header
     table = pd.DataFrame(rows, columns=names, dtype=object) if rows else pd.DataFrame(
         {c: pd.Series([], dtype=object) for c in names})
     return table, np.asarray(lines, dtype=int)
 
 
-def _wrong_field_count(path, what: str, line: int, row: list[str], header: list[str]):
+def _wrong_field_count(path, what: str, line: int, row: list[str], header: list[str], header_line: int):
+    named = len(header)
+    while named and not header[named - 1]:          # empty names at the end of the header
+        named -= 1
+    if named < len(header) and len(row) == named:   # rows without them: the header alone has trailing commas
+        raise DataFormatError(f"{what} file {path}, line {header_line}: the header ends with an empty column name (a trailing "
+                              f"comma?): it has {len(header)} names, {header}, but line {line} has {len(row)} "
+                              "field(s); remove the trailing comma from the header")
     if len(row) < len(header):
         absent = header[len(row):]
         raise DataFormatError(f"{what} file {path}, line {line}, column(s) {absent}: the row has {len(row)} field(s), "
@@ -485,6 +495,12 @@ def epochs(readings: pd.DataFrame, anchor_ids) -> Epochs:
     return Epochs(time_s, rss, per_epoch[:, :3], per_epoch[:, 3], tx, anchor_ids)
 
 
+def _count(value: float) -> str:
+    """A count for a message: every digit up to 1e15 (``10,000,000,002``), beyond that 3 significant digits
+    (``1e+301``; a bad timestamp can ask for 300-digit tick counts)."""
+    return f"{value:,.0f}" if abs(value) < 1e15 else f"{value:.3g}"
+
+
 def regular_epochs(ep: Epochs, dt_s: float, *, tolerance_s: float | None = None,
                    max_epochs: int = MAX_REGULAR_EPOCHS) -> tuple[Epochs, np.ndarray]:
     """Put one transmitter's epochs on a regular clock of period ``dt_s`` for the filters, which step at a fixed
@@ -520,9 +536,9 @@ def regular_epochs(ep: Epochs, dt_s: float, *, tolerance_s: float | None = None,
         i = int(np.argmax(gaps))
         gap, cut = float(gaps[i]), float(time_s[i + 1])
         raise ParameterError(
-            f"regular_epochs: the {dt_s:g} s clock would need {n_needed:,.0f} epochs, more than max_epochs = "
+            f"regular_epochs: the {dt_s:g} s clock would need {_count(n_needed)} epochs, more than max_epochs = "
             f"{max_epochs:,}; the largest gap is {gap!r} s, between the epochs at {_seconds(time_s[i])} and "
-            f"{_seconds(time_s[i + 1])} (epochs {i} and {i + 1} of {len(time_s)}), {gap / dt_s:,.0f} empty ticks. "
+            f"{_seconds(time_s[i + 1])} (epochs {i} and {i + 1} of {len(time_s)}), {_count(gap / dt_s)} empty ticks. "
             f"A clock jump? Then split the recording there (ep.select(ep.time_s < {cut!r}) and "
             f"ep.select(ep.time_s >= {cut!r})) and put each part on the clock, or raise max_epochs if "
             "the recording really is that long")

@@ -673,3 +673,15 @@ def test_grid_ml_overflow_is_consistent_with_rss_ml_and_silent(value):
         assert res.status[2] == "solver_failed" and not res.converged[2]
         assert np.isnan(res.position_m[2]).all() and np.isnan(res.cost[2])
         assert res.converged[[0, 1, 3]].all() and np.isfinite(res.cost[[0, 1, 3]]).all()
+
+
+def test_the_degenerate_geometry_message_says_plane_in_3d():
+    """3-D anchors on one plane were described as 'collinear (coplanar) ... across the line they lie on'."""
+    coplanar = np.array([[0.0, 0.0, 1.0], [10.0, 0.0, 1.0], [0.0, 10.0, 1.0], [10.0, 10.0, 1.0], [5.0, 3.0, 1.0]])
+    with pytest.raises(lb.DegenerateGeometryError) as info:
+        lb.check_anchor_geometry(coplanar)
+    message = str(info.value)
+    assert "coplanar" in message and "plane" in message and "collinear" not in message and "line" not in message
+    with pytest.raises(lb.DegenerateGeometryError) as info:
+        lb.check_anchor_geometry(np.c_[np.arange(4.0), np.zeros(4)])     # 2-D: on the x axis
+    assert "collinear" in str(info.value) and "across the line" in str(info.value)

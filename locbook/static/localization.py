@@ -174,10 +174,12 @@ def check_anchor_geometry(anchors_m) -> np.ndarray:
     ratio = sv[dim - 1] / sv[0]
     if not ratio > ANCHOR_CONDITION_RTOL:
         rank = int(np.sum(sv > ANCHOR_CONDITION_RTOL * sv[0]))
+        flat, across = ("coplanar", "across the plane they lie in") if dim == 3 else \
+            ("collinear", "across the line they lie on")
         raise DegenerateGeometryError(
-            f"the {m} anchors are collinear{' (coplanar)' if dim == 3 else ''} or nearly so: the smallest singular "
-            f"value of the centred anchors is {ratio:.3g} of the largest (numerical rank {rank} < {dim}; the bound "
-            f"is {ANCHOR_CONDITION_RTOL:g}), so a position across the line they lie on cannot be resolved"
+            f"the {m} anchors are {flat} or nearly so: the smallest singular value of the centred anchors is "
+            f"{ratio:.3g} of the largest (numerical rank {rank} < {dim}; the bound is {ANCHOR_CONDITION_RTOL:g}), "
+            f"so a position {across} cannot be resolved"
         )
     return anchors_m
 

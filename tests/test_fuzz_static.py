@@ -16,6 +16,7 @@ coincident anchors; layouts scaled to 1e-300 and 1e300; empty batches; int and f
 Example counts are bounded (``max_examples``) so that the module runs in well under a minute.
 """
 import inspect
+import re
 import warnings
 
 import numpy as np
@@ -36,8 +37,24 @@ FUZZ_SLOW = settings(max_examples=30, deadline=None, derandomize=True,
 SPECIALS = {"nan": np.nan, "inf": np.inf, "-inf": -np.inf, "huge": 1e300, "-huge": -1e300, "tiny": 1e-300,
             "+500": 500.0, "zero": 0.0, "negative": -3.0}
 MODEL = lb.PathLossModel(-45.0, 2.2, 3.0)
-#: words a ValueError may name besides the function's own arguments (a model's field names it, e.g.)
-EXTRA_NAMES = ("model.", "anchors", "distance", "power", "weights", "lower", "upper")
+#: names a ValueError may give besides the function's own arguments: the fields of its PathLossModel argument
+EXTRA_NAMES = ("model.ref_power_dbm", "model.path_loss_exp", "model.sigma_db")
+
+
+#: ValueErrors that name no argument of the function they come from, found when EXTRA_NAMES was tightened to the
+#: real names (issue 26 follow-up). Their fix belongs in locbook/static/least_squares.py ("distance_m must be
+#: non-negative"), locbook/static/fingerprint.py and locbook/static/reference_tags.py (cells, tags or readers so far
+#: apart that their distances overflow: an internal distance_m is blamed); test_known_messages_that_name_no_argument
+#: (strict xfail) fails once they are fixed: then empty this.
+KNOWN_UNNAMED = {"least_squares_position": "distances must be non-negative",
+                 "model_fingerprints": "distance_m must be finite",
+                 "calibrate_from_reference_tags": "distance_m must be finite"}
+
+
+def names_an_argument(message: str, names) -> bool:
+    """Whether ``message`` names one of ``names`` as a whole word ('y' is not named by 'only', 'distance_m' not by
+    'min_distance_m' or 'distance')."""
+    return any(re.search(rf"(?<![\w.]){re.escape(name)}(?!\w)", message) for name in names)
 
 
 class Refused(Exception):
@@ -57,7 +74,7 @@ def call(fn, *args, **kwargs):
         raise AssertionError(f"{fn.__name__}: a raw LinAlgError escaped: {exc}") from exc
     except ValueError as exc:
         names = tuple(inspect.signature(fn).parameters) + EXTRA_NAMES
-        assert any(name in str(exc) for name in names), \
+        assert names_an_argument(str(exc), names) or str(exc).startswith(KNOWN_UNNAMED.get(fn.__name__, "\0")), \
             f"{fn.__name__}: a ValueError that names no argument ({names}): {exc}"
         raise Refused(str(exc)) from None
 
@@ -441,11 +458,14 @@ def test_calibrate_path_loss(mode, locations, kind, shape, specials, dtype, stri
         d_o, p_o = as_dtype(np.ascontiguousarray(d), dtype, strided), as_dtype(p, dtype, strided)
         same_result(refused_or(lb.calibrate_path_loss, d_o, p_o, mode),
                     refused_or(lb.calibrate_path_loss, np.asarray(d_o, float), np.asarray(p_o, float), mode))
-    if fit is None:
-        return
-    judge_fit(fit, batch + ((len(anchors),) if mode == "per_anchor" else ()))
-    if not specials and kind == "good" and fit.ok:
+    if fit is not None:
+        judge_fit(fit, batch + ((len(anchors),) if mode == "per_anchor" else ()))
+    if not specials and kind == "good" and locations >= (2 if mode == "per_anchor" else 1):
+        # clean and well-posed (per anchor: two locations give two distances; else one location gives the 4 to 6
+        # anchors' distinct distances): the fit must be usable and exact, never silently not ok
+        assert fit is not None and fit.ok, (mode, locations, None if fit is None else fit.problem_status)
         np.testing.assert_allclose(fit.path_loss_exp, 2.2, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(fit.ref_power_dbm, -45.0, rtol=0, atol=1e-8)
 
 
 @FUZZ
@@ -482,3 +502,19 @@ def test_calibrate_from_reference_tags(steps, tags, kind, bounded, specials, dty
 
 
 # -- regression tests for what the fuzzing found -----------------------------------------------------------------
+
+
+@pytest.mark.xfail(strict=True, reason="messages outside this helper's files name no argument: see KNOWN_UNNAMED")
+@pytest.mark.parametrize("case", sorted(KNOWN_UNNAMED))
+def test_known_messages_that_name_no_argument(case):
+    """Each call is refused with a ValueError that must name an argument of the function (strict xfail until the
+    messages are fixed; then remove the entry from KNOWN_UNNAMED)."""
+    fn, args = {"least_squares_position": (lb.least_squares_position, (GRID[:3], [1.0, -1.0, 2.0])),
+                "model_fingerprints": (lb.model_fingerprints, (GRID[:3] * 1e300, -GRID[:4] * 1e300, MODEL)),
+                "calibrate_from_reference_tags": (lb.calibrate_from_reference_tags,
+                                                  (np.full((1, 3, 4), -60.0), GRID[:3] + 1.0,
+                                                   np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]])
+                                                   * 1e300))}[case]
+    with pytest.raises(ValueError) as info, np.errstate(all="ignore"):
+        fn(*args)
+    assert names_an_argument(str(info.value), tuple(inspect.signature(fn).parameters) + EXTRA_NAMES), str(info.value)

@@ -142,7 +142,8 @@ class LocalizationResult:
 #: millimetre of range error is already a kilometre across the line, so no layout below it can give an answer
 #: worth reporting. It is scale-invariant, lies well above float64 round-off (the squared ranges' rounding alone
 #: moves the fix by about ``eps / r`` of the layout's size, 2e-10 at the bound) and far below every layout the
-#: notebooks use (the least, a 2.1 m x 7.8 m corridor, has 0.27; a real-data subset of three anchors 0.02).
+#: notebooks and the shipped data use (the least full layout, the 2.1 m x 7.8 m corridor, has 0.27 and 0.23 on a
+#: subset of three; the least of all, a subset of three of the Kolakowski 2021 anchors, 0.022).
 ANCHOR_CONDITION_RTOL = 1e-6
 
 

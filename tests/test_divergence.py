@@ -27,8 +27,8 @@ R = np.array([[0.5, 0.1], [0.1, 0.3]])
 ANCHORS = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]])
 
 
-def _simulate(runs, steps, seed, missing=0.0):
-    """States and position fixes drawn from the filter's own model (x0 ~ N(X0, P0), w ~ N(0, Q), v ~ N(0, R))."""
+def _simulate(runs, steps, seed, missing=0.0, noise=R):
+    """States and position fixes drawn from the filter's own model (x0 ~ N(X0, P0), w ~ N(0, Q), v ~ N(0, noise))."""
     rng = np.random.default_rng(seed)
     x0, P0 = np.array([1.0, 2.0, 0.5, -0.3]), np.eye(4)
     x = x0 + rng.multivariate_normal(np.zeros(4), P0, runs)
@@ -36,7 +36,7 @@ def _simulate(runs, steps, seed, missing=0.0):
     for k in range(steps):
         x = x @ MODEL.F.T + rng.multivariate_normal(np.zeros(4), MODEL.Q, runs)
         xs[:, k] = x
-    z = xs @ H.T + rng.multivariate_normal(np.zeros(2), R, (runs, steps))
+    z = xs @ H.T + rng.multivariate_normal(np.zeros(2), noise, (runs, steps))
     z[rng.random(z.shape) < missing] = np.nan
     return xs, z, x0, P0
 
@@ -142,14 +142,47 @@ def test_nis_of_the_rss_ekf_numpy_and_compiled_agree_with_a_direct_computation(m
             np.testing.assert_array_equal(out[path].nis_dof, res.nis_dof)
 
 
-def test_false_alarms_on_the_filters_own_model_stay_below_the_chi_square_bound():
-    """Simulated from the filter's own model, NIS ~ chi^2(dof) independently over steps. A window of w consecutive
-    exceedances at probability p then starts at a given update with probability (1 - p)^w, so a run of T updates is
-    flagged with probability at most (T - w + 1) (1 - p)^w. Checked at the defaults (bound 1e-58: no flag) and at a
-    loose setting (w = 2, p = 0.9: bound 0.39 per run; the fraction must stay under it with a binomial margin)."""
+def _streak_probabilities(steps, window, q):
+    """``out[t]``: the exact probability of at least ``window`` consecutive exceedances among ``t`` independent
+    updates that each exceed with probability ``q``, for t = 0 .. steps (a dynamic programme over the length of the
+    current streak, 0 .. window - 1; a completed streak is absorbed into ``out``)."""
+    state = np.zeros(window)
+    state[0] = 1.0
+    out = np.zeros(steps + 1)
+    for t in range(1, steps + 1):
+        out[t] = out[t - 1] + q * state[-1]
+        state = np.concatenate([[(1 - q) * state.sum()], q * state[:-1]])
+    return out
+
+
+def test_the_streak_probability_equals_enumeration():
+    """The dynamic programme against every one of the 2^12 exceedance patterns of 12 updates."""
+    q, steps = 0.3, 12
+    patterns = (np.arange(2 ** steps)[:, None] >> np.arange(steps)) & 1
+    prob = np.prod(np.where(patterns == 1, q, 1 - q), axis=1)
+    for window in (1, 2, 3, 5, 12):
+        longest = np.zeros(patterns.shape[0], int)
+        streak = np.zeros(patterns.shape[0], int)
+        for k in range(steps):
+            streak = np.where(patterns[:, k] == 1, streak + 1, 0)
+            longest = np.maximum(longest, streak)
+        assert _streak_probabilities(steps, window, q)[-1] == pytest.approx(prob[longest >= window].sum(), rel=1e-12)
+
+
+def test_false_alarms_on_the_filters_own_model_match_the_exact_streak_probability():
+    """Simulated from the filter's own model, NIS ~ chi^2(dof) independently over updates, so each update exceeds the
+    bound with probability exactly 1 - p and a run of T updates is flagged with the exact probability of a streak of
+    w exceedances among T Bernoulli(1 - p) trials. At the defaults that is below 1e-55 (no flag); at a loose setting
+    (w = 2, p = 0.9, about 0.6 per run) the fraction flagged must equal the mean of the runs' exact probabilities
+    within 4 binomial standard errors (the flags of different runs are independent). The serial EKF gets readings
+    drawn with its diagonal R (its own model)."""
     runs, steps = 400, 100
     _, z, x0, P0 = _simulate(runs, steps, 2, missing=0.1)
-    for name, res in _filters(z, x0, P0).items():
+    _, z_diag, _, _ = _simulate(runs, steps, 12, missing=0.1, noise=np.diag(np.diag(R)))
+    results = {name: res for name, res in _filters(z, x0, P0).items() if not name.startswith("ekf serial")}
+    results["ekf serial (diagonal R)"] = _filters(z_diag, x0, P0)["ekf serial (diagonal R)"]
+    assert _streak_probabilities(steps, DEFAULT_WINDOW, 1 - DEFAULT_PROBABILITY)[-1] < 1e-55
+    for name, res in results.items():
         assert res.n_diverged == 0, name
         assert np.all(res.diverged_step == -1)
         # the NIS is chi-square: mean = dof, and the tail beyond the 0.999 quantile is rare
@@ -157,11 +190,97 @@ def test_false_alarms_on_the_filters_own_model_stay_below_the_chi_square_bound()
         assert abs(nis.mean() - dof) < 4 * np.sqrt(2 * dof / nis.size), name
         assert (nis > chi2.ppf(0.999, dof)).mean() < 0.003, name
     w, p = 2, 0.9
-    bound = (steps - w + 1) * (1 - p) ** w
-    for name, res in _filters(z, x0, P0, divergence_window=w, divergence_probability=p).items():
-        frac = res.diverged.mean()
-        assert frac <= bound + 3 * np.sqrt(bound * (1 - bound) / runs), (name, frac, bound)
-        assert res.n_diverged > 0, name              # the loose setting does flag some runs: the guard is live
+    hits = _streak_probabilities(steps, w, 1 - p)
+    for name, res in results.items():
+        readings = z_diag if name.startswith("ekf serial") else z
+        updates = np.isfinite(readings).any(axis=-1).sum(axis=-1)          # steps without any reading are skipped
+        prob = hits[updates]
+        expected, se = prob.mean(), np.sqrt(np.sum(prob * (1 - prob))) / runs
+        flagged = lb.tracking.kalman.nis_divergence(res.nis, res.nis_dof, w, p)[0]
+        assert abs(flagged.mean() - expected) <= 4 * se, (name, flagged.mean(), expected, se)
+        loose = _filters(readings, x0, P0, divergence_window=w, divergence_probability=p)[name]
+        np.testing.assert_array_equal(loose.diverged, flagged, err_msg=name)
+
+
+DEFAULT_WINDOW, DEFAULT_PROBABILITY = lb.tracking.kalman.DIVERGENCE_WINDOW, lb.tracking.kalman.DIVERGENCE_PROBABILITY
+
+
+def _documented_table():
+    """The table of the module docstring of locbook.tracking.kalman: {row label: [values per dof]} and the dofs."""
+    doc = lb.tracking.kalman.__doc__
+    lines = [line.strip() for line in doc.splitlines()]
+    start = next(i for i, line in enumerate(lines) if line.startswith("dof "))
+    dofs = [int(v) for v in lines[start].split()[1:]]
+    rows = {}
+    for line in lines[start + 1:start + 4]:
+        label, values = line.split(":")
+        rows[label.strip()] = [float(v) for v in values.split()]
+    return dofs, rows
+
+
+def test_the_documented_flag_probabilities_of_a_mis_specified_noise_level_are_exact():
+    """The docstring's table: sigma underestimated by half with R dominating S makes the NIS 4 chi^2(dof), so each
+    update exceeds the bound with q = chi2.sf(chi2.ppf(p, dof) / 4, dof); each entry (2 significant digits) must be
+    the exact streak probability at the defaults."""
+    dofs, rows = _documented_table()
+    assert set(rows) == {"q per update", "flagged, T = 1e3", "flagged, T = 1e4"}
+    for i, dof in enumerate(dofs):
+        q = chi2.sf(chi2.ppf(DEFAULT_PROBABILITY, dof) / 4, dof)
+        assert rows["q per update"][i] == float(f"{q:.2g}"), dof
+        hits = _streak_probabilities(10_000, DEFAULT_WINDOW, q)
+        assert rows["flagged, T = 1e3"][i] == float(f"{hits[1000]:.2g}"), dof
+        assert rows["flagged, T = 1e4"][i] == float(f"{hits[10_000]:.2g}"), dof
+    assert max(rows["flagged, T = 1e4"]) > 0.5 and min(rows["flagged, T = 1e4"]) < 1e-9
+
+
+@pytest.mark.parametrize("dof", [4, 8, 10])
+def test_the_guard_flags_a_noise_level_underestimated_by_half_as_often_as_documented(dof):
+    """NIS = 4 chi^2(dof) (sigma underestimated by half, R dominating S), 1,000 updates per run: the fraction of runs
+    flagged at the defaults equals the exact streak probability within 4 binomial standard errors (at dof 4 none of
+    the runs, at dof 10 about one in six)."""
+    rng = np.random.default_rng(dof)
+    runs, steps = 2000, 1000
+    nis = 4 * rng.chisquare(dof, (runs, steps))
+    flagged, first = lb.tracking.kalman.nis_divergence(nis, np.full((runs, steps), dof))
+    q = chi2.sf(chi2.ppf(DEFAULT_PROBABILITY, dof) / 4, dof)
+    prob = _streak_probabilities(steps, DEFAULT_WINDOW, q)[-1]
+    se = np.sqrt(prob * (1 - prob) / runs)
+    assert abs(flagged.mean() - prob) <= 4 * se + 1e-12, (flagged.mean(), prob, se)
+    assert np.all((first >= 0) == flagged)
+
+
+def test_integral_float_dof_are_accepted_and_others_named():
+    """nis_divergence(np.ones(30) * 100, np.full(30, 2.0), 5) ended in numpy's 'arrays used as indices must be of
+    integer type'. A float dof with integral values equals the integer dof; a fractional, negative or NaN dof is an
+    error naming nis_dof."""
+    nis = np.ones(30) * 100
+    got = lb.tracking.kalman.nis_divergence(nis, np.full(30, 2.0), 5)
+    assert got[0] and got[1] == 0
+    rng = np.random.default_rng(4)
+    dof = rng.integers(0, 4, (3, 40))
+    nis = np.where(dof > 0, 30.0 * rng.random(dof.shape), np.nan)
+    for as_float in (dof.astype(float), dof.astype(np.float32), dof.astype(np.uint8)):
+        for a, b in zip(lb.tracking.kalman.nis_divergence(nis, as_float, 2, 0.9),
+                        lb.tracking.kalman.nis_divergence(nis, dof, 2, 0.9)):
+            np.testing.assert_array_equal(a, b)
+    for bad in (np.full(30, 2.5), np.full(30, -1.0), np.full(30, -1), np.r_[np.full(29, 2.0), np.nan],
+                np.full(30, np.inf)):
+        with pytest.raises(ValueError, match="nis_dof"):
+            lb.tracking.kalman.nis_divergence(np.ones(30) * 100, bad, 5)
+
+
+def test_a_nan_nis_at_an_update_neither_counts_nor_breaks_the_streak():
+    """A NaN NIS where dof > 0 (e.g. a foreign update function that returns x and P only) carries no evidence either
+    way: it is skipped like a step without an update. It used to reset the streak."""
+    nis, dof = np.full(21, 100.0), np.full(21, 2)
+    nis[10] = np.nan
+    diverged, first = lb.tracking.kalman.nis_divergence(nis, dof, 20)
+    assert diverged and first == 0                     # 20 exceedances around the NaN
+    diverged, _ = lb.tracking.kalman.nis_divergence(nis[:20], dof[:20], 20)
+    assert not diverged                                 # 19 exceedances: the NaN does not count
+    nis = np.r_[np.full(5, 100.0), np.nan, np.full(5, 100.0)]
+    diverged, first = lb.tracking.kalman.nis_divergence(nis, np.full(11, 2), 6)
+    assert diverged and first == 0
 
 
 def _ukf_scenario_1(runs=6, steps=60, seed=0):
@@ -247,7 +366,7 @@ def _reference_flags(nis, dof, window, probability):
     for b in range(flat_nis.shape[0]):
         streak, start = 0, -1
         for k in range(flat_nis.shape[1]):
-            if flat_dof[b, k] == 0:
+            if flat_dof[b, k] == 0 or np.isnan(flat_nis[b, k]):
                 continue
             if flat_nis[b, k] > chi2.ppf(probability, flat_dof[b, k]):
                 start = k if streak == 0 else start
@@ -265,6 +384,7 @@ def test_window_rule_equals_a_per_run_loop():
     dof = rng.integers(0, 4, (5, 7, 40))
     nis = np.where(dof > 0, rng.chisquare(np.maximum(dof, 1)) * rng.choice([0.5, 40.0], dof.shape, p=[0.5, 0.5]),
                    np.nan)
+    nis[rng.random(nis.shape) < 0.05] = np.nan          # NaN at some updates (dof > 0): skipped by both
     for window, p in ((1, 0.99), (3, 0.9), (4, 0.999), (41, 0.5)):
         got = lb.tracking.kalman.nis_divergence(nis, dof, window, p)
         ref = _reference_flags(nis, dof, window, p)

@@ -29,15 +29,39 @@ normalised innovation squared of each run and step,
 by-product of the update (the solve or Cholesky of S that gives the gain also gives ``S^{-1} nu``). Under the filter's
 own model the innovations of one step are independent Gaussians (the sequential updates of one step, e.g. the serial
 EKF's scalar updates or several streams, are each conditioned on the previous ones, so their innovations are
-independent), so ``NIS_k ~ chi^2(dof_k)``, and the NIS of different steps are independent. A run is flagged
+independent), so ``NIS_k ~ chi^2(dof_k)``, and the NIS of different steps are independent. That is exact for linear
+streams (the KF; LinearMeasurement streams in the EKF and UKF) and holds to first order for RSS and other nonlinear
+streams (their innovation is Gaussian only as far as h is linear over the state's spread). A run is flagged
 ``diverged`` when its NIS exceeds ``chi2.ppf(divergence_probability, dof_k)`` at ``divergence_window`` consecutive
-updates (steps without an update neither count nor break the streak); ``diverged_step`` is the first step of the
-first such window (-1 where not diverged). On a consistent filter the chance of a flag is at most
-``(T - w + 1) (1 - p)^w`` per run of T updates (``(1 - p)^w = 1e-60`` at the defaults w = 20, p = 0.999; the
-window is long so that a filter that is merely optimistic, e.g. with sigma underestimated by half, is not called
-diverged); a filter that has lost track (an error far beyond its reported covariance) exceeds the bound at every
-update. ``divergence_window=0`` (or None) turns the guard off (nothing is flagged; NIS is still returned). The flags
+updates (steps without an update, or whose NIS is NaN, neither count nor break the streak); ``diverged_step`` is the
+first step of the first such window (-1 where not diverged). On a consistent filter each update exceeds the bound with
+probability 1 - p, so a run of T updates is flagged with the probability of a streak of w among T Bernoulli(1 - p)
+trials, at most ``(T - w + 1) (1 - p)^w`` (``(1 - p)^w = 1e-60`` at the defaults w = 20, p = 0.999).
+
+What the guard flags: runs whose innovations stay inconsistent with the filter's own S. A filter that has lost track
+(an error far beyond its reported covariance) exceeds the bound at every update; but so, at many readings per step,
+does a filter whose noise level is badly mis-specified. With sigma underestimated by half and R dominating S the NIS
+is 4 chi^2(dof), each update exceeds the bound with probability q = chi2.sf(chi2.ppf(p, dof) / 4, dof), and the exact
+probability that a run of T updates is flagged at the defaults (a streak of 20 exceedances) is
+
+    dof                1        2        4        6        8        9        10       12
+    q per update:      0.1      0.18     0.33     0.47     0.59     0.64     0.69     0.77
+    flagged, T = 1e3:  8.7e-18  8.1e-13  1.4e-07  0.00013  0.0098   0.046    0.16     0.69
+    flagged, T = 1e4:  8.8e-17  8.2e-12  1.5e-06  0.0013   0.095    0.38     0.82     1
+
+(dof: the readings of one update, e.g. 2 for a position fix, one per anchor heard for RSS). Up to about 6 readings per
+step such a filter is practically never flagged; from 8 a growing share of long runs is, from 12 nearly every run. A
+flag says "this run's innovations contradict its covariance" (lost, or a noise level far off), not "this run lost
+track". ``divergence_window=0`` (or None) turns the guard off (nothing is flagged; NIS is still returned). The flags
 never change the estimates; a diverged run is the caller's to count and show, not to average silently.
+
+Batch isolation: the one exception. Elsewhere in locbook a bad problem of a batch gets NaN and a status while the others
+go on. Here a run whose state or covariance overflows (a reading of 1.5e308 dBm, fixes of 1e300 m, a huge F, Q or P0)
+or whose innovation covariance is singular raises a SingularCovarianceError for the whole batch, naming the step and
+the first such run. Why: on the shared-covariance paths (above) one P, S and K serve every run, so there is no per-run
+covariance to set aside; on the batched and compiled paths a failed run would have to be carried to the end as a dead
+lane (left out of every update and check, NaN in the output) so that the others go on untouched. That dead-lane mask
+is planned for every path; until then such a run is an error, never a NaN or a confident answer.
 """
 from __future__ import annotations
 
@@ -109,19 +133,40 @@ def nis_divergence(nis, nis_dof, window: int | None = DIVERGENCE_WINDOW,
     innovation squared ``nis`` ``batch + (T,)`` (NaN: no update) and its degrees of freedom ``nis_dof``.
 
     A run diverged when ``nis > chi2.ppf(probability, dof)`` at ``window`` consecutive updates (steps with
-    ``dof == 0`` are skipped); ``diverged_step`` is the first step of the first such window, -1 where none.
+    ``dof == 0`` are skipped, and so are steps whose NIS is NaN: they carry no evidence either way, e.g. a foreign
+    update function that returns no NIS); ``diverged_step`` is the first step of the first such window, -1 where
+    none. ``nis_dof``: non-negative integers (an integer or float array with integral values).
     Vectorized over runs (no loop over runs or steps)."""
     window, probability = _check_guard(window, probability)
     nis = np.asarray(nis, dtype=float)
-    dof = np.broadcast_to(np.asarray(nis_dof), nis.shape)
+    dof = np.asarray(nis_dof)
+    if not np.issubdtype(dof.dtype, np.integer):        # float (or bool) dof: integral values only
+        try:
+            as_float = dof.astype(float)
+        except (TypeError, ValueError):
+            raise ValueError(f"nis_dof must hold non-negative integers (degrees of freedom), got dtype {dof.dtype}") \
+                from None
+        fractional = ~np.isfinite(as_float) | (as_float != np.round(as_float))
+        if fractional.any():
+            raise ValueError(f"nis_dof must hold non-negative integers (degrees of freedom); got "
+                             f"{as_float[fractional].flat[0]!r} at index "
+                             f"{tuple(int(i) for i in np.argwhere(fractional)[0])}")
+        dof = as_float.astype(np.int64)
+    if dof.size and dof.min() < 0:
+        raise ValueError(f"nis_dof must hold non-negative integers (degrees of freedom); got {int(dof.min())} at index "
+                         f"{tuple(int(i) for i in np.argwhere(dof < 0)[0])}")
+    try:
+        dof = np.broadcast_to(dof, nis.shape)
+    except ValueError:
+        raise ValueError(f"nis_dof {dof.shape} must broadcast to the shape of nis {nis.shape}") from None
     batch = nis.shape[:-1]
     if window == 0 or nis.shape[-1] < window or nis.size == 0:
         return np.zeros(batch, bool), np.full(batch, -1, np.int64)
     from scipy.special import chdtri            # lazy: keeps `import locbook` fast
-    updated = dof > 0
+    updated = (dof > 0) & ~np.isnan(nis)        # a NaN NIS (no evidence) is skipped: neither counts nor breaks
     # the dimensions are small integers: one quantile each, looked up (inf for dof 0: never exceeded)
     table = np.concatenate([[np.inf], chdtri(np.arange(1, max(int(dof.max()), 1) + 1, dtype=float), 1.0 - probability)])
-    exceed = nis > table[dof]                   # NaN NIS (a non-finite innovation) never counts as an exceedance
+    exceed = nis > table[dof]                   # NaN > bound is False: a skipped step never counts
     # the length of the current streak of exceedances among the updates: count minus the count at the last update
     # that stayed within the bound
     count = np.cumsum(exceed, axis=-1)
@@ -808,7 +853,7 @@ def _rss_serial_update(x, P, z, meas: RssMeasurement, step: int = 0):
     sigma2 = np.broadcast_to(np.asarray(ch.sigma_db, dtype=float) ** 2, z.shape)
     order = _serial_order(z, meas.order)
     # the scalar innovations of one step are independent under the model (each is conditioned on the previous
-    # updates), so their NIS add up to a chi-square with one dof per reading
+    # updates), so their NIS add up to a chi-square with one dof per reading (to first order: h is linearised)
     nis, dof = np.zeros(x.shape[:-1]), np.isfinite(z).sum(axis=-1)
     for j in range(m):
         a = order[..., j]
@@ -1072,9 +1117,12 @@ def extended_kalman_filter(F, Q, x0, P0, measurements, *, record=None, predict_f
 
     ``divergence_window``, ``divergence_probability``: the consistency guard (module docstring). The result's
     ``nis`` ``batch + (T,)`` sums the NIS of the step's updates (for a serial stream, its scalar updates, whose
-    innovations are independent under the model, so the sum is chi-square with one dof per reading); a run whose NIS
+    innovations are independent under the model, so the sum is chi-square with one dof per reading: exactly for a
+    LinearMeasurement, to first order for an RSS or nonlinear stream, whose h is linearised); a run whose NIS
     exceeds ``chi2.ppf(divergence_probability, dof)`` at ``divergence_window`` consecutive updates is flagged in
-    ``diverged`` with its ``diverged_step``; 0 or None turns the flag off.
+    ``diverged`` with its ``diverged_step``; 0 or None turns the flag off. A flag means the run's innovations stay
+    inconsistent with its covariance: a lost track, or (at many readings per step) a noise level far off (the module
+    docstring gives the probabilities).
     """
     window, probability = _check_guard(divergence_window, divergence_probability)
     setup = _setup(F, Q, x0, P0, measurements, record, "extended_kalman_filter")

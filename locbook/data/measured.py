@@ -180,9 +180,9 @@ def _wrong_field_count(path, what: str, line: int, row: list[str], header: list[
     while named and not header[named - 1]:          # empty names at the end of the header
         named -= 1
     if named < len(header) and len(row) == named:   # rows without them: the header alone has trailing commas
-        raise DataFormatError(f"{what} file {path}, line {header_line}: the header ends with an empty column name (a trailing "
-                              f"comma?): it has {len(header)} names, {header}, but line {line} has {len(row)} "
-                              "field(s); remove the trailing comma from the header")
+        raise DataFormatError(f"{what} file {path}, line {header_line}: the header ends with an empty column name "
+                              f"(a trailing comma?): it has {len(header)} names, {header}, but line {line} has "
+                              f"{len(row)} field(s); remove the trailing comma from the header")
     if len(row) < len(header):
         absent = header[len(row):]
         raise DataFormatError(f"{what} file {path}, line {line}, column(s) {absent}: the row has {len(row)} field(s), "

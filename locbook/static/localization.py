@@ -89,8 +89,9 @@ IMPLAUSIBLE_SIGMAS = 10.0
 #: is chi-square with ``m_heard - dim`` degrees of freedom (to first order: the residual sum of squares of a linear
 #: Gaussian model fitted by least squares, Cochran's theorem), so a reading set drawn from the model is flagged once
 #: in a billion problems, while readings that no single position explains (four corners of a 10 m square all at
-#: +100 dBm: about 48 sigma per anchor) are flagged at any sigma. Why so small: the flag must say "these readings are not this
-#: channel", not "an unlucky draw"; real mismodelling (walls, a sentinel, a wrong P_0) is many sigma away.
+#: +100 dBm: about 48 sigma per anchor) are flagged at any sigma. Why so small: the flag must say "these readings
+#: are not this channel", not "an unlucky draw"; real mismodelling (walls, a sentinel, a wrong P_0) is many sigma
+#: away.
 GOODNESS_OF_FIT_ALPHA = 1e-9
 
 
@@ -119,8 +120,8 @@ class LocalizationResult:
 
     ``converged`` is never True with an infinite or NaN ``cost``.
 
-    Problems with any status but ``"ok"``, ``"not_converged"`` and ``"poor_fit"`` have a NaN position. ``cost`` is NaN where
-    no cost was evaluated.
+    Problems with any status but ``"ok"``, ``"not_converged"`` and ``"poor_fit"`` have a NaN position. ``cost`` is
+    NaN where no cost was evaluated.
     """
 
     position_m: np.ndarray
@@ -801,8 +802,9 @@ def rss_ml_position(anchors_m, power_dbm, model: PathLossModel, initial_m=None, 
     Garbage never gives a confident answer: a problem with an implausible power (more than
     :data:`IMPLAUSIBLE_SIGMAS` sigma above the model's mean at ``max(min_distance_m, model.min_distance_m)``, e.g.
     +500 dBm; the assumption: a reading implying a tag closer than 1 mm, the default clamp, to an anchor's antenna
-    is not a reading of this channel) gets NaN and ``status="implausible_reading"`` before any iteration, and a problem whose cost is
-    infinite or NaN (at the start or at the end) gets NaN and ``status="solver_failed"``, never ``converged``.
+    is not a reading of this channel) gets NaN and ``status="implausible_reading"`` before any iteration, and a
+    problem whose cost is infinite or NaN (at the start or at the end) gets NaN and ``status="solver_failed"``, never
+    ``converged``.
     Readings that are each possible but impossible together get ``status="poor_fit"`` (position and ``converged``
     kept): a converged problem whose cost over ``sigma^2`` exceeds ``chi2.ppf(1 - alpha, m_heard - dim)``,
     :data:`GOODNESS_OF_FIT_ALPHA` (model with ``sigma_db > 0`` only).
@@ -940,8 +942,9 @@ def grid_ml_position(anchors_m, power_dbm, model: PathLossModel, grid_m, *,
     power (above the model's mean at its clamp, ``max(model.min_distance_m, 1e-6)``, by more than
     :data:`IMPLAUSIBLE_SIGMAS` sigma: a reading implying a tag closer than 1 micrometre to an anchor's antenna)
     gives NaN and ``status="implausible_reading"``; a cost that overflows (e.g. a reading of -1e300 dBm) NaN
-    position and cost and ``status="solver_failed"``, without a warning, like :func:`rss_ml_position`. A best cost beyond the chi-square bound of :data:`GOODNESS_OF_FIT_ALPHA`
-    (``m_heard - dim`` degrees of freedom, cost over sigma^2; model with ``sigma_db > 0``) gives
+    position and cost and ``status="solver_failed"``, without a warning, like :func:`rss_ml_position`. A best cost
+    beyond the chi-square bound of :data:`GOODNESS_OF_FIT_ALPHA` (``m_heard - dim`` degrees of freedom, cost over
+    sigma^2; model with ``sigma_db > 0``) gives
     ``status="poor_fit"``, position and ``converged`` kept; the cost at a grid point includes the grid's
     discretisation, so a grid far coarser than the shadowing can be flagged too (no grid point fits the readings).
     ``tag_height_m``: anchors ``(m, 3)`` with heights, a plan grid ``(G, 2)`` (module docstring)."""

@@ -45,7 +45,7 @@ from .tracking.kalman import (DIVERGENCE_PROBABILITY, DIVERGENCE_WINDOW, KF_VARI
                               rss_measurement_jacobian)
 from .tracking.unscented import (UKF_WEIGHTS, UkfResult, UnscentedWeights, sigma_points, unscented_kalman_filter,
                                  unscented_transform, unscented_weights)
-from .static.localization import (ANCHOR_CONDITION_RTOL, IMPLAUSIBLE_SIGMAS, LOCALIZATION_STATUSES, LocalizationResult,
+from .static.localization import (ANCHOR_CONDITION_RTOL, GOODNESS_OF_FIT_ALPHA, IMPLAUSIBLE_SIGMAS, LOCALIZATION_STATUSES, LocalizationResult,
                                   implausible_powers, check_anchor_geometry, grid_ml_position, lateration_box_ls,
                            lateration_ls, lateration_system, lateration_wls, rss_ml_position)
 from .metrics import (empirical_cdf, error_std_m, error_summary, mean_error_m, median_error_m, percentile_error_m,
@@ -79,7 +79,7 @@ __all__ = [
     "PathLossFit", "FIT_PROBLEM_STATUSES", "fit_path_loss", "fit_path_loss_closed_form", "calibrate_path_loss", "CALIBRATION_MODES", "fix_error_covariance",
     "path_loss_exp_ratio_estimate", "path_loss_exp_given_ref_power",
     # static localization
-    "LocalizationResult", "LOCALIZATION_STATUSES", "ANCHOR_CONDITION_RTOL", "IMPLAUSIBLE_SIGMAS", "implausible_powers", "check_anchor_geometry", "lateration_system", "lateration_ls", "lateration_wls",
+    "LocalizationResult", "LOCALIZATION_STATUSES", "ANCHOR_CONDITION_RTOL", "GOODNESS_OF_FIT_ALPHA", "IMPLAUSIBLE_SIGMAS", "implausible_powers", "check_anchor_geometry", "lateration_system", "lateration_ls", "lateration_wls",
     "lateration_box_ls", "rss_ml_position", "grid_ml_position", "lateration_rows", "least_squares_position",
     "recursive_least_squares", "RlsResult", "LATERATION_REFERENCES", "LATERATION_VARIANTS",
     "log_normal_range_moments", "correct_range_bias", "RANGE_BIAS_TARGETS",

@@ -41,14 +41,8 @@ MODEL = lb.PathLossModel(-45.0, 2.2, 3.0)
 EXTRA_NAMES = ("model.ref_power_dbm", "model.path_loss_exp", "model.sigma_db")
 
 
-#: ValueErrors that name no argument of the function they come from, found when EXTRA_NAMES was tightened to the
-#: real names (issue 26 follow-up). Their fix belongs in locbook/static/least_squares.py ("distance_m must be
-#: non-negative"), locbook/static/fingerprint.py and locbook/static/reference_tags.py (cells, tags or readers so far
-#: apart that their distances overflow: an internal distance_m is blamed); test_known_messages_that_name_no_argument
-#: (strict xfail) fails once they are fixed: then empty this.
-KNOWN_UNNAMED = {"least_squares_position": "distances must be non-negative",
-                 "model_fingerprints": "distance_m must be finite",
-                 "calibrate_from_reference_tags": "distance_m must be finite"}
+#: ValueErrors that name no argument of the function they come from (none left: issue 26 follow-up named them)
+KNOWN_UNNAMED: dict[str, str] = {}
 
 
 def names_an_argument(message: str, names) -> bool:
@@ -504,11 +498,10 @@ def test_calibrate_from_reference_tags(steps, tags, kind, bounded, specials, dty
 # -- regression tests for what the fuzzing found -----------------------------------------------------------------
 
 
-@pytest.mark.xfail(strict=True, reason="messages outside this helper's files name no argument: see KNOWN_UNNAMED")
-@pytest.mark.parametrize("case", sorted(KNOWN_UNNAMED))
-def test_known_messages_that_name_no_argument(case):
-    """Each call is refused with a ValueError that must name an argument of the function (strict xfail until the
-    messages are fixed; then remove the entry from KNOWN_UNNAMED)."""
+@pytest.mark.parametrize("case", ["least_squares_position", "model_fingerprints", "calibrate_from_reference_tags"])
+def test_messages_found_naming_no_argument_now_name_one(case):
+    """Found by the fuzzing: a negative distance, and cells, tags or readers so far apart that their distances
+    overflow, were refused with messages that blamed no argument (or an internal distance_m); each names one now."""
     fn, args = {"least_squares_position": (lb.least_squares_position, (GRID[:3], [1.0, -1.0, 2.0])),
                 "model_fingerprints": (lb.model_fingerprints, (GRID[:3] * 1e300, -GRID[:4] * 1e300, MODEL)),
                 "calibrate_from_reference_tags": (lb.calibrate_from_reference_tags,

@@ -110,7 +110,7 @@ def test_a_solver_that_stops_early_is_reported_not_raised(monkeypatch, how):
     (lambda: lb.PathLossModel(-40.0, 2.0, sigma_db=float("inf")), "sigma_db must be finite"),
     (lambda: lb.PathLossModel(-40.0, 2.0).mean_power_dbm([1.0, np.nan]), "distance_m must be finite"),
     (lambda: lb.quantize_db([1.0], step_db=float("nan")), "step_db must be finite"),
-    (lambda: lb.pairwise_distance_m(np.zeros((2, 3)), np.zeros((4, 2))), "points have dimension 3"),
+    (lambda: lb.pairwise_distance_m(np.zeros((2, 3)), np.zeros((4, 2))), "points_m have dimension 3"),
     (lambda: lb.smooth_rssi(np.zeros(3), np.zeros((4, 2)), np.zeros((4, 2))), r"ref_rss_dbm must have shape"),
     (lambda: lb.smooth_rssi(np.zeros(2), np.zeros((4, 2)), np.zeros((3, 2))),
      r"ref_expected_dbm must have shape \(\.\.\., 4, 2\), got \(3, 2\)"),

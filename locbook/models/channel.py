@@ -77,16 +77,24 @@ def quantize_db(power_dbm, step_db: float = 1.0, floor_dbm: float | None = None)
     return q
 
 
-def pairwise_distance_m(points_m, anchors_m):
-    """Euclidean distances between points ``(..., dim)`` and anchors ``(m, dim)`` -> ``(..., m)``."""
-    points_m = as_array("points_m", points_m, min_ndim=1)
-    anchors_m = as_array("anchors_m", anchors_m, ndim=2)
+def pairwise_distance_m(points_m, anchors_m, *, names: tuple[str, str] = ("points_m", "anchors_m")):
+    """Euclidean distances between points ``(..., dim)`` and anchors ``(m, dim)`` -> ``(..., m)``.
+
+    ``names``: the caller's names of the two arguments, used in the error raised when finite coordinates are so
+    large (about 1e154 m) that their distances overflow."""
+    points_m = as_array(names[0], points_m, min_ndim=1)
+    anchors_m = as_array(names[1], anchors_m, ndim=2)
     if points_m.shape[-1] != anchors_m.shape[-1]:
         raise ValueError(
-            f"points have dimension {points_m.shape[-1]} but anchors have {anchors_m.shape[-1]}"
+            f"{names[0]} have dimension {points_m.shape[-1]} but {names[1]} have {anchors_m.shape[-1]}"
         )
     diff = points_m[..., None, :] - anchors_m
-    return np.sqrt(np.einsum("...i,...i->...", diff, diff))
+    with np.errstate(over="ignore", invalid="ignore"):
+        distance = np.sqrt(np.einsum("...i,...i->...", diff, diff))
+    if not np.all(np.isfinite(distance)):          # the inputs are finite (as_array): this is overflow
+        raise ValueError(f"the distances between {names[0]} and {names[1]} overflow: their coordinates reach "
+                         f"{max(np.abs(points_m).max(initial=0), np.abs(anchors_m).max(initial=0)):.3g} m")
+    return distance
 
 
 def log_distance_mean_dbm(distance_m, ref_power_dbm, path_loss_exp, *, ref_distance_m: float = 1.0,

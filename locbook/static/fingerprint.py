@@ -50,7 +50,7 @@ def model_fingerprints(cells_m, readers_m, model: PathLossModel, walls_m=None, m
             raise ValueError(f"model.{name} must be a scalar or have shape (..., {m}) (one per reader), "
                              f"got shape {value.shape}")
     check_scalar("min_distance_m", min_distance_m, gt=0)
-    distance = pairwise_distance_m(cells_m, readers_m)
+    distance = pairwise_distance_m(cells_m, readers_m, names=("cells_m", "readers_m"))
     n_walls = 0 if walls_m is None else wall_crossings(cells_m, readers_m, walls_m)
 
     def per_cell(value):   # (..., m) parameters -> (..., 1, m), so they broadcast over the cell axis

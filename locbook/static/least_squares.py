@@ -53,7 +53,8 @@ def lateration_rows(receivers_m, distance_m, *, reference: str = "consecutive", 
     if n < 2:
         raise ValueError(f"receivers_m must hold at least two receiver positions (axis -2), got shape {s.shape}")
     if np.any(d < 0):
-        raise ValueError("distances must be non-negative (NaN = not heard)")
+        raise ValueError(f"distance_m must be non-negative (NaN = not heard); it holds {float(np.nanmin(d)):.6g} at "
+                         f"index {tuple(int(i) for i in np.argwhere(d < 0)[0])}")
     i, j = _pairs(n, reference)
     factor = 2.0 if variant == "corrected" else 1.0
     H = factor * (s[..., j, :] - s[..., i, :])

@@ -90,7 +90,7 @@ def calibrate_from_reference_tags(ref_rss_dbm, ref_positions_m, readers_m, *, wa
     ref_positions_m = as_array("ref_positions_m", ref_positions_m, ndim=2, trailing=(None, 2))
     ref_rss_dbm = as_array("ref_rss_dbm", ref_rss_dbm, min_ndim=2, nan_ok=True,
                            trailing=(ref_positions_m.shape[0], readers_m.shape[0]))
-    distance = pairwise_distance_m(ref_positions_m, readers_m)                     # (K, m)
+    distance = pairwise_distance_m(ref_positions_m, readers_m, names=("ref_positions_m", "readers_m"))  # (K, m)
     wall_loss = (0.0 if walls_m is None
                  else wall_attenuation_db * wall_crossings(ref_positions_m, readers_m, walls_m))
     compensated = ref_rss_dbm + wall_loss                                           # (..., K, m)

@@ -307,3 +307,76 @@ def test_run_axes_on_F_H_and_Q_equal_one_filter_per_run():
 def test_run_axes_that_do_not_broadcast_are_named():
     with pytest.raises(ValueError, match=r"run \(batch\) axes.*z \(3,\).*Q \(2,\)"):
         lb.kalman_filter(np.zeros((3, 5, 2)), MODEL.F, H, np.stack([MODEL.Q] * 2), R, X0, P0)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Issue 26 review: the covariance check's tolerance follows the input's precision and each variance's own scale
+# ---------------------------------------------------------------------------------------------------------------
+def _float32_sample_covariance(seed=0):
+    """The sample covariance, in float32, of two perfectly correlated components: singular, with a round-off
+    eigenvalue of either sign at float32 precision (about 6e-8 relative)."""
+    e = np.random.default_rng(seed).normal(size=(50, 1)).astype(np.float32)
+    X = np.hstack([e, np.float32(2.3) * e])
+    Xc = X - X.mean(0)
+    return Xc.T @ Xc / np.float32(49)
+
+
+def test_a_singular_float32_sample_covariance_is_accepted():
+    """Refused as 'R must be positive semi-definite, -1.12e-07': the tolerance, 1e-8 of the largest entry, was below
+    float32 precision. Each filter now runs, and the KF equals filterpy given the same (float64) values."""
+    R32 = _float32_sample_covariance()
+    assert R32.dtype == np.float32 and np.linalg.eigvalsh(R32.astype(float))[0] < 0      # the case reported
+    R64 = R32.astype(float)
+    z = _track()
+    kf = KalmanFilter(dim_x=4, dim_z=2)
+    kf.F, kf.H, kf.Q, kf.R, kf.x, kf.P = MODEL.F, H, MODEL.Q, R64, X0.copy(), P0.copy()
+    ref = []
+    for zk in z:
+        kf.predict()
+        kf.update(zk)
+        ref.append(kf.x.copy())
+    res = lb.kalman_filter(z, MODEL.F, H, MODEL.Q, R32, X0, P0)
+    np.testing.assert_allclose(res.x, np.array(ref), rtol=0, atol=1e-9)
+    for call in _every_filter(R_=R32):
+        assert np.all(np.isfinite(call().x))
+    for call in _every_filter(Q=np.kron(np.eye(2, dtype=np.float32), R32) * np.float32(0.01)):     # a float32 Q alike
+        assert np.all(np.isfinite(call().x))
+    # float32 precision is no licence for a real negative eigenvalue
+    with pytest.raises(ValueError, match="R must be positive semi-definite"):
+        lb.kalman_filter(z, MODEL.F, H, MODEL.Q, (R32 - np.float32(1e-3) * np.eye(2, dtype=np.float32)), X0, P0)
+
+
+@pytest.mark.parametrize("P, message", [
+    (np.diag([1e8, 1e8, -0.1, -0.1]), r"P0 must be positive semi-definite.*P0\[2, 2\] = -0.1"),   # a sign typo
+    (np.diag([1e8, 1.0, -1e-3, 1.0]), r"P0 must be positive semi-definite.*P0\[2, 2\] = -0.001"),
+    (np.block([[np.diag([1e8, 1e8]), np.zeros((2, 2))], [np.zeros((2, 2)), np.array([[0.1, 0.2], [0.2, 0.1]])]]),
+     r"P0 must be positive semi-definite.*-0.1"),                  # |correlation| 2 in a small block
+    (np.array([[1e8, 0, 1e-3, 0], [0, 1e8, 0, 0], [1e-3, 0, 0, 0], [0, 0, 0, 1.0]]),
+     r"P0 must be positive semi-definite.*variance P0\[2, 2\] is 0 but its covariance P0\[0, 2\]"),   # a zero variance with a covariance
+])
+def test_a_covariance_that_is_not_positive_semi_definite_is_refused_at_any_scale(P, message):
+    """The tolerance was relative to the largest entry, so a diffuse prior (1e8) hid a negative variance of -0.1 or a
+    small block that is not a covariance: accepted, the filter ran on. The test is now made on each entry's own scale
+    (the correlation-scaled matrix D^-1/2 A D^-1/2, D = diag(A)), so a negative variance is refused at any scale."""
+    for call in _every_filter(P=P):
+        with pytest.raises(ValueError, match=message):
+            call()
+    for call in _every_filter(Q=P * 1e-6):
+        with pytest.raises(ValueError, match=message.replace("P0", "Q").replace(r"-0.1", "-1e-07")
+                           .replace("-0.001", "-1e-09")):
+            call()
+
+
+def test_badly_scaled_rank_deficient_covariances_are_accepted():
+    """Round-off is judged on each variance's scale, so genuine covariances whose variances span 16 orders of magnitude,
+    rank-deficient (eigenvalues 0 to round-off, of either sign), in float64 and float32, are accepted."""
+    rng = np.random.default_rng(6)
+    for trial in range(20):
+        B = np.diag([1e4, 1.0, 1e-4, 1e-4]) @ rng.normal(size=(4, 2))            # rank 2
+        P = B @ B.T
+        assert np.linalg.eigvalsh(P / np.sqrt(np.outer(np.diag(P), np.diag(P))))[0] < 1e-12
+        for given in (P, P.astype(np.float32), (P @ np.eye(4)).T):
+            lb.kalman_filter(_track(), MODEL.F, H, MODEL.Q, R, X0, given)
+        lb.extended_kalman_filter(MODEL.F, B @ B.T * 1e-3, X0, P0, [lb.LinearMeasurement(_track(), H, R)])
+    P = np.diag([1e8, 1e8, 0.0, 0.0])                                            # zero variances, zero covariances
+    lb.kalman_filter(_track(), MODEL.F, H, MODEL.Q, R, X0, P)

@@ -179,36 +179,96 @@ def nis_divergence(nis, nis_dof, window: int | None = DIVERGENCE_WINDOW,
     return diverged, np.where(diverged, start, -1).astype(np.int64)
 
 
-#: asymmetry and negative eigenvalues a covariance may have, relative to its largest |entry| (the round-off of
-#: products such as F P F^T is some 1e-16; a matrix typed or built wrong is off by far more)
+#: asymmetry and negative eigenvalues a covariance may have, as a fraction of its entries' scale (the round-off of
+#: products such as F P F^T is some 1e-16; a matrix typed or built wrong is off by far more); inputs of lower precision
+#: get ``_EPS_FACTOR`` of their own epsilon (float32: 7.6e-6) when that is larger
 _SYM_RTOL = 1e-8
+_EPS_FACTOR = 64
+
+
+def _covariance_rtol(dtype) -> float:
+    """The round-off allowed in a covariance given with ``dtype`` (its precision before conversion to float64)."""
+    try:
+        dtype = np.dtype(dtype)
+    except TypeError:
+        return _SYM_RTOL
+    if np.issubdtype(dtype, np.floating):
+        return max(_SYM_RTOL, _EPS_FACTOR * float(np.finfo(dtype).eps))
+    return _SYM_RTOL                                # integers are exact
 
 
 def _covariance(name: str, value, rows: int) -> np.ndarray:
     """A finite, symmetric, positive semi-definite ``(rows, rows)`` matrix (possibly with batch axes), checked up
-    front with an error naming ``name``: asymmetry and negative eigenvalues are allowed up to ``_SYM_RTOL`` times the
-    matrix's largest absolute entry (round-off)."""
+    front with an error naming ``name``.
+
+    Round-off is allowed relative to the input's precision (``rtol``: 1e-8, or 64 epsilons of a float32 input) and to
+    each entry's own scale, so that a diffuse prior cannot hide a small block that is not a covariance:
+
+    - asymmetry up to ``rtol`` times the largest |entry|;
+    - no negative variance beyond ``rtol`` times the largest |entry| of its own row (a sign typo is refused at any
+      scale: ``diag(1e8, 1e8, -0.1, -0.1)``);
+    - the correlation-scaled matrix ``C = D^-1/2 A D^-1/2``, ``D = diag(A)`` (a variance below ``rtol^2`` times the
+      largest entry counts as that floor, so a zero variance admits only a round-off covariance), has no eigenvalue
+      below ``-rtol``. ``A`` is positive semi-definite exactly when ``C`` is (a congruence), and on ``C`` the round-off
+      of a product such as ``B B^T`` is a few epsilons whatever the scales of the variances."""
+    dtype = getattr(value, "dtype", None)            # before the conversion to float64: its precision sets rtol
     A = _matrix(name, value, rows, rows)
     if A.size == 0:
         return A
+    rtol = _covariance_rtol(dtype if dtype is not None else A.dtype)
     scale = np.abs(A).max(axis=(-2, -1))
-    tol = _SYM_RTOL * scale
+    tol = rtol * scale
     asym = np.abs(A - _mT(A)).max(axis=(-2, -1))
     if np.any(asym > tol):
         at = _first_bad(asym > tol)
         raise ValueError(f"{name} must be symmetric (a covariance); the largest |{name} - {name}^T| is "
                          f"{float(asym.max()):.3g}{at}")
     sym = 0.5 * (A + _mT(A))
-    try:                                         # the common case: one Cholesky of A + tol I proves A >= -tol I
-        np.linalg.cholesky(sym + (2 * tol + np.finfo(float).tiny)[..., None, None] * np.eye(rows))
+    var = np.diagonal(sym, axis1=-2, axis2=-1)
+    negative = var < -rtol * np.abs(sym).max(axis=-1)
+    if negative.any():
+        where = np.argwhere(negative)[0]
+        i = int(where[-1])
+        raise ValueError(f"{name} must be positive semi-definite (a covariance); its variance {name}[{i}, {i}] = "
+                         f"{float(var[tuple(where)]):.3g} is negative{_first_bad(negative.any(axis=-1))}")
+    d = np.maximum(var, (rtol * rtol * scale)[..., None])
+    inv_sd = 1.0 / np.sqrt(np.where(d > 0, d, 1.0))  # d = 0 only for an all-zero matrix
+    C = sym * inv_sd[..., :, None] * inv_sd[..., None, :]
+    diag = np.arange(rows)
+    C[..., diag, diag] = np.maximum(var, 0.0) * inv_sd * inv_sd
+    try:                                             # the common case: one Cholesky of C + 2 rtol I proves C >= -rtol I
+        np.linalg.cholesky(C + 2 * rtol * np.eye(rows))
         return A
     except np.linalg.LinAlgError:
         pass
-    low = np.linalg.eigvalsh(sym)[..., 0]
-    if np.any(low < -tol):
-        raise ValueError(f"{name} must be positive semi-definite (a covariance); its smallest eigenvalue is "
-                         f"{float(low.min()):.3g}{_first_bad(low < -tol)}")
+    low = np.linalg.eigvalsh(C)[..., 0]
+    bad = low < -rtol
+    if np.any(bad):
+        raise ValueError(_not_psd_message(name, sym, C, bad, rtol))
     return A
+
+
+def _not_psd_message(name: str, sym, C, bad, rtol: float) -> str:
+    """The error for a symmetric matrix whose correlation-scaled form ``C`` has an eigenvalue below ``-rtol`` (first
+    ``bad`` run): its smallest eigenvalue and, when there is one, the pair of entries that alone breaks it (a
+    correlation beyond 1, or a covariance where a variance is 0). Error path only."""
+    at = tuple(int(i) for i in np.argwhere(bad)[0]) if np.ndim(bad) else ()
+    A, Cb = sym[at], C[at]
+    low = float(np.linalg.eigvalsh(A)[0])
+    text = f"{name} must be positive semi-definite (a covariance); its smallest eigenvalue is {low:.3g}"
+    excess = np.abs(Cb) - np.sqrt(np.outer(np.diag(Cb), np.diag(Cb))) * (1 + rtol)
+    np.fill_diagonal(excess, -np.inf)
+    if excess.max() > 0:
+        i, j = (int(v) for v in np.unravel_index(np.argmax(excess), excess.shape))
+        i, j = min(i, j), max(i, j)
+        if A[i, i] <= 0 or A[j, j] <= 0 or min(A[i, i], A[j, j]) < rtol * rtol * np.abs(A).max():
+            k = i if A[i, i] <= A[j, j] else j
+            text += (f": the variance {name}[{k}, {k}] is {A[k, k]:.3g} but its covariance {name}[{i}, {j}] = "
+                     f"{A[i, j]:.3g} is not 0")
+        else:
+            text += (f": |{name}[{i}, {j}]| = {abs(A[i, j]):.3g} exceeds sqrt({name}[{i}, {i}] {name}[{j}, {j}]) = "
+                     f"{np.sqrt(A[i, i] * A[j, j]):.3g} (a correlation beyond 1)")
+    return text + (f" (run index {at})" if at else "")
 
 
 def _apply(M, x):

@@ -117,3 +117,175 @@ def test_kernel_stderr_log_has_the_mode_of_the_other_report_files(toy):
     folder = toy / "reports" / "quick" / "george-one"
     mode = lambda name: stat.S_IMODE((folder / name).stat().st_mode)
     assert mode("kernel-stderr.log") == mode("numbers.csv") == mode("report.md") == 0o644
+
+
+# -- item 5: a lost Dask scheduler stops the experiments' workers and kernels -------------------------------
+
+def _cli(toy, *args):
+    return subprocess.Popen([sys.executable, "-m", "locbook.suite.cli", *_suite_args(toy), "run", "--reports",
+                             str(toy / "reports"), "--progress", "plain", *args],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def test_a_lost_dask_scheduler_leaves_no_worker_or_kernel_running(toy, request):
+    distributed = pytest.importorskip("distributed")
+    import logging
+    # a cluster like a real one: the scheduler here, the Dask worker in its own process
+    cluster = distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None,
+                                       silence_logs=logging.CRITICAL)
+    request.addfinalizer(cluster.close)
+    set_profile(toy, "george-one", "sleep_s = 120.0")
+    proc = _cli(toy, "george-one", "--executor", "dask", "--scheduler", cluster.scheduler_address)
+    request.addfinalizer(proc.kill)
+    assert wait_for(lambda: any("ipykernel" in c for c in processes_mentioning(str(toy)).values()), 120)
+    started = processes_mentioning(str(toy))          # runner, the experiment's worker and its kernel
+    assert len(started) == 3, started
+    cluster.sync(cluster.scheduler.close)             # the scheduler dies mid-run
+    out, err = proc.communicate(timeout=120)
+    assert proc.returncode == 1, out + err
+    assert "Traceback" not in out + err
+    assert "scheduler" in err and "george-one" in err
+    assert wait_for(lambda: not alive(started), 5), [started[p] for p in alive(started)]
+    folder = toy / "reports" / "quick"
+    assert not list((folder / ".staging").glob("*")) and not (folder / "george-one").exists()
+    # nothing keeps writing into the report folder after locbook exited
+    before = sorted(str(p) for p in folder.rglob("*"))
+    import time
+    time.sleep(3)
+    assert sorted(str(p) for p in folder.rglob("*")) == before
+
+
+# -- item 6: a full disk --------------------------------------------------------------------------------------
+
+DISK_FULL_EXIT = 3
+
+
+def _leftovers(folder):
+    """Staging folders and temporary files a run must never leave behind."""
+    return sorted(str(p.relative_to(folder)) for p in folder.rglob("*")
+                  if p.name.endswith(".tmp") or (p.parent.name == ".staging"))
+
+
+def _assert_disk_full_run(out, err, code, folder, good, path_part):
+    assert code == DISK_FULL_EXIT, out + err
+    assert "Traceback" not in out + err
+    lines = [line for line in err.splitlines() if line.startswith("locbook: error: no space left on device")]
+    assert len(lines) == 1 and path_part in lines[0], err
+    assert "retrying" not in out                           # a full disk is not a kernel failure
+    assert "experiment" in out and "status" in out           # the scoreboard is printed
+    assert _leftovers(folder) == []
+    for eid, files in good.items():                          # earlier reports intact, byte for byte
+        assert {n: (folder / eid / n).read_bytes() for n in files} == files
+
+
+def _report_files(folder, eid):
+    return {p.name: p.read_bytes() for p in (folder / eid).iterdir() if p.is_file()}
+
+
+def test_disk_full_while_promoting_stops_the_run_with_its_own_status(toy, monkeypatch, capsys):
+    assert run(toy) == 0
+    folder = toy / "reports" / "quick"
+    good = {eid: _report_files(folder, eid) for eid in ("george-one", "george-two")}
+    import locbook.suite.runner as runner
+    calls = []
+
+    def full(exp, profile, params, staging, *rest):
+        calls.append(exp.id)
+        raise OSError(errno.ENOSPC, "No space left on device", str(staging / "report.html"))
+
+    monkeypatch.setattr(runner, "_promote", full)
+    capsys.readouterr()
+    code = run(toy, "--force", "--jobs", "1")
+    out, err = capsys.readouterr()
+    _assert_disk_full_run(out, err, code, folder, good, "/.staging/")
+    assert calls == ["george-one"]                           # stopped there: george-two never started
+    status = json.loads((folder / "status.json").read_text())
+    assert status["george-one"]["status"] == "failed" and "no space left" in status["george-one"]["error"]
+    assert not (folder / ".failed").exists()
+
+
+def test_a_kernel_that_meets_a_full_disk_is_not_retried(toy, capsys):
+    """ENOSPC raised inside the kernel (a write to /dev/full, which always fails that way)."""
+    from test_suite import GOOD, PARAMS, _notebook
+    assert run(toy) == 0
+    folder = toy / "reports" / "quick"
+    good = {eid: _report_files(folder, eid) for eid in ("george-one", "george-two")}
+    _notebook(toy / "notebooks" / "one.ipynb", PARAMS,
+              body=GOOD + "with open('/dev/full', 'w') as fh:\n    fh.write('x' * 100000)\n")
+    capsys.readouterr()
+    code = run(toy, "--force", "--jobs", "1", "george-one")
+    out, err = capsys.readouterr()
+    _assert_disk_full_run(out, err, code, folder, good, str(folder / ".staging"))
+
+
+def _mount_tmpfs(path, size):
+    path.mkdir()
+    if not hasattr(os, "geteuid") or os.geteuid() != 0:
+        pytest.skip("mounting a small tmpfs needs root; the injected-ENOSPC tests cover the same paths")
+    done = subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(path)],
+                          capture_output=True, text=True)
+    if done.returncode != 0:
+        pytest.skip(f"mounting a tmpfs is not permitted here ({done.stderr.strip()}); the injected-ENOSPC tests "
+                    "cover the same paths")
+    return lambda: subprocess.run(["umount", "-l", str(path)], capture_output=True)
+
+
+def _fill(disk, leave_bytes):
+    """Fill the file system of ``disk`` until at most ``leave_bytes`` are free."""
+    filler = disk / "filler"
+    with open(filler, "wb") as fh:
+        try:
+            while True:
+                free = os.statvfs(disk).f_bavail * os.statvfs(disk).f_frsize
+                if free <= leave_bytes:
+                    break
+                fh.write(b"\0" * min(1 << 20, max(4096, free - leave_bytes)))
+                fh.flush()
+        except OSError as exc:
+            assert exc.errno == errno.ENOSPC
+
+
+@pytest.mark.parametrize("leave_kb", [0, 96])
+def test_a_real_full_disk(toy, tmp_path, request, capsys, leave_kb):
+    """A 6 MB tmpfs holds the reports: one good run, then the disk is filled (to nothing left, or to a little
+    room, so that the worker's or the kernel's writes fail rather than the runner's) and the run forced."""
+    disk = tmp_path / "disk"
+    request.addfinalizer(_mount_tmpfs(disk, "6m"))
+    reports = disk / "reports"
+    args = [*_suite_args(toy), "run", "--reports", str(reports), "--jobs", "1", "--progress", "plain"]
+    assert main(args) == 0, capsys.readouterr()
+    folder = reports / "quick"
+    good = {eid: _report_files(folder, eid) for eid in ("george-one", "george-two")}
+    index = (folder / "index.html").read_bytes()
+    _fill(disk, leave_kb * 1024)
+    capsys.readouterr()
+    code = main([*args, "--force"])
+    out, err = capsys.readouterr()
+    _assert_disk_full_run(out, err, code, folder, good, str(disk))
+    assert (folder / "index.html").read_bytes() == index
+    assert wait_for(lambda: not processes_mentioning(str(disk)), 5), processes_mentioning(str(disk))
+    # once there is room again the same command runs, and nothing of the failed run is in its way
+    (disk / "filler").unlink()
+    assert main([*args, "--force"]) == 0, capsys.readouterr()
+
+
+def test_report_files_are_utf8_whatever_the_kernels_locale(tmp_path):
+    """A kernel in an ASCII locale (C, without UTF-8 mode) writes numbers.csv and assumptions.csv as UTF-8, which
+    is how the runner reads them."""
+    code = ("import locbook as lb\n"
+            "r = lb.Report('toy')\n"
+            "p = lb.Printed('george', 'Table 1', 'mean', '', 'dB', '1.0')\n"
+            "r.number('mean \\u03c3', p, 1.0, kind='reproduction', note='\\u00b1 one \\u03c3')\n"
+            "r.assumption('\\u03c3', 1.0, 'a \\u00b5 reason')\n")
+    env = {**os.environ, "LC_ALL": "C", "LANG": "C", "PYTHONCOERCECLOCALE": "0", "PYTHONUTF8": "0",
+           "LOCBOOK_OUTPUT_DIR": str(tmp_path), "LOCBOOK_EXPERIMENT": "george-one"}
+    env.pop("PYTHONIOENCODING", None)
+    done = subprocess.run([sys.executable, "-c", "import locale; print(locale.getpreferredencoding(False))"],
+                          env=env, capture_output=True, text=True)
+    if done.stdout.strip().lower() in ("utf-8", "utf8"):
+        pytest.skip("this Python uses UTF-8 even in the C locale")
+    done = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    row = next(csv.DictReader((tmp_path / "numbers.csv").read_text(encoding="utf-8").splitlines()))
+    assert row["quantity"] == "mean \u03c3" and row["note"] == "\u00b1 one \u03c3"
+    assert "a \u00b5 reason" in (tmp_path / "assumptions.csv").read_text(encoding="utf-8")

@@ -1,6 +1,8 @@
 """``locbook`` command line: list the experiments and run the notebook suite.
 
-Exit status: 0 all good; 1 some experiment failed; 2 bad input (parameters, experiment list, folders);
+Exit status (README, "Interrupts, concurrent runs and the cache"): 0 all good; 1 some experiment failed (or the
+Dask scheduler was lost); 2 bad input (parameters, experiment list, notebook file, unwritable folder); 3 no space
+left on the device (or quota) holding the reports: the run stopped, the path is named, earlier reports are kept;
 130 / 143 interrupted by SIGINT / SIGTERM (finished reports are kept).
 """
 from __future__ import annotations
@@ -11,6 +13,9 @@ import sys
 from pathlib import Path
 
 from ..errors import ParameterError
+
+#: exit statuses of ``locbook run`` (module docstring)
+EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_DISK_FULL = 0, 1, 2, 3
 
 PROFILE_HELP = "quick: reduced Monte-Carlo counts (default); full: the source's own counts"
 
@@ -43,9 +48,10 @@ def _print_summary(run, progress: str = "plain") -> None:
     from .progress import print_scoreboard
     print_scoreboard(run, progress)
     print(f"done: {counts}; see {run.report_dir / 'index.html'}")
-    if run.interrupted_by is not None:
-        sig = signal.Signals(run.interrupted_by).name
-        print(f"interrupted by {sig}: finished reports are kept; nothing else was changed.", file=sys.stderr)
+    if run.interrupted_by is not None or run.disk_full is not None or run.executor_error:
+        if run.interrupted_by is not None:
+            sig = signal.Signals(run.interrupted_by).name
+            print(f"interrupted by {sig}: finished reports are kept; nothing else was changed.", file=sys.stderr)
         for status in ("interrupted", "not run"):
             ids = [o.id for o in run.outcomes if o.status == status]
             if ids:
@@ -53,6 +59,12 @@ def _print_summary(run, progress: str = "plain") -> None:
     failed = [o for o in run.outcomes if o.status == "failed"]
     if failed:
         print("failed: " + ", ".join(f"{o.id} ({o.error})" for o in failed), file=sys.stderr)
+    if run.executor_error:
+        print(f"locbook: error: {run.executor_error}; the run stopped, and its experiments on the cluster were "
+              "asked to stop", file=sys.stderr)
+    if run.disk_full is not None:
+        print(f"locbook: error: no space left on device writing {run.disk_full}; the run stopped (earlier "
+              "reports are kept; free some space and run again)", file=sys.stderr)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -122,19 +134,28 @@ def main(argv: list[str] | None = None) -> int:
                            executor=args.executor, scheduler=args.scheduler)
     except ParameterError as exc:
         print(f"locbook: error: {exc}", file=sys.stderr)
-        return 2
+        return EXIT_BAD_INPUT
     except KeyboardInterrupt:  # before the run started its own handling (loading, checking parameters)
         print("locbook: interrupted before any experiment started; nothing was changed", file=sys.stderr)
         return 130
-    except OSError as exc:   # a read-only or full disk while writing the suite files
-        print(f"locbook: error: {exc.strerror or exc}: {exc.filename or ''}", file=sys.stderr)
-        return 2
+    except OSError as exc:   # a read-only or full disk before any experiment ran (the folder, its lock)
+        from .worker import disk_full_path
+        path = disk_full_path(exc, "")
+        if path is not None:
+            print(f"locbook: error: no space left on device writing {path or 'the reports folder'}; nothing "
+                  "was run", file=sys.stderr)
+            return EXIT_DISK_FULL
+        where = f" ({exc.filename})" if exc.filename else ""
+        print(f"locbook: error: {exc.strerror or exc}{where}", file=sys.stderr)
+        return EXIT_BAD_INPUT
     if result.report_dir.name != args.profile:
         print(f"reports of this run: {result.report_dir.resolve()} (reports/{args.profile}/ is unchanged)")
     _print_summary(result, args.progress)
     if result.interrupted_by is not None:
         return 128 + int(result.interrupted_by)
-    return 1 if result.count("failed") else 0
+    if result.disk_full is not None:
+        return EXIT_DISK_FULL
+    return EXIT_FAILED if result.count("failed") or result.executor_error else EXIT_OK
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -7,7 +7,9 @@ the numbers. On a cluster the reports folder must be on a file system the worker
 project file system of an HPC cluster), and every worker needs locbook installed.
 
 The Dask executor runs one experiment per task: the task starts the worker process, waits for it, and stops
-it when the runner writes ``.stop`` into the staging folder (an interrupt of the run).
+it (worker and kernel) when the runner writes ``.stop`` into the staging folder (an interrupt of the run, or a
+task the runner gave up on), when the task file disappears (the runner removed or moved the staging folder), or
+when the Dask worker running the task stops running (it lost its scheduler), so no experiment outlives the run.
 """
 from __future__ import annotations
 
@@ -19,6 +21,7 @@ import sys
 from pathlib import Path
 
 from .spec import SuiteError
+from .worker import EXIT_DISK_FULL
 
 __all__ = ["LocalExecutor", "DaskExecutor", "make_executor", "run_worker_process"]
 
@@ -32,10 +35,16 @@ def _worker_command(task_path: Path | str, parent: int | None = None) -> list[st
     return cmd + [str(parent)] if parent is not None else cmd
 
 
-def _why(code: int | None) -> str:
+def _no_result(code: int | None, staging: Path) -> dict:
+    """What the runner records for a worker that left no result, by its exit status: a worker killed from
+    outside, or one that exited without a result, is worth one more attempt (``kernel_failure``); one that
+    could not write for lack of space (:data:`~locbook.suite.worker.EXIT_DISK_FULL`) is not."""
+    if code == EXIT_DISK_FULL:
+        return {"error": f"no space left on device writing {staging}", "kernel_failure": False,
+                "disk_full": str(staging)}
     if code is not None and code < 0:
-        return f"worker process died ({signal.Signals(-code).name})"
-    return f"worker process exited with status {code} without a result"
+        return {"error": f"worker process died ({signal.Signals(-code).name})", "kernel_failure": True}
+    return {"error": f"worker process exited with status {code} without a result", "kernel_failure": True}
 
 
 def _spawn(task_path, parent=None) -> subprocess.Popen:
@@ -75,8 +84,12 @@ class LocalExecutor:
     def done(self, proc) -> bool:
         return proc.poll() is not None
 
-    def why_no_result(self, proc) -> str:
-        return _why(proc.returncode)
+    def no_result(self, proc, staging: Path) -> dict:
+        return _no_result(proc.returncode, staging)
+
+    def broken(self) -> str:
+        """Why no further experiment can run here ('' while they can)."""
+        return ""
 
     def stop(self, proc, staging: Path) -> None:
         if proc.poll() is None:
@@ -86,18 +99,34 @@ class LocalExecutor:
         _wait_or_kill(proc, timeout_s)
 
 
+def _running_dask_worker():
+    """The Dask worker running the calling task, or None outside a Dask task."""
+    try:
+        from distributed import get_worker
+        return get_worker()
+    except (ImportError, ValueError):
+        return None
+
+
 def run_worker_process(task_path: str) -> int:
-    """The Dask task: run one experiment's worker process to its end and return its exit status. The runner
-    asks it to stop by writing ``.stop`` beside the task file; the worker then gets SIGTERM (it stops its
-    kernel), and SIGKILL after a grace period."""
+    """The Dask task: run one experiment's worker process to its end and return its exit status.
+
+    The worker gets SIGTERM (it stops its kernel), and SIGKILL after a grace period, as soon as the run no
+    longer wants it: the runner wrote ``.stop`` beside the task file (an interrupt, or a task it gave up on),
+    the task file is gone (the runner removed or moved the staging folder: it finished or gave up), or the Dask
+    worker running this task stopped running (it lost its scheduler, so no result would reach the runner).
+    """
+    task = Path(task_path)
     proc = _spawn(task_path, parent=os.getpid())
-    stop = Path(task_path).parent / ".stop"
+    stop = task.parent / ".stop"
+    dask_worker = _running_dask_worker()
     while True:
         try:
             return proc.wait(0.2)
         except subprocess.TimeoutExpired:
             pass
-        if stop.exists():
+        lost = dask_worker is not None and getattr(dask_worker.status, "name", "running") not in ("running", "paused")
+        if lost or stop.exists() or not task.exists():
             proc.send_signal(signal.SIGTERM)
             return _wait_or_kill(proc, _STOP_GRACE_S)
 
@@ -114,6 +143,7 @@ class DaskExecutor:
         except ImportError:
             raise SuiteError("--executor dask needs dask.distributed: pip install 'locbook[dask]'") from None
         self.cluster = None
+        self.scheduler = scheduler
         try:
             if scheduler:
                 if Path(scheduler).is_file():
@@ -161,20 +191,39 @@ class DaskExecutor:
     def done(self, future) -> bool:
         return future.done()
 
-    def why_no_result(self, future) -> str:
+    def no_result(self, future, staging: Path) -> dict:
+        """A task that finished without a result file is judged by its worker's exit status. A task the
+        cluster lost (cancelled: the client lost its scheduler) or that failed there (its Dask worker died)
+        may still be running somewhere: ``lost`` tells the runner to ask it to stop (``.stop``); a lost task is
+        not retried."""
         if future.status == "finished":
-            return _why(future.result())
+            return _no_result(future.result(), staging)
         if future.status == "cancelled":
-            return "Dask task cancelled"
-        exc = future.exception()
-        return f"Dask task failed: {type(exc).__name__}: {exc}"
+            why = self.broken() or "the task was cancelled on the cluster"
+            return {"error": f"Dask task lost: {why}", "kernel_failure": False, "lost": True}
+        try:
+            exc = future.exception(timeout=1)
+        except Exception as err:      # the client cannot say any more (it lost its scheduler meanwhile)
+            exc = err
+        return {"error": f"Dask task failed: {type(exc).__name__}: {exc}", "kernel_failure": True, "lost": True}
+
+    def broken(self) -> str:
+        """Why no further experiment can run on the cluster ('' while they can): the client lost its
+        scheduler (it is reconnecting, or gave up and closed)."""
+        status = getattr(self.client, "status", "running")
+        if status in ("running", "newly-created"):
+            return ""
+        # the runner says this in one line; the client's own reconnect errors (tracebacks) would bury it
+        for name in [n for n in logging.root.manager.loggerDict if n.split(".")[0] == "distributed"]:
+            logging.getLogger(name).setLevel(logging.CRITICAL)   # distributed's config sets some levels itself
+        return f"lost the Dask scheduler {self.scheduler or '(local cluster)'} (client {status})"
 
     def stop(self, future, staging: Path) -> None:
-        if not future.done():
-            try:
-                (staging / ".stop").write_text("")
-            except OSError:
-                pass
+        # written even when the future is done: a task the client saw cancelled may still run on its worker
+        try:
+            (staging / ".stop").write_text("")
+        except OSError:
+            pass
 
     def wait_or_kill(self, future, timeout_s: float) -> None:
         try:

@@ -72,7 +72,7 @@ class Table:
         return "\n".join(lines)
 
     def write_csv(self, path: Path):
-        with open(path, "w", newline="") as fh:
+        with open(path, "w", newline="", encoding="utf-8") as fh:    # as the runner reads it, whatever the locale
             writer = csv.DictWriter(fh, fieldnames=self.columns)
             writer.writeheader()
             for r in self.rows:
@@ -227,4 +227,4 @@ class Report:
     def _save_manifest(self):
         manifest = {"experiment": self.experiment, "figures": self.figures, "tables": self.tables,
                     "n_numbers": len(self.numbers), "n_assumptions": len(self.assumptions)}
-        (self.output_dir / "manifest.json").write_text(json.dumps(manifest, indent=1))
+        (self.output_dir / "manifest.json").write_text(json.dumps(manifest, indent=1), encoding="utf-8")

@@ -23,6 +23,10 @@ Guarantees (README, "Interrupts, concurrent runs and the cache"):
   interrupted or concurrent run never replaces or corrupts a good report;
 - SIGINT / SIGTERM: no new experiment starts, running ones are stopped (worker and kernel), finished ones
   are kept, and :class:`SuiteRun` says what ran and what did not;
+- a full disk (ENOSPC, or the quota) is not a kernel failure: the run stops as on an interrupt, without
+  retrying, its staging removed and every earlier report intact; :attr:`SuiteRun.disk_full` names the path;
+- an executor that can run nothing more (a lost Dask scheduler): every running experiment is asked to stop
+  (``.stop``), and :attr:`SuiteRun.executor_error` says why;
 - the suite files (index, numbers.csv) are rebuilt from every experiment folder present, so a partial run
   keeps the other experiments' previous results, each with its own stamp.
 """
@@ -51,6 +55,7 @@ from .report import NUMBER_COLUMNS
 from .params import read_notebook
 from .site import _read_csv, _read_json
 from .executors import _STOP_GRACE_S, make_executor
+from .worker import disk_full_path
 from .progress import expected_seconds, make_progress
 from .spec import SAFE_NAME, Experiment, Suite, SuiteError
 
@@ -81,6 +86,10 @@ class SuiteRun:
     outcomes: list[Outcome]
     report_dir: Path
     interrupted_by: int | None = None
+    #: the path a write failed on for lack of space (disk or quota full); the run stopped there
+    disk_full: str | None = None
+    #: why the executor could run nothing more (a lost Dask scheduler); the run stopped there
+    executor_error: str = ""
 
     def count(self, status: str) -> int:
         return sum(o.status == status for o in self.outcomes)
@@ -188,8 +197,12 @@ def override_folder_name(profile: str, overrides: dict[str, str]) -> str:
 
 def _write_atomic(path: Path, text: str) -> None:
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    tmp.write_text(text, encoding="utf-8")
-    os.replace(tmp, path)
+    try:
+        tmp.write_text(text, encoding="utf-8")
+        os.replace(tmp, path)
+    except BaseException:     # a full disk, an interrupt: no half-written temporary file is left behind
+        tmp.unlink(missing_ok=True)
+        raise
 
 
 def _replace_dir(new: Path, final: Path):
@@ -448,6 +461,8 @@ def run_suite(suite: Suite, experiments: list[Experiment], profile: str, *, jobs
         probe.write_text("")
         probe.unlink()
     except OSError as exc:
+        if disk_full_path(exc, str(report_dir)) is not None:
+            raise          # not bad input: the CLI says which path, with the full-disk exit status
         raise SuiteError(f"cannot write to the reports folder {report_dir}: {exc.strerror}") from None
     data_roots = [str(_package_dir()), str(suite.root.parent / "shared")]
     run = SuiteRun([], report_dir)
@@ -485,12 +500,28 @@ def _run_locked(suite, experiments, profile, resolved, report_dir, data_roots, f
     by_id = {e.id: e for e in experiments}
     keys = {exp.id: cache_key(exp, profile, resolved[exp.id], source=source, versions=versions)
             for exp in experiments}
+
+    def disk_full(path) -> None:
+        """A write failed for lack of space: the run stops (no retry, no new experiment)."""
+        if run.disk_full is None:
+            run.disk_full = str(path)
+            progress.message(f"no space left on device writing {path}; stopping the run")
+
+    def halted() -> bool:
+        return stop.signum is not None or run.disk_full is not None or bool(run.executor_error)
+
     def finish(outcome: Outcome):
         run.outcomes.append(outcome)
         if outcome.status != "not run":
             status[outcome.id] = {"status": outcome.status, "seconds": round(outcome.seconds, 2),
                                   "error": outcome.error}
-            _write_atomic(status_path, json.dumps(status, indent=1, sort_keys=True))
+            try:
+                _write_atomic(status_path, json.dumps(status, indent=1, sort_keys=True))
+            except OSError as exc:
+                path = disk_full_path(exc, str(status_path))
+                if path is None:
+                    raise
+                disk_full(path)    # the record of this attempt is lost; the reports are not
         progress.finished(outcome)
 
     queue: deque = deque()
@@ -507,12 +538,27 @@ def _run_locked(suite, experiments, profile, resolved, report_dir, data_roots, f
 
     def launch(eid: str, attempt: int):
         staging = staging_root / f"{eid}-{attempt}"
-        staging.mkdir(parents=True)
         task = {"id": eid, "notebook": str(by_id[eid].notebook), "parameters": resolved[eid],
                 "staging": str(staging), "timeout": timeout_s, "kernel": kernel_name,
                 "data_roots": data_roots, "runner_pid": os.getpid()}
-        (staging / ".task.json").write_text(json.dumps(task))
-        running[eid] = (pool.submit(eid, staging / ".task.json"), staging, attempt, None)
+        writing = staging
+        try:
+            staging.mkdir(parents=True)
+            writing = staging / ".task.json"
+            writing.write_text(json.dumps(task))
+            handle = pool.submit(eid, staging / ".task.json")
+        except Exception as exc:   # a full disk, or an executor that lost its cluster: this one has not started
+            queue.appendleft((eid, attempt))
+            shutil.rmtree(staging, ignore_errors=True)
+            path = disk_full_path(exc, str(writing))
+            if path is not None:
+                disk_full(path)
+            elif pool.broken():
+                run.executor_error = pool.broken()
+            else:
+                raise
+            return
+        running[eid] = (handle, staging, attempt, None)
 
     def mark_started():
         """An experiment is running once its worker has made its runtime folder (on a cluster, a submitted
@@ -525,9 +571,18 @@ def _run_locked(suite, experiments, profile, resolved, report_dir, data_roots, f
     def complete(eid: str, handle, staging: Path, attempt: int, started: float | None):
         seconds = time.perf_counter() - started if started is not None else 0.0
         result = _read_json(staging / ".result.json", None)
-        if result is None:
-            result = {"error": pool.why_no_result(handle), "kernel_failure": True, "seconds": seconds}
-        if result["error"] and result.get("kernel_failure") and attempt <= retries and stop.signum is None:
+        if not isinstance(result, dict):
+            result = {"seconds": seconds, **pool.no_result(handle, staging)}
+        result.setdefault("seconds", seconds)
+        if result.get("lost"):
+            # the executor gave up on the task, which may still be running where it was sent: ask it to stop,
+            # and leave its staging folder in place (removed with the run's) so that nothing writes elsewhere
+            pool.stop(handle, staging)
+            if pool.broken():
+                run.executor_error = pool.broken()
+        if result.get("disk_full"):
+            disk_full(result["disk_full"])
+        elif (result["error"] and result.get("kernel_failure") and attempt <= retries and not halted()):
             progress.message(f"{eid}: {result['error']}; retrying once")
             queue.appendleft((eid, attempt + 1))
             return
@@ -536,21 +591,27 @@ def _run_locked(suite, experiments, profile, resolved, report_dir, data_roots, f
             try:
                 _promote(by_id[eid], profile, resolved[eid], staging, report_dir, stamp, keys[eid], result)
             except OSError as exc:
-                error = f"could not write the report: {exc.strerror or exc}"
+                path = disk_full_path(exc, str(staging))
+                if path is not None:
+                    disk_full(path)
+                    error = f"no space left on device writing {path}"
+                else:
+                    error = f"could not write the report: {exc.strerror or exc}"
         if error:
-            try:
-                _keep_failed(staging, report_dir / ".failed" / eid)
-            except OSError:
-                pass
+            if not (result.get("lost") or run.disk_full):   # nothing to inspect in an attempt the disk cut short
+                try:
+                    _keep_failed(staging, report_dir / ".failed" / eid)
+                except OSError:
+                    pass
             finish(Outcome(eid, "failed", result["seconds"], error, attempt))
         else:
             finish(Outcome(eid, "ok", result["seconds"], "", attempt))
 
     try:
         while queue or running:
-            if stop.signum is not None:
+            if halted():
                 break
-            while queue and len(running) < pool.capacity:
+            while queue and len(running) < pool.capacity and not halted():
                 launch(*queue.popleft())
             mark_started()
             time.sleep(0.1)
@@ -559,19 +620,34 @@ def _run_locked(suite, experiments, profile, resolved, report_dir, data_roots, f
                 if started is None:
                     progress.started(eid, attempt)
                 complete(eid, handle, staging, attempt, started)
+            if not run.executor_error and pool.broken():
+                run.executor_error = pool.broken()
     finally:
-        # an interrupt (or an unexpected error here): stop the workers, keep everything finished
+        # an interrupt, a full disk, a lost cluster (or an unexpected error here): stop the workers, keep
+        # everything finished. Each step runs whatever the one before it met, so the staging is always removed.
         for eid, (handle, staging, attempt, started) in running.items():
             pool.stop(handle, staging)
         deadline = time.perf_counter() + _STOP_GRACE_S
+        if stop.signum:
+            why = f"stopped by {signal.Signals(stop.signum).name}"
+        elif run.disk_full is not None:
+            why = "stopped: no space left on device"
+        else:
+            why = f"stopped: {run.executor_error}" if run.executor_error else "stopped"
         for eid, (handle, staging, attempt, started) in running.items():
             pool.wait_or_kill(handle, max(0.0, deadline - time.perf_counter()))
             finish(Outcome(eid, "interrupted", time.perf_counter() - started if started is not None else 0.0,
-                           f"stopped by {signal.Signals(stop.signum).name}" if stop.signum else "stopped", attempt))
+                           why, attempt))
         for eid, _attempt in queue:
             finish(Outcome(eid, "not run", 0.0))
         shutil.rmtree(staging_root, ignore_errors=True)
-        write_suite_reports(suite, report_dir, list_all=not custom_folder)
+        try:
+            write_suite_reports(suite, report_dir, list_all=not custom_folder)
+        except OSError as exc:
+            path = disk_full_path(exc, str(report_dir))
+            if path is None:
+                raise
+            disk_full(path)        # the previous index and numbers.csv stay as they were
 
 
 def _strip_worker_files(staging: Path) -> None:

@@ -7,12 +7,18 @@ folder and writes ``result.json`` there; it never touches the report itself.
 Clean-up guarantees: if the runner dies (even by SIGKILL) the worker gets SIGTERM from the kernel
 (``PR_SET_PDEATHSIG`` on Linux; a parent watch elsewhere); on SIGTERM the worker kills its Jupyter kernel and
 exits. A kernel whose worker vanished exits by itself (ipykernel's parent poller, ``JPY_PARENT_PID``).
+
+A full disk (or quota) is not a kernel failure: the worker records ``disk_full`` (the path that could not be
+written) in its result, or, when even the result cannot be written, exits with :data:`EXIT_DISK_FULL`; the
+runner then stops the run instead of retrying.
 """
 from __future__ import annotations
 
+import errno
 import json
 import math
 import os
+import re
 import signal
 import sys
 import threading
@@ -23,6 +29,29 @@ SINGLE_THREAD = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_T
                  "BLIS_NUM_THREADS": "1", "VECLIB_MAXIMUM_THREADS": "1", "NUMEXPR_NUM_THREADS": "1"}
 #: failures worth one more attempt: the kernel died or never answered (the papermill/ipykernel port race)
 KERNEL_FAILURES = ("DeadKernelError", "ZMQError", "Kernel died", "kernel_info", "Kernel didn't respond")
+#: no space left on the device, or the disk quota exceeded
+DISK_FULL_ERRNOS = (errno.ENOSPC, errno.EDQUOT)
+#: exit status of a worker that could not even write its result for lack of space (28 = ENOSPC on Linux)
+EXIT_DISK_FULL = 28
+_DISK_FULL_TEXT = re.compile(r"\[Errno (?:%s)\][^:']*(?::\s*'([^']*)')?" % "|".join(map(str, DISK_FULL_ERRNOS)))
+
+
+def disk_full_path(exc: BaseException, default: str) -> str | None:
+    """The path ``exc`` (or an exception it was raised from) could not write for lack of space: its file
+    name, or ``default`` when it names none; ``None`` when ``exc`` is not a full disk or quota."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        seen.add(id(exc))
+        if isinstance(exc, OSError) and exc.errno in DISK_FULL_ERRNOS:
+            return os.fsdecode(exc.filename) if exc.filename else default
+        exc = exc.__cause__ or exc.__context__
+    return None
+
+
+def _disk_full_in_text(text: str, default: str) -> str:
+    """The same for an error raised inside the kernel, known by its text (``[Errno 28] ...: 'path'``)."""
+    match = _DISK_FULL_TEXT.search(text)
+    return (match.group(1) or default) if match else ""
 
 
 def _children(pid: int) -> list[int]:
@@ -69,31 +98,38 @@ def _die_with_parent(parent: int):
 
 
 def execute(task: dict) -> dict:
-    """Run the notebook; return ``{"error", "kernel_failure", "seconds"}``; never raises."""
+    """Run the notebook; return ``{"error", "kernel_failure", "disk_full", "seconds"}``; never raises.
+    ``disk_full``: the path that could not be written for lack of space ('' otherwise)."""
     import papermill as pm
     from nbconvert import HTMLExporter
 
     staging = Path(task["staging"])
     out_nb = staging / f"{task['id']}.ipynb"
     start = time.perf_counter()
-    error, kernel_failure = "", False
+    error, kernel_failure, disk_full = "", False, ""
     try:
         pm.execute_notebook(task["notebook"], str(out_nb), parameters=task["parameters"],
                             kernel_name=task["kernel"], cwd=str(Path(task["notebook"]).parent),
                             progress_bar=False, log_output=False, execution_timeout=math.ceil(task["timeout"]))   # nbclient wants whole seconds
     except pm.PapermillExecutionError as exc:
         error = f"{exc.ename}: {exc.evalue}"
+        disk_full = _disk_full_in_text(error, str(staging))
     except Exception as exc:  # kernel death, timeout, missing kernel, I/O: the run fails, the suite goes on
         error = f"{type(exc).__name__}: {str(exc).strip().splitlines()[0] if str(exc).strip() else ''}"
-        kernel_failure = any(k in error for k in KERNEL_FAILURES)
+        disk_full = disk_full_path(exc, str(staging)) or ""
+        kernel_failure = not disk_full and any(k in error for k in KERNEL_FAILURES)
     seconds = time.perf_counter() - start
     if out_nb.exists() and not error:
+        page = staging / f"{task['id']}.html"
         try:
             body, _ = HTMLExporter(template_name="lab").from_filename(str(out_nb))
-            (staging / f"{task['id']}.html").write_text(body, encoding="utf-8")
+            page.write_text(body, encoding="utf-8")
         except Exception as exc:  # an HTML failure must not hide the notebook's own result
             error = f"HTML export failed: {type(exc).__name__}: {exc}"
-    return {"error": error, "kernel_failure": kernel_failure, "seconds": seconds}
+            disk_full = disk_full_path(exc, str(page)) or ""
+    if disk_full:
+        error = f"no space left on device writing {disk_full}"
+    return {"error": error, "kernel_failure": kernel_failure, "disk_full": disk_full, "seconds": seconds}
 
 
 def main(task_path: str, parent: int | None = None) -> int:
@@ -103,6 +139,31 @@ def main(task_path: str, parent: int | None = None) -> int:
     signal.signal(signal.SIGTERM, _kill_kernels_and_exit)
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the runner decides what an interrupt means
     staging = Path(task["staging"])
+    try:
+        return _run(task, staging)
+    except OSError as exc:
+        path = disk_full_path(exc, str(staging))
+        if path is None:
+            raise
+        try:   # a result names the path; if even that cannot be written, the exit status says it
+            _write_result(staging, {"error": f"no space left on device writing {path}", "kernel_failure": False,
+                                    "disk_full": path, "seconds": 0.0})
+        except OSError:
+            pass
+        return EXIT_DISK_FULL
+
+
+def _write_result(staging: Path, result: dict) -> None:
+    tmp = staging / ".result.json.tmp"
+    try:
+        tmp.write_text(json.dumps(result))
+        os.replace(tmp, staging / ".result.json")
+    except OSError:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def _run(task: dict, staging: Path) -> int:
     runtime = staging / ".runtime"     # own folder for the kernel's connection file and temporary files
     runtime.mkdir(exist_ok=True)
     os.environ.update(SINGLE_THREAD)
@@ -117,10 +178,8 @@ def main(task_path: str, parent: int | None = None) -> int:
     os.dup2(log_fd, 2)
     os.close(log_fd)
     result = execute(task)
-    tmp = staging / ".result.json.tmp"
-    tmp.write_text(json.dumps(result))
-    os.replace(tmp, staging / ".result.json")
-    return 0
+    _write_result(staging, result)
+    return EXIT_DISK_FULL if result["disk_full"] else 0
 
 
 if __name__ == "__main__":

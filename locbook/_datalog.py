@@ -1,9 +1,11 @@
 """Which data files an experiment reads, so that editing one re-runs exactly the experiments that read it.
 
 Under ``locbook run`` the worker sets ``LOCBOOK_DATA_LOG`` (a file) and ``LOCBOOK_DATA_ROOTS`` (folders,
-``os.pathsep``-separated: the package's data and ``../shared``). Importing locbook then installs an audit hook
-(PEP 578) that appends the path of every file opened for reading under those roots, except Python sources,
-to the log. The runner stores each logged file's SHA-256 with the report; a cached report is reused only
+``os.pathsep``-separated: the runner's package and ``../shared``). Importing locbook then installs an audit hook
+(PEP 578) that appends the path of every file opened for reading under those roots and under the folder of the
+locbook being imported, except Python sources, to the log. The kernel's locbook need not be the runner's (a
+kernel started in the notebook's folder imports the installed package while the runner may run from a source
+tree), and its own data files are what the notebook reads. The runner stores each logged file's SHA-256 with the report; a cached report is reused only
 while every file it read is unchanged. The hook sees every read (``open``, numpy, pandas, csv alike), so no
 data access has to remember to register itself. Outside ``locbook run`` nothing is installed.
 """
@@ -21,6 +23,7 @@ def install_from_environment() -> None:
     roots = [os.path.realpath(r) for r in os.environ.get("LOCBOOK_DATA_ROOTS", "").split(os.pathsep) if r]
     if _installed or not log_path or not roots:
         return
+    roots.append(os.path.realpath(os.path.dirname(os.path.abspath(__file__))))   # this locbook's own data
     _installed = True
     log = open(log_path, "a", encoding="utf-8")   # opened once: the hook itself never opens a file
     seen: set[str] = set()

@@ -69,10 +69,13 @@ def test_a_wheel_installed_in_a_fresh_venv_runs_george_from_an_empty_folder(tmp_
     python = venv / "bin" / "python"
     site = Path(subprocess.run([str(python), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
                                check=True, capture_output=True, text=True).stdout.strip())
-    # this environment's packages after the fresh one's own (a plain path line: its editable locbook is not loaded)
-    (site / "deps.pth").write_text(sysconfig.get_paths()["purelib"] + "\n")
+    # the wheel first: with this environment's packages already on the path, pip would see this environment's
+    # locbook (an installed one, of the same version) and install nothing
     subprocess.run([sys.executable, "-m", "pip", "--python", str(python), "install", "-q", "--no-deps", str(wheel)],
                    check=True, capture_output=True)
+    assert list(site.glob("locbook-*.dist-info")), "the wheel was not installed into the fresh environment"
+    # this environment's packages after the fresh one's own (a plain path line: its editable locbook is not loaded)
+    (site / "deps.pth").write_text(sysconfig.get_paths()["purelib"] + "\n")
     empty = tmp_path / "empty"
     empty.mkdir()
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "VIRTUAL_ENV")}
@@ -93,3 +96,28 @@ def test_a_wheel_installed_in_a_fresh_venv_runs_george_from_an_empty_folder(tmp_
                             capture_output=True, text=True)
     assert copied.returncode == 0, copied.stderr
     assert (empty / "mine" / "experiments.toml").is_file() and (empty / "mine" / "george" / "tracking.ipynb").is_file()
+
+
+def test_the_data_log_tracks_the_imported_packages_own_data_wherever_it_is_installed(tmp_path):
+    """A kernel may import another locbook than the runner (an installed one, while the runner's roots name a
+    source tree): the data files of the locbook it imports are still logged, so the cache notices them."""
+    import locbook
+    log = tmp_path / "read.log"
+    env = {**os.environ, "LOCBOOK_DATA_LOG": str(log), "LOCBOOK_DATA_ROOTS": str(tmp_path / "elsewhere")}
+    subprocess.run([sys.executable, "-c", "import locbook; locbook.printed('george'); open(locbook.__file__).read()"],
+                   cwd=tmp_path, env=env, check=True)
+    package = Path(locbook.__file__).resolve().parent
+    assert log.read_text().splitlines() == [str(package / "data" / "printed" / "george.csv")]
+
+
+def test_readme_states_every_exit_status_of_locbook_run():
+    from locbook.suite import cli
+    readme = (REPO / "README.md").read_text(encoding="utf-8")
+    section = readme.split("### Interrupts, concurrent runs and the cache", 1)[1].split("\n### ", 1)[0]
+    table = dict(line.strip("|").split("|", 1)[0:2] for line in section.splitlines()
+                 if line.startswith("| ") and not line.startswith("| status"))
+    statuses = {k.strip(): v.strip() for k, v in table.items()}
+    assert set(statuses) == {str(cli.EXIT_OK), str(cli.EXIT_FAILED), str(cli.EXIT_BAD_INPUT),
+                             str(cli.EXIT_DISK_FULL), "130 / 143"}
+    assert "no space left" in statuses[str(cli.EXIT_DISK_FULL)] and "bad input" in statuses[str(cli.EXIT_BAD_INPUT)]
+    assert len({cli.EXIT_OK, cli.EXIT_FAILED, cli.EXIT_BAD_INPUT, cli.EXIT_DISK_FULL, 130, 143}) == 6

@@ -12,6 +12,7 @@ and the weights; empty batches, zero steps, int and float32 dtypes, non-contiguo
   or reshape ValueError), never a finite (or NaN) answer from non-finite input without a flag.
 """
 import contextlib
+import re
 import warnings
 
 import numpy as np
@@ -293,10 +294,19 @@ def test_fuzz_bayes_filters(problem, which):
     status, res = outcome(lambda: call(given_rss), ("rss_dbm",))
     values = np.asarray(given_rss, dtype=float)       # what the filter was given (float32 turns 1e300 into inf)
     if status == "error":
-        assert corrupt is not None and np.isinf(values[corrupt]), "an error on sane readings"
+        assert corrupt is not None, "an error on sane readings"
+        if "collapsed in every run" in str(res):      # a collapse is an error only when no run is left
+            assert values.shape[0] == 1, "one bad reading collapsed every run"
+            assert f"step {corrupt[1]} (run {corrupt[0]})" in str(res)
+        else:
+            assert np.isinf(values[corrupt]), "an error on finite readings"
         return
     _check_flags(res, values, corrupt, res.mmse_m)
-    ref = call(np.asarray(given_rss, dtype=float).copy())
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        ref = call(np.asarray(given_rss, dtype=float).copy())
+    told = [w for w in caught if issubclass(w.category, RuntimeWarning) and "collapsed in" in str(w.message)]
+    assert len(told) == (1 if res.n_degenerate else 0), "a collapse must be told once (and only a collapse)"
     np.testing.assert_array_equal(res.mmse_m, ref.mmse_m)
 
 
@@ -316,8 +326,12 @@ def test_fuzz_sir_particle_filter(runs, steps, bad, method):
 
     status, res = outcome(lambda: lb.sir_particle_filter(start, loglik, steps, np.random.default_rng(1),
                                                          process_sd_m=0.1, resampling=method), ("log_likelihood",))
-    assert status == "ok"
     collapse = bad is not None and runs and (np.isnan(bad) or bad == np.inf)
+    if collapse and runs == 1:                   # every run collapsed: an error naming the likelihood and step
+        assert status == "error" and re.search(rf"log_likelihood collapsed in every run.*step {steps - 1} \(run 0\)",
+                                               str(res)), res
+        return
+    assert status == "ok"
     assert res.degenerate.shape == (runs,)
     assert res.degenerate.tolist() == ([True] + [False] * (runs - 1) if collapse else [False] * runs)
     finite = np.isfinite(res.mean).all(axis=(-2, -1))

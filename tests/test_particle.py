@@ -1,5 +1,8 @@
 """The general SIR particle filter against the Kalman posterior of a linear-Gaussian problem, its RSS likelihood
 against a direct computation, the kernel MAP and the N_eff trigger."""
+import re
+import warnings
+
 import numpy as np
 import pytest
 
@@ -82,7 +85,8 @@ def test_particle_filter_isolates_a_run_whose_likelihood_collapses(threshold):
     bad[2, 5, 1] = 1e300
     kw = dict(n_particles=300, region_m=([0.0, 0.0], [10.0, 10.0]), resample_threshold=threshold)
     ref = lb.particle_filter(good, BAYES_MODEL, np.random.default_rng(7), **kw)
-    res = lb.particle_filter(bad, BAYES_MODEL, np.random.default_rng(7), **kw)
+    with pytest.warns(RuntimeWarning, match=r"1 of 4 runs \(first: run 2, step 5"):
+        res = lb.particle_filter(bad, BAYES_MODEL, np.random.default_rng(7), **kw)
     assert res.degenerate.tolist() == [False, False, True, False]
     assert res.degenerate_step.tolist() == [-1, -1, 5, -1]
     assert ref.n_degenerate == 0 and res.n_degenerate == 1
@@ -114,8 +118,9 @@ def test_sir_particle_filter_isolates_a_run_whose_likelihood_collapses(method, c
         return out
 
     ref = lb.sir_particle_filter(start, loglik, 6, np.random.default_rng(1), process_sd_m=0.1, resampling=method)
-    res = lb.sir_particle_filter(start, lambda x, k: loglik(x, k, True), 6, np.random.default_rng(1),
-                                 process_sd_m=0.1, resampling=method)
+    with pytest.warns(RuntimeWarning, match=r"1 of 3 runs \(first: run 1, step 3"):
+        res = lb.sir_particle_filter(start, lambda x, k: loglik(x, k, True), 6, np.random.default_rng(1),
+                                     process_sd_m=0.1, resampling=method)
     assert res.degenerate.tolist() == [False, True, False] and res.degenerate_step.tolist() == [-1, 3, -1]
     for name in ("mean", "variance", "max_weight", "n_eff", "resampled", "particles", "weights"):
         np.testing.assert_array_equal(getattr(res, name)[[0, 2]], getattr(ref, name)[[0, 2]], err_msg=name)
@@ -140,7 +145,8 @@ def test_grid_bayes_filter_isolates_a_run_whose_likelihood_collapses():
     bad[1, 2, 0] = 1e300
     cells = np.stack(np.meshgrid(np.arange(0.5, 10, 1.0), np.arange(0.5, 10, 1.0)), -1).reshape(-1, 2)
     ref = lb.grid_bayes_filter(good, cells, BAYES_MODEL, 1.0)
-    res = lb.grid_bayes_filter(bad, cells, BAYES_MODEL, 1.0)
+    with pytest.warns(RuntimeWarning, match=r"1 of 3 runs \(first: run 1, step 2"):
+        res = lb.grid_bayes_filter(bad, cells, BAYES_MODEL, 1.0)
     assert res.degenerate.tolist() == [False, True, False] and res.degenerate_step.tolist() == [-1, 2, -1]
     assert ref.n_degenerate == 0 and res.n_degenerate == 1
     for name in ("mmse_m", "map_m", "belief"):
@@ -153,3 +159,70 @@ def test_sir_without_particles_is_a_clear_error():
     """Used to end in numpy's "zero-size array to reduction operation maximum"."""
     with pytest.raises(ValueError, match=r"initial_particles_m must hold at least one particle.*\(2, 0, 2\)"):
         lb.sir_particle_filter(np.zeros((2, 0, 2)), lambda x, k: np.zeros(x.shape[:2]), 2, np.random.default_rng(0))
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Issue 26 review: a collapse is not silent. Every run collapsed: an error; some runs: one RuntimeWarning
+# ---------------------------------------------------------------------------------------------------------------
+def _grid_cells():
+    return np.stack(np.meshgrid(np.arange(0.5, 10, 1.0), np.arange(0.5, 10, 1.0)), -1).reshape(-1, 2)
+
+
+def _bayes_filters():
+    """particle_filter and grid_bayes_filter on the same readings."""
+    yield "particle_filter", lambda rss: lb.particle_filter(rss, BAYES_MODEL, np.random.default_rng(7), n_particles=200,
+                                                            region_m=([0.0, 0.0], [10.0, 10.0]))
+    yield "grid_bayes_filter", lambda rss: lb.grid_bayes_filter(rss, _grid_cells(), BAYES_MODEL, 1.0)
+
+
+def test_every_run_collapsing_is_an_error_naming_the_likelihood_and_the_first_step():
+    """With every run collapsed the filters returned all-NaN with n_degenerate equal to the run count: a units bug
+    (1e300 dBm in every run, a likelihood that is -inf everywhere) became NaN instead of an error. Now a ValueError
+    names the likelihood (or rss_dbm), the first step and run, before anything is returned."""
+    start = np.random.default_rng(0).normal(0, 1, (3, 50, 2))
+    with pytest.raises(ValueError, match=r"log_likelihood.*every run \(3 of 3\).*step 0 \(run 0\)"):
+        lb.sir_particle_filter(start, lambda x, k: np.full(x.shape[:2], -np.inf), 4, np.random.default_rng(1))
+
+    def staggered(x, k):                # run 1 collapses at step 1, the others at step 2
+        out = -0.5 * np.sum(x ** 2, axis=-1)
+        out[1] = -np.inf if k >= 1 else out[1]
+        out[:] = np.nan if k >= 2 else out
+        return out
+    with pytest.raises(ValueError, match=r"log_likelihood.*every run \(3 of 3\).*step 1 \(run 1\)"):
+        lb.sir_particle_filter(start, staggered, 4, np.random.default_rng(1))
+    rss = _rss_runs()
+    rss[:, 3, 1] = 1e300                                                           # every run: a units bug
+    for name, call in _bayes_filters():
+        with pytest.raises(ValueError, match=r"rss_dbm.*every run \(4 of 4\).*step 3 \(run 0\).*1e\+300"):
+            call(rss)
+
+
+def test_some_runs_collapsing_give_one_warning_with_the_count_and_the_first_run_and_step():
+    rss = _rss_runs()
+    rss[2, 5, 1] = 1e300
+    rss[1, 6, 0] = -1e300
+    rss[3, 6, 2] = 1e300
+    for name, call in _bayes_filters():
+        with pytest.warns(RuntimeWarning) as record:
+            res = call(rss)
+        assert len(record) == 1, [str(w.message) for w in record]
+        assert re.search(r"3 of 4 runs.*run 2, step 5", str(record[0].message)), str(record[0].message)
+        assert res.degenerate.tolist() == [False, True, True, True]
+        assert res.degenerate_step.tolist() == [-1, 6, 5, 6]
+    start = np.random.default_rng(0).normal(0, 1, (3, 50, 2))
+
+    def loglik(x, k):
+        out = -0.5 * np.sum(x ** 2, axis=-1)
+        if k == 2:
+            out[2] = np.nan
+        return out
+    with pytest.warns(RuntimeWarning) as record:
+        res = lb.sir_particle_filter(start, loglik, 4, np.random.default_rng(1))
+    assert len(record) == 1 and re.search(r"log_likelihood.*1 of 3 runs.*run 2, step 2", str(record[0].message))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")                                            # no collapse: no warning
+        lb.sir_particle_filter(start, lambda x, k: -0.5 * np.sum(x ** 2, axis=-1), 4, np.random.default_rng(1))
+        for name, call in _bayes_filters():
+            call(_rss_runs())
+        assert lb.sir_particle_filter(np.zeros((0, 5, 2)), lambda x, k: np.zeros(x.shape[:2]), 2,
+                                      np.random.default_rng(0)).n_degenerate == 0      # no runs: nothing collapsed

@@ -19,6 +19,7 @@ the highest-weight particle, since a particle set has no density).
 """
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -166,6 +167,42 @@ def _check_inputs(rss_dbm, model: RssMeasurementModel, *, cells_m=None):
     return rss_dbm, cells_m
 
 
+def _first_collapse(dead_step) -> tuple[int, int]:
+    """(run, step) of the earliest collapse (the lowest run among those of the earliest step)."""
+    steps = np.where(dead_step >= 0, dead_step, np.iinfo(np.int64).max)
+    run = int(np.argmin(steps))
+    return run, int(dead_step[run])
+
+
+def _collapse_error(dead_step, what: str, detail=None) -> ValueError:
+    """The error when every run collapsed: ``what`` names the likelihood or readings (the argument), ``detail(run,
+    step)`` may describe that run's input at that step."""
+    run, step = _first_collapse(dead_step)
+    extra = detail(run, step) if detail is not None else ""
+    return ValueError(f"{what} collapsed in every run ({dead_step.size} of {dead_step.size}): -inf for every particle "
+                      f"(or cell), or NaN or +inf, so no weight can be normalised; first at step {step} (run {run})"
+                      f"{extra}. Nothing can be estimated: check the units and the model (a reading of 1e300 dBm, "
+                      "or mW given as dBm, overflows the Gaussian likelihood)")
+
+
+def _warn_collapse(dead, dead_step, function: str, what: str, detail=None) -> None:
+    """One RuntimeWarning when some runs (not all) collapsed: their number and the first (run, step)."""
+    run, step = _first_collapse(dead_step)
+    extra = detail(run, step) if detail is not None else ""
+    warnings.warn(f"{function}: {what} collapsed in {int(dead.sum())} of {dead.size} runs (first: run {run}, step "
+                  f"{step}{extra}); those runs are NaN from their step on (see degenerate, degenerate_step), the "
+                  "others are unaffected", RuntimeWarning, stacklevel=3)
+
+
+def _reading_detail(rss_dbm):
+    """``detail(run, step)`` for the collapse messages: that run's readings at that step."""
+    return lambda run, step: (f"; rss_dbm[{run}, {step}] = ["
+                              + ", ".join(f"{v:.4g}" for v in np.asarray(rss_dbm[run, step], float)) + "]")
+
+
+_LIKELIHOOD = "the likelihood of rss_dbm"
+
+
 def _normalise_log(logw):
     """Weights proportional to ``exp(logw)`` along the last axis, computed without overflow."""
     w = np.exp(logw - logw.max(axis=-1, keepdims=True))
@@ -285,7 +322,9 @@ def grid_bayes_filter(rss_dbm, cells_m, model: RssMeasurementModel, spread_m: fl
 
     A run whose posterior collapses at a step (the likelihood is -inf, or NaN, on every cell the belief allows, e.g.
     a reading of 1e300 dBm) is flagged ``degenerate`` with that ``degenerate_step``; its estimates and final belief
-    are NaN from that step on, and the other runs are unaffected.
+    are NaN from that step on, and the other runs are unaffected. The call then emits one ``RuntimeWarning`` (the
+    number of such runs, the first run and step, its readings); when every run collapses it raises a ValueError
+    naming ``rss_dbm`` and the first step instead (nothing can be estimated: a units bug, not a result).
     """
     rss_dbm, cells_m = _check_inputs(rss_dbm, model, cells_m=cells_m)
     check_scalar("spread_m", spread_m, gt=0, allow_inf=True)
@@ -324,6 +363,8 @@ def grid_bayes_filter(rss_dbm, cells_m, model: RssMeasurementModel, spread_m: fl
         collapsed = ~dead & (np.isnan(top) | np.isinf(top))
         dead_step[collapsed] = t
         dead |= collapsed
+        if n_runs and dead.all():
+            raise _collapse_error(dead_step, _LIKELIHOOD, _reading_detail(rss_dbm))
         if dead.any():              # a collapsed run goes on with a uniform belief (NaN outputs): others unaffected
             log_post[dead] = 0.0
         belief = _normalise_log(log_post)
@@ -334,6 +375,7 @@ def grid_bayes_filter(rss_dbm, cells_m, model: RssMeasurementModel, spread_m: fl
     if dead.any():
         belief = belief.copy()
         belief[dead] = np.nan
+        _warn_collapse(dead, dead_step, "grid_bayes_filter", _LIKELIHOOD, _reading_detail(rss_dbm))
     return GridFilterResult(mmse, best, belief, dead, dead_step)
 
 
@@ -430,6 +472,8 @@ def particle_filter(rss_dbm, model: RssMeasurementModel, rng: np.random.Generato
     that overflows the Gaussian, or NaN) is isolated: it is flagged ``degenerate`` with that ``degenerate_step``,
     its estimates are NaN from that step on and its final particles and weights NaN; it goes on internally with
     equal weights, so the other runs' random draws, and hence their results, are those of a batch without the fault.
+    The call then emits one ``RuntimeWarning`` (the number of such runs, the first run and step, its readings); when
+    every run collapses it raises a ValueError naming ``rss_dbm`` and the first step instead.
     """
     check_choice("weight_smoothing", weight_smoothing, WEIGHT_SMOOTHINGS)
     check_scalar("n_particles", n_particles, ge=1, integer=True)
@@ -485,6 +529,8 @@ def particle_filter(rss_dbm, model: RssMeasurementModel, rng: np.random.Generato
         collapsed = ~dead & (np.isnan(top) | np.isinf(top))     # -inf for every particle, or NaN / +inf anywhere
         dead_step[collapsed] = t
         dead |= collapsed
+        if n_runs and dead.all():
+            raise _collapse_error(dead_step, _LIKELIHOOD, _reading_detail(rss_dbm))
         if dead.any():              # a collapsed run goes on with equal weights (NaN outputs): others unaffected
             logits[dead] = 0.0
         w = _normalise_log(logits)
@@ -518,4 +564,5 @@ def particle_filter(rss_dbm, model: RssMeasurementModel, rng: np.random.Generato
     if dead.any():
         particles, weights = particles.copy(), weights.copy()
         particles[dead], weights[dead] = np.nan, np.nan
+        _warn_collapse(dead, dead_step, "particle_filter", _LIKELIHOOD, _reading_detail(rss_dbm))
     return ParticleFilterResult(mmse, best, n_eff, resampled, particles, weights, dead, dead_step)

@@ -21,6 +21,9 @@ flagged ``degenerate`` with the first such step (``degenerate_step``, -1 elsewhe
 step on and its final particles and weights are NaN; the other runs go on as if that run were sane (its particles are
 still propagated and resampled with equal weights, so with systematic or stratified resampling, whose random draws
 do not depend on the weights, the other runs are bit-identical). -inf for some particles only is a zero weight.
+A collapse is never silent: the call emits one ``RuntimeWarning`` with the number of collapsed runs and the first
+(run, step); when EVERY run collapses (nothing can be estimated: typically a units bug, or a likelihood that overflows)
+it raises a ValueError naming ``log_likelihood`` and the first step and run instead of returning NaN.
 """
 from __future__ import annotations
 
@@ -30,6 +33,7 @@ import numpy as np
 
 from .._validate import as_array, check_scalar
 from ..models.channel import PathLossModel
+from .bayes import _collapse_error, _warn_collapse
 from .resampling import RESAMPLING_METHODS, resample
 
 __all__ = ["SirResult", "sir_particle_filter", "rss_log_likelihood", "kernel_map_estimate"]
@@ -160,6 +164,8 @@ def sir_particle_filter(initial_particles_m, log_likelihood, n_steps: int, rng: 
         collapsed = ~dead & (np.isnan(top) | np.isinf(top))      # NaN anywhere, +inf anywhere, or -inf everywhere
         dead_step[collapsed] = k
         dead |= collapsed
+        if R and dead.all():
+            raise _collapse_error(dead_step, "log_likelihood")
         if dead.any():              # a collapsed run goes on with equal weights (its outputs are NaN): others unaffected
             logw[dead] = 0.0
         logw = logw - logw.max(axis=-1, keepdims=True)
@@ -189,4 +195,5 @@ def sir_particle_filter(initial_particles_m, log_likelihood, n_steps: int, rng: 
     if dead.any():
         x, w = x.copy(), w.copy()
         x[dead], w[dead] = np.nan, np.nan
+        _warn_collapse(dead, dead_step, "sir_particle_filter", "log_likelihood")
     return SirResult(mean, var, best, n_eff, did, x, w, clouds, dead, dead_step)

@@ -3,6 +3,9 @@
 Independent references: filterpy's KalmanFilter updated with the rows present (H and R reduced by hand),
 and the RSS likelihood recomputed with the silent reader removed.
 """
+import re
+import warnings
+
 import numpy as np
 import pytest
 from filterpy.kalman import KalmanFilter
@@ -380,3 +383,46 @@ def test_badly_scaled_rank_deficient_covariances_are_accepted():
         lb.extended_kalman_filter(MODEL.F, B @ B.T * 1e-3, X0, P0, [lb.LinearMeasurement(_track(), H, R)])
     P = np.diag([1e8, 1e8, 0.0, 0.0])                                            # zero variances, zero covariances
     lb.kalman_filter(_track(), MODEL.F, H, MODEL.Q, R, X0, P)
+
+
+def _overflowing_filters():
+    """Every Kalman-family path, run 1 given readings of 1.5e308 (m, or dBm) from step 2 on: the state overflows."""
+    rng = np.random.default_rng(9)
+    z = np.cumsum(rng.normal(size=(3, 8, 2)), axis=1)
+    z[1, 2:] = 1.5e308
+    uneven = z.copy()
+    uneven[0, 1, 1] = np.nan                             # a missing pattern that differs between runs: batched paths
+    power = CHANNEL.sample_power_dbm(np.linalg.norm(5 + rng.normal(size=(3, 8, 1, 2)) - ANCHORS, axis=-1), rng)
+    power[1, 2:] = 1.5e308
+    x0 = MODEL.state_from(np.array([5.0, 5.0]))
+    yield "kalman_filter (one covariance)", lambda: lb.kalman_filter(z, MODEL.F, H, MODEL.Q, R, x0, P0)
+    yield "kalman_filter (batched)", lambda: lb.kalman_filter(uneven, MODEL.F, H, MODEL.Q, R, x0, P0)
+    diag = np.diag(np.diag(R))
+    for flt in (lb.extended_kalman_filter, lb.unscented_kalman_filter):
+        kw = {} if flt is lb.extended_kalman_filter else dict(alpha=1.0)
+        yield f"{flt.__name__} linear", lambda flt=flt, kw=kw: flt(MODEL.F, MODEL.Q, x0, P0,
+                                                                   [lb.LinearMeasurement(z, H, R)], **kw)
+        yield f"{flt.__name__} linear batched", lambda flt=flt, kw=kw: flt(MODEL.F, MODEL.Q, x0, P0,
+                                                                           [lb.LinearMeasurement(uneven, H, R)], **kw)
+        yield f"{flt.__name__} linear serial", lambda flt=flt, kw=kw: flt(
+            MODEL.F, MODEL.Q, x0, P0, [lb.LinearMeasurement(uneven, H, diag, mode="serial")], **kw)
+        for mode in ("parallel", "serial"):
+            yield f"{flt.__name__} RSS {mode}", lambda flt=flt, kw=kw, mode=mode: flt(
+                MODEL.F, MODEL.Q, x0, P0, [lb.RssMeasurement(power, ANCHORS, CHANNEL, MODEL.position_index, mode=mode)],
+                **kw)
+
+
+@pytest.mark.parametrize("name, call", list(_overflowing_filters()), ids=[n for n, _ in _overflowing_filters()])
+def test_an_overflowing_reading_is_named_as_an_overflow_not_as_a_bad_noise_covariance(name, call):
+    """One run's overflow stops the batch (the Kalman family's documented exception to batch isolation), but the
+    message used to blame the innovation covariance and R ('the measurement noise (R, sigma_db) must be positive';
+    the UKF's 'unscented innovation covariance ... is singular'). It now names the overflow of the reading or state,
+    the step and the run."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)          # numpy's overflow warnings on the way
+        with pytest.raises(lb.SingularCovarianceError) as info:
+            call()
+    text = str(info.value)
+    assert re.search(r"overflow", text) and "reading" in text, text
+    assert re.search(r"at step [2-7]\b.*\(run index \(1,\)\)", text), text
+    assert "must be positive" not in text and "innovation covariance" not in text, text

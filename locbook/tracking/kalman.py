@@ -330,6 +330,13 @@ _STATE_NOT_FINITE = ("the state is not finite, or so far from the anchors that i
                      "the filter ran away (an overflow, e.g. after a reading of 1e300 dBm or a huge F or Q)")
 
 
+_STATE_OVERFLOW = ("the state or its covariance overflowed at step {step} (no longer finite): the filter ran away, e.g. "
+                   "after a reading too large for float64 arithmetic (1.5e308 dBm or m) or with a huge F, Q or P0")
+_UPDATE_OVERFLOW = ("the state overflowed in the update at step {step}: the updated state is not finite (a reading too "
+                    "large for float64 arithmetic, e.g. 1.5e308 dBm or m, or a state already far out after a huge F, Q "
+                    "or P0)")
+
+
 class _Singular(Exception):
     """Raised inside an update; the time loop turns it into a SingularCovarianceError naming the step."""
 
@@ -345,8 +352,7 @@ def _check_state(step: int, x, P):
     if np.isfinite(x).all() and np.isfinite(P).all():
         return
     bad = ~np.all(np.isfinite(x), axis=-1) | ~np.all(np.isfinite(P), axis=(-2, -1))
-    _raise_singular(step, bad, message=_STATE_NOT_FINITE.replace("the state is not finite", "the state or its "
-                                                                 "covariance is not finite"))
+    _raise_singular(step, bad, message=_STATE_OVERFLOW)
 
 
 def _raise_singular(step: int, bad, what: str = "innovation covariance", message: str = ""):
@@ -444,6 +450,7 @@ def _kalman_filter_batched(z, F, H, Q, R, x, P, batch, predict_first, variant, j
         if predict_first or k > 0:
             x_pred = _apply(F, x)                    # x- = F x
             P_pred = F @ P @ _mT(F) + Q              # P- = F P F' + Q
+            _check_state(k, x_pred, P_pred)          # an overflow in the prediction is named as such
         else:
             x_pred, P_pred = x, P
         # the printed update of document 003 uses the previous posterior, not the prediction
@@ -491,7 +498,7 @@ def _kalman_filter_batched(z, F, H, Q, R, x, P, batch, predict_first, variant, j
         P = np.where(valid[..., None, None], P_new, P_pred)
         bad = valid & ~np.all(np.isfinite(x), axis=-1)
         if bad.any():
-            _raise_singular(k, bad)
+            _raise_singular(k, bad, message=_UPDATE_OVERFLOW)
         _check_state(k, x, P)
         out_x[..., k, :], out_P[..., k, :, :] = x, P
         out_xp[..., k, :], out_Pp[..., k, :, :] = x_use, P_use
@@ -532,6 +539,7 @@ def _kalman_filter_shared(z, F, H, Q, R, x, P, pattern, predict_first, variant, 
         if predict_first or k > 0:
             x_pred = x @ Ft
             P_pred = F @ P @ Ft + Q
+            _check_state(k, x_pred, P_pred)
         else:
             x_pred, P_pred = x, P
         x_use, P_use = (x, P) if variant == "literal_003" else (x_pred, P_pred)
@@ -567,7 +575,7 @@ def _kalman_filter_shared(z, F, H, Q, R, x, P, pattern, predict_first, variant, 
         else:
             x, P = x_new, P_new
             if not np.isfinite(x).all():
-                _raise_singular(k, ~np.all(np.isfinite(x), axis=-1))
+                _raise_singular(k, ~np.all(np.isfinite(x), axis=-1), message=_UPDATE_OVERFLOW)
             out_nu[..., k, :] = nu
             out_nis[..., k] = nis
             out_dof[..., k] = dof
@@ -607,7 +615,7 @@ def _linear_update_shared(x, P, z, present, H, R, *, joseph: bool = True):
     nis, dof = nis.reshape(x.shape[:-1]), int(present.sum())
     x_new = x + nu @ K.T
     if not np.isfinite(x_new).all():
-        raise _Singular(~np.all(np.isfinite(x_new), axis=-1))
+        raise _Singular(~np.all(np.isfinite(x_new), axis=-1), _UPDATE_OVERFLOW)
     if joseph:
         return x_new, _joseph(P, K, H, R), nis, dof
     short = (np.eye(P.shape[-1]) - K @ H) @ P
@@ -859,7 +867,7 @@ def _linear_update(x, P, z, H, R, *, joseph: bool = True):
         nis = np.einsum("...i,...i->...", nu, sol[..., n])
     x_new = x + (K @ nu[..., None])[..., 0]
     if not np.isfinite(x_new).all():                          # a larger S that is not positive definite
-        raise _Singular(~np.all(np.isfinite(x_new), axis=-1))
+        raise _Singular(~np.all(np.isfinite(x_new), axis=-1), _UPDATE_OVERFLOW)
     if joseph:
         return x_new, _joseph(P, K, H, R), nis, dof
     short = (np.eye(P.shape[-1]) - K @ H) @ P
@@ -936,6 +944,9 @@ def _rss_serial_update(x, P, z, meas: RssMeasurement, step: int = 0):
         K = np.where(valid[..., None], ph / s[..., None], 0.0)
         nis = nis + np.where(valid, nu * nu / np.where(valid, s, 1.0), 0.0)
         x = x + K * nu[..., None]
+        over = ~np.all(np.isfinite(x), axis=-1)
+        if over.any():              # named here: the next reading's linearisation would only see NaN
+            raise _Singular(over, _UPDATE_OVERFLOW)
         P = _joseph(P, K[..., :, None], h_row[..., None, :], var[..., None, None])
     return x, P, nis, dof
 
@@ -1086,6 +1097,7 @@ def _time_loop(setup: _Setup, measurements, update, predict_first: bool, *, shar
         if predict_first or k > 0:
             x = x @ Ft if F.ndim == 2 else _apply(F, x)
             P = F @ P @ Ft + Q
+            _check_state(k, x, P)               # an overflow in the prediction is named as such
         nis, dof = 0.0, 0
         for meas, z, act in zip(measurements, setup.zs, setup.active):
             if not act[k]:

@@ -40,7 +40,7 @@ import numpy as np
 from .._validate import check_choice, check_scalar
 from ..models.channel import log_distance_mean_dbm
 from .kalman import (DIVERGENCE_PROBABILITY, DIVERGENCE_WINDOW, LinearMeasurement, NonlinearMeasurement,
-                     RssMeasurement, TrackResult, _inv_small, _mT,
+                     RssMeasurement, TrackResult, _UPDATE_OVERFLOW, _inv_small, _mT,
                      _not_positive_definite, _pick_anchor, _serial_order, _Singular, _singular_runs,
                      run_recursive_filter)
 
@@ -88,6 +88,10 @@ def unscented_weights(n: int, alpha: float = 1e-3, beta: float = 2.0, kappa: flo
     cov[0] = w_m0 + 1.0 - alpha**2 + beta
     return UnscentedWeights(mean, cov, float(lam))
 
+
+_SIGMA_OVERFLOW = ("the state overflowed at step {step}: the readings predicted at its sigma points, or their "
+                   "covariance, are not finite (the state was driven far out by a reading too large for float64 "
+                   "arithmetic, e.g. 1.5e308 dBm or m, or by a huge F, Q or P0)")
 
 _P_NOT_PD = ("the state covariance P is not positive definite at step {step}, so its Cholesky factor (the "
              "sigma-point spread of Eqs. (3.19)-(3.20)) does not exist; check P0, Q and the measurement noise")
@@ -160,7 +164,9 @@ def _ukf_update(x, P, z, h, R, weights: UnscentedWeights, innovation_noise: bool
         eig = np.linalg.eigvalsh(S)
         bad = bad | row_ok & ~(eig[..., 0] > 1e3 * m * np.finfo(float).eps * np.abs(eig[..., -1]))
     if bad.any():
-        raise _Singular(bad)
+        # sigma points far out (a state driven there by an overflowing reading): their readings or S overflow
+        over = bad & ~(np.all(np.isfinite(Y), axis=(-2, -1)) & np.all(np.isfinite(S), axis=(-2, -1)))
+        raise _Singular(over, _SIGMA_OVERFLOW) if over.any() else _Singular(bad)
     nu = np.where(valid, z - z_hat, 0.0)
     S_use = S if row_ok.all() else np.where(row_ok[..., None, None], S, np.eye(m))
     S_inv = _inverse(S_use, row_ok)
@@ -168,7 +174,7 @@ def _ukf_update(x, P, z, h, R, weights: UnscentedWeights, innovation_noise: bool
     nis = np.where(row_ok, np.einsum("...i,...i->...", nu, (S_inv @ nu[..., None])[..., 0]), 0.0)
     x_new = x + (K @ nu[..., None])[..., 0]
     if not np.all(np.isfinite(x_new)):
-        raise _Singular(~np.all(np.isfinite(x_new), axis=-1))
+        raise _Singular(~np.all(np.isfinite(x_new), axis=-1), _UPDATE_OVERFLOW)
     # Joseph form with the statistically linearised H~ = P_xz^T P^{-1} and R~ = S - H~ P H~^T (module docstring),
     # through L: H~ P H~^T = c D^T D and (I - K H~) P (I - K H~)^T = M M^T / c with M = (I - K H~) L = L - c K D^T
     Rt = S - c * (_mT(D) @ D)

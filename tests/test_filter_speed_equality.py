@@ -8,6 +8,7 @@ compiled EKF equals the numpy EKF on every stream option it supports (and gives 
 cannot update).
 """
 import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -255,3 +256,39 @@ def test_nonlinear_streams_stay_in_numpy(monkeypatch):
                                                                                                     np.eye(2))])
     non = lb.extended_kalman_filter(model.F, model.Q, np.zeros(4), np.eye(4), [meas])
     np.testing.assert_allclose(non.x, lin.x, rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("kernel", ["numba" if HAVE_NUMBA else "plain Python"])
+def test_zero_steps_do_not_turn_the_compiled_ekf_off(monkeypatch, kernel):
+    """Zero steps reached the kernel's argument packing inside the guard that turns the compiled EKF off for the whole
+    session on any exception ('cannot reshape array of size 0', with a RuntimeWarning), so every later EKF ran in
+    numpy. (The fuzz module restores _NUMBA_ENABLED and ignores RuntimeWarning, so it could not see this.) Without
+    numba installed the same wrapper runs with the kernel as plain Python (the kernels are plain functions until
+    numba compiles them)."""
+    monkeypatch.setattr(K, "_NUMBA_ENABLED", True)
+    monkeypatch.setattr(K, "_NUMBA_MIN_WORK", 0)
+    if not HAVE_NUMBA:
+        monkeypatch.setitem(K._NUMBA_STATE, "ready", True)
+    model = lb.constant_velocity(1.0, 0.05)
+    H = model.position_measurement_matrix()
+    R = np.diag([0.5, 0.8])
+    x0, P0 = np.zeros(4), np.eye(4)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")                        # no "the compiled EKF failed" warning
+        for z in (np.empty((3, 0, 2)), np.empty((0, 5, 2)), np.empty((0, 0, 2))):
+            res = lb.extended_kalman_filter(model.F, model.Q, x0, P0, [lb.LinearMeasurement(z, H, R)])
+            assert res.x.shape == z.shape[:-1] + (4,)
+    assert K._NUMBA_ENABLED is True
+    # and the compiled path is still taken: a batch whose missing components differ between runs
+    z = np.random.default_rng(0).normal(size=(2, 3, 2))
+    z[0, 1, 0] = np.nan
+    calls = []
+    original = K._compiled_ekf
+    monkeypatch.setattr(K, "_compiled_ekf", lambda *a: calls.append(original(*a)) or calls[-1])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        res = lb.extended_kalman_filter(model.F, model.Q, x0, P0, [lb.LinearMeasurement(z, H, R)])
+    assert len(calls) == 1 and calls[0] is not None
+    monkeypatch.setattr(K, "_NUMBA_ENABLED", False)
+    ref = lb.extended_kalman_filter(model.F, model.Q, x0, P0, [lb.LinearMeasurement(z, H, R)])
+    np.testing.assert_allclose(res.x, ref.x, rtol=0, atol=TOL)

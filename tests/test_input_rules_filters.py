@@ -354,8 +354,8 @@ def test_a_singular_float32_sample_covariance_is_accepted():
     (np.diag([1e8, 1.0, -1e-3, 1.0]), r"P0 must be positive semi-definite.*P0\[2, 2\] = -0.001"),
     (np.block([[np.diag([1e8, 1e8]), np.zeros((2, 2))], [np.zeros((2, 2)), np.array([[0.1, 0.2], [0.2, 0.1]])]]),
      r"P0 must be positive semi-definite.*-0.1"),                  # |correlation| 2 in a small block
-    (np.array([[1e8, 0, 1e-3, 0], [0, 1e8, 0, 0], [1e-3, 0, 0, 0], [0, 0, 0, 1.0]]),
-     r"P0 must be positive semi-definite.*variance P0\[2, 2\] is 0 but its covariance P0\[0, 2\]"),   # a zero variance with a covariance
+    (np.array([[1e8, 0, 1e-3, 0], [0, 1e8, 0, 0], [1e-3, 0, 0, 0], [0, 0, 0, 1.0]]),   # a zero variance, a covariance
+     r"P0 must be positive semi-definite.*variance P0\[2, 2\] is 0 but its covariance P0\[0, 2\]"),
 ])
 def test_a_covariance_that_is_not_positive_semi_definite_is_refused_at_any_scale(P, message):
     """The tolerance was relative to the largest entry, so a diffuse prior (1e8) hid a negative variance of -0.1 or a

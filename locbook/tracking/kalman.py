@@ -330,8 +330,8 @@ _STATE_NOT_FINITE = ("the state is not finite, or so far from the anchors that i
                      "the filter ran away (an overflow, e.g. after a reading of 1e300 dBm or a huge F or Q)")
 
 
-_STATE_OVERFLOW = ("the state or its covariance overflowed at step {step} (no longer finite): the filter ran away, e.g. "
-                   "after a reading too large for float64 arithmetic (1.5e308 dBm or m) or with a huge F, Q or P0")
+_STATE_OVERFLOW = ("the state or its covariance overflowed at step {step} (no longer finite): the filter ran away, "
+                   "e.g. after a reading too large for float64 arithmetic (1.5e308 dBm or m) or with a huge F, Q or P0")
 _UPDATE_OVERFLOW = ("the state overflowed in the update at step {step}: the updated state is not finite (a reading too "
                     "large for float64 arithmetic, e.g. 1.5e308 dBm or m, or a state already far out after a huge F, Q "
                     "or P0)")

@@ -20,6 +20,7 @@ import math
 import os
 import re
 import signal
+import stat
 import sys
 import threading
 import time
@@ -29,6 +30,8 @@ SINGLE_THREAD = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_T
                  "BLIS_NUM_THREADS": "1", "VECLIB_MAXIMUM_THREADS": "1", "NUMEXPR_NUM_THREADS": "1"}
 #: failures worth one more attempt: the kernel died or never answered (the papermill/ipykernel port race)
 KERNEL_FAILURES = ("DeadKernelError", "ZMQError", "Kernel died", "kernel_info", "Kernel didn't respond")
+#: rw-rw-rw- before the umask: the mode open() gives new files
+_FILE_MODE = stat.S_IRUSR | stat.S_IWUSR | stat.S_IRGRP | stat.S_IWGRP | stat.S_IROTH | stat.S_IWOTH
 #: no space left on the device, or the disk quota exceeded
 DISK_FULL_ERRNOS = (errno.ENOSPC, errno.EDQUOT)
 #: exit status of a worker that could not even write its result for lack of space (28 = ENOSPC on Linux)
@@ -173,8 +176,9 @@ def _run(task: dict, staging: Path) -> int:
                        "JUPYTER_RUNTIME_DIR": str(runtime), "TMPDIR": str(runtime),
                        "PYDEVD_DISABLE_FILE_VALIDATION": "1"})
     # the kernel inherits stderr: keep its chatter in a log beside the report
-    # mode 0o666 before the umask, as open() creates every other report file (os.open's default is 0o777)
-    log_fd = os.open(staging / "kernel-stderr.log", os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o666)
+    # read-write for all before the umask, as open() creates every other report file (os.open's default
+    # also sets the execute bits)
+    log_fd = os.open(staging / "kernel-stderr.log", os.O_WRONLY | os.O_CREAT | os.O_TRUNC, _FILE_MODE)
     os.dup2(log_fd, 2)
     os.close(log_fd)
     result = execute(task)

@@ -90,9 +90,9 @@ _API = (
     # errors and reports
     ("errors", ("LocbookError", "DegenerateGeometryError", "ConvergenceError", "ParameterError",
         "SingularCovarianceError",)),
-    ("suite.report", ("Report",)),
-    ("suite.scoring", ("Ambiguity",)),
-    ("data.printed_values", ("Printed", "PrintedValues", "printed",)),
+    ("reproduce.report", ("Report",)),
+    ("reproduce.scoring", ("Ambiguity",)),
+    ("reproduce.printed_values", ("Printed", "PrintedValues", "printed",)),
 )
 _HOME = {name: module for module, names in _API for name in names}
 __all__ = ["__version__", *_HOME]

@@ -4,7 +4,7 @@ import json
 
 import pytest
 
-from locbook.suite.report import NUMBER_COLUMNS
+from locbook.reproduce.report import NUMBER_COLUMNS
 from locbook.suite import load_suite, read_parameters, run_suite
 
 SUITE = load_suite()

@@ -7,7 +7,7 @@ import tokenize
 from pathlib import Path
 
 import locbook as lb
-from locbook.data.printed_values import PRINTED_DIR
+from locbook.reproduce.printed_values import PRINTED_DIR
 
 ROOT = Path(__file__).resolve().parents[1]
 

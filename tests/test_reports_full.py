@@ -7,8 +7,8 @@ import pytest
 
 import locbook as lb
 from locbook.suite import load_suite
-from locbook.suite.report import NUMBER_COLUMNS
-from locbook.suite.scoring import JUDGED_KINDS, KINDS, WITHIN_LIMIT
+from locbook.reproduce.report import NUMBER_COLUMNS
+from locbook.reproduce.scoring import JUDGED_KINDS, KINDS, WITHIN_LIMIT
 from locbook.suite.site import double_counted
 
 FULL = Path(__file__).resolve().parents[1] / "reports" / "full"

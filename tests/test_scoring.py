@@ -1,13 +1,13 @@
-"""The scoreboard's rules (locbook/suite/scoring.py), the printed-values files and the report rows built on them."""
+"""The scoreboard's rules (locbook/reproduce/scoring.py), the printed-values files and the report rows built on them."""
 import csv
 import math
 
 import pytest
 
 import locbook as lb
-from locbook.data.printed_values import PRINTED_DIR, printed_number, printed_rounding
+from locbook.reproduce.printed_values import PRINTED_DIR, printed_number, printed_rounding
 from locbook.suite import site
-from locbook.suite.scoring import WITHIN_LIMIT, score
+from locbook.reproduce.scoring import WITHIN_LIMIT, score
 
 
 @pytest.mark.parametrize("text, value, rounding", [
@@ -95,7 +95,7 @@ def test_report_rows_keep_the_printed_text_and_name_calibrations(tmp_path, monke
     assert row["printed"] == "2.2867" and row["verdict"] == "miss"     # window: rounding only
     with open(tmp_path / "numbers.csv") as fh:
         written = list(csv.DictReader(fh))
-    assert written[0]["printed"] == "2.2867" and tuple(written[0]) == lb.suite.report.NUMBER_COLUMNS
+    assert written[0]["printed"] == "2.2867" and tuple(written[0]) == lb.reproduce.report.NUMBER_COLUMNS
     wide = report.number("C", c_raw, 2.3, kind="reproduction",
                          ambiguity=lb.Ambiguity(1.0, "one walk", "George Sec. 6"))
     assert wide["verdict"] == "loose" and "one walk" in wide["note"]

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..models.channel import PathLossModel, pairwise_distance_m
-from ..data.printed_values import printed
+from ..reproduce.printed_values import printed
 from ..errors import ParameterError
 from ..tracking.kalman import LinearMeasurement, RssMeasurement, TrackResult, extended_kalman_filter
 from ..static.localization import grid_ml_position, rss_ml_position
@@ -666,7 +666,7 @@ def record_tables(report, rows, *, variants: dict | None = None, label: str = ""
     the note of every miss (the reading was tested before the miss is attributed). Loose rows keep the automatic
     note (which part of the window is wide). A filter cell whose runs the NIS guard flagged says how many in its note
     (the RMSE keeps them, as the thesis averaged every run)."""
-    from ..suite.scoring import Ambiguity, score
+    from ..reproduce.scoring import Ambiguity, score
     rel = thesis_repeat_error()
     by_key = {(r["table"], r["row"], r["column"]): r for r in rows}
     counts: dict = {}

@@ -20,7 +20,7 @@ from ..static.calibration import calibrate_path_loss, fix_error_covariance
 from ..models.channel import PathLossModel, pairwise_distance_m
 from ..tracking.kalman import kalman_filter
 from ..static.localization import lateration_ls
-from ..data.printed_values import printed
+from ..reproduce.printed_values import printed
 from ..metrics import position_error_m
 from ..models.motion import constant_velocity
 from . import DivergenceFlags

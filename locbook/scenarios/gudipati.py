@@ -20,7 +20,7 @@ import numpy as np
 
 from ..bounds.crlb import rss_crlb_m
 from ..bounds.pcrlb import position_bound_m, posterior_crlb, rss_state_information
-from ..data.printed_values import printed
+from ..reproduce.printed_values import printed
 from ..metrics import position_error_m
 from ..models.channel import PathLossModel, correlated_shadowing_db, pairwise_distance_m, quantize_db
 from ..models.imu import (accelerometer_readings, body_to_world, dead_reckon, gyroscope_readings, integrate,

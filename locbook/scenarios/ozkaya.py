@@ -24,11 +24,11 @@ from ..tracking.bayes import RssMeasurementModel, grid_bayes_filter, particle_fi
 from ..bounds.crlb import crlb_rms_over_area_m, rss_crlb_m
 from ..static.fingerprint import knn_position, model_fingerprints
 from ..models.channel import PathLossModel
-from ..data.printed_values import printed
+from ..reproduce.printed_values import printed
 from ..metrics import (error_std_m, mean_error_m, median_error_m, percentile_error_m, position_error_m, rmse_m,
                        rmse_standard_error_m)
 from ..montecarlo import bootstrap_standard_error, seed_from_values
-from ..suite.scoring import Ambiguity, score
+from ..reproduce.scoring import Ambiguity, score
 from ..models.motion import reflect_into_box
 
 __all__ = [

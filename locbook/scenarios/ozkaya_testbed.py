@@ -39,7 +39,7 @@ from ..static.fingerprint import knn_position, model_fingerprints
 from ..metrics import error_summary_per_run, position_error_m
 from ..montecarlo import mc_standard_error
 from ..static.reference_tags import calibrate_from_reference_tags, smooth_rssi
-from ..suite.scoring import Ambiguity, score
+from ..reproduce.scoring import Ambiguity, score
 from . import ozkaya as oz
 
 __all__ = [

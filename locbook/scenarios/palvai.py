@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..data.printed_values import printed
+from ..reproduce.printed_values import printed
 from ..models.channel import PathLossModel, correct_range_bias
 from ..static.least_squares import lateration_rows, least_squares_position, recursive_least_squares
 from ..tracking.kalman import NonlinearMeasurement, RssMeasurement, extended_kalman_filter

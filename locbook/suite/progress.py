@@ -65,7 +65,7 @@ def scoreboard_rows(run) -> list[dict]:
 
 
 def _columns(rows) -> list[str]:
-    from .scoring import KINDS
+    from ..reproduce.scoring import KINDS
     kinds = [k for k in KINDS if any(r.get(k) for r in rows)]
     return ["experiment", "status", "time", *kinds]
 

@@ -51,7 +51,7 @@ from importlib import metadata
 from pathlib import Path
 
 from . import site
-from .report import NUMBER_COLUMNS
+from ..reproduce.report import NUMBER_COLUMNS
 from .params import read_notebook
 from .site import _read_csv, _read_json
 from .executors import _STOP_GRACE_S, make_executor

@@ -26,8 +26,8 @@ import re
 from collections import Counter, defaultdict
 from pathlib import Path
 
-from .report import Table
-from .scoring import KINDS
+from ..reproduce.report import Table
+from ..reproduce.scoring import KINDS
 
 __all__ = ["VERDICT_COLUMNS", "scoreboard_counts", "summary_markdown", "page_markdown", "page_html",
            "index_markdown", "index_html", "double_counted"]

@@ -1,4 +1,4 @@
-"""The numbers each source document printed, read from ``printed/<document>.csv``.
+"""The numbers each source document printed, read from ``locbook/data/printed/<document>.csv``.
 
 One CSV per document, transcribed from its reading note, with the columns
 ``location, item, statistic, unit, printed``: where the number stands (``Table 7.1``, ``Fig. 5 text``,
@@ -18,7 +18,7 @@ from pathlib import Path
 __all__ = ["Printed", "PrintedValues", "printed", "printed_number", "printed_rounding", "PRINTED_DIR",
            "PRINTED_COLUMNS"]
 
-PRINTED_DIR = Path(__file__).with_name("printed")
+PRINTED_DIR = Path(__file__).resolve().parents[1] / "data" / "printed"    # package data of locbook.data
 PRINTED_COLUMNS = ("location", "item", "statistic", "unit", "printed")
 
 

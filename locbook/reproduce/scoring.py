@@ -1,6 +1,6 @@
 """The scoreboard's rules: what kind of agreement a row is, its window, and its verdict.
 
-Every row of ``numbers.csv`` compares one printed quantity (a :class:`~locbook.data.Printed`) with our
+Every row of ``numbers.csv`` compares one printed quantity (a :class:`~locbook.reproduce.Printed`) with our
 number, and says what kind of comparison it is:
 
 ``reproduction``
@@ -37,10 +37,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from ..data.printed_values import printed_number, printed_rounding
+from .printed_values import printed_number, printed_rounding
 
 __all__ = ["KINDS", "VERDICTS", "JUDGED_KINDS", "CLAIM_RELATIONS", "WITHIN_LIMIT", "Ambiguity", "Score",
-           "score", "printed_number", "printed_rounding"]
+           "score"]
 
 KINDS = ("reproduction", "calibrated", "arithmetic", "claim", "shown")
 #: kinds that get within / loose / miss

@@ -5,8 +5,8 @@ A notebook creates one :class:`Report` and calls :meth:`Report.number`, :meth:`R
 experiment's staging folder (environment variable ``LOCBOOK_OUTPUT_DIR``); run interactively they go to
 a scratch folder in the system's temporary directory, so exploring never touches ``reports/``.
 
-Each number row compares one printed quantity (:class:`locbook.data.Printed`, read from the document's
-printed-values file) with our number, under the rules of :mod:`locbook.suite.scoring`: its ``kind``
+Each number row compares one printed quantity (:class:`locbook.reproduce.Printed`, read from the document's
+printed-values file) with our number, under the rules of :mod:`locbook.reproduce.scoring`: its ``kind``
 (reproduction, calibrated, arithmetic, claim, shown), its window (printed rounding + 2 Monte-Carlo standard
 errors + a named ambiguity) and its verdict (within, loose, miss). The columns are :data:`NUMBER_COLUMNS`.
 """
@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..data.printed_values import Printed
+from .printed_values import Printed
 from .scoring import KINDS, Ambiguity, score
 
 __all__ = ["Report", "NUMBER_COLUMNS", "Table"]
@@ -118,7 +118,7 @@ class Report:
 
         ``printed`` comes from the document's printed-values file (``lb.printed(document).get(...)``), never
         typed in. ``kind`` is one of ``reproduction``, ``calibrated``, ``arithmetic``, ``claim``, ``shown``
-        (:mod:`locbook.suite.scoring`). ``mc_std_error`` is the Monte-Carlo standard error of ``reproduced``
+        (:mod:`locbook.reproduce.scoring`). ``mc_std_error`` is the Monte-Carlo standard error of ``reproduced``
         from run-level values; ``ambiguity`` names a protocol ambiguity, its size (in the unit) and source.
         A ``calibrated`` row says in ``calibrated_from`` which input was chosen from which printed number. A
         ``claim`` gives ``relation`` (``>``, ``>=``, ``<``, ``<=``) against the printed threshold. ``same_as``
@@ -126,7 +126,7 @@ class Report:
         only at the printed quantity it names.
         """
         if not isinstance(printed, Printed):
-            raise TypeError("printed must be a locbook.data.Printed from the document's printed-values file, "
+            raise TypeError("printed must be a locbook.reproduce.Printed from the document's printed-values file, "
                             f"got {type(printed).__name__}")
         if kind not in KINDS:
             raise ValueError(f"kind must be one of {KINDS}, got {kind!r}")

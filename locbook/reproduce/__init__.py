@@ -1,0 +1,34 @@
+"""The reproduction layer: the numbers each source printed, the scoreboard's rules, and what a notebook records.
+
+- :mod:`.printed_values`: :func:`printed` reads a document's printed numbers (package data ``locbook/data/printed``),
+  each a :class:`Printed` with its text, value and rounding;
+- :mod:`.scoring`: a row's kind, window (printed rounding + 2 Monte-Carlo standard errors + a named
+  :class:`Ambiguity`) and verdict (:func:`score`);
+- :mod:`.report`: :class:`Report`, whose :meth:`Report.number` applies those rules (window, verdict and note),
+  so that a notebook never computes a window itself.
+
+Scenarios may import this layer; it imports nothing from the suite (the suite imports it). Names load on first use,
+so that ``import locbook.reproduce.printed_values`` does not pay for the report's numpy.
+"""
+from importlib import import_module
+
+_EXPORTS = {
+    **dict.fromkeys(("Printed", "PrintedValues", "printed", "printed_number", "printed_rounding", "PRINTED_DIR",
+                     "PRINTED_COLUMNS"), "printed_values"),
+    **dict.fromkeys(("KINDS", "JUDGED_KINDS", "VERDICTS", "CLAIM_RELATIONS", "WITHIN_LIMIT", "Ambiguity", "Score",
+                     "score"), "scoring"),
+    **dict.fromkeys(("Report", "Table", "NUMBER_COLUMNS"), "report"),
+}
+__all__ = list(_EXPORTS)
+
+
+def __getattr__(name):
+    if name in _EXPORTS:
+        value = getattr(import_module(f".{_EXPORTS[name]}", __name__), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(__all__)

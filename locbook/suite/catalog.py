@@ -11,7 +11,6 @@ import shutil
 from pathlib import Path
 
 from .params import FINITE, is_numeric_annotation
-from .site import VERDICT_COLUMNS, scoreboard_counts
 from .spec import PROFILES, Experiment, Suite, SuiteError
 
 __all__ = ["last_result", "list_text", "show_text", "copy_notebooks"]
@@ -25,8 +24,9 @@ def _read_json(path: Path) -> dict:
     return value if isinstance(value, dict) else {}
 
 
-def last_result(exp: Experiment, reports_root: Path, profile: str) -> dict:
-    """The experiment's last report at a profile: ``{"seconds", "status", "counts", "stamp"}`` (empty if none)."""
+def last_result(exp: Experiment, reports_root: Path, profile: str, *, counts: bool = True) -> dict:
+    """The experiment's last report at a profile: ``{"seconds", "status", "counts", "stamp"}`` (empty if none);
+    ``counts=False`` leaves out the verdict counts (``locbook list`` shows none, and they need numpy)."""
     folder = reports_root / profile / exp.id
     report = _read_json(folder / "report.json")
     status = _read_json(reports_root / profile / "status.json").get(exp.id, {})
@@ -41,6 +41,9 @@ def last_result(exp: Experiment, reports_root: Path, profile: str) -> dict:
         out["status"] = "ok"
     if report.get("locbook"):
         out["stamp"] = report["locbook"]
+    if not counts:
+        return out
+    from .site import scoreboard_counts   # here: the report site imports numpy
     try:
         with open(folder / "numbers.csv", newline="", encoding="utf-8") as fh:
             out["counts"] = scoreboard_counts(list(csv.DictReader(fh)))
@@ -52,6 +55,7 @@ def last_result(exp: Experiment, reports_root: Path, profile: str) -> dict:
 def _counts_text(counts) -> str:
     if not counts:
         return "no printed numbers"
+    from .site import VERDICT_COLUMNS
     parts = []
     for kind, c in counts.items():
         inner = ", ".join(f"{c[v]} {v}" for v in VERDICT_COLUMNS if c.get(v))
@@ -67,7 +71,7 @@ def list_text(suite: Suite, reports_root: Path) -> str:
     """One line per experiment: id, document, what it covers, last run time at each profile."""
     lines = [f"{'experiment':34s} {'document':15s} {'quick':>7s} {'full':>7s}  covers"]
     for exp in suite.experiments:
-        times = [_seconds_text(last_result(exp, reports_root, p)) for p in PROFILES]
+        times = [_seconds_text(last_result(exp, reports_root, p, counts=False)) for p in PROFILES]
         lines.append(f"{exp.id:34s} {exp.document.key:15s} {times[0]:>7s} {times[1]:>7s}  {exp.section}")
     lines.append(f"\n{len(suite.experiments)} experiments; run times from the reports under {reports_root} "
                  "('-': not run there yet). `locbook show ID` lists an experiment's parameters.")

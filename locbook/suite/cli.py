@@ -112,7 +112,7 @@ def main(argv: list[str] | None = None) -> int:
         command.add_argument("--suite", type=Path, default=argparse.SUPPRESS, help=suite_help)
     args = parser.parse_args(argv)
 
-    from . import load_suite, run_suite
+    from .spec import load_suite   # each command imports what it needs: `locbook list` loads no numpy
 
     try:
         suite = load_suite(args.suite)
@@ -128,6 +128,7 @@ def main(argv: list[str] | None = None) -> int:
                   f"`jupyter lab {dest}`, or run them with `locbook run --suite {dest / 'experiments.toml'}`")
             return 0
         experiments = suite.select(args.ids)
+        from .runner import run_suite
         result = run_suite(suite, experiments, args.profile, jobs=args.jobs, force=args.force,
                            overrides=_parse_overrides(args.parameter), report_root=args.reports,
                            out_dir=args.out, timeout_s=args.timeout, progress=args.progress,

@@ -1,0 +1,31 @@
+"""`locbook --version` and `locbook list` answer at once: they import only what they need (issue 27).
+The times themselves are measured by benchmarks/bench_startup.py, not asserted here."""
+import subprocess
+import sys
+
+HEAVY = ("numpy", "scipy", "pandas", "matplotlib", "cvxpy", "pydantic", "papermill", "nbformat", "jinja2", "rich")
+
+
+def _modules_after(code: str) -> set[str]:
+    out = subprocess.run([sys.executable, "-c", code + "\nimport sys; print(' '.join(sys.modules))"],
+                         capture_output=True, text=True, check=True).stdout.split()
+    return {name.split(".")[0] for name in out}
+
+
+def test_version_and_list_import_no_heavy_package():
+    version = _modules_after("from locbook.suite.cli import main\n"
+                             "try:\n    main(['--version'])\nexcept SystemExit as exc:\n    assert exc.code == 0")
+    listing = _modules_after("import contextlib, io\nfrom locbook.suite.cli import main\n"
+                             "with contextlib.redirect_stdout(io.StringIO()) as out:\n    assert main(['list']) == 0\n"
+                             "assert 'experiments;' in out.getvalue()")
+    assert not version & set(HEAVY), version & set(HEAVY)
+    assert not listing & set(HEAVY), listing & set(HEAVY)
+
+
+def test_import_locbook_loads_no_submodule_but_the_data_audit_hook():
+    loaded = _modules_after("import locbook")
+    assert not loaded & set(HEAVY), loaded & set(HEAVY)
+    submodules = subprocess.run([sys.executable, "-c", "import sys, locbook; "
+                                 "print(' '.join(m for m in sys.modules if m.startswith('locbook.')))"],
+                                capture_output=True, text=True, check=True).stdout.split()
+    assert submodules == ["locbook._datalog"]   # records the data files a kernel reads (LOCBOOK_DATA_LOG)

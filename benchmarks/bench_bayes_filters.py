@@ -26,7 +26,7 @@ def measure(runs: int = 1000, particles: int = 250, steps: int = 10, loop_runs: 
     case = oz.SimCase("sir", "mobile", rt=steps, n_particles=particles)
     truth, rss = oz.simulate_truth_and_rss(case, runs, np.random.default_rng(1))
     readers = oz.readers_for("corners3")
-    model = lb.RssMeasurementModel(readers, -52.0, 2.3, 5.2)
+    model = lb.RssModel(readers, lb.PathLossModel(-52.0, 2.3, 5.2, min_distance_m=0.1))
     region = (np.zeros(2), np.array(oz.ROOM_M))
     cells = oz.cell_centres(oz.ROOM_M, 4, 7)
 

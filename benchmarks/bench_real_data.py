@@ -77,14 +77,14 @@ def measure(spacing: float = 0.1, particles: int = 5000, knn_queries: int = 100_
          lambda: lb.unscented_kalman_filter(motion.F, motion.Q, x0, P0, [stream], alpha=0.5).x[ticks, :2], "fix"),
         (f"particle filter ({particles} particles)", f"{len(reg.time_s)} ticks, 1 run",
          lambda: lb.particle_filter(reg.rss_dbm[None], bayes_model, np.random.default_rng(1), n_particles=particles,
-                                    region_m=(lower, upper), spread_m=0.3, resample_threshold=0.5).mmse_m[0, ticks], "fix"),
+                                    region_m=(lower, upper), spread_m=0.3, resample_threshold=0.5).mean_m[0, ticks], "fix"),
         (f"grid Bayes, separable ({spacing} m)", f"{len(reg.time_s)} ticks x {len(grid)} cells",
-         lambda: lb.grid_bayes_filter(reg.rss_dbm[None], grid, bayes_model, 0.3).mmse_m[0, ticks], "fix"),
+         lambda: lb.grid_bayes_filter(reg.rss_dbm[None], grid, bayes_model, 0.3).mean_m[0, ticks], "fix"),
     ]
     if dense_check:
         cases.append((f"grid Bayes, dense ({spacing} m)", f"{len(reg.time_s)} ticks x {len(grid)} cells",
                       lambda: lb.grid_bayes_filter(reg.rss_dbm[None], grid, bayes_model, 0.3,
-                                                   transition="dense").mmse_m[0, ticks], "fix"))
+                                                   transition="dense").mean_m[0, ticks], "fix"))
     rows = []
     for name, workload, fn, kind in cases:
         seconds, _, out = hx.timed(fn)

@@ -60,11 +60,11 @@ _API = (
     ("tracking.unscented", ("unscented_kalman_filter", "UkfResult", "unscented_weights", "UnscentedWeights",
         "sigma_points", "unscented_transform", "UKF_WEIGHTS",)),
     # Bayes filters
-    ("tracking.bayes", ("RssMeasurementModel", "GridFilterResult", "grid_bayes_filter", "grid_transition_matrix",
-        "ParticleFilterResult", "particle_filter", "systematic_resample", "effective_sample_size",
-        "RESAMPLING_CDFS", "WEIGHT_SMOOTHINGS",)),
-    ("tracking.resampling", ("resample", "resample_where", "counts_to_indices", "RESAMPLING_METHODS",)),
-    ("tracking.particle", ("sir_particle_filter", "SirResult", "rss_log_likelihood", "kernel_map_estimate",)),
+    ("models.rss", ("RssModel",)),
+    ("tracking.bayes", ("BayesFilterResult", "grid_bayes_filter", "grid_transition_matrix",)),
+    ("tracking.resampling", ("resample", "systematic_resample", "resample_where", "effective_sample_size",
+        "counts_to_indices", "RESAMPLING_METHODS", "RESAMPLING_CDFS",)),
+    ("tracking.particle", ("particle_filter", "kernel_map_estimate", "WEIGHT_SMOOTHINGS",)),
     # reference tags
     ("static.reference_tags", ("OnlineCalibration", "calibrate_from_reference_tags", "pooled_sigma_db",
         "smooth_rssi", "OZKAYA_REF_POWER_BOUNDS_DBM", "OZKAYA_PATH_LOSS_EXP_BOUNDS",)),

@@ -33,13 +33,13 @@ def test_heard_mask_equals_leaving_the_anchors_out():
 
 def test_particle_filter_gaussian_start():
     rng = np.random.default_rng(1)
-    model = lb.RssMeasurementModel(np.array([[0.0, 0.0], [20.0, 0.0], [0.0, 20.0]]), -40.0, 2.0, 4.0)
+    model = lb.RssModel(np.array([[0.0, 0.0], [20.0, 0.0], [0.0, 20.0]]), lb.PathLossModel(-40.0, 2.0, 4.0, min_distance_m=0.1))
     runs = 4000
     nothing_heard = np.full((runs, 1, 3), np.nan)                  # flat likelihood: the estimate is the particle
     start = np.array([10.0, 8.0])
     res = lb.particle_filter(nothing_heard, model, rng, n_particles=1, region_m=((0, 0), (20, 20)), spread_m=0.5,
                              initial_position_m=np.tile(start, (runs, 1)), initial_sd_m=1.5)
-    draws = res.mmse_m[:, 0]
+    draws = res.mean_m[:, 0]
     se = 1.5 / np.sqrt(runs)
     assert np.all(np.abs(draws.mean(axis=0) - start) < 4 * se)
     assert np.all(np.abs(draws.std(axis=0, ddof=1) - 1.5) < 4 * 1.5 / np.sqrt(2 * runs))
@@ -50,7 +50,8 @@ def test_particle_filter_gaussian_start():
 def test_per_reader_sigma_likelihood_matches_scipy():
     readers = np.array([[0.0, 0.0], [8.0, 0.0], [0.0, 6.0]])
     sigma = np.array([3.0, 5.0, 8.0])
-    model = lb.RssMeasurementModel(readers, np.array([-40.0, -45.0, -50.0]), np.array([2.0, 2.5, 3.0]), sigma)
+    model = lb.RssModel(readers, lb.PathLossModel(np.array([-40.0, -45.0, -50.0]), np.array([2.0, 2.5, 3.0]), sigma,
+                                                  min_distance_m=0.1))
     rss = np.array([[-60.0, np.nan, -70.0]])
     cells = np.array([[1.0, 2.0], [4.0, 4.0], [6.0, 1.0]])
     ll = model.log_likelihood(rss, cells)[0]
@@ -58,8 +59,9 @@ def test_per_reader_sigma_likelihood_matches_scipy():
     heard = ~np.isnan(rss[0])
     want = norm.logpdf(rss[0, heard], mean[:, heard], sigma[heard]).sum(axis=-1)
     np.testing.assert_allclose(ll - ll[0], want - want[0], rtol=1e-12)
-    with pytest.raises(ValueError, match="one per reader"):
-        lb.RssMeasurementModel(readers, -40.0, 2.0, np.array([3.0, 4.0]))
+    np.testing.assert_allclose(ll, want, rtol=1e-12)
+    with pytest.raises(ValueError, match="one per anchor"):
+        lb.RssModel(readers, lb.PathLossModel(-40.0, 2.0, np.array([3.0, 4.0])))
 
 
 @pytest.mark.parametrize("key", [k for k in bm.STATIC_SCENARIOS if not k.startswith("kolakowski")])

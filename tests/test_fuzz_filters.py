@@ -250,7 +250,7 @@ def particle_problems(draw):
     runs = draw(st.sampled_from([0, 1, 3]))
     T = draw(st.sampled_from([0, 1, 4]))
     rng = np.random.default_rng(draw(st.integers(0, 50)))
-    model = lb.RssMeasurementModel(ANCHORS, -40.0, 2.0, 3.0)
+    model = lb.RssModel(ANCHORS, lb.PathLossModel(-40.0, 2.0, 3.0, min_distance_m=0.1))
     pos = 5 + np.cumsum(0.3 * rng.standard_normal((runs, T, 2)), axis=1)
     rss = model.mean_rss_dbm(pos.reshape(-1, 2))[0].reshape(runs, T, 4) + 3 * rng.standard_normal((runs, T, 4))
     corrupt = None
@@ -301,13 +301,13 @@ def test_fuzz_bayes_filters(problem, which):
         else:
             assert np.isinf(values[corrupt]), "an error on finite readings"
         return
-    _check_flags(res, values, corrupt, res.mmse_m)
+    _check_flags(res, values, corrupt, res.mean_m)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         ref = call(np.asarray(given_rss, dtype=float).copy())
     told = [w for w in caught if issubclass(w.category, RuntimeWarning) and "collapsed in" in str(w.message)]
     assert len(told) == (1 if res.n_degenerate else 0), "a collapse must be told once (and only a collapse)"
-    np.testing.assert_array_equal(res.mmse_m, ref.mmse_m)
+    np.testing.assert_array_equal(res.mean_m, ref.mean_m)
 
 
 @settings(max_examples=40, **SETTINGS)
@@ -324,8 +324,9 @@ def test_fuzz_sir_particle_filter(runs, steps, bad, method):
             out[0, :3] = bad
         return out
 
-    status, res = outcome(lambda: lb.sir_particle_filter(start, loglik, steps, np.random.default_rng(1),
-                                                         process_sd_m=0.1, resampling=method), ("log_likelihood",))
+    status, res = outcome(lambda: lb.particle_filter(None, loglik, np.random.default_rng(1), n_steps=steps,
+                                                     initial_particles_m=start, spread_m=0.1, resampling=method),
+                          ("log_likelihood",))
     collapse = bad is not None and runs and (np.isnan(bad) or bad == np.inf)
     if collapse and runs == 1:                   # every run collapsed: an error naming the likelihood and step
         assert status == "error" and re.search(rf"log_likelihood collapsed in every run.*step {steps - 1} \(run 0\)",
@@ -334,7 +335,7 @@ def test_fuzz_sir_particle_filter(runs, steps, bad, method):
     assert status == "ok"
     assert res.degenerate.shape == (runs,)
     assert res.degenerate.tolist() == ([True] + [False] * (runs - 1) if collapse else [False] * runs)
-    finite = np.isfinite(res.mean).all(axis=(-2, -1))
+    finite = np.isfinite(res.mean_m).all(axis=(-2, -1))
     np.testing.assert_array_equal(finite, ~res.degenerate)
 
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
-from locbook import (PathLossModel, constant_velocity, RssMeasurement, RssMeasurementModel,
+from locbook import (PathLossModel, constant_velocity, RssMeasurement, RssModel,
                      extended_kalman_filter, grid_ml_position, lateration_box_ls, lateration_ls, lateration_wls,
                      rss_ml_position, rss_position_information)
 
@@ -82,12 +82,12 @@ def test_grid_ml_with_height_equals_the_3d_grid_at_that_height():
 
 
 def test_bayes_model_with_height_uses_3d_distances():
-    model = RssMeasurementModel(ANCHORS, -55.0, 2.2, 3.0, tag_height_m=H)
+    model = RssModel(ANCHORS, PathLossModel(-55.0, 2.2, 3.0, min_distance_m=0.1), tag_height_m=H)
     cells = np.array([[1.0, 1.0], [4.0, 3.0]])
     expected = -55.0 - 22.0 * np.log10(ranges_3d(cells))
     np.testing.assert_allclose(model.mean_rss_dbm(cells)[0], expected, rtol=1e-13)
-    with pytest.raises(ValueError, match="readers_m"):
-        RssMeasurementModel(ANCHORS[:, :2], -55.0, 2.2, 3.0, tag_height_m=H)
+    with pytest.raises(ValueError, match="anchors_m"):
+        RssModel(ANCHORS[:, :2], PathLossModel(-55.0, 2.2, 3.0), tag_height_m=H)
 
 
 def test_crlb_height_offsets_per_anchor():

@@ -113,7 +113,7 @@ def test_singular_three_component_update_names_the_offending_run():
 
 
 _READERS = np.array([[0.0, 0.0], [8.0, 0.0], [0.0, 6.0]])
-_BAYES = lb.RssMeasurementModel(_READERS, -52.0, 2.3, sigma_db=3.0)
+_BAYES = lb.RssModel(_READERS, lb.PathLossModel(-52.0, 2.3, sigma_db=3.0, min_distance_m=0.1))
 
 
 @pytest.mark.parametrize("call, message", [
@@ -142,7 +142,7 @@ _BAYES = lb.RssMeasurementModel(_READERS, -52.0, 2.3, sigma_db=3.0)
     (lambda: _BAYES.log_likelihood(np.zeros((2, 4)), np.zeros((5, 2))), r"rss_dbm must have shape \(\.\.\., 3\)"),
     (lambda: _BAYES.log_likelihood(np.zeros((2, 3)), np.zeros((1, 5, 2))), "no silent broadcasting"),
     (lambda: _BAYES.log_likelihood(np.zeros((2, 3)), np.full((5, 2), np.nan)), "positions_m must be finite"),
-    (lambda: lb.RssMeasurementModel(_READERS, ref_power_dbm=np.zeros((2, 4, 3)), path_loss_exp=2.3, sigma_db=5.0).log_likelihood(
+    (lambda: lb.RssModel(_READERS, lb.PathLossModel(ref_power_dbm=np.zeros((2, 4, 3)), path_loss_exp=2.3, sigma_db=5.0)).log_likelihood(
         np.zeros((2, 3)), np.zeros((5, 2)), step=-1), r"step must be an integer in \[0, 4\)"),
     (lambda: lb.systematic_resample([0.5, -0.1, 0.6], 0.3), "weights must be non-negative"),
     (lambda: lb.systematic_resample([[0.5, 0.5]], [0.3, 0.2]), r"uniforms must be draws in \[0, 1\)"),
@@ -167,12 +167,12 @@ def test_bad_input_names_the_argument_more(call, message):
     (lambda: lb.constant_velocity(float("nan"), 1.0), "dt_s must be finite"),
     (lambda: lb.constant_velocity(1.0, float("nan")), "process noise q must be finite"),
     (lambda: lb.grid_transition_matrix(np.zeros((3, 2)), float("nan")), "spread_m must be finite"),
-    (lambda: lb.RssMeasurementModel(np.zeros((3, 2)), ref_power_dbm=np.nan, path_loss_exp=2.3, sigma_db=5.0), "ref_power_dbm must be finite"),
-    (lambda: lb.RssMeasurementModel(np.zeros((3, 2)), -52.0, path_loss_exp=[2.0, np.nan, 2.0], sigma_db=5.0), "path_loss_exp must be finite"),
-    (lambda: lb.RssMeasurementModel(np.zeros((3, 2)), -52.0, 2.3, sigma_db=-1.0), "sigma_db must be a non-negative"),
-    (lambda: lb.RssMeasurementModel(np.ones((3, 2)), -52.0, 2.3, sigma_db=0.0).log_likelihood(np.zeros((1, 3)), np.zeros((2, 2))),
+    (lambda: lb.RssModel(np.zeros((3, 2)), lb.PathLossModel(ref_power_dbm=np.nan, path_loss_exp=2.3, sigma_db=5.0)), "ref_power_dbm must be finite"),
+    (lambda: lb.RssModel(np.zeros((3, 2)), lb.PathLossModel(-52.0, path_loss_exp=[2.0, np.nan, 2.0], sigma_db=5.0)), "path_loss_exp must be finite"),
+    (lambda: lb.RssModel(np.zeros((3, 2)), lb.PathLossModel(-52.0, 2.3, sigma_db=-1.0)), "sigma_db must be (a )?non-negative"),
+    (lambda: lb.RssModel(np.ones((3, 2)), lb.PathLossModel(-52.0, 2.3, sigma_db=0.0)).log_likelihood(np.zeros((1, 3)), np.zeros((2, 2))),
      "the likelihood needs sigma_db > 0"),
-    (lambda: lb.grid_bayes_filter(np.zeros((2, 3, 4)), np.zeros((5, 2)), lb.RssMeasurementModel(np.zeros((3, 2)), -52.0, 2.3, 5.0)),
+    (lambda: lb.grid_bayes_filter(np.zeros((2, 3, 4)), np.zeros((5, 2)), lb.RssModel(np.zeros((3, 2)), lb.PathLossModel(-52.0, 2.3, 5.0))),
      r"rss_dbm must have shape \(runs, steps, 3\)"),
     (lambda: lb.simulate_states(MODEL.F, np.diag([1.0, 1.0, -1.0, 1.0]), X0, 3, np.random.default_rng(0)),
      "Q must be positive semi-definite"),
@@ -185,11 +185,11 @@ def test_bad_input_names_the_argument(call, message):
 
 def test_likelihood_leaves_out_a_silent_reader_only():
     readers = np.array([[0.0, 0.0], [8.0, 0.0], [0.0, 6.0], [8.0, 6.0]])
-    model = lb.RssMeasurementModel(readers, ref_power_dbm=[-50.0, -52.0, -51.0, -49.0], path_loss_exp=2.2, sigma_db=4.0)
+    model = lb.RssModel(readers, lb.PathLossModel(ref_power_dbm=[-50.0, -52.0, -51.0, -49.0], path_loss_exp=2.2, sigma_db=4.0))
     cells = np.array([[1.0, 1.0], [4.0, 3.0], [7.0, 5.0]])
     rss = np.array([[-60.0, np.nan, -63.0, -65.0]])
-    reduced = lb.RssMeasurementModel(readers[[0, 2, 3]], ref_power_dbm=[-50.0, -51.0, -49.0], path_loss_exp=2.2,
-                                     sigma_db=4.0)
+    reduced = lb.RssModel(readers[[0, 2, 3]], lb.PathLossModel(ref_power_dbm=[-50.0, -51.0, -49.0], path_loss_exp=2.2,
+                                                               sigma_db=4.0))
     np.testing.assert_allclose(model.log_likelihood(rss, cells), reduced.log_likelihood(rss[:, [0, 2, 3]], cells),
                                rtol=1e-12)
     flat = model.log_likelihood(np.full((1, 4), np.nan), cells)
@@ -199,7 +199,7 @@ def test_likelihood_leaves_out_a_silent_reader_only():
 def test_uniform_proposal_starts_from_equal_weights():
     """spread_m = inf draws new particles: their weights must be this step's likelihood alone."""
     readers = np.array([[0.0, 0.0], [8.0, 0.0], [0.0, 6.0]])
-    model = lb.RssMeasurementModel(readers, -52.0, 2.3, sigma_db=3.0)
+    model = lb.RssModel(readers, lb.PathLossModel(-52.0, 2.3, sigma_db=3.0, min_distance_m=0.1))
     rng = np.random.default_rng(5)
     rss = model.mean_rss_dbm(np.array([[2.0, 3.0]]))[0, 0] + rng.normal(scale=3.0, size=(2, 4, 3))
     res = lb.particle_filter(rss, model, np.random.default_rng(1), n_particles=200, region_m=([0, 0], [8, 6]),

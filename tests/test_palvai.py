@@ -48,8 +48,9 @@ def test_particle_filter_schedules_run_and_concentrate(schedule):
     loc = pv.draw_locations(3, 20, 2, rng)
     z = pv.measure(setup, loc, rng)
     res = pv.pf_run(setup, loc, z, rng, n_particles=3000, n_iterations=20, schedule=schedule, true_locations_m=loc)
-    assert res.mean.shape == (3, 20, 2)
-    assert np.all(pv.errors_m(res.mean[:, -1], setup.target) < 8.0)
-    assert np.all(res.variance[:, -1].sum(-1) < res.variance[:, 0].sum(-1))
+    assert res.mean_m.shape == (3, 20, 2)
+    assert np.all(pv.errors_m(res.mean_m[:, -1], setup.target) < 8.0)
+    variance = np.trace(res.covariance_m2, axis1=-2, axis2=-1)
+    assert np.all(variance[:, -1] < variance[:, 0])
     with pytest.raises(ValueError, match="n_iterations <= 20"):
         pv.pf_run(setup, loc, z, rng, n_particles=10, n_iterations=21, schedule="sequential")

@@ -1,4 +1,4 @@
-"""The general SIR particle filter against the Kalman posterior of a linear-Gaussian problem, its RSS likelihood
+"""The particle filter against the Kalman posterior of a linear-Gaussian problem, the RSS model's likelihood
 against a direct computation, the kernel MAP and the N_eff trigger."""
 import re
 import warnings
@@ -22,26 +22,29 @@ def test_sir_posterior_of_a_linear_gaussian_problem_equals_the_kalman_posterior(
     def loglik(x, k):
         return -0.5 * np.sum((z[:, k, None, :] - x) ** 2, axis=-1) / r
 
-    res = lb.sir_particle_filter(particles, loglik, K, rng, resampling=method)
+    res = lb.particle_filter(None, loglik, rng, n_steps=K, initial_particles_m=particles, spread_m=0.0,
+                             resampling=method)
     # conjugate posterior after all K steps (static state, z_k = x + v)
     info = np.linalg.inv(P0) + K / r * np.eye(2)
     post_P = np.linalg.inv(info)
     post_m = (post_P @ (np.linalg.solve(P0, m0)[:, None] + z.sum(axis=1).T / r)).T
     tol = 5 * np.sqrt(np.diag(post_P) / (Ns / 10))           # resampling leaves ~Ns/10 distinct ancestors
-    assert np.all(np.abs(res.mean[:, -1] - post_m) < tol)
-    np.testing.assert_allclose(res.variance[:, -1].mean(axis=0), np.diag(post_P), rtol=0.1)
+    assert np.all(np.abs(res.mean_m[:, -1] - post_m) < tol)
+    np.testing.assert_allclose(np.diagonal(res.covariance_m2[:, -1], axis1=-2, axis2=-1).mean(axis=0), np.diag(post_P),
+                               rtol=0.1)
+    np.testing.assert_allclose(res.covariance_m2[:, -1].mean(axis=0)[0, 1], post_P[0, 1], atol=0.1 * post_P[0, 0])
     assert res.resampled.all()
 
 
 @pytest.mark.parametrize("ref_distance_m", [1.0, 2.0])
-def test_rss_log_likelihood_leaves_out_missing_readings(ref_distance_m):
+def test_rss_model_likelihood_with_per_run_anchors_leaves_out_missing_readings(ref_distance_m):
     rng = np.random.default_rng(1)
-    ch = lb.PathLossModel(-20.0, 4.0, 6.0, ref_distance_m=ref_distance_m)
+    ch = lb.PathLossModel(-20.0, 4.0, 6.0, ref_distance_m=ref_distance_m, min_distance_m=1e-3)
     x = rng.uniform(0, 50, (2, 7, 3))
     s = rng.uniform(0, 50, (2, 4, 3))
     z = rng.uniform(-90, -50, (2, 4))
     z[1, 2] = np.nan
-    ours = lb.rss_log_likelihood(x, s, z, ch)
+    ours = lb.RssModel(s, ch).log_likelihood(z, x, constant=False)
     for r in range(2):
         for i in range(7):
             d = np.linalg.norm(x[r, i] - s[r], axis=-1)
@@ -56,16 +59,17 @@ def test_kernel_map_finds_the_mode_and_neff_triggers_resampling():
     w = np.full((1, 4000), 1 / 4000)
     mode = lb.kernel_map_estimate(x, w)
     assert np.linalg.norm(mode[0] - 3.0) < 0.6
-    res = lb.sir_particle_filter(rng.normal(0, 1, (3, 500, 1)), lambda p, k: -0.5 * p[..., 0] ** 2 * (k + 1), 4, rng,
-                                 resample_threshold=250.0)
+    res = lb.particle_filter(None, lambda p, k: -0.5 * p[..., 0] ** 2 * (k + 1), rng, n_steps=4,
+                             initial_particles_m=rng.normal(0, 1, (3, 500, 1)), spread_m=0.0, resample_threshold=0.5)
     np.testing.assert_array_equal(res.resampled, res.n_eff < 250.0)
+    assert res.resampled.any() and not res.resampled.all()
 
 
 # ---------------------------------------------------------------------------------------------------------------
 # Issue 26, item 9: a run whose likelihoods all collapse is isolated (flagged, NaN from that step), not fatal
 # ---------------------------------------------------------------------------------------------------------------
 READERS = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]])
-BAYES_MODEL = lb.RssMeasurementModel(READERS, -40.0, 2.0, 3.0)
+BAYES_MODEL = lb.RssModel(READERS, lb.PathLossModel(-40.0, 2.0, 3.0, min_distance_m=0.1))
 
 
 def _rss_runs(runs=4, steps=8, seed=3):
@@ -91,10 +95,10 @@ def test_particle_filter_isolates_a_run_whose_likelihood_collapses(threshold):
     assert res.degenerate_step.tolist() == [-1, -1, 5, -1]
     assert ref.n_degenerate == 0 and res.n_degenerate == 1
     others = [0, 1, 3]
-    for name in ("mmse_m", "map_m", "n_eff", "resampled", "particles_m", "weights"):
+    for name in ("mean_m", "covariance_m2", "map_m", "n_eff", "resampled", "particles_m", "weights"):
         np.testing.assert_array_equal(getattr(res, name)[others], getattr(ref, name)[others], err_msg=name)
-    np.testing.assert_array_equal(res.mmse_m[2, :5], ref.mmse_m[2, :5])
-    assert np.isnan(res.mmse_m[2, 5:]).all() and np.isnan(res.map_m[2, 5:]).all() and np.isnan(res.n_eff[2, 5:]).all()
+    np.testing.assert_array_equal(res.mean_m[2, :5], ref.mean_m[2, :5])
+    assert np.isnan(res.mean_m[2, 5:]).all() and np.isnan(res.covariance_m2[2, 5:]).all() and np.isnan(res.map_m[2, 5:]).all() and np.isnan(res.n_eff[2, 5:]).all()
     assert np.isnan(res.weights[2]).all() and np.isnan(res.particles_m[2]).all()
 
 
@@ -117,15 +121,15 @@ def test_sir_particle_filter_isolates_a_run_whose_likelihood_collapses(method, c
                 out[1] = collapse
         return out
 
-    ref = lb.sir_particle_filter(start, loglik, 6, np.random.default_rng(1), process_sd_m=0.1, resampling=method)
+    kw = dict(n_steps=6, initial_particles_m=start, spread_m=0.1, resampling=method)
+    ref = lb.particle_filter(None, loglik, np.random.default_rng(1), **kw)
     with pytest.warns(RuntimeWarning, match=r"1 of 3 runs \(first: run 1, step 3"):
-        res = lb.sir_particle_filter(start, lambda x, k: loglik(x, k, True), 6, np.random.default_rng(1),
-                                     process_sd_m=0.1, resampling=method)
+        res = lb.particle_filter(None, lambda x, k: loglik(x, k, True), np.random.default_rng(1), **kw)
     assert res.degenerate.tolist() == [False, True, False] and res.degenerate_step.tolist() == [-1, 3, -1]
-    for name in ("mean", "variance", "max_weight", "n_eff", "resampled", "particles", "weights"):
+    for name in ("mean_m", "covariance_m2", "map_m", "n_eff", "resampled", "particles_m", "weights"):
         np.testing.assert_array_equal(getattr(res, name)[[0, 2]], getattr(ref, name)[[0, 2]], err_msg=name)
-    np.testing.assert_array_equal(res.mean[1, :3], ref.mean[1, :3])
-    assert np.isnan(res.mean[1, 3:]).all() and np.isnan(res.variance[1, 3:]).all()
+    np.testing.assert_array_equal(res.mean_m[1, :3], ref.mean_m[1, :3])
+    assert np.isnan(res.mean_m[1, 3:]).all() and np.isnan(res.covariance_m2[1, 3:]).all()
     assert np.isnan(res.weights[1]).all() and not res.resampled[1, 3:].any()
 
 
@@ -133,9 +137,10 @@ def test_sir_particles_with_minus_inf_likelihood_are_only_dropped():
     """-inf for some particles is a legitimate zero weight (an impossible state), not a collapse."""
     rng = np.random.default_rng(2)
     start = rng.normal(0, 1, (2, 400, 1))
-    res = lb.sir_particle_filter(start, lambda x, k: np.where(x[..., 0] > 0, 0.0, -np.inf), 1, rng)
+    res = lb.particle_filter(None, lambda x, k: np.where(x[..., 0] > 0, 0.0, -np.inf), rng, n_steps=1,
+                             initial_particles_m=start)
     assert not res.degenerate.any()
-    assert np.all(res.mean[:, 0, 0] > 0)
+    assert np.all(res.mean_m[:, 0, 0] > 0)
 
 
 def test_grid_bayes_filter_isolates_a_run_whose_likelihood_collapses():
@@ -149,16 +154,17 @@ def test_grid_bayes_filter_isolates_a_run_whose_likelihood_collapses():
         res = lb.grid_bayes_filter(bad, cells, BAYES_MODEL, 1.0)
     assert res.degenerate.tolist() == [False, True, False] and res.degenerate_step.tolist() == [-1, 2, -1]
     assert ref.n_degenerate == 0 and res.n_degenerate == 1
-    for name in ("mmse_m", "map_m", "belief"):
+    for name in ("mean_m", "covariance_m2", "map_m", "n_eff", "weights"):
         np.testing.assert_array_equal(getattr(res, name)[[0, 2]], getattr(ref, name)[[0, 2]])
-    np.testing.assert_array_equal(res.mmse_m[1, :2], ref.mmse_m[1, :2])
-    assert np.isnan(res.mmse_m[1, 2:]).all() and np.isnan(res.belief[1]).all()
+    np.testing.assert_array_equal(res.mean_m[1, :2], ref.mean_m[1, :2])
+    assert np.isnan(res.mean_m[1, 2:]).all() and np.isnan(res.weights[1]).all()
 
 
 def test_sir_without_particles_is_a_clear_error():
     """Used to end in numpy's "zero-size array to reduction operation maximum"."""
     with pytest.raises(ValueError, match=r"initial_particles_m must hold at least one particle.*\(2, 0, 2\)"):
-        lb.sir_particle_filter(np.zeros((2, 0, 2)), lambda x, k: np.zeros(x.shape[:2]), 2, np.random.default_rng(0))
+        lb.particle_filter(None, lambda x, k: np.zeros(x.shape[:2]), np.random.default_rng(0), n_steps=2,
+                           initial_particles_m=np.zeros((2, 0, 2)))
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -181,7 +187,8 @@ def test_every_run_collapsing_is_an_error_naming_the_likelihood_and_the_first_st
     names the likelihood (or rss_dbm), the first step and run, before anything is returned."""
     start = np.random.default_rng(0).normal(0, 1, (3, 50, 2))
     with pytest.raises(ValueError, match=r"log_likelihood.*every run \(3 of 3\).*step 0 \(run 0\)"):
-        lb.sir_particle_filter(start, lambda x, k: np.full(x.shape[:2], -np.inf), 4, np.random.default_rng(1))
+        lb.particle_filter(None, lambda x, k: np.full(x.shape[:2], -np.inf), np.random.default_rng(1), n_steps=4,
+                           initial_particles_m=start)
 
     def staggered(x, k):                # run 1 collapses at step 1, the others at step 2
         out = -0.5 * np.sum(x ** 2, axis=-1)
@@ -189,7 +196,7 @@ def test_every_run_collapsing_is_an_error_naming_the_likelihood_and_the_first_st
         out[:] = np.nan if k >= 2 else out
         return out
     with pytest.raises(ValueError, match=r"log_likelihood.*every run \(3 of 3\).*step 1 \(run 1\)"):
-        lb.sir_particle_filter(start, staggered, 4, np.random.default_rng(1))
+        lb.particle_filter(None, staggered, np.random.default_rng(1), n_steps=4, initial_particles_m=start)
     rss = _rss_runs()
     rss[:, 3, 1] = 1e300                                                           # every run: a units bug
     for name, call in _bayes_filters():
@@ -217,12 +224,13 @@ def test_some_runs_collapsing_give_one_warning_with_the_count_and_the_first_run_
             out[2] = np.nan
         return out
     with pytest.warns(RuntimeWarning) as record:
-        res = lb.sir_particle_filter(start, loglik, 4, np.random.default_rng(1))
+        res = lb.particle_filter(None, loglik, np.random.default_rng(1), n_steps=4, initial_particles_m=start)
     assert len(record) == 1 and re.search(r"log_likelihood.*1 of 3 runs.*run 2, step 2", str(record[0].message))
     with warnings.catch_warnings():
         warnings.simplefilter("error")                                            # no collapse: no warning
-        lb.sir_particle_filter(start, lambda x, k: -0.5 * np.sum(x ** 2, axis=-1), 4, np.random.default_rng(1))
+        lb.particle_filter(None, lambda x, k: -0.5 * np.sum(x ** 2, axis=-1), np.random.default_rng(1), n_steps=4,
+                           initial_particles_m=start)
         for name, call in _bayes_filters():
             call(_rss_runs())
-        assert lb.sir_particle_filter(np.zeros((0, 5, 2)), lambda x, k: np.zeros(x.shape[:2]), 2,
-                                      np.random.default_rng(0)).n_degenerate == 0      # no runs: nothing collapsed
+        assert lb.particle_filter(None, lambda x, k: np.zeros(x.shape[:2]), np.random.default_rng(0), n_steps=2,
+                                  initial_particles_m=np.zeros((0, 5, 2))).n_degenerate == 0   # no runs: nothing collapsed

@@ -3,7 +3,7 @@ equals the dense C x C matrix, on small problems where the dense forms fit."""
 import numpy as np
 import pytest
 
-from locbook import RssMeasurementModel, grid_bayes_filter, grid_transition_matrix, knn_position
+from locbook import PathLossModel, RssModel, grid_bayes_filter, grid_transition_matrix, knn_position
 
 
 @pytest.mark.parametrize("weighting", ["inverse_square", "uniform", "literal_004"])
@@ -48,14 +48,14 @@ def _masked_grid(spacing):
 def test_separable_grid_transition_equals_dense(spread_m, velocity_m):
     rng = np.random.default_rng(3)
     cells = _masked_grid(0.25)
-    model = RssMeasurementModel(np.array([[0, 0], [5, 0], [0, 4], [5, 4.0]]), -40.0, 2.5, 3.0)
+    model = RssModel(np.array([[0, 0], [5, 0], [0, 4], [5, 4.0]]), PathLossModel(-40.0, 2.5, 3.0, min_distance_m=0.1))
     rss = rng.normal(-60, 5, (3, 15, 4))
     rss[0, 3, 1] = np.nan
     rss[2, 5] = np.nan                                      # a step where nothing was heard
     dense = grid_bayes_filter(rss, cells, model, spread_m, velocity_m=velocity_m, transition="dense")
     separable = grid_bayes_filter(rss, cells, model, spread_m, velocity_m=velocity_m, transition="separable")
-    np.testing.assert_allclose(separable.belief, dense.belief, rtol=1e-9, atol=1e-14)
-    np.testing.assert_allclose(separable.mmse_m, dense.mmse_m, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(separable.weights, dense.weights, rtol=1e-9, atol=1e-14)
+    np.testing.assert_allclose(separable.mean_m, dense.mean_m, rtol=0, atol=1e-12)
     np.testing.assert_array_equal(separable.map_m, dense.map_m)
 
 
@@ -82,6 +82,6 @@ def test_auto_transition_never_builds_the_dense_matrix_on_a_grid(monkeypatch):
         raise AssertionError("the dense transition was built")
 
     monkeypatch.setattr(bayes, "grid_transition_matrix", refuse)
-    model = RssMeasurementModel(np.array([[0, 0], [5, 0], [0, 4.0]]), -40.0, 2.5, 3.0)
+    model = RssModel(np.array([[0, 0], [5, 0], [0, 4.0]]), PathLossModel(-40.0, 2.5, 3.0, min_distance_m=0.1))
     res = grid_bayes_filter(np.full((1, 4, 3), -60.0), cells, model, 0.5)
-    assert np.isfinite(res.mmse_m).all()
+    assert np.isfinite(res.mean_m).all()

@@ -42,7 +42,9 @@ from ..static.calibration import fix_error_covariance
 from ..static.fingerprint import knn_position, model_fingerprints
 from ..static.localization import (grid_ml_position, lateration_box_ls, lateration_ls, lateration_wls,
                                    rss_ml_position)
-from ..tracking.bayes import RssMeasurementModel, grid_bayes_filter, particle_filter
+from ..models.rss import RssModel
+from ..tracking.bayes import grid_bayes_filter
+from ..tracking.particle import particle_filter
 from ..tracking.kalman import LinearMeasurement, RssMeasurement, extended_kalman_filter
 from ..tracking.unscented import unscented_kalman_filter
 from . import DivergenceFlags, dogan, george, gudipati, kolakowski, ozkaya, palvai
@@ -423,11 +425,12 @@ def _rss_ml(sc, rss, opts):
     return rss_ml_position(sc.anchors_m, _flat(rss), sc.channel, start, tag_height_m=sc.tag_height_m).position_m
 
 
-def _bayes_model(sc) -> RssMeasurementModel:
+def _bayes_model(sc) -> RssModel:
     m = sc.channel
-    return RssMeasurementModel(sc.anchors_m, np.asarray(m.ref_power_dbm, float), np.asarray(m.path_loss_exp, float),
-                               np.asarray(m.sigma_db, float), tag_height_m=sc.tag_height_m,
-                               min_distance_m=float(m.min_distance_m) if m.min_distance_m > 0 else 0.1)
+    return RssModel(sc.anchors_m, PathLossModel(np.asarray(m.ref_power_dbm, float), np.asarray(m.path_loss_exp, float),
+                                                np.asarray(m.sigma_db, float), m.ref_distance_m, m.wall_attenuation_db,
+                                                float(m.min_distance_m) if m.min_distance_m > 0 else 0.1),
+                    tag_height_m=sc.tag_height_m)
 
 
 #: problems per block of the grid posterior: beliefs of about 32 MiB at a time
@@ -439,7 +442,7 @@ def _grid_mmse(sc, rss, opts):
     flat = _flat(rss)
     cells, model = sc.grid_m(), _bayes_model(sc)
     block = max(1, GRID_BLOCK_VALUES // cells.shape[0])
-    return np.concatenate([grid_bayes_filter(flat[i:i + block, None, :], cells, model, 1.0).mmse_m[:, 0]
+    return np.concatenate([grid_bayes_filter(flat[i:i + block, None, :], cells, model, 1.0).mean_m[:, 0]
                            for i in range(0, flat.shape[0], block)])
 
 
@@ -595,11 +598,11 @@ def run_trackers(sc: TrackingScenario, rss_dbm, x0, ts: TrackerSettings, rng: np
     if "particle" in chosen:
         out["particle"] = particle_filter(rss, model, rng_pf, n_particles=ts.n_particles, region_m=sc.box_m,
                                           spread_m=sc.spread_m, initial_position_m=x0[:, :2],
-                                          initial_sd_m=ts.initial_position_sd_m, resample_threshold=0.5).mmse_m
+                                          initial_sd_m=ts.initial_position_sd_m, resample_threshold=0.5).mean_m
     if "grid_bayes" in chosen:
         cells = grid_in_outline(sc.outline_m, sc.grid_spacing_m)
         out["grid_bayes"] = grid_bayes_filter(rss, cells, model, sc.spread_m,
-                                              initial_belief=_gaussian_belief(cells, x0, ts.P0[:2, :2])).mmse_m
+                                              initial_belief=_gaussian_belief(cells, x0, ts.P0[:2, :2])).mean_m
     out = {k: out[k] for k in chosen}
     return (out, flags) if with_divergence else out
 

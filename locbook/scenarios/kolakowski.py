@@ -32,7 +32,9 @@ from ..static.calibration import PathLossFit, calibrate_path_loss, fix_error_cov
 from ..static.fingerprint import knn_position
 from ..static.localization import (grid_ml_position, lateration_box_ls, lateration_ls, lateration_wls,
                                    rss_ml_position)
-from ..tracking.bayes import RssMeasurementModel, grid_bayes_filter, particle_filter
+from ..models.rss import RssModel
+from ..tracking.bayes import grid_bayes_filter
+from ..tracking.particle import particle_filter
 from ..tracking.kalman import LinearMeasurement, RssMeasurement, extended_kalman_filter
 from ..tracking.unscented import unscented_kalman_filter
 from . import DivergenceFlags
@@ -206,19 +208,22 @@ def tracks(data: MeasuredData, model: PathLossModel, recording: str, rng: np.ran
     bayes_model = bayes_measurement_model(data, model)
     runs = np.broadcast_to(rss, (particle_runs,) + rss.shape)
     out["particle"] = particle_filter(runs, bayes_model, rng, n_particles=n_particles, region_m=(lower, upper),
-                                      spread_m=spread_m, resample_threshold=0.5).mmse_m
-    out["grid_bayes"] = grid_bayes_filter(rss[None], grid, bayes_model, spread_m).mmse_m[0]
+                                      spread_m=spread_m, resample_threshold=0.5).mean_m
+    out["grid_bayes"] = grid_bayes_filter(rss[None], grid, bayes_model, spread_m).mean_m[0]
     out["rss_ml"] = ml
     if with_divergence:
         return reg, ticks, out, {name: DivergenceFlags.of(res) for name, res in kalman.items()}
     return reg, ticks, out
 
 
-def bayes_measurement_model(data: MeasuredData, model: PathLossModel) -> RssMeasurementModel:
-    """The fitted channel as the likelihood of the particle and grid Bayes filters (per-anchor sigma, 3-D distances)."""
-    return RssMeasurementModel(data.anchors_m, np.asarray(model.ref_power_dbm, float),
-                               np.asarray(model.path_loss_exp, float), np.asarray(model.sigma_db, float),
-                               tag_height_m=TAG_HEIGHT_M)
+def bayes_measurement_model(data: MeasuredData, model: PathLossModel) -> RssModel:
+    """The fitted channel as the likelihood of the particle and grid Bayes filters (per-anchor sigma, 3-D distances,
+    the near-field clamp of 0.1 m they have always used)."""
+    return RssModel(data.anchors_m, PathLossModel(np.asarray(model.ref_power_dbm, float),
+                                                  np.asarray(model.path_loss_exp, float),
+                                                  np.asarray(model.sigma_db, float), model.ref_distance_m,
+                                                  model.wall_attenuation_db, min_distance_m=0.1),
+                    tag_height_m=TAG_HEIGHT_M)
 
 
 def fix_covariance_from_calibration(data: MeasuredData, model: PathLossModel, *, grid_spacing_m: float = 0.1):

@@ -20,7 +20,9 @@ from functools import lru_cache
 
 import numpy as np
 
-from ..tracking.bayes import RssMeasurementModel, grid_bayes_filter, particle_filter
+from ..models.rss import RssModel
+from ..tracking.bayes import grid_bayes_filter
+from ..tracking.particle import particle_filter
 from ..bounds.crlb import crlb_rms_over_area_m, rss_crlb_m
 from ..static.fingerprint import knn_position, model_fingerprints
 from ..models.channel import PathLossModel
@@ -197,7 +199,7 @@ def simulate_truth_and_rss(case: SimCase, n_runs: int, rng: np.random.Generator)
             truth = np.broadcast_to(start[:, None, :], (n_runs, steps, 2))
         else:
             raise ValueError(f"unknown target protocol {case.target!r}")
-    model = RssMeasurementModel(readers, case.alpha_dbm, case.path_loss_exp, case.sigma0_db)
+    model = RssModel(readers, PathLossModel(case.alpha_dbm, case.path_loss_exp, case.sigma0_db, min_distance_m=0.1))
     mean = model.mean_rss_dbm(truth)                                    # (R, T, m): steps as positions
     noise_shape = (n_runs, 1 if case.target == "fixed" else steps, readers.shape[0])
     rss = mean + case.sigma0_db * rng.standard_normal(noise_shape)
@@ -211,7 +213,7 @@ def run_case(case: SimCase, n_runs: int, seed: int, *, return_all: bool = False)
     truth, rss = simulate_truth_and_rss(case, n_runs, rng)
     room = room_for(case.layout)
     readers = readers_for(case.layout)
-    filter_model = RssMeasurementModel(readers, case.alpha_dbm, case.path_loss_exp, case.sigma_db)
+    filter_model = RssModel(readers, PathLossModel(case.alpha_dbm, case.path_loss_exp, case.sigma_db, min_distance_m=0.1))
     if case.method in ("nn", "grid"):
         cells = cell_centres(room, *CELL_PATTERNS[case.k_cell])
     if case.method == "nn":
@@ -224,14 +226,14 @@ def run_case(case: SimCase, n_runs: int, seed: int, *, return_all: bool = False)
             initial = np.zeros((n_runs, cells.shape[0]))
             initial[np.arange(n_runs), np.argmin(np.sum((cells[None] - truth[:, :1]) ** 2, -1), -1)] = 1.0
         res = grid_bayes_filter(rss, cells, filter_model, case.spread_m, velocity_m=velocity, initial_belief=initial)
-        estimate = res.mmse_m if case.estimator == "mmse" else res.map_m
+        estimate = res.mean_m if case.estimator == "mmse" else res.map_m
     elif case.method == "sir":
         res = particle_filter(
             rss, filter_model, rng, n_particles=case.n_particles, region_m=_region(case.filter_region, room),
             spread_m=case.spread_m, velocity_m=(0.0, case.velocity_m) if case.known_velocity else None,
             initial_position_m=truth[:, 0] if case.known_initial else None,
             resample_threshold=case.resample_threshold, weight_smoothing=case.weight_smoothing)
-        estimate = res.mmse_m if case.estimator == "mmse" else res.map_m
+        estimate = res.mean_m if case.estimator == "mmse" else res.map_m
     else:
         raise ValueError(f"unknown method {case.method!r}")
     errors = position_error_m(estimate, truth)

@@ -31,7 +31,9 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..tracking.bayes import RssMeasurementModel, grid_bayes_filter, particle_filter
+from ..models.rss import RssModel
+from ..tracking.bayes import grid_bayes_filter
+from ..tracking.particle import particle_filter
 from ..bounds.crlb import rss_crlb_m
 from ..models.channel import (PathLossModel, attenuation_bursts_db, correlated_shadowing_db, pairwise_distance_m,
                               quantize_db)
@@ -349,9 +351,9 @@ def _estimate(method: Method, rss, tags, calibration, settings: MethodSettings, 
         fp = model_fingerprints(TESTBED_CELLS_M, readers, PathLossModel(alpha, n, wall_attenuation_db=oz.WAF_DB), walls)
         return knn_position(rss, fp, TESTBED_CELLS_M, min(k, TESTBED_CELLS_M.shape[0]))
     sigma = calibration.sigma_db if method.online_sigma else settings.sigma_db
-    model = RssMeasurementModel(readers, alpha, n, sigma, oz.WAF_DB, walls)
+    model = RssModel(readers, PathLossModel(alpha, n, sigma, wall_attenuation_db=oz.WAF_DB, min_distance_m=0.1), walls)
     if method.estimator == "grid":
-        return grid_bayes_filter(rss, TESTBED_CELLS_M, model, settings.spread_m, velocity_m=velocity_m).mmse_m
+        return grid_bayes_filter(rss, TESTBED_CELLS_M, model, settings.spread_m, velocity_m=velocity_m).mean_m
     if method.estimator != "sir":
         raise ValueError(f"unknown estimator {method.estimator!r}")
     n_runs = rss.shape[0]
@@ -360,13 +362,12 @@ def _estimate(method: Method, rss, tags, calibration, settings: MethodSettings, 
     out = []
     for start, child in zip(starts, seed_sequence.spawn(len(starts))):
         sl = slice(start, start + block)
-        part = lambda v: v[sl] if np.ndim(v) >= 2 else v
-        block_model = replace(model, ref_power_dbm=part(alpha), path_loss_exp=part(n), sigma_db=part(sigma))
+        block_model = model.select_runs(sl)
         res = particle_filter(rss[sl], block_model, np.random.default_rng(child), n_particles=settings.n_particles,
                               region_m=((0.0, 0.0), oz.TESTBED_SIZE_M), spread_m=settings.spread_m,
                               velocity_m=velocity_m, resample_threshold=settings.resample_threshold,
                               weight_smoothing="sqrt")
-        out.append(res.mmse_m)
+        out.append(res.mean_m)
     return np.concatenate(out, axis=0)
 
 

@@ -18,7 +18,8 @@ from ..models.channel import PathLossModel, correct_range_bias
 from ..static.least_squares import lateration_rows, least_squares_position, recursive_least_squares
 from ..tracking.kalman import NonlinearMeasurement, RssMeasurement, extended_kalman_filter
 from . import DivergenceFlags
-from ..tracking.particle import rss_log_likelihood, sir_particle_filter
+from ..models.rss import RssModel
+from ..tracking.particle import particle_filter
 
 __all__ = [
     "DOCUMENT", "PRINTED", "SIGMA1_DB", "ETA", "SIGMA2_M", "SIGMA3_M", "N_LOCATIONS", "AREA_M", "Setup",
@@ -192,20 +193,24 @@ def pf_run(setup: Setup, receivers_m, power_dbm, rng: np.random.Generator, *, n_
     if shadowing == "iid" and true_locations_m is None:
         raise ValueError("fresh shadowing per iteration needs true_locations_m to measure at")
     sigma = setup.sigma_db if likelihood_sigma_db is None else likelihood_sigma_db
-    ch = PathLossModel(setup.ref_power_dbm, setup.path_loss_exp, sigma)
+    ch = PathLossModel(setup.ref_power_dbm, setup.path_loss_exp, sigma, min_distance_m=1.0)
     data_rng = np.random.default_rng(rng.integers(2**63))
     z0 = np.asarray(power_dbm, float)
+    # the receivers differ per run: one model over all of them, or one per location for the one-location schedules
+    models = [RssModel(s, ch)] if schedule == "all" else [RssModel(s[:, j:j + 1], ch) for j in range(N)]
 
     def loglik(particles, k):
         z = measure(setup, true_locations_m, data_rng) if shadowing == "iid" else z0
         if schedule == "all":
-            return rss_log_likelihood(particles, s, z, ch, min_distance_m=1.0)
+            return models[0].log_likelihood(z, particles, constant=False)
         j = k if schedule == "sequential" else k % N
-        return rss_log_likelihood(particles, s[:, j:j + 1], z[:, j:j + 1], ch, min_distance_m=1.0)
+        return models[j].log_likelihood(z[:, j:j + 1], particles, constant=False)
 
     init = rng.uniform(0.0, AREA_M, (R_, n_particles, dim))
-    return sir_particle_filter(init, loglik, n_iterations, rng, process_sd_m=process_sd_m, resampling=resampling,
-                               cloud_steps=cloud_steps)
+    if process_sd_m > 0:        # every iteration predicts before its update, the first one too (Sec. 5.3.1)
+        init = init + process_sd_m * rng.standard_normal(init.shape)
+    return particle_filter(None, loglik, rng, n_steps=n_iterations, initial_particles_m=init, spread_m=process_sd_m,
+                           resampling=resampling, cloud_steps=cloud_steps)
 
 
 def crlb_m(setup: Setup, locations_m) -> np.ndarray:

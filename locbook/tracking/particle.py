@@ -1,101 +1,281 @@
-"""A general sampling-importance-resampling (bootstrap) particle filter, vectorized over runs and particles.
+"""The particle filter: bootstrap sampling-importance-resampling (SIR), vectorized over runs and particles, with the
+improved SIR of Ozkaya (2011) as options of it.
 
-Palvai (2008), Sec. 5.3.1 (after Arulampalam et al. 2002): at every step k
+Palvai (2008), Sec. 5.3.1, and Ozkaya (2011), Tables 4.3-4.4 (after Arulampalam et al. 2002): at every step t
 
-    1. draw x_k^(i) ~ p(x_k | x_{k-1}^(i))                 (the transition prior: here a Gaussian random walk)
-    2. w_k^(i) ∝ w_{k-1}^(i) p(z_k | x_k^(i))              (uniform previous weights after a resampling)
-    3. normalise; record the estimates
-    4. resample: at every step (SIR), or where N_eff = 1 / sum w^2 falls below a threshold
+    1. predict: x_t^(i) ~ p(x_t | x_t-1^(i))             (from step 1 on; step 0 updates the prior)
+    2. update:  w_t^(i) ~ w_t-1^(i) p(z_t | x_t^(i))       (Eq. (4.34); uniform previous weights after a resampling)
+    3. normalise; record the estimates (:class:`~locbook.tracking.bayes.BayesFilterResult`)
+    4. resample (any scheme of :mod:`locbook.tracking.resampling`): at every step (SIR), on a schedule, or where
+       N_eff = 1 / sum w^2 falls below a fraction of N (the one ESS convention, as the ``particles`` package has it)
 
-The measurement model enters only through ``log_likelihood(particles, k)``, so one filter serves any schedule of
-measurements (one receiver per step, all receivers every step, cycling through them; fresh or frozen shadowing):
-the caller decides what step k observes. :func:`rss_log_likelihood` is the log-distance RSS likelihood with
-missing readings (NaN = not heard) left out.
-
-Estimates per step: the weighted mean (MMSE) and variance, the highest-weight particle; at the end, a kernel
-density MAP (:func:`kernel_map_estimate`).
+The likelihood is an :class:`~locbook.models.rss.RssModel` with its readings, or any callable
+``log_likelihood(particles (R, N, dim), t) -> (R, N)``; the motion model is the reflected random walk
+``x_t = x_t-1 + v_t + N(0, D^2 I)`` (Ozkaya Eq. (4.2); Palvai's sigma_2) or any callable
+``transition(particles, t, rng) -> particles``.
 
 A collapsed run is isolated (issue 26): where a run's log-likelihood is -inf for every particle (no particle
 explains the reading), or NaN or +inf for any particle (garbage), its weights cannot be normalised. That run is
 flagged ``degenerate`` with the first such step (``degenerate_step``, -1 elsewhere), its estimates are NaN from that
 step on and its final particles and weights are NaN; the other runs go on as if that run were sane (its particles are
-still propagated and resampled with equal weights, so with systematic or stratified resampling, whose random draws
-do not depend on the weights, the other runs are bit-identical). -inf for some particles only is a zero weight.
+still propagated and resampled with equal weights; every resampling draw is made for every run whether or not it
+resamples, so the other runs are bit-identical). -inf for some particles only is a zero weight.
 A collapse is never silent: the call emits one ``RuntimeWarning`` with the number of collapsed runs and the first
 (run, step); when EVERY run collapses (nothing can be estimated: typically a units bug, or a likelihood that overflows)
-it raises a ValueError naming ``log_likelihood`` and the first step and run instead of returning NaN.
+it raises a ValueError naming the likelihood and the first step and run instead of returning NaN.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
-from .._validate import as_array, check_scalar
-from ..models.channel import PathLossModel
-from .bayes import _collapse_error, _warn_collapse
-from .resampling import RESAMPLING_METHODS, resample
+from .._validate import as_array, check_choice, check_scalar
+from ..models.motion import reflect_into_box
+from ..models.rss import RssModel
+from .bayes import (BayesFilterResult, _LIKELIHOOD, _collapse_error, _normalise_log, _reading_detail,
+                    _velocity_schedule, _warn_collapse, weighted_moments)
+from .resampling import RESAMPLING_CDFS, RESAMPLING_METHODS, effective_sample_size, resample, systematic_resample
 
-__all__ = ["SirResult", "sir_particle_filter", "rss_log_likelihood", "kernel_map_estimate"]
+__all__ = ["particle_filter", "kernel_map_estimate", "WEIGHT_SMOOTHINGS"]
 
-
-@dataclass(frozen=True)
-class SirResult:
-    """Per run and step: ``mean`` and ``variance`` ``(R, K, dim)`` of the weighted particles, ``max_weight``
-    ``(R, K, dim)`` the highest-weight particle, ``n_eff`` ``(R, K)`` before resampling and ``resampled``
-    ``(R, K)``; the final ``particles`` ``(R, Ns, dim)`` and ``weights`` ``(R, Ns)``; ``clouds``: the particles
-    (after the update, before resampling) at the steps asked for, ``{k: (R, Ns, dim)}``; ``degenerate`` ``(R,)`` and
-    ``degenerate_step`` ``(R,)``: runs whose likelihood collapsed, and the step (module docstring)."""
-
-    mean: np.ndarray
-    variance: np.ndarray
-    max_weight: np.ndarray
-    n_eff: np.ndarray
-    resampled: np.ndarray
-    particles: np.ndarray
-    weights: np.ndarray
-    clouds: dict
-    degenerate: np.ndarray = None
-    degenerate_step: np.ndarray = None
-
-    @property
-    def n_degenerate(self) -> int:
-        """The number of runs whose likelihood collapsed (module docstring)."""
-        return 0 if self.degenerate is None else int(np.count_nonzero(self.degenerate))
+WEIGHT_SMOOTHINGS = ("none", "sqrt", "sqrt_corrected")
 
 
-def rss_log_likelihood(particles_m, receivers_m, power_dbm, channel: PathLossModel, *, min_distance_m: float = 1e-3):
-    """``log p(z | x)`` up to a constant for every particle: ``-sum_j (z_j - h_j(x))^2 / (2 sigma^2)`` over the heard
-    readings ``j`` (NaN = not heard, left out), ``h_j`` the log-distance mean power from receiver ``j``.
+def _check_rng(rng) -> None:
+    if not isinstance(rng, np.random.Generator):
+        raise ValueError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
 
-    ``particles_m`` ``(R, Ns, dim)``; ``receivers_m`` ``(m, dim)`` or per run ``(R, m, dim)``; ``power_dbm``
-    ``(R, m)``. Accumulated one receiver at a time, so memory stays ``O(R Ns)``."""
-    x = np.asarray(particles_m, dtype=float)
-    s = np.asarray(receivers_m, dtype=float)
-    z = np.asarray(power_dbm, dtype=float)
-    m = z.shape[-1]
-    if s.shape[-2] != m:
-        raise ValueError(f"receivers_m has {s.shape[-2]} receivers, power_dbm {m} readings")
-    p0 = np.broadcast_to(np.asarray(channel.ref_power_dbm, float), (m,))
-    ple = np.broadcast_to(np.asarray(channel.path_loss_exp, float), (m,))
-    var = np.broadcast_to(np.asarray(channel.sigma_db, float) ** 2, (m,))
-    if np.any(var <= 0):
-        raise ValueError("the likelihood needs sigma_db > 0 (a zero-noise likelihood is a delta)")
-    out = np.zeros(x.shape[:-1])
-    for j in range(m):
-        zj = z[..., j]
-        heard = np.isfinite(zj)
-        if not heard.any():
-            continue
-        sj = s[..., j, :] if s.ndim == 2 else s[:, j, :]
-        diff = x - (sj if s.ndim == 2 else sj[:, None, :])
-        d2 = np.einsum("...i,...i->...", diff, diff)
-        # the log-distance mean from d^2 (log10 d = log10(d^2) / 2; the same clamp), without a square root
-        d2 = np.maximum(d2, min_distance_m**2) if min_distance_m > 0 else d2
-        resid = np.where(heard, zj - p0[j] - 10 * ple[j] * np.log10(channel.ref_distance_m), 0.0)[:, None] \
-            + 5.0 * ple[j] * np.log10(d2)
-        out -= np.where(heard[:, None], resid**2, 0.0) / (2 * var[j])
-    return out
+
+def _region(region_m, dim: int | None):
+    if len(region_m) != 2:
+        raise ValueError(f"region_m must be (lower, upper) corners, got {region_m!r}")
+    trailing = (None,) if dim is None else (dim,)
+    lower, upper = (as_array(name, b, ndim=1, trailing=trailing)
+                    for name, b in zip(("region_m lower", "region_m upper"), region_m))
+    if lower.shape != upper.shape or np.any(upper <= lower):
+        raise ValueError(f"region_m needs upper > lower on every axis, got {lower.tolist()} and {upper.tolist()}")
+    return lower, upper
+
+
+def particle_filter(rss_dbm, model, rng: np.random.Generator, *, n_steps: int | None = None,
+                    n_particles: int | None = None, region_m=None, initial_particles_m=None, initial_position_m=None,
+                    initial_sd_m: float = 0.0, spread_m=0.5, velocity_m=None, transition=None,
+                    resampling: str = "systematic", resample_threshold: float | None = None,
+                    resample_every: int | None = None, weight_smoothing: str = "none",
+                    resampling_cdf: str = "standard", cloud_steps=()) -> BayesFilterResult:
+    """Bootstrap SIR particle filter and Ozkaya's improved SIR (module docstring; Ozkaya 2011, Tables 4.3-4.4,
+    Sec. 7.1.4; Palvai 2008, Sec. 5.3.1), over runs ``R`` and steps ``T``.
+
+    Likelihood: ``model`` an :class:`~locbook.models.rss.RssModel` and ``rss_dbm`` its readings ``(R, T, m)`` (NaN =
+    not heard), or ``model`` a callable ``log_likelihood(particles (R, N, dim), t) -> (R, N)`` with ``rss_dbm=None``
+    and ``n_steps`` given.
+
+    Prior (step 0, no prediction): ``initial_particles_m`` ``(R, N, dim)``; or ``n_particles`` drawn uniform in
+    ``region_m = (lower, upper)``; or all at ``initial_position_m`` ``(R, dim)`` (a known start, Table 7.21), drawn
+    from ``N(initial_position_m, initial_sd_m^2 I)`` (reflected into ``region_m`` when given) when
+    ``initial_sd_m > 0`` (the Gaussian prior the posterior CRLB assumes).
+
+    Proposal = process model (bootstrap, Eq. (4.33)): ``transition(particles, t, rng)``, or by default
+    ``x_t = x_t-1 + v_t + N(0, D^2 I)`` with ``D = spread_m`` (a scalar or one per axis; 0 draws nothing) and
+    ``v_t = velocity_m`` (``(dim,)`` or ``(T, dim)``), reflected into ``region_m`` when given (the room, or the
+    accessible part of it: Table 7.22). ``spread_m = inf`` draws a fresh uniform proposal over the region (Tables
+    7.18-7.19), whose particles start from equal weights (the previous weights belonged to the replaced particles).
+
+    Resampling (``resampling``: one of :data:`~locbook.tracking.resampling.RESAMPLING_METHODS`): at every step by
+    default (basic SIR, Table 4.4); with ``resample_threshold`` only where ``N_eff < resample_threshold * N`` (the
+    thesis's "N_t = 0.5", read as a fraction of N since N_eff >= 1; note 004, section 11.6); with
+    ``resample_every = k`` at steps ``k - 1, 2k - 1, ...``. The draws are made for every run at every step, so the
+    random stream does not depend on which runs resample. ``resampling_cdf``: the systematic scheme's cumulative sum
+    (:func:`~locbook.tracking.resampling.systematic_resample`; ``"literal_004"`` is Table 4.2 as printed).
+
+    ``weight_smoothing`` (Ozkaya's improved SIR): ``"sqrt"`` replaces the normalised weights by ``sqrt(w)``
+    renormalised before the estimate, the N_eff test and the resampling, and carries them forward (the
+    interpretation validated in note 004, section 3.7; it tempers the likelihood). ``"sqrt_corrected"`` is the
+    literature's generalised resampling: draw with ``a = sqrt(w)`` and reweight the copies by ``w / a``.
+
+    Returns a :class:`~locbook.tracking.bayes.BayesFilterResult`: the weighted mean (MMSE) and covariance, the
+    highest-weight particle as MAP, ``n_eff`` before resampling (of the weights drawn from), ``resampled``, the final
+    particles and normalised weights, and ``clouds`` at ``cloud_steps``. Collapsed runs: module docstring.
+    """
+    _check_rng(rng)
+    check_choice("resampling", resampling, RESAMPLING_METHODS)
+    check_choice("resampling_cdf", resampling_cdf, RESAMPLING_CDFS)
+    check_choice("weight_smoothing", weight_smoothing, WEIGHT_SMOOTHINGS)
+    if resample_threshold is not None and not 0.0 < resample_threshold <= 1.0:
+        raise ValueError(f"resample_threshold is a fraction of N in (0, 1], got {resample_threshold}")
+    if resample_every is not None:
+        check_scalar("resample_every", resample_every, ge=1, integer=True)
+        if resample_threshold is not None:
+            raise ValueError("give resample_threshold (N_eff-triggered) or resample_every (scheduled), not both")
+    check_scalar("initial_sd_m", initial_sd_m, ge=0)
+    if initial_sd_m > 0 and initial_position_m is None:
+        raise ValueError("initial_sd_m spreads the particles around initial_position_m; give initial_position_m too")
+
+    # -- the likelihood ------------------------------------------------------------------------------
+    detail, what = None, "log_likelihood"
+    if isinstance(model, RssModel):
+        if rss_dbm is None:
+            raise ValueError("rss_dbm must be the readings (runs, steps, m) of the RssModel model")
+        rss_dbm = model.check_readings(rss_dbm, ndim=3)
+        if n_steps is not None and n_steps != rss_dbm.shape[1]:
+            raise ValueError(f"n_steps {n_steps} disagrees with the {rss_dbm.shape[1]} steps of rss_dbm")
+        n_runs, n_steps = rss_dbm.shape[:2]
+        detail, what = _reading_detail(rss_dbm), _LIKELIHOOD
+
+        def log_likelihood(particles, t):
+            return model.log_likelihood(rss_dbm[:, t], particles, t, constant=False)
+    elif callable(model):
+        if rss_dbm is not None:
+            raise ValueError("rss_dbm goes with an RssModel; a log_likelihood callable reads its own data "
+                             "(give rss_dbm=None and n_steps)")
+        if n_steps is None:
+            raise ValueError("n_steps must be given with a log_likelihood callable")
+        check_scalar("n_steps", n_steps, ge=1, integer=True)
+        n_steps, n_runs, log_likelihood = int(n_steps), None, model
+    else:
+        raise ValueError(f"model must be an RssModel or a callable log_likelihood(particles, t), "
+                         f"got {type(model).__name__}")
+
+    # -- the prior -----------------------------------------------------------------------------------
+    dim = model.dim if isinstance(model, RssModel) else None
+    bounds = None if region_m is None else _region(region_m, dim)
+    if initial_particles_m is not None:
+        if n_particles is not None or initial_position_m is not None:
+            raise ValueError("give initial_particles_m, or n_particles with region_m or initial_position_m, not both")
+        particles = as_array("initial_particles_m", initial_particles_m, ndim=3).copy()
+        if particles.shape[1] == 0:
+            raise ValueError(f"initial_particles_m must hold at least one particle per run, got shape {particles.shape}")
+    else:
+        if n_particles is None:
+            raise ValueError("give n_particles (with region_m or initial_position_m), or initial_particles_m")
+        check_scalar("n_particles", n_particles, ge=1, integer=True)
+        if initial_position_m is None:
+            if bounds is None:
+                raise ValueError("a uniform prior needs region_m (or give initial_position_m or initial_particles_m)")
+            if n_runs is None:
+                raise ValueError("with a log_likelihood callable give initial_particles_m or initial_position_m "
+                                 "(the number of runs)")
+            shape = (n_runs, int(n_particles), bounds[0].size)
+            particles = bounds[0] + (bounds[1] - bounds[0]) * rng.random(shape)
+        else:
+            start = as_array("initial_position_m", initial_position_m)
+            want = (n_runs if n_runs is not None else start.shape[0] if start.ndim == 2 else None,
+                    dim if dim is not None else start.shape[-1] if start.ndim == 2 else None)
+            if start.shape != want:
+                raise ValueError(f"initial_position_m must have shape (runs, {want[1] or 'dim'}) = {want}, "
+                                 f"got {start.shape}")
+            shape = (start.shape[0], int(n_particles), start.shape[1])
+            particles = np.broadcast_to(start[:, None, :], shape).copy()
+            if initial_sd_m > 0:
+                particles = particles + initial_sd_m * rng.standard_normal(shape)
+                if bounds is not None:
+                    particles = reflect_into_box(particles, *bounds)
+    R, n, d = particles.shape
+    if n_runs is not None and R != n_runs or dim is not None and d != dim:
+        raise ValueError(f"the particles {particles.shape} must be (runs, N, dim) with the {n_runs} runs of rss_dbm "
+                         f"and the model's dim {dim}")
+    if bounds is not None and bounds[0].size != d:
+        raise ValueError(f"region_m has {bounds[0].size} axes, the particles {d}")
+
+    # -- the motion model ----------------------------------------------------------------------------
+    fresh = False
+    if transition is None:
+        try:
+            spread = np.asarray(spread_m, dtype=float)
+        except (TypeError, ValueError):
+            raise ValueError(f"spread_m must be numeric, got {spread_m!r}") from None
+        if spread.ndim > 1 or spread.size not in (1, d) or np.any(np.isnan(spread)) or np.any(spread < 0):
+            raise ValueError(f"spread_m must be finite (inf: a fresh uniform proposal) and >= 0, a scalar or one "
+                             f"per axis ({d},), got {spread_m!r}")
+        fresh = bool(np.any(np.isinf(spread)))
+        if fresh and (spread.size != 1 or bounds is None):
+            raise ValueError("spread_m = inf (a fresh uniform proposal) must be a scalar and needs region_m")
+        velocity = _velocity_schedule(velocity_m, n_steps, d)
+        moves = bool(np.any(spread > 0))
+
+        def transition(x, t, rng):
+            if fresh:                         # fresh draws from the uniform proposal over the region
+                return bounds[0] + (bounds[1] - bounds[0]) * rng.random(x.shape)
+            if moves:
+                x = x + velocity[t] + spread * rng.standard_normal(x.shape)
+            elif velocity_m is not None:
+                x = x + velocity[t]
+            return x if bounds is None else reflect_into_box(x, *bounds)
+    elif not callable(transition):
+        raise ValueError(f"transition must be a callable transition(particles, t, rng), got {type(transition).__name__}")
+
+    # -- the recursion -------------------------------------------------------------------------------
+    log_w = np.full((R, n), -np.log(n))
+    mean = np.empty((R, n_steps, d))
+    cov = np.empty((R, n_steps, d, d))
+    best = np.empty((R, n_steps, d))
+    n_eff = np.empty((R, n_steps))
+    resampled = np.zeros((R, n_steps), dtype=bool)
+    clouds = {}
+    dead = np.zeros(R, bool)
+    dead_step = np.full(R, -1, np.int64)
+    for t in range(n_steps):
+        if t > 0:
+            particles = np.asarray(transition(particles, t, rng), dtype=float)
+            if particles.shape != (R, n, d):
+                raise ValueError(f"transition must return ({R}, {n}, {d}), got {particles.shape}")
+            if fresh:                         # the old weights belonged to the old particles
+                log_w = np.full((R, n), -np.log(n))
+        ll = np.asarray(log_likelihood(particles, t), dtype=float)
+        if ll.shape != (R, n):
+            raise ValueError(f"log_likelihood must return ({R}, {n}), got {ll.shape}")
+        logits = log_w + ll
+        top = logits.max(axis=-1)
+        collapsed = ~dead & (np.isnan(top) | np.isinf(top))      # -inf for every particle, or NaN / +inf anywhere
+        dead_step[collapsed] = t
+        dead |= collapsed
+        if R and dead.all():
+            raise _collapse_error(dead_step, what, detail)
+        if dead.any():              # a collapsed run goes on with equal weights (NaN outputs): others unaffected
+            logits[dead] = 0.0
+        w = _normalise_log(logits)
+        if weight_smoothing == "sqrt":
+            w = np.sqrt(w)
+            w /= w.sum(axis=-1, keepdims=True)
+        mean[:, t], cov[:, t] = weighted_moments(w, particles)
+        best[:, t] = particles[np.arange(R), np.argmax(w, axis=-1)]
+        if t in cloud_steps:
+            clouds[t] = particles.copy()
+        draw_w = w
+        if weight_smoothing == "sqrt_corrected":
+            draw_w = np.sqrt(w)
+            draw_w /= draw_w.sum(axis=-1, keepdims=True)
+        n_eff[:, t] = effective_sample_size(draw_w)
+        if resample_threshold is not None:
+            do = n_eff[:, t] < resample_threshold * n
+        else:
+            do = np.full(R, resample_every is None or (t + 1) % resample_every == 0)
+        resampled[:, t] = do
+        # drawn for every run so that the stream does not depend on `do`
+        if resampling == "systematic":
+            u = rng.random(R)
+            idx = systematic_resample(draw_w[do], u[do], resampling_cdf) if do.any() else None
+        else:
+            idx = resample(draw_w, rng, resampling)[do]
+        if do.any():
+            particles[do] = particles[do][np.arange(idx.shape[0])[:, None], idx]
+            if weight_smoothing == "sqrt_corrected":
+                new_w = np.take_along_axis(w[do], idx, -1) / np.take_along_axis(draw_w[do], idx, -1)
+                w[do] = new_w / new_w.sum(axis=-1, keepdims=True)
+            else:
+                w[do] = 1.0 / n
+        log_w = np.log(np.maximum(w, 1e-300))
+        if dead.any():
+            mean[dead, t], cov[dead, t], best[dead, t], n_eff[dead, t] = np.nan, np.nan, np.nan, np.nan
+            resampled[dead, t] = False
+            if t in cloud_steps:
+                clouds[t][dead] = np.nan
+    weights = np.exp(log_w)
+    weights /= weights.sum(axis=-1, keepdims=True)
+    if dead.any():
+        particles = particles.copy()
+        particles[dead], weights[dead] = np.nan, np.nan
+        _warn_collapse(dead, dead_step, "particle_filter", what, detail)
+    return BayesFilterResult(mean, cov, best, n_eff, resampled, particles, weights, dead, dead_step, clouds)
 
 
 def kernel_map_estimate(particles_m, weights, *, bandwidth_m=None, n_candidates: int = 256):
@@ -122,78 +302,3 @@ def kernel_map_estimate(particles_m, weights, *, bandwidth_m=None, n_candidates:
         d2 = np.sum((cand[:, :, None, :] - xs[:, None, :, :]) ** 2, axis=-1)
         dens += np.einsum("rkn,rn->rk", np.exp(-0.5 * d2 / h[:, None, None] ** 2), ws)
     return np.take_along_axis(cand, np.argmax(dens, axis=-1)[:, None, None], axis=1)[:, 0]
-
-
-def sir_particle_filter(initial_particles_m, log_likelihood, n_steps: int, rng: np.random.Generator, *,
-                        process_sd_m=0.0, resampling: str = "systematic", resample_threshold=None,
-                        cloud_steps=()) -> SirResult:
-    """Bootstrap SIR filter (module docstring) from ``initial_particles_m`` ``(R, Ns, dim)`` (equal weights) over
-    ``n_steps`` steps. ``log_likelihood(particles (R, Ns, dim), k) -> (R, Ns)``; ``process_sd_m``: the random
-    walk's standard deviation per step (scalar or ``(dim,)``; Palvai's sigma_2), drawn before each update;
-    ``resampling``: one of :data:`locbook.RESAMPLING_METHODS`; ``resample_threshold``: None resamples at every step
-    (SIR), a number resamples where ``N_eff`` is below it (e.g. ``Ns / 3``)."""
-    x = as_array("initial_particles_m", initial_particles_m, ndim=3).copy()
-    if resampling not in RESAMPLING_METHODS:
-        raise ValueError(f"resampling must be one of {RESAMPLING_METHODS}, got {resampling!r}")
-    check_scalar("n_steps", n_steps, ge=1, integer=True)
-    if not isinstance(rng, np.random.Generator):
-        raise ValueError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
-    R, n, dim = x.shape
-    if n == 0:
-        raise ValueError(f"initial_particles_m must hold at least one particle per run, got shape {x.shape}")
-    sd = np.broadcast_to(as_array("process_sd_m", process_sd_m), (dim,))
-    if np.any(sd < 0):
-        raise ValueError("process_sd_m must be >= 0")
-    logw = np.full((R, n), -np.log(n))
-    mean = np.empty((R, n_steps, dim))
-    var = np.empty((R, n_steps, dim))
-    best = np.empty((R, n_steps, dim))
-    n_eff = np.empty((R, n_steps))
-    did = np.zeros((R, n_steps), bool)
-    clouds = {}
-    dead = np.zeros(R, bool)
-    dead_step = np.full(R, -1, np.int64)
-    for k in range(int(n_steps)):
-        if np.any(sd > 0):
-            x = x + sd * rng.standard_normal(x.shape)
-        ll = np.asarray(log_likelihood(x, k), dtype=float)
-        if ll.shape != (R, n):
-            raise ValueError(f"log_likelihood must return ({R}, {n}), got {ll.shape}")
-        logw = logw + ll
-        top = logw.max(axis=-1)
-        collapsed = ~dead & (np.isnan(top) | np.isinf(top))      # NaN anywhere, +inf anywhere, or -inf everywhere
-        dead_step[collapsed] = k
-        dead |= collapsed
-        if R and dead.all():
-            raise _collapse_error(dead_step, "log_likelihood")
-        if dead.any():              # a collapsed run goes on with equal weights (its outputs are NaN): others unaffected
-            logw[dead] = 0.0
-        logw = logw - logw.max(axis=-1, keepdims=True)
-        w = np.exp(logw)
-        w /= w.sum(axis=-1, keepdims=True)
-        logw = np.log(np.maximum(w, 1e-300))
-        mean[:, k] = np.einsum("rn,rnd->rd", w, x)
-        var[:, k] = np.einsum("rn,rnd->rd", w, (x - mean[:, k, None]) ** 2)
-        best[:, k] = np.take_along_axis(x, np.argmax(w, axis=-1)[:, None, None], axis=1)[:, 0]
-        n_eff[:, k] = 1.0 / np.einsum("rn,rn->r", w, w)
-        if k in cloud_steps:
-            clouds[k] = x.copy()
-        do = np.ones(R, bool) if resample_threshold is None else n_eff[:, k] < resample_threshold
-        if do.any():
-            idx = resample(w, rng, resampling)
-            x = np.where(do[:, None, None], np.take_along_axis(x, idx[..., None], axis=1), x)
-            logw = np.where(do[:, None], -np.log(n), logw)
-        did[:, k] = do & ~dead
-        if dead.any():
-            for out in (mean, var, best):
-                out[dead, k] = np.nan
-            n_eff[dead, k] = np.nan
-            if k in cloud_steps:
-                clouds[k][dead] = np.nan
-    w = np.exp(logw)
-    w /= w.sum(axis=-1, keepdims=True)
-    if dead.any():
-        x, w = x.copy(), w.copy()
-        x[dead], w[dead] = np.nan, np.nan
-        _warn_collapse(dead, dead_step, "sir_particle_filter", "log_likelihood")
-    return SirResult(mean, var, best, n_eff, did, x, w, clouds, dead, dead_step)

@@ -10,11 +10,13 @@ from __future__ import annotations
 import numpy as np
 
 from .._validate import as_array, check_choice
-from .bayes import effective_sample_size, systematic_resample
 
-__all__ = ["RESAMPLING_METHODS", "resample", "counts_to_indices", "resample_where"]
+__all__ = ["RESAMPLING_METHODS", "RESAMPLING_CDFS", "resample", "systematic_resample", "counts_to_indices",
+           "resample_where", "effective_sample_size"]
 
 RESAMPLING_METHODS = ("systematic", "stratified", "multinomial", "residual")
+#: the cumulative sums of :func:`systematic_resample`: the standard one and Table 4.2 of Ozkaya (2011) as printed
+RESAMPLING_CDFS = ("standard", "literal_004")
 
 #: relative round-off allowed in ``N w`` before the residual scheme's floor (normalising N weights and scaling by N
 #: err by a few ulps; 64 ulps is far below any weight difference that matters)
@@ -28,6 +30,13 @@ def _check_weights(weights) -> np.ndarray:
     return w / w.sum(axis=-1, keepdims=True)
 
 
+def effective_sample_size(weights):
+    """``N_eff = 1 / sum_j w_j^2`` of normalised weights along the last axis (Ozkaya 2011, Eq. (4.28); Arulampalam
+    et al. 2002, Eq. (51)). Every filter of locbook triggers resampling on ``N_eff`` below a fraction of ``N``."""
+    weights = as_array("weights", weights, min_ndim=1)
+    return 1.0 / np.einsum("...n,...n->...", weights, weights)
+
+
 def _search_rows(cdf, points):
     """Row-wise ``searchsorted(cdf_r, points_r, side="left")`` for ``(B, N)`` arrays with values in [0, 1], in one
     call (row r is shifted by 2r so the rows do not overlap)."""
@@ -35,6 +44,37 @@ def _search_rows(cdf, points):
     offset = 2.0 * np.arange(n_rows)[:, None]
     idx = np.searchsorted((cdf + offset).ravel(), (points + offset).ravel(), side="left").reshape(points.shape)
     return np.minimum(idx - n * np.arange(n_rows)[:, None], n - 1)
+
+
+def systematic_resample(weights, uniforms, cdf: str = "standard"):
+    """Systematic resampling (Ozkaya 2011, Table 4.2; Arulampalam et al. 2002, Alg. 2) of every row of
+    ``weights (..., N)``.
+
+    ``uniforms (...)`` are the single draws ``u_1 ~ U[0, 1)``, scaled here to ``U[0, 1/N)``; the sample
+    points are ``u_i = (u_1 + i - 1) / N`` and particle ``j`` is copied for each ``u_i`` with
+    ``c_j-1 < u_i <= c_j``. ``cdf="standard"`` uses ``c_j = w_1 + ... + w_j``. The table prints ``c_1 = 0``,
+    ``c_j = c_j-1 + w_j``, which drops ``w_1`` and shifts every particle's interval; that is kept as the
+    flagged ``"literal_004"`` (indices beyond the last particle are clipped to it).
+    Returns integer indices ``(..., N)``.
+    """
+    check_choice("cdf", cdf, RESAMPLING_CDFS)
+    weights = as_array("weights", weights, min_ndim=1)
+    batch, n = weights.shape[:-1], weights.shape[-1]
+    if n == 0 or np.any(weights < 0) or np.any(weights.sum(axis=-1) <= 0):
+        raise ValueError(f"weights must be non-negative with a positive sum in every row, got shape {weights.shape}")
+    uniforms_arr = as_array("uniforms", uniforms)
+    if uniforms_arr.shape != batch or np.any(uniforms_arr < 0) or np.any(uniforms_arr >= 1):
+        raise ValueError(f"uniforms must be draws in [0, 1) of shape {batch} (one per row of weights), "
+                         f"got shape {uniforms_arr.shape}")
+    w = weights.reshape(-1, n)
+    c = np.cumsum(w, axis=-1)
+    c /= c[:, -1:]
+    if cdf == "literal_004":
+        c = np.concatenate([np.zeros((c.shape[0], 1)), c[:, 1:] - c[:, :1]], axis=-1)
+    else:
+        c[:, -1] = 1.0                                     # guard against round-off below the last u_i
+    u = (uniforms_arr.reshape(-1, 1) + np.arange(n)) / n
+    return _search_rows(c, u).reshape(batch + (n,))
 
 
 def counts_to_indices(counts):
@@ -51,7 +91,7 @@ def counts_to_indices(counts):
 def resample(weights, rng: np.random.Generator, method: str = "systematic"):
     """Ancestor indices ``(..., N)`` for every row of ``weights (..., N)`` (normalised here).
 
-    - ``"systematic"``: one uniform per row, points ``(u + i) / N`` (:func:`locbook.systematic_resample`);
+    - ``"systematic"``: one uniform per row, points ``(u + i) / N`` (:func:`systematic_resample`);
     - ``"stratified"``: one uniform per stratum, points ``(u_i + i) / N``;
     - ``"multinomial"``: N independent draws from the weights;
     - ``"residual"``: ``floor(N w_j)`` copies of each particle, the remaining ``N - sum floor(N w)`` drawn

@@ -1,0 +1,299 @@
+"""The RSS measurement model: one object that every RSS filter and estimator asks for the mean reading, its
+Jacobian, the log-likelihood of readings and the Fisher information (after Stone Soup's measurement models).
+
+Reader (anchor) ``j`` at ``a_j`` hears a tag at ``p`` with (Ozkaya 2011, Eq. (6.3); Dogan 2015, Eq. (2.2);
+George and Vadivukkarasi, Eq. (5))
+
+    s_j = h_j(p) + e_j,   h_j(p) = P_0j - 10 n_j log10(max(d_j, d_min) / d0) - nW_j(p) WAF,   e_j ~ N(0, sigma_j^2),
+
+independently across readers, with the channel's parameters and near-field clamp ``d_min``
+(:class:`locbook.models.channel.PathLossModel`, evaluated by :func:`~locbook.models.channel.log_distance_mean_dbm`),
+``nW_j`` the walls crossed by the straight path (:func:`~locbook.models.channel.wall_crossings`). ``d_j`` is the
+distance in the position's space or, with ``tag_height_m``, the 3-D distance to anchors that carry a height
+(``d^2 = |p - a_j|^2 + (z_j - h)^2``, the tag in the plane ``z = h``).
+
+Shapes: positions are ``(P, dim)`` or per run ``(R, P, dim)``; results carry a run axis ``R`` (1 when nothing is
+per run) and the position axis ``P``: mean ``(R, P, m)``, Jacobian ``(R, P, m, dim)``, Fisher information
+``(R, P, dim, dim)``, log-likelihood ``(R, P)`` for readings ``(R, m)``. Parameters may be scalars, per reader
+``(m,)``, or per run and step (``ref_power_dbm``, ``path_loss_exp``: ``(R, T, m)``; ``sigma_db``: ``(R, T)``, the
+pooled online sigma of Ozkaya Eq. (6.7)); ``step`` picks the step. Anchors are ``(m, k)`` or per run ``(R, m, k)``
+(measurement locations drawn per Monte-Carlo run, Palvai 2008). NaN readings mean "not heard" and are left out.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .._validate import as_array, check_scalar
+from .channel import PathLossModel, log_distance_mean_dbm, wall_crossings
+
+__all__ = ["RssModel", "LIKELIHOOD_BLOCK_VALUES"]
+
+_LOG_2PI = float(np.log(2.0 * np.pi))
+#: runs per block of :meth:`RssModel.log_likelihood`: about this many values in each temporary (32 MiB)
+LIKELIHOOD_BLOCK_VALUES = 1 << 22
+
+
+@dataclass(frozen=True)
+class RssModel:
+    """Log-distance RSS readings from ``anchors_m`` through ``channel`` (module docstring).
+
+    ``anchors_m``: ``(m, dim)`` or per run ``(R, m, dim)``; with ``tag_height_m`` ``(m, 3)`` or ``(R, m, 3)``, the
+    last coordinate the anchor's height and the positions 2-D. ``channel``: a :class:`PathLossModel`; its
+    ``ref_power_dbm`` and ``path_loss_exp`` are scalars, ``(m,)`` or ``(R, T, m)``, its ``sigma_db`` a scalar,
+    ``(m,)`` or ``(R, T)``, its ``min_distance_m`` the near-field clamp (0: none; a position on an anchor then has
+    an infinite mean) and its ``wall_attenuation_db`` the loss per wall of ``walls_m`` ``(W, 2, 2)`` (2-D only).
+    """
+
+    anchors_m: np.ndarray
+    channel: PathLossModel
+    walls_m: np.ndarray | None = None
+    tag_height_m: float | None = None
+
+    def __post_init__(self):
+        if not isinstance(self.channel, PathLossModel):
+            raise ValueError(f"channel must be a PathLossModel, got {type(self.channel).__name__}")
+        if self.tag_height_m is not None:
+            check_scalar("tag_height_m", self.tag_height_m)
+        anchors = as_array("anchors_m", self.anchors_m, min_ndim=2)
+        if self.tag_height_m is not None and (anchors.ndim > 3 or anchors.shape[-1] != 3):
+            raise ValueError(f"anchors_m must have shape (m, 3) or (R, m, 3) (x, y, height) with tag_height_m (the tag "
+                             f"moves in the plane z = tag_height_m), got {anchors.shape}")
+        if anchors.ndim > 3 or anchors.shape[-1] < 1:
+            raise ValueError(f"anchors_m must have shape (m, dim) or (R, m, dim), got {anchors.shape}")
+        object.__setattr__(self, "anchors_m", anchors)
+        m = anchors.shape[-2]
+        ch = self.channel
+        for name in ("ref_power_dbm", "path_loss_exp"):
+            value = np.asarray(getattr(ch, name), float)
+            if value.ndim not in (0, 1, 3) or (value.ndim and value.shape[-1] != m):
+                raise ValueError(f"channel.{name} must be a scalar, ({m},) or (R, T, {m}), got shape {value.shape}")
+        sigma = np.asarray(ch.sigma_db, float)
+        if sigma.ndim not in (0, 1, 2) or (sigma.ndim == 1 and sigma.shape != (m,)):
+            raise ValueError(f"channel.sigma_db must be a scalar, ({m},) (one per anchor) or (R, T), "
+                             f"got shape {sigma.shape}")
+        if np.any(np.asarray(ch.path_loss_exp) <= 0):
+            raise ValueError(f"channel.path_loss_exp must be positive, got {ch.path_loss_exp!r}")
+        if self.walls_m is not None:
+            walls = as_array("walls_m", np.reshape(self.walls_m, (-1, 2, 2)))
+            if self.dim != 2:
+                raise ValueError(f"walls_m needs 2-D positions, the anchors give {self.dim}-D")
+            object.__setattr__(self, "walls_m", walls)
+        _ = self.runs                    # per-run axes must agree
+
+    # -- shapes --------------------------------------------------------------------------------------
+    @property
+    def n_anchors(self) -> int:
+        return self.anchors_m.shape[-2]
+
+    @property
+    def dim(self) -> int:
+        """The dimension of the positions (the anchors' minus the height column)."""
+        return self.anchors_m.shape[-1] - (self.tag_height_m is not None)
+
+    @property
+    def runs(self) -> int | None:
+        """The number of runs of per-run anchors or parameters (None when everything is shared)."""
+        ch = self.channel
+        runs = {np.shape(v)[0] for v in (ch.ref_power_dbm, ch.path_loss_exp) if np.ndim(v) == 3}
+        runs |= {np.shape(ch.sigma_db)[0]} if np.ndim(ch.sigma_db) == 2 else set()
+        runs |= {self.anchors_m.shape[0]} if self.anchors_m.ndim == 3 else set()
+        if len(runs) > 1:
+            raise ValueError(f"per-run anchors and parameters disagree on the number of runs: {sorted(runs)}")
+        return runs.pop() if runs else None
+
+    @property
+    def steps(self) -> int | None:
+        """The number of steps of per-step parameters (None when none is per step)."""
+        ch = self.channel
+        steps = [np.shape(v)[1] for v in (ch.ref_power_dbm, ch.path_loss_exp) if np.ndim(v) == 3]
+        steps += [np.shape(ch.sigma_db)[1]] if np.ndim(ch.sigma_db) == 2 else []
+        return min(steps) if steps else None
+
+    def select_runs(self, runs) -> "RssModel":
+        """The model of the runs ``runs`` (a slice or indices) of its per-run anchors and parameters."""
+        ch = self.channel
+
+        def part(value, per_run_ndim):
+            return np.asarray(value)[runs] if np.ndim(value) == per_run_ndim else value
+
+        channel = PathLossModel(part(ch.ref_power_dbm, 3), part(ch.path_loss_exp, 3), part(ch.sigma_db, 2),
+                                ch.ref_distance_m, ch.wall_attenuation_db, ch.min_distance_m)
+        return RssModel(part(self.anchors_m, 3), channel, self.walls_m, self.tag_height_m)
+
+    def check_step(self, step) -> None:
+        """``step`` must index the per-step parameters (no negative wrap-around)."""
+        n_steps = self.steps
+        if isinstance(step, (bool, np.bool_)) or not isinstance(step, (int, np.integer)) or step < 0 or (
+                n_steps is not None and step >= n_steps):
+            raise ValueError(f"step must be an integer in [0, {'inf' if n_steps is None else n_steps}), got {step!r}")
+
+    def check_readings(self, rss_dbm, *, ndim: int) -> np.ndarray:
+        """Readings ``(R, m)`` (``ndim=2``) or ``(R, T, m)`` (``ndim=3``) against the model's anchors, runs and
+        steps; NaN = not heard."""
+        m = self.n_anchors
+        rss = as_array("rss_dbm", rss_dbm, ndim=ndim, nan_ok=True, trailing=(m,) if ndim == 2 else None)
+        if rss.shape[-1] != m:
+            raise ValueError(f"rss_dbm must have shape ({'runs, steps' if ndim == 3 else 'runs'}, {m}) for the model's "
+                             f"{m} anchors, got {rss.shape}")
+        runs = self.runs
+        if runs is not None and runs != rss.shape[0]:
+            raise ValueError(f"the model's per-run anchors or parameters have {runs} runs, rss_dbm has {rss.shape[0]} "
+                             f"(shape {rss.shape})")
+        if ndim == 3 and rss.shape[1]:
+            self.check_step(rss.shape[1] - 1)       # per-step parameters must cover every step
+        return rss
+
+    # -- geometry ------------------------------------------------------------------------------------
+    def _positions(self, positions_m) -> np.ndarray:
+        positions_m = as_array("positions_m", positions_m, trailing=(None, self.dim))
+        if positions_m.ndim not in (2, 3):
+            raise ValueError(f"positions_m must have shape (P, {self.dim}) or (R, P, {self.dim}), got "
+                             f"{positions_m.shape}")
+        runs = self.runs
+        if positions_m.ndim == 3 and runs is not None and positions_m.shape[0] != runs:
+            raise ValueError(f"positions_m per run {positions_m.shape} must have the model's {runs} runs on its "
+                             f"first axis (no silent broadcasting)")
+        return positions_m
+
+    def _offsets(self, positions_m):
+        """``(p - a_j)`` ``(R|1, P, m, dim)`` and the squared vertical offsets (``(R|1, 1, m)`` or 0)."""
+        anchors = self.anchors_m
+        plan = anchors[..., :self.dim]
+        if anchors.ndim == 3:
+            diff = (positions_m if positions_m.ndim == 3 else positions_m[None])[:, :, None, :] - plan[:, None]
+        else:
+            diff = positions_m[..., None, :] - plan
+        if self.tag_height_m is None:
+            return diff, None
+        vertical = anchors[..., -1] - self.tag_height_m
+        return diff, np.square(vertical if anchors.ndim == 2 else vertical[:, None, :])
+
+    def distance_m(self, positions_m) -> np.ndarray:
+        """Distances ``(R|1, P, m)`` from the positions to the anchors (3-D with ``tag_height_m``)."""
+        positions_m = self._positions(positions_m)
+        diff, vertical2 = self._offsets(positions_m)
+        with np.errstate(over="ignore", invalid="ignore"):
+            distance = np.sqrt(np.einsum("...i,...i->...", diff, diff))
+            if vertical2 is not None:
+                distance = np.sqrt(distance**2 + vertical2)
+        if not np.all(np.isfinite(distance)):           # finite inputs (checked): this is overflow
+            raise ValueError(f"the distances between positions_m and anchors_m overflow: their coordinates reach "
+                             f"{max(np.abs(positions_m).max(initial=0), np.abs(self.anchors_m).max(initial=0)):.3g} m")
+        return distance if distance.ndim == 3 else distance[None]
+
+    def _per_step(self, value, step: int, per_anchor: bool):
+        value = np.asarray(value, dtype=float)
+        if per_anchor:
+            return value[:, step, None, :] if value.ndim == 3 else value          # (R, 1, m) or (m,)
+        return value[:, step, None] if value.ndim == 2 else value                   # (R, 1) or scalar
+
+    # -- the model -----------------------------------------------------------------------------------
+    def mean_rss_dbm(self, positions_m, step: int = 0) -> np.ndarray:
+        """``h(p)`` ``(R|1, P, m)`` at positions ``(P, dim)`` or ``(R, P, dim)`` (module docstring)."""
+        positions_m = self._positions(positions_m)
+        self.check_step(step)
+        ch = self.channel
+        mean = log_distance_mean_dbm(self.distance_m(positions_m),
+                                     self._per_step(ch.ref_power_dbm, step, True),
+                                     self._per_step(ch.path_loss_exp, step, True),
+                                     ref_distance_m=ch.ref_distance_m, min_distance_m=ch.min_distance_m)
+        if self.walls_m is not None and ch.wall_attenuation_db != 0.0:
+            plan = self.anchors_m[..., :2]
+            if plan.ndim == 3:
+                crossings = np.stack([wall_crossings(positions_m[r] if positions_m.ndim == 3 else positions_m,
+                                                     plan[r], self.walls_m) for r in range(plan.shape[0])])
+            else:
+                crossings = wall_crossings(positions_m, plan, self.walls_m)
+            mean = mean - ch.wall_attenuation_db * crossings
+        return mean
+
+    def jacobian(self, positions_m, step: int = 0) -> np.ndarray:
+        """``dh_j/dp = -(10 n_j / ln 10) (p - a_j) / d_j^2`` ``(R|1, P, m, dim)`` (note 000, section 2.6), with
+        ``d_j`` the 3-D distance when the anchors have heights. Walls add a piecewise-constant term (zero
+        derivative almost everywhere). Within the clamp the factor ``1/d^2`` is capped at ``1/d_min^2`` with the
+        direction kept, as :func:`~locbook.models.channel.log_distance_gradient` does (the clamped mean itself is
+        flat there): a continuous extension that keeps Newton and EKF steps finite at an anchor."""
+        positions_m = self._positions(positions_m)
+        self.check_step(step)
+        diff, vertical2 = self._offsets(positions_m)
+        d2 = np.einsum("...i,...i->...", diff, diff)
+        if vertical2 is not None:
+            d2 = d2 + vertical2
+        d_min = self.channel.min_distance_m
+        if d_min > 0:
+            d2 = np.maximum(d2, d_min**2)
+        slope = 10.0 * self._per_step(self.channel.path_loss_exp, step, True) / np.log(10.0)
+        grad = -(slope / d2)[..., None] * diff
+        return grad if grad.ndim == 4 else grad[None]
+
+    def _sigma(self, step: int, where: str):
+        sigma = self._per_step(self.channel.sigma_db, step, False)
+        if np.any(np.asarray(sigma) <= 0):     # a model with sigma 0 gives mean readings, not a density
+            raise ValueError(f"{where} needs sigma_db > 0 (channel.sigma_db), got {self.channel.sigma_db!r} at step "
+                             f"{step}")
+        return sigma
+
+    def log_likelihood(self, rss_dbm, positions_m, step: int = 0, *, constant: bool = True) -> np.ndarray:
+        """``log p(s | p) = sum_j log N(s_j; h_j(p), sigma_j^2)`` over the heard readings ``(R, m)`` (NaN: not heard,
+        left out; a run that heard nothing gets 0) at positions ``(P, dim)`` or ``(R, P, dim)`` -> ``(R, P)``.
+
+        ``constant=False`` leaves out ``-sum_j (log sigma_j + log(2 pi) / 2)``, which does not depend on the
+        position: the particle and grid filters normalise their weights per run and use this form. Runs are
+        evaluated in blocks of about :data:`LIKELIHOOD_BLOCK_VALUES` temporaries (each run's arithmetic is the same
+        in any block)."""
+        rss = self.check_readings(rss_dbm, ndim=2)
+        positions_m = self._positions(positions_m)
+        if positions_m.ndim == 3 and positions_m.shape[0] != rss.shape[0]:
+            raise ValueError(f"positions_m per run {positions_m.shape} must have the {rss.shape[0]} runs of rss_dbm "
+                             f"{rss.shape} on its first axis (no silent broadcasting)")
+        self.check_step(step)
+        sigma = self._sigma(step, "the likelihood")
+        n_runs = rss.shape[0]
+        block = max(1, LIKELIHOOD_BLOCK_VALUES // max(1, positions_m.shape[-2] * rss.shape[1] * (self.dim + 1)))
+        if n_runs <= block:
+            return self._log_likelihood(rss, positions_m, step, constant, sigma)
+        out = np.empty((n_runs, positions_m.shape[-2]))
+        per_run = self.runs is not None
+        for start in range(0, n_runs, block):
+            rows = slice(start, start + block)
+            model = self.select_runs(rows) if per_run else self
+            out[rows] = model._log_likelihood(rss[rows], positions_m[rows] if positions_m.ndim == 3 else positions_m,
+                                              step, constant, sigma[rows] if np.ndim(sigma) == 2 else sigma)
+        return out
+
+    def _log_likelihood(self, rss, positions_m, step, constant, sigma):
+        """:meth:`log_likelihood` on checked inputs, one block of runs (``sigma`` at the step)."""
+        missing = np.isnan(rss)
+        resid = rss[:, None, :] - self.mean_rss_dbm(positions_m, step)
+        resid = np.where(missing[:, None, :], 0.0, resid)
+        if np.ndim(sigma) == 1:                # one sigma per anchor
+            resid = resid / sigma
+            out = -0.5 * np.einsum("rpm,rpm->rp", resid, resid)
+        else:
+            out = -0.5 * np.einsum("rpm,rpm->rp", resid, resid) / np.square(sigma)
+        if constant:
+            log_norm = np.broadcast_to(np.log(sigma) + 0.5 * _LOG_2PI, rss.shape)       # sigma: (), (m,) or (R, 1)
+            out = out - np.where(missing, 0.0, log_norm).sum(axis=-1)[:, None]
+        return out
+
+    def fisher_information(self, positions_m, step: int = 0, *, heard=None) -> np.ndarray:
+        """``J(p) = sum_j grad h_j grad h_j^T / sigma_j^2`` ``(R|1, P, dim, dim)``, i.e.
+        ``(10 n / (sigma ln 10))^2 sum_j (p - a_j)(p - a_j)^T / d_j^4`` (Patwari et al. 2003, Eq. (5); Ozkaya 2011,
+        App. A corrected; Dogan 2015, Eq. (4.19)), from :meth:`jacobian`. ``heard``: booleans broadcastable to
+        ``(R|1, P, m)``, False where an anchor gave no reading (its term is left out)."""
+        grad = self.jacobian(positions_m, step)
+        sigma = self._sigma(step, "the Fisher information")
+        gain = 1.0 / np.square(np.asarray(sigma, float))
+        gain = gain[..., None] if np.ndim(gain) == 2 else gain                     # (R, 1) -> (R, 1, 1)
+        gain = np.broadcast_to(gain, np.broadcast_shapes(np.shape(gain), grad.shape[:-1]))
+        if heard is not None:
+            heard = np.asarray(heard)
+            if heard.dtype != bool:
+                raise ValueError(f"heard must be booleans (False = not heard), got dtype {heard.dtype}")
+            try:
+                gain = gain * np.broadcast_to(heard, gain.shape)
+            except ValueError:
+                raise ValueError(f"heard must broadcast to {gain.shape}, got shape {heard.shape}") from None
+        return np.einsum("...j,...ji,...jk->...ik", gain, grad, grad)

@@ -17,7 +17,7 @@ MODULES = run_all.discover(BENCH)
 def test_the_benchmarks_are_discovered():
     names = {p.stem for p in MODULES}
     assert {"bench_dogan_filters", "bench_ukf_speed", "bench_bayes_filters", "bench_palvai", "bench_path_loss_fit",
-            "bench_real_data", "bench_static_localization", "bench_ukf_stability"} <= names
+            "bench_real_data", "bench_static_localization", "bench_ukf_stability", "bench_startup"} <= names
 
 
 def _positive(value):

@@ -78,7 +78,7 @@ _API = (
         "error_std_m", "empirical_cdf", "reduction_pct", "error_summary", "rmse_standard_error_m",
         "accuracy_metrics", "ACCURACY_STATISTICS",)),
     ("montecarlo", ("spawn_generators", "streams", "mc_standard_error", "bootstrap_standard_error",
-        "seed_from_values", "canonical_encoding",)),
+        "replicate_standard_error", "seed_from_values", "canonical_encoding",)),
     # measured data and floor geometry
     ("data.measured", ("MeasuredData", "Epochs", "DataFormatError", "read_readings", "read_anchors", "read_outline",
         "read_path_segments", "validate_readings", "epochs", "regular_epochs", "kolakowski2021",

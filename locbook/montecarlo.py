@@ -23,7 +23,8 @@ import numpy as np
 
 from ._validate import check_scalar
 
-__all__ = ["spawn_generators", "streams", "mc_standard_error", "bootstrap_standard_error", "seed_from_values", "canonical_encoding"]
+__all__ = ["spawn_generators", "streams", "mc_standard_error", "bootstrap_standard_error", "replicate_standard_error",
+           "seed_from_values", "canonical_encoding"]
 
 
 def spawn_generators(seed: int | np.random.SeedSequence, n: int) -> list[np.random.Generator]:
@@ -63,6 +64,21 @@ def bootstrap_standard_error(samples, statistic, rng: np.random.Generator, n_res
     resamples = x[rng.integers(0, x.size, size=(n_resamples, x.size))]
     return float(np.std(statistic(resamples, axis=-1), ddof=1))
 
+
+
+def replicate_standard_error(estimate, seeds) -> float:
+    """Standard error of an estimate that is not a mean of independent run-level values (the minimum of a bound
+    averaged over simulated trajectories, the time of that minimum): the sample standard deviation (``ddof=1``) of
+    independent replicates of the same size, ``estimate(numpy.random.default_rng(seed))`` for each seed.
+
+    For an estimate with variance ``s^2`` the expected squared result is ``s^2`` (the unbiased sample variance);
+    with few replicates it is itself uncertain (its relative standard error is about ``1 / sqrt(2 (k - 1))`` for
+    ``k`` Gaussian replicates)."""
+    seeds = list(seeds)
+    if len(seeds) < 2:
+        raise ValueError(f"seeds: a replicate standard error needs at least two replicates, got {len(seeds)}")
+    values = [estimate(np.random.default_rng(seed)) for seed in seeds]
+    return float(np.std(values, ddof=1))
 
 def _canonical(value):
     """JSON-ready form: every real number by its exact binary value (``float.hex``; 1 and 1.0 are one value),

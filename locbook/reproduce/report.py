@@ -113,7 +113,8 @@ class Report:
     def number(self, quantity: str, printed: Printed, reproduced=None, *, kind: str,
                mc_std_error: float | None = None, ambiguity: Ambiguity | None = None,
                relation: str | None = None, threshold: float | None = None, calibrated_from: str = "",
-               same_as: Printed | None = None, note: str = "") -> dict:
+               same_as: Printed | None = None, note: str = "", miss_note: str = "",
+               loose_note: str = "") -> dict:
         """Record our value of one printed quantity, with its kind, window and verdict.
 
         ``printed`` comes from the document's printed-values file (``lb.printed(document).get(...)``), never
@@ -124,6 +125,13 @@ class Report:
         ``claim`` gives ``relation`` (``>``, ``>=``, ``<``, ``<=``) against the printed threshold. ``same_as``
         marks a quantity the source prints again: the row is kept for reading but compared (and counted)
         only at the printed quantity it names.
+
+        The note is built here from the verdict, so that a notebook never computes a window: ``miss_note`` (the
+        likely reason for a miss) is used only when the verdict is ``miss`` or ``inconsistent`` (outside printed +-
+        (rounding + 2 SE + ambiguity); a claim that fails), ``loose_note`` only when it is ``loose`` (a window wider
+        than +-25 %; a claim that holds for our value but not beyond 2 standard errors), after the automatic
+        sentence that says why it is loose. ``note`` is always kept. The parts are joined by ``"; "``:
+        ``[why loose]; [miss_note or loose_note]; [note]``.
         """
         if not isinstance(printed, Printed):
             raise TypeError("printed must be a locbook.reproduce.Printed from the document's printed-values file, "
@@ -142,6 +150,9 @@ class Report:
         ours = None if reproduced is None else float(reproduced)
         s = score(kind, printed.text, ours, mc_std_error=mc_std_error, ambiguity=ambiguity,
                   relation=relation, threshold=threshold, linked=same_as is not None)
+        reason = miss_note if s.verdict in ("miss", "inconsistent") else loose_note if s.verdict == "loose" else ""
+        if reason:
+            note = f"{reason}; {note}" if note else reason
         low = s.low
         if printed.unit == "m" and math.isfinite(low):
             low = max(low, 0.0)                      # distances and errors are not negative

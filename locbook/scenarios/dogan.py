@@ -25,6 +25,8 @@ import numpy as np
 
 from ..models.channel import PathLossModel, pairwise_distance_m
 from ..reproduce.printed_values import printed
+from ..reproduce.scoring import Ambiguity
+from ..montecarlo import replicate_standard_error
 from ..errors import ParameterError
 from ..tracking.kalman import LinearMeasurement, RssMeasurement, TrackResult, extended_kalman_filter
 from ..static.localization import grid_ml_position, rss_ml_position
@@ -894,3 +896,63 @@ def table_view(rows, table: str) -> list[dict]:
         if r["table"] == table:
             out.setdefault(r["row"], {"row": r["row"]})[r["column"]] = f"{r['printed']:.3f} / {r['reproduced']:.3f}"
     return list(out.values())
+
+
+HORIZON_SOURCE = "note 000 A4; Dogan 2015 Sec. 4.1.2"
+
+
+@dataclass(frozen=True)
+class BoundStudy:
+    """The Ch. 4 bounds of one run of the study (Figs. 4.1-4.4): every SMC curve from one seed, as one figure of
+    the thesis would draw them, and independent replicate seeds for the Monte-Carlo standard error of a statistic
+    of an SMC curve. ``mse_mle_m2`` maps sigma_RSS (dB) to the per-axis MSE of the Ch. 3 MLE (P_0, and R of the
+    linear bound); the other fields are those of :func:`pcrlb_m`."""
+
+    mse_mle_m2: dict
+    n_steps: int
+    n_trajectories: int
+    smc_seed: int
+    replicate_seeds: tuple
+    acc_at_rss_epochs: bool = False
+    min_distance_m: float = 0.0
+    height_offset_m: float = 0.0
+
+    def bound_m(self, kind: str, fusion: bool, sigma_rss_db: float, sigma_acc_mps2: float = SIGMA_ACC_MPS2, *,
+                rng: np.random.Generator | None = None) -> np.ndarray:
+        """Position PCRLB (Eq. (4.23), m) per step; an SMC bound draws its trajectories from ``rng`` (default: a
+        generator of the study's one seed, so that every curve uses the same trajectories); a linear bound is
+        deterministic."""
+        if kind == "smc" and rng is None:
+            rng = np.random.default_rng(self.smc_seed)
+        elif kind != "smc":
+            rng = None
+        return pcrlb_m(kind, fusion=fusion, sigma_rss_db=sigma_rss_db, mse_mle_m2=self.mse_mle_m2[sigma_rss_db],
+                       n_steps=self.n_steps, sigma_acc_mps2=sigma_acc_mps2, rng=rng, n_trajectories=self.n_trajectories,
+                       acc_at_rss_epochs=self.acc_at_rss_epochs, min_distance_m=self.min_distance_m,
+                       height_offset_m=self.height_offset_m)
+
+    def replicate_se(self, statistic, kind: str, fusion: bool, sigma_rss_db: float,
+                     sigma_acc_mps2: float = SIGMA_ACC_MPS2) -> float:
+        """Monte-Carlo standard error of ``statistic(bound)``: the standard deviation of independent SMC replicates
+        of the same size (:func:`locbook.montecarlo.replicate_standard_error`); 0 for the deterministic linear
+        bound."""
+        if kind != "smc":
+            return 0.0
+        return replicate_standard_error(
+            lambda rng: statistic(self.bound_m(kind, fusion, sigma_rss_db, sigma_acc_mps2, rng=rng)),
+            self.replicate_seeds)
+
+
+def horizon_ambiguity(bound_m, time_s, horizon_s: float, other_horizons_s) -> Ambiguity:
+    """The averaging horizon of Figs. 4.3-4.4's time averages is not printed (note 000 A4): the ambiguity is the
+    largest change of the average of ``bound_m`` over ``time_s < h`` for the other plausible horizons ``h``, from
+    its average over the whole curve (``horizon_s``)."""
+    bound_m, time_s = np.asarray(bound_m, float), np.asarray(time_s, float)
+    if bound_m.shape != time_s.shape:
+        raise ParameterError(f"bound_m and time_s must have one shape, got {bound_m.shape} and {time_s.shape}")
+    if not len(other_horizons_s):
+        raise ParameterError("other_horizons_s must name at least one other plausible horizon")
+    size = max(abs(float(bound_m[time_s < h].mean()) - float(bound_m.mean())) for h in other_horizons_s)
+    what = (f"the averaging horizon is not printed: the largest change of the average over "
+            f"{', '.join(f'{h:g}' for h in other_horizons_s)} s from {horizon_s:g} s")
+    return Ambiguity(size, what, HORIZON_SOURCE)

@@ -13,6 +13,7 @@ import sys
 import time
 
 import nbformat
+import psutil
 import pytest
 from nbformat.v4 import new_code_cell, new_notebook
 
@@ -214,28 +215,30 @@ def cli(toy, *args):
 def processes_mentioning(text: str) -> dict[int, str]:
     """Live processes whose command line or environment mentions ``text`` (the runner and its workers carry the
     toy's paths; kernels inherit LOCBOOK_OUTPUT_DIR), and all their descendants."""
-    info = {}
-    for entry in os.listdir("/proc"):
-        if not entry.isdigit() or int(entry) == os.getpid():
+    chosen = {}
+    for proc in psutil.process_iter():
+        if proc.pid == os.getpid():
             continue
         try:
-            with open(f"/proc/{entry}/cmdline", "rb") as fh:
-                cmd = fh.read().replace(b"\0", b" ").decode(errors="replace")
-            with open(f"/proc/{entry}/environ", "rb") as fh:
-                env = fh.read().decode(errors="replace")
-            with open(f"/proc/{entry}/stat") as fh:
-                fields = fh.read().rsplit(")", 1)[1].split()
-        except OSError:
+            if proc.status() == psutil.STATUS_ZOMBIE:
+                continue
+            cmd = " ".join(proc.cmdline())
+            if text in cmd or any(text in v for v in proc.environ().values()):
+                chosen[proc.pid] = proc
+        except psutil.Error:          # gone, or not ours to read
             continue
-        if fields[0] != "Z":
-            info[int(entry)] = (int(fields[1]), cmd, text in env)
-    chosen = {pid for pid, (_, cmd, in_env) in info.items() if text in cmd or in_env}
-    grew = True
-    while grew:
-        more = {pid for pid, (ppid, *_) in info.items() if ppid in chosen} - chosen
-        chosen |= more
-        grew = bool(more)
-    return {pid: info[pid][1] for pid in sorted(chosen)}
+    for proc in list(chosen.values()):
+        try:
+            chosen.update({c.pid: c for c in proc.children(recursive=True) if c.status() != psutil.STATUS_ZOMBIE})
+        except psutil.Error:
+            pass
+    out = {}
+    for pid, proc in sorted(chosen.items()):
+        try:
+            out[pid] = " ".join(proc.cmdline())
+        except psutil.Error:
+            pass
+    return out
 
 
 def alive(pids) -> list[int]:
@@ -243,10 +246,9 @@ def alive(pids) -> list[int]:
     out = []
     for pid in pids:
         try:
-            with open(f"/proc/{pid}/stat") as fh:
-                if fh.read().rsplit(")", 1)[1].split()[0] != "Z":
-                    out.append(pid)
-        except OSError:
+            if psutil.Process(pid).status() != psutil.STATUS_ZOMBIE:
+                out.append(pid)
+        except psutil.Error:
             pass
     return out
 

@@ -26,6 +26,8 @@ import threading
 import time
 from pathlib import Path
 
+import psutil   # at import, not in the SIGTERM handler: an import there could wait on the import lock
+
 SINGLE_THREAD = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
                  "BLIS_NUM_THREADS": "1", "VECLIB_MAXIMUM_THREADS": "1", "NUMEXPR_NUM_THREADS": "1"}
 #: failures worth one more attempt: the kernel died or never answered (the papermill/ipykernel port race)
@@ -57,27 +59,18 @@ def _disk_full_in_text(text: str, default: str) -> str:
     return (match.group(1) or default) if match else ""
 
 
-def _children(pid: int) -> list[int]:
-    """Direct children of ``pid`` (Linux /proc; empty elsewhere)."""
-    out = []
-    for entry in Path("/proc").glob("[0-9]*/stat"):
-        try:
-            fields = entry.read_text().rsplit(")", 1)[1].split()
-        except OSError:
-            continue
-        if int(fields[1]) == pid:
-            out.append(int(entry.parent.name))
-    return out
-
-
 def _kill_kernels_and_exit(signum=signal.SIGTERM, _frame=None):
-    for child in _children(os.getpid()):
+    try:
+        descendants = psutil.Process().children(recursive=True)   # the kernel and anything it started
+    except psutil.Error:
+        descendants = []
+    for child in descendants:
         try:
-            os.killpg(child, signal.SIGKILL)      # the kernel leads its own session
+            os.killpg(child.pid, signal.SIGKILL)      # the kernel leads its own session
         except OSError:
             try:
-                os.kill(child, signal.SIGKILL)
-            except OSError:
+                child.kill()
+            except psutil.Error:
                 pass
     os._exit(128 + int(signum))
 

@@ -69,7 +69,7 @@ def measure(runs: int = 10_000, pf_runs: int = 100, particles: int = 10_000, ite
     rows.append(hx.row("SIR particle filter (Palvai)",
                        f"{pf_runs} runs x {particles:,} particles x {iterations} iterations, 25 locations", t_pf,
                        peak=hx.peak_mb(pf),
-                       note=f"mean error {pv.errors_m(res.mean[:, -1], s25.target).mean():.2f} m; no reference"))
+                       note=f"mean error {pv.errors_m(res.mean_m[:, -1], s25.target).mean():.2f} m; no reference"))
     return rows
 
 

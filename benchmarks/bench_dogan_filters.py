@@ -25,7 +25,7 @@ import _harness as hx  # noqa: E402
 
 import locbook as lb  # noqa: E402
 from locbook.scenarios import dogan as dg  # noqa: E402
-from locbook.tracking import kalman as _kalman  # noqa: E402
+from locbook.tracking import _compiled  # noqa: E402
 
 FILTERS = ("kalman_filter", "parallel_ekf", "serial_ekf")
 LABELS = {"kalman_filter": "KF (MLE fixes + accelerometer)", "parallel_ekf": "parallel EKF (RSS + accelerometer)",
@@ -142,7 +142,7 @@ def measure(runs: int = 500, filterpy_runs: int = 50, filters=FILTERS, repeat: i
     T = s["tr"].time_s.size
     n = min(filterpy_runs, runs)
     workload = f"{runs} runs x {T} steps"
-    paths = [("numba", True), ("numpy", False)] if _kalman._numba_ready() and _kalman._NUMBA_ENABLED else \
+    paths = [("numba", True), ("numpy", False)] if _compiled._numba_ready() and _compiled._NUMBA_ENABLED else \
         [("numpy", False)]
     rows = []
     for name in filters:
@@ -151,14 +151,14 @@ def measure(runs: int = 500, filterpy_runs: int = 50, filters=FILTERS, repeat: i
         for path, numba in paths:
             if name == "kalman_filter" and path == "numpy" and len(paths) > 1:
                 continue                                    # KF (MLE) never takes the compiled path (shared covariance)
-            saved = _kalman._NUMBA_ENABLED, _kalman._NUMBA_MIN_WORK
-            _kalman._NUMBA_ENABLED, _kalman._NUMBA_MIN_WORK = numba, 0    # the named path, whatever the size
+            saved = _compiled._NUMBA_ENABLED, _compiled._NUMBA_MIN_WORK
+            _compiled._NUMBA_ENABLED, _compiled._NUMBA_MIN_WORK = numba, 0    # the named path, whatever the size
             try:
                 locbook_filter(name, s)                     # warm-up (numba: load or compile the kernel)
                 t, cpu, ours = hx.timed(lambda: locbook_filter(name, s), repeat)
                 peak = hx.peak_mb(lambda: locbook_filter(name, s))
             finally:
-                _kalman._NUMBA_ENABLED, _kalman._NUMBA_MIN_WORK = saved
+                _compiled._NUMBA_ENABLED, _compiled._NUMBA_MIN_WORK = saved
             dx, dP = max_difference(s, ours, ref_x, ref_P)
             scale = runs / n
             label = LABELS[name] + ("" if name == "kalman_filter" else f", {path}")

@@ -13,7 +13,8 @@ from filterpy.kalman import KalmanFilter
 from scipy.stats import chi2
 
 import locbook as lb
-from locbook.tracking import kalman as K
+from locbook.tracking import _compiled as K
+from locbook.tracking import _loop
 
 try:
     import numba  # noqa: F401
@@ -70,7 +71,7 @@ def _filters(z, x0, P0, **kw):
     """Every Kalman-family filter on the same linear model (serial streams: one scalar update per component)."""
     diag_R = np.diag(np.diag(R))
     return {
-        "kalman_filter": lb.kalman_filter(z, MODEL.F, H, MODEL.Q, R, x0, P0, **kw),
+        "kalman_filter": lb.kalman_filter(MODEL.F, MODEL.Q, x0, P0, lb.LinearMeasurement(z, H, R), **kw),
         "ekf parallel": lb.extended_kalman_filter(MODEL.F, MODEL.Q, x0, P0, [lb.LinearMeasurement(z, H, R)], **kw),
         "ukf": lb.unscented_kalman_filter(MODEL.F, MODEL.Q, x0, P0, [lb.LinearMeasurement(z, H, R)], alpha=1.0, **kw),
         "ekf serial (diagonal R)": lb.extended_kalman_filter(
@@ -196,18 +197,18 @@ def test_false_alarms_on_the_filters_own_model_match_the_exact_streak_probabilit
         updates = np.isfinite(readings).any(axis=-1).sum(axis=-1)          # steps without any reading are skipped
         prob = hits[updates]
         expected, se = prob.mean(), np.sqrt(np.sum(prob * (1 - prob))) / runs
-        flagged = lb.tracking.kalman.nis_divergence(res.nis, res.nis_dof, w, p)[0]
+        flagged = lb.tracking.results.nis_divergence(res.nis, res.nis_dof, w, p)[0]
         assert abs(flagged.mean() - expected) <= 4 * se, (name, flagged.mean(), expected, se)
         loose = _filters(readings, x0, P0, divergence_window=w, divergence_probability=p)[name]
         np.testing.assert_array_equal(loose.diverged, flagged, err_msg=name)
 
 
-DEFAULT_WINDOW, DEFAULT_PROBABILITY = lb.tracking.kalman.DIVERGENCE_WINDOW, lb.tracking.kalman.DIVERGENCE_PROBABILITY
+DEFAULT_WINDOW, DEFAULT_PROBABILITY = lb.tracking.results.DIVERGENCE_WINDOW, lb.tracking.results.DIVERGENCE_PROBABILITY
 
 
 def _documented_table():
-    """The table of the module docstring of locbook.tracking.kalman: {row label: [values per dof]} and the dofs."""
-    doc = lb.tracking.kalman.__doc__
+    """The table of the module docstring of locbook.tracking.results: {row label: [values per dof]} and the dofs."""
+    doc = lb.tracking.results.__doc__
     lines = [line.strip() for line in doc.splitlines()]
     start = next(i for i, line in enumerate(lines) if line.startswith("dof "))
     dofs = [int(v) for v in lines[start].split()[1:]]
@@ -241,7 +242,7 @@ def test_the_guard_flags_a_noise_level_underestimated_by_half_as_often_as_docume
     rng = np.random.default_rng(dof)
     runs, steps = 2000, 1000
     nis = 4 * rng.chisquare(dof, (runs, steps))
-    flagged, first = lb.tracking.kalman.nis_divergence(nis, np.full((runs, steps), dof))
+    flagged, first = lb.tracking.results.nis_divergence(nis, np.full((runs, steps), dof))
     q = chi2.sf(chi2.ppf(DEFAULT_PROBABILITY, dof) / 4, dof)
     prob = _streak_probabilities(steps, DEFAULT_WINDOW, q)[-1]
     se = np.sqrt(prob * (1 - prob) / runs)
@@ -254,19 +255,19 @@ def test_integral_float_dof_are_accepted_and_others_named():
     integer type'. A float dof with integral values equals the integer dof; a fractional, negative or NaN dof is an
     error naming nis_dof."""
     nis = np.ones(30) * 100
-    got = lb.tracking.kalman.nis_divergence(nis, np.full(30, 2.0), 5)
+    got = lb.tracking.results.nis_divergence(nis, np.full(30, 2.0), 5)
     assert got[0] and got[1] == 0
     rng = np.random.default_rng(4)
     dof = rng.integers(0, 4, (3, 40))
     nis = np.where(dof > 0, 30.0 * rng.random(dof.shape), np.nan)
     for as_float in (dof.astype(float), dof.astype(np.float32), dof.astype(np.uint8)):
-        for a, b in zip(lb.tracking.kalman.nis_divergence(nis, as_float, 2, 0.9),
-                        lb.tracking.kalman.nis_divergence(nis, dof, 2, 0.9)):
+        for a, b in zip(lb.tracking.results.nis_divergence(nis, as_float, 2, 0.9),
+                        lb.tracking.results.nis_divergence(nis, dof, 2, 0.9)):
             np.testing.assert_array_equal(a, b)
     for bad in (np.full(30, 2.5), np.full(30, -1.0), np.full(30, -1), np.r_[np.full(29, 2.0), np.nan],
                 np.full(30, np.inf)):
         with pytest.raises(ValueError, match="nis_dof"):
-            lb.tracking.kalman.nis_divergence(np.ones(30) * 100, bad, 5)
+            lb.tracking.results.nis_divergence(np.ones(30) * 100, bad, 5)
 
 
 def test_a_nan_nis_at_an_update_neither_counts_nor_breaks_the_streak():
@@ -274,12 +275,12 @@ def test_a_nan_nis_at_an_update_neither_counts_nor_breaks_the_streak():
     way: it is skipped like a step without an update. It used to reset the streak."""
     nis, dof = np.full(21, 100.0), np.full(21, 2)
     nis[10] = np.nan
-    diverged, first = lb.tracking.kalman.nis_divergence(nis, dof, 20)
+    diverged, first = lb.tracking.results.nis_divergence(nis, dof, 20)
     assert diverged and first == 0                     # 20 exceedances around the NaN
-    diverged, _ = lb.tracking.kalman.nis_divergence(nis[:20], dof[:20], 20)
+    diverged, _ = lb.tracking.results.nis_divergence(nis[:20], dof[:20], 20)
     assert not diverged                                 # 19 exceedances: the NaN does not count
     nis = np.r_[np.full(5, 100.0), np.nan, np.full(5, 100.0)]
-    diverged, first = lb.tracking.kalman.nis_divergence(nis, np.full(11, 2), 6)
+    diverged, first = lb.tracking.results.nis_divergence(nis, np.full(11, 2), 6)
     assert diverged and first == 0
 
 
@@ -386,15 +387,15 @@ def test_window_rule_equals_a_per_run_loop():
                    np.nan)
     nis[rng.random(nis.shape) < 0.05] = np.nan          # NaN at some updates (dof > 0): skipped by both
     for window, p in ((1, 0.99), (3, 0.9), (4, 0.999), (41, 0.5)):
-        got = lb.tracking.kalman.nis_divergence(nis, dof, window, p)
+        got = lb.tracking.results.nis_divergence(nis, dof, window, p)
         ref = _reference_flags(nis, dof, window, p)
         np.testing.assert_array_equal(got[0], ref[0])
         np.testing.assert_array_equal(got[1], ref[1])
         if window == 3:
             assert 0 < ref[0].sum() < ref[0].size           # the pattern exercises both outcomes
-    off = lb.tracking.kalman.nis_divergence(nis, dof, 0)
+    off = lb.tracking.results.nis_divergence(nis, dof, 0)
     assert not off[0].any() and np.all(off[1] == -1)
     with pytest.raises(ValueError, match="divergence_probability"):
-        lb.tracking.kalman.nis_divergence(nis, dof, 3, 1.0)
+        lb.tracking.results.nis_divergence(nis, dof, 3, 1.0)
     with pytest.raises(ValueError, match="divergence_window"):
-        lb.kalman_filter(np.zeros((3, 2)), MODEL.F, H, MODEL.Q, R, np.zeros(4), np.eye(4), divergence_window=2.5)
+        lb.kalman_filter(MODEL.F, MODEL.Q, np.zeros(4), np.eye(4), lb.LinearMeasurement(np.zeros((3, 2)), H, R), divergence_window=2.5)

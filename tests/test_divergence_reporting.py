@@ -21,7 +21,7 @@ from locbook.scenarios import george
 from locbook.scenarios import gudipati as gu
 from locbook.scenarios import kolakowski as ko
 from locbook.scenarios import palvai as pv
-from locbook.tracking.kalman import DIVERGENCE_PROBABILITY, DIVERGENCE_WINDOW
+from locbook.tracking.results import DIVERGENCE_PROBABILITY, DIVERGENCE_WINDOW
 
 
 # ------------------------------------------------------------------------------------------------ the helper

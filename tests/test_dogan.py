@@ -96,7 +96,7 @@ def test_serial_parallel_and_kf_agree_on_a_linear_model():
     x0, P0 = np.zeros(6), np.eye(6)
     par = lb.extended_kalman_filter(model.F, model.Q, x0, P0, [lb.LinearMeasurement(z, H, R)])
     ser = lb.extended_kalman_filter(model.F, model.Q, x0, P0, [lb.LinearMeasurement(z, H, R, mode="serial")])
-    kf = lb.kalman_filter(z, model.F, H, model.Q, R, x0, P0)
+    kf = lb.kalman_filter(model.F, model.Q, x0, P0, lb.LinearMeasurement(z, H, R))
     np.testing.assert_allclose(ser.x, par.x, atol=1e-9)
     np.testing.assert_allclose(ser.P, par.P, atol=1e-12)
     np.testing.assert_allclose(par.x, kf.x, atol=1e-9)

@@ -16,7 +16,8 @@ import pytest
 from filterpy.kalman import KalmanFilter
 
 import locbook as lb
-from locbook.tracking import kalman as K
+from locbook.tracking import _compiled as K
+from locbook.tracking import _loop
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 import bench_dogan_filters as bd  # noqa: E402
@@ -95,16 +96,17 @@ def test_kalman_filter_on_dogan_fixes_equals_filterpy(dogan, uniform):
     if not uniform:
         z[3, tr.rss_steps[4]] = np.nan
         z[5, tr.rss_steps[6], 1] = np.nan
-    assert (K._shared_pattern(z) is not None) == uniform
+    assert (_loop._shared_pattern(z) is not None) == uniform
     x0, P0 = bd.dg.initial_state(s["fix"][:, 0], s["mse"], acc_var=s["p0_acc"])
     R = np.diag(s["mse"])
     H = model.position_measurement_matrix()
-    res = lb.kalman_filter(z, model.F, H, model.Q, R, x0, P0)
+    res = lb.kalman_filter(model.F, model.Q, x0, P0, lb.LinearMeasurement(z, H, R), outputs=("innovation",))
     ref_x, ref_P = _kf_reference(z, model.F, H, model.Q, R, x0, P0)
     np.testing.assert_allclose(res.x, ref_x, rtol=0, atol=TOL)
     np.testing.assert_allclose(res.P, ref_P, rtol=0, atol=TOL)
     for b in (0, 3):                  # batched = one run at a time
-        one = lb.kalman_filter(z[b], model.F, H, model.Q, R, x0[b], P0)
+        one = lb.kalman_filter(model.F, model.Q, x0[b], P0, lb.LinearMeasurement(z[b], H, R),
+                               outputs=("innovation",))
         np.testing.assert_allclose(res.x[b], one.x, rtol=0, atol=1e-12)
         np.testing.assert_allclose(res.innovation[b], one.innovation, rtol=0, atol=1e-12)
 
@@ -142,7 +144,7 @@ def _both(F, Q, x0, P0, streams, **kw):
         K._NUMBA_ENABLED = False
         a = lb.extended_kalman_filter(F, Q, x0, P0, streams, **kw)
         K._NUMBA_ENABLED, K._NUMBA_MIN_WORK = True, 0
-        setup = K._setup(F, Q, x0, P0, streams, kw.get("record"), "extended_kalman_filter")
+        setup = _loop._setup(F, Q, x0, P0, streams, kw.get("record"), "extended_kalman_filter")
         compiled = K._compiled_ekf(setup, streams, kw.get("predict_first", True))
         b = lb.extended_kalman_filter(F, Q, x0, P0, streams, **kw)
     finally:
@@ -233,7 +235,7 @@ def test_compiled_ekf_gives_way_to_numpy_errors():
     power[:, 0] = np.nan
     for mode in ("parallel", "serial"):
         meas = lb.RssMeasurement(power, anchors, lb.PathLossModel(-40.0, 2.0, 0.0), model.position_index, mode=mode)
-        setup = K._setup(model.F, np.zeros((4, 4)), np.zeros((2, 4)) + 3.0, np.zeros((4, 4)), [meas], None, "ekf")
+        setup = _loop._setup(model.F, np.zeros((4, 4)), np.zeros((2, 4)) + 3.0, np.zeros((4, 4)), [meas], None, "ekf")
         saved = K._NUMBA_ENABLED, K._NUMBA_MIN_WORK
         try:
             K._NUMBA_ENABLED, K._NUMBA_MIN_WORK = True, 0
@@ -250,7 +252,7 @@ def test_nonlinear_streams_stay_in_numpy(monkeypatch):
     z = np.random.default_rng(0).normal(size=(3, 10, 2))
     meas = lb.NonlinearMeasurement(z, lambda x: x[..., :2], np.eye(2),
                                    jacobian=lambda x: np.broadcast_to(np.eye(2, 4), x.shape[:-1] + (2, 4)))
-    setup = K._setup(model.F, model.Q, np.zeros(4), np.eye(4), [meas], None, "ekf")
+    setup = _loop._setup(model.F, model.Q, np.zeros(4), np.eye(4), [meas], None, "ekf")
     assert K._compiled_ekf(setup, [meas], True) is None
     lin = lb.extended_kalman_filter(model.F, model.Q, np.zeros(4), np.eye(4), [lb.LinearMeasurement(z, np.eye(2, 4),
                                                                                                     np.eye(2))])

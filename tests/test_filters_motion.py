@@ -50,7 +50,7 @@ def _scenario(batch=3, steps=30, seed=0):
 @pytest.mark.parametrize("joseph", [True, False])
 def test_kalman_equals_filterpy(joseph):
     model, H, z, R, x0, P0 = _scenario()
-    res = lb.kalman_filter(z, model.F, H, model.Q, R, x0, P0, joseph=joseph)
+    res = lb.kalman_filter(model.F, model.Q, x0, P0, lb.LinearMeasurement(z, H, R), joseph=joseph)
     for b in range(z.shape[0]):
         kf = KalmanFilter(dim_x=4, dim_z=2)
         kf.F, kf.H, kf.Q, kf.R, kf.x, kf.P = model.F, H, model.Q, R, x0.copy(), P0.copy()
@@ -67,16 +67,15 @@ def test_batched_per_run_R_equals_loop():
     model, H, z, _, x0, _ = _scenario(batch=4)
     Rs = np.array([np.diag([a, b]) for a, b in [(1, 2), (3, 0.5), (8.6, 0.66), (0.1, 0.1)]])
     P0 = np.eye(4)
-    batched = lb.kalman_filter(z, model.F, H, model.Q, Rs, x0, P0).x
+    batched = lb.kalman_filter(model.F, model.Q, x0, P0, lb.LinearMeasurement(z, H, Rs)).x
     for b in range(4):
-        np.testing.assert_allclose(batched[b], lb.kalman_filter(z[b], model.F, H, model.Q, Rs[b], x0, P0).x, atol=1e-13)
+        np.testing.assert_allclose(batched[b], lb.kalman_filter(model.F, model.Q, x0, P0, lb.LinearMeasurement(z[b], H, Rs[b])).x, atol=1e-13)
 
 
 def test_static_model_filter_is_recursive_least_squares():
     # F = I, Q = 0, flat prior: the filtered state is the batch least-squares mean of all measurements
     z = np.random.default_rng(3).normal(size=(40, 2))
-    res = lb.kalman_filter(z, np.eye(2), np.eye(2), np.zeros((2, 2)), np.eye(2), np.zeros(2), 1e12 * np.eye(2),
-                           predict_first=False)
+    res = lb.kalman_filter(np.eye(2), np.zeros((2, 2)), np.zeros(2), 1e12 * np.eye(2), lb.LinearMeasurement(z, np.eye(2), np.eye(2)), predict_first=False)
     np.testing.assert_allclose(res.x, np.cumsum(z, 0) / np.arange(1, 41)[:, None], atol=1e-9)
     np.testing.assert_allclose(res.P[-1], np.eye(2) / 40, atol=1e-12)
 
@@ -84,16 +83,17 @@ def test_static_model_filter_is_recursive_least_squares():
 def test_covariance_converges_to_riccati_solution():
     model = lb.constant_velocity(1.0, 0.05)
     H, R = model.position_measurement_matrix(), np.diag([2.0, 0.5])
-    res = lb.kalman_filter(np.zeros((300, 2)), model.F, H, model.Q, R, np.zeros(4), np.eye(4))
+    res = lb.kalman_filter(model.F, model.Q, np.zeros(4), np.eye(4), lb.LinearMeasurement(np.zeros((300, 2)), H, R),
+                           outputs=("P_pred",))
     p_pred = solve_discrete_are(model.F.T, H.T, model.Q, R)     # steady-state prediction covariance
     np.testing.assert_allclose(res.P_pred[-1], p_pred, rtol=1e-8)
 
 
 def test_gain_limits():
     model, H, z, _, x0, P0 = _scenario(batch=1)
-    follow = lb.kalman_filter(z, model.F, H, model.Q, 1e-12 * np.eye(2), x0, P0)
+    follow = lb.kalman_filter(model.F, model.Q, x0, P0, lb.LinearMeasurement(z, H, 1e-12 * np.eye(2)))
     np.testing.assert_allclose(model.position(follow.x), z, atol=1e-6)      # R -> 0 follows the fixes
-    keep = lb.kalman_filter(z, model.F, H, model.Q, 1e12 * np.eye(2), x0, P0)
+    keep = lb.kalman_filter(model.F, model.Q, x0, P0, lb.LinearMeasurement(z, H, 1e12 * np.eye(2)))
     np.testing.assert_allclose(keep.x, 0.0, atol=1e-6)                       # R -> inf keeps the prediction
 
 
@@ -101,7 +101,7 @@ def test_missing_measurements_predict_only():
     model, H, z, R, x0, P0 = _scenario(batch=1, steps=5)
     z = z.copy()
     z[0, 2] = np.nan
-    res = lb.kalman_filter(z, model.F, H, model.Q, R, x0, P0)
+    res = lb.kalman_filter(model.F, model.Q, x0, P0, lb.LinearMeasurement(z, H, R))
     np.testing.assert_allclose(res.x[0, 2], model.F @ res.x[0, 1])
     np.testing.assert_allclose(res.P[0, 2], model.F @ res.P[0, 1] @ model.F.T + model.Q, rtol=1e-12)   # no update
 
@@ -110,8 +110,7 @@ def test_literal_003_variant_is_running_average():
     # Eqs. (11)-(13) as printed drop the prediction: P shrinks as 1/k and x is the running mean
     z = np.random.default_rng(7).normal(size=(20, 2)) + 5.0
     model = lb.constant_velocity(1.0, 1.0)
-    res = lb.kalman_filter(z, model.F, model.position_measurement_matrix(), model.Q, np.eye(2),
-                           np.r_[z[0], 0, 0], np.diag([1.0, 1.0, 1.0, 1.0]), variant="literal_003")
+    res = lb.kalman_filter(model.F, model.Q, np.r_[z[0], 0, 0], np.diag([1.0, 1.0, 1.0, 1.0]), lb.LinearMeasurement(z, model.position_measurement_matrix(), np.eye(2)), variant="literal_003")
     k = np.arange(2, 22)[:, None]
     np.testing.assert_allclose(res.x[:, :2], (z[0] + np.cumsum(z, 0)) / k, atol=1e-12)
 
@@ -171,7 +170,7 @@ def test_batched_process_noise_equals_loop():
     model, H, z, R, x0, P0 = _scenario(batch=1)
     qs = [1e-4, 1e-2, 1.0]
     Qs = np.stack([lb.constant_velocity(1.0, q).Q for q in qs])
-    batched = lb.kalman_filter(z[0], model.F, H, Qs, R, x0, P0).x
+    batched = lb.kalman_filter(model.F, Qs, x0, P0, lb.LinearMeasurement(z[0], H, R)).x
     assert batched.shape == (3, z.shape[1], 4)
     for i, Q in enumerate(Qs):
-        np.testing.assert_allclose(batched[i], lb.kalman_filter(z[0], model.F, H, Q, R, x0, P0).x, atol=1e-13)
+        np.testing.assert_allclose(batched[i], lb.kalman_filter(model.F, Q, x0, P0, lb.LinearMeasurement(z[0], H, R)).x, atol=1e-13)

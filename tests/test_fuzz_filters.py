@@ -23,7 +23,8 @@ from hypothesis import strategies as st
 
 import locbook as lb
 from locbook.errors import LocbookError
-from locbook.tracking import kalman as K
+from locbook.tracking import _compiled as K
+from locbook.tracking import _loop
 
 MODEL = lb.constant_velocity(1.0, 0.05)
 F0, Q0 = MODEL.F, MODEL.Q
@@ -169,7 +170,7 @@ FILTER_NAMES = ["kalman_filter", "ekf numpy", "ekf numba", "ukf", "ekf nonlinear
 
 def _run(kind, a):
     if kind == "kalman_filter":
-        return lb.kalman_filter(a["z"], a["F"], H0, a["Q"], a["R"], a["x0"], a["P0"])
+        return lb.kalman_filter(a["F"], a["Q"], a["x0"], a["P0"], lb.LinearMeasurement(a["z"], H0, a["R"]))
     if kind.endswith("nonlinear"):            # the linear model written as a NonlinearMeasurement (h = H x)
         stream = [lb.NonlinearMeasurement(a["z"], lambda x: x @ H0.T, a["R"],
                                           jacobian=lambda x: np.broadcast_to(H0, x.shape[:-1] + H0.shape))]

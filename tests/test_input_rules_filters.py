@@ -48,7 +48,8 @@ def test_kalman_filter_updates_with_the_components_present():
     z[10] = np.nan                    # all missing: prediction only
     x_ref, P_ref = filterpy_reference(z)
     for joseph in (True, False):      # the short form (I - K H) P equals Joseph's in exact arithmetic
-        res = lb.kalman_filter(z, MODEL.F, H, MODEL.Q, R, X0, P0, joseph=joseph)
+        res = lb.kalman_filter(MODEL.F, MODEL.Q, X0, P0, lb.LinearMeasurement(z, H, R), joseph=joseph,
+                               outputs=("innovation",))
         np.testing.assert_allclose(res.x, x_ref, rtol=0, atol=1e-9)
         np.testing.assert_allclose(res.P, P_ref, rtol=0, atol=1e-9)
     assert np.isnan(res.innovation[3, 0]) and np.isfinite(res.innovation[3, 1])
@@ -59,7 +60,7 @@ def test_kalman_filter_updates_with_the_components_present():
 def test_property_random_masks_kf_and_ekf_agree_with_filterpy(mask):
     z = np.where(mask, np.nan, _track(3, 12))
     x_ref, P_ref = filterpy_reference(z)
-    kf = lb.kalman_filter(z, MODEL.F, H, MODEL.Q, R, X0, P0)
+    kf = lb.kalman_filter(MODEL.F, MODEL.Q, X0, P0, lb.LinearMeasurement(z, H, R))
     np.testing.assert_allclose(kf.x, x_ref, rtol=0, atol=1e-9)
     ekf = lb.extended_kalman_filter(MODEL.F, MODEL.Q, X0, P0, [lb.LinearMeasurement(z, H, R)])
     np.testing.assert_allclose(ekf.x, x_ref, rtol=0, atol=1e-9)
@@ -69,7 +70,7 @@ def test_property_random_masks_kf_and_ekf_agree_with_filterpy(mask):
 def test_singular_innovation_covariance_is_an_error_naming_the_step():
     z = _track()
     with pytest.raises(lb.SingularCovarianceError, match="at step 0"):
-        lb.kalman_filter(z, MODEL.F, H, np.zeros((4, 4)), np.zeros((2, 2)), X0, np.zeros((4, 4)))
+        lb.kalman_filter(MODEL.F, np.zeros((4, 4)), X0, np.zeros((4, 4)), lb.LinearMeasurement(z, H, np.zeros((2, 2))))
     anchors = np.array([[0.0, 0.0], [10.0, 0.0], [0.0, 10.0]])
     power = np.full((2, 5, 3), -60.0)
     power[:, 0] = np.nan                              # no reading at step 0: the failure comes at step 1
@@ -87,7 +88,7 @@ def test_a_missing_component_with_zero_noise_does_not_stop_the_filter():
     z[:, 0] = np.nan
     z[4] = np.nan
     r_zero, p0, q0 = np.diag([0.0, 0.8]), np.diag([0.0, 1.0, 0.0, 1.0]), np.zeros((4, 4))
-    res = lb.kalman_filter(z, MODEL.F, H, q0, r_zero, X0, p0)
+    res = lb.kalman_filter(MODEL.F, q0, X0, p0, lb.LinearMeasurement(z, H, r_zero))
     kf = KalmanFilter(dim_x=4, dim_z=2)
     kf.F, kf.Q, kf.x, kf.P = MODEL.F, q0, X0.copy(), p0.copy()
     for k, zk in enumerate(z):
@@ -107,7 +108,7 @@ def test_singular_three_component_update_names_the_offending_run():
     R3 = np.stack([np.eye(3), np.diag([1.0, 1.0, 0.0])])
     z = np.ones((2, 4, 3))
     with pytest.raises(lb.SingularCovarianceError, match=r"at step 0 \(run index \(1,\)\)"):
-        lb.kalman_filter(z, MODEL.F, H3, np.zeros((4, 4)), R3, X0, np.zeros((4, 4)))
+        lb.kalman_filter(MODEL.F, np.zeros((4, 4)), X0, np.zeros((4, 4)), lb.LinearMeasurement(z, H3, R3))
     with pytest.raises(lb.SingularCovarianceError, match=r"at step 0 \(run index \(1,\)\)"):
         lb.extended_kalman_filter(MODEL.F, np.zeros((4, 4)), X0, np.zeros((4, 4)), [lb.LinearMeasurement(z, H3, R3)])
 
@@ -117,8 +118,8 @@ _BAYES = lb.RssModel(_READERS, lb.PathLossModel(-52.0, 2.3, sigma_db=3.0, min_di
 
 
 @pytest.mark.parametrize("call, message", [
-    (lambda: lb.kalman_filter(_track(), MODEL.F, H[:, :3], MODEL.Q, R, X0, P0), r"H must have shape \(m, 4\)"),
-    (lambda: lb.kalman_filter(_track(), MODEL.F, H, MODEL.Q, R, X0, np.ones(4)), r"P0 must have shape \(4, 4\)"),
+    (lambda: lb.kalman_filter(MODEL.F, MODEL.Q, X0, P0, lb.LinearMeasurement(_track(), H[:, :3], R)), r"H must have shape \(m, 4\)"),
+    (lambda: lb.kalman_filter(MODEL.F, MODEL.Q, X0, np.ones(4), lb.LinearMeasurement(_track(), H, R)), r"P0 must have shape \(4, 4\)"),
     (lambda: lb.extended_kalman_filter(MODEL.F, MODEL.Q, X0, P0, [lb.LinearMeasurement(_track(), H, R)], record=[20]),
      r"record must be distinct integer step indices in \[0, 15\)"),
     (lambda: lb.RssMeasurement(np.zeros((3, 3)), _READERS, lb.PathLossModel(-40.0, 2.0, sigma_db=[3.0, 4.0]), [0, 1]),
@@ -155,11 +156,11 @@ def test_bad_input_names_the_argument_more(call, message):
 
 
 @pytest.mark.parametrize("call, message", [
-    (lambda: lb.kalman_filter(_track(), MODEL.F, H, np.ones(4), R, X0, P0), r"Q must have shape \(4, 4\)"),
-    (lambda: lb.kalman_filter(_track(), MODEL.F, H, MODEL.Q, np.ones(2), X0, P0), r"R must have shape \(2, 2\)"),
-    (lambda: lb.kalman_filter(_track(), MODEL.F, H, MODEL.Q, R, X0[:3], P0), "x0 must end in"),
-    (lambda: lb.kalman_filter(_track(), MODEL.F * np.nan, H, MODEL.Q, R, X0, P0), "F must be finite"),
-    (lambda: lb.kalman_filter(np.full((3, 2), np.inf), MODEL.F, H, MODEL.Q, R, X0, P0), "z must be finite"),
+    (lambda: lb.kalman_filter(MODEL.F, np.ones(4), X0, P0, lb.LinearMeasurement(_track(), H, R)), r"Q must have shape \(4, 4\)"),
+    (lambda: lb.kalman_filter(MODEL.F, MODEL.Q, X0, P0, lb.LinearMeasurement(_track(), H, np.ones(2))), r"R must have shape \(2, 2\)"),
+    (lambda: lb.kalman_filter(MODEL.F, MODEL.Q, X0[:3], P0, lb.LinearMeasurement(_track(), H, R)), "x0 must end in"),
+    (lambda: lb.kalman_filter(MODEL.F * np.nan, MODEL.Q, X0, P0, lb.LinearMeasurement(_track(), H, R)), "F must be finite"),
+    (lambda: lb.kalman_filter(MODEL.F, MODEL.Q, X0, P0, lb.LinearMeasurement(np.full((3, 2), np.inf), H, R)), "z must be finite"),
     (lambda: lb.extended_kalman_filter(MODEL.F, np.ones(4), X0, P0, [lb.LinearMeasurement(_track(), H, R)]),
      r"Q must have shape \(4, 4\)"),
     (lambda: lb.LinearMeasurement(_track(), H[:1], R), "H must have 2 rows"),
@@ -227,7 +228,7 @@ def _every_filter(Q=MODEL.Q, R_=R, P=P0):
     """Each filter with the given Q, R and P0 (the RSS filters take R through a LinearMeasurement stream)."""
     z = _track()
     rss = lb.RssMeasurement(_rss(z.shape[0]), ANCHORS, CHANNEL, MODEL.position_index)
-    yield lambda: lb.kalman_filter(z, MODEL.F, H, Q, R_, X0, P)
+    yield lambda: lb.kalman_filter(MODEL.F, Q, X0, P, lb.LinearMeasurement(z, H, R_))
     for flt in (lb.extended_kalman_filter, lb.unscented_kalman_filter):
         yield lambda flt=flt: flt(MODEL.F, Q, X0, P, [lb.LinearMeasurement(z, H, R_), rss])
 
@@ -262,7 +263,7 @@ def test_round_off_asymmetry_is_accepted():
 def test_kalman_filter_with_zero_steps_returns_an_empty_result():
     """Used to end in numpy's "cannot reshape array of size 0"."""
     for z in (np.empty((0, 2)), np.empty((3, 0, 2))):
-        res = lb.kalman_filter(z, MODEL.F, H, MODEL.Q, R, X0, P0)
+        res = lb.kalman_filter(MODEL.F, MODEL.Q, X0, P0, lb.LinearMeasurement(z, H, R), outputs=("innovation",))
         batch = z.shape[:-2]
         assert res.x.shape == batch + (0, 4) and res.P.shape == batch + (0, 4, 4)
         assert res.innovation.shape == batch + (0, 2) and res.nis.shape == batch + (0,)
@@ -296,7 +297,7 @@ def test_run_axes_on_F_H_and_Q_equal_one_filter_per_run():
     z = _track(5, 10)
     zb = np.broadcast_to(z, (runs,) + z.shape)
     ref = _per_run_filterpy(zb, Fs, Hs, Qs, X0, P0)
-    res = lb.kalman_filter(z, Fs, Hs, Qs, R, X0, P0)                   # run axes on F, H, Q only
+    res = lb.kalman_filter(Fs, Qs, X0, P0, lb.LinearMeasurement(z, Hs, R))                   # run axes on F, H, Q only
     np.testing.assert_allclose(res.x, ref, rtol=0, atol=1e-9)
     Hb = np.broadcast_to(H, (runs,) + H.shape)
     ref = _per_run_filterpy(zb, Fs, Hb, Qs, X0, P0)
@@ -309,7 +310,7 @@ def test_run_axes_on_F_H_and_Q_equal_one_filter_per_run():
 
 def test_run_axes_that_do_not_broadcast_are_named():
     with pytest.raises(ValueError, match=r"run \(batch\) axes.*z \(3,\).*Q \(2,\)"):
-        lb.kalman_filter(np.zeros((3, 5, 2)), MODEL.F, H, np.stack([MODEL.Q] * 2), R, X0, P0)
+        lb.kalman_filter(MODEL.F, np.stack([MODEL.Q] * 2), X0, P0, lb.LinearMeasurement(np.zeros((3, 5, 2)), H, R))
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -338,7 +339,7 @@ def test_a_singular_float32_sample_covariance_is_accepted():
         kf.predict()
         kf.update(zk)
         ref.append(kf.x.copy())
-    res = lb.kalman_filter(z, MODEL.F, H, MODEL.Q, R32, X0, P0)
+    res = lb.kalman_filter(MODEL.F, MODEL.Q, X0, P0, lb.LinearMeasurement(z, H, R32))
     np.testing.assert_allclose(res.x, np.array(ref), rtol=0, atol=1e-9)
     for call in _every_filter(R_=R32):
         assert np.all(np.isfinite(call().x))
@@ -346,7 +347,7 @@ def test_a_singular_float32_sample_covariance_is_accepted():
         assert np.all(np.isfinite(call().x))
     # float32 precision is no licence for a real negative eigenvalue
     with pytest.raises(ValueError, match="R must be positive semi-definite"):
-        lb.kalman_filter(z, MODEL.F, H, MODEL.Q, (R32 - np.float32(1e-3) * np.eye(2, dtype=np.float32)), X0, P0)
+        lb.kalman_filter(MODEL.F, MODEL.Q, X0, P0, lb.LinearMeasurement(z, H, R32 - np.float32(1e-3) * np.eye(2, dtype=np.float32)))
 
 
 @pytest.mark.parametrize("P, message", [
@@ -379,10 +380,10 @@ def test_badly_scaled_rank_deficient_covariances_are_accepted():
         P = B @ B.T
         assert np.linalg.eigvalsh(P / np.sqrt(np.outer(np.diag(P), np.diag(P))))[0] < 1e-12
         for given in (P, P.astype(np.float32), (P @ np.eye(4)).T):
-            lb.kalman_filter(_track(), MODEL.F, H, MODEL.Q, R, X0, given)
+            lb.kalman_filter(MODEL.F, MODEL.Q, X0, given, lb.LinearMeasurement(_track(), H, R))
         lb.extended_kalman_filter(MODEL.F, B @ B.T * 1e-3, X0, P0, [lb.LinearMeasurement(_track(), H, R)])
     P = np.diag([1e8, 1e8, 0.0, 0.0])                                            # zero variances, zero covariances
-    lb.kalman_filter(_track(), MODEL.F, H, MODEL.Q, R, X0, P)
+    lb.kalman_filter(MODEL.F, MODEL.Q, X0, P, lb.LinearMeasurement(_track(), H, R))
 
 
 def _overflowing_filters():
@@ -395,8 +396,8 @@ def _overflowing_filters():
     power = CHANNEL.sample_power_dbm(np.linalg.norm(5 + rng.normal(size=(3, 8, 1, 2)) - ANCHORS, axis=-1), rng)
     power[1, 2:] = 1.5e308
     x0 = MODEL.state_from(np.array([5.0, 5.0]))
-    yield "kalman_filter (one covariance)", lambda: lb.kalman_filter(z, MODEL.F, H, MODEL.Q, R, x0, P0)
-    yield "kalman_filter (batched)", lambda: lb.kalman_filter(uneven, MODEL.F, H, MODEL.Q, R, x0, P0)
+    yield "kalman_filter (one covariance)", lambda: lb.kalman_filter(MODEL.F, MODEL.Q, x0, P0, lb.LinearMeasurement(z, H, R))
+    yield "kalman_filter (batched)", lambda: lb.kalman_filter(MODEL.F, MODEL.Q, x0, P0, lb.LinearMeasurement(uneven, H, R))
     diag = np.diag(np.diag(R))
     for flt in (lb.extended_kalman_filter, lb.unscented_kalman_filter):
         kw = {} if flt is lb.extended_kalman_filter else dict(alpha=1.0)

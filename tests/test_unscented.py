@@ -59,7 +59,7 @@ def test_ukf_equals_kf_on_a_linear_model(alpha):
     rng = np.random.default_rng(7)
     model, H, R, z = _linear_setup(rng)
     x0, P0 = np.zeros(4), np.diag([4.0, 4.0, 1.0, 1.0])
-    kf = lb.kalman_filter(z, model.F, H, model.Q, R, x0, P0)
+    kf = lb.kalman_filter(model.F, model.Q, x0, P0, lb.LinearMeasurement(z, H, R))
     ukf = lb.unscented_kalman_filter(model.F, model.Q, x0, P0, [lb.LinearMeasurement(z, H, R)], alpha=alpha)
     np.testing.assert_allclose(ukf.x, kf.x, atol=1e-9)
     np.testing.assert_allclose(ukf.P, kf.P, atol=1e-9)

@@ -1,7 +1,7 @@
 """Per-document scenarios: the geometry, printed numbers and simulation protocol of each source.
 
 Divergence flags (issue 26). Every Kalman-family filter flags a run ``diverged`` when its normalised innovation
-squared stays beyond a chi-square bound for a window of consecutive updates (:mod:`locbook.tracking.kalman`, module
+squared stays beyond a chi-square bound for a window of consecutive updates (:mod:`locbook.tracking.results`, module
 docstring). The scenario functions that run such a filter pass the flags on in one way:
 
 - a function that returns positions (``george.track_with_kalman``, ``gudipati.track``, ``palvai.ekf_path``,
@@ -10,7 +10,7 @@ docstring). The scenario functions that run such a filter pass the flags on in o
   flags)``, ``flags`` a :class:`DivergenceFlags` (one filter; None for a method that runs no Kalman-family filter)
   or ``{tracker: DivergenceFlags}`` for the Kalman-family trackers among several;
 - a function that already returns the filter's own result returns it with the guard's fields filled and mapped onto
-  the scenario's step grid (``dogan.run_filter``: a ``TrackResult``), and ``dogan.ChannelRun.divergence`` holds the
+  the scenario's step grid (``dogan.run_filter``: a ``KalmanResult``), and ``dogan.ChannelRun.divergence`` holds the
   :class:`DivergenceFlags` of every filter case, keyed like its ``errors``.
 
 Where a scenario runs a filter on a subset of its runs or in segments, the flags are combined here: runs left out are
@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..tracking.kalman import DIVERGENCE_PROBABILITY, DIVERGENCE_WINDOW, nis_divergence
+from ..tracking.results import DIVERGENCE_PROBABILITY, DIVERGENCE_WINDOW, nis_divergence
 
 __all__ = ["DivergenceFlags", "divergence_note", "divergence_rows"]
 
@@ -49,7 +49,7 @@ class DivergenceFlags:
     @classmethod
     def of(cls, result, *, step_offset: int = 0, window: int = DIVERGENCE_WINDOW,
            probability: float = DIVERGENCE_PROBABILITY) -> "DivergenceFlags":
-        """The flags of a filter result (``KalmanResult``, ``TrackResult``, ``UkfResult``) whose step ``k`` is the
+        """The flags of a Kalman-family filter result (a ``KalmanResult``) whose step ``k`` is the
         scenario's step ``k + step_offset``. ``window`` and ``probability``: those the filter ran with."""
         diverged = np.asarray(result.diverged, bool)
         step = np.asarray(result.diverged_step, np.int64)
@@ -59,7 +59,7 @@ class DivergenceFlags:
     def from_nis(cls, nis, nis_dof, *, step_offset: int = 0, window: int = DIVERGENCE_WINDOW,
                  probability: float = DIVERGENCE_PROBABILITY) -> "DivergenceFlags":
         """The flags of the NIS ``batch + (T,)`` of one filter run assembled from segments (the guard's rule,
-        :func:`locbook.tracking.kalman.nis_divergence`, applied to the whole sequence)."""
+        :func:`locbook.tracking.results.nis_divergence`, applied to the whole sequence)."""
         diverged, step = nis_divergence(nis, nis_dof, window, probability)
         return cls(diverged, np.where(diverged, step + int(step_offset), -1), int(window), float(probability))
 

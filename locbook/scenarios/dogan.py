@@ -28,7 +28,9 @@ from ..reproduce.printed_values import printed
 from ..reproduce.scoring import Ambiguity
 from ..montecarlo import replicate_standard_error
 from ..errors import ParameterError
-from ..tracking.kalman import LinearMeasurement, RssMeasurement, TrackResult, extended_kalman_filter
+from ..tracking.kalman import extended_kalman_filter
+from ..tracking.results import KalmanResult
+from ..tracking.streams import LinearMeasurement, RssMeasurement
 from ..static.localization import grid_ml_position, rss_ml_position
 from ..models.motion import KinematicModel, constant_acceleration, simulate_states
 from ..bounds.pcrlb import linear_measurement_information, position_bound_m, posterior_crlb, rss_state_information
@@ -273,7 +275,7 @@ def initial_state(first_fix_m, mse_mle_m2, *, vel_var: float = P00_VEL_VAR, acc_
 
 def run_filter(name: str, trajectory: Trajectory, rss_dbm, mle_fix_m, mse_mle_m2, channel: PathLossModel, *,
                acc_mps2=None, sigma_acc_mps2: float | None = None, model: KinematicModel | None = None,
-               p0_acc_var: float = P00_ACC_VAR, serial_order: str = "descending", anchors_m=ANCHORS_M) -> TrackResult:
+               p0_acc_var: float = P00_ACC_VAR, serial_order: str = "descending", anchors_m=ANCHORS_M) -> KalmanResult:
     """One filter of Tables 3.7-3.12 on all runs at once, recorded at the RSS epochs.
 
     ``rss_dbm`` ``(..., E, m)`` and ``mle_fix_m`` ``(..., E, 2)`` are at ``trajectory.rss_steps``; the filter starts
@@ -285,7 +287,7 @@ def run_filter(name: str, trajectory: Trajectory, rss_dbm, mle_fix_m, mse_mle_m2
     ``mse_mle_m2`` is ``(2,)`` (one MSE per axis, the default reading of Eq. (3.21), A6) or ``(E, 2)``: one per RSS
     epoch, Table 4.1's R_{k+1} (A6 variant; KF (MLE) only, P_0 from the first epoch's).
 
-    The result is the filter's own :class:`~locbook.TrackResult` with the NIS guard's fields on the trajectory's grid:
+    The result is the filter's own :class:`~locbook.KalmanResult` with the NIS guard's fields on the trajectory's grid:
     ``nis``/``nis_dof`` ``(..., T)`` (NaN / 0 up to the first epoch, where the filter starts), ``diverged`` and
     ``diverged_step`` (a step of ``trajectory.time_s``); with a per-epoch MSE the segments are judged as one filter
     (:meth:`locbook.scenarios.DivergenceFlags.from_nis` on their concatenated NIS).
@@ -327,10 +329,10 @@ def run_filter(name: str, trajectory: Trajectory, rss_dbm, mle_fix_m, mse_mle_m2
     track = extended_kalman_filter(model.F, model.Q, x0, P0, measurements, record=at)
     x = np.concatenate([np.broadcast_to(x0[..., None, :], track.x.shape[:-2] + (1, 6)), track.x], axis=-2)
     P = np.concatenate([np.broadcast_to(P0[..., None, :, :], track.P.shape[:-3] + (1, 6, 6)), track.P], axis=-3)
-    return _on_trajectory_grid(TrackResult(x, P, steps), track.nis, track.nis_dof, n_steps)
+    return _on_trajectory_grid(KalmanResult(x, P, steps), track.nis, track.nis_dof, n_steps)
 
 
-def _on_trajectory_grid(result: TrackResult, nis, nis_dof, n_steps: int) -> TrackResult:
+def _on_trajectory_grid(result: KalmanResult, nis, nis_dof, n_steps: int) -> KalmanResult:
     """``result`` with the NIS guard of the filter grid after the first RSS epoch (steps ``steps[0] + 1 ..``; NIS
     ``nis``, ``nis_dof``) put on the trajectory's grid of ``n_steps`` steps: no update before the filter starts."""
     offset = n_steps - nis.shape[-1]
@@ -341,7 +343,7 @@ def _on_trajectory_grid(result: TrackResult, nis, nis_dof, n_steps: int) -> Trac
                    diverged=flags.diverged, diverged_step=flags.diverged_step)
 
 
-def _per_epoch_kf(model, x0, P0, acc_streams, z, mse, at, steps, n_steps) -> TrackResult:
+def _per_epoch_kf(model, x0, P0, acc_streams, z, mse, at, steps, n_steps) -> KalmanResult:
     """KF (MLE) with R = diag(MSE_MLE) of each epoch (Table 4.1's R_{k+1}): the same multi-rate filter
     (:func:`locbook.extended_kalman_filter`) run one inter-epoch segment at a time, each segment with its epoch's R,
     continuing from the previous segment's posterior. A segment holds one RSS update (fewer than the guard's window),
@@ -367,7 +369,7 @@ def _per_epoch_kf(model, x0, P0, acc_streams, z, mse, at, steps, n_steps) -> Tra
         track = extended_kalman_filter(model.F, model.Q, x, P, segment)
         nis.append(track.nis)
         dof.append(np.broadcast_to(track.nis_dof, track.nis.shape))
-    return _on_trajectory_grid(TrackResult(np.stack(xs, axis=-2), np.stack(Ps, axis=-3), steps),
+    return _on_trajectory_grid(KalmanResult(np.stack(xs, axis=-2), np.stack(Ps, axis=-3), steps),
                                np.concatenate(nis, axis=-1), np.concatenate(dof, axis=-1), n_steps)
 
 

@@ -19,6 +19,7 @@ import numpy as np
 from ..static.calibration import calibrate_path_loss, fix_error_covariance
 from ..models.channel import PathLossModel, pairwise_distance_m
 from ..tracking.kalman import kalman_filter
+from ..tracking.streams import LinearMeasurement
 from ..static.localization import lateration_ls
 from ..reproduce.printed_values import printed
 from ..metrics import position_error_m
@@ -187,11 +188,12 @@ def track_with_kalman(fixes_m, truth_m, *, q: float, dt_s: float = 1.0, r_mode: 
     P0[..., 2, 2] = P0[..., 3, 3] = init_velocity_var
     if init == "first_measurement":
         x0 = model.state_from(fixes_m[..., 0, :])
-        res = kalman_filter(fixes_m[..., 1:, :], model.F, H, model.Q, R, x0, P0, predict_first=True, variant=variant)
+        res = kalman_filter(model.F, model.Q, x0, P0, LinearMeasurement(fixes_m[..., 1:, :], H, R), predict_first=True,
+                            variant=variant)
         out = np.concatenate([fixes_m[..., :1, :], model.position(res.x)], axis=-2)
         # the filter's step k is marked point k + 1 (point 0 is the first fix)
         return (out, DivergenceFlags.of(res, step_offset=1)) if with_divergence else out
     x0 = model.state_from(np.broadcast_to(np.asarray(truth_m, float)[0], fixes_m.shape[:-2] + (2,)))
-    res = kalman_filter(fixes_m, model.F, H, model.Q, R, x0, P0, predict_first=False, variant=variant)
+    res = kalman_filter(model.F, model.Q, x0, P0, LinearMeasurement(fixes_m, H, R), predict_first=False, variant=variant)
     out = model.position(res.x)
     return (out, DivergenceFlags.of(res)) if with_divergence else out

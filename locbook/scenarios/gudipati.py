@@ -30,7 +30,8 @@ from ..models.trajectory import Trajectory, waypoint_trajectory
 from ..static.calibration import fix_error_covariance
 from ..static.localization import lateration_box_ls, lateration_ls
 from ..tracking.fusion import fuse_estimates
-from ..tracking.kalman import LinearMeasurement, NonlinearMeasurement, RssMeasurement, extended_kalman_filter
+from ..tracking.kalman import extended_kalman_filter
+from ..tracking.streams import LinearMeasurement, NonlinearMeasurement, RssMeasurement
 from ..tracking.unscented import unscented_kalman_filter
 from ..montecarlo import mc_standard_error
 from . import DivergenceFlags, divergence_note

@@ -35,7 +35,8 @@ from ..static.localization import (grid_ml_position, lateration_box_ls, laterati
 from ..models.rss import RssModel
 from ..tracking.bayes import grid_bayes_filter
 from ..tracking.particle import particle_filter
-from ..tracking.kalman import LinearMeasurement, RssMeasurement, extended_kalman_filter
+from ..tracking.kalman import extended_kalman_filter
+from ..tracking.streams import LinearMeasurement, RssMeasurement
 from ..tracking.unscented import unscented_kalman_filter
 from . import DivergenceFlags
 

@@ -16,7 +16,8 @@ import numpy as np
 from ..reproduce.printed_values import printed
 from ..models.channel import PathLossModel, correct_range_bias
 from ..static.least_squares import lateration_rows, least_squares_position, recursive_least_squares
-from ..tracking.kalman import NonlinearMeasurement, RssMeasurement, extended_kalman_filter
+from ..tracking.kalman import extended_kalman_filter
+from ..tracking.streams import NonlinearMeasurement, RssMeasurement
 from . import DivergenceFlags
 from ..models.rss import RssModel
 from ..tracking.particle import particle_filter

@@ -33,19 +33,22 @@ Missing readings follow the library's rule: a NaN component is left out of the u
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from .._validate import check_choice, check_scalar
 from ..models.channel import log_distance_mean_dbm
-from .kalman import (DIVERGENCE_PROBABILITY, DIVERGENCE_WINDOW, LinearMeasurement, NonlinearMeasurement,
-                     RssMeasurement, TrackResult, _UPDATE_OVERFLOW, _inv_small, _mT,
-                     _not_positive_definite, _pick_anchor, _serial_order, _Singular, _singular_runs,
-                     run_recursive_filter)
+from ._linalg import (_UPDATE_OVERFLOW, _gaussian_log_likelihood, _inv_small, _logdet, _mT, _not_positive_definite,
+                      _Singular, _singular_runs)
+from ._loop import _check_outputs, _run, _setup, _streams
+from .functional import _missing_as_nan, _Out
+from .results import DIVERGENCE_PROBABILITY, DIVERGENCE_WINDOW, KalmanResult, _check_guard, _flag
+from .streams import (LinearMeasurement, NonlinearMeasurement, RssMeasurement, _pick_anchor, _serial_linear,
+                      _serial_order)
 
 __all__ = ["UKF_WEIGHTS", "UnscentedWeights", "unscented_weights", "sigma_points", "unscented_transform",
-           "unscented_kalman_filter", "UkfResult"]
+           "unscented_kalman_filter"]
 
 UKF_WEIGHTS = ("corrected", "literal_001")
 
@@ -131,14 +134,20 @@ def unscented_transform(points, values, weights: UnscentedWeights):
     return mean, 0.5 * (cov + _mT(cov)), cross
 
 
-def _ukf_update(x, P, z, h, R, weights: UnscentedWeights, innovation_noise: bool, guard: list):
+def _ukf_update(x, P, z, h, R, weights: UnscentedWeights, innovation_noise: bool, guard: list,
+                want: bool = False) -> _Out:
     """One unscented update with measurement function ``h`` (sigma points -> values); NaN rows of ``z`` are left
-    out. ``guard[0]`` counts the updates whose ``R~`` needed flooring. Returns ``(x, P, nis, dof)``: the NIS
-    ``nu^T S^{-1} nu`` of the components present (from the inverse that gives the gain) and their number."""
+    out. ``guard[0]`` counts the updates whose ``R~`` needed flooring. Returns the posterior with the NIS
+    ``nu^T S^{-1} nu`` of the components present (from the inverse that gives the gain), their number and the
+    Gaussian log-likelihood ``log N(nu; 0, S)``; ``want``: also the innovation ``z - z^`` and ``S`` (NaN where
+    missing)."""
     valid = np.isfinite(z)
     dof = valid.sum(axis=-1)
     if not valid.any():
-        return x, P, np.zeros(x.shape[:-1]), dof
+        zero = np.zeros(x.shape[:-1])
+        if not want:
+            return _Out(x, P, zero, dof, zero)
+        return _Out(x, P, zero, dof, zero, np.full(z.shape, np.nan), np.full(z.shape + (z.shape[-1],), np.nan))
     X, L = _sigma_points(x, P, weights.lam)
     Y = h(X)
     n, m = x.shape[-1], z.shape[-1]
@@ -172,6 +181,7 @@ def _ukf_update(x, P, z, h, R, weights: UnscentedWeights, innovation_noise: bool
     S_inv = _inverse(S_use, row_ok)
     K = Pxz @ S_inv                                  # K = P_xz S^{-1}
     nis = np.where(row_ok, np.einsum("...i,...i->...", nu, (S_inv @ nu[..., None])[..., 0]), 0.0)
+    ll = np.where(row_ok, _gaussian_log_likelihood(nis, _logdet(S_use), dof), 0.0)
     x_new = x + (K @ nu[..., None])[..., 0]
     if not np.all(np.isfinite(x_new)):
         raise _Singular(~np.all(np.isfinite(x_new), axis=-1), _UPDATE_OVERFLOW)
@@ -193,7 +203,10 @@ def _ukf_update(x, P, z, h, R, weights: UnscentedWeights, innovation_noise: bool
     if keep.any():
         x_new = np.where(keep[..., None], x, x_new)
         P_new = np.where(keep[..., None, None], P, P_new)
-    return x_new, P_new, nis, dof
+    if not want:
+        return _Out(x_new, P_new, nis, dof, ll)
+    nu_out, S_out = _missing_as_nan(nu, S, valid)
+    return _Out(x_new, P_new, nis, dof, ll, nu_out, S_out)
 
 
 def _inverse(A, active):
@@ -262,24 +275,17 @@ def _rss_noise(meas: RssMeasurement, x, z, step: int):
     return np.broadcast_to(meas.variance_db2(d, ch.path_loss_exp, ch.sigma_db), z.shape)
 
 
-@dataclass(frozen=True)
-class UkfResult(TrackResult):
-    """:class:`TrackResult` plus the sigma-point settings and ``floored_updates``, the number of (run, update)
-    pairs whose ``R~`` had a negative eigenvalue floored by the guard (see the module docstring)."""
-
-    weights: UnscentedWeights = None
-    floored_updates: int = 0
-
-
 def unscented_kalman_filter(F, Q, x0, P0, measurements, *, alpha: float = 1e-3, beta: float = 2.0,
                             kappa: float = 0.0, weights: str = "corrected", innovation_noise: bool = True,
-                            record=None, predict_first: bool = True,
+                            record=None, predict_first: bool = True, outputs=(),
                             divergence_window: int | None = DIVERGENCE_WINDOW,
-                            divergence_probability: float = DIVERGENCE_PROBABILITY) -> UkfResult:
+                            divergence_probability: float = DIVERGENCE_PROBABILITY) -> KalmanResult:
     """Unscented Kalman filter with linear motion, vectorized over leading Monte-Carlo axes (Gudipati 2017,
     Sec. 3.6, corrected; see the module docstring for the printed errors and the covariance guard).
 
-    Same arguments and time loop as :func:`locbook.extended_kalman_filter`. :class:`RssMeasurement` and
+    Same arguments, time loop and result (:class:`~locbook.tracking.results.KalmanResult`, whose
+    ``floored_updates`` counts the (run, update) pairs whose ``R~`` had a negative eigenvalue floored by the guard of
+    the module docstring) as :func:`locbook.extended_kalman_filter`. :class:`RssMeasurement` and
     :class:`NonlinearMeasurement` streams are updated by the unscented transform (serial RSS streams one anchor
     at a time, each with fresh sigma points); :class:`LinearMeasurement` streams go through the unscented
     transform too, which is exact for them (so the UKF equals the KF on a linear model, a tested invariant).
@@ -289,7 +295,7 @@ def unscented_kalman_filter(F, Q, x0, P0, measurements, *, alpha: float = 1e-3, 
     ``innovation_noise=False``: Eq. (3.26) as printed, without R (flagged: with more measurements than the
     state's spread can explain, P_zz is singular and the update stops with a clear error).
 
-    ``divergence_window``, ``divergence_probability``: the consistency guard of :mod:`locbook.tracking.kalman` (its
+    ``divergence_window``, ``divergence_probability``: the consistency guard of :mod:`locbook.tracking.results` (its
     module docstring). The UKF can lose track while its covariance stays symmetric positive definite (a sigma-point
     spread far beyond the measurement's linear range, e.g. sigma = 1e-3 dB with Q = 1e4 at alpha = 1; or the
     round-off of alpha = 1e-3 over 1e5 steps): its error then grows far beyond the reported covariance, the NIS
@@ -302,9 +308,9 @@ def unscented_kalman_filter(F, Q, x0, P0, measurements, *, alpha: float = 1e-3, 
     w = unscented_weights(F_arr.shape[-1], alpha, beta, kappa, weights)
     guard = [0]
 
-    def update(x, P, z, meas, step):
+    def update(x, P, z, meas, step, want):
         try:
-            return _update(x, P, z, meas, step)
+            return _update(x, P, z, meas, step, want)
         except _Singular as exc:
             if exc.message:                  # the state covariance: already says what failed
                 raise
@@ -315,39 +321,47 @@ def unscented_kalman_filter(F, Q, x0, P0, measurements, *, alpha: float = 1e-3, 
                                      f"{printed_weights} is singular, not positive definite or not finite at step "
                                      "{step}") from None
 
-    def _update(x, P, z, meas, step):
+    def _update(x, P, z, meas, step, want):
         if isinstance(meas, LinearMeasurement):
             H, R = np.asarray(meas.H, float), np.asarray(meas.R, float)
             if meas.mode == "parallel":
                 return _ukf_update(x, P, z, lambda X: X @ _mT(H) if H.ndim == 2 else np.einsum("...mn,...kn->...km", H, X),
-                                   R, w, innovation_noise, guard)
-            nis, dof = 0.0, 0
-            for j in range(z.shape[-1]):
-                Hj = H[..., j:j + 1, :]
-                x, P, nis_j, dof_j = _ukf_update(x, P, z[..., j:j + 1], lambda X: np.einsum("...mn,...kn->...km", Hj, X),
-                                                 R[..., j:j + 1, j:j + 1], w, innovation_noise, guard)
-                nis, dof = nis + nis_j, dof + dof_j
-            return x, P, nis, dof
+                                   R, w, innovation_noise, guard, want)
+            return _serial_linear(x, P, z.shape[-1], lambda x, P, j: _ukf_update(
+                x, P, z[..., j:j + 1], lambda X: np.einsum("...mn,...kn->...km", H[..., j:j + 1, :], X),
+                R[..., j:j + 1, j:j + 1], w, innovation_noise, guard, want), want)
         if isinstance(meas, NonlinearMeasurement):
-            return _ukf_update(x, P, z, meas.h, np.asarray(meas.R, float), w, innovation_noise, guard)
+            return _ukf_update(x, P, z, meas.h, np.asarray(meas.R, float), w, innovation_noise, guard, want)
         m = z.shape[-1]
         if meas.mode == "parallel":
             sigma2 = _rss_noise(meas, x, z, step)
             return _ukf_update(x, P, z, _rss_function(meas, step), sigma2[..., :, None] * np.eye(m), w,
-                               innovation_noise, guard)
+                               innovation_noise, guard, want)
         order = _serial_order(z, meas.order)
-        nis, dof = 0.0, 0          # scalar innovations of one step: independent under the model, their NIS add up
+        nis = ll = 0.0
+        dof = 0          # scalar innovations of one step: independent under the model, their NIS add up
+        nu = np.full(x.shape[:-1] + (m,), np.nan) if want else None
+        var = np.full(x.shape[:-1] + (m,), np.nan) if want else None
         for j in range(m):
             a = order[..., j]
             zj = np.take_along_axis(z, a[..., None], -1)
-            x, P, nis_j, dof_j = _ukf_update(x, P, zj, _rss_function(meas, step, a),
-                                             np.take_along_axis(_rss_noise(meas, x, z, step), a[..., None], -1)[..., None],
-                                             w, innovation_noise, guard)
-            nis, dof = nis + nis_j, dof + dof_j
-        return x, P, nis, dof
+            o = _ukf_update(x, P, zj, _rss_function(meas, step, a),
+                            np.take_along_axis(_rss_noise(meas, x, z, step), a[..., None], -1)[..., None],
+                            w, innovation_noise, guard, want)
+            x, P, nis, dof, ll = o.x, o.P, nis + o.nis, dof + o.dof, ll + o.ll
+            if want:                         # reading j of the order goes to its anchor's column
+                col = np.broadcast_to(a, nu.shape[:-1])[..., None]
+                np.put_along_axis(nu, col, np.broadcast_to(o.nu, nu.shape[:-1] + (1,)), -1)
+                np.put_along_axis(var, col, np.broadcast_to(o.S[..., 0], nu.shape[:-1] + (1,)), -1)
+        if not want:
+            return _Out(x, P, nis, dof, ll)
+        S = np.where(np.eye(m, dtype=bool), var[..., :, None], 0.0)
+        S = np.where(np.isnan(var)[..., :, None] | np.isnan(var)[..., None, :], np.nan, S)
+        return _Out(x, P, nis, dof, ll, nu, S)
 
-    res = run_recursive_filter(F, Q, x0, P0, measurements, update, record=record, predict_first=predict_first,
-                               filter_name="unscented_kalman_filter", divergence_window=divergence_window,
-                               divergence_probability=divergence_probability)
-    return UkfResult(res.x, res.P, res.steps, res.nis, res.nis_dof, res.diverged, res.diverged_step, weights=w,
-                     floored_updates=guard[0])
+    window, probability = _check_guard(divergence_window, divergence_probability)
+    outputs = _check_outputs(outputs)
+    measurements = _streams(measurements)
+    setup = _setup(F, Q, x0, P0, measurements, record, "unscented_kalman_filter")
+    res = _run(setup, measurements, update, predict_first, outputs=outputs)
+    return _flag(replace(res, floored_updates=guard[0]), window, probability)

@@ -1,0 +1,145 @@
+"""The optional compiled EKF (numba): the same recursion as the numpy loop, run by run in compiled loops over blocks of
+runs (the kernels of :mod:`locbook.tracking._kernels`, compiled on first use).
+
+The EKF (and the KF on batched covariances) uses them when numba is installed, ``_NUMBA_ENABLED`` is True (environment
+variable ``LOCBOOK_NUMBA=0`` turns them off) and the problem has at least ``_NUMBA_MIN_WORK`` run-steps (smaller
+problems stay in numpy, with no compilation wait); streams the kernel does not cover (NonlinearMeasurement, batched F
+or Q, walls, outputs beyond x and P) run in numpy. Either way the results are the same to round-off
+(tests/test_filter_speed_equality.py), and every error is raised by the numpy loop.
+"""
+from __future__ import annotations
+
+import importlib.util
+import os
+import warnings
+
+import numpy as np
+
+from ._linalg import _mT
+from ._loop import _Setup
+from .results import KalmanResult
+from .streams import LinearMeasurement, RssMeasurement
+
+_NUMBA_ENABLED = os.environ.get("LOCBOOK_NUMBA", "1").strip().lower() not in ("0", "false", "no", "off")
+_NUMBA_MIN_WORK = int(os.environ.get("LOCBOOK_NUMBA_MIN_WORK", "20000").strip() or 20000)
+_NUMBA_STATE = {"ready": None}
+_LINEAR_PARALLEL, _LINEAR_SERIAL, _RSS_PARALLEL, _RSS_SERIAL = 0, 1, 2, 3
+
+
+def _numba_ready() -> bool:
+    """True when numba is installed (checked once, without importing it)."""
+    if _NUMBA_STATE["ready"] is None:
+        _NUMBA_STATE["ready"] = importlib.util.find_spec("numba") is not None
+    return _NUMBA_STATE["ready"]
+
+
+def _leading(value, batch, B, tail):
+    """``value`` (``tail`` or ``batch + tail`` after broadcasting) as ``(1 or B,) + tail``, contiguous."""
+    value = np.asarray(value, dtype=float)
+    if value.ndim <= len(tail):
+        return np.ascontiguousarray(np.broadcast_to(value, tail)[None])
+    return np.ascontiguousarray(np.broadcast_to(value, batch + tail).reshape((B,) + tail))
+
+
+def _pack_streams(setup: _Setup, measurements, B):
+    """The streams as the kernel's flat arrays (readings side by side on one axis), or None if one is not supported
+    (a NonlinearMeasurement: its h and Jacobian are Python functions)."""
+    batch, T, n = setup.batch, setup.T, setup.F.shape[-1]
+    kinds, cols, lin, rss, scal = [], [0], [], [], []
+    Z = np.empty((T, B, sum(z.shape[-1] for z in setup.zs)))       # time first: a step's readings side by side
+    by_time = Z.reshape((T,) + batch + Z.shape[-1:])
+    for meas, z in zip(measurements, setup.zs):
+        m = z.shape[-1]
+        c0 = cols[-1]
+        cols.append(c0 + m)
+        by_time[..., c0:c0 + m] = np.moveaxis(z, -2, 0)
+        if isinstance(meas, LinearMeasurement):
+            kinds.append(_LINEAR_PARALLEL if meas.mode == "parallel" else _LINEAR_SERIAL)
+            lin.append((c0, m, _leading(meas.H, batch, B, (m, n)), _leading(meas.R, batch, B, (m, m))))
+            scal.append((2, 1.0, 0.0, 1.0, 0.0, 0.0, (0, 0, 0), 0, False))
+        elif isinstance(meas, RssMeasurement):
+            ch = meas.channel
+            anchors = np.asarray(meas.anchors_m, dtype=float)
+            dim = anchors.shape[-1]
+            if dim > 3 or not np.isfinite(ch.wall_attenuation_db):
+                return None
+            if anchors.ndim == 2:
+                a = anchors[None, None]
+            elif anchors.ndim == 3:
+                a = anchors[None]
+            else:
+                a = np.broadcast_to(anchors, batch + anchors.shape[-3:]).reshape((B,) + anchors.shape[-3:])
+            kinds.append(_RSS_PARALLEL if meas.mode == "parallel" else _RSS_SERIAL)
+            rss.append((c0, m, dim, a, *(_leading(v, batch, B, (m,)) for v in (ch.ref_power_dbm, ch.path_loss_exp,
+                                                                                ch.sigma_db))))
+            idx = np.asarray(meas.position_index, dtype=np.int64)
+            tag = np.nan if meas.tag_height_m is None else float(meas.tag_height_m)
+            scal.append((dim, float(ch.ref_distance_m), float(ch.min_distance_m), float(meas.min_distance_m),
+                         float(meas.anchor_sigma_m), tag, tuple(idx) + (0,) * (3 - idx.size), idx.size,
+                         meas.order == "descending"))
+        else:
+            return None
+    M = cols[-1]
+    BH = max([h.shape[0] for _, _, h, _ in lin] + [1])
+    BR = max([r.shape[0] for _, _, _, r in lin] + [1])
+    H, R = np.zeros((BH, M, n)), np.zeros((BR, M, M))
+    for c0, m, h, r in lin:
+        H[:, c0:c0 + m] = h
+        R[:, c0:c0 + m, c0:c0 + m] = r
+    BA = max([e[3].shape[0] for e in rss] + [1])
+    TA = max([e[3].shape[1] for e in rss] + [1])
+    BC = max([max(e[4].shape[0], e[5].shape[0], e[6].shape[0]) for e in rss] + [1])
+    A, P0c, PLE, SIG = np.zeros((BA, TA, M, 3)), np.zeros((BC, M)), np.zeros((BC, M)), np.zeros((BC, M))
+    for c0, m, dim, a, p0, ple, sigma in rss:
+        A[:, :, c0:c0 + m, :dim] = a
+        P0c[:, c0:c0 + m], PLE[:, c0:c0 + m], SIG[:, c0:c0 + m] = p0, ple, sigma
+    dims, ref_d, ch_min, meas_min, anchor_sigma, tag_h, pidx, npos, desc = (np.array(v) for v in zip(*scal))
+    nz, nnz = np.zeros((len(kinds), n), np.int64), np.zeros(len(kinds), np.int64)
+    for s, (kind, c0, c1) in enumerate(zip(kinds, cols[:-1], cols[1:])):     # the columns a row can use
+        used = np.flatnonzero(np.any(H[:, c0:c1] != 0, axis=(0, 1))) if kind <= _LINEAR_SERIAL else \
+            np.asarray(pidx[s][:npos[s]], np.int64)
+        nz[s, :used.size], nnz[s] = used, used.size
+    return (np.array(kinds, np.int64), np.array(cols, np.int64), nz, nnz, Z, H, R, A, P0c, PLE, SIG,
+            dims.astype(np.int64), ref_d.astype(float), ch_min.astype(float), meas_min.astype(float),
+            anchor_sigma.astype(float), tag_h.astype(float), pidx.astype(np.int64).reshape(-1, 3), npos.astype(np.int64), desc.astype(np.bool_))
+
+
+def _compiled_ekf(setup: _Setup, measurements, predict_first: bool):
+    """:func:`locbook.extended_kalman_filter` by the compiled kernel when it applies (numba installed and enabled, F
+    and Q without batch axes, linear and RSS streams, a large enough problem), else None: the numpy loop then runs. It
+    also returns None when an update fails (a covariance that is not positive definite, a state that is not finite): the
+    numpy loop then redoes the filter and raises the library's error for it."""
+    global _NUMBA_ENABLED
+    F, Q, batch, T = setup.F, setup.Q, setup.batch, setup.T
+    B = int(np.prod(batch, dtype=np.int64))
+    if not _NUMBA_ENABLED or F.ndim != 2 or Q.ndim != 2 or B * T < _NUMBA_MIN_WORK or B == 0 or T == 0:
+        return None
+    if not all(isinstance(m, (LinearMeasurement, RssMeasurement)) for m in measurements):
+        return None
+    if not (np.array_equal(Q, Q.T) and np.array_equal(setup.P, _mT(setup.P))):
+        return None                 # the kernel keeps P exactly symmetric (it computes one triangle of F P F^T + Q)
+    packed = _pack_streams(setup, measurements, B)
+    if packed is None or not _numba_ready():
+        return None
+    n, S = F.shape[-1], setup.steps.size
+    Fi, Fj = np.nonzero(F)
+    P0 = setup.P[None] if setup.P.ndim == 2 else np.broadcast_to(setup.P, batch + (n, n)).reshape(B, n, n)
+    out_x, out_P = np.empty((B, S, n)), np.empty((B, S, n, n))
+    out_nis, out_dof, out_ll = np.empty((B, T)), np.empty((B, T), np.int64), np.empty((B, T))
+    args = (Fi.astype(np.int64), Fj.astype(np.int64), np.ascontiguousarray(F[Fi, Fj]), np.ascontiguousarray(Q),
+            np.ascontiguousarray(setup.x.reshape(B, n)), np.ascontiguousarray(P0), bool(predict_first),
+            setup.slot.astype(np.int64), np.array(setup.active, dtype=np.bool_).reshape(-1, T), *packed, out_x, out_P,
+            out_nis, out_dof, out_ll)
+    from . import _kernels           # lazy: numba loads only when the compiled path runs
+    try:                            # only the kernel here: an error of ours must not turn numba off for the session
+        status = _kernels._nb_ekf(*args)
+    except Exception as exc:        # numba could not compile or run the kernel here: numpy from now on
+        _NUMBA_ENABLED = False
+        warnings.warn(f"locbook: the compiled EKF failed ({type(exc).__name__}: {exc}); using the numpy loop "
+                      "(set LOCBOOK_NUMBA=0 to skip the attempt)", RuntimeWarning, stacklevel=3)
+        return None
+    if status:
+        return None
+    return KalmanResult(out_x.reshape(batch + (S, n)), out_P.reshape(batch + (S, n, n)), setup.steps,
+                        log_likelihood=out_ll.reshape(batch + (T,)), nis=out_nis.reshape(batch + (T,)),
+                        nis_dof=out_dof.reshape(batch + (T,)))

@@ -1,0 +1,333 @@
+"""The compiled EKF kernels (numba), module-level functions compiled on first call (numba caches the machine code on
+disk). Imported only by :func:`locbook.tracking._compiled._compiled_ekf` when the compiled path runs, so that
+``import locbook`` never loads numba. Without numba they are plain Python (the same arithmetic, slowly: the tests
+run them that way). Each kernel works on ``_LANES`` runs at once on the innermost axis."""
+from __future__ import annotations
+
+import numpy as np
+
+try:
+    import numba
+except ImportError:                 # plain Python kernels (only the tests call them so)
+    numba = None
+
+_LANES = 64     # runs per block of the compiled EKF: the innermost axis, long enough for LLVM to vectorise it
+_LOG_2PI = float(np.log(2.0 * np.pi))
+
+
+def _jit(fn):
+    """``fn`` compiled on first call (numba's njit), cached on disk where there is a writable cache location."""
+    if numba is None:
+        return fn
+    try:
+        return numba.njit(cache=True, nogil=True, error_model="numpy")(fn)
+    except RuntimeError:            # no writable cache location: compile in memory at each session
+        return numba.njit(nogil=True, error_model="numpy")(fn)
+
+
+@_jit
+def _nb_predict(Fi, Fj, Fv, Q, x, P, xt, T1):
+    """x = F x, P = (F P) F^T + Q in place for the lanes (last axis), F given by its nonzero entries (rows Fi,
+    columns Fj, values Fv); P symmetric in, symmetric out (the upper triangle is computed and mirrored)."""
+    n = x.shape[0]
+    for i in range(n):
+        for w in range(_LANES):
+            xt[i, w] = 0.0
+        for c in range(n):
+            for w in range(_LANES):
+                T1[i, c, w] = 0.0
+    for e in range(Fi.shape[0]):
+        i, j, v = Fi[e], Fj[e], Fv[e]
+        for w in range(_LANES):
+            xt[i, w] += v * x[j, w]
+        for c in range(n):
+            for w in range(_LANES):
+                T1[i, c, w] += v * P[j, c, w]
+    for i in range(n):
+        for w in range(_LANES):
+            x[i, w] = xt[i, w]
+        for c in range(i + 1):
+            for w in range(_LANES):
+                P[c, i, w] = 0.0
+    for e in range(Fi.shape[0]):                          # (F P) F^T, upper triangle: P[a, i] for a <= i
+        i, j, v = Fi[e], Fj[e], Fv[e]
+        for a in range(i + 1):
+            for w in range(_LANES):
+                P[a, i, w] += v * T1[a, j, w]
+    for a in range(n):
+        for c in range(a, n):
+            for w in range(_LANES):
+                P[a, c, w] += Q[a, c]
+                P[c, a, w] = P[a, c, w]
+
+
+@_jit
+def _nb_update(x, P, c, nz, nnz, H, nu, R, HP, HPH, S, L, KT, PH, D, t, u, Y, nis, hld):
+    """Kalman update in place, lane by lane (last axis), with the rows ``H[:c]`` (nonzero only in the columns
+    ``nz[:nnz]``), innovations ``nu[:c]`` and noise ``R[:c, :c]``; a missing reading is a zero row with zero
+    innovation and unit decoupled noise (its gain column is then exactly zero). K = P H^T S^{-1} (Cholesky of
+    S = H P H^T + R), x += K nu, and the Joseph form (I - K H) P (I - K H)^T + K R K^T, symmetrised, written as
+    P - K (H P) + (K S - P H^T) K^T (equal for any K). Adds each lane's NIS nu^T S^{-1} nu = |L^{-1} nu|^2 to
+    ``nis`` and half its log-determinant, sum log L_jj, to ``hld`` (a missing row adds 0 to both). False when some S
+    is not positive definite or some state not finite."""
+    n = x.shape[0]
+    for r in range(c):                                    # HP = H P, PH = P H^T
+        for j in range(n):
+            for w in range(_LANES):
+                HP[r, j, w] = 0.0
+                PH[j, r, w] = 0.0
+        for e in range(nnz):
+            i = nz[e]
+            for j in range(n):
+                for w in range(_LANES):
+                    HP[r, j, w] += H[r, i, w] * P[i, j, w]
+                    PH[j, r, w] += P[j, i, w] * H[r, i, w]
+    for r in range(c):                                    # S = H P H^T + R
+        for q in range(c):
+            for w in range(_LANES):
+                HPH[r, q, w] = 0.0
+            for e in range(nnz):
+                j = nz[e]
+                for w in range(_LANES):
+                    HPH[r, q, w] += HP[r, j, w] * H[q, j, w]
+            for w in range(_LANES):
+                S[r, q, w] = HPH[r, q, w] + R[r, q, w]
+    for j in range(c):                                    # S = L L^T
+        for w in range(_LANES):
+            t[w] = S[j, j, w]
+        for i in range(j):
+            for w in range(_LANES):
+                t[w] -= L[j, i, w] * L[j, i, w]
+        good = True
+        for w in range(_LANES):
+            good = good and t[w] > 0.0
+        if not good:
+            return False
+        for w in range(_LANES):
+            L[j, j, w] = np.sqrt(t[w])
+            hld[w] += np.log(L[j, j, w])
+        for i in range(j + 1, c):
+            for w in range(_LANES):
+                t[w] = S[i, j, w]
+            for q in range(j):
+                for w in range(_LANES):
+                    t[w] -= L[i, q, w] * L[j, q, w]
+            for w in range(_LANES):
+                L[i, j, w] = t[w] / L[j, j, w]
+    for i in range(c):                                    # NIS = |Y|^2, L Y = nu (forward substitution)
+        for w in range(_LANES):
+            Y[i, w] = nu[i, w]
+        for q in range(i):
+            for w in range(_LANES):
+                Y[i, w] -= L[i, q, w] * Y[q, w]
+        for w in range(_LANES):
+            Y[i, w] /= L[i, i, w]
+            nis[w] += Y[i, w] * Y[i, w]
+    for j in range(n):                                    # K^T = S^{-1} H P
+        for i in range(c):
+            for w in range(_LANES):
+                KT[i, j, w] = HP[i, j, w]
+            for q in range(i):
+                for w in range(_LANES):
+                    KT[i, j, w] -= L[i, q, w] * KT[q, j, w]
+            for w in range(_LANES):
+                KT[i, j, w] /= L[i, i, w]
+        for i in range(c - 1, -1, -1):
+            for q in range(i + 1, c):
+                for w in range(_LANES):
+                    KT[i, j, w] -= L[q, i, w] * KT[q, j, w]
+            for w in range(_LANES):
+                KT[i, j, w] /= L[i, i, w]
+    good = True
+    for i in range(n):                                    # x += K nu
+        for w in range(_LANES):
+            t[w] = 0.0
+        for r in range(c):
+            for w in range(_LANES):
+                t[w] += KT[r, i, w] * nu[r, w]
+        for w in range(_LANES):
+            x[i, w] += t[w]
+            good = good and np.isfinite(x[i, w])
+    if not good:
+        return False
+    for i in range(n):                                    # D = K S - P H^T
+        for r in range(c):
+            for w in range(_LANES):
+                D[i, r, w] = -PH[i, r, w]
+            for q in range(c):
+                for w in range(_LANES):
+                    D[i, r, w] += KT[q, i, w] * S[q, r, w]
+    for i in range(n):                                    # P - K (H P) + D K^T, symmetrised
+        for j in range(i, n):
+            for w in range(_LANES):
+                t[w] = P[i, j, w]
+                u[w] = P[j, i, w]
+            for r in range(c):
+                for w in range(_LANES):
+                    t[w] += D[i, r, w] * KT[r, j, w] - KT[r, i, w] * HP[r, j, w]
+                    u[w] += D[j, r, w] * KT[r, i, w] - KT[r, j, w] * HP[r, i, w]
+            for w in range(_LANES):
+                P[i, j, w] = 0.5 * (t[w] + u[w])
+                P[j, i, w] = P[i, j, w]
+    return True
+
+
+@_jit
+def _nb_rss_row(x, w, pidx, npos, tag_h, anchor, p0, ple, sigma, ref_d, ch_min, meas_min, anchor_sigma, z, parallel):
+    """One RSS reading of lane ``w`` linearised at its state: (innovation z - h(x), variance, the Jacobian's entries
+    at the ``npos`` position indices), as :func:`locbook.tracking.streams._rss_parallel_update` (``parallel``: the
+    channel's near-field clamp in h) and ``_rss_serial_update``."""
+    d2 = 0.0
+    for i in range(anchor.shape[0]):
+        u = (x[pidx[i], w] if i < npos else tag_h) - anchor[i]
+        d2 += u * u
+    if d2 < meas_min * meas_min:
+        d2 = meas_min * meas_min
+    slope = 10.0 * ple / np.log(10.0)
+    g0 = -(slope / d2) * (x[pidx[0], w] - anchor[0])
+    g1 = -(slope / d2) * (x[pidx[1], w] - anchor[1]) if npos > 1 else 0.0
+    g2 = -(slope / d2) * (x[pidx[2], w] - anchor[2]) if npos > 2 else 0.0
+    d = np.sqrt(d2)
+    dh = d
+    if parallel and ch_min > 0.0 and dh < ch_min:
+        dh = ch_min
+    h = p0 - 10.0 * ple * np.log10(dh / ref_d)
+    var = sigma * sigma
+    if anchor_sigma > 0.0:
+        u = slope * anchor_sigma / (d if d > meas_min else meas_min)
+        var += u * u
+    return z - h, var, g0, g1, g2
+
+
+@_jit
+def _nb_ekf(Fi, Fj, Fv, Q, x0, P0, predict_first, slot, active, kind, col, nz, nnz, Z, H, R, A, P0c, PLE, SIG, dims,
+            ref_d, ch_min, meas_min, anchor_sigma, tag_h, pidx, npos, descending, out_x, out_P, out_nis, out_dof,
+            out_ll):
+    """The EKF time loop of :func:`locbook.tracking._loop._run` with :func:`locbook.tracking.streams._ekf_update`, over
+    blocks of ``_LANES`` runs (the last block padded with copies of the last run), with each run's NIS, its dof and
+    log-likelihood at every step (``out_nis``, ``out_dof``, ``out_ll`` ``(B, T)``; NaN, 0 and NaN where no update).
+    Returns 0, or 1 + a run whose update failed (the caller then redoes the filter in numpy, which raises the
+    library's error)."""
+    T, B, n, ns = Z.shape[0], Z.shape[1], x0.shape[1], kind.shape[0]
+    mmax = 1
+    for s in range(ns):
+        mmax = max(mmax, col[s + 1] - col[s])
+    x, xt = np.empty((n, _LANES)), np.empty((n, _LANES))
+    P, T1 = np.empty((n, n, _LANES)), np.empty((n, n, _LANES))
+    Hr, HP, KT = np.zeros((mmax, n, _LANES)), np.empty((mmax, n, _LANES)), np.empty((mmax, n, _LANES))
+    nu, var, key = np.empty((mmax, _LANES)), np.empty((mmax, _LANES)), np.empty((mmax, _LANES))
+    Rr, S, L = np.zeros((mmax, mmax, _LANES)), np.empty((mmax, mmax, _LANES)), np.zeros((mmax, mmax, _LANES))
+    HPH, PH, D = np.empty((mmax, mmax, _LANES)), np.empty((n, mmax, _LANES)), np.empty((n, mmax, _LANES))
+    t, t2 = np.empty(_LANES), np.empty(_LANES)
+    Y, nis, dof = np.empty((mmax, _LANES)), np.zeros(_LANES), np.zeros(_LANES, np.int64)
+    hld = np.zeros(_LANES)
+    valid = np.zeros((mmax, _LANES), np.bool_)
+    sel = np.empty((mmax, _LANES), np.int64)
+    run = np.empty(_LANES, np.int64)
+    for b0 in range(0, B, _LANES):
+        for w in range(_LANES):
+            b = min(b0 + w, B - 1)
+            run[w] = b
+            for i in range(n):
+                x[i, w] = x0[b, i]
+                for j in range(n):
+                    P[i, j, w] = P0[min(b, P0.shape[0] - 1), i, j]
+        for k in range(T):
+            if predict_first or k > 0:
+                _nb_predict(Fi, Fj, Fv, Q, x, P, xt, T1)
+            for w in range(_LANES):
+                nis[w] = 0.0
+                hld[w] = 0.0
+                dof[w] = 0
+            ta = min(k, A.shape[1] - 1)
+            for s in range(ns):
+                if not active[s, k]:                      # no reading of this stream at this step in any run
+                    continue
+                c0, m, kd = col[s], col[s + 1] - col[s], kind[s]
+                serial = kd == 1 or kd == 3
+                for w in range(_LANES):                   # the update order: as given, or by descending RSS
+                    for j in range(m):
+                        sel[j, w] = j
+                    if kd == 3 and descending[s]:         # stable: ties (and the missing, last) keep their order
+                        for j in range(m):
+                            zj = Z[k, run[w], c0 + j]
+                            key[j, w] = zj if np.isfinite(zj) else -np.inf
+                        for j in range(1, m):
+                            i = j
+                            while i > 0 and key[sel[i - 1, w], w] < key[sel[i, w], w]:
+                                sel[i - 1, w], sel[i, w] = sel[i, w], sel[i - 1, w]
+                                i -= 1
+                for u in range(m if serial else 1):       # serial: one scalar update per reading
+                    rows = 1 if serial else m
+                    present = False
+                    for r in range(rows):
+                        for w in range(_LANES):
+                            b = run[w]
+                            j = sel[u, w] if serial else r
+                            zj = Z[k, b, c0 + j]
+                            valid[r, w] = np.isfinite(zj)
+                            for e in range(nnz[s]):
+                                Hr[r, nz[s, e], w] = 0.0
+                            nu[r, w] = 0.0
+                            var[r, w] = 1.0
+                            if not valid[r, w]:
+                                continue
+                            present = True
+                            dof[w] += 1
+                            if kd <= 1:
+                                bh = min(b, H.shape[0] - 1)
+                                q = 0.0
+                                for e in range(nnz[s]):
+                                    Hr[r, nz[s, e], w] = H[bh, c0 + j, nz[s, e]]
+                                    q += H[bh, c0 + j, nz[s, e]] * x[nz[s, e], w]
+                                nu[r, w] = zj - q
+                            else:
+                                bc = min(b, P0c.shape[0] - 1)
+                                nu[r, w], var[r, w], g0, g1, g2 = _nb_rss_row(
+                                    x, w, pidx[s], npos[s], tag_h[s], A[min(b, A.shape[0] - 1), ta, c0 + j, :dims[s]],
+                                    P0c[bc, c0 + j], PLE[bc, c0 + j], SIG[bc, c0 + j], ref_d[s], ch_min[s], meas_min[s],
+                                    anchor_sigma[s], zj, not serial)
+                                Hr[r, pidx[s, 0], w] = g0
+                                if npos[s] > 1:
+                                    Hr[r, pidx[s, 1], w] = g1
+                                if npos[s] > 2:
+                                    Hr[r, pidx[s, 2], w] = g2
+                    if not present:
+                        continue
+                    for r in range(rows):                 # R of the readings present, unit decoupled noise elsewhere
+                        for q in range(rows):
+                            for w in range(_LANES):
+                                if not (valid[r, w] and valid[q, w]):
+                                    Rr[r, q, w] = 1.0 if r == q else 0.0
+                                elif kd <= 1:
+                                    jr = sel[u, w] if serial else r
+                                    jq = sel[u, w] if serial else q
+                                    Rr[r, q, w] = R[min(run[w], R.shape[0] - 1), c0 + jr, c0 + jq]
+                                else:
+                                    Rr[r, q, w] = var[r, w] if r == q else 0.0
+                    if not _nb_update(x, P, rows, nz[s], nnz[s], Hr, nu, Rr, HP, HPH, S, L, KT, PH, D, t, t2, Y, nis,
+                                      hld):
+                        return b0 + 1
+            for w in range(_LANES):                       # a state or covariance that overflowed: numpy names it
+                t[w] = 0.0                                # (v - v is NaN exactly when v is not finite)
+            for i in range(n):
+                for w in range(_LANES):
+                    t[w] += x[i, w] - x[i, w]
+                for j in range(i, n):
+                    for w in range(_LANES):
+                        t[w] += P[i, j, w] - P[i, j, w]
+            for w in range(_LANES):
+                if not t[w] == 0.0:
+                    return b0 + 1
+            for w in range(min(_LANES, B - b0)):
+                out_nis[b0 + w, k] = nis[w] if dof[w] > 0 else np.nan
+                # log N(nu; 0, S) summed over the step's updates: -(NIS + log det S + dof log 2 pi) / 2
+                out_ll[b0 + w, k] = -0.5 * (nis[w] + 2.0 * hld[w] + dof[w] * _LOG_2PI) if dof[w] > 0 else np.nan
+                out_dof[b0 + w, k] = dof[w]
+            if slot[k] >= 0:
+                for w in range(min(_LANES, B - b0)):
+                    for i in range(n):
+                        out_x[b0 + w, slot[k], i] = x[i, w]
+                        for j in range(n):
+                            out_P[b0 + w, slot[k], i, j] = P[i, j, w]
+    return 0

@@ -1,0 +1,264 @@
+"""The time loop every Kalman-family filter runs (internal): the checked inputs (:func:`_setup`), then at every step the
+prediction :func:`locbook.tracking.functional.predict` and the streams' updates in the given order, each from the
+previous one's posterior, with the outputs of :class:`locbook.tracking.results.KalmanResult` recorded as asked.
+
+Speed (issue 18). While the covariance recursion is the same in every run (P0, F and Q without batch axes, linear
+streams whose H and R have none and whose missing components are the same in every run) the covariance is kept
+unbatched and updated once per step; the first update that differs between runs broadcasts it and continues batched.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .._validate import as_array
+from ._linalg import _Singular, _batch_shape, _check_state, _covariance, _mT, _raise_singular
+from .functional import _linear_update_shared, _predict
+from .results import KALMAN_OUTPUTS, KalmanResult
+from .streams import (MEASUREMENT_TYPES, LinearMeasurement, NonlinearMeasurement, RssMeasurement, _stream_name,
+                      _serial_linear, _stream_readings)
+
+@dataclass
+class _Setup:
+    """The checked inputs of a recursive filter: ``x`` ``batch + (n,)`` (a copy), ``P`` as given (possibly without
+    the batch axes), the streams' measurements ``zs`` broadcast to the batch, the steps with any reading
+    ``active`` per stream, the recorded ``steps`` with their output ``slot`` per step (-1: not recorded), and the
+    streams' first ``cols`` on the axis of a step's readings (``cols[-1]`` = M, module docstring of results)."""
+
+    F: np.ndarray
+    Q: np.ndarray
+    x: np.ndarray
+    P: np.ndarray
+    batch: tuple
+    T: int
+    steps: np.ndarray
+    slot: np.ndarray
+    zs: list
+    active: list
+    cols: np.ndarray
+
+
+def _streams(measurements) -> list:
+    """The streams as a list: one stream, or a sequence of them."""
+    if isinstance(measurements, MEASUREMENT_TYPES):
+        return [measurements]
+    try:
+        return list(measurements)
+    except TypeError:
+        raise ValueError(f"measurements must be a measurement stream or a list of them, got "
+                         f"{type(measurements).__name__}") from None
+
+
+def _check_outputs(outputs) -> frozenset:
+    """The optional outputs asked for: names among KALMAN_OUTPUTS."""
+    if isinstance(outputs, str):
+        outputs = (outputs,)
+    try:
+        names = frozenset(outputs or ())
+    except TypeError:
+        raise ValueError(f"outputs must be a sequence of names among {KALMAN_OUTPUTS}, got {outputs!r}") from None
+    unknown = sorted(str(v) for v in names - set(KALMAN_OUTPUTS))
+    if unknown:
+        raise ValueError(f"outputs must name fields among {KALMAN_OUTPUTS}, got {unknown}")
+    return names
+
+
+def _setup(F, Q, x0, P0, measurements, record, filter_name) -> _Setup:
+    """The input checks of every Kalman-family filter (once, before the time loop)."""
+    F = as_array("F", F)
+    if F.ndim < 2 or F.shape[-1] != F.shape[-2]:
+        raise ValueError(f"F must be square (n, n) or batch + (n, n), got {F.shape}")
+    n = F.shape[-1]
+    Q = _covariance("Q", Q, n)
+    measurements = _streams(measurements)
+    if not all(isinstance(m, MEASUREMENT_TYPES) for m in measurements):
+        raise ValueError("measurements must be LinearMeasurement, RssMeasurement or NonlinearMeasurement streams, got "
+                         f"{[type(m).__name__ for m in measurements]}")
+    for meas in measurements:
+        if isinstance(meas, LinearMeasurement) and np.shape(meas.H)[-1] != n:
+            raise ValueError(f"LinearMeasurement.H must have shape (m, {n}) or batch + (m, {n}) (one column per state "
+                             f"component), got {np.shape(meas.H)}")
+        if isinstance(meas, RssMeasurement) and np.max(meas.position_index) >= n:
+            raise ValueError(f"RssMeasurement.position_index {meas.position_index} is outside the {n}-state")
+    streams = [_stream_readings(m) for m in measurements]
+    if not streams:
+        raise ValueError(f"{filter_name} needs at least one measurement stream")
+    T = {np.shape(s)[-2] for s in streams}
+    if len(T) != 1:
+        raise ValueError(f"measurement streams must share one time grid, got lengths {sorted(T)}")
+    T = T.pop()
+    x = as_array("x0", x0)
+    if x.ndim < 1 or x.shape[-1] != n:
+        raise ValueError(f"x0 must end in ({n},); got {x.shape}")
+    P = _covariance("P0", P0, n)
+    # every argument with run axes sets the batch (a batched Q alone runs one filter per Q)
+    batch = _batch_shape(*(named for m, s in zip(measurements, streams) for named in _stream_batch_shapes(m, s)),
+                         ("x0", x.shape[:-1]), ("P0", P.shape[:-2]), ("F", F.shape[:-2]), ("Q", Q.shape[:-2]))
+    x = np.broadcast_to(x, batch + (n,)).copy()
+    steps = np.arange(T) if record is None else np.asarray(record)
+    if record is not None and (steps.ndim != 1 or not np.issubdtype(steps.dtype, np.integer)
+                               or np.any(steps < 0) or np.any(steps >= T) or np.unique(steps).size != steps.size):
+        raise ValueError(f"record must be distinct integer step indices in [0, {T}), got {record!r}")
+    slot = np.full(T, -1)
+    slot[steps] = np.arange(steps.size)
+    zs = [np.broadcast_to(np.asarray(s, dtype=float), batch + np.shape(s)[-2:]) for s in streams]
+    active = [_steps_with_readings(z) for z in zs]
+    cols = np.concatenate([[0], np.cumsum([z.shape[-1] for z in zs])]).astype(np.int64)
+    return _Setup(F, Q, x, P, batch, T, steps, slot, zs, active, cols)
+
+
+def _stream_batch_shapes(meas, z):
+    """The run axes that a stream's arrays carry, named: its readings ``batch + (T, m)`` and its parameters (H, R,
+    anchors per step ``batch + (T, m, dim)``, channel parameters ``batch + (1 or m,)``)."""
+    name = _stream_name(meas)
+    if isinstance(meas, RssMeasurement):
+        ch = meas.channel
+        return [(f"{name}.power_dbm", np.shape(z)[:-2]), (f"{name}.anchors_m", np.shape(meas.anchors_m)[:-3])] + \
+            [(f"{name}.channel.{v}", np.shape(getattr(ch, v))[:-1]) for v in ("ref_power_dbm", "path_loss_exp",
+                                                                              "sigma_db")]
+    shapes = [(f"{name}.z", np.shape(z)[:-2]), (f"{name}.R", np.shape(meas.R)[:-2])]
+    if isinstance(meas, LinearMeasurement):
+        shapes.append((f"{name}.H", np.shape(meas.H)[:-2]))
+    return shapes
+
+
+def _steps_with_readings(z):
+    """``(T,)``: the steps at which ``z`` ``batch + (T, m)`` has a reading in some run (batch axes reduced first:
+    one pass over contiguous memory)."""
+    if z.size == 0:
+        return np.zeros(z.shape[-2], bool)
+    finite = np.isfinite(z).reshape(-1, z.shape[-2] * z.shape[-1])
+    return finite.any(axis=0).reshape(z.shape[-2:]).any(axis=-1)
+
+
+def _shared_pattern(z):
+    """The missing-component pattern ``(T, m)`` of measurements ``batch + (T, m)`` when it is the same in every run
+    (then a linear filter's covariance recursion is the same in every run too), else None."""
+    if z.size == 0:
+        return None
+    finite = np.isfinite(z)
+    flat = finite.reshape((-1,) + finite.shape[-2:])
+    if flat.shape[0] == 0 or not (flat == flat[0]).all():
+        return None
+    return flat[0]
+
+
+def _covariance_shared_throughout(setup: _Setup, measurements) -> bool:
+    """True when the covariance recursion is the same in every run at every step (a linear filter with P0, F, Q, H
+    and R without batch axes and the same components missing in every run): the numpy loop then updates one
+    covariance per step, which beats running the runs one by one."""
+    if setup.F.ndim != 2 or setup.Q.ndim != 2 or setup.P.ndim != 2:
+        return False
+    return all(isinstance(meas, LinearMeasurement) and np.ndim(meas.H) == 2 and np.ndim(meas.R) == 2
+               and _shared_pattern(z) is not None for meas, z in zip(measurements, setup.zs))
+
+
+def _shared_linear_update(x, P, z, meas, joseph: bool = True, want: bool = False):
+    """The update of a :class:`LinearMeasurement` on an unbatched covariance ``P (n, n)`` when H and R have no batch
+    axes and the same components are present in every run; else None (the caller goes batched)."""
+    if not isinstance(meas, LinearMeasurement):
+        return None
+    H, R = np.asarray(meas.H, float), np.asarray(meas.R, float)
+    if H.ndim != 2 or R.ndim != 2:
+        return None
+    finite = np.isfinite(z)
+    m = finite.shape[-1]
+    flat = finite.reshape(-1, m)
+    if flat.shape[0] == 0 or not (flat == flat[0]).all():
+        return None
+    present = flat[0]
+    if meas.mode == "parallel":
+        return _linear_update_shared(x, P, z, present, H, R, joseph=joseph, want=want)
+    return _serial_linear(x, P, m, lambda x, P, j: _linear_update_shared(
+        x, P, z[..., j:j + 1], present[j:j + 1], H[j:j + 1], R[j:j + 1, j:j + 1], joseph=joseph, want=want), want)
+
+
+def _run(setup: _Setup, measurements, update, predict_first: bool, *, shared: bool = False, literal: bool = False,
+         joseph: bool = True, outputs=frozenset()) -> KalmanResult:
+    """The time loop: at every step predict (unless ``predict_first`` is False at step 0), then apply the streams
+    present at that step in order with ``update(x, P, z_k, stream, k, want)`` (each from the previous one's
+    posterior; it returns a :class:`locbook.tracking.functional._Out`). ``shared``: keep the covariance unbatched
+    while it is the same in every run (module docstring; the linear streams' update in the Joseph form or, with
+    ``joseph=False``, the short form). ``literal``: the updates start from the previous
+    posterior instead of the prediction, and a run without a reading takes the prediction (document 003's printed
+    update, :func:`locbook.kalman_filter`). ``outputs``: the optional fields to record (results.KALMAN_OUTPUTS)."""
+    F, Q, x, batch, n = setup.F, setup.Q, setup.x, setup.batch, setup.F.shape[-1]
+    shared = shared and F.ndim == 2 and Q.ndim == 2 and setup.P.ndim == 2
+    P = setup.P.copy() if shared else np.broadcast_to(setup.P, batch + (n, n)).copy()
+    steps, slot, T, cols = setup.steps, setup.slot, setup.T, setup.cols
+    R, M = steps.size, int(cols[-1])
+    out_x = np.empty(batch + (R, n))
+    out_P = np.empty(batch + (R, n, n))
+    out_nis = np.full(batch + (T,), np.nan)
+    out_ll = np.full(batch + (T,), np.nan)
+    out_dof = np.zeros(batch + (T,), np.int64)
+    out_xp = np.empty(batch + (R, n)) if "x_pred" in outputs else None
+    out_Pp = np.empty(batch + (R, n, n)) if "P_pred" in outputs else None
+    out_nu = np.full(batch + (R, M), np.nan) if "innovation" in outputs else None
+    out_S = np.full(batch + (R, M, M), np.nan) if "S" in outputs else None
+    want = out_nu is not None or out_S is not None
+    if out_S is not None:           # the streams' blocks of a step's S (its updates' innovations are independent)
+        block = np.zeros((M, M), bool)
+        for c0, c1 in zip(cols[:-1], cols[1:]):
+            block[c0:c1, c0:c1] = True
+    Ft = np.ascontiguousarray(_mT(F))
+    for k in range(T):
+        if predict_first or k > 0:
+            x_pred, P_pred = _predict(x, P, F, Q, Ft)
+            _check_state(k, x_pred, P_pred)          # an overflow in the prediction is named as such
+        else:
+            x_pred, P_pred = x, P
+        # document 003's printed update starts from the previous posterior, not the prediction
+        x, P = (x, P) if literal else (x_pred, P_pred)
+        s = slot[k]
+        if s >= 0 and out_xp is not None:
+            out_xp[..., s, :] = x
+        if s >= 0 and out_Pp is not None:
+            out_Pp[..., s, :, :] = P
+        nis, dof, ll = 0.0, 0, 0.0
+        for i, (meas, z, act) in enumerate(zip(measurements, setup.zs, setup.active)):
+            if not act[k]:
+                continue
+            try:
+                out = None
+                if shared:
+                    out = _shared_linear_update(x, P, z[..., k, :], meas, joseph, want)
+                    if out is None:
+                        shared = False
+                        P = np.broadcast_to(P, batch + (n, n)).copy()
+                        if literal:
+                            P_pred = np.broadcast_to(P_pred, batch + (n, n))
+                if out is None:
+                    out = update(x, P, z[..., k, :], meas, k, want)
+            except _Singular as exc:
+                _raise_singular(k, exc.bad, f"innovation covariance of the {_stream_name(meas)} update", exc.message)
+            x, P = out.x, out.P
+            nis, dof, ll = nis + out.nis, dof + out.dof, ll + out.ll
+            if want and s >= 0:
+                c0, c1 = cols[i], cols[i + 1]
+                if out_nu is not None:
+                    out_nu[..., s, c0:c1] = out.nu
+                if out_S is not None:
+                    out_S[..., s, c0:c1, c0:c1] = out.S
+        if literal:                               # a run without a reading at this step takes the prediction
+            updated = np.asarray(dof) > 0
+            if shared:
+                if not updated:
+                    x, P = x_pred, P_pred
+            elif not updated.all():
+                x = np.where(updated[..., None], x, x_pred)
+                P = np.where(updated[..., None, None], P, P_pred)
+        _check_state(k, x, P)
+        if out_S is not None and s >= 0:          # zero off the blocks, NaN in the rows and columns of missing readings
+            v = np.concatenate([np.isfinite(z[..., k, :]) for z in setup.zs], axis=-1)
+            out_S[..., s, :, :] = np.where(v[..., :, None] & v[..., None, :],
+                                           np.where(block, out_S[..., s, :, :], 0.0), np.nan)
+        has = np.asarray(dof) > 0
+        out_nis[..., k] = np.where(has, nis, np.nan)
+        out_ll[..., k] = np.where(has, ll, np.nan)
+        out_dof[..., k] = dof
+        if s >= 0:
+            out_x[..., s, :] = x
+            out_P[..., s, :, :] = P
+    return KalmanResult(out_x, out_P, steps, out_xp, out_Pp, out_nu, out_S, out_ll, out_nis, out_dof)

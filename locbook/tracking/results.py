@@ -1,0 +1,191 @@
+"""The result of every Kalman-family filter and the consistency guard on its innovations.
+
+:class:`KalmanResult` is what :func:`locbook.kalman_filter`, :func:`locbook.extended_kalman_filter` (parallel and
+serial) and :func:`locbook.unscented_kalman_filter` return: posterior means and covariances at the recorded steps, the
+per-step Gaussian log-likelihood of the innovations, the normalised innovation squared (NIS) and the guard's flags; on
+request (``outputs=``) the priors, innovations and innovation covariances at the recorded steps.
+
+Innovations of several streams and of serial updates. A step's readings are laid side by side on one axis of ``M``
+columns: the streams in the order given, each stream's readings in its own column order (a serial RSS stream's column
+``j`` is anchor ``j``, whatever the update order). A sequential update's innovation is taken at the state updated so
+far (the previous streams' or readings' posterior), as the filter uses it. Under the filter's model the innovations of
+the sequential updates of one step are independent (each is conditioned on the previous ones), so the covariance of
+the stacked innovations is block diagonal: ``S`` holds each update's innovation covariance on its block (a parallel
+stream: its ``m x m`` block; a serial stream: one ``1 x 1`` block per reading) and zeros off the blocks. The step's
+log-likelihood, ``log N(nu; 0, S)`` of the present readings, is therefore the sum over its updates of
+``-(nu_u^T S_u^{-1} nu_u + log det S_u + m_u log 2 pi) / 2`` (the prediction-error decomposition; exact for linear
+streams, to first order for RSS and other nonlinear streams). A missing reading is NaN in ``innovation`` and in its row
+and column of ``S``.
+
+Memory. ``x``, ``P`` and the optional ``x_pred``, ``P_pred``, ``innovation`` (``batch + (R, M)``) and ``S``
+(``batch + (R, M, M)``) are kept at the ``record`` steps only (``R`` of them; default every step), and the optional ones
+only when named in ``outputs``; ``log_likelihood``, ``nis`` and ``nis_dof`` are ``batch + (T,)`` scalars per step.
+
+Consistency guard (issue 26). Every Kalman-family filter (:func:`locbook.kalman_filter` and
+:func:`locbook.extended_kalman_filter`, numpy and compiled paths, and :func:`locbook.unscented_kalman_filter`) returns
+the normalised innovation squared of each run and step,
+
+    NIS_k = sum over the updates u of step k of  nu_u^T S_u^{-1} nu_u,      dof_k = sum of their dimensions,
+
+(``nu`` the innovation, ``S`` its covariance, the components present only; NaN where step k has no update). It is a
+by-product of the update (the solve or Cholesky of S that gives the gain also gives ``S^{-1} nu``). Under the filter's
+own model the innovations of one step are independent Gaussians (the sequential updates of one step, e.g. the serial
+EKF's scalar updates or several streams, are each conditioned on the previous ones, so their innovations are
+independent), so ``NIS_k ~ chi^2(dof_k)``, and the NIS of different steps are independent. That is exact for linear
+streams (the KF; LinearMeasurement streams in the EKF and UKF) and holds to first order for RSS and other nonlinear
+streams (their innovation is Gaussian only as far as h is linear over the state's spread). A run is flagged
+``diverged`` when its NIS exceeds ``chi2.ppf(divergence_probability, dof_k)`` at ``divergence_window`` consecutive
+updates (steps without an update, or whose NIS is NaN, neither count nor break the streak); ``diverged_step`` is the
+first step of the first such window (-1 where not diverged). On a consistent filter each update exceeds the bound with
+probability 1 - p, so a run of T updates is flagged with the probability of a streak of w among T Bernoulli(1 - p)
+trials, at most ``(T - w + 1) (1 - p)^w`` (``(1 - p)^w = 1e-60`` at the defaults w = 20, p = 0.999).
+
+What the guard flags: runs whose innovations stay inconsistent with the filter's own S. A filter that has lost track
+(an error far beyond its reported covariance) exceeds the bound at every update; but so, at many readings per step,
+does a filter whose noise level is badly mis-specified. With sigma underestimated by half and R dominating S the NIS
+is 4 chi^2(dof), each update exceeds the bound with probability q = chi2.sf(chi2.ppf(p, dof) / 4, dof), and the exact
+probability that a run of T updates is flagged at the defaults (a streak of 20 exceedances) is
+
+    dof                1        2        4        6        8        9        10       12
+    q per update:      0.1      0.18     0.33     0.47     0.59     0.64     0.69     0.77
+    flagged, T = 1e3:  8.7e-18  8.1e-13  1.4e-07  0.00013  0.0098   0.046    0.16     0.69
+    flagged, T = 1e4:  8.8e-17  8.2e-12  1.5e-06  0.0013   0.095    0.38     0.82     1
+
+(dof: the readings of one update, e.g. 2 for a position fix, one per anchor heard for RSS). Up to about 6 readings per
+step such a filter is practically never flagged; from 8 a growing share of long runs is, from 12 nearly every run. A
+flag says "this run's innovations contradict its covariance" (lost, or a noise level far off), not "this run lost
+track". ``divergence_window=0`` (or None) turns the guard off (nothing is flagged; NIS is still returned). The flags
+never change the estimates; a diverged run is the caller's to count and show, not to average silently.
+
+Batch isolation: the one exception. Elsewhere in locbook a bad problem of a batch gets NaN and a status while the others
+go on. Here a run whose state or covariance overflows (a reading of 1.5e308 dBm, fixes of 1e300 m, a huge F, Q or P0)
+or whose innovation covariance is singular raises a SingularCovarianceError for the whole batch, naming the step and
+the first such run. Why: on the shared-covariance paths (above) one P, S and K serve every run, so there is no per-run
+covariance to set aside; on the batched and compiled paths a failed run would have to be carried to the end as a dead
+lane (left out of every update and check, NaN in the output) so that the others go on untouched. That dead-lane mask
+is planned for every path; until then such a run is an error, never a NaN or a confident answer.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from .._validate import check_scalar
+
+__all__ = ["KalmanResult", "nis_divergence", "DIVERGENCE_WINDOW", "DIVERGENCE_PROBABILITY", "KALMAN_OUTPUTS"]
+
+#: defaults of the consistency guard (module docstring): consecutive updates, and the chi-square probability
+DIVERGENCE_WINDOW = 20
+DIVERGENCE_PROBABILITY = 0.999
+
+#: the optional per-step outputs a Kalman-family filter records on request (``outputs=``), at its ``record`` steps
+KALMAN_OUTPUTS = ("x_pred", "P_pred", "innovation", "S")
+
+
+@dataclass(frozen=True)
+class KalmanResult:
+    """Output of every Kalman-family filter (module docstring); ``batch`` the runs' axes, ``R`` recorded steps.
+
+    - ``x`` ``batch + (R, n)``, ``P`` ``batch + (R, n, n)``: posterior means and covariances at ``steps`` ``(R,)``;
+    - ``x_pred``, ``P_pred``: the prior each step's update starts from (the one-step prediction; for the KF's
+      ``literal_003`` variant the previous posterior, which the printed update uses); ``innovation``
+      ``batch + (R, M)`` and ``S`` ``batch + (R, M, M)``: the readings' innovations and their covariance, block
+      diagonal over a step's sequential updates (module docstring). None unless named in the filter's ``outputs``;
+    - ``log_likelihood`` ``batch + (T,)``: ``log N(innovation; 0, S)`` of each step's present readings (NaN where a
+      step has no update), :attr:`total_log_likelihood` their sum;
+    - ``nis``, ``nis_dof``, ``diverged``, ``diverged_step``: the consistency guard (module docstring);
+    - ``floored_updates``: the unscented filter's count of covariance updates its guard floored (0 for KF and EKF).
+    """
+
+    x: np.ndarray
+    P: np.ndarray
+    steps: np.ndarray
+    x_pred: np.ndarray | None = None
+    P_pred: np.ndarray | None = None
+    innovation: np.ndarray | None = None
+    S: np.ndarray | None = None
+    log_likelihood: np.ndarray | None = None
+    nis: np.ndarray | None = None
+    nis_dof: np.ndarray | None = None
+    diverged: np.ndarray | None = None
+    diverged_step: np.ndarray | None = None
+    floored_updates: int = 0
+
+    @property
+    def n_diverged(self) -> int:
+        """The number of runs flagged ``diverged``."""
+        return 0 if self.diverged is None else int(np.count_nonzero(self.diverged))
+
+    @property
+    def total_log_likelihood(self) -> np.ndarray:
+        """``batch``: the log-likelihood of all the readings, the sum over the steps (those without an update add
+        nothing)."""
+        return np.nansum(self.log_likelihood, axis=-1)
+
+
+def _check_guard(window, probability):
+    """The guard's arguments: ``window`` a non-negative integer (0 or None: off), ``probability`` in (0, 1)."""
+    if window is not None:
+        check_scalar("divergence_window", window, ge=0, integer=True)
+    check_scalar("divergence_probability", probability, gt=0, lt=1)
+    return 0 if window is None else int(window), float(probability)
+
+
+def nis_divergence(nis, nis_dof, window: int | None = DIVERGENCE_WINDOW,
+                   probability: float = DIVERGENCE_PROBABILITY):
+    """The consistency guard of the module docstring: ``(diverged batch, diverged_step batch)`` from the normalised
+    innovation squared ``nis`` ``batch + (T,)`` (NaN: no update) and its degrees of freedom ``nis_dof``.
+
+    A run diverged when ``nis > chi2.ppf(probability, dof)`` at ``window`` consecutive updates (steps with
+    ``dof == 0`` are skipped, and so are steps whose NIS is NaN: they carry no evidence either way, e.g. a foreign
+    update function that returns no NIS); ``diverged_step`` is the first step of the first such window, -1 where
+    none. ``nis_dof``: non-negative integers (an integer or float array with integral values).
+    Vectorized over runs (no loop over runs or steps)."""
+    window, probability = _check_guard(window, probability)
+    nis = np.asarray(nis, dtype=float)
+    dof = np.asarray(nis_dof)
+    if not np.issubdtype(dof.dtype, np.integer):        # float (or bool) dof: integral values only
+        try:
+            as_float = dof.astype(float)
+        except (TypeError, ValueError):
+            raise ValueError(f"nis_dof must hold non-negative integers (degrees of freedom), got dtype {dof.dtype}") \
+                from None
+        fractional = ~np.isfinite(as_float) | (as_float != np.round(as_float))
+        if fractional.any():
+            raise ValueError(f"nis_dof must hold non-negative integers (degrees of freedom); got "
+                             f"{as_float[fractional].flat[0]!r} at index "
+                             f"{tuple(int(i) for i in np.argwhere(fractional)[0])}")
+        dof = as_float.astype(np.int64)
+    if dof.size and dof.min() < 0:
+        raise ValueError(f"nis_dof must hold non-negative integers (degrees of freedom); got {int(dof.min())} at index "
+                         f"{tuple(int(i) for i in np.argwhere(dof < 0)[0])}")
+    try:
+        dof = np.broadcast_to(dof, nis.shape)
+    except ValueError:
+        raise ValueError(f"nis_dof {dof.shape} must broadcast to the shape of nis {nis.shape}") from None
+    batch = nis.shape[:-1]
+    if window == 0 or nis.shape[-1] < window or nis.size == 0:
+        return np.zeros(batch, bool), np.full(batch, -1, np.int64)
+    from scipy.special import chdtri            # lazy: keeps `import locbook` fast
+    updated = (dof > 0) & ~np.isnan(nis)        # a NaN NIS (no evidence) is skipped: neither counts nor breaks
+    # the dimensions are small integers: one quantile each, looked up (inf for dof 0: never exceeded)
+    table = np.concatenate([[np.inf], chdtri(np.arange(1, max(int(dof.max()), 1) + 1, dtype=float), 1.0 - probability)])
+    exceed = nis > table[dof]                   # NaN > bound is False: a skipped step never counts
+    # the length of the current streak of exceedances among the updates: count minus the count at the last update
+    # that stayed within the bound
+    count = np.cumsum(exceed, axis=-1)
+    reset = np.maximum.accumulate(np.where(updated & ~exceed, count, 0), axis=-1)
+    hit = (count - reset) >= window
+    diverged = hit.any(axis=-1)
+    end = np.argmax(hit, axis=-1)               # the update that completes the first window
+    first = np.take_along_axis(count, end[..., None], -1) - window + 1
+    start = np.argmax(count >= first, axis=-1)  # the first exceedance of that window
+    return diverged, np.where(diverged, start, -1).astype(np.int64)
+
+
+def _flag(res: KalmanResult, window: int, probability: float) -> KalmanResult:
+    """``res`` with the guard's ``diverged`` and ``diverged_step`` (module docstring)."""
+    diverged, step = nis_divergence(res.nis, res.nis_dof, window, probability)
+    return replace(res, diverged=diverged, diverged_step=step)

@@ -1,0 +1,360 @@
+"""Measurement streams of the Kalman family and their updates: :class:`LinearMeasurement` (the KF's, also used by
+the EKF and UKF), :class:`RssMeasurement` (parallel and serial RSS EKF, Dogan 2015, Ch. 3) and
+:class:`NonlinearMeasurement` (an EKF/UKF stream given by its function h).
+
+Each ``*_update`` applies one stream's readings of one step to a batched state (``_ekf_update`` dispatches on the
+stream) and returns the posterior with the NIS, dof and Gaussian log-likelihood of the readings present, and on request
+their innovations and innovation covariance (block diagonal over serial updates; :mod:`locbook.tracking.results`).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .._validate import as_array, check_choice, check_scalar
+from ..models.channel import PathLossModel, log_distance_gradient, log_distance_mean_dbm
+from ._linalg import _LOG_2PI, _STATE_NOT_FINITE, _UPDATE_OVERFLOW, _Singular, _covariance, _joseph
+from .functional import _linear_update, _Out
+
+__all__ = ["LinearMeasurement", "RssMeasurement", "NonlinearMeasurement", "MEASUREMENT_TYPES",
+           "rss_measurement_jacobian", "RSS_UPDATE_MODES", "SERIAL_ORDERS"]
+
+RSS_UPDATE_MODES = ("parallel", "serial")
+SERIAL_ORDERS = ("descending", "given")
+
+
+@dataclass(frozen=True)
+class LinearMeasurement:
+    """A linear-Gaussian measurement stream ``z_k = H x_k + v_k``, ``v_k ~ N(0, R)``.
+
+    ``z``: ``batch + (T, m)``; a NaN entry is a missing component (that row is left out of the
+    update, the others are used), so streams at different rates share one time grid.
+    ``R``: ``(m, m)`` or with batch axes ``batch + (m, m)``.
+    ``mode``: ``"parallel"`` (one stacked update) or ``"serial"`` (one scalar update per row in the given order;
+    needs a diagonal R, and then equals the parallel update exactly, note 000 s.2.6).
+    """
+
+    z: np.ndarray
+    H: np.ndarray
+    R: np.ndarray
+    mode: str = "parallel"
+
+    def __post_init__(self):
+        check_choice("mode", self.mode, RSS_UPDATE_MODES)
+        z = as_array("LinearMeasurement.z", self.z, min_ndim=2, nan_ok=True)
+        H = as_array("LinearMeasurement.H", self.H)
+        m = z.shape[-1]
+        if H.ndim < 2 or H.shape[-2] != m:
+            raise ValueError(f"LinearMeasurement.H must have {m} rows (one per component of z), got shape {H.shape}")
+        R = _covariance("LinearMeasurement.R", self.R, m)
+        if self.mode == "serial" and np.any(R - R * np.eye(R.shape[-1])):
+            raise ValueError("serial linear updates need a diagonal R (independent measurement components)")
+
+
+@dataclass(frozen=True)
+class RssMeasurement:
+    """Received powers from fixed anchors, ``z_kj = P_0 - 10 alpha log10 |p_k - a_j| + e_kj``
+    (Dogan Eq. (2.2)), ``e ~ N(0, sigma_db^2)`` i.i.d., for the EKF.
+
+    ``power_dbm``: ``batch + (T, m)``, NaN where an anchor gave no reading (a step without any reading is
+    prediction only). ``channel``: its ``ref_power_dbm``, ``path_loss_exp`` and ``sigma_db`` may be scalars,
+    per-anchor ``(m,)`` arrays, or carry batch axes ``batch + (1,)`` (several settings run as one batch).
+    ``mode``: ``"parallel"`` (one stacked update, Table 3.4) or ``"serial"`` (scalar updates, each
+    re-linearised at the state updated so far, Table 3.3, in ``order`` ``"descending"`` RSS as printed or
+    the ``"given"`` anchor order). ``min_distance_m`` keeps the Jacobian finite at an anchor.
+
+    ``anchors_m``: fixed anchors ``(m, dim)``, or receiver positions per step ``batch + (T, m, dim)`` (a moving
+    receiver, or measurement locations drawn per Monte-Carlo run: Palvai 2008, Eq. (4.28)). ``anchor_sigma_m``:
+    the anchors' positions are known only to this standard deviation (e.g. GPS, Palvai's sigma_3); the
+    measurement variance is then inflated to ``sigma^2 + (10 n / ln 10)^2 anchor_sigma^2 / d^2`` at the
+    linearisation point (first-order propagation of the position error; note 002 A8).
+
+    ``tag_height_m``: the anchors are ``(m, 3)`` (x, y, height), the tag moves in the plane ``z = tag_height_m``
+    and ``position_index`` names the state's x and y only; the distances are 3-D.
+    """
+
+    power_dbm: np.ndarray
+    anchors_m: np.ndarray
+    channel: PathLossModel
+    position_index: np.ndarray
+    mode: str = "parallel"
+    order: str = "descending"
+    min_distance_m: float = 1e-3
+    anchor_sigma_m: float = 0.0
+    tag_height_m: float | None = None
+
+    def lift(self, positions_m):
+        """Positions ``(..., k)`` from the state, with the known tag height appended when there is one."""
+        if self.tag_height_m is None:
+            return positions_m
+        return np.concatenate([positions_m, np.full(positions_m.shape[:-1] + (1,), float(self.tag_height_m))], -1)
+
+    def anchors_at(self, step: int) -> np.ndarray:
+        """Anchor positions at ``step``: ``(m, dim)`` or ``batch + (m, dim)``."""
+        a = np.asarray(self.anchors_m, dtype=float)
+        return a if a.ndim == 2 else a[..., min(step, a.shape[-3] - 1), :, :]
+
+    def variance_db2(self, distance_m, path_loss_exp, sigma_db):
+        """Measurement variance per reading: ``sigma^2``, inflated for ``anchor_sigma_m`` (class docstring)."""
+        var = np.asarray(sigma_db, dtype=float) ** 2
+        if self.anchor_sigma_m > 0:
+            slope = 10.0 * np.asarray(path_loss_exp, dtype=float) / np.log(10.0)
+            var = var + (slope * self.anchor_sigma_m / np.maximum(distance_m, self.min_distance_m)) ** 2
+        return var
+
+    def __post_init__(self):
+        check_choice("mode", self.mode, RSS_UPDATE_MODES)
+        check_choice("order", self.order, SERIAL_ORDERS)
+        power = as_array("RssMeasurement.power_dbm", self.power_dbm, min_ndim=2, nan_ok=True)
+        anchors = as_array("RssMeasurement.anchors_m", self.anchors_m, min_ndim=2)
+        m, dim = anchors.shape[-2], anchors.shape[-1]
+        if power.shape[-1] != m:
+            raise ValueError(f"RssMeasurement.power_dbm has {power.shape[-1]} anchors on its last axis, "
+                             f"anchors_m has {m}")
+        if anchors.ndim > 2 and anchors.shape[-3] not in (1, power.shape[-2]):
+            raise ValueError(f"RssMeasurement.anchors_m per step must have shape batch + (T, m, dim) with T = "
+                             f"{power.shape[-2]} steps (or 1), got {anchors.shape}")
+        idx = np.asarray(self.position_index)
+        if self.tag_height_m is not None:
+            check_scalar("tag_height_m", self.tag_height_m)
+            if dim != 3:
+                raise ValueError(f"RssMeasurement with tag_height_m needs anchors (m, 3) (x, y, height), got {anchors.shape}")
+        n_free = dim - (self.tag_height_m is not None)
+        if idx.shape != (n_free,):
+            raise ValueError(f"RssMeasurement.position_index must hold {n_free} state indices (one per "
+                             f"axis of the anchors{', the height known' if n_free < dim else ''}), got "
+                             f"{self.position_index!r}")
+        check_scalar("anchor_sigma_m", self.anchor_sigma_m, ge=0)
+        for name in ("ref_power_dbm", "path_loss_exp", "sigma_db"):
+            value = as_array(f"RssMeasurement.channel.{name}", getattr(self.channel, name))
+            if value.ndim and value.shape[-1] not in (1, m):
+                raise ValueError(f"RssMeasurement.channel.{name} must be a scalar or end in (1,) or ({m},) "
+                                 f"(one per anchor), got shape {value.shape}")
+        check_scalar("min_distance_m", self.min_distance_m, gt=0)
+
+
+@dataclass(frozen=True)
+class NonlinearMeasurement:
+    """A nonlinear measurement stream ``z_k = h(x_k) + v_k``, ``v_k ~ N(0, R)`` (e.g. a body-frame accelerometer,
+    whose reading depends on the heading state; Gudipati 2017, Eqs. (3.9), (3.11)).
+
+    ``z``: ``batch + (T, m)``, NaN = a missing component (left out of the update). ``h``: maps states
+    ``(..., n)`` to ``(..., m)`` over any leading axes: the EKF calls it with ``batch + (n,)``, the UKF with the
+    sigma points ``batch + (2n + 1, n)``. ``jacobian``: states ``(..., n)`` to ``(..., m, n)``; the EKF needs it,
+    the UKF does not. ``R``: ``(m, m)`` or ``batch + (m, m)``. ``name`` names the stream in error messages.
+    """
+
+    z: np.ndarray
+    h: object
+    R: np.ndarray
+    jacobian: object = None
+    name: str = "nonlinear measurement"
+
+    def __post_init__(self):
+        z = as_array(f"{self.name}: z", self.z, min_ndim=2, nan_ok=True)
+        if not callable(self.h):
+            raise ValueError(f"{self.name}: h must be a function of the state, got {type(self.h).__name__}")
+        if self.jacobian is not None and not callable(self.jacobian):
+            raise ValueError(f"{self.name}: jacobian must be a function of the state or None, got "
+                             f"{type(self.jacobian).__name__}")
+        _covariance(f"{self.name}: R", self.R, z.shape[-1])
+
+
+MEASUREMENT_TYPES = (LinearMeasurement, RssMeasurement, NonlinearMeasurement)
+
+
+def rss_measurement_jacobian(positions_m, anchors_m, path_loss_exp, *, min_distance_m: float = 1e-3):
+    """Predicted-power gradient w.r.t. position, ``(..., m, dim)``:
+    ``dh_j/dp = -(10 alpha / ln 10) (p - a_j) / d_j^2`` (note 000, section 2.6; not printed in the thesis).
+    Also returns the distances ``(..., m)`` (at least ``min_distance_m``).
+
+    ``positions_m (..., dim)``, ``anchors_m (m, dim)``, ``path_loss_exp`` a scalar, ``(m,)`` or broadcastable
+    to ``(..., m)``; all finite, ``min_distance_m > 0``."""
+    anchors = as_array("anchors_m", anchors_m, ndim=2)
+    as_array("positions_m", positions_m, min_ndim=1, trailing=(anchors.shape[1],))
+    ple = as_array("path_loss_exp", path_loss_exp)
+    if ple.ndim and ple.shape[-1] not in (1, anchors.shape[0]):
+        raise ValueError(f"path_loss_exp must be a scalar or end in ({anchors.shape[0]},) (one per anchor), "
+                         f"got shape {ple.shape}")
+    check_scalar("min_distance_m", min_distance_m, gt=0)
+    return _rss_jacobian(positions_m, anchors_m, path_loss_exp, min_distance_m)
+
+
+def _rss_jacobian(positions_m, anchors_m, path_loss_exp, min_distance_m):
+    """:func:`rss_measurement_jacobian` without the input checks (the EKF's inner loop)."""
+    diff = np.asarray(positions_m, dtype=float)[..., None, :] - np.asarray(anchors_m, dtype=float)
+    grad, d2 = log_distance_gradient(diff, path_loss_exp, min_distance_m=min_distance_m)
+    return grad, np.sqrt(d2)
+
+
+
+def _rss_parallel_update(x, P, z, meas: RssMeasurement, step: int = 0, want: bool = False) -> _Out:
+    """Table 3.4: one update with the stacked Jacobian at the predicted state, R = sigma^2 I (inflated for
+    uncertain anchor positions, :class:`RssMeasurement`)."""
+    idx = np.asarray(meas.position_index)
+    ch = meas.channel
+    grad, d = _rss_jacobian(meas.lift(x[..., idx]), meas.anchors_at(step), ch.path_loss_exp, meas.min_distance_m)
+    m = z.shape[-1]
+    H = np.zeros(grad.shape[:-1] + (x.shape[-1],))
+    H[..., idx] = grad[..., :idx.size]
+    far = ~np.all(np.isfinite(d), axis=-1)
+    if far.any():                   # the state ran away (an overflow, e.g. after a reading of 1e300 dBm)
+        raise _Singular(far, _STATE_NOT_FINITE)
+    h = ch.mean_power_dbm(d)
+    sigma2 = np.broadcast_to(meas.variance_db2(d, ch.path_loss_exp, ch.sigma_db), z.shape)
+    R = sigma2[..., :, None] * np.eye(m)
+    valid = np.isfinite(z)
+    # the linear update on the innovation's linearisation: z - h(x) = H (x_true - x) + e; its innovation is z - h(x)
+    return _linear_update(x, P, np.where(valid, z - h + (H @ x[..., None])[..., 0], np.nan), H, R, want=want)
+
+
+def _serial_order(z, order: str):
+    """Anchor order of serial updates per run ``batch + (m,)``: strongest reading first (missing last) or as given."""
+    if order == "descending":
+        return np.argsort(-np.where(np.isfinite(z), z, -np.inf), axis=-1, kind="stable")
+    return np.broadcast_to(np.arange(z.shape[-1]), z.shape)
+
+
+def _pick_anchor(anchors, a):
+    """The anchor ``a`` (batch indices) of fixed ``(m, dim)`` or per-run ``batch + (m, dim)`` anchors."""
+    if anchors.ndim == 2:
+        return anchors[a]
+    anchors = np.broadcast_to(anchors, a.shape + anchors.shape[-2:])
+    return np.take_along_axis(anchors, a[..., None, None], -2)[..., 0, :]
+
+
+class _Serial:
+    """Accumulates the scalar updates of one serial stream: NIS and log-likelihood summed (the innovations of one
+    step's sequential updates are independent under the model), and on request each reading's innovation and variance
+    in its own column (``column`` ``batch``: the reading each run updates with), S diagonal."""
+
+    def __init__(self, batch, m, want: bool):
+        self.nis, self.ll = np.zeros(batch), np.zeros(batch)
+        self.nu = np.full(batch + (m,), np.nan) if want else None
+        self.var = np.full(batch + (m,), np.nan) if want else None
+
+    def add(self, nu, s, valid, column):
+        """One scalar update per run: innovation ``nu``, variance ``s``, the reading's ``column`` ``batch``
+        (``valid``: the reading is present)."""
+        safe = np.where(valid, s, 1.0)
+        term = np.where(valid, nu * nu / safe, 0.0)
+        self.nis = self.nis + term
+        self.ll = self.ll + np.where(valid, -0.5 * (term + np.log(safe) + _LOG_2PI), 0.0)
+        if self.nu is not None:
+            np.put_along_axis(self.nu, column[..., None], np.where(valid, nu, np.nan)[..., None], -1)
+            np.put_along_axis(self.var, column[..., None], np.where(valid, s, np.nan)[..., None], -1)
+
+    def out(self, x, P, dof) -> _Out:
+        if self.nu is None:
+            return _Out(x, P, self.nis, dof, self.ll)
+        m = self.nu.shape[-1]
+        S = np.where(np.eye(m, dtype=bool), self.var[..., :, None], 0.0)
+        S = np.where(np.isnan(self.var)[..., :, None] | np.isnan(self.var)[..., None, :], np.nan, S)
+        return _Out(x, P, self.nis, dof, self.ll, self.nu, S)
+
+
+def _rss_serial_update(x, P, z, meas: RssMeasurement, step: int = 0, want: bool = False) -> _Out:
+    """Table 3.3: scalar updates in descending RSS order (strongest anchor first), each re-linearised at the
+    state updated so far; loop bound j <= N (the print's j < N is corrected, note 000 A11)."""
+    idx = np.asarray(meas.position_index)
+    ch = meas.channel
+    m = z.shape[-1]
+    anchors = meas.anchors_at(step)
+    p0 = np.broadcast_to(np.asarray(ch.ref_power_dbm, dtype=float), z.shape)
+    ple = np.broadcast_to(np.asarray(ch.path_loss_exp, dtype=float), z.shape)
+    sigma2 = np.broadcast_to(np.asarray(ch.sigma_db, dtype=float) ** 2, z.shape)
+    order = _serial_order(z, meas.order)
+    # the scalar innovations of one step are independent under the model (each is conditioned on the previous
+    # updates), so their NIS add up to a chi-square with one dof per reading (to first order: h is linearised)
+    acc, dof = _Serial(x.shape[:-1], m, want), np.isfinite(z).sum(axis=-1)
+    for j in range(m):
+        a = order[..., j]
+        zj = np.take_along_axis(z, a[..., None], -1)[..., 0]
+        valid = np.isfinite(zj)
+        if not valid.any():
+            continue
+        pick = lambda arr: np.take_along_axis(arr, a[..., None], -1)[..., 0]
+        diff = meas.lift(x[..., idx]) - _pick_anchor(anchors, a)
+        grad, d2 = log_distance_gradient(diff, pick(ple), min_distance_m=meas.min_distance_m)
+        h_row = np.zeros(x.shape)
+        h_row[..., idx] = grad[..., :idx.size]
+        hx = log_distance_mean_dbm(np.sqrt(d2), pick(p0), pick(ple), ref_distance_m=ch.ref_distance_m)
+        var = meas.variance_db2(np.sqrt(d2), pick(ple), np.sqrt(pick(sigma2)))
+        nu = np.where(valid, zj - hx, 0.0)
+        ph = (P @ h_row[..., None])[..., 0]                   # P H^T
+        s = np.einsum("...i,...i->...", h_row, ph) + var
+        if (valid & ~(s > 0)).any():
+            raise _Singular(valid & ~(s > 0))
+        K = np.where(valid[..., None], ph / s[..., None], 0.0)
+        acc.add(nu, s, valid, np.broadcast_to(a, valid.shape))
+        x = x + K * nu[..., None]
+        over = ~np.all(np.isfinite(x), axis=-1)
+        if over.any():              # named here: the next reading's linearisation would only see NaN
+            raise _Singular(over, _UPDATE_OVERFLOW)
+        P = _joseph(P, K[..., :, None], h_row[..., None, :], var[..., None, None])
+    return acc.out(x, P, dof)
+
+
+def _nonlinear_ekf_update(x, P, z, meas: NonlinearMeasurement, want: bool = False) -> _Out:
+    """EKF update of a :class:`NonlinearMeasurement`: linearised at the predicted state."""
+    if meas.jacobian is None:
+        raise ValueError(f"{meas.name}: the EKF needs its jacobian (the UKF does not)")
+    H = np.asarray(meas.jacobian(x), dtype=float)
+    if H.shape != x.shape[:-1] + (z.shape[-1], x.shape[-1]):
+        raise ValueError(f"{meas.name}: jacobian returned shape {H.shape}, expected "
+                         f"{x.shape[:-1] + (z.shape[-1], x.shape[-1])}")
+    h = np.asarray(meas.h(x), dtype=float)
+    valid = np.isfinite(z)
+    return _linear_update(x, P, np.where(valid, z - h + (H @ x[..., None])[..., 0], np.nan), H,
+                          np.asarray(meas.R, dtype=float), want=want)
+
+
+def _serial_linear(x, P, m: int, update, want: bool) -> _Out:
+    """Scalar updates ``update(x, P, j)`` of the components ``j = 0 .. m-1`` in order (a diagonal R), each from the
+    previous one's posterior; NIS, dof and log-likelihood summed, innovations side by side, S diagonal."""
+    nis = ll = 0.0
+    dof = 0
+    nus, var = [], []
+    for j in range(m):
+        o = update(x, P, j)
+        x, P, nis, dof, ll = o.x, o.P, nis + o.nis, dof + o.dof, ll + o.ll
+        if want:
+            nus.append(o.nu[..., 0])
+            var.append(o.S[..., 0, 0])
+    if not want:
+        return _Out(x, P, nis, dof, ll)
+    nu = np.stack(np.broadcast_arrays(*nus), axis=-1)
+    v = np.stack(np.broadcast_arrays(*var), axis=-1)
+    S = np.where(np.eye(m, dtype=bool), v[..., :, None], 0.0)
+    S = np.where(np.isnan(v)[..., :, None] | np.isnan(v)[..., None, :], np.nan, S)
+    return _Out(x, P, nis, dof, ll, nu, S)
+
+
+def _linear_stream_update(x, P, z, meas: LinearMeasurement, joseph: bool = True, want: bool = False) -> _Out:
+    H, R = np.asarray(meas.H, float), np.asarray(meas.R, float)
+    if meas.mode == "parallel":
+        return _linear_update(x, P, z, H, R, joseph=joseph, want=want)
+    return _serial_linear(x, P, z.shape[-1], lambda x, P, j: _linear_update(
+        x, P, z[..., j:j + 1], H[..., j:j + 1, :], R[..., j:j + 1, j:j + 1], joseph=joseph, want=want), want)
+
+
+def _ekf_update(x, P, z, meas, step, want: bool = False, joseph: bool = True) -> _Out:
+    """One stream's update of the EKF (and the KF): linear streams exactly, RSS and nonlinear ones linearised at the
+    state so far."""
+    if isinstance(meas, LinearMeasurement):
+        return _linear_stream_update(x, P, z, meas, joseph, want)
+    if isinstance(meas, NonlinearMeasurement):
+        return _nonlinear_ekf_update(x, P, z, meas, want)
+    if meas.mode == "parallel":
+        return _rss_parallel_update(x, P, z, meas, step, want)
+    return _rss_serial_update(x, P, z, meas, step, want)
+
+
+def _stream_name(meas) -> str:
+    return meas.name if isinstance(meas, NonlinearMeasurement) else type(meas).__name__
+
+
+def _stream_readings(meas):
+    """A stream's readings ``batch + (T, m)``."""
+    return meas.power_dbm if isinstance(meas, RssMeasurement) else meas.z

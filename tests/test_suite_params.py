@@ -99,7 +99,7 @@ def test_a_rule_applies_to_every_number_inside_lists_and_its_length_to_the_list(
 
 
 def test_unsupported_annotations_are_refused():
-    for annotation in ("dict[str, float]", "numpy.ndarray", "set[int]", "Path", "1 + 2"):
+    for annotation in ("dict[str, float]", "numpy.ndarray", "set[int]", "Path", "1 + 2", "list", "tuple"):
         with pytest.raises(ParameterError, match="unsupported parameter annotation"):
             check_value(param(annotation), 1)
 

@@ -7,7 +7,8 @@ every float must be finite unless its rule says ``allow_inf`` (NaN never is).
 
 Checking is pydantic's: the annotation is evaluated with ``int``/``float``/``bool``/``str`` bound to strict,
 constrained types (``Annotated[float, Strict(), Field(ge=0, allow_inf_nan=False)]``) built from the rule, so a
-rule applies to every number, also inside lists, and ``min_items``/``max_items`` to the list itself.
+rule applies to every number, also inside lists, and ``min_items``/``max_items`` to the list itself. A
+``Literal`` compares by value, as pydantic's does (``Literal[1]`` would accept ``True``; the suite's are strings).
 
 Reading is Python's own parser (:mod:`ast`), not ``papermill.inspect_notebook``: papermill 2.7's
 ``PythonTranslator.PARAMETER_PATTERN`` skips any line with a second ``=`` (a help comment such as
@@ -187,6 +188,9 @@ def _adapter(annotation: str, rule: ParameterRule | None):
         kind = eval(compile(ast.parse(annotation, mode="eval"), "<annotation>", "eval"), namespace)
     except Exception:   # a name outside the namespace, or an expression that builds no type
         raise ParameterError(f"unsupported parameter annotation {annotation!r}") from None
+    if kind in (list, tuple):   # items of any type: no rule could reach them
+        raise ParameterError(f"unsupported parameter annotation {annotation!r}; name the items' type, "
+                             f"e.g. {annotation}[float]")
 
     def sized(t):   # min_items/max_items: the parameter's own list, not lists inside it
         if typing.get_origin(t) in (list, tuple):

@@ -1,4 +1,4 @@
-"""The committed scoreboard (reports/full) follows the rules of locbook/suite/scoring.py (issue 13)."""
+"""The committed scoreboard (reports/full) follows the rules of locbook/reproduce/scoring.py (issue 13)."""
 import csv
 import json
 from pathlib import Path

@@ -9,7 +9,7 @@ Three views of the same events (``locbook run --progress``):
 - ``quiet``: nothing while running; only the end.
 
 Every view ends with the same scoreboard, one row per experiment: status, time and its numbers counted by
-kind and verdict (the scoring of ``locbook.suite.scoring``), then the path of the report.
+kind and verdict (the scoring of ``locbook.reproduce.scoring``), then the path of the report.
 """
 from __future__ import annotations
 

@@ -23,7 +23,6 @@ from __future__ import annotations
 
 from .._validate import check_choice
 from . import _compiled
-from ._linalg import _mT  # noqa: F401  (locbook/bounds/pcrlb.py imports it from here; it belongs in ._linalg)
 from ._loop import _check_outputs, _covariance_shared_throughout, _run, _setup, _streams
 from .results import DIVERGENCE_PROBABILITY, DIVERGENCE_WINDOW, KalmanResult, _check_guard, _flag
 from .streams import LinearMeasurement, _ekf_update

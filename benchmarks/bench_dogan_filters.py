@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -35,9 +34,9 @@ LABELS = {"kalman_filter": "KF (MLE fixes + accelerometer)", "parallel_ekf": "pa
 def setting(runs: int, seed: int = 1, steps: int | None = None) -> dict:
     """The inputs of the timed setting: trajectory (its first ``steps`` steps, default all 1620), channel, RSS at the
     epochs, accelerometer, MLE fixes and their MSE."""
-    tr = dg.polyline_trajectory()
+    tr = dg.walk_trajectory()
     if steps is not None:
-        tr = replace(tr, time_s=tr.time_s[:steps], state=tr.state[:steps], rss_steps=tr.rss_steps[tr.rss_steps < steps])
+        tr = tr.head(steps)
     sigma_acc = dg.TABLE_SIGMA_ACC_MPS2
     q, p0_acc = dg.filter_noise(dg.DEFAULT_NOISE_READING, sigma_acc)
     model = dg.motion_model(dg.DT_S, q)

@@ -37,9 +37,8 @@ _API = (
     ("static.localization", ("LocalizationResult", "LOCALIZATION_STATUSES", "ANCHOR_CONDITION_RTOL",
         "GOODNESS_OF_FIT_ALPHA", "IMPLAUSIBLE_SIGMAS", "implausible_powers", "check_anchor_geometry",
         "lateration_system", "lateration_ls", "lateration_wls", "lateration_box_ls", "rss_ml_position",
-        "grid_ml_position",)),
-    ("static.least_squares", ("lateration_rows", "least_squares_position", "recursive_least_squares", "RlsResult",
-        "LATERATION_REFERENCES", "LATERATION_VARIANTS",)),
+        "grid_ml_position", "LATERATION_PAIRS", "LATERATION_VARIANTS",)),
+    ("static.least_squares", ("recursive_least_squares", "RlsResult",)),
     ("models.channel", ("log_normal_range_moments", "correct_range_bias", "RANGE_BIAS_TARGETS",)),
     # fingerprinting
     ("static.fingerprint", ("knn_position", "model_fingerprints", "pattern_fingerprints", "KNN_WEIGHTINGS",)),
@@ -47,7 +46,7 @@ _API = (
     ("models.motion", ("KinematicModel", "constant_velocity", "constant_acceleration", "reflect_into_box",
         "simulate_states", "HeadingKinematicModel", "HEADING_MODELS",)),
     ("tracking.results", ("KalmanResult",)),
-    ("models.trajectory", ("Trajectory", "waypoint_trajectory",)),
+    ("models.trajectory", ("Trajectory", "waypoint_trajectory", "polyline_trajectory",)),
     # inertial sensors and fusion
     ("models.imu", ("accelerometer_readings", "gyroscope_readings", "stationary_bias", "rotation_2d",
         "world_to_body", "body_to_world", "integrate", "dead_reckon", "inertial_measurement_function",
@@ -80,13 +79,14 @@ _API = (
         "error_std_m", "empirical_cdf", "reduction_pct", "error_summary", "rmse_standard_error_m",
         "accuracy_metrics", "ACCURACY_STATISTICS",)),
     ("montecarlo", ("spawn_generators", "streams", "mc_standard_error", "bootstrap_standard_error",
-        "replicate_standard_error", "seed_from_values", "canonical_encoding",)),
+        "jackknife_standard_error", "replicate_standard_error", "single_run_interval", "seed_from_values",
+        "canonical_encoding",)),
     # measured data and floor geometry
     ("data.measured", ("MeasuredData", "Epochs", "DataFormatError", "read_readings", "read_anchors", "read_outline",
         "read_path_segments", "validate_readings", "epochs", "regular_epochs", "kolakowski2021",
         "KOLAKOWSKI2021_ATTRIBUTION", "MeasuredDataWarning", "MAX_TIME_S", "ANCHOR_MIN_SEPARATION_M",
         "MAX_REGULAR_EPOCHS",)),
-    ("geometry", ("inside_outline", "grid_in_outline", "outline_box", "distance_to_segments",)),
+    ("geometry", ("inside_outline", "grid_in_outline", "outline_box", "box_outline", "distance_to_segments",)),
     ("tracking.bayes", ("GRID_TRANSITIONS",)),
     ("static.fingerprint", ("KNN_BLOCK_BYTES",)),
     # errors and reports

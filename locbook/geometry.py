@@ -7,7 +7,7 @@ from matplotlib.path import Path as _PolygonPath
 
 from ._validate import as_array, check_scalar
 
-__all__ = ["inside_outline", "grid_in_outline", "outline_box", "distance_to_segments"]
+__all__ = ["inside_outline", "grid_in_outline", "outline_box", "box_outline", "distance_to_segments"]
 
 
 def _outline(outline_m) -> np.ndarray:
@@ -37,6 +37,17 @@ def outline_box(outline_m) -> tuple[np.ndarray, np.ndarray]:
     """The outline's bounding box ``(lower (2,), upper (2,))``."""
     outline = _outline(outline_m)
     return outline.min(axis=0), outline.max(axis=0)
+
+
+def box_outline(lower_m, upper_m) -> np.ndarray:
+    """The rectangle with corners ``lower_m`` and ``upper_m`` ``(2,)`` as an outline ``(4, 2)``, counter-clockwise
+    from the lower corner (the inverse of :func:`outline_box` for a rectangle)."""
+    lower = as_array("lower_m", lower_m, ndim=1, trailing=(2,))
+    upper = as_array("upper_m", upper_m, ndim=1, trailing=(2,))
+    if np.any(upper <= lower):
+        raise ValueError(f"upper_m {upper.tolist()} must exceed lower_m {lower.tolist()} on both axes")
+    (x0, y0), (x1, y1) = lower, upper
+    return np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]], float)
 
 
 def grid_in_outline(outline_m, spacing_m: float) -> np.ndarray:

@@ -22,9 +22,10 @@ from numbers import Integral, Real
 import numpy as np
 
 from ._validate import check_scalar
+from .errors import ParameterError
 
-__all__ = ["spawn_generators", "streams", "mc_standard_error", "bootstrap_standard_error", "replicate_standard_error",
-           "seed_from_values", "canonical_encoding"]
+__all__ = ["spawn_generators", "streams", "mc_standard_error", "bootstrap_standard_error", "jackknife_standard_error",
+           "replicate_standard_error", "single_run_interval", "seed_from_values", "canonical_encoding"]
 
 
 def spawn_generators(seed: int | np.random.SeedSequence, n: int) -> list[np.random.Generator]:
@@ -65,6 +66,23 @@ def bootstrap_standard_error(samples, statistic, rng: np.random.Generator, n_res
     return float(np.std(statistic(resamples, axis=-1), ddof=1))
 
 
+def jackknife_standard_error(statistic, *per_run) -> float:
+    """Delete-one jackknife standard error over runs of ``statistic(*per_run)``, where each array of ``per_run``
+    holds one run-level value per run along axis 0 (Efron and Tibshirani 1993, Eq. (11.5)):
+    ``sqrt((n - 1) / n * sum_i (theta_(i) - theta_(.))^2)``, for statistics that are not means of run-level values,
+    such as a reduction of pooled RMSEs. For the mean it is ``s / sqrt(n)`` exactly."""
+    if not per_run:
+        raise ParameterError("per_run: the jackknife needs at least one array of run-level values")
+    arrays = [np.asarray(a) for a in per_run]
+    n = arrays[0].shape[0] if arrays[0].ndim else 0
+    if n < 2 or any(a.ndim == 0 or a.shape[0] != n for a in arrays):
+        raise ParameterError(f"per_run: arrays with the same number (at least two) of runs on axis 0, got shapes "
+                         f"{[a.shape for a in arrays]}")
+    keep = ~np.eye(n, dtype=bool)
+    leave = np.array([statistic(*(a[keep[i]] for a in arrays)) for i in range(n)])
+    return float(np.sqrt((n - 1) / n * np.sum((leave - leave.mean()) ** 2)))
+
+
 
 def replicate_standard_error(estimate, seeds) -> float:
     """Standard error of an estimate that is not a mean of independent run-level values (the minimum of a bound
@@ -79,6 +97,17 @@ def replicate_standard_error(estimate, seeds) -> float:
         raise ValueError(f"seeds: a replicate standard error needs at least two replicates, got {len(seeds)}")
     values = [estimate(np.random.default_rng(seed)) for seed in seeds]
     return float(np.std(values, ddof=1))
+
+
+def single_run_interval(per_run, coverage: float = 0.90) -> tuple[float, float]:
+    """The central ``coverage`` interval of a run-level statistic (the ``(1 - coverage) / 2`` and
+    ``(1 + coverage) / 2`` sample quantiles over runs, linear interpolation): where a single run, e.g. one measured
+    walk, should fall if the simulation's model were the experiment's."""
+    if not 0.0 < coverage < 1.0:
+        raise ParameterError(f"coverage must lie in (0, 1), got {coverage}")
+    tail = 50.0 * (1.0 - coverage)
+    lo, hi = np.percentile(np.asarray(per_run, float), [tail, 100.0 - tail])
+    return float(lo), float(hi)
 
 def _canonical(value):
     """JSON-ready form: every real number by its exact binary value (``float.hex``; 1 and 1.0 are one value),

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["draw_room", "draw_path", "mean_with_band", "error_cdf"]
+__all__ = ["draw_room", "draw_path", "mean_with_band", "error_cdf", "heat_map"]
 
 
 def draw_room(ax, size_m, anchors_m=None, *, label_anchors: bool = True, margin_m: float = 0.0):
@@ -56,3 +56,30 @@ def error_cdf(ax, errors_m, label: str = "", **style):
     ax.plot(x, np.arange(1, x.size + 1) / x.size, label=label, **style)
     ax.set_xlabel("error (m)")
     ax.set_ylabel("CDF")
+
+
+def heat_map(ax, rows, kind: str, methods, scenarios, not_applicable=None, *, vmax_log2: float = 3.0):
+    """Error / bound (RMSE over RMS bound) of each method (rows) on each scenario (columns), log2 colour scale centred
+    on 1; a column that does not apply is hatched and labelled."""
+    import matplotlib.colors as mcolors
+    from matplotlib.patches import Rectangle
+
+    grid = np.full((len(methods), len(scenarios)), np.nan)
+    for r in rows:
+        if r["kind"] == kind and r["method"] in methods and r["scenario"] in scenarios:
+            grid[list(methods).index(r["method"]), list(scenarios).index(r["scenario"])] = r["ratio"]
+    norm = mcolors.TwoSlopeNorm(vcenter=0.0, vmin=-vmax_log2, vmax=vmax_log2)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        image = ax.imshow(np.clip(np.log2(grid), -vmax_log2, vmax_log2), cmap="RdBu_r", norm=norm, aspect="auto")
+    for i in range(grid.shape[0]):
+        for j in range(grid.shape[1]):
+            if np.isfinite(grid[i, j]):
+                ax.text(j, i, f"{grid[i, j]:.2f}", ha="center", va="center", fontsize=8,
+                        color="white" if abs(np.log2(grid[i, j])) > 0.6 * vmax_log2 else "black")
+    for j, key in enumerate(scenarios):
+        if not_applicable and key in not_applicable:
+            ax.add_patch(Rectangle((j - 0.5, -0.5), 1, len(methods), fill=False, hatch="//", edgecolor="0.6"))
+            ax.text(j, (len(methods) - 1) / 2, "n/a", ha="center", va="center", fontsize=9, color="0.3")
+    ax.set_xticks(range(len(scenarios)), scenarios, rotation=30, ha="right", fontsize=8)
+    ax.set_yticks(range(len(methods)), methods, fontsize=8)
+    return image

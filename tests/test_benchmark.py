@@ -8,7 +8,8 @@ import pytest
 from scipy.stats import norm
 
 import locbook as lb
-from locbook.scenarios import benchmark as bm, ozkaya
+from locbook import benchmark as bm
+from locbook.scenarios import ozkaya
 
 
 def test_heard_mask_equals_leaving_the_anchors_out():
@@ -154,3 +155,40 @@ def test_every_declared_method_gives_a_cell_and_a_new_scenario_a_column(monkeypa
     assert all(r["settings"] and np.isfinite(r["ratio"]) for r in rows)
     # a fourth reader adds information: the bound falls
     assert rows[-1]["bound_rms_m"] < rows[0]["bound_rms_m"]
+
+
+def test_box_outline_is_the_rectangle_outline_box_reads_back():
+    from locbook.geometry import box_outline, inside_outline, outline_box
+    outline = box_outline((1.0, -2.0), (4.0, 3.0))
+    lower, upper = outline_box(outline)
+    np.testing.assert_array_equal(lower, [1.0, -2.0])
+    np.testing.assert_array_equal(upper, [4.0, 3.0])
+    # shoelace area of a counter-clockwise polygon is +width * height
+    x, y = outline.T
+    assert 0.5 * np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y) == 15.0
+    assert inside_outline(np.array([[2.5, 0.5], [4.5, 0.5]]), outline).tolist() == [True, False]
+    with pytest.raises(ValueError, match="upper_m"):
+        box_outline((0.0, 0.0), (1.0, 0.0))
+    with pytest.raises(ValueError, match="lower_m"):
+        box_outline((0.0, 0.0, 0.0), (1.0, 1.0))
+
+
+def test_heat_map_colours_log2_of_the_ratio_and_hatches_what_does_not_apply():
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.patches import Rectangle
+
+    from locbook.plotting import heat_map
+    rows = [{"kind": "static", "method": "a", "scenario": "s", "ratio": 2.0},
+            {"kind": "static", "method": "b", "scenario": "s", "ratio": 0.5},
+            {"kind": "static", "method": "a", "scenario": "t", "ratio": 100.0},
+            {"kind": "tracking", "method": "b", "scenario": "t", "ratio": 4.0}]     # another kind: left out
+    fig, ax = plt.subplots()
+    image = heat_map(ax, rows, "static", ["a", "b"], ["s", "t", "u"], {"u": "no moving tag"}, vmax_log2=3.0)
+    shown = np.ma.filled(image.get_array().astype(float), np.nan)
+    np.testing.assert_array_equal(shown[:, 0], [1.0, -1.0])          # log2(2), log2(0.5)
+    assert shown[0, 1] == 3.0 and np.isnan(shown[1, 1]) and np.isnan(shown[:, 2]).all()   # clipped; no row
+    assert [t.get_text() for t in ax.texts] == ["2.00", "100.00", "0.50", "n/a"]
+    assert sum(isinstance(p, Rectangle) and p.get_hatch() == "//" for p in ax.patches) == 1
+    plt.close(fig)

@@ -124,3 +124,30 @@ def test_bootstrap_standard_error_matches_closed_forms():
     assert np.mean(ratios[np.median]) == pytest.approx(1.0, abs=0.08)
     with pytest.raises(ValueError, match="two"):
         lb.bootstrap_standard_error([1.0], np.mean, np.random.default_rng(0))
+
+
+def test_jackknife_standard_error_closed_forms():
+    """For the mean the delete-one jackknife SE is s / sqrt(n) exactly (Efron and Tibshirani 1993, Sec. 11.2); for a
+    difference of means of paired runs it is that of the paired differences."""
+    rng = np.random.default_rng(0)
+    x, y = rng.normal(size=50), rng.normal(size=50)
+    assert lb.jackknife_standard_error(np.mean, x) == pytest.approx(x.std(ddof=1) / np.sqrt(x.size), rel=1e-12)
+    d = x - y
+    assert lb.jackknife_standard_error(lambda a, b: a.mean() - b.mean(), x, y) == pytest.approx(
+        d.std(ddof=1) / np.sqrt(d.size), rel=1e-12)
+    with pytest.raises(lb.ParameterError, match="per_run"):
+        lb.jackknife_standard_error(np.mean, x, y[:10])
+    with pytest.raises(lb.ParameterError, match="per_run"):
+        lb.jackknife_standard_error(np.mean, [1.0])
+
+
+def test_single_run_interval_is_the_central_sample_quantile_range():
+    from scipy.stats.mstats import mquantiles
+    lo, hi = lb.single_run_interval(np.linspace(0, 1, 100001), 0.9)
+    assert (lo, hi) == pytest.approx((0.05, 0.95), abs=1e-12)
+    x = np.random.default_rng(3).gamma(2.0, size=37)
+    # numpy's linear percentile is Hyndman-Fan type 7, scipy's mquantiles with alphap = betap = 1
+    np.testing.assert_allclose(lb.single_run_interval(x, 0.8), mquantiles(x, [0.1, 0.9], alphap=1, betap=1),
+                               rtol=1e-12)
+    with pytest.raises(lb.ParameterError, match="coverage"):
+        lb.single_run_interval(x, 1.0)

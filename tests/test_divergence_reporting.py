@@ -15,7 +15,7 @@ from scipy.stats import chi2
 
 import locbook as lb
 from locbook.scenarios import DivergenceFlags, divergence_note, divergence_rows
-from locbook.scenarios import benchmark as bm
+from locbook import benchmark as bm
 from locbook.scenarios import dogan as dg
 from locbook.scenarios import george
 from locbook.scenarios import gudipati as gu
@@ -102,8 +102,8 @@ def test_george_runs_without_fixes_are_neither_flagged_nor_counted():
 
 @pytest.fixture(scope="module")
 def dogan_case():
-    tr = dg.polyline_trajectory(speed_mps=0.5)
-    tr = dg.Trajectory(tr.time_s[:400], tr.state[:400], tr.rss_steps[tr.rss_steps < 400], tr.waypoints_m, tr.start)
+    tr = dg.walk_trajectory(speed_m_s=0.5)
+    tr = tr.head(400)
     rng = np.random.default_rng(5)
     channel = lb.PathLossModel(dg.REF_POWER_DBM, dg.PATH_LOSS_EXP, 6.0)
     rss = dg.simulate_rss(tr, channel, 40, rng)

@@ -121,21 +121,21 @@ def test_serial_parallel_and_kf_agree_on_a_linear_model():
 def test_default_trajectory():
     """A1: 24 m at 0.3 m/s -> 80 s = 1600 steps of 50 ms and 160 RSS epochs; the accelerometer truth
     integrates to the velocity; the rest start ramps up over 2 s."""
-    tr = dg.polyline_trajectory(start="moving")
+    tr = dg.walk_trajectory(start="moving")
     assert tr.time_s.size == 1600 and tr.rss_steps.size == 160
-    speed = np.hypot(tr.state[:, 1], tr.state[:, 4])
+    speed = np.hypot(tr.velocity_m_s[:, 0], tr.velocity_m_s[:, 1])
     np.testing.assert_allclose(speed, 0.3, atol=1e-12)
-    vel = tr.state[:, [1, 4]]
-    np.testing.assert_allclose(vel[0] + np.cumsum(tr.acceleration_mps2[1:], axis=0) * dg.DT_S, vel[1:], atol=1e-12)
-    assert np.sum(np.linalg.norm(tr.acceleration_mps2, axis=1) > 1) == 3      # three sharp turns
+    vel = tr.velocity_m_s
+    np.testing.assert_allclose(vel[0] + np.cumsum(tr.acceleration_m_s2[1:], axis=0) * dg.DT_S, vel[1:], atol=1e-12)
+    assert np.sum(np.linalg.norm(tr.acceleration_m_s2, axis=1) > 1) == 3      # three sharp turns
     np.testing.assert_allclose(tr.position_m[0], dg.WAYPOINTS_M[0])
     path = np.sum(np.linalg.norm(np.diff(tr.position_m, axis=0), axis=1))
     assert abs(path - (24.0 - 0.3 * dg.DT_S)) < 0.02          # corners are cut by at most one step
-    rest = dg.polyline_trajectory()                                # the default start: from rest, 2 s ramp
-    assert rest.start == "rest" and rest.time_s.size == 1620 and rest.state[0, 1] == 0.0 and rest.state[0, 4] == 0.0
-    np.testing.assert_allclose(rest.acceleration_mps2[1:40, 1], 0.15, atol=1e-9)
+    rest = dg.walk_trajectory()                                # the default start: from rest, 2 s ramp
+    assert rest.start == "rest" and rest.time_s.size == 1620 and rest.velocity_m_s[0, 0] == 0.0 and rest.velocity_m_s[0, 1] == 0.0
+    np.testing.assert_allclose(rest.acceleration_m_s2[1:40, 1], 0.15, atol=1e-9)
     with pytest.raises(lb.ParameterError, match="start"):
-        dg.polyline_trajectory(start="standing")
+        dg.walk_trajectory(start="standing")
 
 
 def test_table_plan_covers_every_printed_cell():
@@ -148,7 +148,7 @@ def test_table_plan_covers_every_printed_cell():
 
 
 def test_channel_runs_are_reproducible_and_subset_invariant():
-    tr = dg.polyline_trajectory(waypoints_m=((1, 1), (1, 4), (4, 4)), speed_mps=0.6)
+    tr = dg.walk_trajectory(waypoints_m=((1, 1), (1, 4), (4, 4)), speed_m_s=0.6)
     a = dg.run_tables(tr, 6, seed=5, channels=[(5, 3.0), (4, 3.0)])
     b = dg.run_tables(tr, 6, seed=5, channels=[(4, 3.0)])
     for key, err in b[(4, 3.0)].errors.items():

@@ -96,8 +96,8 @@ def test_chosen_reading_equals_an_independent_filterpy_implementation(name):
     above on the same draws: the RSS, the MLE fixes and the accelerometer noise are replayed from the same seed in
     run_channel's order (RSS, then one unit accelerometer noise draw scaled per sigma_ACC)."""
     assert (dg.DEFAULT_START, dg.DEFAULT_NOISE_READING) == ("rest", "sigma_acc")
-    tr = dg.polyline_trajectory(waypoints_m=((1.0, 1.0), (1.0, 4.0), (4.0, 4.0)), speed_mps=0.5)
-    assert tr.start == "rest" and np.all(tr.state[0, [1, 4]] == 0.0)
+    tr = dg.walk_trajectory(waypoints_m=((1.0, 1.0), (1.0, 4.0), (4.0, 4.0)), speed_m_s=0.5)
+    assert tr.start == "rest" and np.all(tr.velocity_m_s[0] == 0.0)
     n_runs, sigmas = 3, (0.0075, 0.0015)
     run = dg.run_channel(tr, 6.0, 3.0, n_runs, np.random.default_rng(11), sigma_acc_values=sigmas, only_rss=False,
                          filters=(name,), keep_estimates=True)
@@ -107,9 +107,9 @@ def test_chosen_reading_equals_an_independent_filterpy_implementation(name):
     fixes = dg.mle_positions(rss, channel).position_m
     mse = np.mean((fixes - tr.position_m[tr.rss_steps]) ** 2, axis=(0, 1))
     np.testing.assert_allclose(run.mse_mle_m2, mse, rtol=1e-12)
-    unit = rng.standard_normal((n_runs,) + tr.acceleration_mps2.shape)
+    unit = rng.standard_normal((n_runs,) + tr.acceleration_m_s2.shape)
     for sigma in sigmas:
-        ref = _filterpy_fusion(name, rss, fixes, mse, tr.acceleration_mps2 + sigma * unit, sigma, tr.rss_steps,
+        ref = _filterpy_fusion(name, rss, fixes, mse, tr.acceleration_m_s2 + sigma * unit, sigma, tr.rss_steps,
                                tr.time_s.size, dg.DT_S, dg.ANCHORS_M, dg.REF_POWER_DBM, 3.0, 6.0)
         np.testing.assert_allclose(run.errors[("estimates", name, sigma)], ref, atol=1e-8)
 
@@ -133,11 +133,6 @@ def test_thesis_repeat_error_from_the_printed_re_runs():
     rel = [(cells[a + (c,)] - cells[b + (c,)]) / ((cells[a + (c,)] + cells[b + (c,)]) / 2) for a, b, c in pairs]
     assert dg.thesis_repeat_error() == pytest.approx(np.sqrt(np.mean(np.square(rel)) / 2), rel=1e-12)
     assert 0.005 < dg.thesis_repeat_error() < 0.02                       # 0.2-2.7 % differences (note 000 s.3.3)
-
-
-def test_jackknife_standard_error_of_a_mean_is_the_usual_one():
-    x = np.random.default_rng(0).normal(size=50)
-    assert dg.jackknife_standard_error(np.mean, x) == pytest.approx(x.std(ddof=1) / np.sqrt(x.size), rel=1e-12)
 
 
 def test_fusion_gain_and_mean_level_by_hand():
@@ -165,7 +160,7 @@ def test_fusion_gain_and_mean_level_by_hand():
 def test_per_epoch_r_with_equal_epochs_equals_the_constant_r(fusion):
     """KF (MLE) with a per-epoch R (Table 4.1's R_{k+1}, run segment by segment) equals the one-pass filter when every
     epoch has the same R: segmenting the multi-rate filter changes nothing."""
-    tr = dg.polyline_trajectory(waypoints_m=((1.0, 1.0), (1.0, 4.0), (4.0, 4.0)), speed_mps=0.5)
+    tr = dg.walk_trajectory(waypoints_m=((1.0, 1.0), (1.0, 4.0), (4.0, 4.0)), speed_m_s=0.5)
     rng = np.random.default_rng(2)
     channel = lb.PathLossModel(dg.REF_POWER_DBM, 3.0, 6.0)
     rss = dg.simulate_rss(tr, channel, 4, rng)

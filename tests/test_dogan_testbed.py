@@ -52,13 +52,13 @@ def test_orientation_gain_averages_to_zero_over_the_circle():
 
 
 def test_testbed_grid_and_single_walk_window():
-    assert dg.polyline_trajectory(rss_every=tb.TESTBED_RSS_EVERY).rss_steps.size == 41    # from rest: 81 s
-    traj = dg.polyline_trajectory(start="moving", rss_every=tb.TESTBED_RSS_EVERY)
+    assert dg.walk_trajectory(rss_every=tb.TESTBED_RSS_EVERY).rss_steps.size == 41    # from rest: 81 s
+    traj = dg.walk_trajectory(start="moving", rss_every=tb.TESTBED_RSS_EVERY)
     assert traj.rss_steps.size == 40 and np.allclose(np.diff(traj.time_s[traj.rss_steps]), 2.0)   # 1 packet / 2 s
-    lo, hi = tb.single_run_interval(np.linspace(0, 1, 100001), 0.9)
+    lo, hi = lb.single_run_interval(np.linspace(0, 1, 100001), 0.9)
     assert (lo, hi) == pytest.approx((0.05, 0.95))
     with pytest.raises(lb.ParameterError):
-        tb.single_run_interval([1.0, 2.0], 1.0)
+        lb.single_run_interval([1.0, 2.0], 1.0)
     run = dg.run_channel(traj, 6.0, 1.8, 30, np.random.default_rng(4), sigma_acc_values=(0.0152,), ref_power_dbm=-52.0)
     rows = tb.testbed_rows(run, 0.0152)
     assert len(rows) == len(tb.PRINTED_TESTBED_RMSE) + 4

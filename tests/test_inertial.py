@@ -157,3 +157,44 @@ def test_ratio_estimator_is_unbiased_with_its_closed_form_variance():
     var = sigma**2 / d.size**2 * np.sum(1 / (10 * L) ** 2) + sigma0**2 * np.mean(1 / (10 * L)) ** 2
     assert abs(est.mean() - C) < 4 * np.sqrt(var / R)
     assert est.var() == pytest.approx(var, rel=0.02)
+
+
+def test_polyline_trajectory_walks_at_constant_speed_with_impulse_turns():
+    """Sharp corners at constant speed: |v| is the speed, the acceleration is the backward difference of the
+    velocity (zero on the legs, an impulse of |dv| / dt at each turn), the arc length the distance walked."""
+    path = [[0.0, 0.0], [3.0, 0.0], [3.0, 4.0]]
+    tr = lb.polyline_trajectory(path, speed_m_s=0.5, dt_s=0.1)
+    assert tr.time_s.size == round(7.0 / 0.5 / 0.1) and tr.start == "moving"
+    np.testing.assert_allclose(np.linalg.norm(tr.velocity_m_s, axis=-1), 0.5, rtol=1e-15)
+    np.testing.assert_allclose(tr.velocity_m_s[0] + np.cumsum(tr.acceleration_m_s2[1:], axis=0) * 0.1,
+                               tr.velocity_m_s[1:], atol=1e-12)
+    big = np.linalg.norm(tr.acceleration_m_s2, axis=-1) > 1e-9
+    assert big.sum() == 1 and np.linalg.norm(tr.acceleration_m_s2[big]) == pytest.approx(0.5 * np.sqrt(2) / 0.1)
+    np.testing.assert_allclose(tr.arc_length_m, 0.5 * tr.time_s, rtol=1e-15)
+    np.testing.assert_allclose(tr.heading_rad[[0, -1]], [0.0, np.pi / 2])
+    # from rest: uniform ramp over ramp_s to the speed, half the ramp added to the duration
+    rest = lb.polyline_trajectory(path, speed_m_s=0.5, dt_s=0.1, start="rest", ramp_s=2.0, rss_every=4)
+    assert rest.time_s.size == round((14.0 + 1.0) / 0.1)
+    np.testing.assert_allclose(rest.acceleration_m_s2[1:20, 0], 0.25, rtol=1e-12)
+    np.testing.assert_array_equal(rest.rss_steps, np.arange(0, rest.time_s.size, 4))
+    with pytest.raises(lb.ParameterError, match="start"):
+        lb.polyline_trajectory(path, speed_m_s=0.5, dt_s=0.1, start="standing")
+    with pytest.raises(lb.ParameterError, match="repeated"):
+        lb.polyline_trajectory([[0.0, 0.0], [0.0, 0.0]], speed_m_s=0.5, dt_s=0.1)
+
+
+def test_trajectory_states_follow_the_model_layout_and_head_cuts_every_field():
+    tr = lb.polyline_trajectory([[0.0, 0.0], [3.0, 0.0], [3.0, 4.0]], speed_m_s=0.5, dt_s=0.1, rss_every=10)
+    ca = lb.constant_acceleration(0.1, 1.0, layout="axis_major")           # [x, vx, ax, y, vy, ay]
+    x = tr.states(ca)
+    np.testing.assert_array_equal(x[:, [0, 3]], tr.position_m)
+    np.testing.assert_array_equal(x[:, [1, 4]], tr.velocity_m_s)
+    np.testing.assert_array_equal(x[:, [2, 5]], tr.acceleration_m_s2)
+    cv = lb.constant_velocity(0.1, 1.0)                                    # [x, y, vx, vy]: no acceleration
+    np.testing.assert_array_equal(tr.states(cv), np.concatenate([tr.position_m, tr.velocity_m_s], axis=-1))
+    head = tr.head(25)
+    assert head.time_s.size == 25 and head.position_m.shape == (25, 2) and head.arc_length_m.size == 25
+    np.testing.assert_array_equal(head.rss_steps, [0, 10, 20])
+    no_arc = lb.Trajectory(tr.time_s, tr.position_m, tr.velocity_m_s, tr.acceleration_m_s2)
+    with pytest.raises(lb.ParameterError, match="arc_length_m"):
+        no_arc.indices_every(1.0)

@@ -540,7 +540,8 @@ def _scenario_layouts() -> dict:
     """Every anchor layout of the scenarios and the shipped data, as plan positions ``(m, 2)`` (the estimators judge
     the geometry of anchors with heights on their plan positions)."""
     from locbook.data.measured import measured_data_dir, read_anchors
-    from locbook.scenarios import benchmark, dogan, george, gudipati, ozkaya
+    from locbook import benchmark
+    from locbook.scenarios import dogan, george, gudipati, ozkaya
     layouts = {"george": george.ANCHORS_M, "dogan": dogan.ANCHORS_M,
                "ozkaya testbed": np.array(ozkaya.TESTBED_READERS_M, float),
                "kolakowski2021 shipped anchors": read_anchors(measured_data_dir("kolakowski2021") / "anchors.csv")[

@@ -5,8 +5,8 @@ squared stays beyond a chi-square bound for a window of consecutive updates (:mo
 docstring). The scenario functions that run such a filter pass the flags on in one way:
 
 - a function that returns positions (``george.track_with_kalman``, ``gudipati.track``, ``palvai.ekf_path``,
-  ``dogan.only_acc_errors``) or several trackers' positions (``kolakowski.tracks``, ``benchmark.run_trackers``,
-  ``benchmark.tracking_cells``) takes ``with_divergence=False``; with ``True`` it returns ``(what it returned,
+  ``dogan.only_acc_errors``) or several trackers' positions (``kolakowski.tracks``, and outside the scenarios
+  ``locbook.benchmark.run_trackers`` and ``locbook.benchmark.tracking_cells``) takes ``with_divergence=False``; with ``True`` it returns ``(what it returned,
   flags)``, ``flags`` a :class:`DivergenceFlags` (one filter; None for a method that runs no Kalman-family filter)
   or ``{tracker: DivergenceFlags}`` for the Kalman-family trackers among several;
 - a function that already returns the filter's own result returns it with the guard's fields filled and mapped onto

@@ -26,13 +26,15 @@ import numpy as np
 from ..models.channel import PathLossModel, pairwise_distance_m
 from ..reproduce.printed_values import printed
 from ..reproduce.scoring import Ambiguity
-from ..montecarlo import replicate_standard_error
+from ..metrics import rmse_m
+from ..montecarlo import jackknife_standard_error, replicate_standard_error
 from ..errors import ParameterError
 from ..tracking.kalman import extended_kalman_filter
 from ..tracking.results import KalmanResult
 from ..tracking.streams import LinearMeasurement, RssMeasurement
 from ..static.localization import grid_ml_position, rss_ml_position
 from ..models.motion import KinematicModel, constant_acceleration, simulate_states
+from ..models.trajectory import POLYLINE_STARTS, Trajectory, polyline_trajectory
 from ..bounds.pcrlb import linear_measurement_information, position_bound_m, posterior_crlb, rss_state_information
 from . import DivergenceFlags, divergence_note, divergence_rows
 
@@ -40,13 +42,13 @@ __all__ = [
     "PRINTED", "ROOM_M", "ANCHORS_M", "corner_anchors", "STATE_LAYOUT", "POSITION_INDEX", "REF_POWER_DBM",
     "PATH_LOSS_EXP", "SIGMA_RSS_DB", "SIGMA_ACC_MPS2", "Q_PER_STEP", "DT_S", "RSS_EVERY", "P00_VEL_VAR",
     "P00_ACC_VAR", "WAYPOINTS_M", "SPEED_MPS", "SPEED_CALIBRATED_FROM", "MC_RUNS", "START_MODES", "DEFAULT_START",
-    "NOISE_READINGS", "DEFAULT_NOISE_READING", "Q_PER_ACC_VARIANCE", "filter_noise", "FILTERS", "Trajectory",
-    "polyline_trajectory", "motion_model", "simulate_rss", "simulate_acceleration", "mle_positions", "mle_cost_eq24",
-    "initial_state", "run_filter", "ChannelRun", "run_channel", "printed_tables", "TABLE_SETTINGS", "Setting",
-    "table_channels", "record_tables", "bound_rows", "thesis_repeat_error", "per_run_rms_m", "tail_rows",
+    "NOISE_READINGS", "DEFAULT_NOISE_READING", "Q_PER_ACC_VARIANCE", "filter_noise", "FILTERS",
+    "walk_trajectory", "motion_model", "simulate_rss", "simulate_acceleration", "mle_positions", "mle_cost_eq24",
+    "initial_state", "run_filter", "ChannelRun", "run_channel", "printed_tables", "TABLE_SETTINGS", "TableSetting",
+    "table_channels", "record_tables", "bound_rows", "thesis_repeat_error", "tail_rows",
     "fusion_reduction_rows", "ordering_rows", "table_view", "BOUND_KINDS", "pcrlb_m",
     "smc_trajectories", "smc_trajectory", "CHANNELS", "run_tables", "table_rows", "only_acc_errors",
-    "jackknife_standard_error", "fusion_gain_pct", "mean_rmse_m", "printed_fusion_gains_pct", "REPEATED_ROWS",
+    "fusion_gain_pct", "mean_rmse_m", "printed_fusion_gains_pct", "REPEATED_ROWS",
     "RMSE_TABLES", "TABLE_SIGMA_ACC_MPS2", "TABLE_36_CHANNEL", "SIGMA_ACC_SWEEP_CHANNELS", "ACCELERATION_INDEX", "MLE_R_READINGS",
     "divergence_table",
 ]
@@ -111,7 +113,7 @@ MC_RUNS = int(_value("Sec. 3.5 text", "Monte Carlo runs"))
 #: ``"moving"``: it walks at SPEED_MPS from t = 0 (the former default, kept as a labelled variant): the reading
 #: that gives Fig. 3.2's 24 m ONLY-ACC drift, but leaves the fused EKFs an unobserved 0.3 m/s velocity error from
 #: which 4-6 % of runs diverge beyond 4 m at 6 dB (the thesis saw "4 m errors" at worst, Fig. 3.10 text).
-START_MODES = ("rest", "moving")
+START_MODES = POLYLINE_STARTS
 DEFAULT_START = "rest"
 #: How the filter's process noise and the acceleration variance of P_{0|0} relate to sigma_ACC.
 #: ``"sigma_acc"``: Q = sigma_ACC^2 / 10 I_6 per step and P_{0|0,acc} = sigma_ACC^2, for the sigma_ACC of the row
@@ -156,64 +158,12 @@ def filter_noise(reading: str, sigma_acc_mps2: float | None) -> tuple[float, flo
 
 
 
-@dataclass(frozen=True)
-class Trajectory:
-    """A true trajectory on the filter grid: ``state`` ``(T, 6)`` in the thesis's per-axis layout
-    ``[x, vx, ax, y, vy, ay]`` (Eq. (3.10)), or ``(N, T, 6)`` for one trajectory per Monte-Carlo run;
-    ``time_s`` ``(T,)`` and the RSS epochs ``rss_steps``."""
-
-    time_s: np.ndarray
-    state: np.ndarray
-    rss_steps: np.ndarray
-    waypoints_m: tuple
-    start: str
-
-    @property
-    def position_m(self) -> np.ndarray:
-        return self.state[..., POSITION_INDEX]
-
-    @property
-    def acceleration_mps2(self) -> np.ndarray:
-        return self.state[..., ACCELERATION_INDEX]
-
-
-def polyline_trajectory(waypoints_m=WAYPOINTS_M, speed_mps: float = SPEED_MPS, dt_s: float = DT_S, *,
-                        start: str = DEFAULT_START, ramp_s: float = 2.0, rss_every: int = RSS_EVERY) -> Trajectory:
-    """Walk the polyline at constant speed, sampled every ``dt_s`` (note 000, A1).
-
-    The velocity turns within one step at each corner, so the true acceleration (what a bias-free, perfectly
-    oriented accelerometer reads, Eq. (3.17)) is the backward difference ``(v_k - v_{k-1}) / dt``: zero on the
-    straight segments and an impulse at the turns (and during the ramp for ``start="rest"``).
-    """
-    if start not in START_MODES:
-        raise ParameterError(f"start must be one of {START_MODES}, got {start!r}")
-    if speed_mps <= 0 or dt_s <= 0 or rss_every < 1:
-        raise ParameterError("speed_mps and dt_s must be positive and rss_every at least 1")
-    pts = np.asarray(waypoints_m, dtype=float)
-    if pts.ndim != 2 or pts.shape[1] != 2 or len(pts) < 2:
-        raise ParameterError(f"waypoints_m must be at least two (x, y) points, got shape {pts.shape}")
-    seg = np.diff(pts, axis=0)
-    seg_len = np.linalg.norm(seg, axis=1)
-    if np.any(seg_len == 0):
-        raise ParameterError("waypoints_m has repeated consecutive points")
-    length = seg_len.sum()
-    ramp = ramp_s if start == "rest" else 0.0
-    accel = speed_mps / ramp if ramp > 0 else 0.0
-    duration = length / speed_mps + 0.5 * ramp
-    n = int(round(duration / dt_s))
-    t = np.arange(n) * dt_s
-    # arc length and speed as functions of time
-    s = np.where(t < ramp, 0.5 * accel * t**2, 0.5 * accel * ramp**2 + speed_mps * (t - ramp))
-    speed = np.where(t < ramp, accel * t, speed_mps)
-    cum = np.concatenate([[0.0], np.cumsum(seg_len)])
-    i = np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(seg) - 1)
-    direction = seg[i] / seg_len[i, None]
-    pos = pts[i] + direction * (s - cum[i])[:, None]
-    vel = direction * speed[:, None]
-    acc = np.zeros_like(vel)
-    acc[1:] = np.diff(vel, axis=0) / dt_s
-    state = np.stack([pos[:, 0], vel[:, 0], acc[:, 0], pos[:, 1], vel[:, 1], acc[:, 1]], axis=1)
-    return Trajectory(t, state, np.arange(0, n, rss_every), tuple(map(tuple, pts.tolist())), start)
+def walk_trajectory(waypoints_m=WAYPOINTS_M, speed_m_s: float = SPEED_MPS, dt_s: float = DT_S, *,
+                    start: str = DEFAULT_START, ramp_s: float = 2.0, rss_every: int = RSS_EVERY) -> Trajectory:
+    """The walk of note 000 A1 (:func:`~locbook.models.trajectory.polyline_trajectory`): the polyline at constant
+    speed, sampled at the accelerometer's rate, RSS every ``rss_every``-th sample (Sec. 3.5)."""
+    return polyline_trajectory(waypoints_m, speed_m_s=speed_m_s, dt_s=dt_s, start=start, ramp_s=ramp_s,
+                               rss_every=rss_every)
 
 
 def motion_model(dt_s: float = DT_S, q_per_step: float = Q_PER_STEP) -> KinematicModel:
@@ -234,7 +184,7 @@ def simulate_acceleration(trajectory: Trajectory, sigma_acc_mps2: float, n_runs:
                           rng: np.random.Generator) -> np.ndarray:
     """Accelerometer readings ``(n_runs, T, 2)``: true world-frame acceleration plus white noise, Eq. (3.17)
     (no bias, perfect orientation)."""
-    a = trajectory.acceleration_mps2
+    a = trajectory.acceleration_m_s2
     return a + sigma_acc_mps2 * rng.standard_normal(np.broadcast_shapes((n_runs,) + a.shape[-2:], a.shape))
 
 
@@ -414,10 +364,10 @@ def run_channel(trajectory: Trajectory, sigma_rss_db: float, path_loss_exp: floa
     if keep_estimates:
         out.errors[("estimates", "static_mle")] = fix
     # one accelerometer noise draw, scaled for each sigma_ACC (common random numbers across the sweep)
-    unit_noise = rng.standard_normal((n_runs,) + trajectory.acceleration_mps2.shape[-2:])
+    unit_noise = rng.standard_normal((n_runs,) + trajectory.acceleration_m_s2.shape[-2:])
     cases = ([None] if only_rss else []) + list(sigma_acc_values)
     for sigma_acc in cases:
-        acc = None if sigma_acc is None else trajectory.acceleration_mps2 + sigma_acc * unit_noise
+        acc = None if sigma_acc is None else trajectory.acceleration_m_s2 + sigma_acc * unit_noise
         q, p0_acc = filter_noise(noise_reading, sigma_acc)
         model = motion_model(dt_s, q)
         for name in filters:
@@ -433,7 +383,7 @@ def run_channel(trajectory: Trajectory, sigma_rss_db: float, path_loss_exp: floa
 
 
 @dataclass(frozen=True)
-class Setting:
+class TableSetting:
     """One printed cell's setting: channel (sigma_RSS, alpha) and accelerometer (None for ONLY RSS)."""
 
     sigma_rss_db: float
@@ -455,12 +405,12 @@ def _table_settings():
         if p.location not in RMSE_TABLES or (table, p.item) in out:
             continue
         label = float(p.item.partition("=")[2])
-        setting = {"3.7": lambda: Setting(label, PATH_LOSS_EXP, None),
-                   "3.8": lambda: Setting(label, PATH_LOSS_EXP, acc),
-                   "3.9": lambda: Setting(fixed_rss["3.9"], PATH_LOSS_EXP, label),
-                   "3.10": lambda: Setting(fixed_rss["3.10"], PATH_LOSS_EXP, label),
-                   "3.11": lambda: Setting(fixed_rss["3.11"], label, None),
-                   "3.12": lambda: Setting(fixed_rss["3.12"], label, acc_312)}[table]()
+        setting = {"3.7": lambda: TableSetting(label, PATH_LOSS_EXP, None),
+                   "3.8": lambda: TableSetting(label, PATH_LOSS_EXP, acc),
+                   "3.9": lambda: TableSetting(fixed_rss["3.9"], PATH_LOSS_EXP, label),
+                   "3.10": lambda: TableSetting(fixed_rss["3.10"], PATH_LOSS_EXP, label),
+                   "3.11": lambda: TableSetting(fixed_rss["3.11"], label, None),
+                   "3.12": lambda: TableSetting(fixed_rss["3.12"], label, acc_312)}[table]()
         out[(table, p.item)] = setting
     return out
 
@@ -468,12 +418,6 @@ def _table_settings():
 #: The printed RMSE tables of Ch. 3.
 RMSE_TABLES = tuple(f"Table 3.{i}" for i in range(7, 13))
 TABLE_SETTINGS = _table_settings()
-#: The channel (sigma_RSS, alpha) of Table 3.6, and the channels of the sigma_ACC sweeps (Tables 3.9 and 3.10).
-TABLE_36_CHANNEL = (SIGMA_RSS_DB, PATH_LOSS_EXP)
-SIGMA_ACC_SWEEP_CHANNELS = tuple(dict.fromkeys((st.sigma_rss_db, st.path_loss_exp) for (t, _), st in TABLE_SETTINGS.items()
-                                               if t in ("3.9", "3.10")))
-#: sigma_ACC of the fused rows of Tables 3.8, 3.11-3.12 as the captions write it (Table 3.6: 0.0152).
-TABLE_SIGMA_ACC_MPS2 = TABLE_SETTINGS[("3.8", "sigma_rss_db=6")].sigma_acc_mps2
 #: The channel (sigma_RSS, alpha) of Table 3.6, and the channels of the sigma_ACC sweeps (Tables 3.9 and 3.10).
 TABLE_36_CHANNEL = (SIGMA_RSS_DB, PATH_LOSS_EXP)
 SIGMA_ACC_SWEEP_CHANNELS = tuple(dict.fromkeys((st.sigma_rss_db, st.path_loss_exp) for (t, _), st in TABLE_SETTINGS.items()
@@ -576,7 +520,9 @@ def smc_trajectory(states, rss_every: int = RSS_EVERY, dt_s: float = DT_S) -> Tr
     filters can be run on the bound's own scenario."""
     states = np.asarray(states, dtype=float)
     n = states.shape[-2]
-    return Trajectory(np.arange(n) * dt_s, states, np.arange(0, n, rss_every), (), "smc")
+    model = motion_model(dt_s)
+    return Trajectory(np.arange(n) * dt_s, states[..., model.position_index], states[..., model.velocity_index],
+                      states[..., model.acceleration_index], rss_steps=np.arange(0, n, rss_every), start="smc")
 
 
 def pcrlb_m(kind: str, *, fusion: bool, sigma_rss_db: float, mse_mle_m2, n_steps: int,
@@ -614,7 +560,7 @@ def pcrlb_m(kind: str, *, fusion: bool, sigma_rss_db: float, mse_mle_m2, n_steps
     elif kind == "truth":
         if trajectory is None or trajectory.time_s.size < n_steps:
             raise ParameterError("the truth-conditioned bound needs a trajectory of at least n_steps steps")
-        rss_info = rss_state_information(trajectory.state[rss_steps], anchors_m, path_loss_exp, sigma_rss_db, idx,
+        rss_info = rss_state_information(trajectory.states(model)[rss_steps], anchors_m, path_loss_exp, sigma_rss_db, idx,
                                          **regularise)
     else:
         if rng is None:
@@ -625,13 +571,6 @@ def pcrlb_m(kind: str, *, fusion: bool, sigma_rss_db: float, mse_mle_m2, n_steps
     jz[rss_steps - 1] += rss_info
     info = posterior_crlb(np.linalg.inv(P0), model.F, model.Q, jz)
     return position_bound_m(info, idx)
-
-
-def per_run_rms_m(errors_m) -> np.ndarray:
-    """The per-run time-RMS error ``sqrt(mean_k e_k^2)`` of errors ``(runs, epochs)``: the x axis of Figs
-    3.9-3.11 ("error averaged (RMS) over time"), and the run-level value of every Monte-Carlo standard error here
-    (epochs within a run are correlated, runs are independent)."""
-    return np.sqrt(np.mean(np.asarray(errors_m, float) ** 2, axis=-1))
 
 
 #: Printed rows that repeat one setting (note 000 s.3.3): Table 3.9's sigma_ACC = 0.015 row is Table 3.8's 6 dB
@@ -744,16 +683,6 @@ def fusion_reduction_rows(runs: dict) -> list[dict]:
     return out
 
 
-def jackknife_standard_error(statistic, *per_run) -> float:
-    """Delete-one jackknife standard error over runs of ``statistic(*per_run)``, where each array of ``per_run``
-    holds one run-level value per run along axis 0 (Efron and Tibshirani 1993, Eq. (11.5)): for statistics that are
-    not means of run-level values, such as a reduction of pooled RMSEs."""
-    n = np.asarray(per_run[0]).shape[0]
-    keep = ~np.eye(n, dtype=bool)
-    leave = np.array([statistic(*(np.asarray(a)[keep[i]] for a in per_run)) for i in range(n)])
-    return float(np.sqrt((n - 1) / n * np.sum((leave - leave.mean()) ** 2)))
-
-
 def fusion_gain_pct(run: ChannelRun, sigma_acc_mps2: float, filters=FILTERS) -> tuple[float, float, dict]:
     """The fusion reduction of the RMSE, ONLY RSS -> RSS/IMU, averaged over ``filters`` (the text's "Sensor fusion
     decreases the error approximately % 30", Figs 3.5-3.7), its jackknife standard error over runs, and the
@@ -840,7 +769,7 @@ def bound_rows(runs: dict, trajectory: Trajectory, *, noise_reading: str = DEFAU
 
 def tail_rows(runs: dict, threshold_m: float = 4.0) -> list[dict]:
     """For every filter case of every channel: the RMSE, the median (typical-run) and 90th percentile of the
-    per-run RMS error (:func:`per_run_rms_m`), the fraction of runs beyond ``threshold_m``, the worst run, and the
+    per-run RMS error (:func:`~locbook.metrics.rmse_m` over epochs), the fraction of runs beyond ``threshold_m``, the worst run, and the
     runs the NIS guard flagged diverged (blank for the MLE)."""
     from ..metrics import rmse_m
     out = []
@@ -849,7 +778,7 @@ def tail_rows(runs: dict, threshold_m: float = 4.0) -> list[dict]:
             if key != "static_mle" and not (isinstance(key, tuple) and key[0] in FILTERS):
                 continue
             name, sigma_acc = (key, None) if key == "static_mle" else key
-            per = per_run_rms_m(err)
+            per = rmse_m(err, axis=-1)
             flags = run.divergence.get(key) if key != "static_mle" else None
             out.append(dict(sigma_rss_db=sigma, ple=ple, filter=name,
                             case="ONLY RSS" if sigma_acc is None else f"RSS/IMU {sigma_acc:g}",

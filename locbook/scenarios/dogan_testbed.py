@@ -23,6 +23,7 @@ from ..static.calibration import PathLossFit, calibrate_path_loss
 from ..models.channel import PathLossModel, pairwise_distance_m, quantize_db
 from ..errors import ParameterError
 from ..metrics import reduction_pct, rmse_m
+from ..montecarlo import single_run_interval
 from .dogan import ANCHORS_M, DT_S, FILTERS, PRINTED, ChannelRun
 
 __all__ = [
@@ -31,7 +32,7 @@ __all__ = [
     "PRINTED_TESTBED_RMSE", "PRINTED_FUSION_REDUCTION", "PRINTED_FUSION_REDUCTION_CH6", "PRINTED_ACCURACY",
     "ANTENNA_SEPARATION_M", "ANTENNA_HEIGHT_M", "ORIENTATION_SAMPLES", "ONE_WALK_SOURCE",
     "calibration_points_m", "simulate_calibration", "fit_calibration", "CalibrationStudy", "calibration_study",
-    "orientation_gain_db", "simulate_orientation", "single_run_interval", "testbed_rows", "printed_reductions_pct",
+    "orientation_gain_db", "simulate_orientation", "testbed_rows", "printed_reductions_pct",
 ]
 
 #: Sec. 5.2: the LS fit of Eq. (5.1) to the laboratory measurements.
@@ -161,16 +162,6 @@ def simulate_orientation(theta_deg, channel: PathLossModel, rng: np.random.Gener
     theta = np.atleast_1d(np.asarray(theta_deg, float))
     mean = channel.mean_power_dbm(separation_m) + orientation_gain_db(theta, **gain)
     return mean[:, None] + sigma_db * rng.standard_normal((theta.size, n_samples))
-
-
-def single_run_interval(per_run_rmse_m, coverage: float = 0.90) -> tuple[float, float]:
-    """The central ``coverage`` interval of the RMSE of one run: where a single measured walk should fall if the
-    simulation's channel were the laboratory's."""
-    if not 0.0 < coverage < 1.0:
-        raise ParameterError(f"coverage must lie in (0, 1), got {coverage}")
-    tail = 50.0 * (1.0 - coverage)
-    lo, hi = np.percentile(np.asarray(per_run_rmse_m, float), [tail, 100.0 - tail])
-    return float(lo), float(hi)
 
 
 def _walk_row(values, coverage: float) -> dict:

@@ -30,45 +30,39 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..bounds.crlb import rss_position_information
-from ..bounds.pcrlb import posterior_crlb, position_bound_m, rss_state_information
-from ..data.measured import regular_epochs
-from ..geometry import grid_in_outline, outline_box
-from ..metrics import accuracy_metrics, position_error_m, rmse_standard_error_m
-from ..montecarlo import seed_from_values
-from ..models.channel import PathLossModel
-from ..models.motion import constant_velocity
-from ..static.calibration import fix_error_covariance
-from ..static.fingerprint import knn_position, model_fingerprints
-from ..static.localization import (grid_ml_position, lateration_box_ls, lateration_ls, lateration_wls,
+from .bounds.crlb import rss_position_information
+from .bounds.pcrlb import posterior_crlb, position_bound_m, rss_state_information
+from .data.measured import regular_epochs
+from .geometry import box_outline, grid_in_outline, outline_box
+from .metrics import accuracy_metrics, position_error_m, rmse_standard_error_m
+from .montecarlo import seed_from_values
+from .models.channel import PathLossModel
+from .models.motion import constant_velocity
+from .static.calibration import fix_error_covariance
+from .static.fingerprint import knn_position, model_fingerprints
+from .static.localization import (grid_ml_position, lateration_box_ls, lateration_ls, lateration_wls,
                                    rss_ml_position)
-from ..models.rss import RssModel
-from ..tracking.bayes import grid_bayes_filter
-from ..tracking.particle import particle_filter
-from ..tracking.kalman import extended_kalman_filter
-from ..tracking.streams import LinearMeasurement, RssMeasurement
-from ..tracking.unscented import unscented_kalman_filter
-from . import DivergenceFlags, dogan, george, gudipati, kolakowski, ozkaya, palvai
+from .models.rss import RssModel
+from .tracking.bayes import grid_bayes_filter
+from .tracking.particle import particle_filter
+from .tracking.kalman import extended_kalman_filter
+from .tracking.streams import LinearMeasurement, RssMeasurement
+from .tracking.unscented import unscented_kalman_filter
+from .scenarios import DivergenceFlags, dogan, george, gudipati, kolakowski, ozkaya, palvai
 
-__all__ = ["Setting", "StaticScenario", "TrackingScenario", "STATIC_SCENARIOS", "TRACKING_SCENARIOS",
+__all__ = ["ProtocolChoice", "StaticScenario", "TrackingScenario", "STATIC_SCENARIOS", "TRACKING_SCENARIOS",
            "STATIC_METHODS", "TRACKERS", "NOT_APPLICABLE", "TrackerSettings", "static_scenario", "tracking_scenario",
            "static_fixes", "static_bound_m", "run_trackers", "tracking_bound_m", "initial_states", "score",
-           "box_outline", "scenario_rng", "static_cells", "tracking_cells", "settings_rows", "heat_map"]
+           "scenario_rng", "static_cells", "tracking_cells", "settings_rows"]
 
 
 @dataclass(frozen=True)
-class Setting:
+class ProtocolChoice:
     """One named choice of a scenario or a method: its value and where it comes from."""
 
     name: str
     value: str
     source: str
-
-
-def box_outline(lower_m, upper_m) -> np.ndarray:
-    """The rectangle ``lower``-``upper`` as an outline ``(4, 2)``."""
-    (x0, y0), (x1, y1) = lower_m, upper_m
-    return np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]], float)
 
 
 @dataclass(frozen=True)
@@ -86,7 +80,7 @@ class StaticScenario:
     outline_m: np.ndarray
     points_m: np.ndarray
     grid_spacing_m: float
-    settings: tuple[Setting, ...]
+    settings: tuple[ProtocolChoice, ...]
     tag_height_m: float | None = None
     measured_rss_dbm: np.ndarray | None = None
     radio_map: tuple | None = field(default=None, repr=False)
@@ -133,7 +127,7 @@ class TrackingScenario:
     dt_s: float
     spread_m: float
     grid_spacing_m: float
-    settings: tuple[Setting, ...]
+    settings: tuple[ProtocolChoice, ...]
     tag_height_m: float | None = None
     measured_rss_dbm: np.ndarray | None = None
     scored: np.ndarray | None = None
@@ -175,10 +169,10 @@ def _fmt(values) -> str:
     return f"{a[0]:g}" if a.size == 1 or np.all(a == a[0]) else "[" + ", ".join(f"{v:g}" for v in a) + "]"
 
 
-def _channel_settings(model: PathLossModel, source: str) -> tuple[Setting, ...]:
-    return (Setting("P0 (dBm at 1 m)", _fmt(model.ref_power_dbm), source),
-            Setting("path-loss exponent", _fmt(model.path_loss_exp), source),
-            Setting("shadowing sigma (dB)", _fmt(model.sigma_db), source))
+def _channel_settings(model: PathLossModel, source: str) -> tuple[ProtocolChoice, ...]:
+    return (ProtocolChoice("P0 (dBm at 1 m)", _fmt(model.ref_power_dbm), source),
+            ProtocolChoice("path-loss exponent", _fmt(model.path_loss_exp), source),
+            ProtocolChoice("shadowing sigma (dB)", _fmt(model.sigma_db), source))
 
 
 # ---------------------------------------------------------------------------------------------------- scenarios
@@ -191,10 +185,10 @@ def _george_static() -> StaticScenario:
     return StaticScenario(
         "george-corridor", "george", "2.1 x 7.8 m corridor, 4 corner anchors", george.ANCHORS_M, model,
         box_outline((0, 0), (w, h)), george.trajectory_m("centerline"), 0.05,
-        (Setting("anchors", "4 corners (0,0) (2.1,0) (0,7.8) (2.1,7.8)", "Sec. 5"),
+        (ProtocolChoice("anchors", "4 corners (0,0) (2.1,0) (0,7.8) (2.1,7.8)", "Sec. 5"),
          *_channel_settings(model, src),
-         Setting("positions", "the 25 marked points on the centre line, y 0.3-7.5 m", "not printed; note 003 s.6 item 8"),
-         Setting("grid pitch", "0.05 m", "benchmark: fine against the corridor's 2.1 m width")))
+         ProtocolChoice("positions", "the 25 marked points on the centre line, y 0.3-7.5 m", "not printed; note 003 s.6 item 8"),
+         ProtocolChoice("grid pitch", "0.05 m", "benchmark: fine against the corridor's 2.1 m width")))
 
 
 def _ozkaya_static() -> StaticScenario:
@@ -202,22 +196,22 @@ def _ozkaya_static() -> StaticScenario:
     return StaticScenario(
         "ozkaya2011-room", "ozkaya2011", "5 x 8 m room, 3 corner readers", ozkaya.readers_for("corners3"), model,
         box_outline((0, 0), ozkaya.ROOM_M), ozkaya.cell_centres(ozkaya.ROOM_M, *ozkaya.CELL_PATTERNS[28]), 0.1,
-        (Setting("readers", "3 corners (layout corners3)", "Sec. 7.2.1; note 004 s.4.2"),
+        (ProtocolChoice("readers", "3 corners (layout corners3)", "Sec. 7.2.1; note 004 s.4.2"),
          *_channel_settings(model, "Table 6.1, Reader 2 (the simulation channel, Sec. 7.2.1)"),
-         Setting("positions", "the 28 cell centres (x 1-4 m, y 1-7 m)", "Fig. 7.2"),
-         Setting("grid pitch", "0.1 m", "benchmark")))
+         ProtocolChoice("positions", "the 28 cell centres (x 1-4 m, y 1-7 m)", "Fig. 7.2"),
+         ProtocolChoice("grid pitch", "0.1 m", "benchmark")))
 
 
 def _dogan_static() -> StaticScenario:
     model = PathLossModel(dogan.REF_POWER_DBM, dogan.PATH_LOSS_EXP, dogan.SIGMA_RSS_DB)
-    walk = dogan.polyline_trajectory()
+    walk = dogan.walk_trajectory()
     return StaticScenario(
         "dogan2015-room", "dogan2015", "7.6 x 9.2 m room, 4 corner anchors", dogan.ANCHORS_M, model,
         box_outline((0, 0), dogan.ROOM_M), walk.position_m[walk.rss_steps], 0.1,
-        (Setting("anchors", "4 corners", "Sec. 5.4"), *_channel_settings(model, "Table 3.6"),
-         Setting("positions", f"the walk's {len(walk.rss_steps)} RSS epochs (0.3 m/s polyline, 2 Hz)",
+        (ProtocolChoice("anchors", "4 corners", "Sec. 5.4"), *_channel_settings(model, "Table 3.6"),
+         ProtocolChoice("positions", f"the walk's {len(walk.rss_steps)} RSS epochs (0.3 m/s polyline, 2 Hz)",
                  "note 000 A1; where the thesis's MLE is computed"),
-         Setting("grid pitch", "0.1 m", "benchmark")))
+         ProtocolChoice("grid pitch", "0.1 m", "benchmark")))
 
 
 #: Gudipati's readings: shadowing 3 dB plus 1 dB per-packet noise (note F5.1), as one i.i.d. term of the same variance
@@ -242,13 +236,13 @@ def _gudipati_static() -> StaticScenario:
     return StaticScenario(
         "gudipati2017-hall", "gudipati2017", "30 x 10 m hall, 6 anchors", gudipati.anchors_m(gudipati.ANCHOR_SETS[6]),
         model, box_outline((0, 0), gudipati.ROOM_M), pos[marks], 0.2,
-        (Setting("anchors", "12-15 at the corners, 16-17 mid long walls", "Sec. 5.1 (which ID where: note 001 s.3.3)"),
+        (ProtocolChoice("anchors", "12-15 at the corners, 16-17 mid long walls", "Sec. 5.1 (which ID where: note 001 s.3.3)"),
          *_channel_settings(model, "Table 5.2 (S, C per anchor); sigma: 3 dB shadowing and 1 dB per packet "
                                    "(note F5.1) as one i.i.d. term (the bounds' model; the thesis's walk has "
                                    "correlated shadowing)"),
-         Setting("positions", f"the U-path's report points every {gudipati.REPORT_SPACING_M:g} m ({len(marks)})",
+         ProtocolChoice("positions", f"the U-path's report points every {gudipati.REPORT_SPACING_M:g} m ({len(marks)})",
                  "Sec. 5.3; path: note 001 s.3.6"),
-         Setting("grid pitch", "0.2 m", "benchmark")))
+         ProtocolChoice("grid pitch", "0.2 m", "benchmark")))
 
 
 #: Palvai: the 25 measurement locations are drawn once, in the plane, from this seed (the thesis redraws them per
@@ -263,12 +257,12 @@ def _palvai_static() -> StaticScenario:
     return StaticScenario(
         "palvai2008-area", "palvai2008", "50 x 50 m area, emitter seen from 25 receiver positions", receivers, model,
         box_outline((0, 0), (palvai.AREA_M, palvai.AREA_M)), setup.target[None], 0.25,
-        (Setting("receivers", f"{palvai.N_LOCATIONS} positions uniform in the area, drawn once (seed "
+        (ProtocolChoice("receivers", f"{palvai.N_LOCATIONS} positions uniform in the area, drawn once (seed "
                               f"{PALVAI_GEOMETRY_SEED}), exactly known", "Sec. 4.4 (N = 25); note 002 A3; sigma_3 = 0"),
          *_channel_settings(model, "Secs. 2.6, 4.4 (sigma_1, eta); K = -20 dBm at 1 m (note 002 A4)"),
-         Setting("positions", "the emitter at the area's centre (25, 25)", "note 002 A2"),
-         Setting("plane", "2-D (the thesis's equations are 3-D)", "note 002 A1"),
-         Setting("grid pitch", "0.25 m", "benchmark: 40,000 cells over the area")))
+         ProtocolChoice("positions", "the emitter at the area's centre (25, 25)", "note 002 A2"),
+         ProtocolChoice("plane", "2-D (the thesis's equations are 3-D)", "note 002 A1"),
+         ProtocolChoice("grid pitch", "0.25 m", "benchmark: 40,000 cells over the area")))
 
 
 def _kolakowski_parts(fit: str = "closed_form"):
@@ -277,10 +271,10 @@ def _kolakowski_parts(fit: str = "closed_form"):
     return data, model
 
 
-def _measured_settings(model: PathLossModel, fit: str) -> tuple[Setting, ...]:
-    return (Setting("data", "M. Kolakowski (2021), BLE RSS data set, CC BY 4.0", "locbook/data/measured/kolakowski2021"),
-            Setting("anchors", "6, at 1.85-2.62 m height; tag at 1.3 m (3-D distances)", "data set README"),
-            Setting("channel", f"per-anchor {fit} fit on the 4,104 calibration points (never the scored drive)",
+def _measured_settings(model: PathLossModel, fit: str) -> tuple[ProtocolChoice, ...]:
+    return (ProtocolChoice("data", "M. Kolakowski (2021), BLE RSS data set, CC BY 4.0", "locbook/data/measured/kolakowski2021"),
+            ProtocolChoice("anchors", "6, at 1.85-2.62 m height; tag at 1.3 m (3-D distances)", "data set README"),
+            ProtocolChoice("channel", f"per-anchor {fit} fit on the 4,104 calibration points (never the scored drive)",
                     "kolakowski2021-calibration"),
             *_channel_settings(model, "the fit (sigma = residual spread per anchor)"))
 
@@ -293,10 +287,10 @@ def _kolakowski_static(fit: str = "closed_form") -> StaticScenario:
         "kolakowski2021-drive", "kolakowski2021", "measured: 9 x 7 m flat, 6 BLE anchors, robot drive", data.anchors_m,
         model, np.asarray(data.outline_m, float), drive.truth_m, 0.1,
         (*_measured_settings(model, fit),
-         Setting("positions", f"the robot drive's {len(drive.truth_m)} epochs (LiDAR truth)", "data set"),
-         Setting("k-NN map", f"the calibration points; {100 * filled:.1f} % of readings not heard, filled with the "
+         ProtocolChoice("positions", f"the robot drive's {len(drive.truth_m)} epochs (LiDAR truth)", "data set"),
+         ProtocolChoice("k-NN map", f"the calibration points; {100 * filled:.1f} % of readings not heard, filled with the "
                              "fitted mean", "kolakowski2021-localization"),
-         Setting("grid pitch", "0.1 m inside the floor outline", "kolakowski2021-localization")),
+         ProtocolChoice("grid pitch", "0.1 m inside the floor outline", "kolakowski2021-localization")),
         tag_height_m=kolakowski.TAG_HEIGHT_M, measured_rss_dbm=drive.rss_dbm, radio_map=(cells, fingerprints))
 
 
@@ -316,7 +310,7 @@ def _george_tracking() -> TrackingScenario:
     return TrackingScenario(
         "george-walk", "george", "corridor centre line, 25 points at 1 s", st.anchors_m, st.channel, st.outline_m,
         george.trajectory_m("centerline"), 1.0, 0.3, 0.05,
-        (*st.settings[:4], Setting("path", "centre line, y 0.3 -> 7.5 m, one point per second (0.3 m/s)",
+        (*st.settings[:4], ProtocolChoice("path", "centre line, y 0.3 -> 7.5 m, one point per second (0.3 m/s)",
                                    "not printed; note 003 s.6 item 8; dt: george-tracking dt_s")))
 
 
@@ -327,17 +321,17 @@ def _ozkaya_tracking() -> TrackingScenario:
     return TrackingScenario(
         "ozkaya2011-constant-velocity", "ozkaya2011", "+0.5 m in y per recursion, 10 recursions", st.anchors_m,
         st.channel, st.outline_m, truth, 1.0, 0.5, 0.1,
-        (*st.settings[:4], Setting("path", "x = 2.5 m, y = 1 + 0.5 k m, k = 1..10 (one recursion = 1 s)",
+        (*st.settings[:4], ProtocolChoice("path", "x = 2.5 m, y = 1 + 0.5 k m, k = 1..10 (one recursion = 1 s)",
                                    "Table 7.20 protocol (x drawn at random there; the room's middle here)")))
 
 
 def _dogan_tracking() -> TrackingScenario:
     st = _dogan_static()
-    walk = dogan.polyline_trajectory()
+    walk = dogan.walk_trajectory()
     return TrackingScenario(
         "dogan2015-walk", "dogan2015", "0.3 m/s polyline, RSS at 2 Hz", st.anchors_m, st.channel, st.outline_m,
         walk.position_m[walk.rss_steps], dogan.DT_S * dogan.RSS_EVERY, 0.15, 0.1,
-        (*st.settings[:4], Setting("path", "the 24 m polyline at 0.3 m/s from rest, at its RSS epochs (0.5 s); "
+        (*st.settings[:4], ProtocolChoice("path", "the 24 m polyline at 0.3 m/s from rest, at its RSS epochs (0.5 s); "
                                            "RSS only (the accelerometer is not used here)", "note 000 A1; Sec. 3.5")))
 
 
@@ -353,7 +347,7 @@ def _gudipati_tracking() -> TrackingScenario:
     return TrackingScenario(
         "gudipati2017-u-path", "gudipati2017", "U-path at 0.5 m/s, RSS every 0.5 s", st.anchors_m, st.channel,
         st.outline_m, pos, GUDIPATI_TRACKING_DT_S, 0.25, 0.2,
-        (*st.settings[:4], Setting("path", "the U-path (2 m from the walls) at 0.5 m/s with 0.25 m/s^2 ramps and 1 m "
+        (*st.settings[:4], ProtocolChoice("path", "the U-path (2 m from the walls) at 0.5 m/s with 0.25 m/s^2 ramps and 1 m "
                                            "turn radius; a step every 0.5 s (the thesis: 0.1 s); RSS only",
                                    "note 001 s.3.6, s.5 points 10-11; GUDIPATI_TRACKING_DT_S")))
 
@@ -369,9 +363,9 @@ def _kolakowski_tracking(fit: str = "closed_form") -> TrackingScenario:
         "kolakowski2021-drive", "kolakowski2021", "measured: robot drive, 1/3 s epochs", data.anchors_m, model,
         np.asarray(data.outline_m, float), truth, kolakowski.EPOCH_S, 0.3, 0.1,
         (*_measured_settings(model, fit),
-         Setting("path", f"the robot drive on a 1/3 s clock ({len(ticks)} epochs scored against the LiDAR truth)",
+         ProtocolChoice("path", f"the robot drive on a 1/3 s clock ({len(ticks)} epochs scored against the LiDAR truth)",
                  "data set; kolakowski2021-tracking"),
-         Setting("KF-on-ML R", "covariance of RSS-ML fix errors on the calibration points",
+         ProtocolChoice("KF-on-ML R", "covariance of RSS-ML fix errors on the calibration points",
                  "kolakowski.fix_covariance_from_calibration")),
         tag_height_m=kolakowski.TAG_HEIGHT_M, measured_rss_dbm=reg.rss_dbm, scored=scored,
         fix_cov_m2=kolakowski.fix_covariance_from_calibration(data, model))
@@ -719,30 +713,3 @@ def settings_rows(scenarios) -> list[dict]:
     """Every scenario's named settings, one row each."""
     return [{"scenario": sc.key, "document": sc.document, "setting": st.name, "value": st.value, "source": st.source}
             for sc in scenarios for st in sc.settings]
-
-
-def heat_map(ax, rows, kind: str, methods, scenarios, not_applicable=None, *, vmax_log2: float = 3.0):
-    """Error / bound (RMSE over RMS bound) of each method (rows) on each scenario (columns), log2 colour scale centred
-    on 1; a column that does not apply is hatched and labelled."""
-    import matplotlib.colors as mcolors
-    from matplotlib.patches import Rectangle
-
-    grid = np.full((len(methods), len(scenarios)), np.nan)
-    for r in rows:
-        if r["kind"] == kind and r["method"] in methods and r["scenario"] in scenarios:
-            grid[list(methods).index(r["method"]), list(scenarios).index(r["scenario"])] = r["ratio"]
-    norm = mcolors.TwoSlopeNorm(vcenter=0.0, vmin=-vmax_log2, vmax=vmax_log2)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        image = ax.imshow(np.clip(np.log2(grid), -vmax_log2, vmax_log2), cmap="RdBu_r", norm=norm, aspect="auto")
-    for i in range(grid.shape[0]):
-        for j in range(grid.shape[1]):
-            if np.isfinite(grid[i, j]):
-                ax.text(j, i, f"{grid[i, j]:.2f}", ha="center", va="center", fontsize=8,
-                        color="white" if abs(np.log2(grid[i, j])) > 0.6 * vmax_log2 else "black")
-    for j, key in enumerate(scenarios):
-        if not_applicable and key in not_applicable:
-            ax.add_patch(Rectangle((j - 0.5, -0.5), 1, len(methods), fill=False, hatch="//", edgecolor="0.6"))
-            ax.text(j, (len(methods) - 1) / 2, "n/a", ha="center", va="center", fontsize=9, color="0.3")
-    ax.set_xticks(range(len(scenarios)), scenarios, rotation=30, ha="right", fontsize=8)
-    ax.set_yticks(range(len(methods)), methods, fontsize=8)
-    return image

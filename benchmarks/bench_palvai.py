@@ -42,11 +42,11 @@ def measure(runs: int = 10_000, pf_runs: int = 100, particles: int = 10_000, ite
     d = setup.channel.range_m(pv.measure(setup, loc, rng))
     rows = []
     workload = f"{runs:,} problems, 50 locations, 3-D"
-    t_batch, _, batch = hx.timed(lambda: lb.least_squares_position(loc, d).position_m, repeat)
-    H, Y = lb.lateration_rows(loc, d)
+    t_batch, _, batch = hx.timed(lambda: lb.lateration_ls(loc, d, pairs="consecutive").position_m, repeat)
+    H, Y = lb.lateration_system(loc, d, pairs="consecutive")
     t_loop, _, loop = hx.timed(lambda: np.stack([np.linalg.lstsq(H[r], Y[r], rcond=None)[0] for r in range(runs)]))
     rows.append(hx.row("batch LS (Palvai)", workload, t_batch, "numpy lstsq per-run loop", t_loop,
-                       hx.peak_mb(lambda: lb.least_squares_position(loc, d)),
+                       hx.peak_mb(lambda: lb.lateration_ls(loc, d, pairs="consecutive")),
                        f"max difference {np.nanmax(np.abs(batch - loop)):.1e} m"))
     t_rls, _, rls = hx.timed(lambda: lb.recursive_least_squares(H, Y).x[:, -1], repeat)
     sub = min(runs, 500)

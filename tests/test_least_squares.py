@@ -8,17 +8,17 @@ import locbook as lb
 
 
 @pytest.mark.parametrize("dim", [2, 3])
-@pytest.mark.parametrize("reference", lb.LATERATION_REFERENCES)
+@pytest.mark.parametrize("reference", lb.LATERATION_PAIRS)
 def test_least_squares_equals_cvxpy_and_is_exact_without_noise(dim, reference):
     rng = np.random.default_rng(dim)
     s = rng.uniform(0, 50, (4, 12, dim))
     target = rng.uniform(0, 50, (4, dim))
     d_true = np.linalg.norm(s - target[:, None], axis=-1)
-    exact = lb.least_squares_position(s, d_true, reference=reference)
+    exact = lb.lateration_ls(s, d_true, pairs=reference)
     np.testing.assert_allclose(exact.position_m, target, atol=1e-7)
     d = d_true * np.exp(0.2 * rng.standard_normal(d_true.shape))
-    ours = lb.least_squares_position(s, d, reference=reference).position_m
-    H, Y = lb.lateration_rows(s, d, reference=reference)
+    ours = lb.lateration_ls(s, d, pairs=reference).position_m
+    H, Y = lb.lateration_system(s, d, pairs=reference)
     for r in range(4):
         x = cp.Variable(dim)
         cp.Problem(cp.Minimize(cp.sum_squares(H[r] @ x - Y[r]))).solve()
@@ -30,7 +30,7 @@ def test_printed_rows_without_the_factor_2_double_the_coordinates():
     s = rng.uniform(0, 50, (10, 3))
     target = np.array([20.0, 30.0, 25.0])
     d = np.linalg.norm(s - target, axis=-1)
-    lit = lb.least_squares_position(s, d, variant="literal_002").position_m
+    lit = lb.lateration_ls(s, d, pairs="consecutive", variant="literal_002").position_m
     np.testing.assert_allclose(lit, 2 * target, rtol=1e-9)
 
 
@@ -41,7 +41,8 @@ def test_missing_readings_drop_their_rows_and_too_few_rows_give_nan():
     d = np.linalg.norm(s - target, axis=-1)
     d2 = d.copy()
     d2[2] = np.nan                                  # rows (1,2) and (2,3) go
-    res = lb.least_squares_position(np.stack([s, s]), np.stack([d2, np.r_[d[:3], np.nan, np.nan, np.nan]]))
+    res = lb.lateration_ls(np.stack([s, s]), np.stack([d2, np.r_[d[:3], np.nan, np.nan, np.nan]]),
+                          pairs="consecutive")
     np.testing.assert_allclose(res.position_m[0], target, atol=1e-7)
     assert res.status.tolist() == ["ok", "too_few_anchors"] and np.all(np.isnan(res.position_m[1]))
 
@@ -65,9 +66,9 @@ def test_rls_equals_the_regularised_batch_solution_and_batch_ls_as_the_prior_van
     # RLSF on the lateration rows = LSF (the thesis: "identical error performance")
     s = rng.uniform(0, 50, (3, 20, 3))
     d = np.linalg.norm(s - 25.0, axis=-1) * np.exp(0.3 * rng.standard_normal((3, 20)))
-    Hl, Yl = lb.lateration_rows(s, d)
+    Hl, Yl = lb.lateration_system(s, d, pairs="consecutive")
     np.testing.assert_allclose(lb.recursive_least_squares(Hl, Yl).x[:, -1],      # the thesis's Pi_0 = 1e6 I
-                               lb.least_squares_position(s, d).position_m, atol=1e-4)
+                               lb.lateration_ls(s, d, pairs="consecutive").position_m, atol=1e-4)
 
 
 def test_log_normal_range_moments_against_monte_carlo_and_the_note():
@@ -87,6 +88,28 @@ def test_log_normal_range_moments_against_monte_carlo_and_the_note():
 @pytest.mark.parametrize("n", [0, 1])
 def test_too_few_receivers_names_the_argument(n):
     """Found by tests/test_fuzz_static.py: the message said "lateration needs at least two receiver positions"
-    without naming receivers_m or its shape."""
-    with pytest.raises(ValueError, match=rf"receivers_m must hold at least two receiver positions.*\(3, {n}, 2\)"):
-        lb.least_squares_position(np.zeros((3, n, 2)), np.ones((3, n)))
+    without naming the argument or its shape."""
+    with pytest.raises(ValueError, match=rf"anchors_m must hold at least two anchor positions.*\(3, {n}, 2\)"):
+        lb.lateration_ls(np.zeros((3, n, 2)), np.ones((3, n)), pairs="consecutive")
+
+
+def test_reference_anchor_and_first_pairs_are_one_system():
+    """Every anchor against anchor 0 (George's Eq. (8)) and every anchor against the first (Palvai's pairs) difference
+    the same sphere equations, with opposite signs: one system, so one least-squares fix."""
+    rng = np.random.default_rng(4)
+    anchors = rng.uniform(0, 20, (6, 2))
+    d = np.linalg.norm(anchors - [7.0, 9.0], axis=-1) * np.exp(0.1 * rng.standard_normal((5, 6)))
+    A, b = lb.lateration_system(anchors, d, 0)
+    H, Y = lb.lateration_system(anchors, d, pairs="first")
+    np.testing.assert_array_equal(H, -A)
+    np.testing.assert_allclose(Y, -b, rtol=1e-12)
+    np.testing.assert_allclose(lb.lateration_ls(anchors, d, pairs="first").position_m,
+                               lb.lateration_ls(anchors, d, 0).position_m, rtol=1e-9)
+    # the printed rows without the factor 2 halve A and double the fix on either form
+    np.testing.assert_array_equal(lb.lateration_system(anchors, d, 0, variant="literal_002")[0], A / 2)
+    np.testing.assert_allclose(lb.lateration_ls(anchors, d, 0, variant="literal_002").position_m,
+                               2 * lb.lateration_ls(anchors, d, 0).position_m, rtol=1e-9)
+    with pytest.raises(lb.ParameterError, match="pairs"):
+        lb.lateration_ls(anchors, d, pairs="first", min_anchors=3)
+    with pytest.raises(ValueError, match="pairs"):
+        lb.lateration_system(anchors, d, pairs="every")

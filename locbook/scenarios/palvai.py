@@ -15,7 +15,8 @@ import numpy as np
 
 from ..reproduce.printed_values import printed
 from ..models.channel import PathLossModel, correct_range_bias
-from ..static.least_squares import lateration_rows, least_squares_position, recursive_least_squares
+from ..static.least_squares import recursive_least_squares
+from ..static.localization import lateration_ls, lateration_system
 from ..tracking.kalman import extended_kalman_filter
 from ..tracking.streams import NonlinearMeasurement, RssMeasurement
 from . import DivergenceFlags
@@ -94,7 +95,7 @@ def lsf_by_count(setup: Setup, locations_m, power_dbm, counts, *, reference: str
     positions ``(R, len(counts), dim)``. ``bias_correction="median"`` is the thesis's plain inversion (2.34);
     ``"squared"`` removes the log-normal bias of ``d^2`` (note 002 s.2.7, an extension)."""
     d = _ranges(setup, power_dbm, bias_correction)
-    out = [least_squares_position(locations_m[:, :n], d[:, :n], reference=reference, variant=variant).position_m
+    out = [lateration_ls(locations_m[:, :n], d[:, :n], pairs=reference, variant=variant).position_m
            for n in counts]
     return np.stack(out, axis=1)
 
@@ -103,7 +104,7 @@ def rlsf_path(setup: Setup, locations_m, power_dbm, *, bias_correction: str = "m
     """RLSF (Eqs. (2.49)-(2.58), corrected) over the consecutive rows: estimates ``(R, N - 1, dim)`` after locations
     2..N (row i needs locations i and i + 1), prior mean 0 and ``Pi_0 = 1e6 I`` by default (note 002 s.2.8)."""
     d = _ranges(setup, power_dbm, bias_correction)
-    H, Y = lateration_rows(locations_m, d, reference="consecutive")
+    H, Y = lateration_system(locations_m, d, pairs="consecutive")
     return recursive_least_squares(H, Y, prior_cov=prior_cov).x
 
 

@@ -1,18 +1,10 @@
-"""Linearised lateration from receivers that differ per problem (2-D or 3-D), batch and recursive least squares.
+"""Recursive least squares over the rows of a linear system: the recursive form of the linearized lateration fix.
 
-Palvai (2008) locates a static emitter from ranges measured at N receiver positions (random per Monte-Carlo run).
-Differencing the sphere equations ``|X - s_i|^2 = d_i^2`` of two positions removes ``|X|^2``:
-
-    2 (s_j - s_i)^T X = d_i^2 - d_j^2 - |s_i|^2 + |s_j|^2,
-
-with ``(i, j)`` consecutive pairs ``(i, i + 1)`` (Eqs. (2.27)-(2.28), corrected: the printed rows lack the factor 2
-and Eq. (2.18)'s right-hand side the full norms, note 002 s.2.4-2.6), or every position against the first or the
-last one. ``variant="literal_002"`` keeps the printed rows without the 2 (flagged: it returns twice the
-coordinates). The batch solution is ``(H^T H)^{-1} H^T Y`` (Eq. (2.29)); :func:`recursive_least_squares` is the
-RLSF of Eqs. (2.49)-(2.58), which equals it as the prior information goes to zero.
-
-Missing readings (NaN distance = not heard) drop every row that uses them; a problem left with fewer than ``dim``
-independent rows gets a NaN position and status ``too_few_anchors`` or ``degenerate_geometry``.
+Palvai (2008) locates a static emitter from ranges measured at N receiver positions; its LSF is the batch solution
+``(H^T H)^{-1} H^T Y`` of the differenced sphere equations (:func:`locbook.static.localization.lateration_ls` with
+``pairs``, rows from :func:`locbook.static.localization.lateration_system`), and its RLSF, Eqs. (2.49)-(2.58), is
+:func:`recursive_least_squares` of the same rows, which equals the batch solution as the prior information goes to
+zero. A NaN row (a missing reading) is skipped.
 """
 from __future__ import annotations
 
@@ -20,70 +12,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._validate import as_array, check_choice
-from .localization import LocalizationResult
+from .._validate import as_array
 
-__all__ = ["LATERATION_REFERENCES", "LATERATION_VARIANTS", "lateration_rows", "least_squares_position",
-           "RlsResult", "recursive_least_squares"]
-
-LATERATION_REFERENCES = ("consecutive", "first", "last")
-LATERATION_VARIANTS = ("corrected", "literal_002")
-
-
-def _pairs(n: int, reference: str):
-    if reference == "consecutive":
-        return np.arange(n - 1), np.arange(1, n)
-    if reference == "first":
-        return np.zeros(n - 1, int), np.arange(1, n)
-    return np.arange(n - 1), np.full(n - 1, n - 1)
-
-
-def lateration_rows(receivers_m, distance_m, *, reference: str = "consecutive", variant: str = "corrected"):
-    """The differenced system ``H X = Y``: ``H`` ``(..., N - 1, dim)`` with rows ``2 (s_j - s_i)`` and ``Y``
-    ``(..., N - 1)`` with ``d_i^2 - d_j^2 - |s_i|^2 + |s_j|^2`` for the pairs of ``reference``. ``receivers_m``
-    ``(..., N, dim)`` (per problem) or ``(N, dim)`` (shared); ``distance_m`` ``(..., N)``, NaN = not heard (its rows
-    are NaN)."""
-    check_choice("reference", reference, LATERATION_REFERENCES)
-    check_choice("variant", variant, LATERATION_VARIANTS)
-    s = as_array("receivers_m", receivers_m, min_ndim=2)
-    d = as_array("distance_m", distance_m, min_ndim=1, nan_ok=True)
-    n = s.shape[-2]
-    if d.shape[-1] != n:
-        raise ValueError(f"distance_m has {d.shape[-1]} readings on its last axis, receivers_m has {n} positions")
-    if n < 2:
-        raise ValueError(f"receivers_m must hold at least two receiver positions (axis -2), got shape {s.shape}")
-    if np.any(d < 0):
-        raise ValueError(f"distance_m must be non-negative (NaN = not heard); it holds {float(np.nanmin(d)):.6g} at "
-                         f"index {tuple(int(i) for i in np.argwhere(d < 0)[0])}")
-    i, j = _pairs(n, reference)
-    factor = 2.0 if variant == "corrected" else 1.0
-    H = factor * (s[..., j, :] - s[..., i, :])
-    norms = np.einsum("...k,...k->...", s, s)
-    Y = d[..., i] ** 2 - d[..., j] ** 2 - norms[..., i] + norms[..., j]
-    return H, Y
-
-
-def least_squares_position(receivers_m, distance_m, *, reference: str = "consecutive",
-                           variant: str = "corrected") -> LocalizationResult:
-    """Batch least squares ``(H^T H)^{-1} H^T Y`` of :func:`lateration_rows` for every problem (Palvai 2008,
-    Eq. (2.29)), by the normal equations (``dim x dim``); rows with a missing reading are left out."""
-    H, Y = lateration_rows(receivers_m, distance_m, reference=reference, variant=variant)
-    H, Y = np.broadcast_arrays(H, Y[..., None])
-    Y = Y[..., 0]
-    ok_row = np.isfinite(Y)
-    Hm = np.where(ok_row[..., None], H, 0.0)
-    Ym = np.where(ok_row, Y, 0.0)
-    A = np.einsum("...ki,...kj->...ij", Hm, Hm)
-    b = np.einsum("...ki,...k->...i", Hm, Ym)
-    dim = H.shape[-1]
-    enough = ok_row.sum(axis=-1) >= dim
-    sv = np.linalg.svd(A, compute_uv=False) if A.size else np.zeros(A.shape[:-1])
-    full = enough & (sv[..., -1] > 1e-10 * np.maximum(sv[..., 0], 1e-300))
-    safe = np.where(full[..., None, None], A, np.eye(dim))
-    pos = np.linalg.solve(safe, b[..., None])[..., 0]
-    pos = np.where(full[..., None], pos, np.nan)
-    status = np.where(full, "ok", np.where(enough, "degenerate_geometry", "too_few_anchors")).astype("<U19")
-    return LocalizationResult(pos, full, None, 0, f"least_squares_position({reference}, {variant})", status)
+__all__ = ["RlsResult", "recursive_least_squares"]
 
 
 @dataclass(frozen=True)

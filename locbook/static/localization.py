@@ -5,7 +5,13 @@ axes ``(..., m)``, and returns a :class:`LocalizationResult` whose ``position_m`
 
 - :func:`lateration_ls`: linearized least squares, Eq. (8) of George and Vadivukkarasi (document 003):
   subtracting the circle of a reference anchor r from circle i gives the linear system
-  ``2 (a_r - a_i)^T p = d_i^2 - d_r^2 - |a_i|^2 + |a_r|^2``.
+  ``2 (a_r - a_i)^T p = d_i^2 - d_r^2 - |a_i|^2 + |a_r|^2``. With ``pairs`` (Palvai 2008, Eqs. (2.27)-(2.29)):
+  the anchors may differ per problem (receivers ``(..., N, dim)`` at random positions) and the sphere equations
+  are differenced in pairs ``(i, j)``, consecutive or against the first or the last anchor,
+  ``2 (s_j - s_i)^T X = d_i^2 - d_j^2 - |s_i|^2 + |s_j|^2`` (corrected: the printed rows lack the factor 2 and
+  Eq. (2.18)'s right-hand side the full norms, note 002 s.2.4-2.6; ``variant="literal_002"`` keeps the printed
+  rows without the 2, flagged: it returns twice the coordinates). :func:`lateration_system` builds either system;
+  :func:`locbook.static.least_squares.recursive_least_squares` is the recursive form of the same rows.
 - :func:`lateration_wls`: the same system with weights.
 - :func:`lateration_box_ls`: the same objective with a box constraint, solved exactly by enumerating the
   KKT active sets, vectorized over problems (cvxpy kept as the reference, ``solver="cvxpy"``).
@@ -46,7 +52,7 @@ import numpy as np
 from .._cvx import cp, solve
 from .._validate import as_array, check_choice, check_scalar
 from ..models.channel import PathLossModel, log_distance_gradient, log_distance_mean_dbm, pairwise_distance_m
-from ..errors import ConvergenceError, DegenerateGeometryError
+from ..errors import ConvergenceError, DegenerateGeometryError, ParameterError
 
 __all__ = [
     "LocalizationResult",
@@ -55,6 +61,8 @@ __all__ = [
     "lateration_ls",
     "lateration_wls",
     "lateration_box_ls",
+    "LATERATION_PAIRS",
+    "LATERATION_VARIANTS",
     "BOX_LS_SOLVERS",
     "ANCHOR_CONDITION_RTOL",
     "rss_ml_position",
@@ -67,6 +75,14 @@ __all__ = [
 
 #: values of ``solver`` in :func:`lateration_box_ls`
 BOX_LS_SOLVERS = ("exact", "cvxpy")
+
+#: values of ``pairs`` in :func:`lateration_system` and :func:`lateration_ls`: which sphere equations are differenced
+#: (Palvai 2008): each anchor against the next, or every anchor against the first or the last one
+LATERATION_PAIRS = ("consecutive", "first", "last")
+
+#: values of ``variant``: the rows with the factor 2 of the differenced sphere equations, or Palvai's printed rows
+#: without it (note 002 s.2.4; they give twice the coordinates)
+LATERATION_VARIANTS = ("corrected", "literal_002")
 
 #: values of :attr:`LocalizationResult.status`
 LOCALIZATION_STATUSES = ("ok", "too_few_anchors", "degenerate_geometry", "solver_failed", "not_converged",
@@ -361,7 +377,8 @@ def _min_anchors(min_anchors, dim: int, m: int) -> int:
     return int(min_anchors)
 
 
-def lateration_system(anchors_m, distance_m, ref_index: int = 0, *, tag_height_m: float | None = None):
+def lateration_system(anchors_m, distance_m, ref_index: int = 0, *, pairs: str | None = None,
+                      variant: str = "corrected", tag_height_m: float | None = None):
     """Matrices of the linearized lateration system ``A p = b`` (Eq. (8), document 003).
 
     Returns ``A`` of shape ``(m-1, dim)`` (``2 (a_r - a_i)``, rows for i != r) and ``b`` of shape
@@ -369,7 +386,20 @@ def lateration_system(anchors_m, distance_m, ref_index: int = 0, *, tag_height_m
     that use it: its own row, or every row of its problem if it is the reference's.
     With ``tag_height_m`` (anchors ``(m, 3)``) the system is the plan one, exact: ``d^2`` becomes
     ``d^2 - (a_z - h)^2`` and ``a`` the anchors' ``(x, y)`` (module docstring).
+
+    With ``pairs`` (one of :data:`LATERATION_PAIRS`; Palvai 2008, Eqs. (2.27)-(2.28)) the anchors are
+    ``(..., N, dim)`` per problem or ``(N, dim)`` shared, and the rows are ``2 (s_j - s_i)`` ``(..., N - 1, dim)``
+    and ``d_i^2 - d_j^2 - |s_i|^2 + |s_j|^2`` ``(..., N - 1)`` over the pairs ``(i, j)`` (NaN where a reading is
+    missing); no geometry check (the anchors differ per problem: :func:`lateration_ls` judges each system's rank).
+    ``variant="literal_002"`` drops the factor 2 of ``A`` (:data:`LATERATION_VARIANTS`).
     """
+    check_choice("variant", variant, LATERATION_VARIANTS)
+    factor = 2.0 if variant == "corrected" else 1.0
+    if pairs is not None:
+        if tag_height_m is not None or ref_index != 0:
+            raise ParameterError("pairs: differenced pairs take neither ref_index nor tag_height_m (the pairs name every "
+                             "reference; anchor heights are not supported there)")
+        return _pair_rows(anchors_m, distance_m, pairs, factor)
     plan, vertical = _planar(anchors_m, tag_height_m)
     anchors_m = check_anchor_geometry(plan)
     m = anchors_m.shape[0]
@@ -381,7 +411,7 @@ def lateration_system(anchors_m, distance_m, ref_index: int = 0, *, tag_height_m
     ref_index %= m
     others = np.array([i for i in range(m) if i != ref_index])
     a_r = anchors_m[ref_index]
-    a_mat = 2.0 * (a_r - anchors_m[others])
+    a_mat = factor * (a_r - anchors_m[others])
     norms = np.sum(anchors_m**2, axis=1)
     if vertical is not None:
         norms = norms + vertical**2           # |p - a_xy|^2 = d^2 - v^2: the known height joins the anchor terms
@@ -390,19 +420,81 @@ def lateration_system(anchors_m, distance_m, ref_index: int = 0, *, tag_height_m
     return a_mat, b
 
 
-def lateration_ls(anchors_m, distance_m, ref_index: int = 0, *, min_anchors: int | None = None,
-                  tag_height_m: float | None = None) -> LocalizationResult:
-    """Linearized least squares ``p = (A^T A)^{-1} A^T b`` (Eq. (8), George and Vadivukkarasi).
+def _pair_indices(n: int, pairs: str):
+    if pairs == "consecutive":
+        return np.arange(n - 1), np.arange(1, n)
+    if pairs == "first":
+        return np.zeros(n - 1, int), np.arange(1, n)
+    return np.arange(n - 1), np.full(n - 1, n - 1)
+
+
+def _pair_rows(anchors_m, distance_m, pairs: str, factor: float):
+    """The rows of :func:`lateration_system` with ``pairs``."""
+    check_choice("pairs", pairs, LATERATION_PAIRS)
+    s = as_array("anchors_m", anchors_m, min_ndim=2)
+    d = as_array("distance_m", distance_m, min_ndim=1, nan_ok=True)
+    n = s.shape[-2]
+    if d.shape[-1] != n:
+        raise ValueError(f"distance_m has {d.shape[-1]} readings on its last axis, anchors_m has {n} positions")
+    if n < 2:
+        raise ValueError(f"anchors_m must hold at least two anchor positions (axis -2), got shape {s.shape}")
+    if np.any(d < 0):
+        raise ValueError(f"distance_m must be non-negative (NaN = not heard); it holds {float(np.nanmin(d)):.6g} at "
+                         f"index {tuple(int(i) for i in np.argwhere(d < 0)[0])}")
+    i, j = _pair_indices(n, pairs)
+    H = factor * (s[..., j, :] - s[..., i, :])
+    norms = np.einsum("...k,...k->...", s, s)
+    Y = d[..., i] ** 2 - d[..., j] ** 2 - norms[..., i] + norms[..., j]
+    return H, Y
+
+
+def _pair_least_squares(anchors_m, distance_m, pairs: str, variant: str) -> LocalizationResult:
+    """:func:`lateration_ls` with ``pairs``: per problem the normal equations ``(H^T H) X = H^T Y`` (``dim x dim``,
+    Palvai 2008 Eq. (2.29)) of the rows that are heard; a problem with fewer than ``dim`` rows, or a rank-deficient
+    ``H^T H`` (smallest singular value below 1e-10 of the largest), gets NaN and its status."""
+    H, Y = lateration_system(anchors_m, distance_m, pairs=pairs, variant=variant)
+    H, Y = np.broadcast_arrays(H, Y[..., None])
+    Y = Y[..., 0]
+    ok_row = np.isfinite(Y)
+    Hm = np.where(ok_row[..., None], H, 0.0)
+    Ym = np.where(ok_row, Y, 0.0)
+    A = np.einsum("...ki,...kj->...ij", Hm, Hm)
+    b = np.einsum("...ki,...k->...i", Hm, Ym)
+    dim = H.shape[-1]
+    enough = ok_row.sum(axis=-1) >= dim
+    sv = np.linalg.svd(A, compute_uv=False) if A.size else np.zeros(A.shape[:-1])
+    full = enough & (sv[..., -1] > 1e-10 * np.maximum(sv[..., 0], 1e-300))
+    safe = np.where(full[..., None, None], A, np.eye(dim))
+    pos = np.linalg.solve(safe, b[..., None])[..., 0]
+    pos = np.where(full[..., None], pos, np.nan)
+    status = np.where(full, "ok", np.where(enough, "degenerate_geometry", "too_few_anchors")).astype("<U19")
+    return LocalizationResult(pos, full, None, 0, f"lateration_ls(pairs={pairs}, {variant})", status)
+
+
+def lateration_ls(anchors_m, distance_m, ref_index: int = 0, *, pairs: str | None = None, variant: str = "corrected",
+                  min_anchors: int | None = None, tag_height_m: float | None = None) -> LocalizationResult:
+    """Linearized least squares ``p = (A^T A)^{-1} A^T b`` (Eq. (8), George and Vadivukkarasi) of
+    :func:`lateration_system`, the one entry point for a linearized lateration fix (weights:
+    :func:`lateration_wls`; a box: :func:`lateration_box_ls`; recursively:
+    :func:`locbook.static.least_squares.recursive_least_squares` of the same rows).
 
     Unconstrained: estimates may leave the room, as the paper observes ("some of the results go
     beyond the boundaries"). The result depends slightly on ``ref_index`` (anchor 1 in the paper).
     NaN distances are anchors not heard; ``tag_height_m``: anchors with heights (module docstring).
+    Shared anchors: ``pinv(A)`` once for the batch. With ``pairs`` (Palvai 2008, Eq. (2.29); anchors may differ per
+    problem, ``(..., N, dim)``): the normal equations per problem, the rows with a missing reading left out
+    (``min_anchors`` and ``tag_height_m`` do not apply). ``variant``: :data:`LATERATION_VARIANTS`.
     """
-    a_mat, b = lateration_system(anchors_m, distance_m, ref_index, tag_height_m=tag_height_m)
+    if pairs is not None:
+        if min_anchors is not None or tag_height_m is not None:
+            raise ParameterError("pairs: min_anchors and tag_height_m do not apply to differenced pairs")
+        return _pair_least_squares(anchors_m, distance_m, pairs, variant)
+    a_mat, b = lateration_system(anchors_m, distance_m, ref_index, variant=variant, tag_height_m=tag_height_m)
     min_anchors = _min_anchors(min_anchors, a_mat.shape[1], a_mat.shape[0] + 1)
     if _has_missing(distance_m):
         return _lateration_by_heard(anchors_m, distance_m, ref_index, min_anchors,
-                                    lambda a, d, ref: lateration_ls(a, d, ref, tag_height_m=tag_height_m),
+                                    lambda a, d, ref: lateration_ls(a, d, ref, variant=variant,
+                                                                    tag_height_m=tag_height_m),
                                     f"lateration_ls(ref={ref_index})", tag_height_m)
     with np.errstate(over="ignore", invalid="ignore"):
         pos = b @ np.linalg.pinv(a_mat).T

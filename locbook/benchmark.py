@@ -48,7 +48,8 @@ from .tracking.particle import particle_filter
 from .tracking.kalman import extended_kalman_filter
 from .tracking.streams import LinearMeasurement, RssMeasurement
 from .tracking.unscented import unscented_kalman_filter
-from .scenarios import DivergenceFlags, dogan, george, gudipati, kolakowski, ozkaya, palvai
+from .scenarios import dogan, george, gudipati, kolakowski, ozkaya, palvai
+from .tracking.divergence import DivergenceFlags
 
 __all__ = ["ProtocolChoice", "StaticScenario", "TrackingScenario", "STATIC_SCENARIOS", "TRACKING_SCENARIOS",
            "STATIC_METHODS", "TRACKERS", "NOT_APPLICABLE", "TrackerSettings", "static_scenario", "tracking_scenario",
@@ -567,7 +568,7 @@ def run_trackers(sc: TrackingScenario, rss_dbm, x0, ts: TrackerSettings, rng: np
                  trackers=None, with_divergence: bool = False):
     """Every declared tracker on readings ``(R, T, m)`` from initial states ``(R, 4)`` -> positions ``(R, T, 2)``.
     ``with_divergence=True`` returns ``(positions, {tracker: flags})``, the NIS guard per run of each Kalman-family
-    tracker (:class:`locbook.scenarios.DivergenceFlags`, steps of the scenario's clock)."""
+    tracker (:class:`locbook.tracking.divergence.DivergenceFlags`, steps of the scenario's clock)."""
     rss = np.asarray(rss_dbm, float)
     rng_cov, rng_pf = rng.spawn(2)
     chosen = tuple(TRACKERS if trackers is None else trackers)

@@ -14,7 +14,7 @@ import pytest
 from scipy.stats import chi2
 
 import locbook as lb
-from locbook.scenarios import DivergenceFlags, divergence_note, divergence_rows
+from locbook.tracking.divergence import DivergenceFlags, divergence_note, divergence_rows
 from locbook import benchmark as bm
 from locbook.scenarios import dogan as dg
 from locbook.scenarios import george

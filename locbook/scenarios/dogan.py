@@ -36,7 +36,7 @@ from ..static.localization import grid_ml_position, rss_ml_position
 from ..models.motion import KinematicModel, constant_acceleration, simulate_states
 from ..models.trajectory import POLYLINE_STARTS, Trajectory, polyline_trajectory
 from ..bounds.pcrlb import linear_measurement_information, position_bound_m, posterior_crlb, rss_state_information
-from . import DivergenceFlags, divergence_note, divergence_rows
+from ..tracking.divergence import DivergenceFlags, divergence_note, divergence_rows
 
 __all__ = [
     "PRINTED", "ROOM_M", "ANCHORS_M", "corner_anchors", "STATE_LAYOUT", "POSITION_INDEX", "REF_POWER_DBM",
@@ -240,7 +240,7 @@ def run_filter(name: str, trajectory: Trajectory, rss_dbm, mle_fix_m, mse_mle_m2
     The result is the filter's own :class:`~locbook.KalmanResult` with the NIS guard's fields on the trajectory's grid:
     ``nis``/``nis_dof`` ``(..., T)`` (NaN / 0 up to the first epoch, where the filter starts), ``diverged`` and
     ``diverged_step`` (a step of ``trajectory.time_s``); with a per-epoch MSE the segments are judged as one filter
-    (:meth:`locbook.scenarios.DivergenceFlags.from_nis` on their concatenated NIS).
+    (:meth:`locbook.tracking.divergence.DivergenceFlags.from_nis` on their concatenated NIS).
     """
     if name not in FILTERS:
         raise ParameterError(f"filter must be one of {FILTERS}, got {name!r}")
@@ -327,7 +327,7 @@ def _per_epoch_kf(model, x0, P0, acc_streams, z, mse, at, steps, n_steps) -> Kal
 class ChannelRun:
     """All filters for one channel setting (sigma_RSS, alpha): errors ``(runs, E)`` at the RSS epochs, keyed
     ``"static_mle"`` and ``(filter, sigma_acc or None)``; ``mse_mle_m2`` the per-axis MSE used for R and P_0;
-    ``divergence``: the NIS guard's :class:`~locbook.scenarios.DivergenceFlags` of every filter case, keyed like
+    ``divergence``: the NIS guard's :class:`~locbook.tracking.divergence.DivergenceFlags` of every filter case, keyed like
     ``errors`` (the errors keep every run: the thesis averaged all its runs)."""
 
     sigma_rss_db: float
@@ -805,7 +805,7 @@ def only_acc_errors(trajectory: Trajectory, sigma_acc_mps2: float, n_runs: int, 
     """Fig. 3.2, tracking with ONLY ACC: the KF of Table 3.5 with the accelerometer alone (Eq. (3.18),
     R_acc = sigma_ACC^2 I), started at the true position with zero velocity and acceleration (Eq. (3.19) with a
     perfect position). Returns the position error ``(n_runs, T - 1)`` at steps 1 .. T-1; with ``with_divergence``
-    ``(errors, flags)``, the KF's NIS guard per run (:class:`locbook.scenarios.DivergenceFlags`, steps of the
+    ``(errors, flags)``, the KF's NIS guard per run (:class:`locbook.tracking.divergence.DivergenceFlags`, steps of the
     trajectory's grid). The guard sees the accelerometer's innovations only: the position is not observed, so its
     drift is no inconsistency of the filter."""
     dt_s = float(trajectory.time_s[1] - trajectory.time_s[0])

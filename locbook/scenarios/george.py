@@ -24,7 +24,7 @@ from ..static.localization import lateration_ls
 from ..reproduce.printed_values import printed
 from ..metrics import position_error_m
 from ..models.motion import constant_velocity
-from . import DivergenceFlags
+from ..tracking.divergence import DivergenceFlags
 
 __all__ = [
     "ANCHORS_M", "CORRIDOR_SIZE_M", "PRINTED", "PRINTED_N", "PRINTED_C_RAW", "PRINTED_C_KF",
@@ -160,7 +160,7 @@ def track_with_kalman(fixes_m, truth_m, *, q: float, dt_s: float = 1.0, r_mode: 
     P0 = diag(R_xx, R_yy, v, v). With the first-fix start the first output is that fix.
 
     ``with_divergence=True`` returns ``(positions, flags)``, ``flags`` the KF's NIS guard per run
-    (:class:`locbook.scenarios.DivergenceFlags`, steps indexed by marked point): runs without fixes (failed
+    (:class:`locbook.tracking.divergence.DivergenceFlags`, steps indexed by marked point): runs without fixes (failed
     calibration) are not filtered, so neither flagged nor counted.
     """
     if r_mode not in R_MODES:

@@ -34,7 +34,7 @@ from ..tracking.kalman import extended_kalman_filter
 from ..tracking.streams import LinearMeasurement, NonlinearMeasurement, RssMeasurement
 from ..tracking.unscented import unscented_kalman_filter
 from ..montecarlo import mc_standard_error
-from . import DivergenceFlags, divergence_note
+from ..tracking.divergence import DivergenceFlags, divergence_note
 
 __all__ = [
     "DOCUMENT", "PRINTED", "ROOM_M", "ANCHOR_IDS", "ANCHOR_POSITIONS_M", "ANCHOR_SETS", "REF_POWER_DBM",
@@ -342,7 +342,7 @@ def track(walk: Walk, method: str, *, fix_covariance=None, ukf_alpha: float = UK
       world-frame (the gyroscope's yaw rate as theta_x, theta_y never measured), flagged).
 
     ``with_divergence=True`` returns ``(estimates, flags)``: for ``kf``, ``ekf`` and ``ukf`` the filter's NIS guard
-    per walk (:class:`locbook.scenarios.DivergenceFlags`, steps of the walk's filter grid ``walk.truth.time_s``), None
+    per walk (:class:`locbook.tracking.divergence.DivergenceFlags`, steps of the walk's filter grid ``walk.truth.time_s``), None
     for the methods that run no Kalman-family filter.
     """
     if method not in METHODS:

@@ -38,7 +38,7 @@ from ..tracking.particle import particle_filter
 from ..tracking.kalman import extended_kalman_filter
 from ..tracking.streams import LinearMeasurement, RssMeasurement
 from ..tracking.unscented import unscented_kalman_filter
-from . import DivergenceFlags
+from ..tracking.divergence import DivergenceFlags
 
 __all__ = ["TAG_HEIGHT_M", "EPOCH_S", "PATH_LOSS_EXP_BOUNDS", "REF_POWER_BOUNDS_DBM", "HUBER_DELTA_DB",
            "STATIC_METHODS", "TRACKERS", "load", "calibration_set", "calibrate", "channel", "ranging_errors",
@@ -184,7 +184,7 @@ def tracks(data: MeasuredData, model: PathLossModel, recording: str, rng: np.ran
     The starting state of the Kalman filters is the first RSS-ML fix with a 2 m standard deviation, at rest.
 
     ``with_divergence=True`` appends ``{tracker: flags}`` for ``kf_on_ml``, ``ekf`` and ``ukf``: the NIS guard of the
-    one run on the recording (:class:`locbook.scenarios.DivergenceFlags`, steps of the regular clock)."""
+    one run on the recording (:class:`locbook.tracking.divergence.DivergenceFlags`, steps of the regular clock)."""
     ep = data.epochs(recording)
     reg, ticks = regular_epochs(ep, EPOCH_S, tolerance_s=0.1 * EPOCH_S)
     rss = reg.rss_dbm

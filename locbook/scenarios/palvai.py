@@ -19,7 +19,7 @@ from ..static.least_squares import recursive_least_squares
 from ..static.localization import lateration_ls, lateration_system
 from ..tracking.kalman import extended_kalman_filter
 from ..tracking.streams import NonlinearMeasurement, RssMeasurement
-from . import DivergenceFlags
+from ..tracking.divergence import DivergenceFlags
 from ..models.rss import RssModel
 from ..tracking.particle import particle_filter
 
@@ -135,7 +135,7 @@ def ekf_path(setup: Setup, receivers_m, power_dbm, x0, P0, *, process_sd_m: floa
     sigma_3, A8); ``"literal_002"`` (flagged): the printed Jacobian (4.43) and ``R = I`` as printed.
     ``schedule="batch"``: all N readings in one update (the corrected EKF only). Returns the estimates
     ``(R, N, dim)`` after each location (``(R, 1, dim)`` for the batch schedule); with ``with_divergence``
-    ``(estimates, flags)``, the EKF's NIS guard per run (:class:`locbook.scenarios.DivergenceFlags`, step k =
+    ``(estimates, flags)``, the EKF's NIS guard per run (:class:`locbook.tracking.divergence.DivergenceFlags`, step k =
     location k; the batch schedule has one update, fewer than the guard's window, and is never flagged)."""
     if variant not in EKF_VARIANTS:
         raise ValueError(f"variant must be one of {EKF_VARIANTS}, got {variant!r}")

@@ -317,7 +317,7 @@ def test_crlb(kind, shape, specials, dtype, strided, seed):
        where=st.sampled_from(["receivers", "distance"]), reference=st.sampled_from(lb.LATERATION_PAIRS),
        dtype=st.sampled_from(["float64", "float32", "int"]), strided=st.booleans(), collinear=st.booleans(),
        seed=st.integers(0, 2**16))
-def test_least_squares_position(n, shape, specials, where, reference, dtype, strided, collinear, seed):
+def test_lateration_ls_with_pairs(n, shape, specials, where, reference, dtype, strided, collinear, seed):
     rng = np.random.default_rng(seed)
     batch = batch_shape(shape)
     receivers = rng.uniform(0.0, 10.0, batch + (n, 2))
@@ -495,11 +495,11 @@ def test_calibrate_from_reference_tags(steps, tags, kind, bounded, specials, dty
 # -- regression tests for what the fuzzing found -----------------------------------------------------------------
 
 
-@pytest.mark.parametrize("case", ["least_squares_position", "model_fingerprints", "calibrate_from_reference_tags"])
+@pytest.mark.parametrize("case", ["lateration_ls_pairs", "model_fingerprints", "calibrate_from_reference_tags"])
 def test_messages_found_naming_no_argument_now_name_one(case):
     """Found by the fuzzing: a negative distance, and cells, tags or readers so far apart that their distances
     overflow, were refused with messages that blamed no argument (or an internal distance_m); each names one now."""
-    fn, args = {"least_squares_position": (partial(lb.lateration_ls, pairs="consecutive"), (GRID[:3], [1.0, -1.0, 2.0])),
+    fn, args = {"lateration_ls_pairs": (partial(lb.lateration_ls, pairs="consecutive"), (GRID[:3], [1.0, -1.0, 2.0])),
                 "model_fingerprints": (lb.model_fingerprints, (GRID[:3] * 1e300, -GRID[:4] * 1e300, MODEL)),
                 "calibrate_from_reference_tags": (lb.calibrate_from_reference_tags,
                                                   (np.full((1, 3, 4), -60.0), GRID[:3] + 1.0,

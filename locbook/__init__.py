@@ -54,7 +54,7 @@ _API = (
     ("tracking.fusion", ("fuse_estimates", "FUSION_READINGS",)),
     ("tracking.kalman", ("kalman_filter", "KF_VARIANTS", "extended_kalman_filter",)),
     ("tracking.results", ("nis_divergence", "DIVERGENCE_WINDOW", "DIVERGENCE_PROBABILITY", "KALMAN_OUTPUTS",)),
-    ("tracking.streams", ("LinearMeasurement", "RssMeasurement", "NonlinearMeasurement", "rss_measurement_jacobian",
+    ("tracking.streams", ("LinearMeasurement", "RssMeasurement", "NonlinearMeasurement",
         "RSS_UPDATE_MODES", "SERIAL_ORDERS",)),
     ("tracking.functional", ("KalmanUpdate",)),
     ("models.motion", ("NOISE_MODELS", "STATE_LAYOUTS",)),

@@ -125,8 +125,16 @@ def test_rss_information_regularisations():
     u = np.array([0.6, 0.8])
     np.testing.assert_allclose(plain[np.ix_(idx, idx)], beta2 * np.outer(u, u) / 0.25)
     assert np.count_nonzero(plain) == 4
+    # the clamped model's mean is flat within d_min (its derivative is 0: a reading there carries no information);
+    # outside d_min the clamp changes nothing
     clipped = lb.rss_state_information(state, anchors, 3.0, 6.0, idx, min_distance_m=1.0)
-    np.testing.assert_allclose(clipped[np.ix_(idx, idx)], beta2 * np.outer(u, u))
+    np.testing.assert_array_equal(clipped, 0.0)
+    channel = lb.PathLossModel(-40.0, 3.0, min_distance_m=1.0)
+    eps = 1e-6
+    for e in np.eye(2) * eps:
+        assert channel.mean_power_dbm(np.linalg.norm(state[idx] + e)) == channel.mean_power_dbm(np.linalg.norm(state[idx] - e))
+    np.testing.assert_array_equal(lb.rss_state_information(state, anchors, 3.0, 6.0, idx, min_distance_m=0.4), plain)
+    np.testing.assert_array_equal(lb.rss_state_information(np.zeros(6), anchors, 3.0, 6.0, idx, min_distance_m=1.0), 0.0)
     lifted = lb.rss_state_information(state, anchors, 3.0, 6.0, idx, height_offset_m=1.2)
     d2 = 0.25 + 1.44
     np.testing.assert_allclose(lifted[np.ix_(idx, idx)], beta2 * np.outer([0.3, 0.4], [0.3, 0.4]) / d2**2)

@@ -44,13 +44,24 @@ def test_jacobian_equals_central_differences(name, model):
         np.testing.assert_allclose(jac[..., axis], fd, rtol=1e-6, atol=1e-8)
 
 
-def test_jacobian_inside_the_clamp_follows_log_distance_gradient():
-    """Within d_min the clamped mean is flat; the Jacobian is the capped extension the EKF uses (channel.py)."""
+def test_jacobian_inside_the_clamp_is_the_derivative_of_the_clamped_mean():
+    """Within d_min the clamped mean P_0 - 10 n log10(d_min / d0) is flat: its derivative (central differences,
+    the oracle) is 0 for that anchor and the usual one for the others, and the reading adds no Fisher information
+    (the same as the model without that anchor). Replaces the earlier capped-extension convention (issue 27)."""
     model = lb.RssModel(ANCHORS, lb.PathLossModel(-45.0, 2.3, 4.0, min_distance_m=0.5))
-    p = np.array([[0.1, 0.2]])
-    from locbook.models.channel import log_distance_gradient
-    grad, _ = log_distance_gradient(p[:, None, :] - ANCHORS, 2.3, min_distance_m=0.5)
-    np.testing.assert_array_equal(model.jacobian(p)[0], grad)
+    p = np.array([[0.1, 0.2]])                                  # 0.22 m from anchor 0
+    jac = model.jacobian(p)[0, 0]
+    assert np.all(jac[0] == 0.0) and np.all(jac[1:] != 0.0)
+    h = 1e-6
+    for axis in range(2):
+        e = np.zeros(2)
+        e[axis] = h
+        fd = (model.mean_rss_dbm(p + e) - model.mean_rss_dbm(p - e))[0, 0] / (2 * h)
+        np.testing.assert_allclose(jac[:, axis], fd, rtol=1e-6, atol=1e-12)
+    without = lb.RssModel(ANCHORS[1:], lb.PathLossModel(-45.0, 2.3, 4.0, min_distance_m=0.5))
+    np.testing.assert_allclose(model.fisher_information(p), without.fisher_information(p), rtol=1e-15)
+    on_anchor = model.jacobian(ANCHORS[:1])[0, 0]               # finite at the anchor itself
+    assert np.all(on_anchor[0] == 0.0) and np.all(np.isfinite(on_anchor))
 
 
 @pytest.mark.parametrize("name, model", list(_models()))

@@ -17,6 +17,8 @@ import numpy as np
 
 from ..errors import DegenerateGeometryError
 from .._validate import as_array, check_choice, check_scalar
+from ..models.channel import PathLossModel
+from ..models.rss import RssModel
 from ..static.localization import check_anchor_geometry
 
 __all__ = ["rss_fisher_information", "rss_position_information", "rss_crlb_m", "crlb_rms_over_area_m", "CRLB_FORMS"]
@@ -43,8 +45,11 @@ def rss_position_information(position_m, anchors_m, path_loss_exp, sigma_db, for
     ``E[1/d^2]`` diverges for position densities positive at an anchor (note 000 s.2.10), so two regularisations
     are offered: ``height_offset_m`` (antenna height difference, a scalar or one per anchor,
     ``d^2 = |p - a|^2 + h^2``, the exact information of that model, e.g. anchors near the ceiling and a tag at a
-    known height) and ``min_distance_m`` (the gradient's ``1/d`` factor capped at ``1/d_min``, the model's
-    validity limit). ``form="ozkaya_printed"`` uses ``d^2`` in the denominator (flagged, see module docstring).
+    known height) and ``min_distance_m`` (the near-field clamp of the model, ``max(d, d_min)`` in the law: its mean
+    is flat within ``d_min`` of an anchor, so a reading there carries no information and its term is 0). The
+    information is :meth:`locbook.models.rss.RssModel.fisher_information` of that model (``form="correct"``);
+    ``form="ozkaya_printed"`` uses ``d^2`` in the denominator (flagged, see module docstring; within the clamp
+    ``d_min^2``).
     ``heard``: booleans broadcastable to ``(..., m)``, False where an anchor gave no reading (NaN = not heard, the
     library's rule): a reading that is not there carries no information, so its term is left out.
     """
@@ -63,24 +68,37 @@ def rss_position_information(position_m, anchors_m, path_loss_exp, sigma_db, for
                          f"height), got shape {height.shape}")
     diff = position_m[..., None, :] - anchors_m  # (..., m, 2)
     d2 = np.einsum("...i,...i->...", diff, diff) + height**2
-    if np.any(d2 == 0):
+    if min_distance_m == 0 and np.any(d2 == 0):
         where = tuple(int(i) for i in np.argwhere(d2 == 0)[0])
         raise DegenerateGeometryError(f"the RSS Fisher information is undefined at an anchor position (d = 0): "
                                       f"position_m{list(where[:-1])} = {position_m[where[:-1]].tolist()} is anchor "
-                                      f"{where[-1]}; give height_offset_m (antenna height difference)")
-    gain = (10.0 * np.asarray(path_loss_exp, float) / (np.asarray(sigma_db, float) * np.log(10.0))) ** 2
-    gain = np.broadcast_to(gain, d2.shape)
+                                      f"{where[-1]}; give height_offset_m (antenna height difference) or "
+                                      f"min_distance_m (the near-field clamp)")
     if heard is not None:
         heard = np.asarray(heard)
         if heard.dtype != bool:
             raise ValueError(f"heard must be booleans (False = not heard), got dtype {heard.dtype}")
         try:
-            gain = gain * np.broadcast_to(heard, d2.shape)
+            heard = np.broadcast_to(heard, d2.shape)
         except ValueError:
             raise ValueError(f"heard must broadcast to (..., {m}) = {d2.shape}, got shape {heard.shape}") from None
-    capped = np.maximum(d2, min_distance_m**2)     # the gradient's 1/d capped at 1/d_min; its direction kept
-    denom = d2 * capped if form == "correct" else capped   # d^4 (correct) or d^2 (as printed in Ozkaya A.10-A.12)
-    return np.einsum("...j,...ji,...jk->...ik", gain / denom, diff, diff)
+    if form == "ozkaya_printed":    # a flagged variant of the bound, not of the model: d^2 where the model has d^4
+        gain = (10.0 * np.asarray(path_loss_exp, float) / (np.asarray(sigma_db, float) * np.log(10.0))) ** 2
+        gain = np.broadcast_to(gain, d2.shape) if heard is None else gain * heard
+        return np.einsum("...j,...ji,...jk->...ik", gain / np.maximum(d2, min_distance_m**2), diff, diff)
+    # the one RSS model's information (its Jacobian, exactly 0 within the clamp, where the clamped mean is flat)
+    channel = PathLossModel(0.0, np.asarray(path_loss_exp, float), np.asarray(sigma_db, float),
+                            min_distance_m=float(min_distance_m))
+    if np.any(height != 0):         # the anchors' heights above the tag's plane z = 0
+        if anchors_m.shape[1] != 2:
+            raise ValueError(f"height_offset_m needs plan anchors (m, 2) (the tag in a plane), got {anchors_m.shape}")
+        model = RssModel(np.column_stack([anchors_m, np.broadcast_to(height, (m,))]), channel, tag_height_m=0.0)
+    else:
+        model = RssModel(anchors_m, channel)
+    batch = position_m.shape[:-1]
+    flat = position_m.reshape(-1, anchors_m.shape[1])
+    info = model.fisher_information(flat, heard=None if heard is None else heard.reshape(1, -1, m))
+    return info.reshape(batch + info.shape[-2:])
 
 
 def rss_crlb_m(position_m, anchors_m, path_loss_exp, sigma_db, form: str = "correct"):

@@ -24,6 +24,7 @@ __all__ = [
     "PathLossModel",
     "log_distance_mean_dbm",
     "log_distance_gradient",
+    "log_distance_regressor_db",
     "CC2420_RSSI_OFFSET_DB",
     "AT86RF230_ED_OFFSET_DB",
     "register_to_dbm",
@@ -113,17 +114,30 @@ def log_distance_mean_dbm(distance_m, ref_power_dbm, path_loss_exp, *, ref_dista
     return mean
 
 
-def log_distance_gradient(offset_m, path_loss_exp, *, min_distance_m: float = 0.0):
-    """Gradient of :func:`log_distance_mean_dbm` w.r.t. the position, ``-(10 n / ln 10) (p - a) / d^2``, from
-    the offsets ``p - a`` ``(..., m, dim)`` -> ``(gradient (..., m, dim), d^2 (..., m))`` (note 000, section
-    2.6; the thesis does not print it). Within ``min_distance_m`` the ``1/d`` factor is capped at ``1/d_min``
-    and the direction kept (a continuous extension that keeps filters and Newton steps finite at an anchor);
-    the returned ``d^2`` is the capped one."""
-    d2 = np.einsum("...i,...i->...", offset_m, offset_m)
-    if min_distance_m > 0:
-        d2 = np.maximum(d2, min_distance_m**2)
+def log_distance_gradient(offset_m, path_loss_exp, *, min_distance_m: float = 0.0, d2_m2=None):
+    """Gradient of :func:`log_distance_mean_dbm` w.r.t. the position, ``-(10 n / ln 10) (p - a) / d^2``
+    ``(..., m, dim)``, from the offsets ``p - a`` ``(..., m, dim)`` (note 000, section 2.6; the thesis does not print
+    it); ``d2_m2`` ``(..., m)``: the squared distances when the caller has them (e.g. 3-D with a height column).
+
+    Within the near-field clamp (``d < min_distance_m``) the mean is ``P_0 - 10 n log10(d_min / d0)``, a constant,
+    so its gradient is exactly 0 there (the reading carries no information about the position): filters and Newton
+    steps stay finite at an anchor and the Fisher information of a reading inside the clamp is 0. At ``d = d_min``
+    the one-sided derivative from outside is used. No input checks (callers check once)."""
+    offset_m = np.asarray(offset_m, dtype=float)
+    d2 = np.einsum("...i,...i->...", offset_m, offset_m) if d2_m2 is None else d2_m2
     slope = 10.0 * np.asarray(path_loss_exp) / np.log(10.0)
-    return -(slope / d2)[..., None] * offset_m, d2
+    if min_distance_m > 0:
+        inside = d2 < min_distance_m**2
+        # max() changes no value outside the clamp; inside it only avoids 0/0 before the exact 0 is put in
+        return np.where(inside[..., None], 0.0, -(slope / np.maximum(d2, min_distance_m**2))[..., None] * offset_m)
+    return -(slope / d2)[..., None] * offset_m
+
+
+def log_distance_regressor_db(distance_m, ref_distance_m: float = 1.0):
+    """``10 log10(d / d0)``: the regressor of the log-distance law, linear in ``(P_0, n)``
+    (``P = P_0 - n * 10 log10(d/d0)``), for the calibrations that fit the law (Gudipati 2017, Eqs. (3.7), (6);
+    Dogan 2015, Eq. (5.1)). No input checks."""
+    return 10.0 * np.log10(np.asarray(distance_m, dtype=float) / ref_distance_m)
 
 
 @dataclass(frozen=True)

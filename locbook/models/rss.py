@@ -26,13 +26,32 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._validate import as_array, check_scalar
-from .channel import PathLossModel, log_distance_mean_dbm, wall_crossings
+from .channel import PathLossModel, log_distance_gradient, log_distance_mean_dbm, wall_crossings
 
-__all__ = ["RssModel", "LIKELIHOOD_BLOCK_VALUES"]
+__all__ = ["RssModel", "rss_mean_jacobian", "LIKELIHOOD_BLOCK_VALUES"]
 
 _LOG_2PI = float(np.log(2.0 * np.pi))
 #: runs per block of :meth:`RssModel.log_likelihood`: about this many values in each temporary (32 MiB)
 LIKELIHOOD_BLOCK_VALUES = 1 << 22
+
+
+def rss_mean_jacobian(offset_m, ref_power_dbm, path_loss_exp, *, ref_distance_m: float = 1.0,
+                      min_distance_m: float = 0.0, vertical_m2=None, jacobian: bool = True):
+    """The model's arithmetic at offsets ``p - a_j`` ``(..., m, k)``, without input checks (the filters' and
+    solvers' inner loops; :class:`RssModel` checks, then calls it): the mean ``h_j`` ``(..., m)`` (module
+    docstring, walls left out), its Jacobian ``dh_j/dp = -(10 n_j / ln 10) (p - a_j) / d_j^2`` ``(..., m, k)``
+    (``None`` with ``jacobian=False``; exactly 0 within the clamp ``d_j < min_distance_m``, where the clamped mean is
+    flat) and the squared distances ``d_j^2`` ``(..., m)`` (not clamped). ``vertical_m2``: squared vertical offsets
+    broadcasting to ``(..., m)`` added to ``|p - a_j|^2`` (anchors above the tag's plane; the Jacobian is then the
+    plan part). Parameters broadcast against ``(..., m)``. Distances that overflow give an infinite ``d^2`` (callers
+    that must refuse it check)."""
+    d2 = np.einsum("...i,...i->...", offset_m, offset_m)
+    if vertical_m2 is not None:
+        d2 = d2 + vertical_m2
+    mean = log_distance_mean_dbm(np.sqrt(d2), ref_power_dbm, path_loss_exp, ref_distance_m=ref_distance_m,
+                                 min_distance_m=min_distance_m)
+    grad = log_distance_gradient(offset_m, path_loss_exp, min_distance_m=min_distance_m, d2_m2=d2) if jacobian else None
+    return mean, grad, d2
 
 
 @dataclass(frozen=True)
@@ -170,17 +189,22 @@ class RssModel:
         vertical = anchors[..., -1] - self.tag_height_m
         return diff, np.square(vertical if anchors.ndim == 2 else vertical[:, None, :])
 
+    def _checked_d2(self, d2, positions_m):
+        """``d2`` as given, refused when it overflowed (finite inputs are checked: only overflow makes it infinite)."""
+        if not np.all(np.isfinite(d2)):
+            raise ValueError(f"the distances between positions_m and anchors_m overflow: their coordinates reach "
+                             f"{max(np.abs(positions_m).max(initial=0), np.abs(self.anchors_m).max(initial=0)):.3g} m")
+        return d2
+
     def distance_m(self, positions_m) -> np.ndarray:
         """Distances ``(R|1, P, m)`` from the positions to the anchors (3-D with ``tag_height_m``)."""
         positions_m = self._positions(positions_m)
         diff, vertical2 = self._offsets(positions_m)
         with np.errstate(over="ignore", invalid="ignore"):
-            distance = np.sqrt(np.einsum("...i,...i->...", diff, diff))
+            d2 = np.einsum("...i,...i->...", diff, diff)
             if vertical2 is not None:
-                distance = np.sqrt(distance**2 + vertical2)
-        if not np.all(np.isfinite(distance)):           # finite inputs (checked): this is overflow
-            raise ValueError(f"the distances between positions_m and anchors_m overflow: their coordinates reach "
-                             f"{max(np.abs(positions_m).max(initial=0), np.abs(self.anchors_m).max(initial=0)):.3g} m")
+                d2 = d2 + vertical2
+        distance = np.sqrt(self._checked_d2(d2, positions_m))
         return distance if distance.ndim == 3 else distance[None]
 
     def _per_step(self, value, step: int, per_anchor: bool):
@@ -190,15 +214,28 @@ class RssModel:
         return value[:, step, None] if value.ndim == 2 else value                   # (R, 1) or scalar
 
     # -- the model -----------------------------------------------------------------------------------
-    def mean_rss_dbm(self, positions_m, step: int = 0) -> np.ndarray:
-        """``h(p)`` ``(R|1, P, m)`` at positions ``(P, dim)`` or ``(R, P, dim)`` (module docstring)."""
+    def _evaluate(self, positions_m, step: int, jacobian: bool):
+        """:func:`rss_mean_jacobian` at checked positions and step: (positions, mean, Jacobian or None), the run
+        axis present."""
         positions_m = self._positions(positions_m)
         self.check_step(step)
         ch = self.channel
-        mean = log_distance_mean_dbm(self.distance_m(positions_m),
-                                     self._per_step(ch.ref_power_dbm, step, True),
-                                     self._per_step(ch.path_loss_exp, step, True),
-                                     ref_distance_m=ch.ref_distance_m, min_distance_m=ch.min_distance_m)
+        diff, vertical2 = self._offsets(positions_m)
+        with np.errstate(over="ignore", invalid="ignore"):
+            mean, grad, d2 = rss_mean_jacobian(diff, self._per_step(ch.ref_power_dbm, step, True),
+                                               self._per_step(ch.path_loss_exp, step, True),
+                                               ref_distance_m=ch.ref_distance_m, min_distance_m=ch.min_distance_m,
+                                               vertical_m2=vertical2, jacobian=jacobian)
+        self._checked_d2(d2, positions_m)
+        mean = mean if mean.ndim == 3 else mean[None]
+        if grad is not None and grad.ndim == 3:
+            grad = grad[None]
+        return positions_m, mean, grad
+
+    def mean_rss_dbm(self, positions_m, step: int = 0) -> np.ndarray:
+        """``h(p)`` ``(R|1, P, m)`` at positions ``(P, dim)`` or ``(R, P, dim)`` (module docstring)."""
+        positions_m, mean, _ = self._evaluate(positions_m, step, jacobian=False)
+        ch = self.channel
         if self.walls_m is not None and ch.wall_attenuation_db != 0.0:
             plan = self.anchors_m[..., :2]
             if plan.ndim == 3:
@@ -212,21 +249,10 @@ class RssModel:
     def jacobian(self, positions_m, step: int = 0) -> np.ndarray:
         """``dh_j/dp = -(10 n_j / ln 10) (p - a_j) / d_j^2`` ``(R|1, P, m, dim)`` (note 000, section 2.6), with
         ``d_j`` the 3-D distance when the anchors have heights. Walls add a piecewise-constant term (zero
-        derivative almost everywhere). Within the clamp the factor ``1/d^2`` is capped at ``1/d_min^2`` with the
-        direction kept, as :func:`~locbook.models.channel.log_distance_gradient` does (the clamped mean itself is
-        flat there): a continuous extension that keeps Newton and EKF steps finite at an anchor."""
-        positions_m = self._positions(positions_m)
-        self.check_step(step)
-        diff, vertical2 = self._offsets(positions_m)
-        d2 = np.einsum("...i,...i->...", diff, diff)
-        if vertical2 is not None:
-            d2 = d2 + vertical2
-        d_min = self.channel.min_distance_m
-        if d_min > 0:
-            d2 = np.maximum(d2, d_min**2)
-        slope = 10.0 * self._per_step(self.channel.path_loss_exp, step, True) / np.log(10.0)
-        grad = -(slope / d2)[..., None] * diff
-        return grad if grad.ndim == 4 else grad[None]
+        derivative almost everywhere). Within the near-field clamp (``d_j < d_min``) the mean
+        ``P_0 - 10 n log10(d_min / d0)`` is constant, so the derivative is exactly 0 there
+        (:func:`~locbook.models.channel.log_distance_gradient`); the Fisher information of such a reading is 0."""
+        return self._evaluate(positions_m, step, jacobian=True)[2]
 
     def _sigma(self, step: int, where: str):
         sigma = self._per_step(self.channel.sigma_db, step, False)

@@ -51,7 +51,8 @@ import numpy as np
 
 from .._cvx import cp, solve
 from .._validate import as_array, check_choice, check_scalar
-from ..models.channel import PathLossModel, log_distance_gradient, log_distance_mean_dbm, pairwise_distance_m
+from ..models.channel import PathLossModel, log_distance_mean_dbm, pairwise_distance_m
+from ..models.rss import rss_mean_jacobian
 from ..errors import ConvergenceError, DegenerateGeometryError, ParameterError
 
 __all__ = [
@@ -234,8 +235,8 @@ def implausible_powers(power_dbm, model: PathLossModel, clamp_m: float) -> np.nd
     the clamp mean); for a tag at least ``clamp_m`` away the model gives such a reading probability below 1e-23.
     NaN (not heard) is never implausible."""
     check_scalar("clamp_m", clamp_m, gt=0)     # 0 would give an infinite bound (nothing refused), NaN no bound
-    top = (np.asarray(model.ref_power_dbm, float)
-           - 10.0 * np.asarray(model.path_loss_exp, float) * np.log10(clamp_m / model.ref_distance_m)
+    top = (log_distance_mean_dbm(clamp_m, np.asarray(model.ref_power_dbm, float), np.asarray(model.path_loss_exp, float),
+                                 ref_distance_m=model.ref_distance_m)
            + IMPLAUSIBLE_SIGMAS * np.asarray(model.sigma_db, float))
     return np.any(power_dbm > top, axis=-1)
 
@@ -816,17 +817,17 @@ def _default_start(anchors_m, power_dbm, model: PathLossModel, tag_height_m=None
                              tag_height_m=tag_height_m).position_m
 
 
-def _rss_residual_jacobian(pos, anchors, power, model: PathLossModel, min_distance_m, vertical_m=None):
-    """Residuals, their Jacobian w.r.t. the position and the squared distances; with ``vertical_m`` (anchor
+def _rss_residual_jacobian(pos, anchors, power, model: PathLossModel, clamp_m, vertical_m=None):
+    """Residuals, their Jacobian w.r.t. the position and the squared distances (not clamped) of the one RSS model
+    (:func:`locbook.models.rss.rss_mean_jacobian`) with the near-field clamp ``clamp_m``; with ``vertical_m`` (anchor
     heights above the tag's plane) the distances are 3-D and the Jacobian keeps the plan columns."""
     diff = pos[..., None, :] - anchors  # (..., m, dim)
     if vertical_m is not None:
         diff = np.concatenate([diff, _lift(pos, vertical_m)[..., None]], axis=-1)
-    grad, d2 = log_distance_gradient(diff, np.asarray(model.path_loss_exp), min_distance_m=min_distance_m)
-    # the model's mean (no walls) without its input checks: a distance that overflowed to inf is a valid state here
-    resid = power - log_distance_mean_dbm(np.sqrt(d2), np.asarray(model.ref_power_dbm), np.asarray(model.path_loss_exp),
-                                          ref_distance_m=model.ref_distance_m, min_distance_m=model.min_distance_m)
-    return resid, -grad[..., :anchors.shape[-1]], d2    # d resid / d p = - d mean / d p
+    # the model without its input checks: a distance that overflowed to inf is a valid state here
+    mean, grad, d2 = rss_mean_jacobian(diff, np.asarray(model.ref_power_dbm), np.asarray(model.path_loss_exp),
+                                       ref_distance_m=model.ref_distance_m, min_distance_m=clamp_m)
+    return power - mean, -grad[..., :anchors.shape[-1]], d2    # d resid / d p = - d mean / d p
 
 
 def _min_eigenvalue(a):
@@ -849,17 +850,21 @@ def _solve_small(a, b):
     return np.linalg.solve(a, b[..., None])[..., 0]
 
 
-def _newton_matrix(resid, jac, d2, pos, anchors, model):
+def _newton_matrix(resid, jac, d2, pos, anchors, model, clamp_m):
     """Hessian of 0.5 |r|^2: J^T J + sum_j r_j grad^2 r_j, with
-    grad^2 r_j = c (I / d_j^2 - 2 (p - a_j)(p - a_j)^T / d_j^4), c = 10 n / ln 10. Falls back to the
-    Gauss-Newton matrix J^T J where the full Hessian is not positive definite. The second-order
+    grad^2 r_j = c (I / d_j^2 - 2 (p - a_j)(p - a_j)^T / d_j^4), c = 10 n / ln 10 (the derivative of the one model's
+    Jacobian, :func:`locbook.models.rss.rss_mean_jacobian`; 0 within the clamp ``clamp_m``, where the mean is flat).
+    Falls back to the Gauss-Newton matrix J^T J where the full Hessian is not positive definite. The second-order
     term matters: shadowing leaves large residuals, where Gauss-Newton converges only linearly."""
     jtj = np.einsum("...ki,...kj->...ij", jac, jac)
     diff = pos[..., None, :] - anchors
     c = np.broadcast_to(10.0 * np.asarray(model.path_loss_exp) / np.log(10.0), d2.shape)
     eye = np.eye(pos.shape[-1])
+    inside = d2 < clamp_m**2
+    d2 = np.maximum(d2, clamp_m**2)            # no value changes outside the clamp; inside the term is 0 below
     hr = c[..., None, None] * (eye / d2[..., None, None]
                                 - 2.0 * diff[..., :, None] * diff[..., None, :] / (d2**2)[..., None, None])
+    hr = np.where(inside[..., None, None], 0.0, hr)
     full = jtj + np.einsum("...k,...kij->...ij", resid, hr)
     eig_min = _min_eigenvalue(full)
     return np.where((eig_min > 1e-9 * np.trace(jtj, axis1=-2, axis2=-1))[..., None, None], full, jtj)
@@ -962,8 +967,9 @@ def rss_ml_position(anchors_m, power_dbm, model: PathLossModel, initial_m=None, 
                            "rss_ml_lm", "solver_failed")
         return _raise_if_failed(res, raise_on_failure)
     power = power_dbm.reshape(-1, power_dbm.shape[-1])
+    clamp_m = max(float(min_distance_m), model.min_distance_m)     # the model's near-field clamp
     with np.errstate(over="ignore", invalid="ignore"):     # a start so far away that its distances overflow
-        resid, jac, d2 = _rss_residual_jacobian(pos, anchors_m, power, model, min_distance_m, vertical)
+        resid, jac, d2 = _rss_residual_jacobian(pos, anchors_m, power, model, clamp_m, vertical)
         cost = np.sum(resid**2, axis=-1)
     lam = np.full(cost.shape, 1e-3)
     converged = np.zeros(cost.shape, bool)
@@ -972,14 +978,13 @@ def rss_ml_position(anchors_m, power_dbm, model: PathLossModel, initial_m=None, 
     it = 0
     for it in range(1, max_iter + 1):
         p_a, r_a, j_a, d2_a, c_a, l_a = (a[active] for a in (pos, resid, jac, d2, cost, lam))
-        hess = _newton_matrix(r_a, j_a, d2_a, p_a, anchors_m, model)
+        hess = _newton_matrix(r_a, j_a, d2_a, p_a, anchors_m, model, clamp_m)
         jtr = np.einsum("...ki,...k->...i", j_a, r_a)
         # damped step: (H + lam diag(H)) delta = -J^T r
         damp = l_a[:, None, None] * (eye * np.diagonal(hess, axis1=-2, axis2=-1)[:, None, :] + 1e-12 * eye)
         step = -_solve_small(hess + damp, jtr)
         trial = p_a + step
-        r_new, j_new, d2_new = _rss_residual_jacobian(trial, anchors_m, power[active], model, min_distance_m,
-                                                      vertical)
+        r_new, j_new, d2_new = _rss_residual_jacobian(trial, anchors_m, power[active], model, clamp_m, vertical)
         c_new = np.sum(r_new**2, axis=-1)
         better = c_new <= c_a
         step_small = np.linalg.norm(step, axis=-1) <= tol_m * (1.0 + np.linalg.norm(p_a, axis=-1))
@@ -1068,12 +1073,15 @@ def grid_ml_position(anchors_m, power_dbm, model: PathLossModel, grid_m, *,
             "grid_ml")
     batch = power.shape[:-1]
     flat = power.reshape(-1, power.shape[-1])
-    distance = pairwise_distance_m(grid_m, anchors_m)
-    if vertical is not None:
-        distance = np.sqrt(distance**2 + vertical**2)
-    mean_grid = log_distance_mean_dbm(distance, np.asarray(model.ref_power_dbm),
-                                      np.asarray(model.path_loss_exp), ref_distance_m=model.ref_distance_m,
-                                      min_distance_m=max(model.min_distance_m, 1e-6))  # (G, m); a node may sit on an anchor
+    with np.errstate(over="ignore", invalid="ignore"):
+        # the one RSS model's mean (G, m); a node may sit on an anchor: clamped at 1 micrometre at least
+        mean_grid, _, d2 = rss_mean_jacobian(grid_m[:, None, :] - anchors_m, np.asarray(model.ref_power_dbm),
+                                             np.asarray(model.path_loss_exp), ref_distance_m=model.ref_distance_m,
+                                             min_distance_m=max(model.min_distance_m, 1e-6),
+                                             vertical_m2=None if vertical is None else vertical**2, jacobian=False)
+    if not np.all(np.isfinite(d2)):            # finite coordinates (checked): only overflow gets here
+        raise ValueError(f"the distances between grid_m and anchors_m overflow: their coordinates reach "
+                         f"{max(np.abs(grid_m).max(initial=0), np.abs(anchors_m).max(initial=0)):.3g} m")
     best = np.empty(flat.shape[0], dtype=int)
     best_cost = np.empty(flat.shape[0])
     # a finite power of absurd size (-1e300 dBm: a tag very far away is not implausible) overflows its squares; that

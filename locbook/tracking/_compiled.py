@@ -56,7 +56,7 @@ def _pack_streams(setup: _Setup, measurements, B):
         if isinstance(meas, LinearMeasurement):
             kinds.append(_LINEAR_PARALLEL if meas.mode == "parallel" else _LINEAR_SERIAL)
             lin.append((c0, m, _leading(meas.H, batch, B, (m, n)), _leading(meas.R, batch, B, (m, m))))
-            scal.append((2, 1.0, 0.0, 1.0, 0.0, 0.0, (0, 0, 0), 0, False))
+            scal.append((2, 1.0, 1.0, 0.0, 0.0, (0, 0, 0), 0, False))
         elif isinstance(meas, RssMeasurement):
             ch = meas.channel
             anchors = np.asarray(meas.anchors_m, dtype=float)
@@ -74,7 +74,7 @@ def _pack_streams(setup: _Setup, measurements, B):
                                                                                 ch.sigma_db))))
             idx = np.asarray(meas.position_index, dtype=np.int64)
             tag = np.nan if meas.tag_height_m is None else float(meas.tag_height_m)
-            scal.append((dim, float(ch.ref_distance_m), float(ch.min_distance_m), float(meas.min_distance_m),
+            scal.append((dim, float(ch.ref_distance_m), meas.clamp_m,
                          float(meas.anchor_sigma_m), tag, tuple(idx) + (0,) * (3 - idx.size), idx.size,
                          meas.order == "descending"))
         else:
@@ -93,15 +93,15 @@ def _pack_streams(setup: _Setup, measurements, B):
     for c0, m, dim, a, p0, ple, sigma in rss:
         A[:, :, c0:c0 + m, :dim] = a
         P0c[:, c0:c0 + m], PLE[:, c0:c0 + m], SIG[:, c0:c0 + m] = p0, ple, sigma
-    dims, ref_d, ch_min, meas_min, anchor_sigma, tag_h, pidx, npos, desc = (np.array(v) for v in zip(*scal))
+    dims, ref_d, clamp, anchor_sigma, tag_h, pidx, npos, desc = (np.array(v) for v in zip(*scal))
     nz, nnz = np.zeros((len(kinds), n), np.int64), np.zeros(len(kinds), np.int64)
     for s, (kind, c0, c1) in enumerate(zip(kinds, cols[:-1], cols[1:])):     # the columns a row can use
         used = np.flatnonzero(np.any(H[:, c0:c1] != 0, axis=(0, 1))) if kind <= _LINEAR_SERIAL else \
             np.asarray(pidx[s][:npos[s]], np.int64)
         nz[s, :used.size], nnz[s] = used, used.size
     return (np.array(kinds, np.int64), np.array(cols, np.int64), nz, nnz, Z, H, R, A, P0c, PLE, SIG,
-            dims.astype(np.int64), ref_d.astype(float), ch_min.astype(float), meas_min.astype(float),
-            anchor_sigma.astype(float), tag_h.astype(float), pidx.astype(np.int64).reshape(-1, 3), npos.astype(np.int64), desc.astype(np.bool_))
+            dims.astype(np.int64), ref_d.astype(float), clamp.astype(float), anchor_sigma.astype(float),
+            tag_h.astype(float), pidx.astype(np.int64).reshape(-1, 3), npos.astype(np.int64), desc.astype(np.bool_))
 
 
 def _compiled_ekf(setup: _Setup, measurements, predict_first: bool):

@@ -173,35 +173,35 @@ def _nb_update(x, P, c, nz, nnz, H, nu, R, HP, HPH, S, L, KT, PH, D, t, u, Y, ni
 
 
 @_jit
-def _nb_rss_row(x, w, pidx, npos, tag_h, anchor, p0, ple, sigma, ref_d, ch_min, meas_min, anchor_sigma, z, parallel):
+def _nb_rss_row(x, w, pidx, npos, tag_h, anchor, p0, ple, sigma, ref_d, clamp, anchor_sigma, z):
     """One RSS reading of lane ``w`` linearised at its state: (innovation z - h(x), variance, the Jacobian's entries
-    at the ``npos`` position indices), as :func:`locbook.tracking.streams._rss_parallel_update` (``parallel``: the
-    channel's near-field clamp in h) and ``_rss_serial_update``."""
+    at the ``npos`` position indices). The one RSS model's formula (:func:`locbook.models.rss.rss_mean_jacobian`, as
+    :func:`locbook.tracking.streams._rss_parallel_update` and ``_rss_serial_update`` evaluate it), compiled:
+    ``h = P_0 - 10 n log10(max(d, clamp) / d0)``, ``dh/dp = -(10 n / ln 10) (p - a) / d^2`` outside the clamp and 0
+    within it (``d^2 < clamp^2``, where h is flat), variance ``sigma^2 + anchor_sigma^2 |dh/dp|^2``
+    (:meth:`locbook.tracking.streams.RssMeasurement.variance_db2`); ``clamp`` the stream's ``clamp_m``."""
     d2 = 0.0
     for i in range(anchor.shape[0]):
         u = (x[pidx[i], w] if i < npos else tag_h) - anchor[i]
         d2 += u * u
-    if d2 < meas_min * meas_min:
-        d2 = meas_min * meas_min
     slope = 10.0 * ple / np.log(10.0)
-    g0 = -(slope / d2) * (x[pidx[0], w] - anchor[0])
-    g1 = -(slope / d2) * (x[pidx[1], w] - anchor[1]) if npos > 1 else 0.0
-    g2 = -(slope / d2) * (x[pidx[2], w] - anchor[2]) if npos > 2 else 0.0
+    inside = d2 < clamp * clamp
+    g0 = 0.0 if inside else -(slope / d2) * (x[pidx[0], w] - anchor[0])
+    g1 = -(slope / d2) * (x[pidx[1], w] - anchor[1]) if npos > 1 and not inside else 0.0
+    g2 = -(slope / d2) * (x[pidx[2], w] - anchor[2]) if npos > 2 and not inside else 0.0
     d = np.sqrt(d2)
-    dh = d
-    if parallel and ch_min > 0.0 and dh < ch_min:
-        dh = ch_min
+    dh = d if d > clamp else clamp
     h = p0 - 10.0 * ple * np.log10(dh / ref_d)
     var = sigma * sigma
-    if anchor_sigma > 0.0:
-        u = slope * anchor_sigma / (d if d > meas_min else meas_min)
+    if anchor_sigma > 0.0 and not inside:
+        u = slope * anchor_sigma / d
         var += u * u
     return z - h, var, g0, g1, g2
 
 
 @_jit
 def _nb_ekf(Fi, Fj, Fv, Q, x0, P0, predict_first, slot, active, kind, col, nz, nnz, Z, H, R, A, P0c, PLE, SIG, dims,
-            ref_d, ch_min, meas_min, anchor_sigma, tag_h, pidx, npos, descending, out_x, out_P, out_nis, out_dof,
+            ref_d, clamp, anchor_sigma, tag_h, pidx, npos, descending, out_x, out_P, out_nis, out_dof,
             out_ll):
     """The EKF time loop of :func:`locbook.tracking._loop._run` with :func:`locbook.tracking.streams._ekf_update`, over
     blocks of ``_LANES`` runs (the last block padded with copies of the last run), with each run's NIS, its dof and
@@ -285,8 +285,8 @@ def _nb_ekf(Fi, Fj, Fv, Q, x0, P0, predict_first, slot, active, kind, col, nz, n
                                 bc = min(b, P0c.shape[0] - 1)
                                 nu[r, w], var[r, w], g0, g1, g2 = _nb_rss_row(
                                     x, w, pidx[s], npos[s], tag_h[s], A[min(b, A.shape[0] - 1), ta, c0 + j, :dims[s]],
-                                    P0c[bc, c0 + j], PLE[bc, c0 + j], SIG[bc, c0 + j], ref_d[s], ch_min[s], meas_min[s],
-                                    anchor_sigma[s], zj, not serial)
+                                    P0c[bc, c0 + j], PLE[bc, c0 + j], SIG[bc, c0 + j], ref_d[s], clamp[s],
+                                    anchor_sigma[s], zj)
                                 Hr[r, pidx[s, 0], w] = g0
                                 if npos[s] > 1:
                                     Hr[r, pidx[s, 1], w] = g1

@@ -13,12 +13,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._validate import as_array, check_choice, check_scalar
-from ..models.channel import PathLossModel, log_distance_gradient, log_distance_mean_dbm
+from ..models.channel import PathLossModel
+from ..models.rss import rss_mean_jacobian
 from ._linalg import _LOG_2PI, _STATE_NOT_FINITE, _UPDATE_OVERFLOW, _Singular, _covariance, _joseph
 from .functional import _linear_update, _Out
 
 __all__ = ["LinearMeasurement", "RssMeasurement", "NonlinearMeasurement", "MEASUREMENT_TYPES",
-           "rss_measurement_jacobian", "RSS_UPDATE_MODES", "SERIAL_ORDERS"]
+           "RSS_UPDATE_MODES", "SERIAL_ORDERS"]
 
 RSS_UPDATE_MODES = ("parallel", "serial")
 SERIAL_ORDERS = ("descending", "given")
@@ -54,21 +55,25 @@ class LinearMeasurement:
 
 @dataclass(frozen=True)
 class RssMeasurement:
-    """Received powers from fixed anchors, ``z_kj = P_0 - 10 alpha log10 |p_k - a_j| + e_kj``
-    (Dogan Eq. (2.2)), ``e ~ N(0, sigma_db^2)`` i.i.d., for the EKF.
+    """Received powers from fixed anchors, ``z_kj = h_j(p_k) + e_kj``, ``e ~ N(0, sigma_db^2)`` i.i.d., for the EKF
+    and the UKF: ``h`` and its Jacobian are the one RSS model's (:class:`locbook.models.rss.RssModel`, evaluated by
+    :func:`locbook.models.rss.rss_mean_jacobian`; Dogan Eq. (2.2)) with the near-field clamp :attr:`clamp_m`.
 
     ``power_dbm``: ``batch + (T, m)``, NaN where an anchor gave no reading (a step without any reading is
     prediction only). ``channel``: its ``ref_power_dbm``, ``path_loss_exp`` and ``sigma_db`` may be scalars,
     per-anchor ``(m,)`` arrays, or carry batch axes ``batch + (1,)`` (several settings run as one batch).
     ``mode``: ``"parallel"`` (one stacked update, Table 3.4) or ``"serial"`` (scalar updates, each
     re-linearised at the state updated so far, Table 3.3, in ``order`` ``"descending"`` RSS as printed or
-    the ``"given"`` anchor order). ``min_distance_m`` keeps the Jacobian finite at an anchor.
+    the ``"given"`` anchor order). ``min_distance_m``: the stream's near-field clamp, used when the channel's
+    ``min_distance_m`` is smaller (:attr:`clamp_m`; the default 1 mm keeps ``h`` finite at an anchor; within the clamp
+    the mean is flat and its Jacobian 0).
 
     ``anchors_m``: fixed anchors ``(m, dim)``, or receiver positions per step ``batch + (T, m, dim)`` (a moving
     receiver, or measurement locations drawn per Monte-Carlo run: Palvai 2008, Eq. (4.28)). ``anchor_sigma_m``:
     the anchors' positions are known only to this standard deviation (e.g. GPS, Palvai's sigma_3); the
-    measurement variance is then inflated to ``sigma^2 + (10 n / ln 10)^2 anchor_sigma^2 / d^2`` at the
-    linearisation point (first-order propagation of the position error; note 002 A8).
+    measurement variance is then inflated to ``sigma^2 + anchor_sigma^2 |dh/dp|^2``, i.e.
+    ``sigma^2 + (10 n / ln 10)^2 anchor_sigma^2 / d^2`` (0 added within the clamp), at the linearisation point
+    (first-order propagation of the position error; note 002 A8).
 
     ``tag_height_m``: the anchors are ``(m, 3)`` (x, y, height), the tag moves in the plane ``z = tag_height_m``
     and ``position_index`` names the state's x and y only; the distances are 3-D.
@@ -95,12 +100,20 @@ class RssMeasurement:
         a = np.asarray(self.anchors_m, dtype=float)
         return a if a.ndim == 2 else a[..., min(step, a.shape[-3] - 1), :, :]
 
+    @property
+    def clamp_m(self) -> float:
+        """The model's near-field clamp: the larger of the channel's ``min_distance_m`` and the stream's."""
+        return max(float(self.min_distance_m), float(self.channel.min_distance_m))
+
     def variance_db2(self, distance_m, path_loss_exp, sigma_db):
-        """Measurement variance per reading: ``sigma^2``, inflated for ``anchor_sigma_m`` (class docstring)."""
+        """Measurement variance per reading: ``sigma^2``, inflated for ``anchor_sigma_m`` (class docstring) by
+        ``anchor_sigma^2 |dh/dp|^2``, ``|dh/dp| = 10 n / (d ln 10)`` outside the clamp and 0 inside."""
         var = np.asarray(sigma_db, dtype=float) ** 2
         if self.anchor_sigma_m > 0:
             slope = 10.0 * np.asarray(path_loss_exp, dtype=float) / np.log(10.0)
-            var = var + (slope * self.anchor_sigma_m / np.maximum(distance_m, self.min_distance_m)) ** 2
+            clamp = self.clamp_m
+            inflation = (slope * self.anchor_sigma_m / np.maximum(distance_m, clamp)) ** 2
+            var = var + np.where(np.asarray(distance_m) < clamp, 0.0, inflation)
         return var
 
     def __post_init__(self):
@@ -164,29 +177,12 @@ class NonlinearMeasurement:
 MEASUREMENT_TYPES = (LinearMeasurement, RssMeasurement, NonlinearMeasurement)
 
 
-def rss_measurement_jacobian(positions_m, anchors_m, path_loss_exp, *, min_distance_m: float = 1e-3):
-    """Predicted-power gradient w.r.t. position, ``(..., m, dim)``:
-    ``dh_j/dp = -(10 alpha / ln 10) (p - a_j) / d_j^2`` (note 000, section 2.6; not printed in the thesis).
-    Also returns the distances ``(..., m)`` (at least ``min_distance_m``).
-
-    ``positions_m (..., dim)``, ``anchors_m (m, dim)``, ``path_loss_exp`` a scalar, ``(m,)`` or broadcastable
-    to ``(..., m)``; all finite, ``min_distance_m > 0``."""
-    anchors = as_array("anchors_m", anchors_m, ndim=2)
-    as_array("positions_m", positions_m, min_ndim=1, trailing=(anchors.shape[1],))
-    ple = as_array("path_loss_exp", path_loss_exp)
-    if ple.ndim and ple.shape[-1] not in (1, anchors.shape[0]):
-        raise ValueError(f"path_loss_exp must be a scalar or end in ({anchors.shape[0]},) (one per anchor), "
-                         f"got shape {ple.shape}")
-    check_scalar("min_distance_m", min_distance_m, gt=0)
-    return _rss_jacobian(positions_m, anchors_m, path_loss_exp, min_distance_m)
-
-
-def _rss_jacobian(positions_m, anchors_m, path_loss_exp, min_distance_m):
-    """:func:`rss_measurement_jacobian` without the input checks (the EKF's inner loop)."""
-    diff = np.asarray(positions_m, dtype=float)[..., None, :] - np.asarray(anchors_m, dtype=float)
-    grad, d2 = log_distance_gradient(diff, path_loss_exp, min_distance_m=min_distance_m)
-    return grad, np.sqrt(d2)
-
+def _rss_mean_jacobian(meas: RssMeasurement, offset_m, ref_power_dbm, path_loss_exp):
+    """The stream's model at offsets ``p - a_j`` (with the height column when the tag height is known): mean, Jacobian,
+    distances (not clamped)."""
+    mean, grad, d2 = rss_mean_jacobian(offset_m, ref_power_dbm, path_loss_exp, ref_distance_m=meas.channel.ref_distance_m,
+                                       min_distance_m=meas.clamp_m)
+    return mean, grad, np.sqrt(d2)
 
 
 def _rss_parallel_update(x, P, z, meas: RssMeasurement, step: int = 0, want: bool = False) -> _Out:
@@ -194,14 +190,14 @@ def _rss_parallel_update(x, P, z, meas: RssMeasurement, step: int = 0, want: boo
     uncertain anchor positions, :class:`RssMeasurement`)."""
     idx = np.asarray(meas.position_index)
     ch = meas.channel
-    grad, d = _rss_jacobian(meas.lift(x[..., idx]), meas.anchors_at(step), ch.path_loss_exp, meas.min_distance_m)
+    offset = meas.lift(x[..., idx])[..., None, :] - meas.anchors_at(step)
+    h, grad, d = _rss_mean_jacobian(meas, offset, np.asarray(ch.ref_power_dbm), np.asarray(ch.path_loss_exp))
     m = z.shape[-1]
     H = np.zeros(grad.shape[:-1] + (x.shape[-1],))
     H[..., idx] = grad[..., :idx.size]
     far = ~np.all(np.isfinite(d), axis=-1)
     if far.any():                   # the state ran away (an overflow, e.g. after a reading of 1e300 dBm)
         raise _Singular(far, _STATE_NOT_FINITE)
-    h = ch.mean_power_dbm(d)
     sigma2 = np.broadcast_to(meas.variance_db2(d, ch.path_loss_exp, ch.sigma_db), z.shape)
     R = sigma2[..., :, None] * np.eye(m)
     valid = np.isfinite(z)
@@ -276,11 +272,10 @@ def _rss_serial_update(x, P, z, meas: RssMeasurement, step: int = 0, want: bool 
             continue
         pick = lambda arr: np.take_along_axis(arr, a[..., None], -1)[..., 0]
         diff = meas.lift(x[..., idx]) - _pick_anchor(anchors, a)
-        grad, d2 = log_distance_gradient(diff, pick(ple), min_distance_m=meas.min_distance_m)
+        hx, grad, d = _rss_mean_jacobian(meas, diff, pick(p0), pick(ple))      # the batch axes in the anchor's place
         h_row = np.zeros(x.shape)
         h_row[..., idx] = grad[..., :idx.size]
-        hx = log_distance_mean_dbm(np.sqrt(d2), pick(p0), pick(ple), ref_distance_m=ch.ref_distance_m)
-        var = meas.variance_db2(np.sqrt(d2), pick(ple), np.sqrt(pick(sigma2)))
+        var = meas.variance_db2(d, pick(ple), np.sqrt(pick(sigma2)))
         nu = np.where(valid, zj - hx, 0.0)
         ph = (P @ h_row[..., None])[..., 0]                   # P H^T
         s = np.einsum("...i,...i->...", h_row, ph) + var

@@ -38,7 +38,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .._validate import check_choice, check_scalar
-from ..models.channel import log_distance_mean_dbm
+from ..models.rss import rss_mean_jacobian
 from ._linalg import (_UPDATE_OVERFLOW, _gaussian_log_likelihood, _inv_small, _logdet, _mT, _not_positive_definite,
                       _Singular, _singular_runs)
 from ._loop import _check_outputs, _run, _setup, _streams
@@ -241,8 +241,8 @@ def _anchor_axis(value):
 
 
 def _rss_function(meas: RssMeasurement, step: int, anchor=None):
-    """``h`` of an RSS stream over sigma points: the log-distance mean power at each anchor (or at the one anchor
-    per run ``anchor`` ``batch``, for serial updates)."""
+    """``h`` of an RSS stream over sigma points: the one RSS model's mean (:func:`locbook.models.rss.rss_mean_jacobian`,
+    the stream's clamp) at each anchor (or at the one anchor per run ``anchor`` ``batch``, for serial updates)."""
     idx = np.asarray(meas.position_index)
     anchors = meas.anchors_at(step)
     ch = meas.channel
@@ -253,15 +253,13 @@ def _rss_function(meas: RssMeasurement, step: int, anchor=None):
         if anchor is None:
             a = anchors if anchors.ndim == 2 else anchors[..., None, :, :]        # batch + (1, m, dim)
             diff = pos[..., None, :] - a                                        # batch + (N, m, dim)
-            d = np.sqrt(np.einsum("...i,...i->...", diff, diff))
-            return log_distance_mean_dbm(d, p0, ple, ref_distance_m=ch.ref_distance_m,
-                                         min_distance_m=max(meas.min_distance_m, ch.min_distance_m))
+            return rss_mean_jacobian(diff, p0, ple, ref_distance_m=ch.ref_distance_m, min_distance_m=meas.clamp_m,
+                                     jacobian=False)[0]
         diff = pos - _pick_anchor(anchors, anchor)[..., None, :]                 # batch + (N, dim)
-        d = np.sqrt(np.einsum("...i,...i->...", diff, diff))
         pick = lambda v: np.take_along_axis(np.broadcast_to(np.asarray(v, float), anchor.shape + (anchors.shape[-2],)),
                                             anchor[..., None], -1)      # batch + (1,)
-        return log_distance_mean_dbm(d, pick(ch.ref_power_dbm), pick(ch.path_loss_exp), ref_distance_m=ch.ref_distance_m,
-                                     min_distance_m=max(meas.min_distance_m, ch.min_distance_m))[..., None]
+        return rss_mean_jacobian(diff, pick(ch.ref_power_dbm), pick(ch.path_loss_exp), ref_distance_m=ch.ref_distance_m,
+                                 min_distance_m=meas.clamp_m, jacobian=False)[0][..., None]
     return h
 
 

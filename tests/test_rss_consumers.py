@@ -1,0 +1,108 @@
+"""Every RSS consumer agrees with the one measurement model (issue 27): the EKF stream's update is filterpy's EKF update
+with RssModel's mean and Jacobian, the UKF's h is RssModel's mean, the static bound is RssModel's Fisher information
+(closed form of Patwari et al. 2003, Eq. (5) as the oracle), the RSS ML fix is a stationary point of the model's
+cost, and the compiled row kernel is the numpy formula, also inside the near-field clamp (where the clamped mean is
+flat: its derivative, its information and the anchor-sigma inflation are 0)."""
+import numpy as np
+import pytest
+from filterpy.kalman import ExtendedKalmanFilter
+
+import locbook as lb
+from locbook.tracking import _kernels, unscented
+from locbook.tracking.streams import _rss_mean_jacobian
+
+ANCHORS = np.array([[0.0, 0.0], [8.0, 0.5], [1.0, 7.0], [7.5, 6.0]])
+CHANNEL = lb.PathLossModel(np.array([-44.0, -47.0, -50.0, -46.0]), np.array([2.0, 2.4, 2.8, 1.9]), 3.0)
+
+
+def _stream(z, mode="parallel", **kw):
+    return lb.RssMeasurement(z, ANCHORS, CHANNEL, [0, 1], mode=mode, **kw)
+
+
+@pytest.mark.parametrize("x_pos", [[3.0, 2.5], [0.0004, 0.0003]])        # the second inside the 1 mm clamp
+def test_parallel_ekf_update_is_filterpys_with_the_models_mean_and_jacobian(x_pos):
+    x0 = np.array([x_pos[0], x_pos[1], 0.2, -0.1])
+    P0 = np.diag([1.0, 1.5, 0.3, 0.3])
+    z = np.array([[-60.0, -62.0, -68.0, -59.0]])
+    res = lb.extended_kalman_filter(np.eye(4), np.zeros((4, 4)), x0, P0, _stream(z), predict_first=False)
+    model = lb.RssModel(ANCHORS, lb.PathLossModel(CHANNEL.ref_power_dbm, CHANNEL.path_loss_exp, CHANNEL.sigma_db,
+                                                  min_distance_m=1e-3))
+
+    def hjac(x):
+        H = np.zeros((4, 4))
+        H[:, :2] = model.jacobian(np.ravel(x)[None, :2])[0, 0]          # filterpy's states are columns
+        return H
+
+    ekf = ExtendedKalmanFilter(dim_x=4, dim_z=4)
+    ekf.x, ekf.P, ekf.R = x0[:, None].copy(), P0.copy(), 9.0 * np.eye(4)
+    ekf.update(z[0][:, None], hjac, lambda x: model.mean_rss_dbm(x[None, :2, 0])[0, 0][:, None])
+    np.testing.assert_allclose(res.x[0], ekf.x[:, 0], rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(res.P[0], ekf.P, rtol=1e-9, atol=1e-12)
+    if np.hypot(*x_pos) < 1e-3:                                 # inside the clamp of anchor 0: no correction from it
+        assert np.all(hjac(x0)[0] == 0.0)
+
+
+def test_stream_mean_and_jacobian_are_the_models_with_the_larger_clamp():
+    ch = lb.PathLossModel(CHANNEL.ref_power_dbm, CHANNEL.path_loss_exp, CHANNEL.sigma_db, min_distance_m=0.5)
+    meas = lb.RssMeasurement(np.zeros((1, 4)), ANCHORS, ch, [0, 1], min_distance_m=1e-3)
+    assert meas.clamp_m == 0.5
+    model = lb.RssModel(ANCHORS, ch)
+    pos = np.array([[0.3, 0.1], [4.0, 3.0], [7.6, 6.2], [8.0, 0.5]])     # inside, outside, inside, on an anchor
+    h, grad, d = _rss_mean_jacobian(meas, pos[:, None, :] - ANCHORS, ch.ref_power_dbm, ch.path_loss_exp)
+    np.testing.assert_array_equal(h, model.mean_rss_dbm(pos)[0])
+    np.testing.assert_array_equal(grad, model.jacobian(pos)[0])
+    np.testing.assert_array_equal(d, model.distance_m(pos)[0])
+
+
+def test_ukf_h_is_the_models_mean():
+    meas = _stream(np.zeros((1, 4)))
+    model = lb.RssModel(ANCHORS, lb.PathLossModel(CHANNEL.ref_power_dbm, CHANNEL.path_loss_exp, 3.0, min_distance_m=1e-3))
+    sigma_points = np.random.default_rng(3).uniform(-1, 9, (9, 4))
+    sigma_points[0, :2] = ANCHORS[2] + 1e-4                                # one within the clamp
+    np.testing.assert_array_equal(unscented._rss_function(meas, 0)(sigma_points),
+                                  model.mean_rss_dbm(sigma_points[:, :2])[0])
+
+
+def test_crlb_information_is_the_models_fisher_information_and_its_closed_form():
+    rng = np.random.default_rng(4)
+    pos = rng.uniform(0.5, 7.5, (6, 2))
+    n, sigma = 2.6, 4.0
+    info = lb.rss_position_information(pos, ANCHORS, n, sigma, min_distance_m=0.2)
+    model = lb.RssModel(ANCHORS, lb.PathLossModel(0.0, n, sigma, min_distance_m=0.2))
+    np.testing.assert_array_equal(info, model.fisher_information(pos)[0])
+    diff = pos[:, None, :] - ANCHORS
+    d2 = np.sum(diff**2, -1)
+    beta2 = (10 * n / (sigma * np.log(10))) ** 2                              # Patwari et al. (2003), Eq. (5)
+    np.testing.assert_allclose(info, beta2 * np.einsum("pj,pji,pjk->pik", 1 / d2**2, diff, diff), rtol=1e-13)
+    near = ANCHORS[1] + [0.1, -0.05]                                          # within 0.2 m of anchor 1: no term
+    np.testing.assert_allclose(lb.rss_position_information(near, ANCHORS, n, sigma, min_distance_m=0.2),
+                               lb.rss_position_information(near, ANCHORS[[0, 2, 3]], n, sigma), rtol=1e-14)
+
+
+def test_rss_ml_fix_is_a_stationary_point_of_the_models_cost():
+    truth = np.array([[3.0, 2.0], [5.5, 4.5], [1.5, 5.0]])
+    model = lb.RssModel(ANCHORS, CHANNEL)
+    z = model.mean_rss_dbm(truth)[0] + np.random.default_rng(5).normal(0, 3.0, (3, 4))
+    fix = lb.rss_ml_position(ANCHORS, z, CHANNEL, tol_m=1e-12)
+    assert fix.converged.all()
+    resid = z - model.mean_rss_dbm(fix.position_m)[0]
+    gradient = np.einsum("pj,pji->pi", resid, model.jacobian(fix.position_m)[0])    # -(1/2) d cost / dp
+    assert np.max(np.abs(gradient)) < 1e-6 * np.max(np.abs(model.jacobian(fix.position_m)))
+
+
+@pytest.mark.parametrize("offset", [[2.0, 1.0], [3e-4, -2e-4], [0.0, 0.0]])      # outside, inside the clamp, on it
+def test_compiled_row_kernel_is_the_numpy_model(offset):
+    clamp, sigma, anchor_sigma, ple, p0 = 1e-3, 3.0, 0.4, 2.4, -47.0
+    meas = lb.RssMeasurement(np.zeros((1, 4)), ANCHORS, lb.PathLossModel(p0, ple, sigma), [0, 1],
+                             min_distance_m=clamp, anchor_sigma_m=anchor_sigma)
+    anchor = ANCHORS[1]
+    x = np.zeros((4, 1))
+    x[:2, 0] = anchor + offset
+    z = -60.0
+    nu, var, g0, g1, _ = _kernels._nb_rss_row(x, 0, np.array([0, 1, 0]), 2, np.nan, anchor, p0, ple, sigma, 1.0, clamp,
+                                              anchor_sigma, z)
+    h, grad, d = _rss_mean_jacobian(meas, x[:2, 0] - anchor, p0, ple)
+    assert nu == z - h and [g0, g1] == grad.tolist()
+    assert var == meas.variance_db2(d, ple, sigma)
+    if np.hypot(*offset) < clamp:
+        assert grad.tolist() == [0.0, 0.0] and var == sigma**2

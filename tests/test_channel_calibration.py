@@ -181,3 +181,11 @@ def test_fix_error_covariance_is_numpy_cov_of_the_errors_per_run():
     R = lb.fix_error_covariance(fixes, truth)
     for k in range(3):
         np.testing.assert_allclose(R[k], np.cov((fixes[k] - truth).T), rtol=1e-12)
+
+
+def test_design_rows_times_the_parameters_are_the_channels_mean():
+    """The calibration's regressor is the law's: [1, -10 log10(d/d0)] . (P_0, n) = PathLossModel.mean_power_dbm(d)."""
+    d = np.array([0.5, 1.0, 3.0, 12.5])
+    model = lb.PathLossModel(-41.5, 2.7, ref_distance_m=0.5)
+    rows = path_loss_design_matrix(d, ref_distance_m=0.5)
+    np.testing.assert_allclose(rows @ [-41.5, 2.7], model.mean_power_dbm(d), rtol=1e-14)

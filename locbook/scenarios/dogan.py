@@ -205,6 +205,7 @@ def mle_cost_eq24(points_m, rss_dbm, channel: PathLossModel, anchors_m=ANCHORS_M
 
     It equals ``(10 alpha)^-2 sum_j (P_j - P(d_j))^2``, the Gaussian RSS-domain likelihood that
     :func:`locbook.rss_ml_position` minimises (note 000 s.2.3, derived), so both have the same minimiser."""
+    # log ranges compared as Eq. (2.4) prints them (the range domain, not the power-domain law)
     log_d = np.log10(np.maximum(pairwise_distance_m(np.asarray(points_m, float), anchors_m), 1e-9))   # (G, m)
     log_d_hat = np.log10(channel.range_m(np.asarray(rss_dbm, float)))                                  # (..., m)
     return np.sum((log_d_hat[..., None, :] - log_d) ** 2, axis=-1)

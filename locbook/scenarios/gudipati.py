@@ -22,7 +22,8 @@ from ..bounds.crlb import rss_crlb_m
 from ..bounds.pcrlb import position_bound_m, posterior_crlb, rss_state_information
 from ..reproduce.printed_values import printed
 from ..metrics import position_error_m
-from ..models.channel import PathLossModel, correlated_shadowing_db, pairwise_distance_m, quantize_db
+from ..models.channel import (PathLossModel, correlated_shadowing_db, log_distance_gradient, pairwise_distance_m,
+                              quantize_db)
 from ..models.imu import (accelerometer_readings, body_to_world, dead_reckon, gyroscope_readings, integrate,
                           inertial_measurement_function, inertial_measurement_jacobian)
 from ..models.motion import HeadingKinematicModel, KinematicModel
@@ -284,8 +285,7 @@ def _rss_stream(walk: Walk, model, sign: str = "corrected"):
         return -ch.mean_power_dbm(np.linalg.norm(x[..., None, idx] - a, axis=-1))
 
     def jacobian(x):
-        diff = x[..., None, idx] - a
-        grad = -(10 * ch.path_loss_exp / np.log(10))[:, None] * diff / np.sum(diff**2, axis=-1)[..., None]
+        grad = log_distance_gradient(x[..., None, idx] - a, ch.path_loss_exp)     # the model's dh/dp (no clamp, as printed)
         H = np.zeros(x.shape[:-1] + (a.shape[0], x.shape[-1]))
         H[..., idx] = -grad
         return H

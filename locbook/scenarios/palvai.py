@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..reproduce.printed_values import printed
-from ..models.channel import PathLossModel, correct_range_bias
+from ..models.channel import PathLossModel, correct_range_bias, log_distance_gradient
 from ..static.least_squares import recursive_least_squares
 from ..static.localization import lateration_ls, lateration_system
 from ..tracking.kalman import extended_kalman_filter
@@ -113,8 +113,7 @@ EKF_VARIANTS = ("corrected", "literal_002")
 
 def corrected_jacobian(x, receivers_m, path_loss_exp):
     """``dh_i/dX = (10 eta / ln 10) (s_i - X)^T / d_i^2`` (Eq. (4.43) corrected, note 002 s.2.11): ``(..., N, dim)``."""
-    diff = np.asarray(receivers_m) - np.asarray(x)[..., None, :]
-    return 10 * path_loss_exp / np.log(10) * diff / np.sum(diff**2, axis=-1)[..., None]
+    return log_distance_gradient(np.asarray(x, float)[..., None, :] - np.asarray(receivers_m, float), path_loss_exp)
 
 
 def printed_jacobian(x, receivers_m, path_loss_exp):

@@ -38,6 +38,7 @@ import scipy.sparse as sp
 from .._cvx import cp, solve
 from .._validate import as_array, check_choice, check_scalar
 from ..errors import ConvergenceError, DegenerateGeometryError
+from ..models.channel import log_distance_regressor_db
 
 __all__ = [
     "PathLossFit",
@@ -125,7 +126,7 @@ def path_loss_design_matrix(distance_m, ref_distance_m: float = 1.0,
     check_scalar("ref_distance_m", ref_distance_m, gt=0)
     distance_m = as_array("distance_m", distance_m)
     _positive_distances(distance_m)
-    log_term = 10.0 * np.log10(distance_m / ref_distance_m)
+    log_term = log_distance_regressor_db(distance_m, ref_distance_m)
     second = -log_term if sign_convention == "corrected" else log_term
     return np.stack([np.ones_like(log_term), second], axis=-1)
 
@@ -151,8 +152,9 @@ def _prepare(distance_m, power_dbm, ref_distance_m):
     _positive_distances(distance_m[mask])
     # the design (every given distance, heard or not): all equal is an error whatever was heard
     given = distance_m > 0
+    # log10 d here only tests that the distances differ (not the law)
     _check_distinct_distances(np.where(given, np.log10(np.where(given, distance_m, 1.0)), 0.0), given)
-    log_d = np.where(mask, 10.0 * np.log10(np.where(mask, distance_m, 1.0) / ref_distance_m), 0.0)
+    log_d = np.where(mask, log_distance_regressor_db(np.where(mask, distance_m, 1.0), ref_distance_m), 0.0)
     return log_d, np.where(mask, power_dbm, 0.0), mask, _distinct(log_d, mask)
 
 
@@ -449,6 +451,8 @@ def _exponent_inputs(distance_m, power_dbm, ref_power_dbm, ref_distance_m):
         raise ValueError("distances must be positive")
     ref = as_array("ref_power_dbm", ref_power_dbm)
     check_scalar("ref_distance_m", ref_distance_m, gt=0)
+    # L = log10(D/d0) of Eq. (3.8) and its LS form, as those estimators print it (the law's regressor is 10 L;
+    # the factor 10 stays where they write it, so their rounding is the printed algebra's)
     log_d = np.broadcast_to(np.log10(distance_m / ref_distance_m), shape)
     excess = np.broadcast_to(power_dbm - ref[..., None], shape)
     return log_d, excess

@@ -98,9 +98,10 @@ def rss_state_information(states, anchors_m, path_loss_exp, sigma_db, position_i
                           min_distance_m: float = 0.0, height_offset_m: float = 0.0, heard=None):
     """Fisher information of RSS from every anchor about the full state, ``(..., n, n)`` for states ``(..., n)``.
 
-    ``Lambda(x) = H(x)^T R^{-1} H(x)`` (Dogan Eq. (4.19)), ``R = sigma^2 I``: the static RSS information
-    (:func:`locbook.bounds.crlb.rss_position_information`, with its near-anchor regularisations and its ``heard``
-    mask for readings that are not there) in the position block.
+    ``Lambda(x) = H(x)^T R^{-1} H(x)`` (Dogan Eq. (4.19)), ``R = sigma^2 I``: the one RSS model's Fisher information
+    (:meth:`locbook.models.rss.RssModel.fisher_information`, through
+    :func:`locbook.bounds.crlb.rss_position_information` with its near-anchor regularisations, the clamp giving 0
+    within ``min_distance_m``, and its ``heard`` mask for readings that are not there) in the position block.
     """
     states = as_array("states", states, min_ndim=1)
     idx = np.asarray(position_index)

@@ -22,6 +22,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import locbook as lb
+from locbook.tracking.resampling import RESAMPLING_METHODS
 from locbook.errors import LocbookError
 from locbook.tracking import _compiled as K
 from locbook.tracking import _loop
@@ -313,7 +314,7 @@ def test_fuzz_bayes_filters(problem, which):
 
 @settings(max_examples=40, **SETTINGS)
 @given(runs=st.sampled_from([0, 1, 3]), steps=st.sampled_from([1, 3]), bad=st.sampled_from([None, *SPECIAL]),
-       method=st.sampled_from(list(lb.RESAMPLING_METHODS)))
+       method=st.sampled_from(list(RESAMPLING_METHODS)))
 def test_fuzz_sir_particle_filter(runs, steps, bad, method):
     rng = np.random.default_rng(0)
     start = rng.normal(0, 1, (runs, 30, 2))
@@ -342,7 +343,7 @@ def test_fuzz_sir_particle_filter(runs, steps, bad, method):
 
 @settings(max_examples=60, **SETTINGS)
 @given(n=st.sampled_from([1, 2, 7, 20]), rows=st.sampled_from([(), (0,), (3,)]), bad=st.sampled_from([None, *SPECIAL]),
-       method=st.sampled_from(list(lb.RESAMPLING_METHODS)), dtype=st.sampled_from(["float64", "float32", "int"]),
+       method=st.sampled_from(list(RESAMPLING_METHODS)), dtype=st.sampled_from(["float64", "float32", "int"]),
        is_strided=st.booleans(), where=st.booleans())
 def test_fuzz_resampling(n, rows, bad, method, dtype, is_strided, where):
     rng = np.random.default_rng(3)

@@ -26,8 +26,8 @@ from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
 import locbook as lb
-from locbook.static.calibration import FIT_PROBLEM_STATUSES
-from locbook.static.localization import GOODNESS_OF_FIT_ALPHA
+from locbook.static.calibration import CALIBRATION_MODES, FIT_PROBLEM_STATUSES
+from locbook.static.localization import GOODNESS_OF_FIT_ALPHA, LATERATION_PAIRS, LOCALIZATION_STATUSES
 from scipy.stats import chi2
 
 FUZZ = settings(max_examples=200, deadline=None, derandomize=True,
@@ -166,7 +166,7 @@ def same_result(a, b):
 # -- the rule for each kind of result ----------------------------------------------------------------------------
 def judge_localization(res: lb.LocalizationResult, batch, dim: int, with_cost: bool):
     assert res.position_m.shape == batch + (dim,) and res.converged.shape == batch and res.status.shape == batch
-    assert set(np.unique(res.status).tolist()) <= set(lb.LOCALIZATION_STATUSES), res.status
+    assert set(np.unique(res.status).tolist()) <= set(LOCALIZATION_STATUSES), res.status
     # poor_fit: converged on readings that do not fit the model together (the ML answer is kept)
     assert same(res.converged, np.isin(res.status, ["ok", "poor_fit"]))
     assert np.isfinite(res.position_m[res.converged]).all(), "converged with a NaN position"
@@ -314,7 +314,7 @@ def test_crlb(kind, shape, specials, dtype, strided, seed):
 # -- Palvai's lateration from receivers per problem, recursive least squares ------------------------------------
 @FUZZ
 @given(n=st.integers(0, 6), shape=st.integers(0, 4), specials=st.lists(st.sampled_from(sorted(SPECIALS)), max_size=2),
-       where=st.sampled_from(["receivers", "distance"]), reference=st.sampled_from(lb.LATERATION_PAIRS),
+       where=st.sampled_from(["receivers", "distance"]), reference=st.sampled_from(LATERATION_PAIRS),
        dtype=st.sampled_from(["float64", "float32", "int"]), strided=st.booleans(), collinear=st.booleans(),
        seed=st.integers(0, 2**16))
 def test_lateration_ls_with_pairs(n, shape, specials, where, reference, dtype, strided, collinear, seed):
@@ -436,7 +436,7 @@ def _fuzz_fit(mode, n, shape, specials, where, distinct, dtype, strided, seed):
 
 
 @FUZZ
-@given(mode=st.sampled_from(lb.CALIBRATION_MODES), locations=st.integers(0, 4), kind=st.sampled_from(LAYOUTS),
+@given(mode=st.sampled_from(CALIBRATION_MODES), locations=st.integers(0, 4), kind=st.sampled_from(LAYOUTS),
        shape=st.integers(0, 4), specials=st.lists(st.sampled_from(sorted(SPECIALS)), max_size=2),
        dtype=st.sampled_from(["float64", "float32", "int"]), strided=st.booleans(), seed=st.integers(0, 2**16))
 def test_calibrate_path_loss(mode, locations, kind, shape, specials, dtype, strided, seed):

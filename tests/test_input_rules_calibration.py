@@ -14,6 +14,7 @@ from hypothesis import strategies as st
 from scipy.optimize import least_squares
 
 import locbook as lb
+from locbook.static.calibration import CALIBRATION_MODES
 from locbook.static import calibration, reference_tags
 
 
@@ -447,7 +448,7 @@ def test_reference_tags_a_reader_that_heard_one_tag_is_named():
             lb.calibrate_from_reference_tags(big, tags, readers, ref_power_bounds_dbm=None, path_loss_exp_bounds=None)
 
 
-@pytest.mark.parametrize("mode", lb.CALIBRATION_MODES)
+@pytest.mark.parametrize("mode", CALIBRATION_MODES)
 def test_calibrating_an_empty_batch_is_an_empty_calibration(mode):
     """Found by tests/test_fuzz_static.py: the pooled mode reshaped an empty batch with -1 (numpy: 'cannot reshape
     array of size 0 into shape (0,newaxis)')."""

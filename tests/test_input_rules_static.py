@@ -14,6 +14,7 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 import locbook as lb
+from locbook.static.localization import LOCALIZATION_STATUSES
 from locbook.static import localization
 
 ANCHORS = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 8.0], [0.0, 8.0], [5.0, 12.0]])
@@ -654,7 +655,7 @@ def test_a_poor_fit_is_flagged_alone_in_its_batch(name):
 
 
 def test_poor_fit_is_a_documented_status():
-    assert "poor_fit" in lb.LOCALIZATION_STATUSES and "poor_fit" in lb.LocalizationResult.__doc__
+    assert "poor_fit" in LOCALIZATION_STATUSES and "poor_fit" in lb.LocalizationResult.__doc__
     assert 0 < localization.GOODNESS_OF_FIT_ALPHA <= 1e-6
 
 

@@ -7,9 +7,10 @@ import numpy as np
 import pytest
 
 import locbook as lb
+from locbook.tracking.resampling import RESAMPLING_METHODS
 
 
-@pytest.mark.parametrize("method", lb.RESAMPLING_METHODS)
+@pytest.mark.parametrize("method", RESAMPLING_METHODS)
 def test_sir_posterior_of_a_linear_gaussian_problem_equals_the_kalman_posterior(method):
     rng = np.random.default_rng(0)
     R, Ns, K = 4, 40_000, 5

@@ -6,6 +6,7 @@ import pytest
 import filterpy.monte_carlo.resampling as fp_resampling
 
 import locbook as lb
+from locbook.tracking.resampling import RESAMPLING_METHODS
 
 W = np.array([0.02, 0.33, 0.05, 0.25, 0.01, 0.17, 0.12, 0.05])
 N = W.size
@@ -16,7 +17,7 @@ def _counts(indices):
     return np.apply_along_axis(np.bincount, -1, indices, minlength=N)
 
 
-@pytest.mark.parametrize("method", lb.RESAMPLING_METHODS)
+@pytest.mark.parametrize("method", RESAMPLING_METHODS)
 def test_each_scheme_is_unbiased(method):
     rng = np.random.default_rng(1)
     idx = lb.resample(np.broadcast_to(W, (DRAWS, N)), rng, method)

@@ -10,7 +10,7 @@
 Scenarios may import this layer; it imports nothing from the suite (the suite imports it). Names load on first use,
 so that ``import locbook.reproduce.printed_values`` does not pay for the report's numpy.
 """
-from importlib import import_module
+from .._lazy import lazy_exports
 
 _EXPORTS = {
     **dict.fromkeys(("Printed", "PrintedValues", "printed", "printed_number", "printed_rounding", "PRINTED_DIR",
@@ -20,15 +20,4 @@ _EXPORTS = {
     **dict.fromkeys(("Report", "Table", "NUMBER_COLUMNS"), "report"),
 }
 __all__ = list(_EXPORTS)
-
-
-def __getattr__(name):
-    if name in _EXPORTS:
-        value = getattr(import_module(f".{_EXPORTS[name]}", __name__), name)
-        globals()[name] = value
-        return value
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__():
-    return sorted(__all__)
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)

@@ -3,7 +3,7 @@
 Names are imported on first use (PEP 562): a notebook needs none of the suite (its ``Report`` lives in
 :mod:`locbook.reproduce`), and the runner's dependencies (papermill, nbformat, jinja2) would cost every kernel seconds at start-up.
 """
-from importlib import import_module
+from .._lazy import lazy_exports
 
 _EXPORTS = {
     "NotebookParameter": "params", "ParameterRule": "params", "read_parameters": "params",
@@ -13,15 +13,4 @@ _EXPORTS = {
     "load_suite": "spec",
 }
 __all__ = list(_EXPORTS)
-
-
-def __getattr__(name):
-    if name in _EXPORTS:
-        value = getattr(import_module(f".{_EXPORTS[name]}", __name__), name)
-        globals()[name] = value
-        return value
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__():
-    return sorted(__all__)
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)

@@ -1,0 +1,28 @@
+"""Names imported on first use (PEP 562), for locbook and its subpackages.
+
+A package lists where each public name lives; ``import locbook`` then loads no submodule, and a kernel or a CLI
+call pays only for the names it touches (pandas, matplotlib and cvxpy load with the first name that needs them).
+"""
+from __future__ import annotations
+
+import sys
+from importlib import import_module
+
+
+def lazy_exports(package: str, homes: dict[str, str]):
+    """``(__getattr__, __dir__)`` for the module ``package`` whose public names live in its submodules: ``homes``
+    maps each name to its submodule, relative to ``package`` (``"models.channel"``). A name is imported on first
+    access and then kept in the package's namespace, so later accesses cost nothing."""
+
+    def __getattr__(name: str):
+        module = homes.get(name)
+        if module is None:
+            raise AttributeError(f"module {package!r} has no attribute {name!r}")
+        value = getattr(import_module(f".{module}", package), name)
+        setattr(sys.modules[package], name, value)
+        return value
+
+    def __dir__():
+        return sorted(set(homes) | {n for n in vars(sys.modules[package]) if not n.startswith("_")})
+
+    return __getattr__, __dir__

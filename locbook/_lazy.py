@@ -7,16 +7,20 @@ from __future__ import annotations
 
 import sys
 from importlib import import_module
+from importlib.util import find_spec
 
 
 def lazy_exports(package: str, homes: dict[str, str]):
     """``(__getattr__, __dir__)`` for the module ``package`` whose public names live in its submodules: ``homes``
     maps each name to its submodule, relative to ``package`` (``"models.channel"``). A name is imported on first
-    access and then kept in the package's namespace, so later accesses cost nothing."""
+    access and then kept in the package's namespace, so later accesses cost nothing. A submodule is imported on
+    first access too (``locbook.tracking.functional`` without an import statement, as scipy allows)."""
 
     def __getattr__(name: str):
         module = homes.get(name)
         if module is None:
+            if not name.startswith("__") and find_spec(f"{package}.{name}") is not None:
+                return import_module(f".{name}", package)
             raise AttributeError(f"module {package!r} has no attribute {name!r}")
         value = getattr(import_module(f".{module}", package), name)
         setattr(sys.modules[package], name, value)

@@ -14,6 +14,7 @@ from stonesoup.types.groundtruth import GroundTruthPath, GroundTruthState
 from stonesoup.types.state import GaussianState
 
 import locbook as lb
+from locbook.bounds.pcrlb import PCRLB_FORMS
 
 # Stone Soup's own PCRB test (stonesoup/metricgenerator/tests/test_pcrbmetric.py): two constant-velocity axes,
 # q = 0.05, position measured with R = diag(5, 5), prior diag(5, 10, 5, 10), 21 steps of 1 s
@@ -28,7 +29,7 @@ def _groundtruth(states):
                             for i, s in enumerate(states)])
 
 
-@pytest.mark.parametrize("form", lb.PCRLB_FORMS)
+@pytest.mark.parametrize("form", PCRLB_FORMS)
 def test_stonesoup_pcrb_scenario(form):
     model = lb.constant_velocity(1.0, 0.05, layout="axis_major", noise="continuous")
     ss_transition = CombinedLinearGaussianTransitionModel([ConstantVelocity(0.05), ConstantVelocity(0.05)])

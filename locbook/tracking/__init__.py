@@ -1,1 +1,4 @@
 """Tracking filters: the Kalman family, grid Bayes and particle filters."""
+from .._lazy import lazy_exports
+
+__getattr__, __dir__ = lazy_exports(__name__, {})   # submodules load on first access

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 import locbook as lb
+from locbook.tracking.divergence import DivergenceFlags
 from locbook.scenarios import dogan as dg
 from locbook.scenarios import dogan_testbed as tb
 
@@ -134,3 +135,41 @@ def test_printed_testbed_reductions_are_the_printed_pairs():
     assert red["parallel_ekf"] == pytest.approx(100 * (1.78 - 1.52) / 1.78, rel=1e-12)
     assert red["kalman_filter"] == pytest.approx(100 * (2.04 - 1.85) / 2.04, rel=1e-12)
     assert abs(np.mean(list(red.values())) - tb.PRINTED_FUSION_REDUCTION.value) < tb.PRINTED_FUSION_REDUCTION.rounding
+
+
+def test_record_testbed_records_each_printed_walk_value_with_its_flags_and_the_best_filter_claim(tmp_path, monkeypatch):
+    monkeypatch.setenv("LOCBOOK_OUTPUT_DIR", str(tmp_path))
+    k = np.arange(21.0)
+    walks = lambda rmse: np.repeat(np.asarray(rmse, float)[:, None], 7, axis=1)
+    errors = {"static_mle": walks(2.0 + 0.1 * k)}
+    divergence = {}
+    for name, level in {"parallel_ekf": 1.0, "serial_ekf": 1.2, "kalman_filter": 1.1}.items():
+        errors[(name, None)] = walks(level + 0.05 * k)
+        errors[(name, 0.5)] = walks(0.9 * (level + 0.05 * k))
+        for case in (None, 0.5):
+            flagged = np.zeros(21, bool)
+            flagged[:2 if (name, case) == ("serial_ekf", 0.5) else 0] = True      # 2 of 21 walks of one case
+            divergence[(name, case)] = DivergenceFlags(flagged, np.where(flagged, 3, -1))
+    run = dg.ChannelRun(6.0, 1.8, np.zeros(2), errors, divergence=divergence)
+    rows = tb.testbed_rows(run, 0.5)
+    assert tb.testbed_flags(rows[0], run, 0.5) is None                                      # the MLE has no guard
+    mean_row = next(r for r in rows if r["filter"] == "mean of the three")
+    assert set(tb.testbed_flags(mean_row, run, 0.5)) == {f"{n} {c}" for n in dg.FILTERS for c in ("ONLY RSS", "RSS/IMU")}
+    report = lb.Report("test")
+    tb.record_testbed(report, rows, run, 0.5)
+    recorded = report.numbers
+    # the seven printed walk values and the printed 15 %, then the arithmetic mean of the printed pairs, then the claim
+    assert len(recorded) == len(tb.PRINTED_TESTBED_RMSE) + 1 + 2
+    by_id = {r["printed_id"]: r for r in recorded}
+    mle = by_id[tb.PRINTED_TESTBED_RMSE[("static_mle", None)].id]
+    assert mle["kind"] == "reproduction" and mle["reproduced"] == pytest.approx(3.0, abs=1e-12)
+    assert "flagged" not in mle["note"]
+    fused = by_id[tb.PRINTED_TESTBED_RMSE[("serial_ekf", "fusion")].id]
+    assert fused["kind"] == "calibrated" and "2 of 21 runs flagged diverged" in fused["note"]
+    assert "flagged" not in by_id[tb.PRINTED_TESTBED_RMSE[("serial_ekf", None)].id]["note"]
+    assert "2 of 21" in by_id[tb.PRINTED_FUSION_REDUCTION.id]["note"]                       # the mean covers every filter
+    arithmetic = by_id[tb.PRINTED_FUSION_REDUCTION_CH6.id]
+    assert arithmetic["reproduced"] == pytest.approx(np.mean(list(tb.printed_reductions_pct().values())), rel=1e-12)
+    claim = by_id[tb.PRINTED_ACCURACY.id]                                                   # best: parallel EKF fused
+    assert "(parallel_ekf RSS/IMU)" in claim["quantity"]
+    assert claim["reproduced"] == pytest.approx(0.9 * (1.0 + 0.05 * 10), rel=1e-12)

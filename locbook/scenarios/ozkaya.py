@@ -25,7 +25,7 @@ from ..tracking.bayes import grid_bayes_filter
 from ..tracking.particle import particle_filter
 from ..bounds.crlb import crlb_rms_over_area_m, rss_crlb_m
 from ..static.fingerprint import knn_position, model_fingerprints
-from ..models.channel import PathLossModel
+from ..models.channel import PathLossModel, quantize_db
 from ..reproduce.printed_values import printed
 from ..metrics import (error_std_m, mean_error_m, median_error_m, percentile_error_m, position_error_m, rmse_m,
                        rmse_standard_error_m)
@@ -43,6 +43,7 @@ __all__ = [
     "is_crlb_row",
     "settling_step", "literature_table", "PRINTED", "OFFLINE_PARAMETERS", "AUTO_PARAMETERS", "R3_CALIBRATION_DISTANCES_M",
     "TESTBED_SIZE_M", "TESTBED_WALLS_M", "TESTBED_READERS_M", "REFERENCE_TAGS_M", "READER_SENSITIVITY_DBM", "WAF_DB",
+    "synthetic_campaign", "CRLB_NOT_FROM_FORMULA",
 ]
 
 #: Every number the thesis prints (locbook/data/printed/ozkaya2011.csv).
@@ -102,13 +103,13 @@ def cell_centres(room_m, nx: int, ny: int, margin_m: float = 0.5) -> np.ndarray:
 
 def printed_tables() -> list[dict]:
     """Every printed number of Tables 7.1-7.46 (locbook/data/printed/ozkaya2011.csv): dicts with
-    ``table, row, column, value`` (float) and the :class:`~locbook.data.Printed` itself (``printed``)."""
+    ``table, row, column, value`` (float) and the :class:`~locbook.reproduce.Printed` itself (``printed``)."""
     return [{"table": p.location.removeprefix("Table "), "row": p.item, "column": p.statistic, "value": p.value,
              "printed": p} for p in printed("ozkaya2011") if p.location.startswith("Table 7.")]
 
 
 def printed_cell(table: str, row: str, column: str):
-    """The :class:`~locbook.data.Printed` of a cell of Tables 7.1-7.46, or None where the thesis prints none."""
+    """The :class:`~locbook.reproduce.Printed` of a cell of Tables 7.1-7.46, or None where the thesis prints none."""
     return printed("ozkaya2011").find(f"Table {table}", row, column)
 
 
@@ -443,7 +444,7 @@ def _first_printings() -> dict:
 
 def run_tables(tables, n_runs: int, seed: int, **overrides) -> list[dict]:
     """Run every case of the given tables (e.g. ``["7.1", "7.2"]``) and return long-form rows ``table, row,
-    column, printed`` (the :class:`~locbook.data.Printed`), ``reproduced, se_m, case, first_printed`` for every
+    column, printed`` (the :class:`~locbook.reproduce.Printed`), ``reproduced, se_m, case, first_printed`` for every
     printed statistic; CRLB cells carry ``reproduced`` = the thesis-form bound and ``se_m`` None. Identical
     settings are simulated once. ``first_printed`` is the first printing of the same setting and statistic
     in the thesis (the row itself if it is the first). ``overrides`` replace :class:`SimCase` fields in every
@@ -518,9 +519,18 @@ def record_tables(report, rows, n_runs: int) -> None:
                       ambiguity=ambiguity, same_as=same_as, note=note)
 
 
+#: Note of a printed CRLB of a layout whose bound the printed formula cannot give (half-separation and large room).
+CRLB_NOT_FROM_FORMULA = ("not reproducible: the printed CRLB formula is scale-invariant (doubling the room and the reader "
+                         "separations leaves it unchanged), so this value cannot come from it (note 004 s.3.9); the layout or "
+                         "the formula behind it is not printed")
+
+
 def crlb_rows() -> list[dict]:
-    """Every printed CRLB cell of the simulation tables with its layout and sigma (from the table's case), our
-    thesis-form value, and the first printing of the same (layout, sigma) (``first_printed``)."""
+    """Every printed CRLB cell of the simulation tables with its layout and sigma (from the table's case), the first
+    printing of the same (layout, sigma) (``first_printed``), and how to record it: ``same_as`` is that first
+    printing when this cell prints the same value again (a repeat, linked), else None; ``note`` says when the thesis
+    prints the bound again with a different value (both are compared) and, for the layouts the scale-invariant
+    printed formula cannot give (:data:`CRLB_NOT_FROM_FORMULA`), why it is not reproducible."""
     rows, first = [], {}
     seen = set()
     for table, row, column, case in simulation_cases():
@@ -536,6 +546,13 @@ def crlb_rows() -> list[dict]:
             p = printed_cell(table, "CRLB", f"rmse_m@sigma={s:g}")
             first.setdefault(("corners3", s), p)
             rows.append({"printed": p, "layout": "corners3", "sigma_db": s, "first_printed": first[("corners3", s)]})
+    for r in rows:
+        p, again = r["printed"], r["first_printed"]
+        r["same_as"] = again if again.id != p.id and again.value == p.value else None
+        note = CRLB_NOT_FROM_FORMULA if r["layout"] in ("half3", "large3", "large4") else ""
+        if again.id != p.id and again.value != p.value:
+            note = f"the thesis prints this bound again at {again.where} as {again.text}; both are compared. " + note
+        r["note"] = note.strip()
     return rows
 
 
@@ -584,6 +601,32 @@ R3_CALIBRATION_DISTANCES_M = tuple(tuple(p.value for p in PRINTED.where("Fig. 6.
                                    for room in ("same", "other"))
 READER_SENSITIVITY_DBM = PRINTED.get("Sec. 6.1 text", "readers", "sensitivity_dbm").value
 WAF_DB = OFFLINE_PARAMETERS["waf_db"]
+
+def synthetic_campaign(reader: int, n_campaigns: int, rng: np.random.Generator, distances_m, walls, *,
+                       location_sigma_db: float, locations_per_distance: int, readings_per_location: int,
+                       parameters: dict | None = None) -> np.ndarray:
+    """Synthetic offline calibration campaigns of Sec. 6.1 for reader ``reader`` (0-based) of
+    ``parameters`` (default :data:`OFFLINE_PARAMETERS`, Table 6.1), shape
+    ``(n_campaigns, distances, locations_per_distance, readings_per_location)``.
+
+    Reading = Eq. (6.4)'s mean ``alpha - 10 n log10 d - WAF walls`` + a per-location offset
+    ``N(0, location_sigma_db^2)`` (orientation, position on the arc; note 004 s.9) + per-reading noise
+    ``N(0, sigma^2 - location_sigma_db^2)``, so the total per-distance variance is Table 6.1's ``sigma^2``; then 1 dB
+    reader resolution and the -90 dBm sensitivity floor (:func:`~locbook.models.channel.quantize_db`). The offsets
+    are drawn before the readings' noise (one stream, ``rng``)."""
+    P = OFFLINE_PARAMETERS if parameters is None else parameters
+    read_var = P["sigma_db"][reader] ** 2 - location_sigma_db**2
+    if not read_var >= 0:
+        raise ValueError(f"location_sigma_db = {location_sigma_db!r} exceeds the reader's total sigma "
+                         f"{P['sigma_db'][reader]!r} dB")
+    distances_m = np.asarray(distances_m, float)
+    mean = PathLossModel(P["alpha_dbm"][reader], P["path_loss_exp"][reader],
+                         wall_attenuation_db=P["waf_db"]).mean_power_dbm(distances_m, walls)
+    read_sd = np.sqrt(read_var)
+    offs = location_sigma_db * rng.standard_normal((n_campaigns, distances_m.size, locations_per_distance, 1))
+    noise = read_sd * rng.standard_normal((n_campaigns, distances_m.size, locations_per_distance, readings_per_location))
+    return quantize_db(mean[:, None, None] + offs + noise, 1.0, READER_SENSITIVITY_DBM)
+
 
 #: Synthetic two-room test bed (note 004 s.6.1, every coordinate ASSUMED: the plan exists only in figures):
 #: small room x in [0, 3], large room x in [3, 9], both y in [0, 4], brick wall at x = 3.

@@ -563,7 +563,7 @@ TABLE_CELLS = {(t, r, c): _cell(t, r, c) for t, r, c, _ in _printed_cells()}
 
 def first_printing(experiment: str, method: str, statistic: str):
     """The first printed cell (thesis order) of one (experiment, method, statistic) of Tables 7.26-7.44: the
-    :class:`~locbook.data.Printed` a repeat of the same quantity links to (None if never printed)."""
+    :class:`~locbook.reproduce.Printed` a repeat of the same quantity links to (None if never printed)."""
     return _FIRST.get((experiment, method, statistic))
 
 
@@ -582,7 +582,7 @@ def _statistics(results, experiment):
 
 def table_rows(results: dict[str, ExperimentResult]) -> list[dict]:
     """Every printed cell of Tables 7.26-7.44 whose experiment was run, in the thesis's order: ``printed`` and
-    ``first_printed`` (the :class:`~locbook.data.Printed` of this cell and of the first printing of the same
+    ``first_printed`` (the :class:`~locbook.reproduce.Printed` of this cell and of the first printing of the same
     experiment, method and statistic), ``reproduced`` (the mean over the synthetic test beds), ``spread_m``
     (their standard deviation, ddof 1), ``mc_se_m`` (its standard error, spread / sqrt(Z)) and ``per_testbed``
     (the statistic of each test bed)."""

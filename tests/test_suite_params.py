@@ -3,6 +3,7 @@
 No notebook is executed: these check the types and rules directly, and read parameters cells written here.
 """
 import math
+import operator
 
 import nbformat
 import pytest
@@ -96,6 +97,30 @@ def test_a_rule_applies_to_every_number_inside_lists_and_its_length_to_the_list(
     with pytest.raises(ParameterError, match=r"\(allowed: list\[int\], >= 0, <= 31, at least 1 item\(s\), at most "
                                              r"3 item\(s\), finite\)"):
         check_value(param("list[int]"), [-1], rule)
+
+
+def test_an_int_with_a_fractional_bound_is_held_to_the_whole_numbers_the_bound_admits():
+    # pydantic refuses a fractional bound on an int; the rule means n >= ceil(ge), n > floor(gt), n <= floor(le),
+    # n < ceil(lt), checked here against every integer near the bounds (and inside lists)
+    rules = [ParameterRule(ge=0.5, le=2.5), ParameterRule(gt=0.5, lt=2.5), ParameterRule(ge=-1.5, lt=-0.5),
+             ParameterRule(gt=-1.5, le=1.0)]
+    for rule in rules:
+        for n in range(-4, 6):
+            holds = all(op(n, b) for op, b in ((operator.ge, rule.ge), (operator.gt, rule.gt), (operator.le, rule.le),
+                                               (operator.lt, rule.lt)) if b is not None)
+            if holds:
+                assert check_value(param("int"), n, rule) == n
+                assert check_value(param("list[int]"), [n, n], rule) == [n, n]
+            else:
+                with pytest.raises(ParameterError, match=rf"'x' = {n} is not allowed: must be "):
+                    check_value(param("int"), n, rule)
+    with pytest.raises(ParameterError, match=r"'x' = 3 is not allowed: must be <= 2.5 \(allowed: int, >= 0.5, <= 2.5"):
+        check_value(param("int"), 3, ParameterRule(ge=0.5, le=2.5))
+    # an infinite bound: no constraint where every int meets it, refused (naming it) where none does
+    assert check_value(param("int"), -7, ParameterRule(ge=-math.inf, le=math.inf)) == -7
+    assert check_value(param("float"), 0.25, ParameterRule(ge=0.5 - 0.25)) == 0.25       # floats keep the bound
+    with pytest.raises(ParameterError, match=r"the rule ge = inf admits no whole number"):
+        check_value(param("int"), 3, ParameterRule(ge=math.inf))
 
 
 def test_unsupported_annotations_are_refused():

@@ -164,6 +164,27 @@ def _not_nan(value: float) -> float:
     return value
 
 
+#: The whole-number bound a rule's bound means for an ``int``: n >= x iff n >= ceil(x), n > x iff n > floor(x),
+#: n <= x iff n <= floor(x), n < x iff n < ceil(x) (pydantic refuses a fractional bound on an int).
+_WHOLE = {"ge": math.ceil, "gt": math.floor, "le": math.floor, "lt": math.ceil}
+
+
+def _whole_bounds(bounds: dict) -> dict:
+    """``bounds`` as the int bounds they mean (:data:`_WHOLE`); an infinite bound every int meets is dropped, one
+    none meets (or a NaN bound) is refused naming it."""
+    out = {}
+    for key, x in bounds.items():
+        if x is None or isinstance(x, int):
+            out[key] = x
+        elif math.isinf(x) and (x < 0) == (key in ("ge", "gt")):   # -inf below or +inf above: no constraint
+            out[key] = None
+        elif math.isfinite(x):
+            out[key] = _WHOLE[key](x)
+        else:
+            raise ParameterError(f"the rule {key} = {x} admits no whole number; an int parameter needs a finite bound")
+    return out
+
+
 @functools.lru_cache(maxsize=None)
 def _adapter(annotation: str, rule: ParameterRule | None):
     """A pydantic ``TypeAdapter`` for ``annotation`` with ``rule`` applied to every number and to the list
@@ -180,7 +201,7 @@ def _adapter(annotation: str, rule: ParameterRule | None):
     nan = [AfterValidator(_not_nan)] if rule is not None and rule.allow_inf else []   # NaN is never a value
     namespace = {
         "__builtins__": {}, "Literal": Literal, "list": list, "tuple": tuple, "None": None,
-        "int": Annotated[int, Strict(), Field(**bounds)],   # Strict: no bool, no 2.0, no "2"
+        "int": Annotated[int, Strict(), Field(**_whole_bounds(bounds))],   # Strict: no bool, no 2.0, no "2"
         "float": Annotated[float, Strict(), number, *nan],
         "bool": Annotated[bool, Strict()], "str": Annotated[str, Strict()],
     }

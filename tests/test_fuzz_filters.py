@@ -315,7 +315,7 @@ def test_fuzz_bayes_filters(problem, which):
 @settings(max_examples=40, **SETTINGS)
 @given(runs=st.sampled_from([0, 1, 3]), steps=st.sampled_from([1, 3]), bad=st.sampled_from([None, *SPECIAL]),
        method=st.sampled_from(list(RESAMPLING_METHODS)))
-def test_fuzz_sir_particle_filter(runs, steps, bad, method):
+def test_fuzz_particle_filter_callback_likelihood(runs, steps, bad, method):
     rng = np.random.default_rng(0)
     start = rng.normal(0, 1, (runs, 30, 2))
     z = rng.normal(0, 1, (runs, steps, 2))

@@ -105,7 +105,7 @@ def test_particle_filter_isolates_a_run_whose_likelihood_collapses(threshold):
 
 @pytest.mark.parametrize("method", ["systematic", "stratified"])
 @pytest.mark.parametrize("collapse", [-np.inf, np.nan, np.inf])
-def test_sir_particle_filter_isolates_a_run_whose_likelihood_collapses(method, collapse):
+def test_particle_filter_isolates_a_run_whose_likelihood_collapses(method, collapse):
     """A log-likelihood that is -inf for every particle, NaN for some or +inf (garbage) flags that run at that step;
     the others are bit-identical to the run with a sane likelihood (with these schemes the random draws do not depend
     on the weights)."""

@@ -66,8 +66,25 @@ class ProtocolChoice:
     source: str
 
 
+class _AnchorReadings:
+    """What the static and tracking scenarios share: the anchor distances of plan positions and channel draws at
+    them (the scenario supplies ``anchors_m``, ``channel`` and ``tag_height_m``)."""
+
+    def distances_m(self, points_m) -> np.ndarray:
+        """Anchor distances ``(..., m)`` (3-D when the anchors carry heights: the tag at ``tag_height_m``)."""
+        p = np.asarray(points_m, float)
+        if self.tag_height_m is not None:
+            p = np.concatenate([p, np.full(p.shape[:-1] + (1,), self.tag_height_m)], axis=-1)
+        return np.linalg.norm(p[..., None, :] - self.anchors_m, axis=-1)
+
+    def _sample_rss_dbm(self, points_m, n_runs: int, rng: np.random.Generator) -> np.ndarray:
+        """``n_runs`` independent channel draws at ``points_m``: ``(n_runs, ..., m)``."""
+        d = self.distances_m(points_m)
+        return self.channel.sample_power_dbm(np.broadcast_to(d, (n_runs,) + d.shape), rng)
+
+
 @dataclass(frozen=True)
-class StaticScenario:
+class StaticScenario(_AnchorReadings):
     """A static localization problem: anchors ``(m, 2)`` (or ``(m, 3)`` with ``tag_height_m``), the channel (the
     truth and what the estimators know), the floor (``outline_m``; the region of box-LS is its bounding box),
     evaluation positions ``points_m (P, 2)``, the pitch of the grid methods' grid; for measured data the readings
@@ -97,23 +114,15 @@ class StaticScenario:
     def grid_m(self, spacing_m: float | None = None) -> np.ndarray:
         return grid_in_outline(self.outline_m, self.grid_spacing_m if spacing_m is None else spacing_m)
 
-    def distances_m(self, points_m) -> np.ndarray:
-        """Anchor distances ``(..., m)`` (3-D when the anchors carry heights)."""
-        p = np.asarray(points_m, float)
-        if self.tag_height_m is not None:
-            p = np.concatenate([p, np.full(p.shape[:-1] + (1,), self.tag_height_m)], axis=-1)
-        return np.linalg.norm(p[..., None, :] - self.anchors_m, axis=-1)
-
     def rss_dbm(self, n_runs: int, rng: np.random.Generator) -> np.ndarray:
         """Readings ``(R, P, m)``: the measured ones (``R = 1``), or ``n_runs`` draws of the channel."""
         if self.measured:
             return self.measured_rss_dbm[None]
-        d = self.distances_m(self.points_m)
-        return self.channel.sample_power_dbm(np.broadcast_to(d, (n_runs,) + d.shape), rng)
+        return self._sample_rss_dbm(self.points_m, n_runs, rng)
 
 
 @dataclass(frozen=True)
-class TrackingScenario:
+class TrackingScenario(_AnchorReadings):
     """A tracking problem on a fixed clock ``dt_s``: true plan positions ``truth_m (T, 2)`` at every tick (NaN where
     the truth is unknown), the ticks that are scored (``scored (T,)``), the anchors and channel, the floor, and for
     measured data the readings ``measured_rss_dbm (T, m)`` on the clock (a tick without readings is all NaN)."""
@@ -152,17 +161,11 @@ class TrackingScenario:
         a, b = steps[0], steps[1]
         return np.r_[self.truth_m[a], (self.truth_m[b] - self.truth_m[a]) / ((b - a) * self.dt_s)]
 
-    def distances_m(self, points_m) -> np.ndarray:
-        p = np.asarray(points_m, float)
-        if self.tag_height_m is not None:
-            p = np.concatenate([p, np.full(p.shape[:-1] + (1,), self.tag_height_m)], axis=-1)
-        return np.linalg.norm(p[..., None, :] - self.anchors_m, axis=-1)
-
     def rss_dbm(self, n_runs: int, rng: np.random.Generator) -> np.ndarray:
+        """Readings ``(R, T, m)``: the measured ones repeated ``n_runs`` times, or ``n_runs`` draws of the channel."""
         if self.measured:
             return np.broadcast_to(self.measured_rss_dbm, (n_runs,) + self.measured_rss_dbm.shape)
-        d = self.distances_m(self.truth_m)
-        return self.channel.sample_power_dbm(np.broadcast_to(d, (n_runs,) + d.shape), rng)
+        return self._sample_rss_dbm(self.truth_m, n_runs, rng)
 
 
 def _fmt(values) -> str:

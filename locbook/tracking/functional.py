@@ -171,20 +171,8 @@ def _linear_update(x, P, z, H, R, *, joseph: bool = True, want: bool = False) ->
         sol = _solve_active(S, rhs, valid.any(axis=-1))
         K = _mT(sol[..., :n])
         nis = np.einsum("...i,...i->...", nu, sol[..., n])
-    x_new = x + (K @ nu[..., None])[..., 0]
-    if not np.isfinite(x_new).all():                          # a larger S that is not positive definite
-        raise _Singular(~np.all(np.isfinite(x_new), axis=-1), _UPDATE_OVERFLOW)
     # a run without readings has S = I (zero H, unit noise): log det 0, NIS 0, dof 0, log-likelihood 0
-    ll = _gaussian_log_likelihood(nis, _logdet(S), dof)
-    if joseph:
-        P_new = _joseph(P, K, H, R)
-    else:
-        short = (np.eye(P.shape[-1]) - K @ H) @ P
-        P_new = 0.5 * (short + _mT(short))
-    if not want:
-        return _Out(x_new, P_new, nis, dof, ll)
-    nu_out, S_out = _missing_as_nan(nu, S, valid)
-    return _Out(x_new, P_new, nis, dof, ll, nu_out, S_out)
+    return _finish(x + (K @ nu[..., None])[..., 0], P, K, H, R, nu, S, nis, dof, valid, joseph=joseph, want=want)
 
 
 def _linear_update_shared(x, P, z, present, H, R, *, joseph: bool = True, want: bool = False) -> _Out:
@@ -217,7 +205,13 @@ def _linear_update_shared(x, P, z, present, H, R, *, joseph: bool = True, want: 
         K = sol[:, :P.shape[-1]].T
         nis = np.einsum("bi,ib->b", flat, sol[:, P.shape[-1]:])
     nis, dof = nis.reshape(x.shape[:-1]), int(present.sum())
-    x_new = x + nu @ K.T
+    return _finish(x + nu @ K.T, P, K, H, R, nu, S, nis, dof, present, joseph=joseph, want=want)
+
+
+def _finish(x_new, P, K, H, R, nu, S, nis, dof, valid, *, joseph: bool, want: bool) -> _Out:
+    """The tail both linear updates share: refuse a non-finite state (a larger S that is not positive definite),
+    the Gaussian log-likelihood of the innovation, the posterior covariance (Joseph form, or the short form
+    ``(I - K H) P`` symmetrised) and the outputs (innovation and S with NaN at missing components if ``want``)."""
     if not np.isfinite(x_new).all():
         raise _Singular(~np.all(np.isfinite(x_new), axis=-1), _UPDATE_OVERFLOW)
     ll = _gaussian_log_likelihood(nis, _logdet(S), dof)
@@ -225,8 +219,8 @@ def _linear_update_shared(x, P, z, present, H, R, *, joseph: bool = True, want: 
         P_new = _joseph(P, K, H, R)
     else:
         short = (np.eye(P.shape[-1]) - K @ H) @ P
-        P_new = 0.5 * (short + short.T)
+        P_new = 0.5 * (short + _mT(short))
     if not want:
         return _Out(x_new, P_new, nis, dof, ll)
-    nu_out, S_out = _missing_as_nan(nu, S, present)
+    nu_out, S_out = _missing_as_nan(nu, S, valid)
     return _Out(x_new, P_new, nis, dof, ll, nu_out, S_out)

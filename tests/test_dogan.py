@@ -195,3 +195,31 @@ def test_record_tables_kinds_repeats_and_miss_notes(tmp_path, monkeypatch):
     miss = out["Table 3.9, sigma_acc=0.0015, kalman_filter"]
     assert miss["verdict"] == "miss" and "start moving, Q printed: 1.500" in miss["note"]
     assert counts == {"within": 2, "linked": 2, "miss": 1}
+
+
+def test_readings_summary_counts_fusion_cells_within_the_tolerance_per_reading():
+    # hand-made deviations |ours / printed - 1| (exact in binary): the chosen reading from rows, others from variants
+    cells = {  # key: (printed, chosen, A, B)
+        ("3.8", "sigma_rss_db=3", "parallel_ekf"): (4.0, 4.5, 5.0, 3.0),     # 0.125, 0.25, 0.25
+        ("3.8", "sigma_rss_db=3", "serial_ekf"): (8.0, 6.0, 8.0, 9.0),       # 0.25, 0, 0.125
+        ("3.10", "y", "kalman_filter"): (2.0, 2.5, 2.25, 1.5),               # 0.25, 0.125, 0.25
+        ("3.9", "sigma_acc=0.015", "parallel_ekf"): (1.0, 9.0, 9.0, 9.0),    # a repeat (REPEATED_ROWS): left out
+        ("3.7", "sigma_rss_db=6", "serial_ekf"): (1.0, 9.0, 9.0, 9.0),       # ONLY RSS table: left out
+    }
+    rows = [{"table": k[0], "row": k[1], "column": k[2], "printed": v[0], "reproduced": v[1]} for k, v in cells.items()]
+    variants = {k: {"A": v[2], "B": v[3]} for k, v in cells.items()}
+    rows.append({"table": "3.10", "row": "x", "column": "kalman_filter", "printed": 1.0, "reproduced": 9.0})
+    variants[("3.10", "x", "kalman_filter")] = {"R per epoch": 9.0}          # one reading only: left out
+    assert ("3.9", "sigma_acc=0.015") in dg.REPEATED_ROWS
+    out = {(s["reading"], s["filters"]): s for s in dg.readings_summary(rows, variants, "chosen", ["A", "B"])}
+    assert [k for k in out] == [(r, f) for r in ("chosen", "A", "B") for f in ("EKFs", "KF (MLE)")]
+    expect = {("chosen", "EKFs"): (2, 1, 18.75), ("chosen", "KF (MLE)"): (1, 0, 25.0),
+              ("A", "EKFs"): (2, 1, 12.5), ("A", "KF (MLE)"): (1, 1, 12.5),
+              ("B", "EKFs"): (2, 1, 18.75), ("B", "KF (MLE)"): (1, 0, 25.0)}
+    for key, (n, within, median) in expect.items():
+        assert (out[key]["cells"], out[key]["within_20_pct"]) == (n, within)
+        assert out[key]["median_abs_deviation_pct"] == pytest.approx(median, rel=1e-12)
+    wide = dg.readings_summary(rows, variants, "chosen", ["A"], tolerance=0.25)     # the bound is inclusive
+    assert [s["within_25_pct"] for s in wide] == [2, 1, 2, 1]
+    with pytest.raises(ValueError, match="tolerance"):
+        dg.readings_summary(rows, variants, "chosen", ["A"], tolerance=20)

@@ -39,7 +39,7 @@ from ..bounds.pcrlb import linear_measurement_information, position_bound_m, pos
 from ..tracking.divergence import DivergenceFlags, divergence_note, divergence_rows
 
 __all__ = [
-    "PRINTED", "ROOM_M", "ANCHORS_M", "corner_anchors", "STATE_LAYOUT", "POSITION_INDEX", "REF_POWER_DBM",
+    "PRINTED", "ROOM_M", "ANCHORS_M", "corner_anchors", "STATE_LAYOUT", "REF_POWER_DBM",
     "PATH_LOSS_EXP", "SIGMA_RSS_DB", "SIGMA_ACC_MPS2", "Q_PER_STEP", "DT_S", "RSS_EVERY", "P00_VEL_VAR",
     "P00_ACC_VAR", "WAYPOINTS_M", "SPEED_MPS", "SPEED_CALIBRATED_FROM", "MC_RUNS", "START_MODES", "DEFAULT_START",
     "NOISE_READINGS", "DEFAULT_NOISE_READING", "Q_PER_ACC_VARIANCE", "filter_noise", "FILTERS",
@@ -48,8 +48,8 @@ __all__ = [
     "table_channels", "record_tables", "bound_rows", "thesis_repeat_error", "tail_rows",
     "fusion_reduction_rows", "ordering_rows", "table_view", "BOUND_KINDS", "pcrlb_m",
     "smc_trajectories", "smc_trajectory", "CHANNELS", "run_tables", "table_rows", "only_acc_errors",
-    "fusion_gain_pct", "mean_rmse_m", "printed_fusion_gains_pct", "REPEATED_ROWS",
-    "RMSE_TABLES", "TABLE_SIGMA_ACC_MPS2", "TABLE_36_CHANNEL", "SIGMA_ACC_SWEEP_CHANNELS", "ACCELERATION_INDEX", "MLE_R_READINGS",
+    "fusion_gain_pct", "mean_rmse_m", "printed_fusion_gains_pct", "REPEATED_ROWS", "readings_summary",
+    "RMSE_TABLES", "TABLE_SIGMA_ACC_MPS2", "TABLE_36_CHANNEL", "SIGMA_ACC_SWEEP_CHANNELS", "MLE_R_READINGS",
     "divergence_table",
 ]
 
@@ -77,8 +77,6 @@ def corner_anchors(room_m=ROOM_M) -> np.ndarray:
 ANCHORS_M = corner_anchors(ROOM_M)
 #: The state layout of Eq. (3.10), per axis: ``[x, vx, ax, y, vy, ay]``; the positions sit at indices 0 and 3.
 STATE_LAYOUT = ("x", "vx", "ax", "y", "vy", "ay")
-POSITION_INDEX = np.array([STATE_LAYOUT.index("x"), STATE_LAYOUT.index("y")])
-ACCELERATION_INDEX = np.array([STATE_LAYOUT.index("ax"), STATE_LAYOUT.index("ay")])
 #: Table 3.6: first-meter power P0 (dBm), path-loss exponent alpha, sigma_RSS (dB), sigma_ACC (m/s^2).
 REF_POWER_DBM = _value("Table 3.6", "first meter power of RSS P0")
 PATH_LOSS_EXP = _value("Table 3.6", "path loss exponent alpha")
@@ -429,7 +427,7 @@ TABLE_SIGMA_ACC_MPS2 = TABLE_SETTINGS[("3.8", "sigma_rss_db=6")].sigma_acc_mps2
 
 def printed_tables() -> tuple[dict, ...]:
     """Printed cells of Tables 3.7-3.12 (locbook/data/printed/dogan2015.csv): dicts with table, row, column,
-    value (float) and the :class:`~locbook.data.Printed` itself (``printed``)."""
+    value (float) and the :class:`~locbook.reproduce.Printed` itself (``printed``)."""
     return tuple({"table": p.location.removeprefix("Table "), "row": p.item, "column": p.statistic,
                   "value": p.value, "printed": p}
                  for p in PRINTED if p.location in RMSE_TABLES)
@@ -632,6 +630,34 @@ def record_tables(report, rows, *, variants: dict | None = None, label: str = ""
                             same_as=same["printed_value"] if same else None, note=note)
         counts[row["verdict"] or "linked"] = counts.get(row["verdict"] or "linked", 0) + 1
     return counts
+
+
+def readings_summary(rows, variants: dict, chosen: str, others, *, tolerance: float = 0.2) -> list[dict]:
+    """How close each reading comes to the printed fusion cells of the 6 and 3 dB channels (Tables 3.8-3.10, the
+    repeats of :data:`REPEATED_ROWS` left out, only cells run under more than one reading): per reading and filter
+    family (the EKFs, KF (MLE)), the number of cells, how many lie within ``tolerance`` (relative) of the printed
+    value, ``|ours / printed - 1| <= tolerance``, and the median of ``100 |ours / printed - 1|``.
+
+    ``rows``: :func:`table_rows` of the chosen reading (named ``chosen``); ``variants``: ``(table, row, column) ->
+    {reading: value}`` as for :func:`record_tables`; ``others``: the names of the other readings to summarise.
+    A summary of the readings table, not a scored comparison (no window, no verdict)."""
+    if not 0.0 < tolerance < 1.0:
+        raise ParameterError(f"tolerance must be a fraction in (0, 1), got {tolerance!r}")
+    ours = {(r["table"], r["row"], r["column"]): r["reproduced"] for r in rows}
+    printed_of = {(r["table"], r["row"], r["column"]): r["printed"] for r in rows}
+    fusion_keys = [k for k in variants if k[0] in ("3.8", "3.9", "3.10") and REPEATED_ROWS.get(k[:2]) is None
+                   and len(variants[k]) > 1]
+    within = f"within_{100 * tolerance:g}_pct"
+    summary = []
+    for name in [chosen, *others]:
+        values = ours if name == chosen else {k: variants[k][name] for k in fusion_keys}
+        for family, cols in [("EKFs", ("parallel_ekf", "serial_ekf")), ("KF (MLE)", ("kalman_filter",))]:
+            keys = [k for k in fusion_keys if k[2] in cols]
+            deviation = [abs(values[k] / printed_of[k] - 1) for k in keys]
+            summary.append({"reading": name, "filters": family, "cells": len(keys),
+                            within: sum(d <= tolerance for d in deviation),
+                            "median_abs_deviation_pct": float(np.median([100 * d for d in deviation]))})
+    return summary
 
 
 def _miss_reason(row, variants: dict) -> str:

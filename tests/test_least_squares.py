@@ -114,3 +114,48 @@ def test_reference_anchor_and_first_pairs_are_one_system():
         lb.lateration_ls(anchors, d, pairs="first", min_anchors=3)
     with pytest.raises(ValueError, match="pairs"):
         lb.lateration_system(anchors, d, pairs="every")
+
+
+def test_first_and_last_pairs_re_pick_a_reference_that_was_not_heard_as_the_reference_anchor_path_does():
+    """Shared anchors, the pair reference (anchor 0 for "first", the last anchor for "last") not heard: the pairs
+    take the first (last) heard anchor instead, so the fix is the reference-anchor path's, and exact ranges give the
+    tag back; problems that heard the reference are solved as before."""
+    rng = np.random.default_rng(11)
+    anchors = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0], [4.0, 7.0]])
+    tag = np.array([3.0, 4.0])
+    exact = np.linalg.norm(anchors - tag, axis=-1)
+    for pairs, lost in (("first", 0), ("last", 4)):
+        d = exact.copy()
+        d[lost] = np.nan
+        res = lb.lateration_ls(anchors, d, pairs=pairs)
+        assert res.status == "ok" and res.converged
+        np.testing.assert_allclose(res.position_m, tag, rtol=0, atol=1e-9)
+    noisy = exact * np.exp(0.1 * rng.standard_normal((6, 5)))
+    noisy[1:4, 0] = np.nan                                    # three problems without anchor 0
+    noisy[3, 1] = np.nan                                      # one of them without anchor 1 too
+    noisy[5, :3] = np.nan                                     # two anchors heard: too few for a 2-D fix
+    res = lb.lateration_ls(anchors, noisy, pairs="first")
+    ref = lb.lateration_ls(anchors, noisy)                    # re-picks the first heard anchor as its reference
+    np.testing.assert_array_equal(res.status, ref.status)
+    assert list(res.status) == ["ok"] * 5 + ["too_few_anchors"]
+    np.testing.assert_allclose(res.position_m[:5], ref.position_m[:5], rtol=1e-9)
+    kept = [0, 4]                                             # heard the reference: unchanged by the others
+    np.testing.assert_array_equal(res.position_m[kept], lb.lateration_ls(anchors, noisy[kept], pairs="first").position_m)
+
+
+def test_degenerate_geometry_is_reported_alike_on_the_reference_and_pair_paths():
+    """Shared anchors on one line raise DegenerateGeometryError on both paths; a problem whose heard anchors are
+    collinear, or too few, gets NaN and the same status on both."""
+    line = np.c_[np.arange(4.0), np.zeros(4)]
+    for pairs in (None, "first", "last"):
+        with pytest.raises(lb.DegenerateGeometryError, match="collinear"):
+            lb.lateration_ls(line, np.ones(4), pairs=pairs)
+    anchors = np.array([[0.0, 0.0], [5.0, 0.0], [10.0, 0.0], [5.0, 8.0]])    # the first three on the x axis
+    d = np.tile(np.linalg.norm(anchors - [4.0, 3.0], axis=-1), (3, 1))
+    d[0, 3] = np.nan                                          # heard only the collinear three
+    d[1, [0, 3]] = np.nan                                     # heard two
+    for pairs in (None, "first", "last"):
+        res = lb.lateration_ls(anchors, d, pairs=pairs)
+        assert list(res.status) == ["degenerate_geometry", "too_few_anchors", "ok"], pairs
+        assert np.isnan(res.position_m[:2]).all() and not res.converged[:2].any()
+        np.testing.assert_allclose(res.position_m[2], [4.0, 3.0], atol=1e-9)

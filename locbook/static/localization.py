@@ -472,6 +472,34 @@ def _pair_least_squares(anchors_m, distance_m, pairs: str, variant: str) -> Loca
     return LocalizationResult(pos, full, None, 0, f"lateration_ls(pairs={pairs}, {variant})", status)
 
 
+def _shared_pair_least_squares(anchors_m, distance_m, pairs: str, variant: str) -> LocalizationResult:
+    """:func:`_pair_least_squares` for anchors ``(n, dim)`` shared by every problem and ``pairs`` "first" or "last",
+    the conventions of the reference-anchor path: the shared layout is judged once
+    (:func:`check_anchor_geometry` raises :class:`DegenerateGeometryError`), and a problem that did not hear the
+    pair reference (anchor 0, or n - 1) takes the first (last) anchor it heard instead, as
+    :func:`_ref_in_subset` does, rather than losing every row. Problems that heard the reference are solved exactly
+    as before; the others are solved on their anchors with the new reference swapped into the reference's place
+    (a per-problem layout; a heard subset too small or collinear gets its status)."""
+    check_anchor_geometry(anchors_m)
+    res = _pair_least_squares(anchors_m, distance_m, pairs, variant)
+    d = as_array("distance_m", distance_m, min_ndim=1, nan_ok=True)
+    n = anchors_m.shape[0]
+    heard = ~np.isnan(d)
+    ref = 0 if pairs == "first" else n - 1
+    lost = ~heard[..., ref] & heard.any(axis=-1)
+    if not lost.any():
+        return res
+    h = heard[lost]                                                     # (k, n)
+    new_ref = np.argmax(h, axis=-1) if pairs == "first" else n - 1 - np.argmax(h[:, ::-1], axis=-1)
+    order = np.broadcast_to(np.arange(n), h.shape).copy()
+    rows = np.arange(h.shape[0])
+    order[rows, ref], order[rows, new_ref] = new_ref, ref               # swap the heard reference into place
+    sub = _pair_least_squares(anchors_m[order], np.take_along_axis(d[lost], order, axis=-1), pairs, variant)
+    pos, converged, status = (np.array(v) for v in (res.position_m, res.converged, res.status))   # 0-d for one problem
+    pos[lost], converged[lost], status[lost] = sub.position_m, sub.converged, sub.status
+    return LocalizationResult(pos, converged, None, 0, res.method, status)
+
+
 def lateration_ls(anchors_m, distance_m, ref_index: int = 0, *, pairs: str | None = None, variant: str = "corrected",
                   min_anchors: int | None = None, tag_height_m: float | None = None) -> LocalizationResult:
     """Linearized least squares ``p = (A^T A)^{-1} A^T b`` (Eq. (8), George and Vadivukkarasi) of
@@ -485,10 +513,22 @@ def lateration_ls(anchors_m, distance_m, ref_index: int = 0, *, pairs: str | Non
     Shared anchors: ``pinv(A)`` once for the batch. With ``pairs`` (Palvai 2008, Eq. (2.29); anchors may differ per
     problem, ``(..., N, dim)``): the normal equations per problem, the rows with a missing reading left out
     (``min_anchors`` and ``tag_height_m`` do not apply). ``variant``: :data:`LATERATION_VARIANTS`.
+
+    Degenerate geometry and missing readings, one convention on both paths: shared anchors ``(m, dim)`` that are
+    too few, coincident or collinear raise :class:`DegenerateGeometryError` (``pairs="consecutive"`` excepted: its
+    rows are judged per problem); a problem whose heard anchors are too few or collinear gets NaN and the status
+    ``too_few_anchors`` or ``degenerate_geometry``, as does every problem of per-problem anchors. A reference that
+    was not heard is replaced by a heard anchor: the first heard for ``ref_index`` and ``pairs="first"``, the last
+    heard for ``pairs="last"``. Remaining difference: per-problem anchors are judged by the rank of ``H^T H``
+    (1e-10), shared ones by :func:`check_anchor_geometry` (1e-6 on the centred anchors).
     """
     if pairs is not None:
         if min_anchors is not None or tag_height_m is not None:
             raise ParameterError("pairs: min_anchors and tag_height_m do not apply to differenced pairs")
+        check_choice("pairs", pairs, LATERATION_PAIRS)
+        shared = as_array("anchors_m", anchors_m, min_ndim=2)
+        if shared.ndim == 2 and pairs in ("first", "last"):
+            return _shared_pair_least_squares(shared, distance_m, pairs, variant)
         return _pair_least_squares(anchors_m, distance_m, pairs, variant)
     a_mat, b = lateration_system(anchors_m, distance_m, ref_index, variant=variant, tag_height_m=tag_height_m)
     min_anchors = _min_anchors(min_anchors, a_mat.shape[1], a_mat.shape[0] + 1)

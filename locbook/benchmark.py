@@ -68,7 +68,16 @@ class ProtocolChoice:
 
 class _AnchorReadings:
     """What the static and tracking scenarios share: the anchor distances of plan positions and channel draws at
-    them (the scenario supplies ``anchors_m``, ``channel`` and ``tag_height_m``)."""
+    them, whether the readings are measured, and the floor's bounding box (the scenario supplies ``anchors_m``,
+    ``channel``, ``tag_height_m``, ``measured_rss_dbm`` and ``outline_m``)."""
+
+    @property
+    def measured(self) -> bool:
+        return self.measured_rss_dbm is not None
+
+    @property
+    def box_m(self):
+        return outline_box(self.outline_m)
 
     def distances_m(self, points_m) -> np.ndarray:
         """Anchor distances ``(..., m)`` (3-D when the anchors carry heights: the tag at ``tag_height_m``)."""
@@ -103,14 +112,6 @@ class StaticScenario(_AnchorReadings):
     measured_rss_dbm: np.ndarray | None = None
     radio_map: tuple | None = field(default=None, repr=False)
 
-    @property
-    def measured(self) -> bool:
-        return self.measured_rss_dbm is not None
-
-    @property
-    def box_m(self):
-        return outline_box(self.outline_m)
-
     def grid_m(self, spacing_m: float | None = None) -> np.ndarray:
         return grid_in_outline(self.outline_m, self.grid_spacing_m if spacing_m is None else spacing_m)
 
@@ -142,14 +143,6 @@ class TrackingScenario(_AnchorReadings):
     measured_rss_dbm: np.ndarray | None = None
     scored: np.ndarray | None = None
     fix_cov_m2: np.ndarray | None = None
-
-    @property
-    def measured(self) -> bool:
-        return self.measured_rss_dbm is not None
-
-    @property
-    def box_m(self):
-        return outline_box(self.outline_m)
 
     @property
     def scored_steps(self) -> np.ndarray:

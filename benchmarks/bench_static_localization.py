@@ -29,7 +29,7 @@ def measure(n: int = 10_000, loop_n: int | None = None, repeat: int = 3) -> list
     rng = np.random.default_rng(0)
     truth = rng.uniform([0, 0], [2.1, 7.8], (n, 2))
     model = lb.PathLossModel(-45.0, 2.1843, 1.83)
-    power = model.sample_power_dbm(lb.pairwise_distance_m(truth, anchors), rng)
+    power = model.sample_rss_dbm(lb.pairwise_distance_m(truth, anchors), rng)
     ranges = model.range_m(power)
     a_mat, b = lb.lateration_system(anchors, ranges)
     workload = f"{n:,} problems, 4 anchors (corridor of document 003)"
@@ -64,7 +64,7 @@ def measure(n: int = 10_000, loop_n: int | None = None, repeat: int = 3) -> list
     t_batch, _, ml = hx.timed(lambda: lb.rss_ml_position(anchors, power, model))
 
     def scipy_loop():
-        return np.array([least_squares(lambda q, i=i: power[i] - model.mean_power_dbm(lb.pairwise_distance_m(q, anchors)),
+        return np.array([least_squares(lambda q, i=i: power[i] - model.mean_rss_dbm(lb.pairwise_distance_m(q, anchors)),
                                        est[i], method="lm").x for i in range(loop_n)])
 
     t_loop, _, _ = hx.timed(scipy_loop)

@@ -36,7 +36,7 @@ def setting(runs: int, steps: int | None = None, seed: int = 0) -> dict:
     imu, rss = gu._imu_stream(w, False), gu._rss_stream(w, model)
     if steps is not None:
         imu = replace(imu, z=np.asarray(imu.z)[:, :steps])
-        rss = replace(rss, power_dbm=np.asarray(rss.power_dbm)[:, :steps])
+        rss = replace(rss, rss_dbm=np.asarray(rss.rss_dbm)[:, :steps])
     return dict(settings=s, model=model, x0=x0, P0=P0, imu=imu, rss=rss, anchors=w.anchors_m)
 
 
@@ -54,7 +54,7 @@ def filterpy_ukf(st: dict, runs: int, alpha: float):
     ch = rss.channel
     points = MerweScaledSigmaPoints(8, alpha=alpha, beta=2.0, kappa=0.0)
     h_imu = imu.h
-    z_imu, z_rss = np.asarray(imu.z), np.asarray(rss.power_dbm)
+    z_imu, z_rss = np.asarray(imu.z), np.asarray(rss.rss_dbm)
     p0 = np.broadcast_to(ch.ref_power_dbm, a.shape[:1])
     ple = np.broadcast_to(ch.path_loss_exp, a.shape[:1])
     T = z_imu.shape[1]

@@ -89,7 +89,7 @@ class _AnchorReadings:
     def _sample_rss_dbm(self, points_m, n_runs: int, rng: np.random.Generator) -> np.ndarray:
         """``n_runs`` independent channel draws at ``points_m``: ``(n_runs, ..., m)``."""
         d = self.distances_m(points_m)
-        return self.channel.sample_power_dbm(np.broadcast_to(d, (n_runs,) + d.shape), rng)
+        return self.channel.sample_rss_dbm(np.broadcast_to(d, (n_runs,) + d.shape), rng)
 
 
 @dataclass(frozen=True)

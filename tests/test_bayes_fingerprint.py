@@ -67,7 +67,7 @@ def test_model_fingerprints_match_path_loss_model():
     cells = np.array([[1.0, 1.0], [4.0, 3.0]])
     walls = [[[3.0, -1.0], [3.0, 9.0]]]
     fp = lb.model_fingerprints(cells, READERS, model, walls)
-    expected = model.mean_power_dbm(lb.pairwise_distance_m(cells, READERS),
+    expected = model.mean_rss_dbm(lb.pairwise_distance_m(cells, READERS),
                                     lb.wall_crossings(cells, READERS, walls))
     np.testing.assert_allclose(fp, expected)
 

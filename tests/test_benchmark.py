@@ -83,7 +83,7 @@ def test_noise_free_readings_give_the_truth(key):
         np.testing.assert_allclose(fixes[name][0], sc.points_m, atol=2e-4, err_msg=name)
     # grid ML: the cell whose mean readings are nearest (brute force over every cell), within a pitch of the truth
     cells = sc.grid_m()
-    mean = sc.channel.mean_power_dbm(sc.distances_m(cells))
+    mean = sc.channel.mean_rss_dbm(sc.distances_m(cells))
     cost = np.sum((rss[0][:, None, :] - mean[None]) ** 2, axis=-1)             # (P, C)
     chosen = np.argmin(np.linalg.norm(cells[None] - fixes["grid_ml"][0][:, None], axis=-1), axis=1)
     assert np.allclose(fixes["grid_ml"][0], cells[chosen], atol=1e-12)             # a cell of the grid

@@ -19,8 +19,8 @@ def test_fisher_information_equals_numerical_jacobian():
     model = lb.PathLossModel(-45.0, 2.1843, 3.0)
     p = np.array([0.7, 2.9])
     eps = 1e-6
-    jac = np.stack([(model.mean_power_dbm(lb.pairwise_distance_m(p + eps * e, SQUARE))
-                     - model.mean_power_dbm(lb.pairwise_distance_m(p - eps * e, SQUARE))) / (2 * eps)
+    jac = np.stack([(model.mean_rss_dbm(lb.pairwise_distance_m(p + eps * e, SQUARE))
+                     - model.mean_rss_dbm(lb.pairwise_distance_m(p - eps * e, SQUARE))) / (2 * eps)
                     for e in np.eye(2)], axis=1)
     np.testing.assert_allclose(lb.rss_fisher_information(p, SQUARE, 2.1843, 3.0), jac.T @ jac / 9.0, rtol=1e-6)
 
@@ -28,7 +28,7 @@ def test_fisher_information_equals_numerical_jacobian():
 def test_ml_attains_bound_at_high_snr():
     model = lb.PathLossModel(-45.0, 2.5, 0.5)
     p = np.array([1.3, 2.6])
-    power = model.sample_power_dbm(np.broadcast_to(lb.pairwise_distance_m(p, SQUARE), (20000, 4)),
+    power = model.sample_rss_dbm(np.broadcast_to(lb.pairwise_distance_m(p, SQUARE), (20000, 4)),
                                    np.random.default_rng(11))
     err2 = np.sum((lb.rss_ml_position(SQUARE, power, model).position_m - p) ** 2, axis=-1)
     bound = lb.rss_crlb_m(p, SQUARE, 2.5, 0.5)

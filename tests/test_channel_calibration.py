@@ -14,20 +14,20 @@ def test_mean_power_and_range_inversion():
     model = lb.PathLossModel(-45.0, 2.1843, 0.0)
     d = np.array([1.0, 2.0, 10.0])
     # 10 n log10(10) = 21.843 dB below the 1 m power
-    np.testing.assert_allclose(model.mean_power_dbm(d), [-45.0, -45.0 - 21.843 * np.log10(2), -66.843], atol=1e-12)
-    np.testing.assert_allclose(model.range_m(model.mean_power_dbm(d)), d, rtol=1e-12)
+    np.testing.assert_allclose(model.mean_rss_dbm(d), [-45.0, -45.0 - 21.843 * np.log10(2), -66.843], atol=1e-12)
+    np.testing.assert_allclose(model.range_m(model.mean_rss_dbm(d)), d, rtol=1e-12)
 
 
 def test_per_anchor_parameters_broadcast_on_last_axis():
     model = lb.PathLossModel(np.array([-40.0, -50.0]), np.array([2.0, 3.0]))
-    p = model.mean_power_dbm(np.full((3, 2), 10.0))
+    p = model.mean_rss_dbm(np.full((3, 2), 10.0))
     np.testing.assert_allclose(p, np.tile([-60.0, -80.0], (3, 1)))
 
 
 def test_range_bias_factor_matches_lognormal_mean():
     model = lb.PathLossModel(-52.0, 1.8, 6.0)
     rng = np.random.default_rng(1)
-    d_hat = model.range_m(model.sample_power_dbm(np.full(400_000, 3.0), rng))
+    d_hat = model.range_m(model.sample_rss_dbm(np.full(400_000, 3.0), rng))
     ratio = d_hat / 3.0
     se = ratio.std() / np.sqrt(ratio.size)
     assert abs(ratio.mean() - model.range_bias_factor()) < 4 * se
@@ -186,8 +186,8 @@ def test_fix_error_covariance_is_numpy_cov_of_the_errors_per_run():
 
 
 def test_design_rows_times_the_parameters_are_the_channels_mean():
-    """The calibration's regressor is the law's: [1, -10 log10(d/d0)] . (P_0, n) = PathLossModel.mean_power_dbm(d)."""
+    """The calibration's regressor is the law's: [1, -10 log10(d/d0)] . (P_0, n) = PathLossModel.mean_rss_dbm(d)."""
     d = np.array([0.5, 1.0, 3.0, 12.5])
     model = lb.PathLossModel(-41.5, 2.7, ref_distance_m=0.5)
     rows = path_loss_design_matrix(d, ref_distance_m=0.5)
-    np.testing.assert_allclose(rows @ [-41.5, 2.7], model.mean_power_dbm(d), rtol=1e-14)
+    np.testing.assert_allclose(rows @ [-41.5, 2.7], model.mean_rss_dbm(d), rtol=1e-14)

@@ -105,7 +105,7 @@ def test_nis_of_the_rss_ekf_numpy_and_compiled_agree_with_a_direct_computation(m
     ch = lb.PathLossModel(-40.0, 2.2, 2.0)
     model = lb.constant_velocity(1.0, 0.05)
     pos = 5 + np.cumsum(0.1 * rng.standard_normal((30, 12, 2)), axis=1)
-    z = ch.sample_power_dbm(np.linalg.norm(pos[:, :, None] - ANCHORS, axis=-1), rng)
+    z = ch.sample_rss_dbm(np.linalg.norm(pos[:, :, None] - ANCHORS, axis=-1), rng)
     z[rng.random(z.shape) < 0.2] = np.nan
     x0, P0 = model.state_from(np.array([5.0, 5.0])), np.eye(4)
     monkeypatch.setattr(K, "_NUMBA_MIN_WORK", 0)
@@ -124,7 +124,7 @@ def test_nis_of_the_rss_ekf_numpy_and_compiled_agree_with_a_direct_computation(m
                 d = np.linalg.norm(x[b, :2] - ANCHORS[heard], axis=-1)
                 Hb = np.zeros((heard.sum(), 4))
                 Hb[:, :2] = -(10 * 2.2 / np.log(10)) * (x[b, :2] - ANCHORS[heard]) / d[:, None] ** 2
-                nu = z[b, k, heard] - ch.mean_power_dbm(d)
+                nu = z[b, k, heard] - ch.mean_rss_dbm(d)
                 S = Hb @ P[b] @ Hb.T + 4.0 * np.eye(heard.sum())
                 expected = nu @ np.linalg.solve(S, nu)
             else:                                           # scalar updates, each at the state updated so far
@@ -133,7 +133,7 @@ def test_nis_of_the_rss_ekf_numpy_and_compiled_agree_with_a_direct_computation(m
                     d = np.linalg.norm(xb[:2] - ANCHORS[j])
                     h = np.zeros(4)
                     h[:2] = -(10 * 2.2 / np.log(10)) * (xb[:2] - ANCHORS[j]) / d**2
-                    nu, s = z[b, k, j] - ch.mean_power_dbm(d), h @ Pb @ h + 4.0
+                    nu, s = z[b, k, j] - ch.mean_rss_dbm(d), h @ Pb @ h + 4.0
                     expected += nu**2 / s
                     gain = Pb @ h / s
                     xb, Pb = xb + gain * nu, Pb - np.outer(gain, gain) * s
@@ -289,7 +289,7 @@ def _ukf_scenario_1(runs=6, steps=60, seed=0):
     rng = np.random.default_rng(seed)
     ch = lb.PathLossModel(-40.0, 2.0, 1e-3)
     pos = 5 + np.cumsum(0.05 * rng.standard_normal((runs, steps, 2)), axis=1)
-    z = ch.sample_power_dbm(np.linalg.norm(pos[:, :, None] - ANCHORS, axis=-1), rng)
+    z = ch.sample_rss_dbm(np.linalg.norm(pos[:, :, None] - ANCHORS, axis=-1), rng)
     return pos, lb.RssMeasurement(z, ANCHORS, ch, [0, 1]), np.eye(2), 1e4 * np.eye(2)
 
 
@@ -320,7 +320,7 @@ def test_ukf_at_the_default_alpha_with_missing_readings_is_flagged_once_it_lost_
     ch = lb.PathLossModel(-40.0, 2.0, 2.0)
     runs, steps = 8, 80
     pos = 5 + np.cumsum(0.02 * rng.standard_normal((runs, steps, 2)), axis=1)
-    z = ch.sample_power_dbm(np.linalg.norm(pos[:, :, None] - ANCHORS, axis=-1), rng)
+    z = ch.sample_rss_dbm(np.linalg.norm(pos[:, :, None] - ANCHORS, axis=-1), rng)
     z[rng.random(z.shape) < 0.2] = np.nan
     x0 = np.zeros((runs, 4))
     x0[:, :2] = 5.0
@@ -342,7 +342,7 @@ def test_numpy_and_compiled_ekf_agree_on_the_flags(monkeypatch):
     model = lb.constant_velocity(1.0, 0.05)
     runs, steps = 70, 60
     pos = 5 + np.cumsum(0.05 * rng.standard_normal((runs, steps, 2)), axis=1)
-    mean = ch.mean_power_dbm(np.linalg.norm(pos[:, :, None] - ANCHORS, axis=-1))
+    mean = ch.mean_rss_dbm(np.linalg.norm(pos[:, :, None] - ANCHORS, axis=-1))
     noisy = np.arange(runs) % 2 == 0
     z = mean + np.where(noisy, 30.0, 1.0)[:, None, None] * rng.standard_normal(mean.shape)
     x0, P0 = model.state_from(np.array([5.0, 5.0])), np.eye(4)

@@ -20,7 +20,7 @@ def _scenario(seed=0, runs=3, steps=240):
     for k in range(1, steps):
         truth[:, k] = truth[:, k - 1] @ F.T + rng.multivariate_normal(np.zeros(6), Q, runs)
     channel = lb.PathLossModel(dg.REF_POWER_DBM, dg.PATH_LOSS_EXP, dg.SIGMA_RSS_DB)
-    power = channel.sample_power_dbm(lb.pairwise_distance_m(truth[..., model.position_index], ANCHORS), rng)
+    power = channel.sample_rss_dbm(lb.pairwise_distance_m(truth[..., model.position_index], ANCHORS), rng)
     power[:, np.arange(steps) % 10 != 0] = np.nan
     acc = truth[..., model.acceleration_index] + 0.015 * rng.standard_normal((runs, steps, 2))
     x0 = truth[:, 0] + rng.normal(0, 1, (runs, 6)) * [1, 0.08, 0.015, 1, 0.08, 0.015]
@@ -162,12 +162,12 @@ def test_mle_reaches_the_grid_optimum():
     rng = np.random.default_rng(11)
     channel = lb.PathLossModel(-48.0, 3.0, 6.0)
     truth = rng.uniform([0, 0], [7.6, 9.2], (40, 2))
-    power = channel.sample_power_dbm(lb.pairwise_distance_m(truth, ANCHORS), rng)
+    power = channel.sample_rss_dbm(lb.pairwise_distance_m(truth, ANCHORS), rng)
     est = dg.mle_positions(power, channel)
     xs, ys = np.arange(-3, 10.6, 0.05), np.arange(-3, 12.2, 0.05)
     fine = np.stack(np.meshgrid(xs, ys, indexing="ij"), -1).reshape(-1, 2)
     best = lb.grid_ml_position(ANCHORS, power, channel, fine)
-    cost = np.sum((power - channel.mean_power_dbm(lb.pairwise_distance_m(est.position_m, ANCHORS))) ** 2, -1)
+    cost = np.sum((power - channel.mean_rss_dbm(lb.pairwise_distance_m(est.position_m, ANCHORS))) ** 2, -1)
     assert np.all(cost <= best.cost + 1e-9) and np.all(est.converged)
 
 

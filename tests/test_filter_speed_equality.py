@@ -127,7 +127,7 @@ def upath():
 def test_ukf_on_the_u_path_equals_filterpy(upath, alpha, runs, tol):
     ours = bu.locbook_ukf(upath, alpha)
     ref_x, ref_P = bu.filterpy_ukf(upath, runs, alpha)
-    assert np.isnan(np.asarray(upath["rss"].power_dbm)[:runs]).any()        # some steps with an anchor not heard
+    assert np.isnan(np.asarray(upath["rss"].rss_dbm)[:runs]).any()        # some steps with an anchor not heard
     np.testing.assert_allclose(ours.x[:runs], ref_x, rtol=0, atol=tol)
     np.testing.assert_allclose(ours.P[:runs], ref_P, rtol=0, atol=tol)
     assert ours.floored_updates == 0
@@ -159,7 +159,7 @@ def _case(kind, rng):
     anchors = np.array([[0.0, 0.0], [12.0, 0.0], [12.0, 9.0], [0.0, 9.0], [6.0, 4.5]])
     truth = np.cumsum(rng.normal(0, 0.3, (B, T, 2)), axis=1) + [6.0, 4.5]
     ch = lb.PathLossModel(-40.0, 2.5, 3.0)
-    power = ch.sample_power_dbm(lb.pairwise_distance_m(truth, anchors), rng)
+    power = ch.sample_rss_dbm(lb.pairwise_distance_m(truth, anchors), rng)
     power[rng.random(power.shape) < 0.2] = np.nan
     x0 = np.concatenate([truth[:, 0] + rng.normal(0, 0.5, (B, 2)), np.zeros((B, 2))], axis=1)
     P0 = np.diag([1.0, 1.0, 0.3, 0.3])

@@ -213,7 +213,7 @@ def rss_problems(draw):
     T = draw(st.sampled_from([0, 1, 4]))
     rng = np.random.default_rng(draw(st.integers(0, 50)))
     pos = 5 + np.cumsum(0.3 * rng.standard_normal(batch + (T, 2)), axis=-2)
-    z = CHANNEL.sample_power_dbm(np.linalg.norm(pos[..., None, :] - ANCHORS, axis=-1), rng)
+    z = CHANNEL.sample_rss_dbm(np.linalg.norm(pos[..., None, :] - ANCHORS, axis=-1), rng)
     if z.size:
         z.reshape(-1)[draw(st.integers(0, z.size - 1))] = draw(st.sampled_from(SPECIAL))
     mode = draw(st.sampled_from(["parallel", "serial"]))
@@ -237,7 +237,7 @@ def test_fuzz_rss_streams(problem, path, unscented):
         with ekf_path(path):
             return lb.extended_kalman_filter(F0, Q0, x0, P00, [meas])
 
-    status, res = outcome(lambda: call(given_z), ("power_dbm", "RssMeasurement"))
+    status, res = outcome(lambda: call(given_z), ("rss_dbm", "RssMeasurement"))
     if status == "error":
         return
     finite_input = not np.isinf(z).any()

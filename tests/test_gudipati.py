@@ -26,7 +26,7 @@ def test_table_5_2_and_the_anchor_layout():
     assert gu.ROOM_M == (30.0, 10.0)
     ch = gu.channel_model(("13",))
     # Eq. (3.7) at 10 m for anchor 13: S - 10 C
-    assert ch.mean_power_dbm(np.array([10.0]))[0] == pytest.approx(gu.REF_POWER_DBM[1] - 10 * gu.PATH_LOSS_EXP[1])
+    assert ch.mean_rss_dbm(np.array([10.0]))[0] == pytest.approx(gu.REF_POWER_DBM[1] - 10 * gu.PATH_LOSS_EXP[1])
     assert len(gu.calibration_distances_m("span")) == 20 and len(gu.calibration_distances_m("sixty")) == 60
 
 
@@ -49,7 +49,7 @@ def test_noise_free_rss_only_error_is_the_register_quantisation_only():
     s = _quiet(gu.WalkSettings())
     w = gu.simulate_walk("linear", 6, s, 2, np.random.default_rng(0))
     err = gu.walk_errors(w, gu.track(w, "rss_only")).mean_m
-    w_fine = replace(w, rss_dbm=gu.channel_model(w.anchor_ids).mean_power_dbm(
+    w_fine = replace(w, rss_dbm=gu.channel_model(w.anchor_ids).mean_rss_dbm(
         lb.pairwise_distance_m(w.truth.position_m, w.anchors_m))[None].repeat(2, 0))
     exact = gu.walk_errors(w_fine, gu.track(w_fine, "rss_only")).per_point_m
     # averaging dB over the centred window costs little inside; the end points' windows are one-sided
@@ -143,7 +143,7 @@ def test_printed_sign_stream_jacobian_and_the_ins_drift_covariance():
     x[:, :2] += [10, 4]
     num = np.stack([(m.h(x + 1e-6 * e) - m.h(x - 1e-6 * e)) / 2e-6 for e in np.eye(8)], -1)
     np.testing.assert_allclose(m.jacobian(x), num, atol=1e-6)
-    np.testing.assert_allclose(m.h(x), -gu._rss_stream(w, model).channel.mean_power_dbm(
+    np.testing.assert_allclose(m.h(x), -gu._rss_stream(w, model).channel.mean_rss_dbm(
         np.linalg.norm(x[:, None, :2] - w.anchors_m, axis=-1)), atol=1e-12)
     # the closed-form drift variance against the dead-reckoning errors of 300 walks (per axis, pooled)
     e = gu.inertial_only(w)[:, w.report_steps] - w.truth.position_m[w.report_steps]

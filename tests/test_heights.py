@@ -55,13 +55,13 @@ def test_anchors_at_the_tag_height_reduce_to_the_plan_problem():
 def test_rss_ml_with_height_matches_an_independent_scipy_solve():
     rng = np.random.default_rng(2)
     truth = rng.uniform([0.5, 0.5], [8.5, 6.5], (25, 2))
-    power = MODEL.mean_power_dbm(ranges_3d(truth)) + rng.normal(0, 3.0, (25, 6))
+    power = MODEL.mean_rss_dbm(ranges_3d(truth)) + rng.normal(0, 3.0, (25, 6))
     res = rss_ml_position(ANCHORS, power, MODEL, tag_height_m=H)
     assert res.converged.all()
     for k in range(25):
         def resid(p, k=k):
             d = np.linalg.norm(np.r_[p, H] - ANCHORS, axis=-1)
-            return power[k] - MODEL.mean_power_dbm(d)
+            return power[k] - MODEL.mean_rss_dbm(d)
         ref = least_squares(resid, res.position_m[k] + 0.3, xtol=1e-14, ftol=1e-14, gtol=1e-14)
         if np.sum(ref.fun**2) <= np.sum(resid(res.position_m[k])**2) + 1e-9:   # same basin: same minimum
             np.testing.assert_allclose(res.position_m[k], ref.x, atol=1e-6)
@@ -104,7 +104,7 @@ def test_ekf_with_known_height_equals_a_3d_state_with_a_frozen_height():
     rng = np.random.default_rng(4)
     steps = 40
     truth = np.cumsum(rng.normal(0, 0.1, (steps, 2)), axis=0) + [4.0, 3.0]
-    power = MODEL.mean_power_dbm(ranges_3d(truth)) + rng.normal(0, 3.0, (steps, 6))
+    power = MODEL.mean_rss_dbm(ranges_3d(truth)) + rng.normal(0, 3.0, (steps, 6))
     power[5, [0, 3]] = np.nan
     dt = 1 / 3
     for mode in ("parallel", "serial"):

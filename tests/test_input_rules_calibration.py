@@ -100,16 +100,16 @@ def test_a_solver_that_stops_early_is_reported_not_raised(monkeypatch, how):
 
 
 @pytest.mark.parametrize("call, message", [
-    (lambda: lb.fit_path_loss(np.ones(5), np.ones(4)), r"distance_m \(5,\) must have the shape of power_dbm"),
+    (lambda: lb.fit_path_loss(np.ones(5), np.ones(4)), r"distance_m \(5,\) must have the shape of rss_dbm"),
     (lambda: lb.fit_path_loss([1.0, 2.0, np.nan], [1.0, 2.0, 3.0]), "distance_m must be finite"),
-    (lambda: lb.fit_path_loss([1.0, 2.0, 3.0], [1.0, np.inf, 3.0]), "power_dbm must be finite"),
+    (lambda: lb.fit_path_loss([1.0, 2.0, 3.0], [1.0, np.inf, 3.0]), "rss_dbm must be finite"),
     (lambda: lb.fit_path_loss([1.0, 2.0], [1.0, 2.0], solver="magic"), "solver must be one of"),
     (lambda: lb.fit_path_loss([1.0, 2.0], [1.0, 2.0], path_loss_exp_bounds=(3.0, 1.0)), "lower <= upper"),
     (lambda: lb.fit_path_loss([1.0, 2.0], [1.0, 2.0], loss="huber", huber_delta_db=0.0), "huber_delta_db must be > 0"),
     (lambda: lb.PathLossModel(ref_power_dbm=np.nan, path_loss_exp=2.0), "ref_power_dbm must be finite"),
     (lambda: lb.PathLossModel(-40.0, path_loss_exp=[2.0, np.nan]), "path_loss_exp must be finite"),
     (lambda: lb.PathLossModel(-40.0, 2.0, sigma_db=float("inf")), "sigma_db must be finite"),
-    (lambda: lb.PathLossModel(-40.0, 2.0).mean_power_dbm([1.0, np.nan]), "distance_m must be finite"),
+    (lambda: lb.PathLossModel(-40.0, 2.0).mean_rss_dbm([1.0, np.nan]), "distance_m must be finite"),
     (lambda: lb.quantize_db([1.0], step_db=float("nan")), "step_db must be finite"),
     (lambda: lb.pairwise_distance_m(np.zeros((2, 3)), np.zeros((4, 2))), "points_m have dimension 3"),
     (lambda: lb.smooth_rssi(np.zeros(3), np.zeros((4, 2)), np.zeros((4, 2))), r"ref_rss_dbm must have shape"),
@@ -152,12 +152,12 @@ def test_ranging_needs_a_positive_exponent(exponent):
         model.range_bias_factor()
     # the forward model has no division: a zero exponent is a flat channel, P = P0
     if np.ndim(exponent) == 0 and exponent == 0.0:
-        np.testing.assert_array_equal(model.mean_power_dbm([2.0, 7.0]), [-45.0, -45.0])
+        np.testing.assert_array_equal(model.mean_rss_dbm([2.0, 7.0]), [-45.0, -45.0])
 
 
 def test_wall_counts_are_checked():
     with pytest.raises(ValueError, match="n_walls must be non-negative"):
-        lb.PathLossModel(-45.0, 2.0).mean_power_dbm([2.0], n_walls=-1)
+        lb.PathLossModel(-45.0, 2.0).mean_rss_dbm([2.0], n_walls=-1)
     with pytest.raises(ValueError, match="n_walls must be finite"):
         lb.PathLossModel(-45.0, 2.0, wall_attenuation_db=3.0).range_m([-60.0], n_walls=np.nan)
 
@@ -317,16 +317,16 @@ def test_any_missing_mask_fits_the_heard_samples(heard):
 
 
 @settings(max_examples=40, deadline=None, derandomize=True)
-@given(st.sampled_from(["distance_m", "power_dbm"]), st.integers(0, 2), st.integers(1, 4))
+@given(st.sampled_from(["distance_m", "rss_dbm"]), st.integers(0, 2), st.integers(1, 4))
 def test_wrong_shapes_name_the_argument(which, axis, size):
     good = np.ones((2, 3, 5))
     shape = list(good.shape)
     shape[axis] = shape[axis] + size
     bad = np.ones(shape)
-    args = {"distance_m": good, "power_dbm": good} | {which: bad}
-    got = re.escape(f"got {args['distance_m'].shape} and {args['power_dbm'].shape}")
-    with pytest.raises(ValueError, match=r"distance_m and power_dbm must both have shape .*" + got):
-        lb.calibrate_path_loss(args["distance_m"], args["power_dbm"], mode="pooled")
+    args = {"distance_m": good, "rss_dbm": good} | {which: bad}
+    got = re.escape(f"got {args['distance_m'].shape} and {args['rss_dbm'].shape}")
+    with pytest.raises(ValueError, match=r"distance_m and rss_dbm must both have shape .*" + got):
+        lb.calibrate_path_loss(args["distance_m"], args["rss_dbm"], mode="pooled")
 
 
 def test_ozkaya_setting_streams_are_keyed_by_values_not_their_spelling():
@@ -389,7 +389,7 @@ def test_a_design_that_cannot_identify_the_exponent_still_raises():
     """Missing readings are data (a status); the distances are the design: all equal, no batch can use them."""
     with pytest.raises(lb.DegenerateGeometryError, match="distinct distances"):
         lb.fit_path_loss(np.full((2, 4), 3.0), np.full((2, 4), -60.0))
-    with pytest.raises(lb.DegenerateGeometryError, match=r"distance_m and power_dbm must hold at least two"):
+    with pytest.raises(lb.DegenerateGeometryError, match=r"distance_m and rss_dbm must hold at least two"):
         lb.fit_path_loss(np.ones((3, 1)), np.ones((3, 1)))
 
 

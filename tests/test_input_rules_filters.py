@@ -222,7 +222,7 @@ CHANNEL = lb.PathLossModel(-40.0, 2.0, 2.0)
 def _rss(T=6):
     rng = np.random.default_rng(4)
     pos = 5 + np.cumsum(0.2 * rng.standard_normal((T, 2)), axis=0)
-    return CHANNEL.sample_power_dbm(np.linalg.norm(pos[:, None] - ANCHORS, axis=-1), rng)
+    return CHANNEL.sample_rss_dbm(np.linalg.norm(pos[:, None] - ANCHORS, axis=-1), rng)
 
 
 def _every_filter(Q=MODEL.Q, R_=R, P=P0):
@@ -394,7 +394,7 @@ def _overflowing_filters():
     z[1, 2:] = 1.5e308
     uneven = z.copy()
     uneven[0, 1, 1] = np.nan                             # a missing pattern that differs between runs: batched paths
-    power = CHANNEL.sample_power_dbm(np.linalg.norm(5 + rng.normal(size=(3, 8, 1, 2)) - ANCHORS, axis=-1), rng)
+    power = CHANNEL.sample_rss_dbm(np.linalg.norm(5 + rng.normal(size=(3, 8, 1, 2)) - ANCHORS, axis=-1), rng)
     power[1, 2:] = 1.5e308
     x0 = MODEL.state_from(np.array([5.0, 5.0]))
     yield "kalman_filter (one covariance)", lambda: lb.kalman_filter(MODEL.F, MODEL.Q, x0, P0, lb.LinearMeasurement(z, H, R))

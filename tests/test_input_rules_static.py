@@ -25,7 +25,7 @@ BOX = ([-1.0, -1.0], [11.0, 13.0])
 def _batch(n=40, seed=3):
     rng = np.random.default_rng(seed)
     truth = rng.uniform([0, 0], [10, 12], (n, 2))
-    power = MODEL.sample_power_dbm(lb.pairwise_distance_m(truth, ANCHORS), rng)
+    power = MODEL.sample_rss_dbm(lb.pairwise_distance_m(truth, ANCHORS), rng)
     return truth, power
 
 
@@ -63,7 +63,7 @@ def test_missing_anchor_equals_the_heard_subset_and_leaves_the_batch_alone(name)
 
 def test_grid_ml_ignores_a_missing_anchor_instead_of_returning_cell_zero():
     truth = np.array([[7.0, 9.0]])
-    power = MODEL.mean_power_dbm(lb.pairwise_distance_m(truth, ANCHORS))
+    power = MODEL.mean_rss_dbm(lb.pairwise_distance_m(truth, ANCHORS))
     power[0, 1] = np.nan
     grid = np.stack(np.meshgrid(np.arange(0, 10.5, 0.5), np.arange(0, 12.5, 0.5)), -1).reshape(-1, 2)
     res = lb.grid_ml_position(ANCHORS, power, MODEL, grid)
@@ -175,7 +175,7 @@ def test_bad_input_names_the_argument(call, message):
 def test_target_on_an_anchor_is_found():
     d = lb.pairwise_distance_m(ANCHORS[2], ANCHORS)          # zero distance to anchor 2
     np.testing.assert_allclose(lb.lateration_ls(ANCHORS, d).position_m, ANCHORS[2], atol=1e-9)
-    power = MODEL.mean_power_dbm(np.maximum(d, 1e-3))
+    power = MODEL.mean_rss_dbm(np.maximum(d, 1e-3))
     np.testing.assert_allclose(lb.rss_ml_position(ANCHORS, power, MODEL).position_m, ANCHORS[2], atol=1e-3)
 
 
@@ -216,7 +216,7 @@ def test_knn_compares_over_the_heard_readers():
     np.testing.assert_allclose(res[keep], full[keep], rtol=1e-12)   # einsum may sum another batch size otherwise
     np.testing.assert_allclose(res[1], lb.knn_position(query[1, [0, 1, 3]], fp[:, [0, 1, 3]], cells, k=4), rtol=1e-12)
     assert np.isnan(res[4]).all()
-    np.testing.assert_allclose(lb.knn_position(holed[4], fp, cells, k=4, min_readers=2),
+    np.testing.assert_allclose(lb.knn_position(holed[4], fp, cells, k=4, min_anchors=2),
                                lb.knn_position(query[4, [2, 3]], fp[:, [2, 3]], cells, k=4), rtol=1e-12)
     with pytest.raises(ValueError, match="fingerprints_dbm must be finite"):
         lb.knn_position(query, np.where(fp > -50, np.nan, fp), cells, k=4)
@@ -327,7 +327,7 @@ def test_target_on_an_anchor_with_another_anchor_missing(name):
     d = lb.pairwise_distance_m(ANCHORS[2], ANCHORS)[None]
     for holed in (d, _with_overflow(d, 0, 4, np.nan)):
         if name == "grid":    # noiseless powers at the grid's own distance floor (1e-6 m) for the anchor
-            power = MODEL.mean_power_dbm(np.maximum(np.nan_to_num(holed, nan=1.0), 1e-6))
+            power = MODEL.mean_rss_dbm(np.maximum(np.nan_to_num(holed, nan=1.0), 1e-6))
             power[np.isnan(holed)] = np.nan
             grid = np.stack(np.meshgrid(np.arange(0, 10.5, 0.5), np.arange(0, 12.5, 0.5)), -1).reshape(-1, 2)
             res = lb.grid_ml_position(ANCHORS, power, MODEL, grid)
@@ -341,7 +341,7 @@ def test_target_on_an_anchor_with_another_anchor_missing(name):
 
 # -- k-NN and the maps -------------------------------------------------------------------------------------------
 def test_knn_minimum_is_capped_at_the_readers_of_the_map():
-    """With a two-reader map a query that heard both readers is always compared (default min_readers 3), in a batch
+    """With a two-reader map a query that heard both readers is always compared (default min_anchors 3), in a batch
     with missing readings too; one reader heard is too few."""
     fp = np.array([[-50.0, -60.0], [-52.0, -60.0], [-50.0, -62.0]])
     cells = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
@@ -381,8 +381,8 @@ def test_crlb_in_3d_is_the_trace_of_the_inverse_numerical_fisher_information():
     model = lb.PathLossModel(-45.0, 2.3, 4.0)
     p = np.array([2.1, 1.7, 0.9])
     eps = 1e-6
-    jac = np.stack([(model.mean_power_dbm(lb.pairwise_distance_m(p + eps * e, anchors))
-                     - model.mean_power_dbm(lb.pairwise_distance_m(p - eps * e, anchors))) / (2 * eps)
+    jac = np.stack([(model.mean_rss_dbm(lb.pairwise_distance_m(p + eps * e, anchors))
+                     - model.mean_rss_dbm(lb.pairwise_distance_m(p - eps * e, anchors))) / (2 * eps)
                     for e in np.eye(3)], axis=1)
     expected = np.sqrt(np.trace(np.linalg.inv(jac.T @ jac / 16.0)))
     assert lb.rss_crlb_m(p, anchors, 2.3, 4.0) == pytest.approx(expected, rel=1e-6)
@@ -411,7 +411,7 @@ COLLINEAR3 = np.array([[0.0, 0.0], [5.0, 0.0], [10.0, 0.0], [5.0, 8.0], [0.0, 8.
 @given(mask=arrays(bool, (10, 5)), name=st.sampled_from(["ls", "wls", "grid"]))
 def test_property_collinear_heard_subsets_are_degenerate(mask, name):
     truth = np.random.default_rng(2).uniform([1, 1], [9, 7], (10, 2))
-    power = MODEL.mean_power_dbm(lb.pairwise_distance_m(truth, COLLINEAR3))
+    power = MODEL.mean_rss_dbm(lb.pairwise_distance_m(truth, COLLINEAR3))
     res = ESTIMATORS[name](COLLINEAR3, np.where(mask, np.nan, power))
     for i in range(10):
         heard = np.flatnonzero(~mask[i])
@@ -474,7 +474,7 @@ def test_physically_impossible_powers_get_their_own_status(name, value):
     est = {"ml": lambda p: lb.rss_ml_position(SQUARE, p, SQUARE_MODEL),
            "grid": lambda p: lb.grid_ml_position(SQUARE, p, SQUARE_MODEL, grid)}[name]
     truth = np.array([[2.0, 3.0], [7.0, 6.0], [4.0, 8.0]])
-    power = SQUARE_MODEL.mean_power_dbm(lb.pairwise_distance_m(truth, SQUARE))
+    power = SQUARE_MODEL.mean_rss_dbm(lb.pairwise_distance_m(truth, SQUARE))
     bad = power.copy()
     bad[1] = value                                   # every reading of problem 1
     bad[2, 3] = value                                # one reading of problem 2
@@ -496,7 +496,7 @@ def test_an_infinite_cost_is_never_converged():
     """A start at 1e300 m: every distance squares to infinity, the cost is infinite and the step NaN; before, the
     damping grew to its cap and the problem was declared converged at the start with cost inf."""
     truth = np.array([[2.0, 3.0], [7.0, 6.0]])
-    power = SQUARE_MODEL.mean_power_dbm(lb.pairwise_distance_m(truth, SQUARE))
+    power = SQUARE_MODEL.mean_rss_dbm(lb.pairwise_distance_m(truth, SQUARE))
     with np.errstate(over="ignore", invalid="ignore"):
         res = lb.rss_ml_position(SQUARE, power, SQUARE_MODEL, initial_m=[[np.nan, np.nan], [1e300, 1e300]])
     assert res.status.tolist() == ["ok", "solver_failed"] and res.converged.tolist() == [True, False]
@@ -531,7 +531,7 @@ def test_nearly_collinear_heard_anchors_fail_their_problem_alone():
     holed[1, 3] = np.nan
     for res in (lb.lateration_ls(anchors, holed), lb.lateration_wls(anchors, holed, [1.0, 1.0, 1.0]),
                 lb.lateration_box_ls(anchors, holed, -1.0, 11.0),
-                lb.rss_ml_position(anchors, np.where(np.isnan(holed), np.nan, SQUARE_MODEL.mean_power_dbm(d)),
+                lb.rss_ml_position(anchors, np.where(np.isnan(holed), np.nan, SQUARE_MODEL.mean_rss_dbm(d)),
                                    SQUARE_MODEL)):
         assert res.status.tolist() == ["ok", "degenerate_geometry"] and np.isnan(res.position_m[1]).all()
         np.testing.assert_allclose(res.position_m[0], truth[0], atol=1e-6)
@@ -626,7 +626,7 @@ def test_model_consistent_readings_are_never_a_poor_fit(name, sigma_db):
     model = lb.PathLossModel(-40.0, 2.5, sigma_db)
     rng = np.random.default_rng(26)
     truth = rng.uniform(0.5, 9.5, (2000, 2))
-    power = model.sample_power_dbm(lb.pairwise_distance_m(truth, SQUARE), rng)
+    power = model.sample_rss_dbm(lb.pairwise_distance_m(truth, SQUARE), rng)
     res = ML_ESTIMATORS[name](SQUARE, power, model)
     assert "poor_fit" not in set(res.status.tolist())
     assert res.converged.all()
@@ -641,7 +641,7 @@ def test_a_poor_fit_is_flagged_alone_in_its_batch(name):
     shadowing model) flags nothing."""
     rng = np.random.default_rng(5)
     truth = rng.uniform(1, 9, (8, 2))
-    power = SQUARE_MODEL.sample_power_dbm(lb.pairwise_distance_m(truth, SQUARE), rng)
+    power = SQUARE_MODEL.sample_rss_dbm(lb.pairwise_distance_m(truth, SQUARE), rng)
     power[3] = -30.0
     power[5, 2] = np.nan
     res = ML_ESTIMATORS[name](SQUARE, power, SQUARE_MODEL)
@@ -676,9 +676,9 @@ def test_implausible_reading_states_its_physical_assumption():
     claim that no real reading is refused."""
     model = lb.PathLossModel(-40.0, 2.0)                      # sigma_db = 0, min_distance_m = 0 (the defaults)
     truth = np.array([5e-4, 0.0])                             # 0.5 mm from anchor 0
-    power = model.mean_power_dbm(lb.pairwise_distance_m(truth, SQUARE))
+    power = model.mean_rss_dbm(lb.pairwise_distance_m(truth, SQUARE))
     assert lb.rss_ml_position(SQUARE, power, model).status == "implausible_reading"
-    far = model.mean_power_dbm(lb.pairwise_distance_m(np.array([2e-3, 0.0]), SQUARE))   # 2 mm: taken
+    far = model.mean_rss_dbm(lb.pairwise_distance_m(np.array([2e-3, 0.0]), SQUARE))   # 2 mm: taken
     assert lb.rss_ml_position(SQUARE, far, model).status != "implausible_reading"
     import inspect
     source = inspect.getsource(localization)

@@ -57,14 +57,14 @@ def ml_problems():
     """50 noisy RSS problems and their global minima found without locbook: a brute-force grid of the cost over
     the corridor and 3 m around it, then scipy's least_squares from the true position and the 3 best grid points."""
     points = np.random.default_rng(2).uniform([0, 0], [2.1, 7.8], (50, 2))
-    power = ML_MODEL.sample_power_dbm(lb.pairwise_distance_m(points, ANCHORS), np.random.default_rng(4))
+    power = ML_MODEL.sample_rss_dbm(lb.pairwise_distance_m(points, ANCHORS), np.random.default_rng(4))
     xs, ys = np.meshgrid(np.arange(-2.95, 5.1, 0.3), np.arange(-2.95, 10.8, 0.3))    # never on an anchor
     grid = np.stack([xs.ravel(), ys.ravel()], -1)
-    grid_mean = ML_MODEL.mean_power_dbm(lb.pairwise_distance_m(grid, ANCHORS))
+    grid_mean = ML_MODEL.mean_rss_dbm(lb.pairwise_distance_m(grid, ANCHORS))
     best_cells = np.argsort(np.sum((power[:, None, :] - grid_mean[None]) ** 2, -1), axis=1)[:, :3]
     best_x, best_cost = np.empty((50, 2)), np.empty(50)
     for i in range(50):
-        resid = lambda p: power[i] - ML_MODEL.mean_power_dbm(lb.pairwise_distance_m(p, ANCHORS))
+        resid = lambda p: power[i] - ML_MODEL.mean_rss_dbm(lb.pairwise_distance_m(p, ANCHORS))
         runs = [least_squares(resid, start, xtol=1e-12, ftol=1e-12, gtol=1e-12)
                 for start in [points[i], *grid[best_cells[i]]]]
         best = min(runs, key=lambda r: r.cost)
@@ -75,20 +75,20 @@ def ml_problems():
 def test_rss_ml_noiseless_and_against_scipy(points, ml_problems):
     model = ML_MODEL
     d = lb.pairwise_distance_m(points, ANCHORS)
-    exact = lb.rss_ml_position(ANCHORS, model.mean_power_dbm(d), model)
+    exact = lb.rss_ml_position(ANCHORS, model.mean_rss_dbm(d), model)
     np.testing.assert_allclose(exact.position_m, points, atol=1e-6)
-    power = model.sample_power_dbm(d, np.random.default_rng(4))
+    power = model.sample_rss_dbm(d, np.random.default_rng(4))
     np.testing.assert_array_equal(power, ml_problems["power"])
     ml = lb.rss_ml_position(ANCHORS, power, model)
     assert ml.converged.all()
     for i in range(0, 50, 5):
-        ref = least_squares(lambda p: power[i] - model.mean_power_dbm(lb.pairwise_distance_m(p, ANCHORS)),
+        ref = least_squares(lambda p: power[i] - model.mean_rss_dbm(lb.pairwise_distance_m(p, ANCHORS)),
                             ml.position_m[i] + 0.05, xtol=1e-12, ftol=1e-12)
         # same local minimum, and scipy cannot improve on locbook's cost
         np.testing.assert_allclose(ml.position_m[i], ref.x, atol=1e-4)
         assert ml.cost[i] <= 2 * ref.cost + 1e-9
     # locbook's cost is the sum of squared residuals at its position, recomputed here
-    resid = power - model.mean_power_dbm(lb.pairwise_distance_m(ml.position_m[:, None, :], ANCHORS)[:, 0])
+    resid = power - model.mean_rss_dbm(lb.pairwise_distance_m(ml.position_m[:, None, :], ANCHORS)[:, 0])
     np.testing.assert_allclose(ml.cost, np.sum(resid**2, -1), rtol=1e-9)
     # started in the global basin (the best brute-force grid point, not locbook's answer), locbook's iteration
     # reaches the global minimum that scipy found from independent starts, for every problem
@@ -107,7 +107,7 @@ def test_rss_ml_converged_means_a_stationary_point_of_the_cost(ml_problems):
     power = ml_problems["power"]
     ml = lb.rss_ml_position(ANCHORS, power, ML_MODEL)
     assert ml.converged.all()
-    cost = lambda p: np.sum((power - ML_MODEL.mean_power_dbm(lb.pairwise_distance_m(p[:, None, :], ANCHORS)[:, 0])) ** 2, -1)
+    cost = lambda p: np.sum((power - ML_MODEL.mean_rss_dbm(lb.pairwise_distance_m(p[:, None, :], ANCHORS)[:, 0])) ** 2, -1)
     h = 1e-6
     for axis in (0, 1):
         step = np.zeros(2)
@@ -124,7 +124,7 @@ def test_grid_ml_noiseless_picks_true_grid_point():
     model = lb.PathLossModel(-45.0, 2.0)
     grid = np.stack(np.meshgrid(np.arange(0.05, 2.1, 0.1), np.arange(0.05, 7.8, 0.1)), -1).reshape(-1, 2)
     truth = grid[[10, 200, 777]]
-    res = lb.grid_ml_position(ANCHORS, model.mean_power_dbm(lb.pairwise_distance_m(truth, ANCHORS)), model, grid, chunk=2)
+    res = lb.grid_ml_position(ANCHORS, model.mean_rss_dbm(lb.pairwise_distance_m(truth, ANCHORS)), model, grid, chunk=2)
     np.testing.assert_allclose(res.position_m, truth)
 
 

@@ -16,7 +16,7 @@ def test_corrected_jacobian_matches_finite_differences_and_the_printed_one_does_
     s = rng.uniform(0, 50, (6, 3))
     x = np.array([20.0, 31.0, 12.0])
     setup = pv.Setup()
-    h = lambda p: setup.channel.mean_power_dbm(np.linalg.norm(p - s, axis=-1))
+    h = lambda p: setup.channel.mean_rss_dbm(np.linalg.norm(p - s, axis=-1))
     fd = np.stack([(h(x + 1e-6 * e) - h(x - 1e-6 * e)) / 2e-6 for e in np.eye(3)], -1)
     np.testing.assert_allclose(pv.corrected_jacobian(x, s, pv.ETA), fd, rtol=1e-6, atol=1e-9)
     assert not np.allclose(pv.printed_jacobian(x, s, pv.ETA), fd, rtol=0.5)

@@ -133,7 +133,7 @@ def test_rss_information_regularisations():
     channel = lb.PathLossModel(-40.0, 3.0, min_distance_m=1.0)
     eps = 1e-6
     for e in np.eye(2) * eps:
-        assert channel.mean_power_dbm(np.linalg.norm(state[idx] + e)) == channel.mean_power_dbm(np.linalg.norm(state[idx] - e))
+        assert channel.mean_rss_dbm(np.linalg.norm(state[idx] + e)) == channel.mean_rss_dbm(np.linalg.norm(state[idx] - e))
     np.testing.assert_array_equal(lb.rss_state_information(state, anchors, 3.0, 6.0, idx, min_distance_m=0.4), plain)
     np.testing.assert_array_equal(lb.rss_state_information(np.zeros(6), anchors, 3.0, 6.0, idx, min_distance_m=1.0), 0.0)
     lifted = lb.rss_state_information(state, anchors, 3.0, 6.0, idx, height_offset_m=1.2)

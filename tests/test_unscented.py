@@ -72,7 +72,7 @@ def _rss_data(rng, T=30, sigma_db=4.0):
     truth = lb.simulate_states(model.F, model.Q, start, T - 1, rng)
     channel = lb.PathLossModel(np.array([-40.0, -45.0, -42.0, -38.0]), np.array([1.8, 3.1, 1.7, 1.2]), sigma_db)
     d = lb.pairwise_distance_m(truth[:, :2], ANCHORS)
-    z = channel.sample_power_dbm(d, rng)
+    z = channel.sample_rss_dbm(d, rng)
     return model, channel, start, z
 
 
@@ -244,7 +244,7 @@ def test_rss_ukf_equals_stone_soup(alpha):
     rng = np.random.default_rng(8)
     channel = lb.PathLossModel(np.array([-40.0, -45.0, -42.0, -38.0]), np.array([1.8, 3.1, 1.7, 1.2]), 4.0)
     truth = np.stack([np.linspace(3, 20, 25), np.full(25, 4.0)], -1) + 0.2 * rng.standard_normal((25, 2))
-    z = channel.sample_power_dbm(lb.pairwise_distance_m(truth, ANCHORS), rng)
+    z = channel.sample_rss_dbm(lb.pairwise_distance_m(truth, ANCHORS), rng)
     x0 = np.array([4.0, 0.5, 3.0, 0.0])                                   # axis-major [x, vx, y, vy]
     P0 = np.diag([2.0, 0.5, 2.0, 0.5])
     F, Q, ref_x, ref_P = _stonesoup_ukf(z, x0, P0, ANCHORS, channel, alpha)
@@ -262,7 +262,7 @@ def test_covariance_stays_symmetric_positive_definite_over_1e5_steps_at_alpha_1e
     t = np.arange(T) * 0.1
     pos = np.stack([10 + 5 * np.cos(0.05 * t), 6 + 4 * np.sin(0.05 * t)], -1)       # laps around the anchors
     ch = lb.PathLossModel(-40.0, 2.5, 3.0)
-    z = ch.sample_power_dbm(lb.pairwise_distance_m(pos, anchors), rng)
+    z = ch.sample_rss_dbm(lb.pairwise_distance_m(pos, anchors), rng)
     res = lb.unscented_kalman_filter(model.F, model.Q, np.r_[pos[0], 0.0, 0.0], np.eye(4),
                                      [lb.RssMeasurement(z, anchors, ch, model.position_index)], alpha=1e-3)
     assert np.linalg.eigvalsh(res.P).min() > 0

@@ -58,13 +58,13 @@ def register_to_dbm(register, offset_db: float = CC2420_RSSI_OFFSET_DB):
     return as_array("register", register, nan_ok=True) + offset_db
 
 
-def dbm_to_register(power_dbm, offset_db: float = CC2420_RSSI_OFFSET_DB):
+def dbm_to_register(rss_dbm, offset_db: float = CC2420_RSSI_OFFSET_DB):
     """Inverse of :func:`register_to_dbm` (no rounding; see :func:`quantize_db`). NaN (not heard) stays NaN."""
     check_scalar("offset_db", offset_db)
-    return as_array("power_dbm", power_dbm, nan_ok=True) - offset_db
+    return as_array("rss_dbm", rss_dbm, nan_ok=True) - offset_db
 
 
-def quantize_db(power_dbm, step_db: float = 1.0, floor_dbm: float | None = None):
+def quantize_db(rss_dbm, step_db: float = 1.0, floor_dbm: float | None = None):
     """Round powers to the radio's resolution (1 dB for CC2420, AT86RF230 ED and the
     Ozkaya readers) and optionally clip at a sensitivity floor (e.g. -90 dBm in Ozkaya 2011).
     A NaN power (not heard) stays NaN; it is not clipped to the floor.
@@ -72,7 +72,7 @@ def quantize_db(power_dbm, step_db: float = 1.0, floor_dbm: float | None = None)
     check_scalar("step_db", step_db, gt=0)
     if floor_dbm is not None:
         check_scalar("floor_dbm", floor_dbm)
-    q = np.round(as_array("power_dbm", power_dbm, nan_ok=True) / step_db) * step_db
+    q = np.round(as_array("rss_dbm", rss_dbm, nan_ok=True) / step_db) * step_db
     if floor_dbm is not None:
         q = np.maximum(q, floor_dbm)
     return q
@@ -187,7 +187,7 @@ class PathLossModel:
         if np.any(np.asarray(self.path_loss_exp) <= 0):
             raise ValueError(f"{where} divides by path_loss_exp, which must be > 0; got {self.path_loss_exp}")
 
-    def mean_power_dbm(self, distance_m, n_walls=0):
+    def mean_rss_dbm(self, distance_m, n_walls=0):
         """Mean received power, ``P_0 - 10 n log10(d/d0) - n_W WAF`` (Eq. (5) in document 003,
         Eq. (6.4) in Ozkaya 2011)."""
         distance_m = as_array("distance_m", distance_m)
@@ -198,25 +198,25 @@ class PathLossModel:
                                      ref_distance_m=self.ref_distance_m, min_distance_m=self.min_distance_m,
                                      n_walls=np.asarray(n_walls), wall_attenuation_db=self.wall_attenuation_db)
 
-    def sample_power_dbm(self, distance_m, rng: np.random.Generator, n_walls=0):
+    def sample_rss_dbm(self, distance_m, rng: np.random.Generator, n_walls=0):
         """Mean power plus i.i.d. Gaussian shadowing ``w ~ N(0, sigma_db^2)``, one draw per entry."""
         if not isinstance(rng, np.random.Generator):
             raise ValueError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
-        mean = self.mean_power_dbm(distance_m, n_walls)
+        mean = self.mean_rss_dbm(distance_m, n_walls)
         return mean + np.asarray(self.sigma_db) * rng.standard_normal(mean.shape)
 
-    def range_m(self, power_dbm, n_walls=0):
+    def range_m(self, rss_dbm, n_walls=0):
         """Invert the mean model: ``d = d0 10^((P_0 - P_r - n_W WAF) / (10 n))``.
 
         Eq. (7) in George and Vadivukkarasi; Eq. (2.3) in Dogan (2015). The estimate is median
         unbiased but mean biased by ``exp((sigma ln10 / (10 n))^2 / 2)`` under shadowing.
         A NaN power (not heard) gives a NaN range (still not heard).
         """
-        power_dbm = as_array("power_dbm", power_dbm, nan_ok=True)
+        rss_dbm = as_array("rss_dbm", rss_dbm, nan_ok=True)
         self._positive_exponent("range_m")
         _check_walls_count(n_walls)
         exponent = (
-            np.asarray(self.ref_power_dbm) - power_dbm - np.asarray(n_walls) * self.wall_attenuation_db
+            np.asarray(self.ref_power_dbm) - rss_dbm - np.asarray(n_walls) * self.wall_attenuation_db
         ) / (10.0 * np.asarray(self.path_loss_exp))
         return self.ref_distance_m * 10.0**exponent
 

@@ -175,7 +175,7 @@ def simulate_rss(trajectory: Trajectory, channel: PathLossModel, n_runs: int, rn
     and runs (note 000 s.2.2)."""
     d = pairwise_distance_m(trajectory.position_m[..., trajectory.rss_steps, :], anchors_m)
     noise = rng.standard_normal(np.broadcast_shapes((n_runs,) + d.shape[-2:], d.shape))
-    return channel.mean_power_dbm(d) + np.asarray(channel.sigma_db) * noise
+    return channel.mean_rss_dbm(d) + np.asarray(channel.sigma_db) * noise
 
 
 def simulate_acceleration(trajectory: Trajectory, sigma_acc_mps2: float, n_runs: int,

@@ -95,7 +95,7 @@ def simulate_calibration(points_m, channel: PathLossModel, n_packets: int, rng: 
         raise ParameterError("n_packets and n_runs must be at least 1")
     distance = pairwise_distance_m(np.asarray(points_m, float), anchors_m)
     shape = (n_runs, distance.shape[0], n_packets, distance.shape[1])
-    power = channel.sample_power_dbm(np.broadcast_to(distance[None, :, None, :], shape), rng)
+    power = channel.sample_rss_dbm(np.broadcast_to(distance[None, :, None, :], shape), rng)
     if quantize_step_db:
         power = quantize_db(power, quantize_step_db)
     return power, distance
@@ -137,12 +137,12 @@ def calibration_study(points_m, channel: PathLossModel, n_packets: int, n_runs: 
     return CalibrationStudy(fit.ref_power_dbm, fit.path_loss_exp, fit.residual_sigma_db, int(fit.n_samples[0]))
 
 
-def fit_calibration(power_dbm, distance_m) -> PathLossFit:
+def fit_calibration(rss_dbm, distance_m) -> PathLossFit:
     """One calibration, Eq. (5.1) solved as the convex LS ``min ||P - (P0 - 10 alpha log10 d)||^2`` in cvxpy
-    over every packet of ``power_dbm`` ``(P, packets, m)`` at ``distance_m`` ``(P, m)``."""
-    power_dbm = np.asarray(power_dbm, float)
-    d = np.broadcast_to(np.asarray(distance_m, float)[:, None, :], power_dbm.shape)
-    return calibrate_path_loss(d.reshape(-1, d.shape[-1]), power_dbm.reshape(-1, d.shape[-1]), "pooled",
+    over every packet of ``rss_dbm`` ``(P, packets, m)`` at ``distance_m`` ``(P, m)``."""
+    rss_dbm = np.asarray(rss_dbm, float)
+    d = np.broadcast_to(np.asarray(distance_m, float)[:, None, :], rss_dbm.shape)
+    return calibrate_path_loss(d.reshape(-1, d.shape[-1]), rss_dbm.reshape(-1, d.shape[-1]), "pooled",
                                solver="cvxpy")
 
 
@@ -163,7 +163,7 @@ def simulate_orientation(theta_deg, channel: PathLossModel, rng: np.random.Gener
     not enter the distance) for each orientation: the channel mean plus :func:`orientation_gain_db` plus
     N(0, sigma_db^2) sample noise (a static link fluctuates less than the walking channel)."""
     theta = np.atleast_1d(np.asarray(theta_deg, float))
-    mean = channel.mean_power_dbm(separation_m) + orientation_gain_db(theta, **gain)
+    mean = channel.mean_rss_dbm(separation_m) + orientation_gain_db(theta, **gain)
     return mean[:, None] + sigma_db * rng.standard_normal((theta.size, n_samples))
 
 

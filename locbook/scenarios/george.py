@@ -88,17 +88,17 @@ MIN_PLAUSIBLE_PATH_LOSS_EXP = 1.0
 class CorridorRuns:
     """Monte-Carlo runs of the paper's pipeline up to the unfiltered fixes (leading axis: runs).
 
-    truth_m (T, 2); calibration_power_dbm (runs, L, 4); fitted ref_power_dbm, path_loss_exp (runs,);
-    power_dbm (runs, T, 4) the per-point mean received powers; fixes_m (runs, T, 2) from Eq. (8), NaN for a
+    truth_m (T, 2); calibration_rss_dbm (runs, L, 4); fitted ref_power_dbm, path_loss_exp (runs,);
+    rss_dbm (runs, T, 4) the per-point mean received powers; fixes_m (runs, T, 2) from Eq. (8), NaN for a
     run whose calibration failed (``calibration_ok`` False, see :data:`MIN_PLAUSIBLE_PATH_LOSS_EXP`).
     """
 
     truth_m: np.ndarray
     calibration_points_m: np.ndarray
-    calibration_power_dbm: np.ndarray
+    calibration_rss_dbm: np.ndarray
     ref_power_dbm: np.ndarray
     path_loss_exp: np.ndarray
-    power_dbm: np.ndarray
+    rss_dbm: np.ndarray
     fixes_m: np.ndarray
     calibration_ok: np.ndarray
 
@@ -130,7 +130,7 @@ def simulate_corridor(n_runs: int, truth_m, true_model: PathLossModel, *, rng_ca
     truth_m = np.asarray(truth_m, float)
     cal_pts = np.asarray(calibration_points_m, float)
     cal_dist = pairwise_distance_m(cal_pts, ANCHORS_M)                         # (L, 4)
-    cal_power = true_model.sample_power_dbm(np.broadcast_to(cal_dist, (n_runs,) + cal_dist.shape), rng_calibration)
+    cal_power = true_model.sample_rss_dbm(np.broadcast_to(cal_dist, (n_runs,) + cal_dist.shape), rng_calibration)
     fit = calibrate_path_loss(np.broadcast_to(cal_dist, cal_power.shape), cal_power, mode=calib_mode,
                               solver="closed_form")
     if calib_mode == "per_anchor":
@@ -138,7 +138,7 @@ def simulate_corridor(n_runs: int, truth_m, true_model: PathLossModel, *, rng_ca
     else:
         ref, exp = fit.ref_power_dbm[:, None, None], fit.path_loss_exp[:, None, None]
     dist = pairwise_distance_m(truth_m, ANCHORS_M)                              # (T, 4)
-    power = true_model.sample_power_dbm(np.broadcast_to(dist, (n_runs,) + dist.shape), rng_tracking)
+    power = true_model.sample_rss_dbm(np.broadcast_to(dist, (n_runs,) + dist.shape), rng_tracking)
     ok = np.all(fit.path_loss_exp.reshape(n_runs, -1) >= min_path_loss_exp, axis=-1) if use_calibrated_model \
         else np.ones(n_runs, bool)
     ranging = PathLossModel(ref, np.where(ok.reshape((n_runs,) + (1,) * (exp.ndim - 1)), exp, 1.0)) \

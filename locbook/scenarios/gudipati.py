@@ -84,11 +84,11 @@ ED_OFFSET_DB = -PRINTED.get("Sec. 3.3 text", "register conversion", "subtracted 
 ED_RANGE = (0, 84)
 
 
-def ed_register_dbm(power_dbm):
+def ed_register_dbm(rss_dbm):
     """What the AT86RF230 energy detect reports: 1 dB steps over ED 0..84 (M = ED - 91 dBm). A power below ED 0 is
     not a reading (NaN = not heard, the library's missing rule: the floor value -91 dBm would be a confident wrong
     reading); above ED 84 it saturates."""
-    q = quantize_db(power_dbm, 1.0)
+    q = quantize_db(rss_dbm, 1.0)
     q = np.where(q < ED_OFFSET_DB + ED_RANGE[0], np.nan, q)
     return np.minimum(q, ED_OFFSET_DB + ED_RANGE[1])
 
@@ -188,7 +188,7 @@ def simulate_walk(path: str, n_anchors: int, settings: WalkSettings, n_runs: int
     truth = path_trajectory(path, settings)
     a = anchors_m(ids)
     d = pairwise_distance_m(truth.position_m, a)                                   # (T, m)
-    mean = channel_model(ids).mean_power_dbm(d)
+    mean = channel_model(ids).mean_rss_dbm(d)
     T, m = d.shape
     shadow = correlated_shadowing_db(truth.position_m, settings.shadowing_sigma_db, settings.decorrelation_m, rng,
                                      size=(n_runs, m))                             # (R, m, T)
@@ -282,7 +282,7 @@ def _rss_stream(walk: Walk, model, sign: str = "corrected"):
     a, idx = walk.anchors_m, model.position_index
 
     def h(x):
-        return -ch.mean_power_dbm(np.linalg.norm(x[..., None, idx] - a, axis=-1))
+        return -ch.mean_rss_dbm(np.linalg.norm(x[..., None, idx] - a, axis=-1))
 
     def jacobian(x):
         grad = log_distance_gradient(x[..., None, idx] - a, ch.path_loss_exp)     # the model's dh/dp (no clamp, as printed)
@@ -493,9 +493,9 @@ def simulate_calibration_walk(anchor_id: str, distances_m, *, shadowing_sigma_db
     ch = channel_model((anchor_id,))
     pts = np.stack([d, np.zeros_like(d)], -1)
     shadow = correlated_shadowing_db(pts, shadowing_sigma_db, decorrelation_m, rng, size=(n_runs,))
-    mean = ch.mean_power_dbm(d[:, None])[:, 0] + shadow
+    mean = ch.mean_rss_dbm(d[:, None])[:, 0] + shadow
     packets = ed_register_dbm(mean[..., None] + fast_sigma_db * rng.standard_normal(mean.shape + (samples,)))
-    ref_mean = ch.mean_power_dbm(np.array([1.0]))[0] + shadowing_sigma_db * rng.standard_normal(n_runs)
+    ref_mean = ch.mean_rss_dbm(np.array([1.0]))[0] + shadowing_sigma_db * rng.standard_normal(n_runs)
     ref = ed_register_dbm(ref_mean[:, None] + fast_sigma_db * rng.standard_normal((n_runs, samples)))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)          # a step with no packet heard stays NaN

@@ -118,7 +118,7 @@ def radio_map(data: MeasuredData, model: PathLossModel):
     filled_fraction)``."""
     xy, distance, rss = calibration_set(data)
     missing = np.isnan(rss)
-    filled = np.where(missing, model.mean_power_dbm(distance), rss)
+    filled = np.where(missing, model.mean_rss_dbm(distance), rss)
     return xy, filled, float(missing.mean())
 
 

@@ -621,7 +621,7 @@ def synthetic_campaign(reader: int, n_campaigns: int, rng: np.random.Generator, 
                          f"{P['sigma_db'][reader]!r} dB")
     distances_m = np.asarray(distances_m, float)
     mean = PathLossModel(P["alpha_dbm"][reader], P["path_loss_exp"][reader],
-                         wall_attenuation_db=P["waf_db"]).mean_power_dbm(distances_m, walls)
+                         wall_attenuation_db=P["waf_db"]).mean_rss_dbm(distances_m, walls)
     read_sd = np.sqrt(read_var)
     offs = location_sigma_db * rng.standard_normal((n_campaigns, distances_m.size, locations_per_distance, 1))
     noise = read_sd * rng.standard_normal((n_campaigns, distances_m.size, locations_per_distance, readings_per_location))

@@ -216,11 +216,11 @@ def draw_testbed(channel: TestbedChannel, n_realizations: int, rng: np.random.Ge
     return Testbed(channel, points, np.swapaxes(field_db, -1, -2), tag_o)
 
 
-def _read(channel, power_dbm):
+def _read(channel, rss_dbm):
     """What the reader reports: ``resolution_db`` steps (None: no quantisation) and the sensitivity floor."""
     if channel.resolution_db is None:
-        return np.maximum(power_dbm, channel.floor_dbm)
-    return quantize_db(power_dbm, channel.resolution_db, channel.floor_dbm)
+        return np.maximum(rss_dbm, channel.floor_dbm)
+    return quantize_db(rss_dbm, channel.resolution_db, channel.floor_dbm)
 
 
 def measure_sessions(testbed: Testbed, positions_m, rng: np.random.Generator, *,

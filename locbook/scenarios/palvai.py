@@ -75,7 +75,7 @@ def measure(setup: Setup, locations_m, rng: np.random.Generator) -> np.ndarray:
     """Received powers ``(R, N)`` (Eq. (4.28)): the log-distance mean (distances below 1 m clamped, A2) plus
     shadowing ``N(0, sigma_1^2)``."""
     d = np.linalg.norm(np.asarray(locations_m) - setup.target, axis=-1)
-    return setup.channel.sample_power_dbm(d, rng)
+    return setup.channel.sample_rss_dbm(d, rng)
 
 
 def observed_locations(setup: Setup, locations_m, rng: np.random.Generator) -> np.ndarray:
@@ -84,26 +84,26 @@ def observed_locations(setup: Setup, locations_m, rng: np.random.Generator) -> n
     return loc + setup.receiver_sigma_m * rng.standard_normal(loc.shape) if setup.receiver_sigma_m > 0 else loc
 
 
-def _ranges(setup: Setup, power_dbm, bias_correction: str):
-    d = setup.channel.range_m(power_dbm)
+def _ranges(setup: Setup, rss_dbm, bias_correction: str):
+    d = setup.channel.range_m(rss_dbm)
     return correct_range_bias(d, setup.sigma_db, setup.path_loss_exp, bias_correction)
 
 
-def lsf_by_count(setup: Setup, locations_m, power_dbm, counts, *, reference: str = "consecutive",
+def lsf_by_count(setup: Setup, locations_m, rss_dbm, counts, *, reference: str = "consecutive",
                  variant: str = "corrected", bias_correction: str = "median") -> np.ndarray:
     """Batch LSF (Eqs. (2.27)-(2.29), corrected) on the first ``n`` locations for each ``n`` in ``counts``:
     positions ``(R, len(counts), dim)``. ``bias_correction="median"`` is the thesis's plain inversion (2.34);
     ``"squared"`` removes the log-normal bias of ``d^2`` (note 002 s.2.7, an extension)."""
-    d = _ranges(setup, power_dbm, bias_correction)
+    d = _ranges(setup, rss_dbm, bias_correction)
     out = [lateration_ls(locations_m[:, :n], d[:, :n], pairs=reference, variant=variant).position_m
            for n in counts]
     return np.stack(out, axis=1)
 
 
-def rlsf_path(setup: Setup, locations_m, power_dbm, *, bias_correction: str = "median", prior_cov=None):
+def rlsf_path(setup: Setup, locations_m, rss_dbm, *, bias_correction: str = "median", prior_cov=None):
     """RLSF (Eqs. (2.49)-(2.58), corrected) over the consecutive rows: estimates ``(R, N - 1, dim)`` after locations
     2..N (row i needs locations i and i + 1), prior mean 0 and ``Pi_0 = 1e6 I`` by default (note 002 s.2.8)."""
-    d = _ranges(setup, power_dbm, bias_correction)
+    d = _ranges(setup, rss_dbm, bias_correction)
     H, Y = lateration_system(locations_m, d, pairs="consecutive")
     return recursive_least_squares(H, Y, prior_cov=prior_cov).x
 
@@ -111,21 +111,21 @@ def rlsf_path(setup: Setup, locations_m, power_dbm, *, bias_correction: str = "m
 EKF_VARIANTS = ("corrected", "literal_002")
 
 
-def corrected_jacobian(x, receivers_m, path_loss_exp):
+def corrected_jacobian(x, anchors_m, path_loss_exp):
     """``dh_i/dX = (10 eta / ln 10) (s_i - X)^T / d_i^2`` (Eq. (4.43) corrected, note 002 s.2.11): ``(..., N, dim)``."""
-    return log_distance_gradient(np.asarray(x, float)[..., None, :] - np.asarray(receivers_m, float), path_loss_exp)
+    return log_distance_gradient(np.asarray(x, float)[..., None, :] - np.asarray(anchors_m, float), path_loss_exp)
 
 
-def printed_jacobian(x, receivers_m, path_loss_exp):
+def printed_jacobian(x, anchors_m, path_loss_exp):
     """Eq. (4.43) as printed (flagged): ``10 eta (s_i - X)^T / d_i`` (no 1/ln 10, one factor 1/d_i missing)."""
-    diff = np.asarray(receivers_m) - np.asarray(x)[..., None, :]
+    diff = np.asarray(anchors_m) - np.asarray(x)[..., None, :]
     return 10 * path_loss_exp * diff / np.linalg.norm(diff, axis=-1)[..., None]
 
 
 EKF_SCHEDULES = ("sequential", "batch")
 
 
-def ekf_path(setup: Setup, receivers_m, power_dbm, x0, P0, *, process_sd_m: float = SIGMA2_M,
+def ekf_path(setup: Setup, anchors_m, rss_dbm, x0, P0, *, process_sd_m: float = SIGMA2_M,
              variant: str = "corrected", inflate: bool = False, schedule: str = "sequential",
              with_divergence: bool = False):
     """The EKF of Sec. 4.3 over the sequential schedule (A5a: step k assimilates location k): random-walk state
@@ -140,26 +140,26 @@ def ekf_path(setup: Setup, receivers_m, power_dbm, x0, P0, *, process_sd_m: floa
         raise ValueError(f"variant must be one of {EKF_VARIANTS}, got {variant!r}")
     if schedule not in EKF_SCHEDULES:
         raise ValueError(f"schedule must be one of {EKF_SCHEDULES}, got {schedule!r}")
-    s = np.asarray(receivers_m, float)
+    s = np.asarray(anchors_m, float)
     R_, N, dim = s.shape
     F, Q = np.eye(dim), process_sd_m**2 * np.eye(dim)
     if schedule == "batch":
         if variant != "corrected":
             raise ValueError("the batch schedule is offered for the corrected EKF only")
-        meas = RssMeasurement(np.asarray(power_dbm)[:, None, :], s[:, None], setup.channel, np.arange(dim),
+        meas = RssMeasurement(np.asarray(rss_dbm)[:, None, :], s[:, None], setup.channel, np.arange(dim),
                               anchor_sigma_m=setup.receiver_sigma_m if inflate else 0.0, min_distance_m=1.0)
         return _with_flags(extended_kalman_filter(F, Q, x0, P0, [meas]), with_divergence)
     if variant == "corrected":
-        meas = RssMeasurement(np.asarray(power_dbm)[..., None], s[:, :, None, :], setup.channel, np.arange(dim),
+        meas = RssMeasurement(np.asarray(rss_dbm)[..., None], s[:, :, None, :], setup.channel, np.arange(dim),
                               anchor_sigma_m=setup.receiver_sigma_m if inflate else 0.0, min_distance_m=1.0)
         return _with_flags(extended_kalman_filter(F, Q, x0, P0, [meas]), with_divergence)
     # printed form: one location per step through the "diagonal" of an (N, N) stream (NaN off the diagonal)
     z = np.full((R_, N, N), np.nan)
-    z[:, np.arange(N), np.arange(N)] = power_dbm
+    z[:, np.arange(N), np.arange(N)] = rss_dbm
     ch = setup.channel
 
     def h(x):
-        return ch.mean_power_dbm(np.linalg.norm(x[..., None, :] - s, axis=-1))
+        return ch.mean_rss_dbm(np.linalg.norm(x[..., None, :] - s, axis=-1))
 
     meas = NonlinearMeasurement(z, h, np.eye(N), jacobian=lambda x: printed_jacobian(x, s, setup.path_loss_exp),
                                 name="RSS with the printed Jacobian (4.43) and R = I")
@@ -174,7 +174,7 @@ SCHEDULES = ("all", "sequential", "cyclic")
 SHADOWING = ("frozen", "iid")
 
 
-def pf_run(setup: Setup, receivers_m, power_dbm, rng: np.random.Generator, *, n_particles: int, n_iterations: int,
+def pf_run(setup: Setup, anchors_m, rss_dbm, rng: np.random.Generator, *, n_particles: int, n_iterations: int,
            schedule: str = "all", shadowing: str = "frozen", true_locations_m=None, process_sd_m: float = SIGMA2_M,
            likelihood_sigma_db: float | None = None, resampling: str = "systematic", cloud_steps=()):
     """The SIR-PF of Sec. 5.3.1 (bootstrap proposal, resampling at every iteration, A12), particles drawn uniform in
@@ -187,7 +187,7 @@ def pf_run(setup: Setup, receivers_m, power_dbm, rng: np.random.Generator, *, n_
         raise ValueError(f"schedule must be one of {SCHEDULES}, got {schedule!r}")
     if shadowing not in SHADOWING:
         raise ValueError(f"shadowing must be one of {SHADOWING}, got {shadowing!r}")
-    s = np.asarray(receivers_m, float)
+    s = np.asarray(anchors_m, float)
     R_, N, dim = s.shape
     if schedule == "sequential" and n_iterations > N:
         raise ValueError(f"the sequential schedule has one iteration per location: n_iterations <= {N}")
@@ -196,7 +196,7 @@ def pf_run(setup: Setup, receivers_m, power_dbm, rng: np.random.Generator, *, n_
     sigma = setup.sigma_db if likelihood_sigma_db is None else likelihood_sigma_db
     ch = PathLossModel(setup.ref_power_dbm, setup.path_loss_exp, sigma, min_distance_m=1.0)
     data_rng = np.random.default_rng(rng.integers(2**63))
-    z0 = np.asarray(power_dbm, float)
+    z0 = np.asarray(rss_dbm, float)
     # the receivers differ per run: one model over all of them, or one per location for the one-location schedules
     models = [RssModel(s, ch)] if schedule == "all" else [RssModel(s[:, j:j + 1], ch) for j in range(N)]
 

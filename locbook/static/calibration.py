@@ -10,7 +10,7 @@ corrected: the paper prints ``+10 log d_i``, which, read literally, returns ``-n
 It is also Eq. (5.1) of Dogan (2015) and the per-reader fit of Ozkaya (2011), Eq. (6.4)-(6.6),
 whose bounded variant (alpha in [-55, -40] dBm, n in [1.5, 3]) is the ``*_bounds_*`` arguments.
 
-Problems carry leading batch axes: ``distance_m`` and ``power_dbm`` of shape ``(..., N)`` are
+Problems carry leading batch axes: ``distance_m`` and ``rss_dbm`` of shape ``(..., N)`` are
 ``prod(...)`` independent fits. NaN powers are missing samples (a reading not heard).
 
 A batch is isolated: the distances are the design (chosen by the experimenter), so a problem whose given
@@ -131,31 +131,31 @@ def path_loss_design_matrix(distance_m, ref_distance_m: float = 1.0,
     return np.stack([np.ones_like(log_term), second], axis=-1)
 
 
-def _prepare(distance_m, power_dbm, ref_distance_m):
+def _prepare(distance_m, rss_dbm, ref_distance_m):
     distance_m = as_array("distance_m", distance_m)
-    power_dbm = as_array("power_dbm", power_dbm, nan_ok=True)
+    rss_dbm = as_array("rss_dbm", rss_dbm, nan_ok=True)
     check_scalar("ref_distance_m", ref_distance_m, gt=0)
-    if distance_m.shape != power_dbm.shape:
+    if distance_m.shape != rss_dbm.shape:
         # the one broadcast allowed: distances shared by all problems, powers with the full shape (..., N)
         try:
-            shared = np.broadcast_shapes(distance_m.shape, power_dbm.shape) == power_dbm.shape
+            shared = np.broadcast_shapes(distance_m.shape, rss_dbm.shape) == rss_dbm.shape
         except ValueError:
             shared = False
         if not shared:
-            raise ValueError(f"distance_m {distance_m.shape} must have the shape of power_dbm {power_dbm.shape} "
+            raise ValueError(f"distance_m {distance_m.shape} must have the shape of rss_dbm {rss_dbm.shape} "
                              "(..., N), or be shared by all its problems")
-        distance_m = np.broadcast_to(distance_m, power_dbm.shape)
+        distance_m = np.broadcast_to(distance_m, rss_dbm.shape)
     if distance_m.ndim == 0 or distance_m.shape[-1] < 2:
-        raise DegenerateGeometryError("distance_m and power_dbm must hold at least two measurements per problem "
-                                      f"(on the last axis) for a path-loss fit, got shape {power_dbm.shape}")
-    mask = np.isfinite(power_dbm) & np.isfinite(distance_m)
+        raise DegenerateGeometryError("distance_m and rss_dbm must hold at least two measurements per problem "
+                                      f"(on the last axis) for a path-loss fit, got shape {rss_dbm.shape}")
+    mask = np.isfinite(rss_dbm) & np.isfinite(distance_m)
     _positive_distances(distance_m[mask])
     # the design (every given distance, heard or not): all equal is an error whatever was heard
     given = distance_m > 0
     # log10 d here only tests that the distances differ (not the law)
     _check_distinct_distances(np.where(given, np.log10(np.where(given, distance_m, 1.0)), 0.0), given)
     log_d = np.where(mask, log_distance_regressor_db(np.where(mask, distance_m, 1.0), ref_distance_m), 0.0)
-    return log_d, np.where(mask, power_dbm, 0.0), mask, _distinct(log_d, mask)
+    return log_d, np.where(mask, rss_dbm, 0.0), mask, _distinct(log_d, mask)
 
 
 def _positive_distances(distance_m):
@@ -211,10 +211,10 @@ def _finish(log_d, power, mask, ref, exp, status, usable, *, covariance: bool = 
     return PathLossFit(ref, exp, np.sqrt(s2), cov, n, status, problem_status=problem_status)
 
 
-def fit_path_loss_closed_form(distance_m, power_dbm, ref_distance_m: float = 1.0) -> PathLossFit:
+def fit_path_loss_closed_form(distance_m, rss_dbm, ref_distance_m: float = 1.0) -> PathLossFit:
     """Unconstrained least squares by the normal equations ``(M^T M)^{-1} M^T P`` (Eq. (6),
     document 003, sign corrected), batched over leading axes. Missing powers are NaN."""
-    log_d, power, mask, usable = _prepare(distance_m, power_dbm, ref_distance_m)
+    log_d, power, mask, usable = _prepare(distance_m, rss_dbm, ref_distance_m)
     # normal equations of P = a - n L:  [[N, -sum L], [-sum L, sum L^2]] [a, n] = [sum P, -sum L P];
     # log_d and power are 0 at missing samples, so the plain sums run over the observed ones
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):   # per problem: _finish marks them
@@ -291,13 +291,13 @@ def _stacked_problem(log_d, power, mask, ref_bounds, exp_bounds, loss="squared",
     return problem, (ref, exp)
 
 
-def fit_path_loss(distance_m, power_dbm, *, ref_distance_m: float = 1.0,
+def fit_path_loss(distance_m, rss_dbm, *, ref_distance_m: float = 1.0,
                   ref_power_bounds_dbm: tuple[float, float] | None = None,
                   path_loss_exp_bounds: tuple[float, float] | None = None,
                   solver: str = "auto", loss: str = "squared", huber_delta_db: float = 6.0) -> PathLossFit:
     """Least-squares fit of ``(ref_power_dbm, path_loss_exp)`` for every problem in the batch.
 
-    ``distance_m, power_dbm``: shape ``(..., N)``, one problem per leading index (distances may be shared by
+    ``distance_m, rss_dbm``: shape ``(..., N)``, one problem per leading index (distances may be shared by
     all problems). Bounds, if given, constrain every problem (Ozkaya 2011, Sec. 6.2: alpha in [-55, -40] dBm,
     n in [1.5, 3]). ``loss="huber"`` is the robust variant: residuals beyond ``huber_delta_db`` count
     linearly (cvxpy's ``huber``), so a few gross outliers (a blocked link) do not drag the fit.
@@ -339,14 +339,14 @@ def fit_path_loss(distance_m, power_dbm, *, ref_distance_m: float = 1.0,
         if bounded or loss != "squared":
             raise ValueError("the closed form is the unconstrained least-squares fit; bounds and loss='huber' "
                              "need solver='cvxpy' (or 'auto'; bounds alone also solver='exact')")
-        return fit_path_loss_closed_form(distance_m, power_dbm, ref_distance_m)
+        return fit_path_loss_closed_form(distance_m, rss_dbm, ref_distance_m)
     if solver == "exact":
         if loss != "squared":
             raise ValueError("solver='exact' is the (bounded) least-squares fit; loss='huber' has no closed form "
                              "and needs solver='cvxpy' (or 'auto')")
         if not bounded:
-            return fit_path_loss_closed_form(distance_m, power_dbm, ref_distance_m)
-    log_d, power, mask, usable = _prepare(distance_m, power_dbm, ref_distance_m)
+            return fit_path_loss_closed_form(distance_m, rss_dbm, ref_distance_m)
+    log_d, power, mask, usable = _prepare(distance_m, rss_dbm, ref_distance_m)
     if solver == "exact":
         with np.errstate(over="ignore", invalid="ignore", divide="ignore"):   # per problem: _finish marks them
             ref, exp = _bounded_closed_form(log_d, power, mask, bounds[0], bounds[1])
@@ -392,11 +392,11 @@ def _solve_stacked(log_d, power, mask, bounds, loss, huber_delta_db):
             np.concatenate([p[2] for p in parts]), failed[0] if failed else cp.OPTIMAL)
 
 
-def calibrate_path_loss(distance_m, power_dbm, mode: str = "per_location_mean", **fit_kwargs) -> PathLossFit:
+def calibrate_path_loss(distance_m, rss_dbm, mode: str = "per_location_mean", **fit_kwargs) -> PathLossFit:
     """Calibrate one shared ``(P_0, n)`` from measurements at known locations.
 
-    ``distance_m, power_dbm``: shape ``(..., L, m)``, location ``l`` at distance ``d_lj`` from anchor
-    ``j``, with ``power_dbm`` the mean received power of that link; leading axes are independent
+    ``distance_m, rss_dbm``: shape ``(..., L, m)``, location ``l`` at distance ``d_lj`` from anchor
+    ``j``, with ``rss_dbm`` the mean received power of that link; leading axes are independent
     calibrations (e.g. Monte-Carlo runs).
 
     Modes
@@ -409,17 +409,17 @@ def calibrate_path_loss(distance_m, power_dbm, mode: str = "per_location_mean", 
     """
     check_choice("mode", mode, CALIBRATION_MODES)
     distance_m = as_array("distance_m", distance_m)
-    power_dbm = as_array("power_dbm", power_dbm, nan_ok=True)
-    if distance_m.ndim < 2 or distance_m.shape != power_dbm.shape:
+    rss_dbm = as_array("rss_dbm", rss_dbm, nan_ok=True)
+    if distance_m.ndim < 2 or distance_m.shape != rss_dbm.shape:
         raise ValueError(
-            f"distance_m and power_dbm must both have shape (..., locations, anchors); got "
-            f"{distance_m.shape} and {power_dbm.shape}"
+            f"distance_m and rss_dbm must both have shape (..., locations, anchors); got "
+            f"{distance_m.shape} and {rss_dbm.shape}"
         )
     if distance_m.shape[-2] < 1 or distance_m.shape[-1] < 1:
-        raise ValueError(f"distance_m and power_dbm must hold at least one location and one anchor, got shape "
+        raise ValueError(f"distance_m and rss_dbm must hold at least one location and one anchor, got shape "
                          f"{distance_m.shape}")
     if mode == "per_location_mean":
-        per = fit_path_loss(distance_m, power_dbm, **fit_kwargs)
+        per = fit_path_loss(distance_m, rss_dbm, **fit_kwargs)
         n_loc = distance_m.shape[-2]
         cov = per.covariance.sum(axis=-3) / n_loc**2
         # a calibration is the mean of all its locations' fits: a failed location fails it (NaN already propagates)
@@ -432,21 +432,21 @@ def calibrate_path_loss(distance_m, power_dbm, mode: str = "per_location_mean", 
         )
     if mode == "pooled":
         pooled = distance_m.shape[:-2] + (distance_m.shape[-2] * distance_m.shape[-1],)   # not -1: empty batches
-        return fit_path_loss(distance_m.reshape(pooled), power_dbm.reshape(pooled), **fit_kwargs)
+        return fit_path_loss(distance_m.reshape(pooled), rss_dbm.reshape(pooled), **fit_kwargs)
     if mode == "per_anchor":
-        return fit_path_loss(np.swapaxes(distance_m, -1, -2), np.swapaxes(power_dbm, -1, -2), **fit_kwargs)
+        return fit_path_loss(np.swapaxes(distance_m, -1, -2), np.swapaxes(rss_dbm, -1, -2), **fit_kwargs)
     raise ValueError(f"calibration mode must be one of {CALIBRATION_MODES}, got {mode!r}")
 
 
-def _exponent_inputs(distance_m, power_dbm, ref_power_dbm, ref_distance_m):
+def _exponent_inputs(distance_m, rss_dbm, ref_power_dbm, ref_distance_m):
     distance_m = as_array("distance_m", distance_m)
-    power_dbm = as_array("power_dbm", power_dbm, nan_ok=True)
+    rss_dbm = as_array("rss_dbm", rss_dbm, nan_ok=True)
     try:
-        shape = np.broadcast_shapes(distance_m.shape, power_dbm.shape)
+        shape = np.broadcast_shapes(distance_m.shape, rss_dbm.shape)
     except ValueError:
-        raise ValueError(f"distance_m {distance_m.shape} and power_dbm {power_dbm.shape} do not broadcast") from None
+        raise ValueError(f"distance_m {distance_m.shape} and rss_dbm {rss_dbm.shape} do not broadcast") from None
     if not shape:
-        raise ValueError("distance_m and power_dbm need a sample axis (the last one)")
+        raise ValueError("distance_m and rss_dbm need a sample axis (the last one)")
     if np.any(distance_m <= 0):
         raise ValueError("distances must be positive")
     ref = as_array("ref_power_dbm", ref_power_dbm)
@@ -454,18 +454,18 @@ def _exponent_inputs(distance_m, power_dbm, ref_power_dbm, ref_distance_m):
     # L = log10(D/d0) of Eq. (3.8) and its LS form, as those estimators print it (the law's regressor is 10 L;
     # the factor 10 stays where they write it, so their rounding is the printed algebra's)
     log_d = np.broadcast_to(np.log10(distance_m / ref_distance_m), shape)
-    excess = np.broadcast_to(power_dbm - ref[..., None], shape)
+    excess = np.broadcast_to(rss_dbm - ref[..., None], shape)
     return log_d, excess
 
 
-def path_loss_exp_ratio_estimate(distance_m, power_dbm, ref_power_dbm, *, ref_distance_m: float = 1.0):
+def path_loss_exp_ratio_estimate(distance_m, rss_dbm, ref_power_dbm, *, ref_distance_m: float = 1.0):
     """The thesis-literal exponent estimator, Eq. (3.8) in Gudipati 2017 (flagged: an average of ratios):
     ``C = -(1/N) sum_s (M_s - S) / (10 log10(D_s / d0))`` with ``S = ref_power_dbm`` measured at ``d0``.
 
     The term at ``D = d0`` is 0/0 and is left out (note 001, s.5 point 6), as are missing (NaN) powers; near
     ``d0`` the ratio's denominator is small, so those points dominate its variance (compare
     :func:`path_loss_exp_given_ref_power`). ``(..., N)`` -> ``(...)``."""
-    log_d, excess = _exponent_inputs(distance_m, power_dbm, ref_power_dbm, ref_distance_m)
+    log_d, excess = _exponent_inputs(distance_m, rss_dbm, ref_power_dbm, ref_distance_m)
     use = np.isfinite(excess) & (np.abs(log_d) > 1e-12)
     if np.any(use.sum(axis=-1) == 0):
         raise DegenerateGeometryError("the ratio estimator needs at least one heard point away from the reference "
@@ -474,12 +474,12 @@ def path_loss_exp_ratio_estimate(distance_m, power_dbm, ref_power_dbm, *, ref_di
     return ratio.sum(axis=-1) / use.sum(axis=-1)
 
 
-def path_loss_exp_given_ref_power(distance_m, power_dbm, ref_power_dbm, *, ref_distance_m: float = 1.0):
+def path_loss_exp_given_ref_power(distance_m, rss_dbm, ref_power_dbm, *, ref_distance_m: float = 1.0):
     """Least-squares exponent with the reference power fixed at its measured value: minimises
     ``sum_s (M_s - S + 10 C log10(D_s/d0))^2``, so ``C = -sum L (M - S) / (10 sum L^2)``, ``L = log10(D/d0)``.
     The convex reformulation of Eq. (3.8) (note 001, s.2.4; the full two-parameter fit is :func:`fit_path_loss`).
     Missing (NaN) powers are left out. ``(..., N)`` -> ``(...)``."""
-    log_d, excess = _exponent_inputs(distance_m, power_dbm, ref_power_dbm, ref_distance_m)
+    log_d, excess = _exponent_inputs(distance_m, rss_dbm, ref_power_dbm, ref_distance_m)
     use = np.isfinite(excess)
     l2 = np.where(use, log_d**2, 0.0).sum(axis=-1)
     if np.any(l2 <= 0):

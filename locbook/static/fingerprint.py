@@ -31,18 +31,18 @@ __all__ = ["KNN_WEIGHTINGS", "KNN_BLOCK_BYTES", "knn_position", "model_fingerpri
 KNN_WEIGHTINGS = ("inverse_square", "literal_004", "uniform")
 
 
-def model_fingerprints(cells_m, readers_m, model: PathLossModel, walls_m=None, min_distance_m: float = 0.1):
+def model_fingerprints(cells_m, anchors_m, model: PathLossModel, walls_m=None, min_distance_m: float = 0.1):
     """Parameter-based map: mean RSSI ``(..., C, m)`` of the model at cell centres ``(C, 2)``.
 
     Model parameters broadcast against the reader axis; a leading batch axis on them (e.g. online
     calibration per step, shape ``(..., m)``) gives one map per batch entry. Distances below
-    ``min_distance_m`` (> 0) are clipped (a cell centre on a reader). ``readers_m`` ``(m, 2)`` must be finite,
+    ``min_distance_m`` (> 0) are clipped (a cell centre on a reader). ``anchors_m`` ``(m, 2)`` must be finite,
     like the cells; ``walls_m`` is checked by :func:`locbook.wall_crossings`.
     """
     if not isinstance(model, PathLossModel):
         raise ValueError(f"model must be a PathLossModel, got {type(model).__name__}")
-    readers_m = as_array("readers_m", readers_m, ndim=2)
-    m, dim = readers_m.shape
+    anchors_m = as_array("anchors_m", anchors_m, ndim=2)
+    m, dim = anchors_m.shape
     cells_m = as_array("cells_m", cells_m, ndim=2, trailing=(dim,))
     for name in ("ref_power_dbm", "path_loss_exp"):
         value = np.asarray(getattr(model, name))
@@ -50,15 +50,15 @@ def model_fingerprints(cells_m, readers_m, model: PathLossModel, walls_m=None, m
             raise ValueError(f"model.{name} must be a scalar or have shape (..., {m}) (one per reader), "
                              f"got shape {value.shape}")
     check_scalar("min_distance_m", min_distance_m, gt=0)
-    distance = pairwise_distance_m(cells_m, readers_m, names=("cells_m", "readers_m"))
-    n_walls = 0 if walls_m is None else wall_crossings(cells_m, readers_m, walls_m)
+    distance = pairwise_distance_m(cells_m, anchors_m, names=("cells_m", "anchors_m"))
+    n_walls = 0 if walls_m is None else wall_crossings(cells_m, anchors_m, walls_m)
 
     def per_cell(value):   # (..., m) parameters -> (..., 1, m), so they broadcast over the cell axis
         return np.asarray(value, float)[..., None, :] if np.ndim(value) else value
 
     batched = replace(model, ref_power_dbm=per_cell(model.ref_power_dbm), path_loss_exp=per_cell(model.path_loss_exp),
                       min_distance_m=max(model.min_distance_m, min_distance_m))
-    return batched.mean_power_dbm(distance, n_walls)
+    return batched.mean_rss_dbm(distance, n_walls)
 
 
 def pattern_fingerprints(rss_dbm, axis: int = -2):
@@ -92,7 +92,7 @@ KNN_BLOCK_BYTES = 64 * 2**20
 
 
 def knn_position(rss_dbm, fingerprints_dbm, cells_m, k: int, weighting: str = "inverse_square", *,
-                 min_readers: int = 3, chunk: int | None = None):
+                 min_anchors: int = 3, chunk: int | None = None):
     """Weighted k-nearest-neighbour position, Eqs. (3.1)-(3.3) of Ozkaya (2011), weights corrected.
 
     ``rss_dbm``: ``(..., m)`` target RSSI vectors; ``fingerprints_dbm``: ``(C, m)`` or ``(..., C, m)``
@@ -100,7 +100,7 @@ def knn_position(rss_dbm, fingerprints_dbm, cells_m, k: int, weighting: str = "i
     ``k = C`` (all cells) is the weighted centroid used in the thesis's experiments.
 
     Missing readings: a NaN in ``rss_dbm`` is a reader not heard; that query is compared with the map over the
-    readers it heard, and with fewer than ``min(min_readers, m)`` heard its position is NaN (a query that heard
+    readers it heard, and with fewer than ``min(min_anchors, m)`` heard its position is NaN (a query that heard
     every reader is always compared). The map itself must be complete (a cell a reader never heard has no
     fingerprint to compare: fill it, or drop that reader); a NaN in it is an error naming the cell and reader.
     The batch axes of ``rss_dbm`` and of a batched map must broadcast against each other.
@@ -127,11 +127,11 @@ def knn_position(rss_dbm, fingerprints_dbm, cells_m, k: int, weighting: str = "i
                          "broadcast against each other") from None
     if isinstance(k, (bool, np.bool_)) or not isinstance(k, (int, np.integer)) or not 1 <= k <= n_cells:
         raise ValueError(f"k must be between 1 and the number of cells ({n_cells}), got {k}")
-    check_scalar("min_readers", min_readers, ge=1, integer=True)
+    check_scalar("min_anchors", min_anchors, ge=1, integer=True)
     if chunk is not None:
         check_scalar("chunk", chunk, ge=1, integer=True)
     if np.isnan(rss_dbm).any():
-        return _knn_by_heard_readers(rss_dbm, fingerprints_dbm, cells_m, k, weighting, min(int(min_readers), m),
+        return _knn_by_heard_readers(rss_dbm, fingerprints_dbm, cells_m, k, weighting, min(int(min_anchors), m),
                                      chunk)
     batch = np.broadcast_shapes(rss_dbm.shape[:-1], fingerprints_dbm.shape[:-2])
     n_queries = int(np.prod(batch, dtype=np.int64))
@@ -177,7 +177,7 @@ def _check_complete_map(fingerprints_dbm: np.ndarray) -> None:
                          "entries a reader never heard (e.g. with its sensitivity floor) or drop that reader")
 
 
-def _knn_by_heard_readers(rss_dbm, fingerprints_dbm, cells_m, k, weighting, min_readers, chunk):
+def _knn_by_heard_readers(rss_dbm, fingerprints_dbm, cells_m, k, weighting, min_anchors, chunk):
     """Group the queries by their pattern of heard readers and compare each group over those readers."""
     m = rss_dbm.shape[-1]
     batch = np.broadcast_shapes(rss_dbm.shape[:-1], fingerprints_dbm.shape[:-2])
@@ -188,10 +188,10 @@ def _knn_by_heard_readers(rss_dbm, fingerprints_dbm, cells_m, k, weighting, min_
     patterns, inverse = np.unique(~np.isnan(flat), axis=0, return_inverse=True)
     inverse = inverse.reshape(-1)
     for g, heard in enumerate(patterns):
-        if heard.sum() < min_readers:
+        if heard.sum() < min_anchors:
             continue
         sel = np.flatnonzero(inverse == g)
         group_maps = fingerprints_dbm[:, heard] if fingerprints_dbm.ndim == 2 else maps[sel][..., heard]
-        out[sel] = knn_position(flat[np.ix_(sel, heard)], group_maps, cells_m, k, weighting, min_readers=min_readers,
+        out[sel] = knn_position(flat[np.ix_(sel, heard)], group_maps, cells_m, k, weighting, min_anchors=min_anchors,
                                 chunk=chunk)
     return out.reshape(batch + (cells_m.shape[1],))

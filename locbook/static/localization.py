@@ -224,8 +224,8 @@ def _status(ok: np.ndarray, failure: str = "solver_failed") -> np.ndarray:
     return np.where(ok, "ok", failure).astype("<U19")
 
 
-def implausible_powers(power_dbm, model: PathLossModel, clamp_m: float) -> np.ndarray:
-    """Per problem ``(...)``: whether some heard power of ``power_dbm (..., m)`` exceeds the model's mean at the
+def implausible_powers(rss_dbm, model: PathLossModel, clamp_m: float) -> np.ndarray:
+    """Per problem ``(...)``: whether some heard power of ``rss_dbm (..., m)`` exceeds the model's mean at the
     near-field clamp ``clamp_m`` (a positive finite distance), ``P_0 - 10 n log10(clamp_m / d0)`` (walls and
     antenna heights only lower it), by more than :data:`IMPLAUSIBLE_SIGMAS` times the anchor's shadowing sigma.
 
@@ -238,7 +238,7 @@ def implausible_powers(power_dbm, model: PathLossModel, clamp_m: float) -> np.nd
     top = (log_distance_mean_dbm(clamp_m, np.asarray(model.ref_power_dbm, float), np.asarray(model.path_loss_exp, float),
                                  ref_distance_m=model.ref_distance_m)
            + IMPLAUSIBLE_SIGMAS * np.asarray(model.sigma_db, float))
-    return np.any(power_dbm > top, axis=-1)
+    return np.any(rss_dbm > top, axis=-1)
 
 
 def _goodness_of_fit(status: np.ndarray, cost: np.ndarray, model: PathLossModel, m: int, dim: int) -> np.ndarray:
@@ -845,11 +845,11 @@ def lateration_box_ls(anchors_m, distance_m, lower_m, upper_m, ref_index: int = 
                               _status(ok).reshape(batch))
 
 
-def _default_start(anchors_m, power_dbm, model: PathLossModel, tag_height_m=None) -> np.ndarray:
+def _default_start(anchors_m, rss_dbm, model: PathLossModel, tag_height_m=None) -> np.ndarray:
     """The convex start of :func:`rss_ml_position`: the linearized LS fix on the model's ranges. A problem
     whose ranges overflow (infinite) has no such fix: NaN."""
     with np.errstate(over="ignore"):
-        ranges = model.range_m(power_dbm)
+        ranges = model.range_m(rss_dbm)
     if np.all(np.isfinite(ranges)):
         return lateration_ls(anchors_m, ranges, tag_height_m=tag_height_m).position_m
     with np.errstate(over="ignore", invalid="ignore"):
@@ -910,7 +910,7 @@ def _newton_matrix(resid, jac, d2, pos, anchors, model, clamp_m):
     return np.where((eig_min > 1e-9 * np.trace(jtj, axis1=-2, axis2=-1))[..., None, None], full, jtj)
 
 
-def rss_ml_position(anchors_m, power_dbm, model: PathLossModel, initial_m=None, *,
+def rss_ml_position(anchors_m, rss_dbm, model: PathLossModel, initial_m=None, *,
                     max_iter: int = 100, tol_m: float = 1e-7, min_distance_m: float = 1e-3,
                     raise_on_failure: bool = False, min_anchors: int | None = None,
                     tag_height_m: float | None = None) -> LocalizationResult:
@@ -950,7 +950,7 @@ def rss_ml_position(anchors_m, power_dbm, model: PathLossModel, initial_m=None, 
     anchors_full = np.asarray(anchors_m, dtype=float)        # with heights: what recursive calls are given
     anchors_m = check_anchor_geometry(plan)
     m, dim = anchors_m.shape
-    power_dbm = _readings("power_dbm", power_dbm, m)
+    rss_dbm = _readings("rss_dbm", rss_dbm, m)
     _check_model(model, m)
     check_scalar("max_iter", max_iter, ge=1, integer=True)
     check_scalar("tol_m", tol_m, gt=0)
@@ -959,17 +959,17 @@ def rss_ml_position(anchors_m, power_dbm, model: PathLossModel, initial_m=None, 
     if initial_m is not None:
         initial_m = as_array("initial_m", initial_m, min_ndim=1, nan_ok=True)
         try:
-            initial_m = np.broadcast_to(initial_m, power_dbm.shape[:-1] + (dim,))
+            initial_m = np.broadcast_to(initial_m, rss_dbm.shape[:-1] + (dim,))
         except ValueError:
-            raise ValueError(f"initial_m must broadcast to {power_dbm.shape[:-1] + (dim,)}, got shape "
+            raise ValueError(f"initial_m must broadcast to {rss_dbm.shape[:-1] + (dim,)}, got shape "
                              f"{initial_m.shape}") from None
         no_start = np.isnan(initial_m)
         if np.any(no_start.any(axis=-1) & ~no_start.all(axis=-1)):
             raise ValueError("initial_m must be finite, or all NaN in a problem's row (no start: the default), got "
                              f"a partly NaN row {initial_m[no_start.any(axis=-1) & ~no_start.all(axis=-1)][0].tolist()}")
-    implausible = implausible_powers(power_dbm, model, max(float(min_distance_m), model.min_distance_m)).reshape(-1)
+    implausible = implausible_powers(rss_dbm, model, max(float(min_distance_m), model.min_distance_m)).reshape(-1)
     if implausible.any():             # those problems fail alone, before any arithmetic on their readings
-        flat, batch = power_dbm.reshape(-1, m), power_dbm.shape[:-1]
+        flat, batch = rss_dbm.reshape(-1, m), rss_dbm.shape[:-1]
         start = None if initial_m is None else initial_m.reshape(-1, dim)
         res = _solve_where(~implausible, batch, dim,
                            lambda sel: rss_ml_position(anchors_full, flat[sel], model,
@@ -978,11 +978,11 @@ def rss_ml_position(anchors_m, power_dbm, model: PathLossModel, initial_m=None, 
                                                        min_anchors=min_anchors, tag_height_m=tag_height_m),
                            "rss_ml_lm", "implausible_reading")
         return _raise_if_failed(res, raise_on_failure)
-    if np.isnan(power_dbm).any():
-        flat = power_dbm.reshape(-1, m)
+    if np.isnan(rss_dbm).any():
+        flat = rss_dbm.reshape(-1, m)
         start = None if initial_m is None else initial_m.reshape(-1, dim)
         res = _by_heard_anchors(
-            anchors_m, power_dbm, min_anchors,
+            anchors_m, rss_dbm, min_anchors,
             lambda heard, sel: rss_ml_position(
                 anchors_full[heard], flat[np.ix_(sel, heard)], _model_subset(model, heard, m),
                 None if start is None else start[sel], max_iter=max_iter, tol_m=tol_m,
@@ -990,23 +990,23 @@ def rss_ml_position(anchors_m, power_dbm, model: PathLossModel, initial_m=None, 
             "rss_ml_lm")
         return _raise_if_failed(res, raise_on_failure)
     if initial_m is None:
-        initial_m = _default_start(anchors_full, power_dbm, model, tag_height_m)
+        initial_m = _default_start(anchors_full, rss_dbm, model, tag_height_m)
     elif np.isnan(initial_m).any():     # rows without a start get the default one
         initial_m = np.array(initial_m)
         no_start = np.isnan(initial_m).all(axis=-1)
-        initial_m[no_start] = _default_start(anchors_full, power_dbm[no_start], model, tag_height_m)
-    batch, dim = power_dbm.shape[:-1], anchors_m.shape[1]
+        initial_m[no_start] = _default_start(anchors_full, rss_dbm[no_start], model, tag_height_m)
+    batch, dim = rss_dbm.shape[:-1], anchors_m.shape[1]
     pos = np.array(np.broadcast_to(initial_m, batch + (dim,)), dtype=float).reshape(-1, dim)
     startable = np.all(np.isfinite(pos), axis=-1)
     if not startable.all():           # no finite start: those problems fail alone
-        flat = power_dbm.reshape(-1, m)
+        flat = rss_dbm.reshape(-1, m)
         res = _solve_where(startable, batch, dim,
                            lambda sel: rss_ml_position(anchors_full, flat[sel], model, pos[sel], max_iter=max_iter,
                                                        tol_m=tol_m, min_distance_m=min_distance_m,
                                                        tag_height_m=tag_height_m),
                            "rss_ml_lm", "solver_failed")
         return _raise_if_failed(res, raise_on_failure)
-    power = power_dbm.reshape(-1, power_dbm.shape[-1])
+    power = rss_dbm.reshape(-1, rss_dbm.shape[-1])
     clamp_m = max(float(min_distance_m), model.min_distance_m)     # the model's near-field clamp
     with np.errstate(over="ignore", invalid="ignore"):     # a start so far away that its distances overflow
         resid, jac, d2 = _rss_residual_jacobian(pos, anchors_m, power, model, clamp_m, vertical)
@@ -1068,7 +1068,7 @@ def _check_model(model, m: int) -> None:
         raise ValueError(f"model.path_loss_exp must be positive, got {model.path_loss_exp!r}")
 
 
-def grid_ml_position(anchors_m, power_dbm, model: PathLossModel, grid_m, *,
+def grid_ml_position(anchors_m, rss_dbm, model: PathLossModel, grid_m, *,
                      chunk: int = 2048, min_anchors: int | None = None,
                      tag_height_m: float | None = None) -> LocalizationResult:
     """Grid maximum likelihood: the candidate point of ``grid_m`` ``(G, dim)`` with the smallest
@@ -1092,7 +1092,7 @@ def grid_ml_position(anchors_m, power_dbm, model: PathLossModel, grid_m, *,
     grid_m = as_array("grid_m", grid_m, ndim=2, trailing=(dim,))
     if grid_m.shape[0] < 1:
         raise ValueError("grid_m must hold at least one candidate point")
-    power = _readings("power_dbm", power_dbm, m)
+    power = _readings("rss_dbm", rss_dbm, m)
     _check_model(model, m)
     check_scalar("chunk", chunk, ge=1, integer=True)
     min_anchors = _min_anchors(min_anchors, dim, m)

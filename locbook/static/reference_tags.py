@@ -68,7 +68,7 @@ def pooled_sigma_db(residual_db, axis=(-2, -1), ddof: int = 0):
     return np.sqrt(np.where(dof > 0, total / np.where(dof > 0, dof, 1), np.nan))
 
 
-def calibrate_from_reference_tags(ref_rss_dbm, ref_positions_m, readers_m, *, walls_m=None,
+def calibrate_from_reference_tags(ref_rss_dbm, ref_positions_m, anchors_m, *, walls_m=None,
                                   wall_attenuation_db: float = 0.0,
                                   ref_power_bounds_dbm=OZKAYA_REF_POWER_BOUNDS_DBM,
                                   path_loss_exp_bounds=OZKAYA_PATH_LOSS_EXP_BOUNDS,
@@ -86,13 +86,13 @@ def calibrate_from_reference_tags(ref_rss_dbm, ref_positions_m, readers_m, *, wa
     raises :class:`ConvergenceError` if a fit does not reach an optimum.
     """
     check_scalar("wall_attenuation_db", wall_attenuation_db)
-    readers_m = as_array("readers_m", readers_m, ndim=2, trailing=(None, 2))
+    anchors_m = as_array("anchors_m", anchors_m, ndim=2, trailing=(None, 2))
     ref_positions_m = as_array("ref_positions_m", ref_positions_m, ndim=2, trailing=(None, 2))
     ref_rss_dbm = as_array("ref_rss_dbm", ref_rss_dbm, min_ndim=2, nan_ok=True,
-                           trailing=(ref_positions_m.shape[0], readers_m.shape[0]))
-    distance = pairwise_distance_m(ref_positions_m, readers_m, names=("ref_positions_m", "readers_m"))  # (K, m)
+                           trailing=(ref_positions_m.shape[0], anchors_m.shape[0]))
+    distance = pairwise_distance_m(ref_positions_m, anchors_m, names=("ref_positions_m", "anchors_m"))  # (K, m)
     wall_loss = (0.0 if walls_m is None
-                 else wall_attenuation_db * wall_crossings(ref_positions_m, readers_m, walls_m))
+                 else wall_attenuation_db * wall_crossings(ref_positions_m, anchors_m, walls_m))
     compensated = ref_rss_dbm + wall_loss                                           # (..., K, m)
     fit = fit_path_loss(np.broadcast_to(distance.T, compensated.shape[:-2] + distance.T.shape),
                         np.swapaxes(compensated, -1, -2),
@@ -109,7 +109,7 @@ def calibrate_from_reference_tags(ref_rss_dbm, ref_positions_m, readers_m, *, wa
         raise ConvergenceError(f"reference-tag calibration: the path-loss fit ended with status "
                                f"{fit.status!r}; no calibration is returned")
     ref, exp = fit.ref_power_dbm, fit.path_loss_exp                                 # (..., m)
-    expected = model_fingerprints(ref_positions_m, readers_m, PathLossModel(ref, exp, wall_attenuation_db=wall_attenuation_db),
+    expected = model_fingerprints(ref_positions_m, anchors_m, PathLossModel(ref, exp, wall_attenuation_db=wall_attenuation_db),
                                   walls_m)
     sigma = pooled_sigma_db(ref_rss_dbm - expected, ddof=sigma_ddof)
     return OnlineCalibration(ref, exp, sigma, expected, fit)

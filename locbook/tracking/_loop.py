@@ -114,7 +114,7 @@ def _stream_batch_shapes(meas, z):
     name = _stream_name(meas)
     if isinstance(meas, RssMeasurement):
         ch = meas.channel
-        return [(f"{name}.power_dbm", np.shape(z)[:-2]), (f"{name}.anchors_m", np.shape(meas.anchors_m)[:-3])] + \
+        return [(f"{name}.rss_dbm", np.shape(z)[:-2]), (f"{name}.anchors_m", np.shape(meas.anchors_m)[:-3])] + \
             [(f"{name}.channel.{v}", np.shape(getattr(ch, v))[:-1]) for v in ("ref_power_dbm", "path_loss_exp",
                                                                               "sigma_db")]
     shapes = [(f"{name}.z", np.shape(z)[:-2]), (f"{name}.R", np.shape(meas.R)[:-2])]

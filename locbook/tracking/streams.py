@@ -59,7 +59,7 @@ class RssMeasurement:
     and the UKF: ``h`` and its Jacobian are the one RSS model's (:class:`locbook.models.rss.RssModel`, evaluated by
     :func:`locbook.models.rss.rss_mean_jacobian`; Dogan Eq. (2.2)) with the near-field clamp :attr:`clamp_m`.
 
-    ``power_dbm``: ``batch + (T, m)``, NaN where an anchor gave no reading (a step without any reading is
+    ``rss_dbm``: ``batch + (T, m)``, NaN where an anchor gave no reading (a step without any reading is
     prediction only). ``channel``: its ``ref_power_dbm``, ``path_loss_exp`` and ``sigma_db`` may be scalars,
     per-anchor ``(m,)`` arrays, or carry batch axes ``batch + (1,)`` (several settings run as one batch).
     ``mode``: ``"parallel"`` (one stacked update, Table 3.4) or ``"serial"`` (scalar updates, each
@@ -79,7 +79,7 @@ class RssMeasurement:
     and ``position_index`` names the state's x and y only; the distances are 3-D.
     """
 
-    power_dbm: np.ndarray
+    rss_dbm: np.ndarray
     anchors_m: np.ndarray
     channel: PathLossModel
     position_index: np.ndarray
@@ -119,11 +119,11 @@ class RssMeasurement:
     def __post_init__(self):
         check_choice("mode", self.mode, RSS_UPDATE_MODES)
         check_choice("order", self.order, SERIAL_ORDERS)
-        power = as_array("RssMeasurement.power_dbm", self.power_dbm, min_ndim=2, nan_ok=True)
+        power = as_array("RssMeasurement.rss_dbm", self.rss_dbm, min_ndim=2, nan_ok=True)
         anchors = as_array("RssMeasurement.anchors_m", self.anchors_m, min_ndim=2)
         m, dim = anchors.shape[-2], anchors.shape[-1]
         if power.shape[-1] != m:
-            raise ValueError(f"RssMeasurement.power_dbm has {power.shape[-1]} anchors on its last axis, "
+            raise ValueError(f"RssMeasurement.rss_dbm has {power.shape[-1]} anchors on its last axis, "
                              f"anchors_m has {m}")
         if anchors.ndim > 2 and anchors.shape[-3] not in (1, power.shape[-2]):
             raise ValueError(f"RssMeasurement.anchors_m per step must have shape batch + (T, m, dim) with T = "
@@ -352,4 +352,4 @@ def _stream_name(meas) -> str:
 
 def _stream_readings(meas):
     """A stream's readings ``batch + (T, m)``."""
-    return meas.power_dbm if isinstance(meas, RssMeasurement) else meas.z
+    return meas.rss_dbm if isinstance(meas, RssMeasurement) else meas.z

@@ -182,8 +182,7 @@ def _case(kind, rng):
     elif kind == "per_anchor_channel_and_anchor_sigma":
         ch2 = lb.PathLossModel(np.array([-40.0, -42.0, -38.0, -41.0, -39.0]), np.array([2.0, 2.5, 3.0, 2.2, 2.7]),
                                np.array([2.0, 3.0, 4.0, 2.5, 3.5]), min_distance_m=0.5)
-        streams = [lb.RssMeasurement(power, anchors, ch2, model.position_index, anchor_sigma_m=0.3,
-                                     min_distance_m=0.2),
+        streams = [lb.RssMeasurement(power, anchors, ch2, model.position_index, anchor_sigma_m=0.3),
                    lb.RssMeasurement(power, anchors, ch2, model.position_index, mode="serial", anchor_sigma_m=0.3)]
     elif kind == "batched_channel":
         ch3 = lb.PathLossModel(np.linspace(-42, -38, B)[:, None], np.linspace(2, 3, B)[:, None], 3.0)

@@ -3,6 +3,7 @@ with RssModel's mean and Jacobian, the UKF's h is RssModel's mean, the static bo
 (closed form of Patwari et al. 2003, Eq. (5) as the oracle), the RSS ML fix is a stationary point of the model's
 cost, and the compiled row kernel is the numpy formula, also inside the near-field clamp (where the clamped mean is
 flat: its derivative, its information and the anchor-sigma inflation are 0)."""
+import dataclasses
 import numpy as np
 import pytest
 from filterpy.kalman import ExtendedKalmanFilter
@@ -15,8 +16,11 @@ ANCHORS = np.array([[0.0, 0.0], [8.0, 0.5], [1.0, 7.0], [7.5, 6.0]])
 CHANNEL = lb.PathLossModel(np.array([-44.0, -47.0, -50.0, -46.0]), np.array([2.0, 2.4, 2.8, 1.9]), 3.0)
 
 
-def _stream(z, mode="parallel", **kw):
-    return lb.RssMeasurement(z, ANCHORS, CHANNEL, [0, 1], mode=mode, **kw)
+CLAMPED = dataclasses.replace(CHANNEL, min_distance_m=1e-3)
+
+
+def _stream(z, mode="parallel", channel=CHANNEL, **kw):
+    return lb.RssMeasurement(z, ANCHORS, channel, [0, 1], mode=mode, **kw)
 
 
 @pytest.mark.parametrize("x_pos", [[3.0, 2.5], [0.0004, 0.0003]])        # the second inside the 1 mm clamp
@@ -24,9 +28,9 @@ def test_parallel_ekf_update_is_filterpys_with_the_models_mean_and_jacobian(x_po
     x0 = np.array([x_pos[0], x_pos[1], 0.2, -0.1])
     P0 = np.diag([1.0, 1.5, 0.3, 0.3])
     z = np.array([[-60.0, -62.0, -68.0, -59.0]])
-    res = lb.extended_kalman_filter(np.eye(4), np.zeros((4, 4)), x0, P0, _stream(z), predict_first=False)
-    model = lb.RssModel(ANCHORS, lb.PathLossModel(CHANNEL.ref_power_dbm, CHANNEL.path_loss_exp, CHANNEL.sigma_db,
-                                                  min_distance_m=1e-3))
+    res = lb.extended_kalman_filter(np.eye(4), np.zeros((4, 4)), x0, P0, _stream(z, channel=CLAMPED),
+                                    predict_first=False)
+    model = lb.RssModel(ANCHORS, CLAMPED)
 
     def hjac(x):
         H = np.zeros((4, 4))
@@ -42,9 +46,21 @@ def test_parallel_ekf_update_is_filterpys_with_the_models_mean_and_jacobian(x_po
         assert np.all(hjac(x0)[0] == 0.0)
 
 
-def test_stream_mean_and_jacobian_are_the_models_with_the_larger_clamp():
+@pytest.mark.parametrize("mode", ["parallel", "serial"])
+def test_a_state_on_an_anchor_without_a_clamp_is_a_named_error_and_a_clamp_makes_the_ekf_finite(mode):
+    x0 = np.array([8.0, 0.5, 0.0, 0.0])                          # exactly on anchor 1, its reading the strongest
+    z = np.array([[-60.0, -50.0, -68.0, -59.0]])                 # (the serial update linearises there first)
+    args = (np.eye(4), np.zeros((4, 4)), x0, np.eye(4))
+    for run in (lb.extended_kalman_filter, lb.unscented_kalman_filter):    # the UKF's centre sigma point is x0
+        with pytest.raises(lb.SingularCovarianceError, match="on an anchor at step 0 .*no near-field clamp"):
+            run(*args, _stream(z, mode), predict_first=False)
+    res = lb.extended_kalman_filter(*args, _stream(z, mode, channel=CLAMPED), predict_first=False)
+    assert np.isfinite(res.x).all()
+
+
+def test_stream_mean_and_jacobian_are_the_models_with_the_channels_clamp():
     ch = lb.PathLossModel(CHANNEL.ref_power_dbm, CHANNEL.path_loss_exp, CHANNEL.sigma_db, min_distance_m=0.5)
-    meas = lb.RssMeasurement(np.zeros((1, 4)), ANCHORS, ch, [0, 1], min_distance_m=1e-3)
+    meas = lb.RssMeasurement(np.zeros((1, 4)), ANCHORS, ch, [0, 1])
     assert meas.clamp_m == 0.5
     model = lb.RssModel(ANCHORS, ch)
     pos = np.array([[0.3, 0.1], [4.0, 3.0], [7.6, 6.2], [8.0, 0.5]])     # inside, outside, inside, on an anchor
@@ -55,8 +71,8 @@ def test_stream_mean_and_jacobian_are_the_models_with_the_larger_clamp():
 
 
 def test_ukf_h_is_the_models_mean():
-    meas = _stream(np.zeros((1, 4)))
-    model = lb.RssModel(ANCHORS, lb.PathLossModel(CHANNEL.ref_power_dbm, CHANNEL.path_loss_exp, 3.0, min_distance_m=1e-3))
+    meas = _stream(np.zeros((1, 4)), channel=CLAMPED)
+    model = lb.RssModel(ANCHORS, CLAMPED)
     sigma_points = np.random.default_rng(3).uniform(-1, 9, (9, 4))
     sigma_points[0, :2] = ANCHORS[2] + 1e-4                                # one within the clamp
     np.testing.assert_array_equal(unscented._rss_function(meas, 0)(sigma_points),
@@ -93,8 +109,8 @@ def test_rss_ml_fix_is_a_stationary_point_of_the_models_cost():
 @pytest.mark.parametrize("offset", [[2.0, 1.0], [3e-4, -2e-4], [0.0, 0.0]])      # outside, inside the clamp, on it
 def test_compiled_row_kernel_is_the_numpy_model(offset):
     clamp, sigma, anchor_sigma, ple, p0 = 1e-3, 3.0, 0.4, 2.4, -47.0
-    meas = lb.RssMeasurement(np.zeros((1, 4)), ANCHORS, lb.PathLossModel(p0, ple, sigma), [0, 1],
-                             min_distance_m=clamp, anchor_sigma_m=anchor_sigma)
+    meas = lb.RssMeasurement(np.zeros((1, 4)), ANCHORS, lb.PathLossModel(p0, ple, sigma, min_distance_m=clamp), [0, 1],
+                             anchor_sigma_m=anchor_sigma)
     anchor = ANCHORS[1]
     x = np.zeros((4, 1))
     x[:2, 0] = anchor + offset

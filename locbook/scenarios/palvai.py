@@ -147,11 +147,11 @@ def ekf_path(setup: Setup, anchors_m, rss_dbm, x0, P0, *, process_sd_m: float = 
         if variant != "corrected":
             raise ValueError("the batch schedule is offered for the corrected EKF only")
         meas = RssMeasurement(np.asarray(rss_dbm)[:, None, :], s[:, None], setup.channel, np.arange(dim),
-                              anchor_sigma_m=setup.receiver_sigma_m if inflate else 0.0, min_distance_m=1.0)
+                              anchor_sigma_m=setup.receiver_sigma_m if inflate else 0.0)
         return _with_flags(extended_kalman_filter(F, Q, x0, P0, [meas]), with_divergence)
     if variant == "corrected":
         meas = RssMeasurement(np.asarray(rss_dbm)[..., None], s[:, :, None, :], setup.channel, np.arange(dim),
-                              anchor_sigma_m=setup.receiver_sigma_m if inflate else 0.0, min_distance_m=1.0)
+                              anchor_sigma_m=setup.receiver_sigma_m if inflate else 0.0)
         return _with_flags(extended_kalman_filter(F, Q, x0, P0, [meas]), with_divergence)
     # printed form: one location per step through the "diagonal" of an (N, N) stream (NaN off the diagonal)
     z = np.full((R_, N, N), np.nan)

@@ -22,6 +22,8 @@ __all__ = ["LinearMeasurement", "RssMeasurement", "NonlinearMeasurement", "MEASU
            "RSS_UPDATE_MODES", "SERIAL_ORDERS"]
 
 RSS_UPDATE_MODES = ("parallel", "serial")
+_ON_ANCHOR = ("the state is on an anchor at step {step} and the channel has no near-field clamp (min_distance_m = 0), "
+              "where the log-distance mean is infinite: give the channel a min_distance_m (e.g. 1e-3 m)")
 SERIAL_ORDERS = ("descending", "given")
 
 
@@ -64,9 +66,11 @@ class RssMeasurement:
     per-anchor ``(m,)`` arrays, or carry batch axes ``batch + (1,)`` (several settings run as one batch).
     ``mode``: ``"parallel"`` (one stacked update, Table 3.4) or ``"serial"`` (scalar updates, each
     re-linearised at the state updated so far, Table 3.3, in ``order`` ``"descending"`` RSS as printed or
-    the ``"given"`` anchor order). ``min_distance_m``: the stream's near-field clamp, used when the channel's
-    ``min_distance_m`` is smaller (:attr:`clamp_m`; the default 1 mm keeps ``h`` finite at an anchor; within the clamp
-    the mean is flat and its Jacobian 0).
+    the ``"given"`` anchor order). The near-field clamp is the channel's ``min_distance_m`` (:attr:`clamp_m`; within
+    it the mean is flat and its Jacobian 0), so the stream and :class:`~locbook.models.rss.RssModel` are one model.
+    A channel without a clamp (``min_distance_m = 0``) has an infinite mean on an anchor: a state (or sigma point)
+    exactly on one raises :class:`~locbook.errors.SingularCovarianceError` naming the step; give the channel a clamp
+    (e.g. 1 mm) where the track can pass over an anchor.
 
     ``anchors_m``: fixed anchors ``(m, dim)``, or receiver positions per step ``batch + (T, m, dim)`` (a moving
     receiver, or measurement locations drawn per Monte-Carlo run: Palvai 2008, Eq. (4.28)). ``anchor_sigma_m``:
@@ -85,7 +89,6 @@ class RssMeasurement:
     position_index: np.ndarray
     mode: str = "parallel"
     order: str = "descending"
-    min_distance_m: float = 1e-3
     anchor_sigma_m: float = 0.0
     tag_height_m: float | None = None
 
@@ -102,8 +105,8 @@ class RssMeasurement:
 
     @property
     def clamp_m(self) -> float:
-        """The model's near-field clamp: the larger of the channel's ``min_distance_m`` and the stream's."""
-        return max(float(self.min_distance_m), float(self.channel.min_distance_m))
+        """The model's near-field clamp: the channel's ``min_distance_m``."""
+        return float(self.channel.min_distance_m)
 
     def variance_db2(self, distance_m, path_loss_exp, sigma_db):
         """Measurement variance per reading: ``sigma^2``, inflated for ``anchor_sigma_m`` (class docstring) by
@@ -144,7 +147,6 @@ class RssMeasurement:
             if value.ndim and value.shape[-1] not in (1, m):
                 raise ValueError(f"RssMeasurement.channel.{name} must be a scalar or end in (1,) or ({m},) "
                                  f"(one per anchor), got shape {value.shape}")
-        check_scalar("min_distance_m", self.min_distance_m, gt=0)
 
 
 @dataclass(frozen=True)
@@ -177,11 +179,17 @@ class NonlinearMeasurement:
 MEASUREMENT_TYPES = (LinearMeasurement, RssMeasurement, NonlinearMeasurement)
 
 
-def _rss_mean_jacobian(meas: RssMeasurement, offset_m, ref_power_dbm, path_loss_exp):
+def _rss_mean_jacobian(meas: RssMeasurement, offset_m, ref_power_dbm, path_loss_exp, batch_ndim: int | None = None):
     """The stream's model at offsets ``p - a_j`` (with the height column when the tag height is known): mean, Jacobian,
-    distances (not clamped)."""
+    distances (not clamped). Without a clamp, a state on an anchor has no finite mean: a named error (the runs
+    ``batch_ndim`` leading axes; the rest are reduced)."""
     mean, grad, d2 = rss_mean_jacobian(offset_m, ref_power_dbm, path_loss_exp, ref_distance_m=meas.channel.ref_distance_m,
                                        min_distance_m=meas.clamp_m)
+    if meas.clamp_m == 0 and not np.all(d2 != 0):
+        on = d2 == 0
+        if batch_ndim is not None:
+            on = on.reshape(on.shape[:batch_ndim] + (-1,)).any(axis=-1)
+        raise _Singular(on, _ON_ANCHOR)
     return mean, grad, np.sqrt(d2)
 
 
@@ -191,7 +199,8 @@ def _rss_parallel_update(x, P, z, meas: RssMeasurement, step: int = 0, want: boo
     idx = np.asarray(meas.position_index)
     ch = meas.channel
     offset = meas.lift(x[..., idx])[..., None, :] - meas.anchors_at(step)
-    h, grad, d = _rss_mean_jacobian(meas, offset, np.asarray(ch.ref_power_dbm), np.asarray(ch.path_loss_exp))
+    h, grad, d = _rss_mean_jacobian(meas, offset, np.asarray(ch.ref_power_dbm), np.asarray(ch.path_loss_exp),
+                                    x.ndim - 1)
     m = z.shape[-1]
     H = np.zeros(grad.shape[:-1] + (x.shape[-1],))
     H[..., idx] = grad[..., :idx.size]
@@ -272,7 +281,7 @@ def _rss_serial_update(x, P, z, meas: RssMeasurement, step: int = 0, want: bool 
             continue
         pick = lambda arr: np.take_along_axis(arr, a[..., None], -1)[..., 0]
         diff = meas.lift(x[..., idx]) - _pick_anchor(anchors, a)
-        hx, grad, d = _rss_mean_jacobian(meas, diff, pick(p0), pick(ple))      # the batch axes in the anchor's place
+        hx, grad, d = _rss_mean_jacobian(meas, diff, pick(p0), pick(ple), x.ndim - 1)   # the batch axes in the anchor's place
         h_row = np.zeros(x.shape)
         h_row[..., idx] = grad[..., :idx.size]
         var = meas.variance_db2(d, pick(ple), np.sqrt(pick(sigma2)))

@@ -44,7 +44,7 @@ from ._linalg import (_UPDATE_OVERFLOW, _gaussian_log_likelihood, _inv_small, _l
 from ._loop import _check_outputs, _run, _setup, _streams
 from .functional import _missing_as_nan, _Out
 from .results import DIVERGENCE_PROBABILITY, DIVERGENCE_WINDOW, KalmanResult, _check_guard, _flag
-from .streams import (LinearMeasurement, NonlinearMeasurement, RssMeasurement, _pick_anchor, _serial_linear,
+from .streams import (_ON_ANCHOR, LinearMeasurement, NonlinearMeasurement, RssMeasurement, _pick_anchor, _serial_linear,
                       _serial_order)
 
 __all__ = ["UKF_WEIGHTS", "UnscentedWeights", "unscented_weights", "sigma_points", "unscented_transform",
@@ -253,13 +253,21 @@ def _rss_function(meas: RssMeasurement, step: int, anchor=None):
         if anchor is None:
             a = anchors if anchors.ndim == 2 else anchors[..., None, :, :]        # batch + (1, m, dim)
             diff = pos[..., None, :] - a                                        # batch + (N, m, dim)
-            return rss_mean_jacobian(diff, p0, ple, ref_distance_m=ch.ref_distance_m, min_distance_m=meas.clamp_m,
-                                     jacobian=False)[0]
-        diff = pos - _pick_anchor(anchors, anchor)[..., None, :]                 # batch + (N, dim)
-        pick = lambda v: np.take_along_axis(np.broadcast_to(np.asarray(v, float), anchor.shape + (anchors.shape[-2],)),
-                                            anchor[..., None], -1)      # batch + (1,)
-        return rss_mean_jacobian(diff, pick(ch.ref_power_dbm), pick(ch.path_loss_exp), ref_distance_m=ch.ref_distance_m,
-                                 min_distance_m=meas.clamp_m, jacobian=False)[0][..., None]
+            mean, _, d2 = rss_mean_jacobian(diff, p0, ple, ref_distance_m=ch.ref_distance_m,
+                                            min_distance_m=meas.clamp_m, jacobian=False)
+        else:
+            diff = pos - _pick_anchor(anchors, anchor)[..., None, :]             # batch + (N, dim)
+            pick = lambda v: np.take_along_axis(np.broadcast_to(np.asarray(v, float),
+                                                                anchor.shape + (anchors.shape[-2],)),
+                                                anchor[..., None], -1)  # batch + (1,)
+            mean, _, d2 = rss_mean_jacobian(diff, pick(ch.ref_power_dbm), pick(ch.path_loss_exp),
+                                            ref_distance_m=ch.ref_distance_m, min_distance_m=meas.clamp_m,
+                                            jacobian=False)
+            mean = mean[..., None]
+        if meas.clamp_m == 0 and not np.all(d2 != 0):  # no clamp: the mean is infinite on an anchor
+            on = d2 == 0
+            raise _Singular(on.reshape(on.shape[:X.ndim - 2] + (-1,)).any(axis=-1), _ON_ANCHOR)
+        return mean
     return h
 
 

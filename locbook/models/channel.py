@@ -116,8 +116,9 @@ def log_distance_mean_dbm(distance_m, ref_power_dbm, path_loss_exp, *, ref_dista
 
 def log_distance_gradient(offset_m, path_loss_exp, *, min_distance_m: float = 0.0, d2_m2=None):
     """Gradient of :func:`log_distance_mean_dbm` w.r.t. the position, ``-(10 n / ln 10) (p - a) / d^2``
-    ``(..., m, dim)``, from the offsets ``p - a`` ``(..., m, dim)`` (note 000, section 2.6; the thesis does not print
-    it); ``d2_m2`` ``(..., m)``: the squared distances when the caller has them (e.g. 3-D with a height column).
+    ``(..., m, dim)``, from the offsets ``p - a`` ``(..., m, dim)`` (the EKF Jacobian of Dogan 2015, Table 3.2, which
+    the thesis does not print); ``d2_m2`` ``(..., m)``: the squared distances when the caller has them (e.g. 3-D
+    with a height column).
 
     Within the near-field clamp (``d < min_distance_m``) the mean is ``P_0 - 10 n log10(d_min / d0)``, a constant,
     so its gradient is exactly 0 there (the reading carries no information about the position): filters and Newton
@@ -222,7 +223,7 @@ class PathLossModel:
 
     def range_bias_factor(self):
         """Mean bias of :meth:`range_m` under shadowing: ``E[d_hat]/d = exp((sigma ln10/(10 n))^2/2)``
-        (note 000, section 2.2)."""
+        (the range of Dogan 2015, Eq. (2.3), is log-normal)."""
         self._positive_exponent("range_bias_factor")
         s = np.asarray(self.sigma_db) * np.log(10.0) / (10.0 * np.asarray(self.path_loss_exp))
         return np.exp(0.5 * s**2)
@@ -233,7 +234,7 @@ RANGE_BIAS_TARGETS = ("median", "mean", "squared")
 
 def log_normal_range_moments(sigma_db, path_loss_exp) -> dict:
     """Moments of the range inverted from a log-normally shadowed power, ``d = d_0 exp(k)``, ``k ~ N(0, sigma_k^2)``,
-    ``sigma_k = ln(10) sigma / (10 n)`` (Palvai 2008, Eqs. (2.35)-(2.38); note 002 s.2.7): ``sigma_k``,
+    ``sigma_k = ln(10) sigma / (10 n)`` (Palvai 2008, Eqs. (2.35)-(2.38)): ``sigma_k``,
     ``mean_ratio`` ``E[d]/d_0 = exp(sigma_k^2 / 2)``, ``mean_square_ratio`` ``E[d^2]/d_0^2 = exp(2 sigma_k^2)`` and
     ``sd_ratio`` ``sd(d)/d_0 = sqrt(exp(2 sigma_k^2) - exp(sigma_k^2))``. Arrays broadcast."""
     sigma = as_array("sigma_db", sigma_db)
@@ -246,7 +247,8 @@ def log_normal_range_moments(sigma_db, path_loss_exp) -> dict:
 
 
 def correct_range_bias(distance_m, sigma_db, path_loss_exp, target: str = "mean"):
-    """Ranges inverted from shadowed powers, corrected for the log-normal bias (note 002 s.2.7): ``"median"``
+    """Ranges inverted from shadowed powers, corrected for the log-normal bias (Palvai 2008,
+    Eqs. (2.35)-(2.38); the thesis does not correct it, an extension): ``"median"``
     leaves them (already median-unbiased), ``"mean"`` divides by ``exp(sigma_k^2 / 2)`` (mean-unbiased ``d``),
     ``"squared"`` divides by ``exp(sigma_k^2)`` so that ``d^2`` is mean-unbiased (what linearised lateration
     uses). NaN (not heard) stays NaN."""
@@ -270,7 +272,8 @@ def correlated_shadowing_db(points_m, sigma_db: float, decorrelation_m: float,
 
     Covariance ``sigma^2 exp(-|p_i - p_j| / d_c)`` between points ``(P, dim)``; returns draws of
     shape ``size + (P,)``. Used where a source needs shadowing that averaging over packets does not
-    remove (note 001, F5.1; note 004, synthetic testbed). ``decorrelation_m = 0`` gives i.i.d. draws.
+    remove (our synthetic stand-ins for Gudipati 2017's Fig. 5.1 calibration walk and for
+    Ozkaya 2011's test bed, Sec. 7.3). ``decorrelation_m = 0`` gives i.i.d. draws.
     """
     points_m = np.atleast_2d(as_array("points_m", points_m))
     check_scalar("sigma_db", sigma_db, ge=0)
@@ -291,10 +294,10 @@ def attenuation_bursts_db(shape, probability: float, loss_range_db: tuple[float,
     uniformly from ``loss_range_db = (low, high)`` (both >= 0), else no loss.
 
     A burst drawn per (receiver, step) and added to every transmitter that receiver hears at that step models a
-    body or object next to the receiver shading it as a whole ("reader-wide" attenuation: note 004, s.9, the
-    synthetic test bed of Ozkaya 2011); the caller broadcasts the ``shape`` draw over the transmitters. Returns
-    an array of ``shape``: ``-U(low, high)`` where a burst occurs, ``0`` elsewhere. The expected value is
-    ``-probability (low + high) / 2``.
+    body or object next to the receiver shading it as a whole ("reader-wide" attenuation: our synthetic stand-in for
+    the obstructed readers of Ozkaya 2011, Sec. 7.3, Tables 7.38 and 7.44); the caller broadcasts the ``shape``
+    draw over the transmitters. Returns an array of ``shape``: ``-U(low, high)`` where a burst occurs, ``0``
+    elsewhere. The expected value is ``-probability (low + high) / 2``.
     """
     check_scalar("probability", probability, ge=0, le=1)
     if len(loss_range_db) != 2:

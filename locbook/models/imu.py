@@ -2,14 +2,14 @@
 body-to-world rotation and dead reckoning (Gudipati 2017, Secs. 3.3 and 4.1).
 
 Sensor models, as printed (Eqs. (3.4)-(3.6)), for a level sensor (gravity is on the vertical axis, so only the
-residual bias of the horizontal axes remains, note 001 s.2.3):
+residual bias of the horizontal axes remains, Sec. 3.3):
 
     accelerometer:  acc_t = a_t - b_a + v_a,   v_a ~ N(0, sigma_a^2)     (body frame, per axis)
     gyroscope:      y_t = omega_t - b_g + v_g, v_g ~ N(0, sigma_g^2)
 
 Calibration (Sec. 3.3): average samples taken while the node is stationary; during operation subtract that
-mean (it estimates ``-b``). The thesis never rotates body-frame readings by the heading (note 001, s.5 point
-2); locbook rotates by default (``frame="body"``) and keeps the literal reading (``frame="world"``: the readings
+mean (it estimates ``-b``). The thesis never rotates body-frame readings by the heading (Secs. 3.3,
+4.1); locbook rotates by default (``frame="body"``) and keeps the literal reading (``frame="world"``: the readings
 are taken as world-frame accelerations) as a flagged option.
 
 Dead reckoning (Sec. 4.1): integrate acceleration to velocity and velocity to position (trapezoid rule by

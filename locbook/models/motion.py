@@ -15,7 +15,8 @@ over a step (the "discrete white noise" model, Bar-Shalom et al. 2001, Sec. 6.3.
 Any other Q can be passed to the filters directly.
 
 For CV, ``G_axis = [dt^2/2, dt]^T``: the two-axis generalisation of B_KF in Eq. (9) of George and
-Vadivukkarasi (document 003, note section 2.6 point 5). ``noise="continuous"`` gives the integrated
+Vadivukkarasi, whose Q is not printed ("tuned to minimise C") and whose B_KF drives both axes with one
+scalar acceleration; the per-axis G is our choice. ``noise="continuous"`` gives the integrated
 continuous white-noise form instead (``q`` then is a power spectral density).
 
 State layout is explicit, because the sources differ:
@@ -153,7 +154,8 @@ class KinematicModel:
         return np.asarray(state)[..., self.position_index]
 
     def position_measurement_matrix(self) -> np.ndarray:
-        """H with ``z = position + v`` (document 003: H = [[1,0,0,0],[0,1,0,0]], note 2.6 point 3)."""
+        """H with ``z = position + v`` (George and Vadivukkarasi do not print H; their Z_k is the
+        2-D fix of Eq. (8), so H = [[1,0,0,0],[0,1,0,0]])."""
         return self.derivative_measurement_matrix(0)
 
     def state_from(self, position, velocity=None, acceleration=None):
@@ -192,7 +194,7 @@ class HeadingKinematicModel:
     """Planar nearly-constant-acceleration motion with two angular states (Gudipati 2017, Sec. 3.2).
 
     The thesis prints an 8-D state ``[x, y, vx, vy, ax, ay, theta_x, theta_y]`` but 6 x 6 matrices A (3.2) and
-    Q (3.3) (note 001, s.5 point 1). The 6-D block is :class:`KinematicModel` (order 2, derivative-major as
+    Q (3.3) (Sec. 3.2). The 6-D block is :class:`KinematicModel` (order 2, derivative-major as
     printed, ``noise="wiener"``: ``Q = q G G^T`` with ``G = [dt^2/2, dt, 1]`` per axis, Eq. (3.3); ``q`` is the
     variance of the acceleration increment per step, (m/s^2)^2). The angular block is
 
@@ -255,7 +257,8 @@ class HeadingKinematicModel:
         return np.asarray(state)[..., self.position_index]
 
     def position_measurement_matrix(self) -> np.ndarray:
-        """H = [I_2 0] (a position fix as the measurement, note 001 s.5 point 13)."""
+        """H = [I_2 0] (a position fix as the measurement: our reading of the
+        thesis's "linear Kalman filter", whose measurement model Sec. 5.3 does not state)."""
         h = np.zeros((2, 8))
         h[[0, 1], [0, 1]] = 1.0
         return h
@@ -277,7 +280,8 @@ class HeadingKinematicModel:
 def reflect_into_box(position_m, lower_m, upper_m):
     """Fold positions ``(..., dim)`` back into the box ``[lower, upper]`` by mirror reflection at its
     walls (repeatedly, for steps longer than the box). Used for targets and particles confined to a room
-    (Ozkaya 2011 simulations; note 004, section 4.3: "kept inside the room by reflection").
+    (Ozkaya 2011, Sec. 7.2 simulations: the boundary handling is not stated; reflection reproduces the
+    printed tables).
     """
     lower = as_array("lower_m", lower_m)
     width = as_array("upper_m", upper_m) - lower

@@ -247,7 +247,8 @@ class RssModel:
         return mean
 
     def jacobian(self, positions_m, step: int = 0) -> np.ndarray:
-        """``dh_j/dp = -(10 n_j / ln 10) (p - a_j) / d_j^2`` ``(R|1, P, m, dim)`` (note 000, section 2.6), with
+        """``dh_j/dp = -(10 n_j / ln 10) (p - a_j) / d_j^2`` ``(R|1, P, m, dim)`` (the EKF Jacobian of Dogan 2015,
+        Table 3.2, not printed there), with
         ``d_j`` the 3-D distance when the anchors have heights. Walls add a piecewise-constant term (zero
         derivative almost everywhere). Within the near-field clamp (``d_j < d_min``) the mean
         ``P_0 - 10 n log10(d_min / d0)`` is constant, so the derivative is exactly 0 there

@@ -5,11 +5,11 @@ or one per Monte-Carlo run) and two ways to make one along a waypoint path.
   (start and stop at rest). Gives every quantity the inertial sensors see: position, velocity, acceleration
   (tangential plus centripetal), heading and yaw rate, in closed form at every sample, so simulated accelerometer
   and gyroscope readings are exact derivatives of the path. Used where a source names a path but never prints it
-  (Gudipati 2017's "linear path" and "U-path", note 001 s.3.6): the waypoints, turn radius, speed and acceleration
+  (Gudipati 2017's "linear path" and "U-path", Sec. 5.3): the waypoints, turn radius, speed and acceleration
   are then named, documented parameters.
 - :func:`polyline_trajectory`: sharp corners walked at constant speed (optionally after a uniform ramp from rest),
   the velocity turning within one step, so the acceleration is the backward difference of the velocity (Dogan 2015's
-  walk, note 000 A1).
+  walk of Fig. 3.1, whose coordinates are not printed).
 """
 from __future__ import annotations
 
@@ -195,7 +195,7 @@ def waypoint_trajectory(waypoints_m, *, speed_m_s: float, accel_m_s2: float, dt_
 def polyline_trajectory(waypoints_m, *, speed_m_s: float, dt_s: float, start: str = "moving", ramp_s: float = 2.0,
                         rss_every: int = 1) -> Trajectory:
     """Walk the polyline ``waypoints_m`` ``(K, 2)`` at constant speed ``speed_m_s``, sampled every ``dt_s`` (Dogan
-    2015 note 000, A1), RSS read every ``rss_every``-th sample.
+    2015, Fig. 3.1, path not printed), RSS read every ``rss_every``-th sample.
 
     ``start="rest"``: the speed ramps up uniformly over ``ramp_s``; ``"moving"``: at speed from t = 0. The walk lasts
     ``length / speed + ramp_s / 2`` (rounded to whole samples) and does not stop at the end. The velocity turns

@@ -8,8 +8,8 @@ information of the position p is (Patwari et al. 2003, Eq. (5); Ozkaya 2011, App
 and any unbiased estimator has ``E|p_hat - p|^2 >= tr J^{-1}`` (Ozkaya Eq. (A.5): (F_xx + F_yy) / det F).
 
 Ozkaya's Appendix A prints ``d_j^2`` in the denominators (Eqs. (A.10)-(A.12)), which makes the bound
-dimensionless and scale-invariant; it is kept as ``form="ozkaya_printed"`` (flagged; note 004, section
-3.9) because the thesis's CRLB numbers were computed with it (with n = 2).
+dimensionless and scale-invariant; it is kept as ``form="ozkaya_printed"`` (flagged) because, with
+n = 2, it reproduces the thesis's CRLB numbers (our finding; the simulations themselves use n = 2.3).
 """
 from __future__ import annotations
 
@@ -42,7 +42,8 @@ def rss_position_information(position_m, anchors_m, path_loss_exp, sigma_db, for
                              min_distance_m: float = 0.0, height_offset_m: float = 0.0, heard=None):
     """``beta^2 sum_j (p - a_j)(p - a_j)^T / d_j^4``, ``beta = 10 n / (sigma ln 10)``, for any anchors ``(m, 2)``.
 
-    ``E[1/d^2]`` diverges for position densities positive at an anchor (note 000 s.2.10), so two regularisations
+    ``E[1/d^2]`` diverges for position densities positive at an anchor (so the sample average of Dogan 2015,
+    Eq. (4.22), has infinite variance), so two regularisations
     are offered: ``height_offset_m`` (antenna height difference, a scalar or one per anchor,
     ``d^2 = |p - a|^2 + h^2``, the exact information of that model, e.g. anchors near the ceiling and a tag at a
     known height) and ``min_distance_m`` (the near-field clamp of the model, ``max(d, d_min)`` in the law: its mean

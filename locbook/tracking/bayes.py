@@ -5,7 +5,8 @@ Both run the recursion of Ozkaya (2011), Eqs. (4.1)-(4.5),
 
     p(L_t | s_1:t)  ~  p(s_t | L_t)  integral p(L_t | L_t-1) p(L_t-1 | s_1:t-1) dL_t-1,
 
-with the RSS likelihood of independent readers (Sec. 5, Eq. (5.11) sign corrected; note 004, section 3.1) given by
+with the RSS likelihood of independent readers (Ch. 5, Eq. (5.11), whose wall term has the wrong sign in
+the print, corrected) given by
 the one RSS model, :class:`locbook.models.rss.RssModel`,
 
     p(s | L) = prod_j N(s_j; alpha_j - 10 n_j log10(d_j(L)/d0) - nW_j(L) WAF, sigma^2),
@@ -135,7 +136,8 @@ def _velocity_schedule(velocity_m, n_steps, dim: int = 2):
 # -- grid-based Bayes --------------------------------------------------------------------------------
 def grid_transition_matrix(cells_m, spread_m: float, velocity_m=(0.0, 0.0)):
     """Transition ``T[l, l'] = P(L_t = c_l | L_t-1 = c_l')``: a Gaussian of std ``spread_m`` (D) centred on
-    ``c_l' + v``, normalised over the grid for each ``l'`` (note 004, section 3.7). ``spread_m = inf``
+    ``c_l' + v``, normalised over the grid for each ``l'`` (Eqs. (4.10)-(4.15) state the Gaussian process
+    model of std D; its discretisation on the grid is ours). ``spread_m = inf``
     gives the uniform transition (no motion prior)."""
     cells_m = as_array("cells_m", cells_m, ndim=2, trailing=(None, 2))
     n = cells_m.shape[0]

@@ -6,8 +6,9 @@
 the covariance-weighted (minimum-variance) combination, which equals ``R (R_1^{-1} z_1 + R_2^{-1} z_2)``.
 
 The thesis applies (4.8) to the RSS powers ``Z^1`` (N values) and the inertial readings ``Z^2`` (accelerations and
-rates), which are different quantities of different sizes, so it cannot be applied literally (note 001, s.2.9 and
-s.5 point 5). Two readings are implemented and labelled:
+rates), which are different quantities of different sizes, so it cannot be applied literally (our finding; the
+section's title, "Fusing the Position Estimates", supports the first reading). Two readings are implemented and
+labelled:
 
 - ``"position"``: fuse two 2-D position estimates (the RSS trilateration fix and the inertial dead-reckoned
   position) with :func:`fuse_estimates`, and give the fused position to a KF/EKF/UKF as a position measurement;

@@ -11,8 +11,8 @@ Standard recursion (filterpy / Dogan 2015, Table 3.1 notation; :mod:`locbook.tra
 
 Document 003 (George and Vadivukkarasi, Eqs. (9)-(13)) prints the update with ``X_{k-1}`` and
 ``P_{k-1}`` in place of the predicted quantities, so the prediction of Eqs. (9)-(10) is computed and
-then discarded. That literal form is available as ``variant="literal_003"`` (flagged; note 003,
-section 2.6 point 1): it reduces to a running average of the measurements.
+then discarded. That literal form is available as ``variant="literal_003"`` (flagged): it
+reduces to a running average of the measurements.
 
 The module's layout (issue 27): the streams and their updates in :mod:`locbook.tracking.streams`, the functional
 predict / update in :mod:`locbook.tracking.functional`, the shared time loop in ``_loop``, the compiled EKF in

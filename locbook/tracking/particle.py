@@ -82,15 +82,15 @@ def particle_filter(rss_dbm, model, rng: np.random.Generator, *, n_steps: int | 
 
     Resampling (``resampling``: one of :data:`~locbook.tracking.resampling.RESAMPLING_METHODS`): at every step by
     default (basic SIR, Table 4.4); with ``resample_threshold`` only where ``N_eff < resample_threshold * N`` (the
-    thesis's "N_t = 0.5", read as a fraction of N since N_eff >= 1; note 004, section 11.6); with
+    thesis's "N_t = 0.5", read as a fraction of N since N_eff >= 1 and a literal N_eff < 0.5 never fires); with
     ``resample_every = k`` at steps ``k - 1, 2k - 1, ...``. The draws are made for every run at every step, so the
     random stream does not depend on which runs resample. ``resampling_cdf``: the systematic scheme's cumulative sum
     (:func:`~locbook.tracking.resampling.systematic_resample`; ``"literal_004"`` is Table 4.2 as printed).
 
     ``weight_smoothing`` (Ozkaya's improved SIR): ``"sqrt"`` replaces the normalised weights by ``sqrt(w)``
-    renormalised before the estimate, the N_eff test and the resampling, and carries them forward (the
-    interpretation validated in note 004, section 3.7; it tempers the likelihood). ``"sqrt_corrected"`` is the
-    literature's generalised resampling: draw with ``a = sqrt(w)`` and reweight the copies by ``w / a``.
+    renormalised before the estimate, the N_eff test and the resampling, and carries them forward (our
+    reading of Sec. 7.1.4, which reproduces Tables 7.23 and 7.25; it tempers the likelihood). ``"sqrt_corrected"``
+    is the literature's generalised resampling: draw with ``a = sqrt(w)`` and reweight the copies by ``w / a``.
 
     Returns a :class:`~locbook.tracking.bayes.BayesFilterResult`: the weighted mean (MMSE) and covariance, the
     highest-weight particle as MAP, ``n_eff`` before resampling (of the weights drawn from), ``resampled``, the final

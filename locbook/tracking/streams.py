@@ -35,7 +35,8 @@ class LinearMeasurement:
     update, the others are used), so streams at different rates share one time grid.
     ``R``: ``(m, m)`` or with batch axes ``batch + (m, m)``.
     ``mode``: ``"parallel"`` (one stacked update) or ``"serial"`` (one scalar update per row in the given order;
-    needs a diagonal R, and then equals the parallel update exactly, note 000 s.2.6).
+    needs a diagonal R, and then equals the parallel update exactly; Dogan 2015's serial and parallel RSS EKFs,
+    Tables 3.3-3.4, differ only by the re-linearisation between scalar updates).
     """
 
     z: np.ndarray
@@ -77,7 +78,8 @@ class RssMeasurement:
     the anchors' positions are known only to this standard deviation (e.g. GPS, Palvai's sigma_3); the
     measurement variance is then inflated to ``sigma^2 + anchor_sigma^2 |dh/dp|^2``, i.e.
     ``sigma^2 + (10 n / ln 10)^2 anchor_sigma^2 / d^2`` (0 added within the clamp), at the linearisation point
-    (first-order propagation of the position error; note 002 A8).
+    (first-order propagation of the position error; an extension: Palvai 2008, Sec. 4.4, does not say how sigma_3
+    enters the EKF).
 
     ``tag_height_m``: the anchors are ``(m, 3)`` (x, y, height), the tag moves in the plane ``z = tag_height_m``
     and ``position_index`` names the state's x and y only; the distances are 3-D.
@@ -261,7 +263,8 @@ class _Serial:
 
 def _rss_serial_update(x, P, z, meas: RssMeasurement, step: int = 0, want: bool = False) -> _Out:
     """Table 3.3: scalar updates in descending RSS order (strongest anchor first), each re-linearised at the
-    state updated so far; loop bound j <= N (the print's j < N is corrected, note 000 A11)."""
+    state updated so far; loop bound j <= N (the print's "for each j < N" would skip the
+    last anchor; corrected)."""
     idx = np.asarray(meas.position_index)
     ch = meas.channel
     m = z.shape[-1]

@@ -1,6 +1,6 @@
 """Unscented Kalman filter (scaled unscented transform), vectorized over leading Monte-Carlo axes.
 
-Gudipati 2017, Sec. 3.6, Eqs. (3.18)-(3.30), corrected (note 001, s.2.7 and s.5 point 4):
+Gudipati 2017, Sec. 3.6, Eqs. (3.18)-(3.30), with the print's errors corrected (marked in brackets below):
 
     lambda = alpha^2 (n + kappa) - n
     X^0 = x-,  X^i = x- + (sqrt((n + lambda) P-))_i,  X^{n+i} = x- - (sqrt((n + lambda) P-))_i     (3.18)-(3.20)

@@ -6,7 +6,7 @@ For measurements ``(d_i, P_i)`` the model ``P_i = P_0 - 10 n log10(d_i/d0) + e_i
 
 This is Eq. (6) of George and Vadivukkarasi (document 003) with the sign of the second column
 corrected: the paper prints ``+10 log d_i``, which, read literally, returns ``-n``
-(note 003, section 2.3, point 1). The literal form is kept as ``sign_convention="literal_003"``.
+where the paper reports n = +2.1843. The literal form is kept as ``sign_convention="literal_003"``.
 It is also Eq. (5.1) of Dogan (2015) and the per-reader fit of Ozkaya (2011), Eq. (6.4)-(6.6),
 whose bounded variant (alpha in [-55, -40] dBm, n in [1.5, 3]) is the ``*_bounds_*`` arguments.
 
@@ -462,7 +462,7 @@ def path_loss_exp_ratio_estimate(distance_m, rss_dbm, ref_power_dbm, *, ref_dist
     """The thesis-literal exponent estimator, Eq. (3.8) in Gudipati 2017 (flagged: an average of ratios):
     ``C = -(1/N) sum_s (M_s - S) / (10 log10(D_s / d0))`` with ``S = ref_power_dbm`` measured at ``d0``.
 
-    The term at ``D = d0`` is 0/0 and is left out (note 001, s.5 point 6), as are missing (NaN) powers; near
+    The term at ``D = d0`` is 0/0 and is left out (the print does not say so), as are missing (NaN) powers; near
     ``d0`` the ratio's denominator is small, so those points dominate its variance (compare
     :func:`path_loss_exp_given_ref_power`). ``(..., N)`` -> ``(...)``."""
     log_d, excess = _exponent_inputs(distance_m, rss_dbm, ref_power_dbm, ref_distance_m)
@@ -477,7 +477,8 @@ def path_loss_exp_ratio_estimate(distance_m, rss_dbm, ref_power_dbm, *, ref_dist
 def path_loss_exp_given_ref_power(distance_m, rss_dbm, ref_power_dbm, *, ref_distance_m: float = 1.0):
     """Least-squares exponent with the reference power fixed at its measured value: minimises
     ``sum_s (M_s - S + 10 C log10(D_s/d0))^2``, so ``C = -sum L (M - S) / (10 sum L^2)``, ``L = log10(D/d0)``.
-    The convex reformulation of Eq. (3.8) (note 001, s.2.4; the full two-parameter fit is :func:`fit_path_loss`).
+    The convex reformulation of Eq. (3.8) (ours, not the thesis's; the full two-parameter fit is
+    :func:`fit_path_loss`).
     Missing (NaN) powers are left out. ``(..., N)`` -> ``(...)``."""
     log_d, excess = _exponent_inputs(distance_m, rss_dbm, ref_power_dbm, ref_distance_m)
     use = np.isfinite(excess)

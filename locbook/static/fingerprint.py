@@ -9,8 +9,8 @@ the ``k`` nearest cells are kept, and the estimate is their weighted centroid (E
 
     x = sum_i w_i x_i,   w_i = (1/E_i^2) / sum_j (1/E_j^2).
 
-Eq. (3.3) as printed divides by ``sum_j E_j^2`` instead, which does not normalise the weights (a typo;
-note 004, section 3.5, validated against the simulation tables); it is kept as ``weighting="literal_004"``.
+Eq. (3.3) as printed divides by ``sum_j E_j^2`` instead, which does not normalise the weights (a typo:
+the normalised form, LANDMARC's, reproduces the simulation tables); it is kept as ``weighting="literal_004"``.
 
 Two ways to build the map (Ozkaya 2011, Sec. 3.1):
 - pattern based: the stored mean RSSI vector measured at each training location (:func:`pattern_fingerprints`);

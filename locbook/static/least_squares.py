@@ -37,7 +37,8 @@ def recursive_least_squares(H, y, *, x0=None, prior_cov=None) -> RlsResult:
 
     Each estimate equals the regularised batch solution ``(Pi_0^{-1} + H_k^T H_k)^{-1} (Pi_0^{-1} x0 + H_k^T Y_k)``
     of the rows so far, and batch least squares as ``prior_cov -> inf``. Defaults: ``x0 = 0``,
-    ``prior_cov = 1e6 I`` (note 002 s.2.8). A NaN row (a missing reading) is skipped."""
+    ``prior_cov = 1e6 I`` (Palvai 2008, Eq. (2.49), prints no value for Pi_0; ours). A NaN row (a missing
+    reading) is skipped."""
     H = as_array("H", H, min_ndim=2, nan_ok=True)
     y = as_array("y", y, min_ndim=1, nan_ok=True)
     n = H.shape[-1]

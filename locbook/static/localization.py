@@ -8,9 +8,10 @@ axes ``(..., m)``, and returns a :class:`LocalizationResult` whose ``position_m`
   ``2 (a_r - a_i)^T p = d_i^2 - d_r^2 - |a_i|^2 + |a_r|^2``. With ``pairs`` (Palvai 2008, Eqs. (2.27)-(2.29)):
   the anchors may differ per problem (receivers ``(..., N, dim)`` at random positions) and the sphere equations
   are differenced in pairs ``(i, j)``, consecutive or against the first or the last anchor,
-  ``2 (s_j - s_i)^T X = d_i^2 - d_j^2 - |s_i|^2 + |s_j|^2`` (corrected: the printed rows lack the factor 2 and
-  Eq. (2.18)'s right-hand side the full norms, note 002 s.2.4-2.6; ``variant="literal_002"`` keeps the printed
-  rows without the 2, flagged: it returns twice the coordinates). :func:`lateration_system` builds either system;
+  ``2 (s_j - s_i)^T X = d_i^2 - d_j^2 - |s_i|^2 + |s_j|^2`` (corrected: the printed rows, Eqs. (2.18), (2.20) and
+  (2.27), lack the factor 2 and Eq. (2.18)'s right-hand side the full norms; ``variant="literal_002"`` keeps the
+  printed rows without the 2, flagged: it returns twice the coordinates). :func:`lateration_system` builds either
+  system;
   :func:`locbook.static.least_squares.recursive_least_squares` is the recursive form of the same rows.
 - :func:`lateration_wls`: the same system with weights.
 - :func:`lateration_box_ls`: the same objective with a box constraint, solved exactly by enumerating the
@@ -82,7 +83,7 @@ BOX_LS_SOLVERS = ("exact", "cvxpy")
 LATERATION_PAIRS = ("consecutive", "first", "last")
 
 #: values of ``variant``: the rows with the factor 2 of the differenced sphere equations, or Palvai's printed rows
-#: without it (note 002 s.2.4; they give twice the coordinates)
+#: without it (Palvai 2008, Eqs. (2.20), (2.27); they give twice the coordinates)
 LATERATION_VARIANTS = ("corrected", "literal_002")
 
 #: values of :attr:`LocalizationResult.status`
@@ -917,7 +918,8 @@ def rss_ml_position(anchors_m, rss_dbm, model: PathLossModel, initial_m=None, *,
     """Maximum-likelihood position from received powers ``(..., m)`` under Gaussian shadowing.
 
     Minimises ``sum_j (P_j - P_0 + 10 n log10 |p - a_j|)^2``, which equals Dogan's MLE cost (2.4)
-    up to the factor ``(10 n)^{-2}`` (note 000, section 2.3). The problem is non-convex; every problem
+    up to the factor ``(10 n)^{-2}`` (by Eq. (2.3), ``log10 d_hat_j - log10 d_j = -(P_j - P(d_j)) / (10 n)``).
+    The problem is non-convex; every problem
     starts from ``initial_m`` or, by default, the linearized LS fix on the model's ranges (the convex
     initialiser), and is refined by damped Newton steps (Levenberg-Marquardt with the exact Hessian where it is
     positive definite), vectorized over the batch; each iteration works only on the problems that have not

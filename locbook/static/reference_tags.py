@@ -1,6 +1,6 @@
 """Reference tags at known positions: online path-loss calibration and RSSI smoothing (Ozkaya 2011).
 
-Online calibration (Sec. 6.2, 7.1.5.1-2; note 004, section 3.3). At every observation step and for every
+Online calibration (Secs. 6.2, 7.1.5.1-2). At every observation step and for every
 reader j, fit ``(alpha_j, n_j)`` to the instantaneous RSSI of the K reference tags,
 
     min  sum_i (RSSI_ij - (alpha_j - 10 n_j log10 d_ij - nW_ij WAF))^2     (Eqs. (6.5)-(6.6))
@@ -11,7 +11,7 @@ problem (a convex QP), all readers and steps stacked into one cvxpy solve (:func
 The pooled measurement noise is Eq. (6.7): ``sigma = sqrt(sum_ij resid_ij^2 / (K m))`` (no degrees-of-freedom
 correction, one value shared by all readers).
 
-RSSI smoothing (Sec. 7.1.5.3, the thesis's own contribution; note 004, section 3.8): the reference tags'
+RSSI smoothing (Sec. 7.1.5.3, the thesis's own contribution): the reference tags'
 errors ``e_k = r_k - r_hat_k`` (observed minus expected) are assumed to be spatially correlated; when the
 target's RSSI vector is close (in RSSI space) to tag k's, the target's RSSI is corrected by that error.
 """

@@ -7,10 +7,10 @@ No source printed these numbers; nothing here is scored against a printed value.
 
 One protocol for every cell (each choice a named setting, reported with the cell):
 
-- Synthetic scenarios take each document's geometry and channel (the values its reading note and its own
-  experiment use, cited per setting) with i.i.d. log-normal shadowing, the model both bounds assume. The estimators
-  know the true channel, so a cell measures the method and the geometry, not a calibration. All methods of a
-  scenario see the same draws (common random numbers).
+- Synthetic scenarios take each document's geometry and channel (the values its own experiment uses, or our
+  stated default where it prints none, cited per setting) with i.i.d. log-normal shadowing, the model both
+  bounds assume. The estimators know the true channel, so a cell measures the method and the geometry, not a
+  calibration. All methods of a scenario see the same draws (common random numbers).
 - The measured scenario is the Kolakowski (2021) robot drive with the channel fitted on the calibration points
   (:mod:`locbook.scenarios.kolakowski`); its bound uses only the anchors heard at each epoch.
 - Static bound: the CRLB ``sqrt(tr J^-1)`` at each true position; the cell's ratio is the RMSE over all fixes
@@ -176,15 +176,15 @@ def _channel_settings(model: PathLossModel, source: str) -> tuple[ProtocolChoice
 
 def _george_static() -> StaticScenario:
     model = PathLossModel(-45.0, george.PRINTED_N.value, 1.83)
-    src = "george-tracking defaults: A = -45 dBm (note 003 s.6 item 5), n = the printed calibrated n (Sec. 6), " \
-          "sigma 1.83 dB (note 003 s.7, chosen there to match the printed C_raw: a calibration)"
+    src = "george-tracking defaults: A = -45 dBm (not printed; raw RSSI 0 at 1 m by Eq. (3)), n = the printed " \
+          "calibrated n (Sec. 6), sigma 1.83 dB (not printed; chosen to match the printed C_raw: a calibration)"
     w, h = george.CORRIDOR_SIZE_M
     return StaticScenario(
         "george-corridor", "george", "2.1 x 7.8 m corridor, 4 corner anchors", george.ANCHORS_M, model,
         box_outline((0, 0), (w, h)), george.trajectory_m("centerline"), 0.05,
         (ProtocolChoice("anchors", "4 corners (0,0) (2.1,0) (0,7.8) (2.1,7.8)", "Sec. 5"),
          *_channel_settings(model, src),
-         ProtocolChoice("positions", "the 25 marked points on the centre line, y 0.3-7.5 m", "not printed; note 003 s.6 item 8"),
+         ProtocolChoice("positions", "the 25 marked points on the centre line, y 0.3-7.5 m", "not printed; our default"),
          ProtocolChoice("grid pitch", "0.05 m", "benchmark: fine against the corridor's 2.1 m width")))
 
 
@@ -193,7 +193,7 @@ def _ozkaya_static() -> StaticScenario:
     return StaticScenario(
         "ozkaya2011-room", "ozkaya2011", "5 x 8 m room, 3 corner readers", ozkaya.readers_for("corners3"), model,
         box_outline((0, 0), ozkaya.ROOM_M), ozkaya.cell_centres(ozkaya.ROOM_M, *ozkaya.CELL_PATTERNS[28]), 0.1,
-        (ProtocolChoice("readers", "3 corners (layout corners3)", "Sec. 7.2.1; note 004 s.4.2"),
+        (ProtocolChoice("readers", "3 corners (layout corners3)", "Sec. 7.2.1 (which three: not printed)"),
          *_channel_settings(model, "Table 6.1, Reader 2 (the simulation channel, Sec. 7.2.1)"),
          ProtocolChoice("positions", "the 28 cell centres (x 1-4 m, y 1-7 m)", "Fig. 7.2"),
          ProtocolChoice("grid pitch", "0.1 m", "benchmark")))
@@ -207,11 +207,11 @@ def _dogan_static() -> StaticScenario:
         box_outline((0, 0), dogan.ROOM_M), walk.position_m[walk.rss_steps], 0.1,
         (ProtocolChoice("anchors", "4 corners", "Sec. 5.4"), *_channel_settings(model, "Table 3.6"),
          ProtocolChoice("positions", f"the walk's {len(walk.rss_steps)} RSS epochs (0.3 m/s polyline, 2 Hz)",
-                 "note 000 A1; where the thesis's MLE is computed"),
+                 "path not printed (our default); where the thesis's MLE is computed"),
          ProtocolChoice("grid pitch", "0.1 m", "benchmark")))
 
 
-#: Gudipati's readings: shadowing 3 dB plus 1 dB per-packet noise (note F5.1), as one i.i.d. term of the same variance
+#: Gudipati's readings: shadowing 3 dB plus 1 dB per-packet noise (our defaults), as one i.i.d. term of the same variance
 GUDIPATI_SIGMA_DB = float(np.hypot(gudipati.WalkSettings().shadowing_sigma_db, gudipati.WalkSettings().fast_sigma_db))
 
 
@@ -233,12 +233,12 @@ def _gudipati_static() -> StaticScenario:
     return StaticScenario(
         "gudipati2017-hall", "gudipati2017", "30 x 10 m hall, 6 anchors", gudipati.anchors_m(gudipati.ANCHOR_SETS[6]),
         model, box_outline((0, 0), gudipati.ROOM_M), pos[marks], 0.2,
-        (ProtocolChoice("anchors", "12-15 at the corners, 16-17 mid long walls", "Sec. 5.1 (which ID where: note 001 s.3.3)"),
+        (ProtocolChoice("anchors", "12-15 at the corners, 16-17 mid long walls", "Sec. 5.1 (which ID where: ours)"),
          *_channel_settings(model, "Table 5.2 (S, C per anchor); sigma: 3 dB shadowing and 1 dB per packet "
-                                   "(note F5.1) as one i.i.d. term (the bounds' model; the thesis's walk has "
+                                   "(our defaults) as one i.i.d. term (the bounds' model; the thesis's walk has "
                                    "correlated shadowing)"),
          ProtocolChoice("positions", f"the U-path's report points every {gudipati.REPORT_SPACING_M:g} m ({len(marks)})",
-                 "Sec. 5.3; path: note 001 s.3.6"),
+                 "Sec. 5.3; path geometry not printed (ours)"),
          ProtocolChoice("grid pitch", "0.2 m", "benchmark")))
 
 
@@ -255,10 +255,10 @@ def _palvai_static() -> StaticScenario:
         "palvai2008-area", "palvai2008", "50 x 50 m area, emitter seen from 25 receiver positions", receivers, model,
         box_outline((0, 0), (palvai.AREA_M, palvai.AREA_M)), setup.target[None], 0.25,
         (ProtocolChoice("receivers", f"{palvai.N_LOCATIONS} positions uniform in the area, drawn once (seed "
-                              f"{PALVAI_GEOMETRY_SEED}), exactly known", "Sec. 4.4 (N = 25); note 002 A3; sigma_3 = 0"),
-         *_channel_settings(model, "Secs. 2.6, 4.4 (sigma_1, eta); K = -20 dBm at 1 m (note 002 A4)"),
-         ProtocolChoice("positions", "the emitter at the area's centre (25, 25)", "note 002 A2"),
-         ProtocolChoice("plane", "2-D (the thesis's equations are 3-D)", "note 002 A1"),
+                              f"{PALVAI_GEOMETRY_SEED}), exactly known", "Sec. 4.4 (N = 25; law ours); sigma_3 = 0"),
+         *_channel_settings(model, "Secs. 2.6, 4.4 (sigma_1, eta); K = -20 dBm at 1 m (not printed; ours)"),
+         ProtocolChoice("positions", "the emitter at the area's centre (25, 25)", "not printed (ours)"),
+         ProtocolChoice("plane", "2-D (the thesis's equations are 3-D)", "ours (Sec. 5.4 reads its clouds in 2-D)"),
          ProtocolChoice("grid pitch", "0.25 m", "benchmark: 40,000 cells over the area")))
 
 
@@ -308,7 +308,7 @@ def _george_tracking() -> TrackingScenario:
         "george-walk", "george", "corridor centre line, 25 points at 1 s", st.anchors_m, st.channel, st.outline_m,
         george.trajectory_m("centerline"), 1.0, 0.3, 0.05,
         (*st.settings[:4], ProtocolChoice("path", "centre line, y 0.3 -> 7.5 m, one point per second (0.3 m/s)",
-                                   "not printed; note 003 s.6 item 8; dt: george-tracking dt_s")))
+                                   "not printed (our default); dt: george-tracking dt_s")))
 
 
 def _ozkaya_tracking() -> TrackingScenario:
@@ -329,7 +329,8 @@ def _dogan_tracking() -> TrackingScenario:
         "dogan2015-walk", "dogan2015", "0.3 m/s polyline, RSS at 2 Hz", st.anchors_m, st.channel, st.outline_m,
         walk.position_m[walk.rss_steps], dogan.DT_S * dogan.RSS_EVERY, 0.15, 0.1,
         (*st.settings[:4], ProtocolChoice("path", "the 24 m polyline at 0.3 m/s from rest, at its RSS epochs (0.5 s); "
-                                           "RSS only (the accelerometer is not used here)", "note 000 A1; Sec. 3.5")))
+                                           "RSS only (the accelerometer is not used here)",
+                                   "path not printed (our default); Sec. 3.5")))
 
 
 #: Gudipati's filters step at every 0.1 s packet; the benchmark steps at 0.5 s (one reading per anchor per step),
@@ -346,7 +347,7 @@ def _gudipati_tracking() -> TrackingScenario:
         st.outline_m, pos, GUDIPATI_TRACKING_DT_S, 0.25, 0.2,
         (*st.settings[:4], ProtocolChoice("path", "the U-path (2 m from the walls) at 0.5 m/s with 0.25 m/s^2 ramps and 1 m "
                                            "turn radius; a step every 0.5 s (the thesis: 0.1 s); RSS only",
-                                   "note 001 s.3.6, s.5 points 10-11; GUDIPATI_TRACKING_DT_S")))
+                                   "path and timing not printed (ours); GUDIPATI_TRACKING_DT_S")))
 
 
 def _kolakowski_tracking(fit: str = "closed_form") -> TrackingScenario:

@@ -8,10 +8,10 @@ CRLB (Ch. 4).
 
 Every printed value used here is read from ``locbook/data/printed/dogan2015.csv`` (Table 3.6, Eqs. (3.20) and
 (3.24), the Sec. 3.5 rates, the Sec. 5.4 area). The thesis prints neither the room of Ch. 3, nor the trajectory,
-nor the time step. Every such value is a named default here, with its reason from ``shared/notes/000_dogan.md``
-(sections 3.1, 5 and 7): the room is the test-bed room 7.6 m x 9.2 m (A1, inferred), the trajectory a 24 m
-polyline walked at 0.3 m/s in 80 s (A1), one 20 Hz grid for every filter with RSS at every 10th step (A2), and
-the MLE an unconstrained grid + Levenberg-Marquardt search (A8).
+nor the time step. Every such value is a named default here, with its reason beside it: the room is the test-bed room
+7.6 m x 9.2 m (inferred), the trajectory a 24 m polyline walked at 0.3 m/s in 80 s (our choice), one 20 Hz grid
+for every filter with RSS at every 10th step (the step is not printed), and the MLE an unconstrained grid +
+Levenberg-Marquardt search (the thesis names no solver).
 
 The fusion reading (how the filter's Q and P_0 relate to sigma_ACC, and how the node starts) is a named option,
 :data:`NOISE_READINGS` and :data:`START_MODES`; the default is the one the printed constants support
@@ -61,8 +61,9 @@ def _value(location: str, item: str, statistic: str = "") -> float:
     return PRINTED.get(location, item, statistic).value
 
 
-#: Room of Ch. 3, inferred to be the test-bed area of Sec. 5.4 ("a 7.6 m x 9.2 m area"; note 000 s.3.1: the
-#: Fig 3.1 axes, "the same trajectory", and only this room reproduces the MLE column of Tables 3.7/3.11).
+#: Room of Ch. 3, inferred to be the test-bed area of Sec. 5.4 ("a 7.6 m x 9.2 m area"; inferred from
+#: the Fig 3.1 axes and Sec. 5.4's "the same trajectory", and of the rooms we tried only this one reproduces the
+#: MLE column of Tables 3.7/3.11).
 ROOM_M = (_value("Sec. 5.4", "area", "width"), _value("Sec. 5.4", "area", "length"))
 
 
@@ -86,7 +87,7 @@ SIGMA_ACC_MPS2 = _value("Table 3.6", "standard deviation of acceleration sigma_A
 #: noise is 0.0048", Sec. 4.1.2).
 Q_PER_STEP = _value("Eq. (3.24)", "process noise covariance Q", "per-step variance (Q = value x I_6)")
 #: Sec. 3.5: 20 Hz accelerometer, "2 RSS measurements are taken each second". One common grid at the
-#: accelerometer rate (A2; the step is not printed) with the RSS at every 10th step.
+#: accelerometer rate (the step is not printed) with the RSS at every 10th step.
 _ACC_HZ = _value("Sec. 3.5 text", "acceleration measurements", "rate")
 _RSS_HZ = _value("Sec. 3.5 text", "RSS measurements", "rate")
 DT_S = 1.0 / _ACC_HZ
@@ -94,17 +95,17 @@ RSS_EVERY = int(round(_ACC_HZ / _RSS_HZ))
 #: Eq. (3.20): initial velocity and acceleration variances of P_{0|0}.
 P00_VEL_VAR = _value("Eq. (3.20)", "P_0|0", "velocity variance")
 P00_ACC_VAR = _value("Eq. (3.20)", "P_0|0", "acceleration variance")
-#: Default trajectory (A1; not printed): a 24 m polyline with sharp 90-degree turns inside the room.
+#: Default trajectory (not printed): a 24 m polyline with sharp 90-degree turns inside the room.
 WAYPOINTS_M = ((1.0, 1.0), (1.0, 8.2), (6.6, 8.2), (6.6, 1.0), (2.6, 1.0))
-#: Walking speed (A1; not printed): 24 m in 80 s. Chosen so that Fig 3.2's "24 meter after 80 seconds"
-#: ONLY-ACC drift is what an unobserved initial speed of 0.3 m/s gives (note 000 s.7): every filter row run on
+#: Walking speed (not printed): 24 m in 80 s. Chosen so that Fig 3.2's "24 meter after 80 seconds"
+#: ONLY-ACC drift is what an unobserved initial speed of 0.3 m/s gives (our simulation): every filter row run on
 #: this trajectory is therefore ``calibrated`` from that printed number.
 SPEED_MPS = 0.3
 SPEED_CALIBRATED_FROM = ("walking speed 0.3 m/s (24 m polyline in 80 s) chosen so that an unobserved initial "
                          "velocity gives the ONLY-ACC drift 'reaches to 24 meter after 80 seconds' (Fig. 3.2 text)")
 #: Monte-Carlo runs (Sec. 3.5).
 MC_RUNS = int(_value("Sec. 3.5 text", "Monte Carlo runs"))
-#: The true node's initial motion (A1, not printed).
+#: The true node's initial motion (not printed).
 #: ``"rest"``: it starts from rest and accelerates uniformly to SPEED_MPS over ``ramp_s``: the reading of the
 #: thesis's own initialisation, Eqs. (3.19)-(3.20), x_0 with zero velocity and velocity variance 0.0065 (sd
 #: 0.08 m/s), which a node walking at 0.3 m/s would violate by 3.7 sd. Default.
@@ -129,13 +130,13 @@ NOISE_READINGS = ("sigma_acc", "printed")
 DEFAULT_NOISE_READING = "sigma_acc"
 #: Q per step over sigma_ACC^2 in the ``"sigma_acc"`` reading (0.000023 / 0.0152^2 = 0.0996).
 Q_PER_ACC_VARIANCE = 0.1
-#: KF (MLE)'s R = diag(MSE_MLE) (Eq. (3.21), A6): ``"constant"``, the MSE per axis averaged over runs and epochs
-#: ("averaging Mean Squared Error (MSE) of static localization over 500 Monte Carlo runs", Sec. 3.5; default), or
-#: ``"per_epoch"``, averaged over runs at each epoch (Table 4.1 indexes R_{RSS-MLE,k+1} by time; variant).
+#: KF (MLE)'s R = diag(MSE_MLE) (Eq. (3.21); constant or per epoch is not stated): ``"constant"``, the MSE per
+#: axis averaged over runs and epochs ("averaging Mean Squared Error (MSE) of static localization over 500 Monte
+#: Carlo runs", Sec. 3.5; default), or ``"per_epoch"``, averaged over runs at each epoch (Table 4.1 indexes R_{RSS-MLE,k+1} by time; variant).
 MLE_R_READINGS = ("constant", "per_epoch")
 #: Filter columns of Tables 3.7-3.12.
 FILTERS = ("parallel_ekf", "serial_ekf", "kalman_filter")
-#: MLE search grid (A8): the room +- 3 m at 0.5 m, then Levenberg-Marquardt, unconstrained.
+#: MLE search grid (the thesis names no solver): the room +- 3 m at 0.5 m, then Levenberg-Marquardt, unconstrained.
 MLE_GRID_STEP_M = 0.5
 MLE_GRID_MARGIN_M = 3.0
 
@@ -158,8 +159,8 @@ def filter_noise(reading: str, sigma_acc_mps2: float | None) -> tuple[float, flo
 
 def walk_trajectory(waypoints_m=WAYPOINTS_M, speed_m_s: float = SPEED_MPS, dt_s: float = DT_S, *,
                     start: str = DEFAULT_START, ramp_s: float = 2.0, rss_every: int = RSS_EVERY) -> Trajectory:
-    """The walk of note 000 A1 (:func:`~locbook.models.trajectory.polyline_trajectory`): the polyline at constant
-    speed, sampled at the accelerometer's rate, RSS every ``rss_every``-th sample (Sec. 3.5)."""
+    """The default walk for Fig. 3.1's unprinted path (:func:`~locbook.models.trajectory.polyline_trajectory`): the
+    polyline at constant speed, sampled at the accelerometer's rate, RSS every ``rss_every``-th sample (Sec. 3.5)."""
     return polyline_trajectory(waypoints_m, speed_m_s=speed_m_s, dt_s=dt_s, start=start, ramp_s=ramp_s,
                                rss_every=rss_every)
 
@@ -172,7 +173,7 @@ def motion_model(dt_s: float = DT_S, q_per_step: float = Q_PER_STEP) -> Kinemati
 def simulate_rss(trajectory: Trajectory, channel: PathLossModel, n_runs: int, rng: np.random.Generator,
                  anchors_m=ANCHORS_M) -> np.ndarray:
     """RSS ``(n_runs, E, m)`` at the RSS epochs from Eq. (2.2), i.i.d. N(0, sigma^2) across anchors, time
-    and runs (note 000 s.2.2)."""
+    and runs (Eq. (2.2); the thesis models no correlation)."""
     d = pairwise_distance_m(trajectory.position_m[..., trajectory.rss_steps, :], anchors_m)
     noise = rng.standard_normal(np.broadcast_shapes((n_runs,) + d.shape[-2:], d.shape))
     return channel.mean_rss_dbm(d) + np.asarray(channel.sigma_db) * noise
@@ -189,7 +190,8 @@ def simulate_acceleration(trajectory: Trajectory, sigma_acc_mps2: float, n_runs:
 def mle_positions(rss_dbm, channel: PathLossModel, anchors_m=ANCHORS_M, *, room_m=ROOM_M,
                   grid_step_m: float = MLE_GRID_STEP_M, margin_m: float = MLE_GRID_MARGIN_M):
     """Static MLE (Eq. (2.4)) of every RSS vector ``(..., m)``: the best point of a grid over the room +- margin,
-    refined by Levenberg-Marquardt without bounds (note 000, A8). Returns a LocalizationResult."""
+    refined by Levenberg-Marquardt without bounds (the thesis names no solver, start or bounds). Returns a
+    LocalizationResult."""
     xs = np.arange(-margin_m, room_m[0] + margin_m + 1e-9, grid_step_m)
     ys = np.arange(-margin_m, room_m[1] + margin_m + 1e-9, grid_step_m)
     grid = np.stack(np.meshgrid(xs, ys, indexing="ij"), axis=-1).reshape(-1, 2)
@@ -202,7 +204,7 @@ def mle_cost_eq24(points_m, rss_dbm, channel: PathLossModel, anchors_m=ANCHORS_M
     for every candidate ``points_m`` ``(G, 2)`` and RSS vector ``rss_dbm`` ``(..., m)``: shape ``(..., G)``.
 
     It equals ``(10 alpha)^-2 sum_j (P_j - P(d_j))^2``, the Gaussian RSS-domain likelihood that
-    :func:`locbook.rss_ml_position` minimises (note 000 s.2.3, derived), so both have the same minimiser."""
+    :func:`locbook.rss_ml_position` minimises (derived from Eq. (2.3)), so both have the same minimiser."""
     # log ranges compared as Eq. (2.4) prints them (the range domain, not the power-domain law)
     log_d = np.log10(np.maximum(pairwise_distance_m(np.asarray(points_m, float), anchors_m), 1e-9))   # (G, m)
     log_d_hat = np.log10(channel.range_m(np.asarray(rss_dbm, float)))                                  # (..., m)
@@ -233,8 +235,8 @@ def run_filter(name: str, trajectory: Trajectory, rss_dbm, mle_fix_m, mse_mle_m2
     and ``"serial_ekf"`` use the raw RSS with R = sigma^2 I (Eq. (3.22)). With ``acc_mps2`` ``(..., T, 2)`` the
     accelerometer updates every step before the RSS (Table 3.5, R_acc = sigma_acc^2 I, Eq. (3.23)). ``model``
     carries Q (:func:`motion_model`), ``p0_acc_var`` the acceleration variance of P_0 (:func:`filter_noise`).
-    ``mse_mle_m2`` is ``(2,)`` (one MSE per axis, the default reading of Eq. (3.21), A6) or ``(E, 2)``: one per RSS
-    epoch, Table 4.1's R_{k+1} (A6 variant; KF (MLE) only, P_0 from the first epoch's).
+    ``mse_mle_m2`` is ``(2,)`` (one MSE per axis, the default reading of Eq. (3.21)) or ``(E, 2)``: one per RSS
+    epoch, Table 4.1's R_{k+1} (the other reading; KF (MLE) only, P_0 from the first epoch's).
 
     The result is the filter's own :class:`~locbook.KalmanResult` with the NIS guard's fields on the trajectory's grid:
     ``nis``/``nis_dof`` ``(..., T)`` (NaN / 0 up to the first epoch, where the filter starts), ``diverged`` and
@@ -345,7 +347,7 @@ def run_channel(trajectory: Trajectory, sigma_rss_db: float, path_loss_exp: floa
     """Simulate one channel setting and run the MLE and the requested filters, ONLY RSS and/or fused with an
     accelerometer of each ``sigma_acc_values``; all cases share the same RSS draws (common random numbers, so
     the fusion gain is measured on identical RSS). The MLE's per-axis MSE sets R and P_0 of KF (MLE) and
-    P_0 of every filter (Eqs. (3.20), (3.21), A6). Each case's Q and P_0 acceleration variance follow
+    P_0 of every filter (Eqs. (3.20), (3.21)). Each case's Q and P_0 acceleration variance follow
     ``noise_reading`` (:func:`filter_noise`); the filter grid is the trajectory's. ``mle_r`` (:data:`MLE_R_READINGS`):
     KF (MLE)'s R from the MSE per axis over runs and epochs (``"constant"``) or per epoch over runs
     (``"per_epoch"``)."""
@@ -391,8 +393,8 @@ class TableSetting:
 
 
 def _table_settings():
-    """Printed row -> setting for Tables 3.7-3.12, from the row labels and the captions in dogan2015.csv (note 000
-    s.3.3): 3.7 sweeps sigma_RSS ONLY RSS at Table 3.6's alpha; 3.8 the same fused at its caption's sigma_ACC
+    """Printed row -> setting for Tables 3.7-3.12, from the row labels and the captions in dogan2015.csv:
+    3.7 sweeps sigma_RSS ONLY RSS at Table 3.6's alpha; 3.8 the same fused at its caption's sigma_ACC
     (0.015, Table 3.6: 0.0152); 3.9 / 3.10 sweep sigma_ACC at their caption's sigma_RSS; 3.11 / 3.12 sweep alpha at
     their caption's sigma_RSS, ONLY RSS and fused at Table 3.12's caption's sigma_ACC."""
     acc = _value("Table 3.8 caption", "sigma_ACC")
@@ -474,9 +476,9 @@ def run_tables(trajectory: Trajectory, n_runs: int, seed: int, *, channels=None,
 
 
 def table_rows(runs: dict) -> list[dict]:
-    """Printed cells beside the reproduced RMSE (over runs and RSS epochs, note 000 A7, every run as the thesis
-    averaged every run) with its Monte-Carlo standard error and, for a filter column, the NIS guard's flags of its
-    runs (``divergence``, None for the MLE); cells whose setting was not run are left out."""
+    """Printed cells beside the reproduced RMSE (over runs and RSS epochs: the thesis does not define its table RMSE;
+    every run, as the thesis averaged every run) with its Monte-Carlo standard error and, for a filter column, the
+    NIS guard's flags of its runs (``divergence``, None for the MLE); cells whose setting was not run are left out."""
     from ..metrics import rmse_m
     rows = []
     for cell in printed_tables():
@@ -498,7 +500,7 @@ def table_rows(runs: dict) -> list[dict]:
 #: ``"smc"``: Eq. (4.22), the RSS information averaged over simulated CA trajectories (Figs 4.1/4.3);
 #: ``"linear"``: MLE fixes as linear measurements with R = diag(MSE_MLE) (Figs 4.2/4.4, trajectory-free);
 #: ``"truth"``: the RSS information along one known trajectory (truth-conditioned, Stone Soup's convention),
-#: the bound to set beside filters run on that trajectory (note 000 X2).
+#: the bound to set beside filters run on that trajectory (an extension: the thesis never overlays them).
 BOUND_KINDS = ("smc", "linear", "truth")
 
 
@@ -506,7 +508,8 @@ def smc_trajectories(n_trajectories: int, n_steps: int, rng: np.random.Generator
                      model: KinematicModel | None = None, room_m=ROOM_M):
     """Sec. 4.1.2: trajectories "that exactly follow the constant acceleration model", each beginning at a point
     "selected arbitrarily in the area": uniform in the room, v_0 ~ N(0, 0.0065 I), a_0 ~ N(0, 0.00023 I) (the
-    P_{0|0} blocks, note 000 A4), propagated with the per-step Q. Shape ``(N, n_steps, 6)``."""
+    P_{0|0} blocks; the thesis prints no start distribution), propagated with the per-step Q. Shape
+    ``(N, n_steps, 6)``."""
     model = model or motion_model()
     start = model.state_from(rng.uniform((0.0, 0.0), room_m, (n_trajectories, 2)),
                              np.sqrt(P00_VEL_VAR) * rng.standard_normal((n_trajectories, 2)),
@@ -536,8 +539,8 @@ def pcrlb_m(kind: str, *, fusion: bool, sigma_rss_db: float, mse_mle_m2, n_steps
     RSS epochs (every ``rss_every``-th step) is the RSS information of ``kind`` (see :data:`BOUND_KINDS`), and for
     ``fusion`` the accelerometer's ``H_acc^T R_acc^{-1} H_acc`` at the other steps. Table 4.1 leaves the
     acceleration out at RSS epochs although the fusion filter uses it there; ``acc_at_rss_epochs=True`` adds it
-    (the FIX of note 000 A5). ``min_distance_m`` / ``height_offset_m`` regularise the near-anchor 1/d^2 singularity
-    of E[J_z] (note 000 s.2.10); the thesis uses neither.
+    (our correction, off by default). ``min_distance_m`` / ``height_offset_m`` regularise the near-anchor 1/d^2
+    singularity of E[J_z] (which gives the average of Eq. (4.22) an infinite variance); the thesis uses neither.
     """
     if kind not in BOUND_KINDS:
         raise ParameterError(f"kind must be one of {BOUND_KINDS}, got {kind!r}")
@@ -572,7 +575,7 @@ def pcrlb_m(kind: str, *, fusion: bool, sigma_rss_db: float, mse_mle_m2, n_steps
     return position_bound_m(info, idx)
 
 
-#: Printed rows that repeat one setting (note 000 s.3.3): Table 3.9's sigma_ACC = 0.015 row is Table 3.8's 6 dB
+#: Printed rows that repeat one setting: Table 3.9's sigma_ACC = 0.015 row is Table 3.8's 6 dB
 #: row (the same run, printed twice); Tables 3.11/3.12's alpha = 3 rows re-run Tables 3.7/3.8's 6 dB rows.
 REPEATED_ROWS = {("3.9", "sigma_acc=0.015"): ("3.8", "sigma_rss_db=6"),
                  ("3.11", "ple=3"): ("3.7", "sigma_rss_db=6"),
@@ -667,28 +670,29 @@ def _miss_reason(row, variants: dict) -> str:
               " The other readings were run on the 6 dB and 3 dB channels (the readings table), not on this one.")
     ours, printed_value = row["reproduced"], row["printed"]
     if row["column"] == "static_mle":
-        return ("STATIC (MLE): the room, anchors and MLE are those of note 000 s.3.1/A8; the residual gap is the "
-                "unprinted path (A1), which sets how close the node comes to the anchors." + tested)
+        return ("STATIC (MLE): the room is the inferred test-bed room and the MLE an unbounded search (neither is "
+                "printed for Ch. 3); the residual gap is the unprinted path, which sets how close the node comes to "
+                "the anchors." + tested)
     if s.sigma_acc_mps2 is None:
         if row["column"] == "kalman_filter" and s.path_loss_exp <= 2.5:
             return ("KF (MLE) at low alpha: far-out MLE fixes make R = diag(MSE_MLE) large and our KF beats the "
-                    "printed one; R per epoch (Table 4.1's R_k+1, the other reading of A6) beats it too, and any bound "
-                    "on the MLE (A8) is not printed." + tested)
-        return ("ONLY RSS filters: they depend on the unprinted path, speed and start (A1) through how often the "
+                    "printed one; R per epoch (Table 4.1's R_k+1, the other reading of Eq. (3.21)) beats it too, and "
+                    "any bound on the MLE is not printed." + tested)
+        return ("ONLY RSS filters: they depend on the unprinted path, speed and start through how often the "
                 "constant-acceleration model meets a turn; the fusion readings barely change ONLY RSS, and for KF "
-                "(MLE) R per epoch (A6) moves it further from the printed value." + tested)
+                "(MLE) R per epoch (Table 4.1's R_k+1) moves it further from the printed value." + tested)
     if s.sigma_acc_mps2 >= TABLE_SIGMA_ACC_MPS2:
         return ("sigma_ACC = 0.015: no reading tried reproduces this row (start from rest or moving, Q printed or "
                 "from sigma_ACC; at 0.015 both Q readings coincide): from rest every fused filter is better than "
                 "printed, the moving start makes the EKFs diverge in a tail of runs and worse than printed, so the "
-                "printed value lies between the two unprinted starts (A1)." + tested)
+                "printed value lies between the two unprinted starts." + tested)
     if row["column"] != "kalman_filter" and ours > printed_value:
         return ("fused EKF at sigma_ACC below 0.015 with Q = sigma_ACC^2/10: the typical run improves with "
                 "sigma_ACC as printed (see the median table), but with so small a Q a few runs lock onto a wrong "
                 "position and never recover (fraction beyond 4 m in the tail table), which the RMSE weighs; the "
                 "thesis's EKFs show no such tail." + tested)
     return ("fused filter below 0.015: the KF (MLE) follows the printed fall with sigma_ACC only under "
-            "Q = sigma_ACC^2/10; the remaining gap is the unprinted path and start (A1)." + tested)
+            "Q = sigma_ACC^2/10; the remaining gap is the unprinted path and start." + tested)
 
 
 def fusion_reduction_rows(runs: dict) -> list[dict]:
@@ -713,7 +717,7 @@ def fusion_reduction_rows(runs: dict) -> list[dict]:
 def fusion_gain_pct(run: ChannelRun, sigma_acc_mps2: float, filters=FILTERS) -> tuple[float, float, dict]:
     """The fusion reduction of the RMSE, ONLY RSS -> RSS/IMU, averaged over ``filters`` (the text's "Sensor fusion
     decreases the error approximately % 30", Figs 3.5-3.7), its jackknife standard error over runs, and the
-    reduction of each filter. The RMSE is pooled over runs and epochs (A7)."""
+    reduction of each filter. The RMSE is pooled over runs and epochs (the thesis does not define it)."""
     mse = {(f, c): np.mean(run.errors[(f, c)] ** 2, axis=1) for f in filters for c in (None, sigma_acc_mps2)}
 
     def mean_gain(*per_run):
@@ -856,7 +860,7 @@ def table_view(rows, table: str) -> list[dict]:
     return list(out.values())
 
 
-HORIZON_SOURCE = "note 000 A4; Dogan 2015 Sec. 4.1.2"
+HORIZON_SOURCE = "Dogan 2015 Sec. 4.1.2 (the averaging horizon is not printed)"
 
 
 @dataclass(frozen=True)
@@ -902,7 +906,7 @@ class BoundStudy:
 
 
 def horizon_ambiguity(bound_m, time_s, horizon_s: float, other_horizons_s) -> Ambiguity:
-    """The averaging horizon of Figs. 4.3-4.4's time averages is not printed (note 000 A4): the ambiguity is the
+    """The averaging horizon of Figs. 4.3-4.4's time averages is not printed: the ambiguity is the
     largest change of the average of ``bound_m`` over ``time_s < h`` for the other plausible horizons ``h``, from
     its average over the whole curve (``horizon_s``)."""
     bound_m, time_s = np.asarray(bound_m, float), np.asarray(time_s, float)

@@ -42,17 +42,18 @@ __all__ = [
 TESTBED_REF_POWER_DBM = PRINTED.get("Sec. 5.2", "LS fit (Eq. (5.1))", "P0").value
 TESTBED_PATH_LOSS_EXP = PRINTED.get("Sec. 5.2", "LS fit (Eq. (5.1))", "alpha").value
 TESTBED_FIT_SIGMA_DB = PRINTED.get("Sec. 5.2", "LS fit (Eq. (5.1))", "sigma_RSS").value
-#: Figs 5.8-5.9 captions: the tracking uses sigma_RSS = 6 dB (note 000 A13).
+#: Figs 5.8-5.9 captions: the tracking uses sigma_RSS = 6 dB (not the fitted 5.8 dB).
 TESTBED_SIGMA_DB = PRINTED.get("Fig. 5.8 caption", "tracking channel", "sigma_RSS").value
-#: Sec. 5.4: one packet "each 2 seconds": every 40th step of the 20 Hz grid (note 000 A2, A14).
+#: Sec. 5.4: one packet "each 2 seconds": every 40th step of the 20 Hz grid (our time step; the
+#: walk's timing is not printed).
 TESTBED_RSS_EVERY = int(round(PRINTED.get("Sec. 5.4", "packet period").value / DT_S))
-#: Fig 5.4's 24 points; coordinates not printed. Default (note 000 F5.4): a 6 x 4 grid inside the room.
+#: Fig 5.4's 24 points; coordinates not printed. Default (ours): a 6 x 4 grid inside the room.
 CALIBRATION_X_M = (1.1, 2.2, 3.3, 4.3, 5.4, 6.5)
 CALIBRATION_Y_M = (1.5, 3.5, 5.7, 7.7)
 #: Sec. 5.2: 24 points, 30 packets per point, every anchor records each.
 CALIBRATION_POINTS = int(PRINTED.get("Sec. 5.2", "calibration", "measurement points").value)
 CALIBRATION_PACKETS = int(PRINTED.get("Sec. 5.2", "calibration", "packets per point").value)
-#: Sec. 5.2: "Total number of the measurements used in parameter estimation is 3360" (24 x 30 x 4 = 2880, A12).
+#: Sec. 5.2: "Total number of the measurements used in parameter estimation is 3360" (but 24 x 30 x 4 = 2880).
 PRINTED_MEASUREMENT_COUNT = PRINTED.get("Sec. 5.2", "calibration", "total number of the measurements")
 #: Sec. 5.4, Figs 5.8-5.11: RMSE (m) of the single measured walk, ONLY RSS (None) and RSS + simulated
 #: acceleration ("fusion"), as :class:`~locbook.reproduce.Printed`.
@@ -81,7 +82,7 @@ _FIGURE = {"static_mle": "Fig. 5.8", "serial_ekf": "Fig. 5.9", "parallel_ekf": "
 
 
 def calibration_points_m(x_m=CALIBRATION_X_M, y_m=CALIBRATION_Y_M) -> np.ndarray:
-    """The Fig 5.4 measurement points ``(P, 2)``, row by row (the assumed grid, note 000 F5.4)."""
+    """The Fig 5.4 measurement points ``(P, 2)``, row by row (our assumed grid)."""
     xs, ys = np.meshgrid(np.asarray(x_m, float), np.asarray(y_m, float))
     return np.stack([xs.ravel(), ys.ravel()], axis=-1)
 
@@ -125,7 +126,7 @@ def calibration_study(points_m, channel: PathLossModel, n_packets: int, n_runs: 
                       average_packets: bool = False, quantize_step_db: float | None = None,
                       anchors_m=ANCHORS_M) -> CalibrationStudy:
     """Repeat the calibration ``n_runs`` times: pooled LS (Eq. (5.1)) over every (point, anchor, packet) sample,
-    or over the per-(point, anchor) packet means (``average_packets``; the thesis does not say, A12). Uses the
+    or over the per-(point, anchor) packet means (``average_packets``; the thesis does not say). Uses the
     normal equations, which equal the cvxpy solution (tested)."""
     power, distance = simulate_calibration(points_m, channel, n_packets, rng, n_runs=n_runs, anchors_m=anchors_m,
                                            quantize_step_db=quantize_step_db)
@@ -151,7 +152,7 @@ def orientation_gain_db(theta_deg, *, quadrupole_db: float = 4.0, dipole_db: flo
     """An **illustrative** non-isotropic antenna gain ``g(theta) = A cos(2 theta + phi) + B cos(theta)`` (dB).
 
     Sec. 5.3 measured the RSS against the blindfolded node's orientation (Fig 5.6) and printed no value; the shape
-    and the 3-5 dB amplitudes are the note's illustration (note 000 F5.6), not the thesis's chip antenna."""
+    and the 3-5 dB amplitudes are our illustration, not the thesis's chip antenna."""
     t = np.deg2rad(np.asarray(theta_deg, float))
     return quadrupole_db * np.cos(2.0 * t + np.deg2rad(phase_deg)) + dipole_db * np.cos(t)
 
@@ -211,11 +212,12 @@ def testbed_rows(run: ChannelRun, sigma_acc_mps2: float, *, coverage: float = 0.
     return rows
 
 
-#: Note 000 A17: why the synthetic walks miss the measured one.
-A17_NOTE = ("A17: the experiment's MLE is better than i.i.d. 6 dB shadowing at alpha 1.8 allows (static CRLB RMS over the "
+#: Why the synthetic walks miss the measured one.
+A17_NOTE = ("the experiment's MLE is better than i.i.d. 6 dB shadowing at alpha 1.8 allows (static CRLB RMS over the "
             "room about 5 m); the real errors were smaller or more benign, so the synthetic ONLY-RSS walks are worse")
-_MISS_NOTES = {"ONLY RSS": A17_NOTE, "RSS/IMU": "the fused filter misses for the same reason as ONLY RSS (A17)"}
-_REDUCTION_MISS = "the simulated walks gain more from fusion than the measured one (A17)"
+_MISS_NOTES = {"ONLY RSS": A17_NOTE, "RSS/IMU": "the fused filter misses for the same reason as ONLY RSS"}
+_REDUCTION_MISS = ("the simulated walks gain more from fusion than the measured one (the measured channel is more "
+                   "benign than i.i.d. 6 dB shadowing)")
 _KEPT = "kept in the mean over the simulated walks"
 
 
@@ -257,7 +259,7 @@ def record_testbed(report, rows: list[dict], run: ChannelRun, sigma_acc_mps2: fl
     best = min((r for r in rows if r["case"] in ("ONLY RSS", "RSS/IMU") and r["filter"] != "static_mle"),
                key=lambda r: r["mean_single_walk"])
     printed_best = min(p.value for (name, _), p in PRINTED_TESTBED_RMSE.items() if name != "static_mle")
-    a16 = f"not reached in our walks, nor in the thesis's own: its best printed walk is {printed_best:g} m (note 000 A16)"
+    a16 = f"not reached in our walks, nor in the thesis's own: its best printed walk is {printed_best:g} m"
     report.number(f"best tracking filter, mean RMSE of one walk ({best['filter']} {best['case']})", PRINTED_ACCURACY,
                   best["mean_single_walk"], kind="claim", relation="<=", mc_std_error=best["mc_se"],
                   miss_note=a16, loose_note=a16,

@@ -6,8 +6,8 @@ measured at 25 marked points; LDPM calibration at 5 known points, ranging by Eq.
 multilateration by Eq. (8), and a constant-velocity Kalman filter on the position fixes.
 
 The paper prints neither the trajectory, the shadowing level, the calibration points, nor Q, R, P0 or
-dt; every such value is an explicit argument here, with the default and its reason from
-``shared/notes/003_george.md`` (sections 5-7). The pipeline is simulated, so the reproduction is of
+dt; every such value is an explicit argument here, with its default and the reason for it stated
+where it is defined. The pipeline is simulated, so the reproduction is of
 the method under those assumptions, not of the authors' measured data.
 """
 from __future__ import annotations
@@ -52,7 +52,7 @@ PRINTED_REDUCTION_CLAIM = PRINTED.get("Abstract", "error reduction", "claim")
 CC2420_PA_LEVEL_DBM = {31: 0.0, 27: -1.0, 23: -3.0, 19: -5.0, 15: -7.0, 11: -10.0, 7: -15.0, 3: -25.0}
 
 #: Five calibration points (not printed). Chosen off the corridor centre, where all four anchor
-#: distances are equal and the fit is singular; each gives cond(M) <= 18 (note 003, sec. 2.3 point 5).
+#: distances are equal and the fit is singular; each gives cond(M) <= 18 (our choice and check).
 DEFAULT_CALIBRATION_POINTS_M = ((0.525, 1.95), (1.575, 1.95), (0.525, 5.85), (1.575, 5.85), (1.05, 1.0))
 
 TRAJECTORIES = ("centerline", "zigzag")
@@ -64,7 +64,7 @@ def trajectory_m(kind: str = "centerline", n_points: int = 25) -> np.ndarray:
     """The 25 marked points ("cross 1-25"), whose coordinates the paper does not print.
 
     ``"centerline"``: x = 1.05 m, y from 0.3 to 7.5 m evenly (0.3 m steps for 25 points);
-    ``"zigzag"``: the same y with x alternating 0.5 / 1.6 m (note 003, section 6 item 8).
+    ``"zigzag"``: the same y with x alternating 0.5 / 1.6 m (an alternative of ours).
     """
     if n_points < 2:
         raise ValueError(f"n_points must be at least 2, got {n_points}")
@@ -153,10 +153,11 @@ def track_with_kalman(fixes_m, truth_m, *, q: float, dt_s: float = 1.0, r_mode: 
                       variant: str = "standard", with_divergence: bool = False):
     """Filter the fixes with the constant-velocity KF of Eqs. (9)-(13); returns positions (runs, T, 2).
 
-    Q = q G G^T (white acceleration, note 003 sec. 2.6 point 5), H = [I 0], U = 0. R is the empirical
-    fix covariance per run (``"empirical"``) or ``r_iso_m2 * I`` (``"isotropic"``; 3.3 m^2 from note
-    003 sec. 7). Initial state (Sec. 4 steps 5.2-5.3, "set the initial position", "initial velocity to
-    zero"): the first fix (``"first_measurement"``) or the true start (``"true_start"``), with
+    Q = q G G^T (white acceleration; the paper prints no Q, only that it was "tuned" to minimise
+    C), H = [I 0], U = 0. R is the empirical fix covariance per run (``"empirical"``) or ``r_iso_m2 * I``
+    (``"isotropic"``; 3.3 m^2, our default from a pilot simulation of this corridor: the paper says only that R
+    is "obtained from experiments"). Initial state (Sec. 4 steps 5.2-5.3, "set the initial position", "initial
+    velocity to zero"): the first fix (``"first_measurement"``) or the true start (``"true_start"``), with
     P0 = diag(R_xx, R_yy, v, v). With the first-fix start the first output is that fix.
 
     ``with_divergence=True`` returns ``(positions, flags)``, ``flags`` the KF's NIS guard per run

@@ -6,7 +6,7 @@ in an empty 30 m x 10 m hall with 4 or 6 anchors; RSS (per-anchor log-distance m
 inertial readings by a linear KF, an EKF and a UKF. Headline (Ch. VI): the mean position error falls from 3.83 m to
 0.8 m on the linear path and from 4.9 m to 1.01 m on the U-path.
 
-The thesis prints no trajectory, rate, noise level, q, anchor coordinate or filter initialisation (note 001, s.5).
+The thesis prints no trajectory, rate, noise level, q, anchor coordinate or filter initialisation.
 Every such value is a named field of :class:`WalkSettings` or a constant here, with its source or reason; the
 simulation reproduces the method under those assumptions, not the authors' measured data. Printed numbers are
 read from ``locbook/data/printed/gudipati2017.csv``.
@@ -67,7 +67,7 @@ ANCHOR_POSITIONS_M = {"12": (0.0, 0.0), "13": (ROOM_M[0], 0.0), "14": ROOM_M, "1
 ANCHOR_SETS = {4: ANCHOR_IDS[:4], 6: ANCHOR_IDS}
 #: "sent to the base station at every 1m distance" (Sec. 5.3): the report points where errors are evaluated.
 REPORT_SPACING_M = PRINTED.get("Sec. 5.3 text", "report", "spacing").value
-#: ASSUMED paths (note 001 s.3.6): the linear path along the middle of the hall, end to end; the U-path 2 m from
+#: ASSUMED paths (geometry not printed): the linear path along the middle of the hall, end to end; the U-path 2 m from
 #: the walls, out along y = 2 m, across at x = 28 m, back along y = 8 m. "over the length of the room" (Sec. 5.3).
 PATHS = {"linear": ((0.0, ROOM_M[1] / 2), (ROOM_M[0], ROOM_M[1] / 2)),
          "u": ((2.0, 2.0), (ROOM_M[0] - 2.0, 2.0), (ROOM_M[0] - 2.0, ROOM_M[1] - 2.0), (2.0, ROOM_M[1] - 2.0))}
@@ -79,7 +79,7 @@ CALIBRATION_STEP_M = PRINTED.get("Sec. 3.3 text", "calibration walk", "step").va
 CALIBRATION_SPAN_M = PRINTED.get("Sec. 3.3 text", "calibration walk", "span").value
 CALIBRATION_SAMPLES = int(PRINTED.get("Sec. 3.3 text", "calibration walk", "samples per step").value)
 CALIBRATION_TERMS = int(PRINTED.get("Eq. (3.8)", "calibration walk", "terms in the sum").value)
-#: AT86RF230 energy detect: M = RSS - 91 (Sec. 3.3), 1 dB steps over ED 0..84 (datasheet; note 001 s.2.4).
+#: AT86RF230 energy detect: M = RSS - 91 (Sec. 3.3), 1 dB steps over ED 0..84 (AT86RF230 datasheet).
 ED_OFFSET_DB = -PRINTED.get("Sec. 3.3 text", "register conversion", "subtracted from RSS").value
 ED_RANGE = (0, 84)
 
@@ -106,21 +106,22 @@ def anchors_m(anchor_ids) -> np.ndarray:
 
 @dataclass(frozen=True)
 class WalkSettings:
-    """Every unprinted quantity of the mobile experiments (note 001 s.5 points 10-11 and s.4), with its reason.
+    """Every unprinted quantity of the mobile experiments (the thesis prints none of them), with
+    its reason.
 
     Motion (ASSUMED; "moved along a linear path and a U-path", how is not said, "on a smooth surface"):
     ``speed_m_s`` cruise speed of a pushed cart, ``accel_m_s2`` its start/stop ramps, ``turn_radius_m`` the U-path
     corners.
-    Radio: ``dt_s`` packet period per anchor = filter step (note: 10 Hz filter); shadowing ``shadowing_sigma_db``
-    spatially correlated along the path over ``decorrelation_m`` (Gudmundson; note F5.1: 3 dB, about 1 m) plus
-    i.i.d. per-packet noise ``fast_sigma_db`` (note F5.1: 1 dB); readings quantised to the ED register's 1 dB.
+    Radio: ``dt_s`` packet period per anchor = filter step (default: a 10 Hz filter); shadowing ``shadowing_sigma_db``
+    spatially correlated along the path over ``decorrelation_m`` (Gudmundson's model; default 3 dB, 1 m) plus
+    i.i.d. per-packet noise ``fast_sigma_db`` (default 1 dB); readings quantised to the ED register's 1 dB.
     Inertial: accelerometer white noise ``accel_sigma_m_s2`` and gyroscope ``gyro_sigma_rad_s`` per sample at
     ``imu_rate_hz``, averaged to the filter step; residual biases after the stationary calibration drawn per run
-    with sd ``accel_residual_bias_m_s2`` and ``gyro_residual_bias_rad_s`` (note F5.2/F5.3: 0.02 m/s^2, 0.5 deg/s).
-    Filters: ``q`` acceleration-increment variance per step (note s.5 point 11: 0.1 (m/s^3)^2 as a jerk spectral
+    with sd ``accel_residual_bias_m_s2`` and ``gyro_residual_bias_rad_s`` (defaults 0.02 m/s^2, 0.5 deg/s).
+    Filters: ``q`` acceleration-increment variance per step (default 0.1 (m/s^3)^2 as a jerk spectral
     density, times dt), ``q_angular`` yaw-rate increment variance per step (the yaw rate jumps by v / r at the arc
     ends), the filters' RSS sigma the model's total (``filter_sigma_db``, None = sqrt(shadowing^2 + fast^2)),
-    P_0 and the start at the true start point at rest (note s.5 point 11).
+    P_0 and the start at the true start point at rest. All defaults are ours.
     ``imu_frame``: ``"body"`` (readings rotated by the heading; default) or the literal ``"world"``.
     """
 
@@ -193,8 +194,8 @@ def simulate_walk(path: str, n_anchors: int, settings: WalkSettings, n_runs: int
     shadow = correlated_shadowing_db(truth.position_m, settings.shadowing_sigma_db, settings.decorrelation_m, rng,
                                      size=(n_runs, m))                             # (R, m, T)
     rss = mean + np.swapaxes(shadow, -1, -2) + settings.fast_sigma_db * rng.standard_normal((n_runs, T, m))
-    # the ED register (note 001 s.2.4); packets below its floor are not heard (anchor 13, C = 3.1, reaches it at the
-    # far end of the hall)
+    # the ED register (Sec. 3.3, AT86RF230 datasheet); packets below its floor are not heard (anchor 13, C = 3.1,
+    # reaches it at the far end of the hall)
     rss = ed_register_dbm(rss)
     per_step = np.sqrt(settings.imu_samples_per_step)
     acc_bias = settings.accel_residual_bias_m_s2 * rng.standard_normal((n_runs, 1, 2))
@@ -309,9 +310,9 @@ def ins_drift_covariance(walk: Walk) -> np.ndarray:
 
 
 def position_fusion(walk: Walk, fix_covariance) -> tuple[np.ndarray, np.ndarray]:
-    """The "position" reading of Eqs. (4.8)-(4.9) (note 001 s.2.9): at each report point, the RSS-only fix
-    (covariance ``fix_covariance``) fused with the dead-reckoned position (covariance :func:`ins_drift_covariance`,
-    growing with the time since the start). Returns the fused positions ``(R, K, 2)`` and covariances ``(K, 2, 2)``."""
+    """The "position" reading of Eqs. (4.8)-(4.9) (ours, as in :mod:`~locbook.tracking.fusion`): at each report
+    point, the RSS-only fix (covariance ``fix_covariance``) fused with the dead-reckoned position (covariance
+    :func:`ins_drift_covariance`, growing with the time since the start). Returns the fused positions ``(R, K, 2)`` and covariances ``(K, 2, 2)``."""
     ins = inertial_only(walk)[:, walk.report_steps]
     z, R = fuse_estimates(rss_only_fixes(walk), np.asarray(fix_covariance, float), ins, ins_drift_covariance(walk))
     return z, R[0] if R.ndim == 4 else R
@@ -323,7 +324,8 @@ STATE_MODELS = ("heading", "literal_001")
 def track(walk: Walk, method: str, *, fix_covariance=None, ukf_alpha: float = UKF_ALPHA, ukf_weights: str = "corrected",
           ukf_innovation_noise: bool = True, rss_sign: str = "corrected", state_model: str = "heading",
           with_divergence: bool = False):
-    """Position estimates ``(R, K, 2)`` at the report points for one method (Sec. 2.10 of note 001):
+    """Position estimates ``(R, K, 2)`` at the report points for one method (the methods of Ch. V; their inputs are
+    our reconstruction):
 
     - ``rss_only``: :func:`rss_only_fixes`;
     - ``inertial_only``: :func:`inertial_only`;
@@ -471,7 +473,8 @@ def table_5_1():
 
 def calibration_distances_m(terms: str = "span") -> np.ndarray:
     """The calibration walk's distances: ``"span"`` 0.5 m steps over 10 m as Sec. 3.3 says (20 steps), or
-    ``"sixty"`` 60 steps of 0.5 m (the count Eq. (3.8) sums over, the hall's 30 m; note 001 s.5 point 6)."""
+    ``"sixty"`` 60 steps of 0.5 m (the count Eq. (3.8) sums over, which would span the
+    hall's 30 m)."""
     if terms == "span":
         n = int(round(CALIBRATION_SPAN_M / CALIBRATION_STEP_M))
     elif terms == "sixty":
@@ -486,7 +489,8 @@ def simulate_calibration_walk(anchor_id: str, distances_m, *, shadowing_sigma_db
                               samples: int = CALIBRATION_SAMPLES):
     """Averaged received power ``(R, N)`` (dBm) at each calibration distance: the anchor's Table 5.2 model plus
     correlated shadowing along the walk and ``samples`` per-packet noise draws, each quantised to the ED register's
-    1 dB, averaged (note 001, F5.1 recipe). Also returns the 1 m reference power ``(R,)`` averaged the same way
+    1 dB, averaged (our synthetic stand-in for the unprinted
+    data of Fig. 5.1). Also returns the 1 m reference power ``(R,)`` averaged the same way
     (S is "measured at 1 m", Sec. 3.3), drawn with its own shadowing. Packets below the ED floor are not heard and
     left out of the averages (a step with none heard is NaN)."""
     d = np.asarray(distances_m, dtype=float)

@@ -2,10 +2,10 @@
 indication (RSSI) based indoor localization and tracking methods using active RFID devices", M.Sc. thesis,
 METU, 2011. Chapter 7 simulations.
 
-The simulation protocol is the one reconstructed and validated in ``shared/notes/004_ozkaya.md``,
-sections 4.1-4.3: a 5 m x 8 m room without walls, readers at three (or four) corners, alpha = -52 dBm,
-n = 2.3 for every reader, Gaussian RSSI noise independent across readers, 1000 runs per setting. A *mobile*
-target starts uniformly in the room, takes one Gaussian step of std D_0 per recursion (reflected at the
+The simulation protocol is the one stated in Sec. 7.2.1, its unprinted parts reconstructed by us and checked
+against the printed tables by re-simulation: a 5 m x 8 m room without walls, readers at three (or four) corners,
+alpha = -52 dBm, n = 2.3 for every reader, Gaussian RSSI noise independent across readers, 1000 runs per setting.
+A *mobile* target starts uniformly in the room, takes one Gaussian step of std D_0 per recursion (reflected at the
 walls) and gets a fresh noise vector every step; a *fixed* target is uniform in the room and its noise vector
 is drawn once per run and frozen (static shadowing). The error is taken at the last recursion rt. NN
 methods take one shot.
@@ -61,9 +61,10 @@ ALPHA_DBM, PATH_LOSS_EXP, SIGMA_DB = (PRINTED.get("Table 6.1", "Reader 2", s).va
                                       for s in ("alpha_dbm", "path_loss_exp", "sigma_db"))
 STATISTICS = ("rmse_m", "mean_m", "median_m", "p90_m", "std_m")
 
-#: Reader layouts. Corners: note 004 section 4.2 (any three corners are equivalent by symmetry).
+#: Reader layouts. Corners: Sec. 7.2.1's separations of 5 m and 8 m (which three corners is not printed; any
+#: three are equivalent by symmetry).
 #: "half3": the half-separation layout of Fig. 7.6 (2.5 m and 4 m); its positions are not printed, so this
-#: is the note's guess, centred in the room, which the note already found does not reproduce Table 7.5.
+#: is our guess, centred in the room; it does not reproduce Table 7.5.
 LAYOUTS = {
     "corners3": ((0.0, 0.0), (5.0, 0.0), (0.0, 8.0)),
     "corners4": ((0.0, 0.0), (5.0, 0.0), (0.0, 8.0), (5.0, 8.0)),
@@ -72,7 +73,7 @@ LAYOUTS = {
     "large4": ((0.0, 0.0), (10.0, 0.0), (0.0, 16.0), (10.0, 16.0)),
 }
 
-#: k_CELL -> (nx, ny) lattice patterns of note 004 section 4.2 (6, 16, 56, 98 are not specified in the
+#: k_CELL -> (nx, ny) lattice patterns (ours for 6, 16, 56, 98, which are not specified in the
 #: thesis; 8, 28, 112 are: 2 m, 1 m and 0.5 m spacing). 135 is the 10 x 16 m room.
 CELL_PATTERNS = {6: (2, 3), 8: (2, 4), 16: (4, 4), 28: (4, 7), 56: (7, 8), 98: (7, 14), 112: (8, 14), 135: (9, 15)}
 
@@ -92,7 +93,7 @@ def cell_centres(room_m, nx: int, ny: int, margin_m: float = 0.5) -> np.ndarray:
     """Centres of an ``nx x ny`` partition of the room shrunk by ``margin_m`` on every side.
 
     With the default margin this gives the thesis's 28 cells at x in {1..4}, y in {1..7} (Fig. 7.2), the
-    112 cells at 0.5 m spacing and the 135 cells of the 10 x 16 m room (note 004, section 4.2).
+    112 cells at 0.5 m spacing and the 135 cells of the 10 x 16 m room (Tables 7.1, 7.6).
     """
     w, h = room_m[0] - 2 * margin_m, room_m[1] - 2 * margin_m
     xs = margin_m + w * (np.arange(nx) + 0.5) / nx
@@ -269,12 +270,12 @@ def _area_points(room_m, step_m: float = 0.05):
 
 def thesis_crlb_m(layout: str, sigma_db: float, path_loss_exp: float = 2.0, average: str = "cells_mean") -> float:
     """The thesis's CRLB columns: Eqs. (A.10)-(A.13) as printed (1/d^2, flagged ``ozkaya_printed``) with n = 2
-    (note 004, section 3.9).
+    (our finding: the printed formula gives the printed columns with n = 2, not the simulations' 2.3).
 
     How the thesis averaged the bound over target positions is not stated. ``"cells_mean"`` (default) is the
     mean of the per-position bound over the 1 m grid cells of the layout's room (28 cells in 5 x 8 m); it gives
     0.7999 / 0.6392 m for 3 / 4 corner readers at 5.2 dB, and 0.1538 m per dB, i.e. every printed value
-    0.15 / 0.46 / 0.80 / 1.08 / 1.38 / 1.70. ``"area_rms"`` is the note's reading (RMS over uniformly spread
+    0.15 / 0.46 / 0.80 / 1.08 / 1.38 / 1.70. ``"area_rms"`` is another reading (RMS over uniformly spread
     positions; 0.818 / 0.640 m).
     """
     room = room_for(layout)
@@ -393,16 +394,17 @@ def thesis_monte_carlo_ambiguity(standard_error: float, n_runs: int) -> Ambiguit
 #: Why a printed simulation cell is expected to be missed.
 KNOWN_MISSES = {
     ("7.5", "Half of default (2.5 m, 4 m)"): (
-        "reader positions of Fig. 7.6 are not printed; the guessed layout (note 004 s.4.2) is not the thesis's, and "
+        "reader positions of Fig. 7.6 are not printed; our guessed layout is not the thesis's, and "
         "its printed CRLB 0.76 cannot come from the scale-invariant printed formula either"),
     ("7.19", "Uniform over the area"): (
         "the thesis's 'uniform proposal' is not a memoryless uniform draw (which ignores all motion and gives about "
-        "1.75 m; note 004 s.11.8); its exact form is not stated"),
+        "1.75 m); its exact form is not stated"),
     ("7.20", "Gaussian, zero mean, D = 0.5 / const. vel."): (
         "constant-velocity protocol not fully stated (start x range, whether particles start uniform, step count); "
-        "note 004 s.11.9 gets the same 1.6 m"),
+        "a separate pilot simulation of ours gets the same 1.6 m"),
     ("7.20", "Gaussian, mean = known velocity, D = 0.5 / const. vel."): (
-        "constant-velocity protocol not fully stated (note 004 s.11.9: about 0.97 m with the same reading)"),
+        "constant-velocity protocol not fully stated (a separate pilot simulation: about 0.97 m with the same "
+        "reading)"),
     ("7.21", "Gaussian, mean = known velocity, D = 0.5 / const. vel."): (
         "same case as Table 7.20 row 1 (constant-velocity protocol not fully stated)"),
     ("7.21", "same + initial location known / const. vel."): (
@@ -415,15 +417,15 @@ for _k in ("15", "20", "23", "25", "28"):
     KNOWN_MISSES[("7.4", _k)] = _NN_LARGE_K
 for _s in ("3", "5.2", "7", "9"):
     KNOWN_MISSES[("7.3", _s)] = ("parameter-based NN errors come out 0.05-0.15 m below the thesis's at every sigma_0 "
-                                 "(the reading note found the same: 1.36/1.87/2.19/2.49 vs 1.38/1.95/2.29/2.57); the "
-                                 "thesis's NN has some extra error source that is not described")
+                                 "(a separate pilot simulation found the same: 1.36/1.87/2.19/2.49 vs "
+                                 "1.38/1.95/2.29/2.57); the thesis's NN has some extra error source that is not described")
 for _k in ("1", "2", "3", "4", "5", "6", "7"):
-    KNOWN_MISSES[("7.4", _k)] = ("few-neighbour NN errors come out 0.1-0.2 m below the thesis's (note 004 s.4.3: "
-                                  "k = 1 gives 1.97 vs 2.17); the cause is not known")
+    KNOWN_MISSES[("7.4", _k)] = ("few-neighbour NN errors come out 0.1-0.2 m below the thesis's (a separate pilot "
+                                  "simulation: k = 1 gives 1.97 vs 2.17); the cause is not known")
 _SHAPE = ("the row's RMSE agrees; the shape of the error distribution differs (here typically a higher median and a "
           "lower 90th percentile than printed, i.e. fewer large errors); the thesis does not say how it computed "
           "percentiles")
-_UNEXPLAINED = ("not explained: the simulation protocol is a reconstruction (note 004 s.4.3: it matches the tables to "
+_UNEXPLAINED = ("not explained: the simulation protocol is a reconstruction (it matches most tables to "
                 "about 0.1 m) and the thesis does not print every setting of this case")
 
 
@@ -521,7 +523,7 @@ def record_tables(report, rows, n_runs: int) -> None:
 
 #: Note of a printed CRLB of a layout whose bound the printed formula cannot give (half-separation and large room).
 CRLB_NOT_FROM_FORMULA = ("not reproducible: the printed CRLB formula is scale-invariant (doubling the room and the reader "
-                         "separations leaves it unchanged), so this value cannot come from it (note 004 s.3.9); the layout or "
+                         "separations leaves it unchanged), so this value cannot come from it; the layout or "
                          "the formula behind it is not printed")
 
 
@@ -610,7 +612,7 @@ def synthetic_campaign(reader: int, n_campaigns: int, rng: np.random.Generator, 
     ``(n_campaigns, distances, locations_per_distance, readings_per_location)``.
 
     Reading = Eq. (6.4)'s mean ``alpha - 10 n log10 d - WAF walls`` + a per-location offset
-    ``N(0, location_sigma_db^2)`` (orientation, position on the arc; note 004 s.9) + per-reading noise
+    ``N(0, location_sigma_db^2)`` (orientation, position on the arc) + per-reading noise
     ``N(0, sigma^2 - location_sigma_db^2)``, so the total per-distance variance is Table 6.1's ``sigma^2``; then 1 dB
     reader resolution and the -90 dBm sensitivity floor (:func:`~locbook.models.channel.quantize_db`). The offsets
     are drawn before the readings' noise (one stream, ``rng``)."""
@@ -628,7 +630,8 @@ def synthetic_campaign(reader: int, n_campaigns: int, rng: np.random.Generator, 
     return quantize_db(mean[:, None, None] + offs + noise, 1.0, READER_SENSITIVITY_DBM)
 
 
-#: Synthetic two-room test bed (note 004 s.6.1, every coordinate ASSUMED: the plan exists only in figures):
+#: Synthetic two-room test bed (Sec. 6.1: rooms of 3 m x 4 m and 4 m x 6 m; every coordinate ASSUMED: the plan
+#: exists only in figures):
 #: small room x in [0, 3], large room x in [3, 9], both y in [0, 4], brick wall at x = 3.
 TESTBED_SIZE_M = (9.0, 4.0)
 TESTBED_WALLS_M = (((3.0, 0.0), (3.0, 4.0)),)
@@ -640,21 +643,21 @@ REFERENCE_TAGS_M = ((1.5, 1.5), (2.0, 3.0), (4.5, 1.5), (5.0, 3.0))
 
 def record_simulation_assumptions(report) -> None:
     """Record the assumptions shared by the Sec. 7.2 simulation notebooks (NN, grid, SIR and their comparison): the
-    single 5 m x 8 m room with three corner readers, the noise and motion protocols validated against the tables
-    (note 004 s.4.3), the cells and the averaging of the thesis's CRLB column."""
+    single 5 m x 8 m room with three corner readers, the noise and motion protocols checked against the tables
+    by re-simulation, the cells and the averaging of the thesis's CRLB column."""
     for name, value, reason in [
         ("room_m", ROOM_M, "Sec. 7.2.1: single 5 m x 8 m room, no walls"),
         ("anchors_m", LAYOUTS["corners3"], "three corners (separations 5 m and 8 m, Sec. 7.2.1); which three is not "
-         "printed and is equivalent by symmetry (note 004 s.4.2)"),
-        ("noise_model", "i.i.d. per reader", "validated against the tables (note 004 s.4.3); the text's 'noise on the "
+         "printed and is equivalent by symmetry"),
+        ("noise_model", "i.i.d. per reader", "checked against the tables by re-simulation; the text's 'noise on the "
          "transmit power' (common mode) gives clearly lower errors"),
         ("mobile_protocol", "uniform start, Gaussian steps reflected at the walls, fresh noise each step, error at step rt",
-         "note 004 s.4.3 (validated)"),
+         "not fully printed (Sec. 7.2.1); checked against the tables by re-simulation"),
         ("fixed_protocol", "uniform position, noise drawn once per run and frozen, error at step rt",
-         "note 004 s.4.3 (validated): fresh noise per step gives far smaller errors than printed"),
+         "checked against the tables by re-simulation: fresh noise per step gives far smaller errors than printed"),
         ("cells", "nx x ny partition of the room shrunk by 0.5 m", "gives the printed 28 cells at x 1..4, y 1..7 and the "
-         "0.5 m and 2 m grids; the 6/16/56/98 patterns are not printed (note 004 s.4.2)"),
-        ("min_distance_m", 0.1, "avoids log10(0) at a reader (note 004 s.4.3)"),
+         "0.5 m and 2 m grids; the 6/16/56/98 patterns are not printed"),
+        ("min_distance_m", 0.1, "avoids log10(0) at a reader (ours)"),
         ("thesis_crlb_average", "mean over the 1 m cells", "the averaging is not printed; this reading reproduces "
          "0.80 / 0.64 m and the whole sigma sweep"),
     ]:

@@ -2,9 +2,9 @@
 
 The thesis measured one home (two rooms, 3 m x 4 m and 6 m x 4 m, a brick wall between them, three readers,
 four reference tags) and prints no raw RSSI and no coordinates. This module builds a synthetic stand-in
-with every unprinted quantity a named, documented assumption (note 004 sections 6 and 9):
+with every unprinted quantity a named, documented assumption:
 
-* the layout of note 004 s.6.1 (``TESTBED_*`` constants of :mod:`locbook.scenarios.ozkaya`, plus the test
+* an assumed layout consistent with Sec. 6.1 (``TESTBED_*`` constants of :mod:`locbook.scenarios.ozkaya`, plus the test
   points, pattern locations and paths below);
 * a channel (:class:`TestbedChannel`) whose mean is the offline calibration of Table 6.1 with WAF = 2 dB, and
   whose randomness is the sum of a static, spatially correlated shadowing field per reader (it is what makes
@@ -103,11 +103,12 @@ THESIS_CRLB_PATH_LOSS_EXP = 2.0
 CRLB_CALIBRATED_FROM = (
     f"printed-form bound (Eqs. A.10-A.12, 1/d^2) with n = {THESIS_CRLB_PATH_LOSS_EXP:g} and the mean over the cells, "
     "both chosen because they reproduce the simulation CRLB columns (e.g. Table 7.2 row 3: "
-    f"{oz.PRINTED.get('Table 7.2', '3', 'crlb_m').text}; note 004 s.3.9); the test-bed layout is assumed (note 004 s.6.1)")
+    f"{oz.PRINTED.get('Table 7.2', '3', 'crlb_m').text}); the test-bed layout is assumed (Sec. 6.1 prints no "
+    "coordinates)")
 
 #: The thesis measured ONE test bed; ours is the mean over synthetic ones: the window adds where one test bed falls.
 TESTBED_AMBIGUITY_WHAT = "one measured test bed: 2 sd of the statistic between synthetic test beds"
-TESTBED_AMBIGUITY_SOURCE = "Ozkaya 2011 Sec. 7.3 (one test bed measured); note 004 s.6.1, s.9"
+TESTBED_AMBIGUITY_SOURCE = "Ozkaya 2011 Sec. 7.3 (one test bed measured); Sec. 6.1 (its layout not printed)"
 
 
 def testbed_ambiguity(per_testbed) -> Ambiguity:
@@ -127,10 +128,10 @@ class TestbedChannel:
 
     * ``alpha_j, n_j, WAF``: Table 6.1 (offline calibration; the most careful measurement in the thesis);
     * ``S_j(p)``: static shadowing, a Gaussian field per reader with exponential correlation
-      (``static_sigma_db``, ``decorrelation_m``; note 004 s.9 suggests about 4 dB and 1-2 m);
+      (``static_sigma_db``, ``decorrelation_m``; our defaults, about 4 dB and 1-2 m);
     * ``O_j``: tag orientation, drawn once per visit of a point or pass of a path (the tag is re-oriented
       between visits, Sec. 7.3.1; calibrated to be nearly omnidirectional, hence small);
-    * ``e_jt``: dynamic noise, i.i.d. per reading (``dynamic_sigma_db``; note 004 s.9: about 3 dB, the
+    * ``e_jt``: dynamic noise, i.i.d. per reading (``dynamic_sigma_db``; default about 3 dB, the
       figure the thesis quotes for a home [14]);
     * ``b_jt``: a burst loss common to every tag seen by reader j (a person next to the reader), with
       probability ``burst_probability`` per step and a loss uniform in ``burst_loss_db``;
@@ -419,13 +420,13 @@ def run_testbed(n_realizations: int, seed: int, *, channel: TestbedChannel = Tes
     """Run the experiments of Sec. 7.3 on ``n_realizations`` independent synthetic test beds.
 
     * fixed: each of :data:`FIXED_POINTS_M` visited once for ``fixed_steps`` estimates (25 x 30 = 750 in the
-      thesis); filters restart at every point (note 004 s.11.14).
+      thesis); filters restart at every point (not stated in the thesis).
     * mobile: each path of :data:`MOBILE_PATHS_M` walked ``mobile_passes`` times (the count is not printed),
       one estimate per step, velocity known to the filters (Sec. 7.3.1.3).
     * dynamic: :data:`DYNAMIC_POINTS_M` x ``fixed_steps`` with people moving around target and readers:
       reader bursts with probability ``dynamic_burst_probability`` per step (ASSUMED).
     * obstructed: :data:`OBSTRUCTION_POINTS_M` x ``fixed_steps``; metal objects in front of every reader add a loss
-      uniform in ``obstruction_loss_db`` per reader (note 004 s.9: 5-10 dB), to target and tags alike.
+      uniform in ``obstruction_loss_db`` per reader (default 5-10 dB, ours), to target and tags alike.
     * monopole: the mobile experiment on a fresh test bed whose random components are scaled by
       ``monopole_noise_scale``; the fixed-sigma filters still assume 5.2 dB (Sec. 7.3.2.6).
 
@@ -723,7 +724,7 @@ _FILTER_FIXED = (f"fixed target: the thesis's Bayesian filters are its worst fix
                  "Gaussian likelihood accumulates evidence for a wrong cell; the synthetic channel has no such model "
                  "error. Whether the thesis restarted the filter at each point is not stated either")
 _FILTER_MOVING = ("Bayesian filter on the synthetic test bed: the path's x, the number of passes, the obstruction points "
-                  "and whether a filter restarts are assumed (note 004 s.11.13-14), and the model error that hurts the "
+                  "and whether a filter restarts are assumed (none is printed), and the model error that hurts the "
                   "thesis's fixed-target filters (a real home is not a log-distance mean plus a smooth Gaussian field) "
                   "acts here too; the synthetic channel has none of it")
 _SMALL_K = (f"few neighbours: the thesis's k = 4 and 18 errors have heavy tails (90 % at {_pt('7.27', '4', 'p90_m')} / "
@@ -767,7 +768,7 @@ def miss_note(experiment: str, method: str, column: str) -> str:
     if METHODS[method].online_sigma:
         return _SIGMA
     return ("not explained: the synthetic test bed differs from the home in a way this model does not capture "
-            "(its coordinates, furniture and noise structure are assumed, note 004 s.6.1, s.9)")
+            "(its coordinates, furniture and noise structure are assumed; Sec. 6.1 prints none of them)")
 
 
 _RANKING_NOTES = (

@@ -4,8 +4,8 @@ thesis, George Mason University.
 A static emitter is located from RSS recorded by a receiver at N random measurement locations whose positions come
 from GPS (sigma_3 = 5 m): linearised least squares (LSF) and its recursive form (RLSF), an EKF with a random-walk
 state, and a SIR particle filter. The thesis prints no numeric result, only parameters and claims; every unprinted
-choice below follows note 002 s.5 (A1-A16) and is a named argument. The note's own sanity numbers (its s.7) are
-orientation, never scored.
+choice below is a named argument with its reason. Numbers from our own pilot simulations are orientation, never
+scored.
 """
 from __future__ import annotations
 
@@ -44,8 +44,8 @@ AREA_M = 50.0
 
 @dataclass(frozen=True)
 class Setup:
-    """The simulated world (note 002 A1-A4, A9): ``dim`` 3 (the thesis's equations) or 2; the target at the
-    area's centre (A2, not printed); the link budget ``ref_power_dbm`` at ``1 m`` (A4: K = -20 dBm, known to every
+    """The simulated world: ``dim`` 3 (the thesis's equations) or 2; the target at the area's centre (not
+    printed); the link budget ``ref_power_dbm`` at ``1 m`` (not printed; K = -20 dBm, ours, known to every
     estimator); shadowing ``sigma_db`` and exponent ``path_loss_exp`` (Secs. 2.6, 4.4); receiver positions observed
     with GPS noise ``receiver_sigma_m`` (sigma_3; 0 = exact, as for the LSF of Sec. 2.6)."""
 
@@ -66,20 +66,21 @@ class Setup:
 
 
 def draw_locations(n_runs: int, n_locations: int, dim: int, rng: np.random.Generator) -> np.ndarray:
-    """Measurement locations "random selected points within the coverage area" (A3): uniform in the area, redrawn
-    per run, ``(R, N, dim)``."""
+    """Measurement locations "random selected points within the coverage area" (distribution not stated): uniform
+    in the area, redrawn per run, ``(R, N, dim)``."""
     return rng.uniform(0.0, AREA_M, (n_runs, n_locations, dim))
 
 
 def measure(setup: Setup, locations_m, rng: np.random.Generator) -> np.ndarray:
-    """Received powers ``(R, N)`` (Eq. (4.28)): the log-distance mean (distances below 1 m clamped, A2) plus
+    """Received powers ``(R, N)`` (Eq. (4.28)): the log-distance mean (distances below 1 m clamped, ours) plus
     shadowing ``N(0, sigma_1^2)``."""
     d = np.linalg.norm(np.asarray(locations_m) - setup.target, axis=-1)
     return setup.channel.sample_rss_dbm(d, rng)
 
 
 def observed_locations(setup: Setup, locations_m, rng: np.random.Generator) -> np.ndarray:
-    """The receiver positions the estimators see: the true ones plus GPS noise ``N(0, sigma_3^2 I)`` (A9)."""
+    """The receiver positions the estimators see: the true ones plus GPS noise ``N(0, sigma_3^2 I)``
+    (Sec. 4.4; the thesis does not say which estimators see it)."""
     loc = np.asarray(locations_m, float)
     return loc + setup.receiver_sigma_m * rng.standard_normal(loc.shape) if setup.receiver_sigma_m > 0 else loc
 
@@ -93,7 +94,7 @@ def lsf_by_count(setup: Setup, locations_m, rss_dbm, counts, *, reference: str =
                  variant: str = "corrected", bias_correction: str = "median") -> np.ndarray:
     """Batch LSF (Eqs. (2.27)-(2.29), corrected) on the first ``n`` locations for each ``n`` in ``counts``:
     positions ``(R, len(counts), dim)``. ``bias_correction="median"`` is the thesis's plain inversion (2.34);
-    ``"squared"`` removes the log-normal bias of ``d^2`` (note 002 s.2.7, an extension)."""
+    ``"squared"`` removes the log-normal bias of ``d^2`` (Eqs. (2.35)-(2.38); an extension)."""
     d = _ranges(setup, rss_dbm, bias_correction)
     out = [lateration_ls(locations_m[:, :n], d[:, :n], pairs=reference, variant=variant).position_m
            for n in counts]
@@ -102,7 +103,8 @@ def lsf_by_count(setup: Setup, locations_m, rss_dbm, counts, *, reference: str =
 
 def rlsf_path(setup: Setup, locations_m, rss_dbm, *, bias_correction: str = "median", prior_cov=None):
     """RLSF (Eqs. (2.49)-(2.58), corrected) over the consecutive rows: estimates ``(R, N - 1, dim)`` after locations
-    2..N (row i needs locations i and i + 1), prior mean 0 and ``Pi_0 = 1e6 I`` by default (note 002 s.2.8)."""
+    2..N (row i needs locations i and i + 1), prior mean 0 and ``Pi_0 = 1e6 I`` by default (Eq. (2.49) prints no
+    Pi_0; ours)."""
     d = _ranges(setup, rss_dbm, bias_correction)
     H, Y = lateration_system(locations_m, d, pairs="consecutive")
     return recursive_least_squares(H, Y, prior_cov=prior_cov).x
@@ -112,7 +114,8 @@ EKF_VARIANTS = ("corrected", "literal_002")
 
 
 def corrected_jacobian(x, anchors_m, path_loss_exp):
-    """``dh_i/dX = (10 eta / ln 10) (s_i - X)^T / d_i^2`` (Eq. (4.43) corrected, note 002 s.2.11): ``(..., N, dim)``."""
+    """``dh_i/dX = (10 eta / ln 10) (s_i - X)^T / d_i^2`` (Eq. (4.43) corrected: the print lacks
+    the 1/ln 10 and one 1/d_i): ``(..., N, dim)``."""
     return log_distance_gradient(np.asarray(x, float)[..., None, :] - np.asarray(anchors_m, float), path_loss_exp)
 
 
@@ -128,10 +131,11 @@ EKF_SCHEDULES = ("sequential", "batch")
 def ekf_path(setup: Setup, anchors_m, rss_dbm, x0, P0, *, process_sd_m: float = SIGMA2_M,
              variant: str = "corrected", inflate: bool = False, schedule: str = "sequential",
              with_divergence: bool = False):
-    """The EKF of Sec. 4.3 over the sequential schedule (A5a: step k assimilates location k): random-walk state
-    ``X_k = X_{k-1} + w``, ``Q = sigma_2^2 I`` (Eq. (4.25), A6); measurement (4.28). ``variant="corrected"``: the
-    nonlinear innovation, the corrected Jacobian and ``R = sigma_1^2`` (optionally ``inflate``d for the GPS noise
-    sigma_3, A8); ``"literal_002"`` (flagged): the printed Jacobian (4.43) and ``R = I`` as printed.
+    """The EKF of Sec. 4.3 over the sequential schedule (our reading of its "time": step k assimilates
+    location k): random-walk state ``X_k = X_{k-1} + w``, ``Q = sigma_2^2 I`` (Eq. (4.25); the true target is
+    static); measurement (4.28). ``variant="corrected"``: the nonlinear innovation, the corrected Jacobian and
+    ``R = sigma_1^2`` (optionally ``inflate``d for the GPS noise sigma_3, an extension); ``"literal_002"``
+    (flagged): the printed Jacobian (4.43) and ``R = I`` as printed.
     ``schedule="batch"``: all N readings in one update (the corrected EKF only). Returns the estimates
     ``(R, N, dim)`` after each location (``(R, 1, dim)`` for the batch schedule); with ``with_divergence``
     ``(estimates, flags)``, the EKF's NIS guard per run (:class:`locbook.tracking.divergence.DivergenceFlags`, step k =
@@ -177,12 +181,13 @@ SHADOWING = ("frozen", "iid")
 def pf_run(setup: Setup, anchors_m, rss_dbm, rng: np.random.Generator, *, n_particles: int, n_iterations: int,
            schedule: str = "all", shadowing: str = "frozen", true_locations_m=None, process_sd_m: float = SIGMA2_M,
            likelihood_sigma_db: float | None = None, resampling: str = "systematic", cloud_steps=()):
-    """The SIR-PF of Sec. 5.3.1 (bootstrap proposal, resampling at every iteration, A12), particles drawn uniform in
-    the area (Sec. 5.4). ``schedule`` (A5): ``"all"`` assimilates every location's reading at each iteration,
-    ``"sequential"`` location k at iteration k (needs ``n_iterations <= N``), ``"cyclic"`` location ``k mod N``.
-    ``shadowing``: ``"frozen"`` reuses the recorded readings (A5 b2, default), ``"iid"`` draws fresh shadowing at
-    every iteration at the ``true_locations_m`` (A5 b1). ``likelihood_sigma_db``: the filter's sigma (default
-    sigma_1; A10 uses 1 dB for a noise-free channel)."""
+    """The SIR-PF of Sec. 5.3.1 (bootstrap proposal, resampling at every iteration; the scheme is not named),
+    particles drawn uniform in the area (Sec. 5.4). ``schedule`` (what an iteration assimilates is not stated):
+    ``"all"`` assimilates every location's reading at each iteration, ``"sequential"`` location k at iteration k
+    (needs ``n_iterations <= N``), ``"cyclic"`` location ``k mod N``.
+    ``shadowing``: ``"frozen"`` reuses the recorded readings (default), ``"iid"`` draws fresh shadowing at
+    every iteration at the ``true_locations_m``. ``likelihood_sigma_db``: the filter's sigma (default
+    sigma_1; 1 dB suits Fig. 21's noise-free channel)."""
     if schedule not in SCHEDULES:
         raise ValueError(f"schedule must be one of {SCHEDULES}, got {schedule!r}")
     if shadowing not in SHADOWING:
@@ -227,5 +232,5 @@ def crlb_m(setup: Setup, locations_m) -> np.ndarray:
 
 
 def errors_m(estimates_m, target_m) -> np.ndarray:
-    """Euclidean error ``|X_hat - X|`` (A15)."""
+    """Euclidean error ``|X_hat - X|`` (the thesis's "difference between estimated mean and actual location")."""
     return np.linalg.norm(np.asarray(estimates_m) - np.asarray(target_m), axis=-1)

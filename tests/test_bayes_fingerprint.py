@@ -288,7 +288,7 @@ def test_thesis_crlb_sweep_reproduces_every_printed_value():
     for sigma, value in printed.items():
         assert abs(oz.thesis_crlb_m("corners3", sigma) - value) <= 0.02
     assert abs(oz.thesis_crlb_m("corners4", 5.2) - 0.64) <= 0.02
-    # the correct bound is several times larger (note 004 s.3.9: about 3.4-3.7 m)
+    # the correct bound (1/d^4) is several times larger
     assert 3.0 < oz.correct_crlb_m("corners3", 5.2) < 4.0
 
 

@@ -31,7 +31,7 @@ def test_range_bias_factor_matches_lognormal_mean():
     ratio = d_hat / 3.0
     se = ratio.std() / np.sqrt(ratio.size)
     assert abs(ratio.mean() - model.range_bias_factor()) < 4 * se
-    assert model.range_bias_factor() == pytest.approx(1.34, abs=0.01)  # note 000, sec. 2.2
+    assert model.range_bias_factor() == pytest.approx(1.34, abs=0.01)  # Dogan 2015's testbed, alpha 1.8, 6 dB
     # lognormal mean: d_hat / d = 10^(-e / (10 n)) = exp(-e ln10 / (10 n)) with e ~ N(0, 6^2): exp(s^2 / 2)
     s = 6.0 * np.log(10.0) / 18.0
     assert model.range_bias_factor() == pytest.approx(np.exp(s**2 / 2), rel=1e-14)

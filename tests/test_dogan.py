@@ -77,7 +77,7 @@ def test_rss_ekf_equals_filterpy(mode, fusion):
 
 def test_serial_order_matters_for_rss():
     """The serial EKF re-linearises after each scalar update, so unlike the linear case its result depends
-    on the order (note 000 s.2.6)."""
+    on the order (Tables 3.3-3.4)."""
     model, channel, power, acc, x0, P0 = _scenario(seed=3)
     runs = [lb.extended_kalman_filter(model.F, model.Q, x0, P0, [lb.RssMeasurement(
         power, ANCHORS, channel, model.position_index, mode="serial", order=o)]).x for o in ("descending", "given")]
@@ -119,7 +119,7 @@ def test_serial_parallel_and_kf_agree_on_a_linear_model():
 
 
 def test_default_trajectory():
-    """A1: 24 m at 0.3 m/s -> 80 s = 1600 steps of 50 ms and 160 RSS epochs; the accelerometer truth
+    """The default walk: 24 m at 0.3 m/s -> 80 s = 1600 steps of 50 ms and 160 RSS epochs; the accelerometer truth
     integrates to the velocity; the rest start ramps up over 2 s."""
     tr = dg.walk_trajectory(start="moving")
     assert tr.time_s.size == 1600 and tr.rss_steps.size == 160
@@ -139,7 +139,7 @@ def test_default_trajectory():
 
 
 def test_table_plan_covers_every_printed_cell():
-    """88 printed cells (16 + 12 + 12 + 6 + 24 + 18, note 000 s.3.3), 9 channel settings."""
+    """88 printed cells (16 + 12 + 12 + 6 + 24 + 18, Tables 3.7-3.12), 9 channel settings."""
     cells = dg.printed_tables()
     assert len(cells) == 88
     assert all((c["table"], c["row"]) in dg.TABLE_SETTINGS for c in cells)

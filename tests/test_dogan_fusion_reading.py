@@ -132,7 +132,7 @@ def test_thesis_repeat_error_from_the_printed_re_runs():
     pairs += [(("Table 3.12", "ple=3"), ("Table 3.8", "sigma_rss_db=6"), c) for c in ("parallel_ekf", "serial_ekf", "kalman_filter")]
     rel = [(cells[a + (c,)] - cells[b + (c,)]) / ((cells[a + (c,)] + cells[b + (c,)]) / 2) for a, b, c in pairs]
     assert dg.thesis_repeat_error() == pytest.approx(np.sqrt(np.mean(np.square(rel)) / 2), rel=1e-12)
-    assert 0.005 < dg.thesis_repeat_error() < 0.02                       # 0.2-2.7 % differences (note 000 s.3.3)
+    assert 0.005 < dg.thesis_repeat_error() < 0.02                       # 0.2-2.7 % differences (Tables 3.7-3.12)
 
 
 def test_fusion_gain_and_mean_level_by_hand():

@@ -33,7 +33,7 @@ def test_calibration_ls_matches_cvxpy_and_its_sampling_law():
     design = np.stack([np.ones(d.size), -10 * np.log10(d)], -1)
     normal = np.linalg.solve(design.T @ design, design.T @ power[0].ravel())           # Eq. (5.1) directly
     np.testing.assert_allclose([one.ref_power_dbm, one.path_loss_exp], normal, rtol=1e-6, atol=1e-6)
-    assert d.size == 2880 != tb.PRINTED_MEASUREMENT_COUNT.value                               # note 000 A12
+    assert d.size == 2880 != tb.PRINTED_MEASUREMENT_COUNT.value                               # the print says 3360
     # repeated calibrations: unbiased, with the OLS covariance sigma^2 (M^T M)^-1
     n_runs = 4000
     study = tb.calibration_study(points, channel, tb.CALIBRATION_PACKETS, n_runs, np.random.default_rng(2))
@@ -129,7 +129,7 @@ def test_testbed_rows_on_hand_made_walks():
 
 def test_printed_testbed_reductions_are_the_printed_pairs():
     """Ch. 5: the three reductions derived from the printed pairs (Figs. 5.9-5.11), and their mean, which the thesis
-    rounds to 'approximately 15%' (note 000 s.3.5: 20.2, 14.6 and 9.3 %, mean 14.7 %)."""
+    rounds to 'approximately 15%' (20.2, 14.6 and 9.3 %, mean 14.7 %)."""
     red = tb.printed_reductions_pct()
     assert red["serial_ekf"] == pytest.approx(100 * (1.93 - 1.54) / 1.93, rel=1e-12)
     assert red["parallel_ekf"] == pytest.approx(100 * (1.78 - 1.52) / 1.78, rel=1e-12)

@@ -16,7 +16,7 @@ def test_table_5_1_average_row_arithmetic():
     assert labels == ["n = 1.03", "n = 3.1", "n = 1.72", "n = 1.2"]
     np.testing.assert_allclose(dist, np.arange(1, 10))
     mean = cells.mean(axis=0)
-    assert mean[-1] == pytest.approx(7.535)                 # the printed 7.77 is the thesis's error (note 001 s.3.4)
+    assert mean[-1] == pytest.approx(7.535)                 # the printed 7.77 is the thesis's error (Table 5.1)
     # the printed average's rounding (0.005) plus that of the mean of four cells printed to 0.01 (0.005)
     assert np.all(np.abs(mean[:-1] - avg[:-1]) <= 0.01 + 1e-12)
 

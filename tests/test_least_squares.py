@@ -1,5 +1,5 @@
 """Lateration from per-problem receivers (2-D and 3-D) against cvxpy, RLS against batch LS, and the log-normal
-range moments against Monte Carlo and closed forms (Palvai 2008, note 002 s.2.4-2.8)."""
+range moments against Monte Carlo and closed forms (Palvai 2008, Eqs. (2.27)-(2.58))."""
 import cvxpy as cp
 import numpy as np
 import pytest

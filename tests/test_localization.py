@@ -22,7 +22,7 @@ def test_lateration_exact_ranges(points, ref):
 
 def test_lateration_system_matches_paper_numbers():
     a_mat, b = lb.lateration_system(ANCHORS, np.zeros(4))
-    np.testing.assert_allclose(a_mat, [[-4.2, 0.0], [0.0, -15.6], [-4.2, -15.6]])      # note 003, sec. 2.5
+    np.testing.assert_allclose(a_mat, [[-4.2, 0.0], [0.0, -15.6], [-4.2, -15.6]])      # Eq. (8), 2 (x_1 - x_i)
     np.testing.assert_allclose(b, [-4.41, -60.84, -65.25])
     np.testing.assert_allclose(np.linalg.pinv(a_mat), [[-0.15873, 0.07937, -0.07937], [0.02137, -0.04274, -0.02137]], atol=1e-5)
 

@@ -86,7 +86,7 @@ def test_noise_free_online_calibration_recovers_the_channel_and_absorbs_an_obstr
 
 def test_every_printed_cell_maps_to_a_method_the_experiment_runs():
     printed = [r for r in oz.printed_tables() if len(r["table"]) == 4 and "7.26" <= r["table"] <= "7.44"]
-    # counted from note 004 s.7: 10+15+14+15+15+3+10+10+2+10+2+10+2+15+49 (7.40 lacks one std)+35+35+6+4
+    # counted from Tables 7.26-7.44: 10+15+14+15+15+3+10+10+2+10+2+10+2+15+49 (7.40 lacks one std)+35+35+6+4
     assert len(tb.TABLE_CELLS) == len(printed) == 262
     for (table, row, column), (experiment, method, stat) in tb.TABLE_CELLS.items():
         base = "fixed" if experiment == "fixed_near_tags" else experiment
@@ -223,7 +223,7 @@ def test_testbed_crlb_is_the_printed_form_bound_averaged_over_the_cells():
     for p in cells:
         diff = p - readers
         d2 = np.sum(diff**2, -1)
-        fxx = b * np.sum(diff[:, 0] ** 2 / d2)          # printed form: d^2 where d^4 belongs (note 004 s.3.9)
+        fxx = b * np.sum(diff[:, 0] ** 2 / d2)          # printed form: d^2 where d^4 belongs (Eqs. (A.10)-(A.12))
         fyy = b * np.sum(diff[:, 1] ** 2 / d2)
         fxy = b * np.sum(diff[:, 0] * diff[:, 1] / d2)
         bounds.append(np.sqrt((fxx + fyy) / (fxx * fyy - fxy**2)))
@@ -246,7 +246,7 @@ def test_first_printings_follow_the_thesis_order():
     assert tb.first_printing(*tb.TABLE_CELLS[("7.41", "Grid Bayes", "rmse_m")]).location == "Table 7.29"
     assert tb.first_printing(*tb.TABLE_CELLS[("7.43", "Offline NN", "std_m")]).location == "Table 7.28"
     assert tb.first_printing(*tb.TABLE_CELLS[("7.40", "patch / Grid Bayes", "rmse_m")]).location == "Table 7.30"
-    # ... except the offline-NN mobile row, printed only in Table 7.42 (note 004 s.7)
+    # ... except the offline-NN mobile row, printed only in Table 7.42
     offline_mobile = tb.TABLE_CELLS[("7.42", "Parameter-based offline NN", "rmse_m")]
     assert tb.first_printing(*offline_mobile).location == "Table 7.42"
     # every cell of Table 7.41 (all methods, fixed target) was printed before

@@ -1,5 +1,5 @@
 """RSS filters with receivers that move or differ per run, and the variance inflation for uncertain receiver
-positions (Palvai 2008, Eq. (4.28), note 002 A8-A9)."""
+positions (Palvai 2008, Eq. (4.28), Sec. 4.4's sigma_3; the inflation is our extension)."""
 import numpy as np
 import pytest
 

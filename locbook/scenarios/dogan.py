@@ -860,7 +860,7 @@ def table_view(rows, table: str) -> list[dict]:
     return list(out.values())
 
 
-HORIZON_SOURCE = "Dogan 2015 Sec. 4.1.2 (the averaging horizon is not printed)"
+HORIZON_SOURCE = "Dogan 2015 Sec. 4.1.2"
 
 
 @dataclass(frozen=True)

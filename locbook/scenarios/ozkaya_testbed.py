@@ -108,7 +108,7 @@ CRLB_CALIBRATED_FROM = (
 
 #: The thesis measured ONE test bed; ours is the mean over synthetic ones: the window adds where one test bed falls.
 TESTBED_AMBIGUITY_WHAT = "one measured test bed: 2 sd of the statistic between synthetic test beds"
-TESTBED_AMBIGUITY_SOURCE = "Ozkaya 2011 Sec. 7.3 (one test bed measured); Sec. 6.1 (its layout not printed)"
+TESTBED_AMBIGUITY_SOURCE = "Ozkaya 2011 Secs. 6.1, 7.3: one test bed measured, its layout not printed"
 
 
 def testbed_ambiguity(per_testbed) -> Ambiguity:

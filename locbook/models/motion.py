@@ -15,7 +15,7 @@ over a step (the "discrete white noise" model, Bar-Shalom et al. 2001, Sec. 6.3.
 Any other Q can be passed to the filters directly.
 
 For CV, ``G_axis = [dt^2/2, dt]^T``: the two-axis generalisation of B_KF in Eq. (9) of George and
-Vadivukkarasi, whose Q is not printed ("tuned to minimise C") and whose B_KF drives both axes with one
+Vadivukkarasi, whose Q is not printed (only tuned to minimise C) and whose B_KF drives both axes with one
 scalar acceleration; the per-axis G is our choice. ``noise="continuous"`` gives the integrated
 continuous white-noise form instead (``q`` then is a power spectral density).
 

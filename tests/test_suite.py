@@ -3,6 +3,7 @@
 A small throw-away suite of toy notebooks keeps these tests fast; tests/test_notebooks.py runs the real one.
 """
 import csv
+import hashlib
 import json
 import textwrap
 
@@ -11,6 +12,7 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import nbformat
 import psutil
@@ -302,6 +304,28 @@ def test_editing_a_data_file_reruns_exactly_its_readers(toy, capsys):
     assert "george-one: ok" in out and "george-two: cached" in out and "1 executed, 1 cached" in out
     row = next(csv.DictReader((toy / "reports" / "quick" / "george-one" / "numbers.csv").read_text().splitlines()))
     assert row["printed"] == "0.5"
+
+
+def test_the_cache_follows_the_library_modules_each_notebook_imported(toy, capsys):
+    import locbook
+    package = Path(locbook.__file__).resolve().parent
+    assert run(toy) == 0
+    record_path = toy / "reports" / "quick" / "george-one" / "run.json"
+    record = json.loads(record_path.read_text())
+    modules = record["modules"]
+    # what the toy notebook ran (Report, Printed, streams) is recorded with its hash; what it never imported is not
+    for used in ("__init__.py", "reproduce/report.py", "montecarlo.py"):
+        path = str(package / used)
+        assert modules[path] == hashlib.sha256((package / used).read_bytes()).hexdigest()
+    assert not any("/tracking/" in m or m.endswith("particle.py") for m in modules)
+    assert not any("__pycache__" in p for p in [*modules, *record["data"]])
+    # a changed module (here: its recorded hash no longer matching) re-runs exactly the experiments that imported it
+    modules[str(package / "reproduce" / "report.py")] = "0" * 64
+    record_path.write_text(json.dumps(record))
+    capsys.readouterr()
+    assert run(toy) == 0
+    out = capsys.readouterr().out
+    assert "george-one: ok" in out and "george-two: cached" in out and "1 executed, 1 cached" in out
 
 
 def test_a_killed_worker_fails_only_its_experiment(toy, capsys):

@@ -7,7 +7,7 @@ Layout of a reports folder (``reports/<profile>/``, or its own folder for a run 
     <id>/summary.md, report.md, *.png, *.csv lightweight results (committed for the full profile)
     <id>/report.html                         the whole page in HTML
     <id>/report.json                         stamp, parameters and run time of the report (committed)
-    <id>/run.json                            cache record: key, data files read and their hashes, time
+    <id>/run.json                            cache record: key, data files and modules read with their hashes, time
     .lock                                    held by the run writing this folder
     .staging/<run>/<id>/                     experiments in progress, one folder per run
     .failed/<id>/                            the last failed attempt, kept for inspection
@@ -66,7 +66,8 @@ __all__ = ["KERNEL_NAME", "run_suite", "cache_key", "Outcome", "SuiteRun", "writ
 KERNEL_NAME = "python3"
 _DEPENDENCIES = ("numpy", "scipy", "cvxpy", "clarabel", "osqp", "scs", "matplotlib", "papermill",
                  "nbclient", "nbconvert", "nbformat", "ipykernel", "numba")
-_WORKER_FILES = (".runtime", ".result.json", ".result.json.tmp", ".task.json", ".data-read.log", ".stop")
+_WORKER_FILES = (".runtime", ".result.json", ".result.json.tmp", ".task.json", ".data-read.log", ".modules-read.log",
+                 ".stop")
 
 
 @dataclass
@@ -104,13 +105,16 @@ def _package_dir() -> Path:
     return Path(__file__).resolve().parents[1]
 
 
-def _source_fingerprint() -> str:
-    """Every Python source of the package and the report site's templates (data files are tracked per
-    experiment, by what it reads)."""
+def _runner_fingerprint() -> str:
+    """The runner's side of a report: the sources of the locbook modules this process has loaded (the suite, which
+    writes the pages, and what it imports) and the report site's templates. The kernel's side, the library code the
+    notebook ran, is recorded per experiment (``run.json`` "modules", like its data files)."""
     package = _package_dir()
+    loaded = {Path(m.__file__).resolve() for name, m in list(sys.modules.items())
+              if (name == "locbook" or name.startswith("locbook.")) and getattr(m, "__file__", None)}
     h = hashlib.sha256()
-    for path in sorted([*package.rglob("*.py"), *(package / "suite" / "templates").glob("*")]):
-        h.update(str(path.relative_to(package)).encode())
+    for path in sorted([*loaded, *(package / "suite" / "templates").glob("*")]):
+        h.update(str(path.relative_to(package) if path.is_relative_to(package) else path).encode())
         h.update(path.read_bytes())
     return h.hexdigest()
 
@@ -137,12 +141,13 @@ def _notebook_fingerprint(path: Path) -> str:
 
 def cache_key(exp: Experiment, profile: str, params: dict, *, source: str | None = None,
               versions: dict | None = None) -> str:
-    """Hash of notebook, parameters, profile, locbook source and dependency versions. The data files an
-    experiment reads are checked separately, by their hashes recorded in ``run.json``."""
+    """Hash of notebook, parameters, profile, the runner's locbook source (:func:`_runner_fingerprint`) and
+    dependency versions. The data files an experiment reads and the library modules its kernel imports are checked
+    separately, by their hashes recorded in ``run.json``."""
     payload = {
         "experiment": exp.id, "profile": profile, "parameters": params,
         "notebook": _notebook_fingerprint(exp.notebook),
-        "locbook": source or _source_fingerprint(),
+        "locbook": source or _runner_fingerprint(),
         "versions": versions or _dependency_versions(),
     }
     return hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()
@@ -264,9 +269,10 @@ def _validate_report(folder: Path, exp_id: str) -> str:
     return ""
 
 
-def _data_hashes(staging: Path) -> dict[str, str]:
-    """SHA-256 of every data file the worker logged as read (see locbook._datalog)."""
-    logged = staging / ".data-read.log"
+def _data_hashes(staging: Path, log: str = ".data-read.log") -> dict[str, str]:
+    """SHA-256 of every data file (or, with ``log=".modules-read.log"``, every locbook module source) the kernel
+    logged as read (see locbook._datalog)."""
+    logged = staging / log
     paths = sorted(set(logged.read_text(encoding="utf-8").splitlines())) if logged.exists() else []
     return {p: _sha256(Path(p)) for p in paths if Path(p).is_file()}
 
@@ -312,9 +318,9 @@ def _cached(report_dir: Path, exp: Experiment, key: str) -> tuple[bool, str]:
     would be up to date but is damaged (``why`` says what is wrong), ``(False, "")`` when it is stale or absent.
     A damaged report is never served: it is executed again."""
     run = _read_json(report_dir / exp.id / "run.json", {})
-    data = run.get("data", {})
+    data, modules = run.get("data", {}), run.get("modules")
     if not (run.get("cache_key") == key and run.get("status") == "ok" and isinstance(data, dict)
-            and _data_unchanged(data)):
+            and isinstance(modules, dict) and _data_unchanged(data) and _data_unchanged(modules)):
         return False, ""
     why = _validate_promoted(report_dir / exp.id, exp.id)
     return not why, why
@@ -492,7 +498,7 @@ def run_suite(suite: Suite, experiments: list[Experiment], profile: str, *, jobs
 
 def _run_locked(suite, experiments, profile, resolved, report_dir, data_roots, force, timeout_s, retries,
                 kernel_name, custom_folder, stop, run, progress, pool):
-    source, versions = _source_fingerprint(), _dependency_versions()
+    source, versions = _runner_fingerprint(), _dependency_versions()
     rev, dirty = _git_state(suite.repository)
     stamp = locbook_version() + (f" (source {rev}{' + uncommitted changes' if dirty else ''})" if rev else "")
     status_path = report_dir / "status.json"
@@ -669,7 +675,7 @@ def _promote(exp, profile, params, staging: Path, report_dir: Path, stamp: str, 
     """Write the summary and the records into the validated staging folder, then swap it into place. The cache
     record (run.json) is written before the swap, inside the new folder, so it only ever describes a
     complete report."""
-    data = _data_hashes(staging)
+    data, modules = _data_hashes(staging), _data_hashes(staging, ".modules-read.log")
     _strip_worker_files(staging)
     numbers = _read_csv(staging / "numbers.csv")
     (staging / "summary.md").write_text(site.summary_markdown(exp, profile, numbers, stamp), encoding="utf-8")
@@ -682,5 +688,6 @@ def _promote(exp, profile, params, staging: Path, report_dir: Path, stamp: str, 
          "seconds": round(result["seconds"], 1)}, indent=1,
         sort_keys=True) + "\n")
     (staging / "run.json").write_text(json.dumps({
-        "cache_key": key, "status": "ok", "seconds": round(result["seconds"], 2), "data": data}, indent=1))
+        "cache_key": key, "status": "ok", "seconds": round(result["seconds"], 2), "data": data, "modules": modules},
+        indent=1))
     _replace_dir(staging, report_dir / exp.id)

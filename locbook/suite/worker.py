@@ -165,6 +165,7 @@ def _run(task: dict, staging: Path) -> int:
     os.environ.update(SINGLE_THREAD)
     os.environ.update({"LOCBOOK_OUTPUT_DIR": str(staging), "LOCBOOK_EXPERIMENT": task["id"],
                        "LOCBOOK_DATA_LOG": str(staging / ".data-read.log"),
+                       "LOCBOOK_MODULE_LOG": str(staging / ".modules-read.log"),
                        "LOCBOOK_DATA_ROOTS": os.pathsep.join(task["data_roots"]),
                        "JUPYTER_RUNTIME_DIR": str(runtime), "TMPDIR": str(runtime),
                        "PYDEVD_DISABLE_FILE_VALIDATION": "1"})

@@ -453,7 +453,7 @@ def _knn(sc, rss, opts):
 STATIC_METHODS = {
     "lls": (_lls, "linearized LS on the inverted ranges (reference anchor 0)", "no region"),
     "wls": (_wls, "weighted linearized LS, weights 1/d^4 of the inverted ranges", "no region"),
-    "box_ls": (_box_ls, "box-constrained LS (cvxpy)", "box = the floor's bounding box"),
+    "box_ls": (_box_ls, "box-constrained LS (exact active set)", "box = the floor's bounding box"),
     "rss_ml": (_rss_ml, "RSS maximum likelihood (Gauss-Newton) from the grid-ML fix", "unconstrained after the start"),
     "grid_ml": (_grid_ml, "grid maximum likelihood", "grid inside the floor at the scenario's pitch"),
     "grid_mmse": (_grid_mmse, "grid posterior mean, uniform prior over the floor", "grid inside the floor"),

@@ -52,7 +52,6 @@ title = "A toy document"
 authors = "A. Author"
 year = "2015"
 source = "s"
-note = "n"
 [[experiment]]
 id = "george-good"
 document = "george"

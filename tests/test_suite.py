@@ -79,7 +79,6 @@ def toy(tmp_path):
         authors = "a"
         year = "2015"
         source = "s"
-        note = "n"
         [[experiment]]
         id = "george-one"
         document = "george"

@@ -1,6 +1,6 @@
 """The numbers each source document printed, read from ``locbook/data/printed/<document>.csv``.
 
-One CSV per document, transcribed from its reading note, with the columns
+One CSV per document, transcribed from the source by the locbook authors, with the columns
 ``location, item, statistic, unit, printed``: where the number stands (``Table 7.1``, ``Fig. 5 text``,
 ``Abstract``), the row or item, the statistic or column, the unit, and the text exactly as printed
 (``2.2867``, ``1.0``, ``about 6``, ``more than 50 %``). Lines starting with ``#`` are comments.

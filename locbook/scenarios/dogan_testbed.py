@@ -35,7 +35,7 @@ __all__ = [
     "ANTENNA_SEPARATION_M", "ANTENNA_HEIGHT_M", "ORIENTATION_SAMPLES", "ONE_WALK_SOURCE",
     "calibration_points_m", "simulate_calibration", "fit_calibration", "CalibrationStudy", "calibration_study",
     "orientation_gain_db", "simulate_orientation", "testbed_rows", "printed_reductions_pct", "testbed_flags",
-    "record_testbed", "A17_NOTE",
+    "record_testbed", "BENIGN_CHANNEL_NOTE",
 ]
 
 #: Sec. 5.2: the LS fit of Eq. (5.1) to the laboratory measurements.
@@ -213,9 +213,10 @@ def testbed_rows(run: ChannelRun, sigma_acc_mps2: float, *, coverage: float = 0.
 
 
 #: Why the synthetic walks miss the measured one.
-A17_NOTE = ("the experiment's MLE is better than i.i.d. 6 dB shadowing at alpha 1.8 allows (static CRLB RMS over the "
-            "room about 5 m); the real errors were smaller or more benign, so the synthetic ONLY-RSS walks are worse")
-_MISS_NOTES = {"ONLY RSS": A17_NOTE, "RSS/IMU": "the fused filter misses for the same reason as ONLY RSS"}
+BENIGN_CHANNEL_NOTE = ("the experiment's MLE is better than i.i.d. 6 dB shadowing at alpha 1.8 allows (static CRLB RMS "
+                       "over the room about 5 m); the real errors were smaller or more benign, so the synthetic ONLY-RSS "
+                       "walks are worse")
+_MISS_NOTES = {"ONLY RSS": BENIGN_CHANNEL_NOTE, "RSS/IMU": "the fused filter misses for the same reason as ONLY RSS"}
 _REDUCTION_MISS = ("the simulated walks gain more from fusion than the measured one (the measured channel is more "
                    "benign than i.i.d. 6 dB shadowing)")
 _KEPT = "kept in the mean over the simulated walks"
@@ -239,7 +240,7 @@ def record_testbed(report, rows: list[dict], run: ChannelRun, sigma_acc_mps2: fl
     Each printed RMSE (and the 15 % reduction) is one measured walk: our value is the mean over simulated walks of
     one walk's value, its standard error the Monte-Carlo one, and 2 sd of single walks the named ambiguity
     (:data:`ONE_WALK_SOURCE`). The MLE row is a ``reproduction``, the filter rows ``calibrated`` (the walking speed,
-    :data:`~locbook.scenarios.dogan.SPEED_CALIBRATED_FROM`). A miss says why (:data:`A17_NOTE`); every note counts
+    :data:`~locbook.scenarios.dogan.SPEED_CALIBRATED_FROM`). A miss says why (:data:`BENIGN_CHANNEL_NOTE`); every note counts
     the runs the NIS guard flagged (:func:`testbed_flags`). The per-filter reductions derived from printed pairs
     (``printed_value`` None) are table rows only."""
     for r in rows:

@@ -3,8 +3,8 @@
 Schema::
 
     [documents.<key>]            # key: dogan2015, gudipati2017, palvai2008, george, ozkaya2011, kolakowski2021
-    title, authors, year, source  # source: the file in ../shared/seeds (or the data set's folder), note: the
-                                  # reading note (or the data set's README)
+    title, authors, year, source  # source: where it was published (thesis, university, date), or for a data
+                                  # set or our own benchmark the file in the repository that describes it
 
     [[experiment]]
     id = "<key>-<name>"           # prefixed by its document key
@@ -45,6 +45,9 @@ class SuiteError(ParameterError):
     """The experiment list is malformed."""
 
 
+_DOCUMENT_FIELDS = {"title", "authors", "year", "source"}
+
+
 @dataclass(frozen=True)
 class Document:
     key: str
@@ -52,7 +55,6 @@ class Document:
     authors: str
     year: str
     source: str
-    note: str
 
 
 @dataclass(frozen=True)
@@ -158,10 +160,13 @@ def load_suite(path: Path | None = None) -> Suite:
     for key, doc in data.get("documents", {}).items():
         if key not in DOCUMENT_KEYS:
             raise SuiteError(f"{path}: unknown document key {key!r}; expected one of {DOCUMENT_KEYS}")
-        missing = {"title", "authors", "year", "source", "note"} - set(doc)
+        missing, unknown = _DOCUMENT_FIELDS - set(doc), set(doc) - _DOCUMENT_FIELDS
         if missing:
             raise SuiteError(f"{path}: document {key!r} lacks {sorted(missing)}")
-        documents[key] = Document(key, doc["title"], doc["authors"], str(doc["year"]), doc["source"], doc["note"])
+        if unknown:
+            raise SuiteError(f"{path}: document {key!r} has unknown fields {sorted(unknown)}; "
+                             f"expected {sorted(_DOCUMENT_FIELDS)}")
+        documents[key] = Document(key, doc["title"], doc["authors"], str(doc["year"]), doc["source"])
     suite_rules = _rules(data.get("parameter_rules", {}), f"{path}: [parameter_rules]")
     experiments, seen = [], set()
     for raw in data.get("experiment", []):

@@ -1,4 +1,4 @@
-"""Error metrics for position estimates (Eq. (15) of document 003; Ozkaya 2011, Sec. 7.2.1).
+"""Error metrics for position estimates (Eq. (15) of George and Vadivukkarasi; Ozkaya 2011, Sec. 7.2.1).
 
 All functions take estimates and truths of shape ``(..., dim)`` or precomputed errors, and reduce
 over ``axis`` (default: all axes), so a ``(runs, steps)`` error array gives one number, or one per run
@@ -51,7 +51,7 @@ def position_error_m(estimate_m, truth_m):
 
 
 def mean_error_m(error_m, axis=None):
-    """Mean Euclidean error, ``C = (1/N) sum_i |p_i - p_hat_i|`` (Eq. (15), document 003)."""
+    """Mean Euclidean error, ``C = (1/N) sum_i |p_i - p_hat_i|`` (Eq. (15) of George and Vadivukkarasi)."""
     _check_errors("error_m", error_m)
     return np.mean(error_m, axis=axis)
 
@@ -102,7 +102,7 @@ def empirical_cdf(error_m):
 
 
 def reduction_pct(before, after):
-    """Relative reduction ``100 (before - after) / before`` (document 003: 2.2867 -> 1.0378 m is 54.62 %)."""
+    """Relative reduction ``100 (before - after) / before`` (George and Vadivukkarasi: 2.2867 -> 1.0378 m is 54.62 %)."""
     before_arr, after_arr = as_array("before", before, nan_ok=True), as_array("after", after, nan_ok=True)
     if before_arr.ndim and after_arr.ndim and before_arr.shape != after_arr.shape:
         raise ValueError(f"before {before_arr.shape} and after {after_arr.shape} must have the same shape "

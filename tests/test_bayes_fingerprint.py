@@ -48,7 +48,7 @@ def test_knn_inverse_square_weights_by_hand():
     np.testing.assert_allclose(lb.knn_position(np.array([-51.5, -60.0]), fp, cells, k=2),
                                0.9 * cells[1] + 0.1 * cells[0], rtol=1e-12)
     # literal Eq. (3.3): (1/E^2) / sum E^2 = (1, 1, 0.1) / 12
-    np.testing.assert_allclose(lb.knn_position(s, fp, cells, k=3, weighting="literal_004"), 2.1 * expected / 12)
+    np.testing.assert_allclose(lb.knn_position(s, fp, cells, k=3, weighting="literal_ozkaya2011"), 2.1 * expected / 12)
 
 
 def test_knn_exact_match_and_batched_maps():
@@ -178,7 +178,7 @@ def test_systematic_resample_rows_are_independent_and_literal_cdf_is_shifted():
     w = np.array([[0.5, 0.25, 0.25], [0.1, 0.1, 0.8]])
     np.testing.assert_array_equal(lb.systematic_resample(w, [0.0, 0.5]), [[0, 0, 1], [1, 2, 2]])   # u = 1/6, 1/2, 5/6 against c = .1, .2, 1
     # printed CDF: c = (0, 0.25, 0.5): u = 0, 1/3, 2/3 -> first c_j >= u_i: 0, 2, past the end (clipped)
-    np.testing.assert_array_equal(lb.systematic_resample(w[0], 0.0, cdf="literal_004"), [0, 2, 2])
+    np.testing.assert_array_equal(lb.systematic_resample(w[0], 0.0, cdf="literal_ozkaya2011"), [0, 2, 2])
 
 
 def test_sir_converges_to_the_grid_posterior_mean():

@@ -141,7 +141,7 @@ def test_per_location_mean_is_mean_of_fits(cal_data):
 def test_literal_sign_returns_minus_n():
     d = np.array([1.0, 2.0, 4.0, 8.0])
     p = -45.0 - 21.843 * np.log10(d)
-    t = np.linalg.lstsq(path_loss_design_matrix(d, sign_convention="literal_003"), p, rcond=None)[0]
+    t = np.linalg.lstsq(path_loss_design_matrix(d, sign_convention="literal_george"), p, rcond=None)[0]
     assert t[1] == pytest.approx(-2.1843, abs=1e-10)
 
 

@@ -106,11 +106,11 @@ def test_missing_measurements_predict_only():
     np.testing.assert_allclose(res.P[0, 2], model.F @ res.P[0, 1] @ model.F.T + model.Q, rtol=1e-12)   # no update
 
 
-def test_literal_003_variant_is_running_average():
+def test_literal_george_variant_is_running_average():
     # Eqs. (11)-(13) as printed drop the prediction: P shrinks as 1/k and x is the running mean
     z = np.random.default_rng(7).normal(size=(20, 2)) + 5.0
     model = lb.constant_velocity(1.0, 1.0)
-    res = lb.kalman_filter(model.F, model.Q, np.r_[z[0], 0, 0], np.diag([1.0, 1.0, 1.0, 1.0]), lb.LinearMeasurement(z, model.position_measurement_matrix(), np.eye(2)), variant="literal_003")
+    res = lb.kalman_filter(model.F, model.Q, np.r_[z[0], 0, 0], np.diag([1.0, 1.0, 1.0, 1.0]), lb.LinearMeasurement(z, model.position_measurement_matrix(), np.eye(2)), variant="literal_george")
     k = np.arange(2, 22)[:, None]
     np.testing.assert_allclose(res.x[:, :2], (z[0] + np.cumsum(z, 0)) / k, atol=1e-12)
 

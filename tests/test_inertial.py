@@ -20,7 +20,7 @@ def test_heading_model_blocks_are_eqs_3_2_and_3_3():
     np.testing.assert_allclose(m.F[6:, 6:], [[1, dt], [0, 1]])
     np.testing.assert_allclose(m.Q[6:, 6:], qa * np.array([[dt**2, dt], [dt, 1]]))
     assert not np.any(m.F[:6, 6:]) and not np.any(m.Q[:6, 6:])
-    lit = lb.HeadingKinematicModel(dt, q, qa, heading="literal_001")
+    lit = lb.HeadingKinematicModel(dt, q, qa, heading="literal_gudipati2017")
     np.testing.assert_allclose(lit.F[6:, 6:], np.eye(2))
     np.testing.assert_allclose(lit.Q[6:, 6:], qa * dt * np.eye(2))
 

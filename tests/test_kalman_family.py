@@ -205,9 +205,9 @@ def test_serial_rss_innovations_sit_in_their_anchors_columns():
     assert (res.nis_dof == np.isfinite(z).sum(-1)).all()
 
 
-def test_literal_003_records_the_previous_posterior_as_its_prior():
+def test_literal_george_records_the_previous_posterior_as_its_prior():
     z, R, x0, P0 = _problem(batch=2, steps=6)
-    res = lb.kalman_filter(MODEL.F, MODEL.Q, x0, P0, lb.LinearMeasurement(z, H, R), variant="literal_003",
+    res = lb.kalman_filter(MODEL.F, MODEL.Q, x0, P0, lb.LinearMeasurement(z, H, R), variant="literal_george",
                            outputs=("x_pred", "P_pred"))
     np.testing.assert_array_equal(res.x_pred[:, 1:], res.x[:, :-1])
     np.testing.assert_array_equal(res.P_pred[:, 1:], res.P[:, :-1])

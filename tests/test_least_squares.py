@@ -31,7 +31,7 @@ def test_printed_rows_without_the_factor_2_double_the_coordinates():
     s = rng.uniform(0, 50, (10, 3))
     target = np.array([20.0, 30.0, 25.0])
     d = np.linalg.norm(s - target, axis=-1)
-    lit = lb.lateration_ls(s, d, pairs="consecutive", variant="literal_002").position_m
+    lit = lb.lateration_ls(s, d, pairs="consecutive", variant="literal_palvai2008").position_m
     np.testing.assert_allclose(lit, 2 * target, rtol=1e-9)
 
 
@@ -107,8 +107,8 @@ def test_reference_anchor_and_first_pairs_are_one_system():
     np.testing.assert_allclose(lb.lateration_ls(anchors, d, pairs="first").position_m,
                                lb.lateration_ls(anchors, d, 0).position_m, rtol=1e-9)
     # the printed rows without the factor 2 halve A and double the fix on either form
-    np.testing.assert_array_equal(lb.lateration_system(anchors, d, 0, variant="literal_002")[0], A / 2)
-    np.testing.assert_allclose(lb.lateration_ls(anchors, d, 0, variant="literal_002").position_m,
+    np.testing.assert_array_equal(lb.lateration_system(anchors, d, 0, variant="literal_palvai2008")[0], A / 2)
+    np.testing.assert_allclose(lb.lateration_ls(anchors, d, 0, variant="literal_palvai2008").position_m,
                                2 * lb.lateration_ls(anchors, d, 0).position_m, rtol=1e-9)
     with pytest.raises(lb.ParameterError, match="pairs"):
         lb.lateration_ls(anchors, d, pairs="first", min_anchors=3)

@@ -6,7 +6,7 @@ import pytest
 from locbook import PathLossModel, RssModel, grid_bayes_filter, grid_transition_matrix, knn_position
 
 
-@pytest.mark.parametrize("weighting", ["inverse_square", "uniform", "literal_004"])
+@pytest.mark.parametrize("weighting", ["inverse_square", "uniform", "literal_ozkaya2011"])
 def test_chunked_knn_equals_unchunked(weighting):
     rng = np.random.default_rng(7)
     cells = rng.uniform(0, 8, (150, 2))

@@ -23,7 +23,7 @@ def test_weights_equal_filterpy_and_sum_to_one(n, alpha, beta, kappa):
 
 def test_printed_weight_of_eq_3_22_sums_to_2n_over_n_plus_lambda():
     n, alpha = 8, 1e-3
-    w = lb.unscented_weights(n, alpha, variant="literal_001")
+    w = lb.unscented_weights(n, alpha, variant="literal_gudipati2017")
     n_plus_lambda = alpha**2 * n
     assert w.mean.sum() == pytest.approx(2 * n / n_plus_lambda, rel=1e-12)
     assert w.mean[0] == pytest.approx(n / n_plus_lambda, rel=1e-12)

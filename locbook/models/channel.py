@@ -4,7 +4,7 @@ The log-distance path-loss model (LDPM) in the dB domain, with reference distanc
 
     P_r(d) = P_0 - 10 n log10(d / d0) - n_W * WAF + w,     w ~ N(0, sigma^2)  [dB]
 
-is Eq. (5) of George and Vadivukkarasi (document 003), Eq. (2.2) of Dogan (2015, where the
+is Eq. (5) of George and Vadivukkarasi, Eq. (2.2) of Dogan (2015, where the
 exponent is called alpha), and Eq. (6.3) of Ozkaya (2011, where the reference power is called
 alpha and walls attenuate by WAF each). Names in code are explicit to avoid that clash:
 ``ref_power_dbm`` (P_0), ``path_loss_exp`` (n), ``ref_distance_m`` (d0).

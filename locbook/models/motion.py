@@ -186,7 +186,7 @@ def constant_acceleration(dt_s: float, q: float, dim: int = 2, layout: str = "ax
     return KinematicModel(dt_s, q, order=2, dim=dim, layout=layout, noise=noise)
 
 
-HEADING_MODELS = ("yaw_rate", "literal_001")
+HEADING_MODELS = ("yaw_rate", "literal_gudipati2017")
 
 
 @dataclass(frozen=True)
@@ -202,7 +202,7 @@ class HeadingKinematicModel:
       ``omega`` a random walk with increments of variance ``q_angular`` (rad/s)^2 per step (the same form:
       ``Q = q_angular g g^T``, ``g = [dt, 1]``). Planar motion has one rotation axis; the gyroscope measures
       ``omega`` and the heading rotates body-frame accelerations into the world frame.
-    - ``heading="literal_001"`` (flagged): ``theta_x``, ``theta_y`` "angular velocities along x and y" as
+    - ``heading="literal_gudipati2017"`` (flagged): ``theta_x``, ``theta_y`` "angular velocities along x and y" as
       printed, each a random walk (A block ``I_2``, Q block ``q_angular dt I_2``).
 
     State indices: position 0-1, velocity 2-3, acceleration 4-5, angular 6-7 (``heading_index``,

@@ -1,4 +1,4 @@
-"""Document 000: Dogan (2015), "Indoor Localization and Tracking Based on RSSI and Accelerometer
+"""Dogan (2015), "Indoor Localization and Tracking Based on RSSI and Accelerometer
 Measurements", M.Sc. thesis, METU.
 
 One blindfolded node tracked from RSS at four corner anchors with a nearly-constant-acceleration model:

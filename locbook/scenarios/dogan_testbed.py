@@ -1,4 +1,4 @@
-"""Document 000, Ch. 5: Dogan (2015)'s test bed, regenerated from the printed channel fit.
+"""Dogan (2015), Ch. 5: the thesis's test bed, regenerated from the printed channel fit.
 
 No raw measurement of the thesis was published, so everything here is synthetic data drawn with the printed fit
 (Sec. 5.2: P0, alpha and sigma_RSS of the LS fit; the tracking figures use sigma_RSS = 6 dB) in the 7.6 m x 9.2 m

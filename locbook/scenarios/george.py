@@ -1,4 +1,4 @@
-"""Document 003: George and Vadivukkarasi, "Kalman Filtering For RSSI Based Localization System in
+"""George and Vadivukkarasi, "Kalman Filtering For RSSI Based Localization System in
 Wireless Sensor Networks" (conference paper, about 2015; venue and year not stated).
 
 Test bed: a 2.1 m x 7.8 m corridor with four TelosB (CC2420) anchors at its corners; a walking target

@@ -1,4 +1,4 @@
-"""Document 001: Gudipati (2017), "Application of Kalman Filter to Estimate Position of a Mobile Node in Indoor
+"""Gudipati (2017), "Application of Kalman Filter to Estimate Position of a Mobile Node in Indoor
 Environments", M.S. thesis, The University of Akron.
 
 A mobile IRIS mote (AT86RF230 radio, LIS344AL accelerometer, LSM6DS3 gyroscope) travels a linear path and a U-path
@@ -60,7 +60,7 @@ REF_POWER_DBM = np.array([PRINTED.get("Table 5.2", i, "S").value for i in ANCHOR
 PATH_LOSS_EXP = np.array([PRINTED.get("Table 5.2", i, "C").value for i in ANCHOR_IDS])
 #: ASSUMED anchor coordinates (m): 12-15 at the corners ("four anchor nodes were placed in the four corners",
 #: Sec. 5.1; which ID at which corner is not said), 16 and 17 at the mid-points of the long walls ("two more
-#: anchor nodes were added", positions not given). Note 001 s.3.3 defaults.
+#: anchor nodes were added", positions not given): our placement.
 ANCHOR_POSITIONS_M = {"12": (0.0, 0.0), "13": (ROOM_M[0], 0.0), "14": ROOM_M, "15": (0.0, ROOM_M[1]),
                       "16": (ROOM_M[0] / 2, 0.0), "17": (ROOM_M[0] / 2, ROOM_M[1])}
 #: The two anchor sets of Sec. 5.1 (ASSUMED: 12-15 first, 16-17 added; Table 5.2 lists them in that order).
@@ -318,7 +318,7 @@ def position_fusion(walk: Walk, fix_covariance) -> tuple[np.ndarray, np.ndarray]
     return z, R[0] if R.ndim == 4 else R
 
 
-STATE_MODELS = ("heading", "literal_001")
+STATE_MODELS = ("heading", "literal_gudipati2017")
 
 
 def track(walk: Walk, method: str, *, fix_covariance=None, ukf_alpha: float = UKF_ALPHA, ukf_weights: str = "corrected",
@@ -337,9 +337,9 @@ def track(walk: Walk, method: str, *, fix_covariance=None, ukf_alpha: float = UK
       frame by the integrated gyroscope as linear measurements at every step;
     - ``ekf`` / ``ukf``: the 8-D model with heading and yaw rate (:class:`HeadingKinematicModel`), the RSS of every
       packet (Eq. (3.12) sign corrected) and the inertial readings (body frame) stacked at every step; the UKF with
-      the thesis's alpha, beta = 2, kappa = 0 and the corrected equations of Sec. 3.6 (``ukf_weights="literal_001"``
+      the thesis's alpha, beta = 2, kappa = 0 and the corrected equations of Sec. 3.6 (``ukf_weights="literal_gudipati2017"``
       and ``ukf_innovation_noise=False``: the printed Eqs. (3.22) and (3.26), flagged; ``rss_sign="printed_3_12"``:
-      h with the printed leading minus, flagged; ``state_model="literal_001"``: the 8-D state as printed, theta_x and
+      h with the printed leading minus, flagged; ``state_model="literal_gudipati2017"``: the 8-D state as printed, theta_x and
       theta_y random walks, with Z^2 = [a_x, a_y, theta_x, theta_y] a linear measurement and the readings taken as
       world-frame (the gyroscope's yaw rate as theta_x, theta_y never measured), flagged).
 
@@ -372,7 +372,7 @@ def track(walk: Walk, method: str, *, fix_covariance=None, ukf_alpha: float = UK
         return (res.x[..., :2], DivergenceFlags.of(res)) if with_divergence else res.x[..., :2]
     if state_model not in STATE_MODELS:
         raise ValueError(f"state_model must be one of {STATE_MODELS}, got {state_model!r}")
-    model = HeadingKinematicModel(s.dt_s, s.q, s.q_angular, heading="yaw_rate" if state_model == "heading" else "literal_001")
+    model = HeadingKinematicModel(s.dt_s, s.q, s.q_angular, heading="yaw_rate" if state_model == "heading" else "literal_gudipati2017")
     x0, P0 = _initial(walk, model, 8)
     if state_model == "heading":
         imu = _imu_stream(walk, method == "ekf")

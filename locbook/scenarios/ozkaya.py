@@ -1,4 +1,4 @@
-"""Document 004: B. Ozkaya, "Application, comparison, and improvement of known received signal strength
+"""B. Ozkaya, "Application, comparison, and improvement of known received signal strength
 indication (RSSI) based indoor localization and tracking methods using active RFID devices", M.Sc. thesis,
 METU, 2011. Chapter 7 simulations.
 

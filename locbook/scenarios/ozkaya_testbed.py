@@ -1,4 +1,4 @@
-"""Document 004 (Ozkaya 2011), Chapter 7 experiments (Sec. 7.3) on a synthetic two-room test bed.
+"""Ozkaya (2011), Chapter 7 experiments (Sec. 7.3) on a synthetic two-room test bed.
 
 The thesis measured one home (two rooms, 3 m x 4 m and 6 m x 4 m, a brick wall between them, three readers,
 four reference tags) and prints no raw RSSI and no coordinates. This module builds a synthetic stand-in

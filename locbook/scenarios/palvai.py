@@ -1,4 +1,4 @@
-"""Document 002: Palvai (2008), "Passive RF Localization Based on RSSI Using Non-linear Bayesian Estimation", M.S.
+"""Palvai (2008), "Passive RF Localization Based on RSSI Using Non-linear Bayesian Estimation", M.S.
 thesis, George Mason University.
 
 A static emitter is located from RSS recorded by a receiver at N random measurement locations whose positions come
@@ -110,7 +110,7 @@ def rlsf_path(setup: Setup, locations_m, rss_dbm, *, bias_correction: str = "med
     return recursive_least_squares(H, Y, prior_cov=prior_cov).x
 
 
-EKF_VARIANTS = ("corrected", "literal_002")
+EKF_VARIANTS = ("corrected", "literal_palvai2008")
 
 
 def corrected_jacobian(x, anchors_m, path_loss_exp):
@@ -134,7 +134,7 @@ def ekf_path(setup: Setup, anchors_m, rss_dbm, x0, P0, *, process_sd_m: float = 
     """The EKF of Sec. 4.3 over the sequential schedule (our reading of its "time": step k assimilates
     location k): random-walk state ``X_k = X_{k-1} + w``, ``Q = sigma_2^2 I`` (Eq. (4.25); the true target is
     static); measurement (4.28). ``variant="corrected"``: the nonlinear innovation, the corrected Jacobian and
-    ``R = sigma_1^2`` (optionally ``inflate``d for the GPS noise sigma_3, an extension); ``"literal_002"``
+    ``R = sigma_1^2`` (optionally ``inflate``d for the GPS noise sigma_3, an extension); ``"literal_palvai2008"``
     (flagged): the printed Jacobian (4.43) and ``R = I`` as printed.
     ``schedule="batch"``: all N readings in one update (the corrected EKF only). Returns the estimates
     ``(R, N, dim)`` after each location (``(R, 1, dim)`` for the batch schedule); with ``with_divergence``

@@ -4,9 +4,9 @@ For measurements ``(d_i, P_i)`` the model ``P_i = P_0 - 10 n log10(d_i/d0) + e_i
 ``T = [P_0, n]``; the least-squares fit is ``T = (M^T M)^{-1} M^T P`` with rows
 ``M_i = [1, -10 log10(d_i/d0)]``.
 
-This is Eq. (6) of George and Vadivukkarasi (document 003) with the sign of the second column
+This is Eq. (6) of George and Vadivukkarasi with the sign of the second column
 corrected: the paper prints ``+10 log d_i``, which, read literally, returns ``-n``
-where the paper reports n = +2.1843. The literal form is kept as ``sign_convention="literal_003"``.
+where the paper reports n = +2.1843. The literal form is kept as ``sign_convention="literal_george"``.
 It is also Eq. (5.1) of Dogan (2015) and the per-reader fit of Ozkaya (2011), Eq. (6.4)-(6.6),
 whose bounded variant (alpha in [-55, -40] dBm, n in [1.5, 3]) is the ``*_bounds_*`` arguments.
 
@@ -121,8 +121,8 @@ class PathLossFit:
 def path_loss_design_matrix(distance_m, ref_distance_m: float = 1.0,
                             sign_convention: str = "corrected"):
     """Rows ``[1, -10 log10(d/d0)]`` (corrected) or ``[1, +10 log10 d]`` as printed in Eq. (6)
-    of document 003 (``"literal_003"``; its second unknown is then ``-n``)."""
-    check_choice("sign_convention", sign_convention, ("corrected", "literal_003"))
+    of George and Vadivukkarasi (``"literal_george"``; its second unknown is then ``-n``)."""
+    check_choice("sign_convention", sign_convention, ("corrected", "literal_george"))
     check_scalar("ref_distance_m", ref_distance_m, gt=0)
     distance_m = as_array("distance_m", distance_m)
     _positive_distances(distance_m)
@@ -213,7 +213,7 @@ def _finish(log_d, power, mask, ref, exp, status, usable, *, covariance: bool = 
 
 def fit_path_loss_closed_form(distance_m, rss_dbm, ref_distance_m: float = 1.0) -> PathLossFit:
     """Unconstrained least squares by the normal equations ``(M^T M)^{-1} M^T P`` (Eq. (6),
-    document 003, sign corrected), batched over leading axes. Missing powers are NaN."""
+    George and Vadivukkarasi, sign corrected), batched over leading axes. Missing powers are NaN."""
     log_d, power, mask, usable = _prepare(distance_m, rss_dbm, ref_distance_m)
     # normal equations of P = a - n L:  [[N, -sum L], [-sum L, sum L^2]] [a, n] = [sum P, -sum L P];
     # log_d and power are 0 at missing samples, so the plain sums run over the observed ones
@@ -401,7 +401,7 @@ def calibrate_path_loss(distance_m, rss_dbm, mode: str = "per_location_mean", **
 
     Modes
     -----
-    ``"per_location_mean"``  (document 003, Simulation Results): fit each location's m links, then
+    ``"per_location_mean"``  (George and Vadivukkarasi, Simulation Results): fit each location's m links, then
         average the L estimates; ``per_location`` holds the L fits. The covariance is that of the mean
         of L independent fits.
     ``"pooled"``: one fit over all ``L*m`` pairs.

@@ -10,7 +10,7 @@ the ``k`` nearest cells are kept, and the estimate is their weighted centroid (E
     x = sum_i w_i x_i,   w_i = (1/E_i^2) / sum_j (1/E_j^2).
 
 Eq. (3.3) as printed divides by ``sum_j E_j^2`` instead, which does not normalise the weights (a typo:
-the normalised form, LANDMARC's, reproduces the simulation tables); it is kept as ``weighting="literal_004"``.
+the normalised form, LANDMARC's, reproduces the simulation tables); it is kept as ``weighting="literal_ozkaya2011"``.
 
 Two ways to build the map (Ozkaya 2011, Sec. 3.1):
 - pattern based: the stored mean RSSI vector measured at each training location (:func:`pattern_fingerprints`);
@@ -28,7 +28,7 @@ from ..models.channel import PathLossModel, pairwise_distance_m, wall_crossings
 
 __all__ = ["KNN_WEIGHTINGS", "KNN_BLOCK_BYTES", "knn_position", "model_fingerprints", "pattern_fingerprints"]
 
-KNN_WEIGHTINGS = ("inverse_square", "literal_004", "uniform")
+KNN_WEIGHTINGS = ("inverse_square", "literal_ozkaya2011", "uniform")
 
 
 def model_fingerprints(cells_m, anchors_m, model: PathLossModel, walls_m=None, min_distance_m: float = 0.1):

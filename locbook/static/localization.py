@@ -3,13 +3,13 @@
 Every estimator takes anchors ``(m, 2)`` shared by all problems and measurements with leading batch
 axes ``(..., m)``, and returns a :class:`LocalizationResult` whose ``position_m`` has shape ``(..., 2)``.
 
-- :func:`lateration_ls`: linearized least squares, Eq. (8) of George and Vadivukkarasi (document 003):
+- :func:`lateration_ls`: linearized least squares, Eq. (8) of George and Vadivukkarasi:
   subtracting the circle of a reference anchor r from circle i gives the linear system
   ``2 (a_r - a_i)^T p = d_i^2 - d_r^2 - |a_i|^2 + |a_r|^2``. With ``pairs`` (Palvai 2008, Eqs. (2.27)-(2.29)):
   the anchors may differ per problem (receivers ``(..., N, dim)`` at random positions) and the sphere equations
   are differenced in pairs ``(i, j)``, consecutive or against the first or the last anchor,
   ``2 (s_j - s_i)^T X = d_i^2 - d_j^2 - |s_i|^2 + |s_j|^2`` (corrected: the printed rows, Eqs. (2.18), (2.20) and
-  (2.27), lack the factor 2 and Eq. (2.18)'s right-hand side the full norms; ``variant="literal_002"`` keeps the
+  (2.27), lack the factor 2 and Eq. (2.18)'s right-hand side the full norms; ``variant="literal_palvai2008"`` keeps the
   printed rows without the 2, flagged: it returns twice the coordinates). :func:`lateration_system` builds either
   system;
   :func:`locbook.static.least_squares.recursive_least_squares` is the recursive form of the same rows.
@@ -84,7 +84,7 @@ LATERATION_PAIRS = ("consecutive", "first", "last")
 
 #: values of ``variant``: the rows with the factor 2 of the differenced sphere equations, or Palvai's printed rows
 #: without it (Palvai 2008, Eqs. (2.20), (2.27); they give twice the coordinates)
-LATERATION_VARIANTS = ("corrected", "literal_002")
+LATERATION_VARIANTS = ("corrected", "literal_palvai2008")
 
 #: values of :attr:`LocalizationResult.status`
 LOCALIZATION_STATUSES = ("ok", "too_few_anchors", "degenerate_geometry", "solver_failed", "not_converged",
@@ -381,7 +381,7 @@ def _min_anchors(min_anchors, dim: int, m: int) -> int:
 
 def lateration_system(anchors_m, distance_m, ref_index: int = 0, *, pairs: str | None = None,
                       variant: str = "corrected", tag_height_m: float | None = None):
-    """Matrices of the linearized lateration system ``A p = b`` (Eq. (8), document 003).
+    """Matrices of the linearized lateration system ``A p = b`` (Eq. (8) of George and Vadivukkarasi).
 
     Returns ``A`` of shape ``(m-1, dim)`` (``2 (a_r - a_i)``, rows for i != r) and ``b`` of shape
     ``(..., m-1)`` (``d_i^2 - d_r^2 - |a_i|^2 + |a_r|^2``). A NaN distance (not heard) gives NaN in the rows
@@ -393,7 +393,7 @@ def lateration_system(anchors_m, distance_m, ref_index: int = 0, *, pairs: str |
     ``(..., N, dim)`` per problem or ``(N, dim)`` shared, and the rows are ``2 (s_j - s_i)`` ``(..., N - 1, dim)``
     and ``d_i^2 - d_j^2 - |s_i|^2 + |s_j|^2`` ``(..., N - 1)`` over the pairs ``(i, j)`` (NaN where a reading is
     missing); no geometry check (the anchors differ per problem: :func:`lateration_ls` judges each system's rank).
-    ``variant="literal_002"`` drops the factor 2 of ``A`` (:data:`LATERATION_VARIANTS`).
+    ``variant="literal_palvai2008"`` drops the factor 2 of ``A`` (:data:`LATERATION_VARIANTS`).
     """
     check_choice("variant", variant, LATERATION_VARIANTS)
     factor = 2.0 if variant == "corrected" else 1.0
@@ -786,7 +786,7 @@ def lateration_box_ls(anchors_m, distance_m, lower_m, upper_m, ref_index: int = 
     """Linearized least squares constrained to the box ``lower_m <= p <= upper_m``:
     ``min |A p - b|^2`` over the box, with ``A, b`` of :func:`lateration_system` (2-D or 3-D).
 
-    An optional extension to document 003 (which does not constrain its estimates: "some of the results go
+    An optional extension to George and Vadivukkarasi (which does not constrain its estimates: "some of the results go
     beyond the boundaries"); a fix kept inside the room.
 
     ``solver="exact"`` (default): KKT active-set enumeration, exact (no iterations, no solver tolerance). Each

@@ -106,7 +106,7 @@ class Suite:
         return (self.repository or Path.cwd()) / "reports"
 
     def select(self, ids: list[str]) -> list[Experiment]:
-        """Experiments by exact id or by document key / id prefix (``george`` selects all of 003)."""
+        """Experiments by exact id or by document key / id prefix (``george`` selects all of its experiments)."""
         if not ids:
             return list(self.experiments)
         chosen, unknown = [], []

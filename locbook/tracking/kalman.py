@@ -11,7 +11,7 @@ Standard recursion (filterpy / Dogan 2015, Table 3.1 notation; :mod:`locbook.tra
 
 Document 003 (George and Vadivukkarasi, Eqs. (9)-(13)) prints the update with ``X_{k-1}`` and
 ``P_{k-1}`` in place of the predicted quantities, so the prediction of Eqs. (9)-(10) is computed and
-then discarded. That literal form is available as ``variant="literal_003"`` (flagged): it
+then discarded. That literal form is available as ``variant="literal_george"`` (flagged): it
 reduces to a running average of the measurements.
 
 The module's layout (issue 27): the streams and their updates in :mod:`locbook.tracking.streams`, the functional
@@ -29,7 +29,7 @@ from .streams import LinearMeasurement, _ekf_update
 
 __all__ = ["kalman_filter", "extended_kalman_filter", "KF_VARIANTS"]
 
-KF_VARIANTS = ("standard", "literal_003")
+KF_VARIANTS = ("standard", "literal_george")
 
 
 def kalman_filter(F, Q, x0, P0, measurements, *, record=None, predict_first: bool = True,
@@ -51,7 +51,7 @@ def kalman_filter(F, Q, x0, P0, measurements, *, record=None, predict_first: boo
         and a step without any is prediction only. ``T = 0`` steps give an empty result.
     record : step indices to keep (default all); ``outputs``: optional fields among ``("x_pred", "P_pred",
         "innovation", "S")`` to keep at those steps (:class:`~locbook.tracking.results.KalmanResult`).
-    variant : ``"standard"`` or ``"literal_003"`` (Eqs. (11)-(13) of document 003 as printed: each update starts
+    variant : ``"standard"`` or ``"literal_george"`` (Eqs. (11)-(13) of George and Vadivukkarasi as printed: each update starts
         from the previous posterior; ``x_pred``/``P_pred`` are then that posterior).
     joseph : the Joseph-form covariance update (keeps P symmetric positive definite); False: ``(I - K H) P``.
     divergence_window, divergence_probability : the consistency guard (:mod:`locbook.tracking.results`): a run whose
@@ -75,7 +75,7 @@ def kalman_filter(F, Q, x0, P0, measurements, *, record=None, predict_first: boo
         if compiled is not None:
             return _flag(compiled, window, probability)
     return _flag(_run(setup, measurements, lambda x, P, z, meas, k, want: _ekf_update(x, P, z, meas, k, want, joseph),
-                      predict_first, shared=True, literal=variant == "literal_003", joseph=joseph, outputs=outputs),
+                      predict_first, shared=True, literal=variant == "literal_george", joseph=joseph, outputs=outputs),
                  window, probability)
 
 

@@ -85,7 +85,7 @@ def particle_filter(rss_dbm, model, rng: np.random.Generator, *, n_steps: int | 
     thesis's "N_t = 0.5", read as a fraction of N since N_eff >= 1 and a literal N_eff < 0.5 never fires); with
     ``resample_every = k`` at steps ``k - 1, 2k - 1, ...``. The draws are made for every run at every step, so the
     random stream does not depend on which runs resample. ``resampling_cdf``: the systematic scheme's cumulative sum
-    (:func:`~locbook.tracking.resampling.systematic_resample`; ``"literal_004"`` is Table 4.2 as printed).
+    (:func:`~locbook.tracking.resampling.systematic_resample`; ``"literal_ozkaya2011"`` is Table 4.2 as printed).
 
     ``weight_smoothing`` (Ozkaya's improved SIR): ``"sqrt"`` replaces the normalised weights by ``sqrt(w)``
     renormalised before the estimate, the N_eff test and the resampling, and carries them forward (our

@@ -16,7 +16,7 @@ __all__ = ["RESAMPLING_METHODS", "RESAMPLING_CDFS", "resample", "systematic_resa
 
 RESAMPLING_METHODS = ("systematic", "stratified", "multinomial", "residual")
 #: the cumulative sums of :func:`systematic_resample`: the standard one and Table 4.2 of Ozkaya (2011) as printed
-RESAMPLING_CDFS = ("standard", "literal_004")
+RESAMPLING_CDFS = ("standard", "literal_ozkaya2011")
 
 #: relative round-off allowed in ``N w`` before the residual scheme's floor (normalising N weights and scaling by N
 #: err by a few ulps; 64 ulps is far below any weight difference that matters)
@@ -54,7 +54,7 @@ def systematic_resample(weights, uniforms, cdf: str = "standard"):
     points are ``u_i = (u_1 + i - 1) / N`` and particle ``j`` is copied for each ``u_i`` with
     ``c_j-1 < u_i <= c_j``. ``cdf="standard"`` uses ``c_j = w_1 + ... + w_j``. The table prints ``c_1 = 0``,
     ``c_j = c_j-1 + w_j``, which drops ``w_1`` and shifts every particle's interval; that is kept as the
-    flagged ``"literal_004"`` (indices beyond the last particle are clipped to it).
+    flagged ``"literal_ozkaya2011"`` (indices beyond the last particle are clipped to it).
     Returns integer indices ``(..., N)``.
     """
     check_choice("cdf", cdf, RESAMPLING_CDFS)
@@ -69,7 +69,7 @@ def systematic_resample(weights, uniforms, cdf: str = "standard"):
     w = weights.reshape(-1, n)
     c = np.cumsum(w, axis=-1)
     c /= c[:, -1:]
-    if cdf == "literal_004":
+    if cdf == "literal_ozkaya2011":
         c = np.concatenate([np.zeros((c.shape[0], 1)), c[:, 1:] - c[:, :1]], axis=-1)
     else:
         c[:, -1] = 1.0                                     # guard against round-off below the last u_i

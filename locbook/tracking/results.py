@@ -90,7 +90,7 @@ class KalmanResult:
 
     - ``x`` ``batch + (R, n)``, ``P`` ``batch + (R, n, n)``: posterior means and covariances at ``steps`` ``(R,)``;
     - ``x_pred``, ``P_pred``: the prior each step's update starts from (the one-step prediction; for the KF's
-      ``literal_003`` variant the previous posterior, which the printed update uses); ``innovation``
+      ``literal_george`` variant the previous posterior, which the printed update uses); ``innovation``
       ``batch + (R, M)`` and ``S`` ``batch + (R, M, M)``: the readings' innovations and their covariance, block
       diagonal over a step's sequential updates (module docstring). None unless named in the filter's ``outputs``;
     - ``log_likelihood`` ``batch + (T,)``: ``log N(innovation; 0, S)`` of each step's present readings (NaN where a

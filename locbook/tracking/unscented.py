@@ -25,7 +25,7 @@ which equals ``P- - K P_zz K^T`` in exact arithmetic (``K P_zz K^T = K P_xz^T``)
 semi-definite whenever ``R~`` is. ``R~`` is symmetrised and its eigenvalues floored at 0 (the guard); the number
 of floored updates is returned, so a run can show it is rarely or never needed.
 
-The thesis-literal forms are flagged variants: ``weights="literal_001"`` (Eq. (3.22) as printed; the weights then
+The thesis-literal forms are flagged variants: ``weights="literal_gudipati2017"`` (Eq. (3.22) as printed; the weights then
 sum to ``2n / (n + lambda)``) and ``innovation_noise=False`` (Eq. (3.26) without R). Eq. (3.30) as printed cannot
 be evaluated (an ``n x m`` times ``n x m`` product) and has no variant.
 
@@ -50,7 +50,7 @@ from .streams import (_ON_ANCHOR, LinearMeasurement, NonlinearMeasurement, RssMe
 __all__ = ["UKF_WEIGHTS", "UnscentedWeights", "unscented_weights", "sigma_points", "unscented_transform",
            "unscented_kalman_filter"]
 
-UKF_WEIGHTS = ("corrected", "literal_001")
+UKF_WEIGHTS = ("corrected", "literal_gudipati2017")
 
 
 @dataclass(frozen=True)
@@ -70,7 +70,7 @@ def unscented_weights(n: int, alpha: float = 1e-3, beta: float = 2.0, kappa: flo
                       variant: str = "corrected") -> UnscentedWeights:
     """Weights of Eqs. (3.21)-(3.23) in Gudipati 2017 (van der Merwe's scaled sigma points).
 
-    ``variant="corrected"``: ``W_m^0 = lambda / (n + lambda)`` (the weights sum to 1). ``"literal_001"``: the
+    ``variant="corrected"``: ``W_m^0 = lambda / (n + lambda)`` (the weights sum to 1). ``"literal_gudipati2017"``: the
     printed ``W_m^0 = n / (n + lambda)`` (flagged: the mean weights then sum to ``2n / (n + lambda)``, about 2e6
     at the thesis's alpha = 1e-3 and n = 8). ``n + lambda = alpha^2 (n + kappa)`` must be positive."""
     check_scalar("n", n, ge=1, integer=True)
@@ -297,7 +297,7 @@ def unscented_kalman_filter(F, Q, x0, P0, measurements, *, alpha: float = 1e-3, 
     transform too, which is exact for them (so the UKF equals the KF on a linear model, a tested invariant).
 
     ``alpha``, ``beta``, ``kappa``: sigma-point spread; defaults are the thesis's (alpha = 1e-3, beta = 2,
-    kappa = 0). ``weights``: ``"corrected"`` or the flagged ``"literal_001"`` (Eq. (3.22) as printed).
+    kappa = 0). ``weights``: ``"corrected"`` or the flagged ``"literal_gudipati2017"`` (Eq. (3.22) as printed).
     ``innovation_noise=False``: Eq. (3.26) as printed, without R (flagged: with more measurements than the
     state's spread can explain, P_zz is singular and the update stops with a clear error).
 
@@ -322,7 +322,7 @@ def unscented_kalman_filter(F, Q, x0, P0, measurements, *, alpha: float = 1e-3, 
                 raise
             name = meas.name if isinstance(meas, NonlinearMeasurement) else type(meas).__name__
             form = "P_zz + R" if innovation_noise else "P_zz without R (Eq. (3.26) as printed)"
-            printed_weights = " with the printed weights of Eq. (3.22)" if weights == "literal_001" else ""
+            printed_weights = " with the printed weights of Eq. (3.22)" if weights == "literal_gudipati2017" else ""
             raise _Singular(exc.bad, f"the unscented innovation covariance S = {form} of the {name} update"
                                      f"{printed_weights} is singular, not positive definite or not finite at step "
                                      "{step}") from None

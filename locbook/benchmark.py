@@ -66,10 +66,18 @@ class ProtocolChoice:
     source: str
 
 
+@dataclass(frozen=True)
 class _AnchorReadings:
-    """What the static and tracking scenarios share: the anchor distances of plan positions and channel draws at
-    them, whether the readings are measured, and the floor's bounding box (the scenario supplies ``anchors_m``,
-    ``channel``, ``tag_height_m``, ``measured_rss_dbm`` and ``outline_m``)."""
+    """What the static and tracking scenarios share: their name, document and title, the anchors, channel and floor,
+    the anchor distances of plan positions and channel draws at them, whether the readings are measured, and the
+    floor's bounding box (the scenario adds ``tag_height_m`` and ``measured_rss_dbm``)."""
+
+    key: str
+    document: str
+    title: str
+    anchors_m: np.ndarray
+    channel: PathLossModel
+    outline_m: np.ndarray
 
     @property
     def measured(self) -> bool:
@@ -99,12 +107,6 @@ class StaticScenario(_AnchorReadings):
     evaluation positions ``points_m (P, 2)``, the pitch of the grid methods' grid; for measured data the readings
     ``measured_rss_dbm (P, m)`` (NaN = not heard) and the k-NN radio map ``(cells, fingerprints)``."""
 
-    key: str
-    document: str
-    title: str
-    anchors_m: np.ndarray
-    channel: PathLossModel
-    outline_m: np.ndarray
     points_m: np.ndarray
     grid_spacing_m: float
     settings: tuple[ProtocolChoice, ...]
@@ -128,12 +130,6 @@ class TrackingScenario(_AnchorReadings):
     the truth is unknown), the ticks that are scored (``scored (T,)``), the anchors and channel, the floor, and for
     measured data the readings ``measured_rss_dbm (T, m)`` on the clock (a tick without readings is all NaN)."""
 
-    key: str
-    document: str
-    title: str
-    anchors_m: np.ndarray
-    channel: PathLossModel
-    outline_m: np.ndarray
     truth_m: np.ndarray
     dt_s: float
     spread_m: float

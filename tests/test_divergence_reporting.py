@@ -248,3 +248,17 @@ def test_dogan_table_rows_and_notes_carry_the_flags():
     assert table[0]["median first time (s)"] == pytest.approx(2.0)
     tails = {t["filter"]: t for t in dg.tail_rows(runs)}
     assert tails["parallel_ekf"]["runs flagged diverged"] == 2 and tails["static_mle"]["runs flagged diverged"] == ""
+
+
+def test_george_kalman_error_vs_q_is_the_mean_error_of_each_filtered_run():
+    truth, fixes = _george_fixes(8, 1.0, np.random.default_rng(4))
+    fixes[3] = np.nan                                            # a failed calibration: NaN error, not counted
+    q_grid = [1e-3, 0.1, 10.0]
+    errors, flags = george.kalman_error_vs_q(fixes, truth, q_grid, r_mode="isotropic", r_iso_m2=2.0)
+    assert errors.shape == (3, 8) and len(flags) == 3
+    for i, q in enumerate(q_grid):
+        est, one = george.track_with_kalman(fixes, truth, q=q, r_mode="isotropic", r_iso_m2=2.0, with_divergence=True)
+        by_hand = np.sqrt(((est - truth) ** 2).sum(-1)).mean(-1)      # Eq. (15): mean Euclidean error per run
+        np.testing.assert_allclose(errors[i], by_hand, rtol=1e-14, equal_nan=True)
+        np.testing.assert_array_equal(flags[i].diverged, one.diverged)
+    assert np.isnan(errors[:, 3]).all() and np.isfinite(np.delete(errors, 3, axis=1)).all()

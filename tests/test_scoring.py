@@ -127,3 +127,32 @@ def test_every_printed_values_file_is_well_formed():
             printed_number(p.text)                  # each printed text holds exactly one number
     with pytest.raises(KeyError, match="known"):
         lb.printed("nobody2099")
+
+
+def test_single_experiment_ambiguity_is_k_sample_standard_deviations():
+    import statistics
+    runs = [2.1, 2.6, 1.9, 2.4, 3.0, 2.2]
+    amb = lb.Ambiguity.single_experiment(runs, "one walk", "Sec. 6")
+    assert math.isclose(amb.size, 2 * statistics.stdev(runs), rel_tol=1e-14)
+    assert math.isclose(lb.Ambiguity.single_experiment(runs, "one walk", "Sec. 6", k=1.0).size, statistics.stdev(runs),
+                        rel_tol=1e-14)
+    assert (amb.what, amb.source) == ("one walk", "Sec. 6")
+    with pytest.raises(ValueError, match="at least two finite"):
+        lb.Ambiguity.single_experiment([2.0], "one walk", "Sec. 6")
+    with pytest.raises(ValueError, match="NaN or inf"):
+        lb.Ambiguity.single_experiment([2.0, float("nan"), 3.0], "one walk", "Sec. 6")
+
+
+def test_spread_ambiguity_is_the_largest_distance_from_our_reading():
+    assert lb.Ambiguity.spread([1.2, 0.7, 1.05], 1.0, "three curves", "Fig. 3.4").size == pytest.approx(0.3, abs=1e-15)
+    assert lb.Ambiguity.spread([4, 6], 5, "tolerance halved or doubled", "Sec. 7").size == 1.0
+    with pytest.raises(ValueError, match="at least one value"):
+        lb.Ambiguity.spread([], 1.0, "none", "nowhere")
+
+
+def test_ozkaya_settling_reading_moves_with_the_tolerance_as_counted_by_hand():
+    from locbook.scenarios import ozkaya as oz
+    curve = [5.0, 3.0, 1.0, 0.35, 0.18, 0.12, 0.1, 0.1, 0.1]     # final value 0.1
+    # within 0.1 of 0.1 from 0.18 (recursion 5); within 0.05 from 0.12 (6); within 0.2 also from 0.18 (5)
+    settled, amb = oz.settling_reading(curve, 0.1, "Sec. 7.2.2.2")
+    assert settled == 5 and amb.size == 1.0 and amb.source == "Sec. 7.2.2.2" and "0.1 m" in amb.what

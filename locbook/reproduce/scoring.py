@@ -37,6 +37,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numpy as np
+
 from .printed_values import printed_number, printed_rounding
 
 __all__ = ["KINDS", "VERDICTS", "JUDGED_KINDS", "CLAIM_RELATIONS", "WITHIN_LIMIT", "Ambiguity", "Score",
@@ -67,6 +69,26 @@ class Ambiguity:
 
     def describe(self) -> str:
         return f"{self.what} ({self.source})"
+
+    @classmethod
+    def single_experiment(cls, per_run, what: str, source: str, *, k: float = 2.0) -> "Ambiguity":
+        """The source measured ONE experiment (one walk, one calibration), whose value scatters as one of our runs
+        does: the window widens by ``k`` sample standard deviations (``ddof=1``) of our run-level values
+        ``per_run`` (at least two finite values)."""
+        values = np.asarray(per_run, dtype=float).ravel()
+        if values.size < 2 or not np.all(np.isfinite(values)):
+            raise ValueError(f"a single-experiment ambiguity needs at least two finite run-level values, got "
+                             f"{values.size} value(s){'' if np.all(np.isfinite(values)) else ' with NaN or inf'}")
+        return cls(k * float(np.std(values, ddof=1)), what, source)
+
+    @classmethod
+    def spread(cls, values, centre: float, what: str, source: str) -> "Ambiguity":
+        """A quantity the source leaves undefined, whose plausible readings give ``values``: the window widens by
+        the largest distance of any of them from ``centre`` (our number's reading)."""
+        values = np.asarray(values, dtype=float).ravel()
+        if values.size == 0:
+            raise ValueError("a spread ambiguity needs at least one value of the alternative readings")
+        return cls(float(np.max(np.abs(values - centre))), what, source)
 
 
 @dataclass(frozen=True)

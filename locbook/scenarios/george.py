@@ -22,7 +22,7 @@ from ..tracking.kalman import kalman_filter
 from ..tracking.streams import LinearMeasurement
 from ..static.localization import lateration_ls
 from ..reproduce.printed_values import printed
-from ..metrics import position_error_m
+from ..metrics import mean_error_m, position_error_m
 from ..models.motion import constant_velocity
 from ..tracking.divergence import DivergenceFlags
 
@@ -30,6 +30,7 @@ __all__ = [
     "ANCHORS_M", "CORRIDOR_SIZE_M", "PRINTED", "PRINTED_N", "PRINTED_C_RAW", "PRINTED_C_KF",
     "PRINTED_REDUCTION", "PRINTED_REDUCTION_CLAIM", "CC2420_PA_LEVEL_DBM", "DEFAULT_CALIBRATION_POINTS_M",
     "trajectory_m", "MIN_PLAUSIBLE_PATH_LOSS_EXP", "CorridorRuns", "simulate_corridor", "track_with_kalman",
+    "kalman_error_vs_q",
     "TRAJECTORIES", "R_MODES", "INIT_MODES",
 ]
 
@@ -198,3 +199,16 @@ def track_with_kalman(fixes_m, truth_m, *, q: float, dt_s: float = 1.0, r_mode: 
     res = kalman_filter(model.F, model.Q, x0, P0, LinearMeasurement(fixes_m, H, R), predict_first=False, variant=variant)
     out = model.position(res.x)
     return (out, DivergenceFlags.of(res)) if with_divergence else out
+
+
+def kalman_error_vs_q(fixes_m, truth_m, q_grid, **kalman) -> tuple[np.ndarray, list[DivergenceFlags]]:
+    """The paper's tuning of Q ("tuned" to minimise C, Sec. 4), as a sweep: for each ``q`` of ``q_grid`` the mean
+    error C (Eq. (15)) of every run filtered by :func:`track_with_kalman` (``kalman``: its other keywords), shape
+    ``(len(q_grid), runs)`` (NaN for runs without fixes), and the NIS guard's flags per ``q``."""
+    truth_m = np.asarray(truth_m, float)
+    errors, flags = [], []
+    for q in np.asarray(q_grid, float).ravel():
+        est, flagged = track_with_kalman(fixes_m, truth_m, q=float(q), with_divergence=True, **kalman)
+        errors.append(mean_error_m(position_error_m(est, truth_m), axis=-1))
+        flags.append(flagged)
+    return np.array(errors), flags

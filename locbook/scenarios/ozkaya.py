@@ -41,7 +41,7 @@ __all__ = [
     "GRID_RT_BY_SIGMA", "SIR_RT_BY_SIGMA", "THESIS_RUNS", "thesis_monte_carlo_ambiguity", "crlb_rows",
     "record_simulation_assumptions",
     "is_crlb_row",
-    "settling_step", "literature_table", "PRINTED", "OFFLINE_PARAMETERS", "AUTO_PARAMETERS", "R3_CALIBRATION_DISTANCES_M",
+    "settling_step", "settling_reading", "literature_table", "PRINTED", "OFFLINE_PARAMETERS", "AUTO_PARAMETERS", "R3_CALIBRATION_DISTANCES_M",
     "TESTBED_SIZE_M", "TESTBED_WALLS_M", "TESTBED_READERS_M", "REFERENCE_TAGS_M", "READER_SENSITIVITY_DBM", "WAF_DB",
     "synthetic_campaign", "CRLB_NOT_FROM_FORMULA",
 ]
@@ -577,6 +577,17 @@ def settling_step(mean_error_m, tolerance_m: float = 0.1) -> int:
     inside = np.abs(e - e[-1]) <= tolerance_m
     outside = np.flatnonzero(~inside)
     return int(outside[-1] + 2) if outside.size else 1
+
+
+def settling_reading(mean_error_m, tolerance_m: float, source: str) -> tuple[int, Ambiguity]:
+    """Our settling recursion (:func:`settling_step` at ``tolerance_m``) and the ambiguity of the undefined
+    "settles": how far it moves when the tolerance is halved or doubled (:meth:`Ambiguity.spread`); ``source`` the
+    thesis passage that reads the settling off its figure."""
+    settled = settling_step(mean_error_m, tolerance_m)
+    moved = [settling_step(mean_error_m, t) for t in (tolerance_m / 2, 2 * tolerance_m)]
+    return settled, Ambiguity.spread(moved, settled, "settling is not defined; ours is the first recursion within "
+                                     f"{tolerance_m} m of the final mean error, and the ambiguity is how far it moves "
+                                     "when that tolerance is halved or doubled", source)
 
 
 # -- Chapters 5-6: literature constants, calibration, the test bed -----------------------------------

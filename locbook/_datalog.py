@@ -42,17 +42,19 @@ def install_from_environment() -> None:
     in_package = package + os.sep
     cache_dir = os.sep + "__pycache__" + os.sep
 
+    def append(to, path: str) -> None:
+        if path not in seen:
+            seen.add(path)
+            to.write(path + "\n")
+            to.flush()
+
     def log_module(path: str) -> None:
         if path.endswith(".pyc"):
             try:
                 path = source_from_cache(path)
             except ValueError:                    # not a PEP 3147 cache name: no source to key on
                 return
-        if path in seen:
-            return
-        seen.add(path)
-        module_log.write(path + "\n")
-        module_log.flush()
+        append(module_log, path)
 
     if module_log is not None:
         for name, module in list(sys.modules.items()):
@@ -76,10 +78,7 @@ def install_from_environment() -> None:
             if module_log is not None and path.startswith(in_package):
                 log_module(path)
             return
-        if cache_dir in path:
-            return
-        seen.add(path)
-        log.write(path + "\n")
-        log.flush()
+        if cache_dir not in path:
+            append(log, path)
 
     sys.addaudithook(hook)

@@ -1,0 +1,239 @@
+"""Every document's unprinted assumptions and contested readings, declared as data (issue 28, "Reading brackets").
+
+One CSV per document, ``locbook/data/readings/<document>.csv`` (package data, beside the printed values of
+:mod:`.printed_values`), lines starting with ``#`` being comments. One row per reading, with the columns
+:data:`READING_COLUMNS`:
+
+``name``
+    snake_case, unique within the document.
+``experiments``
+    the experiment ids (``notebooks/experiments.toml``) it applies to, separated by spaces.
+``parameter``
+    the notebook parameter that sets it, as in each listed notebook's parameters cell; empty when no notebook
+    parameter sets it yet, and then ``where`` must name the module attribute that holds it (the gap is visible).
+``where``
+    a dotted path ``package.module.attribute[.attribute]`` (``locbook.scenarios.dogan.Q_PER_STEP``); optional when
+    ``parameter`` is given.
+``default``
+    the value used today, as a TOML value (``0.3``, ``'rest'``, ``[1.0, 2.0]``); empty means the notebook's
+    ``None`` (the notebook resolves it, e.g. to a printed value or a calibration, as ``reason`` says).
+``alternatives``
+    a TOML array of the other plausible values (empty or ``[]``: none named).
+``low``, ``high``
+    a plausible range of a numeric reading (both or neither).
+``basis``
+    one of :data:`BASES`: ``printed`` (the text prints it), ``assumed`` (not printed: our choice, with a reason),
+    ``fitted_to_output`` (chosen because it fits printed results: rows that use it are calibrations).
+``source``, ``reason``
+    where the source prints the value or leaves it open (section, equation, table), and why the default and the
+    alternatives (both required).
+
+Rules (:func:`readings` raises :class:`ReadingsError` naming the file, the line and the problem): the
+columns exactly as above; a known basis; a unique snake_case name; at least one experiment; ``parameter`` or
+``where``; every TOML value parses (``alternatives`` as an array); the default is not among the alternatives;
+``low <= high``, both numbers, and a numeric default inside ``[low, high]``; a ``fitted_to_output`` reading names at
+least one alternative or a range, so that a sweep can test the printed numbers under a reading not chosen from them.
+
+This module only declares and validates; it imports nothing from the suite (the suite's tests check each
+``parameter`` against the notebooks, ``tests/test_readings.py``).
+"""
+from __future__ import annotations
+
+import csv
+import math
+import re
+import tomllib
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+from typing import Any
+
+from ..errors import LocbookError
+
+__all__ = ["Reading", "ReadingsError", "readings", "readings_for", "load_reading_file", "READINGS_DIR",
+           "READING_COLUMNS", "BASES"]
+
+READINGS_DIR = Path(__file__).resolve().parents[1] / "data" / "readings"    # package data of locbook.data
+READING_COLUMNS = ("name", "experiments", "parameter", "where", "default", "alternatives", "low", "high", "basis",
+                   "source", "reason")
+#: The basis of a reading's default: printed by the source, assumed by us, or fitted to the source's printed output.
+BASES = ("printed", "assumed", "fitted_to_output")
+
+
+
+class ReadingsError(LocbookError, ValueError):
+    """A readings file that breaks a rule of the declaration; the message names the file, the line and the problem."""
+
+
+_NAME = re.compile(r"[a-z][a-z0-9_]*\Z")
+_WHERE = re.compile(r"[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)+\Z")
+
+
+@dataclass(frozen=True)
+class Reading:
+    """One unprinted assumption or contested reading of a document (a row of its readings CSV).
+
+    ``default`` is the value used today (``None``: the notebook parameter's ``None``); ``alternatives`` the other
+    plausible values; ``low``/``high`` a plausible range (both ``None`` if not numeric or not given);
+    ``parameter`` the notebook parameter that sets it (``""`` if none does: then ``where`` names the attribute).
+    """
+
+    document: str
+    name: str
+    experiments: tuple[str, ...]
+    parameter: str
+    where: str
+    default: Any
+    alternatives: tuple
+    low: float | None
+    high: float | None
+    basis: str
+    source: str
+    reason: str
+
+    @property
+    def is_gap(self) -> bool:
+        """True when no notebook parameter sets this reading (it lives in a module: :attr:`where`)."""
+        return not self.parameter
+
+    @property
+    def is_calibration(self) -> bool:
+        """True when the default was chosen because it fits printed output (rows using it are calibrations)."""
+        return self.basis == "fitted_to_output"
+
+    @property
+    def values(self) -> tuple:
+        """The default followed by the alternatives: the discrete values a sweep of this reading visits."""
+        return (self.default, *self.alternatives)
+
+
+def _toml_value(text: str, where: str, column: str):
+    try:
+        return tomllib.loads(f"v = {text}")["v"]
+    except tomllib.TOMLDecodeError as exc:
+        raise ReadingsError(f"{where}: {column} {text!r} is not a TOML value ({exc}); strings need quotes, "
+                            f"e.g. 'rest'") from None
+
+
+def _number(text: str, where: str, column: str) -> float | None:
+    if text == "":
+        return None
+    value = _toml_value(text, where, column)
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise ReadingsError(f"{where}: {column} must be a finite number, got {text!r}")
+    return float(value)
+
+
+def _is_number(value) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _key(value):
+    """A comparable key under which 1 and 1.0 are the same value but True and 1 are not (Python's == equates them)."""
+    if isinstance(value, bool):
+        return ("bool", value)
+    if _is_number(value):
+        return ("number", float(value))
+    if isinstance(value, (list, tuple)):
+        return ("array", tuple(_key(v) for v in value))
+    if isinstance(value, dict):
+        return ("table", tuple(sorted((k, _key(v)) for k, v in value.items())))
+    return (type(value).__name__, value)
+
+
+def _reading(document: str, row: dict, where: str) -> Reading:
+    cells = {k: (row[k] or "").strip() for k in READING_COLUMNS}
+    name = cells["name"]
+    if not _NAME.match(name):
+        raise ReadingsError(f"{where}: name {name!r} must be snake_case (lower-case letters, digits, underscores)")
+    where = f"{where} ({name})"
+    if cells["basis"] not in BASES:
+        raise ReadingsError(f"{where}: unknown basis {cells['basis']!r}; allowed: {', '.join(BASES)}")
+    experiments = tuple(cells["experiments"].split())
+    if not experiments:
+        raise ReadingsError(f"{where}: experiments is empty; list the experiment ids the reading applies to")
+    if len(set(experiments)) != len(experiments):
+        raise ReadingsError(f"{where}: experiments lists an experiment twice: {cells['experiments']!r}")
+    if not cells["parameter"] and not cells["where"]:
+        raise ReadingsError(f"{where}: needs a parameter or, if no notebook parameter sets it, where (the module "
+                            f"attribute that holds it)")
+    if cells["parameter"] and not cells["parameter"].isidentifier():
+        raise ReadingsError(f"{where}: parameter {cells['parameter']!r} is not a Python name")
+    if cells["where"] and not _WHERE.match(cells["where"]):
+        raise ReadingsError(f"{where}: where {cells['where']!r} must be a dotted path such as "
+                            f"locbook.scenarios.dogan.Q_PER_STEP")
+    for column in ("source", "reason"):
+        if not cells[column]:
+            raise ReadingsError(f"{where}: {column} is empty")
+    default = None if cells["default"] == "" else _toml_value(cells["default"], where, "default")
+    alternatives = () if cells["alternatives"] in ("", "[]") else _toml_value(cells["alternatives"], where,
+                                                                                "alternatives")
+    if not isinstance(alternatives, (list, tuple)):
+        raise ReadingsError(f"{where}: alternatives must be a TOML array such as ['moving'] or [0.5, 1.0], "
+                            f"got {cells['alternatives']!r}")
+    alternatives = tuple(alternatives)
+    keys = [_key(a) for a in alternatives]
+    if default is not None and _key(default) in keys:
+        raise ReadingsError(f"{where}: the default {cells['default']} is also among the alternatives")
+    if len(set(keys)) != len(keys):
+        raise ReadingsError(f"{where}: alternatives repeat a value: {cells['alternatives']}")
+    low, high = _number(cells["low"], where, "low"), _number(cells["high"], where, "high")
+    if (low is None) != (high is None):
+        raise ReadingsError(f"{where}: give both low and high, or neither")
+    if low is not None:
+        if low > high:
+            raise ReadingsError(f"{where}: low {cells['low']} > high {cells['high']}")
+        if default is not None and not _is_number(default):
+            raise ReadingsError(f"{where}: a range [low, high] needs a numeric default, got {cells['default']}")
+        if default is not None and not low <= default <= high:
+            raise ReadingsError(f"{where}: the default {cells['default']} is outside [low, high] = "
+                                f"[{cells['low']}, {cells['high']}]")
+    if cells["basis"] == "fitted_to_output" and not alternatives and low is None:
+        raise ReadingsError(f"{where}: a fitted_to_output reading needs at least one alternative or a range "
+                            f"[low, high], so that a sweep can test the printed numbers under a reading not chosen "
+                            f"from them")
+    return Reading(document, name, experiments, cells["parameter"], cells["where"], default, alternatives, low, high,
+                   cells["basis"], cells["source"], cells["reason"])
+
+
+def load_reading_file(path: str | Path, document: str | None = None) -> tuple[Reading, ...]:
+    """The validated readings of one CSV file (``document``: its stem unless given). Errors name the file, the
+    line and the problem (:class:`ReadingsError`)."""
+    path = Path(path)
+    document = document or path.stem
+    with open(path, newline="", encoding="utf-8") as fh:
+        lines = [(number, line) for number, line in enumerate(fh, start=1) if not line.startswith("#")]
+    if not lines:
+        raise ReadingsError(f"{path}: no header line; the columns must be {', '.join(READING_COLUMNS)}")
+    reader = csv.DictReader(line for _, line in lines)
+    if tuple(reader.fieldnames or ()) != READING_COLUMNS:
+        raise ReadingsError(f"{path}, line {lines[0][0]}: columns must be {', '.join(READING_COLUMNS)}; "
+                            f"got {', '.join(reader.fieldnames or ())}")
+    out, seen = [], {}
+    for row in reader:
+        number = lines[reader.line_num - 1][0]     # reader.line_num counts the non-comment lines read so far
+        where = f"{path}, line {number}"
+        if None in row or any(v is None for v in row.values()):
+            raise ReadingsError(f"{where}: expected {len(READING_COLUMNS)} fields ({', '.join(READING_COLUMNS)})")
+        reading = _reading(document, row, where)
+        if reading.name in seen:
+            raise ReadingsError(f"{where}: duplicate name {reading.name!r} (first on line {seen[reading.name]})")
+        seen[reading.name] = number
+        out.append(reading)
+    return tuple(out)
+
+
+@lru_cache(maxsize=None)
+def readings(document: str) -> tuple[Reading, ...]:
+    """The declared readings of ``document`` (``"dogan2015"``, ``"george"``, ...), validated; cached."""
+    path = READINGS_DIR / f"{document}.csv"
+    if not path.is_file():
+        known = sorted(p.stem for p in READINGS_DIR.glob("*.csv"))
+        raise KeyError(f"no readings declared for document {document!r}; known: {known}")
+    return load_reading_file(path, document)
+
+
+def readings_for(experiment_id: str) -> tuple[Reading, ...]:
+    """Every declared reading (of any document) that applies to ``experiment_id``, in file order."""
+    return tuple(r for path in sorted(READINGS_DIR.glob("*.csv")) for r in readings(path.stem)
+                 if experiment_id in r.experiments)

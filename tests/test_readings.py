@@ -146,9 +146,13 @@ def test_dogan_q_reading_offers_the_printed_constant():
     noise = {r.name: r for r in readings("dogan2015")}["noise_reading"]
     assert noise.is_calibration and "printed" in noise.alternatives
     assert set(noise.values) <= set(dogan.NOISE_READINGS)
-    # the printed reading is Eq. (3.24)'s constant: the same Q whatever sigma_ACC
+    # the printed reading is Eq. (3.24)'s constant: the same Q whatever sigma_ACC, the square of Sec. 4.1.2's sd
     assert dogan.filter_noise("printed", 0.005) == dogan.filter_noise("printed", 0.15)
-    assert dogan.filter_noise("printed", None)[0] == pytest.approx(0.0048 ** 2, rel=0.01)
+    sd = dogan.PRINTED.get("Sec. 4.1.2 text", "process noise", "standard deviation")
+    assert dogan.filter_noise("printed", None)[0] == pytest.approx(sd.value ** 2, abs=2 * sd.value * sd.rounding)
+    # the fitted reading agrees with it only at Table 3.6's sigma_ACC
+    assert dogan.filter_noise("sigma_acc", None)[0] == pytest.approx(dogan.Q_PER_STEP, rel=0.01)
+    assert dogan.filter_noise("sigma_acc", 0.005)[0] < dogan.Q_PER_STEP / 5
 
 
 def test_every_calibration_reading_can_be_swept_away_from_its_fit():

@@ -5,7 +5,10 @@
 - :mod:`.scoring`: a row's kind, window (printed rounding + 2 Monte-Carlo standard errors + a named
   :class:`Ambiguity`) and verdict (:func:`score`);
 - :mod:`.report`: :class:`Report`, whose :meth:`Report.number` applies those rules (window, verdict and note),
-  so that a notebook never computes a window itself.
+  so that a notebook never computes a window itself;
+- :mod:`.readings`: each document's unprinted assumptions and contested readings (package data
+  ``locbook/data/readings``): the default, the plausible alternatives or range, the basis (printed, assumed, or
+  fitted to printed output) and the source, as :class:`Reading` (:func:`readings`, :func:`readings_for`).
 
 Scenarios may import this layer; it imports nothing from the suite (the suite imports it). Names load on first use,
 so that ``import locbook.reproduce.printed_values`` does not pay for the report's numpy.
@@ -18,6 +21,8 @@ _EXPORTS = {
     **dict.fromkeys(("KINDS", "JUDGED_KINDS", "VERDICTS", "CLAIM_RELATIONS", "WITHIN_LIMIT", "Ambiguity", "Score",
                      "score"), "scoring"),
     **dict.fromkeys(("Report", "Table", "NUMBER_COLUMNS"), "report"),
+    **dict.fromkeys(("Reading", "ReadingsError", "readings", "readings_for", "load_reading_file", "READINGS_DIR",
+                     "READING_COLUMNS", "BASES"), "readings"),
 }
 __all__ = list(_EXPORTS)
 __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)

@@ -1,9 +1,9 @@
-"""``locbook`` command line: list the experiments and run the notebook suite.
+"""``locbook`` command line: list the experiments, run the notebook suite, run a study.
 
-Exit status (README, "Interrupts, concurrent runs and the cache"): 0 all good; 1 some experiment failed (or the
-Dask scheduler was lost); 2 bad input (parameters, experiment list, notebook file, unwritable folder); 3 no space
-left on the device (or quota) holding the reports: the run stopped, the path is named, earlier reports are kept;
-130 / 143 interrupted by SIGINT / SIGTERM (finished reports are kept).
+Exit status of ``run`` and ``study`` (README, "Interrupts, concurrent runs and the cache"): 0 all good; 1 some
+experiment failed (or the Dask scheduler was lost); 2 bad input (parameters, experiment list, notebook file,
+unwritable folder); 3 no space left on the device (or quota) holding the reports: the run stopped, the path is
+named, earlier reports are kept; 130 / 143 interrupted by SIGINT / SIGTERM (finished reports are kept).
 """
 from __future__ import annotations
 
@@ -41,13 +41,13 @@ def _positive(kind, text: str):
     return value
 
 
-def _print_summary(run, progress: str = "plain") -> None:
+def _print_summary(run, progress: str = "plain", see: Path | None = None) -> None:
     names = {"ok": "executed", "cached": "cached", "failed": "failed", "interrupted": "interrupted",
              "not run": "not started"}
     counts = ", ".join(f"{run.count(s)} {w}" for s, w in names.items() if run.count(s) or s in ("ok", "cached", "failed"))
     from .progress import print_scoreboard
     print_scoreboard(run, progress)
-    print(f"done: {counts}; see {run.report_dir / 'index.html'}")
+    print(f"done: {counts}; see {see or run.report_dir / 'index.html'}")
     if run.interrupted_by is not None or run.disk_full is not None or run.executor_error:
         if run.interrupted_by is not None:
             sig = signal.Signals(run.interrupted_by).name
@@ -108,7 +108,25 @@ def main(argv: list[str] | None = None) -> int:
     run.add_argument("--scheduler", metavar="ADDRESS",
                      help="with --executor dask: a scheduler address (tcp://host:8786) or scheduler file; default: "
                           "a LocalCluster of --jobs workers")
-    for command in (lst, show, nbs, run):   # --suite after the command too; SUPPRESS keeps one given before it
+    study = sub.add_parser("study", help="run a declared parameter study and write reports/studies/<name>/ "
+                                         "(study.csv, plots/)")
+    study.add_argument("study", metavar="NAME_OR_PATH",
+                       help="a study declared in the experiment list ([[study]]) or a TOML file holding one")
+    study.add_argument("--jobs", "-j", type=lambda t: _positive(int, t), default=2,
+                       help="study points run in parallel processes (default 2)")
+    study.add_argument("--force", action="store_true", help="execute even the points whose report is up to date")
+    study.add_argument("--reports", type=Path, help="reports folder (default: <repository>/reports); the study "
+                                                    "writes <reports>/studies/<name>/")
+    study.add_argument("--timeout", type=lambda t: _positive(float, t), default=1800,
+                       help="seconds allowed per notebook cell (default 1800)")
+    study.add_argument("--progress", choices=("auto", "live", "plain", "quiet"), default="auto",
+                       help="as for run")
+    study.add_argument("--quiet", "-q", dest="progress", action="store_const", const="quiet",
+                       help="--progress quiet")
+    study.add_argument("--executor", choices=("local", "dask"), default="local",
+                       help="local: worker processes here (default); dask: each point a task on dask.distributed")
+    study.add_argument("--scheduler", metavar="ADDRESS", help="as for run")
+    for command in (lst, show, nbs, run, study):   # --suite after the command too; SUPPRESS keeps one given before it
         command.add_argument("--suite", type=Path, default=argparse.SUPPRESS, help=suite_help)
     args = parser.parse_args(argv)
 
@@ -127,12 +145,20 @@ def main(argv: list[str] | None = None) -> int:
             print(f"copied {len(suite.experiments)} notebooks and experiments.toml to {dest}; open them with "
                   f"`jupyter lab {dest}`, or run them with `locbook run --suite {dest / 'experiments.toml'}`")
             return 0
-        experiments = suite.select(args.ids)
-        from .runner import run_suite
-        result = run_suite(suite, experiments, args.profile, jobs=args.jobs, force=args.force,
-                           overrides=_parse_overrides(args.parameter), report_root=args.reports,
-                           out_dir=args.out, timeout_s=args.timeout, progress=args.progress,
-                           executor=args.executor, scheduler=args.scheduler)
+        if args.command == "study":
+            from .study import load_study, run_study, study_folder
+            declared = load_study(suite, args.study)
+            see = study_folder(suite, declared, args.reports) / "study.csv"
+            result = run_study(suite, declared, report_root=args.reports, jobs=args.jobs, force=args.force,
+                               timeout_s=args.timeout, progress=args.progress, executor=args.executor,
+                               scheduler=args.scheduler)
+        else:
+            experiments = suite.select(args.ids)
+            from .runner import run_suite
+            result = run_suite(suite, experiments, args.profile, jobs=args.jobs, force=args.force,
+                               overrides=_parse_overrides(args.parameter), report_root=args.reports,
+                               out_dir=args.out, timeout_s=args.timeout, progress=args.progress,
+                               executor=args.executor, scheduler=args.scheduler)
     except ParameterError as exc:
         print(f"locbook: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
@@ -149,9 +175,16 @@ def main(argv: list[str] | None = None) -> int:
         where = f" ({exc.filename})" if exc.filename else ""
         print(f"locbook: error: {exc.strerror or exc}{where}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    if args.command == "study":
+        _print_summary(result, args.progress, see)
+        return _exit_status(result)
     if result.report_dir.name != args.profile:
         print(f"reports of this run: {result.report_dir.resolve()} (reports/{args.profile}/ is unchanged)")
     _print_summary(result, args.progress)
+    return _exit_status(result)
+
+
+def _exit_status(result) -> int:
     if result.interrupted_by is not None:
         return 128 + int(result.interrupted_by)
     if result.disk_full is not None:

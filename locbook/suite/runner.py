@@ -46,7 +46,7 @@ import threading
 import time
 import uuid
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from importlib import metadata
 from pathlib import Path
 
@@ -59,8 +59,8 @@ from .worker import disk_full_path
 from .progress import expected_seconds, make_progress
 from .spec import SAFE_NAME, Experiment, Suite, SuiteError
 
-__all__ = ["KERNEL_NAME", "run_suite", "cache_key", "Outcome", "SuiteRun", "write_suite_reports",
-           "override_folder_name"]
+__all__ = ["KERNEL_NAME", "run_suite", "run_tasks", "Task", "cache_key", "Outcome", "SuiteRun",
+           "write_suite_reports", "override_folder_name"]
 
 #: Every notebook runs on this kernel; jupyter_client maps it to the running interpreter.
 KERNEL_NAME = "python3"
@@ -68,6 +68,19 @@ _DEPENDENCIES = ("numpy", "scipy", "cvxpy", "clarabel", "osqp", "scs", "matplotl
                  "nbclient", "nbconvert", "nbformat", "ipykernel", "numba")
 _WORKER_FILES = (".runtime", ".result.json", ".result.json.tmp", ".task.json", ".data-read.log", ".modules-read.log",
                  ".stop")
+
+
+@dataclass(frozen=True)
+class Task:
+    """One notebook execution: ``experiment`` with checked ``parameters``, reported in ``<report_dir>/<key>/``.
+
+    ``locbook run`` makes one per experiment (``key`` = the experiment id); a study (:mod:`locbook.suite.study`)
+    one per point, so one runner session runs every point of a study. The notebook always runs as its experiment
+    (its numbers.csv rows name ``experiment.id``); ``key`` names only the folder, the status and the outcome."""
+
+    key: str
+    experiment: Experiment
+    parameters: dict = field(hash=False)
 
 
 @dataclass
@@ -313,16 +326,16 @@ def _validate_promoted(folder: Path, exp_id: str) -> str:
     return ""
 
 
-def _cached(report_dir: Path, exp: Experiment, key: str) -> tuple[bool, str]:
-    """``(True, "")`` when the report in ``report_dir`` is up to date and intact; ``(False, why)`` when it
+def _cached(folder: Path, exp: Experiment, key: str) -> tuple[bool, str]:
+    """``(True, "")`` when the report in ``folder`` is up to date and intact; ``(False, why)`` when it
     would be up to date but is damaged (``why`` says what is wrong), ``(False, "")`` when it is stale or absent.
     A damaged report is never served: it is executed again."""
-    run = _read_json(report_dir / exp.id / "run.json", {})
+    run = _read_json(folder / "run.json", {})
     data, modules = run.get("data", {}), run.get("modules")
     if not (run.get("cache_key") == key and run.get("status") == "ok" and isinstance(data, dict)
             and isinstance(modules, dict) and _data_unchanged(data) and _data_unchanged(modules)):
         return False, ""
-    why = _validate_promoted(report_dir / exp.id, exp.id)
+    why = _validate_promoted(folder, exp.id)
     return not why, why
 
 
@@ -429,19 +442,8 @@ def run_suite(suite: Suite, experiments: list[Experiment], profile: str, *, jobs
     (each experiment a task on dask.distributed: the cluster at ``scheduler``, or a LocalCluster of ``jobs``
     workers); both run the same worker, so caching, locking, retries and numbers are the same.
     """
-    from filelock import FileLock
-
     overrides = overrides or {}
-    if not timeout_s > 0:
-        raise SuiteError(f"the timeout must be a positive number of seconds, got {timeout_s}")
-    if jobs < 1:
-        raise SuiteError(f"jobs must be at least 1, got {jobs}")
-    if executor not in ("local", "dask"):
-        raise SuiteError(f"executor must be 'local' or 'dask', got {executor!r}")
-    if scheduler and executor != "dask":
-        raise SuiteError("a scheduler address needs --executor dask")
-    if isinstance(progress, str):
-        progress = make_progress(progress)
+    _check_options(timeout_s, jobs, executor, scheduler)
     # every user path made absolute here, once: the workers and kernels run in other folders (a kernel runs in
     # its notebook's folder), so a relative staging path would point elsewhere there
     root = _absolute(report_root) if report_root else _absolute(suite.default_reports())
@@ -454,7 +456,40 @@ def run_suite(suite: Suite, experiments: list[Experiment], profile: str, *, jobs
         report_dir = root / override_folder_name(profile, overrides)
     else:
         report_dir = root / profile
-    resolved = {exp.id: exp.parameters(profile, overrides) for exp in experiments}  # validation first
+    tasks = [Task(exp.id, exp, exp.parameters(profile, overrides)) for exp in experiments]  # validation first
+    custom_folder = bool(overrides) or out_dir is not None
+    return run_tasks(suite, tasks, profile, report_dir, jobs=jobs, force=force, timeout_s=timeout_s,
+                     retries=retries, kernel_name=kernel_name, progress=progress, executor=executor,
+                     scheduler=scheduler,
+                     write_reports=lambda folder, _outcomes: write_suite_reports(suite, folder,
+                                                                                list_all=not custom_folder))
+
+
+def _check_options(timeout_s: float, jobs: int, executor: str, scheduler: str | None) -> None:
+    if not timeout_s > 0:
+        raise SuiteError(f"the timeout must be a positive number of seconds, got {timeout_s}")
+    if jobs < 1:
+        raise SuiteError(f"jobs must be at least 1, got {jobs}")
+    if executor not in ("local", "dask"):
+        raise SuiteError(f"executor must be 'local' or 'dask', got {executor!r}")
+    if scheduler and executor != "dask":
+        raise SuiteError("a scheduler address needs --executor dask")
+
+
+def run_tasks(suite: Suite, tasks: list[Task], profile: str, report_dir: Path, *, write_reports, jobs: int = 1,
+              force: bool = False, timeout_s: float = 1800, retries: int = 1, kernel_name: str = KERNEL_NAME,
+              progress="plain", executor: str = "local", scheduler: str | None = None) -> SuiteRun:
+    """Run ``tasks`` (checked parameters; distinct keys) into ``report_dir`` (an absolute path) under its lock,
+    with every guarantee of the module docstring, then call ``write_reports(report_dir, outcomes)`` (also after
+    an interrupt; one :class:`Outcome` per task) to rebuild the folder's aggregate files. :func:`run_suite` and
+    ``locbook study`` (:func:`locbook.suite.study.run_study`) both run here."""
+    from filelock import FileLock
+
+    _check_options(timeout_s, jobs, executor, scheduler)
+    if len({t.key for t in tasks}) != len(tasks):
+        raise SuiteError("every task of a run needs its own key (it names the task's folder)")
+    if isinstance(progress, str):
+        progress = make_progress(progress)
     rev, dirty = _git_state(suite.repository)
     if dirty and _committed_reports(suite.repository, report_dir):
         changed = ", ".join(line[3:] for line in dirty.splitlines()[:5])
@@ -476,36 +511,35 @@ def run_suite(suite: Suite, experiments: list[Experiment], profile: str, *, jobs
         lock = FileLock(str(report_dir / ".lock"))
         if not _acquire(lock, report_dir, stop, progress):
             run.interrupted_by = stop.signum
-            run.outcomes = [Outcome(e.id, "not run", 0.0) for e in experiments]
+            run.outcomes = [Outcome(t.key, "not run", 0.0) for t in tasks]
             return run
         try:
             _recover(report_dir)
-            progress.begin([e.id for e in experiments], expected_seconds(report_dir, [e.id for e in experiments]))
+            keys = [t.key for t in tasks]
+            progress.begin(keys, expected_seconds(report_dir, keys))
             try:
                 with make_executor(executor, jobs, scheduler) as pool:
-                    _run_locked(suite, experiments, profile, resolved, report_dir, data_roots, force, timeout_s,
-                                retries, kernel_name, bool(overrides) or out_dir is not None, stop, run, progress,
-                                pool)
+                    _run_locked(suite, tasks, profile, report_dir, data_roots, force, timeout_s, retries,
+                                kernel_name, write_reports, stop, run, progress, pool)
             finally:
                 progress.end(run)
         finally:
             lock.release()
     run.interrupted_by = stop.signum
-    order = {exp.id: i for i, exp in enumerate(experiments)}
+    order = {t.key: i for i, t in enumerate(tasks)}
     run.outcomes.sort(key=lambda o: order[o.id])
     return run
 
 
-def _run_locked(suite, experiments, profile, resolved, report_dir, data_roots, force, timeout_s, retries,
-                kernel_name, custom_folder, stop, run, progress, pool):
+def _run_locked(suite, tasks, profile, report_dir, data_roots, force, timeout_s, retries, kernel_name,
+                write_reports, stop, run, progress, pool):
     source, versions = _runner_fingerprint(), _dependency_versions()
     rev, dirty = _git_state(suite.repository)
     stamp = locbook_version() + (f" (source {rev}{' + uncommitted changes' if dirty else ''})" if rev else "")
     status_path = report_dir / "status.json"
     status = _read_json(status_path, {})
-    by_id = {e.id: e for e in experiments}
-    keys = {exp.id: cache_key(exp, profile, resolved[exp.id], source=source, versions=versions)
-            for exp in experiments}
+    by_id = {t.key: t for t in tasks}
+    keys = {t.key: cache_key(t.experiment, profile, t.parameters, source=source, versions=versions) for t in tasks}
 
     def disk_full(path) -> None:
         """A write failed for lack of space: the run stops (no retry, no new experiment)."""
@@ -531,20 +565,21 @@ def _run_locked(suite, experiments, profile, resolved, report_dir, data_roots, f
         progress.finished(outcome)
 
     queue: deque = deque()
-    for exp in experiments:
-        cached, damaged = (False, "") if force else _cached(report_dir, exp, keys[exp.id])
+    for t in tasks:
+        cached, damaged = (False, "") if force else _cached(report_dir / t.key, t.experiment, keys[t.key])
         if cached:
-            finish(Outcome(exp.id, "cached", 0.0))
+            finish(Outcome(t.key, "cached", 0.0))
         else:
             if damaged:
-                progress.message(f"{exp.id}: the cached report is damaged ({damaged}); executing it again")
-            queue.append((exp.id, 1))
+                progress.message(f"{t.key}: the cached report is damaged ({damaged}); executing it again")
+            queue.append((t.key, 1))
     staging_root = report_dir / ".staging" / f"{os.getpid()}-{uuid.uuid4().hex[:8]}"
     running: dict[str, tuple] = {}     # id -> (executor handle, staging, attempt, started or None)
 
     def launch(eid: str, attempt: int):
         staging = staging_root / f"{eid}-{attempt}"
-        task = {"id": eid, "notebook": str(by_id[eid].notebook), "parameters": resolved[eid],
+        exp = by_id[eid].experiment
+        task = {"id": exp.id, "notebook": str(exp.notebook), "parameters": by_id[eid].parameters,
                 "staging": str(staging), "timeout": timeout_s, "kernel": kernel_name,
                 "data_roots": data_roots, "runner_pid": os.getpid()}
         writing = staging
@@ -592,10 +627,11 @@ def _run_locked(suite, experiments, profile, resolved, report_dir, data_roots, f
             progress.message(f"{eid}: {result['error']}; retrying once")
             queue.appendleft((eid, attempt + 1))
             return
-        error = result["error"] or _validate_report(staging, eid)
+        error = result["error"] or _validate_report(staging, by_id[eid].experiment.id)
         if not error:
             try:
-                _promote(by_id[eid], profile, resolved[eid], staging, report_dir, stamp, keys[eid], result)
+                _promote(by_id[eid].experiment, profile, by_id[eid].parameters, staging, report_dir / eid, stamp,
+                         keys[eid], result)
             except OSError as exc:
                 path = disk_full_path(exc, str(staging))
                 if path is not None:
@@ -648,7 +684,7 @@ def _run_locked(suite, experiments, profile, resolved, report_dir, data_roots, f
             finish(Outcome(eid, "not run", 0.0))
         shutil.rmtree(staging_root, ignore_errors=True)
         try:
-            write_suite_reports(suite, report_dir, list_all=not custom_folder)
+            write_reports(report_dir, run.outcomes)
         except OSError as exc:
             path = disk_full_path(exc, str(report_dir))
             if path is None:
@@ -671,7 +707,7 @@ def _keep_failed(staging: Path, failed: Path) -> None:
     _replace_dir(staging, failed)
 
 
-def _promote(exp, profile, params, staging: Path, report_dir: Path, stamp: str, key: str, result: dict) -> None:
+def _promote(exp, profile, params, staging: Path, folder: Path, stamp: str, key: str, result: dict) -> None:
     """Write the summary and the records into the validated staging folder, then swap it into place. The cache
     record (run.json) is written before the swap, inside the new folder, so it only ever describes a
     complete report."""
@@ -690,4 +726,4 @@ def _promote(exp, profile, params, staging: Path, report_dir: Path, stamp: str, 
     (staging / "run.json").write_text(json.dumps({
         "cache_key": key, "status": "ok", "seconds": round(result["seconds"], 2), "data": data, "modules": modules},
         indent=1))
-    _replace_dir(staging, report_dir / exp.id)
+    _replace_dir(staging, folder)

@@ -18,6 +18,8 @@ Schema::
     [parameter_rules]             # allowed values by parameter name, for every experiment declaring it
     n_runs = { ge = 2 }           # keys: ge, gt, le, lt, allow_inf, min_items, max_items (ParameterRule)
 
+    [[study]]                     # optional: parameter studies, read by locbook.suite.study (its docstring)
+
 Experiment ids are ``[a-z0-9-]`` only (they name folders under ``reports/``).
 """
 from __future__ import annotations

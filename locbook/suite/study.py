@@ -1,0 +1,447 @@
+"""Declared parameter studies: many points of one or more experiments, run by the suite's runner, one tidy table.
+
+A study is a ``[[study]]`` table in ``notebooks/experiments.toml`` or in a TOML file of its own (given by path;
+such a file holds one ``[[study]]``)::
+
+    [[study]]
+    name = "george-sigma"               # [a-z0-9-]: names reports/studies/<name>/
+    experiments = ["george-tracking"]   # experiment ids; every swept parameter must be declared by each
+    profile = "quick"                   # default "quick": the values of every parameter the study does not set
+    replicates = 2                      # default 1: replicate r = 0, 1, ... sets seed_parameter = base + r,
+    seed_parameter = "seed"             #   base = the profile's seed (else the notebook's default), so
+                                        #   replicate 0 is the profile's own run ("consecutive seeds")
+    samples = 4                         # draws of the random / lhs parameters (needed iff there are any)
+    sample_seed = 0                     # default 0: numpy.random.default_rng(sample_seed) draws them
+    collect = ["mean error C without filter"]   # optional: keep rows whose quantity or printed_id is listed
+    [study.parameters]
+    sigma_db = { grid = [1.5, 2.0, 2.5] }                     # an axis crossed with every other block
+    ref_power_dbm = { list = [-45.0, -50.0] }                 # lists are paired element-wise (equal lengths)
+    dt_s = { random = { low = 0.5, high = 2.0 } }             # uniform draws, i.i.d.
+    r_iso_m2 = { lhs = { low = 1e-1, high = 10.0, log = true } }   # Latin hypercube (stratified) draws
+
+The points are the Cartesian product of the blocks, in the order the parameters are declared: each ``grid``
+parameter is a block, all ``list`` parameters together one block (row i pairs their i-th values), all ``random``
+and ``lhs`` parameters together one block of ``samples`` rows. A ``random`` value is ``low + u (high - low)``
+with ``u ~ U[0, 1)``; a ``lhs`` column is ``(permutation(samples) + U[0, 1)) / samples`` mapped the same way
+(McKay, Beckman and Conover 1979, one stratum per sample in each dimension); ``log = true`` maps ``u`` on
+``log(low) .. log(high)`` instead. Draws are taken parameter by parameter in declared order, so the same study
+gives the same points. Only ``float`` parameters can be drawn.
+
+Everything is checked before anything runs (:class:`~locbook.suite.spec.SuiteError`, naming the study and what is
+wrong): unknown keys, experiments and samplers, parameters an experiment does not declare, and every value of
+every point against the parameter's type and declared rule (``[parameter_rules]``).
+
+Each point (experiment x parameter point x replicate) is one task of :func:`locbook.suite.runner.run_tasks`, all
+in one runner session (``--jobs`` runs points in parallel; lock, staging, validation, retries, interrupts and the
+cache per point are the runner's). A point's folder is ``<experiment>-<hash of its parameters>``, so a finished
+point is cached across reruns and edits of the study that keep it. Outputs in ``<reports>/studies/<name>/``:
+
+- ``study.csv`` (:data:`STUDY_COLUMNS` with one column per swept parameter after ``replicate_seed``): one row per
+  point and collected ``numbers.csv`` row, values copied as the notebook wrote them;
+- ``plots/<experiment>-<printed quantity>-<parameter>.png``: each printed quantity's ``ours`` (2 standard errors
+  as bars) against each swept parameter, the printed value as a line and its rounding (printed +- rounding) as
+  a band;
+- one report folder per point (the executed notebook, numbers.csv), as ``locbook run`` writes.
+"""
+from __future__ import annotations
+
+import csv
+import hashlib
+import io
+import itertools
+import json
+import math
+import os
+import re
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import ParameterError
+from .params import check_value
+from .spec import SAFE_NAME, Experiment, Suite, SuiteError
+
+__all__ = ["Study", "StudyPoint", "load_study", "load_studies", "expand_study", "run_study", "STUDY_COLUMNS"]
+
+_KEYS = {"name", "experiments", "profile", "replicates", "seed_parameter", "samples", "sample_seed", "collect",
+         "parameters"}
+_SAMPLERS = ("grid", "list", "random", "lhs")
+#: study.csv columns before the swept parameters, then after them
+_LEAD = ("study", "experiment", "point", "replicate", "replicate_seed")
+_TAIL = ("printed_id", "quantity", "where", "unit", "kind", "printed", "ours", "mc_std_error", "rounding",
+         "verdict", "folder")
+STUDY_COLUMNS = (*_LEAD, *_TAIL)
+
+
+@dataclass(frozen=True)
+class Study:
+    """A checked study declaration (module docstring)."""
+
+    name: str
+    experiments: tuple[Experiment, ...]
+    profile: str
+    replicates: int
+    seed_parameter: str
+    samples: int
+    sample_seed: int
+    collect: tuple[str, ...]
+    parameters: dict[str, tuple[str, object]] = field(hash=False)   # name -> (sampler, values or range)
+    source: Path = field(default=Path(), hash=False)
+
+
+@dataclass(frozen=True)
+class StudyPoint:
+    """One task of a study: ``values`` (the swept parameters) of parameter point ``point`` (1-based),
+    replicate ``replicate`` of ``experiment``; ``parameters``: every checked value the notebook gets."""
+
+    key: str
+    experiment: Experiment
+    point: int
+    replicate: int
+    replicate_seed: int | None
+    values: dict = field(hash=False)
+    parameters: dict = field(hash=False)
+
+
+def _err(study: str, where: Path, text: str) -> SuiteError:
+    return SuiteError(f"{where}: study {study!r}: {text}")
+
+
+def _whole(raw, key, default, name, where, least):
+    value = raw.get(key, default)
+    if not isinstance(value, int) or isinstance(value, bool) or value < least:
+        raise _err(name, where, f"{key} must be a whole number >= {least}, got {value!r}")
+    return value
+
+
+def _range(spec, sampler, pname, name, where) -> dict:
+    if not isinstance(spec, dict) or set(spec) - {"low", "high", "log"} or not {"low", "high"} <= set(spec):
+        raise _err(name, where, f"parameter {pname!r}: {sampler} needs a table {{ low = ..., high = ..., "
+                                f"log = false }}, got {spec!r}")
+    low, high, log = spec["low"], spec["high"], spec.get("log", False)
+    if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in (low, high)):
+        raise _err(name, where, f"parameter {pname!r}: {sampler} low and high must be finite numbers")
+    if not isinstance(log, bool):
+        raise _err(name, where, f"parameter {pname!r}: log must be true or false, got {log!r}")
+    if not low < high:
+        raise _err(name, where, f"parameter {pname!r}: {sampler} needs low < high, got {low} and {high}")
+    if log and not low > 0:
+        raise _err(name, where, f"parameter {pname!r}: log = true needs low > 0, got {low}")
+    return {"low": float(low), "high": float(high), "log": log}
+
+
+def _parse(raw: dict, suite: Suite, where: Path) -> Study:
+    if not isinstance(raw, dict):
+        raise SuiteError(f"{where}: a [[study]] must be a table")
+    name = raw.get("name")
+    if not isinstance(name, str) or not SAFE_NAME.match(name):
+        raise SuiteError(f"{where}: study name {name!r} must be lower-case letters, digits and hyphens ([a-z0-9-]); "
+                         "it names reports/studies/<name>/")
+    unknown = set(raw) - _KEYS
+    if unknown:
+        raise _err(name, where, f"unknown key(s) {sorted(unknown)}; allowed: {', '.join(sorted(_KEYS))}")
+    ids = raw.get("experiments")
+    if not isinstance(ids, list) or not ids or not all(isinstance(i, str) for i in ids):
+        raise _err(name, where, "experiments must be a non-empty list of experiment ids")
+    by_id = {e.id: e for e in suite.experiments}
+    missing = [i for i in ids if i not in by_id]
+    if missing:
+        raise _err(name, where, f"unknown experiment(s) {', '.join(missing)}; `locbook list` shows the ids")
+    if len(set(ids)) != len(ids):
+        raise _err(name, where, "an experiment is listed twice")
+    experiments = tuple(by_id[i] for i in ids)
+    profile = raw.get("profile", "quick")
+    if not isinstance(profile, str) or any(profile not in e.profiles for e in experiments):
+        raise _err(name, where, f"profile {profile!r} is not a profile of every experiment (quick, full)")
+    replicates = _whole(raw, "replicates", 1, name, where, 1)
+    samples = _whole(raw, "samples", 0, name, where, 0)
+    sample_seed = _whole(raw, "sample_seed", 0, name, where, 0)
+    seed_parameter = raw.get("seed_parameter", "seed")
+    if not isinstance(seed_parameter, str):
+        raise _err(name, where, f"seed_parameter must be a parameter name, got {seed_parameter!r}")
+    collect = raw.get("collect", [])
+    if not isinstance(collect, list) or not all(isinstance(c, str) for c in collect):
+        raise _err(name, where, "collect must be a list of quantities or printed ids (numbers.csv columns)")
+    table = raw.get("parameters", {})
+    if not isinstance(table, dict):
+        raise _err(name, where, "[study.parameters] must be a table of parameter = { sampler = ... }")
+    parameters = {}
+    for pname, spec in table.items():
+        if not isinstance(spec, dict) or len(spec) != 1 or next(iter(spec)) not in _SAMPLERS:
+            raise _err(name, where, f"parameter {pname!r} needs exactly one sampler of {', '.join(_SAMPLERS)} "
+                                    f"(e.g. {{ grid = [1.0, 2.0] }}), got {spec!r}")
+        sampler, value = next(iter(spec.items()))
+        if sampler in ("grid", "list"):
+            if not isinstance(value, list) or not value:
+                raise _err(name, where, f"parameter {pname!r}: {sampler} needs a non-empty list of values")
+        else:
+            value = _range(value, sampler, pname, name, where)
+        parameters[pname] = (sampler, value)
+    lists = {p: len(v) for p, (s, v) in parameters.items() if s == "list"}
+    if len(set(lists.values())) > 1:
+        raise _err(name, where, f"list parameters are paired element-wise and need equal lengths, got {lists}")
+    drawn = [p for p, (s, _v) in parameters.items() if s in ("random", "lhs")]
+    if drawn and samples < 1:
+        raise _err(name, where, f"random / lhs parameters ({', '.join(drawn)}) need samples >= 1")
+    if samples and not drawn:
+        raise _err(name, where, "samples is set but no parameter is random or lhs")
+    if replicates > 1 and seed_parameter in parameters:
+        raise _err(name, where, f"{seed_parameter!r} is swept and also set by the replicates; do one of them")
+    for exp in experiments:
+        declared = exp.declared_parameters()
+        for pname in parameters:
+            if pname not in declared:
+                raise _err(name, where, f"experiment {exp.id!r} has no parameter {pname!r} (known: "
+                                        f"{', '.join(sorted(declared))})")
+        for pname in drawn:
+            if declared[pname].annotation != "float":
+                raise _err(name, where, f"parameter {pname!r} of {exp.id!r} is {declared[pname].annotation}; "
+                                        "only float parameters can be drawn (use grid or list)")
+        if replicates > 1 and (seed_parameter not in declared or declared[seed_parameter].annotation != "int"):
+            raise _err(name, where, f"replicates need an int parameter {seed_parameter!r} in {exp.id!r} "
+                                    "(set seed_parameter)")
+    return Study(name, experiments, profile, replicates, seed_parameter, samples, sample_seed, tuple(collect),
+                 parameters, where)
+
+
+def load_studies(suite: Suite, path: Path | None = None) -> dict[str, Study]:
+    """Every study declared in ``path`` (default: the suite's experiments.toml), checked, by name."""
+    path = Path(path) if path else suite.path
+    try:
+        with open(path, "rb") as fh:
+            data = tomllib.load(fh)
+    except OSError as exc:
+        raise SuiteError(f"cannot read the study file {path}: {exc.strerror}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise SuiteError(f"{path}: {exc}") from None
+    raw = data.get("study", [])
+    if not isinstance(raw, list):
+        raise SuiteError(f"{path}: studies are [[study]] tables (an array of tables)")
+    studies = {}
+    for table in raw:
+        study = _parse(table, suite, path)
+        if study.name in studies:
+            raise SuiteError(f"{path}: duplicate study name {study.name!r}")
+        studies[study.name] = study
+    return studies
+
+
+def load_study(suite: Suite, name_or_path: str | Path) -> Study:
+    """A study by name (declared in the suite's experiments.toml) or the one study of a TOML file."""
+    studies = load_studies(suite)
+    if str(name_or_path) in studies:
+        return studies[str(name_or_path)]
+    path = Path(name_or_path).expanduser()
+    if not path.is_file():
+        known = ", ".join(studies) or "none"
+        raise SuiteError(f"no study {str(name_or_path)!r}: neither a study of {suite.path} (declared: {known}) nor "
+                         "a TOML file")
+    found = load_studies(suite, path)
+    if len(found) != 1:
+        raise SuiteError(f"{path}: a study file holds exactly one [[study]], found {len(found)} "
+                         f"({', '.join(found) or 'none'})")
+    return next(iter(found.values()))
+
+
+def _draw(study: Study) -> dict[str, list[float]]:
+    """The ``samples`` values of each random / lhs parameter (module docstring), in declared order."""
+    rng = np.random.default_rng(study.sample_seed)
+    n, out = study.samples, {}
+    for pname, (sampler, spec) in study.parameters.items():
+        if sampler == "random":
+            u = rng.random(n)
+        elif sampler == "lhs":
+            u = (rng.permutation(n) + rng.random(n)) / n
+        else:
+            continue
+        lo, hi = (math.log(spec["low"]), math.log(spec["high"])) if spec["log"] else (spec["low"], spec["high"])
+        x = lo + u * (hi - lo)
+        out[pname] = [float(v) for v in (np.exp(x) if spec["log"] else x)]
+    return out
+
+
+def _parameter_points(study: Study) -> list[dict]:
+    """The parameter points (without replicates): the product of the blocks (module docstring)."""
+    drawn = _draw(study)
+    lists = {p: v for p, (s, v) in study.parameters.items() if s == "list"}
+    blocks, placed = [], set()     # placed: the list and drawn blocks, at their first parameter
+    for pname, (sampler, values) in study.parameters.items():
+        block = "list" if sampler == "list" else "drawn" if sampler in ("random", "lhs") else pname
+        if block in placed:
+            continue
+        placed.add(block)
+        columns = {pname: values} if sampler == "grid" else lists if block == "list" else drawn
+        blocks.append([dict(zip(columns, row)) for row in zip(*columns.values())])
+    return [{k: v for part in combo for k, v in part.items()} for combo in itertools.product(*blocks)]
+
+
+def _point_key(exp: Experiment, values: dict) -> str:
+    digest = hashlib.sha256(json.dumps(values, sort_keys=True).encode()).hexdigest()[:10]
+    return f"{exp.id}-{digest}"
+
+
+def expand_study(study: Study) -> list[StudyPoint]:
+    """Every task of the study (experiment x parameter point x replicate), each value checked against the
+    parameter's type and rule; raises a SuiteError naming the point and the value otherwise."""
+    points = _parameter_points(study)
+    tasks, keys = [], {}
+    for exp in study.experiments:
+        declared = exp.declared_parameters()
+        base = exp.parameters(study.profile)
+        for i, values in enumerate(points, start=1):
+            checked = {}
+            for pname, value in values.items():
+                try:
+                    checked[pname] = check_value(declared[pname], value, exp.rules.get(pname))
+                except ParameterError as exc:    # say which study and point
+                    raise _err(study.name, study.source, f"point {i} of {exp.id!r}: {exc}") from None
+            seeded = (study.seed_parameter in declared and study.seed_parameter not in checked
+                      and declared[study.seed_parameter].annotation == "int")
+            base_seed = base.get(study.seed_parameter, declared[study.seed_parameter].default) if seeded else None
+            for r in range(study.replicates):
+                # the seed is always explicit (also with one replicate), so adding replicates keeps replicate 0
+                seed = base_seed + r if seeded else None
+                run_values = dict(checked)
+                if seeded:
+                    try:
+                        run_values[study.seed_parameter] = check_value(declared[study.seed_parameter], seed,
+                                                                       exp.rules.get(study.seed_parameter))
+                    except ParameterError as exc:
+                        raise _err(study.name, study.source, f"replicate {r} of {exp.id!r}: {exc}") from None
+                key = _point_key(exp, run_values)
+                if key in keys:
+                    raise _err(study.name, study.source, f"point {i} of {exp.id!r} repeats point {keys[key]} "
+                                                         f"({values}); every point must differ")
+                keys[key] = i
+                tasks.append(StudyPoint(key, exp, i, r, seed, checked, {**base, **run_values}))
+    return tasks
+
+
+# ---------------------------------------------------------------------------------------------------
+# outputs
+
+def _atomic(path: Path, write) -> None:
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        write(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def study_rows(study: Study, points: list[StudyPoint], folder: Path, done: set[str]) -> list[dict]:
+    """The study.csv rows of the points in ``done`` (keys whose report is up to date), in point order."""
+    from .site import _read_csv
+
+    rows = []
+    for p in points:
+        if p.key not in done:
+            continue
+        for r in _read_csv(folder / p.key / "numbers.csv"):
+            if study.collect and r["quantity"] not in study.collect and r["printed_id"] not in study.collect:
+                continue
+            seed = "" if p.replicate_seed is None else p.replicate_seed
+            rows.append({"study": study.name, "experiment": p.experiment.id, "point": p.point,
+                         "replicate": p.replicate, "replicate_seed": seed,
+                         **{k: json.dumps(v) if isinstance(v, (list, dict)) else v for k, v in p.values.items()},
+                         **{c: r.get(c, "") for c in _TAIL if c not in ("ours", "folder")},
+                         "ours": r.get("reproduced", ""), "folder": p.key})
+    return rows
+
+
+def _write_csv(study: Study, rows: list[dict], path: Path) -> None:
+    out = io.StringIO()
+    writer = csv.DictWriter(out, fieldnames=[*_LEAD, *study.parameters, *_TAIL], lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(rows)
+    _atomic(path, lambda tmp: tmp.write_text(out.getvalue(), encoding="utf-8"))
+
+
+def _number(text) -> float | None:
+    try:
+        value = float(text)
+    except (TypeError, ValueError):
+        return None
+    return value if math.isfinite(value) else None
+
+
+def _slug(text: str, limit: int = 50) -> str:
+    return re.sub(r"[^a-z0-9]+", "-", text.lower()).strip("-")[:limit].strip("-")
+
+
+def _write_plots(study: Study, rows: list[dict], plots: Path) -> list[Path]:
+    """One PNG per (experiment, printed quantity with a numeric printed value, numeric swept parameter)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    groups: dict[tuple, list[dict]] = {}
+    for r in rows:
+        if _number(r["printed"]) is not None and _number(r["ours"]) is not None:
+            groups.setdefault((r["experiment"], r["printed_id"]), []).append(r)
+    written = []
+    plots.mkdir(exist_ok=True)
+    for (eid, printed_id), group in groups.items():
+        printed = _number(group[0]["printed"])
+        rounding = _number(group[0]["rounding"]) or 0.0
+        for pname in study.parameters:
+            xs = [_number(r[pname]) for r in group]
+            if any(x is None for x in xs):
+                continue    # a list- or text-valued parameter has no axis
+            ys = np.array([_number(r["ours"]) for r in group])
+            se = np.array([_number(r["mc_std_error"]) or 0.0 for r in group])
+            fig, ax = plt.subplots(figsize=(6, 4))
+            ax.axhspan(printed - rounding, printed + rounding, color="tab:orange", alpha=0.25,
+                       label=f"printed {group[0]['printed']} +- rounding {rounding:g}")
+            ax.axhline(printed, color="tab:orange", lw=1)
+            ax.errorbar(xs, ys, yerr=2 * se, fmt="o", ms=4, capsize=2, label="ours (+- 2 standard errors)")
+            sampler, spec = study.parameters[pname]
+            if sampler in ("random", "lhs") and spec["log"]:
+                ax.set_xscale("log")
+            ax.set_xlabel(pname)
+            ax.set_ylabel(f"{group[0]['quantity']}" + (f" ({group[0]['unit']})" if group[0]["unit"] else ""))
+            ax.set_title(f"{eid}: {printed_id}"[:90], fontsize=9)
+            ax.legend(fontsize=8)
+            fig.tight_layout()
+            digest = hashlib.sha256(printed_id.encode()).hexdigest()[:6]
+            path = plots / f"{eid}-{_slug(printed_id)}-{digest}-{_slug(pname)}.png"
+            _atomic(path, lambda tmp: fig.savefig(tmp, format="png", dpi=100))
+            plt.close(fig)
+            written.append(path)
+    for old in plots.glob("*.png"):    # plots of quantities or parameters the study no longer has
+        if old not in written:
+            old.unlink(missing_ok=True)
+    return written
+
+
+def write_study_outputs(study: Study, points: list[StudyPoint], folder: Path, outcomes) -> None:
+    """study.csv and the plots from the points whose outcome is ok or cached (the report is this study's)."""
+    done = {o.id for o in outcomes if o.status in ("ok", "cached")}
+    rows = study_rows(study, points, folder, done)
+    _write_csv(study, rows, folder / "study.csv")
+    _write_plots(study, rows, folder / "plots")
+
+
+def study_folder(suite: Suite, study: Study, report_root: Path | None = None) -> Path:
+    root = Path(os.path.abspath(Path(report_root).expanduser())) if report_root else suite.default_reports()
+    return root / "studies" / study.name
+
+
+def run_study(suite: Suite, study: Study, *, report_root: Path | None = None, jobs: int = 1, force: bool = False,
+              timeout_s: float = 1800, retries: int = 1, progress="plain", executor: str = "local",
+              scheduler: str | None = None, kernel_name: str | None = None):
+    """Run every point of ``study`` in one runner session into ``<report_root>/studies/<name>/`` and write its
+    study.csv and plots (also after an interrupt: the points finished so far). Returns the
+    :class:`~locbook.suite.runner.SuiteRun` (one outcome per point, by folder key)."""
+    from .runner import KERNEL_NAME, Task, run_tasks
+
+    points = expand_study(study)     # every value checked before anything runs
+    folder = study_folder(suite, study, report_root)
+    tasks = [Task(p.key, p.experiment, p.parameters) for p in points]
+    return run_tasks(suite, tasks, study.profile, folder, jobs=jobs, force=force, timeout_s=timeout_s,
+                     retries=retries, kernel_name=kernel_name or KERNEL_NAME, progress=progress, executor=executor,
+                     scheduler=scheduler,
+                     write_reports=lambda where, outcomes: write_study_outputs(study, points, where, outcomes))

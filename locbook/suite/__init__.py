@@ -9,6 +9,9 @@ _EXPORTS = {
     "NotebookParameter": "params", "ParameterRule": "params", "read_parameters": "params",
     "KERNEL_NAME": "runner", "Outcome": "runner", "SuiteRun": "runner", "cache_key": "runner",
     "override_folder_name": "runner", "run_suite": "runner", "write_suite_reports": "runner",
+    "Task": "runner", "run_tasks": "runner",
+    "Study": "study", "StudyPoint": "study", "load_study": "study", "load_studies": "study",
+    "expand_study": "study", "run_study": "study", "STUDY_COLUMNS": "study",
     "DOCUMENT_KEYS": "spec", "PROFILES": "spec", "Experiment": "spec", "Suite": "spec", "SuiteError": "spec",
     "load_suite": "spec",
 }

@@ -118,16 +118,22 @@ def _package_dir() -> Path:
     return Path(__file__).resolve().parents[1]
 
 
+#: the runner process's locbook code (package-relative patterns): the suite, the reproduction layer it imports, the
+#: package's own start-up modules and errors, and the templates of the report pages
+_RUNNER_SOURCES = ("suite/*.py", "suite/templates/*", "reproduce/*.py", "__init__.py", "_lazy.py", "_datalog.py",
+                   "errors.py")
+
+
 def _runner_fingerprint() -> str:
-    """The runner's side of a report: the sources of the locbook modules this process has loaded (the suite, which
-    writes the pages, and what it imports) and the report site's templates. The kernel's side, the library code the
-    notebook ran, is recorded per experiment (``run.json`` "modules", like its data files)."""
+    """The runner's side of a report: the sources of the suite (which writes the pages) and of what it imports from
+    locbook (:data:`_RUNNER_SOURCES`), and the report site's templates. A fixed set, so a run from the command line
+    and one from Python share their cache. The kernel's side, the library code the notebook ran, is recorded per
+    experiment (``run.json`` "modules", like its data files)."""
     package = _package_dir()
-    loaded = {Path(m.__file__).resolve() for name, m in list(sys.modules.items())
-              if (name == "locbook" or name.startswith("locbook.")) and getattr(m, "__file__", None)}
+    files = {path for pattern in _RUNNER_SOURCES for path in package.glob(pattern)}
     h = hashlib.sha256()
-    for path in sorted([*loaded, *(package / "suite" / "templates").glob("*")]):
-        h.update(str(path.relative_to(package) if path.is_relative_to(package) else path).encode())
+    for path in sorted(files):
+        h.update(str(path.relative_to(package)).encode())
         h.update(path.read_bytes())
     return h.hexdigest()
 

@@ -28,6 +28,7 @@ from pathlib import Path
 
 from ..reproduce.report import Table
 from ..reproduce.scoring import KINDS
+from .spec import finite_float
 
 __all__ = ["VERDICT_COLUMNS", "scoreboard_counts", "summary_markdown", "page_markdown", "page_html",
            "index_markdown", "index_html", "double_counted"]
@@ -340,15 +341,6 @@ def index_markdown(report_dir: Path, entries, rows) -> str:
     return "\n".join(lines)
 
 
-def _seconds(value) -> float | None:
-    """A run time read from a record (``None`` unless a finite number: records may be damaged)."""
-    try:
-        x = float(value)
-    except (TypeError, ValueError):
-        return None
-    return x if math.isfinite(x) else None
-
-
 def _index_entry(report_dir: Path, e) -> dict:
     exp, last, present = e["exp"], e["last"], e["present"]
     folder = report_dir / exp.id
@@ -356,9 +348,9 @@ def _index_entry(report_dir: Path, e) -> dict:
     if not present and state in ("ok", "cached"):
         state = "not run"                      # recorded as run, but its folder is gone
     flagged = state in ("failed", "interrupted")
-    seconds = _seconds(last.get("seconds")) if state in ("ok", "failed", "interrupted") else None
+    seconds = finite_float(last.get("seconds")) if state in ("ok", "failed", "interrupted") else None
     if not seconds and present:
-        seconds = _seconds(e["report"].get("seconds")) or _seconds(e["run"].get("seconds"))
+        seconds = finite_float(e["report"].get("seconds")) or finite_float(e["run"].get("seconds"))
     links = []
     if present:
         for label, names in (("report", ("report.html",)), ("notebook", (f"{exp.id}.html", f"{exp.id}.ipynb")),

@@ -24,6 +24,7 @@ Experiment ids are ``[a-z0-9-]`` only (they name folders under ``reports/``).
 """
 from __future__ import annotations
 
+import math
 import re
 import tomllib
 from dataclasses import dataclass, field
@@ -149,15 +150,29 @@ def _rules(raw: dict, where: str) -> dict[str, ParameterRule]:
     return {name: ParameterRule.from_toml(name, rule, where) for name, rule in raw.items()}
 
 
-def load_suite(path: Path | None = None) -> Suite:
-    path = Path(path) if path else find_suite_file()
+def read_toml(path: Path, what: str) -> dict:
+    """The TOML file ``path`` (``what`` names it in the error: unreadable, or not TOML with its line)."""
     try:
         with open(path, "rb") as fh:
-            data = tomllib.load(fh)
+            return tomllib.load(fh)
     except OSError as exc:
-        raise SuiteError(f"cannot read the experiment list {path}: {exc.strerror}") from None
+        raise SuiteError(f"cannot read {what} {path}: {exc.strerror}") from None
     except tomllib.TOMLDecodeError as exc:
         raise SuiteError(f"{path}: {exc}") from None
+
+
+def finite_float(value) -> float | None:
+    """``value`` as a finite float, else None (records and CSV cells may be empty or damaged)."""
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        return None
+    return x if math.isfinite(x) else None
+
+
+def load_suite(path: Path | None = None) -> Suite:
+    path = Path(path) if path else find_suite_file()
+    data = read_toml(path, "the experiment list")
     documents = {}
     for key, doc in data.get("documents", {}).items():
         if key not in DOCUMENT_KEYS:

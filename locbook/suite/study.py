@@ -53,7 +53,6 @@ import json
 import math
 import os
 import re
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -61,7 +60,7 @@ import numpy as np
 
 from ..errors import ParameterError
 from .params import check_value
-from .spec import SAFE_NAME, Experiment, Suite, SuiteError
+from .spec import SAFE_NAME, Experiment, Suite, SuiteError, finite_float, read_toml
 
 __all__ = ["Study", "StudyPoint", "load_study", "load_studies", "expand_study", "run_study", "STUDY_COLUMNS"]
 
@@ -209,13 +208,7 @@ def _parse(raw: dict, suite: Suite, where: Path) -> Study:
 def load_studies(suite: Suite, path: Path | None = None) -> dict[str, Study]:
     """Every study declared in ``path`` (default: the suite's experiments.toml), checked, by name."""
     path = Path(path) if path else suite.path
-    try:
-        with open(path, "rb") as fh:
-            data = tomllib.load(fh)
-    except OSError as exc:
-        raise SuiteError(f"cannot read the study file {path}: {exc.strerror}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise SuiteError(f"{path}: {exc}") from None
+    data = read_toml(path, "the study file")
     raw = data.get("study", [])
     if not isinstance(raw, list):
         raise SuiteError(f"{path}: studies are [[study]] tables (an array of tables)")
@@ -360,14 +353,6 @@ def _write_csv(study: Study, rows: list[dict], path: Path) -> None:
     _atomic(path, lambda tmp: tmp.write_text(out.getvalue(), encoding="utf-8"))
 
 
-def _number(text) -> float | None:
-    try:
-        value = float(text)
-    except (TypeError, ValueError):
-        return None
-    return value if math.isfinite(value) else None
-
-
 def _slug(text: str, limit: int = 50) -> str:
     return re.sub(r"[^a-z0-9]+", "-", text.lower()).strip("-")[:limit].strip("-")
 
@@ -380,19 +365,19 @@ def _write_plots(study: Study, rows: list[dict], plots: Path) -> list[Path]:
 
     groups: dict[tuple, list[dict]] = {}
     for r in rows:
-        if _number(r["printed"]) is not None and _number(r["ours"]) is not None:
+        if finite_float(r["printed"]) is not None and finite_float(r["ours"]) is not None:
             groups.setdefault((r["experiment"], r["printed_id"]), []).append(r)
     written = []
     plots.mkdir(exist_ok=True)
     for (eid, printed_id), group in groups.items():
-        printed = _number(group[0]["printed"])
-        rounding = _number(group[0]["rounding"]) or 0.0
+        printed = finite_float(group[0]["printed"])
+        rounding = finite_float(group[0]["rounding"]) or 0.0
         for pname in study.parameters:
-            xs = [_number(r[pname]) for r in group]
+            xs = [finite_float(r[pname]) for r in group]
             if any(x is None for x in xs):
                 continue    # a list- or text-valued parameter has no axis
-            ys = np.array([_number(r["ours"]) for r in group])
-            se = np.array([_number(r["mc_std_error"]) or 0.0 for r in group])
+            ys = np.array([finite_float(r["ours"]) for r in group])
+            se = np.array([finite_float(r["mc_std_error"]) or 0.0 for r in group])
             fig, ax = plt.subplots(figsize=(6, 4))
             ax.axhspan(printed - rounding, printed + rounding, color="tab:orange", alpha=0.25,
                        label=f"printed {group[0]['printed']} +- rounding {rounding:g}")

@@ -187,12 +187,18 @@ def _rss_mean_jacobian(meas: RssMeasurement, offset_m, ref_power_dbm, path_loss_
     ``batch_ndim`` leading axes; the rest are reduced)."""
     mean, grad, d2 = rss_mean_jacobian(offset_m, ref_power_dbm, path_loss_exp, ref_distance_m=meas.channel.ref_distance_m,
                                        min_distance_m=meas.clamp_m)
+    _refuse_on_anchor(meas, d2, batch_ndim)
+    return mean, grad, np.sqrt(d2)
+
+
+def _refuse_on_anchor(meas: RssMeasurement, d2, batch_ndim: int | None) -> None:
+    """Without a clamp the mean is infinite on an anchor: a named error for the runs (``batch_ndim`` leading axes of
+    the squared distances ``d2``; the rest are reduced) whose point lies on one."""
     if meas.clamp_m == 0 and not np.all(d2 != 0):
         on = d2 == 0
         if batch_ndim is not None:
             on = on.reshape(on.shape[:batch_ndim] + (-1,)).any(axis=-1)
         raise _Singular(on, _ON_ANCHOR)
-    return mean, grad, np.sqrt(d2)
 
 
 def _rss_parallel_update(x, P, z, meas: RssMeasurement, step: int = 0, want: bool = False) -> _Out:

@@ -44,8 +44,8 @@ from ._linalg import (_UPDATE_OVERFLOW, _gaussian_log_likelihood, _inv_small, _l
 from ._loop import _check_outputs, _run, _setup, _streams
 from .functional import _missing_as_nan, _Out
 from .results import DIVERGENCE_PROBABILITY, DIVERGENCE_WINDOW, KalmanResult, _check_guard, _flag
-from .streams import (_ON_ANCHOR, LinearMeasurement, NonlinearMeasurement, RssMeasurement, _pick_anchor, _serial_linear,
-                      _serial_order)
+from .streams import (LinearMeasurement, NonlinearMeasurement, RssMeasurement, _pick_anchor, _refuse_on_anchor,
+                      _serial_linear, _serial_order)
 
 __all__ = ["UKF_WEIGHTS", "UnscentedWeights", "unscented_weights", "sigma_points", "unscented_transform",
            "unscented_kalman_filter"]
@@ -264,9 +264,7 @@ def _rss_function(meas: RssMeasurement, step: int, anchor=None):
                                             ref_distance_m=ch.ref_distance_m, min_distance_m=meas.clamp_m,
                                             jacobian=False)
             mean = mean[..., None]
-        if meas.clamp_m == 0 and not np.all(d2 != 0):  # no clamp: the mean is infinite on an anchor
-            on = d2 == 0
-            raise _Singular(on.reshape(on.shape[:X.ndim - 2] + (-1,)).any(axis=-1), _ON_ANCHOR)
+        _refuse_on_anchor(meas, d2, X.ndim - 2)
         return mean
     return h
 

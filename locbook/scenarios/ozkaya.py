@@ -27,11 +27,13 @@ from ..bounds.crlb import crlb_rms_over_area_m, rss_crlb_m
 from ..static.fingerprint import knn_position, model_fingerprints
 from ..models.channel import PathLossModel, quantize_db
 from ..reproduce.printed_values import printed
+from ..reproduce.readings import readings as declared_readings
 from ..metrics import (error_std_m, mean_error_m, median_error_m, percentile_error_m, position_error_m, rmse_m,
                        rmse_standard_error_m)
 from ..montecarlo import bootstrap_standard_error, seed_from_values
 from ..reproduce.scoring import Ambiguity, score
 from ..models.motion import reflect_into_box
+from ..errors import ParameterError
 
 __all__ = [
     "ROOM_M", "LARGE_ROOM_M", "LAYOUTS", "CELL_PATTERNS", "ALPHA_DBM", "PATH_LOSS_EXP", "SIGMA_DB",
@@ -44,6 +46,8 @@ __all__ = [
     "settling_step", "settling_reading", "literature_table", "PRINTED", "OFFLINE_PARAMETERS", "AUTO_PARAMETERS", "R3_CALIBRATION_DISTANCES_M",
     "TESTBED_SIZE_M", "TESTBED_WALLS_M", "TESTBED_READERS_M", "REFERENCE_TAGS_M", "READER_SENSITIVITY_DBM", "WAF_DB",
     "synthetic_campaign", "CRLB_NOT_FROM_FORMULA",
+    "CELL_MARGIN_M", "SIM_READINGS", "sim_readings", "with_readings", "run_summary", "resample_fraction",
+    "record_readings",
 ]
 
 #: Every number the thesis prints (locbook/data/printed/ozkaya2011.csv).
@@ -76,6 +80,28 @@ LAYOUTS = {
 #: k_CELL -> (nx, ny) lattice patterns (ours for 6, 16, 56, 98, which are not specified in the
 #: thesis; 8, 28, 112 are: 2 m, 1 m and 0.5 m spacing). 135 is the 10 x 16 m room.
 CELL_PATTERNS = {6: (2, 3), 8: (2, 4), 16: (4, 4), 28: (4, 7), 56: (7, 8), 98: (7, 14), 112: (8, 14), 135: (9, 15)}
+#: The cells tile the room shrunk by this margin on every side (Fig. 7.2: 28 cells at x 1..4, y 1..7).
+CELL_MARGIN_M = 0.5
+
+#: The contested readings of the Sec. 7.2 simulations (locbook/data/readings/ozkaya2011.csv): reading name -> its
+#: values, the first being the default. Each is a notebook parameter of the same name.
+SIM_READINGS = {
+    # how the median and 90th percentile were computed (Sec. 7.2.1 lists them, not how)
+    "percentile_convention": ("pooled_last_recursion", "pooled_all_recursions", "per_run_then_averaged",
+                              "over_run_rmses"),
+    # where a target 'placed at random in the room' (Sec. 7.2.1) is drawn: the room, 1 m in, or the cells' area
+    "target_sampling": ("room", "inner", "cell_cores"),
+    # the k-NN weights of Eq. (3.3): corrected, as printed, or plain averaging
+    "nn_weights": ("inverse_square", "literal_ozkaya2011", "uniform"),
+    # i.i.d. noise per reader, or one draw on 'the target transmit power' shared by every reader (Sec. 7.2.1)
+    "reader_noise": ("independent_per_reader", "common_mode"),
+    # a fixed target's noise: drawn once per run (static shadowing) or afresh at every recursion
+    "fixed_target_noise": ("frozen_per_run", "fresh_per_step"),
+    # a mobile target's RMSE, mean and std: of the error at recursion rt, or of the errors of every recursion
+    "mobile_protocol": ("reflect_error_at_rt", "mean_over_recursions"),
+    # Table 7.24's N_t = 0.5: a fraction of N, or N_eff < 0.5 particles as printed (never true: N_eff >= 1)
+    "resample_threshold": ("fraction_of_n", "absolute"),
+}
 
 
 
@@ -127,8 +153,14 @@ class SimCase:
     target: ``"fixed"`` (noise frozen per run), ``"mobile"`` (Gaussian steps of ``motion_m``, fresh noise),
         ``"const_velocity"`` (Table 7.20: +0.5 m in y per recursion from y = 1, random x, fresh noise).
     sigma0_db / sigma_db: simulated noise / the filter's model. spread_m: the filter's D (inf = uniform).
-    filter_region / target_region: ``"room"`` or ``"inner"`` (1 m from the walls, Table 7.22).
-    resample_threshold: None = every step (basic SIR); else a fraction of N.
+    filter_region / target_region: ``"room"``, ``"inner"`` (1 m from the walls, Table 7.22) or ``"cell_cores"``
+        (the area the cells tile, :data:`CELL_MARGIN_M` in; target regions only).
+    resample_threshold: None = every step (basic SIR); else the N_eff threshold, read per ``resample_threshold_unit``:
+        ``"fraction_of_n"`` (N_eff < threshold N) or ``"absolute"`` (N_eff < threshold, as Table 7.24 prints it).
+    nn_weights: the k-NN weighting of Eq. (3.3) (:data:`~locbook.static.fingerprint.KNN_WEIGHTINGS`).
+    reader_noise: ``"independent_per_reader"`` or ``"common_mode"`` (one draw per run and step shared by every
+        reader: noise on the target's transmit power, Sec. 7.2.1).
+    fixed_target_noise: ``"frozen_per_run"`` (a fixed target's noise drawn once) or ``"fresh_per_step"``.
     """
 
     method: str
@@ -152,6 +184,10 @@ class SimCase:
     velocity_m: float = 0.5
     alpha_dbm: float = ALPHA_DBM
     path_loss_exp: float = PATH_LOSS_EXP
+    nn_weights: str = "inverse_square"
+    reader_noise: str = "independent_per_reader"
+    fixed_target_noise: str = "frozen_per_run"
+    resample_threshold_unit: str = "fraction_of_n"
 
     def describe(self) -> str:
         base = SimCase(self.method)
@@ -163,7 +199,9 @@ def _region(kind: str, room_m):
         return np.zeros(2), np.asarray(room_m, float)
     if kind == "inner":
         return np.ones(2), np.asarray(room_m, float) - 1.0
-    raise ValueError(f"region must be 'room' or 'inner', got {kind!r}")
+    if kind == "cell_cores":
+        return np.full(2, CELL_MARGIN_M), np.asarray(room_m, float) - CELL_MARGIN_M
+    raise ValueError(f"region must be 'room', 'inner' or 'cell_cores', got {kind!r}")
 
 
 _TRUTH_FIELDS = ("target", "layout", "sigma0_db", "motion_m", "target_region", "velocity_m", "alpha_dbm",
@@ -174,14 +212,22 @@ def case_seed_sequence(seed: int, case: SimCase) -> np.random.SeedSequence:
     """The stream of a setting, keyed by what draws the truth and the RSSI (target protocol, layout, noise,
     steps). Settings that differ only in the estimator (k_NN, cells, D, N, resampling, weights) therefore see
     the same targets and noise: common random numbers, so a sweep's rows differ by the method alone, as the
-    thesis's repeated rows do. Adding a setting never shifts another's numbers."""
+    thesis's repeated rows do. Adding a setting never shifts another's numbers. The noise readings
+    (``reader_noise``, ``fixed_target_noise``) are left out of the key on purpose: the targets are drawn before the
+    noise, so a setting under another noise reading sees the same targets."""
     key = {f: getattr(case, f) for f in _TRUTH_FIELDS}
     key["steps"] = 1 if case.method == "nn" else case.rt
     return np.random.SeedSequence([seed, seed_from_values(key)])
 
 
 def simulate_truth_and_rss(case: SimCase, n_runs: int, rng: np.random.Generator):
-    """Target positions ``(R, T, 2)`` and RSSI ``(R, T, m)`` for the case's target protocol."""
+    """Target positions ``(R, T, 2)`` and RSSI ``(R, T, m)`` for the case's target protocol (Sec. 7.2.1).
+
+    Noise: ``N(0, sigma0^2)`` per run, step and reader; ``reader_noise="common_mode"`` draws one value per run and
+    step for every reader (noise on the target's transmit power), ``fixed_target_noise="frozen_per_run"`` one per
+    run for a fixed target (the same vector at every recursion)."""
+    _check_reading("reader_noise", case.reader_noise)
+    _check_reading("fixed_target_noise", case.fixed_target_noise)
     room = room_for(case.layout)
     readers = readers_for(case.layout)
     lo, hi = _region(case.target_region, room)
@@ -204,9 +250,20 @@ def simulate_truth_and_rss(case: SimCase, n_runs: int, rng: np.random.Generator)
             raise ValueError(f"unknown target protocol {case.target!r}")
     model = RssModel(readers, PathLossModel(case.alpha_dbm, case.path_loss_exp, case.sigma0_db, min_distance_m=0.1))
     mean = model.mean_rss_dbm(truth)                                    # (R, T, m): steps as positions
-    noise_shape = (n_runs, 1 if case.target == "fixed" else steps, readers.shape[0])
+    frozen = case.target == "fixed" and case.fixed_target_noise == "frozen_per_run"
+    noise_shape = (n_runs, 1 if frozen else steps, 1 if case.reader_noise == "common_mode" else readers.shape[0])
     rss = mean + case.sigma0_db * rng.standard_normal(noise_shape)
     return np.asarray(truth), rss
+
+
+def resample_fraction(case: SimCase) -> float | None:
+    """The SIR's N_eff threshold as the fraction of N that :func:`~locbook.tracking.particle.particle_filter` takes:
+    ``resample_threshold`` itself under ``"fraction_of_n"``, ``resample_threshold / N`` under ``"absolute"`` (Table
+    7.24's ``N_eff < 0.5`` read literally: since N_eff >= 1 it never resamples); None (every step) stays None."""
+    _check_reading("resample_threshold", case.resample_threshold_unit)
+    if case.resample_threshold is None or case.resample_threshold_unit == "fraction_of_n":
+        return case.resample_threshold
+    return case.resample_threshold / case.n_particles
 
 
 def run_case(case: SimCase, n_runs: int, seed: int, *, return_all: bool = False):
@@ -221,7 +278,7 @@ def run_case(case: SimCase, n_runs: int, seed: int, *, return_all: bool = False)
         cells = cell_centres(room, *CELL_PATTERNS[case.k_cell])
     if case.method == "nn":
         fp = model_fingerprints(cells, readers, PathLossModel(case.alpha_dbm, case.path_loss_exp))
-        estimate = knn_position(rss, fp, cells, case.k_nn)
+        estimate = knn_position(rss, fp, cells, case.k_nn, case.nn_weights)
     elif case.method == "grid":
         velocity = (0.0, case.velocity_m) if case.known_velocity else None
         initial = None
@@ -235,7 +292,7 @@ def run_case(case: SimCase, n_runs: int, seed: int, *, return_all: bool = False)
             rss, filter_model, rng, n_particles=case.n_particles, region_m=_region(case.filter_region, room),
             spread_m=case.spread_m, velocity_m=(0.0, case.velocity_m) if case.known_velocity else None,
             initial_position_m=truth[:, 0] if case.known_initial else None,
-            resample_threshold=case.resample_threshold, weight_smoothing=case.weight_smoothing)
+            resample_threshold=resample_fraction(case), weight_smoothing=case.weight_smoothing)
         estimate = res.mean_m if case.estimator == "mmse" else res.map_m
     else:
         raise ValueError(f"unknown method {case.method!r}")
@@ -247,17 +304,107 @@ def run_case(case: SimCase, n_runs: int, seed: int, *, return_all: bool = False)
 
 _STATISTIC_FUNCTIONS = {"rmse_m": rmse_m, "mean_m": mean_error_m, "median_m": median_error_m,
                         "p90_m": percentile_error_m, "std_m": error_std_m}
+_PERCENTILES = {"median_m": 50.0, "p90_m": 90.0}
 
 
-def summarize(errors, rng: np.random.Generator | None = None) -> dict:
-    """The printed statistics of the last-recursion errors (one per run), and with ``rng`` their Monte-Carlo
-    standard errors (``<statistic>_se``): the delta method for the RMSE, the bootstrap over runs for the rest."""
-    out = {k: float(f(errors)) for k, f in _STATISTIC_FUNCTIONS.items()}
-    out["rmse_se_m"] = float(rmse_standard_error_m(errors))
+def _percentile_over_runs(errors_m, q: float, convention: str):
+    """The ``q``-th percentile of per-step errors ``(..., R, T)`` under a percentile convention, one per leading
+    index: pooled over the runs' last recursion, pooled over every recursion, the mean over runs of each run's
+    percentile over its recursions, or the percentile over runs of each run's RMSE over its recursions."""
+    lead = errors_m.shape[:-2]
+    if convention == "pooled_last_recursion":
+        return np.percentile(errors_m[..., -1], q, axis=-1)
+    if convention == "pooled_all_recursions":
+        return np.percentile(errors_m.reshape(lead + (-1,)), q, axis=-1)
+    if convention == "per_run_then_averaged":
+        return np.mean(np.percentile(errors_m, q, axis=-1), axis=-1)
+    return np.percentile(np.sqrt(np.mean(np.square(errors_m), axis=-1)), q, axis=-1)      # over_run_rmses
+
+
+def summarize(errors, rng: np.random.Generator | None = None, *,
+              percentile_convention: str = "pooled_last_recursion", over_recursions: bool = False) -> dict:
+    """The printed statistics (Sec. 7.2.1: RMSE, mean, median, 90th percentile, std) of the errors, and with ``rng``
+    their Monte-Carlo standard errors (``<statistic>_se``).
+
+    ``errors``: one last-recursion error per run ``(R,)``, or the per-step errors ``(R, T)`` (the last column being
+    recursion rt). Two readings the thesis does not print (locbook/data/readings/ozkaya2011.csv):
+    ``percentile_convention`` (:data:`SIM_READINGS`) says how the median and the 90th percentile are taken (see
+    :func:`_percentile_over_runs`); ``over_recursions`` takes the RMSE, mean and std over the errors of every
+    recursion instead of recursion rt (the ``"mean_over_recursions"`` mobile protocol). For a one-shot method
+    (T = 1) the conventions agree except ``per_run_then_averaged``, whose percentiles are then the mean error.
+
+    Standard errors: the delta method for the RMSE (over the runs' mean squared errors) and the bootstrap over
+    whole runs for the rest (a run's recursions are not independent).
+    """
+    _check_reading("percentile_convention", percentile_convention)
+    errors = np.asarray(errors, float)
+    if errors.ndim not in (1, 2):
+        raise ParameterError(f"errors must be (runs,) or (runs, recursions), got shape {errors.shape}")
+    per_step = errors if errors.ndim == 2 else errors[:, None]
+    if percentile_convention == "pooled_last_recursion" and not over_recursions:
+        last = per_step[:, -1]
+        out = {k: float(f(last)) for k, f in _STATISTIC_FUNCTIONS.items()}
+        out["rmse_se_m"] = float(rmse_standard_error_m(last))
+        if rng is not None:
+            for k, f in _STATISTIC_FUNCTIONS.items():
+                out[k + "_se"] = out["rmse_se_m"] if k == "rmse_m" else bootstrap_standard_error(last, f, rng)
+        return out
+
+    def statistics(e):            # (..., R, T) -> {statistic: (...)}
+        sample = e.reshape(e.shape[:-2] + (-1,)) if over_recursions else e[..., -1]
+        got = {k: _STATISTIC_FUNCTIONS[k](sample, axis=-1) for k in ("rmse_m", "mean_m", "std_m")}
+        got.update({k: _percentile_over_runs(e, q, percentile_convention) for k, q in _PERCENTILES.items()})
+        return got
+
+    got = statistics(per_step)
+    out = {k: float(got[k]) for k in _STATISTIC_FUNCTIONS}
+    n_runs = per_step.shape[0]
+    if n_runs < 2:
+        raise ParameterError(f"errors: a standard error needs at least two Monte-Carlo runs, got {n_runs}")
+    # delta method over the runs' mean squared errors (independent across runs, unlike a run's recursions)
+    run_ms = np.mean(np.square(per_step), axis=1) if over_recursions else np.square(per_step[:, -1])
+    out["rmse_se_m"] = float(np.std(run_ms, ddof=1) / np.sqrt(n_runs) / (2.0 * np.sqrt(np.mean(run_ms))))
     if rng is not None:
-        for k, f in _STATISTIC_FUNCTIONS.items():
-            out[k + "_se"] = out["rmse_se_m"] if k == "rmse_m" else bootstrap_standard_error(errors, f, rng)
+        resampled = statistics(per_step[rng.integers(0, n_runs, size=(200, n_runs))])
+        for k in _STATISTIC_FUNCTIONS:
+            out[k + "_se"] = out["rmse_se_m"] if k == "rmse_m" else float(np.std(resampled[k], ddof=1))
     return out
+
+
+def _check_reading(name: str, value) -> None:
+    if value not in SIM_READINGS[name]:
+        raise ParameterError(f"{name} must be one of {SIM_READINGS[name]}, got {value!r}")
+
+
+def sim_readings(**chosen) -> dict:
+    """Every simulation reading (:data:`SIM_READINGS`), the ``chosen`` values over the defaults; an unknown reading
+    or value raises :class:`~locbook.errors.ParameterError` naming it."""
+    for name, value in chosen.items():
+        if name not in SIM_READINGS:
+            raise ParameterError(f"unknown simulation reading {name!r}; known: {sorted(SIM_READINGS)}")
+        _check_reading(name, value)
+    return {name: chosen.get(name, values[0]) for name, values in SIM_READINGS.items()}
+
+
+def with_readings(case: SimCase, readings: dict | None = None) -> SimCase:
+    """``case`` under the simulation ``readings`` (:func:`sim_readings`): a target the thesis places 'at random in
+    the room' (``target_region="room"``) is drawn per ``target_sampling``; a region the thesis prints (Table 7.22's
+    1 m from the walls) is kept. The noise, weight and threshold readings set their fields."""
+    r = sim_readings(**(readings or {}))
+    return replace(case, target_region=r["target_sampling"] if case.target_region == "room" else case.target_region,
+                   nn_weights=r["nn_weights"], reader_noise=r["reader_noise"],
+                   fixed_target_noise=r["fixed_target_noise"], resample_threshold_unit=r["resample_threshold"])
+
+
+def run_summary(case: SimCase, n_runs: int, seed: int, readings: dict | None = None,
+                rng: np.random.Generator | None = None) -> dict:
+    """:func:`summarize` of ``case`` run under ``readings`` (:func:`with_readings`): the percentile convention, and
+    the mobile protocol for a mobile target."""
+    r = sim_readings(**(readings or {}))
+    case = with_readings(case, r)
+    _, per_step, _, _ = run_case(case, n_runs, seed, return_all=True)
+    return summarize(per_step, rng, percentile_convention=r["percentile_convention"],
+                     over_recursions=case.target == "mobile" and r["mobile_protocol"] == "mean_over_recursions")
 
 
 # -- bounds ------------------------------------------------------------------------------------------
@@ -444,13 +591,16 @@ def _first_printings() -> dict:
     return first
 
 
-def run_tables(tables, n_runs: int, seed: int, **overrides) -> list[dict]:
+def run_tables(tables, n_runs: int, seed: int, *, readings: dict | None = None, **overrides) -> list[dict]:
     """Run every case of the given tables (e.g. ``["7.1", "7.2"]``) and return long-form rows ``table, row,
     column, printed`` (the :class:`~locbook.reproduce.Printed`), ``reproduced, se_m, case, first_printed`` for every
     printed statistic; CRLB cells carry ``reproduced`` = the thesis-form bound and ``se_m`` None. Identical
     settings are simulated once. ``first_printed`` is the first printing of the same setting and statistic
     in the thesis (the row itself if it is the first). ``overrides`` replace :class:`SimCase` fields in every
-    case (e.g. ``n_particles=500``); fields a case does not use are ignored by it."""
+    case (e.g. ``n_particles=500``); fields a case does not use are ignored by it. ``readings``: the simulation
+    readings (:func:`sim_readings`; omitted ones at their defaults), applied by :func:`with_readings` and
+    :func:`run_summary`."""
+    readings = sim_readings(**(readings or {}))
     wanted = {str(t) for t in tables}
     first = _first_printings()
     cache: dict = {}
@@ -458,10 +608,10 @@ def run_tables(tables, n_runs: int, seed: int, **overrides) -> list[dict]:
     for table, row, column, base_case in simulation_cases():
         if table not in wanted:
             continue
-        case = replace(base_case, **overrides)
+        case = replace(with_readings(base_case, readings), **overrides)
         if case not in cache:
             bootstrap_rng = np.random.default_rng(case_seed_sequence(seed, case).spawn(1)[0])
-            cache[case] = summarize(run_case(case, n_runs, seed), bootstrap_rng)
+            cache[case] = run_summary(case, n_runs, seed, readings, bootstrap_rng)
         res = cache[case]
         columns = [column] if column else [c for c in STATISTICS if printed_cell(table, row, c) is not None]
         for col in columns:
@@ -652,20 +802,29 @@ TESTBED_READERS_M = ((9.0, 4.0), (9.0, 0.0), (0.0, 0.0))
 REFERENCE_TAGS_M = ((1.5, 1.5), (2.0, 3.0), (4.5, 1.5), (5.0, 3.0))
 
 
-def record_simulation_assumptions(report) -> None:
+def record_readings(report, chosen: dict) -> None:
+    """Record each chosen reading (name -> value, names of locbook/data/readings/ozkaya2011.csv) as an assumption,
+    with its source, the reason of the declaration and the other values it could take."""
+    declared = {r.name: r for r in declared_readings("ozkaya2011")}
+    for name, value in chosen.items():
+        if name not in declared:
+            raise ParameterError(f"unknown reading {name!r}; declared: {sorted(declared)}")
+        r = declared[name]
+        others = [v for v in r.values if v != value]
+        report.assumption(name, value, f"{r.source}: {r.reason} (basis of the declared default: {r.basis}; other "
+                          f"readings: {', '.join(map(str, others)) or 'none'})")
+
+
+def record_simulation_assumptions(report, readings: dict | None = None) -> None:
     """Record the assumptions shared by the Sec. 7.2 simulation notebooks (NN, grid, SIR and their comparison): the
-    single 5 m x 8 m room with three corner readers, the noise and motion protocols checked against the tables
-    by re-simulation, the cells and the averaging of the thesis's CRLB column."""
+    single 5 m x 8 m room with three corner readers, the cells, the averaging of the thesis's CRLB column, and the
+    notebook's simulation ``readings`` (:func:`record_readings`: the noise and motion protocols, the percentiles)."""
     for name, value, reason in [
         ("room_m", ROOM_M, "Sec. 7.2.1: single 5 m x 8 m room, no walls"),
         ("anchors_m", LAYOUTS["corners3"], "three corners (separations 5 m and 8 m, Sec. 7.2.1); which three is not "
          "printed and is equivalent by symmetry"),
-        ("noise_model", "i.i.d. per reader", "checked against the tables by re-simulation; the text's 'noise on the "
-         "transmit power' (common mode) gives clearly lower errors"),
-        ("mobile_protocol", "uniform start, Gaussian steps reflected at the walls, fresh noise each step, error at step rt",
-         "not fully printed (Sec. 7.2.1); checked against the tables by re-simulation"),
-        ("fixed_protocol", "uniform position, noise drawn once per run and frozen, error at step rt",
-         "checked against the tables by re-simulation: fresh noise per step gives far smaller errors than printed"),
+        ("target_protocol", "mobile: uniform start, Gaussian steps reflected at the walls, fresh noise each step; "
+         "fixed: uniform position", "not fully printed (Sec. 7.2.1); the contested parts are the readings below"),
         ("cells", "nx x ny partition of the room shrunk by 0.5 m", "gives the printed 28 cells at x 1..4, y 1..7 and the "
          "0.5 m and 2 m grids; the 6/16/56/98 patterns are not printed"),
         ("min_distance_m", 0.1, "avoids log10(0) at a reader (ours)"),
@@ -673,3 +832,4 @@ def record_simulation_assumptions(report) -> None:
          "0.80 / 0.64 m and the whole sigma sweep"),
     ]:
         report.assumption(name, value, reason)
+    record_readings(report, readings or {})

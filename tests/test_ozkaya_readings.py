@@ -1,0 +1,153 @@
+"""The Ozkaya (2011) simulation readings (locbook/data/readings/ozkaya2011.csv) as library options: each alternative
+checked against what it means (an independent computation or an invariant), and the defaults unchanged."""
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+import locbook as lb
+from locbook.errors import ParameterError
+from locbook.reproduce.readings import readings
+from locbook.scenarios import ozkaya as oz
+
+
+@pytest.fixture
+def per_step():
+    """Hand-built per-step errors (runs x recursions), skewed like filter errors, with distinct runs."""
+    rng = np.random.default_rng(11)
+    return rng.gamma(2.0, 0.5, size=(40, 6)) + np.linspace(1.0, 0.0, 6)
+
+
+def test_default_convention_equals_the_last_recursion_vector(per_step):
+    """Passing the per-step errors under the defaults is the old one-error-per-run summary, standard errors too."""
+    a = oz.summarize(per_step, np.random.default_rng(3))
+    b = oz.summarize(per_step[:, -1].copy(), np.random.default_rng(3))
+    assert a == b
+    assert a["p90_m"] == np.percentile(per_step[:, -1], 90) and a["median_m"] == np.median(per_step[:, -1])
+
+
+def test_percentiles_over_run_rmses_are_numpys_percentiles_of_the_run_rmses(per_step):
+    got = oz.summarize(per_step, percentile_convention="over_run_rmses")
+    run_rmse = np.sqrt((per_step**2).mean(axis=1))
+    assert got["median_m"] == pytest.approx(np.percentile(run_rmse, 50), rel=1e-12)
+    assert got["p90_m"] == pytest.approx(np.percentile(run_rmse, 90), rel=1e-12)
+    # the convention moves only the percentiles: RMSE, mean and std stay those of recursion rt
+    assert got["rmse_m"] == pytest.approx(np.sqrt(np.mean(per_step[:, -1] ** 2)), rel=1e-12)
+    assert got["std_m"] == pytest.approx(np.std(per_step[:, -1]), rel=1e-12)
+
+
+def test_pooled_all_recursions_and_per_run_then_averaged(per_step):
+    pooled = oz.summarize(per_step, percentile_convention="pooled_all_recursions")
+    assert pooled["p90_m"] == pytest.approx(np.percentile(per_step.ravel(), 90), rel=1e-12)
+    averaged = oz.summarize(per_step, percentile_convention="per_run_then_averaged")
+    assert averaged["median_m"] == pytest.approx(np.mean(np.median(per_step, axis=1)), rel=1e-12)
+    assert averaged["p90_m"] == pytest.approx(np.mean(np.percentile(per_step, 90, axis=1)), rel=1e-12)
+    # one shot per run (NN): a run's percentile is its error, so the averaged percentiles are the mean error
+    one = oz.summarize(per_step[:, -1:], percentile_convention="per_run_then_averaged")
+    assert one["median_m"] == pytest.approx(one["mean_m"]) and one["p90_m"] == pytest.approx(one["mean_m"])
+
+
+def test_mean_over_recursions_takes_rmse_mean_and_std_over_every_recursion(per_step):
+    got = oz.summarize(per_step, np.random.default_rng(1), over_recursions=True)
+    assert got["rmse_m"] == pytest.approx(np.sqrt(np.mean(per_step**2)), rel=1e-12)
+    assert got["mean_m"] == pytest.approx(per_step.mean(), rel=1e-12)
+    assert got["std_m"] == pytest.approx(per_step.std(), rel=1e-12)
+    # its RMSE standard error is the delta method over the runs' mean squares (runs independent, steps not)
+    ms = (per_step**2).mean(axis=1)
+    assert got["rmse_m_se"] == pytest.approx(ms.std(ddof=1) / np.sqrt(40) / (2 * np.sqrt(ms.mean())), rel=1e-12)
+    assert all(got[k + "_se"] > 0 for k in oz.STATISTICS)
+
+
+def test_unknown_readings_are_refused_naming_them():
+    with pytest.raises(ParameterError, match="percentile_convention"):
+        oz.summarize(np.ones(5), percentile_convention="pooled")
+    with pytest.raises(ParameterError, match="no_such_reading"):
+        oz.sim_readings(no_such_reading="x")
+    with pytest.raises(ParameterError, match="reader_noise"):
+        oz.simulate_truth_and_rss(oz.SimCase("nn", reader_noise="shared"), 3, np.random.default_rng(0))
+
+
+def test_common_mode_noise_leaves_the_reader_differences_noise_free():
+    """Sec. 7.2.1's noise on the transmit power: one draw shared by every reader, so the differences between
+    readers are those of the mean RSSI, while each reader's own noise still has sigma_0."""
+    case = oz.SimCase("grid", "mobile", sigma0_db=5.2, rt=4, reader_noise="common_mode")
+    truth, rss = oz.simulate_truth_and_rss(case, 4000, np.random.default_rng(2))
+    mean = lb.RssModel(oz.readers_for("corners3"), lb.PathLossModel(oz.ALPHA_DBM, oz.PATH_LOSS_EXP,
+                                                                    min_distance_m=0.1)).mean_rss_dbm(truth)
+    noise = rss - mean
+    np.testing.assert_allclose(np.diff(noise, axis=-1), 0.0, atol=1e-9)
+    assert np.std(noise[..., 0]) == pytest.approx(5.2, rel=0.03)
+    # the targets are those of the independent-noise reading (the same stream: the truth is drawn first)
+    truth_iid, _ = oz.simulate_truth_and_rss(replace(case, reader_noise="independent_per_reader"), 4000,
+                                             np.random.default_rng(2))
+    np.testing.assert_array_equal(truth, truth_iid)
+
+
+def test_fixed_target_noise_frozen_or_fresh():
+    frozen = oz.SimCase("grid", "fixed", rt=5)
+    _, rss = oz.simulate_truth_and_rss(frozen, 50, np.random.default_rng(4))
+    assert np.all(rss == rss[:, :1])                                     # the same vector at every recursion
+    truth, rss = oz.simulate_truth_and_rss(replace(frozen, fixed_target_noise="fresh_per_step"), 50,
+                                           np.random.default_rng(4))
+    assert np.all(truth == truth[:, :1])                                 # still a fixed target
+    assert not np.any(rss[:, 1:] == rss[:, :1])                          # a new noise draw each recursion
+
+
+def test_cell_cores_sampling_stays_in_the_area_the_cells_tile():
+    case = oz.with_readings(oz.SimCase("nn"), {"target_sampling": "cell_cores"})
+    truth, _ = oz.simulate_truth_and_rss(case, 5000, np.random.default_rng(5))
+    xy = truth[:, 0]
+    cells = oz.cell_centres(oz.ROOM_M, 4, 7)
+    half = np.array([(oz.ROOM_M[0] - 1) / 8, (oz.ROOM_M[1] - 1) / 14])      # half a cell's sides
+    assert np.all(xy >= cells.min(0) - half) and np.all(xy <= cells.max(0) + half)
+    assert np.allclose(xy.min(0), 0.5, atol=0.01) and np.allclose(xy.max(0), np.array(oz.ROOM_M) - 0.5, atol=0.01)
+    # a region the thesis prints for a row (Table 7.22: 1 m from the walls) is kept under any sampling
+    assert oz.with_readings(oz.SimCase("sir", target_region="inner"), {"target_sampling": "cell_cores"}) \
+        .target_region == "inner"
+
+
+def test_uniform_nn_weights_over_every_cell_give_the_cells_centroid():
+    """With k = every cell and plain averaging, the estimate is the centroid of the 28 cells whatever the RSSI, so
+    the error is the distance from the target to (2.5, 4)."""
+    case = oz.with_readings(oz.SimCase("nn", k_nn=28), {"nn_weights": "uniform"})
+    last, _, truth, estimate = oz.run_case(case, 30, 7, return_all=True)
+    np.testing.assert_allclose(estimate[:, 0], np.broadcast_to([2.5, 4.0], (30, 2)), atol=1e-12)
+    np.testing.assert_allclose(last, np.linalg.norm(truth[:, 0] - [2.5, 4.0], axis=-1), atol=1e-12)
+    # the corrected weights put more weight on the near cells: not the centroid
+    default = oz.run_case(oz.SimCase("nn", k_nn=28), 30, 7, return_all=True)[3]
+    assert np.abs(default[:, 0] - [2.5, 4.0]).max() > 0.1
+
+
+def test_absolute_resample_threshold_never_resamples():
+    """Table 7.24's N_eff < 0.5 read literally: N_eff >= 1 always, so the filter never resamples, while 0.5 N does."""
+    base = oz.SimCase("sir", "mobile", resample_threshold=0.5, n_particles=200, rt=6)
+    absolute = replace(base, resample_threshold_unit="absolute")
+    assert oz.resample_fraction(base) == 0.5
+    assert oz.resample_fraction(absolute) * absolute.n_particles == pytest.approx(0.5)
+    assert oz.resample_fraction(replace(absolute, resample_threshold=None)) is None
+    truth, rss = oz.simulate_truth_and_rss(base, 20, np.random.default_rng(8))
+    model = lb.RssModel(oz.readers_for("corners3"), lb.PathLossModel(oz.ALPHA_DBM, oz.PATH_LOSS_EXP, oz.SIGMA_DB,
+                                                                     min_distance_m=0.1))
+    region = (np.zeros(2), np.array(oz.ROOM_M))
+    results = {c.resample_threshold_unit: lb.particle_filter(rss, model, np.random.default_rng(9), n_particles=200,
+                                                             region_m=region, resample_threshold=oz.resample_fraction(c))
+               for c in (base, absolute)}
+    assert results["fraction_of_n"].resampled.any() and not results["absolute"].resampled.any()
+    assert np.all(results["absolute"].n_eff >= 1 - 1e-9)
+
+
+def test_run_tables_defaults_equal_explicit_default_readings():
+    a = oz.run_tables(["7.2"], 30, 3)
+    b = oz.run_tables(["7.2"], 30, 3, readings=oz.sim_readings())
+    assert [r["reproduced"] for r in a] == [r["reproduced"] for r in b]
+    c = oz.run_tables(["7.2"], 30, 3, readings={"reader_noise": "common_mode"})
+    assert [r["reproduced"] for r in a if r["column"] == "rmse_m"] != \
+        [r["reproduced"] for r in c if r["column"] == "rmse_m"]
+
+
+def test_every_simulation_reading_is_declared_with_the_librarys_values():
+    declared = {r.name: r for r in readings("ozkaya2011")}
+    for name, values in oz.SIM_READINGS.items():
+        r = declared[name]
+        assert r.parameter == name and r.default == values[0] and set(r.values) == set(values)
+    assert set(declared["crlb_average"].values) == {"cells_mean", "area_rms"}

@@ -157,3 +157,104 @@ def test_printed_sign_stream_jacobian_and_the_ins_drift_covariance():
     ref_z, ref_R = lb.fuse_estimates(gu.rss_only_fixes(w), cov, gu.inertial_only(w)[:, w.report_steps],
                                      gu.ins_drift_covariance(w))
     np.testing.assert_allclose(z, ref_z)
+
+
+# -- the readings opened as notebook parameters (issue 28) -----------------------------------------------------------
+
+def test_anchor_layouts_place_16_and_17_at_the_wall_midpoints_and_the_walk_uses_them():
+    L, W = gu.ROOM_M
+    long_, short = (gu.anchors_m(gu.ANCHOR_IDS, k) for k in gu.ANCHOR_LAYOUTS)
+    np.testing.assert_array_equal(long_[:4], short[:4])                 # the corners do not move (Sec. 5.1)
+    np.testing.assert_array_equal(long_[4:], [[L / 2, 0.0], [L / 2, W]])
+    np.testing.assert_array_equal(short[4:], [[0.0, W / 2], [L, W / 2]])
+    np.testing.assert_array_equal(gu.anchors_m(gu.ANCHOR_IDS), long_)   # the default layout
+    with pytest.raises(ValueError, match="anchor_layout"):
+        gu.anchors_m(gu.ANCHOR_IDS, "ceiling")
+    # noise-free readings are Eq. (3.7) at the distances to the chosen layout's anchors, quantised by the register
+    s = replace(_quiet(gu.WalkSettings()), anchor_layout="corners_and_short_wall_midpoints")
+    w = gu.simulate_walk("u", 6, s, 1, np.random.default_rng(0))
+    np.testing.assert_array_equal(w.anchors_m, short)
+    d = np.linalg.norm(w.truth.position_m[:, None] - short, axis=-1)
+    mean = gu.REF_POWER_DBM - 10 * gu.PATH_LOSS_EXP * np.log10(np.maximum(d, 0.1))
+    np.testing.assert_allclose(w.rss_dbm[0], np.minimum(np.round(mean), -7.0), atol=1e-9)
+    x, y, bound = gu.crlb_map_m(6, 3.0, spacing_m=1.0, layout="corners_and_short_wall_midpoints")
+    i, j = np.argmin(np.abs(y - W / 2)), np.argmin(np.abs(x - 0.5))
+    assert bound[i, j] < gu.crlb_map_m(6, 3.0, spacing_m=1.0)[2][i, j]  # beside the short wall's anchor: tighter
+
+
+class _Rows:
+    """A stand-in for lb.Report that keeps what record_ch6 records."""
+
+    def __init__(self):
+        self.rows = []
+
+    def number(self, quantity, printed, reproduced=None, **kw):
+        self.rows.append((quantity, printed, reproduced))
+
+
+@pytest.mark.parametrize("method", gu.FUSED_METHODS)
+def test_the_fused_headline_is_the_chosen_methods_mean_error(method):
+    rng = np.random.default_rng(0)
+    R, K = 5, 7
+    errors = {(p, na, m): gu.WalkErrors(*(lambda e: (e.mean(1), np.sqrt((e**2).mean(1)), e))(rng.uniform(0, 5, (R, K))))
+              for p in gu.PATHS for na in gu.ANCHOR_SETS for m in gu.METHODS}
+    flags = dict.fromkeys(errors)
+    rep = _Rows()
+    gu.record_ch6(rep, errors, flags, headline_anchors=6, shadowing_sigma_db=1.0, calibrated=False, ukf_alpha=1.0,
+                  near_turn=np.arange(K) < 2, fused_method=method)
+    for path, item in (("linear", "linear path"), ("u", "U-path")):
+        printed = gu.PRINTED.get("Ch. VI text", item, "fused")
+        got = [v for q, p, v in rep.rows if p == printed]
+        assert got == [pytest.approx(errors[(path, 6, method)].mean_m.mean())]
+        assert any(gu.METHOD_LABELS[method] in q for q, p, _ in rep.rows if p == printed)
+    abstract = gu.PRINTED.get("Abstract", "30m x 10m area", "positional accuracy")
+    assert [v for _, p, v in rep.rows if p == abstract] == [pytest.approx(errors[("linear", 6, method)].mean_m.mean())]
+    with pytest.raises(ValueError, match="fused_method"):
+        gu.record_ch6(_Rows(), errors, flags, headline_anchors=6, shadowing_sigma_db=1.0, calibrated=False,
+                      ukf_alpha=1.0, near_turn=np.arange(K) < 2, fused_method="pf")
+
+
+def test_a_2_s_filter_step_filters_once_per_report_point_on_single_packets():
+    # 0.5 m/s x 2 s = the 1 m report spacing: after the start ramp every step is a report point, each window one packet
+    s = replace(gu.WalkSettings(), dt_s=2.0)
+    w = gu.simulate_walk("linear", 6, s, 3, np.random.default_rng(1))
+    np.testing.assert_allclose(np.diff(w.truth.time_s), 2.0)
+    T = w.truth.time_s.size
+    assert w.report_steps.size >= T - 2 and np.all(np.diff(w.report_steps[1:]) == 1)
+    k = w.report_steps
+    arc = w.truth.arc_length_m
+    single = (np.abs(arc[k][:, None] - arc[None, :]) <= gu.REPORT_SPACING_M / 2).sum(axis=1) == 1
+    assert single.sum() >= k.size - 4                        # all but the ramps' windows hold one packet
+    expected = lb.lateration_ls(w.anchors_m, gu.channel_model(w.anchor_ids).range_m(w.rss_dbm[:, k]),
+                                ref_index=5).position_m
+    np.testing.assert_allclose(gu.rss_only_fixes(w)[:, single], expected[:, single], atol=1e-9)   # no averaging
+    cov = gu.fix_covariance_from(gu.simulate_walk("linear", 6, s, 10, np.random.default_rng(2)))
+    for m in ("kf", "ekf", "ukf"):
+        assert np.all(np.isfinite(gu.track(w, m, fix_covariance=cov, ukf_alpha=1.0)))
+
+
+@pytest.mark.parametrize("r_m", [0.5, 2.0])
+def test_the_u_path_turn_radius_sets_the_arcs(r_m):
+    tr = gu.path_trajectory("u", replace(gu.WalkSettings(), turn_radius_m=r_m))
+    (x0, y0), _, (x2, y2), _ = gu.PATHS["u"]
+    legs = 2 * (x2 - x0) + (y2 - y0)
+    # two corners: each cuts r off both legs it joins and adds a quarter circle pi r / 2
+    assert tr.length_m == pytest.approx(legs - 4 * r_m + np.pi * r_m, abs=1e-9)
+    on_arc = np.abs(tr.yaw_rate_rad_s) > 0
+    speed = np.linalg.norm(tr.velocity_m_s, axis=-1)
+    np.testing.assert_allclose(np.abs(tr.yaw_rate_rad_s[on_arc]), speed[on_arc] / r_m, rtol=1e-12)
+
+
+def test_imu_frame_world_takes_the_readings_as_world_accelerations():
+    s = _quiet(gu.WalkSettings())
+    body = gu.simulate_walk("u", 4, s, 1, np.random.default_rng(0))
+    world = gu.simulate_walk("u", 4, replace(s, imu_frame="world"), 1, np.random.default_rng(0))
+    a = body.truth.acceleration_m_s2
+    np.testing.assert_allclose(world.acc_m_s2[0], a, atol=1e-12)
+    back = body.truth.heading_rad == np.pi                   # the return leg: the body frame is the world turned round
+    assert back.sum() > 100
+    np.testing.assert_allclose(body.acc_m_s2[0, back], -a[back], atol=1e-12)
+    # world-frame readings are integrated as they are: the gyroscope's heading plays no part in dead reckoning
+    spun = replace(world, gyro_rad_s=world.gyro_rad_s + 0.3)
+    np.testing.assert_array_equal(gu.inertial_only(spun), gu.inertial_only(world))
+    assert not np.allclose(gu.inertial_only(replace(body, gyro_rad_s=body.gyro_rad_s + 0.3)), gu.inertial_only(body))

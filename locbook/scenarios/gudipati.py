@@ -18,6 +18,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from .._validate import check_choice
 from ..bounds.crlb import rss_crlb_m
 from ..bounds.pcrlb import position_bound_m, posterior_crlb, rss_state_information
 from ..reproduce.printed_values import printed
@@ -38,7 +39,8 @@ from ..montecarlo import mc_standard_error
 from ..tracking.divergence import DivergenceFlags, divergence_note
 
 __all__ = [
-    "DOCUMENT", "PRINTED", "ROOM_M", "ANCHOR_IDS", "ANCHOR_POSITIONS_M", "ANCHOR_SETS", "REF_POWER_DBM",
+    "DOCUMENT", "PRINTED", "ROOM_M", "ANCHOR_IDS", "ANCHOR_LAYOUTS", "DEFAULT_ANCHOR_LAYOUT", "ANCHOR_POSITIONS_M",
+    "ANCHOR_SETS", "REF_POWER_DBM", "FUSED_METHODS",
     "PATH_LOSS_EXP", "REPORT_SPACING_M", "PATHS", "UKF_ALPHA", "UKF_BETA", "CALIBRATION_STEP_M",
     "CALIBRATION_SPAN_M", "CALIBRATION_SAMPLES", "CALIBRATION_TERMS", "WalkSettings", "channel_model",
     "path_trajectory", "Walk", "simulate_walk", "rss_only_fixes", "METHODS", "track", "WalkErrors", "walk_errors",
@@ -58,11 +60,18 @@ ANCHOR_IDS = tuple(p.item for p in PRINTED.where("Table 5.2", statistic="S"))
 #: Table 5.2: S (dBm at 1 m) and C per anchor, in ANCHOR_IDS order.
 REF_POWER_DBM = np.array([PRINTED.get("Table 5.2", i, "S").value for i in ANCHOR_IDS])
 PATH_LOSS_EXP = np.array([PRINTED.get("Table 5.2", i, "C").value for i in ANCHOR_IDS])
-#: ASSUMED anchor coordinates (m): 12-15 at the corners ("four anchor nodes were placed in the four corners",
-#: Sec. 5.1; which ID at which corner is not said), 16 and 17 at the mid-points of the long walls ("two more
-#: anchor nodes were added", positions not given): our placement.
-ANCHOR_POSITIONS_M = {"12": (0.0, 0.0), "13": (ROOM_M[0], 0.0), "14": ROOM_M, "15": (0.0, ROOM_M[1]),
-                      "16": (ROOM_M[0] / 2, 0.0), "17": (ROOM_M[0] / 2, ROOM_M[1])}
+#: ASSUMED anchor coordinates (m) per reading of Sec. 5.1: 12-15 at the corners ("four anchor nodes were placed in
+#: the four corners"; which ID at which corner is not said), 16 and 17 ("two more anchor nodes were added", positions
+#: not given) at the mid-points of the long walls (y = 0 and y = 10 m; the default) or of the short walls (x = 0 and
+#: x = 30 m, where the linear path along the middle starts and ends).
+_CORNERS_M = {"12": (0.0, 0.0), "13": (ROOM_M[0], 0.0), "14": ROOM_M, "15": (0.0, ROOM_M[1])}
+ANCHOR_LAYOUTS = {
+    "corners_and_long_wall_midpoints": {**_CORNERS_M, "16": (ROOM_M[0] / 2, 0.0), "17": (ROOM_M[0] / 2, ROOM_M[1])},
+    "corners_and_short_wall_midpoints": {**_CORNERS_M, "16": (0.0, ROOM_M[1] / 2), "17": (ROOM_M[0], ROOM_M[1] / 2)},
+}
+DEFAULT_ANCHOR_LAYOUT = "corners_and_long_wall_midpoints"
+#: The default layout's coordinates.
+ANCHOR_POSITIONS_M = ANCHOR_LAYOUTS[DEFAULT_ANCHOR_LAYOUT]
 #: The two anchor sets of Sec. 5.1 (ASSUMED: 12-15 first, 16-17 added; Table 5.2 lists them in that order).
 ANCHOR_SETS = {4: ANCHOR_IDS[:4], 6: ANCHOR_IDS}
 #: "sent to the base station at every 1m distance" (Sec. 5.3): the report points where errors are evaluated.
@@ -100,8 +109,10 @@ def channel_model(anchor_ids, sigma_db: float = 0.0) -> PathLossModel:
     return PathLossModel(REF_POWER_DBM[idx], PATH_LOSS_EXP[idx], sigma_db, min_distance_m=0.1)
 
 
-def anchors_m(anchor_ids) -> np.ndarray:
-    return np.array([ANCHOR_POSITIONS_M[i] for i in anchor_ids], dtype=float)
+def anchors_m(anchor_ids, layout: str = DEFAULT_ANCHOR_LAYOUT) -> np.ndarray:
+    """Coordinates ``(m, 2)`` of ``anchor_ids`` under one of :data:`ANCHOR_LAYOUTS` (Sec. 5.1 places only the corners)."""
+    check_choice("anchor_layout", layout, tuple(ANCHOR_LAYOUTS))
+    return np.array([ANCHOR_LAYOUTS[layout][i] for i in anchor_ids], dtype=float)
 
 
 @dataclass(frozen=True)
@@ -123,6 +134,7 @@ class WalkSettings:
     ends), the filters' RSS sigma the model's total (``filter_sigma_db``, None = sqrt(shadowing^2 + fast^2)),
     P_0 and the start at the true start point at rest. All defaults are ours.
     ``imu_frame``: ``"body"`` (readings rotated by the heading; default) or the literal ``"world"``.
+    ``anchor_layout``: where anchors 16 and 17 stand, a key of :data:`ANCHOR_LAYOUTS` (Sec. 5.1 does not say).
     """
 
     speed_m_s: float = 0.5
@@ -143,6 +155,7 @@ class WalkSettings:
     initial_position_sd_m: float = 1.0
     initial_rate_sd: float = 0.3
     imu_frame: str = "body"
+    anchor_layout: str = DEFAULT_ANCHOR_LAYOUT
 
     @property
     def rss_sigma_db(self) -> float:
@@ -178,7 +191,7 @@ class Walk:
 
     @property
     def anchors_m(self) -> np.ndarray:
-        return anchors_m(self.anchor_ids)
+        return anchors_m(self.anchor_ids, self.settings.anchor_layout)
 
 
 def simulate_walk(path: str, n_anchors: int, settings: WalkSettings, n_runs: int, rng: np.random.Generator) -> Walk:
@@ -187,7 +200,7 @@ def simulate_walk(path: str, n_anchors: int, settings: WalkSettings, n_runs: int
         raise ValueError(f"n_anchors must be one of {tuple(ANCHOR_SETS)} (Sec. 5.1), got {n_anchors!r}")
     ids = ANCHOR_SETS[n_anchors]
     truth = path_trajectory(path, settings)
-    a = anchors_m(ids)
+    a = anchors_m(ids, settings.anchor_layout)
     d = pairwise_distance_m(truth.position_m, a)                                   # (T, m)
     mean = channel_model(ids).mean_rss_dbm(d)
     T, m = d.shape
@@ -425,15 +438,16 @@ def posterior_crlb_m(walk: Walk) -> np.ndarray:
     return position_bound_m(info, model.position_index)[walk.report_steps]
 
 
-def crlb_map_m(n_anchors: int, sigma_db: float, spacing_m: float = 0.25):
+def crlb_map_m(n_anchors: int, sigma_db: float, spacing_m: float = 0.25, layout: str = DEFAULT_ANCHOR_LAYOUT):
     """The static RSS CRLB ``sqrt(tr J^{-1})`` from one reading of every anchor (Table 5.2's exponents) over the hall:
-    ``(x (X,), y (Y,), bound (Y, X))`` (an extension: where the anchor placement of Sec. 5.1 helps)."""
+    ``(x (X,), y (Y,), bound (Y, X))`` (an extension: where the anchor placement of Sec. 5.1 helps), anchors placed
+    by ``layout`` (:data:`ANCHOR_LAYOUTS`)."""
     x = np.arange(spacing_m / 2, ROOM_M[0], spacing_m)
     y = np.arange(spacing_m / 2, ROOM_M[1], spacing_m)
     grid = np.stack(np.meshgrid(x, y), -1)
     ids = ANCHOR_SETS[n_anchors]
     ch = channel_model(ids)
-    return x, y, rss_crlb_m(grid, anchors_m(ids), ch.path_loss_exp, sigma_db)
+    return x, y, rss_crlb_m(grid, anchors_m(ids, layout), ch.path_loss_exp, sigma_db)
 
 
 def fix_covariance_from(walk: Walk) -> np.ndarray:
@@ -535,6 +549,10 @@ def calibrate_shadowing(target_mean_error_m: float, path: str, n_anchors: int, s
 #: Display names of :data:`METHODS`.
 METHOD_LABELS = {"rss_only": "RSS only", "inertial_only": "inertial only", "position_fusion": "position fusion (4.8)-(4.9)",
                  "kf": "KF", "ekf": "EKF", "ukf": "UKF"}
+#: The methods Ch. VI's fused headline (0.8 m, 1.01 m) may refer to: the text ties it to no filter (Ch. VI; Fig. 5.4
+#: finds the UKF best, the default); the linear KF, the EKF and the position fusion of Eqs. (4.8)-(4.9) are the
+#: other readings.
+FUSED_METHODS = ("ukf", "kf", "ekf", "position_fusion")
 NOTE_FUSED = ("the fused error depends on every unprinted setting (residual IMU biases, q, packet rate, shadowing "
               "correlation); see the sensitivity tables below")
 NOTE_U_RSS = ("the U-path's RSS-only error follows from the calibrated shadowing and the assumed U geometry (2 m from the "
@@ -552,16 +570,17 @@ def _mean_se(values) -> tuple[float, float]:
 
 
 def record_ch6(report, errors: dict, flags: dict, *, headline_anchors: int, shadowing_sigma_db: float, calibrated: bool,
-               ukf_alpha: float, near_turn) -> None:
+               ukf_alpha: float, near_turn, fused_method: str = "ukf") -> None:
     """Record Ch. VI's four headline mean errors and the claims of Sec. 5.3 and the Fig. 5.4 caption.
 
     ``errors[(path, n_anchors, method)]`` is a :class:`WalkErrors` and ``flags`` the NIS guard's
     :class:`DivergenceFlags` (None for a method without one) on the same keys; ``near_turn`` marks the U-path's
-    report points at the turns. The fused headline values are compared with the UKF (the best method in the
-    text). Each claim is checked as stated on paired differences of per-walk mean errors (the same walks for both
+    report points at the turns. The fused headline values are compared with ``fused_method`` (one of
+    :data:`FUSED_METHODS`; default the UKF, the best method of Fig. 5.4). Each claim is checked as stated on paired differences of per-walk mean errors (the same walks for both
     methods), so its standard error is that of the difference; where a claim names several panels, the smallest
     margin over them is recorded. Headline rows are ``calibrated`` when the shadowing was chosen from the printed
     linear-path RSS-only error (``calibrated``), and name it."""
+    check_choice("fused_method", fused_method, FUSED_METHODS)
     ha = headline_anchors
     label = METHOD_LABELS
     printed_rss_linear = PRINTED.get("Ch. VI text", "linear path", "without fusion")
@@ -578,14 +597,15 @@ def record_ch6(report, errors: dict, flags: dict, *, headline_anchors: int, shad
 
     for path, m, p, why in [("linear", "rss_only", printed_rss_linear, ""),
                             ("u", "rss_only", PRINTED.get("Ch. VI text", "U-path", "without fusion"), NOTE_U_RSS),
-                            ("linear", "ukf", PRINTED.get("Ch. VI text", "linear path", "fused"), NOTE_FUSED),
-                            ("u", "ukf", PRINTED.get("Ch. VI text", "U-path", "fused"), NOTE_FUSED)]:
+                            ("linear", fused_method, PRINTED.get("Ch. VI text", "linear path", "fused"), NOTE_FUSED),
+                            ("u", fused_method, PRINTED.get("Ch. VI text", "U-path", "fused"), NOTE_FUSED)]:
         v, se = stat(path, ha, m)
         report.number(f"{'linear' if path == 'linear' else 'U'}-path, {label[m]}, mean error ({ha} anchors)", p, v,
                       kind=kind, mc_std_error=se, calibrated_from=calibrated_from, miss_note=why,
                       note=divergence_note("", flags[(path, ha, m)]))
-    report.number(f"linear-path, UKF, mean error ({ha} anchors)", PRINTED.get("Abstract", "30m x 10m area", "positional accuracy"),
-                  stat("linear", ha, "ukf")[0], kind=kind, calibrated_from=calibrated_from,
+    report.number(f"linear-path, {label[fused_method]}, mean error ({ha} anchors)",
+                  PRINTED.get("Abstract", "30m x 10m area", "positional accuracy"),
+                  stat("linear", ha, fused_method)[0], kind=kind, calibrated_from=calibrated_from,
                   same_as=PRINTED.get("Ch. VI text", "linear path", "fused"))
     claim = dict(kind="claim", relation=">", threshold=0.0)
     # Fig. 5.4's caption: every fusion filter better than each individual sensor (RSS only, inertial only)

@@ -9,10 +9,11 @@ scored.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
+from .._validate import check_choice
 from ..reproduce.printed_values import printed
 from ..models.channel import PathLossModel, correct_range_bias, log_distance_gradient
 from ..static.least_squares import recursive_least_squares
@@ -21,12 +22,12 @@ from ..tracking.kalman import extended_kalman_filter
 from ..tracking.streams import NonlinearMeasurement, RssMeasurement
 from ..tracking.divergence import DivergenceFlags
 from ..models.rss import RssModel
-from ..tracking.particle import particle_filter
+from ..tracking.particle import kernel_map_estimate, particle_filter
 
 __all__ = [
     "DOCUMENT", "PRINTED", "SIGMA1_DB", "ETA", "SIGMA2_M", "SIGMA3_M", "N_LOCATIONS", "AREA_M", "Setup",
-    "draw_locations", "measure", "observed_locations", "lsf_by_count", "rlsf_path", "ekf_path", "EKF_VARIANTS", "EKF_SCHEDULES",
-    "SCHEDULES", "SHADOWING", "pf_run", "printed_jacobian", "corrected_jacobian", "crlb_m", "errors_m",
+    "TARGETS", "with_target", "draw_locations", "measure", "observed_locations", "lsf_by_count", "rlsf_path", "ekf_path", "EKF_VARIANTS", "EKF_SCHEDULES",
+    "SCHEDULES", "SHADOWING", "pf_run", "PF_ESTIMATES", "pf_estimate_m", "printed_jacobian", "corrected_jacobian", "crlb_m", "errors_m",
 ]
 
 DOCUMENT = "palvai2008"
@@ -44,13 +45,14 @@ AREA_M = 50.0
 
 @dataclass(frozen=True)
 class Setup:
-    """The simulated world: ``dim`` 3 (the thesis's equations) or 2; the target at the area's centre (not
-    printed); the link budget ``ref_power_dbm`` at ``1 m`` (not printed; K = -20 dBm, ours, known to every
-    estimator); shadowing ``sigma_db`` and exponent ``path_loss_exp`` (Secs. 2.6, 4.4); receiver positions observed
-    with GPS noise ``receiver_sigma_m`` (sigma_3; 0 = exact, as for the LSF of Sec. 2.6)."""
+    """The simulated world: ``dim`` 3 (the thesis's equations) or 2; the target ``target_m`` (not printed: None is
+    the area's centre; a point ``(dim,)``, or one target per run ``(R, dim)``, see :func:`with_target`); the link
+    budget ``ref_power_dbm`` at ``1 m`` (not printed; K = -20 dBm, ours, known to every estimator); shadowing
+    ``sigma_db`` and exponent ``path_loss_exp`` (Secs. 2.6, 4.4); receiver positions observed with GPS noise
+    ``receiver_sigma_m`` (sigma_3; 0 = exact, as for the LSF of Sec. 2.6)."""
 
     dim: int = 3
-    target_m: tuple | None = None
+    target_m: tuple | np.ndarray | None = None
     ref_power_dbm: float = -20.0
     path_loss_exp: float = ETA
     sigma_db: float = SIGMA1_DB
@@ -58,11 +60,41 @@ class Setup:
 
     @property
     def target(self) -> np.ndarray:
+        """The target ``(dim,)``, or one per run ``(R, dim)``."""
         return np.full(self.dim, AREA_M / 2) if self.target_m is None else np.asarray(self.target_m, float)
+
+    def run_target(self, run: int = 0) -> np.ndarray:
+        """The target ``(dim,)`` of one run (the same for every run unless drawn per run)."""
+        t = self.target
+        return t if t.ndim == 1 else t[run]
+
+    def target_for(self, x) -> np.ndarray:
+        """The target shaped to broadcast against ``x`` ``(R, ..., dim)`` (per-run targets get singleton axes)."""
+        return _target_like(self.target, x)
 
     @property
     def channel(self) -> PathLossModel:
         return PathLossModel(self.ref_power_dbm, self.path_loss_exp, self.sigma_db, min_distance_m=1.0)
+
+
+def _target_like(target, x) -> np.ndarray:
+    t = np.asarray(target, float)
+    return t if t.ndim == 1 else t.reshape(t.shape[:1] + (1,) * (np.ndim(x) - 2) + t.shape[1:])
+
+
+#: Where the static target is (Secs. 2.4, 4.5: "a given target location", not printed): the area's centre, or drawn
+#: uniform in the area, one per Monte-Carlo run.
+TARGETS = ("area_centre", "uniform_per_run")
+
+
+def with_target(setup: Setup, target: str, n_runs: int, rng: np.random.Generator) -> Setup:
+    """``setup`` with its target read as ``target`` (:data:`TARGETS`) for ``n_runs`` runs: ``"area_centre"``
+    returns ``setup`` unchanged and draws nothing (so every other stream is untouched); ``"uniform_per_run"`` draws
+    one target per run uniform in the area, ``(n_runs, dim)``."""
+    check_choice("target", target, TARGETS)
+    if target == "area_centre":
+        return setup
+    return replace(setup, target_m=rng.uniform(0.0, AREA_M, (int(n_runs), setup.dim)))
 
 
 def draw_locations(n_runs: int, n_locations: int, dim: int, rng: np.random.Generator) -> np.ndarray:
@@ -74,7 +106,8 @@ def draw_locations(n_runs: int, n_locations: int, dim: int, rng: np.random.Gener
 def measure(setup: Setup, locations_m, rng: np.random.Generator) -> np.ndarray:
     """Received powers ``(R, N)`` (Eq. (4.28)): the log-distance mean (distances below 1 m clamped, ours) plus
     shadowing ``N(0, sigma_1^2)``."""
-    d = np.linalg.norm(np.asarray(locations_m) - setup.target, axis=-1)
+    loc = np.asarray(locations_m)
+    d = np.linalg.norm(loc - setup.target_for(loc), axis=-1)
     return setup.channel.sample_rss_dbm(d, rng)
 
 
@@ -219,11 +252,32 @@ def pf_run(setup: Setup, anchors_m, rss_dbm, rng: np.random.Generator, *, n_part
                            resampling=resampling, cloud_steps=cloud_steps)
 
 
+#: The SIR-PF's point estimate (Sec. 6.1 does not say which estimate of the cloud it compares: its "ML estimate" is
+#: not defined): the weighted mean (MMSE), the highest-weight particle, or the mode of a kernel density of the cloud.
+PF_ESTIMATES = ("mean", "highest_weight", "kde_mode")
+
+
+def pf_estimate_m(result, estimate: str = "mean") -> np.ndarray:
+    """The SIR-PF's estimate ``(R, dim)`` after the last iteration of ``result`` (:func:`pf_run`), as ``estimate``
+    (:data:`PF_ESTIMATES`): ``"mean"`` the weighted particle mean (MMSE), ``"highest_weight"`` the particle of the
+    largest weight (both before the last resampling), ``"kde_mode"`` the mode of a Gaussian kernel density of the
+    final cloud, Silverman's bandwidth (:func:`locbook.tracking.particle.kernel_map_estimate`; the SIR resamples at
+    every iteration, so the final weights are equal and the density is evaluated at that function's first 256
+    particles as candidates, a subsample of the posterior)."""
+    check_choice("estimate", estimate, PF_ESTIMATES)
+    if estimate == "mean":
+        return result.mean_m[:, -1]
+    if estimate == "highest_weight":
+        return result.map_m[:, -1]
+    return kernel_map_estimate(result.particles_m, result.weights)
+
+
 def crlb_m(setup: Setup, locations_m) -> np.ndarray:
     """The CRLB ``sqrt(tr J^{-1})`` ``(R,)`` of the static position from the N readings (an extension): ``J =
     sum_i (10 eta / ln 10)^2 u_i u_i^T / (d_i^2 v_i)``, ``v_i = sigma_1^2 + (10 eta / ln 10)^2 sigma_3^2 / d_i^2``
     (the GPS noise propagated to first order, as in the EKF's inflation; ``sigma_3 = 0`` gives the standard bound)."""
-    diff = np.asarray(locations_m, float) - setup.target
+    loc = np.asarray(locations_m, float)
+    diff = loc - setup.target_for(loc)
     d2 = np.maximum(np.sum(diff**2, axis=-1), 1.0)
     slope2 = (10 * setup.path_loss_exp / np.log(10)) ** 2
     v = setup.sigma_db**2 + slope2 * setup.receiver_sigma_m**2 / d2
@@ -232,5 +286,7 @@ def crlb_m(setup: Setup, locations_m) -> np.ndarray:
 
 
 def errors_m(estimates_m, target_m) -> np.ndarray:
-    """Euclidean error ``|X_hat - X|`` (the thesis's "difference between estimated mean and actual location")."""
-    return np.linalg.norm(np.asarray(estimates_m) - np.asarray(target_m), axis=-1)
+    """Euclidean error ``|X_hat - X|`` (the thesis's "difference between estimated mean and actual location");
+    ``target_m`` ``(dim,)`` or one per run ``(R, dim)`` against estimates ``(R, ..., dim)``."""
+    est = np.asarray(estimates_m)
+    return np.linalg.norm(est - _target_like(target_m, est), axis=-1)

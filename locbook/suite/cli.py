@@ -1,6 +1,6 @@
-"""``locbook`` command line: list the experiments, run the notebook suite, run a study.
+"""``locbook`` command line: list the experiments, run the notebook suite, run a study or a reading bracket.
 
-Exit status of ``run`` and ``study`` (README, "Interrupts, concurrent runs and the cache"): 0 all good; 1 some
+Exit status of ``run``, ``study`` and ``bracket`` (README, "Interrupts, concurrent runs and the cache"): 0 all good; 1 some
 experiment failed (or the Dask scheduler was lost); 2 bad input (parameters, experiment list, notebook file,
 unwritable folder); 3 no space left on the device (or quota) holding the reports: the run stopped, the path is
 named, earlier reports are kept; 130 / 143 interrupted by SIGINT / SIGTERM (finished reports are kept).
@@ -13,6 +13,7 @@ import sys
 from pathlib import Path
 
 from ..errors import ParameterError
+from ..reproduce.readings import ReadingsError
 
 #: exit statuses of ``locbook run`` (module docstring)
 EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_DISK_FULL = 0, 1, 2, 3
@@ -126,7 +127,29 @@ def main(argv: list[str] | None = None) -> int:
     study.add_argument("--executor", choices=("local", "dask"), default="local",
                        help="local: worker processes here (default); dask: each point a task on dask.distributed")
     study.add_argument("--scheduler", metavar="ADDRESS", help="as for run")
-    for command in (lst, show, nbs, run, study):   # --suite after the command too; SUPPRESS keeps one given before it
+    bracket = sub.add_parser("bracket", help="run an experiment under each declared reading of what its source left "
+                                             "unprinted and give every scored row a bracket verdict "
+                                             "(reports/brackets/<experiment>/)")
+    bracket.add_argument("experiment", help="an experiment id (`locbook list`)")
+    bracket.add_argument("--profile", choices=("quick", "full"), default="quick", help=PROFILE_HELP)
+    bracket.add_argument("--readings", type=Path, metavar="CSV",
+                         help="a readings file of your own (the columns of locbook/data/readings/*.csv) instead of "
+                              "the declared readings")
+    bracket.add_argument("--jobs", "-j", type=lambda t: _positive(int, t), default=2,
+                         help="points run in parallel processes (default 2)")
+    bracket.add_argument("--force", action="store_true", help="execute even the points whose report is up to date")
+    bracket.add_argument("--reports", type=Path, help="reports folder (default: <repository>/reports); the bracket "
+                                                      "writes <reports>/brackets/<experiment>/")
+    bracket.add_argument("--timeout", type=lambda t: _positive(float, t), default=1800,
+                         help="seconds allowed per notebook cell (default 1800)")
+    bracket.add_argument("--progress", choices=("auto", "live", "plain", "quiet"), default="auto",
+                         help="as for run")
+    bracket.add_argument("--quiet", "-q", dest="progress", action="store_const", const="quiet",
+                         help="--progress quiet")
+    bracket.add_argument("--executor", choices=("local", "dask"), default="local",
+                         help="local: worker processes here (default); dask: each point a task on dask.distributed")
+    bracket.add_argument("--scheduler", metavar="ADDRESS", help="as for run")
+    for command in (lst, show, nbs, run, study, bracket):   # --suite after the command too; SUPPRESS keeps one given before it
         command.add_argument("--suite", type=Path, default=argparse.SUPPRESS, help=suite_help)
     args = parser.parse_args(argv)
 
@@ -152,6 +175,14 @@ def main(argv: list[str] | None = None) -> int:
             result = run_study(suite, declared, report_root=args.reports, jobs=args.jobs, force=args.force,
                                timeout_s=args.timeout, progress=args.progress, executor=args.executor,
                                scheduler=args.scheduler)
+        elif args.command == "bracket":
+            from .bracket import bracket_folder, find_experiment, read_readings_option, run_bracket
+            exp = find_experiment(suite, args.experiment)
+            see = bracket_folder(suite, exp, args.reports) / "bracket.csv"
+            result = run_bracket(suite, exp, profile=args.profile, readings=read_readings_option(args.readings),
+                                 report_root=args.reports, jobs=args.jobs, force=args.force,
+                                 timeout_s=args.timeout, progress=args.progress, executor=args.executor,
+                                 scheduler=args.scheduler)
         else:
             experiments = suite.select(args.ids)
             from .runner import run_suite
@@ -159,7 +190,7 @@ def main(argv: list[str] | None = None) -> int:
                                overrides=_parse_overrides(args.parameter), report_root=args.reports,
                                out_dir=args.out, timeout_s=args.timeout, progress=args.progress,
                                executor=args.executor, scheduler=args.scheduler)
-    except ParameterError as exc:
+    except (ParameterError, ReadingsError) as exc:
         print(f"locbook: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:  # before the run started its own handling (loading, checking parameters)
@@ -177,6 +208,13 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_BAD_INPUT
     if args.command == "study":
         _print_summary(result, args.progress, see)
+        return _exit_status(result)
+    if args.command == "bracket":
+        from .bracket import counts, load_bracket
+        _print_summary(result, args.progress, see)
+        found = counts(load_bracket(see.parent))
+        print(f"bracket of {args.experiment}: " + ", ".join(f"{n} {b}" for b, n in found.items())
+              + f" (scored rows; findings: {see.parent.parent / (exp.document.key + '-findings.md')})")
         return _exit_status(result)
     if result.report_dir.name != args.profile:
         print(f"reports of this run: {result.report_dir.resolve()} (reports/{args.profile}/ is unchanged)")

@@ -349,11 +349,14 @@ def _cached(folder: Path, exp: Experiment, key: str) -> tuple[bool, str]:
 # reports
 
 def write_suite_reports(suite: Suite, report_dir: Path, *, list_all: bool = True) -> None:
-    """Rebuild ``numbers.csv``, ``index.html`` and ``index.md`` from the experiment folders present.
+    """Rebuild ``numbers.csv``, ``index.html`` and ``index.md`` from the experiment folders present (and the
+    reading brackets in ``<reports>/brackets/``: :mod:`locbook.suite.bracket`).
 
     An experiment's rows come from its own folder, whatever run wrote it, so a partial run leaves the
     others' results as they were. ``list_all=False`` (folders of ``-p`` runs) lists only the experiments
     present."""
+    from .bracket import SITE_NUMBER_COLUMNS, bracket_of_rows, brackets_root, load_bracket
+
     status = _read_json(report_dir / "status.json", {})
     rows, entries = [], []
     for exp in suite.experiments:
@@ -362,15 +365,17 @@ def write_suite_reports(suite: Suite, report_dir: Path, *, list_all: bool = True
         if not present and not list_all:
             continue
         numbers = _read_csv(folder / "numbers.csv") if present else []
+        # each row's reading bracket, from <reports>/brackets/<id>/bracket.csv when one was run (else empty)
+        numbers = bracket_of_rows(numbers, load_bracket(brackets_root(report_dir) / exp.id))
         rows += numbers
         entries.append({"exp": exp, "present": present, "report": _read_json(folder / "report.json", {}),
                         "run": _read_json(folder / "run.json", {}), "last": status.get(exp.id, {}),
                         "numbers": numbers})
     out = io.StringIO()
-    writer = csv.DictWriter(out, fieldnames=NUMBER_COLUMNS)
+    writer = csv.DictWriter(out, fieldnames=SITE_NUMBER_COLUMNS)
     writer.writeheader()
     for r in rows:
-        writer.writerow({c: r.get(c, "") for c in NUMBER_COLUMNS})
+        writer.writerow({c: r.get(c, "") for c in SITE_NUMBER_COLUMNS})
     _write_atomic(report_dir / "numbers.csv", out.getvalue())
     _write_atomic(report_dir / "index.html", site.index_html(report_dir, entries, rows, locbook_version()))
     _write_atomic(report_dir / "index.md", site.index_markdown(report_dir, entries, rows))

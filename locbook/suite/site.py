@@ -82,6 +82,34 @@ def _headline(rows) -> str:
             "counted apart below).")
 
 
+def _bracket_counts(rows) -> dict | None:
+    """Bracket verdicts of the scored rows (reproduction, calibrated, claim; each printed quantity once), or None
+    when no row has a bracket (no ``locbook bracket`` ran for these experiments)."""
+    scored = [r for r in rows if r.get("kind") in ("reproduction", "calibrated", "claim") and not r.get("same_as")
+              and r.get("verdict") in ("within", "loose", "miss")]
+    c = Counter(r.get("bracket", "") for r in scored)
+    if not any(c[b] for b in ("default", "reachable", "open", "outside")):
+        return None
+    return {"n": len(scored), "default": c["default"], "reachable": c["reachable"], "open": c["open"],
+            "outside": c["outside"], "none": c[""]}
+
+
+def _bracket_headline(rows) -> str:
+    b = _bracket_counts(rows)
+    if b is None:
+        return ""
+    return (f"**Reading brackets of the {b['n']} scored rows: {b['default']} within by default, {b['reachable']} "
+            f"reachable under another declared reading, {b['outside']} outside every declared reading, {b['open']} "
+            f"open (a reading not swept), {b['none']} not bracketed** (`locbook bracket`; the `bracket` and "
+            "`bracket_readings` columns of numbers.csv, and the findings page of each document).")
+
+
+def _findings(report_dir: Path) -> list[tuple[str, str]]:
+    """(document, relative link) of every findings page beside this reports folder."""
+    root = Path(report_dir).parent / "brackets"
+    return [(p.name[:-len("-findings.md")], f"../brackets/{p.name}") for p in sorted(root.glob("*-findings.md"))]
+
+
 def _reasons(rows) -> list[dict]:
     """Misses and loose rows grouped by their note (the likely reason)."""
     groups: dict[tuple, list] = defaultdict(list)
@@ -316,6 +344,9 @@ def index_markdown(report_dir: Path, entries, rows) -> str:
              "nothing to compare). Verdicts: `within` (inside a window no wider than +-25 %: printed rounding + "
              "2 Monte-Carlo standard errors + a named ambiguity), `loose` (inside a wider window), `miss`.", "",
              _headline(rows), ""]
+    if _bracket_headline(rows):
+        lines += [_bracket_headline(rows), "", "Findings per document: " + ", ".join(
+            f"[{doc}]({link})" for doc, link in _findings(report_dir)), ""]
     twice = double_counted(rows)
     if twice:
         lines += ["**Counted more than once** (fix the notebooks): " + "; ".join(
@@ -390,7 +421,8 @@ def index_html(report_dir: Path, entries, rows, version: str) -> str:
                  for key, doc, doc_rows in _by_document(entries, rows) if doc_rows]
     return _render(
         "index.html", version=version, folder=report_dir.name, numbers_csv=(report_dir / "numbers.csv").is_file(),
-        headline=_headline_counts(rows), twice=double_counted(rows),
+        headline=_headline_counts(rows), brackets=_bracket_counts(rows), findings=_findings(report_dir),
+        twice=double_counted(rows),
         total=_counts_table(scoreboard_counts(rows)) if rows else None, documents=documents,
         experiments=experiments, n_present=sum(1 for e in entries if e["present"]), reasons=reasons)
 

@@ -1,0 +1,406 @@
+"""Reading brackets: does ANY plausible reading of what a source left unprinted reproduce a printed number?
+
+``locbook bracket EXPERIMENT`` runs the experiment under its declared readings (:mod:`locbook.reproduce.readings`,
+``locbook/data/readings/<document>.csv``) and gives every scored row a bracket verdict beside its verdict.
+
+Points (each one task of :func:`locbook.suite.runner.run_tasks`, so lock, staging, validation, retries, interrupts,
+Dask and the cache per point are the runner's): the ``default`` point (the profile's own parameters), then, one
+reading at a time, a point per other value of each reading that a notebook parameter sets: every alternative,
+and for a numeric range both ends ``low`` and ``high`` (rounded for an ``int`` parameter). Values equal to the
+profile's value are not run again; two readings that name the same parameter value share one point. Every value
+is checked against the parameter's type and rule before anything runs (a readings file that names a value the
+notebook refuses is a :class:`~locbook.suite.spec.SuiteError`). Readings act one at a time: a printed number
+that only a combination of readings reaches is not found (declare the combination as a reading of its own).
+
+The bracket verdict of a scored row (kind ``reproduction``, ``calibrated`` or ``claim`` with a within / loose /
+miss verdict; arithmetic, shown and linked rows have none), in this order:
+
+``default``
+    within under the default reading;
+``reachable``
+    within under at least one other declared reading (``reached_by`` names each: ``reading: parameter=value``,
+    with ``[fitted]`` for a reading declared ``fitted_to_output``);
+``open``
+    not reached, and a reading that could matter was not swept: a gap (a reading no notebook parameter sets yet,
+    with alternatives or a range) or a point that failed (``open_readings`` names them);
+``outside``
+    every declared reading was swept and none reaches it: the printed number disagrees with every plausible
+    reading of its own description.
+
+"Within" is the point's own verdict, i.e. under that run's window (rounding, 2 Monte-Carlo standard errors at the
+bracket's profile, the named ambiguity). ``band_low`` / ``band_high`` are the smallest and largest of our values
+over every point, ``closest`` the value nearest the printed one and ``closest_reading`` its point.
+
+Outputs in ``<reports>/brackets/<experiment>/``: ``bracket.csv`` (:data:`BRACKET_COLUMNS`, one row per scored
+row of the default point), ``points.csv`` (:data:`POINT_COLUMNS`: what each point changed and how it ended) and one
+report folder per point; ``<reports>/brackets/<document>-findings.md`` lists, from every bracket of the document
+present, the ``outside`` rows with their evidence, then the reachable and open rows. The site (index, pages,
+``numbers.csv``) shows the bracket of each row (:func:`bracket_of_rows`): ``default`` when the row is within in
+that report, else what the bracket's other readings gave.
+"""
+from __future__ import annotations
+
+import csv
+import io
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ..errors import ParameterError
+from ..reproduce.readings import Reading, load_reading_file, readings_for
+from ..reproduce.report import NUMBER_COLUMNS
+from ..reproduce.scoring import JUDGED_KINDS
+from .params import check_value
+from .spec import Experiment, Suite, SuiteError, finite_float
+from .study import _atomic, _point_key
+
+__all__ = ["BracketPoint", "find_experiment", "brackets_root", "SITE_NUMBER_COLUMNS", "BRACKET_ROW_COLUMNS", "bracket_points", "bracket_gaps", "run_bracket", "bracket_folder", "bracket_rows",
+           "bracket_of_rows", "load_bracket", "BRACKETS", "BRACKET_COLUMNS", "POINT_COLUMNS"]
+
+BRACKETS = ("default", "reachable", "open", "outside")
+#: the columns a suite's numbers.csv adds to an experiment's (:data:`~locbook.reproduce.report.NUMBER_COLUMNS`)
+BRACKET_ROW_COLUMNS = ("bracket", "bracket_readings")
+SITE_NUMBER_COLUMNS = (*NUMBER_COLUMNS, *BRACKET_ROW_COLUMNS)
+BRACKET_COLUMNS = ("experiment", "printed_id", "quantity", "where", "unit", "kind", "printed", "ours", "verdict",
+                   "bracket", "reached_by", "open_readings", "band_low", "band_high", "closest", "closest_reading",
+                   "points", "profile")
+POINT_COLUMNS = ("point", "readings", "parameter", "value", "status", "folder")
+DEFAULT_POINT = "default"
+
+
+@dataclass(frozen=True)
+class BracketPoint:
+    """One run of a bracket: ``parameter`` set to ``value`` (``None`` for the default point) for ``readings``
+    (the declared readings that name this value); ``parameters`` every value the notebook gets."""
+
+    key: str
+    experiment: Experiment
+    readings: tuple[Reading, ...]
+    parameter: str
+    value: object
+    parameters: dict = field(hash=False)
+
+    @property
+    def label(self) -> str:
+        """``reading: parameter=value`` (``[fitted]`` after a fitted_to_output reading), or ``default``."""
+        if not self.readings:
+            return DEFAULT_POINT
+        names = ", ".join(r.name + (" [fitted]" if r.is_calibration else "") for r in self.readings)
+        return f"{names}: {self.parameter}={_text(self.value)}"
+
+
+def _text(value) -> str:
+    if isinstance(value, str):
+        return f"'{value}'"
+    if isinstance(value, bool):
+        return str(value).lower()
+    return repr(value)
+
+
+def _sweep_values(reading: Reading, annotation: str) -> list:
+    values = list(reading.alternatives)
+    if reading.low is not None:
+        ends = (reading.low, reading.high)
+        values += [int(round(v)) for v in ends] if annotation == "int" else list(ends)
+    return values
+
+
+def _same(a, b) -> bool:
+    if isinstance(a, bool) or isinstance(b, bool):
+        return a is b
+    if isinstance(a, (int, float)) and isinstance(b, (int, float)):
+        return float(a) == float(b)
+    return a == b
+
+
+def find_experiment(suite: Suite, experiment_id: str) -> Experiment:
+    """The experiment of ``experiment_id`` (exactly: a bracket is per experiment)."""
+    for exp in suite.experiments:
+        if exp.id == experiment_id:
+            return exp
+    raise SuiteError(f"unknown experiment {experiment_id!r}; a bracket takes one experiment id (`locbook list`)")
+
+
+def experiment_readings(exp: Experiment, readings: tuple[Reading, ...] | None = None) -> tuple[Reading, ...]:
+    """The readings of ``exp``: those given (any that list it), else the declared ones of the package."""
+    found = readings_for(exp.id) if readings is None else tuple(r for r in readings if exp.id in r.experiments)
+    if not found:
+        raise SuiteError(f"no readings are declared for experiment {exp.id!r}, so there is nothing to bracket "
+                         "(locbook/data/readings/<document>.csv, or give a readings file with --readings)")
+    return found
+
+
+def bracket_gaps(readings: tuple[Reading, ...]) -> list[Reading]:
+    """The readings that could move a row but cannot be swept: no notebook parameter sets them, and they name
+    alternatives or a range."""
+    return [r for r in readings if r.is_gap and (r.alternatives or r.low is not None)]
+
+
+def bracket_points(exp: Experiment, profile: str, readings: tuple[Reading, ...]) -> list[BracketPoint]:
+    """The default point, then one point per other value of each sweepable reading (module docstring), every
+    value checked against the parameter's type and rule."""
+    declared = exp.declared_parameters()
+    base = exp.parameters(profile)
+    points = [BracketPoint(f"{exp.id}-{DEFAULT_POINT}", exp, (), "", None, base)]
+    by_value: dict[tuple, int] = {}
+    for reading in readings:
+        if reading.is_gap:
+            continue
+        if reading.parameter not in declared:
+            raise SuiteError(f"reading {reading.document}/{reading.name} names parameter {reading.parameter!r}, which "
+                             f"{exp.id!r} does not declare (known: {', '.join(sorted(declared))})")
+        param = declared[reading.parameter]
+        for value in _sweep_values(reading, param.annotation):
+            try:
+                checked = check_value(param, value, exp.rules.get(reading.parameter))
+            except ParameterError as exc:
+                raise SuiteError(f"reading {reading.document}/{reading.name} of {exp.id!r}: {exc}") from None
+            if _same(checked, base.get(reading.parameter, param.default)):
+                continue       # the profile's own value: the default point
+            key = _point_key(exp, {reading.parameter: checked})
+            if key in by_value:   # another reading names the same value: one run serves both
+                i = by_value[key]
+                points[i] = BracketPoint(key, exp, (*points[i].readings, reading), reading.parameter, checked,
+                                         points[i].parameters)
+                continue
+            by_value[key] = len(points)
+            points.append(BracketPoint(key, exp, (reading,), reading.parameter, checked,
+                                       {**base, reading.parameter: checked}))
+    return points
+
+
+# ---------------------------------------------------------------------------------------------------
+# verdicts
+
+def _row_key(r: dict) -> tuple[str, str, str]:
+    return (r["printed_id"], r["quantity"], r["where"])
+
+
+def _index(rows: list[dict]) -> tuple[dict, dict]:
+    """Rows by (printed_id, quantity, where), and by (printed_id, where) where that pair is unique (quantities
+    that name a run count differ between profiles)."""
+    full, loose, seen = {}, {}, {}
+    for r in rows:
+        full.setdefault(_row_key(r), r)
+        pair = (r["printed_id"], r["where"])
+        seen[pair] = seen.get(pair, 0) + 1
+        loose[pair] = r
+    return full, {k: v for k, v in loose.items() if seen[k] == 1}
+
+
+def _find(indexed: tuple[dict, dict], r: dict) -> dict | None:
+    full, loose = indexed
+    return full.get(_row_key(r)) or loose.get((r["printed_id"], r["where"]))
+
+
+def _scored(r: dict) -> bool:
+    return r["kind"] in JUDGED_KINDS and r["verdict"] in ("within", "loose", "miss")
+
+
+def bracket_rows(exp: Experiment, points: list[BracketPoint], folder: Path, done: set[str], gaps: list[Reading],
+                 profile: str) -> list[dict]:
+    """The bracket.csv rows: one per scored row of the default point (none if the default point did not run)."""
+    from .site import _read_csv
+
+    if points[0].key not in done:
+        return []
+    default = _read_csv(folder / points[0].key / "numbers.csv")
+    others = [(p, _index(_read_csv(folder / p.key / "numbers.csv"))) for p in points[1:] if p.key in done]
+    failed = [p for p in points[1:] if p.key not in done]
+    open_names = [f"{r.name} (gap: {r.where})" for r in gaps] + [f"{p.label} (did not run)" for p in failed]
+    rows = []
+    for r in default:
+        if not _scored(r):
+            continue
+        printed = finite_float(r["printed"])
+        values = [(DEFAULT_POINT, finite_float(r["reproduced"]))]
+        reached = []
+        for p, indexed in others:
+            alt = _find(indexed, r)
+            if alt is None:
+                continue
+            values.append((p.label, finite_float(alt["reproduced"])))
+            if alt["verdict"] == "within":
+                reached.append(p.label)
+        if r["verdict"] == "within":
+            verdict = "default"
+        elif reached:
+            verdict = "reachable"
+        elif open_names:
+            verdict = "open"
+        else:
+            verdict = "outside"
+        finite = [(label, v) for label, v in values if v is not None]
+        closest = (min(finite, key=lambda lv: abs(lv[1] - printed)) if finite and printed is not None
+                   else ("", None))
+        rows.append({"experiment": exp.id, "printed_id": r["printed_id"], "quantity": r["quantity"],
+                     "where": r["where"], "unit": r["unit"], "kind": r["kind"], "printed": r["printed"],
+                     "ours": r["reproduced"], "verdict": r["verdict"], "bracket": verdict,
+                     "reached_by": "; ".join(reached),
+                     "open_readings": "; ".join(open_names) if verdict == "open" else "",
+                     "band_low": _fmt(min((v for _, v in finite), default=None)),
+                     "band_high": _fmt(max((v for _, v in finite), default=None)),
+                     "closest": _fmt(closest[1]), "closest_reading": closest[0], "points": len(finite),
+                     "profile": profile})
+    return rows
+
+
+def _fmt(value: float | None) -> str:
+    return "" if value is None else f"{value:.10g}"
+
+
+def bracket_of_rows(rows: list[dict], bracket: list[dict]) -> list[dict]:
+    """``rows`` (numbers.csv rows of one experiment, any profile) with ``bracket`` and ``bracket_readings`` set from
+    that experiment's ``bracket`` rows: ``default`` when the row itself is within, else the bracket's other
+    readings (reachable / open / outside); empty for rows the bracket does not cover or does not score."""
+    indexed = _index(bracket)
+    out = []
+    for r in rows:
+        b = _find(indexed, r) if _scored(r) else None
+        if b is None:
+            out.append({**r, "bracket": "", "bracket_readings": ""})
+        elif r["verdict"] == "within":
+            out.append({**r, "bracket": "default", "bracket_readings": ""})
+        elif b["reached_by"]:
+            out.append({**r, "bracket": "reachable", "bracket_readings": b["reached_by"]})
+        elif b["open_readings"] or b["bracket"] == "open":
+            out.append({**r, "bracket": "open", "bracket_readings": b["open_readings"]})
+        else:
+            out.append({**r, "bracket": "outside", "bracket_readings": f"band {b['band_low']} .. {b['band_high']} "
+                                                                        f"over {b['points']} readings"})
+    return out
+
+
+# ---------------------------------------------------------------------------------------------------
+# outputs
+
+def bracket_folder(suite: Suite, exp: Experiment, report_root: Path | None = None) -> Path:
+    root = Path(os.path.abspath(Path(report_root).expanduser())) if report_root else suite.default_reports()
+    return root / "brackets" / exp.id
+
+
+def brackets_root(report_dir: Path) -> Path:
+    """Where the brackets of a run's reports folder live: ``<reports>/brackets`` beside ``<reports>/<profile>``."""
+    return Path(report_dir).parent / "brackets"
+
+
+def load_bracket(folder: Path) -> list[dict]:
+    """The rows of ``<folder>/bracket.csv`` (empty if there is none)."""
+    from .site import _read_csv
+    return _read_csv(folder / "bracket.csv")
+
+
+def _write_table(path: Path, columns, rows) -> None:
+    out = io.StringIO()
+    writer = csv.DictWriter(out, fieldnames=columns, lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(rows)
+    _atomic(path, lambda tmp: tmp.write_text(out.getvalue(), encoding="utf-8"))
+
+
+def _md_cell(text) -> str:
+    return str(text).replace("|", "\\|").replace("\n", " ")
+
+
+def findings_markdown(document: str, brackets: dict[str, list[dict]], points: dict[str, list[dict]]) -> str:
+    """The findings page of ``document`` from its experiments' bracket rows and points (module docstring)."""
+    rows = [r for eid in sorted(brackets) for r in brackets[eid]]
+    counts = {b: sum(r["bracket"] == b for r in rows) for b in BRACKETS}
+    lines = [f"# Findings: {document}", "",
+             f"Scored rows bracketed: {len(rows)} ({', '.join(f'{b} {n}' for b, n in counts.items())}), from the "
+             f"brackets of {', '.join(sorted(brackets))}. A bracket runs the experiment under each declared reading "
+             "of what the source left unprinted, one reading at a time (README, \"Reading brackets\").", ""]
+    sections = [("outside", "Outside: no declared reading reaches the printed number",
+                 "Every declared reading was run; the printed number lies outside every window. Evidence: our values "
+                 "over all readings (band) and the closest one."),
+                ("reachable", "Reachable: within under another reading", "The reading(s) that reach each row."),
+                ("open", "Open: a reading that could matter was not swept", "The readings not swept.")]
+    for verdict, title, text in sections:
+        chosen = [r for r in rows if r["bracket"] == verdict]
+        lines += [f"## {title} ({len(chosen)})", "", text, ""]
+        if not chosen:
+            lines += ["None.", ""]
+            continue
+        lines += ["| experiment | printed quantity | printed | ours (default) | verdict | band | closest (reading) | "
+                  + ("readings |" if verdict != "outside" else "points |"),
+                  "|---|---|---|---|---|---|---|---|"]
+        for r in chosen:
+            extra = {"outside": r["points"], "reachable": r["reached_by"], "open": r["open_readings"]}[verdict]
+            lines.append(f"| {r['experiment']} | {_md_cell(r['printed_id'])} | {r['printed']} | {r['ours']} | "
+                         f"{r['verdict']} | {r['band_low']} .. {r['band_high']} | {r['closest']} "
+                         f"({_md_cell(r['closest_reading'])}) | {_md_cell(extra)} |")
+        lines.append("")
+    lines += ["## Readings swept", ""]
+    for eid in sorted(points):
+        lines.append(f"- {eid} ({brackets[eid][0]['profile'] if brackets.get(eid) else '?'} profile): "
+                     + "; ".join(f"{p['readings'] or 'default'}"
+                                 + (f" = {p['value']}" if p["parameter"] else "")
+                                 + ("" if p["status"] in ("ok", "cached") else f" [{p['status']}]")
+                                 for p in points[eid]))
+    return "\n".join(lines) + "\n"
+
+
+def write_findings(report_root: Path, document: str, suite: Suite) -> Path | None:
+    """Rewrite ``<report_root>/brackets/<document>-findings.md`` from the brackets of ``document`` present."""
+    from .site import _read_csv
+    brackets, points = {}, {}
+    for exp in suite.experiments:
+        if exp.document.key != document:
+            continue
+        folder = report_root / "brackets" / exp.id
+        if (folder / "bracket.csv").is_file():
+            brackets[exp.id] = load_bracket(folder)
+            points[exp.id] = _read_csv(folder / "points.csv")
+    if not brackets:
+        return None
+    path = report_root / "brackets" / f"{document}-findings.md"
+    text = findings_markdown(document, brackets, points)
+    _atomic(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
+    return path
+
+
+def write_bracket_outputs(exp: Experiment, points: list[BracketPoint], folder: Path, outcomes, gaps: list[Reading],
+                          profile: str, suite: Suite) -> None:
+    """bracket.csv, points.csv and the document's findings page (also after an interrupt: from the points that
+    ran; a row is ``open`` while a point it needs has not run)."""
+    status = {o.id: o.status for o in outcomes}
+    done = {k for k, s in status.items() if s in ("ok", "cached")}
+    rows = bracket_rows(exp, points, folder, done, gaps, profile)
+    _write_table(folder / "bracket.csv", BRACKET_COLUMNS, rows)
+    _write_table(folder / "points.csv", POINT_COLUMNS, [
+        {"point": i, "readings": ", ".join(r.name for r in p.readings), "parameter": p.parameter,
+         "value": "" if not p.parameter else _text(p.value), "status": status.get(p.key, "not run"),
+         "folder": p.key} for i, p in enumerate(points)])
+    write_findings(folder.parent.parent, exp.document.key, suite)
+
+
+def run_bracket(suite: Suite, exp: Experiment, *, profile: str = "quick", readings: tuple[Reading, ...] | None = None,
+                report_root: Path | None = None, jobs: int = 1, force: bool = False, timeout_s: float = 1800,
+                retries: int = 1, progress="plain", executor: str = "local", scheduler: str | None = None,
+                kernel_name: str | None = None):
+    """Run the bracket of ``exp`` (module docstring) into ``<report_root>/brackets/<experiment>/``. ``readings``:
+    the readings to sweep (default: those the package declares for ``exp``). Returns the runner's
+    :class:`~locbook.suite.runner.SuiteRun` (one outcome per point, by folder key)."""
+    from .runner import KERNEL_NAME, Task, run_tasks
+
+    found = experiment_readings(exp, readings)
+    points = bracket_points(exp, profile, found)      # every value checked before anything runs
+    gaps = bracket_gaps(found)
+    folder = bracket_folder(suite, exp, report_root)
+    tasks = [Task(p.key, exp, p.parameters) for p in points]
+    return run_tasks(suite, tasks, profile, folder, jobs=jobs, force=force, timeout_s=timeout_s, retries=retries,
+                     kernel_name=kernel_name or KERNEL_NAME, progress=progress, executor=executor,
+                     scheduler=scheduler,
+                     write_reports=lambda where, outcomes: write_bracket_outputs(exp, points, where, outcomes, gaps,
+                                                                                 profile, suite))
+
+
+def read_readings_option(path: Path | None) -> tuple[Reading, ...] | None:
+    """``--readings FILE``: a readings CSV of one's own (the columns of locbook/data/readings), else None."""
+    return None if path is None else load_reading_file(path)
+
+
+def counts(rows: list[dict]) -> dict[str, int]:
+    """Bracket verdict counts of bracket.csv rows (or numbers rows with a ``bracket`` column)."""
+    return {b: sum(r.get("bracket") == b for r in rows) for b in BRACKETS}
+

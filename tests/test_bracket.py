@@ -1,0 +1,172 @@
+"""``locbook bracket``: points from declared readings, bracket verdicts of a toy notebook whose arithmetic is known
+(value = 10 a + b + seed against a printed 16.0; twice = 2 a against a printed 3.0), the findings page, and the
+bracket columns of the suite's numbers.csv."""
+import csv
+import textwrap
+
+import pytest
+
+from locbook.reproduce.readings import READING_COLUMNS, load_reading_file, readings_for
+from locbook.suite import SuiteError, load_suite
+from locbook.suite.bracket import (BRACKET_COLUMNS, SITE_NUMBER_COLUMNS, bracket_gaps, bracket_of_rows,
+                                   bracket_points, experiment_readings, find_experiment)
+from locbook.suite.cli import main
+from test_study import stoy  # noqa: F401  (a fixture: the toy repository with george-study, quick seed = 3)
+from test_suite import toy  # noqa: F401
+
+HEADER = ",".join(READING_COLUMNS)
+#: a = 1.3 gives value 16.0 (printed, within); b never reaches value; twice's window is always loose
+READINGS = f"""{HEADER}
+slope,george-study,a,,1.0,[1.3],0.0,2.0,assumed,Table 9,toy slope
+offset,george-study,b,,0.0,[0.5],,,printed,Table 9,toy offset
+"""
+OFFSET_ONLY = f"""{HEADER}
+offset,george-study,b,,0.0,[0.5],,,printed,Table 9,toy offset
+"""
+WITH_GAP = f"""{HEADER}
+offset,george-study,b,,0.0,[0.5],,,printed,Table 9,toy offset
+hidden,george-study,,locbook.toy.HIDDEN,1,[2],,,assumed,Table 9,a module constant no parameter sets
+"""
+
+
+def _readings(tmp_path, text, name="george.csv"):
+    path = tmp_path / name
+    path.write_text(textwrap.dedent(text))
+    return path
+
+
+def _suite(toy):
+    return load_suite(toy / "notebooks" / "experiments.toml")
+
+
+def bracket(toy, readings, *args, reports="reports"):
+    return main(["--suite", str(toy / "notebooks" / "experiments.toml"), "bracket", "george-study", "--readings",
+                 str(readings), "--reports", str(toy / reports), "--progress", "plain", *args])
+
+
+def _table(path):
+    with open(path, newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+# -- the points ---------------------------------------------------------------------------------------------
+
+def test_points_are_the_default_then_each_other_value_one_reading_at_a_time(stoy, tmp_path):
+    exp = find_experiment(_suite(stoy), "george-study")
+    found = experiment_readings(exp, load_reading_file(_readings(tmp_path, READINGS)))
+    points = bracket_points(exp, "quick", found)
+    assert [p.label for p in points] == ["default", "slope: a=1.3", "slope: a=0.0", "slope: a=2.0", "offset: b=0.5"]
+    assert points[0].parameters == {"seed": 3}                           # the profile's own values
+    assert points[1].parameters == {"seed": 3, "a": 1.3}                 # one reading changed, the rest as profiled
+    assert len({p.key for p in points}) == len(points)
+
+
+def test_a_value_equal_to_the_profile_is_not_run_twice_and_shared_values_share_a_point(stoy, tmp_path):
+    exp = find_experiment(_suite(stoy), "george-study")
+    text = f"{HEADER}\nslope,george-study,a,,1.0,[1.3],1.0,2.0,assumed,s,r\nsame,george-study,a,,,[2.0],,,assumed,s,r\n"
+    points = bracket_points(exp, "quick", load_reading_file(_readings(tmp_path, text)))
+    # the range's low end equals the default (1.0): skipped; a = 2.0 is named by both readings: one point
+    assert [p.label for p in points] == ["default", "slope: a=1.3", "slope, same: a=2.0"]
+
+
+def test_a_reading_value_the_notebook_refuses_is_an_error_before_anything_runs(stoy, tmp_path):
+    exp = find_experiment(_suite(stoy), "george-study")
+    bad = load_reading_file(_readings(tmp_path, f"{HEADER}\nslope,george-study,a,,1.0,[7.0],,,assumed,s,r\n"))
+    with pytest.raises(SuiteError, match=r"reading george/slope of 'george-study'.*'a' = 7.0 is not allowed"):
+        bracket_points(exp, "quick", bad)
+    unknown = load_reading_file(_readings(tmp_path, f"{HEADER}\nslope,george-study,nope,,1.0,[2.0],,,assumed,s,r\n"))
+    with pytest.raises(SuiteError, match="names parameter 'nope', which 'george-study' does not declare"):
+        bracket_points(exp, "quick", unknown)
+    with pytest.raises(SuiteError, match="no readings are declared for experiment 'george-study'"):
+        experiment_readings(exp, load_reading_file(_readings(tmp_path, OFFSET_ONLY.replace("george-study", "x-y"))))
+
+
+def test_gaps_are_the_unswept_readings_that_name_other_values(tmp_path):
+    found = load_reading_file(_readings(tmp_path, WITH_GAP))
+    assert [r.name for r in bracket_gaps(found)] == ["hidden"]
+    # a gap with nothing else to try cannot move a row
+    assert bracket_gaps(load_reading_file(_readings(tmp_path, WITH_GAP.replace("[2]", "[]")))) == []
+
+
+def test_a_bad_readings_file_is_one_line_and_exit_status_2(stoy, tmp_path, capsys):
+    path = _readings(tmp_path, f"{HEADER}\nslope,george-study,a,,1.0,[1.0],,,assumed,s,r\n")
+    assert bracket(stoy, path) == 2
+    err = capsys.readouterr().err
+    assert "the default 1.0 is also among the alternatives" in err and "Traceback" not in err
+
+
+def test_the_declared_readings_of_every_experiment_give_valid_points():
+    """Every packaged reading names a parameter and values its notebook accepts (checked as a bracket would)."""
+    suite = load_suite()
+    for exp in suite.experiments:
+        found = readings_for(exp.id)
+        if found:
+            points = bracket_points(exp, "quick", found)
+            assert points[0].label == "default"
+
+
+# -- verdicts ------------------------------------------------------------------------------------------------
+
+@pytest.mark.notebooks
+def test_a_toy_bracket_gives_each_row_its_verdict_and_the_site_shows_it(stoy, tmp_path, capsys):
+    assert main(["--suite", str(stoy / "notebooks" / "experiments.toml"), "run", "george-study", "--reports",
+                 str(stoy / "reports"), "--progress", "plain"]) == 0
+    assert bracket(stoy, _readings(tmp_path, READINGS), "--jobs", "2") == 0
+    out = capsys.readouterr().out
+    assert "5 executed" in out and "bracket of george-study: 0 default, 1 reachable, 0 open, 1 outside" in out
+    folder = stoy / "reports" / "brackets" / "george-study"
+    rows = {r["quantity"]: r for r in _table(folder / "bracket.csv")}
+    assert tuple(_table(folder / "bracket.csv")[0]) == BRACKET_COLUMNS
+    # value = 10 a + b + 3: 13 by default (window 16 +- (0.05 + 2 x 0.375 + 1) = 14.2 .. 17.8: a miss), 16 at
+    # a = 1.3; over the points a = 1.3, 0, 2 and b = 0.5 it spans 3 .. 23
+    value = rows["value"]
+    assert value["verdict"] == "miss" and value["bracket"] == "reachable"
+    assert value["reached_by"] == "slope: a=1.3" and value["closest_reading"] == "slope: a=1.3"
+    assert float(value["band_low"]) == pytest.approx(3.0) and float(value["band_high"]) == pytest.approx(23.0)
+    assert float(value["closest"]) == pytest.approx(16.0) and value["points"] == "5"
+    # twice = 2 a against 3.0 +- 1.05: a window of +-35 % is loose whatever a is, so no reading makes it within
+    assert (rows["twice"]["verdict"], rows["twice"]["bracket"]) == ("loose", "outside")
+    assert (rows["twice"]["band_low"], rows["twice"]["band_high"]) == ("0", "4")
+    points = _table(folder / "points.csv")
+    assert [p["status"] for p in points] == ["ok"] * 5 and points[1]["value"] == "1.3"
+    findings = (stoy / "reports" / "brackets" / "george-findings.md").read_text()
+    assert "## Reachable: within under another reading (1)" in findings and "slope: a=1.3" in findings
+    assert "## Outside: no declared reading reaches the printed number (1)" in findings
+
+    # the suite's numbers.csv carries each row's bracket once the site is rebuilt (any later run)
+    assert main(["--suite", str(stoy / "notebooks" / "experiments.toml"), "run", "george-study", "--reports",
+                 str(stoy / "reports"), "--progress", "plain"]) == 0
+    site = _table(stoy / "reports" / "quick" / "numbers.csv")
+    assert tuple(site[0]) == SITE_NUMBER_COLUMNS
+    by = {r["quantity"]: r for r in site}
+    assert (by["value"]["bracket"], by["value"]["bracket_readings"]) == ("reachable", "slope: a=1.3")
+    assert (by["twice"]["bracket"], by["twice"]["bracket_readings"]) == ("outside", "band 0 .. 4 over 5 readings")
+    index = (stoy / "reports" / "quick" / "index.md").read_text()
+    assert "Reading brackets of the 2 scored rows: 0 within by default, 1 reachable" in index
+    assert "[george](../brackets/george-findings.md)" in index
+
+    # only the offset reading: nothing reaches value (13 and 13.5): outside, with its band
+    assert bracket(stoy, _readings(tmp_path, OFFSET_ONLY), reports="offset") == 0
+    value = {r["quantity"]: r for r in _table(stoy / "offset" / "brackets" / "george-study" / "bracket.csv")}["value"]
+    assert value["bracket"] == "outside" and (value["band_low"], value["band_high"]) == ("13", "13.5")
+    # a gap that names other values leaves it open, naming the gap
+    assert bracket(stoy, _readings(tmp_path, WITH_GAP), reports="gap") == 0
+    value = {r["quantity"]: r for r in _table(stoy / "gap" / "brackets" / "george-study" / "bracket.csv")}["value"]
+    assert value["bracket"] == "open" and value["open_readings"] == "hidden (gap: locbook.toy.HIDDEN)"
+
+
+def test_the_site_bracket_of_a_row_follows_its_own_verdict_first():
+    """bracket_of_rows: a row within in this report is 'default' whatever the bracket's profile said; otherwise
+    the bracket's other readings decide; unscored and unmatched rows have none."""
+    bracket = [{"printed_id": "p", "quantity": "q", "where": "w", "bracket": "reachable", "reached_by": "r: x=1",
+                "open_readings": "", "band_low": "1", "band_high": "2", "points": "3"},
+               {"printed_id": "o", "quantity": "q (500 runs)", "where": "w", "bracket": "outside", "reached_by": "",
+                "open_readings": "", "band_low": "1", "band_high": "2", "points": "3"}]
+    row = {"printed_id": "p", "quantity": "q", "where": "w", "kind": "reproduction"}
+    out = bracket_of_rows([{**row, "verdict": "within"}, {**row, "verdict": "miss"},
+                           {**row, "verdict": "consistent", "kind": "arithmetic"},
+                           # another profile's run count in the quantity: matched on (printed_id, where)
+                           {**row, "printed_id": "o", "quantity": "q (20 runs)", "verdict": "loose"},
+                           {**row, "printed_id": "z", "verdict": "miss"}], bracket)
+    assert [(r["bracket"], r["bracket_readings"]) for r in out] == [
+        ("default", ""), ("reachable", "r: x=1"), ("", ""), ("outside", "band 1 .. 2 over 3 readings"), ("", "")]

@@ -171,9 +171,13 @@ def test_mle_reaches_the_grid_optimum():
     assert np.all(cost <= best.cost + 1e-9) and np.all(est.converged)
 
 
-def test_record_tables_kinds_repeats_and_miss_notes(tmp_path, monkeypatch):
-    """The MLE column is a reproduction, every filter column calibrated from the Fig. 3.2 drift (the walking speed);
-    the repeats of one setting link to the cell they repeat and get no verdict; a miss names the readings tested."""
+@pytest.mark.parametrize("start, noise_reading", [("rest", "printed"), ("moving", "printed"), ("rest", "sigma_acc"),
+                                                 ("moving", "sigma_acc")])
+def test_record_tables_kinds_repeats_and_miss_notes(tmp_path, monkeypatch, start, noise_reading):
+    """The MLE column is a reproduction; a filter column is calibrated exactly when the rows were computed under a
+    reading fitted to output (the moving start's speed from Fig. 3.2, Q from sigma_ACC fitted to Table 3.9), naming
+    each, else a reproduction; the repeats of one setting link to the cell they repeat and get no verdict; a miss
+    names the readings tested and the reading it was computed under."""
     monkeypatch.setenv("LOCBOOK_OUTPUT_DIR", str(tmp_path))
     report = lb.Report("x")
     cells = {(c["table"], c["row"], c["column"]): c for c in dg.printed_tables()}
@@ -181,12 +185,18 @@ def test_record_tables_kinds_repeats_and_miss_notes(tmp_path, monkeypatch):
             ("3.9", "sigma_acc=0.015", "serial_ekf"), ("3.11", "ple=3", "static_mle"), ("3.9", "sigma_acc=0.0015", "kalman_filter")]
     rows = [dict(table=k[0], row=k[1], column=k[2], printed=cells[k]["value"], printed_value=cells[k]["printed"],
                  reproduced=cells[k]["value"] * (2.0 if k[1] == "sigma_acc=0.0015" else 1.0), mc_se=0.001) for k in keys]
-    counts = dg.record_tables(report, rows, variants={keys[-1]: {"start moving, Q printed": 1.5}})
+    counts = dg.record_tables(report, rows, variants={keys[-1]: {"start moving, Q printed": 1.5}}, start=start,
+                              noise_reading=noise_reading)
     out = {r["where"]: r for r in report.numbers}
     mle = out["Table 3.7, sigma_rss_db=6, static_mle"]
     assert mle["kind"] == "reproduction" and mle["verdict"] == "within" and not mle["calibrated_from"]
     serial = out["Table 3.8, sigma_rss_db=6, serial_ekf"]
-    assert serial["kind"] == "calibrated" and "24 meter" in serial["calibrated_from"]
+    if (start, noise_reading) == ("rest", "printed"):
+        assert serial["kind"] == "reproduction" and serial["calibrated_from"] == ""
+    else:
+        assert serial["kind"] == "calibrated"
+        assert ("24 meter" in serial["calibrated_from"]) == (start == "moving")
+        assert ("Table 3.9" in serial["calibrated_from"]) == (noise_reading == "sigma_acc")
     # the thesis's Monte-Carlo error widens the window: 2 x its relative standard error of the printed value
     assert serial["ambiguity"] == pytest.approx(2 * dg.thesis_repeat_error() * 1.47114, rel=1e-12)
     repeat = out["Table 3.9, sigma_acc=0.015, serial_ekf"]
@@ -194,6 +204,7 @@ def test_record_tables_kinds_repeats_and_miss_notes(tmp_path, monkeypatch):
     assert out["Table 3.11, ple=3, static_mle"]["same_as"] == "Table 3.7 | sigma_rss_db=6 | static_mle"
     miss = out["Table 3.9, sigma_acc=0.0015, kalman_filter"]
     assert miss["verdict"] == "miss" and "start moving, Q printed: 1.500" in miss["note"]
+    assert ("Q printed as a constant" in miss["note"]) == (noise_reading == "printed")
     assert counts == {"within": 2, "linked": 2, "miss": 1}
 
 

@@ -1,7 +1,8 @@
-"""Document 000 (Dogan 2015), Ch. 3 fusion: the reading of the filter's Q and P_0 that the printed constants support
-(Q = sigma_ACC^2 / 10 I_6 per step, P_0,acc = sigma_ACC^2, the node starting from rest), checked against the printed
-constants and against an independent filterpy implementation written here from the thesis's equations (Tables 3.1-3.5,
-Eqs. (3.18)-(3.24)), without calling locbook's filters."""
+"""Document 000 (Dogan 2015), Ch. 3 fusion: the readings of the filter's Q and P_0, the default printed as constants
+(Q = 0.000023 I_6 per step, P_0,acc = 0.00023, Eqs. (3.20), (3.24); the node starting from rest) and the alternative
+fitted to Table 3.9 (Q = sigma_ACC^2 / 10 I_6, P_0,acc = sigma_ACC^2), checked against the printed constants and
+against an independent filterpy implementation written here from the thesis's equations (Tables 3.1-3.5,
+Eqs. (3.18)-(3.24)), without calling locbook's filters; and which rows each reading makes calibrations."""
 import numpy as np
 import pytest
 from filterpy.kalman import ExtendedKalmanFilter
@@ -40,13 +41,13 @@ def _ca_matrices(dt, q):
 
 
 def _filterpy_fusion(name, rss_dbm, fixes_m, mse_m2, acc, sigma_acc, rss_steps, n_steps, dt, anchors, p0_dbm, ple,
-                     sigma_rss):
+                     sigma_rss, q, acc_var):
     """Table 3.5 per run with filterpy: prediction, then the accelerometer (Eq. (3.18), R = sigma_acc^2 I), then at
-    RSS epochs KF (MLE) (Eq. (3.21)) or the parallel / serial EKF (Tables 3.3-3.4, Eq. (3.22)). Q and P_0 from
-    sigma_ACC: Q = sigma^2/10 I_6, P_0 = diag(MSE_x, 0.0065, sigma^2, MSE_y, 0.0065, sigma^2) (Eqs. (3.19)-(3.20)).
+    RSS epochs KF (MLE) (Eq. (3.21)) or the parallel / serial EKF (Tables 3.3-3.4, Eq. (3.22)). Q = q I_6 and
+    P_0 = diag(MSE_x, 0.0065, acc_var, MSE_y, 0.0065, acc_var) (Eqs. (3.19)-(3.20), (3.24)).
     Returns the position estimates at the RSS epochs, (runs, epochs, 2)."""
     vel_var = P.get("Eq. (3.20)", "P_0|0", "velocity variance").value
-    F, Q = _ca_matrices(dt, sigma_acc**2 / 10)
+    F, Q = _ca_matrices(dt, q)
     h_acc = np.zeros((2, 6))
     h_acc[0, 2] = h_acc[1, 5] = 1.0
     h_pos = np.zeros((2, 6))
@@ -67,7 +68,7 @@ def _filterpy_fusion(name, rss_dbm, fixes_m, mse_m2, acc, sigma_acc, rss_steps, 
     for b in range(rss_dbm.shape[0]):
         f = ExtendedKalmanFilter(6, 1)
         f.x = np.array([fixes_m[b, 0, 0], 0, 0, fixes_m[b, 0, 1], 0, 0], float)
-        f.P = np.diag([mse_m2[0], vel_var, sigma_acc**2, mse_m2[1], vel_var, sigma_acc**2])
+        f.P = np.diag([mse_m2[0], vel_var, acc_var, mse_m2[1], vel_var, acc_var])
         f.F, f.Q = F, Q
         out[b, 0] = f.x[[0, 3]]
         epoch = 1
@@ -90,17 +91,21 @@ def _filterpy_fusion(name, rss_dbm, fixes_m, mse_m2, acc, sigma_acc, rss_steps, 
     return out
 
 
+@pytest.mark.parametrize("reading", ["printed", "sigma_acc"])
 @pytest.mark.parametrize("name", ["kalman_filter", "parallel_ekf", "serial_ekf"])
-def test_chosen_reading_equals_an_independent_filterpy_implementation(name):
-    """run_channel under the default reading (start from rest, Q and P_0 from sigma_ACC) against the filterpy loop
-    above on the same draws: the RSS, the MLE fixes and the accelerometer noise are replayed from the same seed in
-    run_channel's order (RSS, then one unit accelerometer noise draw scaled per sigma_ACC)."""
-    assert (dg.DEFAULT_START, dg.DEFAULT_NOISE_READING) == ("rest", "sigma_acc")
+def test_each_reading_equals_an_independent_filterpy_implementation(name, reading):
+    """run_channel from rest under each noise reading against the filterpy loop above on the same draws: the RSS,
+    the MLE fixes and the accelerometer noise are replayed from the same seed in run_channel's order (RSS, then one
+    unit accelerometer noise draw scaled per sigma_ACC). Q and P_0,acc come from the printed constants ('printed')
+    or from sigma_ACC ('sigma_acc'), written here, not from filter_noise."""
+    assert (dg.DEFAULT_START, dg.DEFAULT_NOISE_READING) == ("rest", "printed")
     tr = dg.walk_trajectory(waypoints_m=((1.0, 1.0), (1.0, 4.0), (4.0, 4.0)), speed_m_s=0.5)
     assert tr.start == "rest" and np.all(tr.velocity_m_s[0] == 0.0)
     n_runs, sigmas = 3, (0.0075, 0.0015)
     run = dg.run_channel(tr, 6.0, 3.0, n_runs, np.random.default_rng(11), sigma_acc_values=sigmas, only_rss=False,
-                         filters=(name,), keep_estimates=True)
+                         filters=(name,), keep_estimates=True, noise_reading=reading)
+    q_printed = P.get("Eq. (3.24)", "process noise covariance Q", "per-step variance (Q = value x I_6)").value
+    acc_printed = P.get("Eq. (3.20)", "P_0|0", "acceleration variance").value
     rng = np.random.default_rng(11)
     channel = lb.PathLossModel(dg.REF_POWER_DBM, 3.0, 6.0)
     rss = dg.simulate_rss(tr, channel, n_runs, rng)
@@ -109,9 +114,40 @@ def test_chosen_reading_equals_an_independent_filterpy_implementation(name):
     np.testing.assert_allclose(run.mse_mle_m2, mse, rtol=1e-12)
     unit = rng.standard_normal((n_runs,) + tr.acceleration_m_s2.shape)
     for sigma in sigmas:
+        q, acc_var = (q_printed, acc_printed) if reading == "printed" else (sigma**2 / 10, sigma**2)
         ref = _filterpy_fusion(name, rss, fixes, mse, tr.acceleration_m_s2 + sigma * unit, sigma, tr.rss_steps,
-                               tr.time_s.size, dg.DT_S, dg.ANCHORS_M, dg.REF_POWER_DBM, 3.0, 6.0)
+                               tr.time_s.size, dg.DT_S, dg.ANCHORS_M, dg.REF_POWER_DBM, 3.0, 6.0, q, acc_var)
         np.testing.assert_allclose(run.errors[("estimates", name, sigma)], ref, atol=1e-8)
+
+
+@pytest.mark.parametrize("sigma_acc", [None, 0.15, 0.015, 0.0152, 0.0075, 0.0015, 1e-6])
+def test_the_default_reading_is_eq_3_24s_constant_q_for_any_sigma_acc(sigma_acc):
+    """The default (the text's reading) is Q = 0.000023 I_6 per step (Eq. (3.24)) and P_0,acc = 0.00023
+    (Eq. (3.20)) whatever sigma_ACC; Sec. 4.1.2's process-noise sd 0.0048 is its square root to the printed digits."""
+    q = P.get("Eq. (3.24)", "process noise covariance Q", "per-step variance (Q = value x I_6)")
+    p0 = P.get("Eq. (3.20)", "P_0|0", "acceleration variance")
+    assert dg.filter_noise(dg.DEFAULT_NOISE_READING, sigma_acc) == (q.value, p0.value) == (0.000023, 0.00023)
+    sd = P.get("Sec. 4.1.2 text", "process noise", "standard deviation")
+    assert abs(np.sqrt(dg.filter_noise(dg.DEFAULT_NOISE_READING, sigma_acc)[0]) - sd.value) <= sd.rounding
+
+
+def test_fitted_readings_names_exactly_the_readings_fitted_to_output():
+    """Issue 28's rule for the four (start, noise reading) pairs: rest + printed is the text's own reading (no
+    calibration); the moving start carries the speed fitted to Fig. 3.2, 'sigma_acc' the Q fitted to Table 3.9, and
+    both together name both; a speed other than the fitted one under the moving start is an assumption."""
+    assert dg.fitted_readings("rest", "printed") == ""
+    moving = dg.fitted_readings("moving", "printed")
+    assert "Fig. 3.2" in moving and "24 meter" in moving and "Table 3.9" not in moving
+    scaled = dg.fitted_readings("rest", "sigma_acc")
+    assert "Table 3.9" in scaled and "sigma_acc" in scaled and "Fig. 3.2" not in scaled
+    both = dg.fitted_readings("moving", "sigma_acc")
+    assert both == f"{moving}; {scaled}"
+    assert dg.fitted_readings("moving", "printed", speed_mps=0.5) == ""
+    assert dg.fitted_readings() == ""                                    # the defaults are the text's readings
+    with pytest.raises(lb.ParameterError, match="start"):
+        dg.fitted_readings("running", "printed")
+    with pytest.raises(lb.ParameterError, match="noise_reading"):
+        dg.fitted_readings("rest", "guessed")
 
 
 def test_the_printed_reading_does_not_see_sigma_acc_in_q():

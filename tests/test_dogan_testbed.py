@@ -165,7 +165,7 @@ def test_record_testbed_records_each_printed_walk_value_with_its_flags_and_the_b
     assert mle["kind"] == "reproduction" and mle["reproduced"] == pytest.approx(3.0, abs=1e-12)
     assert "flagged" not in mle["note"]
     fused = by_id[tb.PRINTED_TESTBED_RMSE[("serial_ekf", "fusion")].id]
-    assert fused["kind"] == "calibrated" and "2 of 21 runs flagged diverged" in fused["note"]
+    assert fused["kind"] == "reproduction" and "2 of 21 runs flagged diverged" in fused["note"]   # the text's readings
     assert "flagged" not in by_id[tb.PRINTED_TESTBED_RMSE[("serial_ekf", None)].id]["note"]
     assert "2 of 21" in by_id[tb.PRINTED_FUSION_REDUCTION.id]["note"]                       # the mean covers every filter
     arithmetic = by_id[tb.PRINTED_FUSION_REDUCTION_CH6.id]
@@ -173,3 +173,10 @@ def test_record_testbed_records_each_printed_walk_value_with_its_flags_and_the_b
     claim = by_id[tb.PRINTED_ACCURACY.id]                                                   # best: parallel EKF fused
     assert "(parallel_ekf RSS/IMU)" in claim["quantity"]
     assert claim["reproduced"] == pytest.approx(0.9 * (1.0 + 0.05 * 10), rel=1e-12)
+    # a walk run under a reading fitted to output makes every filter row a calibration naming it; the MLE stays
+    report = lb.Report("test2")
+    tb.record_testbed(report, rows, run, 0.5, start="moving", noise_reading="sigma_acc")
+    by_id = {r["printed_id"]: r for r in report.numbers}
+    fused = by_id[tb.PRINTED_TESTBED_RMSE[("serial_ekf", "fusion")].id]
+    assert fused["kind"] == "calibrated" and fused["calibrated_from"] == dg.fitted_readings("moving", "sigma_acc")
+    assert by_id[tb.PRINTED_TESTBED_RMSE[("static_mle", None)].id]["kind"] == "reproduction"

@@ -144,8 +144,9 @@ def test_the_readings_issue_28_names_are_declared():
 def test_dogan_q_reading_offers_the_printed_constant():
     from locbook.scenarios import dogan
     noise = {r.name: r for r in readings("dogan2015")}["noise_reading"]
-    assert noise.is_calibration and "printed" in noise.alternatives
-    assert set(noise.values) <= set(dogan.NOISE_READINGS)
+    # issue 28: the default is the text's constant; the reading fitted to Table 3.9 is a named alternative
+    assert not noise.is_calibration and noise.default == "printed" == dogan.DEFAULT_NOISE_READING
+    assert "sigma_acc" in noise.alternatives and set(noise.values) <= set(dogan.NOISE_READINGS)
     # the printed reading is Eq. (3.24)'s constant: the same Q whatever sigma_ACC, the square of Sec. 4.1.2's sd
     assert dogan.filter_noise("printed", 0.005) == dogan.filter_noise("printed", 0.15)
     sd = dogan.PRINTED.get("Sec. 4.1.2 text", "process noise", "standard deviation")

@@ -26,7 +26,8 @@ from ..metrics import reduction_pct, rmse_m
 from ..montecarlo import single_run_interval
 from ..reproduce.scoring import Ambiguity
 from ..tracking.divergence import divergence_note
-from .dogan import ANCHORS_M, DT_S, FILTERS, PRINTED, SPEED_CALIBRATED_FROM, ChannelRun
+from .dogan import (ANCHORS_M, DEFAULT_NOISE_READING, DEFAULT_START, DT_S, FILTERS, PRINTED, SPEED_MPS, ChannelRun,
+                    fitted_readings)
 
 __all__ = [
     "TESTBED_REF_POWER_DBM", "TESTBED_PATH_LOSS_EXP", "TESTBED_FIT_SIGMA_DB", "TESTBED_SIGMA_DB", "TESTBED_RSS_EVERY",
@@ -233,26 +234,29 @@ def testbed_flags(row: dict, run: ChannelRun, sigma_acc_mps2: float) -> dict | N
     return {f"{n} {'ONLY RSS' if c is None else 'RSS/IMU'}": run.divergence[(n, c)] for n in names for c in cases}
 
 
-def record_testbed(report, rows: list[dict], run: ChannelRun, sigma_acc_mps2: float) -> None:
+def record_testbed(report, rows: list[dict], run: ChannelRun, sigma_acc_mps2: float, *, start: str = DEFAULT_START,
+                   noise_reading: str = DEFAULT_NOISE_READING, speed_mps: float = SPEED_MPS) -> None:
     """Record Sec. 5.4's printed single-walk values (Figs. 5.8-5.11) from :func:`testbed_rows`, then the mean of the
     three printed reductions (arithmetic) and the "accuracy 1 m" claim on the best tracking filter.
 
     Each printed RMSE (and the 15 % reduction) is one measured walk: our value is the mean over simulated walks of
     one walk's value, its standard error the Monte-Carlo one, and 2 sd of single walks the named ambiguity
-    (:data:`ONE_WALK_SOURCE`). The MLE row is a ``reproduction``, the filter rows ``calibrated`` (the walking speed,
-    :data:`~locbook.scenarios.dogan.SPEED_CALIBRATED_FROM`). A miss says why (:data:`BENIGN_CHANNEL_NOTE`); every note counts
+    (:data:`ONE_WALK_SOURCE`). The MLE row is a ``reproduction``; the filter rows are ``calibrated`` exactly when
+    ``run`` used a reading fitted to printed output (``start``, ``noise_reading``, ``speed_mps`` as run; named by
+    :func:`~locbook.scenarios.dogan.fitted_readings`), else ``reproduction``. A miss says why (:data:`BENIGN_CHANNEL_NOTE`); every note counts
     the runs the NIS guard flagged (:func:`testbed_flags`). The per-filter reductions derived from printed pairs
     (``printed_value`` None) are table rows only."""
+    fitted = fitted_readings(start, noise_reading, speed_mps=speed_mps)
     for r in rows:
         p = r["printed_value"]
         if p is None:
             continue
         amb = Ambiguity(2 * r["sd_single_walk"], "one measured walk: 2 sd of the value of one simulated walk", ONE_WALK_SOURCE)
-        kind = "reproduction" if r["filter"] == "static_mle" else "calibrated"
+        kind = "calibrated" if fitted and r["filter"] != "static_mle" else "reproduction"
         name = (f"test-bed RMSE {r['filter']} {r['case']}, mean of one walk" if r["case"] != "reduction %" else
                 "fusion reduction, mean of the three filters, mean of one walk")
         report.number(name, p, r["mean_single_walk"], kind=kind, mc_std_error=r["mc_se"], ambiguity=amb,
-                      calibrated_from=SPEED_CALIBRATED_FROM if kind == "calibrated" else "",
+                      calibrated_from=fitted if kind == "calibrated" else "",
                       miss_note=_MISS_NOTES.get(r["case"], _REDUCTION_MISS),
                       note=divergence_note("", testbed_flags(r, run, sigma_acc_mps2), averaged=_KEPT))
     report.number("fusion reduction, mean of the three printed pairs (Figs. 5.9-5.11)", PRINTED_FUSION_REDUCTION_CH6,

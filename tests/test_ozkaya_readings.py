@@ -151,3 +151,36 @@ def test_every_simulation_reading_is_declared_with_the_librarys_values():
         r = declared[name]
         assert r.parameter == name and r.default == values[0] and set(r.values) == set(values)
     assert set(declared["crlb_average"].values) == {"cells_mean", "area_rms"}
+
+
+# -- readings fitted to the output (issue 28): rows computed under them are calibrated ---------------------------
+def test_fitted_values_are_declared_values_and_the_fitted_defaults_are_listed():
+    declared = {r.name: r for r in readings("ozkaya2011")}
+    for name, value in oz.FITTED_VALUES.items():
+        assert value in declared[name].values, name
+    for r in declared.values():
+        if r.is_calibration and not r.name.startswith("testbed_"):     # the test bed marks its own (ozkaya_testbed)
+            assert oz.FITTED_VALUES[r.name] == r.default, r.name
+
+
+def test_fitted_readings_are_those_that_can_move_the_case():
+    defaults = oz.sim_readings()
+    assert oz.fitted_readings(defaults) == ("reader_noise", "fixed_target_noise", "mobile_protocol")
+    assert oz.fitted_readings(defaults, oz.SimCase("nn")) == ("reader_noise",)              # one shot, no recursions
+    assert oz.fitted_readings(defaults, oz.SimCase("grid", "fixed")) == ("reader_noise", "fixed_target_noise")
+    assert oz.fitted_readings(defaults, oz.SimCase("sir", "mobile")) == ("reader_noise", "mobile_protocol")
+    assert oz.fitted_readings(defaults, oz.SimCase("grid", "fixed", sigma0_db=0.0)) == ()      # no noise to read
+    text = {**defaults, "reader_noise": "common_mode", "fixed_target_noise": "fresh_per_step",
+            "mobile_protocol": "mean_over_recursions"}
+    assert oz.fitted_readings(text) == () and oz.fitted_calibrated_from(text, oz.SimCase("nn")) == ""
+    assert oz.fitted_readings({"crlb_exponent": 2.0, "crlb_average": "area_rms"}) == ("crlb_exponent",)
+    assert "reader_noise = 'independent_per_reader'" in oz.fitted_calibrated_from(defaults, oz.SimCase("nn"))
+
+
+def test_rows_under_no_fitted_reading_are_reproductions(tmp_path, monkeypatch):
+    monkeypatch.setenv("LOCBOOK_OUTPUT_DIR", str(tmp_path))
+    monkeypatch.setenv("LOCBOOK_EXPERIMENT", "ozkaya2011-nn-sim")
+    report = lb.Report()
+    rows = oz.run_tables(["7.2"], 30, 5, readings={"reader_noise": "common_mode"})
+    oz.record_tables(report, rows, 30)
+    assert report.numbers and all(r["kind"] == "reproduction" and not r["calibrated_from"] for r in report.numbers)

@@ -47,7 +47,7 @@ __all__ = [
     "TESTBED_SIZE_M", "TESTBED_WALLS_M", "TESTBED_READERS_M", "REFERENCE_TAGS_M", "READER_SENSITIVITY_DBM", "WAF_DB",
     "synthetic_campaign", "CRLB_NOT_FROM_FORMULA",
     "CELL_MARGIN_M", "SIM_READINGS", "sim_readings", "with_readings", "run_summary", "resample_fraction",
-    "record_readings",
+    "record_readings", "FITTED_VALUES", "fitted_readings", "fitted_calibrated_from",
 ]
 
 #: Every number the thesis prints (locbook/data/printed/ozkaya2011.csv).
@@ -371,6 +371,41 @@ def summarize(errors, rng: np.random.Generator | None = None, *,
     return out
 
 
+#: The value of each reading that was chosen by re-simulating the printed output (issue 28: such a reading is a
+#: calibration; readings CSV, basis fitted_to_output): reading name -> the fitted value.
+FITTED_VALUES = {"reader_noise": "independent_per_reader", "fixed_target_noise": "frozen_per_run",
+                 "mobile_protocol": "reflect_error_at_rt", "crlb_average": "cells_mean", "crlb_exponent": 2.0}
+
+
+def _can_move(name: str, case: SimCase) -> bool:
+    """Whether reading ``name`` can change the errors of ``case`` (noise readings need noise; the fixed target's
+    noise needs recursions; the mobile protocol a mobile target)."""
+    if name == "reader_noise":
+        return case.sigma0_db > 0
+    if name == "fixed_target_noise":
+        return case.sigma0_db > 0 and case.target == "fixed" and case.method != "nn"
+    if name == "mobile_protocol":
+        return case.target == "mobile"
+    return True
+
+
+def fitted_readings(chosen: dict, case: SimCase | None = None) -> tuple[str, ...]:
+    """The names of the ``chosen`` readings (name -> value) set to the value fitted to the printed output
+    (:data:`FITTED_VALUES`); with ``case``, only those that can move that case's numbers. A row computed under any of
+    them is ``calibrated`` (issue 28) and names them (:func:`fitted_calibrated_from`)."""
+    return tuple(n for n, v in chosen.items() if n in FITTED_VALUES and v == FITTED_VALUES[n]
+                 and (case is None or _can_move(n, case)))
+
+
+def fitted_calibrated_from(chosen: dict, case: SimCase | None = None) -> str:
+    """The ``calibrated_from`` text of a row computed under ``chosen`` (empty when no fitted reading moves it)."""
+    names = fitted_readings(chosen, case)
+    if not names:
+        return ""
+    return ("; ".join(f"{n} = {chosen[n]!r}" for n in names) + " chosen by re-simulating the printed simulation "
+            "tables (readings fitted to the output, locbook/data/readings/ozkaya2011.csv)")
+
+
 def _check_reading(name: str, value) -> None:
     if value not in SIM_READINGS[name]:
         raise ParameterError(f"{name} must be one of {SIM_READINGS[name]}, got {value!r}")
@@ -618,7 +653,7 @@ def run_tables(tables, n_runs: int, seed: int, *, readings: dict | None = None, 
             stat = _statistic(col)
             rows.append({"table": table, "row": row, "column": col, "printed": printed_cell(table, row, col),
                          "reproduced": res[stat], "se_m": res[stat + "_se"], "case": case,
-                         "first_printed": first[(base_case, stat)]})
+                         "first_printed": first[(base_case, stat)], "readings": readings})
         crlb = printed_cell(table, row, "crlb_m")
         if crlb is not None:
             rows.append({"table": table, "row": row, "column": "crlb_m", "printed": crlb,
@@ -639,7 +674,8 @@ def is_crlb_row(row: dict) -> bool:
 
 
 def record_tables(report, rows, n_runs: int) -> None:
-    """Record every printed error statistic of ``rows`` (from :func:`run_tables`) as a ``reproduction``.
+    """Record every printed error statistic of ``rows`` (from :func:`run_tables`) as a ``reproduction``, or as
+    ``calibrated`` when a reading fitted to the printed tables moves it (:func:`fitted_calibrated_from`).
 
     Window: the printed rounding, 2 of our standard errors and the thesis's own Monte-Carlo error
     (:func:`thesis_monte_carlo_ambiguity`). A setting the thesis prints again with the same value is compared
@@ -652,7 +688,9 @@ def record_tables(report, rows, n_runs: int) -> None:
         p, first = r["printed"], r["first_printed"]
         same_as = first if first.id != p.id and first.value == p.value else None
         ambiguity = thesis_monte_carlo_ambiguity(r["se_m"], n_runs)
-        judged = score("reproduction", p.text, r["reproduced"], mc_std_error=r["se_m"], ambiguity=ambiguity,
+        calibrated_from = fitted_calibrated_from(r.get("readings") or sim_readings(), r["case"])
+        kind = "calibrated" if calibrated_from else "reproduction"
+        judged = score(kind, p.text, r["reproduced"], mc_std_error=r["se_m"], ambiguity=ambiguity,
                        linked=same_as is not None)
         note = ""
         if judged.verdict in ("miss", "loose"):
@@ -667,8 +705,8 @@ def record_tables(report, rows, n_runs: int) -> None:
         if first.id != p.id and first.value != p.value:
             note = (f"the thesis prints this setting again at {first.where} as {first.text}; both printed values "
                     "are compared. " + note).strip()
-        report.number(r["column"], p, r["reproduced"], kind="reproduction", mc_std_error=r["se_m"],
-                      ambiguity=ambiguity, same_as=same_as, note=note)
+        report.number(r["column"], p, r["reproduced"], kind=kind, mc_std_error=r["se_m"],
+                      ambiguity=ambiguity, same_as=same_as, note=note, calibrated_from=calibrated_from)
 
 
 #: Note of a printed CRLB of a layout whose bound the printed formula cannot give (half-separation and large room).

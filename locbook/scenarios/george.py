@@ -107,6 +107,27 @@ class CorridorRuns:
     def n_failed_calibrations(self) -> int:
         return int(np.sum(~self.calibration_ok))
 
+    def calibrated(self, per_run, axis: int = 0) -> np.ndarray:
+        """The entries of ``per_run`` (one per run along ``axis``) of the runs whose calibration succeeded: the runs a
+        statistic of the paper's pipeline averages. A failed run has no fixes, so no C of Eq. (15): it is left out and
+        counted (:meth:`failed_calibration_note`), never averaged in as NaN (README, missing readings)."""
+        per_run = np.asarray(per_run)
+        if per_run.ndim == 0 or per_run.shape[axis] != self.calibration_ok.size:
+            raise ValueError(f"per_run must hold one entry per run ({self.calibration_ok.size}) along axis {axis}, "
+                             f"got shape {per_run.shape}")
+        return np.compress(self.calibration_ok, per_run, axis=axis)
+
+    def failed_calibration_note(self, note: str = "") -> str:
+        """``note`` followed by the count of runs left out of every statistic because their calibration failed
+        (fitted exponent below :data:`MIN_PLAUSIBLE_PATH_LOSS_EXP` or not finite); ``note`` unchanged when none did."""
+        failed = self.n_failed_calibrations
+        if failed == 0:
+            return note
+        clause = (f"{failed} of {self.calibration_ok.size} runs left out: their calibration failed (fitted path-loss "
+                  f"exponent below {MIN_PLAUSIBLE_PATH_LOSS_EXP:g}), so Eqs. (7)-(8) give no fixes; the statistic is "
+                  f"over the other {self.calibration_ok.size - failed}")
+        return f"{note}; {clause}" if note else clause
+
     @property
     def fix_error_m(self) -> np.ndarray:
         return position_error_m(self.fixes_m, self.truth_m)

@@ -1,0 +1,81 @@
+"""George and Vadivukkarasi (locbook.scenarios.george): runs whose calibration failed have no fixes and are left out
+of the notebooks' statistics and counted (README, "Missing readings and bad input"), never averaged in as NaN."""
+import numpy as np
+import pytest
+
+import locbook as lb
+from locbook.scenarios import george
+
+
+def _hand_built_runs():
+    """Three runs on the 25 marked points: run 0 off by (0.3, 0.4) m everywhere (C = 0.5 m), run 1 failed its
+    calibration (no fixes), run 2 off by (0.6, 0.8) m (C = 1.0 m)."""
+    truth = george.trajectory_m()
+    fixes = np.stack([truth + [0.3, 0.4], np.full(truth.shape, np.nan), truth + [0.6, 0.8]])
+    ok = np.array([True, False, True])
+    runs = george.CorridorRuns(truth, np.zeros((5, 2)), np.zeros((3, 5, 4)), np.full(3, -45.0),
+                               np.array([2.2, 0.7, 2.1]), np.zeros((3, truth.shape[0], 4)), fixes, ok)
+    return truth, runs
+
+
+def test_failed_calibration_is_left_out_of_the_single_experiment_window_and_counted():
+    _, runs = _hand_built_runs()
+    c_all = lb.mean_error_m(runs.fix_error_m, axis=-1)
+    assert np.isnan(c_all[1])
+    # the notebook's scoring before the fix: a NaN run breaks the window
+    with pytest.raises(ValueError, match="NaN or inf"):
+        lb.Ambiguity.single_experiment(c_all, what="one walk", source="test")
+    c = runs.calibrated(c_all)
+    np.testing.assert_allclose(c, [0.5, 1.0], rtol=1e-12)
+    amb = lb.Ambiguity.single_experiment(c, what="one walk", source="test")
+    assert amb.size == pytest.approx(2.0 * np.std([0.5, 1.0], ddof=1), rel=1e-12)
+    note = runs.failed_calibration_note()
+    assert "1 of 3 runs left out" in note and "over the other 2" in note
+    assert runs.failed_calibration_note("q = 0.01").startswith("q = 0.01; 1 of 3")
+
+
+def test_calibrated_selects_runs_along_the_given_axis_and_checks_its_length():
+    _, runs = _hand_built_runs()
+    by_q = np.arange(6.0).reshape(2, 3)                       # (q, runs)
+    np.testing.assert_array_equal(runs.calibrated(by_q, axis=1), [[0.0, 2.0], [3.0, 5.0]])
+    np.testing.assert_array_equal(runs.calibrated(runs.fix_error_m), runs.fix_error_m[[0, 2]])
+    with pytest.raises(ValueError, match="one entry per run"):
+        runs.calibrated(by_q)                                  # axis 0 holds 2 entries, not 3 runs
+
+
+@pytest.mark.parametrize("offset, failed", [(-0.01, False), (0.01, True)])
+def test_noise_free_calibration_fails_exactly_below_the_threshold(offset, failed):
+    """Without shadowing the fit returns the true exponent, so the rule turns on at it; a successful run's fixes are
+    exact and nothing is counted, a failed one has none."""
+    n_true = 2.0
+    truth = george.trajectory_m()
+    rng = lb.streams(7, "calibration", "tracking")
+    runs = george.simulate_corridor(4, truth, lb.PathLossModel(-45.0, n_true, 0.0), rng_calibration=rng["calibration"],
+                                    rng_tracking=rng["tracking"], min_path_loss_exp=n_true + offset)
+    np.testing.assert_allclose(runs.path_loss_exp, n_true, rtol=1e-9)
+    assert runs.n_failed_calibrations == (4 if failed else 0)
+    if failed:
+        assert np.isnan(runs.fixes_m).all() and runs.calibrated(runs.fix_error_m).shape == (0, truth.shape[0])
+        assert runs.failed_calibration_note().startswith("4 of 4 runs left out")
+    else:
+        np.testing.assert_allclose(runs.fixes_m, np.broadcast_to(truth, runs.fixes_m.shape), atol=1e-9)
+        assert runs.failed_calibration_note("x") == "x"
+
+
+def test_at_6_db_the_only_runs_without_c_are_those_whose_fitted_exponent_is_below_one():
+    """The notebook's failing case (sigma 6 dB, the reading's range end): an independent per-location fit (numpy
+    polyfit of P = A - 10 n log10 d, averaged over the five points, Sec. 6) finds the failed runs, and every other run
+    has a finite C, so the scored window can be built."""
+    truth = george.trajectory_m()
+    rng = lb.streams(20150, "calibration", "tracking")
+    runs = george.simulate_corridor(300, truth, lb.PathLossModel(-45.0, george.PRINTED_N.value, 6.0),
+                                    rng_calibration=rng["calibration"], rng_tracking=rng["tracking"])
+    x = -10.0 * np.log10(lb.pairwise_distance_m(np.asarray(george.DEFAULT_CALIBRATION_POINTS_M), george.ANCHORS_M))
+    n_hand = np.array([[np.polyfit(x[l], runs.calibration_rss_dbm[r, l], 1)[0] for l in range(x.shape[0])]
+                       for r in range(300)]).mean(axis=1)
+    c_all = lb.mean_error_m(runs.fix_error_m, axis=-1)
+    np.testing.assert_array_equal(~np.isfinite(c_all), n_hand < george.MIN_PLAUSIBLE_PATH_LOSS_EXP)
+    assert runs.n_failed_calibrations > 0                     # the case the notebook met
+    c = runs.calibrated(c_all)
+    assert c.size == 300 - runs.n_failed_calibrations and np.isfinite(c).all()
+    lb.Ambiguity.single_experiment(c, what="one walk", source="test")

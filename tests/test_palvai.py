@@ -145,3 +145,17 @@ def test_pf_kde_mode_is_scipy_gaussian_kde_argmax_over_the_particles():
         kde = gaussian_kde(x[r].T, bw_method=h * np.sqrt(1 - np.sum(w[r] ** 2)), weights=w[r])
         np.testing.assert_allclose(kde.covariance, h**2 * np.eye(3), atol=1e-10)
         np.testing.assert_array_equal(ours[r], x[r, np.argmax(kde(x[r].T))])
+
+
+def test_the_sequential_schedule_runs_one_iteration_per_location_and_the_others_as_asked():
+    assert pv.pf_iterations("sequential", 250, 10) == 10 and pv.pf_iterations("sequential", 5, 10) == 5
+    assert pv.pf_iterations("all", 250, 10) == 250 and pv.pf_iterations("cyclic", 250, 10) == 250
+    rng = np.random.default_rng(9)
+    setup = pv.Setup(dim=2)
+    loc = pv.draw_locations(2, 4, 2, rng)
+    z = pv.measure(setup, loc, rng)
+    res = pv.pf_run(setup, loc, z, rng, n_particles=50, n_iterations=pv.pf_iterations("sequential", 30, 4),
+                    schedule="sequential")
+    assert res.mean_m.shape == (2, 4, 2)
+    with pytest.raises(ValueError, match="schedule must be one of"):
+        pv.pf_iterations("random", 3, 4)

@@ -27,7 +27,7 @@ from ..tracking.particle import kernel_map_estimate, particle_filter
 __all__ = [
     "DOCUMENT", "PRINTED", "SIGMA1_DB", "ETA", "SIGMA2_M", "SIGMA3_M", "N_LOCATIONS", "AREA_M", "Setup",
     "TARGETS", "with_target", "draw_locations", "measure", "observed_locations", "lsf_by_count", "rlsf_path", "ekf_path", "EKF_VARIANTS", "EKF_SCHEDULES",
-    "SCHEDULES", "SHADOWING", "pf_run", "PF_ESTIMATES", "pf_estimate_m", "printed_jacobian", "corrected_jacobian", "crlb_m", "errors_m",
+    "SCHEDULES", "SHADOWING", "pf_iterations", "pf_run", "PF_ESTIMATES", "pf_estimate_m", "printed_jacobian", "corrected_jacobian", "crlb_m", "errors_m",
 ]
 
 DOCUMENT = "palvai2008"
@@ -209,6 +209,13 @@ def _with_flags(result, with_divergence: bool):
 
 SCHEDULES = ("all", "sequential", "cyclic")
 SHADOWING = ("frozen", "iid")
+
+
+def pf_iterations(schedule: str, n_iterations: int, n_locations: int) -> int:
+    """The iterations ``schedule`` (:data:`SCHEDULES`) runs: the sequential schedule assimilates location k at
+    iteration k, so it ends after the ``n_locations`` locations; the others run ``n_iterations``."""
+    check_choice("schedule", schedule, SCHEDULES)
+    return min(int(n_iterations), int(n_locations)) if schedule == "sequential" else int(n_iterations)
 
 
 def pf_run(setup: Setup, anchors_m, rss_dbm, rng: np.random.Generator, *, n_particles: int, n_iterations: int,

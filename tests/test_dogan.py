@@ -234,3 +234,106 @@ def test_readings_summary_counts_fusion_cells_within_the_tolerance_per_reading()
     assert [s["within_25_pct"] for s in wide] == [2, 1, 2, 1]
     with pytest.raises(ValueError, match="tolerance"):
         dg.readings_summary(rows, variants, "chosen", ["A"], tolerance=20)
+
+
+# -- readings opened as notebook parameters (issue 28) --------------------------------------------------------------
+def test_mle_bounds_room_projects_the_fix_onto_the_room():
+    """'room': every fix inside [0, w] x [0, l]; a fix the unconstrained MLE put inside is unchanged, one outside moves to
+    the nearest point of the room (no point of a 1 cm grid over the room is closer)."""
+    rng = np.random.default_rng(3)
+    channel = lb.PathLossModel(-48.0, 3.0, 8.0)
+    truth = rng.uniform([0, 0], [7.6, 9.2], (200, 2))
+    power = channel.sample_rss_dbm(lb.pairwise_distance_m(truth, ANCHORS), rng)
+    free = dg.mle_positions(power, channel).position_m
+    room = dg.mle_positions(power, channel, bounds="room").position_m
+    inside = np.all((free >= 0) & (free <= [7.6, 9.2]), axis=-1)
+    assert inside.any() and (~inside).any()
+    np.testing.assert_array_equal(room[inside], free[inside])
+    assert np.all((room >= 0) & (room <= [7.6, 9.2]))
+    xs, ys = np.arange(0, 7.6 + 1e-9, 0.01), np.arange(0, 9.2 + 1e-9, 0.01)
+    grid = np.stack(np.meshgrid(xs, ys, indexing="ij"), -1).reshape(-1, 2)
+    for f, r in zip(free[~inside][:5], room[~inside][:5]):
+        assert np.linalg.norm(f - r) <= np.min(np.linalg.norm(grid - f, axis=-1)) + 1e-12
+    with pytest.raises(lb.ParameterError, match="bounds"):
+        dg.mle_positions(power, channel, bounds="box")
+
+
+@pytest.mark.parametrize("step", [0.5, 0.25, 0.1])
+def test_mle_grid_step_sets_the_start_grid_the_fix_descends_from(step):
+    """Levenberg-Marquardt starts at the best point of the grid of that step over the room +- 3 m: the fix's RSS-domain
+    cost is never above the best cost on that grid, and every problem converges."""
+    rng = np.random.default_rng(7)
+    channel = lb.PathLossModel(-48.0, 3.0, 6.0)
+    truth = rng.uniform([0, 0], [7.6, 9.2], (30, 2))
+    power = channel.sample_rss_dbm(lb.pairwise_distance_m(truth, ANCHORS), rng)
+    est = dg.mle_positions(power, channel, grid_step_m=step)
+    xs, ys = np.arange(-3, 10.6 + 1e-9, step), np.arange(-3, 12.2 + 1e-9, step)
+    grid = np.stack(np.meshgrid(xs, ys, indexing="ij"), -1).reshape(-1, 2)
+    d = np.maximum(lb.pairwise_distance_m(grid, ANCHORS), 1e-3)          # the grid passes through the anchors
+    grid_cost = np.sum((power[:, None, :] - channel.mean_rss_dbm(d)) ** 2, -1)
+    cost = np.sum((power - channel.mean_rss_dbm(lb.pairwise_distance_m(est.position_m, ANCHORS))) ** 2, -1)
+    assert np.all(cost <= grid_cost.min(axis=-1) + 1e-9) and np.all(est.converged)
+    with pytest.raises(lb.ParameterError, match="grid_step_m"):
+        dg.mle_positions(power, channel, grid_step_m=0.0)
+
+
+def test_room_sets_the_corner_anchors_the_scaled_path_and_the_smc_starts():
+    """A room of sides (w, l): anchors at its four corners in Sec. 5.4's order, Fig. 3.1's path at the same fractions
+    of the sides as in the default room, SMC trajectories starting inside it; the default room changes nothing."""
+    np.testing.assert_array_equal(dg.corner_anchors([6.0, 10.0]), [[0, 0], [6, 0], [6, 10], [0, 10]])
+    assert dg.room_waypoints(dg.WAYPOINTS_M, [7.6, 9.2]) is dg.WAYPOINTS_M
+    scaled = np.asarray(dg.room_waypoints(dg.WAYPOINTS_M, [6.0, 10.0]))
+    np.testing.assert_allclose(scaled / [6.0, 10.0], np.asarray(dg.WAYPOINTS_M) / [7.6, 9.2], rtol=1e-12)
+    states = dg.smc_trajectories(400, 2, np.random.default_rng(1), room_m=(6.0, 10.0))
+    start = states[:, 0, [0, 3]]
+    assert np.all((start >= 0) & (start <= [6.0, 10.0])) and start[:, 1].max() > 9.2
+    for bad in ([6.0], [6.0, -1.0], [6.0, np.inf]):
+        with pytest.raises(lb.ParameterError, match="room_m"):
+            dg.corner_anchors(bad)
+
+
+@pytest.mark.parametrize("mle_r", ["constant", "per_epoch"])
+def test_every_step_rmse_scores_the_filters_at_every_grid_step(mle_r):
+    """'every_step' records the same recursion at every 20 Hz step from the first RSS epoch: its errors at the RSS epochs
+    equal the RSS-epoch run's, and the table RMSE is the root mean square over runs and every step; the MLE column
+    stays at the RSS epochs."""
+    tr = dg.walk_trajectory(waypoints_m=((1.0, 1.0), (1.0, 4.0), (4.0, 4.0)), speed_m_s=0.5)
+    kw = dict(sigma_acc_values=(0.0075,), mle_r=mle_r)
+    a = dg.run_channel(tr, 6.0, 3.0, 5, np.random.default_rng(4), **kw)
+    b = dg.run_channel(tr, 6.0, 3.0, 5, np.random.default_rng(4), rmse_epochs="every_step", **kw)
+    for key in [(f, c) for f in dg.FILTERS for c in (None, 0.0075)]:
+        every = b.errors[("every_step",) + key]
+        assert every.shape == (5, tr.time_s.size - tr.rss_steps[0])
+        np.testing.assert_allclose(every[:, tr.rss_steps - tr.rss_steps[0]], a.errors[key], rtol=0, atol=1e-12)
+        np.testing.assert_allclose(b.errors[key], a.errors[key], rtol=0, atol=1e-12)
+        assert dg.scored_errors(b, key, "every_step") is every
+    runs = {(6.0, 3.0): b}
+    rows = {r["column"]: r for r in dg.table_rows(runs, "every_step") if r["table"] == "3.7" and r["row"] == "sigma_rss_db=6"}
+    every = b.errors[("every_step", "serial_ekf", None)]
+    assert rows["serial_ekf"]["reproduced"] == pytest.approx(np.sqrt(np.mean(every**2)), rel=1e-12)
+    assert rows["static_mle"]["reproduced"] == pytest.approx(np.sqrt(np.mean(b.errors["static_mle"] ** 2)), rel=1e-12)
+    with pytest.raises(lb.ParameterError, match="rmse_epochs"):
+        dg.scored_errors(b, ("serial_ekf", None), "all")
+
+
+def test_pcrlb_per_epoch_mse_mle():
+    """The per-epoch MSE_MLE: equal epochs give the constant bound; P_0 comes from epoch 0 (the bound at step 0 is
+    sqrt(MSE_x + MSE_y) of epoch 0); a worse fix at one epoch leaves the linear bound unchanged before that epoch and
+    never lowers it after; too few epochs for the horizon is refused."""
+    n = 200
+    const = dg.pcrlb_m("linear", fusion=True, sigma_rss_db=6.0, mse_mle_m2=np.array([2.0, 3.0]), n_steps=n)
+    epochs = np.tile([2.0, 3.0], (n // dg.RSS_EVERY, 1))
+    np.testing.assert_allclose(dg.pcrlb_m("linear", fusion=True, sigma_rss_db=6.0, mse_mle_m2=epochs, n_steps=n), const,
+                               rtol=1e-12)
+    varied = epochs.copy()
+    varied[0] = [0.5, 0.25]
+    varied[7] = [20.0, 30.0]
+    bound = dg.pcrlb_m("linear", fusion=True, sigma_rss_db=6.0, mse_mle_m2=varied, n_steps=n)
+    assert bound[0] == pytest.approx(np.sqrt(0.75), rel=1e-12)
+    only_7 = epochs.copy()
+    only_7[7] = [20.0, 30.0]
+    worse = dg.pcrlb_m("linear", fusion=True, sigma_rss_db=6.0, mse_mle_m2=only_7, n_steps=n)
+    np.testing.assert_allclose(worse[:7 * dg.RSS_EVERY], const[:7 * dg.RSS_EVERY], rtol=1e-12)
+    assert np.all(worse >= const - 1e-12) and worse[7 * dg.RSS_EVERY] > const[7 * dg.RSS_EVERY]
+    with pytest.raises(lb.ParameterError, match="per-epoch"):
+        dg.pcrlb_m("linear", fusion=True, sigma_rss_db=6.0, mse_mle_m2=epochs[:5], n_steps=n)

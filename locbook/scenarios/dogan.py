@@ -54,7 +54,7 @@ __all__ = [
     "smc_trajectories", "smc_trajectory", "CHANNELS", "run_tables", "table_rows", "only_acc_errors",
     "fusion_gain_pct", "mean_rmse_m", "printed_fusion_gains_pct", "REPEATED_ROWS", "readings_summary",
     "RMSE_TABLES", "TABLE_SIGMA_ACC_MPS2", "TABLE_36_CHANNEL", "SIGMA_ACC_SWEEP_CHANNELS", "MLE_R_READINGS",
-    "divergence_table",
+    "divergence_table", "MLE_BOUNDS", "RMSE_EPOCHS", "PCRLB_MSE_MLE", "room_waypoints", "scored_errors",
 ]
 
 #: Everything the thesis prints (locbook/data/printed/dogan2015.csv).
@@ -71,9 +71,16 @@ def _value(location: str, item: str, statistic: str = "") -> float:
 ROOM_M = (_value("Sec. 5.4", "area", "width"), _value("Sec. 5.4", "area", "length"))
 
 
+def _room(room_m) -> tuple[float, float]:
+    room = np.asarray(room_m, dtype=float)
+    if room.shape != (2,) or not np.all(np.isfinite(room)) or not np.all(room > 0):
+        raise ParameterError(f"room_m must be two positive finite sides (width, length) in m, got {room_m!r}")
+    return float(room[0]), float(room[1])
+
+
 def corner_anchors(room_m=ROOM_M) -> np.ndarray:
     """Anchors A1-A4 at the corners of the room, in the order of Sec. 5.4: (0, 0), (w, 0), (w, l), (0, l)."""
-    w, length = map(float, room_m)
+    w, length = _room(room_m)
     return np.array([[0.0, 0.0], [w, 0.0], [w, length], [0.0, length]])
 
 
@@ -152,6 +159,18 @@ FILTERS = ("parallel_ekf", "serial_ekf", "kalman_filter")
 #: MLE search grid (the thesis names no solver): the room +- 3 m at 0.5 m, then Levenberg-Marquardt, unconstrained.
 MLE_GRID_STEP_M = 0.5
 MLE_GRID_MARGIN_M = 3.0
+#: The MLE's domain (Sec. 2.3.1 names no solver, start or bounds): ``"unconstrained"`` (default), or ``"room"``: the
+#: unconstrained fix projected onto the room (each coordinate clipped to [0, w] x [0, l]), the simplest reading of a
+#: fix known to lie in the room (not the box-constrained minimiser of Eq. (2.4)).
+MLE_BOUNDS = ("unconstrained", "room")
+#: The steps of the tables' RMSE (Tables 3.7-3.12 do not define it): ``"rss_epochs"`` (default: every filter where
+#: the MLE exists) or ``"every_step"``: the filters at every step of the 20 Hz grid from the first RSS epoch (the MLE
+#: column stays at the RSS epochs, where it exists).
+RMSE_EPOCHS = ("rss_epochs", "every_step")
+#: How the PCRLB uses the MLE's per-axis MSE (Eq. (3.20), Sec. 4.1.2; not stated): ``"runs_and_epochs"`` (default:
+#: one MSE per axis averaged over runs and epochs, for P_0 and every epoch's R of the linear bound) or
+#: ``"per_epoch"``: averaged over runs at each epoch, P_0 from the first epoch's, the linear bound's R_k per epoch.
+PCRLB_MSE_MLE = ("runs_and_epochs", "per_epoch")
 
 
 def filter_noise(reading: str, sigma_acc_mps2: float | None) -> tuple[float, float]:
@@ -200,6 +219,16 @@ def speed_reason(start: str = DEFAULT_START, speed_mps: float = SPEED_MPS) -> st
 
 
 
+def room_waypoints(waypoints_m=WAYPOINTS_M, room_m=ROOM_M):
+    """Fig. 3.1's path, drawn in the frame of the default room :data:`ROOM_M`, read in a room of sides ``room_m``:
+    every coordinate scaled by the ratio of the rooms' sides (Fig. 3.1 draws the path relative to the room, with no
+    coordinates). The default room returns ``waypoints_m`` itself."""
+    scale = np.asarray(_room(room_m)) / np.asarray(ROOM_M, dtype=float)
+    if np.all(scale == 1.0):
+        return waypoints_m
+    return (np.asarray(waypoints_m, dtype=float) * scale).tolist()
+
+
 def walk_trajectory(waypoints_m=WAYPOINTS_M, speed_m_s: float = SPEED_MPS, dt_s: float = DT_S, *,
                     start: str = DEFAULT_START, ramp_s: float = 2.0, rss_every: int = RSS_EVERY) -> Trajectory:
     """The default walk for Fig. 3.1's unprinted path (:func:`~locbook.models.trajectory.polyline_trajectory`): the
@@ -231,15 +260,24 @@ def simulate_acceleration(trajectory: Trajectory, sigma_acc_mps2: float, n_runs:
 
 
 def mle_positions(rss_dbm, channel: PathLossModel, anchors_m=ANCHORS_M, *, room_m=ROOM_M,
-                  grid_step_m: float = MLE_GRID_STEP_M, margin_m: float = MLE_GRID_MARGIN_M):
-    """Static MLE (Eq. (2.4)) of every RSS vector ``(..., m)``: the best point of a grid over the room +- margin,
-    refined by Levenberg-Marquardt without bounds (the thesis names no solver, start or bounds). Returns a
-    LocalizationResult."""
+                  grid_step_m: float = MLE_GRID_STEP_M, margin_m: float = MLE_GRID_MARGIN_M,
+                  bounds: str = "unconstrained"):
+    """Static MLE (Eq. (2.4)) of every RSS vector ``(..., m)``: the best point of a grid of ``grid_step_m`` over the
+    room +- margin, refined by Levenberg-Marquardt without bounds (the thesis names no solver, start or bounds); with
+    ``bounds="room"`` (:data:`MLE_BOUNDS`) the fix is then projected onto the room. Returns a LocalizationResult."""
+    if bounds not in MLE_BOUNDS:
+        raise ParameterError(f"bounds must be one of {MLE_BOUNDS}, got {bounds!r}")
+    if not (np.isfinite(grid_step_m) and grid_step_m > 0):
+        raise ParameterError(f"grid_step_m must be a positive finite step in m, got {grid_step_m!r}")
+    room_m = _room(room_m)
     xs = np.arange(-margin_m, room_m[0] + margin_m + 1e-9, grid_step_m)
     ys = np.arange(-margin_m, room_m[1] + margin_m + 1e-9, grid_step_m)
     grid = np.stack(np.meshgrid(xs, ys, indexing="ij"), axis=-1).reshape(-1, 2)
     start = grid_ml_position(anchors_m, rss_dbm, channel, grid).position_m
-    return rss_ml_position(anchors_m, rss_dbm, channel, start)
+    fix = rss_ml_position(anchors_m, rss_dbm, channel, start)
+    if bounds == "room":
+        fix = replace(fix, position_m=np.clip(fix.position_m, 0.0, np.asarray(room_m)))
+    return fix
 
 
 def mle_cost_eq24(points_m, rss_dbm, channel: PathLossModel, anchors_m=ANCHORS_M):
@@ -269,7 +307,8 @@ def initial_state(first_fix_m, mse_mle_m2, *, vel_var: float = P00_VEL_VAR, acc_
 
 def run_filter(name: str, trajectory: Trajectory, rss_dbm, mle_fix_m, mse_mle_m2, channel: PathLossModel, *,
                acc_mps2=None, sigma_acc_mps2: float | None = None, model: KinematicModel | None = None,
-               p0_acc_var: float = P00_ACC_VAR, serial_order: str = "descending", anchors_m=ANCHORS_M) -> KalmanResult:
+               p0_acc_var: float = P00_ACC_VAR, serial_order: str = "descending", anchors_m=ANCHORS_M,
+               every_step: bool = False) -> KalmanResult:
     """One filter of Tables 3.7-3.12 on all runs at once, recorded at the RSS epochs.
 
     ``rss_dbm`` ``(..., E, m)`` and ``mle_fix_m`` ``(..., E, 2)`` are at ``trajectory.rss_steps``; the filter starts
@@ -280,6 +319,9 @@ def run_filter(name: str, trajectory: Trajectory, rss_dbm, mle_fix_m, mse_mle_m2
     carries Q (:func:`motion_model`), ``p0_acc_var`` the acceleration variance of P_0 (:func:`filter_noise`).
     ``mse_mle_m2`` is ``(2,)`` (one MSE per axis, the default reading of Eq. (3.21)) or ``(E, 2)``: one per RSS
     epoch, Table 4.1's R_{k+1} (the other reading; KF (MLE) only, P_0 from the first epoch's).
+
+    With ``every_step`` the estimates are recorded at every grid step from the first RSS epoch (``steps`` of the
+    result: ``rss_steps[0] .. T - 1``) instead of at the RSS epochs only (the same recursion).
 
     The result is the filter's own :class:`~locbook.KalmanResult` with the NIS guard's fields on the trajectory's grid:
     ``nis``/``nis_dof`` ``(..., T)`` (NaN / 0 up to the first epoch, where the filter starts), ``diverged`` and
@@ -312,7 +354,7 @@ def run_filter(name: str, trajectory: Trajectory, rss_dbm, mle_fix_m, mse_mle_m2
         z = np.full(grid_shape + (2,), np.nan)
         z[..., at, :] = np.asarray(mle_fix_m)[..., 1:, :]
         if per_epoch:
-            return _per_epoch_kf(model, x0, P0, measurements, z, mse, at, steps, n_steps)
+            return _per_epoch_kf(model, x0, P0, measurements, z, mse, at, steps, n_steps, every_step)
         measurements.append(LinearMeasurement(z, model.position_measurement_matrix(), mse[..., :, None] * np.eye(2)))
     else:
         z = np.full(grid_shape + (rss_dbm.shape[-1],), np.nan)
@@ -320,10 +362,11 @@ def run_filter(name: str, trajectory: Trajectory, rss_dbm, mle_fix_m, mse_mle_m2
         mode = "parallel" if name == "parallel_ekf" else "serial"
         measurements.append(RssMeasurement(z, anchors_m, channel, model.position_index, mode=mode,
                                            order=serial_order))
-    track = extended_kalman_filter(model.F, model.Q, x0, P0, measurements, record=at)
+    track = extended_kalman_filter(model.F, model.Q, x0, P0, measurements, record=None if every_step else at)
     x = np.concatenate([np.broadcast_to(x0[..., None, :], track.x.shape[:-2] + (1, 6)), track.x], axis=-2)
     P = np.concatenate([np.broadcast_to(P0[..., None, :, :], track.P.shape[:-3] + (1, 6, 6)), track.P], axis=-3)
-    return _on_trajectory_grid(KalmanResult(x, P, steps), track.nis, track.nis_dof, n_steps)
+    recorded = np.arange(steps[0], n_steps) if every_step else steps
+    return _on_trajectory_grid(KalmanResult(x, P, recorded), track.nis, track.nis_dof, n_steps)
 
 
 def _on_trajectory_grid(result: KalmanResult, nis, nis_dof, n_steps: int) -> KalmanResult:
@@ -337,7 +380,7 @@ def _on_trajectory_grid(result: KalmanResult, nis, nis_dof, n_steps: int) -> Kal
                    diverged=flags.diverged, diverged_step=flags.diverged_step)
 
 
-def _per_epoch_kf(model, x0, P0, acc_streams, z, mse, at, steps, n_steps) -> KalmanResult:
+def _per_epoch_kf(model, x0, P0, acc_streams, z, mse, at, steps, n_steps, every_step=False) -> KalmanResult:
     """KF (MLE) with R = diag(MSE_MLE) of each epoch (Table 4.1's R_{k+1}): the same multi-rate filter
     (:func:`locbook.extended_kalman_filter`) run one inter-epoch segment at a time, each segment with its epoch's R,
     continuing from the previous segment's posterior. A segment holds one RSS update (fewer than the guard's window),
@@ -349,10 +392,14 @@ def _per_epoch_kf(model, x0, P0, acc_streams, z, mse, at, steps, n_steps) -> Kal
     for e, end in enumerate(at, start=1):
         segment = [LinearMeasurement(m.z[..., start:end + 1, :], m.H, m.R) for m in acc_streams]
         segment.append(LinearMeasurement(z[..., start:end + 1, :], H, mse[e][:, None] * np.eye(2)))
-        track = extended_kalman_filter(model.F, model.Q, x, P, segment, record=[end - start])
-        x, P = track.x[..., 0, :], track.P[..., 0, :, :]
-        xs.append(x)
-        Ps.append(P)
+        track = extended_kalman_filter(model.F, model.Q, x, P, segment, record=None if every_step else [end - start])
+        x, P = track.x[..., -1, :], track.P[..., -1, :, :]
+        if every_step:                   # every step of the segment, its epoch last
+            xs.extend(np.moveaxis(track.x, -2, 0))
+            Ps.extend(np.moveaxis(track.P, -3, 0))
+        else:
+            xs.append(x)
+            Ps.append(P)
         nis.append(track.nis)
         dof.append(np.broadcast_to(track.nis_dof, track.nis.shape))
         start = end + 1
@@ -363,7 +410,11 @@ def _per_epoch_kf(model, x0, P0, acc_streams, z, mse, at, steps, n_steps) -> Kal
         track = extended_kalman_filter(model.F, model.Q, x, P, segment)
         nis.append(track.nis)
         dof.append(np.broadcast_to(track.nis_dof, track.nis.shape))
-    return _on_trajectory_grid(KalmanResult(np.stack(xs, axis=-2), np.stack(Ps, axis=-3), steps),
+        if every_step:
+            xs.extend(np.moveaxis(track.x, -2, 0))
+            Ps.extend(np.moveaxis(track.P, -3, 0))
+    recorded = np.arange(steps[0], n_steps) if every_step else steps
+    return _on_trajectory_grid(KalmanResult(np.stack(xs, axis=-2), np.stack(Ps, axis=-3), recorded),
                                np.concatenate(nis, axis=-1), np.concatenate(dof, axis=-1), n_steps)
 
 
@@ -372,7 +423,9 @@ class ChannelRun:
     """All filters for one channel setting (sigma_RSS, alpha): errors ``(runs, E)`` at the RSS epochs, keyed
     ``"static_mle"`` and ``(filter, sigma_acc or None)``; ``mse_mle_m2`` the per-axis MSE used for R and P_0;
     ``divergence``: the NIS guard's :class:`~locbook.tracking.divergence.DivergenceFlags` of every filter case, keyed like
-    ``errors`` (the errors keep every run: the thesis averaged all its runs)."""
+    ``errors`` (the errors keep every run: the thesis averaged all its runs); ``mse_mle_epoch_m2`` ``(E, 2)`` the MSE
+    per axis and RSS epoch (over runs). With ``rmse_epochs="every_step"`` the filter cases' errors at every grid step
+    from the first RSS epoch are kept too, keyed ``("every_step", filter, sigma_acc)`` (:func:`scored_errors`)."""
 
     sigma_rss_db: float
     path_loss_exp: float
@@ -380,30 +433,47 @@ class ChannelRun:
     errors: dict = field(default_factory=dict)
     converged_fraction: float = 1.0
     divergence: dict = field(default_factory=dict)
+    mse_mle_epoch_m2: np.ndarray | None = None
+
+
+def scored_errors(run: ChannelRun, key, rmse_epochs: str = "rss_epochs") -> np.ndarray:
+    """The errors of ``run`` a table RMSE is taken over (:data:`RMSE_EPOCHS`): ``run.errors[key]`` at the RSS epochs,
+    or, for ``"every_step"`` and a filter case ``(filter, sigma_acc)``, its errors at every grid step."""
+    if rmse_epochs not in RMSE_EPOCHS:
+        raise ParameterError(f"rmse_epochs must be one of {RMSE_EPOCHS}, got {rmse_epochs!r}")
+    if rmse_epochs == "every_step" and isinstance(key, tuple) and key[0] in FILTERS:
+        return run.errors[("every_step",) + key]
+    return run.errors[key]
 
 
 def run_channel(trajectory: Trajectory, sigma_rss_db: float, path_loss_exp: float, n_runs: int,
                 rng: np.random.Generator, *, sigma_acc_values=(), only_rss: bool = True, filters=FILTERS,
                 ref_power_dbm: float = REF_POWER_DBM, serial_order: str = "descending",
                 noise_reading: str = DEFAULT_NOISE_READING, anchors_m=ANCHORS_M, mle_r: str = "constant",
-                keep_estimates: bool = False) -> ChannelRun:
+                keep_estimates: bool = False, room_m=ROOM_M, mle_grid_step_m: float = MLE_GRID_STEP_M,
+                mle_bounds: str = "unconstrained", rmse_epochs: str = "rss_epochs") -> ChannelRun:
     """Simulate one channel setting and run the MLE and the requested filters, ONLY RSS and/or fused with an
     accelerometer of each ``sigma_acc_values``; all cases share the same RSS draws (common random numbers, so
     the fusion gain is measured on identical RSS). The MLE's per-axis MSE sets R and P_0 of KF (MLE) and
     P_0 of every filter (Eqs. (3.20), (3.21)). Each case's Q and P_0 acceleration variance follow
     ``noise_reading`` (:func:`filter_noise`); the filter grid is the trajectory's. ``mle_r`` (:data:`MLE_R_READINGS`):
     KF (MLE)'s R from the MSE per axis over runs and epochs (``"constant"``) or per epoch over runs
-    (``"per_epoch"``)."""
+    (``"per_epoch"``). The MLE (:func:`mle_positions`) searches ``room_m`` (with ``anchors_m``) at
+    ``mle_grid_step_m``, bounded by ``mle_bounds``; ``rmse_epochs="every_step"`` also keeps every filter's errors at
+    every grid step (:func:`scored_errors`)."""
+    if rmse_epochs not in RMSE_EPOCHS:
+        raise ParameterError(f"rmse_epochs must be one of {RMSE_EPOCHS}, got {rmse_epochs!r}")
     if mle_r not in MLE_R_READINGS:
         raise ParameterError(f"mle_r must be one of {MLE_R_READINGS}, got {mle_r!r}")
     channel = PathLossModel(ref_power_dbm, path_loss_exp, sigma_rss_db)
     dt_s = float(trajectory.time_s[1] - trajectory.time_s[0])
     truth = trajectory.position_m[..., trajectory.rss_steps, :]
     rss = simulate_rss(trajectory, channel, n_runs, rng, anchors_m)
-    mle = mle_positions(rss, channel, anchors_m)
+    mle = mle_positions(rss, channel, anchors_m, room_m=room_m, grid_step_m=mle_grid_step_m, bounds=mle_bounds)
     fix = mle.position_m
     mse = np.mean((fix - truth) ** 2, axis=(0, 1))
-    out = ChannelRun(sigma_rss_db, path_loss_exp, mse, converged_fraction=float(np.mean(mle.converged)))
+    out = ChannelRun(sigma_rss_db, path_loss_exp, mse, converged_fraction=float(np.mean(mle.converged)),
+                     mse_mle_epoch_m2=np.mean((fix - truth) ** 2, axis=0))
     out.errors["static_mle"] = np.linalg.norm(fix - truth, axis=-1)
     if keep_estimates:
         out.errors[("estimates", "static_mle")] = fix
@@ -417,8 +487,13 @@ def run_channel(trajectory: Trajectory, sigma_rss_db: float, path_loss_exp: floa
         for name in filters:
             r_mse = np.mean((fix - truth) ** 2, axis=0) if (mle_r == "per_epoch" and name == "kalman_filter") else mse
             track = run_filter(name, trajectory, rss, fix, r_mse, channel, acc_mps2=acc, sigma_acc_mps2=sigma_acc,
-                               model=model, p0_acc_var=p0_acc, serial_order=serial_order, anchors_m=anchors_m)
+                               model=model, p0_acc_var=p0_acc, serial_order=serial_order, anchors_m=anchors_m,
+                               every_step=rmse_epochs == "every_step")
             pos = track.x[..., model.position_index]
+            if rmse_epochs == "every_step":
+                every = np.linalg.norm(pos - trajectory.position_m[..., track.steps, :], axis=-1)
+                out.errors[("every_step", name, sigma_acc)] = every
+                pos = pos[..., trajectory.rss_steps - track.steps[0], :]      # the same estimates at the RSS epochs
             out.errors[(name, sigma_acc)] = np.linalg.norm(pos - truth, axis=-1)
             out.divergence[(name, sigma_acc)] = DivergenceFlags.of(track)
             if keep_estimates:
@@ -499,9 +574,10 @@ CHANNELS = tuple(table_channels())
 
 def run_tables(trajectory: Trajectory, n_runs: int, seed: int, *, channels=None, filters=FILTERS,
                serial_order: str = "descending", noise_reading: str = DEFAULT_NOISE_READING,
-               anchors_m=ANCHORS_M, mle_r: str = "constant") -> dict:
+               anchors_m=ANCHORS_M, mle_r: str = "constant", **mle_options) -> dict:
     """Every channel setting of Tables 3.7-3.12 (or the ``channels`` subset of :data:`CHANNELS`), each with its
-    own random stream spawned from ``seed``; returns ``{(sigma_RSS, alpha): ChannelRun}``."""
+    own random stream spawned from ``seed``; returns ``{(sigma_RSS, alpha): ChannelRun}``. ``mle_options``: ``room_m``,
+    ``mle_grid_step_m``, ``mle_bounds``, ``rmse_epochs`` of :func:`run_channel`."""
     plan = table_channels()
     chosen = CHANNELS if channels is None else tuple(channels)
     unknown = [c for c in chosen if c not in plan]
@@ -514,14 +590,15 @@ def run_tables(trajectory: Trajectory, n_runs: int, seed: int, *, channels=None,
         rng = np.random.default_rng(children[CHANNELS.index(key)])
         out[key] = run_channel(trajectory, key[0], key[1], n_runs, rng, sigma_acc_values=accs, only_rss=only,
                                filters=filters, serial_order=serial_order, noise_reading=noise_reading,
-                               anchors_m=anchors_m, mle_r=mle_r)
+                               anchors_m=anchors_m, mle_r=mle_r, **mle_options)
     return out
 
 
-def table_rows(runs: dict) -> list[dict]:
+def table_rows(runs: dict, rmse_epochs: str = "rss_epochs") -> list[dict]:
     """Printed cells beside the reproduced RMSE (over runs and RSS epochs: the thesis does not define its table RMSE;
     every run, as the thesis averaged every run) with its Monte-Carlo standard error and, for a filter column, the
-    NIS guard's flags of its runs (``divergence``, None for the MLE); cells whose setting was not run are left out."""
+    NIS guard's flags of its runs (``divergence``, None for the MLE); cells whose setting was not run are left out.
+    ``rmse_epochs="every_step"`` takes the filters' RMSE over every grid step instead (:func:`scored_errors`)."""
     from ..metrics import rmse_m
     rows = []
     for cell in printed_tables():
@@ -530,7 +607,7 @@ def table_rows(runs: dict) -> list[dict]:
         key = "static_mle" if cell["column"] == "static_mle" else (cell["column"], s.sigma_acc_mps2)
         if run is None or key not in run.errors:
             continue
-        err = run.errors[key]
+        err = scored_errors(run, key, rmse_epochs)
         per_run = np.mean(err**2, axis=1)          # runs are independent; epochs within a run are not
         value = float(rmse_m(err))
         se = float(np.std(per_run, ddof=1) / np.sqrt(per_run.size) / (2.0 * value))
@@ -554,7 +631,7 @@ def smc_trajectories(n_trajectories: int, n_steps: int, rng: np.random.Generator
     P_{0|0} blocks; the thesis prints no start distribution), propagated with the per-step Q. Shape
     ``(N, n_steps, 6)``."""
     model = model or motion_model()
-    start = model.state_from(rng.uniform((0.0, 0.0), room_m, (n_trajectories, 2)),
+    start = model.state_from(rng.uniform((0.0, 0.0), _room(room_m), (n_trajectories, 2)),
                              np.sqrt(P00_VEL_VAR) * rng.standard_normal((n_trajectories, 2)),
                              np.sqrt(P00_ACC_VAR) * rng.standard_normal((n_trajectories, 2)))
     return simulate_states(model.F, model.Q, start, n_steps - 1, rng)
@@ -575,7 +652,7 @@ def pcrlb_m(kind: str, *, fusion: bool, sigma_rss_db: float, mse_mle_m2, n_steps
             rng: np.random.Generator | None = None, n_trajectories: int = MC_RUNS, trajectory: Trajectory | None = None,
             acc_at_rss_epochs: bool = False, min_distance_m: float = 0.0, height_offset_m: float = 0.0,
             rss_every: int = RSS_EVERY, model: KinematicModel | None = None, p0_acc_var: float = P00_ACC_VAR,
-            anchors_m=ANCHORS_M) -> np.ndarray:
+            anchors_m=ANCHORS_M, room_m=ROOM_M) -> np.ndarray:
     """Position PCRLB (Eq. (4.23), m) at steps ``0 .. n_steps - 1`` of the 20 Hz grid, by Table 4.1.
 
     J_0 = P_{0|0}^{-1} (Eqs. (3.20), (4.11)); the Tichavsky recursion (4.7) with D22 = Q^{-1} + J_z, where J_z at
@@ -584,14 +661,21 @@ def pcrlb_m(kind: str, *, fusion: bool, sigma_rss_db: float, mse_mle_m2, n_steps
     acceleration out at RSS epochs although the fusion filter uses it there; ``acc_at_rss_epochs=True`` adds it
     (our correction, off by default). ``min_distance_m`` / ``height_offset_m`` regularise the near-anchor 1/d^2
     singularity of E[J_z] (which gives the average of Eq. (4.22) an infinite variance); the thesis uses neither.
+    ``mse_mle_m2`` is ``(2,)`` (one MSE per axis over runs and epochs) or ``(E, 2)`` per RSS epoch
+    (:data:`PCRLB_MSE_MLE`): P_0 from epoch 0's, and the linear bound's R at the k-th RSS epoch from epoch k's (Table
+    4.1's R_{k+1}). The SMC trajectories start in ``room_m``; ``anchors_m`` are the anchors.
     """
     if kind not in BOUND_KINDS:
         raise ParameterError(f"kind must be one of {BOUND_KINDS}, got {kind!r}")
     model = model or motion_model()
     idx = model.position_index
     mse = np.asarray(mse_mle_m2, dtype=float)
-    _, P0 = initial_state(np.zeros(2), mse, acc_var=p0_acc_var)
+    per_epoch = mse.ndim == 2
     rss_steps = np.arange(rss_every, n_steps, rss_every)
+    if per_epoch and (mse.shape[-1] != 2 or mse.shape[0] < rss_steps.size + 1):
+        raise ParameterError(f"a per-epoch mse_mle_m2 must be (epochs, 2) with at least {rss_steps.size + 1} epochs for "
+                             f"{n_steps} steps, got shape {mse.shape}")
+    _, P0 = initial_state(np.zeros(2), mse[0] if per_epoch else mse, acc_var=p0_acc_var)
     jz = np.zeros((n_steps - 1, 6, 6))
     if fusion:
         acc_info = linear_measurement_information(model.derivative_measurement_matrix(2),
@@ -600,7 +684,10 @@ def pcrlb_m(kind: str, *, fusion: bool, sigma_rss_db: float, mse_mle_m2, n_steps
         if not acc_at_rss_epochs:
             jz[rss_steps - 1] = 0.0
     regularise = dict(min_distance_m=min_distance_m, height_offset_m=height_offset_m)
-    if kind == "linear":
+    if kind == "linear" and per_epoch:        # R_k per epoch (Table 4.1's R_{k+1}); epoch 0 is P_0's
+        H = model.position_measurement_matrix()
+        rss_info = np.stack([linear_measurement_information(H, np.diag(m)) for m in mse[1:rss_steps.size + 1]])
+    elif kind == "linear":
         rss_info = linear_measurement_information(model.position_measurement_matrix(), np.diag(mse))
     elif kind == "truth":
         if trajectory is None or trajectory.time_s.size < n_steps:
@@ -610,7 +697,7 @@ def pcrlb_m(kind: str, *, fusion: bool, sigma_rss_db: float, mse_mle_m2, n_steps
     else:
         if rng is None:
             raise ParameterError("the Monte-Carlo (smc) bound needs rng")
-        states = smc_trajectories(n_trajectories, n_steps, rng, model=model)
+        states = smc_trajectories(n_trajectories, n_steps, rng, model=model, room_m=room_m)
         rss_info = rss_state_information(states[:, rss_steps], anchors_m, path_loss_exp, sigma_rss_db, idx,
                                          **regularise).mean(axis=0)               # Eq. (4.22)
     jz[rss_steps - 1] += rss_info
@@ -772,11 +859,13 @@ def fusion_reduction_rows(runs: dict) -> list[dict]:
     return out
 
 
-def fusion_gain_pct(run: ChannelRun, sigma_acc_mps2: float, filters=FILTERS) -> tuple[float, float, dict]:
+def fusion_gain_pct(run: ChannelRun, sigma_acc_mps2: float, filters=FILTERS,
+                    rmse_epochs: str = "rss_epochs") -> tuple[float, float, dict]:
     """The fusion reduction of the RMSE, ONLY RSS -> RSS/IMU, averaged over ``filters`` (the text's "Sensor fusion
     decreases the error approximately % 30", Figs 3.5-3.7), its jackknife standard error over runs, and the
     reduction of each filter. The RMSE is pooled over runs and epochs (the thesis does not define it)."""
-    mse = {(f, c): np.mean(run.errors[(f, c)] ** 2, axis=1) for f in filters for c in (None, sigma_acc_mps2)}
+    mse = {(f, c): np.mean(scored_errors(run, (f, c), rmse_epochs) ** 2, axis=1) for f in filters
+           for c in (None, sigma_acc_mps2)}
 
     def mean_gain(*per_run):
         parts = [100.0 * (1.0 - np.sqrt(per_run[2 * i + 1].mean() / per_run[2 * i].mean())) for i in range(len(filters))]
@@ -787,11 +876,12 @@ def fusion_gain_pct(run: ChannelRun, sigma_acc_mps2: float, filters=FILTERS) -> 
     return mean_gain(*arrays), jackknife_standard_error(mean_gain, *arrays), each
 
 
-def mean_rmse_m(run: ChannelRun, sigma_acc_mps2: float | None, filters=FILTERS) -> tuple[float, float, dict]:
+def mean_rmse_m(run: ChannelRun, sigma_acc_mps2: float | None, filters=FILTERS,
+                rmse_epochs: str = "rss_epochs") -> tuple[float, float, dict]:
     """The mean over ``filters`` of their pooled RMSE in one case (the one level the text reads off three curves,
     "errors are near 1.5 meter", Fig. 3.4), its jackknife standard error over runs (the filters share the runs'
     RSS, so their errors are correlated), and each filter's RMSE."""
-    arrays = [np.mean(run.errors[(f, sigma_acc_mps2)] ** 2, axis=1) for f in filters]
+    arrays = [np.mean(scored_errors(run, (f, sigma_acc_mps2), rmse_epochs) ** 2, axis=1) for f in filters]
 
     def level(*per_run):
         return float(np.mean([np.sqrt(a.mean()) for a in per_run]))
@@ -926,7 +1016,8 @@ class BoundStudy:
     """The Ch. 4 bounds of one run of the study (Figs. 4.1-4.4): every SMC curve from one seed, as one figure of
     the thesis would draw them, and independent replicate seeds for the Monte-Carlo standard error of a statistic
     of an SMC curve. ``mse_mle_m2`` maps sigma_RSS (dB) to the per-axis MSE of the Ch. 3 MLE (P_0, and R of the
-    linear bound); the other fields are those of :func:`pcrlb_m`."""
+    linear bound), per axis ``(2,)`` or per epoch ``(E, 2)``; ``room_m`` the room, its corners the anchors; the other
+    fields are those of :func:`pcrlb_m`."""
 
     mse_mle_m2: dict
     n_steps: int
@@ -936,6 +1027,7 @@ class BoundStudy:
     acc_at_rss_epochs: bool = False
     min_distance_m: float = 0.0
     height_offset_m: float = 0.0
+    room_m: tuple = ROOM_M
 
     def bound_m(self, kind: str, fusion: bool, sigma_rss_db: float, sigma_acc_mps2: float = SIGMA_ACC_MPS2, *,
                 rng: np.random.Generator | None = None) -> np.ndarray:
@@ -949,7 +1041,7 @@ class BoundStudy:
         return pcrlb_m(kind, fusion=fusion, sigma_rss_db=sigma_rss_db, mse_mle_m2=self.mse_mle_m2[sigma_rss_db],
                        n_steps=self.n_steps, sigma_acc_mps2=sigma_acc_mps2, rng=rng, n_trajectories=self.n_trajectories,
                        acc_at_rss_epochs=self.acc_at_rss_epochs, min_distance_m=self.min_distance_m,
-                       height_offset_m=self.height_offset_m)
+                       height_offset_m=self.height_offset_m, room_m=self.room_m, anchors_m=corner_anchors(self.room_m))
 
     def replicate_se(self, statistic, kind: str, fusion: bool, sigma_rss_db: float,
                      sigma_acc_mps2: float = SIGMA_ACC_MPS2) -> float:

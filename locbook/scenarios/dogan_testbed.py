@@ -27,7 +27,7 @@ from ..montecarlo import single_run_interval
 from ..reproduce.scoring import Ambiguity
 from ..tracking.divergence import divergence_note
 from .dogan import (ANCHORS_M, DEFAULT_NOISE_READING, DEFAULT_START, DT_S, FILTERS, PRINTED, SPEED_MPS, ChannelRun,
-                    fitted_readings)
+                    fitted_readings, scored_errors)
 
 __all__ = [
     "TESTBED_REF_POWER_DBM", "TESTBED_PATH_LOSS_EXP", "TESTBED_FIT_SIGMA_DB", "TESTBED_SIGMA_DB", "TESTBED_RSS_EVERY",
@@ -183,28 +183,30 @@ def printed_reductions_pct() -> dict:
                                       PRINTED_TESTBED_RMSE[(name, "fusion")].value)) for name in FILTERS}
 
 
-def testbed_rows(run: ChannelRun, sigma_acc_mps2: float, *, coverage: float = 0.90) -> list[dict]:
+def testbed_rows(run: ChannelRun, sigma_acc_mps2: float, *, coverage: float = 0.90,
+                 rmse_epochs: str = "rss_epochs") -> list[dict]:
     """Each printed test-bed RMSE beside the simulated walks: the RMSE of one walk (per walk over its epochs) with
     its mean, sd, Monte-Carlo standard error of the mean, median and central ``coverage`` interval, and the pooled
     Monte-Carlo RMSE (``mc_rmse``); then the fusion reduction per filter (printed: derived from the printed pair) and
-    the mean of the three per walk, which the thesis summarises as "approximately 15%"."""
+    the mean of the three per walk, which the thesis summarises as "approximately 15%". ``rmse_epochs``: the filters'
+    RMSE over the packet epochs or over every grid step (:func:`~locbook.scenarios.dogan.scored_errors`)."""
     rows = []
     for (name, case), printed in PRINTED_TESTBED_RMSE.items():
         key = "static_mle" if name == "static_mle" else (name, None if case is None else sigma_acc_mps2)
-        err = run.errors[key]
+        err = scored_errors(run, key, rmse_epochs)
         rows.append(dict(filter=name, case="ONLY RSS" if case is None else "RSS/IMU", where=printed.location,
                          printed=printed.value, printed_value=printed, mc_rmse=float(rmse_m(err)),
                          **_walk_row(rmse_m(err, axis=1), coverage)))
     per_filter = []
     printed_red = printed_reductions_pct()
     for name in FILTERS:
-        only = rmse_m(run.errors[(name, None)], axis=1)
-        fused = rmse_m(run.errors[(name, sigma_acc_mps2)], axis=1)
+        only = rmse_m(scored_errors(run, (name, None), rmse_epochs), axis=1)
+        fused = rmse_m(scored_errors(run, (name, sigma_acc_mps2), rmse_epochs), axis=1)
         per_filter.append(reduction_pct(only, fused))
         rows.append(dict(filter=name, case="reduction % (derived)", where=PRINTED_TESTBED_RMSE[(name, None)].location,
                          printed=printed_red[name], printed_value=None,
-                         mc_rmse=float(reduction_pct(rmse_m(run.errors[(name, None)]),
-                                                     rmse_m(run.errors[(name, sigma_acc_mps2)]))),
+                         mc_rmse=float(reduction_pct(rmse_m(scored_errors(run, (name, None), rmse_epochs)),
+                                                     rmse_m(scored_errors(run, (name, sigma_acc_mps2), rmse_epochs)))),
                          **_walk_row(per_filter[-1], coverage)))
     mean_reduction = np.mean(per_filter, axis=0)          # per walk: the mean of the three filters' reductions
     rows.append(dict(filter="mean of the three", case="reduction %", where=PRINTED_FUSION_REDUCTION.location,

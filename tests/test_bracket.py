@@ -133,14 +133,18 @@ def test_a_toy_bracket_gives_each_row_its_verdict_and_the_site_shows_it(stoy, tm
     assert "## Reachable: within under another reading (1)" in findings and "slope: a=1.3" in findings
     assert "## Outside: no declared reading reaches the printed number (1)" in findings
 
-    # the suite's numbers.csv carries each row's bracket once the site is rebuilt (any later run)
+    # the suite's numbers.csv carries each row's bracket once the site is rebuilt (any later run; --force renders
+    # the experiment's page again too)
     assert main(["--suite", str(stoy / "notebooks" / "experiments.toml"), "run", "george-study", "--reports",
-                 str(stoy / "reports"), "--progress", "plain"]) == 0
+                 str(stoy / "reports"), "--progress", "plain", "--force"]) == 0
     site = _table(stoy / "reports" / "quick" / "numbers.csv")
     assert tuple(site[0]) == SITE_NUMBER_COLUMNS
     by = {r["quantity"]: r for r in site}
     assert (by["value"]["bracket"], by["value"]["bracket_readings"]) == ("reachable", "slope: a=1.3")
     assert (by["twice"]["bracket"], by["twice"]["bracket_readings"]) == ("outside", "band 0 .. 4 over 5 readings")
+    # the experiment's page (rendered when it ran, after the bracket) shows each row's bracket beside its verdict
+    page = (stoy / "reports" / "quick" / "george-study" / "report.md").read_text()
+    assert "| verdict | bracket | bracket_readings |" in page and "| reachable | slope: a=1.3 |" in page
     index = (stoy / "reports" / "quick" / "index.md").read_text()
     assert "Reading brackets of the 2 scored rows: 0 within by default, 1 reachable" in index
     assert "[george](../brackets/george-findings.md)" in index

@@ -725,6 +725,11 @@ def _promote(exp, profile, params, staging: Path, folder: Path, stamp: str, key:
     data, modules = _data_hashes(staging), _data_hashes(staging, ".modules-read.log")
     _strip_worker_files(staging)
     numbers = _read_csv(staging / "numbers.csv")
+    # the pages show each row's reading bracket when the experiment was bracketed (<reports>/brackets/<id>/)
+    from .bracket import bracket_of_rows, brackets_root, load_bracket
+    bracket = load_bracket(brackets_root(folder.parent) / exp.id)
+    if bracket:
+        numbers = bracket_of_rows(numbers, bracket)
     (staging / "summary.md").write_text(site.summary_markdown(exp, profile, numbers, stamp), encoding="utf-8")
     (staging / "report.md").write_text(site.page_markdown(exp, profile, params, staging, numbers, stamp),
                                        encoding="utf-8")

@@ -153,6 +153,14 @@ _PAGE_COLUMNS = ("quantity", "where", "unit", "kind", "printed", "reproduced", "
                  "ambiguity_basis", "calibrated_from", "same_as", "note")
 
 
+def _page_columns(numbers: list[dict]) -> tuple[str, ...]:
+    """The page's columns: the bracket verdict and its readings after the verdict when a bracket was run."""
+    if not any(r.get("bracket") for r in numbers):
+        return _PAGE_COLUMNS
+    at = _PAGE_COLUMNS.index("verdict") + 1
+    return (*_PAGE_COLUMNS[:at], "bracket", "bracket_readings", *_PAGE_COLUMNS[at:])
+
+
 def _page_parts(exp, params: dict, folder: Path, numbers: list[dict]):
     manifest = _read_json(folder / "manifest.json", {"figures": [], "tables": []})
     assumptions = _read_csv(folder / "assumptions.csv")
@@ -160,7 +168,7 @@ def _page_parts(exp, params: dict, folder: Path, numbers: list[dict]):
     parameters = [{"name": name, "value": json.dumps(params.get(name, p.default)),
                    "set by": "profile / -p" if name in params else "notebook default", "meaning": p.help}
                   for name, p in declared.items()]
-    shown = [{c: r.get(c, "") for c in _PAGE_COLUMNS} for r in numbers]
+    shown = [{c: r.get(c, "") for c in _page_columns(numbers)} for r in numbers]
     for row in shown:
         if row["reproduced"] not in ("", None):
             row["reproduced"] = f"{float(row['reproduced']):.4g}"
@@ -298,7 +306,7 @@ def page_html(exp, profile: str, params: dict, folder: Path, numbers: list[dict]
     for row in shown:
         for c in ("window_low", "window_high"):
             row[c] = _number(row[c], 6)
-        for c in _PAGE_COLUMNS:
+        for c in _page_columns(numbers):
             row[c] = "" if row[c] is None else row[c]
     figures, tables = _page_outputs(folder, manifest)
     links = []
@@ -318,7 +326,7 @@ def page_html(exp, profile: str, params: dict, folder: Path, numbers: list[dict]
         headline=_headline_counts(numbers),
         counts=_counts_table(scoreboard_counts(numbers)) if numbers else None,
         reasons=[{k: g[k] for k in ("verdict", "rows", "reason", "where")} for g in _reasons(numbers)],
-        numbers=shown, page_columns=_PAGE_COLUMNS, parameters=parameters,
+        numbers=shown, page_columns=_page_columns(numbers), parameters=parameters,
         assumptions=[{c: r.get(c) or "" for c in assumption_columns} for r in assumptions],
         assumption_columns=assumption_columns, figures=figures, tables=tables)
 

@@ -113,7 +113,7 @@ def test_a_toy_bracket_gives_each_row_its_verdict_and_the_site_shows_it(stoy, tm
                  str(stoy / "reports"), "--progress", "plain"]) == 0
     assert bracket(stoy, _readings(tmp_path, READINGS), "--jobs", "2") == 0
     out = capsys.readouterr().out
-    assert "5 executed" in out and "bracket of george-study: 0 default, 1 reachable, 0 open, 1 outside" in out
+    assert "5 executed" in out and "bracket of george-study: 0 default, 1 reachable, 0 open, 1 loose, 0 outside" in out
     folder = stoy / "reports" / "brackets" / "george-study"
     rows = {r["quantity"]: r for r in _table(folder / "bracket.csv")}
     assert tuple(_table(folder / "bracket.csv")[0]) == BRACKET_COLUMNS
@@ -124,14 +124,16 @@ def test_a_toy_bracket_gives_each_row_its_verdict_and_the_site_shows_it(stoy, tm
     assert value["reached_by"] == "slope: a=1.3" and value["closest_reading"] == "slope: a=1.3"
     assert float(value["band_low"]) == pytest.approx(3.0) and float(value["band_high"]) == pytest.approx(23.0)
     assert float(value["closest"]) == pytest.approx(16.0) and value["points"] == "5"
-    # twice = 2 a against 3.0 +- 1.05: a window of +-35 % is loose whatever a is, so no reading makes it within
-    assert (rows["twice"]["verdict"], rows["twice"]["bracket"]) == ("loose", "outside")
+    # twice = 2 a against 3.0 +- 1.05: a window of +-35 % is loose whatever a is, so no reading makes it within;
+    # the printed value is inside it by default and at a = 1.3, 2.0 and b = 0.5 (a = 0 gives 0: a miss)
+    assert (rows["twice"]["verdict"], rows["twice"]["bracket"]) == ("loose", "loose")
+    assert rows["twice"]["loose_under"] == "default; slope: a=1.3; slope: a=2.0; offset: b=0.5"
     assert (rows["twice"]["band_low"], rows["twice"]["band_high"]) == ("0", "4")
     points = _table(folder / "points.csv")
     assert [p["status"] for p in points] == ["ok"] * 5 and points[1]["value"] == "1.3"
     findings = (stoy / "reports" / "brackets" / "george-findings.md").read_text()
     assert "## Reachable: within under another reading (1)" in findings and "slope: a=1.3" in findings
-    assert "## Outside: no declared reading reaches the printed number (1)" in findings
+    assert "## Outside: no declared reading reaches the printed number (0)" in findings
 
     # the suite's numbers.csv carries each row's bracket once the site is rebuilt (any later run; --force renders
     # the experiment's page again too)
@@ -141,7 +143,8 @@ def test_a_toy_bracket_gives_each_row_its_verdict_and_the_site_shows_it(stoy, tm
     assert tuple(site[0]) == SITE_NUMBER_COLUMNS
     by = {r["quantity"]: r for r in site}
     assert (by["value"]["bracket"], by["value"]["bracket_readings"]) == ("reachable", "slope: a=1.3")
-    assert (by["twice"]["bracket"], by["twice"]["bracket_readings"]) == ("outside", "band 0 .. 4 over 5 readings")
+    assert (by["twice"]["bracket"], by["twice"]["bracket_readings"]) == (
+        "loose", "this report; slope: a=1.3; slope: a=2.0; offset: b=0.5")
     # the experiment's page (rendered when it ran, after the bracket) shows each row's bracket beside its verdict
     page = (stoy / "reports" / "quick" / "george-study" / "report.md").read_text()
     assert "| verdict | bracket | bracket_readings |" in page and "| reachable | slope: a=1.3 |" in page
@@ -170,7 +173,10 @@ def test_the_site_bracket_of_a_row_follows_its_own_verdict_first():
     out = bracket_of_rows([{**row, "verdict": "within"}, {**row, "verdict": "miss"},
                            {**row, "verdict": "consistent", "kind": "arithmetic"},
                            # another profile's run count in the quantity: matched on (printed_id, where)
+                           {**row, "printed_id": "o", "quantity": "q (20 runs)", "verdict": "miss"},
+                           # loose here: at worst loose, whatever the bracket's own runs gave
                            {**row, "printed_id": "o", "quantity": "q (20 runs)", "verdict": "loose"},
                            {**row, "printed_id": "z", "verdict": "miss"}], bracket)
     assert [(r["bracket"], r["bracket_readings"]) for r in out] == [
-        ("default", ""), ("reachable", "r: x=1"), ("", ""), ("outside", "band 1 .. 2 over 3 readings"), ("", "")]
+        ("default", ""), ("reachable", "r: x=1"), ("", ""), ("outside", "band 1 .. 2 over 3 readings"),
+        ("loose", "this report"), ("", "")]

@@ -23,8 +23,11 @@ miss verdict; arithmetic, shown and linked rows have none), in this order:
 ``open``
     not reached, and a reading that could matter was not swept: a gap (a reading no notebook parameter sets yet,
     with alternatives or a range) or a point that failed (``open_readings`` names them);
+``loose``
+    every declared reading was swept, none makes it within, but under at least one the printed value lies inside
+    a window wider than +-25 % (``loose_under`` names them): the comparison cannot decide either way;
 ``outside``
-    every declared reading was swept and none reaches it: the printed number disagrees with every plausible
+    every declared reading was swept and every one misses it: the printed number disagrees with every plausible
     reading of its own description.
 
 "Within" is the point's own verdict, i.e. under that run's window (rounding, 2 Monte-Carlo standard errors at the
@@ -57,12 +60,12 @@ from .study import _atomic, _point_key
 __all__ = ["BracketPoint", "find_experiment", "brackets_root", "SITE_NUMBER_COLUMNS", "BRACKET_ROW_COLUMNS", "bracket_points", "bracket_gaps", "run_bracket", "bracket_folder", "bracket_rows",
            "bracket_of_rows", "load_bracket", "BRACKETS", "BRACKET_COLUMNS", "POINT_COLUMNS"]
 
-BRACKETS = ("default", "reachable", "open", "outside")
+BRACKETS = ("default", "reachable", "open", "loose", "outside")
 #: the columns a suite's numbers.csv adds to an experiment's (:data:`~locbook.reproduce.report.NUMBER_COLUMNS`)
 BRACKET_ROW_COLUMNS = ("bracket", "bracket_readings")
 SITE_NUMBER_COLUMNS = (*NUMBER_COLUMNS, *BRACKET_ROW_COLUMNS)
 BRACKET_COLUMNS = ("experiment", "printed_id", "quantity", "where", "unit", "kind", "printed", "ours", "verdict",
-                   "bracket", "reached_by", "open_readings", "band_low", "band_high", "closest", "closest_reading",
+                   "bracket", "reached_by", "open_readings", "loose_under", "band_low", "band_high", "closest", "closest_reading",
                    "points", "profile")
 POINT_COLUMNS = ("point", "readings", "parameter", "value", "status", "folder")
 DEFAULT_POINT = "default"
@@ -214,7 +217,7 @@ def bracket_rows(exp: Experiment, points: list[BracketPoint], folder: Path, done
             continue
         printed = finite_float(r["printed"])
         values = [(DEFAULT_POINT, finite_float(r["reproduced"]))]
-        reached = []
+        reached, inside = [], [DEFAULT_POINT] if r["verdict"] == "loose" else []
         for p, indexed in others:
             alt = _find(indexed, r)
             if alt is None:
@@ -222,12 +225,16 @@ def bracket_rows(exp: Experiment, points: list[BracketPoint], folder: Path, done
             values.append((p.label, finite_float(alt["reproduced"])))
             if alt["verdict"] == "within":
                 reached.append(p.label)
+            elif alt["verdict"] == "loose":
+                inside.append(p.label)
         if r["verdict"] == "within":
             verdict = "default"
         elif reached:
             verdict = "reachable"
         elif open_names:
             verdict = "open"
+        elif inside:
+            verdict = "loose"
         else:
             verdict = "outside"
         finite = [(label, v) for label, v in values if v is not None]
@@ -238,6 +245,7 @@ def bracket_rows(exp: Experiment, points: list[BracketPoint], folder: Path, done
                      "ours": r["reproduced"], "verdict": r["verdict"], "bracket": verdict,
                      "reached_by": "; ".join(reached),
                      "open_readings": "; ".join(open_names) if verdict == "open" else "",
+                     "loose_under": "; ".join(inside) if not reached else "",
                      "band_low": _fmt(min((v for _, v in finite), default=None)),
                      "band_high": _fmt(max((v for _, v in finite), default=None)),
                      "closest": _fmt(closest[1]), "closest_reading": closest[0], "points": len(finite),
@@ -252,7 +260,8 @@ def _fmt(value: float | None) -> str:
 def bracket_of_rows(rows: list[dict], bracket: list[dict]) -> list[dict]:
     """``rows`` (numbers.csv rows of one experiment, any profile) with ``bracket`` and ``bracket_readings`` set from
     that experiment's ``bracket`` rows: ``default`` when the row itself is within, else the bracket's other
-    readings (reachable / open / outside); empty for rows the bracket does not cover or does not score."""
+    readings (reachable / open / loose / outside: a row loose in this report is at worst ``loose``); empty for rows
+    the bracket does not cover or does not score."""
     indexed = _index(bracket)
     out = []
     for r in rows:
@@ -265,6 +274,10 @@ def bracket_of_rows(rows: list[dict], bracket: list[dict]) -> list[dict]:
             out.append({**r, "bracket": "reachable", "bracket_readings": b["reached_by"]})
         elif b["open_readings"] or b["bracket"] == "open":
             out.append({**r, "bracket": "open", "bracket_readings": b["open_readings"]})
+        elif r["verdict"] == "loose" or b.get("loose_under"):
+            under = [x for x in b.get("loose_under", "").split("; ") if x and x != DEFAULT_POINT]
+            out.append({**r, "bracket": "loose", "bracket_readings": "; ".join(
+                (["this report"] if r["verdict"] == "loose" else []) + under)})
         else:
             out.append({**r, "bracket": "outside", "bracket_readings": f"band {b['band_low']} .. {b['band_high']} "
                                                                         f"over {b['points']} readings"})
@@ -314,7 +327,10 @@ def findings_markdown(document: str, brackets: dict[str, list[dict]], points: di
                  "Every declared reading was run; the printed number lies outside every window. Evidence: our values "
                  "over all readings (band) and the closest one."),
                 ("reachable", "Reachable: within under another reading", "The reading(s) that reach each row."),
-                ("open", "Open: a reading that could matter was not swept", "The readings not swept.")]
+                ("open", "Open: a reading that could matter was not swept", "The readings not swept."),
+                ("loose", "Loose: inside a wide window, never within",
+                 "Under these readings the printed value lies inside a window wider than +-25 %: the comparison "
+                 "cannot decide.")]
     for verdict, title, text in sections:
         chosen = [r for r in rows if r["bracket"] == verdict]
         lines += [f"## {title} ({len(chosen)})", "", text, ""]
@@ -325,7 +341,8 @@ def findings_markdown(document: str, brackets: dict[str, list[dict]], points: di
                   + ("readings |" if verdict != "outside" else "points |"),
                   "|---|---|---|---|---|---|---|---|"]
         for r in chosen:
-            extra = {"outside": r["points"], "reachable": r["reached_by"], "open": r["open_readings"]}[verdict]
+            extra = {"outside": r["points"], "reachable": r["reached_by"], "open": r["open_readings"],
+                     "loose": r["loose_under"]}[verdict]
             lines.append(f"| {r['experiment']} | {_md_cell(r['printed_id'])} | {r['printed']} | {r['ours']} | "
                          f"{r['verdict']} | {r['band_low']} .. {r['band_high']} | {r['closest']} "
                          f"({_md_cell(r['closest_reading'])}) | {_md_cell(extra)} |")

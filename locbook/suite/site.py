@@ -88,10 +88,10 @@ def _bracket_counts(rows) -> dict | None:
     scored = [r for r in rows if r.get("kind") in ("reproduction", "calibrated", "claim") and not r.get("same_as")
               and r.get("verdict") in ("within", "loose", "miss")]
     c = Counter(r.get("bracket", "") for r in scored)
-    if not any(c[b] for b in ("default", "reachable", "open", "outside")):
+    if not any(c[b] for b in ("default", "reachable", "open", "loose", "outside")):
         return None
     return {"n": len(scored), "default": c["default"], "reachable": c["reachable"], "open": c["open"],
-            "outside": c["outside"], "none": c[""]}
+            "loose": c["loose"], "outside": c["outside"], "none": c[""]}
 
 
 def _bracket_headline(rows) -> str:
@@ -100,7 +100,8 @@ def _bracket_headline(rows) -> str:
         return ""
     return (f"**Reading brackets of the {b['n']} scored rows: {b['default']} within by default, {b['reachable']} "
             f"reachable under another declared reading, {b['outside']} outside every declared reading, {b['open']} "
-            f"open (a reading not swept), {b['none']} not bracketed** (`locbook bracket`; the `bracket` and "
+            f"open (a reading not swept), {b['loose']} loose under every reading that ran (a window too wide to "
+            f"decide), {b['none']} not bracketed** (`locbook bracket`; the `bracket` and "
             "`bracket_readings` columns of numbers.csv, and the findings page of each document).")
 
 
@@ -243,7 +244,7 @@ def _chips(rows) -> list[tuple[str, int]]:
 def _bracket_chips(rows) -> list[tuple[str, int]]:
     """Bracket verdict counts of an experiment's rows (none when it was not bracketed)."""
     c = Counter(r.get("bracket", "") for r in rows)
-    return [(b, c[b]) for b in ("default", "reachable", "open", "outside") if c[b]]
+    return [(b, c[b]) for b in ("default", "reachable", "open", "loose", "outside") if c[b]]
 
 
 def _number(value, digits: int) -> str:

@@ -1,5 +1,6 @@
 """The Ozkaya (2011) simulation readings (locbook/data/readings/ozkaya2011.csv) as library options: each alternative
-checked against what it means (an independent computation or an invariant), and the defaults unchanged."""
+checked against what it means (an independent computation or an invariant); the defaults are the text's readings and
+the readings fitted to the printed output are named alternatives (issue 28)."""
 from dataclasses import replace
 
 import numpy as np
@@ -84,7 +85,7 @@ def test_common_mode_noise_leaves_the_reader_differences_noise_free():
 
 
 def test_fixed_target_noise_frozen_or_fresh():
-    frozen = oz.SimCase("grid", "fixed", rt=5)
+    frozen = oz.SimCase("grid", "fixed", rt=5, fixed_target_noise="frozen_per_run")
     _, rss = oz.simulate_truth_and_rss(frozen, 50, np.random.default_rng(4))
     assert np.all(rss == rss[:, :1])                                     # the same vector at every recursion
     truth, rss = oz.simulate_truth_and_rss(replace(frozen, fixed_target_noise="fresh_per_step"), 50,
@@ -140,7 +141,7 @@ def test_run_tables_defaults_equal_explicit_default_readings():
     a = oz.run_tables(["7.2"], 30, 3)
     b = oz.run_tables(["7.2"], 30, 3, readings=oz.sim_readings())
     assert [r["reproduced"] for r in a] == [r["reproduced"] for r in b]
-    c = oz.run_tables(["7.2"], 30, 3, readings={"reader_noise": "common_mode"})
+    c = oz.run_tables(["7.2"], 30, 3, readings={"reader_noise": "independent_per_reader"})
     assert [r["reproduced"] for r in a if r["column"] == "rmse_m"] != \
         [r["reproduced"] for r in c if r["column"] == "rmse_m"]
 
@@ -153,34 +154,112 @@ def test_every_simulation_reading_is_declared_with_the_librarys_values():
     assert set(declared["crlb_average"].values) == {"cells_mean", "area_rms"}
 
 
-# -- readings fitted to the output (issue 28): rows computed under them are calibrated ---------------------------
-def test_fitted_values_are_declared_values_and_the_fitted_defaults_are_listed():
+# -- readings fitted to the output (issue 28): never the default; rows computed under them are calibrated ----------
+def test_fitted_values_are_declared_alternatives_never_defaults():
     declared = {r.name: r for r in readings("ozkaya2011")}
     for name, value in oz.FITTED_VALUES.items():
-        assert value in declared[name].values, name
-    for r in declared.values():
-        if r.is_calibration and not r.name.startswith("testbed_"):     # the test bed marks its own (ozkaya_testbed)
-            assert oz.FITTED_VALUES[r.name] == r.default, r.name
+        assert value in declared[name].alternatives and value != declared[name].default, name
+        assert not declared[name].is_calibration, name        # the basis describes the default, which is not fitted
+    assert all(r.name.startswith("testbed_") for r in declared.values() if r.is_calibration)   # the test bed's own
+
+
+def test_library_defaults_equal_the_declared_defaults():
+    """Every Ozkaya reading the library holds has the readings CSV's default: the simulation readings (their first
+    value, sim_readings(), the SimCase fields they set), the CRLB readings (thesis_crlb_m's defaults) and the
+    record_crlb defaults."""
+    import inspect
+    declared = {r.name: r for r in readings("ozkaya2011")}
+    defaults = oz.sim_readings()
+    for name, values in oz.SIM_READINGS.items():
+        assert values[0] == defaults[name] == declared[name].default, name
+    case = oz.SimCase("grid")
+    assert case.reader_noise == declared["reader_noise"].default
+    assert case.fixed_target_noise == declared["fixed_target_noise"].default
+    assert case.nn_weights == declared["nn_weights"].default
+    assert case.resample_threshold_unit == declared["resample_threshold"].default
+    assert case.target_region == declared["target_sampling"].default
+    for function in (oz.thesis_crlb_m, oz.record_crlb):
+        params = inspect.signature(function).parameters
+        assert params["path_loss_exp"].default == declared["crlb_exponent"].default
+        assert params["average"].default == declared["crlb_average"].default
+    assert declared["crlb_exponent"].default == oz.PATH_LOSS_EXP          # the simulations' n of Sec. 7.2.1
+    assert oz.fitted_readings(defaults) == ()
+    # under the defaults a mobile run's statistics are over every recursion (run_summary passes over_recursions)
+    mobile = oz.SimCase("grid", "mobile", rt=4)
+    _, per_step, _, _ = oz.run_case(mobile, 20, 3, return_all=True)
+    assert oz.run_summary(mobile, 20, 3)["rmse_m"] == pytest.approx(np.sqrt(np.mean(per_step**2)), rel=1e-12)
 
 
 def test_fitted_readings_are_those_that_can_move_the_case():
-    defaults = oz.sim_readings()
-    assert oz.fitted_readings(defaults) == ("reader_noise", "fixed_target_noise", "mobile_protocol")
-    assert oz.fitted_readings(defaults, oz.SimCase("nn")) == ("reader_noise",)              # one shot, no recursions
-    assert oz.fitted_readings(defaults, oz.SimCase("grid", "fixed")) == ("reader_noise", "fixed_target_noise")
-    assert oz.fitted_readings(defaults, oz.SimCase("sir", "mobile")) == ("reader_noise", "mobile_protocol")
-    assert oz.fitted_readings(defaults, oz.SimCase("grid", "fixed", sigma0_db=0.0)) == ()      # no noise to read
-    text = {**defaults, "reader_noise": "common_mode", "fixed_target_noise": "fresh_per_step",
-            "mobile_protocol": "mean_over_recursions"}
+    fitted = oz.sim_readings(**{n: v for n, v in oz.FITTED_VALUES.items() if n in oz.SIM_READINGS})
+    assert oz.fitted_readings(fitted) == ("reader_noise", "fixed_target_noise", "mobile_protocol")
+    assert oz.fitted_readings(fitted, oz.SimCase("nn")) == ("reader_noise",)              # one shot, no recursions
+    assert oz.fitted_readings(fitted, oz.SimCase("grid", "fixed")) == ("reader_noise", "fixed_target_noise")
+    assert oz.fitted_readings(fitted, oz.SimCase("sir", "mobile")) == ("reader_noise", "mobile_protocol")
+    assert oz.fitted_readings(fitted, oz.SimCase("grid", "fixed", sigma0_db=0.0)) == ()      # no noise to read
+    text = oz.sim_readings()
     assert oz.fitted_readings(text) == () and oz.fitted_calibrated_from(text, oz.SimCase("nn")) == ""
     assert oz.fitted_readings({"crlb_exponent": 2.0, "crlb_average": "area_rms"}) == ("crlb_exponent",)
-    assert "reader_noise = 'independent_per_reader'" in oz.fitted_calibrated_from(defaults, oz.SimCase("nn"))
+    assert "reader_noise = 'independent_per_reader'" in oz.fitted_calibrated_from(fitted, oz.SimCase("nn"))
+    # the text's readings that can move a case are the complement
+    assert oz.unfitted_readings(text, oz.SimCase("grid", "fixed")) == ("reader_noise", "fixed_target_noise")
+    assert oz.unfitted_readings(fitted, oz.SimCase("grid", "fixed")) == ()
 
 
-def test_rows_under_no_fitted_reading_are_reproductions(tmp_path, monkeypatch):
+def test_text_reading_note_names_the_readings_the_side_and_the_bracket():
+    text = oz.sim_readings()
+    note = oz.text_reading_note(text, oz.SimCase("nn"), "ozkaya2011-nn-sim", 1.5, 1.95)
+    assert note.startswith("under the text's reading (common-mode noise on the transmit power) ours is below")
+    assert "(independent noise per reader) is an alternative: locbook bracket ozkaya2011-nn-sim runs it" in note
+    both = oz.text_reading_note(text, oz.SimCase("sir", "mobile"), "ozkaya2011-sir-sim", 1.3, 1.14)
+    assert "ours is above" in both and "over every recursion" in both and "at recursion rt" in both
+    assert "are alternatives" in both and "runs them" in both
+    # nothing to say under the fitted readings, or where no reading can move the case (no noise)
+    fitted = {**text, "reader_noise": "independent_per_reader"}
+    assert oz.text_reading_note(fitted, oz.SimCase("nn"), "x", 1.0, 2.0) == ""
+    assert oz.text_reading_note(text, oz.SimCase("grid", "fixed", sigma0_db=0.0), "x", 1.0, 2.0) == ""
+
+
+def test_rows_under_no_fitted_reading_are_reproductions_and_misses_name_the_fitted_alternative(tmp_path, monkeypatch):
     monkeypatch.setenv("LOCBOOK_OUTPUT_DIR", str(tmp_path))
     monkeypatch.setenv("LOCBOOK_EXPERIMENT", "ozkaya2011-nn-sim")
     report = lb.Report()
-    rows = oz.run_tables(["7.2"], 30, 5, readings={"reader_noise": "common_mode"})
-    oz.record_tables(report, rows, 30)
+    rows = oz.run_tables(["7.2", "7.3"], 60, 5)
+    oz.record_tables(report, rows, 60)
     assert report.numbers and all(r["kind"] == "reproduction" and not r["calibrated_from"] for r in report.numbers)
+    misses = [r for r in report.numbers if r["verdict"] in ("miss", "loose")]
+    assert misses and all("locbook bracket ozkaya2011-nn-sim" in r["note"] for r in misses)
+
+
+def test_crlb_exponent_scales_the_printed_bound_as_one_over_n():
+    """Eqs. (A.10)-(A.12): the Fisher information scales as (n / sigma)^2, so the printed-form bound is proportional
+    to sigma / n under either averaging."""
+    for average in ("area_rms", "cells_mean"):
+        ref = oz.thesis_crlb_m("corners3", 5.2, 2.0, average)
+        assert oz.thesis_crlb_m("corners3", 5.2, 2.3, average) == pytest.approx(ref * 2.0 / 2.3, rel=1e-12)
+        assert oz.thesis_crlb_m("corners3", 10.4, 2.0, average) == pytest.approx(2 * ref, rel=1e-12)
+
+
+def test_area_rms_is_the_rms_of_the_bound_over_the_room():
+    xs, ys = np.arange(0.025, 5.0, 0.05), np.arange(0.025, 8.0, 0.05)
+    points = np.stack(np.meshgrid(xs, ys, indexing="ij"), -1).reshape(-1, 2)
+    bound = lb.rss_crlb_m(points, oz.readers_for("corners3"), 2.3, 5.2, "ozkaya_printed")
+    assert oz.thesis_crlb_m("corners3", 5.2) == pytest.approx(np.sqrt(np.mean(bound**2)), rel=1e-9)
+    cells = lb.rss_crlb_m(oz.cell_centres(oz.ROOM_M, 4, 7), oz.readers_for("corners3"), 2.0, 5.2, "ozkaya_printed")
+    assert oz.thesis_crlb_m("corners3", 5.2, 2.0, "cells_mean") == pytest.approx(np.mean(cells), rel=1e-12)
+
+
+def test_record_crlb_calibrated_only_under_a_fitted_reading(tmp_path, monkeypatch):
+    monkeypatch.setenv("LOCBOOK_OUTPUT_DIR", str(tmp_path))
+    monkeypatch.setenv("LOCBOOK_EXPERIMENT", "ozkaya2011-crlb")
+    text, fitted = lb.Report(), lb.Report()
+    oz.record_crlb(text)
+    oz.record_crlb(fitted, 2.0, "cells_mean")
+    assert all(r["kind"] == "reproduction" for r in text.numbers)
+    assert all(r["kind"] == "calibrated" and "n = 2 " in r["calibrated_from"] for r in fitted.numbers)
+    by_id = {r["printed_id"]: r for r in text.numbers}
+    five = next(r for r in text.numbers if r["verdict"] and float(r["printed"]) == 0.80)
+    assert float(five["reproduced"]) == pytest.approx(oz.thesis_crlb_m("corners3", 5.2), rel=1e-12)
+    assert five["verdict"] == "miss" and "locbook bracket ozkaya2011-crlb" in five["note"]
+    assert "(n = 2 and the mean over the 1 m cells) are alternatives" in five["note"]
+    assert by_id.keys() == {r["printed_id"] for r in fitted.numbers}

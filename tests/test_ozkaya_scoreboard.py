@@ -44,10 +44,11 @@ def test_record_tables_compares_each_printed_value_once(tmp_path, monkeypatch):
     monkeypatch.setenv("LOCBOOK_EXPERIMENT", "ozkaya2011-nn-sim")
     report = lb.Report()
     n_runs = 60
-    rows = oz.run_tables(["7.2", "7.3", "7.6"], n_runs, 5)
+    # i.i.d. reader noise (an alternative) was chosen by re-simulating the tables: every row computed under it is
+    # calibrated and says so
+    rows = oz.run_tables(["7.2", "7.3", "7.6"], n_runs, 5, readings={"reader_noise": "independent_per_reader"})
     oz.record_tables(report, rows, n_runs)
     recorded = report.numbers
-    # i.i.d. reader noise was chosen by re-simulating the tables: every row computed under it is calibrated and says so
     assert all(r["kind"] == "calibrated" and r["calibrated_from"].startswith("reader_noise = 'independent_per_reader'")
                for r in recorded)
     assert not any("crlb" in r["printed_id"] for r in recorded)       # CRLB is compared in ozkaya2011-crlb only
@@ -71,7 +72,8 @@ def test_record_tables_compares_each_printed_value_once(tmp_path, monkeypatch):
 
 def test_statistic_standard_errors_shrink_with_the_number_of_runs():
     case = oz.SimCase("nn")
-    se = {n: oz.summarize(oz.run_case(case, n, 3), np.random.default_rng(0)) for n in (100, 1600)}
+    # 400 runs at least: a 100-run bootstrap SE of the 90th percentile scatters from 2.4 to 7 times the 1600-run one
+    se = {n: oz.summarize(oz.run_case(case, n, 3), np.random.default_rng(0)) for n in (400, 6400)}
     for stat in oz.STATISTICS:
-        ratio = se[100][stat + "_se"] / se[1600][stat + "_se"]
+        ratio = se[400][stat + "_se"] / se[6400][stat + "_se"]
         assert 2.5 < ratio < 6.5, stat                                # sqrt(16) = 4 within bootstrap scatter

@@ -238,19 +238,22 @@ def test_readings_summary_counts_fusion_cells_within_the_tolerance_per_reading()
 
 # -- readings opened as notebook parameters (issue 28) --------------------------------------------------------------
 def test_mle_bounds_room_projects_the_fix_onto_the_room():
-    """'room': every fix inside [0, w] x [0, l]; a fix the unconstrained MLE put inside is unchanged, one outside moves to
-    the nearest point of the room (no point of a 1 cm grid over the room is closer)."""
+    """'room': every fix inside the room inset by MLE_ROOM_INSET_M (off the corner anchors); a fix the unconstrained MLE
+    put there is unchanged, one outside moves to the nearest point of that box (no point of a 1 cm grid over it is
+    closer)."""
     rng = np.random.default_rng(3)
     channel = lb.PathLossModel(-48.0, 3.0, 8.0)
     truth = rng.uniform([0, 0], [7.6, 9.2], (200, 2))
     power = channel.sample_rss_dbm(lb.pairwise_distance_m(truth, ANCHORS), rng)
     free = dg.mle_positions(power, channel).position_m
     room = dg.mle_positions(power, channel, bounds="room").position_m
-    inside = np.all((free >= 0) & (free <= [7.6, 9.2]), axis=-1)
+    lo, hi = dg.MLE_ROOM_INSET_M, np.array([7.6, 9.2]) - dg.MLE_ROOM_INSET_M
+    assert 0 < lo < 0.5
+    inside = np.all((free >= lo) & (free <= hi), axis=-1)
     assert inside.any() and (~inside).any()
     np.testing.assert_array_equal(room[inside], free[inside])
-    assert np.all((room >= 0) & (room <= [7.6, 9.2]))
-    xs, ys = np.arange(0, 7.6 + 1e-9, 0.01), np.arange(0, 9.2 + 1e-9, 0.01)
+    assert np.all((room >= lo) & (room <= hi))
+    xs, ys = np.arange(lo, hi[0] + 1e-9, 0.01), np.arange(lo, hi[1] + 1e-9, 0.01)
     grid = np.stack(np.meshgrid(xs, ys, indexing="ij"), -1).reshape(-1, 2)
     for f, r in zip(free[~inside][:5], room[~inside][:5]):
         assert np.linalg.norm(f - r) <= np.min(np.linalg.norm(grid - f, axis=-1)) + 1e-12

@@ -160,9 +160,12 @@ FILTERS = ("parallel_ekf", "serial_ekf", "kalman_filter")
 MLE_GRID_STEP_M = 0.5
 MLE_GRID_MARGIN_M = 3.0
 #: The MLE's domain (Sec. 2.3.1 names no solver, start or bounds): ``"unconstrained"`` (default), or ``"room"``: the
-#: unconstrained fix projected onto the room (each coordinate clipped to [0, w] x [0, l]), the simplest reading of a
-#: fix known to lie in the room (not the box-constrained minimiser of Eq. (2.4)).
+#: unconstrained fix projected onto the room inset by :data:`MLE_ROOM_INSET_M` (each coordinate clipped), the simplest
+#: reading of a fix known to lie in the room (not the box-constrained minimiser of Eq. (2.4)).
 MLE_BOUNDS = ("unconstrained", "room")
+#: Inset of the ``"room"`` bound from the walls: a fix clipped into a corner would sit on an anchor, where the RSS
+#: model (Eq. (2.2)) is singular and an EKF started there cannot linearise; 0.1 m keeps it off (our choice).
+MLE_ROOM_INSET_M = 0.1
 #: The steps of the tables' RMSE (Tables 3.7-3.12 do not define it): ``"rss_epochs"`` (default: every filter where
 #: the MLE exists) or ``"every_step"``: the filters at every step of the 20 Hz grid from the first RSS epoch (the MLE
 #: column stays at the RSS epochs, where it exists).
@@ -264,7 +267,8 @@ def mle_positions(rss_dbm, channel: PathLossModel, anchors_m=ANCHORS_M, *, room_
                   bounds: str = "unconstrained"):
     """Static MLE (Eq. (2.4)) of every RSS vector ``(..., m)``: the best point of a grid of ``grid_step_m`` over the
     room +- margin, refined by Levenberg-Marquardt without bounds (the thesis names no solver, start or bounds); with
-    ``bounds="room"`` (:data:`MLE_BOUNDS`) the fix is then projected onto the room. Returns a LocalizationResult."""
+    ``bounds="room"`` (:data:`MLE_BOUNDS`) the fix is then projected onto the room inset by :data:`MLE_ROOM_INSET_M`.
+    Returns a LocalizationResult."""
     if bounds not in MLE_BOUNDS:
         raise ParameterError(f"bounds must be one of {MLE_BOUNDS}, got {bounds!r}")
     if not (np.isfinite(grid_step_m) and grid_step_m > 0):
@@ -276,7 +280,8 @@ def mle_positions(rss_dbm, channel: PathLossModel, anchors_m=ANCHORS_M, *, room_
     start = grid_ml_position(anchors_m, rss_dbm, channel, grid).position_m
     fix = rss_ml_position(anchors_m, rss_dbm, channel, start)
     if bounds == "room":
-        fix = replace(fix, position_m=np.clip(fix.position_m, 0.0, np.asarray(room_m)))
+        inset = MLE_ROOM_INSET_M
+        fix = replace(fix, position_m=np.clip(fix.position_m, inset, np.asarray(room_m) - inset))
     return fix
 
 

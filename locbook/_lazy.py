@@ -30,3 +30,13 @@ def lazy_exports(package: str, homes: dict[str, str]):
         return sorted(set(homes) | {n for n in vars(sys.modules[package]) if not n.startswith("_")})
 
     return __getattr__, __dir__
+
+
+def skip_iri_format_checker() -> None:
+    """Spare a process that reads notebooks the 2-3 s import of ``rfc3987_syntax``, which builds a lark grammar so
+    that jsonschema can check the ``iri`` string format, a format no notebook schema uses. jsonschema imports it
+    under ``suppress(ImportError)``; a ``None`` entry in ``sys.modules`` makes that import fail, so the checker is
+    left out. Called by the ``locbook`` command and its worker processes only (not on ``import locbook``), and
+    only if nothing imported the package already."""
+    sys.modules.setdefault("rfc3987_syntax", None)
+

@@ -30,3 +30,14 @@ def test_import_locbook_loads_no_submodule_but_the_data_audit_hook():
                                 capture_output=True, text=True, check=True).stdout.split()
     # the lazy-export helper, and the hook that records the data files a kernel reads (LOCBOOK_DATA_LOG)
     assert sorted(submodules) == ["locbook._datalog", "locbook._lazy"]
+
+
+def test_show_and_the_worker_skip_jsonschemas_iri_grammar_but_still_validate_notebooks():
+    """``locbook show`` reads a notebook (nbformat, hence jsonschema) without building rfc3987_syntax's grammar
+    (2-3 s of every worker's start-up, issue 28's bracket benchmark); nbformat still refuses a broken notebook."""
+    shown = _modules_after("import contextlib, io\nfrom locbook.suite.cli import main\n"
+                           "with contextlib.redirect_stdout(io.StringIO()):\n    assert main(['show', 'george-tracking']) == 0\n"
+                           "import nbformat, pytest\nnb = nbformat.v4.new_notebook()\nnb.cells = [{'cell_type': 'code'}]\n"
+                           "with pytest.raises(nbformat.ValidationError):\n    nbformat.validate(nb)")
+    assert "nbformat" in shown and "jsonschema" in shown
+    assert "lark" not in shown       # the parser rfc3987_syntax builds its grammar with (its key is present, None)

@@ -70,6 +70,8 @@ def _print_summary(run, progress: str = "plain", see: Path | None = None) -> Non
 
 def main(argv: list[str] | None = None) -> int:
     from .. import __version__
+    from .._lazy import skip_iri_format_checker
+    skip_iri_format_checker()      # `locbook show` and the runner read notebooks with nbformat (and jsonschema)
 
     parser = argparse.ArgumentParser(prog="locbook", description="Rerun published RSSI localization experiments.")
     parser.add_argument("--version", action="version", version=f"locbook {__version__}")

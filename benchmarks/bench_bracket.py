@@ -26,8 +26,8 @@ import _harness as hx  # noqa: E402
 
 #: seconds a bracket of one document may take at the quick profile on 2 cores (issue 28)
 TARGET_S = 600.0
-TINY_READINGS = ("name,experiments,parameter,where,default,alternatives,low,high,basis,source,reason\n"
-                 "shadowing,george-rssi-vs-distance,sigma_indoor_db,,,[3.0],,,assumed,benchmark,one alternative\n")
+TINY_READINGS = ("name,experiments,parameter,where,default,alternatives,fitted,low,high,basis,source,reason\n"
+                 "shadowing,george-rssi-vs-distance,sigma_indoor_db,,,[3.0],,,,assumed,benchmark,one alternative\n")
 
 
 def _bracket(experiment: str, reports: Path, readings: Path | None = None) -> tuple[float, int, str]:

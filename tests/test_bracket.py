@@ -17,15 +17,15 @@ from test_suite import toy  # noqa: F401
 HEADER = ",".join(READING_COLUMNS)
 #: a = 1.3 gives value 16.0 (printed, within); b never reaches value; twice's window is always loose
 READINGS = f"""{HEADER}
-slope,george-study,a,,1.0,[1.3],0.0,2.0,assumed,Table 9,toy slope
-offset,george-study,b,,0.0,[0.5],,,printed,Table 9,toy offset
+slope,george-study,a,,1.0,[1.3],,0.0,2.0,assumed,Table 9,toy slope
+offset,george-study,b,,0.0,[0.5],,,,printed,Table 9,toy offset
 """
 OFFSET_ONLY = f"""{HEADER}
-offset,george-study,b,,0.0,[0.5],,,printed,Table 9,toy offset
+offset,george-study,b,,0.0,[0.5],,,,printed,Table 9,toy offset
 """
 WITH_GAP = f"""{HEADER}
-offset,george-study,b,,0.0,[0.5],,,printed,Table 9,toy offset
-hidden,george-study,,locbook.toy.HIDDEN,1,[2],,,assumed,Table 9,a module constant no parameter sets
+offset,george-study,b,,0.0,[0.5],,,,printed,Table 9,toy offset
+hidden,george-study,,locbook.toy.HIDDEN,1,[2],,,,assumed,Table 9,a module constant no parameter sets
 """
 
 
@@ -63,18 +63,19 @@ def test_points_are_the_default_then_each_other_value_one_reading_at_a_time(stoy
 
 def test_a_value_equal_to_the_profile_is_not_run_twice_and_shared_values_share_a_point(stoy, tmp_path):
     exp = find_experiment(_suite(stoy), "george-study")
-    text = f"{HEADER}\nslope,george-study,a,,1.0,[1.3],1.0,2.0,assumed,s,r\nsame,george-study,a,,,[2.0],,,assumed,s,r\n"
+    text = f"{HEADER}\nslope,george-study,a,,1.0,[1.3],,1.0,2.0,assumed,s,r\nsame,george-study,a,,,[2.0],[2.0],,,assumed,s,r\n"
     points = bracket_points(exp, "quick", load_reading_file(_readings(tmp_path, text)))
-    # the range's low end equals the default (1.0): skipped; a = 2.0 is named by both readings: one point
-    assert [p.label for p in points] == ["default", "slope: a=1.3", "slope, same: a=2.0"]
+    # the range's low end equals the default (1.0): skipped; a = 2.0 is named by both readings: one point, marked
+    # fitted for the reading that declares it so
+    assert [p.label for p in points] == ["default", "slope: a=1.3", "slope, same [fitted]: a=2.0"]
 
 
 def test_a_reading_value_the_notebook_refuses_is_an_error_before_anything_runs(stoy, tmp_path):
     exp = find_experiment(_suite(stoy), "george-study")
-    bad = load_reading_file(_readings(tmp_path, f"{HEADER}\nslope,george-study,a,,1.0,[7.0],,,assumed,s,r\n"))
+    bad = load_reading_file(_readings(tmp_path, f"{HEADER}\nslope,george-study,a,,1.0,[7.0],,,,assumed,s,r\n"))
     with pytest.raises(SuiteError, match=r"reading george/slope of 'george-study'.*'a' = 7.0 is not allowed"):
         bracket_points(exp, "quick", bad)
-    unknown = load_reading_file(_readings(tmp_path, f"{HEADER}\nslope,george-study,nope,,1.0,[2.0],,,assumed,s,r\n"))
+    unknown = load_reading_file(_readings(tmp_path, f"{HEADER}\nslope,george-study,nope,,1.0,[2.0],,,,assumed,s,r\n"))
     with pytest.raises(SuiteError, match="names parameter 'nope', which 'george-study' does not declare"):
         bracket_points(exp, "quick", unknown)
     with pytest.raises(SuiteError, match="no readings are declared for experiment 'george-study'"):
@@ -89,7 +90,7 @@ def test_gaps_are_the_unswept_readings_that_name_other_values(tmp_path):
 
 
 def test_a_bad_readings_file_is_one_line_and_exit_status_2(stoy, tmp_path, capsys):
-    path = _readings(tmp_path, f"{HEADER}\nslope,george-study,a,,1.0,[1.0],,,assumed,s,r\n")
+    path = _readings(tmp_path, f"{HEADER}\nslope,george-study,a,,1.0,[1.0],,,,assumed,s,r\n")
     assert bracket(stoy, path) == 2
     err = capsys.readouterr().err
     assert "the default 1.0 is also among the alternatives" in err and "Traceback" not in err

@@ -186,6 +186,8 @@ def test_a_good_file_loads(tmp_path):
     assert r.values == (0.3, 0.5) and not r.is_gap and not r.is_calibration
     (none,) = load_reading_file(_write(tmp_path, {**GOOD, "default": "", "low": "", "high": ""}))
     assert none.default is None
+    (fit,) = load_reading_file(_write(tmp_path, {**GOOD, "alternatives": "[0.5, 1]", "fitted": "[1.0]"}))
+    assert fit.fitted == (1.0,) and fit.is_fitted(1) and not fit.is_fitted(0.5) and not r.is_fitted(0.5)
 
 
 @pytest.mark.parametrize("change, problem", [
@@ -200,6 +202,8 @@ def test_a_good_file_loads(tmp_path):
     ({"default": "rest", "low": "", "high": ""}, "default 'rest' is not a TOML value"),
     ({"alternatives": "[0.5"}, "alternatives '[0.5' is not a TOML value"),
     ({"alternatives": "0.5"}, "alternatives must be a TOML array"),
+    ({"fitted": "[0.7]"}, "fitted names [0.7], which are not among the alternatives"),
+    ({"fitted": "0.5"}, "fitted must be a TOML array"),
     ({"default": "'rest'", "alternatives": "['moving']"}, "needs a numeric default"),
     ({"basis": "fitted_to_output", "alternatives": "", "low": "", "high": ""}, "needs at least one alternative"),
     ({"parameter": "", "where": ""}, "needs a parameter or"),

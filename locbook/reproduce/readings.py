@@ -19,6 +19,9 @@ One CSV per document, ``locbook/data/readings/<document>.csv`` (package data, be
     ``None`` (the notebook resolves it, e.g. to a printed value or a calibration, as ``reason`` says).
 ``alternatives``
     a TOML array of the other plausible values (empty or ``[]``: none named).
+``fitted``
+    a TOML array of those alternatives that were chosen because they fit printed results (empty: none); rows
+    computed under one are calibrations, and a bracket marks it ``[fitted]`` where it reaches a row.
 ``low``, ``high``
     a plausible range of a numeric reading (both or neither).
 ``basis``
@@ -30,7 +33,7 @@ One CSV per document, ``locbook/data/readings/<document>.csv`` (package data, be
 
 Rules (:func:`readings` raises :class:`ReadingsError` naming the file, the line and the problem): the
 columns exactly as above; a known basis; a unique snake_case name; at least one experiment; ``parameter`` or
-``where``; every TOML value parses (``alternatives`` as an array); the default is not among the alternatives;
+``where``; every TOML value parses (``alternatives`` and ``fitted`` as arrays); the default is not among the alternatives, and every fitted value is;
 ``low <= high``, both numbers, and a numeric default inside ``[low, high]``; a ``fitted_to_output`` reading names at
 least one alternative or a range, so that a sweep can test the printed numbers under a reading not chosen from them.
 
@@ -54,8 +57,8 @@ __all__ = ["Reading", "ReadingsError", "readings", "readings_for", "load_reading
            "READING_COLUMNS", "BASES"]
 
 READINGS_DIR = Path(__file__).resolve().parents[1] / "data" / "readings"    # package data of locbook.data
-READING_COLUMNS = ("name", "experiments", "parameter", "where", "default", "alternatives", "low", "high", "basis",
-                   "source", "reason")
+READING_COLUMNS = ("name", "experiments", "parameter", "where", "default", "alternatives", "fitted", "low", "high",
+                   "basis", "source", "reason")
 #: The basis of a reading's default: printed by the source, assumed by us, or fitted to the source's printed output.
 BASES = ("printed", "assumed", "fitted_to_output")
 
@@ -90,6 +93,7 @@ class Reading:
     basis: str
     source: str
     reason: str
+    fitted: tuple = ()
 
     @property
     def is_gap(self) -> bool:
@@ -100,6 +104,10 @@ class Reading:
     def is_calibration(self) -> bool:
         """True when the default was chosen because it fits printed output (rows using it are calibrations)."""
         return self.basis == "fitted_to_output"
+
+    def is_fitted(self, value) -> bool:
+        """True when ``value`` is one of the alternatives chosen because it fits printed results."""
+        return any(_key(value) == _key(f) for f in self.fitted)
 
     @property
     def values(self) -> tuple:
@@ -177,6 +185,13 @@ def _reading(document: str, row: dict, where: str) -> Reading:
         raise ReadingsError(f"{where}: the default {cells['default']} is also among the alternatives")
     if len(set(keys)) != len(keys):
         raise ReadingsError(f"{where}: alternatives repeat a value: {cells['alternatives']}")
+    fitted = () if cells["fitted"] in ("", "[]") else _toml_value(cells["fitted"], where, "fitted")
+    if not isinstance(fitted, (list, tuple)):
+        raise ReadingsError(f"{where}: fitted must be a TOML array of alternatives, got {cells['fitted']!r}")
+    stray = [f for f in fitted if _key(f) not in keys]
+    if stray:
+        raise ReadingsError(f"{where}: fitted names {stray}, which are not among the alternatives "
+                            f"{cells['alternatives'] or '[]'}")
     low, high = _number(cells["low"], where, "low"), _number(cells["high"], where, "high")
     if (low is None) != (high is None):
         raise ReadingsError(f"{where}: give both low and high, or neither")
@@ -193,7 +208,7 @@ def _reading(document: str, row: dict, where: str) -> Reading:
                             f"[low, high], so that a sweep can test the printed numbers under a reading not chosen "
                             f"from them")
     return Reading(document, name, experiments, cells["parameter"], cells["where"], default, alternatives, low, high,
-                   cells["basis"], cells["source"], cells["reason"])
+                   cells["basis"], cells["source"], cells["reason"], tuple(fitted))
 
 
 def load_reading_file(path: str | Path, document: str | None = None) -> tuple[Reading, ...]:

@@ -19,7 +19,7 @@ miss verdict; arithmetic, shown and linked rows have none), in this order:
     within under the default reading;
 ``reachable``
     within under at least one other declared reading (``reached_by`` names each: ``reading: parameter=value``,
-    with ``[fitted]`` for a reading declared ``fitted_to_output``);
+    with ``[fitted]`` after a value declared fitted to printed results: rows under it are calibrations);
 ``open``
     not reached, and a reading that could matter was not swept: a gap (a reading no notebook parameter sets yet,
     with alternatives or a range) or a point that failed (``open_readings`` names them);
@@ -85,10 +85,11 @@ class BracketPoint:
 
     @property
     def label(self) -> str:
-        """``reading: parameter=value`` (``[fitted]`` after a fitted_to_output reading), or ``default``."""
+        """``reading: parameter=value`` (``[fitted]`` after a reading whose value was fitted to printed results),
+        or ``default``."""
         if not self.readings:
             return DEFAULT_POINT
-        names = ", ".join(r.name + (" [fitted]" if r.is_calibration else "") for r in self.readings)
+        names = ", ".join(r.name + (" [fitted]" if r.is_fitted(self.value) else "") for r in self.readings)
         return f"{names}: {self.parameter}={_text(self.value)}"
 
 

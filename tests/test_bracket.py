@@ -9,7 +9,7 @@ import pytest
 from locbook.reproduce.readings import READING_COLUMNS, load_reading_file, readings_for
 from locbook.suite import SuiteError, load_suite
 from locbook.suite.bracket import (BRACKET_COLUMNS, SITE_NUMBER_COLUMNS, bracket_gaps, bracket_of_rows,
-                                   bracket_points, experiment_readings, find_experiment)
+                                   bracket_points, bracket_rows, experiment_readings, find_experiment)
 from locbook.suite.cli import main
 from test_study import stoy  # noqa: F401  (a fixture: the toy repository with george-study, quick seed = 3)
 from test_suite import toy  # noqa: F401
@@ -143,16 +143,22 @@ def test_a_toy_bracket_gives_each_row_its_verdict_and_the_site_shows_it(stoy, tm
     site = _table(stoy / "reports" / "quick" / "numbers.csv")
     assert tuple(site[0]) == SITE_NUMBER_COLUMNS
     by = {r["quantity"]: r for r in site}
-    assert (by["value"]["bracket"], by["value"]["bracket_readings"]) == ("reachable", "slope: a=1.3")
+    assert (by["value"]["bracket"], by["value"]["bracket_readings"]) == ("reachable", "at quick: slope: a=1.3")
     assert (by["twice"]["bracket"], by["twice"]["bracket_readings"]) == (
-        "loose", "this report; slope: a=1.3; slope: a=2.0; offset: b=0.5")
+        "loose", "this report; at quick: slope: a=1.3; slope: a=2.0; offset: b=0.5")
     # the experiment's page (rendered when it ran, after the bracket) shows each row's bracket beside its verdict
     page = (stoy / "reports" / "quick" / "george-study" / "report.md").read_text()
-    assert "| verdict | bracket | bracket_readings |" in page and "| reachable | slope: a=1.3 |" in page
+    assert "| verdict | bracket | bracket_readings |" in page and "| reachable | at quick: slope: a=1.3 |" in page
     index = (stoy / "reports" / "quick" / "index.md").read_text()
-    assert "Reading brackets of the 2 scored rows: 0 within by default, 1 reachable" in index
+    assert ("Reading brackets of the 2 scored rows: 0 within by default, 1 reachable under another declared reading "
+            "(0 of them only under a reading fitted to printed output)") in index
     assert "[george](../brackets/george-findings.md)" in index
 
+    # a -p run's rows were computed under another reading than the bracket's default: no bracket there
+    assert main(["--suite", str(stoy / "notebooks" / "experiments.toml"), "run", "george-study", "--reports",
+                 str(stoy / "reports"), "--progress", "plain", "-p", "a=1.3"]) == 0
+    (custom,) = (stoy / "reports").glob("quick-a-1-3-*")
+    assert {r["bracket"] for r in _table(custom / "numbers.csv")} == {""}
     # only the offset reading: nothing reaches value (13 and 13.5): outside, with its band
     assert bracket(stoy, _readings(tmp_path, OFFSET_ONLY), reports="offset") == 0
     value = {r["quantity"]: r for r in _table(stoy / "offset" / "brackets" / "george-study" / "bracket.csv")}["value"]
@@ -167,9 +173,9 @@ def test_the_site_bracket_of_a_row_follows_its_own_verdict_first():
     """bracket_of_rows: a row within in this report is 'default' whatever the bracket's profile said; otherwise
     the bracket's other readings decide; unscored and unmatched rows have none."""
     bracket = [{"printed_id": "p", "quantity": "q", "where": "w", "bracket": "reachable", "reached_by": "r: x=1",
-                "open_readings": "", "band_low": "1", "band_high": "2", "points": "3"},
+                "open_readings": "", "band_low": "1", "band_high": "2", "points": "3", "profile": "quick"},
                {"printed_id": "o", "quantity": "q (500 runs)", "where": "w", "bracket": "outside", "reached_by": "",
-                "open_readings": "", "band_low": "1", "band_high": "2", "points": "3"}]
+                "open_readings": "", "band_low": "1", "band_high": "2", "points": "3", "profile": "quick"}]
     row = {"printed_id": "p", "quantity": "q", "where": "w", "kind": "reproduction"}
     out = bracket_of_rows([{**row, "verdict": "within"}, {**row, "verdict": "miss"},
                            {**row, "verdict": "consistent", "kind": "arithmetic"},
@@ -179,5 +185,91 @@ def test_the_site_bracket_of_a_row_follows_its_own_verdict_first():
                            {**row, "printed_id": "o", "quantity": "q (20 runs)", "verdict": "loose"},
                            {**row, "printed_id": "z", "verdict": "miss"}], bracket)
     assert [(r["bracket"], r["bracket_readings"]) for r in out] == [
-        ("default", ""), ("reachable", "r: x=1"), ("", ""), ("outside", "band 1 .. 2 over 3 readings"),
+        ("default", ""), ("reachable", "at quick: r: x=1"), ("", ""), ("outside", "at quick: band 1 .. 2 over 3 runs"),
         ("loose", "this report"), ("", "")]
+    # within under the default at the bracket's profile, a miss here (another profile's window): open, not outside
+    within_there = [{**bracket[1], "bracket": "default"}]
+    (row,) = bracket_of_rows([{**row, "printed_id": "o", "quantity": "q", "verdict": "miss"}], within_there)
+    assert row["bracket"] == "open" and "within at quick under the default reading, not here" in row["bracket_readings"]
+
+
+# -- verdicts from hand-written point reports (no notebook) ---------------------------------------------------
+
+def _numbers(folder, *rows):
+    from locbook.reproduce.report import NUMBER_COLUMNS
+    folder.mkdir(parents=True)
+    with open(folder / "numbers.csv", "w", newline="") as fh:
+        writer = csv.DictWriter(fh, fieldnames=NUMBER_COLUMNS)
+        writer.writeheader()
+        for r in rows:
+            writer.writerow({"printed_id": "T | v | ", "quantity": "v", "where": "T, v", "kind": "reproduction",
+                             "printed": "16.0", **r})
+
+
+def _hand_points(stoy, tmp_path, text):
+    exp = find_experiment(_suite(stoy), "george-study")
+    return exp, bracket_points(exp, "quick", load_reading_file(_readings(tmp_path, text)))
+
+
+RANGE_ONLY = f"{HEADER}\nslope,george-study,a,,1.0,[],,0.0,2.0,assumed,s,r\n"
+
+
+def test_a_range_whose_runs_straddle_the_printed_value_is_open_not_outside(stoy, tmp_path):
+    exp, points = _hand_points(stoy, tmp_path, RANGE_ONLY)
+    assert [p.label for p in points] == ["default", "slope: a=0.0", "slope: a=2.0"]
+    folder = tmp_path / "b"
+    for p, value in zip(points, ("13", "3", "23")):        # 10 a + 3: a miss everywhere, 16 lies between a = 1 and 2
+        _numbers(folder / p.key, {"reproduced": value, "verdict": "miss"})
+    (row,) = bracket_rows(exp, points, folder, {p.key: "ok" for p in points}, [], "quick")
+    assert row["bracket"] == "open" and row["open_readings"].startswith("slope between a=1 and 2 (ours 13 .. 23")
+    # the same runs on one side of the printed value: every reading misses it
+    for p, value in zip(points, ("13", "3", "15")):
+        (folder / p.key / "numbers.csv").unlink()
+        (folder / p.key).rmdir()
+        _numbers(folder / p.key, {"reproduced": value, "verdict": "miss"})
+    (row,) = bracket_rows(exp, points, folder, {p.key: "ok" for p in points}, [], "quick")
+    assert (row["bracket"], row["band_low"], row["band_high"], row["points"]) == ("outside", "3", "15", 3)
+
+
+def test_a_point_that_failed_or_did_not_produce_the_row_leaves_it_open(stoy, tmp_path):
+    exp, points = _hand_points(stoy, tmp_path, OFFSET_ONLY)
+    folder = tmp_path / "b"
+    _numbers(folder / points[0].key, {"reproduced": "13", "verdict": "miss"})
+    _numbers(folder / points[1].key, {"printed_id": "renamed", "reproduced": "13.5", "verdict": "miss"})
+    (row,) = bracket_rows(exp, points, folder, {p.key: "ok" for p in points}, [], "quick")
+    assert (row["bracket"], row["open_readings"]) == ("open", "offset: b=0.5 (row not produced)")
+    (row,) = bracket_rows(exp, points, folder, {points[0].key: "ok", points[1].key: "failed"}, [], "quick")
+    assert (row["bracket"], row["open_readings"]) == ("open", "offset: b=0.5 (failed)")
+    # no default point, no bracket: an earlier bracket.csv is kept as it was
+    (folder / "bracket.csv").write_text("kept\n")
+    from locbook.suite.bracket import write_bracket_outputs
+    from locbook.suite.runner import Outcome
+    write_bracket_outputs(exp, points, folder, [Outcome(points[0].key, "interrupted", 1.0),
+                                                Outcome(points[1].key, "ok", 1.0)], [], "quick", _suite(stoy))
+    assert (folder / "bracket.csv").read_text() == "kept\n"
+
+
+def test_a_damaged_bracket_file_labels_nothing(tmp_path):
+    from locbook.suite.bracket import load_bracket
+    (tmp_path / "bracket.csv").write_text("experiment,printed_id\nx,y\n")            # another layout
+    assert load_bracket(tmp_path) == []
+    (tmp_path / "bracket.csv").write_text(",".join(BRACKET_COLUMNS) + "\nx,y\n")     # a short row
+    assert load_bracket(tmp_path) == []
+    (tmp_path / "bracket.csv").write_bytes(b"\xff\xfe not utf-8")
+    assert load_bracket(tmp_path) == []
+
+
+def test_int_range_ends_are_the_whole_numbers_inside_the_range():
+    from locbook.suite.bracket import _sweep_values
+    from locbook.reproduce.readings import Reading
+    r = Reading("d", "n", ("e",), "k", "", 1, (), 0.5, 2.5, "assumed", "s", "r")
+    assert _sweep_values(r, "int") == [1, 2] and _sweep_values(r, "int | None") == [1, 2]
+    assert _sweep_values(r, "float") == [0.5, 2.5]
+
+
+def test_a_profile_that_sets_a_reading_off_its_default_is_refused(stoy, tmp_path):
+    exp = find_experiment(_suite(stoy), "george-study")
+    text = f"{HEADER}\nseed_reading,george-study,seed,,7,[8],,,,assumed,s,r\n"     # the quick profile sets seed = 3
+    with pytest.raises(SuiteError, match="the quick profile of 'george-study' sets seed = 3, not the declared "
+                                         "default 7"):
+        bracket_points(exp, "quick", load_reading_file(_readings(tmp_path, text)))

@@ -37,14 +37,19 @@ over every point, ``closest`` the value nearest the printed one and ``closest_re
 Outputs in ``<reports>/brackets/<experiment>/``: ``bracket.csv`` (:data:`BRACKET_COLUMNS`, one row per scored
 row of the default point), ``points.csv`` (:data:`POINT_COLUMNS`: what each point changed and how it ended) and one
 report folder per point; ``<reports>/brackets/<document>-findings.md`` lists, from every bracket of the document
-present, the ``outside`` rows with their evidence, then the reachable and open rows. The site (index, pages,
-``numbers.csv``) shows the bracket of each row (:func:`bracket_of_rows`): ``default`` when the row is within in
-that report, else what the bracket's other readings gave.
+present, the ``outside`` rows with their evidence, then the reachable, open and loose rows. The site (index, pages,
+``numbers.csv``) shows the bracket of each row (:func:`bracket_of_rows`) in the folders of a profile
+(``reports/quick``, ``reports/full``; not a ``-p`` run's folder), rebuilt by the next ``locbook run`` (a cached run
+costs nothing): ``default`` when the row is within in that report, else what the bracket's other readings gave,
+named with the bracket's profile. A bracket whose default point did not finish writes nothing (an earlier one is
+kept).
 """
 from __future__ import annotations
 
 import csv
 import io
+import json
+import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -57,7 +62,8 @@ from .params import check_value
 from .spec import Experiment, Suite, SuiteError, finite_float
 from .study import _atomic, _point_key
 
-__all__ = ["BracketPoint", "find_experiment", "brackets_root", "SITE_NUMBER_COLUMNS", "BRACKET_ROW_COLUMNS", "bracket_points", "bracket_gaps", "run_bracket", "bracket_folder", "bracket_rows",
+__all__ = ["BracketPoint", "find_experiment", "brackets_root", "SITE_NUMBER_COLUMNS", "BRACKET_ROW_COLUMNS",
+           "experiment_readings", "write_findings", "counts", "read_readings_option", "bracket_points", "bracket_gaps", "run_bracket", "bracket_folder", "bracket_rows",
            "bracket_of_rows", "load_bracket", "BRACKETS", "BRACKET_COLUMNS", "POINT_COLUMNS"]
 
 BRACKETS = ("default", "reachable", "open", "loose", "outside")
@@ -67,7 +73,7 @@ SITE_NUMBER_COLUMNS = (*NUMBER_COLUMNS, *BRACKET_ROW_COLUMNS)
 BRACKET_COLUMNS = ("experiment", "printed_id", "quantity", "where", "unit", "kind", "printed", "ours", "verdict",
                    "bracket", "reached_by", "open_readings", "loose_under", "band_low", "band_high", "closest", "closest_reading",
                    "points", "profile")
-POINT_COLUMNS = ("point", "readings", "parameter", "value", "status", "folder")
+POINT_COLUMNS = ("point", "readings", "parameter", "value", "status", "folder", "generated_by", "readings_file")
 DEFAULT_POINT = "default"
 
 
@@ -104,8 +110,10 @@ def _text(value) -> str:
 def _sweep_values(reading: Reading, annotation: str) -> list:
     values = list(reading.alternatives)
     if reading.low is not None:
-        ends = (reading.low, reading.high)
-        values += [int(round(v)) for v in ends] if annotation == "int" else list(ends)
+        if annotation.replace(" ", "").split("|")[0] == "int":   # int, int | None: the whole numbers inside
+            values += [math.ceil(reading.low), math.floor(reading.high)]
+        else:
+            values += [reading.low, reading.high]
     return values
 
 
@@ -154,6 +162,11 @@ def bracket_points(exp: Experiment, profile: str, readings: tuple[Reading, ...])
             raise SuiteError(f"reading {reading.document}/{reading.name} names parameter {reading.parameter!r}, which "
                              f"{exp.id!r} does not declare (known: {', '.join(sorted(declared))})")
         param = declared[reading.parameter]
+        profiled = base.get(reading.parameter, param.default)
+        if reading.default is not None and not _same(profiled, reading.default):
+            raise SuiteError(f"reading {reading.document}/{reading.name}: the {profile} profile of {exp.id!r} sets "
+                             f"{reading.parameter} = {profiled!r}, not the declared default {reading.default!r}; the "
+                             "bracket's default point would not be the default reading")
         for value in _sweep_values(reading, param.annotation):
             try:
                 checked = check_value(param, value, exp.rules.get(reading.parameter))
@@ -194,40 +207,81 @@ def _index(rows: list[dict]) -> tuple[dict, dict]:
 
 def _find(indexed: tuple[dict, dict], r: dict) -> dict | None:
     full, loose = indexed
-    return full.get(_row_key(r)) or loose.get((r["printed_id"], r["where"]))
+    return full.get(_row_key(r)) or loose.get((r.get("printed_id", ""), r.get("where", "")))
 
 
 def _scored(r: dict) -> bool:
-    return r["kind"] in JUDGED_KINDS and r["verdict"] in ("within", "loose", "miss")
+    return r.get("kind") in JUDGED_KINDS and r.get("verdict") in ("within", "loose", "miss")
 
 
-def bracket_rows(exp: Experiment, points: list[BracketPoint], folder: Path, done: set[str], gaps: list[Reading],
-                 profile: str) -> list[dict]:
-    """The bracket.csv rows: one per scored row of the default point (none if the default point did not run)."""
+def _crossings(printed: float | None, points: list[BracketPoint], values: dict[str, tuple]) -> list[str]:
+    """The range readings with two neighbouring runs (the default and the range ends, in parameter order) that miss
+    the printed value on opposite sides: in between it may be reached, and nothing ran there. (A run inside its
+    window, loose, already puts the printed value inside: the reading is judged by those runs.) ``values``: point
+    key -> (our value, verdict)."""
+    if printed is None:
+        return []
+    out = []
+    by_reading: dict[str, list[tuple[float, float, str]]] = {}
+    for p in points[1:]:
+        v, verdict = values.get(p.key, (None, ""))
+        for reading in p.readings:
+            if reading.low is not None and v is not None and isinstance(p.value, (int, float)):
+                by_reading.setdefault(reading.name, []).append((float(p.value), v, verdict))
+    default_v, default_verdict = values.get(points[0].key, (None, ""))
+    for reading in {r.name: r for p in points[1:] for r in p.readings}.values():
+        runs = by_reading.get(reading.name, [])
+        if reading.low is None or not runs:
+            continue
+        base = points[0].parameters.get(reading.parameter, reading.default)
+        if default_v is not None and isinstance(base, (int, float)):
+            runs = [*runs, (float(base), default_v, default_verdict)]
+        runs.sort()
+        for (x0, y0, v0), (x1, y1, v1) in zip(runs, runs[1:]):
+            if v0 == v1 == "miss" and (y0 - printed) * (y1 - printed) < 0:
+                out.append(f"{reading.name} between {reading.parameter}={x0:g} and {x1:g} (ours {y0:.4g} .. "
+                           f"{y1:.4g} straddles the printed value; not run in between)")
+                break
+    return out
+
+
+def bracket_rows(exp: Experiment, points: list[BracketPoint], folder: Path, status: dict[str, str],
+                 gaps: list[Reading], profile: str) -> list[dict]:
+    """The bracket.csv rows: one per scored row of the default point (none if the default point did not run).
+
+    ``status``: each point's outcome (``ok``, ``cached``, ``failed``, ``interrupted``, ``not run``). A point that did
+    not finish, or finished without producing the row (renamed, linked, damaged numbers.csv), leaves the row
+    ``open``, as does a range reading whose runs straddle the printed value (:func:`_crossings`)."""
     from .site import _read_csv
 
+    done = {k for k, st in status.items() if st in ("ok", "cached")}
     if points[0].key not in done:
         return []
     default = _read_csv(folder / points[0].key / "numbers.csv")
     others = [(p, _index(_read_csv(folder / p.key / "numbers.csv"))) for p in points[1:] if p.key in done]
-    failed = [p for p in points[1:] if p.key not in done]
-    open_names = [f"{r.name} (gap: {r.where})" for r in gaps] + [f"{p.label} (did not run)" for p in failed]
+    unfinished = [f"{p.label} ({status.get(p.key, 'not run')})" for p in points[1:] if p.key not in done]
+    gap_names = [f"{r.name} (gap: {r.where})" for r in gaps]
     rows = []
     for r in default:
         if not _scored(r):
             continue
         printed = finite_float(r["printed"])
         values = [(DEFAULT_POINT, finite_float(r["reproduced"]))]
-        reached, inside = [], [DEFAULT_POINT] if r["verdict"] == "loose" else []
+        by_key = {points[0].key: (values[0][1], r["verdict"])}
+        reached, inside, missing = [], [DEFAULT_POINT] if r["verdict"] == "loose" else [], []
         for p, indexed in others:
             alt = _find(indexed, r)
-            if alt is None:
+            if alt is None or alt.get("verdict") not in ("within", "loose", "miss"):
+                missing.append(f"{p.label} (row not produced)")
                 continue
-            values.append((p.label, finite_float(alt["reproduced"])))
+            value = finite_float(alt.get("reproduced", ""))
+            values.append((p.label, value))
+            by_key[p.key] = (value, alt["verdict"])
             if alt["verdict"] == "within":
                 reached.append(p.label)
             elif alt["verdict"] == "loose":
                 inside.append(p.label)
+        open_names = gap_names + unfinished + missing + _crossings(printed, points, by_key)
         if r["verdict"] == "within":
             verdict = "default"
         elif reached:
@@ -259,29 +313,37 @@ def _fmt(value: float | None) -> str:
 
 
 def bracket_of_rows(rows: list[dict], bracket: list[dict]) -> list[dict]:
-    """``rows`` (numbers.csv rows of one experiment, any profile) with ``bracket`` and ``bracket_readings`` set from
-    that experiment's ``bracket`` rows: ``default`` when the row itself is within, else the bracket's other
-    readings (reachable / open / loose / outside: a row loose in this report is at worst ``loose``); empty for rows
-    the bracket does not cover or does not score."""
+    """``rows`` (numbers.csv rows of one experiment) with ``bracket`` and ``bracket_readings`` set from that
+    experiment's ``bracket`` rows: ``default`` when the row itself is within here, else what the bracket's other
+    readings gave (reachable / open / loose / outside, each reading named with the bracket's profile, e.g.
+    ``at quick: ...``). A row loose here is at worst ``loose``; a row the bracket had within under the default but
+    that is not within here (another profile's window) is ``open``: the readings were not run at this profile.
+    Empty for rows the bracket does not cover or does not score."""
     indexed = _index(bracket)
     out = []
     for r in rows:
         b = _find(indexed, r) if _scored(r) else None
         if b is None:
             out.append({**r, "bracket": "", "bracket_readings": ""})
-        elif r["verdict"] == "within":
-            out.append({**r, "bracket": "default", "bracket_readings": ""})
-        elif b["reached_by"]:
-            out.append({**r, "bracket": "reachable", "bracket_readings": b["reached_by"]})
-        elif b["open_readings"] or b["bracket"] == "open":
-            out.append({**r, "bracket": "open", "bracket_readings": b["open_readings"]})
+            continue
+        at = f"at {b.get('profile') or '?'}: "
+        if r["verdict"] == "within":
+            verdict, readings = "default", ""
+        elif b.get("reached_by"):
+            verdict, readings = "reachable", at + b["reached_by"]
+        elif b.get("open_readings") or b.get("bracket") == "open":
+            verdict, readings = "open", at + (b.get("open_readings") or "")
+        elif b.get("bracket") == "default":
+            verdict, readings = "open", (f"within {at[:-2]} under the default reading, not here: the other readings "
+                                         "were not run at this profile")
         elif r["verdict"] == "loose" or b.get("loose_under"):
-            under = [x for x in b.get("loose_under", "").split("; ") if x and x != DEFAULT_POINT]
-            out.append({**r, "bracket": "loose", "bracket_readings": "; ".join(
-                (["this report"] if r["verdict"] == "loose" else []) + under)})
+            under = [x for x in (b.get("loose_under") or "").split("; ") if x and x != DEFAULT_POINT]
+            verdict, readings = "loose", "; ".join((["this report"] if r["verdict"] == "loose" else [])
+                                                   + ([at + "; ".join(under)] if under else []))
         else:
-            out.append({**r, "bracket": "outside", "bracket_readings": f"band {b['band_low']} .. {b['band_high']} "
-                                                                        f"over {b['points']} readings"})
+            verdict, readings = "outside", (f"{at}band {b.get('band_low')} .. {b.get('band_high')} over "
+                                            f"{b.get('points')} runs")
+        out.append({**r, "bracket": verdict, "bracket_readings": readings})
     return out
 
 
@@ -299,9 +361,21 @@ def brackets_root(report_dir: Path) -> Path:
 
 
 def load_bracket(folder: Path) -> list[dict]:
-    """The rows of ``<folder>/bracket.csv`` (empty if there is none)."""
-    from .site import _read_csv
-    return _read_csv(folder / "bracket.csv")
+    """The rows of ``<folder>/bracket.csv``; empty if there is none, or if it is damaged or of another layout
+    (a header other than :data:`BRACKET_COLUMNS`, a short row): a report is never labelled from a file that cannot
+    be read as written."""
+    path = Path(folder) / "bracket.csv"
+    try:
+        with open(path, newline="", encoding="utf-8") as fh:
+            reader = csv.DictReader(fh)
+            if tuple(reader.fieldnames or ()) != BRACKET_COLUMNS:
+                return []
+            rows = list(reader)
+    except (OSError, ValueError, csv.Error):
+        return []
+    if any(None in r or any(v is None for v in r.values()) for r in rows):
+        return []
+    return rows
 
 
 def _write_table(path: Path, columns, rows) -> None:
@@ -378,18 +452,28 @@ def write_findings(report_root: Path, document: str, suite: Suite) -> Path | Non
 
 
 def write_bracket_outputs(exp: Experiment, points: list[BracketPoint], folder: Path, outcomes, gaps: list[Reading],
-                          profile: str, suite: Suite) -> None:
+                          profile: str, suite: Suite, readings_file: str = "") -> None:
     """bracket.csv, points.csv and the document's findings page (also after an interrupt: from the points that
     ran; a row is ``open`` while a point it needs has not run)."""
     status = {o.id: o.status for o in outcomes}
-    done = {k for k, s in status.items() if s in ("ok", "cached")}
-    rows = bracket_rows(exp, points, folder, done, gaps, profile)
+    if status.get(points[0].key) not in ("ok", "cached"):
+        return     # without the default point there is no bracket: the previous one (if any) is kept as it was
+    rows = bracket_rows(exp, points, folder, status, gaps, profile)
     _write_table(folder / "bracket.csv", BRACKET_COLUMNS, rows)
     _write_table(folder / "points.csv", POINT_COLUMNS, [
         {"point": i, "readings": ", ".join(r.name for r in p.readings), "parameter": p.parameter,
          "value": "" if not p.parameter else _text(p.value), "status": status.get(p.key, "not run"),
-         "folder": p.key} for i, p in enumerate(points)])
+         "folder": p.key, "generated_by": _stamp(folder / p.key), "readings_file": readings_file}
+        for i, p in enumerate(points)])
     write_findings(folder.parent.parent, exp.document.key, suite)
+
+
+def _stamp(folder: Path) -> str:
+    """The locbook version and commit a point's report was made by (its report.json), '' if it has none."""
+    try:
+        return str(json.loads((folder / "report.json").read_text(encoding="utf-8")).get("locbook", ""))
+    except (OSError, ValueError, AttributeError):
+        return ""
 
 
 def run_bracket(suite: Suite, exp: Experiment, *, profile: str = "quick", readings: tuple[Reading, ...] | None = None,
@@ -402,6 +486,8 @@ def run_bracket(suite: Suite, exp: Experiment, *, profile: str = "quick", readin
     from .runner import KERNEL_NAME, Task, run_tasks
 
     found = experiment_readings(exp, readings)
+    # a readings file of one's own is named in points.csv (the packaged ones: empty)
+    readings_file = "" if readings is None else "; ".join(sorted({r.document for r in found})) + " (--readings)"
     points = bracket_points(exp, profile, found)      # every value checked before anything runs
     gaps = bracket_gaps(found)
     folder = bracket_folder(suite, exp, report_root)
@@ -410,7 +496,7 @@ def run_bracket(suite: Suite, exp: Experiment, *, profile: str = "quick", readin
                      kernel_name=kernel_name or KERNEL_NAME, progress=progress, executor=executor,
                      scheduler=scheduler,
                      write_reports=lambda where, outcomes: write_bracket_outputs(exp, points, where, outcomes, gaps,
-                                                                                 profile, suite))
+                                                                                 profile, suite, readings_file))
 
 
 def read_readings_option(path: Path | None) -> tuple[Reading, ...] | None:

@@ -214,9 +214,13 @@ def main(argv: list[str] | None = None) -> int:
     if args.command == "bracket":
         from .bracket import counts, load_bracket
         _print_summary(result, args.progress, see)
-        found = counts(load_bracket(see.parent))
-        print(f"bracket of {args.experiment}: " + ", ".join(f"{n} {b}" for b, n in found.items())
-              + f" (scored rows; findings: {see.parent.parent / (exp.document.key + '-findings.md')})")
+        if result.outcomes and result.outcomes[0].status in ("ok", "cached"):
+            found = counts(load_bracket(see.parent))
+            print(f"bracket of {args.experiment}: " + ", ".join(f"{n} {b}" for b, n in found.items())
+                  + f" (scored rows; findings: {see.parent.parent / (exp.document.key + '-findings.md')})")
+        else:
+            print(f"bracket of {args.experiment} incomplete: its default point did not finish, so no verdict was "
+                  "written (an earlier bracket.csv is kept)", file=sys.stderr)
         return _exit_status(result)
     if result.report_dir.name != args.profile:
         print(f"reports of this run: {result.report_dir.resolve()} (reports/{args.profile}/ is unchanged)")

@@ -57,7 +57,7 @@ from .site import _read_csv, _read_json
 from .executors import _STOP_GRACE_S, make_executor
 from .worker import disk_full_path
 from .progress import expected_seconds, make_progress
-from .spec import SAFE_NAME, Experiment, Suite, SuiteError
+from .spec import PROFILES, SAFE_NAME, Experiment, Suite, SuiteError
 
 __all__ = ["KERNEL_NAME", "run_suite", "run_tasks", "Task", "cache_key", "Outcome", "SuiteRun",
            "write_suite_reports", "override_folder_name"]
@@ -365,8 +365,10 @@ def write_suite_reports(suite: Suite, report_dir: Path, *, list_all: bool = True
         if not present and not list_all:
             continue
         numbers = _read_csv(folder / "numbers.csv") if present else []
-        # each row's reading bracket, from <reports>/brackets/<id>/bracket.csv when one was run (else empty)
-        numbers = bracket_of_rows(numbers, load_bracket(brackets_root(report_dir) / exp.id))
+        # each row's reading bracket, from <reports>/brackets/<id>/bracket.csv when one was run (else empty); not
+        # for a -p run's folder, whose rows were computed under other readings than the bracket's default
+        bracket = load_bracket(brackets_root(report_dir) / exp.id) if report_dir.name in PROFILES else []
+        numbers = bracket_of_rows(numbers, bracket)
         rows += numbers
         entries.append({"exp": exp, "present": present, "report": _read_json(folder / "report.json", {}),
                         "run": _read_json(folder / "run.json", {}), "last": status.get(exp.id, {}),
@@ -727,7 +729,7 @@ def _promote(exp, profile, params, staging: Path, folder: Path, stamp: str, key:
     numbers = _read_csv(staging / "numbers.csv")
     # the pages show each row's reading bracket when the experiment was bracketed (<reports>/brackets/<id>/)
     from .bracket import bracket_of_rows, brackets_root, load_bracket
-    bracket = load_bracket(brackets_root(folder.parent) / exp.id)
+    bracket = load_bracket(brackets_root(folder.parent) / exp.id) if folder.parent.name in PROFILES else []
     if bracket:
         numbers = bracket_of_rows(numbers, bracket)
     (staging / "summary.md").write_text(site.summary_markdown(exp, profile, numbers, stamp), encoding="utf-8")

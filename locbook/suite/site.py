@@ -27,7 +27,7 @@ from collections import Counter, defaultdict
 from pathlib import Path
 
 from ..reproduce.report import Table
-from ..reproduce.scoring import KINDS
+from ..reproduce.scoring import JUDGED_KINDS, KINDS
 from .spec import finite_float
 
 __all__ = ["VERDICT_COLUMNS", "scoreboard_counts", "summary_markdown", "page_markdown", "page_html",
@@ -85,13 +85,16 @@ def _headline(rows) -> str:
 def _bracket_counts(rows) -> dict | None:
     """Bracket verdicts of the scored rows (reproduction, calibrated, claim; each printed quantity once), or None
     when no row has a bracket (no ``locbook bracket`` ran for these experiments)."""
-    scored = [r for r in rows if r.get("kind") in ("reproduction", "calibrated", "claim") and not r.get("same_as")
+    scored = [r for r in rows if r.get("kind") in JUDGED_KINDS and not r.get("same_as")
               and r.get("verdict") in ("within", "loose", "miss")]
+    from .bracket import BRACKETS
     c = Counter(r.get("bracket", "") for r in scored)
-    if not any(c[b] for b in ("default", "reachable", "open", "loose", "outside")):
+    if not any(c[b] for b in BRACKETS):
         return None
-    return {"n": len(scored), "default": c["default"], "reachable": c["reachable"], "open": c["open"],
-            "loose": c["loose"], "outside": c["outside"], "none": c[""]}
+    # a reading fitted to printed output reaching a row it was chosen from shows consistency, not a reproduction
+    fitted_only = sum(1 for r in scored if r.get("bracket") == "reachable"
+                      and all("[fitted]" in part for part in r.get("bracket_readings", "").split("; ")))
+    return {"n": len(scored), **{b: c[b] for b in BRACKETS}, "fitted_only": fitted_only, "none": c[""]}
 
 
 def _bracket_headline(rows) -> str:
@@ -99,7 +102,8 @@ def _bracket_headline(rows) -> str:
     if b is None:
         return ""
     return (f"**Reading brackets of the {b['n']} scored rows: {b['default']} within by default, {b['reachable']} "
-            f"reachable under another declared reading, {b['outside']} outside every declared reading, {b['open']} "
+            f"reachable under another declared reading ({b['fitted_only']} of them only under a reading fitted to "
+            f"printed output), {b['outside']} outside every declared reading, {b['open']} "
             f"open (a reading not swept), {b['loose']} loose under every reading that ran (a window too wide to "
             f"decide), {b['none']} not bracketed** (`locbook bracket`; the `bracket` and "
             "`bracket_readings` columns of numbers.csv, and the findings page of each document).")
@@ -244,7 +248,8 @@ def _chips(rows) -> list[tuple[str, int]]:
 def _bracket_chips(rows) -> list[tuple[str, int]]:
     """Bracket verdict counts of an experiment's rows (none when it was not bracketed)."""
     c = Counter(r.get("bracket", "") for r in rows)
-    return [(b, c[b]) for b in ("default", "reachable", "open", "loose", "outside") if c[b]]
+    from .bracket import BRACKETS
+    return [(b, c[b]) for b in BRACKETS if c[b]]
 
 
 def _number(value, digits: int) -> str:

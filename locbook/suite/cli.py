@@ -68,6 +68,23 @@ def _print_summary(run, progress: str = "plain", see: Path | None = None) -> Non
               "reports are kept; free some space and run again)", file=sys.stderr)
 
 
+def _point_options(command: argparse.ArgumentParser, writes: str) -> None:
+    """The runner options of a command that runs many points (study, bracket)."""
+    command.add_argument("--jobs", "-j", type=lambda t: _positive(int, t), default=2,
+                         help="points run in parallel processes (default 2)")
+    command.add_argument("--force", action="store_true", help="execute even the points whose report is up to date")
+    command.add_argument("--reports", type=Path, help=f"reports folder (default: <repository>/reports); {writes}")
+    command.add_argument("--timeout", type=lambda t: _positive(float, t), default=1800,
+                         help="seconds allowed per notebook cell (default 1800)")
+    command.add_argument("--progress", choices=("auto", "live", "plain", "quiet"), default="auto",
+                         help="as for run")
+    command.add_argument("--quiet", "-q", dest="progress", action="store_const", const="quiet",
+                         help="--progress quiet")
+    command.add_argument("--executor", choices=("local", "dask"), default="local",
+                         help="local: worker processes here (default); dask: each point a task on dask.distributed")
+    command.add_argument("--scheduler", metavar="ADDRESS", help="as for run")
+
+
 def main(argv: list[str] | None = None) -> int:
     from .. import __version__
     from .._lazy import skip_iri_format_checker
@@ -115,20 +132,7 @@ def main(argv: list[str] | None = None) -> int:
                                          "(study.csv, plots/)")
     study.add_argument("study", metavar="NAME_OR_PATH",
                        help="a study declared in the experiment list ([[study]]) or a TOML file holding one")
-    study.add_argument("--jobs", "-j", type=lambda t: _positive(int, t), default=2,
-                       help="study points run in parallel processes (default 2)")
-    study.add_argument("--force", action="store_true", help="execute even the points whose report is up to date")
-    study.add_argument("--reports", type=Path, help="reports folder (default: <repository>/reports); the study "
-                                                    "writes <reports>/studies/<name>/")
-    study.add_argument("--timeout", type=lambda t: _positive(float, t), default=1800,
-                       help="seconds allowed per notebook cell (default 1800)")
-    study.add_argument("--progress", choices=("auto", "live", "plain", "quiet"), default="auto",
-                       help="as for run")
-    study.add_argument("--quiet", "-q", dest="progress", action="store_const", const="quiet",
-                       help="--progress quiet")
-    study.add_argument("--executor", choices=("local", "dask"), default="local",
-                       help="local: worker processes here (default); dask: each point a task on dask.distributed")
-    study.add_argument("--scheduler", metavar="ADDRESS", help="as for run")
+    _point_options(study, "the study writes <reports>/studies/<name>/")
     bracket = sub.add_parser("bracket", help="run an experiment under each declared reading of what its source left "
                                              "unprinted and give every scored row a bracket verdict "
                                              "(reports/brackets/<experiment>/)")
@@ -137,20 +141,7 @@ def main(argv: list[str] | None = None) -> int:
     bracket.add_argument("--readings", type=Path, metavar="CSV",
                          help="a readings file of your own (the columns of locbook/data/readings/*.csv) instead of "
                               "the declared readings")
-    bracket.add_argument("--jobs", "-j", type=lambda t: _positive(int, t), default=2,
-                         help="points run in parallel processes (default 2)")
-    bracket.add_argument("--force", action="store_true", help="execute even the points whose report is up to date")
-    bracket.add_argument("--reports", type=Path, help="reports folder (default: <repository>/reports); the bracket "
-                                                      "writes <reports>/brackets/<experiment>/")
-    bracket.add_argument("--timeout", type=lambda t: _positive(float, t), default=1800,
-                         help="seconds allowed per notebook cell (default 1800)")
-    bracket.add_argument("--progress", choices=("auto", "live", "plain", "quiet"), default="auto",
-                         help="as for run")
-    bracket.add_argument("--quiet", "-q", dest="progress", action="store_const", const="quiet",
-                         help="--progress quiet")
-    bracket.add_argument("--executor", choices=("local", "dask"), default="local",
-                         help="local: worker processes here (default); dask: each point a task on dask.distributed")
-    bracket.add_argument("--scheduler", metavar="ADDRESS", help="as for run")
+    _point_options(bracket, "the bracket writes <reports>/brackets/<experiment>/")
     for command in (lst, show, nbs, run, study, bracket):   # --suite after the command too; SUPPRESS keeps one given before it
         command.add_argument("--suite", type=Path, default=argparse.SUPPRESS, help=suite_help)
     args = parser.parse_args(argv)

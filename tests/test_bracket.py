@@ -273,3 +273,16 @@ def test_a_profile_that_sets_a_reading_off_its_default_is_refused(stoy, tmp_path
     with pytest.raises(SuiteError, match="the quick profile of 'george-study' sets seed = 3, not the declared "
                                          "default 7"):
         bracket_points(exp, "quick", load_reading_file(_readings(tmp_path, text)))
+
+
+def test_values_fitted_together_get_one_joint_point(stoy, tmp_path):
+    exp = find_experiment(_suite(stoy), "george-study")
+    text = (f"{HEADER}\nslope,george-study,a,,1.0,\"[1.3, 2.0]\",[1.3],,,assumed,s,r\n"
+            f"offset,george-study,b,,0.0,[0.5],[0.5],,,assumed,s,r\n")
+    points = bracket_points(exp, "quick", load_reading_file(_readings(tmp_path, text)))
+    assert [p.label for p in points] == ["default", "slope [fitted]: a=1.3", "slope: a=2.0", "offset [fitted]: b=0.5",
+                                         "fitted readings together [fitted]: a=1.3, b=0.5"]
+    assert points[-1].parameters == {"seed": 3, "a": 1.3, "b": 0.5}
+    # one fitted reading alone is its own one-at-a-time point: nothing joint
+    single = bracket_points(exp, "quick", load_reading_file(_readings(tmp_path, text.replace("[0.5],[0.5]", "[0.5],"))))
+    assert not any(p.together for p in single)

@@ -7,7 +7,9 @@ Points (each one task of :func:`locbook.suite.runner.run_tasks`, so lock, stagin
 Dask and the cache per point are the runner's): the ``default`` point (the profile's own parameters), then, one
 reading at a time, a point per other value of each reading that a notebook parameter sets: every alternative,
 and for a numeric range both ends ``low`` and ``high`` (rounded for an ``int`` parameter). Values equal to the
-profile's value are not run again; two readings that name the same parameter value share one point. Every value
+profile's value are not run again; two readings that name the same parameter value share one point. When two or
+more readings name values fitted to printed output (the ``fitted`` column), one more point sets them all at once,
+as they were chosen together (``fitted readings together [fitted]: ...``). Every value
 is checked against the parameter's type and rule before anything runs (a readings file that names a value the
 notebook refuses is a :class:`~locbook.suite.spec.SuiteError`). Readings act one at a time: a printed number
 that only a combination of readings reaches is not found (declare the combination as a reading of its own).
@@ -88,13 +90,17 @@ class BracketPoint:
     parameter: str
     value: object
     parameters: dict = field(hash=False)
+    #: the joint point of the fitted values: parameter -> value (``parameter`` is then empty)
+    together: dict = field(default_factory=dict, hash=False)
 
     @property
     def label(self) -> str:
         """``reading: parameter=value`` (``[fitted]`` after a reading whose value was fitted to printed results),
-        or ``default``."""
+        ``fitted readings together [fitted]: p=v, q=w``, or ``default``."""
         if not self.readings:
             return DEFAULT_POINT
+        if self.together:
+            return "fitted readings together [fitted]: " + ", ".join(f"{k}={_text(v)}" for k, v in self.together.items())
         names = ", ".join(r.name + (" [fitted]" if r.is_fitted(self.value) else "") for r in self.readings)
         return f"{names}: {self.parameter}={_text(self.value)}"
 
@@ -183,6 +189,15 @@ def bracket_points(exp: Experiment, profile: str, readings: tuple[Reading, ...])
             by_value[key] = len(points)
             points.append(BracketPoint(key, exp, (reading,), reading.parameter, checked,
                                        {**base, reading.parameter: checked}))
+    # values fitted to printed output were chosen together: one more run sets them all at once
+    fitted: dict[str, tuple[Reading, object]] = {}
+    for reading in readings:
+        if not reading.is_gap and reading.fitted:
+            fitted.setdefault(reading.parameter, (reading, reading.fitted[0]))
+    if len(fitted) >= 2:
+        together = {p: check_value(declared[p], v, exp.rules.get(p)) for p, (_r, v) in fitted.items()}
+        points.append(BracketPoint(_point_key(exp, together), exp, tuple(r for r, _v in fitted.values()), "", None,
+                                   {**base, **together}, together))
     return points
 
 
@@ -461,8 +476,10 @@ def write_bracket_outputs(exp: Experiment, points: list[BracketPoint], folder: P
     rows = bracket_rows(exp, points, folder, status, gaps, profile)
     _write_table(folder / "bracket.csv", BRACKET_COLUMNS, rows)
     _write_table(folder / "points.csv", POINT_COLUMNS, [
-        {"point": i, "readings": ", ".join(r.name for r in p.readings), "parameter": p.parameter,
-         "value": "" if not p.parameter else _text(p.value), "status": status.get(p.key, "not run"),
+        {"point": i, "readings": ", ".join(r.name for r in p.readings),
+         "parameter": ", ".join(p.together) if p.together else p.parameter,
+         "value": ", ".join(_text(v) for v in p.together.values()) if p.together
+         else "" if not p.parameter else _text(p.value), "status": status.get(p.key, "not run"),
          "folder": p.key, "generated_by": _stamp(folder / p.key), "readings_file": readings_file}
         for i, p in enumerate(points)])
     write_findings(folder.parent.parent, exp.document.key, suite)

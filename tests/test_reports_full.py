@@ -7,8 +7,8 @@ import pytest
 
 import locbook as lb
 from locbook.suite import load_suite
-from locbook.reproduce.report import NUMBER_COLUMNS
 from locbook.reproduce.scoring import JUDGED_KINDS, KINDS, WITHIN_LIMIT
+from locbook.suite.bracket import BRACKETS, SITE_NUMBER_COLUMNS, load_bracket
 from locbook.suite.site import double_counted
 
 FULL = Path(__file__).resolve().parents[1] / "reports" / "full"
@@ -18,7 +18,8 @@ FULL = Path(__file__).resolve().parents[1] / "reports" / "full"
 def rows():
     with open(FULL / "numbers.csv", newline="") as fh:
         reader = csv.DictReader(fh)
-        assert tuple(reader.fieldnames) == NUMBER_COLUMNS
+        # an experiment's columns, then each row's reading bracket (locbook bracket)
+        assert tuple(reader.fieldnames) == SITE_NUMBER_COLUMNS
         return list(reader)
 
 
@@ -66,3 +67,26 @@ def test_committed_reports_are_stamped_with_a_commit_and_never_from_a_dirty_tree
     for exp in suite.experiments:
         stamp = json.loads((FULL / exp.id / "report.json").read_text())["locbook"]
         assert "(source " in stamp and "uncommitted" not in stamp, (exp.id, stamp)
+
+
+def test_every_miss_and_loose_reproduction_or_calibrated_row_has_a_bracket_verdict(rows):
+    """Issue 28: the committed brackets (reports/brackets) cover every reproduction or calibrated row that is not
+    within, each verdict naming its evidence; a within row is 'default' wherever a bracket covers it."""
+    for r in rows:
+        if r["kind"] in ("reproduction", "calibrated") and r["verdict"] in ("miss", "loose") and not r["same_as"]:
+            assert r["bracket"] in BRACKETS and r["bracket"] != "default", r
+            assert r["bracket_readings"].strip(), r
+        if r["bracket"] == "default":
+            assert r["verdict"] == "within", r
+
+
+def test_the_committed_brackets_are_complete_and_from_committed_code():
+    folder = FULL.parent / "brackets"
+    for points_csv in sorted(folder.glob("*/points.csv")):
+        assert load_bracket(points_csv.parent), points_csv.parent       # bracket.csv beside it, readable
+        with open(points_csv, newline="") as fh:
+            points = list(csv.DictReader(fh))
+        assert points and points[0]["status"] in ("ok", "cached"), points_csv        # the default point ran
+        assert all(p["generated_by"] and "uncommitted" not in p["generated_by"]
+                   for p in points if p["status"] in ("ok", "cached")), points_csv
+        assert not any(p["readings_file"] for p in points), points_csv     # the packaged readings only

@@ -332,7 +332,8 @@ def bracket_of_rows(rows: list[dict], bracket: list[dict]) -> list[dict]:
     experiment's ``bracket`` rows: ``default`` when the row itself is within here, else what the bracket's other
     readings gave (reachable / open / loose / outside, each reading named with the bracket's profile, e.g.
     ``at quick: ...``). A row loose here is at worst ``loose``; a row the bracket had within under the default but
-    that is not within here (another profile's window) is ``open``: the readings were not run at this profile.
+    that is not within here (another profile's window) is ``open`` whatever the other readings gave there: they
+    were not run at this profile.
     Empty for rows the bracket does not cover or does not score."""
     indexed = _index(bracket)
     out = []
@@ -344,13 +345,15 @@ def bracket_of_rows(rows: list[dict], bracket: list[dict]) -> list[dict]:
         at = f"at {b.get('profile') or '?'}: "
         if r["verdict"] == "within":
             verdict, readings = "default", ""
+        elif b.get("bracket") == "default":
+            # within under the default at the bracket's profile (a wider window), not here: the other readings'
+            # verdicts there say nothing about this report's window
+            verdict, readings = "open", (f"within {at[:-2]} under the default reading, not here: the readings were "
+                                         "not run at this profile")
         elif b.get("reached_by"):
             verdict, readings = "reachable", at + b["reached_by"]
         elif b.get("open_readings") or b.get("bracket") == "open":
             verdict, readings = "open", at + (b.get("open_readings") or "")
-        elif b.get("bracket") == "default":
-            verdict, readings = "open", (f"within {at[:-2]} under the default reading, not here: the other readings "
-                                         "were not run at this profile")
         elif r["verdict"] == "loose" or b.get("loose_under"):
             under = [x for x in (b.get("loose_under") or "").split("; ") if x and x != DEFAULT_POINT]
             verdict, readings = "loose", "; ".join((["this report"] if r["verdict"] == "loose" else [])

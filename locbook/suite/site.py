@@ -103,8 +103,8 @@ def _bracket_headline(rows) -> str:
         return ""
     return (f"**Reading brackets of the {b['n']} scored rows: {b['default']} within by default, {b['reachable']} "
             f"reachable under another declared reading ({b['fitted_only']} of them only under a reading fitted to "
-            f"printed output), {b['outside']} outside every declared reading, {b['open']} "
-            f"open (a reading not swept), {b['loose']} loose under every reading that ran (a window too wide to "
+            f"printed output), {b['outside']} outside every declared reading, {b['open']} open (a reading not swept, "
+            f"or not run at this profile), {b['loose']} loose under every reading that ran (a window too wide to "
             f"decide), {b['none']} not bracketed** (`locbook bracket`, each reading judged by its own run at the "
             "bracket's profile, named in `bracket_readings`; the `bracket` and "
             "`bracket_readings` columns of numbers.csv, and the findings page of each document).")

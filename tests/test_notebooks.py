@@ -4,7 +4,7 @@ import json
 
 import pytest
 
-from locbook.reproduce.report import NUMBER_COLUMNS
+from locbook.suite.bracket import SITE_NUMBER_COLUMNS
 from locbook.suite import load_suite, read_parameters, run_suite
 
 SUITE = load_suite()
@@ -49,8 +49,9 @@ def test_numbers_csv_holds_the_printed_numbers(quick_reports):
     folder, _ = quick_reports
     with open(folder / "numbers.csv") as fh:
         reader = csv.DictReader(fh)
-        assert tuple(reader.fieldnames) == NUMBER_COLUMNS
+        assert tuple(reader.fieldnames) == SITE_NUMBER_COLUMNS     # an experiment's columns, then its bracket
         rows = {(r["experiment"], r["quantity"]): r for r in reader}
+    assert {r["bracket"] for r in rows.values()} == {""}      # no bracket was run for this folder
     # printed values exactly as printed (the text of locbook/data/printed/george.csv)
     c_raw = rows[("george-tracking", "mean error C without filter")]
     assert c_raw["printed"] == "2.2867" and c_raw["where"].startswith("Fig. 5")

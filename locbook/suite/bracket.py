@@ -404,6 +404,12 @@ def _write_table(path: Path, columns, rows) -> None:
     _atomic(path, lambda tmp: tmp.write_text(out.getvalue(), encoding="utf-8"))
 
 
+def _short(text: str) -> str:
+    """A number of bracket.csv to 4 significant digits for the findings page (text as it is)."""
+    value = finite_float(text)
+    return text if value is None else f"{value:.4g}"
+
+
 def _md_cell(text) -> str:
     return str(text).replace("|", "\\|").replace("\n", " ")
 
@@ -415,7 +421,9 @@ def findings_markdown(document: str, brackets: dict[str, list[dict]], points: di
     lines = [f"# Findings: {document}", "",
              f"Scored rows bracketed: {len(rows)} ({', '.join(f'{b} {n}' for b, n in counts.items())}), from the "
              f"brackets of {', '.join(sorted(brackets))}. A bracket runs the experiment under each declared reading "
-             "of what the source left unprinted, one reading at a time (README, \"Reading brackets\").", ""]
+             "of what the source left unprinted, one reading at a time, plus one run with every value fitted to printed "
+             "output together (README, \"Reading brackets\"). Values below are rounded to 4 significant digits; "
+             "bracket.csv has them in full.", ""]
     sections = [("outside", "Outside: no declared reading reaches the printed number",
                  "Every declared reading was run; the printed number lies outside every window. Evidence: our values "
                  "over all readings (band) and the closest one."),
@@ -436,8 +444,8 @@ def findings_markdown(document: str, brackets: dict[str, list[dict]], points: di
         for r in chosen:
             extra = {"outside": r["points"], "reachable": r["reached_by"], "open": r["open_readings"],
                      "loose": r["loose_under"]}[verdict]
-            lines.append(f"| {r['experiment']} | {_md_cell(r['printed_id'])} | {r['printed']} | {r['ours']} | "
-                         f"{r['verdict']} | {r['band_low']} .. {r['band_high']} | {r['closest']} "
+            lines.append(f"| {r['experiment']} | {_md_cell(r['printed_id'])} | {r['printed']} | {_short(r['ours'])} | "
+                         f"{r['verdict']} | {_short(r['band_low'])} .. {_short(r['band_high'])} | {_short(r['closest'])} "
                          f"({_md_cell(r['closest_reading'])}) | {_md_cell(extra)} |")
         lines.append("")
     lines += ["## Readings swept", ""]

@@ -132,6 +132,9 @@ def test_a_toy_bracket_gives_each_row_its_verdict_and_the_site_shows_it(stoy, tm
     assert (rows["twice"]["band_low"], rows["twice"]["band_high"]) == ("0", "4")
     points = _table(folder / "points.csv")
     assert [p["status"] for p in points] == ["ok"] * 5 and points[1]["value"] == "1.3"
+    import json     # the points ran without figures (only their numbers are read); the suite's own run with them
+    assert json.loads((folder / "george-study-default" / "manifest.json").read_text())["figures_saved"] is False
+    assert "figures_saved" not in json.loads((stoy / "reports" / "quick" / "george-study" / "manifest.json").read_text())
     findings = (stoy / "reports" / "brackets" / "george-findings.md").read_text()
     assert "## Reachable: within under another reading (1)" in findings and "slope: a=1.3" in findings
     assert "## Outside: no declared reading reaches the printed number (0)" in findings
@@ -288,3 +291,92 @@ def test_values_fitted_together_get_one_joint_point(stoy, tmp_path):
     # one fitted reading alone is its own one-at-a-time point: nothing joint
     single = bracket_points(exp, "quick", load_reading_file(_readings(tmp_path, text.replace("[0.5],[0.5]", "[0.5],"))))
     assert not any(p.together for p in single)
+
+
+def _with_bracket_table(toy, table):
+    path = toy / "notebooks" / "experiments.toml"
+    text = path.read_text()
+    path.write_text(text.replace("a = { ge = 0, le = 5 }\n", "a = { ge = 0, le = 5 }\n" + table, 1))
+    return _suite(toy)
+
+
+def test_bracket_settings_are_set_at_every_point_and_checked(stoy, tmp_path):
+    suite = _with_bracket_table(stoy, '[experiment.bracket]\nparameters = { tag = "q" }\nreason = "toy: not scored"\n')
+    exp = find_experiment(suite, "george-study")
+    points = bracket_points(exp, "quick", load_reading_file(_readings(tmp_path, READINGS)))
+    assert [p.parameters.get("tag") for p in points] == ["q"] * 5          # the default point too
+    assert points[0].parameters == {"seed": 3, "tag": "q"}
+
+
+def test_a_bracket_setting_may_not_touch_what_the_readings_sweep(stoy, tmp_path):
+    exp_a = find_experiment(_with_bracket_table(stoy, '[experiment.bracket]\nparameters = { a = 2.0 }\nreason = "x"\n'),
+                            "george-study")
+    with pytest.raises(SuiteError, match="sets 'a', a parameter its readings sweep"):
+        bracket_points(exp_a, "quick", load_reading_file(_readings(tmp_path, READINGS)))
+
+
+@pytest.mark.parametrize("table, message", [
+    ('[experiment.bracket]\nparameters = { tag = "q" }\n', r"sets parameters without a 'reason'"),
+    ('[experiment.bracket]\nparams = { tag = "q" }\nreason = "x"\n', r"takes a table 'parameters' and a string 'reason'"),
+])
+def test_a_malformed_bracket_table_is_refused(stoy, table, message):
+    with pytest.raises(SuiteError, match=message):
+        _with_bracket_table(stoy, table)
+
+
+def test_a_bracket_setting_the_notebook_does_not_declare_is_refused(stoy, tmp_path):
+    exp = find_experiment(_with_bracket_table(stoy, '[experiment.bracket]\nparameters = { nope = 1 }\nreason = "x"\n'),
+                          "george-study")
+    with pytest.raises(SuiteError, match="sets 'nope', which its notebook does not declare"):
+        bracket_points(exp, "quick", load_reading_file(_readings(tmp_path, READINGS)))
+
+
+# -- bracket points run without figures ------------------------------------------------------------------------
+
+def _figure_report(tmp_path, monkeypatch, off):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import locbook as lb
+    monkeypatch.setenv("LOCBOOK_OUTPUT_DIR", str(tmp_path))
+    if off:
+        monkeypatch.setenv("LOCBOOK_FIGURES", "off")
+    else:
+        monkeypatch.delenv("LOCBOOK_FIGURES", raising=False)
+    report = lb.Report("george-study")
+    fig, ax = plt.subplots()
+    ax.plot([0, 1], [1, 0])
+    report.figure(fig, "line", "a line")
+    (tmp_path / "george-study.ipynb").write_text('{"cells": [], "metadata": {}, "nbformat": 4, "nbformat_minor": 5}')
+    return fig, plt
+
+
+def test_figures_off_records_the_caption_saves_no_file_and_the_report_still_validates(tmp_path, monkeypatch):
+    import json
+    from locbook.suite.runner import _validate_report
+    fig, plt = _figure_report(tmp_path, monkeypatch, off=True)
+    manifest = json.loads((tmp_path / "manifest.json").read_text())
+    assert manifest["figures"] == [{"name": "line", "file": "", "caption": "a line"}]
+    assert manifest["figures_saved"] is False
+    assert not list(tmp_path.glob("*.png")) and not plt.fignum_exists(fig.number)     # closed unsaved
+    assert _validate_report(tmp_path, "george-study") == ""
+    # a figure without its file in a report that claims its figures were saved is damage, as before
+    manifest.pop("figures_saved")
+    (tmp_path / "manifest.json").write_text(json.dumps(manifest))
+    assert "listed in the manifest but missing" in _validate_report(tmp_path, "george-study")
+
+
+def test_figures_on_by_default(tmp_path, monkeypatch):
+    import json
+    _figure_report(tmp_path, monkeypatch, off=False)
+    manifest = json.loads((tmp_path / "manifest.json").read_text())
+    assert manifest["figures"][0]["file"] == "line.png" and (tmp_path / "line.png").is_file()
+    assert "figures_saved" not in manifest
+
+
+def test_a_run_without_figures_has_its_own_cache_key(stoy, tmp_path):
+    from locbook.suite.runner import cache_key
+    exp = find_experiment(_suite(stoy), "george-study")
+    kw = dict(source="s", versions={"v": "1"})
+    assert cache_key(exp, "quick", {"seed": 3}, **kw) == cache_key(exp, "quick", {"seed": 3}, figures=True, **kw)
+    assert cache_key(exp, "quick", {"seed": 3}, **kw) != cache_key(exp, "quick", {"seed": 3}, figures=False, **kw)

@@ -91,6 +91,11 @@ def _user() -> str:
     return re.sub(r"[^A-Za-z0-9_.-]", "_", name)
 
 
+def _figures_on() -> bool:
+    """False where the environment sets ``LOCBOOK_FIGURES=off`` (:meth:`Report.figure`)."""
+    return os.environ.get("LOCBOOK_FIGURES", "").strip().lower() != "off"
+
+
 class Report:
     """Collects one experiment's outputs. ``experiment`` defaults to ``LOCBOOK_EXPERIMENT``."""
 
@@ -199,9 +204,18 @@ class Report:
 
     # -- figures, tables, assumptions -------------------------------------------------------------
     def figure(self, fig, name: str, caption: str = "", dpi: int = 110) -> Path:
-        """Save a matplotlib figure as ``<name>.png``; the caption says what it reproduces."""
+        """Save a matplotlib figure as ``<name>.png``; the caption says what it reproduces. Where the environment
+        sets ``LOCBOOK_FIGURES=off`` (the points of ``locbook bracket``, whose numbers are all that is read of
+        them) the figure is closed unsaved and the manifest lists its caption without a file."""
         self._check_name(name)
         path = self.output_dir / f"{name}.png"
+        if not _figures_on():
+            import matplotlib.pyplot as plt
+            plt.close(fig)
+            self.figures = [f for f in self.figures if f["name"] != name]
+            self.figures.append({"name": name, "file": "", "caption": caption})
+            self._save_manifest()
+            return path
         # fixed metadata keeps PNG bytes identical between identical runs
         fig.savefig(path, dpi=dpi, bbox_inches="tight", metadata={"Software": None})
         self.figures = [f for f in self.figures if f["name"] != name]
@@ -238,4 +252,6 @@ class Report:
     def _save_manifest(self):
         manifest = {"experiment": self.experiment, "figures": self.figures, "tables": self.tables,
                     "n_numbers": len(self.numbers), "n_assumptions": len(self.assumptions)}
+        if not _figures_on():
+            manifest["figures_saved"] = False     # its figures list captions without files
         (self.output_dir / "manifest.json").write_text(json.dumps(manifest, indent=1), encoding="utf-8")

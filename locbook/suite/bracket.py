@@ -7,7 +7,9 @@ Points (each one task of :func:`locbook.suite.runner.run_tasks`, so lock, stagin
 Dask and the cache per point are the runner's): the ``default`` point (the profile's own parameters), then, one
 reading at a time, a point per other value of each reading that a notebook parameter sets: every alternative,
 and for a numeric range both ends ``low`` and ``high`` (rounded for an ``int`` parameter). Values equal to the
-profile's value are not run again; two readings that name the same parameter value share one point. When two or
+profile's value are not run again; an experiment's ``[experiment.bracket]`` parameters (the experiment list)
+are set at every point, the default one included (never a reading's parameter; e.g. a notebook's own sweep of
+readings the bracket runs as points anyway); two readings that name the same parameter value share one point. When two or
 more readings name values fitted to printed output (the ``fitted`` column), one more point sets them all at once,
 as they were chosen together (``fitted readings together [fitted]: ...``). Every value
 is checked against the parameter's type and rule before anything runs (a readings file that names a value the
@@ -65,7 +67,7 @@ from .spec import Experiment, Suite, SuiteError, finite_float
 from .study import _atomic, _point_key
 
 __all__ = ["BracketPoint", "find_experiment", "brackets_root", "SITE_NUMBER_COLUMNS", "BRACKET_ROW_COLUMNS",
-           "experiment_readings", "write_findings", "counts", "read_readings_option", "bracket_points", "bracket_gaps", "run_bracket", "bracket_folder", "bracket_rows",
+           "experiment_readings", "bracket_settings", "write_findings", "counts", "read_readings_option", "bracket_points", "bracket_gaps", "run_bracket", "bracket_folder", "bracket_rows",
            "bracket_of_rows", "load_bracket", "BRACKETS", "BRACKET_COLUMNS", "POINT_COLUMNS"]
 
 BRACKETS = ("default", "reachable", "open", "loose", "outside")
@@ -154,11 +156,30 @@ def bracket_gaps(readings: tuple[Reading, ...]) -> list[Reading]:
     return [r for r in readings if r.is_gap and (r.alternatives or r.low is not None)]
 
 
+def bracket_settings(exp: Experiment, readings: tuple[Reading, ...]) -> dict:
+    """The experiment's ``[experiment.bracket]`` parameters, checked: declared by the notebook, valid, and none
+    of them a reading's parameter (they must not change what the bracket sweeps)."""
+    declared = exp.declared_parameters()
+    swept = {r.parameter for r in readings if not r.is_gap}
+    settings = {}
+    for name, value in exp.bracket_parameters.items():
+        if name not in declared:
+            raise SuiteError(f"[experiment.bracket] of {exp.id!r} sets {name!r}, which its notebook does not declare "
+                             f"(known: {', '.join(sorted(declared))})")
+        if name in swept:
+            raise SuiteError(f"[experiment.bracket] of {exp.id!r} sets {name!r}, a parameter its readings sweep")
+        try:
+            settings[name] = check_value(declared[name], value, exp.rules.get(name))
+        except ParameterError as exc:
+            raise SuiteError(f"[experiment.bracket] of {exp.id!r}: {exc}") from None
+    return settings
+
+
 def bracket_points(exp: Experiment, profile: str, readings: tuple[Reading, ...]) -> list[BracketPoint]:
     """The default point, then one point per other value of each sweepable reading (module docstring), every
     value checked against the parameter's type and rule."""
     declared = exp.declared_parameters()
-    base = exp.parameters(profile)
+    base = {**exp.parameters(profile), **bracket_settings(exp, readings)}
     points = [BracketPoint(f"{exp.id}-{DEFAULT_POINT}", exp, (), "", None, base)]
     by_value: dict[tuple, int] = {}
     for reading in readings:
@@ -414,8 +435,10 @@ def _md_cell(text) -> str:
     return str(text).replace("|", "\\|").replace("\n", " ")
 
 
-def findings_markdown(document: str, brackets: dict[str, list[dict]], points: dict[str, list[dict]]) -> str:
-    """The findings page of ``document`` from its experiments' bracket rows and points (module docstring)."""
+def findings_markdown(document: str, brackets: dict[str, list[dict]], points: dict[str, list[dict]],
+                      settings: dict[str, tuple[dict, str]] | None = None) -> str:
+    """The findings page of ``document`` from its experiments' bracket rows and points (module docstring);
+    ``settings``: experiment -> its ``[experiment.bracket]`` parameters and reason."""
     rows = [r for eid in sorted(brackets) for r in brackets[eid]]
     counts = {b: sum(r["bracket"] == b for r in rows) for b in BRACKETS}
     lines = [f"# Findings: {document}", "",
@@ -454,7 +477,10 @@ def findings_markdown(document: str, brackets: dict[str, list[dict]], points: di
                      + "; ".join(f"{p['readings'] or 'default'}"
                                  + (f" = {p['value']}" if p["parameter"] else "")
                                  + ("" if p["status"] in ("ok", "cached") else f" [{p['status']}]")
-                                 for p in points[eid]))
+                                 for p in points[eid])
+                     + ("" if not (settings or {}).get(eid, ({}, ""))[0] else
+                        ". Every point sets " + ", ".join(f"{k}={_text(v)}" for k, v in settings[eid][0].items())
+                        + f" ({settings[eid][1]})"))
     return "\n".join(lines) + "\n"
 
 
@@ -472,7 +498,8 @@ def write_findings(report_root: Path, document: str, suite: Suite) -> Path | Non
     if not brackets:
         return None
     path = report_root / "brackets" / f"{document}-findings.md"
-    text = findings_markdown(document, brackets, points)
+    settings = {e.id: (e.bracket_parameters, e.bracket_reason) for e in suite.experiments if e.id in brackets}
+    text = findings_markdown(document, brackets, points, settings)
     _atomic(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
     return path
 
@@ -519,7 +546,7 @@ def run_bracket(suite: Suite, exp: Experiment, *, profile: str = "quick", readin
     points = bracket_points(exp, profile, found)      # every value checked before anything runs
     gaps = bracket_gaps(found)
     folder = bracket_folder(suite, exp, report_root)
-    tasks = [Task(p.key, exp, p.parameters) for p in points]
+    tasks = [Task(p.key, exp, p.parameters, figures=False) for p in points]   # only their numbers are read
     return run_tasks(suite, tasks, profile, folder, jobs=jobs, force=force, timeout_s=timeout_s, retries=retries,
                      kernel_name=kernel_name or KERNEL_NAME, progress=progress, executor=executor,
                      scheduler=scheduler,

@@ -81,6 +81,9 @@ class Task:
     key: str
     experiment: Experiment
     parameters: dict = field(hash=False)
+    #: False: the notebook's figures are neither drawn nor saved (matplotlib's Agg backend, :meth:`Report.figure`
+    #: records the caption only): the points of a bracket, whose numbers are all that is read of them
+    figures: bool = True
 
 
 @dataclass
@@ -159,7 +162,7 @@ def _notebook_fingerprint(path: Path) -> str:
 
 
 def cache_key(exp: Experiment, profile: str, params: dict, *, source: str | None = None,
-              versions: dict | None = None) -> str:
+              versions: dict | None = None, figures: bool = True) -> str:
     """Hash of notebook, parameters, profile, the runner's locbook source (:func:`_runner_fingerprint`) and
     dependency versions. The data files an experiment reads and the library modules its kernel imports are checked
     separately, by their hashes recorded in ``run.json``."""
@@ -168,6 +171,7 @@ def cache_key(exp: Experiment, profile: str, params: dict, *, source: str | None
         "notebook": _notebook_fingerprint(exp.notebook),
         "locbook": source or _runner_fingerprint(),
         "versions": versions or _dependency_versions(),
+        **({} if figures else {"figures": False}),      # the keys of runs with figures are unchanged
     }
     return hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()
 
@@ -264,7 +268,10 @@ def _validate_report(folder: Path, exp_id: str) -> str:
     manifest = _read_json(folder / "manifest.json", None)
     if not isinstance(manifest, dict):
         return "manifest.json missing or malformed (the notebook did not create a locbook Report)"
+    unsaved = manifest.get("figures_saved") is False      # a bracket point's figures were not drawn
     for item in manifest.get("figures", []) + manifest.get("tables", []):
+        if unsaved and item.get("file") == "" and item in manifest.get("figures", []):
+            continue
         if not (folder / item["file"]).is_file():
             return f"{item['file']} is listed in the manifest but missing"
     numbers = folder / "numbers.csv"
@@ -552,7 +559,8 @@ def _run_locked(suite, tasks, profile, report_dir, data_roots, force, timeout_s,
     status_path = report_dir / "status.json"
     status = _read_json(status_path, {})
     by_id = {t.key: t for t in tasks}
-    keys = {t.key: cache_key(t.experiment, profile, t.parameters, source=source, versions=versions) for t in tasks}
+    keys = {t.key: cache_key(t.experiment, profile, t.parameters, source=source, versions=versions,
+                             figures=t.figures) for t in tasks}
 
     def disk_full(path) -> None:
         """A write failed for lack of space: the run stops (no retry, no new experiment)."""
@@ -594,7 +602,7 @@ def _run_locked(suite, tasks, profile, report_dir, data_roots, force, timeout_s,
         exp = by_id[eid].experiment
         task = {"id": exp.id, "notebook": str(exp.notebook), "parameters": by_id[eid].parameters,
                 "staging": str(staging), "timeout": timeout_s, "kernel": kernel_name,
-                "data_roots": data_roots, "runner_pid": os.getpid()}
+                "data_roots": data_roots, "runner_pid": os.getpid(), "figures": by_id[eid].figures}
         writing = staging
         try:
             staging.mkdir(parents=True)

@@ -14,6 +14,9 @@ Schema::
     [experiment.profiles.quick]   # parameters per profile (every profile must be present)
     [experiment.profiles.full]
     [experiment.parameter_rules]  # optional: rules for this experiment's parameters (override the suite's)
+    [experiment.bracket]          # optional: parameters every point of ``locbook bracket`` sets (never a scored
+    parameters = { ... }          # quantity's input, never a declared reading), and the reason, shown with the
+    reason = "..."                # bracket's findings (e.g. a notebook's own sweep of readings the bracket runs)
 
     [parameter_rules]             # allowed values by parameter name, for every experiment declaring it
     n_runs = { ge = 2 }           # keys: ge, gt, le, lt, allow_inf, min_items, max_items (ParameterRule)
@@ -69,6 +72,9 @@ class Experiment:
     notebook: Path
     profiles: dict[str, dict] = field(hash=False)
     rules: dict[str, ParameterRule] = field(default_factory=dict, hash=False)
+    #: ``[experiment.bracket]``: parameter -> value set at every bracket point, and why (empty: none)
+    bracket_parameters: dict = field(default_factory=dict, hash=False)
+    bracket_reason: str = ""
 
     def declared_parameters(self) -> dict[str, NotebookParameter]:
         return read_parameters(self.notebook)
@@ -207,6 +213,14 @@ def load_suite(path: Path | None = None) -> Suite:
         if not notebook.is_file():
             raise SuiteError(f"{path}: experiment {eid!r}: notebook {raw['notebook']} does not exist")
         rules = {**suite_rules, **_rules(raw.get("parameter_rules", {}), f"{path}: experiment {eid!r}")}
+        bracket = raw.get("bracket", {})
+        if not isinstance(bracket, dict) or set(bracket) - {"parameters", "reason"} \
+                or not isinstance(bracket.get("parameters", {}), dict):
+            raise SuiteError(f"{path}: experiment {eid!r}: [experiment.bracket] takes a table 'parameters' and a "
+                             "string 'reason'")
+        if bracket.get("parameters") and not str(bracket.get("reason", "")).strip():
+            raise SuiteError(f"{path}: experiment {eid!r}: [experiment.bracket] sets parameters without a 'reason'")
         experiments.append(Experiment(eid, documents[dkey], raw["title"], raw["section"], notebook,
-                                      {p: dict(raw["profiles"][p]) for p in PROFILES}, rules))
+                                      {p: dict(raw["profiles"][p]) for p in PROFILES}, rules,
+                                      dict(bracket.get("parameters", {})), str(bracket.get("reason", "")).strip()))
     return Suite(path.resolve(), documents, experiments)

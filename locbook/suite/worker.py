@@ -171,6 +171,10 @@ def _run(task: dict, staging: Path) -> int:
                        "LOCBOOK_DATA_ROOTS": os.pathsep.join(task["data_roots"]),
                        "JUPYTER_RUNTIME_DIR": str(runtime), "TMPDIR": str(runtime),
                        "PYDEVD_DISABLE_FILE_VALIDATION": "1"})
+    if not task.get("figures", True):     # a bracket point: Agg draws nothing until saved, and Report saves nothing
+        quiet = "ignore:FigureCanvasAgg is non-interactive:UserWarning"     # plt.show() under Agg
+        os.environ.update({"MPLBACKEND": "Agg", "LOCBOOK_FIGURES": "off",
+                           "PYTHONWARNINGS": ",".join(filter(None, [os.environ.get("PYTHONWARNINGS", ""), quiet]))})
     # the kernel inherits stderr: keep its chatter in a log beside the report
     # read-write for all before the umask, as open() creates every other report file (os.open's default
     # also sets the execute bits)

@@ -380,3 +380,17 @@ def test_a_run_without_figures_has_its_own_cache_key(stoy, tmp_path):
     kw = dict(source="s", versions={"v": "1"})
     assert cache_key(exp, "quick", {"seed": 3}, **kw) == cache_key(exp, "quick", {"seed": 3}, figures=True, **kw)
     assert cache_key(exp, "quick", {"seed": 3}, **kw) != cache_key(exp, "quick", {"seed": 3}, figures=False, **kw)
+
+
+def test_a_reading_that_requires_another_value_runs_each_of_its_values_with_it(stoy, tmp_path):
+    exp = find_experiment(_suite(stoy), "george-study")
+    text = (f"{HEADER},requires\nlabel,george-study,tag,,'x',['p'],,,,assumed,s,r,\n"
+            f"slope_p,george-study,a,,1.0,,,0.5,2.0,assumed,s,r,{{ tag = 'p' }}\n")
+    points = bracket_points(exp, "quick", load_reading_file(_readings(tmp_path, text)))
+    # a = 1.0 under tag p is the point of tag = 'p' itself: shared; both range ends run with tag = 'p'
+    assert [p.label for p in points] == ["default", "label, slope_p: tag='p'", "slope_p: a=0.5 with tag='p'",
+                                         "slope_p: a=2.0 with tag='p'"]
+    assert points[2].parameters == {"seed": 3, "a": 0.5, "tag": "p"}
+    bad = f"{HEADER},requires\nslope_p,george-study,a,,1.0,,,0.5,2.0,assumed,s,r,{{ zz = 1 }}\n"
+    with pytest.raises(SuiteError, match="requires parameter 'zz', which 'george-study' does not declare"):
+        bracket_points(exp, "quick", load_reading_file(_readings(tmp_path, bad)))

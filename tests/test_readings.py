@@ -258,3 +258,19 @@ def test_labelled_function_readings_match_the_functions_defaults():
     assert inspect.signature(ozkaya.thesis_crlb_m).parameters["average"].default == average.default
     for value in average.values:              # every declared averaging is one the function computes
         assert ozkaya.thesis_crlb_m("corners3", 5.2, average=value) > 0
+
+
+def test_requires_is_an_optional_last_column_of_other_parameters(tmp_path):
+    from locbook.reproduce.readings import OPTIONAL_READING_COLUMNS
+    header = READING_COLUMNS + OPTIONAL_READING_COLUMNS
+    (r,) = load_reading_file(_write(tmp_path, {**GOOD, "requires": "{ mode = 'iso', k = 2 }"}, header=header))
+    assert r.requires == {"mode": "iso", "k": 2}
+    (plain,) = load_reading_file(_write(tmp_path, GOOD, header=header))      # empty: none
+    assert plain.requires == {}
+    for bad, problem in [("['mode']", "requires must be a TOML inline table"),
+                         ("{ speed_mps = 1.0 }", "requires names the reading's own parameter 'speed_mps'")]:
+        with pytest.raises(ReadingsError, match=re.escape(problem)):
+            load_reading_file(_write(tmp_path, {**GOOD, "requires": bad}, header=header))
+    with pytest.raises(ReadingsError, match="requires needs the reading's own parameter"):
+        load_reading_file(_write(tmp_path, {**GOOD, "parameter": "", "where": "a.b", "requires": "{ m = 1 }"},
+                                 header=header))

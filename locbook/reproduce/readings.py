@@ -30,10 +30,15 @@ One CSV per document, ``locbook/data/readings/<document>.csv`` (package data, be
 ``source``, ``reason``
     where the source prints the value or leaves it open (section, equation, table), and why the default and the
     alternatives (both required).
+``requires`` (optional last column, :data:`OPTIONAL_READING_COLUMNS`)
+    a TOML inline table of other parameters this reading acts only together with (``{ r_mode = 'isotropic' }``:
+    George's isotropic R is used only when ``r_mode`` is ``'isotropic'``); a bracket sets them at each of this
+    reading's points, its default value included. Empty: none.
 
 Rules (:func:`readings` raises :class:`ReadingsError` naming the file, the line and the problem): the
 columns exactly as above; a known basis; a unique snake_case name; at least one experiment; ``parameter`` or
 ``where``; every TOML value parses (``alternatives`` and ``fitted`` as arrays); the default is not among the alternatives, and every fitted value is;
+``requires`` a table of parameter names other than the reading's own (and only with a ``parameter``);
 ``low <= high``, both numbers, and a numeric default inside ``[low, high]``; a ``fitted_to_output`` reading names at
 least one alternative or a range, so that a sweep can test the printed numbers under a reading not chosen from them.
 
@@ -46,7 +51,7 @@ import csv
 import math
 import re
 import tomllib
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
 from typing import Any
@@ -54,11 +59,13 @@ from typing import Any
 from ..errors import LocbookError
 
 __all__ = ["Reading", "ReadingsError", "readings", "readings_for", "load_reading_file", "READINGS_DIR",
-           "READING_COLUMNS", "BASES"]
+           "READING_COLUMNS", "OPTIONAL_READING_COLUMNS", "BASES"]
 
 READINGS_DIR = Path(__file__).resolve().parents[1] / "data" / "readings"    # package data of locbook.data
 READING_COLUMNS = ("name", "experiments", "parameter", "where", "default", "alternatives", "fitted", "low", "high",
                    "basis", "source", "reason")
+#: columns a readings file may add after :data:`READING_COLUMNS`
+OPTIONAL_READING_COLUMNS = ("requires",)
 #: The basis of a reading's default: printed by the source, assumed by us, or fitted to the source's printed output.
 BASES = ("printed", "assumed", "fitted_to_output")
 
@@ -94,6 +101,8 @@ class Reading:
     source: str
     reason: str
     fitted: tuple = ()
+    #: other parameters set with each of this reading's values (the ``requires`` column): name -> value
+    requires: dict = field(default_factory=dict, hash=False, compare=False)
 
     @property
     def is_gap(self) -> bool:
@@ -150,7 +159,7 @@ def _key(value):
 
 
 def _reading(document: str, row: dict, where: str) -> Reading:
-    cells = {k: (row[k] or "").strip() for k in READING_COLUMNS}
+    cells = {k: (row.get(k) or "").strip() for k in READING_COLUMNS + OPTIONAL_READING_COLUMNS}
     name = cells["name"]
     if not _NAME.match(name):
         raise ReadingsError(f"{where}: name {name!r} must be snake_case (lower-case letters, digits, underscores)")
@@ -207,8 +216,16 @@ def _reading(document: str, row: dict, where: str) -> Reading:
         raise ReadingsError(f"{where}: a fitted_to_output reading needs at least one alternative or a range "
                             f"[low, high], so that a sweep can test the printed numbers under a reading not chosen "
                             f"from them")
+    requires = {} if cells["requires"] == "" else _toml_value(cells["requires"], where, "requires")
+    if not isinstance(requires, dict) or not all(k.isidentifier() for k in requires):
+        raise ReadingsError(f"{where}: requires must be a TOML inline table of parameter names, such as "
+                            f"{{ r_mode = 'isotropic' }}, got {cells['requires']!r}")
+    if requires and not cells["parameter"]:
+        raise ReadingsError(f"{where}: requires needs the reading's own parameter (a gap is not swept)")
+    if cells["parameter"] in requires:
+        raise ReadingsError(f"{where}: requires names the reading's own parameter {cells['parameter']!r}")
     return Reading(document, name, experiments, cells["parameter"], cells["where"], default, alternatives, low, high,
-                   cells["basis"], cells["source"], cells["reason"], tuple(fitted))
+                   cells["basis"], cells["source"], cells["reason"], tuple(fitted), dict(requires))
 
 
 def load_reading_file(path: str | Path, document: str | None = None) -> tuple[Reading, ...]:
@@ -221,15 +238,16 @@ def load_reading_file(path: str | Path, document: str | None = None) -> tuple[Re
     if not lines:
         raise ReadingsError(f"{path}: no header line; the columns must be {', '.join(READING_COLUMNS)}")
     reader = csv.DictReader(line for _, line in lines)
-    if tuple(reader.fieldnames or ()) != READING_COLUMNS:
-        raise ReadingsError(f"{path}, line {lines[0][0]}: columns must be {', '.join(READING_COLUMNS)}; "
-                            f"got {', '.join(reader.fieldnames or ())}")
+    columns = tuple(reader.fieldnames or ())
+    if columns not in (READING_COLUMNS, READING_COLUMNS + OPTIONAL_READING_COLUMNS):
+        raise ReadingsError(f"{path}, line {lines[0][0]}: columns must be {', '.join(READING_COLUMNS)} (then "
+                            f"optionally {', '.join(OPTIONAL_READING_COLUMNS)}); got {', '.join(columns)}")
     out, seen = [], {}
     for row in reader:
         number = lines[reader.line_num - 1][0]     # reader.line_num counts the non-comment lines read so far
         where = f"{path}, line {number}"
         if None in row or any(v is None for v in row.values()):
-            raise ReadingsError(f"{where}: expected {len(READING_COLUMNS)} fields ({', '.join(READING_COLUMNS)})")
+            raise ReadingsError(f"{where}: expected {len(columns)} fields ({', '.join(columns)})")
         reading = _reading(document, row, where)
         if reading.name in seen:
             raise ReadingsError(f"{where}: duplicate name {reading.name!r} (first on line {seen[reading.name]})")

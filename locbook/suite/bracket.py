@@ -94,6 +94,8 @@ class BracketPoint:
     parameters: dict = field(hash=False)
     #: the joint point of the fitted values: parameter -> value (``parameter`` is then empty)
     together: dict = field(default_factory=dict, hash=False)
+    #: other parameters set with ``value`` because the reading acts only together with them (its ``requires``)
+    requires: dict = field(default_factory=dict, hash=False)
 
     @property
     def label(self) -> str:
@@ -104,7 +106,8 @@ class BracketPoint:
         if self.together:
             return "fitted readings together [fitted]: " + ", ".join(f"{k}={_text(v)}" for k, v in self.together.items())
         names = ", ".join(r.name + (" [fitted]" if r.is_fitted(self.value) else "") for r in self.readings)
-        return f"{names}: {self.parameter}={_text(self.value)}"
+        extra = "".join(f" with {k}={_text(v)}" for k, v in self.requires.items())
+        return f"{names}: {self.parameter}={_text(self.value)}{extra}"
 
 
 def _text(value) -> str:
@@ -175,6 +178,23 @@ def bracket_settings(exp: Experiment, readings: tuple[Reading, ...]) -> dict:
     return settings
 
 
+def _required(exp: Experiment, reading: Reading, declared: dict, base: dict) -> dict:
+    """The values of ``reading.requires`` that differ from ``base``, checked (a reading of the packaged files or
+    of ``--readings``: an unknown parameter or a refused value is a :class:`SuiteError`)."""
+    out = {}
+    for name, value in reading.requires.items():
+        if name not in declared:
+            raise SuiteError(f"reading {reading.document}/{reading.name} requires parameter {name!r}, which "
+                             f"{exp.id!r} does not declare")
+        try:
+            checked = check_value(declared[name], value, exp.rules.get(name))
+        except ParameterError as exc:
+            raise SuiteError(f"reading {reading.document}/{reading.name} of {exp.id!r} (requires): {exc}") from None
+        if not _same(checked, base.get(name, declared[name].default)):
+            out[name] = checked
+    return out
+
+
 def bracket_points(exp: Experiment, profile: str, readings: tuple[Reading, ...]) -> list[BracketPoint]:
     """The default point, then one point per other value of each sweepable reading (module docstring), every
     value checked against the parameter's type and rule."""
@@ -194,22 +214,29 @@ def bracket_points(exp: Experiment, profile: str, readings: tuple[Reading, ...])
             raise SuiteError(f"reading {reading.document}/{reading.name}: the {profile} profile of {exp.id!r} sets "
                              f"{reading.parameter} = {profiled!r}, not the declared default {reading.default!r}; the "
                              "bracket's default point would not be the default reading")
-        for value in _sweep_values(reading, param.annotation):
+        requires = _required(exp, reading, declared, base)
+        values = _sweep_values(reading, param.annotation)
+        if requires and reading.default is not None:
+            values = [reading.default, *values]     # the default too acts differently under what it requires
+        for value in values:
             try:
                 checked = check_value(param, value, exp.rules.get(reading.parameter))
             except ParameterError as exc:
                 raise SuiteError(f"reading {reading.document}/{reading.name} of {exp.id!r}: {exc}") from None
-            if _same(checked, base.get(reading.parameter, param.default)):
+            change = {**requires}
+            if not _same(checked, base.get(reading.parameter, param.default)):
+                change[reading.parameter] = checked
+            if not change:
                 continue       # the profile's own value: the default point
-            key = _point_key(exp, {reading.parameter: checked})
-            if key in by_value:   # another reading names the same value: one run serves both
+            key = _point_key(exp, change)
+            if key in by_value:   # another reading names the same values: one run serves both
                 i = by_value[key]
-                points[i] = BracketPoint(key, exp, (*points[i].readings, reading), reading.parameter, checked,
-                                         points[i].parameters)
+                points[i] = BracketPoint(key, exp, (*points[i].readings, reading), points[i].parameter,
+                                         points[i].value, points[i].parameters, requires=points[i].requires)
                 continue
             by_value[key] = len(points)
-            points.append(BracketPoint(key, exp, (reading,), reading.parameter, checked,
-                                       {**base, reading.parameter: checked}))
+            points.append(BracketPoint(key, exp, (reading,), reading.parameter, checked, {**base, **change},
+                                       requires=requires))
     # values fitted to printed output were chosen together: one more run sets them all at once
     fitted: dict[str, tuple[Reading, object]] = {}
     for reading in readings:
@@ -262,15 +289,17 @@ def _crossings(printed: float | None, points: list[BracketPoint], values: dict[s
     for p in points[1:]:
         v, verdict = values.get(p.key, (None, ""))
         for reading in p.readings:
-            if reading.low is not None and v is not None and isinstance(p.value, (int, float)):
-                by_reading.setdefault(reading.name, []).append((float(p.value), v, verdict))
+            x = p.parameters.get(reading.parameter)      # (a point shared with another reading: its value here)
+            if reading.low is not None and v is not None and isinstance(x, (int, float)) and not isinstance(x, bool):
+                by_reading.setdefault(reading.name, []).append((float(x), v, verdict))
     default_v, default_verdict = values.get(points[0].key, (None, ""))
     for reading in {r.name: r for p in points[1:] for r in p.readings}.values():
         runs = by_reading.get(reading.name, [])
         if reading.low is None or not runs:
             continue
         base = points[0].parameters.get(reading.parameter, reading.default)
-        if default_v is not None and isinstance(base, (int, float)):
+        # a reading that requires other values has its own run at its default (the default point is not one)
+        if default_v is not None and isinstance(base, (int, float)) and not reading.requires:
             runs = [*runs, (float(base), default_v, default_verdict)]
         runs.sort()
         for (x0, y0, v0), (x1, y1, v1) in zip(runs, runs[1:]):

@@ -196,6 +196,17 @@ def test_the_site_bracket_of_a_row_follows_its_own_verdict_first():
         (row,) = bracket_of_rows([{**row, "printed_id": b["printed_id"], "quantity": "q", "verdict": "miss"}], [b])
         assert row["bracket"] == "open" and "within at quick under the default reading, not here" in \
             row["bracket_readings"]
+    # at the bracket's own profile a value other than its default run's means a stale bracket: open, named so
+    b = {**bracket[0], "ours": "1.5"}
+    same, other, fine = bracket_of_rows([{**row, "verdict": "miss", "reproduced": "1.5000000000001"},
+                                         {**row, "verdict": "miss", "reproduced": "1.6"},
+                                         {**row, "verdict": "within", "reproduced": "1.6"}], [b], "quick")
+    assert same["bracket"] == "reachable"
+    assert other["bracket"] == "open" and other["bracket_readings"] == (
+        "the quick bracket is stale for this row: its default run gave 1.5, this report 1.6 (run locbook bracket again)")
+    assert fine["bracket"] == "default"                 # within here whatever the bracket says
+    (full,) = bracket_of_rows([{**row, "verdict": "miss", "reproduced": "1.6"}], [b], "full")
+    assert full["bracket"] == "reachable"               # another profile's run: values differ by design
 
 
 # -- verdicts from hand-written point reports (no notebook) ---------------------------------------------------

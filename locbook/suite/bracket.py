@@ -377,13 +377,22 @@ def _fmt(value: float | None) -> str:
     return "" if value is None else f"{value:.10g}"
 
 
-def bracket_of_rows(rows: list[dict], bracket: list[dict]) -> list[dict]:
+def _same_number(a, b) -> bool:
+    """Two CSV cells of ``ours`` hold the same value (numbers to round-off, anything else as text)."""
+    x, y = finite_float(a), finite_float(b)
+    if x is None or y is None:
+        return str(a).strip() == str(b).strip()
+    return math.isclose(x, y, rel_tol=1e-9, abs_tol=1e-12)
+
+
+def bracket_of_rows(rows: list[dict], bracket: list[dict], profile: str | None = None) -> list[dict]:
     """``rows`` (numbers.csv rows of one experiment) with ``bracket`` and ``bracket_readings`` set from that
     experiment's ``bracket`` rows: ``default`` when the row itself is within here, else what the bracket's other
     readings gave (reachable / open / loose / outside, each reading named with the bracket's profile, e.g.
     ``at quick: ...``). A row loose here is at worst ``loose``; a row the bracket had within under the default but
     that is not within here (another profile's window) is ``open`` whatever the other readings gave there: they
-    were not run at this profile.
+    were not run at this profile. ``profile``: the report's; where it is the bracket's, a row whose value here
+    differs from the bracket's default run is ``open``: the bracket is stale (made by other code or parameters).
     Empty for rows the bracket does not cover or does not score."""
     indexed = _index(bracket)
     out = []
@@ -395,6 +404,11 @@ def bracket_of_rows(rows: list[dict], bracket: list[dict]) -> list[dict]:
         at = f"at {b.get('profile') or '?'}: "
         if r["verdict"] == "within":
             verdict, readings = "default", ""
+        elif profile is not None and profile == b.get("profile") and not _same_number(r.get("reproduced"),
+                                                                                       b.get("ours")):
+            verdict, readings = "open", (f"the {profile} bracket is stale for this row: its default run gave "
+                                         f"{b.get('ours')}, this report {r.get('reproduced')} (run locbook "
+                                         "bracket again)")
         elif b.get("bracket") == "default":
             # within under the default at the bracket's profile (a wider window), not here: the other readings'
             # verdicts there say nothing about this report's window
@@ -502,7 +516,9 @@ def findings_markdown(document: str, brackets: dict[str, list[dict]], points: di
         lines.append("")
     lines += ["## Readings swept", ""]
     for eid in sorted(points):
-        lines.append(f"- {eid} ({brackets[eid][0]['profile'] if brackets.get(eid) else '?'} profile): "
+        made = points[eid][0].get("generated_by") if points[eid] else ""
+        lines.append(f"- {eid} ({brackets[eid][0]['profile'] if brackets.get(eid) else '?'} profile"
+                     + (f", made by locbook {made}" if made else "") + "): "
                      + "; ".join(f"{p['readings'] or 'default'}"
                                  + (f" = {p['value']}" if p["parameter"] else "")
                                  + ("" if p["status"] in ("ok", "cached") else f" [{p['status']}]")

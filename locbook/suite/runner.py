@@ -375,7 +375,7 @@ def write_suite_reports(suite: Suite, report_dir: Path, *, list_all: bool = True
         # each row's reading bracket, from <reports>/brackets/<id>/bracket.csv when one was run (else empty); not
         # for a -p run's folder, whose rows were computed under other readings than the bracket's default
         bracket = load_bracket(brackets_root(report_dir) / exp.id) if report_dir.name in PROFILES else []
-        numbers = bracket_of_rows(numbers, bracket)
+        numbers = bracket_of_rows(numbers, bracket, report_dir.name)
         rows += numbers
         entries.append({"exp": exp, "present": present, "report": _read_json(folder / "report.json", {}),
                         "run": _read_json(folder / "run.json", {}), "last": status.get(exp.id, {}),
@@ -739,7 +739,7 @@ def _promote(exp, profile, params, staging: Path, folder: Path, stamp: str, key:
     from .bracket import bracket_of_rows, brackets_root, load_bracket
     bracket = load_bracket(brackets_root(folder.parent) / exp.id) if folder.parent.name in PROFILES else []
     if bracket:
-        numbers = bracket_of_rows(numbers, bracket)
+        numbers = bracket_of_rows(numbers, bracket, profile)
     (staging / "summary.md").write_text(site.summary_markdown(exp, profile, numbers, stamp), encoding="utf-8")
     (staging / "report.md").write_text(site.page_markdown(exp, profile, params, staging, numbers, stamp),
                                        encoding="utf-8")

@@ -137,6 +137,9 @@ def test_a_toy_bracket_gives_each_row_its_verdict_and_the_site_shows_it(stoy, tm
     assert "figures_saved" not in json.loads((stoy / "reports" / "quick" / "george-study" / "manifest.json").read_text())
     findings = (stoy / "reports" / "brackets" / "george-findings.md").read_text()
     assert "## Reachable: within under another reading (1)" in findings and "slope: a=1.3" in findings
+    # a second bracket serves every point from its cache (figureless reports validate as such)
+    assert bracket(stoy, _readings(tmp_path, READINGS), "--jobs", "2") == 0
+    assert "0 executed, 5 cached" in capsys.readouterr().out
     assert "## Outside: no declared reading reaches the printed number (0)" in findings
 
     # the suite's numbers.csv carries each row's bracket once the site is rebuilt (any later run; --force renders
@@ -203,7 +206,8 @@ def test_the_site_bracket_of_a_row_follows_its_own_verdict_first():
                                          {**row, "verdict": "within", "reproduced": "1.6"}], [b], "quick")
     assert same["bracket"] == "reachable"
     assert other["bracket"] == "open" and other["bracket_readings"] == (
-        "the quick bracket is stale for this row: its default run gave 1.5, this report 1.6 (run locbook bracket again)")
+        "this report and its quick bracket disagree: the bracket's default run gave 1.5, this report 1.6 (made by "
+        "other code or parameters; run the older of the two again)")
     assert fine["bracket"] == "default"                 # within here whatever the bracket says
     (full,) = bracket_of_rows([{**row, "verdict": "miss", "reproduced": "1.6"}], [b], "full")
     assert full["bracket"] == "reachable"               # another profile's run: values differ by design
@@ -370,11 +374,12 @@ def test_figures_off_records_the_caption_saves_no_file_and_the_report_still_vali
     assert manifest["figures"] == [{"name": "line", "file": "", "caption": "a line"}]
     assert manifest["figures_saved"] is False
     assert not list(tmp_path.glob("*.png")) and not plt.fignum_exists(fig.number)     # closed unsaved
-    assert _validate_report(tmp_path, "george-study") == ""
+    assert _validate_report(tmp_path, "george-study", figures=False) == ""
+    assert "its figures were not saved" in _validate_report(tmp_path, "george-study")    # a run that wanted them
     # a figure without its file in a report that claims its figures were saved is damage, as before
     manifest.pop("figures_saved")
     (tmp_path / "manifest.json").write_text(json.dumps(manifest))
-    assert "listed in the manifest but missing" in _validate_report(tmp_path, "george-study")
+    assert "listed in the manifest but missing" in _validate_report(tmp_path, "george-study", figures=False)
 
 
 def test_figures_on_by_default(tmp_path, monkeypatch):
@@ -405,3 +410,41 @@ def test_a_reading_that_requires_another_value_runs_each_of_its_values_with_it(s
     bad = f"{HEADER},requires\nslope_p,george-study,a,,1.0,,,0.5,2.0,assumed,s,r,{{ zz = 1 }}\n"
     with pytest.raises(SuiteError, match="requires parameter 'zz', which 'george-study' does not declare"):
         bracket_points(exp, "quick", load_reading_file(_readings(tmp_path, bad)))
+
+
+def test_a_reading_with_requires_keeps_its_own_default_run_in_the_range_check(stoy, tmp_path):
+    """The default value under what a reading requires runs on a point shared with the reading that sets only
+    that value; the range check must see it there (review of issue 28): 10 a + 3 misses 16 at a = 0.5 (8) and
+    at a = 1.0 under tag p (here 20 by hand), straddling it: open, not outside."""
+    text = (f"{HEADER},requires\nlabel,george-study,tag,,'x',['p'],,,,assumed,s,r,\n"
+            f"slope_p,george-study,a,,1.0,,,0.5,1.0,assumed,s,r,{{ tag = 'p' }}\n")
+    exp, points = _hand_points(stoy, tmp_path, text)
+    # the range's high end is the default: one point, the reading listed once
+    assert [p.label for p in points] == ["default", "label, slope_p: tag='p'", "slope_p: a=0.5 with tag='p'"]
+    assert points[1].reading_values == {"label": "p", "slope_p": 1.0}
+    folder = tmp_path / "b"
+    for p, value in zip(points, ("13", "20", "8")):
+        _numbers(folder / p.key, {"reproduced": value, "verdict": "miss"})
+    (row,) = bracket_rows(exp, points, folder, {p.key: "ok" for p in points}, [], "quick")
+    assert row["bracket"] == "open" and row["open_readings"].startswith("slope_p between a=0.5 and 1 (ours 8 .. 20")
+
+
+def test_the_fitted_together_point_is_not_a_run_of_one_range_reading(stoy, tmp_path):
+    text = (f"{HEADER}\nslope,george-study,a,,1.0,[1.3],[1.3],0.0,2.0,assumed,s,r\n"
+            f"offset,george-study,b,,0.0,[0.5],[0.5],,,assumed,s,r\n")
+    exp, points = _hand_points(stoy, tmp_path, text)
+    assert points[-1].together
+    folder = tmp_path / "b"
+    # every one-reading run misses low; only the joint run (a = 1.3 and b = 0.5) lands above 16
+    for p, value in zip(points, ("13", "14", "3", "14.5", "13.5", "30")):
+        _numbers(folder / p.key, {"reproduced": value, "verdict": "miss"})
+    (row,) = bracket_rows(exp, points, folder, {p.key: "ok" for p in points}, [], "quick")
+    assert row["bracket"] == "outside", row
+
+
+def test_a_bracket_setting_a_profile_sets_is_refused(stoy, tmp_path):
+    # the default point must stay the profile's own run: the site compares its rows with the bracket's default
+    exp = find_experiment(_with_bracket_table(stoy, '[experiment.bracket]\nparameters = { seed = 4 }\nreason = "x"\n'),
+                          "george-study")
+    with pytest.raises(SuiteError, match="sets 'seed', which a profile sets"):
+        bracket_points(exp, "quick", load_reading_file(_readings(tmp_path, OFFSET_ONLY)))

@@ -7,7 +7,8 @@ Points (each one task of :func:`locbook.suite.runner.run_tasks`, so lock, stagin
 Dask and the cache per point are the runner's): the ``default`` point (the profile's own parameters), then, one
 reading at a time, a point per other value of each reading that a notebook parameter sets: every alternative,
 and for a numeric range both ends ``low`` and ``high`` (rounded for an ``int`` parameter). Values equal to the
-profile's value are not run again; an experiment's ``[experiment.bracket]`` parameters (the experiment list)
+profile's value are not run again (except a reading's default under the values its ``requires`` column names,
+which runs with them); an experiment's ``[experiment.bracket]`` parameters (the experiment list)
 are set at every point, the default one included (never a reading's parameter; e.g. a notebook's own sweep of
 readings the bracket runs as points anyway); two readings that name the same parameter value share one point. When two or
 more readings name values fitted to printed output (the ``fitted`` column), one more point sets them all at once,
@@ -77,7 +78,8 @@ SITE_NUMBER_COLUMNS = (*NUMBER_COLUMNS, *BRACKET_ROW_COLUMNS)
 BRACKET_COLUMNS = ("experiment", "printed_id", "quantity", "where", "unit", "kind", "printed", "ours", "verdict",
                    "bracket", "reached_by", "open_readings", "loose_under", "band_low", "band_high", "closest", "closest_reading",
                    "points", "profile")
-POINT_COLUMNS = ("point", "readings", "parameter", "value", "status", "folder", "generated_by", "readings_file")
+POINT_COLUMNS = ("point", "readings", "parameter", "value", "status", "folder", "generated_by", "readings_file",
+                 "settings")
 DEFAULT_POINT = "default"
 
 
@@ -96,6 +98,8 @@ class BracketPoint:
     together: dict = field(default_factory=dict, hash=False)
     #: other parameters set with ``value`` because the reading acts only together with them (its ``requires``)
     requires: dict = field(default_factory=dict, hash=False)
+    #: each reading's own value at this point (reading name -> value; a shared point holds several)
+    reading_values: dict = field(default_factory=dict, hash=False)
 
     @property
     def label(self) -> str:
@@ -105,7 +109,8 @@ class BracketPoint:
             return DEFAULT_POINT
         if self.together:
             return "fitted readings together [fitted]: " + ", ".join(f"{k}={_text(v)}" for k, v in self.together.items())
-        names = ", ".join(r.name + (" [fitted]" if r.is_fitted(self.value) else "") for r in self.readings)
+        names = ", ".join(r.name + (" [fitted]" if r.is_fitted(self.reading_values.get(r.name, self.value)) else "")
+                          for r in self.readings)
         extra = "".join(f" with {k}={_text(v)}" for k, v in self.requires.items())
         return f"{names}: {self.parameter}={_text(self.value)}{extra}"
 
@@ -163,7 +168,8 @@ def bracket_settings(exp: Experiment, readings: tuple[Reading, ...]) -> dict:
     """The experiment's ``[experiment.bracket]`` parameters, checked: declared by the notebook, valid, and none
     of them a reading's parameter (they must not change what the bracket sweeps)."""
     declared = exp.declared_parameters()
-    swept = {r.parameter for r in readings if not r.is_gap}
+    swept = {r.parameter for r in readings if not r.is_gap} | {k for r in readings for k in r.requires}
+    profiled = {k for values in exp.profiles.values() for k in values}
     settings = {}
     for name, value in exp.bracket_parameters.items():
         if name not in declared:
@@ -171,6 +177,8 @@ def bracket_settings(exp: Experiment, readings: tuple[Reading, ...]) -> dict:
                              f"(known: {', '.join(sorted(declared))})")
         if name in swept:
             raise SuiteError(f"[experiment.bracket] of {exp.id!r} sets {name!r}, a parameter its readings sweep")
+        if name in profiled:     # the default point must stay the profile's run (the site compares the two)
+            raise SuiteError(f"[experiment.bracket] of {exp.id!r} sets {name!r}, which a profile sets")
         try:
             settings[name] = check_value(declared[name], value, exp.rules.get(name))
         except ParameterError as exc:
@@ -231,12 +239,14 @@ def bracket_points(exp: Experiment, profile: str, readings: tuple[Reading, ...])
             key = _point_key(exp, change)
             if key in by_value:   # another reading names the same values: one run serves both
                 i = by_value[key]
-                points[i] = BracketPoint(key, exp, (*points[i].readings, reading), points[i].parameter,
-                                         points[i].value, points[i].parameters, requires=points[i].requires)
+                if reading not in points[i].readings:
+                    points[i] = BracketPoint(key, exp, (*points[i].readings, reading), points[i].parameter,
+                                             points[i].value, points[i].parameters, requires=points[i].requires,
+                                             reading_values={**points[i].reading_values, reading.name: checked})
                 continue
             by_value[key] = len(points)
             points.append(BracketPoint(key, exp, (reading,), reading.parameter, checked, {**base, **change},
-                                       requires=requires))
+                                       requires=requires, reading_values={reading.name: checked}))
     # values fitted to printed output were chosen together: one more run sets them all at once
     fitted: dict[str, tuple[Reading, object]] = {}
     for reading in readings:
@@ -287,9 +297,11 @@ def _crossings(printed: float | None, points: list[BracketPoint], values: dict[s
     out = []
     by_reading: dict[str, list[tuple[float, float, str]]] = {}
     for p in points[1:]:
+        if p.together:          # other readings changed too: not a run of one reading
+            continue
         v, verdict = values.get(p.key, (None, ""))
         for reading in p.readings:
-            x = p.parameters.get(reading.parameter)      # (a point shared with another reading: its value here)
+            x = p.reading_values.get(reading.name)       # this reading's value at the point (shared points too)
             if reading.low is not None and v is not None and isinstance(x, (int, float)) and not isinstance(x, bool):
                 by_reading.setdefault(reading.name, []).append((float(x), v, verdict))
     default_v, default_verdict = values.get(points[0].key, (None, ""))
@@ -298,8 +310,9 @@ def _crossings(printed: float | None, points: list[BracketPoint], values: dict[s
         if reading.low is None or not runs:
             continue
         base = points[0].parameters.get(reading.parameter, reading.default)
-        # a reading that requires other values has its own run at its default (the default point is not one)
-        if default_v is not None and isinstance(base, (int, float)) and not reading.requires:
+        # a reading whose required values the default point lacks has its own run at its default instead
+        satisfied = all(_same(points[0].parameters.get(k), v) for k, v in reading.requires.items())
+        if default_v is not None and isinstance(base, (int, float)) and satisfied:
             runs = [*runs, (float(base), default_v, default_verdict)]
         runs.sort()
         for (x0, y0, v0), (x1, y1, v1) in zip(runs, runs[1:]):
@@ -406,9 +419,9 @@ def bracket_of_rows(rows: list[dict], bracket: list[dict], profile: str | None =
             verdict, readings = "default", ""
         elif profile is not None and profile == b.get("profile") and not _same_number(r.get("reproduced"),
                                                                                        b.get("ours")):
-            verdict, readings = "open", (f"the {profile} bracket is stale for this row: its default run gave "
-                                         f"{b.get('ours')}, this report {r.get('reproduced')} (run locbook "
-                                         "bracket again)")
+            verdict, readings = "open", (f"this report and its {profile} bracket disagree: the bracket's default "
+                                         f"run gave {b.get('ours')}, this report {r.get('reproduced')} (made by "
+                                         "other code or parameters; run the older of the two again)")
         elif b.get("bracket") == "default":
             # within under the default at the bracket's profile (a wider window), not here: the other readings'
             # verdicts there say nothing about this report's window
@@ -478,10 +491,8 @@ def _md_cell(text) -> str:
     return str(text).replace("|", "\\|").replace("\n", " ")
 
 
-def findings_markdown(document: str, brackets: dict[str, list[dict]], points: dict[str, list[dict]],
-                      settings: dict[str, tuple[dict, str]] | None = None) -> str:
-    """The findings page of ``document`` from its experiments' bracket rows and points (module docstring);
-    ``settings``: experiment -> its ``[experiment.bracket]`` parameters and reason."""
+def findings_markdown(document: str, brackets: dict[str, list[dict]], points: dict[str, list[dict]]) -> str:
+    """The findings page of ``document`` from its experiments' bracket rows and points (module docstring)."""
     rows = [r for eid in sorted(brackets) for r in brackets[eid]]
     counts = {b: sum(r["bracket"] == b for r in rows) for b in BRACKETS}
     lines = [f"# Findings: {document}", "",
@@ -523,9 +534,8 @@ def findings_markdown(document: str, brackets: dict[str, list[dict]], points: di
                                  + (f" = {p['value']}" if p["parameter"] else "")
                                  + ("" if p["status"] in ("ok", "cached") else f" [{p['status']}]")
                                  for p in points[eid])
-                     + ("" if not (settings or {}).get(eid, ({}, ""))[0] else
-                        ". Every point sets " + ", ".join(f"{k}={_text(v)}" for k, v in settings[eid][0].items())
-                        + f" ({settings[eid][1]})"))
+                     + (f". Every point sets {points[eid][0]['settings']}"
+                        if points[eid] and points[eid][0].get("settings") else ""))
     return "\n".join(lines) + "\n"
 
 
@@ -543,8 +553,7 @@ def write_findings(report_root: Path, document: str, suite: Suite) -> Path | Non
     if not brackets:
         return None
     path = report_root / "brackets" / f"{document}-findings.md"
-    settings = {e.id: (e.bracket_parameters, e.bracket_reason) for e in suite.experiments if e.id in brackets}
-    text = findings_markdown(document, brackets, points, settings)
+    text = findings_markdown(document, brackets, points)
     _atomic(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
     return path
 
@@ -563,7 +572,10 @@ def write_bracket_outputs(exp: Experiment, points: list[BracketPoint], folder: P
          "parameter": ", ".join(p.together) if p.together else p.parameter,
          "value": ", ".join(_text(v) for v in p.together.values()) if p.together
          else "" if not p.parameter else _text(p.value), "status": status.get(p.key, "not run"),
-         "folder": p.key, "generated_by": _stamp(folder / p.key), "readings_file": readings_file}
+         "folder": p.key, "generated_by": _stamp(folder / p.key), "readings_file": readings_file,
+         # [experiment.bracket] as this bracket ran it (the findings page names it from here, not from today's file)
+         "settings": "" if not exp.bracket_parameters else
+         ", ".join(f"{k}={_text(v)}" for k, v in exp.bracket_parameters.items()) + f" ({exp.bracket_reason})"}
         for i, p in enumerate(points)])
     write_findings(folder.parent.parent, exp.document.key, suite)
 

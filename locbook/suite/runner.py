@@ -19,7 +19,7 @@ Guarantees (README, "Interrupts, concurrent runs and the cache"):
 - each experiment runs in its own worker process; a worker that dies fails only its experiment (retried
   once, as is a kernel that dies on start); every other experiment finishes;
 - a finished experiment is validated (notebook readable, every file in its manifest present, numbers.csv
-  well formed) and then promoted by renames; only then is its cache record written, so a failed,
+  well formed; a bracket point's figures are captions only) and then promoted by renames; only then is its cache record written, so a failed,
   interrupted or concurrent run never replaces or corrupts a good report;
 - SIGINT / SIGTERM: no new experiment starts, running ones are stopped (worker and kernel), finished ones
   are kept, and :class:`SuiteRun` says what ran and what did not;
@@ -259,8 +259,9 @@ def _recover(report_dir: Path) -> None:
         tmp.unlink(missing_ok=True)
 
 
-def _validate_report(folder: Path, exp_id: str) -> str:
-    """'' if ``folder`` holds a complete report of ``exp_id``, else what is wrong."""
+def _validate_report(folder: Path, exp_id: str, figures: bool = True) -> str:
+    """'' if ``folder`` holds a complete report of ``exp_id``, else what is wrong. ``figures``: the run was asked
+    for its figures (a report without them is then incomplete)."""
     try:
         read_notebook(folder / f"{exp_id}.ipynb")
     except Exception as exc:
@@ -269,6 +270,8 @@ def _validate_report(folder: Path, exp_id: str) -> str:
     if not isinstance(manifest, dict):
         return "manifest.json missing or malformed (the notebook did not create a locbook Report)"
     unsaved = manifest.get("figures_saved") is False      # a bracket point's figures were not drawn
+    if unsaved and figures:
+        return "its figures were not saved (LOCBOOK_FIGURES=off), but this run asked for them"
     for item in manifest.get("figures", []) + manifest.get("tables", []):
         if unsaved and item.get("file") == "" and item in manifest.get("figures", []):
             continue
@@ -313,10 +316,10 @@ def _data_unchanged(recorded: dict[str, str]) -> bool:
     return True
 
 
-def _validate_promoted(folder: Path, exp_id: str) -> str:
+def _validate_promoted(folder: Path, exp_id: str, figures: bool = True) -> str:
     """'' if ``folder`` holds a complete promoted report of ``exp_id`` (:func:`_validate_report` plus the files
     :func:`_promote` writes), else what is wrong."""
-    why = _validate_report(folder, exp_id)
+    why = _validate_report(folder, exp_id, figures)
     if why:
         return why
     try:
@@ -339,7 +342,7 @@ def _validate_promoted(folder: Path, exp_id: str) -> str:
     return ""
 
 
-def _cached(folder: Path, exp: Experiment, key: str) -> tuple[bool, str]:
+def _cached(folder: Path, exp: Experiment, key: str, figures: bool = True) -> tuple[bool, str]:
     """``(True, "")`` when the report in ``folder`` is up to date and intact; ``(False, why)`` when it
     would be up to date but is damaged (``why`` says what is wrong), ``(False, "")`` when it is stale or absent.
     A damaged report is never served: it is executed again."""
@@ -348,7 +351,7 @@ def _cached(folder: Path, exp: Experiment, key: str) -> tuple[bool, str]:
     if not (run.get("cache_key") == key and run.get("status") == "ok" and isinstance(data, dict)
             and isinstance(modules, dict) and _data_unchanged(data) and _data_unchanged(modules)):
         return False, ""
-    why = _validate_promoted(folder, exp.id)
+    why = _validate_promoted(folder, exp.id, figures)
     return not why, why
 
 
@@ -375,7 +378,7 @@ def write_suite_reports(suite: Suite, report_dir: Path, *, list_all: bool = True
         # each row's reading bracket, from <reports>/brackets/<id>/bracket.csv when one was run (else empty); not
         # for a -p run's folder, whose rows were computed under other readings than the bracket's default
         bracket = load_bracket(brackets_root(report_dir) / exp.id) if report_dir.name in PROFILES else []
-        numbers = bracket_of_rows(numbers, bracket, report_dir.name)
+        numbers = bracket_of_rows(numbers, bracket, _read_json(folder / "report.json", {}).get("profile"))
         rows += numbers
         entries.append({"exp": exp, "present": present, "report": _read_json(folder / "report.json", {}),
                         "run": _read_json(folder / "run.json", {}), "last": status.get(exp.id, {}),
@@ -587,7 +590,7 @@ def _run_locked(suite, tasks, profile, report_dir, data_roots, force, timeout_s,
 
     queue: deque = deque()
     for t in tasks:
-        cached, damaged = (False, "") if force else _cached(report_dir / t.key, t.experiment, keys[t.key])
+        cached, damaged = (False, "") if force else _cached(report_dir / t.key, t.experiment, keys[t.key], t.figures)
         if cached:
             finish(Outcome(t.key, "cached", 0.0))
         else:
@@ -648,7 +651,7 @@ def _run_locked(suite, tasks, profile, report_dir, data_roots, force, timeout_s,
             progress.message(f"{eid}: {result['error']}; retrying once")
             queue.appendleft((eid, attempt + 1))
             return
-        error = result["error"] or _validate_report(staging, by_id[eid].experiment.id)
+        error = result["error"] or _validate_report(staging, by_id[eid].experiment.id, by_id[eid].figures)
         if not error:
             try:
                 _promote(by_id[eid].experiment, profile, by_id[eid].parameters, staging, report_dir / eid, stamp,

@@ -194,6 +194,9 @@ def page_markdown(exp, profile: str, params: dict, folder: Path, numbers: list[d
     if manifest.get("figures"):
         lines += ["## Figures", ""]
         for fig in manifest["figures"]:
+            if not fig.get("file"):     # a bracket point: figures are not drawn
+                lines += [f"*{fig['caption'] or fig['name']}* (not drawn: a bracket point)", ""]
+                continue
             lines += [f"![{fig['caption'] or fig['name']}]({fig['file']})", "", f"*{fig['caption']}*", ""]
     if manifest.get("tables"):
         lines += ["## Tables", ""]

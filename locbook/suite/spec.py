@@ -218,7 +218,9 @@ def load_suite(path: Path | None = None) -> Suite:
                 or not isinstance(bracket.get("parameters", {}), dict):
             raise SuiteError(f"{path}: experiment {eid!r}: [experiment.bracket] takes a table 'parameters' and a "
                              "string 'reason'")
-        if bracket.get("parameters") and not str(bracket.get("reason", "")).strip():
+        if not isinstance(bracket.get("reason", ""), str):
+            raise SuiteError(f"{path}: experiment {eid!r}: [experiment.bracket] reason must be a string")
+        if bracket.get("parameters") and not bracket.get("reason", "").strip():
             raise SuiteError(f"{path}: experiment {eid!r}: [experiment.bracket] sets parameters without a 'reason'")
         experiments.append(Experiment(eid, documents[dkey], raw["title"], raw["section"], notebook,
                                       {p: dict(raw["profiles"][p]) for p in PROFILES}, rules,

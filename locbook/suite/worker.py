@@ -171,6 +171,7 @@ def _run(task: dict, staging: Path) -> int:
                        "LOCBOOK_DATA_ROOTS": os.pathsep.join(task["data_roots"]),
                        "JUPYTER_RUNTIME_DIR": str(runtime), "TMPDIR": str(runtime),
                        "PYDEVD_DISABLE_FILE_VALIDATION": "1"})
+    os.environ.pop("LOCBOOK_FIGURES", None)     # never inherited: only the task decides
     if not task.get("figures", True):     # a bracket point: Agg draws nothing until saved, and Report saves nothing
         quiet = "ignore:FigureCanvasAgg is non-interactive:UserWarning"     # plt.show() under Agg
         os.environ.update({"MPLBACKEND": "Agg", "LOCBOOK_FIGURES": "off",

@@ -191,3 +191,35 @@ def test_design_rows_times_the_parameters_are_the_channels_mean():
     model = lb.PathLossModel(-41.5, 2.7, ref_distance_m=0.5)
     rows = path_loss_design_matrix(d, ref_distance_m=0.5)
     np.testing.assert_allclose(rows @ [-41.5, 2.7], model.mean_rss_dbm(d), rtol=1e-14)
+
+
+def test_a_fit_becomes_the_model_it_estimates():
+    """A noiseless log-distance data set: the fit's model is the generating one (closed form); per anchor, one
+    channel per anchor; a fit handed where a model is expected says how to convert it."""
+    rng = np.random.default_rng(5)
+    d = rng.uniform(1.0, 12.0, size=(30, 3))                       # 30 locations x 3 anchors
+    p0, n = np.array([-40.0, -47.0, -52.0]), np.array([1.8, 2.4, 3.1])
+    rss = p0 - 10 * n * np.log10(d)
+    per_anchor = lb.calibrate_path_loss(d, rss, "per_anchor").model(sigma_db=4.0)
+    np.testing.assert_allclose(per_anchor.ref_power_dbm, p0, atol=1e-9)
+    np.testing.assert_allclose(per_anchor.path_loss_exp, n, atol=1e-9)
+    assert per_anchor.sigma_db == 4.0
+    np.testing.assert_allclose(per_anchor.mean_rss_dbm(d), rss, atol=1e-8)
+    shared = lb.calibrate_path_loss(d[:, :1], rss[:, :1], "pooled").model(min_distance_m=0.1)
+    assert np.isclose(shared.ref_power_dbm, -40.0) and np.isclose(shared.path_loss_exp, 1.8)
+    assert np.isclose(shared.sigma_db, 0.0, atol=1e-9) and shared.min_distance_m == 0.1   # residual sigma
+    with pytest.raises(ValueError, match=r"a path-loss fit becomes one with fit.model\(\)"):
+        lb.rss_ml_position(np.array([[0.0, 0.0], [10.0, 0.0], [0.0, 10.0]]), np.array([-50.0, -60.0, -60.0]),
+                           lb.calibrate_path_loss(d, rss, "per_anchor"))
+
+
+def test_a_fit_of_independent_problems_or_a_failed_fit_is_not_a_model():
+    rng = np.random.default_rng(6)
+    d = rng.uniform(1.0, 12.0, size=(4, 20, 2))                    # 4 independent calibrations
+    batch = lb.fit_path_loss(d, -45.0 - 20 * np.log10(d))
+    with pytest.raises(ValueError, match=r"shape \(4, 20\)|select one problem first"):
+        batch.model()
+    one = lb.fit_path_loss(np.array([2.0, 2.0, 5.0]), np.array([-50.0, np.nan, np.nan]))   # one distance heard
+    assert not one.ok
+    with pytest.raises(ValueError, match="cannot become a model.*too_few_distances"):
+        one.model()

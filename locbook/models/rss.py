@@ -26,7 +26,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._validate import as_array, check_scalar
-from .channel import PathLossModel, log_distance_gradient, log_distance_mean_dbm, wall_crossings
+from .channel import (PathLossModel, log_distance_gradient, log_distance_mean_dbm, require_path_loss_model,
+                      wall_crossings)
 
 __all__ = ["RssModel", "rss_mean_jacobian", "LIKELIHOOD_BLOCK_VALUES"]
 
@@ -71,8 +72,7 @@ class RssModel:
     tag_height_m: float | None = None
 
     def __post_init__(self):
-        if not isinstance(self.channel, PathLossModel):
-            raise ValueError(f"channel must be a PathLossModel, got {type(self.channel).__name__}")
+        require_path_loss_model(self.channel, "channel")
         if self.tag_height_m is not None:
             check_scalar("tag_height_m", self.tag_height_m)
         anchors = as_array("anchors_m", self.anchors_m, min_ndim=2)

@@ -38,7 +38,7 @@ import scipy.sparse as sp
 from .._cvx import cp, solve
 from .._validate import as_array, check_choice, check_scalar
 from ..errors import ConvergenceError, DegenerateGeometryError
-from ..models.channel import log_distance_regressor_db
+from ..models.channel import PathLossModel, log_distance_regressor_db
 
 __all__ = [
     "PathLossFit",
@@ -116,6 +116,25 @@ class PathLossFit:
     def std_error(self) -> np.ndarray:
         """Standard errors of ``[ref_power_dbm, path_loss_exp]``, shape ``batch + (2,)``."""
         return np.sqrt(np.diagonal(self.covariance, axis1=-2, axis2=-1))
+
+    def model(self, sigma_db=None, *, ref_distance_m: float = 1.0, **options) -> PathLossModel:
+        """The fitted channel as a :class:`~locbook.PathLossModel`, for the estimators and filters.
+
+        ``sigma_db``: the shadowing of the model (default: the fit's residual sigma). ``ref_distance_m`` must be
+        the reference distance the fit used (1 m unless given to the fit); ``options`` are the model's other
+        fields (``min_distance_m``, ``wall_attenuation_db``). A scalar fit gives one shared channel; a 1-D fit
+        (``calibrate_path_loss(..., "per_anchor")``) one channel per anchor, in anchor order. A fit with more
+        axes (independent problems) has no single model; a fit with a problem that is not ``"ok"`` is refused.
+        """
+        if not self.ok:
+            bad = sorted(set(np.atleast_1d(self.problem_status).tolist()) - {"ok"}) or [self.status]
+            raise ValueError(f"this path-loss fit cannot become a model: status {self.status!r}, problems {bad}")
+        if np.ndim(self.ref_power_dbm) > 1:
+            raise ValueError(f"a fit of shape {np.shape(self.ref_power_dbm)} holds independent problems; a model "
+                             "takes one shared fit or one per anchor (shape (m,)): select one problem first")
+        sigma = self.residual_sigma_db if sigma_db is None else sigma_db
+        return PathLossModel(self.ref_power_dbm, self.path_loss_exp, sigma, ref_distance_m=ref_distance_m,
+                             **options)
 
 
 def path_loss_design_matrix(distance_m, ref_distance_m: float = 1.0,

@@ -24,7 +24,7 @@ from dataclasses import replace
 import numpy as np
 
 from .._validate import as_array, check_choice, check_scalar
-from ..models.channel import PathLossModel, pairwise_distance_m, wall_crossings
+from ..models.channel import PathLossModel, pairwise_distance_m, require_path_loss_model, wall_crossings
 
 __all__ = ["KNN_WEIGHTINGS", "KNN_BLOCK_BYTES", "knn_position", "model_fingerprints", "pattern_fingerprints"]
 
@@ -39,8 +39,7 @@ def model_fingerprints(cells_m, anchors_m, model: PathLossModel, walls_m=None, m
     ``min_distance_m`` (> 0) are clipped (a cell centre on a reader). ``anchors_m`` ``(m, 2)`` must be finite,
     like the cells; ``walls_m`` is checked by :func:`locbook.wall_crossings`.
     """
-    if not isinstance(model, PathLossModel):
-        raise ValueError(f"model must be a PathLossModel, got {type(model).__name__}")
+    require_path_loss_model(model)
     anchors_m = as_array("anchors_m", anchors_m, ndim=2)
     m, dim = anchors_m.shape
     cells_m = as_array("cells_m", cells_m, ndim=2, trailing=(dim,))

@@ -52,7 +52,7 @@ import numpy as np
 
 from .._cvx import cp, solve
 from .._validate import as_array, check_choice, check_scalar
-from ..models.channel import PathLossModel, log_distance_mean_dbm, pairwise_distance_m
+from ..models.channel import PathLossModel, log_distance_mean_dbm, pairwise_distance_m, require_path_loss_model
 from ..models.rss import rss_mean_jacobian
 from ..errors import ConvergenceError, DegenerateGeometryError, ParameterError
 
@@ -1059,8 +1059,7 @@ def rss_ml_position(anchors_m, rss_dbm, model: PathLossModel, initial_m=None, *,
 
 def _check_model(model, m: int) -> None:
     """The channel's parameters are scalars or per-anchor ``(m,)`` arrays, finite."""
-    if not isinstance(model, PathLossModel):
-        raise ValueError(f"model must be a PathLossModel, got {type(model).__name__}")
+    require_path_loss_model(model)
     for name in ("ref_power_dbm", "path_loss_exp", "sigma_db"):
         value = as_array(f"model.{name}", getattr(model, name))
         if value.ndim > 1 or value.size not in (1, m):

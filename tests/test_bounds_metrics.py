@@ -151,3 +151,23 @@ def test_single_run_interval_is_the_central_sample_quantile_range():
                                rtol=1e-12)
     with pytest.raises(lb.ParameterError, match="coverage"):
         lb.single_run_interval(x, 1.0)
+
+
+def test_rss_crlb_with_a_known_tag_height_is_the_xy_block_of_the_3d_information():
+    """3-D anchors: the known-height 2-D bound inverts the (x, y) block of the 3-D Fisher information at the tag's
+    height (independent route: the 3-D information, sliced and inverted by numpy); the 3-D bound (height unknown)
+    is never below it (Schur complement), and the choice is explicit (2-D anchors take no tag height)."""
+    anchors = np.array([[0.0, 0.0, 2.8], [8.0, 0.0, 2.5], [8.0, 6.0, 2.9], [0.0, 6.0, 2.6], [4.0, 3.0, 3.0]])
+    xy = np.array([[2.0, 1.5], [5.5, 4.0], [4.0, 1.0]])
+    h = 1.3
+    known = lb.rss_crlb_m(xy, anchors, 2.2, 4.0, tag_height_m=h)
+    xyz = np.column_stack([xy, np.full(len(xy), h)])
+    info3 = lb.rss_fisher_information(xyz, anchors, 2.2, 4.0)
+    expected = np.sqrt(np.trace(np.linalg.inv(info3[:, :2, :2]), axis1=-2, axis2=-1))
+    np.testing.assert_allclose(known, expected, rtol=1e-12)
+    full3d = lb.rss_crlb_m(xyz, anchors, 2.2, 4.0)
+    assert np.all(full3d >= known)
+    assert lb.crlb_rms_over_area_m(xy, anchors, 2.2, 4.0, tag_height_m=h) == pytest.approx(
+        float(np.sqrt(np.mean(known**2))), rel=1e-12)
+    with pytest.raises(ValueError, match=r"tag_height_m needs 3-D anchors \(m, 3\)"):
+        lb.rss_crlb_m(xy, anchors[:, :2], 2.2, 4.0, tag_height_m=h)

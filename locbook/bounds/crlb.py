@@ -102,11 +102,27 @@ def rss_position_information(position_m, anchors_m, path_loss_exp, sigma_db, for
     return info.reshape(batch + info.shape[-2:])
 
 
-def rss_crlb_m(position_m, anchors_m, path_loss_exp, sigma_db, form: str = "correct"):
+def rss_crlb_m(position_m, anchors_m, path_loss_exp, sigma_db, form: str = "correct", *,
+               tag_height_m: float | None = None):
     """Position RMSE bound ``sqrt(tr J^{-1})`` (m) at each position ``(..., 2)`` -> ``(...)``.
 
     In 2-D by Ozkaya's closed form (A.5); for anchors in another dimension ``(m, dim)`` (positions
-    ``(..., dim)``) by the trace of the inverse. Positions must be finite and off the anchors."""
+    ``(..., dim)``) by the trace of the inverse. Positions must be finite and off the anchors.
+
+    With 3-D anchors ``(m, 3)`` the choice is explicit: without ``tag_height_m`` the bound is the 3-D one of a
+    position whose height is unknown too (positions ``(..., 3)``; often mostly height error); with
+    ``tag_height_m`` it is the 2-D bound of ``(x, y)`` (positions ``(..., 2)``) for a tag at that known height:
+    each anchor's height above the tag enters the distance (``rss_fisher_information``'s ``height_offset_m``),
+    i.e. the ``(x, y)`` block of the 3-D information, not its Schur complement."""
+    if tag_height_m is not None:
+        anchors = as_array("anchors_m", anchors_m, ndim=2)
+        if anchors.shape[1] != 3:
+            raise ValueError(f"tag_height_m needs 3-D anchors (m, 3) with their heights, got shape {anchors.shape}")
+        check_scalar("tag_height_m", tag_height_m)
+        info = rss_fisher_information(position_m, anchors[:, :2], path_loss_exp, sigma_db, form,
+                                      height_offset_m=anchors[:, 2] - tag_height_m)
+        det = info[..., 0, 0] * info[..., 1, 1] - info[..., 0, 1] ** 2
+        return np.sqrt((info[..., 0, 0] + info[..., 1, 1]) / det)
     info = rss_fisher_information(position_m, anchors_m, path_loss_exp, sigma_db, form)
     if info.shape[-1] != 2:
         return np.sqrt(np.trace(np.linalg.inv(info), axis1=-2, axis2=-1))
@@ -114,11 +130,12 @@ def rss_crlb_m(position_m, anchors_m, path_loss_exp, sigma_db, form: str = "corr
     return np.sqrt((info[..., 0, 0] + info[..., 1, 1]) / det)   # (F_xx + F_yy) / (F_xx F_yy - F_xy^2)
 
 
-def crlb_rms_over_area_m(points_m, anchors_m, path_loss_exp, sigma_db, form: str = "correct"):
+def crlb_rms_over_area_m(points_m, anchors_m, path_loss_exp, sigma_db, form: str = "correct", *,
+                         tag_height_m: float | None = None):
     """RMS of the bound over target positions ``(P, 2)``: ``sqrt(mean_p tr J(p)^{-1})``, the
-    area-average used by Ozkaya (2011) for Fig. 7.1 and the CRLB columns."""
+    area-average used by Ozkaya (2011) for Fig. 7.1 and the CRLB columns (``tag_height_m``: :func:`rss_crlb_m`)."""
     points_m = as_array("points_m", points_m, min_ndim=1)
     if points_m.size == 0:
         raise ValueError(f"points_m must hold at least one position, got shape {points_m.shape}")
-    bound = rss_crlb_m(points_m, anchors_m, path_loss_exp, sigma_db, form)
+    bound = rss_crlb_m(points_m, anchors_m, path_loss_exp, sigma_db, form, tag_height_m=tag_height_m)
     return float(np.sqrt(np.mean(bound**2)))

@@ -342,7 +342,7 @@ def test_a_malformed_bracket_table_is_refused(stoy, table, message):
 def test_a_bracket_setting_the_notebook_does_not_declare_is_refused(stoy, tmp_path):
     exp = find_experiment(_with_bracket_table(stoy, '[experiment.bracket]\nparameters = { nope = 1 }\nreason = "x"\n'),
                           "george-study")
-    with pytest.raises(SuiteError, match="sets 'nope', which its notebook does not declare"):
+    with pytest.raises(SuiteError, match="sets 'nope', which 'george-study' does not declare"):
         bracket_points(exp, "quick", load_reading_file(_readings(tmp_path, READINGS)))
 
 

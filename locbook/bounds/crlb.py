@@ -121,9 +121,8 @@ def rss_crlb_m(position_m, anchors_m, path_loss_exp, sigma_db, form: str = "corr
         check_scalar("tag_height_m", tag_height_m)
         info = rss_fisher_information(position_m, anchors[:, :2], path_loss_exp, sigma_db, form,
                                       height_offset_m=anchors[:, 2] - tag_height_m)
-        det = info[..., 0, 0] * info[..., 1, 1] - info[..., 0, 1] ** 2
-        return np.sqrt((info[..., 0, 0] + info[..., 1, 1]) / det)
-    info = rss_fisher_information(position_m, anchors_m, path_loss_exp, sigma_db, form)
+    else:
+        info = rss_fisher_information(position_m, anchors_m, path_loss_exp, sigma_db, form)
     if info.shape[-1] != 2:
         return np.sqrt(np.trace(np.linalg.inv(info), axis1=-2, axis2=-1))
     det = info[..., 0, 0] * info[..., 1, 1] - info[..., 0, 1] ** 2

@@ -366,10 +366,10 @@ def small_scale_fading_db(distance_m, wavelength_m: float, rng: np.random.Genera
     field = np.sqrt(1.0 / (1.0 + k_factor)) * scattered + np.sqrt(k_factor / (1.0 + k_factor)) * np.exp(1j * k * x)
     return 20.0 * np.log10(np.abs(field))
 
+
 def require_path_loss_model(value, name: str = "model") -> None:
     """Raise a ValueError naming ``name`` unless ``value`` is a :class:`PathLossModel` (a path-loss fit says how
     it becomes one)."""
     if not isinstance(value, PathLossModel):
         hint = "; a path-loss fit becomes one with fit.model()" if type(value).__name__ == "PathLossFit" else ""
         raise ValueError(f"{name} must be a PathLossModel, got {type(value).__name__}{hint}")
-

@@ -209,17 +209,14 @@ class Report:
         them) the figure is closed unsaved and the manifest lists its caption without a file."""
         self._check_name(name)
         path = self.output_dir / f"{name}.png"
-        if not _figures_on():
+        if _figures_on():
+            # fixed metadata keeps PNG bytes identical between identical runs
+            fig.savefig(path, dpi=dpi, bbox_inches="tight", metadata={"Software": None})
+        else:
             import matplotlib.pyplot as plt
             plt.close(fig)
-            self.figures = [f for f in self.figures if f["name"] != name]
-            self.figures.append({"name": name, "file": "", "caption": caption})
-            self._save_manifest()
-            return path
-        # fixed metadata keeps PNG bytes identical between identical runs
-        fig.savefig(path, dpi=dpi, bbox_inches="tight", metadata={"Software": None})
         self.figures = [f for f in self.figures if f["name"] != name]
-        self.figures.append({"name": name, "file": path.name, "caption": caption})
+        self.figures.append({"name": name, "file": path.name if _figures_on() else "", "caption": caption})
         self._save_manifest()
         return path
 

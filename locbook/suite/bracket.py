@@ -164,6 +164,21 @@ def bracket_gaps(readings: tuple[Reading, ...]) -> list[Reading]:
     return [r for r in readings if r.is_gap and (r.alternatives or r.low is not None)]
 
 
+def _declared(exp: Experiment, declared: dict, name: str, who: str) -> None:
+    """``who`` (e.g. ``reading george/x names parameter``) names a parameter the notebook must declare."""
+    if name not in declared:
+        raise SuiteError(f"{who} {name!r}, which {exp.id!r} does not declare (known: {', '.join(sorted(declared))})")
+
+
+def _checked(exp: Experiment, declared: dict, name: str, value, who: str):
+    """``value`` checked against the type and rule of ``name`` (declared); a refusal is a :class:`SuiteError`
+    that starts with ``who``."""
+    try:
+        return check_value(declared[name], value, exp.rules.get(name))
+    except ParameterError as exc:
+        raise SuiteError(f"{who}: {exc}") from None
+
+
 def bracket_settings(exp: Experiment, readings: tuple[Reading, ...]) -> dict:
     """The experiment's ``[experiment.bracket]`` parameters, checked: declared by the notebook, valid, and none
     of them a reading's parameter (they must not change what the bracket sweeps)."""
@@ -171,18 +186,14 @@ def bracket_settings(exp: Experiment, readings: tuple[Reading, ...]) -> dict:
     swept = {r.parameter for r in readings if not r.is_gap} | {k for r in readings for k in r.requires}
     profiled = {k for values in exp.profiles.values() for k in values}
     settings = {}
+    who = f"[experiment.bracket] of {exp.id!r}"
     for name, value in exp.bracket_parameters.items():
-        if name not in declared:
-            raise SuiteError(f"[experiment.bracket] of {exp.id!r} sets {name!r}, which its notebook does not declare "
-                             f"(known: {', '.join(sorted(declared))})")
+        _declared(exp, declared, name, f"{who} sets")
         if name in swept:
             raise SuiteError(f"[experiment.bracket] of {exp.id!r} sets {name!r}, a parameter its readings sweep")
         if name in profiled:     # the default point must stay the profile's run (the site compares the two)
             raise SuiteError(f"[experiment.bracket] of {exp.id!r} sets {name!r}, which a profile sets")
-        try:
-            settings[name] = check_value(declared[name], value, exp.rules.get(name))
-        except ParameterError as exc:
-            raise SuiteError(f"[experiment.bracket] of {exp.id!r}: {exc}") from None
+        settings[name] = _checked(exp, declared, name, value, who)
     return settings
 
 
@@ -191,13 +202,9 @@ def _required(exp: Experiment, reading: Reading, declared: dict, base: dict) -> 
     of ``--readings``: an unknown parameter or a refused value is a :class:`SuiteError`)."""
     out = {}
     for name, value in reading.requires.items():
-        if name not in declared:
-            raise SuiteError(f"reading {reading.document}/{reading.name} requires parameter {name!r}, which "
-                             f"{exp.id!r} does not declare")
-        try:
-            checked = check_value(declared[name], value, exp.rules.get(name))
-        except ParameterError as exc:
-            raise SuiteError(f"reading {reading.document}/{reading.name} of {exp.id!r} (requires): {exc}") from None
+        _declared(exp, declared, name, f"reading {reading.document}/{reading.name} requires parameter")
+        checked = _checked(exp, declared, name, value, f"reading {reading.document}/{reading.name} of {exp.id!r} "
+                                                       "(requires)")
         if not _same(checked, base.get(name, declared[name].default)):
             out[name] = checked
     return out
@@ -213,9 +220,7 @@ def bracket_points(exp: Experiment, profile: str, readings: tuple[Reading, ...])
     for reading in readings:
         if reading.is_gap:
             continue
-        if reading.parameter not in declared:
-            raise SuiteError(f"reading {reading.document}/{reading.name} names parameter {reading.parameter!r}, which "
-                             f"{exp.id!r} does not declare (known: {', '.join(sorted(declared))})")
+        _declared(exp, declared, reading.parameter, f"reading {reading.document}/{reading.name} names parameter")
         param = declared[reading.parameter]
         profiled = base.get(reading.parameter, param.default)
         if reading.default is not None and not _same(profiled, reading.default):
@@ -227,10 +232,8 @@ def bracket_points(exp: Experiment, profile: str, readings: tuple[Reading, ...])
         if requires and reading.default is not None:
             values = [reading.default, *values]     # the default too acts differently under what it requires
         for value in values:
-            try:
-                checked = check_value(param, value, exp.rules.get(reading.parameter))
-            except ParameterError as exc:
-                raise SuiteError(f"reading {reading.document}/{reading.name} of {exp.id!r}: {exc}") from None
+            checked = _checked(exp, declared, reading.parameter, value,
+                               f"reading {reading.document}/{reading.name} of {exp.id!r}")
             change = {**requires}
             if not _same(checked, base.get(reading.parameter, param.default)):
                 change[reading.parameter] = checked

@@ -272,9 +272,8 @@ def _validate_report(folder: Path, exp_id: str, figures: bool = True) -> str:
     unsaved = manifest.get("figures_saved") is False      # a bracket point's figures were not drawn
     if unsaved and figures:
         return "its figures were not saved (LOCBOOK_FIGURES=off), but this run asked for them"
-    for item in manifest.get("figures", []) + manifest.get("tables", []):
-        if unsaved and item.get("file") == "" and item in manifest.get("figures", []):
-            continue
+    drawn = [f for f in manifest.get("figures", []) if not (unsaved and f.get("file") == "")]
+    for item in drawn + manifest.get("tables", []):
         if not (folder / item["file"]).is_file():
             return f"{item['file']} is listed in the manifest but missing"
     numbers = folder / "numbers.csv"

@@ -1,5 +1,5 @@
 """Time and peak memory of every method on the measured data of Kolakowski (2021) (CC BY 4.0, shipped with
-locbook; attribution in locbook/data/measured/kolakowski2021/README.md).
+locbook; attribution in locbook/data/datasets/kolakowski2021/README.md).
 
     python benchmarks/bench_real_data.py [--spacing 0.1] [--particles 5000] [--knn-queries 100000] [--dense-check]
                                          [--size tiny]
@@ -23,25 +23,26 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import _harness as hx  # noqa: E402
 
 import locbook as lb  # noqa: E402
-from locbook.scenarios import kolakowski as ko  # noqa: E402
+from locbook.scenarios import measured as ko  # noqa: E402
 
 
 def measure(spacing: float = 0.1, particles: int = 5000, knn_queries: int = 100_000, dense_check: bool = False,
             cvxpy_fits: bool = True) -> list[dict]:
-    data = ko.load()
+    data = ko.load("kolakowski2021")
+    epoch_s = ko.epoch_s(data, "robot")
     fit = ko.calibrate(data)
     model = ko.channel(fit)
-    drive = ko.Drive.of(data)
+    drive = ko.TestEpochs.of(data, "robot")
     rss, truth = drive.rss_dbm, drive.truth_m
-    anchors, h = data.anchors_m, ko.TAG_HEIGHT_M
+    anchors, h = data.anchors_m, data.tag_height_m
     grid = lb.grid_in_outline(data.outline_m, spacing)
     lower, upper = lb.outline_box(data.outline_m)
     ranges = model.range_m(rss)
     cells, fingerprints, _ = ko.radio_map(data, model)
-    reg, ticks = lb.regular_epochs(data.epochs("robot"), ko.EPOCH_S, tolerance_s=0.1 * ko.EPOCH_S)
+    reg, ticks = lb.regular_epochs(data.epochs("robot"), epoch_s, tolerance_s=0.1 * epoch_s)
     bayes_model = ko.bayes_measurement_model(data, model)
     fix_cov = ko.fix_covariance_from_calibration(data, model)
-    motion = lb.constant_velocity(ko.EPOCH_S, 0.05)
+    motion = lb.constant_velocity(epoch_s, 0.05)
     x0, P0 = np.r_[truth[0], 0.0, 0.0], np.diag([4.0, 4.0, 1.0, 1.0])
     stream = lb.RssMeasurement(reg.rss_dbm, anchors, model, np.array([0, 1]), tag_height_m=h)
     queries = np.resize(rss, (knn_queries, rss.shape[1]))

@@ -11,8 +11,10 @@ One protocol for every cell (each choice a named setting, reported with the cell
   stated default where it prints none, cited per setting) with i.i.d. log-normal shadowing, the model both
   bounds assume. The estimators know the true channel, so a cell measures the method and the geometry, not a
   calibration. All methods of a scenario see the same draws (common random numbers).
-- The measured scenario is the Kolakowski (2021) robot drive with the channel fitted on the calibration points
-  (:mod:`locbook.scenarios.kolakowski`); its bound uses only the anchors heard at each epoch.
+- A measured scenario is built from any data set (:func:`measured_static_scenario`, :func:`measured_tracking_scenario`;
+  the notebook's ``data`` parameter lists them): the channel fitted on its calibration recordings
+  (:mod:`locbook.scenarios.measured`), scored on its other recordings; its bound uses only the anchors heard at
+  each epoch.
 - Static bound: the CRLB ``sqrt(tr J^-1)`` at each true position; the cell's ratio is the RMSE over all fixes
   divided by the RMS of the bound over the positions. Methods that know the room (box-LS, grid ML, grid MMSE,
   k-NN) use information the CRLB does not have and may fall below it.
@@ -48,10 +50,11 @@ from .tracking.particle import particle_filter
 from .tracking.kalman import extended_kalman_filter
 from .tracking.streams import LinearMeasurement, RssMeasurement
 from .tracking.unscented import unscented_kalman_filter
-from .scenarios import dogan, george, gudipati, kolakowski, ozkaya, palvai
+from .scenarios import dogan, george, gudipati, measured, ozkaya, palvai
 from .tracking.divergence import DivergenceFlags
 
 __all__ = ["ProtocolChoice", "StaticScenario", "TrackingScenario", "STATIC_SCENARIOS", "TRACKING_SCENARIOS",
+           "measured_static_scenario", "measured_tracking_scenario",
            "STATIC_METHODS", "TRACKERS", "NOT_APPLICABLE", "TrackerSettings", "static_scenario", "tracking_scenario",
            "static_fixes", "static_bound_m", "run_trackers", "tracking_bound_m", "initial_states", "score",
            "scenario_rng", "static_cells", "tracking_cells", "settings_rows"]
@@ -258,38 +261,49 @@ def _palvai_static() -> StaticScenario:
          ProtocolChoice("grid pitch", "0.25 m", "benchmark: 40,000 cells over the area")))
 
 
-def _kolakowski_parts(fit: str = "closed_form"):
-    data = kolakowski.load()
-    model = kolakowski.channel(kolakowski.calibrate(data, fit=fit))
-    return data, model
+def _measured_parts(data, fit: str = "closed_form"):
+    ds = measured.load(data)
+    return ds, measured.channel(measured.calibrate(ds, fit=fit))
 
 
-def _measured_settings(model: PathLossModel, fit: str) -> tuple[ProtocolChoice, ...]:
-    return (ProtocolChoice("data", "M. Kolakowski (2021), BLE RSS data set, CC BY 4.0", "locbook/data/measured/kolakowski2021"),
-            ProtocolChoice("anchors", "6, at 1.85-2.62 m height; tag at 1.3 m (3-D distances)", "data set README"),
-            ProtocolChoice("channel", f"per-anchor {fit} fit on the 4,104 calibration points (never the scored drive)",
-                    "kolakowski2021-calibration"),
+def _measured_settings(ds, model: PathLossModel, fit: str) -> tuple[ProtocolChoice, ...]:
+    heights = ds.anchors_m[:, 2]
+    return (ProtocolChoice("data", f"{ds.title}; {ds.license}", f"{ds.root.name}/dataset.toml"),
+            ProtocolChoice("anchors", f"{len(heights)}, at {heights.min():g}-{heights.max():g} m height; tag at "
+                                      f"{ds.tag_height_m:g} m (3-D distances)", "the data set's manifest"),
+            ProtocolChoice("channel", f"per-anchor {fit} fit on the calibration recordings "
+                                      f"({', '.join(ds.recordings_with('calibration'))}; never a scored one)",
+                           "measured-calibration"),
             *_channel_settings(model, "the fit (sigma = residual spread per anchor)"))
 
 
-def _kolakowski_static(fit: str = "closed_form") -> StaticScenario:
-    data, model = _kolakowski_parts(fit)
-    drive = kolakowski.Drive.of(data)
-    cells, fingerprints, filled = kolakowski.radio_map(data, model)
+def measured_static_scenario(data, fit: str = "closed_form") -> StaticScenario:
+    """The static scenario of a data set (a :class:`~locbook.data.dataset.Dataset`, a shipped name or a folder):
+    every epoch with a true position of its scored recordings (:func:`locbook.scenarios.measured.scored_recordings`)
+    is a test point with its measured readings; k-NN's radio map is the calibration epochs."""
+    ds, model = _measured_parts(data, fit)
+    names = measured.scored_recordings(ds)
+    if not names:
+        raise ValueError(f"data set {ds.name!r} has no recording with a true position to score static methods on")
+    tests = [measured.TestEpochs.of(ds, n) for n in names]
+    truth = np.concatenate([t.truth_m for t in tests])
+    rss = np.concatenate([t.rss_dbm for t in tests])
+    cells, fingerprints, filled = measured.radio_map(ds, model)
     return StaticScenario(
-        "kolakowski2021-drive", "kolakowski2021", "measured: 9 x 7 m flat, 6 BLE anchors, robot drive", data.anchors_m,
-        model, np.asarray(data.outline_m, float), drive.truth_m, 0.1,
-        (*_measured_settings(model, fit),
-         ProtocolChoice("positions", f"the robot drive's {len(drive.truth_m)} epochs (LiDAR truth)", "data set"),
-         ProtocolChoice("k-NN map", f"the calibration points; {100 * filled:.1f} % of readings not heard, filled with the "
-                             "fitted mean", "kolakowski2021-localization"),
-         ProtocolChoice("grid pitch", "0.1 m inside the floor outline", "kolakowski2021-localization")),
-        tag_height_m=kolakowski.TAG_HEIGHT_M, measured_rss_dbm=drive.rss_dbm, radio_map=(cells, fingerprints))
+        f"data-{ds.name}", ds.name, f"measured: {ds.name}, {len(ds.anchor_ids)} anchors", ds.anchors_m, model,
+        np.asarray(ds.outline_m, float), truth, 0.1,
+        (*_measured_settings(ds, model, fit),
+         ProtocolChoice("positions", f"the {len(truth)} epochs with a true position of {', '.join(names)}",
+                        "the data set"),
+         ProtocolChoice("k-NN map", f"the calibration epochs; {100 * filled:.1f} % of readings not heard, filled with "
+                                    "the fitted mean", "measured-localization"),
+         ProtocolChoice("grid pitch", "0.1 m inside the floor outline", "measured-localization")),
+        tag_height_m=ds.tag_height_m, measured_rss_dbm=rss, radio_map=(cells, fingerprints))
 
 
 STATIC_SCENARIOS = {"george-corridor": _george_static, "ozkaya2011-room": _ozkaya_static,
                     "dogan2015-room": _dogan_static, "gudipati2017-hall": _gudipati_static,
-                    "palvai2008-area": _palvai_static, "kolakowski2021-drive": _kolakowski_static}
+                    "palvai2008-area": _palvai_static}
 
 
 def static_scenario(key: str, **kwargs) -> StaticScenario:
@@ -346,28 +360,34 @@ def _gudipati_tracking() -> TrackingScenario:
                                    "path and timing not printed (ours); GUDIPATI_TRACKING_DT_S")))
 
 
-def _kolakowski_tracking(fit: str = "closed_form") -> TrackingScenario:
-    data, model = _kolakowski_parts(fit)
-    reg, ticks = regular_epochs(data.epochs("robot"), kolakowski.EPOCH_S, tolerance_s=0.1 * kolakowski.EPOCH_S)
+def measured_tracking_scenario(data, fit: str = "closed_form") -> TrackingScenario | None:
+    """The tracking scenario of a data set: its first track with a true position per epoch, on its epoch clock
+    (a tick without readings is all NaN and unscored); None when no track has per-epoch truth."""
+    ds, model = _measured_parts(data, fit)
+    names = [n for n in ds.recordings_with("track") if ds.recording(n).has_truth]
+    if not names:
+        return None
+    name = names[0]
+    dt = measured.epoch_s(ds, name)
+    ep = ds.epochs(name)
+    reg, ticks = regular_epochs(ep, dt, tolerance_s=0.1 * dt)
     truth = np.full((reg.rss_dbm.shape[0], 2), np.nan)
-    truth[ticks] = data.epochs("robot").position_m[:, :2]
-    scored = np.zeros(len(truth), bool)
-    scored[ticks] = True
+    truth[ticks] = ep.position_m[:, :2]
+    scored = np.isfinite(truth).all(axis=1)
     return TrackingScenario(
-        "kolakowski2021-drive", "kolakowski2021", "measured: robot drive, 1/3 s epochs", data.anchors_m, model,
-        np.asarray(data.outline_m, float), truth, kolakowski.EPOCH_S, 0.3, 0.1,
-        (*_measured_settings(model, fit),
-         ProtocolChoice("path", f"the robot drive on a 1/3 s clock ({len(ticks)} epochs scored against the LiDAR truth)",
-                 "data set; kolakowski2021-tracking"),
-         ProtocolChoice("KF-on-ML R", "covariance of RSS-ML fix errors on the calibration points",
-                 "kolakowski.fix_covariance_from_calibration")),
-        tag_height_m=kolakowski.TAG_HEIGHT_M, measured_rss_dbm=reg.rss_dbm, scored=scored,
-        fix_cov_m2=kolakowski.fix_covariance_from_calibration(data, model))
+        f"data-{ds.name}", ds.name, f"measured: {ds.name}, track {name}, {dt:g} s epochs", ds.anchors_m, model,
+        np.asarray(ds.outline_m, float), truth, dt, 0.3, 0.1,
+        (*_measured_settings(ds, model, fit),
+         ProtocolChoice("path", f"the track {name!r} on a {dt:g} s clock ({int(scored.sum())} epochs scored against "
+                                "its truth)", "the data set; measured-tracking"),
+         ProtocolChoice("KF-on-ML R", "covariance of RSS-ML fix errors on the calibration epochs",
+                        "measured.fix_covariance_from_calibration")),
+        tag_height_m=ds.tag_height_m, measured_rss_dbm=reg.rss_dbm, scored=scored,
+        fix_cov_m2=measured.fix_covariance_from_calibration(ds, model))
 
 
 TRACKING_SCENARIOS = {"george-walk": _george_tracking, "ozkaya2011-constant-velocity": _ozkaya_tracking,
-                      "dogan2015-walk": _dogan_tracking, "gudipati2017-u-path": _gudipati_tracking,
-                      "kolakowski2021-drive": _kolakowski_tracking}
+                      "dogan2015-walk": _dogan_tracking, "gudipati2017-u-path": _gudipati_tracking}
 
 #: documents with no scenario of a kind, and why (shown as a blank column with the reason)
 NOT_APPLICABLE = {("tracking", "palvai2008"): "a static emitter seen from a moving receiver: there is no moving tag "

@@ -17,6 +17,7 @@ import warnings
 import numpy as np
 
 from ._validate import as_array, check_scalar
+from .montecarlo import moving_block_indices
 
 __all__ = [
     "position_error_m", "mean_error_m", "rmse_m", "median_error_m", "percentile_error_m",
@@ -180,10 +181,8 @@ def accuracy_metrics(error_m, rng: np.random.Generator, *, n_bootstrap: int = 10
     check_scalar("n_bootstrap", n_bootstrap, ge=2, integer=True)
     check_scalar("level", level, gt=0, lt=1)
     check_scalar("block_length", block_length, ge=1, integer=True)
-    n, length = e.size, min(int(block_length), e.size)
-    n_blocks = -(-n // length)
-    starts = rng.integers(0, n - length + 1, size=(int(n_bootstrap), n_blocks))
-    idx = (starts[..., None] + np.arange(length)).reshape(int(n_bootstrap), -1)[:, :n]
+    n = e.size
+    idx = moving_block_indices(n, int(block_length), int(n_bootstrap), rng)
     point, boot = _accuracy_stats(e), _accuracy_stats(e[idx], axis=-1)
     tail = 50.0 * (1.0 - level)
     out = {"n": int(n), "coverage": float(np.mean(np.isfinite(e)))}

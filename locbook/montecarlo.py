@@ -25,7 +25,8 @@ from ._validate import check_scalar
 from .errors import ParameterError
 
 __all__ = ["spawn_generators", "streams", "mc_standard_error", "bootstrap_standard_error", "jackknife_standard_error",
-           "replicate_standard_error", "single_run_interval", "seed_from_values", "canonical_encoding"]
+           "replicate_standard_error", "single_run_interval", "seed_from_values", "canonical_encoding",
+           "moving_block_indices"]
 
 
 def spawn_generators(seed: int | np.random.SeedSequence, n: int) -> list[np.random.Generator]:
@@ -64,6 +65,23 @@ def bootstrap_standard_error(samples, statistic, rng: np.random.Generator, n_res
         raise ValueError("a standard error needs at least two Monte-Carlo samples")
     resamples = x[rng.integers(0, x.size, size=(n_resamples, x.size))]
     return float(np.std(statistic(resamples, axis=-1), ddof=1))
+
+
+def moving_block_indices(n: int, block_length: int, n_resamples: int, rng: np.random.Generator) -> np.ndarray:
+    """Index arrays ``(n_resamples, n)`` of the moving-block bootstrap (Kuensch 1989): each resample joins
+    ``ceil(n / L)`` blocks of ``L = min(block_length, n)`` consecutive indices, each block starting uniformly in
+    ``[0, n - L]``, cut to ``n``. ``block_length = 1`` is the ordinary bootstrap. For series whose neighbours are
+    correlated (a track's errors, calibration points recorded along a path), whose ordinary bootstrap understates
+    the spread of a statistic."""
+    check_scalar("n", n, ge=1, integer=True)
+    check_scalar("block_length", block_length, ge=1, integer=True)
+    check_scalar("n_resamples", n_resamples, ge=1, integer=True)
+    if not isinstance(rng, np.random.Generator):
+        raise ParameterError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
+    length = min(int(block_length), int(n))
+    n_blocks = -(-int(n) // length)
+    starts = rng.integers(0, int(n) - length + 1, size=(int(n_resamples), n_blocks))
+    return (starts[..., None] + np.arange(length)).reshape(int(n_resamples), -1)[:, :int(n)]
 
 
 def jackknife_standard_error(statistic, *per_run) -> float:

@@ -65,14 +65,14 @@ def test_per_reader_sigma_likelihood_matches_scipy():
         lb.RssModel(readers, lb.PathLossModel(-40.0, 2.0, np.array([3.0, 4.0])))
 
 
-@pytest.mark.parametrize("key", [k for k in bm.STATIC_SCENARIOS if not k.startswith("kolakowski")])
+@pytest.mark.parametrize("key", list(bm.STATIC_SCENARIOS))
 def test_static_bound_is_the_closed_form_crlb(key):
     sc = bm.static_scenario(key)
     want = lb.rss_crlb_m(sc.points_m, sc.anchors_m, sc.channel.path_loss_exp, sc.channel.sigma_db)
     np.testing.assert_allclose(bm.static_bound_m(sc), want, rtol=1e-10)
 
 
-@pytest.mark.parametrize("key", [k for k in bm.STATIC_SCENARIOS if not k.startswith("kolakowski")])
+@pytest.mark.parametrize("key", list(bm.STATIC_SCENARIOS))
 def test_noise_free_readings_give_the_truth(key):
     sc = bm.static_scenario(key)
     ch = sc.channel
@@ -125,9 +125,9 @@ def _covariance_form_bound(sc, ts):
     return np.array(out)
 
 
-@pytest.mark.parametrize("key", ["dogan2015-walk", "kolakowski2021-drive"])
+@pytest.mark.parametrize("key", ["dogan2015-walk", "data-kolakowski2021"])
 def test_tracking_bound_is_the_kalman_covariance_linearised_at_the_truth(key):
-    sc = bm.tracking_scenario(key)
+    sc = (bm.measured_tracking_scenario("kolakowski2021") if key.startswith("data-") else bm.tracking_scenario(key))
     ts = bm.TrackerSettings(q=0.05)
     np.testing.assert_allclose(bm.tracking_bound_m(sc, ts), _covariance_form_bound(sc, ts), rtol=1e-8)
 

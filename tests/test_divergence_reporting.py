@@ -19,7 +19,7 @@ from locbook import benchmark as bm
 from locbook.scenarios import dogan as dg
 from locbook.scenarios import george
 from locbook.scenarios import gudipati as gu
-from locbook.scenarios import kolakowski as ko
+from locbook.scenarios import measured as ko
 from locbook.scenarios import palvai as pv
 from locbook.tracking.results import DIVERGENCE_PROBABILITY, DIVERGENCE_WINDOW
 
@@ -204,8 +204,8 @@ def test_benchmark_trackers_return_flags_of_the_kalman_trackers():
     assert set(cell_flags) == set(kalman) and all(f.n_runs == 4 for f in cell_flags.values())
 
 
-def test_kolakowski_tracks_return_flags_of_the_kalman_trackers():
-    data = ko.load()
+def test_measured_tracks_return_flags_of_the_kalman_trackers():
+    data = ko.load("kolakowski2021")
     model = ko.channel(ko.calibrate(data))
     kw = dict(q=0.05, fix_cov_m2=ko.fix_covariance_from_calibration(data, model), spread_m=0.3, n_particles=20,
               particle_runs=1)

@@ -540,12 +540,13 @@ def test_nearly_collinear_heard_anchors_fail_their_problem_alone():
 def _scenario_layouts() -> dict:
     """Every anchor layout of the scenarios and the shipped data, as plan positions ``(m, 2)`` (the estimators judge
     the geometry of anchors with heights on their plan positions)."""
-    from locbook.data.measured import measured_data_dir, read_anchors
+    from locbook.data.dataset import datasets_dir
+    from locbook.data.measured import read_anchors
     from locbook import benchmark
     from locbook.scenarios import dogan, george, gudipati, ozkaya
     layouts = {"george": george.ANCHORS_M, "dogan": dogan.ANCHORS_M,
                "ozkaya testbed": np.array(ozkaya.TESTBED_READERS_M, float),
-               "kolakowski2021 shipped anchors": read_anchors(measured_data_dir("kolakowski2021") / "anchors.csv")[
+               "kolakowski2021 shipped anchors": read_anchors(datasets_dir() / "kolakowski2021" / "anchors.csv")[
                    ["x", "y"]].to_numpy(float)}
     layouts |= {f"ozkaya {name}": np.array(readers, float) for name, readers in ozkaya.LAYOUTS.items()}
     layouts |= {f"gudipati {n}": gudipati.anchors_m(ids) for n, ids in gudipati.ANCHOR_SETS.items()}

@@ -1,14 +1,11 @@
 """The long format of measured data: every rule refuses a malformed file with a message naming file, line and
-column (one test per rule), and the Kolakowski (2021) adapter keeps every empty cell as NaN (not heard)."""
-import csv
-import re
+column (one test per rule). Data sets and their manifests: tests/test_datasets.py."""
 
 import numpy as np
-import pandas as pd
 import pytest
 
-from locbook.data.measured import (DataFormatError, MeasuredData, epochs, kolakowski2021, measured_data_dir,
-                                   read_anchors, read_outline, read_path_segments, read_readings, regular_epochs)
+from locbook.data.measured import (DataFormatError, epochs, read_anchors, read_outline, read_path_segments,
+                                   read_readings, regular_epochs)
 
 GOOD = """time_s,transmitter,receiver,rssi_dbm,x_m,y_m
 0.0,tag,A,-60.5,1.0,2.0
@@ -139,63 +136,3 @@ def test_regular_epochs_inserts_silent_ticks(tmp_path):
     assert np.isnan(reg.rss_dbm[2]).all() and np.isnan(reg.position_m[2]).all()
     with pytest.raises(ValueError, match="0.1 s off the 0.4 s clock"):
         regular_epochs(epochs(table, ["A", "B"]), 0.4, tolerance_s=0.05)
-
-
-# -- the Kolakowski (2021) adapter ---------------------------------------------------------------------------
-def _source_cells(name):
-    """The source file read with the csv module (independent of the adapter): RSSI cells per row, as text."""
-    with open(measured_data_dir("kolakowski2021") / name, newline="") as fh:
-        reader = csv.DictReader(fh)
-        return [[row[f"rssi_{a}"] for a in range(1, 7)] for row in reader]
-
-
-@pytest.fixture(scope="module")
-def kolakowski():
-    return kolakowski2021()
-
-
-@pytest.mark.parametrize("recording,name", [("calibration", "calibration_df.csv"), ("robot", "test_robot_df.csv"),
-                                            ("walk", "test_walk_df.csv")])
-def test_kolakowski_empty_cells_are_not_heard(kolakowski, recording, name):
-    cells = _source_cells(name)
-    ep = kolakowski.epochs(recording)
-    assert ep.rss_dbm.shape == (len(cells), 6)
-    empty = np.array([[c.strip() == "" for c in row] for row in cells])
-    np.testing.assert_array_equal(np.isnan(ep.rss_dbm), empty)
-    heard = np.array([[float(c) if c.strip() else np.nan for c in row] for row in cells])
-    np.testing.assert_array_equal(ep.rss_dbm, heard)
-
-
-def test_kolakowski_facts(kolakowski):
-    cal, robot, walk = (kolakowski.epochs(k) for k in ("calibration", "robot", "walk"))
-    assert (len(cal), len(robot), len(walk)) == (4104, 719, 876)       # the data set's README
-    assert np.isclose(robot.time_s[-1] - robot.time_s[0], 352.0, atol=0.5)
-    assert np.all(robot.position_m[:, 2] == 1.3) and np.isnan(walk.position_m).all()
-    assert kolakowski.anchors_m.shape == (6, 3) and kolakowski.outline_m.shape[1] == 2
-    assert "CC BY 4.0" in kolakowski.attribution and "10.3390/s21186270" in kolakowski.attribution
-
-
-def test_kolakowski_round_trip_through_the_long_format(kolakowski, tmp_path):
-    """Written out in the long format and read back by the generic reader, the robot drive is unchanged."""
-    path = tmp_path / "robot_long.csv"
-    kolakowski.recordings["robot"].to_csv(path, index=False, float_format="%.17g")
-    anchors = tmp_path / "anchors.csv"
-    kolakowski.anchors.to_csv(anchors, index=False)
-    again = MeasuredData.from_files("copy", anchors, {"robot": path}, attribution=kolakowski.attribution)
-    a, b = kolakowski.epochs("robot"), again.epochs("robot")
-    np.testing.assert_array_equal(a.rss_dbm, b.rss_dbm)
-    np.testing.assert_array_equal(a.position_m, b.position_m)
-
-
-def test_kolakowski_malformed_wide_cell_names_the_source_column(tmp_path):
-    src = measured_data_dir("kolakowski2021")
-    for name in ("anchors.csv", "layout.csv", "path_reference.csv", "test_robot_df.csv", "test_walk_df.csv"):
-        (tmp_path / name).write_bytes((src / name).read_bytes())
-    lines = (src / "calibration_df.csv").read_text().splitlines()
-    fields = lines[9].split(",")
-    fields[7] = "-5x"                                 # rssi_3 of the 9th data row (line 10)
-    lines[9] = ",".join(fields)
-    (tmp_path / "calibration_df.csv").write_text("\n".join(lines) + "\n")
-    with pytest.raises(DataFormatError) as info:
-        kolakowski2021(tmp_path)
-    assert re.search(r"calibration_df\.csv, line 10, column 'rssi_3': '-5x' is not a finite number", str(info.value))

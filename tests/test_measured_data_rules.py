@@ -8,7 +8,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from locbook.data.measured import (DataFormatError, Epochs, MeasuredData, MeasuredDataWarning, epochs, read_anchors,
+from locbook.data.dataset import load_dataset
+from locbook.data.measured import (DataFormatError, Epochs, MeasuredDataWarning, epochs, read_anchors,
                                    read_readings, regular_epochs)
 from locbook.errors import ParameterError
 
@@ -193,10 +194,16 @@ def test_bad_options_are_refused(tmp_path):
         read_readings(path, invalid_values_dbm=(np.nan,))
 
 
-def test_from_files_passes_the_reading_options(tmp_path):
-    anchors = write(tmp_path, "id,x,y,z\nA1,0,0,2\nA2,5,0,2\nA3,0,5,2\n", "anchors.csv")
-    data = MeasuredData.from_files("s", anchors, {"r": write(tmp_path, SENTINELS)}, attribution="test",
-                                   invalid_values_dbm=(0, 2, 4))
+def test_a_manifest_passes_the_reading_options(tmp_path):
+    write(tmp_path, "id,x,y,z\nA1,0,0,2\nA2,5,0,2\nA3,0,5,2\n", "anchors.csv")
+    write(tmp_path, SENTINELS, "track.csv")
+    write(tmp_path, "time_s,transmitter,receiver,rssi_dbm,x_m,y_m\n0,t,A1,-50,1,1\n", "cal.csv")
+    write(tmp_path, """name = "s"\ntitle = "t"\nlicense = "CC0"\nattribution = "test"\ntag_height_m = 1.0
+[readings]\ninvalid_values_dbm = [0, 2, 4]\n[geometry]\nanchors = "anchors.csv"\ntag_height_m = 1.0
+[epochs]\nwindow_s = 0.5\n[[recording]]\nname = "cal"\nfile = "cal.csv"\nrole = "calibration"
+[[recording]]\nname = "r"\nfile = "track.csv"\nrole = "track"\n""".replace('tag_height_m = 1.0\n[readings]', '[readings]'),
+          "dataset.toml")
+    data = load_dataset(tmp_path)
     assert np.isnan(data.epochs("r").rss_dbm).sum() == 6 - 2
 
 

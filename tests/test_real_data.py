@@ -1,15 +1,15 @@
-"""Measured data end to end: the NaN rules hold on the real Kolakowski (2021) readings, the floor geometry and
+"""Measured data end to end: the NaN rules hold on the real Kolakowski (2021) readings (the shipped data set), the floor geometry and
 the accuracy table agree with independent computations."""
 import numpy as np
 import pytest
 
 import locbook as lb
-from locbook.scenarios import kolakowski as ko
+from locbook.scenarios import measured as ko
 
 
 @pytest.fixture(scope="module")
 def real():
-    data = ko.load()
+    data = ko.load("kolakowski2021")
     model = ko.channel(ko.calibrate(data))
     return data, model
 
@@ -20,7 +20,7 @@ def test_static_methods_use_the_heard_anchors_of_each_real_epoch(real):
     heard = (~np.isnan(rss)).sum(axis=1)
     pick = np.r_[np.flatnonzero(heard == 6)[:20], np.flatnonzero(heard == 4)[:20], np.flatnonzero(heard == 2)[:5]]
     grid = lb.grid_in_outline(data.outline_m, 0.25)
-    res = lb.grid_ml_position(data.anchors_m, rss[pick], model, grid, tag_height_m=ko.TAG_HEIGHT_M)
+    res = lb.grid_ml_position(data.anchors_m, rss[pick], model, grid, tag_height_m=data.tag_height_m)
     assert np.isnan(res.position_m[heard[pick] < 3]).all()
     assert set(res.status[heard[pick] < 3]) == {"too_few_anchors"}
     assert np.isfinite(res.position_m[heard[pick] >= 3]).all()
@@ -30,7 +30,7 @@ def test_static_methods_use_the_heard_anchors_of_each_real_epoch(real):
         keep = ~np.isnan(row)
         sub = lb.PathLossModel(model.ref_power_dbm[keep], model.path_loss_exp[keep], model.sigma_db[keep],
                                min_distance_m=model.min_distance_m)
-        alone = lb.grid_ml_position(data.anchors_m[keep], row[keep], sub, grid, tag_height_m=ko.TAG_HEIGHT_M)
+        alone = lb.grid_ml_position(data.anchors_m[keep], row[keep], sub, grid, tag_height_m=data.tag_height_m)
         np.testing.assert_array_equal(res.position_m[k], alone.position_m)
     knn = lb.knn_position(rss[pick], ko.radio_map(data, model)[1], ko.radio_map(data, model)[0], 5)
     assert np.isnan(knn[heard[pick] < 3]).all() and np.isfinite(knn[heard[pick] >= 3]).all()
@@ -38,17 +38,18 @@ def test_static_methods_use_the_heard_anchors_of_each_real_epoch(real):
 
 def test_filters_predict_through_the_real_gaps(real):
     data, model = real
-    reg, ticks = lb.regular_epochs(data.epochs("robot"), ko.EPOCH_S, tolerance_s=0.1 * ko.EPOCH_S)
+    dt = ko.epoch_s(data, "robot")
+    reg, ticks = lb.regular_epochs(data.epochs("robot"), dt, tolerance_s=0.1 * dt)
     silent = np.isnan(reg.rss_dbm).all(axis=1)
     assert silent.sum() == len(reg.time_s) - len(ticks) > 300            # the drive's pauses: 338 empty ticks
-    motion = lb.constant_velocity(ko.EPOCH_S, 0.05)
-    stream = lb.RssMeasurement(reg.rss_dbm, data.anchors_m, model, np.array([0, 1]), tag_height_m=ko.TAG_HEIGHT_M)
+    motion = lb.constant_velocity(dt, 0.05)
+    stream = lb.RssMeasurement(reg.rss_dbm, data.anchors_m, model, np.array([0, 1]), tag_height_m=data.tag_height_m)
     res = lb.extended_kalman_filter(motion.F, motion.Q, np.r_[4.0, 3.0, 0, 0], np.diag([4.0, 4, 1, 1]), [stream])
     assert np.isfinite(res.x).all()
     # through a silent stretch the filter only predicts: position variance grows, the velocity is carried
     run = np.flatnonzero(silent[1:] & silent[:-1])[0] + 1
     assert res.P[run, 0, 0] > res.P[run - 1, 0, 0]
-    np.testing.assert_allclose(res.x[run, :2], res.x[run - 1, :2] + ko.EPOCH_S * res.x[run - 1, 2:], rtol=1e-12)
+    np.testing.assert_allclose(res.x[run, :2], res.x[run - 1, :2] + dt * res.x[run - 1, 2:], rtol=1e-12)
 
 
 def _ray_casting(point, polygon):
@@ -115,8 +116,8 @@ def test_block_bootstrap_widens_the_interval_of_correlated_errors():
 def test_a_calibration_that_cannot_fit_an_anchor_names_it(monkeypatch):
     """An anchor that heard nothing on the calibration points is named with its status, not blamed on the solver."""
     from locbook.errors import ConvergenceError
-    from locbook.scenarios import kolakowski as k
-    data = lb.kolakowski2021()
+    from locbook.scenarios import measured as k
+    data = k.load("kolakowski2021")
     xy, distance, rss = k.calibration_set(data)
     rss = rss.copy()
     rss[:, 2] = np.nan

@@ -17,8 +17,8 @@ column         required meaning
 ``heading_rad``no       true heading of the transmitter (rad), where known
 ============== ======== ========================================================================================
 
-Other columns are kept and ignored. Every row has exactly the header's number of fields: an empty value is an
-empty field (``0.5,tag,A,`` = not heard), while a row with a field missing (``0.5,tag,A``) or one too many is
+Other columns are kept (an epoch keeps those with one value within it, e.g. a point id). Every row has exactly
+the header's number of fields: an empty value is an empty field (``0.5,tag,A,`` = not heard), while a row with a field missing (``0.5,tag,A``) or one too many is
 refused. In the number columns an empty field, ``NaN``, ``NA`` or ``N/A`` is missing; ids are text, so ``NA`` is
 an id and only an empty field is no id. ``time_s`` is in seconds: a magnitude of :data:`MAX_TIME_S` (1e11 s) or
 more is milli-, micro- or nanoseconds since 1970 and is refused (as 64-bit floats such values also lose the
@@ -39,14 +39,14 @@ closing vertex may repeat the first).
 
 Every rule failure raises :class:`DataFormatError` naming the file, the line (as a text editor counts it, the
 header being line 1, blank lines included) and the column (or the byte, for a file that is not UTF-8).
-:func:`epochs` turns a validated recording into the arrays the estimators take: one row per (time, transmitter)
-epoch, one column per anchor, NaN where the anchor heard nothing (the library's one rule for missing readings,
-README). :func:`regular_epochs` puts one transmitter on a fixed clock, refusing a clock jump that would need
-more than ``max_epochs`` ticks.
+:func:`epochs` turns a validated recording into the arrays the estimators take: one row per epoch (a distinct
+(time, transmitter), or a window of raw packets), one column per anchor, NaN where the anchor heard nothing (the
+library's one rule for missing readings, README). :func:`regular_epochs` puts one transmitter on a fixed clock,
+refusing a clock jump that would need more than ``max_epochs`` ticks.
 
-Adapter: :func:`kolakowski2021` reads the BLE data set of Kolakowski (2021) shipped in
-``locbook/data/measured/kolakowski2021`` (CC BY 4.0; attribution in :data:`KOLAKOWSKI2021_ATTRIBUTION` and that
-folder's README.md and LICENSE.md) into this format.
+A data set (:mod:`locbook.data.dataset`) is a folder of such files with a manifest (``dataset.toml``) that says
+their units, sentinels, epoch rule, tag height, outline and roles; :func:`locbook.data.dataset.load_dataset` reads
+one, and the data sets shipped with locbook (``locbook/data/datasets/``) are read the same way.
 """
 from __future__ import annotations
 
@@ -66,10 +66,9 @@ from ..errors import LocbookError, ParameterError
 
 __all__ = [
     "DataFormatError", "MeasuredDataWarning", "READING_COLUMNS", "OPTIONAL_READING_COLUMNS", "RSSI_RANGE_DBM",
-    "MAX_TIME_S", "ANCHOR_MIN_SEPARATION_M", "MAX_REGULAR_EPOCHS", "MeasuredData", "Epochs",
+    "MAX_TIME_S", "ANCHOR_MIN_SEPARATION_M", "MAX_REGULAR_EPOCHS", "AGGREGATES", "Epochs",
     "read_readings", "read_anchors", "read_outline", "read_path_segments", "validate_readings", "epochs",
-    "regular_epochs", "kolakowski2021", "KOLAKOWSKI2021_ATTRIBUTION", "KOLAKOWSKI2021_TAG_HEIGHT_M",
-    "measured_data_dir",
+    "regular_epochs",
 ]
 
 READING_COLUMNS = ("time_s", "transmitter", "receiver", "rssi_dbm")
@@ -84,31 +83,12 @@ ANCHOR_MIN_SEPARATION_M = 1e-3
 MAX_REGULAR_EPOCHS = 1_000_000
 _MISSING_TEXT = {"", "nan", "NaN", "NAN", "NA", "N/A"}
 
-KOLAKOWSKI2021_ATTRIBUTION = (
-    "Measured data: M. Kolakowski, \"Automated Calibration of RSS Fingerprinting Based Systems Using a Mobile Robot "
-    "and Machine Learning\", Sensors 21, 6270 (2021), doi:10.3390/s21186270; data set \"BLE RSS dataset for "
-    "fingerprinting radio map calibration\" (github.com/marckolak/ble-rss-fingerprints-calib2021, commit 0a69aaa, "
-    "Zenodo doi:10.5281/zenodo.5457591), licensed CC BY 4.0 (creativecommons.org/licenses/by/4.0). Files used "
-    "unchanged; locbook converts them to its long format in memory.")
-#: The tag's height in the data set's README ("about 1.3 m above the floor"); the data carry no per-sample height.
-KOLAKOWSKI2021_TAG_HEIGHT_M = 1.3
-
-
 class DataFormatError(LocbookError, ValueError):
     """A measured-data file that breaks a rule of the long format; the message names file, line and column."""
 
 
 class MeasuredDataWarning(UserWarning):
     """Measured data that loads but looks wrong (e.g. readings at or above 0 dBm with no sentinel declared)."""
-
-
-def measured_data_dir(name: str) -> Path:
-    """The folder of a data set shipped with locbook (``locbook/data/measured/<name>``)."""
-    path = Path(__file__).with_name("measured") / name
-    if not path.is_dir():
-        shipped = sorted(p.name for p in Path(__file__).with_name("measured").iterdir() if p.is_dir())
-        raise ValueError(f"no measured data set {name!r} is shipped with locbook; shipped: {shipped}")
-    return path
 
 
 # -- reading and checking CSV text ---------------------------------------------------------------------------
@@ -439,11 +419,18 @@ def read_path_segments(path) -> np.ndarray:
 
 
 # -- from readings to estimator inputs ---------------------------------------------------------------------
+#: how the readings of one anchor within one epoch window become the epoch's reading
+AGGREGATES = ("mean", "median", "max")
+
+
 @dataclass(frozen=True)
 class Epochs:
     """One recording as the estimators take it: ``rss_dbm (T, m)`` per epoch and anchor (NaN = not heard),
     ``time_s (T,)``, the true position ``position_m (T, 3)`` and heading ``heading_rad (T,)`` (NaN where unknown),
-    the ``transmitter`` of each epoch and the anchor ids of the columns."""
+    the ``transmitter`` of each epoch and the anchor ids of the columns. ``n_readings (T, m)``: how many readings
+    made each entry (0 where not heard). ``extra``: the readings file's other columns (a point id, a label) that
+    hold one value within every epoch, one value per epoch (a column that varies within an epoch is not kept:
+    name it in ``group_by`` to split epochs by it)."""
 
     time_s: np.ndarray
     rss_dbm: np.ndarray
@@ -451,6 +438,8 @@ class Epochs:
     heading_rad: np.ndarray
     transmitter: np.ndarray
     anchor_ids: tuple[str, ...]
+    n_readings: np.ndarray | None = None
+    extra: dict = field(default_factory=dict)
 
     def __len__(self) -> int:
         return self.time_s.shape[0]
@@ -458,41 +447,128 @@ class Epochs:
     def select(self, mask) -> "Epochs":
         """The epochs where ``mask`` holds (or at the given indices)."""
         return Epochs(self.time_s[mask], self.rss_dbm[mask], self.position_m[mask], self.heading_rad[mask],
-                      self.transmitter[mask], self.anchor_ids)
+                      self.transmitter[mask], self.anchor_ids,
+                      None if self.n_readings is None else self.n_readings[mask],
+                      {k: v[mask] for k, v in self.extra.items()})
 
 
-def epochs(readings: pd.DataFrame, anchor_ids) -> Epochs:
-    """Pivot validated readings to one row per (time, transmitter) epoch and one column per anchor of
-    ``anchor_ids`` (in that order). A receiver with no row in an epoch, or an empty reading, is NaN (not heard).
-    The true position of an epoch must be the same on all of its rows (else :class:`DataFormatError`)."""
+def _check_epoch_rule(window_s, aggregate: str, min_readings: int, group_by, readings: pd.DataFrame):
+    if window_s is not None and not (isinstance(window_s, (int, float)) and not isinstance(window_s, bool)
+                                     and math.isfinite(window_s) and window_s >= 0):
+        raise ParameterError(f"window_s must be None or a finite number of seconds >= 0, got {window_s!r}")
+    if aggregate not in AGGREGATES:
+        raise ParameterError(f"aggregate must be one of {AGGREGATES}, got {aggregate!r}")
+    if not (isinstance(min_readings, (int, np.integer)) and not isinstance(min_readings, bool) and min_readings >= 1):
+        raise ParameterError(f"min_readings must be an integer >= 1, got {min_readings!r}")
+    group_by = (group_by,) if isinstance(group_by, str) else tuple(group_by)
+    reserved = set(READING_COLUMNS) | set(OPTIONAL_READING_COLUMNS)
+    for col in group_by:
+        if col in reserved:
+            raise ParameterError(f"group_by names extra columns of the readings (e.g. a point id), not {col!r}")
+        if col not in readings.columns:
+            raise ParameterError(f"group_by column {col!r} is not a column of the readings "
+                                 f"(extra columns: {[c for c in readings.columns if c not in reserved]})")
+    return group_by
+
+
+def epochs(readings: pd.DataFrame, anchor_ids, *, window_s: float | None = None, aggregate: str = "mean",
+           min_readings: int = 1, group_by=()) -> Epochs:
+    """Readings (validated, long format) -> one row per epoch and one column per anchor of ``anchor_ids`` (in
+    that order), NaN where the anchor heard nothing (the library's one rule for missing readings). Epochs are in
+    time order (ties: the transmitter's first appearance).
+
+    ``window_s=None`` (or 0): the rows already are epochs: every distinct (time, transmitter) is one epoch, and
+    its true position must be the same on all of its rows (else :class:`DataFormatError`).
+
+    ``window_s > 0``: raw packets -> epochs. A transmitter's readings go to the window of the nearest tick of a
+    clock of period ``window_s`` started at that transmitter's first reading (tick ``k`` holds ``t0 + k w`` +- ``w
+    / 2``, so rows already on such a clock keep one epoch each), and the readings of one anchor in one window are
+    combined by ``aggregate`` (``"mean"``, ``"median"`` or ``"max"`` of the dBm values); an anchor with fewer than
+    ``min_readings`` readings in the window is NaN (not heard). The epoch's time is its tick; its true position is
+    the mean of its rows' positions (a moving tag: the window's mean), its heading their circular mean.
+
+    ``group_by``: extra columns (a point id) whose values never share an epoch: epochs are split by them, so a
+    window never mixes two static points. Extra columns that hold one value within every epoch are kept in
+    :attr:`Epochs.extra`."""
     anchor_ids = tuple(str(a) for a in anchor_ids)
+    group_by = _check_epoch_rule(window_s, aggregate, min_readings, group_by, readings)
     col = {a: j for j, a in enumerate(anchor_ids)}
-    keys = readings[["time_s", "transmitter"]]
-    codes, uniques = pd.MultiIndex.from_frame(keys).factorize()
-    order = np.lexsort((np.arange(len(uniques)), uniques.get_level_values(0).to_numpy()))
-    rank = np.empty_like(order)
-    rank[order] = np.arange(order.size)
-    row = rank[codes]
-    n = len(uniques)
     receivers = readings["receiver"].map(col)
     if receivers.isna().any():
         bad = readings["receiver"][receivers.isna()].iloc[0]
         raise DataFormatError(f"receiver {bad!r} is not one of the anchor ids {list(anchor_ids)}")
-    rss = np.full((n, len(anchor_ids)), np.nan)
-    rss[row, receivers.to_numpy(int)] = readings["rssi_dbm"].to_numpy(float)
+    receivers = receivers.to_numpy(int)
+    time_s = readings["time_s"].to_numpy(float)
+    tx_codes, tx_names = pd.factorize(readings["transmitter"])
+    windowed = bool(window_s)
+    if windowed:
+        first = pd.Series(time_s).groupby(tx_codes).transform("min").to_numpy()
+        tick = np.rint((time_s - first) / window_s)
+        epoch_time = first + tick * window_s
+    else:
+        epoch_time = time_s
+    keys = [pd.Series(epoch_time), pd.Series(tx_codes)] + [readings[c].reset_index(drop=True).astype(str)
+                                                             for c in group_by]
+    row, uniques = pd.MultiIndex.from_arrays(keys).factorize()
+    n, m = len(uniques), len(anchor_ids)
+    # epochs in time order, ties by the transmitter's first appearance, then by first appearance of the group
+    utime = uniques.get_level_values(0).to_numpy(float)
+    utx = uniques.get_level_values(1).to_numpy(int)
+    order = np.lexsort((np.arange(n), utx, utime))
+    rank = np.empty_like(order)
+    rank[order] = np.arange(n)
+    row = rank[row]
+    rss_in = readings["rssi_dbm"].to_numpy(float)
+    heard = np.isfinite(rss_in)
+    flat = row * m + receivers
+    counts = np.bincount(flat[heard], minlength=n * m).reshape(n, m)
+    rss = np.full(n * m, np.nan)
+    if windowed:
+        grouped = pd.Series(rss_in[heard]).groupby(flat[heard])
+        agg = getattr(grouped, aggregate)()
+        rss[agg.index.to_numpy()] = agg.to_numpy()
+        rss = rss.reshape(n, m)
+        rss[counts < min_readings] = np.nan
+    else:
+        rss[flat] = rss_in
+        rss = rss.reshape(n, m)
     truth = readings[["x_m", "y_m", "z_m", "heading_rad"]].to_numpy(float)
-    per_epoch = np.full((n, 4), np.nan)
-    per_epoch[row] = truth
-    again = np.full((n, 4), np.nan)
-    again[row[::-1]] = truth[::-1]             # the first row of each epoch, to compare with the last
-    differ = ~((per_epoch == again) | (np.isnan(per_epoch) & np.isnan(again)))
-    if differ.any():
-        e = int(np.flatnonzero(differ.any(axis=1))[0])
-        raise DataFormatError(f"epoch at {_seconds(uniques[order[e]][0])} of transmitter {uniques[order[e]][1]!r} has "
-                              "different true positions or headings on its rows")
-    time_s = uniques.get_level_values(0).to_numpy(float)[order]
-    tx = uniques.get_level_values(1).to_numpy(object)[order]
-    return Epochs(time_s, rss, per_epoch[:, :3], per_epoch[:, 3], tx, anchor_ids)
+    if windowed:
+        frame = pd.DataFrame({"x": truth[:, 0], "y": truth[:, 1], "z": truth[:, 2],
+                              "c": np.cos(truth[:, 3]), "s": np.sin(truth[:, 3])})
+        frame["h"] = truth[:, 3]
+        grouped = frame.groupby(row)
+        mean, low, high = grouped.mean(), grouped.min(), grouped.max()   # NaN left out
+        at = mean.index.to_numpy()
+        position = np.full((n, 3), np.nan)
+        heading = np.full(n, np.nan)
+        # a value constant within the epoch (a static tag, rows already epochs) is kept exactly, not averaged
+        position[at] = np.where(low[["x", "y", "z"]] == high[["x", "y", "z"]], low[["x", "y", "z"]],
+                                mean[["x", "y", "z"]])
+        heading[at] = np.where(low["h"] == high["h"], low["h"],
+                               np.arctan2(mean["s"].to_numpy(), mean["c"].to_numpy()))
+    else:
+        per_epoch = np.full((n, 4), np.nan)
+        per_epoch[row] = truth
+        again = np.full((n, 4), np.nan)
+        again[row[::-1]] = truth[::-1]             # the first row of each epoch, to compare with the last
+        differ = ~((per_epoch == again) | (np.isnan(per_epoch) & np.isnan(again)))
+        if differ.any():
+            e = int(np.flatnonzero(differ.any(axis=1))[0])
+            raise DataFormatError(f"epoch at {_seconds(utime[order[e]])} of transmitter {tx_names[utx[order[e]]]!r} "
+                                  "has different true positions or headings on its rows")
+        position, heading = per_epoch[:, :3], per_epoch[:, 3]
+    extra = {}
+    reserved = set(READING_COLUMNS) | set(OPTIONAL_READING_COLUMNS)
+    for name in [c for c in readings.columns if c not in reserved]:
+        values = readings[name].reset_index(drop=True)
+        if name not in group_by and (values.groupby(row).nunique(dropna=False) > 1).any():
+            continue                                   # varies within an epoch: not an epoch's property
+        kept = np.empty(n, dtype=object)
+        kept[row[::-1]] = values.to_numpy(object)[::-1]
+        extra[name] = kept
+    tx = np.asarray(tx_names, dtype=object)[utx[order]]
+    return Epochs(utime[order], rss, position, heading, tx, anchor_ids, counts, extra)
 
 
 def _count(value: float) -> str:
@@ -561,103 +637,14 @@ def regular_epochs(ep: Epochs, dt_s: float, *, tolerance_s: float | None = None,
         return out
 
     tx = np.full(n, ep.transmitter[0], dtype=object)
+    counts = None
+    if ep.n_readings is not None:
+        counts = np.zeros((n, m), dtype=ep.n_readings.dtype)
+        counts[tick] = ep.n_readings
+    extra = {}
+    for name, values in ep.extra.items():
+        extra[name] = np.full(n, None, dtype=object)
+        extra[name][tick] = values
     reg = Epochs(t0 + np.arange(n) * dt_s, spread(ep.rss_dbm, (n, m)), spread(ep.position_m, (n, 3)),
-                 spread(ep.heading_rad, (n,)), tx, ep.anchor_ids)
+                 spread(ep.heading_rad, (n,)), tx, ep.anchor_ids, counts, extra)
     return reg, tick
-
-
-# -- data sets ------------------------------------------------------------------------------------------------
-@dataclass(frozen=True)
-class MeasuredData:
-    """A measured data set in locbook's format: ``anchors`` (id, x, y, z), ``recordings`` by name (long-format
-    readings), an optional floor ``outline_m (V, 2)`` and reference ``path_m (S, 2, 2)``, and its attribution
-    (to be shown wherever its numbers are)."""
-
-    name: str
-    anchors: pd.DataFrame
-    recordings: dict[str, pd.DataFrame]
-    attribution: str
-    outline_m: np.ndarray | None = None
-    path_m: np.ndarray | None = None
-    notes: dict[str, str] = field(default_factory=dict)
-
-    @property
-    def anchor_ids(self) -> tuple[str, ...]:
-        return tuple(self.anchors["id"])
-
-    @property
-    def anchors_m(self) -> np.ndarray:
-        """Anchor positions ``(m, 3)`` in the order of :attr:`anchor_ids`."""
-        return self.anchors[["x", "y", "z"]].to_numpy(float)
-
-    def epochs(self, recording: str) -> Epochs:
-        if recording not in self.recordings:
-            raise ValueError(f"{self.name} has no recording {recording!r}; it has {sorted(self.recordings)}")
-        return epochs(self.recordings[recording], self.anchor_ids)
-
-    @classmethod
-    def from_files(cls, name: str, anchors, recordings: dict, *, attribution: str, outline=None, path=None,
-                   invalid_values_dbm=None, valid_range_dbm=None, sort: bool = False):
-        """A data set from files of the long format: ``recordings`` maps names to readings CSVs, read with the
-        options of :func:`validate_readings` (sentinel values, plausible range, sorting by time)."""
-        anchor_table = read_anchors(anchors)
-        recs = {k: read_readings(p, anchor_ids=anchor_table["id"], invalid_values_dbm=invalid_values_dbm,
-                                 valid_range_dbm=valid_range_dbm, sort=sort) for k, p in recordings.items()}
-        return cls(name, anchor_table, recs, attribution, None if outline is None else read_outline(outline),
-                   None if path is None else read_path_segments(path))
-
-
-def _kolakowski_wide(path: Path, anchor_ids, *, tag_height_m: float, with_truth: bool) -> pd.DataFrame:
-    """One Kolakowski (2021) wide file (``ts`` ns, ``x``, ``heading``, ``y``, ``rssi_<id>``) in the long format,
-    checked by the long format's rules with messages pointing at the wide file's lines and columns."""
-    rssi_cols = [f"rssi_{a}" for a in anchor_ids]
-    required = ("ts",) + (("x", "y", "heading") if with_truth else ()) + tuple(rssi_cols)
-    table, lines = _read_text_table(path, required, "Kolakowski 2021")
-    source = f"Kolakowski 2021 file {path}"
-    ts_ns = _numeric(table, "ts", source, lines, missing_ok=False)
-    n, m = len(table), len(anchor_ids)
-    rssi = np.column_stack([_numeric(table, c, source, lines, missing_ok=True) for c in rssi_cols])
-    low, high = RSSI_RANGE_DBM
-    outside = np.isfinite(rssi) & ((rssi < low) | (rssi > high))
-    if outside.any():
-        i, j = (int(v) for v in np.argwhere(outside)[0])
-        raise DataFormatError(f"{source}, line {lines[i]}, column {rssi_cols[j]!r}: {rssi[i, j]:g} dBm is outside "
-                              f"[{low:g}, {high:g}] dBm")
-    long = pd.DataFrame({
-        "time_s": np.repeat((ts_ns - ts_ns[0]) * 1e-9, m) if n else np.zeros(0),
-        "transmitter": "tag",
-        "receiver": np.tile(np.asarray(anchor_ids, dtype=object), n),
-        "rssi_dbm": rssi.reshape(-1),
-    })
-    if with_truth:
-        for col, src in (("x_m", "x"), ("y_m", "y"), ("heading_rad", "heading")):
-            long[col] = np.repeat(_numeric(table, src, source, lines, missing_ok=True), m)
-        long["z_m"] = np.where(np.isnan(long["x_m"]), np.nan, tag_height_m)
-    return validate_readings(long, source=source, lines=np.repeat(lines, m), anchor_ids=anchor_ids)
-
-
-def kolakowski2021(root=None, *, tag_height_m: float = KOLAKOWSKI2021_TAG_HEIGHT_M) -> MeasuredData:
-    """The BLE RSSI data set of Kolakowski (2021), in locbook's long format (CC BY 4.0; see
-    :data:`KOLAKOWSKI2021_ATTRIBUTION`).
-
-    Recordings: ``calibration`` (4,104 static robot positions with LiDAR ground truth), ``robot`` (a 352 s robot
-    drive with ground truth, 3 epochs per second with one 20 s gap) and ``walk`` (a person walking the reference
-    path; no per-sample truth). Each row of the source files is one epoch whose RSSI values are averages over the
-    packets of that interval (so many are not integers); an empty cell is "not heard". Times are seconds from the
-    first row of each file. The tag's height is not in the files: ``tag_height_m`` (default 1.3 m, from the data
-    set's README: "about 1.3 m above the floor") is given to every position with ground truth. ``root``: the
-    folder of the unchanged source files (default: the copy shipped with locbook)."""
-    root = measured_data_dir("kolakowski2021") if root is None else Path(root)
-    if not (isinstance(tag_height_m, (int, float)) and math.isfinite(tag_height_m)):
-        raise ValueError(f"tag_height_m must be a finite number of metres, got {tag_height_m!r}")
-    anchors = read_anchors(root / "anchors.csv")
-    ids = tuple(anchors["id"])
-    recordings = {
-        "calibration": _kolakowski_wide(root / "calibration_df.csv", ids, tag_height_m=tag_height_m, with_truth=True),
-        "robot": _kolakowski_wide(root / "test_robot_df.csv", ids, tag_height_m=tag_height_m, with_truth=True),
-        "walk": _kolakowski_wide(root / "test_walk_df.csv", ids, tag_height_m=tag_height_m, with_truth=False),
-    }
-    notes = {"tag_height_m": f"{tag_height_m:g} m for every position (README of the data set: about 1.3 m)",
-             "rssi": "per-epoch averages of the packets received in the interval (dBm); empty = not heard"}
-    return MeasuredData("kolakowski2021", anchors, recordings, KOLAKOWSKI2021_ATTRIBUTION,
-                        read_outline(root / "layout.csv"), read_path_segments(root / "path_reference.csv"), notes)

@@ -12,7 +12,7 @@ import signal
 import sys
 from pathlib import Path
 
-from ..errors import ParameterError
+from ..errors import LocbookError, ParameterError
 from ..reproduce.readings import ReadingsError
 
 #: exit statuses of ``locbook run`` (module docstring)
@@ -114,6 +114,10 @@ def main(argv: list[str] | None = None) -> int:
     run.add_argument("-p", "--parameter", action="append", default=[], metavar="NAME=VALUE",
                      help="override a notebook parameter (a TOML value, checked against its type and range); "
                           "the reports go to their own folder, never to reports/<profile>/")
+    run.add_argument("--data", metavar="DIR_OR_NAME",
+                     help="run on this data set (a folder with dataset.toml, or a shipped name such as "
+                          "kolakowski2021): every experiment that takes one (default: all of them); the reports go "
+                          "to <reports>/<profile>/data-<name>/")
     run.add_argument("--reports", type=Path, help="reports folder (default: <repository>/reports)")
     run.add_argument("--out", type=Path, help="write this run's reports to this folder (a path; its last part "
                                                 "[a-z0-9-] only)")
@@ -142,7 +146,15 @@ def main(argv: list[str] | None = None) -> int:
                          help="a readings file of your own (the columns of locbook/data/readings/*.csv) instead of "
                               "the declared readings")
     _point_options(bracket, "the bracket writes <reports>/brackets/<experiment>/")
-    for command in (lst, show, nbs, run, study, bracket):   # --suite after the command too; SUPPRESS keeps one given before it
+    data = sub.add_parser("data", help="measured data sets: check one (`check DIR`), or write the synthetic "
+                                       "example (`example DIR`)")
+    data.add_argument("action", choices=("check", "example"),
+                      help="check: read a data set as `locbook run --data` will and print what it holds; example: "
+                           "write the synthetic example data set (raw packets with known truth) to DIR")
+    data.add_argument("dataset", metavar="DIR_OR_NAME", help="the data set's folder (or its dataset.toml), or a "
+                                                            "shipped name; for example: the folder to create")
+    data.add_argument("--seed", type=int, default=1, help="example: the generator's seed (default 1)")
+    for command in (lst, show, nbs, run, study, bracket, data):   # --suite after the command too; SUPPRESS keeps one given before it
         command.add_argument("--suite", type=Path, default=argparse.SUPPRESS, help=suite_help)
     args = parser.parse_args(argv)
 
@@ -154,6 +166,16 @@ def main(argv: list[str] | None = None) -> int:
             from .catalog import list_text, show_text
             reports = args.reports or suite.default_reports()
             print(show_text(suite, args.key, reports) if args.key else list_text(suite, reports))
+            return 0
+        if args.command == "data":
+            if args.action == "example":
+                import numpy as np
+                from ..data.example import write_example_dataset
+                folder = write_example_dataset(args.dataset, np.random.default_rng(args.seed), seed_note=args.seed)
+                print(f"wrote the example data set to {folder}; check it with `locbook data check {folder}` and run "
+                      f"the battery with `locbook run --data {folder}`")
+                return 0
+            print(_dataset_text(args.dataset))
             return 0
         if args.command == "notebooks":
             from .catalog import copy_notebooks
@@ -177,13 +199,16 @@ def main(argv: list[str] | None = None) -> int:
                                  timeout_s=args.timeout, progress=args.progress, executor=args.executor,
                                  scheduler=args.scheduler)
         else:
-            experiments = suite.select(args.ids)
+            if args.data is not None and not args.ids:     # every experiment that takes a data set
+                experiments = [e for e in suite.experiments if "data" in e.declared_parameters()]
+            else:
+                experiments = suite.select(args.ids)
             from .runner import run_suite
             result = run_suite(suite, experiments, args.profile, jobs=args.jobs, force=args.force,
                                overrides=_parse_overrides(args.parameter), report_root=args.reports,
                                out_dir=args.out, timeout_s=args.timeout, progress=args.progress,
-                               executor=args.executor, scheduler=args.scheduler)
-    except (ParameterError, ReadingsError) as exc:
+                               executor=args.executor, scheduler=args.scheduler, data=args.data)
+    except (ParameterError, ReadingsError, LocbookError) as exc:   # LocbookError: a malformed data set too
         print(f"locbook: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:  # before the run started its own handling (loading, checking parameters)
@@ -213,10 +238,29 @@ def main(argv: list[str] | None = None) -> int:
             print(f"bracket of {args.experiment} incomplete: its default point did not finish, so no verdict was "
                   "written (an earlier bracket.csv is kept)", file=sys.stderr)
         return _exit_status(result)
-    if result.report_dir.name != args.profile:
+    if result.report_dir.name != args.profile and args.data is not None:
+        print(f"reports of this run: {result.report_dir.resolve()} (data set {args.data})")
+    elif result.report_dir.name != args.profile:
         print(f"reports of this run: {result.report_dir.resolve()} (reports/{args.profile}/ is unchanged)")
     _print_summary(result, args.progress)
     return _exit_status(result)
+
+
+def _dataset_text(path: str) -> str:
+    """What ``locbook data`` prints: the data set's provenance, geometry, notes and one line per recording."""
+    from ..data.dataset import dataset_summary, load_dataset
+    from ..reproduce.report import Table
+    ds = load_dataset(path)
+    lo, hi = ds.outline_m.min(axis=0), ds.outline_m.max(axis=0)
+    lines = [f"data set {ds.name!r}: {ds.title}", f"  folder: {ds.root}", f"  licence: {ds.license}",
+             f"  attribution: {ds.attribution}",
+             f"  anchors: {len(ds.anchor_ids)} ({', '.join(ds.anchor_ids[:12])}{', ...' if len(ds.anchor_ids) > 12 else ''}), "
+             f"heights {ds.anchors_m[:, 2].min():g}-{ds.anchors_m[:, 2].max():g} m; tag height {ds.tag_height_m:g} m",
+             f"  outline: {len(ds.outline_m)} vertices, x {lo[0]:g}..{hi[0]:g} m, y {lo[1]:g}..{hi[1]:g} m"]
+    lines += [f"  {key.replace('_', ' ')}: {note}" for key, note in ds.notes.items()]
+    lines += ["", Table(dataset_summary(ds)).to_markdown(), "",
+              f"ok: `locbook run --data {path}` runs the measured-data experiments and the benchmark on it"]
+    return "\n".join(lines)
 
 
 def _exit_status(result) -> int:

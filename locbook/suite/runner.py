@@ -452,8 +452,13 @@ def run_suite(suite: Suite, experiments: list[Experiment], profile: str, *, jobs
               overrides: dict[str, str] | None = None, report_root: Path | None = None,
               out_dir: Path | None = None, timeout_s: float = 1800, retries: int = 1,
               kernel_name: str = KERNEL_NAME, progress="plain", executor: str = "local",
-              scheduler: str | None = None) -> SuiteRun:
+              scheduler: str | None = None, data: str | None = None) -> SuiteRun:
     """Run experiments and write their reports; see the module docstring for the guarantees.
+
+    ``data``: a data set (a shipped name or a folder with ``dataset.toml``; :func:`locbook.data.dataset.load_dataset`
+    checks it first) for every selected experiment, each of which must take one (a ``data`` parameter: the measured-
+    data experiments and the cross-document benchmark). Its reports go to ``data-<name>/`` inside the folder the run
+    would otherwise write (``<report_root>/<profile>/data-<name>/``), and its files join the cache key.
 
     Parameters of every selected experiment are checked before any executes (raises ParameterError).
     The reports go to ``<report_root>/<profile>/``, or, with ``overrides``, to their own folder
@@ -464,8 +469,25 @@ def run_suite(suite: Suite, experiments: list[Experiment], profile: str, *, jobs
     (each experiment a task on dask.distributed: the cluster at ``scheduler``, or a LocalCluster of ``jobs``
     workers); both run the same worker, so caching, locking, retries and numbers are the same.
     """
-    overrides = overrides or {}
+    overrides = dict(overrides or {})
     _check_options(timeout_s, jobs, executor, scheduler)
+    data_roots: list[str] = []
+    per_experiment: dict[str, dict] = {}
+    dataset_name = None
+    if data is not None:
+        dataset_name, value, root_dir = _dataset_argument(data)
+        data_roots.append(root_dir)
+        if "data" in overrides:
+            raise SuiteError("give the data set once: --data or -p data=..., not both")
+        for exp in experiments:
+            declared = exp.declared_parameters()
+            if "data" not in declared:
+                takes = [e.id for e in suite.experiments if "data" in e.declared_parameters()]
+                raise SuiteError(f"experiment {exp.id!r} takes no data set; with --data run the experiments that do: "
+                                 f"{', '.join(takes)} (`locbook run --data DIR` runs them all)")
+            as_list = str(declared["data"].annotation).replace(" ", "").startswith("list")
+            # override text as `-p` takes it: a str parameter verbatim, a list as a TOML array
+            per_experiment[exp.id] = {"data": json.dumps([value]) if as_list else value}
     # every user path made absolute here, once: the workers and kernels run in other folders (a kernel runs in
     # its notebook's folder), so a relative staging path would point elsewhere there
     root = _absolute(report_root) if report_root else _absolute(suite.default_reports())
@@ -478,13 +500,32 @@ def run_suite(suite: Suite, experiments: list[Experiment], profile: str, *, jobs
         report_dir = root / override_folder_name(profile, overrides)
     else:
         report_dir = root / profile
-    tasks = [Task(exp.id, exp, exp.parameters(profile, overrides)) for exp in experiments]  # validation first
-    custom_folder = bool(overrides) or out_dir is not None
+    if dataset_name is not None and out_dir is None:
+        report_dir = report_dir / f"data-{dataset_name}"
+    tasks = [Task(exp.id, exp, exp.parameters(profile, {**overrides, **per_experiment.get(exp.id, {})}))
+             for exp in experiments]  # validation first
+    custom_folder = bool(overrides) or out_dir is not None or dataset_name is not None
     return run_tasks(suite, tasks, profile, report_dir, jobs=jobs, force=force, timeout_s=timeout_s,
                      retries=retries, kernel_name=kernel_name, progress=progress, executor=executor,
-                     scheduler=scheduler,
-                     write_reports=lambda folder, _outcomes: write_suite_reports(suite, folder,
-                                                                                list_all=not custom_folder))
+                     scheduler=scheduler, data_roots=data_roots,
+                     write_reports=lambda folder, _outcomes: _write_reports(suite, folder, custom_folder,
+                                                                            dataset_name is not None and out_dir is None))
+
+
+def _write_reports(suite: Suite, folder: Path, custom_folder: bool, nested: bool) -> None:
+    write_suite_reports(suite, folder, list_all=not custom_folder)
+    parent = folder.parent
+    if nested and (parent / "index.html").is_file():     # the profile's index links its data-<name>/ folders
+        write_suite_reports(suite, parent, list_all=parent.name in PROFILES)
+
+
+def _dataset_argument(data: str) -> tuple[str, str, str]:
+    """``(name, parameter value, folder)`` of a data set given to ``--data``: checked by loading it (a malformed one
+    fails here, before anything runs). A shipped data set is passed by name, any other by its absolute folder."""
+    from ..data.dataset import datasets_dir, load_dataset
+    ds = load_dataset(data)
+    shipped = ds.root.resolve() == (datasets_dir() / ds.name).resolve()
+    return ds.name, (ds.name if shipped else str(ds.root)), str(ds.root)
 
 
 def _check_options(timeout_s: float, jobs: int, executor: str, scheduler: str | None) -> None:
@@ -500,7 +541,8 @@ def _check_options(timeout_s: float, jobs: int, executor: str, scheduler: str | 
 
 def run_tasks(suite: Suite, tasks: list[Task], profile: str, report_dir: Path, *, write_reports, jobs: int = 1,
               force: bool = False, timeout_s: float = 1800, retries: int = 1, kernel_name: str = KERNEL_NAME,
-              progress="plain", executor: str = "local", scheduler: str | None = None) -> SuiteRun:
+              progress="plain", executor: str = "local", scheduler: str | None = None,
+              data_roots: list[str] | None = None) -> SuiteRun:
     """Run ``tasks`` (checked parameters; distinct keys) into ``report_dir`` (an absolute path) under its lock,
     with every guarantee of the module docstring, then call ``write_reports(report_dir, outcomes)`` (also after
     an interrupt; one :class:`Outcome` per task) to rebuild the folder's aggregate files. :func:`run_suite` and
@@ -527,7 +569,8 @@ def run_tasks(suite: Suite, tasks: list[Task], profile: str, report_dir: Path, *
         if disk_full_path(exc, str(report_dir)) is not None:
             raise          # not bad input: the CLI says which path, with the full-disk exit status
         raise SuiteError(f"cannot write to the reports folder {report_dir}: {exc.strerror}") from None
-    data_roots = [str(_package_dir()), str(suite.root.parent / "shared")]
+    # data files read under these folders are hashed into the cache record (a changed file reruns the report)
+    data_roots = [str(_package_dir()), str(suite.root.parent / "shared"), *(data_roots or [])]
     run = SuiteRun([], report_dir)
     with _Stop() as stop:
         lock = FileLock(str(report_dir / ".lock"))

@@ -359,6 +359,12 @@ def _experiment_line(e) -> dict:
             "other rows": sum(1 for r in rows if r["kind"] not in ("reproduction", "calibrated") or r.get("same_as"))}
 
 
+def _datasets(report_dir: Path) -> list[tuple[str, str]]:
+    """``(data set, link)`` of the reports of other data sets kept in this folder (``data-<name>/``)."""
+    return [(d.name[len("data-"):], f"{d.name}/index.html") for d in sorted(Path(report_dir).glob("data-*"))
+            if (d / "index.html").is_file()]
+
+
 def index_markdown(report_dir: Path, entries, rows) -> str:
     lines = [f"# locbook reports, `{report_dir.name}`", "",
              "Every printed number beside ours: [numbers.csv](numbers.csv). A row's kind says what agreement "
@@ -371,6 +377,9 @@ def index_markdown(report_dir: Path, entries, rows) -> str:
     if _bracket_headline(rows):
         lines += [_bracket_headline(rows), "", "Findings per document: " + ", ".join(
             f"[{doc}]({link})" for doc, link in _findings(report_dir)), ""]
+    if _datasets(report_dir):
+        lines += ["The measured-data experiments on other data sets (`locbook run --data`): " + ", ".join(
+            f"[{name}]({link.replace('index.html', 'index.md')})" for name, link in _datasets(report_dir)), ""]
     twice = double_counted(rows)
     if twice:
         lines += ["**Counted more than once** (fix the notebooks): " + "; ".join(
@@ -447,7 +456,7 @@ def index_html(report_dir: Path, entries, rows, version: str) -> str:
     return _render(
         "index.html", version=version, folder=report_dir.name, numbers_csv=(report_dir / "numbers.csv").is_file(),
         headline=_headline_counts(rows), brackets=_bracket_counts(rows), findings=_findings(report_dir),
-        twice=double_counted(rows),
+        twice=double_counted(rows), datasets=_datasets(report_dir),
         total=_counts_table(scoreboard_counts(rows)) if rows else None, documents=documents,
         experiments=experiments, n_present=sum(1 for e in entries if e["present"]), reasons=reasons)
 

@@ -5,7 +5,7 @@ bound for a window of consecutive updates (:mod:`locbook.tracking.results`, modu
 that run such a filter pass the flags on in one way:
 
 - a function that returns positions (``george.track_with_kalman``, ``gudipati.track``, ``palvai.ekf_path``,
-  ``dogan.only_acc_errors``) or several trackers' positions (``kolakowski.tracks``,
+  ``dogan.only_acc_errors``) or several trackers' positions (``measured.tracks``,
   ``locbook.benchmark.run_trackers``, ``locbook.benchmark.tracking_cells``) takes ``with_divergence=False``; with
   ``True`` it returns ``(what it returned, flags)``, ``flags`` a :class:`DivergenceFlags` (one filter; None for a
   method that runs no Kalman-family filter) or ``{tracker: DivergenceFlags}`` for the Kalman-family trackers among

@@ -1,0 +1,464 @@
+"""A measured data set: a folder of long-format files (:mod:`locbook.data.measured`) plus a manifest,
+``dataset.toml``, that says everything the methods need to know about it. Nothing about a data set lives in code:
+the shipped ones (``locbook/data/datasets/<name>/``) and a user's own are read the same way, by
+:func:`load_dataset`, and every measured-data experiment takes one (``locbook run --data DIR``).
+
+The manifest (every key below; ``[units]`` describes the files, every other value is SI as its name says)::
+
+    name = "my-lab"                     # [a-z0-9-]: names the reports folder (reports/<profile>/data-<name>/)
+    title = "BLE tags in the lab, 2026"
+    license = "CC BY 4.0"               # the licence the files are under
+    license_file = "LICENSE.md"         # optional: its text, in the folder
+    attribution = "A. Author, ..."      # shown with every number computed from the data
+    changes = "converted to the long format"   # optional: what differs from the source files (CC BY asks)
+
+    [units]                             # of the files' columns (which keep their names): optional
+    time = "s"                          # s | ms | us | ns; not seconds: shifted to the file's first time, scaled
+    length = "m"                        # m | cm | mm: anchors, outline, true positions, reference paths
+    rssi = "dBm"                        # dBm only
+
+    [readings]                          # optional
+    valid_range_dbm = [-120.0, -10.0]   # a reading outside is refused (default [-150, 20])
+    invalid_values_dbm = [0.0, 2.0, 4.0]  # values the receivers write for "no reading": NaN (not heard)
+    backward_time = "refuse"            # refuse | sort: a file whose time goes back (sort: counted and reported)
+
+    [geometry]
+    anchors = "anchors.csv"             # id, x, y, z
+    outline = "outline.csv"             # optional floor outline (x, y); default: the box around anchors and truth
+    tag_height_m = 1.3                  # the tag's height, known to the estimators; optional where every true
+                                        # position has z_m (then their median)
+
+    [epochs]                            # raw packets -> epochs (locbook.data.measured.epochs)
+    window_s = 1.0                      # 0: each distinct time already is an epoch
+    aggregate = "mean"                  # mean | median | max of one anchor's readings in a window
+    min_readings = 1                    # fewer readings of an anchor in a window: NaN (not heard)
+
+    [[recording]]                       # one per readings file
+    name = "survey"                     # [a-z0-9_-]
+    file = "survey.csv"
+    role = "calibration"                # calibration (fit the channel, build radio maps) | static (test points) |
+                                        # track (a moving tag, on the epoch clock)
+    point_column = "point"              # optional: an extra column naming the point; epochs never mix points
+    reference_path = "path.csv"         # optional, track: segments x0, y0, x1, y1 the walker followed
+    window_s = 0                        # optional: this recording's own epoch window
+
+A data set needs at least one calibration recording and at least one static or track recording. Every failure
+raises :class:`~locbook.data.measured.DataFormatError` naming the manifest (and key) or the file, line and column.
+"""
+from __future__ import annotations
+
+import math
+import re
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from ..errors import ParameterError
+from .measured import (AGGREGATES, DataFormatError, Epochs, _read_text_table, _reading_options,
+                       epochs, read_anchors, read_outline, read_path_segments, validate_readings, READING_COLUMNS)
+
+__all__ = ["Dataset", "Recording", "EpochRule", "load_dataset", "shipped_datasets", "datasets_dir",
+           "MANIFEST", "ROLES", "dataset_summary"]
+
+MANIFEST = "dataset.toml"
+ROLES = ("calibration", "static", "track")
+_TIME_SCALE = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
+_LENGTH_SCALE = {"m": 1.0, "cm": 1e-2, "mm": 1e-3}
+_NAME = re.compile(r"^[a-z0-9]+(-[a-z0-9]+)*$")
+_RECORDING_NAME = re.compile(r"^[a-z0-9][a-z0-9_-]*$")
+#: margin (m) around anchors and true positions of the default outline, a data set without one
+DEFAULT_OUTLINE_MARGIN_M = 0.5
+
+_TOP = {"name", "title", "license", "license_file", "attribution", "changes", "units", "readings", "geometry",
+        "epochs", "recording"}
+_SECTIONS = {"units": {"time", "length", "rssi"},
+             "readings": {"valid_range_dbm", "invalid_values_dbm", "backward_time"},
+             "geometry": {"anchors", "outline", "tag_height_m"},
+             "epochs": {"window_s", "aggregate", "min_readings"}}
+_RECORDING_KEYS = {"name", "file", "role", "point_column", "reference_path", "window_s"}
+
+
+def datasets_dir() -> Path:
+    """The folder of the data sets shipped with locbook (``locbook/data/datasets``)."""
+    return Path(__file__).with_name("datasets")
+
+
+def shipped_datasets() -> tuple[str, ...]:
+    """Names of the data sets shipped with locbook."""
+    return tuple(sorted(p.name for p in datasets_dir().iterdir() if (p / MANIFEST).is_file()))
+
+
+@dataclass(frozen=True)
+class EpochRule:
+    """How readings become epochs (:func:`locbook.data.measured.epochs`): ``window_s`` (0 = rows are epochs),
+    ``aggregate`` and ``min_readings``."""
+
+    window_s: float
+    aggregate: str = "mean"
+    min_readings: int = 1
+
+    def describe(self) -> str:
+        if not self.window_s:
+            return "each distinct time of a transmitter is one epoch (the rows already are epochs)"
+        return (f"{self.window_s:g} s windows, the {self.aggregate} of each anchor's readings, at least "
+                f"{self.min_readings} reading(s) per anchor (else not heard)")
+
+
+@dataclass(frozen=True)
+class Recording:
+    """One readings file of a data set: its ``role``, validated ``readings`` (long format, SI), epoch rule, the
+    optional point column and reference path, and ``sorted_rows``: how many rows went back in time and were put
+    in order (``backward_time = "sort"``; 0 otherwise)."""
+
+    name: str
+    role: str
+    file: Path
+    readings: pd.DataFrame = field(repr=False)
+    epoch_rule: EpochRule
+    point_column: str | None = None
+    reference_path_m: np.ndarray | None = None
+    sorted_rows: int = 0
+
+    @property
+    def has_truth(self) -> bool:
+        return bool(np.isfinite(self.readings["x_m"].to_numpy(float)).any())
+
+
+@dataclass(frozen=True)
+class Dataset:
+    """A measured data set read from its folder (module docstring). ``epochs(name)`` gives a recording's epochs
+    by the data set's rule; ``recordings_with(role)`` lists recordings by role."""
+
+    name: str
+    title: str
+    root: Path
+    license: str
+    attribution: str
+    anchors: pd.DataFrame = field(repr=False)
+    outline_m: np.ndarray = field(repr=False)
+    tag_height_m: float
+    recordings: dict[str, Recording] = field(repr=False)
+    changes: str = ""
+    license_file: Path | None = None
+    #: how each value the methods need was obtained, when the manifest did not give it directly
+    notes: dict[str, str] = field(default_factory=dict)
+    _cache: dict = field(default_factory=dict, repr=False, compare=False)
+
+    @property
+    def anchor_ids(self) -> tuple[str, ...]:
+        return tuple(self.anchors["id"])
+
+    @property
+    def anchors_m(self) -> np.ndarray:
+        """Anchor positions ``(m, 3)`` in the order of :attr:`anchor_ids` (metres)."""
+        return self.anchors[["x", "y", "z"]].to_numpy(float)
+
+    def recordings_with(self, role: str) -> list[str]:
+        if role not in ROLES:
+            raise ParameterError(f"role must be one of {ROLES}, got {role!r}")
+        return [name for name, rec in self.recordings.items() if rec.role == role]
+
+    def recording(self, name: str) -> Recording:
+        if name not in self.recordings:
+            raise ParameterError(f"data set {self.name!r} has no recording {name!r}; it has {sorted(self.recordings)}")
+        return self.recordings[name]
+
+    def epochs(self, name: str) -> Epochs:
+        """The recording's epochs by the data set's epoch rule (cached: the arrays are shared, do not modify)."""
+        if name not in self._cache:
+            rec = self.recording(name)
+            rule = rec.epoch_rule
+            self._cache[name] = epochs(rec.readings, self.anchor_ids, window_s=rule.window_s or None,
+                                       aggregate=rule.aggregate, min_readings=rule.min_readings,
+                                       group_by=() if rec.point_column is None else (rec.point_column,))
+        return self._cache[name]
+
+    def epochs_of(self, role: str) -> Epochs:
+        """The epochs of every recording of ``role``, one after the other (in manifest order)."""
+        parts = [self.epochs(n) for n in self.recordings_with(role)]
+        if not parts:
+            raise ParameterError(f"data set {self.name!r} has no {role} recording")
+        if len(parts) == 1:
+            return parts[0]
+        keys = set.intersection(*(set(p.extra) for p in parts))
+        return Epochs(np.concatenate([p.time_s for p in parts]), np.concatenate([p.rss_dbm for p in parts]),
+                      np.concatenate([p.position_m for p in parts]), np.concatenate([p.heading_rad for p in parts]),
+                      np.concatenate([p.transmitter for p in parts]), self.anchor_ids,
+                      np.concatenate([p.n_readings for p in parts]),
+                      {k: np.concatenate([p.extra[k] for p in parts]) for k in sorted(keys)})
+
+
+# -- reading the manifest --------------------------------------------------------------------------------------
+def _fail(manifest: Path, message: str):
+    raise DataFormatError(f"{manifest}: {message}")
+
+
+def _string(manifest, raw: dict, key: str, where: str, *, required: bool = True, default: str = "") -> str:
+    value = raw.get(key, None)
+    if value is None:
+        if required:
+            _fail(manifest, f"{where}{key!r} is required")
+        return default
+    if not isinstance(value, str) or not value.strip():
+        _fail(manifest, f"{where}{key!r} must be a non-empty string, got {value!r}")
+    return value.strip()
+
+
+def _number(manifest, raw: dict, key: str, where: str, *, ge: float | None = None, gt: float | None = None):
+    value = raw[key]
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        _fail(manifest, f"{where}{key!r} must be a finite number, got {value!r}")
+    if (ge is not None and value < ge) or (gt is not None and value <= gt):
+        _fail(manifest, f"{where}{key!r} must be {'>= ' + str(ge) if ge is not None else '> ' + str(gt)}, "
+                        f"got {value!r}")
+    return float(value)
+
+
+def _unknown_keys(manifest, raw: dict, allowed: set, where: str):
+    unknown = sorted(set(raw) - allowed)
+    if unknown:
+        _fail(manifest, f"{where}unknown key(s) {unknown}; allowed: {sorted(allowed)}")
+
+
+def _file(manifest: Path, root: Path, value: str, where: str) -> Path:
+    path = (root / value)
+    if Path(value).is_absolute() or ".." in Path(value).parts:
+        _fail(manifest, f"{where}{value!r} must be a file inside the data set's folder (a relative path)")
+    if not path.is_file():
+        _fail(manifest, f"{where}file {value!r} does not exist in {root}")
+    return path
+
+
+def _resolve(path) -> tuple[Path, Path]:
+    """``(folder, manifest)`` of a data set given as a shipped name, a folder or its ``dataset.toml``."""
+    text = str(path)
+    if isinstance(path, str) and _NAME.match(text) and not Path(text).exists():
+        folder = datasets_dir() / text
+        if not (folder / MANIFEST).is_file():
+            raise ParameterError(f"{text!r} is neither a folder nor a data set shipped with locbook "
+                                 f"(shipped: {', '.join(shipped_datasets())}); give the folder holding {MANIFEST}")
+        return folder, folder / MANIFEST
+    p = Path(path).expanduser()
+    if p.is_dir():
+        p = p / MANIFEST
+    if not p.is_file():
+        raise ParameterError(f"no data set at {path}: {p} does not exist (a data set is a folder with a {MANIFEST}; "
+                             "README: 'Analyse your own data')")
+    return p.parent.resolve(), p.resolve()
+
+
+def _convert(table: pd.DataFrame, time_scale: float, length_scale: float) -> pd.DataFrame:
+    """The readings table (text) with times in seconds (shifted to the file's first time when not seconds: large
+    epoch times keep their differences) and lengths in metres. A cell that is not a number is left as written, for
+    the long format's checks to name."""
+    if time_scale == 1.0 and length_scale == 1.0:
+        return table
+    out = table.copy()
+
+    def scaled(column: str, scale: float, shift: bool):
+        text = out[column].astype(object)
+        v = pd.to_numeric(text.where(text.notna(), "").astype(str).str.strip(), errors="coerce").to_numpy(float)
+        finite = np.isfinite(v)
+        if shift and finite.any():
+            v = v - np.min(v[finite])
+        out[column] = np.where(finite, v * scale, text.to_numpy(object)).astype(object)
+
+    if time_scale != 1.0:
+        scaled("time_s", time_scale, shift=True)
+    if length_scale != 1.0:
+        for col in ("x_m", "y_m", "z_m"):
+            if col in out.columns:
+                scaled(col, length_scale, shift=False)
+    return out
+
+
+def _backward_rows(time_s: np.ndarray, transmitter: pd.Series) -> int:
+    """Rows whose time is earlier than the row before them of the same transmitter (file order)."""
+    codes = pd.factorize(transmitter)[0]
+    by_tx = np.argsort(codes, kind="stable")
+    return int(((np.diff(time_s[by_tx]) < 0) & (np.diff(codes[by_tx]) == 0)).sum())
+
+
+def load_dataset(path) -> Dataset:
+    """Read and check a data set: a shipped name (``"kolakowski2021"``), its folder, or its ``dataset.toml``.
+
+    Every file is read and validated here (long format rules, the manifest's sentinels, range, units and clock
+    handling), so a data set that loads is one every experiment can run on."""
+    root, manifest = _resolve(path)
+    try:
+        with open(manifest, "rb") as fh:
+            raw = tomllib.load(fh)
+    except tomllib.TOMLDecodeError as exc:
+        raise DataFormatError(f"{manifest}: not valid TOML ({exc})") from None
+    _unknown_keys(manifest, raw, _TOP, "")
+    for section, allowed in _SECTIONS.items():
+        if not isinstance(raw.get(section, {}), dict):
+            _fail(manifest, f"[{section}] must be a table")
+        _unknown_keys(manifest, raw.get(section, {}), allowed, f"[{section}] ")
+    name = _string(manifest, raw, "name", "")
+    if not _NAME.match(name):
+        _fail(manifest, f"name {name!r} must be lower-case letters, digits and single hyphens ([a-z0-9-]); it names "
+                        "the reports folder")
+    title = _string(manifest, raw, "title", "")
+    license_ = _string(manifest, raw, "license", "")
+    attribution = _string(manifest, raw, "attribution", "")
+    changes = _string(manifest, raw, "changes", "", required=False)
+    license_file = None
+    if "license_file" in raw:
+        license_file = _file(manifest, root, _string(manifest, raw, "license_file", ""), "license_file: ")
+
+    units = raw.get("units", {})
+    time_unit, length_unit = units.get("time", "s"), units.get("length", "m")
+    if time_unit not in _TIME_SCALE:
+        _fail(manifest, f"[units] time must be one of {sorted(_TIME_SCALE)}, got {time_unit!r}")
+    if length_unit not in _LENGTH_SCALE:
+        _fail(manifest, f"[units] length must be one of {sorted(_LENGTH_SCALE)}, got {length_unit!r}")
+    if units.get("rssi", "dBm") != "dBm":
+        _fail(manifest, f"[units] rssi must be 'dBm' (convert the readings to dBm), got {units.get('rssi')!r}")
+    time_scale, length_scale = _TIME_SCALE[time_unit], _LENGTH_SCALE[length_unit]
+
+    opts = raw.get("readings", {})
+    try:
+        sentinels, valid_range = _reading_options(opts.get("invalid_values_dbm"), opts.get("valid_range_dbm"))
+    except ParameterError as exc:
+        raise DataFormatError(f"{manifest}: [readings] {exc}") from None
+    backward = opts.get("backward_time", "refuse")
+    if backward not in ("refuse", "sort"):
+        _fail(manifest, f"[readings] backward_time must be 'refuse' or 'sort', got {backward!r}")
+
+    geometry = raw.get("geometry", {})
+    anchors = read_anchors(_file(manifest, root, _string(manifest, geometry, "anchors", "[geometry] "),
+                                 "[geometry] anchors: "))
+    if length_scale != 1.0:
+        anchors[["x", "y", "z"]] *= length_scale
+
+    rule_raw = raw.get("epochs", {})
+    default_rule = _epoch_rule(manifest, rule_raw, "[epochs] ", None)
+
+    records = raw.get("recording", [])
+    if not isinstance(records, list) or not records:
+        _fail(manifest, "no [[recording]]: a data set lists its readings files, each with a role "
+                        f"({', '.join(ROLES)})")
+    recordings: dict[str, Recording] = {}
+    for i, rec in enumerate(records):
+        where = f"[[recording]] {i + 1}: "
+        if not isinstance(rec, dict):
+            _fail(manifest, f"{where}must be a table")
+        _unknown_keys(manifest, rec, _RECORDING_KEYS, where)
+        rname = _string(manifest, rec, "name", where)
+        where = f"[[recording]] {rname!r}: "
+        if not _RECORDING_NAME.match(rname):
+            _fail(manifest, f"{where}name must be lower-case letters, digits, '_' and '-'")
+        if rname in recordings:
+            _fail(manifest, f"{where}the name appears twice")
+        role = _string(manifest, rec, "role", where)
+        if role not in ROLES:
+            _fail(manifest, f"{where}role must be one of {ROLES}, got {role!r}")
+        path = _file(manifest, root, _string(manifest, rec, "file", where), where)
+        point_column = _string(manifest, rec, "point_column", where, required=False) or None
+        rule = _epoch_rule(manifest, {**rule_raw, **({"window_s": rec["window_s"]} if "window_s" in rec else {})},
+                           where, default_rule)
+        if role == "track" and not rule.window_s:
+            _fail(manifest, f"{where}a track needs an epoch window (window_s > 0): the filters step on that clock")
+        table, lines = _read_text_table(path, READING_COLUMNS, "readings")
+        if point_column is not None and point_column not in table.columns:
+            _fail(manifest, f"{where}point_column {point_column!r} is not a column of {path.name} "
+                            f"(its columns: {list(table.columns)})")
+        table = _convert(table, time_scale, length_scale)
+        source = f"readings file {path}"
+        sorted_rows = 0
+        if backward == "sort":
+            t = pd.to_numeric(table["time_s"].astype(str).str.strip(), errors="coerce").to_numpy(float)
+            sorted_rows = _backward_rows(t, table["transmitter"].astype(str).str.strip())
+        readings = validate_readings(table, source=source, lines=lines, anchor_ids=anchors["id"],
+                                     invalid_values_dbm=sentinels, valid_range_dbm=valid_range,
+                                     sort=backward == "sort")
+        reference = None
+        if "reference_path" in rec:
+            if role != "track":
+                _fail(manifest, f"{where}reference_path belongs to a track, not a {role} recording")
+            reference = read_path_segments(_file(manifest, root, _string(manifest, rec, "reference_path", where),
+                                                 where + "reference_path: ")) * length_scale
+        recordings[rname] = Recording(rname, role, path, readings, rule, point_column, reference, sorted_rows)
+    roles = {r.role for r in recordings.values()}
+    if "calibration" not in roles:
+        _fail(manifest, "no recording has role 'calibration': the channel is fitted on it (and never on the "
+                        "recordings it is scored on)")
+    if not roles & {"static", "track"}:
+        _fail(manifest, "no recording has role 'static' or 'track': there is nothing to localize")
+
+    for rec in recordings.values():
+        if rec.role == "calibration" and not rec.has_truth:
+            _fail(manifest, f"[[recording]] {rec.name!r}: a calibration recording needs true positions (x_m, y_m): "
+                            "the channel is fitted on the distances from them to the anchors")
+    notes = {}
+    truth_z = np.concatenate([r.readings["z_m"].to_numpy(float) for r in recordings.values()])
+    truth_xy = np.concatenate([r.readings[["x_m", "y_m"]].to_numpy(float) for r in recordings.values()])
+    with_xy = np.isfinite(truth_xy).all(axis=1)
+    if "tag_height_m" in geometry:
+        tag_height = _number(manifest, geometry, "tag_height_m", "[geometry] ")
+        notes["tag_height_m"] = f"{tag_height:g} m (manifest)"
+    elif with_xy.any() and np.isfinite(truth_z[with_xy]).all():
+        tag_height = float(np.median(truth_z[with_xy]))
+        notes["tag_height_m"] = f"{tag_height:g} m: the median of the recorded true heights (z_m)"
+    else:
+        _fail(manifest, "[geometry] tag_height_m is required: the estimators need the tag's height, and not every "
+                        "true position has a z_m")
+    for rec in recordings.values():     # a true position without a height is at the tag's known height
+        r = rec.readings
+        r.loc[r["x_m"].notna() & r["z_m"].isna(), "z_m"] = tag_height
+    if "outline" in geometry:
+        outline = read_outline(_file(manifest, root, _string(manifest, geometry, "outline", "[geometry] "),
+                                     "[geometry] outline: ")) * length_scale
+    else:
+        pts = np.vstack([anchors[["x", "y"]].to_numpy(float), truth_xy[with_xy]])
+        lo, hi = pts.min(axis=0) - DEFAULT_OUTLINE_MARGIN_M, pts.max(axis=0) + DEFAULT_OUTLINE_MARGIN_M
+        outline = np.array([[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]]])
+        notes["outline"] = (f"none given: the box around the anchors and the true positions with a "
+                            f"{DEFAULT_OUTLINE_MARGIN_M:g} m margin")
+    for rec in recordings.values():
+        if rec.sorted_rows:
+            notes[f"sorted {rec.name}"] = (f"{rec.sorted_rows} row(s) of {rec.file.name} went back in time and were "
+                                           "put in time order (backward_time = 'sort')")
+    if sentinels.size:
+        notes["invalid readings"] = (f"values {', '.join(f'{v:g}' for v in sentinels)} dBm are 'no reading' and load as "
+                                     "NaN (not heard)")
+    return Dataset(name, title, root, license_, attribution, anchors, outline, tag_height, recordings, changes,
+                   license_file, notes)
+
+
+def _epoch_rule(manifest, raw: dict, where: str, default: EpochRule | None) -> EpochRule:
+    window = _number(manifest, raw, "window_s", where, ge=0) if "window_s" in raw else (
+        default.window_s if default else 0.0)
+    aggregate = raw.get("aggregate", "mean")
+    if aggregate not in AGGREGATES:
+        _fail(manifest, f"{where}aggregate must be one of {AGGREGATES}, got {aggregate!r}")
+    min_readings = raw.get("min_readings", 1)
+    if isinstance(min_readings, bool) or not isinstance(min_readings, int) or min_readings < 1:
+        _fail(manifest, f"{where}min_readings must be an integer >= 1, got {min_readings!r}")
+    return EpochRule(window, aggregate, min_readings)
+
+
+def dataset_summary(data: Dataset) -> list[dict]:
+    """One row per recording: role, readings, epochs, share of (epoch, anchor) entries heard, readings per heard
+    entry, duration, truth, rows sorted; what ``locbook data check`` prints and every report's first table shows."""
+    rows = []
+    for name, rec in data.recordings.items():
+        ep = data.epochs(name)
+        heard = np.isfinite(ep.rss_dbm)
+        finite_rows = int(np.isfinite(rec.readings["rssi_dbm"].to_numpy(float)).sum())
+        rows.append({
+            "recording": name, "role": rec.role, "file": rec.file.name, "readings": finite_rows,
+            "rows not heard": int(len(rec.readings) - finite_rows), "epochs": len(ep),
+            "heard (%)": round(100 * float(heard.mean()), 1) if heard.size else 0.0,
+            "readings per heard entry": round(float(ep.n_readings[heard].mean()), 2) if heard.any() else 0.0,
+            "duration (s)": round(float(ep.time_s.max() - ep.time_s.min()), 1) if len(ep) else 0.0,
+            "truth": ("per epoch" if np.isfinite(ep.position_m[:, 0]).any()
+                      else "reference path" if rec.reference_path_m is not None else "none"),
+            "points": (len(set(ep.extra[rec.point_column].tolist())) if rec.point_column else ""),
+            "rows sorted": rec.sorted_rows,
+        })
+    return rows

@@ -1,0 +1,282 @@
+"""Data sets: the manifest (dataset.toml) and its rules, raw packets -> epochs, the shipped data sets, the synthetic
+example, and the whole battery on a new data set with one command."""
+import csv
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import locbook as lb
+from locbook.data.dataset import datasets_dir, load_dataset, shipped_datasets
+from locbook.data.example import EXAMPLE_SITE, write_example_dataset
+from locbook.data.measured import DataFormatError, epochs, validate_readings
+from locbook.errors import ParameterError
+from locbook.scenarios import measured as me
+
+ANCHORS = "id,x,y,z\nA,0,0,2.5\nB,6,0,2.5\nC,0,6,2.5\nD,6,6,2.5\n"
+CAL = ("time_s,transmitter,receiver,rssi_dbm,x_m,y_m\n"
+       + "".join(f"{t},tag,{a},-{50 + t + j},{1 + t},2\n" for t in range(4) for j, a in enumerate("ABCD")))
+TRACK = ("time_s,transmitter,receiver,rssi_dbm,x_m,y_m\n"
+         + "".join(f"{0.5 * t},tag,{a},-{55 + j},{t},3\n" for t in range(6) for j, a in enumerate("ABCD")))
+MANIFEST = """name = "tiny"
+title = "tiny test set"
+license = "CC0 1.0"
+attribution = "test"
+[geometry]
+anchors = "anchors.csv"
+tag_height_m = 1.0
+[epochs]
+window_s = 0.5
+[[recording]]
+name = "cal"
+file = "cal.csv"
+role = "calibration"
+window_s = 0
+[[recording]]
+name = "walk"
+file = "walk.csv"
+role = "track"
+"""
+
+
+def folder(tmp_path, name):
+    path = tmp_path / name
+    path.mkdir()
+    return path
+
+
+def make(tmp_path, manifest=MANIFEST, cal=CAL, track=TRACK, anchors=ANCHORS):
+    for name, text in (("dataset.toml", manifest), ("cal.csv", cal), ("walk.csv", track), ("anchors.csv", anchors)):
+        (tmp_path / name).write_text(text)
+    return tmp_path
+
+
+def refused(tmp_path, *needles, **files):
+    make(tmp_path, **files)
+    with pytest.raises(DataFormatError) as info:
+        load_dataset(tmp_path)
+    for needle in needles:
+        assert needle in str(info.value), str(info.value)
+    return str(info.value)
+
+
+# -- the manifest ---------------------------------------------------------------------------------------------
+def test_a_minimal_data_set_loads(tmp_path):
+    ds = load_dataset(make(tmp_path))
+    assert ds.name == "tiny" and ds.anchor_ids == ("A", "B", "C", "D") and ds.tag_height_m == 1.0
+    assert ds.recordings_with("track") == ["walk"] and len(ds.epochs("cal")) == 4
+    # no outline: the box around anchors and truth with a 0.5 m margin, said in the notes
+    np.testing.assert_array_equal(ds.outline_m.min(axis=0), [-0.5, -0.5])
+    np.testing.assert_array_equal(ds.outline_m.max(axis=0), [6.5, 6.5])
+    assert "outline" in ds.notes
+    # a true position without a height is at the tag's height
+    assert np.all(ds.epochs("cal").position_m[:, 2] == 1.0)
+
+
+@pytest.mark.parametrize("edit,needles", [
+    (lambda m: m.replace('name = "tiny"', 'name = "Tiny Set"'), ["name 'Tiny Set'", "[a-z0-9-]"]),
+    (lambda m: m.replace('license = "CC0 1.0"\n', ""), ["'license' is required"]),
+    (lambda m: m + "colour = 3\n", ["unknown key(s) ['colour']"]),
+    (lambda m: m.replace('role = "track"', 'role = "walking"'), ["role must be one of", "'walking'"]),
+    (lambda m: m.replace('file = "walk.csv"', 'file = "../walk.csv"'), ["inside the data set's folder"]),
+    (lambda m: m.replace('file = "walk.csv"', 'file = "nowhere.csv"'), ["'nowhere.csv' does not exist"]),
+    (lambda m: m.replace('[epochs]\nwindow_s = 0.5\n', ""), ["a track needs an epoch window"]),
+    (lambda m: m.replace("[geometry]", '[units]\ntime = "min"\n[geometry]'), ["[units] time must be one of"]),
+    (lambda m: m.replace("[geometry]", '[units]\nrssi = "mW"\n[geometry]'), ["rssi must be 'dBm'"]),
+    (lambda m: m.replace("tag_height_m = 1.0\n", ""), ["tag_height_m is required"]),
+    (lambda m: m.replace('role = "calibration"', 'role = "static"'), ["no recording has role 'calibration'"]),
+    (lambda m: m + '[readings]\nbackward_time = "maybe"\n', ["backward_time must be 'refuse' or 'sort'"]),
+    (lambda m: m.replace("window_s = 0.5", "window_s = -1"), ["'window_s' must be >= 0"]),
+])
+def test_manifest_rules_name_the_problem(tmp_path, edit, needles):
+    message = refused(tmp_path, *needles, manifest=edit(MANIFEST))
+    assert "dataset.toml" in message
+
+
+def test_calibration_needs_truth_and_missing_manifest_is_named(tmp_path):
+    no_truth = "time_s,transmitter,receiver,rssi_dbm\n" + "".join(f"{t},tag,A,-{50 + t}\n" for t in range(4))
+    refused(tmp_path, "calibration recording needs true positions", cal=no_truth)
+    with pytest.raises(ParameterError, match="dataset.toml"):
+        load_dataset(tmp_path / "elsewhere")
+    with pytest.raises(ParameterError, match="shipped"):
+        load_dataset("no-such-set")
+
+
+def test_backward_time_is_refused_or_sorted_with_a_count(tmp_path):
+    lines = TRACK.splitlines()
+    lines[5], lines[9] = lines[9], lines[5]                   # rows of t = 0.5 before rows of t = 1.0 swapped
+    track = "\n".join(lines) + "\n"
+    refused(tmp_path, "walk.csv, line", "time goes back", track=track)
+    ds = load_dataset(make(tmp_path, manifest=MANIFEST + '[readings]\nbackward_time = "sort"\n', track=track))
+    assert ds.recording("walk").sorted_rows == 1 and "sorted walk" in ds.notes
+    clean = load_dataset(make(folder(tmp_path, "clean")))
+    np.testing.assert_array_equal(ds.epochs("walk").rss_dbm, clean.epochs("walk").rss_dbm)
+
+
+def test_units_are_converted_to_seconds_and_metres(tmp_path):
+    base = load_dataset(make(folder(tmp_path, "si")))
+    cm = "id,x,y,z\nA,0,0,250\nB,600,0,250\nC,0,600,250\nD,600,600,250\n"
+    ms = lambda text: "\n".join([text.splitlines()[0]] + [
+        ",".join([str(1000 * float(f[0]) + 5000), *f[1:4], str(100 * float(f[4])), str(100 * float(f[5]))])
+        for f in (line.split(",") for line in text.splitlines()[1:])]) + "\n"
+    manifest = MANIFEST.replace("[geometry]", '[units]\ntime = "ms"\nlength = "cm"\n[geometry]')
+    other = load_dataset(make(folder(tmp_path, "ms"), manifest=manifest,
+                              cal=ms(CAL), track=ms(TRACK), anchors=cm))
+    np.testing.assert_allclose(other.anchors_m, base.anchors_m)
+    for name in ("cal", "walk"):
+        a, b = base.epochs(name), other.epochs(name)
+        np.testing.assert_allclose(b.time_s - b.time_s[0], a.time_s - a.time_s[0], atol=1e-9)
+        np.testing.assert_allclose(b.position_m, a.position_m, atol=1e-12)
+        np.testing.assert_array_equal(b.rss_dbm, a.rss_dbm)
+
+
+def test_sentinels_become_not_heard_and_the_range_refuses(tmp_path):
+    track = TRACK.replace(",-55,", ",4,", 1)
+    manifest = MANIFEST + "[readings]\ninvalid_values_dbm = [4]\nvalid_range_dbm = [-100, -30]\n"
+    ds = load_dataset(make(tmp_path, manifest=manifest, track=track))
+    assert np.isnan(ds.epochs("walk").rss_dbm[0, 0]) and "invalid readings" in ds.notes
+    refused(tmp_path, "walk.csv, line 2", "outside [-100, -30]", manifest=manifest, track=track.replace(",4,", ",-20,", 1))
+
+
+# -- raw packets -> epochs ------------------------------------------------------------------------------------
+def _raw(rows, extra=None):
+    table = pd.DataFrame(rows, columns=["time_s", "transmitter", "receiver", "rssi_dbm", "x_m", "y_m"])
+    for k, v in (extra or {}).items():
+        table[k] = v
+    return validate_readings(table, source="test", sort=True)
+
+
+def test_windows_aggregate_each_anchors_readings():
+    rows = [(0.00, "t", "A", -60, 0.0, 0.0), (0.30, "t", "A", -70, 1.0, 0.0), (0.40, "t", "A", -62, 2.0, 0.0),
+            (0.10, "t", "B", -80, 0.0, 0.0), (1.05, "t", "A", -50, 3.0, 0.0), (1.10, "t", "B", np.nan, 3.0, 0.0)]
+    table = _raw(rows)
+    by = {agg: epochs(table, ["A", "B"], window_s=1.0, aggregate=agg) for agg in ("mean", "median", "max")}
+    ep = by["mean"]
+    np.testing.assert_array_equal(ep.time_s, [0.0, 1.0])              # ticks of the window clock
+    np.testing.assert_allclose(ep.rss_dbm, [[-64.0, -80.0], [-50.0, np.nan]])
+    np.testing.assert_allclose(by["median"].rss_dbm[0], [-62.0, -80.0])
+    np.testing.assert_allclose(by["max"].rss_dbm[0], [-60.0, -80.0])
+    np.testing.assert_array_equal(ep.n_readings, [[3, 1], [1, 0]])
+    np.testing.assert_allclose(ep.position_m[:, 0], [0.75, 3.0])      # a moving tag: the window's mean
+    two = epochs(table, ["A", "B"], window_s=1.0, min_readings=2)
+    np.testing.assert_allclose(two.rss_dbm, [[-64.0, np.nan], [np.nan, np.nan]])
+
+
+def test_a_point_column_keeps_points_apart_and_is_kept():
+    rows = [(0.0, "t", "A", -60, 1.0, 1.0), (0.1, "t", "A", -62, 1.0, 1.0), (0.2, "t", "A", -70, 5.0, 5.0),
+            (0.3, "t", "B", -71, 5.0, 5.0)]
+    table = _raw(rows, {"point": ["P1", "P1", "P2", "P2"], "note": ["a", "b", "c", "c"]})
+    mixed = epochs(table, ["A", "B"], window_s=1.0)
+    assert len(mixed) == 1 and "point" not in mixed.extra              # the point varies inside the window
+    ep = epochs(table, ["A", "B"], window_s=1.0, group_by="point")
+    assert len(ep) == 2 and list(ep.extra["point"]) == ["P1", "P2"]
+    np.testing.assert_allclose(ep.rss_dbm, [[-61.0, np.nan], [-70.0, -71.0]])
+    assert "note" not in ep.extra                                      # varies within P1's epoch: not kept
+    np.testing.assert_array_equal(ep.select([1]).extra["point"], ["P2"])
+    with pytest.raises(ParameterError, match="group_by column 'room'"):
+        epochs(table, ["A", "B"], window_s=1.0, group_by="room")
+
+
+def test_rows_already_on_the_clock_are_one_epoch_each():
+    rows = [(k / 3, "t", a, -60.0 - k - j, k * 0.1, 0.0) for k in range(9) for j, a in enumerate("AB")]
+    table = _raw(rows)
+    plain, windowed = epochs(table, ["A", "B"]), epochs(table, ["A", "B"], window_s=1 / 3)
+    np.testing.assert_array_equal(plain.rss_dbm, windowed.rss_dbm)
+    np.testing.assert_array_equal(plain.position_m, windowed.position_m)
+    np.testing.assert_allclose(plain.time_s, windowed.time_s, atol=1e-12)
+
+
+# -- the shipped data sets ------------------------------------------------------------------------------------
+def test_every_shipped_data_set_loads_with_its_licence():
+    assert "kolakowski2021" in shipped_datasets()
+    for name in shipped_datasets():
+        ds = load_dataset(name)
+        assert ds.name == name and ds.license_file is not None and ds.license_file.is_file()
+        assert ds.recordings_with("calibration") and me.scored_recordings(ds)
+
+
+def test_kolakowski_long_files_keep_every_empty_cell_as_not_heard():
+    """The shipped long files read with the csv module (independent of the loader): every empty cell is NaN."""
+    ds = load_dataset("kolakowski2021")
+    for name, rows in (("calibration", 4104), ("robot", 719), ("walk", 876)):
+        with open(ds.recording(name).file, newline="") as fh:
+            cells = [r["rssi_dbm"] for r in csv.DictReader(fh)]
+        grid = np.array([float(c) if c else np.nan for c in cells]).reshape(rows, 6)
+        np.testing.assert_array_equal(ds.epochs(name).rss_dbm, grid)
+    robot = ds.epochs("robot")
+    assert np.isclose(robot.time_s[-1] - robot.time_s[0], 352.0, atol=0.5)     # the data set's README
+    assert np.all(robot.position_m[:, 2] == 1.3)
+
+
+SOURCE = Path(__file__).resolve().parents[2] / "shared" / "data" / "kolakowski2021"
+
+
+@pytest.mark.skipif(not (SOURCE / "calibration_df.csv").is_file(), reason="the published source files are not here")
+def test_kolakowski_conversion_reproduces_the_shipped_files(tmp_path):
+    """convert.py applied to the published wide files gives the shipped long files byte for byte."""
+    import importlib.util
+    spec = importlib.util.spec_from_file_location("convert", datasets_dir() / "kolakowski2021" / "convert.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    module.convert(SOURCE, tmp_path)
+    for name in ("calibration.csv", "robot.csv", "walk.csv", "anchors.csv", "outline.csv", "path_reference.csv"):
+        assert (tmp_path / name).read_bytes() == (datasets_dir() / "kolakowski2021" / name).read_bytes(), name
+
+
+# -- the example data set -------------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def example(tmp_path_factory):
+    return write_example_dataset(tmp_path_factory.mktemp("example"), np.random.default_rng(5), walk_s=60.0)
+
+
+def test_the_example_has_the_faults_it_promises(example):
+    ds = load_dataset(example)
+    assert ds.recording("walk_b").sorted_rows > 0
+    survey = pd.read_csv(example / "survey.csv", dtype={"rssi_dbm": str})
+    assert (survey["rssi_dbm"] == "0.0").any() and survey["rssi_dbm"].isna().any()
+    assert not np.any(ds.recording("survey").readings["rssi_dbm"] >= 0)      # the sentinel is not a reading
+    assert set(ds.epochs("points").extra["point"]) == {f"T{k:02d}" for k in range(1, 13)}
+
+
+def test_the_example_calibration_recovers_its_channel(example):
+    """The closed-form fit on the survey's 1 s epoch means recovers the generator's channel (4 dB per packet)."""
+    fit = me.calibrate(load_dataset(example))
+    np.testing.assert_allclose(fit.path_loss_exp, EXAMPLE_SITE["path_loss_exp"], atol=0.2)
+    np.testing.assert_allclose(fit.ref_power_dbm, EXAMPLE_SITE["ref_power_dbm"], atol=2.0)
+
+
+@pytest.mark.notebooks
+def test_one_command_runs_the_whole_battery_on_a_new_data_set(tmp_path):
+    """The issue's test: a data set written to a folder (log-distance packets, NaN readings, a point id column, an
+    invalid sentinel, backward timestamps in one track), its manifest, and `locbook run --data DIR`."""
+    from locbook.suite.cli import main
+    folder = write_example_dataset(tmp_path / "mine", np.random.default_rng(7), name="mine", walk_s=60.0)
+    assert main(["data", "check", str(folder)]) == 0
+    assert main(["run", "--data", str(folder), "--reports", str(tmp_path / "reports"), "--quiet"]) == 0
+    out = tmp_path / "reports" / "quick" / "data-mine"
+    for exp in ("measured-calibration", "measured-localization", "measured-tracking", "benchmark-cross-document"):
+        assert (out / exp / "summary.md").is_file() and list((out / exp).glob("*.png")), exp
+    metrics = pd.read_csv(out / "measured-localization" / "metrics.csv")
+    at = metrics.set_index(["recording", "method"])["mean_m"]
+    bound = at[("points", "CRLB (fitted channel, at the truth)")]
+    assert at[("points", "grid_ml")] < 2 * bound and at[("walk_a", "grid_ml")] < 2 * bound
+    assert (pd.read_csv(out / "measured-calibration" / "fits.csv").query("fit == 'closed_form' and mode == "
+            "'per_anchor'")["n"].sub(EXAMPLE_SITE["path_loss_exp"]).abs() < 0.3).all()
+    bench = pd.read_csv(out / "benchmark-cross-document" / "benchmark.csv")
+    assert set(bench.loc[bench["scenario"] == "data-mine", "kind"]) == {"static", "tracking"}
+
+
+def test_run_with_data_refuses_bad_input_before_running(tmp_path, capsys):
+    from locbook.suite.cli import EXIT_BAD_INPUT, main
+    good = make(folder(tmp_path, "good"))
+    assert main(["run", "george-tracking", "--data", str(good), "--reports", str(tmp_path / "r")]) == EXIT_BAD_INPUT
+    assert "takes no data set" in capsys.readouterr().err
+    assert main(["run", "--data", str(tmp_path / "missing"), "--reports", str(tmp_path / "r")]) == EXIT_BAD_INPUT
+    assert "no data set at" in capsys.readouterr().err
+    bad = make(folder(tmp_path, "bad"), manifest=MANIFEST.replace('role = "track"', 'role = "walking"'))
+    assert main(["run", "--data", str(bad), "--reports", str(tmp_path / "r")]) == EXIT_BAD_INPUT
+    assert "dataset.toml" in capsys.readouterr().err and not (tmp_path / "r").exists()
+    assert main(["data", "check", str(bad)]) == EXIT_BAD_INPUT
+    assert main(["data", "check", str(good)]) == 0 and "data set 'tiny'" in capsys.readouterr().out

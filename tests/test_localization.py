@@ -141,3 +141,28 @@ def test_degenerate_anchor_geometry_raises(anchors, message):
 def test_wrong_number_of_ranges_raises():
     with pytest.raises(ValueError, match="anchors"):
         lb.lateration_ls(ANCHORS, np.ones(3))
+
+
+def test_rss_ml_on_a_box_is_the_bounded_optimum_of_scipy():
+    """region_m: the projected LM equals scipy's L-BFGS-B on the same cost with the same bounds where the free
+    optimum lies outside the box, and changes nothing where it lies inside."""
+    from scipy.optimize import minimize
+    anchors = np.array([[0.0, 0.0], [10.0, 0.0], [0.0, 10.0], [10.0, 10.0]])
+    model = lb.PathLossModel(-40.0, 2.5, 4.0)
+    rng = np.random.default_rng(3)
+    box = ([1.0, 1.0], [9.0, 9.0])                   # the anchors outside it: no distance is ever 0
+    for true in ([12.0, 5.0], [4.0, -3.0], [11.5, 11.0], [3.0, 7.0]):
+        rss = model.mean_rss_dbm(np.linalg.norm(np.array(true) - anchors, axis=1)) + rng.normal(0, 1.0, 4)
+        cost = lambda p: np.sum((rss - model.mean_rss_dbm(np.linalg.norm(p - anchors, axis=1))) ** 2)
+        ref = minimize(cost, [5.0, 5.0], method="L-BFGS-B", bounds=[(1, 9), (1, 9)],
+                       options=dict(ftol=1e-15, gtol=1e-10))
+        got = lb.rss_ml_position(anchors, rss, model, np.array([5.0, 5.0]), region_m=box)
+        assert got.status == "ok"
+        np.testing.assert_allclose(got.position_m, ref.x, atol=1e-4)
+        free = lb.rss_ml_position(anchors, rss, model, np.array([5.0, 5.0]))
+        inside = np.all((free.position_m >= 1) & (free.position_m <= 9))
+        assert inside == (true == [3.0, 7.0])
+        if inside:
+            np.testing.assert_allclose(got.position_m, free.position_m, atol=1e-9)
+    with pytest.raises(ValueError, match="lower < upper"):
+        lb.rss_ml_position(anchors, rss, model, region_m=([1.0, 1.0], [1.0, 9.0]))

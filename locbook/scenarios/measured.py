@@ -10,8 +10,9 @@ Protocol (every choice a named constant or argument, with its reason; nothing he
   radio map of k-NN needs a value for each (point, anchor): a reading an anchor did not hear at a calibration epoch is
   filled with the fitted channel's mean there (:func:`radio_map`), stated;
 - positions stay inside the floor outline where the method allows it: grid ML, grid Bayes and k-NN work on points
-  inside it, box-LS on its bounding box, RSS ML starts from the grid-ML fix; the fraction of fixes outside the
-  outline is reported for every method;
+  inside it, box-LS and RSS ML on its bounding box (RSS ML started from the grid-ML fix; ``rss_ml_free`` is the same
+  without the box, to show what the bound does); the fraction of fixes outside the outline is reported for every
+  method;
 - trackers run on the recording's epoch clock (the manifest's ``window_s``); a tick without an epoch is all NaN and
   the filters predict through it;
 - the bound is the CRLB of the fitted per-anchor log-normal channel at each true position (3-D distances, the tag's
@@ -56,7 +57,7 @@ REF_POWER_BOUNDS_DBM = (-90.0, -20.0)
 HUBER_DELTA_DB = 6.0
 #: near-field clamp of the fitted channel (m): below any anchor-to-tag distance of a room-scale deployment
 NEAR_FIELD_M = 0.1
-STATIC_METHODS = ("lls", "wls", "box_ls", "rss_ml", "grid_ml", "knn", "grid_bayes")
+STATIC_METHODS = ("lls", "wls", "box_ls", "rss_ml", "rss_ml_free", "grid_ml", "knn", "grid_bayes")
 TRACKERS = ("kf_on_ml", "ekf", "ukf", "particle", "grid_bayes")
 
 
@@ -154,7 +155,8 @@ def static_fixes(data: Dataset, model: PathLossModel, rss_dbm, *, grid_spacing_m
     """Every static estimator on the readings ``(T, m)`` (one fix per epoch, NaN where a method has none):
     linearized LS, weighted LS (weights ``1 / d_i^4`` of the inverted ranges: the squared-range equations'
     variance grows as ``d^4`` under log-normal shadowing), box-LS on the outline's bounding box, RSS ML started
-    at the grid-ML fix, grid ML on a grid inside the outline, and k-NN on :func:`radio_map`."""
+    at the grid-ML fix on the outline's bounding box (``rss_ml``) and on the whole plane (``rss_ml_free``), grid ML
+    on a grid inside the outline, and k-NN on :func:`radio_map`."""
     anchors, height = data.anchors_m, data.tag_height_m
     ranges = model.range_m(rss_dbm)
     lower, upper = outline_box(data.outline_m)
@@ -165,7 +167,9 @@ def static_fixes(data: Dataset, model: PathLossModel, rss_dbm, *, grid_spacing_m
     out["box_ls"] = lateration_box_ls(anchors, ranges, lower, upper, tag_height_m=height).position_m
     grid_fix = grid_ml_position(anchors, rss_dbm, model, grid, chunk=chunk, tag_height_m=height).position_m
     out["grid_ml"] = grid_fix
-    out["rss_ml"] = rss_ml_position(anchors, rss_dbm, model, grid_fix, tag_height_m=height).position_m
+    out["rss_ml"] = rss_ml_position(anchors, rss_dbm, model, grid_fix, tag_height_m=height,
+                                    region_m=(lower, upper)).position_m
+    out["rss_ml_free"] = rss_ml_position(anchors, rss_dbm, model, grid_fix, tag_height_m=height).position_m
     cells, fingerprints, _ = radio_map(data, model)
     out["knn"] = knn_position(rss_dbm, fingerprints, cells, knn_k)
     return out
@@ -196,7 +200,7 @@ def tracks(data: Dataset, model: PathLossModel, recording: str, rng: np.random.G
     streams of ``rng``: the spread over them is the filter's own randomness).
 
     - ``kf_on_ml``: constant-velocity KF (``q``, m^2/s^3 white-acceleration PSD per axis, discrete form) on the
-      RSS-ML fixes with ``R = fix_cov_m2`` (calibrated on the calibration epochs, not on this recording);
+      RSS-ML fixes (on the outline's bounding box) with ``R = fix_cov_m2`` (calibrated on the calibration epochs, not on this recording);
     - ``ekf`` (parallel update) and ``ukf`` (``ukf_alpha``): the same motion model on the raw RSSI, per-anchor
       channel, 3-D distances;
     - ``particle``: SIR, ``L_t = L_t-1 + N(0, spread_m^2 I)`` reflected into the outline's box, resampled when
@@ -215,7 +219,8 @@ def tracks(data: Dataset, model: PathLossModel, recording: str, rng: np.random.G
     heard = ~np.isnan(rss).all(axis=-1)
     ml = np.full((rss.shape[0], 2), np.nan)
     grid_fix = grid_ml_position(anchors, rss[heard], model, grid, tag_height_m=height).position_m
-    ml[heard] = rss_ml_position(anchors, rss[heard], model, grid_fix, tag_height_m=height).position_m
+    ml[heard] = rss_ml_position(anchors, rss[heard], model, grid_fix, tag_height_m=height,
+                                region_m=(lower, upper)).position_m
     fixed = np.flatnonzero(np.isfinite(ml).all(axis=1))
     if fixed.size == 0:
         raise ParameterError(f"recording {recording!r} of {data.name!r}: no epoch gives an RSS-ML fix to start from")
@@ -256,7 +261,8 @@ def fix_covariance_from_calibration(data: Dataset, model: PathLossModel, *, grid
     xy, _, rss = calibration_set(data)
     grid = grid_in_outline(data.outline_m, grid_spacing_m)
     grid_fix = grid_ml_position(data.anchors_m, rss, model, grid, tag_height_m=data.tag_height_m).position_m
-    fixes = rss_ml_position(data.anchors_m, rss, model, grid_fix, tag_height_m=data.tag_height_m).position_m
+    fixes = rss_ml_position(data.anchors_m, rss, model, grid_fix, tag_height_m=data.tag_height_m,
+                            region_m=outline_box(data.outline_m)).position_m
     ok = np.isfinite(fixes).all(axis=1)
     return fix_error_covariance(fixes[ok], xy[ok])
 

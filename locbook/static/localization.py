@@ -914,7 +914,7 @@ def _newton_matrix(resid, jac, d2, pos, anchors, model, clamp_m):
 def rss_ml_position(anchors_m, rss_dbm, model: PathLossModel, initial_m=None, *,
                     max_iter: int = 100, tol_m: float = 1e-7, min_distance_m: float = 1e-3,
                     raise_on_failure: bool = False, min_anchors: int | None = None,
-                    tag_height_m: float | None = None) -> LocalizationResult:
+                    tag_height_m: float | None = None, region_m=None) -> LocalizationResult:
     """Maximum-likelihood position from received powers ``(..., m)`` under Gaussian shadowing.
 
     Minimises ``sum_j (P_j - P_0 + 10 n log10 |p - a_j|)^2``, which equals Dogan's MLE cost (2.4)
@@ -947,11 +947,18 @@ def rss_ml_position(anchors_m, rss_dbm, model: PathLossModel, initial_m=None, *,
     Readings that are each possible but impossible together get ``status="poor_fit"`` (position and ``converged``
     kept): a converged problem whose cost over ``sigma^2`` exceeds ``chi2.ppf(1 - alpha, m_heard - dim)``,
     :data:`GOODNESS_OF_FIT_ALPHA` (model with ``sigma_db > 0`` only).
+
+    ``region_m=(lower, upper)``: the maximum likelihood over that box (a room's bounding box, e.g.
+    :func:`locbook.geometry.outline_box`) instead of the whole plane: the start is clipped into it and every step
+    is projected onto it (projected Levenberg-Marquardt), so no fix leaves the box; a fix on its boundary is the
+    constrained optimum, where the unconstrained one lies outside. Without it a fix can land far outside the room
+    when the readings point there (deep fades, a biased channel).
     """
     plan, vertical = _planar(anchors_m, tag_height_m)
     anchors_full = np.asarray(anchors_m, dtype=float)        # with heights: what recursive calls are given
     anchors_m = check_anchor_geometry(plan)
     m, dim = anchors_m.shape
+    lower, upper = _region(region_m, dim)
     rss_dbm = _readings("rss_dbm", rss_dbm, m)
     _check_model(model, m)
     check_scalar("max_iter", max_iter, ge=1, integer=True)
@@ -977,7 +984,8 @@ def rss_ml_position(anchors_m, rss_dbm, model: PathLossModel, initial_m=None, *,
                            lambda sel: rss_ml_position(anchors_full, flat[sel], model,
                                                        None if start is None else start[sel], max_iter=max_iter,
                                                        tol_m=tol_m, min_distance_m=min_distance_m,
-                                                       min_anchors=min_anchors, tag_height_m=tag_height_m),
+                                                       min_anchors=min_anchors, tag_height_m=tag_height_m,
+                                                       region_m=region_m),
                            "rss_ml_lm", "implausible_reading")
         return _raise_if_failed(res, raise_on_failure)
     if np.isnan(rss_dbm).any():
@@ -988,7 +996,7 @@ def rss_ml_position(anchors_m, rss_dbm, model: PathLossModel, initial_m=None, *,
             lambda heard, sel: rss_ml_position(
                 anchors_full[heard], flat[np.ix_(sel, heard)], _model_subset(model, heard, m),
                 None if start is None else start[sel], max_iter=max_iter, tol_m=tol_m,
-                min_distance_m=min_distance_m, tag_height_m=tag_height_m),
+                min_distance_m=min_distance_m, tag_height_m=tag_height_m, region_m=region_m),
             "rss_ml_lm")
         return _raise_if_failed(res, raise_on_failure)
     if initial_m is None:
@@ -1005,9 +1013,11 @@ def rss_ml_position(anchors_m, rss_dbm, model: PathLossModel, initial_m=None, *,
         res = _solve_where(startable, batch, dim,
                            lambda sel: rss_ml_position(anchors_full, flat[sel], model, pos[sel], max_iter=max_iter,
                                                        tol_m=tol_m, min_distance_m=min_distance_m,
-                                                       tag_height_m=tag_height_m),
+                                                       tag_height_m=tag_height_m, region_m=region_m),
                            "rss_ml_lm", "solver_failed")
         return _raise_if_failed(res, raise_on_failure)
+    if lower is not None:
+        pos = np.clip(pos, lower, upper)
     power = rss_dbm.reshape(-1, rss_dbm.shape[-1])
     clamp_m = max(float(min_distance_m), model.min_distance_m)     # the model's near-field clamp
     with np.errstate(over="ignore", invalid="ignore"):     # a start so far away that its distances overflow
@@ -1023,8 +1033,19 @@ def rss_ml_position(anchors_m, rss_dbm, model: PathLossModel, initial_m=None, *,
         hess = _newton_matrix(r_a, j_a, d2_a, p_a, anchors_m, model, clamp_m)
         jtr = np.einsum("...ki,...k->...i", j_a, r_a)
         # damped step: (H + lam diag(H)) delta = -J^T r
+        if lower is not None:
+            # projected Newton (Bertsekas 1982): a coordinate on a bound whose gradient points out of the box is
+            # held (its row and column of the system replaced by the identity, its gradient by 0); the others
+            # take the Newton step of the reduced problem, clipped into the box
+            held = ((p_a <= lower) & (jtr > 0)) | ((p_a >= upper) & (jtr < 0))
+            if held.any():
+                free = ~held
+                hess = np.where(free[:, :, None] & free[:, None, :], hess, 0.0) + held[:, :, None] * eye
+                jtr = np.where(free, jtr, 0.0)
         damp = l_a[:, None, None] * (eye * np.diagonal(hess, axis1=-2, axis2=-1)[:, None, :] + 1e-12 * eye)
         step = -_solve_small(hess + damp, jtr)
+        if lower is not None:                 # the step that stays inside the box
+            step = np.clip(p_a + step, lower, upper) - p_a
         trial = p_a + step
         r_new, j_new, d2_new = _rss_residual_jacobian(trial, anchors_m, power[active], model, clamp_m, vertical)
         c_new = np.sum(r_new**2, axis=-1)
@@ -1055,6 +1076,22 @@ def rss_ml_position(anchors_m, rss_dbm, model: PathLossModel, initial_m=None, *,
         )
     return LocalizationResult(pos.reshape(batch + (dim,)), converged.reshape(batch), cost.reshape(batch),
                               it, "rss_ml_lm", status.reshape(batch))
+
+
+def _region(region_m, dim: int):
+    """``(lower, upper)`` arrays ``(dim,)`` of a ``region_m`` box, checked (``(None, None)`` without one)."""
+    if region_m is None:
+        return None, None
+    try:
+        lower, upper = region_m
+    except (TypeError, ValueError):
+        raise ValueError(f"region_m must be a pair (lower, upper) of corners, got {region_m!r}") from None
+    lower = as_array("region_m lower corner", lower, ndim=1, trailing=(dim,))
+    upper = as_array("region_m upper corner", upper, ndim=1, trailing=(dim,))
+    if np.any(lower >= upper):
+        raise ValueError(f"region_m must have lower < upper in every coordinate, got {lower.tolist()} and "
+                         f"{upper.tolist()}")
+    return lower, upper
 
 
 def _check_model(model, m: int) -> None:

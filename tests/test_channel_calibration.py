@@ -223,3 +223,21 @@ def test_a_fit_of_independent_problems_or_a_failed_fit_is_not_a_model():
     assert not one.ok
     with pytest.raises(ValueError, match="cannot become a model.*too_few_distances"):
         one.model()
+
+
+def test_nan_padded_distances_fit_each_ragged_problem_as_its_own_samples():
+    """Problems of unequal length padded with NaN (distance and power) give the fits of the unpadded problems;
+    a NaN distance beside a reading is refused."""
+    d = np.array([[1.0, 2.0, 4.0, np.nan], [1.0, 2.0, 3.0, 5.0]])
+    p = np.array([[-40.0, -46.5, -52.0, np.nan], [-40.0, -46.0, -50.5, -54.0]])
+    both = lb.fit_path_loss(d, p)
+    for k, n in ((0, 3), (1, 4)):
+        alone = lb.fit_path_loss(d[k, :n], p[k, :n])
+        A = np.column_stack([np.ones(n), -10 * np.log10(d[k, :n])])          # numpy's least squares: the oracle
+        ref, exp = np.linalg.lstsq(A, p[k, :n], rcond=None)[0]
+        np.testing.assert_allclose([both.ref_power_dbm[k], both.path_loss_exp[k]], [ref, exp], rtol=1e-12)
+        np.testing.assert_allclose([alone.ref_power_dbm, alone.path_loss_exp], [ref, exp], rtol=1e-12)
+    bad = p.copy()
+    bad[0, 3] = -55.0
+    with pytest.raises(ValueError, match="NaN where rss_dbm holds a reading"):
+        lb.fit_path_loss(d, bad)

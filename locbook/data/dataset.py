@@ -424,8 +424,8 @@ def load_dataset(path) -> Dataset:
             notes[f"sorted {rec.name}"] = (f"{rec.sorted_rows} row(s) of {rec.file.name} went back in time and were "
                                            "put in time order (backward_time = 'sort')")
     if sentinels.size:
-        notes["invalid readings"] = (f"values {', '.join(f'{v:g}' for v in sentinels)} dBm are 'no reading' and load as "
-                                     "NaN (not heard)")
+        values = ", ".join(f"{v:g}" for v in sentinels)
+        notes["invalid readings"] = f"values {values} dBm are 'no reading' and load as NaN (not heard)"
     return Dataset(name, title, root, license_, attribution, anchors, outline, tag_height, recordings, changes,
                    license_file, notes)
 

@@ -38,8 +38,8 @@ EXAMPLE_SITE = {
     "walk_speed_m_s": 1.0,
 }
 
-_MANIFEST = '''# A synthetic example data set written by locbook.data.example (locbook data example DIR): raw BLE packets
-# from a log-distance channel with known truth, in the long format, with the faults real data bring.
+_MANIFEST = '''# A synthetic example data set written by locbook.data.example (locbook data example DIR):
+# raw BLE packets from a log-distance channel with known truth, in the long format, with the faults real data bring.
 name = "{name}"
 title = "Synthetic example: 20 m x 12 m hall, 8 anchors, raw packets at 4 Hz (locbook.data.example)"
 license = "CC0 1.0"

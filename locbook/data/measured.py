@@ -17,18 +17,18 @@ column         required meaning
 ``heading_rad``no       true heading of the transmitter (rad), where known
 ============== ======== ========================================================================================
 
-Other columns are kept (an epoch keeps those with one value within it, e.g. a point id). Every row has exactly
-the header's number of fields: an empty value is an empty field (``0.5,tag,A,`` = not heard), while a row with a field missing (``0.5,tag,A``) or one too many is
-refused. In the number columns an empty field, ``NaN``, ``NA`` or ``N/A`` is missing; ids are text, so ``NA`` is
-an id and only an empty field is no id. ``time_s`` is in seconds: a magnitude of :data:`MAX_TIME_S` (1e11 s) or
-more is milli-, micro- or nanoseconds since 1970 and is refused (as 64-bit floats such values also lose the
-differences between readings). A reading must lie in ``valid_range_dbm`` (default :data:`RSSI_RANGE_DBM`,
-``[-150, 20]`` dBm: outside it is a unit or sign error, never a reading); infinite values are errors anywhere.
-Values a data set writes for "invalid reading" (e.g. 0, 2, 4 dBm) are declared with ``invalid_values_dbm`` and
-become NaN (not heard); readings at or above 0 dBm with no sentinel declared and the default range load with one
-:class:`MeasuredDataWarning` (implausible beyond a few centimetres from an antenna). The same (time,
-transmitter, receiver) may appear once only; ``sort=True`` reorders a file by time (stably) before the checks.
-Files are UTF-8 (a byte-order mark is allowed).
+Other columns are kept (an epoch keeps those with one value within it, e.g. a point id). Every row has exactly the
+header's number of fields: an empty value is an empty field (``0.5,tag,A,`` = not heard), while a row with a field
+missing (``0.5,tag,A``) or one too many is refused. In the number columns an empty field, ``NaN``, ``NA`` or
+``N/A`` is missing; ids are text, so ``NA`` is an id and only an empty field is no id. ``time_s`` is in seconds: a
+magnitude of :data:`MAX_TIME_S` (1e11 s) or more is milli-, micro- or nanoseconds since 1970 and is refused (as
+64-bit floats such values also lose the differences between readings). A reading must lie in ``valid_range_dbm``
+(default :data:`RSSI_RANGE_DBM`, ``[-150, 20]`` dBm: outside it is a unit or sign error, never a reading); infinite
+values are errors anywhere. Values a data set writes for "invalid reading" (e.g. 0, 2, 4 dBm) are declared with
+``invalid_values_dbm`` and become NaN (not heard); readings at or above 0 dBm with no sentinel declared and the
+default range load with one :class:`MeasuredDataWarning` (implausible beyond a few centimetres from an antenna).
+The same (time, transmitter, receiver) may appear once only; ``sort=True`` reorders a file by time (stably) before
+the checks. Files are UTF-8 (a byte-order mark is allowed).
 
 **Anchors** (CSV): ``id, x, y, z`` in metres (``z`` is the anchor height; required, so that ranges are
 three-dimensional). Ids are unique; coordinates finite; no two anchors within :data:`ANCHOR_MIN_SEPARATION_M`

@@ -200,7 +200,8 @@ def tracks(data: Dataset, model: PathLossModel, recording: str, rng: np.random.G
     streams of ``rng``: the spread over them is the filter's own randomness).
 
     - ``kf_on_ml``: constant-velocity KF (``q``, m^2/s^3 white-acceleration PSD per axis, discrete form) on the
-      RSS-ML fixes (on the outline's bounding box) with ``R = fix_cov_m2`` (calibrated on the calibration epochs, not on this recording);
+      RSS-ML fixes (on the outline's bounding box) with ``R = fix_cov_m2`` (calibrated on the calibration epochs,
+      not on this recording);
     - ``ekf`` (parallel update) and ``ukf`` (``ukf_alpha``): the same motion model on the raw RSSI, per-anchor
       channel, 3-D distances;
     - ``particle``: SIR, ``L_t = L_t-1 + N(0, spread_m^2 I)`` reflected into the outline's box, resampled when

@@ -11,7 +11,8 @@ It is also Eq. (5.1) of Dogan (2015) and the per-reader fit of Ozkaya (2011), Eq
 whose bounded variant (alpha in [-55, -40] dBm, n in [1.5, 3]) is the ``*_bounds_*`` arguments.
 
 Problems carry leading batch axes: ``distance_m`` and ``rss_dbm`` of shape ``(..., N)`` are
-``prod(...)`` independent fits. NaN powers are missing samples (a reading not heard).
+``prod(...)`` independent fits. NaN powers are missing samples (a reading not heard); a NaN distance pads a
+ragged problem and must pair with a NaN power.
 
 A batch is isolated: the distances are the design (chosen by the experimenter), so a problem whose given
 distances are all equal cannot identify the exponent whatever was heard, and raises
@@ -151,7 +152,8 @@ def path_loss_design_matrix(distance_m, ref_distance_m: float = 1.0,
 
 
 def _prepare(distance_m, rss_dbm, ref_distance_m):
-    distance_m = as_array("distance_m", distance_m)
+    # NaN distances pad ragged problems (rows of unequal length) and must pair with a NaN power
+    distance_m = as_array("distance_m", distance_m, nan_ok=True)
     rss_dbm = as_array("rss_dbm", rss_dbm, nan_ok=True)
     check_scalar("ref_distance_m", ref_distance_m, gt=0)
     if distance_m.shape != rss_dbm.shape:
@@ -167,6 +169,11 @@ def _prepare(distance_m, rss_dbm, ref_distance_m):
     if distance_m.ndim == 0 or distance_m.shape[-1] < 2:
         raise DegenerateGeometryError("distance_m and rss_dbm must hold at least two measurements per problem "
                                       f"(on the last axis) for a path-loss fit, got shape {rss_dbm.shape}")
+    orphan = np.isnan(distance_m) & np.isfinite(rss_dbm)
+    if orphan.any():
+        at = tuple(int(i) for i in np.argwhere(orphan)[0])
+        raise ValueError(f"distance_m is NaN where rss_dbm holds a reading ({int(orphan.sum())} such sample(s), the "
+                         f"first at index {at}): a NaN distance pads a problem and must pair with a NaN power")
     mask = np.isfinite(rss_dbm) & np.isfinite(distance_m)
     _positive_distances(distance_m[mask])
     # the design (every given distance, heard or not): all equal is an error whatever was heard

@@ -277,14 +277,15 @@ def _measured_settings(ds, model: PathLossModel, fit: str) -> tuple[ProtocolChoi
             *_channel_settings(model, "the fit (sigma = residual spread per anchor)"))
 
 
-def measured_static_scenario(data, fit: str = "closed_form") -> StaticScenario:
+def measured_static_scenario(data, fit: str = "closed_form") -> StaticScenario | None:
     """The static scenario of a data set (a :class:`~locbook.data.dataset.Dataset`, a shipped name or a folder):
     every epoch with a true position of its scored recordings (:func:`locbook.scenarios.measured.scored_recordings`)
-    is a test point with its measured readings; k-NN's radio map is the calibration epochs."""
+    is a test point with its measured readings; k-NN's radio map is the calibration epochs. None when no recording
+    has a true position per epoch (nothing to score)."""
     ds, model = _measured_parts(data, fit)
     names = measured.scored_recordings(ds)
     if not names:
-        raise ValueError(f"data set {ds.name!r} has no recording with a true position to score static methods on")
+        return None
     tests = [measured.TestEpochs.of(ds, n) for n in names]
     truth = np.concatenate([t.truth_m for t in tests])
     rss = np.concatenate([t.rss_dbm for t in tests])

@@ -16,8 +16,11 @@ from locbook.errors import ParameterError
 from locbook.scenarios import measured as me
 
 ANCHORS = "id,x,y,z\nA,0,0,2.5\nB,6,0,2.5\nC,0,6,2.5\nD,6,6,2.5\n"
-CAL = ("time_s,transmitter,receiver,rssi_dbm,x_m,y_m\n"
-       + "".join(f"{t},tag,{a},-{50 + t + j},{1 + t},2\n" for t in range(4) for j, a in enumerate("ABCD")))
+_XYZ = {"A": (0, 0, 2.5), "B": (6, 0, 2.5), "C": (0, 6, 2.5), "D": (6, 6, 2.5)}
+# a calibration walk at (1 + t, 2), t = 0..3, the tag 1 m high, readings of -40 - 20 log10 d (whole dBm)
+CAL = ("time_s,transmitter,receiver,rssi_dbm,x_m,y_m\n" + "".join(
+    f"{t},tag,{a},{round(-40 - 20 * np.log10(np.hypot(np.hypot(1 + t - _XYZ[a][0], 2 - _XYZ[a][1]), 1.5)))},"
+    f"{1 + t},2\n" for t in range(4) for a in "ABCD"))
 TRACK = ("time_s,transmitter,receiver,rssi_dbm,x_m,y_m\n"
          + "".join(f"{0.5 * t},tag,{a},-{55 + j},{t},3\n" for t in range(6) for j, a in enumerate("ABCD")))
 MANIFEST = """name = "tiny"
@@ -106,11 +109,11 @@ def test_calibration_needs_truth_and_missing_manifest_is_named(tmp_path):
 
 def test_backward_time_is_refused_or_sorted_with_a_count(tmp_path):
     lines = TRACK.splitlines()
-    lines[5], lines[9] = lines[9], lines[5]                   # rows of t = 0.5 before rows of t = 1.0 swapped
+    lines[5], lines[9] = lines[9], lines[5]          # (1.0, A) logged before the four readings of t = 0.5
     track = "\n".join(lines) + "\n"
     refused(tmp_path, "walk.csv, line", "time goes back", track=track)
     ds = load_dataset(make(tmp_path, manifest=MANIFEST + '[readings]\nbackward_time = "sort"\n', track=track))
-    assert ds.recording("walk").sorted_rows == 1 and "sorted walk" in ds.notes
+    assert ds.recording("walk").sorted_rows == 4 and "sorted walk" in ds.notes     # the four t = 0.5 rows
     clean = load_dataset(make(folder(tmp_path, "clean")))
     np.testing.assert_array_equal(ds.epochs("walk").rss_dbm, clean.epochs("walk").rss_dbm)
 
@@ -280,3 +283,100 @@ def test_run_with_data_refuses_bad_input_before_running(tmp_path, capsys):
     assert "dataset.toml" in capsys.readouterr().err and not (tmp_path / "r").exists()
     assert main(["data", "check", str(bad)]) == EXIT_BAD_INPUT
     assert main(["data", "check", str(good)]) == 0 and "data set 'tiny'" in capsys.readouterr().out
+
+
+# -- what the review of the first version found ---------------------------------------------------------------
+def test_windows_are_half_open_so_a_regular_clock_gives_even_counts():
+    """2 Hz packets with 1 s windows: two readings in every window (round-half-to-even gave 2, 1, 3, 1, 3, ...)."""
+    rows = [(0.5 * k, "t", "A", -60.0 - k, 0.0, 0.0) for k in range(12)]
+    ep = epochs(_raw(rows), ["A"], window_s=1.0)
+    np.testing.assert_array_equal(ep.n_readings[:, 0], [1] + [2] * 5 + [1])     # [-0.5, 0.5), [0.5, 1.5), ...
+    rows = [(0.1 * k, "t", "A", -60.0, 0.0, 0.0) for k in range(20)]           # a decimal clock
+    np.testing.assert_array_equal(epochs(_raw(rows), ["A"], window_s=0.5).n_readings[:, 0], [3, 5, 5, 5, 2])
+
+
+def test_undeclared_readings_at_0_dbm_warn_through_a_manifest(tmp_path):
+    from locbook.data.measured import MeasuredDataWarning
+    with pytest.warns(MeasuredDataWarning, match="at or above 0 dBm"):
+        load_dataset(make(tmp_path, track=TRACK.replace(",-55,", ",0,")))
+
+
+def test_a_track_with_two_transmitters_or_a_point_column_is_refused(tmp_path):
+    two = TRACK + "".join(f"{0.5 * t},other,A,-60,{t},3\n" for t in range(3))
+    refused(tmp_path, "walk.csv holds 2 transmitters", "their own file", track=two)
+    refused(tmp_path, "point_column belongs to calibration and static",
+            manifest=MANIFEST.replace('role = "track"', 'role = "track"\npoint_column = "x_m"'))
+
+
+def test_empty_point_ids_are_refused_naming_the_line(tmp_path):
+    cal = CAL.replace("x_m,y_m\n", "x_m,y_m,point\n", 1)
+    cal = "\n".join(line + ("" if i == 0 else (",P1" if i < 9 else ("," if i == 9 else ",P2")))
+                    for i, line in enumerate(cal.splitlines())) + "\n"
+    manifest = MANIFEST.replace('role = "calibration"', 'role = "calibration"\npoint_column = "point"')
+    refused(tmp_path, "cal.csv, line 10, column 'point'", "the point id is empty", manifest=manifest, cal=cal)
+
+
+def test_nanoseconds_since_1970_keep_every_digit(tmp_path):
+    base = 1_700_000_000_000_000_000
+    ns = "time_s,transmitter,receiver,rssi_dbm,x_m,y_m\n" + "".join(
+        f"{base + 250_000_000 * t + 7},tag,{a},-{55 + j},{t},3\n" for t in range(6) for j, a in enumerate("ABCD"))
+    manifest = MANIFEST.replace("[geometry]", '[units]\ntime = "ns"\n[geometry]')
+    ds = load_dataset(make(tmp_path, manifest=manifest, track=ns,
+                           cal=CAL.replace("\n0,", "\n1700000000000000000,").replace("\n1,", "\n1700000000000000001,")
+                           .replace("\n2,", "\n1700000000000000002,").replace("\n3,", "\n1700000000000000003,")))
+    np.testing.assert_array_equal(ds.recording("walk").readings["time_s"].unique(), 0.25 * np.arange(6))
+    assert len(ds.epochs("cal")) == 4                 # 1 ns apart, still four distinct epochs
+
+
+def test_a_data_set_without_per_epoch_truth_has_no_static_scenario(tmp_path):
+    from locbook import benchmark as bm
+    track = "time_s,transmitter,receiver,rssi_dbm\n" + "".join(
+        f"{0.5 * t},tag,{a},-{55 + j}\n" for t in range(6) for j, a in enumerate("ABCD"))
+    ds = load_dataset(make(tmp_path, track=track))
+    assert "scoring" in ds.notes and me.scored_recordings(ds) == []
+    assert bm.measured_static_scenario(ds) is None and bm.measured_tracking_scenario(ds) is None
+
+
+def test_the_measured_bound_uses_the_anchors_each_epoch_heard():
+    """An epoch that did not hear some anchors: its bound is the closed-form CRLB of the anchors it heard."""
+    ds = load_dataset("kolakowski2021")
+    model = me.channel(me.calibrate(ds))
+    t = me.TestEpochs.of(ds, "robot")
+    rss = t.rss_dbm[:3].copy()
+    rss[1, [0, 4]] = np.nan
+    rss[2, [0, 1, 2, 3, 4]] = np.nan                     # one anchor: no fix, no bound
+    got = me.crlb_m(ds, model, t.truth_m[:3], rss)
+    np.testing.assert_allclose(got[0], me.crlb_m(ds, model, t.truth_m[:1])[0], rtol=1e-12)
+    keep = [1, 2, 3, 5]
+    alone = lb.rss_crlb_m(t.truth_m[1], ds.anchors_m[keep], model.path_loss_exp[keep], model.sigma_db[keep],
+                          tag_height_m=ds.tag_height_m)
+    np.testing.assert_allclose(got[1], alone, rtol=1e-10)
+    assert np.isnan(got[2])
+
+
+def test_data_sets_of_one_name_never_share_a_reports_folder(tmp_path):
+    from locbook.suite import load_suite, run_suite
+    from locbook.suite.spec import SuiteError
+    suite = load_suite()
+    exp = [e for e in suite.experiments if e.id == "measured-calibration"]
+    first, second = make(folder(tmp_path, "one")), make(folder(tmp_path, "two"))
+    from locbook.suite.runner import _claim_dataset_folder, _dataset_argument
+    name, _, roots, identity = _dataset_argument(str(first))
+    assert str(first) in roots and identity == str(first)
+    _claim_dataset_folder(tmp_path / "r" / "quick" / "data-tiny", name, identity)
+    with pytest.raises(SuiteError, match="another data set named 'tiny'"):
+        run_suite(suite, exp, "quick", report_root=tmp_path / "r", overrides={"data": str(second)},
+                  out_dir=None, progress="quiet")
+    with pytest.raises(ParameterError, match="not an empty folder"):
+        write_example_dataset(first, np.random.default_rng(1))
+
+
+def test_danis2022_facts():
+    """The second shipped data set as its README describes it."""
+    ds = load_dataset("danis2022")
+    assert len(ds.anchor_ids) == 12 and sorted(set(ds.anchors_m[:, 2])) == [1.22, 2.3]
+    assert len(set(ds.epochs("calibration").extra["point"])) == 81
+    assert len(set(ds.epochs("points").extra["point"])) == 45
+    assert len(ds.recordings_with("track")) == 9 and all(ds.recording(n).has_truth for n in ds.recordings_with("track"))
+    assert ds.tag_height_m == pytest.approx(1.85) and "median" in ds.notes["tag_height_m"]
+    assert "CC0" in ds.license and ds.license_file.is_file()

@@ -57,8 +57,8 @@ import numpy as np
 import pandas as pd
 
 from ..errors import ParameterError
-from .measured import (AGGREGATES, DataFormatError, Epochs, _read_text_table, _reading_options,
-                       epochs, read_anchors, read_outline, read_path_segments, validate_readings, READING_COLUMNS)
+from .measured import (AGGREGATES, DataFormatError, Epochs, _reading_options, epochs, read_anchors, read_outline,
+                       read_path_segments, read_readings_table, validate_readings_file)
 
 __all__ = ["Dataset", "Recording", "EpochRule", "load_dataset", "shipped_datasets", "datasets_dir",
            "MANIFEST", "ROLES", "dataset_summary"]
@@ -102,7 +102,8 @@ class EpochRule:
 
     def describe(self) -> str:
         if not self.window_s:
-            return "each distinct time of a transmitter is one epoch (the rows already are epochs)"
+            return ("each distinct time of a transmitter is one epoch (the rows already are epochs; aggregate and "
+                    "min_readings do not apply)")
         return (f"{self.window_s:g} s windows, the {self.aggregate} of each anchor's readings, at least "
                 f"{self.min_readings} reading(s) per anchor (else not heard)")
 
@@ -145,6 +146,8 @@ class Dataset:
     license_file: Path | None = None
     #: how each value the methods need was obtained, when the manifest did not give it directly
     notes: dict[str, str] = field(default_factory=dict)
+    #: every file the manifest names (itself included): what a report computed from the data set depends on
+    files: tuple[Path, ...] = ()
     _cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     @property
@@ -251,16 +254,29 @@ def _resolve(path) -> tuple[Path, Path]:
 
 
 def _convert(table: pd.DataFrame, time_scale: float, length_scale: float) -> pd.DataFrame:
-    """The readings table (text) with times in seconds (shifted to the file's first time when not seconds: large
-    epoch times keep their differences) and lengths in metres. A cell that is not a number is left as written, for
-    the long format's checks to name."""
+    """The readings table with times in seconds (shifted to the file's first time when not seconds; integer times,
+    such as nanoseconds since 1970, are shifted as integers, so no digit is lost) and lengths in metres. A cell that
+    is not a number is left as written, for the long format's checks to name."""
     if time_scale == 1.0 and length_scale == 1.0:
         return table
     out = table.copy()
 
     def scaled(column: str, scale: float, shift: bool):
-        text = out[column].astype(object)
-        v = pd.to_numeric(text.where(text.notna(), "").astype(str).str.strip(), errors="coerce").to_numpy(float)
+        raw = out[column]
+        if pd.api.types.is_numeric_dtype(raw) and not isinstance(raw.dtype, pd.CategoricalDtype):
+            v = raw.to_numpy(float)
+            out[column] = (v - np.nanmin(v) if shift and np.isfinite(v).any() else v) * scale
+            return
+        text = raw.astype(object).where(raw.notna(), "").astype(str).str.strip()
+        if shift and len(text) and text.str.fullmatch(r"[+-]?\d{1,19}").all():
+            try:
+                v = text.astype(np.int64).to_numpy()        # integers up to 9.2e18 (ns since 1970: year 2262)
+            except (OverflowError, ValueError):
+                v = None
+            if v is not None:
+                out[column] = (v - v.min()).astype(float) * scale
+                return
+        v = pd.to_numeric(text, errors="coerce").to_numpy(float)
         finite = np.isfinite(v)
         if shift and finite.any():
             v = v - np.min(v[finite])
@@ -275,11 +291,12 @@ def _convert(table: pd.DataFrame, time_scale: float, length_scale: float) -> pd.
     return out
 
 
-def _backward_rows(time_s: np.ndarray, transmitter: pd.Series) -> int:
-    """Rows whose time is earlier than the row before them of the same transmitter (file order)."""
-    codes = pd.factorize(transmitter)[0]
-    by_tx = np.argsort(codes, kind="stable")
-    return int(((np.diff(time_s[by_tx]) < 0) & (np.diff(codes[by_tx]) == 0)).sum())
+def _backward_rows(time_s: np.ndarray, transmitter) -> int:
+    """Rows that came after a later reading of the same transmitter (file order): the rows sorting moves back."""
+    frame = pd.DataFrame({"t": time_s, "tx": pd.factorize(transmitter)[0]})
+    latest = frame.groupby("tx")["t"].cummax()
+    earlier = latest.groupby(frame["tx"]).shift(1)
+    return int((frame["t"] < earlier).sum())
 
 
 def load_dataset(path) -> Dataset:
@@ -343,6 +360,7 @@ def load_dataset(path) -> Dataset:
         _fail(manifest, "no [[recording]]: a data set lists its readings files, each with a role "
                         f"({', '.join(ROLES)})")
     recordings: dict[str, Recording] = {}
+    invalid_found: dict[str, int] = {}
     for i, rec in enumerate(records):
         where = f"[[recording]] {i + 1}: "
         if not isinstance(rec, dict):
@@ -363,19 +381,30 @@ def load_dataset(path) -> Dataset:
                            where, default_rule)
         if role == "track" and not rule.window_s:
             _fail(manifest, f"{where}a track needs an epoch window (window_s > 0): the filters step on that clock")
-        table, lines = _read_text_table(path, READING_COLUMNS, "readings")
-        if point_column is not None and point_column not in table.columns:
-            _fail(manifest, f"{where}point_column {point_column!r} is not a column of {path.name} "
-                            f"(its columns: {list(table.columns)})")
-        table = _convert(table, time_scale, length_scale)
-        source = f"readings file {path}"
+        if role == "track" and point_column is not None:
+            _fail(manifest, f"{where}point_column belongs to calibration and static recordings (a tag standing at "
+                            "named points); a track moves")
+        table, lines = read_readings_table(path, time_as_text=time_scale != 1.0)
+        if point_column is not None:
+            _check_point_column(table, lines, point_column, path, manifest, where)
+        readings = validate_readings_file(path, table, lines, lambda t: _convert(t, time_scale, length_scale),
+                                          anchor_ids=anchors["id"], invalid_values_dbm=sentinels,
+                                          # None when not declared: readings >= 0 dBm then warn
+                                          valid_range_dbm=opts.get("valid_range_dbm"), sort=backward == "sort")
         sorted_rows = 0
-        if backward == "sort":
-            t = pd.to_numeric(table["time_s"].astype(str).str.strip(), errors="coerce").to_numpy(float)
-            sorted_rows = _backward_rows(t, table["transmitter"].astype(str).str.strip())
-        readings = validate_readings(table, source=source, lines=lines, anchor_ids=anchors["id"],
-                                     invalid_values_dbm=sentinels, valid_range_dbm=valid_range,
-                                     sort=backward == "sort")
+        if backward == "sort":     # counted on the file's order (validate_readings has sorted its copy)
+            t = _convert(table, time_scale, length_scale)["time_s"]
+            sorted_rows = _backward_rows(pd.to_numeric(pd.Series(t), errors="coerce").to_numpy(float),
+                                         table["transmitter"])
+        if sentinels.size:
+            raw_rssi = pd.to_numeric(pd.Series(table["rssi_dbm"]).astype(object), errors="coerce").to_numpy(float)
+            invalid_found[rname] = int(np.isin(raw_rssi, sentinels).sum())
+        if role == "track":
+            senders = readings["transmitter"].unique()
+            if len(senders) > 1:
+                _fail(manifest, f"{where}{path.name} holds {len(senders)} transmitters ({', '.join(map(str, senders[:5]))}"
+                                f"{', ...' if len(senders) > 5 else ''}); a track follows one tag: give each "
+                                "transmitter's rows their own file and [[recording]]")
         reference = None
         if "reference_path" in rec:
             if role != "track":
@@ -414,7 +443,8 @@ def load_dataset(path) -> Dataset:
         outline = read_outline(_file(manifest, root, _string(manifest, geometry, "outline", "[geometry] "),
                                      "[geometry] outline: ")) * length_scale
     else:
-        pts = np.vstack([anchors[["x", "y"]].to_numpy(float), truth_xy[with_xy]])
+        paths = [r.reference_path_m.reshape(-1, 2) for r in recordings.values() if r.reference_path_m is not None]
+        pts = np.vstack([anchors[["x", "y"]].to_numpy(float), truth_xy[with_xy], *paths])
         lo, hi = pts.min(axis=0) - DEFAULT_OUTLINE_MARGIN_M, pts.max(axis=0) + DEFAULT_OUTLINE_MARGIN_M
         outline = np.array([[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]]])
         notes["outline"] = (f"none given: the box around the anchors and the true positions with a "
@@ -425,9 +455,36 @@ def load_dataset(path) -> Dataset:
                                            "put in time order (backward_time = 'sort')")
     if sentinels.size:
         values = ", ".join(f"{v:g}" for v in sentinels)
-        notes["invalid readings"] = f"values {values} dBm are 'no reading' and load as NaN (not heard)"
-    return Dataset(name, title, root, license_, attribution, anchors, outline, tag_height, recordings, changes,
-                   license_file, notes)
+        found = ", ".join(f"{n} in {k}" for k, n in invalid_found.items() if n) or "none found"
+        notes["invalid readings"] = f"values {values} dBm are 'no reading' and load as NaN (not heard): {found}"
+    if not any(r.role == "static" or (r.role == "track" and r.has_truth) for r in recordings.values()):
+        notes["scoring"] = ("no static or track recording has a true position per epoch: the static methods are "
+                            "not scored (tracks with a reference path are scored by their distance to it)")
+    files = [manifest, root / _string(manifest, geometry, "anchors", "[geometry] ")]
+    files += [root / geometry["outline"]] if "outline" in geometry else []
+    files += [license_file] if license_file else []
+    for i, rec in enumerate(records):
+        files += [recordings[rec["name"]].file] + ([root / rec["reference_path"]] if "reference_path" in rec else [])
+    data = Dataset(name, title, root, license_, attribution, anchors, outline, tag_height, recordings, changes,
+                   license_file, notes, tuple(files))
+    for rname, rec in recordings.items():    # every recording's epochs now: a problem is named with its file
+        try:
+            data.epochs(rname)
+        except DataFormatError as exc:
+            raise DataFormatError(f"readings file {rec.file} (recording {rname!r}): {exc}") from None
+    return data
+
+
+def _check_point_column(table: pd.DataFrame, lines, column: str, path: Path, manifest: Path, where: str) -> None:
+    """Every row of a point column names its point (an empty id would make one 'point' of rows in transit)."""
+    ids = table[column]
+    text = ids.astype(object).where(ids.notna(), "").astype(str).str.strip()
+    empty = (text == "").to_numpy()
+    if empty.any():
+        i = int(np.flatnonzero(empty)[0])
+        raise DataFormatError(f"readings file {path}, line {lines[i]}, column {column!r}: the point id is empty "
+                              f"({int(empty.sum())} such row(s)); every row of a point column ({manifest.name}, "
+                              f"{where.rstrip(': ')}) names its point: drop rows taken between points, or label them")
 
 
 def _epoch_rule(manifest, raw: dict, where: str, default: EpochRule | None) -> EpochRule:

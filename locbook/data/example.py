@@ -137,14 +137,19 @@ def _loop(duration_s: float, offset_m: float, rng, site, t0: float = 0.0):
 
 
 def write_example_dataset(folder, rng: np.random.Generator, *, name: str = "example", walk_s: float = 120.0,
-                          seed_note: int | str = "given") -> Path:
-    """Write the example data set (module docstring) to ``folder`` (created) and return it. ``walk_s``: length of
-    each walk (s): 120 s gives about 30,000 readings in all; the loader benchmark scales it up. ``name``: the
-    manifest's name (it names the reports folder)."""
+                          seed_note: int | str = "given", force: bool = False) -> Path:
+    """Write the example data set (module docstring) to ``folder`` (created; a folder that holds files is refused
+    unless ``force``, so a typo never overwrites a data set) and return it. ``walk_s``: length of each walk (s): 120 s
+    gives about 30,000 readings in all; the loader benchmark scales it up. ``name``: the manifest's name (it names
+    the reports folder)."""
+    from ..errors import ParameterError
     if not isinstance(rng, np.random.Generator):
         raise TypeError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
     site = EXAMPLE_SITE
     folder = Path(folder)
+    if folder.exists() and (not folder.is_dir() or (any(folder.iterdir()) and not force)):
+        raise ParameterError(f"{folder} exists and is not an empty folder; the example is written to a new or empty "
+                             "folder (force=True, `--force`, to overwrite its files)")
     folder.mkdir(parents=True, exist_ok=True)
     w, h = site["hall_m"]
     pd.DataFrame({"id": [f"A{j + 1}" for j in range(len(site["anchors_m"]))], "x": site["anchors_m"][:, 0],

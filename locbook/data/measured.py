@@ -235,11 +235,12 @@ def _check_time_unit(time_s: np.ndarray, raw: pd.Series, source: str, lines) -> 
     i = int(np.flatnonzero(huge)[0])
     t = float(time_s[i])
     guess = ""
-    for scale, unit in ((1e3, "milliseconds"), (1e6, "microseconds"), (1e9, "nanoseconds")):
+    for scale, unit, short in ((1e3, "milliseconds", "ms"), (1e6, "microseconds", "us"), (1e9, "nanoseconds", "ns")):
         if 1e8 <= abs(t) / scale < MAX_TIME_S:   # 1973 .. 5138 as seconds since 1970
             when = datetime.fromtimestamp(t / scale, tz=timezone.utc).isoformat(timespec="seconds")
-            guess = (f"; it looks like {unit} since 1970 ({t / scale!r} s = {when}): convert the column to seconds "
-                     f"(divide by {scale:.0e}, after subtracting the first time to keep the small differences)")
+            guess = (f"; it looks like {unit} since 1970 ({t / scale!r} s = {when}): in a data set, declare "
+                     f"[units] time = \"{short}\" in dataset.toml; else convert the column to seconds (divide by "
+                     f"{scale:.0e}, after subtracting the first time to keep the small differences)")
             break
     raise DataFormatError(f"{source}, line {lines[i]}, column 'time_s': {str(raw.iloc[i]).strip()!r} is not a time in "
                           f"seconds ({abs(t) / 3.15576e7:.3g} years; time_s is at most {MAX_TIME_S:.0e} s in "
@@ -280,12 +281,12 @@ def validate_readings(table: pd.DataFrame, *, source: str, lines=None, anchor_id
     out["time_s"] = time_s
     for col in ("transmitter", "receiver"):
         # ids are text: "NA", "N/A" or "nan" are ids, only an empty field is no id
-        ids = text[col].astype(object).where(text[col].notna(), "").astype(str).str.strip()
-        empty = (ids == "").to_numpy()
+        ids = _ids(text[col])
+        empty = ids.isna().to_numpy()
         if empty.any():
             i = int(np.flatnonzero(empty)[0])
             raise DataFormatError(f"{source}, line {lines[i]}, column {col!r}: the id is empty")
-        out[col] = ids.to_numpy()
+        out[col] = ids.array
     rssi = _numeric(text, "rssi_dbm", source, lines, missing_ok=True)
     rssi = np.where(np.isin(rssi, sentinels), np.nan, rssi)     # declared sentinels: not heard
     outside = np.isfinite(rssi) & ((rssi < low) | (rssi > high))
@@ -346,17 +347,115 @@ def validate_readings(table: pd.DataFrame, *, source: str, lines=None, anchor_id
                               "reordered by time, stably)")
     extra = [c for c in text.columns if c not in out.columns]
     for col in extra:
-        out[col] = text[col].to_numpy()
+        out[col] = text[col].array
     return out
+
+
+def _ids(column: pd.Series) -> pd.Series:
+    """Text ids, stripped, as categories (one string per distinct id, whatever the number of rows); an empty or
+    absent field is missing (NaN)."""
+    if not isinstance(column.dtype, pd.CategoricalDtype):
+        column = column.astype(object).where(column.notna(), "").astype(str).astype("category")
+    cats = column.cat.categories.astype(str).str.strip()
+    uniq, inverse = np.unique(cats.to_numpy(object), return_inverse=True)
+    codes = column.cat.codes.to_numpy()
+    new = np.where(codes < 0, -1, inverse[np.maximum(codes, 0)])
+    empty = np.flatnonzero(uniq == "")
+    if empty.size:
+        new = np.where(new == empty[0], -1, new - (new > empty[0]))
+        uniq = np.delete(uniq, empty[0])
+    return pd.Series(pd.Categorical.from_codes(new, pd.Index(uniq, dtype=object)), index=column.index)
+
+
+#: bytes per block of the field-count scan of :func:`read_readings_table` (its scratch memory is ~6x this)
+_SCAN_BLOCK = 1 << 25
+
+
+def _one_record_per_line(data: bytes, n_fields: int) -> bool:
+    """Whether every line of ``data`` (a CSV without quotes) after the header holds ``n_fields`` fields and is not
+    blank, with LF or CRLF line ends: then data row ``i`` is line ``i + 2`` and no row is short or long."""
+    if data.count(b"\r") != data.count(b"\r\n"):          # CR-only line ends: the exact reader counts those
+        return False
+    body_start = data.find(b"\n") + 1
+    if body_start == 0:
+        return True                                        # a header alone
+    want = n_fields - 1
+    pos = body_start
+    while pos < len(data):
+        end = data.rfind(b"\n", pos, pos + _SCAN_BLOCK) + 1 if pos + _SCAN_BLOCK < len(data) else len(data)
+        if end <= pos:                                     # one line longer than a block: scan it whole
+            end = data.find(b"\n", pos) + 1 or len(data)
+        block = np.frombuffer(data, np.uint8, end - pos, pos)
+        newline = np.flatnonzero(block == 10)
+        ends = newline if end < len(data) or block[-1] == 10 else np.r_[newline, block.size]
+        commas = np.cumsum(block == 44, dtype=np.int32)
+        per_line = np.diff(np.r_[0, commas[np.minimum(ends, block.size - 1)]])
+        if ends.size and ends[-1] == block.size:           # the last line has no newline: its commas run to the end
+            per_line[-1] = commas[-1] - (commas[ends[-2]] if ends.size > 1 else 0)
+        if np.any(per_line != want):
+            return False
+        pos = end
+    return True
+
+
+def read_readings_table(path, *, time_as_text: bool = False) -> tuple[pd.DataFrame, np.ndarray]:
+    """A readings CSV as :func:`validate_readings` takes it, and each row's line: the number columns as floats
+    (empty, ``NaN``, ``NA``, ``N/A`` missing), the ids and other columns as categories (text, stripped later).
+
+    Files of one record per line without quotes (every logger's output) are parsed by pandas' C reader, at a few
+    bytes per field; any other file, or one that reader refuses, goes through the exact reader
+    (``_read_text_table``), whose messages name the line and column of the problem. ``time_as_text`` keeps
+    ``time_s`` as written (integer nanoseconds since 1970 lose their last digits as floats)."""
+    path = Path(path)
+    if not path.is_file():
+        raise DataFormatError(f"readings file {path} does not exist")
+    data = path.read_bytes()
+    bom = data.startswith(b"\xef\xbb\xbf")
+    body = data[3:] if bom else data
+    header_end = body.find(b"\n")
+    header = [c.strip() for c in body[:header_end if header_end >= 0 else len(body)].decode("utf-8", "replace")
+              .rstrip("\r").split(",")]
+    numeric = [c for c in ("time_s", "rssi_dbm", *OPTIONAL_READING_COLUMNS)
+               if c in header and not (time_as_text and c == "time_s")]
+    fast = (b'"' not in body and all(c in header for c in READING_COLUMNS) and len(set(header)) == len(header)
+            and all(header) and _one_record_per_line(body, len(header)))
+    if fast:
+        try:
+            body.decode("utf-8")
+            kinds = {c: (float if c in numeric else str if c == "time_s" else "category") for c in header}
+            table = pd.read_csv(io.BytesIO(body), dtype=kinds,
+                                keep_default_na=False, na_values={c: sorted(_MISSING_TEXT) for c in numeric},
+                                skipinitialspace=True, engine="c", encoding="utf-8")
+        except (ValueError, UnicodeDecodeError, pd.errors.ParserError):
+            fast = False             # the exact reader says what and where
+    if not fast:
+        return _read_text_table(path, READING_COLUMNS, "readings")
+    table.columns = header
+    table.attrs["parsed"] = True       # numbers already parsed: see validate_readings_file
+    return table, _file_lines(len(table))
+
+
+def validate_readings_file(path, table: pd.DataFrame, lines, prepare=lambda t: t, **options) -> pd.DataFrame:
+    """:func:`validate_readings` of a table from :func:`read_readings_table` (after ``prepare``, e.g. a unit
+    conversion). Where the fast reader parsed the numbers and the table breaks a rule, the file is read again as
+    text and checked again, so that the message quotes the file's own text (two times equal only as floats)."""
+    source = f"readings file {path}"
+    try:
+        return validate_readings(prepare(table), source=source, lines=lines, **options)
+    except DataFormatError:
+        if not table.attrs.get("parsed"):
+            raise
+    exact, lines = _read_text_table(path, READING_COLUMNS, "readings")
+    return validate_readings(prepare(exact), source=source, lines=lines, **options)
 
 
 def read_readings(path, *, anchor_ids=None, invalid_values_dbm=None, valid_range_dbm=None,
                   sort: bool = False) -> pd.DataFrame:
     """Read and check a readings CSV of the long format (module docstring); the options are those of
     :func:`validate_readings` (sentinel values, plausible range, sorting by time)."""
-    table, lines = _read_text_table(path, READING_COLUMNS, "readings")
-    return validate_readings(table, source=f"readings file {path}", lines=lines, anchor_ids=anchor_ids,
-                             invalid_values_dbm=invalid_values_dbm, valid_range_dbm=valid_range_dbm, sort=sort)
+    table, lines = read_readings_table(path)
+    return validate_readings_file(path, table, lines, anchor_ids=anchor_ids, invalid_values_dbm=invalid_values_dbm,
+                                  valid_range_dbm=valid_range_dbm, sort=sort)
 
 
 def read_anchors(path, *, min_separation_m: float = ANCHOR_MIN_SEPARATION_M) -> pd.DataFrame:
@@ -481,8 +580,8 @@ def epochs(readings: pd.DataFrame, anchor_ids, *, window_s: float | None = None,
     its true position must be the same on all of its rows (else :class:`DataFormatError`).
 
     ``window_s > 0``: raw packets -> epochs. A transmitter's readings go to the window of the nearest tick of a
-    clock of period ``window_s`` started at that transmitter's first reading (tick ``k`` holds ``t0 + k w`` +- ``w
-    / 2``, so rows already on such a clock keep one epoch each), and the readings of one anchor in one window are
+    clock of period ``window_s`` started at that transmitter's first reading (tick ``k`` holds ``[t0 + (k - 1/2) w,
+    t0 + (k + 1/2) w)``, so rows already on such a clock keep one epoch each), and the readings of one anchor in one window are
     combined by ``aggregate`` (``"mean"``, ``"median"`` or ``"max"`` of the dBm values); an anchor with fewer than
     ``min_readings`` readings in the window is NaN (not heard). The epoch's time is its tick; its true position is
     the mean of its rows' positions (a moving tag: the window's mean), its heading their circular mean.
@@ -493,9 +592,9 @@ def epochs(readings: pd.DataFrame, anchor_ids, *, window_s: float | None = None,
     anchor_ids = tuple(str(a) for a in anchor_ids)
     group_by = _check_epoch_rule(window_s, aggregate, min_readings, group_by, readings)
     col = {a: j for j, a in enumerate(anchor_ids)}
-    receivers = readings["receiver"].map(col)
+    receivers = pd.Series(readings["receiver"].map(col), dtype=float)
     if receivers.isna().any():
-        bad = readings["receiver"][receivers.isna()].iloc[0]
+        bad = readings["receiver"][receivers.isna().to_numpy()].iloc[0]
         raise DataFormatError(f"receiver {bad!r} is not one of the anchor ids {list(anchor_ids)}")
     receivers = receivers.to_numpy(int)
     time_s = readings["time_s"].to_numpy(float)
@@ -503,12 +602,14 @@ def epochs(readings: pd.DataFrame, anchor_ids, *, window_s: float | None = None,
     windowed = bool(window_s)
     if windowed:
         first = pd.Series(time_s).groupby(tx_codes).transform("min").to_numpy()
-        tick = np.rint((time_s - first) / window_s)
+        # half-open windows [t0 + (k - 1/2) w, t0 + (k + 1/2) w): a reading half a window from a tick goes to the later
+        # tick (np.rint's round-half-to-even would make windows alternately wider and narrower); the relative epsilon
+        # keeps readings on a decimal clock (0.1 s steps) on one side of every boundary
+        tick = np.floor((time_s - first) / window_s + 0.5 + 1e-9)
         epoch_time = first + tick * window_s
     else:
         epoch_time = time_s
-    keys = [pd.Series(epoch_time), pd.Series(tx_codes)] + [readings[c].reset_index(drop=True).astype(str)
-                                                             for c in group_by]
+    keys = [pd.Series(epoch_time), pd.Series(tx_codes)] + [pd.Series(pd.factorize(readings[c])[0]) for c in group_by]
     row, uniques = pd.MultiIndex.from_arrays(keys).factorize()
     n, m = len(uniques), len(anchor_ids)
     # epochs in time order, ties by the transmitter's first appearance, then by first appearance of the group
@@ -550,9 +651,12 @@ def epochs(readings: pd.DataFrame, anchor_ids, *, window_s: float | None = None,
     else:
         per_epoch = np.full((n, 4), np.nan)
         per_epoch[row] = truth
-        again = np.full((n, 4), np.nan)
-        again[row[::-1]] = truth[::-1]             # the first row of each epoch, to compare with the last
-        differ = ~((per_epoch == again) | (np.isnan(per_epoch) & np.isnan(again)))
+        # every row of an epoch must give the same truth: the same value on all of them, or none on all
+        grouped = pd.DataFrame(truth).groupby(row)
+        low, high, count = (grouped.min().to_numpy(), grouped.max().to_numpy(), grouped.count().to_numpy())
+        size = grouped.size().to_numpy()[:, None]
+        differ = np.full((n, 4), False)
+        differ[grouped.min().index.to_numpy()] = (low != high) & (count > 0) | (count > 0) & (count < size)
         if differ.any():
             e = int(np.flatnonzero(differ.any(axis=1))[0])
             raise DataFormatError(f"epoch at {_seconds(utime[order[e]])} of transmitter {tx_names[utx[order[e]]]!r} "

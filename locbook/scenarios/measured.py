@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..bounds.crlb import rss_crlb_m
+from ..bounds.crlb import rss_crlb_m, rss_position_information
 from ..data.dataset import Dataset, load_dataset
 from ..data.measured import regular_epochs
 from ..errors import ConvergenceError, ParameterError
@@ -98,6 +98,14 @@ def calibrate(data: Dataset, *, mode: str = "per_anchor", fit: str = "closed_for
         failed = ", ".join(f"{n}: {s}" for n, s in zip(names, status) if s != "ok") or "none"
         raise ConvergenceError(f"the {fit} {mode} path-loss fit on {data.name!r} failed (solver status "
                                f"{result.status}); not fitted: {failed}")
+    exponents = np.atleast_1d(result.path_loss_exp)
+    if np.any(exponents <= 0):
+        names = list(data.anchor_ids) if exponents.size == len(data.anchor_ids) else ["all"]
+        bad = ", ".join(f"{a}: n = {v:.3g}" for a, v in zip(names, exponents) if v <= 0)
+        raise ConvergenceError(f"the {fit} {mode} path-loss fit on {data.name!r} gives a path-loss exponent <= 0 "
+                               f"({bad}): the anchor's readings do not fall with distance on the calibration "
+                               "recordings (a mislabelled anchor or wrong coordinates?); check it, or fit with "
+                               "fit='bounded' (exponents in PATH_LOSS_EXP_BOUNDS)")
     return result
 
 
@@ -175,11 +183,23 @@ def static_fixes(data: Dataset, model: PathLossModel, rss_dbm, *, grid_spacing_m
     return out
 
 
-def crlb_m(data: Dataset, model: PathLossModel, positions_m):
+def crlb_m(data: Dataset, model: PathLossModel, positions_m, rss_dbm=None):
     """``sqrt(trace(J^-1))`` of the plan position for the fitted per-anchor channel at plan positions ``(..., 2)``,
-    the tag at the data set's known height (3-D distances; the 2-D bound of :func:`locbook.rss_crlb_m`)."""
-    return rss_crlb_m(positions_m, data.anchors_m, model.path_loss_exp, model.sigma_db,
-                      tag_height_m=data.tag_height_m)
+    the tag at the data set's known height (3-D distances; the 2-D bound of :func:`locbook.rss_crlb_m`). With the
+    epochs' readings ``rss_dbm (..., m)`` the information of each epoch is that of the anchors it heard (an anchor
+    not heard tells nothing), and an epoch with too few of them for a fix has NaN (no bound)."""
+    if rss_dbm is None:
+        return rss_crlb_m(positions_m, data.anchors_m, model.path_loss_exp, model.sigma_db,
+                          tag_height_m=data.tag_height_m)
+    anchors = data.anchors_m
+    info = rss_position_information(positions_m, anchors[:, :2], model.path_loss_exp, model.sigma_db,
+                                    height_offset_m=anchors[:, 2] - data.tag_height_m,
+                                    heard=~np.isnan(np.asarray(rss_dbm, float)))
+    det = info[..., 0, 0] * info[..., 1, 1] - info[..., 0, 1] ** 2
+    trace = info[..., 0, 0] + info[..., 1, 1]
+    ok = det > 1e-12 * np.maximum(trace, 1e-300) ** 2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(ok, np.sqrt(trace / np.where(ok, det, 1.0)), np.nan)
 
 
 def epoch_s(data: Dataset, recording: str) -> float:

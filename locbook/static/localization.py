@@ -891,12 +891,14 @@ def _solve_small(a, b):
     return np.linalg.solve(a, b[..., None])[..., 0]
 
 
-def _newton_matrix(resid, jac, d2, pos, anchors, model, clamp_m):
+def _newton_matrix(resid, jac, d2, pos, anchors, model, clamp_m, held=None):
     """Hessian of 0.5 |r|^2: J^T J + sum_j r_j grad^2 r_j, with
     grad^2 r_j = c (I / d_j^2 - 2 (p - a_j)(p - a_j)^T / d_j^4), c = 10 n / ln 10 (the derivative of the one model's
     Jacobian, :func:`locbook.models.rss.rss_mean_jacobian`; 0 within the clamp ``clamp_m``, where the mean is flat).
     Falls back to the Gauss-Newton matrix J^T J where the full Hessian is not positive definite. The second-order
-    term matters: shadowing leaves large residuals, where Gauss-Newton converges only linearly."""
+    term matters: shadowing leaves large residuals, where Gauss-Newton converges only linearly. ``held (..., dim)``:
+    coordinates held on a bound (projected Newton): their rows and columns are replaced by the identity before the
+    test, so the choice is made on the free block, the matrix the step actually uses."""
     jtj = np.einsum("...ki,...kj->...ij", jac, jac)
     diff = pos[..., None, :] - anchors
     c = np.broadcast_to(10.0 * np.asarray(model.path_loss_exp) / np.log(10.0), d2.shape)
@@ -907,6 +909,11 @@ def _newton_matrix(resid, jac, d2, pos, anchors, model, clamp_m):
                                 - 2.0 * diff[..., :, None] * diff[..., None, :] / (d2**2)[..., None, None])
     hr = np.where(inside[..., None, None], 0.0, hr)
     full = jtj + np.einsum("...k,...kij->...ij", resid, hr)
+    if held is not None and held.any():
+        keep = ~(held[..., :, None] | held[..., None, :])
+        ident = held[..., :, None] * eye
+        full = np.where(keep, full, 0.0) + ident
+        jtj = np.where(keep, jtj, 0.0) + ident
     eig_min = _min_eigenvalue(full)
     return np.where((eig_min > 1e-9 * np.trace(jtj, axis1=-2, axis2=-1))[..., None, None], full, jtj)
 
@@ -952,7 +959,8 @@ def rss_ml_position(anchors_m, rss_dbm, model: PathLossModel, initial_m=None, *,
     :func:`locbook.geometry.outline_box`) instead of the whole plane: the start is clipped into it and every step
     is projected onto it (projected Levenberg-Marquardt), so no fix leaves the box; a fix on its boundary is the
     constrained optimum, where the unconstrained one lies outside. Without it a fix can land far outside the room
-    when the readings point there (deep fades, a biased channel).
+    when the readings point there (deep fades, a biased channel). The cost is not convex: like the free problem,
+    the boxed one can stop in another local minimum than a different solver started at the same point.
     """
     plan, vertical = _planar(anchors_m, tag_height_m)
     anchors_full = np.asarray(anchors_m, dtype=float)        # with heights: what recursive calls are given
@@ -1030,18 +1038,16 @@ def rss_ml_position(anchors_m, rss_dbm, model: PathLossModel, initial_m=None, *,
     it = 0
     for it in range(1, max_iter + 1):
         p_a, r_a, j_a, d2_a, c_a, l_a = (a[active] for a in (pos, resid, jac, d2, cost, lam))
-        hess = _newton_matrix(r_a, j_a, d2_a, p_a, anchors_m, model, clamp_m)
         jtr = np.einsum("...ki,...k->...i", j_a, r_a)
-        # damped step: (H + lam diag(H)) delta = -J^T r
+        held = None
         if lower is not None:
             # projected Newton (Bertsekas 1982): a coordinate on a bound whose gradient points out of the box is
             # held (its row and column of the system replaced by the identity, its gradient by 0); the others
             # take the Newton step of the reduced problem, clipped into the box
             held = ((p_a <= lower) & (jtr > 0)) | ((p_a >= upper) & (jtr < 0))
-            if held.any():
-                free = ~held
-                hess = np.where(free[:, :, None] & free[:, None, :], hess, 0.0) + held[:, :, None] * eye
-                jtr = np.where(free, jtr, 0.0)
+            jtr = np.where(held, 0.0, jtr)
+        hess = _newton_matrix(r_a, j_a, d2_a, p_a, anchors_m, model, clamp_m, held)
+        # damped step: (H + lam diag(H)) delta = -J^T r
         damp = l_a[:, None, None] * (eye * np.diagonal(hess, axis1=-2, axis2=-1)[:, None, :] + 1e-12 * eye)
         step = -_solve_small(hess + damp, jtr)
         if lower is not None:                 # the step that stays inside the box

@@ -154,6 +154,9 @@ def main(argv: list[str] | None = None) -> int:
     data.add_argument("dataset", metavar="DIR_OR_NAME", help="the data set's folder (or its dataset.toml), or a "
                                                             "shipped name; for example: the folder to create")
     data.add_argument("--seed", type=int, default=1, help="example: the generator's seed (default 1)")
+    data.add_argument("--name", default="example",
+                      help="example: the data set's name in its manifest (names the reports folder; default example)")
+    data.add_argument("--force", action="store_true", help="example: write into a folder that already holds files")
     for command in (lst, show, nbs, run, study, bracket, data):   # --suite after the command too; SUPPRESS keeps one given before it
         command.add_argument("--suite", type=Path, default=argparse.SUPPRESS, help=suite_help)
     args = parser.parse_args(argv)
@@ -171,7 +174,8 @@ def main(argv: list[str] | None = None) -> int:
             if args.action == "example":
                 import numpy as np
                 from ..data.example import write_example_dataset
-                folder = write_example_dataset(args.dataset, np.random.default_rng(args.seed), seed_note=args.seed)
+                folder = write_example_dataset(args.dataset, np.random.default_rng(args.seed), seed_note=args.seed,
+                                               name=args.name, force=args.force)
                 print(f"wrote the example data set to {folder}; check it with `locbook data check {folder}` and run "
                       f"the battery with `locbook run --data {folder}`")
                 return 0

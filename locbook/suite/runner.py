@@ -473,12 +473,13 @@ def run_suite(suite: Suite, experiments: list[Experiment], profile: str, *, jobs
     _check_options(timeout_s, jobs, executor, scheduler)
     data_roots: list[str] = []
     per_experiment: dict[str, dict] = {}
-    dataset_name = None
-    if data is not None:
-        dataset_name, value, root_dir = _dataset_argument(data)
-        data_roots.append(root_dir)
-        if "data" in overrides:
+    dataset_name = identity = None
+    if "data" in overrides:
+        if data is not None:
             raise SuiteError("give the data set once: --data or -p data=..., not both")
+        data = overrides.pop("data")          # -p data=X is --data X: checked, hashed, its own folder
+    if data is not None:
+        dataset_name, value, data_roots, identity = _dataset_argument(data)
         for exp in experiments:
             declared = exp.declared_parameters()
             if "data" not in declared:
@@ -502,6 +503,8 @@ def run_suite(suite: Suite, experiments: list[Experiment], profile: str, *, jobs
         report_dir = root / profile
     if dataset_name is not None and out_dir is None:
         report_dir = report_dir / f"data-{dataset_name}"
+    if identity is not None:
+        _claim_dataset_folder(report_dir, dataset_name, identity)
     tasks = [Task(exp.id, exp, exp.parameters(profile, {**overrides, **per_experiment.get(exp.id, {})}))
              for exp in experiments]  # validation first
     custom_folder = bool(overrides) or out_dir is not None or dataset_name is not None
@@ -516,16 +519,42 @@ def _write_reports(suite: Suite, folder: Path, custom_folder: bool, nested: bool
     write_suite_reports(suite, folder, list_all=not custom_folder)
     parent = folder.parent
     if nested and (parent / "index.html").is_file():     # the profile's index links its data-<name>/ folders
-        write_suite_reports(suite, parent, list_all=parent.name in PROFILES)
+        from filelock import FileLock, Timeout
+        lock = FileLock(str(parent / ".lock"))
+        try:
+            lock.acquire(timeout=0)       # a run writing that folder rebuilds its index itself, link included
+        except Timeout:
+            return
+        try:
+            write_suite_reports(suite, parent, list_all=parent.name in PROFILES)
+        finally:
+            lock.release()
 
 
-def _dataset_argument(data: str) -> tuple[str, str, str]:
-    """``(name, parameter value, folder)`` of a data set given to ``--data``: checked by loading it (a malformed one
-    fails here, before anything runs). A shipped data set is passed by name, any other by its absolute folder."""
+def _dataset_argument(data: str) -> tuple[str, str, list[str], str]:
+    """``(name, parameter value, data roots, identity)`` of a data set given to ``--data``: checked by loading it (a
+    malformed one fails here, before anything runs). A shipped data set is passed by name, any other by its absolute
+    folder. The roots hold every file its manifest names (a symbolic link's target folder too), so that each file
+    a report read joins its cache record; the identity ("shipped:<name>" or the folder) tells two data sets of one
+    name apart."""
     from ..data.dataset import datasets_dir, load_dataset
     ds = load_dataset(data)
     shipped = ds.root.resolve() == (datasets_dir() / ds.name).resolve()
-    return ds.name, (ds.name if shipped else str(ds.root)), str(ds.root)
+    roots = sorted({str(ds.root), *(str(Path(f).resolve().parent) for f in ds.files)})
+    return ds.name, (ds.name if shipped else str(ds.root)), roots, (f"shipped:{ds.name}" if shipped else str(ds.root))
+
+
+def _claim_dataset_folder(report_dir: Path, name: str, identity: str) -> None:
+    """``data-<name>/`` holds one data set's reports: refuse a different data set of the same name (its reports
+    would replace the others'), else record which one it holds (``dataset.json``)."""
+    record = report_dir / "dataset.json"
+    held = _read_json(record, {}).get("data set")
+    if held and held != identity:
+        raise SuiteError(f"{report_dir} holds the reports of another data set named {name!r} ({held}); give yours "
+                         "another name in its dataset.toml (name = ...), or remove that folder")
+    if not held:
+        report_dir.mkdir(parents=True, exist_ok=True)
+        _write_atomic(record, json.dumps({"name": name, "data set": identity}, indent=1) + "\n")
 
 
 def _check_options(timeout_s: float, jobs: int, executor: str, scheduler: str | None) -> None:

@@ -371,31 +371,41 @@ def _ids(column: pd.Series) -> pd.Series:
 _SCAN_BLOCK = 1 << 25
 
 
-def _one_record_per_line(data: bytes, n_fields: int) -> bool:
-    """Whether every line of ``data`` (a CSV without quotes) after the header holds ``n_fields`` fields and is not
-    blank, with LF or CRLF line ends: then data row ``i`` is line ``i + 2`` and no row is short or long."""
-    if data.count(b"\r") != data.count(b"\r\n"):          # CR-only line ends: the exact reader counts those
-        return False
-    body_start = data.find(b"\n") + 1
-    if body_start == 0:
-        return True                                        # a header alone
+def _one_record_per_line(path: Path, n_fields: int) -> bool:
+    """Whether the file after its header line is UTF-8 text without quotes, with LF or CRLF line ends, whose every
+    line holds ``n_fields`` fields and none is blank: then data row ``i`` is line ``i + 2`` and no row is short or
+    long. Read in blocks of :data:`_SCAN_BLOCK` bytes (never the whole file at once)."""
     want = n_fields - 1
-    pos = body_start
-    while pos < len(data):
-        end = data.rfind(b"\n", pos, pos + _SCAN_BLOCK) + 1 if pos + _SCAN_BLOCK < len(data) else len(data)
-        if end <= pos:                                     # one line longer than a block: scan it whole
-            end = data.find(b"\n", pos) + 1 or len(data)
-        block = np.frombuffer(data, np.uint8, end - pos, pos)
-        newline = np.flatnonzero(block == 10)
-        ends = newline if end < len(data) or block[-1] == 10 else np.r_[newline, block.size]
-        commas = np.cumsum(block == 44, dtype=np.int32)
-        per_line = np.diff(np.r_[0, commas[np.minimum(ends, block.size - 1)]])
-        if ends.size and ends[-1] == block.size:           # the last line has no newline: its commas run to the end
-            per_line[-1] = commas[-1] - (commas[ends[-2]] if ends.size > 1 else 0)
-        if np.any(per_line != want):
-            return False
-        pos = end
-    return True
+    with open(path, "rb") as fh:
+        fh.readline()                                      # the header (checked by the caller)
+        rest = b""
+        while True:
+            chunk = fh.read(_SCAN_BLOCK)
+            if not chunk and not rest:
+                return True
+            block = rest + chunk
+            if chunk:                                      # cut at the last line end; the rest joins the next block
+                cut = block.rfind(b"\n") + 1
+                if cut == 0:
+                    rest = block
+                    continue
+                block, rest = block[:cut], block[cut:]
+            else:
+                rest = b""
+            if b'"' in block or block.count(b"\r") != block.count(b"\r\n"):
+                return False                               # quotes or CR-only line ends: the exact reader
+            try:
+                block.decode("utf-8")
+            except UnicodeDecodeError:
+                return False                               # the exact reader names the byte
+            a = np.frombuffer(block, np.uint8)
+            ends = np.flatnonzero(a == 10)
+            if a[-1] != 10:
+                ends = np.r_[ends, a.size - 1]             # the last line without a line end
+            commas = np.cumsum(a == 44, dtype=np.int64)
+            per_line = np.diff(np.r_[0, commas[ends]])
+            if np.any(per_line != want):
+                return False
 
 
 def read_readings_table(path, *, time_as_text: bool = False) -> tuple[pd.DataFrame, np.ndarray]:
@@ -409,23 +419,21 @@ def read_readings_table(path, *, time_as_text: bool = False) -> tuple[pd.DataFra
     path = Path(path)
     if not path.is_file():
         raise DataFormatError(f"readings file {path} does not exist")
-    data = path.read_bytes()
-    bom = data.startswith(b"\xef\xbb\xbf")
-    body = data[3:] if bom else data
-    header_end = body.find(b"\n")
-    header = [c.strip() for c in body[:header_end if header_end >= 0 else len(body)].decode("utf-8", "replace")
-              .rstrip("\r").split(",")]
+    with open(path, "rb") as fh:
+        first = fh.readline()
+    if first.startswith(b"\xef\xbb\xbf"):
+        first = first[3:]
+    header = [c.strip() for c in first.decode("utf-8", "replace").rstrip("\r\n").split(",")]
     numeric = [c for c in ("time_s", "rssi_dbm", *OPTIONAL_READING_COLUMNS)
                if c in header and not (time_as_text and c == "time_s")]
-    fast = (b'"' not in body and all(c in header for c in READING_COLUMNS) and len(set(header)) == len(header)
-            and all(header) and _one_record_per_line(body, len(header)))
+    fast = (b'"' not in first and all(c in header for c in READING_COLUMNS) and len(set(header)) == len(header)
+            and all(header) and _one_record_per_line(path, len(header)))
     if fast:
         try:
-            body.decode("utf-8")
             kinds = {c: (float if c in numeric else str if c == "time_s" else "category") for c in header}
-            table = pd.read_csv(io.BytesIO(body), dtype=kinds,
-                                keep_default_na=False, na_values={c: sorted(_MISSING_TEXT) for c in numeric},
-                                skipinitialspace=True, engine="c", encoding="utf-8")
+            table = pd.read_csv(path, dtype=kinds, keep_default_na=False,
+                                na_values={c: sorted(_MISSING_TEXT) for c in numeric}, skipinitialspace=True,
+                                engine="c", encoding="utf-8-sig")
         except (ValueError, UnicodeDecodeError, pd.errors.ParserError):
             fast = False             # the exact reader says what and where
     if not fast:

@@ -263,7 +263,7 @@ def test_one_command_runs_the_whole_battery_on_a_new_data_set(tmp_path):
         assert (out / exp / "summary.md").is_file() and list((out / exp).glob("*.png")), exp
     metrics = pd.read_csv(out / "measured-localization" / "metrics.csv")
     at = metrics.set_index(["recording", "method"])["mean_m"]
-    bound = at[("points", "CRLB (fitted channel, at the truth)")]
+    bound = at[("points", "CRLB (fitted channel, at the truth, anchors heard)")]
     assert at[("points", "grid_ml")] < 2 * bound and at[("walk_a", "grid_ml")] < 2 * bound
     assert (pd.read_csv(out / "measured-calibration" / "fits.csv").query("fit == 'closed_form' and mode == "
             "'per_anchor'")["n"].sub(EXAMPLE_SITE["path_loss_exp"]).abs() < 0.3).all()

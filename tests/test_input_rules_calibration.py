@@ -101,7 +101,7 @@ def test_a_solver_that_stops_early_is_reported_not_raised(monkeypatch, how):
 
 @pytest.mark.parametrize("call, message", [
     (lambda: lb.fit_path_loss(np.ones(5), np.ones(4)), r"distance_m \(5,\) must have the shape of rss_dbm"),
-    (lambda: lb.fit_path_loss([1.0, 2.0, np.nan], [1.0, 2.0, 3.0]), "distance_m must be finite"),
+    (lambda: lb.fit_path_loss([1.0, 2.0, np.nan], [1.0, 2.0, 3.0]), "distance_m is NaN where rss_dbm holds a reading"),
     (lambda: lb.fit_path_loss([1.0, 2.0, 3.0], [1.0, np.inf, 3.0]), "rss_dbm must be finite"),
     (lambda: lb.fit_path_loss([1.0, 2.0], [1.0, 2.0], solver="magic"), "solver must be one of"),
     (lambda: lb.fit_path_loss([1.0, 2.0], [1.0, 2.0], path_loss_exp_bounds=(3.0, 1.0)), "lower <= upper"),

@@ -1,0 +1,63 @@
+"""The Rauch-Tung-Striebel smoother against filterpy's (an independent implementation), and its invariants."""
+import numpy as np
+import pytest
+
+import locbook as lb
+from locbook.tracking.smoother import rts_smoother
+
+filterpy_kalman = pytest.importorskip("filterpy.kalman")
+
+
+def _cv_problem(rng, T=60, runs=3, missing=True):
+    dt, q = 0.5, 0.3
+    model = lb.constant_velocity(dt, q, dim=2)
+    H = np.hstack([np.eye(2), np.zeros((2, 2))])
+    R = np.diag([0.8, 1.3])
+    truth = np.cumsum(rng.normal(0, 0.3, (runs, T, 2)), axis=1)
+    z = truth + rng.normal(0, 1.0, (runs, T, 2))
+    if missing:
+        z[:, 10:14] = np.nan                              # four steps without a reading
+    x0 = np.zeros(4)
+    P0 = np.diag([4.0, 4.0, 1.0, 1.0])
+    return model, H, R, z, x0, P0
+
+
+def test_rts_smoother_equals_filterpy_on_every_run():
+    rng = np.random.default_rng(1)
+    model, H, R, z, x0, P0 = _cv_problem(rng)
+    run = lb.kalman_filter(model.F, model.Q, np.broadcast_to(x0, (3, 4)), P0, lb.LinearMeasurement(z, H, R),
+                           outputs=("x_pred", "P_pred"))
+    smooth = rts_smoother(run, model.F)
+    for r in range(3):
+        kf = filterpy_kalman.KalmanFilter(dim_x=4, dim_z=2)
+        kf.x, kf.P, kf.F, kf.Q, kf.H, kf.R = x0.copy(), P0.copy(), model.F, model.Q, H, R
+        zs = [None if np.isnan(zk).any() else zk for zk in z[r]]
+        means, covs, _, _ = kf.batch_filter(zs)
+        np.testing.assert_allclose(run.x[r], means, atol=1e-9)
+        xs, Ps, Ks, _ = kf.rts_smoother(means, covs)
+        np.testing.assert_allclose(smooth.x[r], xs, atol=1e-9)
+        np.testing.assert_allclose(smooth.P[r], Ps, atol=1e-9)
+        np.testing.assert_allclose(smooth.gain[r], Ks[:-1], atol=1e-9)
+
+
+def test_the_last_step_is_the_filter_and_smoothing_never_adds_uncertainty():
+    rng = np.random.default_rng(2)
+    model, H, R, z, x0, P0 = _cv_problem(rng, runs=2)
+    run = lb.kalman_filter(model.F, model.Q, np.broadcast_to(x0, (2, 4)), P0, lb.LinearMeasurement(z, H, R),
+                           outputs=("x_pred", "P_pred"))
+    smooth = rts_smoother(run, model.F)
+    np.testing.assert_array_equal(smooth.x[:, -1], run.x[:, -1])
+    # P_filtered - P_smoothed is positive semi-definite at every step
+    assert np.linalg.eigvalsh(run.P - smooth.P).min() > -1e-10
+
+
+def test_rts_smoother_refuses_a_run_without_its_predictions():
+    rng = np.random.default_rng(3)
+    model, H, R, z, x0, P0 = _cv_problem(rng, runs=1)
+    run = lb.kalman_filter(model.F, model.Q, x0, P0, lb.LinearMeasurement(z[0], H, R))
+    with pytest.raises(ValueError, match="outputs=\\('x_pred', 'P_pred'\\)"):
+        rts_smoother(run, model.F)
+    every_other = lb.kalman_filter(model.F, model.Q, x0, P0, lb.LinearMeasurement(z[0], H, R),
+                                   record=np.arange(0, 60, 2), outputs=("x_pred", "P_pred"))
+    with pytest.raises(ValueError, match="every step recorded"):
+        rts_smoother(every_other, model.F)

@@ -171,3 +171,18 @@ def test_rss_crlb_with_a_known_tag_height_is_the_xy_block_of_the_3d_information(
         float(np.sqrt(np.mean(known**2))), rel=1e-12)
     with pytest.raises(ValueError, match=r"tag_height_m needs 3-D anchors \(m, 3\)"):
         lb.rss_crlb_m(xy, anchors[:, :2], 2.2, 4.0, tag_height_m=h)
+
+
+def test_the_bound_of_the_anchors_heard_is_the_bound_of_that_subset():
+    """rss_crlb_m(heard=): each position's bound from the anchors it heard only (the closed form on that subset);
+    a position that heard one anchor has no finite bound."""
+    anchors = np.array([[0.0, 0.0, 2.5], [8.0, 0.0, 2.4], [0.0, 6.0, 2.6], [8.0, 6.0, 2.5], [4.0, 3.0, 3.0]])
+    n, sigma = np.array([2.0, 2.2, 2.5, 1.8, 2.1]), np.array([4.0, 5.0, 6.0, 4.5, 5.5])
+    pos = np.array([[1.0, 1.0], [5.0, 2.0], [3.0, 4.0]])
+    heard = np.array([[True] * 5, [True, False, True, True, False], [False, False, True, False, False]])
+    got = lb.rss_crlb_m(pos, anchors, n, sigma, tag_height_m=1.2, heard=heard)
+    np.testing.assert_allclose(got[0], lb.rss_crlb_m(pos[0], anchors, n, sigma, tag_height_m=1.2), rtol=1e-12)
+    keep = heard[1]
+    np.testing.assert_allclose(got[1], lb.rss_crlb_m(pos[1], anchors[keep], n[keep], sigma[keep], tag_height_m=1.2),
+                               rtol=1e-12)
+    assert got[2] == np.inf

@@ -103,7 +103,7 @@ def rss_position_information(position_m, anchors_m, path_loss_exp, sigma_db, for
 
 
 def rss_crlb_m(position_m, anchors_m, path_loss_exp, sigma_db, form: str = "correct", *,
-               tag_height_m: float | None = None):
+               tag_height_m: float | None = None, heard=None):
     """Position RMSE bound ``sqrt(tr J^{-1})`` (m) at each position ``(..., 2)`` -> ``(...)``.
 
     In 2-D by Ozkaya's closed form (A.5); for anchors in another dimension ``(m, dim)`` (positions
@@ -113,20 +113,34 @@ def rss_crlb_m(position_m, anchors_m, path_loss_exp, sigma_db, form: str = "corr
     position whose height is unknown too (positions ``(..., 3)``; often mostly height error); with
     ``tag_height_m`` it is the 2-D bound of ``(x, y)`` (positions ``(..., 2)``) for a tag at that known height:
     each anchor's height above the tag enters the distance (``rss_fisher_information``'s ``height_offset_m``),
-    i.e. the ``(x, y)`` block of the 3-D information, not its Schur complement."""
+    i.e. the ``(x, y)`` block of the 3-D information, not its Schur complement.
+
+    ``heard`` ``(..., m)`` booleans (measured data: False = the anchor heard nothing at that epoch): the bound of
+    the anchors each position heard (2-D positions only); where those cannot fix a position (fewer than two, or
+    aligned with it) the bound is ``inf``."""
+    # with a heard mask a position may see too few anchors: no up-front geometry check, inf where singular
+    information = rss_fisher_information if heard is None else rss_position_information
+    extra = {} if heard is None else {"heard": heard}
     if tag_height_m is not None:
         anchors = as_array("anchors_m", anchors_m, ndim=2)
         if anchors.shape[1] != 3:
             raise ValueError(f"tag_height_m needs 3-D anchors (m, 3) with their heights, got shape {anchors.shape}")
         check_scalar("tag_height_m", tag_height_m)
-        info = rss_fisher_information(position_m, anchors[:, :2], path_loss_exp, sigma_db, form,
-                                      height_offset_m=anchors[:, 2] - tag_height_m)
+        info = information(position_m, anchors[:, :2], path_loss_exp, sigma_db, form,
+                           height_offset_m=anchors[:, 2] - tag_height_m, **extra)
     else:
-        info = rss_fisher_information(position_m, anchors_m, path_loss_exp, sigma_db, form)
+        info = information(position_m, anchors_m, path_loss_exp, sigma_db, form, **extra)
     if info.shape[-1] != 2:
+        if heard is not None:
+            raise ValueError("heard= gives the bound of 2-D positions (plan anchors, or 3-D ones with tag_height_m)")
         return np.sqrt(np.trace(np.linalg.inv(info), axis1=-2, axis2=-1))
     det = info[..., 0, 0] * info[..., 1, 1] - info[..., 0, 1] ** 2
-    return np.sqrt((info[..., 0, 0] + info[..., 1, 1]) / det)   # (F_xx + F_yy) / (F_xx F_yy - F_xy^2)
+    trace = info[..., 0, 0] + info[..., 1, 1]
+    if heard is None:
+        return np.sqrt(trace / det)   # (F_xx + F_yy) / (F_xx F_yy - F_xy^2)
+    ok = det > 1e-12 * trace**2       # rank 2, beyond rounding
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(ok, np.sqrt(trace / np.where(ok, det, 1.0)), np.inf)
 
 
 def crlb_rms_over_area_m(points_m, anchors_m, path_loss_exp, sigma_db, form: str = "correct", *,

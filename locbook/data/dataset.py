@@ -463,7 +463,7 @@ def load_dataset(path) -> Dataset:
     files = [manifest, root / _string(manifest, geometry, "anchors", "[geometry] ")]
     files += [root / geometry["outline"]] if "outline" in geometry else []
     files += [license_file] if license_file else []
-    for i, rec in enumerate(records):
+    for rec in records:
         files += [recordings[rec["name"]].file] + ([root / rec["reference_path"]] if "reference_path" in rec else [])
     data = Dataset(name, title, root, license_, attribution, anchors, outline, tag_height, recordings, changes,
                    license_file, notes, tuple(files))

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..bounds.crlb import rss_crlb_m, rss_position_information
+from ..bounds.crlb import rss_crlb_m
 from ..data.dataset import Dataset, load_dataset
 from ..data.measured import regular_epochs
 from ..errors import ConvergenceError, ParameterError
@@ -32,6 +32,7 @@ from ..geometry import grid_in_outline, inside_outline, outline_box
 from ..models.channel import PathLossModel
 from ..models.motion import constant_velocity
 from ..models.rss import RssModel
+from ..montecarlo import moving_block_indices
 from ..static.calibration import PathLossFit, calibrate_path_loss, fix_error_covariance
 from ..static.fingerprint import knn_position
 from ..static.localization import (grid_ml_position, lateration_box_ls, lateration_ls, lateration_wls,
@@ -188,18 +189,10 @@ def crlb_m(data: Dataset, model: PathLossModel, positions_m, rss_dbm=None):
     the tag at the data set's known height (3-D distances; the 2-D bound of :func:`locbook.rss_crlb_m`). With the
     epochs' readings ``rss_dbm (..., m)`` the information of each epoch is that of the anchors it heard (an anchor
     not heard tells nothing), and an epoch with too few of them for a fix has NaN (no bound)."""
-    if rss_dbm is None:
-        return rss_crlb_m(positions_m, data.anchors_m, model.path_loss_exp, model.sigma_db,
-                          tag_height_m=data.tag_height_m)
-    anchors = data.anchors_m
-    info = rss_position_information(positions_m, anchors[:, :2], model.path_loss_exp, model.sigma_db,
-                                    height_offset_m=anchors[:, 2] - data.tag_height_m,
-                                    heard=~np.isnan(np.asarray(rss_dbm, float)))
-    det = info[..., 0, 0] * info[..., 1, 1] - info[..., 0, 1] ** 2
-    trace = info[..., 0, 0] + info[..., 1, 1]
-    ok = det > 1e-12 * np.maximum(trace, 1e-300) ** 2
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(ok, np.sqrt(trace / np.where(ok, det, 1.0)), np.nan)
+    heard = None if rss_dbm is None else ~np.isnan(np.asarray(rss_dbm, float))
+    bound = rss_crlb_m(positions_m, data.anchors_m, model.path_loss_exp, model.sigma_db,
+                       tag_height_m=data.tag_height_m, heard=heard)
+    return bound if heard is None else np.where(np.isfinite(bound), bound, np.nan)
 
 
 def epoch_s(data: Dataset, recording: str) -> float:
@@ -301,7 +294,6 @@ def calibration_block_bootstrap(data: Dataset, rng: np.random.Generator, *, n_bo
     in time order (blocks of ``block_s`` seconds' worth of epochs at the median spacing): neighbouring epochs share
     their shadowing, so resampling single epochs (``block_s`` below one spacing) understates the spread. Returns
     ``(fits of the resamples (a batch PathLossFit), block length in epochs)``."""
-    from ..montecarlo import moving_block_indices
     ep = data.epochs_of("calibration")
     _, distance, rss = calibration_set(data)
     time_s = ep.time_s[np.isfinite(ep.position_m[:, :2]).all(axis=1)]

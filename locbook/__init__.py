@@ -39,6 +39,8 @@ _API = (
     ("Kalman family", "tracking.streams", ("LinearMeasurement", "RssMeasurement", "NonlinearMeasurement")),
     ("Kalman family", "tracking.results", ("KalmanResult", "nis_divergence")),
     ("Kalman family", "tracking.functional", ("KalmanUpdate",)),
+    ("Kalman family", "tracking.transition", ("per_step", "PerStep", "NonlinearMotion")),
+    ("Kalman family", "tracking.smoother", ("rts_smoother", "SmoothedResult")),
     ("fusion", "tracking.fusion", ("fuse_estimates",)),
     ("particle and grid filters", "tracking.particle", ("particle_filter", "kernel_map_estimate")),
     ("particle and grid filters", "tracking.bayes", ("BayesFilterResult", "grid_bayes_filter",

@@ -55,7 +55,7 @@ def test_rts_smoother_refuses_a_run_without_its_predictions():
     rng = np.random.default_rng(3)
     model, H, R, z, x0, P0 = _cv_problem(rng, runs=1)
     run = lb.kalman_filter(model.F, model.Q, x0, P0, lb.LinearMeasurement(z[0], H, R))
-    with pytest.raises(ValueError, match="outputs=\\('x_pred', 'P_pred'\\)"):
+    with pytest.raises(ValueError, match="outputs=\\('x_pred', 'P_pred', 'P_cross'\\)"):
         rts_smoother(run, model.F)
     every_other = lb.kalman_filter(model.F, model.Q, x0, P0, lb.LinearMeasurement(z[0], H, R),
                                    record=np.arange(0, 60, 2), outputs=("x_pred", "P_pred"))

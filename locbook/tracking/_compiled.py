@@ -112,7 +112,9 @@ def _compiled_ekf(setup: _Setup, measurements, predict_first: bool):
     global _NUMBA_ENABLED
     F, Q, batch, T = setup.F, setup.Q, setup.batch, setup.T
     B = int(np.prod(batch, dtype=np.int64))
-    if not _NUMBA_ENABLED or F.ndim != 2 or Q.ndim != 2 or B * T < _NUMBA_MIN_WORK or B == 0 or T == 0:
+    if not _NUMBA_ENABLED or not setup.plain_motion or any(setup.per_step_streams):
+        return None                 # time-varying or nonlinear motion, a control input, H or R per step: numpy
+    if F.ndim != 2 or Q.ndim != 2 or B * T < _NUMBA_MIN_WORK or B == 0 or T == 0:
         return None
     if not all(isinstance(m, (LinearMeasurement, RssMeasurement)) for m in measurements):
         return None

@@ -13,11 +13,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._validate import as_array
-from ._linalg import _Singular, _batch_shape, _check_state, _covariance, _mT, _raise_singular
-from .functional import _linear_update_shared, _predict
+from ._linalg import _Singular, _apply, _batch_shape, _check_state, _covariance, _mT, _raise_singular
+from .functional import _linear_update_shared
 from .results import KALMAN_OUTPUTS, KalmanResult
-from .streams import (MEASUREMENT_TYPES, LinearMeasurement, NonlinearMeasurement, RssMeasurement, _stream_name,
-                      _serial_linear, _stream_readings)
+from .streams import (MEASUREMENT_TYPES, LinearMeasurement, NonlinearMeasurement, RssMeasurement, _per_step_stream,
+                      _stream_at, _stream_name, _serial_linear, _stream_readings)
+from .transition import NonlinearMotion, PerStep, _control_drift, _matrix_arg
 
 @dataclass
 class _Setup:
@@ -26,7 +27,7 @@ class _Setup:
     ``active`` per stream, the recorded ``steps`` with their output ``slot`` per step (-1: not recorded), and the
     streams' first ``cols`` on the axis of a step's readings (``cols[-1]`` = M, module docstring of results)."""
 
-    F: np.ndarray
+    F: np.ndarray | None
     Q: np.ndarray
     x: np.ndarray
     P: np.ndarray
@@ -37,6 +38,26 @@ class _Setup:
     zs: list
     active: list
     cols: np.ndarray
+    n: int = 0
+    F_steps: bool = False          # F is batch + (T, n, n): one matrix per step
+    Q_steps: bool = False
+    drift: np.ndarray | None = None     # the control input B_k u_k, batch + (T or 1, n)
+    motion: NonlinearMotion | None = None   # nonlinear motion (F is then None)
+    per_step_streams: tuple = ()   # per stream: True when its H or R is given per step
+
+    @property
+    def plain_motion(self) -> bool:
+        """One constant linear F and Q, no control input: the compiled kernel's and the shared paths' motion."""
+        return self.motion is None and not self.F_steps and not self.Q_steps and self.drift is None
+
+    def F_at(self, k: int):
+        return self.F[..., min(k, self.F.shape[-3] - 1), :, :] if self.F_steps else self.F
+
+    def Q_at(self, k: int):
+        return self.Q[..., min(k, self.Q.shape[-3] - 1), :, :] if self.Q_steps else self.Q
+
+    def drift_at(self, k: int):
+        return None if self.drift is None else self.drift[..., min(k, self.drift.shape[-2] - 1), :]
 
 
 def _streams(measurements) -> list:
@@ -64,13 +85,22 @@ def _check_outputs(outputs) -> frozenset:
     return names
 
 
-def _setup(F, Q, x0, P0, measurements, record, filter_name) -> _Setup:
-    """The input checks of every Kalman-family filter (once, before the time loop)."""
-    F = as_array("F", F)
-    if F.ndim < 2 or F.shape[-1] != F.shape[-2]:
-        raise ValueError(f"F must be square (n, n) or batch + (n, n), got {F.shape}")
-    n = F.shape[-1]
-    Q = _covariance("Q", Q, n)
+def _setup(F, Q, x0, P0, measurements, record, filter_name, B=None, u=None) -> _Setup:
+    """The input checks of every Kalman-family filter (once, before the time loop). ``F`` a matrix, ``per_step``
+    matrices or a NonlinearMotion; ``Q`` a covariance or ``per_step`` covariances; ``B``, ``u`` the control input
+    (:mod:`locbook.tracking.transition`)."""
+    motion = F if isinstance(F, NonlinearMotion) else None
+    if motion is not None:
+        x = as_array("x0", x0)
+        if x.ndim < 1:
+            raise ValueError(f"x0 must end in (n,), got {x.shape}")
+        n = x.shape[-1]
+    else:
+        shape = F.shape if isinstance(F, PerStep) else np.shape(F)
+        if len(shape) < 2 or shape[-1] != shape[-2]:
+            raise ValueError(f"F must be square (n, n) or batch + (n, n), per_step(batch + (T, n, n)) or a "
+                             f"NonlinearMotion, got shape {shape}")
+        n = shape[-1]
     measurements = _streams(measurements)
     if not all(isinstance(m, MEASUREMENT_TYPES) for m in measurements):
         raise ValueError("measurements must be LinearMeasurement, RssMeasurement or NonlinearMeasurement streams, got "
@@ -88,13 +118,29 @@ def _setup(F, Q, x0, P0, measurements, record, filter_name) -> _Setup:
     if len(T) != 1:
         raise ValueError(f"measurement streams must share one time grid, got lengths {sorted(T)}")
     T = T.pop()
+    F_steps = False
+    F_batch = ()
+    if motion is None:
+        F, F_steps, F_batch = _matrix_arg("F", F, n, n, T)
+    else:
+        F = None
+    Q_steps = isinstance(Q, PerStep)
+    if Q_steps:
+        Q = _covariance("Q (per step)", Q.value, n)
+        if Q.ndim < 3 or Q.shape[-3] not in (1, T):
+            raise ValueError(f"Q per step must have shape batch + ({T}, {n}, {n}), got {Q.shape}")
+    else:
+        Q = _covariance("Q", Q, n)
+    Q_batch = Q.shape[:-3] if Q_steps else Q.shape[:-2]
+    drift, drift_batch = _control_drift(B, u, n, T)
     x = as_array("x0", x0)
     if x.ndim < 1 or x.shape[-1] != n:
         raise ValueError(f"x0 must end in ({n},); got {x.shape}")
     P = _covariance("P0", P0, n)
     # every argument with run axes sets the batch (a batched Q alone runs one filter per Q)
     batch = _batch_shape(*(named for m, s in zip(measurements, streams) for named in _stream_batch_shapes(m, s)),
-                         ("x0", x.shape[:-1]), ("P0", P.shape[:-2]), ("F", F.shape[:-2]), ("Q", Q.shape[:-2]))
+                         ("x0", x.shape[:-1]), ("P0", P.shape[:-2]), ("F", F_batch), ("Q", Q_batch),
+                         ("B u", drift_batch))
     x = np.broadcast_to(x, batch + (n,)).copy()
     steps = np.arange(T) if record is None else np.asarray(record)
     if record is not None and (steps.ndim != 1 or not np.issubdtype(steps.dtype, np.integer)
@@ -102,10 +148,18 @@ def _setup(F, Q, x0, P0, measurements, record, filter_name) -> _Setup:
         raise ValueError(f"record must be distinct integer step indices in [0, {T}), got {record!r}")
     slot = np.full(T, -1)
     slot[steps] = np.arange(steps.size)
-    zs = [np.broadcast_to(np.asarray(s, dtype=float), batch + np.shape(s)[-2:]) for s in streams]
+    zs = [np.broadcast_to(_offset_readings(m, s), batch + np.shape(s)[-2:]) for m, s in zip(measurements, streams)]
     active = [_steps_with_readings(z) for z in zs]
     cols = np.concatenate([[0], np.cumsum([z.shape[-1] for z in zs])]).astype(np.int64)
-    return _Setup(F, Q, x, P, batch, T, steps, slot, zs, active, cols)
+    return _Setup(F, Q, x, P, batch, T, steps, slot, zs, active, cols, n=n, F_steps=F_steps, Q_steps=Q_steps,
+                  drift=drift, motion=motion, per_step_streams=tuple(_per_step_stream(m) for m in measurements))
+
+
+def _offset_readings(meas, z):
+    """The readings with a linear stream's offset taken off (``z - d = H x + v``), as floats."""
+    z = np.asarray(z, dtype=float)
+    offset = getattr(meas, "offset", None)
+    return z if offset is None else z - np.asarray(offset, dtype=float)
 
 
 def _stream_batch_shapes(meas, z):
@@ -117,9 +171,14 @@ def _stream_batch_shapes(meas, z):
         return [(f"{name}.rss_dbm", np.shape(z)[:-2]), (f"{name}.anchors_m", np.shape(meas.anchors_m)[:-3])] + \
             [(f"{name}.channel.{v}", np.shape(getattr(ch, v))[:-1]) for v in ("ref_power_dbm", "path_loss_exp",
                                                                               "sigma_db")]
-    shapes = [(f"{name}.z", np.shape(z)[:-2]), (f"{name}.R", np.shape(meas.R)[:-2])]
+    run_axes = lambda v: v.shape[:-3] if isinstance(v, PerStep) else np.shape(v)[:-2]
+    shapes = [(f"{name}.z", np.shape(z)[:-2])]
+    if not callable(meas.R):
+        shapes.append((f"{name}.R", run_axes(meas.R)))
     if isinstance(meas, LinearMeasurement):
-        shapes.append((f"{name}.H", np.shape(meas.H)[:-2]))
+        shapes.append((f"{name}.H", run_axes(meas.H)))
+        if meas.offset is not None and np.ndim(meas.offset) > 1:
+            shapes.append((f"{name}.offset", np.shape(meas.offset)[:-2]))
     return shapes
 
 
@@ -148,10 +207,20 @@ def _covariance_shared_throughout(setup: _Setup, measurements) -> bool:
     """True when the covariance recursion is the same in every run at every step (a linear filter with P0, F, Q, H
     and R without batch axes and the same components missing in every run): the numpy loop then updates one
     covariance per step, which beats running the runs one by one."""
-    if setup.F.ndim != 2 or setup.Q.ndim != 2 or setup.P.ndim != 2:
+    if not _motion_shared(setup) or setup.P.ndim != 2:
         return False
-    return all(isinstance(meas, LinearMeasurement) and np.ndim(meas.H) == 2 and np.ndim(meas.R) == 2
+    return all(isinstance(meas, LinearMeasurement) and _unbatched(meas.H) and _unbatched(meas.R)
                and _shared_pattern(z) is not None for meas, z in zip(measurements, setup.zs))
+
+
+def _unbatched(matrix) -> bool:
+    """A stream matrix without run axes (``(r, c)``, or per step ``(T, r, c)``)."""
+    return matrix.value.ndim == 3 if isinstance(matrix, PerStep) else np.ndim(matrix) == 2
+
+
+def _motion_shared(setup: _Setup) -> bool:
+    """Linear motion whose F and Q have no run axes (a control input moves the means only)."""
+    return (setup.motion is None and setup.F.ndim == 2 + setup.F_steps and setup.Q.ndim == 2 + setup.Q_steps)
 
 
 def _shared_linear_update(x, P, z, meas, joseph: bool = True, want: bool = False):
@@ -174,17 +243,47 @@ def _shared_linear_update(x, P, z, meas, joseph: bool = True, want: bool = False
         x, P, z[..., j:j + 1], present[j:j + 1], H[j:j + 1], R[j:j + 1, j:j + 1], joseph=joseph, want=want), want)
 
 
+def _predictor(setup: _Setup):
+    """The prediction of the KF and the EKF (:mod:`locbook.tracking.transition`): ``predict(x, P, k, cross)`` ->
+    ``(x-, P-, C)`` with the cross-covariance ``C = P F^T`` (``P J^T`` for nonlinear motion) when ``cross``."""
+    motion = setup.motion
+    if motion is not None:
+        def predict(x, P, k, cross):
+            J = motion.jacobian_at(x, k)
+            x_pred = motion.apply(x, k)
+            d = setup.drift_at(k)
+            if d is not None:
+                x_pred = x_pred + d
+            JP = J @ P
+            return x_pred, JP @ _mT(J) + setup.Q_at(k), (_mT(JP) if cross else None)
+        return predict
+    Ft_const = None if setup.F_steps else np.ascontiguousarray(_mT(setup.F))
+
+    def predict(x, P, k, cross):
+        F = setup.F_at(k)
+        Ft = Ft_const if Ft_const is not None else _mT(F)
+        FP = F @ P
+        x_pred = x @ Ft if F.ndim == 2 else _apply(F, x)
+        d = setup.drift_at(k)
+        if d is not None:
+            x_pred = x_pred + d
+        return x_pred, FP @ Ft + setup.Q_at(k), (_mT(FP) if cross else None)
+    return predict
+
+
 def _run(setup: _Setup, measurements, update, predict_first: bool, *, shared: bool = False, literal: bool = False,
-         joseph: bool = True, outputs=frozenset()) -> KalmanResult:
+         joseph: bool = True, outputs=frozenset(), predict=None) -> KalmanResult:
     """The time loop: at every step predict (unless ``predict_first`` is False at step 0), then apply the streams
     present at that step in order with ``update(x, P, z_k, stream, k, want)`` (each from the previous one's
     posterior; it returns a :class:`locbook.tracking.functional._Out`). ``shared``: keep the covariance unbatched
     while it is the same in every run (module docstring; the linear streams' update in the Joseph form or, with
     ``joseph=False``, the short form). ``literal``: the updates start from the previous
     posterior instead of the prediction, and a run without a reading takes the prediction (document 003's printed
-    update, :func:`locbook.kalman_filter`). ``outputs``: the optional fields to record (results.KALMAN_OUTPUTS)."""
-    F, Q, x, batch, n = setup.F, setup.Q, setup.x, setup.batch, setup.F.shape[-1]
-    shared = shared and F.ndim == 2 and Q.ndim == 2 and setup.P.ndim == 2
+    update, :func:`locbook.kalman_filter`). ``outputs``: the optional fields to record (results.KALMAN_OUTPUTS).
+    ``predict``: the prediction ``(x, P, k, cross) -> (x-, P-, C)`` (default :func:`_predictor`'s)."""
+    x, batch, n = setup.x, setup.batch, setup.n
+    predict = predict or _predictor(setup)
+    shared = shared and _motion_shared(setup) and setup.P.ndim == 2
     P = setup.P.copy() if shared else np.broadcast_to(setup.P, batch + (n, n)).copy()
     steps, slot, T, cols = setup.steps, setup.slot, setup.T, setup.cols
     R, M = steps.size, int(cols[-1])
@@ -195,6 +294,7 @@ def _run(setup: _Setup, measurements, update, predict_first: bool, *, shared: bo
     out_dof = np.zeros(batch + (T,), np.int64)
     out_xp = np.empty(batch + (R, n)) if "x_pred" in outputs else None
     out_Pp = np.empty(batch + (R, n, n)) if "P_pred" in outputs else None
+    out_Pc = np.full(batch + (R, n, n), np.nan) if "P_cross" in outputs else None
     out_nu = np.full(batch + (R, M), np.nan) if "innovation" in outputs else None
     out_S = np.full(batch + (R, M, M), np.nan) if "S" in outputs else None
     want = out_nu is not None or out_S is not None
@@ -202,16 +302,20 @@ def _run(setup: _Setup, measurements, update, predict_first: bool, *, shared: bo
         block = np.zeros((M, M), bool)
         for c0, c1 in zip(cols[:-1], cols[1:]):
             block[c0:c1, c0:c1] = True
-    Ft = np.ascontiguousarray(_mT(F))
     for k in range(T):
+        s = slot[k]
         if predict_first or k > 0:
-            x_pred, P_pred = _predict(x, P, F, Q, Ft)
+            try:
+                x_pred, P_pred, cross = predict(x, P, k, out_Pc is not None and s >= 0)
+            except _Singular as exc:
+                _raise_singular(k, exc.bad, "state covariance", exc.message)
             _check_state(k, x_pred, P_pred)          # an overflow in the prediction is named as such
+            if cross is not None:
+                out_Pc[..., s, :, :] = cross
         else:
             x_pred, P_pred = x, P
         # document 003's printed update starts from the previous posterior, not the prediction
         x, P = (x, P) if literal else (x_pred, P_pred)
-        s = slot[k]
         if s >= 0 and out_xp is not None:
             out_xp[..., s, :] = x
         if s >= 0 and out_Pp is not None:
@@ -220,6 +324,8 @@ def _run(setup: _Setup, measurements, update, predict_first: bool, *, shared: bo
         for i, (meas, z, act) in enumerate(zip(measurements, setup.zs, setup.active)):
             if not act[k]:
                 continue
+            if setup.per_step_streams[i]:
+                meas = _stream_at(meas, k)
             try:
                 out = None
                 if shared:
@@ -261,4 +367,5 @@ def _run(setup: _Setup, measurements, update, predict_first: bool, *, shared: bo
         if s >= 0:
             out_x[..., s, :] = x
             out_P[..., s, :, :] = P
-    return KalmanResult(out_x, out_P, steps, out_xp, out_Pp, out_nu, out_S, out_ll, out_nis, out_dof)
+    return KalmanResult(out_x, out_P, steps, out_xp, out_Pp, out_nu, out_S, out_ll, out_nis, out_dof,
+                        P_cross=out_Pc)

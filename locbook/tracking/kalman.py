@@ -26,13 +26,14 @@ from . import _compiled
 from ._loop import _check_outputs, _covariance_shared_throughout, _run, _setup, _streams
 from .results import DIVERGENCE_PROBABILITY, DIVERGENCE_WINDOW, KalmanResult, _check_guard, _flag
 from .streams import LinearMeasurement, _ekf_update
+from .transition import NonlinearMotion
 
 __all__ = ["kalman_filter", "extended_kalman_filter", "KF_VARIANTS"]
 
 KF_VARIANTS = ("standard", "literal_george")
 
 
-def kalman_filter(F, Q, x0, P0, measurements, *, record=None, predict_first: bool = True,
+def kalman_filter(F, Q, x0, P0, measurements, *, B=None, u=None, record=None, predict_first: bool = True,
                   variant: str = "standard", joseph: bool = True, outputs=(),
                   divergence_window: int | None = DIVERGENCE_WINDOW,
                   divergence_probability: float = DIVERGENCE_PROBABILITY) -> KalmanResult:
@@ -42,7 +43,10 @@ def kalman_filter(F, Q, x0, P0, measurements, *, record=None, predict_first: boo
     Parameters
     ----------
     F, Q : motion ``(n, n)`` and process covariance (symmetric positive semi-definite, checked up front); may carry
-        run axes ``batch + (n, n)``.
+        run axes ``batch + (n, n)``, or be given per step, ``per_step(batch + (T, n, n))`` (F_k moves step k - 1 to
+        step k; :mod:`locbook.tracking.transition`).
+    B, u : the control input: ``x_{k|k-1} = F_k x_{k-1} + B_k u_k``, ``u`` ``batch + (T, p)``, ``B`` ``(n, p)``,
+        ``batch + (n, p)`` or ``per_step(...)``; pykalman's transition offsets are ``B = I``.
     x0, P0 : initial state ``batch + (n,)`` and covariance. With ``predict_first=True`` they are the posterior one
         step *before* the first reading (filterpy's convention: predict, then update, at every step); with
         ``predict_first=False`` the prior at the first reading, used without a prediction.
@@ -50,7 +54,7 @@ def kalman_filter(F, Q, x0, P0, measurements, *, record=None, predict_first: boo
         grid, applied in order at each step. A NaN reading is a missing component: the update uses those present
         and a step without any is prediction only. ``T = 0`` steps give an empty result.
     record : step indices to keep (default all); ``outputs``: optional fields among ``("x_pred", "P_pred",
-        "innovation", "S")`` to keep at those steps (:class:`~locbook.tracking.results.KalmanResult`).
+        "P_cross", "innovation", "S")`` to keep at those steps (:class:`~locbook.tracking.results.KalmanResult`).
     variant : ``"standard"`` or ``"literal_george"`` (Eqs. (11)-(13) of George and Vadivukkarasi as printed: each update starts
         from the previous posterior; ``x_pred``/``P_pred`` are then that posterior).
     joseph : the Joseph-form covariance update (keeps P symmetric positive definite); False: ``(I - K H) P``.
@@ -65,11 +69,14 @@ def kalman_filter(F, Q, x0, P0, measurements, *, record=None, predict_first: boo
     window, probability = _check_guard(divergence_window, divergence_probability)
     outputs = _check_outputs(outputs)
     measurements = _streams(measurements)
+    if isinstance(F, NonlinearMotion):
+        raise ValueError("kalman_filter takes a linear motion F; a NonlinearMotion needs extended_kalman_filter or "
+                         "unscented_kalman_filter")
     if not all(isinstance(m, LinearMeasurement) for m in measurements):
         raise ValueError("kalman_filter takes LinearMeasurement streams, got "
                          f"{[type(m).__name__ for m in measurements]} (RSS and nonlinear streams: "
                          "extended_kalman_filter or unscented_kalman_filter)")
-    setup = _setup(F, Q, x0, P0, measurements, record, "kalman_filter")
+    setup = _setup(F, Q, x0, P0, measurements, record, "kalman_filter", B, u)
     if variant == "standard" and joseph and not outputs and not _covariance_shared_throughout(setup, measurements):
         compiled = _compiled._compiled_ekf(setup, measurements, predict_first)
         if compiled is not None:
@@ -79,12 +86,15 @@ def kalman_filter(F, Q, x0, P0, measurements, *, record=None, predict_first: boo
                  window, probability)
 
 
-def extended_kalman_filter(F, Q, x0, P0, measurements, *, record=None, predict_first: bool = True, outputs=(),
+def extended_kalman_filter(F, Q, x0, P0, measurements, *, B=None, u=None, record=None, predict_first: bool = True,
+                           outputs=(),
                            divergence_window: int | None = DIVERGENCE_WINDOW,
                            divergence_probability: float = DIVERGENCE_PROBABILITY) -> KalmanResult:
     """Multi-rate (extended) Kalman filter on one time grid, vectorized over leading Monte-Carlo axes.
 
-    At every step: predict with ``x = F x``, ``P = F P F^T + Q`` (linear motion, so the EKF's F is F), then apply
+    At every step: predict with ``x = F x + B u``, ``P = F P F^T + Q`` (F, Q constant, with run axes or
+    ``per_step``; or a :class:`~locbook.tracking.transition.NonlinearMotion` ``f`` with its Jacobian J: ``x = f(x) +
+    B u``, ``P = J P J^T + Q``; :mod:`locbook.tracking.transition`), then apply
     the ``measurements`` in the given order, each update starting from the previous one's posterior (Dogan
     Table 3.5: acceleration first, then RSS at RSS epochs). Each entry is a :class:`LinearMeasurement` (KF,
     e.g. accelerometer or MLE position fixes), a :class:`RssMeasurement` (parallel or serial EKF) or a
@@ -93,7 +103,8 @@ def extended_kalman_filter(F, Q, x0, P0, measurements, *, record=None, predict_f
 
     ``x0``, ``P0``: ``batch + (n,)``, ``batch + (n, n)``; with ``predict_first`` (filterpy's convention) they
     are the posterior one step before step 0, else the prior at step 0. ``record``: step indices to return
-    (default all); ``outputs``: optional fields among ``("x_pred", "P_pred", "innovation", "S")`` kept at those steps
+    (default all); ``outputs``: optional fields among ``("x_pred", "P_pred", "P_cross", "innovation", "S")`` kept at
+    those steps
     (innovations of several streams and serial updates side by side, S block diagonal: :mod:`locbook.tracking.results`).
     ``F``, ``Q``, ``P0`` and the streams' H, R and anchors may carry run axes (the batch is the broadcast of all run
     axes); Q, P0 and R must be symmetric positive semi-definite (checked up front).
@@ -114,7 +125,7 @@ def extended_kalman_filter(F, Q, x0, P0, measurements, *, record=None, predict_f
     window, probability = _check_guard(divergence_window, divergence_probability)
     outputs = _check_outputs(outputs)
     measurements = _streams(measurements)
-    setup = _setup(F, Q, x0, P0, measurements, record, "extended_kalman_filter")
+    setup = _setup(F, Q, x0, P0, measurements, record, "extended_kalman_filter", B, u)
     if not outputs and not _covariance_shared_throughout(setup, measurements):
         compiled = _compiled._compiled_ekf(setup, measurements, predict_first)
         if compiled is not None:

@@ -81,7 +81,7 @@ DIVERGENCE_WINDOW = 20
 DIVERGENCE_PROBABILITY = 0.999
 
 #: the optional per-step outputs a Kalman-family filter records on request (``outputs=``), at its ``record`` steps
-KALMAN_OUTPUTS = ("x_pred", "P_pred", "innovation", "S")
+KALMAN_OUTPUTS = ("x_pred", "P_pred", "P_cross", "innovation", "S")
 
 
 @dataclass(frozen=True)
@@ -92,7 +92,10 @@ class KalmanResult:
     - ``x_pred``, ``P_pred``: the prior each step's update starts from (the one-step prediction; for the KF's
       ``literal_george`` variant the previous posterior, which the printed update uses); ``innovation``
       ``batch + (R, M)`` and ``S`` ``batch + (R, M, M)``: the readings' innovations and their covariance, block
-      diagonal over a step's sequential updates (module docstring). None unless named in the filter's ``outputs``;
+      diagonal over a step's sequential updates (module docstring); ``P_cross`` ``batch + (R, n, n)``: the
+      cross-covariance ``Cov(x_{k-1}, x_k)`` of the previous posterior and the prediction (``P F^T``, ``P J^T`` or the
+      sigma points'; NaN at a step not predicted), what :func:`locbook.rts_smoother` needs. None unless named in the
+      filter's ``outputs``;
     - ``log_likelihood`` ``batch + (T,)``: ``log N(innovation; 0, S)`` of each step's present readings (NaN where a
       step has no update), :attr:`total_log_likelihood` their sum;
     - ``nis``, ``nis_dof``, ``diverged``, ``diverged_step``: the consistency guard (module docstring);
@@ -112,6 +115,7 @@ class KalmanResult:
     diverged: np.ndarray | None = None
     diverged_step: np.ndarray | None = None
     floored_updates: int = 0
+    P_cross: np.ndarray | None = None
 
     @property
     def n_diverged(self) -> int:

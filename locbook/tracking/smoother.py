@@ -1,9 +1,10 @@
 """Fixed-interval smoothing of a Kalman-family run: every step's state given all the readings, past and future.
 
 :func:`rts_smoother` is the Rauch-Tung-Striebel smoother (H. E. Rauch, F. Tung and C. T. Striebel, "Maximum
-likelihood estimates of linear dynamic systems", AIAA Journal 3(8), 1965) on the filtered and predicted moments a
-:func:`~locbook.tracking.kalman.kalman_filter` or :func:`~locbook.tracking.kalman.extended_kalman_filter` run records,
-vectorized over the run's leading Monte-Carlo axes (the backward pass loops over time only).
+likelihood estimates of linear dynamic systems", AIAA Journal 3(8), 1965) on the filtered and predicted moments and
+cross-covariances a :func:`~locbook.tracking.kalman.kalman_filter`, :func:`~locbook.tracking.kalman.extended_kalman_filter`
+or :func:`~locbook.tracking.unscented.unscented_kalman_filter` run records (for the UKF with nonlinear motion it is the
+unscented RTS smoother), vectorized over the run's leading Monte-Carlo axes (the backward pass loops over time only).
 """
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ import numpy as np
 
 from .._validate import as_array
 from .results import KalmanResult
+from .transition import PerStep
 
 __all__ = ["SmoothedResult", "rts_smoother"]
 
@@ -27,43 +29,73 @@ class SmoothedResult:
     gain: np.ndarray
 
 
-def rts_smoother(result: KalmanResult, F) -> SmoothedResult:
-    """Rauch-Tung-Striebel smoother of a filter run with motion ``x_{k+1} = F x_k + w_k``:
+def rts_smoother(result: KalmanResult, F=None, *, residual=None) -> SmoothedResult:
+    """Rauch-Tung-Striebel smoother of a filter run (the KF, the EKF, and the UKF's unscented RTS smoother):
 
-    ``C_k = P_k F^T P_{k+1|k}^{-1}``, ``x^s_k = x_k + C_k (x^s_{k+1} - x_{k+1|k})``,
-    ``P^s_k = P_k + C_k (P^s_{k+1} - P_{k+1|k}) C_k^T``, from ``x^s_{T-1} = x_{T-1}``, ``P^s_{T-1} = P_{T-1}``.
+    ``C_k = D_{k+1} P_{k+1|k}^{-1}``, ``x^s_k = x_k + C_k (x^s_{k+1} - x_{k+1|k})``,
+    ``P^s_k = P_k + C_k (P^s_{k+1} - P_{k+1|k}) C_k^T``, from ``x^s_{T-1} = x_{T-1}``, ``P^s_{T-1} = P_{T-1}``,
 
-    ``result``: a run that recorded every step and its predictions, ``outputs=("x_pred", "P_pred")`` with
-    ``record=None`` and ``predict_first=True`` (the prior of step ``k + 1`` is ``F`` applied to step ``k``'s
-    posterior); its ``x_pred``/``P_pred`` are used as recorded, so the filter's own ``Q`` is in them. ``F``: the
-    motion matrix ``(n, n)``, or with the run's leading axes ``batch + (n, n)``; for an EKF, its motion Jacobian.
-    A step without readings is smoothed like any other (its posterior is its prediction)."""
+    where ``D_{k+1} = Cov(x_k, x_{k+1})`` is the cross-covariance of the posterior of step k and the prediction of step
+    k + 1: ``P_k F^T`` for linear motion, ``P_k J^T`` for the EKF's, the sigma points' ``sum W_c (X - x)(Y - x-)^T``
+    for the UKF's (S. Sarkka, "Unscented Rauch-Tung-Striebel smoother", IEEE TAC 53(3), 2008; filterpy's
+    ``UnscentedKalmanFilter.rts_smoother``).
+
+    ``result``: a run that recorded every step and its predictions, ``outputs=("x_pred", "P_pred", "P_cross")`` with
+    ``record=None`` (the filter's own Q, control input and motion are in them). Without ``P_cross``, ``F`` (``(n,
+    n)``, with the run's leading axes, or ``per_step(batch + (T, n, n))``, F_k moving step k - 1 to step k) gives
+    ``D_{k+1} = P_k F_{k+1}^T``. ``residual(a, b)``: the difference of states (e.g. a wrapped heading; the motion's
+    ``residual``). A step without readings is smoothed like any other (its posterior is its prediction)."""
     if not isinstance(result, KalmanResult):
         raise TypeError(f"result must be a KalmanResult, got {type(result).__name__}")
     if result.x_pred is None or result.P_pred is None:
-        raise ValueError("rts_smoother needs the run's predictions: filter with outputs=('x_pred', 'P_pred')")
+        raise ValueError("rts_smoother needs the run's predictions: filter with outputs=('x_pred', 'P_pred', "
+                         "'P_cross')")
     x, P = np.asarray(result.x, float), np.asarray(result.P, float)
     T, n = x.shape[-2], x.shape[-1]
     steps = np.asarray(result.steps)
     if not np.array_equal(steps, np.arange(T)) or T == 0:
         raise ValueError("rts_smoother needs every step recorded (record=None), from step 0 on; got steps "
                          f"{steps[:5].tolist()}{'...' if steps.size > 5 else ''} of a run")
-    F = as_array("F", F, min_ndim=2)
-    if F.shape[-2:] != (n, n):
-        raise ValueError(f"F must be ({n}, {n}) (the state's size), with optional run axes; got shape {F.shape}")
     batch = x.shape[:-2]
-    try:
-        F = np.broadcast_to(F, batch + (n, n))
-    except ValueError:
-        raise ValueError(f"F's run axes {F.shape[:-2]} do not match the run's {batch}") from None
+    if result.P_cross is not None:
+        cross = np.asarray(result.P_cross, float)
+    elif F is None:
+        raise ValueError("rts_smoother needs the cross-covariances of the run (outputs=('x_pred', 'P_pred', "
+                         "'P_cross')) or its linear motion F")
+    else:
+        cross = _cross_from_F(F, P, batch, T, n)
     x_pred, P_pred = np.asarray(result.x_pred, float), np.asarray(result.P_pred, float)
+    diff = (lambda a, b: a - b) if residual is None else (lambda a, b: np.asarray(residual(a, b), dtype=float))
     xs, Ps = x.copy(), P.copy()
     gain = np.empty(batch + (max(T - 1, 0), n, n))
     for k in range(T - 2, -1, -1):
-        # C = P_k F^T P_pred^{-1}, solved as (P_pred^{-1} F P_k)^T (P_pred and P_k symmetric)
-        C = np.swapaxes(np.linalg.solve(P_pred[..., k + 1, :, :], F @ P[..., k, :, :]), -1, -2)
+        # C = D P_pred^{-1}, solved as (P_pred^{-1} D^T)^T (P_pred symmetric)
+        C = np.swapaxes(np.linalg.solve(P_pred[..., k + 1, :, :], np.swapaxes(cross[..., k + 1, :, :], -1, -2)),
+                        -1, -2)
         gain[..., k, :, :] = C
-        xs[..., k, :] = x[..., k, :] + np.einsum("...ij,...j->...i", C, xs[..., k + 1, :] - x_pred[..., k + 1, :])
+        xs[..., k, :] = x[..., k, :] + np.einsum("...ij,...j->...i", C,
+                                                 diff(xs[..., k + 1, :], x_pred[..., k + 1, :]))
         Pk = P[..., k, :, :] + C @ (Ps[..., k + 1, :, :] - P_pred[..., k + 1, :, :]) @ np.swapaxes(C, -1, -2)
         Ps[..., k, :, :] = 0.5 * (Pk + np.swapaxes(Pk, -1, -2))
     return SmoothedResult(xs, Ps, gain)
+
+
+def _cross_from_F(F, P, batch, T: int, n: int):
+    """``D_k = P_{k-1} F_k^T`` ``batch + (T, n, n)`` (index 0 unused) for linear motion ``F``."""
+    if isinstance(F, PerStep):
+        Fs = F.value
+        if Fs.shape[-2:] != (n, n) or Fs.shape[-3] not in (1, T):
+            raise ValueError(f"F per step must have shape batch + ({T}, {n}, {n}), got {Fs.shape}")
+    else:
+        Fs = as_array("F", F, min_ndim=2)
+        if Fs.shape[-2:] != (n, n):
+            raise ValueError(f"F must be ({n}, {n}) (the state's size), with optional run axes; got shape {Fs.shape}")
+        Fs = Fs[..., None, :, :]
+    try:
+        Fs = np.broadcast_to(Fs, batch + (T, n, n))
+    except ValueError:
+        raise ValueError(f"F's run axes {Fs.shape[:-3]} do not match the run's {batch}") from None
+    cross = np.full(batch + (T, n, n), np.nan)
+    if T > 1:
+        cross[..., 1:, :, :] = P[..., :-1, :, :] @ np.swapaxes(Fs[..., 1:, :, :], -1, -2)
+    return cross

@@ -17,6 +17,7 @@ from ..models.channel import PathLossModel
 from ..models.rss import rss_mean_jacobian
 from ._linalg import _LOG_2PI, _STATE_NOT_FINITE, _UPDATE_OVERFLOW, _Singular, _covariance, _joseph
 from .functional import _linear_update, _Out
+from .transition import PerStep
 
 __all__ = ["LinearMeasurement", "RssMeasurement", "NonlinearMeasurement", "MEASUREMENT_TYPES",
            "RSS_UPDATE_MODES", "SERIAL_ORDERS"]
@@ -29,11 +30,14 @@ SERIAL_ORDERS = ("descending", "given")
 
 @dataclass(frozen=True)
 class LinearMeasurement:
-    """A linear-Gaussian measurement stream ``z_k = H x_k + v_k``, ``v_k ~ N(0, R)``.
+    """A linear-Gaussian measurement stream ``z_k = H_k x_k + d_k + v_k``, ``v_k ~ N(0, R_k)``.
 
     ``z``: ``batch + (T, m)``; a NaN entry is a missing component (that row is left out of the
     update, the others are used), so streams at different rates share one time grid.
-    ``R``: ``(m, m)`` or with batch axes ``batch + (m, m)``.
+    ``H``: ``(m, n)``, with run axes ``batch + (m, n)``, or one per step ``per_step(batch + (T, m, n))``
+    (:func:`locbook.per_step`). ``R``: ``(m, m)``, ``batch + (m, m)`` or ``per_step(batch + (T, m, m))``.
+    ``offset``: the measurement offset ``d`` (pykalman's observation offset), ``(m,)`` or per step like ``z``
+    (``batch + (T, m)``); the filters update with ``z - d``.
     ``mode``: ``"parallel"`` (one stacked update) or ``"serial"`` (one scalar update per row in the given order;
     needs a diagonal R, and then equals the parallel update exactly; Dogan 2015's serial and parallel RSS EKFs,
     Tables 3.3-3.4, differ only by the re-linearisation between scalar updates).
@@ -43,17 +47,27 @@ class LinearMeasurement:
     H: np.ndarray
     R: np.ndarray
     mode: str = "parallel"
+    offset: np.ndarray | None = None
 
     def __post_init__(self):
         check_choice("mode", self.mode, RSS_UPDATE_MODES)
         z = as_array("LinearMeasurement.z", self.z, min_ndim=2, nan_ok=True)
-        H = as_array("LinearMeasurement.H", self.H)
-        m = z.shape[-1]
+        T, m = z.shape[-2:]
+        H = self.H.value if isinstance(self.H, PerStep) else as_array("LinearMeasurement.H", self.H)
         if H.ndim < 2 or H.shape[-2] != m:
             raise ValueError(f"LinearMeasurement.H must have {m} rows (one per component of z), got shape {H.shape}")
-        R = _covariance("LinearMeasurement.R", self.R, m)
+        R = _covariance("LinearMeasurement.R", self.R.value if isinstance(self.R, PerStep) else self.R, m)
+        for name, value in (("H", self.H), ("R", self.R)):
+            if isinstance(value, PerStep) and value.value.shape[-3] not in (1, T):
+                raise ValueError(f"LinearMeasurement.{name} per step must have {T} steps on axis -3 (one per "
+                                 f"reading step), got shape {value.value.shape}")
         if self.mode == "serial" and np.any(R - R * np.eye(R.shape[-1])):
             raise ValueError("serial linear updates need a diagonal R (independent measurement components)")
+        if self.offset is not None:
+            d = as_array("LinearMeasurement.offset", self.offset, min_ndim=1)
+            if d.shape[-1] != m or d.ndim > 1 and d.shape[-2] not in (1, T):
+                raise ValueError(f"LinearMeasurement.offset must have shape ({m},) or batch + ({T}, {m}) like z, got "
+                                 f"{d.shape}")
 
 
 @dataclass(frozen=True)
@@ -154,12 +168,19 @@ class RssMeasurement:
 @dataclass(frozen=True)
 class NonlinearMeasurement:
     """A nonlinear measurement stream ``z_k = h(x_k) + v_k``, ``v_k ~ N(0, R)`` (e.g. a body-frame accelerometer,
-    whose reading depends on the heading state; Gudipati 2017, Eqs. (3.9), (3.11)).
+    whose reading depends on the heading state; Gudipati 2017, Eqs. (3.9), (3.11); or a bearing and range).
 
     ``z``: ``batch + (T, m)``, NaN = a missing component (left out of the update). ``h``: maps states
     ``(..., n)`` to ``(..., m)`` over any leading axes: the EKF calls it with ``batch + (n,)``, the UKF with the
-    sigma points ``batch + (2n + 1, n)``. ``jacobian``: states ``(..., n)`` to ``(..., m, n)``; the EKF needs it,
-    the UKF does not. ``R``: ``(m, m)`` or ``batch + (m, m)``. ``name`` names the stream in error messages.
+    sigma points ``batch + (N, n)``. ``jacobian``: states ``(..., n)`` to ``(..., m, n)``; the EKF needs it,
+    the UKF does not. ``R``: ``(m, m)`` or ``batch + (m, m)``, or a function of the state ``x`` ``batch + (n,)``
+    returning them (a noise that depends on the state, e.g. on the range; evaluated where the update linearises: the
+    EKF's state so far, the UKF's predicted mean). ``name`` names the stream in error messages.
+
+    For readings on a circle (a bearing): ``residual(a, b)`` is the difference ``a - b`` of readings ``(..., m)``
+    (e.g. wrapped to ``(-pi, pi]``), used for the innovation and, in the UKF, wherever readings are subtracted;
+    ``mean(values, weights)`` the UKF's weighted mean of predicted readings ``(..., N, m)`` (e.g. a circular mean of
+    the angle components). Both default to the linear forms.
     """
 
     z: np.ndarray
@@ -167,15 +188,34 @@ class NonlinearMeasurement:
     R: np.ndarray
     jacobian: object = None
     name: str = "nonlinear measurement"
+    residual: object = None
+    mean: object = None
 
     def __post_init__(self):
         z = as_array(f"{self.name}: z", self.z, min_ndim=2, nan_ok=True)
         if not callable(self.h):
             raise ValueError(f"{self.name}: h must be a function of the state, got {type(self.h).__name__}")
-        if self.jacobian is not None and not callable(self.jacobian):
-            raise ValueError(f"{self.name}: jacobian must be a function of the state or None, got "
-                             f"{type(self.jacobian).__name__}")
-        _covariance(f"{self.name}: R", self.R, z.shape[-1])
+        for field in ("jacobian", "residual", "mean"):
+            value = getattr(self, field)
+            if value is not None and not callable(value):
+                raise ValueError(f"{self.name}: {field} must be a function or None, got {type(value).__name__}")
+        if not callable(self.R):
+            _covariance(f"{self.name}: R", self.R, z.shape[-1])
+
+    def noise_at(self, x) -> np.ndarray:
+        """R at the state ``x`` ``batch + (n,)``: the fixed R, or the callback's (checked: a covariance)."""
+        if not callable(self.R):
+            return np.asarray(self.R, dtype=float)
+        m = np.shape(self.z)[-1]
+        R = _covariance(f"{self.name}: R(x)", self.R(x), m)
+        if R.shape[:-2] not in ((), np.shape(x)[:-1]):
+            raise ValueError(f"{self.name}: R(x) returned shape {R.shape}, expected ({m}, {m}) or "
+                             f"{np.shape(x)[:-1] + (m, m)}")
+        return R
+
+    def difference(self, a, b):
+        """``a - b`` of readings, through ``residual`` when given."""
+        return np.asarray(self.residual(a, b), dtype=float) if self.residual is not None else a - b
 
 
 MEASUREMENT_TYPES = (LinearMeasurement, RssMeasurement, NonlinearMeasurement)
@@ -319,8 +359,10 @@ def _nonlinear_ekf_update(x, P, z, meas: NonlinearMeasurement, want: bool = Fals
                          f"{x.shape[:-1] + (z.shape[-1], x.shape[-1])}")
     h = np.asarray(meas.h(x), dtype=float)
     valid = np.isfinite(z)
-    return _linear_update(x, P, np.where(valid, z - h + (H @ x[..., None])[..., 0], np.nan), H,
-                          np.asarray(meas.R, dtype=float), want=want)
+    # the linear update on the linearisation z - h(x) = H (x_true - x) + v, whose innovation is (the residual) z - h(x)
+    nu = meas.difference(np.where(valid, z, h), h)
+    return _linear_update(x, P, np.where(valid, nu + (H @ x[..., None])[..., 0], np.nan), H, meas.noise_at(x),
+                          want=want)
 
 
 def _serial_linear(x, P, m: int, update, want: bool) -> _Out:
@@ -362,6 +404,24 @@ def _ekf_update(x, P, z, meas, step, want: bool = False, joseph: bool = True) ->
     if meas.mode == "parallel":
         return _rss_parallel_update(x, P, z, meas, step, want)
     return _rss_serial_update(x, P, z, meas, step, want)
+
+
+def _per_step_stream(meas) -> bool:
+    """True for a linear stream whose H or R is given per step."""
+    return isinstance(meas, LinearMeasurement) and (isinstance(meas.H, PerStep) or isinstance(meas.R, PerStep))
+
+
+def _stream_at(meas: LinearMeasurement, step: int) -> LinearMeasurement:
+    """The stream with its per-step H and R of ``step`` (checked at construction; built without re-checking)."""
+    view = object.__new__(LinearMeasurement)
+    for field in ("z", "mode", "offset"):
+        object.__setattr__(view, field, getattr(meas, field))
+    for field in ("H", "R"):
+        value = getattr(meas, field)
+        if isinstance(value, PerStep):
+            value = value.value[..., min(step, value.value.shape[-3] - 1), :, :]
+        object.__setattr__(view, field, value)
+    return view
 
 
 def _stream_name(meas) -> str:

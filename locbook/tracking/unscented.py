@@ -47,10 +47,12 @@ from .results import DIVERGENCE_PROBABILITY, DIVERGENCE_WINDOW, KalmanResult, _c
 from .streams import (LinearMeasurement, NonlinearMeasurement, RssMeasurement, _pick_anchor, _refuse_on_anchor,
                       _serial_linear, _serial_order)
 
-__all__ = ["UKF_WEIGHTS", "UnscentedWeights", "unscented_weights", "sigma_points", "unscented_transform",
+__all__ = ["UKF_WEIGHTS", "SIGMA_POINT_SETS", "UnscentedWeights", "unscented_weights", "sigma_points", "unscented_transform",
            "unscented_kalman_filter"]
 
 UKF_WEIGHTS = ("corrected", "literal_gudipati2017")
+#: the sigma-point sets of :func:`unscented_weights`
+SIGMA_POINT_SETS = ("merwe", "julier", "cubature")
 
 
 @dataclass(frozen=True)
@@ -67,18 +69,36 @@ class UnscentedWeights:
 
 
 def unscented_weights(n: int, alpha: float = 1e-3, beta: float = 2.0, kappa: float = 0.0,
-                      variant: str = "corrected") -> UnscentedWeights:
-    """Weights of Eqs. (3.21)-(3.23) in Gudipati 2017 (van der Merwe's scaled sigma points).
+                      variant: str = "corrected", points: str = "merwe") -> UnscentedWeights:
+    """Weights of a symmetric sigma-point set: ``X^0 = x``, ``X^{i, n+i} = x +- (sqrt((n + lambda) P))_i``.
 
+    ``points="merwe"``: van der Merwe's scaled set, Eqs. (3.21)-(3.23) in Gudipati 2017 (``lambda = alpha^2 (n +
+    kappa) - n``, ``W_m^i = W_c^i = 1 / (2 (n + lambda))``, ``W_c^0 = W_m^0 + 1 - alpha^2 + beta``).
     ``variant="corrected"``: ``W_m^0 = lambda / (n + lambda)`` (the weights sum to 1). ``"literal_gudipati2017"``: the
     printed ``W_m^0 = n / (n + lambda)`` (flagged: the mean weights then sum to ``2n / (n + lambda)``, about 2e6
-    at the thesis's alpha = 1e-3 and n = 8). ``n + lambda = alpha^2 (n + kappa)`` must be positive."""
+    at the thesis's alpha = 1e-3 and n = 8). ``n + lambda = alpha^2 (n + kappa)`` must be positive.
+
+    ``points="julier"``: Julier and Uhlmann's set (S. J. Julier and J. K. Uhlmann, "A new extension of the Kalman
+    filter to nonlinear systems", 1997): ``lambda = kappa``, ``W^0 = kappa / (n + kappa)``, ``W^i = 1 / (2 (n +
+    kappa))``, the same weights for mean and covariance (filterpy's JulierSigmaPoints). ``points="cubature"``: the
+    third-degree spherical-radial cubature rule (I. Arasaratnam and S. Haykin, "Cubature Kalman filters", IEEE TAC
+    54(6), 2009): ``2n`` points ``x +- sqrt(n) (sqrt P)_i`` of weight ``1 / (2n)`` (here with a centre point of weight
+    0). Both are the scaled set's algebra at ``alpha = 1``, ``beta = 0`` (Julier's with its kappa, the cubature rule
+    with kappa = 0); ``alpha`` and ``beta`` are not used by them."""
     check_scalar("n", n, ge=1, integer=True)
     check_scalar("alpha", alpha, gt=0)
     check_scalar("beta", beta)
     check_scalar("kappa", kappa)
     check_choice("variant", variant, UKF_WEIGHTS)
+    check_choice("points", points, SIGMA_POINT_SETS)
+    if points != "merwe" and variant != "corrected":
+        raise ValueError(f"variant={variant!r} is a variant of the printed scaled (merwe) weights; points={points!r} "
+                         "has none")
     n = int(n)
+    if points == "cubature":
+        alpha, beta, kappa = 1.0, 0.0, 0.0
+    elif points == "julier":
+        alpha, beta = 1.0, 0.0
     c = alpha**2 * (n + kappa)           # n + lambda, computed directly (lambda = c - n cancels at small alpha)
     if not c > 0:
         raise ValueError(f"n + lambda = alpha^2 (n + kappa) must be positive, got {c} (n = {n}, kappa = {kappa})")
@@ -135,12 +155,12 @@ def unscented_transform(points, values, weights: UnscentedWeights):
 
 
 def _ukf_update(x, P, z, h, R, weights: UnscentedWeights, innovation_noise: bool, guard: list,
-                want: bool = False) -> _Out:
+                want: bool = False, meas=None) -> _Out:
     """One unscented update with measurement function ``h`` (sigma points -> values); NaN rows of ``z`` are left
     out. ``guard[0]`` counts the updates whose ``R~`` needed flooring. Returns the posterior with the NIS
     ``nu^T S^{-1} nu`` of the components present (from the inverse that gives the gain), their number and the
     Gaussian log-likelihood ``log N(nu; 0, S)``; ``want``: also the innovation ``z - z^`` and ``S`` (NaN where
-    missing)."""
+    missing). ``meas``: a NonlinearMeasurement whose ``residual`` and ``mean`` replace the linear forms."""
     valid = np.isfinite(z)
     dof = valid.sum(axis=-1)
     if not valid.any():
@@ -152,8 +172,11 @@ def _ukf_update(x, P, z, h, R, weights: UnscentedWeights, innovation_noise: bool
     Y = h(X)
     n, m = x.shape[-1], z.shape[-1]
     c = n + weights.lam                              # L L^T = c P
-    z_hat = weights.mean @ Y                         # Eq. (3.25)
-    dv = Y - z_hat[..., None, :]
+    if meas is not None and meas.mean is not None:   # e.g. a circular mean of bearings
+        z_hat = np.asarray(meas.mean(Y, weights.mean), dtype=float)
+    else:
+        z_hat = weights.mean @ Y                     # Eq. (3.25)
+    dv = Y - z_hat[..., None, :] if meas is None else meas.difference(Y, z_hat[..., None, :])
     Pzz = _mT(weights.cov[:, None] * dv) @ dv        # Eq. (3.26) without R
     Pzz = 0.5 * (Pzz + _mT(Pzz))
     # P_xz = sum_i W_c^i (X^i - x-)(gamma^i - z^)^T (Eq. (3.27)) = L D: X^i - x- = +-(column i of L) and W_c^i is the
@@ -176,7 +199,7 @@ def _ukf_update(x, P, z, h, R, weights: UnscentedWeights, innovation_noise: bool
         # sigma points far out (a state driven there by an overflowing reading): their readings or S overflow
         over = bad & ~(np.all(np.isfinite(Y), axis=(-2, -1)) & np.all(np.isfinite(S), axis=(-2, -1)))
         raise _Singular(over, _SIGMA_OVERFLOW) if over.any() else _Singular(bad)
-    nu = np.where(valid, z - z_hat, 0.0)
+    nu = np.where(valid, (z - z_hat) if meas is None else meas.difference(np.where(valid, z, z_hat), z_hat), 0.0)
     S_use = S if row_ok.all() else np.where(row_ok[..., None, None], S, np.eye(m))
     S_inv = _inverse(S_use, row_ok)
     K = Pxz @ S_inv                                  # K = P_xz S^{-1}
@@ -279,13 +302,47 @@ def _rss_noise(meas: RssMeasurement, x, z, step: int):
     return np.broadcast_to(meas.variance_db2(d, ch.path_loss_exp, ch.sigma_db), z.shape)
 
 
-def unscented_kalman_filter(F, Q, x0, P0, measurements, *, alpha: float = 1e-3, beta: float = 2.0,
-                            kappa: float = 0.0, weights: str = "corrected", innovation_noise: bool = True,
-                            record=None, predict_first: bool = True, outputs=(),
+def _unscented_predictor(setup, weights: UnscentedWeights):
+    """The unscented prediction through a NonlinearMotion (:mod:`locbook.tracking.transition`): sigma points ``X`` of
+    the posterior, ``Y = f(X) + B u``, ``x- = sum W_m Y`` (or the motion's mean), ``P- = sum W_c (Y - x-)(Y - x-)^T +
+    Q`` and the cross-covariance ``sum W_c (X - x)(Y - x-)^T`` (differences through the motion's residual)."""
+    motion = setup.motion
+
+    def predict(x, P, k, cross):
+        X, L = _sigma_points(x, P, weights.lam)
+        Y = motion.apply(X, k)
+        d = setup.drift_at(k)
+        if d is not None:
+            Y = Y + d[..., None, :]
+        if motion.mean is not None:
+            x_pred = np.asarray(motion.mean(Y, weights.mean), dtype=float)
+        else:
+            x_pred = weights.mean @ Y
+        dY = motion.difference(Y, x_pred[..., None, :])
+        wdY = weights.cov[:, None] * dY
+        P_pred = _mT(dY) @ wdY
+        P_pred = 0.5 * (P_pred + _mT(P_pred)) + setup.Q_at(k)
+        C = None
+        if cross:                   # X^i - x = +-(column i of L): sum W_c (X - x)(Y - x-)^T = L (wdY_i - wdY_{n+i})
+            n = x.shape[-1]
+            C = L @ (wdY[..., 1:n + 1, :] - wdY[..., n + 1:, :])
+        return x_pred, P_pred, C
+    return predict
+
+
+def unscented_kalman_filter(F, Q, x0, P0, measurements, *, B=None, u=None, alpha: float = 1e-3, beta: float = 2.0,
+                            kappa: float = 0.0, weights: str = "corrected", points: str = "merwe",
+                            innovation_noise: bool = True, record=None, predict_first: bool = True, outputs=(),
                             divergence_window: int | None = DIVERGENCE_WINDOW,
                             divergence_probability: float = DIVERGENCE_PROBABILITY) -> KalmanResult:
-    """Unscented Kalman filter with linear motion, vectorized over leading Monte-Carlo axes (Gudipati 2017,
-    Sec. 3.6, corrected; see the module docstring for the printed errors and the covariance guard).
+    """Unscented Kalman filter, vectorized over leading Monte-Carlo axes (Gudipati 2017, Sec. 3.6, corrected; see the
+    module docstring for the printed errors and the covariance guard).
+
+    Motion: a linear ``F`` (constant, with run axes or ``per_step``) is predicted exactly (the Kalman prediction, as
+    the thesis's linear model has it); a :class:`~locbook.tracking.transition.NonlinearMotion` by the unscented
+    transform of the posterior's sigma points through ``f`` (its ``mean`` and ``residual`` for states on a circle),
+    ``P- = sum W_c (Y - x-)(Y - x-)^T + Q``; the control input ``B u`` is added to the prediction. ``points``: the
+    sigma-point set (:func:`unscented_weights`: ``"merwe"``, ``"julier"``, ``"cubature"``).
 
     Same arguments, time loop and result (:class:`~locbook.tracking.results.KalmanResult`, whose
     ``floored_updates`` counts the (run, update) pairs whose ``R~`` had a negative eigenvalue floored by the guard of
@@ -306,10 +363,11 @@ def unscented_kalman_filter(F, Q, x0, P0, measurements, *, alpha: float = 1e-3, 
     exceeds the chi-square bound at every update and the run is flagged ``diverged`` (with ``diverged_step``).
     """
     check_choice("weights", weights, UKF_WEIGHTS)
-    F_arr = np.asarray(F)
-    if F_arr.ndim < 2:
-        raise ValueError(f"F must be square (n, n) or batch + (n, n), got {F_arr.shape}")
-    w = unscented_weights(F_arr.shape[-1], alpha, beta, kappa, weights)
+    window, probability = _check_guard(divergence_window, divergence_probability)
+    outputs = _check_outputs(outputs)
+    measurements = _streams(measurements)
+    setup = _setup(F, Q, x0, P0, measurements, record, "unscented_kalman_filter", B, u)
+    w = unscented_weights(setup.n, alpha, beta, kappa, weights, points)
     guard = [0]
 
     def update(x, P, z, meas, step, want):
@@ -335,7 +393,7 @@ def unscented_kalman_filter(F, Q, x0, P0, measurements, *, alpha: float = 1e-3, 
                 x, P, z[..., j:j + 1], lambda X: np.einsum("...mn,...kn->...km", H[..., j:j + 1, :], X),
                 R[..., j:j + 1, j:j + 1], w, innovation_noise, guard, want), want)
         if isinstance(meas, NonlinearMeasurement):
-            return _ukf_update(x, P, z, meas.h, np.asarray(meas.R, float), w, innovation_noise, guard, want)
+            return _ukf_update(x, P, z, meas.h, meas.noise_at(x), w, innovation_noise, guard, want, meas)
         m = z.shape[-1]
         if meas.mode == "parallel":
             sigma2 = _rss_noise(meas, x, z, step)
@@ -363,9 +421,6 @@ def unscented_kalman_filter(F, Q, x0, P0, measurements, *, alpha: float = 1e-3, 
         S = np.where(np.isnan(var)[..., :, None] | np.isnan(var)[..., None, :], np.nan, S)
         return _Out(x, P, nis, dof, ll, nu, S)
 
-    window, probability = _check_guard(divergence_window, divergence_probability)
-    outputs = _check_outputs(outputs)
-    measurements = _streams(measurements)
-    setup = _setup(F, Q, x0, P0, measurements, record, "unscented_kalman_filter")
-    res = _run(setup, measurements, update, predict_first, outputs=outputs)
+    predict = _unscented_predictor(setup, w) if setup.motion is not None else None
+    res = _run(setup, measurements, update, predict_first, outputs=outputs, predict=predict)
     return _flag(replace(res, floored_updates=guard[0]), window, probability)

@@ -1,0 +1,145 @@
+"""The motion side of the Kalman family: constant, time-varying and nonlinear transitions, with a control input.
+
+Every Kalman-family filter (:func:`locbook.kalman_filter`, :func:`locbook.extended_kalman_filter`,
+:func:`locbook.unscented_kalman_filter`) predicts step ``k`` from the posterior of step ``k - 1`` with
+
+    x_{k|k-1} = F_k x_{k-1|k-1} + B_k u_k            P_{k|k-1} = F_k P_{k-1|k-1} F_k^T + Q_k        (linear)
+    x_{k|k-1} = f(x_{k-1|k-1}) + B_k u_k             P_{k|k-1} = J P J^T + Q_k,  J = df/dx           (EKF)
+    x_{k|k-1} = sum_i W_m^i f(X^i) + B_k u_k          P_{k|k-1} = sum_i W_c^i (Y^i - x)(Y^i - x)^T + Q_k (UKF)
+
+(filterpy's convention: the matrices and control of index ``k`` act in the prediction *to* step ``k``; with
+``predict_first=False`` step 0 is not predicted and index 0 is unused, pykalman's convention, whose offset ``b_{t-1}``
+moves ``t - 1`` to ``t``, is then ``u_k = b_{k-1}`` with ``B = I``).
+
+- ``F`` is a matrix ``(n, n)`` (or with run axes ``batch + (n, n)``), a matrix per step ``per_step(batch + (T, n, n))``
+  or a :class:`NonlinearMotion` (``f`` with its Jacobian for the EKF, ``f`` alone for the UKF).
+- ``Q`` is a covariance ``(n, n)`` / ``batch + (n, n)`` or ``per_step(batch + (T, n, n))``.
+- The control input: ``u`` ``batch + (T, p)`` and ``B`` ``(n, p)`` / ``batch + (n, p)`` / ``per_step(batch + (T, n,
+  p))``; ``B u`` is formed once for all steps.
+
+A leading time axis is marked by :func:`per_step` because run axes are leading axes too: an array ``(T, n, n)``
+without the mark is ``T`` runs of one constant matrix each.
+
+Besides the posterior, a prediction gives the cross-covariance of the previous posterior and the prediction,
+``C_k = Cov(x_{k-1}, x_k | z_1..z_{k-1})`` (``P F^T``, ``P J^T`` or the sigma points' ``sum W_c (X - x)(Y - x)^T``),
+recorded on request as ``P_cross``: the one quantity a Rauch-Tung-Striebel smoother needs beyond the filter's moments,
+so one smoother (:func:`locbook.rts_smoother`) serves the KF, the EKF and the UKF (the unscented RTS smoother).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .._validate import as_array
+
+__all__ = ["PerStep", "per_step", "NonlinearMotion"]
+
+
+class PerStep:
+    """An array whose axis ``-3`` is time: a matrix per step ``batch + (T, r, c)`` (made by :func:`per_step`)."""
+
+    __slots__ = ("value",)
+
+    def __init__(self, value, name: str = "per_step value"):
+        value = as_array(name, value.value if isinstance(value, PerStep) else value)
+        if value.ndim < 3:
+            raise ValueError(f"{name} must have shape batch + (T, rows, cols) (a matrix per step), got {value.shape}")
+        self.value = value
+
+    @property
+    def shape(self) -> tuple:
+        return self.value.shape
+
+    def at(self, step: int) -> np.ndarray:
+        """The matrix of ``step``: ``batch + (r, c)``."""
+        return self.value[..., step, :, :]
+
+    def __repr__(self) -> str:
+        return f"per_step(array of shape {self.value.shape})"
+
+
+def per_step(value) -> PerStep:
+    """Mark ``value`` ``batch + (T, r, c)`` as one matrix per time step (F, Q, B, or a LinearMeasurement's H and R)."""
+    return PerStep(value)
+
+
+@dataclass(frozen=True)
+class NonlinearMotion:
+    """A nonlinear motion model ``x_k = f(x_{k-1}) + B u_k + w_k``, ``w_k ~ N(0, Q_k)`` (module docstring).
+
+    ``f``: maps states ``(..., n)`` to ``(..., n)`` over any leading axes (the EKF calls it with the runs'
+    posteriors ``batch + (n,)``, the UKF with their sigma points ``batch + (N, n)``). ``jacobian``: states ``(..., n)``
+    to ``(..., n, n)``; the EKF needs it, the UKF does not. With ``uses_step=True`` both are called as ``f(x, k)``
+    (``k`` the step predicted to), for a model whose time step varies.
+
+    For states on a circle (a heading): ``residual(a, b)`` is the difference ``a - b`` of states (e.g. wrapped to
+    ``(-pi, pi]``), used wherever the UKF subtracts states; ``mean(points, weights)`` the weighted mean of points
+    ``(..., N, n)`` with weights ``(N,)`` (e.g. a circular mean); both default to the linear forms. ``name`` names the
+    model in errors.
+    """
+
+    f: object
+    jacobian: object = None
+    residual: object = None
+    mean: object = None
+    uses_step: bool = False
+    name: str = "motion"
+
+    def __post_init__(self):
+        for field in ("f", "jacobian", "residual", "mean"):
+            value = getattr(self, field)
+            if (value is not None or field == "f") and not callable(value):
+                raise ValueError(f"{self.name}: {field} must be a function, got {type(value).__name__}")
+
+    def apply(self, x, step: int):
+        """``f(x)`` (or ``f(x, step)``), checked to keep the state's shape."""
+        out = np.asarray(self.f(x, step) if self.uses_step else self.f(x), dtype=float)
+        if out.shape != np.shape(x):
+            raise ValueError(f"{self.name}: f returned shape {out.shape} for states of shape {np.shape(x)}")
+        return out
+
+    def jacobian_at(self, x, step: int):
+        """The Jacobian ``df/dx`` ``(..., n, n)`` at ``x`` (the EKF's), checked."""
+        if self.jacobian is None:
+            raise ValueError(f"{self.name}: the EKF needs the motion's jacobian (the UKF does not)")
+        J = np.asarray(self.jacobian(x, step) if self.uses_step else self.jacobian(x), dtype=float)
+        n = np.shape(x)[-1]
+        if J.shape[-2:] != (n, n) or J.shape[:-2] not in ((), np.shape(x)[:-1]):
+            raise ValueError(f"{self.name}: jacobian returned shape {J.shape}, expected {np.shape(x)[:-1] + (n, n)}")
+        return J
+
+    def difference(self, a, b):
+        """``a - b`` of states, through ``residual`` when given."""
+        return np.asarray(self.residual(a, b), dtype=float) if self.residual is not None else a - b
+
+
+def _matrix_arg(name: str, value, rows: int, cols: int, T: int):
+    """A matrix argument that may be constant (``batch + (rows, cols)``) or per step (``PerStep``, ``batch + (T, rows,
+    cols)``): ``(array, per_step flag, run axes)``."""
+    if isinstance(value, PerStep):
+        arr = value.value
+        if arr.shape[-2:] != (rows, cols) or arr.shape[-3] not in (1, T):
+            raise ValueError(f"{name} per step must have shape batch + ({T}, {rows}, {cols}), got {arr.shape}")
+        return arr, True, arr.shape[:-3]
+    arr = as_array(name, value)
+    if arr.ndim < 2 or arr.shape[-2:] != (rows, cols):
+        raise ValueError(f"{name} must have shape ({rows}, {cols}) or batch + ({rows}, {cols}) (per_step(...) for a "
+                         f"matrix per step), got {arr.shape}")
+    return arr, False, arr.shape[:-2]
+
+
+def _control_drift(B, u, n: int, T: int):
+    """``B_k u_k`` ``batch + (T, n)`` for the control input (module docstring), or None without one; and its run
+    axes."""
+    if B is None and u is None:
+        return None, ()
+    if B is None or u is None:
+        raise ValueError("a control input needs both B (n, p) and u batch + (T, p)")
+    u = as_array("u", u, min_ndim=2)
+    if u.shape[-2] not in (1, T):
+        raise ValueError(f"u must have shape batch + ({T}, p) (one control vector per step), got {u.shape}")
+    p = u.shape[-1]
+    B, steps, _ = _matrix_arg("B", B, n, p, T)
+    drift = np.einsum("...np,...p->...n", B if steps else B[..., None, :, :], u)
+    return drift, drift.shape[:-2]

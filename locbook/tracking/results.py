@@ -72,9 +72,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .._validate import check_scalar
+from .._validate import as_array, check_scalar
 
-__all__ = ["KalmanResult", "nis_divergence", "DIVERGENCE_WINDOW", "DIVERGENCE_PROBABILITY", "KALMAN_OUTPUTS"]
+__all__ = ["KalmanResult", "nis_divergence", "nees", "DIVERGENCE_WINDOW", "DIVERGENCE_PROBABILITY", "KALMAN_OUTPUTS"]
 
 #: defaults of the consistency guard (module docstring): consecutive updates, and the chi-square probability
 DIVERGENCE_WINDOW = 20
@@ -187,6 +187,27 @@ def nis_divergence(nis, nis_dof, window: int | None = DIVERGENCE_WINDOW,
     first = np.take_along_axis(count, end[..., None], -1) - window + 1
     start = np.argmax(count >= first, axis=-1)  # the first exceedance of that window
     return diverged, np.where(diverged, start, -1).astype(np.int64)
+
+
+def nees(x_true, x, P, *, index=None):
+    """Normalised estimation error squared ``(x - x_true)^T P^{-1} (x - x_true)`` ``batch + (T,)`` of estimates ``x``
+    ``batch + (T, n)`` with covariances ``P`` ``batch + (T, n, n)`` against the truth ``x_true`` (broadcast against
+    ``x``; NaN where the truth is missing). ``index``: the state components to score (e.g. the position), with the
+    matching block of P. Under a consistent filter NEES ~ chi^2(n) at each step, so its average over M Monte-Carlo
+    runs lies in ``chi2.ppf([a, 1 - a], M n) / M`` (Bar-Shalom, Li and Kirubarajan 2001, Sec. 5.4.2)."""
+    x = as_array("x", x, min_ndim=1)
+    x_true = as_array("x_true", x_true, min_ndim=1, nan_ok=True)
+    P = as_array("P", P, min_ndim=2)
+    if index is not None:
+        idx = np.asarray(index)
+        x, x_true, P = x[..., idx], x_true[..., idx], P[..., idx[:, None], idx[None, :]]
+    if P.shape[-2:] != (x.shape[-1], x.shape[-1]) or x_true.shape[-1] != x.shape[-1]:
+        raise ValueError(f"x {x.shape}, x_true {x_true.shape} and P {P.shape} must share the state size")
+    e = x - x_true
+    ok = np.all(np.isfinite(e), axis=-1)
+    e = np.where(ok[..., None], e, 0.0)
+    sol = np.linalg.solve(P, e[..., None])[..., 0]
+    return np.where(ok, np.einsum("...i,...i->...", e, sol), np.nan)
 
 
 def _flag(res: KalmanResult, window: int, probability: float) -> KalmanResult:

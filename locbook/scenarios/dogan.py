@@ -48,7 +48,7 @@ __all__ = [
     "DEFAULT_START", "NOISE_READINGS", "DEFAULT_NOISE_READING", "NOISE_CALIBRATED_FROM", "Q_PER_ACC_VARIANCE",
     "filter_noise", "fitted_readings", "speed_reason", "FILTERS",
     "walk_trajectory", "motion_model", "simulate_rss", "simulate_acceleration", "mle_positions", "mle_cost_eq24",
-    "initial_state", "run_filter", "ChannelRun", "run_channel", "printed_tables", "TABLE_SETTINGS", "TableSetting",
+    "initial_state", "filter_inputs", "run_filter", "ChannelRun", "run_channel", "noise_fit", "printed_tables", "TABLE_SETTINGS", "TableSetting",
     "table_channels", "record_tables", "bound_rows", "thesis_repeat_error", "tail_rows",
     "fusion_reduction_rows", "ordering_rows", "table_view", "BOUND_KINDS", "pcrlb_m",
     "smc_trajectories", "smc_trajectory", "CHANNELS", "run_tables", "table_rows", "only_acc_errors",
@@ -310,6 +310,44 @@ def initial_state(first_fix_m, mse_mle_m2, *, vel_var: float = P00_VEL_VAR, acc_
     return x0, diag[..., :, None] * np.eye(6)
 
 
+def filter_inputs(name: str, trajectory: Trajectory, rss_dbm, mle_fix_m, mse_mle_m2, channel: PathLossModel, *,
+                  acc_mps2=None, sigma_acc_mps2: float | None = None, model: KinematicModel | None = None,
+                  p0_acc_var: float = P00_ACC_VAR, serial_order: str = "descending", anchors_m=ANCHORS_M):
+    """The inputs of one filter of Tables 3.7-3.12 (:func:`run_filter`): ``(x0, P0, measurements, at)`` for
+    :func:`locbook.extended_kalman_filter` on the grid after the first RSS epoch (``at``: the later RSS epochs on it);
+    with a per-epoch MSE (KF (MLE)) also the fixes ``z`` on the grid, ``(x0, P0, measurements, at, z)``."""
+    model = model or motion_model()
+    steps = trajectory.rss_steps
+    n_steps = trajectory.time_s.size
+    rss_dbm = np.asarray(rss_dbm, dtype=float)
+    batch = rss_dbm.shape[:-2]
+    mse = np.asarray(mse_mle_m2, dtype=float)
+    per_epoch = mse.ndim == 2
+    x0, P0 = initial_state(np.asarray(mle_fix_m)[..., 0, :], mse[0] if per_epoch else mse, acc_var=p0_acc_var)
+    measurements = []
+    if acc_mps2 is not None:
+        if sigma_acc_mps2 is None:
+            raise ParameterError("fusion needs sigma_acc_mps2 for R_acc")
+        acc = np.asarray(acc_mps2, dtype=float)[..., steps[0] + 1:, :]
+        measurements.append(LinearMeasurement(acc, model.derivative_measurement_matrix(2),
+                                              np.asarray(sigma_acc_mps2, float)[..., None, None] ** 2 * np.eye(2)))
+    grid_shape = batch + (n_steps - steps[0] - 1,)
+    at = steps[1:] - steps[0] - 1                  # RSS epochs after the first, on the grid after step 0
+    if name == "kalman_filter":
+        z = np.full(grid_shape + (2,), np.nan)
+        z[..., at, :] = np.asarray(mle_fix_m)[..., 1:, :]
+        if per_epoch:
+            return x0, P0, measurements, at, z
+        measurements.append(LinearMeasurement(z, model.position_measurement_matrix(), mse[..., :, None] * np.eye(2)))
+    else:
+        z = np.full(grid_shape + (rss_dbm.shape[-1],), np.nan)
+        z[..., at, :] = rss_dbm[..., 1:, :]
+        mode = "parallel" if name == "parallel_ekf" else "serial"
+        measurements.append(RssMeasurement(z, anchors_m, channel, model.position_index, mode=mode,
+                                           order=serial_order))
+    return x0, P0, measurements, at
+
+
 def run_filter(name: str, trajectory: Trajectory, rss_dbm, mle_fix_m, mse_mle_m2, channel: PathLossModel, *,
                acc_mps2=None, sigma_acc_mps2: float | None = None, model: KinematicModel | None = None,
                p0_acc_var: float = P00_ACC_VAR, serial_order: str = "descending", anchors_m=ANCHORS_M,
@@ -338,35 +376,18 @@ def run_filter(name: str, trajectory: Trajectory, rss_dbm, mle_fix_m, mse_mle_m2
     model = model or motion_model()
     steps = trajectory.rss_steps
     n_steps = trajectory.time_s.size
-    rss_dbm = np.asarray(rss_dbm, dtype=float)
-    batch = rss_dbm.shape[:-2]
     mse = np.asarray(mse_mle_m2, dtype=float)
     per_epoch = mse.ndim == 2
     if per_epoch and (name != "kalman_filter" or mse.shape != (steps.size, 2)):
         raise ParameterError(f"a per-epoch MSE must be (epochs, 2) = ({steps.size}, 2) and is used by KF (MLE) only, "
                              f"got shape {mse.shape} for {name}")
-    x0, P0 = initial_state(np.asarray(mle_fix_m)[..., 0, :], mse[0] if per_epoch else mse, acc_var=p0_acc_var)
-    measurements = []
-    if acc_mps2 is not None:
-        if sigma_acc_mps2 is None:
-            raise ParameterError("fusion needs sigma_acc_mps2 for R_acc")
-        acc = np.asarray(acc_mps2, dtype=float)[..., steps[0] + 1:, :]
-        measurements.append(LinearMeasurement(acc, model.derivative_measurement_matrix(2),
-                                              np.asarray(sigma_acc_mps2, float)[..., None, None] ** 2 * np.eye(2)))
-    grid_shape = batch + (n_steps - steps[0] - 1,)
-    at = steps[1:] - steps[0] - 1                  # RSS epochs after the first, on the grid after step 0
-    if name == "kalman_filter":
-        z = np.full(grid_shape + (2,), np.nan)
-        z[..., at, :] = np.asarray(mle_fix_m)[..., 1:, :]
-        if per_epoch:
-            return _per_epoch_kf(model, x0, P0, measurements, z, mse, at, steps, n_steps, every_step)
-        measurements.append(LinearMeasurement(z, model.position_measurement_matrix(), mse[..., :, None] * np.eye(2)))
-    else:
-        z = np.full(grid_shape + (rss_dbm.shape[-1],), np.nan)
-        z[..., at, :] = rss_dbm[..., 1:, :]
-        mode = "parallel" if name == "parallel_ekf" else "serial"
-        measurements.append(RssMeasurement(z, anchors_m, channel, model.position_index, mode=mode,
-                                           order=serial_order))
+    inputs = filter_inputs(name, trajectory, rss_dbm, mle_fix_m, mse, channel, acc_mps2=acc_mps2,
+                           sigma_acc_mps2=sigma_acc_mps2, model=model, p0_acc_var=p0_acc_var,
+                           serial_order=serial_order, anchors_m=anchors_m)
+    if per_epoch:
+        x0, P0, measurements, at, z = inputs
+        return _per_epoch_kf(model, x0, P0, measurements, z, mse, at, steps, n_steps, every_step)
+    x0, P0, measurements, at = inputs
     track = extended_kalman_filter(model.F, model.Q, x0, P0, measurements, record=None if every_step else at)
     x = np.concatenate([np.broadcast_to(x0[..., None, :], track.x.shape[:-2] + (1, 6)), track.x], axis=-2)
     P = np.concatenate([np.broadcast_to(P0[..., None, :, :], track.P.shape[:-3] + (1, 6, 6)), track.P], axis=-3)
@@ -504,6 +525,58 @@ def run_channel(trajectory: Trajectory, sigma_rss_db: float, path_loss_exp: floa
             if keep_estimates:
                 out.errors[("estimates", name, sigma_acc)] = pos
     return out
+
+
+def noise_fit(trajectory: Trajectory, sigma_rss_db: float, path_loss_exp: float, n_runs: int,
+              rng: np.random.Generator, *, name: str = "parallel_ekf", noise_reading: str = DEFAULT_NOISE_READING,
+              ref_power_dbm: float = REF_POWER_DBM, anchors_m=ANCHORS_M, room_m=ROOM_M,
+              mle_grid_step_m: float = MLE_GRID_STEP_M, mle_bounds: str = "unconstrained") -> dict:
+    """Maximum-likelihood noise levels of an ONLY-RSS filter of Tables 3.7-3.12 beside the thesis's hand-set ones.
+
+    The thesis sets ``Q = q I`` by hand (Eq. (3.24), q = 2.3e-5 per step) and ``R = sigma_RSS^2 I`` at the simulated
+    sigma (Eq. (3.22)). On ``n_runs`` simulated runs of one channel (the tables' simulation, :func:`run_channel`), the
+    innovations' log-likelihood (:func:`locbook.fit_noise_ml`, EKF) is maximised over a multiplier of Q and one of
+    sigma_RSS^2: pooled over the runs (one estimate), and per run (its spread). Then the filter runs at the hand-set
+    and at the pooled ML values. The truth has no process noise (a deterministic walk with sharp turns, the assumed
+    Fig. 3.1 path): the ML q is the white-noise level that best explains the turns as the filter sees them, not a
+    property of the simulation, while the ML sigma_RSS should recover the simulated sigma (a check of the method).
+
+    Returns a dict: ``q_hand``, ``q_ml`` (pooled), ``q_ml_runs`` (per run), ``sigma_hand_db``, ``sigma_ml_db``,
+    ``sigma_ml_runs_db``, ``rmse_hand_m``, ``rmse_ml_m`` (over runs and RSS epochs), the pooled log-likelihoods
+    ``log_likelihood_hand`` and ``log_likelihood_ml``, and ``at_bound`` (a multiplier at its bound)."""
+    from ..tracking.noise import fit_noise_ml
+    if name not in ("parallel_ekf", "serial_ekf"):
+        raise ParameterError(f"noise_fit fits the RSS EKFs (parallel_ekf, serial_ekf), got {name!r}")
+    channel = PathLossModel(ref_power_dbm, path_loss_exp, sigma_rss_db)
+    dt_s = float(trajectory.time_s[1] - trajectory.time_s[0])
+    truth = trajectory.position_m[..., trajectory.rss_steps, :]
+    rss = simulate_rss(trajectory, channel, n_runs, rng, anchors_m)
+    fix = mle_positions(rss, channel, anchors_m, room_m=room_m, grid_step_m=mle_grid_step_m,
+                        bounds=mle_bounds).position_m
+    mse = np.mean((fix - truth) ** 2, axis=(0, 1))
+    q, p0_acc = filter_noise(noise_reading, None)
+    model = motion_model(dt_s, q)
+    x0, P0, measurements, at = filter_inputs(name, trajectory, rss, fix, mse, channel, model=model,
+                                             p0_acc_var=p0_acc, anchors_m=anchors_m)
+    pooled = fit_noise_ml(model.F, model.Q, x0, P0, measurements, kind="ekf", per_run=False)
+    each = fit_noise_ml(model.F, model.Q, x0, P0, measurements, kind="ekf", per_run=True)
+
+    def rmse(q_scale, r_scale):
+        sigma = sigma_rss_db * np.sqrt(r_scale)
+        ch = PathLossModel(ref_power_dbm, path_loss_exp, sigma)
+        track = run_filter(name, trajectory, rss, fix, mse, ch, model=motion_model(dt_s, q * q_scale),
+                           p0_acc_var=p0_acc, anchors_m=anchors_m)
+        pos = track.x[..., model.position_index]
+        return float(np.sqrt(np.mean(np.sum((pos - truth) ** 2, axis=-1))))
+
+    qs, rs = float(pooled.q_scale[0]), float(pooled.r_scale[0][0])
+    return {"q_hand": q, "q_ml": q * qs, "q_ml_runs": q * each.q_scale[..., 0],
+            "sigma_hand_db": float(sigma_rss_db), "sigma_ml_db": float(sigma_rss_db * np.sqrt(rs)),
+            "sigma_ml_runs_db": sigma_rss_db * np.sqrt(each.r_scale[0][..., 0]),
+            "rmse_hand_m": rmse(1.0, 1.0), "rmse_ml_m": rmse(qs, rs),
+            "log_likelihood_hand": float(pooled.initial_log_likelihood),
+            "log_likelihood_ml": float(pooled.log_likelihood),
+            "at_bound": bool(np.any(pooled.at_bound) or np.any(each.at_bound))}
 
 
 @dataclass(frozen=True)

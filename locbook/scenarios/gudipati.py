@@ -43,7 +43,7 @@ __all__ = [
     "ANCHOR_SETS", "REF_POWER_DBM", "FUSED_METHODS",
     "PATH_LOSS_EXP", "REPORT_SPACING_M", "PATHS", "UKF_ALPHA", "UKF_BETA", "CALIBRATION_STEP_M",
     "CALIBRATION_SPAN_M", "CALIBRATION_SAMPLES", "CALIBRATION_TERMS", "WalkSettings", "channel_model",
-    "path_trajectory", "Walk", "simulate_walk", "rss_only_fixes", "METHODS", "track", "WalkErrors", "walk_errors",
+    "path_trajectory", "Walk", "simulate_walk", "rss_only_fixes", "METHODS", "track", "noise_fit", "WalkErrors", "walk_errors",
     "table_5_1", "calibration_distances_m", "ed_register_dbm", "simulate_calibration_walk", "rss_only_mean_error", "calibrate_shadowing",
     "fix_covariance_from", "inertial_only", "anchors_m", "ins_drift_covariance", "position_fusion", "RSS_SIGNS", "STATE_MODELS",
     "posterior_crlb_m", "crlb_map_m", "METHOD_LABELS", "record_ch6",
@@ -402,6 +402,65 @@ def track(walk: Walk, method: str, *, fix_covariance=None, ukf_alpha: float = UK
         res = unscented_kalman_filter(model.F, model.Q, x0, P0, streams, alpha=ukf_alpha, beta=UKF_BETA, kappa=0.0,
                                       weights=ukf_weights, innovation_noise=ukf_innovation_noise, record=steps)
     return (res.x[..., :2], DivergenceFlags.of(res)) if with_divergence else res.x[..., :2]
+
+
+def noise_fit(walk: Walk, method: str = "ekf", *, ukf_alpha: float = UKF_ALPHA, per_walk: bool = False) -> dict:
+    """Maximum-likelihood noise levels of the fused EKF or UKF of :func:`track` beside the hand-set ones (our
+    extension: the thesis picks Q and R by trial and prints none of them).
+
+    The filter's own innovations choose five variance multipliers (:func:`locbook.fit_noise_ml`): the translational
+    ``q`` and the angular ``q_angular`` blocks of Q, the accelerometer and gyroscope rows of the inertial R, and the
+    RSS sigma; pooled over the walks (one estimate) and, with ``per_walk``, per walk (its spread; five times the
+    filter calls). The hand-set inertial R is the white
+    noise averaged over a step plus the residual biases' variance (:func:`_imu_stream`), and the RSS sigma the
+    calibrated shadowing with the per-packet noise; the simulation's biases are constant and its shadowing correlated
+    along the path, which no white-noise R describes, so the ML values say what white noise the data look like
+    through this model. Returns a dict with, for each quantity, the hand-set value, the pooled ML value and the
+    per-walk ML values (None without ``per_walk``), and the mean error over walks at the report points
+    (:func:`walk_errors`) under each; ``at_bound`` names the multipliers that ended at their bound."""
+    from ..tracking.noise import fit_noise_ml
+    if method not in ("ekf", "ukf"):
+        raise ValueError(f"noise_fit fits the fused EKF or UKF, got {method!r}")
+    s = walk.settings
+    model = HeadingKinematicModel(s.dt_s, s.q, s.q_angular, heading="yaw_rate")
+    x0, P0 = _initial(walk, model, 8)
+    streams = [_imu_stream(walk, method == "ekf"), _rss_stream(walk, model)]
+    translational, angular = [0, 1, 2, 3, 4, 5], [6, 7]
+    options = dict(kind=method, fit_Q=[translational, angular], fit_R=[[[0, 1], [2]], "scale"])
+    if method == "ukf":
+        options.update(alpha=ukf_alpha, beta=UKF_BETA, kappa=0.0)
+    pooled = fit_noise_ml(model.F, model.Q, x0, P0, streams, per_run=False, **options)
+    each = fit_noise_ml(model.F, model.Q, x0, P0, streams, per_run=True, **options) if per_walk else None
+    options.pop("fit_Q"), options.pop("fit_R")
+    filt = extended_kalman_filter if method == "ekf" else unscented_kalman_filter
+    kind = options.pop("kind")
+
+    def mean_error(Q, imu_R, sigma_db):
+        st = [replace(streams[0], R=imu_R), replace(streams[1], channel=replace(streams[1].channel, sigma_db=sigma_db))]
+        res = filt(model.F, Q, x0, P0, st, record=walk.report_steps, **options)
+        return float(walk_errors(walk, res.x[..., :2]).mean_m.mean())
+
+    imu_R, sigma = np.asarray(streams[0].R), float(streams[1].channel.sigma_db)
+    acc_var, gyro_var = imu_R[0, 0], imu_R[2, 2]
+    q_mult, r_mult = pooled.q_scale, pooled.r_scale
+    per = lambda base, scale, i, root=False: None if each is None else (
+        base * (np.sqrt(scale(each)[:, i]) if root else scale(each)[:, i]))
+    names = ("q", "q_angular", "accelerometer variance", "gyroscope variance", "RSS variance")
+    multipliers = np.concatenate([q_mult, r_mult[0], r_mult[1]])
+    lo, hi = 1e-4, 1e4                     # fit_noise_ml's default scale_bounds
+    return {
+        "method": kind,
+        "q": (s.q, s.q * q_mult[0], per(s.q, lambda e: e.q_scale, 0)),
+        "q_angular": (s.q_angular, s.q_angular * q_mult[1], per(s.q_angular, lambda e: e.q_scale, 1)),
+        "accelerometer sigma (m/s^2)": (np.sqrt(acc_var), np.sqrt(acc_var * r_mult[0][0]),
+                                        per(np.sqrt(acc_var), lambda e: e.r_scale[0], 0, True)),
+        "gyroscope sigma (rad/s)": (np.sqrt(gyro_var), np.sqrt(gyro_var * r_mult[0][1]),
+                                    per(np.sqrt(gyro_var), lambda e: e.r_scale[0], 1, True)),
+        "RSS sigma (dB)": (sigma, sigma * np.sqrt(r_mult[1][0]), per(sigma, lambda e: e.r_scale[1], 0, True)),
+        "mean error (m)": (mean_error(model.Q, imu_R, sigma), mean_error(pooled.Q, pooled.R[0], pooled.R[1]), None),
+        "log-likelihood, all walks": (float(pooled.initial_log_likelihood), float(pooled.log_likelihood), None),
+        "at_bound": [name for name, v in zip(names, multipliers) if v <= lo * (1 + 1e-6) or v >= hi * (1 - 1e-6)],
+    }
 
 
 def _untracked(walk: Walk, method: str, fix_covariance) -> np.ndarray:

@@ -20,7 +20,7 @@ Protocol (every choice a named constant or argument, with its reason; nothing he
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -46,7 +46,7 @@ from ..tracking.unscented import unscented_kalman_filter
 
 __all__ = ["PATH_LOSS_EXP_BOUNDS", "REF_POWER_BOUNDS_DBM", "HUBER_DELTA_DB", "NEAR_FIELD_M", "STATIC_METHODS",
            "TRACKERS", "load", "calibration_set", "calibrate", "channel", "ranging_errors", "radio_map",
-           "scored_recordings", "TestEpochs", "static_fixes", "crlb_m", "epoch_s", "tracks",
+           "scored_recordings", "TestEpochs", "static_fixes", "crlb_m", "epoch_s", "tracks", "noise_fit",
            "bayes_measurement_model", "fix_covariance_from_calibration", "outside_fraction",
            "calibration_block_bootstrap", "record_dataset"]
 
@@ -257,6 +257,49 @@ def tracks(data: Dataset, model: PathLossModel, recording: str, rng: np.random.G
     if with_divergence:
         return reg, ticks, out, {name: DivergenceFlags.of(res) for name, res in kalman.items()}
     return reg, ticks, out
+
+
+def noise_fit(data: Dataset, model: PathLossModel, recording: str, *, q: float) -> dict:
+    """Maximum-likelihood noise levels of the EKF of :func:`tracks` on one recording, beside the ones it uses.
+
+    The EKF uses a walking-pace prior ``q`` (not tuned) and the channel's sigma_db fitted on the calibration
+    recordings. Here the innovations of this recording's own readings choose a multiplier of each
+    (:func:`locbook.fit_noise_ml`: Q -> e^a Q, every anchor's sigma_db^2 -> e^b sigma_db^2, the calibrated ratios
+    between anchors kept); no truth is used. The EKF is then rerun at the estimate. Returns a dict: ``q`` and
+    ``q_ml``, ``sigma_db`` (the calibration's, mean over anchors) and ``sigma_ml_db``, the log-likelihoods, the
+    multipliers at their bound, and ``mean_error_m`` / ``mean_error_ml_m`` where the recording has a true position
+    per epoch (else None)."""
+    from ..tracking.noise import fit_noise_ml
+    dt = epoch_s(data, recording)
+    reg, ticks = regular_epochs(data.epochs(recording), dt, tolerance_s=0.1 * dt)
+    rss = reg.rss_dbm
+    anchors, height = data.anchors_m, data.tag_height_m
+    lower, upper = outline_box(data.outline_m)
+    heard = np.flatnonzero(~np.isnan(rss).all(axis=-1))
+    if heard.size == 0:
+        raise ParameterError(f"recording {recording!r} of {data.name!r}: no epoch with a reading")
+    first = rss[heard[:1]]
+    start = grid_ml_position(anchors, first, model, grid_in_outline(data.outline_m, 0.1), tag_height_m=height)
+    fix = rss_ml_position(anchors, first, model, start.position_m, tag_height_m=height,
+                          region_m=(lower, upper)).position_m[0]
+    motion = constant_velocity(dt, q, dim=2)
+    x0, P0 = np.r_[fix, 0.0, 0.0], np.diag([4.0, 4.0, 1.0, 1.0])      # as tracks(): the first fix, at rest
+    stream = RssMeasurement(rss, anchors, model, np.array([0, 1]), tag_height_m=height)
+    fit = fit_noise_ml(motion.F, motion.Q, x0, P0, stream, kind="ekf", fit_Q="scale", fit_R="scale", per_run=False)
+    sigma = np.asarray(model.sigma_db, dtype=float)
+    out = {"recording": recording, "q": q, "q_ml": float(q * fit.q_scale[0]),
+           "sigma_db": float(np.mean(sigma)), "sigma_ml_db": float(np.mean(sigma * np.sqrt(fit.r_scale[0][0]))),
+           "log_likelihood": float(fit.initial_log_likelihood), "log_likelihood_ml": float(fit.log_likelihood),
+           "at_bound": bool(np.any(fit.at_bound)), "mean_error_m": None, "mean_error_ml_m": None}
+    ep = data.epochs(recording)
+    known = np.isfinite(ep.position_m[:, :2]).all(axis=1)
+    if known.any():
+        ml_stream = RssMeasurement(rss, anchors, replace(model, sigma_db=fit.R[0]), np.array([0, 1]),
+                                   tag_height_m=height)
+        for key, Q, st in (("mean_error_m", motion.Q, stream), ("mean_error_ml_m", fit.Q, ml_stream)):
+            x = extended_kalman_filter(motion.F, Q, x0, P0, [st]).x[:, :2]
+            out[key] = float(np.mean(np.linalg.norm(x[ticks[known]] - ep.position_m[known, :2], axis=-1)))
+    return out
 
 
 def bayes_measurement_model(data: Dataset, model: PathLossModel) -> RssModel:

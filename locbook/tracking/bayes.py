@@ -11,6 +11,8 @@ the one RSS model, :class:`locbook.models.rss.RssModel`,
 
     p(s | L) = prod_j N(s_j; alpha_j - 10 n_j log10(d_j(L)/d0) - nW_j(L) WAF, sigma^2),
 
+or by any callable ``log_likelihood(points, t)`` (a Gaussian position fix, a range, a fused model),
+
 and the process model ``L_t = L_t-1 + v_t + N(0, D^2 I)`` (Eq. (4.2); ``v`` a known velocity, D = inf a
 uniform transition). Everything is vectorized over a leading Monte-Carlo axis ``R`` (runs) and over cells or
 particles; the only Python loop is over time steps.
@@ -73,14 +75,13 @@ def weighted_moments(weights, points_m):
 
 
 def _check_inputs(rss_dbm, model: RssModel, *, cells_m=None):
-    """``rss_dbm (R, T, m)`` against the model's ``m`` anchors (NaN = not heard); cells ``(C, 2)``."""
+    """``rss_dbm (R, T, m)`` against the model's ``m`` anchors (NaN = not heard); cells ``(C, dim)`` in the model's
+    position space."""
     if not isinstance(model, RssModel):
         raise ValueError(f"model must be an RssModel, got {type(model).__name__}")
     rss_dbm = model.check_readings(rss_dbm, ndim=3)
     if cells_m is not None:
-        cells_m = as_array("cells_m", cells_m, ndim=2, trailing=(None, 2))
-        if model.dim != 2:
-            raise ValueError(f"the grid filter works in the plane; the model's positions are {model.dim}-D")
+        cells_m = as_array("cells_m", cells_m, ndim=2, trailing=(None, model.dim))
     return rss_dbm, cells_m
 
 
@@ -134,18 +135,31 @@ def _velocity_schedule(velocity_m, n_steps, dim: int = 2):
 
 
 # -- grid-based Bayes --------------------------------------------------------------------------------
-def grid_transition_matrix(cells_m, spread_m: float, velocity_m=(0.0, 0.0)):
-    """Transition ``T[l, l'] = P(L_t = c_l | L_t-1 = c_l')``: a Gaussian of std ``spread_m`` (D) centred on
-    ``c_l' + v``, normalised over the grid for each ``l'`` (Eqs. (4.10)-(4.15) state the Gaussian process
-    model of std D; its discretisation on the grid is ours). ``spread_m = inf``
-    gives the uniform transition (no motion prior)."""
-    cells_m = as_array("cells_m", cells_m, ndim=2, trailing=(None, 2))
-    n = cells_m.shape[0]
+def grid_transition_matrix(cells_m, spread_m: float, velocity_m=None):
+    """Transition ``T[l, l'] = P(L_t = c_l | L_t-1 = c_l')`` on cells ``(C, dim)``: the process model
+    ``L_t = L_t-1 + v + N(0, D^2 I)`` of Ozkaya (2011), Eq. (4.2), with ``D = spread_m`` (Eqs. (4.10)-(4.15) state
+    the Gaussian model of std D; its discretisation on the grid is ours),
+
+        T[l, l'] = K(c_l - c_l' - v) / sum_k K(c_k - c_l' - v),   K(u) = exp(-|u|^2 / (2 D^2)),
+
+    the Gaussian density *sampled* at the cells (not integrated over the cells' areas) and normalised over the grid
+    for each source cell ``l'``. Edges therefore truncate and renormalise: the mass the continuous Gaussian would
+    carry outside the grid (or outside a masked floor outline) goes to the cells inside in proportion to the kernel,
+    none is lost, and near an edge the prediction is pulled inwards (the particle filter reflects instead). Far from
+    the edges of a regular lattice of spacing ``h`` the sampled kernel's mean is ``v`` and its variance ``D^2`` per
+    axis up to aliasing terms (Poisson summation) of relative size about ``8 pi^2 (D/h)^2 exp(-2 pi^2 D^2 / h^2)``
+    in the variance (2e-7 at D = h, 0.14 at D = h/2); for ``D`` well below ``h`` it is no longer Gaussian (nearly
+    all the mass stays on the cell nearest ``c_l' + v``, so a velocity below h/2 per step is rounded away). Each
+    column is computed relative to its largest entry, so a column whose kernel underflows everywhere (a target far
+    outside the grid) gives its mass to the cells nearest ``c_l' + v``. ``spread_m = inf`` gives the uniform
+    transition (no motion prior). ``velocity_m``: ``(dim,)``; zero if None."""
+    cells_m = as_array("cells_m", cells_m, ndim=2)
+    n, dim = cells_m.shape
     check_scalar("spread_m", spread_m, gt=0, allow_inf=True)
-    as_array("velocity_m", velocity_m, trailing=(2,))
+    velocity = np.zeros(dim) if velocity_m is None else as_array("velocity_m", velocity_m, trailing=(dim,))
     if np.isinf(spread_m):
         return np.full((n, n), 1.0 / n)
-    diff = cells_m[:, None, :] - cells_m[None, :, :] - np.asarray(velocity_m, dtype=float)
+    diff = cells_m[:, None, :] - cells_m[None, :, :] - velocity
     log_t = -0.5 * np.einsum("abi,abi->ab", diff, diff) / spread_m**2
     t = np.exp(log_t - log_t.max(axis=0, keepdims=True))
     return t / t.sum(axis=0, keepdims=True)
@@ -155,32 +169,44 @@ def grid_transition_matrix(cells_m, spread_m: float, velocity_m=(0.0, 0.0)):
 GRID_TRANSITIONS = ("auto", "dense", "separable")
 
 
+def _along_axes(kernels, lattice):
+    """``kernels[a]`` applied along the lattice axis of coordinate ``a`` (the lattice's axes run from the last
+    coordinate to the first, after any run axis), for any dimension."""
+    for a in reversed(range(len(kernels))):
+        axis = lattice.ndim - 1 - a
+        lattice = np.moveaxis(np.tensordot(kernels[a], lattice, axes=([1], [axis])), 0, axis)
+    return lattice
+
+
 class _SeparableTransition:
     """The transition of :func:`grid_transition_matrix` applied without the ``C x C`` matrix.
 
-    The cells are a subset of the lattice ``xs x ys`` of their distinct coordinates. The Gaussian kernel factors,
-    ``K(c_l - c_l' - v) = Kx(x_l - x_l' - v_x) Ky(y_l - y_l' - v_y)``, so with the normaliser
+    The cells are a subset of the lattice ``xs x ys (x ...)`` of their distinct coordinates. The Gaussian kernel
+    factors, ``K(c_l - c_l' - v) = Kx(x_l - x_l' - v_x) Ky(y_l - y_l' - v_y)``, so with the normaliser
     ``Z_l' = sum_l K(...)`` over the cells (the lattice's other points weigh 0)
 
         (T b)(l) = sum_l' K(c_l - c_l' - v) b(l') / Z_l' = [Ky (B / Z) Kx^T](l),
 
-    with ``B`` the belief placed on the lattice: memory ``O(lattice + nx^2 + ny^2)`` instead of ``O(C^2)`` and the
-    same numbers up to rounding (no truncation of the kernel). Each column of ``Kx`` and ``Ky`` is scaled by its
-    largest entry before use (a factor that cancels between numerator and ``Z``), as the dense matrix subtracts
-    its column maxima, so that a narrow kernel does not underflow."""
+    with ``B`` the belief placed on the lattice (rows y, columns x; in other dimensions one kernel per axis):
+    memory ``O(lattice + nx^2 + ny^2)`` instead of ``O(C^2)`` and the same numbers up to rounding (no truncation of
+    the kernel). Each column of ``Kx`` and ``Ky`` is scaled by its largest entry before use (a factor that cancels
+    between numerator and ``Z``), as the dense matrix subtracts its column maxima, so that a narrow kernel does not
+    underflow."""
 
     def __init__(self, cells_m: np.ndarray, spread_m: float):
-        self.xs, self.ix = np.unique(cells_m[:, 0], return_inverse=True)
-        self.ys, self.iy = np.unique(cells_m[:, 1], return_inverse=True)
+        self.dim = cells_m.shape[1]
+        axes = [np.unique(cells_m[:, a], return_inverse=True) for a in range(self.dim)]
+        self.coords = [values for values, _ in axes]
+        self.index = tuple(inverse for _, inverse in reversed(axes))        # (iy, ix) in the plane
         self.spread_m = spread_m
         self.n_cells = cells_m.shape[0]
-        self.mask = np.zeros((self.ys.size, self.xs.size))
-        self.mask[self.iy, self.ix] = 1.0
-        self._v, self._kx, self._ky, self._z = None, None, None, None
+        self.mask = np.zeros(tuple(values.size for values in reversed(self.coords)))
+        self.mask[self.index] = 1.0
+        self._v, self._k, self._z = None, None, None
 
     @staticmethod
     def lattice_size(cells_m: np.ndarray) -> int:
-        return int(np.unique(cells_m[:, 0]).size) * int(np.unique(cells_m[:, 1]).size)
+        return int(np.prod([np.unique(cells_m[:, a]).size for a in range(cells_m.shape[1])]))
 
     def _kernel(self, coords, shift):
         """``K[i, j] = exp(-(c_i - c_j - shift)^2 / (2 D^2))`` scaled so that each column's maximum is 1."""
@@ -190,8 +216,12 @@ class _SeparableTransition:
     def _prepare(self, velocity_m) -> bool:
         v = np.asarray(velocity_m, dtype=float)
         if self._v is None or not np.array_equal(v, self._v):
-            self._kx, self._ky = self._kernel(self.xs, v[0]), self._kernel(self.ys, v[1])
-            self._z = (self._ky.T @ self.mask @ self._kx)[self.iy, self.ix]      # Z_l' at each cell
+            self._k = [self._kernel(c, v[a]) for a, c in enumerate(self.coords)]
+            if self.dim == 2:
+                kx, ky = self._k
+                self._z = (ky.T @ self.mask @ kx)[self.index]                      # Z_l' at each cell
+            else:
+                self._z = _along_axes([k.T for k in self._k], self.mask)[self.index]
             self._v = v
         return bool(np.all(self._z > 0))
 
@@ -203,24 +233,33 @@ class _SeparableTransition:
         if not self._prepare(velocity_m):
             return None
         lattice = np.zeros((belief.shape[0],) + self.mask.shape)
-        lattice[:, self.iy, self.ix] = belief / self._z
-        return np.matmul(np.matmul(self._ky, lattice), self._kx.T)[:, self.iy, self.ix]
+        lattice[(slice(None),) + self.index] = belief / self._z
+        if self.dim == 2:
+            kx, ky = self._k
+            return np.matmul(np.matmul(ky, lattice), kx.T)[(slice(None),) + self.index]
+        return _along_axes(self._k, lattice)[(slice(None),) + self.index]
 
 
-def grid_bayes_filter(rss_dbm, cells_m, model: RssModel, spread_m: float = 0.5, *,
+def grid_bayes_filter(rss_dbm, cells_m, model, spread_m: float = 0.5, *, n_steps: int | None = None,
                       velocity_m=None, initial_belief=None, transition: str = "auto") -> BayesFilterResult:
     """Grid-based Bayes filter (Ozkaya 2011, Eqs. (4.10)-(4.15)) over runs ``R`` and steps ``T``.
 
-    ``Bel_t(l) ~ p(s_t | c_l) sum_l' T[l, l'] Bel_t-1(l')`` with :func:`grid_transition_matrix` and the likelihood
-    of ``model`` (:meth:`RssModel.log_likelihood <locbook.models.rss.RssModel.log_likelihood>`).
+    ``Bel_t(l) ~ p(z_t | c_l) sum_l' T[l, l'] Bel_t-1(l')`` with :func:`grid_transition_matrix` (its docstring: a
+    sampled Gaussian normalised over the grid, edges truncated and renormalised) and the likelihood of ``model``.
     Returns a :class:`BayesFilterResult`: the posterior mean, covariance and MAP cell per step, ``n_eff`` the
     effective number of cells ``1 / sum Bel^2``, and the cells with the final belief as ``particles_m``, ``weights``.
-    ``velocity_m``: a known displacement per step, ``(2,)`` or ``(T, 2)`` (the mean of the process model
+
+    Likelihood: ``model`` an :class:`~locbook.models.rss.RssModel` and ``rss_dbm`` its readings ``(R, T, m)`` (NaN =
+    not heard; :meth:`RssModel.log_likelihood <locbook.models.rss.RssModel.log_likelihood>`), the cells in the
+    model's position space; or ``model`` a callable ``log_likelihood(cells (C, dim), t) -> (R, C)`` (the log of
+    ``p(z_t | c_l)`` up to a constant per run; any model: a Gaussian position fix, ranges, several sensors) with
+    ``rss_dbm=None`` and ``n_steps`` given, the cells ``(C, dim)`` of any dimension, the number of runs that of its
+    output. ``velocity_m``: a known displacement per step, ``(dim,)`` or ``(T, dim)`` (the mean of the process model
     in the thesis's constant-velocity experiment). ``initial_belief``: ``(C,)`` or ``(R, C)``; uniform if None.
 
     ``transition``: ``"dense"`` builds the ``C x C`` matrix (memory quadratic in the cells: 2 GB at 16,000
-    cells); ``"separable"`` applies the same transition as two small matrix products on the lattice of the cells'
-    distinct x and y coordinates (memory linear in the cells for a grid, possibly masked by a floor outline;
+    cells); ``"separable"`` applies the same transition as one small matrix product per axis on the lattice of the
+    cells' distinct coordinates (memory linear in the cells for a grid, possibly masked by a floor outline;
     equal to the dense one up to rounding); ``"auto"`` (default) takes the separable form when that lattice
     has at most 4 points per cell, which every regular grid has.
 
@@ -228,14 +267,50 @@ def grid_bayes_filter(rss_dbm, cells_m, model: RssModel, spread_m: float = 0.5, 
     a reading of 1e300 dBm) is flagged ``degenerate`` with that ``degenerate_step``; its estimates and final belief
     are NaN from that step on, and the other runs are unaffected. The call then emits one ``RuntimeWarning`` (the
     number of such runs, the first run and step, its readings); when every run collapses it raises a ValueError
-    naming ``rss_dbm`` and the first step instead (nothing can be estimated: a units bug, not a result).
+    naming ``rss_dbm`` (or ``log_likelihood``) and the first step instead (nothing can be estimated: a units bug,
+    not a result).
     """
-    rss_dbm, cells_m = _check_inputs(rss_dbm, model, cells_m=cells_m)
+    first = None                                    # the callable's step-0 output, which gives the number of runs
+    if isinstance(model, RssModel):
+        if rss_dbm is None:
+            raise ValueError("rss_dbm must be the readings (runs, steps, m) of the RssModel model")
+        rss_dbm, cells_m = _check_inputs(rss_dbm, model, cells_m=cells_m)
+        if n_steps is not None and n_steps != rss_dbm.shape[1]:
+            raise ValueError(f"n_steps {n_steps} disagrees with the {rss_dbm.shape[1]} steps of rss_dbm")
+        n_runs, n_steps, _ = rss_dbm.shape
+        detail, what = _reading_detail(rss_dbm), _LIKELIHOOD
+
+        def log_likelihood(t):
+            return model.log_likelihood(rss_dbm[:, t], cells_m, t, constant=False)
+    elif callable(model):
+        if rss_dbm is not None:
+            raise ValueError("rss_dbm goes with an RssModel; a log_likelihood callable reads its own data "
+                             "(give rss_dbm=None and n_steps)")
+        if n_steps is None:
+            raise ValueError("n_steps must be given with a log_likelihood callable")
+        check_scalar("n_steps", n_steps, ge=1, integer=True)
+        n_steps = int(n_steps)
+        cells_m = as_array("cells_m", cells_m, ndim=2)
+        if cells_m.shape[1] < 1:
+            raise ValueError(f"cells_m must have shape (C, dim) with dim >= 1, got {cells_m.shape}")
+        detail, what, n_runs = None, "log_likelihood", None
+
+        def log_likelihood(t):
+            ll = np.asarray(model(cells_m, t), dtype=float)
+            if ll.ndim != 2 or ll.shape[1] != cells_m.shape[0] or n_runs is not None and ll.shape[0] != n_runs:
+                raise ValueError(f"log_likelihood must return (runs, C) = ({n_runs or 'runs'}, {cells_m.shape[0]}) "
+                                 f"at every step, got {ll.shape} at step {t}")
+            return ll
+    else:
+        raise ValueError(f"model must be an RssModel or a callable log_likelihood(cells, t), "
+                         f"got {type(model).__name__}")
     check_scalar("spread_m", spread_m, gt=0, allow_inf=True)
     check_choice("transition", transition, GRID_TRANSITIONS)
-    n_runs, n_steps, _ = rss_dbm.shape
-    n_cells = cells_m.shape[0]
-    velocity = _velocity_schedule(velocity_m, n_steps)
+    n_cells, dim = cells_m.shape
+    velocity = _velocity_schedule(velocity_m, n_steps, dim)
+    if n_runs is None:
+        first = log_likelihood(0)
+        n_runs = first.shape[0]
     if initial_belief is not None:
         initial_belief = as_array("initial_belief", initial_belief)
         if initial_belief.shape not in ((n_cells,), (n_runs, n_cells)):
@@ -245,9 +320,9 @@ def grid_bayes_filter(rss_dbm, cells_m, model: RssModel, spread_m: float = 0.5, 
             raise ValueError("initial_belief must be non-negative with a positive sum over the cells")
     belief = (np.full((n_runs, n_cells), 1.0 / n_cells) if initial_belief is None
               else np.broadcast_to(np.asarray(initial_belief, float), (n_runs, n_cells)).copy())
-    mean = np.empty((n_runs, n_steps, 2))
-    cov = np.empty((n_runs, n_steps, 2, 2))
-    best = np.empty((n_runs, n_steps, 2))
+    mean = np.empty((n_runs, n_steps, dim))
+    cov = np.empty((n_runs, n_steps, dim, dim))
+    best = np.empty((n_runs, n_steps, dim))
     n_eff = np.empty((n_runs, n_steps))
     separable = None
     if transition == "separable" or (
@@ -264,14 +339,13 @@ def grid_bayes_filter(rss_dbm, cells_m, model: RssModel, spread_m: float = 0.5, 
                     dense, last_v = grid_transition_matrix(cells_m, spread_m, velocity[t]), velocity[t]
                 predicted = belief @ dense.T
             belief = predicted
-        log_post = np.log(np.maximum(belief, 1e-300)) + model.log_likelihood(rss_dbm[:, t], cells_m, t,
-                                                                             constant=False)
+        log_post = np.log(np.maximum(belief, 1e-300)) + (first if t == 0 and first is not None else log_likelihood(t))
         top = log_post.max(axis=-1)
         collapsed = ~dead & (np.isnan(top) | np.isinf(top))
         dead_step[collapsed] = t
         dead |= collapsed
         if n_runs and dead.all():
-            raise _collapse_error(dead_step, _LIKELIHOOD, _reading_detail(rss_dbm))
+            raise _collapse_error(dead_step, what, detail)
         if dead.any():              # a collapsed run goes on with a uniform belief (NaN outputs): others unaffected
             log_post[dead] = 0.0
         belief = _normalise_log(log_post)
@@ -283,6 +357,6 @@ def grid_bayes_filter(rss_dbm, cells_m, model: RssModel, spread_m: float = 0.5, 
     if dead.any():
         belief = belief.copy()
         belief[dead] = np.nan
-        _warn_collapse(dead, dead_step, "grid_bayes_filter", _LIKELIHOOD, _reading_detail(rss_dbm))
+        _warn_collapse(dead, dead_step, "grid_bayes_filter", what, detail)
     return BayesFilterResult(mean, cov, best, n_eff, np.zeros((n_runs, n_steps), bool),
                              np.broadcast_to(cells_m, (n_runs,) + cells_m.shape), belief, dead, dead_step)

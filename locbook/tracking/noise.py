@@ -8,13 +8,16 @@ readings under the model (the prediction-error decomposition, :mod:`locbook.trac
 
 exact for a linear-Gaussian model and to first order for the EKF's and UKF's linearisations. Two estimators:
 
-- :func:`fit_noise_ml` maximises it over the noise (scipy.optimize L-BFGS-B on log multipliers, central-difference
-  gradients). ``"scale"`` fits one multiplier of a given covariance (Q -> e^a Q, R -> e^b R, an RSS stream's sigma_db^2
-  -> e^b sigma_db^2); ``"diagonal"`` one per component (Q -> D Q D with D = diag(e^{a_i / 2}): each variance scaled,
-  the correlations of the given matrix kept, e.g. the position-velocity coupling of a white-noise CV model; an RSS
-  stream: one sigma_db per anchor). Batched over runs: with ``per_run=True`` every run gets its own estimate, found by
-  one optimisation of the sum of the runs' (independent) objectives, whose gradient is separable, so each gradient costs
-  ``2p + 1`` batched filter calls whatever the number of runs (the candidates ride on a leading axis of one call).
+- :func:`fit_noise_ml` maximises it over the noise, on log variance multipliers. ``"scale"`` fits one multiplier of a
+  given covariance (Q -> e^a Q, R -> e^b R, an RSS stream's sigma_db^2 -> e^b sigma_db^2); ``"diagonal"`` one per
+  component (Q -> D Q D with D = diag(e^{a_i / 2}): each variance scaled, the correlations of the given matrix kept,
+  e.g. the position-velocity coupling of a white-noise CV model; an RSS stream: one sigma_db per anchor); a list of
+  index groups one per group (e.g. the translational and the angular blocks of Q, the accelerometer and the gyroscope
+  rows of R). Pooled over runs (one estimate): scipy.optimize's L-BFGS-B with central-difference gradients, the ``2p +
+  1`` candidates of a gradient on a leading axis of one batched filter call. Per run (``per_run=True``): damped Newton
+  steps on every run at once, gradient and Hessian by central differences, all the candidates of all runs in one
+  filter call per iteration (a joint L-BFGS over the runs' separable objectives converges slowly: its line search is
+  shared).
 - :func:`fit_noise_em` is the expectation-maximisation of Shumway and Stoffer (1982) for a linear-Gaussian model with
   one LinearMeasurement stream: the RTS smoother's moments and lag-one cross-covariances give the M-step in closed form
   (full Q and R; pykalman's ``em`` with ``em_vars=['transition_covariance', 'observation_covariance']``). Each iteration
@@ -79,31 +82,56 @@ def _stream_noise(meas):
     return np.asarray(meas.R, dtype=float)
 
 
+def _groups(name: str, form, size: int, free=None) -> np.ndarray:
+    """The variance groups of a fitted covariance as a ``(g, size)`` 0/1 matrix: ``"scale"`` one group of every
+    component, ``"diagonal"`` one per component (those with a positive variance in ``free``), or a sequence of index
+    groups (each group's variances scaled together; the components in no group are kept)."""
+    if isinstance(form, str):
+        check_choice(name, form, NOISE_FORMS)
+        if form == "scale":
+            return np.ones((1, size))
+        keep = np.ones(size, bool) if free is None else np.asarray(free, bool)
+        return np.eye(size)[keep]
+    try:
+        groups = [np.asarray(g, dtype=int).ravel() for g in form]
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be 'scale', 'diagonal', None or a list of index groups, got {form!r}") from None
+    flat = np.concatenate(groups) if groups else np.array([], int)
+    if not groups or any(g.size == 0 for g in groups) or flat.min() < 0 or flat.max() >= size \
+            or np.unique(flat).size != flat.size:
+        raise ValueError(f"{name}: index groups must be non-empty, disjoint and within 0..{size - 1}, got {form!r}")
+    M = np.zeros((len(groups), size))
+    for i, g in enumerate(groups):
+        M[i, g] = 1.0
+    return M
+
+
 class _Parameters:
-    """The map from log multipliers ``theta (..., p)`` to Q and the streams' noise (module docstring)."""
+    """The map from log multipliers ``theta (..., p)`` to Q and the streams' noise (module docstring): each fitted
+    covariance ``C`` becomes ``D C D`` with ``D = diag(exp(theta @ M / 2))``, ``M`` its groups (:func:`_groups`), so a
+    group's variances are scaled together and the correlations kept; an RSS stream's sigma_db^2 per anchor likewise."""
 
     def __init__(self, Q, streams, fit_Q, fit_R):
         self.Q0 = np.asarray(Q, dtype=float)
         n = self.Q0.shape[-1]
-        self.blocks = []                 # (target, form, size, base): target -1 = Q, i = stream i
+        self.blocks = []                 # (target, groups M, base): target -1 = Q, i = stream i
         if fit_Q is not None:
-            check_choice("fit_Q", fit_Q, NOISE_FORMS)
-            if fit_Q == "diagonal":
-                free = np.diagonal(self.Q0, axis1=-2, axis2=-1).reshape(-1, n).max(axis=0) > 0
-            self.blocks.append((-1, fit_Q, 1 if fit_Q == "scale" else n, None if fit_Q == "scale" else free))
+            free = np.diagonal(self.Q0, axis1=-2, axis2=-1).reshape(-1, n).max(axis=0) > 0
+            self.blocks.append((-1, _groups("fit_Q", fit_Q, n, free), self.Q0))
         for i, (meas, form) in enumerate(zip(streams, fit_R)):
             if form is None:
                 continue
-            check_choice(f"fit_R[{i}]", form, NOISE_FORMS)
             base = _stream_noise(meas)
             if isinstance(meas, RssMeasurement):
+                base = base.reshape(base.shape + (1,)) if base.ndim == 0 else base
                 m = np.shape(meas.rss_dbm)[-1]
-                size = 1 if form == "scale" else m
+                M = _groups(f"fit_R[{i}]", form, m)
+                if M.shape[0] > 1 or M.shape[1] != base.shape[-1]:
+                    base = np.broadcast_to(base, base.shape[:-1] + (m,))     # one sigma per anchor
             else:
-                m = base.shape[-1]
-                size = 1 if form == "scale" else m
-            self.blocks.append((i, form, size, base))
-        self.size = sum(b[2] for b in self.blocks)
+                M = _groups(f"fit_R[{i}]", form, base.shape[-1])
+            self.blocks.append((i, M, base))
+        self.size = sum(b[1].shape[0] for b in self.blocks)
         if self.size == 0:
             raise ValueError("nothing to fit: give fit_Q and/or fit_R")
         self.streams = streams
@@ -112,39 +140,34 @@ class _Parameters:
         """``(Q, streams)`` for log multipliers ``theta (..., p)`` (the leading axes become run axes)."""
         Q, streams = self.Q0, list(self.streams)
         c = 0
-        for target, form, size, extra in self.blocks:
-            a = theta[..., c:c + size]
-            c += size
+        for target, M, base in self.blocks:
+            a = theta[..., c:c + M.shape[0]]
+            c += M.shape[0]
+            log_var = a @ M                                       # (..., size): each component's log multiplier
             if target == -1:
-                if form == "scale":
-                    Q = np.exp(a)[..., None] * self.Q0
-                else:
-                    d = np.exp(0.5 * np.where(extra, a, 0.0))
-                    Q = d[..., :, None] * self.Q0 * d[..., None, :]
+                d = np.exp(0.5 * log_var)
+                Q = d[..., :, None] * base * d[..., None, :]
                 continue
             meas = streams[target]
             if isinstance(meas, RssMeasurement):
-                sigma2 = np.exp(a) * extra                 # (..., 1 or m): the channel's sigma_db per anchor
+                sigma2 = np.exp(log_var if base.shape[-1] > 1 else log_var[..., :1]) * base
                 streams[target] = replace(meas, channel=replace(meas.channel, sigma_db=np.sqrt(sigma2)))
                 continue
-            if form == "scale":
-                R = np.exp(a)[..., None] * extra
-            else:
-                d = np.exp(0.5 * a)
-                R = d[..., :, None] * extra * d[..., None, :]
-            streams[target] = _with_R(meas, R)
+            d = np.exp(0.5 * log_var)
+            streams[target] = _with_R(meas, d[..., :, None] * base * d[..., None, :])
         return Q, streams
 
     def unpack(self, theta):
-        """``(Q multipliers or None, per-stream multipliers or None)`` of ``theta``."""
+        """``(Q multipliers or None, per-stream multipliers or None)`` of ``theta``, one per group."""
         q, r = None, [None] * len(self.streams)
         c = 0
-        for target, _, size, _ in self.blocks:
+        for target, M, _ in self.blocks:
+            k = M.shape[0]
             if target == -1:
-                q = np.exp(theta[..., c:c + size])
+                q = np.exp(theta[..., c:c + k])
             else:
-                r[target] = np.exp(theta[..., c:c + size])
-            c += size
+                r[target] = np.exp(theta[..., c:c + k])
+            c += k
         return q, tuple(r)
 
 
@@ -170,8 +193,9 @@ def fit_noise_ml(F, Q, x0, P0, measurements, *, kind: str = "kf", fit_Q: str | N
 
     ``F, Q, x0, P0, measurements`` and ``options`` (``B``, ``u``, ``predict_first``, ``alpha``, ``points``, ...) as
     the filter ``kind`` (``"kf"``, ``"ekf"``, ``"ukf"``) takes them; ``Q`` and the streams' R (or sigma_db) are the
-    starting point and the shape of what is fitted. ``fit_Q``: ``"scale"``, ``"diagonal"`` or None (kept);
-    ``fit_R``: one of those for every stream, or a list with one per stream. ``per_run``: every run (the leading axes
+    starting point and the shape of what is fitted. ``fit_Q``: ``"scale"``, ``"diagonal"``, a list of index groups
+    (module docstring) or None (kept); ``fit_R``: ``"scale"``, ``"diagonal"`` or None for every stream, or a list
+    with one form per stream (a form, index groups or None). ``per_run``: every run (the leading axes
     of the readings) gets its own estimate; False pools the runs (one estimate, the sum of their log-likelihoods).
     ``scale_bounds``: the range of every variance multiplier. ``max_iter``, ``tol``: L-BFGS-B's iteration limit and
     its tolerance on the relative change of the objective.
@@ -182,6 +206,8 @@ def fit_noise_ml(F, Q, x0, P0, measurements, *, kind: str = "kf", fit_Q: str | N
     check_choice("kind", kind, tuple(_FILTERS))
     streams = _as_list(measurements)
     fit_R = [fit_R] * len(streams) if fit_R is None or isinstance(fit_R, str) else list(fit_R)
+    if len(streams) == 1 and len(fit_R) != 1 and all(np.ndim(g) == 1 for g in fit_R):
+        fit_R = [fit_R]                   # one stream's index groups
     if len(fit_R) != len(streams):
         raise ValueError(f"fit_R must be one form or one per stream ({len(streams)}), got {len(fit_R)}")
     if isinstance(Q, PerStep):
@@ -202,32 +228,11 @@ def fit_noise_ml(F, Q, x0, P0, measurements, *, kind: str = "kf", fit_Q: str | N
 
     ll0 = log_likelihood(np.zeros(p))
     runs = np.shape(ll0)
-    batch = runs if per_run else ()
-    h = 1e-5
-    steps = np.concatenate([np.zeros((1, p)), h * np.eye(p), -h * np.eye(p)])     # centre, +h e_j, -h e_j
-
-    def objective(flat):
-        theta = flat.reshape(batch + (p,))
-        if not per_run:             # one theta for every run: the candidates' axis in front of the runs'
-            theta = theta.reshape((1,) * len(runs) + (p,))
-        cand = theta + steps.reshape((2 * p + 1,) + (1,) * len(runs) + (p,))      # (2p + 1,) + runs + (p,)
-        ll = log_likelihood(cand)
-        if not per_run:
-            ll = ll.reshape(2 * p + 1, -1).sum(axis=-1)
-        grad = (ll[1:p + 1] - ll[p + 1:]) / (2 * h)                                # (p,) + batch
-        value = -float(np.sum(ll[0]))
-        if not np.isfinite(value):
-            return np.inf, np.zeros(flat.size)
-        return value, -np.moveaxis(grad, 0, -1).ravel()
-
-    bounds = [(np.log(lo), np.log(hi))] * (int(np.prod(batch, dtype=np.int64)) * p)
-    scale = max(1.0, abs(float(np.sum(ll0))))
-    res = minimize(objective, np.zeros(len(bounds)), jac=True, method="L-BFGS-B", bounds=bounds,
-                   options={"maxiter": int(max_iter), "ftol": tol, "gtol": 1e-6 * scale / max(len(bounds), 1)})
-    if not res.success:
-        raise ConvergenceError(f"fit_noise_ml: L-BFGS-B stopped without converging after {res.nit} iterations "
-                               f"({res.message}); raise max_iter or check the model")
-    theta = res.x.reshape(batch + (p,))
+    if per_run:
+        theta, iterations = _newton_per_run(log_likelihood, runs, p, np.log(lo), np.log(hi), int(max_iter))
+    else:
+        theta, iterations = _lbfgs_pooled(log_likelihood, runs, p, np.log(lo), np.log(hi), int(max_iter), tol,
+                                          abs(float(np.sum(ll0))))
     Qf, st = params.apply(theta)       # pooled: one Q and R for every run
     q, r = params.unpack(theta)
     at_bound = np.any((theta <= np.log(lo) + 1e-6) | (theta >= np.log(hi) - 1e-6), axis=-1)
@@ -235,7 +240,73 @@ def fit_noise_ml(F, Q, x0, P0, measurements, *, kind: str = "kf", fit_Q: str | N
               for s, form in zip(st, fit_R))
     ll = log_likelihood(theta)
     return NoiseFit(Qf, R, q, r, ll if per_run else np.sum(ll), ll0 if per_run else np.sum(ll0), at_bound,
-                    int(res.nit), "ml")
+                    iterations, "ml")
+
+
+_H = 1e-4          # finite-difference step in log multipliers (a relative change of 1e-4)
+
+
+def _lbfgs_pooled(log_likelihood, runs, p: int, lo: float, hi: float, max_iter: int, tol: float, scale: float):
+    """One multiplier vector for all runs: scipy's L-BFGS-B on the summed log-likelihood, its central-difference
+    gradient from one filter call with the ``2p + 1`` candidates on a leading axis."""
+    from scipy.optimize import minimize           # lazy: keeps `import locbook` fast
+    steps = np.concatenate([np.zeros((1, p)), _H * np.eye(p), -_H * np.eye(p)])     # centre, +h e_j, -h e_j
+
+    def objective(theta):
+        cand = theta.reshape((1,) * len(runs) + (p,)) + steps.reshape((2 * p + 1,) + (1,) * len(runs) + (p,))
+        ll = log_likelihood(cand).reshape(2 * p + 1, -1).sum(axis=-1)
+        value = -float(ll[0])
+        if not np.isfinite(value):
+            return np.inf, np.zeros(p)
+        return value, -(ll[1:p + 1] - ll[p + 1:]) / (2 * _H)
+
+    res = minimize(objective, np.zeros(p), jac=True, method="L-BFGS-B", bounds=[(lo, hi)] * p,
+                   options={"maxiter": max_iter, "ftol": tol, "gtol": 1e-7 * max(scale, 1.0)})
+    if not res.success:
+        raise ConvergenceError(f"fit_noise_ml: L-BFGS-B stopped without converging after {res.nit} iterations "
+                               f"({res.message}); raise max_iter or check the model")
+    return res.x, int(res.nit)
+
+
+def _newton_per_run(log_likelihood, runs, p: int, lo: float, hi: float, max_iter: int):
+    """A multiplier vector per run: damped Newton steps on every run at once (Levenberg-Marquardt damping, projected
+    onto the bounds), the gradient and Hessian by central differences from one filter call with the ``1 + 2p +
+    p(p-1)/2`` candidates on a leading axis, the trial step from a second. A run stops when its step changes no
+    multiplier by more than 1e-6 (relative)."""
+    pairs = [(i, j) for i in range(p) for j in range(i + 1, p)]
+    stencil = [np.zeros(p)] + [s * _H * np.eye(p)[i] for s in (1, -1) for i in range(p)] + \
+        [_H * (np.eye(p)[i] + np.eye(p)[j]) for i, j in pairs]
+    stencil = np.array(stencil).reshape((len(stencil),) + (1,) * len(runs) + (p,))
+    theta = np.zeros(runs + (p,))
+    damping = np.full(runs, 1e-3)
+    done = np.zeros(runs, bool)
+    for it in range(1, max_iter + 1):
+        f = log_likelihood(theta + stencil)                      # (E,) + runs
+        f0, fp, fm = f[0], f[1:p + 1], f[p + 1:2 * p + 1]
+        g = np.moveaxis((fp - fm) / (2 * _H), 0, -1)             # runs + (p,)
+        H = np.zeros(runs + (p, p))
+        diag = np.moveaxis((fp - 2 * f0 + fm) / _H**2, 0, -1)
+        H[..., np.arange(p), np.arange(p)] = diag
+        for (i, j), fij in zip(pairs, f[2 * p + 1:]):
+            H[..., i, j] = H[..., j, i] = (fij - fp[i] - fp[j] + f0) / _H**2
+        # ascent on f: solve (-H + mu I) step = g, mu lifting -H to positive definite and damping the step
+        A = -0.5 * (H + np.swapaxes(H, -1, -2))
+        low = np.linalg.eigvalsh(A)[..., 0]
+        size = np.maximum(np.abs(diag).max(axis=-1), 1e-12)
+        mu = np.maximum(0.0, -low) + damping * size
+        step = np.linalg.solve(A + mu[..., None, None] * np.eye(p), g[..., None])[..., 0]
+        trial = np.clip(theta + step, lo, hi)
+        step = np.where(done[..., None], 0.0, trial - theta)
+        f_trial = log_likelihood(theta + step)
+        better = np.isfinite(f_trial) & (f_trial >= f0 - 1e-12 * np.abs(f0))
+        theta = np.where(better[..., None], theta + step, theta)
+        damping = np.where(better, damping / 10.0, damping * 10.0)
+        small = np.abs(step).max(axis=-1) < 1e-6
+        done = done | (better & small)
+        if done.all():
+            return theta, it
+    raise ConvergenceError(f"fit_noise_ml: {int(np.count_nonzero(~done))} of {done.size} runs did not converge in "
+                           f"{max_iter} damped Newton iterations; raise max_iter or check the model")
 
 
 def fit_noise_em(F, Q, x0, P0, measurement: LinearMeasurement, *, B=None, u=None, n_iter: int = 10,

@@ -5,14 +5,27 @@ Palvai (2008), Sec. 5.3.1, and Ozkaya (2011), Tables 4.3-4.4 (after Arulampalam 
 
     1. predict: x_t^(i) ~ p(x_t | x_t-1^(i))             (from step 1 on; step 0 updates the prior)
     2. update:  w_t^(i) ~ w_t-1^(i) p(z_t | x_t^(i))       (Eq. (4.34); uniform previous weights after a resampling)
-    3. normalise; record the estimates (:class:`~locbook.tracking.bayes.BayesFilterResult`)
+    3. normalise; record the estimates (:class:`ParticleFilterResult`, a
+       :class:`~locbook.tracking.bayes.BayesFilterResult` with the final log-weights)
     4. resample (any scheme of :mod:`locbook.tracking.resampling`): at every step (SIR), on a schedule, or where
        N_eff = 1 / sum w^2 falls below a fraction of N (the one ESS convention, as the ``particles`` package has it)
 
 The likelihood is an :class:`~locbook.models.rss.RssModel` with its readings, or any callable
-``log_likelihood(particles (R, N, dim), t) -> (R, N)``; the motion model is the reflected random walk
-``x_t = x_t-1 + v_t + N(0, D^2 I)`` (Ozkaya Eq. (4.2); Palvai's sigma_2) or any callable
-``transition(particles, t, rng) -> particles``.
+``log_likelihood(particles (R, N, dim), t) -> (R, N)``. The motion model is one of
+
+- the reflected random walk ``x_t = x_t-1 + v_t + N(0, D^2 I)`` (Ozkaya Eq. (4.2); Palvai's sigma_2), the default;
+- a linear kinematic model (``motion=``: :func:`~locbook.models.motion.constant_velocity`,
+  :func:`~locbook.models.motion.constant_acceleration`, any model with ``F``, ``Q`` and ``position_index``):
+  the particles carry the full state and move by ``x_t = F x_t-1 + w_t``, ``w_t ~ N(0, Q)`` (Bar-Shalom et al. 2001,
+  Sec. 6.3; the bootstrap proposal of Arulampalam et al. 2002, Sec. V-A). Q is often singular (the discrete
+  white-noise Q = q G G^T has rank dim), so w is drawn as ``sqrt(q) G n`` with ``n ~ N(0, I_dim)``, or from an
+  eigen-factor of Q (never a Cholesky factor, which does not exist for a singular Q); the RSS likelihood sees the
+  positions ``x[..., position_index]``;
+- any callable ``transition(particles, t, rng) -> particles``.
+
+One run may be given without the run axis (readings ``(T, m)``, or with a callable likelihood the particles
+``(N, dim)`` or the start ``(dim,)``): the callables then see ``(N, dim)`` and return ``(N,)`` / ``(N, dim)``, and
+every output of the result loses its leading run axis.
 
 A collapsed run is isolated (issue 26): where a run's log-likelihood is -inf for every particle (no particle
 explains the reading), or NaN or +inf for any particle (garbage), its weights cannot be normalised. That run is
@@ -26,18 +39,36 @@ it raises a ValueError naming the likelihood and the first step and run instead 
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from .._validate import as_array, check_choice, check_scalar
-from ..models.motion import reflect_into_box
+from ..models.motion import KinematicModel, reflect_into_box
 from ..models.rss import RssModel
 from .bayes import (BayesFilterResult, _LIKELIHOOD, _collapse_error, _normalise_log, _reading_detail,
                     _velocity_schedule, _warn_collapse, weighted_moments)
 from .resampling import RESAMPLING_CDFS, RESAMPLING_METHODS, effective_sample_size, resample, systematic_resample
 
-__all__ = ["particle_filter", "kernel_map_estimate", "WEIGHT_SMOOTHINGS"]
+__all__ = ["particle_filter", "ParticleFilterResult", "kernel_map_estimate", "WEIGHT_SMOOTHINGS"]
 
 WEIGHT_SMOOTHINGS = ("none", "sqrt", "sqrt_corrected")
+
+#: the random walk's step D when ``spread_m`` is not given (m)
+DEFAULT_SPREAD_M = 0.5
+
+
+@dataclass(frozen=True)
+class ParticleFilterResult(BayesFilterResult):
+    """:class:`~locbook.tracking.bayes.BayesFilterResult` of :func:`particle_filter`, with ``log_weights``
+    ``(R, N)``: the final normalised log-weights, computed in the log domain at the last update (``-inf`` = a zero
+    weight; ``exp(log_weights)`` equals ``weights`` except below 1e-300, where ``weights`` keeps the filter's floor;
+    NaN for a collapsed run). With ``motion=`` the estimates and particles are over the full state ``n`` (``mean_m``
+    ``(R, T, n)``, ``covariance_m2`` ``(R, T, n, n)``, ``particles_m`` ``(R, N, n)``: positions in m, velocities in
+    m/s, ...). For a single run (no run axis given) every array lacks the leading ``R`` axis (``degenerate`` and
+    ``degenerate_step`` are 0-d)."""
+
+    log_weights: np.ndarray | None = None
 
 
 def _check_rng(rng) -> None:
@@ -56,12 +87,76 @@ def _region(region_m, dim: int | None):
     return lower, upper
 
 
+def _psd_root(name: str, cov) -> np.ndarray:
+    """A factor ``L`` ``(..., n, k)`` with ``cov = L L^T`` from the eigen-decomposition, so that a singular
+    (positive semi-definite) covariance is fine; only the directions of positive variance are kept."""
+    w, v = np.linalg.eigh(cov)
+    scale = np.max(np.abs(w), initial=0.0)
+    if np.any(w < -1e-9 * max(scale, 1e-300)) or not np.allclose(cov, np.swapaxes(cov, -1, -2), rtol=0,
+                                                                   atol=1e-12 * max(scale, 1e-300)):
+        raise ValueError(f"{name} must be symmetric positive semi-definite, its smallest eigenvalue is {w.min()}")
+    keep = np.any(w > 4 * w.shape[-1] * np.finfo(float).eps * scale, axis=tuple(range(w.ndim - 1)))
+    return v[..., keep] * np.sqrt(np.clip(w[..., keep], 0.0, None))[..., None, :]
+
+
+class _Kinematics:
+    """A linear motion model given as ``motion=``: its F, the factor of its Q and its position / derivative indices,
+    and the mirror reflection at the walls of a region."""
+
+    def __init__(self, motion):
+        if not all(hasattr(motion, a) for a in ("F", "Q", "position_index")):
+            raise ValueError(f"motion must be a KinematicModel (constant_velocity, constant_acceleration) or a model "
+                             f"with F, Q and position_index, got {type(motion).__name__}")
+        self.F = as_array("motion.F", motion.F, ndim=2)
+        n = self.F.shape[0]
+        if self.F.shape != (n, n):
+            raise ValueError(f"motion.F must be square, got shape {self.F.shape}")
+        Q = as_array("motion.Q", motion.Q, ndim=2)
+        if Q.shape != (n, n):
+            raise ValueError(f"motion.Q must have the shape {(n, n)} of motion.F, got {Q.shape}")
+        self.n_state = n
+        self.position_index = np.asarray(motion.position_index, dtype=np.int64).ravel()
+        if not np.any(Q):
+            self.root = None                                  # q = 0: deterministic motion, nothing drawn
+        elif isinstance(motion, KinematicModel) and motion.noise in ("discrete", "wiener"):
+            self.root = np.sqrt(motion.q) * motion.G          # Q = q G G^T exactly: dim draws per particle
+        else:
+            self.root = _psd_root("motion.Q", Q)
+        # the derivatives whose sign a mirror reflection of the position reverses (velocity, acceleration)
+        self.derivatives = ([motion.index(k) for k in range(1, motion.order + 1)]
+                            if isinstance(motion, KinematicModel) else None)
+
+    def state_from_positions(self, positions):
+        out = np.zeros(positions.shape[:-1] + (self.n_state,))
+        out[..., self.position_index] = positions
+        return out
+
+    def mirror(self, x, lower, upper):
+        """Fold the positions into the box as :func:`~locbook.models.motion.reflect_into_box` does, and reverse the
+        velocity and acceleration on every axis reflected an odd number of times (the mirror image of the motion)."""
+        width = upper - lower
+        folded = np.mod(x[..., self.position_index] - lower, 2.0 * width)
+        back = folded > width
+        x[..., self.position_index] = lower + np.where(back, 2.0 * width - folded, folded)
+        sign = np.where(back, -1.0, 1.0)
+        for idx in self.derivatives:
+            x[..., idx] *= sign
+        return x
+
+    def step(self, x, rng, bounds):
+        x = x @ self.F.T
+        if self.root is not None:
+            x = x + rng.standard_normal(x.shape[:-1] + (self.root.shape[-1],)) @ self.root.T
+        return x if bounds is None else self.mirror(x, *bounds)
+
+
 def particle_filter(rss_dbm, model, rng: np.random.Generator, *, n_steps: int | None = None,
                     n_particles: int | None = None, region_m=None, initial_particles_m=None, initial_position_m=None,
-                    initial_sd_m: float = 0.0, spread_m=0.5, velocity_m=None, transition=None,
-                    resampling: str = "systematic", resample_threshold: float | None = None,
-                    resample_every: int | None = None, weight_smoothing: str = "none",
-                    resampling_cdf: str = "standard", cloud_steps=()) -> BayesFilterResult:
+                    initial_sd_m: float = 0.0, initial_covariance=None, spread_m=None, velocity_m=None,
+                    transition=None, motion=None, resampling: str = "systematic",
+                    resample_threshold: float | None = None, resample_every: int | None = None,
+                    weight_smoothing: str = "none", resampling_cdf: str = "standard",
+                    cloud_steps=()) -> ParticleFilterResult:
     """Bootstrap SIR particle filter and Ozkaya's improved SIR (module docstring; Ozkaya 2011, Tables 4.3-4.4,
     Sec. 7.1.4; Palvai 2008, Sec. 5.3.1), over runs ``R`` and steps ``T``.
 
@@ -72,13 +167,24 @@ def particle_filter(rss_dbm, model, rng: np.random.Generator, *, n_steps: int | 
     Prior (step 0, no prediction): ``initial_particles_m`` ``(R, N, dim)``; or ``n_particles`` drawn uniform in
     ``region_m = (lower, upper)``; or all at ``initial_position_m`` ``(R, dim)`` (a known start, Table 7.21), drawn
     from ``N(initial_position_m, initial_sd_m^2 I)`` (reflected into ``region_m`` when given) when
-    ``initial_sd_m > 0`` (the Gaussian prior the posterior CRLB assumes).
+    ``initial_sd_m > 0`` (the Gaussian prior the posterior CRLB assumes), or from
+    ``N(initial_position_m, initial_covariance)`` (``(dim, dim)`` or ``(R, dim, dim)``, positive semi-definite).
 
     Proposal = process model (bootstrap, Eq. (4.33)): ``transition(particles, t, rng)``, or by default
-    ``x_t = x_t-1 + v_t + N(0, D^2 I)`` with ``D = spread_m`` (a scalar or one per axis; 0 draws nothing) and
-    ``v_t = velocity_m`` (``(dim,)`` or ``(T, dim)``), reflected into ``region_m`` when given (the room, or the
-    accessible part of it: Table 7.22). ``spread_m = inf`` draws a fresh uniform proposal over the region (Tables
-    7.18-7.19), whose particles start from equal weights (the previous weights belonged to the replaced particles).
+    ``x_t = x_t-1 + v_t + N(0, D^2 I)`` with ``D = spread_m`` (a scalar or one per axis, default
+    :data:`DEFAULT_SPREAD_M`; 0 draws nothing) and ``v_t = velocity_m`` (``(dim,)`` or ``(T, dim)``), reflected into
+    ``region_m`` when given (the room, or the accessible part of it: Table 7.22). ``spread_m = inf`` draws a fresh
+    uniform proposal over the region (Tables 7.18-7.19), whose particles start from equal weights (the previous
+    weights belonged to the replaced particles).
+
+    ``motion``: a kinematic model (:class:`~locbook.models.motion.KinematicModel`; module docstring) instead of the
+    random walk: the particles are full states ``(R, N, n)`` moved by ``x = F x + w``, ``w ~ N(0, Q)``; an
+    RssModel's likelihood sees ``x[..., motion.position_index]``, a callable likelihood the full states. The prior
+    is then over the full state: ``initial_particles_m`` ``(R, N, n)``; ``initial_position_m`` a state ``(R, n)``
+    or a position ``(R, dim)`` (at rest: the other derivatives 0), spread over the positions by ``initial_sd_m``
+    or over the state by ``initial_covariance`` ``(n, n)``; or ``n_particles`` uniform over ``region_m``, at rest.
+    With ``region_m`` (a KinematicModel only) a particle leaving the region is mirrored back and its velocity and
+    acceleration on that axis reversed. ``motion`` excludes ``transition``, ``spread_m`` and ``velocity_m``.
 
     Resampling (``resampling``: one of :data:`~locbook.tracking.resampling.RESAMPLING_METHODS`): at every step by
     default (basic SIR, Table 4.4); with ``resample_threshold`` only where ``N_eff < resample_threshold * N`` (the
@@ -92,9 +198,15 @@ def particle_filter(rss_dbm, model, rng: np.random.Generator, *, n_steps: int | 
     reading of Sec. 7.1.4, which reproduces Tables 7.23 and 7.25; it tempers the likelihood). ``"sqrt_corrected"``
     is the literature's generalised resampling: draw with ``a = sqrt(w)`` and reweight the copies by ``w / a``.
 
-    Returns a :class:`~locbook.tracking.bayes.BayesFilterResult`: the weighted mean (MMSE) and covariance, the
-    highest-weight particle as MAP, ``n_eff`` before resampling (of the weights drawn from), ``resampled``, the final
-    particles and normalised weights, and ``clouds`` at ``cloud_steps``. Collapsed runs: module docstring.
+    A single run: readings ``(T, m)``, or with a callable likelihood ``initial_particles_m`` ``(N, dim)`` or
+    ``initial_position_m`` ``(dim,)`` (``initial_covariance`` ``(dim, dim)``). The callables then take and return
+    arrays without the run axis (``log_likelihood(particles (N, dim), t) -> (N,)``, ``transition(particles (N, dim),
+    t, rng) -> (N, dim)``) and so does the result (module docstring). The random stream is that of the same call with
+    one run, so the numbers are equal to that call's run 0.
+
+    Returns a :class:`ParticleFilterResult`: the weighted mean (MMSE) and covariance, the highest-weight particle as
+    MAP, ``n_eff`` before resampling (of the weights drawn from), ``resampled``, the final particles, normalised
+    weights and log-weights, and ``clouds`` at ``cloud_steps``. Collapsed runs: module docstring.
     """
     _check_rng(rng)
     check_choice("resampling", resampling, RESAMPLING_METHODS)
@@ -107,8 +219,60 @@ def particle_filter(rss_dbm, model, rng: np.random.Generator, *, n_steps: int | 
         if resample_threshold is not None:
             raise ValueError("give resample_threshold (N_eff-triggered) or resample_every (scheduled), not both")
     check_scalar("initial_sd_m", initial_sd_m, ge=0)
-    if initial_sd_m > 0 and initial_position_m is None:
-        raise ValueError("initial_sd_m spreads the particles around initial_position_m; give initial_position_m too")
+    if (initial_sd_m > 0 or initial_covariance is not None) and initial_position_m is None:
+        raise ValueError("initial_sd_m and initial_covariance spread the particles around initial_position_m; "
+                         "give initial_position_m too")
+    if initial_sd_m > 0 and initial_covariance is not None:
+        raise ValueError("give initial_sd_m (an isotropic spread of the positions) or initial_covariance, not both")
+    kin = None
+    if motion is not None:
+        given = [name for name, value in (("transition", transition), ("spread_m", spread_m),
+                                          ("velocity_m", velocity_m)) if value is not None]
+        if given:
+            raise ValueError(f"motion moves the particles by x = F x + w, w ~ N(0, Q); it excludes "
+                             f"{' and '.join(given)} (got motion={type(motion).__name__} and {', '.join(given)})")
+        kin = _Kinematics(motion)
+        if region_m is not None and kin.derivatives is None:
+            raise ValueError(f"region_m mirrors the velocity of a KinematicModel at the walls; "
+                             f"motion={type(motion).__name__} has no derivative layout to mirror")
+
+    # -- one run without the run axis ----------------------------------------------------------------
+    single = False
+    if isinstance(model, RssModel):
+        single = np.ndim(rss_dbm) == 2
+    elif callable(model):
+        single = (initial_particles_m is not None and np.ndim(initial_particles_m) == 2
+                  or initial_particles_m is None and initial_position_m is not None
+                  and np.ndim(initial_position_m) == 1)
+    if single:
+        if isinstance(model, RssModel):
+            rss_dbm = np.asarray(rss_dbm)[None]
+            for name, value, nd in (("initial_particles_m", initial_particles_m, 2),
+                                    ("initial_position_m", initial_position_m, 1)):
+                if value is not None and np.ndim(value) != nd:
+                    raise ValueError(f"a single run (rss_dbm of shape (steps, m)) takes {name} without the run axis "
+                                     f"({'(N, dim)' if nd == 2 else '(dim,)'}), got shape {np.shape(value)}")
+        else:
+            user_ll = model
+
+            def model(particles, t):
+                out = np.asarray(user_ll(particles[0], t), dtype=float)
+                if out.shape != particles.shape[1:2]:
+                    raise ValueError(f"log_likelihood must return ({particles.shape[1]},) for a single run (particles "
+                                     f"{particles.shape[1:]}), got {out.shape}")
+                return out[None]
+        if transition is not None and callable(transition):
+            user_transition = transition
+
+            def transition(particles, t, rng):
+                out = np.asarray(user_transition(particles[0], t, rng), dtype=float)
+                if out.shape != particles.shape[1:]:
+                    raise ValueError(f"transition must return {particles.shape[1:]} for a single run, got {out.shape}")
+                return out[None]
+        if initial_particles_m is not None:
+            initial_particles_m = np.asarray(initial_particles_m)[None]
+        if initial_position_m is not None:
+            initial_position_m = np.asarray(initial_position_m)[None]
 
     # -- the likelihood ------------------------------------------------------------------------------
     detail, what = None, "log_likelihood"
@@ -121,8 +285,12 @@ def particle_filter(rss_dbm, model, rng: np.random.Generator, *, n_steps: int | 
         n_runs, n_steps = rss_dbm.shape[:2]
         detail, what = _reading_detail(rss_dbm), _LIKELIHOOD
 
-        def log_likelihood(particles, t):
-            return model.log_likelihood(rss_dbm[:, t], particles, t, constant=False)
+        if kin is None:
+            def log_likelihood(particles, t):
+                return model.log_likelihood(rss_dbm[:, t], particles, t, constant=False)
+        else:
+            def log_likelihood(particles, t):         # the RSS model sees the positions of the states
+                return model.log_likelihood(rss_dbm[:, t], particles[..., kin.position_index], t, constant=False)
     elif callable(model):
         if rss_dbm is not None:
             raise ValueError("rss_dbm goes with an RssModel; a log_likelihood callable reads its own data "
@@ -136,8 +304,20 @@ def particle_filter(rss_dbm, model, rng: np.random.Generator, *, n_steps: int | 
                          f"got {type(model).__name__}")
 
     # -- the prior -----------------------------------------------------------------------------------
-    dim = model.dim if isinstance(model, RssModel) else None
-    bounds = None if region_m is None else _region(region_m, dim)
+    # dim: the length of a particle (the state with motion); pos_dim: of its position (what region_m bounds)
+    pos_dim = model.dim if isinstance(model, RssModel) else None
+    if kin is not None:
+        if pos_dim is not None and kin.position_index.size != pos_dim:
+            raise ValueError(f"motion has {kin.position_index.size} position axes, the RssModel {pos_dim}")
+        pos_dim = kin.position_index.size
+    dim = kin.n_state if kin is not None else pos_dim
+    bounds = None if region_m is None else _region(region_m, pos_dim)
+
+    def confine(x):
+        if bounds is None:
+            return x
+        return reflect_into_box(x, *bounds) if kin is None else kin.mirror(x, *bounds)
+
     if initial_particles_m is not None:
         if n_particles is not None or initial_position_m is not None:
             raise ValueError("give initial_particles_m, or n_particles with region_m or initial_position_m, not both")
@@ -156,31 +336,50 @@ def particle_filter(rss_dbm, model, rng: np.random.Generator, *, n_steps: int | 
                                  "(the number of runs)")
             shape = (n_runs, int(n_particles), bounds[0].size)
             particles = bounds[0] + (bounds[1] - bounds[0]) * rng.random(shape)
+            if kin is not None:                       # uniform positions, at rest
+                particles = kin.state_from_positions(particles)
         else:
             start = as_array("initial_position_m", initial_position_m)
+            if kin is not None and start.ndim == 2 and start.shape[-1] == pos_dim:
+                start = kin.state_from_positions(start)   # a position: at rest
             want = (n_runs if n_runs is not None else start.shape[0] if start.ndim == 2 else None,
                     dim if dim is not None else start.shape[-1] if start.ndim == 2 else None)
             if start.shape != want:
-                raise ValueError(f"initial_position_m must have shape (runs, {want[1] or 'dim'}) = {want}, "
-                                 f"got {start.shape}")
+                axes = (want[1] or "dim") if kin is None else f"{kin.n_state}) or (runs, {pos_dim}"
+                raise ValueError(f"initial_position_m must have shape (runs, {axes}) = {want}, got {start.shape}")
             shape = (start.shape[0], int(n_particles), start.shape[1])
             particles = np.broadcast_to(start[:, None, :], shape).copy()
             if initial_sd_m > 0:
-                particles = particles + initial_sd_m * rng.standard_normal(shape)
-                if bounds is not None:
-                    particles = reflect_into_box(particles, *bounds)
+                if kin is None:
+                    particles = particles + initial_sd_m * rng.standard_normal(shape)
+                else:
+                    particles[..., kin.position_index] += initial_sd_m * rng.standard_normal(shape[:2] + (pos_dim,))
+                particles = confine(particles)
+            elif initial_covariance is not None:
+                d = shape[-1]
+                cov = as_array("initial_covariance", initial_covariance)
+                if cov.shape not in ((d, d), (shape[0], d, d)):
+                    raise ValueError(f"initial_covariance must have shape ({d}, {d}) or ({shape[0]}, {d}, {d}), "
+                                     f"got {cov.shape}")
+                root = _psd_root("initial_covariance", cov)
+                z = rng.standard_normal(shape[:2] + (root.shape[-1],))
+                particles = confine(particles + (z @ root.T if root.ndim == 2 else
+                                                 np.einsum("rnk,rdk->rnd", z, root)))
     R, n, d = particles.shape
     if n_runs is not None and R != n_runs or dim is not None and d != dim:
         raise ValueError(f"the particles {particles.shape} must be (runs, N, dim) with the {n_runs} runs of rss_dbm "
-                         f"and the model's dim {dim}")
-    if bounds is not None and bounds[0].size != d:
+                         f"and the model's dim {dim}" + ("" if kin is None else " (the state of motion)"))
+    if bounds is not None and kin is None and bounds[0].size != d:
         raise ValueError(f"region_m has {bounds[0].size} axes, the particles {d}")
 
     # -- the motion model ----------------------------------------------------------------------------
     fresh = False
-    if transition is None:
+    if kin is not None:
+        def transition(x, t, rng):
+            return kin.step(x, rng, bounds)
+    elif transition is None:
         try:
-            spread = np.asarray(spread_m, dtype=float)
+            spread = np.asarray(DEFAULT_SPREAD_M if spread_m is None else spread_m, dtype=float)
         except (TypeError, ValueError):
             raise ValueError(f"spread_m must be numeric, got {spread_m!r}") from None
         if spread.ndim > 1 or spread.size not in (1, d) or np.any(np.isnan(spread)) or np.any(spread < 0):
@@ -205,6 +404,7 @@ def particle_filter(rss_dbm, model, rng: np.random.Generator, *, n_steps: int | 
 
     # -- the recursion -------------------------------------------------------------------------------
     log_w = np.full((R, n), -np.log(n))
+    final_log_w = log_w.copy()                # the normalised log-weights of the last step (exact, for the result)
     mean = np.empty((R, n_steps, d))
     cov = np.empty((R, n_steps, d, d))
     best = np.empty((R, n_steps, d))
@@ -214,6 +414,7 @@ def particle_filter(rss_dbm, model, rng: np.random.Generator, *, n_steps: int | 
     dead = np.zeros(R, bool)
     dead_step = np.full(R, -1, np.int64)
     for t in range(n_steps):
+        last = t == n_steps - 1
         if t > 0:
             particles = np.asarray(transition(particles, t, rng), dtype=float)
             if particles.shape != (R, n, d):
@@ -233,9 +434,13 @@ def particle_filter(rss_dbm, model, rng: np.random.Generator, *, n_steps: int | 
         if dead.any():              # a collapsed run goes on with equal weights (NaN outputs): others unaffected
             logits[dead] = 0.0
         w = _normalise_log(logits)
+        if last:
+            final_log_w = _log_normalise(logits)
         if weight_smoothing == "sqrt":
             w = np.sqrt(w)
             w /= w.sum(axis=-1, keepdims=True)
+            if last:
+                final_log_w = _log_normalise(0.5 * final_log_w)
         mean[:, t], cov[:, t] = weighted_moments(w, particles)
         best[:, t] = particles[np.arange(R), np.argmax(w, axis=-1)]
         if t in cloud_steps:
@@ -263,6 +468,8 @@ def particle_filter(rss_dbm, model, rng: np.random.Generator, *, n_steps: int | 
                 w[do] = new_w / new_w.sum(axis=-1, keepdims=True)
             else:
                 w[do] = 1.0 / n
+            if last:
+                final_log_w[do] = np.log(w[do])
         log_w = np.log(np.maximum(w, 1e-300))
         if dead.any():
             mean[dead, t], cov[dead, t], best[dead, t], n_eff[dead, t] = np.nan, np.nan, np.nan, np.nan
@@ -273,9 +480,20 @@ def particle_filter(rss_dbm, model, rng: np.random.Generator, *, n_steps: int | 
     weights /= weights.sum(axis=-1, keepdims=True)
     if dead.any():
         particles = particles.copy()
-        particles[dead], weights[dead] = np.nan, np.nan
+        particles[dead], weights[dead], final_log_w[dead] = np.nan, np.nan, np.nan
         _warn_collapse(dead, dead_step, "particle_filter", what, detail)
-    return BayesFilterResult(mean, cov, best, n_eff, resampled, particles, weights, dead, dead_step, clouds)
+    out = dict(mean_m=mean, covariance_m2=cov, map_m=best, n_eff=n_eff, resampled=resampled, particles_m=particles,
+               weights=weights, degenerate=dead, degenerate_step=dead_step, log_weights=final_log_w)
+    if single:                        # one run given without the run axis: none in the result either
+        return ParticleFilterResult(**{k: a[0, ...] for k, a in out.items()},
+                                    clouds={t: c[0] for t, c in clouds.items()})
+    return ParticleFilterResult(**out, clouds=clouds)
+
+
+def _log_normalise(logw):
+    """``logw - log sum exp(logw)`` along the last axis (normalised log-weights; -inf stays -inf)."""
+    top = logw.max(axis=-1, keepdims=True)
+    return logw - top - np.log(np.exp(logw - top).sum(axis=-1, keepdims=True))
 
 
 def kernel_map_estimate(particles_m, weights, *, bandwidth_m=None, n_candidates: int = 256):

@@ -380,3 +380,31 @@ def test_danis2022_facts():
     assert len(ds.recordings_with("track")) == 9 and all(ds.recording(n).has_truth for n in ds.recordings_with("track"))
     assert ds.tag_height_m == pytest.approx(1.85) and "median" in ds.notes["tag_height_m"]
     assert "CC0" in ds.license and ds.license_file.is_file()
+
+
+def test_noise_fit_on_a_track_starts_where_the_trackers_start_and_raises_the_likelihood():
+    """measured.noise_fit runs the EKF of measured.tracks (same start, same clock): its mean error under the prior
+    equals the one computed from tracks()'s EKF; the maximum-likelihood setting scores the readings at least as well,
+    and an EKF rerun at it gives the reported log-likelihood."""
+    ds = me.load("danis2022")
+    model = me.channel(me.calibrate(ds))
+    name = next(r for r in ds.recordings_with("track") if np.isfinite(ds.epochs(r).position_m[:, 0]).any())
+    fit = me.noise_fit(ds, model, name, q=0.05)
+    reg, ticks, out = me.tracks(ds, model, name, np.random.default_rng(0), q=0.05,
+                                fix_cov_m2=np.eye(2), spread_m=0.3, n_particles=50, particle_runs=1)
+    ep = ds.epochs(name)
+    known = np.isfinite(ep.position_m[:, :2]).all(axis=1)
+    error = np.mean(np.linalg.norm(out["ekf"][ticks[known]] - ep.position_m[known, :2], axis=-1))
+    assert fit["mean_error_m"] == pytest.approx(error, rel=1e-12)
+    assert fit["log_likelihood_ml"] >= fit["log_likelihood"]
+    dt = me.epoch_s(ds, name)
+    motion = lb.constant_velocity(dt, fit["q_ml"], dim=2)
+    scale = fit["sigma_ml_db"] / fit["sigma_db"]
+    stream = lb.RssMeasurement(reg.rss_dbm, ds.anchors_m,
+                               lb.PathLossModel(model.ref_power_dbm, model.path_loss_exp,
+                                                np.asarray(model.sigma_db) * scale, model.ref_distance_m,
+                                                min_distance_m=model.min_distance_m),
+                               np.array([0, 1]), tag_height_m=ds.tag_height_m)
+    x0 = np.r_[out["rss_ml"][np.flatnonzero(np.isfinite(out["rss_ml"]).all(axis=1))[0]], 0.0, 0.0]
+    rerun = lb.extended_kalman_filter(motion.F, motion.Q, x0, np.diag([4.0, 4.0, 1.0, 1.0]), stream)
+    assert rerun.total_log_likelihood == pytest.approx(fit["log_likelihood_ml"], rel=1e-9)

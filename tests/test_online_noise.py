@@ -1,7 +1,7 @@
 """Online filtering, NEES and noise estimation (issue 30).
 
 - OnlineFilter, fed one step at a time, gives the batch filter's numbers (KF with a time-varying model and a control
-  input, the RSS EKF, the UKF with nonlinear motion) and the batch call's divergence flags;
+  input, the RSS EKF and UKF, the EKF and UKF with a step-aware nonlinear motion) and the batch call's divergence flags;
 - NEES: the closed form on one sample, and its chi-square mean over Monte-Carlo runs of a consistent KF;
 - EM: pykalman's robot data, the log-likelihoods its data set records for the first five EM iterations and pykalman's
   own EM estimates; ML: at the estimate, pykalman's independent log-likelihood equals ours and every nearby setting
@@ -67,10 +67,45 @@ def test_online_ekf_and_ukf_equal_batch_and_flag_the_same_divergence():
         np.testing.assert_array_equal(step.diverged_step, batch.diverged_step)
 
 
-def test_online_filter_refuses_a_multi_step_reading():
+def test_online_nonlinear_motion_with_the_step_equals_batch():
+    """A unicycle whose time step varies by step (f(x, k)): the online filter passes its step counter."""
+    rng = np.random.default_rng(10)
+    dts = 0.2 + 0.1 * rng.random(30)
+
+    def f(x, k):
+        out = np.array(x, dtype=float, copy=True)
+        out[..., 0] += dts[k] * x[..., 3] * np.cos(x[..., 2])
+        out[..., 1] += dts[k] * x[..., 3] * np.sin(x[..., 2])
+        return out
+
+    def jac(x, k):
+        J = np.broadcast_to(np.eye(4), x.shape[:-1] + (4, 4)).copy()
+        J[..., 0, 2], J[..., 0, 3] = -dts[k] * x[..., 3] * np.sin(x[..., 2]), dts[k] * np.cos(x[..., 2])
+        J[..., 1, 2], J[..., 1, 3] = dts[k] * x[..., 3] * np.cos(x[..., 2]), dts[k] * np.sin(x[..., 2])
+        return J
+    motion = lb.NonlinearMotion(f, jac, uses_step=True)
+    z = rng.normal(size=(2, 30, 2)) + np.linspace(0, 3, 30)[:, None]
+    H = np.hstack([np.eye(2), np.zeros((2, 2))])
+    x0, P0, Q = np.broadcast_to([0.0, 0.0, 0.5, 1.0], (2, 4)), np.eye(4), 0.01 * np.eye(4)
+    for kind, fn in (("ekf", lb.extended_kalman_filter), ("ukf", lb.unscented_kalman_filter)):
+        batch = fn(motion, Q, x0, P0, lb.LinearMeasurement(z, H, np.eye(2)))
+        online = lb.OnlineFilter(kind, motion, Q, x0, P0)
+        for k in range(30):
+            step = online.step(lb.LinearMeasurement(z[:, k:k + 1], H, np.eye(2)))
+            np.testing.assert_allclose(step.x[:, 0], batch.x[:, k], atol=1e-12)
+
+
+def test_online_filter_refuses_what_the_batch_call_refuses():
     online = lb.OnlineFilter("kf", np.eye(2), np.eye(2), np.zeros(2), np.eye(2))
     with pytest.raises(ValueError, match="one step of readings"):
         online.step(lb.LinearMeasurement(np.zeros((3, 2)), np.eye(2), np.eye(2)))
+    with pytest.raises(ValueError, match="unknown option"):
+        lb.OnlineFilter("kf", np.eye(2), np.eye(2), np.zeros(2), np.eye(2), josep=False)
+    short = lb.OnlineFilter("kf", lb.per_step(np.broadcast_to(np.eye(2), (2, 2, 2))), np.eye(2), np.zeros(2), np.eye(2))
+    for _ in range(2):
+        short.step(lb.LinearMeasurement(np.zeros((1, 2)), np.eye(2), np.eye(2)))
+    with pytest.raises(ValueError, match="past its end"):
+        short.step(lb.LinearMeasurement(np.zeros((1, 2)), np.eye(2), np.eye(2)))
 
 
 def test_nees_closed_form_and_chi_square_mean_over_runs():
@@ -92,6 +127,10 @@ def test_nees_closed_form_and_chi_square_mean_over_runs():
     lo2, hi2 = chi2.ppf([1e-4, 1 - 1e-4], 2 * M) / M
     assert lo2 < pos < hi2
     assert np.isnan(lb.nees(np.full(2, np.nan), x, P))
+    with pytest.raises(ValueError, match="index must be distinct state components"):
+        lb.nees(np.zeros(2), x, P, index=[0, 2])
+    with pytest.raises(ValueError, match="singular"):
+        lb.nees(np.zeros(2), x, np.zeros((2, 2)))
 
 
 def _robot():
@@ -118,6 +157,23 @@ def test_em_equals_pykalman_on_its_robot_data():
                                d.initial_state_mean, d.initial_state_covariance,
                                em_vars=["transition_covariance", "observation_covariance"])
     kf.em(np.ma.masked_invalid(z), n_iter=4)
+    np.testing.assert_allclose(fit.Q, kf.transition_covariance, atol=1e-9)
+    np.testing.assert_allclose(fit.R[0], kf.observation_covariance, atol=1e-9)
+
+
+def test_em_with_partly_missing_readings_equals_pykalman_and_never_lowers_the_likelihood():
+    """A step with one component missing is missing as a whole (pykalman's rule, in its filter too)."""
+    rng = np.random.default_rng(12)
+    model, H, R, truth, z = _cv_runs(rng, runs=1, T=200, missing=False)
+    z = z[0]
+    z[rng.random(200) < 0.4, 1] = np.nan                    # component 1 missing at 40 % of the steps
+    z[:30, 0] += rng.normal(0, 5.0, 30)                      # and noisy readings where it is
+    x0, P0 = np.zeros(4), np.eye(4)
+    fit = lb.fit_noise_em(model.F, model.Q, x0, P0, lb.LinearMeasurement(z, H, R), n_iter=8)
+    assert np.all(np.diff(fit.history) > -1e-9 * np.abs(fit.history[1:]))
+    kf = pykalman.KalmanFilter(model.F, H, model.Q, R, initial_state_mean=x0, initial_state_covariance=P0,
+                               em_vars=["transition_covariance", "observation_covariance"])
+    kf.em(np.ma.masked_invalid(z), n_iter=8)
     np.testing.assert_allclose(fit.Q, kf.transition_covariance, atol=1e-9)
     np.testing.assert_allclose(fit.R[0], kf.observation_covariance, atol=1e-9)
 
@@ -180,5 +236,7 @@ def test_ml_diagonal_form_and_rss_sigma():
     assert fit.q_scale is None
     # each anchor's sigma recovered within 15% (400 readings per anchor: the standard error of a sigma is ~3.5%)
     np.testing.assert_allclose(sigma, sigma_true, rtol=0.15)
+    with pytest.raises(ValueError, match="one entry per stream"):
+        lb.fit_noise_ml(model.F, model.Q, np.zeros(4), np.eye(4), meas, kind="ekf", fit_R=[[0, 1], [2, 3]])
     with pytest.raises(ValueError, match="nothing to fit"):
         lb.fit_noise_ml(model.F, model.Q, np.zeros(4), np.eye(4), meas, kind="ekf", fit_Q=None, fit_R=None)

@@ -61,3 +61,20 @@ def test_rts_smoother_refuses_a_run_without_its_predictions():
                                    record=np.arange(0, 60, 2), outputs=("x_pred", "P_pred"))
     with pytest.raises(ValueError, match="every step recorded"):
         rts_smoother(every_other, model.F)
+
+
+def test_one_covariance_for_every_run_gives_the_per_run_smoother():
+    """A linear run whose covariance is the same in every run is smoothed with one covariance recursion; each run
+    equals the general smoother applied to that run alone."""
+    from locbook.tracking.results import KalmanResult
+    rng = np.random.default_rng(4)
+    model, H, R, z, x0, P0 = _cv_problem(rng, runs=3, missing=False)
+    run = lb.kalman_filter(model.F, model.Q, np.broadcast_to(x0, (3, 4)), P0, lb.LinearMeasurement(z, H, R),
+                           outputs=("x_pred", "P_pred", "P_cross"))
+    smooth = rts_smoother(run)
+    for r in range(3):
+        alone = rts_smoother(KalmanResult(run.x[r], run.P[r], run.steps, run.x_pred[r], run.P_pred[r],
+                                          P_cross=run.P_cross[r]))
+        np.testing.assert_allclose(smooth.x[r], alone.x, atol=1e-12)
+        np.testing.assert_allclose(smooth.P[r], alone.P, atol=1e-12)
+        np.testing.assert_allclose(smooth.gain[r], alone.gain, atol=1e-12)

@@ -472,6 +472,16 @@ def scored_errors(run: ChannelRun, key, rmse_epochs: str = "rss_epochs") -> np.n
     return run.errors[key]
 
 
+def _simulate_channel(trajectory: Trajectory, channel: PathLossModel, n_runs: int, rng: np.random.Generator,
+                      anchors_m, room_m, mle_grid_step_m: float, mle_bounds: str):
+    """The tables' simulation of one channel: the true positions at the RSS epochs, the RSS of ``n_runs`` runs and
+    their MLE fixes (:func:`run_channel`, :func:`noise_fit`)."""
+    truth = trajectory.position_m[..., trajectory.rss_steps, :]
+    rss = simulate_rss(trajectory, channel, n_runs, rng, anchors_m)
+    mle = mle_positions(rss, channel, anchors_m, room_m=room_m, grid_step_m=mle_grid_step_m, bounds=mle_bounds)
+    return truth, rss, mle
+
+
 def run_channel(trajectory: Trajectory, sigma_rss_db: float, path_loss_exp: float, n_runs: int,
                 rng: np.random.Generator, *, sigma_acc_values=(), only_rss: bool = True, filters=FILTERS,
                 ref_power_dbm: float = REF_POWER_DBM, serial_order: str = "descending",
@@ -493,9 +503,8 @@ def run_channel(trajectory: Trajectory, sigma_rss_db: float, path_loss_exp: floa
         raise ParameterError(f"mle_r must be one of {MLE_R_READINGS}, got {mle_r!r}")
     channel = PathLossModel(ref_power_dbm, path_loss_exp, sigma_rss_db)
     dt_s = float(trajectory.time_s[1] - trajectory.time_s[0])
-    truth = trajectory.position_m[..., trajectory.rss_steps, :]
-    rss = simulate_rss(trajectory, channel, n_runs, rng, anchors_m)
-    mle = mle_positions(rss, channel, anchors_m, room_m=room_m, grid_step_m=mle_grid_step_m, bounds=mle_bounds)
+    truth, rss, mle = _simulate_channel(trajectory, channel, n_runs, rng, anchors_m, room_m, mle_grid_step_m,
+                                        mle_bounds)
     fix = mle.position_m
     mse = np.mean((fix - truth) ** 2, axis=(0, 1))
     out = ChannelRun(sigma_rss_db, path_loss_exp, mse, converged_fraction=float(np.mean(mle.converged)),
@@ -549,10 +558,9 @@ def noise_fit(trajectory: Trajectory, sigma_rss_db: float, path_loss_exp: float,
         raise ParameterError(f"noise_fit fits the RSS EKFs (parallel_ekf, serial_ekf), got {name!r}")
     channel = PathLossModel(ref_power_dbm, path_loss_exp, sigma_rss_db)
     dt_s = float(trajectory.time_s[1] - trajectory.time_s[0])
-    truth = trajectory.position_m[..., trajectory.rss_steps, :]
-    rss = simulate_rss(trajectory, channel, n_runs, rng, anchors_m)
-    fix = mle_positions(rss, channel, anchors_m, room_m=room_m, grid_step_m=mle_grid_step_m,
-                        bounds=mle_bounds).position_m
+    truth, rss, mle = _simulate_channel(trajectory, channel, n_runs, rng, anchors_m, room_m, mle_grid_step_m,
+                                        mle_bounds)
+    fix = mle.position_m
     mse = np.mean((fix - truth) ** 2, axis=(0, 1))
     q, p0_acc = filter_noise(noise_reading, None)
     model = motion_model(dt_s, q)
@@ -576,7 +584,7 @@ def noise_fit(trajectory: Trajectory, sigma_rss_db: float, path_loss_exp: float,
             "rmse_hand_m": rmse(1.0, 1.0), "rmse_ml_m": rmse(qs, rs),
             "log_likelihood_hand": float(pooled.initial_log_likelihood),
             "log_likelihood_ml": float(pooled.log_likelihood),
-            "at_bound": bool(np.any(pooled.at_bound) or np.any(each.at_bound))}
+            "at_bound": bool(np.any(pooled.at_bound) or np.any(each.at_bound))}   # any multiplier of any fit
 
 
 @dataclass(frozen=True)

@@ -446,8 +446,7 @@ def noise_fit(walk: Walk, method: str = "ekf", *, ukf_alpha: float = UKF_ALPHA, 
     per = lambda base, scale, i, root=False: None if each is None else (
         base * (np.sqrt(scale(each)[:, i]) if root else scale(each)[:, i]))
     names = ("q", "q_angular", "accelerometer variance", "gyroscope variance", "RSS variance")
-    multipliers = np.concatenate([q_mult, r_mult[0], r_mult[1]])
-    lo, hi = 1e-4, 1e4                     # fit_noise_ml's default scale_bounds
+    at_bound = pooled.at_bound if each is None else pooled.at_bound | each.at_bound.any(axis=0)
     return {
         "method": kind,
         "q": (s.q, s.q * q_mult[0], per(s.q, lambda e: e.q_scale, 0)),
@@ -459,7 +458,7 @@ def noise_fit(walk: Walk, method: str = "ekf", *, ukf_alpha: float = UKF_ALPHA, 
         "RSS sigma (dB)": (sigma, sigma * np.sqrt(r_mult[1][0]), per(sigma, lambda e: e.r_scale[1], 0, True)),
         "mean error (m)": (mean_error(model.Q, imu_R, sigma), mean_error(pooled.Q, pooled.R[0], pooled.R[1]), None),
         "log-likelihood, all walks": (float(pooled.initial_log_likelihood), float(pooled.log_likelihood), None),
-        "at_bound": [name for name, v in zip(names, multipliers) if v <= lo * (1 + 1e-6) or v >= hi * (1 - 1e-6)],
+        "at_bound": [name for name, hit in zip(names, at_bound) if hit],
     }
 
 

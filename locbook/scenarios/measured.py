@@ -204,6 +204,26 @@ def epoch_s(data: Dataset, recording: str) -> float:
     return float(window)
 
 
+def _ml_fixes(data: Dataset, model: PathLossModel, rss, grid):
+    """RSS-ML fixes ``(E, 2)`` on the outline's bounding box, started at the best point of ``grid`` (NaN where an epoch
+    heard no anchor)."""
+    lower, upper = outline_box(data.outline_m)
+    heard = ~np.isnan(rss).all(axis=-1)
+    ml = np.full((rss.shape[0], 2), np.nan)
+    grid_fix = grid_ml_position(data.anchors_m, rss[heard], model, grid, tag_height_m=data.tag_height_m).position_m
+    ml[heard] = rss_ml_position(data.anchors_m, rss[heard], model, grid_fix, tag_height_m=data.tag_height_m,
+                                region_m=(lower, upper)).position_m
+    return ml
+
+
+def _kalman_start(data: Dataset, recording: str, ml):
+    """The Kalman filters' start (:func:`tracks`): the first RSS-ML fix with a 2 m standard deviation, at rest."""
+    fixed = np.flatnonzero(np.isfinite(ml).all(axis=1))
+    if fixed.size == 0:
+        raise ParameterError(f"recording {recording!r} of {data.name!r}: no epoch gives an RSS-ML fix to start from")
+    return np.r_[ml[fixed[0]], 0.0, 0.0], np.diag([4.0, 4.0, 1.0, 1.0])
+
+
 def tracks(data: Dataset, model: PathLossModel, recording: str, rng: np.random.Generator, *, q: float,
            fix_cov_m2, spread_m: float, n_particles: int, particle_runs: int, grid_spacing_m: float = 0.1,
            ukf_alpha: float = 0.5, with_divergence: bool = False):
@@ -230,17 +250,9 @@ def tracks(data: Dataset, model: PathLossModel, recording: str, rng: np.random.G
     anchors, height = data.anchors_m, data.tag_height_m
     lower, upper = outline_box(data.outline_m)
     grid = grid_in_outline(data.outline_m, grid_spacing_m)
-    heard = ~np.isnan(rss).all(axis=-1)
-    ml = np.full((rss.shape[0], 2), np.nan)
-    grid_fix = grid_ml_position(anchors, rss[heard], model, grid, tag_height_m=height).position_m
-    ml[heard] = rss_ml_position(anchors, rss[heard], model, grid_fix, tag_height_m=height,
-                                region_m=(lower, upper)).position_m
-    fixed = np.flatnonzero(np.isfinite(ml).all(axis=1))
-    if fixed.size == 0:
-        raise ParameterError(f"recording {recording!r} of {data.name!r}: no epoch gives an RSS-ML fix to start from")
+    ml = _ml_fixes(data, model, rss, grid)
     motion = constant_velocity(dt, q, dim=2)
-    x0 = np.r_[ml[fixed[0]], 0.0, 0.0]
-    P0 = np.diag([4.0, 4.0, 1.0, 1.0])
+    x0, P0 = _kalman_start(data, recording, ml)
     H = np.hstack([np.eye(2), np.zeros((2, 2))])
     rss_stream = RssMeasurement(rss, anchors, model, np.array([0, 1]), tag_height_m=height)
     kalman = {"kf_on_ml": extended_kalman_filter(motion.F, motion.Q, x0, P0,
@@ -259,7 +271,7 @@ def tracks(data: Dataset, model: PathLossModel, recording: str, rng: np.random.G
     return reg, ticks, out
 
 
-def noise_fit(data: Dataset, model: PathLossModel, recording: str, *, q: float) -> dict:
+def noise_fit(data: Dataset, model: PathLossModel, recording: str, *, q: float, grid_spacing_m: float = 0.1) -> dict:
     """Maximum-likelihood noise levels of the EKF of :func:`tracks` on one recording, beside the ones it uses.
 
     The EKF uses a walking-pace prior ``q`` (not tuned) and the channel's sigma_db fitted on the calibration
@@ -274,16 +286,11 @@ def noise_fit(data: Dataset, model: PathLossModel, recording: str, *, q: float) 
     reg, ticks = regular_epochs(data.epochs(recording), dt, tolerance_s=0.1 * dt)
     rss = reg.rss_dbm
     anchors, height = data.anchors_m, data.tag_height_m
-    lower, upper = outline_box(data.outline_m)
     heard = np.flatnonzero(~np.isnan(rss).all(axis=-1))
-    if heard.size == 0:
-        raise ParameterError(f"recording {recording!r} of {data.name!r}: no epoch with a reading")
-    first = rss[heard[:1]]
-    start = grid_ml_position(anchors, first, model, grid_in_outline(data.outline_m, 0.1), tag_height_m=height)
-    fix = rss_ml_position(anchors, first, model, start.position_m, tag_height_m=height,
-                          region_m=(lower, upper)).position_m[0]
+    # as tracks(): the first RSS-ML fix, at rest (each epoch's fix is its own problem: the first alone suffices)
+    ml = _ml_fixes(data, model, rss[heard[:1]], grid_in_outline(data.outline_m, grid_spacing_m))
+    x0, P0 = _kalman_start(data, recording, ml)
     motion = constant_velocity(dt, q, dim=2)
-    x0, P0 = np.r_[fix, 0.0, 0.0], np.diag([4.0, 4.0, 1.0, 1.0])      # as tracks(): the first fix, at rest
     stream = RssMeasurement(rss, anchors, model, np.array([0, 1]), tag_height_m=height)
     fit = fit_noise_ml(motion.F, motion.Q, x0, P0, stream, kind="ekf", fit_Q="scale", fit_R="scale", per_run=False)
     sigma = np.asarray(model.sigma_db, dtype=float)

@@ -1,6 +1,7 @@
 """The time loop every Kalman-family filter runs (internal): the checked inputs (:func:`_setup`), then at every step the
-prediction :func:`locbook.tracking.functional.predict` and the streams' updates in the given order, each from the
-previous one's posterior, with the outputs of :class:`locbook.tracking.results.KalmanResult` recorded as asked.
+prediction (:func:`_predictor`: linear, per-step or nonlinear motion with the control input, or the filter's own, e.g.
+the UKF's unscented prediction) and the streams' updates in the given order, each from the previous one's posterior,
+with the outputs of :class:`locbook.tracking.results.KalmanResult` recorded as asked.
 
 Speed (issue 18). While the covariance recursion is the same in every run (P0, F and Q without batch axes, linear
 streams whose H and R have none and whose missing components are the same in every run) the covariance is kept
@@ -18,7 +19,7 @@ from .functional import _linear_update_shared
 from .results import KALMAN_OUTPUTS, KalmanResult
 from .streams import (MEASUREMENT_TYPES, LinearMeasurement, NonlinearMeasurement, RssMeasurement, _per_step_stream,
                       _stream_at, _stream_name, _serial_linear, _stream_readings)
-from .transition import NonlinearMotion, PerStep, _control_drift, _matrix_arg
+from .transition import NonlinearMotion, PerStep, _control_drift, _matrix_arg, step_matrix
 
 @dataclass
 class _Setup:
@@ -51,10 +52,10 @@ class _Setup:
         return self.motion is None and not self.F_steps and not self.Q_steps and self.drift is None
 
     def F_at(self, k: int):
-        return self.F[..., min(k, self.F.shape[-3] - 1), :, :] if self.F_steps else self.F
+        return step_matrix(self.F, k) if self.F_steps else self.F
 
     def Q_at(self, k: int):
-        return self.Q[..., min(k, self.Q.shape[-3] - 1), :, :] if self.Q_steps else self.Q
+        return step_matrix(self.Q, k) if self.Q_steps else self.Q
 
     def drift_at(self, k: int):
         return None if self.drift is None else self.drift[..., min(k, self.drift.shape[-2] - 1), :]
@@ -89,6 +90,9 @@ def _setup(F, Q, x0, P0, measurements, record, filter_name, B=None, u=None) -> _
     """The input checks of every Kalman-family filter (once, before the time loop). ``F`` a matrix, ``per_step``
     matrices or a NonlinearMotion; ``Q`` a covariance or ``per_step`` covariances; ``B``, ``u`` the control input
     (:mod:`locbook.tracking.transition`)."""
+    if isinstance(P0, PerStep) or isinstance(x0, PerStep):
+        raise ValueError("x0 and P0 are the prior of one step: they have no time axis (per_step is for F, Q, B and a "
+                         "LinearMeasurement's H and R)")
     motion = F if isinstance(F, NonlinearMotion) else None
     if motion is not None:
         x = as_array("x0", x0)
@@ -288,13 +292,13 @@ def _run(setup: _Setup, measurements, update, predict_first: bool, *, shared: bo
     steps, slot, T, cols = setup.steps, setup.slot, setup.T, setup.cols
     R, M = steps.size, int(cols[-1])
     out_x = np.empty(batch + (R, n))
-    out_P = np.empty(batch + (R, n, n))
+    out_P = _CovarianceRecord(batch, R, n, shared)
     out_nis = np.full(batch + (T,), np.nan)
     out_ll = np.full(batch + (T,), np.nan)
     out_dof = np.zeros(batch + (T,), np.int64)
     out_xp = np.empty(batch + (R, n)) if "x_pred" in outputs else None
-    out_Pp = np.empty(batch + (R, n, n)) if "P_pred" in outputs else None
-    out_Pc = np.full(batch + (R, n, n), np.nan) if "P_cross" in outputs else None
+    out_Pp = _CovarianceRecord(batch, R, n, shared) if "P_pred" in outputs else None
+    out_Pc = _CovarianceRecord(batch, R, n, shared, np.nan) if "P_cross" in outputs else None
     out_nu = np.full(batch + (R, M), np.nan) if "innovation" in outputs else None
     out_S = np.full(batch + (R, M, M), np.nan) if "S" in outputs else None
     want = out_nu is not None or out_S is not None
@@ -311,7 +315,7 @@ def _run(setup: _Setup, measurements, update, predict_first: bool, *, shared: bo
                 _raise_singular(k, exc.bad, "state covariance", exc.message)
             _check_state(k, x_pred, P_pred)          # an overflow in the prediction is named as such
             if cross is not None:
-                out_Pc[..., s, :, :] = cross
+                out_Pc.put(s, cross)
         else:
             x_pred, P_pred = x, P
         # document 003's printed update starts from the previous posterior, not the prediction
@@ -319,7 +323,7 @@ def _run(setup: _Setup, measurements, update, predict_first: bool, *, shared: bo
         if s >= 0 and out_xp is not None:
             out_xp[..., s, :] = x
         if s >= 0 and out_Pp is not None:
-            out_Pp[..., s, :, :] = P
+            out_Pp.put(s, P)
         nis, dof, ll = 0.0, 0, 0.0
         for i, (meas, z, act) in enumerate(zip(measurements, setup.zs, setup.active)):
             if not act[k]:
@@ -366,6 +370,30 @@ def _run(setup: _Setup, measurements, update, predict_first: bool, *, shared: bo
         out_dof[..., k] = dof
         if s >= 0:
             out_x[..., s, :] = x
-            out_P[..., s, :, :] = P
-    return KalmanResult(out_x, out_P, steps, out_xp, out_Pp, out_nu, out_S, out_ll, out_nis, out_dof,
-                        P_cross=out_Pc)
+            out_P.put(s, P)
+    covariance = lambda record: None if record is None else record.array()
+    return KalmanResult(out_x, out_P.array(), steps, out_xp, covariance(out_Pp), out_nu, out_S, out_ll, out_nis, out_dof,
+                        P_cross=covariance(out_Pc), variant="literal_george" if literal else "standard")
+
+
+class _CovarianceRecord:
+    """A recorded covariance output ``batch + (R, n, n)``, kept as one ``(R, n, n)`` array while the covariance is
+    the same in every run (the shared path: writing it into every run at every step costs more than the recursion)
+    and spread over the runs when a batched value first arrives, or at the end."""
+
+    def __init__(self, batch, R: int, n: int, shared: bool, fill=None):
+        self.batch = batch
+        empty = (lambda shape: np.full(shape, fill)) if fill is not None else np.empty
+        self.small = empty((R, n, n)) if shared else None
+        self.big = None if shared else empty(batch + (R, n, n))
+
+    def put(self, slot: int, value) -> None:
+        if self.big is None:
+            if np.ndim(value) == 2:
+                self.small[slot] = value
+                return
+            self.big = np.broadcast_to(self.small, self.batch + self.small.shape).copy()
+        self.big[..., slot, :, :] = value
+
+    def array(self) -> np.ndarray:
+        return self.big if self.big is not None else np.broadcast_to(self.small, self.batch + self.small.shape).copy()

@@ -21,8 +21,8 @@ exact for a linear-Gaussian model and to first order for the EKF's and UKF's lin
 - :func:`fit_noise_em` is the expectation-maximisation of Shumway and Stoffer (1982) for a linear-Gaussian model with
   one LinearMeasurement stream: the RTS smoother's moments and lag-one cross-covariances give the M-step in closed form
   (full Q and R; pykalman's ``em`` with ``em_vars=['transition_covariance', 'observation_covariance']``). Each iteration
-  never lowers the likelihood. Readings with a missing component leave their step out of the R update (pykalman's
-  rule).
+  never lowers the likelihood. A step with a missing component is treated as missing as a whole, in the filter and
+  smoother of the E-step and in the M-step (pykalman's rule; the likelihood is then that of the complete steps).
 """
 from __future__ import annotations
 
@@ -32,16 +32,15 @@ import numpy as np
 
 from .._validate import check_choice, check_scalar
 from ..errors import ConvergenceError
-from .kalman import extended_kalman_filter, kalman_filter
+from .kalman import kalman_filter
 from .smoother import rts_smoother
-from .streams import LinearMeasurement, NonlinearMeasurement, RssMeasurement
-from .transition import PerStep, _control_drift
-from .unscented import unscented_kalman_filter
+from .streams import LinearMeasurement, NonlinearMeasurement, RssMeasurement, _replace_unchecked
+from .transition import NonlinearMotion, PerStep, _control_drift
+from .online import KALMAN_FILTERS
 
 __all__ = ["NoiseFit", "fit_noise_ml", "fit_noise_em", "NOISE_FORMS"]
 
 NOISE_FORMS = ("scale", "diagonal")
-_FILTERS = {"kf": kalman_filter, "ekf": extended_kalman_filter, "ukf": unscented_kalman_filter}
 
 
 @dataclass(frozen=True)
@@ -53,8 +52,8 @@ class NoiseFit:
     - ``q_scale`` ``batch + (p_q,)`` and ``r_scale`` (per stream, ``batch + (p_r,)`` or None): the variance multipliers
       of the given Q and R (1 = as given);
     - ``log_likelihood`` ``batch``: at the estimate; ``initial_log_likelihood``: at the given Q and R;
-    - ``at_bound`` ``batch``: a multiplier ended at its bound (the likelihood wants it beyond: widen ``scale_bounds``
-      or suspect the model); ``history`` (EM) ``batch + (iterations + 1,)``: the log-likelihood before each iteration
+    - ``at_bound`` ``batch + (p,)``: each multiplier (``q_scale``'s, then each stream's ``r_scale``, in order) ended at
+      its bound (the likelihood wants it beyond: widen ``scale_bounds`` or suspect the model); ``history`` (EM) ``batch + (iterations + 1,)``: the log-likelihood before each iteration
       and at the end; ``iterations``, ``method`` (``"ml"`` or ``"em"``).
     """
 
@@ -154,7 +153,8 @@ class _Parameters:
                 streams[target] = replace(meas, channel=replace(meas.channel, sigma_db=np.sqrt(sigma2)))
                 continue
             d = np.exp(0.5 * log_var)
-            streams[target] = _with_R(meas, d[..., :, None] * base * d[..., None, :])
+            # a congruence of a checked covariance: a covariance again
+            streams[target] = _replace_unchecked(meas, R=d[..., :, None] * base * d[..., None, :])
         return Q, streams
 
     def unpack(self, theta):
@@ -169,15 +169,6 @@ class _Parameters:
                 r[target] = np.exp(theta[..., c:c + k])
             c += k
         return q, tuple(r)
-
-
-def _with_R(meas, R):
-    """The stream with noise R (built without re-checking: R is a congruence of a checked covariance)."""
-    view = object.__new__(type(meas))
-    for field in meas.__dataclass_fields__:
-        object.__setattr__(view, field, getattr(meas, field))
-    object.__setattr__(view, "R", R)
-    return view
 
 
 def _as_list(streams):
@@ -195,21 +186,23 @@ def fit_noise_ml(F, Q, x0, P0, measurements, *, kind: str = "kf", fit_Q: str | N
     the filter ``kind`` (``"kf"``, ``"ekf"``, ``"ukf"``) takes them; ``Q`` and the streams' R (or sigma_db) are the
     starting point and the shape of what is fitted. ``fit_Q``: ``"scale"``, ``"diagonal"``, a list of index groups
     (module docstring) or None (kept); ``fit_R``: ``"scale"``, ``"diagonal"`` or None for every stream, or a list
-    with one form per stream (a form, index groups or None). ``per_run``: every run (the leading axes
+    with exactly one entry per stream (a form, a list of index groups, or None: ``[[[0, 1], [2]], "scale"]`` fits
+    two groups of the first stream's R and one scale of the second's). ``per_run``: every run (the leading axes
     of the readings) gets its own estimate; False pools the runs (one estimate, the sum of their log-likelihoods).
-    ``scale_bounds``: the range of every variance multiplier. ``max_iter``, ``tol``: L-BFGS-B's iteration limit and
-    its tolerance on the relative change of the objective.
+    ``scale_bounds``: the range of every variance multiplier. ``max_iter``: the iteration limit (of L-BFGS-B pooled,
+    of the damped Newton steps per run); ``tol``: L-BFGS-B's tolerance on the relative change of the objective (the
+    per-run Newton steps stop when no multiplier changes by more than 1e-6, relative).
 
     Raises ConvergenceError when the optimiser stops without meeting its criteria; a multiplier that ends at its bound
     is reported in ``at_bound`` (not an error: the likelihood may be flat or want more)."""
     from scipy.optimize import minimize           # lazy: keeps `import locbook` fast
-    check_choice("kind", kind, tuple(_FILTERS))
+    check_choice("kind", kind, tuple(KALMAN_FILTERS))
     streams = _as_list(measurements)
     fit_R = [fit_R] * len(streams) if fit_R is None or isinstance(fit_R, str) else list(fit_R)
-    if len(streams) == 1 and len(fit_R) != 1 and all(np.ndim(g) == 1 for g in fit_R):
-        fit_R = [fit_R]                   # one stream's index groups
     if len(fit_R) != len(streams):
-        raise ValueError(f"fit_R must be one form or one per stream ({len(streams)}), got {len(fit_R)}")
+        raise ValueError(f"fit_R must be 'scale', 'diagonal' or None for every stream, or a list with one entry per "
+                         f"stream ({len(streams)}; index groups of one stream go in its entry, e.g. [[[0, 1], [2]]]), "
+                         f"got {len(fit_R)} entries")
     if isinstance(Q, PerStep):
         raise ValueError("fit_noise_ml fits a constant Q (a per-step Q has no one scale); give Q (n, n)")
     check_scalar("max_iter", max_iter, ge=1, integer=True)
@@ -218,7 +211,7 @@ def fit_noise_ml(F, Q, x0, P0, measurements, *, kind: str = "kf", fit_Q: str | N
         raise ValueError(f"scale_bounds must be (low, high) with 0 < low <= 1 <= high, got {scale_bounds!r}")
     params = _Parameters(Q, streams, fit_Q, fit_R)
     p = params.size
-    filt = _FILTERS[kind]
+    filt = KALMAN_FILTERS[kind]
     options = {**options, "divergence_window": 0, "record": [0]}
 
     def log_likelihood(theta):
@@ -235,7 +228,7 @@ def fit_noise_ml(F, Q, x0, P0, measurements, *, kind: str = "kf", fit_Q: str | N
                                           abs(float(np.sum(ll0))))
     Qf, st = params.apply(theta)       # pooled: one Q and R for every run
     q, r = params.unpack(theta)
-    at_bound = np.any((theta <= np.log(lo) + 1e-6) | (theta >= np.log(hi) - 1e-6), axis=-1)
+    at_bound = (theta <= np.log(lo) + 1e-6) | (theta >= np.log(hi) - 1e-6)
     R = tuple((s.channel.sigma_db if isinstance(s, RssMeasurement) else s.R) if form is not None else None
               for s, form in zip(st, fit_R))
     ll = log_likelihood(theta)
@@ -320,15 +313,19 @@ def fit_noise_em(F, Q, x0, P0, measurement: LinearMeasurement, *, B=None, u=None
 
         Q = 1/(T-1) sum_k [e_k e_k^T + F V_k F^T + V_{k+1} - V_{k+1,k} F^T - F V_{k+1,k}^T],
             e_k = m_{k+1} - F m_k - B u_{k+1}      (F = F_{k+1})
-        R = 1/|K| sum_{k in K} [r_k r_k^T + H V_k H^T],   r_k = z_k - H m_k - d,  K the steps with every component.
+        R = 1/|K| sum_{k in K} [r_k r_k^T + H V_k H^T],   r_k = z_k - H m_k - d,  K the steps with every component
+                                                                               (the others are missing as a whole).
 
     ``fit``: which of ``"Q"``, ``"R"`` to update. ``per_run``: one estimate per run (the leading axes of the readings),
     else the runs' statistics are pooled. ``history``: the log-likelihood before each iteration and at the end (it never
     decreases, up to round-off)."""
     check_scalar("n_iter", n_iter, ge=1, integer=True)
     if not isinstance(measurement, LinearMeasurement) or isinstance(measurement.H, PerStep) \
-            or isinstance(measurement.R, PerStep) or measurement.mode != "parallel":
-        raise ValueError("fit_noise_em takes one parallel LinearMeasurement with a constant H and R")
+            or isinstance(measurement.R, PerStep) or measurement.mode != "parallel" or np.ndim(measurement.H) != 2:
+        raise ValueError("fit_noise_em takes one parallel LinearMeasurement with one constant H (m, n) and R")
+    if isinstance(F, NonlinearMotion) or isinstance(Q, PerStep) or np.ndim(Q) != 2:
+        raise ValueError("fit_noise_em fits the linear model: F a matrix (n, n) or per_step(F), Q one (n, n) "
+                         "covariance (a NonlinearMotion or a per-step Q has no closed-form M-step here)")
     unknown = set(fit) - {"Q", "R"}
     if unknown or not fit:
         raise ValueError(f"fit must name 'Q' and/or 'R', got {fit!r}")
@@ -338,6 +335,11 @@ def fit_noise_em(F, Q, x0, P0, measurement: LinearMeasurement, *, B=None, u=None
     z = np.asarray(measurement.z, dtype=float)
     if measurement.offset is not None:
         z = z - np.asarray(measurement.offset, dtype=float)
+    # pykalman's rule: a step with a missing component is missing as a whole, in the E-step and the M-step alike
+    # (the R M-step of a partly observed step has no closed form; leaving such steps out of the M-step only would
+    # break the monotone likelihood of EM)
+    z = np.where(np.all(np.isfinite(z), axis=-1, keepdims=True), z, np.nan)
+    measurement = replace(measurement, z=z, offset=None)
     T, n = z.shape[-2], H.shape[-1]
     if T < 2:
         raise ValueError("fit_noise_em needs at least two steps")
@@ -384,5 +386,5 @@ def fit_noise_em(F, Q, x0, P0, measurement: LinearMeasurement, *, B=None, u=None
     if not per_run:
         history = history.reshape(-1, n_iter + 1).sum(axis=0)
     final = history[..., -1]
-    return NoiseFit(Q, (R,), None, (None,), final, history[..., 0], np.zeros(np.shape(final), bool), int(n_iter),
-                    "em", history)
+    return NoiseFit(Q, (R,), None, (None,), final, history[..., 0], np.zeros(np.shape(final) + (0,), bool),
+                    int(n_iter), "em", history)

@@ -7,47 +7,61 @@ one-step problem from the held posterior. The arithmetic is therefore the batch 
 calls gives the numbers of one batch call on the whole sequence (to round-off where the batch call picks its shared-
 covariance or compiled path; a tested invariant).
 
-The consistency guard of :mod:`locbook.tracking.results` runs online as well: each run's streak of NIS exceedances is
-carried from step to step, so ``diverged`` and ``diverged_step`` are those the batch call would report.
+The consistency guard of :mod:`locbook.tracking.results` runs online as well: the rule of
+:func:`locbook.nis_divergence` on the NIS of every step so far, so ``diverged`` and ``diverged_step`` are those the
+batch call would report.
 """
 from __future__ import annotations
 
+import inspect
 from dataclasses import replace
 
 import numpy as np
 
 from .._validate import as_array
 from .kalman import extended_kalman_filter, kalman_filter
-from .results import DIVERGENCE_PROBABILITY, DIVERGENCE_WINDOW, KalmanResult, _check_guard
+from .results import DIVERGENCE_PROBABILITY, DIVERGENCE_WINDOW, KalmanResult, _check_guard, nis_divergence
 from .transition import NonlinearMotion, PerStep
 from .unscented import unscented_kalman_filter
 
-__all__ = ["OnlineFilter"]
+__all__ = ["OnlineFilter", "KALMAN_FILTERS"]
 
-_FILTERS = {"kf": kalman_filter, "ekf": extended_kalman_filter, "ukf": unscented_kalman_filter}
+#: the Kalman-family filters by kind
+KALMAN_FILTERS = {"kf": kalman_filter, "ekf": extended_kalman_filter, "ukf": unscented_kalman_filter}
 
 
 class OnlineFilter:
     """A Kalman-family filter fed one step at a time (module docstring).
 
     ``kind``: ``"kf"``, ``"ekf"`` or ``"ukf"``. ``F``, ``Q``, ``B``: the motion as the batch filters take it (a
-    ``per_step`` matrix is indexed by the step counter; a :class:`~locbook.tracking.transition.NonlinearMotion` with
-    ``uses_step`` sees the step counter too). ``x0``, ``P0``: as the batch filters' (``predict_first``: the first
+    ``per_step`` matrix is indexed by the step counter, and stepping past its last step is an error, as in the batch
+    call; a :class:`~locbook.tracking.transition.NonlinearMotion` with ``uses_step`` sees the step counter too). ``x0``, ``P0``: as the batch filters' (``predict_first``: the first
     step predicts from them, else they are the prior of the first step). ``options``: the filter's other keywords
     (``joseph``, ``alpha``, ``points``, ``divergence_window``, ...; ``record`` and ``outputs`` are per step: every
     step's result holds its one step).
 
     :meth:`step` takes that step's measurement streams, their readings ``batch + (1, m)`` (one step), and optionally this step's ``F``, ``Q``, ``B``, ``u`` (``batch + (p,)``) in place of
-    the constructor's; it returns the step's :class:`~locbook.tracking.results.KalmanResult` and keeps the posterior.
+    the constructor's (this step's matrices: a ``per_step`` array is refused there; a step-aware NonlinearMotion sees
+    the step counter); it returns the step's :class:`~locbook.tracking.results.KalmanResult` and keeps the posterior.
+    Its ``diverged`` and ``diverged_step`` are the guard's verdict on every step so far (:func:`locbook.nis_divergence`
+    on the NIS history), as the batch call on the same steps would give.
     """
 
     def __init__(self, kind: str, F, Q, x0, P0, *, B=None, predict_first: bool = True, outputs=(),
                  divergence_window: int | None = DIVERGENCE_WINDOW,
                  divergence_probability: float = DIVERGENCE_PROBABILITY, **options):
-        if kind not in _FILTERS:
-            raise ValueError(f"kind must be one of {sorted(_FILTERS)}, got {kind!r}")
-        if "record" in options:
-            raise ValueError("record has no meaning online: every step's result holds that step")
+        if kind not in KALMAN_FILTERS:
+            raise ValueError(f"kind must be one of {sorted(KALMAN_FILTERS)}, got {kind!r}")
+        for name in ("record", "u"):
+            if name in options:
+                raise ValueError(f"{name} is not an option of OnlineFilter: " + (
+                    "every step's result holds that step" if name == "record" else "u goes to step(), one step at a "
+                    "time"))
+        try:                        # a misspelt option is named now, not at the first step
+            inspect.signature(KALMAN_FILTERS[kind]).bind_partial(**options)
+        except TypeError:
+            known = set(inspect.signature(KALMAN_FILTERS[kind]).parameters)
+            raise ValueError(f"unknown option(s) of the {kind} filter: {sorted(set(options) - known)}") from None
         self.kind = kind
         self.F, self.Q, self.B = F, Q, B
         self.x = np.array(as_array("x0", x0), dtype=float)
@@ -58,59 +72,52 @@ class OnlineFilter:
         self._options = options
         self._window, self._probability = _check_guard(divergence_window, divergence_probability)
         self.log_likelihood = 0.0
-        self._streak = self._start = self.diverged = self.diverged_step = None
+        self._nis, self._dof = [], []
 
-    def _at(self, value, k: int):
+    def _at(self, value, k: int, name: str):
         """A constructor argument at step ``k``: a per-step matrix sliced to its step (kept per step), a step-aware
         motion shifted to the step counter."""
         if isinstance(value, PerStep):
             v = value.value
-            return PerStep(v[..., min(k, v.shape[-3] - 1):min(k, v.shape[-3] - 1) + 1, :, :])
-        if isinstance(value, NonlinearMotion) and value.uses_step:
-            shift = lambda fn: None if fn is None else (lambda x, step: fn(x, step + k))
-            return replace(value, f=shift(value.f), jacobian=shift(value.jacobian))
-        return value
+            if k >= v.shape[-3] and v.shape[-3] != 1:
+                raise ValueError(f"{name} per step has {v.shape[-3]} steps; step {k} is past its end")
+            return PerStep(v[..., min(k, v.shape[-3] - 1), None, :, :])
+        return _shifted(value, k)
 
     def step(self, measurements, *, F=None, Q=None, B=None, u=None) -> KalmanResult:
         """Predict and update every run with one step's readings (class docstring); returns that step's result."""
         k = self.step_index
         streams = [measurements] if not isinstance(measurements, (list, tuple)) else list(measurements)
         streams = [_one_step(s) for s in streams]
-        F = self._at(self.F, k) if F is None else F
-        Q = self._at(self.Q, k) if Q is None else Q
-        B = self._at(self.B, k) if B is None else B
+        for name, value in (("F", F), ("Q", Q), ("B", B)):
+            if isinstance(value, PerStep):
+                raise ValueError(f"step()'s {name} is this step's matrix; a per_step array goes to the constructor")
+        F = self._at(self.F, k, "F") if F is None else _shifted(F, k)
+        Q = self._at(self.Q, k, "Q") if Q is None else Q
+        B = self._at(self.B, k, "B") if B is None else B
         if u is not None:
             u = as_array("u", u, min_ndim=1)[..., None, :]
-        res = _FILTERS[self.kind](F, Q, self.x, self.P, streams, B=B if u is not None else None, u=u,
-                                  predict_first=self._predict_next, outputs=self._outputs, divergence_window=0,
-                                  **self._options)
+        res = KALMAN_FILTERS[self.kind](F, Q, self.x, self.P, streams, B=B if u is not None else None, u=u,
+                                        predict_first=self._predict_next, outputs=self._outputs, divergence_window=0,
+                                        **self._options)
         self.x, self.P = res.x[..., -1, :], res.P[..., -1, :, :]
         self._predict_next = True
         self.step_index += 1
         self.log_likelihood = self.log_likelihood + np.nan_to_num(res.log_likelihood[..., -1])
-        res = self._guard(res)
-        return res
+        self._nis.append(res.nis[..., -1])
+        self._dof.append(res.nis_dof[..., -1])
+        diverged, step = nis_divergence(np.stack(self._nis, axis=-1), np.stack(self._dof, axis=-1), self._window,
+                                        self._probability)
+        return replace(res, diverged=diverged, diverged_step=step)
 
-    def _guard(self, res: KalmanResult) -> KalmanResult:
-        """Carry each run's streak of NIS exceedances (the rule of :func:`locbook.nis_divergence`) one step on."""
-        nis, dof = res.nis[..., -1], res.nis_dof[..., -1]
-        if self._streak is None:
-            self._streak = np.zeros(nis.shape, np.int64)
-            self._start = np.full(nis.shape, -1, np.int64)
-            self.diverged = np.zeros(nis.shape, bool)
-            self.diverged_step = np.full(nis.shape, -1, np.int64)
-        if self._window:
-            from scipy.special import chdtri          # lazy, as in results.py
-            updated = (dof > 0) & ~np.isnan(nis)
-            bound = np.where(updated, chdtri(np.maximum(dof, 1).astype(float), 1.0 - self._probability), np.inf)
-            exceed = updated & (nis > bound)
-            k = self.step_index - 1
-            self._start = np.where(exceed & (self._streak == 0), k, self._start)
-            self._streak = np.where(exceed, self._streak + 1, np.where(updated, 0, self._streak))
-            newly = ~self.diverged & (self._streak >= self._window)
-            self.diverged_step = np.where(newly, self._start, self.diverged_step)
-            self.diverged = self.diverged | newly
-        return replace(res, diverged=self.diverged.copy(), diverged_step=self.diverged_step.copy())
+
+def _shifted(motion, k: int):
+    """A step-aware NonlinearMotion whose step is counted from ``k`` (a one-step call sees step 0); other motions
+    as they are."""
+    if isinstance(motion, NonlinearMotion) and motion.uses_step:
+        shift = lambda fn: None if fn is None else (lambda x, step: fn(x, step + k))
+        return replace(motion, f=shift(motion.f), jacobian=shift(motion.jacobian))
+    return motion
 
 
 def _one_step(stream):

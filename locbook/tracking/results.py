@@ -99,7 +99,9 @@ class KalmanResult:
     - ``log_likelihood`` ``batch + (T,)``: ``log N(innovation; 0, S)`` of each step's present readings (NaN where a
       step has no update), :attr:`total_log_likelihood` their sum;
     - ``nis``, ``nis_dof``, ``diverged``, ``diverged_step``: the consistency guard (module docstring);
-    - ``floored_updates``: the unscented filter's count of covariance updates its guard floored (0 for KF and EKF).
+    - ``floored_updates``: the unscented filter's count of covariance updates its guard floored (0 for KF and EKF);
+    - ``variant``: the update form that produced the run (``"standard"``, or the KF's flagged ``"literal_george"``,
+      whose ``x_pred``/``P_pred`` are the previous posterior: no smoother applies to it).
     """
 
     x: np.ndarray
@@ -116,6 +118,7 @@ class KalmanResult:
     diverged_step: np.ndarray | None = None
     floored_updates: int = 0
     P_cross: np.ndarray | None = None
+    variant: str = "standard"
 
     @property
     def n_diverged(self) -> int:
@@ -198,15 +201,22 @@ def nees(x_true, x, P, *, index=None):
     x = as_array("x", x, min_ndim=1)
     x_true = as_array("x_true", x_true, min_ndim=1, nan_ok=True)
     P = as_array("P", P, min_ndim=2)
-    if index is not None:
-        idx = np.asarray(index)
-        x, x_true, P = x[..., idx], x_true[..., idx], P[..., idx[:, None], idx[None, :]]
     if P.shape[-2:] != (x.shape[-1], x.shape[-1]) or x_true.shape[-1] != x.shape[-1]:
         raise ValueError(f"x {x.shape}, x_true {x_true.shape} and P {P.shape} must share the state size")
+    if index is not None:
+        idx = np.atleast_1d(np.asarray(index))
+        if idx.ndim != 1 or not np.issubdtype(idx.dtype, np.integer) or idx.size == 0 or idx.min() < 0 \
+                or idx.max() >= x.shape[-1] or np.unique(idx).size != idx.size:
+            raise ValueError(f"index must be distinct state components in 0..{x.shape[-1] - 1}, got {index!r}")
+        x, x_true, P = x[..., idx], x_true[..., idx], P[..., idx[:, None], idx[None, :]]
     e = x - x_true
     ok = np.all(np.isfinite(e), axis=-1)
     e = np.where(ok[..., None], e, 0.0)
-    sol = np.linalg.solve(P, e[..., None])[..., 0]
+    try:
+        sol = np.linalg.solve(P, e[..., None])[..., 0]
+    except np.linalg.LinAlgError:
+        raise ValueError("nees needs positive definite covariances P: some P (of the components scored) is "
+                         "singular") from None
     return np.where(ok, np.einsum("...i,...i->...", e, sol), np.nan)
 
 

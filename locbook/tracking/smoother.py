@@ -47,6 +47,9 @@ def rts_smoother(result: KalmanResult, F=None, *, residual=None) -> SmoothedResu
     ``residual``). A step without readings is smoothed like any other (its posterior is its prediction)."""
     if not isinstance(result, KalmanResult):
         raise TypeError(f"result must be a KalmanResult, got {type(result).__name__}")
+    if result.variant != "standard":
+        raise ValueError(f"rts_smoother needs a standard run: the {result.variant!r} variant's x_pred and P_pred are "
+                         "the previous posterior, not a prediction")
     if result.x_pred is None or result.P_pred is None:
         raise ValueError("rts_smoother needs the run's predictions: filter with outputs=('x_pred', 'P_pred', "
                          "'P_cross')")
@@ -66,6 +69,15 @@ def rts_smoother(result: KalmanResult, F=None, *, residual=None) -> SmoothedResu
         cross = _cross_from_F(F, P, batch, T, n)
     x_pred, P_pred = np.asarray(result.x_pred, float), np.asarray(result.P_pred, float)
     diff = (lambda a, b: a - b) if residual is None else (lambda a, b: np.asarray(residual(a, b), dtype=float))
+    if batch and _same_in_every_run(batch, P, P_pred, cross[..., 1:, :, :]):
+        # one covariance recursion for every run (a linear filter's shared path): gains and covariances once
+        one = (0,) * len(batch)
+        Cs, Ps1 = _covariance_pass(P[one], P_pred[one], cross[one])
+        xs = x.copy()
+        for k in range(T - 2, -1, -1):
+            xs[..., k, :] = x[..., k, :] + diff(xs[..., k + 1, :], x_pred[..., k + 1, :]) @ Cs[k].T
+        return SmoothedResult(xs, np.broadcast_to(Ps1, batch + Ps1.shape).copy(),
+                              np.broadcast_to(Cs, batch + Cs.shape).copy())
     xs, Ps = x.copy(), P.copy()
     gain = np.empty(batch + (max(T - 1, 0), n, n))
     for k in range(T - 2, -1, -1):
@@ -78,6 +90,27 @@ def rts_smoother(result: KalmanResult, F=None, *, residual=None) -> SmoothedResu
         Pk = P[..., k, :, :] + C @ (Ps[..., k + 1, :, :] - P_pred[..., k + 1, :, :]) @ np.swapaxes(C, -1, -2)
         Ps[..., k, :, :] = 0.5 * (Pk + np.swapaxes(Pk, -1, -2))
     return SmoothedResult(xs, Ps, gain)
+
+
+def _same_in_every_run(batch, *arrays) -> bool:
+    """True when each of ``arrays`` (``batch + (...)``) holds the same values in every run."""
+    for a in arrays:
+        flat = a.reshape((-1,) + a.shape[len(batch):])
+        if flat.shape[0] > 1 and not np.array_equal(flat, np.broadcast_to(flat[:1], flat.shape)):
+            return False
+    return True
+
+
+def _covariance_pass(P, P_pred, cross):
+    """The backward covariance recursion of one run: gains ``(T - 1, n, n)`` and smoothed covariances ``(T, n, n)``."""
+    T, n = P.shape[0], P.shape[-1]
+    Cs, Ps = np.empty((max(T - 1, 0), n, n)), P.copy()
+    for k in range(T - 2, -1, -1):
+        C = np.linalg.solve(P_pred[k + 1], cross[k + 1].T).T
+        Cs[k] = C
+        Pk = P[k] + C @ (Ps[k + 1] - P_pred[k + 1]) @ C.T
+        Ps[k] = 0.5 * (Pk + Pk.T)
+    return Cs, Ps
 
 
 def _cross_from_F(F, P, batch, T: int, n: int):

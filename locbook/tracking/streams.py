@@ -199,6 +199,9 @@ class NonlinearMeasurement:
             value = getattr(self, field)
             if value is not None and not callable(value):
                 raise ValueError(f"{self.name}: {field} must be a function or None, got {type(value).__name__}")
+        if isinstance(self.R, PerStep):
+            raise ValueError(f"{self.name}: a NonlinearMeasurement's R is one covariance or a function of the state "
+                             "(per_step R is for a LinearMeasurement)")
         if not callable(self.R):
             _covariance(f"{self.name}: R", self.R, z.shape[-1])
 
@@ -208,9 +211,11 @@ class NonlinearMeasurement:
             return np.asarray(self.R, dtype=float)
         m = np.shape(self.z)[-1]
         R = _covariance(f"{self.name}: R(x)", self.R(x), m)
-        if R.shape[:-2] not in ((), np.shape(x)[:-1]):
-            raise ValueError(f"{self.name}: R(x) returned shape {R.shape}, expected ({m}, {m}) or "
-                             f"{np.shape(x)[:-1] + (m, m)}")
+        try:
+            np.broadcast_shapes(R.shape[:-2], np.shape(x)[:-1])
+        except ValueError:
+            raise ValueError(f"{self.name}: R(x) returned shape {R.shape}, which does not broadcast to the runs' "
+                             f"{np.shape(x)[:-1] + (m, m)}") from None
         return R
 
     def difference(self, a, b):
@@ -413,14 +418,17 @@ def _per_step_stream(meas) -> bool:
 
 def _stream_at(meas: LinearMeasurement, step: int) -> LinearMeasurement:
     """The stream with its per-step H and R of ``step`` (checked at construction; built without re-checking)."""
-    view = object.__new__(LinearMeasurement)
-    for field in ("z", "mode", "offset"):
-        object.__setattr__(view, field, getattr(meas, field))
-    for field in ("H", "R"):
-        value = getattr(meas, field)
-        if isinstance(value, PerStep):
-            value = value.value[..., min(step, value.value.shape[-3] - 1), :, :]
-        object.__setattr__(view, field, value)
+    return _replace_unchecked(meas, **{field: getattr(meas, field).at(step) for field in ("H", "R")
+                                       if isinstance(getattr(meas, field), PerStep)})
+
+
+def _replace_unchecked(stream, **changes):
+    """``dataclasses.replace`` of a frozen stream without running its checks again: for values derived from checked
+    ones inside a filter (a per-step matrix's step, a congruence of a checked covariance), where re-checking every
+    step would cost more than the update."""
+    view = object.__new__(type(stream))
+    for field in stream.__dataclass_fields__:
+        object.__setattr__(view, field, changes.get(field, getattr(stream, field)))
     return view
 
 

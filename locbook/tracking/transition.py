@@ -52,11 +52,17 @@ class PerStep:
         return self.value.shape
 
     def at(self, step: int) -> np.ndarray:
-        """The matrix of ``step``: ``batch + (r, c)``."""
-        return self.value[..., step, :, :]
+        """The matrix of ``step``: ``batch + (r, c)`` (:func:`step_matrix`)."""
+        return step_matrix(self.value, step)
 
     def __repr__(self) -> str:
         return f"per_step(array of shape {self.value.shape})"
+
+
+def step_matrix(value: np.ndarray, step: int) -> np.ndarray:
+    """The matrix of ``step`` from a per-step array ``batch + (T, r, c)``; a time axis of length 1 holds one matrix
+    for every step."""
+    return value[..., min(step, value.shape[-3] - 1), :, :]
 
 
 def per_step(value) -> PerStep:

@@ -474,12 +474,12 @@ def scored_errors(run: ChannelRun, key, rmse_epochs: str = "rss_epochs") -> np.n
 
 def _simulate_channel(trajectory: Trajectory, channel: PathLossModel, n_runs: int, rng: np.random.Generator,
                       anchors_m, room_m, mle_grid_step_m: float, mle_bounds: str):
-    """The tables' simulation of one channel: the true positions at the RSS epochs, the RSS of ``n_runs`` runs and
-    their MLE fixes (:func:`run_channel`, :func:`noise_fit`)."""
+    """The tables' simulation of one channel: the true positions at the RSS epochs, the RSS of ``n_runs`` runs, their
+    MLE fixes and its per-axis MSE over runs and epochs (:func:`run_channel`, :func:`noise_fit`)."""
     truth = trajectory.position_m[..., trajectory.rss_steps, :]
     rss = simulate_rss(trajectory, channel, n_runs, rng, anchors_m)
     mle = mle_positions(rss, channel, anchors_m, room_m=room_m, grid_step_m=mle_grid_step_m, bounds=mle_bounds)
-    return truth, rss, mle
+    return truth, rss, mle, np.mean((mle.position_m - truth) ** 2, axis=(0, 1))
 
 
 def run_channel(trajectory: Trajectory, sigma_rss_db: float, path_loss_exp: float, n_runs: int,
@@ -503,10 +503,9 @@ def run_channel(trajectory: Trajectory, sigma_rss_db: float, path_loss_exp: floa
         raise ParameterError(f"mle_r must be one of {MLE_R_READINGS}, got {mle_r!r}")
     channel = PathLossModel(ref_power_dbm, path_loss_exp, sigma_rss_db)
     dt_s = float(trajectory.time_s[1] - trajectory.time_s[0])
-    truth, rss, mle = _simulate_channel(trajectory, channel, n_runs, rng, anchors_m, room_m, mle_grid_step_m,
-                                        mle_bounds)
+    truth, rss, mle, mse = _simulate_channel(trajectory, channel, n_runs, rng, anchors_m, room_m, mle_grid_step_m,
+                                             mle_bounds)
     fix = mle.position_m
-    mse = np.mean((fix - truth) ** 2, axis=(0, 1))
     out = ChannelRun(sigma_rss_db, path_loss_exp, mse, converged_fraction=float(np.mean(mle.converged)),
                      mse_mle_epoch_m2=np.mean((fix - truth) ** 2, axis=0))
     out.errors["static_mle"] = np.linalg.norm(fix - truth, axis=-1)
@@ -558,10 +557,9 @@ def noise_fit(trajectory: Trajectory, sigma_rss_db: float, path_loss_exp: float,
         raise ParameterError(f"noise_fit fits the RSS EKFs (parallel_ekf, serial_ekf), got {name!r}")
     channel = PathLossModel(ref_power_dbm, path_loss_exp, sigma_rss_db)
     dt_s = float(trajectory.time_s[1] - trajectory.time_s[0])
-    truth, rss, mle = _simulate_channel(trajectory, channel, n_runs, rng, anchors_m, room_m, mle_grid_step_m,
-                                        mle_bounds)
+    truth, rss, mle, mse = _simulate_channel(trajectory, channel, n_runs, rng, anchors_m, room_m, mle_grid_step_m,
+                                             mle_bounds)
     fix = mle.position_m
-    mse = np.mean((fix - truth) ** 2, axis=(0, 1))
     q, p0_acc = filter_noise(noise_reading, None)
     model = motion_model(dt_s, q)
     x0, P0, measurements, at = filter_inputs(name, trajectory, rss, fix, mse, channel, model=model,

@@ -121,6 +121,18 @@ def _reading_detail(rss_dbm):
 _LIKELIHOOD = "the likelihood of rss_dbm"
 
 
+def _callable_steps(rss_dbm, n_steps) -> int:
+    """The number of steps of a filter whose likelihood is a callable (it reads its own data): ``n_steps``, checked,
+    with ``rss_dbm`` None (particle and grid filters alike)."""
+    if rss_dbm is not None:
+        raise ValueError("rss_dbm goes with an RssModel; a log_likelihood callable reads its own data "
+                         "(give rss_dbm=None and n_steps)")
+    if n_steps is None:
+        raise ValueError("n_steps must be given with a log_likelihood callable")
+    check_scalar("n_steps", n_steps, ge=1, integer=True)
+    return int(n_steps)
+
+
 def _normalise_log(logw):
     """Weights proportional to ``exp(logw)`` along the last axis, computed without overflow."""
     w = np.exp(logw - logw.max(axis=-1, keepdims=True))
@@ -283,13 +295,7 @@ def grid_bayes_filter(rss_dbm, cells_m, model, spread_m: float = 0.5, *, n_steps
         def log_likelihood(t):
             return model.log_likelihood(rss_dbm[:, t], cells_m, t, constant=False)
     elif callable(model):
-        if rss_dbm is not None:
-            raise ValueError("rss_dbm goes with an RssModel; a log_likelihood callable reads its own data "
-                             "(give rss_dbm=None and n_steps)")
-        if n_steps is None:
-            raise ValueError("n_steps must be given with a log_likelihood callable")
-        check_scalar("n_steps", n_steps, ge=1, integer=True)
-        n_steps = int(n_steps)
+        n_steps = _callable_steps(rss_dbm, n_steps)
         cells_m = as_array("cells_m", cells_m, ndim=2)
         if cells_m.shape[1] < 1:
             raise ValueError(f"cells_m must have shape (C, dim) with dim >= 1, got {cells_m.shape}")

@@ -46,8 +46,8 @@ import numpy as np
 from .._validate import as_array, check_choice, check_scalar
 from ..models.motion import KinematicModel, reflect_into_box
 from ..models.rss import RssModel
-from .bayes import (BayesFilterResult, _LIKELIHOOD, _collapse_error, _normalise_log, _reading_detail,
-                    _velocity_schedule, _warn_collapse, weighted_moments)
+from .bayes import (BayesFilterResult, _LIKELIHOOD, _callable_steps, _collapse_error, _normalise_log,
+                    _reading_detail, _velocity_schedule, _warn_collapse, weighted_moments)
 from .resampling import RESAMPLING_CDFS, RESAMPLING_METHODS, effective_sample_size, resample, systematic_resample
 
 __all__ = ["particle_filter", "ParticleFilterResult", "kernel_map_estimate", "WEIGHT_SMOOTHINGS"]
@@ -292,13 +292,7 @@ def particle_filter(rss_dbm, model, rng: np.random.Generator, *, n_steps: int | 
             def log_likelihood(particles, t):         # the RSS model sees the positions of the states
                 return model.log_likelihood(rss_dbm[:, t], particles[..., kin.position_index], t, constant=False)
     elif callable(model):
-        if rss_dbm is not None:
-            raise ValueError("rss_dbm goes with an RssModel; a log_likelihood callable reads its own data "
-                             "(give rss_dbm=None and n_steps)")
-        if n_steps is None:
-            raise ValueError("n_steps must be given with a log_likelihood callable")
-        check_scalar("n_steps", n_steps, ge=1, integer=True)
-        n_steps, n_runs, log_likelihood = int(n_steps), None, model
+        n_steps, n_runs, log_likelihood = _callable_steps(rss_dbm, n_steps), None, model
     else:
         raise ValueError(f"model must be an RssModel or a callable log_likelihood(particles, t), "
                          f"got {type(model).__name__}")

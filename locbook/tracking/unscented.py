@@ -142,11 +142,12 @@ def _sigma_points(x, P, lam: float):
     return X, L
 
 
-def _pair_differences(weighted, n: int):
-    """``D`` with ``sum_i W_c^i (X^i - x)(v^i)^T = L D`` for a symmetric sigma-point set: ``X^i - x = +-(column i of
-    L)`` (zero for the centre), so row i of D is ``W_c^i v^i - W_c^{n+i} v^{n+i}`` of the weighted values
-    ``weighted`` ``(..., 2n + 1, m)`` (``W_c^i v^i``)."""
-    return weighted[..., 1:n + 1, :] - weighted[..., n + 1:, :]
+def _pair_differences(values, weights: UnscentedWeights):
+    """``D`` with ``sum_i W_c^i (X^i - x)(v^i)^T = L D`` for a symmetric sigma-point set and values ``(..., 2n + 1,
+    m)``: ``X^i - x = +-(column i of L)`` (zero for the centre) and ``W_c^i`` is the same for ``i >= 1``, so row i of
+    D is ``W_c^1 (v^i - v^{n+i})``."""
+    n = weights.n
+    return weights.cov[1] * (values[..., 1:n + 1, :] - values[..., n + 1:, :])
 
 
 def unscented_transform(points, values, weights: UnscentedWeights):
@@ -187,7 +188,7 @@ def _ukf_update(x, P, z, h, R, weights: UnscentedWeights, innovation_noise: bool
     Pzz = _mT(weights.cov[:, None] * dv) @ dv        # Eq. (3.26) without R
     Pzz = 0.5 * (Pzz + _mT(Pzz))
     # P_xz = sum_i W_c^i (X^i - x-)(gamma^i - z^)^T (Eq. (3.27)) = L D, D = L^{-1} P_xz
-    D = _pair_differences(weights.cov[1] * dv, n)
+    D = _pair_differences(dv, weights)
     S = Pzz + R if innovation_noise else Pzz
     S = np.broadcast_to(S, x.shape[:-1] + (m, m))
     row_ok = valid.any(axis=-1)
@@ -328,7 +329,7 @@ def _unscented_predictor(setup, weights: UnscentedWeights):
         wdY = weights.cov[:, None] * dY
         P_pred = _mT(dY) @ wdY
         P_pred = 0.5 * (P_pred + _mT(P_pred)) + setup.Q_at(k)
-        C = L @ _pair_differences(wdY, x.shape[-1]) if cross else None     # sum W_c (X - x)(Y - x-)^T
+        C = L @ _pair_differences(dY, weights) if cross else None          # sum W_c (X - x)(Y - x-)^T
         return x_pred, P_pred, C
     return predict
 

@@ -72,24 +72,15 @@ def rts_smoother(result: KalmanResult, F=None, *, residual=None) -> SmoothedResu
     if batch and _same_in_every_run(batch, P, P_pred, cross[..., 1:, :, :]):
         # one covariance recursion for every run (a linear filter's shared path): gains and covariances once
         one = (0,) * len(batch)
-        Cs, Ps1 = _covariance_pass(P[one], P_pred[one], cross[one])
-        xs = x.copy()
-        for k in range(T - 2, -1, -1):
-            xs[..., k, :] = x[..., k, :] + diff(xs[..., k + 1, :], x_pred[..., k + 1, :]) @ Cs[k].T
-        return SmoothedResult(xs, np.broadcast_to(Ps1, batch + Ps1.shape).copy(),
-                              np.broadcast_to(Cs, batch + Cs.shape).copy())
-    xs, Ps = x.copy(), P.copy()
-    gain = np.empty(batch + (max(T - 1, 0), n, n))
+        gain, Ps = _covariance_pass(P[one], P_pred[one], cross[one])
+    else:
+        gain, Ps = _covariance_pass(P, P_pred, cross)
+    xs = x.copy()
     for k in range(T - 2, -1, -1):
-        # C = D P_pred^{-1}, solved as (P_pred^{-1} D^T)^T (P_pred symmetric)
-        C = np.swapaxes(np.linalg.solve(P_pred[..., k + 1, :, :], np.swapaxes(cross[..., k + 1, :, :], -1, -2)),
-                        -1, -2)
-        gain[..., k, :, :] = C
-        xs[..., k, :] = x[..., k, :] + np.einsum("...ij,...j->...i", C,
+        xs[..., k, :] = x[..., k, :] + np.einsum("...ij,...j->...i", gain[..., k, :, :],
                                                  diff(xs[..., k + 1, :], x_pred[..., k + 1, :]))
-        Pk = P[..., k, :, :] + C @ (Ps[..., k + 1, :, :] - P_pred[..., k + 1, :, :]) @ np.swapaxes(C, -1, -2)
-        Ps[..., k, :, :] = 0.5 * (Pk + np.swapaxes(Pk, -1, -2))
-    return SmoothedResult(xs, Ps, gain)
+    full = lambda a: a if a.shape[:-3] == batch else np.broadcast_to(a, batch + a.shape).copy()
+    return SmoothedResult(xs, full(Ps), full(gain))
 
 
 def _same_in_every_run(batch, *arrays) -> bool:
@@ -102,15 +93,18 @@ def _same_in_every_run(batch, *arrays) -> bool:
 
 
 def _covariance_pass(P, P_pred, cross):
-    """The backward covariance recursion of one run: gains ``(T - 1, n, n)`` and smoothed covariances ``(T, n, n)``."""
-    T, n = P.shape[0], P.shape[-1]
-    Cs, Ps = np.empty((max(T - 1, 0), n, n)), P.copy()
+    """The backward covariance recursion over leading run axes: gains ``C_k = D_{k+1} P_{k+1|k}^{-1}`` ``(..., T - 1,
+    n, n)`` and smoothed covariances ``(..., T, n, n)`` (the means need the gains only)."""
+    T, n = P.shape[-3], P.shape[-1]
+    gain, Ps = np.empty(P.shape[:-3] + (max(T - 1, 0), n, n)), P.copy()
     for k in range(T - 2, -1, -1):
-        C = np.linalg.solve(P_pred[k + 1], cross[k + 1].T).T
-        Cs[k] = C
-        Pk = P[k] + C @ (Ps[k + 1] - P_pred[k + 1]) @ C.T
-        Ps[k] = 0.5 * (Pk + Pk.T)
-    return Cs, Ps
+        # C = D P_pred^{-1}, solved as (P_pred^{-1} D^T)^T (P_pred symmetric)
+        C = np.swapaxes(np.linalg.solve(P_pred[..., k + 1, :, :], np.swapaxes(cross[..., k + 1, :, :], -1, -2)),
+                        -1, -2)
+        gain[..., k, :, :] = C
+        Pk = P[..., k, :, :] + C @ (Ps[..., k + 1, :, :] - P_pred[..., k + 1, :, :]) @ np.swapaxes(C, -1, -2)
+        Ps[..., k, :, :] = 0.5 * (Pk + np.swapaxes(Pk, -1, -2))
+    return gain, Ps
 
 
 def _cross_from_F(F, P, batch, T: int, n: int):

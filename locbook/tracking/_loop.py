@@ -17,7 +17,7 @@ from .._validate import as_array
 from ._linalg import _Singular, _apply, _batch_shape, _check_state, _covariance, _mT, _raise_singular
 from .functional import _linear_update_shared
 from .results import KALMAN_OUTPUTS, KalmanResult
-from .streams import (MEASUREMENT_TYPES, LinearMeasurement, NonlinearMeasurement, RssMeasurement, _per_step_stream,
+from .streams import (MEASUREMENT_TYPES, LinearMeasurement, RssMeasurement, _per_step_stream,
                       _stream_at, _stream_name, _serial_linear, _stream_readings)
 from .transition import NonlinearMotion, PerStep, _control_drift, _matrix_arg, step_matrix
 

@@ -32,9 +32,10 @@ import numpy as np
 
 from .._validate import check_choice, check_scalar
 from ..errors import ConvergenceError
+from ._loop import _streams
 from .kalman import kalman_filter
 from .smoother import rts_smoother
-from .streams import LinearMeasurement, NonlinearMeasurement, RssMeasurement, _replace_unchecked
+from .streams import LinearMeasurement, RssMeasurement, _replace_unchecked
 from .transition import NonlinearMotion, PerStep, _control_drift
 from .online import KALMAN_FILTERS
 
@@ -171,12 +172,6 @@ class _Parameters:
         return q, tuple(r)
 
 
-def _as_list(streams):
-    if isinstance(streams, (LinearMeasurement, RssMeasurement, NonlinearMeasurement)):
-        return [streams]
-    return list(streams)
-
-
 def fit_noise_ml(F, Q, x0, P0, measurements, *, kind: str = "kf", fit_Q: str | None = "scale",
                  fit_R="scale", per_run: bool = True, scale_bounds=(1e-4, 1e4), max_iter: int = 200,
                  tol: float = 1e-10, **options) -> NoiseFit:
@@ -195,9 +190,8 @@ def fit_noise_ml(F, Q, x0, P0, measurements, *, kind: str = "kf", fit_Q: str | N
 
     Raises ConvergenceError when the optimiser stops without meeting its criteria; a multiplier that ends at its bound
     is reported in ``at_bound`` (not an error: the likelihood may be flat or want more)."""
-    from scipy.optimize import minimize           # lazy: keeps `import locbook` fast
     check_choice("kind", kind, tuple(KALMAN_FILTERS))
-    streams = _as_list(measurements)
+    streams = _streams(measurements)
     fit_R = [fit_R] * len(streams) if fit_R is None or isinstance(fit_R, str) else list(fit_R)
     if len(fit_R) != len(streams):
         raise ValueError(f"fit_R must be 'scale', 'diagonal' or None for every stream, or a list with one entry per "

@@ -1,24 +1,43 @@
-"""Helpers shared by the benchmark modules: the ``run(size) -> list[dict]`` protocol of ``benchmarks/run_all.py``.
+"""The one benchmark harness: paired, alternated repeats; CPU and wall time; memory; load; agreement.
 
-Every ``bench_*.py`` exposes ``run(size="full")`` (``size`` is ``"full"`` or ``"tiny"``; tiny runs in a few seconds)
-returning rows with the keys of :data:`KEYS`:
+Every ``bench_*.py`` exposes ``run(size="full")`` (``size`` is ``"full"`` or ``"tiny"``; tiny runs in seconds and is
+what the smoke test uses), a generator (or a function returning a list) of rows made by :func:`row`. ``run_all.py``
+writes each row as soon as it is yielded.
 
-- ``method``, ``workload``: what was timed, on what;
-- ``locbook_s``: wall-clock seconds of the locbook call (best of a few repeats where it is cheap);
-- ``reference``, ``reference_s``: what it is compared with (e.g. a per-run filterpy loop) and its seconds, or None;
-- ``ratio``: ``reference_s / locbook_s`` or None;
-- ``peak_mb``: the ``tracemalloc`` peak of the locbook call in MiB (numpy's arrays are traced; memory that a numba
-  kernel allocates is not), measured in a separate call so that tracing does not slow the timed one; or None;
-- ``note``: anything else (differences to the reference, how a reference time was scaled, errors).
+How a ratio is measured (:func:`compare`): the locbook call and the reference call alternate in one process,
+``L R R L L R ...`` (the order flips every pair, so a slow drift of the machine falls on both), at least
+:data:`MIN_REPEATS` times each. Each call's wall time (``perf_counter``), CPU time (``process_time``: every thread of
+the process) and peak memory are recorded; the row gives the medians and the ratio of medians, for wall and CPU time
+both, and the spread (min-max) of the locbook calls. The two results are compared in the same run (``agree``) and the
+figure goes into the row. A reference too slow to repeat on the whole workload (a per-run Python loop) runs on a
+subset of the runs and is scaled by ``reference_scale`` (stated in the row); the locbook call always does the whole
+workload. The largest workloads use :func:`once`: one call, timed and measured at the same time.
+
+Memory: the increase of the process's peak resident set (``VmHWM`` of ``/proc/self/status``, reset before the call
+through ``/proc/self/clear_refs``) over its resident set before the call: numpy's arrays and a compiled kernel's
+buffers alike. ``run_all.py`` starts its process with a fixed ``malloc`` mmap threshold (``MALLOC_MMAP_THRESHOLD_``)
+so that large arrays are returned to the system when freed and one call's memory does not hide in the next one's
+baseline. Where ``/proc`` is unavailable the ``tracemalloc`` peak of a separate call is used instead (numpy arrays
+only), and the row says so.
+
+The load average (1 min) is recorded before and after each measurement and shown in its row.
 """
 from __future__ import annotations
 
+import gc
 import math
+import os
+import statistics
 import time
 import tracemalloc
+from dataclasses import dataclass, field
 
 SIZES = ("full", "tiny")
-KEYS = ("method", "workload", "locbook_s", "reference", "reference_s", "ratio", "peak_mb", "note")
+MIN_REPEATS = 5
+KEYS = ("method", "workload", "locbook_s", "locbook_cpu_s", "reference", "reference_s", "reference_cpu_s", "ratio",
+        "ratio_cpu", "repeats", "peak_mb", "reference_peak_mb", "agreement", "goal", "load", "note")
+_STATUS = "/proc/self/status"
+_CLEAR_REFS = "/proc/self/clear_refs"
 
 
 def check_size(size: str) -> str:
@@ -27,19 +46,60 @@ def check_size(size: str) -> str:
     return size
 
 
-def timed(fn, repeat: int = 1):
-    """``(best wall-clock seconds over repeat calls, best CPU seconds, the last call's result)``."""
-    best, best_cpu, out = math.inf, math.inf, None
-    for _ in range(max(1, repeat)):
-        t, c = time.perf_counter(), time.process_time()
-        out = fn()
-        best_cpu = min(best_cpu, time.process_time() - c)
-        best = min(best, time.perf_counter() - t)
-    return best, best_cpu, out
+def _status_kib(field_name: str) -> int | None:
+    try:
+        with open(_STATUS) as f:
+            for line in f:
+                if line.startswith(field_name + ":"):
+                    return int(line.split()[1])
+    except OSError:
+        return None
+    return None
 
 
-def peak_mb(fn) -> float:
-    """The ``tracemalloc`` peak of one call of ``fn``, in MiB."""
+def _reset_peak() -> bool:
+    """Reset the process's peak resident set (Linux); False where that is not possible."""
+    try:
+        with open(_CLEAR_REFS, "w") as f:
+            f.write("5")
+        return True
+    except OSError:
+        return False
+
+
+def _load() -> float | None:
+    try:
+        return os.getloadavg()[0]
+    except OSError:
+        return None
+
+
+@dataclass
+class Call:
+    """One timed call: wall and CPU seconds, peak memory increase in MiB (None if unmeasured), the result."""
+    wall_s: float
+    cpu_s: float
+    peak_mb: float | None
+    result: object = None
+
+
+def call(fn, memory: bool = True) -> Call:
+    """``fn()`` timed (wall, CPU) and, where the platform allows, its peak memory measured in the same call."""
+    gc.collect()
+    measured = memory and _reset_peak()
+    before = _status_kib("VmRSS") if measured else None
+    t, c = time.perf_counter(), time.process_time()
+    out = fn()
+    cpu, wall = time.process_time() - c, time.perf_counter() - t
+    peak = None
+    if measured and before is not None:
+        hwm = _status_kib("VmHWM")
+        peak = None if hwm is None else max(0, hwm - before) / 1024
+    return Call(wall, cpu, peak, out)
+
+
+def tracemalloc_peak_mb(fn) -> float:
+    """The ``tracemalloc`` peak of one call of ``fn`` in MiB (numpy's arrays; not a compiled kernel's buffers)."""
     was_tracing = tracemalloc.is_tracing()
     if not was_tracing:
         tracemalloc.start()
@@ -53,27 +113,148 @@ def peak_mb(fn) -> float:
     return peak / 2**20
 
 
-def row(method: str, workload: str, locbook_s: float, reference: str | None = None, reference_s: float | None = None,
-        peak: float | None = None, note: str = "") -> dict:
-    ratio = reference_s / locbook_s if reference_s is not None and locbook_s else None
-    return {"method": method, "workload": workload, "locbook_s": float(locbook_s), "reference": reference,
-            "reference_s": None if reference_s is None else float(reference_s), "ratio": ratio,
-            "peak_mb": None if peak is None else float(peak), "note": note}
+@dataclass
+class Measurement:
+    """What :func:`compare` or :func:`once` measured (medians over the repeats)."""
+    locbook_wall_s: float
+    locbook_cpu_s: float
+    locbook_spread_s: tuple[float, float]
+    repeats: int
+    peak_mb: float | None
+    reference_wall_s: float | None = None
+    reference_cpu_s: float | None = None
+    reference_peak_mb: float | None = None
+    reference_scale: float = 1.0
+    agreement: str = ""
+    load: tuple[float | None, float | None] = (None, None)
+    results: tuple = field(default=(None, None), repr=False)
+
+    @property
+    def ratio(self) -> float | None:
+        if self.reference_wall_s is None or not self.locbook_wall_s:
+            return None
+        return self.reference_wall_s / self.locbook_wall_s
+
+    @property
+    def ratio_cpu(self) -> float | None:
+        if self.reference_cpu_s is None or not self.locbook_cpu_s:
+            return None
+        return self.reference_cpu_s / self.locbook_cpu_s
+
+
+def _median(values):
+    return float(statistics.median(values))
+
+
+def compare(locbook, reference, *, repeats: int = MIN_REPEATS, reference_scale: float = 1.0, agree=None,
+            memory: bool = True) -> Measurement:
+    """``locbook()`` against ``reference()``, paired and alternated ``repeats`` times each (at least
+    :data:`MIN_REPEATS`). ``reference_scale`` multiplies the reference's times (it ran on a subset of the runs: the
+    number of runs of the workload over the number it ran); ``agree(locbook_result, reference_result) -> str`` is
+    the agreement figure (e.g. ``"max |x - filterpy| 2e-13"``), computed on the results of the last pair; it may
+    raise AssertionError when the results disagree beyond the benchmark's stated tolerance (the row then says so)."""
+    repeats = max(MIN_REPEATS, int(repeats))
+    load0 = _load()
+    ours, theirs = [], []
+    for i in range(repeats):
+        order = (True, False) if i % 2 == 0 else (False, True)
+        for mine in order:
+            (ours if mine else theirs).append(call(locbook if mine else reference, memory))
+    load1 = _load()
+    text = ""
+    if agree is not None:
+        try:
+            text = agree(ours[-1].result, theirs[-1].result)
+        except AssertionError as exc:
+            text = f"DISAGREE: {exc}"
+    peaks = [c.peak_mb for c in ours if c.peak_mb is not None]
+    ref_peaks = [c.peak_mb for c in theirs if c.peak_mb is not None]
+    walls = [c.wall_s for c in ours]
+    return Measurement(_median(walls), _median([c.cpu_s for c in ours]), (min(walls), max(walls)), repeats,
+                       max(peaks) if peaks else None,
+                       _median([c.wall_s for c in theirs]) * reference_scale,
+                       _median([c.cpu_s for c in theirs]) * reference_scale,
+                       max(ref_peaks) if ref_peaks else None, reference_scale, text, (load0, load1),
+                       (ours[-1].result, theirs[-1].result))
+
+
+def repeat(locbook, *, repeats: int = MIN_REPEATS, agree=None, memory: bool = True) -> Measurement:
+    """``locbook()`` alone (no reference), ``repeats`` times; ``agree(result) -> str`` an accuracy figure."""
+    repeats = max(MIN_REPEATS, int(repeats))
+    load0 = _load()
+    ours = [call(locbook, memory) for _ in range(repeats)]
+    load1 = _load()
+    text = agree(ours[-1].result) if agree is not None else ""
+    walls = [c.wall_s for c in ours]
+    peaks = [c.peak_mb for c in ours if c.peak_mb is not None]
+    return Measurement(_median(walls), _median([c.cpu_s for c in ours]), (min(walls), max(walls)), repeats,
+                       max(peaks) if peaks else None, agreement=text, load=(load0, load1),
+                       results=(ours[-1].result, None))
+
+
+def once(locbook, *, agree=None) -> Measurement:
+    """One call of a workload too large to repeat: timed and its memory measured in the same call."""
+    load0 = _load()
+    c = call(locbook, True)
+    load1 = _load()
+    text = agree(c.result) if agree is not None else ""
+    return Measurement(c.wall_s, c.cpu_s, (c.wall_s, c.wall_s), 1, c.peak_mb, agreement=text, load=(load0, load1),
+                       results=(c.result, None))
+
+
+def _fmt_load(load) -> str:
+    a, b = load
+    return "" if a is None else f"{a:.2f}->{b:.2f}"
+
+
+def row(method: str, workload: str, m: Measurement, reference: str | None = None, *, goal: float | None = None,
+        note: str = "") -> dict:
+    """A row of RESULTS.md from a measurement. ``reference`` names the reference (and the subset it ran on, when
+    scaled); ``goal``: the ratio the issue asks for (the row says met or MISSED, on the CPU-time ratio)."""
+    ratio, ratio_cpu = m.ratio, m.ratio_cpu
+    verdict = None
+    if goal is not None:
+        verdict = (f">= {goal:g}x: " + ("met" if ratio_cpu is not None and ratio_cpu >= goal else "MISSED")
+                   if goal >= 1 else f">= {goal:g}x (within {1 / goal:g}x): "
+                   + ("met" if ratio_cpu is not None and ratio_cpu >= goal else "MISSED"))
+    lo, hi = m.locbook_spread_s
+    spread = f"locbook {lo:.3g}-{hi:.3g} s over {m.repeats} calls" if m.repeats > 1 else "timed once"
+    if m.reference_scale != 1.0:
+        spread += f"; reference times scaled x{m.reference_scale:g}"
+    return {"method": method, "workload": workload, "locbook_s": float(m.locbook_wall_s),
+            "locbook_cpu_s": float(m.locbook_cpu_s), "reference": reference if m.reference_wall_s is not None else None,
+            "reference_s": m.reference_wall_s, "reference_cpu_s": m.reference_cpu_s, "ratio": ratio,
+            "ratio_cpu": ratio_cpu, "repeats": m.repeats, "peak_mb": m.peak_mb,
+            "reference_peak_mb": m.reference_peak_mb, "agreement": m.agreement, "goal": verdict,
+            "load": _fmt_load(m.load), "note": "; ".join(x for x in (note, spread) if x)}
 
 
 def _fmt(value, digits=3):
     if value is None:
         return ""
     if isinstance(value, float):
+        if not math.isfinite(value):
+            return str(value)
         return f"{value:.{digits}g}" if abs(value) < 1000 else f"{value:.0f}"
     return str(value)
 
 
-def print_rows(rows) -> None:
-    """The rows as a plain-text table (the modules' command lines)."""
+def format_row(r: dict) -> str:
+    """One row as a line of plain text (the modules' command lines, run_all's progress)."""
+    ratio = f" x{r['ratio_cpu']:.1f} CPU, x{r['ratio']:.1f} wall" if r.get("ratio") is not None else ""
+    ref = f"; {r['reference']}: {_fmt(r['reference_cpu_s'])} s CPU{ratio}" if r.get("reference") else ""
+    peak = f"; peak +{_fmt(r['peak_mb'])} MiB" if r.get("peak_mb") is not None else ""
+    agree = f"; {r['agreement']}" if r.get("agreement") else ""
+    goal = f"; goal {r['goal']}" if r.get("goal") else ""
+    note = f"  [{r['note']}]" if r.get("note") else ""
+    return (f"{r['method']} ({r['workload']}): locbook {_fmt(r['locbook_cpu_s'])} s CPU, {_fmt(r['locbook_s'])} s "
+            f"wall{ref}{peak}{agree}{goal}{note}")
+
+
+def print_rows(rows) -> list[dict]:
+    """Print each row as it comes (``rows`` may be a generator); return them as a list."""
+    out = []
     for r in rows:
-        ratio = f"x{r['ratio']:.0f}" if r["ratio"] is not None else ""
-        ref = f"; {r['reference']}: {_fmt(r['reference_s'])} s {ratio}" if r["reference"] else ""
-        peak = f"; peak {_fmt(r['peak_mb'])} MiB" if r["peak_mb"] is not None else ""
-        note = f"  [{r['note']}]" if r["note"] else ""
-        print(f"{r['method']} ({r['workload']}): locbook {_fmt(r['locbook_s'])} s{ref}{peak}{note}")
+        print(format_row(r), flush=True)
+        out.append(r)
+    return out

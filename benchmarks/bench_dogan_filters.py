@@ -1,14 +1,15 @@
 """Time one Dogan (2015) table setting with locbook's batched KF and EKFs and with per-run filterpy loops.
 
-    python benchmarks/bench_dogan_filters.py [--runs 500] [--filterpy-runs 50] [--filter serial_ekf ...] [--size tiny]
+    python benchmarks/bench_dogan_filters.py [--runs 500] [--filterpy-runs 20] [--filter serial_ekf ...] [--size tiny]
 
 One setting = Table 3.8's first row (sigma_RSS = 6 dB, alpha = 3, the tables' sigma_ACC, RSS/IMU fusion) on the default
 trajectory at 20 Hz under the default fusion reading (start from rest, Q and P_0 from sigma_ACC, scenarios/dogan.py):
 ``runs`` Monte-Carlo runs of 1620 steps in one vectorized call, against filterpy's KalmanFilter (KF (MLE)) or
 ExtendedKalmanFilter (parallel and serial EKF) looped over runs and steps on the same inputs (a subset of
-``filterpy-runs`` runs, scaled to the full count). Reports both times, their ratio and the largest state difference on
-the common runs. With numba installed, locbook's EKFs run compiled; each EKF is then also timed on the numpy path
-(``LOCBOOK_NUMBA=0``).
+``filterpy-runs`` runs, scaled to the full count), paired and alternated (benchmarks/_harness.py). Reports both times
+(CPU and wall), their ratios and the largest state and covariance difference on the common runs, at 500 runs and at
+10 runs (the issue's two batch sizes). locbook's EKFs run compiled (the default); the serial EKF is also timed on the
+numpy loop (``LOCBOOK_NUMBA=0``).
 """
 from __future__ import annotations
 
@@ -136,53 +137,67 @@ def max_difference(s: dict, ours, ref_x, ref_P) -> tuple[float, float]:
     return (float(np.max(np.abs(ours.x[:n, 1:] - ref_x[:, at]))), float(np.max(np.abs(ours.P[:n, 1:] - ref_P[:, at]))))
 
 
-def measure(runs: int = 500, filterpy_runs: int = 50, filters=FILTERS, repeat: int = 3) -> list[dict]:
-    s = setting(runs)
-    T = s["tr"].time_s.size
-    n = min(filterpy_runs, runs)
-    workload = f"{runs} runs x {T} steps"
-    paths = [("numba", True), ("numpy", False)] if _compiled._numba_ready() and _compiled._NUMBA_ENABLED else \
-        [("numpy", False)]
-    rows = []
-    for name in filters:
-        t_ref, cpu_ref, (ref_x, ref_P) = hx.timed(lambda: filterpy_filter(name, s, n))
-        reference = "filterpy per-run loop" + ("" if n == runs else f" ({n} runs, scaled)")
-        for path, numba in paths:
-            if name == "kalman_filter" and path == "numpy" and len(paths) > 1:
-                continue                                    # KF (MLE) never takes the compiled path (shared covariance)
-            saved = _compiled._NUMBA_ENABLED, _compiled._NUMBA_MIN_WORK
-            _compiled._NUMBA_ENABLED, _compiled._NUMBA_MIN_WORK = numba, 0    # the named path, whatever the size
-            try:
-                locbook_filter(name, s)                     # warm-up (numba: load or compile the kernel)
-                t, cpu, ours = hx.timed(lambda: locbook_filter(name, s), repeat)
-                peak = hx.peak_mb(lambda: locbook_filter(name, s))
-            finally:
-                _compiled._NUMBA_ENABLED, _compiled._NUMBA_MIN_WORK = saved
-            dx, dP = max_difference(s, ours, ref_x, ref_P)
-            scale = runs / n
-            label = LABELS[name] + ("" if name == "kalman_filter" else f", {path}")
-            rows.append(hx.row(label, workload, t, reference, t_ref * scale, peak,
-                               f"max |x - filterpy| {dx:.1e}, |P - filterpy| {dP:.1e} on {n} runs; "
-                               f"CPU-time ratio x{cpu_ref * scale / cpu:.0f}"))
-    return rows
+def _path(numba: bool):
+    """A context in which locbook's EKF takes the compiled path (``numba``) or the numpy loop, whatever the size."""
+    class _Use:
+        def __enter__(self):
+            self.saved = _compiled._NUMBA_ENABLED, _compiled._NUMBA_MIN_WORK
+            _compiled._NUMBA_ENABLED, _compiled._NUMBA_MIN_WORK = numba, 0
+        def __exit__(self, *exc):
+            _compiled._NUMBA_ENABLED, _compiled._NUMBA_MIN_WORK = self.saved
+    return _Use()
 
 
-def run(size: str = "full") -> list[dict]:
-    """The benchmark protocol (benchmarks/run_all.py): full = 500 runs (filterpy on 50), tiny = 4 runs (filterpy on 2)."""
-    if hx.check_size(size) == "tiny":
-        return measure(runs=4, filterpy_runs=2, repeat=1)
-    return measure()
+#: (runs, filterpy runs, goal for the EKFs): the issue's two batch sizes; filterpy runs a subset, scaled
+SIZES = {"full": [(500, 20, 200.0), (10, 10, 20.0)], "tiny": [(4, 2, None)]}
+
+
+def measure(sizes, filters=FILTERS, numpy_rows: bool = True):
+    """Rows (yielded as they finish): each filter at each batch size against the per-run filterpy loop, paired and
+    alternated (benchmarks/_harness.py); the EKFs on the default (compiled) path, and the serial EKF also on the
+    numpy loop (``LOCBOOK_NUMBA=0``) at the largest size."""
+    for runs, filterpy_runs, goal in sizes:
+        s = setting(runs)
+        T = s["tr"].time_s.size
+        n = min(filterpy_runs, runs)
+        workload = f"{runs} runs x {T} steps"
+        reference = "filterpy per-run loop" + ("" if n == runs else f" ({n} of {runs} runs, scaled)")
+        for name in filters:
+            paths = [True] + ([False] if numpy_rows and name == "serial_ekf" and runs == sizes[0][0] else [])
+            for numba in paths:
+                with _path(numba):
+                    locbook_filter(name, s)                     # warm-up (numba: load the cached kernel)
+
+                    def agree(ours, ref):
+                        dx, dP = max_difference(s, ours, *ref)
+                        if dx > 1e-9 or dP > 1e-9:
+                            raise AssertionError(f"max |x - filterpy| {dx:.1e}, |P - filterpy| {dP:.1e} > 1e-9")
+                        return f"max |x - filterpy| {dx:.1e}, |P - filterpy| {dP:.1e} on {n} runs"
+
+                    m = hx.compare(lambda: locbook_filter(name, s), lambda: filterpy_filter(name, s, n),
+                                   reference_scale=runs / n, agree=agree)
+                label = LABELS[name] + ("" if name == "kalman_filter" else (", compiled" if numba else
+                                                                            ", numpy loop (LOCBOOK_NUMBA=0)"))
+                yield hx.row(label, workload, m, reference,
+                             goal=goal if name != "kalman_filter" and numba else None,
+                             note="" if name != "kalman_filter" else "one covariance for all runs (numpy)")
+
+
+def run(size: str = "full"):
+    """The benchmark protocol (benchmarks/run_all.py): full = 500 runs (filterpy on 20) and 10 runs (filterpy on 10),
+    tiny = 4 runs (filterpy on 2)."""
+    yield from measure(SIZES[hx.check_size(size)])
 
 
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--runs", type=int, default=500)
-    ap.add_argument("--filterpy-runs", type=int, default=50)
+    ap.add_argument("--filterpy-runs", type=int, default=20)
     ap.add_argument("--filter", choices=FILTERS, nargs="+", default=list(FILTERS))
     ap.add_argument("--size", choices=hx.SIZES, default=None, help="the run(size) preset instead of --runs")
     args = ap.parse_args()
-    rows = run(args.size) if args.size else measure(args.runs, args.filterpy_runs, args.filter)
-    hx.print_rows(rows)
+    hx.print_rows(run(args.size) if args.size else
+                  measure([(args.runs, args.filterpy_runs, None)], args.filter))
 
 
 if __name__ == "__main__":

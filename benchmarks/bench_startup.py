@@ -5,16 +5,22 @@ and ``locbook --version`` / ``locbook list`` answer in well under a second. Ever
 interpreters (each import is timed once per process: a second import in the same process is a dictionary
 look-up). Reports measured figures; not a test.
 
-- ``import numpy, scipy``: timed inside a fresh interpreter;
-- ``import locbook`` on top of it: timed in the same interpreter, right after;
-- ``locbook --version`` and ``locbook list``: wall time of ``python -m locbook ...`` from the repository root,
-  against ``python -c pass`` (the interpreter's own start) as the reference.
+- ``import locbook`` against ``import numpy, scipy``: both timed inside the same fresh interpreter, one after the
+  other (wall: ``perf_counter``; CPU: ``process_time``; memory: the interpreter's resident-set high-water mark
+  ``ru_maxrss`` before and after each), so every interpreter gives one pair;
+- ``locbook --version`` and ``locbook list``: ``python -m locbook ...`` from the repository root alternated with
+  ``python -c pass`` (the interpreter's own start, the reference): wall time, and CPU time (user + system) of the
+  child from ``RUSAGE_CHILDREN``, which hardly depends on what else the machine runs.
 
-    python benchmarks/bench_startup.py [--size tiny] [--repeat N]
+The harness's ``compare`` times calls inside this process (its CPU clock does not see a child process), so the
+pairs are measured here and handed to ``hx.row`` as an ``hx.Measurement`` (medians, spread, load, like ``compare``).
+
+    python benchmarks/bench_startup.py [full|tiny] [--repeat N]
 """
 from __future__ import annotations
 
 import argparse
+import os
 import resource
 import statistics
 import subprocess
@@ -28,8 +34,21 @@ import _harness as hx  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 #: the added start-up issue 27 allows ``import locbook`` over ``import numpy, scipy``
 IMPORT_BUDGET_S = 0.3
-_IMPORTS = ("import time\nt0 = time.perf_counter()\nimport numpy, scipy\nt1 = time.perf_counter()\n"
-            "import locbook\nt2 = time.perf_counter()\nprint(t1 - t0, t2 - t1)")
+_IMPORTS = ("import resource, time\n"
+            "def rss(): return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss\n"
+            "m0 = rss(); t0, c0 = time.perf_counter(), time.process_time()\n"
+            "import numpy, scipy\n"
+            "t1, c1 = time.perf_counter(), time.process_time(); m1 = rss()\n"
+            "import locbook\n"
+            "t2, c2 = time.perf_counter(), time.process_time(); m2 = rss()\n"
+            "print(t1 - t0, c1 - c0, (m1 - m0) / 1024, t2 - t1, c2 - c1, (m2 - m1) / 1024)")
+
+
+def _load() -> float | None:
+    try:
+        return os.getloadavg()[0]
+    except OSError:
+        return None
 
 
 def _child_cpu_s() -> float:
@@ -37,58 +56,69 @@ def _child_cpu_s() -> float:
     return usage.ru_utime + usage.ru_stime
 
 
-def _wall_s(args: list[str]) -> tuple[float, float]:
-    """``(wall, CPU)`` seconds of one fresh ``python args`` from the repository root (its output discarded).
-    The CPU time (user + system) hardly depends on what else the machine runs; the wall time does."""
+def _child(args: list[str]) -> tuple[float, float]:
+    """``(wall, CPU)`` seconds of one fresh ``python args`` from the repository root (its output discarded)."""
     cpu, start = _child_cpu_s(), time.perf_counter()
     subprocess.run([sys.executable, *args], cwd=ROOT, check=True, stdout=subprocess.DEVNULL,
                    stderr=subprocess.DEVNULL)
     return time.perf_counter() - start, _child_cpu_s() - cpu
 
 
-def _medians(args: list[str], repeat: int) -> tuple[float, float]:
-    runs = [_wall_s(args) for _ in range(repeat)]
-    return statistics.median(w for w, _ in runs), statistics.median(c for _, c in runs)
+def _measurement(ours: list[tuple], ref: list[tuple], load, agreement: str = "") -> hx.Measurement:
+    """Medians of ``(wall, CPU[, peak MiB])`` pairs as the harness reports them."""
+    med = lambda xs, i: float(statistics.median(x[i] for x in xs))                     # noqa: E731
+    walls = [x[0] for x in ours]
+    peak = max(x[2] for x in ours) if len(ours[0]) > 2 else None
+    ref_peak = max(x[2] for x in ref) if len(ref[0]) > 2 else None
+    return hx.Measurement(med(ours, 0), med(ours, 1), (min(walls), max(walls)), len(ours), peak, med(ref, 0),
+                          med(ref, 1), ref_peak, 1.0, agreement, load)
 
 
-def _import_s() -> tuple[float, float]:
-    """``(import numpy, scipy; import locbook after it)`` in seconds, timed inside one fresh interpreter."""
-    out = subprocess.run([sys.executable, "-c", _IMPORTS], cwd=ROOT, check=True, capture_output=True, text=True)
-    base, extra = map(float, out.stdout.split())
-    return base, extra
+def _imports(repeat: int) -> tuple[hx.Measurement, list[float]]:
+    """``import locbook`` (ours) and ``import numpy, scipy`` (reference), one pair per fresh interpreter."""
+    load0, ours, ref = _load(), [], []
+    for _ in range(repeat):
+        out = subprocess.run([sys.executable, "-c", _IMPORTS], cwd=ROOT, check=True, capture_output=True, text=True)
+        bw, bc, bm, lw, lc, lm = map(float, out.stdout.split())
+        ours.append((lw, lc, lm))
+        ref.append((bw, bc, bm))
+    return _measurement(ours, ref, (load0, _load())), [x[0] for x in ours]
 
 
-def measure(repeat: int = 9) -> list[dict]:
-    imports = [_import_s() for _ in range(repeat)]
-    base_s = statistics.median(b for b, _ in imports)
-    extra_s = statistics.median(e for _, e in imports)
-    python_s, python_cpu = _medians(["-c", "pass"], repeat)
-    version_s, version_cpu = _medians(["-m", "locbook", "--version"], repeat)
-    list_s, list_cpu = _medians(["-m", "locbook", "list"], repeat)
+def _cli(args: list[str], repeat: int) -> hx.Measurement:
+    """``python args`` against ``python -c pass``, alternated L R R L L R ... like ``hx.compare``."""
+    load0, ours, ref = _load(), [], []
+    for i in range(repeat):
+        for mine in ((True, False) if i % 2 == 0 else (False, True)):
+            (ours if mine else ref).append(_child(args if mine else ["-c", "pass"]))
+    return _measurement(ours, ref, (load0, _load()))
+
+
+def measure(repeat: int = hx.MIN_REPEATS, cli=("--version", "list")):
+    repeat = max(hx.MIN_REPEATS, repeat)
     runs = f"median of {repeat} fresh interpreters"
-    verdict = "within" if extra_s < IMPORT_BUDGET_S else "OVER"
-    return [
-        hx.row("import numpy, scipy", runs, base_s, note="the baseline import locbook is compared with"),
-        hx.row("import locbook", f"after import numpy, scipy; {runs}", extra_s, reference="import numpy, scipy",
-               reference_s=base_s, note=f"{verdict} the {IMPORT_BUDGET_S} s budget over numpy and scipy (issue 27)"),
-        hx.row("locbook --version", f"python -m locbook --version, wall; {runs}", version_s,
-               reference="python -c pass", reference_s=python_s,
-               note=f"the interpreter's start included; CPU {version_cpu:.3f} s against {python_cpu:.3f} s"),
-        hx.row("locbook list", f"python -m locbook list, wall; {runs}", list_s,
-               reference="python -c pass", reference_s=python_s,
-               note=f"the interpreter's start included; CPU {list_cpu:.3f} s against {python_cpu:.3f} s"),
-    ]
+    m, _ = _imports(repeat)
+    verdict = "within" if m.locbook_wall_s < IMPORT_BUDGET_S else "OVER"
+    yield hx.row("import locbook", f"after import numpy, scipy; {runs}", m, "import numpy, scipy (same interpreter)",
+                 note=f"{verdict} the {IMPORT_BUDGET_S} s budget over numpy and scipy (issue 27); peak = the "
+                      "interpreter's ru_maxrss increase")
+    for command in cli:
+        name, args = f"locbook {command}", ["-m", "locbook", command]
+        yield hx.row(name, f"python {' '.join(args)}, from the repository root; {runs}", _cli(args, repeat),
+                     "python -c pass", note="the interpreter's start included; CPU = the child's user + system time")
 
 
-def run(size: str = "full") -> list[dict]:
-    """The benchmark protocol (benchmarks/run_all.py): full = median of 9 interpreters, tiny = of 3."""
-    return measure(3 if hx.check_size(size) == "tiny" else 9)
+def run(size: str = "full"):
+    """The benchmark protocol (benchmarks/run_all.py): the median of 5 interpreters per figure (45 interpreters,
+    about 20 s); tiny: without ``locbook list`` (25)."""
+    return measure(cli=("--version",) if hx.check_size(size) == "tiny" else ("--version", "list"))
 
 
 def main():
     ap = argparse.ArgumentParser()
-    ap.add_argument("--repeat", type=int, default=9, help="fresh interpreters per figure (the median is shown)")
-    ap.add_argument("--size", choices=hx.SIZES, default=None, help="the run(size) preset instead of --repeat")
+    ap.add_argument("size", nargs="?", choices=hx.SIZES, default=None, help="the run(size) preset")
+    ap.add_argument("--repeat", type=int, default=hx.MIN_REPEATS,
+                    help="fresh interpreters per figure (the median is shown)")
     args = ap.parse_args()
     hx.print_rows(run(args.size) if args.size else measure(args.repeat))
 

@@ -1,13 +1,16 @@
 """Time batched static localization against a per-problem loop, for N problems (default 10,000).
 
-    python benchmarks/bench_static_localization.py [--n 10000] [--loop-n N] [--size tiny]
+    python benchmarks/bench_static_localization.py [full|tiny]
+    python benchmarks/bench_static_localization.py --n 10000 [--loop-n N]
 
-Reports seconds per method. The cvxpy loop builds one parameterized problem (DPP) and re-solves it per problem, the
-fastest way to loop with cvxpy; with ``--loop-n`` smaller than ``--n`` the loops are timed on a subset and scaled to N
-(marked "scaled").
+Each batched call alternates with its per-problem loop in one process (``hx.compare``: medians of CPU and wall time,
+at least 5 pairs); the differences to the loop come from the same calls. The cvxpy loop builds one parameterized
+problem (DPP) and re-solves it per problem, the fastest way to loop with cvxpy; the loops run on a subset of the
+problems and are scaled to N (the reference text says how many).
 """
 from __future__ import annotations
 
+import gc
 import argparse
 import sys
 from pathlib import Path
@@ -23,8 +26,12 @@ import locbook as lb  # noqa: E402
 from locbook.scenarios import george  # noqa: E402
 
 
-def measure(n: int = 10_000, loop_n: int | None = None, repeat: int = 3) -> list[dict]:
+def measure(n: int = 10_000, loop_n: int | None = None, scipy_n: int | None = None, repeats: int = hx.MIN_REPEATS):
+    """Rows as each comparison finishes: the batched call on all ``n`` problems against a per-problem loop on the
+    first ``loop_n`` (``scipy_n`` for the slowest loop, scipy's least_squares), scaled by n / loop_n, alternated in
+    one process; the differences come from the same calls."""
     loop_n = min(loop_n or n, n)
+    scipy_n = min(scipy_n or loop_n, n)
     anchors = george.ANCHORS_M
     rng = np.random.default_rng(0)
     truth = rng.uniform([0, 0], [2.1, 7.8], (n, 2))
@@ -33,16 +40,21 @@ def measure(n: int = 10_000, loop_n: int | None = None, repeat: int = 3) -> list
     ranges = model.range_m(power)
     a_mat, b = lb.lateration_system(anchors, ranges)
     workload = f"{n:,} problems, 4 anchors (corridor of document 003)"
-    scaled = "" if loop_n == n else f" ({loop_n} problems, scaled)"
-    rows = []
+    gc.collect()
+    gc.freeze()     # the imported modules' objects out of the collector: the harness collects before every call
 
-    t_batch, _, est = hx.timed(lambda: lb.lateration_ls(anchors, ranges).position_m, repeat)
-    t_loop, _, loop_est = hx.timed(lambda: np.array([np.linalg.lstsq(a_mat, b[i], rcond=None)[0] for i in range(loop_n)]))
-    rows.append(hx.row("linearized LS", workload, t_batch, "numpy lstsq per-problem loop" + scaled, t_loop * n / loop_n,
-                       hx.peak_mb(lambda: lb.lateration_ls(anchors, ranges)),
-                       f"max difference {np.abs(est[:loop_n] - loop_est).max():.1e} m"))
+    def scaled(k):
+        return "" if k == n else f" ({k:,} of {n:,} problems, scaled)"
 
-    t_batch, _, box = hx.timed(lambda: lb.lateration_box_ls(anchors, ranges, [0, 0], [2.1, 7.8]).position_m)
+    def max_diff(k):
+        return lambda ours, ref: f"max difference {np.abs(ours[:k] - ref).max():.1e} m on {k:,} problems"
+
+    m = hx.compare(lambda: lb.lateration_ls(anchors, ranges).position_m,
+                   lambda: np.array([np.linalg.lstsq(a_mat, b[i], rcond=None)[0] for i in range(loop_n)]),
+                   repeats=repeats, reference_scale=n / loop_n, agree=max_diff(loop_n))
+    yield hx.row("linearized LS", workload, m, "numpy lstsq per-problem loop" + scaled(loop_n))
+    est = m.results[0]
+
     p = cp.Variable(2)
     b_par = cp.Parameter(3)
     single = cp.Problem(cp.Minimize(cp.sum_squares(a_mat @ p - b_par)), [p >= 0, p <= [2.1, 7.8]])
@@ -55,37 +67,40 @@ def measure(n: int = 10_000, loop_n: int | None = None, repeat: int = 3) -> list
             out[i] = p.value
         return out
 
-    t_loop, _, loop_box = hx.timed(cvx_loop)
-    rows.append(hx.row("box-constrained LS (batched)", workload, t_batch,
-                       "cvxpy DPP per-problem loop" + scaled, t_loop * n / loop_n,
-                       hx.peak_mb(lambda: lb.lateration_box_ls(anchors, ranges, [0, 0], [2.1, 7.8])),
-                       f"max difference {np.abs(box[:loop_n] - loop_box).max():.1e} m"))
-
-    t_batch, _, ml = hx.timed(lambda: lb.rss_ml_position(anchors, power, model))
+    m = hx.compare(lambda: lb.lateration_box_ls(anchors, ranges, [0, 0], [2.1, 7.8]).position_m, cvx_loop,
+                   repeats=repeats, reference_scale=n / loop_n, agree=max_diff(loop_n))
+    yield hx.row("box-constrained LS (batched)", workload, m, "cvxpy DPP per-problem loop" + scaled(loop_n))
 
     def scipy_loop():
         return np.array([least_squares(lambda q, i=i: power[i] - model.mean_rss_dbm(lb.pairwise_distance_m(q, anchors)),
-                                       est[i], method="lm").x for i in range(loop_n)])
+                                       est[i], method="lm").x for i in range(scipy_n)])
 
-    t_loop, _, _ = hx.timed(scipy_loop)
-    rows.append(hx.row("RSS maximum likelihood", workload, t_batch, "scipy least_squares per-problem loop" + scaled,
-                       t_loop * n / loop_n, hx.peak_mb(lambda: lb.rss_ml_position(anchors, power, model)),
-                       f"converged for {ml.converged.mean():.2%} of problems"))
-    return rows
+    def ml_agree(ours, ref):
+        ok = ours.converged[:scipy_n]
+        diff = np.max(np.abs(ours.position_m[:scipy_n][ok] - ref[ok]), axis=-1)
+        far = int(np.sum(diff > 1e-3))
+        return (f"converged for {ours.converged.mean():.2%} of problems; on the {int(ok.sum()):,} of {scipy_n:,} that "
+                f"converged, median difference to scipy {np.median(diff):.1e} m, max {diff.max():.1e} m"
+                + (f" ({far} beyond 1 mm: another local optimum of the same cost)" if far else ""))
+
+    m = hx.compare(lambda: lb.rss_ml_position(anchors, power, model), scipy_loop, repeats=repeats,
+                   reference_scale=n / scipy_n, agree=ml_agree)
+    yield hx.row("RSS maximum likelihood", workload, m, "scipy least_squares (LM) per-problem loop" + scaled(scipy_n))
 
 
-def run(size: str = "full") -> list[dict]:
-    """The benchmark protocol (benchmarks/run_all.py): full = 10,000 problems (loops on 2,000, scaled), tiny = 100."""
+def run(size: str = "full"):
+    """The benchmark protocol (benchmarks/run_all.py): full = 10,000 problems (loops on 300, scipy's on 100,
+    scaled), tiny = 100 (loops on 10, scipy's on 5)."""
     if hx.check_size(size) == "tiny":
-        return measure(100, 20, repeat=1)
-    return measure(10_000, 2_000)
+        return measure(100, 10, 5)
+    return measure(10_000, 300, 100)
 
 
 def main():
     ap = argparse.ArgumentParser()
+    ap.add_argument("size", nargs="?", choices=hx.SIZES, default=None, help="the run(size) preset")
     ap.add_argument("--n", type=int, default=10_000)
     ap.add_argument("--loop-n", type=int, default=None, help="problems timed in the per-problem loops")
-    ap.add_argument("--size", choices=hx.SIZES, default=None, help="the run(size) preset instead of the options")
     args = ap.parse_args()
     hx.print_rows(run(args.size) if args.size else measure(args.n, args.loop_n))
 

@@ -1,7 +1,8 @@
-"""Time Gudipati's fusion UKF over many Monte-Carlo runs of the U-path with locbook's batched UKF and with a per-run
-filterpy UnscentedKalmanFilter loop on the same inputs.
+"""Time Gudipati's fusion UKF over many Monte-Carlo runs of the U-path with locbook's UKF (the compiled kernel of
+locbook/tracking/_ukf_kernels.py when numba is enabled) and with a per-run filterpy UnscentedKalmanFilter loop on the
+same inputs, and compare its time per run-step with the UKF's arithmetic floor (issue 31).
 
-    python benchmarks/bench_ukf_speed.py [--runs 1000] [--filterpy-runs 5] [--alpha 1e-3] [--size tiny]
+    python benchmarks/bench_ukf_speed.py [full | tiny]
 
 The 8-D constant-acceleration + heading model, 6 anchors, the inertial stream (body frame) then the RSS stream at
 every 0.1 s step (scenarios/gudipati.py defaults, shadowing 1.45 dB; the issue-7 setting). filterpy runs a subset,
@@ -9,11 +10,28 @@ scaled to the full count; a step with some RSS readings missing updates filterpy
 and R, locbook's rule for missing readings), so every run is compared. At the thesis's alpha = 1e-3 the sigma-point
 weights are -1e6 and 6e4 and two correct implementations differ by round-off amplified to about 1e-8; at alpha = 0.5
 or 1 they agree to about 1e-13.
+
+Rows (benchmarks/_harness.py): 500 runs and 10 runs against filterpy on a subset of the runs (its time scaled by the
+number of runs), goals 200x and 20x on the CPU-time ratio (issue 31), with the agreement max |x - filterpy| and
+|P - filterpy| on that subset; then the time per run-step against the floor of :func:`floor_per_run_step` (goal: within
+5x).
+
+The floor. One run-step of this UKF (n = 8 states, N = 2n + 1 = 17 sigma points; the inertial update, m = 3, and the
+RSS update, m = 6, each with fresh sigma points) needs at least the floating-point operations counted by
+:func:`ukf_flops` (a multiply-add counts 2, triangles of symmetric products are counted once): per update the Cholesky
+factor of ``c P`` (n^3 / 3), the sigma points (2 n^2), the readings at the distinct points (an RSS reading depends on x
+and y only: 5 distinct points of 17), the mean (2 N m), the deviations (N m), P_zz (N m (m + 1) + N m), D (2 n m), S,
+its Cholesky factor (m^3 / 3), P_xz = L D (n (n + 1) m), the gain (2 n m^2), the state (2 n m), R~ = S - c D^T D
+(m (m + 1) (n + 1)), M = L - c K D^T (2 n^2 (m + 1)), R~ K^T (2 n m^2) and P+ = M M^T / c + K R~ K^T (n (n + 1) (2n +
+2m + 1) / 2); the prediction F x, F P F^T + Q with F's nonzero entries. Besides, transcendental calls: 6 anchors x 5
+distinct points logarithms, 15 distinct headings' sine and cosine. The floor is the FLOPs at the machine's rate for
+this loop shape (multiply-adds over 64 runs side by side, measured here by a numba loop; ~1 FLOP per ns is the scalar
+rate) plus the calls at their measured cost.
 """
 from __future__ import annotations
 
-import argparse
 import sys
+import time
 from dataclasses import replace
 from pathlib import Path
 
@@ -80,45 +98,137 @@ def filterpy_ukf(st: dict, runs: int, alpha: float):
     return xs, Ps
 
 
-def measure(runs: int = 1000, filterpy_runs: int = 5, alphas=(1e-3,), steps: int | None = None,
-            repeat: int = 1) -> list[dict]:
-    st = setting(runs, steps)
-    T = np.shape(st["imu"].z)[1]
-    n = min(filterpy_runs, runs)
-    rows = []
-    for alpha in alphas:
-        t_ref, cpu_ref, (ref_x, ref_P) = hx.timed(lambda: filterpy_ukf(st, n, alpha))
-        t, cpu, ours = hx.timed(lambda: locbook_ukf(st, alpha), repeat)
-        peak = hx.peak_mb(lambda: locbook_ukf(st, alpha))
-        dx = float(np.max(np.abs(ours.x[:n] - ref_x)))
-        dP = float(np.max(np.abs(ours.P[:n] - ref_P)))
-        scale = runs / n
-        rows.append(hx.row(f"UKF (inertial + RSS), alpha = {alpha:g}", f"U-path, {runs} runs x {T} steps", t,
-                           "filterpy per-run loop" + ("" if n == runs else f" ({n} runs, scaled)"), t_ref * scale,
-                           peak, f"max |x - filterpy| {dx:.1e}, |P - filterpy| {dP:.1e} on {n} runs; "
-                                 f"{ours.floored_updates} floored updates; CPU-time ratio x{cpu_ref * scale / cpu:.0f}"))
-    return rows
+def _first_steps(st: dict, steps: int) -> dict:
+    """The setting ``st`` cut to its first ``steps`` steps (the same walk)."""
+    return dict(st, imu=replace(st["imu"], z=np.asarray(st["imu"].z)[:, :steps]),
+                rss=replace(st["rss"], rss_dbm=np.asarray(st["rss"].rss_dbm)[:, :steps]))
 
 
-def run(size: str = "full") -> list[dict]:
-    """The benchmark protocol (benchmarks/run_all.py): full = 1000 runs x 1164 steps at alpha 1e-3 (filterpy on 5 runs)
-    and 200 runs at alpha 0.5; tiny = 6 runs x 60 steps (filterpy on 2)."""
-    if hx.check_size(size) == "tiny":
-        return measure(runs=6, filterpy_runs=2, alphas=(1e-3, 0.5), steps=60)
-    return measure() + measure(runs=200, filterpy_runs=3, alphas=(0.5,))
+def _filterpy_agreement(n: int, steps: int):
+    """The agreement figure of the harness: max |x - filterpy|, |P - filterpy| on the first ``n`` runs and ``steps``
+    steps (where filterpy ran)."""
+    def agree(ours, ref):
+        ref_x, ref_P = ref
+        dx = float(np.max(np.abs(ours.x[:n, :steps] - ref_x)))
+        dP = float(np.max(np.abs(ours.P[:n, :steps] - ref_P)))
+        return (f"max |x - filterpy| {dx:.1e}, |P - filterpy| {dP:.1e} on {n} run{'s' * (n > 1)} x {steps} steps; "
+                f"{ours.floored_updates} floored updates")
+    return agree
 
 
-def main():
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--runs", type=int, default=1000)
-    ap.add_argument("--filterpy-runs", type=int, default=5)
-    ap.add_argument("--alpha", type=float, default=1e-3)
-    ap.add_argument("--steps", type=int, default=None, help="the first STEPS steps of the walk (default all)")
-    ap.add_argument("--size", choices=hx.SIZES, default=None, help="the run(size) preset instead of --runs")
-    args = ap.parse_args()
-    rows = run(args.size) if args.size else measure(args.runs, args.filterpy_runs, (args.alpha,), args.steps)
-    hx.print_rows(rows)
+def ukf_flops(n: int, ms, distinct_points, f_nonzero: int) -> int:
+    """Floating-point operations of one run-step of the UKF (module docstring): linear prediction with ``f_nonzero``
+    entries of F, then one update per entry of ``ms`` (readings per update), whose measurement function is evaluated at
+    ``distinct_points`` of the ``2n + 1`` sigma points (about 10 FLOPs per RSS reading, 6 per inertial point)."""
+    N = 2 * n + 1
+    flops = 2 * f_nonzero + 2 * f_nonzero * n + f_nonzero * (n + 1) + n * (n + 1) // 2
+    for m, points in zip(ms, distinct_points):
+        h = points * m * 10 if m == 6 else points * 6
+        flops += (n * (n + 1) // 2 + n**3 // 3 + 2 * n * n + h + 2 * N * m + N * m + N * m * (m + 1) + N * m
+                  + 2 * n * m + m * (m + 1) // 2 + m**3 // 3 + n * (n + 1) * m + 2 * n * m * m + m * m + 2 * m
+                  + 2 * n * m + m * (m + 1) * (n + 1) + 2 * n * n * (m + 1) + 2 * n * m * m
+                  + n * (n + 1) * (2 * n + 2 * m + 1) // 2)
+    return flops
+
+
+def _rate_kernels():
+    """The numba loops of :func:`machine_rates`, compiled in memory (run_all.py loads this module under a name numba's
+    disk cache cannot import)."""
+    import numba
+    jit = numba.njit(error_model="numpy")
+
+    def fma(A, B, C, reps):
+        n, W = B.shape
+        for _ in range(reps):
+            for i in range(n):
+                for k in range(n):
+                    for w in range(W):
+                        C[i, w] += A[i, k, w] * B[k, w]
+
+    def logs(a, out, reps):
+        for _ in range(reps):
+            for i in range(a.size):
+                out[i] += np.log(a[i])
+
+    def trig(a, out, reps):
+        for _ in range(reps):
+            for i in range(a.size):
+                out[i] += np.cos(a[i]) + np.sin(a[i])
+    return jit(fma), jit(logs), jit(trig)
+
+
+def machine_rates() -> dict:
+    """The machine's rates for the floor, measured by numba loops: multiply-adds with the runs on the innermost axis
+    (the kernels' loop shape) in FLOP per ns, and the cost of a logarithm and of a sine + cosine in ns (best of 5)."""
+    fma, logs, trig = _rate_kernels()
+    rng = np.random.default_rng(0)
+    A, B, C = rng.random((8, 8, 64)), rng.random((8, 64)), np.zeros((8, 64))
+    a, out = rng.random(64) + 0.5, np.zeros(64)
+    rates = {}
+    for name, fn, args, count in (("flop_per_ns", fma, (A, B, C), 2 * 8 * 8 * 64), ("log_ns", logs, (a, out), 64),
+                                  ("sincos_ns", trig, (a, out), 64)):
+        fn(*args, 1)
+        reps = 2000 if name == "flop_per_ns" else 10000
+        best = np.inf
+        for _ in range(5):
+            t = time.process_time()
+            fn(*args, reps)
+            best = min(best, time.process_time() - t)
+        rates[name] = count * reps / best / 1e9 if name == "flop_per_ns" else best / (count * reps) * 1e9
+    return rates
+
+
+def floor_per_run_step(st: dict) -> dict:
+    """The arithmetic floor of one run-step on this setting (module docstring): FLOPs, calls, and ns at the measured
+    rates and at 1 FLOP per ns."""
+    n = 8
+    f_nonzero = int(np.count_nonzero(st["model"].F))
+    flops = ukf_flops(n, (3, 6), (2 * n + 1, 5), f_nonzero)
+    n_log, n_trig = 6 * 5, 2 * 7 + 1
+    rates = machine_rates()
+    calls_ns = n_log * rates["log_ns"] + n_trig * rates["sincos_ns"]
+    return dict(flops=flops, n_log=n_log, n_trig=n_trig, rates=rates, calls_ns=calls_ns,
+                floor_ns=flops / rates["flop_per_ns"] + calls_ns, floor_1flop_ns=flops + calls_ns)
+
+
+def run(size: str = "full"):
+    """The benchmark protocol (benchmarks/run_all.py), at the thesis's alpha = 1e-3: full = 500 runs and 10 runs over
+    the whole walk (1164 steps), filterpy on 1 run x the first 400 steps (a filterpy step costs the same all along the
+    walk, so its time is scaled by runs x 1164 / 400; the full walk would take 5 x 2 filterpy runs, ~40 s at least,
+    beyond the benchmark's 90 s), then the floor row; tiny = 6 runs x 60 steps and 3 runs x 60 steps (filterpy on 1 run
+    x 30 steps)."""
+    tiny = hx.check_size(size) == "tiny"
+    alpha = 1e-3
+    steps, ref_steps = (60, 30) if tiny else (None, 400)
+    per_step = None
+    for runs, goal in ((6, None), (3, None)) if tiny else ((500, 200), (10, 20)):
+        st = setting(runs, steps)
+        T = np.shape(st["imu"].z)[1]
+        ref_st = _first_steps(st, ref_steps)
+        locbook_ukf(st, alpha)                     # numba's load and the kernel's first call, outside the timing
+        m = hx.compare(lambda: locbook_ukf(st, alpha), lambda: filterpy_ukf(ref_st, 1, alpha),
+                       repeats=5, reference_scale=runs * T / ref_steps, agree=_filterpy_agreement(1, ref_steps))
+        ns = m.locbook_cpu_s / (runs * T) * 1e9
+        if per_step is None:
+            per_step = (m, st, runs, T)
+        yield hx.row(f"UKF (inertial + RSS), alpha = {alpha:g}", f"U-path, {runs} runs x {T} steps", m,
+                     f"filterpy per-run loop (1 run x {ref_steps} steps, scaled)", goal=goal,
+                     note=f"{ns:.0f} ns CPU per run-step")
+    m, st, runs, T = per_step
+    ns = m.locbook_cpu_s / (runs * T) * 1e9
+    fl = floor_per_run_step(st)
+    r = fl["rates"]
+    floor_s = fl["floor_ns"] * 1e-9 * runs * T
+    # the locbook calls of the first row (paired repeats), against the floor of the same workload
+    floor = replace(m, reference_wall_s=floor_s, reference_cpu_s=floor_s, reference_peak_mb=None, reference_scale=1.0,
+                    agreement=(f"{fl['flops']} FLOPs + {fl['n_log']} log + {fl['n_trig']} sin/cos per run-step; "
+                               f"measured {ns:.0f} ns per run-step, floor {fl['floor_ns']:.0f} ns "
+                               f"({ns / fl['floor_ns']:.1f}x)"))
+    yield hx.row("UKF (inertial + RSS), compiled, vs its arithmetic floor", f"U-path, {runs} runs x {T} steps (n = 8, "
+                 "17 sigma points, m = 3 + 6)", floor, f"arithmetic floor at {r['flop_per_ns']:.2f} FLOP/ns (64 lanes, "
+                 f"measured) + log {r['log_ns']:.1f} ns, sin + cos {r['sincos_ns']:.1f} ns", goal=0.2,
+                 note=f"ratio = floor / locbook; at 1 FLOP/ns the floor would be {fl['floor_1flop_ns']:.0f} ns")
 
 
 if __name__ == "__main__":
-    main()
+    hx.print_rows(run(sys.argv[1] if len(sys.argv) > 1 else "full"))

@@ -3,11 +3,18 @@
     python benchmarks/run_all.py [--size full|tiny] [--out benchmarks/RESULTS.md] [--only NAME ...]
 
 Imports every ``benchmarks/bench_*.py`` (discovered, so a new one is picked up), calls its ``run(size)`` (the
-protocol of ``benchmarks/_harness.py``: a list of rows with method, workload, locbook_s, reference, reference_s,
-ratio, peak_mb, note) and writes the rows as a table, with the machine facts (CPUs, Python, numpy, numba, date, git
-commit), to ``--out``. A benchmark that raises, or returns something that is not a list of such rows, becomes an
-error row; the others still run. Text below the line ``<!-- notes: kept by run_all.py -->`` in an existing output file
-(the hand-written analysis) is carried over unchanged.
+protocol of ``benchmarks/_harness.py``: rows made by ``_harness.row``, yielded as each measurement finishes) and writes
+the rows as a table, with the machine facts (CPU, Python, numpy, numba, date, git commit), to ``--out``. Each row is
+printed when it arrives and the table so far is written to ``<out>.partial`` after every row; ``--out`` itself is
+replaced (atomically) only when every module has run, so an interrupted run leaves the last complete table intact
+and the rows it measured in the partial file. A benchmark that raises, or yields something that is not a row, becomes
+an error row; the others still run. Text below the line ``<!-- notes: kept by run_all.py -->`` in an existing output
+file (the hand-written analysis) is carried over unchanged.
+
+The process runs with BLAS pinned to one thread (``threadpoolctl``, and the ``*_NUM_THREADS`` variables for any
+process it starts) and, when started from the command line, with a fixed ``malloc`` mmap threshold
+(``MALLOC_MMAP_THRESHOLD_=65536``, so that freed arrays go back to the system and the harness's peak-memory figure of
+one call is not hidden in the next one's baseline): ``main`` re-executes itself once with these variables set.
 """
 from __future__ import annotations
 
@@ -24,7 +31,14 @@ import traceback
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-KEYS = ("method", "workload", "locbook_s", "reference", "reference_s", "ratio", "peak_mb", "note")
+if str(HERE) not in sys.path:
+    sys.path.insert(0, str(HERE))
+import _harness  # noqa: E402
+
+#: set before numpy loads (main re-executes itself with them): one BLAS thread, freed arrays returned at once
+RUN_ENV = {"MALLOC_MMAP_THRESHOLD_": "65536", "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1",
+           "MKL_NUM_THREADS": "1"}
+KEYS = _harness.KEYS
 NOTES_MARKER = "<!-- notes: kept by run_all.py -->"
 
 
@@ -44,41 +58,60 @@ def load(path: Path):
 
 
 def _error_row(name: str, message: str, seconds: float | None = None) -> dict:
-    return {"method": f"{name}: ERROR", "workload": "", "locbook_s": seconds, "reference": None, "reference_s": None,
-            "ratio": None, "peak_mb": None, "note": message, "benchmark": name, "error": True}
+    out = dict.fromkeys(KEYS)
+    out.update(method=f"{name}: ERROR", workload="", locbook_s=seconds, note=message, benchmark=name, error=True)
+    return out
+
+
+def row_problems(i: int, r) -> list[str]:
+    """What is wrong with one row ([] if nothing)."""
+    if not isinstance(r, dict):
+        return [f"row {i} is a {type(r).__name__}"]
+    problems = []
+    missing = [k for k in KEYS if k not in r]
+    if missing:
+        problems.append(f"row {i} lacks {missing}")
+    t = r.get("locbook_s")
+    if not (isinstance(t, (int, float)) and math.isfinite(t) and t > 0):
+        problems.append(f"row {i} ({r.get('method')}) has locbook_s = {t!r}")
+    return problems
 
 
 def check_rows(rows) -> list[str]:
     """What is wrong with a module's rows ([] if nothing)."""
     if not isinstance(rows, list) or not rows:
         return [f"run() returned {type(rows).__name__}, not a non-empty list of rows"]
-    problems = []
-    for i, r in enumerate(rows):
-        if not isinstance(r, dict):
-            problems.append(f"row {i} is a {type(r).__name__}")
-            continue
-        missing = [k for k in KEYS if k not in r]
-        if missing:
-            problems.append(f"row {i} lacks {missing}")
-        t = r.get("locbook_s")
-        if not (isinstance(t, (int, float)) and math.isfinite(t) and t > 0):
-            problems.append(f"row {i} ({r.get('method')}) has locbook_s = {t!r}")
-    return problems
+    return [p for i, r in enumerate(rows) for p in row_problems(i, r)]
+
+
+def iter_module(path: Path, size: str):
+    """The rows of one benchmark as they finish, each tagged with its module; an error row where it fails (a bad
+    row, or an exception: the rows before it are kept)."""
+    name = path.stem
+    start = time.perf_counter()
+    n = 0
+    try:
+        rows = load(path).run(size)
+        if isinstance(rows, dict) or not hasattr(rows, "__iter__"):
+            raise TypeError(f"run() returned {type(rows).__name__}, not rows")
+        for r in rows:
+            problems = row_problems(n, r)
+            n += 1
+            if problems:
+                yield _error_row(name, "; ".join(problems), time.perf_counter() - start)
+            else:
+                yield dict(r, benchmark=name, error=False)
+    except Exception as exc:                                  # noqa: BLE001 - reported as a row, never a crash
+        tb = traceback.format_exception_only(type(exc), exc)[-1].strip()
+        yield _error_row(name, tb, time.perf_counter() - start)
+        return
+    if n == 0:
+        yield _error_row(name, "run() gave no rows", time.perf_counter() - start)
 
 
 def run_module(path: Path, size: str) -> list[dict]:
     """The rows of one benchmark, each tagged with its module; an error row if it fails."""
-    name = path.stem
-    start = time.perf_counter()
-    try:
-        rows = load(path).run(size)
-    except Exception as exc:                                  # noqa: BLE001 - reported as a row, never a crash
-        tb = traceback.format_exception_only(type(exc), exc)[-1].strip()
-        return [_error_row(name, tb, time.perf_counter() - start)]
-    problems = check_rows(rows)
-    if problems:
-        return [_error_row(name, "; ".join(problems), time.perf_counter() - start)]
-    return [dict(r, benchmark=name, error=False) for r in rows]
+    return list(iter_module(path, size))
 
 
 def _git(*args) -> str:
@@ -115,11 +148,21 @@ def machine_facts() -> dict:
             "CPU": f"{cpu}, {os.cpu_count()} logical CPUs", "load average (1, 5, 15 min) at the end": load,
             "platform": platform.platform(), "python": sys.version.split()[0], "numpy": numpy.__version__,
             "scipy": scipy.__version__, "numba": numba_version,
-            "LOCBOOK_NUMBA": os.environ.get("LOCBOOK_NUMBA", "(unset: compiled EKF on when numba is installed)")}
+            "LOCBOOK_NUMBA": os.environ.get("LOCBOOK_NUMBA", "(unset: compiled kernels on)"),
+            "BLAS threads": _blas_threads(),
+            "malloc mmap threshold": os.environ.get("MALLOC_MMAP_THRESHOLD_", "(glibc default, dynamic)")}
+
+
+def _blas_threads() -> str:
+    try:
+        from threadpoolctl import threadpool_info
+        return ", ".join(f"{p['internal_api']} {p['num_threads']}" for p in threadpool_info()) or "none loaded"
+    except ImportError:
+        return "unknown (threadpoolctl not installed)"
 
 
 def _cell(value, kind: str = "") -> str:
-    if value is None:
+    if value is None or value == "":
         return ""
     if kind == "s":
         return f"{value:.3g}" if value < 100 else f"{value:.0f}"
@@ -130,23 +173,43 @@ def _cell(value, kind: str = "") -> str:
     return str(value).replace("|", "\\|").replace("\n", " ")
 
 
-def markdown(rows: list[dict], size: str, facts: dict, seconds: float, notes: str = "") -> str:
-    lines = [f"# Benchmark results ({size})", "",
-             f"Written by `python benchmarks/run_all.py --size {size}` in {seconds:.0f} s. Times are wall-clock seconds "
-             "(best of a few repeats for the cheap locbook calls); a reference marked \"scaled\" was timed on a subset "
-             "of the runs and scaled to the full count; ratio = reference / locbook; peak memory is the tracemalloc "
-             "peak of the locbook call in MiB (numpy arrays included, numba kernel buffers not).", "",
-             "| machine | |", "|---|---|"]
+COLUMNS = ("benchmark", "method", "workload", "locbook CPU (s)", "locbook wall (s)", "reference", "reference CPU (s)",
+           "ratio (CPU)", "ratio (wall)", "goal", "peak (MiB)", "reference peak (MiB)", "agreement", "load (1 min)",
+           "note")
+
+
+def _table_row(r: dict) -> str:
+    method = ("**" + _cell(r["method"]) + "**") if r.get("error") else _cell(r["method"])
+    return "| " + " | ".join([
+        _cell(r.get("benchmark")), method, _cell(r["workload"]), _cell(r.get("locbook_cpu_s"), "s"),
+        _cell(r["locbook_s"], "s"), _cell(r["reference"]), _cell(r.get("reference_cpu_s"), "s"),
+        _cell(r.get("ratio_cpu"), "ratio"), _cell(r["ratio"], "ratio"), _cell(r.get("goal")),
+        _cell(r["peak_mb"], "mb"), _cell(r.get("reference_peak_mb"), "mb"), _cell(r.get("agreement")),
+        _cell(r.get("load")), _cell(r["note"])]) + " |"
+
+
+def markdown(rows: list[dict], size: str, facts: dict, seconds: float, notes: str = "",
+             module_seconds: dict | None = None, complete: bool = True) -> str:
+    state = "" if complete else " (IN PROGRESS: the run has not finished; the rows so far)"
+    lines = [f"# Benchmark results ({size}){state}", "",
+             f"Written by `python benchmarks/run_all.py --size {size}` in {seconds:.0f} s. Each ratio is reference / "
+             "locbook of the medians of paired, alternated calls in one process (at least 5 of each; "
+             "`benchmarks/_harness.py`), in CPU time and in wall time; a reference marked \"scaled\" ran on a "
+             "subset of the runs and its times were scaled to the whole workload (locbook always runs the whole "
+             "workload). Peak memory is the increase of the process's peak resident set during the call (numpy "
+             "arrays and compiled kernels' buffers alike), in MiB. The agreement column compares the two results "
+             "of the same run; the load column is the 1-minute load average before and after the measurement. "
+             "BLAS runs on one thread.", "", "| machine | |", "|---|---|"]
     lines += [f"| {k} | {_cell(v)} |" for k, v in facts.items()]
-    lines += ["", "| benchmark | method | workload | locbook (s) | reference | reference (s) | ratio | peak (MiB) | note |",
-              "|---|---|---|---:|---|---:|---:|---:|---|"]
-    for r in rows:
-        lines.append("| " + " | ".join([
-            _cell(r.get("benchmark")), ("**" + _cell(r["method"]) + "**") if r.get("error") else _cell(r["method"]),
-            _cell(r["workload"]), _cell(r["locbook_s"], "s"), _cell(r["reference"]), _cell(r["reference_s"], "s"),
-            _cell(r["ratio"], "ratio"), _cell(r["peak_mb"], "mb"), _cell(r["note"])]) + " |")
+    lines += ["", "| " + " | ".join(COLUMNS) + " |",
+              "|" + "|".join("---:" if c.endswith(("(s)", "(CPU)", "(wall)", "(MiB)")) else "---" for c in COLUMNS)
+              + "|"]
+    lines += [_table_row(r) for r in rows]
     errors = sum(bool(r.get("error")) for r in rows)
     lines += ["", f"{len(rows)} rows, {errors} error(s)."]
+    if module_seconds:
+        lines += ["", "| module | wall time (s) |", "|---|---:|"]
+        lines += [f"| {k} | {v:.1f} |" for k, v in module_seconds.items()]
     text = "\n".join(lines) + "\n"
     if notes:
         text += "\n" + NOTES_MARKER + "\n" + notes.lstrip("\n")
@@ -162,30 +225,46 @@ def kept_notes(out: Path) -> str:
     return text.split(NOTES_MARKER, 1)[1] if NOTES_MARKER in text else ""
 
 
+def _write(path: Path, text: str) -> None:
+    """Write ``path`` atomically (a temporary file renamed over it)."""
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+
+
 def run_all(size: str = "full", out: Path | str = HERE / "RESULTS.md", only=None, folder: Path = HERE,
             verbose: bool = True) -> list[dict]:
-    """Run the benchmarks (all, or those whose module name contains one of ``only``) and write ``out``."""
+    """Run the benchmarks (all, or those whose module name contains one of ``only``) and write ``out`` (module
+    docstring: rows printed and written to ``<out>.partial`` as they finish, ``out`` replaced at the end)."""
     if size not in ("full", "tiny"):
         raise ValueError(f"size must be 'full' or 'tiny', got {size!r}")
-    start = time.perf_counter()
-    rows = []
-    for path in discover(folder):
-        if only and not any(o in path.stem for o in only):
-            continue
-        if verbose:
-            print(f"[run_all] {path.stem} ({size}) ...", flush=True)
-        t = time.perf_counter()
-        new = run_module(path, size)
-        rows += new
-        if verbose:
-            status = "ERROR " + new[0]["note"] if new[0].get("error") else f"{len(new)} rows"
-            print(f"[run_all] {path.stem}: {status} in {time.perf_counter() - t:.1f} s", flush=True)
+    from threadpoolctl import threadpool_limits
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    text = markdown(rows, size, machine_facts(), time.perf_counter() - start, kept_notes(out))
-    out.write_text(text)
+    partial = out.with_name(out.name + ".partial")
+    notes = kept_notes(out)
+    start = time.perf_counter()
+    rows, module_seconds = [], {}
+    with threadpool_limits(limits=1, user_api="blas"):
+        for path in discover(folder):
+            if only and not any(o in path.stem for o in only):
+                continue
+            if verbose:
+                print(f"[run_all] {path.stem} ({size}) ...", flush=True)
+            t = time.perf_counter()
+            for r in iter_module(path, size):
+                rows.append(r)
+                if verbose:
+                    print("  " + ("ERROR " + r["note"] if r.get("error") else _harness.format_row(r)), flush=True)
+                _write(partial, markdown(rows, size, machine_facts(), time.perf_counter() - start, notes,
+                                         module_seconds, complete=False))
+            module_seconds[path.stem] = time.perf_counter() - t
+            if verbose:
+                print(f"[run_all] {path.stem}: {module_seconds[path.stem]:.1f} s", flush=True)
+    _write(out, markdown(rows, size, machine_facts(), time.perf_counter() - start, notes, module_seconds))
+    partial.unlink(missing_ok=True)
     if verbose:
-        print(f"[run_all] wrote {out}")
+        print(f"[run_all] wrote {out} in {time.perf_counter() - start:.0f} s")
     return rows
 
 
@@ -195,6 +274,8 @@ def main():
     ap.add_argument("--out", default=str(HERE / "RESULTS.md"))
     ap.add_argument("--only", nargs="*", default=None, help="run only the benchmarks whose name contains one of these")
     args = ap.parse_args()
+    if any(os.environ.get(k) != v for k, v in RUN_ENV.items()):       # once: before numpy and malloc start
+        os.execve(sys.executable, [sys.executable, *sys.argv], {**os.environ, **RUN_ENV})
     rows = run_all(args.size, args.out, args.only)
     sys.exit(1 if any(r.get("error") for r in rows) else 0)
 

@@ -204,6 +204,7 @@ def test_benchmark_trackers_return_flags_of_the_kalman_trackers():
     assert set(cell_flags) == set(kalman) and all(f.n_runs == 4 for f in cell_flags.values())
 
 
+@pytest.mark.slow
 def test_measured_tracks_return_flags_of_the_kalman_trackers():
     data = ko.load("kolakowski2021")
     model = ko.channel(ko.calibrate(data))

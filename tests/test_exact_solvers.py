@@ -73,6 +73,7 @@ def _n_active(p, lo, hi):
     return np.sum((np.abs(p - lo) < 1e-9) | (np.abs(p - hi) < 1e-9), axis=-1)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("dim", [2, 3])
 def test_exact_box_ls_equals_cvxpy(dim):
     anchors, d, lo, hi = _problems(dim, 1500, seed=dim)

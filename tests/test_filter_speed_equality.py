@@ -67,7 +67,27 @@ def test_compiled_path_is_taken_for_the_ekfs(dogan, path):
     finally:
         K._compiled_ekf = original
     assert (calls[0] is not None) == (path == "numba")
-    assert len(calls) == 1            # KF (MLE): one covariance for all runs, the numpy loop without the kernel
+    # KF (MLE), one covariance for all runs: at 20 runs (one block of lanes) compiled too; numpy turns it off
+    assert len(calls) == (2 if path == "numba" else 1) and (calls[-1] is not None) == (path == "numba")
+
+
+@pytest.mark.skipif(not HAVE_NUMBA, reason="numba is not installed")
+def test_a_covariance_shared_by_many_runs_stays_in_numpy(monkeypatch):
+    """More runs than one block of lanes with one covariance for all: the numpy loop updates it once per step (the
+    kernel is not called), and gives the kernel's numbers."""
+    monkeypatch.setattr(K, "_NUMBA_ENABLED", True)
+    monkeypatch.setattr(K, "_NUMBA_MIN_WORK", 0)
+    s = bd.setting(65, steps=60)
+    calls = []
+    original = K._compiled_ekf
+    monkeypatch.setattr(K, "_compiled_ekf", lambda *a: calls.append(original(*a)) or calls[-1])
+    shared = bd.locbook_filter("kalman_filter", s)
+    assert calls == []
+    small = {k: (v[:64] if isinstance(v, np.ndarray) and v.ndim >= 2 and v.shape[0] == 65 else v) for k, v in s.items()}
+    compiled = bd.locbook_filter("kalman_filter", small)
+    assert len(calls) == 1 and calls[0] is not None
+    np.testing.assert_allclose(compiled.x, shared.x[:64], rtol=0, atol=1e-10)
+    np.testing.assert_allclose(compiled.P, shared.P[:64], rtol=0, atol=1e-12)
 
 
 def _kf_reference(z, F, H, Q, R, x0, P0):
@@ -124,6 +144,7 @@ def upath():
     # filterpy by 1.5e-8 on this instance too)
     (1e-3, 5, 1e-7),
 ])
+@pytest.mark.slow
 def test_ukf_on_the_u_path_equals_filterpy(upath, alpha, runs, tol):
     ours = bu.locbook_ukf(upath, alpha)
     ref_x, ref_P = bu.filterpy_ukf(upath, runs, alpha)

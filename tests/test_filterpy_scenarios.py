@@ -221,6 +221,7 @@ def test_univariate():
             _close(res.P[r, i], f.P)
 
 
+@pytest.mark.slow
 def test_procedure_form():
     """test_procedure_form: a target moving 100 m per step read with noise 10.1 m for 2000 steps (positions to 2e5 m),
     filtered by filterpy's procedural predict/update (which its test checks against its class). The
@@ -368,6 +369,7 @@ def _slant_range_jacobian(x):
     return H
 
 
+@pytest.mark.slow
 def test_ekf_radar():
     """test_ekf: horizontal distance, speed and altitude of an aircraft from its slant range, 400 steps of 0.05 s. The
     loop updates before it predicts, with ``R = 0.05 h(x)`` at the state it updates (a noise growing with the range):
@@ -451,6 +453,7 @@ def _radar_motion():
     return lb.NonlinearMotion(lambda x: x @ RADAR_F.T, name="radar motion")
 
 
+@pytest.mark.slow
 def test_ukf_radar():
     """test_radar (test_ukf.py): the radar scenario through the UKF with Julier's points, kappa = 0, 401 steps,
     predict then update; Q = 0.01 I, R = 10, x0 = (0, 90, 1100), P0 = 100 I; the Mahalanobis distance of each update.
@@ -634,6 +637,7 @@ def test_ukf_batch_missing_data():
         _close(res.P[r], Ps)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kappa", [1.0, 0.0])
 def test_ukf_rts(kappa):
     """test_rts (test_ukf.py; Julier kappa = 1) and the full-run half of test_fixed_lag (Julier kappa = 0): the radar
@@ -715,6 +719,7 @@ def _polar_to_xy_deg(x):
     return np.stack([np.cos(a) * x[..., 0], np.sin(a) * x[..., 0]], axis=-1)
 
 
+@pytest.mark.slow
 def test_ukf_circle():
     """test_circle: a target on a circle of radius 50 (1/30 degree per step) read in x, y with noise 0.1, tracked by a
     UKF in polar coordinates (radius, angle, angular rate; Julier kappa = 0; Q = 0.001 on the angle only) and by a
@@ -768,6 +773,7 @@ def test_ukf_circle():
                 _close(kf_run.P[r, t], kf.P)
 
 
+@pytest.mark.slow
 def test_kf_circle_polar():
     """kf_circle (test_ukf.py; a scenario filterpy does not collect, no test_ prefix): the circular track read in x, y,
     converted to (radius, bearing) with atan2 and filtered by a 3-state KF (radius, bearing, bearing rate) with Q = I

@@ -219,6 +219,7 @@ def run_estimator(name: str, anchors, readings, scale: float):
        specials=st.lists(st.sampled_from(sorted(SPECIALS)), max_size=2), dtype=st.sampled_from(["float64", "float32",
                                                                                                "int"]),
        strided=st.booleans(), seed=st.integers(0, 2**16))
+@pytest.mark.slow
 def test_static_estimators(name, kind, shape, specials, dtype, strided, seed):
     rng = np.random.default_rng(seed)
     anchors = layout(kind, rng)

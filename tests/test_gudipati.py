@@ -63,6 +63,7 @@ def test_kf_needs_the_fix_covariance():
         gu.track(w, "kf")
 
 
+@pytest.mark.slow
 def test_shadowing_calibration_hits_its_target_with_the_same_streams():
     s = gu.WalkSettings()
     target = 3.0
@@ -134,6 +135,7 @@ def test_the_ed_floor_is_not_heard_and_the_ceiling_saturates():
     assert np.isnan(out[0]) and out[1] == -91.0 and out[2] == -91.0 and out[3] == -7.0
 
 
+@pytest.mark.slow
 def test_printed_sign_stream_jacobian_and_the_ins_drift_covariance():
     s = replace(gu.WalkSettings(), shadowing_sigma_db=1.5)
     w = gu.simulate_walk("linear", 6, s, 300, np.random.default_rng(0))

@@ -143,6 +143,7 @@ def _robot():
     return d, z, u
 
 
+@pytest.mark.slow
 def test_em_equals_pykalman_on_its_robot_data():
     d, z, u = _robot()
     meas = lb.LinearMeasurement(z, d.observation_matrix, d.initial_observation_covariance,
@@ -178,6 +179,7 @@ def test_em_with_partly_missing_readings_equals_pykalman_and_never_lowers_the_li
     np.testing.assert_allclose(fit.R[0], kf.observation_covariance, atol=1e-9)
 
 
+@pytest.mark.slow
 def test_ml_is_a_maximum_of_pykalmans_independent_likelihood():
     d, z, u = _robot()
     meas = lb.LinearMeasurement(z, d.observation_matrix, d.initial_observation_covariance,
@@ -199,6 +201,7 @@ def test_ml_is_a_maximum_of_pykalmans_independent_likelihood():
                 assert pk(dq * fit.Q, dr * fit.R[0]) < best
 
 
+@pytest.mark.slow
 def test_per_run_ml_equals_separate_fits_and_recovers_the_simulated_noise():
     rng = np.random.default_rng(8)
     q, r = 0.05, 0.5
@@ -220,6 +223,7 @@ def test_per_run_ml_equals_separate_fits_and_recovers_the_simulated_noise():
     assert abs(np.log(pooled.q_scale[0]) - np.log(10.0)) < 0.2 and abs(np.log(pooled.r_scale[0][0]) - np.log(0.25)) < 0.1
 
 
+@pytest.mark.slow
 def test_ml_diagonal_form_and_rss_sigma():
     rng = np.random.default_rng(9)
     channel = lb.PathLossModel(ref_power_dbm=-40.0, path_loss_exp=2.5, sigma_db=2.0, min_distance_m=1e-3)

@@ -265,6 +265,7 @@ def _hand_made_results(levels: dict, experiments=("fixed", "mobile", "monopole")
     return res
 
 
+@pytest.mark.slow
 def test_recorded_rows_have_kinds_links_windows_and_notes(tmp_path, monkeypatch):
     monkeypatch.setenv("LOCBOOK_OUTPUT_DIR", str(tmp_path))
     monkeypatch.setenv("LOCBOOK_EXPERIMENT", "ozkaya2011-testbed")

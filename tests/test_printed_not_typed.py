@@ -1,6 +1,7 @@
 """Printed numbers live only in locbook/data/printed/<document>.csv: none is typed into Python code or a notebook
 cell (issue 13). Numeric literals of the package and the notebooks' code cells are compared with every printed
 number of at least four significant digits (shorter ones, such as 1.87, collide with ordinary constants)."""
+import ast
 import io
 import json
 import tokenize
@@ -42,7 +43,7 @@ def _printed_literals() -> dict[float, str]:
 def _number_tokens(source: str):
     for tok in tokenize.generate_tokens(io.StringIO(source).readline):
         if tok.type == tokenize.NUMBER and not tok.string.lower().endswith("j"):
-            yield tok.start[0], float(tok.string.replace("_", ""))
+            yield tok.start[0], float(ast.literal_eval(tok.string))      # 1_000, 0x3ff, 1e-3 alike
 
 
 def test_no_printed_number_is_typed_in_code():

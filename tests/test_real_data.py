@@ -83,6 +83,7 @@ def test_distance_to_segments_closed_form():
     np.testing.assert_allclose(lb.distance_to_segments(points, segments), expected)
 
 
+@pytest.mark.slow
 def test_accuracy_metrics_against_direct_numpy():
     rng = np.random.default_rng(1)
     e = np.abs(rng.normal(0, 1.0, 4000))

@@ -480,3 +480,15 @@ def test_committed_reports_are_never_written_from_a_dirty_tree(toy, capsys):
     assert run(toy, "--out", str(toy / "scratch")) == 0
     stamp = json.loads((toy / "scratch" / "george-one" / "report.json").read_text())["locbook"]
     assert stamp.endswith("+ uncommitted changes)")
+
+
+def test_the_kernel_runs_blas_on_one_thread(toy, tmp_path):
+    """A worker's kernel loads BLAS with one thread (SINGLE_THREAD set before the kernel starts), so --jobs N
+    workers use N cores, whatever the machine's core count (threadpoolctl reads the thread count in the kernel)."""
+    record = tmp_path / "blas.json"
+    body = GOOD + ("import json\nfrom threadpoolctl import threadpool_info\n"
+                   f"open({str(record)!r}, 'w').write(json.dumps([p['num_threads'] for p in threadpool_info()]))\n")
+    _notebook(toy / "notebooks" / "one.ipynb", PARAMS, body)
+    assert run(toy, "george-one") == 0
+    threads = json.loads(record.read_text())
+    assert threads and set(threads) == {1}

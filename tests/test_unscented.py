@@ -254,6 +254,7 @@ def test_rss_ukf_equals_stone_soup(alpha):
     np.testing.assert_allclose(ours.P, ref_P, atol=1e-8)
 
 
+@pytest.mark.slow
 def test_covariance_stays_symmetric_positive_definite_over_1e5_steps_at_alpha_1e_3():
     rng = np.random.default_rng(0)
     T = 100_000

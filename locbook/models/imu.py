@@ -122,6 +122,9 @@ def inertial_measurement_function(frame: str = "body", *, acceleration_index=(4,
         a = x[..., ia]
         acc = world_to_body(a, x[..., heading_index]) if frame == "body" else a
         return np.concatenate([acc, x[..., yaw_rate_index:yaw_rate_index + 1]], axis=-1)
+    # what h computes, for the compiled UKF (locbook.tracking.unscented._inertial_parameters), which then evaluates
+    # the same function in its kernel instead of calling h
+    h.inertial = (frame == "body", tuple(int(i) for i in ia.reshape(-1)), int(heading_index), int(yaw_rate_index))
     return h
 
 

@@ -27,7 +27,11 @@ import time
 from pathlib import Path
 
 import psutil   # at import, not in the SIGTERM handler: an import there could wait on the import lock
+from threadpoolctl import threadpool_limits
 
+#: one BLAS/OpenMP thread per worker: set before the kernel starts, so its numpy loads BLAS with one thread (``--jobs
+#: N`` workers then use N cores, not N x cores: 2 workers x 2 OpenBLAS threads on 2 cores cost the grid filter 4x its
+#: CPU time); the worker's own libraries are limited through threadpoolctl (_run)
 SINGLE_THREAD = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
                  "BLIS_NUM_THREADS": "1", "VECLIB_MAXIMUM_THREADS": "1", "NUMEXPR_NUM_THREADS": "1"}
 #: failures worth one more attempt: the kernel died or never answered (the papermill/ipykernel port race)
@@ -165,6 +169,7 @@ def _run(task: dict, staging: Path) -> int:
     runtime = staging / ".runtime"     # own folder for the kernel's connection file and temporary files
     runtime.mkdir(exist_ok=True)
     os.environ.update(SINGLE_THREAD)
+    threadpool_limits(limits=1)         # libraries this process has already loaded (the variables act at load)
     os.environ.update({"LOCBOOK_OUTPUT_DIR": str(staging), "LOCBOOK_EXPERIMENT": task["id"],
                        "LOCBOOK_DATA_LOG": str(staging / ".data-read.log"),
                        "LOCBOOK_MODULE_LOG": str(staging / ".modules-read.log"),

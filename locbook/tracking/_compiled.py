@@ -1,9 +1,10 @@
-"""The optional compiled EKF (numba): the same recursion as the numpy loop, run by run in compiled loops over blocks of
-runs (the kernels of :mod:`locbook.tracking._kernels`, compiled on first use).
+"""The compiled EKF (numba): the same recursion as the numpy loop, run by run in compiled loops over blocks of
+runs (the kernels of :mod:`locbook.tracking._kernels`, compiled on first use and cached on disk).
 
-The EKF (and the KF on batched covariances) uses them when numba is installed, ``_NUMBA_ENABLED`` is True (environment
-variable ``LOCBOOK_NUMBA=0`` turns them off) and the problem has at least ``_NUMBA_MIN_WORK`` run-steps (smaller
-problems stay in numpy, with no compilation wait); streams the kernel does not cover (NonlinearMeasurement, batched F
+The EKF and the KF use them when ``_NUMBA_ENABLED`` is True (environment variable ``LOCBOOK_NUMBA=0`` turns them off),
+the problem has at least ``_NUMBA_MIN_WORK`` run-steps (below that, loading numba would cost more than it saves) and
+either the covariance differs between runs or the batch is at most one block of runs (a covariance shared by many runs
+is updated once per step by the numpy loop instead); streams the kernel does not cover (NonlinearMeasurement, batched F
 or Q, walls, outputs beyond x and P) run in numpy. Either way the results are the same to round-off
 (tests/test_filter_speed_equality.py), and every error is raised by the numpy loop.
 """
@@ -21,9 +22,16 @@ from .results import KalmanResult
 from .streams import LinearMeasurement, RssMeasurement
 
 _NUMBA_ENABLED = os.environ.get("LOCBOOK_NUMBA", "1").strip().lower() not in ("0", "false", "no", "off")
-_NUMBA_MIN_WORK = int(os.environ.get("LOCBOOK_NUMBA_MIN_WORK", "20000").strip() or 20000)
+_NUMBA_MIN_WORK = int(os.environ.get("LOCBOOK_NUMBA_MIN_WORK", "2000").strip() or 2000)
 _NUMBA_STATE = {"ready": None}
+_LANES = 64                 # = _kernels._LANES (not imported from there: that would load numba)
 _LINEAR_PARALLEL, _LINEAR_SERIAL, _RSS_PARALLEL, _RSS_SERIAL = 0, 1, 2, 3
+
+
+def _small_batch(setup: _Setup) -> bool:
+    """At most one block of runs (``_kernels._LANES``): the compiled kernel then beats the numpy loop even where that
+    loop computes one covariance for all runs (its fixed cost per step is larger than a block's arithmetic)."""
+    return _NUMBA_ENABLED and int(np.prod(setup.batch, dtype=np.int64)) <= _LANES
 
 
 def _numba_ready() -> bool:

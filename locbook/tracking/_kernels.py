@@ -1,7 +1,8 @@
 """The compiled EKF kernels (numba), module-level functions compiled on first call (numba caches the machine code on
 disk). Imported only by :func:`locbook.tracking._compiled._compiled_ekf` when the compiled path runs, so that
 ``import locbook`` never loads numba. Without numba they are plain Python (the same arithmetic, slowly: the tests
-run them that way). Each kernel works on ``_LANES`` runs at once on the innermost axis."""
+run them that way). Each kernel works on ``W`` runs at once on the innermost axis (the last axis of its arrays):
+``_LANES`` runs, or all of them when there are fewer (a small batch pays for its own runs only)."""
 from __future__ import annotations
 
 import numpy as np
@@ -29,34 +30,34 @@ def _jit(fn):
 def _nb_predict(Fi, Fj, Fv, Q, x, P, xt, T1):
     """x = F x, P = (F P) F^T + Q in place for the lanes (last axis), F given by its nonzero entries (rows Fi,
     columns Fj, values Fv); P symmetric in, symmetric out (the upper triangle is computed and mirrored)."""
-    n = x.shape[0]
+    n, W = x.shape
     for i in range(n):
-        for w in range(_LANES):
+        for w in range(W):
             xt[i, w] = 0.0
         for c in range(n):
-            for w in range(_LANES):
+            for w in range(W):
                 T1[i, c, w] = 0.0
     for e in range(Fi.shape[0]):
         i, j, v = Fi[e], Fj[e], Fv[e]
-        for w in range(_LANES):
+        for w in range(W):
             xt[i, w] += v * x[j, w]
         for c in range(n):
-            for w in range(_LANES):
+            for w in range(W):
                 T1[i, c, w] += v * P[j, c, w]
     for i in range(n):
-        for w in range(_LANES):
+        for w in range(W):
             x[i, w] = xt[i, w]
         for c in range(i + 1):
-            for w in range(_LANES):
+            for w in range(W):
                 P[c, i, w] = 0.0
     for e in range(Fi.shape[0]):                          # (F P) F^T, upper triangle: P[a, i] for a <= i
         i, j, v = Fi[e], Fj[e], Fv[e]
         for a in range(i + 1):
-            for w in range(_LANES):
+            for w in range(W):
                 P[a, i, w] += v * T1[a, j, w]
     for a in range(n):
         for c in range(a, n):
-            for w in range(_LANES):
+            for w in range(W):
                 P[a, c, w] += Q[a, c]
                 P[c, a, w] = P[a, c, w]
 
@@ -70,103 +71,103 @@ def _nb_update(x, P, c, nz, nnz, H, nu, R, HP, HPH, S, L, KT, PH, D, t, u, Y, ni
     P - K (H P) + (K S - P H^T) K^T (equal for any K). Adds each lane's NIS nu^T S^{-1} nu = |L^{-1} nu|^2 to
     ``nis`` and half its log-determinant, sum log L_jj, to ``hld`` (a missing row adds 0 to both). False when some S
     is not positive definite or some state not finite."""
-    n = x.shape[0]
+    n, W = x.shape
     for r in range(c):                                    # HP = H P, PH = P H^T
         for j in range(n):
-            for w in range(_LANES):
+            for w in range(W):
                 HP[r, j, w] = 0.0
                 PH[j, r, w] = 0.0
         for e in range(nnz):
             i = nz[e]
             for j in range(n):
-                for w in range(_LANES):
+                for w in range(W):
                     HP[r, j, w] += H[r, i, w] * P[i, j, w]
                     PH[j, r, w] += P[j, i, w] * H[r, i, w]
     for r in range(c):                                    # S = H P H^T + R
         for q in range(c):
-            for w in range(_LANES):
+            for w in range(W):
                 HPH[r, q, w] = 0.0
             for e in range(nnz):
                 j = nz[e]
-                for w in range(_LANES):
+                for w in range(W):
                     HPH[r, q, w] += HP[r, j, w] * H[q, j, w]
-            for w in range(_LANES):
+            for w in range(W):
                 S[r, q, w] = HPH[r, q, w] + R[r, q, w]
     for j in range(c):                                    # S = L L^T
-        for w in range(_LANES):
+        for w in range(W):
             t[w] = S[j, j, w]
         for i in range(j):
-            for w in range(_LANES):
+            for w in range(W):
                 t[w] -= L[j, i, w] * L[j, i, w]
         good = True
-        for w in range(_LANES):
+        for w in range(W):
             good = good and t[w] > 0.0
         if not good:
             return False
-        for w in range(_LANES):
+        for w in range(W):
             L[j, j, w] = np.sqrt(t[w])
             hld[w] += np.log(L[j, j, w])
         for i in range(j + 1, c):
-            for w in range(_LANES):
+            for w in range(W):
                 t[w] = S[i, j, w]
             for q in range(j):
-                for w in range(_LANES):
+                for w in range(W):
                     t[w] -= L[i, q, w] * L[j, q, w]
-            for w in range(_LANES):
+            for w in range(W):
                 L[i, j, w] = t[w] / L[j, j, w]
     for i in range(c):                                    # NIS = |Y|^2, L Y = nu (forward substitution)
-        for w in range(_LANES):
+        for w in range(W):
             Y[i, w] = nu[i, w]
         for q in range(i):
-            for w in range(_LANES):
+            for w in range(W):
                 Y[i, w] -= L[i, q, w] * Y[q, w]
-        for w in range(_LANES):
+        for w in range(W):
             Y[i, w] /= L[i, i, w]
             nis[w] += Y[i, w] * Y[i, w]
     for j in range(n):                                    # K^T = S^{-1} H P
         for i in range(c):
-            for w in range(_LANES):
+            for w in range(W):
                 KT[i, j, w] = HP[i, j, w]
             for q in range(i):
-                for w in range(_LANES):
+                for w in range(W):
                     KT[i, j, w] -= L[i, q, w] * KT[q, j, w]
-            for w in range(_LANES):
+            for w in range(W):
                 KT[i, j, w] /= L[i, i, w]
         for i in range(c - 1, -1, -1):
             for q in range(i + 1, c):
-                for w in range(_LANES):
+                for w in range(W):
                     KT[i, j, w] -= L[q, i, w] * KT[q, j, w]
-            for w in range(_LANES):
+            for w in range(W):
                 KT[i, j, w] /= L[i, i, w]
     good = True
     for i in range(n):                                    # x += K nu
-        for w in range(_LANES):
+        for w in range(W):
             t[w] = 0.0
         for r in range(c):
-            for w in range(_LANES):
+            for w in range(W):
                 t[w] += KT[r, i, w] * nu[r, w]
-        for w in range(_LANES):
+        for w in range(W):
             x[i, w] += t[w]
             good = good and np.isfinite(x[i, w])
     if not good:
         return False
     for i in range(n):                                    # D = K S - P H^T
         for r in range(c):
-            for w in range(_LANES):
+            for w in range(W):
                 D[i, r, w] = -PH[i, r, w]
             for q in range(c):
-                for w in range(_LANES):
+                for w in range(W):
                     D[i, r, w] += KT[q, i, w] * S[q, r, w]
     for i in range(n):                                    # P - K (H P) + D K^T, symmetrised
         for j in range(i, n):
-            for w in range(_LANES):
+            for w in range(W):
                 t[w] = P[i, j, w]
                 u[w] = P[j, i, w]
             for r in range(c):
-                for w in range(_LANES):
+                for w in range(W):
                     t[w] += D[i, r, w] * KT[r, j, w] - KT[r, i, w] * HP[r, j, w]
                     u[w] += D[j, r, w] * KT[r, i, w] - KT[r, j, w] * HP[r, i, w]
-            for w in range(_LANES):
+            for w in range(W):
                 P[i, j, w] = 0.5 * (t[w] + u[w])
                 P[j, i, w] = P[i, j, w]
     return True
@@ -204,28 +205,29 @@ def _nb_ekf(Fi, Fj, Fv, Q, x0, P0, predict_first, slot, active, kind, col, nz, n
             ref_d, clamp, anchor_sigma, tag_h, pidx, npos, descending, out_x, out_P, out_nis, out_dof,
             out_ll):
     """The EKF time loop of :func:`locbook.tracking._loop._run` with :func:`locbook.tracking.streams._ekf_update`, over
-    blocks of ``_LANES`` runs (the last block padded with copies of the last run), with each run's NIS, its dof and
+    blocks of ``W = min(_LANES, B)`` runs (the last block padded with copies of the last run), with each run's NIS, its dof and
     log-likelihood at every step (``out_nis``, ``out_dof``, ``out_ll`` ``(B, T)``; NaN, 0 and NaN where no update).
     Returns 0, or 1 + a run whose update failed (the caller then redoes the filter in numpy, which raises the
     library's error)."""
     T, B, n, ns = Z.shape[0], Z.shape[1], x0.shape[1], kind.shape[0]
+    W = min(_LANES, B)
     mmax = 1
     for s in range(ns):
         mmax = max(mmax, col[s + 1] - col[s])
-    x, xt = np.empty((n, _LANES)), np.empty((n, _LANES))
-    P, T1 = np.empty((n, n, _LANES)), np.empty((n, n, _LANES))
-    Hr, HP, KT = np.zeros((mmax, n, _LANES)), np.empty((mmax, n, _LANES)), np.empty((mmax, n, _LANES))
-    nu, var, key = np.empty((mmax, _LANES)), np.empty((mmax, _LANES)), np.empty((mmax, _LANES))
-    Rr, S, L = np.zeros((mmax, mmax, _LANES)), np.empty((mmax, mmax, _LANES)), np.zeros((mmax, mmax, _LANES))
-    HPH, PH, D = np.empty((mmax, mmax, _LANES)), np.empty((n, mmax, _LANES)), np.empty((n, mmax, _LANES))
-    t, t2 = np.empty(_LANES), np.empty(_LANES)
-    Y, nis, dof = np.empty((mmax, _LANES)), np.zeros(_LANES), np.zeros(_LANES, np.int64)
-    hld = np.zeros(_LANES)
-    valid = np.zeros((mmax, _LANES), np.bool_)
-    sel = np.empty((mmax, _LANES), np.int64)
-    run = np.empty(_LANES, np.int64)
-    for b0 in range(0, B, _LANES):
-        for w in range(_LANES):
+    x, xt = np.empty((n, W)), np.empty((n, W))
+    P, T1 = np.empty((n, n, W)), np.empty((n, n, W))
+    Hr, HP, KT = np.zeros((mmax, n, W)), np.empty((mmax, n, W)), np.empty((mmax, n, W))
+    nu, var, key = np.empty((mmax, W)), np.empty((mmax, W)), np.empty((mmax, W))
+    Rr, S, L = np.zeros((mmax, mmax, W)), np.empty((mmax, mmax, W)), np.zeros((mmax, mmax, W))
+    HPH, PH, D = np.empty((mmax, mmax, W)), np.empty((n, mmax, W)), np.empty((n, mmax, W))
+    t, t2 = np.empty(W), np.empty(W)
+    Y, nis, dof = np.empty((mmax, W)), np.zeros(W), np.zeros(W, np.int64)
+    hld = np.zeros(W)
+    valid = np.zeros((mmax, W), np.bool_)
+    sel = np.empty((mmax, W), np.int64)
+    run = np.empty(W, np.int64)
+    for b0 in range(0, B, W):
+        for w in range(W):
             b = min(b0 + w, B - 1)
             run[w] = b
             for i in range(n):
@@ -235,7 +237,7 @@ def _nb_ekf(Fi, Fj, Fv, Q, x0, P0, predict_first, slot, active, kind, col, nz, n
         for k in range(T):
             if predict_first or k > 0:
                 _nb_predict(Fi, Fj, Fv, Q, x, P, xt, T1)
-            for w in range(_LANES):
+            for w in range(W):
                 nis[w] = 0.0
                 hld[w] = 0.0
                 dof[w] = 0
@@ -245,7 +247,7 @@ def _nb_ekf(Fi, Fj, Fv, Q, x0, P0, predict_first, slot, active, kind, col, nz, n
                     continue
                 c0, m, kd = col[s], col[s + 1] - col[s], kind[s]
                 serial = kd == 1 or kd == 3
-                for w in range(_LANES):                   # the update order: as given, or by descending RSS
+                for w in range(W):                   # the update order: as given, or by descending RSS
                     for j in range(m):
                         sel[j, w] = j
                     if kd == 3 and descending[s]:         # stable: ties (and the missing, last) keep their order
@@ -261,7 +263,7 @@ def _nb_ekf(Fi, Fj, Fv, Q, x0, P0, predict_first, slot, active, kind, col, nz, n
                     rows = 1 if serial else m
                     present = False
                     for r in range(rows):
-                        for w in range(_LANES):
+                        for w in range(W):
                             b = run[w]
                             j = sel[u, w] if serial else r
                             zj = Z[k, b, c0 + j]
@@ -296,7 +298,7 @@ def _nb_ekf(Fi, Fj, Fv, Q, x0, P0, predict_first, slot, active, kind, col, nz, n
                         continue
                     for r in range(rows):                 # R of the readings present, unit decoupled noise elsewhere
                         for q in range(rows):
-                            for w in range(_LANES):
+                            for w in range(W):
                                 if not (valid[r, w] and valid[q, w]):
                                     Rr[r, q, w] = 1.0 if r == q else 0.0
                                 elif kd <= 1:
@@ -308,24 +310,24 @@ def _nb_ekf(Fi, Fj, Fv, Q, x0, P0, predict_first, slot, active, kind, col, nz, n
                     if not _nb_update(x, P, rows, nz[s], nnz[s], Hr, nu, Rr, HP, HPH, S, L, KT, PH, D, t, t2, Y, nis,
                                       hld):
                         return b0 + 1
-            for w in range(_LANES):                       # a state or covariance that overflowed: numpy names it
+            for w in range(W):                       # a state or covariance that overflowed: numpy names it
                 t[w] = 0.0                                # (v - v is NaN exactly when v is not finite)
             for i in range(n):
-                for w in range(_LANES):
+                for w in range(W):
                     t[w] += x[i, w] - x[i, w]
                 for j in range(i, n):
-                    for w in range(_LANES):
+                    for w in range(W):
                         t[w] += P[i, j, w] - P[i, j, w]
-            for w in range(_LANES):
+            for w in range(W):
                 if not t[w] == 0.0:
                     return b0 + 1
-            for w in range(min(_LANES, B - b0)):
+            for w in range(min(W, B - b0)):
                 out_nis[b0 + w, k] = nis[w] if dof[w] > 0 else np.nan
                 # log N(nu; 0, S) summed over the step's updates: -(NIS + log det S + dof log 2 pi) / 2
                 out_ll[b0 + w, k] = -0.5 * (nis[w] + 2.0 * hld[w] + dof[w] * _LOG_2PI) if dof[w] > 0 else np.nan
                 out_dof[b0 + w, k] = dof[w]
             if slot[k] >= 0:
-                for w in range(min(_LANES, B - b0)):
+                for w in range(min(W, B - b0)):
                     for i in range(n):
                         out_x[b0 + w, slot[k], i] = x[i, w]
                         for j in range(n):

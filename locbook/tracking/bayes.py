@@ -30,7 +30,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .._validate import as_array, check_choice, check_scalar
-from ..models.rss import RssModel
+from ..models.rss import LIKELIHOOD_BLOCK_VALUES, RssModel
+from . import _compiled
 from .resampling import effective_sample_size
 
 __all__ = ["BayesFilterResult", "grid_bayes_filter", "grid_transition_matrix", "GRID_TRANSITIONS"]
@@ -252,6 +253,193 @@ class _SeparableTransition:
         return _along_axes(self._k, lattice)[(slice(None),) + self.index]
 
 
+#: runs x steps x cells from which grid_bayes_filter runs the compiled kernels (smaller problems stay in numpy, with
+#: no compilation wait)
+_GRID_MIN_WORK = 200_000
+#: the largest per-run mean table (runs x cells x anchors values, 128 MiB) computed once; above it, per step
+_TABLE_MAX_VALUES = 1 << 24
+_EPS_LOG = 53 * np.log(2.0)                 # -log(2^-53): a tap below exp(-_EPS_LOG) of the largest is rounding
+
+
+def _even_axis(values: np.ndarray) -> float | None:
+    """The spacing of sorted distinct coordinates if they are evenly spaced up to the rounding of ``arange`` or
+    ``linspace`` (64 ulp of the largest coordinate), else None; 0 for a single value."""
+    if values.size == 1:
+        return 0.0
+    h = (values[-1] - values[0]) / (values.size - 1)
+    tol = 64 * np.finfo(float).eps * max(np.abs(values).max(), h)
+    return float(h) if np.all(np.abs(values - (values[0] + h * np.arange(values.size))) <= tol) else None
+
+
+class _BandedLattice:
+    """The transition of :func:`grid_transition_matrix` on a regular lattice (cells evenly spaced per axis, possibly
+    masked; up to three axes) as a banded correlation along each axis, by the compiled kernel
+    :func:`locbook.tracking._grid_kernels._nb_predict`.
+
+    On a lattice of spacing ``h`` the per-axis kernel of :class:`_SeparableTransition` is Toeplitz,
+    ``Kx[i, j] = exp(-((i - j) h - v)^2 / (2 D^2))``, so ``Kx b`` is a 1-D correlation with the taps
+    ``t(s) = exp(-(s h - v)^2 / (2 D^2))``, ``s = i - j``. Truncation: a tap is dropped where it is below 2^-53 (the
+    rounding of a double) of the largest entry of every column of ``Kx`` (the columns at the lattice's ends, whose
+    targets ``x_j + v`` may fall outside it, have the smallest largest entries: the rule takes theirs); with ``v = 0``
+    on a long axis this keeps ``|s h| <= sqrt(2 * 53 ln 2) D = 8.57 D``. An entry of the 2-D (3-D) column is a product
+    of per-axis entries, so every dropped entry is below 2^-53 of its column's largest entry on the lattice (on a
+    masked lattice, of the largest over the lattice's points, which the cells may not all be). Normalisers ``Z_l'``
+    (the same correlation, taps reversed, of the mask) are computed with the same truncation, so each column is
+    normalised over the cells as before: edges truncate and renormalise. A column whose ``Z`` underflows, or taps
+    spanning more than 700 in the exponent (a velocity carrying the targets far outside the lattice), are left to
+    :class:`_SeparableTransition` (``prepare`` returns False). The work per run is ``C (K_x + K_y)`` multiply-adds
+    (``K`` the number of taps: 85 per axis at ``D = 5 h``) instead of ``C (n_x + n_y)``."""
+
+    def __init__(self, cells_m: np.ndarray, spread_m: float, spacing):
+        self.dim = cells_m.shape[1]
+        self.spread_m = float(spread_m)
+        axes = [np.unique(cells_m[:, a], return_inverse=True) for a in range(self.dim)]
+        self.n = [values.size for values, _ in axes]                # per coordinate axis (x, y, z)
+        self.h = list(spacing)
+        self.index = [inverse.astype(np.int64) for _, inverse in axes]
+        self.n_cells = cells_m.shape[0]
+        sizes = self.n + [1] * (3 - self.dim)
+        self.shape = (sizes[2], sizes[1], sizes[0])                 # (n0, n1, n2) = (z, y, x) planes, rows, columns
+        self._v, self._plan, self._zinv = None, None, None
+
+    @staticmethod
+    def build(cells_m: np.ndarray, spread_m: float):
+        """The banded transition of ``cells_m``, or None when it does not apply (uneven coordinates, more than three
+        axes, an infinite spread)."""
+        if not np.isfinite(spread_m) or not 1 <= cells_m.shape[1] <= 3:
+            return None
+        spacing = [_even_axis(np.unique(cells_m[:, a])) for a in range(cells_m.shape[1])]
+        if any(h is None for h in spacing):
+            return None
+        return _BandedLattice(cells_m, spread_m, spacing)
+
+    def _taps(self, a: int, v: float):
+        """The kept taps of axis ``a`` and their first offset ``s_min``, or None (the class docstring)."""
+        n, h = self.n[a], self.h[a]
+        if n == 1:
+            return np.ones(1), 0
+        s = np.arange(-(n - 1), n)
+        e = np.square(s * h - v) / (2.0 * self.spread_m**2)
+        worst = max(e[n - 1:].min(), e[:n].min())                   # the end columns' largest entries
+        keep = np.flatnonzero(e <= worst + _EPS_LOG)
+        if worst - e.min() > 700.0:
+            return None
+        return np.exp(-(e[keep[0]:keep[-1] + 1] - e.min())), int(s[keep[0]])
+
+    def _make_plan(self, taps):
+        """Buffers and offsets of :func:`_nb_predict` for the per-axis ``(taps, s_min)`` (x, y, z)."""
+        n0, n1, n2 = self.shape
+        padded = []
+        for a in range(3):
+            t, smin = taps[a] if a < self.dim else (np.ones(1), 0)
+            k = -(-t.size // 8) * 8
+            tt = np.zeros(k)
+            tt[:t.size] = t
+            lead = max(0, k - 1 + smin)                                # pad before the lattice
+            length = lead + (n2, n1, n0)[a] + max(0, -smin)
+            padded.append((tt, lead - smin, lead, length))
+        (tx, bx, px, lx), (ty, by, py, ly), (tz, bz, pz, lz) = padded
+        ix = self.index[0]
+        iy = self.index[1] if self.dim > 1 else np.zeros_like(ix)
+        iz = self.index[2] if self.dim > 2 else np.zeros_like(ix)
+        scatter = (iz * n1 + iy) * lx + px + ix
+        gather = (iz * n1 + iy) * n2 + ix
+        return dict(scatter=scatter, gather=gather, dims=np.array([n0, n1, n2, self.dim], np.int64),
+                    xb=np.zeros(n0 * n1 * lx), lx=lx, tx=tx, bx=bx,
+                    yb=np.zeros(n0 * ly * n2 if self.dim > 1 else 1), ly=ly, py=py, ty=ty, by=by,
+                    zb=np.zeros(lz * n1 * n2 if self.dim > 2 else 1), pz=pz, tz=tz, bz=bz, out=np.zeros(n0 * n1 * n2))
+
+    def _run(self, plan, belief, zinv, dead, kernels):
+        pred = np.empty_like(belief)
+        kernels._nb_predict(belief, zinv, dead, plan["scatter"], plan["gather"], plan["dims"], plan["xb"],
+                            plan["lx"], plan["tx"], plan["bx"], plan["yb"], plan["ly"], plan["py"], plan["ty"],
+                            plan["by"], plan["zb"], plan["pz"], plan["tz"], plan["bz"], plan["out"], pred)
+        return pred
+
+    def prepare(self, velocity_m, kernels) -> bool:
+        v = np.asarray(velocity_m, dtype=float)
+        if self._v is not None and np.array_equal(v, self._v):
+            return self._plan is not None
+        self._v, self._plan = v.copy(), None
+        taps = [self._taps(a, v[a]) for a in range(self.dim)]
+        if any(t is None for t in taps):
+            return False
+        flipped = [(t[::-1].copy(), -(smin + t.size - 1)) for t, smin in taps]    # Z: the reversed taps on the mask
+        ones = np.ones((1, self.n_cells))
+        z = self._run(self._make_plan(flipped), ones, ones[0], np.zeros(1, np.bool_), kernels)[0]
+        if not np.all(z > 0):
+            return False
+        self._plan, self._zinv = self._make_plan(taps), 1.0 / z
+        return True
+
+    def predict(self, belief: np.ndarray, velocity_m, dead: np.ndarray, kernels) -> np.ndarray | None:
+        """``belief (R, C)`` -> the predicted belief (rows of ``dead`` runs unspecified), or None (not applicable
+        at this velocity)."""
+        if not self.prepare(velocity_m, kernels):
+            return None
+        pred = self._run(self._plan, np.ascontiguousarray(belief), self._zinv, dead, kernels)
+        pred[dead] = belief[dead]                   # (the kernel skips them)
+        return pred
+
+
+_KERNELS = {}
+
+
+def _grid_kernels():
+    """:mod:`locbook.tracking._grid_kernels`, imported on first use (numba loads only when the compiled path runs)
+    and tried once per session on a small problem; None (the numpy path) without numba, or where numba cannot
+    compile or run them (with one warning, as the compiled EKF)."""
+    if "module" not in _KERNELS:
+        _KERNELS["module"] = None
+        if _compiled._numba_ready():
+            try:
+                from . import _grid_kernels as kernels
+                cells = np.array([[0.0, 0.0], [0.5, 0.0], [0.0, 0.5], [0.5, 0.5]])
+                lattice = _BandedLattice.build(cells, 0.5)
+                belief = lattice.predict(np.full((1, 4), 0.25), np.zeros(2), np.zeros(1, bool), kernels)
+                kernels._nb_update(belief, np.zeros((1, 4)), True, np.zeros((1, 1, 4)), np.zeros((1, 1)),
+                                   np.ones(1), np.zeros(1, bool), np.ascontiguousarray(cells.T), np.empty(4),
+                                   np.empty(4), np.empty((1, 2)), np.empty((1, 2, 2)), np.zeros(1, np.int64),
+                                   np.empty(1), np.zeros(1, np.bool_))
+                _KERNELS["module"] = kernels
+            except Exception as exc:    # numba could not compile or run the kernels here: numpy from now on
+                warnings.warn(f"locbook: the compiled grid filter failed ({type(exc).__name__}: {exc}); using the "
+                              "numpy loop (set LOCBOOK_NUMBA=0 to skip the attempt)", RuntimeWarning, stacklevel=3)
+    return _KERNELS["module"]
+
+
+def _fix_mean_table(fixed: dict, model: RssModel, cells_m, n_runs: int) -> None:
+    """The cell-by-anchor mean table ``(1 or R, C, m)`` and the sigma of ``model`` into ``fixed`` when its mean does
+    not change with the step (no per-step parameters; walls are fixed per cell too) and a per-run table fits in
+    :data:`_TABLE_MAX_VALUES`; else ``fixed`` stays empty and each step evaluates the model."""
+    if model.steps is not None:
+        return
+    runs = model.runs
+    if runs is not None and runs * cells_m.shape[0] * model.n_anchors > _TABLE_MAX_VALUES:
+        return
+    fixed["sigma"] = model._sigma(0, "the likelihood")
+    fixed["table"] = model.mean_rss_dbm(cells_m, 0)
+
+
+def _table_log_likelihood(rss, table, sigma, dim: int):
+    """:meth:`RssModel.log_likelihood` (``constant=False``) of the readings ``(R, m)`` from the mean table ``(1 or
+    R, C, m)``: the same arithmetic on the same blocks of runs, so the same bits."""
+    n_runs, n_cells = rss.shape[0], table.shape[1]
+    block = max(1, LIKELIHOOD_BLOCK_VALUES // max(1, n_cells * rss.shape[1] * (dim + 1)))
+    out = np.empty((n_runs, n_cells))
+    for start in range(0, n_runs, block):
+        rows = slice(start, start + block)
+        r = rss[rows]
+        resid = r[:, None, :] - (table[rows] if table.shape[0] > 1 else table)
+        resid = np.where(np.isnan(r)[:, None, :], 0.0, resid)
+        if np.ndim(sigma) == 1:
+            resid = resid / sigma
+            out[rows] = -0.5 * np.einsum("rpm,rpm->rp", resid, resid)
+        else:
+            out[rows] = -0.5 * np.einsum("rpm,rpm->rp", resid, resid) / np.square(sigma)
+    return out
+
+
 def grid_bayes_filter(rss_dbm, cells_m, model, spread_m: float = 0.5, *, n_steps: int | None = None,
                       velocity_m=None, initial_belief=None, transition: str = "auto") -> BayesFilterResult:
     """Grid-based Bayes filter (Ozkaya 2011, Eqs. (4.10)-(4.15)) over runs ``R`` and steps ``T``.
@@ -275,6 +463,20 @@ def grid_bayes_filter(rss_dbm, cells_m, model, spread_m: float = 0.5, *, n_steps
     equal to the dense one up to rounding); ``"auto"`` (default) takes the separable form when that lattice
     has at most 4 points per cell, which every regular grid has.
 
+    Speed (issue 31). With an :class:`~locbook.models.rss.RssModel` whose mean does not change with the step (no
+    per-step ``ref_power_dbm``, ``path_loss_exp`` or ``sigma_db``; walls allowed), the cell-by-anchor mean table is
+    computed once per call (per run for per-run anchors, up to :data:`_TABLE_MAX_VALUES` values) and each step's
+    log-likelihood from it, by the same arithmetic as :meth:`RssModel.log_likelihood
+    <locbook.models.rss.RssModel.log_likelihood>` (the same bits). From :data:`_GRID_MIN_WORK` runs x steps x
+    cells on, with numba (``LOCBOOK_NUMBA=0`` turns it off), compiled kernels (:mod:`locbook.tracking._grid_kernels`)
+    run the update (likelihood, posterior, moments, MAP, ``n_eff`` in a few passes per run) and, on a lattice whose
+    distinct coordinates are evenly spaced per axis (up to three axes; possibly masked), the separable prediction as
+    a banded correlation truncated where a kernel entry is below 2^-53 of its column's largest (``|u| > 8.57 D`` away
+    from the edges; :class:`_BandedLattice`). Their results equal the numpy path's to about 1e-14 (tests/
+    test_grid_speed.py), except where the posterior lies in the far tail of the prediction (readings contradicting
+    the motion model by more than about 8 D), where the truncated entries, negligible against their columns, are not
+    negligible against the tail.
+
     A run whose posterior collapses at a step (the likelihood is -inf, or NaN, on every cell the belief allows, e.g.
     a reading of 1e300 dBm) is flagged ``degenerate`` with that ``degenerate_step``; its estimates and final belief
     are NaN from that step on, and the other runs are unaffected. The call then emits one ``RuntimeWarning`` (the
@@ -291,15 +493,18 @@ def grid_bayes_filter(rss_dbm, cells_m, model, spread_m: float = 0.5, *, n_steps
             raise ValueError(f"n_steps {n_steps} disagrees with the {rss_dbm.shape[1]} steps of rss_dbm")
         n_runs, n_steps, _ = rss_dbm.shape
         detail, what = _reading_detail(rss_dbm), _LIKELIHOOD
+        fixed = {}                                  # the mean table, once (when the model's mean is fixed)
 
         def log_likelihood(t):
+            if "table" in fixed:
+                return _table_log_likelihood(rss_dbm[:, t], fixed["table"], fixed["sigma"], model.dim)
             return model.log_likelihood(rss_dbm[:, t], cells_m, t, constant=False)
     elif callable(model):
         n_steps = _callable_steps(rss_dbm, n_steps)
         cells_m = as_array("cells_m", cells_m, ndim=2)
         if cells_m.shape[1] < 1:
             raise ValueError(f"cells_m must have shape (C, dim) with dim >= 1, got {cells_m.shape}")
-        detail, what, n_runs = None, "log_likelihood", None
+        detail, what, n_runs, fixed = None, "log_likelihood", None, {}
 
         def log_likelihood(t):
             ll = np.asarray(model(cells_m, t), dtype=float)
@@ -330,34 +535,68 @@ def grid_bayes_filter(rss_dbm, cells_m, model, spread_m: float = 0.5, *, n_steps
     cov = np.empty((n_runs, n_steps, dim, dim))
     best = np.empty((n_runs, n_steps, dim))
     n_eff = np.empty((n_runs, n_steps))
-    separable = None
+    separable = banded = None
     if transition == "separable" or (
             transition == "auto" and _SeparableTransition.lattice_size(cells_m) <= 4 * n_cells):
         separable = _SeparableTransition(cells_m, spread_m)
+    if isinstance(model, RssModel) and n_steps:
+        _fix_mean_table(fixed, model, cells_m, n_runs)
+    kernels = None
+    if _compiled._NUMBA_ENABLED and n_runs * n_steps * n_cells >= _GRID_MIN_WORK:
+        kernels = _grid_kernels()
+        if kernels is not None and separable is not None:
+            banded = _BandedLattice.build(cells_m, spread_m)
     dense, last_v = None, None
     dead = np.zeros(n_runs, bool)
     dead_step = np.full(n_runs, -1, np.int64)
+    if kernels is not None:
+        points = np.ascontiguousarray(cells_m.T)
+        llb, wb = np.empty(n_cells), np.empty(n_cells)
+        step_mean, step_cov = np.empty((n_runs, dim)), np.empty((n_runs, dim, dim))
+        step_best, step_n_eff = np.zeros(n_runs, np.int64), np.empty(n_runs)
+        use_table = "table" in fixed
+        table_t = (np.ascontiguousarray(np.swapaxes(fixed["table"], 1, 2)) if use_table else np.zeros((1, 1, 1)))
+        inv_sigma = (np.broadcast_to(1.0 / np.asarray(fixed["sigma"], float), (rss_dbm.shape[2],)).copy()
+                     if use_table else np.zeros(1))
     for t in range(n_steps):
         if t > 0:
-            predicted = None if separable is None else separable.predict(belief, velocity[t])
+            predicted = None
+            if banded is not None:
+                predicted = banded.predict(belief, velocity[t], dead, kernels)
+            if predicted is None and separable is not None:
+                predicted = separable.predict(belief, velocity[t])
             if predicted is None:
                 if dense is None or not np.array_equal(velocity[t], last_v):
                     dense, last_v = grid_transition_matrix(cells_m, spread_m, velocity[t]), velocity[t]
                 predicted = belief @ dense.T
             belief = predicted
-        log_post = np.log(np.maximum(belief, 1e-300)) + (first if t == 0 and first is not None else log_likelihood(t))
-        top = log_post.max(axis=-1)
-        collapsed = ~dead & (np.isnan(top) | np.isinf(top))
+        if kernels is not None:                     # the fused update (_grid_kernels._nb_update)
+            belief = np.ascontiguousarray(belief)
+            ll = None if use_table else np.ascontiguousarray(
+                first if t == 0 and first is not None else log_likelihood(t), dtype=float)
+            hit = np.zeros(n_runs, np.bool_)
+            kernels._nb_update(belief, np.zeros((1, 1)) if ll is None else ll, use_table, table_t,
+                               np.ascontiguousarray(rss_dbm[:, t]) if use_table else np.zeros((1, 1)), inv_sigma,
+                               dead, points, llb, wb, step_mean, step_cov, step_best, step_n_eff, hit)
+            collapsed = hit & ~dead
+        else:
+            log_post = np.log(np.maximum(belief, 1e-300)) + (first if t == 0 and first is not None
+                                                             else log_likelihood(t))
+            top = log_post.max(axis=-1)
+            collapsed = ~dead & (np.isnan(top) | np.isinf(top))
         dead_step[collapsed] = t
         dead |= collapsed
         if n_runs and dead.all():
             raise _collapse_error(dead_step, what, detail)
-        if dead.any():              # a collapsed run goes on with a uniform belief (NaN outputs): others unaffected
-            log_post[dead] = 0.0
-        belief = _normalise_log(log_post)
-        mean[:, t], cov[:, t] = weighted_moments(belief, cells_m)
-        best[:, t] = cells_m[np.argmax(belief, axis=-1)]
-        n_eff[:, t] = effective_sample_size(belief)
+        if kernels is not None:
+            mean[:, t], cov[:, t], best[:, t], n_eff[:, t] = step_mean, step_cov, cells_m[step_best], step_n_eff
+        else:
+            if dead.any():          # a collapsed run goes on with a uniform belief (NaN outputs): others unaffected
+                log_post[dead] = 0.0
+            belief = _normalise_log(log_post)
+            mean[:, t], cov[:, t] = weighted_moments(belief, cells_m)
+            best[:, t] = cells_m[np.argmax(belief, axis=-1)]
+            n_eff[:, t] = effective_sample_size(belief)
         if dead.any():
             mean[dead, t], cov[dead, t], best[dead, t], n_eff[dead, t] = np.nan, np.nan, np.nan, np.nan
     if dead.any():

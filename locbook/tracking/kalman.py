@@ -77,7 +77,8 @@ def kalman_filter(F, Q, x0, P0, measurements, *, B=None, u=None, record=None, pr
                          f"{[type(m).__name__ for m in measurements]} (RSS and nonlinear streams: "
                          "extended_kalman_filter or unscented_kalman_filter)")
     setup = _setup(F, Q, x0, P0, measurements, record, "kalman_filter", B, u)
-    if variant == "standard" and joseph and not outputs and not _covariance_shared_throughout(setup, measurements):
+    if variant == "standard" and joseph and not outputs and (
+            _compiled._small_batch(setup) or not _covariance_shared_throughout(setup, measurements)):
         compiled = _compiled._compiled_ekf(setup, measurements, predict_first)
         if compiled is not None:
             return _flag(compiled, window, probability)
@@ -118,15 +119,16 @@ def extended_kalman_filter(F, Q, x0, P0, measurements, *, B=None, u=None, record
     None turns the flag off. A flag means the run's innovations stay inconsistent with its covariance: a lost track,
     or (at many readings per step) a noise level far off (the results module's docstring gives the probabilities).
 
-    Speed: when the covariance is the same in every run it is updated once per step; otherwise, with numba installed,
-    compiled loops run blocks of runs (``locbook.tracking._compiled``; ``LOCBOOK_NUMBA=0`` turns them off; not with
-    ``outputs``), else the numpy loop. All paths give the same numbers to round-off.
+    Speed: compiled loops (numba, ``locbook.tracking._compiled``) run blocks of runs, except when the covariance is the
+    same in every run of a large batch (more than one block of runs): numpy then updates it once per step for all runs.
+    ``LOCBOOK_NUMBA=0`` turns the compiled loops off; they do not produce ``outputs`` and do not take nonlinear or
+    time-varying motion (the numpy loop runs those). All paths give the same numbers to round-off.
     """
     window, probability = _check_guard(divergence_window, divergence_probability)
     outputs = _check_outputs(outputs)
     measurements = _streams(measurements)
     setup = _setup(F, Q, x0, P0, measurements, record, "extended_kalman_filter", B, u)
-    if not outputs and not _covariance_shared_throughout(setup, measurements):
+    if not outputs and (_compiled._small_batch(setup) or not _covariance_shared_throughout(setup, measurements)):
         compiled = _compiled._compiled_ekf(setup, measurements, predict_first)
         if compiled is not None:
             return _flag(compiled, window, probability)

@@ -36,9 +36,21 @@ resamples, so the other runs are bit-identical). -inf for some particles only is
 A collapse is never silent: the call emits one ``RuntimeWarning`` with the number of collapsed runs and the first
 (run, step); when EVERY run collapses (nothing can be estimated: typically a units bug, or a likelihood that overflows)
 it raises a ValueError naming the likelihood and the first step and run instead of returning NaN.
+
+Compiled path (issue 31): from :data:`_NUMBA_MIN_PARTICLES` particles in all (runs x N) on, with numba installed and
+not turned off (``LOCBOOK_NUMBA=0``), the kernels of :mod:`locbook.tracking._particle_kernels` run the hot loop with
+no temporaries of the size of the cloud: an RssModel's log-likelihood in one pass over the particles
+(:func:`_fused_rss_log_likelihood`; walls with a nonzero loss stay in numpy), the default random walk in place, and,
+with ``weight_smoothing="none"``, the normalisation, the moments, N_eff and systematic resampling (``"standard"``
+cumulative sum; the other schemes draw in numpy). The random stream is the numpy path's draw for draw, and so are the
+weight normalisation (numpy's pairwise sum) and the systematic ancestors; the likelihood differs from numpy's in the
+last bits (its log10 is within 2 ulp of numpy's, its sum over the anchors is in order), so the weights agree to about
+1e-14 relative, the resampling decisions and particles are the numpy path's unless a sample point falls within that
+of a cumulative weight, and the estimates agree to round-off (tests/test_particle_speed.py).
 """
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -49,6 +61,7 @@ from ..models.rss import RssModel
 from .bayes import (BayesFilterResult, _LIKELIHOOD, _callable_steps, _collapse_error, _normalise_log,
                     _reading_detail, _velocity_schedule, _warn_collapse, weighted_moments)
 from .resampling import RESAMPLING_CDFS, RESAMPLING_METHODS, effective_sample_size, resample, systematic_resample
+from . import _compiled
 
 __all__ = ["particle_filter", "ParticleFilterResult", "kernel_map_estimate", "WEIGHT_SMOOTHINGS"]
 
@@ -56,6 +69,84 @@ WEIGHT_SMOOTHINGS = ("none", "sqrt", "sqrt_corrected")
 
 #: the random walk's step D when ``spread_m`` is not given (m)
 DEFAULT_SPREAD_M = 0.5
+#: the compiled kernels run from this many particles (runs x N) on; smaller filters stay in numpy (no compilation
+#: wait for a few hundred particles). Read at call time (tests set it to 0).
+_NUMBA_MIN_PARTICLES = 20000
+#: the compiled random walk draws its normals in blocks of runs of about this many values (the same stream as one
+#: draw of the whole cloud, in a buffer of 512 KiB)
+_NOISE_BLOCK_VALUES = 1 << 16
+
+
+_KERNELS = {"ok": None}
+
+
+def _kernels_ok() -> bool:
+    """Compile (or load) the kernels once per session on a tiny problem; if numba cannot, warn once and turn the
+    compiled paths off (``_compiled._NUMBA_ENABLED``), as the compiled EKF does: numpy from then on."""
+    if _KERNELS["ok"] is None:
+        from . import _particle_kernels as K
+        try:
+            x, w, z1 = np.zeros((1, 2, 2)), np.full((1, 2), 0.5), np.zeros((1, 2))
+            K._nb_rss_loglik(x, np.arange(2), np.ones((1, 1, 2)), np.zeros((1, 1)), np.zeros((1, 1)),
+                             np.zeros((1, 1)), np.ones((1, 1)), np.ones((1, 1)), False, 0.1, 1.0, z1.copy())
+            K._nb_random_walk(x.copy(), np.zeros(2), np.ones(2), x, True, np.zeros(2), np.ones(2), True)
+            K._nb_normalise(z1.copy(), z1.copy(), np.zeros(1, bool), w.copy(), z1.copy(), True, np.zeros(1, bool))
+            K._nb_moments(w, x, np.zeros((1, 2)), np.zeros((1, 2, 2)), np.zeros((1, 2)), np.zeros(1))
+            K._nb_systematic(w, np.zeros(1), np.ones(1, bool), x, x.copy(), z1.copy())
+            _KERNELS["ok"] = True
+        except Exception as exc:    # numba could not compile or run the kernels here
+            _KERNELS["ok"] = False
+            _compiled._NUMBA_ENABLED = False
+            warnings.warn(f"locbook: the compiled particle filter failed ({type(exc).__name__}: {exc}); using numpy "
+                          "(set LOCBOOK_NUMBA=0 to skip the attempt)", RuntimeWarning, stacklevel=3)
+    return _KERNELS["ok"]
+
+
+def _use_compiled(n_particles: int) -> bool:
+    """True when the compiled kernels should run for ``n_particles`` in all (numba installed and enabled:
+    ``locbook.tracking._compiled._NUMBA_ENABLED``, read at call time, and the kernels compile here)."""
+    return bool(_compiled._NUMBA_ENABLED and n_particles >= _NUMBA_MIN_PARTICLES and _compiled._numba_ready()
+                and _kernels_ok())
+
+
+def _fused_rss_log_likelihood(model: RssModel, rss_dbm, particles, step: int, position_index=None, out=None):
+    """``model.log_likelihood(rss_dbm, particles[..., position_index], step, constant=False)`` ``(R, N)`` in one
+    compiled pass over the particles (:func:`~locbook.tracking._particle_kernels._nb_rss_loglik`: distance, clamp,
+    tag height, per-anchor or per-run parameters and anchors, NaN readings left out), with no ``(R, N, m)``
+    temporary. ``rss_dbm`` ``(R, m)`` checked readings; ``particles`` ``(R, N, n)`` or shared ``(N, n)``;
+    ``position_index`` the position columns (default the first ``model.dim``); ``out`` an ``(R, N)`` buffer.
+    None when the model has walls with a nonzero loss (the numpy path covers them). Coordinates or distances that
+    are not finite are handed to :meth:`~locbook.models.rss.RssModel.log_likelihood`, which raises its error."""
+    ch = model.channel
+    if model.walls_m is not None and ch.wall_attenuation_db != 0.0:
+        return None
+    from . import _particle_kernels as K          # lazy: numba loads only when the compiled path runs
+    sigma = np.asarray(model._sigma(step, "the likelihood"), dtype=float)
+    z = np.ascontiguousarray(rss_dbm, dtype=float)
+    x = np.asarray(particles, dtype=float)
+    x3 = x if x.ndim == 3 else x[None]
+    m, dim = model.n_anchors, model.dim
+    pidx = np.arange(dim, dtype=np.int64) if position_index is None else np.asarray(position_index, np.int64)
+    anchors = model.anchors_m if model.anchors_m.ndim == 3 else model.anchors_m[None]
+    plan = np.ascontiguousarray(anchors[..., :dim], dtype=float)
+    vert2 = (np.zeros((1, m)) if model.tag_height_m is None
+             else np.ascontiguousarray(np.square(anchors[..., -1] - model.tag_height_m)))
+
+    def per_step(value):                          # (1|R, m) at the step
+        value = np.asarray(value, dtype=float)
+        return np.ascontiguousarray(value[:, step] if value.ndim == 3 else np.broadcast_to(value, (m,))[None])
+
+    tenn = 10.0 * np.asarray(ch.path_loss_exp, dtype=float)       # numpy's (10 n) log10(d / d0), the same rounding
+    per_anchor = sigma.ndim == 1
+    sig = (sigma[None] if per_anchor else sigma.reshape(-1, 1)).astype(float)
+    R = z.shape[0]
+    out = np.empty((R, x3.shape[1])) if out is None else out
+    if K._nb_rss_loglik(x3, pidx, plan, vert2, z, per_step(ch.ref_power_dbm), per_step(tenn),
+                        np.ascontiguousarray(sig), per_anchor, float(ch.min_distance_m), float(ch.ref_distance_m),
+                        out):
+        return out
+    positions = x if position_index is None else x[..., pidx]
+    return model.log_likelihood(z, positions, step, constant=False)
 
 
 @dataclass(frozen=True)
@@ -209,6 +300,7 @@ def particle_filter(rss_dbm, model, rng: np.random.Generator, *, n_steps: int | 
     weights and log-weights, and ``clouds`` at ``cloud_steps``. Collapsed runs: module docstring.
     """
     _check_rng(rng)
+    given_transition = transition is not None     # a caller's transition may keep the arrays it returns
     check_choice("resampling", resampling, RESAMPLING_METHODS)
     check_choice("resampling_cdf", resampling_cdf, RESAMPLING_CDFS)
     check_choice("weight_smoothing", weight_smoothing, WEIGHT_SMOOTHINGS)
@@ -286,10 +378,18 @@ def particle_filter(rss_dbm, model, rng: np.random.Generator, *, n_steps: int | 
         detail, what = _reading_detail(rss_dbm), _LIKELIHOOD
 
         if kin is None:
-            def log_likelihood(particles, t):
+            def log_likelihood(particles, t, out=None):
+                if compiled:
+                    ll = _fused_rss_log_likelihood(model, rss_dbm[:, t], particles, t, out=out)
+                    if ll is not None:
+                        return ll
                 return model.log_likelihood(rss_dbm[:, t], particles, t, constant=False)
         else:
-            def log_likelihood(particles, t):         # the RSS model sees the positions of the states
+            def log_likelihood(particles, t, out=None):   # the RSS model sees the positions of the states
+                if compiled:
+                    ll = _fused_rss_log_likelihood(model, rss_dbm[:, t], particles, t, kin.position_index, out)
+                    if ll is not None:
+                        return ll
                 return model.log_likelihood(rss_dbm[:, t], particles[..., kin.position_index], t, constant=False)
     elif callable(model):
         n_steps, n_runs, log_likelihood = _callable_steps(rss_dbm, n_steps), None, model
@@ -367,6 +467,11 @@ def particle_filter(rss_dbm, model, rng: np.random.Generator, *, n_steps: int | 
         raise ValueError(f"region_m has {bounds[0].size} axes, the particles {d}")
 
     # -- the motion model ----------------------------------------------------------------------------
+    compiled = _use_compiled(R * n)
+    if compiled:
+        from . import _particle_kernels as K      # lazy: numba loads only when the compiled path runs
+        particles = np.ascontiguousarray(particles, dtype=float)
+    own_motion = False                        # the compiled random walk moves our own buffer in place
     fresh = False
     if kin is not None:
         def transition(x, t, rng):
@@ -384,10 +489,24 @@ def particle_filter(rss_dbm, model, rng: np.random.Generator, *, n_steps: int | 
             raise ValueError("spread_m = inf (a fresh uniform proposal) must be a scalar and needs region_m")
         velocity = _velocity_schedule(velocity_m, n_steps, d)
         moves = bool(np.any(spread > 0))
+        own_motion = compiled and not fresh
+        if own_motion:                        # normals drawn in blocks of runs: the same stream, no cloud-sized buffer
+            block = max(1, _NOISE_BLOCK_VALUES // max(1, n * d))
+            noise = np.empty((max(1, min(block, R)), n, d)) if moves else np.empty((1, 1, d))
+            spread_d = np.ascontiguousarray(np.broadcast_to(spread, (d,)), dtype=float)
+            velocity_c = np.ascontiguousarray(velocity, dtype=float)
+            lower_c, upper_c = (np.zeros(d), np.ones(d)) if bounds is None else bounds
 
         def transition(x, t, rng):
             if fresh:                         # fresh draws from the uniform proposal over the region
                 return bounds[0] + (bounds[1] - bounds[0]) * rng.random(x.shape)
+            if own_motion:                    # x + v + D n in place, n drawn as numpy's standard_normal(x.shape)
+                for r0 in range(0, R, noise.shape[0] if moves else R):
+                    xs = x[r0:r0 + noise.shape[0]] if moves else x
+                    if moves:
+                        rng.standard_normal(out=noise[:xs.shape[0]])
+                    K._nb_random_walk(xs, velocity_c[t], spread_d, noise, moves, lower_c, upper_c, bounds is not None)
+                return x
             if moves:
                 x = x + velocity[t] + spread * rng.standard_normal(x.shape)
             elif velocity_m is not None:
@@ -407,6 +526,13 @@ def particle_filter(rss_dbm, model, rng: np.random.Generator, *, n_steps: int | 
     clouds = {}
     dead = np.zeros(R, bool)
     dead_step = np.full(R, -1, np.int64)
+    # compiled update (module docstring): buffers reused at every step; the particles are resampled into `spare` and
+    # the two swap (a caller's transition keeps its arrays: then a fresh target each step)
+    fast = compiled and weight_smoothing == "none"
+    if fast:
+        w = np.empty((R, n))
+        ll_buf = np.empty((R, n)) if isinstance(model, RssModel) else None
+        spare = np.empty((R, n, d)) if not given_transition else None
     for t in range(n_steps):
         last = t == n_steps - 1
         if t > 0:
@@ -415,61 +541,89 @@ def particle_filter(rss_dbm, model, rng: np.random.Generator, *, n_steps: int | 
                 raise ValueError(f"transition must return ({R}, {n}, {d}), got {particles.shape}")
             if fresh:                         # the old weights belonged to the old particles
                 log_w = np.full((R, n), -np.log(n))
-        ll = np.asarray(log_likelihood(particles, t), dtype=float)
-        if ll.shape != (R, n):
-            raise ValueError(f"log_likelihood must return ({R}, {n}), got {ll.shape}")
-        logits = log_w + ll
-        top = logits.max(axis=-1)
-        collapsed = ~dead & (np.isnan(top) | np.isinf(top))      # -inf for every particle, or NaN / +inf anywhere
-        dead_step[collapsed] = t
-        dead |= collapsed
-        if R and dead.all():
-            raise _collapse_error(dead_step, what, detail)
-        if dead.any():              # a collapsed run goes on with equal weights (NaN outputs): others unaffected
-            logits[dead] = 0.0
-        w = _normalise_log(logits)
-        if last:
-            final_log_w = _log_normalise(logits)
-        if weight_smoothing == "sqrt":
-            w = np.sqrt(w)
-            w /= w.sum(axis=-1, keepdims=True)
+        if fast:
+            ll = np.asarray(log_likelihood(particles, t) if ll_buf is None else
+                            log_likelihood(particles, t, out=ll_buf), dtype=float)
+            if ll.shape != (R, n):
+                raise ValueError(f"log_likelihood must return ({R}, {n}), got {ll.shape}")
+            if ll is not ll_buf:              # the kernel overwrites it with the logits: never a caller's array
+                ll = np.array(ll, dtype=float, order="C")
+            collapsed = np.zeros(R, bool)
+            K._nb_normalise(log_w, ll, dead, w, final_log_w, last, collapsed)
+            dead_step[collapsed] = t
+            dead |= collapsed
+            if R and dead.all():
+                raise _collapse_error(dead_step, what, detail)
+            K._nb_moments(w, particles, mean[:, t], cov[:, t], best[:, t], n_eff[:, t])
+            if t in cloud_steps:
+                clouds[t] = particles.copy()
+            draw_w = w
+        else:
+            ll = np.asarray(log_likelihood(particles, t), dtype=float)
+            if ll.shape != (R, n):
+                raise ValueError(f"log_likelihood must return ({R}, {n}), got {ll.shape}")
+            logits = log_w + ll
+            top = logits.max(axis=-1)
+            collapsed = ~dead & (np.isnan(top) | np.isinf(top))      # -inf for every particle, or NaN / +inf anywhere
+            dead_step[collapsed] = t
+            dead |= collapsed
+            if R and dead.all():
+                raise _collapse_error(dead_step, what, detail)
+            if dead.any():              # a collapsed run goes on with equal weights (NaN outputs): others unaffected
+                logits[dead] = 0.0
+            w = _normalise_log(logits)
             if last:
-                final_log_w = _log_normalise(0.5 * final_log_w)
-        mean[:, t], cov[:, t] = weighted_moments(w, particles)
-        best[:, t] = particles[np.arange(R), np.argmax(w, axis=-1)]
-        if t in cloud_steps:
-            clouds[t] = particles.copy()
-        draw_w = w
-        if weight_smoothing == "sqrt_corrected":
-            draw_w = np.sqrt(w)
-            draw_w /= draw_w.sum(axis=-1, keepdims=True)
-        n_eff[:, t] = effective_sample_size(draw_w)
+                final_log_w = _log_normalise(logits)
+            if weight_smoothing == "sqrt":
+                w = np.sqrt(w)
+                w /= w.sum(axis=-1, keepdims=True)
+                if last:
+                    final_log_w = _log_normalise(0.5 * final_log_w)
+            mean[:, t], cov[:, t] = weighted_moments(w, particles)
+            best[:, t] = particles[np.arange(R), np.argmax(w, axis=-1)]
+            if t in cloud_steps:
+                clouds[t] = particles.copy()
+            draw_w = w
+            if weight_smoothing == "sqrt_corrected":
+                draw_w = np.sqrt(w)
+                draw_w /= draw_w.sum(axis=-1, keepdims=True)
+            n_eff[:, t] = effective_sample_size(draw_w)
         if resample_threshold is not None:
             do = n_eff[:, t] < resample_threshold * n
         else:
             do = np.full(R, resample_every is None or (t + 1) % resample_every == 0)
         resampled[:, t] = do
         # drawn for every run so that the stream does not depend on `do`
-        if resampling == "systematic":
-            u = rng.random(R)
-            idx = systematic_resample(draw_w[do], u[do], resampling_cdf) if do.any() else None
+        if fast and resampling == "systematic" and resampling_cdf == "standard":
+            u = rng.random(R)                 # the same draw; ancestors, copies and log_w in one pass
+            target = np.empty((R, n, d)) if spare is None else spare
+            K._nb_systematic(w, u, do, particles, target, log_w)
+            particles, spare = target, (None if spare is None else particles)
+            if last and do.any():
+                final_log_w[do] = np.log(1.0 / n)
         else:
-            idx = resample(draw_w, rng, resampling)[do]
-        if do.any():
-            particles[do] = particles[do][np.arange(idx.shape[0])[:, None], idx]
-            if weight_smoothing == "sqrt_corrected":
-                new_w = np.take_along_axis(w[do], idx, -1) / np.take_along_axis(draw_w[do], idx, -1)
-                w[do] = new_w / new_w.sum(axis=-1, keepdims=True)
+            if resampling == "systematic":
+                u = rng.random(R)
+                idx = systematic_resample(draw_w[do], u[do], resampling_cdf) if do.any() else None
             else:
-                w[do] = 1.0 / n
-            if last:
-                final_log_w[do] = np.log(w[do])
-        log_w = np.log(np.maximum(w, 1e-300))
+                idx = resample(draw_w, rng, resampling)[do]
+            if do.any():
+                particles[do] = particles[do][np.arange(idx.shape[0])[:, None], idx]
+                if weight_smoothing == "sqrt_corrected":
+                    new_w = np.take_along_axis(w[do], idx, -1) / np.take_along_axis(draw_w[do], idx, -1)
+                    w[do] = new_w / new_w.sum(axis=-1, keepdims=True)
+                else:
+                    w[do] = 1.0 / n
+                if last:
+                    final_log_w[do] = np.log(w[do])
+            log_w = np.log(np.maximum(w, 1e-300))
         if dead.any():
             mean[dead, t], cov[dead, t], best[dead, t], n_eff[dead, t] = np.nan, np.nan, np.nan, np.nan
             resampled[dead, t] = False
             if t in cloud_steps:
                 clouds[t][dead] = np.nan
+    if fast:
+        w = ll_buf = spare = None             # the loop's buffers go before the result's arrays are made
     weights = np.exp(log_w)
     weights /= weights.sum(axis=-1, keepdims=True)
     if dead.any():

@@ -30,9 +30,18 @@ sum to ``2n / (n + lambda)``) and ``innovation_noise=False`` (Eq. (3.26) without
 be evaluated (an ``n x m`` times ``n x m`` product) and has no variant.
 
 Missing readings follow the library's rule: a NaN component is left out of the update (zero gain column).
+
+Speed (issue 31). With numba installed and enabled (``LOCBOOK_NUMBA``, :mod:`locbook.tracking._compiled`), linear
+motion (F, Q without run axes) and LinearMeasurement, RssMeasurement and inertial
+(:func:`locbook.models.imu.inertial_measurement_function`) streams, the same recursion runs compiled on blocks of runs
+(:mod:`locbook.tracking._ukf_kernels`); anything it cannot do (a covariance that is not positive definite, the
+eigenvalue guard on a multi-reading update, a state that overflows) sends the problem back to the numpy loop, which
+raises the library's error or applies the guard. Both paths give the same numbers to round-off
+(tests/test_ukf_compiled.py).
 """
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -365,6 +374,11 @@ def unscented_kalman_filter(F, Q, x0, P0, measurements, *, B=None, u=None, alpha
     spread far beyond the measurement's linear range, e.g. sigma = 1e-3 dB with Q = 1e4 at alpha = 1; or the
     round-off of alpha = 1e-3 over 1e5 steps): its error then grows far beyond the reported covariance, the NIS
     exceeds the chi-square bound at every update and the run is flagged ``diverged`` (with ``diverged_step``).
+
+    Speed: with numba installed, linear motion (F, Q without run axes, no control input), LinearMeasurement,
+    RssMeasurement and inertial (:func:`locbook.models.imu.inertial_measurement_function`) streams and no ``outputs``,
+    compiled loops run blocks of runs (:mod:`locbook.tracking._ukf_kernels`; ``LOCBOOK_NUMBA=0`` turns them off), else
+    the numpy loop; both give the same numbers to round-off (amplified some 1e6 times at alpha = 1e-3).
     """
     check_choice("weights", weights, UKF_WEIGHTS)
     window, probability = _check_guard(divergence_window, divergence_probability)
@@ -425,6 +439,98 @@ def unscented_kalman_filter(F, Q, x0, P0, measurements, *, B=None, u=None, alpha
         S = np.where(np.isnan(var)[..., :, None] | np.isnan(var)[..., None, :], np.nan, S)
         return _Out(x, P, nis, dof, ll, nu, S)
 
+    if not outputs:
+        compiled = _compiled_ukf(setup, measurements, predict_first, w, innovation_noise)
+        if compiled is not None:
+            return _flag(compiled, window, probability)
     predict = _unscented_predictor(setup, w) if setup.motion is not None else None
     res = _run(setup, measurements, update, predict_first, outputs=outputs, predict=predict)
     return _flag(replace(res, floored_updates=guard[0]), window, probability)
+
+
+_LANES_MAX = 64      # runs per block of the compiled UKF (the innermost axis of its buffers)
+
+
+def _lanes(B: int) -> int:
+    """Runs per block of the compiled UKF for ``B`` runs: blocks of equal size up to ``_LANES_MAX`` (500 runs: 8
+    blocks of 63 lanes; measured faster than 64, whose power-of-two strides collide in the cache)."""
+    blocks = -(-B // _LANES_MAX)
+    return -(-B // blocks)
+
+
+def _inertial_parameters(meas: NonlinearMeasurement):
+    """``(body frame, acceleration indices, heading index, yaw-rate index)`` when the stream's ``h`` was made by
+    :func:`locbook.models.imu.inertial_measurement_function` (which records them on ``h.inertial``), with a fixed R and
+    the linear residual and mean; else None (the stream then stays in numpy)."""
+    spec = getattr(meas.h, "inertial", None)
+    if (spec is None or callable(meas.R) or meas.residual is not None or meas.mean is not None
+            or np.shape(meas.z)[-1] != 3 or len(spec[1]) != 2):
+        return None
+    body, ia, heading, yaw_rate = spec
+    return bool(body), ia[0], ia[1], heading, yaw_rate
+
+
+def _compiled_ukf(setup, measurements, predict_first: bool, weights: UnscentedWeights, innovation_noise: bool):
+    """The UKF by the compiled kernel (:mod:`locbook.tracking._ukf_kernels`) when it applies (numba installed and
+    enabled, F and Q without run axes and no control input, LinearMeasurement, RssMeasurement and inertial streams,
+    at least ``_NUMBA_MIN_WORK`` run-steps, the EKF's threshold), else None: the numpy loop then runs. Also None when
+    an update fails or needs the eigenvalue guard on more than one reading (status of the kernel): the numpy loop then
+    redoes the filter and raises the library's error or applies the guard."""
+    from . import _compiled
+    F, Q, batch, T = setup.F, setup.Q, setup.batch, setup.T
+    B = int(np.prod(batch, dtype=np.int64))
+    if not _compiled._NUMBA_ENABLED or not setup.plain_motion or any(setup.per_step_streams):
+        return None                 # nonlinear or time-varying motion, a control input, H or R per step: numpy
+    if F.ndim != 2 or Q.ndim != 2 or B * T < _compiled._NUMBA_MIN_WORK or B == 0 or T == 0:
+        return None
+    if not (np.array_equal(Q, Q.T) and np.array_equal(setup.P, _mT(setup.P))):
+        return None                 # the kernel keeps P exactly symmetric
+    n = setup.n
+    packable, inertial = [], []
+    for meas in measurements:
+        if isinstance(meas, (LinearMeasurement, RssMeasurement)):
+            packable.append(meas)
+            inertial.append((0, 0, 0, 0, 0))
+            continue
+        params = _inertial_parameters(meas) if isinstance(meas, NonlinearMeasurement) else None
+        if params is None or max(params[1:]) >= n:
+            return None
+        H = np.zeros((3, n))
+        H[0, list(params[1:])] = 1.0             # marks the components the readings depend on
+        packable.append(LinearMeasurement(np.zeros((1, 3)), H, meas.R))
+        inertial.append(tuple(int(v) for v in params))
+    if not _compiled._numba_ready():
+        return None
+    packed = _compiled._pack_streams(setup, packable, B)
+    if packed is None:
+        return None
+    kinds, nz, nnz = packed[0].copy(), packed[2], packed[3]
+    iner = np.array(inertial, dtype=np.int64)
+    kinds[np.array([isinstance(meas, NonlinearMeasurement) for meas in measurements])] = 4    # the inertial kind
+    umax = np.array([nz[s, :nnz[s]].max() if nnz[s] else -1 for s in range(len(measurements))], dtype=np.int64)
+    S = setup.steps.size
+    Fi, Fj = np.nonzero(F)
+    P0 = setup.P[None] if setup.P.ndim == 2 else np.broadcast_to(setup.P, batch + (n, n)).reshape(B, n, n)
+    lanes = _lanes(B)
+    out_x, out_P = np.empty((B, S, n)), np.empty((B, S, n, n))
+    out_nis, out_dof, out_ll = np.empty((B, T)), np.empty((B, T), np.int64), np.empty((B, T))
+    out_floored = np.zeros(B, np.int64)
+    args = (Fi.astype(np.int64), Fj.astype(np.int64), np.ascontiguousarray(F[Fi, Fj]), np.ascontiguousarray(Q),
+            np.ascontiguousarray(setup.x.reshape(B, n)), np.ascontiguousarray(P0), bool(predict_first),
+            setup.slot.astype(np.int64), np.array(setup.active, dtype=np.bool_).reshape(-1, T), kinds,
+            *packed[1:], iner, umax, np.ascontiguousarray(weights.mean, dtype=float),
+            np.ascontiguousarray(weights.cov, dtype=float), float(n + weights.lam), bool(innovation_noise),
+            lanes, out_x, out_P, out_nis, out_dof, out_ll, out_floored)
+    from . import _ukf_kernels       # lazy: numba loads only when the compiled path runs
+    try:                            # only the kernel here: an error of ours must not turn numba off for the session
+        status, _ = _ukf_kernels._nb_ukf(*args)
+    except Exception as exc:        # numba could not compile or run the kernel here: numpy from now on
+        _compiled._NUMBA_ENABLED = False
+        warnings.warn(f"locbook: the compiled UKF failed ({type(exc).__name__}: {exc}); using the numpy loop "
+                      "(set LOCBOOK_NUMBA=0 to skip the attempt)", RuntimeWarning, stacklevel=3)
+        return None
+    if status:
+        return None
+    return KalmanResult(out_x.reshape(batch + (S, n)), out_P.reshape(batch + (S, n, n)), setup.steps,
+                        log_likelihood=out_ll.reshape(batch + (T,)), nis=out_nis.reshape(batch + (T,)),
+                        nis_dof=out_dof.reshape(batch + (T,)), floored_updates=int(out_floored.sum()))

@@ -1,0 +1,142 @@
+"""How far the compiled filters are from their arithmetic floor (issue 31: "EKF and UKF within 5x of their
+arithmetic floor per run-step").
+
+    python benchmarks/bench_floor.py [full|tiny]
+
+The floor of a workload is its floating-point operation count divided by the rate this machine attains on the same
+data layout. Both are stated here so that the figure can be checked:
+
+- The count (:func:`ekf_step_flops`) is the arithmetic of the algorithm the kernel implements, counted at its minimum:
+  a multiply-add is 2 operations, a division, square root or logarithm 1 (so the floor is optimistic for the
+  transcendental functions), only the nonzero entries of F and H are used, and symmetric results are computed as
+  one triangle. The kernel's Joseph-form update ``P - K (H P) + (K S - P H^T) K^T`` is counted as written (it is
+  the update the library chose for its numerical properties; the cheaper ``P - K H P`` would lower the floor by the
+  ``(K S - P H^T) K^T`` term).
+- The rate (:func:`attainable_rate`) is measured here, in the same process, by a compiled kernel doing batched 6 x 6
+  matrix products in the filters' layout (runs side by side on the innermost axis, ``W`` of them): the rate of
+  well-vectorised multiply-adds on data that stays in cache, i.e. the best the filters' inner loops can reach.
+  It is measured at 64 lanes for every workload: a batch of 10 runs has the same floor per run-step as one of 500
+  (a small batch that fills fewer lanes pays for that in the ratio, not in a lower floor).
+
+The row's ratio is floor / locbook: at least 0.2 means within 5x of the floor.
+"""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import _harness as hx  # noqa: E402
+import bench_dogan_filters as bd  # noqa: E402
+
+
+try:
+    import numba
+except ImportError:                     # numba is a dependency of locbook; this only guards a broken install
+    numba = None
+
+
+def _rate_kernel(A, B, C, reps):
+    """``reps`` times C = A B for 6 x 6 matrices, ``W`` of them side by side on the last axis (2 * 6^3 operations per
+    product and lane)."""
+    n, W = A.shape[0], A.shape[2]
+    for _ in range(reps):
+        for i in range(n):
+            for j in range(n):
+                for w in range(W):
+                    C[i, j, w] = 0.0
+                for k in range(n):
+                    for w in range(W):
+                        C[i, j, w] += A[i, k, w] * B[k, j, w]
+        for i in range(n):                  # feed C back so that the loop is not optimised away
+            for w in range(W):
+                A[i, i, w] = 0.5 * A[i, i, w] + 1e-3 * C[i, i, w]
+    return C[0, 0, 0]
+
+
+_rate_compiled = numba.njit(cache=True, nogil=True, error_model="numpy")(_rate_kernel) if numba else _rate_kernel
+
+
+def attainable_rate(width: int, seconds: float = 0.3) -> float:
+    """Operations per second of the compiled 6 x 6 products at ``width`` lanes (the median of 5 timed batches)."""
+    rng = np.random.default_rng(0)
+    A, B = rng.standard_normal((6, 6, width)), rng.standard_normal((6, 6, width))
+    C = np.empty_like(A)
+    _rate_compiled(A, B, C, 1)              # compile or load
+    per_rep = 2.0 * 6**3 * width
+    reps = max(1, int(seconds * 2e9 / per_rep / 5))
+    m = hx.repeat(lambda: _rate_compiled(A, B, C, reps), memory=False)
+    return reps * per_rep / m.locbook_cpu_s
+
+
+def update_flops(n: int, m: int, k: int) -> int:
+    """One Kalman update with ``m`` rows of ``k`` nonzeros each, state size ``n`` (Cholesky of S, the Joseph form as
+    the kernel writes it; symmetric products as one triangle)."""
+    tri_n, tri_m = n * (n + 1) // 2, m * (m + 1) // 2
+    return (2 * m * k                       # innovation z - H x
+            + 2 * m * k * n                 # H P
+            + 2 * k * tri_m + tri_m         # H P H^T + R
+            + m**3 // 3 + 2 * m             # Cholesky (m square roots)
+            + 2 * m * m * n + m * n         # K^T = S^-1 H P (two triangular solves)
+            + 2 * n * m                     # x += K nu
+            + 2 * m * m + m                 # NIS, log det
+            + 2 * n * m * m                 # K S
+            + 2 * 2 * m * tri_n)            # - K (H P) + (K S - P H^T) K^T, one triangle
+
+
+def predict_flops(F: np.ndarray, n_q_entries: int) -> int:
+    """``x = F x``, ``P = F P F^T + Q`` with F's nonzeros, one triangle of the result."""
+    n = F.shape[0]
+    nnz = int(np.count_nonzero(F))
+    upper = sum(i + 1 for i, _ in zip(*np.nonzero(F)))            # (F P) F^T: row i of F feeds columns a <= i
+    return 2 * nnz + 2 * nnz * n + 2 * upper + n_q_entries
+
+
+RSS_ROW_FLOPS = 2 * 2 + 1 + 1 + 4 + 2 * 2       # squared distance, sqrt, log10, mean, Jacobian (2-D)
+
+
+def ekf_step_flops(name: str, s: dict) -> float:
+    """Operations per run-step of the Dogan setting's filter ``name`` (averaged over the steps: the accelerometer at
+    every step, the 4 RSS readings at one step in ten)."""
+    F = s["model"].F
+    n = F.shape[0]
+    steps, epochs = s["tr"].time_s.size, s["tr"].rss_steps.size
+    per_step = predict_flops(F, n * (n + 1) // 2) + update_flops(n, 2, 1)
+    if name == "serial_ekf":
+        rss = 4 * (update_flops(n, 1, 2) + RSS_ROW_FLOPS)
+    elif name == "parallel_ekf":
+        rss = update_flops(n, 4, 2) + 4 * RSS_ROW_FLOPS
+    else:                                                       # KF: the MLE fix, 2 rows of 1 nonzero
+        rss = update_flops(n, 2, 1)
+    return per_step + rss * epochs / steps
+
+
+SIZES = {"full": [500, 10], "tiny": [4]}
+
+
+def run(size: str = "full"):
+    """The benchmark protocol (benchmarks/run_all.py): the serial and parallel EKF at 500 and 10 runs (tiny: 4) on the
+    Dogan setting against their floor."""
+    for runs in SIZES[hx.check_size(size)]:
+        s = bd.setting(runs)
+        T = s["tr"].time_s.size
+        width = 64
+        rate = attainable_rate(width, 0.05 if size == "tiny" else 0.3)
+        for name in ("serial_ekf", "parallel_ekf"):
+            flops = ekf_step_flops(name, s)
+            floor_s = flops * runs * T / rate
+            with bd._path(True):
+                bd.locbook_filter(name, s)
+                m = hx.repeat(lambda: bd.locbook_filter(name, s), memory=False)
+            m.reference_wall_s = m.reference_cpu_s = floor_s
+            m.agreement = (f"{flops:.0f} operations per run-step; {m.locbook_cpu_s / (runs * T) * 1e9:.0f} ns per "
+                           f"run-step measured, floor {floor_s / (runs * T) * 1e9:.1f} ns")
+            yield hx.row(bd.LABELS[name] + ", compiled", f"{runs} runs x {T} steps", m,
+                         f"arithmetic floor at {rate / 1e9:.1f} Gop/s ({width} lanes, measured)", goal=0.2,
+                         note="ratio = floor / locbook")
+
+
+if __name__ == "__main__":
+    hx.print_rows(run(sys.argv[1] if len(sys.argv) > 1 else "full"))

@@ -1,0 +1,457 @@
+"""The compiled grid Bayes filter kernels (numba), compiled on first call (numba caches the machine code on disk).
+Imported only by :func:`locbook.tracking.bayes.grid_bayes_filter` when the compiled path runs, so that ``import
+locbook`` never loads numba. Without numba they are plain Python (the same arithmetic, slowly).
+
+Two kernels, both run by run over the leading run axis (the runs are independent: a run's numbers do not depend on
+the others):
+
+- :func:`_nb_predict`: the prediction ``sum_l' K(c_l - c_l' - v) b(l') / Z_l'`` as a banded correlation along each
+  axis of the regular lattice (``locbook.tracking.bayes._BandedLattice`` explains the truncation and the
+  buffers); the normalisers ``Z`` are the same passes with the taps reversed, applied to the lattice's mask;
+- :func:`_nb_update`: per run, the log-likelihood (from the fixed cell-by-anchor mean table and the step's readings,
+  NaN = not heard, or given), the collapse test of the numpy loop, the posterior ``max(pred, 1e-300) exp(ll -
+  max ll)`` (the log-domain form of the numpy loop where that under- or overflows), its normalisation, mean,
+  centred covariance, MAP cell and ``n_eff``.
+
+The exponential of the update is evaluated by :func:`_exp_nonpositive` (Cody-Waite reduction and a degree-13 Taylor
+polynomial, within 2 ulp of ``exp``), which LLVM vectorises; the library ``exp`` is a scalar call per cell and was
+most of the update's time.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+try:
+    import numba
+except ImportError:                 # plain Python kernels (only the tests call them so)
+    numba = None
+
+_FLOOR = 1e-300                     # the numpy loop's floor on the predicted belief (its log(max(b, 1e-300)))
+_LOG2E = 1.4426950408889634
+_LN2_HI = 6.93147180369123816490e-01    # fdlibm's split of ln 2: k * _LN2_HI is exact for |k| < 2^11
+_LN2_LO = 1.90821492927058770002e-10
+_MAGIC = 6755399441055744.0         # 1.5 * 2^52: adding it rounds to an integer held in the low mantissa bits
+_TWO_M64 = 5.421010862427522e-20    # 2^-64
+_BLOCK = 1024                       # cells per partial sum of the reductions (error ~ (block/4 + C/block) ulp)
+
+
+
+def _jit(fn):
+    """``fn`` compiled on first call (numba's njit, as :func:`locbook.tracking._kernels._jit`), cached on disk where
+    there is a writable cache location, with ``fastmath={"contract"}`` only: ``a * b + c`` may become one fused
+    multiply-add (one rounding instead of two; it halves the work of the polynomial and the correlations). No other
+    fast-math licence: no reassociation, NaN and infinities kept."""
+    if numba is None:
+        return fn
+    try:
+        return numba.njit(cache=True, nogil=True, error_model="numpy", fastmath={"contract"})(fn)
+    except RuntimeError:            # no writable cache location: compile in memory at each session
+        return numba.njit(nogil=True, error_model="numpy", fastmath={"contract"})(fn)
+
+
+if numba is not None:
+    from llvmlite import ir
+    from numba.core import types
+    from numba.extending import intrinsic
+
+    @intrinsic
+    def _bits(typingctx, x):
+        """The IEEE-754 bits of a float64 as an int64 (a bitcast)."""
+        if not isinstance(x, types.Float):
+            return None
+
+        def codegen(context, builder, signature, args):
+            return builder.bitcast(args[0], ir.IntType(64))
+        return types.int64(types.float64), codegen
+
+    @intrinsic
+    def _from_bits(typingctx, b):
+        """The float64 whose IEEE-754 bits are the int64 ``b`` (a bitcast)."""
+        if not isinstance(b, types.Integer):
+            return None
+
+        def codegen(context, builder, signature, args):
+            return builder.bitcast(args[0], ir.DoubleType())
+        return types.float64(types.int64), codegen
+else:                               # plain Python
+    def _bits(x):
+        return int(np.float64(x).view(np.int64))
+
+    def _from_bits(b):
+        return float(np.int64(b).view(np.float64))
+
+
+@_jit
+def _exp_nonpositive(x):
+    """``exp(x)`` for ``x <= 0`` (``-inf`` allowed; not NaN): ``x = k ln2 + r``, ``|r| <= ln2 / 2`` (Cody-Waite,
+    fdlibm's split of ln 2), ``exp(r)`` by its Taylor polynomial to degree 13 (remainder below 5e-18 relative),
+    times ``2^k`` built from its bits (``2^(k+64)``, always normal, then ``2^-64``: one rounding for a subnormal
+    result). Below -746 the result is 0, as ``exp``'s. Within 2 ulp of the correctly rounded value."""
+    if x < -746.0:
+        x = -746.0
+    kd = x * _LOG2E + _MAGIC
+    k = kd - _MAGIC
+    r = (x - k * _LN2_HI) - k * _LN2_LO
+    p = 1.0 / 6227020800.0
+    p = p * r + 1.0 / 479001600.0
+    p = p * r + 1.0 / 39916800.0
+    p = p * r + 1.0 / 3628800.0
+    p = p * r + 1.0 / 362880.0
+    p = p * r + 1.0 / 40320.0
+    p = p * r + 1.0 / 5040.0
+    p = p * r + 1.0 / 720.0
+    p = p * r + 1.0 / 120.0
+    p = p * r + 1.0 / 24.0
+    p = p * r + 1.0 / 6.0
+    p = p * r + 0.5
+    p = p * r + 1.0
+    p = p * r + 1.0
+    ki = _bits(kd) - _bits(_MAGIC)
+    return p * _from_bits((ki + 1087) << 52) * _TWO_M64
+
+
+@_jit
+def _shift_pass(src, b, taps, dst, n):
+    """``dst[i] = sum_k taps[k] src[b + i - k]`` for ``i < n`` (a correlation along a contiguous row; ``src`` padded
+    so that every index is inside; ``len(taps)`` a multiple of 8, zero-padded), eight taps per sweep."""
+    for i in range(n):
+        dst[i] = 0.0
+    for k in range(0, taps.shape[0], 8):
+        c = b - k
+        s0, s1, s2, s3 = src[c:c + n], src[c - 1:c - 1 + n], src[c - 2:c - 2 + n], src[c - 3:c - 3 + n]
+        s4, s5, s6, s7 = src[c - 4:c - 4 + n], src[c - 5:c - 5 + n], src[c - 6:c - 6 + n], src[c - 7:c - 7 + n]
+        w0, w1, w2, w3 = taps[k], taps[k + 1], taps[k + 2], taps[k + 3]
+        w4, w5, w6, w7 = taps[k + 4], taps[k + 5], taps[k + 6], taps[k + 7]
+        for i in range(n):
+            dst[i] += ((w0 * s0[i] + w1 * s1[i]) + (w2 * s2[i] + w3 * s3[i])) + \
+                ((w4 * s4[i] + w5 * s5[i]) + (w6 * s6[i] + w7 * s7[i]))
+
+
+@_jit
+def _rows_pass(src, m, b, taps, dst, j):
+    """``dst[x] = sum_k taps[k] src[(b + j - k) m + x]`` for ``x < m``: a correlation across rows of length ``m`` of
+    the flat buffer ``src`` (vectorised along the rows), eight taps per sweep."""
+    for x in range(m):
+        dst[x] = 0.0
+    for k in range(0, taps.shape[0], 8):
+        c = (b + j - k) * m
+        s0, s1, s2, s3 = src[c:c + m], src[c - m:c], src[c - 2 * m:c - m], src[c - 3 * m:c - 2 * m]
+        s4, s5, s6, s7 = src[c - 4 * m:c - 3 * m], src[c - 5 * m:c - 4 * m], src[c - 6 * m:c - 5 * m], \
+            src[c - 7 * m:c - 6 * m]
+        w0, w1, w2, w3 = taps[k], taps[k + 1], taps[k + 2], taps[k + 3]
+        w4, w5, w6, w7 = taps[k + 4], taps[k + 5], taps[k + 6], taps[k + 7]
+        for x in range(m):
+            dst[x] += ((w0 * s0[x] + w1 * s1[x]) + (w2 * s2[x] + w3 * s3[x])) + \
+                ((w4 * s4[x] + w5 * s5[x]) + (w6 * s6[x] + w7 * s7[x]))
+
+
+@_jit
+def _rows_pass2(src, m, b, taps, dst0, dst1, j):
+    """:func:`_rows_pass` for the rows ``j`` (into ``dst0``) and ``j + 1`` (into ``dst1``) at once: nine source
+    rows per sweep of eight taps serve both (fewer loads per multiply-add)."""
+    for x in range(m):
+        dst0[x] = 0.0
+        dst1[x] = 0.0
+    for k in range(0, taps.shape[0], 8):
+        c = (b + j - k) * m
+        r8 = src[c + m:c + 2 * m]
+        s0, s1, s2, s3 = src[c:c + m], src[c - m:c], src[c - 2 * m:c - m], src[c - 3 * m:c - 2 * m]
+        s4, s5, s6, s7 = src[c - 4 * m:c - 3 * m], src[c - 5 * m:c - 4 * m], src[c - 6 * m:c - 5 * m], \
+            src[c - 7 * m:c - 6 * m]
+        w0, w1, w2, w3 = taps[k], taps[k + 1], taps[k + 2], taps[k + 3]
+        w4, w5, w6, w7 = taps[k + 4], taps[k + 5], taps[k + 6], taps[k + 7]
+        for x in range(m):
+            a0, a1, a2, a3, a4, a5, a6, a7 = s0[x], s1[x], s2[x], s3[x], s4[x], s5[x], s6[x], s7[x]
+            dst0[x] += ((w0 * a0 + w1 * a1) + (w2 * a2 + w3 * a3)) + ((w4 * a4 + w5 * a5) + (w6 * a6 + w7 * a7))
+            dst1[x] += ((w0 * r8[x] + w1 * a0) + (w2 * a1 + w3 * a2)) + ((w4 * a3 + w5 * a4) + (w6 * a5 + w7 * a6))
+
+
+@_jit
+def _nb_predict(belief, zinv, dead, scatter, gather, dims, xb, lx, tx, bx, yb, ly, py, ty, by, zb, pz, tz, bz, out,
+                pred):
+    """``pred[r] = (K (belief[r] * zinv))`` at the cells, for the runs not ``dead``: the belief over ``Z`` scattered
+    into the padded lattice ``xb`` (rows of length ``lx``; masked points and pads stay 0), correlated along x into
+    ``yb`` (``(n0, ly, n2)``, rows ``py..`` of each plane), along y into ``zb`` (3-D: planes ``pz..``) or ``out``,
+    along z into ``out``, and gathered. ``dims = (n0, n1, n2, dim)``; ``t*``, ``b*``: each axis's taps and read
+    offset (:func:`_shift_pass`, :func:`_rows_pass`)."""
+    n0, n1, n2, dim = dims[0], dims[1], dims[2], dims[3]
+    n_runs, n_cells = belief.shape
+    for r in range(n_runs):
+        if dead[r]:
+            continue
+        for c in range(n_cells):
+            xb[scatter[c]] = belief[r, c] * zinv[c]
+        for q in range(n0 * n1):
+            if dim == 1:
+                dst = out[0:n2]
+            else:
+                o = ((q // n1) * ly + py + q % n1) * n2
+                dst = yb[o:o + n2]
+            _shift_pass(xb[q * lx:(q + 1) * lx], bx, tx, dst, n2)
+        if dim >= 2:
+            for a in range(n0):
+                src = yb[a * ly * n2:(a + 1) * ly * n2]
+                target = out if dim == 2 else zb
+                for j in range(0, n1, 2):
+                    o = (a * n1 + j) * n2 if dim == 2 else ((pz + a) * n1 + j) * n2
+                    if j + 1 < n1:
+                        _rows_pass2(src, n2, by, ty, target[o:o + n2], target[o + n2:o + 2 * n2], j)
+                    else:
+                        _rows_pass(src, n2, by, ty, target[o:o + n2], j)
+        if dim == 3:
+            m = n1 * n2
+            for a in range(0, n0, 2):
+                if a + 1 < n0:
+                    _rows_pass2(zb, m, bz, tz, out[a * m:(a + 1) * m], out[(a + 1) * m:(a + 2) * m], a)
+                else:
+                    _rows_pass(zb, m, bz, tz, out[a * m:(a + 1) * m], a)
+        for c in range(n_cells):
+            pred[r, c] = out[gather[c]]
+
+
+@_jit
+def _sum(a, n):
+    """``sum(a[:n])`` in blocks of ``_BLOCK`` with four partial sums each."""
+    total = 0.0
+    for start in range(0, n, _BLOCK):
+        stop = min(start + _BLOCK, n)
+        s0 = s1 = s2 = s3 = 0.0
+        i = start
+        while i + 4 <= stop:
+            s0 += a[i]
+            s1 += a[i + 1]
+            s2 += a[i + 2]
+            s3 += a[i + 3]
+            i += 4
+        while i < stop:
+            s0 += a[i]
+            i += 1
+        total += (s0 + s1) + (s2 + s3)
+    return total
+
+
+@_jit
+def _dot(a, b, n):
+    """``sum(a[:n] * b[:n])`` in blocks, as :func:`_sum`."""
+    total = 0.0
+    for start in range(0, n, _BLOCK):
+        stop = min(start + _BLOCK, n)
+        s0 = s1 = s2 = s3 = 0.0
+        i = start
+        while i + 4 <= stop:
+            s0 += a[i] * b[i]
+            s1 += a[i + 1] * b[i + 1]
+            s2 += a[i + 2] * b[i + 2]
+            s3 += a[i + 3] * b[i + 3]
+            i += 4
+        while i < stop:
+            s0 += a[i] * b[i]
+            i += 1
+        total += (s0 + s1) + (s2 + s3)
+    return total
+
+
+@_jit
+def _centred(w, x, mx, y, my, n):
+    """``sum(w (x - mx) (y - my))`` over ``n`` cells, in blocks, as :func:`_sum`."""
+    total = 0.0
+    for start in range(0, n, _BLOCK):
+        stop = min(start + _BLOCK, n)
+        s0 = s1 = s2 = s3 = 0.0
+        i = start
+        while i + 4 <= stop:
+            s0 += w[i] * (x[i] - mx) * (y[i] - my)
+            s1 += w[i + 1] * (x[i + 1] - mx) * (y[i + 1] - my)
+            s2 += w[i + 2] * (x[i + 2] - mx) * (y[i + 2] - my)
+            s3 += w[i + 3] * (x[i + 3] - mx) * (y[i + 3] - my)
+            i += 4
+        while i < stop:
+            s0 += w[i] * (x[i] - mx) * (y[i] - my)
+            i += 1
+        total += (s0 + s1) + (s2 + s3)
+    return total
+
+
+@_jit
+def _top(ll, n):
+    """``(max ll[:n], any NaN)``, four partial maxima."""
+    t0 = t1 = t2 = t3 = -np.inf
+    nan = 0
+    i = 0
+    while i + 4 <= n:
+        a, b, c, d = ll[i], ll[i + 1], ll[i + 2], ll[i + 3]
+        nan |= (a != a) | (b != b) | (c != c) | (d != d)
+        t0 = a if a > t0 else t0
+        t1 = b if b > t1 else t1
+        t2 = c if c > t2 else t2
+        t3 = d if d > t3 else t3
+        i += 4
+    while i < n:
+        a = ll[i]
+        nan |= a != a
+        t0 = a if a > t0 else t0
+        i += 1
+    return max(max(t0, t1), max(t2, t3)), nan != 0
+
+
+@_jit
+def _moments2(w, x, y, n):
+    """``(sum w^2, sum w x, sum w y)`` over ``n`` cells, in blocks with four partial sums each."""
+    sq = mx = my = 0.0
+    for start in range(0, n, _BLOCK):
+        stop = min(start + _BLOCK, n)
+        q0 = q1 = q2 = q3 = x0 = x1 = x2 = x3 = y0 = y1 = y2 = y3 = 0.0
+        i = start
+        while i + 4 <= stop:
+            a, b, c, d = w[i], w[i + 1], w[i + 2], w[i + 3]
+            q0 += a * a
+            q1 += b * b
+            q2 += c * c
+            q3 += d * d
+            x0 += a * x[i]
+            x1 += b * x[i + 1]
+            x2 += c * x[i + 2]
+            x3 += d * x[i + 3]
+            y0 += a * y[i]
+            y1 += b * y[i + 1]
+            y2 += c * y[i + 2]
+            y3 += d * y[i + 3]
+            i += 4
+        while i < stop:
+            q0 += w[i] * w[i]
+            x0 += w[i] * x[i]
+            y0 += w[i] * y[i]
+            i += 1
+        sq += (q0 + q1) + (q2 + q3)
+        mx += (x0 + x1) + (x2 + x3)
+        my += (y0 + y1) + (y2 + y3)
+    return sq, mx, my
+
+
+@_jit
+def _cov2(w, x, mx, y, my, n):
+    """``sum w (x - mx)^2, sum w (x - mx)(y - my), sum w (y - my)^2`` over ``n`` cells, in blocks."""
+    sxx = sxy = syy = 0.0
+    for start in range(0, n, _BLOCK):
+        stop = min(start + _BLOCK, n)
+        a0 = a1 = a2 = a3 = b0 = b1 = b2 = b3 = c0 = c1 = c2 = c3 = 0.0
+        i = start
+        while i + 4 <= stop:
+            u0, u1, u2, u3 = x[i] - mx, x[i + 1] - mx, x[i + 2] - mx, x[i + 3] - mx
+            v0, v1, v2, v3 = y[i] - my, y[i + 1] - my, y[i + 2] - my, y[i + 3] - my
+            p0, p1, p2, p3 = w[i] * u0, w[i + 1] * u1, w[i + 2] * u2, w[i + 3] * u3
+            a0 += p0 * u0
+            a1 += p1 * u1
+            a2 += p2 * u2
+            a3 += p3 * u3
+            b0 += p0 * v0
+            b1 += p1 * v1
+            b2 += p2 * v2
+            b3 += p3 * v3
+            c0 += w[i] * v0 * v0
+            c1 += w[i + 1] * v1 * v1
+            c2 += w[i + 2] * v2 * v2
+            c3 += w[i + 3] * v3 * v3
+            i += 4
+        while i < stop:
+            u0, v0 = x[i] - mx, y[i] - my
+            a0 += w[i] * u0 * u0
+            b0 += w[i] * u0 * v0
+            c0 += w[i] * v0 * v0
+            i += 1
+        sxx += (a0 + a1) + (a2 + a3)
+        sxy += (b0 + b1) + (b2 + b3)
+        syy += (c0 + c1) + (c2 + c3)
+    return sxx, sxy, syy
+
+
+@_jit
+def _nb_update(belief, ll_given, use_table, table, rss, inv_sigma, dead, points, llb, wb, mean, cov, best, n_eff,
+               collapsed):
+    """The update of the runs not ``dead``, in place: ``belief (R, C)`` holds the predicted belief (or the prior) on
+    entry and the posterior on exit. The log-likelihood is ``ll_given[r]`` or, with ``use_table``, ``-0.5 sum_j
+    ((rss[r, j] - table[r or 0, j, c]) inv_sigma[j])^2`` over the heard readings (NaN = not heard, left out: the
+    rule of :meth:`RssModel.log_likelihood`). A run whose ``max ll`` is NaN or infinite, or with a NaN ``ll``, is
+    flagged in ``collapsed`` and left alone (the numpy loop's test: its ``max(log b + ll)`` is then not finite).
+    Otherwise ``w = max(pred, 1e-300) exp(ll - max ll)``, in the log domain where its largest value is below 1e-250
+    or its sum overflows; the posterior ``w / sum w``; its mean ``(R, dim)`` and centred covariance written at the
+    step's slot; ``best`` the first cell of the largest posterior; ``n_eff = 1 / sum b^2``. ``points``: ``(dim,
+    C)``; ``llb``, ``wb``: scratch ``(C,)``."""
+    n_runs, n_cells = belief.shape
+    dim = points.shape[0]
+    n_anchors = rss.shape[1]
+    for r in range(n_runs):
+        if dead[r]:
+            continue
+        if use_table:
+            tr = table[r if table.shape[0] > 1 else 0]
+            first = True
+            for j in range(n_anchors):
+                v = rss[r, j]
+                if v != v:                              # not heard
+                    continue
+                s = inv_sigma[j]
+                row = tr[j]
+                if first:
+                    for c in range(n_cells):
+                        d = (v - row[c]) * s
+                        llb[c] = d * d
+                    first = False
+                else:
+                    for c in range(n_cells):
+                        d = (v - row[c]) * s
+                        llb[c] += d * d
+            if first:                                   # nothing heard
+                for c in range(n_cells):
+                    llb[c] = 0.0
+            else:
+                for c in range(n_cells):
+                    llb[c] *= -0.5
+            ll = llb
+        else:
+            ll = ll_given[r]
+        top, bad = _top(ll, n_cells)
+        if bad or top == np.inf or top == -np.inf:
+            collapsed[r] = True
+            continue
+        pr = belief[r]
+        for c in range(n_cells):
+            p = pr[c]
+            if p < _FLOOR:
+                p = _FLOOR
+            wb[c] = p * _exp_nonpositive(ll[c] - top)
+        s = _sum(wb, n_cells)
+        if not (s >= 1e-240 and s < np.inf):          # the posterior under- or overflows: the log domain
+            top = -np.inf
+            for c in range(n_cells):
+                wb[c] = np.log(max(pr[c], _FLOOR)) + ll[c]
+                if wb[c] > top:
+                    top = wb[c]
+            if not (top > -np.inf and top < np.inf):
+                collapsed[r] = True
+                continue
+            for c in range(n_cells):
+                wb[c] = np.exp(wb[c] - top)
+            s = _sum(wb, n_cells)
+        for c in range(n_cells):
+            pr[c] = wb[c] / s
+        at = 0
+        big = pr[0]
+        for c in range(n_cells):
+            if pr[c] > big:
+                at, big = c, pr[c]
+        best[r] = at
+        if dim == 2:
+            sq, mx, my = _moments2(pr, points[0], points[1], n_cells)
+            n_eff[r] = 1.0 / sq
+            mean[r, 0], mean[r, 1] = mx, my
+            cxx, cxy, cyy = _cov2(pr, points[0], mx, points[1], my, n_cells)
+            cov[r, 0, 0], cov[r, 0, 1], cov[r, 1, 0], cov[r, 1, 1] = cxx, cxy, cxy, cyy
+            continue
+        n_eff[r] = 1.0 / _dot(pr, pr, n_cells)
+        for d in range(dim):
+            mean[r, d] = _dot(pr, points[d], n_cells)
+        for d in range(dim):
+            for e in range(d + 1):
+                cov[r, d, e] = _centred(pr, points[d], mean[r, d], points[e], mean[r, e], n_cells)
+                cov[r, e, d] = cov[r, d, e]

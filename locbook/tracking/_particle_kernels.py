@@ -1,0 +1,393 @@
+"""The compiled particle-filter kernels (numba): the RSS log-likelihood of every particle in one pass, the random-walk
+step, the weight normalisation, the moments and systematic resampling, each a loop over runs and particles with no
+temporaries of the size of the cloud. Imported only by :mod:`locbook.tracking.particle` when the compiled path runs, so
+that ``import locbook`` never loads numba; without numba they are plain Python (the same arithmetic, slowly).
+
+Each kernel does the arithmetic of the numpy code it replaces, in the same order where that order is numpy's own
+documented algorithm (the pairwise sum of ``np.sum``, the sequential ``np.cumsum``, ``np.mod``'s sign rule, the row
+offsets of :func:`~locbook.tracking.resampling._search_rows`), so the weights, the resampling decisions and the
+particles follow the numpy path's; sums that numpy leaves to its SIMD loops (``einsum``) are summed in order here and
+agree to round-off. The likelihood's log10 is musl's algorithm written to vectorise (within 2 ulp of numpy's, which
+calls the C library's one value at a time: that call was most of the likelihood's time).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+try:
+    import numba
+except ImportError:                 # plain Python kernels (only the tests call them so)
+    numba = None
+
+_PW_BLOCK = 128                     # numpy's pairwise-sum block (PW_BLOCKSIZE in loops_utils.h)
+
+
+def _jit(fn):
+    """``fn`` compiled on first call (numba's njit), cached on disk where there is a writable cache location."""
+    if numba is None:
+        return fn
+    try:
+        return numba.njit(cache=True, nogil=True, error_model="numpy")(fn)
+    except RuntimeError:            # no writable cache location: compile in memory at each session
+        return numba.njit(nogil=True, error_model="numpy")(fn)
+
+
+@_jit
+def _block_sum(a, lo, n):
+    """numpy's pairwise sum of ``a[lo:lo + n]`` for ``n <= 128``: in order below 8, else 8 accumulators."""
+    if n < 8:
+        res = 0.0
+        for i in range(n):
+            res += a[lo + i]
+        return res
+    r0, r1, r2, r3 = a[lo], a[lo + 1], a[lo + 2], a[lo + 3]
+    r4, r5, r6, r7 = a[lo + 4], a[lo + 5], a[lo + 6], a[lo + 7]
+    i = 8
+    stop = n - n % 8
+    while i < stop:
+        r0 += a[lo + i]
+        r1 += a[lo + i + 1]
+        r2 += a[lo + i + 2]
+        r3 += a[lo + i + 3]
+        r4 += a[lo + i + 4]
+        r5 += a[lo + i + 5]
+        r6 += a[lo + i + 6]
+        r7 += a[lo + i + 7]
+        i += 8
+    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while i < n:
+        res += a[lo + i]
+        i += 1
+    return res
+
+
+@_jit
+def _pairwise_sum(a, lo, n):
+    """``np.sum(a[lo:lo + n])`` bit for bit: numpy's pairwise summation (blocks of 128 summed by
+    :func:`_block_sum`; above, the sum of the two halves split at a multiple of 8), walked with an explicit stack
+    (numba's on-disk cache mishandles a recursive kernel)."""
+    if n <= _PW_BLOCK:
+        return _block_sum(a, lo, n)
+    los = np.empty(64, np.int64)
+    ns = np.empty(64, np.int64)
+    stage = np.zeros(64, np.int64)                     # 0: not split yet; 1: left half pending; 2: right half pending
+    left = np.empty(64)
+    top = 0
+    los[0], ns[0], stage[0] = lo, n, 0
+    value, returned = 0.0, False
+    while True:
+        if returned:
+            if top < 0:
+                return value
+            if stage[top] == 1:                        # the left half is done: keep it, do the right half
+                left[top] = value
+                stage[top] = 2
+                half = ns[top] // 2
+                half -= half % 8
+                los[top + 1], ns[top + 1], stage[top + 1] = los[top] + half, ns[top] - half, 0
+                top += 1
+                returned = False
+            else:                                      # both halves done
+                value = left[top] + value
+                top -= 1
+        elif ns[top] <= _PW_BLOCK:
+            value = _block_sum(a, los[top], ns[top])
+            top -= 1
+            returned = True
+        else:
+            stage[top] = 1
+            half = ns[top] // 2
+            half -= half % 8
+            los[top + 1], ns[top + 1], stage[top + 1] = los[top], half, 0
+            top += 1
+
+
+# musl's log10 (after FreeBSD's e_log10.c): log(1 + f) by the Remez polynomial of s = f / (2 + f), then the
+# product with 1/ln 10 and the k log10(2) term in two parts; within 1 ulp of the correct value (glibc's, numpy's log10
+# is also within 1 ulp: the two differ by at most 2 ulp). Written on integer views so that LLVM vectorises it.
+_IVLN10HI, _IVLN10LO = 4.34294481878168880939e-01, 2.50829467116452752298e-11
+_LOG10_2HI, _LOG10_2LO = 3.01029995663611771306e-01, 3.69423907715893078616e-13
+_LG1, _LG2, _LG3, _LG4 = 6.666666666666735130e-01, 3.999999999940941908e-01, 2.857142874366239149e-01, \
+    2.222219843214978396e-01
+_LG5, _LG6, _LG7 = 1.818357216161805012e-01, 1.531383769920937332e-01, 1.479819860511658591e-01
+_TWO52 = 4503599627370496.0
+_TINY = 2.2250738585072014e-308                 # the smallest normal double
+
+
+@_jit
+def _log10_block(x, out, work, n):
+    """``out[:n] = log10(x[:n])`` (musl's algorithm above) for positive normal finite ``x``; any other value goes to
+    ``np.log10`` (zero, subnormal, infinite). ``work``: a scratch array of the same length."""
+    xb = x.view(np.uint64)
+    ob = out.view(np.uint64)
+    wb = work.view(np.uint64)
+    for i in range(n):                          # x = 2^k (1 + f), 1 + f in [sqrt(2)/2, sqrt(2))
+        ix = xb[i]
+        hx = (ix >> np.uint64(32)) + np.uint64(0x3ff00000 - 0x3fe6a09e)
+        ob[i] = (hx >> np.uint64(20)) | np.uint64(0x4330000000000000)        # k + 1023 as the double 2^52 + (k+1023)
+        wb[i] = (((hx & np.uint64(0x000fffff)) + np.uint64(0x3fe6a09e)) << np.uint64(32)) | (ix & np.uint64(0xffffffff))
+    for i in range(n):
+        dk = (out[i] - _TWO52) - 1023.0
+        f = work[i] - 1.0
+        hfsq = 0.5 * f * f
+        s = f / (2.0 + f)
+        z = s * s
+        w = z * z
+        t1 = w * (_LG2 + w * (_LG4 + w * _LG6))
+        t2 = z * (_LG1 + w * (_LG3 + w * (_LG5 + w * _LG7)))
+        r = t2 + t1
+        work[i] = f - hfsq
+        wb[i] = wb[i] & np.uint64(0xffffffff00000000)                     # hi: the top 21 bits of f - hfsq
+        hi = work[i]
+        lo = f - hi - hfsq + s * (hfsq + r)
+        val_hi = hi * _IVLN10HI
+        y = dk * _LOG10_2HI
+        val_lo = dk * _LOG10_2LO + (lo + hi) * _IVLN10LO + lo * _IVLN10HI
+        top = y + val_hi
+        val_lo += (y - top) + val_hi
+        out[i] = val_lo + top
+    for i in range(n):
+        if not (x[i] >= _TINY and x[i] < np.inf):
+            out[i] = np.log10(x[i])
+
+
+_CHUNK = 512                                    # particles per block of the likelihood kernel (its buffers fit L1)
+
+
+@_jit
+def _nb_rss_loglik(x, pidx, plan, vert2, z, p0, tenn, sigma, per_anchor, d_min, d_ref, out):
+    """``out[r, i] = -0.5 sum_j ((z_rj - h_j(x_ri)) / sigma_j)^2`` over the heard anchors (``z`` not NaN), with
+    ``h_j(p) = P0_j - 10 n_j log10(max(d_j, d_min) / d0)`` and ``d_j^2 = |p - a_j|^2 + vert2_j`` (Ozkaya 2011,
+    Eq. (6.3); :meth:`~locbook.models.rss.RssModel.log_likelihood` with ``constant=False``, walls left out).
+
+    ``x`` ``(1|R, N, n)`` (positions at the columns ``pidx``), ``plan`` ``(1|R, m, dim)``, ``vert2`` ``(1|R, m)``,
+    ``z`` ``(R, m)``, ``p0`` and ``tenn = 10 n`` ``(1|R, m)``, ``sigma`` ``(1|R, m)`` (``per_anchor``: each residual
+    divided by its sigma, as numpy does for sigma ``(m,)``) or ``(1|R, 1)`` (the sum divided by sigma^2 at the end).
+    Blocks of :data:`_CHUNK` particles, one anchor at a time (the sum over the anchors in their order). Returns False
+    when a coordinate or a distance is not finite (the numpy path then raises its error)."""
+    R, N = out.shape
+    m = plan.shape[1]
+    dim = pidx.shape[0]
+    pos = np.empty((dim, _CHUNK))
+    d2 = np.empty(_CHUNK)
+    dist = np.empty(_CHUNK)
+    lg = np.empty(_CHUNK)
+    work = np.empty(_CHUNK)
+    acc = np.empty(_CHUNK)
+    for r in range(R):
+        rx = r if x.shape[0] > 1 else 0
+        ra = r if plan.shape[0] > 1 else 0
+        rv = r if vert2.shape[0] > 1 else 0
+        rp = r if p0.shape[0] > 1 else 0
+        rs = r if sigma.shape[0] > 1 else 0
+        for i0 in range(0, N, _CHUNK):
+            nc = min(_CHUNK, N - i0)
+            for k in range(dim):
+                col = pidx[k]
+                for i in range(nc):
+                    pos[k, i] = x[rx, i0 + i, col]
+            for i in range(nc):
+                acc[i] = 0.0
+            for j in range(m):
+                for i in range(nc):
+                    d2[i] = 0.0
+                for k in range(dim):
+                    a = plan[ra, j, k]
+                    for i in range(nc):
+                        diff = pos[k, i] - a
+                        d2[i] += diff * diff
+                v2 = vert2[rv, j]
+                for i in range(nc):
+                    d2[i] = d2[i] + v2
+                for i in range(nc):
+                    if not d2[i] < np.inf:
+                        return False
+                zj = z[r, j]
+                if zj != zj:                     # not heard: left out
+                    continue
+                for i in range(nc):
+                    d = math.sqrt(d2[i])
+                    if d_min > 0.0 and d < d_min:
+                        d = d_min
+                    dist[i] = d / d_ref
+                _log10_block(dist, lg, work, nc)
+                p0j, tj = p0[rp, j], tenn[rp, j]
+                if per_anchor:
+                    sj = sigma[rs, j]
+                    for i in range(nc):
+                        resid = (zj - (p0j - tj * lg[i])) / sj
+                        acc[i] += resid * resid
+                else:
+                    for i in range(nc):
+                        resid = zj - (p0j - tj * lg[i])
+                        acc[i] += resid * resid
+            if per_anchor:
+                for i in range(nc):
+                    out[r, i0 + i] = -0.5 * acc[i]
+            else:
+                s = sigma[rs, 0]
+                s2 = s * s
+                for i in range(nc):
+                    out[r, i0 + i] = -0.5 * acc[i] / s2
+    return True
+
+
+@_jit
+def _nb_random_walk(x, velocity, spread, noise, moves, lower, upper, bounded):
+    """The random walk ``x = x + v + D n`` in place (``n`` the standard normals drawn by numpy; ``D`` per axis), then
+    folded into ``[lower, upper]`` by mirror reflection as :func:`~locbook.models.motion.reflect_into_box` does
+    (``bounded``)."""
+    R, N, d = x.shape
+    for r in range(R):
+        for i in range(N):
+            for k in range(d):
+                v = x[r, i, k]
+                if moves:
+                    v = (v + velocity[k]) + spread[k] * noise[r, i, k]
+                else:
+                    v = v + velocity[k]
+                if bounded:
+                    width = upper[k] - lower[k]
+                    period = 2.0 * width
+                    shifted = v - lower[k]
+                    if 0.0 <= shifted < period:     # np.mod(a, b) = a here and a + b just below 0 (fmod is a)
+                        folded = shifted
+                    elif -period <= shifted < 0.0:
+                        folded = shifted + period
+                    else:                           # Python's float % is np.mod's rule
+                        folded = shifted % period
+                    v = lower[k] + (period - folded if folded > width else folded)
+                x[r, i, k] = v
+
+
+@_jit
+def _nb_normalise(log_w, logits, dead, w, final, want_final, collapsed):
+    """The weight update in place: ``logits = log_w + ll`` (``logits`` holds ``ll`` on entry), its maximum, and
+    ``w = exp(logits - max) / sum`` (numpy's ``_normalise_log`` with its pairwise sum). A run whose maximum is NaN
+    or infinite and that was not ``dead`` is flagged in ``collapsed``; a dead or collapsed run gets logits 0 (equal
+    weights). ``want_final``: ``final = logits - max - log(sum)`` too (the normalised log-weights)."""
+    R, N = logits.shape
+    for r in range(R):
+        top = -np.inf
+        bad = False
+        for i in range(N):
+            v = log_w[r, i] + logits[r, i]
+            logits[r, i] = v
+            if v != v:
+                bad = True
+            elif v > top:
+                top = v
+        if not dead[r] and (bad or math.isinf(top)):
+            collapsed[r] = True
+        if dead[r] or collapsed[r]:
+            for i in range(N):
+                logits[r, i] = 0.0
+            top = 0.0
+        for i in range(N):
+            w[r, i] = np.exp(logits[r, i] - top)
+        total = _pairwise_sum(w[r], 0, N)
+        for i in range(N):
+            w[r, i] = w[r, i] / total
+        if want_final:
+            log_total = np.log(total)
+            for i in range(N):
+                final[r, i] = logits[r, i] - top - log_total
+
+
+@_jit
+def _nb_moments(w, x, mean, cov, best, n_eff):
+    """Per run: the weighted mean ``(R, d)`` and covariance ``(R, d, d)`` of the particles (as
+    :func:`~locbook.tracking.bayes.weighted_moments`), the highest-weight particle ``(R, d)`` (the first on ties, as
+    ``argmax``) and ``N_eff = 1 / sum w^2`` (Arulampalam et al. 2002, Eq. (51)). Positions in the plane (d = 2) take
+    a loop with the sums in registers."""
+    R, N, d = x.shape
+    for r in range(R):
+        sq = 0.0
+        top = -1.0
+        arg = 0
+        for i in range(N):
+            wi = w[r, i]
+            sq += wi * wi
+            if wi > top:
+                top = wi
+                arg = i
+        n_eff[r] = 1.0 / sq
+        for k in range(d):
+            best[r, k] = x[r, arg, k]
+        if d == 2:
+            m0 = 0.0
+            m1 = 0.0
+            for i in range(N):
+                m0 += w[r, i] * x[r, i, 0]
+                m1 += w[r, i] * x[r, i, 1]
+            c00 = 0.0
+            c01 = 0.0
+            c11 = 0.0
+            for i in range(N):
+                d0 = x[r, i, 0] - m0
+                d1 = x[r, i, 1] - m1
+                c00 += w[r, i] * d0 * d0
+                c01 += w[r, i] * d0 * d1
+                c11 += w[r, i] * d1 * d1
+            mean[r, 0], mean[r, 1] = m0, m1
+            cov[r, 0, 0], cov[r, 0, 1], cov[r, 1, 0], cov[r, 1, 1] = c00, c01, c01, c11
+            continue
+        for k in range(d):
+            mean[r, k] = 0.0
+        for i in range(N):
+            wi = w[r, i]
+            for k in range(d):
+                mean[r, k] += wi * x[r, i, k]
+        for k in range(d):
+            for c in range(d):
+                cov[r, k, c] = 0.0
+        for i in range(N):
+            wi = w[r, i]
+            for k in range(d):
+                dk = x[r, i, k] - mean[r, k]
+                for c in range(k + 1):
+                    cov[r, k, c] += wi * dk * (x[r, i, c] - mean[r, c])
+        for k in range(d):
+            for c in range(k):
+                cov[r, c, k] = cov[r, k, c]
+
+
+@_jit
+def _nb_systematic(w, u, do, x, x_out, log_w):
+    """Systematic resampling (Arulampalam et al. 2002, Alg. 2) of the runs ``do`` into ``x_out`` (the others are
+    copied), then ``log_w = log(max(w, 1e-300))`` with ``w = 1 / N`` where resampled.
+
+    The ancestors are those of :func:`~locbook.tracking.resampling.systematic_resample` (``cdf="standard"``) bit for
+    bit: its cumulative sum normalised by its last entry (set to 1), the points ``(u + i) / N``, both shifted by
+    ``2 k`` for the k-th resampled run (its one-call search), and the first ``j`` with ``c_j >= point_i`` (a merge:
+    the points are sorted), clipped to ``N - 1``."""
+    R, N, d = x.shape
+    k_row = 0
+    uniform_log = np.log(max(1.0 / N, 1e-300))
+    cdf = np.empty(N)
+    for r in range(R):
+        if not do[r]:
+            for i in range(N):
+                for k in range(d):
+                    x_out[r, i, k] = x[r, i, k]
+                log_w[r, i] = np.log(max(w[r, i], 1e-300))
+            continue
+        cum = 0.0
+        for j in range(N):
+            cum += w[r, j]
+            cdf[j] = cum
+        offset = 2.0 * k_row
+        k_row += 1
+        for j in range(N - 1):
+            cdf[j] = cdf[j] / cum + offset
+        cdf[N - 1] = 1.0 + offset
+        j = 0
+        for i in range(N):
+            point = (u[r] + i) / N + offset
+            while cdf[j] < point and j < N - 1:       # the last entry is the largest value: never passed
+                j += 1
+            for k in range(d):
+                x_out[r, i, k] = x[r, j, k]
+            log_w[r, i] = uniform_log

@@ -15,15 +15,19 @@ workload. The largest workloads use :func:`once`: one call, timed and measured a
 
 Memory: the increase of the process's peak resident set (``VmHWM`` of ``/proc/self/status``, reset before the call
 through ``/proc/self/clear_refs``) over its resident set before the call: numpy's arrays and a compiled kernel's
-buffers alike. ``run_all.py`` starts its process with a fixed ``malloc`` mmap threshold (``MALLOC_MMAP_THRESHOLD_``)
-so that large arrays are returned to the system when freed and one call's memory does not hide in the next one's
-baseline. Where ``/proc`` is unavailable the ``tracemalloc`` peak of a separate call is used instead (numpy arrays
-only), and the row says so.
+buffers alike. Before each call the free memory ``malloc`` keeps is returned to the system (``malloc_trim``), so that a
+call's arrays are counted even where they reuse memory a previous call freed; the timed calls otherwise run with the
+default ``malloc`` settings a user has. Where ``/proc`` is unavailable the row has no memory figure (``tracemalloc_peak_mb``
+measures numpy's arrays in a separate call).
+
+The garbage collector runs once before a measurement (and the objects alive then are frozen out of later
+collections), not before every call; only the last result of each side is kept.
 
 The load average (1 min) is recorded before and after each measurement and shown in its row.
 """
 from __future__ import annotations
 
+import ctypes
 import gc
 import math
 import os
@@ -38,6 +42,7 @@ KEYS = ("method", "workload", "locbook_s", "locbook_cpu_s", "reference", "refere
         "ratio_cpu", "repeats", "peak_mb", "reference_peak_mb", "agreement", "goal", "load", "note")
 _STATUS = "/proc/self/status"
 _CLEAR_REFS = "/proc/self/clear_refs"
+_LIBC = {}
 
 
 def check_size(size: str) -> str:
@@ -83,9 +88,27 @@ class Call:
     result: object = None
 
 
+def _malloc_trim() -> None:
+    """Return malloc's free memory to the system (glibc), so that the next call's peak counts every page it touches."""
+    if _LIBC.get("trim") is None:
+        try:
+            _LIBC["trim"] = ctypes.CDLL("libc.so.6").malloc_trim
+        except (OSError, AttributeError):
+            _LIBC["trim"] = False
+    if _LIBC["trim"]:
+        _LIBC["trim"](0)
+
+
+def _settle() -> None:
+    """Once before a measurement: collect garbage and freeze what is alive (later collections skip it)."""
+    gc.collect()
+    gc.freeze()
+
+
 def call(fn, memory: bool = True) -> Call:
     """``fn()`` timed (wall, CPU) and, where the platform allows, its peak memory measured in the same call."""
-    gc.collect()
+    if memory:
+        _malloc_trim()
     measured = memory and _reset_peak()
     before = _status_kib("VmRSS") if measured else None
     t, c = time.perf_counter(), time.process_time()
@@ -154,17 +177,20 @@ def compare(locbook, reference, *, repeats: int = MIN_REPEATS, reference_scale: 
     the agreement figure (e.g. ``"max |x - filterpy| 2e-13"``), computed on the results of the last pair; it may
     raise AssertionError when the results disagree beyond the benchmark's stated tolerance (the row then says so)."""
     repeats = max(MIN_REPEATS, int(repeats))
+    _settle()
     load0 = _load()
-    ours, theirs = [], []
+    ours, theirs, last = [], [], [None, None]
     for i in range(repeats):
         order = (True, False) if i % 2 == 0 else (False, True)
         for mine in order:
-            (ours if mine else theirs).append(call(locbook if mine else reference, memory))
+            c = call(locbook if mine else reference, memory)
+            last[0 if mine else 1], c.result = c.result, None          # keep only each side's last result
+            (ours if mine else theirs).append(c)
     load1 = _load()
     text = ""
     if agree is not None:
         try:
-            text = agree(ours[-1].result, theirs[-1].result)
+            text = agree(last[0], last[1])
         except AssertionError as exc:
             text = f"DISAGREE: {exc}"
     peaks = [c.peak_mb for c in ours if c.peak_mb is not None]
@@ -174,26 +200,30 @@ def compare(locbook, reference, *, repeats: int = MIN_REPEATS, reference_scale: 
                        max(peaks) if peaks else None,
                        _median([c.wall_s for c in theirs]) * reference_scale,
                        _median([c.cpu_s for c in theirs]) * reference_scale,
-                       max(ref_peaks) if ref_peaks else None, reference_scale, text, (load0, load1),
-                       (ours[-1].result, theirs[-1].result))
+                       max(ref_peaks) if ref_peaks else None, reference_scale, text, (load0, load1), tuple(last))
 
 
 def repeat(locbook, *, repeats: int = MIN_REPEATS, agree=None, memory: bool = True) -> Measurement:
     """``locbook()`` alone (no reference), ``repeats`` times; ``agree(result) -> str`` an accuracy figure."""
     repeats = max(MIN_REPEATS, int(repeats))
+    _settle()
     load0 = _load()
-    ours = [call(locbook, memory) for _ in range(repeats)]
+    ours, result = [], None
+    for _ in range(repeats):
+        c = call(locbook, memory)
+        result, c.result = c.result, None
+        ours.append(c)
     load1 = _load()
-    text = agree(ours[-1].result) if agree is not None else ""
+    text = agree(result) if agree is not None else ""
     walls = [c.wall_s for c in ours]
     peaks = [c.peak_mb for c in ours if c.peak_mb is not None]
     return Measurement(_median(walls), _median([c.cpu_s for c in ours]), (min(walls), max(walls)), repeats,
-                       max(peaks) if peaks else None, agreement=text, load=(load0, load1),
-                       results=(ours[-1].result, None))
+                       max(peaks) if peaks else None, agreement=text, load=(load0, load1), results=(result, None))
 
 
 def once(locbook, *, agree=None) -> Measurement:
     """One call of a workload too large to repeat: timed and its memory measured in the same call."""
+    _settle()
     load0 = _load()
     c = call(locbook, True)
     load1 = _load()

@@ -6,7 +6,8 @@ locbook; attribution in locbook/data/datasets/kolakowski2021/README.md).
 
 Each method runs on the real inputs (the calibration set for the fits, the 719-epoch robot drive for the
 estimators, the drive on its 1/3 s clock for the trackers), 5 times (``hx.repeat``: medians of CPU and wall time;
-peak resident memory of each call); the many k-NN queries and the particle filter once (``hx.once``). No reference: the figure beside the
+peak resident memory of each call); the many k-NN queries, the Huber fit and the particle filter once
+(``hx.once``). No reference: the figure beside the
 time is the mean error against the robot's truth, from the timed calls. The grid Bayes filter is
 shown on the flat at ``--spacing`` with the separable transition; ``--dense-check`` also runs the dense C x C
 transition (its matrix alone is 8 C^2 bytes) for comparison. The k-NN radio map is the 4,104 calibration points;
@@ -32,8 +33,8 @@ from locbook.scenarios import measured as ko  # noqa: E402
 def measure(spacing: float = 0.1, particles: int = 3000, knn_queries: int = 10_000, dense_check: bool = False,
             cvxpy_fits: bool = True, repeats: int = hx.MIN_REPEATS):
     """Rows as each method finishes: ``hx.repeat`` (``repeats`` calls, medians) for every method, ``hx.once`` for the
-    many k-NN queries and the particle filter (for every method when ``repeats`` is 1); the mean error against the
-    robot's truth from the timed calls."""
+    many k-NN queries, the Huber fit and the particle filter (for every method when ``repeats`` is 1); the mean error
+    against the robot's truth from the timed calls."""
     data = ko.load("kolakowski2021")
     epoch_s = ko.epoch_s(data, "robot")
     fit = ko.calibrate(data)
@@ -62,7 +63,7 @@ def measure(spacing: float = 0.1, particles: int = 3000, knn_queries: int = 10_0
         cases += [("fit per anchor (bounded, cvxpy)", "4,104 points x 6 anchors", lambda: ko.calibrate(data, fit="bounded"),
                    None),
                   ("fit per anchor (Huber, cvxpy)", "4,104 points x 6 anchors", lambda: ko.calibrate(data, fit="huber"),
-                   None)]
+                   "once")]
     cases += [
         ("LLS", "719 epochs", lambda: lb.lateration_ls(anchors, ranges, tag_height_m=h).position_m, "fix"),
         ("box-LS", "719 epochs", lambda: lb.lateration_box_ls(anchors, ranges, lower, upper,

@@ -11,10 +11,9 @@ and the rows it measured in the partial file. A benchmark that raises, or yields
 an error row; the others still run. Text below the line ``<!-- notes: kept by run_all.py -->`` in an existing output
 file (the hand-written analysis) is carried over unchanged.
 
-The process runs with BLAS pinned to one thread (``threadpoolctl``, and the ``*_NUM_THREADS`` variables for any
-process it starts) and, when started from the command line, with a fixed ``malloc`` mmap threshold
-(``MALLOC_MMAP_THRESHOLD_=65536``, so that freed arrays go back to the system and the harness's peak-memory figure of
-one call is not hidden in the next one's baseline): ``main`` re-executes itself once with these variables set.
+The process runs with BLAS pinned to one thread: ``threadpoolctl`` in the process, and the ``*_NUM_THREADS``
+variables for the processes it starts (``main`` re-executes itself once with them set, so that they also hold from
+the start).
 """
 from __future__ import annotations
 
@@ -35,8 +34,8 @@ if str(HERE) not in sys.path:
     sys.path.insert(0, str(HERE))
 import _harness  # noqa: E402
 
-#: set before numpy loads (main re-executes itself with them): one BLAS thread, freed arrays returned at once
-RUN_ENV = {"MALLOC_MMAP_THRESHOLD_": "65536", "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1",
+#: set before numpy loads (main re-executes itself with them): one BLAS thread
+RUN_ENV = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1",
            "MKL_NUM_THREADS": "1"}
 KEYS = _harness.KEYS
 NOTES_MARKER = "<!-- notes: kept by run_all.py -->"
@@ -149,8 +148,7 @@ def machine_facts() -> dict:
             "platform": platform.platform(), "python": sys.version.split()[0], "numpy": numpy.__version__,
             "scipy": scipy.__version__, "numba": numba_version,
             "LOCBOOK_NUMBA": os.environ.get("LOCBOOK_NUMBA", "(unset: compiled kernels on)"),
-            "BLAS threads": _blas_threads(),
-            "malloc mmap threshold": os.environ.get("MALLOC_MMAP_THRESHOLD_", "(glibc default, dynamic)")}
+            "BLAS threads": _blas_threads()}
 
 
 def _blas_threads() -> str:

@@ -713,12 +713,24 @@ def _box_ls_exact(a_mat, b, lower, upper):
     the unique minimiser, exact up to rounding. The tests allow 1e-9 relative rounding; should rounding leave a
     problem with no KKT candidate, the primal-feasible candidate of least objective is taken (a corner always
     is feasible). Returns positions ``(k, dim)`` (clipped into the box) and success flags (finite).
+
+    With numba (:func:`_box_kernel_module`: enabled, at least ``_BOX_NUMBA_MIN_PROBLEMS`` problems) the same search runs
+    problem by problem in one compiled loop (:func:`locbook.static._box_kernels._nb_box_ls`): the same sets in the
+    same order, acceptance rule, tolerance and fallback, so the same answers up to the rounding of the products
+    (1e-12, ``tests/test_box_ls_speed.py``); a problem inside the box keeps ``p*`` bit for bit either way.
     """
     key = tuple(map(tuple, a_mat.tolist()))
     pinv_t, levels = _box_active_sets(key, lower, upper)
     lo, hi = np.array(lower), np.array(upper)
     with np.errstate(over="ignore", invalid="ignore"):
         p_star = b @ pinv_t
+    kernels = _box_kernel_module(len(b))
+    if kernels is not None:     # the same search, problem by problem in one compiled loop (no temporaries per set)
+        weights, offsets, start, n_kkt = _box_kernel_tables(key, lower, upper)
+        pos, ok = np.empty(p_star.shape), np.empty(len(b), bool)
+        kernels._nb_box_ls(np.ascontiguousarray(p_star), lo, hi, float(np.max(np.maximum(np.abs(lo), np.abs(hi)))),
+                           weights, offsets, start, n_kkt, np.ascontiguousarray(a_mat, dtype=float), False, pos, ok)
+        return pos, ok
     # per coordinate: numpy reductions over an axis of 2 or 3 are slow
     ok, inside = np.ones(len(b), bool), np.ones(len(b), bool)
     for j in range(len(lo)):
@@ -732,6 +744,57 @@ def _box_ls_exact(a_mat, b, lower, upper):
 
 
 _BOX_BLOCK_VALUES = 32_768     # values of the largest temporary per block of problems (256 kB)
+#: problems from which :func:`_box_ls_exact` runs the compiled search (fewer: numpy, without loading numba)
+_BOX_NUMBA_MIN_PROBLEMS = 256
+_BOX_KERNELS = {"module": None, "tried": False}
+
+
+def _box_kernel_module(n_problems: int):
+    """:mod:`locbook.static._box_kernels` when the compiled search applies (numba installed and enabled, i.e.
+    ``locbook.tracking._compiled._NUMBA_ENABLED`` read at call time, and at least ``_BOX_NUMBA_MIN_PROBLEMS``
+    problems), else None (the numpy search). Imported and tried once per session on a small problem; where numba
+    cannot compile or run it, one warning and numpy from then on (as the compiled filters)."""
+    from ..tracking import _compiled
+    if not _compiled._NUMBA_ENABLED or n_problems < _BOX_NUMBA_MIN_PROBLEMS:
+        return None
+    if not _BOX_KERNELS["tried"]:
+        _BOX_KERNELS["tried"] = True
+        if _compiled._numba_ready():
+            try:
+                from . import _box_kernels as kernels   # lazy: numba loads only when the compiled path runs
+                a_mat = np.array([[1.0, 0.0], [0.0, 1.0]])
+                weights, offsets, start, n_kkt = _box_kernel_tables(((1.0, 0.0), (0.0, 1.0)), (0.0, 0.0), (1.0, 1.0))
+                pos, ok = np.empty((1, 2)), np.empty(1, bool)
+                kernels._nb_box_ls(np.array([[2.0, 0.5]]), np.zeros(2), np.ones(2), 1.0, weights, offsets, start,
+                                   n_kkt, a_mat, False, pos, ok)
+                _BOX_KERNELS["module"] = kernels
+            except Exception as exc:    # numba could not compile or run the kernel here: numpy from now on
+                import warnings
+                warnings.warn(f"locbook: the compiled box LS failed ({type(exc).__name__}: {exc}); using numpy "
+                              "(set LOCBOOK_NUMBA=0 to skip the attempt)", RuntimeWarning, stacklevel=4)
+    return _BOX_KERNELS["module"]
+
+
+def _box_flat_tables(levels, dim: int):
+    """The active sets of ``levels`` (:func:`_box_active_sets`) for the compiled search, in the numpy search's order:
+    ``weights (rows, dim)`` and ``offsets (rows,)`` of every set one after the other, and per set its first row
+    ``start`` and its number of KKT quantities ``n_kkt`` (``2 dim - j`` for ``j`` coordinates at a bound; the
+    ``dim`` rows of its candidate follow them)."""
+    start, n_kkt, first = [], [], 0
+    for j, (weights, _, n_sets) in enumerate(levels, start=1):
+        per_set = weights.shape[0] // n_sets
+        start += [first + s * per_set for s in range(n_sets)]
+        n_kkt += [2 * dim - j] * n_sets
+        first += weights.shape[0]
+    return (np.ascontiguousarray(np.concatenate([lv[0] for lv in levels]), dtype=float),
+            np.ascontiguousarray(np.concatenate([lv[1][:, 0] for lv in levels]), dtype=float),
+            np.array(start, np.int64), np.array(n_kkt, np.int64))
+
+
+@lru_cache(maxsize=64)
+def _box_kernel_tables(a_key, lower, upper):
+    """:func:`_box_flat_tables` of :func:`_box_active_sets` (once per anchors and box)."""
+    return _box_flat_tables(_box_active_sets(a_key, lower, upper)[1], len(lower))
 
 
 def _box_active_set_search(p_star, lo, hi, levels, a_mat):
@@ -792,8 +855,10 @@ def lateration_box_ls(anchors_m, distance_m, lower_m, upper_m, ref_index: int = 
     ``solver="exact"`` (default): KKT active-set enumeration, exact (no iterations, no solver tolerance). Each
     of the ``3^dim`` (9 or 27) ways to hold every coordinate free, at its lower or at its upper bound gives the
     reduced unconstrained LS in closed form; its reduced matrices depend only on ``A`` and the box, so they are
-    computed once per anchors and box (cached), and the active sets are evaluated with matrix products over
-    many problems at once (blocks of about a thousand; never a loop over problems). The answer is the candidate
+    computed once per anchors and box (cached). From 256 problems on, one compiled loop (numba; ``LOCBOOK_NUMBA=0``
+    turns it off) tries the active sets problem by problem, stopping at the first that passes; otherwise numpy
+    evaluates them with matrix products over many problems at once (blocks of about a thousand). Both give the same
+    answers (to 1e-12; tests/test_box_ls_speed.py). The answer is the candidate
     that is feasible and meets the KKT sign conditions (gradient ``A^T (A p - b)`` >= 0 at a lower bound, <= 0
     at an upper one, 0 on free coordinates); for this strictly convex QP it is unique (:func:`_box_ls_exact`).
     Where the unconstrained fix is inside the box it is the answer (bit for bit that of :func:`lateration_ls`);

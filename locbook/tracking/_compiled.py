@@ -122,11 +122,11 @@ def _compiled_ekf(setup: _Setup, measurements, predict_first: bool):
     B = int(np.prod(batch, dtype=np.int64))
     if not _NUMBA_ENABLED or not setup.plain_motion or any(setup.per_step_streams):
         return None                 # time-varying or nonlinear motion, a control input, H or R per step: numpy
-    if F.ndim != 2 or Q.ndim != 2 or B * T < _NUMBA_MIN_WORK or B == 0 or T == 0:
+    if F.ndim != 2 or B * T < _NUMBA_MIN_WORK or B == 0 or T == 0:
         return None
     if not all(isinstance(m, (LinearMeasurement, RssMeasurement)) for m in measurements):
         return None
-    if not (np.array_equal(Q, Q.T) and np.array_equal(setup.P, _mT(setup.P))):
+    if not (np.array_equal(Q, _mT(Q)) and np.array_equal(setup.P, _mT(setup.P))):
         return None                 # the kernel keeps P exactly symmetric (it computes one triangle of F P F^T + Q)
     packed = _pack_streams(setup, measurements, B)
     if packed is None or not _numba_ready():
@@ -136,7 +136,7 @@ def _compiled_ekf(setup: _Setup, measurements, predict_first: bool):
     P0 = setup.P[None] if setup.P.ndim == 2 else np.broadcast_to(setup.P, batch + (n, n)).reshape(B, n, n)
     out_x, out_P = np.empty((B, S, n)), np.empty((B, S, n, n))
     out_nis, out_dof, out_ll = np.empty((B, T)), np.empty((B, T), np.int64), np.empty((B, T))
-    args = (Fi.astype(np.int64), Fj.astype(np.int64), np.ascontiguousarray(F[Fi, Fj]), np.ascontiguousarray(Q),
+    args = (Fi.astype(np.int64), Fj.astype(np.int64), np.ascontiguousarray(F[Fi, Fj]), _leading(Q, batch, B, (n, n)),
             np.ascontiguousarray(setup.x.reshape(B, n)), np.ascontiguousarray(P0), bool(predict_first),
             setup.slot.astype(np.int64), np.array(setup.active, dtype=np.bool_).reshape(-1, T), *packed, out_x, out_P,
             out_nis, out_dof, out_ll)

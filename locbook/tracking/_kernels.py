@@ -29,7 +29,8 @@ def _jit(fn):
 @_jit
 def _nb_predict(Fi, Fj, Fv, Q, x, P, xt, T1):
     """x = F x, P = (F P) F^T + Q in place for the lanes (last axis), F given by its nonzero entries (rows Fi,
-    columns Fj, values Fv); P symmetric in, symmetric out (the upper triangle is computed and mirrored)."""
+    columns Fj, values Fv), Q per lane ``(n, n, W)``; P symmetric in, symmetric out (the upper triangle is computed and
+    mirrored)."""
     n, W = x.shape
     for i in range(n):
         for w in range(W):
@@ -58,7 +59,7 @@ def _nb_predict(Fi, Fj, Fv, Q, x, P, xt, T1):
     for a in range(n):
         for c in range(a, n):
             for w in range(W):
-                P[a, c, w] += Q[a, c]
+                P[a, c, w] += Q[a, c, w]
                 P[c, a, w] = P[a, c, w]
 
 
@@ -67,10 +68,11 @@ def _nb_update(x, P, c, nz, nnz, H, nu, R, HP, HPH, S, L, KT, PH, D, t, u, Y, ni
     """Kalman update in place, lane by lane (last axis), with the rows ``H[:c]`` (nonzero only in the columns
     ``nz[:nnz]``), innovations ``nu[:c]`` and noise ``R[:c, :c]``; a missing reading is a zero row with zero
     innovation and unit decoupled noise (its gain column is then exactly zero). K = P H^T S^{-1} (Cholesky of
-    S = H P H^T + R), x += K nu, and the Joseph form (I - K H) P (I - K H)^T + K R K^T, symmetrised, written as
-    P - K (H P) + (K S - P H^T) K^T (equal for any K). Adds each lane's NIS nu^T S^{-1} nu = |L^{-1} nu|^2 to
-    ``nis`` and half its log-determinant, sum log L_jj, to ``hld`` (a missing row adds 0 to both). False when some S
-    is not positive definite or some state not finite."""
+    S = H P H^T + R), x += K nu, and the Joseph form (I - K H) P (I - K H)^T + K R K^T written as
+    P - K (H P) + (K S - P H^T) K^T (equal for any K), its upper triangle computed and mirrored (exactly symmetric).
+    Adds each lane's NIS nu^T S^{-1} nu = |L^{-1} nu|^2 to ``nis`` and half its log-determinant, sum log L_jj, to
+    ``hld`` (a missing row adds 0 to both). False when some S is not positive definite or some state not finite.
+    ``u`` is scratch space the caller provides (unused since the update computes one triangle)."""
     n, W = x.shape
     for r in range(c):                                    # HP = H P, PH = P H^T
         for j in range(n):
@@ -158,18 +160,16 @@ def _nb_update(x, P, c, nz, nnz, H, nu, R, HP, HPH, S, L, KT, PH, D, t, u, Y, ni
             for q in range(c):
                 for w in range(W):
                     D[i, r, w] += KT[q, i, w] * S[q, r, w]
-    for i in range(n):                                    # P - K (H P) + D K^T, symmetrised
+    for i in range(n):                                    # P - K (H P) + D K^T: the upper triangle, mirrored
         for j in range(i, n):
             for w in range(W):
                 t[w] = P[i, j, w]
-                u[w] = P[j, i, w]
             for r in range(c):
                 for w in range(W):
                     t[w] += D[i, r, w] * KT[r, j, w] - KT[r, i, w] * HP[r, j, w]
-                    u[w] += D[j, r, w] * KT[r, i, w] - KT[r, j, w] * HP[r, i, w]
             for w in range(W):
-                P[i, j, w] = 0.5 * (t[w] + u[w])
-                P[j, i, w] = P[i, j, w]
+                P[i, j, w] = t[w]
+                P[j, i, w] = t[w]
     return True
 
 
@@ -226,6 +226,7 @@ def _nb_ekf(Fi, Fj, Fv, Q, x0, P0, predict_first, slot, active, kind, col, nz, n
     valid = np.zeros((mmax, W), np.bool_)
     sel = np.empty((mmax, W), np.int64)
     run = np.empty(W, np.int64)
+    Qw = np.empty((n, n, W))
     for b0 in range(0, B, W):
         for w in range(W):
             b = min(b0 + w, B - 1)
@@ -234,9 +235,10 @@ def _nb_ekf(Fi, Fj, Fv, Q, x0, P0, predict_first, slot, active, kind, col, nz, n
                 x[i, w] = x0[b, i]
                 for j in range(n):
                     P[i, j, w] = P0[min(b, P0.shape[0] - 1), i, j]
+                    Qw[i, j, w] = Q[min(b, Q.shape[0] - 1), i, j]
         for k in range(T):
             if predict_first or k > 0:
-                _nb_predict(Fi, Fj, Fv, Q, x, P, xt, T1)
+                _nb_predict(Fi, Fj, Fv, Qw, x, P, xt, T1)
             for w in range(W):
                 nis[w] = 0.0
                 hld[w] = 0.0

@@ -81,8 +81,8 @@ def _nb_clearly_well_conditioned(S, m, rel, A, L, W, t):
 
 @_jit
 def _nb_predict(Fi, Fj, Fv, Q, x, P, xt, T1, n, W):
-    """x = F x, P = (F P) F^T + Q for the lanes, F by its nonzero entries (rows Fi, columns Fj, values Fv); the lower
-    triangle is computed and mirrored."""
+    """x = F x, P = (F P) F^T + Q for the lanes, F by its nonzero entries (rows Fi, columns Fj, values Fv), Q per lane
+    ``(n, n, W)``; the lower triangle is computed and mirrored."""
     for i in range(n):
         for w in range(W):
             xt[i, w] = 0.0
@@ -110,7 +110,7 @@ def _nb_predict(Fi, Fj, Fv, Q, x, P, xt, T1, n, W):
     for a in range(n):
         for c in range(a + 1):
             for w in range(W):
-                P[a, c, w] += Q[a, c]
+                P[a, c, w] += Q[a, c, w]
                 P[c, a, w] = P[a, c, w]
 
 
@@ -404,6 +404,7 @@ def _nb_ukf(Fi, Fj, Fv, Q, x0, P0, predict_first, slot, active, kind, col, nz, n
     valid = np.zeros((mmax, W), np.bool_)
     sel = np.empty((mmax, W), np.int64)
     run = np.empty(W, np.int64)
+    Qw = np.empty((n, n, W))
     for b0 in range(0, B, W):
         for w in range(W):
             b = min(b0 + w, B - 1)
@@ -413,9 +414,10 @@ def _nb_ukf(Fi, Fj, Fv, Q, x0, P0, predict_first, slot, active, kind, col, nz, n
                 x[i, w] = x0[b, i]
                 for j in range(n):
                     P[i, j, w] = P0[min(b, P0.shape[0] - 1), i, j]
+                    Qw[i, j, w] = Q[min(b, Q.shape[0] - 1), i, j]
         for k in range(T):
             if predict_first or k > 0:
-                _nb_predict(Fi, Fj, Fv, Q, x, P, xt, T1, n, W)
+                _nb_predict(Fi, Fj, Fv, Qw, x, P, xt, T1, n, W)
             for w in range(W):
                 nis[w] = 0.0
                 hld[w] = 0.0

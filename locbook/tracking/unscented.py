@@ -481,9 +481,9 @@ def _compiled_ukf(setup, measurements, predict_first: bool, weights: UnscentedWe
     B = int(np.prod(batch, dtype=np.int64))
     if not _compiled._NUMBA_ENABLED or not setup.plain_motion or any(setup.per_step_streams):
         return None                 # nonlinear or time-varying motion, a control input, H or R per step: numpy
-    if F.ndim != 2 or Q.ndim != 2 or B * T < _compiled._NUMBA_MIN_WORK or B == 0 or T == 0:
+    if F.ndim != 2 or B * T < _compiled._NUMBA_MIN_WORK or B == 0 or T == 0:
         return None
-    if not (np.array_equal(Q, Q.T) and np.array_equal(setup.P, _mT(setup.P))):
+    if not (np.array_equal(Q, _mT(Q)) and np.array_equal(setup.P, _mT(setup.P))):
         return None                 # the kernel keeps P exactly symmetric
     n = setup.n
     packable, inertial = [], []
@@ -515,7 +515,7 @@ def _compiled_ukf(setup, measurements, predict_first: bool, weights: UnscentedWe
     out_x, out_P = np.empty((B, S, n)), np.empty((B, S, n, n))
     out_nis, out_dof, out_ll = np.empty((B, T)), np.empty((B, T), np.int64), np.empty((B, T))
     out_floored = np.zeros(B, np.int64)
-    args = (Fi.astype(np.int64), Fj.astype(np.int64), np.ascontiguousarray(F[Fi, Fj]), np.ascontiguousarray(Q),
+    args = (Fi.astype(np.int64), Fj.astype(np.int64), np.ascontiguousarray(F[Fi, Fj]), _compiled._leading(Q, batch, B, (n, n)),
             np.ascontiguousarray(setup.x.reshape(B, n)), np.ascontiguousarray(P0), bool(predict_first),
             setup.slot.astype(np.int64), np.array(setup.active, dtype=np.bool_).reshape(-1, T), kinds,
             *packed[1:], iner, umax, np.ascontiguousarray(weights.mean, dtype=float),

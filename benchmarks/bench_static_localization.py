@@ -71,9 +71,13 @@ def measure(n: int = 10_000, loop_n: int | None = None, scipy_n: int | None = No
                    repeats=repeats, reference_scale=n / loop_n, agree=max_diff(loop_n))
     yield hx.row("box-constrained LS (batched)", workload, m, "cvxpy DPP per-problem loop" + scaled(loop_n))
 
+    p0, ple, d0 = model.ref_power_dbm, model.path_loss_exp, model.ref_distance_m
+
+    def residual(q, i):          # the log-distance mean written out, as a hand-written reference would
+        return power[i] - (p0 - 10.0 * ple * np.log10(np.sqrt(np.sum((q - anchors) ** 2, axis=-1)) / d0))
+
     def scipy_loop():
-        return np.array([least_squares(lambda q, i=i: power[i] - model.mean_rss_dbm(lb.pairwise_distance_m(q, anchors)),
-                                       est[i], method="lm").x for i in range(scipy_n)])
+        return np.array([least_squares(residual, est[i], args=(i,), method="lm").x for i in range(scipy_n)])
 
     def ml_agree(ours, ref):
         ok = ours.converged[:scipy_n]

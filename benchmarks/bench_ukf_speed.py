@@ -77,8 +77,9 @@ def filterpy_ukf(st: dict, runs: int, alpha: float):
     ple = np.broadcast_to(ch.path_loss_exp, a.shape[:1])
     T = z_imu.shape[1]
     xs, Ps = np.empty((runs, T, 8)), np.empty((runs, T, 8, 8))
+    F = model.F                      # once: the model's property builds the matrix at each access
     for r in range(runs):
-        f = UnscentedKalmanFilter(8, 3, st["settings"].dt_s, h_imu, lambda x, dt: model.F @ x, points)
+        f = UnscentedKalmanFilter(8, 3, st["settings"].dt_s, h_imu, lambda x, dt: F @ x, points)
         f.x, f.P, f.Q = st["x0"].copy(), st["P0"].copy(), model.Q
         for k in range(T):
             f.predict()

@@ -14,21 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-try:
-    import numba
-except ImportError:                 # plain Python kernel (only the tests call it so)
-    numba = None
-
-
-def _jit(fn):
-    """``fn`` compiled on first call (numba's njit, as :func:`locbook.tracking._kernels._jit`), cached on disk where
-    there is a writable cache location."""
-    if numba is None:
-        return fn
-    try:
-        return numba.njit(cache=True, nogil=True, error_model="numpy")(fn)
-    except RuntimeError:            # no writable cache location: compile in memory at each session
-        return numba.njit(nogil=True, error_model="numpy")(fn)
+from .._numba import jit as _jit
 
 
 @_jit

@@ -26,6 +26,8 @@ try:
 except ImportError:                 # plain Python kernels (only the tests call them so)
     numba = None
 
+from .._numba import jit
+
 _FLOOR = 1e-300                     # the numpy loop's floor on the predicted belief (its log(max(b, 1e-300)))
 _LOG2E = 1.4426950408889634
 _LN2_HI = 6.93147180369123816490e-01    # fdlibm's split of ln 2: k * _LN2_HI is exact for |k| < 2^11
@@ -37,16 +39,9 @@ _BLOCK = 1024                       # cells per partial sum of the reductions (e
 
 
 def _jit(fn):
-    """``fn`` compiled on first call (numba's njit, as :func:`locbook.tracking._kernels._jit`), cached on disk where
-    there is a writable cache location, with ``fastmath={"contract"}`` only: ``a * b + c`` may become one fused
-    multiply-add (one rounding instead of two; it halves the work of the polynomial and the correlations). No other
-    fast-math licence: no reassociation, NaN and infinities kept."""
-    if numba is None:
-        return fn
-    try:
-        return numba.njit(cache=True, nogil=True, error_model="numpy", fastmath={"contract"})(fn)
-    except RuntimeError:            # no writable cache location: compile in memory at each session
-        return numba.njit(nogil=True, error_model="numpy", fastmath={"contract"})(fn)
+    """``fn`` compiled as every kernel (:func:`locbook._numba.jit`), with fused multiply-adds allowed (``contract``:
+    one rounding instead of two; it halves the work of the polynomial and the correlations)."""
+    return jit(fn, contract=True)
 
 
 if numba is not None:

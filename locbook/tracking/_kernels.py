@@ -7,23 +7,10 @@ from __future__ import annotations
 
 import numpy as np
 
-try:
-    import numba
-except ImportError:                 # plain Python kernels (only the tests call them so)
-    numba = None
+from .._numba import jit as _jit
 
 _LANES = 64     # runs per block of the compiled EKF: the innermost axis, long enough for LLVM to vectorise it
 _LOG_2PI = float(np.log(2.0 * np.pi))
-
-
-def _jit(fn):
-    """``fn`` compiled on first call (numba's njit), cached on disk where there is a writable cache location."""
-    if numba is None:
-        return fn
-    try:
-        return numba.njit(cache=True, nogil=True, error_model="numpy")(fn)
-    except RuntimeError:            # no writable cache location: compile in memory at each session
-        return numba.njit(nogil=True, error_model="numpy")(fn)
 
 
 @_jit

@@ -16,22 +16,9 @@ import math
 
 import numpy as np
 
-try:
-    import numba
-except ImportError:                 # plain Python kernels (only the tests call them so)
-    numba = None
+from .._numba import jit as _jit
 
 _PW_BLOCK = 128                     # numpy's pairwise-sum block (PW_BLOCKSIZE in loops_utils.h)
-
-
-def _jit(fn):
-    """``fn`` compiled on first call (numba's njit), cached on disk where there is a writable cache location."""
-    if numba is None:
-        return fn
-    try:
-        return numba.njit(cache=True, nogil=True, error_model="numpy")(fn)
-    except RuntimeError:            # no writable cache location: compile in memory at each session
-        return numba.njit(nogil=True, error_model="numpy")(fn)
 
 
 @_jit

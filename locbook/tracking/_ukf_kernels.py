@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._kernels import _jit
+from .._numba import jit as _jit
 
 _LOG_2PI = float(np.log(2.0 * np.pi))
 _EPS = float(np.finfo(float).eps)
@@ -82,7 +82,9 @@ def _nb_clearly_well_conditioned(S, m, rel, A, L, W, t):
 @_jit
 def _nb_predict(Fi, Fj, Fv, Q, x, P, xt, T1, n, W):
     """x = F x, P = (F P) F^T + Q for the lanes, F by its nonzero entries (rows Fi, columns Fj, values Fv), Q per lane
-    ``(n, n, W)``; the lower triangle is computed and mirrored."""
+    ``(n, n, W)``; the lower triangle is computed and mirrored. (The EKF kernel's prediction computes the upper
+    one. It is not imported from there on purpose: numba's disk cache of this module would not notice a change in
+    another file and could keep running the old code.)"""
     for i in range(n):
         for w in range(W):
             xt[i, w] = 0.0

@@ -100,7 +100,9 @@ def _malloc_trim() -> None:
 
 
 def _settle() -> None:
-    """Once before a measurement: collect garbage and freeze what is alive (later collections skip it)."""
+    """Once before a measurement: collect garbage and freeze what is alive (the measurement's collections skip it;
+    what an earlier measurement froze is released first, so that its garbage is collected now)."""
+    gc.unfreeze()
     gc.collect()
     gc.freeze()
 

@@ -46,6 +46,7 @@ def test_tiny_run_gives_protocol_rows(path):
             assert r["repeats"] >= harness.MIN_REPEATS        # every ratio from paired, alternated repeats
         assert r["peak_mb"] is None or (math.isfinite(r["peak_mb"]) and r["peak_mb"] >= 0)
         assert isinstance(r["note"], str)
+        assert not str(r["agreement"]).startswith("DISAGREE"), r          # the same run's results agree
 
 
 def test_run_all_writes_a_table_and_reports_a_failing_benchmark(tmp_path):

@@ -228,3 +228,31 @@ def test_outputs_and_unsupported_streams_stay_in_numpy(monkeypatch):
     monkeypatch.setattr(K, "_NUMBA_MIN_WORK", 10**9)
     setup = U._setup(F, Q, x0, P0, streams, None, "ukf")
     assert U._compiled_ukf(setup, streams, True, w, True) is None       # too small: no compilation wait
+
+
+@pytest.mark.parametrize("heading_index", [6, -2])
+def test_inertial_stream_with_an_index_from_the_end_equals_the_numpy_ukf(monkeypatch, heading_index):
+    """The inertial h takes numpy indices, -2 included (the heading of an 8-state model); the kernel counts from 0,
+    so such a stream stays in numpy (-2), and a positive index is compiled (6): both equal the numpy loop. Q per
+    run is compiled too."""
+    from locbook.models.imu import inertial_measurement_function
+    rng = np.random.default_rng(0)
+    n, B, T = 8, 6, 40
+    F = np.eye(n)
+    F[0, 2] = F[1, 3] = F[2, 4] = F[3, 5] = F[6, 7] = 0.1
+    Q = np.stack([np.eye(n) * 0.01 * (1 + i) for i in range(B)])
+    x0, P0 = rng.normal(0.0, 1.0, (B, n)), 0.5 * np.eye(n)
+    h = inertial_measurement_function("body", acceleration_index=(4, 5), heading_index=heading_index,
+                                      yaw_rate_index=7)
+    meas = lb.NonlinearMeasurement(rng.normal(0.0, 1.0, (B, T, 3)), h, 0.1 * np.eye(3))
+    monkeypatch.setattr(K, "_NUMBA_MIN_WORK", 0)
+    monkeypatch.setattr(K, "_NUMBA_ENABLED", False)
+    ref = lb.unscented_kalman_filter(F, Q, x0, P0, [meas], alpha=0.5)
+    monkeypatch.setattr(K, "_NUMBA_ENABLED", True)
+    calls = []
+    original = U._compiled_ukf
+    monkeypatch.setattr(U, "_compiled_ukf", lambda *a: calls.append(original(*a)) or calls[-1])
+    ours = lb.unscented_kalman_filter(F, Q, x0, P0, [meas], alpha=0.5)
+    assert (calls[0] is not None) == (heading_index >= 0)
+    np.testing.assert_allclose(ours.x, ref.x, rtol=0, atol=1e-10)
+    np.testing.assert_allclose(ours.P, ref.P, rtol=0, atol=1e-10)

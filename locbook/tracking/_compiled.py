@@ -5,7 +5,7 @@ The EKF and the KF use them when ``_NUMBA_ENABLED`` is True (environment variabl
 the problem has at least ``_NUMBA_MIN_WORK`` run-steps (below that, loading numba would cost more than it saves) and
 either the covariance differs between runs or the batch is at most one block of runs (a covariance shared by many runs
 is updated once per step by the numpy loop instead); streams the kernel does not cover (NonlinearMeasurement, batched F
-or Q, walls, outputs beyond x and P) run in numpy. Either way the results are the same to round-off
+(Q may differ per run), walls, outputs beyond x and P) run in numpy. Either way the results are the same to round-off
 (tests/test_filter_speed_equality.py), and every error is raised by the numpy loop.
 """
 from __future__ import annotations

@@ -32,7 +32,7 @@ be evaluated (an ``n x m`` times ``n x m`` product) and has no variant.
 Missing readings follow the library's rule: a NaN component is left out of the update (zero gain column).
 
 Speed (issue 31). With numba installed and enabled (``LOCBOOK_NUMBA``, :mod:`locbook.tracking._compiled`), linear
-motion (F, Q without run axes) and LinearMeasurement, RssMeasurement and inertial
+motion (F without run axes; Q may differ per run) and LinearMeasurement, RssMeasurement and inertial
 (:func:`locbook.models.imu.inertial_measurement_function`) streams, the same recursion runs compiled on blocks of runs
 (:mod:`locbook.tracking._ukf_kernels`); anything it cannot do (a covariance that is not positive definite, the
 eigenvalue guard on a multi-reading update, a state that overflows) sends the problem back to the numpy loop, which
@@ -375,7 +375,7 @@ def unscented_kalman_filter(F, Q, x0, P0, measurements, *, B=None, u=None, alpha
     round-off of alpha = 1e-3 over 1e5 steps): its error then grows far beyond the reported covariance, the NIS
     exceeds the chi-square bound at every update and the run is flagged ``diverged`` (with ``diverged_step``).
 
-    Speed: with numba installed, linear motion (F, Q without run axes, no control input), LinearMeasurement,
+    Speed: with numba installed, linear motion (F without run axes, Q per run or shared, no control input), LinearMeasurement,
     RssMeasurement and inertial (:func:`locbook.models.imu.inertial_measurement_function`) streams and no ``outputs``,
     compiled loops run blocks of runs (:mod:`locbook.tracking._ukf_kernels`; ``LOCBOOK_NUMBA=0`` turns them off), else
     the numpy loop; both give the same numbers to round-off (amplified some 1e6 times at alpha = 1e-3).
@@ -467,12 +467,14 @@ def _inertial_parameters(meas: NonlinearMeasurement):
             or np.shape(meas.z)[-1] != 3 or len(spec[1]) != 2):
         return None
     body, ia, heading, yaw_rate = spec
+    if min(ia + (heading, yaw_rate)) < 0:
+        return None                 # an index from the end (numpy's h takes it; the kernel counts from 0)
     return bool(body), ia[0], ia[1], heading, yaw_rate
 
 
 def _compiled_ukf(setup, measurements, predict_first: bool, weights: UnscentedWeights, innovation_noise: bool):
     """The UKF by the compiled kernel (:mod:`locbook.tracking._ukf_kernels`) when it applies (numba installed and
-    enabled, F and Q without run axes and no control input, LinearMeasurement, RssMeasurement and inertial streams,
+    enabled, F without run axes (Q may have them) and no control input, LinearMeasurement, RssMeasurement and inertial streams,
     at least ``_NUMBA_MIN_WORK`` run-steps, the EKF's threshold), else None: the numpy loop then runs. Also None when
     an update fails or needs the eigenvalue guard on more than one reading (status of the kernel): the numpy loop then
     redoes the filter and raises the library's error or applies the guard."""

@@ -256,3 +256,28 @@ def test_inertial_stream_with_an_index_from_the_end_equals_the_numpy_ukf(monkeyp
     assert (calls[0] is not None) == (heading_index >= 0)
     np.testing.assert_allclose(ours.x, ref.x, rtol=0, atol=1e-10)
     np.testing.assert_allclose(ours.P, ref.P, rtol=0, atol=1e-10)
+
+
+@pytest.mark.parametrize("which", ["EKF", "UKF"])
+def test_a_kernel_that_cannot_run_warns_once_and_the_numpy_loop_answers(monkeypatch, which):
+    """numba failing inside a kernel (here: the kernel raises) gives one RuntimeWarning naming the filter, turns the
+    compiled paths off for the session and returns the numpy loop's numbers."""
+    from locbook.tracking import _kernels, _ukf_kernels
+    F, Q, x0, P0, streams, kw = _case("rss_parallel", np.random.default_rng(0))
+    run = lb.extended_kalman_filter if which == "EKF" else lb.unscented_kalman_filter
+    kw = {} if which == "EKF" else kw
+    monkeypatch.setattr(K, "_NUMBA_ENABLED", False)
+    ref = run(F, Q, x0, P0, streams, **kw)
+
+    def broken(*args):
+        raise RuntimeError("no LLVM here")
+
+    monkeypatch.setattr(_kernels if which == "EKF" else _ukf_kernels, "_nb_ekf" if which == "EKF" else "_nb_ukf",
+                        broken)
+    monkeypatch.setattr(K, "_NUMBA_ENABLED", True)
+    monkeypatch.setattr(K, "_NUMBA_MIN_WORK", 0)
+    with pytest.warns(RuntimeWarning, match=f"the compiled {which} failed \\(RuntimeError: no LLVM here\\)"):
+        ours = run(F, Q, x0, P0, streams, **kw)
+    assert K._NUMBA_ENABLED is False
+    np.testing.assert_array_equal(ours.x, ref.x)
+    np.testing.assert_array_equal(ours.P, ref.P)

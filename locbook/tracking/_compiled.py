@@ -112,12 +112,24 @@ def _pack_streams(setup: _Setup, measurements, B):
             tag_h.astype(float), pidx.astype(np.int64).reshape(-1, 3), npos.astype(np.int64), desc.astype(np.bool_))
 
 
+def _call_kernel(kernel, args, name: str):
+    """``kernel(*args)``, or None when numba could not compile or run it: one warning, and the numpy loops from then on
+    (for the session). Only the kernel call is guarded: an error of ours before it must not turn numba off."""
+    global _NUMBA_ENABLED
+    try:
+        return kernel(*args)
+    except Exception as exc:        # noqa: BLE001 - numba's compile and lowering errors have no common base
+        _NUMBA_ENABLED = False
+        warnings.warn(f"locbook: the compiled {name} failed ({type(exc).__name__}: {exc}); using the numpy loop "
+                      "(set LOCBOOK_NUMBA=0 to skip the attempt)", RuntimeWarning, stacklevel=4)
+        return None
+
+
 def _compiled_ekf(setup: _Setup, measurements, predict_first: bool):
     """:func:`locbook.extended_kalman_filter` by the compiled kernel when it applies (numba installed and enabled, F
     and Q without batch axes, linear and RSS streams, a large enough problem), else None: the numpy loop then runs. It
     also returns None when an update fails (a covariance that is not positive definite, a state that is not finite): the
     numpy loop then redoes the filter and raises the library's error for it."""
-    global _NUMBA_ENABLED
     F, Q, batch, T = setup.F, setup.Q, setup.batch, setup.T
     B = int(np.prod(batch, dtype=np.int64))
     if not _NUMBA_ENABLED or not setup.plain_motion or any(setup.per_step_streams):
@@ -141,14 +153,8 @@ def _compiled_ekf(setup: _Setup, measurements, predict_first: bool):
             setup.slot.astype(np.int64), np.array(setup.active, dtype=np.bool_).reshape(-1, T), *packed, out_x, out_P,
             out_nis, out_dof, out_ll)
     from . import _kernels           # lazy: numba loads only when the compiled path runs
-    try:                            # only the kernel here: an error of ours must not turn numba off for the session
-        status = _kernels._nb_ekf(*args)
-    except Exception as exc:        # numba could not compile or run the kernel here: numpy from now on
-        _NUMBA_ENABLED = False
-        warnings.warn(f"locbook: the compiled EKF failed ({type(exc).__name__}: {exc}); using the numpy loop "
-                      "(set LOCBOOK_NUMBA=0 to skip the attempt)", RuntimeWarning, stacklevel=3)
-        return None
-    if status:
+    status = _call_kernel(_kernels._nb_ekf, args, "EKF")
+    if status is None or status:
         return None
     return KalmanResult(out_x.reshape(batch + (S, n)), out_P.reshape(batch + (S, n, n)), setup.steps,
                         log_likelihood=out_ll.reshape(batch + (T,)), nis=out_nis.reshape(batch + (T,)),

@@ -41,7 +41,6 @@ raises the library's error or applies the guard. Both paths give the same number
 """
 from __future__ import annotations
 
-import warnings
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -524,14 +523,8 @@ def _compiled_ukf(setup, measurements, predict_first: bool, weights: UnscentedWe
             np.ascontiguousarray(weights.cov, dtype=float), float(n + weights.lam), bool(innovation_noise),
             lanes, out_x, out_P, out_nis, out_dof, out_ll, out_floored)
     from . import _ukf_kernels       # lazy: numba loads only when the compiled path runs
-    try:                            # only the kernel here: an error of ours must not turn numba off for the session
-        status, _ = _ukf_kernels._nb_ukf(*args)
-    except Exception as exc:        # numba could not compile or run the kernel here: numpy from now on
-        _compiled._NUMBA_ENABLED = False
-        warnings.warn(f"locbook: the compiled UKF failed ({type(exc).__name__}: {exc}); using the numpy loop "
-                      "(set LOCBOOK_NUMBA=0 to skip the attempt)", RuntimeWarning, stacklevel=3)
-        return None
-    if status:
+    done = _compiled._call_kernel(_ukf_kernels._nb_ukf, args, "UKF")
+    if done is None or done[0]:     # (status, block): a failed update, the numpy loop redoes the filter
         return None
     return KalmanResult(out_x.reshape(batch + (S, n)), out_P.reshape(batch + (S, n, n)), setup.steps,
                         log_likelihood=out_ll.reshape(batch + (T,)), nis=out_nis.reshape(batch + (T,)),

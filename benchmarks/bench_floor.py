@@ -56,7 +56,9 @@ def _rate_kernel(A, B, C, reps):
     return C[0, 0, 0]
 
 
-_rate_compiled = numba.njit(cache=True, nogil=True, error_model="numpy")(_rate_kernel) if numba else _rate_kernel
+# compiled in memory (no disk cache: run_all loads this file under a module name of its own, which numba's cache
+# records and a later process loading the file otherwise could not import)
+_rate_compiled = numba.njit(nogil=True, error_model="numpy")(_rate_kernel) if numba else _rate_kernel
 
 
 def attainable_rate(width: int, seconds: float = 0.3) -> float:

@@ -193,6 +193,35 @@ def test_fusion_gain_and_mean_level_by_hand():
 
 
 @pytest.mark.parametrize("fusion", [False, True])
+def test_per_epoch_r_equals_the_filter_run_one_segment_at_a_time(fusion):
+    """KF (MLE) with a per-epoch R (Table 4.1's R_{k+1}; one filter with R per step) equals the filter run one
+    inter-epoch segment at a time, each with its epoch's R and starting from the previous segment's posterior."""
+    tr = dg.walk_trajectory(waypoints_m=((1.0, 1.0), (1.0, 4.0), (4.0, 4.0)), speed_m_s=0.5)
+    rng = np.random.default_rng(3)
+    channel = lb.PathLossModel(dg.REF_POWER_DBM, 3.0, 6.0)
+    rss = dg.simulate_rss(tr, channel, 4, rng)
+    fix = dg.mle_positions(rss, channel).position_m
+    mse = rng.uniform(0.2, 2.0, (tr.rss_steps.size, 2))                    # a different R at every epoch
+    acc = dg.simulate_acceleration(tr, 0.0075, 4, rng) if fusion else None
+    kw = dict(acc_mps2=acc, sigma_acc_mps2=0.0075 if fusion else None)
+    ours = dg.run_filter("kalman_filter", tr, rss, fix, mse, channel, **kw)
+    model = dg.motion_model()
+    x0, P0, acc_streams, at, z = dg.filter_inputs("kalman_filter", tr, rss, fix, mse, channel, model=model, **kw)
+    H = model.position_measurement_matrix()
+    x, P, xs, nis, start = x0, np.broadcast_to(P0, x0.shape[:-1] + (6, 6)), [x0], [], 0
+    for e, end in enumerate(list(at) + [z.shape[-2] - 1], start=1):
+        part = [lb.LinearMeasurement(m.z[..., start:end + 1, :], m.H, m.R) for m in acc_streams]
+        part.append(lb.LinearMeasurement(z[..., start:end + 1, :], H, np.diag(mse[min(e, len(mse) - 1)])))
+        track = lb.extended_kalman_filter(model.F, model.Q, x, P, part)
+        x, P = track.x[..., -1, :], track.P[..., -1, :, :]
+        xs.append(x)
+        nis.append(track.nis)
+        start = end + 1
+    np.testing.assert_allclose(ours.x, np.stack(xs[:-1], axis=-2), rtol=0, atol=1e-9)
+    np.testing.assert_allclose(ours.nis[..., -z.shape[-2]:], np.concatenate(nis, axis=-1), rtol=1e-9)
+
+
+@pytest.mark.parametrize("fusion", [False, True])
 def test_per_epoch_r_with_equal_epochs_equals_the_constant_r(fusion):
     """KF (MLE) with a per-epoch R (Table 4.1's R_{k+1}, run segment by segment) equals the one-pass filter when every
     epoch has the same R: segmenting the multi-rate filter changes nothing."""

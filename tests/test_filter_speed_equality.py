@@ -223,6 +223,12 @@ def _case(kind, rng):
         streams = [lb.RssMeasurement(power.reshape(1, B, T, 5), anchors, ch, model.position_index, mode="serial")]
         x0 = np.broadcast_to(x0, (2, B, 4))
         P0 = np.stack([P0 * (1 + b) for b in range(B)])
+    elif kind == "per_step_H_and_R":                 # R per step and run, H per step; one of each for all steps
+        Rs = np.diag([1.0, 1.5]) * rng.uniform(0.5, 2.0, (B, T, 1, 1))
+        Hs = H * rng.choice([0.5, 1.0], T)[:, None, None]
+        streams = [lb.LinearMeasurement(fixes, lb.per_step(Hs), lb.per_step(Rs)),
+                   lb.LinearMeasurement(fixes, lb.per_step(Hs[:1]), lb.per_step(Rs[0]), mode="serial"),
+                   lb.RssMeasurement(power, anchors, ch, model.position_index)]
     else:
         raise ValueError(kind)
     return model.F, model.Q, x0, P0, streams, kw
@@ -230,7 +236,7 @@ def _case(kind, rng):
 
 CASES = ["parallel", "serial_descending", "serial_given_with_fixes", "linear_serial_batched_R",
          "linear_nonuniform_missing", "per_anchor_channel_and_anchor_sigma", "batched_channel", "tag_height",
-         "moving_receivers", "record_and_no_predict_first", "batched_P0_multidim_batch"]
+         "moving_receivers", "record_and_no_predict_first", "batched_P0_multidim_batch", "per_step_H_and_R"]
 
 
 @pytest.mark.skipif(not HAVE_NUMBA, reason="numba is not installed: only the numpy path exists")
@@ -264,6 +270,58 @@ def test_compiled_ekf_gives_way_to_numpy_errors():
                 lb.extended_kalman_filter(model.F, np.zeros((4, 4)), np.zeros((2, 4)) + 3.0, np.zeros((4, 4)), [meas])
         finally:
             K._NUMBA_ENABLED, K._NUMBA_MIN_WORK = saved
+
+
+@pytest.mark.skipif(not HAVE_NUMBA, reason="numba is not installed: only the numpy path exists")
+@pytest.mark.parametrize("frame", ["body", "world"])
+def test_compiled_ekf_with_the_inertial_stream_equals_numpy(upath, frame):
+    """Gudipati's fused EKF (the inertial stream of locbook.models.imu with its Jacobian, then six anchors' RSS with
+    some missing; 20 walks, 200 steps): the kernel evaluates h and its Jacobian itself and equals the numpy loop,
+    which calls the two functions; a missing inertial component is left out of the update in both."""
+    m, imu = upath["model"], upath["imu"]
+    z = np.array(imu.z)
+    z[np.random.default_rng(1).random(z.shape) < 0.1] = np.nan
+    imu = lb.NonlinearMeasurement(z, lb.inertial_measurement_function(frame), imu.R,
+                                  jacobian=lb.inertial_measurement_jacobian(8, frame))
+    a, b, compiled = _both(m.F, m.Q, upath["x0"], upath["P0"], [imu, upath["rss"]])
+    assert compiled
+    assert (a.nis_dof > 0).all() and len(np.unique(a.nis_dof)) > 2          # some readings missing
+    np.testing.assert_allclose(b.x, a.x, rtol=0, atol=TOL)
+    np.testing.assert_allclose(b.P, a.P, rtol=0, atol=TOL)
+    np.testing.assert_allclose(b.nis, a.nis, rtol=0, atol=TOL * 100)
+    np.testing.assert_allclose(b.log_likelihood, a.log_likelihood, rtol=0, atol=TOL * 100)
+    np.testing.assert_array_equal(b.nis_dof, a.nis_dof)
+
+
+@pytest.mark.parametrize("why", ["own_jacobian", "jacobian_of_other_indices", "jacobian_for_other_state_size",
+                                 "index_from_the_end", "state_dependent_R"])
+def test_inertial_streams_the_kernel_cannot_check_stay_in_numpy(monkeypatch, why):
+    """The kernel computes the Jacobian of imu's h itself, so it runs only when the stream's Jacobian is imu's for the
+    same indices and state size (else the user's Jacobian is what the filter must use), with indices from 0 and a fixed
+    R."""
+    monkeypatch.setattr(K, "_NUMBA_MIN_WORK", 0)
+    n = 8
+    h = lb.inertial_measurement_function("body")
+    jac = lb.inertial_measurement_jacobian(n, "body")
+    R = 0.1 * np.eye(3)
+    if why == "own_jacobian":
+        jac = lambda x: lb.inertial_measurement_jacobian(n, "body")(x)          # noqa: E731
+    elif why == "jacobian_of_other_indices":
+        jac = lb.inertial_measurement_jacobian(n, "body", acceleration_index=(2, 3))
+    elif why == "jacobian_for_other_state_size":
+        jac = lb.inertial_measurement_jacobian(9, "body")
+    elif why == "index_from_the_end":
+        h = lb.inertial_measurement_function("body", heading_index=-2)
+        jac = lb.inertial_measurement_jacobian(n, "body", heading_index=-2)
+    elif why == "state_dependent_R":
+        R = lambda x: 0.1 * np.eye(3)                                           # noqa: E731
+    meas = lb.NonlinearMeasurement(np.zeros((2, 5, 3)), h, R, jacobian=jac)
+    setup = _loop._setup(np.eye(n), 0.01 * np.eye(n), np.zeros(n), np.eye(n), [meas], None, "ekf")
+    assert K._compiled_ekf(setup, [meas], True) is None
+    good = lb.NonlinearMeasurement(np.zeros((2, 5, 3)), lb.inertial_measurement_function("body"), 0.1 * np.eye(3),
+                                   jacobian=lb.inertial_measurement_jacobian(n, "body"))
+    if HAVE_NUMBA:
+        assert K._compiled_ekf(setup, [good], True) is not None
 
 
 def test_nonlinear_streams_stay_in_numpy(monkeypatch):

@@ -114,6 +114,10 @@ def _case(kind, rng, B=5, T=50):
     elif kind == "alpha_1_beta_0_kappa_1":
         streams = [rss(mode="serial")]
         kw.update(alpha=1.0, beta=0.0, kappa=1.0)
+    elif kind == "per_step_H_and_R":                               # R per step and run; H per step
+        Rs = np.diag([1.0, 1.5]) * rng.uniform(0.5, 2.0, (B, T, 1, 1))
+        Hs = H * rng.choice([0.5, 1.0], T)[:, None, None]
+        streams = [lb.LinearMeasurement(fixes, lb.per_step(Hs), lb.per_step(Rs)), rss()]
     elif kind == "inertial_world_frame":                          # the readings read the velocity as "acceleration"
         acc = np.concatenate([np.diff(truth, axis=1, prepend=truth[:, :1]) / 0.5, rng.normal(0, 0.1, (B, T, 1))], -1)
         h = inertial_measurement_function("world", acceleration_index=(2, 3), heading_index=0, yaw_rate_index=1)
@@ -126,7 +130,7 @@ def _case(kind, rng, B=5, T=50):
 CASES = ["rss_parallel", "rss_serial_descending", "rss_serial_given_with_fixes", "linear_parallel_correlated_R",
          "linear_serial_batched_R", "per_anchor_channel_and_anchor_sigma", "batched_channel_no_clamp", "tag_height",
          "moving_receivers", "record_and_no_predict_first", "batched_P0_multidim_batch", "julier", "cubature",
-         "printed_weights_of_eq_3_22", "alpha_1_beta_0_kappa_1", "inertial_world_frame"]
+         "printed_weights_of_eq_3_22", "alpha_1_beta_0_kappa_1", "inertial_world_frame", "per_step_H_and_R"]
 
 
 @pytest.mark.parametrize("kind", CASES)

@@ -122,8 +122,8 @@ def inertial_measurement_function(frame: str = "body", *, acceleration_index=(4,
         a = x[..., ia]
         acc = world_to_body(a, x[..., heading_index]) if frame == "body" else a
         return np.concatenate([acc, x[..., yaw_rate_index:yaw_rate_index + 1]], axis=-1)
-    # what h computes, for the compiled UKF (locbook.tracking.unscented._inertial_parameters), which then evaluates
-    # the same function in its kernel instead of calling h
+    # what h computes, for the compiled EKF and UKF (locbook.tracking._compiled._inertial_parameters), which then
+    # evaluate the same function in their kernels instead of calling h
     h.inertial = (frame == "body", tuple(int(i) for i in ia.reshape(-1)), int(heading_index), int(yaw_rate_index))
     return h
 
@@ -149,4 +149,7 @@ def inertial_measurement_jacobian(n_state: int = 8, frame: str = "body", *, acce
             H[..., 0, ia[0]] = H[..., 1, ia[1]] = 1.0
         H[..., 2, yaw_rate_index] = 1.0
         return H
+    # what it differentiates (inertial_measurement_function's record) and for how many states, for the compiled EKF
+    jacobian.inertial = (frame == "body", tuple(int(i) for i in ia.reshape(-1)), int(heading_index),
+                         int(yaw_rate_index), int(n_state))
     return jacobian

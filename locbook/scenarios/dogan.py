@@ -35,6 +35,7 @@ from ..errors import ParameterError
 from ..tracking.kalman import extended_kalman_filter
 from ..tracking.results import KalmanResult
 from ..tracking.streams import LinearMeasurement, RssMeasurement
+from ..tracking.transition import per_step
 from ..static.localization import grid_ml_position, rss_ml_position
 from ..models.motion import KinematicModel, constant_acceleration, simulate_states
 from ..models.trajectory import POLYLINE_STARTS, Trajectory, polyline_trajectory
@@ -407,41 +408,23 @@ def _on_trajectory_grid(result: KalmanResult, nis, nis_dof, n_steps: int) -> Kal
 
 
 def _per_epoch_kf(model, x0, P0, acc_streams, z, mse, at, steps, n_steps, every_step=False) -> KalmanResult:
-    """KF (MLE) with R = diag(MSE_MLE) of each epoch (Table 4.1's R_{k+1}): the same multi-rate filter
-    (:func:`locbook.extended_kalman_filter`) run one inter-epoch segment at a time, each segment with its epoch's R,
-    continuing from the previous segment's posterior. A segment holds one RSS update (fewer than the guard's window),
-    so the guard judges the segments' concatenated NIS, as for one filter."""
+    """KF (MLE) with R = diag(MSE_MLE) of each epoch (Table 4.1's R_{k+1}): the multi-rate filter
+    (:func:`locbook.extended_kalman_filter`) with the fixes' R given per step, each inter-epoch segment the R of the
+    epoch that ends it (the steps after the last epoch: the last epoch's). The same recursion as running one segment at
+    a time from the previous segment's posterior (tests/test_dogan_fusion_reading.py compares the two), in one call;
+    the guard judges the whole NIS as one filter's."""
     H = model.position_measurement_matrix()
-    x, P = x0, np.broadcast_to(P0, x0.shape[:-1] + P0.shape[-2:])
-    xs, Ps, nis, dof = [x], [P], [], []
-    start = 0
-    for e, end in enumerate(at, start=1):
-        segment = [LinearMeasurement(m.z[..., start:end + 1, :], m.H, m.R) for m in acc_streams]
-        segment.append(LinearMeasurement(z[..., start:end + 1, :], H, mse[e][:, None] * np.eye(2)))
-        track = extended_kalman_filter(model.F, model.Q, x, P, segment, record=None if every_step else [end - start])
-        x, P = track.x[..., -1, :], track.P[..., -1, :, :]
-        if every_step:                   # every step of the segment, its epoch last
-            xs.extend(np.moveaxis(track.x, -2, 0))
-            Ps.extend(np.moveaxis(track.P, -3, 0))
-        else:
-            xs.append(x)
-            Ps.append(P)
-        nis.append(track.nis)
-        dof.append(np.broadcast_to(track.nis_dof, track.nis.shape))
-        start = end + 1
     grid = z.shape[-2]
-    if start < grid:            # steps after the last RSS epoch: the acceleration updates only, outputs not recorded
-        segment = [LinearMeasurement(m.z[..., start:, :], m.H, m.R) for m in acc_streams]
-        segment.append(LinearMeasurement(z[..., start:, :], H, mse[-1][:, None] * np.eye(2)))
-        track = extended_kalman_filter(model.F, model.Q, x, P, segment)
-        nis.append(track.nis)
-        dof.append(np.broadcast_to(track.nis_dof, track.nis.shape))
-        if every_step:
-            xs.extend(np.moveaxis(track.x, -2, 0))
-            Ps.extend(np.moveaxis(track.P, -3, 0))
+    ends = np.append(np.asarray(at, dtype=np.int64), grid - 1)
+    segment = np.searchsorted(ends, np.arange(grid))        # a step's segment, 0 up to the first epoch after the start
+    r_steps = mse[np.minimum(segment + 1, len(mse) - 1)][:, :, None] * np.eye(2)      # mse[e] for segment e - 1
+    track = extended_kalman_filter(model.F, model.Q, x0, P0,
+                                   [*acc_streams, LinearMeasurement(z, H, per_step(r_steps))],
+                                   record=None if every_step else at)
+    x = np.concatenate([np.broadcast_to(x0[..., None, :], track.x.shape[:-2] + (1, 6)), track.x], axis=-2)
+    P = np.concatenate([np.broadcast_to(P0[..., None, :, :], track.P.shape[:-3] + (1, 6, 6)), track.P], axis=-3)
     recorded = np.arange(steps[0], n_steps) if every_step else steps
-    return _on_trajectory_grid(KalmanResult(np.stack(xs, axis=-2), np.stack(Ps, axis=-3), recorded),
-                               np.concatenate(nis, axis=-1), np.concatenate(dof, axis=-1), n_steps)
+    return _on_trajectory_grid(KalmanResult(x, P, recorded), track.nis, track.nis_dof, n_steps)
 
 
 @dataclass

@@ -242,20 +242,22 @@ def pf_run(setup: Setup, anchors_m, rss_dbm, rng: np.random.Generator, *, n_part
     ch = PathLossModel(setup.ref_power_dbm, setup.path_loss_exp, sigma, min_distance_m=1.0)
     data_rng = np.random.default_rng(rng.integers(2**63))
     z0 = np.asarray(rss_dbm, float)
-    # the receivers differ per run: one model over all of them, or one per location for the one-location schedules
-    models = [RssModel(s, ch)] if schedule == "all" else [RssModel(s[:, j:j + 1], ch) for j in range(N)]
-
-    def loglik(particles, k):
-        z = measure(setup, true_locations_m, data_rng) if shadowing == "iid" else z0
-        if schedule == "all":
-            return models[0].log_likelihood(z, particles, constant=False)
-        j = k if schedule == "sequential" else k % N
-        return models[j].log_likelihood(z[:, j:j + 1], particles, constant=False)
-
+    # the readings each iteration assimilates, (R, iterations, N): every location's, or one location's with the
+    # others NaN (not heard: left out of the likelihood); the same readings each time, or fresh shadowing drawn in
+    # iteration order. One model over every receiver, so the particle filter runs its RssModel path (compiled for
+    # large clouds)
+    fresh = [measure(setup, true_locations_m, data_rng) for _ in range(n_iterations)] if shadowing == "iid" else None
+    readings = np.stack(fresh, axis=1) if fresh is not None else np.broadcast_to(z0[:, None], (R_, n_iterations, N))
+    if schedule != "all":
+        k = np.arange(n_iterations)
+        heard = np.zeros((n_iterations, N), bool)
+        heard[k, k if schedule == "sequential" else k % N] = True
+        readings = np.where(heard, readings, np.nan)
+    model = RssModel(s, ch)
     init = rng.uniform(0.0, AREA_M, (R_, n_particles, dim))
     if process_sd_m > 0:        # every iteration predicts before its update, the first one too (Sec. 5.3.1)
         init = init + process_sd_m * rng.standard_normal(init.shape)
-    return particle_filter(None, loglik, rng, n_steps=n_iterations, initial_particles_m=init, spread_m=process_sd_m,
+    return particle_filter(readings, model, rng, initial_particles_m=init, spread_m=process_sd_m,
                            resampling=resampling, cloud_steps=cloud_steps)
 
 

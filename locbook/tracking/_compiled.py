@@ -4,8 +4,9 @@ runs (the kernels of :mod:`locbook.tracking._kernels`, compiled on first use and
 The EKF and the KF use them when ``_NUMBA_ENABLED`` is True (environment variable ``LOCBOOK_NUMBA=0`` turns them off),
 the problem has at least ``_NUMBA_MIN_WORK`` run-steps (below that, loading numba would cost more than it saves) and
 either the covariance differs between runs or the batch is at most one block of runs (a covariance shared by many runs
-is updated once per step by the numpy loop instead); streams the kernel does not cover (NonlinearMeasurement, batched F
-(Q may differ per run), walls, outputs beyond x and P) run in numpy. Either way the results are the same to round-off
+is updated once per step by the numpy loop instead); streams the kernel does not cover (a NonlinearMeasurement other
+than the inertial one of :mod:`locbook.models.imu` with its Jacobian, F with run axes or per step (Q may differ per
+run), walls, outputs beyond x and P) run in numpy; a LinearMeasurement's H and R may be given per step. Either way the results are the same to round-off
 (tests/test_filter_speed_equality.py), and every error is raised by the numpy loop.
 """
 from __future__ import annotations
@@ -19,13 +20,14 @@ import numpy as np
 from ._linalg import _mT
 from ._loop import _Setup
 from .results import KalmanResult
-from .streams import LinearMeasurement, RssMeasurement
+from .streams import LinearMeasurement, NonlinearMeasurement, RssMeasurement
+from .transition import PerStep
 
 _NUMBA_ENABLED = os.environ.get("LOCBOOK_NUMBA", "1").strip().lower() not in ("0", "false", "no", "off")
 _NUMBA_MIN_WORK = int(os.environ.get("LOCBOOK_NUMBA_MIN_WORK", "2000").strip() or 2000)
 _NUMBA_STATE = {"ready": None}
 _LANES = 64                 # = _kernels._LANES (not imported from there: that would load numba)
-_LINEAR_PARALLEL, _LINEAR_SERIAL, _RSS_PARALLEL, _RSS_SERIAL = 0, 1, 2, 3
+_LINEAR_PARALLEL, _LINEAR_SERIAL, _RSS_PARALLEL, _RSS_SERIAL, _INERTIAL = 0, 1, 2, 3, 4
 
 
 def _small_batch(setup: _Setup) -> bool:
@@ -49,6 +51,17 @@ def _leading(value, batch, B, tail):
     return np.ascontiguousarray(np.broadcast_to(value, batch + tail).reshape((B,) + tail))
 
 
+def _leading_steps(value, batch, B, tail, T):
+    """A LinearMeasurement's H or R as ``(1 or B, 1 or T) + tail``, contiguous: per step when given ``per_step`` (its
+    time axis 1 or ``T`` long, checked by the stream)."""
+    if not isinstance(value, PerStep):
+        return _leading(value, batch, B, tail)[:, None]
+    v = value.value
+    if v.ndim <= len(tail) + 1:
+        return np.ascontiguousarray(v[None])
+    return np.ascontiguousarray(np.broadcast_to(v, batch + v.shape[-3:]).reshape((B,) + v.shape[-3:]))
+
+
 def _pack_streams(setup: _Setup, measurements, B):
     """The streams as the kernel's flat arrays (readings side by side on one axis), or None if one is not supported
     (a NonlinearMeasurement: its h and Jacobian are Python functions)."""
@@ -63,7 +76,7 @@ def _pack_streams(setup: _Setup, measurements, B):
         by_time[..., c0:c0 + m] = np.moveaxis(z, -2, 0)
         if isinstance(meas, LinearMeasurement):
             kinds.append(_LINEAR_PARALLEL if meas.mode == "parallel" else _LINEAR_SERIAL)
-            lin.append((c0, m, _leading(meas.H, batch, B, (m, n)), _leading(meas.R, batch, B, (m, m))))
+            lin.append((c0, m, _leading_steps(meas.H, batch, B, (m, n), T), _leading_steps(meas.R, batch, B, (m, m), T)))
             scal.append((2, 1.0, 1.0, 0.0, 0.0, (0, 0, 0), 0, False))
         elif isinstance(meas, RssMeasurement):
             ch = meas.channel
@@ -88,12 +101,12 @@ def _pack_streams(setup: _Setup, measurements, B):
         else:
             return None
     M = cols[-1]
-    BH = max([h.shape[0] for _, _, h, _ in lin] + [1])
-    BR = max([r.shape[0] for _, _, _, r in lin] + [1])
-    H, R = np.zeros((BH, M, n)), np.zeros((BR, M, M))
+    BH, TH = (max([h.shape[i] for _, _, h, _ in lin] + [1]) for i in (0, 1))
+    BR, TR = (max([r.shape[i] for _, _, _, r in lin] + [1]) for i in (0, 1))
+    H, R = np.zeros((BH, TH, M, n)), np.zeros((BR, TR, M, M))      # runs, steps (1 when the same throughout)
     for c0, m, h, r in lin:
-        H[:, c0:c0 + m] = h
-        R[:, c0:c0 + m, c0:c0 + m] = r
+        H[:, :, c0:c0 + m] = h
+        R[:, :, c0:c0 + m, c0:c0 + m] = r
     BA = max([e[3].shape[0] for e in rss] + [1])
     TA = max([e[3].shape[1] for e in rss] + [1])
     BC = max([max(e[4].shape[0], e[5].shape[0], e[6].shape[0]) for e in rss] + [1])
@@ -104,12 +117,59 @@ def _pack_streams(setup: _Setup, measurements, B):
     dims, ref_d, clamp, anchor_sigma, tag_h, pidx, npos, desc = (np.array(v) for v in zip(*scal))
     nz, nnz = np.zeros((len(kinds), n), np.int64), np.zeros(len(kinds), np.int64)
     for s, (kind, c0, c1) in enumerate(zip(kinds, cols[:-1], cols[1:])):     # the columns a row can use
-        used = np.flatnonzero(np.any(H[:, c0:c1] != 0, axis=(0, 1))) if kind <= _LINEAR_SERIAL else \
+        used = np.flatnonzero(np.any(H[:, :, c0:c1] != 0, axis=(0, 1, 2))) if kind <= _LINEAR_SERIAL else \
             np.asarray(pidx[s][:npos[s]], np.int64)
         nz[s, :used.size], nnz[s] = used, used.size
     return (np.array(kinds, np.int64), np.array(cols, np.int64), nz, nnz, Z, H, R, A, P0c, PLE, SIG,
             dims.astype(np.int64), ref_d.astype(float), clamp.astype(float), anchor_sigma.astype(float),
             tag_h.astype(float), pidx.astype(np.int64).reshape(-1, 3), npos.astype(np.int64), desc.astype(np.bool_))
+
+
+def _inertial_parameters(meas: NonlinearMeasurement, n: int, *, with_jacobian: bool):
+    """``(body frame, acceleration indices, heading index, yaw-rate index)`` when the stream's ``h`` was made by
+    :func:`locbook.models.imu.inertial_measurement_function` (which records them on ``h.inertial``), with a fixed R, the
+    linear residual and mean, and indices the kernels can take (from 0, below ``n``, distinct); with
+    ``with_jacobian`` (the EKF) also its ``jacobian`` made by :func:`locbook.models.imu.inertial_measurement_jacobian`
+    for the same indices and ``n`` states. Else None: the stream stays in numpy."""
+    spec = getattr(meas.h, "inertial", None)
+    if (spec is None or callable(meas.R) or meas.residual is not None or meas.mean is not None
+            or np.shape(meas.z)[-1] != 3 or len(spec[1]) != 2):
+        return None
+    if with_jacobian and getattr(meas.jacobian, "inertial", None) != spec + (n,):
+        return None
+    body, ia, heading, yaw_rate = spec
+    index = ia + (heading, yaw_rate)
+    if min(index) < 0 or max(index) >= n or len(set(index)) != 4:
+        return None                 # an index from the end (numpy's h takes it; the kernels count from 0)
+    return bool(body), ia[0], ia[1], heading, yaw_rate
+
+
+def _pack_with_inertial(setup: _Setup, measurements, B, *, with_jacobian: bool):
+    """:func:`_pack_streams` where inertial streams (:func:`_inertial_parameters`) are allowed too: their kind is
+    ``_INERTIAL`` (the readings and R packed as a linear stream's, H marking the four components they depend on), and
+    ``iner`` ``(streams, 5)`` gives their parameters (zeros for the other streams). Returns ``(packed, iner)`` or None
+    when a stream is not supported."""
+    n = setup.n
+    packable, inertial = [], []
+    for meas in measurements:
+        if isinstance(meas, (LinearMeasurement, RssMeasurement)):
+            packable.append(meas)
+            inertial.append((0, 0, 0, 0, 0))
+            continue
+        params = (_inertial_parameters(meas, n, with_jacobian=with_jacobian)
+                  if isinstance(meas, NonlinearMeasurement) else None)
+        if params is None:
+            return None
+        H = np.zeros((3, n))
+        H[0, list(params[1:])] = 1.0             # marks the components the readings depend on
+        packable.append(LinearMeasurement(np.zeros((1, 3)), H, meas.R))
+        inertial.append(tuple(int(v) for v in params))
+    packed = _pack_streams(setup, packable, B)
+    if packed is None:
+        return None
+    kinds = packed[0].copy()
+    kinds[np.array([isinstance(meas, NonlinearMeasurement) for meas in measurements])] = _INERTIAL
+    return (kinds,) + packed[1:], np.array(inertial, dtype=np.int64)
 
 
 def _call_kernel(kernel, args, name: str):
@@ -132,17 +192,18 @@ def _compiled_ekf(setup: _Setup, measurements, predict_first: bool):
     numpy loop then redoes the filter and raises the library's error for it."""
     F, Q, batch, T = setup.F, setup.Q, setup.batch, setup.T
     B = int(np.prod(batch, dtype=np.int64))
-    if not _NUMBA_ENABLED or not setup.plain_motion or any(setup.per_step_streams):
-        return None                 # time-varying or nonlinear motion, a control input, H or R per step: numpy
+    if not _NUMBA_ENABLED or not setup.plain_motion:
+        return None                 # time-varying or nonlinear motion, a control input: numpy
     if F.ndim != 2 or B * T < _NUMBA_MIN_WORK or B == 0 or T == 0:
-        return None
-    if not all(isinstance(m, (LinearMeasurement, RssMeasurement)) for m in measurements):
         return None
     if not (np.array_equal(Q, _mT(Q)) and np.array_equal(setup.P, _mT(setup.P))):
         return None                 # the kernel keeps P exactly symmetric (it computes one triangle of F P F^T + Q)
-    packed = _pack_streams(setup, measurements, B)
-    if packed is None or not _numba_ready():
+    if not _numba_ready():
         return None
+    packing = _pack_with_inertial(setup, measurements, B, with_jacobian=True)
+    if packing is None:
+        return None
+    packed, iner = packing
     n, S = F.shape[-1], setup.steps.size
     Fi, Fj = np.nonzero(F)
     P0 = setup.P[None] if setup.P.ndim == 2 else np.broadcast_to(setup.P, batch + (n, n)).reshape(B, n, n)
@@ -150,8 +211,8 @@ def _compiled_ekf(setup: _Setup, measurements, predict_first: bool):
     out_nis, out_dof, out_ll = np.empty((B, T)), np.empty((B, T), np.int64), np.empty((B, T))
     args = (Fi.astype(np.int64), Fj.astype(np.int64), np.ascontiguousarray(F[Fi, Fj]), _leading(Q, batch, B, (n, n)),
             np.ascontiguousarray(setup.x.reshape(B, n)), np.ascontiguousarray(P0), bool(predict_first),
-            setup.slot.astype(np.int64), np.array(setup.active, dtype=np.bool_).reshape(-1, T), *packed, out_x, out_P,
-            out_nis, out_dof, out_ll)
+            setup.slot.astype(np.int64), np.array(setup.active, dtype=np.bool_).reshape(-1, T), *packed, iner, out_x,
+            out_P, out_nis, out_dof, out_ll)
     from . import _kernels           # lazy: numba loads only when the compiled path runs
     status = _call_kernel(_kernels._nb_ekf, args, "EKF")
     if status is None or status:

@@ -11,6 +11,7 @@ from .._numba import jit as _jit
 
 _LANES = 64     # runs per block of the compiled EKF: the innermost axis, long enough for LLVM to vectorise it
 _LOG_2PI = float(np.log(2.0 * np.pi))
+_INERTIAL = 4   # the inertial stream's kind (= _compiled._INERTIAL); 0-3: linear and RSS, parallel and serial
 
 
 @_jit
@@ -188,13 +189,37 @@ def _nb_rss_row(x, w, pidx, npos, tag_h, anchor, p0, ple, sigma, ref_d, clamp, a
 
 
 @_jit
+def _nb_inertial_row(x, w, j, spec, z, Hrow):
+    """Reading ``j`` of the inertial stream for lane ``w``: writes the Jacobian's row into ``Hrow[:, w]`` (its four
+    columns; the caller zeroed them) and returns the innovation ``z - h_j(x)``. The model of
+    :func:`locbook.models.imu.inertial_measurement_function` and its Jacobian
+    :func:`locbook.models.imu.inertial_measurement_jacobian`: body-frame acceleration ``R(psi)^T a`` (``spec[0]`` 1) or
+    ``a`` (world frame), then the yaw rate; ``spec`` = (body, acceleration indices, heading, yaw rate)."""
+    a0i, a1i, hd, yr = spec[1], spec[2], spec[3], spec[4]
+    if j == 2:
+        Hrow[yr, w] = 1.0
+        return z - x[yr, w]
+    a0, a1 = x[a0i, w], x[a1i, w]
+    if spec[0] == 0:
+        Hrow[a0i if j == 0 else a1i, w] = 1.0
+        return z - (a0 if j == 0 else a1)
+    c, sn = np.cos(x[hd, w]), np.sin(x[hd, w])
+    if j == 0:                                            # [c s; -s c] a, and d/dpsi
+        Hrow[a0i, w], Hrow[a1i, w], Hrow[hd, w] = c, sn, -sn * a0 + c * a1
+        return z - (c * a0 + sn * a1)
+    Hrow[a0i, w], Hrow[a1i, w], Hrow[hd, w] = -sn, c, -c * a0 - sn * a1
+    return z - (-sn * a0 + c * a1)
+
+
+@_jit
 def _nb_ekf(Fi, Fj, Fv, Q, x0, P0, predict_first, slot, active, kind, col, nz, nnz, Z, H, R, A, P0c, PLE, SIG, dims,
-            ref_d, clamp, anchor_sigma, tag_h, pidx, npos, descending, out_x, out_P, out_nis, out_dof,
+            ref_d, clamp, anchor_sigma, tag_h, pidx, npos, descending, iner, out_x, out_P, out_nis, out_dof,
             out_ll):
     """The EKF time loop of :func:`locbook.tracking._loop._run` with :func:`locbook.tracking.streams._ekf_update`, over
     blocks of ``W = min(_LANES, B)`` runs (the last block padded with copies of the last run), with each run's NIS, its dof and
     log-likelihood at every step (``out_nis``, ``out_dof``, ``out_ll`` ``(B, T)``; NaN, 0 and NaN where no update).
-    Returns 0, or 1 + a run whose update failed (the caller then redoes the filter in numpy, which raises the
+    Stream kinds: 0/1 linear parallel/serial, 2/3 RSS parallel/serial, 4 inertial (parallel, :func:`_nb_inertial_row`
+    with the parameters ``iner[s]``). Returns 0, or 1 + a run whose update failed (the caller then redoes the filter in numpy, which raises the
     library's error)."""
     T, B, n, ns = Z.shape[0], Z.shape[1], x0.shape[1], kind.shape[0]
     W = min(_LANES, B)
@@ -265,12 +290,14 @@ def _nb_ekf(Fi, Fj, Fv, Q, x0, P0, predict_first, slot, active, kind, col, nz, n
                                 continue
                             present = True
                             dof[w] += 1
-                            if kd <= 1:
-                                bh = min(b, H.shape[0] - 1)
+                            if kd == _INERTIAL:
+                                nu[r, w] = _nb_inertial_row(x, w, j, iner[s], zj, Hr[r])
+                            elif kd <= 1:
+                                bh, th = min(b, H.shape[0] - 1), min(k, H.shape[1] - 1)
                                 q = 0.0
                                 for e in range(nnz[s]):
-                                    Hr[r, nz[s, e], w] = H[bh, c0 + j, nz[s, e]]
-                                    q += H[bh, c0 + j, nz[s, e]] * x[nz[s, e], w]
+                                    Hr[r, nz[s, e], w] = H[bh, th, c0 + j, nz[s, e]]
+                                    q += H[bh, th, c0 + j, nz[s, e]] * x[nz[s, e], w]
                                 nu[r, w] = zj - q
                             else:
                                 bc = min(b, P0c.shape[0] - 1)
@@ -290,10 +317,11 @@ def _nb_ekf(Fi, Fj, Fv, Q, x0, P0, predict_first, slot, active, kind, col, nz, n
                             for w in range(W):
                                 if not (valid[r, w] and valid[q, w]):
                                     Rr[r, q, w] = 1.0 if r == q else 0.0
-                                elif kd <= 1:
+                                elif kd <= 1 or kd == _INERTIAL:
                                     jr = sel[u, w] if serial else r
                                     jq = sel[u, w] if serial else q
-                                    Rr[r, q, w] = R[min(run[w], R.shape[0] - 1), c0 + jr, c0 + jq]
+                                    Rr[r, q, w] = R[min(run[w], R.shape[0] - 1), min(k, R.shape[1] - 1), c0 + jr,
+                                                    c0 + jq]
                                 else:
                                     Rr[r, q, w] = var[r, w] if r == q else 0.0
                     if not _nb_update(x, P, rows, nz[s], nnz[s], Hr, nu, Rr, HP, HPH, S, L, KT, PH, D, t, t2, Y, nis,

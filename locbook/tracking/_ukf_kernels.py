@@ -456,9 +456,9 @@ def _nb_ukf(Fi, Fj, Fv, Q, x0, P0, predict_first, slot, active, kind, col, nz, n
                                 present += 1
                                 dof[w] += 1
                             if kd <= _LINEAR_SERIAL or kd == _INERTIAL:
-                                bh = min(b, H.shape[0] - 1)
+                                bh, th = min(b, H.shape[0] - 1), min(k, H.shape[1] - 1)
                                 for e in range(nnz[s]):
-                                    Hr[r, e, w] = H[bh, c0 + j, nz[s, e]]
+                                    Hr[r, e, w] = H[bh, th, c0 + j, nz[s, e]]
                             else:
                                 bc = min(b, P0c.shape[0] - 1)
                                 ba = min(b, A.shape[0] - 1)
@@ -487,7 +487,8 @@ def _nb_ukf(Fi, Fj, Fv, Q, x0, P0, predict_first, slot, active, kind, col, nz, n
                                 if kd <= _LINEAR_SERIAL or kd == _INERTIAL:
                                     jr = sel[u, w] if serial else r
                                     jq = sel[u, w] if serial else q
-                                    Rr[r, q, w] = R[min(run[w], R.shape[0] - 1), c0 + jr, c0 + jq]
+                                    Rr[r, q, w] = R[min(run[w], R.shape[0] - 1), min(k, R.shape[1] - 1), c0 + jr,
+                                                    c0 + jq]
                                 else:
                                     Rr[r, q, w] = var[r, w] if r == q else 0.0
                     status = _nb_ukf_update(x, P, n, rows, kd, nz[s], nnz[s], umax[s], Hr, ar, dims[s], pidx[s],

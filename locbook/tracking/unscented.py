@@ -457,20 +457,6 @@ def _lanes(B: int) -> int:
     return -(-B // blocks)
 
 
-def _inertial_parameters(meas: NonlinearMeasurement):
-    """``(body frame, acceleration indices, heading index, yaw-rate index)`` when the stream's ``h`` was made by
-    :func:`locbook.models.imu.inertial_measurement_function` (which records them on ``h.inertial``), with a fixed R and
-    the linear residual and mean; else None (the stream then stays in numpy)."""
-    spec = getattr(meas.h, "inertial", None)
-    if (spec is None or callable(meas.R) or meas.residual is not None or meas.mean is not None
-            or np.shape(meas.z)[-1] != 3 or len(spec[1]) != 2):
-        return None
-    body, ia, heading, yaw_rate = spec
-    if min(ia + (heading, yaw_rate)) < 0:
-        return None                 # an index from the end (numpy's h takes it; the kernel counts from 0)
-    return bool(body), ia[0], ia[1], heading, yaw_rate
-
-
 def _compiled_ukf(setup, measurements, predict_first: bool, weights: UnscentedWeights, innovation_noise: bool):
     """The UKF by the compiled kernel (:mod:`locbook.tracking._ukf_kernels`) when it applies (numba installed and
     enabled, F without run axes (Q may have them) and no control input, LinearMeasurement, RssMeasurement and inertial streams,
@@ -480,34 +466,20 @@ def _compiled_ukf(setup, measurements, predict_first: bool, weights: UnscentedWe
     from . import _compiled
     F, Q, batch, T = setup.F, setup.Q, setup.batch, setup.T
     B = int(np.prod(batch, dtype=np.int64))
-    if not _compiled._NUMBA_ENABLED or not setup.plain_motion or any(setup.per_step_streams):
-        return None                 # nonlinear or time-varying motion, a control input, H or R per step: numpy
+    if not _compiled._NUMBA_ENABLED or not setup.plain_motion:
+        return None                 # nonlinear or time-varying motion, a control input: numpy
     if F.ndim != 2 or B * T < _compiled._NUMBA_MIN_WORK or B == 0 or T == 0:
         return None
     if not (np.array_equal(Q, _mT(Q)) and np.array_equal(setup.P, _mT(setup.P))):
         return None                 # the kernel keeps P exactly symmetric
     n = setup.n
-    packable, inertial = [], []
-    for meas in measurements:
-        if isinstance(meas, (LinearMeasurement, RssMeasurement)):
-            packable.append(meas)
-            inertial.append((0, 0, 0, 0, 0))
-            continue
-        params = _inertial_parameters(meas) if isinstance(meas, NonlinearMeasurement) else None
-        if params is None or max(params[1:]) >= n:
-            return None
-        H = np.zeros((3, n))
-        H[0, list(params[1:])] = 1.0             # marks the components the readings depend on
-        packable.append(LinearMeasurement(np.zeros((1, 3)), H, meas.R))
-        inertial.append(tuple(int(v) for v in params))
     if not _compiled._numba_ready():
         return None
-    packed = _compiled._pack_streams(setup, packable, B)
-    if packed is None:
+    packing = _compiled._pack_with_inertial(setup, measurements, B, with_jacobian=False)
+    if packing is None:
         return None
-    kinds, nz, nnz = packed[0].copy(), packed[2], packed[3]
-    iner = np.array(inertial, dtype=np.int64)
-    kinds[np.array([isinstance(meas, NonlinearMeasurement) for meas in measurements])] = 4    # the inertial kind
+    packed, iner = packing
+    nz, nnz = packed[2], packed[3]
     umax = np.array([nz[s, :nnz[s]].max() if nnz[s] else -1 for s in range(len(measurements))], dtype=np.int64)
     S = setup.steps.size
     Fi, Fj = np.nonzero(F)
@@ -518,9 +490,8 @@ def _compiled_ukf(setup, measurements, predict_first: bool, weights: UnscentedWe
     out_floored = np.zeros(B, np.int64)
     args = (Fi.astype(np.int64), Fj.astype(np.int64), np.ascontiguousarray(F[Fi, Fj]), _compiled._leading(Q, batch, B, (n, n)),
             np.ascontiguousarray(setup.x.reshape(B, n)), np.ascontiguousarray(P0), bool(predict_first),
-            setup.slot.astype(np.int64), np.array(setup.active, dtype=np.bool_).reshape(-1, T), kinds,
-            *packed[1:], iner, umax, np.ascontiguousarray(weights.mean, dtype=float),
-            np.ascontiguousarray(weights.cov, dtype=float), float(n + weights.lam), bool(innovation_noise),
+            setup.slot.astype(np.int64), np.array(setup.active, dtype=np.bool_).reshape(-1, T), *packed, iner, umax,
+            np.ascontiguousarray(weights.mean, dtype=float), np.ascontiguousarray(weights.cov, dtype=float), float(n + weights.lam), bool(innovation_noise),
             lanes, out_x, out_P, out_nis, out_dof, out_ll, out_floored)
     from . import _ukf_kernels       # lazy: numba loads only when the compiled path runs
     done = _compiled._call_kernel(_ukf_kernels._nb_ukf, args, "UKF")

@@ -492,3 +492,28 @@ def test_the_kernel_runs_blas_on_one_thread(toy, tmp_path):
     assert run(toy, "george-one") == 0
     threads = json.loads(record.read_text())
     assert threads and set(threads) == {1}
+
+
+def test_the_longest_experiments_are_launched_first(tmp_path):
+    """Launch order (issue 31): the last run times in this folder, longest first; an experiment this folder never
+    timed takes the other profile's time; one never timed anywhere goes first; ties keep the suite's order."""
+    from locbook.suite.runner import _longest_first
+
+    def timed(folder, eid, seconds):
+        (folder / eid).mkdir(parents=True)
+        (folder / eid / "report.json").write_text(json.dumps({"seconds": seconds}))
+
+    quick, full = tmp_path / "quick", tmp_path / "full"
+    timed(quick, "a", 5.0)
+    timed(quick, "b", 40.0)
+    timed(full, "c", 300.0)           # quick never ran c: full's time ranks it
+    timed(full, "b", 900.0)           # quick's own time for b wins
+    timed(quick, "e", 5.0)
+    ids = ["a", "b", "c", "d", "e"]
+    order = sorted([(e, 1) for e in ids], key=_longest_first(quick, "quick", ids))
+    assert [e for e, _ in order] == ["d", "c", "b", "a", "e"]
+    # a data set's folder (reports/quick/data-x) has no sibling profile: its own times only
+    data = quick / "data-x"
+    timed(data, "a", 1.0)
+    order = sorted([(e, 1) for e in ids], key=_longest_first(data, "quick", ids))
+    assert [e for e, _ in order] == ["b", "c", "d", "e", "a"]

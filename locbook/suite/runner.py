@@ -625,6 +625,18 @@ def run_tasks(suite: Suite, tasks: list[Task], profile: str, report_dir: Path, *
     return run
 
 
+def _longest_first(report_dir: Path, profile: str, ids):
+    """The launch order: the longest experiments first (their last run time in this folder, else in the other
+    profile's folder beside it, for a first run), so that at the end no worker waits alone on a long one; experiments
+    never timed first of all (they may be long), then the suite's order among equals."""
+    seconds = expected_seconds(report_dir, ids)
+    for other in PROFILES:
+        sibling = report_dir.parent / other
+        if other != profile and report_dir.name == profile and sibling.is_dir():
+            seconds = {**expected_seconds(sibling, [e for e in ids if e not in seconds]), **seconds}
+    return lambda item: -seconds.get(item[0], float("inf"))
+
+
 def _run_locked(suite, tasks, profile, report_dir, data_roots, force, timeout_s, retries, kernel_name,
                 write_reports, stop, run, progress, pool):
     source, versions = _runner_fingerprint(), _dependency_versions()
@@ -668,6 +680,7 @@ def _run_locked(suite, tasks, profile, report_dir, data_roots, force, timeout_s,
             if damaged:
                 progress.message(f"{t.key}: the cached report is damaged ({damaged}); executing it again")
             queue.append((t.key, 1))
+    queue = deque(sorted(queue, key=_longest_first(report_dir, profile, [eid for eid, _ in queue])))
     staging_root = report_dir / ".staging" / f"{os.getpid()}-{uuid.uuid4().hex[:8]}"
     running: dict[str, tuple] = {}     # id -> (executor handle, staging, attempt, started or None)
 

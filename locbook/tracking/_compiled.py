@@ -67,13 +67,17 @@ def _pack_streams(setup: _Setup, measurements, B):
     (a NonlinearMeasurement: its h and Jacobian are Python functions)."""
     batch, T, n = setup.batch, setup.T, setup.F.shape[-1]
     kinds, cols, lin, rss, scal = [], [0], [], [], []
-    Z = np.empty((T, B, sum(z.shape[-1] for z in setup.zs)))       # time first: a step's readings side by side
-    by_time = Z.reshape((T,) + batch + Z.shape[-1:])
+    # the readings (B, T, M): a step's readings of all streams side by side (one stream: its own array when it is
+    # already laid out so, no copy)
+    flat = [z.reshape((B,) + z.shape[-2:]) for z in setup.zs]
+    Z = flat[0] if len(flat) == 1 else np.concatenate(flat, axis=-1)
+    Z = np.ascontiguousarray(Z, dtype=float)
+    if not Z.flags.writeable:       # a read-only array would compile the kernels once more for that type
+        Z = Z.copy()
     for meas, z in zip(measurements, setup.zs):
         m = z.shape[-1]
         c0 = cols[-1]
         cols.append(c0 + m)
-        by_time[..., c0:c0 + m] = np.moveaxis(z, -2, 0)
         if isinstance(meas, LinearMeasurement):
             kinds.append(_LINEAR_PARALLEL if meas.mode == "parallel" else _LINEAR_SERIAL)
             lin.append((c0, m, _leading_steps(meas.H, batch, B, (m, n), T), _leading_steps(meas.R, batch, B, (m, m), T)))

@@ -221,7 +221,7 @@ def _nb_ekf(Fi, Fj, Fv, Q, x0, P0, predict_first, slot, active, kind, col, nz, n
     Stream kinds: 0/1 linear parallel/serial, 2/3 RSS parallel/serial, 4 inertial (parallel, :func:`_nb_inertial_row`
     with the parameters ``iner[s]``). Returns 0, or 1 + a run whose update failed (the caller then redoes the filter in numpy, which raises the
     library's error)."""
-    T, B, n, ns = Z.shape[0], Z.shape[1], x0.shape[1], kind.shape[0]
+    B, T, n, ns = Z.shape[0], Z.shape[1], x0.shape[1], kind.shape[0]
     W = min(_LANES, B)
     mmax = 1
     for s in range(ns):
@@ -266,7 +266,7 @@ def _nb_ekf(Fi, Fj, Fv, Q, x0, P0, predict_first, slot, active, kind, col, nz, n
                         sel[j, w] = j
                     if kd == 3 and descending[s]:         # stable: ties (and the missing, last) keep their order
                         for j in range(m):
-                            zj = Z[k, run[w], c0 + j]
+                            zj = Z[run[w], k, c0 + j]
                             key[j, w] = zj if np.isfinite(zj) else -np.inf
                         for j in range(1, m):
                             i = j
@@ -280,7 +280,7 @@ def _nb_ekf(Fi, Fj, Fv, Q, x0, P0, predict_first, slot, active, kind, col, nz, n
                         for w in range(W):
                             b = run[w]
                             j = sel[u, w] if serial else r
-                            zj = Z[k, b, c0 + j]
+                            zj = Z[b, k, c0 + j]
                             valid[r, w] = np.isfinite(zj)
                             for e in range(nnz[s]):
                                 Hr[r, nz[s, e], w] = 0.0

@@ -385,7 +385,7 @@ def _nb_ukf(Fi, Fj, Fv, Q, x0, P0, predict_first, slot, active, kind, col, nz, n
     ``W`` runs (the last block padded with copies of the last run); each run's NIS, dof and log-likelihood at every
     step and its number of floored updates. Returns ``(status, block start)``: status 0, or a FAIL_ code (the caller
     then redoes the filter in numpy, which raises the library's error or applies the eigenvalue guard)."""
-    T, B, n, ns = Z.shape[0], Z.shape[1], x0.shape[1], kind.shape[0]
+    B, T, n, ns = Z.shape[0], Z.shape[1], x0.shape[1], kind.shape[0]
     N = 2 * n + 1
     mmax = 1
     for s in range(ns):
@@ -435,7 +435,7 @@ def _nb_ukf(Fi, Fj, Fv, Q, x0, P0, predict_first, slot, active, kind, col, nz, n
                         sel[j, w] = j
                     if kd == _RSS_SERIAL and descending[s]:   # stable: ties (and the missing, last) keep their order
                         for j in range(m):
-                            zj = Z[k, run[w], c0 + j]
+                            zj = Z[run[w], k, c0 + j]
                             key[j, w] = zj if np.isfinite(zj) else -np.inf
                         for j in range(1, m):
                             i = j
@@ -449,7 +449,7 @@ def _nb_ukf(Fi, Fj, Fv, Q, x0, P0, predict_first, slot, active, kind, col, nz, n
                         for w in range(W):
                             b = run[w]
                             j = sel[u, w] if serial else r
-                            zj = Z[k, b, c0 + j]
+                            zj = Z[b, k, c0 + j]
                             valid[r, w] = np.isfinite(zj)
                             zr[r, w] = zj
                             if valid[r, w]:

@@ -15,6 +15,9 @@ pytest.importorskip("numba")
 from locbook.tracking import _particle_kernels as K  # noqa: E402
 
 ANCHORS = np.array([[0.0, 0.0], [20.0, 0.0], [20.0, 15.0], [0.0, 15.0], [10.0, 7.5]])
+# an office's walls: a long one, a short one, a diagonal, and one through an anchor's column
+WALLS = np.array([[[5.0, -1.0], [5.0, 16.0]], [[12.0, 4.0], [12.0, 9.0]], [[0.0, 10.0], [8.0, 14.0]],
+                  [[10.0, 0.0], [10.0, 5.0]]])
 
 
 def _rel(a, b):
@@ -40,6 +43,10 @@ def _models(R, T):
     yield "tag height", lb.RssModel(heights, lb.PathLossModel(-40.0, 2.5, 4.0), tag_height_m=1.2)
     walls = np.array([[[5.0, -1.0], [5.0, 16.0]]])
     yield "walls without loss", lb.RssModel(ANCHORS, lb.PathLossModel(-40.0, 2.5, 4.0, min_distance_m=0.1), walls)
+    yield "walls with a loss", lb.RssModel(ANCHORS, lb.PathLossModel(-40.0, 2.5, 4.0, wall_attenuation_db=3.5), WALLS)
+    yield "walls, per-run anchors, per-anchor sigma", lb.RssModel(
+        ANCHORS + rng.uniform(-1, 1, (R, m, 2)), lb.PathLossModel(-40.0, 2.5, rng.uniform(2, 6, m),
+                                                                 wall_attenuation_db=2.0), WALLS)
 
 
 @pytest.mark.parametrize("shared", [False, True])
@@ -81,10 +88,26 @@ def test_fused_likelihood_equals_the_closed_form_at_known_distances():
     assert P._fused_rss_log_likelihood(model, z, np.zeros((1, 2)), 0)[0, 0] == pytest.approx(want, rel=1e-15)
 
 
-def test_fused_likelihood_leaves_walls_with_a_loss_to_numpy_and_refuses_what_numpy_refuses():
-    walls = np.array([[[5.0, -1.0], [5.0, 16.0]]])
-    model = lb.RssModel(ANCHORS, lb.PathLossModel(-40.0, 2.5, 4.0, wall_attenuation_db=3.0), walls)
-    assert P._fused_rss_log_likelihood(model, np.full((1, 5), -60.0), np.ones((1, 10, 2)), 0) is None
+def test_compiled_wall_counts_are_numpys_exactly():
+    """The kernel's wall counts equal lb.wall_crossings on particles everywhere, on the wall lines and at their ends
+    (the same expressions in the same order: the same signs, so the same integers)."""
+    rng = np.random.default_rng(3)
+    pos = np.concatenate([rng.uniform(-2, 22, (4000, 2)),
+                          WALLS.reshape(-1, 2),                                            # the walls' ends
+                          WALLS[:, 0] + rng.random((len(WALLS), 1)) * (WALLS[:, 1] - WALLS[:, 0])])   # on the walls
+    n = pos.shape[0]
+    buf = np.zeros(n)
+    for j, (ax, ay) in enumerate(ANCHORS):
+        out = np.zeros(n)
+        for i0 in range(0, n, 512):
+            part = np.ascontiguousarray(pos[i0:i0 + 512].T)
+            K._crossings(part, part.shape[1], ax, ay, WALLS, buf[:part.shape[1]])
+            out[i0:i0 + part.shape[1]] = buf[:part.shape[1]]
+        np.testing.assert_array_equal(out, lb.wall_crossings(pos, ANCHORS[j:j + 1], WALLS)[:, 0])
+    assert lb.wall_crossings(pos, ANCHORS, WALLS).max() >= 2          # some paths cross two walls
+
+
+def test_fused_likelihood_refuses_what_numpy_refuses():
     plain = lb.RssModel(ANCHORS, lb.PathLossModel(-40.0, 2.5, 4.0))
     far = np.full((1, 10, 2), 1e200)                        # distances overflow: numpy's error
     with pytest.raises(ValueError, match="overflow"):
@@ -143,6 +166,7 @@ CASES = {
     "fresh uniform proposal": dict(spread_m=np.inf),
     "sqrt smoothing": dict(weight_smoothing="sqrt", resample_threshold=0.5),
     "clouds": dict(cloud_steps=(0, 3)),
+    "office walls with a loss": dict(walls=WALLS),
 }
 
 
@@ -152,6 +176,8 @@ def test_the_filter_gives_the_same_results_with_numba_on_and_off(monkeypatch, ca
     estimates agree to round-off (the likelihood's log10 and the moments' sums differ in the last bits)."""
     model, rss = _scenario()
     kw = dict(n_particles=3000, region_m=([0.0, 0.0], [20.0, 15.0]), **CASES[case])
+    if "walls" in kw:
+        model = lb.RssModel(ANCHORS, lb.PathLossModel(-40.0, 2.5, 4.0, wall_attenuation_db=3.5), kw.pop("walls"))
     plain, fast = _both(monkeypatch, lambda: lb.particle_filter(rss, model, np.random.default_rng(4), **kw))
     np.testing.assert_array_equal(fast.particles_m, plain.particles_m)
     np.testing.assert_array_equal(fast.resampled, plain.resampled)

@@ -144,7 +144,29 @@ _CHUNK = 512                                    # particles per block of the lik
 
 
 @_jit
-def _nb_rss_loglik(x, pidx, plan, vert2, z, p0, tenn, sigma, per_anchor, d_min, d_ref, out):
+def _crossings(pos, nc, ax, ay, walls, out):
+    """``out[i]`` = the walls crossed by the path from the particle ``pos[:, i]`` to the anchor ``(ax, ay)``:
+    :func:`~locbook.models.channel.wall_crossings` with its expressions in its order (a proper intersection of the
+    two segments by orientation tests), so the counts are numpy's."""
+    for i in range(nc):
+        out[i] = 0.0
+    for q in range(walls.shape[0]):
+        w0x, w0y, w1x, w1y = walls[q, 0, 0], walls[q, 0, 1], walls[q, 1, 0], walls[q, 1, 1]
+        ex, ey = w1x - w0x, w1y - w0y
+        side_a = ex * (ay - w0y) - ey * (ax - w0x)           # which side of the wall line the anchor is on
+        c0, a0x, a0y = ax * w0y - ay * w0x, ax - w0x, ay - w0y
+        c1, a1x, a1y = ax * w1y - ay * w1x, ax - w1x, ay - w1y
+        for i in range(nc):
+            px, py = pos[0, i], pos[1, i]
+            side_p = ex * (py - w0y) - ey * (px - w0x)
+            s0 = (c0 + px * a0y) - py * a0x                  # which side of the path line each wall end is on
+            s1 = (c1 + px * a1y) - py * a1x
+            if s0 * s1 < 0.0 and side_p * side_a < 0.0:
+                out[i] += 1.0
+
+
+@_jit
+def _nb_rss_loglik(x, pidx, plan, vert2, z, p0, tenn, sigma, per_anchor, d_min, d_ref, walls, waf, out):
     """``out[r, i] = -0.5 sum_j ((z_rj - h_j(x_ri)) / sigma_j)^2`` over the heard anchors (``z`` not NaN), with
     ``h_j(p) = P0_j - 10 n_j log10(max(d_j, d_min) / d0)`` and ``d_j^2 = |p - a_j|^2 + vert2_j`` (Ozkaya 2011,
     Eq. (6.3); :meth:`~locbook.models.rss.RssModel.log_likelihood` with ``constant=False``, walls left out).
@@ -152,6 +174,8 @@ def _nb_rss_loglik(x, pidx, plan, vert2, z, p0, tenn, sigma, per_anchor, d_min, 
     ``x`` ``(1|R, N, n)`` (positions at the columns ``pidx``), ``plan`` ``(1|R, m, dim)``, ``vert2`` ``(1|R, m)``,
     ``z`` ``(R, m)``, ``p0`` and ``tenn = 10 n`` ``(1|R, m)``, ``sigma`` ``(1|R, m)`` (``per_anchor``: each residual
     divided by its sigma, as numpy does for sigma ``(m,)``) or ``(1|R, 1)`` (the sum divided by sigma^2 at the end).
+    ``walls`` ``(W, 2, 2)`` (2-D positions; W may be 0) with the loss ``waf`` per wall crossed:
+    :func:`~locbook.models.channel.wall_crossings` evaluated with the same expressions, ``h_j - waf nW_j``.
     Blocks of :data:`_CHUNK` particles, one anchor at a time (the sum over the anchors in their order). Returns False
     when a coordinate or a distance is not finite (the numpy path then raises its error)."""
     R, N = out.shape
@@ -163,6 +187,8 @@ def _nb_rss_loglik(x, pidx, plan, vert2, z, p0, tenn, sigma, per_anchor, d_min, 
     lg = np.empty(_CHUNK)
     work = np.empty(_CHUNK)
     acc = np.empty(_CHUNK)
+    crossed = np.zeros(_CHUNK)
+    n_walls = walls.shape[0]
     for r in range(R):
         rx = r if x.shape[0] > 1 else 0
         ra = r if plan.shape[0] > 1 else 0
@@ -200,15 +226,17 @@ def _nb_rss_loglik(x, pidx, plan, vert2, z, p0, tenn, sigma, per_anchor, d_min, 
                         d = d_min
                     dist[i] = d / d_ref
                 _log10_block(dist, lg, work, nc)
+                if n_walls > 0:                  # without walls crossed stays 0: h - 0 is h exactly
+                    _crossings(pos, nc, plan[ra, j, 0], plan[ra, j, 1], walls, crossed)
                 p0j, tj = p0[rp, j], tenn[rp, j]
                 if per_anchor:
                     sj = sigma[rs, j]
                     for i in range(nc):
-                        resid = (zj - (p0j - tj * lg[i])) / sj
+                        resid = (zj - ((p0j - tj * lg[i]) - waf * crossed[i])) / sj
                         acc[i] += resid * resid
                 else:
                     for i in range(nc):
-                        resid = zj - (p0j - tj * lg[i])
+                        resid = zj - ((p0j - tj * lg[i]) - waf * crossed[i])
                         acc[i] += resid * resid
             if per_anchor:
                 for i in range(nc):

@@ -40,7 +40,7 @@ it raises a ValueError naming the likelihood and the first step and run instead 
 Compiled path (issue 31): from :data:`_NUMBA_MIN_PARTICLES` particles in all (runs x N) on, with numba installed and
 not turned off (``LOCBOOK_NUMBA=0``), the kernels of :mod:`locbook.tracking._particle_kernels` run the hot loop with
 no temporaries of the size of the cloud: an RssModel's log-likelihood in one pass over the particles
-(:func:`_fused_rss_log_likelihood`; walls with a nonzero loss stay in numpy), the default random walk in place, and,
+(:func:`_fused_rss_log_likelihood`, walls included), the default random walk in place, and,
 with ``weight_smoothing="none"``, the normalisation, the moments, N_eff and systematic resampling (``"standard"``
 cumulative sum; the other schemes draw in numpy). The random stream is the numpy path's draw for draw, and so are the
 weight normalisation (numpy's pairwise sum) and the systematic ancestors; the likelihood differs from numpy's in the
@@ -88,7 +88,8 @@ def _kernels_ok() -> bool:
         try:
             x, w, z1 = np.zeros((1, 2, 2)), np.full((1, 2), 0.5), np.zeros((1, 2))
             K._nb_rss_loglik(x, np.arange(2), np.ones((1, 1, 2)), np.zeros((1, 1)), np.zeros((1, 1)),
-                             np.zeros((1, 1)), np.ones((1, 1)), np.ones((1, 1)), False, 0.1, 1.0, z1.copy())
+                             np.zeros((1, 1)), np.ones((1, 1)), np.ones((1, 1)), False, 0.1, 1.0, np.zeros((0, 2, 2)),
+                             0.0, z1.copy())
             K._nb_random_walk(x.copy(), np.zeros(2), np.ones(2), x, True, np.zeros(2), np.ones(2), True)
             K._nb_normalise(z1.copy(), z1.copy(), np.zeros(1, bool), w.copy(), z1.copy(), True, np.zeros(1, bool))
             K._nb_moments(w, x, np.zeros((1, 2)), np.zeros((1, 2, 2)), np.zeros((1, 2)), np.zeros(1))
@@ -112,14 +113,17 @@ def _use_compiled(n_particles: int) -> bool:
 def _fused_rss_log_likelihood(model: RssModel, rss_dbm, particles, step: int, position_index=None, out=None):
     """``model.log_likelihood(rss_dbm, particles[..., position_index], step, constant=False)`` ``(R, N)`` in one
     compiled pass over the particles (:func:`~locbook.tracking._particle_kernels._nb_rss_loglik`: distance, clamp,
-    tag height, per-anchor or per-run parameters and anchors, NaN readings left out), with no ``(R, N, m)``
+    tag height, walls, per-anchor or per-run parameters and anchors, NaN readings left out), with no ``(R, N, m)``
     temporary. ``rss_dbm`` ``(R, m)`` checked readings; ``particles`` ``(R, N, n)`` or shared ``(N, n)``;
     ``position_index`` the position columns (default the first ``model.dim``); ``out`` an ``(R, N)`` buffer.
-    None when the model has walls with a nonzero loss (the numpy path covers them). Coordinates or distances that
-    are not finite are handed to :meth:`~locbook.models.rss.RssModel.log_likelihood`, which raises its error."""
+    None when the wall loss is not one number (the numpy path covers it). Coordinates or distances that are not
+    finite are handed to :meth:`~locbook.models.rss.RssModel.log_likelihood`, which raises its error."""
     ch = model.channel
-    if model.walls_m is not None and ch.wall_attenuation_db != 0.0:
+    waf = np.asarray(ch.wall_attenuation_db, dtype=float)
+    with_walls = model.walls_m is not None and bool(np.any(waf != 0.0))
+    if with_walls and waf.ndim != 0:
         return None
+    walls = np.ascontiguousarray(model.walls_m, dtype=float) if with_walls else np.zeros((0, 2, 2))
     from . import _particle_kernels as K          # lazy: numba loads only when the compiled path runs
     sigma = np.asarray(model._sigma(step, "the likelihood"), dtype=float)
     z = np.ascontiguousarray(rss_dbm, dtype=float)
@@ -143,7 +147,7 @@ def _fused_rss_log_likelihood(model: RssModel, rss_dbm, particles, step: int, po
     out = np.empty((R, x3.shape[1])) if out is None else out
     if K._nb_rss_loglik(x3, pidx, plan, vert2, z, per_step(ch.ref_power_dbm), per_step(tenn),
                         np.ascontiguousarray(sig), per_anchor, float(ch.min_distance_m), float(ch.ref_distance_m),
-                        out):
+                        walls, float(waf) if with_walls else 0.0, out):
         return out
     positions = x if position_index is None else x[..., pidx]
     return model.log_likelihood(z, positions, step, constant=False)

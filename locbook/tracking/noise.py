@@ -185,8 +185,9 @@ def fit_noise_ml(F, Q, x0, P0, measurements, *, kind: str = "kf", fit_Q: str | N
     two groups of the first stream's R and one scale of the second's). ``per_run``: every run (the leading axes
     of the readings) gets its own estimate; False pools the runs (one estimate, the sum of their log-likelihoods).
     ``scale_bounds``: the range of every variance multiplier. ``max_iter``: the iteration limit (of L-BFGS-B pooled,
-    of the damped Newton steps per run); ``tol``: L-BFGS-B's tolerance on the relative change of the objective (the
-    per-run Newton steps stop when no multiplier changes by more than 1e-6, relative).
+    of the damped Newton steps per run); ``tol``: the tolerance on the relative change of the objective (L-BFGS-B's;
+    a run's Newton steps stop when one raises its log-likelihood by no more than that, or changes no multiplier by
+    more than 1e-6, relative).
 
     Raises ConvergenceError when the optimiser stops without meeting its criteria; a multiplier that ends at its bound
     is reported in ``at_bound`` (not an error: the likelihood may be flat or want more)."""
@@ -216,7 +217,7 @@ def fit_noise_ml(F, Q, x0, P0, measurements, *, kind: str = "kf", fit_Q: str | N
     ll0 = log_likelihood(np.zeros(p))
     runs = np.shape(ll0)
     if per_run:
-        theta, iterations = _newton_per_run(log_likelihood, runs, p, np.log(lo), np.log(hi), int(max_iter))
+        theta, iterations = _newton_per_run(log_likelihood, runs, p, np.log(lo), np.log(hi), int(max_iter), tol)
     else:
         theta, iterations = _lbfgs_pooled(log_likelihood, runs, p, np.log(lo), np.log(hi), int(max_iter), tol,
                                           abs(float(np.sum(ll0))))
@@ -231,6 +232,8 @@ def fit_noise_ml(F, Q, x0, P0, measurements, *, kind: str = "kf", fit_Q: str | N
 
 
 _H = 1e-4          # finite-difference step in log multipliers (a relative change of 1e-4)
+_DAMPING_FLOOR = 1e-10      # the per-run Newton's smallest damping (relative to the Hessian's largest diagonal entry)
+_EXPAND = 2.0 ** np.arange(8)   # the per-run Newton tries its step times each of these
 
 
 def _lbfgs_pooled(log_likelihood, runs, p: int, lo: float, hi: float, max_iter: int, tol: float, scale: float):
@@ -255,11 +258,12 @@ def _lbfgs_pooled(log_likelihood, runs, p: int, lo: float, hi: float, max_iter: 
     return res.x, int(res.nit)
 
 
-def _newton_per_run(log_likelihood, runs, p: int, lo: float, hi: float, max_iter: int):
+def _newton_per_run(log_likelihood, runs, p: int, lo: float, hi: float, max_iter: int, tol: float):
     """A multiplier vector per run: damped Newton steps on every run at once (Levenberg-Marquardt damping, projected
     onto the bounds), the gradient and Hessian by central differences from one filter call with the ``1 + 2p +
-    p(p-1)/2`` candidates on a leading axis, the trial step from a second. A run stops when its step changes no
-    multiplier by more than 1e-6 (relative)."""
+    p(p-1)/2`` candidates on a leading axis, the step and its doublings (:data:`_EXPAND`) from a second, the step
+    doubled as long as the likelihood keeps rising. A run stops when its accepted step changes no multiplier by more than 1e-6 (relative) or raises its
+    log-likelihood by no more than ``tol`` (relative)."""
     pairs = [(i, j) for i in range(p) for j in range(i + 1, p)]
     stencil = [np.zeros(p)] + [s * _H * np.eye(p)[i] for s in (1, -1) for i in range(p)] + \
         [_H * (np.eye(p)[i] + np.eye(p)[j]) for i, j in pairs]
@@ -282,14 +286,21 @@ def _newton_per_run(log_likelihood, runs, p: int, lo: float, hi: float, max_iter
         size = np.maximum(np.abs(diag).max(axis=-1), 1e-12)
         mu = np.maximum(0.0, -low) + damping * size
         step = np.linalg.solve(A + mu[..., None, None] * np.eye(p), g[..., None])[..., 0]
-        trial = np.clip(theta + step, lo, hi)
-        step = np.where(done[..., None], 0.0, trial - theta)
-        f_trial = log_likelihood(theta + step)
+        # where the likelihood is not concave (a flat ridge towards a bound) the shifted Newton step alone crawls:
+        # the step and its multiples up to 2^7 in one call, doubled as long as the likelihood keeps rising
+        trials = np.clip(theta + _EXPAND.reshape((-1,) + (1,) * (len(runs) + 1)) * step, lo, hi)
+        trials = np.where(done[..., None], theta, trials)
+        f_trials = np.where(np.isfinite(f_trials := log_likelihood(trials)), f_trials, -np.inf)
+        best = np.cumprod(f_trials[1:] > f_trials[:-1], axis=0).sum(axis=0)     # the last of the rising multiples
+        f_trial = np.take_along_axis(f_trials, best[None], 0)[0]
+        step = np.take_along_axis(trials, best[None, ..., None], 0)[0] - theta
         better = np.isfinite(f_trial) & (f_trial >= f0 - 1e-12 * np.abs(f0))
         theta = np.where(better[..., None], theta + step, theta)
-        damping = np.where(better, damping / 10.0, damping * 10.0)
+        # the damping keeps a floor: below it, mu would equal -low to round-off and A + mu I be singular
+        damping = np.where(better, np.maximum(damping / 10.0, _DAMPING_FLOOR), damping * 10.0)
         small = np.abs(step).max(axis=-1) < 1e-6
-        done = done | (better & small)
+        flat = f_trial - f0 <= tol * np.abs(f0)        # on a flat top, round-off moves the step back and forth
+        done = done | (better & (small | flat))
         if done.all():
             return theta, it
     raise ConvergenceError(f"fit_noise_ml: {int(np.count_nonzero(~done))} of {done.size} runs did not converge in "

@@ -148,6 +148,23 @@ def test_bad_parameter_stops_before_execution(toy, capsys, override, message):
     assert report.read_bytes() == before               # the existing report is untouched
 
 
+def test_a_parameter_on_several_experiments_goes_to_those_that_declare_it(toy, capsys):
+    """Issue 32: `locbook run george -p NAME=VALUE` where only some of the selected experiments declare NAME runs
+    those with it and says which were left out; a name none declares is refused before anything runs."""
+    nb = toy / "notebooks" / "two.ipynb"
+    _notebook(nb, PARAMS.replace("weights: list[float] = [1.0]  # a list\n", ""))     # george-two: no `weights`
+    assert run(toy, "george", "-p", "weights=[2.0]") == 0
+    out = capsys.readouterr().out
+    assert "-p weights: 1 of 2 selected experiments declare it and run (george-one); left out: george-two" in out
+    assert "1 executed" in out
+    assert run(toy, "george", "-p", "n=3") == 0                      # declared by both: both run
+    assert "2 executed" in capsys.readouterr().out
+    assert run(toy, "george", "-p", "no_such=1") == 2
+    assert "unknown parameter 'no_such': none of the 2 selected experiments declares it" in capsys.readouterr().err
+    assert run(toy, "george-two", "-p", "weights=[2.0]") == 2        # one experiment: its own parameters only
+    assert "unknown parameter 'weights'" in capsys.readouterr().err
+
+
 def test_profile_value_of_wrong_type_is_rejected(toy):
     toml = toy / "notebooks" / "experiments.toml"
     toml.write_text(toml.read_text().replace("n = 5\n", 'n = "five"\n'))

@@ -207,9 +207,15 @@ def main(argv: list[str] | None = None) -> int:
                 experiments = [e for e in suite.experiments if "data" in e.declared_parameters()]
             else:
                 experiments = suite.select(args.ids)
-            from .runner import run_suite
+            from .runner import run_suite, split_overrides
+            overrides = _parse_overrides(args.parameter)
+            kept, own, left_out = split_overrides(experiments, overrides)
+            if left_out:
+                taken = sorted({k for e in kept for k in own[e.id] if k != "data"})
+                print(f"-p {', '.join(taken)}: {len(kept)} of {len(experiments)} selected experiments declare it and "
+                      f"run ({', '.join(e.id for e in kept)}); left out: {', '.join(left_out)}")
             result = run_suite(suite, experiments, args.profile, jobs=args.jobs, force=args.force,
-                               overrides=_parse_overrides(args.parameter), report_root=args.reports,
+                               overrides=overrides, report_root=args.reports,
                                out_dir=args.out, timeout_s=args.timeout, progress=args.progress,
                                executor=args.executor, scheduler=args.scheduler, data=args.data)
     except (ParameterError, ReadingsError, LocbookError) as exc:   # LocbookError: a malformed data set too

@@ -51,6 +51,7 @@ from importlib import metadata
 from pathlib import Path
 
 from . import site
+from ..errors import ParameterError
 from ..reproduce.report import NUMBER_COLUMNS
 from .params import read_notebook
 from .site import _read_csv, _read_json
@@ -448,6 +449,31 @@ def _absolute(path) -> Path:
     return Path(os.path.abspath(Path(path).expanduser()))
 
 
+def split_overrides(experiments: list[Experiment], overrides: dict[str, str]):
+    """``-p`` on several experiments: each takes the overrides its notebook declares, and one that declares none of
+    them is left out (it would only rerun its defaults). Returns ``(kept experiments, {id: its overrides}, left-out
+    ids)``. A name that no selected experiment declares is refused (ParameterError naming the experiments); with one
+    experiment every name must be its own (the usual check, in :meth:`Experiment.parameters`)."""
+    names = [k for k in overrides if k != "data"]
+    if len(experiments) <= 1 or not names:
+        return list(experiments), {e.id: dict(overrides) for e in experiments}, []
+    declared = {e.id: e.declared_parameters() for e in experiments}
+    nobody = [k for k in names if not any(k in d for d in declared.values())]
+    if nobody:
+        raise ParameterError(f"unknown parameter {', '.join(repr(k) for k in nobody)}: none of the "
+                             f"{len(experiments)} selected experiments declares it "
+                             f"({', '.join(e.id for e in experiments)}); `locbook show ID` lists an experiment's")
+    kept, each, left_out = [], {}, []
+    for e in experiments:
+        mine = {k: v for k, v in overrides.items() if k in declared[e.id] or k == "data"}
+        if any(k in declared[e.id] for k in names):
+            kept.append(e)
+            each[e.id] = mine
+        else:
+            left_out.append(e.id)
+    return kept, each, left_out
+
+
 def run_suite(suite: Suite, experiments: list[Experiment], profile: str, *, jobs: int = 1, force: bool = False,
               overrides: dict[str, str] | None = None, report_root: Path | None = None,
               out_dir: Path | None = None, timeout_s: float = 1800, retries: int = 1,
@@ -460,7 +486,9 @@ def run_suite(suite: Suite, experiments: list[Experiment], profile: str, *, jobs
     data experiments and the cross-document benchmark). Its reports go to ``data-<name>/`` inside the folder the run
     would otherwise write (``<report_root>/<profile>/data-<name>/``), and its files join the cache key.
 
-    Parameters of every selected experiment are checked before any executes (raises ParameterError).
+    Parameters of every selected experiment are checked before any executes (raises ParameterError); with several
+    experiments, each takes the ``overrides`` it declares and those declaring none are left out
+    (:func:`split_overrides`).
     The reports go to ``<report_root>/<profile>/``, or, with ``overrides``, to their own folder
     (:func:`override_folder_name`) so that the profile's default report is never touched; ``out_dir``
     names the folder explicitly. ``retries``: further attempts for an experiment whose worker or kernel died.
@@ -505,7 +533,8 @@ def run_suite(suite: Suite, experiments: list[Experiment], profile: str, *, jobs
         report_dir = report_dir / f"data-{dataset_name}"
     if identity is not None:
         _claim_dataset_folder(report_dir, dataset_name, identity)
-    tasks = [Task(exp.id, exp, exp.parameters(profile, {**overrides, **per_experiment.get(exp.id, {})}))
+    experiments, own, _ = split_overrides(experiments, overrides)
+    tasks = [Task(exp.id, exp, exp.parameters(profile, {**own[exp.id], **per_experiment.get(exp.id, {})}))
              for exp in experiments]  # validation first
     custom_folder = bool(overrides) or out_dir is not None or dataset_name is not None
     return run_tasks(suite, tasks, profile, report_dir, jobs=jobs, force=force, timeout_s=timeout_s,

@@ -1,6 +1,6 @@
 """locbook: rerun, check and extend published RSSI indoor localization and tracking experiments.
 
-The public API is the table ``_API`` below (role, home module, names), listed in README under "Public API": the
+The public API is the table ``_API`` below (role, home module, names), listed in docs/architecture.md under "Public API": the
 channel and the one RSS measurement model; calibration and static localization; motion models, trajectories and
 inertial sensors; the Kalman family, particle and grid filters; bounds, metrics and Monte-Carlo helpers; measured
 data and floor geometry; errors; and the reproduction layer (:class:`Report`, :func:`printed`, :class:`Ambiguity`).
@@ -11,7 +11,7 @@ from ._lazy import lazy_exports
 
 # (role, home module, names): the names a user calls, each imported on first use from its one home (PEP 562), so
 # that `import locbook` loads no submodule. Constants (variant lists, defaults, limits) stay in their modules.
-# README's "Public API" table lists exactly this (tests/test_public_api.py).
+# docs/architecture.md's "Public API" table lists exactly this (tests/test_public_api.py).
 _API = (
     ("channel", "models.channel", ("PathLossModel", "register_to_dbm", "dbm_to_register", "quantize_db",
         "pairwise_distance_m", "correlated_shadowing_db", "wall_crossings", "small_scale_fading_db",

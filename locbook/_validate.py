@@ -1,6 +1,6 @@
 """Input checks at the public boundary: every failure names the argument, what it got and what it expects.
 
-The library's one rule for missing values (README, "Missing readings"): a NaN received power means "not
+The library's one rule for missing values (docs/filters.md, "Missing readings"): a NaN received power means "not
 heard" (the anchor got no packet in that epoch). Measurement arrays therefore accept NaN and each estimator
 says how it uses the readings present; every other input (anchors, model parameters, covariances, grids)
 must be finite, and infinities are never a reading.

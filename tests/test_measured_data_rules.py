@@ -47,7 +47,7 @@ def test_short_row_missing_several_columns(tmp_path):
 
 
 def test_empty_rssi_field_stays_not_heard(tmp_path):
-    """The documented rule (module docstring, README): an empty rssi_dbm, or NaN, is "not heard"."""
+    """The documented rule (module docstring, docs/filters.md): an empty rssi_dbm, or NaN, is "not heard"."""
     table = read_readings(write(tmp_path, HEADER + "0,t,A1,-60\n0,t,A2,\n0,t,A3,NaN\n"))
     assert table["rssi_dbm"].iloc[0] == -60.0 and table["rssi_dbm"].iloc[1:].isna().all()
 

@@ -110,10 +110,10 @@ def test_the_data_log_tracks_the_imported_packages_own_data_wherever_it_is_insta
     assert log.read_text().splitlines() == [str(package / "data" / "printed" / "george.csv")]
 
 
-def test_readme_states_every_exit_status_of_locbook_run():
+def test_the_docs_state_every_exit_status_of_locbook_run():
     from locbook.suite import cli
-    readme = (REPO / "README.md").read_text(encoding="utf-8")
-    section = readme.split("### Interrupts, concurrent runs and the cache", 1)[1].split("\n### ", 1)[0]
+    readme = (REPO / "docs" / "running.md").read_text(encoding="utf-8")
+    section = readme.split("## Interrupts, concurrent runs and the cache", 1)[1].split("\n## ", 1)[0]
     table = dict(line.strip("|").split("|", 1)[0:2] for line in section.splitlines()
                  if line.startswith("| ") and not line.startswith("| status"))
     statuses = {k.strip(): v.strip() for k, v in table.items()}

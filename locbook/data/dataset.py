@@ -249,7 +249,7 @@ def _resolve(path) -> tuple[Path, Path]:
         p = p / MANIFEST
     if not p.is_file():
         raise ParameterError(f"no data set at {path}: {p} does not exist (a data set is a folder with a {MANIFEST}; "
-                             "README: 'Analyse your own data')")
+                             "docs/data-format.md)")
     return p.parent.resolve(), p.resolve()
 
 

@@ -1,7 +1,7 @@
 """A synthetic data set in the form a real one arrives in: raw packets in the long format with a manifest.
 
 :func:`write_example_dataset` writes a folder that ``locbook data check`` and ``locbook run --data`` read like any
-measured data set (README, "Analyse your own data"), with the faults real data bring: packets not heard (absent
+measured data set (docs/data-format.md), with the faults real data bring: packets not heard (absent
 rows, and a few rows with an empty reading), an invalid-reading sentinel (0 dBm), a point id column, and a track
 logged with some timestamps out of order. Its truth is known exactly, so the battery's estimates can be checked
 against it. ``locbook data example DIR`` calls it.

@@ -41,7 +41,7 @@ Every rule failure raises :class:`DataFormatError` naming the file, the line (as
 header being line 1, blank lines included) and the column (or the byte, for a file that is not UTF-8).
 :func:`epochs` turns a validated recording into the arrays the estimators take: one row per epoch (a distinct
 (time, transmitter), or a window of raw packets), one column per anchor, NaN where the anchor heard nothing (the
-library's one rule for missing readings, README). :func:`regular_epochs` puts one transmitter on a fixed clock,
+library's one rule for missing readings, docs/filters.md). :func:`regular_epochs` puts one transmitter on a fixed clock,
 refusing a clock jump that would need more than ``max_epochs`` ticks.
 
 A data set (:mod:`locbook.data.dataset`) is a folder of such files with a manifest (``dataset.toml``) that says

@@ -110,7 +110,7 @@ class CorridorRuns:
     def calibrated(self, per_run, axis: int = 0) -> np.ndarray:
         """The entries of ``per_run`` (one per run along ``axis``) of the runs whose calibration succeeded: the runs a
         statistic of the paper's pipeline averages. A failed run has no fixes, so no C of Eq. (15): it is left out and
-        counted (:meth:`failed_calibration_note`), never averaged in as NaN (README, missing readings)."""
+        counted (:meth:`failed_calibration_note`), never averaged in as NaN (docs/filters.md, missing readings)."""
         per_run = np.asarray(per_run)
         if per_run.ndim == 0 or per_run.shape[axis] != self.calibration_ok.size:
             raise ValueError(f"per_run must hold one entry per run ({self.calibration_ok.size}) along axis {axis}, "

@@ -502,7 +502,7 @@ def findings_markdown(document: str, brackets: dict[str, list[dict]], points: di
              f"Scored rows bracketed: {len(rows)} ({', '.join(f'{b} {n}' for b, n in counts.items())}), from the "
              f"brackets of {', '.join(sorted(brackets))}. A bracket runs the experiment under each declared reading "
              "of what the source left unprinted, one reading at a time, plus one run with every value fitted to printed "
-             "output together (README, \"Reading brackets\"). Values below are rounded to 4 significant digits; "
+             "output together (docs/studies-and-brackets.md, \"Reading brackets\"). Values below are rounded to 4 significant digits; "
              "bracket.csv has them in full.", ""]
     sections = [("outside", "Outside: no declared reading reaches the printed number",
                  "Every declared reading was run; the printed number lies outside every window. Evidence: our values "

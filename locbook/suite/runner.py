@@ -13,7 +13,7 @@ Layout of a reports folder (``reports/<profile>/``, or its own folder for a run 
     .failed/<id>/                            the last failed attempt, kept for inspection
     status.json                              the last attempt of each experiment
 
-Guarantees (README, "Interrupts, concurrent runs and the cache"):
+Guarantees (docs/running.md, "Interrupts, concurrent runs and the cache"):
 
 - one run at a time per folder: a second run waits for the lock and says so;
 - each experiment runs in its own worker process; a worker that dies fails only its experiment (retried

@@ -2,6 +2,7 @@
 (the reports in a temporary folder instead of the clone's `reports/`), and must succeed. The install line and the
 test commands are what `.ci/run` itself runs (checked to be there); `jupyter lab` opens a server, so its notebook is
 checked to exist and JupyterLab to be installed. README's Python block runs as written."""
+import importlib.util
 import re
 import shlex
 import subprocess
@@ -63,7 +64,7 @@ def test_every_readme_command_runs(clone, tmp_path):
             assert command in ci, command
         elif args[:2] == ["jupyter", "lab"]:
             assert (REPO / args[2]).is_file(), command
-            import jupyterlab  # noqa: F401  (installed with locbook)
+            assert importlib.util.find_spec("jupyterlab") is not None, "JupyterLab is installed with locbook"
         elif args[0] == "locbook":
             extra = ["--suite", str(SUITE)]
             if args[1] in ("run", "study", "bracket"):

@@ -200,6 +200,16 @@ def test_every_link_and_image_of_the_site_resolves(browser, site_dir, tmp_path):
     assert visited == {"index.html", "george-good/report.html", "george-good/george-good.html"}
     for name in ("index.html", "george-good/report.html"):             # the site itself never leaves the machine
         assert pages[(site_dir / name).resolve()][1] == [], name
+    # issue 32: every experiment page with compared numbers shows ours against printed (an inline SVG per table)
+    for page in pages:
+        if page.name == "report.html":
+            browser.get(page.as_uri())
+            scored = browser.find_elements(By.XPATH, "//h2[text()='Reproduced versus printed']/following::table[1]"
+                                                     "//td[@class='v-within' or @class='v-loose' or @class='v-miss']")
+            plots = browser.find_elements(By.CSS_SELECTOR, "figure.pvo svg")
+            assert bool(scored) == bool(plots), page
+            for plot in plots:
+                assert plot.size["width"] >= 200 and plot.find_elements(By.CSS_SELECTOR, "circle"), page
 
     # the index: kind-by-verdict tables coloured by verdict, one row per experiment, run status as text
     browser.get(index.as_uri())
@@ -229,6 +239,10 @@ def test_every_link_and_image_of_the_site_resolves(browser, site_dir, tmp_path):
     page = site_dir / "george-good" / "report.html"
     browser.get(page.as_uri())
     browser.save_screenshot(str(_screenshot_dir() / "site-page.png"))
+    plot = browser.find_element(By.CSS_SELECTOR, "figure.pvo")
+    assert "Table 1" in plot.find_element(By.TAG_NAME, "figcaption").text
+    assert len(plot.find_elements(By.CSS_SELECTOR, "circle")) == 1              # the one compared number
+    plot.screenshot(str(_screenshot_dir() / "site-printed-versus-ours.png"))
     text = browser.find_element(By.TAG_NAME, "body").text
     assert "A good experiment" in text and "A. Author" in text and "Table 1" in text
     assert "the <toy> samples & their order" in text                       # escaped, shown as written

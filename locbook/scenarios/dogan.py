@@ -389,7 +389,9 @@ def run_filter(name: str, trajectory: Trajectory, rss_dbm, mle_fix_m, mse_mle_m2
         x0, P0, measurements, at, z = inputs
         return _per_epoch_kf(model, x0, P0, measurements, z, mse, at, steps, n_steps, every_step)
     x0, P0, measurements, at = inputs
-    track = extended_kalman_filter(model.F, model.Q, x0, P0, measurements, record=None if every_step else at)
+    # the guard is judged on the trajectory's grid (_on_trajectory_grid): the filter's own, on its grid, is not needed
+    track = extended_kalman_filter(model.F, model.Q, x0, P0, measurements, record=None if every_step else at,
+                                   divergence_window=0)
     x = np.concatenate([np.broadcast_to(x0[..., None, :], track.x.shape[:-2] + (1, 6)), track.x], axis=-2)
     P = np.concatenate([np.broadcast_to(P0[..., None, :, :], track.P.shape[:-3] + (1, 6, 6)), track.P], axis=-3)
     recorded = np.arange(steps[0], n_steps) if every_step else steps
@@ -420,7 +422,7 @@ def _per_epoch_kf(model, x0, P0, acc_streams, z, mse, at, steps, n_steps, every_
     r_steps = mse[np.minimum(segment + 1, len(mse) - 1)][:, :, None] * np.eye(2)      # mse[e] for segment e - 1
     track = extended_kalman_filter(model.F, model.Q, x0, P0,
                                    [*acc_streams, LinearMeasurement(z, H, per_step(r_steps))],
-                                   record=None if every_step else at)
+                                   record=None if every_step else at, divergence_window=0)
     x = np.concatenate([np.broadcast_to(x0[..., None, :], track.x.shape[:-2] + (1, 6)), track.x], axis=-2)
     P = np.concatenate([np.broadcast_to(P0[..., None, :, :], track.P.shape[:-3] + (1, 6, 6)), track.P], axis=-3)
     recorded = np.arange(steps[0], n_steps) if every_step else steps

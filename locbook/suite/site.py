@@ -308,6 +308,70 @@ def _page_outputs(folder: Path, manifest: dict) -> tuple[list[dict], list[dict]]
     return figures, tables
 
 
+_VERDICT_FILL = {"within": "#2e8b3d", "consistent": "#2e8b3d", "loose": "#c99400", "miss": "#c0392b",
+                 "inconsistent": "#c0392b"}
+
+
+def _scored_point(row: dict):
+    """(printed, ours, window low, window high) of a compared row with numbers on both sides, else None."""
+    if row.get("kind") not in ("reproduction", "calibrated") or row.get("same_as"):
+        return None
+    printed = finite_float(str(row.get("printed", "")).replace(",", "").strip().rstrip("%"))
+    values = [finite_float(row.get(k)) for k in ("reproduced", "window_low", "window_high")]
+    if printed is None or any(v is None for v in values):
+        return None
+    return (printed, *values)
+
+
+def printed_versus_ours(numbers: list[dict], size: int = 300) -> list[dict]:
+    """One inline SVG per printed table (the rows' ``location``, and unit): each compared number a point at (printed,
+    ours) with its window as a vertical bar, coloured by its verdict (a ring marks a row whose bracket reached it
+    under another reading), and the line ours = printed. Rows without numbers on both sides are left out; a table
+    with none gets no figure. Returns ``[{"title", "svg", "n"}]`` in the order the tables first appear."""
+    groups: dict[tuple, list] = {}
+    for r in numbers:
+        point = _scored_point(r)
+        if point is not None:
+            location = (r.get("printed_id") or "").split(" | ")[0]
+            groups.setdefault((location, r.get("unit") or ""), []).append((point, r))
+    out = []
+    pad, inner = 40, size - 52
+    for (location, unit), items in groups.items():
+        values = [v for (p, *_rest), _ in items for v in (p, *_rest)]
+        lo, hi = min(values), max(values)
+        span = hi - lo if hi > lo else max(abs(hi), 1.0)
+        lo, hi = lo - 0.06 * span, hi + 0.06 * span
+
+        def at(v, flip=False):
+            f = (v - lo) / (hi - lo)
+            return round(pad + (1 - f if flip else f) * inner, 1)
+        parts = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{size}" height="{size}" viewBox="0 0 {size} {size}" '
+                 f'role="img" class="pvo"><title>{html.escape(location)}: ours against printed</title>',
+                 f'<rect x="{pad}" y="{pad - 28}" width="{inner}" height="{inner}" fill="none" stroke="#9aa3ad"/>',
+                 f'<line x1="{at(lo)}" y1="{at(lo, True) - 28}" x2="{at(hi)}" y2="{at(hi, True) - 28}" '
+                 'stroke="#9aa3ad" stroke-dasharray="4 3"/>']
+        for v in (lo + 0.06 * span / 1.12, hi - 0.06 * span / 1.12):        # the data's ends as tick labels
+            parts.append(f'<text x="{at(v)}" y="{size - 2}" font-size="10" text-anchor="middle">{v:.3g}</text>')
+            parts.append(f'<text x="{pad - 3}" y="{at(v, True) - 25}" font-size="10" text-anchor="end">{v:.3g}</text>')
+        parts.append(f'<text x="{pad + inner / 2}" y="{size - 14}" font-size="11" text-anchor="middle">printed'
+                     f'{" (" + html.escape(unit) + ")" if unit else ""}</text>')
+        parts.append(f'<text x="10" y="{pad + inner / 2 - 28}" font-size="11" text-anchor="middle" '
+                     f'transform="rotate(-90 10 {pad + inner / 2 - 28})">ours</text>')
+        for (printed, ours, low, high), r in items:
+            x, colour = at(printed), _VERDICT_FILL.get(r.get("verdict"), "#5b6470")
+            label = html.escape(f'{r.get("printed_id")}: printed {r.get("printed")}, ours {ours:.4g}, window '
+                                f'[{low:.4g}, {high:.4g}], {r.get("verdict")}'
+                                + (f', bracket {r["bracket"]}' if r.get("bracket") else ""))
+            parts.append(f'<g><title>{label}</title><line x1="{x}" y1="{at(low, True) - 28}" x2="{x}" '
+                         f'y2="{at(high, True) - 28}" stroke="{colour}" stroke-width="2" opacity="0.45"/>'
+                         f'<circle cx="{x}" cy="{at(ours, True) - 28}" r="3.5" fill="{colour}"/>'
+                         + (f'<circle cx="{x}" cy="{at(ours, True) - 28}" r="6" fill="none" stroke="#1f5fae"/>'
+                            if r.get("bracket") == "reachable" else "") + '</g>')
+        parts.append("</svg>")
+        out.append({"title": location + (f" ({unit})" if unit else ""), "svg": "".join(parts), "n": len(items)})
+    return out
+
+
 def page_html(exp, profile: str, params: dict, folder: Path, numbers: list[dict], stamp: str) -> str:
     """``<id>/report.html``, rendered in ``folder`` (the staging folder, before it is promoted): links to the
     files present there and to ``../index.html``, which every run (re)writes."""
@@ -336,7 +400,8 @@ def page_html(exp, profile: str, params: dict, folder: Path, numbers: list[dict]
         headline=_headline_counts(numbers),
         counts=_counts_table(scoreboard_counts(numbers)) if numbers else None,
         reasons=[{k: g[k] for k in ("verdict", "rows", "reason", "where")} for g in _reasons(numbers)],
-        numbers=shown, page_columns=_page_columns(numbers), parameters=parameters,
+        numbers=shown, page_columns=_page_columns(numbers), plots=printed_versus_ours(numbers),
+        parameters=parameters,
         assumptions=[{c: r.get(c) or "" for c in assumption_columns} for r in assumptions],
         assumption_columns=assumption_columns, figures=figures, tables=tables)
 

@@ -156,3 +156,13 @@ def test_ozkaya_settling_reading_moves_with_the_tolerance_as_counted_by_hand():
     # within 0.1 of 0.1 from 0.18 (recursion 5); within 0.05 from 0.12 (6); within 0.2 also from 0.18 (5)
     settled, amb = oz.settling_reading(curve, 0.1, "Sec. 7.2.2.2")
     assert settled == 5 and amb.size == 1.0 and amb.source == "Sec. 7.2.2.2" and "0.1 m" in amb.what
+
+
+def test_index_cells_are_shaded_by_the_share_of_each_verdict():
+    """Issue 32: 120 within and 15 missed shades a cell 88.9 % green and 11.1 % red, not solid red."""
+    from collections import Counter
+    from locbook.suite.site import _shares
+    style = _shares(Counter(within=120, miss=15))
+    assert style == "background: linear-gradient(to right, #d8f0d8 0.0% 88.9%, #f8d0d0 88.9% 100.0%)"
+    assert _shares(Counter()) == ""
+    assert _shares(Counter(loose=1)) == "background: linear-gradient(to right, #fff1c2 0.0% 100.0%)"

@@ -227,7 +227,8 @@ def test_every_link_and_image_of_the_site_resolves(browser, site_dir, tmp_path):
     assert (site_dir / "george-good" / "report.html").resolve().as_uri() in good
     assert (site_dir / "george-good" / "george-good.html").resolve().as_uri() in good
     assert "ok" in rows["george-good"].find_element(By.CSS_SELECTOR, "td.status").text
-    assert "v-loose" in rows["george-good"].find_element(By.CSS_SELECTOR, "td.n").get_attribute("class")
+    shaded = rows["george-good"].find_element(By.CSS_SELECTOR, "td.shares").get_attribute("style")
+    assert "linear-gradient" in shaded and "0.0% 100.0%" in shaded          # one loose row: the whole cell amber
     failed = rows["george-failed"]
     assert "failed" in failed.find_element(By.CSS_SELECTOR, ".flag").text
     assert "deliberate failure" in failed.find_element(By.CSS_SELECTOR, ".err").text

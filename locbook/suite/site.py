@@ -239,9 +239,23 @@ def _headline_counts(rows) -> dict:
     return {"within": rep["within"], "loose": rep["loose"], "miss": rep["miss"], "n": sum(rep.values())}
 
 
-def _worst(counter: Counter) -> str:
-    """The verdict a cell counting within / loose / miss is coloured by: its worst verdict."""
-    return next((v for v in ("miss", "inconsistent", "loose", "within", "consistent") if counter[v]), "")
+_SHADE = {"within": "#d8f0d8", "consistent": "#d8f0d8", "loose": "#fff1c2", "miss": "#f8d0d0",
+          "inconsistent": "#f8d0d0"}
+
+
+def _shares(counter: Counter) -> str:
+    """A CSS background for a cell counting within / loose / miss: a bar whose bands are each verdict's share of the
+    rows (120 within and 15 missed is mostly green, not red); '' for no rows."""
+    parts = [(v, counter[v]) for v in ("within", "consistent", "loose", "miss", "inconsistent") if counter[v]]
+    total = sum(n for _, n in parts)
+    if not total:
+        return ""
+    stops, at = [], 0.0
+    for v, n in parts:
+        end = at + 100.0 * n / total
+        stops.append(f"{_SHADE[v]} {at:.1f}% {end:.1f}%")
+        at = end
+    return f"background: linear-gradient(to right, {', '.join(stops)})"
 
 
 def _chips(rows) -> list[tuple[str, int]]:
@@ -500,9 +514,9 @@ def _index_entry(report_dir: Path, e) -> dict:
             "doc_authors": doc.authors, "doc_year": doc.year, "profile": e["report"].get("profile", ""),
             "page": f"{exp.id}/report.html" if present and (folder / "report.html").is_file() else None,
             "reproductions": line["reproductions within / loose / miss"],
-            "rep_verdict": _worst(counts.get("reproduction", Counter())),
+            "rep_shares": _shares(counts.get("reproduction", Counter())),
             "calibrated": line["calibrated within / loose / miss"],
-            "cal_verdict": _worst(counts.get("calibrated", Counter())),
+            "cal_shares": _shares(counts.get("calibrated", Counter())),
             "other": line["other rows"], "chips": _chips(rows), "bracket_chips": _bracket_chips(rows),
             "state": state, "flagged": flagged, "shown_last_good": flagged and present,
             "error": last.get("error", ""), "time": f"{float(seconds):.1f} s" if seconds else "-",

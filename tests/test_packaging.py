@@ -42,6 +42,25 @@ def test_version_list_and_show(capsys):
         show_text(suite, "no-such-experiment", REPO / "reports")
 
 
+def test_list_says_which_machine_each_profiles_times_came_from(tmp_path):
+    """Issue 32: `locbook list` showed full faster than quick with times from two machines, unlabelled."""
+    import json
+    from locbook.suite.catalog import machine_label
+    suite = load_suite(REPO / "notebooks" / "experiments.toml")
+    for profile, eid, seconds, machine in (("quick", "george-crlb", 4.0, machine_label()),
+                                           ("full", "george-crlb", 2.0, "Some CPU, 64 CPUs"),
+                                           ("full", "george-geometry", 3.0, None)):
+        folder = tmp_path / profile / eid
+        folder.mkdir(parents=True)
+        record = {"experiment": eid, "profile": profile, "seconds": seconds}
+        if machine:
+            record["machine"] = machine
+        (folder / "report.json").write_text(json.dumps(record))
+    text = list_text(suite, tmp_path)
+    assert f"quick times measured on: {machine_label()} (this machine)" in text
+    assert "full times measured on: Some CPU, 64 CPUs; a machine not recorded" in text
+
+
 def test_copy_notebooks_never_overwrites_without_force(tmp_path):
     suite = load_suite(REPO / "notebooks" / "experiments.toml")
     dest = copy_notebooks(suite, tmp_path / "notebooks")

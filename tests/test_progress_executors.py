@@ -106,3 +106,21 @@ def test_suite_option_after_the_command_and_a_malformed_scheduler(toy, capsys):
     err = capsys.readouterr().err
     assert "neither a scheduler address (tcp://HOST:PORT) nor an existing scheduler file" in err
     assert "Traceback" not in err
+
+
+def test_the_live_view_keeps_the_running_clock_at_the_finish(monkeypatch):
+    """Issue 32: a row showed 35 s while running and then 22 s (the notebook's own execution time, without the
+    worker and kernel start and the export); its clock now stops where it was."""
+    import locbook.suite.progress as progress
+    from locbook.suite.runner import Outcome
+    clock = [100.0]
+    monkeypatch.setattr(progress.time, "perf_counter", lambda: clock[0])
+    view = LiveProgress(io.StringIO())
+    view.state = {"a": {"status": "queued", "since": None, "seconds": None, "attempt": 1}}
+    view.start, view.total, view.done = 100.0, 1, 0
+    view.started("a", 1)
+    clock[0] = 135.0
+    view.finished(Outcome("a", "ok", 22.0))
+    assert view.state["a"]["seconds"] == 35.0
+    view.finished(Outcome("b", "cached", 0.0))                       # a cached one shows no time
+    assert view.state["b"]["seconds"] is None

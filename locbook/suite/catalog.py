@@ -5,8 +5,10 @@ last result (``locbook show KEY``), and a copy of the notebooks for interactive 
 from __future__ import annotations
 
 import csv
+import functools
 import json
 import math
+import os
 import shutil
 from pathlib import Path
 
@@ -22,6 +24,22 @@ def _read_json(path: Path) -> dict:
     except (OSError, ValueError):
         return {}
     return value if isinstance(value, dict) else {}
+
+
+@functools.lru_cache(maxsize=1)
+def machine_label() -> str:
+    """The machine a run time was measured on, as ``locbook list`` shows it: the CPU model and the logical CPUs
+    (``AMD EPYC 9B14, 2 CPUs``); no host name."""
+    import platform
+    cpu = platform.processor() or platform.machine() or "unknown CPU"
+    try:
+        for line in Path("/proc/cpuinfo").read_text(encoding="utf-8", errors="replace").splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return f"{cpu}, {os.cpu_count() or '?'} CPUs"
 
 
 def last_result(exp: Experiment, reports_root: Path, profile: str, *, counts: bool = True) -> dict:
@@ -41,6 +59,8 @@ def last_result(exp: Experiment, reports_root: Path, profile: str, *, counts: bo
         out["status"] = "ok"
     if report.get("locbook"):
         out["stamp"] = report["locbook"]
+    if isinstance(report.get("machine"), str):
+        out["machine"] = report["machine"]
     if not counts:
         return out
     from .site import scoreboard_counts   # here: the report site imports numpy
@@ -69,12 +89,22 @@ def _seconds_text(result: dict) -> str:
 
 def list_text(suite: Suite, reports_root: Path) -> str:
     """One line per experiment: id, document, what it covers, last run time at each profile."""
+    here = machine_label()
     lines = [f"{'experiment':34s} {'document':15s} {'quick':>7s} {'full':>7s}  covers"]
+    machines = {p: set() for p in PROFILES}
     for exp in suite.experiments:
-        times = [_seconds_text(last_result(exp, reports_root, p, counts=False)) for p in PROFILES]
+        results = [last_result(exp, reports_root, p, counts=False) for p in PROFILES]
+        for p, r in zip(PROFILES, results):
+            if "seconds" in r:
+                machines[p].add(r.get("machine", "a machine not recorded"))
+        times = [_seconds_text(r) for r in results]
         lines.append(f"{exp.id:34s} {exp.document.key:15s} {times[0]:>7s} {times[1]:>7s}  {exp.section}")
     lines.append(f"\n{len(suite.experiments)} experiments; run times from the reports under {reports_root} "
                  "('-': not run there yet). `locbook show ID` lists an experiment's parameters.")
+    for p in PROFILES:           # the times compare only on one machine: say where each profile's came from
+        if machines[p]:
+            where = "; ".join(sorted(m + (" (this machine)" if m == here else "") for m in machines[p]))
+            lines.append(f"{p} times measured on: {where}")
     return "\n".join(lines)
 
 

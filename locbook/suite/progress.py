@@ -204,8 +204,13 @@ class LiveProgress(_Base):
 
     def finished(self, outcome):
         super().finished(outcome)
+        state = self.state.setdefault(outcome.id, {"attempt": 1})
         seconds = outcome.seconds if outcome.status in ("ok", "failed", "interrupted") else None
-        self.state.setdefault(outcome.id, {"attempt": 1}).update(status=outcome.status, seconds=seconds)
+        if seconds is not None and state.get("since") is not None:
+            # the clock the row showed while it ran (worker and kernel start, export included) stops here, so the
+            # time does not drop at the finish to the notebook's own execution time
+            seconds = time.perf_counter() - state["since"]
+        state.update(status=outcome.status, seconds=seconds)
         if outcome.error and self.live is not None:
             self.live.console.print(f"{outcome.id}: {outcome.status}: {outcome.error}", markup=False,
                                     highlight=False)

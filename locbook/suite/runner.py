@@ -53,6 +53,7 @@ from pathlib import Path
 from . import site
 from ..errors import ParameterError
 from ..reproduce.report import NUMBER_COLUMNS
+from .catalog import machine_label
 from .params import read_notebook
 from .site import _read_csv, _read_json
 from .executors import _STOP_GRACE_S, make_executor
@@ -863,7 +864,7 @@ def _promote(exp, profile, params, staging: Path, folder: Path, stamp: str, key:
                                          encoding="utf-8")
     (staging / "report.json").write_text(json.dumps(
         {"experiment": exp.id, "profile": profile, "parameters": params, "locbook": stamp,
-         "seconds": round(result["seconds"], 1)}, indent=1,
+         "seconds": round(result["seconds"], 1), "machine": machine_label()}, indent=1,
         sort_keys=True) + "\n")
     (staging / "run.json").write_text(json.dumps({
         "cache_key": key, "status": "ok", "seconds": round(result["seconds"], 2), "data": data, "modules": modules},

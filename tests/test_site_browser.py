@@ -200,6 +200,13 @@ def test_every_link_and_image_of_the_site_resolves(browser, site_dir, tmp_path):
     assert visited == {"index.html", "george-good/report.html", "george-good/george-good.html"}
     for name in ("index.html", "george-good/report.html"):             # the site itself never leaves the machine
         assert pages[(site_dir / name).resolve()][1] == [], name
+    # issue 32: no page loads a script or style sheet from the network (the notebook page's math is SVG, not MathJax)
+    for page in pages:
+        browser.get(page.as_uri())
+        remote = [e.get_attribute("src") or e.get_attribute("href") for e in
+                  browser.find_elements(By.CSS_SELECTOR, "script[src], link[href]")
+                  if (e.get_attribute("src") or e.get_attribute("href") or "").startswith(("http:", "https:"))]
+        assert remote == [], page
     # issue 32: every experiment page with compared numbers shows ours against printed (an inline SVG per table)
     for page in pages:
         if page.name == "report.html":

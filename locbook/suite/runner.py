@@ -125,7 +125,7 @@ def _package_dir() -> Path:
 
 #: the runner process's locbook code (package-relative patterns): the suite, the reproduction layer it imports, the
 #: package's own start-up modules and errors, and the templates of the report pages
-_RUNNER_SOURCES = ("suite/*.py", "suite/templates/*", "reproduce/*.py", "__init__.py", "_lazy.py", "_datalog.py",
+_RUNNER_SOURCES = ("suite/*.py", "suite/templates/**/*", "reproduce/*.py", "__init__.py", "_lazy.py", "_datalog.py",
                    "errors.py")
 
 
@@ -135,7 +135,7 @@ def _runner_fingerprint() -> str:
     and one from Python share their cache. The kernel's side, the library code the notebook ran, is recorded per
     experiment (``run.json`` "modules", like its data files)."""
     package = _package_dir()
-    files = {path for pattern in _RUNNER_SOURCES for path in package.glob(pattern)}
+    files = {path for pattern in _RUNNER_SOURCES for path in package.glob(pattern) if path.is_file()}
     h = hashlib.sha256()
     for path in sorted(files):
         h.update(str(path.relative_to(package)).encode())

@@ -101,7 +101,7 @@ def execute(task: dict) -> dict:
     """Run the notebook; return ``{"error", "kernel_failure", "disk_full", "seconds"}``; never raises.
     ``disk_full``: the path that could not be written for lack of space ('' otherwise)."""
     import papermill as pm
-    from nbconvert import HTMLExporter
+    from .notebook_html import export_html
 
     staging = Path(task["staging"])
     out_nb = staging / f"{task['id']}.ipynb"
@@ -122,7 +122,7 @@ def execute(task: dict) -> dict:
     if out_nb.exists() and not error:
         page = staging / f"{task['id']}.html"
         try:
-            body, _ = HTMLExporter(template_name="lab").from_filename(str(out_nb))
+            body = export_html(out_nb)        # self-contained: the math drawn to SVG, no script from a CDN
             page.write_text(body, encoding="utf-8")
         except Exception as exc:  # an HTML failure must not hide the notebook's own result
             error = f"HTML export failed: {type(exc).__name__}: {exc}"

@@ -121,3 +121,23 @@ def test_every_experiment_with_compared_numbers_gets_printed_versus_ours_figures
             assert len(dots) == p["n"] and set(dots) <= {"#2e8b3d", "#c99400", "#c0392b"}, (experiment, p["title"])
     table = printed_versus_ours(by_experiment["ozkaya2011-nn-sim"])[0]
     assert table["title"] == "Table 7.1 (m)" and table["n"] == 35
+
+
+def test_the_index_opens_with_findings_generated_from_the_rows(rows):
+    """Issue 32: per document, a few sentences from its rows: the counts of the scoreboard and the notes of the most
+    missed rows."""
+    from collections import Counter
+    from locbook.suite.site import findings_summary
+    suite = load_suite(Path(__file__).resolve().parents[1] / "notebooks" / "experiments.toml")
+    entries = [{"exp": e, "numbers": [r for r in rows if r["experiment"] == e.id]} for e in suite.experiments]
+    found = {f["key"]: f["text"] for f in findings_summary(entries, rows)}
+    assert set(found) == {"george", "ozkaya2011", "dogan2015", "gudipati2017", "palvai2008"}
+    for key, text in found.items():
+        counted = [r for r in rows if r["document"] == key and not r["same_as"]]
+        rep = Counter(r["verdict"] for r in counted if r["kind"] == "reproduction")
+        if rep:
+            assert (f"Of {sum(rep.values())} printed numbers reproduced independently, {rep['within']} are within "
+                    f"their window, {rep['loose']} loose") in text and f"and {rep['miss']} missed." in text, key
+        notes = Counter(r["note"] for r in counted if r["verdict"] == "miss" and r["note"])
+        if notes:
+            assert "The likely reasons of most misses: " in text, key

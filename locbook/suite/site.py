@@ -130,6 +130,46 @@ def _reasons(rows) -> list[dict]:
     return sorted(out, key=lambda g: (g["experiment"], order[g["verdict"]], -g["rows"]))
 
 
+def _short(note: str, limit: int = 160) -> str:
+    """A note's first sentence (or clause), at most ``limit`` characters."""
+    first = re.split(r"(?<=[.;])\s", note.strip(), maxsplit=1)[0].rstrip(".;")
+    return first if len(first) <= limit else first[:limit].rsplit(" ", 1)[0] + " ..."
+
+
+def findings_summary(entries, rows) -> list[dict]:
+    """A few sentences per document, generated from its rows (issue 32): what is reproduced, what is only
+    calibrated, what misses and the likely reasons of the most missed rows (their notes, the most frequent first).
+    ``[{"key", "authors", "year", "text"}]`` for the documents with scored rows."""
+    out = []
+    for key, doc, doc_rows in _by_document(entries, rows):
+        counted = [r for r in doc_rows if not r.get("same_as")]
+        rep = Counter(r["verdict"] for r in counted if r.get("kind") == "reproduction")
+        cal = Counter(r["verdict"] for r in counted if r.get("kind") == "calibrated")
+        claims = Counter(r["verdict"] for r in counted if r.get("kind") == "claim")
+        if not (rep or cal or claims):
+            continue
+        parts = []
+        if rep:
+            parts.append(f"Of {sum(rep.values())} printed numbers reproduced independently, {rep['within']} are "
+                         f"within their window, {rep['loose']} loose (a window too wide to decide) and "
+                         f"{rep['miss']} missed.")
+        if cal:
+            parts.append(f"{sum(cal.values())}{' more' if rep else ''} are calibrated (an input chosen from a printed "
+                         f"number, so agreement shows consistency only): {cal['within']} within, {cal['loose']} "
+                         f"loose, {cal['miss']} missed.")
+        if claims:
+            parts.append(f"Of {sum(claims.values())} printed claims, {claims['within']} hold beyond two standard "
+                         f"errors, {claims['loose']} only for our estimate and {claims['miss']} do not.")
+        missed = Counter(_short(r.get("note") or "") for r in counted
+                         if r.get("verdict") == "miss" and r.get("kind") in ("reproduction", "calibrated", "claim")
+                         and (r.get("note") or "").strip())
+        if missed:
+            reasons = [f"{why} ({n} row{'s' if n != 1 else ''})" for why, n in missed.most_common(2)]
+            parts.append("The likely reasons of most misses: " + "; ".join(reasons) + ".")
+        out.append({"key": key, "authors": doc.authors, "year": doc.year, "text": " ".join(parts)})
+    return out
+
+
 # -- one experiment ------------------------------------------------------------------------------------------
 
 def _header(exp, profile: str, stamp: str) -> list[str]:
@@ -463,6 +503,10 @@ def index_markdown(report_dir: Path, entries, rows) -> str:
     if twice:
         lines += ["**Counted more than once** (fix the notebooks): " + "; ".join(
             f"{d} {p} in {', '.join(e)}" for d, p, e in twice), ""]
+    findings = findings_summary(entries, rows)
+    if findings:
+        lines += ["## Findings", ""] + [f"- **{f['authors']} ({f['year']})**, `{f['key']}`: {f['text']}"
+                                        for f in findings] + [""]
     lines += ["## By document", ""]
     for key, doc, doc_rows in _by_document(entries, rows):
         if doc_rows:
@@ -537,7 +581,8 @@ def index_html(report_dir: Path, entries, rows, version: str) -> str:
         headline=_headline_counts(rows), brackets=_bracket_counts(rows), findings=_findings(report_dir),
         twice=double_counted(rows), datasets=_datasets(report_dir),
         total=_counts_table(scoreboard_counts(rows)) if rows else None, documents=documents,
-        experiments=experiments, n_present=sum(1 for e in entries if e["present"]), reasons=reasons)
+        experiments=experiments, n_present=sum(1 for e in entries if e["present"]), reasons=reasons,
+        summary=findings_summary(entries, rows))
 
 
 def _read_json(path: Path, default):

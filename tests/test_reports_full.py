@@ -141,3 +141,21 @@ def test_the_index_opens_with_findings_generated_from_the_rows(rows):
         notes = Counter(r["note"] for r in counted if r["verdict"] == "miss" and r["note"])
         if notes:
             assert "The likely reasons of most misses: " in text, key
+
+
+def test_a_pages_repeated_notes_are_shown_once_and_every_reference_resolves(rows):
+    """Issue 32: the windows' bases and the notes, repeated on every row, are numbered once below the table; each
+    cell links to its note, long ones folded."""
+    import re
+    from locbook.suite import site
+    suite = load_suite(Path(__file__).resolve().parents[1] / "notebooks" / "experiments.toml")
+    exp = next(e for e in suite.experiments if e.id == "dogan2015-tracking")
+    numbers = [r for r in rows if r["experiment"] == exp.id]
+    page = site.page_html(exp, "full", {}, FULL / exp.id, numbers, "test")
+    columns = ("ambiguity_basis", "calibrated_from", "bracket_readings", "note")
+    texts = {r[c].strip() for r in numbers for c in columns if r[c].strip()}
+    notes = re.findall(r'<li id="fn-(\d+)" value="\1">', page)
+    assert sorted(map(int, notes)) == list(range(1, len(texts) + 1))
+    assert set(re.findall(r'href="#fn-(\d+)"', page)) <= set(notes)
+    assert len(re.findall(r'class="fn"', page)) == sum(1 for r in numbers for c in columns if r[c].strip())
+    assert "<details><summary>" in page                       # the long notes are folded

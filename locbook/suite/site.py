@@ -426,6 +426,25 @@ def printed_versus_ours(numbers: list[dict], size: int = 300) -> list[dict]:
     return out
 
 
+#: the page's columns whose long texts repeat from row to row: shown once, below the table, as numbered notes
+_FOOTNOTE_COLUMNS = ("ambiguity_basis", "calibrated_from", "bracket_readings", "note")
+_FOLD_CHARS = 240          # a note longer than this is folded (<details>), its first sentence shown
+
+
+def _footnotes(shown: list[dict]) -> list[dict]:
+    """Each distinct text of :data:`_FOOTNOTE_COLUMNS` numbered once, in order of first use; the cells become links to
+    it (``[3]``). Returns the notes ``[{"n", "text", "head"}]`` (``head``: the first sentence of a folded one)."""
+    from markupsafe import Markup, escape
+    numbered: dict[str, int] = {}
+    for row in shown:
+        for c in _FOOTNOTE_COLUMNS:
+            text = str(row.get(c) or "").strip()
+            if text:
+                n = numbered.setdefault(text, len(numbered) + 1)
+                row[c] = Markup(f'<a class="fn" href="#fn-{n}" title="{escape(_short(text, 200))}">[{n}]</a>')
+    return [{"n": n, "text": t, "head": _short(t, 160) if len(t) > _FOLD_CHARS else ""} for t, n in numbered.items()]
+
+
 def page_html(exp, profile: str, params: dict, folder: Path, numbers: list[dict], stamp: str) -> str:
     """``<id>/report.html``, rendered in ``folder`` (the staging folder, before it is promoted): links to the
     files present there and to ``../index.html``, which every run (re)writes."""
@@ -436,6 +455,7 @@ def page_html(exp, profile: str, params: dict, folder: Path, numbers: list[dict]
             row[c] = _number(row[c], 6)
         for c in _page_columns(numbers):
             row[c] = "" if row[c] is None else row[c]
+    footnotes = _footnotes(shown)
     figures, tables = _page_outputs(folder, manifest)
     links = []
     notebook = _rel(folder, f"{exp.id}.html", f"{exp.id}.ipynb")
@@ -454,7 +474,7 @@ def page_html(exp, profile: str, params: dict, folder: Path, numbers: list[dict]
         headline=_headline_counts(numbers),
         counts=_counts_table(scoreboard_counts(numbers)) if numbers else None,
         reasons=[{k: g[k] for k in ("verdict", "rows", "reason", "where")} for g in _reasons(numbers)],
-        numbers=shown, page_columns=_page_columns(numbers), plots=printed_versus_ours(numbers),
+        numbers=shown, page_columns=_page_columns(numbers), plots=printed_versus_ours(numbers), footnotes=footnotes,
         parameters=parameters,
         assumptions=[{c: r.get(c) or "" for c in assumption_columns} for r in assumptions],
         assumption_columns=assumption_columns, figures=figures, tables=tables)

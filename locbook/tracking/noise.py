@@ -1,8 +1,8 @@
 """Noise levels from the readings: maximum likelihood (any Kalman-family filter) and EM (the linear model).
 
-Every source document tunes its process and measurement noise by hand (Dogan 2015 sets q = 2.3e-5 and sigma = 3.5 dB;
-Gudipati 2017 picks Q and R by trial). The innovations of a Kalman-family filter give the log-likelihood of the
-readings under the model (the prediction-error decomposition, :mod:`locbook.tracking.results`):
+Every source document tunes its process and measurement noise by hand (Dogan 2015 sets q = 2.3e-5 for readings
+simulated at sigma = 6 dB; Gudipati 2017 picks Q and R by trial). The innovations of a Kalman-family filter give the
+log-likelihood of the readings under the model (the prediction-error decomposition, :mod:`locbook.tracking.results`):
 
     log p(z_1..z_T | theta) = sum_k log N(nu_k; 0, S_k(theta)),
 

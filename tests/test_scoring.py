@@ -163,6 +163,6 @@ def test_index_cells_are_shaded_by_the_share_of_each_verdict():
     from collections import Counter
     from locbook.suite.site import _shares
     style = _shares(Counter(within=120, miss=15))
-    assert style == "background: linear-gradient(to right, #d8f0d8 0.0% 88.9%, #f8d0d0 88.9% 100.0%)"
+    assert style == "background: linear-gradient(to right, var(--within) 0.0% 88.9%, var(--miss) 88.9% 100.0%)"
     assert _shares(Counter()) == ""
-    assert _shares(Counter(loose=1)) == "background: linear-gradient(to right, #fff1c2 0.0% 100.0%)"
+    assert _shares(Counter(loose=1)) == "background: linear-gradient(to right, var(--loose) 0.0% 100.0%)"

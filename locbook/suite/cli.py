@@ -1,7 +1,7 @@
 """``locbook`` command line: list the experiments, run the notebook suite, run a study or a reading bracket.
 
-Exit status of ``run``, ``study`` and ``bracket`` (docs/running.md, "Interrupts, concurrent runs and the cache"): 0 all good; 1 some
-experiment failed (or the Dask scheduler was lost); 2 bad input (parameters, experiment list, notebook file,
+Exit status of ``run``, ``study`` and ``bracket`` (docs/running.md, "Interrupts, concurrent runs and the cache"): 0 all
+good; 1 some experiment failed (or the Dask scheduler was lost); 2 bad input (parameters, experiment list, notebook file,
 unwritable folder); 3 no space left on the device (or quota) holding the reports: the run stopped, the path is
 named, earlier reports are kept; 130 / 143 interrupted by SIGINT / SIGTERM (finished reports are kept).
 """

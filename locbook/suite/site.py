@@ -279,8 +279,8 @@ def _headline_counts(rows) -> dict:
     return {"within": rep["within"], "loose": rep["loose"], "miss": rep["miss"], "n": sum(rep.values())}
 
 
-_SHADE = {"within": "#d8f0d8", "consistent": "#d8f0d8", "loose": "#fff1c2", "miss": "#f8d0d0",
-          "inconsistent": "#f8d0d0"}
+_SHADE = {"within": "var(--within)", "consistent": "var(--within)", "loose": "var(--loose)", "miss": "var(--miss)",
+          "inconsistent": "var(--miss)"}          # site.css's verdict colours
 
 
 def _shares(counter: Counter) -> str:
@@ -392,9 +392,9 @@ def printed_versus_ours(numbers: list[dict], size: int = 300) -> list[dict]:
     pad, inner = 40, size - 52
     for (location, unit), items in groups.items():
         values = [v for (p, *_rest), _ in items for v in (p, *_rest)]
-        lo, hi = min(values), max(values)
-        span = hi - lo if hi > lo else max(abs(hi), 1.0)
-        lo, hi = lo - 0.06 * span, hi + 0.06 * span
+        data_lo, data_hi = min(values), max(values)
+        span = data_hi - data_lo if data_hi > data_lo else max(abs(data_hi), 1.0)
+        lo, hi = data_lo - 0.06 * span, data_hi + 0.06 * span          # a margin around the data
 
         def at(v, flip=False):
             f = (v - lo) / (hi - lo)
@@ -404,7 +404,7 @@ def printed_versus_ours(numbers: list[dict], size: int = 300) -> list[dict]:
                  f'<rect x="{pad}" y="{pad - 28}" width="{inner}" height="{inner}" fill="none" stroke="#9aa3ad"/>',
                  f'<line x1="{at(lo)}" y1="{at(lo, True) - 28}" x2="{at(hi)}" y2="{at(hi, True) - 28}" '
                  'stroke="#9aa3ad" stroke-dasharray="4 3"/>']
-        for v in (lo + 0.06 * span / 1.12, hi - 0.06 * span / 1.12):        # the data's ends as tick labels
+        for v in (data_lo, data_hi):                                         # the data's ends as tick labels
             parts.append(f'<text x="{at(v)}" y="{size - 2}" font-size="10" text-anchor="middle">{v:.3g}</text>')
             parts.append(f'<text x="{pad - 3}" y="{at(v, True) - 25}" font-size="10" text-anchor="end">{v:.3g}</text>')
         parts.append(f'<text x="{pad + inner / 2}" y="{size - 14}" font-size="11" text-anchor="middle">printed'

@@ -4,10 +4,11 @@ runs (the kernels of :mod:`locbook.tracking._kernels`, compiled on first use and
 The EKF and the KF use them when ``_NUMBA_ENABLED`` is True (environment variable ``LOCBOOK_NUMBA=0`` turns them off),
 the problem has at least ``_NUMBA_MIN_WORK`` run-steps (below that, loading numba would cost more than it saves) and
 either the covariance differs between runs or the batch is at most one block of runs (a covariance shared by many runs
-is updated once per step by the numpy loop instead); streams the kernel does not cover (a NonlinearMeasurement other
-than the inertial one of :mod:`locbook.models.imu` with its Jacobian, F with run axes or per step (Q may differ per
-run), walls, outputs beyond x and P) run in numpy; a LinearMeasurement's H and R may be given per step. Either way the results are the same to round-off
-(tests/test_filter_speed_equality.py), and every error is raised by the numpy loop.
+is updated once per step by the numpy loop instead). The kernel takes linear streams (H and R constant, per run or
+per step), RSS streams and the inertial stream of :mod:`locbook.models.imu` with its Jacobian; other nonlinear
+streams, F with run axes or per step (Q may differ per run), walls and outputs beyond x and P run in numpy. Either way
+the results are the same to round-off (tests/test_filter_speed_equality.py), and every error is raised by the numpy
+loop.
 """
 from __future__ import annotations
 
@@ -63,8 +64,8 @@ def _leading_steps(value, batch, B, tail, T):
 
 
 def _pack_streams(setup: _Setup, measurements, B):
-    """The streams as the kernel's flat arrays (readings side by side on one axis), or None if one is not supported
-    (a NonlinearMeasurement: its h and Jacobian are Python functions)."""
+    """The linear and RSS streams as the kernels' flat arrays (readings side by side on one axis), or None if one is
+    not supported (a NonlinearMeasurement: :func:`_pack_with_inertial` packs the inertial one)."""
     batch, T, n = setup.batch, setup.T, setup.F.shape[-1]
     kinds, cols, lin, rss, scal = [], [0], [], [], []
     # the readings (B, T, M): a step's readings of all streams side by side (one stream: its own array when it is
@@ -80,7 +81,8 @@ def _pack_streams(setup: _Setup, measurements, B):
         cols.append(c0 + m)
         if isinstance(meas, LinearMeasurement):
             kinds.append(_LINEAR_PARALLEL if meas.mode == "parallel" else _LINEAR_SERIAL)
-            lin.append((c0, m, _leading_steps(meas.H, batch, B, (m, n), T), _leading_steps(meas.R, batch, B, (m, m), T)))
+            lin.append((c0, m, _leading_steps(meas.H, batch, B, (m, n), T),
+                        _leading_steps(meas.R, batch, B, (m, m), T)))
             scal.append((2, 1.0, 1.0, 0.0, 0.0, (0, 0, 0), 0, False))
         elif isinstance(meas, RssMeasurement):
             ch = meas.channel
@@ -191,7 +193,7 @@ def _call_kernel(kernel, args, name: str):
 
 def _compiled_ekf(setup: _Setup, measurements, predict_first: bool):
     """:func:`locbook.extended_kalman_filter` by the compiled kernel when it applies (numba installed and enabled, F
-    and Q without batch axes, linear and RSS streams, a large enough problem), else None: the numpy loop then runs. It
+    without run axes, the streams of the module docstring, a large enough problem), else None: the numpy loop then runs. It
     also returns None when an update fails (a covariance that is not positive definite, a state that is not finite): the
     numpy loop then redoes the filter and raises the library's error for it."""
     F, Q, batch, T = setup.F, setup.Q, setup.batch, setup.T

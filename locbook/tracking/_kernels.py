@@ -219,8 +219,8 @@ def _nb_ekf(Fi, Fj, Fv, Q, x0, P0, predict_first, slot, active, kind, col, nz, n
     blocks of ``W = min(_LANES, B)`` runs (the last block padded with copies of the last run), with each run's NIS, its dof and
     log-likelihood at every step (``out_nis``, ``out_dof``, ``out_ll`` ``(B, T)``; NaN, 0 and NaN where no update).
     Stream kinds: 0/1 linear parallel/serial, 2/3 RSS parallel/serial, 4 inertial (parallel, :func:`_nb_inertial_row`
-    with the parameters ``iner[s]``). Returns 0, or 1 + a run whose update failed (the caller then redoes the filter in numpy, which raises the
-    library's error)."""
+    with the parameters ``iner[s]``). Returns 0, or 1 + a run whose update failed (the caller then redoes the filter in
+    numpy, which raises the library's error)."""
     B, T, n, ns = Z.shape[0], Z.shape[1], x0.shape[1], kind.shape[0]
     W = min(_LANES, B)
     mmax = 1

@@ -169,7 +169,7 @@ def _crossings(pos, nc, ax, ay, walls, out):
 def _nb_rss_loglik(x, pidx, plan, vert2, z, p0, tenn, sigma, per_anchor, d_min, d_ref, walls, waf, out):
     """``out[r, i] = -0.5 sum_j ((z_rj - h_j(x_ri)) / sigma_j)^2`` over the heard anchors (``z`` not NaN), with
     ``h_j(p) = P0_j - 10 n_j log10(max(d_j, d_min) / d0)`` and ``d_j^2 = |p - a_j|^2 + vert2_j`` (Ozkaya 2011,
-    Eq. (6.3); :meth:`~locbook.models.rss.RssModel.log_likelihood` with ``constant=False``, walls left out).
+    Eq. (6.3); :meth:`~locbook.models.rss.RssModel.log_likelihood` with ``constant=False``).
 
     ``x`` ``(1|R, N, n)`` (positions at the columns ``pidx``), ``plan`` ``(1|R, m, dim)``, ``vert2`` ``(1|R, m)``,
     ``z`` ``(R, m)``, ``p0`` and ``tenn = 10 n`` ``(1|R, m)``, ``sigma`` ``(1|R, m)`` (``per_anchor``: each residual

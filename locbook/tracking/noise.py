@@ -262,8 +262,8 @@ def _newton_per_run(log_likelihood, runs, p: int, lo: float, hi: float, max_iter
     """A multiplier vector per run: damped Newton steps on every run at once (Levenberg-Marquardt damping, projected
     onto the bounds), the gradient and Hessian by central differences from one filter call with the ``1 + 2p +
     p(p-1)/2`` candidates on a leading axis, the step and its doublings (:data:`_EXPAND`) from a second, the step
-    doubled as long as the likelihood keeps rising. A run stops when its accepted step changes no multiplier by more than 1e-6 (relative) or raises its
-    log-likelihood by no more than ``tol`` (relative)."""
+    doubled as long as the likelihood keeps rising. A run stops when its accepted step changes no multiplier by more
+    than 1e-6 (relative) or raises its log-likelihood by no more than ``tol`` (relative)."""
     pairs = [(i, j) for i in range(p) for j in range(i + 1, p)]
     stencil = [np.zeros(p)] + [s * _H * np.eye(p)[i] for s in (1, -1) for i in range(p)] + \
         [_H * (np.eye(p)[i] + np.eye(p)[j]) for i, j in pairs]
@@ -290,7 +290,8 @@ def _newton_per_run(log_likelihood, runs, p: int, lo: float, hi: float, max_iter
         # the step and its multiples up to 2^7 in one call, doubled as long as the likelihood keeps rising
         trials = np.clip(theta + _EXPAND.reshape((-1,) + (1,) * (len(runs) + 1)) * step, lo, hi)
         trials = np.where(done[..., None], theta, trials)
-        f_trials = np.where(np.isfinite(f_trials := log_likelihood(trials)), f_trials, -np.inf)
+        f_trials = log_likelihood(trials)
+        f_trials = np.where(np.isfinite(f_trials), f_trials, -np.inf)
         best = np.cumprod(f_trials[1:] > f_trials[:-1], axis=0).sum(axis=0)     # the last of the rising multiples
         f_trial = np.take_along_axis(f_trials, best[None], 0)[0]
         step = np.take_along_axis(trials, best[None, ..., None], 0)[0] - theta

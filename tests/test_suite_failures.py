@@ -198,9 +198,13 @@ def test_disk_full_while_promoting_stops_the_run_with_its_own_status(toy, monkey
     code = run(toy, "--force", "--jobs", "1")
     out, err = capsys.readouterr()
     _assert_disk_full_run(out, err, code, folder, good, "/.staging/")
-    assert calls == ["george-one"]                           # stopped there: george-two never started
+    # The launch order follows the last run's times (longest first), which for two toy notebooks is a coin toss;
+    # what matters is that the run stopped at the first promotion and the other never started.
+    assert len(calls) == 1, calls
     status = json.loads((folder / "status.json").read_text())
-    assert status["george-one"]["status"] == "failed" and "no space left" in status["george-one"]["error"]
+    assert status[calls[0]]["status"] == "failed" and "no space left" in status[calls[0]]["error"]
+    other, = {"george-one", "george-two"} - set(calls)
+    assert status[other]["status"] == "ok"                  # its earlier good run stands
     assert not (folder / ".failed").exists()
 
 

@@ -124,6 +124,41 @@ def test_pairwise_sum_is_numpys_sum_bit_for_bit(n):
     assert K._pairwise_sum(a, 0, n) == a.sum()
 
 
+def _weight_rows(n, rng):
+    """Rows of weights that stress a systematic search: uneven, flat (every point on a cumulative sum when u = 0),
+    dyadic steps, most weight on one particle, long runs of zeros, and tiny weights beside large ones."""
+    uneven = np.exp(-0.5 * ((rng.random(n) - 0.5) / 0.05) ** 2)
+    dyadic = np.repeat([0.5, 0.25, 0.125, 0.0625, 0.0625], -(-n // 5))[:n]
+    spike = np.full(n, 1e-12)
+    spike[n // 3] = 1.0
+    zeros = np.where(rng.random(n) < 0.9, 0.0, rng.random(n))
+    zeros[-1] = 1.0
+    mixed = 10.0 ** rng.uniform(-300, 0, n)
+    rows = np.stack([uneven, np.ones(n), dyadic, spike, zeros, mixed])
+    return rows / rows.sum(-1, keepdims=True)
+
+
+@pytest.mark.parametrize("n", [1, 2, 5, 64, 1000, 10_007])
+def test_compiled_systematic_resampling_draws_the_ancestors_of_systematic_resample(n):
+    """The kernel's histogram search against the searchsorted reference on the same weights and draws, including
+    draws 0 and just below 1 that put points exactly on (or one ulp from) cumulative sums; runs not resampled keep
+    their particles and their log-weights."""
+    from locbook.tracking.resampling import systematic_resample
+    rng = np.random.default_rng(n)
+    w = np.concatenate([_weight_rows(n, rng)] * 3)
+    u = np.concatenate([np.zeros(6), np.full(6, np.nextafter(1.0, 0.0)), rng.random(6)])
+    do = np.ones(w.shape[0], bool)
+    do[[4, 11]] = False
+    x = rng.random((w.shape[0], n, 3))
+    out, log_w = np.empty_like(x), np.empty_like(w)
+    K._nb_systematic(w, u, do, x, out, log_w)
+    idx = systematic_resample(w[do], u[do])
+    np.testing.assert_array_equal(out[do], np.take_along_axis(x[do], idx[..., None], axis=1))
+    np.testing.assert_array_equal(out[~do], x[~do])
+    np.testing.assert_array_equal(log_w[do], np.log(1.0 / n))
+    np.testing.assert_array_equal(log_w[~do], np.log(np.maximum(w[~do], 1e-300)))
+
+
 def test_log10_is_within_two_ulp_of_numpy_and_exact_at_powers_of_ten():
     rng = np.random.default_rng(2)
     x = np.concatenate([np.exp(rng.uniform(-700, 700, 200_000)), 10.0 ** np.arange(-300, 301),

@@ -17,6 +17,7 @@ import math
 import numpy as np
 
 from .._numba import jit as _jit
+from ._grid_kernels import _exp_nonpositive
 
 _PW_BLOCK = 128                     # numpy's pairwise-sum block (PW_BLOCKSIZE in loops_utils.h)
 
@@ -224,7 +225,10 @@ def _nb_rss_loglik(x, pidx, plan, vert2, z, p0, tenn, sigma, per_anchor, d_min, 
                     d = math.sqrt(d2[i])
                     if d_min > 0.0 and d < d_min:
                         d = d_min
-                    dist[i] = d / d_ref
+                    dist[i] = d
+                if d_ref != 1.0:                 # d / 1 is d exactly: the division only where it changes a value
+                    for i in range(nc):
+                        dist[i] = dist[i] / d_ref
                 _log10_block(dist, lg, work, nc)
                 if n_walls > 0:                  # without walls crossed stays 0: h - 0 is h exactly
                     _crossings(pos, nc, plan[ra, j, 0], plan[ra, j, 1], walls, crossed)
@@ -300,8 +304,8 @@ def _nb_normalise(log_w, logits, dead, w, final, want_final, collapsed):
             for i in range(N):
                 logits[r, i] = 0.0
             top = 0.0
-        for i in range(N):
-            w[r, i] = np.exp(logits[r, i] - top)
+        for i in range(N):                # logits - top <= 0 here (NaN and infinite maxima were zeroed above)
+            w[r, i] = _exp_nonpositive(logits[r, i] - top)
         total = _pairwise_sum(w[r], 0, N)
         for i in range(N):
             w[r, i] = w[r, i] / total
@@ -375,13 +379,19 @@ def _nb_systematic(w, u, do, x, x_out, log_w):
     copied), then ``log_w = log(max(w, 1e-300))`` with ``w = 1 / N`` where resampled.
 
     The ancestors are those of :func:`~locbook.tracking.resampling.systematic_resample` (``cdf="standard"``) bit for
-    bit: its cumulative sum normalised by its last entry (set to 1), the points ``(u + i) / N``, both shifted by
-    ``2 k`` for the k-th resampled run (its one-call search), and the first ``j`` with ``c_j >= point_i`` (a merge:
-    the points are sorted), clipped to ``N - 1``."""
+    bit: its cumulative sum normalised by its last entry (set to 1), the points ``p_i = (u + i) / N``, both shifted by
+    ``2 k`` for the k-th resampled run (its one-call search), and for each point the first ``j`` with ``c_j >= p_i``,
+    clipped to ``N - 1``. That ancestor is the number of ``j <= N - 2`` with ``c_j < p_i``, i.e. with ``n_j <= i``
+    where ``n_j`` is the number of points ``<= c_j`` (the points increase with ``i``). Each ``n_j`` is found from its
+    estimate ``floor(N c_j - u) + 1`` and corrected by comparing the exact points (rarely more than one step), and the
+    ancestors are the running sum of a histogram of the ``n_j``: no branch depends on the weights, where a merge of
+    the two sorted lists mispredicts about once per particle (3x slower on uneven weights)."""
     R, N, d = x.shape
     k_row = 0
     uniform_log = np.log(max(1.0 / N, 1e-300))
     cdf = np.empty(N)
+    points = np.empty(N + 1)
+    count = np.empty(N + 1, np.int64)
     for r in range(R):
         if not do[r]:
             for i in range(N):
@@ -398,11 +408,24 @@ def _nb_systematic(w, u, do, x, x_out, log_w):
         for j in range(N - 1):
             cdf[j] = cdf[j] / cum + offset
         cdf[N - 1] = 1.0 + offset
-        j = 0
+        ur = u[r]
         for i in range(N):
-            point = (u[r] + i) / N + offset
-            while cdf[j] < point and j < N - 1:       # the last entry is the largest value: never passed
-                j += 1
+            points[i] = (ur + i) / N + offset
+        points[N] = np.inf                              # a sentinel: no count exceeds N
+        for i in range(N + 1):
+            count[i] = 0
+        for j in range(N - 1):                          # the last entry is the largest value: never passed
+            c = cdf[j]
+            n_j = int((c - offset) * N - ur) + 1
+            n_j = min(max(n_j, 0), N)
+            while points[n_j] <= c:
+                n_j += 1
+            while n_j > 0 and points[n_j - 1] > c:
+                n_j -= 1
+            count[n_j] += 1
+        ancestor = 0
+        for i in range(N):
+            ancestor += count[i]
             for k in range(d):
-                x_out[r, i, k] = x[r, j, k]
+                x_out[r, i, k] = x[r, ancestor, k]
             log_w[r, i] = uniform_log

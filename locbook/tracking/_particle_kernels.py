@@ -136,9 +136,13 @@ def _log10_block(x, out, work, n):
         top = y + val_hi
         val_lo += (y - top) + val_hi
         out[i] = val_lo + top
+    odd = 0                                     # an integer reduction vectorises; the guarded call would not
     for i in range(n):
-        if not (x[i] >= _TINY and x[i] < np.inf):
-            out[i] = np.log10(x[i])
+        odd |= not (x[i] >= _TINY and x[i] < np.inf)
+    if odd:
+        for i in range(n):
+            if not (x[i] >= _TINY and x[i] < np.inf):
+                out[i] = np.log10(x[i])
 
 
 _CHUNK = 512                                    # particles per block of the likelihood kernel (its buffers fit L1)
@@ -215,9 +219,11 @@ def _nb_rss_loglik(x, pidx, plan, vert2, z, p0, tenn, sigma, per_anchor, d_min, 
                 v2 = vert2[rv, j]
                 for i in range(nc):
                     d2[i] = d2[i] + v2
+                unbounded = 0                    # an integer reduction (vectorised), not an exit per particle
                 for i in range(nc):
-                    if not d2[i] < np.inf:
-                        return False
+                    unbounded |= not d2[i] < np.inf
+                if unbounded:
+                    return False
                 zj = z[r, j]
                 if zj != zj:                     # not heard: left out
                     continue

@@ -249,6 +249,10 @@ def test_compiled_ekf_equals_numpy_ekf(kind):
     np.testing.assert_array_equal(a.steps, b.steps)
     np.testing.assert_allclose(b.x, a.x, rtol=0, atol=TOL)
     np.testing.assert_allclose(b.P, a.P, rtol=0, atol=TOL)
+    # the guard's inputs too: NIS and the log-likelihood (log det S through the kernels' own log)
+    np.testing.assert_array_equal(b.nis_dof, a.nis_dof)
+    np.testing.assert_allclose(b.nis, a.nis, rtol=1e-9, atol=TOL)
+    np.testing.assert_allclose(b.log_likelihood, a.log_likelihood, rtol=1e-9, atol=TOL)
 
 
 @pytest.mark.skipif(not HAVE_NUMBA, reason="numba is not installed: only the numpy path exists")

@@ -13,27 +13,17 @@ the others):
   max ll)`` (the log-domain form of the numpy loop where that under- or overflows), its normalisation, mean,
   centred covariance, MAP cell and ``n_eff``.
 
-The exponential of the update is evaluated by :func:`_exp_nonpositive` (Cody-Waite reduction and a degree-13 Taylor
-polynomial, within 2 ulp of ``exp``), which LLVM vectorises; the library ``exp`` is a scalar call per cell and was
-most of the update's time.
+The exponential of the update is :func:`locbook.tracking._vecmath._exp_nonpositive` (within 2 ulp of ``exp``), which
+LLVM vectorises; the library ``exp`` is a scalar call per cell and was most of the update's time.
 """
 from __future__ import annotations
 
 import numpy as np
 
-try:
-    import numba
-except ImportError:                 # plain Python kernels (only the tests call them so)
-    numba = None
-
 from .._numba import jit
+from ._vecmath import _exp_nonpositive  # noqa: F401 - the tests reach it here too
 
 _FLOOR = 1e-300                     # the numpy loop's floor on the predicted belief (its log(max(b, 1e-300)))
-_LOG2E = 1.4426950408889634
-_LN2_HI = 6.93147180369123816490e-01    # fdlibm's split of ln 2: k * _LN2_HI is exact for |k| < 2^11
-_LN2_LO = 1.90821492927058770002e-10
-_MAGIC = 6755399441055744.0         # 1.5 * 2^52: adding it rounds to an integer held in the low mantissa bits
-_TWO_M64 = 5.421010862427522e-20    # 2^-64
 _BLOCK = 1024                       # cells per partial sum of the reductions (error ~ (block/4 + C/block) ulp)
 
 
@@ -42,67 +32,6 @@ def _jit(fn):
     """``fn`` compiled as every kernel (:func:`locbook._numba.jit`), with fused multiply-adds allowed (``contract``:
     one rounding instead of two; it halves the work of the polynomial and the correlations)."""
     return jit(fn, contract=True)
-
-
-if numba is not None:
-    from llvmlite import ir
-    from numba.core import types
-    from numba.extending import intrinsic
-
-    @intrinsic
-    def _bits(typingctx, x):
-        """The IEEE-754 bits of a float64 as an int64 (a bitcast)."""
-        if not isinstance(x, types.Float):
-            return None
-
-        def codegen(context, builder, signature, args):
-            return builder.bitcast(args[0], ir.IntType(64))
-        return types.int64(types.float64), codegen
-
-    @intrinsic
-    def _from_bits(typingctx, b):
-        """The float64 whose IEEE-754 bits are the int64 ``b`` (a bitcast)."""
-        if not isinstance(b, types.Integer):
-            return None
-
-        def codegen(context, builder, signature, args):
-            return builder.bitcast(args[0], ir.DoubleType())
-        return types.float64(types.int64), codegen
-else:                               # plain Python
-    def _bits(x):
-        return int(np.float64(x).view(np.int64))
-
-    def _from_bits(b):
-        return float(np.int64(b).view(np.float64))
-
-
-@_jit
-def _exp_nonpositive(x):
-    """``exp(x)`` for ``x <= 0`` (``-inf`` allowed; not NaN): ``x = k ln2 + r``, ``|r| <= ln2 / 2`` (Cody-Waite,
-    fdlibm's split of ln 2), ``exp(r)`` by its Taylor polynomial to degree 13 (remainder below 5e-18 relative),
-    times ``2^k`` built from its bits (``2^(k+64)``, always normal, then ``2^-64``: one rounding for a subnormal
-    result). Below -746 the result is 0, as ``exp``'s. Within 2 ulp of the correctly rounded value."""
-    if x < -746.0:
-        x = -746.0
-    kd = x * _LOG2E + _MAGIC
-    k = kd - _MAGIC
-    r = (x - k * _LN2_HI) - k * _LN2_LO
-    p = 1.0 / 6227020800.0
-    p = p * r + 1.0 / 479001600.0
-    p = p * r + 1.0 / 39916800.0
-    p = p * r + 1.0 / 3628800.0
-    p = p * r + 1.0 / 362880.0
-    p = p * r + 1.0 / 40320.0
-    p = p * r + 1.0 / 5040.0
-    p = p * r + 1.0 / 720.0
-    p = p * r + 1.0 / 120.0
-    p = p * r + 1.0 / 24.0
-    p = p * r + 1.0 / 6.0
-    p = p * r + 0.5
-    p = p * r + 1.0
-    p = p * r + 1.0
-    ki = _bits(kd) - _bits(_MAGIC)
-    return p * _from_bits((ki + 1087) << 52) * _TWO_M64
 
 
 @_jit

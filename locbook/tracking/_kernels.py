@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from .._numba import jit as _jit
+from ._vecmath import _log_positive
 
 _LANES = 64     # runs per block of the compiled EKF: the innermost axis, long enough for LLVM to vectorise it
 _LOG_2PI = float(np.log(2.0 * np.pi))
@@ -91,12 +92,19 @@ def _nb_update(x, P, c, nz, nnz, H, nu, R, HP, HPH, S, L, KT, PH, D, t, u, Y, ni
                 t[w] -= L[j, i, w] * L[j, i, w]
         good = True
         for w in range(W):
-            good = good and t[w] > 0.0
+            good &= t[w] > 0.0
         if not good:
             return False
+        unbounded = 0
         for w in range(W):
-            L[j, j, w] = np.sqrt(t[w])
-            hld[w] += np.log(L[j, j, w])
+            L[j, j, w] = np.sqrt(t[w])                   # positive and normal (t > 0): log's domain unless infinite
+            unbounded |= not L[j, j, w] < np.inf
+        if unbounded:
+            for w in range(W):
+                hld[w] += np.log(L[j, j, w])
+        else:                                             # the vectorised log (locbook.tracking._vecmath)
+            for w in range(W):
+                hld[w] += _log_positive(L[j, j, w])
         for i in range(j + 1, c):
             for w in range(W):
                 t[w] = S[i, j, w]
@@ -138,7 +146,7 @@ def _nb_update(x, P, c, nz, nnz, H, nu, R, HP, HPH, S, L, KT, PH, D, t, u, Y, ni
                 t[w] += KT[r, i, w] * nu[r, w]
         for w in range(W):
             x[i, w] += t[w]
-            good = good and np.isfinite(x[i, w])
+            good &= x[i, w] - x[i, w] == 0.0
     if not good:
         return False
     for i in range(n):                                    # D = K S - P H^T
@@ -239,6 +247,7 @@ def _nb_ekf(Fi, Fj, Fv, Q, x0, P0, predict_first, slot, active, kind, col, nz, n
     sel = np.empty((mmax, W), np.int64)
     run = np.empty(W, np.int64)
     Qw = np.empty((n, n, W))
+    qacc = np.empty((mmax, W))
     for b0 in range(0, B, W):
         for w in range(W):
             b = min(b0 + w, B - 1)
@@ -276,7 +285,31 @@ def _nb_ekf(Fi, Fj, Fv, Q, x0, P0, predict_first, slot, active, kind, col, nz, n
                 for u in range(m if serial else 1):       # serial: one scalar update per reading
                     rows = 1 if serial else m
                     present = False
-                    for r in range(rows):
+                    if kd <= 1:                           # linear rows: no branch per lane (selects vectorise)
+                        th, hb = min(k, H.shape[1] - 1), H.shape[0]
+                        for r in range(rows):
+                            j = u if serial else r
+                            for w in range(W):
+                                qacc[r, w] = 0.0
+                            for e in range(nnz[s]):
+                                col_e = nz[s, e]
+                                for w in range(W):
+                                    h = H[min(run[w], hb - 1), th, c0 + j, col_e]
+                                    Hr[r, col_e, w] = h
+                                    qacc[r, w] += h * x[col_e, w]
+                            for w in range(W):
+                                zj = Z[run[w], k, c0 + j]
+                                ok = zj - zj == 0.0               # finite
+                                valid[r, w] = ok
+                                nu[r, w] = zj - qacc[r, w] if ok else 0.0
+                                var[r, w] = 1.0
+                                dof[w] += ok
+                                present |= ok
+                            for e in range(nnz[s]):
+                                col_e = nz[s, e]
+                                for w in range(W):
+                                    Hr[r, col_e, w] = Hr[r, col_e, w] if valid[r, w] else 0.0
+                    for r in range(rows if kd > 1 else 0):
                         for w in range(W):
                             b = run[w]
                             j = sel[u, w] if serial else r
@@ -314,6 +347,17 @@ def _nb_ekf(Fi, Fj, Fv, Q, x0, P0, predict_first, slot, active, kind, col, nz, n
                         continue
                     for r in range(rows):                 # R of the readings present, unit decoupled noise elsewhere
                         for q in range(rows):
+                            if kd <= 1 or kd == _INERTIAL:    # (the order is the given one: sel is the identity)
+                                jr, jq = (u, u) if serial else (r, q)
+                                tr, rb = min(k, R.shape[1] - 1), R.shape[0]
+                                for w in range(W):
+                                    Rr[r, q, w] = R[min(run[w], rb - 1), tr, c0 + jr, c0 + jq] \
+                                        if valid[r, w] and valid[q, w] else (1.0 if r == q else 0.0)
+                                continue
+                            if kd >= 2:                       # RSS: var is 1 where a reading is missing
+                                for w in range(W):
+                                    Rr[r, q, w] = var[r, w] if r == q else 0.0
+                                continue
                             for w in range(W):
                                 if not (valid[r, w] and valid[q, w]):
                                     Rr[r, q, w] = 1.0 if r == q else 0.0

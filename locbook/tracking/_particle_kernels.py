@@ -17,7 +17,7 @@ import math
 import numpy as np
 
 from .._numba import jit as _jit
-from ._grid_kernels import _exp_nonpositive
+from ._vecmath import _exp_nonpositive
 
 _PW_BLOCK = 128                     # numpy's pairwise-sum block (PW_BLOCKSIZE in loops_utils.h)
 

@@ -668,7 +668,6 @@ def table_rows(runs: dict, rmse_epochs: str = "rss_epochs") -> list[dict]:
     every run, as the thesis averaged every run) with its Monte-Carlo standard error and, for a filter column, the
     NIS guard's flags of its runs (``divergence``, None for the MLE); cells whose setting was not run are left out.
     ``rmse_epochs="every_step"`` takes the filters' RMSE over every grid step instead (:func:`scored_errors`)."""
-    from ..metrics import rmse_m
     rows = []
     for cell in printed_tables():
         s = TABLE_SETTINGS[(cell["table"], cell["row"])]
@@ -988,7 +987,6 @@ def bound_rows(runs: dict, trajectory: Trajectory, *, noise_reading: str = DEFAU
     """Every filter's RMSE beside the truth-conditioned PCRLB of its own information (ONLY RSS or fused, same
     trajectory, Q, R and P_0 as the filter under ``noise_reading``), both as the RMS over the RSS epochs; KF (MLE)
     also beside the linear bound."""
-    from ..metrics import rmse_m
     n = trajectory.time_s.size
     dt_s = float(trajectory.time_s[1] - trajectory.time_s[0])
     out = []
@@ -1019,7 +1017,6 @@ def tail_rows(runs: dict, threshold_m: float = 4.0) -> list[dict]:
     """For every filter case of every channel: the RMSE, the median (typical-run) and 90th percentile of the
     per-run RMS error (:func:`~locbook.metrics.rmse_m` over epochs), the fraction of runs beyond ``threshold_m``, the worst run, and the
     runs the NIS guard flagged diverged (blank for the MLE)."""
-    from ..metrics import rmse_m
     out = []
     for (sigma, ple), run in runs.items():
         for key, err in run.errors.items():

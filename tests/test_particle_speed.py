@@ -298,7 +298,7 @@ def test_kernels_that_cannot_compile_turn_the_compiled_path_off_with_a_warning(m
 
     monkeypatch.setattr(_compiled, "_NUMBA_ENABLED", True)
     monkeypatch.setattr(P, "_NUMBA_MIN_PARTICLES", 0)
-    monkeypatch.setattr(P, "_KERNELS", {"ok": None})
+    monkeypatch.setattr(_compiled, "_KERNEL_MODULES", {})              # not tried yet in this session
     monkeypatch.setattr(K, "_nb_moments", broken)
     with pytest.warns(RuntimeWarning, match="compiled particle filter failed.*no compiler here"):
         res = lb.particle_filter(rss, model, np.random.default_rng(10), **kw)

@@ -746,33 +746,25 @@ def _box_ls_exact(a_mat, b, lower, upper):
 _BOX_BLOCK_VALUES = 32_768     # values of the largest temporary per block of problems (256 kB)
 #: problems from which :func:`_box_ls_exact` runs the compiled search (fewer: numpy, without loading numba)
 _BOX_NUMBA_MIN_PROBLEMS = 256
-_BOX_KERNELS = {"module": None, "tried": False}
+
+
+def _box_trial(kernels) -> None:
+    """The box-LS kernel on a tiny problem (compiled or loaded here, once per session)."""
+    a_mat = np.array([[1.0, 0.0], [0.0, 1.0]])
+    weights, offsets, start, n_kkt = _box_kernel_tables(((1.0, 0.0), (0.0, 1.0)), (0.0, 0.0), (1.0, 1.0))
+    pos, ok = np.empty((1, 2)), np.empty(1, bool)
+    kernels._nb_box_ls(np.array([[2.0, 0.5]]), np.zeros(2), np.ones(2), 1.0, weights, offsets, start, n_kkt, a_mat,
+                       False, pos, ok)
 
 
 def _box_kernel_module(n_problems: int):
-    """:mod:`locbook.static._box_kernels` when the compiled search applies (numba installed and enabled, i.e.
-    ``locbook.tracking._compiled._NUMBA_ENABLED`` read at call time, and at least ``_BOX_NUMBA_MIN_PROBLEMS``
-    problems), else None (the numpy search). Imported and tried once per session on a small problem; where numba
-    cannot compile or run it, one warning and numpy from then on (as the compiled filters)."""
+    """:mod:`locbook.static._box_kernels` when the compiled search applies (at least ``_BOX_NUMBA_MIN_PROBLEMS``
+    problems, the compiled paths on and the kernel working here:
+    :func:`locbook.tracking._compiled._kernel_module`), else None (the numpy search)."""
     from ..tracking import _compiled
-    if not _compiled._NUMBA_ENABLED or n_problems < _BOX_NUMBA_MIN_PROBLEMS:
+    if n_problems < _BOX_NUMBA_MIN_PROBLEMS:
         return None
-    if not _BOX_KERNELS["tried"]:
-        _BOX_KERNELS["tried"] = True
-        if _compiled._numba_ready():
-            try:
-                from . import _box_kernels as kernels   # lazy: numba loads only when the compiled path runs
-                a_mat = np.array([[1.0, 0.0], [0.0, 1.0]])
-                weights, offsets, start, n_kkt = _box_kernel_tables(((1.0, 0.0), (0.0, 1.0)), (0.0, 0.0), (1.0, 1.0))
-                pos, ok = np.empty((1, 2)), np.empty(1, bool)
-                kernels._nb_box_ls(np.array([[2.0, 0.5]]), np.zeros(2), np.ones(2), 1.0, weights, offsets, start,
-                                   n_kkt, a_mat, False, pos, ok)
-                _BOX_KERNELS["module"] = kernels
-            except Exception as exc:    # numba could not compile or run the kernel here: numpy from now on
-                import warnings
-                warnings.warn(f"locbook: the compiled box LS failed ({type(exc).__name__}: {exc}); using numpy "
-                              "(set LOCBOOK_NUMBA=0 to skip the attempt)", RuntimeWarning, stacklevel=4)
-    return _BOX_KERNELS["module"]
+    return _compiled._kernel_module("locbook.static._box_kernels", _box_trial, "box LS", stacklevel=5)
 
 
 def _box_flat_tables(levels, dim: int):

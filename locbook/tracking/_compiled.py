@@ -178,16 +178,47 @@ def _pack_with_inertial(setup: _Setup, measurements, B, *, with_jacobian: bool):
     return (kinds,) + packed[1:], np.array(inertial, dtype=np.int64)
 
 
-def _call_kernel(kernel, args, name: str):
-    """``kernel(*args)``, or None when numba could not compile or run it: one warning, and the numpy loops from then on
-    (for the session). Only the kernel call is guarded: an error of ours before it must not turn numba off."""
+# The one rule of every compiled path (EKF/KF, UKF, grid Bayes, particle filter, box LS): where numba cannot compile
+# or run a kernel, one RuntimeWarning names it and every compiled path is off for the rest of the session (numpy
+# answers, with the same numbers to round-off). The kernel modules are imported on first use only (so that ``import
+# locbook`` never loads numba); those with a trial run it once on a tiny problem (_kernel_module).
+_KERNEL_MODULES: dict = {}
+
+
+def _compiled_failed(what: str, exc: Exception, stacklevel: int) -> None:
+    """The rule above, for the compiled ``what`` that raised ``exc``; ``stacklevel`` counts from the caller (as
+    ``warnings.warn``'s from its caller: the warning points at the user's line)."""
     global _NUMBA_ENABLED
+    _NUMBA_ENABLED = False
+    warnings.warn(f"locbook: the compiled {what} failed ({type(exc).__name__}: {exc}); using numpy from now on "
+                  "(set LOCBOOK_NUMBA=0 to skip the attempt)", RuntimeWarning, stacklevel=stacklevel + 1)
+
+
+def _kernel_module(name: str, trial, what: str, stacklevel: int):
+    """The kernel module ``name`` (e.g. ``"locbook.tracking._grid_kernels"``) when the compiled paths are on (numba
+    installed, ``LOCBOOK_NUMBA`` not 0, no failure yet), imported and checked by ``trial(module)`` once per session;
+    else None. A trial that raises applies the rule above (``what`` names the path in the warning; ``stacklevel``
+    counts the frames from here to the user's call, this function being 1)."""
+    if not _NUMBA_ENABLED or not _numba_ready():
+        return None
+    if name not in _KERNEL_MODULES:
+        try:
+            module = importlib.import_module(name)
+            trial(module)
+        except Exception as exc:    # noqa: BLE001 - numba's compile and lowering errors have no common base
+            _compiled_failed(what, exc, stacklevel)
+            return None
+        _KERNEL_MODULES[name] = module
+    return _KERNEL_MODULES[name]
+
+
+def _call_kernel(kernel, args, name: str):
+    """``kernel(*args)``, or None when numba could not compile or run it (the rule above). Only the kernel call is
+    guarded: an error of ours before it must not turn numba off."""
     try:
         return kernel(*args)
     except Exception as exc:        # noqa: BLE001 - numba's compile and lowering errors have no common base
-        _NUMBA_ENABLED = False
-        warnings.warn(f"locbook: the compiled {name} failed ({type(exc).__name__}: {exc}); using the numpy loop "
-                      "(set LOCBOOK_NUMBA=0 to skip the attempt)", RuntimeWarning, stacklevel=4)
+        _compiled_failed(name, exc, 4)
         return None
 
 

@@ -382,30 +382,20 @@ class _BandedLattice:
         return pred
 
 
-_KERNELS = {}
+def _grid_trial(kernels) -> None:
+    """The grid kernels on a tiny problem (compiled or loaded here, once per session: _compiled._kernel_module)."""
+    cells = np.array([[0.0, 0.0], [0.5, 0.0], [0.0, 0.5], [0.5, 0.5]])
+    lattice = _BandedLattice.build(cells, 0.5)
+    belief = lattice.predict(np.full((1, 4), 0.25), np.zeros(2), np.zeros(1, bool), kernels)
+    kernels._nb_update(belief, np.zeros((1, 4)), True, np.zeros((1, 1, 4)), np.zeros((1, 1)), np.ones(1),
+                       np.zeros(1, bool), np.ascontiguousarray(cells.T), np.empty(4), np.empty(4), np.empty((1, 2)),
+                       np.empty((1, 2, 2)), np.zeros(1, np.int64), np.empty(1), np.zeros(1, np.bool_))
 
 
 def _grid_kernels():
-    """:mod:`locbook.tracking._grid_kernels`, imported on first use (numba loads only when the compiled path runs)
-    and tried once per session on a small problem; None (the numpy path) without numba, or where numba cannot
-    compile or run them (with one warning, as the compiled EKF)."""
-    if "module" not in _KERNELS:
-        _KERNELS["module"] = None
-        if _compiled._numba_ready():
-            try:
-                from . import _grid_kernels as kernels
-                cells = np.array([[0.0, 0.0], [0.5, 0.0], [0.0, 0.5], [0.5, 0.5]])
-                lattice = _BandedLattice.build(cells, 0.5)
-                belief = lattice.predict(np.full((1, 4), 0.25), np.zeros(2), np.zeros(1, bool), kernels)
-                kernels._nb_update(belief, np.zeros((1, 4)), True, np.zeros((1, 1, 4)), np.zeros((1, 1)),
-                                   np.ones(1), np.zeros(1, bool), np.ascontiguousarray(cells.T), np.empty(4),
-                                   np.empty(4), np.empty((1, 2)), np.empty((1, 2, 2)), np.zeros(1, np.int64),
-                                   np.empty(1), np.zeros(1, np.bool_))
-                _KERNELS["module"] = kernels
-            except Exception as exc:    # numba could not compile or run the kernels here: numpy from now on
-                warnings.warn(f"locbook: the compiled grid filter failed ({type(exc).__name__}: {exc}); using the "
-                              "numpy loop (set LOCBOOK_NUMBA=0 to skip the attempt)", RuntimeWarning, stacklevel=3)
-    return _KERNELS["module"]
+    """:mod:`locbook.tracking._grid_kernels` when the compiled paths are on and the kernels work here, else None (the
+    numpy path): :func:`locbook.tracking._compiled._kernel_module`."""
+    return _compiled._kernel_module("locbook.tracking._grid_kernels", _grid_trial, "grid filter", stacklevel=4)
 
 
 def _fix_mean_table(fixed: dict, model: RssModel, cells_m, n_runs: int) -> None:
@@ -542,7 +532,7 @@ def grid_bayes_filter(rss_dbm, cells_m, model, spread_m: float = 0.5, *, n_steps
     if isinstance(model, RssModel) and n_steps:
         _fix_mean_table(fixed, model, cells_m, n_runs)
     kernels = None
-    if _compiled._NUMBA_ENABLED and n_runs * n_steps * n_cells >= _GRID_MIN_WORK:
+    if n_runs * n_steps * n_cells >= _GRID_MIN_WORK:
         kernels = _grid_kernels()
         if kernels is not None and separable is not None:
             banded = _BandedLattice.build(cells_m, spread_m)

@@ -50,7 +50,6 @@ of a cumulative weight, and the estimates agree to round-off (tests/test_particl
 """
 from __future__ import annotations
 
-import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -77,37 +76,22 @@ _NUMBA_MIN_PARTICLES = 20000
 _NOISE_BLOCK_VALUES = 1 << 16
 
 
-_KERNELS = {"ok": None}
-
-
-def _kernels_ok() -> bool:
-    """Compile (or load) the kernels once per session on a tiny problem; if numba cannot, warn once and turn the
-    compiled paths off (``_compiled._NUMBA_ENABLED``), as the compiled EKF does: numpy from then on."""
-    if _KERNELS["ok"] is None:
-        from . import _particle_kernels as K
-        try:
-            x, w, z1 = np.zeros((1, 2, 2)), np.full((1, 2), 0.5), np.zeros((1, 2))
-            K._nb_rss_loglik(x, np.arange(2), np.ones((1, 1, 2)), np.zeros((1, 1)), np.zeros((1, 1)),
-                             np.zeros((1, 1)), np.ones((1, 1)), np.ones((1, 1)), False, 0.1, 1.0, np.zeros((0, 2, 2)),
-                             0.0, z1.copy())
-            K._nb_random_walk(x.copy(), np.zeros(2), np.ones(2), x, True, np.zeros(2), np.ones(2), True)
-            K._nb_normalise(z1.copy(), z1.copy(), np.zeros(1, bool), w.copy(), z1.copy(), True, np.zeros(1, bool))
-            K._nb_moments(w, x, np.zeros((1, 2)), np.zeros((1, 2, 2)), np.zeros((1, 2)), np.zeros(1))
-            K._nb_systematic(w, np.zeros(1), np.ones(1, bool), x, x.copy(), z1.copy())
-            _KERNELS["ok"] = True
-        except Exception as exc:    # numba could not compile or run the kernels here
-            _KERNELS["ok"] = False
-            _compiled._NUMBA_ENABLED = False
-            warnings.warn(f"locbook: the compiled particle filter failed ({type(exc).__name__}: {exc}); using numpy "
-                          "(set LOCBOOK_NUMBA=0 to skip the attempt)", RuntimeWarning, stacklevel=3)
-    return _KERNELS["ok"]
+def _trial(K) -> None:
+    """The particle kernels on a tiny problem (compiled or loaded here, once per session: _compiled._kernel_module)."""
+    x, w, z1 = np.zeros((1, 2, 2)), np.full((1, 2), 0.5), np.zeros((1, 2))
+    K._nb_rss_loglik(x, np.arange(2), np.ones((1, 1, 2)), np.zeros((1, 1)), np.zeros((1, 1)), np.zeros((1, 1)),
+                     np.ones((1, 1)), np.ones((1, 1)), False, 0.1, 1.0, np.zeros((0, 2, 2)), 0.0, z1.copy())
+    K._nb_random_walk(x.copy(), np.zeros(2), np.ones(2), x, True, np.zeros(2), np.ones(2), True)
+    K._nb_normalise(z1.copy(), z1.copy(), np.zeros(1, bool), w.copy(), z1.copy(), True, np.zeros(1, bool))
+    K._nb_moments(w, x, np.zeros((1, 2)), np.zeros((1, 2, 2)), np.zeros((1, 2)), np.zeros(1))
+    K._nb_systematic(w, np.zeros(1), np.ones(1, bool), x, x.copy(), z1.copy())
 
 
 def _use_compiled(n_particles: int) -> bool:
-    """True when the compiled kernels should run for ``n_particles`` in all (numba installed and enabled:
-    ``locbook.tracking._compiled._NUMBA_ENABLED``, read at call time, and the kernels compile here)."""
-    return bool(_compiled._NUMBA_ENABLED and n_particles >= _NUMBA_MIN_PARTICLES and _compiled._numba_ready()
-                and _kernels_ok())
+    """True when the compiled kernels should run for ``n_particles`` in all (the compiled paths on and the kernels
+    working here: :func:`locbook.tracking._compiled._kernel_module`)."""
+    return n_particles >= _NUMBA_MIN_PARTICLES and _compiled._kernel_module(
+        "locbook.tracking._particle_kernels", _trial, "particle filter", stacklevel=4) is not None
 
 
 def _fused_rss_log_likelihood(model: RssModel, rss_dbm, particles, step: int, position_index=None, out=None):

@@ -189,12 +189,7 @@ def compare(locbook, reference, *, repeats: int = MIN_REPEATS, reference_scale: 
             last[0 if mine else 1], c.result = c.result, None          # keep only each side's last result
             (ours if mine else theirs).append(c)
     load1 = _load()
-    text = ""
-    if agree is not None:
-        try:
-            text = agree(last[0], last[1])
-        except AssertionError as exc:
-            text = f"DISAGREE: {exc}"
+    text = _agreement(agree, last[0], last[1])
     peaks = [c.peak_mb for c in ours if c.peak_mb is not None]
     ref_peaks = [c.peak_mb for c in theirs if c.peak_mb is not None]
     walls = [c.wall_s for c in ours]
@@ -205,8 +200,20 @@ def compare(locbook, reference, *, repeats: int = MIN_REPEATS, reference_scale: 
                        max(ref_peaks) if ref_peaks else None, reference_scale, text, (load0, load1), tuple(last))
 
 
+def _agreement(agree, *results) -> str:
+    """``agree(*results)``, the row's agreement figure; an AssertionError (a disagreement beyond the benchmark's stated
+    tolerance) becomes ``"DISAGREE: ..."``, which run_all.py reports as an error."""
+    if agree is None:
+        return ""
+    try:
+        return agree(*results)
+    except AssertionError as exc:
+        return f"DISAGREE: {exc}"
+
+
 def repeat(locbook, *, repeats: int = MIN_REPEATS, agree=None, memory: bool = True) -> Measurement:
-    """``locbook()`` alone (no reference), ``repeats`` times; ``agree(result) -> str`` an accuracy figure."""
+    """``locbook()`` alone (no reference), ``repeats`` times; ``agree(result) -> str`` an accuracy figure (it may raise
+    AssertionError beyond a stated tolerance, as :func:`compare`'s)."""
     repeats = max(MIN_REPEATS, int(repeats))
     _settle()
     load0 = _load()
@@ -216,7 +223,7 @@ def repeat(locbook, *, repeats: int = MIN_REPEATS, agree=None, memory: bool = Tr
         result, c.result = c.result, None
         ours.append(c)
     load1 = _load()
-    text = agree(result) if agree is not None else ""
+    text = _agreement(agree, result)
     walls = [c.wall_s for c in ours]
     peaks = [c.peak_mb for c in ours if c.peak_mb is not None]
     return Measurement(_median(walls), _median([c.cpu_s for c in ours]), (min(walls), max(walls)), repeats,
@@ -229,7 +236,7 @@ def once(locbook, *, agree=None) -> Measurement:
     load0 = _load()
     c = call(locbook, True)
     load1 = _load()
-    text = agree(c.result) if agree is not None else ""
+    text = _agreement(agree, c.result)
     return Measurement(c.wall_s, c.cpu_s, (c.wall_s, c.wall_s), 1, c.peak_mb, agreement=text, load=(load0, load1),
                        results=(c.result, None))
 

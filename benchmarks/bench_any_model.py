@@ -14,7 +14,9 @@ its unscented RTS smoother.
   ``UnscentedKalmanFilter`` predict/update loop + its ``rts_smoother`` per run.
 
 filterpy runs a subset of the runs, scaled to the full count; the two alternate in one process (``hx.compare``) and
-the differences to filterpy on that subset come from the same calls.
+the differences to filterpy on that subset come from the same calls. Tolerance: round-off, 1e-9 of the largest |x|
+(|P|) entry, at least 1e-9 (the same arithmetic in another order; the filterpy comparisons of the tests); beyond it
+the row is a disagreement.
 """
 from __future__ import annotations
 
@@ -130,9 +132,20 @@ def _head(result, n: int):
     return result.x[:n].copy(), result.P[:n].copy()
 
 
+#: the same arithmetic in another order: round-off, relative to the largest entry (at least 1), as the filterpy
+#: comparisons of tests/test_filter_speed_equality.py (the UKF here has alpha = 0.5, weights -3 and 0.5 for n = 4:
+#: no amplification of the round-off)
+TOL = 1e-9
+
+
 def _agree(ours, ref) -> str:
     (x, P), (rx, rP) = ours, ref
-    return f"max |x - filterpy| {np.max(np.abs(x - rx)):.1e}, |P - filterpy| {np.max(np.abs(P - rP)):.1e}"
+    dx, dP = float(np.max(np.abs(x - rx))), float(np.max(np.abs(P - rP)))
+    tx, tP = TOL * max(1.0, float(np.max(np.abs(rx)))), TOL * max(1.0, float(np.max(np.abs(rP))))
+    if not (dx <= tx and dP <= tP):
+        raise AssertionError(f"max |x - filterpy| {dx:.1e} (tolerance {tx:.1e}), |P - filterpy| {dP:.1e} "
+                             f"(tolerance {tP:.1e}): beyond round-off ({TOL:g} of the largest entry)")
+    return f"max |x - filterpy| {dx:.1e}, |P - filterpy| {dP:.1e} (tolerance {TOL:g} of the largest entry)"
 
 
 def measure(runs: int, T: int, filterpy_runs: int, ukf_runs: int, ukf_T: int, ukf_filterpy_runs: int,

@@ -7,6 +7,13 @@ One setting = the mobile-target protocol of Table 7.16 (sigma = 5.2 dB, D = 0.5 
 Monte-Carlo runs, each filtered over ``steps`` recursions, all runs in one vectorized call, against a per-run Python
 loop of the same filter on a subset of runs (scaled to the full count), the two alternated in one process
 (``hx.compare``: medians of CPU and wall time); the particle-steps (or cell-steps) per CPU second are in the note.
+Agreement: the grid filter's posterior means equal the loop's to round-off (1e-9 of the largest coordinate); the
+particle filters draw their own random streams, so the mean errors against the truth on the loop's runs must differ
+by at most 4 standard errors of the paired per-run difference (at the tiny size's 4 runs, a t-distribution with 3
+degrees of freedom: about 3 % of seeds would cross that by chance). Each run of the loop draws from a stream of its
+own (``SeedSequence.spawn``), so the per-run differences are independent as the standard error assumes (a shared
+seed made it too small: 3.9 standard errors on 400 runs instead of -0.45). Beyond either tolerance the row is a
+disagreement.
 """
 from __future__ import annotations
 
@@ -28,8 +35,9 @@ def measure(runs: int = 1000, particles: int = 250, steps: int = 10, loop_runs: 
             repeats: int = hx.MIN_REPEATS):
     """Rows as each filter finishes: the vectorized call on every run against a per-run loop of the same call on
     the first ``loop_runs`` runs (scaled), alternated. Agreement from the same calls: the grid filter is
-    deterministic, so the largest difference of the posterior means; the particle filters draw differently per run,
-    so the mean error against the truth of both on the loop's runs."""
+    deterministic, so the largest difference of the posterior means (tolerance: round-off, 1e-9 of the largest
+    coordinate); the particle filters draw differently per run, so the mean error against the truth of both on the
+    loop's runs (tolerance: their paired difference within 4 standard errors, from the loop's runs)."""
     case = oz.SimCase("sir", "mobile", rt=steps, n_particles=particles)
     truth, rss = oz.simulate_truth_and_rss(case, runs, np.random.default_rng(1))
     readers = oz.readers_for("corners3")
@@ -37,14 +45,14 @@ def measure(runs: int = 1000, particles: int = 250, steps: int = 10, loop_runs: 
     region = (np.zeros(2), np.array(oz.ROOM_M))
     cells = oz.cell_centres(oz.ROOM_M, 4, 7)
 
-    def sir(r):
-        return lb.particle_filter(r, model, np.random.default_rng(2), n_particles=particles, region_m=region).mean_m
+    def sir(r, rng):
+        return lb.particle_filter(r, model, rng, n_particles=particles, region_m=region).mean_m
 
-    def improved(r):
-        return lb.particle_filter(r, model, np.random.default_rng(2), n_particles=particles, region_m=region,
+    def improved(r, rng):
+        return lb.particle_filter(r, model, rng, n_particles=particles, region_m=region,
                                   resample_threshold=0.5, weight_smoothing="sqrt").mean_m
 
-    def grid(r):
+    def grid(r, rng):
         return lb.grid_bayes_filter(r, cells, model, 0.5).mean_m
 
     n = min(loop_runs, runs)
@@ -56,18 +64,35 @@ def measure(runs: int = 1000, particles: int = 250, steps: int = 10, loop_runs: 
         return float(np.mean(np.linalg.norm(mean - truth[:mean.shape[0]], axis=-1)))
 
     def same(ours, loop):
-        return f"max |mean - per-run loop| {np.max(np.abs(ours[:n] - loop)):.1e} m"
+        # the same arithmetic on one run or many: round-off, 1e-9 of the largest coordinate (at least 1 m)
+        d, tol = float(np.max(np.abs(ours[:n] - loop))), 1e-9 * max(1.0, float(np.max(np.abs(loop))))
+        if not d <= tol:
+            raise AssertionError(f"max |mean - per-run loop| {d:.1e} m > {tol:.1e} m (round-off)")
+        return f"max |mean - per-run loop| {d:.1e} m (tolerance {tol:.0e} m)"
 
     def accuracy(ours, loop):
-        return (f"mean error {error_m(ours):.3f} m over {runs} runs, {error_m(ours[:n]):.3f} m on the loop's {n} "
-                f"runs, per-run loop {error_m(loop):.3f} m (own random streams)")
+        # own random streams: the per-run differences of the mean error on the loop's runs (paired on the same
+        # readings) are Monte-Carlo noise; their mean must stay within 4 standard errors (from these n differences)
+        # plus a round-off floor (every run of the loop has its own stream, so the differences are independent)
+        diff = (np.linalg.norm(ours[:n] - truth[:n], axis=-1).mean(-1)
+                - np.linalg.norm(loop - truth[:n], axis=-1).mean(-1))
+        se = float(diff.std(ddof=1) / np.sqrt(n))
+        text = (f"mean error {error_m(ours):.3f} m over {runs} runs, {error_m(ours[:n]):.3f} m on the loop's {n} "
+                f"runs, per-run loop {error_m(loop):.3f} m (own random streams): difference {diff.mean():+.3f} m, "
+                f"standard error {se:.3f} m")
+        if not abs(diff.mean()) <= 4 * se + 1e-9:
+            raise AssertionError(f"{text}: beyond 4 standard errors")
+        return text
 
     for name, fn, units, unit, agree in [
             (f"grid Bayes filter ({len(cells)} cells)", grid, len(cells), "cell", same),
             (f"SIR particle filter ({particles} particles)", sir, particles, "particle", accuracy),
             (f"improved SIR ({particles} particles)", improved, particles, "particle", accuracy)]:
-        fn(rss[:2])     # compiled kernels (numba) compiled or loaded from their cache before the timed calls
-        m = hx.compare(lambda: fn(rss), lambda: np.concatenate([fn(sub[i:i + 1]) for i in range(n)]),
+        fn(rss[:2], np.random.default_rng(0))     # compiled kernels compiled or loaded before the timed calls
+        # the vectorized call draws one stream for all runs; the loop gives each run a stream of its own
+        m = hx.compare(lambda: fn(rss, np.random.default_rng(2)),
+                       lambda: np.concatenate([fn(sub[i:i + 1], np.random.default_rng(seed)) for i, seed in
+                                               enumerate(np.random.SeedSequence(3).spawn(n))]),
                        repeats=repeats, reference_scale=runs / n, agree=agree)
         rate = runs * steps * units / m.locbook_cpu_s
         yield hx.row(name, f"Ozkaya Table 7.16 setting, {runs} runs x {steps} recursions", m,

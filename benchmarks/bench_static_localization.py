@@ -7,6 +7,13 @@ Each batched call alternates with its per-problem loop in one process (``hx.comp
 at least 5 pairs); the differences to the loop come from the same calls. The cvxpy loop builds one parameterized
 problem (DPP) and re-solves it per problem, the fastest way to loop with cvxpy; the loops run on a subset of the
 problems and are scaled to N (the reference text says how many).
+
+Tolerances, per problem (beyond one the row is a disagreement): linearized LS against numpy's lstsq, the round-off
+bound of least squares (:func:`ls_round_off_m`); box-constrained LS against cvxpy, the distance Clarabel's default
+tolerances allow (duality gap 1e-8 through the objective's curvature, plus its feasibility tolerance); RSS maximum
+likelihood against scipy's LM from the same start, the two solvers' stopping rules (scipy's default ftol and xtol,
+locbook's tol_m), or else locbook's fix must be another local minimum of the cost (positive definite Hessian, Newton
+step within its tol_m): the cost is not convex and the two may stop in different basins.
 """
 from __future__ import annotations
 
@@ -24,6 +31,41 @@ import _harness as hx  # noqa: E402
 
 import locbook as lb  # noqa: E402
 from locbook.scenarios import george  # noqa: E402
+
+
+EPS = np.finfo(float).eps
+#: Clarabel's default tolerances (duality gap, absolute and relative; feasibility): the cvxpy loop solves at them
+CLARABEL_GAP, CLARABEL_FEAS = 1e-8, 1e-8
+#: scipy least_squares' default ftol and xtol; rss_ml_position's default tol_m
+SCIPY_FTOL, SCIPY_XTOL, ML_TOL_M = 1e-8, 1e-8, 1e-7
+
+
+def ls_round_off_m(H, Y, x):
+    """A first-order bound on the round-off of a least-squares solution ``x`` ``(..., n)`` of ``H x = Y``
+    ``(..., m, n)``, per problem: the perturbation bound of Golub & Van Loan (Thm. 5.3.1), ``|dx| <= delta (2 kappa /
+    cos(theta) + kappa^2 tan(theta)) |x|``, at the backward error ``delta = m n eps`` of a stable solver, plus the
+    ``delta kappa^2 |x|`` of the normal equations (``sin(theta) = |r| / |Y|``)."""
+    m, n = H.shape[-2:]
+    kappa = np.linalg.cond(H)
+    fit = np.linalg.norm(np.einsum("...ij,...j->...i", H, x), axis=-1)
+    r = np.linalg.norm(Y - np.einsum("...ij,...j->...i", H, x), axis=-1)
+    cos_theta = fit / np.hypot(fit, r)
+    return m * n * EPS * (2 * kappa / cos_theta + kappa**2 * (1 + r / fit)) * np.linalg.norm(x, axis=-1)
+
+
+def _rss_cost_terms(q, anchors, power, model):
+    """The residuals ``P - P0 + 10 n log10(d / d0)`` at positions ``q`` ``(k, 2)``, the gradient and the exact Hessian
+    of their sum of squares."""
+    diff = q[:, None, :] - anchors                                             # (k, m, 2)
+    d2 = np.sum(diff**2, axis=-1)
+    r = power - (model.ref_power_dbm - 10.0 * model.path_loss_exp * np.log10(np.sqrt(d2) / model.ref_distance_m))
+    c = 10.0 * model.path_loss_exp / np.log(10.0)
+    jac = c * diff / d2[..., None]                                             # d r / d q
+    outer = diff[..., :, None] * diff[..., None, :]
+    second = c * (np.eye(2) / d2[..., None, None] - 2 * outer / d2[..., None, None] ** 2)   # d^2 r / d q^2
+    grad = 2 * np.einsum("km,kmi->ki", r, jac)
+    hess = 2 * (np.einsum("kmi,kmj->kij", jac, jac) + np.einsum("km,kmij->kij", r, second))
+    return r, jac, grad, hess
 
 
 def measure(n: int = 10_000, loop_n: int | None = None, scipy_n: int | None = None, repeats: int = hx.MIN_REPEATS):
@@ -46,12 +88,19 @@ def measure(n: int = 10_000, loop_n: int | None = None, scipy_n: int | None = No
     def scaled(k):
         return "" if k == n else f" ({k:,} of {n:,} problems, scaled)"
 
-    def max_diff(k):
-        return lambda ours, ref: f"max difference {np.abs(ours[:k] - ref).max():.1e} m on {k:,} problems"
+    def ls_agree(ours, ref):
+        # two solvers of the same least-squares problems (pinv, lstsq): within the sum of their round-off bounds
+        diff = np.linalg.norm(ours[:loop_n] - ref, axis=-1)
+        excess = np.max(diff / (2 * ls_round_off_m(a_mat, b[:loop_n], ref)))
+        text = (f"max difference {np.max(diff):.1e} m on {loop_n:,} problems, at most {excess:.2g} of the round-off "
+                "bound")
+        if not excess <= 1:                                         # NaN fails too
+            raise AssertionError(f"{text}, beyond it")
+        return text
 
     m = hx.compare(lambda: lb.lateration_ls(anchors, ranges).position_m,
                    lambda: np.array([np.linalg.lstsq(a_mat, b[i], rcond=None)[0] for i in range(loop_n)]),
-                   repeats=repeats, reference_scale=n / loop_n, agree=max_diff(loop_n))
+                   repeats=repeats, reference_scale=n / loop_n, agree=ls_agree)
     yield hx.row("linearized LS", workload, m, "numpy lstsq per-problem loop" + scaled(loop_n))
     est = m.results[0]
 
@@ -67,8 +116,24 @@ def measure(n: int = 10_000, loop_n: int | None = None, scipy_n: int | None = No
             out[i] = p.value
         return out
 
+    def box_agree(ours, ref):
+        # cvxpy stops at Clarabel's tolerances: objective within the duality gap 1e-8 max(1, f) of the optimum, so
+        # (the objective grows as lambda_min(A^T A) |p - p*|^2 from the box's optimum) |p - p*| <= sqrt(gap /
+        # lambda_min), plus the feasibility tolerance on the box (1e-8 of the data's scale); ours is exact
+        f = np.sum((ref @ a_mat.T - b[:loop_n]) ** 2, axis=-1)
+        lam = np.linalg.eigvalsh(a_mat.T @ a_mat)[0]
+        bound = (np.sqrt(CLARABEL_GAP * np.maximum(1.0, f) / lam)
+                 + CLARABEL_FEAS * (1 + np.abs(b[:loop_n]).max(axis=-1) + 7.8))       # 7.8 m: the box's largest bound
+        diff = np.linalg.norm(ours[:loop_n] - ref, axis=-1)
+        excess = np.max(diff / bound)
+        text = (f"max difference {np.max(diff):.1e} m on {loop_n:,} problems, at most {excess:.2g} of the bound from "
+                "Clarabel's tolerances")
+        if not excess <= 1:
+            raise AssertionError(f"{text}, beyond it")
+        return text
+
     m = hx.compare(lambda: lb.lateration_box_ls(anchors, ranges, [0, 0], [2.1, 7.8]).position_m, cvx_loop,
-                   repeats=repeats, reference_scale=n / loop_n, agree=max_diff(loop_n))
+                   repeats=repeats, reference_scale=n / loop_n, agree=box_agree)
     yield hx.row("box-constrained LS (batched)", workload, m, "cvxpy DPP per-problem loop" + scaled(loop_n))
 
     p0, ple, d0 = model.ref_power_dbm, model.path_loss_exp, model.ref_distance_m
@@ -80,12 +145,32 @@ def measure(n: int = 10_000, loop_n: int | None = None, scipy_n: int | None = No
         return np.array([least_squares(residual, est[i], args=(i,), method="lm").x for i in range(scipy_n)])
 
     def ml_agree(ours, ref):
-        ok = ours.converged[:scipy_n]
-        diff = np.max(np.abs(ours.position_m[:scipy_n][ok] - ref[ok]), axis=-1)
-        far = int(np.sum(diff > 1e-3))
-        return (f"converged for {ours.converged.mean():.2%} of problems; on the {int(ok.sum()):,} of {scipy_n:,} that "
-                f"converged, median difference to scipy {np.median(diff):.1e} m, max {diff.max():.1e} m"
-                + (f" ({far} beyond 1 mm: another local optimum of the same cost)" if far else ""))
+        # the same cost from the same start, two local solvers: at one minimum they agree within their stopping
+        # rules, scipy's (a step gaining less than ftol of the cost: |dp| <= sqrt(2 ftol C / lambda_min(J^T J)), C
+        # = its cost 1/2 |r|^2; or a step below xtol |p|) plus ours (a step below tol_m (1 + |p|)). Beyond that
+        # distance the two stopped at different local minima (the cost is not convex): ours must then be one,
+        # a positive definite exact Hessian and a Newton step to its stationary point within its tol_m (1 + |p|)
+        ok = np.flatnonzero(ours.converged[:scipy_n])
+        q, p_ref, pw = ours.position_m[ok], ref[ok], power[ok]
+        r_ref, jac_ref, _, _ = _rss_cost_terms(p_ref, anchors, pw, model)
+        lam = np.linalg.eigvalsh(np.einsum("kmi,kmj->kij", jac_ref, jac_ref))[:, 0]
+        bound = (np.sqrt(2 * SCIPY_FTOL * 0.5 * np.sum(r_ref**2, axis=-1) / lam)
+                 + SCIPY_XTOL * np.linalg.norm(p_ref, axis=-1) + ML_TOL_M * (1 + np.linalg.norm(q, axis=-1)))
+        diff = np.linalg.norm(q - p_ref, axis=-1)
+        other = ~(diff <= bound)
+        _, _, grad, hess = _rss_cost_terms(q[other], anchors, pw[other], model)
+        minimum = np.all(np.linalg.eigvalsh(hess) > 0, axis=-1)
+        safe = np.where(minimum[:, None, None], hess, np.eye(2))          # (not a minimum: fails anyway)
+        newton = np.linalg.norm(np.linalg.solve(safe, grad[..., None])[..., 0], axis=-1)
+        bad = int(np.sum(~(minimum & (newton <= ML_TOL_M * (1 + np.linalg.norm(q[other], axis=-1))))))
+        text = (f"converged for {ours.converged.mean():.2%} of problems; on the {ok.size:,} of {scipy_n:,} that "
+                f"converged, median difference to scipy {np.median(diff):.1e} m, max {diff.max():.1e} m; "
+                f"{ok.size - int(other.sum())} within the solvers' stopping distance (at most "
+                f"{np.max(diff[~other] / bound[~other], initial=0):.2g} of it)"
+                + (f", {other.sum() - bad} at another local minimum of the same cost" if other.sum() > bad else ""))
+        if bad:
+            raise AssertionError(f"{text}; {bad} neither within the stopping distance nor at a local minimum")
+        return text
 
     m = hx.compare(lambda: lb.rss_ml_position(anchors, power, model), scipy_loop, repeats=repeats,
                    reference_scale=n / scipy_n, agree=ml_agree)

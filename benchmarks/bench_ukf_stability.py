@@ -8,7 +8,12 @@ An 8-D constant-acceleration + heading model (HeadingKinematicModel) travels lap
 every step and a body-frame accelerometer + gyroscope every step. At alpha = 1e-3 and n = 8 the sigma-point
 weights are -1e6 and 6.25e4. Reports the time per step (one call, ``hx.once``: timed and its peak resident memory
 measured together), the smallest eigenvalue of P over all steps, the largest asymmetry, how often the guard (R~
-floored) acted, and the position error over the last lap.
+floored) acted, and the position error over the run and its last lap, in metres and as the NEES (the squared error
+in units of the filter's own position covariance). No reference; the checks: P positive definite, its asymmetry
+within the round-off of two sigma-point sums (``bench_ukf_speed.sigma_sum_round_off`` times the largest |P|), and
+the mean NEES, over the run and over the last lap, at most 25: if the covariance is right the NEES is chi-square
+with 2 degrees of freedom, and a mean of such terms exceeds 25 with a probability below 1.3e-4 however correlated
+the steps. Beyond any, the row is a disagreement.
 """
 from __future__ import annotations
 
@@ -22,8 +27,12 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import _harness as hx  # noqa: E402
 
+from bench_ukf_speed import sigma_sum_round_off  # noqa: E402
+
 import locbook as lb  # noqa: E402
 
+#: the mean NEES (2-D position) allowed: exceeded with a probability below 1.3e-4 if the covariance is right
+NEES_BOUND = 25.0
 ANCHORS = np.array([[0.0, 0.0], [30.0, 0.0], [30.0, 10.0], [0.0, 10.0], [15.0, 0.0], [15.0, 10.0]])
 S_DBM = np.array([-31.79, -43.64, -40.42, -30.9, -42.4, -34.55])
 C = np.array([1.84, 3.1, 1.72, 1.2, 1.34, 1.5])
@@ -58,12 +67,24 @@ def measure(steps: int = 100_000, alpha: float = 1e-3, runs: int = 1, seed: int 
 
     def figures(res):
         P = res.P
-        err = np.linalg.norm(res.x[..., :2] - truth.position_m[sl], axis=-1)
+        e = res.x[..., :2] - truth.position_m[sl]
+        err = np.linalg.norm(e, axis=-1)
         last = slice(max(0, T - int(56.0 / (speed * dt))), T)
-        return (f"smallest eigenvalue of P {np.linalg.eigvalsh(P).min():.2e}, largest |P - P^T| "
-                f"{np.abs(P - np.swapaxes(P, -1, -2)).max():.1e}; guard floored R~ in {res.floored_updates} of "
-                f"{2 * T * runs} updates; position error mean {err.mean():.3f} m, last lap "
-                f"{err[..., last].mean():.3f} m")
+        # the position error in the filter's own units (NEES, chi-square with 2 degrees of freedom if the filter's
+        # covariance is right): its mean over any steps, however correlated, exceeds NEES_BOUND with a probability
+        # below (c / 2) e^(1 - c / 2) = 1.3e-4 (Jensen and Chernoff on the chi-square's moment generating function)
+        nees = np.einsum("...i,...ij,...j->...", e, np.linalg.inv(P[..., :2, :2]), e)
+        smallest, asym = float(np.linalg.eigvalsh(P).min()), float(np.abs(P - np.swapaxes(P, -1, -2)).max())
+        # P is a covariance: positive definite; its two triangles differ by round-off at most (two sigma-point sums)
+        asym_tol = 2 * sigma_sum_round_off(8, alpha) * float(np.abs(P).max())
+        text = (f"smallest eigenvalue of P {smallest:.2e} (> 0), largest |P - P^T| {asym:.1e} (<= {asym_tol:.0e}); "
+                f"guard floored R~ in {res.floored_updates} of {2 * T * runs} updates; position error mean "
+                f"{err.mean():.3f} m, last lap {err[..., last].mean():.3f} m; mean NEES {nees.mean():.2f}, last lap "
+                f"{nees[..., last].mean():.2f} (<= {NEES_BOUND:g})")
+        if not (smallest > 0 and asym <= asym_tol and nees.mean() <= NEES_BOUND
+                and nees[..., last].mean() <= NEES_BOUND):
+            raise AssertionError(text)
+        return text
 
     ukf(20)         # compiled kernels (numba) compiled or loaded from their cache before the timed call
     gc.collect()

@@ -28,7 +28,7 @@ from ..tracking.divergence import DivergenceFlags
 
 __all__ = [
     "ANCHORS_M", "CORRIDOR_SIZE_M", "PRINTED", "PRINTED_N", "PRINTED_C_RAW", "PRINTED_C_KF",
-    "PRINTED_REDUCTION", "PRINTED_REDUCTION_CLAIM", "CC2420_PA_LEVEL_DBM", "DEFAULT_CALIBRATION_POINTS_M",
+    "PRINTED_REDUCTION", "PRINTED_REDUCTION_CLAIM", "N_MARKED_POINTS", "CC2420_PA_LEVEL_DBM", "DEFAULT_CALIBRATION_POINTS_M",
     "trajectory_m", "MIN_PLAUSIBLE_PATH_LOSS_EXP", "CorridorRuns", "simulate_corridor", "track_with_kalman",
     "kalman_error_vs_q",
     "TRAJECTORIES", "R_MODES", "INIT_MODES",
@@ -47,6 +47,8 @@ PRINTED_C_RAW = PRINTED.get("Fig. 5 text", "mean error C without filter", "Eq. (
 PRINTED_C_KF = PRINTED.get("Fig. 6 text", "mean error C with Kalman filter", "Eq. (15), 25 points")
 PRINTED_REDUCTION = PRINTED.get("Fig. 6 text", "error reduction", "C without filter to C with Kalman filter")
 PRINTED_REDUCTION_CLAIM = PRINTED.get("Abstract", "error reduction", "claim")
+#: The marked points of the walk, Fig. 5 ("cross 1-25").
+N_MARKED_POINTS = int(PRINTED.get("Fig. 5", "marked trajectory points", "cross 1-25").value)
 
 #: CC2420 PA_LEVEL -> output power (dBm), CC2420 datasheet rev 1.3, Table 9 (external to the paper;
 #: the paper names levels 3 to 31 only).
@@ -61,8 +63,8 @@ R_MODES = ("empirical", "isotropic")
 INIT_MODES = ("first_measurement", "true_start")
 
 
-def trajectory_m(kind: str = "centerline", n_points: int = 25) -> np.ndarray:
-    """The 25 marked points ("cross 1-25"), whose coordinates the paper does not print.
+def trajectory_m(kind: str = "centerline", n_points: int = N_MARKED_POINTS) -> np.ndarray:
+    """The marked points (25, "cross 1-25"), whose coordinates the paper does not print.
 
     ``"centerline"``: x = 1.05 m, y from 0.3 to 7.5 m evenly (0.3 m steps for 25 points);
     ``"zigzag"``: the same y with x alternating 0.5 / 1.6 m (an alternative of ours).

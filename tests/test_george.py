@@ -79,3 +79,24 @@ def test_at_6_db_the_only_runs_without_c_are_those_whose_fitted_exponent_is_belo
     c = runs.calibrated(c_all)
     assert c.size == 300 - runs.n_failed_calibrations and np.isfinite(c).all()
     lb.Ambiguity.single_experiment(c, what="one walk", source="test")
+
+
+def test_the_setup_agrees_with_the_numbers_the_paper_prints():
+    """The printed-values table holds every number of the paper; the scenario's setup follows it: four anchors at the
+    corridor's corners, five calibration locations inside it, 25 marked points, the TX power levels from 3 to 31."""
+    p = george.PRINTED
+
+    def value(location, item, statistic):
+        return p.get(location, item, statistic).value
+
+    width, length = value("Sec. 5", "corridor", "width"), value("Sec. 5", "corridor", "length")
+    assert len(george.ANCHORS_M) == value("Sec. 5", "anchors", "count") == 4
+    assert {tuple(a) for a in george.ANCHORS_M} == {(0.0, 0.0), (width, 0.0), (0.0, length), (width, length)}
+    cal = np.array(george.DEFAULT_CALIBRATION_POINTS_M)
+    assert len(cal) == value("Sec. 6", "calibration locations", "count")
+    assert np.all((cal > 0) & (cal < [width, length]))
+    assert george.trajectory_m().shape == (value("Fig. 5", "marked trajectory points", "cross 1-25"), 2)
+    levels = sorted(george.CC2420_PA_LEVEL_DBM)
+    assert (levels[0], levels[-1]) == (value("Sec. 2.C", "TX power level", "lowest"),
+                                       value("Sec. 2.C", "TX power level", "highest"))
+

@@ -138,6 +138,24 @@ def _weight_rows(n, rng):
     return rows / rows.sum(-1, keepdims=True)
 
 
+def test_compiled_systematic_resampling_keeps_the_ancestors_with_thousands_of_rows():
+    """The k-th resampled row is shifted by 2k (the one-call search of systematic_resample): with 20,000 rows the
+    shift reaches 4e4, where the points and the cumulative sums keep fewer bits; draws of 0 and zero weights put
+    points on the sums."""
+    from locbook.tracking.resampling import systematic_resample
+    rng = np.random.default_rng(3)
+    w = rng.random((20_000, 3)) ** 4
+    w[::7, 1] = 0.0
+    w /= w.sum(-1, keepdims=True)
+    u = rng.random(20_000)
+    u[::5] = 0.0
+    x = rng.random((20_000, 3, 2))
+    out, log_w = np.empty_like(x), np.empty_like(w)
+    K._nb_systematic(w, u, np.ones(20_000, bool), x, out, log_w)
+    idx = systematic_resample(w, u)
+    np.testing.assert_array_equal(out, np.take_along_axis(x, idx[..., None], axis=1))
+
+
 @pytest.mark.parametrize("n", [1, 2, 5, 64, 1000, 10_007])
 def test_compiled_systematic_resampling_draws_the_ancestors_of_systematic_resample(n):
     """The kernel's histogram search against the searchsorted reference on the same weights and draws, including
@@ -189,7 +207,10 @@ def _both(monkeypatch, fn):
     monkeypatch.setattr(_compiled, "_NUMBA_ENABLED", False)
     plain = fn()
     monkeypatch.setattr(_compiled, "_NUMBA_ENABLED", True)
-    return plain, fn()
+    fast = fn()
+    # the compiled path ran (a kernel that failed would have turned it off, and this would compare numpy with numpy)
+    assert _compiled._NUMBA_ENABLED and "locbook.tracking._particle_kernels" in _compiled._KERNEL_MODULES
+    return plain, fast
 
 
 CASES = {
@@ -237,10 +258,14 @@ def test_the_filter_with_motion_and_a_callable_likelihood_matches_with_numba_on_
         return model.log_likelihood(rss[:, t], x, t, constant=False)
 
     start = np.random.default_rng(6).uniform(0, 15, (6, 2000, 2))
+    # resampled only when N_eff drops below half, so that the final weights are not all 1/N
     plain, fast = _both(monkeypatch, lambda: lb.particle_filter(None, loglik, np.random.default_rng(7),
-                                                                n_steps=rss.shape[1], initial_particles_m=start))
-    np.testing.assert_array_equal(fast.particles_m, plain.particles_m)     # the same likelihood: the same weights
-    np.testing.assert_array_equal(fast.weights, plain.weights)
+                                                                n_steps=rss.shape[1], initial_particles_m=start,
+                                                                resample_threshold=0.5))
+    assert not np.all(plain.weights == plain.weights[:, :1])
+    assert not plain.resampled.all() and plain.resampled.any()
+    np.testing.assert_array_equal(fast.particles_m, plain.particles_m)     # the same likelihood: the same decisions
+    np.testing.assert_allclose(fast.weights, plain.weights, rtol=1e-13, atol=0)   # exp within 2 ulp of numpy's
     np.testing.assert_allclose(fast.mean_m, plain.mean_m, rtol=1e-12, atol=1e-12)
 
 
@@ -300,7 +325,8 @@ def test_kernels_that_cannot_compile_turn_the_compiled_path_off_with_a_warning(m
     monkeypatch.setattr(P, "_NUMBA_MIN_PARTICLES", 0)
     monkeypatch.setattr(_compiled, "_KERNEL_MODULES", {})              # not tried yet in this session
     monkeypatch.setattr(K, "_nb_moments", broken)
-    with pytest.warns(RuntimeWarning, match="compiled particle filter failed.*no compiler here"):
+    with pytest.warns(RuntimeWarning, match="compiled particle filter failed.*no compiler here") as caught:
         res = lb.particle_filter(rss, model, np.random.default_rng(10), **kw)
+    assert [w.filename for w in caught] == [__file__]                 # once, at the caller's line
     assert _compiled._NUMBA_ENABLED is False
     np.testing.assert_array_equal(res.mean_m, plain.mean_m)

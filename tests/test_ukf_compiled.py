@@ -280,8 +280,10 @@ def test_a_kernel_that_cannot_run_warns_once_and_the_numpy_loop_answers(monkeypa
                         broken)
     monkeypatch.setattr(K, "_NUMBA_ENABLED", True)
     monkeypatch.setattr(K, "_NUMBA_MIN_WORK", 0)
-    with pytest.warns(RuntimeWarning, match=f"the compiled {which} failed \\(RuntimeError: no LLVM here\\)"):
+    failed = f"the compiled {which} failed \\(RuntimeError: no LLVM here\\)"
+    with pytest.warns(RuntimeWarning, match=failed) as caught:
         ours = run(F, Q, x0, P0, streams, **kw)
+    assert [w.filename for w in caught] == [__file__]                 # once, at the caller's line
     assert K._NUMBA_ENABLED is False
     np.testing.assert_array_equal(ours.x, ref.x)
     np.testing.assert_array_equal(ours.P, ref.P)

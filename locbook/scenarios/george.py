@@ -28,7 +28,8 @@ from ..tracking.divergence import DivergenceFlags
 
 __all__ = [
     "ANCHORS_M", "CORRIDOR_SIZE_M", "PRINTED", "PRINTED_N", "PRINTED_C_RAW", "PRINTED_C_KF",
-    "PRINTED_REDUCTION", "PRINTED_REDUCTION_CLAIM", "N_MARKED_POINTS", "CC2420_PA_LEVEL_DBM", "DEFAULT_CALIBRATION_POINTS_M",
+    "PRINTED_REDUCTION", "PRINTED_REDUCTION_CLAIM", "N_MARKED_POINTS", "CC2420_PA_LEVEL_DBM",
+    "DEFAULT_CALIBRATION_POINTS_M",
     "trajectory_m", "MIN_PLAUSIBLE_PATH_LOSS_EXP", "CorridorRuns", "simulate_corridor", "track_with_kalman",
     "kalman_error_vs_q",
     "TRAJECTORIES", "R_MODES", "INIT_MODES",

@@ -748,13 +748,16 @@ _BOX_BLOCK_VALUES = 32_768     # values of the largest temporary per block of pr
 _BOX_NUMBA_MIN_PROBLEMS = 256
 
 
-def _box_trial(kernels) -> None:
-    """The box-LS kernel on a tiny problem (compiled or loaded here, once per session)."""
+def _box_trial():
+    """A tiny problem for the box-LS kernel (compiled or loaded once per session: _compiled._kernel_module)."""
     a_mat = np.array([[1.0, 0.0], [0.0, 1.0]])
     weights, offsets, start, n_kkt = _box_kernel_tables(((1.0, 0.0), (0.0, 1.0)), (0.0, 0.0), (1.0, 1.0))
     pos, ok = np.empty((1, 2)), np.empty(1, bool)
-    kernels._nb_box_ls(np.array([[2.0, 0.5]]), np.zeros(2), np.ones(2), 1.0, weights, offsets, start, n_kkt, a_mat,
-                       False, pos, ok)
+
+    def run(kernels):
+        kernels._nb_box_ls(np.array([[2.0, 0.5]]), np.zeros(2), np.ones(2), 1.0, weights, offsets, start, n_kkt,
+                           a_mat, False, pos, ok)
+    return run
 
 
 def _box_kernel_module(n_problems: int):

@@ -1,5 +1,6 @@
-"""The compiled EKF (numba): the same recursion as the numpy loop, run by run in compiled loops over blocks of
-runs (the kernels of :mod:`locbook.tracking._kernels`, compiled on first use and cached on disk).
+"""The compiled paths' switch and their one failure rule (every kernel module: EKF/KF, UKF, grid Bayes, particle
+filter, box LS), and the compiled EKF: the same recursion as the numpy loop, run by run in compiled loops over blocks
+of runs (the kernels of :mod:`locbook.tracking._kernels`, compiled on first use and cached on disk).
 
 The EKF and the KF use them when ``_NUMBA_ENABLED`` is True (environment variable ``LOCBOOK_NUMBA=0`` turns them off),
 the problem has at least ``_NUMBA_MIN_WORK`` run-steps (below that, loading numba would cost more than it saves) and
@@ -196,15 +197,18 @@ def _compiled_failed(what: str, exc: Exception, stacklevel: int) -> None:
 
 def _kernel_module(name: str, trial, what: str, stacklevel: int):
     """The kernel module ``name`` (e.g. ``"locbook.tracking._grid_kernels"``) when the compiled paths are on (numba
-    installed, ``LOCBOOK_NUMBA`` not 0, no failure yet), imported and checked by ``trial(module)`` once per session;
-    else None. A trial that raises applies the rule above (``what`` names the path in the warning; ``stacklevel``
-    counts the frames from here to the user's call, this function being 1)."""
+    installed, ``LOCBOOK_NUMBA`` not 0, no failure yet), imported and checked once per session, else None.
+    ``trial()`` builds a tiny problem with our own code (unguarded: an error of ours must not turn numba off) and
+    returns ``run(module)``, which calls the kernels on it; an import or a ``run`` that raises applies the rule above
+    (``what`` names the path in the warning; ``stacklevel`` counts the frames from here to the user's call, this
+    function being 1)."""
     if not _NUMBA_ENABLED or not _numba_ready():
         return None
     if name not in _KERNEL_MODULES:
+        run = trial()
         try:
             module = importlib.import_module(name)
-            trial(module)
+            run(module)
         except Exception as exc:    # noqa: BLE001 - numba's compile and lowering errors have no common base
             _compiled_failed(what, exc, stacklevel)
             return None

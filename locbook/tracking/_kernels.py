@@ -95,16 +95,9 @@ def _nb_update(x, P, c, nz, nnz, H, nu, R, HP, HPH, S, L, KT, PH, D, t, u, Y, ni
             good &= t[w] > 0.0
         if not good:
             return False
-        unbounded = 0
-        for w in range(W):
-            L[j, j, w] = np.sqrt(t[w])                   # positive and normal (t > 0): log's domain unless infinite
-            unbounded |= not L[j, j, w] < np.inf
-        if unbounded:
-            for w in range(W):
-                hld[w] += np.log(L[j, j, w])
-        else:                                             # the vectorised log (locbook.tracking._vecmath)
-            for w in range(W):
-                hld[w] += _log_positive(L[j, j, w])
+        for w in range(W):                                # L_jj > 0 and normal (t > 0): the vectorised log's domain,
+            L[j, j, w] = np.sqrt(t[w])                   # but for an infinite one (lane by lane: a select)
+            hld[w] += _log_positive(L[j, j, w]) if L[j, j, w] < np.inf else np.inf
         for i in range(j + 1, c):
             for w in range(W):
                 t[w] = S[i, j, w]
@@ -309,7 +302,7 @@ def _nb_ekf(Fi, Fj, Fv, Q, x0, P0, predict_first, slot, active, kind, col, nz, n
                                 col_e = nz[s, e]
                                 for w in range(W):
                                     Hr[r, col_e, w] = Hr[r, col_e, w] if valid[r, w] else 0.0
-                    for r in range(rows if kd > 1 else 0):
+                    for r in range(rows if kd > 1 else 0):   # RSS and inertial rows, lane by lane
                         for w in range(W):
                             b = run[w]
                             j = sel[u, w] if serial else r
@@ -325,14 +318,7 @@ def _nb_ekf(Fi, Fj, Fv, Q, x0, P0, predict_first, slot, active, kind, col, nz, n
                             dof[w] += 1
                             if kd == _INERTIAL:
                                 nu[r, w] = _nb_inertial_row(x, w, j, iner[s], zj, Hr[r])
-                            elif kd <= 1:
-                                bh, th = min(b, H.shape[0] - 1), min(k, H.shape[1] - 1)
-                                q = 0.0
-                                for e in range(nnz[s]):
-                                    Hr[r, nz[s, e], w] = H[bh, th, c0 + j, nz[s, e]]
-                                    q += H[bh, th, c0 + j, nz[s, e]] * x[nz[s, e], w]
-                                nu[r, w] = zj - q
-                            else:
+                            else:                                 # RSS (linear rows were built above)
                                 bc = min(b, P0c.shape[0] - 1)
                                 nu[r, w], var[r, w], g0, g1, g2 = _nb_rss_row(
                                     x, w, pidx[s], npos[s], tag_h[s], A[min(b, A.shape[0] - 1), ta, c0 + j, :dims[s]],
@@ -354,20 +340,8 @@ def _nb_ekf(Fi, Fj, Fv, Q, x0, P0, predict_first, slot, active, kind, col, nz, n
                                     Rr[r, q, w] = R[min(run[w], rb - 1), tr, c0 + jr, c0 + jq] \
                                         if valid[r, w] and valid[q, w] else (1.0 if r == q else 0.0)
                                 continue
-                            if kd >= 2:                       # RSS: var is 1 where a reading is missing
-                                for w in range(W):
-                                    Rr[r, q, w] = var[r, w] if r == q else 0.0
-                                continue
-                            for w in range(W):
-                                if not (valid[r, w] and valid[q, w]):
-                                    Rr[r, q, w] = 1.0 if r == q else 0.0
-                                elif kd <= 1 or kd == _INERTIAL:
-                                    jr = sel[u, w] if serial else r
-                                    jq = sel[u, w] if serial else q
-                                    Rr[r, q, w] = R[min(run[w], R.shape[0] - 1), min(k, R.shape[1] - 1), c0 + jr,
-                                                    c0 + jq]
-                                else:
-                                    Rr[r, q, w] = var[r, w] if r == q else 0.0
+                            for w in range(W):                # RSS: var is 1 where a reading is missing
+                                Rr[r, q, w] = var[r, w] if r == q else 0.0
                     if not _nb_update(x, P, rows, nz[s], nnz[s], Hr, nu, Rr, HP, HPH, S, L, KT, PH, D, t, t2, Y, nis,
                                       hld):
                         return b0 + 1

@@ -382,14 +382,18 @@ class _BandedLattice:
         return pred
 
 
-def _grid_trial(kernels) -> None:
-    """The grid kernels on a tiny problem (compiled or loaded here, once per session: _compiled._kernel_module)."""
+def _grid_trial():
+    """A tiny problem for the grid kernels (compiled or loaded once per session: _compiled._kernel_module)."""
     cells = np.array([[0.0, 0.0], [0.5, 0.0], [0.0, 0.5], [0.5, 0.5]])
     lattice = _BandedLattice.build(cells, 0.5)
-    belief = lattice.predict(np.full((1, 4), 0.25), np.zeros(2), np.zeros(1, bool), kernels)
-    kernels._nb_update(belief, np.zeros((1, 4)), True, np.zeros((1, 1, 4)), np.zeros((1, 1)), np.ones(1),
-                       np.zeros(1, bool), np.ascontiguousarray(cells.T), np.empty(4), np.empty(4), np.empty((1, 2)),
-                       np.empty((1, 2, 2)), np.zeros(1, np.int64), np.empty(1), np.zeros(1, np.bool_))
+
+    def run(kernels):
+        belief = lattice.predict(np.full((1, 4), 0.25), np.zeros(2), np.zeros(1, bool), kernels)
+        kernels._nb_update(belief, np.zeros((1, 4)), True, np.zeros((1, 1, 4)), np.zeros((1, 1)), np.ones(1),
+                           np.zeros(1, bool), np.ascontiguousarray(cells.T), np.empty(4), np.empty(4),
+                           np.empty((1, 2)), np.empty((1, 2, 2)), np.zeros(1, np.int64), np.empty(1),
+                           np.zeros(1, np.bool_))
+    return run
 
 
 def _grid_kernels():

@@ -43,9 +43,9 @@ no temporaries of the size of the cloud: an RssModel's log-likelihood in one pas
 (:func:`_fused_rss_log_likelihood`, walls included), the default random walk in place, and,
 with ``weight_smoothing="none"``, the normalisation, the moments, N_eff and systematic resampling (``"standard"``
 cumulative sum; the other schemes draw in numpy). The random stream is the numpy path's draw for draw, and so are the
-weight normalisation (numpy's pairwise sum) and the systematic ancestors; the likelihood differs from numpy's in the
-last bits (its log10 is within 2 ulp of numpy's, its sum over the anchors is in order), so the weights agree to about
-1e-14 relative, the resampling decisions and particles are the numpy path's unless a sample point falls within that
+normalisation's sum (numpy's pairwise sum) and the systematic ancestors given the weights; the likelihood and the
+weights differ from numpy's in the last bits (the likelihood's log10 and the normalisation's exp are within 2 ulp of
+numpy's, the sum over the anchors is in order), so the weights agree to about 1e-14 relative, the resampling decisions and particles are the numpy path's unless a sample point falls within that
 of a cumulative weight, and the estimates agree to round-off (tests/test_particle_speed.py).
 """
 from __future__ import annotations
@@ -76,15 +76,18 @@ _NUMBA_MIN_PARTICLES = 20000
 _NOISE_BLOCK_VALUES = 1 << 16
 
 
-def _trial(K) -> None:
-    """The particle kernels on a tiny problem (compiled or loaded here, once per session: _compiled._kernel_module)."""
+def _trial():
+    """A tiny problem for the particle kernels (compiled or loaded once per session: _compiled._kernel_module)."""
     x, w, z1 = np.zeros((1, 2, 2)), np.full((1, 2), 0.5), np.zeros((1, 2))
-    K._nb_rss_loglik(x, np.arange(2), np.ones((1, 1, 2)), np.zeros((1, 1)), np.zeros((1, 1)), np.zeros((1, 1)),
-                     np.ones((1, 1)), np.ones((1, 1)), False, 0.1, 1.0, np.zeros((0, 2, 2)), 0.0, z1.copy())
-    K._nb_random_walk(x.copy(), np.zeros(2), np.ones(2), x, True, np.zeros(2), np.ones(2), True)
-    K._nb_normalise(z1.copy(), z1.copy(), np.zeros(1, bool), w.copy(), z1.copy(), True, np.zeros(1, bool))
-    K._nb_moments(w, x, np.zeros((1, 2)), np.zeros((1, 2, 2)), np.zeros((1, 2)), np.zeros(1))
-    K._nb_systematic(w, np.zeros(1), np.ones(1, bool), x, x.copy(), z1.copy())
+
+    def run(K):
+        K._nb_rss_loglik(x, np.arange(2), np.ones((1, 1, 2)), np.zeros((1, 1)), np.zeros((1, 1)), np.zeros((1, 1)),
+                         np.ones((1, 1)), np.ones((1, 1)), False, 0.1, 1.0, np.zeros((0, 2, 2)), 0.0, z1.copy())
+        K._nb_random_walk(x.copy(), np.zeros(2), np.ones(2), x, True, np.zeros(2), np.ones(2), True)
+        K._nb_normalise(z1.copy(), z1.copy(), np.zeros(1, bool), w.copy(), z1.copy(), True, np.zeros(1, bool))
+        K._nb_moments(w, x, np.zeros((1, 2)), np.zeros((1, 2, 2)), np.zeros((1, 2)), np.zeros(1))
+        K._nb_systematic(w, np.zeros(1), np.ones(1, bool), x, x.copy(), z1.copy())
+    return run
 
 
 def _use_compiled(n_particles: int) -> bool:

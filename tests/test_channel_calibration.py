@@ -1,5 +1,4 @@
 """Channel model and path-loss calibration against closed forms and an independent solver (scipy)."""
-import cvxpy as cp
 import numpy as np
 import pytest
 from scipy.optimize import lsq_linear

@@ -1,7 +1,6 @@
 """Data sets: the manifest (dataset.toml) and its rules, raw packets -> epochs, the shipped data sets, the synthetic
 example, and the whole battery on a new data set with one command."""
 import csv
-import shutil
 from pathlib import Path
 
 import numpy as np

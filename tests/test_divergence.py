@@ -14,7 +14,6 @@ from scipy.stats import chi2
 
 import locbook as lb
 from locbook.tracking import _compiled as K
-from locbook.tracking import _loop
 
 try:
     import numba  # noqa: F401

@@ -25,7 +25,6 @@ import locbook as lb
 from locbook.tracking.resampling import RESAMPLING_METHODS
 from locbook.errors import LocbookError
 from locbook.tracking import _compiled as K
-from locbook.tracking import _loop
 
 MODEL = lb.constant_velocity(1.0, 0.05)
 F0, Q0 = MODEL.F, MODEL.Q

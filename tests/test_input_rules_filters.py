@@ -11,7 +11,6 @@ import pytest
 from filterpy.kalman import KalmanFilter
 from hypothesis import given, settings
 from hypothesis.extra.numpy import arrays
-from hypothesis import strategies as st
 
 import locbook as lb
 
@@ -380,8 +379,8 @@ def test_badly_scaled_rank_deficient_covariances_are_accepted():
         B = np.diag([1e4, 1.0, 1e-4, 1e-4]) @ rng.normal(size=(4, 2))            # rank 2
         P = B @ B.T
         assert np.linalg.eigvalsh(P / np.sqrt(np.outer(np.diag(P), np.diag(P))))[0] < 1e-12
-        for given in (P, P.astype(np.float32), (P @ np.eye(4)).T):
-            lb.kalman_filter(MODEL.F, MODEL.Q, X0, given, lb.LinearMeasurement(_track(), H, R))
+        for covariance in (P, P.astype(np.float32), (P @ np.eye(4)).T):
+            lb.kalman_filter(MODEL.F, MODEL.Q, X0, covariance, lb.LinearMeasurement(_track(), H, R))
         lb.extended_kalman_filter(MODEL.F, B @ B.T * 1e-3, X0, P0, [lb.LinearMeasurement(_track(), H, R)])
     P = np.diag([1e8, 1e8, 0.0, 0.0])                                            # zero variances, zero covariances
     lb.kalman_filter(MODEL.F, MODEL.Q, X0, P, lb.LinearMeasurement(_track(), H, R))

@@ -3,7 +3,6 @@ printed parameters, the EKF's sequential schedule, and the particle filter's sch
 import numpy as np
 import pytest
 
-import locbook as lb
 from locbook.scenarios import palvai as pv
 
 

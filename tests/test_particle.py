@@ -81,7 +81,7 @@ def _rss_runs(runs=4, steps=8, seed=3):
 
 
 @pytest.mark.parametrize("threshold", [None, 0.5])
-def test_particle_filter_isolates_a_run_whose_likelihood_collapses(threshold):
+def test_particle_filter_isolates_a_run_whose_rss_reading_overflows_the_likelihood(threshold):
     """A reading of 1e300 dBm overflows every particle's likelihood to -inf: that run used to abort the whole batch
     with "weights must be finite" naming no run or step. Now that run is flagged degenerate at that step with NaN
     estimates from there on, and every other run is bit-identical to the batch where that reading was sane."""
@@ -99,7 +99,8 @@ def test_particle_filter_isolates_a_run_whose_likelihood_collapses(threshold):
     for name in ("mean_m", "covariance_m2", "map_m", "n_eff", "resampled", "particles_m", "weights"):
         np.testing.assert_array_equal(getattr(res, name)[others], getattr(ref, name)[others], err_msg=name)
     np.testing.assert_array_equal(res.mean_m[2, :5], ref.mean_m[2, :5])
-    assert np.isnan(res.mean_m[2, 5:]).all() and np.isnan(res.covariance_m2[2, 5:]).all() and np.isnan(res.map_m[2, 5:]).all() and np.isnan(res.n_eff[2, 5:]).all()
+    assert np.isnan(res.mean_m[2, 5:]).all() and np.isnan(res.covariance_m2[2, 5:]).all()
+    assert np.isnan(res.map_m[2, 5:]).all() and np.isnan(res.n_eff[2, 5:]).all()
     assert np.isnan(res.weights[2]).all() and np.isnan(res.particles_m[2]).all()
 
 

@@ -8,6 +8,7 @@ import os
 import stat
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -293,3 +294,26 @@ def test_report_files_are_utf8_whatever_the_kernels_locale(tmp_path):
     row = next(csv.DictReader((tmp_path / "numbers.csv").read_text(encoding="utf-8").splitlines()))
     assert row["quantity"] == "mean \u03c3" and row["note"] == "\u00b1 one \u03c3"
     assert "a \u00b5 reason" in (tmp_path / "assumptions.csv").read_text(encoding="utf-8")
+
+
+def test_a_staging_folder_a_straggler_writes_in_is_removed_on_a_second_pass(tmp_path, monkeypatch):
+    """The end of a run removes its staging folder even when a worker that was told to stop writes a last file while
+    the folder is being removed (the removal of the folder then fails once: here simulated)."""
+    import shutil
+    import locbook.suite.runner as runner
+    real_rmtree = shutil.rmtree
+    staging = tmp_path / ".staging" / "123-abcdef00"
+    (staging / "george-one-1").mkdir(parents=True)
+    (staging / "george-one-1" / "kernel-stderr.log").write_text("x")
+    calls = []
+
+    def racing_rmtree(path, ignore_errors=False):
+        calls.append(path)
+        real_rmtree(path, ignore_errors=ignore_errors)
+        if len(calls) == 1:                       # a straggler's file landed while the tree was walked
+            (Path(path) / "george-one-1").mkdir(parents=True)
+            (Path(path) / "george-one-1" / ".result.json").write_text("{}")
+
+    monkeypatch.setattr(runner.shutil, "rmtree", racing_rmtree)
+    runner._remove_staging(staging)
+    assert not staging.exists() and len(calls) == 2

@@ -820,7 +820,7 @@ def _run_locked(suite, tasks, profile, report_dir, data_roots, force, timeout_s,
                            why, attempt))
         for eid, _attempt in queue:
             finish(Outcome(eid, "not run", 0.0))
-        shutil.rmtree(staging_root, ignore_errors=True)
+        _remove_staging(staging_root)
         try:
             write_reports(report_dir, run.outcomes)
         except OSError as exc:
@@ -828,6 +828,19 @@ def _run_locked(suite, tasks, profile, report_dir, data_roots, force, timeout_s,
             if path is None:
                 raise
             disk_full(path)        # the previous index and numbers.csv stay as they were
+
+
+def _remove_staging(path: Path, within_s: float = 5.0) -> None:
+    """Remove a run's staging folder. A worker told to stop (a lost cluster's task, a kernel's last writes) may
+    still write in it for a moment, and a file created while ``rmtree`` walks the tree makes a folder's removal
+    fail: it is tried again until the folder is gone (nothing recreates it: the workers create files, never their
+    folder) or ``within_s`` has passed (the next run's :func:`_recover` removes what is left)."""
+    deadline = time.perf_counter() + within_s
+    while True:
+        shutil.rmtree(path, ignore_errors=True)
+        if not path.exists() or time.perf_counter() > deadline:
+            return
+        time.sleep(0.1)
 
 
 def _strip_worker_files(staging: Path) -> None:

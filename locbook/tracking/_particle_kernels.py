@@ -7,8 +7,9 @@ Each kernel does the arithmetic of the numpy code it replaces, in the same order
 documented algorithm (the pairwise sum of ``np.sum``, the sequential ``np.cumsum``, ``np.mod``'s sign rule, the row
 offsets of :func:`~locbook.tracking.resampling._search_rows`), so the weights, the resampling decisions and the
 particles follow the numpy path's; sums that numpy leaves to its SIMD loops (``einsum``) are summed in order here and
-agree to round-off. The likelihood's log10 is musl's algorithm written to vectorise (within 2 ulp of numpy's, which
-calls the C library's one value at a time: that call was most of the likelihood's time).
+agree to round-off. The likelihood's log10 is :func:`locbook.tracking._vecmath._log10_block`, musl's algorithm written
+to vectorise (within 2 ulp of numpy's, which calls the C library's one value at a time: that call was most of the
+likelihood's time).
 """
 from __future__ import annotations
 
@@ -17,7 +18,7 @@ import math
 import numpy as np
 
 from .._numba import jit as _jit
-from ._vecmath import _exp_nonpositive
+from ._vecmath import _exp_nonpositive, _log10_block  # noqa: F401 - the tests reach _log10_block here too
 
 _PW_BLOCK = 128                     # numpy's pairwise-sum block (PW_BLOCKSIZE in loops_utils.h)
 
@@ -90,59 +91,6 @@ def _pairwise_sum(a, lo, n):
             half -= half % 8
             los[top + 1], ns[top + 1], stage[top + 1] = los[top], half, 0
             top += 1
-
-
-# musl's log10 (after FreeBSD's e_log10.c): log(1 + f) by the Remez polynomial of s = f / (2 + f), then the
-# product with 1/ln 10 and the k log10(2) term in two parts; within 1 ulp of the correct value (glibc's, numpy's log10
-# is also within 1 ulp: the two differ by at most 2 ulp). Written on integer views so that LLVM vectorises it.
-_IVLN10HI, _IVLN10LO = 4.34294481878168880939e-01, 2.50829467116452752298e-11
-_LOG10_2HI, _LOG10_2LO = 3.01029995663611771306e-01, 3.69423907715893078616e-13
-_LG1, _LG2, _LG3, _LG4 = 6.666666666666735130e-01, 3.999999999940941908e-01, 2.857142874366239149e-01, \
-    2.222219843214978396e-01
-_LG5, _LG6, _LG7 = 1.818357216161805012e-01, 1.531383769920937332e-01, 1.479819860511658591e-01
-_TWO52 = 4503599627370496.0
-_TINY = 2.2250738585072014e-308                 # the smallest normal double
-
-
-@_jit
-def _log10_block(x, out, work, n):
-    """``out[:n] = log10(x[:n])`` (musl's algorithm above) for positive normal finite ``x``; any other value goes to
-    ``np.log10`` (zero, subnormal, infinite). ``work``: a scratch array of the same length."""
-    xb = x.view(np.uint64)
-    ob = out.view(np.uint64)
-    wb = work.view(np.uint64)
-    for i in range(n):                          # x = 2^k (1 + f), 1 + f in [sqrt(2)/2, sqrt(2))
-        ix = xb[i]
-        hx = (ix >> np.uint64(32)) + np.uint64(0x3ff00000 - 0x3fe6a09e)
-        ob[i] = (hx >> np.uint64(20)) | np.uint64(0x4330000000000000)        # k + 1023 as the double 2^52 + (k+1023)
-        wb[i] = (((hx & np.uint64(0x000fffff)) + np.uint64(0x3fe6a09e)) << np.uint64(32)) | (ix & np.uint64(0xffffffff))
-    for i in range(n):
-        dk = (out[i] - _TWO52) - 1023.0
-        f = work[i] - 1.0
-        hfsq = 0.5 * f * f
-        s = f / (2.0 + f)
-        z = s * s
-        w = z * z
-        t1 = w * (_LG2 + w * (_LG4 + w * _LG6))
-        t2 = z * (_LG1 + w * (_LG3 + w * (_LG5 + w * _LG7)))
-        r = t2 + t1
-        work[i] = f - hfsq
-        wb[i] = wb[i] & np.uint64(0xffffffff00000000)                     # hi: the top 21 bits of f - hfsq
-        hi = work[i]
-        lo = f - hi - hfsq + s * (hfsq + r)
-        val_hi = hi * _IVLN10HI
-        y = dk * _LOG10_2HI
-        val_lo = dk * _LOG10_2LO + (lo + hi) * _IVLN10LO + lo * _IVLN10HI
-        top = y + val_hi
-        val_lo += (y - top) + val_hi
-        out[i] = val_lo + top
-    odd = 0                                     # an integer reduction vectorises; the guarded call would not
-    for i in range(n):
-        odd |= not (x[i] >= _TINY and x[i] < np.inf)
-    if odd:
-        for i in range(n):
-            if not (x[i] >= _TINY and x[i] < np.inf):
-                out[i] = np.log10(x[i])
 
 
 _CHUNK = 512                                    # particles per block of the likelihood kernel (its buffers fit L1)

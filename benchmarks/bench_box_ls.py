@@ -17,7 +17,7 @@ alternates with its reference in one process (``hx.compare``: medians of CPU and
 
 Agreement, from the results of the same calls, each with its tolerance (a disagreement beyond it is a DISAGREE row):
 the position (parameter) difference to cvxpy, over the problems Clarabel solved to "optimal" for the loop, within
-the distance its gap and feasibility tolerances allow (:func:`solver_bound`: strong convexity of the objective), and
+the distance its gap and feasibility tolerances allow (`_tolerances.solver_bound`: strong convexity of the objective), and
 the exact objective never above cvxpy's; for the closed form, that the box solution equals it bit for bit where the
 unconstrained fix is inside the box. The millisecond calls are repeated more (``FAST_REPEATS``
 pairs) so that their medians mean something on a shared machine.
@@ -34,6 +34,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import _harness as hx  # noqa: E402
+from _tolerances import LIBRARY_TIGHT, solver_bound  # noqa: E402
 
 import locbook as lb  # noqa: E402
 
@@ -57,21 +58,6 @@ def _box_workload(dim, n, rng):
     truth = np.where(rng.random((n, 1)) < 0.8, rng.uniform(lo, hi, (n, dim)), rng.uniform(lo - size, hi + size, (n, dim)))
     d = lb.pairwise_distance_m(truth, anchors) * rng.uniform(0.75, 1.25, (n, anchors.shape[0]))
     return anchors, d, lo, hi
-
-
-#: the library's stacked cvxpy solves (locbook._cvx): Clarabel's gap and feasibility tolerances
-LIBRARY_TIGHT = {"tol_gap_abs": 1e-10, "tol_gap_rel": 1e-10, "tol_feas": 1e-10}
-
-
-def solver_bound(lam_min, f, tol, scale):
-    """How far a solution that Clarabel accepted can be from the exact optimum ``p*`` of ``min |A p - b|^2`` over a
-    box: the objective exceeds its minimum by at least ``lambda_min(A^T A) |p - p*|^2`` (strong convexity, and the
-    optimality condition at ``p*`` makes the linear term non-negative over the box), and the solver stops within
-    the duality gap ``tol_gap_abs + tol_gap_rel max(1, f)`` of it, so ``|p - p*| <= sqrt(gap / lambda_min)``; plus
-    the feasibility tolerance times the data's scale (the box may be violated by that much). ``f``: the objective
-    whose relative gap the solver controls (the problem's own, or the sum of a stacked solve's)."""
-    gap = tol["tol_gap_abs"] + tol["tol_gap_rel"] * np.maximum(1.0, f)
-    return np.sqrt(gap / lam_min) + tol["tol_feas"] * (1.0 + scale)
 
 
 def _check(text, excess):

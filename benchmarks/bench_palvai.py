@@ -6,7 +6,7 @@
 1. Batch LS and RLS over ``runs`` Monte-Carlo problems (50 locations in 3-D) in one vectorized call, against a per-run
    loop (numpy lstsq per run; a Python RLS loop per run on a subset, scaled), alternated in one process
    (``hx.compare``); the differences come from the same calls. Tolerances, per problem: batch LS against lstsq,
-   the round-off bound of least squares (``bench_static_localization.ls_round_off_m``: Golub & Van Loan's
+   the round-off bound of least squares (``_tolerances.ls_round_off_m``: Golub & Van Loan's
    perturbation bound at a backward error m n eps, and the normal equations' kappa^2); RLS against the loop, the
    round-off of the recursion for each (:func:`rls_round_off_m`: eps times the cancellation 1 + P0 |h|^2 of an
    update, P0 = 1e6, times the largest estimate along the way); RLS against batch LS, the prior's effect (closed
@@ -31,7 +31,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import _harness as hx  # noqa: E402
 
-from bench_static_localization import EPS, ls_round_off_m  # noqa: E402
+from _tolerances import EPS, ls_round_off_m  # noqa: E402
 
 import locbook as lb  # noqa: E402
 from locbook.scenarios import palvai as pv  # noqa: E402

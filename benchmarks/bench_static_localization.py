@@ -9,7 +9,7 @@ problem (DPP) and re-solves it per problem, the fastest way to loop with cvxpy; 
 problems and are scaled to N (the reference text says how many).
 
 Tolerances, per problem (beyond one the row is a disagreement): linearized LS against numpy's lstsq, the round-off
-bound of least squares (:func:`ls_round_off_m`); box-constrained LS against cvxpy, the distance Clarabel's default
+bound of least squares (`_tolerances.ls_round_off_m`); box-constrained LS against cvxpy, the distance Clarabel's default
 tolerances allow (duality gap 1e-8 through the objective's curvature, plus its feasibility tolerance); RSS maximum
 likelihood against scipy's LM from the same start, the two solvers' stopping rules (scipy's default ftol and xtol,
 locbook's tol_m), or else locbook's fix must be another local minimum of the cost (positive definite Hessian, Newton
@@ -28,29 +28,16 @@ from scipy.optimize import least_squares
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import _harness as hx  # noqa: E402
+from _tolerances import CLARABEL_DEFAULT, ls_round_off_m, solver_bound  # noqa: E402
 
 import locbook as lb  # noqa: E402
 from locbook.scenarios import george  # noqa: E402
 
 
-EPS = np.finfo(float).eps
-#: Clarabel's default tolerances (duality gap, absolute and relative; feasibility): the cvxpy loop solves at them
-CLARABEL_GAP, CLARABEL_FEAS = 1e-8, 1e-8
 #: scipy least_squares' default ftol and xtol; rss_ml_position's default tol_m
 SCIPY_FTOL, SCIPY_XTOL, ML_TOL_M = 1e-8, 1e-8, 1e-7
-
-
-def ls_round_off_m(H, Y, x):
-    """A first-order bound on the round-off of a least-squares solution ``x`` ``(..., n)`` of ``H x = Y``
-    ``(..., m, n)``, per problem: the perturbation bound of Golub & Van Loan (Thm. 5.3.1), ``|dx| <= delta (2 kappa /
-    cos(theta) + kappa^2 tan(theta)) |x|``, at the backward error ``delta = m n eps`` of a stable solver, plus the
-    ``delta kappa^2 |x|`` of the normal equations (``sin(theta) = |r| / |Y|``)."""
-    m, n = H.shape[-2:]
-    kappa = np.linalg.cond(H)
-    fit = np.linalg.norm(np.einsum("...ij,...j->...i", H, x), axis=-1)
-    r = np.linalg.norm(Y - np.einsum("...ij,...j->...i", H, x), axis=-1)
-    cos_theta = fit / np.hypot(fit, r)
-    return m * n * EPS * (2 * kappa / cos_theta + kappa**2 * (1 + r / fit)) * np.linalg.norm(x, axis=-1)
+#: the corridor of document 003 (m): the box of the constrained fits
+BOX_LO, BOX_HI = [0.0, 0.0], [2.1, 7.8]
 
 
 def _rss_cost_terms(q, anchors, power, model):
@@ -76,7 +63,7 @@ def measure(n: int = 10_000, loop_n: int | None = None, scipy_n: int | None = No
     scipy_n = min(scipy_n or loop_n, n)
     anchors = george.ANCHORS_M
     rng = np.random.default_rng(0)
-    truth = rng.uniform([0, 0], [2.1, 7.8], (n, 2))
+    truth = rng.uniform(BOX_LO, BOX_HI, (n, 2))
     model = lb.PathLossModel(-45.0, 2.1843, 1.83)
     power = model.sample_rss_dbm(lb.pairwise_distance_m(truth, anchors), rng)
     ranges = model.range_m(power)
@@ -106,7 +93,7 @@ def measure(n: int = 10_000, loop_n: int | None = None, scipy_n: int | None = No
 
     p = cp.Variable(2)
     b_par = cp.Parameter(3)
-    single = cp.Problem(cp.Minimize(cp.sum_squares(a_mat @ p - b_par)), [p >= 0, p <= [2.1, 7.8]])
+    single = cp.Problem(cp.Minimize(cp.sum_squares(a_mat @ p - b_par)), [p >= BOX_LO, p <= BOX_HI])
 
     def cvx_loop():
         out = np.empty((loop_n, 2))
@@ -122,8 +109,7 @@ def measure(n: int = 10_000, loop_n: int | None = None, scipy_n: int | None = No
         # lambda_min), plus the feasibility tolerance on the box (1e-8 of the data's scale); ours is exact
         f = np.sum((ref @ a_mat.T - b[:loop_n]) ** 2, axis=-1)
         lam = np.linalg.eigvalsh(a_mat.T @ a_mat)[0]
-        bound = (np.sqrt(CLARABEL_GAP * np.maximum(1.0, f) / lam)
-                 + CLARABEL_FEAS * (1 + np.abs(b[:loop_n]).max(axis=-1) + 7.8))       # 7.8 m: the box's largest bound
+        bound = solver_bound(lam, f, CLARABEL_DEFAULT, np.abs(b[:loop_n]).max(axis=-1) + max(BOX_HI))
         diff = np.linalg.norm(ours[:loop_n] - ref, axis=-1)
         excess = np.max(diff / bound)
         text = (f"max difference {np.max(diff):.1e} m on {loop_n:,} problems, at most {excess:.2g} of the bound from "
@@ -132,7 +118,7 @@ def measure(n: int = 10_000, loop_n: int | None = None, scipy_n: int | None = No
             raise AssertionError(f"{text}, beyond it")
         return text
 
-    m = hx.compare(lambda: lb.lateration_box_ls(anchors, ranges, [0, 0], [2.1, 7.8]).position_m, cvx_loop,
+    m = hx.compare(lambda: lb.lateration_box_ls(anchors, ranges, BOX_LO, BOX_HI).position_m, cvx_loop,
                    repeats=repeats, reference_scale=n / loop_n, agree=box_agree)
     yield hx.row("box-constrained LS (batched)", workload, m, "cvxpy DPP per-problem loop" + scaled(loop_n))
 

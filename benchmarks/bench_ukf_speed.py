@@ -10,7 +10,7 @@ scaled to the full count; a step with some RSS readings missing updates filterpy
 and R, locbook's rule for missing readings), so every run is compared. At the thesis's alpha = 1e-3 the sigma-point
 weights are -1e6 and 6e4 and two correct implementations differ by round-off amplified to about 1e-8; at alpha = 0.5
 or 1 they agree to about 1e-13. The tolerance is that rounding bound, of one weighted sum over the 17 sigma points:
-17 eps sum |W_i| (:func:`sigma_sum_round_off`, 7.5e-9 at alpha = 1e-3) times the largest |x| (|P|) entry; beyond it
+17 eps sum |W_i| (`_tolerances.sigma_sum_round_off`, 7.5e-9 at alpha = 1e-3) times the largest |x| (|P|) entry; beyond it
 the row is a disagreement.
 
 Rows (benchmarks/_harness.py): 500 runs and 10 runs against filterpy on a subset of the runs (its time scaled by the
@@ -42,6 +42,7 @@ from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import _harness as hx  # noqa: E402
+from _tolerances import sigma_sum_round_off  # noqa: E402
 
 import locbook as lb  # noqa: E402
 from locbook.scenarios import gudipati as gu  # noqa: E402
@@ -107,20 +108,9 @@ def _first_steps(st: dict, steps: int) -> dict:
                 rss=replace(st["rss"], rss_dbm=np.asarray(st["rss"].rss_dbm)[:, :steps]))
 
 
-def sigma_sum_round_off(n: int, alpha: float, beta: float = 2.0, kappa: float = 0.0) -> float:
-    """The relative rounding bound of one weighted sum over the ``N = 2n + 1`` sigma points, ``N eps sum_i |W_i|``
-    (Higham, the error of a sum of N products), with the larger of the mean and covariance weights' sums (the scaled
-    set: ``c = n + lambda = alpha^2 (n + kappa)``, ``W^0_m = 1 - n / c``, ``W^0_c = W^0_m + 1 - alpha^2 + beta``,
-    ``W^i = 1 / (2c)``): about 7.5e-9 at alpha = 1e-3 and n = 8, where the weights are -1e6 and 6.25e4."""
-    c = alpha**2 * (n + kappa)
-    w0m = 1.0 - n / c
-    weights = max(abs(w0m), abs(w0m + 1.0 - alpha**2 + beta)) + n / c
-    return (2 * n + 1) * np.finfo(float).eps * weights
-
-
 def _filterpy_agreement(n: int, steps: int, alpha: float):
     """The agreement figure of the harness: max |x - filterpy|, |P - filterpy| on the first ``n`` runs and ``steps``
-    steps (where filterpy ran); the tolerance, the rounding bound of one sigma-point sum (:func:`sigma_sum_round_off`)
+    steps (where filterpy ran); the tolerance, the rounding bound of one sigma-point sum (`_tolerances.sigma_sum_round_off`)
     times the largest |x| (|P|) entry of filterpy's: two implementations of the same arithmetic in another order."""
     rel = sigma_sum_round_off(8, alpha)
 

@@ -10,7 +10,7 @@ weights are -1e6 and 6.25e4. Reports the time per step (one call, ``hx.once``: t
 measured together), the smallest eigenvalue of P over all steps, the largest asymmetry, how often the guard (R~
 floored) acted, and the position error over the run and its last lap, in metres and as the NEES (the squared error
 in units of the filter's own position covariance). No reference; the checks: P positive definite, its asymmetry
-within the round-off of two sigma-point sums (``bench_ukf_speed.sigma_sum_round_off`` times the largest |P|), and
+within the round-off of two sigma-point sums (``_tolerances.sigma_sum_round_off`` times the largest |P|), and
 the mean NEES, over the run and over the last lap, at most 25: if the covariance is right the NEES is chi-square
 with 2 degrees of freedom, and a mean of such terms exceeds 25 with a probability below 1.3e-4 however correlated
 the steps. Beyond any, the row is a disagreement.
@@ -27,7 +27,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import _harness as hx  # noqa: E402
 
-from bench_ukf_speed import sigma_sum_round_off  # noqa: E402
+from _tolerances import sigma_sum_round_off  # noqa: E402
 
 import locbook as lb  # noqa: E402
 

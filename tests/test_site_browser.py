@@ -224,8 +224,8 @@ def test_every_link_and_image_of_the_site_resolves(browser, site_dir, tmp_path):
     for shot in shots:
         assert browser.save_screenshot(str(shot)) and shot.stat().st_size > 0
     findings = browser.find_elements(By.CSS_SELECTOR, "ul.findings li")         # issue 32: generated from the rows
-    assert [f.text for f in findings] == ["A. Author (2015), george: Of 1 printed numbers reproduced independently, 0 "
-                                          "are within their window, 1 loose (a window too wide to decide) and 0 missed."]
+    assert [f.text for f in findings] == ["A. Author (2015), george: Of 1 printed number reproduced independently, 0 "
+                                          "are within its window, 1 loose (a window too wide to decide) and 0 missed."]
     counts = browser.find_element(By.CSS_SELECTOR, "table.counts")
     assert [c.text for c in counts.find_elements(By.CSS_SELECTOR, "thead th")] == ["kind", "loose", "rows"]
     reproduction = counts.find_element(By.XPATH, ".//tr[th='reproduction']")

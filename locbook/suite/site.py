@@ -26,6 +26,7 @@ import re
 from collections import Counter, defaultdict
 from pathlib import Path
 
+from ..reproduce.printed_values import printed_number
 from ..reproduce.report import Table
 from ..reproduce.scoring import JUDGED_KINDS, KINDS
 from .spec import finite_float
@@ -136,35 +137,40 @@ def _short(note: str, limit: int = 160) -> str:
     return first if len(first) <= limit else first[:limit].rsplit(" ", 1)[0] + " ..."
 
 
+def _plural(n: int, noun: str) -> str:
+    return f"{n} {noun}{'' if n == 1 else 's'}"
+
+
 def findings_summary(entries, rows) -> list[dict]:
     """A few sentences per document, generated from its rows (issue 32): what is reproduced, what is only
     calibrated, what misses and the likely reasons of the most missed rows (their notes, the most frequent first).
     ``[{"key", "authors", "year", "text"}]`` for the documents with scored rows."""
     out = []
     for key, doc, doc_rows in _by_document(entries, rows):
-        counted = [r for r in doc_rows if not r.get("same_as")]
-        rep = Counter(r["verdict"] for r in counted if r.get("kind") == "reproduction")
-        cal = Counter(r["verdict"] for r in counted if r.get("kind") == "calibrated")
-        claims = Counter(r["verdict"] for r in counted if r.get("kind") == "claim")
-        if not (rep or cal or claims):
+        counts = scoreboard_counts(doc_rows)             # per kind; repeats of another row in their own column
+        rep, cal, claims = (counts.get(k, Counter()) for k in ("reproduction", "calibrated", "claim"))
+        n_rep, n_cal, n_claims = (sum(v for c, v in k.items() if c != "linked") for k in (rep, cal, claims))
+        if not (n_rep or n_cal or n_claims):
             continue
         parts = []
-        if rep:
-            parts.append(f"Of {sum(rep.values())} printed numbers reproduced independently, {rep['within']} are "
-                         f"within their window, {rep['loose']} loose (a window too wide to decide) and "
-                         f"{rep['miss']} missed.")
-        if cal:
-            parts.append(f"{sum(cal.values())}{' more' if rep else ''} are calibrated (an input chosen from a printed "
-                         f"number, so agreement shows consistency only): {cal['within']} within, {cal['loose']} "
-                         f"loose, {cal['miss']} missed.")
-        if claims:
-            parts.append(f"Of {sum(claims.values())} printed claims, {claims['within']} hold beyond two standard "
-                         f"errors, {claims['loose']} only for our estimate and {claims['miss']} do not.")
-        missed = Counter(_short(r.get("note") or "") for r in counted
+        if n_rep:
+            parts.append(f"Of {_plural(n_rep, 'printed number')} reproduced independently, {rep['within']} "
+                         f"{'is' if rep['within'] == 1 else 'are'} within {'its' if n_rep == 1 else 'their'} window, "
+                         f"{rep['loose']} loose (a window too wide to decide) and {rep['miss']} missed.")
+        if n_cal:
+            parts.append(f"{n_cal}{' more' if n_rep else ''} {'is' if n_cal == 1 else 'are'} calibrated (an input "
+                         f"chosen from a printed number, so agreement shows consistency only): {cal['within']} "
+                         f"within, {cal['loose']} loose, {cal['miss']} missed.")
+        if n_claims:
+            parts.append(f"Of {_plural(n_claims, 'printed claim')}, {claims['within']} "
+                         f"{'holds' if claims['within'] == 1 else 'hold'} beyond two standard errors, "
+                         f"{claims['loose']} only for our estimate and {claims['miss']} "
+                         f"{'does' if claims['miss'] == 1 else 'do'} not.")
+        missed = Counter(_short(r.get("note") or "") for r in doc_rows if not r.get("same_as")
                          if r.get("verdict") == "miss" and r.get("kind") in ("reproduction", "calibrated", "claim")
                          and (r.get("note") or "").strip())
         if missed:
-            reasons = [f"{why} ({n} row{'s' if n != 1 else ''})" for why, n in missed.most_common(2)]
+            reasons = [f"{why} ({_plural(n, 'row')})" for why, n in missed.most_common(2)]
             parts.append("The likely reasons of most misses: " + "; ".join(reasons) + ".")
         out.append({"key": key, "authors": doc.authors, "year": doc.year, "text": " ".join(parts)})
     return out
@@ -362,64 +368,69 @@ def _page_outputs(folder: Path, manifest: dict) -> tuple[list[dict], list[dict]]
     return figures, tables
 
 
-_VERDICT_FILL = {"within": "#2e8b3d", "consistent": "#2e8b3d", "loose": "#c99400", "miss": "#c0392b",
-                 "inconsistent": "#c0392b"}
+#: the verdicts a compared row can have; its point takes the class ``v-<verdict>`` (colours in site.css)
+_SCORED_VERDICTS = ("within", "loose", "miss")
 
 
 def _scored_point(row: dict):
-    """(printed, ours, window low, window high) of a compared row with numbers on both sides, else None."""
-    if row.get("kind") not in ("reproduction", "calibrated") or row.get("same_as"):
+    """(printed, ours, window low, window high) of a scored row (a reproduction or calibration with a verdict; not a
+    repeat of another row), the printed number read as the scorer reads it (:func:`printed_number`), else None."""
+    if (row.get("kind") not in ("reproduction", "calibrated") or row.get("same_as")
+            or row.get("verdict") not in _SCORED_VERDICTS):
         return None
-    printed = finite_float(str(row.get("printed", "")).replace(",", "").strip().rstrip("%"))
+    try:
+        printed = printed_number(row.get("printed", ""))
+    except ValueError:
+        return None
     values = [finite_float(row.get(k)) for k in ("reproduced", "window_low", "window_high")]
-    if printed is None or any(v is None for v in values):
-        return None
-    return (printed, *values)
+    return None if any(v is None for v in values) else (printed, *values)
 
 
-def printed_versus_ours(numbers: list[dict], size: int = 300) -> list[dict]:
-    """One inline SVG per printed table (the rows' ``location``, and unit): each compared number a point at (printed,
-    ours) with its window as a vertical bar, coloured by its verdict (a ring marks a row whose bracket reached it
-    under another reading), and the line ours = printed. Rows without numbers on both sides are left out; a table
-    with none gets no figure. Returns ``[{"title", "svg", "n"}]`` in the order the tables first appear."""
+def printed_versus_ours(numbers: list[dict]) -> list[dict]:
+    """One inline SVG per printed table (the rows' ``location``, and unit): each scored number a point at (printed,
+    ours) with its window as a vertical bar, in its verdict's class (a ring marks a row whose bracket reached it
+    under another reading), and the line ours = printed. Rows without a verdict are left out; a table with none gets
+    no figure. Returns ``[{"title", "svg", "n"}]`` in the order the tables first appear."""
     groups: dict[tuple, list] = {}
     for r in numbers:
         point = _scored_point(r)
         if point is not None:
             location = (r.get("printed_id") or "").split(" | ")[0]
             groups.setdefault((location, r.get("unit") or ""), []).append((point, r))
+    size, pad = 300, 40
+    inner, top = size - 52, pad - 28                    # the plot square; its top edge (room below for the labels)
     out = []
-    pad, inner = 40, size - 52
     for (location, unit), items in groups.items():
-        values = [v for (p, *_rest), _ in items for v in (p, *_rest)]
+        values = [v for point, _ in items for v in point]
         data_lo, data_hi = min(values), max(values)
         span = data_hi - data_lo if data_hi > data_lo else max(abs(data_hi), 1.0)
         lo, hi = data_lo - 0.06 * span, data_hi + 0.06 * span          # a margin around the data
 
-        def at(v, flip=False):
-            f = (v - lo) / (hi - lo)
-            return round(pad + (1 - f if flip else f) * inner, 1)
+        def x(v):
+            return round(pad + (v - lo) / (hi - lo) * inner, 1)
+
+        def y(v):
+            return round(top + (hi - v) / (hi - lo) * inner, 1)
         parts = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{size}" height="{size}" viewBox="0 0 {size} {size}" '
                  f'role="img" class="pvo"><title>{html.escape(location)}: ours against printed</title>',
-                 f'<rect x="{pad}" y="{pad - 28}" width="{inner}" height="{inner}" fill="none" stroke="#9aa3ad"/>',
-                 f'<line x1="{at(lo)}" y1="{at(lo, True) - 28}" x2="{at(hi)}" y2="{at(hi, True) - 28}" '
-                 'stroke="#9aa3ad" stroke-dasharray="4 3"/>']
+                 f'<rect x="{pad}" y="{top}" width="{inner}" height="{inner}" class="frame"/>',
+                 f'<line x1="{x(lo)}" y1="{y(lo)}" x2="{x(hi)}" y2="{y(hi)}" class="diagonal"/>']
         for v in (data_lo, data_hi):                                         # the data's ends as tick labels
-            parts.append(f'<text x="{at(v)}" y="{size - 2}" font-size="10" text-anchor="middle">{v:.3g}</text>')
-            parts.append(f'<text x="{pad - 3}" y="{at(v, True) - 25}" font-size="10" text-anchor="end">{v:.3g}</text>')
+            parts.append(f'<text x="{x(v)}" y="{size - 2}" font-size="10" text-anchor="middle">{v:.3g}</text>')
+            parts.append(f'<text x="{pad - 3}" y="{y(v) + 3}" font-size="10" text-anchor="end">{v:.3g}</text>')
         parts.append(f'<text x="{pad + inner / 2}" y="{size - 14}" font-size="11" text-anchor="middle">printed'
                      f'{" (" + html.escape(unit) + ")" if unit else ""}</text>')
-        parts.append(f'<text x="10" y="{pad + inner / 2 - 28}" font-size="11" text-anchor="middle" '
-                     f'transform="rotate(-90 10 {pad + inner / 2 - 28})">ours</text>')
+        parts.append(f'<text x="10" y="{top + inner / 2}" font-size="11" text-anchor="middle" '
+                     f'transform="rotate(-90 10 {top + inner / 2})">ours</text>')
         for (printed, ours, low, high), r in items:
-            x, colour = at(printed), _VERDICT_FILL.get(r.get("verdict"), "#5b6470")
+            verdict = r["verdict"]
             label = html.escape(f'{r.get("printed_id")}: printed {r.get("printed")}, ours {ours:.4g}, window '
-                                f'[{low:.4g}, {high:.4g}], {r.get("verdict")}'
+                                f'[{low:.4g}, {high:.4g}], {verdict}'
                                 + (f', bracket {r["bracket"]}' if r.get("bracket") else ""))
-            parts.append(f'<g><title>{label}</title><line x1="{x}" y1="{at(low, True) - 28}" x2="{x}" '
-                         f'y2="{at(high, True) - 28}" stroke="{colour}" stroke-width="2" opacity="0.45"/>'
-                         f'<circle cx="{x}" cy="{at(ours, True) - 28}" r="3.5" fill="{colour}"/>'
-                         + (f'<circle cx="{x}" cy="{at(ours, True) - 28}" r="6" fill="none" stroke="#1f5fae"/>'
+            parts.append(f'<g class="v-{verdict}"><title>{label}</title><line x1="{x(printed)}" y1="{y(low)}" '
+                         f'x2="{x(printed)}" y2="{y(high)}" class="window"/>'
+                         f'<circle cx="{x(printed)}" cy="{y(ours)}" r="3.5" class="ours"/>'
+                         + (f'<circle cx="{x(printed)}" cy="{y(ours)}" r="6" class="reached"/>'
                             if r.get("bracket") == "reachable" else "") + '</g>')
         parts.append("</svg>")
         out.append({"title": location + (f" ({unit})" if unit else ""), "svg": "".join(parts), "n": len(items)})

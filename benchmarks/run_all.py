@@ -128,14 +128,7 @@ def machine_facts() -> dict:
         numba_version = numba.__version__
     except ImportError:
         numba_version = "not installed"
-    cpu = platform.processor() or platform.machine()
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
+    from locbook.suite.catalog import machine_label        # the CPU as report.json and `locbook list` name it
     commit = _git("rev-parse", "--short", "HEAD") or "unknown"
     dirty = _git("--no-optional-locks", "status", "--porcelain", "--untracked-files=no")   # read-only
     try:
@@ -144,7 +137,7 @@ def machine_facts() -> dict:
         load = "n/a"
     return {"date": datetime.datetime.now().astimezone().strftime("%Y-%m-%d %H:%M %Z"),
             "git commit": commit + (" (working tree modified)" if dirty else ""),
-            "CPU": f"{cpu}, {os.cpu_count()} logical CPUs", "load average (1, 5, 15 min) at the end": load,
+            "CPU": machine_label(), "load average (1, 5, 15 min) at the end": load,
             "platform": platform.platform(), "python": sys.version.split()[0], "numpy": numpy.__version__,
             "scipy": scipy.__version__, "numba": numba_version,
             "LOCBOOK_NUMBA": os.environ.get("LOCBOOK_NUMBA", "(unset: compiled kernels on)"),

@@ -877,7 +877,7 @@ def _promote(exp, profile, params, staging: Path, folder: Path, stamp: str, key:
                                          encoding="utf-8")
     (staging / "report.json").write_text(json.dumps(
         {"experiment": exp.id, "profile": profile, "parameters": params, "locbook": stamp,
-         "seconds": round(result["seconds"], 1), "machine": machine_label()}, indent=1,
+         "seconds": round(result["seconds"], 1), "machine": result.get("machine") or machine_label()}, indent=1,
         sort_keys=True) + "\n")
     (staging / "run.json").write_text(json.dumps({
         "cache_key": key, "status": "ok", "seconds": round(result["seconds"], 2), "data": data, "modules": modules},

@@ -129,7 +129,10 @@ def execute(task: dict) -> dict:
             disk_full = disk_full_path(exc, str(page)) or ""
     if disk_full:
         error = f"no space left on device writing {disk_full}"
-    return {"error": error, "kernel_failure": kernel_failure, "disk_full": disk_full, "seconds": seconds}
+    from .catalog import machine_label
+    # "machine": where the seconds were measured, this worker's machine (on a cluster, not the runner's)
+    return {"error": error, "kernel_failure": kernel_failure, "disk_full": disk_full, "seconds": seconds,
+            "machine": machine_label()}
 
 
 def main(task_path: str, parent: int | None = None) -> int:

@@ -266,9 +266,34 @@ def test_per_run_newton_finds_each_runs_interior_maximum():
     np.testing.assert_allclose(theta, centre, atol=1e-5)
 
 
+def test_per_run_newton_climbs_a_flat_ridge_to_its_bound_and_stops_on_a_flat_top(monkeypatch):
+    """Not concave: along the first axis the likelihood rises ever more slowly towards the upper bound (-exp(-theta),
+    its maximum over the box is at the bound); along the second, log cosh has a flat-bottomed valley turned upside
+    down (a smooth top). Each run must end at the bound and at its centre (scipy's bounded L-BFGS-B on the same
+    function, run by run, is the reference), in fewer iterations than the damped step alone takes (the doubled steps
+    cross the ridge)."""
+    from scipy.optimize import minimize
+    lo, hi = np.log(1e-4), np.log(1e4)
+    centre = np.array([0.3, -2.0, 4.0, 1.0])
+
+    def f(theta):
+        return -np.exp(-theta[..., 0]) - np.log(np.cosh(theta[..., 1] - centre))
+    theta, iterations = _newton(f, (4,), 2)
+    for r in range(4):
+        ref = minimize(lambda t: np.exp(-t[0]) + np.log(np.cosh(t[1] - centre[r])), np.zeros(2), method="L-BFGS-B",
+                       bounds=[(lo, hi)] * 2, options={"ftol": 1e-15, "gtol": 1e-12})
+        assert theta[r, 0] == pytest.approx(hi) and ref.x[0] == pytest.approx(hi)
+        assert abs(theta[r, 1] - centre[r]) < 1e-4 and abs(ref.x[1] - centre[r]) < 1e-4
+    from locbook.tracking import noise
+    monkeypatch.setattr(noise, "_EXPAND", np.array([1.0]))               # the damped Newton step alone
+    plain, plain_iterations = _newton(f, (4,), 2)
+    np.testing.assert_allclose(plain, theta, atol=1e-4)
+    assert iterations < plain_iterations
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("speed_mps, start", [(1.5, "rest"), (0.3, "moving")])
-def test_per_run_noise_fit_converges_under_the_dogan_readings_that_broke_it(speed_mps, start):
+def test_per_run_noise_fit_converges_under_the_dogan_readings_that_broke_it(speed_mps, start, monkeypatch):
     """Dogan's per-run ML noise fit (100 runs) under two readings of the bracket: at 1.5 m/s the damping reached
     round-off (mu = -lambda_min exactly: 'Singular matrix'); from a moving start two runs crawled along a flat ridge
     and one oscillated by round-off on a flat top (ConvergenceError after 200 iterations). Every run now ends at a
@@ -284,12 +309,9 @@ def test_per_run_noise_fit_converges_under_the_dogan_readings_that_broke_it(spee
     def keep(*a, **k):
         fits.append(original(*a, **k))
         return fits[-1]
-    try:
-        noise.fit_noise_ml = keep
-        ml = dg.noise_fit(tr, dg.SIGMA_RSS_DB, dg.PATH_LOSS_EXP, 100, lb.streams(2015, "noise_fit")["noise_fit"],
-                          anchors_m=dg.corner_anchors(room), room_m=room)
-    finally:
-        noise.fit_noise_ml = original
+    monkeypatch.setattr(noise, "fit_noise_ml", keep)
+    ml = dg.noise_fit(tr, dg.SIGMA_RSS_DB, dg.PATH_LOSS_EXP, 100, lb.streams(2015, "noise_fit")["noise_fit"],
+                      anchors_m=dg.corner_anchors(room), room_m=room)
     per_run = fits[-1]
     assert np.all(np.isfinite(ml["q_ml_runs"])) and np.asarray(ml["q_ml_runs"]).size == 100
     assert np.all(per_run.log_likelihood >= per_run.initial_log_likelihood - 1e-9 * np.abs(per_run.initial_log_likelihood))

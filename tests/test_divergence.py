@@ -398,3 +398,49 @@ def test_window_rule_equals_a_per_run_loop():
         lb.tracking.results.nis_divergence(nis, dof, 3, 1.0)
     with pytest.raises(ValueError, match="divergence_window"):
         lb.kalman_filter(MODEL.F, MODEL.Q, np.zeros(4), np.eye(4), lb.LinearMeasurement(np.zeros((3, 2)), H, R), divergence_window=2.5)
+
+
+def _guard_by_loop(nis, dof, window, probability):
+    """The guard's rule step by step (one run): the first step of the first `window` consecutive exceedances among
+    the updates (dof > 0 and a number), -1 if none."""
+    streak, start = 0, -1
+    for k, (v, d) in enumerate(zip(nis, dof)):
+        if d == 0 or np.isnan(v):
+            continue
+        if v > chi2.ppf(probability, d):
+            streak, start = streak + 1, start if streak else k
+            if streak == window:
+                return start
+        else:
+            streak = 0
+    return -1
+
+
+def test_the_guard_is_its_rule_run_by_run():
+    """nis_divergence against the rule written as a loop, on runs built around the threshold: exactly `window`
+    exceedances in all (together or split), one short, steps without an update (dof 0 or a NaN NIS) inside a streak,
+    and random runs; the batch axes are kept."""
+    window, probability = 4, 0.99
+    rng = np.random.default_rng(11)
+    runs, steps = 60, 40
+    dof = rng.integers(0, 3, (runs, steps))
+    high, low = 1e3, 1e-3
+    nis = np.where(rng.random((runs, steps)) < 0.3, high, low)
+    nis[:6] = low
+    nis[0, 5:9] = high                                  # exactly window, together
+    nis[1, [3, 4, 20, 21]] = high                       # exactly window, split: no streak
+    nis[2, 10:13] = high                                # one short
+    nis[3, [7, 8, 10, 11]] = high                       # a step without an update inside the streak
+    dof[3, 9], dof[3, [7, 8, 10, 11]] = 0, 2
+    nis[4, 30:35], dof[4, 30:35], nis[4, 32] = high, 1, np.nan
+    nis[5, 36:40], dof[5, 36:40] = high, 2              # at the very end
+    dof[:6, :][nis[:6] == high] = np.maximum(dof[:6, :][nis[:6] == high], 1)
+    nis = np.where((dof == 0) & (rng.random((runs, steps)) < 0.5), np.nan, nis)
+    expected = np.array([_guard_by_loop(nis[b], dof[b], window, probability) for b in range(runs)])
+    diverged, first = lb.tracking.results.nis_divergence(nis.reshape(6, 10, steps), dof.reshape(6, 10, steps), window,
+                                                         probability)
+    assert diverged.shape == first.shape == (6, 10)
+    np.testing.assert_array_equal(first.ravel(), expected)
+    np.testing.assert_array_equal(diverged.ravel(), expected >= 0)
+    assert expected[:6].tolist() == [5, -1, -1, 7, 30, 36]
+    assert 0 < np.count_nonzero(expected >= 0) < runs  # both kinds among the random runs too

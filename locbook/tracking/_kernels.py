@@ -8,82 +8,98 @@ from __future__ import annotations
 import numpy as np
 
 from .._numba import jit as _jit
-from ._vecmath import _log_positive
+from ._vecmath import _log10_block, _log_positive
 
 _LANES = 64     # runs per block of the compiled EKF: the innermost axis, long enough for LLVM to vectorise it
 _LOG_2PI = float(np.log(2.0 * np.pi))
+_LN_10 = float(np.log(10.0))
 _INERTIAL = 4   # the inertial stream's kind (= _compiled._INERTIAL); 0-3: linear and RSS, parallel and serial
 
 
 @_jit
-def _nb_predict(Fi, Fj, Fv, Q, x, P, xt, T1):
+def _nb_predict(Fi, Fj, Fv, row, Q, Qw, x, P, xt, T1):
     """x = F x, P = (F P) F^T + Q in place for the lanes (last axis), F given by its nonzero entries (rows Fi,
-    columns Fj, values Fv), Q per lane ``(n, n, W)``; P symmetric in, symmetric out (the upper triangle is computed and
-    mirrored)."""
+    columns Fj, values Fv, row by row as ``np.nonzero`` gives them; ``row[i]`` True where row i has one), Q
+    ``(n, n)`` the same for every lane when ``Qw`` is empty, else ``Qw`` per lane ``(n, n, W)``; P symmetric in,
+    symmetric out (the upper triangle is computed and mirrored)."""
     n, W = x.shape
-    for i in range(n):
-        for w in range(W):
-            xt[i, w] = 0.0
-        for c in range(n):
-            for w in range(W):
-                T1[i, c, w] = 0.0
-    for e in range(Fi.shape[0]):
+    # each sum over a row of F starts from its first term (F's entries come row by row, np.nonzero's order), so that
+    # no array is zeroed first: numba turns a zeroing loop into a call to memset, a fixed cost per row of lanes
+    for e in range(Fi.shape[0]):                          # xt = F x, T1 = F P
         i, j, v = Fi[e], Fj[e], Fv[e]
+        if e == 0 or Fi[e - 1] != i:
+            for w in range(W):
+                xt[i, w] = v * x[j, w]
+            for c in range(n):
+                for w in range(W):
+                    T1[i, c, w] = v * P[j, c, w]
+            continue
         for w in range(W):
             xt[i, w] += v * x[j, w]
         for c in range(n):
             for w in range(W):
                 T1[i, c, w] += v * P[j, c, w]
-    for i in range(n):
-        for w in range(W):
-            x[i, w] = xt[i, w]
-        for c in range(i + 1):
-            for w in range(W):
-                P[c, i, w] = 0.0
     for e in range(Fi.shape[0]):                          # (F P) F^T, upper triangle: P[a, i] for a <= i
         i, j, v = Fi[e], Fj[e], Fv[e]
+        if e == 0 or Fi[e - 1] != i:
+            for a in range(i + 1):
+                for w in range(W):
+                    P[a, i, w] = v * T1[a, j, w]
+            continue
         for a in range(i + 1):
             for w in range(W):
                 P[a, i, w] += v * T1[a, j, w]
+    for i in range(n):
+        if not row[i]:                                    # a row of F without a nonzero: zeros
+            for w in range(W):
+                xt[i, w] = 0.0
+            for a in range(i + 1):
+                for w in range(W):
+                    P[a, i, w] = 0.0
+        for w in range(W):
+            x[i, w] = xt[i, w]
     for a in range(n):
         for c in range(a, n):
+            if Qw.shape[2] == 0:
+                q = Q[a, c]
+                for w in range(W):
+                    P[a, c, w] += q
+                    P[c, a, w] = P[a, c, w]
+                continue
             for w in range(W):
-                P[a, c, w] += Q[a, c, w]
+                P[a, c, w] += Qw[a, c, w]
                 P[c, a, w] = P[a, c, w]
 
 
 @_jit
-def _nb_update(x, P, c, nz, nnz, H, nu, R, HP, HPH, S, L, KT, PH, D, t, u, Y, nis, hld):
+def _nb_update(x, P, c, nz, nnz, H, nu, R, HP, S, L, Li, KT, D, t, Y, nis, hld):
     """Kalman update in place, lane by lane (last axis), with the rows ``H[:c]`` (nonzero only in the columns
     ``nz[:nnz]``), innovations ``nu[:c]`` and noise ``R[:c, :c]``; a missing reading is a zero row with zero
     innovation and unit decoupled noise (its gain column is then exactly zero). K = P H^T S^{-1} (Cholesky of
     S = H P H^T + R), x += K nu, and the Joseph form (I - K H) P (I - K H)^T + K R K^T written as
     P - K (H P) + (K S - P H^T) K^T (equal for any K), its upper triangle computed and mirrored (exactly symmetric).
     Adds each lane's NIS nu^T S^{-1} nu = |L^{-1} nu|^2 to ``nis`` and half its log-determinant, sum log L_jj, to
-    ``hld`` (a missing row adds 0 to both). False when some S is not positive definite or some state not finite.
-    ``u`` is scratch space the caller provides (unused since the update computes one triangle)."""
+    ``hld`` (a missing row adds 0 to both). False when some S is not positive definite or some state not finite."""
     n, W = x.shape
-    for r in range(c):                                    # HP = H P, PH = P H^T
+    for r in range(c):                                    # HP = H P (= (P H^T)^T: P is exactly symmetric)
         for j in range(n):
             for w in range(W):
                 HP[r, j, w] = 0.0
-                PH[j, r, w] = 0.0
         for e in range(nnz):
             i = nz[e]
             for j in range(n):
                 for w in range(W):
                     HP[r, j, w] += H[r, i, w] * P[i, j, w]
-                    PH[j, r, w] += P[j, i, w] * H[r, i, w]
     for r in range(c):                                    # S = H P H^T + R
         for q in range(c):
             for w in range(W):
-                HPH[r, q, w] = 0.0
+                S[r, q, w] = 0.0
             for e in range(nnz):
                 j = nz[e]
                 for w in range(W):
-                    HPH[r, q, w] += HP[r, j, w] * H[q, j, w]
+                    S[r, q, w] += HP[r, j, w] * H[q, j, w]
             for w in range(W):
-                S[r, q, w] = HPH[r, q, w] + R[r, q, w]
+                S[r, q, w] += R[r, q, w]
     for j in range(c):                                    # S = L L^T
         for w in range(W):
             t[w] = S[j, j, w]
@@ -98,6 +114,7 @@ def _nb_update(x, P, c, nz, nnz, H, nu, R, HP, HPH, S, L, KT, PH, D, t, u, Y, ni
         for w in range(W):                                # L_jj > 0 and normal (t > 0): the vectorised log's domain,
             L[j, j, w] = np.sqrt(t[w])                   # but for an infinite one (lane by lane: a select)
             hld[w] += _log_positive(L[j, j, w]) if L[j, j, w] < np.inf else np.inf
+            Li[j, w] = 1.0 / L[j, j, w]                 # one division per row; the solves multiply by it
         for i in range(j + 1, c):
             for w in range(W):
                 t[w] = S[i, j, w]
@@ -105,7 +122,7 @@ def _nb_update(x, P, c, nz, nnz, H, nu, R, HP, HPH, S, L, KT, PH, D, t, u, Y, ni
                 for w in range(W):
                     t[w] -= L[i, q, w] * L[j, q, w]
             for w in range(W):
-                L[i, j, w] = t[w] / L[j, j, w]
+                L[i, j, w] = t[w] * Li[j, w]
     for i in range(c):                                    # NIS = |Y|^2, L Y = nu (forward substitution)
         for w in range(W):
             Y[i, w] = nu[i, w]
@@ -113,7 +130,7 @@ def _nb_update(x, P, c, nz, nnz, H, nu, R, HP, HPH, S, L, KT, PH, D, t, u, Y, ni
             for w in range(W):
                 Y[i, w] -= L[i, q, w] * Y[q, w]
         for w in range(W):
-            Y[i, w] /= L[i, i, w]
+            Y[i, w] *= Li[i, w]
             nis[w] += Y[i, w] * Y[i, w]
     for j in range(n):                                    # K^T = S^{-1} H P
         for i in range(c):
@@ -123,13 +140,13 @@ def _nb_update(x, P, c, nz, nnz, H, nu, R, HP, HPH, S, L, KT, PH, D, t, u, Y, ni
                 for w in range(W):
                     KT[i, j, w] -= L[i, q, w] * KT[q, j, w]
             for w in range(W):
-                KT[i, j, w] /= L[i, i, w]
+                KT[i, j, w] *= Li[i, w]
         for i in range(c - 1, -1, -1):
             for q in range(i + 1, c):
                 for w in range(W):
                     KT[i, j, w] -= L[q, i, w] * KT[q, j, w]
             for w in range(W):
-                KT[i, j, w] /= L[i, i, w]
+                KT[i, j, w] *= Li[i, w]
     good = True
     for i in range(n):                                    # x += K nu
         for w in range(W):
@@ -145,7 +162,7 @@ def _nb_update(x, P, c, nz, nnz, H, nu, R, HP, HPH, S, L, KT, PH, D, t, u, Y, ni
     for i in range(n):                                    # D = K S - P H^T
         for r in range(c):
             for w in range(W):
-                D[i, r, w] = -PH[i, r, w]
+                D[i, r, w] = -HP[r, i, w]
             for q in range(c):
                 for w in range(W):
                     D[i, r, w] += KT[q, i, w] * S[q, r, w]
@@ -163,30 +180,71 @@ def _nb_update(x, P, c, nz, nnz, H, nu, R, HP, HPH, S, L, KT, PH, D, t, u, Y, ni
 
 
 @_jit
-def _nb_rss_row(x, w, pidx, npos, tag_h, anchor, p0, ple, sigma, ref_d, clamp, anchor_sigma, z):
-    """One RSS reading of lane ``w`` linearised at its state: (innovation z - h(x), variance, the Jacobian's entries
-    at the ``npos`` position indices). The one RSS model's formula (:func:`locbook.models.rss.rss_mean_jacobian`, as
+def _nb_rss_rows(x, r, run, jrow, k, ta, c0, Z, A, P0c, PLE, SIG, pidx, npos, tag_h, dims, ref_d, clamp, anchor_sigma,
+                 Hr, nu, var, valid, dof, zb, d2, dh, lg, work):
+    """Row ``r`` of an RSS update for every lane ``w`` at once: reading ``jrow[w]`` of run ``run[w]`` (readings ``Z``
+    from column ``c0``, anchors ``A``, channel ``P0c``/``PLE``/``SIG`` per run or shared, as packed by
+    :func:`locbook.tracking._compiled._pack_streams`) linearised at the lane's state. Writes the innovation
+    ``nu[r] = z - h(x)``, the variance ``var[r]``, the Jacobian's entries ``Hr[r, pidx[:npos]]`` and ``valid[r]``, and
+    adds 1 to ``dof`` where there is a reading; a missing reading (not finite) gets 0, 1, zeros and False. Returns the
+    number of lanes with a reading.
+
+    The one RSS model's formula (:func:`locbook.models.rss.rss_mean_jacobian`, as
     :func:`locbook.tracking.streams._rss_parallel_update` and ``_rss_serial_update`` evaluate it), compiled:
     ``h = P_0 - 10 n log10(max(d, clamp) / d0)``, ``dh/dp = -(10 n / ln 10) (p - a) / d^2`` outside the clamp and 0
     within it (``d^2 < clamp^2``, where h is flat), variance ``sigma^2 + anchor_sigma^2 |dh/dp|^2``
-    (:meth:`locbook.tracking.streams.RssMeasurement.variance_db2`); ``clamp`` the stream's ``clamp_m``."""
-    d2 = 0.0
-    for i in range(anchor.shape[0]):
-        u = (x[pidx[i], w] if i < npos else tag_h) - anchor[i]
-        d2 += u * u
-    slope = 10.0 * ple / np.log(10.0)
-    inside = d2 < clamp * clamp
-    g0 = 0.0 if inside else -(slope / d2) * (x[pidx[0], w] - anchor[0])
-    g1 = -(slope / d2) * (x[pidx[1], w] - anchor[1]) if npos > 1 and not inside else 0.0
-    g2 = -(slope / d2) * (x[pidx[2], w] - anchor[2]) if npos > 2 and not inside else 0.0
-    d = np.sqrt(d2)
-    dh = d if d > clamp else clamp
-    h = p0 - 10.0 * ple * np.log10(dh / ref_d)
-    var = sigma * sigma
-    if anchor_sigma > 0.0 and not inside:
-        u = slope * anchor_sigma / d
-        var += u * u
-    return z - h, var, g0, g1, g2
+    (:meth:`locbook.tracking.streams.RssMeasurement.variance_db2`); ``clamp`` the stream's ``clamp_m``, ``tag_h`` the
+    height of a tag whose state has fewer position components than the anchors. No branch depends on a lane: the
+    loops vectorise, and the logarithm is :func:`locbook.tracking._vecmath._log10_block` over the lanes (``zb``,
+    ``d2``, ``dh``, ``lg``, ``work``: scratch of one value per lane)."""
+    W = x.shape[1]
+    BA, BC = A.shape[0], P0c.shape[0]
+    p0i, p1i, p2i = pidx[0], pidx[1], pidx[2]
+    for w in range(W):                                    # the distance to the anchor
+        b, j = run[w], jrow[w]
+        ab = min(b, BA - 1)
+        zb[w] = Z[b, k, c0 + j]
+        u = x[p0i, w] - A[ab, ta, c0 + j, 0]
+        s2 = u * u
+        if dims > 1:
+            u = (x[p1i, w] if npos > 1 else tag_h) - A[ab, ta, c0 + j, 1]
+            s2 += u * u
+        if dims > 2:
+            u = (x[p2i, w] if npos > 2 else tag_h) - A[ab, ta, c0 + j, 2]
+            s2 += u * u
+        d2[w] = s2
+        d = np.sqrt(s2)
+        dh[w] = (d if d > clamp else clamp) / ref_d
+    _log10_block(dh, lg, work, W)
+    count = 0
+    for w in range(W):
+        b, j = run[w], jrow[w]
+        ab, bc = min(b, BA - 1), min(b, BC - 1)
+        ple = PLE[bc, c0 + j]
+        slope = 10.0 * ple / _LN_10
+        inside = d2[w] < clamp * clamp
+        coef = slope / d2[w]
+        ok = zb[w] - zb[w] == 0.0                       # finite
+        g = 0.0 if inside else -coef * (x[p0i, w] - A[ab, ta, c0 + j, 0])
+        Hr[r, p0i, w] = g if ok else 0.0
+        if npos > 1:
+            g = 0.0 if inside else -coef * (x[p1i, w] - A[ab, ta, c0 + j, 1])
+            Hr[r, p1i, w] = g if ok else 0.0
+        if npos > 2:
+            g = 0.0 if inside else -coef * (x[p2i, w] - A[ab, ta, c0 + j, 2])
+            Hr[r, p2i, w] = g if ok else 0.0
+        sigma = SIG[bc, c0 + j]
+        v = sigma * sigma
+        if anchor_sigma > 0.0:
+            u = slope * anchor_sigma / np.sqrt(d2[w])
+            v = v if inside else v + u * u
+        h = P0c[bc, c0 + j] - 10.0 * ple * lg[w]
+        nu[r, w] = zb[w] - h if ok else 0.0
+        var[r, w] = v if ok else 1.0
+        valid[r, w] = ok
+        dof[w] += ok
+        count += ok
+    return count
 
 
 @_jit
@@ -232,15 +290,20 @@ def _nb_ekf(Fi, Fj, Fv, Q, x0, P0, predict_first, slot, active, kind, col, nz, n
     Hr, HP, KT = np.zeros((mmax, n, W)), np.empty((mmax, n, W)), np.empty((mmax, n, W))
     nu, var, key = np.empty((mmax, W)), np.empty((mmax, W)), np.empty((mmax, W))
     Rr, S, L = np.zeros((mmax, mmax, W)), np.empty((mmax, mmax, W)), np.zeros((mmax, mmax, W))
-    HPH, PH, D = np.empty((mmax, mmax, W)), np.empty((n, mmax, W)), np.empty((n, mmax, W))
-    t, t2 = np.empty(W), np.empty(W)
-    Y, nis, dof = np.empty((mmax, W)), np.zeros(W), np.zeros(W, np.int64)
+    D = np.empty((n, mmax, W))
+    t = np.empty(W)
+    Y, Li, nis, dof = np.empty((mmax, W)), np.empty((mmax, W)), np.zeros(W), np.zeros(W, np.int64)
     hld = np.zeros(W)
     valid = np.zeros((mmax, W), np.bool_)
     sel = np.empty((mmax, W), np.int64)
     run = np.empty(W, np.int64)
-    Qw = np.empty((n, n, W))
+    Qw = np.empty((n, n, W if Q.shape[0] > 1 else 0))    # Q per lane, or none when every run has the same
     qacc = np.empty((mmax, W))
+    jrow = np.empty(W, np.int64)
+    frow = np.zeros(n, np.bool_)                          # the rows of F with a nonzero
+    for e in range(Fi.shape[0]):
+        frow[Fi[e]] = True
+    zb, d2b, dhb, lgb, wkb = np.empty(W), np.empty(W), np.empty(W), np.empty(W), np.empty(W)
     for b0 in range(0, B, W):
         for w in range(W):
             b = min(b0 + w, B - 1)
@@ -249,10 +312,11 @@ def _nb_ekf(Fi, Fj, Fv, Q, x0, P0, predict_first, slot, active, kind, col, nz, n
                 x[i, w] = x0[b, i]
                 for j in range(n):
                     P[i, j, w] = P0[min(b, P0.shape[0] - 1), i, j]
-                    Qw[i, j, w] = Q[min(b, Q.shape[0] - 1), i, j]
+                    if Q.shape[0] > 1:
+                        Qw[i, j, w] = Q[b, i, j]
         for k in range(T):
             if predict_first or k > 0:
-                _nb_predict(Fi, Fj, Fv, Qw, x, P, xt, T1)
+                _nb_predict(Fi, Fj, Fv, frow, Q[0], Qw, x, P, xt, T1)
             for w in range(W):
                 nis[w] = 0.0
                 hld[w] = 0.0
@@ -263,18 +327,17 @@ def _nb_ekf(Fi, Fj, Fv, Q, x0, P0, predict_first, slot, active, kind, col, nz, n
                     continue
                 c0, m, kd = col[s], col[s + 1] - col[s], kind[s]
                 serial = kd == 1 or kd == 3
-                for w in range(W):                   # the update order: as given, or by descending RSS
+                sort = kd == 3 and descending[s]          # the update order: as given, or by descending RSS
+                for w in range(W if sort else 0):         # stable: ties (and the missing, last) keep their order
                     for j in range(m):
                         sel[j, w] = j
-                    if kd == 3 and descending[s]:         # stable: ties (and the missing, last) keep their order
-                        for j in range(m):
-                            zj = Z[run[w], k, c0 + j]
-                            key[j, w] = zj if np.isfinite(zj) else -np.inf
-                        for j in range(1, m):
-                            i = j
-                            while i > 0 and key[sel[i - 1, w], w] < key[sel[i, w], w]:
-                                sel[i - 1, w], sel[i, w] = sel[i, w], sel[i - 1, w]
-                                i -= 1
+                        zj = Z[run[w], k, c0 + j]
+                        key[j, w] = zj if np.isfinite(zj) else -np.inf
+                    for j in range(1, m):
+                        i = j
+                        while i > 0 and key[sel[i - 1, w], w] < key[sel[i, w], w]:
+                            sel[i - 1, w], sel[i, w] = sel[i, w], sel[i - 1, w]
+                            i -= 1
                 for u in range(m if serial else 1):       # serial: one scalar update per reading
                     rows = 1 if serial else m
                     present = False
@@ -286,6 +349,12 @@ def _nb_ekf(Fi, Fj, Fv, Q, x0, P0, predict_first, slot, active, kind, col, nz, n
                                 qacc[r, w] = 0.0
                             for e in range(nnz[s]):
                                 col_e = nz[s, e]
+                                if hb == 1:                       # one H for every run: a constant over the lanes
+                                    h = H[0, th, c0 + j, col_e]
+                                    for w in range(W):
+                                        Hr[r, col_e, w] = h
+                                        qacc[r, w] += h * x[col_e, w]
+                                    continue
                                 for w in range(W):
                                     h = H[min(run[w], hb - 1), th, c0 + j, col_e]
                                     Hr[r, col_e, w] = h
@@ -302,33 +371,28 @@ def _nb_ekf(Fi, Fj, Fv, Q, x0, P0, predict_first, slot, active, kind, col, nz, n
                                 col_e = nz[s, e]
                                 for w in range(W):
                                     Hr[r, col_e, w] = Hr[r, col_e, w] if valid[r, w] else 0.0
-                    for r in range(rows if kd > 1 else 0):   # RSS and inertial rows, lane by lane
-                        for w in range(W):
-                            b = run[w]
-                            j = sel[u, w] if serial else r
-                            zj = Z[b, k, c0 + j]
-                            valid[r, w] = np.isfinite(zj)
-                            for e in range(nnz[s]):
-                                Hr[r, nz[s, e], w] = 0.0
-                            nu[r, w] = 0.0
-                            var[r, w] = 1.0
-                            if not valid[r, w]:
-                                continue
-                            present = True
-                            dof[w] += 1
-                            if kd == _INERTIAL:
-                                nu[r, w] = _nb_inertial_row(x, w, j, iner[s], zj, Hr[r])
-                            else:                                 # RSS (linear rows were built above)
-                                bc = min(b, P0c.shape[0] - 1)
-                                nu[r, w], var[r, w], g0, g1, g2 = _nb_rss_row(
-                                    x, w, pidx[s], npos[s], tag_h[s], A[min(b, A.shape[0] - 1), ta, c0 + j, :dims[s]],
-                                    P0c[bc, c0 + j], PLE[bc, c0 + j], SIG[bc, c0 + j], ref_d[s], clamp[s],
-                                    anchor_sigma[s], zj)
-                                Hr[r, pidx[s, 0], w] = g0
-                                if npos[s] > 1:
-                                    Hr[r, pidx[s, 1], w] = g1
-                                if npos[s] > 2:
-                                    Hr[r, pidx[s, 2], w] = g2
+                    elif kd == _INERTIAL:                 # inertial rows, lane by lane
+                        for r in range(rows):
+                            for w in range(W):
+                                zj = Z[run[w], k, c0 + r]
+                                valid[r, w] = np.isfinite(zj)
+                                for e in range(nnz[s]):
+                                    Hr[r, nz[s, e], w] = 0.0
+                                nu[r, w] = 0.0
+                                var[r, w] = 1.0
+                                if not valid[r, w]:
+                                    continue
+                                present = True
+                                dof[w] += 1
+                                nu[r, w] = _nb_inertial_row(x, w, r, iner[s], zj, Hr[r])
+                    else:                                 # RSS rows, every lane at once
+                        for r in range(rows):
+                            for w in range(W):
+                                jrow[w] = (sel[u, w] if sort else u) if serial else r
+                            got = _nb_rss_rows(x, r, run, jrow, k, ta, c0, Z, A, P0c, PLE, SIG, pidx[s], npos[s],
+                                               tag_h[s], dims[s], ref_d[s], clamp[s], anchor_sigma[s], Hr, nu, var,
+                                               valid, dof, zb, d2b, dhb, lgb, wkb)
+                            present |= got > 0
                     if not present:
                         continue
                     for r in range(rows):                 # R of the readings present, unit decoupled noise elsewhere
@@ -336,14 +400,19 @@ def _nb_ekf(Fi, Fj, Fv, Q, x0, P0, predict_first, slot, active, kind, col, nz, n
                             if kd <= 1 or kd == _INERTIAL:    # (the order is the given one: sel is the identity)
                                 jr, jq = (u, u) if serial else (r, q)
                                 tr, rb = min(k, R.shape[1] - 1), R.shape[0]
+                                other = 1.0 if r == q else 0.0
+                                if rb == 1:                       # one R for every run
+                                    rv = R[0, tr, c0 + jr, c0 + jq]
+                                    for w in range(W):
+                                        Rr[r, q, w] = rv if valid[r, w] and valid[q, w] else other
+                                    continue
                                 for w in range(W):
                                     Rr[r, q, w] = R[min(run[w], rb - 1), tr, c0 + jr, c0 + jq] \
-                                        if valid[r, w] and valid[q, w] else (1.0 if r == q else 0.0)
+                                        if valid[r, w] and valid[q, w] else other
                                 continue
                             for w in range(W):                # RSS: var is 1 where a reading is missing
                                 Rr[r, q, w] = var[r, w] if r == q else 0.0
-                    if not _nb_update(x, P, rows, nz[s], nnz[s], Hr, nu, Rr, HP, HPH, S, L, KT, PH, D, t, t2, Y, nis,
-                                      hld):
+                    if not _nb_update(x, P, rows, nz[s], nnz[s], Hr, nu, Rr, HP, S, L, Li, KT, D, t, Y, nis, hld):
                         return b0 + 1
             for w in range(W):                       # a state or covariance that overflowed: numpy names it
                 t[w] = 0.0                                # (v - v is NaN exactly when v is not finite)

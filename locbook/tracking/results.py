@@ -176,20 +176,29 @@ def nis_divergence(nis, nis_dof, window: int | None = DIVERGENCE_WINDOW,
     if window == 0 or nis.shape[-1] < window or nis.size == 0:
         return np.zeros(batch, bool), np.full(batch, -1, np.int64)
     from scipy.special import chdtri            # lazy: keeps `import locbook` fast
-    updated = (dof > 0) & ~np.isnan(nis)        # a NaN NIS (no evidence) is skipped: neither counts nor breaks
     # the dimensions are small integers: one quantile each, looked up (inf for dof 0: never exceeded)
     table = np.concatenate([[np.inf], chdtri(np.arange(1, max(int(dof.max()), 1) + 1, dtype=float), 1.0 - probability)])
-    exceed = nis > table[dof]                   # NaN > bound is False: a skipped step never counts
-    # the length of the current streak of exceedances among the updates: count minus the count at the last update
-    # that stayed within the bound
-    count = np.cumsum(exceed, axis=-1)
-    reset = np.maximum.accumulate(np.where(updated & ~exceed, count, 0), axis=-1)
-    hit = (count - reset) >= window
-    diverged = hit.any(axis=-1)
-    end = np.argmax(hit, axis=-1)               # the update that completes the first window
-    first = np.take_along_axis(count, end[..., None], -1) - window + 1
-    start = np.argmax(count >= first, axis=-1)  # the first exceedance of that window
-    return diverged, np.where(diverged, start, -1).astype(np.int64)
+    T = nis.shape[-1]
+    nis, dof = nis.reshape(-1, T), dof.reshape(-1, T)
+    exceed = nis > np.take(table, dof)          # NaN > bound is False: a skipped step never counts
+    diverged, start = np.zeros(nis.shape[0], bool), np.full(nis.shape[0], -1, np.int64)
+    # only a run with at least `window` exceedances in all can hold `window` consecutive ones (most runs of a
+    # consistent filter have a handful): the streaks are counted on those runs alone
+    some = np.flatnonzero(np.count_nonzero(exceed, axis=-1) >= window)
+    if some.size:
+        exceed, nis, dof = exceed[some], nis[some], dof[some]
+        updated = (dof > 0) & ~np.isnan(nis)    # a NaN NIS (no evidence) is skipped: neither counts nor breaks
+        # the length of the current streak of exceedances among the updates: count minus the count at the last
+        # update that stayed within the bound
+        count = np.cumsum(exceed, axis=-1)
+        reset = np.maximum.accumulate(np.where(updated & ~exceed, count, 0), axis=-1)
+        hit = (count - reset) >= window
+        hits = hit.any(axis=-1)
+        end = np.argmax(hit, axis=-1)           # the update that completes the first window
+        first = np.take_along_axis(count, end[..., None], -1) - window + 1
+        diverged[some] = hits
+        start[some] = np.where(hits, np.argmax(count >= first, axis=-1), -1)  # the window's first exceedance
+    return diverged.reshape(batch), start.reshape(batch)
 
 
 def nees(x_true, x, P, *, index=None):

@@ -416,10 +416,15 @@ def _guard_by_loop(nis, dof, window, probability):
     return -1
 
 
-def test_the_guard_is_its_rule_run_by_run():
+@pytest.mark.parametrize("compiled", [False, True])
+def test_the_guard_is_its_rule_run_by_run(compiled, monkeypatch):
     """nis_divergence against the rule written as a loop, on runs built around the threshold: exactly `window`
     exceedances in all (together or split), one short, steps without an update (dof 0 or a NaN NIS) inside a streak,
-    and random runs; the batch axes are kept."""
+    and random runs; the batch axes are kept. Both paths: numpy's passes and the compiled one."""
+    from locbook.tracking import _compiled
+    from locbook.tracking.results import _guard_kernels
+    monkeypatch.setattr(_compiled, "_NUMBA_MIN_WORK", 0 if compiled else 10**9)
+    assert (_guard_kernels(1) is not None) == compiled
     window, probability = 4, 0.99
     rng = np.random.default_rng(11)
     runs, steps = 60, 40

@@ -149,7 +149,9 @@ def nis_divergence(nis, nis_dof, window: int | None = DIVERGENCE_WINDOW,
     ``dof == 0`` are skipped, and so are steps whose NIS is NaN: they carry no evidence either way, e.g. a foreign
     update function that returns no NIS); ``diverged_step`` is the first step of the first such window, -1 where
     none. ``nis_dof``: non-negative integers (an integer or float array with integral values).
-    Vectorized over runs (no loop over runs or steps)."""
+    Vectorized over runs (numpy passes over the runs that have at least ``window`` exceedances), or, from
+    ``_compiled._NUMBA_MIN_WORK`` values on with the compiled paths on, one compiled pass per run that stops at its
+    first window (:func:`locbook.tracking._kernels._nb_nis_streaks`); the two give the same flags."""
     window, probability = _check_guard(window, probability)
     nis = np.asarray(nis, dtype=float)
     dof = np.asarray(nis_dof)
@@ -169,7 +171,7 @@ def nis_divergence(nis, nis_dof, window: int | None = DIVERGENCE_WINDOW,
         raise ValueError(f"nis_dof must hold non-negative integers (degrees of freedom); got {int(dof.min())} at index "
                          f"{tuple(int(i) for i in np.argwhere(dof < 0)[0])}")
     try:
-        dof = np.broadcast_to(dof, nis.shape)
+        dof = dof if dof.shape == nis.shape else np.broadcast_to(dof, nis.shape)
     except ValueError:
         raise ValueError(f"nis_dof {dof.shape} must broadcast to the shape of nis {nis.shape}") from None
     batch = nis.shape[:-1]
@@ -180,6 +182,11 @@ def nis_divergence(nis, nis_dof, window: int | None = DIVERGENCE_WINDOW,
     table = np.concatenate([[np.inf], chdtri(np.arange(1, max(int(dof.max()), 1) + 1, dtype=float), 1.0 - probability)])
     T = nis.shape[-1]
     nis, dof = nis.reshape(-1, T), dof.reshape(-1, T)
+    kernels = _guard_kernels(nis.size)
+    if kernels is not None:                     # the same rule in one compiled pass per run
+        start = np.empty(nis.shape[0], np.int64)
+        kernels._nb_nis_streaks(_writable(nis, float), _writable(dof, np.int64), table, window, start)
+        return (start >= 0).reshape(batch), start.reshape(batch)
     exceed = nis > np.take(table, dof)          # NaN > bound is False: a skipped step never counts
     diverged, start = np.zeros(nis.shape[0], bool), np.full(nis.shape[0], -1, np.int64)
     # only a run with at least `window` exceedances in all can hold `window` consecutive ones (most runs of a
@@ -199,6 +206,30 @@ def nis_divergence(nis, nis_dof, window: int | None = DIVERGENCE_WINDOW,
         diverged[some] = hits
         start[some] = np.where(hits, np.argmax(count >= first, axis=-1), -1)  # the window's first exceedance
     return diverged.reshape(batch), start.reshape(batch)
+
+
+def _writable(a, dtype):
+    """``a`` as a C-contiguous, writable array of ``dtype`` (a copy only where needed: a read-only array would
+    compile a kernel once more for its type)."""
+    a = np.ascontiguousarray(a, dtype=dtype)
+    return a if a.flags.writeable else a.copy()
+
+
+def _guard_trial():
+    def run(kernels):
+        kernels._nb_nis_streaks(np.ones((1, 3)), np.ones((1, 3), np.int64), np.array([np.inf, 0.5]), 2,
+                                np.empty(1, np.int64))
+    return run
+
+
+def _guard_kernels(size: int):
+    """:mod:`locbook.tracking._kernels` for the guard's compiled pass when the NIS has at least
+    ``_compiled._NUMBA_MIN_WORK`` values and the compiled paths are on (:func:`locbook.tracking._compiled._kernel_module`),
+    else None: numpy's passes give the same flags."""
+    from . import _compiled                     # lazy: _compiled imports this module
+    if size < _compiled._NUMBA_MIN_WORK:
+        return None
+    return _compiled._kernel_module("locbook.tracking._kernels", _guard_trial, "NIS guard", stacklevel=4)
 
 
 def nees(x_true, x, P, *, index=None):

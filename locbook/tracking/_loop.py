@@ -213,8 +213,10 @@ def _covariance_shared_throughout(setup: _Setup, measurements) -> bool:
     covariance per step, which beats running the runs one by one."""
     if not _motion_shared(setup) or setup.P.ndim != 2:
         return False
-    return all(isinstance(meas, LinearMeasurement) and _unbatched(meas.H) and _unbatched(meas.R)
-               and _shared_pattern(z) is not None for meas, z in zip(measurements, setup.zs))
+    if not all(isinstance(meas, LinearMeasurement) and _unbatched(meas.H) and _unbatched(meas.R)
+               for meas in measurements):
+        return False                # (before the readings' pass below, which reads every reading)
+    return all(_shared_pattern(z) is not None for z in setup.zs)
 
 
 def _unbatched(matrix) -> bool:

@@ -229,6 +229,13 @@ def _case(kind, rng):
         streams = [lb.LinearMeasurement(fixes, lb.per_step(Hs), lb.per_step(Rs)),
                    lb.LinearMeasurement(fixes, lb.per_step(Hs[:1]), lb.per_step(Rs[0]), mode="serial"),
                    lb.RssMeasurement(power, anchors, ch, model.position_index)]
+    elif kind == "one_state_column":                 # rows that read one state component (one nonzero in all)
+        streams = [lb.LinearMeasurement(fixes[..., :1], H[:1], np.array([[1.2]])),
+                   lb.LinearMeasurement(fixes[..., 1:], H[1:], np.array([[0.8]]), mode="serial")]
+    elif kind == "three_rows_three_columns":         # the general loops: 3 rows, 3 nonzero columns
+        H3 = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [1.0, 0.0, 0.5, 0.0]])
+        z3 = np.concatenate([fixes, fixes[..., :1] + rng.normal(0, 0.5, (B, T, 1))], axis=-1)
+        streams = [lb.LinearMeasurement(z3, H3, np.diag([1.0, 1.5, 2.0]))]
     else:
         raise ValueError(kind)
     return model.F, model.Q, x0, P0, streams, kw
@@ -236,7 +243,8 @@ def _case(kind, rng):
 
 CASES = ["parallel", "serial_descending", "serial_given_with_fixes", "linear_serial_batched_R",
          "linear_nonuniform_missing", "per_anchor_channel_and_anchor_sigma", "batched_channel", "tag_height",
-         "moving_receivers", "record_and_no_predict_first", "batched_P0_multidim_batch", "per_step_H_and_R"]
+         "moving_receivers", "record_and_no_predict_first", "batched_P0_multidim_batch", "per_step_H_and_R",
+         "one_state_column", "three_rows_three_columns"]
 
 
 @pytest.mark.skipif(not HAVE_NUMBA, reason="numba is not installed: only the numpy path exists")

@@ -84,7 +84,20 @@ def _nb_update(x, P, c, nz, nnz, H, nu, R, HP, S, L, Li, KT, D, t, Y, nis, hld):
     Adds each lane's NIS nu^T S^{-1} nu = |L^{-1} nu|^2 to ``nis`` and half its log-determinant, sum log L_jj, to
     ``hld`` (a missing row adds 0 to both). False when some S is not positive definite or some state not finite."""
     n, W = x.shape
+    # one or two rows (and one or two nonzeros per row) are the common updates: their sums are written out in one
+    # loop over the lanes, with the same operations in the same order as the general loops below them (which a
+    # small batch pays for: a loop over few lanes costs about its fixed overhead)
     for r in range(c):                                    # HP = H P (= (P H^T)^T: P is exactly symmetric)
+        if nnz == 1 or nnz == 2:
+            i0, i1 = nz[0], nz[nnz - 1]
+            for j in range(n):
+                if nnz == 1:
+                    for w in range(W):
+                        HP[r, j, w] = H[r, i0, w] * P[i0, j, w]
+                    continue
+                for w in range(W):
+                    HP[r, j, w] = H[r, i0, w] * P[i0, j, w] + H[r, i1, w] * P[i1, j, w]
+            continue
         for j in range(n):
             for w in range(W):
                 HP[r, j, w] = 0.0
@@ -136,6 +149,18 @@ def _nb_update(x, P, c, nz, nnz, H, nu, R, HP, S, L, Li, KT, D, t, Y, nis, hld):
             Y[i, w] *= Li[i, w]
             nis[w] += Y[i, w] * Y[i, w]
     for j in range(n):                                    # K^T = S^{-1} H P
+        if c == 1:
+            for w in range(W):
+                KT[0, j, w] = HP[0, j, w] * Li[0, w] * Li[0, w]
+            continue
+        if c == 2:
+            for w in range(W):
+                k0 = HP[0, j, w] * Li[0, w]
+                k1 = (HP[1, j, w] - L[1, 0, w] * k0) * Li[1, w]
+                k1 = k1 * Li[1, w]
+                KT[1, j, w] = k1
+                KT[0, j, w] = (k0 - L[1, 0, w] * k1) * Li[0, w]
+            continue
         for i in range(c):
             for w in range(W):
                 KT[i, j, w] = HP[i, j, w]
@@ -152,6 +177,14 @@ def _nb_update(x, P, c, nz, nnz, H, nu, R, HP, S, L, Li, KT, D, t, Y, nis, hld):
                 KT[i, j, w] *= Li[i, w]
     good = True
     for i in range(n):                                    # x += K nu
+        if c <= 2:
+            for w in range(W):
+                v = KT[0, i, w] * nu[0, w]
+                if c == 2:
+                    v = v + KT[1, i, w] * nu[1, w]
+                x[i, w] += v
+                good &= x[i, w] - x[i, w] == 0.0
+            continue
         for w in range(W):
             t[w] = 0.0
         for r in range(c):
@@ -163,6 +196,15 @@ def _nb_update(x, P, c, nz, nnz, H, nu, R, HP, S, L, Li, KT, D, t, Y, nis, hld):
     if not good:
         return False
     for i in range(n):                                    # D = K S - P H^T
+        if c == 1:
+            for w in range(W):
+                D[i, 0, w] = -HP[0, i, w] + KT[0, i, w] * S[0, 0, w]
+            continue
+        if c == 2:
+            for w in range(W):
+                D[i, 0, w] = -HP[0, i, w] + KT[0, i, w] * S[0, 0, w] + KT[1, i, w] * S[1, 0, w]
+                D[i, 1, w] = -HP[1, i, w] + KT[0, i, w] * S[0, 1, w] + KT[1, i, w] * S[1, 1, w]
+            continue
         for r in range(c):
             for w in range(W):
                 D[i, r, w] = -HP[r, i, w]
@@ -171,6 +213,14 @@ def _nb_update(x, P, c, nz, nnz, H, nu, R, HP, S, L, Li, KT, D, t, Y, nis, hld):
                     D[i, r, w] += KT[q, i, w] * S[q, r, w]
     for i in range(n):                                    # P - K (H P) + D K^T: the upper triangle, mirrored
         for j in range(i, n):
+            if c <= 2:
+                for w in range(W):
+                    v = P[i, j, w] + (D[i, 0, w] * KT[0, j, w] - KT[0, i, w] * HP[0, j, w])
+                    if c == 2:
+                        v = v + (D[i, 1, w] * KT[1, j, w] - KT[1, i, w] * HP[1, j, w])
+                    P[i, j, w] = v
+                    P[j, i, w] = v
+                continue
             for w in range(W):
                 t[w] = P[i, j, w]
             for r in range(c):

@@ -1,6 +1,7 @@
 """The compiled EKF kernels (numba), module-level functions compiled on first call (numba caches the machine code on
-disk). Imported only by :func:`locbook.tracking._compiled._compiled_ekf` when the compiled path runs, so that
-``import locbook`` never loads numba. Without numba they are plain Python (the same arithmetic, slowly: the tests
+disk), with the serial RSS order the UKF kernels share and the NIS guard's pass. Imported only when a compiled path
+runs (:func:`locbook.tracking._compiled._compiled_ekf`, the UKF kernels, the guard of
+:func:`locbook.tracking.results.nis_divergence`), so that ``import locbook`` never loads numba. Without numba they are plain Python (the same arithmetic, slowly: the tests
 run them that way). Each kernel works on ``W`` runs at once on the innermost axis (the last axis of its arrays):
 ``_LANES`` runs, or all of them when there are fewer (a small batch pays for its own runs only)."""
 from __future__ import annotations
@@ -323,6 +324,23 @@ def _nb_inertial_row(x, w, j, spec, z, Hrow):
     return z - (-sn * a0 + c * a1)
 
 
+@_jit
+def _descending_order(Z, run, k, c0, m, sel, key):
+    """``sel[:m, w]``: the readings ``c0 .. c0 + m - 1`` of run ``run[w]`` at step ``k`` (``Z`` ``(B, T, M)``) in the
+    order of descending value, for every lane ``w``; stable (ties, and the missing readings, last, keep their order).
+    ``key``: scratch ``(m, W)``. The serial RSS update's order in the EKF and UKF kernels."""
+    for w in range(sel.shape[1]):
+        for j in range(m):
+            sel[j, w] = j
+            zj = Z[run[w], k, c0 + j]
+            key[j, w] = zj if np.isfinite(zj) else -np.inf
+        for j in range(1, m):
+            i = j
+            while i > 0 and key[sel[i - 1, w], w] < key[sel[i, w], w]:
+                sel[i - 1, w], sel[i, w] = sel[i, w], sel[i - 1, w]
+                i -= 1
+
+
 @_jit_fma
 def _nb_ekf(Fi, Fj, Fv, Q, x0, P0, predict_first, slot, active, kind, col, nz, nnz, Z, H, R, A, P0c, PLE, SIG, dims,
             ref_d, clamp, anchor_sigma, tag_h, pidx, npos, descending, iner, out_x, out_P, out_nis, out_dof,
@@ -381,16 +399,8 @@ def _nb_ekf(Fi, Fj, Fv, Q, x0, P0, predict_first, slot, active, kind, col, nz, n
                 c0, m, kd = col[s], col[s + 1] - col[s], kind[s]
                 serial = kd == 1 or kd == 3
                 sort = kd == 3 and descending[s]          # the update order: as given, or by descending RSS
-                for w in range(W if sort else 0):         # stable: ties (and the missing, last) keep their order
-                    for j in range(m):
-                        sel[j, w] = j
-                        zj = Z[run[w], k, c0 + j]
-                        key[j, w] = zj if np.isfinite(zj) else -np.inf
-                    for j in range(1, m):
-                        i = j
-                        while i > 0 and key[sel[i - 1, w], w] < key[sel[i, w], w]:
-                            sel[i - 1, w], sel[i, w] = sel[i, w], sel[i - 1, w]
-                            i -= 1
+                if sort:
+                    _descending_order(Z, run, k, c0, m, sel, key)
                 for u in range(m if serial else 1):       # serial: one scalar update per reading
                     rows = 1 if serial else m
                     present = False

@@ -18,6 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from .._numba import jit as _jit
+from ._kernels import _descending_order
 
 _LOG_2PI = float(np.log(2.0 * np.pi))
 _EPS = float(np.finfo(float).eps)
@@ -430,18 +431,12 @@ def _nb_ukf(Fi, Fj, Fv, Q, x0, P0, predict_first, slot, active, kind, col, nz, n
                     continue
                 c0, m, kd = col[s], col[s + 1] - col[s], kind[s]
                 serial = kd == _LINEAR_SERIAL or kd == _RSS_SERIAL
-                for w in range(W):                        # the update order: as given, or by descending RSS
-                    for j in range(m):
-                        sel[j, w] = j
-                    if kd == _RSS_SERIAL and descending[s]:   # stable: ties (and the missing, last) keep their order
+                if kd == _RSS_SERIAL and descending[s]:   # the update order: by descending RSS, or as given
+                    _descending_order(Z, run, k, c0, m, sel, key)
+                else:
+                    for w in range(W):
                         for j in range(m):
-                            zj = Z[run[w], k, c0 + j]
-                            key[j, w] = zj if np.isfinite(zj) else -np.inf
-                        for j in range(1, m):
-                            i = j
-                            while i > 0 and key[sel[i - 1, w], w] < key[sel[i, w], w]:
-                                sel[i - 1, w], sel[i, w] = sel[i, w], sel[i - 1, w]
-                                i -= 1
+                            sel[j, w] = j
                 for u in range(m if serial else 1):       # serial: one scalar update per reading
                     rows = 1 if serial else m
                     present = 0

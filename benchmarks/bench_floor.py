@@ -21,6 +21,8 @@ data layout. Both are stated here so that the figure can be checked:
   1.5x between runs of the same machine), so the product kernel is the row's paired reference: it alternates with
   the filter call in one process (:func:`_harness.compare`), each of its calls about as long as one filter call, and
   the floor is the count at the rate of the same repeats. Short calls get more repeats (about a second of each).
+  Its arrays start on a 64-byte boundary (:func:`_harness.aligned`): at other offsets the same kernel ran at 11.1
+  instead of 18.3 Gop/s here (AVX-512 loads across two cache lines), and numpy's placement decided which.
 
 The row's ratio is floor / locbook: at least 0.2 means within 5x of the floor.
 """
@@ -70,8 +72,7 @@ def rate_call(width: int, seconds: float):
     """``(call, operations)``: a call of the compiled 6 x 6 products at ``width`` lanes lasting about ``seconds``, and
     the operations it does (2 * 6^3 per product and lane)."""
     rng = np.random.default_rng(0)
-    A, B = rng.standard_normal((6, 6, width)), rng.standard_normal((6, 6, width))
-    C = np.empty_like(A)
+    A, B, C = (hx.aligned(rng.standard_normal((6, 6, width))) for _ in range(3))
     _rate_compiled(A, B, C, 1)              # compile
     per_rep = 2.0 * 6**3 * width
     reps = max(1, int(seconds * 1e10 / per_rep))

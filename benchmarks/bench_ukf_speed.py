@@ -173,7 +173,7 @@ def machine_rates() -> dict:
     (the kernels' loop shape) in FLOP per ns, and the cost of a logarithm and of a sine + cosine in ns (best of 5)."""
     fma, logs, trig = _rate_kernels()
     rng = np.random.default_rng(0)
-    A, B, C = rng.random((8, 8, 64)), rng.random((8, 64)), np.zeros((8, 64))
+    A, B, C = hx.aligned(rng.random((8, 8, 64))), hx.aligned(rng.random((8, 64))), hx.aligned(np.zeros((8, 64)))
     a, out = rng.random(64) + 0.5, np.zeros(64)
     rates = {}
     for name, fn, args, count in (("flop_per_ns", fma, (A, B, C), 2 * 8 * 8 * 64), ("log_ns", logs, (a, out), 64),

@@ -126,27 +126,39 @@ SIZES = {"full": [500, 10], "tiny": [4]}
 
 def run(size: str = "full"):
     """The benchmark protocol (benchmarks/run_all.py): the serial and parallel EKF at 500 and 10 runs (tiny: 4) on the
-    Dogan setting against their floor, the product kernel timed alternately with each filter call."""
+    Dogan setting against their floor, the product kernel timed alternately with each filter call. A batch narrower
+    than 64 runs also gets a row without a goal: the floor at the rate the same product kernel attains with as many
+    lanes as runs (how much of the gap the layout itself costs a small batch)."""
     for runs in SIZES[hx.check_size(size)]:
         s = bd.setting(runs)
         T = s["tr"].time_s.size
-        width = 64
         for name in ("serial_ekf", "parallel_ekf"):
-            flops = ekf_step_flops(name, s)
-            total = flops * runs * T
-            with bd._path(True):
-                bd.locbook_filter(name, s)                          # load the kernel
-                first = hx.call(lambda: bd.locbook_filter(name, s), memory=False).cpu_s
-                call, ops = rate_call(width, first)
-                m = hx.compare(lambda: bd.locbook_filter(name, s), call, reference_scale=total / ops, memory=False,
-                               repeats=min(101, max(hx.MIN_REPEATS, int(1.0 / max(first, 1e-3)))))
-            rate = ops / (m.reference_cpu_s / m.reference_scale)
-            m = dataclasses.replace(m, reference_scale=1.0)          # the reference times are the floor's
-            m.agreement = (f"{flops:.0f} operations per run-step; {m.locbook_cpu_s / (runs * T) * 1e9:.0f} ns per "
-                           f"run-step measured, floor {m.reference_cpu_s / (runs * T) * 1e9:.1f} ns")
-            yield hx.row(bd.LABELS[name] + ", compiled", f"{runs} runs x {T} steps", m,
-                         f"arithmetic floor at {rate / 1e9:.1f} Gop/s ({width} lanes, measured alternately)",
-                         goal=0.2, note="ratio = floor / locbook")
+            for width in (64, runs) if runs < 64 else (64,):
+                yield _floor_row(name, s, runs, T, width)
+
+
+def _floor_row(name: str, s: dict, runs: int, T: int, width: int) -> dict:
+    """One row: the filter ``name`` on ``runs`` runs against its floor at the rate of ``width`` lanes."""
+    flops = ekf_step_flops(name, s)
+    total = flops * runs * T
+    with bd._path(True):
+        bd.locbook_filter(name, s)                          # load the kernel
+        first = hx.call(lambda: bd.locbook_filter(name, s), memory=False).cpu_s
+        call, ops = rate_call(width, first)
+        m = hx.compare(lambda: bd.locbook_filter(name, s), call, reference_scale=total / ops, memory=False,
+                       repeats=min(101, max(hx.MIN_REPEATS, int(1.0 / max(first, 1e-3)))))
+    rate = ops / (m.reference_cpu_s / m.reference_scale)
+    m = dataclasses.replace(m, reference_scale=1.0)          # the reference times are the floor's
+    m.agreement = (f"{flops:.0f} operations per run-step; {m.locbook_cpu_s / (runs * T) * 1e9:.0f} ns per "
+                   f"run-step measured, floor {m.reference_cpu_s / (runs * T) * 1e9:.1f} ns")
+    if width == 64:
+        return hx.row(bd.LABELS[name] + ", compiled", f"{runs} runs x {T} steps", m,
+                      f"arithmetic floor at {rate / 1e9:.1f} Gop/s (64 lanes, measured alternately)", goal=0.2,
+                      note="ratio = floor / locbook")
+    return hx.row(bd.LABELS[name] + ", compiled", f"{runs} runs x {T} steps", m,
+                  f"floor at the product kernel's rate with {width} lanes, {rate / 1e9:.1f} Gop/s (measured "
+                  "alternately)", note="ratio = floor / locbook; not the goal's floor (64 lanes): what the layout "
+                  f"itself attains with {width} runs side by side")
 
 
 if __name__ == "__main__":

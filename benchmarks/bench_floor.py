@@ -151,14 +151,14 @@ def _floor_row(name: str, s: dict, runs: int, T: int, width: int) -> dict:
     m = dataclasses.replace(m, reference_scale=1.0)          # the reference times are the floor's
     m.agreement = (f"{flops:.0f} operations per run-step; {m.locbook_cpu_s / (runs * T) * 1e9:.0f} ns per "
                    f"run-step measured, floor {m.reference_cpu_s / (runs * T) * 1e9:.1f} ns")
+    label, workload = bd.LABELS[name] + ", compiled", f"{runs} runs x {T} steps"
     if width == 64:
-        return hx.row(bd.LABELS[name] + ", compiled", f"{runs} runs x {T} steps", m,
+        return hx.row(label, workload, m,
                       f"arithmetic floor at {rate / 1e9:.1f} Gop/s (64 lanes, measured alternately)", goal=0.2,
                       note="ratio = floor / locbook")
-    return hx.row(bd.LABELS[name] + ", compiled", f"{runs} runs x {T} steps", m,
-                  f"floor at the product kernel's rate with {width} lanes, {rate / 1e9:.1f} Gop/s (measured "
-                  "alternately)", note="ratio = floor / locbook; not the goal's floor (64 lanes): what the layout "
-                  f"itself attains with {width} runs side by side")
+    return hx.row(label, workload, m, f"floor at the product kernel's rate with {width} lanes, {rate / 1e9:.1f} Gop/s "
+                  "(measured alternately)", note="ratio = floor / locbook; not the goal's floor (64 lanes): what the "
+                  f"layout itself attains with {width} runs side by side")
 
 
 if __name__ == "__main__":

@@ -264,6 +264,27 @@ def test_compiled_ekf_equals_numpy_ekf(kind):
 
 
 @pytest.mark.skipif(not HAVE_NUMBA, reason="numba is not installed: only the numpy path exists")
+def test_rows_of_F_without_entries_before_others():
+    """State (vx, vy, x, y) whose velocity is drawn afresh each step: F's first two rows are zero. The kernel's F P
+    skips rows without entries, and (F P) F^T reads them for the rows after: they must be zeros, not what the scratch
+    held (a filter with the full F runs first on the same shapes, leaving its F P in the freed memory)."""
+    dt = 0.5
+    F_empty = np.array([[0, 0, 0, 0], [0, 0, 0, 0], [dt, 0, 1, 0], [0, dt, 0, 1.0]])
+    F_full = F_empty + np.diag([1.0, 1.0, 0.0, 0.0])
+    Q = np.diag([0.2, 0.2, 0.01, 0.01])
+    rng = np.random.default_rng(0)
+    B, T = 16, 20
+    fixes, x0, P0 = rng.normal(0, 1, (B, T, 2)), rng.normal(0, 1, (B, 4)), np.diag([0.3, 0.3, 1.0, 1.0])
+    streams = [lb.LinearMeasurement(fixes, np.eye(2, 4, 2), 0.25 * np.eye(2))]
+    for _ in range(3):
+        _both(F_full, Q, x0, P0, streams)
+        a, b, compiled = _both(F_empty, Q, x0, P0, streams)
+        assert compiled
+        np.testing.assert_allclose(b.x, a.x, rtol=0, atol=TOL)
+        np.testing.assert_allclose(b.P, a.P, rtol=0, atol=TOL)
+
+
+@pytest.mark.skipif(not HAVE_NUMBA, reason="numba is not installed: only the numpy path exists")
 def test_compiled_ekf_gives_way_to_numpy_errors():
     """A zero-noise reading with no prior spread: the kernel cannot update, the numpy loop raises the library's error
     naming the step and run."""

@@ -133,7 +133,9 @@ def test_compiled_row_kernel_is_the_numpy_model():
         h, grad, d = _rss_mean_jacobian(meas, x[:2, w] - ANCHORS[j], p0, ple)
         # the logarithm is musl's (vectorised) against numpy's: within 2 ulp of each other (tests/test_vecmath.py)
         assert abs(nu[0, w] - (z[w] - h)) <= 4 * np.spacing(abs(h))
-        assert Hr[0, :2, w].tolist() == grad.tolist() and var[0, w] == meas.variance_db2(d, ple, sigma)
+        # the kernel may fuse a multiply and an add (one rounding instead of two): a few ulp
+        np.testing.assert_allclose(Hr[0, :2, w], grad, rtol=8 * np.finfo(float).eps, atol=0)
+        np.testing.assert_allclose(var[0, w], meas.variance_db2(d, ple, sigma), rtol=8 * np.finfo(float).eps, atol=0)
         if np.hypot(*offsets[w]) < clamp:
-            assert grad.tolist() == [0.0, 0.0] and var[0, w] == sigma**2
+            assert grad.tolist() == [0.0, 0.0] and Hr[0, :2, w].tolist() == [0.0, 0.0] and var[0, w] == sigma**2
     assert nu[0, 3] == 0.0 and var[0, 3] == 1.0 and Hr[0, :2, 3].tolist() == [0.0, 0.0]

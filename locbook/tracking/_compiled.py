@@ -64,6 +64,13 @@ def _leading_steps(value, batch, B, tail, T):
     return np.ascontiguousarray(np.broadcast_to(v, batch + v.shape[-3:]).reshape((B,) + v.shape[-3:]))
 
 
+def _kernel_array(a, dtype) -> np.ndarray:
+    """``a`` as a C-contiguous, writable array of ``dtype``, copied only where needed (a read-only array would compile
+    a kernel once more for its type)."""
+    a = np.ascontiguousarray(a, dtype=dtype)
+    return a if a.flags.writeable else a.copy()
+
+
 def _pack_streams(setup: _Setup, measurements, B):
     """The linear and RSS streams as the kernels' flat arrays (readings side by side on one axis), or None if one is
     not supported (a NonlinearMeasurement: :func:`_pack_with_inertial` packs the inertial one)."""
@@ -72,10 +79,7 @@ def _pack_streams(setup: _Setup, measurements, B):
     # the readings (B, T, M): a step's readings of all streams side by side (one stream: its own array when it is
     # already laid out so, no copy)
     flat = [z.reshape((B,) + z.shape[-2:]) for z in setup.zs]
-    Z = flat[0] if len(flat) == 1 else np.concatenate(flat, axis=-1)
-    Z = np.ascontiguousarray(Z, dtype=float)
-    if not Z.flags.writeable:       # a read-only array would compile the kernels once more for that type
-        Z = Z.copy()
+    Z = _kernel_array(flat[0] if len(flat) == 1 else np.concatenate(flat, axis=-1), float)
     for meas, z in zip(measurements, setup.zs):
         m = z.shape[-1]
         c0 = cols[-1]

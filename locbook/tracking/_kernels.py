@@ -1,9 +1,9 @@
 """The compiled EKF kernels (numba), module-level functions compiled on first call (numba caches the machine code on
 disk), with the serial RSS order the UKF kernels share and the NIS guard's pass. Imported only when a compiled path
-runs (:func:`locbook.tracking._compiled._compiled_ekf`, the UKF kernels, the guard of
-:func:`locbook.tracking.results.nis_divergence`), so that ``import locbook`` never loads numba. Without numba they are plain Python (the same arithmetic, slowly: the tests
-run them that way). Each kernel works on ``W`` runs at once on the innermost axis (the last axis of its arrays):
-``_LANES`` runs, or all of them when there are fewer (a small batch pays for its own runs only)."""
+runs (:func:`locbook.tracking._compiled._compiled_ekf`, the UKF kernels), so that ``import locbook`` never loads
+numba. Without numba they are plain Python (the same arithmetic, slowly: the tests run them that way). Each kernel
+works on ``W`` runs at once on the innermost axis (the last axis of its arrays): ``_LANES`` runs, or all of them when
+there are fewer (a small batch pays for its own runs only)."""
 from __future__ import annotations
 
 import numpy as np
@@ -43,6 +43,13 @@ def _nb_predict(Fi, Fj, Fv, row, Q, Qw, x, P, xt, T1):
         for c in range(n):
             for w in range(W):
                 T1[i, c, w] += v * P[j, c, w]
+    for i in range(n):                                    # a row of F without a nonzero: zeros (F P's row i is read
+        if not row[i]:                                    # below for every column of F after it)
+            for w in range(W):
+                xt[i, w] = 0.0
+            for c in range(n):
+                for w in range(W):
+                    T1[i, c, w] = 0.0
     for e in range(Fi.shape[0]):                          # (F P) F^T, upper triangle: P[a, i] for a <= i
         i, j, v = Fi[e], Fj[e], Fv[e]
         if e == 0 or Fi[e - 1] != i:
@@ -54,9 +61,7 @@ def _nb_predict(Fi, Fj, Fv, row, Q, Qw, x, P, xt, T1):
             for w in range(W):
                 P[a, i, w] += v * T1[a, j, w]
     for i in range(n):
-        if not row[i]:                                    # a row of F without a nonzero: zeros
-            for w in range(W):
-                xt[i, w] = 0.0
+        if not row[i]:                                    # its column of (F P) F^T: zeros
             for a in range(i + 1):
                 for w in range(W):
                     P[a, i, w] = 0.0
@@ -178,7 +183,7 @@ def _nb_update(x, P, c, nz, nnz, H, nu, R, HP, S, L, Li, KT, D, t, Y, nis, hld):
                 KT[i, j, w] *= Li[i, w]
     good = True
     for i in range(n):                                    # x += K nu
-        if c <= 2:
+        if c == 1 or c == 2:
             for w in range(W):
                 v = KT[0, i, w] * nu[0, w]
                 if c == 2:
@@ -214,7 +219,7 @@ def _nb_update(x, P, c, nz, nnz, H, nu, R, HP, S, L, Li, KT, D, t, Y, nis, hld):
                     D[i, r, w] += KT[q, i, w] * S[q, r, w]
     for i in range(n):                                    # P - K (H P) + D K^T: the upper triangle, mirrored
         for j in range(i, n):
-            if c <= 2:
+            if c == 1 or c == 2:
                 for w in range(W):
                     v = P[i, j, w] + (D[i, 0, w] * KT[0, j, w] - KT[0, i, w] * HP[0, j, w])
                     if c == 2:

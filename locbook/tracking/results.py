@@ -68,6 +68,7 @@ is planned for every path; until then such a run is an error, never a NaN or a c
 
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -150,8 +151,8 @@ def nis_divergence(nis, nis_dof, window: int | None = DIVERGENCE_WINDOW,
     update function that returns no NIS); ``diverged_step`` is the first step of the first such window, -1 where
     none. ``nis_dof``: non-negative integers (an integer or float array with integral values).
     Vectorized over runs (numpy passes over the runs that have at least ``window`` exceedances), or, from
-    ``_compiled._NUMBA_MIN_WORK`` values on with the compiled paths on, one compiled pass per run that stops at its
-    first window (:func:`locbook.tracking._kernels._nb_nis_streaks`); the two give the same flags."""
+    ``_compiled._NUMBA_MIN_WORK`` values on once a compiled filter has loaded the kernels, one compiled pass per run
+    that stops at its first window (:func:`locbook.tracking._kernels._nb_nis_streaks`); the two give the same flags."""
     window, probability = _check_guard(window, probability)
     nis = np.asarray(nis, dtype=float)
     dof = np.asarray(nis_dof)
@@ -184,8 +185,9 @@ def nis_divergence(nis, nis_dof, window: int | None = DIVERGENCE_WINDOW,
     nis, dof = nis.reshape(-1, T), dof.reshape(-1, T)
     kernels = _guard_kernels(nis.size)
     if kernels is not None:                     # the same rule in one compiled pass per run
+        from ._compiled import _kernel_array
         start = np.empty(nis.shape[0], np.int64)
-        kernels._nb_nis_streaks(_writable(nis, float), _writable(dof, np.int64), table, window, start)
+        kernels._nb_nis_streaks(_kernel_array(nis, float), _kernel_array(dof, np.int64), table, window, start)
         return (start >= 0).reshape(batch), start.reshape(batch)
     exceed = nis > np.take(table, dof)          # NaN > bound is False: a skipped step never counts
     diverged, start = np.zeros(nis.shape[0], bool), np.full(nis.shape[0], -1, np.int64)
@@ -208,13 +210,6 @@ def nis_divergence(nis, nis_dof, window: int | None = DIVERGENCE_WINDOW,
     return diverged.reshape(batch), start.reshape(batch)
 
 
-def _writable(a, dtype):
-    """``a`` as a C-contiguous, writable array of ``dtype`` (a copy only where needed: a read-only array would
-    compile a kernel once more for its type)."""
-    a = np.ascontiguousarray(a, dtype=dtype)
-    return a if a.flags.writeable else a.copy()
-
-
 def _guard_trial():
     def run(kernels):
         kernels._nb_nis_streaks(np.ones((1, 3)), np.ones((1, 3), np.int64), np.array([np.inf, 0.5]), 2,
@@ -224,10 +219,11 @@ def _guard_trial():
 
 def _guard_kernels(size: int):
     """:mod:`locbook.tracking._kernels` for the guard's compiled pass when the NIS has at least
-    ``_compiled._NUMBA_MIN_WORK`` values and the compiled paths are on (:func:`locbook.tracking._compiled._kernel_module`),
-    else None: numpy's passes give the same flags."""
+    ``_compiled._NUMBA_MIN_WORK`` values, the compiled paths are on and a compiled filter has already loaded that
+    module in this session (:func:`locbook.tracking._compiled._kernel_module`), else None: numpy's passes give the same
+    flags, and loading numba for the guard alone would cost more than it saves."""
     from . import _compiled                     # lazy: _compiled imports this module
-    if size < _compiled._NUMBA_MIN_WORK:
+    if size < _compiled._NUMBA_MIN_WORK or "locbook.tracking._kernels" not in sys.modules:
         return None
     return _compiled._kernel_module("locbook.tracking._kernels", _guard_trial, "NIS guard", stacklevel=4)
 

@@ -453,3 +453,17 @@ def test_the_guard_is_its_rule_run_by_run(compiled, monkeypatch):
     np.testing.assert_array_equal(diverged.ravel(), expected >= 0)
     assert expected[:6].tolist() == [5, -1, -1, 7, 30, 36]
     assert 0 < np.count_nonzero(expected >= 0) < runs  # both kinds among the random runs too
+
+
+def test_the_guard_never_loads_numba_by_itself():
+    """A large NIS judged in a fresh interpreter where no compiled filter ran: numpy's passes answer, and numba stays
+    unloaded (loading it for the guard alone would cost more than the pass saves)."""
+    import subprocess
+    import sys
+    code = ("import sys, numpy as np\n"
+            "from locbook.tracking.results import nis_divergence\n"
+            "nis = np.full((50, 400), 100.0)\n"
+            "flags, first = nis_divergence(nis, np.full((50, 400), 2), 5)\n"
+            "print(bool(flags.all()), int(first.max()), 'numba' in sys.modules)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
+    assert out == ["True", "0", "False"], out

@@ -263,6 +263,41 @@ def test_compiled_ekf_equals_numpy_ekf(kind):
     np.testing.assert_allclose(b.log_likelihood, a.log_likelihood, rtol=1e-9, atol=TOL)
 
 
+@pytest.mark.parametrize("compiled", [True, False] if HAVE_NUMBA else [False])
+def test_the_kernels_prediction_is_F_x_and_F_P_F_T_plus_Q_for_every_pattern_of_empty_rows(compiled):
+    """The kernel's prediction, called directly with its scratch filled with NaN (so that a read of something never
+    written shows), against F x and F P F^T + Q: every pattern of rows of F without entries for n = 5 (none, first,
+    middle, last, all), with Q shared and Q per lane; compiled and as plain Python."""
+    from locbook.tracking import _kernels
+    predict = _kernels._nb_predict if compiled else _kernels._nb_predict.py_func
+    rng = np.random.default_rng(3)
+    n, W = 5, 6
+    F0 = rng.normal(size=(n, n))
+    A = rng.normal(size=(W, n, n))
+    P_lanes = A @ np.swapaxes(A, -1, -2) + np.eye(n)                  # (W, n, n), symmetric positive definite
+    B = rng.normal(size=(W, n, n))
+    Q_lanes = B @ np.swapaxes(B, -1, -2)
+    x_lanes = rng.normal(size=(W, n))
+    for pattern in range(2**n):
+        empty = [(pattern >> i) & 1 == 1 for i in range(n)]
+        F = F0 * ~np.array(empty)[:, None]
+        Fi, Fj = np.nonzero(F)
+        row = np.zeros(n, np.bool_)
+        row[Fi] = True
+        for shared in (True, False):
+            Q = Q_lanes[0] if shared else Q_lanes
+            Qw = np.empty((n, n, 0)) if shared else np.ascontiguousarray(np.moveaxis(Q_lanes, 0, -1))
+            x = np.ascontiguousarray(x_lanes.T)
+            P = np.ascontiguousarray(np.moveaxis(P_lanes, 0, -1))
+            xt, T1 = np.full((n, W), np.nan), np.full((n, n, W), np.nan)
+            predict(Fi.astype(np.int64), Fj.astype(np.int64), np.ascontiguousarray(F[Fi, Fj]), row,
+                    np.ascontiguousarray(Q_lanes[0]), Qw, x, P, xt, T1)
+            want_P = F @ P_lanes @ F.T + Q
+            np.testing.assert_allclose(x.T, x_lanes @ F.T, rtol=1e-12, atol=1e-12, err_msg=f"empty rows {empty}")
+            np.testing.assert_allclose(np.moveaxis(P, -1, 0), want_P, rtol=1e-12, atol=1e-12,
+                                       err_msg=f"empty rows {empty}, Q shared {shared}")
+
+
 @pytest.mark.skipif(not HAVE_NUMBA, reason="numba is not installed: only the numpy path exists")
 def test_rows_of_F_without_entries_before_others():
     """State (vx, vy, x, y) whose velocity is drawn afresh each step: F's first two rows are zero. The kernel's F P

@@ -90,3 +90,13 @@ def test_an_inconsistent_arithmetic_row_takes_the_miss_note_and_a_linked_row_nev
                         loose_note=LOOSE)
     assert row["verdict"] == "" and row["note"] == f"the source prints this quantity again at {p.where}; compared there"
     assert math.isnan(row["window_high"])
+
+
+def test_report_never_makes_the_runners_output_folder_again(tmp_path, monkeypatch):
+    """Under locbook run the output folder is the run's staging, made by the runner and removed when it stops; a
+    kernel that starts late must fail there, not make the folder (and the run's staging) again."""
+    gone = tmp_path / "staging" / "george-one-1"
+    monkeypatch.setenv("LOCBOOK_OUTPUT_DIR", str(gone))
+    with pytest.raises(FileNotFoundError, match="not an existing folder"):
+        lb.Report("toy")
+    assert not (tmp_path / "staging").exists()

@@ -156,6 +156,66 @@ def test_a_lost_dask_scheduler_leaves_no_worker_or_kernel_running(toy, request):
     assert sorted(str(p) for p in folder.rglob("*")) == before
 
 
+class _LostTask:
+    """A Dask future the client lost with its scheduler, whose task still runs where it was sent: told to stop
+    (``.stop``), it meets a kernel that is still starting, which makes its runtime folder again (as ipykernel makes
+    its connection file's parents) before the worker kills it, and then ends as run_worker_process does."""
+    status = "cancelled"
+    started: list = []
+
+    def __init__(self, task_path):
+        import threading
+        self.staging = Path(task_path).parent
+        self.thread = threading.Thread(target=self._task, daemon=True)
+        self.thread.start()
+        _LostTask.started.append(self.thread)
+
+    def _task(self):
+        import time
+        from locbook.suite.executors import _mark_ended
+        deadline = time.monotonic() + 30
+        while not (self.staging / ".stop").exists() and self.staging.exists() and time.monotonic() < deadline:
+            time.sleep(0.01)
+        time.sleep(0.5)                                                  # the worker takes a moment to stop
+        (self.staging / ".runtime").mkdir(parents=True, exist_ok=True)   # the starting kernel's last act
+        _mark_ended(self.staging)
+
+    def done(self):
+        return True
+
+    def result(self, timeout=None):
+        raise RuntimeError("cancelled")
+
+    def cancel(self):
+        pass
+
+
+def test_a_lost_task_still_stopping_leaves_no_staging_behind(toy, monkeypatch):
+    """The runner removes a lost task's staging only after the task ended (its .ended): removed earlier, a kernel
+    still starting makes its folder again (CI, stop 43: test_a_lost_dask_scheduler... found it left behind)."""
+    from types import SimpleNamespace
+    from locbook.suite import executors, runner
+
+    class LostCluster(executors.DaskExecutor):
+        def __init__(self, jobs, scheduler=None):     # a client whose scheduler is gone; no cluster is started
+            self.cluster, self.scheduler, self.capacity = None, "tcp://gone:8786", 1
+            self.client = SimpleNamespace(status="closed", close=lambda: None)
+
+        def submit(self, eid, task_path):
+            return _LostTask(task_path)
+
+    monkeypatch.setattr(runner, "make_executor", lambda kind, jobs, scheduler=None: LostCluster(jobs, scheduler))
+    monkeypatch.setattr(_LostTask, "started", [])
+    suite = load_suite(toy / "notebooks" / "experiments.toml")
+    result = run_suite(suite, suite.experiments[:1], "quick", report_root=toy / "reports", progress="quiet",
+                       executor="dask")
+    assert result.count("failed") == 1 and "lost the Dask scheduler" in result.outcomes[0].error, result.outcomes
+    for thread in _LostTask.started:
+        thread.join()             # the task has ended on its worker: nothing writes any more
+    folder = toy / "reports" / "quick"
+    assert not list((folder / ".staging").glob("*")), list((folder / ".staging").rglob("*"))
+
+
 # -- item 6: a full disk --------------------------------------------------------------------------------------
 
 DISK_FULL_EXIT = 3

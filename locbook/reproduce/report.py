@@ -104,10 +104,17 @@ class Report:
         out = os.environ.get("LOCBOOK_OUTPUT_DIR")
         if out:
             self.output_dir = Path(out)
+            # The runner makes this folder before it starts the notebook and removes it when the run stops or
+            # gives the experiment up; a kernel still starting then must not make it again (a stopped run's
+            # staging would outlive the run), so a missing folder is an error here, never created.
+            if not self.output_dir.is_dir():
+                raise FileNotFoundError(f"LOCBOOK_OUTPUT_DIR={out} is not an existing folder: under locbook run "
+                                        "the run that made it has stopped and removed it; set it to an "
+                                        "existing folder, or unset it to write to a scratch folder")
         else:
             # one scratch folder per user: a shared machine's users never write into each other's
             self.output_dir = (Path(tempfile.gettempdir()) / f"locbook-interactive-{_user()}" / self.experiment)
-        self.output_dir.mkdir(parents=True, exist_ok=True)
+            self.output_dir.mkdir(parents=True, exist_ok=True)
         self.numbers: list[dict] = []
         self.figures: list[dict] = []
         self.tables: list[dict] = []

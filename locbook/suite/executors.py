@@ -10,6 +10,8 @@ The Dask executor runs one experiment per task: the task starts the worker proce
 it (worker and kernel) when the runner writes ``.stop`` into the staging folder (an interrupt of the run, or a
 task the runner gave up on), when the task file disappears (the runner removed or moved the staging folder), or
 when the Dask worker running the task stops running (it lost its scheduler), so no experiment outlives the run.
+The task then writes ``.ended``; a runner that can no longer hear from the cluster waits for it before it removes
+the staging folder.
 """
 from __future__ import annotations
 
@@ -18,6 +20,7 @@ import os
 import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 from .spec import SuiteError
@@ -95,8 +98,8 @@ class LocalExecutor:
         if proc.poll() is None:
             proc.send_signal(signal.SIGTERM)
 
-    def wait_or_kill(self, proc, timeout_s: float) -> None:
-        _wait_or_kill(proc, timeout_s)
+    def wait_or_kill(self, proc, staging: Path, timeout_s: float) -> None:
+        _wait_or_kill(proc, timeout_s)      # the worker kills its kernel before it exits
 
 
 def _running_dask_worker():
@@ -122,13 +125,28 @@ def run_worker_process(task_path: str) -> int:
     dask_worker = _running_dask_worker()
     while True:
         try:
-            return proc.wait(0.2)
+            code = proc.wait(0.2)
+            break
         except subprocess.TimeoutExpired:
             pass
         lost = dask_worker is not None and getattr(dask_worker.status, "name", "running") not in ("running", "paused")
         if lost or stop.exists() or not task.exists():
-            proc.send_signal(signal.SIGTERM)
-            return _wait_or_kill(proc, _STOP_GRACE_S)
+            proc.send_signal(signal.SIGTERM)       # the worker kills its kernel, then exits
+            code = _wait_or_kill(proc, _STOP_GRACE_S)
+            break
+    _mark_ended(task.parent)
+    return code
+
+
+def _mark_ended(staging: Path) -> None:
+    """Write ``.ended`` into the staging folder once the worker process (and so its kernel) is gone: a runner that
+    lost this task removes the folder only then, or after a grace period. A kernel still starting up recreates its
+    runtime folder (ipykernel makes its connection file's parents), so removing earlier could leave the folder
+    behind. Written only into a folder that still exists: opening the file never creates one."""
+    try:
+        (staging / ".ended").write_text("")
+    except OSError:
+        pass
 
 
 class DaskExecutor:
@@ -225,12 +243,18 @@ class DaskExecutor:
         except OSError:
             pass
 
-    def wait_or_kill(self, future, timeout_s: float) -> None:
+    def wait_or_kill(self, future, staging: Path, timeout_s: float) -> None:
+        """Wait until the task's worker has ended (its ``.ended``), at most ``timeout_s`` plus the task's own grace
+        period: the future alone cannot say so once the client lost its scheduler, while the task may still be
+        running on its Dask worker."""
+        deadline = time.perf_counter() + timeout_s + _STOP_GRACE_S
         try:
             future.result(timeout=timeout_s + _STOP_GRACE_S)
         except Exception:  # timed out, cancelled or failed: the run is stopping either way
             pass
         future.cancel()
+        while staging.is_dir() and not (staging / ".ended").exists() and time.perf_counter() < deadline:
+            time.sleep(0.05)
 
 
 def make_executor(kind: str, jobs: int, scheduler: str | None = None):

@@ -69,7 +69,7 @@ KERNEL_NAME = "python3"
 _DEPENDENCIES = ("numpy", "scipy", "cvxpy", "clarabel", "osqp", "scs", "matplotlib", "papermill",
                  "nbclient", "nbconvert", "nbformat", "ipykernel", "numba")
 _WORKER_FILES = (".runtime", ".result.json", ".result.json.tmp", ".task.json", ".data-read.log", ".modules-read.log",
-                 ".stop")
+                 ".stop", ".ended")
 
 
 @dataclass(frozen=True)
@@ -713,6 +713,7 @@ def _run_locked(suite, tasks, profile, report_dir, data_roots, force, timeout_s,
     queue = deque(sorted(queue, key=_longest_first(report_dir, profile, [eid for eid, _ in queue])))
     staging_root = report_dir / ".staging" / f"{os.getpid()}-{uuid.uuid4().hex[:8]}"
     running: dict[str, tuple] = {}     # id -> (executor handle, staging, attempt, started or None)
+    abandoned: list[tuple] = []        # (handle, staging) of lost tasks asked to stop, which may still be running
 
     def launch(eid: str, attempt: int):
         staging = staging_root / f"{eid}-{attempt}"
@@ -757,6 +758,7 @@ def _run_locked(suite, tasks, profile, report_dir, data_roots, force, timeout_s,
             # the executor gave up on the task, which may still be running where it was sent: ask it to stop,
             # and leave its staging folder in place (removed with the run's) so that nothing writes elsewhere
             pool.stop(handle, staging)
+            abandoned.append((handle, staging))
             if pool.broken():
                 run.executor_error = pool.broken()
         if result.get("disk_full"):
@@ -815,9 +817,11 @@ def _run_locked(suite, tasks, profile, report_dir, data_roots, force, timeout_s,
         else:
             why = f"stopped: {run.executor_error}" if run.executor_error else "stopped"
         for eid, (handle, staging, attempt, started) in running.items():
-            pool.wait_or_kill(handle, max(0.0, deadline - time.perf_counter()))
+            pool.wait_or_kill(handle, staging, max(0.0, deadline - time.perf_counter()))
             finish(Outcome(eid, "interrupted", time.perf_counter() - started if started is not None else 0.0,
                            why, attempt))
+        for handle, staging in abandoned:     # their staging goes only once they have ended (or their time is up)
+            pool.wait_or_kill(handle, staging, max(0.0, deadline - time.perf_counter()))
         for eid, _attempt in queue:
             finish(Outcome(eid, "not run", 0.0))
         _remove_staging(staging_root)
@@ -831,10 +835,11 @@ def _run_locked(suite, tasks, profile, report_dir, data_roots, force, timeout_s,
 
 
 def _remove_staging(path: Path, within_s: float = 5.0) -> None:
-    """Remove a run's staging folder. A worker told to stop (a lost cluster's task, a kernel's last writes) may
-    still write in it for a moment, and a file created while ``rmtree`` walks the tree makes a folder's removal
-    fail: it is tried again until the folder is gone (nothing recreates it: the workers create files, never their
-    folder) or ``within_s`` has passed (the next run's :func:`_recover` removes what is left)."""
+    """Remove a run's staging folder, called once its workers have ended (their ``.ended``) or their grace
+    period is over. A kernel's last writes may still land for a moment, and a file created while ``rmtree`` walks
+    the tree makes a folder's removal fail: it is tried again until the folder is gone or ``within_s`` has passed
+    (the next run's :func:`_recover` removes what is left, such as the runtime folder a kernel still starting on
+    an unreachable node would make again)."""
     deadline = time.perf_counter() + within_s
     while True:
         shutil.rmtree(path, ignore_errors=True)

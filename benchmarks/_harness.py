@@ -15,10 +15,14 @@ workload. The largest workloads use :func:`once`: one call, timed and measured a
 
 Memory: the increase of the process's peak resident set (``VmHWM`` of ``/proc/self/status``, reset before the call
 through ``/proc/self/clear_refs``) over its resident set before the call: numpy's arrays and a compiled kernel's
-buffers alike. Before each call the free memory ``malloc`` keeps is returned to the system (``malloc_trim``), so that a
-call's arrays are counted even where they reuse memory a previous call freed; the timed calls otherwise run with the
-default ``malloc`` settings a user has. Where ``/proc`` is unavailable the row has no memory figure (``tracemalloc_peak_mb``
-measures numpy's arrays in a separate call).
+buffers alike. It is measured in one more call of each side after the timed ones (:func:`compare`, :func:`repeat`),
+before which the free memory ``malloc`` keeps is returned to the system (``malloc_trim``), so that the call's arrays
+are counted even where they would reuse memory a previous call freed. The timed calls run as a user's repeated calls
+do, with ``malloc``'s default reuse of freed memory. (Until stop 44 every timed call followed a ``malloc_trim`` too:
+each call then faulted its arrays in afresh, a cold start. For the EKF at 500 runs, which allocates about 120 MiB,
+that added 5-20 ms to a call of about 90 ms here, more right after the filterpy loop, when the kernel sometimes
+compacts memory for transparent huge pages.) :func:`once` times and measures the same call. Where ``/proc`` is
+unavailable the row has no memory figure (``tracemalloc_peak_mb`` measures numpy's arrays in a separate call).
 
 The garbage collector runs once before a measurement (and the objects alive then are frozen out of later
 collections), not before every call; only the last result of each side is kept.
@@ -58,6 +62,19 @@ def aligned(array) -> np.ndarray:
     out[...] = array
     assert out.ctypes.data % 64 == 0
     return out
+
+
+#: lane widths (runs side by side) at which the floors' rate kernels are measured; the floor takes the best
+LANE_WIDTHS = (64, 128, 256, 512)
+
+
+def best_lane_width(rate_of, widths=LANE_WIDTHS) -> tuple[int, dict]:
+    """``(width, rates)``: the lane width at which ``rate_of(width)`` (a floor's rate kernel, operations per second) is
+    highest, and the rate at every width. A floor is the operation count at the machine's best rate for the loop
+    shape: the compiled filters run blocks of up to 256 lanes, and here the 6 x 6 product kernel ran at 18.0, 21.1,
+    24.6 and 18.2 Gop/s at 64, 128, 256 and 512 lanes (the floors of stops 41-43 were taken at 64)."""
+    rates = {w: rate_of(w) for w in widths}
+    return max(rates, key=rates.get), rates
 
 
 def check_size(size: str) -> str:
@@ -200,19 +217,22 @@ def compare(locbook, reference, *, repeats: int = MIN_REPEATS, reference_scale: 
     for i in range(repeats):
         order = (True, False) if i % 2 == 0 else (False, True)
         for mine in order:
-            c = call(locbook if mine else reference, memory)
+            c = call(locbook if mine else reference, memory=False)
             last[0 if mine else 1], c.result = c.result, None          # keep only each side's last result
             (ours if mine else theirs).append(c)
     load1 = _load()
     text = _agreement(agree, last[0], last[1])
-    peaks = [c.peak_mb for c in ours if c.peak_mb is not None]
-    ref_peaks = [c.peak_mb for c in theirs if c.peak_mb is not None]
+    peak, ref_peak = (_peak_call(locbook), _peak_call(reference)) if memory else (None, None)
     walls = [c.wall_s for c in ours]
-    return Measurement(_median(walls), _median([c.cpu_s for c in ours]), (min(walls), max(walls)), repeats,
-                       max(peaks) if peaks else None,
+    return Measurement(_median(walls), _median([c.cpu_s for c in ours]), (min(walls), max(walls)), repeats, peak,
                        _median([c.wall_s for c in theirs]) * reference_scale,
                        _median([c.cpu_s for c in theirs]) * reference_scale,
-                       max(ref_peaks) if ref_peaks else None, reference_scale, text, (load0, load1), tuple(last))
+                       ref_peak, reference_scale, text, (load0, load1), tuple(last))
+
+
+def _peak_call(fn) -> float | None:
+    """The peak memory of one more, untimed call of ``fn`` (module docstring)."""
+    return call(fn, memory=True).peak_mb
 
 
 def _agreement(agree, *results) -> str:
@@ -234,15 +254,15 @@ def repeat(locbook, *, repeats: int = MIN_REPEATS, agree=None, memory: bool = Tr
     load0 = _load()
     ours, result = [], None
     for _ in range(repeats):
-        c = call(locbook, memory)
+        c = call(locbook, memory=False)
         result, c.result = c.result, None
         ours.append(c)
     load1 = _load()
     text = _agreement(agree, result)
     walls = [c.wall_s for c in ours]
-    peaks = [c.peak_mb for c in ours if c.peak_mb is not None]
     return Measurement(_median(walls), _median([c.cpu_s for c in ours]), (min(walls), max(walls)), repeats,
-                       max(peaks) if peaks else None, agreement=text, load=(load0, load1), results=(result, None))
+                       _peak_call(locbook) if memory else None, agreement=text, load=(load0, load1),
+                       results=(result, None))
 
 
 def once(locbook, *, agree=None) -> Measurement:

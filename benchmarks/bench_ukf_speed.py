@@ -27,8 +27,8 @@ its Cholesky factor (m^3 / 3), P_xz = L D (n (n + 1) m), the gain (2 n m^2), the
 (m (m + 1) (n + 1)), M = L - c K D^T (2 n^2 (m + 1)), R~ K^T (2 n m^2) and P+ = M M^T / c + K R~ K^T (n (n + 1) (2n +
 2m + 1) / 2); the prediction F x, F P F^T + Q with F's nonzero entries. Besides, transcendental calls: 6 anchors x 5
 distinct points logarithms, 15 distinct headings' sine and cosine. The floor is the FLOPs at the machine's rate for
-this loop shape (multiply-adds over 64 runs side by side, measured here by a numba loop; ~1 FLOP per ns is the scalar
-rate) plus the calls at their measured cost.
+this loop shape (multiply-adds over runs side by side, measured here by a numba loop at the best of 64, 128, 256 and
+512 lanes; ~1 FLOP per ns is the scalar rate) plus the calls at their measured cost.
 """
 from __future__ import annotations
 
@@ -173,19 +173,27 @@ def machine_rates() -> dict:
     (the kernels' loop shape) in FLOP per ns, and the cost of a logarithm and of a sine + cosine in ns (best of 5)."""
     fma, logs, trig = _rate_kernels()
     rng = np.random.default_rng(0)
-    A, B, C = hx.aligned(rng.random((8, 8, 64))), hx.aligned(rng.random((8, 64))), hx.aligned(np.zeros((8, 64)))
-    a, out = rng.random(64) + 0.5, np.zeros(64)
-    rates = {}
-    for name, fn, args, count in (("flop_per_ns", fma, (A, B, C), 2 * 8 * 8 * 64), ("log_ns", logs, (a, out), 64),
-                                  ("sincos_ns", trig, (a, out), 64)):
+
+    def best_time(fn, args, reps):
         fn(*args, 1)
-        reps = 2000 if name == "flop_per_ns" else 10000
         best = np.inf
         for _ in range(5):
             t = time.process_time()
             fn(*args, reps)
             best = min(best, time.process_time() - t)
-        rates[name] = count * reps / best / 1e9 if name == "flop_per_ns" else best / (count * reps) * 1e9
+        return best
+
+    def flop_rate(W):            # FLOP per second of the multiply-adds at W lanes
+        A, B, C = (hx.aligned(rng.random(shape)) for shape in ((8, 8, W), (8, W), (8, W)))
+        reps = max(1, 2000 * 64 // W)
+        return 2 * 8 * 8 * W * reps / best_time(fma, (A, B, C), reps)
+
+    width, by_width = hx.best_lane_width(flop_rate)
+    a, out = rng.random(64) + 0.5, np.zeros(64)
+    rates = {"flop_per_ns": by_width[width] / 1e9, "lanes": width,
+             "by_lanes": ", ".join(f"{w}: {r / 1e9:.1f}" for w, r in by_width.items())}
+    for name, fn, args in (("log_ns", logs, (a, out)), ("sincos_ns", trig, (a, out))):
+        rates[name] = best_time(fn, args, 10000) / (64 * 10000) * 1e9
     return rates
 
 
@@ -236,9 +244,10 @@ def run(size: str = "full"):
                                f"measured {ns:.0f} ns per run-step, floor {fl['floor_ns']:.0f} ns "
                                f"({ns / fl['floor_ns']:.1f}x)"))
     yield hx.row("UKF (inertial + RSS), compiled, vs its arithmetic floor", f"U-path, {runs} runs x {T} steps (n = 8, "
-                 "17 sigma points, m = 3 + 6)", floor, f"arithmetic floor at {r['flop_per_ns']:.2f} FLOP/ns (64 lanes, "
-                 f"measured) + log {r['log_ns']:.1f} ns, sin + cos {r['sincos_ns']:.1f} ns", goal=0.2,
-                 note=f"ratio = floor / locbook; at 1 FLOP/ns the floor would be {fl['floor_1flop_ns']:.0f} ns")
+                 "17 sigma points, m = 3 + 6)", floor, f"arithmetic floor at {r['flop_per_ns']:.2f} FLOP/ns ({r['lanes']} "
+                 f"lanes, measured) + log {r['log_ns']:.1f} ns, sin + cos {r['sincos_ns']:.1f} ns", goal=0.2,
+                 note=f"ratio = floor / locbook; the rate at its best lane width (FLOP/ns by lanes: {r['by_lanes']}); "
+                      f"at 1 FLOP/ns the floor would be {fl['floor_1flop_ns']:.0f} ns")
 
 
 if __name__ == "__main__":

@@ -187,8 +187,10 @@ def markdown(rows: list[dict], size: str, facts: dict, seconds: float, notes: st
              "locbook of the medians of paired, alternated calls in one process (at least 5 of each; "
              "`benchmarks/_harness.py`), in CPU time and in wall time; a reference marked \"scaled\" ran on a "
              "subset of the runs and its times were scaled to the whole workload (locbook always runs the whole "
-             "workload). Peak memory is the increase of the process's peak resident set during the call (numpy "
-             "arrays and compiled kernels' buffers alike), in MiB. The agreement column compares the two results "
+             "workload). Peak memory is the increase of the process's peak resident set during one more call of "
+             "each side after the timed ones, with malloc's free memory returned to the system first (numpy "
+             "arrays and compiled kernels' buffers alike), in MiB; a workload timed once is timed and measured "
+             "in the same call. The agreement column compares the two results "
              "of the same run; the load column is the 1-minute load average before and after the measurement. "
              "BLAS runs on one thread.", "", "| machine | |", "|---|---|"]
     lines += [f"| {k} | {_cell(v)} |" for k, v in facts.items()]

@@ -115,7 +115,8 @@ def test_compare_alternates_and_measures_both_sides():
         return sum(range(200_000)) and sum(range(50_000))
 
     m = harness.compare(ours, theirs, repeats=5, agree=lambda a, b: f"{a == b}")
-    assert order == ["L", "R", "R", "L", "L", "R", "R", "L", "L", "R"]
+    # the timed pairs alternate; then one more call of each measures its memory, untimed
+    assert order == ["L", "R", "R", "L", "L", "R", "R", "L", "L", "R"] + ["L", "R"]
     assert m.repeats == 5 and m.agreement == "True"
     assert 2.0 < m.ratio_cpu < 8.0
     assert 20.0 < harness.compare(ours, theirs, reference_scale=10.0).ratio_cpu < 80.0
@@ -128,3 +129,6 @@ def test_peak_memory_counts_a_large_array():
     if c.peak_mb is None:
         pytest.skip("no /proc/self/clear_refs here")
     assert c.peak_mb > 60
+    # compare measures it in its extra, untimed call of each side
+    m = harness.compare(lambda: np.ones(8 * 2**20).sum(), lambda: np.ones(2**10).sum())
+    assert m.peak_mb > 60 and m.reference_peak_mb < 30

@@ -173,10 +173,10 @@ def _both(F, Q, x0, P0, streams, **kw):
     return a, b, compiled is not None
 
 
-def _case(kind, rng):
-    """A small multi-stream problem exercising one option of the compiled EKF."""
+def _case(kind, rng, B=5):
+    """A small multi-stream problem of ``B`` runs exercising one option of the compiled EKF."""
     model = lb.constant_velocity(0.5, 0.05)
-    B, T = 5, 60
+    T = 60
     anchors = np.array([[0.0, 0.0], [12.0, 0.0], [12.0, 9.0], [0.0, 9.0], [6.0, 4.5]])
     truth = np.cumsum(rng.normal(0, 0.3, (B, T, 2)), axis=1) + [6.0, 4.5]
     ch = lb.PathLossModel(-40.0, 2.5, 3.0)
@@ -261,6 +261,22 @@ def test_compiled_ekf_equals_numpy_ekf(kind):
     np.testing.assert_array_equal(b.nis_dof, a.nis_dof)
     np.testing.assert_allclose(b.nis, a.nis, rtol=1e-9, atol=TOL)
     np.testing.assert_allclose(b.log_likelihood, a.log_likelihood, rtol=1e-9, atol=TOL)
+
+
+@pytest.mark.skipif(not HAVE_NUMBA, reason="numba is not installed: only the numpy path exists")
+@pytest.mark.parametrize("kind", ["parallel", "serial_descending"])
+def test_compiled_ekf_over_several_blocks_equals_numpy_ekf(kind, monkeypatch):
+    """70 runs in blocks of at most 32 lanes: three blocks of 24, the last padded with two copies of the last run,
+    equal the numpy EKF run by run (so do the padded lanes' runs: they are not written twice)."""
+    monkeypatch.setattr(K, "_BLOCK_LANES", 32)
+    assert K._block_width(70) == 24 and K._block_width(500) == 32 and K._block_width(64) == 32
+    F, Q, x0, P0, streams, kw = _case(kind, np.random.default_rng(11), B=70)
+    a, b, compiled = _both(F, Q, x0, P0, streams, **kw)
+    assert compiled and b.x.shape[0] == 70
+    np.testing.assert_allclose(b.x, a.x, rtol=0, atol=TOL)
+    np.testing.assert_allclose(b.P, a.P, rtol=0, atol=TOL)
+    np.testing.assert_array_equal(b.nis_dof, a.nis_dof)
+    np.testing.assert_allclose(b.nis, a.nis, rtol=1e-9, atol=TOL)
 
 
 @pytest.mark.parametrize("compiled", [True, False] if HAVE_NUMBA else [False])
@@ -440,3 +456,20 @@ def test_zero_steps_do_not_turn_the_compiled_ekf_off(monkeypatch, kernel):
     monkeypatch.setattr(K, "_NUMBA_ENABLED", False)
     ref = lb.extended_kalman_filter(model.F, model.Q, x0, P0, [lb.LinearMeasurement(z, H, R)])
     np.testing.assert_allclose(res.x, ref.x, rtol=0, atol=TOL)
+
+
+@pytest.mark.parametrize("widths", [(2, 4), (1, 3, 2), (2, 2), (3, 0, 1)])
+def test_streams_side_by_side_equal_numpys_concatenation(widths):
+    """The kernels' readings array, copied step by step as blocks of bytes, is np.concatenate's on the last axis for
+    contiguous streams, slices of longer ones (the scenario's accelerometer), broadcast runs, reversed columns (numpy's
+    own copy) and float32; NaN readings are kept bit for bit."""
+    rng = np.random.default_rng(7)
+    zs = [rng.normal(size=(5, 9, m)) for m in widths]
+    zs[0][2, 3, 0] = np.nan
+    cases = [zs, [z[:, 1:] for z in zs], [np.broadcast_to(z[:1], z.shape) for z in zs], [z[..., ::-1] for z in zs],
+             [z.astype(np.float32) for z in zs], [np.asfortranarray(z) for z in zs]]
+    for streams in cases:
+        got = K._side_by_side(streams)
+        want = np.concatenate([np.asarray(z, float) for z in streams], axis=-1)
+        assert got.dtype == np.float64 and got.flags.c_contiguous and got.shape == want.shape
+        assert np.array_equal(got.view(np.int64), want.view(np.int64))

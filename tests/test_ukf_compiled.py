@@ -142,9 +142,14 @@ def test_compiled_ukf_equals_numpy_ukf(kind):
     _assert_same(a, b)
 
 
-@pytest.mark.parametrize("B", [1, 70])
-def test_blocks_of_runs_and_a_single_run(B):
-    """70 runs: two blocks of 35 lanes; 1 run: one lane. Each run equals the same run filtered alone (numpy)."""
+@pytest.mark.parametrize("B, most_lanes", [(1, None), (70, None), (70, 32)])
+def test_blocks_of_runs_and_a_single_run(B, most_lanes, monkeypatch):
+    """70 runs: one block of 70 lanes, or with blocks of at most 32 lanes three blocks of 24 (the last padded with two
+    copies of the last run); 1 run: one lane. Each run equals the same run filtered alone (numpy)."""
+    from locbook.tracking import _compiled
+    if most_lanes:
+        monkeypatch.setattr(_compiled, "_BLOCK_LANES", most_lanes)
+        assert _compiled._block_width(B) == 24
     F, Q, x0, P0, streams, kw = _case("rss_serial_given_with_fixes", np.random.default_rng(3), B=B, T=30)
     a, b, compiled = _both(F, Q, x0, P0, streams, **kw)
     assert compiled

@@ -2,8 +2,9 @@
 disk), with the serial RSS order the UKF kernels share and the NIS guard's pass. Imported only when a compiled path
 runs (:func:`locbook.tracking._compiled._compiled_ekf`, the UKF kernels), so that ``import locbook`` never loads
 numba. Without numba they are plain Python (the same arithmetic, slowly: the tests run them that way). Each kernel
-works on ``W`` runs at once on the innermost axis (the last axis of its arrays): ``_LANES`` runs, or all of them when
-there are fewer (a small batch pays for its own runs only)."""
+works on ``W`` runs at once on the innermost axis (the last axis of its arrays): blocks of equal width up to 256 runs
+(:func:`locbook.tracking._compiled._block_width`), or all of them when there are fewer (a small batch pays for its own
+runs only)."""
 from __future__ import annotations
 
 import numpy as np
@@ -14,7 +15,6 @@ from ._vecmath import _log10_block, _log_positive
 # the filter's arithmetic may fuse a * b + c into one multiply-add (one rounding instead of two: the results agree
 # with the numpy loop's to round-off, as before): 9-14 % faster here, where the CPU has FMA (a no-op where it has not)
 _jit_fma = _jit(contract=True)
-_LANES = 64     # runs per block of the compiled EKF: the innermost axis, long enough for LLVM to vectorise it
 _LOG_2PI = float(np.log(2.0 * np.pi))
 _LN_10 = float(np.log(10.0))
 _INERTIAL = 4   # the inertial stream's kind (= _compiled._INERTIAL); 0-3: linear and RSS, parallel and serial
@@ -349,15 +349,14 @@ def _descending_order(Z, run, k, c0, m, sel, key):
 @_jit_fma
 def _nb_ekf(Fi, Fj, Fv, Q, x0, P0, predict_first, slot, active, kind, col, nz, nnz, Z, H, R, A, P0c, PLE, SIG, dims,
             ref_d, clamp, anchor_sigma, tag_h, pidx, npos, descending, iner, out_x, out_P, out_nis, out_dof,
-            out_ll):
+            out_ll, W):
     """The EKF time loop of :func:`locbook.tracking._loop._run` with :func:`locbook.tracking.streams._ekf_update`, over
-    blocks of ``W = min(_LANES, B)`` runs (the last block padded with copies of the last run), with each run's NIS, its dof and
+    blocks of ``W`` runs (the last block padded with copies of the last run), with each run's NIS, its dof and
     log-likelihood at every step (``out_nis``, ``out_dof``, ``out_ll`` ``(B, T)``; NaN, 0 and NaN where no update).
     Stream kinds: 0/1 linear parallel/serial, 2/3 RSS parallel/serial, 4 inertial (parallel, :func:`_nb_inertial_row`
     with the parameters ``iner[s]``). Returns 0, or 1 + a run whose update failed (the caller then redoes the filter in
     numpy, which raises the library's error)."""
     B, T, n, ns = Z.shape[0], Z.shape[1], x0.shape[1], kind.shape[0]
-    W = min(_LANES, B)
     mmax = 1
     for s in range(ns):
         mmax = max(mmax, col[s + 1] - col[s])

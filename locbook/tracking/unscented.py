@@ -447,16 +447,6 @@ def unscented_kalman_filter(F, Q, x0, P0, measurements, *, B=None, u=None, alpha
     return _flag(replace(res, floored_updates=guard[0]), window, probability)
 
 
-_LANES_MAX = 64      # runs per block of the compiled UKF (the innermost axis of its buffers)
-
-
-def _lanes(B: int) -> int:
-    """Runs per block of the compiled UKF for ``B`` runs: blocks of equal size up to ``_LANES_MAX`` (500 runs: 8
-    blocks of 63 lanes; measured faster than 64, whose power-of-two strides collide in the cache)."""
-    blocks = -(-B // _LANES_MAX)
-    return -(-B // blocks)
-
-
 def _compiled_ukf(setup, measurements, predict_first: bool, weights: UnscentedWeights, innovation_noise: bool):
     """The UKF by the compiled kernel (:mod:`locbook.tracking._ukf_kernels`) when it applies (numba installed and
     enabled, F without run axes (Q may have them) and no control input, LinearMeasurement, RssMeasurement and inertial streams,
@@ -484,7 +474,7 @@ def _compiled_ukf(setup, measurements, predict_first: bool, weights: UnscentedWe
     S = setup.steps.size
     Fi, Fj = np.nonzero(F)
     P0 = setup.P[None] if setup.P.ndim == 2 else np.broadcast_to(setup.P, batch + (n, n)).reshape(B, n, n)
-    lanes = _lanes(B)
+    lanes = _compiled._block_width(B)
     out_x, out_P = np.empty((B, S, n)), np.empty((B, S, n, n))
     out_nis, out_dof, out_ll = np.empty((B, T)), np.empty((B, T), np.int64), np.empty((B, T))
     out_floored = np.zeros(B, np.int64)

@@ -215,3 +215,29 @@ def test_switch_and_minimum_size_select_numpy(monkeypatch):
     monkeypatch.setattr(localization, "_BOX_NUMBA_MIN_PROBLEMS", 300)
     lb.lateration_box_ls(anchors, d, lo, hi)
     assert calls == [1, 1]                                          # compiled
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_the_guided_set_of_each_pattern_holds_those_coordinates_at_those_bounds(dim):
+    """``_box_guided_sets`` maps every free/lower/upper pattern to the active set whose candidate holds exactly those
+    coordinates at those bounds (whatever p*), and ``_box_guided_code`` reads the pattern off p*."""
+    from itertools import product
+    rng = np.random.default_rng(dim)
+    a_mat = rng.normal(size=(dim + 2, dim))
+    lo, hi = -rng.uniform(1, 2, dim), rng.uniform(1, 2, dim)
+    weights, offsets, start, n_kkt, guided = localization._box_kernel_tables(
+        tuple(map(tuple, a_mat.tolist())), tuple(lo), tuple(hi))
+    assert guided[0] == -1 and sorted(guided[1:]) == list(range(3**dim - 1))
+    p = rng.normal(size=dim) * 5
+    for code, kinds in enumerate(product((0, 1, 2), repeat=dim)):
+        if code == 0:
+            continue
+        s = guided[code]
+        r0 = start[s] + n_kkt[s]
+        cand = weights[r0:r0 + dim] @ p + offsets[r0:r0 + dim]
+        for j, kind in enumerate(kinds):
+            if kind:
+                assert cand[j] == (lo[j] if kind == 1 else hi[j])
+        assert n_kkt[s] == 2 * dim - sum(k > 0 for k in kinds)
+        outside = np.where(np.array(kinds) == 1, lo - 1.0, np.where(np.array(kinds) == 2, hi + 1.0, 0.5 * (lo + hi)))
+        assert localization._box_guided_code(outside[None], lo, hi)[0] == code

@@ -8,7 +8,8 @@ problem by problem: the active sets' affine maps ``weights @ p* + offsets`` (:fu
 _box_active_sets`, flattened by :func:`~locbook.static.localization._box_kernel_tables`) are evaluated for one
 unconstrained minimiser ``p*`` at a time, in the same order (by the number of coordinates at a bound, then
 ``itertools.product`` order), the first set whose KKT quantities are all ``>= tol`` settling the problem (the numpy
-search's ``argmax``); no temporaries per set, and a problem stops at its first KKT set.
+search's ``argmax``); no temporaries per set, and a problem stops at its first KKT set. As in numpy, the set that holds
+each coordinate outside the box at the bound it crosses (``guided``) is tried first.
 """
 from __future__ import annotations
 
@@ -29,12 +30,14 @@ def _nb_candidate(weights, offsets, r0, p, cand):
 
 
 @_jit
-def _nb_box_ls(p_star, lo, hi, bound, weights, offsets, start, n_kkt, a_mat, force_fallback, pos, ok):
+def _nb_box_ls(p_star, lo, hi, bound, weights, offsets, start, n_kkt, guided, a_mat, force_fallback, pos, ok):
     """Box LS of every unconstrained minimiser ``p_star (n, dim)``, in place into ``pos (n, dim)`` and ``ok (n,)``.
 
     A problem with a non-finite ``p*`` fails (NaN, ``ok`` False); one inside the box keeps ``p*`` bit for bit; for
-    the others the active sets ``s`` (rows ``start[s]``: ``n_kkt[s]`` KKT quantities, then the ``dim`` coordinates of
-    the candidate) are visited in order and the first whose quantities are all ``>= tol`` (``tol = -1e-9 (1 + bound +
+    the others the set ``guided[code]`` (:func:`~locbook.static.localization._box_guided_sets`: each coordinate outside
+    the box held at the bound it crosses) is tried first, then the active sets ``s`` (rows ``start[s]``: ``n_kkt[s]``
+    KKT quantities, then the ``dim`` coordinates of the candidate) are visited in order; the first whose quantities
+    are all ``>= tol`` (``tol = -1e-9 (1 + bound +
     max_j |p*_j|)``, ``bound`` the box's largest absolute bound) gives the answer. If none does (rounding;
     ``force_fallback`` makes it so for the tests), the primal-feasible candidate (within ``tol``) of least
     ``|A (p - p*)|^2`` is taken, the first of equal ones. The answer is clipped into the box, as in numpy.
@@ -70,7 +73,14 @@ def _nb_box_ls(p_star, lo, hi, bound, weights, offsets, start, n_kkt, a_mat, for
         tol = -1e-9 * (1.0 + bound + size)
         found = False
         if not force_fallback:
-            for s in range(n_sets):
+            code = 0
+            for j in range(dim):
+                code = 3 * code + (1 if p[j] < lo[j] else (2 if p[j] > hi[j] else 0))
+            first = guided[code]
+            for t in range(-1, n_sets):
+                s = first if t < 0 else t
+                if s < 0 or (t >= 0 and s == first):      # (the guided set was tried first)
+                    continue
                 r0 = start[s]
                 kkt = True
                 for r in range(r0, r0 + n_kkt[s]):

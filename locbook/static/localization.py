@@ -702,7 +702,9 @@ def _box_ls_exact(a_mat, b, lower, upper):
     """Box-constrained LS of every row of ``b`` ``(k, rows)``, exactly, by KKT active-set enumeration.
 
     The unconstrained minimiser ``p* = pinv(A) b`` (that of :func:`lateration_ls`) is the answer where it lies
-    in the box. For the other problems the active sets (:func:`_box_active_sets`) are visited by the number of
+    in the box. For the other problems the set that holds each coordinate outside the box at the bound it crosses
+    is tried first (:func:`_box_guided_code`: the answer of most problems); the problems it does not settle visit
+    the active sets (:func:`_box_active_sets`) by the number of
     coordinates held at a bound, 1 to ``dim``, every set of a level tested for the problems still open with one
     matrix product per block of problems (blocks keep the temporaries small: on some machines fresh large
     arrays cost more in page faults than the arithmetic). A candidate is a KKT point if it is primal feasible (its free coordinates within the
@@ -726,10 +728,10 @@ def _box_ls_exact(a_mat, b, lower, upper):
         p_star = b @ pinv_t
     kernels = _box_kernel_module(len(b))
     if kernels is not None:     # the same search, problem by problem in one compiled loop (no temporaries per set)
-        weights, offsets, start, n_kkt = _box_kernel_tables(key, lower, upper)
+        tables = _box_kernel_tables(key, lower, upper)
         pos, ok = np.empty(p_star.shape), np.empty(len(b), bool)
         kernels._nb_box_ls(np.ascontiguousarray(p_star), lo, hi, float(np.max(np.maximum(np.abs(lo), np.abs(hi)))),
-                           weights, offsets, start, n_kkt, np.ascontiguousarray(a_mat, dtype=float), False, pos, ok)
+                           *tables, np.ascontiguousarray(a_mat, dtype=float), False, pos, ok)
         return pos, ok
     # per coordinate: numpy reductions over an axis of 2 or 3 are slow
     ok, inside = np.ones(len(b), bool), np.ones(len(b), bool)
@@ -751,12 +753,11 @@ _BOX_NUMBA_MIN_PROBLEMS = 256
 def _box_trial():
     """A tiny problem for the box-LS kernel (compiled or loaded once per session: _compiled._kernel_module)."""
     a_mat = np.array([[1.0, 0.0], [0.0, 1.0]])
-    weights, offsets, start, n_kkt = _box_kernel_tables(((1.0, 0.0), (0.0, 1.0)), (0.0, 0.0), (1.0, 1.0))
+    tables = _box_kernel_tables(((1.0, 0.0), (0.0, 1.0)), (0.0, 0.0), (1.0, 1.0))
     pos, ok = np.empty((1, 2)), np.empty(1, bool)
 
     def run(kernels):
-        kernels._nb_box_ls(np.array([[2.0, 0.5]]), np.zeros(2), np.ones(2), 1.0, weights, offsets, start, n_kkt,
-                           a_mat, False, pos, ok)
+        kernels._nb_box_ls(np.array([[2.0, 0.5]]), np.zeros(2), np.ones(2), 1.0, *tables, a_mat, False, pos, ok)
     return run
 
 
@@ -783,7 +784,29 @@ def _box_flat_tables(levels, dim: int):
         first += weights.shape[0]
     return (np.ascontiguousarray(np.concatenate([lv[0] for lv in levels]), dtype=float),
             np.ascontiguousarray(np.concatenate([lv[1][:, 0] for lv in levels]), dtype=float),
-            np.array(start, np.int64), np.array(n_kkt, np.int64))
+            np.array(start, np.int64), np.array(n_kkt, np.int64), _box_guided_sets(dim))
+
+
+def _box_guided_sets(dim: int) -> np.ndarray:
+    """``guided[code]``: the index (in :func:`_box_flat_tables`' order) of the active set that holds coordinate ``j``
+    free (``kind 0``), at its lower (1) or at its upper bound (2), ``code = sum_j kind_j 3^(dim - 1 - j)``; -1 for
+    all free. The sets are ordered by the number of bounds held, then in ``itertools.product`` order (as
+    :func:`_box_active_sets` builds them)."""
+    patterns = list(product((0, 1, 2), repeat=dim))
+    order = sorted(range(1, len(patterns)), key=lambda c: (sum(k > 0 for k in patterns[c]), c))
+    guided = np.full(len(patterns), -1, np.int64)
+    guided[order] = np.arange(len(order))
+    return guided
+
+
+def _box_guided_code(p_star, lo, hi) -> np.ndarray:
+    """The code (:func:`_box_guided_sets`) of the active set that holds each coordinate of ``p_star (n, dim)``
+    outside the box at the bound it crosses: the KKT set of most problems (those whose coordinates do not pull one
+    another across the bounds: 79 % of the 3-D benchmark's problems outside the box)."""
+    code = np.zeros(len(p_star), np.int64)
+    for j in range(p_star.shape[1]):
+        code = 3 * code + np.where(p_star[:, j] < lo[j], 1, np.where(p_star[:, j] > hi[j], 2, 0))
+    return code
 
 
 @lru_cache(maxsize=64)
@@ -801,8 +824,24 @@ def _box_active_set_search(p_star, lo, hi, levels, a_mat):
         size = np.maximum(size, np.abs(p_star[:, j]))
     tol = -1e-9 * (1.0 + np.max(np.maximum(np.abs(lo), np.abs(hi))) + size)
     out = np.empty((n, dim))
-    open_ = np.arange(n)
+    # first, per problem, the set that holds each coordinate outside the box at the bound it crosses
+    flat_w, flat_c, starts, n_kkts, guided = _box_flat_tables(levels, dim)
+    sets = guided[_box_guided_code(p_star, lo, hi)]
+    still = []
+    for s in np.unique(sets):
+        idx = np.flatnonzero(sets == s)
+        if s < 0:                         # inside the box (not for this function): the search decides
+            still.append(idx)
+            continue
+        r0, k = starts[s], n_kkts[s]
+        rows = p_star[idx] @ flat_w[r0:r0 + k + dim].T + flat_c[r0:r0 + k + dim]      # (problems, rows)
+        settled = rows[:, :k].min(axis=1) >= tol[idx]
+        out[idx[settled]] = rows[settled, k:]
+        still.append(idx[~settled])
+    open_ = np.concatenate(still) if still else np.arange(0)
     for weights, offsets, n_sets in levels:
+        if not open_.size:
+            break
         # blocks of problems keep the temporaries small (large fresh arrays cost page faults, not arithmetic)
         block = max(256, _BOX_BLOCK_VALUES // weights.shape[0])
         still = []

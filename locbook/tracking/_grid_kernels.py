@@ -24,7 +24,7 @@ from .._numba import jit
 from ._vecmath import _exp_nonpositive  # noqa: F401 - the tests reach it here too
 
 _FLOOR = 1e-300                     # the numpy loop's floor on the predicted belief (its log(max(b, 1e-300)))
-_BLOCK = 1024                       # cells per partial sum of the reductions (error ~ (block/4 + C/block) ulp)
+_BLOCK = 1024                       # cells per block of the reductions (:func:`_reduction`)
 
 
 
@@ -133,66 +133,52 @@ def _nb_predict(belief, zinv, dead, scatter, gather, dims, xb, lx, tx, bx, yb, l
             pred[r, c] = out[gather[c]]
 
 
-@_jit
+def _reduction(fn):
+    """A reduction loop of the update: reassociation allowed (:func:`locbook._numba.jit`), so that LLVM accumulates it
+    in vector registers side by side: 4-6x faster than four scalar partial sums here. Each sum still runs in blocks of
+    ``_BLOCK`` cells whose partial results are added in order, which bounds the error by that of ``_BLOCK`` / (the
+    partial sums of a block) plus ``C / _BLOCK`` additions."""
+    return jit(fn, contract=True, reassoc=True)
+
+
+@_reduction
 def _sum(a, n):
-    """``sum(a[:n])`` in blocks of ``_BLOCK`` with four partial sums each."""
+    """``sum(a[:n])`` in blocks of ``_BLOCK``."""
     total = 0.0
     for start in range(0, n, _BLOCK):
-        stop = min(start + _BLOCK, n)
-        s0 = s1 = s2 = s3 = 0.0
-        i = start
-        while i + 4 <= stop:
-            s0 += a[i]
-            s1 += a[i + 1]
-            s2 += a[i + 2]
-            s3 += a[i + 3]
-            i += 4
-        while i < stop:
-            s0 += a[i]
-            i += 1
-        total += (s0 + s1) + (s2 + s3)
+        s = 0.0
+        ab = a[start:min(start + _BLOCK, n)]        # a view: its index starts at 0, which LLVM vectorises
+        for i in range(ab.size):
+            s += ab[i]
+        total += s
     return total
 
 
-@_jit
+@_reduction
 def _dot(a, b, n):
     """``sum(a[:n] * b[:n])`` in blocks, as :func:`_sum`."""
     total = 0.0
     for start in range(0, n, _BLOCK):
+        s = 0.0
         stop = min(start + _BLOCK, n)
-        s0 = s1 = s2 = s3 = 0.0
-        i = start
-        while i + 4 <= stop:
-            s0 += a[i] * b[i]
-            s1 += a[i + 1] * b[i + 1]
-            s2 += a[i + 2] * b[i + 2]
-            s3 += a[i + 3] * b[i + 3]
-            i += 4
-        while i < stop:
-            s0 += a[i] * b[i]
-            i += 1
-        total += (s0 + s1) + (s2 + s3)
+        ab, bb = a[start:stop], b[start:stop]
+        for i in range(ab.size):
+            s += ab[i] * bb[i]
+        total += s
     return total
 
 
-@_jit
+@_reduction
 def _centred(w, x, mx, y, my, n):
     """``sum(w (x - mx) (y - my))`` over ``n`` cells, in blocks, as :func:`_sum`."""
     total = 0.0
     for start in range(0, n, _BLOCK):
+        s = 0.0
         stop = min(start + _BLOCK, n)
-        s0 = s1 = s2 = s3 = 0.0
-        i = start
-        while i + 4 <= stop:
-            s0 += w[i] * (x[i] - mx) * (y[i] - my)
-            s1 += w[i + 1] * (x[i + 1] - mx) * (y[i + 1] - my)
-            s2 += w[i + 2] * (x[i + 2] - mx) * (y[i + 2] - my)
-            s3 += w[i + 3] * (x[i + 3] - mx) * (y[i + 3] - my)
-            i += 4
-        while i < stop:
-            s0 += w[i] * (x[i] - mx) * (y[i] - my)
-            i += 1
-        total += (s0 + s1) + (s2 + s3)
+        wb, xb, yb = w[start:stop], x[start:stop], y[start:stop]
+        for i in range(wb.size):
+            s += wb[i] * (xb[i] - mx) * (yb[i] - my)
+        total += s
     return total
 
 
@@ -218,74 +204,41 @@ def _top(ll, n):
     return max(max(t0, t1), max(t2, t3)), nan != 0
 
 
-@_jit
+@_reduction
 def _moments2(w, x, y, n):
-    """``(sum w^2, sum w x, sum w y)`` over ``n`` cells, in blocks with four partial sums each."""
+    """``(sum w^2, sum w x, sum w y)`` over ``n`` cells, in blocks, as :func:`_sum`."""
     sq = mx = my = 0.0
     for start in range(0, n, _BLOCK):
+        q = a = b = 0.0
         stop = min(start + _BLOCK, n)
-        q0 = q1 = q2 = q3 = x0 = x1 = x2 = x3 = y0 = y1 = y2 = y3 = 0.0
-        i = start
-        while i + 4 <= stop:
-            a, b, c, d = w[i], w[i + 1], w[i + 2], w[i + 3]
-            q0 += a * a
-            q1 += b * b
-            q2 += c * c
-            q3 += d * d
-            x0 += a * x[i]
-            x1 += b * x[i + 1]
-            x2 += c * x[i + 2]
-            x3 += d * x[i + 3]
-            y0 += a * y[i]
-            y1 += b * y[i + 1]
-            y2 += c * y[i + 2]
-            y3 += d * y[i + 3]
-            i += 4
-        while i < stop:
-            q0 += w[i] * w[i]
-            x0 += w[i] * x[i]
-            y0 += w[i] * y[i]
-            i += 1
-        sq += (q0 + q1) + (q2 + q3)
-        mx += (x0 + x1) + (x2 + x3)
-        my += (y0 + y1) + (y2 + y3)
+        wb, xb, yb = w[start:stop], x[start:stop], y[start:stop]
+        for i in range(wb.size):
+            q += wb[i] * wb[i]
+            a += wb[i] * xb[i]
+            b += wb[i] * yb[i]
+        sq += q
+        mx += a
+        my += b
     return sq, mx, my
 
 
-@_jit
+@_reduction
 def _cov2(w, x, mx, y, my, n):
-    """``sum w (x - mx)^2, sum w (x - mx)(y - my), sum w (y - my)^2`` over ``n`` cells, in blocks."""
+    """``sum w (x - mx)^2, sum w (x - mx)(y - my), sum w (y - my)^2`` over ``n`` cells, in blocks, as :func:`_sum`."""
     sxx = sxy = syy = 0.0
     for start in range(0, n, _BLOCK):
+        a = b = c = 0.0
         stop = min(start + _BLOCK, n)
-        a0 = a1 = a2 = a3 = b0 = b1 = b2 = b3 = c0 = c1 = c2 = c3 = 0.0
-        i = start
-        while i + 4 <= stop:
-            u0, u1, u2, u3 = x[i] - mx, x[i + 1] - mx, x[i + 2] - mx, x[i + 3] - mx
-            v0, v1, v2, v3 = y[i] - my, y[i + 1] - my, y[i + 2] - my, y[i + 3] - my
-            p0, p1, p2, p3 = w[i] * u0, w[i + 1] * u1, w[i + 2] * u2, w[i + 3] * u3
-            a0 += p0 * u0
-            a1 += p1 * u1
-            a2 += p2 * u2
-            a3 += p3 * u3
-            b0 += p0 * v0
-            b1 += p1 * v1
-            b2 += p2 * v2
-            b3 += p3 * v3
-            c0 += w[i] * v0 * v0
-            c1 += w[i + 1] * v1 * v1
-            c2 += w[i + 2] * v2 * v2
-            c3 += w[i + 3] * v3 * v3
-            i += 4
-        while i < stop:
-            u0, v0 = x[i] - mx, y[i] - my
-            a0 += w[i] * u0 * u0
-            b0 += w[i] * u0 * v0
-            c0 += w[i] * v0 * v0
-            i += 1
-        sxx += (a0 + a1) + (a2 + a3)
-        sxy += (b0 + b1) + (b2 + b3)
-        syy += (c0 + c1) + (c2 + c3)
+        wb, xb, yb = w[start:stop], x[start:stop], y[start:stop]
+        for i in range(wb.size):
+            u, v = xb[i] - mx, yb[i] - my
+            p = wb[i] * u
+            a += p * u
+            b += p * v
+            c += wb[i] * v * v
+        sxx += a
+        sxy += b
+        syy += c
     return sxx, sxy, syy
 
 

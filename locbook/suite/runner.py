@@ -754,6 +754,8 @@ def _run_locked(suite, tasks, profile, report_dir, data_roots, force, timeout_s,
         if not isinstance(result, dict):
             result = {"seconds": seconds, **pool.no_result(handle, staging)}
         result.setdefault("seconds", seconds)
+        if not result.get("error") and not result.get("lost"):
+            result.update(_export_page(staging, by_id[eid].experiment.id))
         if result.get("lost"):
             # the executor gave up on the task, which may still be running where it was sent: ask it to stop,
             # and leave its staging folder in place (removed with the run's) so that nothing writes elsewhere
@@ -832,6 +834,27 @@ def _run_locked(suite, tasks, profile, report_dir, data_roots, force, timeout_s,
             if path is None:
                 raise
             disk_full(path)        # the previous index and numbers.csv stay as they were
+
+
+def _export_page(staging: Path, exp_id: str) -> dict:
+    """Write the executed notebook's HTML page (``<id>.html``, :func:`locbook.suite.notebook_html.export_html`) into
+    ``staging``; ``{}``, or the result fields of its failure (an export that fails fails the experiment, without hiding
+    its notebook, which stays for inspection; a full disk names the path). The runner exports every page itself: a
+    worker would pay nbconvert's and mathtext's start (about 1.5 s) once per experiment, the runner once per run."""
+    notebook = staging / f"{exp_id}.ipynb"
+    if not notebook.exists():         # nothing to export: the validation says what is missing
+        return {}
+    from .notebook_html import export_html
+    page = staging / f"{exp_id}.html"
+    try:
+        body = export_html(notebook)      # self-contained: the math drawn to SVG, no script from a CDN
+        page.write_text(body, encoding="utf-8")
+    except Exception as exc:  # an HTML failure must not hide the notebook's own result
+        path = disk_full_path(exc, str(page)) if isinstance(exc, OSError) else None
+        if path is not None:
+            return {"error": f"no space left on device writing {path}", "kernel_failure": False, "disk_full": path}
+        return {"error": f"HTML export failed: {type(exc).__name__}: {exc}", "kernel_failure": False}
+    return {}
 
 
 def _remove_staging(path: Path, within_s: float = 5.0) -> None:

@@ -101,7 +101,6 @@ def execute(task: dict) -> dict:
     """Run the notebook; return ``{"error", "kernel_failure", "disk_full", "seconds"}``; never raises.
     ``disk_full``: the path that could not be written for lack of space ('' otherwise)."""
     import papermill as pm
-    from .notebook_html import export_html
 
     staging = Path(task["staging"])
     out_nb = staging / f"{task['id']}.ipynb"
@@ -119,14 +118,8 @@ def execute(task: dict) -> dict:
         disk_full = disk_full_path(exc, str(staging)) or ""
         kernel_failure = not disk_full and any(k in error for k in KERNEL_FAILURES)
     seconds = time.perf_counter() - start
-    if out_nb.exists() and not error:
-        page = staging / f"{task['id']}.html"
-        try:
-            body = export_html(out_nb)        # self-contained: the math drawn to SVG, no script from a CDN
-            page.write_text(body, encoding="utf-8")
-        except Exception as exc:  # an HTML failure must not hide the notebook's own result
-            error = f"HTML export failed: {type(exc).__name__}: {exc}"
-            disk_full = disk_full_path(exc, str(page)) or ""
+    # the notebook's HTML page is the runner's to write (locbook.suite.runner._export_page): once per run, not once
+    # per experiment, does it pay nbconvert's start
     if disk_full:
         error = f"no space left on device writing {disk_full}"
     from .catalog import machine_label

@@ -39,3 +39,15 @@ def test_the_exported_page_loads_nothing_from_the_network(tmp_path):
     images = re.findall(r"<img [^>]*>", page)
     assert len(images) == 1 and 'class="math"' in images[0] and 'src="data:image/svg+xml;base64,' in images[0]
     assert "img.math {" in page and "The bound" in page
+
+
+def test_math_drawing_leaves_the_callers_matplotlib_backend_alone():
+    """The runner draws the pages' math in its own process, which may be a user's Jupyter session: the pyplot
+    backend stays whatever it was (run in a fresh interpreter, whose backend is chosen by MPLBACKEND)."""
+    import subprocess
+    import sys
+    code = ("import matplotlib.pyplot\nfrom locbook.suite.notebook_html import math_svg\n"
+            "assert math_svg('x^2') is not None\nimport matplotlib\nprint(matplotlib.get_backend())")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         env={**__import__("os").environ, "MPLBACKEND": "svg"}, check=True).stdout
+    assert out.strip().lower() == "svg"

@@ -216,6 +216,86 @@ def test_a_lost_task_still_stopping_leaves_no_staging_behind(toy, monkeypatch):
     assert not list((folder / ".staging").glob("*")), list((folder / ".staging").rglob("*"))
 
 
+# -- the executed notebook's HTML page, written by the runner ----------------------------------------------
+
+def test_the_runner_writes_the_page_and_an_export_failure_fails_the_experiment_keeping_its_notebook(toy,
+                                                                                                   monkeypatch):
+    import locbook.suite.notebook_html as nh
+    suite = load_suite(toy / "notebooks" / "experiments.toml")
+    folder = toy / "reports" / "quick"
+    assert run_suite(suite, suite.experiments[:1], "quick", report_root=toy / "reports", progress="quiet").count("ok")
+    page = (folder / "george-one" / "george-one.html").read_text(encoding="utf-8")
+    assert "<html" in page and "deliberate failure" in page                      # the notebook's code, rendered
+    good = (folder / "george-one" / "report.md").read_bytes()
+
+    def broken(path):
+        raise ValueError("no template")
+    monkeypatch.setattr(nh, "export_html", broken)
+    run = run_suite(suite, suite.experiments[:1], "quick", report_root=toy / "reports", progress="quiet", force=True)
+    (outcome,) = run.outcomes
+    assert outcome.status == "failed" and outcome.error == "HTML export failed: ValueError: no template"
+    assert (folder / ".failed" / "george-one" / "george-one.ipynb").is_file()        # kept for inspection
+    assert (folder / "george-one" / "report.md").read_bytes() == good                # the good report stays
+
+
+def test_a_full_disk_while_the_runner_writes_a_page_stops_the_run_and_names_the_path(toy, monkeypatch):
+    import locbook.suite.notebook_html as nh
+
+    def full(path):
+        raise OSError(errno.ENOSPC, "No space left on device", str(Path(path).with_suffix(".html")))
+    monkeypatch.setattr(nh, "export_html", full)
+    suite = load_suite(toy / "notebooks" / "experiments.toml")
+    run = run_suite(suite, suite.experiments, "quick", report_root=toy / "reports", progress="quiet", jobs=1)
+    assert run.disk_full is not None and run.disk_full.endswith("george-one.html"), run.outcomes
+    assert run.count("ok") == 0
+    assert _leftovers(toy / "reports" / "quick") == []
+
+
+def test_a_stopping_dask_run_waits_for_its_lost_tasks_within_one_budget(toy, monkeypatch):
+    """Every lost task is waited for (its .ended) until one deadline shared by the whole stop, not a grace period
+    each in turn (with every experiment submitted at once, a lost cluster used to cost 5 s per task)."""
+    from types import SimpleNamespace
+    from locbook.suite import executors, runner
+    deadlines = []
+
+    class NeverStarted:
+        status = "cancelled"
+
+        def done(self):
+            return True
+
+        def result(self, timeout=None):
+            raise RuntimeError("cancelled")
+
+        def cancel(self):
+            pass
+
+    class LostCluster(executors.DaskExecutor):
+        stop_grace_s = 0.5
+
+        def __init__(self, jobs, scheduler=None):
+            self.cluster, self.scheduler, self.capacity = None, "tcp://gone:8786", 1 << 30
+            self.client = SimpleNamespace(status="closed", close=lambda: None)
+
+        def submit(self, eid, task_path):
+            return NeverStarted()
+
+        def wait_or_kill(self, future, staging, timeout_s):
+            import time
+            start = time.perf_counter()
+            super().wait_or_kill(future, staging, timeout_s)
+            deadlines.append((start + timeout_s, start, time.perf_counter()))
+
+    monkeypatch.setattr(runner, "make_executor", lambda kind, jobs, scheduler=None: LostCluster(jobs, scheduler))
+    suite = load_suite(toy / "notebooks" / "experiments.toml")
+    run = run_suite(suite, suite.experiments, "quick", report_root=toy / "reports", progress="quiet", executor="dask")
+    assert run.count("failed") == 2 and len(deadlines) == 2, run.outcomes
+    ends = [d[0] for d in deadlines]
+    assert max(ends) - min(ends) < 0.05                          # one deadline for both
+    assert deadlines[-1][2] - deadlines[0][1] < 0.5 + 0.5       # and nothing waited beyond it (each task 5 s more before)
+    assert not list((toy / "reports" / "quick" / ".staging").glob("*"))
+
+
 # -- item 6: a full disk --------------------------------------------------------------------------------------
 
 DISK_FULL_EXIT = 3

@@ -98,6 +98,9 @@ class LocalExecutor:
         if proc.poll() is None:
             proc.send_signal(signal.SIGTERM)
 
+    #: how long a stopping run waits for its workers before it kills them
+    stop_grace_s = _STOP_GRACE_S
+
     def wait_or_kill(self, proc, staging: Path, timeout_s: float) -> None:
         _wait_or_kill(proc, timeout_s)      # the worker kills its kernel before it exits
 
@@ -139,10 +142,12 @@ def run_worker_process(task_path: str) -> int:
 
 
 def _mark_ended(staging: Path) -> None:
-    """Write ``.ended`` into the staging folder once the worker process (and so its kernel) is gone: a runner that
-    lost this task removes the folder only then, or after a grace period. A kernel still starting up recreates its
-    runtime folder (ipykernel makes its connection file's parents), so removing earlier could leave the folder
-    behind. Written only into a folder that still exists: opening the file never creates one."""
+    """Write ``.ended`` into the staging folder once the worker process is gone (it kills its kernel on SIGTERM; one
+    killed after the grace period could not, and its kernel exits when it finds its parent gone: ipykernel polls for
+    it, ``JPY_PARENT_PID``): a runner that lost this
+    task removes the folder only then, or after a grace period. A kernel still starting up recreates its runtime
+    folder (ipykernel makes its connection file's parents), so removing earlier could leave the folder behind.
+    Written only into a folder that still exists: opening the file never creates one."""
     try:
         (staging / ".ended").write_text("")
     except OSError:
@@ -243,13 +248,17 @@ class DaskExecutor:
         except OSError:
             pass
 
+    #: how long a stopping run waits for all its tasks: their own grace before they kill a worker, and that again
+    stop_grace_s = 2 * _STOP_GRACE_S
+
     def wait_or_kill(self, future, staging: Path, timeout_s: float) -> None:
-        """Wait until the task's worker has ended (its ``.ended``), at most ``timeout_s`` plus the task's own grace
-        period: the future alone cannot say so once the client lost its scheduler, while the task may still be
-        running on its Dask worker."""
-        deadline = time.perf_counter() + timeout_s + _STOP_GRACE_S
+        """Wait until the task's worker has ended (its ``.ended``), at most ``timeout_s``: what is left of the
+        stopping run's :attr:`stop_grace_s`, one budget for all its tasks. The future alone cannot say so once the
+        client lost its scheduler, while the task may still be running on its Dask worker (or start there: a task
+        that finds ``.stop`` stops at once, but one that started just before may be making its folders)."""
+        deadline = time.perf_counter() + timeout_s
         try:
-            future.result(timeout=timeout_s + _STOP_GRACE_S)
+            future.result(timeout=timeout_s)
         except Exception:  # timed out, cancelled or failed: the run is stopping either way
             pass
         future.cancel()

@@ -67,8 +67,8 @@ def _rewrite(tex: str) -> str:
 
 def math_svg(tex: str, display: bool = False) -> str | None:
     """``tex`` drawn by mathtext as an ``<img>`` holding the SVG (None when mathtext cannot read it)."""
-    import matplotlib
-    matplotlib.use("Agg")
+    # math_to_image draws on a Figure of its own: no pyplot backend is chosen (this runs in the runner's process,
+    # which may be the user's Jupyter session)
     from matplotlib.mathtext import math_to_image
     buf = io.BytesIO()
     try:

@@ -56,7 +56,7 @@ from ..reproduce.report import NUMBER_COLUMNS
 from .catalog import machine_label
 from .params import read_notebook
 from .site import _read_csv, _read_json
-from .executors import _STOP_GRACE_S, make_executor
+from .executors import make_executor
 from .worker import disk_full_path
 from .progress import expected_seconds, make_progress
 from .spec import PROFILES, SAFE_NAME, Experiment, Suite, SuiteError
@@ -754,8 +754,8 @@ def _run_locked(suite, tasks, profile, report_dir, data_roots, force, timeout_s,
         if not isinstance(result, dict):
             result = {"seconds": seconds, **pool.no_result(handle, staging)}
         result.setdefault("seconds", seconds)
-        if not result.get("error") and not result.get("lost"):
-            result.update(_export_page(staging, by_id[eid].experiment.id))
+        if not result.get("error") and not result.get("lost") and by_id[eid].figures:   # (a bracket point's page:
+            result.update(_export_page(staging, by_id[eid].experiment.id))              # its .ipynb is linked)
         if result.get("lost"):
             # the executor gave up on the task, which may still be running where it was sent: ask it to stop,
             # and leave its staging folder in place (removed with the run's) so that nothing writes elsewhere
@@ -811,7 +811,7 @@ def _run_locked(suite, tasks, profile, report_dir, data_roots, force, timeout_s,
         # everything finished. Each step runs whatever the one before it met, so the staging is always removed.
         for eid, (handle, staging, attempt, started) in running.items():
             pool.stop(handle, staging)
-        deadline = time.perf_counter() + _STOP_GRACE_S
+        deadline = time.perf_counter() + pool.stop_grace_s      # one budget for every task of the run
         if stop.signum:
             why = f"stopped by {signal.Signals(stop.signum).name}"
         elif run.disk_full is not None:
@@ -840,7 +840,8 @@ def _export_page(staging: Path, exp_id: str) -> dict:
     """Write the executed notebook's HTML page (``<id>.html``, :func:`locbook.suite.notebook_html.export_html`) into
     ``staging``; ``{}``, or the result fields of its failure (an export that fails fails the experiment, without hiding
     its notebook, which stays for inspection; a full disk names the path). The runner exports every page itself: a
-    worker would pay nbconvert's and mathtext's start (about 1.5 s) once per experiment, the runner once per run."""
+    worker would pay nbconvert's and mathtext's start (about 1.5 s) once per experiment, the runner once per run.
+    A bracket point (no figures: only its numbers are read) gets none; the site links its ``.ipynb``."""
     notebook = staging / f"{exp_id}.ipynb"
     if not notebook.exists():         # nothing to export: the validation says what is missing
         return {}
@@ -850,7 +851,7 @@ def _export_page(staging: Path, exp_id: str) -> dict:
         body = export_html(notebook)      # self-contained: the math drawn to SVG, no script from a CDN
         page.write_text(body, encoding="utf-8")
     except Exception as exc:  # an HTML failure must not hide the notebook's own result
-        path = disk_full_path(exc, str(page)) if isinstance(exc, OSError) else None
+        path = disk_full_path(exc, str(page))
         if path is not None:
             return {"error": f"no space left on device writing {path}", "kernel_failure": False, "disk_full": path}
         return {"error": f"HTML export failed: {type(exc).__name__}: {exc}", "kernel_failure": False}

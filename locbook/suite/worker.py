@@ -131,7 +131,7 @@ def execute(task: dict) -> dict:
 def main(task_path: str, parent: int | None = None) -> int:
     """``parent``: the process that started this worker (the runner, or a Dask task on a cluster node)."""
     from .._lazy import skip_iri_format_checker
-    skip_iri_format_checker()      # before papermill and nbconvert import nbformat (and jsonschema)
+    skip_iri_format_checker()      # before papermill imports nbformat (and jsonschema)
     task = json.loads(Path(task_path).read_text())
     _die_with_parent(parent if parent is not None else task["runner_pid"])
     signal.signal(signal.SIGTERM, _kill_kernels_and_exit)

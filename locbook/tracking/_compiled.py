@@ -91,6 +91,8 @@ def _side_by_side(streams) -> np.ndarray:
     streams = [np.asarray(z, dtype=float) for z in streams]
     widths = [z.shape[-1] for z in streams]
     Z = np.empty(streams[0].shape[:-1] + (sum(widths),))
+    if Z.shape[-1] == 0:                         # no readings at all: no row type to view
+        return Z
     offsets = np.cumsum([0] + widths[:-1]) * Z.itemsize
     rows = np.dtype({"names": [f"s{i}" for i in range(len(streams))], "formats": [f"V{8 * m}" for m in widths],
                      "offsets": offsets.tolist(), "itemsize": Z.shape[-1] * Z.itemsize})

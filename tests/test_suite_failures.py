@@ -9,10 +9,11 @@ import stat
 import subprocess
 import sys
 from pathlib import Path
+from types import SimpleNamespace
 
 import pytest
 
-from locbook.suite import load_suite, run_suite
+from locbook.suite import executors, load_suite, run_suite
 from locbook.suite.cli import main
 from test_suite import alive, processes_mentioning, run, set_profile, toy, wait_for  # noqa: F401 (toy: fixture)
 
@@ -156,16 +157,32 @@ def test_a_lost_dask_scheduler_leaves_no_worker_or_kernel_running(toy, request):
     assert sorted(str(p) for p in folder.rglob("*")) == before
 
 
-class _LostTask:
-    """A Dask future the client lost with its scheduler, whose task still runs where it was sent: told to stop
-    (``.stop``), it meets a kernel that is still starting, which makes its runtime folder again (as ipykernel makes
-    its connection file's parents) before the worker kills it, and then ends as run_worker_process does."""
+class _CancelledFuture:
+    """A Dask future the client lost with its scheduler: cancelled, its result never comes."""
     status = "cancelled"
+
+    def __init__(self, task_path):
+        self.staging = Path(task_path).parent
+
+    def done(self):
+        return True
+
+    def result(self, timeout=None):
+        raise RuntimeError("cancelled")
+
+    def cancel(self):
+        pass
+
+
+class _LostTask(_CancelledFuture):
+    """A lost future whose task still runs where it was sent: told to stop (``.stop``), it meets a kernel that is
+    still starting, which makes its runtime folder again (as ipykernel makes its connection file's parents) before
+    the worker kills it, and then ends as run_worker_process does."""
     started: list = []
 
     def __init__(self, task_path):
         import threading
-        self.staging = Path(task_path).parent
+        super().__init__(task_path)
         self.thread = threading.Thread(target=self._task, daemon=True)
         self.thread.start()
         _LostTask.started.append(self.thread)
@@ -180,35 +197,35 @@ class _LostTask:
         (self.staging / ".runtime").mkdir(parents=True, exist_ok=True)   # the starting kernel's last act
         _mark_ended(self.staging)
 
-    def done(self):
-        return True
 
-    def result(self, timeout=None):
-        raise RuntimeError("cancelled")
+class _LostCluster(executors.DaskExecutor):
+    """A Dask executor whose client lost its scheduler (no cluster is started): each task submitted becomes a
+    ``future`` (a :class:`_CancelledFuture` class)."""
+    future = _CancelledFuture
 
-    def cancel(self):
-        pass
+    def __init__(self, jobs, scheduler=None):
+        self.cluster, self.scheduler, self.capacity = None, "tcp://gone:8786", 1 << 30
+        self.client = SimpleNamespace(status="closed", close=lambda: None)
+
+    def submit(self, eid, task_path):
+        return self.future(task_path)
+
+
+def _run_on(cluster, monkeypatch, toy, experiments):
+    monkeypatch.setattr("locbook.suite.runner.make_executor", lambda kind, jobs, scheduler=None: cluster(jobs))
+    suite = load_suite(toy / "notebooks" / "experiments.toml")
+    return run_suite(suite, suite.experiments[:experiments], "quick", report_root=toy / "reports", progress="quiet",
+                     executor="dask")
 
 
 def test_a_lost_task_still_stopping_leaves_no_staging_behind(toy, monkeypatch):
     """The runner removes a lost task's staging only after the task ended (its .ended): removed earlier, a kernel
     still starting makes its folder again (CI, stop 43: test_a_lost_dask_scheduler... found it left behind)."""
-    from types import SimpleNamespace
-    from locbook.suite import executors, runner
+    class StillStopping(_LostCluster):
+        future = _LostTask
 
-    class LostCluster(executors.DaskExecutor):
-        def __init__(self, jobs, scheduler=None):     # a client whose scheduler is gone; no cluster is started
-            self.cluster, self.scheduler, self.capacity = None, "tcp://gone:8786", 1
-            self.client = SimpleNamespace(status="closed", close=lambda: None)
-
-        def submit(self, eid, task_path):
-            return _LostTask(task_path)
-
-    monkeypatch.setattr(runner, "make_executor", lambda kind, jobs, scheduler=None: LostCluster(jobs, scheduler))
     monkeypatch.setattr(_LostTask, "started", [])
-    suite = load_suite(toy / "notebooks" / "experiments.toml")
-    result = run_suite(suite, suite.experiments[:1], "quick", report_root=toy / "reports", progress="quiet",
-                       executor="dask")
+    result = _run_on(StillStopping, monkeypatch, toy, 1)
     assert result.count("failed") == 1 and "lost the Dask scheduler" in result.outcomes[0].error, result.outcomes
     for thread in _LostTask.started:
         thread.join()             # the task has ended on its worker: nothing writes any more
@@ -254,31 +271,10 @@ def test_a_full_disk_while_the_runner_writes_a_page_stops_the_run_and_names_the_
 def test_a_stopping_dask_run_waits_for_its_lost_tasks_within_one_budget(toy, monkeypatch):
     """Every lost task is waited for (its .ended) until one deadline shared by the whole stop, not a grace period
     each in turn (with every experiment submitted at once, a lost cluster used to cost 5 s per task)."""
-    from types import SimpleNamespace
-    from locbook.suite import executors, runner
     deadlines = []
 
-    class NeverStarted:
-        status = "cancelled"
-
-        def done(self):
-            return True
-
-        def result(self, timeout=None):
-            raise RuntimeError("cancelled")
-
-        def cancel(self):
-            pass
-
-    class LostCluster(executors.DaskExecutor):
+    class NeverStarted(_LostCluster):
         stop_grace_s = 0.5
-
-        def __init__(self, jobs, scheduler=None):
-            self.cluster, self.scheduler, self.capacity = None, "tcp://gone:8786", 1 << 30
-            self.client = SimpleNamespace(status="closed", close=lambda: None)
-
-        def submit(self, eid, task_path):
-            return NeverStarted()
 
         def wait_or_kill(self, future, staging, timeout_s):
             import time
@@ -286,9 +282,7 @@ def test_a_stopping_dask_run_waits_for_its_lost_tasks_within_one_budget(toy, mon
             super().wait_or_kill(future, staging, timeout_s)
             deadlines.append((start + timeout_s, start, time.perf_counter()))
 
-    monkeypatch.setattr(runner, "make_executor", lambda kind, jobs, scheduler=None: LostCluster(jobs, scheduler))
-    suite = load_suite(toy / "notebooks" / "experiments.toml")
-    run = run_suite(suite, suite.experiments, "quick", report_root=toy / "reports", progress="quiet", executor="dask")
+    run = _run_on(NeverStarted, monkeypatch, toy, 2)
     assert run.count("failed") == 2 and len(deadlines) == 2, run.outcomes
     ends = [d[0] for d in deadlines]
     assert max(ends) - min(ends) < 0.05                          # one deadline for both

@@ -211,6 +211,27 @@ class _LostCluster(executors.DaskExecutor):
         return self.future(task_path)
 
 
+class _ClosedClientFuture(_CancelledFuture):
+    """A future of a client that gave up reconnecting and closed (a scheduler killed with SIGKILL): asking it anything
+    that needs the scheduler raises distributed's ClosedClientError, cancel() included (issue 44, item 2)."""
+
+    def _closed(self, *args, **kwargs):
+        from distributed.client import ClosedClientError
+        raise ClosedClientError("Trying to run a coroutine on a closed client")
+
+    result = cancel = exception = _closed
+
+
+class _FinishedOnAClosedClient(_ClosedClientFuture):
+    """A task that finished on the cluster just as the client closed: its exit status can no longer be fetched."""
+    status = "finished"
+
+
+class _ClosedClient(_LostCluster):
+    future = _ClosedClientFuture
+    stop_grace_s = 0.5          # no task ever ran: nothing will write .ended
+
+
 def _run_on(cluster, monkeypatch, toy, experiments):
     monkeypatch.setattr("locbook.suite.runner.make_executor", lambda kind, jobs, scheduler=None: cluster(jobs))
     suite = load_suite(toy / "notebooks" / "experiments.toml")
@@ -231,6 +252,33 @@ def test_a_lost_task_still_stopping_leaves_no_staging_behind(toy, monkeypatch):
         thread.join()             # the task has ended on its worker: nothing writes any more
     folder = toy / "reports" / "quick"
     assert not list((folder / ".staging").glob("*")), list((folder / ".staging").rglob("*"))
+
+
+@pytest.mark.parametrize("future", [_ClosedClientFuture, _FinishedOnAClosedClient])
+def test_a_closed_dask_client_ends_the_run_with_the_scoreboard_and_no_traceback(toy, monkeypatch, capsys, future):
+    """Issue 44, item 2: the client of a scheduler killed with SIGKILL closes, and from then on cancel() and result()
+    raise ClosedClientError. The run still ends as for any lost cluster: the scoreboard, one line naming the
+    scheduler, the lost experiments failed as lost (status.json updated), exit status 1, no staging left."""
+    pytest.importorskip("distributed")
+    cluster = type("Closed", (_ClosedClient,), {"future": future})
+    monkeypatch.setattr("locbook.suite.runner.make_executor", lambda kind, jobs, scheduler=None: cluster(jobs))
+    code = run(toy, "--executor", "dask", "--progress", "plain")
+    out, err = capsys.readouterr()
+    assert code == 1, out + err
+    assert "Traceback" not in out + err and "ClosedClientError" not in err
+    lines = out.splitlines()
+    head = next(i for i, line in enumerate(lines) if line.startswith("experiment"))       # the scoreboard
+    assert {line.split()[0] for line in lines[head + 2:head + 4]} == {"george-one", "george-two"}
+    assert [line for line in err.splitlines() if line.startswith("locbook: error:")] == [
+        "locbook: error: lost the Dask scheduler tcp://gone:8786 (client closed); the run stopped, and its "
+        "experiments on the cluster were asked to stop"]
+    folder = toy / "reports" / "quick"
+    status = json.loads((folder / "status.json").read_text())
+    # every experiment is submitted at once (the cluster's capacity), so both were lost
+    assert {eid: (r["status"], r["error"]) for eid, r in status.items()} == {
+        eid: ("failed", "Dask task lost: lost the Dask scheduler tcp://gone:8786 (client closed)")
+        for eid in ("george-one", "george-two")}
+    assert not list((folder / ".staging").glob("*")) and not (folder / "george-one").exists()
 
 
 # -- the executed notebook's HTML page, written by the runner ----------------------------------------------

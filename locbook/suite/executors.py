@@ -211,17 +211,35 @@ class DaskExecutor:
         return self.client.submit(run_worker_process, str(task_path), key=f"locbook-{task_path.parent.name}-"
                                   f"{os.urandom(4).hex()}", pure=False, retries=0)
 
+    # Every call on the client or a future below is guarded: once the scheduler may be gone, the client raises
+    # (ClosedClientError, CancelledError, a comm or timeout error) where it used to answer, and a raw traceback from
+    # distributed must never replace the run's scoreboard, status update and clean-up.
+
     def done(self, future) -> bool:
-        return future.done()
+        try:
+            return future.done()
+        except Exception:      # a future the client can no longer follow is finished for the runner: it is lost
+            return True
+
+    def _status(self, future) -> str:
+        try:
+            return str(future.status)
+        except Exception:
+            return "lost"
 
     def no_result(self, future, staging: Path) -> dict:
         """A task that finished without a result file is judged by its worker's exit status. A task the
-        cluster lost (cancelled: the client lost its scheduler) or that failed there (its Dask worker died)
-        may still be running somewhere: ``lost`` tells the runner to ask it to stop (``.stop``); a lost task is
-        not retried."""
-        if future.status == "finished":
-            return _no_result(future.result(), staging)
-        if future.status == "cancelled":
+        cluster lost (cancelled: the client lost its scheduler), one whose exit status can no longer be fetched
+        (the client closed meanwhile), or one that failed there (its Dask worker died) may still be running
+        somewhere: ``lost`` tells the runner to ask it to stop (``.stop``); a lost task is not retried."""
+        status = self._status(future)
+        if status == "finished":
+            try:
+                return _no_result(future.result(timeout=5), staging)
+            except Exception as exc:    # finished on the cluster, but its exit status never reached the client
+                why = self.broken() or f"its exit status could not be fetched ({type(exc).__name__}: {exc})"
+                return {"error": f"Dask task lost: {why}", "kernel_failure": False, "lost": True}
+        if status in ("cancelled", "lost"):
             why = self.broken() or "the task was cancelled on the cluster"
             return {"error": f"Dask task lost: {why}", "kernel_failure": False, "lost": True}
         try:
@@ -233,7 +251,10 @@ class DaskExecutor:
     def broken(self) -> str:
         """Why no further experiment can run on the cluster ('' while they can): the client lost its
         scheduler (it is reconnecting, or gave up and closed)."""
-        status = getattr(self.client, "status", "running")
+        try:
+            status = getattr(self.client, "status", "running")
+        except Exception:      # a client torn down so far that it cannot say
+            status = "unknown"
         if status in ("running", "newly-created"):
             return ""
         # the runner says this in one line; the client's own reconnect errors (tracebacks) would bury it
@@ -261,7 +282,10 @@ class DaskExecutor:
             future.result(timeout=timeout_s)
         except Exception:  # timed out, cancelled or failed: the run is stopping either way
             pass
-        future.cancel()
+        try:
+            future.cancel()
+        except Exception:  # a closed client (ClosedClientError): the task is the cluster's to drop, .stop stops it
+            pass
         while staging.is_dir() and not (staging / ".ended").exists() and time.perf_counter() < deadline:
             time.sleep(0.05)
 

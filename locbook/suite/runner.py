@@ -808,9 +808,18 @@ def _run_locked(suite, tasks, profile, report_dir, data_roots, force, timeout_s,
                 run.executor_error = pool.broken()
     finally:
         # an interrupt, a full disk, a lost cluster (or an unexpected error here): stop the workers, keep
-        # everything finished. Each step runs whatever the one before it met, so the staging is always removed.
+        # everything finished. Each step runs whatever the one before it met (an executor's error is held until the
+        # end), so every experiment gets its outcome, the staging is always removed and the suite files rebuilt.
+        held: list[BaseException] = []
+
+        def guarded(call, *args):
+            try:
+                call(*args)
+            except Exception as exc:
+                held.append(exc)
+
         for eid, (handle, staging, attempt, started) in running.items():
-            pool.stop(handle, staging)
+            guarded(pool.stop, handle, staging)
         deadline = time.perf_counter() + pool.stop_grace_s      # one budget for every task of the run
         if stop.signum:
             why = f"stopped by {signal.Signals(stop.signum).name}"
@@ -819,11 +828,11 @@ def _run_locked(suite, tasks, profile, report_dir, data_roots, force, timeout_s,
         else:
             why = f"stopped: {run.executor_error}" if run.executor_error else "stopped"
         for eid, (handle, staging, attempt, started) in running.items():
-            pool.wait_or_kill(handle, staging, max(0.0, deadline - time.perf_counter()))
+            guarded(pool.wait_or_kill, handle, staging, max(0.0, deadline - time.perf_counter()))
             finish(Outcome(eid, "interrupted", time.perf_counter() - started if started is not None else 0.0,
                            why, attempt))
         for handle, staging in abandoned:     # their staging goes only once they have ended (or their time is up)
-            pool.wait_or_kill(handle, staging, max(0.0, deadline - time.perf_counter()))
+            guarded(pool.wait_or_kill, handle, staging, max(0.0, deadline - time.perf_counter()))
         for eid, _attempt in queue:
             finish(Outcome(eid, "not run", 0.0))
         _remove_staging(staging_root)
@@ -834,6 +843,8 @@ def _run_locked(suite, tasks, profile, report_dir, data_roots, force, timeout_s,
             if path is None:
                 raise
             disk_full(path)        # the previous index and numbers.csv stay as they were
+        if held:
+            raise held[0]          # an executor's own error (not a lost cluster: that is guarded there), after clean-up
 
 
 def _export_page(staging: Path, exp_id: str) -> dict:

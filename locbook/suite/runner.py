@@ -235,28 +235,45 @@ def _write_atomic(path: Path, text: str) -> None:
         raise
 
 
+def _is_folder(path: Path) -> bool:
+    """``path`` is a real folder (not a file, nor a symbolic link, even one to a folder)."""
+    return path.is_dir() and not path.is_symlink()
+
+
+def _remove(path: Path, ignore_errors: bool = False) -> None:
+    """Remove ``path`` whatever it is: a folder tree, or a file or symbolic link (which ``rmtree`` refuses)."""
+    try:
+        if _is_folder(path):
+            shutil.rmtree(path, ignore_errors=ignore_errors)
+        elif os.path.lexists(path):
+            path.unlink()
+    except OSError:
+        if not ignore_errors:
+            raise
+
+
 def _replace_dir(new: Path, final: Path):
     """Swap ``new`` into place of ``final``: ``final -> .old-<name>``, ``new -> final``, remove the old copy.
-    A crash between the two renames leaves ``.old-<name>``, which :func:`_recover` puts back."""
+    A crash between the two renames leaves ``.old-<name>``, which :func:`_recover` puts back. ``final`` (or a left
+    ``.old-<name>``) that is a plain file or a symbolic link is no report: it is moved aside and removed the same
+    way (lexists: a dangling link, which ``exists`` does not see, would make the second rename fail)."""
     old = final.with_name(f".old-{final.name}")
-    if old.exists():
-        shutil.rmtree(old)
-    if final.exists():
+    _remove(old)
+    if os.path.lexists(final):
         final.rename(old)
     new.rename(final)
-    if old.exists():
-        shutil.rmtree(old)
+    _remove(old)
 
 
 def _recover(report_dir: Path) -> None:
     """Undo what an interrupted run left (called under the lock, so no other run is using these)."""
     for old in report_dir.glob(".old-*"):
         final = report_dir / old.name[len(".old-"):]
-        if final.exists():
-            shutil.rmtree(old, ignore_errors=True)
+        if os.path.lexists(final):
+            _remove(old, ignore_errors=True)
         else:
             old.rename(final)
-    shutil.rmtree(report_dir / ".staging", ignore_errors=True)
+    _remove(report_dir / ".staging", ignore_errors=True)     # a file of that name too: the run makes a folder there
     for tmp in report_dir.glob(".*.tmp"):
         tmp.unlink(missing_ok=True)
 
@@ -771,6 +788,10 @@ def _run_locked(suite, tasks, profile, report_dir, data_roots, force, timeout_s,
             return
         error = result["error"] or _validate_report(staging, by_id[eid].experiment.id, by_id[eid].figures)
         if not error:
+            final = report_dir / eid
+            if os.path.lexists(final) and not _is_folder(final):     # no report: the new one takes its place
+                kind = "a symbolic link" if final.is_symlink() else "a file"
+                progress.message(f"{eid}: {final} was {kind}, not a report folder; replaced by the new report")
             try:
                 _promote(by_id[eid].experiment, profile, by_id[eid].parameters, staging, report_dir / eid, stamp,
                          keys[eid], result)

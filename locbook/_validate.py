@@ -3,7 +3,10 @@
 The library's one rule for missing values (docs/filters.md, "Missing readings"): a NaN received power means "not
 heard" (the anchor got no packet in that epoch). Measurement arrays therefore accept NaN and each estimator
 says how it uses the readings present; every other input (anchors, model parameters, covariances, grids)
-must be finite, and infinities are never a reading.
+must be finite, and infinities are never a reading. A numpy masked array follows the same rule, here in the one
+converter every public entry uses: a masked entry is a reading not heard (NaN) where readings are accepted, and an
+error naming the argument elsewhere (its data under the mask is never used). Complex values are refused (their
+imaginary part would be dropped), and a list holding None gets a hint to use NaN for a missing value.
 """
 from __future__ import annotations
 
@@ -11,7 +14,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
-__all__ = ["as_array", "check_trailing_shape", "check_scalar", "check_choice"]
+__all__ = ["as_array", "check_trailing_shape", "check_scalar", "check_choice", "function_output"]
+
+_COMPLEX = "{name} must be real, got complex values (their imaginary part would be dropped)"
 
 
 def as_array(name: str, value, *, ndim: int | None = None, min_ndim: int | None = None,
@@ -21,10 +26,14 @@ def as_array(name: str, value, *, ndim: int | None = None, min_ndim: int | None 
     ``trailing``: the required sizes of the last axes (``None`` = any size), e.g. ``(m, 2)``.
     ``nan_ok``: NaN entries are allowed (missing readings); infinities never are.
     """
+    if np.ma.isMaskedArray(value):
+        value = _unmasked(name, value, nan_ok)
+    if _is_complex(value):                      # numpy would drop the imaginary part with a warning
+        raise ValueError(_COMPLEX.format(name=name))
     try:
         arr = np.asarray(value, dtype=dtype)
     except (TypeError, ValueError) as exc:
-        raise ValueError(f"{name} must be numeric, got {type(value).__name__}: {exc}") from None
+        raise ValueError(_not_numeric(name, value, exc)) from None
     if ndim is not None and arr.ndim != ndim:
         raise ValueError(f"{name} must have {ndim} axes, got shape {arr.shape}")
     if min_ndim is not None and arr.ndim < min_ndim:
@@ -39,6 +48,56 @@ def as_array(name: str, value, *, ndim: int | None = None, min_ndim: int | None 
                              f"got {int(bad.sum())} {what} value(s), the first at index "
                              f"{tuple(int(i) for i in np.argwhere(bad)[0])}")
     return arr
+
+
+def _is_complex(value) -> bool:
+    """Whether an array or numpy scalar holds complex numbers (a Python complex fails the conversion itself)."""
+    try:
+        return np.issubdtype(getattr(value, "dtype", np.float64), np.complexfloating)
+    except TypeError:                           # a dtype numpy does not know (e.g. a pandas extension type)
+        return False
+
+
+def _unmasked(name: str, value, nan_ok: bool) -> np.ndarray:
+    """A masked array's values with its masked entries as NaN (``nan_ok``: readings, NaN = not heard), else an error
+    naming the argument; an array with nothing masked is its data."""
+    mask = np.ma.getmaskarray(value)
+    if not mask.any():
+        return np.ma.getdata(value)
+    if not nan_ok:
+        raise ValueError(f"{name} must not be masked (a mask means a missing reading, allowed only in readings); got "
+                         f"{int(mask.sum())} masked value(s), the first at index "
+                         f"{tuple(int(i) for i in np.argwhere(mask)[0])}")
+    try:
+        return np.ma.filled(value.astype(float), np.nan)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name} must be numeric, got a masked array of {value.dtype}: {exc}") from None
+
+
+def _none_at(value, at=()):
+    """The index of the first None in nested lists or tuples, else None."""
+    if value is None:
+        return at
+    if isinstance(value, (list, tuple)):
+        for i, item in enumerate(value):
+            found = _none_at(item, at + (i,))
+            if found is not None:
+                return found
+    return None
+
+
+def _not_numeric(name: str, value, exc: Exception) -> str:
+    """The one-line error for a value numpy cannot make a float array of: a None (use NaN), or numpy's reason."""
+    where = _none_at(value) if isinstance(value, (list, tuple)) else None
+    if where is not None:
+        return (f"{name} holds None at index {where}: use NaN (float('nan') or np.nan) for a missing value, in an "
+                "array with the same number of entries in every row")
+    if "complex" in str(exc):
+        return _COMPLEX.format(name=name)
+    if "inhomogeneous" in str(exc) or "sequence" in str(exc):
+        return (f"{name} is a ragged sequence (its rows have different lengths, or mix numbers and lists): give every "
+                "row the same number of entries, NaN where a value is missing")
+    return f"{name} must be numeric, got {type(value).__name__}: {exc}"
 
 
 def check_trailing_shape(name: str, arr: np.ndarray, trailing: Sequence[int | None]) -> None:
@@ -73,3 +132,32 @@ def check_scalar(name: str, value, *, gt: float | None = None, ge: float | None 
 def check_choice(name: str, value, choices: Sequence) -> None:
     if value not in choices:
         raise ValueError(f"{name} must be one of {tuple(choices)}, got {value!r}")
+
+
+def function_output(name: str, value, shape: tuple, tail_ndim: int, input_shape: tuple | None = None, *,
+                    broadcast: bool = True) -> np.ndarray:
+    """The output of a user-supplied function ``name`` (e.g. ``"bearing: h"``) as floats of ``shape``, checked: real
+    (complex values are refused, not cut to their real part), numeric, ending in the ``tail_ndim`` axes of ``shape``
+    exactly and with leading axes that broadcast to its leading ones (a constant output may drop the run axes).
+    ``input_shape``: the shape the function was called with, named in the error. ``broadcast=False``: return a
+    valid output as it came (without its broadcast to ``shape``)."""
+    called = f" for input of shape {input_shape}" if input_shape is not None else ""
+    if _is_complex(value):
+        raise ValueError(f"{name} returned complex values{called}: it must return real numbers (the imaginary part "
+                         "would be dropped)")
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} returned {type(value).__name__}{called}, not an array of real numbers of shape "
+                         f"{shape}") from None
+    tail = tuple(shape[len(shape) - tail_ndim:])
+    ok = arr.ndim >= tail_ndim and arr.shape[arr.ndim - tail_ndim:] == tail and arr.ndim <= len(shape)
+    if ok and arr.shape != tuple(shape):
+        try:
+            ok = np.broadcast_shapes(arr.shape, shape) == tuple(shape)
+        except ValueError:
+            ok = False
+    if not ok:
+        raise ValueError(f"{name} returned shape {arr.shape}{called}; it must return shape {tuple(shape)} (ending in "
+                         f"{tail})")
+    return arr if arr.shape == tuple(shape) or not broadcast else np.broadcast_to(arr, shape)

@@ -175,6 +175,20 @@ class _Singular(Exception):
         self.message = message      # "": the innovation covariance; else the text of the failure ({step} filled in)
 
 
+def _refuse_not_finite(name: str, values, bad, batch_ndim: int, step: int, what: str) -> None:
+    """A ValueError naming the user function ``name``, the step and the first run when its output ``values`` is NaN or
+    infinite at some entry of the mask ``bad`` (the runs: the first ``batch_ndim`` axes, the rest reduced): a function
+    that fails is never taken for a missing reading or an overflow of the filter."""
+    bad = np.asarray(bad)
+    if not bad.any():
+        return
+    runs = bad.reshape(bad.shape[:batch_ndim] + (-1,)).any(axis=-1)
+    first = tuple(int(i) for i in np.argwhere(bad)[0])
+    kind = "NaN" if np.isnan(np.asarray(values)[first]) else "an infinite value"
+    raise ValueError(f"{name} returned {kind} at step {step}{_first_bad(runs)} (output index {first[batch_ndim:]}) "
+                     f"{what}")
+
+
 def _check_state(step: int, x, P):
     """A SingularCovarianceError naming the step and run when a state or covariance is no longer finite (an overflow:
     huge F, Q, P0 or readings); the filter never returns them."""

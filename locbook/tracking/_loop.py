@@ -9,12 +9,13 @@ unbatched and updated once per step; the first update that differs between runs 
 """
 from __future__ import annotations
 
+import inspect
 from dataclasses import dataclass
 
 import numpy as np
 
-from .._validate import as_array
-from ._linalg import _Singular, _apply, _batch_shape, _check_state, _covariance, _mT, _raise_singular
+from .._validate import as_array, function_output
+from ._linalg import _Singular, _apply, _batch_shape, _check_state, _covariance, _mT, _raise_singular, _refuse_not_finite
 from .functional import _linear_update_shared
 from .results import KALMAN_OUTPUTS, KalmanResult
 from .streams import (MEASUREMENT_TYPES, LinearMeasurement, RssMeasurement, _per_step_stream,
@@ -249,14 +250,59 @@ def _shared_linear_update(x, P, z, meas, joseph: bool = True, want: bool = False
         x, P, z[..., j:j + 1], present[j:j + 1], H[j:j + 1], R[j:j + 1, j:j + 1], joseph=joseph, want=want), want)
 
 
+_MOTION_FINITE = "for a finite state: f (and its jacobian) must return finite values"
+
+
+def _motion_call(motion: NonlinearMotion, field: str, x, k: int):
+    """The motion's ``f`` or ``jacobian`` at ``x`` (``f(x)``, or ``f(x, k)`` with ``uses_step``); a function whose
+    signature does not take those arguments (filterpy's ``fx(x, dt)``) is a one-line error saying what to pass."""
+    fn = getattr(motion, field)
+    args = (x, k) if motion.uses_step else (x,)
+    try:
+        return fn(*args)
+    except TypeError as exc:
+        try:
+            inspect.signature(fn).bind(*args)
+        except TypeError:
+            form = f"{field}(x, k)" if motion.uses_step else f"{field}(x)"
+            hint = ("uses_step=False for f(x)" if motion.uses_step else
+                    "bind the time step, e.g. NonlinearMotion(lambda x: fx(x, dt)), or uses_step=True for f(x, k) "
+                    "with k the step predicted to")
+            raise ValueError(f"{motion.name}: {field} cannot be called as {form} (states (..., n)"
+                             f"{', k the step' if motion.uses_step else ''}): {exc}; {hint}") from None
+        except ValueError:          # no signature to inspect (a builtin): the function's own error
+            pass
+        raise
+
+
+def _motion_apply(motion: NonlinearMotion, x, k: int, batch_ndim: int) -> np.ndarray:
+    """``f(x)`` checked (:func:`locbook._validate.function_output`; finite: a NaN from f is named, not taken for
+    an overflow of the filter). ``batch_ndim``: the run axes of ``x`` (the rest: a sigma point's, the state's)."""
+    out = function_output(f"{motion.name}: f", _motion_call(motion, "f", x, k), np.shape(x), 1, np.shape(x))
+    _refuse_not_finite(f"{motion.name}: f", out, ~np.isfinite(out), batch_ndim, k, _MOTION_FINITE)
+    return out
+
+
+def _motion_jacobian(motion: NonlinearMotion, x, k: int) -> np.ndarray:
+    """The EKF's ``df/dx`` ``(..., n, n)`` at ``x`` ``batch + (n,)``, checked (unbatched ``(n, n)`` kept as given)."""
+    if motion.jacobian is None:
+        raise ValueError(f"{motion.name}: the EKF needs the motion's jacobian (the UKF does not)")
+    n = np.shape(x)[-1]
+    J = function_output(f"{motion.name}: jacobian", _motion_call(motion, "jacobian", x, k), np.shape(x)[:-1] + (n, n),
+                        2, np.shape(x), broadcast=False)
+    _refuse_not_finite(f"{motion.name}: jacobian", J, np.broadcast_to(~np.isfinite(J), np.shape(x)[:-1] + (n, n)),
+                       np.ndim(x) - 1, k, _MOTION_FINITE)
+    return J
+
+
 def _predictor(setup: _Setup):
     """The prediction of the KF and the EKF (:mod:`locbook.tracking.transition`): ``predict(x, P, k, cross)`` ->
     ``(x-, P-, C)`` with the cross-covariance ``C = P F^T`` (``P J^T`` for nonlinear motion) when ``cross``."""
     motion = setup.motion
     if motion is not None:
         def predict(x, P, k, cross):
-            J = motion.jacobian_at(x, k)
-            x_pred = motion.apply(x, k)
+            J = _motion_jacobian(motion, x, k)
+            x_pred = _motion_apply(motion, x, k, x.ndim - 1)
             d = setup.drift_at(k)
             if d is not None:
                 x_pred = x_pred + d

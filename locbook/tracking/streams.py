@@ -12,10 +12,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._validate import as_array, check_choice, check_scalar
+from .._validate import as_array, check_choice, check_scalar, function_output
 from ..models.channel import PathLossModel
 from ..models.rss import rss_mean_jacobian
-from ._linalg import _LOG_2PI, _STATE_NOT_FINITE, _UPDATE_OVERFLOW, _Singular, _covariance, _joseph
+from ._linalg import (_LOG_2PI, _STATE_NOT_FINITE, _UPDATE_OVERFLOW, _Singular, _covariance, _joseph,
+                      _refuse_not_finite)
 from .functional import _linear_update, _Out
 from .transition import PerStep
 
@@ -26,6 +27,14 @@ RSS_UPDATE_MODES = ("parallel", "serial")
 _ON_ANCHOR = ("the state is on an anchor at step {step} and the channel has no near-field clamp (min_distance_m = 0), "
               "where the log-distance mean is infinite: give the channel a min_distance_m (e.g. 1e-3 m)")
 SERIAL_ORDERS = ("descending", "given")
+
+
+def _readings(stream, field: str, name: str) -> np.ndarray:
+    """A stream's readings ``batch + (T, m)`` as checked floats, kept on the (frozen) stream in place of what was given,
+    so a masked reading is NaN (not heard) wherever the filters read them (a masked array's data is never used)."""
+    z = as_array(name, getattr(stream, field), min_ndim=2, nan_ok=True)
+    object.__setattr__(stream, field, z)
+    return z
 
 
 @dataclass(frozen=True)
@@ -51,9 +60,12 @@ class LinearMeasurement:
 
     def __post_init__(self):
         check_choice("mode", self.mode, RSS_UPDATE_MODES)
-        z = as_array("LinearMeasurement.z", self.z, min_ndim=2, nan_ok=True)
+        z = _readings(self, "z", "LinearMeasurement.z")
         T, m = z.shape[-2:]
         H = self.H.value if isinstance(self.H, PerStep) else as_array("LinearMeasurement.H", self.H)
+        if H.ndim >= 2 and m == 1 and z.ndim >= 3 and z.shape[-2] == H.shape[-2] != 1:
+            raise ValueError(f"LinearMeasurement.z has shape {z.shape}, a column of {H.shape[-2]} readings per step "
+                             f"(filterpy's (m, 1) z); pass batch + (T, m), e.g. z[..., 0] of shape {z.shape[:-1]}")
         if H.ndim < 2 or H.shape[-2] != m:
             raise ValueError(f"LinearMeasurement.H must have {m} rows (one per component of z), got shape {H.shape}")
         R = _covariance("LinearMeasurement.R", self.R.value if isinstance(self.R, PerStep) else self.R, m)
@@ -138,7 +150,7 @@ class RssMeasurement:
     def __post_init__(self):
         check_choice("mode", self.mode, RSS_UPDATE_MODES)
         check_choice("order", self.order, SERIAL_ORDERS)
-        power = as_array("RssMeasurement.rss_dbm", self.rss_dbm, min_ndim=2, nan_ok=True)
+        power = _readings(self, "rss_dbm", "RssMeasurement.rss_dbm")
         anchors = as_array("RssMeasurement.anchors_m", self.anchors_m, min_ndim=2)
         m, dim = anchors.shape[-2], anchors.shape[-1]
         if power.shape[-1] != m:
@@ -192,7 +204,7 @@ class NonlinearMeasurement:
     mean: object = None
 
     def __post_init__(self):
-        z = as_array(f"{self.name}: z", self.z, min_ndim=2, nan_ok=True)
+        z = _readings(self, "z", f"{self.name}: z")
         if not callable(self.h):
             raise ValueError(f"{self.name}: h must be a function of the state, got {type(self.h).__name__}")
         for field in ("jacobian", "residual", "mean"):
@@ -221,6 +233,50 @@ class NonlinearMeasurement:
     def difference(self, a, b):
         """``a - b`` of readings, through ``residual`` when given."""
         return np.asarray(self.residual(a, b), dtype=float) if self.residual is not None else a - b
+
+    # The filters call h, jacobian, residual and mean through these: each output is checked (real, of the shape the
+    # stream needs, finite wherever a reading is present), so a function that fails is an error naming it and the
+    # step, never a reading taken as missing (the EKF's linearised reading would be NaN) or an overflow.
+    def readings_at(self, x, present, step: int, batch_ndim: int) -> np.ndarray:
+        """``h(x)`` ``x.shape[:-1] + (m,)`` (``x``: states or sigma points), checked; ``present`` broadcasts to it."""
+        m = np.shape(self.z)[-1]
+        out = function_output(f"{self.name}: h", self.h(x), np.shape(x)[:-1] + (m,), 1, np.shape(x))
+        _refuse_not_finite(f"{self.name}: h", out, present & ~np.isfinite(out), batch_ndim, step, _PRESENT)
+        return out
+
+    def jacobian_at(self, x, present, step: int) -> np.ndarray:
+        """The EKF's ``dh/dx`` ``batch + (m, n)`` at ``x`` ``batch + (n,)``, checked (rows of present readings
+        finite)."""
+        if self.jacobian is None:
+            raise ValueError(f"{self.name}: the EKF needs its jacobian (the UKF does not)")
+        m, n = np.shape(self.z)[-1], np.shape(x)[-1]
+        H = function_output(f"{self.name}: jacobian", self.jacobian(x), np.shape(x)[:-1] + (m, n), 2, np.shape(x))
+        _refuse_not_finite(f"{self.name}: jacobian", H, present[..., :, None] & ~np.isfinite(H), np.ndim(x) - 1, step,
+                           _PRESENT)
+        return H
+
+    def residual_of(self, a, b, present, step: int, batch_ndim: int) -> np.ndarray:
+        """``a - b`` of readings (``residual`` when given), checked: the broadcast shape, finite where ``present``."""
+        if self.residual is None:
+            return a - b
+        shape = np.broadcast_shapes(np.shape(a), np.shape(b))
+        out = function_output(f"{self.name}: residual", self.residual(a, b), shape, 1, shape)
+        _refuse_not_finite(f"{self.name}: residual", out, present & ~np.isfinite(out), batch_ndim, step, _PRESENT)
+        return out
+
+    def mean_of(self, values, weights, present, step: int, batch_ndim: int) -> np.ndarray:
+        """The UKF's weighted mean of predicted readings ``(..., N, m)`` (``mean`` when given, else the linear one),
+        checked: ``(..., m)``, finite where ``present``."""
+        if self.mean is None:
+            return weights @ values
+        out = function_output(f"{self.name}: mean", self.mean(values, weights), np.shape(values)[:-2] +
+                              np.shape(values)[-1:], 1, np.shape(values))
+        _refuse_not_finite(f"{self.name}: mean", out, present & ~np.isfinite(out), batch_ndim, step, _PRESENT)
+        return out
+
+
+_PRESENT = ("for a reading that is present: it must be finite wherever z has a reading (a missing reading is a NaN "
+            "in z, not in the function's output)")
 
 
 MEASUREMENT_TYPES = (LinearMeasurement, RssMeasurement, NonlinearMeasurement)
@@ -354,18 +410,14 @@ def _rss_serial_update(x, P, z, meas: RssMeasurement, step: int = 0, want: bool 
     return acc.out(x, P, dof)
 
 
-def _nonlinear_ekf_update(x, P, z, meas: NonlinearMeasurement, want: bool = False) -> _Out:
-    """EKF update of a :class:`NonlinearMeasurement`: linearised at the predicted state."""
-    if meas.jacobian is None:
-        raise ValueError(f"{meas.name}: the EKF needs its jacobian (the UKF does not)")
-    H = np.asarray(meas.jacobian(x), dtype=float)
-    if H.shape != x.shape[:-1] + (z.shape[-1], x.shape[-1]):
-        raise ValueError(f"{meas.name}: jacobian returned shape {H.shape}, expected "
-                         f"{x.shape[:-1] + (z.shape[-1], x.shape[-1])}")
-    h = np.asarray(meas.h(x), dtype=float)
+def _nonlinear_ekf_update(x, P, z, meas: NonlinearMeasurement, want: bool = False, step: int = 0) -> _Out:
+    """EKF update of a :class:`NonlinearMeasurement`: linearised at the predicted state (h, its Jacobian and the
+    residual checked: a NaN from them where a reading is present is an error, not a missing reading)."""
     valid = np.isfinite(z)
+    H = meas.jacobian_at(x, valid, step)
+    h = meas.readings_at(x, valid, step, x.ndim - 1)
     # the linear update on the linearisation z - h(x) = H (x_true - x) + v, whose innovation is (the residual) z - h(x)
-    nu = meas.difference(np.where(valid, z, h), h)
+    nu = meas.residual_of(np.where(valid, z, h), h, valid, step, x.ndim - 1)
     return _linear_update(x, P, np.where(valid, nu + (H @ x[..., None])[..., 0], np.nan), H, meas.noise_at(x),
                           want=want)
 
@@ -405,7 +457,7 @@ def _ekf_update(x, P, z, meas, step, want: bool = False, joseph: bool = True) ->
     if isinstance(meas, LinearMeasurement):
         return _linear_stream_update(x, P, z, meas, joseph, want)
     if isinstance(meas, NonlinearMeasurement):
-        return _nonlinear_ekf_update(x, P, z, meas, want)
+        return _nonlinear_ekf_update(x, P, z, meas, want, step)
     if meas.mode == "parallel":
         return _rss_parallel_update(x, P, z, meas, step, want)
     return _rss_serial_update(x, P, z, meas, step, want)

@@ -45,11 +45,11 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .._validate import check_choice, check_scalar
+from .._validate import check_choice, check_scalar, function_output
 from ..models.rss import rss_mean_jacobian
 from ._linalg import (_UPDATE_OVERFLOW, _gaussian_log_likelihood, _inv_small, _logdet, _mT, _not_positive_definite,
-                      _Singular, _singular_runs)
-from ._loop import _check_outputs, _run, _setup, _streams
+                      _refuse_not_finite, _Singular, _singular_runs)
+from ._loop import _check_outputs, _motion_apply, _run, _setup, _streams
 from .functional import _missing_as_nan, _Out
 from .results import DIVERGENCE_PROBABILITY, DIVERGENCE_WINDOW, KalmanResult, _check_guard, _flag
 from .streams import (LinearMeasurement, NonlinearMeasurement, RssMeasurement, _pick_anchor, _refuse_on_anchor,
@@ -171,12 +171,13 @@ def unscented_transform(points, values, weights: UnscentedWeights):
 
 
 def _ukf_update(x, P, z, h, R, weights: UnscentedWeights, innovation_noise: bool, guard: list,
-                want: bool = False, meas=None) -> _Out:
+                want: bool = False, meas=None, step: int = 0) -> _Out:
     """One unscented update with measurement function ``h`` (sigma points -> values); NaN rows of ``z`` are left
     out. ``guard[0]`` counts the updates whose ``R~`` needed flooring. Returns the posterior with the NIS
     ``nu^T S^{-1} nu`` of the components present (from the inverse that gives the gain), their number and the
     Gaussian log-likelihood ``log N(nu; 0, S)``; ``want``: also the innovation ``z - z^`` and ``S`` (NaN where
-    missing). ``meas``: a NonlinearMeasurement whose ``residual`` and ``mean`` replace the linear forms."""
+    missing). ``meas``: a NonlinearMeasurement whose ``residual`` and ``mean`` replace the linear forms (its
+    functions' outputs checked, :class:`~locbook.tracking.streams.NonlinearMeasurement`; ``step`` names the step)."""
     valid = np.isfinite(z)
     dof = valid.sum(axis=-1)
     if not valid.any():
@@ -185,14 +186,16 @@ def _ukf_update(x, P, z, h, R, weights: UnscentedWeights, innovation_noise: bool
             return _Out(x, P, zero, dof, zero)
         return _Out(x, P, zero, dof, zero, np.full(z.shape, np.nan), np.full(z.shape + (z.shape[-1],), np.nan))
     X, L = _sigma_points(x, P, weights.lam)
-    Y = h(X)
+    nb = X.ndim - 2                                  # the run axes
+    Y = h(X) if meas is None else meas.readings_at(X, valid[..., None, :], step, nb)
     n, m = x.shape[-1], z.shape[-1]
     c = n + weights.lam                              # L L^T = c P
-    if meas is not None and meas.mean is not None:   # e.g. a circular mean of bearings
-        z_hat = np.asarray(meas.mean(Y, weights.mean), dtype=float)
+    if meas is not None:                             # its mean, e.g. a circular mean of bearings, or Eq. (3.25)
+        z_hat = meas.mean_of(Y, weights.mean, valid, step, nb)
     else:
         z_hat = weights.mean @ Y                     # Eq. (3.25)
-    dv = Y - z_hat[..., None, :] if meas is None else meas.difference(Y, z_hat[..., None, :])
+    dv = Y - z_hat[..., None, :] if meas is None else meas.residual_of(Y, z_hat[..., None, :], valid[..., None, :],
+                                                                       step, nb)
     Pzz = _mT(weights.cov[:, None] * dv) @ dv        # Eq. (3.26) without R
     Pzz = 0.5 * (Pzz + _mT(Pzz))
     # P_xz = sum_i W_c^i (X^i - x-)(gamma^i - z^)^T (Eq. (3.27)) = L D, D = L^{-1} P_xz
@@ -214,7 +217,8 @@ def _ukf_update(x, P, z, h, R, weights: UnscentedWeights, innovation_noise: bool
         # sigma points far out (a state driven there by an overflowing reading): their readings or S overflow
         over = bad & ~(np.all(np.isfinite(Y), axis=(-2, -1)) & np.all(np.isfinite(S), axis=(-2, -1)))
         raise _Singular(over, _SIGMA_OVERFLOW) if over.any() else _Singular(bad)
-    nu = np.where(valid, (z - z_hat) if meas is None else meas.difference(np.where(valid, z, z_hat), z_hat), 0.0)
+    nu = np.where(valid, (z - z_hat) if meas is None else
+                  meas.residual_of(np.where(valid, z, z_hat), z_hat, valid, step, nb), 0.0)
     S_use = S if row_ok.all() else np.where(row_ok[..., None, None], S, np.eye(m))
     S_inv = _inverse(S_use, row_ok)
     K = Pxz @ S_inv                                  # K = P_xz S^{-1}
@@ -317,6 +321,14 @@ def _rss_noise(meas: RssMeasurement, x, z, step: int):
     return np.broadcast_to(meas.variance_db2(d, ch.path_loss_exp, ch.sigma_db), z.shape)
 
 
+def _checked_motion(motion, field: str, value, shape, batch_ndim: int, step: int) -> np.ndarray:
+    """The output of a NonlinearMotion's ``mean`` or ``residual``, checked: real, of ``shape``, finite."""
+    name = f"{motion.name}: {field}"
+    out = function_output(name, value, shape, 1)
+    _refuse_not_finite(name, out, ~np.isfinite(out), batch_ndim, step, "for finite states: it must return finite values")
+    return out
+
+
 def _unscented_predictor(setup, weights: UnscentedWeights):
     """The unscented prediction through a NonlinearMotion (:mod:`locbook.tracking.transition`): sigma points ``X`` of
     the posterior, ``Y = f(X) + B u``, ``x- = sum W_m Y`` (or the motion's mean), ``P- = sum W_c (Y - x-)(Y - x-)^T +
@@ -325,15 +337,17 @@ def _unscented_predictor(setup, weights: UnscentedWeights):
 
     def predict(x, P, k, cross):
         X, L = _sigma_points(x, P, weights.lam)
-        Y = motion.apply(X, k)
+        nb = X.ndim - 2                              # the run axes
+        Y = _motion_apply(motion, X, k, nb)
         d = setup.drift_at(k)
         if d is not None:
             Y = Y + d[..., None, :]
         if motion.mean is not None:
-            x_pred = np.asarray(motion.mean(Y, weights.mean), dtype=float)
+            x_pred = _checked_motion(motion, "mean", motion.mean(Y, weights.mean), Y.shape[:-2] + Y.shape[-1:], nb, k)
         else:
             x_pred = weights.mean @ Y
-        dY = motion.difference(Y, x_pred[..., None, :])
+        dY = Y - x_pred[..., None, :] if motion.residual is None else _checked_motion(
+            motion, "residual", motion.residual(Y, x_pred[..., None, :]), Y.shape, nb, k)
         wdY = weights.cov[:, None] * dY
         P_pred = _mT(dY) @ wdY
         P_pred = 0.5 * (P_pred + _mT(P_pred)) + setup.Q_at(k)
@@ -410,7 +424,7 @@ def unscented_kalman_filter(F, Q, x0, P0, measurements, *, B=None, u=None, alpha
                 x, P, z[..., j:j + 1], lambda X: np.einsum("...mn,...kn->...km", H[..., j:j + 1, :], X),
                 R[..., j:j + 1, j:j + 1], w, innovation_noise, guard, want), want)
         if isinstance(meas, NonlinearMeasurement):
-            return _ukf_update(x, P, z, meas.h, meas.noise_at(x), w, innovation_noise, guard, want, meas)
+            return _ukf_update(x, P, z, meas.h, meas.noise_at(x), w, innovation_noise, guard, want, meas, step)
         m = z.shape[-1]
         if meas.mode == "parallel":
             sigma2 = _rss_noise(meas, x, z, step)

@@ -301,16 +301,21 @@ def test_regular_epochs_prints_a_huge_tick_count_briefly():
 
 
 def test_the_fast_reader_and_the_exact_reader_agree(tmp_path):
-    """A logger's file (one record per line) goes through pandas' C reader; the same rows with a quoted field go
-    through the exact reader. Both give the same checked table, ids, missing values and extra columns included."""
+    """A logger's file (one record per line, quoted fields allowed) goes through pandas' C reader; the same rows
+    with a blank line go through the exact reader. All give the same checked table, ids, missing values and extra
+    columns included."""
     from locbook.data.measured import read_readings_table
     body = ("time_s,transmitter,receiver,rssi_dbm,x_m,y_m,point\n0.25,tag, A1,-60.5,1.0,2.0,P1\n0.25,tag,A2,,1.0,2.0,P1\n"
             "0.5,NA,A1,NaN,N/A,,P2\n0.75,tag,A3,-70,3,4, P2\n")
     fast_path = write(tmp_path, body, "fast.csv")
-    exact_path = write(tmp_path, body.replace(",P1\n0.25", ',"P1"\n0.25', 1), "exact.csv")
-    assert read_readings_table(fast_path)[0].attrs.get("parsed") and not read_readings_table(exact_path)[0].attrs
-    a, b = read_readings(fast_path), read_readings(exact_path)
-    for col in a.columns:
-        left, right = a[col].astype(object).to_numpy(), b[col].astype(object).to_numpy()
-        assert [str(v).strip() for v in left] == [str(v).strip() for v in right], col
+    quoted_path = write(tmp_path, body.replace(",P1\n0.25", ',"P1"\n0.25', 1), "quoted.csv")
+    exact_path = write(tmp_path, body.replace("\n0.5", "\n\n0.5", 1), "exact.csv")
+    assert read_readings_table(fast_path)[0].attrs.get("parsed") and read_readings_table(quoted_path)[0].attrs
+    assert not read_readings_table(exact_path)[0].attrs
+    a = read_readings(fast_path)
+    for other in (quoted_path, exact_path):
+        b = read_readings(other)
+        for col in a.columns:
+            left, right = a[col].astype(object).to_numpy(), b[col].astype(object).to_numpy()
+            assert [str(v).strip() for v in left] == [str(v).strip() for v in right], col
     assert list(a["transmitter"]) == ["tag", "tag", "NA", "tag"] and list(a["receiver"]) == ["A1", "A2", "A1", "A3"]

@@ -66,7 +66,8 @@ from ..errors import LocbookError, ParameterError
 
 __all__ = [
     "DataFormatError", "MeasuredDataWarning", "READING_COLUMNS", "OPTIONAL_READING_COLUMNS", "RSSI_RANGE_DBM",
-    "MAX_TIME_S", "ANCHOR_MIN_SEPARATION_M", "MAX_REGULAR_EPOCHS", "AGGREGATES", "Epochs",
+    "MAX_TIME_S", "ANCHOR_MIN_SEPARATION_M", "MAX_REGULAR_EPOCHS", "AGGREGATES", "Epochs", "RSSI_LIMITS_DBM",
+    "MAX_COORDINATE_M", "MAX_LINE_BYTES", "MAX_EXACT_READ_BYTES", "MAX_READINGS_FILE_BYTES", "MAX_MIN_READINGS",
     "read_readings", "read_anchors", "read_outline", "read_path_segments", "validate_readings", "epochs",
     "regular_epochs",
 ]
@@ -75,12 +76,41 @@ READING_COLUMNS = ("time_s", "transmitter", "receiver", "rssi_dbm")
 OPTIONAL_READING_COLUMNS = ("x_m", "y_m", "z_m", "heading_rad")
 #: a received power outside this interval (dBm) is a unit or sign error, never a reading
 RSSI_RANGE_DBM = (-150.0, 20.0)
+#: the widest ``valid_range_dbm`` a caller may declare (dBm): -300 dBm is 1e-33 W, +100 dBm 10 MW; a range beyond
+#: (an infinite one) would turn off the unit check
+RSSI_LIMITS_DBM = (-300.0, 100.0)
 #: a time_s of this magnitude or more (3,169 years) is not seconds: milli-, micro- or nanoseconds since 1970
 MAX_TIME_S = 1e11
 #: two anchors closer than this (m) are the same point: refused (the geometry would be degenerate)
 ANCHOR_MIN_SEPARATION_M = 1e-3
 #: the default bound on the ticks :func:`regular_epochs` creates (a clock jump would otherwise fill the memory)
 MAX_REGULAR_EPOCHS = 1_000_000
+#: anchor, outline, path and true-position coordinates of this magnitude (m) or more are refused: no site is larger
+#: (projected map coordinates, e.g. UTM northings, stay below 1e7 m); beyond it is a unit error, and distances
+#: of 1e300 overflow (issue 44)
+MAX_COORDINATE_M = 1e7
+#: a line of a CSV longer than this (bytes) is refused: no row of the long format is that long, it is a file
+#: without line ends or not a CSV at all (the csv module's own field limit, ``csv.field_size_limit()``, is 128 KiB)
+MAX_LINE_BYTES = 128 << 10
+#: the largest file the exact reader (``_read_text_table``) takes: it holds every field as a Python string, about
+#: :data:`EXACT_READER_BYTES_PER_BYTE` bytes of memory per byte of file (issue 29: 800 bytes per reading), so
+#: 64 MiB of CSV take about 1.5 GiB; larger files must be one record per line (the fast reader) or are refused
+MAX_EXACT_READ_BYTES = 64 << 20
+#: peak memory of the exact reader per byte of file (measured: 4.1 M readings, 140 MiB of CSV, peaked at 2.84 GB)
+EXACT_READER_BYTES_PER_BYTE = 24
+#: the largest readings file (bytes) read at all: the fast reader takes about
+#: :data:`FAST_READER_BYTES_PER_BYTE` bytes of memory per byte of file (issue 29: 10^7 readings, 336 MiB of CSV,
+#: peaked at 2.2 GiB), so 1 GiB of CSV (about 3 x 10^7 readings) take about 7 GiB; split larger recordings
+MAX_READINGS_FILE_BYTES = 1 << 30
+FAST_READER_BYTES_PER_BYTE = 7
+#: the largest ``min_readings`` of an epoch rule: more readings of one anchor than any window holds (a million
+#: packets per anchor per window) would leave every entry not heard
+MAX_MIN_READINGS = 1_000_000
+#: rows per chunk when a large file's number column holds text that is not a number (to name its line)
+_LOCATE_CHUNK_ROWS = 200_000
+#: characters of a file's text an error message quotes at most (a field, a header, a line): a message never echoes
+#: a file (a symlink to /proc/self/environ, a binary file)
+MAX_QUOTED_CHARS = 60
 _MISSING_TEXT = {"", "nan", "NaN", "NAN", "NA", "N/A"}
 
 class DataFormatError(LocbookError, ValueError):
@@ -92,6 +122,40 @@ class MeasuredDataWarning(UserWarning):
 
 
 # -- reading and checking CSV text ---------------------------------------------------------------------------
+def _shown(value) -> str:
+    """``repr(value)`` for a message, cut to :data:`MAX_QUOTED_CHARS` characters (with the full length) so that a
+    message never echoes a large or binary file."""
+    text = value if isinstance(value, str) else str(value)
+    if len(text) <= MAX_QUOTED_CHARS:
+        return repr(value)
+    return f"{text[:MAX_QUOTED_CHARS]!r}... ({len(text):,} characters)"
+
+
+def _shown_names(names, limit: int = 12) -> str:
+    """A list of column names for a message: each cut by :func:`_shown`, at most ``limit`` of them."""
+    names = list(names)
+    shown = ", ".join(_shown(n) for n in names[:limit])
+    return f"[{shown}{f', ... ({len(names)} names)' if len(names) > limit else ''}]"
+
+
+def _size(n_bytes: float) -> str:
+    return f"{n_bytes / (1 << 30):.1f} GiB" if n_bytes >= 1 << 30 else f"{n_bytes / (1 << 20):.1f} MiB"
+
+
+def _check_line_lengths(data: bytes, path: Path, what: str, first_line: int = 1) -> None:
+    """Refuse a line longer than :data:`MAX_LINE_BYTES` (bytes ``data`` start at line ``first_line``)."""
+    a = np.frombuffer(data, np.uint8)
+    ends = np.flatnonzero(a == 10)
+    bounds = np.r_[-1, ends, a.size]
+    length = np.diff(bounds) - 1
+    long = np.flatnonzero(length > MAX_LINE_BYTES)
+    if long.size:
+        k = int(long[0])
+        raise DataFormatError(f"{what} file {path}, line {first_line + k}: the line is {int(length[k]):,} bytes "
+                              f"long, more than the {MAX_LINE_BYTES:,} bytes a line may have (MAX_LINE_BYTES): not "
+                              "a row of a CSV (no line ends, or not a text file)")
+
+
 def _decode_utf8(data: bytes, path: Path, what: str) -> str:
     """The file's text; a byte that is not UTF-8 is an error naming its line and its byte in the line."""
     bom = data.startswith(b"\xef\xbb\xbf")             # a UTF-8 byte-order mark (Excel writes one): not data
@@ -103,25 +167,35 @@ def _decode_utf8(data: bytes, path: Path, what: str) -> str:
         line_start = max(data.rfind(b"\n", 0, offset), data.rfind(b"\r", 0, offset)) + 1
         ends = [i for i in (data.find(b"\n", offset), data.find(b"\r", offset)) if i >= 0]
         line_end = min(ends) if ends else len(data)
-        line_text = data[line_start:line_end].decode("utf-8", errors="replace")
+        line_text = data[line_start:min(line_end, line_start + 4 * MAX_QUOTED_CHARS)].decode("utf-8", errors="replace")
         before = data[:offset]
         line = before.count(b"\n") + before.count(b"\r") - before.count(b"\r\n") + 1
         raise DataFormatError(
             f"{what} file {path}, line {line}, byte {offset - line_start + 1} of the "
-            f"line (byte {offset + 1} of the file): 0x{data[offset]:02x} is not UTF-8 ({line_text.rstrip()!r}); "
+            f"line (byte {offset + 1} of the file): 0x{data[offset]:02x} is not UTF-8 ({_shown(line_text.rstrip())}); "
             "locbook reads UTF-8 only: re-save the file as UTF-8 (e.g. iconv -f cp1252 -t utf-8)") from None
 
 
-def _read_text_table(path, required: tuple[str, ...], what: str) -> tuple[pd.DataFrame, np.ndarray]:
+def _read_text_table(path, required: tuple[str, ...], what: str, why: str = "") -> tuple[pd.DataFrame, np.ndarray]:
     """The CSV as text (nothing converted yet), with every required column present, and each row's line in the
     file (as an editor counts it: blank lines count, a quoted field over several lines gives its first line).
 
     Every row must have exactly as many fields as the header: a missing field is never read as empty (an empty
-    field is written ``,,``) and an extra one never shifts the columns."""
+    field is written ``,,``) and an extra one never shifts the columns. A file over :data:`MAX_EXACT_READ_BYTES`
+    is refused before it is read (``why``: the reason it came here, for the message)."""
     path = Path(path)
     if not path.is_file():
         raise DataFormatError(f"{what} file {path} does not exist")
-    text = _decode_utf8(path.read_bytes(), path, what)
+    size = path.stat().st_size
+    if size > MAX_EXACT_READ_BYTES:
+        raise DataFormatError(
+            f"{what} file {path}{': ' + why if why else ''}: such a file is read by the exact reader, which would "
+            f"take about {_size(size * EXACT_READER_BYTES_PER_BYTE)} for its {_size(size)}; it reads files up to "
+            f"{_size(MAX_EXACT_READ_BYTES)} (MAX_EXACT_READ_BYTES): write one record per line (LF or CRLF line "
+            "ends, no blank lines, no quoted line breaks) or split the file")
+    data = path.read_bytes()
+    _check_line_lengths(data, path, what)
+    text = _decode_utf8(data, path, what)
     reader = csv.reader(io.StringIO(text, newline=""), skipinitialspace=True, strict=True)
     rows, lines, header, header_line, end, wrong = [], [], None, 0, 0, None
     try:
@@ -142,10 +216,11 @@ def _read_text_table(path, required: tuple[str, ...], what: str) -> tuple[pd.Dat
         raise DataFormatError(f"{what} file {path} is empty (no header line)")
     duplicated = sorted({c for c in header if header.count(c) > 1})
     if duplicated:
-        raise DataFormatError(f"{what} file {path}: column(s) {duplicated} appear more than once in the header")
+        raise DataFormatError(f"{what} file {path}: column(s) {_shown_names(duplicated)} appear more than once in "
+                              "the header")
     missing = [c for c in required if c not in header]
     if missing:
-        raise DataFormatError(f"{what} file {path}: missing column(s) {missing}; the header has {header} "
+        raise DataFormatError(f"{what} file {path}: missing column(s) {missing}; the header has {_shown_names(header)} "
                               f"(required: {list(required)})")
     if wrong is not None:
         _wrong_field_count(path, what, *wrong, header, header_line)
@@ -161,21 +236,23 @@ def _wrong_field_count(path, what: str, line: int, row: list[str], header: list[
         named -= 1
     if named < len(header) and len(row) == named:   # rows without them: the header alone has trailing commas
         raise DataFormatError(f"{what} file {path}, line {header_line}: the header ends with an empty column name "
-                              f"(a trailing comma?): it has {len(header)} names, {header}, but line {line} has "
+                              f"(a trailing comma?): it has {len(header)} names, {_shown_names(header)}, but line {line} has "
                               f"{len(row)} field(s); remove the trailing comma from the header")
     if len(row) < len(header):
         absent = header[len(row):]
-        raise DataFormatError(f"{what} file {path}, line {line}, column(s) {absent}: the row has {len(row)} field(s), "
+        raise DataFormatError(f"{what} file {path}, line {line}, column(s) {_shown_names(absent)}: the row has {len(row)} field(s), "
                               f"the header {len(header)}: {'it is' if len(absent) == 1 else 'they are'} missing "
                               "(an empty value is written as an empty field, e.g. '0.5,tag,A,' for not heard)")
     raise DataFormatError(f"{what} file {path}, line {line}: the row has {len(row)} fields, the header {len(header)} "
-                          f"fields ({header}); a value with a comma must be quoted, and an extra column needs a "
+                          f"fields ({_shown_names(header)}); a value with a comma must be quoted, and an extra column needs a "
                           "name in the header")
 
 
-def _numeric(table: pd.DataFrame, column: str, source: str, lines, *, missing_ok: bool) -> np.ndarray:
+def _numeric(table: pd.DataFrame, column: str, source: str, lines, *, missing_ok: bool,
+             coordinate: bool = False) -> np.ndarray:
     """A text column as floats; empty / NaN text is missing (allowed only where ``missing_ok``); anything else
-    that is not a finite number is an error naming the line."""
+    that is not a finite number is an error naming the line. A ``coordinate`` of magnitude
+    :data:`MAX_COORDINATE_M` or more is refused too."""
     raw = table[column]
     if pd.api.types.is_numeric_dtype(raw) and not pd.api.types.is_bool_dtype(raw):
         values = raw.to_numpy(dtype=float, na_value=np.nan)
@@ -187,12 +264,19 @@ def _numeric(table: pd.DataFrame, column: str, source: str, lines, *, missing_ok
     bad = ~missing & ~np.isfinite(values)
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
-        raise DataFormatError(f"{source}, line {lines[i]}, column {column!r}: {table[column].iloc[i]!r} is not a finite "
+        raise DataFormatError(f"{source}, line {lines[i]}, column {column!r}: {_shown(table[column].iloc[i])} is not a finite "
                               f"number ({int(bad.sum())} such value(s) in the column)")
     if missing.any() and not missing_ok:
         i = int(np.flatnonzero(missing)[0])
         raise DataFormatError(f"{source}, line {lines[i]}, column {column!r}: value is missing ({int(missing.sum())} "
                               "missing value(s) in the column; it must be given on every row)")
+    if coordinate:
+        far = np.abs(values) >= MAX_COORDINATE_M          # NaN compares False
+        if far.any():
+            i = int(np.flatnonzero(far)[0])
+            raise DataFormatError(f"{source}, line {lines[i]}, column {column!r}: {values[i]:g} is not a coordinate of "
+                                  f"a site (coordinates are less than {MAX_COORDINATE_M:g} in magnitude, "
+                                  f"MAX_COORDINATE_M; {int(far.sum())} such value(s)): a unit error?")
     return values
 
 
@@ -206,22 +290,37 @@ def _seconds(value) -> str:
     return f"{float(value)!r} s"
 
 
+def _is_real(value) -> bool:
+    """A real number that is not a bool (``True`` is 1 to numpy, never a reading) nor text."""
+    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
+
+
 def _reading_options(invalid_values_dbm, valid_range_dbm):
-    """The checked sentinel values (a float array) and range ``(low, high)`` of :func:`validate_readings`."""
-    try:
-        sentinels = np.asarray(() if invalid_values_dbm is None else invalid_values_dbm, dtype=float).reshape(-1)
-    except (TypeError, ValueError):
-        raise ParameterError(f"invalid_values_dbm must be a sequence of numbers (dBm), got {invalid_values_dbm!r}") \
-            from None
+    """The checked sentinel values (a float array) and range ``(low, high)`` of :func:`validate_readings`.
+
+    Sentinels: a number or a sequence of numbers (not text, not bools: ``"0"`` or ``[True]`` are refused, not read
+    as 0 and 1 dBm). The range: two finite numbers within :data:`RSSI_LIMITS_DBM` (an infinite bound would turn off
+    the unit check the range exists for)."""
+    values = () if invalid_values_dbm is None else invalid_values_dbm
+    if _is_real(values):
+        values = (values,)
+    if isinstance(values, np.ndarray):
+        values = values.reshape(-1).tolist() if values.dtype.kind in "iuf" else list(values.reshape(-1))
+    if not isinstance(values, (list, tuple)) or not all(_is_real(v) for v in values):
+        raise ParameterError(f"invalid_values_dbm must be a sequence of numbers (dBm), got {_shown(invalid_values_dbm)}")
+    sentinels = np.asarray(values, dtype=float).reshape(-1)
     if not np.isfinite(sentinels).all():
-        raise ParameterError(f"invalid_values_dbm must hold finite numbers (dBm), got {invalid_values_dbm!r}")
+        raise ParameterError(f"invalid_values_dbm must hold finite numbers (dBm), got {_shown(invalid_values_dbm)}")
     rng = RSSI_RANGE_DBM if valid_range_dbm is None else valid_range_dbm
-    try:
-        low, high = (float(v) for v in rng)
-    except (TypeError, ValueError):
-        raise ParameterError(f"valid_range_dbm must be a pair (low, high) of numbers (dBm), got {rng!r}") from None
-    if not low < high:           # NaN fails too
-        raise ParameterError(f"valid_range_dbm must be (low, high) with low < high (dBm), got {rng!r}")
+    if isinstance(rng, np.ndarray):
+        rng = rng.tolist()
+    if not isinstance(rng, (list, tuple)) or len(rng) != 2 or not all(_is_real(v) for v in rng):
+        raise ParameterError(f"valid_range_dbm must be a pair (low, high) of numbers (dBm), got {_shown(rng)}")
+    low, high = (float(v) for v in rng)
+    lo_limit, hi_limit = RSSI_LIMITS_DBM
+    if not (lo_limit <= low < high <= hi_limit):      # NaN and infinities fail too
+        raise ParameterError(f"valid_range_dbm must be (low, high) with {lo_limit:g} <= low < high <= {hi_limit:g} "
+                             f"(dBm, RSSI_LIMITS_DBM: no receiver reports outside), got {_shown(rng)}")
     return sentinels, (low, high)
 
 
@@ -242,7 +341,7 @@ def _check_time_unit(time_s: np.ndarray, raw: pd.Series, source: str, lines) -> 
                      f"[units] time = \"{short}\" in dataset.toml; else convert the column to seconds (divide by "
                      f"{scale:.0e}, after subtracting the first time to keep the small differences)")
             break
-    raise DataFormatError(f"{source}, line {lines[i]}, column 'time_s': {str(raw.iloc[i]).strip()!r} is not a time in "
+    raise DataFormatError(f"{source}, line {lines[i]}, column 'time_s': {_shown(str(raw.iloc[i]).strip())} is not a time in "
                           f"seconds ({abs(t) / 3.15576e7:.3g} years; time_s is at most {MAX_TIME_S:.0e} s in "
                           f"magnitude){guess} ({int(huge.sum())} such value(s) in the column)")
 
@@ -306,7 +405,8 @@ def validate_readings(table: pd.DataFrame, *, source: str, lines=None, anchor_id
                           MeasuredDataWarning, stacklevel=3)
     out["rssi_dbm"] = rssi
     for col in OPTIONAL_READING_COLUMNS:
-        out[col] = (_numeric(text, col, source, lines, missing_ok=True) if col in text.columns
+        out[col] = (_numeric(text, col, source, lines, missing_ok=True, coordinate=col != "heading_rad")
+                    if col in text.columns
                     else np.full(len(text), np.nan))
     half = np.isnan(out["x_m"].to_numpy()) != np.isnan(out["y_m"].to_numpy())
     if half.any():
@@ -319,8 +419,8 @@ def validate_readings(table: pd.DataFrame, *, source: str, lines=None, anchor_id
         unknown = ~out["receiver"].isin(known).to_numpy()
         if unknown.any():
             i = int(np.flatnonzero(unknown)[0])
-            raise DataFormatError(f"{source}, line {lines[i]}, column 'receiver': {out['receiver'].iloc[i]!r} is not "
-                                  f"an anchor id (the anchors are {sorted(known)})")
+            raise DataFormatError(f"{source}, line {lines[i]}, column 'receiver': {_shown(out['receiver'].iloc[i])} is "
+                                  f"not an anchor id (the anchors are {_shown_names(sorted(known))})")
     key = out[["time_s", "transmitter", "receiver"]]
     dup = key.duplicated(keep="first").to_numpy()
     if dup.any():
@@ -328,11 +428,11 @@ def validate_readings(table: pd.DataFrame, *, source: str, lines=None, anchor_id
         first = int(np.flatnonzero((key == key.iloc[i]).all(axis=1).to_numpy())[0])
         written = [str(text["time_s"].iloc[k]).strip() for k in (first, i)]
         note = ("" if written[0] == written[1] else
-                f" (the source has times {written[0]!r} and {written[1]!r}: equal as 64-bit floats, which hold about "
+                f" (the source has times {_shown(written[0])} and {_shown(written[1])}: equal as 64-bit floats, which hold about "
                 "16 significant digits; give times from a nearer origin, e.g. seconds since the first reading)")
         raise DataFormatError(f"{source}, line {lines[i]}, columns 'time_s','transmitter','receiver': the reading "
-                              f"({_seconds(out['time_s'].iloc[i])}, {out['transmitter'].iloc[i]!r}, "
-                              f"{out['receiver'].iloc[i]!r}) repeats line {lines[first]}{note}")
+                              f"({_seconds(out['time_s'].iloc[i])}, {_shown(out['transmitter'].iloc[i])}, "
+                              f"{_shown(out['receiver'].iloc[i])}) repeats line {lines[first]}{note}")
     # time non-decreasing within each transmitter: group the rows by transmitter (stable), compare neighbours
     codes = pd.factorize(out["transmitter"])[0]
     by_tx = np.argsort(codes, kind="stable")
@@ -342,7 +442,7 @@ def validate_readings(table: pd.DataFrame, *, source: str, lines=None, anchor_id
         i = int(by_tx[k + 1].min())                                        # the first such row of the source
         prev = int(by_tx[k[by_tx[k + 1] == i][0]])
         raise DataFormatError(f"{source}, line {lines[i]}, column 'time_s': time goes back for transmitter "
-                              f"{out['transmitter'].iloc[i]!r} ({_seconds(time_s[i])} after {_seconds(time_s[prev])} "
+                              f"{_shown(out['transmitter'].iloc[i])} ({_seconds(time_s[i])} after {_seconds(time_s[prev])} "
                               f"on line {lines[prev]}); sort the file by time, or read it with sort=True (rows "
                               "reordered by time, stably)")
     extra = [c for c in text.columns if c not in out.columns]
@@ -367,77 +467,148 @@ def _ids(column: pd.Series) -> pd.Series:
     return pd.Series(pd.Categorical.from_codes(new, pd.Index(uniq, dtype=object)), index=column.index)
 
 
-#: bytes per block of the field-count scan of :func:`read_readings_table` (its scratch memory is ~6x this)
+#: bytes per block of the field-count scan of :func:`read_readings_table` (its scratch memory is ~4x this)
 _SCAN_BLOCK = 1 << 25
 
 
-def _one_record_per_line(path: Path, n_fields: int) -> bool:
-    """Whether the file after its header line is UTF-8 text without quotes, with LF or CRLF line ends, whose every
-    line holds ``n_fields`` fields and none is blank: then data row ``i`` is line ``i + 2`` and no row is short or
-    long. Read in blocks of :data:`_SCAN_BLOCK` bytes (never the whole file at once)."""
+def _scan_records(path: Path, n_fields: int) -> str:
+    """``""`` when the file after its header line is UTF-8 text with LF or CRLF line ends whose every line is one
+    record of ``n_fields`` fields (a quoted field, with commas or doubled quotes in it, may appear; a quoted line
+    break may not) and none is blank: then data row ``i`` is line ``i + 2`` and no row is short or long. Else the
+    first reason it is not, naming the line. A line over :data:`MAX_LINE_BYTES` is refused here. Read in blocks of
+    :data:`_SCAN_BLOCK` bytes (never the whole file at once); only lines holding a quote go through the csv
+    module."""
     want = n_fields - 1
     with open(path, "rb") as fh:
-        fh.readline()                                      # the header (checked by the caller)
-        rest = b""
+        fh.readline(MAX_LINE_BYTES + 2)                    # the header (checked by the caller)
+        line, rest = 2, b""                                # the line number of the block's first line
         while True:
             chunk = fh.read(_SCAN_BLOCK)
             if not chunk and not rest:
-                return True
+                return ""
             block = rest + chunk
             if chunk:                                      # cut at the last line end; the rest joins the next block
                 cut = block.rfind(b"\n") + 1
                 if cut == 0:
+                    if len(block) > MAX_LINE_BYTES:
+                        _check_line_lengths(block, path, "readings", line)
                     rest = block
                     continue
                 block, rest = block[:cut], block[cut:]
             else:
                 rest = b""
-            if b'"' in block or block.count(b"\r") != block.count(b"\r\n"):
-                return False                               # quotes or CR-only line ends: the exact reader
-            try:
-                block.decode("utf-8")
-            except UnicodeDecodeError:
-                return False                               # the exact reader names the byte
+            _check_line_lengths(block, path, "readings", line)
             a = np.frombuffer(block, np.uint8)
             ends = np.flatnonzero(a == 10)
             if a[-1] != 10:
                 ends = np.r_[ends, a.size - 1]             # the last line without a line end
-            commas = np.cumsum(a == 44, dtype=np.int64)
-            per_line = np.diff(np.r_[0, commas[ends]])
-            if np.any(per_line != want):
-                return False
+            cr = np.flatnonzero(a == 13)
+            lone = cr[(cr + 1 >= a.size) | (a[np.minimum(cr + 1, a.size - 1)] != 10)]
+            if lone.size:
+                return f"line {line + int(np.searchsorted(ends, lone[0]))} ends with a CR alone (not LF or CRLF)"
+            try:
+                block.decode("utf-8")
+            except UnicodeDecodeError as exc:
+                return f"line {line + int(np.searchsorted(ends, exc.start))} is not UTF-8"
+            per_line = np.diff(np.searchsorted(np.flatnonzero(a == 44), ends, side="right"), prepend=0)
+            quoted = np.unique(np.searchsorted(ends, np.flatnonzero(a == 34)))
+            if quoted.size:                                # those lines: fields as the csv module splits them
+                starts = np.r_[0, ends[:-1] + 1]
+                texts = [block[starts[k]:ends[k] + 1].decode("utf-8").rstrip("\r\n") for k in quoted]
+                reader = csv.reader(texts, skipinitialspace=True, strict=True)
+                try:
+                    for j, row in enumerate(reader):
+                        if reader.line_num != j + 1:
+                            return f"line {line + int(quoted[j])} has a quoted field that goes on over a line break"
+                        per_line[quoted[j]] = len(row) - 1
+                except csv.Error as exc:
+                    k = int(quoted[min(reader.line_num, len(quoted)) - 1])
+                    return f"line {line + k} is not a readable CSV row ({exc})"
+            bad = np.flatnonzero(per_line != want)
+            if bad.size:
+                k = int(bad[0])
+                blank = not block[(0 if k == 0 else ends[k - 1] + 1):ends[k] + 1].strip()
+                return (f"line {line + k} is blank" if blank else
+                        f"line {line + k} has {int(per_line[k]) + 1} field(s), the header {n_fields}")
+            line += ends.size
+
+
+def _header(first: bytes) -> list[str] | None:
+    """The header's column names (stripped), or None if the line is not a readable CSV row."""
+    if first.startswith(b"\xef\xbb\xbf"):
+        first = first[3:]
+    text = first.decode("utf-8", "replace").rstrip("\r\n")
+    if '"' not in text:
+        return [c.strip() for c in text.split(",")]
+    try:
+        rows = list(csv.reader([text], skipinitialspace=True, strict=True))
+    except csv.Error:
+        return None
+    return [c.strip() for c in rows[0]] if len(rows) == 1 else None
+
+
+def _locate_bad_number(path: Path, header: list[str], numeric: list[str], error: Exception):
+    """Name the line and column of the first number column's field the fast reader could not parse (a file too
+    large for the exact reader): read it again in chunks of :data:`_LOCATE_CHUNK_ROWS` rows as text (one record
+    per line, as checked) and run the long format's number check on each."""
+    source = f"readings file {path}"
+    chunks = pd.read_csv(path, dtype=str, keep_default_na=False, skipinitialspace=True, engine="c",
+                         encoding="utf-8-sig", chunksize=_LOCATE_CHUNK_ROWS)
+    offset = 0
+    for chunk in chunks:
+        chunk.columns = header
+        lines = _file_lines(len(chunk)) + offset
+        for column in numeric:
+            _numeric(chunk, column, source, lines, missing_ok=column != "time_s")
+        offset += len(chunk)
+    raise DataFormatError(f"{source}: not readable as the long format ({_shown(str(error))})")
 
 
 def read_readings_table(path, *, time_as_text: bool = False) -> tuple[pd.DataFrame, np.ndarray]:
     """A readings CSV as :func:`validate_readings` takes it, and each row's line: the number columns as floats
     (empty, ``NaN``, ``NA``, ``N/A`` missing), the ids and other columns as categories (text, stripped later).
 
-    Files of one record per line without quotes (every logger's output) are parsed by pandas' C reader, at a few
-    bytes per field; any other file, or one that reader refuses, goes through the exact reader
-    (``_read_text_table``), whose messages name the line and column of the problem. ``time_as_text`` keeps
-    ``time_s`` as written (integer nanoseconds since 1970 lose their last digits as floats)."""
+    Files of one record per line (every logger's output; quoted fields allowed, quoted line breaks not) are parsed
+    by pandas' C reader, at a few bytes per field; any other file, or one that reader refuses, goes through the
+    exact reader (``_read_text_table``), whose messages name the line and column of the problem. Sizes are checked
+    before anything is read: a file over :data:`MAX_READINGS_FILE_BYTES`, a line over :data:`MAX_LINE_BYTES`, and a
+    file over :data:`MAX_EXACT_READ_BYTES` that needs the exact reader are refused, naming the limit.
+    ``time_as_text`` keeps ``time_s`` as written (integer nanoseconds since 1970 lose their last digits as
+    floats)."""
     path = Path(path)
     if not path.is_file():
         raise DataFormatError(f"readings file {path} does not exist")
+    size = path.stat().st_size
+    if size > MAX_READINGS_FILE_BYTES:
+        raise DataFormatError(f"readings file {path} is {_size(size)}: reading it would take about "
+                              f"{_size(size * FAST_READER_BYTES_PER_BYTE)}, and a readings file is at most "
+                              f"{_size(MAX_READINGS_FILE_BYTES)} (MAX_READINGS_FILE_BYTES): split the recording "
+                              "into several files, one [[recording]] each")
     with open(path, "rb") as fh:
-        first = fh.readline()
-    if first.startswith(b"\xef\xbb\xbf"):
-        first = first[3:]
-    header = [c.strip() for c in first.decode("utf-8", "replace").rstrip("\r\n").split(",")]
+        first = fh.readline(MAX_LINE_BYTES + 2)
+    _check_line_lengths(first.rstrip(b"\r\n"), path, "readings")
+    header = _header(first)
+    header_ok = (header is not None and all(c in header for c in READING_COLUMNS)
+                 and len(set(header)) == len(header) and all(header))
+    if not header_ok and size > MAX_EXACT_READ_BYTES:
+        raise DataFormatError(f"readings file {path}, line 1: the header "
+                              f"{'is not a readable CSV row' if header is None else _shown_names(header)}; it names "
+                              f"the columns {list(READING_COLUMNS)} (and optional ones), each once, none empty")
     numeric = [c for c in ("time_s", "rssi_dbm", *OPTIONAL_READING_COLUMNS)
-               if c in header and not (time_as_text and c == "time_s")]
-    fast = (b'"' not in first and all(c in header for c in READING_COLUMNS) and len(set(header)) == len(header)
-            and all(header) and _one_record_per_line(path, len(header)))
-    if fast:
+               if header_ok and c in header and not (time_as_text and c == "time_s")]
+    why = _scan_records(path, len(header)) if header_ok else "the header is not the long format's"
+    if not why:
         try:
             kinds = {c: (float if c in numeric else str if c == "time_s" else "category") for c in header}
             table = pd.read_csv(path, dtype=kinds, keep_default_na=False,
                                 na_values={c: sorted(_MISSING_TEXT) for c in numeric}, skipinitialspace=True,
                                 engine="c", encoding="utf-8-sig")
-        except (ValueError, UnicodeDecodeError, pd.errors.ParserError):
-            fast = False             # the exact reader says what and where
-    if not fast:
-        return _read_text_table(path, READING_COLUMNS, "readings")
+        except (ValueError, UnicodeDecodeError, pd.errors.ParserError) as exc:
+            if size > MAX_EXACT_READ_BYTES:                # too large to read again as text: locate it in chunks
+                _locate_bad_number(path, header, numeric, exc)
+            why = "the fast reader refused it"             # the exact reader says what and where
+    if why:
+        return _read_text_table(path, READING_COLUMNS, "readings", why=why)
     table.columns = header
     table.attrs["parsed"] = True       # numbers already parsed: see validate_readings_file
     return table, _file_lines(len(table))
@@ -446,12 +617,13 @@ def read_readings_table(path, *, time_as_text: bool = False) -> tuple[pd.DataFra
 def validate_readings_file(path, table: pd.DataFrame, lines, prepare=lambda t: t, **options) -> pd.DataFrame:
     """:func:`validate_readings` of a table from :func:`read_readings_table` (after ``prepare``, e.g. a unit
     conversion). Where the fast reader parsed the numbers and the table breaks a rule, the file is read again as
-    text and checked again, so that the message quotes the file's own text (two times equal only as floats)."""
+    text and checked again, so that the message quotes the file's own text (two times equal only as floats); a
+    file too large for the exact reader (:data:`MAX_EXACT_READ_BYTES`) keeps the message of the parsed table."""
     source = f"readings file {path}"
     try:
         return validate_readings(prepare(table), source=source, lines=lines, **options)
     except DataFormatError:
-        if not table.attrs.get("parsed"):
+        if not table.attrs.get("parsed") or Path(path).stat().st_size > MAX_EXACT_READ_BYTES:
             raise
     exact, lines = _read_text_table(path, READING_COLUMNS, "readings")
     return validate_readings(prepare(exact), source=source, lines=lines, **options)
@@ -482,18 +654,18 @@ def read_anchors(path, *, min_separation_m: float = ANCHOR_MIN_SEPARATION_M) -> 
     dup = ids.duplicated().to_numpy()
     if dup.any():
         i = int(np.flatnonzero(dup)[0])
-        raise DataFormatError(f"{source}, line {lines[i]}, column 'id': anchor id {ids.iloc[i]!r} appears twice")
+        raise DataFormatError(f"{source}, line {lines[i]}, column 'id': anchor id {_shown(ids.iloc[i])} appears twice")
     out = pd.DataFrame({"id": ids.to_numpy()})
     for col in ("x", "y", "z"):
-        out[col] = _numeric(table, col, source, lines, missing_ok=False)
+        out[col] = _numeric(table, col, source, lines, missing_ok=False, coordinate=True)
     xyz = out[["x", "y", "z"]].to_numpy(float)
     pairs = cKDTree(xyz).query_pairs(min_separation_m, output_type="ndarray") if len(xyz) > 1 else np.zeros((0, 2))
     if len(pairs):
         pairs = np.sort(pairs, axis=1)
         i, j = (int(v) for v in pairs[np.lexsort((pairs[:, 0], pairs[:, 1]))[0]])   # the first in file order
         raise DataFormatError(
-            f"{source}, lines {lines[i]} and {lines[j]}, columns 'x','y','z': anchors {ids.iloc[i]!r} and "
-            f"{ids.iloc[j]!r} are at the same position ({', '.join(f'{v:g}' for v in xyz[i])}) m (within "
+            f"{source}, lines {lines[i]} and {lines[j]}, columns 'x','y','z': anchors {_shown(ids.iloc[i])} and "
+            f"{_shown(ids.iloc[j])} are at the same position ({', '.join(f'{v:g}' for v in xyz[i])}) m (within "
             f"{min_separation_m:g} m; {len(pairs)} such pair(s)); two receivers at one point are a copy error or one "
             "device: fix the coordinates or keep one id")
     return out
@@ -504,7 +676,7 @@ def read_outline(path) -> np.ndarray:
     without a repeated closing vertex."""
     table, lines = _read_text_table(path, ("x", "y"), "outline")
     source = f"outline file {path}"
-    xy = np.column_stack([_numeric(table, c, source, lines, missing_ok=False) for c in ("x", "y")])
+    xy = np.column_stack([_numeric(table, c, source, lines, missing_ok=False, coordinate=True) for c in ("x", "y")])
     if len(xy) > 1 and np.array_equal(xy[0], xy[-1]):
         xy = xy[:-1]
     if len(xy) < 3:
@@ -519,7 +691,7 @@ def read_path_segments(path) -> np.ndarray:
     """Read a reference path: ``x0, y0, x1, y1`` per straight segment (metres) -> ``(S, 2, 2)``."""
     table, lines = _read_text_table(path, ("x0", "y0", "x1", "y1"), "path")
     source = f"path file {path}"
-    cols = [_numeric(table, c, source, lines, missing_ok=False) for c in ("x0", "y0", "x1", "y1")]
+    cols = [_numeric(table, c, source, lines, missing_ok=False, coordinate=True) for c in ("x0", "y0", "x1", "y1")]
     if len(table) == 0:
         raise DataFormatError(f"{source}: no segments")
     return np.stack(cols, axis=-1).reshape(-1, 2, 2)
@@ -565,8 +737,10 @@ def _check_epoch_rule(window_s, aggregate: str, min_readings: int, group_by, rea
         raise ParameterError(f"window_s must be None or a finite number of seconds >= 0, got {window_s!r}")
     if aggregate not in AGGREGATES:
         raise ParameterError(f"aggregate must be one of {AGGREGATES}, got {aggregate!r}")
-    if not (isinstance(min_readings, (int, np.integer)) and not isinstance(min_readings, bool) and min_readings >= 1):
-        raise ParameterError(f"min_readings must be an integer >= 1, got {min_readings!r}")
+    if not (isinstance(min_readings, (int, np.integer)) and not isinstance(min_readings, bool)
+            and 1 <= min_readings <= MAX_MIN_READINGS):
+        raise ParameterError(f"min_readings must be an integer from 1 to {MAX_MIN_READINGS:,} (MAX_MIN_READINGS), "
+                             f"got {_shown(min_readings)}")
     group_by = (group_by,) if isinstance(group_by, str) else tuple(group_by)
     reserved = set(READING_COLUMNS) | set(OPTIONAL_READING_COLUMNS)
     for col in group_by:

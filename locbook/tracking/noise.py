@@ -55,7 +55,11 @@ class NoiseFit:
     - ``log_likelihood`` ``batch``: at the estimate; ``initial_log_likelihood``: at the given Q and R;
     - ``at_bound`` ``batch + (p,)``: each multiplier (``q_scale``'s, then each stream's ``r_scale``, in order) ended at
       its bound (the likelihood wants it beyond: widen ``scale_bounds`` or suspect the model); ``history`` (EM) ``batch + (iterations + 1,)``: the log-likelihood before each iteration
-      and at the end; ``iterations``, ``method`` (``"ml"`` or ``"em"``).
+      and at the end; ``iterations``, ``method`` (``"ml"`` or ``"em"``);
+    - ``flat`` (ML) ``batch + (p,)``, in ``at_bound``'s order: the log-likelihood does not depend on that multiplier
+      (every reading of its stream, or of that run, is missing): it is not fitted, its ``q_scale``/``r_scale`` and
+      the entries of ``Q``/``R`` it scales are NaN (never the start passed off as a fit). Readings with no value at
+      all are refused (a ValueError: nothing to fit from).
     """
 
     Q: np.ndarray
@@ -68,6 +72,7 @@ class NoiseFit:
     iterations: int
     method: str
     history: np.ndarray | None = None
+    flat: np.ndarray | None = None
 
 
 def _stream_noise(meas):
@@ -189,8 +194,9 @@ def fit_noise_ml(F, Q, x0, P0, measurements, *, kind: str = "kf", fit_Q: str | N
     a run's Newton steps stop when one raises its log-likelihood by no more than that, or changes no multiplier by
     more than 1e-6, relative).
 
-    Raises ConvergenceError when the optimiser stops without meeting its criteria; a multiplier that ends at its bound
-    is reported in ``at_bound`` (not an error: the likelihood may be flat or want more)."""
+    Raises ConvergenceError when the optimiser stops without meeting its criteria, ValueError when no step holds a
+    reading; a multiplier that ends at its bound is reported in ``at_bound`` (not an error: the likelihood may be flat
+    or want more), one the likelihood does not depend on in ``flat`` (NaN estimates; :class:`NoiseFit`)."""
     check_choice("kind", kind, tuple(KALMAN_FILTERS))
     streams = _streams(measurements)
     fit_R = [fit_R] * len(streams) if fit_R is None or isinstance(fit_R, str) else list(fit_R)
@@ -209,26 +215,73 @@ def fit_noise_ml(F, Q, x0, P0, measurements, *, kind: str = "kf", fit_Q: str | N
     filt = KALMAN_FILTERS[kind]
     options = {**options, "divergence_window": 0, "record": [0]}
 
+    def run(theta):
+        Qt, st = params.apply(theta)
+        return filt(F, Qt, x0, P0, st, **options)
+
     def log_likelihood(theta):
         """The runs' total log-likelihood at log multipliers ``theta`` (leading axes: candidates, then runs)."""
-        Qt, st = params.apply(theta)
-        return filt(F, Qt, x0, P0, st, **options).total_log_likelihood
+        return run(theta).total_log_likelihood
 
-    ll0 = log_likelihood(np.zeros(p))
+    start = run(np.zeros(p))
+    ll0 = start.total_log_likelihood
     runs = np.shape(ll0)
+    if not np.isfinite(start.log_likelihood).any():
+        why = f"the runs' axes {runs} hold no run" if 0 in runs else "every reading is missing"
+        raise ValueError(f"fit_noise_ml: no step of the {len(streams)} stream(s) holds a reading ({why}): there are no "
+                         "readings to fit from")
+    flat = _flat(log_likelihood, runs, p, per_run)
     if per_run:
         theta, iterations = _newton_per_run(log_likelihood, runs, p, np.log(lo), np.log(hi), int(max_iter), tol)
     else:
         theta, iterations = _lbfgs_pooled(log_likelihood, runs, p, np.log(lo), np.log(hi), int(max_iter), tol,
                                           abs(float(np.sum(ll0))))
     Qf, st = params.apply(theta)       # pooled: one Q and R for every run
-    q, r = params.unpack(theta)
-    at_bound = (theta <= np.log(lo) + 1e-6) | (theta >= np.log(hi) - 1e-6)
-    R = tuple((s.channel.sigma_db if isinstance(s, RssMeasurement) else s.R) if form is not None else None
-              for s, form in zip(st, fit_R))
+    q, r = params.unpack(np.where(flat, np.nan, theta))
+    at_bound = ((theta <= np.log(lo) + 1e-6) | (theta >= np.log(hi) - 1e-6)) & ~flat
+    R = [(s.channel.sigma_db if isinstance(s, RssMeasurement) else s.R) if form is not None else None
+         for s, form in zip(st, fit_R)]
+    if flat.any():                      # an undetermined multiplier: NaN in what it scales (the status is `flat`)
+        Qf, R = _blank_flat(params, flat, Qf, R)
     ll = log_likelihood(theta)
-    return NoiseFit(Qf, R, q, r, ll if per_run else np.sum(ll), ll0 if per_run else np.sum(ll0), at_bound,
-                    iterations, "ml")
+    return NoiseFit(Qf, tuple(R), q, r, ll if per_run else np.sum(ll), ll0 if per_run else np.sum(ll0), at_bound,
+                    iterations, "ml", flat=flat)
+
+
+def _flat(log_likelihood, runs, p: int, per_run: bool) -> np.ndarray:
+    """``batch + (p,)`` (pooled: ``(p,)``): the log-likelihood at the start does not move, to a few ulp, when a log
+    multiplier moves by :data:`_H` either way: nothing in the readings depends on it (every reading of that stream
+    missing, a run with no reading)."""
+    steps = np.concatenate([np.zeros((1, p)), _H * np.eye(p), -_H * np.eye(p)])
+    f = log_likelihood(steps.reshape((2 * p + 1,) + (1,) * len(runs) + (p,)))
+    if not per_run:
+        f = f.reshape(2 * p + 1, -1).sum(axis=-1)
+    f0, fp, fm = f[0], f[1:p + 1], f[p + 1:]
+    tol = 8 * np.finfo(float).eps * np.abs(f0)
+    flat = (np.abs(fp - f0) <= tol) & (np.abs(fm - f0) <= tol)
+    return np.moveaxis(flat, 0, -1)
+
+
+def _blank_flat(params, flat, Q, R: list):
+    """NaN in the entries of the fitted ``Q`` and ``R`` (per stream) that a flat multiplier scales."""
+    c = 0
+    for target, M, _ in params.blocks:
+        hit = (flat[..., c:c + M.shape[0]].astype(float) @ M) > 0            # (..., size): components scaled
+        c += M.shape[0]
+        if not hit.any():
+            continue
+        value = np.array(Q if target == -1 else R[target], dtype=float)
+        if target != -1 and isinstance(params.streams[target], RssMeasurement):
+            hit = np.broadcast_to(hit.any(axis=-1, keepdims=True) if value.shape[-1:] == (1,) else hit,
+                                  np.broadcast_shapes(hit.shape[:-1] + value.shape[-1:], value.shape))
+            value = np.where(hit, np.nan, value)
+        else:
+            value = np.where(hit[..., :, None] | hit[..., None, :], np.nan, value)
+        if target == -1:
+            Q = value
+        else:
+            R[target] = value
+    return Q, R
 
 
 _H = 1e-4          # finite-difference step in log multipliers (a relative change of 1e-4)
@@ -349,6 +402,7 @@ def fit_noise_em(F, Q, x0, P0, measurement: LinearMeasurement, *, B=None, u=None
     T, n = z.shape[-2], H.shape[-1]
     if T < 2:
         raise ValueError("fit_noise_em needs at least two steps")
+    _check_em_readings(z, per_run)
     Fs = F.value if isinstance(F, PerStep) else np.asarray(F, dtype=float)[..., None, :, :]
     drift, _ = _control_drift(B, u, n, T)
     history = []
@@ -373,24 +427,79 @@ def fit_noise_em(F, Q, x0, P0, measurement: LinearMeasurement, *, B=None, u=None
             terms = (e[..., :, None] * e[..., None, :] + Fk @ V[..., :-1, :, :] @ np.swapaxes(Fk, -1, -2)
                      + V[..., 1:, :, :] - CF - np.swapaxes(CF, -1, -2))
             Q = terms.mean(axis=-3) if per_run else terms.reshape((-1, n, n)).mean(axis=0)
-            Q = 0.5 * (Q + np.swapaxes(Q, -1, -2))
+            parts = (e[..., :, None] * e[..., None, :], V[..., 1:, :, :], CF)
+            Q = _psd_iterate("Q", 0.5 * (Q + np.swapaxes(Q, -1, -2)), _scale(parts, per_run), it + 1)
         if "R" in fit:
             full = np.all(np.isfinite(z), axis=-1)                       # batch + (T,)
             full = np.broadcast_to(full, batch + (T,))
             r = np.where(full[..., None], np.broadcast_to(z, batch + z.shape[-2:]) - m @ H.T, 0.0)
             terms = r[..., :, None] * r[..., None, :] + H @ V @ H.T
             terms = np.where(full[..., None, None], terms, 0.0)
-            if per_run:
-                count = full.sum(axis=-1)
-                if np.any(count == 0):
-                    raise ValueError("fit_noise_em: a run has no step with every reading present (R cannot be fitted)")
-                R = terms.sum(axis=-3) / count[..., None, None]
+            if per_run:                                                  # every run has a full step (checked)
+                R = terms.sum(axis=-3) / full.sum(axis=-1)[..., None, None]
             else:
-                R = terms.reshape((-1,) + R.shape[-2:]).sum(axis=0) / max(int(full.sum()), 1)
-            R = 0.5 * (R + np.swapaxes(R, -1, -2))
+                R = terms.reshape((-1,) + R.shape[-2:]).sum(axis=0) / int(full.sum())
+            R = _psd_iterate("R", 0.5 * (R + np.swapaxes(R, -1, -2)), _scale((terms,), per_run), it + 1)
     history = np.stack([np.asarray(h) for h in history], axis=-1)
     if not per_run:
         history = history.reshape(-1, n_iter + 1).sum(axis=0)
     final = history[..., -1]
     return NoiseFit(Q, (R,), None, (None,), final, history[..., 0], np.zeros(np.shape(final) + (0,), bool),
                     int(n_iter), "em", history)
+
+
+def _check_em_readings(z, per_run: bool) -> None:
+    """Refuse readings ``batch + (T, m)`` that leave EM nothing to fit from: no step with every component present
+    (pooled: in any run; per run: in some run), zero components, or no run at all. Without them the E-step is the
+    prior's prediction and EM would return its start (or R = 0) with a log-likelihood of 0."""
+    m = z.shape[-1]
+    full = np.all(np.isfinite(z), axis=-1) & (m > 0)                        # batch + (T,)
+    if not full.any():
+        what = ("no run" if full.size == 0 else "readings of zero components" if m == 0
+                else f"no step with all {m} components present (a step with a missing component is missing as a whole)")
+        raise ValueError(f"fit_noise_em: measurement.z {z.shape} has {what}: there are no readings to fit from")
+    if per_run and z.ndim > 2:
+        empty = ~full.any(axis=-1)
+        if empty.any():
+            run = tuple(int(i) for i in np.argwhere(empty)[0])
+            raise ValueError(f"fit_noise_em: run {run} of measurement.z {z.shape} has no step with all {m} components "
+                             f"present ({int(empty.sum())} such runs): no readings to fit it from; drop those runs or "
+                             "pool the runs (per_run=False)")
+
+
+#: the round-off an M-step's Q or R may carry below zero, relative to the scale of the terms it sums (the filter's
+#: own tolerance on a covariance, locbook.tracking._linalg._SYM_RTOL)
+_EM_PSD_RTOL = 1e-8
+
+
+def _scale(parts, per_run: bool) -> np.ndarray:
+    """The largest |entry| of the M-step's summands ``parts`` (each ``batch + (K, a, a)``): per run, or of all runs."""
+    axes = (-3, -2, -1)
+    top = np.max([np.abs(p).max(axis=axes) if p.size else np.zeros(p.shape[:-3]) for p in parts], axis=0)
+    return top if per_run else np.max(top, initial=0.0)
+
+
+def _psd_iterate(name: str, A, scale, iteration: int):
+    """The symmetric M-step estimate ``A`` ``(..., a, a)`` as a covariance: an average of conditional second moments
+    is positive semi-definite, so negative eigenvalues within :data:`_EM_PSD_RTOL` times ``scale`` (its summands'
+    largest entry) are cancellation round-off (EM started from Q = 0 stays at 0 up to some 1e-17); where there are
+    any, the eigenvalues within that band become 0. Beyond it the E-step has lost its precision: ConvergenceError."""
+    if A.shape[-1] == 0:
+        return A
+    w, V = np.linalg.eigh(A)
+    low = w[..., 0]
+    if not np.any(low < 0):
+        return A
+    tol = _EM_PSD_RTOL * np.asarray(scale, dtype=float)
+    bad = low < -tol
+    if np.any(bad):
+        at = tuple(int(i) for i in np.argwhere(bad)[0]) if np.ndim(bad) else ()
+        raise ConvergenceError(f"fit_noise_em: the M-step's {name} of iteration {iteration}"
+                               f"{f' in run {at}' if at else ''} has the eigenvalue {float(low[at]):.3g}, below the "
+                               f"round-off {float(np.broadcast_to(tol, np.shape(low))[at]):.3g} of its terms (a "
+                               "covariance cannot be negative): the E-step lost its precision; rescale the model")
+    fix = low < 0
+    w = np.where(np.abs(w) <= tol[..., None] if np.ndim(tol) else np.abs(w) <= tol, 0.0, w)
+    clipped = (V * w[..., None, :]) @ np.swapaxes(V, -1, -2)
+    clipped = 0.5 * (clipped + np.swapaxes(clipped, -1, -2))
+    return np.where(fix[..., None, None], clipped, A) if np.ndim(fix) else clipped

@@ -5,6 +5,13 @@ likelihood estimates of linear dynamic systems", AIAA Journal 3(8), 1965) on the
 cross-covariances a :func:`~locbook.tracking.kalman.kalman_filter`, :func:`~locbook.tracking.kalman.extended_kalman_filter`
 or :func:`~locbook.tracking.unscented.unscented_kalman_filter` run records (for the UKF with nonlinear motion it is the
 unscented RTS smoother), vectorized over the run's leading Monte-Carlo axes (the backward pass loops over time only).
+
+A singular predicted covariance (a deterministic state: Q = 0 with a known start, a zero-variance component) has a
+well-defined smoother: the gain ``C_k = D_{k+1} P_{k+1|k}^+`` with the Moore-Penrose pseudo-inverse gives the Gaussian
+conditional mean for any generalized inverse, because ``D_{k+1}^T`` and ``x_{k+1} - x_{k+1|k}`` lie in the range of
+``P_{k+1|k}`` (pykalman's smoother uses ``pinv`` throughout). A step of a run whose ``P_{k+1|k}`` has an eigenvalue at
+or below :data:`PINV_RTOL` times its largest takes that pseudo-inverse (eigenvalues below the cut treated as 0); every
+other step keeps the LU solve, so a regular run's numbers do not depend on another run being singular.
 """
 from __future__ import annotations
 
@@ -16,7 +23,12 @@ from .._validate import as_array
 from .results import KalmanResult
 from .transition import PerStep
 
-__all__ = ["SmoothedResult", "rts_smoother"]
+__all__ = ["SmoothedResult", "rts_smoother", "PINV_RTOL"]
+
+#: a predicted covariance whose smallest eigenvalue is at most this fraction of its largest is singular for the
+#: smoother (module docstring): its directions below the cut are deterministic, and their round-off residue (some
+#: 1e-16 of the scale) is not inverted
+PINV_RTOL = 1e-12
 
 
 @dataclass(frozen=True)
@@ -54,6 +66,9 @@ def rts_smoother(result: KalmanResult, F=None, *, residual=None) -> SmoothedResu
         raise ValueError("rts_smoother needs the run's predictions: filter with outputs=('x_pred', 'P_pred', "
                          "'P_cross')")
     x, P = np.asarray(result.x, float), np.asarray(result.P, float)
+    if x.ndim < 2 or P.shape != x.shape + x.shape[-1:]:
+        raise ValueError(f"rts_smoother: the run's x must be batch + (T, n) and P batch + (T, n, n), got shapes "
+                         f"{x.shape} and {P.shape}")
     T, n = x.shape[-2], x.shape[-1]
     steps = np.asarray(result.steps)
     if not np.array_equal(steps, np.arange(T)) or T == 0:
@@ -68,6 +83,21 @@ def rts_smoother(result: KalmanResult, F=None, *, residual=None) -> SmoothedResu
     else:
         cross = _cross_from_F(F, P, batch, T, n)
     x_pred, P_pred = np.asarray(result.x_pred, float), np.asarray(result.P_pred, float)
+    for name, a, want in (("x_pred", x_pred, x.shape), ("P_pred", P_pred, P.shape), ("P_cross", cross, P.shape)):
+        if a.shape != want:
+            raise ValueError(f"rts_smoother: the run's {name} must have the shape {want} of its "
+                             f"{'x' if name == 'x_pred' else 'P'}, got {a.shape}")
+    # the covariances of a filter run are finite; NaN or inf here is a broken result (a NaN mean is carried as NaN)
+    for name, a in (("P", P), ("P_pred", P_pred), ("P_cross", cross[..., 1:, :, :])):
+        bad = ~np.isfinite(a)
+        if bad.any():
+            at = tuple(int(i) for i in np.argwhere(bad)[0])
+            step = at[len(batch)] + (name == "P_cross")
+            raise ValueError(f"rts_smoother: the run's {name} is not finite at step {step}"
+                             f"{f' of run {at[:len(batch)]}' if batch else ''} (entry {at[len(batch) + 1:]}); "
+                             "the smoother needs the finite covariances of a filter run")
+    if x.size == 0:                  # no run (a zero-length run axis) or no state: nothing to smooth
+        return SmoothedResult(x.copy(), P.copy(), np.zeros(batch + (T - 1, n, n)))
     diff = (lambda a, b: a - b) if residual is None else (lambda a, b: np.asarray(residual(a, b), dtype=float))
     if batch and _same_in_every_run(batch, P, P_pred, cross[..., 1:, :, :]):
         # one covariance recursion for every run (a linear filter's shared path): gains and covariances once
@@ -94,17 +124,64 @@ def _same_in_every_run(batch, *arrays) -> bool:
 
 def _covariance_pass(P, P_pred, cross):
     """The backward covariance recursion over leading run axes: gains ``C_k = D_{k+1} P_{k+1|k}^{-1}`` ``(..., T - 1,
-    n, n)`` and smoothed covariances ``(..., T, n, n)`` (the means need the gains only)."""
+    n, n)`` and smoothed covariances ``(..., T, n, n)`` (the means need the gains only). A singular ``P_{k+1|k}``
+    (:func:`_singular`) takes the pseudo-inverse (module docstring), the others the LU solve."""
     T, n = P.shape[-3], P.shape[-1]
     gain, Ps = np.empty(P.shape[:-3] + (max(T - 1, 0), n, n)), P.copy()
+    singular = _singular(P_pred[..., 1:, :, :])
     for k in range(T - 2, -1, -1):
         # C = D P_pred^{-1}, solved as (P_pred^{-1} D^T)^T (P_pred symmetric)
-        C = np.swapaxes(np.linalg.solve(P_pred[..., k + 1, :, :], np.swapaxes(cross[..., k + 1, :, :], -1, -2)),
-                        -1, -2)
+        Pp, Dt = P_pred[..., k + 1, :, :], np.swapaxes(cross[..., k + 1, :, :], -1, -2)
+        sing = singular[..., k]
+        if not sing.any():
+            C = np.swapaxes(np.linalg.solve(Pp, Dt), -1, -2)
+        else:
+            C = np.empty(Pp.shape)
+            if sing.ndim == 0:
+                C[...] = _pinv_gain(Pp, Dt)
+            else:
+                C[sing] = _pinv_gain(Pp[sing], Dt[sing])
+                if not sing.all():
+                    C[~sing] = np.swapaxes(np.linalg.solve(Pp[~sing], Dt[~sing]), -1, -2)
         gain[..., k, :, :] = C
         Pk = P[..., k, :, :] + C @ (Ps[..., k + 1, :, :] - P_pred[..., k + 1, :, :]) @ np.swapaxes(C, -1, -2)
         Ps[..., k, :, :] = 0.5 * (Pk + np.swapaxes(Pk, -1, -2))
     return gain, Ps
+
+
+def _singular(P_pred) -> np.ndarray:
+    """Which of the symmetric ``P_pred`` ``(..., n, n)`` have their smallest eigenvalue at or below :data:`PINV_RTOL`
+    times their largest (the mask ``(...)``). The eigenvalues are computed only where a Cholesky factor does not
+    prove the matrix regular: for a positive definite ``A``, ``lambda_min >= det A / lambda_max^(n-1)`` and
+    ``lambda_max <= tr A``, so ``det A > PINV_RTOL tr(A)^n`` (in logs) is enough; the decision is the eigenvalues'."""
+    n = P_pred.shape[-1]
+    out = np.zeros(P_pred.shape[:-2], bool)
+    if out.size == 0:
+        return out
+    trace = np.trace(P_pred, axis1=-2, axis2=-1)
+    try:
+        L = np.linalg.cholesky(P_pred)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            log_det = 2.0 * np.log(np.diagonal(L, axis1=-2, axis2=-1)).sum(axis=-1)
+            sure = (trace > 0) & (log_det > np.log(PINV_RTOL) + n * np.log(trace))
+    except np.linalg.LinAlgError:                 # some matrix is not positive definite: decide every one
+        sure = np.zeros(out.shape, bool)
+    check = ~sure
+    if check.any():
+        w = np.linalg.eigvalsh(P_pred[check])
+        out[check] = w[:, 0] <= PINV_RTOL * w[:, -1]
+    return out
+
+
+def _pinv_gain(P_pred, Dt):
+    """``C = D P_pred^+`` ``(..., n, n)`` from ``Dt = D^T``: the pseudo-inverse from the symmetric eigen-decomposition,
+    eigenvalues at or below :data:`PINV_RTOL` times the largest (and any negative round-off) treated as 0."""
+    w, V = np.linalg.eigh(P_pred)
+    keep = w > PINV_RTOL * np.maximum(w[..., -1:], 0.0)
+    inv_w = np.where(keep, 1.0 / np.where(keep, w, 1.0), 0.0)
+    # C^T = V diag(1/w) V^T D^T
+    Ct = V @ (inv_w[..., :, None] * (np.swapaxes(V, -1, -2) @ Dt))
+    return np.swapaxes(Ct, -1, -2)
 
 
 def _cross_from_F(F, P, batch, T: int, n: int):

@@ -48,6 +48,7 @@ This module only declares and validates; it imports nothing from the suite (the 
 from __future__ import annotations
 
 import csv
+import io
 import math
 import re
 import tomllib
@@ -59,7 +60,7 @@ from typing import Any
 from ..errors import LocbookError
 
 __all__ = ["Reading", "ReadingsError", "readings", "readings_for", "load_reading_file", "READINGS_DIR",
-           "READING_COLUMNS", "OPTIONAL_READING_COLUMNS", "BASES"]
+           "READING_COLUMNS", "OPTIONAL_READING_COLUMNS", "BASES", "utf8_text"]
 
 READINGS_DIR = Path(__file__).resolve().parents[1] / "data" / "readings"    # package data of locbook.data
 READING_COLUMNS = ("name", "experiments", "parameter", "where", "default", "alternatives", "fitted", "low", "high",
@@ -73,6 +74,20 @@ BASES = ("printed", "assumed", "fitted_to_output")
 
 class ReadingsError(LocbookError, ValueError):
     """A readings file that breaks a rule of the declaration; the message names the file, the line and the problem."""
+
+
+def utf8_text(data: bytes, path, error: type[Exception] = ReadingsError) -> str:
+    """``data`` (the bytes of the text file ``path``) decoded as UTF-8 (a leading byte-order mark dropped); a byte
+    that is not UTF-8 raises ``error`` naming the file, the line and the column (1-based, in bytes)."""
+    bom = data.startswith(b"\xef\xbb\xbf")
+    try:
+        return data[3:].decode("utf-8") if bom else data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        offset = exc.start + (3 if bom else 0)
+        line_start = data.rfind(b"\n", 0, offset) + 1
+        line = data.count(b"\n", 0, offset) + 1
+        raise error(f"{path}, line {line}, column {offset - line_start + 1}: byte 0x{data[offset]:02x} is not "
+                    "UTF-8 text; save the file as UTF-8") from None
 
 
 _NAME = re.compile(r"[a-z][a-z0-9_]*\Z")
@@ -233,17 +248,31 @@ def load_reading_file(path: str | Path, document: str | None = None) -> tuple[Re
     line and the problem (:class:`ReadingsError`)."""
     path = Path(path)
     document = document or path.stem
-    with open(path, newline="", encoding="utf-8") as fh:
-        lines = [(number, line) for number, line in enumerate(fh, start=1) if not line.startswith("#")]
+    with open(path, "rb") as fh:
+        text = utf8_text(fh.read(), path)
+    # the lines as open(path, newline="") gave them (\n, \r\n or \r ends a line), numbered as in the file
+    lines = [(number, line) for number, line in enumerate(io.StringIO(text, newline=""), start=1)
+             if not line.startswith("#")]
     if not lines:
         raise ReadingsError(f"{path}: no header line; the columns must be {', '.join(READING_COLUMNS)}")
     reader = csv.DictReader(line for _, line in lines)
-    columns = tuple(reader.fieldnames or ())
+    try:
+        columns = tuple(reader.fieldnames or ())
+    except csv.Error as exc:
+        raise ReadingsError(f"{path}, line {lines[0][0]}: not a well-formed CSV header ({exc})") from None
     if columns not in (READING_COLUMNS, READING_COLUMNS + OPTIONAL_READING_COLUMNS):
         raise ReadingsError(f"{path}, line {lines[0][0]}: columns must be {', '.join(READING_COLUMNS)} (then "
                             f"optionally {', '.join(OPTIONAL_READING_COLUMNS)}); got {', '.join(columns)}")
     out, seen = [], {}
-    for row in reader:
+    rows = iter(reader)
+    while True:
+        try:
+            row = next(rows)
+        except StopIteration:
+            break
+        except csv.Error as exc:     # a NUL byte, a field over the csv module's size limit, a stray quote
+            number = lines[min(reader.line_num, len(lines)) - 1][0]
+            raise ReadingsError(f"{path}, line {number}: not a well-formed CSV row ({exc})") from None
         number = lines[reader.line_num - 1][0]     # reader.line_num counts the non-comment lines read so far
         where = f"{path}, line {number}"
         if None in row or any(v is None for v in row.values()):

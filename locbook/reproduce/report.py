@@ -26,7 +26,7 @@ import numpy as np
 from .printed_values import Printed
 from .scoring import KINDS, Ambiguity, score
 
-__all__ = ["Report", "NUMBER_COLUMNS", "Table"]
+__all__ = ["Report", "NUMBER_COLUMNS", "Table", "markdown_text"]
 
 NUMBER_COLUMNS = (
     "experiment", "document", "printed_id", "quantity", "where", "unit", "kind", "printed", "reproduced",
@@ -34,6 +34,15 @@ NUMBER_COLUMNS = (
     "relation", "calibrated_from", "same_as", "note",
 )
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
+#: where Markdown starts raw HTML (CommonMark 0.31, "Raw HTML" and "Autolinks"): "<" before a letter (a tag, an
+#: autolink), "/" (a closing tag), "!" (a comment, a declaration, CDATA) or "?" (a processing instruction)
+_HTML_START = re.compile(r"<(?=[A-Za-z/!?])")
+
+
+def markdown_text(text) -> str:
+    """``text`` for a Markdown file, with every "<" that could open raw HTML written as ``&lt;`` (a viewer shows
+    it as typed; a "<" before a space or a digit, as in ``N_eff < 0.5``, stays as it is)."""
+    return _HTML_START.sub("&lt;", str(text))
 
 
 def _fmt(value, digits=4):
@@ -66,9 +75,12 @@ class Table:
         return f"<table>{cap}<thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
 
     def to_markdown(self) -> str:
-        lines = ["| " + " | ".join(self.columns) + " |", "|" + "---|" * len(self.columns)]
+        """A Markdown table: "|" escaped, a newline a space, and HTML shown as text (:func:`markdown_text`)."""
+        def cell(value) -> str:
+            return markdown_text(value).replace("|", "\\|").replace("\r\n", " ").replace("\n", " ").replace("\r", " ")
+        lines = ["| " + " | ".join(cell(c) for c in self.columns) + " |", "|" + "---|" * len(self.columns)]
         for r in self.rows:
-            lines.append("| " + " | ".join(_fmt(r.get(c, "")).replace("|", "\\|") for c in self.columns) + " |")
+            lines.append("| " + " | ".join(cell(_fmt(r.get(c, ""))) for c in self.columns) + " |")
         return "\n".join(lines)
 
     def write_csv(self, path: Path):

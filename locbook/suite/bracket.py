@@ -52,6 +52,7 @@ kept).
 from __future__ import annotations
 
 import csv
+import hashlib
 import io
 import json
 import math
@@ -61,15 +62,15 @@ from pathlib import Path
 
 from ..errors import ParameterError
 from ..reproduce.readings import Reading, load_reading_file, readings_for
-from ..reproduce.report import NUMBER_COLUMNS
+from ..reproduce.report import NUMBER_COLUMNS, markdown_text
 from ..reproduce.scoring import JUDGED_KINDS
 from .params import check_value
 from .spec import Experiment, Suite, SuiteError, finite_float
-from .study import _atomic, _point_key
+from .study import Aggregate, _atomic, _canonical, current_points
 
 __all__ = ["BracketPoint", "find_experiment", "brackets_root", "SITE_NUMBER_COLUMNS", "BRACKET_ROW_COLUMNS",
            "experiment_readings", "bracket_settings", "write_findings", "counts", "read_readings_option", "bracket_points", "bracket_gaps", "run_bracket", "bracket_folder", "bracket_rows",
-           "bracket_of_rows", "load_bracket", "BRACKETS", "BRACKET_COLUMNS", "POINT_COLUMNS"]
+           "bracket_of_rows", "load_bracket", "NoBracket", "BRACKETS", "BRACKET_COLUMNS", "POINT_COLUMNS"]
 
 BRACKETS = ("default", "reachable", "open", "loose", "outside")
 #: the columns a suite's numbers.csv adds to an experiment's (:data:`~locbook.reproduce.report.NUMBER_COLUMNS`)
@@ -131,6 +132,16 @@ def _sweep_values(reading: Reading, annotation: str) -> list:
         else:
             values += [reading.low, reading.high]
     return values
+
+
+def _point_key(exp: Experiment, values: dict, taken: dict[str, str] | None = None) -> str:
+    """The folder of a bracket point: the experiment id and the first 10 hex digits of the SHA-256 of its values (as
+    committed in points.csv), or all 64 when those 10 are already ``taken`` (key -> values) by other values: a
+    bracket has a few dozen points, and two of them never share a folder."""
+    text = _canonical(values)
+    digest = hashlib.sha256(text.encode()).hexdigest()
+    key = f"{exp.id}-{digest[:10]}"
+    return key if (taken or {}).get(key, text) == text else f"{exp.id}-{digest}"
 
 
 def _same(a, b) -> bool:
@@ -216,7 +227,8 @@ def bracket_points(exp: Experiment, profile: str, readings: tuple[Reading, ...])
     declared = exp.declared_parameters()
     base = {**exp.parameters(profile), **bracket_settings(exp, readings)}
     points = [BracketPoint(f"{exp.id}-{DEFAULT_POINT}", exp, (), "", None, base)]
-    by_value: dict[tuple, int] = {}
+    by_value: dict[str, int] = {}       # the values a point changes (canonical text) -> its index
+    taken: dict[str, str] = {}          # folder key -> the values it holds
     for reading in readings:
         if reading.is_gap:
             continue
@@ -239,15 +251,17 @@ def bracket_points(exp: Experiment, profile: str, readings: tuple[Reading, ...])
                 change[reading.parameter] = checked
             if not change:
                 continue       # the profile's own value: the default point
-            key = _point_key(exp, change)
-            if key in by_value:   # another reading names the same values: one run serves both
-                i = by_value[key]
+            text = _canonical(change)
+            if text in by_value:   # another reading names the same values: one run serves both
+                i = by_value[text]
                 if reading not in points[i].readings:
                     points[i] = BracketPoint(key, exp, (*points[i].readings, reading), points[i].parameter,
                                              points[i].value, points[i].parameters, requires=points[i].requires,
                                              reading_values={**points[i].reading_values, reading.name: checked})
                 continue
-            by_value[key] = len(points)
+            key = _point_key(exp, change, taken)
+            taken[key] = text
+            by_value[text] = len(points)
             points.append(BracketPoint(key, exp, (reading,), reading.parameter, checked, {**base, **change},
                                        requires=requires, reading_values={reading.name: checked}))
     # values fitted to printed output were chosen together: one more run sets them all at once
@@ -257,7 +271,7 @@ def bracket_points(exp: Experiment, profile: str, readings: tuple[Reading, ...])
             fitted.setdefault(reading.parameter, (reading, reading.fitted[0]))
     if len(fitted) >= 2:
         together = {p: check_value(declared[p], v, exp.rules.get(p)) for p, (_r, v) in fitted.items()}
-        points.append(BracketPoint(_point_key(exp, together), exp, tuple(r for r, _v in fitted.values()), "", None,
+        points.append(BracketPoint(_point_key(exp, together, taken), exp, tuple(r for r, _v in fitted.values()), "", None,
                                    {**base, **together}, together))
     return points
 
@@ -409,7 +423,12 @@ def bracket_of_rows(rows: list[dict], bracket: list[dict], profile: str | None =
     that is not within here (another profile's window) is ``open`` whatever the other readings gave there: they
     were not run at this profile. ``profile``: the report's; where it is the bracket's, a row whose value here
     differs from the bracket's default run is ``open``: the bracket is stale (made by other code or parameters).
-    Empty for rows the bracket does not cover or does not score."""
+    Empty for rows the bracket does not cover or does not score. Where no bracket.csv exists at all (``bracket`` a
+    :class:`NoBracket`), a row keeps the bracket columns the profile's numbers.csv gave it, if its value and verdict
+    there are the same (:func:`_previous_columns`): a missing bracket is no new verdict."""
+    if isinstance(bracket, NoBracket):
+        kept = _previous_columns(bracket.folder, profile)
+        return [{**r, **kept.get(_site_key(r), {"bracket": "", "bracket_readings": ""})} for r in rows]
     indexed = _index(bracket)
     out = []
     for r in rows:
@@ -445,6 +464,30 @@ def bracket_of_rows(rows: list[dict], bracket: list[dict], profile: str | None =
     return out
 
 
+def _site_key(r: dict) -> tuple:
+    """A numbers row as the bracket columns belong to it: the row and what it said (value, verdict)."""
+    return (r.get("experiment", ""), r.get("printed_id", ""), r.get("quantity", ""), r.get("where", ""),
+            str(r.get("reproduced", "")).strip(), r.get("verdict", ""))
+
+
+def _previous_columns(bracket_folder: Path, profile: str | None) -> dict[tuple, dict]:
+    """The bracket columns of the rows of ``numbers.csv`` in the profile's reports folder beside the brackets
+    (``<reports>/<profile>/`` for ``<reports>/brackets/<experiment>``), by :func:`_site_key`; empty for a report of
+    no known profile or a folder without one (its numbers are read as written: a damaged file keeps nothing)."""
+    from .site import _read_csv
+    from .spec import PROFILES
+    if profile not in PROFILES:
+        return {}
+    rows = _read_csv(Path(bracket_folder).parent.parent / profile / "numbers.csv")
+    out = {}
+    for r in rows:
+        if None in r or r.get("bracket") is None or r.get("bracket_readings") is None:
+            return {}      # another layout, or a short row
+        if r["bracket"]:
+            out[_site_key(r)] = {"bracket": r["bracket"], "bracket_readings": r["bracket_readings"]}
+    return out
+
+
 # ---------------------------------------------------------------------------------------------------
 # outputs
 
@@ -458,11 +501,23 @@ def brackets_root(report_dir: Path) -> Path:
     return Path(report_dir).parent / "brackets"
 
 
+class NoBracket(list):
+    """What :func:`load_bracket` returns where no bracket.csv exists (an empty list): ``folder`` is where it looked,
+    so that :func:`bracket_of_rows` keeps the bracket columns a profile's numbers.csv already holds (a copy of
+    ``reports/<profile>`` without ``reports/brackets`` beside it has lost no verdict)."""
+
+    def __init__(self, folder: Path):
+        super().__init__()
+        self.folder = Path(folder)
+
+
 def load_bracket(folder: Path) -> list[dict]:
-    """The rows of ``<folder>/bracket.csv``; empty if there is none, or if it is damaged or of another layout
-    (a header other than :data:`BRACKET_COLUMNS`, a short row): a report is never labelled from a file that cannot
-    be read as written."""
+    """The rows of ``<folder>/bracket.csv``; empty if it is damaged or of another layout (a header other than
+    :data:`BRACKET_COLUMNS`, a short row): a report is never labelled from a file that cannot be read as written;
+    a :class:`NoBracket` (empty) if there is none."""
     path = Path(folder) / "bracket.csv"
+    if not path.is_file():
+        return NoBracket(folder)
     try:
         with open(path, newline="", encoding="utf-8") as fh:
             reader = csv.DictReader(fh)
@@ -490,8 +545,14 @@ def _short(text: str) -> str:
     return text if value is None else f"{value:.4g}"
 
 
+def _md_line(text) -> str:
+    """Text of the findings page on one line, HTML shown as text (a readings file may be anyone's)."""
+    return markdown_text(text).replace("\r", " ").replace("\n", " ")
+
+
 def _md_cell(text) -> str:
-    return str(text).replace("|", "\\|").replace("\n", " ")
+    """A findings table cell: :func:`_md_line` with "|" escaped."""
+    return _md_line(text).replace("|", "\\|")
 
 
 def findings_markdown(document: str, brackets: dict[str, list[dict]], points: dict[str, list[dict]]) -> str:
@@ -524,21 +585,22 @@ def findings_markdown(document: str, brackets: dict[str, list[dict]], points: di
         for r in chosen:
             extra = {"outside": r["points"], "reachable": r["reached_by"], "open": r["open_readings"],
                      "loose": r["loose_under"]}[verdict]
-            lines.append(f"| {r['experiment']} | {_md_cell(r['printed_id'])} | {r['printed']} | {_short(r['ours'])} | "
-                         f"{r['verdict']} | {_short(r['band_low'])} .. {_short(r['band_high'])} | {_short(r['closest'])} "
+            lines.append(f"| {_md_cell(r['experiment'])} | {_md_cell(r['printed_id'])} | {_md_cell(r['printed'])} | "
+                         f"{_md_cell(_short(r['ours']))} | {_md_cell(r['verdict'])} | {_md_cell(_short(r['band_low']))} "
+                         f".. {_md_cell(_short(r['band_high']))} | {_md_cell(_short(r['closest']))} "
                          f"({_md_cell(r['closest_reading'])}) | {_md_cell(extra)} |")
         lines.append("")
     lines += ["## Readings swept", ""]
     for eid in sorted(points):
         made = points[eid][0].get("generated_by") if points[eid] else ""
-        lines.append(f"- {eid} ({brackets[eid][0]['profile'] if brackets.get(eid) else '?'} profile"
+        lines.append(_md_line(f"- {eid} ({brackets[eid][0]['profile'] if brackets.get(eid) else '?'} profile"
                      + (f", made by locbook {made}" if made else "") + "): "
                      + "; ".join(f"{p['readings'] or 'default'}"
                                  + (f" = {p['value']}" if p["parameter"] else "")
                                  + ("" if p["status"] in ("ok", "cached") else f" [{p['status']}]")
                                  for p in points[eid])
                      + (f". Every point sets {points[eid][0]['settings']}"
-                        if points[eid] and points[eid][0].get("settings") else ""))
+                        if points[eid] and points[eid][0].get("settings") else "")))
     return "\n".join(lines) + "\n"
 
 
@@ -562,14 +624,25 @@ def write_findings(report_root: Path, document: str, suite: Suite) -> Path | Non
 
 
 def write_bracket_outputs(exp: Experiment, points: list[BracketPoint], folder: Path, outcomes, gaps: list[Reading],
-                          profile: str, suite: Suite, readings_file: str = "") -> None:
-    """bracket.csv, points.csv and the document's findings page (also after an interrupt: from the points that
-    ran; a row is ``open`` while a point it needs has not run)."""
-    status = {o.id: o.status for o in outcomes}
+                          profile: str, suite: Suite, readings_file: str = "", wrote: list | None = None) -> Aggregate:
+    """bracket.csv, points.csv and the document's findings page, from every point with an up-to-date report (this
+    run's and earlier ones: :func:`~locbook.suite.study.current_points`), so an interrupted or failed run never
+    drops a point that still holds; a row is ``open`` while a point it needs has none. Without an up-to-date default
+    point nothing is written (an earlier bracket is kept as it was). Each file is replaced atomically. ``wrote``: the
+    :class:`~locbook.suite.study.Aggregate` is appended as soon as bracket.csv is in place (or known unwritten)."""
+    status = current_points(folder, profile, [(p.key, exp, p.parameters, False) for p in points], outcomes)
+    done = sum(st in ("ok", "cached") for st in status.values())
+    path = folder / "bracket.csv"
     if status.get(points[0].key) not in ("ok", "cached"):
-        return     # without the default point there is no bracket: the previous one (if any) is kept as it was
+        aggregate = Aggregate(path, done, len(points), written=False)
+        if wrote is not None:
+            wrote.append(aggregate)
+        return aggregate
     rows = bracket_rows(exp, points, folder, status, gaps, profile)
-    _write_table(folder / "bracket.csv", BRACKET_COLUMNS, rows)
+    _write_table(path, BRACKET_COLUMNS, rows)
+    aggregate = Aggregate(path, done, len(points))
+    if wrote is not None:
+        wrote.append(aggregate)
     _write_table(folder / "points.csv", POINT_COLUMNS, [
         {"point": i, "readings": ", ".join(r.name for r in p.readings),
          "parameter": ", ".join(p.together) if p.together else p.parameter,
@@ -581,6 +654,7 @@ def write_bracket_outputs(exp: Experiment, points: list[BracketPoint], folder: P
          ", ".join(f"{k}={_text(v)}" for k, v in exp.bracket_parameters.items()) + f" ({exp.bracket_reason})"}
         for i, p in enumerate(points)])
     write_findings(folder.parent.parent, exp.document.key, suite)
+    return aggregate
 
 
 def _stamp(folder: Path) -> str:
@@ -607,11 +681,15 @@ def run_bracket(suite: Suite, exp: Experiment, *, profile: str = "quick", readin
     gaps = bracket_gaps(found)
     folder = bracket_folder(suite, exp, report_root)
     tasks = [Task(p.key, exp, p.parameters, figures=False) for p in points]   # only their numbers are read
-    return run_tasks(suite, tasks, profile, folder, jobs=jobs, force=force, timeout_s=timeout_s, retries=retries,
-                     kernel_name=kernel_name or KERNEL_NAME, progress=progress, executor=executor,
-                     scheduler=scheduler,
-                     write_reports=lambda where, outcomes: write_bracket_outputs(exp, points, where, outcomes, gaps,
-                                                                                 profile, suite, readings_file))
+    wrote: list[Aggregate] = []
+    run = run_tasks(suite, tasks, profile, folder, jobs=jobs, force=force, timeout_s=timeout_s, retries=retries,
+                    kernel_name=kernel_name or KERNEL_NAME, progress=progress, executor=executor,
+                    scheduler=scheduler,
+                    write_reports=lambda where, outcomes: write_bracket_outputs(exp, points, where, outcomes, gaps,
+                                                                                 profile, suite, readings_file, wrote))
+    # what bracket.csv holds now, for the CLI to say (not rewritten: no up-to-date default point, or a failed write)
+    run.aggregate = wrote[-1] if wrote else Aggregate(folder / "bracket.csv", 0, len(points), written=False)
+    return run
 
 
 def read_readings_option(path: Path | None) -> tuple[Reading, ...] | None:

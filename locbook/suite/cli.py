@@ -42,7 +42,9 @@ def _positive(kind, text: str):
     return value
 
 
-def _print_summary(run, progress: str = "plain", see: Path | None = None) -> None:
+def _print_summary(run, progress: str = "plain", see: Path | None = None, rebuilt: str = "") -> None:
+    """The scoreboard and the end of a run. ``rebuilt``: what the run's aggregate files hold now (for ``run``: the
+    index and numbers.csv; a study's or bracket's :class:`~locbook.suite.study.Aggregate`), said after a stop."""
     names = {"ok": "executed", "cached": "cached", "failed": "failed", "interrupted": "interrupted",
              "not run": "not started"}
     counts = ", ".join(f"{run.count(s)} {w}" for s, w in names.items() if run.count(s) or s in ("ok", "cached", "failed"))
@@ -52,7 +54,8 @@ def _print_summary(run, progress: str = "plain", see: Path | None = None) -> Non
     if run.interrupted_by is not None or run.disk_full is not None or run.executor_error:
         if run.interrupted_by is not None:
             sig = signal.Signals(run.interrupted_by).name
-            print(f"interrupted by {sig}: finished reports are kept; nothing else was changed.", file=sys.stderr)
+            print(f"interrupted by {sig}: finished reports are kept" + (f"; {rebuilt}" if rebuilt else "") + ".",
+                  file=sys.stderr)
         for status in ("interrupted", "not run"):
             ids = [o.id for o in run.outcomes if o.status == status]
             if ids:
@@ -66,6 +69,9 @@ def _print_summary(run, progress: str = "plain", see: Path | None = None) -> Non
     if run.disk_full is not None:
         print(f"locbook: error: no space left on device writing {run.disk_full}; the run stopped (earlier "
               "reports are kept; free some space and run again)", file=sys.stderr)
+    if rebuilt and run.interrupted_by is None and (run.disk_full is not None or run.executor_error
+                                                   or run.count("failed") or run.count("not run")):
+        print(f"  {rebuilt}", file=sys.stderr)
 
 
 def _point_options(command: argparse.ArgumentParser, writes: str) -> None:
@@ -234,19 +240,21 @@ def main(argv: list[str] | None = None) -> int:
         where = f" ({exc.filename})" if exc.filename else ""
         print(f"locbook: error: {exc.strerror or exc}{where}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    aggregate = getattr(result, "aggregate", None)    # a study's or bracket's study.csv / bracket.csv
+    rebuilt = aggregate.describe() if aggregate is not None else ""
     if args.command == "study":
-        _print_summary(result, args.progress, see)
+        _print_summary(result, args.progress, see, rebuilt)
         return _exit_status(result)
     if args.command == "bracket":
         from .bracket import counts, load_bracket
-        _print_summary(result, args.progress, see)
-        if result.outcomes and result.outcomes[0].status in ("ok", "cached"):
+        _print_summary(result, args.progress, see, rebuilt)
+        if aggregate is not None and aggregate.written:
             found = counts(load_bracket(see.parent))
             print(f"bracket of {args.experiment}: " + ", ".join(f"{n} {b}" for b, n in found.items())
                   + f" (scored rows; findings: {see.parent.parent / (exp.document.key + '-findings.md')})")
         else:
-            print(f"bracket of {args.experiment} incomplete: its default point did not finish, so no verdict was "
-                  "written (an earlier bracket.csv is kept)", file=sys.stderr)
+            print(f"bracket of {args.experiment} incomplete: its default point has no up-to-date report, so no "
+                  "verdict was written (an earlier bracket.csv is kept as it was)", file=sys.stderr)
         return _exit_status(result)
     if result.report_dir.name != args.profile and args.data is not None:
         print(f"reports of this run: {result.report_dir.resolve()} (data set {args.data})")

@@ -27,7 +27,7 @@ from collections import Counter, defaultdict
 from pathlib import Path
 
 from ..reproduce.printed_values import printed_number
-from ..reproduce.report import Table
+from ..reproduce.report import Table, markdown_text
 from ..reproduce.scoring import JUDGED_KINDS, KINDS
 from .spec import finite_float
 
@@ -227,6 +227,11 @@ def _page_parts(exp, params: dict, folder: Path, numbers: list[dict]):
     return shown, parameters, assumptions, manifest
 
 
+def _caption_md(text: str) -> str:
+    """A caption on one line of Markdown (a newline would end the image or the list item), HTML shown as text."""
+    return markdown_text(" ".join(str(text).split("\n")))
+
+
 def page_markdown(exp, profile: str, params: dict, folder: Path, numbers: list[dict], stamp: str) -> str:
     shown, parameters, assumptions, manifest = _page_parts(exp, params, folder, numbers)
     lines = _header(exp, profile, stamp) + ["[Summary](summary.md).", ""]
@@ -237,16 +242,18 @@ def page_markdown(exp, profile: str, params: dict, folder: Path, numbers: list[d
     lines += ["", "## Parameters", "", Table(escaped).to_markdown(), ""]
     if assumptions:
         lines += ["## Assumptions", "", Table(assumptions).to_markdown(), ""]
+    # captions are the notebook's text, often built from -p strings: shown as text, never rendered as HTML
     if manifest.get("figures"):
         lines += ["## Figures", ""]
         for fig in manifest["figures"]:
+            caption = _caption_md(fig.get("caption") or "")
             if not fig.get("file"):     # a bracket point: figures are not drawn
-                lines += [f"*{fig['caption'] or fig['name']}* (not drawn: a bracket point)", ""]
+                lines += [f"*{caption or _caption_md(fig['name'])}* (not drawn: a bracket point)", ""]
                 continue
-            lines += [f"![{fig['caption'] or fig['name']}]({fig['file']})", "", f"*{fig['caption']}*", ""]
+            lines += [f"![{caption or fig['name']}]({fig['file']})", "", f"*{caption}*", ""]
     if manifest.get("tables"):
         lines += ["## Tables", ""]
-        lines += [f"- [{t['file']}]({t['file']}): {t['caption']}" for t in manifest["tables"]]
+        lines += [f"- [{t['file']}]({t['file']}): {_caption_md(t.get('caption') or '')}" for t in manifest["tables"]]
         lines.append("")
     return "\n".join(lines)
 
@@ -337,7 +344,8 @@ def _md_captions(folder: Path) -> dict[str, str]:
         return {}
     out = {f: c for c, f in re.findall(r"^!\[(.*)\]\(([^)\s]+)\)\s*$", text, re.M)}
     out.update({f: c for f, c in re.findall(r"^- \[[^\]]*\]\(([^)\s]+)\): (.*)$", text, re.M)})
-    return out
+    # report.md writes "<" as "&lt;" where it could open HTML (markdown_text); the HTML page escapes it itself
+    return {f: c.replace("&lt;", "<") for f, c in out.items()}
 
 
 def _page_outputs(folder: Path, manifest: dict) -> tuple[list[dict], list[dict]]:
@@ -509,10 +517,18 @@ def _experiment_line(e) -> dict:
             "other rows": sum(1 for r in rows if r["kind"] not in ("reproduction", "calibrated") or r.get("same_as"))}
 
 
-def _datasets(report_dir: Path) -> list[tuple[str, str]]:
-    """``(data set, link)`` of the reports of other data sets kept in this folder (``data-<name>/``)."""
-    return [(d.name[len("data-"):], f"{d.name}/index.html") for d in sorted(Path(report_dir).glob("data-*"))
-            if (d / "index.html").is_file()]
+def _datasets(report_dir: Path, page: str = "index.html") -> list[tuple[str, str]]:
+    """``(data set, link)`` of the reports of other data sets kept in this folder (``data-<name>/``): a link to its
+    ``page`` (``index.html`` or ``index.md``), else to the other one; a folder with neither is not listed. Read from
+    disk, whatever run wrote this index: committed reports hold index.md only (the HTML is not committed), and a
+    partial run never drops a data set it did not touch."""
+    other = "index.md" if page == "index.html" else "index.html"
+    out = []
+    for d in sorted(Path(report_dir).glob("data-*")):
+        name = _rel(d, page, other)
+        if d.is_dir() and name:
+            out.append((d.name[len("data-"):], f"{d.name}/{name}"))
+    return out
 
 
 def index_markdown(report_dir: Path, entries, rows) -> str:
@@ -525,18 +541,20 @@ def index_markdown(report_dir: Path, entries, rows) -> str:
              "2 Monte-Carlo standard errors + a named ambiguity), `loose` (inside a wider window), `miss`.", "",
              _headline(rows), ""]
     if _bracket_headline(rows):
-        lines += [_bracket_headline(rows), "", "Findings per document: " + ", ".join(
-            f"[{doc}]({link})" for doc, link in _findings(report_dir)), ""]
-    if _datasets(report_dir):
+        lines += [_bracket_headline(rows), ""]
+        if _findings(report_dir):      # (none beside a copy of the folder without its brackets)
+            lines += ["Findings per document: " + ", ".join(f"[{doc}]({link})" for doc, link in _findings(report_dir)),
+                      ""]
+    if _datasets(report_dir, "index.md"):
         lines += ["The measured-data experiments on other data sets (`locbook run --data`): " + ", ".join(
-            f"[{name}]({link.replace('index.html', 'index.md')})" for name, link in _datasets(report_dir)), ""]
+            f"[{name}]({link})" for name, link in _datasets(report_dir, "index.md")), ""]
     twice = double_counted(rows)
     if twice:
         lines += ["**Counted more than once** (fix the notebooks): " + "; ".join(
             f"{d} {p} in {', '.join(e)}" for d, p, e in twice), ""]
     findings = findings_summary(entries, rows)
     if findings:
-        lines += ["## Findings", ""] + [f"- **{f['authors']} ({f['year']})**, `{f['key']}`: {f['text']}"
+        lines += ["## Findings", ""] + [f"- **{f['authors']} ({f['year']})**, `{f['key']}`: {markdown_text(f['text'])}"
                                         for f in findings] + [""]
     lines += ["## By document", ""]
     for key, doc, doc_rows in _by_document(entries, rows):

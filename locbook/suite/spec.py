@@ -159,13 +159,19 @@ def _rules(raw: dict, where: str) -> dict[str, ParameterRule]:
 
 def read_toml(path: Path, what: str) -> dict:
     """The TOML file ``path`` (``what`` names it in the error: unreadable, or not TOML with its line)."""
+    from ..reproduce.readings import utf8_text
     try:
         with open(path, "rb") as fh:
-            return tomllib.load(fh)
+            data = fh.read()
     except OSError as exc:
         raise SuiteError(f"cannot read {what} {path}: {exc.strerror}") from None
+    text = utf8_text(data, path, SuiteError)       # tomllib's own UnicodeDecodeError names no file or line
+    try:
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise SuiteError(f"{path}: {exc}") from None
+    except RecursionError:      # arrays or tables nested thousands deep
+        raise SuiteError(f"{path}: values are nested too deeply to read as TOML") from None
 
 
 def finite_float(value) -> float | None:

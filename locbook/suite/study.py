@@ -62,7 +62,8 @@ from ..errors import ParameterError
 from .params import check_value
 from .spec import SAFE_NAME, Experiment, Suite, SuiteError, finite_float, read_toml
 
-__all__ = ["Study", "StudyPoint", "load_study", "load_studies", "expand_study", "run_study", "STUDY_COLUMNS"]
+__all__ = ["Study", "StudyPoint", "Aggregate", "load_study", "load_studies", "expand_study", "run_study",
+           "study_size", "current_points", "check_claim", "STUDY_COLUMNS", "MAX_STUDY_RUNS"]
 
 _KEYS = {"name", "experiments", "profile", "replicates", "seed_parameter", "samples", "sample_seed", "collect",
          "parameters"}
@@ -72,6 +73,10 @@ _LEAD = ("study", "experiment", "point", "replicate", "replicate_seed")
 _TAIL = ("printed_id", "quantity", "where", "unit", "kind", "printed", "ours", "mc_std_error", "rounding",
          "verdict", "folder")
 STUDY_COLUMNS = (*_LEAD, *_TAIL)
+#: The most runs (experiments x parameter points x replicates) a study may declare: each is one notebook execution
+#: of seconds to minutes with its own report folder, so more is a typo (``samples = 1000000000``) or a study to split.
+#: Counted from the declaration before anything is drawn or expanded.
+MAX_STUDY_RUNS = 10_000
 
 
 @dataclass(frozen=True)
@@ -188,6 +193,7 @@ def _parse(raw: dict, suite: Suite, where: Path) -> Study:
         raise _err(name, where, "samples is set but no parameter is random or lhs")
     if replicates > 1 and seed_parameter in parameters:
         raise _err(name, where, f"{seed_parameter!r} is swept and also set by the replicates; do one of them")
+    _check_size(name, where, len(experiments), parameters, samples, replicates)
     for exp in experiments:
         declared = exp.declared_parameters()
         for pname in parameters:
@@ -203,6 +209,36 @@ def _parse(raw: dict, suite: Suite, where: Path) -> Study:
                                     "(set seed_parameter)")
     return Study(name, experiments, profile, replicates, seed_parameter, samples, sample_seed, tuple(collect),
                  parameters, where)
+
+
+def _factors(n_experiments: int, parameters: dict, samples: int, replicates: int) -> list[tuple[str, int]]:
+    """The factors of a study's number of runs (module docstring: the product of the blocks), each with the key
+    that sets it: ``experiments``, each ``grid`` parameter, the ``list`` block, ``samples``, ``replicates``."""
+    factors = [("experiments", n_experiments)]
+    factors += [(f"{p} (grid)", len(v)) for p, (sampler, v) in parameters.items() if sampler == "grid"]
+    lists = [len(v) for sampler, v in parameters.values() if sampler == "list"]
+    if lists:
+        factors.append(("the list parameters", lists[0]))
+    if any(sampler in ("random", "lhs") for sampler, _v in parameters.values()):
+        factors.append(("samples", samples))
+    return [*factors, ("replicates", replicates)]
+
+
+def study_size(study: Study) -> int:
+    """The number of runs of ``study`` (experiments x parameter points x replicates), without expanding it."""
+    return math.prod(n for _key, n in _factors(len(study.experiments), study.parameters, study.samples,
+                                               study.replicates))
+
+
+def _check_size(name: str, where: Path, n_experiments: int, parameters: dict, samples: int, replicates: int) -> None:
+    """Refuse a study of more than :data:`MAX_STUDY_RUNS` runs, naming its factors (before anything is drawn)."""
+    factors = _factors(n_experiments, parameters, samples, replicates)
+    runs = math.prod(n for _key, n in factors)
+    if runs > MAX_STUDY_RUNS:
+        largest = max(factors, key=lambda f: f[1])[0]
+        raise _err(name, where, f"{' x '.join(f'{n} {key}' for key, n in factors)} = {runs} runs, more than the "
+                                f"limit of {MAX_STUDY_RUNS} (each run is one notebook execution); reduce "
+                                f"{largest} or split the study")
 
 
 def load_studies(suite: Suite, path: Path | None = None) -> dict[str, Study]:
@@ -270,16 +306,24 @@ def _parameter_points(study: Study) -> list[dict]:
     return [{k: v for part in combo for k, v in part.items()} for combo in itertools.product(*blocks)]
 
 
+def _canonical(values: dict) -> str:
+    """The checked values of a point as one text (what makes two points the same point)."""
+    return json.dumps(values, sort_keys=True)
+
+
 def _point_key(exp: Experiment, values: dict) -> str:
-    digest = hashlib.sha256(json.dumps(values, sort_keys=True).encode()).hexdigest()[:10]
-    return f"{exp.id}-{digest}"
+    """The folder of a study point: the experiment id and the whole SHA-256 of its values (a 40-bit prefix made
+    points collide from about 10^6 points on; the duplicate check compares the values themselves)."""
+    return f"{exp.id}-{hashlib.sha256(_canonical(values).encode()).hexdigest()}"
 
 
 def expand_study(study: Study) -> list[StudyPoint]:
     """Every task of the study (experiment x parameter point x replicate), each value checked against the
     parameter's type and rule; raises a SuiteError naming the point and the value otherwise."""
+    _check_size(study.name, study.source, len(study.experiments), study.parameters, study.samples,
+                study.replicates)      # also for a Study built by hand, before anything is drawn
     points = _parameter_points(study)
-    tasks, keys = [], {}
+    tasks, seen, keys = [], {}, {}
     for exp in study.experiments:
         declared = exp.declared_parameters()
         base = exp.parameters(study.profile)
@@ -303,11 +347,15 @@ def expand_study(study: Study) -> list[StudyPoint]:
                                                                        exp.rules.get(study.seed_parameter))
                     except ParameterError as exc:
                         raise _err(study.name, study.source, f"replicate {r} of {exp.id!r}: {exc}") from None
-                key = _point_key(exp, run_values)
-                if key in keys:
-                    raise _err(study.name, study.source, f"point {i} of {exp.id!r} repeats point {keys[key]} "
+                text = (exp.id, _canonical(run_values))
+                if text in seen:       # the same values (after checking: 1 and 1.0 of a float are one value)
+                    raise _err(study.name, study.source, f"point {i} of {exp.id!r} repeats point {seen[text]} "
                                                          f"({values}); every point must differ")
-                keys[key] = i
+                seen[text] = i
+                key = _point_key(exp, run_values)
+                if keys.setdefault(key, text) != text:    # a SHA-256 collision: refused, never merged
+                    raise _err(study.name, study.source, f"point {i} of {exp.id!r}: its folder key {key} is "
+                                                         "that of another point")
                 tasks.append(StudyPoint(key, exp, i, r, seed, checked, {**base, **run_values}))
     return tasks
 
@@ -402,12 +450,111 @@ def _write_plots(study: Study, rows: list[dict], plots: Path) -> list[Path]:
     return written
 
 
-def write_study_outputs(study: Study, points: list[StudyPoint], folder: Path, outcomes) -> None:
-    """study.csv and the plots from the points whose outcome is ok or cached (the report is this study's)."""
-    done = {o.id for o in outcomes if o.status in ("ok", "cached")}
+def current_points(folder: Path, profile: str, points, outcomes) -> dict[str, str]:
+    """Each point's status for an aggregate (study.csv, bracket.csv): its outcome in this run when ``ok`` or
+    ``cached``; else ``cached`` when its folder still holds the up-to-date report of an earlier run (the runner's own
+    cache test: an interrupted, failed or full-disk ``--force`` run leaves those reports as they were, and they
+    count); else its outcome (``failed``, ``interrupted``, ``not run``). ``points``: ``(key, experiment, parameters,
+    figures)`` of every point."""
+    from .runner import _cached, _dependency_versions, _runner_fingerprint, cache_key
+
+    status = {o.id: o.status for o in outcomes}
+    fingerprint = None
+    out = {}
+    for key, exp, parameters, figures in points:
+        state = status.get(key, "not run")
+        if state not in ("ok", "cached") and (folder / key / "run.json").is_file():
+            if fingerprint is None:      # computed once: it hashes the runner's sources
+                fingerprint = {"source": _runner_fingerprint(), "versions": _dependency_versions()}
+            up_to_date, _damaged = _cached(folder / key, exp, cache_key(exp, profile, parameters, figures=figures,
+                                                                        **fingerprint), figures)
+            if up_to_date:
+                state = "cached"
+        out[key] = state
+    return out
+
+
+@dataclass(frozen=True)
+class Aggregate:
+    """What a study or bracket wrote: ``path`` (study.csv, bracket.csv) from ``kept`` of ``points`` points (those
+    with an up-to-date report); ``written`` False when nothing was rewritten (the earlier file is as it was)."""
+
+    path: Path
+    kept: int
+    points: int
+    written: bool = True
+
+    def describe(self) -> str:
+        if not self.written:
+            return f"{self.path.name} was not rewritten (an earlier one is kept as it was)"
+        rest = "" if self.kept == self.points else (f"; the other {self.points - self.kept} have no up-to-date "
+                                                    "report yet: run it again to complete it")
+        return (f"{self.path.name} was rebuilt from the {self.kept} of {self.points} points with an up-to-date "
+                f"report{rest}")
+
+
+def write_study_outputs(study: Study, points: list[StudyPoint], folder: Path, outcomes,
+                        wrote: list | None = None) -> Aggregate:
+    """study.csv and the plots from every point with an up-to-date report (:func:`current_points`: this run's and
+    earlier ones), so an interrupted or failed run never drops a good row. study.csv is replaced atomically, then
+    the plots; a write that fails leaves the earlier files (old plots are removed only once every new one is
+    written). With no up-to-date point at all, nothing is rewritten. ``wrote``: the :class:`Aggregate` is appended
+    as soon as study.csv is in place (a caller learns it also when the plots then fail)."""
+    status = current_points(folder, study.profile, [(p.key, p.experiment, p.parameters, True) for p in points],
+                            outcomes)
+    done = {k for k, st in status.items() if st in ("ok", "cached")}
+    csv_path = folder / "study.csv"
+    if not done and csv_path.is_file():
+        aggregate = Aggregate(csv_path, 0, len(points), written=False)
+        if wrote is not None:
+            wrote.append(aggregate)
+        return aggregate
+    _claim(study, folder)
     rows = study_rows(study, points, folder, done)
-    _write_csv(study, rows, folder / "study.csv")
+    _write_csv(study, rows, csv_path)
+    aggregate = Aggregate(csv_path, len(done), len(points))
+    if wrote is not None:
+        wrote.append(aggregate)
     _write_plots(study, rows, folder / "plots")
+    return aggregate
+
+
+def _fingerprint(study: Study) -> str:
+    """The declaration of ``study`` as a hash (everything that decides its points)."""
+    declared = {"name": study.name, "experiments": [e.id for e in study.experiments], "profile": study.profile,
+                "replicates": study.replicates, "seed_parameter": study.seed_parameter, "samples": study.samples,
+                "sample_seed": study.sample_seed, "collect": list(study.collect),
+                "parameters": {p: [sampler, v] for p, (sampler, v) in study.parameters.items()}}
+    return hashlib.sha256(json.dumps(declared, sort_keys=True).encode()).hexdigest()
+
+
+def _record(study: Study) -> dict:
+    return {"study": study.name, "declared_in": str(Path(os.path.abspath(study.source))),
+            "fingerprint": _fingerprint(study)}
+
+
+def check_claim(study: Study, folder: Path) -> None:
+    """Refuse to run ``study`` into ``folder`` when the folder holds another study of the same name: one declared in
+    another file with a different declaration (``study.json`` records the file and the declaration's fingerprint).
+    The same file edited is the same study (its points are cached by their values); an identical declaration in
+    another file (a copy) shares the folder too."""
+    from .site import _read_json
+
+    held = _read_json(folder / "study.json", {})
+    mine = _record(study)
+    if held.get("declared_in") and held.get("declared_in") != mine["declared_in"] \
+            and held.get("fingerprint") != mine["fingerprint"]:
+        raise SuiteError(f"{folder} holds the study {study.name!r} declared in {held['declared_in']}; this "
+                         f"{study.name!r} of {mine['declared_in']} is declared differently: give it another name, "
+                         "write it to another reports folder (--reports), or remove that folder")
+
+
+def _claim(study: Study, folder: Path) -> None:
+    """Record which declaration ``folder`` holds (``study.json``, :func:`check_claim`)."""
+    text = json.dumps(_record(study), indent=1) + "\n"
+    path = folder / "study.json"
+    if not path.is_file() or path.read_text(encoding="utf-8", errors="replace") != text:
+        _atomic(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
 
 
 def study_folder(suite: Suite, study: Study, report_root: Path | None = None) -> Path:
@@ -425,8 +572,13 @@ def run_study(suite: Suite, study: Study, *, report_root: Path | None = None, jo
 
     points = expand_study(study)     # every value checked before anything runs
     folder = study_folder(suite, study, report_root)
+    check_claim(study, folder)       # another study of this name: refused before anything runs
     tasks = [Task(p.key, p.experiment, p.parameters) for p in points]
-    return run_tasks(suite, tasks, study.profile, folder, jobs=jobs, force=force, timeout_s=timeout_s,
-                     retries=retries, kernel_name=kernel_name or KERNEL_NAME, progress=progress, executor=executor,
-                     scheduler=scheduler,
-                     write_reports=lambda where, outcomes: write_study_outputs(study, points, where, outcomes))
+    wrote: list[Aggregate] = []
+    run = run_tasks(suite, tasks, study.profile, folder, jobs=jobs, force=force, timeout_s=timeout_s,
+                    retries=retries, kernel_name=kernel_name or KERNEL_NAME, progress=progress, executor=executor,
+                    scheduler=scheduler,
+                    write_reports=lambda where, outcomes: write_study_outputs(study, points, where, outcomes, wrote))
+    # what study.csv holds now, for the CLI to say (not rewritten: none up to date, or its write failed)
+    run.aggregate = wrote[-1] if wrote else Aggregate(folder / "study.csv", 0, len(points), written=False)
+    return run

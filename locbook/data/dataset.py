@@ -47,7 +47,9 @@ raises :class:`~locbook.data.measured.DataFormatError` naming the manifest (and 
 """
 from __future__ import annotations
 
+import filecmp
 import math
+import os
 import re
 import tomllib
 from dataclasses import dataclass, field
@@ -57,8 +59,9 @@ import numpy as np
 import pandas as pd
 
 from ..errors import ParameterError
-from .measured import (AGGREGATES, DataFormatError, Epochs, _reading_options, epochs, read_anchors, read_outline,
-                       read_path_segments, read_readings_table, validate_readings_file)
+from .measured import (AGGREGATES, MAX_MIN_READINGS, OPTIONAL_READING_COLUMNS, READING_COLUMNS, DataFormatError,
+                       Epochs, _decode_utf8, _reading_options, _shown, _shown_names, epochs, read_anchors,
+                       read_outline, read_path_segments, read_readings_table, validate_readings_file)
 
 __all__ = ["Dataset", "Recording", "EpochRule", "load_dataset", "shipped_datasets", "datasets_dir",
            "MANIFEST", "ROLES", "dataset_summary"]
@@ -67,10 +70,17 @@ MANIFEST = "dataset.toml"
 ROLES = ("calibration", "static", "track")
 _TIME_SCALE = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
 _LENGTH_SCALE = {"m": 1.0, "cm": 1e-2, "mm": 1e-3}
-_NAME = re.compile(r"^[a-z0-9]+(-[a-z0-9]+)*$")
-_RECORDING_NAME = re.compile(r"^[a-z0-9][a-z0-9_-]*$")
+_NAME = re.compile(r"[a-z0-9]+(-[a-z0-9]+)*")            # fullmatch: "$" would let a final newline in
+_RECORDING_NAME = re.compile(r"[a-z0-9][a-z0-9_-]*")
 #: margin (m) around anchors and true positions of the default outline, a data set without one
 DEFAULT_OUTLINE_MARGIN_M = 0.5
+#: the longest data set or recording name: it names folders and files (255 bytes is a file name's limit)
+MAX_NAME_CHARS = 64
+#: the tag lies within this height (m) of the anchors' heights (lowest - 100 m .. highest + 100 m): more is a
+#: unit or sign error (a height in mm, below ground), and makes every range the height difference
+MAX_TAG_HEIGHT_OFFSET_M = 100.0
+#: the largest manifest (bytes) read: a dataset.toml is a page of text
+MAX_MANIFEST_BYTES = 1 << 20
 
 _TOP = {"name", "title", "license", "license_file", "attribution", "changes", "units", "readings", "geometry",
         "epochs", "recording"}
@@ -195,6 +205,15 @@ class Dataset:
 
 
 # -- reading the manifest --------------------------------------------------------------------------------------
+def name_problem(name) -> str:
+    """``""`` if ``name`` is a valid data set name (the manifest's ``name``; it names the reports folder), else
+    what is wrong with it, for a message."""
+    if isinstance(name, str) and _NAME.fullmatch(name) and len(name) <= MAX_NAME_CHARS:
+        return ""
+    return (f"name {_shown(name)} must be lower-case letters, digits and single hyphens ([a-z0-9-]), at most "
+            f"{MAX_NAME_CHARS} characters (MAX_NAME_CHARS); it names the reports folder")
+
+
 def _fail(manifest: Path, message: str):
     raise DataFormatError(f"{manifest}: {message}")
 
@@ -206,14 +225,14 @@ def _string(manifest, raw: dict, key: str, where: str, *, required: bool = True,
             _fail(manifest, f"{where}{key!r} is required")
         return default
     if not isinstance(value, str) or not value.strip():
-        _fail(manifest, f"{where}{key!r} must be a non-empty string, got {value!r}")
+        _fail(manifest, f"{where}{key!r} must be a non-empty string, got {_shown(value)}")
     return value.strip()
 
 
 def _number(manifest, raw: dict, key: str, where: str, *, ge: float | None = None, gt: float | None = None):
     value = raw[key]
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        _fail(manifest, f"{where}{key!r} must be a finite number, got {value!r}")
+        _fail(manifest, f"{where}{key!r} must be a finite number, got {_shown(value)}")
     if (ge is not None and value < ge) or (gt is not None and value <= gt):
         _fail(manifest, f"{where}{key!r} must be {'>= ' + str(ge) if ge is not None else '> ' + str(gt)}, "
                         f"got {value!r}")
@@ -223,22 +242,36 @@ def _number(manifest, raw: dict, key: str, where: str, *, ge: float | None = Non
 def _unknown_keys(manifest, raw: dict, allowed: set, where: str):
     unknown = sorted(set(raw) - allowed)
     if unknown:
-        _fail(manifest, f"{where}unknown key(s) {unknown}; allowed: {sorted(allowed)}")
+        _fail(manifest, f"{where}unknown key(s) {_shown_names(unknown)}; allowed: {sorted(allowed)}")
 
 
 def _file(manifest: Path, root: Path, value: str, where: str) -> Path:
-    path = (root / value)
-    if Path(value).is_absolute() or ".." in Path(value).parts:
-        _fail(manifest, f"{where}{value!r} must be a file inside the data set's folder (a relative path)")
-    if not path.is_file():
-        _fail(manifest, f"{where}file {value!r} does not exist in {root}")
+    """The file the manifest names, checked before any byte of it is read: a relative path whose target (every
+    symlink resolved) is a regular file inside the data set's folder. A link out of the folder is refused, naming
+    the link and its target (a data set from elsewhere must not make locbook read, and quote, e.g.
+    /proc/self/environ)."""
+    try:
+        path = root / value
+        if Path(value).is_absolute() or ".." in Path(value).parts:
+            _fail(manifest, f"{where}{_shown(value)} must be a file inside the data set's folder (a relative path)")
+        target = Path(os.path.realpath(path))
+        if not target.is_relative_to(Path(os.path.realpath(root))):
+            _fail(manifest, f"{where}{_shown(value)} is a link to {_shown(str(target))}, outside the data set's folder "
+                            f"{root}; a data set's files lie inside its folder: copy the file in")
+        if not target.is_file():
+            _fail(manifest, f"{where}file {_shown(value)} does not exist in {root}" if not target.exists() else
+                  f"{where}{_shown(value)} is not a regular file")
+    except (OSError, ValueError) as exc:       # a NUL byte, a name too long, a link loop
+        if isinstance(exc, DataFormatError):
+            raise
+        _fail(manifest, f"{where}{_shown(value)} is not a usable file name ({exc.__class__.__name__}: {exc})")
     return path
 
 
 def _resolve(path) -> tuple[Path, Path]:
     """``(folder, manifest)`` of a data set given as a shipped name, a folder or its ``dataset.toml``."""
     text = str(path)
-    if isinstance(path, str) and _NAME.match(text) and not Path(text).exists():
+    if isinstance(path, str) and _NAME.fullmatch(text) and not Path(text).exists():
         folder = datasets_dir() / text
         if not (folder / MANIFEST).is_file():
             raise ParameterError(f"{text!r} is neither a folder nor a data set shipped with locbook "
@@ -305,9 +338,13 @@ def load_dataset(path) -> Dataset:
     Every file is read and validated here (long format rules, the manifest's sentinels, range, units and clock
     handling), so a data set that loads is one every experiment can run on."""
     root, manifest = _resolve(path)
+    size = manifest.stat().st_size
+    if size > MAX_MANIFEST_BYTES:
+        _fail(manifest, f"the manifest is {size:,} bytes; a {MANIFEST} is at most {MAX_MANIFEST_BYTES:,} "
+                        "(MAX_MANIFEST_BYTES)")
+    text = _decode_utf8(manifest.read_bytes(), manifest, "manifest")
     try:
-        with open(manifest, "rb") as fh:
-            raw = tomllib.load(fh)
+        raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise DataFormatError(f"{manifest}: not valid TOML ({exc})") from None
     _unknown_keys(manifest, raw, _TOP, "")
@@ -316,9 +353,9 @@ def load_dataset(path) -> Dataset:
             _fail(manifest, f"[{section}] must be a table")
         _unknown_keys(manifest, raw.get(section, {}), allowed, f"[{section}] ")
     name = _string(manifest, raw, "name", "")
-    if not _NAME.match(name):
-        _fail(manifest, f"name {name!r} must be lower-case letters, digits and single hyphens ([a-z0-9-]); it names "
-                        "the reports folder")
+    problem = name_problem(name)
+    if problem:
+        _fail(manifest, problem)
     title = _string(manifest, raw, "title", "")
     license_ = _string(manifest, raw, "license", "")
     attribution = _string(manifest, raw, "attribution", "")
@@ -329,12 +366,12 @@ def load_dataset(path) -> Dataset:
 
     units = raw.get("units", {})
     time_unit, length_unit = units.get("time", "s"), units.get("length", "m")
-    if time_unit not in _TIME_SCALE:
-        _fail(manifest, f"[units] time must be one of {sorted(_TIME_SCALE)}, got {time_unit!r}")
-    if length_unit not in _LENGTH_SCALE:
-        _fail(manifest, f"[units] length must be one of {sorted(_LENGTH_SCALE)}, got {length_unit!r}")
+    if not isinstance(time_unit, str) or time_unit not in _TIME_SCALE:
+        _fail(manifest, f"[units] time must be one of {sorted(_TIME_SCALE)}, got {_shown(time_unit)}")
+    if not isinstance(length_unit, str) or length_unit not in _LENGTH_SCALE:
+        _fail(manifest, f"[units] length must be one of {sorted(_LENGTH_SCALE)}, got {_shown(length_unit)}")
     if units.get("rssi", "dBm") != "dBm":
-        _fail(manifest, f"[units] rssi must be 'dBm' (convert the readings to dBm), got {units.get('rssi')!r}")
+        _fail(manifest, f"[units] rssi must be 'dBm' (convert the readings to dBm), got {_shown(units.get('rssi'))}")
     time_scale, length_scale = _TIME_SCALE[time_unit], _LENGTH_SCALE[length_unit]
 
     opts = raw.get("readings", {})
@@ -344,7 +381,7 @@ def load_dataset(path) -> Dataset:
         raise DataFormatError(f"{manifest}: [readings] {exc}") from None
     backward = opts.get("backward_time", "refuse")
     if backward not in ("refuse", "sort"):
-        _fail(manifest, f"[readings] backward_time must be 'refuse' or 'sort', got {backward!r}")
+        _fail(manifest, f"[readings] backward_time must be 'refuse' or 'sort', got {_shown(backward)}")
 
     geometry = raw.get("geometry", {})
     anchors = read_anchors(_file(manifest, root, _string(manifest, geometry, "anchors", "[geometry] "),
@@ -368,13 +405,14 @@ def load_dataset(path) -> Dataset:
         _unknown_keys(manifest, rec, _RECORDING_KEYS, where)
         rname = _string(manifest, rec, "name", where)
         where = f"[[recording]] {rname!r}: "
-        if not _RECORDING_NAME.match(rname):
-            _fail(manifest, f"{where}name must be lower-case letters, digits, '_' and '-'")
+        if not _RECORDING_NAME.fullmatch(rname) or len(rname) > MAX_NAME_CHARS:
+            _fail(manifest, f"[[recording]] {i + 1}: name {_shown(rname)} must be lower-case letters, digits, '_' "
+                            f"and '-', at most {MAX_NAME_CHARS} characters (MAX_NAME_CHARS)")
         if rname in recordings:
             _fail(manifest, f"{where}the name appears twice")
         role = _string(manifest, rec, "role", where)
         if role not in ROLES:
-            _fail(manifest, f"{where}role must be one of {ROLES}, got {role!r}")
+            _fail(manifest, f"{where}role must be one of {ROLES}, got {_shown(role)}")
         path = _file(manifest, root, _string(manifest, rec, "file", where), where)
         point_column = _string(manifest, rec, "point_column", where, required=False) or None
         rule = _epoch_rule(manifest, {**rule_raw, **({"window_s": rec["window_s"]} if "window_s" in rec else {})},
@@ -430,12 +468,20 @@ def load_dataset(path) -> Dataset:
     if "tag_height_m" in geometry:
         tag_height = _number(manifest, geometry, "tag_height_m", "[geometry] ")
         notes["tag_height_m"] = f"{tag_height:g} m (manifest)"
+        source = "[geometry] tag_height_m"
     elif with_xy.any() and np.isfinite(truth_z[with_xy]).all():
         tag_height = float(np.median(truth_z[with_xy]))
         notes["tag_height_m"] = f"{tag_height:g} m: the median of the recorded true heights (z_m)"
+        source = "the tag's height (the median of the recordings' z_m)"
     else:
         _fail(manifest, "[geometry] tag_height_m is required: the estimators need the tag's height, and not every "
                         "true position has a z_m")
+    z = anchors["z"].to_numpy(float)
+    low, high = z.min() - MAX_TAG_HEIGHT_OFFSET_M, z.max() + MAX_TAG_HEIGHT_OFFSET_M
+    if not low <= tag_height <= high:
+        _fail(manifest, f"{source} = {tag_height:g} m is not within {MAX_TAG_HEIGHT_OFFSET_M:g} m of the anchors' "
+                        f"heights ({z.min():g} to {z.max():g} m; allowed {low:g} to {high:g} m, "
+                        "MAX_TAG_HEIGHT_OFFSET_M): a unit or sign error? (the manifest's values are in metres)")
     for rec in recordings.values():     # a true position without a height is at the tag's known height
         r = rec.readings
         r.loc[r["x_m"].notna() & r["z_m"].isna(), "z_m"] = tag_height
@@ -449,6 +495,7 @@ def load_dataset(path) -> Dataset:
         outline = np.array([[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]]])
         notes["outline"] = (f"none given: the box around the anchors and the true positions with a "
                             f"{DEFAULT_OUTLINE_MARGIN_M:g} m margin")
+    _check_outline(manifest, outline, anchors[["x", "y"]].to_numpy(float), truth_xy[with_xy])
     for rec in recordings.values():
         if rec.sorted_rows:
             notes[f"sorted {rec.name}"] = (f"{rec.sorted_rows} row(s) of {rec.file.name} went back in time and were "
@@ -457,6 +504,12 @@ def load_dataset(path) -> Dataset:
         values = ", ".join(f"{v:g}" for v in sentinels)
         found = ", ".join(f"{n} in {k}" for k, n in invalid_found.items() if n) or "none found"
         notes["invalid readings"] = f"values {values} dBm are 'no reading' and load as NaN (not heard): {found}"
+    shared = _shared_files(recordings)
+    if shared:
+        notes["in-sample scoring"] = (
+            "; ".join(f"{s} (scored) reads the same file as calibration recording {c} ({f})" for s, c, f in shared)
+            + ": the channel is fitted on the epochs these recordings are scored on, so their errors are in-sample "
+              "(optimistic); give the scored recordings files of their own")
     if not any(r.role == "static" or (r.role == "track" and r.has_truth) for r in recordings.values()):
         notes["scoring"] = ("no static or track recording has a true position per epoch: the static methods are "
                             "not scored (tracks with a reference path are scored by their distance to it)")
@@ -475,8 +528,44 @@ def load_dataset(path) -> Dataset:
     return data
 
 
+def _check_outline(manifest: Path, outline: np.ndarray, anchors_xy: np.ndarray, truth_xy: np.ndarray) -> None:
+    """Refuse an outline that contains none of the anchors and none of the true positions: the bounded methods
+    would search a floor elsewhere and report errors of the outline's offset as ok (a unit error, another site's
+    file)."""
+    from ..geometry import inside_outline
+    if inside_outline(anchors_xy, outline).any() or (len(truth_xy) and inside_outline(truth_xy, outline).any()):
+        return
+    lo, hi = outline.min(axis=0), outline.max(axis=0)
+    _fail(manifest, f"[geometry] outline (x {lo[0]:g}..{hi[0]:g}, y {lo[1]:g}..{hi[1]:g} m) contains none of the "
+                    f"{len(anchors_xy)} anchors and none of the {len(truth_xy)} true positions: it is not this "
+                    "site's floor (another unit, another file?)")
+
+
+def _shared_files(recordings: dict) -> list[tuple[str, str, str]]:
+    """``(scored recording, calibration recording, file name)`` for each scored recording (static, or a track with
+    truth) that reads the same file (by its target, or the same bytes) as a calibration recording."""
+    def same(a: Path, b: Path) -> bool:
+        try:
+            return os.path.samefile(a, b) or filecmp.cmp(a, b, shallow=False)
+        except OSError:
+            return False
+    calibration = [r for r in recordings.values() if r.role == "calibration"]
+    out = []
+    for rec in recordings.values():
+        if rec.role == "static" or (rec.role == "track" and rec.has_truth):
+            out += [(repr(rec.name), repr(c.name), rec.file.name) for c in calibration if same(rec.file, c.file)]
+    return out
+
+
 def _check_point_column(table: pd.DataFrame, lines, column: str, path: Path, manifest: Path, where: str) -> None:
-    """Every row of a point column names its point (an empty id would make one 'point' of rows in transit)."""
+    """The point column is an extra column of the file, and every row names its point (an empty id would make one
+    'point' of rows in transit)."""
+    reserved = READING_COLUMNS + OPTIONAL_READING_COLUMNS
+    if column in reserved or column not in table.columns:
+        extra = [c for c in table.columns if c not in reserved]
+        raise DataFormatError(f"{manifest}: {where}point_column {_shown(column)} must name an extra column of "
+                              f"{path.name} (not one of the long format's); its extra columns are "
+                              f"{_shown_names(extra)}")
     ids = table[column]
     text = ids.astype(object).where(ids.notna(), "").astype(str).str.strip()
     empty = (text == "").to_numpy()
@@ -492,10 +581,11 @@ def _epoch_rule(manifest, raw: dict, where: str, default: EpochRule | None) -> E
         default.window_s if default else 0.0)
     aggregate = raw.get("aggregate", "mean")
     if aggregate not in AGGREGATES:
-        _fail(manifest, f"{where}aggregate must be one of {AGGREGATES}, got {aggregate!r}")
+        _fail(manifest, f"{where}aggregate must be one of {AGGREGATES}, got {_shown(aggregate)}")
     min_readings = raw.get("min_readings", 1)
-    if isinstance(min_readings, bool) or not isinstance(min_readings, int) or min_readings < 1:
-        _fail(manifest, f"{where}min_readings must be an integer >= 1, got {min_readings!r}")
+    if isinstance(min_readings, bool) or not isinstance(min_readings, int) or not 1 <= min_readings <= MAX_MIN_READINGS:
+        _fail(manifest, f"{where}min_readings must be an integer from 1 to {MAX_MIN_READINGS:,} (MAX_MIN_READINGS: "
+                        f"more readings than a window holds leave every entry not heard), got {_shown(min_readings)}")
     return EpochRule(window, aggregate, min_readings)
 
 

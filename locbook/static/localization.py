@@ -214,6 +214,13 @@ def _readings(name: str, values, m: int) -> np.ndarray:
     return values
 
 
+def _given_readings(name: str, values) -> np.ndarray:
+    """Readings as the public entry got them, converted once (:func:`locbook._validate.as_array`: a masked entry is
+    NaN, not heard), so that every later look at them (which anchors were heard, the per-subset solves) sees the same
+    values; the shape is checked where the anchors are known."""
+    return as_array(name, values, nan_ok=True)
+
+
 def _has_missing(values) -> bool:
     """Whether any reading is NaN (not heard). Decided on the readings themselves, never on quantities derived
     from them (a linearized right-hand side can be NaN from overflow with every anchor heard)."""
@@ -523,6 +530,7 @@ def lateration_ls(anchors_m, distance_m, ref_index: int = 0, *, pairs: str | Non
     heard for ``pairs="last"``. Remaining difference: per-problem anchors are judged by the rank of ``H^T H``
     (1e-10), shared ones by :func:`check_anchor_geometry` (1e-6 on the centred anchors).
     """
+    distance_m = _given_readings("distance_m", distance_m)
     if pairs is not None:
         if min_anchors is not None or tag_height_m is not None:
             raise ParameterError("pairs: min_anchors and tag_height_m do not apply to differenced pairs")
@@ -557,6 +565,7 @@ def lateration_wls(anchors_m, distance_m, weights, ref_index: int = 0, *,
     ``status="degenerate_geometry"``. NaN distances are anchors not heard; a problem then keeps the weights of
     its heard anchors (if the reference was not heard, the first heard anchor's weight is unused).
     ``tag_height_m``: anchors with heights (module docstring)."""
+    distance_m = _given_readings("distance_m", distance_m)
     a_mat, b = lateration_system(anchors_m, distance_m, ref_index, tag_height_m=tag_height_m)
     min_anchors = _min_anchors(min_anchors, a_mat.shape[1], a_mat.shape[0] + 1)
     weights = as_array("weights", weights)
@@ -910,6 +919,7 @@ def lateration_box_ls(anchors_m, distance_m, lower_m, upper_m, ref_index: int = 
     ``status="solver_failed"``; the others are kept. NaN distances are anchors not heard;
     ``tag_height_m``: anchors with heights, the box on ``(x, y)`` (module docstring).
     """
+    distance_m = _given_readings("distance_m", distance_m)
     check_choice("solver", solver, BOX_LS_SOLVERS)
     a_mat, b = lateration_system(anchors_m, distance_m, ref_index, tag_height_m=tag_height_m)
     dim = a_mat.shape[1]

@@ -15,7 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._validate import as_array, function_output
-from ._linalg import _Singular, _apply, _batch_shape, _check_state, _covariance, _mT, _raise_singular, _refuse_not_finite
+from ._linalg import (_Singular, _apply, _batch_shape, _check_state, _covariance, _mT, _raise_singular,
+                      _refuse_not_finite)
 from .functional import _linear_update_shared
 from .results import KALMAN_OUTPUTS, KalmanResult
 from .streams import (MEASUREMENT_TYPES, LinearMeasurement, RssMeasurement, _per_step_stream,
@@ -142,6 +143,7 @@ def _setup(F, Q, x0, P0, measurements, record, filter_name, B=None, u=None) -> _
     if x.ndim < 1 or x.shape[-1] != n:
         raise ValueError(f"x0 must end in ({n},); got {x.shape}")
     P = _covariance("P0", P0, n)
+    _refuse_ambiguous_stacks(measurements, streams, T, x, P, (("F", F_batch), ("Q", Q_batch)), B)
     # every argument with run axes sets the batch (a batched Q alone runs one filter per Q)
     batch = _batch_shape(*(named for m, s in zip(measurements, streams) for named in _stream_batch_shapes(m, s)),
                          ("x0", x.shape[:-1]), ("P0", P.shape[:-2]), ("F", F_batch), ("Q", Q_batch),
@@ -158,6 +160,40 @@ def _setup(F, Q, x0, P0, measurements, record, filter_name, B=None, u=None) -> _
     cols = np.concatenate([[0], np.cumsum([z.shape[-1] for z in zs])]).astype(np.int64)
     return _Setup(F, Q, x, P, batch, T, steps, slot, zs, active, cols, n=n, F_steps=F_steps, Q_steps=Q_steps,
                   drift=drift, motion=motion, per_step_streams=tuple(_per_step_stream(m) for m in measurements))
+
+
+def _refuse_ambiguous_stacks(measurements, streams, T: int, x, P, motion_batches, B) -> None:
+    """Refuse the two shapes a peer's call (filterpy's ``batch_filter(zs, Fs=...)``, column readings) takes to mean
+    something else than locbook reads (run axes are leading axes; module docstring of
+    :mod:`locbook.tracking.transition`), when nothing else in the call says there are runs (readings, x0 and P0 without
+    run axes): an unmarked stack of T matrices (F, Q, B, a stream's H or R) with T the number of steps, which would be
+    T runs of one constant matrix each, not one matrix per step; and readings ``(T, 1, 1)`` (T columns of one
+    reading), which would be T runs of one step."""
+    if x.ndim > 1 or P.ndim > 2:
+        return                      # the call has runs: the run axes are what they say
+    for meas, z in zip(measurements, streams):
+        if T == 1 and np.ndim(z) == 3 and np.shape(z)[-2:] == (1, 1) and np.shape(z)[0] > 1:
+            name, k = f"{_stream_name(meas)}.{'rss_dbm' if isinstance(meas, RssMeasurement) else 'z'}", np.shape(z)[0]
+            raise ValueError(f"{name} has shape {np.shape(z)}, {k} runs of one step with one reading each; for one "
+                             f"reading at each of {k} steps (filterpy's column z) pass shape ({k}, 1), e.g. z[..., 0]; "
+                             f"for {k} runs of one step give x0 its run axis")
+    if any(np.ndim(z) > 2 for z in streams):
+        return
+    named = list(motion_batches)
+    if B is not None and not isinstance(B, PerStep):
+        named.append(("B", np.shape(B)[:-2]))
+    for meas in measurements:
+        if isinstance(meas, LinearMeasurement):
+            named += [(f"LinearMeasurement.{f}", np.shape(getattr(meas, f))[:-2]) for f in ("H", "R")
+                      if not isinstance(getattr(meas, f), PerStep)]
+        elif not isinstance(meas, RssMeasurement) and not callable(meas.R):
+            named.append((f"{_stream_name(meas)}.R", np.shape(meas.R)[:-2]))
+    for name, run_axes in named:
+        if T > 1 and run_axes and run_axes[-1] == T:
+            raise ValueError(f"{name} has {T} matrices on its leading axis, as many as the readings' steps: an "
+                             f"unmarked stack is {T} runs of one constant matrix each; for one matrix per step pass "
+                             f"per_step({name.rsplit('.', 1)[-1]}) (filterpy's list of per-step matrices), for {T} "
+                             "runs give the readings (or x0) their run axis")
 
 
 def _offset_readings(meas, z):

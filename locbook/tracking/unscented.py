@@ -76,7 +76,10 @@ class UnscentedWeights:
         return (self.mean.size - 1) // 2
 
 
-def unscented_weights(n: int, alpha: float = 1e-3, beta: float = 2.0, kappa: float = 0.0,
+_DEFAULT_ALPHA, _DEFAULT_BETA = 1e-3, 2.0
+
+
+def unscented_weights(n: int, alpha: float = _DEFAULT_ALPHA, beta: float = _DEFAULT_BETA, kappa: float = 0.0,
                       variant: str = "corrected", points: str = "merwe") -> UnscentedWeights:
     """Weights of a symmetric sigma-point set: ``X^0 = x``, ``X^{i, n+i} = x +- (sqrt((n + lambda) P))_i``.
 
@@ -92,7 +95,8 @@ def unscented_weights(n: int, alpha: float = 1e-3, beta: float = 2.0, kappa: flo
     third-degree spherical-radial cubature rule (I. Arasaratnam and S. Haykin, "Cubature Kalman filters", IEEE TAC
     54(6), 2009): ``2n`` points ``x +- sqrt(n) (sqrt P)_i`` of weight ``1 / (2n)`` (here with a centre point of weight
     0). Both are the scaled set's algebra at ``alpha = 1``, ``beta = 0`` (Julier's with its kappa, the cubature rule
-    with kappa = 0); ``alpha`` and ``beta`` are not used by them."""
+    with kappa = 0); ``alpha`` and ``beta`` are not used by them (nor ``kappa`` by the cubature rule), so a value
+    other than their default is refused with a line saying which parameter the set takes, rather than ignored."""
     check_scalar("n", n, ge=1, integer=True)
     check_scalar("alpha", alpha, gt=0)
     check_scalar("beta", beta)
@@ -102,6 +106,15 @@ def unscented_weights(n: int, alpha: float = 1e-3, beta: float = 2.0, kappa: flo
     if points != "merwe" and variant != "corrected":
         raise ValueError(f"variant={variant!r} is a variant of the printed scaled (merwe) weights; points={points!r} "
                          "has none")
+    scaled = ("julier", "cubature")              # the sets without alpha and beta (cubature: without kappa too)
+    ignored = [f"{name}={value!r}" for name, value, default, sets in
+               (("alpha", alpha, _DEFAULT_ALPHA, scaled), ("beta", beta, _DEFAULT_BETA, scaled),
+                ("kappa", kappa, 0.0, ("cubature",))) if points in sets and value != default]
+    if ignored:
+        takes = ("kappa (lambda = kappa)" if points == "julier" else
+                 "no parameter (x +- sqrt(n) columns, weights 1 / (2n))")
+        raise ValueError(f"points={points!r} does not use {', '.join(ignored)}: its set takes {takes}; alpha and beta "
+                         "scale points='merwe' only")
     n = int(n)
     if points == "cubature":
         alpha, beta, kappa = 1.0, 0.0, 0.0
@@ -325,7 +338,8 @@ def _checked_motion(motion, field: str, value, shape, batch_ndim: int, step: int
     """The output of a NonlinearMotion's ``mean`` or ``residual``, checked: real, of ``shape``, finite."""
     name = f"{motion.name}: {field}"
     out = function_output(name, value, shape, 1)
-    _refuse_not_finite(name, out, ~np.isfinite(out), batch_ndim, step, "for finite states: it must return finite values")
+    _refuse_not_finite(name, out, ~np.isfinite(out), batch_ndim, step,
+                       "for finite states: it must return finite values")
     return out
 
 

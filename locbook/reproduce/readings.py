@@ -271,7 +271,7 @@ def load_reading_file(path: str | Path, document: str | None = None) -> tuple[Re
         except StopIteration:
             break
         except csv.Error as exc:     # a NUL byte, a field over the csv module's size limit, a stray quote
-            number = lines[min(reader.line_num, len(lines)) - 1][0]
+            number = lines[min(reader.line_num, len(lines) - 1)][0]     # the line it failed on is not counted
             raise ReadingsError(f"{path}, line {number}: not a well-formed CSV row ({exc})") from None
         number = lines[reader.line_num - 1][0]     # reader.line_num counts the non-comment lines read so far
         where = f"{path}, line {number}"

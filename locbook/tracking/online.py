@@ -21,6 +21,7 @@ import numpy as np
 from .._validate import as_array
 from .kalman import extended_kalman_filter, kalman_filter
 from .results import DIVERGENCE_PROBABILITY, DIVERGENCE_WINDOW, KalmanResult, _check_guard, nis_divergence
+from .streams import RssMeasurement
 from .transition import NonlinearMotion, PerStep
 from .unscented import unscented_kalman_filter
 
@@ -97,7 +98,8 @@ class OnlineFilter:
         B = self._at(self.B, k, "B") if B is None else B
         if u is not None:
             u = as_array("u", u, min_ndim=1)[..., None, :]
-        res = KALMAN_FILTERS[self.kind](F, Q, self.x, self.P, streams, B=B if u is not None else None, u=u,
+        res = KALMAN_FILTERS[self.kind](F, Q, self._prior_for(streams), self.P, streams,
+                                        B=B if u is not None else None, u=u,
                                         predict_first=self._predict_next, outputs=self._outputs, divergence_window=0,
                                         **self._options)
         self.x, self.P = res.x[..., -1, :], res.P[..., -1, :, :]
@@ -109,6 +111,18 @@ class OnlineFilter:
         diverged, step = nis_divergence(np.stack(self._nis, axis=-1), np.stack(self._dof, axis=-1), self._window,
                                         self._probability)
         return replace(res, diverged=diverged, diverged_step=step)
+
+
+    def _prior_for(self, streams):
+        """The posterior so far with the readings' run axes: a step's readings are ``batch + (1, m)`` by this class's
+        rule, so runs of one reading each are runs (the batch filters refuse ``(B, 1, 1)`` readings with a prior
+        without run axes as ambiguous with a column of B readings; here it is not)."""
+        try:
+            batch = np.broadcast_shapes(*(np.shape(s.rss_dbm if isinstance(s, RssMeasurement) else s.z)[:-2]
+                                          for s in streams), self.x.shape[:-1])
+        except ValueError:
+            return self.x           # the filter names the axes that do not broadcast
+        return np.broadcast_to(self.x, batch + self.x.shape[-1:])
 
 
 def _shifted(motion, k: int):

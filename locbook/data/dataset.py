@@ -256,7 +256,7 @@ def _file(manifest: Path, root: Path, value: str, where: str) -> Path:
             _fail(manifest, f"{where}{_shown(value)} must be a file inside the data set's folder (a relative path)")
         target = Path(os.path.realpath(path))
         if not target.is_relative_to(Path(os.path.realpath(root))):
-            _fail(manifest, f"{where}{_shown(value)} is a link to {_shown(str(target))}, outside the data set's folder "
+            _fail(manifest, f"{where}{_shown(value)} is a link to {str(target)!r}, outside the data set's folder "
                             f"{root}; a data set's files lie inside its folder: copy the file in")
         if not target.is_file():
             _fail(manifest, f"{where}file {_shown(value)} does not exist in {root}" if not target.exists() else
@@ -440,7 +440,7 @@ def load_dataset(path) -> Dataset:
         if role == "track":
             senders = readings["transmitter"].unique()
             if len(senders) > 1:
-                _fail(manifest, f"{where}{path.name} holds {len(senders)} transmitters ({', '.join(map(str, senders[:5]))}"
+                _fail(manifest, f"{where}{path.name} holds {len(senders)} transmitters ({', '.join(map(_shown, senders[:5]))}"
                                 f"{', ...' if len(senders) > 5 else ''}); a track follows one tag: give each "
                                 "transmitter's rows their own file and [[recording]]")
         reference = None

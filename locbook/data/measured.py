@@ -736,7 +736,7 @@ def _check_epoch_rule(window_s, aggregate: str, min_readings: int, group_by, rea
                                      and math.isfinite(window_s) and window_s >= 0):
         raise ParameterError(f"window_s must be None or a finite number of seconds >= 0, got {window_s!r}")
     if aggregate not in AGGREGATES:
-        raise ParameterError(f"aggregate must be one of {AGGREGATES}, got {aggregate!r}")
+        raise ParameterError(f"aggregate must be one of {AGGREGATES}, got {_shown(aggregate)}")
     if not (isinstance(min_readings, (int, np.integer)) and not isinstance(min_readings, bool)
             and 1 <= min_readings <= MAX_MIN_READINGS):
         raise ParameterError(f"min_readings must be an integer from 1 to {MAX_MIN_READINGS:,} (MAX_MIN_READINGS), "
@@ -777,7 +777,7 @@ def epochs(readings: pd.DataFrame, anchor_ids, *, window_s: float | None = None,
     receivers = pd.Series(readings["receiver"].map(col), dtype=float)
     if receivers.isna().any():
         bad = readings["receiver"][receivers.isna().to_numpy()].iloc[0]
-        raise DataFormatError(f"receiver {bad!r} is not one of the anchor ids {list(anchor_ids)}")
+        raise DataFormatError(f"receiver {_shown(bad)} is not one of the anchor ids {_shown_names(anchor_ids)}")
     receivers = receivers.to_numpy(int)
     time_s = readings["time_s"].to_numpy(float)
     tx_codes, tx_names = pd.factorize(readings["transmitter"])
@@ -841,7 +841,7 @@ def epochs(readings: pd.DataFrame, anchor_ids, *, window_s: float | None = None,
         differ[grouped.min().index.to_numpy()] = (low != high) & (count > 0) | (count > 0) & (count < size)
         if differ.any():
             e = int(np.flatnonzero(differ.any(axis=1))[0])
-            raise DataFormatError(f"epoch at {_seconds(utime[order[e]])} of transmitter {tx_names[utx[order[e]]]!r} "
+            raise DataFormatError(f"epoch at {_seconds(utime[order[e]])} of transmitter {_shown(tx_names[utx[order[e]]])} "
                                   "has different true positions or headings on its rows")
         position, heading = per_epoch[:, :3], per_epoch[:, 3]
     extra = {}

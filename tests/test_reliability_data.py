@@ -1,0 +1,369 @@
+"""Issue 44, data sets and loaders (items 4, 5, 7, 8, 12): links out of the data set's folder, readers that ended in
+a raw traceback, size guards computed before reading, manifests that loaded and made every report wrong, and the
+dBm options and the example's name that were accepted unchecked. Every failure is one DataFormatError (or
+ParameterError) line naming the file, line, column or key."""
+import tomllib
+import tracemalloc
+
+import numpy as np
+import pytest
+
+import locbook.data.dataset as dataset_module
+import locbook.data.measured as measured
+from locbook.data.dataset import load_dataset
+from locbook.data.example import write_example_dataset
+from locbook.data.measured import DataFormatError, epochs, read_anchors, read_readings, read_readings_table, validate_readings
+from locbook.errors import ParameterError
+
+# the limits, read where parametrize needs them at collection (getattr: the module still collects without them)
+MAX_COORDINATE_M = getattr(measured, "MAX_COORDINATE_M", 1e7)
+MAX_NAME_CHARS = getattr(dataset_module, "MAX_NAME_CHARS", 64)
+MAX_TAG_HEIGHT_OFFSET_M = getattr(dataset_module, "MAX_TAG_HEIGHT_OFFSET_M", 100.0)
+
+ANCHORS = "id,x,y,z\nA,0,0,2.5\nB,6,0,2.5\nC,0,6,2.5\nD,6,6,2.5\n"
+_XYZ = {"A": (0, 0, 2.5), "B": (6, 0, 2.5), "C": (0, 6, 2.5), "D": (6, 6, 2.5)}
+# a calibration walk at (1 + t, 2), the tag 1 m high, readings of -40 - 20 log10 d (whole dBm), at points P0..P3
+CAL = ("time_s,transmitter,receiver,rssi_dbm,x_m,y_m,point\n" + "".join(
+    f"{t},tag,{a},{round(-40 - 20 * np.log10(np.hypot(np.hypot(1 + t - _XYZ[a][0], 2 - _XYZ[a][1]), 1.5)))},"
+    f"{1 + t},2,P{t}\n" for t in range(4) for a in "ABCD"))
+TRACK = ("time_s,transmitter,receiver,rssi_dbm,x_m,y_m\n"
+         + "".join(f"{0.5 * t},tag,{a},-{55 + j},{t},3\n" for t in range(6) for j, a in enumerate("ABCD")))
+MANIFEST = """name = "tiny"
+title = "tiny test set"
+license = "CC0 1.0"
+attribution = "test"
+[geometry]
+anchors = "anchors.csv"
+tag_height_m = 1.0
+[epochs]
+window_s = 0.5
+[[recording]]
+name = "cal"
+file = "cal.csv"
+role = "calibration"
+window_s = 0
+[[recording]]
+name = "walk"
+file = "walk.csv"
+role = "track"
+"""
+STATIC = """[[recording]]
+name = "pts"
+file = "{file}"
+role = "static"
+window_s = 0
+"""
+
+
+def make(root, manifest=MANIFEST, **files):
+    root.mkdir(parents=True, exist_ok=True)
+    texts = {"dataset.toml": manifest, "cal.csv": CAL, "walk.csv": TRACK, "anchors.csv": ANCHORS}
+    texts.update({name.replace("_", "."): text for name, text in files.items()})
+    for name, text in texts.items():
+        (root / name).write_bytes(text if isinstance(text, bytes) else text.encode())
+    return root
+
+
+def refused(root, *needles, error=DataFormatError):
+    with pytest.raises(error) as info:
+        load_dataset(root)
+    message = str(info.value)
+    assert "\n" not in message, message
+    for needle in needles:
+        assert needle in message, message
+    return message
+
+
+def readings_file(path, rows=6, body=None):
+    text = "time_s,transmitter,receiver,rssi_dbm,point\n" + (
+        body if body is not None else "".join(f"{t},tag,A,-{50 + t},P{t % 2}\n" for t in range(rows)))
+    path.write_text(text)
+    return path
+
+
+# -- item 4: links out of the data set's folder ---------------------------------------------------------------
+def test_a_link_out_of_the_folder_is_refused_naming_link_and_target_and_never_read(tmp_path):
+    secret = tmp_path / "elsewhere" / "environ"
+    secret.parent.mkdir()
+    secret.write_text("SECRET_TOKEN=hunter2\0HOME=/root\0")
+    root = make(tmp_path / "set")
+    (root / "walk.csv").unlink()
+    (root / "walk.csv").symlink_to(secret)
+    message = refused(root, "'walk.csv'", str(secret), "outside the data set's folder")
+    assert "hunter2" not in message
+    # a linked folder leads out the same way
+    (root / "walk.csv").unlink()
+    (root / "walk.csv").write_text(TRACK)
+    (root / "linked").symlink_to(secret.parent, target_is_directory=True)
+    (root / "dataset.toml").write_text(MANIFEST.replace('anchors = "anchors.csv"', 'anchors = "linked/environ"'))
+    assert "hunter2" not in refused(root, "'linked/environ'", "outside the data set's folder", "[geometry] anchors")
+
+
+def test_a_link_inside_the_folder_is_followed(tmp_path):
+    root = make(tmp_path / "set")
+    (root / "data").mkdir()
+    (root / "data" / "walk-file.csv").write_text(TRACK)
+    (root / "walk.csv").unlink()
+    (root / "walk.csv").symlink_to("data/walk-file.csv")
+    assert len(load_dataset(root).epochs("walk")) == 6
+
+
+def test_messages_never_echo_a_large_or_binary_file(tmp_path):
+    junk = "".join(f"VARIABLE_{k}=value_{k}\0" for k in range(500))          # ~10 kB, one line, no column
+    root = make(tmp_path / "set", walk_csv=junk + "\n")
+    message = refused(root, "walk.csv", "missing column(s)")
+    assert "VARIABLE_400" not in message and len(message) < 1000, len(message)
+    long_id = "x" * 5000
+    root = make(tmp_path / "ids", walk_csv=TRACK.replace("tag,A", f"{long_id},A", 1))
+    message = refused(root, "walk.csv")                  # a track of two transmitters, one of them named at length
+    assert long_id not in message and len(message) < 1000, len(message)
+    binary = b"time_s,transmitter,receiver,rssi_dbm\n0,t,A,-50\n" + bytes(range(128, 256)) * 40 + b"\n"
+    root = make(tmp_path / "bin", walk_csv=binary)
+    message = refused(root, "walk.csv, line 3", "is not UTF-8")
+    assert len(message) < 1000, len(message)
+
+
+# -- item 5: readers that ended in a raw traceback --------------------------------------------------------------
+def test_a_manifest_that_is_not_utf8_names_its_line_and_byte(tmp_path):
+    root = make(tmp_path / "set", manifest=MANIFEST.encode().replace(b'"test"', b'"M\xfcller"'))
+    refused(root, "dataset.toml", "line 4", "0xfc is not UTF-8")
+
+
+@pytest.mark.parametrize("value,key", [('time = ["s"]', "[units] time"), ("length = {m = 1}", "[units] length"),
+                                       ("rssi = [1]", "[units] rssi")])
+def test_a_unit_of_the_wrong_type_names_the_key(tmp_path, value, key):
+    root = make(tmp_path / "set", manifest=MANIFEST.replace("[geometry]", f"[units]\n{value}\n[geometry]"))
+    refused(root, key, "must be")
+
+
+@pytest.mark.parametrize("column", ["nope", "x_m", "time_s"])
+def test_point_column_must_name_an_extra_column(tmp_path, column):
+    manifest = MANIFEST.replace('role = "calibration"', f'role = "calibration"\npoint_column = "{column}"')
+    refused(make(tmp_path / "set", manifest=manifest), "[[recording]] 'cal'", f"point_column '{column}'",
+            "['point']")
+
+
+@pytest.mark.parametrize("where,edit", [
+    ("anchors file", lambda files: files.update(anchors_csv=ANCHORS.replace("A,0,0,2.5", "A,1e300,0,2.5"))),
+    ("anchors file", lambda files: files.update(anchors_csv=ANCHORS.replace("D,6,6,2.5", f"D,6,{MAX_COORDINATE_M},2.5"))),
+    ("readings file", lambda files: files.update(walk_csv=TRACK.replace(",2,3\n", ",2,-1e300\n", 1))),
+])
+def test_coordinates_beyond_any_site_are_refused_with_the_limit(tmp_path, where, edit):
+    files = {}
+    edit(files)
+    message = refused(make(tmp_path / "set", **files), where, f"{MAX_COORDINATE_M:g}", "MAX_COORDINATE_M")
+    assert ", line " in message and "column '" in message
+    # the reader alone (scipy's tree of 1e300 coordinates overflowed)
+    if "anchors_csv" in files:
+        with pytest.raises(DataFormatError, match="line [25], column '[xy]'"):
+            read_anchors(tmp_path / "set" / "anchors.csv")
+
+
+def test_a_line_over_the_limit_is_refused_by_either_reader_naming_it(tmp_path):
+    big = "7" * (measured.MAX_LINE_BYTES + 10)
+    fast = readings_file(tmp_path / "fast.csv", body=f"0,tag,A,-50,P0\n1,tag,A,-51,{big}\n")
+    exact = readings_file(tmp_path / "exact.csv", body=f"0,tag,A,-50,P0\n\n1,tag,A,-51,\"{big}\"\n")
+    for path, line in ((fast, 3), (exact, 4)):
+        with pytest.raises(DataFormatError, match=rf"{path.name}, line {line}: the line is [\d,]+ bytes long, "
+                                                  rf"more than the {measured.MAX_LINE_BYTES:,} bytes .*MAX_LINE_BYTES"):
+            read_readings(path)
+
+
+# -- item 7: size guards before reading -----------------------------------------------------------------------------
+def test_a_quoted_field_keeps_a_large_file_on_the_fast_reader(tmp_path, monkeypatch):
+    rows = "".join(f"{t},tag,A,-{50 + t % 40},P{t}\n" for t in range(300))
+    path = readings_file(tmp_path / "r.csv", body=rows.replace(",P7\n", ',"P,7"\n').replace(",P9\n", ',"P""9"\n'))
+    monkeypatch.setattr(measured, "MAX_EXACT_READ_BYTES", 1024)          # the file is "large": 6 kB
+
+    def no_exact_reader(*args, **kwargs):
+        raise AssertionError("the exact reader was used")
+    monkeypatch.setattr(measured, "_read_text_table", no_exact_reader)
+    table, lines = read_readings_table(path)
+    assert table.attrs.get("parsed") and lines[-1] == 301
+    out = read_readings(path)
+    assert out["point"][7] == "P,7" and out["point"][9] == 'P"9' and len(out) == 300
+
+
+@pytest.mark.parametrize("edit,reason", [
+    (lambda rows: rows.replace("\n5,", "\n\n5,"), "line 7 is blank"),
+    (lambda rows: rows.replace(",P5\n", ',"P\n5"\n'), "line 7 has a quoted field that goes on over a line break"),
+    (lambda rows: rows.replace("\n", "\r"), "ends with a CR alone"),
+    (lambda rows: rows.replace(",P5\n", ",P5,extra\n"), "line 7 has 6 field(s), the header 5"),
+])
+def test_a_large_file_the_exact_reader_would_take_is_refused_before_reading(tmp_path, monkeypatch, edit, reason):
+    rows = "".join(f"{t},tag,A,-{50 + t % 40},P{t}\n" for t in range(300))
+    path = readings_file(tmp_path / "r.csv", body=edit(rows))
+    monkeypatch.setattr(measured, "MAX_EXACT_READ_BYTES", 1024)
+    read = []
+    monkeypatch.setattr(type(path), "read_bytes", lambda self: read.append(self) or b"")
+    with pytest.raises(DataFormatError) as info:
+        read_readings(path)
+    message = str(info.value)
+    assert reason in message and "MAX_EXACT_READ_BYTES" in message and "1.0 KiB" not in message, message
+    assert "would take about" in message and not read
+
+
+def test_a_file_without_line_ends_is_refused_without_reading_it_whole(tmp_path, monkeypatch):
+    monkeypatch.setattr(measured, "MAX_LINE_BYTES", 4096)
+    path = tmp_path / "one-line.csv"
+    path.write_bytes(b"time_s,transmitter,receiver,rssi_dbm," + b"9" * 4_000_000)
+    tracemalloc.start()
+    try:
+        with pytest.raises(DataFormatError, match=r"one-line.csv, line 1: the line is [\d,]+ bytes long.*4,096"):
+            read_readings(path)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 1_000_000, peak                     # the 4 MB line was never held
+
+
+def test_a_readings_file_over_the_limit_is_refused_naming_size_and_limit(tmp_path, monkeypatch):
+    path = readings_file(tmp_path / "r.csv", rows=200)
+    monkeypatch.setattr(measured, "MAX_READINGS_FILE_BYTES", 1000)
+    monkeypatch.setattr(measured, "_scan_records", lambda *a: pytest.fail("scanned"))
+    with pytest.raises(DataFormatError, match=r"r.csv is [\d.]+ MiB: reading it would take about .* at most "
+                                              r".*MAX_READINGS_FILE_BYTES"):
+        read_readings(path)
+
+
+def test_a_large_file_names_the_line_of_a_field_that_is_not_a_number(tmp_path, monkeypatch):
+    rows = [f"{t},tag,A,-{50 + t % 40},P{t}\n" for t in range(300)]
+    rows[123] = "123,tag,A,True,P123\n"                       # line 125 (header line 1, rows from line 2)
+    path = readings_file(tmp_path / "r.csv", body="".join(rows))
+    monkeypatch.setattr(measured, "MAX_EXACT_READ_BYTES", 1024)
+    monkeypatch.setattr(measured, "_LOCATE_CHUNK_ROWS", 50)
+    with pytest.raises(DataFormatError, match=r"r.csv, line 125, column 'rssi_dbm': 'True' is not a finite number"):
+        read_readings(path)
+    # a rule broken in a large file: the parsed table's message, the file never read again as text
+    rows[123] = "123,tag,A,-500,P123\n"
+    path = readings_file(tmp_path / "r.csv", body="".join(rows))
+    monkeypatch.setattr(measured, "_read_text_table", lambda *a, **k: pytest.fail("read as text"))
+    with pytest.raises(DataFormatError, match=r"line 125, column 'rssi_dbm': -500 dBm is outside"):
+        read_readings(path)
+
+
+# -- item 8: manifests that loaded and made every report wrong ----------------------------------------------------
+def test_an_outline_around_nothing_of_the_site_is_refused(tmp_path):
+    far = "x,y\n1000,1000\n1010,1000\n1010,1010\n1000,1010\n"
+    manifest = MANIFEST.replace("tag_height_m", 'outline = "outline.csv"\ntag_height_m')
+    refused(make(tmp_path / "far", manifest=manifest, outline_csv=far), "[geometry] outline", "contains none of the 4 "
+            "anchors and none of the", "true positions")
+    # an outline holding the true positions but no anchor (anchors outside the floor) is a site
+    floor = "x,y\n0.5,0.5\n5.5,0.5\n5.5,5.5\n0.5,5.5\n"
+    assert load_dataset(make(tmp_path / "ok", manifest=manifest, outline_csv=floor)).outline_m.shape == (4, 2)
+
+
+def test_scoring_on_the_calibration_file_is_noted_in_the_report_and_in_data_check(tmp_path):
+    from locbook.scenarios.measured import record_dataset
+    from locbook.suite.cli import _dataset_text
+    separate = load_dataset(make(tmp_path / "separate", manifest=MANIFEST + STATIC.format(file="pts.csv"), pts_csv=CAL))
+    copy = load_dataset(make(tmp_path / "copy", manifest=MANIFEST + STATIC.format(file="pts.csv"),
+                             pts_csv=CAL.replace("P", "Q")))
+    assert "in-sample scoring" not in copy.notes
+    assert "in-sample scoring" in separate.notes       # the same bytes under another name
+    same = make(tmp_path / "same", manifest=MANIFEST + STATIC.format(file="cal.csv"))
+    ds = load_dataset(same)
+    note = ds.notes["in-sample scoring"]
+    assert "'pts'" in note and "'cal'" in note and "in-sample" in note
+
+    class Report:
+        def __init__(self):
+            self.assumptions = []
+
+        def assumption(self, key, text, where):
+            self.assumptions.append((key, text))
+    report = Report()
+    record_dataset(report, ds)
+    assert ("in-sample scoring", note) in report.assumptions
+    assert "in-sample scoring: " + note in _dataset_text(str(same))
+
+
+@pytest.mark.parametrize("value", ["1e6", "-1000.0", f"{2.5 + MAX_TAG_HEIGHT_OFFSET_M + 0.01}"])
+def test_a_tag_height_far_from_the_anchors_is_refused_at_load(tmp_path, value):
+    manifest = MANIFEST.replace("tag_height_m = 1.0", f"tag_height_m = {value}")
+    refused(make(tmp_path / "set", manifest=manifest), "[geometry] tag_height_m", "MAX_TAG_HEIGHT_OFFSET_M")
+
+
+def test_a_tag_height_from_the_true_heights_is_checked_too(tmp_path):
+    manifest = MANIFEST.replace("tag_height_m = 1.0\n", "")
+    cal = CAL.replace("x_m,y_m,point", "x_m,y_m,point,z_m").replace("\n", ",-5000\n").replace(",-5000", "", 1)
+    track = TRACK.replace("x_m,y_m", "x_m,y_m,z_m").replace("\n", ",-5000\n").replace(",-5000", "", 1)
+    refused(make(tmp_path / "set", manifest=manifest, cal_csv=cal, walk_csv=track), "median of the recordings' z_m",
+            "-5000 m")
+
+
+def test_min_readings_beyond_any_window_is_refused_at_load_and_by_epochs(tmp_path):
+    refused(make(tmp_path / "set", manifest=MANIFEST.replace("window_s = 0.5", f"window_s = 0.5\nmin_readings = {2**70}")),
+            "[epochs] min_readings", "MAX_MIN_READINGS")
+    table = validate_readings(__import__("pandas").DataFrame(
+        {"time_s": [0.0], "transmitter": ["t"], "receiver": ["A"], "rssi_dbm": [-50.0]}), source="t")
+    with pytest.raises(ParameterError, match="min_readings"):
+        epochs(table, ["A"], window_s=1.0, min_readings=2**70)
+
+
+def test_names_longer_than_a_file_name_allows_are_refused_at_load(tmp_path):
+    long = "a" * 300
+    message = refused(make(tmp_path / "set", manifest=MANIFEST.replace('name = "tiny"', f'name = "{long}"')),
+                      "name", f"at most {MAX_NAME_CHARS} characters")
+    assert long not in message
+    manifest = MANIFEST.replace('name = "walk"', f'name = "{long}"')
+    assert long not in refused(make(tmp_path / "rec", manifest=manifest), "[[recording]] 2", "MAX_NAME_CHARS")
+
+
+# -- item 12: dBm options, the text True, the example's name ----------------------------------------------------
+@pytest.mark.parametrize("line,key", [('invalid_values_dbm = "0"', "invalid_values_dbm"),
+                                      ("invalid_values_dbm = [true]", "invalid_values_dbm"),
+                                      ('invalid_values_dbm = ["0"]', "invalid_values_dbm"),
+                                      ("valid_range_dbm = [-inf, inf]", "valid_range_dbm"),
+                                      ("valid_range_dbm = [-1e300, 0.0]", "valid_range_dbm"),
+                                      ("valid_range_dbm = [false, true]", "valid_range_dbm"),
+                                      ('valid_range_dbm = ["-100", "0"]', "valid_range_dbm")])
+def test_readings_options_that_are_not_dbm_numbers_are_refused(tmp_path, line, key):
+    refused(make(tmp_path / "set", manifest=MANIFEST + f"[readings]\n{line}\n"), "[readings]", key)
+
+
+def test_the_python_api_refuses_the_same_readings_options():
+    import pandas as pd
+    table = pd.DataFrame({"time_s": [0.0], "transmitter": ["t"], "receiver": ["A"], "rssi_dbm": [-50.0]})
+    for kwargs in ({"invalid_values_dbm": "0"}, {"invalid_values_dbm": [True]}, {"invalid_values_dbm": np.array([True])},
+                   {"valid_range_dbm": (-np.inf, np.inf)}, {"valid_range_dbm": (-100.0, 0.0, 5.0)}):
+        with pytest.raises(ParameterError, match=next(iter(kwargs))):
+            validate_readings(table, source="t", **kwargs)
+    # numbers, as a scalar, a sequence or an array, are what they always were
+    for sentinels in (0.0, [0, 2], np.array([0.0, 2.0]), (np.float32(4.0),)):
+        assert validate_readings(table, source="t", invalid_values_dbm=sentinels, valid_range_dbm=np.array([-120, 10]))[
+            "rssi_dbm"][0] == -50.0
+
+
+def test_the_text_true_is_never_a_reading(tmp_path, monkeypatch):
+    """``True`` is 1 to numpy and pandas: a guard for both readers (not reproduced on dcc7249's loaders)."""
+    body = "0,tag,A,-50,P0\n1,tag,A,True,P1\n"
+    for size in (None, 10):
+        if size:
+            monkeypatch.setattr(measured, "MAX_EXACT_READ_BYTES", size)
+        with pytest.raises(DataFormatError, match="line 3, column 'rssi_dbm': 'True' is not a finite number"):
+            read_readings(readings_file(tmp_path / "t.csv", body=body))
+
+
+@pytest.mark.parametrize("name", ['x"\nlicense = "stolen', "Upper", "a" * (MAX_NAME_CHARS + 1), "ok\n", "-x", ""])
+def test_the_example_refuses_a_name_the_manifest_would_refuse_before_writing(tmp_path, name):
+    with pytest.raises(ParameterError, match=r"name \(--name\)"):
+        write_example_dataset(tmp_path / "ex", np.random.default_rng(0), name=name, walk_s=2.0)
+    assert not (tmp_path / "ex").exists()
+
+
+def test_the_example_cli_refuses_a_bad_name_in_one_line(tmp_path, capsys):
+    from locbook.suite.cli import EXIT_BAD_INPUT, main
+    assert main(["data", "example", str(tmp_path / "ex"), "--name", 'a"\nb = "c']) == EXIT_BAD_INPUT
+    err = capsys.readouterr().err.strip()
+    assert "name (--name)" in err and len(err.splitlines()) == 1, err
+
+
+def test_the_example_writes_its_values_as_toml_strings(tmp_path):
+    folder = write_example_dataset(tmp_path / "ex", np.random.default_rng(0), name="my-set", walk_s=2.0,
+                                   seed_note='7"\nlicense = "stolen\\')
+    raw = tomllib.loads((folder / "dataset.toml").read_text())
+    assert raw["name"] == "my-set" and raw["license"] == "CC0 1.0"
+    assert raw["attribution"].endswith('seed 7"\nlicense = "stolen\\)')
+    assert load_dataset(folder).name == "my-set"
+

@@ -119,14 +119,21 @@ def test_a_wheel_installed_in_a_fresh_venv_runs_george_from_an_empty_folder(tmp_
 
 def test_the_data_log_tracks_the_imported_packages_own_data_wherever_it_is_installed(tmp_path):
     """A kernel may import another locbook than the runner (an installed one, while the runner's roots name a
-    source tree): the data files of the locbook it imports are still logged, so the cache notices them."""
-    import locbook
+    source tree): the data files of the locbook it imports are still logged, so the cache notices them.
+
+    The package is the one the subprocess imports, which it reports: this test process may import another (the clone's
+    source tree, when the tests run from a clone beside a non-editable install; issue 44, item 12)."""
+    import hashlib
+    import json
     log = tmp_path / "read.log"
     env = {**os.environ, "LOCBOOK_DATA_LOG": str(log), "LOCBOOK_DATA_ROOTS": str(tmp_path / "elsewhere")}
-    subprocess.run([sys.executable, "-c", "import locbook; locbook.printed('george'); open(locbook.__file__).read()"],
-                   cwd=tmp_path, env=env, check=True)
-    package = Path(locbook.__file__).resolve().parent
-    assert log.read_text().splitlines() == [str(package / "data" / "printed" / "george.csv")]
+    done = subprocess.run([sys.executable, "-c", "import locbook; locbook.printed('george'); "
+                           "open(locbook.__file__).read(); print(locbook.__file__)"],
+                          cwd=tmp_path, env=env, check=True, capture_output=True, text=True)
+    package = Path(done.stdout.strip()).resolve().parent
+    george = package / "data" / "printed" / "george.csv"
+    assert [json.loads(line) for line in log.read_text().splitlines()] == [
+        {"path": str(george), "sha256": hashlib.sha256(george.read_bytes()).hexdigest()}]
 
 
 def test_the_docs_state_every_exit_status_of_locbook_run():

@@ -120,3 +120,120 @@ def test_a_plain_file_where_a_report_folder_should_be_is_replaced_by_the_report(
     assert (folder / "george-one" / "report.md").is_file()
     assert (folder / "george-two" / "report.md").read_bytes() == good_two
     assert not list(folder.glob(".old-*")) and not (folder / ".failed").exists()
+
+
+# -- item 3: files are hashed as the kernel reads them; a symbolic link's target is part of the record ----------
+
+_READ_THEN_EDIT = """
+import os, sys
+import locbook
+with open(sys.argv[1]) as fh:                    # the kernel reads the file ...
+    fh.read()
+with open(sys.argv[2], "w") as fh:               # ... which is edited while the experiment still runs
+    fh.write("edited after it was read\\n")
+open(sys.argv[1]).read()                         # a second read logs nothing more
+"""
+
+
+def _read_log(tmp_path, script, *args):
+    log = tmp_path / "read.log"
+    env = {**os.environ, "LOCBOOK_DATA_LOG": str(log), "LOCBOOK_DATA_ROOTS": str(tmp_path / "data")}
+    subprocess.run([sys.executable, "-c", script, *map(str, args)], cwd=tmp_path, env=env, check=True)
+    return [json.loads(line) for line in log.read_text(encoding="utf-8").splitlines()]
+
+
+def test_the_data_log_records_the_content_the_kernel_read_not_the_content_at_promotion(tmp_path):
+    data = tmp_path / "data"
+    data.mkdir()
+    (data / "walk.csv").write_text("content read\n")
+    read = hashlib.sha256(b"content read\n").hexdigest()
+    entries = _read_log(tmp_path, _READ_THEN_EDIT, "data/walk.csv", data / "walk.csv")
+    assert entries == [{"path": str((data / "walk.csv").resolve()), "sha256": read}]
+    assert _sha256(data / "walk.csv") != read                         # what is there now is not what was read
+
+
+def test_a_file_read_through_a_symbolic_link_is_logged_with_the_link_and_its_target(tmp_path):
+    data = tmp_path / "data"
+    data.mkdir()
+    (data / "a.csv").write_text("a\n")
+    (data / "walk.csv").symlink_to("a.csv")
+    entries = _read_log(tmp_path, "import sys, locbook; open(sys.argv[1]).read()", "data/walk.csv")
+    assert entries == [{"path": str((data / "a.csv").resolve()), "sha256": _sha256(data / "a.csv"),
+                        "link": str(tmp_path.resolve() / "data" / "walk.csv")}]
+
+
+def test_the_runner_keeps_what_was_read_and_names_what_changed_since(tmp_path):
+    from locbook.suite.runner import _data_hashes, _links_unchanged
+    data = tmp_path / "data"
+    data.mkdir()
+    for name in ("a.csv", "b.csv", "same.csv"):
+        (data / name).write_text(name)
+    (data / "walk.csv").symlink_to("a.csv")
+    read = {name: _sha256(data / name) for name in ("a.csv", "same.csv")}
+    log = [{"path": str(data / "a.csv"), "sha256": read["a.csv"], "link": str(data / "walk.csv")},
+           {"path": str(data / "same.csv"), "sha256": read["same.csv"]}]
+    (tmp_path / ".data-read.log").write_text("".join(json.dumps(e) + "\n" for e in log) + '{"path": "/cut')
+    (data / "a.csv").write_text("edited while the experiment ran")
+    (data / "walk.csv").unlink()
+    (data / "walk.csv").symlink_to("b.csv")                           # ... and re-pointed
+    hashes, links, changed = _data_hashes(tmp_path)
+    assert hashes == {str(data / "a.csv"): read["a.csv"], str(data / "same.csv"): read["same.csv"]}
+    assert links == {str(data / "walk.csv"): str(data / "a.csv")}
+    assert changed == sorted([str(data / "a.csv"), str(data / "walk.csv")])
+    assert not _links_unchanged(links) and _links_unchanged({str(data / "walk.csv"): str(data / "b.csv")})
+
+
+@pytest.mark.notebooks
+def test_a_data_file_edited_while_its_experiment_runs_is_not_served_as_cached(toy):
+    offset = toy.parent / "shared" / "data" / "offset.csv"
+    set_profile(toy, "george-one", "read_data = true\nsleep_s = 4.0")
+    proc = cli(toy, "george-one", "--progress", "plain")
+
+    def kernel_read_it():
+        return any("offset.csv" in log.read_text() for log in toy.glob("reports/quick/.staging/*/*/.data-read.log"))
+    try:
+        assert wait_for(kernel_read_it, 120)
+        time.sleep(1.0)                                  # the kernel's own read follows the hook's at once
+        offset.write_text("offset\n0.5\n")
+        out, err = proc.communicate(timeout=120)
+    finally:
+        proc.kill()
+    assert proc.returncode == 0, out + err
+    folder = toy / "reports" / "quick" / "george-one"
+    assert _printed(folder) == "0.0"                       # computed from what it read
+    record = json.loads((folder / "run.json").read_text())
+    again = cli(toy, "george-one", "--progress", "plain")
+    out2, err2 = again.communicate(timeout=120)
+    # the next run executes it again (it used to say cached, serving 0.0 computed from the old content)
+    assert again.returncode == 0 and "george-one: ok" in out2 and "done: 1 executed, 0 cached" in out2, out2 + err2
+    assert _printed(folder) == "0.5"
+    assert f"george-one: {offset.resolve()} changed while it ran, after its kernel read it; the report is kept, " \
+           "and the next run executes it again" in out
+    assert record["data"] == {str(offset.resolve()): hashlib.sha256(b"offset\n0.0\n").hexdigest()}
+
+
+def _printed(folder):
+    import csv
+    return next(csv.DictReader((folder / "numbers.csv").read_text().splitlines()))["printed"]
+
+
+@pytest.mark.notebooks
+def test_re_pointing_a_symlinked_data_file_invalidates_the_report(toy, capsys):
+    data = toy.parent / "shared" / "data"
+    (data / "a.csv").write_text("offset\n0.0\n")
+    (data / "b.csv").write_text("offset\n0.0\n")         # the same content: the link's target alone changed
+    (data / "offset.csv").unlink()
+    (data / "offset.csv").symlink_to("a.csv")
+    set_profile(toy, "george-one", "read_data = true")
+    assert run(toy) == 0
+    record = json.loads((toy / "reports" / "quick" / "george-one" / "run.json").read_text())
+    capsys.readouterr()
+    assert run(toy) == 0 and "0 executed, 2 cached" in capsys.readouterr().out
+    (data / "offset.csv").unlink()
+    (data / "offset.csv").symlink_to("b.csv")
+    assert run(toy) == 0
+    out = capsys.readouterr().out
+    assert "george-one: ok" in out and "george-two: cached" in out         # it used to say cached
+    assert record["links"] == {str(data.resolve() / "offset.csv"): str((data / "a.csv").resolve())}
+    record = json.loads((toy / "reports" / "quick" / "george-one" / "run.json").read_text())
+    assert record["links"] == {str(data.resolve() / "offset.csv"): str((data / "b.csv").resolve())}

@@ -7,7 +7,8 @@ Layout of a reports folder (``reports/<profile>/``, or its own folder for a run 
     <id>/summary.md, report.md, *.png, *.csv lightweight results (committed for the full profile)
     <id>/report.html                         the whole page in HTML
     <id>/report.json                         stamp, parameters and run time of the report (committed)
-    <id>/run.json                            cache record: key, data files and modules read with their hashes, time
+    <id>/run.json                            cache record: key, data files and modules read with their hashes
+                                             (taken as the kernel opened them), symbolic links read through, time
     .lock                                    held by the run writing this folder
     .staging/<run>/<id>/                     experiments in progress, one folder per run
     .failed/<id>/                            the last failed attempt, kept for inspection
@@ -26,7 +27,11 @@ Guarantees (docs/running.md, "Interrupts, concurrent runs and the cache"):
 - a full disk (ENOSPC, or the quota) is not a kernel failure: the run stops as on an interrupt, without
   retrying, its staging removed and every earlier report intact; :attr:`SuiteRun.disk_full` names the path;
 - an executor that can run nothing more (a lost Dask scheduler): every running experiment is asked to stop
-  (``.stop``), and :attr:`SuiteRun.executor_error` says why;
+  (``.stop``), and :attr:`SuiteRun.executor_error` says why; a client that closed meanwhile (its calls raise) ends
+  the run the same way, with its outcomes, its status and its staging removed;
+- a data file (or module) is recorded with the hash of the content the kernel read, taken as it opened it, and one
+  read through a symbolic link with the link and its target: a file edited, or a link re-pointed, while its
+  experiment ran leaves a report that is kept, not served as cached (the run says so);
 - the suite files (index, numbers.csv) are rebuilt from every experiment folder present, so a partial run
   keeps the other experiments' previous results, each with its own stamp.
 """
@@ -316,12 +321,57 @@ def _validate_report(folder: Path, exp_id: str, figures: bool = True) -> str:
     return ""
 
 
-def _data_hashes(staging: Path, log: str = ".data-read.log") -> dict[str, str]:
-    """SHA-256 of every data file (or, with ``log=".modules-read.log"``, every locbook module source) the kernel
-    logged as read (see locbook._datalog)."""
+def _data_hashes(staging: Path, log: str = ".data-read.log") -> tuple[dict[str, str], dict[str, str], list[str]]:
+    """``(hashes, links, changed)`` of every data file (or, with ``log=".modules-read.log"``, every locbook module
+    source) the kernel logged as read (see locbook._datalog): ``hashes`` maps each file to the SHA-256 of the content
+    the kernel read (hashed as it opened it), ``links`` each path opened through a symbolic link to its target then,
+    and ``changed`` lists the files that differ now from what the kernel read (edited, removed or, for a link,
+    re-pointed while the experiment ran). The record keeps what was read, so such a report is not served as cached:
+    the next run sees the change and executes it again. A plain path line (an older kernel's locbook) is hashed
+    now, as before."""
     logged = staging / log
-    paths = sorted(set(logged.read_text(encoding="utf-8").splitlines())) if logged.exists() else []
-    return {p: _sha256(Path(p)) for p in paths if Path(p).is_file()}
+    try:
+        lines = logged.read_text(encoding="utf-8").splitlines()
+    except FileNotFoundError:
+        lines = []
+    hashes: dict[str, str] = {}
+    links: dict[str, str] = {}
+    changed: set[str] = set()
+    for line in lines:
+        entry = _log_entry(line)
+        if entry is None:
+            continue
+        path, digest, link = entry
+        try:
+            now = _sha256(Path(path)) if Path(path).is_file() else None
+        except OSError:
+            now = None
+        if digest is None:              # no hash from the kernel: what is there now (a file gone is no file read)
+            if now is None:
+                continue
+            digest = now
+        first = hashes.setdefault(path, digest)          # a file read twice: the record keeps the first read
+        if now != digest or first != digest:
+            changed.add(path)
+        if link is not None:
+            first = links.setdefault(link, path)
+            if os.path.realpath(link) != path or first != path:
+                changed.add(link)
+    return dict(sorted(hashes.items())), dict(sorted(links.items())), sorted(changed)
+
+
+def _log_entry(line: str) -> tuple[str, str | None, str | None] | None:
+    """``(target, sha256 or None, link or None)`` of one line of a read log: a JSON object, or a plain path."""
+    if not line.startswith("{"):
+        return (line, None, None) if line else None
+    try:
+        entry = json.loads(line)
+        path, digest, link = entry["path"], entry["sha256"], entry.get("link")
+    except (ValueError, KeyError, TypeError, AttributeError):     # a line cut short (a worker killed writing it)
+        return None
+    if not (isinstance(path, str) and isinstance(digest, str) and isinstance(link, (str, type(None)))):
+        return None
+    return path, digest, link
 
 
 def _data_unchanged(recorded: dict[str, str]) -> bool:
@@ -332,6 +382,14 @@ def _data_unchanged(recorded: dict[str, str]) -> bool:
         except (OSError, TypeError, ValueError):     # gone, unreadable, or a damaged record
             return False
     return True
+
+
+def _links_unchanged(recorded: dict[str, str]) -> bool:
+    """Every symbolic link a report read through still points where it did (re-pointed: another file was read)."""
+    try:
+        return all(os.path.realpath(link) == target for link, target in recorded.items())
+    except (OSError, TypeError, ValueError):         # a damaged record
+        return False
 
 
 def _validate_promoted(folder: Path, exp_id: str, figures: bool = True) -> str:
@@ -365,9 +423,10 @@ def _cached(folder: Path, exp: Experiment, key: str, figures: bool = True) -> tu
     would be up to date but is damaged (``why`` says what is wrong), ``(False, "")`` when it is stale or absent.
     A damaged report is never served: it is executed again."""
     run = _read_json(folder / "run.json", {})
-    data, modules = run.get("data", {}), run.get("modules")
+    data, modules, links = run.get("data", {}), run.get("modules"), run.get("links", {})
     if not (run.get("cache_key") == key and run.get("status") == "ok" and isinstance(data, dict)
-            and isinstance(modules, dict) and _data_unchanged(data) and _data_unchanged(modules)):
+            and isinstance(modules, dict) and isinstance(links, dict) and _data_unchanged(data)
+            and _data_unchanged(modules) and _links_unchanged(links)):
         return False, ""
     why = _validate_promoted(folder, exp.id, figures)
     return not why, why
@@ -793,8 +852,12 @@ def _run_locked(suite, tasks, profile, report_dir, data_roots, force, timeout_s,
                 kind = "a symbolic link" if final.is_symlink() else "a file"
                 progress.message(f"{eid}: {final} was {kind}, not a report folder; replaced by the new report")
             try:
-                _promote(by_id[eid].experiment, profile, by_id[eid].parameters, staging, report_dir / eid, stamp,
-                         keys[eid], result)
+                changed = _promote(by_id[eid].experiment, profile, by_id[eid].parameters, staging, report_dir / eid,
+                                   stamp, keys[eid], result)
+                if changed:
+                    more = f" (and {len(changed) - 1} more)" if len(changed) > 1 else ""
+                    progress.message(f"{eid}: {changed[0]}{more} changed while it ran, after its kernel read it; the "
+                                     "report is kept, and the next run executes it again")
             except OSError as exc:
                 path = disk_full_path(exc, str(staging))
                 if path is not None:
@@ -919,11 +982,13 @@ def _keep_failed(staging: Path, failed: Path) -> None:
     _replace_dir(staging, failed)
 
 
-def _promote(exp, profile, params, staging: Path, folder: Path, stamp: str, key: str, result: dict) -> None:
+def _promote(exp, profile, params, staging: Path, folder: Path, stamp: str, key: str, result: dict) -> list[str]:
     """Write the summary and the records into the validated staging folder, then swap it into place. The cache
     record (run.json) is written before the swap, inside the new folder, so it only ever describes a
-    complete report."""
-    data, modules = _data_hashes(staging), _data_hashes(staging, ".modules-read.log")
+    complete report. Returns the files (and links) read that changed while the experiment ran: the record holds
+    what the kernel read, so the next run executes this report again."""
+    data, links, changed = _data_hashes(staging)
+    modules, _module_links, changed_modules = _data_hashes(staging, ".modules-read.log")
     _strip_worker_files(staging)
     numbers = _read_csv(staging / "numbers.csv")
     # the pages show each row's reading bracket when the experiment was bracketed (<reports>/brackets/<id>/)
@@ -941,6 +1006,7 @@ def _promote(exp, profile, params, staging: Path, folder: Path, stamp: str, key:
          "seconds": round(result["seconds"], 1), "machine": result.get("machine") or machine_label()}, indent=1,
         sort_keys=True) + "\n")
     (staging / "run.json").write_text(json.dumps({
-        "cache_key": key, "status": "ok", "seconds": round(result["seconds"], 2), "data": data, "modules": modules},
-        indent=1))
+        "cache_key": key, "status": "ok", "seconds": round(result["seconds"], 2), "data": data, "links": links,
+        "modules": modules}, indent=1))
     _replace_dir(staging, folder)
+    return changed + changed_modules

@@ -399,3 +399,51 @@ def test_rss_model_needs_its_readings():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         grid_bayes_filter(np.full((1, 3, 4), -60.0), _l_shaped_grid(1.0), model, 0.5, n_steps=3)
+
+
+# -- size guard (issue 44, item 7) ------------------------------------------------------------------------------------
+def _guard_model():
+    return lb.RssModel(np.array([[0.0, 0.0], [10.0, 0.0], [0.0, 10.0]]), lb.PathLossModel(-40.0, 2.0, 4.0, min_distance_m=0.1))
+
+
+@pytest.mark.parametrize("transition", ["auto", "dense", "separable"])
+def test_scattered_cells_beyond_the_limit_are_refused_before_anything_is_allocated(transition):
+    import tracemalloc
+    cells = np.random.default_rng(0).random((100_000, 2)) * 10.0            # no two cells share a coordinate
+    tracemalloc.start()
+    try:
+        with pytest.raises(ValueError) as exc:
+            grid_bayes_filter(np.full((1, 5, 3), -60.0), cells, _guard_model(), 0.5, transition=transition)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    text = str(exc.value)
+    assert "\n" not in text and text.startswith("cells_m: ") and "MAX_ARRAY_BYTES = 2 GiB" in text
+    if transition == "separable":     # the lattice of the distinct coordinates: 1e5 x 1e5 points
+        assert f"1 x 10,000,000,000 float64 values, would take {8e10 / 2**30:.3g} GiB" in text
+    else:                             # the dense construction's C x C x dim difference
+        assert f"100,000 x 100,000 x 2 float64 values, would take {1.6e11 / 2**30:.3g} GiB" in text
+    assert peak < 50 * 2**20
+
+
+def test_grid_transition_matrix_checks_its_size_first(monkeypatch):
+    import locbook.tracking.bayes as bayes
+    cells = np.random.default_rng(1).random((300, 2))
+    monkeypatch.setattr(bayes, "MAX_ARRAY_BYTES", 8 * 300 * 300 * 2)        # the construction's largest array
+    assert grid_transition_matrix(cells, 0.5).shape == (300, 300)
+    monkeypatch.setattr(bayes, "MAX_ARRAY_BYTES", 8 * 300 * 300 * 2 - 1)
+    with pytest.raises(ValueError, match="^cells_m: the dense transition"):
+        grid_transition_matrix(cells, 0.5)
+    with pytest.raises(ValueError, match="^cells_m: the dense transition"):
+        grid_bayes_filter(np.full((1, 3, 3), -60.0), cells * 10, _guard_model(), 0.5, transition="dense")
+
+
+def test_the_repositorys_grids_are_inside_the_limit():
+    """The largest grids in use (bench_grid's 36,000-cell separable lattice over 12 runs, bench_real_data's 5,111-cell
+    dense check, 2-D) stay inside the limit, and so does a 10,000-cell dense transition."""
+    from locbook.tracking.bayes import MAX_ARRAY_BYTES
+    assert 8 * 12 * 36_000 < MAX_ARRAY_BYTES and 8 * 10_000**2 * 2 < MAX_ARRAY_BYTES
+    xs, ys = np.arange(0, 24, 0.1), np.arange(0, 15, 0.1)
+    cells = np.stack(np.meshgrid(xs, ys), -1).reshape(-1, 2)
+    res = grid_bayes_filter(np.full((2, 3, 3), -60.0), cells, _guard_model(), 0.5)
+    assert np.isfinite(res.mean_m).all()

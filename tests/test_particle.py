@@ -236,3 +236,53 @@ def test_some_runs_collapsing_give_one_warning_with_the_count_and_the_first_run_
             call(_rss_runs())
         assert lb.particle_filter(None, lambda x, k: np.zeros(x.shape[:2]), np.random.default_rng(0), n_steps=2,
                                   initial_particles_m=np.zeros((0, 5, 2))).n_degenerate == 0   # no runs: nothing collapsed
+
+
+# -- size guard (issue 44, item 7) ------------------------------------------------------------------------------------
+def _guard_model():
+    return lb.RssModel(np.array([[0.0, 0.0], [10.0, 0.0], [0.0, 10.0]]), lb.PathLossModel(-40.0, 2.0, 4.0, min_distance_m=0.1))
+
+
+@pytest.mark.parametrize("prior", ["uniform", "at a start", "kinematic"])
+def test_a_billion_particles_are_refused_before_anything_is_allocated(prior):
+    import tracemalloc
+    kw = {"uniform": dict(region_m=((0, 0), (10, 10))), "at a start": dict(initial_position_m=np.zeros((1, 2))),
+          "kinematic": dict(region_m=((0, 0), (10, 10)), motion=lb.constant_velocity(1.0, 0.1, dim=2))}[prior]
+    state = 4 if prior == "kinematic" else 2
+    tracemalloc.start()
+    try:
+        with pytest.raises(ValueError) as exc:
+            lb.particle_filter(np.full((1, 5, 3), -60.0), _guard_model(), np.random.default_rng(0),
+                               n_particles=10**9, **kw)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    text = str(exc.value)
+    assert "\n" not in text and text.startswith("n_particles: a particle cloud")
+    assert f"1 x 1,000,000,000 x {state} float64 values, would take {8e9 * state / 2**30:.3g} GiB" in text
+    assert "MAX_ARRAY_BYTES = 2 GiB" in text
+    assert peak < 50 * 2**20                                  # refused from the arguments, not after a try
+
+
+def test_the_particle_size_limit_is_the_stated_bytes_of_runs_x_particles_x_state(monkeypatch):
+    import locbook.tracking.bayes as bayes
+    R, N, d = 3, 1000, 2
+    rss = np.full((R, 4, 3), -60.0)
+    monkeypatch.setattr(bayes, "MAX_ARRAY_BYTES", 8 * R * N * d)             # exactly one cloud: allowed
+    res = lb.particle_filter(rss, _guard_model(), np.random.default_rng(0), n_particles=N, region_m=((0, 0), (10, 10)))
+    assert res.particles_m.shape == (R, N, d)
+    monkeypatch.setattr(bayes, "MAX_ARRAY_BYTES", 8 * R * N * d - 1)
+    with pytest.raises(ValueError, match="^n_particles: a particle cloud"):
+        lb.particle_filter(rss, _guard_model(), np.random.default_rng(0), n_particles=N, region_m=((0, 0), (10, 10)))
+    with pytest.raises(ValueError, match="^initial_particles_m: a particle cloud"):
+        lb.particle_filter(rss, _guard_model(), np.random.default_rng(0), initial_particles_m=np.ones((R, N, d)))
+
+
+def test_the_repositorys_largest_particle_workloads_are_inside_the_limit():
+    """The largest clouds in use: Ozkaya's test bed runs its 10,000-particle filters in blocks of
+    ``max_particle_runs`` run-particle pairs (2-D); the notebooks' others are smaller (100 runs x 10,000 in
+    bench_particle, 1000 runs x 1000 in the SIR sweep). Each stays far inside the limit, with a 4-value state too."""
+    from locbook.scenarios.ozkaya_testbed import MethodSettings
+    from locbook.tracking.bayes import MAX_ARRAY_BYTES
+    for pairs in (MethodSettings().max_particle_runs, 100 * 10_000, 1000 * 1000):
+        assert 8 * pairs * 4 < MAX_ARRAY_BYTES / 8

@@ -34,7 +34,31 @@ from ..models.rss import LIKELIHOOD_BLOCK_VALUES, RssModel
 from . import _compiled
 from .resampling import effective_sample_size
 
-__all__ = ["BayesFilterResult", "grid_bayes_filter", "grid_transition_matrix", "GRID_TRANSITIONS"]
+__all__ = ["BayesFilterResult", "grid_bayes_filter", "grid_transition_matrix", "GRID_TRANSITIONS", "MAX_ARRAY_BYTES"]
+
+#: the largest array (bytes) one grid or particle filter call may allocate, checked from the arguments before
+#: anything is allocated: a particle cloud (runs x particles x state values), the per-step outputs (runs x steps x
+#: dim x dim), the grid's belief (runs x cells), the dense transition's construction (cells x cells x dim) and the
+#: separable transition's lattice (runs x lattice points), 8 bytes a value. A call holds a few such arrays at once.
+#: 2 GiB leaves the repository's largest workloads far inside (clouds of at most 2,000,000 run-particle pairs, 32 MB
+#: in 2-D: Ozkaya's test bed in blocks; 36,000 cells separable; 5,111 cells dense, 418 MB to build). Read at call
+#: time: raise it on a machine with more memory.
+MAX_ARRAY_BYTES = 2 * 2**30
+
+
+def _check_size(name: str, what: str, dims, hint: str) -> None:
+    """Refuse an array of ``dims`` float64 values over :data:`MAX_ARRAY_BYTES` before it is allocated, naming the
+    argument ``name`` that sets it, what it is, the size it would take and the limit (Python integers: no overflow)."""
+    dims = [int(v) for v in dims]
+    nbytes = 8 * int(np.prod(dims, dtype=object)) if dims else 8
+    if nbytes > MAX_ARRAY_BYTES:
+        raise ValueError(f"{name}: {what}, {' x '.join(f'{v:,}' for v in dims)} float64 values, would take "
+                         f"{_gib(nbytes)}, over the limit of one array (locbook.tracking.bayes.MAX_ARRAY_BYTES = "
+                         f"{_gib(MAX_ARRAY_BYTES)}); {hint}, or raise that limit if the machine has the memory")
+
+
+def _gib(nbytes: int) -> str:
+    return f"{nbytes / 2**30:.3g} GiB"
 
 
 @dataclass(frozen=True)
@@ -170,6 +194,9 @@ def grid_transition_matrix(cells_m, spread_m: float, velocity_m=None):
     n, dim = cells_m.shape
     check_scalar("spread_m", spread_m, gt=0, allow_inf=True)
     velocity = np.zeros(dim) if velocity_m is None else as_array("velocity_m", velocity_m, trailing=(dim,))
+    # the construction's largest array is the C x C x dim difference (then three C x C ones)
+    _check_size("cells_m", "the dense transition (cells x cells" + (")" if np.isinf(spread_m) else " x dim to build)"),
+                (n, n) if np.isinf(spread_m) else (n, n, max(dim, 1)), _DENSE_HINT)
     if np.isinf(spread_m):
         return np.full((n, n), 1.0 / n)
     diff = cells_m[:, None, :] - cells_m[None, :, :] - velocity
@@ -180,6 +207,7 @@ def grid_transition_matrix(cells_m, spread_m: float, velocity_m=None):
 
 #: how :func:`grid_bayes_filter` applies the transition
 GRID_TRANSITIONS = ("auto", "dense", "separable")
+_DENSE_HINT = "use fewer cells, or cells on a regular grid (possibly masked: the separable transition is linear in them)"
 
 
 def _along_axes(kernels, lattice):
@@ -219,7 +247,7 @@ class _SeparableTransition:
 
     @staticmethod
     def lattice_size(cells_m: np.ndarray) -> int:
-        return int(np.prod([np.unique(cells_m[:, a]).size for a in range(cells_m.shape[1])]))
+        return int(np.prod([np.unique(cells_m[:, a]).size for a in range(cells_m.shape[1])], dtype=object))
 
     def _kernel(self, coords, shift):
         """``K[i, j] = exp(-(c_i - c_j - shift)^2 / (2 D^2))`` scaled so that each column's maximum is 1."""
@@ -451,8 +479,9 @@ def grid_bayes_filter(rss_dbm, cells_m, model, spread_m: float = 0.5, *, n_steps
     output. ``velocity_m``: a known displacement per step, ``(dim,)`` or ``(T, dim)`` (the mean of the process model
     in the thesis's constant-velocity experiment). ``initial_belief``: ``(C,)`` or ``(R, C)``; uniform if None.
 
-    ``transition``: ``"dense"`` builds the ``C x C`` matrix (memory quadratic in the cells: 2 GB at 16,000
-    cells); ``"separable"`` applies the same transition as one small matrix product per axis on the lattice of the
+    ``transition``: ``"dense"`` builds the ``C x C`` matrix (memory quadratic in the cells: its construction peaks
+    at ``8 C^2 (dim + 3)`` bytes, 5 GB at 10,000 cells in 2-D; refused beyond :data:`MAX_ARRAY_BYTES` per array,
+    checked before allocating like every array of the call); ``"separable"`` applies the same transition as one small matrix product per axis on the lattice of the
     cells' distinct coordinates (memory linear in the cells for a grid, possibly masked by a floor outline;
     equal to the dense one up to rounding); ``"auto"`` (default) takes the separable form when that lattice
     has at most 4 points per cell, which every regular grid has.
@@ -523,6 +552,22 @@ def grid_bayes_filter(rss_dbm, cells_m, model, spread_m: float = 0.5, *, n_steps
                              f"got {initial_belief.shape}")
         if np.any(initial_belief < 0) or np.any(initial_belief.sum(axis=-1) <= 0):
             raise ValueError("initial_belief must be non-negative with a positive sum over the cells")
+    # size guards (MAX_ARRAY_BYTES), before anything of the size of the grid is allocated
+    runs_name = "rss_dbm" if isinstance(model, RssModel) else "log_likelihood"
+    _check_size("cells_m", "the belief (runs x cells)", (n_runs, n_cells), "use fewer cells or run the runs in blocks")
+    _check_size(runs_name, "the covariance output (runs x steps x dim x dim)", (n_runs, n_steps, dim, dim),
+                "run the runs or the steps in blocks")
+    lattice = _SeparableTransition.lattice_size(cells_m)
+    use_separable = transition == "separable" or transition == "auto" and lattice <= 4 * n_cells
+    if use_separable:                                # its mask, and with a finite spread one lattice per run
+        _check_size("cells_m", f"the separable transition's lattice of the cells' distinct coordinates (runs x "
+                    f"lattice points, for {n_cells:,} cells)", (1 if np.isinf(spread_m) else max(n_runs, 1), lattice),
+                    "cells on a regular grid keep the lattice near the number of cells; scattered cells take "
+                    "transition='auto'")
+    elif not use_separable and n_steps > 1:
+        _check_size("cells_m", "the dense transition (cells x cells" + (")" if np.isinf(spread_m) else
+                                                                        " x dim to build)"),
+                    (n_cells, n_cells) if np.isinf(spread_m) else (n_cells, n_cells, max(dim, 1)), _DENSE_HINT)
     belief = (np.full((n_runs, n_cells), 1.0 / n_cells) if initial_belief is None
               else np.broadcast_to(np.asarray(initial_belief, float), (n_runs, n_cells)).copy())
     mean = np.empty((n_runs, n_steps, dim))
@@ -530,8 +575,7 @@ def grid_bayes_filter(rss_dbm, cells_m, model, spread_m: float = 0.5, *, n_steps
     best = np.empty((n_runs, n_steps, dim))
     n_eff = np.empty((n_runs, n_steps))
     separable = banded = None
-    if transition == "separable" or (
-            transition == "auto" and _SeparableTransition.lattice_size(cells_m) <= 4 * n_cells):
+    if use_separable:
         separable = _SeparableTransition(cells_m, spread_m)
     if isinstance(model, RssModel) and n_steps:
         _fix_mean_table(fixed, model, cells_m, n_runs)

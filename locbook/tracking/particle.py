@@ -57,7 +57,7 @@ import numpy as np
 from .._validate import as_array, check_choice, check_scalar
 from ..models.motion import KinematicModel, reflect_into_box
 from ..models.rss import RssModel
-from .bayes import (BayesFilterResult, _LIKELIHOOD, _callable_steps, _collapse_error, _normalise_log,
+from .bayes import (BayesFilterResult, _LIKELIHOOD, _callable_steps, _check_size, _collapse_error, _normalise_log,
                     _reading_detail, _velocity_schedule, _warn_collapse, weighted_moments)
 from .resampling import RESAMPLING_CDFS, RESAMPLING_METHODS, effective_sample_size, resample, systematic_resample
 from . import _compiled
@@ -167,6 +167,14 @@ def _region(region_m, dim: int | None):
     if lower.shape != upper.shape or np.any(upper <= lower):
         raise ValueError(f"region_m needs upper > lower on every axis, got {lower.tolist()} and {upper.tolist()}")
     return lower, upper
+
+
+def _check_cloud(name: str, shape) -> None:
+    """Refuse a particle cloud ``(runs, N, state)`` over :data:`~locbook.tracking.bayes.MAX_ARRAY_BYTES` before it is
+    drawn (the filter holds a few: the particles, the moved copy, the resampling target)."""
+    R, N, d = shape
+    _check_size(name, "a particle cloud (runs x particles x state values)", (R, N, d),
+                "use fewer particles, or run the runs in blocks")
 
 
 def _psd_root(name: str, cov) -> np.ndarray:
@@ -406,6 +414,8 @@ def particle_filter(rss_dbm, model, rng: np.random.Generator, *, n_steps: int | 
     if initial_particles_m is not None:
         if n_particles is not None or initial_position_m is not None:
             raise ValueError("give initial_particles_m, or n_particles with region_m or initial_position_m, not both")
+        if np.ndim(initial_particles_m) == 3:
+            _check_cloud("initial_particles_m", np.shape(initial_particles_m))
         particles = as_array("initial_particles_m", initial_particles_m, ndim=3).copy()
         if particles.shape[1] == 0:
             raise ValueError(f"initial_particles_m must hold at least one particle per run, got shape {particles.shape}")
@@ -420,6 +430,7 @@ def particle_filter(rss_dbm, model, rng: np.random.Generator, *, n_steps: int | 
                 raise ValueError("with a log_likelihood callable give initial_particles_m or initial_position_m "
                                  "(the number of runs)")
             shape = (n_runs, int(n_particles), bounds[0].size)
+            _check_cloud("n_particles", shape[:2] + ((kin.n_state,) if kin is not None else shape[2:]))
             particles = bounds[0] + (bounds[1] - bounds[0]) * rng.random(shape)
             if kin is not None:                       # uniform positions, at rest
                 particles = kin.state_from_positions(particles)
@@ -433,6 +444,7 @@ def particle_filter(rss_dbm, model, rng: np.random.Generator, *, n_steps: int | 
                 axes = (want[1] or "dim") if kin is None else f"{kin.n_state}) or (runs, {pos_dim}"
                 raise ValueError(f"initial_position_m must have shape (runs, {axes}) = {want}, got {start.shape}")
             shape = (start.shape[0], int(n_particles), start.shape[1])
+            _check_cloud("n_particles", shape)
             particles = np.broadcast_to(start[:, None, :], shape).copy()
             if initial_sd_m > 0:
                 if kin is None:
@@ -507,6 +519,9 @@ def particle_filter(rss_dbm, model, rng: np.random.Generator, *, n_steps: int | 
         raise ValueError(f"transition must be a callable transition(particles, t, rng), got {type(transition).__name__}")
 
     # -- the recursion -------------------------------------------------------------------------------
+    _check_size("rss_dbm" if isinstance(model, RssModel) else "n_steps",
+                "the covariance output (runs x steps x state x state)", (R, n_steps, d, d),
+                "run the runs or the steps in blocks")
     log_w = np.full((R, n), -np.log(n))
     final_log_w = log_w.copy()                # the normalised log-weights of the last step (exact, for the result)
     mean = np.empty((R, n_steps, d))

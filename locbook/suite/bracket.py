@@ -586,7 +586,8 @@ def findings_markdown(document: str, brackets: dict[str, list[dict]], points: di
             extra = {"outside": r["points"], "reachable": r["reached_by"], "open": r["open_readings"],
                      "loose": r["loose_under"]}[verdict]
             lines.append(f"| {_md_cell(r['experiment'])} | {_md_cell(r['printed_id'])} | {_md_cell(r['printed'])} | "
-                         f"{_md_cell(_short(r['ours']))} | {_md_cell(r['verdict'])} | {_md_cell(_short(r['band_low']))} "
+                         f"{_md_cell(_short(r['ours']))} | {_md_cell(r['verdict'])} | "
+                         f"{_md_cell(_short(r['band_low']))} "
                          f".. {_md_cell(_short(r['band_high']))} | {_md_cell(_short(r['closest']))} "
                          f"({_md_cell(r['closest_reading'])}) | {_md_cell(extra)} |")
         lines.append("")

@@ -57,8 +57,8 @@ class NoiseFit:
       its bound (the likelihood wants it beyond: widen ``scale_bounds`` or suspect the model); ``history`` (EM) ``batch + (iterations + 1,)``: the log-likelihood before each iteration
       and at the end; ``iterations``, ``method`` (``"ml"`` or ``"em"``);
     - ``flat`` (ML) ``batch + (p,)``, in ``at_bound``'s order: the log-likelihood does not depend on that multiplier
-      (every reading of its stream, or of that run, is missing): it is not fitted, its ``q_scale``/``r_scale`` and
-      the entries of ``Q``/``R`` it scales are NaN (never the start passed off as a fit). Readings with no value at
+      (every reading of its stream, or of that run, is missing; a zero Q): it is not fitted, its ``q_scale``/``r_scale``
+      and the nonzero entries of ``Q``/``R`` it scales are NaN (never the start passed off as a fit). Readings with no value at
       all are refused (a ValueError: nothing to fit from).
     """
 
@@ -263,9 +263,10 @@ def _flat(log_likelihood, runs, p: int, per_run: bool) -> np.ndarray:
 
 
 def _blank_flat(params, flat, Q, R: list):
-    """NaN in the entries of the fitted ``Q`` and ``R`` (per stream) that a flat multiplier scales."""
+    """NaN in the entries of the fitted ``Q`` and ``R`` (per stream) that a flat multiplier scales (an entry that is 0
+    in the given matrix stays 0: any multiplier gives it)."""
     c = 0
-    for target, M, _ in params.blocks:
+    for target, M, base in params.blocks:
         hit = (flat[..., c:c + M.shape[0]].astype(float) @ M) > 0            # (..., size): components scaled
         c += M.shape[0]
         if not hit.any():
@@ -276,7 +277,7 @@ def _blank_flat(params, flat, Q, R: list):
                                   np.broadcast_shapes(hit.shape[:-1] + value.shape[-1:], value.shape))
             value = np.where(hit, np.nan, value)
         else:
-            value = np.where(hit[..., :, None] | hit[..., None, :], np.nan, value)
+            value = np.where((hit[..., :, None] | hit[..., None, :]) & (base != 0), np.nan, value)
         if target == -1:
             Q = value
         else:
@@ -411,6 +412,7 @@ def fit_noise_em(F, Q, x0, P0, measurement: LinearMeasurement, *, B=None, u=None
         run = kalman_filter(F, Q, x0, P0, replace(measurement, R=R), B=B, u=u, predict_first=False,
                             outputs=("x_pred", "P_pred", "P_cross"), divergence_window=0)
         history.append(run.total_log_likelihood)
+        _check_em_step(history, per_run, it, z)
         if it == n_iter:
             break
         sm = rts_smoother(run)
@@ -428,7 +430,8 @@ def fit_noise_em(F, Q, x0, P0, measurement: LinearMeasurement, *, B=None, u=None
                      + V[..., 1:, :, :] - CF - np.swapaxes(CF, -1, -2))
             Q = terms.mean(axis=-3) if per_run else terms.reshape((-1, n, n)).mean(axis=0)
             parts = (e[..., :, None] * e[..., None, :], V[..., 1:, :, :], CF)
-            Q = _psd_iterate("Q", 0.5 * (Q + np.swapaxes(Q, -1, -2)), _scale(parts, per_run), it + 1)
+            Q = _psd_iterate("Q", _finite_iterate("Q", 0.5 * (Q + np.swapaxes(Q, -1, -2)), it + 1, z),
+                             _scale(parts, per_run), it + 1)
         if "R" in fit:
             full = np.all(np.isfinite(z), axis=-1)                       # batch + (T,)
             full = np.broadcast_to(full, batch + (T,))
@@ -439,7 +442,8 @@ def fit_noise_em(F, Q, x0, P0, measurement: LinearMeasurement, *, B=None, u=None
                 R = terms.sum(axis=-3) / full.sum(axis=-1)[..., None, None]
             else:
                 R = terms.reshape((-1,) + R.shape[-2:]).sum(axis=0) / int(full.sum())
-            R = _psd_iterate("R", 0.5 * (R + np.swapaxes(R, -1, -2)), _scale((terms,), per_run), it + 1)
+            R = _psd_iterate("R", _finite_iterate("R", 0.5 * (R + np.swapaxes(R, -1, -2)), it + 1, z),
+                             _scale((terms,), per_run), it + 1)
     history = np.stack([np.asarray(h) for h in history], axis=-1)
     if not per_run:
         history = history.reshape(-1, n_iter + 1).sum(axis=0)
@@ -465,6 +469,42 @@ def _check_em_readings(z, per_run: bool) -> None:
             raise ValueError(f"fit_noise_em: run {run} of measurement.z {z.shape} has no step with all {m} components "
                              f"present ({int(empty.sum())} such runs): no readings to fit it from; drop those runs or "
                              "pool the runs (per_run=False)")
+
+
+#: how far EM's log-likelihood may fall in one iteration, relative to its size, before the fit is an error (EM never
+#: lowers it in exact arithmetic; a larger fall is an E-step without precision, e.g. a Q of 1e300 against readings of 1)
+_EM_FALL_RTOL = 1e-7
+
+
+def _check_em_step(history, per_run: bool, it: int, z) -> None:
+    """EM's self-checks after the filter of iteration ``it``: a finite log-likelihood (-inf: a reading the model
+    cannot produce), and one that did not fall beyond round-off since the previous iteration (pooled: their sum)."""
+    h = np.asarray(history[-1], dtype=float)
+    if not np.all(np.isfinite(h)):
+        at = tuple(int(i) for i in np.argwhere(~np.isfinite(h))[0]) if h.ndim else ()
+        top = float(np.nanmax(np.abs(z))) if np.isfinite(z).any() else np.nan
+        raise ValueError(f"fit_noise_em: the log-likelihood of measurement.z is {float(h[at]):g}"
+                         f"{f' in run {at}' if at else ''} at iteration {it} (the largest |z| is {top:.3g}): the "
+                         "readings are impossible under the model; check their units and the model's scales")
+    if it == 0:
+        return
+    new, old = (h, np.asarray(history[-2], dtype=float)) if per_run else (np.sum(h), np.sum(history[-2]))
+    fall = old - new > _EM_FALL_RTOL * np.maximum(np.maximum(np.abs(old), np.abs(new)), 1.0)
+    if np.any(fall):
+        at = tuple(int(i) for i in np.argwhere(fall)[0]) if np.ndim(fall) else ()
+        raise ConvergenceError(f"fit_noise_em: the log-likelihood fell from {float(old[at]):.6g} to "
+                               f"{float(new[at]):.6g}{f' in run {at}' if at else ''} at iteration {it} (EM never "
+                               "lowers it): the filter or smoother lost precision; rescale the model (Q, R and P0 near "
+                               "the readings' variance)")
+
+
+def _finite_iterate(name: str, A, iteration: int, z):
+    """An M-step's estimate, refused where it overflowed float64 (it squares the residuals)."""
+    if not np.all(np.isfinite(A)):
+        top = float(np.nanmax(np.abs(z))) if np.isfinite(z).any() else np.nan
+        raise ConvergenceError(f"fit_noise_em: the M-step's {name} of iteration {iteration} overflows float64 (it "
+                               f"squares the residuals; the largest |z| is {top:.3g}): rescale the readings")
+    return A
 
 
 #: the round-off an M-step's Q or R may carry below zero, relative to the scale of the terms it sums (the filter's

@@ -116,7 +116,7 @@ def rts_smoother(result: KalmanResult, F=None, *, residual=None) -> SmoothedResu
 def _same_in_every_run(batch, *arrays) -> bool:
     """True when each of ``arrays`` (``batch + (...)``) holds the same values in every run."""
     for a in arrays:
-        flat = a.reshape((-1,) + a.shape[len(batch):])
+        flat = a.reshape((int(np.prod(batch)),) + a.shape[len(batch):])     # not -1: a may be empty (T = 1)
         if flat.shape[0] > 1 and not np.array_equal(flat, np.broadcast_to(flat[:1], flat.shape)):
             return False
     return True

@@ -97,7 +97,8 @@ def _not_numeric(name: str, value, exc: Exception) -> str:
     if "inhomogeneous" in str(exc) or "sequence" in str(exc):
         return (f"{name} is a ragged sequence (its rows have different lengths, or mix numbers and lists): give every "
                 "row the same number of entries, NaN where a value is missing")
-    return f"{name} must be numeric, got {type(value).__name__}: {exc}"
+    text = " ".join(repr(value).split())        # one line
+    return f"{name} must be numeric, got {type(value).__name__} {text[:60] + '...' if len(text) > 60 else text}"
 
 
 def check_trailing_shape(name: str, arr: np.ndarray, trailing: Sequence[int | None]) -> None:

@@ -393,3 +393,22 @@ def test_fuzz_systematic_resample(n, bad, u):
         return
     assert sane and 0 <= u < 1
     assert np.all((idx >= 0) & (idx < n))
+
+
+# -- issue 44, item 6: a masked reading is a missing reading -----------------------------------------------------------
+@settings(max_examples=60, **SETTINGS)
+@given(seed=st.integers(0, 10_000), batch=st.sampled_from([(), (3,), (70,)]), share=st.sampled_from([0.1, 0.4]),
+       garbage=st.sampled_from([0.0, 1e3, np.inf, np.nan]), filt=st.sampled_from(["kf", "ekf", "ukf"]),
+       path=st.sampled_from(["numpy", "numba"] if HAVE_NUMBA else ["numpy"]))
+def test_property_masked_readings_equal_nan_readings_on_every_path(seed, batch, share, garbage, filt, path):
+    """Masked readings (any value under the mask) give bit for bit the filter on NaN there, on the numpy and the
+    compiled paths (70 runs: past the shared-covariance threshold, different masks per run)."""
+    rng = np.random.default_rng(seed)
+    z = _track(batch, 8, seed)
+    where = rng.random(z.shape) < share
+    run = dict(kf=lb.kalman_filter, ekf=lb.extended_kalman_filter, ukf=lb.unscented_kalman_filter)[filt]
+    with ekf_path(path):
+        got = run(F0, Q0, X00, P00, lb.LinearMeasurement(np.ma.array(np.where(where, garbage, z), mask=where), H0, R0))
+        ref = run(F0, Q0, X00, P00, lb.LinearMeasurement(np.where(where, np.nan, z), H0, R0))
+    np.testing.assert_array_equal(got.x, ref.x)
+    np.testing.assert_array_equal(got.P, ref.P)

@@ -509,3 +509,37 @@ def test_messages_found_naming_no_argument_now_name_one(case):
     with pytest.raises(ValueError) as info, np.errstate(all="ignore"):
         fn(*args)
     assert names_an_argument(str(info.value), tuple(inspect.signature(fn).parameters) + EXTRA_NAMES), str(info.value)
+
+
+# -- issue 44, item 6: a masked reading is a reading not heard ---------------------------------------------------------
+MASK_ANCHORS = np.array([[0.0, 0.0], [20.0, 0.0], [0.0, 20.0], [20.0, 20.0], [10.0, -5.0]])
+MASK_GRID = np.stack(np.meshgrid(np.arange(0.0, 20.5, 1.0), np.arange(0.0, 20.5, 1.0)), -1).reshape(-1, 2)
+MASK_ESTIMATORS = {
+    "lateration_ls": lambda d, p: lb.lateration_ls(MASK_ANCHORS, d),
+    "lateration_ls pairs": lambda d, p: lb.lateration_ls(MASK_ANCHORS, d, pairs="last"),
+    "lateration_wls": lambda d, p: lb.lateration_wls(MASK_ANCHORS, d, np.ones(4)),
+    "lateration_box_ls": lambda d, p: lb.lateration_box_ls(MASK_ANCHORS, d, 0.0, 20.0),
+    "rss_ml_position": lambda d, p: lb.rss_ml_position(MASK_ANCHORS, p, MODEL),
+    "grid_ml_position": lambda d, p: lb.grid_ml_position(MASK_ANCHORS, p, MODEL, MASK_GRID),
+}
+
+
+@FUZZ
+@given(name=st.sampled_from(sorted(MASK_ESTIMATORS)), seed=st.integers(0, 10_000), share=st.sampled_from([0.0, 0.2, 0.5]),
+       garbage=st.sampled_from([0.0, 1e3, -1.0, np.inf, np.nan]))
+def test_property_masked_readings_equal_nan_readings_whatever_lies_under_the_mask(name, seed, share, garbage):
+    """The result on a masked array (any value under the mask, even inf) equals the result with NaN there, position
+    and status alike: the mask is applied by the converter, the data under it never read."""
+    rng = np.random.default_rng(seed)
+    truth = rng.uniform(1, 19, (4, 2))
+    d = np.linalg.norm(truth[:, None] - MASK_ANCHORS, axis=-1)
+    power = MODEL.ref_power_dbm - 10 * MODEL.path_loss_exp * np.log10(d) + rng.normal(0, 1, d.shape)
+    where = rng.random(d.shape) < share
+    masked = lambda v: np.ma.array(np.where(where, garbage, v), mask=where)
+    solve = MASK_ESTIMATORS[name]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        got = solve(masked(d), masked(power))
+        ref = solve(np.where(where, np.nan, d), np.where(where, np.nan, power))
+    np.testing.assert_array_equal(got.position_m, ref.position_m)
+    np.testing.assert_array_equal(got.status, ref.status)

@@ -184,7 +184,7 @@ def _refuse_not_finite(name: str, values, bad, batch_ndim: int, step: int, what:
         return
     runs = bad.reshape(bad.shape[:batch_ndim] + (-1,)).any(axis=-1)
     first = tuple(int(i) for i in np.argwhere(bad)[0])
-    kind = "NaN" if np.isnan(np.asarray(values)[first]) else "an infinite value"
+    kind = "NaN" if np.isnan(np.broadcast_to(values, bad.shape)[first]) else "an infinite value"
     raise ValueError(f"{name} returned {kind} at step {step}{_first_bad(runs)} (output index {first[batch_ndim:]}) "
                      f"{what}")
 

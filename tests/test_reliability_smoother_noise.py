@@ -1,6 +1,8 @@
 """Issue 44, items 5 and 6 (smoothers and noise fitting): singular covariances, EM's round-off iterates, empty and
 all-missing readings. Every answer is checked against pykalman (an independent implementation whose smoother and
 filter use pseudo-inverses), a closed form or an invariant; every refusal is one line naming what is wrong."""
+import warnings
+
 import numpy as np
 import pytest
 
@@ -195,7 +197,11 @@ def test_ml_per_run_flags_a_run_without_readings_flat_with_nan_estimates():
     z[1] = np.nan
     fit = lb.fit_noise_ml(_model().F, _model().Q, X0, np.eye(4), lb.LinearMeasurement(z, H, R))
     np.testing.assert_array_equal(fit.flat, [[False, False], [True, True], [False, False]])
-    assert np.isnan(fit.Q[1]).all() and np.isnan(fit.R[0][1]).all() and np.isnan(fit.q_scale[1]).all()
+    # NaN where a multiplier scales the given matrix; its zero entries are 0 whatever the multiplier
+    np.testing.assert_array_equal(np.isnan(fit.Q[1]), _model().Q != 0)
+    np.testing.assert_array_equal(fit.Q[1][_model().Q == 0], 0.0)
+    np.testing.assert_array_equal(np.isnan(fit.R[0][1]), R != 0)
+    assert np.isnan(fit.q_scale[1]).all() and np.isnan(fit.r_scale[0][1]).all()
     assert not fit.at_bound[1].any()
     # the other runs are their own fits (the per-run objective is separable)
     alone = lb.fit_noise_ml(_model().F, _model().Q, X0, np.eye(4), lb.LinearMeasurement(z[[0, 2]], H, R))
@@ -209,8 +215,71 @@ def test_ml_pooled_flags_a_stream_without_readings_and_fits_the_rest_as_without_
     fit = lb.fit_noise_ml(_model().F, _model().Q, X0, np.eye(4), [lb.LinearMeasurement(z, H, R), silent],
                           per_run=False)
     np.testing.assert_array_equal(fit.flat, [False, False, True])
-    assert np.isnan(fit.R[1]).all() and np.isnan(fit.r_scale[1]).all()
+    np.testing.assert_array_equal(np.isnan(fit.R[1]), R != 0)
+    assert np.isnan(fit.r_scale[1]).all()
     without = lb.fit_noise_ml(_model().F, _model().Q, X0, np.eye(4), lb.LinearMeasurement(z, H, R), per_run=False)
     np.testing.assert_allclose(fit.Q, without.Q, rtol=1e-6)
     np.testing.assert_allclose(fit.R[0], without.R[0], rtol=1e-6)
     np.testing.assert_allclose(fit.log_likelihood, without.log_likelihood, rtol=1e-12)
+
+
+def test_rts_smoother_of_one_step_runs_is_the_filter():
+    z = _readings(np.random.default_rng(13), T=1, runs=3)
+    run = lb.kalman_filter(_model().F, _model().Q, np.broadcast_to(X0, (3, 4)), np.eye(4),
+                           lb.LinearMeasurement(z, H, R), outputs=("x_pred", "P_pred", "P_cross"))
+    smooth = rts_smoother(run)
+    np.testing.assert_array_equal(smooth.x, run.x)
+    np.testing.assert_array_equal(smooth.P, run.P)
+    assert smooth.gain.shape == (3, 0, 4, 4)
+
+
+# -- EM's self-checks: what exact arithmetic guarantees, refused with one line where float64 breaks it --------------
+H1, R1, Z1 = np.array([[-0.13]]), np.array([[0.5]]), np.array([[0.21], [-1.07]])
+
+
+def test_em_whose_likelihood_falls_says_so_instead_of_returning_the_iterate():
+    """EM never lowers the likelihood (Shumway and Stoffer 1982): a fall beyond round-off is an E-step without
+    precision, an error naming the iteration (per run: the run; pooled: the sum)."""
+    from locbook.tracking.noise import _check_em_step
+    z = np.zeros((2, 1))
+    _check_em_step([np.array(-10.0), np.array(-10.0 - 1e-9)], False, 1, z)         # round-off: accepted
+    with pytest.raises(ConvergenceError) as exc:
+        _check_em_step([np.array([-10.0, -3.0]), np.array([-9.0, -3.5])], True, 2, z)
+    assert "fell from -3 to -3.5 in run (1,) at iteration 2" in _one_line(exc)
+
+
+@pytest.mark.parametrize("H, z, x0", [(-0.1321048632913019, [0.2098002302, -1.0713387463], 0.6404226504432821),
+                                      (-0.13, [0.21, -1.07], 0.0)])
+def test_em_from_a_q_of_1e300_is_monotone_or_an_error(H, z, x0):
+    """From Q = 1e300 the filter's P - K S K^T cancels 1e300 against 1e300; depending on the last bits the M-step's
+    R comes out near 1e265 and the likelihood falls (about -345 to -616 on the first case): EM must then refuse."""
+    try:
+        fit = lb.fit_noise_em(np.eye(1), np.array([[1e300]]), np.array([x0]), np.zeros((1, 1)),
+                              lb.LinearMeasurement(np.array(z)[:, None], np.array([[H]]), R1), n_iter=3,
+                              per_run=False)
+    except ConvergenceError as exc:
+        assert "log-likelihood fell" in str(exc) and "\n" not in str(exc)
+        return
+    assert np.all(np.diff(fit.history) >= -1e-7 * np.abs(fit.history[1:]))
+
+
+@pytest.mark.parametrize("fit", [("Q",), ("R",), ("Q", "R")])
+def test_em_on_a_reading_of_1e300_names_the_readings_not_the_callers_R(fit):
+    """Its log-likelihood under R = 0.5 is -inf (before the fix: a history of -inf returned as a fit, or "R must be
+    finite" about the M-step's own R)."""
+    z = np.array([[1e300], [-1.07]])
+    with pytest.raises(ValueError) as exc:
+        lb.fit_noise_em(np.eye(1), np.array([[0.3]]), np.zeros(1), np.zeros((1, 1)), lb.LinearMeasurement(z, H1, R1),
+                        n_iter=2, fit=fit, per_run=False)
+    assert "log-likelihood of measurement.z is -inf at iteration 0 (the largest |z| is 1e+300)" in _one_line(exc)
+
+
+def test_em_whose_m_step_overflows_says_so_in_one_line():
+    """z = 1e160 against R = 1e300 has a finite likelihood, but the R M-step squares the residual: 1e320."""
+    z = np.array([[1e160], [-1.07]])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        with pytest.raises(ConvergenceError) as exc:
+            lb.fit_noise_em(np.eye(1), np.array([[0.3]]), np.zeros(1), np.zeros((1, 1)),
+                            lb.LinearMeasurement(z, H1, np.array([[1e300]])), n_iter=2, fit=("R",), per_run=False)
+    assert "M-step's R of iteration 1 overflows float64" in _one_line(exc) and "1e+160" in str(exc.value)

@@ -418,32 +418,34 @@ def fit_noise_em(F, Q, x0, P0, measurement: LinearMeasurement, *, B=None, u=None
         sm = rts_smoother(run)
         m, V, G = sm.x, sm.P, sm.gain
         batch = m.shape[:-2]
-        if "Q" in fit:
-            Fk = np.broadcast_to(Fs, np.broadcast_shapes(Fs.shape[:-3], batch) + (T, n, n))[..., 1:, :, :] \
-                if Fs.shape[-3] > 1 else Fs
-            e = m[..., 1:, :] - np.einsum("...ij,...j->...i", Fk, m[..., :-1, :])
-            if drift is not None:
-                e = e - np.broadcast_to(drift, batch + (T, n))[..., 1:, :]
-            C = V[..., 1:, :, :] @ np.swapaxes(G, -1, -2)                 # Cov(x_{k+1}, x_k | all)
-            CF = C @ np.swapaxes(Fk, -1, -2)
-            terms = (e[..., :, None] * e[..., None, :] + Fk @ V[..., :-1, :, :] @ np.swapaxes(Fk, -1, -2)
-                     + V[..., 1:, :, :] - CF - np.swapaxes(CF, -1, -2))
-            Q = terms.mean(axis=-3) if per_run else terms.reshape((-1, n, n)).mean(axis=0)
-            parts = (e[..., :, None] * e[..., None, :], V[..., 1:, :, :], CF)
-            Q = _psd_iterate("Q", _finite_iterate("Q", 0.5 * (Q + np.swapaxes(Q, -1, -2)), it + 1, z),
-                             _scale(parts, per_run), it + 1)
-        if "R" in fit:
-            full = np.all(np.isfinite(z), axis=-1)                       # batch + (T,)
-            full = np.broadcast_to(full, batch + (T,))
-            r = np.where(full[..., None], np.broadcast_to(z, batch + z.shape[-2:]) - m @ H.T, 0.0)
-            terms = r[..., :, None] * r[..., None, :] + H @ V @ H.T
-            terms = np.where(full[..., None, None], terms, 0.0)
-            if per_run:                                                  # every run has a full step (checked)
-                R = terms.sum(axis=-3) / full.sum(axis=-1)[..., None, None]
-            else:
-                R = terms.reshape((-1,) + R.shape[-2:]).sum(axis=0) / int(full.sum())
-            R = _psd_iterate("R", _finite_iterate("R", 0.5 * (R + np.swapaxes(R, -1, -2)), it + 1, z),
-                             _scale((terms,), per_run), it + 1)
+        # an overflow of the squares is caught by _finite_iterate (one line), not warned about on the way
+        with np.errstate(over="ignore", invalid="ignore"):
+            if "Q" in fit:
+                Fk = np.broadcast_to(Fs, np.broadcast_shapes(Fs.shape[:-3], batch) + (T, n, n))[..., 1:, :, :] \
+                    if Fs.shape[-3] > 1 else Fs
+                e = m[..., 1:, :] - np.einsum("...ij,...j->...i", Fk, m[..., :-1, :])
+                if drift is not None:
+                    e = e - np.broadcast_to(drift, batch + (T, n))[..., 1:, :]
+                C = V[..., 1:, :, :] @ np.swapaxes(G, -1, -2)                 # Cov(x_{k+1}, x_k | all)
+                CF = C @ np.swapaxes(Fk, -1, -2)
+                terms = (e[..., :, None] * e[..., None, :] + Fk @ V[..., :-1, :, :] @ np.swapaxes(Fk, -1, -2)
+                         + V[..., 1:, :, :] - CF - np.swapaxes(CF, -1, -2))
+                Q = terms.mean(axis=-3) if per_run else terms.reshape((-1, n, n)).mean(axis=0)
+                parts = (e[..., :, None] * e[..., None, :], V[..., 1:, :, :], CF)
+                Q = _psd_iterate("Q", _finite_iterate("Q", 0.5 * (Q + np.swapaxes(Q, -1, -2)), it + 1, z),
+                                 _scale(parts, per_run), it + 1)
+            if "R" in fit:
+                full = np.all(np.isfinite(z), axis=-1)                       # batch + (T,)
+                full = np.broadcast_to(full, batch + (T,))
+                r = np.where(full[..., None], np.broadcast_to(z, batch + z.shape[-2:]) - m @ H.T, 0.0)
+                terms = r[..., :, None] * r[..., None, :] + H @ V @ H.T
+                terms = np.where(full[..., None, None], terms, 0.0)
+                if per_run:                                                  # every run has a full step (checked)
+                    R = terms.sum(axis=-3) / full.sum(axis=-1)[..., None, None]
+                else:
+                    R = terms.reshape((-1,) + R.shape[-2:]).sum(axis=0) / int(full.sum())
+                R = _psd_iterate("R", _finite_iterate("R", 0.5 * (R + np.swapaxes(R, -1, -2)), it + 1, z),
+                                 _scale((terms,), per_run), it + 1)
     history = np.stack([np.asarray(h) for h in history], axis=-1)
     if not per_run:
         history = history.reshape(-1, n_iter + 1).sum(axis=0)

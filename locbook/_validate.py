@@ -10,6 +10,7 @@ imaginary part would be dropped), and a list holding None gets a hint to use NaN
 """
 from __future__ import annotations
 
+import reprlib
 from collections.abc import Sequence
 
 import numpy as np
@@ -97,8 +98,7 @@ def _not_numeric(name: str, value, exc: Exception) -> str:
     if "inhomogeneous" in str(exc) or "sequence" in str(exc):
         return (f"{name} is a ragged sequence (its rows have different lengths, or mix numbers and lists): give every "
                 "row the same number of entries, NaN where a value is missing")
-    text = " ".join(repr(value).split())        # one line
-    return f"{name} must be numeric, got {type(value).__name__} {text[:60] + '...' if len(text) > 60 else text}"
+    return f"{name} must be numeric, got {type(value).__name__} {' '.join(reprlib.repr(value).split())}"
 
 
 def check_trailing_shape(name: str, arr: np.ndarray, trailing: Sequence[int | None]) -> None:

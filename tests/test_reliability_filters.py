@@ -239,14 +239,30 @@ def test_per_step_F_equals_filterpy_batch_filter_with_its_list_of_Fs():
     np.testing.assert_allclose(res.P, covs, rtol=0, atol=1e-9)
 
 
-@pytest.mark.parametrize("name", ["Q", "H", "R"])
-def test_unmarked_stacks_of_Q_H_and_R_are_refused_too(name):
-    stack = lambda a: np.stack([a] * T)
+@pytest.mark.parametrize("name, stack", [("H", np.stack), ("Q", list), ("R", list)], ids=["H", "Q_list", "R_list"])
+def test_a_stack_of_H_and_filterpy_lists_of_Q_and_R_are_refused_too(name, stack):
     args = dict(Q=MODEL.Q, H=H, R=R)
-    args[name] = stack(args[name])
+    args[name] = stack([args[name]] * T)
     with pytest.raises(ValueError) as exc:
         EKF(MODEL.F, args["Q"], X0, P0, lb.LinearMeasurement(_track(), args["H"], args["R"]))
     _one_line(exc, f"per_step({name})")
+
+
+def test_an_array_of_covariances_stays_a_documented_run_axis():
+    # a sweep of T noise levels on one track (as fit_noise_ml evaluates its candidates): T runs, each the plain KF
+    z, scales = _track(9), np.linspace(0.5, 2.0, T)
+    res = lb.kalman_filter(MODEL.F, scales[:, None, None] * MODEL.Q, X0, P0, lb.LinearMeasurement(z, H, R))
+    for i in (0, 7):
+        one = lb.kalman_filter(MODEL.F, scales[i] * MODEL.Q, X0, P0, lb.LinearMeasurement(z, H, R))
+        np.testing.assert_allclose(res.x[i], one.x, rtol=0, atol=1e-12)
+
+
+def test_fit_noise_ml_candidates_are_runs_even_when_as_many_as_the_steps():
+    # fit_noise_ml evaluates 2p + 1 = 5 candidate (Q, R) as a run axis; on 5 steps that must not read as per-step Q
+    z = _track(10, 5)
+    fit = lb.fit_noise_ml(MODEL.F, MODEL.Q, X0, P0, lb.LinearMeasurement(z, H, R), kind="kf", fit_Q="scale",
+                          fit_R="scale")
+    assert np.isfinite(fit.log_likelihood) and fit.log_likelihood >= fit.initial_log_likelihood
 
 
 def test_a_stack_with_runs_elsewhere_in_the_call_is_still_runs():

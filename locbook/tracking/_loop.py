@@ -19,7 +19,7 @@ from ._linalg import (_Singular, _apply, _batch_shape, _check_state, _covariance
                       _refuse_not_finite)
 from .functional import _linear_update_shared
 from .results import KALMAN_OUTPUTS, KalmanResult
-from .streams import (MEASUREMENT_TYPES, LinearMeasurement, RssMeasurement, _per_step_stream,
+from .streams import (MEASUREMENT_TYPES, LinearMeasurement, NonlinearMeasurement, RssMeasurement, _per_step_stream,
                       _stream_at, _stream_name, _serial_linear, _stream_readings)
 from .transition import NonlinearMotion, PerStep, _control_drift, _matrix_arg, step_matrix
 
@@ -130,7 +130,7 @@ def _setup(F, Q, x0, P0, measurements, record, filter_name, B=None, u=None) -> _
         F, F_steps, F_batch = _matrix_arg("F", F, n, n, T)
     else:
         F = None
-    Q_steps = isinstance(Q, PerStep)
+    Q_given, Q_steps = Q, isinstance(Q, PerStep)
     if Q_steps:
         Q = _covariance("Q (per step)", Q.value, n)
         if Q.ndim < 3 or Q.shape[-3] not in (1, T):
@@ -143,7 +143,7 @@ def _setup(F, Q, x0, P0, measurements, record, filter_name, B=None, u=None) -> _
     if x.ndim < 1 or x.shape[-1] != n:
         raise ValueError(f"x0 must end in ({n},); got {x.shape}")
     P = _covariance("P0", P0, n)
-    _refuse_ambiguous_stacks(measurements, streams, T, x, P, (("F", F_batch), ("Q", Q_batch)), B)
+    _refuse_ambiguous_stacks(measurements, streams, T, x, P, F_batch, Q_given, Q_batch, B)
     # every argument with run axes sets the batch (a batched Q alone runs one filter per Q)
     batch = _batch_shape(*(named for m, s in zip(measurements, streams) for named in _stream_batch_shapes(m, s)),
                          ("x0", x.shape[:-1]), ("P0", P.shape[:-2]), ("F", F_batch), ("Q", Q_batch),
@@ -162,13 +162,17 @@ def _setup(F, Q, x0, P0, measurements, record, filter_name, B=None, u=None) -> _
                   drift=drift, motion=motion, per_step_streams=tuple(_per_step_stream(m) for m in measurements))
 
 
-def _refuse_ambiguous_stacks(measurements, streams, T: int, x, P, motion_batches, B) -> None:
-    """Refuse the two shapes a peer's call (filterpy's ``batch_filter(zs, Fs=...)``, column readings) takes to mean
+def _refuse_ambiguous_stacks(measurements, streams, T: int, x, P, F_batch, Q_given, Q_batch, B) -> None:
+    """Refuse the shapes a peer's call (filterpy's ``batch_filter(zs, Fs=..., Qs=...)``, column readings) gives to mean
     something else than locbook reads (run axes are leading axes; module docstring of
-    :mod:`locbook.tracking.transition`), when nothing else in the call says there are runs (readings, x0 and P0 without
-    run axes): an unmarked stack of T matrices (F, Q, B, a stream's H or R) with T the number of steps, which would be
-    T runs of one constant matrix each, not one matrix per step; and readings ``(T, 1, 1)`` (T columns of one
-    reading), which would be T runs of one step."""
+    :mod:`locbook.tracking.transition`), when nothing else in the call says there are runs (readings, x0 and P0
+    without run axes):
+
+    - a stack of T matrices F, B or a stream's H (T the number of steps), which would be T runs of one constant
+      matrix each, not one matrix per step; of the covariances Q and R only a list or tuple (filterpy's ``Qs``,
+      ``Rs``): an array of covariances is a documented run axis (a sweep of noise levels, as
+      :func:`locbook.fit_noise_ml` evaluates its candidates);
+    - readings ``(T, 1, 1)`` (T columns of one reading), which would be T runs of one step."""
     if x.ndim > 1 or P.ndim > 2:
         return                      # the call has runs: the run axes are what they say
     for meas, z in zip(measurements, streams):
@@ -177,19 +181,22 @@ def _refuse_ambiguous_stacks(measurements, streams, T: int, x, P, motion_batches
             raise ValueError(f"{name} has shape {np.shape(z)}, {k} runs of one step with one reading each; for one "
                              f"reading at each of {k} steps (filterpy's column z) pass shape ({k}, 1), e.g. z[..., 0]; "
                              f"for {k} runs of one step give x0 its run axis")
-    if any(np.ndim(z) > 2 for z in streams):
+    if T < 2 or any(np.ndim(z) > 2 for z in streams):
         return
-    named = list(motion_batches)
+    listed = lambda value: isinstance(value, (list, tuple))
+    named = [("F", F_batch)] + ([("Q", Q_batch)] if listed(Q_given) else [])
     if B is not None and not isinstance(B, PerStep):
         named.append(("B", np.shape(B)[:-2]))
     for meas in measurements:
         if isinstance(meas, LinearMeasurement):
-            named += [(f"LinearMeasurement.{f}", np.shape(getattr(meas, f))[:-2]) for f in ("H", "R")
-                      if not isinstance(getattr(meas, f), PerStep)]
-        elif not isinstance(meas, RssMeasurement) and not callable(meas.R):
+            if not isinstance(meas.H, PerStep):
+                named.append(("LinearMeasurement.H", np.shape(meas.H)[:-2]))
+            if listed(meas.R):
+                named.append(("LinearMeasurement.R", np.shape(meas.R)[:-2]))
+        elif isinstance(meas, NonlinearMeasurement) and listed(meas.R):
             named.append((f"{_stream_name(meas)}.R", np.shape(meas.R)[:-2]))
     for name, run_axes in named:
-        if T > 1 and run_axes and run_axes[-1] == T:
+        if run_axes and run_axes[-1] == T:
             raise ValueError(f"{name} has {T} matrices on its leading axis, as many as the readings' steps: an "
                              f"unmarked stack is {T} runs of one constant matrix each; for one matrix per step pass "
                              f"per_step({name.rsplit('.', 1)[-1]}) (filterpy's list of per-step matrices), for {T} "

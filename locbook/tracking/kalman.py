@@ -44,7 +44,10 @@ def kalman_filter(F, Q, x0, P0, measurements, *, B=None, u=None, record=None, pr
     ----------
     F, Q : motion ``(n, n)`` and process covariance (symmetric positive semi-definite, checked up front); may carry
         run axes ``batch + (n, n)``, or be given per step, ``per_step(batch + (T, n, n))`` (F_k moves step k - 1 to
-        step k; :mod:`locbook.tracking.transition`).
+        step k; :mod:`locbook.tracking.transition`). An unmarked stack of T matrices (filterpy's list of per-step
+        ``Fs``) in a call whose readings, x0 and P0 have no run axes would be T runs: it is refused, naming
+        ``per_step`` (so are such stacks of B and a stream's H, and filterpy's lists of Q and R; an array of Q or R
+        stays a run axis, e.g. a sweep of noise levels).
     B, u : the control input: ``x_{k|k-1} = F_k x_{k-1} + B_k u_k``, ``u`` ``batch + (T, p)``, ``B`` ``(n, p)``,
         ``batch + (n, p)`` or ``per_step(...)``; pykalman's transition offsets are ``B = I``.
     x0, P0 : initial state ``batch + (n,)`` and covariance. With ``predict_first=True`` they are the posterior one
@@ -96,7 +99,9 @@ def extended_kalman_filter(F, Q, x0, P0, measurements, *, B=None, u=None, record
 
     At every step: predict with ``x = F x + B u``, ``P = F P F^T + Q`` (F, Q constant, with run axes or
     ``per_step``; or a :class:`~locbook.tracking.transition.NonlinearMotion` ``f`` with its Jacobian J: ``x = f(x) +
-    B u``, ``P = J P J^T + Q``; :mod:`locbook.tracking.transition`), then apply
+    B u``, ``P = J P J^T + Q``; :mod:`locbook.tracking.transition`; what f and J return is checked: real, the state's
+    shape, finite, else one line naming the motion, the function and the step, and a filterpy-style ``fx(x, dt)`` gets
+    a line saying how to bind dt), then apply
     the ``measurements`` in the given order, each update starting from the previous one's posterior (Dogan
     Table 3.5: acceleration first, then RSS at RSS epochs). Each entry is a :class:`LinearMeasurement` (KF,
     e.g. accelerometer or MLE position fixes), a :class:`RssMeasurement` (parallel or serial EKF) or a

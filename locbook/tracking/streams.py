@@ -42,7 +42,9 @@ class LinearMeasurement:
     """A linear-Gaussian measurement stream ``z_k = H_k x_k + d_k + v_k``, ``v_k ~ N(0, R_k)``.
 
     ``z``: ``batch + (T, m)``; a NaN entry is a missing component (that row is left out of the
-    update, the others are used), so streams at different rates share one time grid.
+    update, the others are used), so streams at different rates share one time grid. A masked entry of a numpy masked
+    array is missing too (pykalman's convention); filterpy's column readings ``(T, m, 1)`` are refused with the shape
+    to pass (as are ``(T, 1, 1)`` readings in a call without run axes elsewhere: T runs or T steps?).
     ``H``: ``(m, n)``, with run axes ``batch + (m, n)``, or one per step ``per_step(batch + (T, m, n))``
     (:func:`locbook.per_step`). ``R``: ``(m, m)``, ``batch + (m, m)`` or ``per_step(batch + (T, m, m))``.
     ``offset``: the measurement offset ``d`` (pykalman's observation offset), ``(m,)`` or per step like ``z``
@@ -193,6 +195,12 @@ class NonlinearMeasurement:
     (e.g. wrapped to ``(-pi, pi]``), used for the innovation and, in the UKF, wherever readings are subtracted;
     ``mean(values, weights)`` the UKF's weighted mean of predicted readings ``(..., N, m)`` (e.g. a circular mean of
     the angle components). Both default to the linear forms.
+
+    The filters check what these functions return (issue 44): real numbers (complex values are refused, never cut to
+    their real part) of the shape the stream needs, finite wherever a reading is present (NaN in ``z`` marks a missing
+    reading; a NaN from ``h`` is not one). Anything else is a ValueError of one line naming the stream's function
+    (``"<name>: h returned shape ..."``, ``"... returned NaN at step k"``); an exception raised inside a function
+    reaches the caller unchanged.
     """
 
     z: np.ndarray

@@ -283,3 +283,16 @@ def test_em_whose_m_step_overflows_says_so_in_one_line():
             lb.fit_noise_em(np.eye(1), np.array([[0.3]]), np.zeros(1), np.zeros((1, 1)),
                             lb.LinearMeasurement(z, H1, np.array([[1e300]])), n_iter=2, fit=("R",), per_run=False)
     assert "M-step's R of iteration 1 overflows float64" in _one_line(exc) and "1e+160" in str(exc.value)
+
+
+@pytest.mark.parametrize("per_run", [False, True])
+def test_ml_on_a_reading_of_1e300_names_the_readings_not_the_callers_Q(per_run):
+    """Before: per run, "Q must be finite" about the optimiser's own NaN step; pooled, the start returned as the fit
+    with a log-likelihood of -inf."""
+    z = _readings(np.random.default_rng(14), T=20, runs=2)
+    z[0, 3, 0] = 1e300
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        with pytest.raises(ValueError) as exc:
+            lb.fit_noise_ml(_model().F, _model().Q, X0, np.eye(4), lb.LinearMeasurement(z, H, R), per_run=per_run)
+    assert "log-likelihood of the readings at the given noise is -inf in run (0,)" in _one_line(exc)

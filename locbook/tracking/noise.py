@@ -230,6 +230,12 @@ def fit_noise_ml(F, Q, x0, P0, measurements, *, kind: str = "kf", fit_Q: str | N
         why = f"the runs' axes {runs} hold no run" if 0 in runs else "every reading is missing"
         raise ValueError(f"fit_noise_ml: no step of the {len(streams)} stream(s) holds a reading ({why}): there are no "
                          "readings to fit from")
+    bad = ~np.isfinite(ll0)
+    if np.any(bad):               # -inf: a reading the model gives no probability (no multiplier in range helps)
+        at = tuple(int(i) for i in np.argwhere(bad)[0]) if np.ndim(bad) else ()
+        raise ValueError(f"fit_noise_ml: the log-likelihood of the readings at the given noise is "
+                         f"{float(np.asarray(ll0)[at]):g}{f' in run {at}' if at else ''}: the readings are impossible "
+                         "under the model (a reading of 1e300?); check their units and the model's scales")
     flat = _flat(log_likelihood, runs, p, per_run)
     if per_run:
         theta, iterations = _newton_per_run(log_likelihood, runs, p, np.log(lo), np.log(hi), int(max_iter), tol)

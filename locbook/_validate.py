@@ -71,8 +71,8 @@ def _unmasked(name: str, value, nan_ok: bool) -> np.ndarray:
                          f"{tuple(int(i) for i in np.argwhere(mask)[0])}")
     try:
         return np.ma.filled(value.astype(float), np.nan)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{name} must be numeric, got a masked array of {value.dtype}: {exc}") from None
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be numeric, got a masked array of dtype {value.dtype}") from None
 
 
 def _none_at(value, at=()):

@@ -112,7 +112,6 @@ class OnlineFilter:
                                         self._probability)
         return replace(res, diverged=diverged, diverged_step=step)
 
-
     def _prior_for(self, streams):
         """The posterior so far with the readings' run axes: a step's readings are ``batch + (1, m)`` by this class's
         rule, so runs of one reading each are runs (the batch filters refuse ``(B, 1, 1)`` readings with a prior

@@ -657,7 +657,11 @@ def kernel_map_estimate(particles_m, weights, *, bandwidth_m=None, n_candidates:
     x = as_array("particles_m", particles_m, ndim=3)
     w = as_array("weights", weights, ndim=2)
     R, n, dim = x.shape
+    check_scalar("n_candidates", n_candidates, ge=1, integer=True)
     k = min(int(n_candidates), n)
+    # the density is evaluated in blocks of 2048 particles for every run and candidate at once
+    _check_size("particles_m", f"the kernel density's block for n_candidates = {k} (runs x candidates x particles "
+                "x dim)", (R, k, min(n, 2048), dim), "run the runs in blocks or lower n_candidates")
     top = np.argsort(-w, axis=-1)[:, :k]
     cand = np.take_along_axis(x, top[..., None], axis=1)                        # (R, k, dim)
     if bandwidth_m is None:

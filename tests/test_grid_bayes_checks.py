@@ -403,7 +403,8 @@ def test_rss_model_needs_its_readings():
 
 # -- size guard (issue 44, item 7) ------------------------------------------------------------------------------------
 def _guard_model():
-    return lb.RssModel(np.array([[0.0, 0.0], [10.0, 0.0], [0.0, 10.0]]), lb.PathLossModel(-40.0, 2.0, 4.0, min_distance_m=0.1))
+    return lb.RssModel(np.array([[0.0, 0.0], [10.0, 0.0], [0.0, 10.0]]),
+                       lb.PathLossModel(-40.0, 2.0, 4.0, min_distance_m=0.1))
 
 
 @pytest.mark.parametrize("transition", ["auto", "dense", "separable"])

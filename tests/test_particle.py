@@ -240,7 +240,8 @@ def test_some_runs_collapsing_give_one_warning_with_the_count_and_the_first_run_
 
 # -- size guard (issue 44, item 7) ------------------------------------------------------------------------------------
 def _guard_model():
-    return lb.RssModel(np.array([[0.0, 0.0], [10.0, 0.0], [0.0, 10.0]]), lb.PathLossModel(-40.0, 2.0, 4.0, min_distance_m=0.1))
+    return lb.RssModel(np.array([[0.0, 0.0], [10.0, 0.0], [0.0, 10.0]]),
+                       lb.PathLossModel(-40.0, 2.0, 4.0, min_distance_m=0.1))
 
 
 @pytest.mark.parametrize("prior", ["uniform", "at a start", "kinematic"])

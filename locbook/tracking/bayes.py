@@ -207,7 +207,8 @@ def grid_transition_matrix(cells_m, spread_m: float, velocity_m=None):
 
 #: how :func:`grid_bayes_filter` applies the transition
 GRID_TRANSITIONS = ("auto", "dense", "separable")
-_DENSE_HINT = "use fewer cells, or cells on a regular grid (possibly masked: the separable transition is linear in them)"
+_DENSE_HINT = ("use fewer cells, or cells on a regular grid (possibly masked: the separable transition is linear in "
+               "them)")
 
 
 def _along_axes(kernels, lattice):
@@ -480,11 +481,12 @@ def grid_bayes_filter(rss_dbm, cells_m, model, spread_m: float = 0.5, *, n_steps
     in the thesis's constant-velocity experiment). ``initial_belief``: ``(C,)`` or ``(R, C)``; uniform if None.
 
     ``transition``: ``"dense"`` builds the ``C x C`` matrix (memory quadratic in the cells: its construction peaks
-    at ``8 C^2 (dim + 3)`` bytes, 5 GB at 10,000 cells in 2-D; refused beyond :data:`MAX_ARRAY_BYTES` per array,
-    checked before allocating like every array of the call); ``"separable"`` applies the same transition as one small matrix product per axis on the lattice of the
-    cells' distinct coordinates (memory linear in the cells for a grid, possibly masked by a floor outline;
-    equal to the dense one up to rounding); ``"auto"`` (default) takes the separable form when that lattice
-    has at most 4 points per cell, which every regular grid has.
+    at ``8 C^2 (dim + 3)`` bytes, 4 GB at 10,000 cells in 2-D); ``"separable"`` applies the same transition as one
+    small matrix product per axis on the lattice of the cells' distinct coordinates (memory linear in the cells for a
+    grid, possibly masked by a floor outline; equal to the dense one up to rounding); ``"auto"`` (default) takes the separable form when that lattice
+    has at most 4 points per cell, which every regular grid has. Every array of the call (the belief, the outputs, the
+    dense construction's ``C x C x dim`` difference, the separable lattice per run) is checked against
+    :data:`MAX_ARRAY_BYTES` before it is allocated: beyond it, a ValueError naming ``cells_m`` (or the readings).
 
     Speed (issue 31). With an :class:`~locbook.models.rss.RssModel` whose mean does not change with the step (no
     per-step ``ref_power_dbm``, ``path_loss_exp`` or ``sigma_db``; walls allowed), the cell-by-anchor mean table is

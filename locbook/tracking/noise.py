@@ -54,12 +54,13 @@ class NoiseFit:
       of the given Q and R (1 = as given);
     - ``log_likelihood`` ``batch``: at the estimate; ``initial_log_likelihood``: at the given Q and R;
     - ``at_bound`` ``batch + (p,)``: each multiplier (``q_scale``'s, then each stream's ``r_scale``, in order) ended at
-      its bound (the likelihood wants it beyond: widen ``scale_bounds`` or suspect the model); ``history`` (EM) ``batch + (iterations + 1,)``: the log-likelihood before each iteration
-      and at the end; ``iterations``, ``method`` (``"ml"`` or ``"em"``);
+      its bound (the likelihood wants it beyond: widen ``scale_bounds`` or suspect the model); ``history`` (EM) ``batch
+      + (iterations + 1,)``: the log-likelihood before each iteration and at the end; ``iterations``, ``method``
+      (``"ml"`` or ``"em"``);
     - ``flat`` (ML) ``batch + (p,)``, in ``at_bound``'s order: the log-likelihood does not depend on that multiplier
-      (every reading of its stream, or of that run, is missing; a zero Q): it is not fitted, its ``q_scale``/``r_scale``
-      and the nonzero entries of ``Q``/``R`` it scales are NaN (never the start passed off as a fit). Readings with no value at
-      all are refused (a ValueError: nothing to fit from).
+      (every reading of its stream, or of that run, is missing; a zero Q): it is not fitted, its ``q_scale`` /
+      ``r_scale`` and the nonzero entries of ``Q`` / ``R`` it scales are NaN (never the start passed off as a fit).
+      Readings with no value at all are refused (a ValueError: nothing to fit from).
     """
 
     Q: np.ndarray

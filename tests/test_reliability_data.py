@@ -367,3 +367,17 @@ def test_the_example_writes_its_values_as_toml_strings(tmp_path):
     assert raw["attribution"].endswith('seed 7"\nlicense = "stolen\\)')
     assert load_dataset(folder).name == "my-set"
 
+
+
+def test_the_fast_reader_keeps_ids_as_written(tmp_path):
+    """Found by tests/test_fuzz_manifests.py: pandas' C reader turned categories that all look like numbers or bools
+    into numbers or bools, so receiver ``01`` became 1 (not the anchor ``01``), points ``1.50`` and ``1.5`` one
+    point, and transmitter ``true`` ``True``; the exact reader keeps the text."""
+    body = "0,true,01,-50,1.50\n1,true,02,-51,1.5\n2,false,01,-52,1.50\n"
+    path = readings_file(tmp_path / "r.csv", body=body)
+    assert read_readings_table(path)[0].attrs.get("parsed")           # the fast reader
+    out = read_readings(path, anchor_ids=["01", "02"])
+    assert list(out["receiver"]) == ["01", "02", "01"] and list(out["transmitter"]) == ["true", "true", "false"]
+    assert list(out["point"]) == ["1.50", "1.5", "1.50"]
+    ep = epochs(out, ["01", "02"], group_by="point")
+    assert sorted(set(ep.extra["point"])) == ["1.5", "1.50"]

@@ -564,6 +564,22 @@ def _locate_bad_number(path: Path, header: list[str], numeric: list[str], error:
     raise DataFormatError(f"{source}: not readable as the long format ({_shown(str(error))})")
 
 
+def _text_categories(path: Path, j: int, n_rows: int) -> pd.Series:
+    """Column ``j`` of the file as categories of its text. pandas' C reader turns categories that all look like
+    numbers or bools into numbers or bools (``01`` -> 1, ``1.50`` and ``1.5`` -> one point, ``true`` -> True), which
+    would change ids; the column is read again as text, in chunks of :data:`_LOCATE_CHUNK_ROWS` rows (each chunk's
+    strings are categories before the next is read)."""
+    from pandas.api.types import union_categoricals
+    parts = [chunk.iloc[:, 0].astype("category") for chunk in
+             pd.read_csv(path, usecols=[j], dtype=str, keep_default_na=False, skipinitialspace=True, engine="c",
+                         encoding="utf-8-sig", chunksize=_LOCATE_CHUNK_ROWS)]
+    values = union_categoricals(parts) if parts else pd.Categorical([])
+    if len(values) != n_rows:           # cannot happen for a file the scan passed; never a silent shift
+        raise DataFormatError(f"readings file {path}: column {j + 1} read again as text has {len(values)} rows, "
+                              f"not {n_rows}")
+    return pd.Series(values)
+
+
 def read_readings_table(path, *, time_as_text: bool = False) -> tuple[pd.DataFrame, np.ndarray]:
     """A readings CSV as :func:`validate_readings` takes it, and each row's line: the number columns as floats
     (empty, ``NaN``, ``NA``, ``N/A`` missing), the ids and other columns as categories (text, stripped later).
@@ -610,6 +626,9 @@ def read_readings_table(path, *, time_as_text: bool = False) -> tuple[pd.DataFra
     if why:
         return _read_text_table(path, READING_COLUMNS, "readings", why=why)
     table.columns = header
+    for j, column in enumerate(header):
+        if kinds[column] == "category" and table[column].cat.categories.dtype.kind not in "OUT":
+            table[column] = _text_categories(path, j, len(table))
     table.attrs["parsed"] = True       # numbers already parsed: see validate_readings_file
     return table, _file_lines(len(table))
 

@@ -257,6 +257,17 @@ def test_a_readings_file_that_cannot_be_read_is_one_line(stoy, tmp_path, capsys,
     assert message in _one_line(capsys)
 
 
+def test_a_line_break_inside_a_cell_stays_on_the_error_line(tmp_path):
+    path = tmp_path / "george.csv"
+    path.write_text(HEADER.replace("experiments", '"exp\neriments"') + "\n")       # a quoted header cell
+    with pytest.raises(ReadingsError) as info:
+        load_reading_file(path)
+    assert "\n" not in str(info.value) and "got name, exp\\neriments, parameter" in str(info.value)
+    path.write_text(HEADER + '\nslope,george-study,a,,1.0,"[2.0,\n2.0]",,,,assumed,s,r\n')     # rows start on line 2
+    with pytest.raises(ReadingsError, match=r"line 2 \(slope\): alternatives repeat a value: \[2\.0,\\n2\.0\]$"):
+        load_reading_file(path)
+
+
 # -- 7. a study too large to run is refused before anything is drawn ------------------------------------------------
 
 @pytest.mark.parametrize("body, count", [

@@ -73,7 +73,11 @@ BASES = ("printed", "assumed", "fitted_to_output")
 
 
 class ReadingsError(LocbookError, ValueError):
-    """A readings file that breaks a rule of the declaration; the message names the file, the line and the problem."""
+    """A readings file that breaks a rule of the declaration; the message names the file, the line and the problem,
+    on one line (a cell's line breaks are shown as ``\\n``)."""
+
+    def __init__(self, message: str):
+        super().__init__(str(message).replace("\r\n", "\\n").replace("\n", "\\n").replace("\r", "\\r"))
 
 
 def utf8_text(data: bytes, path, error: type[Exception] = ReadingsError) -> str:
@@ -266,14 +270,15 @@ def load_reading_file(path: str | Path, document: str | None = None) -> tuple[Re
     out, seen = [], {}
     rows = iter(reader)
     while True:
+        # the line the row starts on: reader.line_num counts the non-comment lines read so far (a quoted field
+        # may span several)
+        number = lines[min(reader.line_num, len(lines) - 1)][0]
         try:
             row = next(rows)
         except StopIteration:
             break
-        except csv.Error as exc:     # a NUL byte, a field over the csv module's size limit, a stray quote
-            number = lines[min(reader.line_num, len(lines) - 1)][0]     # the line it failed on is not counted
+        except csv.Error as exc:     # a field over the csv module's size limit, a stray quote
             raise ReadingsError(f"{path}, line {number}: not a well-formed CSV row ({exc})") from None
-        number = lines[reader.line_num - 1][0]     # reader.line_num counts the non-comment lines read so far
         where = f"{path}, line {number}"
         if None in row or any(v is None for v in row.values()):
             raise ReadingsError(f"{where}: expected {len(columns)} fields ({', '.join(columns)})")

@@ -225,7 +225,7 @@ def main(argv: list[str] | None = None) -> int:
                                out_dir=args.out, timeout_s=args.timeout, progress=args.progress,
                                executor=args.executor, scheduler=args.scheduler, data=args.data)
     except (ParameterError, ReadingsError, LocbookError) as exc:   # LocbookError: a malformed data set too
-        print(f"locbook: error: {exc}", file=sys.stderr)
+        print("locbook: error: " + " ".join(str(exc).split("\n")), file=sys.stderr)   # one line, whatever raised it
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:  # before the run started its own handling (loading, checking parameters)
         print("locbook: interrupted before any experiment started; nothing was changed", file=sys.stderr)

@@ -49,7 +49,11 @@ SAFE_NAME = re.compile(r"^[a-z0-9]+(-[a-z0-9]+)*$")
 
 
 class SuiteError(ParameterError):
-    """The experiment list is malformed."""
+    """The experiment list (or a study, a bracket) is malformed; the message is one line (a value's line breaks
+    are shown as ``\\n``)."""
+
+    def __init__(self, message: str):
+        super().__init__(str(message).replace("\r\n", "\\n").replace("\n", "\\n").replace("\r", "\\r"))
 
 
 _DOCUMENT_FIELDS = {"title", "authors", "year", "source"}

@@ -303,3 +303,14 @@ def test_kernel_map_estimate_checks_its_block_before_allocating(monkeypatch):
         lb.kernel_map_estimate(x, w)
     with pytest.raises(ValueError, match="^n_candidates must be >= 1"):
         lb.kernel_map_estimate(x, w, n_candidates=0)
+
+
+def test_the_clouds_kept_count_against_the_limit(monkeypatch):
+    import locbook.tracking.bayes as bayes
+    rss = np.full((2, 6, 3), -60.0)
+    monkeypatch.setattr(bayes, "MAX_ARRAY_BYTES", 8 * 3 * 2 * 100 * 2)       # three clouds of 2 runs x 100 x 2
+    run = lambda steps: lb.particle_filter(rss, _guard_model(), np.random.default_rng(0), n_particles=100,
+                                           region_m=((0, 0), (10, 10)), cloud_steps=steps)
+    assert sorted(run([0, 2, 5, 9]).clouds) == [0, 2, 5]           # step 9 does not exist: nothing kept
+    with pytest.raises(ValueError, match=r"^cloud_steps: the 4 clouds kept .* 4 x 2 x 100 x 2 float64 values"):
+        run(range(4))

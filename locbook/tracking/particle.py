@@ -522,6 +522,12 @@ def particle_filter(rss_dbm, model, rng: np.random.Generator, *, n_steps: int | 
     _check_size("rss_dbm" if isinstance(model, RssModel) else "n_steps",
                 "the covariance output (runs x steps x state x state)", (R, n_steps, d, d),
                 "run the runs or the steps in blocks")
+    try:
+        kept = len({int(t) for t in cloud_steps if 0 <= int(t) < n_steps})
+    except (TypeError, ValueError):
+        raise ValueError(f"cloud_steps must be a collection of step numbers, got {cloud_steps!r}") from None
+    _check_size("cloud_steps", f"the {kept} clouds kept (steps x runs x particles x state values)", (kept, R, n, d),
+                "keep fewer steps or fewer particles")
     log_w = np.full((R, n), -np.log(n))
     final_log_w = log_w.copy()                # the normalised log-weights of the last step (exact, for the result)
     mean = np.empty((R, n_steps, d))

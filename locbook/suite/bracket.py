@@ -46,8 +46,11 @@ present, the ``outside`` rows with their evidence, then the reachable, open and 
 ``numbers.csv``) shows the bracket of each row (:func:`bracket_of_rows`) in the folders of a profile
 (``reports/quick``, ``reports/full``; not a ``-p`` run's folder), rebuilt by the next ``locbook run`` (a cached run
 costs nothing): ``default`` when the row is within in that report, else what the bracket's other readings gave,
-named with the bracket's profile. A bracket whose default point did not finish writes nothing (an earlier one is
-kept).
+named with the bracket's profile; where no bracket.csv exists at all, a row keeps the bracket columns the folder's
+numbers.csv gave it while its value and verdict are unchanged. After every bracket run, also an interrupted or
+failed one, bracket.csv and points.csv are rebuilt from every point with an up-to-date report, this run's and
+earlier ones (:func:`~locbook.suite.study.current_points`); a bracket whose default point has none writes nothing
+(an earlier one is kept).
 """
 from __future__ import annotations
 

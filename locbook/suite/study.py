@@ -28,13 +28,19 @@ with ``u ~ U[0, 1)``; a ``lhs`` column is ``(permutation(samples) + U[0, 1)) / s
 gives the same points. Only ``float`` parameters can be drawn.
 
 Everything is checked before anything runs (:class:`~locbook.suite.spec.SuiteError`, naming the study and what is
-wrong): unknown keys, experiments and samplers, parameters an experiment does not declare, and every value of
-every point against the parameter's type and declared rule (``[parameter_rules]``).
+wrong): unknown keys, experiments and samplers, parameters an experiment does not declare, the number of runs
+(experiments x the product of the block sizes x replicates, at most :data:`MAX_STUDY_RUNS`, counted before anything
+is drawn), two points with the same checked values, and every value of every point against the parameter's type
+and declared rule (``[parameter_rules]``).
 
 Each point (experiment x parameter point x replicate) is one task of :func:`locbook.suite.runner.run_tasks`, all
 in one runner session (``--jobs`` runs points in parallel; lock, staging, validation, retries, interrupts and the
-cache per point are the runner's). A point's folder is ``<experiment>-<hash of its parameters>``, so a finished
-point is cached across reruns and edits of the study that keep it. Outputs in ``<reports>/studies/<name>/``:
+cache per point are the runner's). A point's folder is ``<experiment>-<SHA-256 of its values>`` (all 64 hex
+digits), so a finished point is cached across reruns and edits of the study that keep it. ``study.json`` in the
+folder records the file that declared the study and its declaration's fingerprint: another declaration of the same
+name from another file is refused (:func:`check_claim`). After every run, also an interrupted or failed one, the
+aggregates are rebuilt from every point with an up-to-date report, this run's and earlier ones
+(:func:`current_points`). Outputs in ``<reports>/studies/<name>/``:
 
 - ``study.csv`` (:data:`STUDY_COLUMNS` with one column per swept parameter after ``replicate_seed``): one row per
   point and collected ``numbers.csv`` row, values copied as the notebook wrote them;
@@ -529,7 +535,7 @@ def _fingerprint(study: Study) -> str:
 
 
 def _record(study: Study) -> dict:
-    return {"study": study.name, "declared_in": str(Path(os.path.abspath(study.source))),
+    return {"study": study.name, "declared_in": str(Path(study.source).resolve()),
             "fingerprint": _fingerprint(study)}
 
 

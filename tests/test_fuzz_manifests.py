@@ -326,17 +326,22 @@ def test_a_random_readings_file_loads_or_is_refused_and_both_readers_agree(scrat
         assert [str(v).strip() for v in a] == [str(v).strip() for v in b], column
 
 
-COORDINATES = st.one_of(st.sampled_from(["0", "6", "2.5", "-3", "1e300", "-1e300", "1e7", "9999999", "1e-300", "",
-                                         "nan", "inf", "x", '"1.5"']),
-                        st.floats(-1e3, 1e3, allow_nan=False).map(repr))
+COORDINATES = st.one_of(st.floats(-1e3, 1e3, allow_nan=False).map(repr),
+                        st.sampled_from(["0", "6", "2.5", "-3", "9999999", "1e-300", "", "nan", "inf", "x", '"1.5"']))
 
 
 @st.composite
 def anchors_texts(draw):
-    rows = [f"{draw(st.sampled_from(['A', 'B', 'C', 'D', 'E', '', 'A']))},"
-            + ",".join(draw(COORDINATES) for _ in range(draw(st.sampled_from([3, 3, 3, 3, 2, 4]))))
-            for _ in range(draw(st.integers(0, 5)))]
-    return ("\n".join(["id,x,y,z"] + rows) + "\n").encode()
+    """An anchors CSV: distinct ids mostly, random coordinates, and now and then one far beyond any site."""
+    n = draw(st.integers(0, 5))
+    ids = draw(st.sampled_from([["A", "B", "C", "D", "E"], ["A", "B", "A", "C", "D"], ["A", "", "B", "C", "D"]]))
+    rows = [[ids[k]] + [draw(COORDINATES) for _ in range(draw(st.sampled_from([3, 3, 3, 3, 2, 4])))]
+            for k in range(n)]
+    far = draw(st.sampled_from([None, "1e300", "-1e300", "1e7", "1.7e308", "-9999999.9"]))
+    if far and rows:
+        row = rows[draw(st.integers(0, n - 1))]
+        row[draw(st.integers(1, len(row) - 1))] = far
+    return ("\n".join(["id,x,y,z"] + [",".join(r) for r in rows]) + "\n").encode()
 
 
 @FUZZ

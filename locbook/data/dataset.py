@@ -5,7 +5,8 @@ the shipped ones (``locbook/data/datasets/<name>/``) and a user's own are read t
 
 The manifest (every key below; ``[units]`` describes the files, every other value is SI as its name says)::
 
-    name = "my-lab"                     # [a-z0-9-]: names the reports folder (reports/<profile>/data-<name>/)
+    name = "my-lab"                     # [a-z0-9-], at most 64 characters: names the reports folder
+                                        # (reports/<profile>/data-<name>/)
     title = "BLE tags in the lab, 2026"
     license = "CC BY 4.0"               # the licence the files are under
     license_file = "LICENSE.md"         # optional: its text, in the folder
@@ -18,23 +19,25 @@ The manifest (every key below; ``[units]`` describes the files, every other valu
     rssi = "dBm"                        # dBm only
 
     [readings]                          # optional
-    valid_range_dbm = [-120.0, -10.0]   # a reading outside is refused (default [-150, 20])
-    invalid_values_dbm = [0.0, 2.0, 4.0]  # values the receivers write for "no reading": NaN (not heard)
+    valid_range_dbm = [-120.0, -10.0]   # a reading outside is refused (default [-150, 20]; finite, within
+                                        # [-300, 100], RSSI_LIMITS_DBM)
+    invalid_values_dbm = [0.0, 2.0, 4.0]  # numbers the receivers write for "no reading": NaN (not heard)
     backward_time = "refuse"            # refuse | sort: a file whose time goes back (sort: counted and reported)
 
     [geometry]
     anchors = "anchors.csv"             # id, x, y, z
-    outline = "outline.csv"             # optional floor outline (x, y); default: the box around anchors and truth
+    outline = "outline.csv"             # optional floor outline (x, y); default: the box around anchors and truth;
+                                        # it must contain an anchor or a true position (else it is another site's)
     tag_height_m = 1.3                  # the tag's height, known to the estimators; optional where every true
-                                        # position has z_m (then their median)
+                                        # position has z_m (then their median); within 100 m of the anchors' heights
 
     [epochs]                            # raw packets -> epochs (locbook.data.measured.epochs)
     window_s = 1.0                      # 0: each distinct time already is an epoch
     aggregate = "mean"                  # mean | median | max of one anchor's readings in a window
-    min_readings = 1                    # fewer readings of an anchor in a window: NaN (not heard)
+    min_readings = 1                    # fewer readings of an anchor in a window: NaN (not heard); at most 10^6
 
     [[recording]]                       # one per readings file
-    name = "survey"                     # [a-z0-9_-]
+    name = "survey"                     # [a-z0-9_-], at most 64 characters
     file = "survey.csv"
     role = "calibration"                # calibration (fit the channel, build radio maps) | static (test points) |
                                         # track (a moving tag, on the epoch clock)
@@ -42,8 +45,13 @@ The manifest (every key below; ``[units]`` describes the files, every other valu
     reference_path = "path.csv"         # optional, track: segments x0, y0, x1, y1 the walker followed
     window_s = 0                        # optional: this recording's own epoch window
 
-A data set needs at least one calibration recording and at least one static or track recording. Every failure
-raises :class:`~locbook.data.measured.DataFormatError` naming the manifest (and key) or the file, line and column.
+A data set needs at least one calibration recording and at least one static or track recording. Every file the
+manifest names is a relative path whose target, every symlink resolved, is a regular file inside the data set's
+folder: a link out of it is refused before any byte is read, naming the link and its target. A scored recording
+(static, or a track with truth) that reads the same file as a calibration recording (the same target or the same
+bytes) loads with a note ("in-sample scoring") in :attr:`Dataset.notes`, which ``locbook data check`` prints and
+every report lists. Every failure raises :class:`~locbook.data.measured.DataFormatError` naming the manifest (and
+key) or the file, line and column; a manifest is UTF-8 and at most :data:`MAX_MANIFEST_BYTES`.
 """
 from __future__ import annotations
 
@@ -63,7 +71,8 @@ from .measured import (AGGREGATES, MAX_MIN_READINGS, OPTIONAL_READING_COLUMNS, R
                        Epochs, _decode_utf8, _reading_options, _shown, _shown_names, epochs, read_anchors,
                        read_outline, read_path_segments, read_readings_table, validate_readings_file)
 
-__all__ = ["Dataset", "Recording", "EpochRule", "load_dataset", "shipped_datasets", "datasets_dir",
+__all__ = ["Dataset", "Recording", "EpochRule", "load_dataset", "shipped_datasets", "datasets_dir", "name_problem",
+           "MAX_NAME_CHARS", "MAX_TAG_HEIGHT_OFFSET_M", "MAX_MANIFEST_BYTES",
            "MANIFEST", "ROLES", "dataset_summary"]
 
 MANIFEST = "dataset.toml"

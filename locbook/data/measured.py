@@ -27,11 +27,20 @@ magnitude of :data:`MAX_TIME_S` (1e11 s) or more is milli-, micro- or nanosecond
 values are errors anywhere. Values a data set writes for "invalid reading" (e.g. 0, 2, 4 dBm) are declared with
 ``invalid_values_dbm`` and become NaN (not heard); readings at or above 0 dBm with no sentinel declared and the
 default range load with one :class:`MeasuredDataWarning` (implausible beyond a few centimetres from an antenna).
-The same (time, transmitter, receiver) may appear once only; ``sort=True`` reorders a file by time (stably) before
-the checks. Files are UTF-8 (a byte-order mark is allowed).
+The sentinels are numbers (text such as ``"0"`` and bools are refused) and the range two finite numbers within
+:data:`RSSI_LIMITS_DBM`. The same (time, transmitter, receiver) may appear once only; ``sort=True`` reorders a file
+by time (stably) before the checks. Files are UTF-8 (a byte-order mark is allowed). True positions, like every
+coordinate, are less than :data:`MAX_COORDINATE_M` (1e7 m) in magnitude.
+
+Sizes are checked before a file is read, each limit a module constant: a line of at most :data:`MAX_LINE_BYTES`
+(128 KiB); a readings file of at most :data:`MAX_READINGS_FILE_BYTES` (1 GiB, about 3 x 10^7 readings); files of
+one record per line (LF or CRLF line ends, no blank line, no quoted line break; quoted fields are fine) go through
+pandas' C reader at about 7 bytes of memory per byte of file, any other file through the exact reader, at about
+24 bytes per byte, which takes files of at most :data:`MAX_EXACT_READ_BYTES` (64 MiB) and refuses a larger one
+naming the line that needs it. Messages quote at most :data:`MAX_QUOTED_CHARS` characters of a file.
 
 **Anchors** (CSV): ``id, x, y, z`` in metres (``z`` is the anchor height; required, so that ranges are
-three-dimensional). Ids are unique; coordinates finite; no two anchors within :data:`ANCHOR_MIN_SEPARATION_M`
+three-dimensional). Ids are unique; coordinates finite and less than :data:`MAX_COORDINATE_M` in magnitude; no two anchors within :data:`ANCHOR_MIN_SEPARATION_M`
 (1 mm) of each other.
 
 **Floor outline** (CSV, optional): ``x, y`` vertices of a closed polygon in metres (at least 3 vertices, the

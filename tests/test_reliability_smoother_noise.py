@@ -296,3 +296,11 @@ def test_ml_on_a_reading_of_1e300_names_the_readings_not_the_callers_Q(per_run):
         with pytest.raises(ValueError) as exc:
             lb.fit_noise_ml(_model().F, _model().Q, X0, np.eye(4), lb.LinearMeasurement(z, H, R), per_run=per_run)
     assert "log-likelihood of the readings at the given noise is -inf in run (0,)" in _one_line(exc)
+
+
+def test_rts_smoother_names_a_wrong_residual_in_one_line():
+    run = lb.kalman_filter(_model().F, _model().Q, X0, np.eye(4), lb.LinearMeasurement(
+        _readings(np.random.default_rng(15)), H, R), outputs=("x_pred", "P_pred"))
+    with pytest.raises(ValueError) as exc:
+        rts_smoother(run, _model().F, residual=lambda a, b: (a - b)[..., :2])
+    assert "residual(a, b) must return the states' shape (4,), got (2,)" in _one_line(exc)

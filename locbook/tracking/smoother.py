@@ -98,7 +98,16 @@ def rts_smoother(result: KalmanResult, F=None, *, residual=None) -> SmoothedResu
                              "the smoother needs the finite covariances of a filter run")
     if x.size == 0:                  # no run (a zero-length run axis) or no state: nothing to smooth
         return SmoothedResult(x.copy(), P.copy(), np.zeros(batch + (T - 1, n, n)))
-    diff = (lambda a, b: a - b) if residual is None else (lambda a, b: np.asarray(residual(a, b), dtype=float))
+    if residual is None:
+        diff = lambda a, b: a - b
+    elif not callable(residual):
+        raise ValueError(f"residual must be a callable residual(a, b) -> a - b of states, got {type(residual).__name__}")
+    else:
+        def diff(a, b):
+            out = np.asarray(residual(a, b), dtype=float)
+            if out.shape != a.shape:
+                raise ValueError(f"residual(a, b) must return the states' shape {a.shape}, got {out.shape}")
+            return out
     if batch and _same_in_every_run(batch, P, P_pred, cross[..., 1:, :, :]):
         # one covariance recursion for every run (a linear filter's shared path): gains and covariances once
         one = (0,) * len(batch)
@@ -187,7 +196,7 @@ def _pinv_gain(P_pred, Dt):
 def _cross_from_F(F, P, batch, T: int, n: int):
     """``D_k = P_{k-1} F_k^T`` ``batch + (T, n, n)`` (index 0 unused) for linear motion ``F``."""
     if isinstance(F, PerStep):
-        Fs = F.value
+        Fs = F.value                                 # checked finite by per_step
         if Fs.shape[-2:] != (n, n) or Fs.shape[-3] not in (1, T):
             raise ValueError(f"F per step must have shape batch + ({T}, {n}, {n}), got {Fs.shape}")
     else:

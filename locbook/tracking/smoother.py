@@ -56,7 +56,9 @@ def rts_smoother(result: KalmanResult, F=None, *, residual=None) -> SmoothedResu
     ``record=None`` (the filter's own Q, control input and motion are in them). Without ``P_cross``, ``F`` (``(n,
     n)``, with the run's leading axes, or ``per_step(batch + (T, n, n))``, F_k moving step k - 1 to step k) gives
     ``D_{k+1} = P_k F_{k+1}^T``. ``residual(a, b)``: the difference of states (e.g. a wrapped heading; the motion's
-    ``residual``). A step without readings is smoothed like any other (its posterior is its prediction)."""
+    ``residual``). A step without readings is smoothed like any other (its posterior is its prediction). A singular
+    ``P_{k+1|k}`` takes the pseudo-inverse (module docstring); a run of zero runs or of one step is returned as it is;
+    covariances that are not finite, or arrays of the wrong shapes (a result built by hand), are refused in one line."""
     if not isinstance(result, KalmanResult):
         raise TypeError(f"result must be a KalmanResult, got {type(result).__name__}")
     if result.variant != "standard":

@@ -448,3 +448,11 @@ def test_the_repositorys_grids_are_inside_the_limit():
     cells = np.stack(np.meshgrid(xs, ys), -1).reshape(-1, 2)
     res = grid_bayes_filter(np.full((2, 3, 3), -60.0), cells, _guard_model(), 0.5)
     assert np.isfinite(res.mean_m).all()
+
+
+def test_no_cells_is_one_line_not_a_division_by_zero():
+    """Before: ZeroDivisionError (the uniform prior 1 / C) and numpy's "zero-size array to reduction"."""
+    with pytest.raises(ValueError, match=r"^cells_m must hold at least one cell, got shape \(0, 2\)$"):
+        grid_bayes_filter(np.full((2, 3, 3), -60.0), np.zeros((0, 2)), _guard_model(), 0.5)
+    with pytest.raises(ValueError, match=r"^cells_m must hold at least one cell"):
+        grid_transition_matrix(np.zeros((0, 2)), 0.5)

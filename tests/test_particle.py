@@ -314,3 +314,9 @@ def test_the_clouds_kept_count_against_the_limit(monkeypatch):
     assert sorted(run([0, 2, 5, 9]).clouds) == [0, 2, 5]           # step 9 does not exist: nothing kept
     with pytest.raises(ValueError, match=r"^cloud_steps: the 4 clouds kept .* 4 x 2 x 100 x 2 float64 values"):
         run(range(4))
+
+
+def test_kernel_map_estimate_of_no_particles_is_one_line():
+    """Before: numpy's "attempt to get argmax of an empty sequence"."""
+    with pytest.raises(ValueError, match=r"^particles_m \(R, N, dim\) must hold at least one particle per run"):
+        lb.kernel_map_estimate(np.zeros((1, 0, 2)), np.zeros((1, 0)))

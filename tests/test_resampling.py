@@ -99,3 +99,11 @@ def test_residual_resampling_counts_never_exceed_n_near_integers():
         counts = np.bincount(idx, minlength=n)
         assert counts.sum() == n
         assert np.all(np.abs(counts - n * w / w.sum()) < 1 + 1e-9)
+
+
+def test_the_effective_sample_size_of_no_weights_is_refused():
+    """1 / sum(w^2) over no weights is 1 / 0 = inf: a confident number from empty input (issue 44)."""
+    from locbook.tracking.resampling import effective_sample_size
+    with pytest.raises(ValueError, match=r"^weights must hold at least one weight along the last axis"):
+        effective_sample_size(np.zeros((3, 0)))
+    np.testing.assert_allclose(effective_sample_size(np.full((2, 4), 0.25)), [4.0, 4.0])

@@ -192,6 +192,8 @@ def grid_transition_matrix(cells_m, spread_m: float, velocity_m=None):
     transition (no motion prior). ``velocity_m``: ``(dim,)``; zero if None."""
     cells_m = as_array("cells_m", cells_m, ndim=2)
     n, dim = cells_m.shape
+    if n == 0:
+        raise ValueError(f"cells_m must hold at least one cell, got shape {cells_m.shape}")
     check_scalar("spread_m", spread_m, gt=0, allow_inf=True)
     velocity = np.zeros(dim) if velocity_m is None else as_array("velocity_m", velocity_m, trailing=(dim,))
     # the construction's largest array is the C x C x dim difference (then three C x C ones)
@@ -543,6 +545,8 @@ def grid_bayes_filter(rss_dbm, cells_m, model, spread_m: float = 0.5, *, n_steps
     check_scalar("spread_m", spread_m, gt=0, allow_inf=True)
     check_choice("transition", transition, GRID_TRANSITIONS)
     n_cells, dim = cells_m.shape
+    if n_cells == 0:
+        raise ValueError(f"cells_m must hold at least one cell, got shape {cells_m.shape}")
     velocity = _velocity_schedule(velocity_m, n_steps, dim)
     if n_runs is None:
         first = log_likelihood(0)

@@ -663,6 +663,9 @@ def kernel_map_estimate(particles_m, weights, *, bandwidth_m=None, n_candidates:
     x = as_array("particles_m", particles_m, ndim=3)
     w = as_array("weights", weights, ndim=2)
     R, n, dim = x.shape
+    if n == 0 or w.shape != (R, n):
+        raise ValueError(f"particles_m (R, N, dim) must hold at least one particle per run and weights be (R, N); got "
+                         f"shapes {x.shape} and {w.shape}")
     check_scalar("n_candidates", n_candidates, ge=1, integer=True)
     k = min(int(n_candidates), n)
     # the density is evaluated in blocks of 2048 particles for every run and candidate at once

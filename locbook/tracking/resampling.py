@@ -76,6 +76,8 @@ def effective_sample_size(weights):
     """``N_eff = 1 / sum_j w_j^2`` of normalised weights along the last axis (Ozkaya 2011, Eq. (4.28); Arulampalam
     et al. 2002, Eq. (51)). Every filter of locbook triggers resampling on ``N_eff`` below a fraction of ``N``."""
     weights = as_array("weights", weights, min_ndim=1)
+    if weights.shape[-1] == 0:              # 1 / 0 = inf would be a confident answer from no weights
+        raise ValueError(f"weights must hold at least one weight along the last axis, got shape {weights.shape}")
     return 1.0 / np.einsum("...n,...n->...", weights, weights)
 
 

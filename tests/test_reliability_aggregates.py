@@ -268,6 +268,22 @@ def test_a_line_break_inside_a_cell_stays_on_the_error_line(tmp_path):
         load_reading_file(path)
 
 
+def test_a_declaration_file_too_large_is_refused_before_it_is_read_whole(stoy, tmp_path, capsys):
+    big = tmp_path / "big.toml"
+    with open(big, "wb") as fh:           # sparse: 64 MiB of NUL bytes that take no disk space
+        fh.write(b'[[study]]\nname = "s"\n')
+        fh.truncate(64 * 2 ** 20)
+    assert main(["--suite", str(stoy / "notebooks" / "experiments.toml"), "study", str(big)]) == 2
+    assert f"{big}: the study file is 64.0 MiB, over the limit of 16 MiB for a declaration" in _one_line(capsys)
+    assert main(["--suite", str(big), "list"]) == 2
+    assert f"{big}: the experiment list is 64.0 MiB, over the limit" in _one_line(capsys)
+    csv_path = big.rename(tmp_path / "george.csv")
+    with pytest.raises(ReadingsError, match="a readings file is 64.0 MiB, over the limit of 16 MiB"):
+        load_reading_file(csv_path)
+    from locbook.reproduce.readings import MAX_DECLARATION_BYTES
+    assert MAX_DECLARATION_BYTES == 16 * 2 ** 20         # the limit the messages state
+
+
 # -- 7. a study too large to run is refused before anything is drawn ------------------------------------------------
 
 @pytest.mark.parametrize("body, count", [

@@ -50,6 +50,7 @@ from __future__ import annotations
 import csv
 import io
 import math
+import os
 import re
 import tomllib
 from dataclasses import dataclass, field
@@ -60,7 +61,8 @@ from typing import Any
 from ..errors import LocbookError
 
 __all__ = ["Reading", "ReadingsError", "readings", "readings_for", "load_reading_file", "READINGS_DIR",
-           "READING_COLUMNS", "OPTIONAL_READING_COLUMNS", "BASES", "utf8_text"]
+           "READING_COLUMNS", "OPTIONAL_READING_COLUMNS", "BASES", "utf8_text", "read_declaration",
+           "MAX_DECLARATION_BYTES"]
 
 READINGS_DIR = Path(__file__).resolve().parents[1] / "data" / "readings"    # package data of locbook.data
 READING_COLUMNS = ("name", "experiments", "parameter", "where", "default", "alternatives", "fitted", "low", "high",
@@ -78,6 +80,25 @@ class ReadingsError(LocbookError, ValueError):
 
     def __init__(self, message: str):
         super().__init__(str(message).replace("\r\n", "\\n").replace("\n", "\\n").replace("\r", "\\r"))
+
+
+#: The largest declaration file read (a readings CSV, a study or experiment list TOML): the packaged ones are tens of
+#: kilobytes, so more is not a declaration (``--suite /dev/zero``, a data file given by mistake).
+MAX_DECLARATION_BYTES = 16 * 2 ** 20
+
+
+def read_declaration(path, error: type[Exception] = ReadingsError, what: str = "a readings file") -> str:
+    """The UTF-8 text of the declaration file ``path`` (:func:`utf8_text`), read only up to
+    :data:`MAX_DECLARATION_BYTES`: a larger file raises ``error`` naming it, its size and the limit, before it is
+    read whole. OSError (missing, unreadable) propagates."""
+    with open(path, "rb") as fh:
+        data = fh.read(MAX_DECLARATION_BYTES + 1)
+        if len(data) > MAX_DECLARATION_BYTES:
+            size = os.fstat(fh.fileno()).st_size     # 0 for a device or a pipe, which may never end
+            held = f"is {size / 2 ** 20:.1f} MiB" if size > MAX_DECLARATION_BYTES else "holds more and has no size"
+            raise error(f"{path}: {what} {held}, over the limit of {MAX_DECLARATION_BYTES // 2 ** 20} MiB for a "
+                        "declaration; is it the right file?")
+    return utf8_text(data, path, error)
 
 
 def utf8_text(data: bytes, path, error: type[Exception] = ReadingsError) -> str:
@@ -252,8 +273,7 @@ def load_reading_file(path: str | Path, document: str | None = None) -> tuple[Re
     line and the problem (:class:`ReadingsError`)."""
     path = Path(path)
     document = document or path.stem
-    with open(path, "rb") as fh:
-        text = utf8_text(fh.read(), path)
+    text = read_declaration(path)
     # the lines as open(path, newline="") gave them (\n, \r\n or \r ends a line), numbered as in the file
     lines = [(number, line) for number, line in enumerate(io.StringIO(text, newline=""), start=1)
              if not line.startswith("#")]

@@ -163,13 +163,11 @@ def _rules(raw: dict, where: str) -> dict[str, ParameterRule]:
 
 def read_toml(path: Path, what: str) -> dict:
     """The TOML file ``path`` (``what`` names it in the error: unreadable, or not TOML with its line)."""
-    from ..reproduce.readings import utf8_text
-    try:
-        with open(path, "rb") as fh:
-            data = fh.read()
+    from ..reproduce.readings import read_declaration
+    try:    # decoded here: tomllib's own UnicodeDecodeError names no file or line; and read only up to a limit
+        text = read_declaration(path, SuiteError, what)
     except OSError as exc:
         raise SuiteError(f"cannot read {what} {path}: {exc.strerror}") from None
-    text = utf8_text(data, path, SuiteError)       # tomllib's own UnicodeDecodeError names no file or line
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

@@ -108,6 +108,7 @@ def _case(kind, rng, B=5, T=50):
     elif kind in ("julier", "cubature"):
         streams = [rss(), lb.LinearMeasurement(fixes, H, np.eye(2))]
         kw.update(points=kind, kappa=1.0 if kind == "julier" else 0.0)
+        del kw["alpha"]                                     # julier and cubature take no alpha (refused if given)
     elif kind == "printed_weights_of_eq_3_22":                   # the flagged variant: mean weights sum to 2n / c
         streams = [lb.LinearMeasurement(fixes, H, np.diag([1.0, 1.5])), rss(mode="serial", order="given")]
         kw.update(weights="literal_gudipati2017")

@@ -146,13 +146,25 @@ def knn_position(rss_dbm, fingerprints_dbm, cells_m, k: int, weighting: str = "i
     return out.reshape(batch + (cells_m.shape[1],))
 
 
+def _k_nearest(dist2, k: int):
+    """Indices ``(..., k)`` of the ``k`` smallest ``dist2`` along the last axis, in increasing cell index; of cells
+    tied at the k-th distance, the lowest-indexed. Integer RSSI fingerprints are often exactly equidistant from a
+    query, and the order in which ``np.argpartition`` returns ties depends on the processor's vector code (AVX-512
+    or not): the tie rule makes the neighbours, and the position, the same on every machine."""
+    kth = np.partition(dist2, k - 1, axis=-1)[..., k - 1:k]        # the k-th smallest value: no tie ambiguity
+    below = dist2 < kth
+    tied = dist2 == kth
+    room = k - below.sum(axis=-1, keepdims=True)                    # >= 1: how many of the ties are taken
+    chosen = below | (tied & (np.cumsum(tied, axis=-1) <= room))
+    return np.nonzero(chosen.reshape(-1, dist2.shape[-1]))[1].reshape(dist2.shape[:-1] + (k,))
+
+
 def _knn_block(rss_dbm, fingerprints_dbm, cells_m, k, weighting):
     """Eqs. (3.1)-(3.3) for queries ``(Q, m)`` against a map ``(C, m)`` or ``(Q, C, m)``, no missing readings."""
     n_cells = cells_m.shape[0]
     diff = fingerprints_dbm - rss_dbm[..., None, :]
     dist2 = np.einsum("...ci,...ci->...c", diff, diff)                  # E_j^2, (..., C)
-    nearest = np.argpartition(dist2, k - 1, axis=-1)[..., :k] if k < n_cells else \
-        np.broadcast_to(np.arange(n_cells), dist2.shape)
+    nearest = _k_nearest(dist2, k) if k < n_cells else np.broadcast_to(np.arange(n_cells), dist2.shape)
     e2 = np.take_along_axis(dist2, nearest, axis=-1)
     if weighting == "uniform":
         w = np.full(e2.shape, 1.0 / k)

@@ -1,0 +1,87 @@
+"""Results that must not depend on the machine's vector code (issue 44, item 9; docs/reports.md, "Across machines").
+
+Two causes made committed numbers move between machines of one kind: iterations stopped midway by a cap (where a
+walk stops depends on the last bits of every step) and choices among exact ties (``np.argpartition`` returns ties in
+an order that depends on AVX-512). Each test states the machine-independent answer from first principles.
+"""
+import numpy as np
+import pytest
+
+import locbook as lb
+from locbook.scenarios import george
+
+
+def _reference_knn(query, fingerprints, cells, k):
+    """Inverse-square weighted k-NN with ties at the k-th distance broken by the lowest cell index, in plain
+    Python (distances of half-integer differences are exact in floating point)."""
+    d2 = [float(np.sum((f - query) ** 2)) for f in fingerprints]      # exact: sums of quarters
+    order = sorted(range(len(d2)), key=lambda c: (d2[c], c))[:k]
+    if min(d2[c] for c in order) == 0:
+        exact = [c for c in order if d2[c] == 0]
+        return cells[exact].mean(axis=0)
+    w = np.array([1.0 / d2[c] for c in order])
+    return (w[:, None] * cells[order]).sum(axis=0) / w.sum()
+
+
+def test_knn_breaks_exact_ties_by_cell_index_whatever_the_selection_algorithm():
+    rng = np.random.default_rng(4)
+    # integer RSSI fingerprints of a few levels: many cells lie at exactly the same distance from a query
+    fingerprints = rng.integers(-70, -66, size=(300, 3)).astype(float)
+    cells = rng.uniform(0, 10, size=(300, 2))
+    queries = rng.integers(-70, -66, size=(200, 3)).astype(float) + 0.5
+    for k in (1, 4, 14):
+        got = lb.knn_position(queries, fingerprints, cells, k)
+        want = np.array([_reference_knn(q, fingerprints, cells, k) for q in queries])
+        np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12)
+
+
+def test_knn_neighbours_do_not_depend_on_the_order_of_tied_cells_in_a_block():
+    # two levels per reader: most cells tie; exact matches (a query equal to fingerprints) take all the weight.
+    # Blocks of one query and one block of all give the same answer, the reference's
+    rng = np.random.default_rng(5)
+    fingerprints = rng.integers(-60, -58, size=(64, 2)).astype(float)
+    cells = rng.uniform(0, 5, size=(64, 2))
+    queries = np.array([[-59.5, -59.5], [-60.0, -58.0], [-58.5, -60.0]])
+    a = lb.knn_position(queries, fingerprints, cells, 5, chunk=1)
+    b = lb.knn_position(queries, fingerprints, cells, 5)
+    np.testing.assert_array_equal(a, b)
+    want = np.array([_reference_knn(q, fingerprints, cells, 5) for q in queries])
+    np.testing.assert_allclose(b, want, rtol=1e-12, atol=1e-12)
+
+
+def _cost_gradient(p, anchors, power, p0_dbm, n):
+    """Gradient of sum_j (P_j - P0 + 10 n log10 |p - a_j|)^2 (Dogan Eq. (2.4) up to a constant), by hand."""
+    diff = p[..., None, :] - anchors
+    d2 = np.sum(diff ** 2, axis=-1)
+    resid = power - p0_dbm + 10 * n * np.log10(np.sqrt(d2))
+    return np.sum(2 * resid[..., None] * (10 * n / np.log(10)) * diff / d2[..., None], axis=-2)
+
+
+def test_rss_ml_runs_to_a_stationary_point_where_a_cap_of_100_would_stop_problems_midway():
+    truth_m = george.trajectory_m("centerline")
+    model = lb.PathLossModel(-45.0, george.PRINTED_N.value, 6.0)
+    power = model.sample_rss_dbm(
+        np.broadcast_to(lb.pairwise_distance_m(truth_m, george.ANCHORS_M), (400, 25, 4)), np.random.default_rng(5))
+    capped = lb.rss_ml_position(george.ANCHORS_M, power, model, max_iter=100)
+    assert not capped.converged.all()                  # the workload needs more than 100 steps for some problems
+    res = lb.rss_ml_position(george.ANCHORS_M, power, model)
+    assert res.converged.all()
+    grad = _cost_gradient(res.position_m, george.ANCHORS_M, power, -45.0, george.PRINTED_N.value)
+    # at a local minimum the gradient vanishes; scale: 10 n / ln 10 dB per unit log-distance, ~ 10 dB^2 per metre
+    slow = ~capped.converged
+    assert np.max(np.linalg.norm(grad[slow], axis=-1)) < 1e-3
+    assert np.max(np.linalg.norm(grad, axis=-1)) < 1e-3
+
+
+@pytest.mark.parametrize("k", [3, 7])
+def test_knn_with_distinct_distances_is_unchanged_by_the_tie_rule(k):
+    # no ties (continuous fingerprints): the k nearest are the k smallest distances, as a full sort gives them
+    rng = np.random.default_rng(6)
+    fingerprints = rng.normal(-60, 5, size=(80, 4))
+    cells = rng.uniform(0, 8, size=(80, 2))
+    queries = rng.normal(-60, 5, size=(50, 4))
+    d2 = np.sum((fingerprints[None] - queries[:, None]) ** 2, axis=-1)
+    idx = np.argsort(d2, axis=-1, kind="stable")[:, :k]
+    w = 1.0 / np.take_along_axis(d2, idx, axis=-1)
+    want = np.einsum("qk,qkd->qd", w / w.sum(axis=-1, keepdims=True), cells[idx])
+    np.testing.assert_allclose(lb.knn_position(queries, fingerprints, cells, k), want, rtol=1e-12, atol=1e-12)

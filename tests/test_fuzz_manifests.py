@@ -385,3 +385,29 @@ def test_readings_options_of_any_type_are_taken_or_refused_by_name(invalid, vali
     assert valid is None or (isinstance(valid, list) and len(valid) == 2 and all(real(v) for v in valid)), valid
     rss = out["rssi_dbm"].to_numpy(float)
     assert not np.isinf(rss).any()
+
+
+@FUZZ
+@given(base=st.sampled_from(["cal", "walk"]), time_scale=st.sampled_from([1.0, 1e-7, 1e9, 1e-300, 3.3]),
+       window=st.sampled_from([None, 0, 0.5, 1.0, 0.25, 2.0, 1e-6, 1e300, 5e-324, 1e-300, -1.0, float("nan"), True,
+                               "1", float("inf")]),
+       aggregate=st.sampled_from(["mean", "median", "max", "mean", "sum", None, ["mean"]]),
+       min_readings=st.sampled_from([1, 2, 3, 1, 0, 2**70, 1.0, True, "1"]),
+       group_by=st.sampled_from([(), ("point",), "point", ("x_m",), ("nope",)]))
+def test_epochs_of_any_rule_are_finite_or_refused(base, time_scale, window, aggregate, min_readings, group_by):
+    import pandas as pd
+    text = pd.read_csv(__import__("io").StringIO(CAL if base == "cal" else TRACK), dtype=str, keep_default_na=False)
+    text["time_s"] = [repr(float(t) * time_scale) for t in text["time_s"]]
+    table = refusal_or(validate_readings, text, source="t")
+    if table is None:
+        return
+    anchors = sorted(set(table["receiver"]))
+    ep = refusal_or(lb.epochs, table, anchors, window_s=window, aggregate=aggregate, min_readings=min_readings,
+                    group_by=group_by)
+    if ep is None:
+        return
+    event("epochs")
+    assert 1 <= len(ep) <= len(table) and np.isfinite(ep.time_s).all() and not np.isinf(ep.rss_dbm).any()
+    assert (ep.n_readings >= 0).all() and ep.rss_dbm.shape == (len(ep), len(anchors))
+    known = np.isfinite(ep.position_m[:, :2])
+    assert (known[:, 0] == known[:, 1]).all()

@@ -381,3 +381,17 @@ def test_the_fast_reader_keeps_ids_as_written(tmp_path):
     assert list(out["point"]) == ["1.50", "1.5", "1.50"]
     ep = epochs(out, ["01", "02"], group_by="point")
     assert sorted(set(ep.extra["point"])) == ["1.5", "1.50"]
+
+
+def test_a_window_too_short_for_its_ticks_is_refused(tmp_path):
+    """Found by the fuzz module: ``window_s = 5e-324`` made the tick count infinite, and two readings 1 s apart one
+    epoch at time inf."""
+    import pandas as pd
+    table = validate_readings(pd.DataFrame({"time_s": [0.0, 1.0, 2.0], "transmitter": ["t"] * 3,
+                                            "receiver": ["A"] * 3, "rssi_dbm": [-50.0, -51.0, -52.0]}), source="t")
+    for window in (5e-324, 1e-300, 1e-7):
+        with pytest.raises(ParameterError, match="window_s .*MIN_WINDOW_S"):
+            epochs(table, ["A"], window_s=window)
+    assert np.array_equal(epochs(table, ["A"], window_s=1e-6).time_s, [0.0, 1.0, 2.0])
+    refused(make(tmp_path / "set", manifest=MANIFEST.replace("window_s = 0.5", "window_s = 5e-324")),
+            "[epochs] 'window_s'", "MIN_WINDOW_S")

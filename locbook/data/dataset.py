@@ -67,7 +67,7 @@ import numpy as np
 import pandas as pd
 
 from ..errors import ParameterError
-from .measured import (AGGREGATES, MAX_MIN_READINGS, OPTIONAL_READING_COLUMNS, READING_COLUMNS, DataFormatError,
+from .measured import (AGGREGATES, MAX_MIN_READINGS, MIN_WINDOW_S, OPTIONAL_READING_COLUMNS, READING_COLUMNS, DataFormatError,
                        Epochs, _decode_utf8, _reading_options, _shown, _shown_names, epochs, read_anchors,
                        read_outline, read_path_segments, read_readings_table, validate_readings_file)
 
@@ -588,6 +588,9 @@ def _check_point_column(table: pd.DataFrame, lines, column: str, path: Path, man
 def _epoch_rule(manifest, raw: dict, where: str, default: EpochRule | None) -> EpochRule:
     window = _number(manifest, raw, "window_s", where, ge=0) if "window_s" in raw else (
         default.window_s if default else 0.0)
+    if 0 < window < MIN_WINDOW_S:
+        _fail(manifest, f"{where}'window_s' must be 0 or at least {MIN_WINDOW_S:g} s (MIN_WINDOW_S: shorter windows "
+                        f"overflow the tick count), got {window!r}")
     aggregate = raw.get("aggregate", "mean")
     if aggregate not in AGGREGATES:
         _fail(manifest, f"{where}aggregate must be one of {AGGREGATES}, got {_shown(aggregate)}")

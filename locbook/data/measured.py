@@ -76,7 +76,7 @@ from ..errors import LocbookError, ParameterError
 __all__ = [
     "DataFormatError", "MeasuredDataWarning", "READING_COLUMNS", "OPTIONAL_READING_COLUMNS", "RSSI_RANGE_DBM",
     "MAX_TIME_S", "ANCHOR_MIN_SEPARATION_M", "MAX_REGULAR_EPOCHS", "AGGREGATES", "Epochs", "RSSI_LIMITS_DBM",
-    "MAX_COORDINATE_M", "MAX_LINE_BYTES", "MAX_EXACT_READ_BYTES", "MAX_READINGS_FILE_BYTES", "MAX_MIN_READINGS",
+    "MAX_COORDINATE_M", "MAX_LINE_BYTES", "MAX_EXACT_READ_BYTES", "MAX_READINGS_FILE_BYTES", "MAX_MIN_READINGS", "MIN_WINDOW_S",
     "read_readings", "read_anchors", "read_outline", "read_path_segments", "validate_readings", "epochs",
     "regular_epochs",
 ]
@@ -112,6 +112,8 @@ EXACT_READER_BYTES_PER_BYTE = 24
 #: peaked at 2.2 GiB), so 1 GiB of CSV (about 3 x 10^7 readings) take about 7 GiB; split larger recordings
 MAX_READINGS_FILE_BYTES = 1 << 30
 FAST_READER_BYTES_PER_BYTE = 7
+#: the shortest epoch window (s) but 0: no radio packet is shorter, and a window of 5e-324 s makes ticks infinite
+MIN_WINDOW_S = 1e-6
 #: the largest ``min_readings`` of an epoch rule: more readings of one anchor than any window holds (a million
 #: packets per anchor per window) would leave every entry not heard
 MAX_MIN_READINGS = 1_000_000
@@ -761,8 +763,9 @@ class Epochs:
 
 def _check_epoch_rule(window_s, aggregate: str, min_readings: int, group_by, readings: pd.DataFrame):
     if window_s is not None and not (isinstance(window_s, (int, float)) and not isinstance(window_s, bool)
-                                     and math.isfinite(window_s) and window_s >= 0):
-        raise ParameterError(f"window_s must be None or a finite number of seconds >= 0, got {window_s!r}")
+                                     and math.isfinite(window_s) and (window_s == 0 or window_s >= MIN_WINDOW_S)):
+        raise ParameterError(f"window_s must be None, 0 or a finite number of seconds >= {MIN_WINDOW_S:g} "
+                             f"(MIN_WINDOW_S: shorter windows overflow the tick count), got {_shown(window_s)}")
     if aggregate not in AGGREGATES:
         raise ParameterError(f"aggregate must be one of {AGGREGATES}, got {_shown(aggregate)}")
     if not (isinstance(min_readings, (int, np.integer)) and not isinstance(min_readings, bool)

@@ -85,3 +85,18 @@ def test_knn_with_distinct_distances_is_unchanged_by_the_tie_rule(k):
     w = 1.0 / np.take_along_axis(d2, idx, axis=-1)
     want = np.einsum("qk,qkd->qd", w / w.sum(axis=-1, keepdims=True), cells[idx])
     np.testing.assert_allclose(lb.knn_position(queries, fingerprints, cells, k), want, rtol=1e-12, atol=1e-12)
+
+
+def test_a_bracket_made_on_another_machine_of_the_same_kind_is_not_called_stale():
+    """dogan2015-tracking's serial EKF RMSE was 2.833613392 here and 2.833613412 with AVX-512 off (7e-9 relative):
+    the same result, so the bracket's verdict stands; a value 1e-4 away is another result (a stale bracket)."""
+    from locbook.suite.bracket import bracket_of_rows
+
+    b = {"printed_id": "p", "quantity": "q", "where": "w", "bracket": "reachable", "reached_by": "r: x=1",
+         "open_readings": "", "band_low": "1", "band_high": "2", "points": "3", "profile": "full",
+         "ours": "2.833613392"}
+    row = {"printed_id": "p", "quantity": "q", "where": "w", "kind": "reproduction", "verdict": "miss"}
+    other_machine, stale = bracket_of_rows([{**row, "reproduced": "2.833613412"},
+                                            {**row, "reproduced": "2.833896753"}], [b], "full")
+    assert other_machine["bracket"] == "reachable"
+    assert stale["bracket"] == "open" and "disagree" in stale["bracket_readings"]

@@ -410,12 +410,20 @@ def _fmt(value: float | None) -> str:
     return "" if value is None else f"{value:.10g}"
 
 
+#: Relative tolerance within which a report's value and its bracket's default run are one result: what another
+#: machine of the same kind gives for the same code and parameters (docs/reports.md, "Across machines": numpy's
+#: and numba's vector code; measured at most 5e-8 over the full profile), with a margin of 20. A stale bracket
+#: (other code or parameters) moves a Monte-Carlo result by far more.
+SAME_RESULT_RTOL = 1e-6
+
+
 def _same_number(a, b) -> bool:
-    """Two CSV cells of ``ours`` hold the same value (numbers to round-off, anything else as text)."""
+    """Two CSV cells of ``ours`` hold the same result (numbers within :data:`SAME_RESULT_RTOL`, anything else as
+    text)."""
     x, y = finite_float(a), finite_float(b)
     if x is None or y is None:
         return str(a).strip() == str(b).strip()
-    return math.isclose(x, y, rel_tol=1e-9, abs_tol=1e-12)
+    return math.isclose(x, y, rel_tol=SAME_RESULT_RTOL, abs_tol=1e-12)
 
 
 def bracket_of_rows(rows: list[dict], bracket: list[dict], profile: str | None = None) -> list[dict]:

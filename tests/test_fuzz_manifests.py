@@ -312,6 +312,10 @@ def test_a_random_readings_file_loads_or_is_refused_and_both_readers_agree(scrat
     exact = refusal_or(_exact, path)
     assert (out is None) == (exact is None), "one reader refused the file, the other took it"
     if out is None:
+        with pytest.MonkeyPatch.context() as mp:         # refused as a large file too, in one line
+            mp.setattr(measured, "MAX_EXACT_READ_BYTES", 0)
+            mp.setattr(measured, "_LOCATE_CHUNK_ROWS", 2)
+            assert refusal_or(read_readings, path) is None
         return
     event("loaded")
     assert np.isfinite(out["time_s"].to_numpy(float)).all()
@@ -320,6 +324,18 @@ def test_a_random_readings_file_loads_or_is_refused_and_both_readers_agree(scrat
     low, high = RSSI_RANGE_DBM
     assert ((rss[np.isfinite(rss)] >= low) & (rss[np.isfinite(rss)] <= high)).all()
     assert (np.isnan(out["x_m"].to_numpy(float)) == np.isnan(out["y_m"].to_numpy(float))).all()
+    assert_same_table(out, exact)
+    # as a "large" file (over the exact reader's limit): the same table from the fast reader, or a one-line refusal
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(measured, "MAX_EXACT_READ_BYTES", 0)
+        mp.setattr(measured, "_LOCATE_CHUNK_ROWS", 2)
+        large = refusal_or(read_readings, path)
+    if large is not None:
+        event("loaded as a large file")
+        assert_same_table(large, exact)
+
+
+def assert_same_table(out, exact):
     assert list(out.columns) == list(exact.columns)
     for column in out.columns:
         a, b = out[column].astype(object).to_numpy(), exact[column].astype(object).to_numpy()

@@ -563,16 +563,22 @@ def _locate_bad_number(path: Path, header: list[str], numeric: list[str], error:
     large for the exact reader): read it again in chunks of :data:`_LOCATE_CHUNK_ROWS` rows as text (one record
     per line, as checked) and run the long format's number check on each."""
     source = f"readings file {path}"
-    chunks = pd.read_csv(path, dtype=str, keep_default_na=False, skipinitialspace=True, engine="c",
-                         encoding="utf-8-sig", chunksize=_LOCATE_CHUNK_ROWS)
-    offset = 0
-    for chunk in chunks:
-        chunk.columns = header
-        lines = _file_lines(len(chunk)) + offset
-        for column in numeric:
-            _numeric(chunk, column, source, lines, missing_ok=column != "time_s")
-        offset += len(chunk)
-    raise DataFormatError(f"{source}: not readable as the long format ({_shown(str(error))})")
+    try:
+        offset = 0
+        for chunk in pd.read_csv(path, dtype=str, keep_default_na=False, skipinitialspace=True, engine="c",
+                                 encoding="utf-8-sig", chunksize=_LOCATE_CHUNK_ROWS):
+            chunk.columns = header
+            lines = _file_lines(len(chunk)) + offset
+            for column in numeric:
+                _numeric(chunk, column, source, lines, missing_ok=column != "time_s")
+            offset += len(chunk)
+    except DataFormatError:
+        raise
+    except (ValueError, UnicodeDecodeError, pd.errors.ParserError) as exc:     # pandas' tokenizer, once more
+        error = exc
+    raise DataFormatError(f"{source}: pandas' reader refused it ({_shown(str(error))}), and at {_size(path.stat().st_size)} "
+                          f"it is too large for the exact reader (MAX_EXACT_READ_BYTES = "
+                          f"{_size(MAX_EXACT_READ_BYTES)}), which would name the line")
 
 
 def _text_categories(path: Path, j: int, n_rows: int) -> pd.Series:

@@ -67,9 +67,9 @@ import numpy as np
 import pandas as pd
 
 from ..errors import ParameterError
-from .measured import (AGGREGATES, MAX_MIN_READINGS, MIN_WINDOW_S, OPTIONAL_READING_COLUMNS, READING_COLUMNS, DataFormatError,
-                       Epochs, _decode_utf8, _reading_options, _shown, _shown_names, epochs, read_anchors,
-                       read_outline, read_path_segments, read_readings_table, validate_readings_file)
+from .measured import (AGGREGATES, MAX_MIN_READINGS, MIN_WINDOW_S, OPTIONAL_READING_COLUMNS, READING_COLUMNS,
+                       DataFormatError, Epochs, _decode_utf8, _reading_options, _shown, _shown_names, epochs,
+                       read_anchors, read_outline, read_path_segments, read_readings_table, validate_readings_file)
 
 __all__ = ["Dataset", "Recording", "EpochRule", "load_dataset", "shipped_datasets", "datasets_dir", "name_problem",
            "MAX_NAME_CHARS", "MAX_TAG_HEIGHT_OFFSET_M", "MAX_MANIFEST_BYTES",
@@ -449,7 +449,8 @@ def load_dataset(path) -> Dataset:
         if role == "track":
             senders = readings["transmitter"].unique()
             if len(senders) > 1:
-                _fail(manifest, f"{where}{path.name} holds {len(senders)} transmitters ({', '.join(map(_shown, senders[:5]))}"
+                _fail(manifest, f"{where}{path.name} holds {len(senders)} transmitters "
+                                f"({', '.join(map(_shown, senders[:5]))}"
                                 f"{', ...' if len(senders) > 5 else ''}); a track follows one tag: give each "
                                 "transmitter's rows their own file and [[recording]]")
         reference = None

@@ -40,7 +40,8 @@ pandas' C reader at about 7 bytes of memory per byte of file, any other file thr
 naming the line that needs it. Messages quote at most :data:`MAX_QUOTED_CHARS` characters of a file.
 
 **Anchors** (CSV): ``id, x, y, z`` in metres (``z`` is the anchor height; required, so that ranges are
-three-dimensional). Ids are unique; coordinates finite and less than :data:`MAX_COORDINATE_M` in magnitude; no two anchors within :data:`ANCHOR_MIN_SEPARATION_M`
+three-dimensional). Ids are unique; coordinates finite and less than :data:`MAX_COORDINATE_M` in magnitude; no two
+anchors within :data:`ANCHOR_MIN_SEPARATION_M`
 (1 mm) of each other.
 
 **Floor outline** (CSV, optional): ``x, y`` vertices of a closed polygon in metres (at least 3 vertices, the
@@ -76,7 +77,8 @@ from ..errors import LocbookError, ParameterError
 __all__ = [
     "DataFormatError", "MeasuredDataWarning", "READING_COLUMNS", "OPTIONAL_READING_COLUMNS", "RSSI_RANGE_DBM",
     "MAX_TIME_S", "ANCHOR_MIN_SEPARATION_M", "MAX_REGULAR_EPOCHS", "AGGREGATES", "Epochs", "RSSI_LIMITS_DBM",
-    "MAX_COORDINATE_M", "MAX_LINE_BYTES", "MAX_EXACT_READ_BYTES", "MAX_READINGS_FILE_BYTES", "MAX_MIN_READINGS", "MIN_WINDOW_S",
+    "MAX_COORDINATE_M", "MAX_LINE_BYTES", "MAX_EXACT_READ_BYTES", "MAX_READINGS_FILE_BYTES", "MAX_MIN_READINGS",
+    "MIN_WINDOW_S",
     "read_readings", "read_anchors", "read_outline", "read_path_segments", "validate_readings", "epochs",
     "regular_epochs",
 ]
@@ -247,15 +249,18 @@ def _wrong_field_count(path, what: str, line: int, row: list[str], header: list[
         named -= 1
     if named < len(header) and len(row) == named:   # rows without them: the header alone has trailing commas
         raise DataFormatError(f"{what} file {path}, line {header_line}: the header ends with an empty column name "
-                              f"(a trailing comma?): it has {len(header)} names, {_shown_names(header)}, but line {line} has "
+                              f"(a trailing comma?): it has {len(header)} names, {_shown_names(header)}, but line "
+                              f"{line} has "
                               f"{len(row)} field(s); remove the trailing comma from the header")
     if len(row) < len(header):
         absent = header[len(row):]
-        raise DataFormatError(f"{what} file {path}, line {line}, column(s) {_shown_names(absent)}: the row has {len(row)} field(s), "
+        raise DataFormatError(f"{what} file {path}, line {line}, column(s) {_shown_names(absent)}: the row has "
+                              f"{len(row)} field(s), "
                               f"the header {len(header)}: {'it is' if len(absent) == 1 else 'they are'} missing "
                               "(an empty value is written as an empty field, e.g. '0.5,tag,A,' for not heard)")
     raise DataFormatError(f"{what} file {path}, line {line}: the row has {len(row)} fields, the header {len(header)} "
-                          f"fields ({_shown_names(header)}); a value with a comma must be quoted, and an extra column needs a "
+                          f"fields ({_shown_names(header)}); a value with a comma must be quoted, and an extra column "
+                          "needs a "
                           "name in the header")
 
 
@@ -275,7 +280,8 @@ def _numeric(table: pd.DataFrame, column: str, source: str, lines, *, missing_ok
     bad = ~missing & ~np.isfinite(values)
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
-        raise DataFormatError(f"{source}, line {lines[i]}, column {column!r}: {_shown(table[column].iloc[i])} is not a finite "
+        raise DataFormatError(f"{source}, line {lines[i]}, column {column!r}: {_shown(table[column].iloc[i])} is "
+                              "not a finite "
                               f"number ({int(bad.sum())} such value(s) in the column)")
     if missing.any() and not missing_ok:
         i = int(np.flatnonzero(missing)[0])
@@ -318,7 +324,8 @@ def _reading_options(invalid_values_dbm, valid_range_dbm):
     if isinstance(values, np.ndarray):
         values = values.reshape(-1).tolist() if values.dtype.kind in "iuf" else list(values.reshape(-1))
     if not isinstance(values, (list, tuple)) or not all(_is_real(v) for v in values):
-        raise ParameterError(f"invalid_values_dbm must be a sequence of numbers (dBm), got {_shown(invalid_values_dbm)}")
+        raise ParameterError("invalid_values_dbm must be a sequence of numbers (dBm), got "
+                             f"{_shown(invalid_values_dbm)}")
     sentinels = np.asarray(values, dtype=float).reshape(-1)
     if not np.isfinite(sentinels).all():
         raise ParameterError(f"invalid_values_dbm must hold finite numbers (dBm), got {_shown(invalid_values_dbm)}")
@@ -352,7 +359,8 @@ def _check_time_unit(time_s: np.ndarray, raw: pd.Series, source: str, lines) -> 
                      f"[units] time = \"{short}\" in dataset.toml; else convert the column to seconds (divide by "
                      f"{scale:.0e}, after subtracting the first time to keep the small differences)")
             break
-    raise DataFormatError(f"{source}, line {lines[i]}, column 'time_s': {_shown(str(raw.iloc[i]).strip())} is not a time in "
+    raise DataFormatError(f"{source}, line {lines[i]}, column 'time_s': {_shown(str(raw.iloc[i]).strip())} is not a "
+                          "time in "
                           f"seconds ({abs(t) / 3.15576e7:.3g} years; time_s is at most {MAX_TIME_S:.0e} s in "
                           f"magnitude){guess} ({int(huge.sum())} such value(s) in the column)")
 
@@ -439,7 +447,8 @@ def validate_readings(table: pd.DataFrame, *, source: str, lines=None, anchor_id
         first = int(np.flatnonzero((key == key.iloc[i]).all(axis=1).to_numpy())[0])
         written = [str(text["time_s"].iloc[k]).strip() for k in (first, i)]
         note = ("" if written[0] == written[1] else
-                f" (the source has times {_shown(written[0])} and {_shown(written[1])}: equal as 64-bit floats, which hold about "
+                f" (the source has times {_shown(written[0])} and {_shown(written[1])}: equal as 64-bit floats, which "
+                "hold about "
                 "16 significant digits; give times from a nearer origin, e.g. seconds since the first reading)")
         raise DataFormatError(f"{source}, line {lines[i]}, columns 'time_s','transmitter','receiver': the reading "
                               f"({_seconds(out['time_s'].iloc[i])}, {_shown(out['transmitter'].iloc[i])}, "
@@ -453,7 +462,8 @@ def validate_readings(table: pd.DataFrame, *, source: str, lines=None, anchor_id
         i = int(by_tx[k + 1].min())                                        # the first such row of the source
         prev = int(by_tx[k[by_tx[k + 1] == i][0]])
         raise DataFormatError(f"{source}, line {lines[i]}, column 'time_s': time goes back for transmitter "
-                              f"{_shown(out['transmitter'].iloc[i])} ({_seconds(time_s[i])} after {_seconds(time_s[prev])} "
+                              f"{_shown(out['transmitter'].iloc[i])} ({_seconds(time_s[i])} after "
+                              f"{_seconds(time_s[prev])} "
                               f"on line {lines[prev]}); sort the file by time, or read it with sort=True (rows "
                               "reordered by time, stably)")
     extra = [c for c in text.columns if c not in out.columns]
@@ -576,7 +586,8 @@ def _locate_bad_number(path: Path, header: list[str], numeric: list[str], error:
         raise
     except (ValueError, UnicodeDecodeError, pd.errors.ParserError) as exc:     # pandas' tokenizer, once more
         error = exc
-    raise DataFormatError(f"{source}: pandas' reader refused it ({_shown(str(error))}), and at {_size(path.stat().st_size)} "
+    raise DataFormatError(f"{source}: pandas' reader refused it ({_shown(str(error))}), and at "
+                          f"{_size(path.stat().st_size)} "
                           f"it is too large for the exact reader (MAX_EXACT_READ_BYTES = "
                           f"{_size(MAX_EXACT_READ_BYTES)}), which would name the line")
 
@@ -878,7 +889,8 @@ def epochs(readings: pd.DataFrame, anchor_ids, *, window_s: float | None = None,
         differ[grouped.min().index.to_numpy()] = (low != high) & (count > 0) | (count > 0) & (count < size)
         if differ.any():
             e = int(np.flatnonzero(differ.any(axis=1))[0])
-            raise DataFormatError(f"epoch at {_seconds(utime[order[e]])} of transmitter {_shown(tx_names[utx[order[e]]])} "
+            raise DataFormatError(f"epoch at {_seconds(utime[order[e]])} of transmitter "
+                                  f"{_shown(tx_names[utx[order[e]]])} "
                                   "has different true positions or headings on its rows")
         position, heading = per_epoch[:, :3], per_epoch[:, 3]
     extra = {}

@@ -100,3 +100,22 @@ def test_a_bracket_made_on_another_machine_of_the_same_kind_is_not_called_stale(
                                             {**row, "reproduced": "2.833896753"}], [b], "full")
     assert other_machine["bracket"] == "reachable"
     assert stale["bracket"] == "open" and "disagree" in stale["bracket_readings"]
+
+
+def test_the_kernel_map_candidates_of_tied_weights_are_taken_by_particle_index():
+    """After resampling, weights take a few values, each shared by many particles (all 1/N right after it): the
+    n_candidates highest-weight particles include a tie, and a non-stable sort returns tied particles in an order
+    that depends on the processor. Tied candidates are now taken by index, so the estimate is the best, under the
+    kernel density (computed here by hand), of the highest weights with ties broken by particle index."""
+    from locbook.tracking.particle import kernel_map_estimate
+
+    rng = np.random.default_rng(8)
+    x = rng.normal(0.0, 1.0, size=(3, 500, 2))
+    w = rng.integers(1, 4, size=(3, 500)).astype(float)
+    w /= w.sum(axis=-1, keepdims=True)
+    order = [sorted(range(500), key=lambda i: (-w[r, i], i))[:16] for r in range(3)]
+    got = kernel_map_estimate(x, w, bandwidth_m=0.3, n_candidates=16)
+    cand = np.stack([x[r, order[r]] for r in range(3)])
+    d2 = np.sum((cand[:, :, None] - x[:, None]) ** 2, axis=-1)
+    dens = np.einsum("rkn,rn->rk", np.exp(-0.5 * d2 / 0.3 ** 2), w)
+    np.testing.assert_array_equal(got, cand[np.arange(3), np.argmax(dens, axis=-1)])

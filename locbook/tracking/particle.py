@@ -337,7 +337,7 @@ def particle_filter(rss_dbm, model, rng: np.random.Generator, *, n_steps: int | 
                   and np.ndim(initial_position_m) == 1)
     if single:
         if isinstance(model, RssModel):
-            rss_dbm = np.asarray(rss_dbm)[None]
+            rss_dbm = as_array("rss_dbm", rss_dbm, nan_ok=True)[None]   # a masked entry is not heard (NaN)
             for name, value, nd in (("initial_particles_m", initial_particles_m, 2),
                                     ("initial_position_m", initial_position_m, 1)):
                 if value is not None and np.ndim(value) != nd:
@@ -671,7 +671,9 @@ def kernel_map_estimate(particles_m, weights, *, bandwidth_m=None, n_candidates:
     # the density is evaluated in blocks of 2048 particles for every run and candidate at once
     _check_size("particles_m", f"the kernel density's block for n_candidates = {k} (runs x candidates x particles "
                 "x dim)", (R, k, min(n, 2048), dim), "run the runs in blocks or lower n_candidates")
-    top = np.argsort(-w, axis=-1)[:, :k]
+    # stable: equal weights (every particle after resampling) rank by index on every machine, not in the order
+    # numpy's vector sort (AVX-512 or not) leaves ties
+    top = np.argsort(-w, axis=-1, kind="stable")[:, :k]
     cand = np.take_along_axis(x, top[..., None], axis=1)                        # (R, k, dim)
     if bandwidth_m is None:
         mean = np.einsum("rn,rnd->rd", w, x)

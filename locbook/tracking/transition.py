@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._validate import as_array
+from .._validate import as_array, function_output
 
 __all__ = ["PerStep", "per_step", "NonlinearMotion"]
 
@@ -99,21 +99,18 @@ class NonlinearMotion:
                 raise ValueError(f"{self.name}: {field} must be a function, got {type(value).__name__}")
 
     def apply(self, x, step: int):
-        """``f(x)`` (or ``f(x, step)``), checked to keep the state's shape."""
-        out = np.asarray(self.f(x, step) if self.uses_step else self.f(x), dtype=float)
-        if out.shape != np.shape(x):
-            raise ValueError(f"{self.name}: f returned shape {out.shape} for states of shape {np.shape(x)}")
-        return out
+        """``f(x)`` (or ``f(x, step)``), checked to keep the state's shape and to be real (a complex output is
+        refused, not cut to its real part)."""
+        out = self.f(x, step) if self.uses_step else self.f(x)
+        return np.asarray(function_output(f"{self.name}: f", out, np.shape(x), np.ndim(x), np.shape(x)))
 
     def jacobian_at(self, x, step: int):
         """The Jacobian ``df/dx`` ``(..., n, n)`` at ``x`` (the EKF's), checked."""
         if self.jacobian is None:
             raise ValueError(f"{self.name}: the EKF needs the motion's jacobian (the UKF does not)")
-        J = np.asarray(self.jacobian(x, step) if self.uses_step else self.jacobian(x), dtype=float)
+        J = self.jacobian(x, step) if self.uses_step else self.jacobian(x)
         n = np.shape(x)[-1]
-        if J.shape[-2:] != (n, n) or J.shape[:-2] not in ((), np.shape(x)[:-1]):
-            raise ValueError(f"{self.name}: jacobian returned shape {J.shape}, expected {np.shape(x)[:-1] + (n, n)}")
-        return J
+        return function_output(f"{self.name}: jacobian", J, np.shape(x)[:-1] + (n, n), 2, np.shape(x), broadcast=False)
 
     def difference(self, a, b):
         """``a - b`` of states, through ``residual`` when given."""

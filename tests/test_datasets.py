@@ -14,33 +14,9 @@ from locbook.data.measured import DataFormatError, epochs, validate_readings
 from locbook.errors import ParameterError
 from locbook.scenarios import measured as me
 
-ANCHORS = "id,x,y,z\nA,0,0,2.5\nB,6,0,2.5\nC,0,6,2.5\nD,6,6,2.5\n"
-_XYZ = {"A": (0, 0, 2.5), "B": (6, 0, 2.5), "C": (0, 6, 2.5), "D": (6, 6, 2.5)}
-# a calibration walk at (1 + t, 2), t = 0..3, the tag 1 m high, readings of -40 - 20 log10 d (whole dBm)
-CAL = ("time_s,transmitter,receiver,rssi_dbm,x_m,y_m\n" + "".join(
-    f"{t},tag,{a},{round(-40 - 20 * np.log10(np.hypot(np.hypot(1 + t - _XYZ[a][0], 2 - _XYZ[a][1]), 1.5)))},"
-    f"{1 + t},2\n" for t in range(4) for a in "ABCD"))
-TRACK = ("time_s,transmitter,receiver,rssi_dbm,x_m,y_m\n"
-         + "".join(f"{0.5 * t},tag,{a},-{55 + j},{t},3\n" for t in range(6) for j, a in enumerate("ABCD")))
-MANIFEST = """name = "tiny"
-title = "tiny test set"
-license = "CC0 1.0"
-attribution = "test"
-[geometry]
-anchors = "anchors.csv"
-tag_height_m = 1.0
-[epochs]
-window_s = 0.5
-[[recording]]
-name = "cal"
-file = "cal.csv"
-role = "calibration"
-window_s = 0
-[[recording]]
-name = "walk"
-file = "walk.csv"
-role = "track"
-"""
+from builders import ANCHORS, MANIFEST, TRACK, calibration_csv
+
+CAL = calibration_csv()
 
 
 def folder(tmp_path, name):

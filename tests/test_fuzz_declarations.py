@@ -32,6 +32,8 @@ from locbook.suite.bracket import bracket_points, experiment_readings, find_expe
 from locbook.suite import study as study_module
 from locbook.suite.study import expand_study, load_studies
 
+from builders import toml_key, toml_value as toml
+
 FUZZ = settings(max_examples=300, deadline=None, derandomize=True,
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much,
                                        HealthCheck.function_scoped_fixture])
@@ -81,28 +83,6 @@ def repo(tmp_path_factory):
 @pytest.fixture(scope="module")
 def suite(repo):
     return load_suite(repo / "notebooks" / "experiments.toml")
-
-
-# -- TOML text of a value (tomllib reads only) -----------------------------------------------------------------
-
-def toml(value) -> str:
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, int):
-        return str(value)
-    if isinstance(value, float):
-        return "nan" if math.isnan(value) else ("inf" if value > 0 else "-inf") if math.isinf(value) else repr(value)
-    if isinstance(value, str):
-        return '"' + value.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n") + '"'
-    if isinstance(value, list):
-        return "[" + ", ".join(toml(v) for v in value) + "]"
-    if isinstance(value, dict):
-        return "{ " + ", ".join(f"{toml_key(k)} = {toml(v)}" for k, v in value.items()) + " }"
-    raise TypeError(value)
-
-
-def toml_key(key: str) -> str:
-    return key if key.replace("_", "").replace("-", "").isalnum() and key.isascii() else toml(key)
 
 
 NUMBERS = st.one_of(st.integers(-3, 12), st.sampled_from([0.5, 1.5, 2.5, 4.9, 5.0, 6.0, -1.0, 1e-3, 1e300,

@@ -35,6 +35,8 @@ import locbook.data.measured as measured
 from locbook.data.dataset import load_dataset
 from locbook.data.measured import RSSI_RANGE_DBM, read_anchors, read_readings, validate_readings
 
+from builders import ANCHORS, TRACK, calibration_csv, toml_document
+
 MAX_COORDINATE_M = getattr(measured, "MAX_COORDINATE_M", 1e7)       # getattr: the module collects on older code
 
 FUZZ = settings(max_examples=150, deadline=None, derandomize=True,
@@ -43,13 +45,7 @@ FUZZ = settings(max_examples=150, deadline=None, derandomize=True,
 #: the longest message of a refusal (paths of the temporary folder included): one line, never a file's content
 MAX_MESSAGE_CHARS = 1500
 
-ANCHORS = "id,x,y,z\nA,0,0,2.5\nB,6,0,2.5\nC,0,6,2.5\nD,6,6,2.5\n"
-_XYZ = {"A": (0, 0, 2.5), "B": (6, 0, 2.5), "C": (0, 6, 2.5), "D": (6, 6, 2.5)}
-CAL = ("time_s,transmitter,receiver,rssi_dbm,x_m,y_m,point\n" + "".join(
-    f"{t},tag,{a},{round(-40 - 20 * np.log10(np.hypot(np.hypot(1 + t - _XYZ[a][0], 2 - _XYZ[a][1]), 1.5)))},"
-    f"{1 + t},2,P{t}\n" for t in range(4) for a in "ABCD"))
-TRACK = ("time_s,transmitter,receiver,rssi_dbm,x_m,y_m\n"
-         + "".join(f"{0.5 * t},tag,{a},-{55 + j},{t},3\n" for t in range(6) for j, a in enumerate("ABCD")))
+CAL = calibration_csv(points=True)
 OUTLINE = "x,y\n-1,-1\n7,-1\n7,7\n-1,7\n"
 PATH = "x0,y0,x1,y1\n0,3,5,3\n"
 FILES = {"anchors.csv": ANCHORS, "cal.csv": CAL, "walk.csv": TRACK, "outline.csv": OUTLINE, "path.csv": PATH}
@@ -65,42 +61,6 @@ def manifest() -> dict:
             "recording": [{"name": "cal", "file": "cal.csv", "role": "calibration", "window_s": 0,
                            "point_column": "point"},
                           {"name": "walk", "file": "walk.csv", "role": "track", "reference_path": "path.csv"}]}
-
-
-# -- a small TOML writer (tomllib reads only) ---------------------------------------------------------------------
-def toml_string(text: str) -> str:
-    return '"' + "".join(c if c not in '"\\' and ord(c) >= 0x20 and ord(c) != 0x7f else
-                         ("\\" + c if c in '"\\' else f"\\u{ord(c):04x}") for c in text) + '"'
-
-
-def toml_key(key: str) -> str:
-    return key if re.fullmatch(r"[A-Za-z0-9_-]+", key) else toml_string(key)
-
-
-def toml_value(value) -> str:
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, int):
-        return str(value)
-    if isinstance(value, float):
-        return "nan" if math.isnan(value) else ("inf" if value > 0 else "-inf") if math.isinf(value) else repr(value)
-    if isinstance(value, str):
-        return toml_string(value)
-    if isinstance(value, list):
-        return "[" + ", ".join(toml_value(v) for v in value) + "]"
-    return "{" + ", ".join(f"{toml_key(k)} = {toml_value(v)}" for k, v in value.items()) + "}"
-
-
-def toml_document(raw: dict) -> str:
-    tables = {k: v for k, v in raw.items() if isinstance(v, dict)}
-    arrays = {k: v for k, v in raw.items() if isinstance(v, list) and v and all(isinstance(e, dict) for e in v)}
-    lines = [f"{toml_key(k)} = {toml_value(v)}" for k, v in raw.items() if k not in tables and k not in arrays]
-    for k, table in tables.items():
-        lines += [f"[{toml_key(k)}]"] + [f"{toml_key(a)} = {toml_value(b)}" for a, b in table.items()]
-    for k, array in arrays.items():
-        for table in array:
-            lines += [f"[[{toml_key(k)}]]"] + [f"{toml_key(a)} = {toml_value(b)}" for a, b in table.items()]
-    return "\n".join(lines) + "\n"
 
 
 # -- the edits ------------------------------------------------------------------------------------------------------

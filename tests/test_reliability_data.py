@@ -15,38 +15,14 @@ from locbook.data.example import write_example_dataset
 from locbook.data.measured import DataFormatError, epochs, read_anchors, read_readings, read_readings_table, validate_readings
 from locbook.errors import ParameterError
 
+from builders import ANCHORS, MANIFEST, TRACK, calibration_csv
+
 # the limits, read where parametrize needs them at collection (getattr: the module still collects without them)
 MAX_COORDINATE_M = getattr(measured, "MAX_COORDINATE_M", 1e7)
 MAX_NAME_CHARS = getattr(dataset_module, "MAX_NAME_CHARS", 64)
 MAX_TAG_HEIGHT_OFFSET_M = getattr(dataset_module, "MAX_TAG_HEIGHT_OFFSET_M", 100.0)
 
-ANCHORS = "id,x,y,z\nA,0,0,2.5\nB,6,0,2.5\nC,0,6,2.5\nD,6,6,2.5\n"
-_XYZ = {"A": (0, 0, 2.5), "B": (6, 0, 2.5), "C": (0, 6, 2.5), "D": (6, 6, 2.5)}
-# a calibration walk at (1 + t, 2), the tag 1 m high, readings of -40 - 20 log10 d (whole dBm), at points P0..P3
-CAL = ("time_s,transmitter,receiver,rssi_dbm,x_m,y_m,point\n" + "".join(
-    f"{t},tag,{a},{round(-40 - 20 * np.log10(np.hypot(np.hypot(1 + t - _XYZ[a][0], 2 - _XYZ[a][1]), 1.5)))},"
-    f"{1 + t},2,P{t}\n" for t in range(4) for a in "ABCD"))
-TRACK = ("time_s,transmitter,receiver,rssi_dbm,x_m,y_m\n"
-         + "".join(f"{0.5 * t},tag,{a},-{55 + j},{t},3\n" for t in range(6) for j, a in enumerate("ABCD")))
-MANIFEST = """name = "tiny"
-title = "tiny test set"
-license = "CC0 1.0"
-attribution = "test"
-[geometry]
-anchors = "anchors.csv"
-tag_height_m = 1.0
-[epochs]
-window_s = 0.5
-[[recording]]
-name = "cal"
-file = "cal.csv"
-role = "calibration"
-window_s = 0
-[[recording]]
-name = "walk"
-file = "walk.csv"
-role = "track"
-"""
+CAL = calibration_csv(points=True)
 STATIC = """[[recording]]
 name = "pts"
 file = "{file}"

@@ -78,10 +78,10 @@ def install_from_environment() -> None:
     def append(to, path: str, link: str | None = None) -> None:
         if (path, link) in seen:
             return
-        seen.add((path, link))
         digest = sha256(path)
-        if digest is None:
+        if digest is None:        # not there (yet): a later open that finds it is logged then
             return
+        seen.add((path, link))
         to.write(json.dumps({"path": path, "sha256": digest, **({"link": link} if link else {})}) + "\n")
         to.flush()
 

@@ -27,6 +27,8 @@ def as_array(name: str, value, *, ndim: int | None = None, min_ndim: int | None 
     ``trailing``: the required sizes of the last axes (``None`` = any size), e.g. ``(m, 2)``.
     ``nan_ok``: NaN entries are allowed (missing readings); infinities never are.
     """
+    if not np.ma.isMaskedArray(value) and isinstance(value, (list, tuple)) and _holds_masked(value):
+        value = _stack_masked(name, value)      # np.asarray of a list of masked rows would drop their masks
     if np.ma.isMaskedArray(value):
         value = _unmasked(name, value, nan_ok)
     if _is_complex(value):                      # numpy would drop the imaginary part with a warning
@@ -49,6 +51,24 @@ def as_array(name: str, value, *, ndim: int | None = None, min_ndim: int | None 
                              f"got {int(bad.sum())} {what} value(s), the first at index "
                              f"{tuple(int(i) for i in np.argwhere(bad)[0])}")
     return arr
+
+
+def _holds_masked(value, depth: int = 0) -> bool:
+    """Whether a (nested) list or tuple holds a masked array."""
+    for v in value:
+        if isinstance(v, np.ma.MaskedArray) or (isinstance(v, (list, tuple)) and depth < 32
+                                                and _holds_masked(v, depth + 1)):
+            return True
+    return False
+
+
+def _stack_masked(name: str, value) -> np.ma.MaskedArray:
+    """A nested list holding masked arrays as one masked array, every element's mask kept."""
+    try:
+        return np.ma.stack([_stack_masked(name, v) if isinstance(v, (list, tuple)) else v for v in value])
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a rectangular array of numbers; got a list whose rows (some masked) have "
+                         "different shapes") from None
 
 
 def _is_complex(value) -> bool:
@@ -152,6 +172,8 @@ def function_output(name: str, value, shape: tuple, tail_ndim: int, input_shape:
         raise ValueError(f"{name} returned {type(value).__name__}{called}, not an array of real numbers of shape "
                          f"{shape}") from None
     tail = tuple(shape[len(shape) - tail_ndim:])
+    if arr.ndim == 0 and tail == (1,):           # a scalar for one component (m = 1): unambiguous
+        arr = arr.reshape(1)
     ok = arr.ndim >= tail_ndim and arr.shape[arr.ndim - tail_ndim:] == tail and arr.ndim <= len(shape)
     if ok and arr.shape != tuple(shape):
         try:

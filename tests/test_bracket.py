@@ -70,6 +70,16 @@ def test_a_value_equal_to_the_profile_is_not_run_twice_and_shared_values_share_a
     assert [p.label for p in points] == ["default", "slope: a=1.3", "slope, same [fitted]: a=2.0"]
 
 
+def test_a_shared_point_keeps_its_own_key_when_a_later_reading_names_it_again(stoy, tmp_path):
+    # 'same' names a = 2.0, which 'slope' made its first alternative point, not its last: the merged point must keep
+    # its own folder (key), not the key of the point appended last (review of issue 44: two points shared a folder)
+    exp = find_experiment(_suite(stoy), "george-study")
+    text = f"{HEADER}\nslope,george-study,a,,1.0,\"[2.0, 1.3]\",,,,assumed,s,r\nsame,george-study,a,,,[2.0],,,,assumed,s,r\n"
+    points = bracket_points(exp, "quick", load_reading_file(_readings(tmp_path, text)))
+    assert [p.label for p in points] == ["default", "slope, same: a=2.0", "slope: a=1.3"]
+    assert len({p.key for p in points}) == len(points)
+
+
 def test_a_reading_value_the_notebook_refuses_is_an_error_before_anything_runs(stoy, tmp_path):
     exp = find_experiment(_suite(stoy), "george-study")
     bad = load_reading_file(_readings(tmp_path, f"{HEADER}\nslope,george-study,a,,1.0,[7.0],,,,assumed,s,r\n"))

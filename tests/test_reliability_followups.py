@@ -30,3 +30,38 @@ def test_a_motion_whose_f_or_jacobian_is_complex_is_refused_by_its_own_methods()
     plain = lb.NonlinearMotion(lambda x: 2 * x, lambda x: 2 * np.eye(2))
     np.testing.assert_array_equal(plain.apply(np.ones((3, 2)), 0), 2 * np.ones((3, 2)))
     np.testing.assert_array_equal(plain.jacobian_at(np.ones((3, 2)), 0), 2 * np.eye(2))
+
+
+def test_a_list_of_masked_rows_keeps_every_rows_mask():
+    # np.asarray of a list of masked arrays drops their masks: the 1e3 under the mask was used (a fix 8 km off)
+    anchors = np.array([[0.0, 0.0], [10.0, 0.0], [0.0, 10.0], [10.0, 10.0]])
+    d = np.linalg.norm(anchors - [3.0, 4.0], axis=1)
+    bad = d.copy()
+    bad[1] = 1e3
+    rows = [np.ma.array(bad, mask=[0, 1, 0, 0]), np.ma.array(d)]
+    for given in (rows, [rows]):
+        np.testing.assert_allclose(lb.lateration_ls(anchors, given).position_m.reshape(-1, 2), [[3.0, 4.0]] * 2)
+    with pytest.raises(ValueError, match="distance_m must be a rectangular array"):
+        lb.lateration_ls(anchors, [rows[0], d[:3]])
+
+
+def test_a_bad_reading_after_a_blank_line_is_named_by_its_own_line(tmp_path):
+    from locbook.reproduce.readings import READING_COLUMNS, ReadingsError, load_reading_file
+    path = tmp_path / "r.csv"
+    path.write_text(",".join(READING_COLUMNS) + "\n\n" + "slope,george-study,a,,1.0,[1.0],,,,assumed,s,r\n")
+    with pytest.raises(ReadingsError, match=r"r\.csv, line 3 \(slope\)"):
+        load_reading_file(path)
+
+
+def test_a_scalar_h_of_a_one_component_reading_equals_the_vector_h():
+    # m = 1, one run: the EKF calls h on one state, and a scalar can only mean that one component (the refusal is for
+    # m > 1, where it would broadcast). The UKF calls h on all sigma points at once: there h must keep their axis.
+    filt = lb.extended_kalman_filter
+    model = lb.constant_velocity(1.0, 0.05)
+    z = np.linspace(0.0, 3.0, 10)[:, None]
+    R = np.array([[0.5]])
+    jac = lambda x: np.array([[1.0, 0.0, 0.0, 0.0]])
+    x0, P0 = np.zeros(4), np.eye(4)
+    scalar = filt(model.F, model.Q, x0, P0, lb.NonlinearMeasurement(z, lambda x: x[0], R, jacobian=jac))
+    vector = filt(model.F, model.Q, x0, P0, lb.NonlinearMeasurement(z, lambda x: x[:1], R, jacobian=jac))
+    np.testing.assert_array_equal(scalar.x, vector.x)

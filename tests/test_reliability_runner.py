@@ -155,6 +155,26 @@ def test_the_data_log_records_the_content_the_kernel_read_not_the_content_at_pro
     assert _sha256(data / "walk.csv") != read                         # what is there now is not what was read
 
 
+_OPEN_MISSING_THEN_CREATE = """
+import pathlib, sys, locbook
+late = pathlib.Path(sys.argv[1])
+try:
+    open(late).read()
+except FileNotFoundError:
+    pass
+late.write_text("made later")
+open(late).read()
+"""
+
+
+def test_a_file_first_opened_while_missing_is_logged_when_it_is_read(tmp_path):
+    # the first open finds nothing to hash; the file made afterwards and read is what the report depends on
+    (tmp_path / "data").mkdir()
+    entries = _read_log(tmp_path, _OPEN_MISSING_THEN_CREATE, "data/late.csv")
+    assert entries == [{"path": str((tmp_path / "data" / "late.csv").resolve()),
+                        "sha256": hashlib.sha256(b"made later").hexdigest()}]
+
+
 def test_a_file_read_through_a_symbolic_link_is_logged_with_the_link_and_its_target(tmp_path):
     data = tmp_path / "data"
     data.mkdir()

@@ -292,7 +292,10 @@ def load_reading_file(path: str | Path, document: str | None = None) -> tuple[Re
     while True:
         # the line the row starts on: reader.line_num counts the non-comment lines read so far (a quoted field
         # may span several)
-        number = lines[min(reader.line_num, len(lines) - 1)][0]
+        at = reader.line_num
+        while at < len(lines) - 1 and lines[at][1] in ("", "\n", "\r\n", "\r"):   # the csv module skips blank lines
+            at += 1
+        number = lines[min(at, len(lines) - 1)][0]
         try:
             row = next(rows)
         except StopIteration:

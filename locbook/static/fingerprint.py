@@ -151,12 +151,19 @@ def _k_nearest(dist2, k: int):
     tied at the k-th distance, the lowest-indexed. Integer RSSI fingerprints are often exactly equidistant from a
     query, and the order in which ``np.argpartition`` returns ties depends on the processor's vector code (AVX-512
     or not): the tie rule makes the neighbours, and the position, the same on every machine."""
-    kth = np.partition(dist2, k - 1, axis=-1)[..., k - 1:k]        # the k-th smallest value: no tie ambiguity
-    below = dist2 < kth
-    tied = dist2 == kth
-    room = k - below.sum(axis=-1, keepdims=True)                    # >= 1: how many of the ties are taken
-    chosen = below | (tied & (np.cumsum(tied, axis=-1) <= room))
-    return np.nonzero(chosen.reshape(-1, dist2.shape[-1]))[1].reshape(dist2.shape[:-1] + (k,))
+    nearest = np.argpartition(dist2, k - 1, axis=-1)[..., :k]
+    kth = np.take_along_axis(dist2, nearest, axis=-1).max(axis=-1, keepdims=True)  # the k-th smallest: no ambiguity
+    flat_d2, flat_nn, flat_kth = dist2.reshape(-1, dist2.shape[-1]), nearest.reshape(-1, k), kth.reshape(-1, 1)
+    tied_rows = np.flatnonzero(np.sum(flat_d2 <= flat_kth, axis=-1) > k)   # more cells than k at or below it
+    if tied_rows.size:                # only rows with a tie at the k-th distance pay for the rule
+        d2, kt = flat_d2[tied_rows], flat_kth[tied_rows]
+        tied = d2 == kt
+        room = k - np.sum(d2 < kt, axis=-1, keepdims=True)          # >= 1: how many of the ties are taken
+        chosen = (d2 < kt) | (tied & (np.cumsum(tied, axis=-1) <= room))
+        flat_nn = flat_nn.copy()
+        flat_nn[tied_rows] = np.nonzero(chosen)[1].reshape(-1, k)
+    # in increasing index: the weighted sums then add the neighbours in one order on every machine
+    return np.sort(flat_nn, axis=-1).reshape(nearest.shape)
 
 
 def _knn_block(rss_dbm, fingerprints_dbm, cells_m, k, weighting):

@@ -258,7 +258,7 @@ def bracket_points(exp: Experiment, profile: str, readings: tuple[Reading, ...])
             if text in by_value:   # another reading names the same values: one run serves both
                 i = by_value[text]
                 if reading not in points[i].readings:
-                    points[i] = BracketPoint(key, exp, (*points[i].readings, reading), points[i].parameter,
+                    points[i] = BracketPoint(points[i].key, exp, (*points[i].readings, reading), points[i].parameter,
                                              points[i].value, points[i].parameters, requires=points[i].requires,
                                              reading_values={**points[i].reading_values, reading.name: checked})
                 continue

@@ -21,11 +21,13 @@ _COMPLEX = "{name} must be real, got complex values (their imaginary part would 
 
 
 def as_array(name: str, value, *, ndim: int | None = None, min_ndim: int | None = None,
-             trailing: Sequence[int | None] | None = None, nan_ok: bool = False, dtype=float) -> np.ndarray:
+             trailing: Sequence[int | None] | None = None, nan_ok: bool = False, dtype=float,
+             inf_ok: bool = False) -> np.ndarray:
     """``value`` as a float array, checked.
 
     ``trailing``: the required sizes of the last axes (``None`` = any size), e.g. ``(m, 2)``.
-    ``nan_ok``: NaN entries are allowed (missing readings); infinities never are.
+    ``nan_ok``: NaN entries are allowed (missing readings); infinities never are, except with ``inf_ok`` (a statistic
+    of values that may overflow, e.g. Monte-Carlo samples, which then propagates them).
     """
     if not np.ma.isMaskedArray(value) and isinstance(value, (list, tuple)) and _holds_masked(value):
         value = _stack_masked(name, value)      # np.asarray of a list of masked rows would drop their masks
@@ -43,7 +45,7 @@ def as_array(name: str, value, *, ndim: int | None = None, min_ndim: int | None 
         raise ValueError(f"{name} must have at least {min_ndim} axes, got shape {arr.shape}")
     if trailing is not None:
         check_trailing_shape(name, arr, trailing)
-    if np.issubdtype(arr.dtype, np.floating):
+    if np.issubdtype(arr.dtype, np.floating) and not (nan_ok and inf_ok):
         bad = np.isinf(arr) if nan_ok else ~np.isfinite(arr)
         if bad.any():
             what = "infinite" if nan_ok else "NaN or infinite"

@@ -6,7 +6,8 @@ with ``axis=-1``.
 
 Missing estimates: a problem an estimator could not solve has a NaN position (the library's missing-reading
 rule), and NaN propagates through these summaries on purpose, so a statistic is never silently computed over
-fewer problems than it claims. Drop them explicitly (``e[np.isfinite(e)]``) and report how many were dropped.
+fewer problems than it claims. A numpy masked array follows the same rule: a masked entry is a NaN (the library's
+one converter, :func:`locbook._validate.as_array`), never left out silently. Drop them explicitly (``e[np.isfinite(e)]``) and report how many were dropped.
 Infinite errors are never valid (an overflowed estimate is a failure to mark NaN, not a distance): they raise
 ``ValueError`` naming the argument, as do empty inputs and out-of-range options.
 """
@@ -26,11 +27,17 @@ __all__ = [
 ]
 
 
-def _check_errors(name: str, error_m, *, min_size: int = 1) -> None:
-    """Errors are finite or NaN (a missing estimate); the reducers keep their own arithmetic on the original."""
+def _errors(name: str, error_m, *, min_size: int = 1) -> np.ndarray:
+    """``error_m`` through the one converter (:func:`locbook._validate.as_array`): finite or NaN (a missing estimate),
+    a masked entry a NaN (so it follows the NaN rule of the statistic, never dropped silently); numbers kept in their
+    own dtype (a float32 or integer array reduces as before)."""
     arr = as_array(name, error_m, nan_ok=True)
     if arr.size < min_size:
         raise ValueError(f"{name} must hold at least {min_size} value(s), got shape {arr.shape}")
+    if np.ma.isMaskedArray(error_m) and np.ma.getmaskarray(error_m).any():
+        return arr
+    kept = as_array(name, error_m, nan_ok=True, dtype=None)
+    return kept if kept.dtype.kind in "biuf" else arr
 
 
 def position_error_m(estimate_m, truth_m):
@@ -53,21 +60,20 @@ def position_error_m(estimate_m, truth_m):
 
 def mean_error_m(error_m, axis=None):
     """Mean Euclidean error, ``C = (1/N) sum_i |p_i - p_hat_i|`` (Eq. (15) of George and Vadivukkarasi)."""
-    _check_errors("error_m", error_m)
+    error_m = _errors("error_m", error_m)
     return np.mean(error_m, axis=axis)
 
 
 def rmse_m(error_m, axis=None):
     """Root mean square of the Euclidean errors."""
-    _check_errors("error_m", error_m)
+    error_m = _errors("error_m", error_m)
     return np.sqrt(np.mean(np.square(error_m), axis=axis))
 
 
 def rmse_standard_error_m(error_m, axis=None):
     """Monte-Carlo standard error of :func:`rmse_m` by the delta method:
     ``SE(sqrt(m2)) = SE(m2) / (2 sqrt(m2))`` with ``m2`` the mean squared error."""
-    _check_errors("error_m", error_m)
-    e2 = np.square(np.asarray(error_m, float))
+    e2 = np.square(np.asarray(_errors("error_m", error_m), float))
     n = e2.size if axis is None else e2.shape[axis]
     if n < 2:
         raise ValueError(f"a standard error needs at least two errors along axis {axis}, got {n}")
@@ -77,27 +83,27 @@ def rmse_standard_error_m(error_m, axis=None):
 
 def median_error_m(error_m, axis=None):
     """Median of the errors."""
-    _check_errors("error_m", error_m)
+    error_m = _errors("error_m", error_m)
     return np.median(error_m, axis=axis)
 
 
 def percentile_error_m(error_m, q: float = 90.0, axis=None):
     """``q``-th percentile of the errors (linear interpolation, numpy's default)."""
-    _check_errors("error_m", error_m)
+    error_m = _errors("error_m", error_m)
     check_scalar("q", q, ge=0, le=100)
     return np.percentile(error_m, q, axis=axis)
 
 
 def error_std_m(error_m, axis=None, ddof: int = 0):
     """Standard deviation of the error magnitudes (population form by default; RMSE^2 = mean^2 + std^2)."""
-    _check_errors("error_m", error_m)
+    error_m = _errors("error_m", error_m)
     check_scalar("ddof", ddof, ge=0, integer=True)
     return np.std(error_m, axis=axis, ddof=ddof)
 
 
 def empirical_cdf(error_m):
     """Sorted errors and their empirical CDF values ``i/N``, for plotting (NaN errors sort last)."""
-    _check_errors("error_m", error_m, min_size=0)
+    error_m = _errors("error_m", error_m, min_size=0)
     x = np.sort(np.ravel(error_m))
     return x, np.arange(1, x.size + 1) / x.size
 
@@ -110,13 +116,12 @@ def reduction_pct(before, after):
                          "(or one be a scalar)")
     if np.any(before_arr == 0):
         raise ValueError("before must be non-zero: a reduction is relative to it")
-    before = np.asarray(before, float)
-    return 100.0 * (before - np.asarray(after, float)) / before
+    return 100.0 * (before_arr - after_arr) / before_arr
 
 
 def error_summary(error_m) -> dict[str, float]:
     """All summary statistics of a set of errors, as plain floats."""
-    _check_errors("error_m", error_m)
+    error_m = _errors("error_m", error_m)
     e = np.ravel(error_m)
     return {
         "mean_m": float(mean_error_m(e)), "rmse_m": float(rmse_m(e)),
@@ -133,8 +138,7 @@ def error_summary_per_run(error_m) -> dict[str, np.ndarray]:
 
     Their spread across runs gives a standard error of their mean over runs (``std(ddof=1) / sqrt(R)``), and
     says how far the statistic of one run may fall from that mean."""
-    _check_errors("error_m", error_m)
-    e = np.asarray(error_m, float)
+    e = np.asarray(_errors("error_m", error_m), float)
     if e.ndim < 2 or e[0].size == 0:
         raise ValueError(f"error_m must have shape (runs, estimates, ...) with at least one estimate per run, "
                          f"got {e.shape}")

@@ -21,7 +21,7 @@ from numbers import Integral, Real
 
 import numpy as np
 
-from ._validate import check_scalar
+from ._validate import as_array, check_scalar
 from .errors import ParameterError
 
 __all__ = ["spawn_generators", "streams", "mc_standard_error", "bootstrap_standard_error", "jackknife_standard_error",
@@ -44,8 +44,11 @@ def streams(seed: int, *names: str) -> dict[str, np.random.Generator]:
 
 
 def mc_standard_error(samples, axis: int = 0) -> np.ndarray:
-    """Standard error of the mean along ``axis``: ``std(ddof=1) / sqrt(N)``."""
-    samples = np.asarray(samples, float)
+    """Standard error of the mean along ``axis``: ``std(ddof=1) / sqrt(N)``. NaN (or a masked entry, which is a NaN)
+    gives NaN: a standard error is never taken silently over fewer samples than it claims."""
+    samples = as_array("samples", samples, nan_ok=True, inf_ok=True)
+    if not isinstance(axis, (int, np.integer)) or isinstance(axis, (bool, np.bool_)) or not -samples.ndim <= axis < samples.ndim:
+        raise ValueError(f"axis must be an axis of samples (shape {samples.shape}), got {axis!r}")
     n = samples.shape[axis]
     if n < 2:
         raise ValueError("a standard error needs at least two Monte-Carlo samples")

@@ -69,6 +69,7 @@ __all__ = [
     "ANCHOR_CONDITION_RTOL",
     "rss_ml_position",
     "grid_ml_position",
+    "GRID_ML_BLOCK_BYTES",
     "LOCALIZATION_STATUSES",
     "IMPLAUSIBLE_SIGMAS",
     "implausible_powers",
@@ -1225,8 +1226,28 @@ def _check_model(model, m: int) -> None:
         raise ValueError(f"model.path_loss_exp must be positive, got {model.path_loss_exp!r}")
 
 
+#: memory of one block of grid costs in :func:`grid_ml_position` (problems x cells doubles; the arithmetic that makes
+#: it holds one temporary of the same size)
+GRID_ML_BLOCK_BYTES = 256 * 2**20
+
+
+def _grid_ml_block(chunk, n_problems: int, n_cells: int) -> int:
+    """Problems per block of :func:`grid_ml_position`: ``chunk`` (default: as many as fit) capped at
+    :data:`GRID_ML_BLOCK_BYTES` of costs, at least two when there are several (a lone row would take BLAS's
+    one-row kernel, which rounds differently: the result would depend on the blocking); checked before anything of
+    the grid's size is allocated."""
+    row = 8 * n_cells
+    smallest = min(n_problems, 2)
+    if smallest * row > GRID_ML_BLOCK_BYTES:
+        raise ValueError(f"grid_m has {n_cells} cells: a block of {smallest} problem(s) of costs would take "
+                         f"{smallest * row / 2**20:.4g} MiB, over the limit GRID_ML_BLOCK_BYTES = "
+                         f"{GRID_ML_BLOCK_BYTES / 2**20:.4g} MiB; use a coarser grid (or a smaller outline)")
+    fit = GRID_ML_BLOCK_BYTES // row
+    return max(smallest, min(fit, int(chunk) if chunk is not None else fit))
+
+
 def grid_ml_position(anchors_m, rss_dbm, model: PathLossModel, grid_m, *,
-                     chunk: int = 2048, min_anchors: int | None = None,
+                     chunk: int | None = None, min_anchors: int | None = None,
                      tag_height_m: float | None = None) -> LocalizationResult:
     """Grid maximum likelihood: the candidate point of ``grid_m`` ``(G, dim)`` with the smallest
     RSS-domain squared residual, for every problem; evaluated in chunks to bound memory. ``cost`` is that
@@ -1241,7 +1262,13 @@ def grid_ml_position(anchors_m, rss_dbm, model: PathLossModel, grid_m, *,
     sigma^2; model with ``sigma_db > 0``) gives
     ``status="poor_fit"``, position and ``converged`` kept; the cost at a grid point includes the grid's
     discretisation, so a grid far coarser than the shadowing can be flagged too (no grid point fits the readings).
-    ``tag_height_m``: anchors ``(m, 3)`` with heights, a plan grid ``(G, 2)`` (module docstring)."""
+    ``tag_height_m``: anchors ``(m, 3)`` with heights, a plan grid ``(G, 2)`` (module docstring).
+
+    Memory is bounded whatever the sizes: the problems are scored against the grid in blocks of at most ``chunk``
+    problems (default: as many as fit :data:`GRID_ML_BLOCK_BYTES` of costs, 256 MiB; an explicit ``chunk`` is capped
+    there too), each problem's arithmetic being the same in any block, so the result does not depend on ``chunk``. A
+    grid so large that two problems' costs (one, for a single problem) exceed the limit is refused in one line naming
+    ``grid_m``, before anything of its size is allocated."""
     plan, vertical = _planar(anchors_m, tag_height_m)
     anchors_full = np.asarray(anchors_m, dtype=float)
     anchors_m = check_anchor_geometry(plan)
@@ -1251,7 +1278,9 @@ def grid_ml_position(anchors_m, rss_dbm, model: PathLossModel, grid_m, *,
         raise ValueError("grid_m must hold at least one candidate point")
     power = _readings("rss_dbm", rss_dbm, m)
     _check_model(model, m)
-    check_scalar("chunk", chunk, ge=1, integer=True)
+    if chunk is not None:
+        check_scalar("chunk", chunk, ge=1, integer=True)
+    block_rows = _grid_ml_block(chunk, int(np.prod(power.shape[:-1], dtype=np.int64)), grid_m.shape[0])
     min_anchors = _min_anchors(min_anchors, dim, m)
     implausible = implausible_powers(power, model, max(model.min_distance_m, 1e-6)).reshape(-1)
     if implausible.any():
@@ -1283,14 +1312,20 @@ def grid_ml_position(anchors_m, rss_dbm, model: PathLossModel, grid_m, *,
     best_cost = np.empty(flat.shape[0])
     # a finite power of absurd size (-1e300 dBm: a tag very far away is not implausible) overflows its squares; that
     # problem is marked failed below, so the overflow is expected, not a warning for the caller
+    n_flat = flat.shape[0]
     with np.errstate(over="ignore", invalid="ignore"):
-        for start in range(0, flat.shape[0], chunk):
-            block = flat[start:start + chunk]
+        sq_grid = (mean_grid**2).sum(1)
+        for start in range(0, n_flat, block_rows):
+            stop = min(start + block_rows, n_flat)
+            # a lone last row is scored with its predecessor (recomputed to the same bits): one row alone would take
+            # BLAS's one-row kernel, whose rounding differs, and the result would depend on chunk
+            start = start - 1 if stop - start == 1 and n_flat > 1 else start
+            block = flat[start:stop]
             # |P - mu_g|^2 = |P|^2 - 2 P.mu_g + |mu_g|^2; the first term does not change the argmin
-            cost = (mean_grid**2).sum(1) - 2.0 * block @ mean_grid.T
+            cost = sq_grid - 2.0 * block @ mean_grid.T
             idx = np.argmin(cost, axis=1)
-            best[start:start + chunk] = idx
-            best_cost[start:start + chunk] = cost[np.arange(len(idx)), idx] + (block**2).sum(1)
+            best[start:stop] = idx
+            best_cost[start:stop] = cost[np.arange(len(idx)), idx] + (block**2).sum(1)
     pos = grid_m[best].reshape(batch + (grid_m.shape[1],))
     ok = np.isfinite(best_cost)
     # a cost that overflowed has no meaningful minimum: NaN position and cost, as rss_ml_position gives

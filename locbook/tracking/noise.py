@@ -27,6 +27,7 @@ exact for a linear-Gaussian model and to first order for the EKF's and UKF's lin
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+import inspect
 
 import numpy as np
 
@@ -214,6 +215,7 @@ def fit_noise_ml(F, Q, x0, P0, measurements, *, kind: str = "kf", fit_Q: str | N
     params = _Parameters(Q, streams, fit_Q, fit_R)
     p = params.size
     filt = KALMAN_FILTERS[kind]
+    _check_options(kind, options)
     options = {**options, "divergence_window": 0, "record": [0]}
 
     def run(theta):
@@ -253,6 +255,18 @@ def fit_noise_ml(F, Q, x0, P0, measurements, *, kind: str = "kf", fit_Q: str | N
     ll = log_likelihood(theta)
     return NoiseFit(Qf, tuple(R), q, r, ll if per_run else np.sum(ll), ll0 if per_run else np.sum(ll0), at_bound,
                     iterations, "ml", flat=flat)
+
+
+def _check_options(kind: str, options: dict) -> None:
+    """A keyword the filter ``kind`` does not take is one line naming it and the kinds that take it (e.g. the UKF's
+    ``alpha`` given with ``kind="kf"``), not the filter's TypeError at the first evaluation."""
+    takes = {k: set(inspect.signature(f).parameters) for k, f in KALMAN_FILTERS.items()}
+    for name in options:
+        if name not in takes[kind]:
+            others = [k for k in KALMAN_FILTERS if name in takes[k]]
+            where = (f"only kind={' or kind='.join(repr(k) for k in others)} takes it" if others else
+                     "no filter kind takes it (a misspelt option?)")
+            raise ValueError(f"fit_noise_ml: the {kind!r} filter has no option {name!r}: {where}")
 
 
 def _flat(log_likelihood, runs, p: int, per_run: bool) -> np.ndarray:

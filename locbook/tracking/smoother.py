@@ -57,7 +57,8 @@ def rts_smoother(result: KalmanResult, F=None, *, residual=None) -> SmoothedResu
     n)``, with the run's leading axes, or ``per_step(batch + (T, n, n))``, F_k moving step k - 1 to step k) gives
     ``D_{k+1} = P_k F_{k+1}^T``. ``residual(a, b)``: the difference of states (e.g. a wrapped heading; the motion's
     ``residual``). A step without readings is smoothed like any other (its posterior is its prediction). A singular
-    ``P_{k+1|k}`` takes the pseudo-inverse (module docstring); a run of zero runs or of one step is returned as it is;
+    ``P_{k+1|k}`` takes the pseudo-inverse (module docstring); a run of zero runs, of no step or of one step is returned
+    as it is (no step: empty arrays, no gain);
     covariances that are not finite, or arrays of the wrong shapes (a result built by hand), are refused in one line."""
     if not isinstance(result, KalmanResult):
         raise TypeError(f"result must be a KalmanResult, got {type(result).__name__}")
@@ -73,7 +74,7 @@ def rts_smoother(result: KalmanResult, F=None, *, residual=None) -> SmoothedResu
                          f"{x.shape} and {P.shape}")
     T, n = x.shape[-2], x.shape[-1]
     steps = np.asarray(result.steps)
-    if not np.array_equal(steps, np.arange(T)) or T == 0:
+    if not np.array_equal(steps, np.arange(T)):
         raise ValueError("rts_smoother needs every step recorded (record=None), from step 0 on; got steps "
                          f"{steps[:5].tolist()}{'...' if steps.size > 5 else ''} of a run")
     batch = x.shape[:-2]
@@ -98,8 +99,8 @@ def rts_smoother(result: KalmanResult, F=None, *, residual=None) -> SmoothedResu
             raise ValueError(f"rts_smoother: the run's {name} is not finite at step {step}"
                              f"{f' of run {at[:len(batch)]}' if batch else ''} (entry {at[len(batch) + 1:]}); "
                              "the smoother needs the finite covariances of a filter run")
-    if x.size == 0:                  # no run (a zero-length run axis) or no state: nothing to smooth
-        return SmoothedResult(x.copy(), P.copy(), np.zeros(batch + (T - 1, n, n)))
+    if x.size == 0:                  # no run (a zero-length run axis), no step or no state: nothing to smooth
+        return SmoothedResult(x.copy(), P.copy(), np.zeros(batch + (max(T - 1, 0), n, n)))
     if residual is None:
         diff = lambda a, b: a - b
     elif not callable(residual):

@@ -9,6 +9,7 @@ their innovations and innovation covariance (block diagonal over serial updates;
 from __future__ import annotations
 
 from dataclasses import dataclass
+import inspect
 
 import numpy as np
 
@@ -223,7 +224,32 @@ class NonlinearMeasurement:
             raise ValueError(f"{self.name}: a NonlinearMeasurement's R is one covariance or a function of the state "
                              "(per_step R is for a LinearMeasurement)")
         if not callable(self.R):
+            R = np.shape(self.R)
+            if z.shape[-1] == 1 and z.ndim >= 3 and len(R) >= 2 and R[-1] == R[-2] == z.shape[-2] != 1:
+                raise ValueError(f"{self.name}: z has shape {z.shape}, a column of {R[-1]} readings per step "
+                                 f"(filterpy's (m, 1) z); pass batch + (T, m), e.g. z[..., 0] of shape {z.shape[:-1]}")
             _covariance(f"{self.name}: R", self.R, z.shape[-1])
+
+    def _call(self, field: str, *args):
+        """The stream's function ``field`` called with ``args``; one whose signature does not take them (filterpy's
+        ``h(x, *hx_args)``) is a one-line error saying what to pass; a TypeError raised inside a function that takes
+        them reaches the caller unchanged."""
+        fn = getattr(self, field)
+        try:
+            return fn(*args)
+        except TypeError as exc:
+            try:
+                inspect.signature(fn).bind(*args)
+            except TypeError:
+                form = {"h": "h(x)", "jacobian": "jacobian(x)", "residual": "residual(a, b)",
+                        "mean": "mean(values, weights)"}[field]
+                hint = {"h": "bind its other arguments: write lambda x: h(x, arg)",
+                        "jacobian": "bind its other arguments: write jacobian=lambda x: H(x, arg)"}.get(
+                            field, f"give a function called as {form}")
+                raise ValueError(f"{self.name}: {field} cannot be called as {form}: {exc}; {hint}") from None
+            except ValueError:      # no signature to inspect (a builtin): the function's own error
+                pass
+            raise
 
     def noise_at(self, x) -> np.ndarray:
         """R at the state ``x`` ``batch + (n,)``: the fixed R, or the callback's (checked: a covariance)."""
@@ -240,7 +266,7 @@ class NonlinearMeasurement:
 
     def difference(self, a, b):
         """``a - b`` of readings, through ``residual`` when given."""
-        return np.asarray(self.residual(a, b), dtype=float) if self.residual is not None else a - b
+        return np.asarray(self._call("residual", a, b), dtype=float) if self.residual is not None else a - b
 
     # The filters call h, jacobian, residual and mean through these: each output is checked (real, of the shape the
     # stream needs, finite wherever a reading is present), so a function that fails is an error naming it and the
@@ -248,7 +274,7 @@ class NonlinearMeasurement:
     def readings_at(self, x, present, step: int, batch_ndim: int) -> np.ndarray:
         """``h(x)`` ``x.shape[:-1] + (m,)`` (``x``: states or sigma points), checked; ``present`` broadcasts to it."""
         m = np.shape(self.z)[-1]
-        out = function_output(f"{self.name}: h", self.h(x), np.shape(x)[:-1] + (m,), 1, np.shape(x))
+        out = function_output(f"{self.name}: h", self._call("h", x), np.shape(x)[:-1] + (m,), 1, np.shape(x))
         _refuse_not_finite(f"{self.name}: h", out, present & ~np.isfinite(out), batch_ndim, step, _PRESENT)
         return out
 
@@ -258,7 +284,7 @@ class NonlinearMeasurement:
         if self.jacobian is None:
             raise ValueError(f"{self.name}: the EKF needs its jacobian (the UKF does not)")
         m, n = np.shape(self.z)[-1], np.shape(x)[-1]
-        H = function_output(f"{self.name}: jacobian", self.jacobian(x), np.shape(x)[:-1] + (m, n), 2, np.shape(x))
+        H = function_output(f"{self.name}: jacobian", self._call("jacobian", x), np.shape(x)[:-1] + (m, n), 2, np.shape(x))
         _refuse_not_finite(f"{self.name}: jacobian", H, present[..., :, None] & ~np.isfinite(H), np.ndim(x) - 1, step,
                            _PRESENT)
         return H
@@ -268,7 +294,7 @@ class NonlinearMeasurement:
         if self.residual is None:
             return a - b
         shape = np.broadcast_shapes(np.shape(a), np.shape(b))
-        out = function_output(f"{self.name}: residual", self.residual(a, b), shape, 1, shape)
+        out = function_output(f"{self.name}: residual", self._call("residual", a, b), shape, 1, shape)
         _refuse_not_finite(f"{self.name}: residual", out, present & ~np.isfinite(out), batch_ndim, step, _PRESENT)
         return out
 
@@ -277,7 +303,7 @@ class NonlinearMeasurement:
         checked: ``(..., m)``, finite where ``present``."""
         if self.mean is None:
             return weights @ values
-        out = function_output(f"{self.name}: mean", self.mean(values, weights), np.shape(values)[:-2] +
+        out = function_output(f"{self.name}: mean", self._call("mean", values, weights), np.shape(values)[:-2] +
                               np.shape(values)[-1:], 1, np.shape(values))
         _refuse_not_finite(f"{self.name}: mean", out, present & ~np.isfinite(out), batch_ndim, step, _PRESENT)
         return out

@@ -112,7 +112,8 @@ MAX_EXACT_READ_BYTES = 64 << 20
 EXACT_READER_BYTES_PER_BYTE = 24
 #: the largest readings file (bytes) read at all: the fast reader takes about
 #: :data:`FAST_READER_BYTES_PER_BYTE` bytes of memory per byte of file (issue 29: 10^7 readings, 336 MiB of CSV,
-#: peaked at 2.2 GiB), so 1 GiB of CSV (about 3 x 10^7 readings) take about 7 GiB; split larger recordings
+#: peaked at 2.2 GiB; issue 44: 10^6 readings, 31 MB, 200 MB above the interpreter, 3 x 10^6 623 MB, one quoted field
+#: or none), so 1 GiB of CSV (about 3 x 10^7 readings) take about 7 GiB; split larger recordings
 MAX_READINGS_FILE_BYTES = 1 << 30
 FAST_READER_BYTES_PER_BYTE = 7
 #: the shortest epoch window (s) but 0: no radio packet is shorter, and a window of 5e-324 s makes ticks infinite

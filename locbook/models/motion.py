@@ -64,6 +64,15 @@ class KinematicModel:
 
     def __post_init__(self):
         check_scalar("dt_s", self.dt_s, gt=0)                    # NaN is rejected too (nan <= 0 is False)
+        power = 2 * (self.order + 1)                             # the highest power of dt in F, G and Q
+        try:
+            big = float(self.dt_s) ** power
+        except OverflowError:
+            big = np.inf
+        if not np.isfinite(big):
+            raise ValueError(f"dt_s = {self.dt_s!r} s is too long a step: dt_s**{power} (in Q) overflows float64; a "
+                             f"step is at most about {np.finfo(float).max ** (1 / power):.3g} s (an epoch window in "
+                             "another time unit?)")
         check_scalar("process noise q", self.q, ge=0)
         if self.order not in (1, 2):
             raise ValueError(f"order must be 1 (constant velocity) or 2 (constant acceleration), got {self.order}")

@@ -10,12 +10,13 @@ imaginary part would be dropped), and a list holding None gets a hint to use NaN
 """
 from __future__ import annotations
 
+import inspect
 import reprlib
 from collections.abc import Sequence
 
 import numpy as np
 
-__all__ = ["as_array", "check_trailing_shape", "check_scalar", "check_choice", "function_output"]
+__all__ = ["as_array", "check_trailing_shape", "check_scalar", "check_choice", "function_output", "call_user"]
 
 _COMPLEX = "{name} must be real, got complex values (their imaginary part would be dropped)"
 
@@ -186,3 +187,19 @@ def function_output(name: str, value, shape: tuple, tail_ndim: int, input_shape:
         raise ValueError(f"{name} returned shape {arr.shape}{called}; it must return shape {tuple(shape)} (ending in "
                          f"{tail})")
     return arr if arr.shape == tuple(shape) or not broadcast else np.broadcast_to(arr, shape)
+
+
+def call_user(fn, args: tuple, mismatch):
+    """``fn(*args)`` for a user-supplied function. A function whose signature cannot take ``args`` (a peer library's
+    form, e.g. filterpy's ``fx(x, dt)`` or ``h(x, *hx_args)``) is a ``ValueError`` of one line, ``mismatch(exc)``;
+    a TypeError raised inside a function that does take them reaches the caller unchanged."""
+    try:
+        return fn(*args)
+    except TypeError as exc:
+        try:
+            inspect.signature(fn).bind(*args)
+        except TypeError:
+            raise ValueError(mismatch(exc)) from None
+        except ValueError:          # no signature to inspect (a builtin): the function's own error
+            pass
+        raise

@@ -9,12 +9,11 @@ unbatched and updated once per step; the first update that differs between runs 
 """
 from __future__ import annotations
 
-import inspect
 from dataclasses import dataclass
 
 import numpy as np
 
-from .._validate import as_array, function_output
+from .._validate import as_array, call_user, function_output
 from ._linalg import (_Singular, _apply, _batch_shape, _check_state, _covariance, _mT, _raise_singular,
                       _refuse_not_finite)
 from .functional import _linear_update_shared
@@ -299,23 +298,13 @@ _MOTION_FINITE = "for a finite state: f (and its jacobian) must return finite va
 def _motion_call(motion: NonlinearMotion, field: str, x, k: int):
     """The motion's ``f`` or ``jacobian`` at ``x`` (``f(x)``, or ``f(x, k)`` with ``uses_step``); a function whose
     signature does not take those arguments (filterpy's ``fx(x, dt)``) is a one-line error saying what to pass."""
-    fn = getattr(motion, field)
-    args = (x, k) if motion.uses_step else (x,)
-    try:
-        return fn(*args)
-    except TypeError as exc:
-        try:
-            inspect.signature(fn).bind(*args)
-        except TypeError:
-            form = f"{field}(x, k)" if motion.uses_step else f"{field}(x)"
-            hint = ("uses_step=False for f(x)" if motion.uses_step else
-                    "bind the time step, e.g. NonlinearMotion(lambda x: fx(x, dt)), or uses_step=True for f(x, k) "
-                    "with k the step predicted to")
-            raise ValueError(f"{motion.name}: {field} cannot be called as {form} (states (..., n)"
-                             f"{', k the step' if motion.uses_step else ''}): {exc}; {hint}") from None
-        except ValueError:          # no signature to inspect (a builtin): the function's own error
-            pass
-        raise
+    form = f"{field}(x, k)" if motion.uses_step else f"{field}(x)"
+    hint = ("uses_step=False for f(x)" if motion.uses_step else
+            "bind the time step, e.g. NonlinearMotion(lambda x: fx(x, dt)), or uses_step=True for f(x, k) "
+            "with k the step predicted to")
+    return call_user(getattr(motion, field), (x, k) if motion.uses_step else (x,),
+                     lambda exc: f"{motion.name}: {field} cannot be called as {form} (states (..., n)"
+                                 f"{', k the step' if motion.uses_step else ''}): {exc}; {hint}")
 
 
 def _motion_apply(motion: NonlinearMotion, x, k: int, batch_ndim: int) -> np.ndarray:

@@ -9,11 +9,10 @@ their innovations and innovation covariance (block diagonal over serial updates;
 from __future__ import annotations
 
 from dataclasses import dataclass
-import inspect
 
 import numpy as np
 
-from .._validate import as_array, check_choice, check_scalar, function_output
+from .._validate import as_array, call_user, check_choice, check_scalar, function_output
 from ..models.channel import PathLossModel
 from ..models.rss import rss_mean_jacobian
 from ._linalg import (_LOG_2PI, _STATE_NOT_FINITE, _UPDATE_OVERFLOW, _Singular, _covariance, _joseph,
@@ -234,22 +233,13 @@ class NonlinearMeasurement:
         """The stream's function ``field`` called with ``args``; one whose signature does not take them (filterpy's
         ``h(x, *hx_args)``) is a one-line error saying what to pass; a TypeError raised inside a function that takes
         them reaches the caller unchanged."""
-        fn = getattr(self, field)
-        try:
-            return fn(*args)
-        except TypeError as exc:
-            try:
-                inspect.signature(fn).bind(*args)
-            except TypeError:
-                form = {"h": "h(x)", "jacobian": "jacobian(x)", "residual": "residual(a, b)",
-                        "mean": "mean(values, weights)"}[field]
-                hint = {"h": "bind its other arguments: write lambda x: h(x, arg)",
-                        "jacobian": "bind its other arguments: write jacobian=lambda x: H(x, arg)"}.get(
-                            field, f"give a function called as {form}")
-                raise ValueError(f"{self.name}: {field} cannot be called as {form}: {exc}; {hint}") from None
-            except ValueError:      # no signature to inspect (a builtin): the function's own error
-                pass
-            raise
+        form = {"h": "h(x)", "jacobian": "jacobian(x)", "residual": "residual(a, b)",
+                "mean": "mean(values, weights)"}[field]
+        hint = {"h": "bind its other arguments: write lambda x: h(x, arg)",
+                "jacobian": "bind its other arguments: write jacobian=lambda x: H(x, arg)"}.get(
+                    field, f"give a function called as {form}")
+        return call_user(getattr(self, field), args,
+                         lambda exc: f"{self.name}: {field} cannot be called as {form}: {exc}; {hint}")
 
     def noise_at(self, x) -> np.ndarray:
         """R at the state ``x`` ``batch + (n,)``: the fixed R, or the callback's (checked: a covariance)."""

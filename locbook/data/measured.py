@@ -653,6 +653,8 @@ def read_readings_table(path, *, time_as_text: bool = False) -> tuple[pd.DataFra
             if size > MAX_EXACT_READ_BYTES:                # too large to read again as text: locate it in chunks
                 _locate_bad_number(path, header, numeric, exc)
             why = "the fast reader refused it"             # the exact reader says what and where
+    if not why and len(table.columns) != len(header):   # e.g. lines ended by a bare CR: the header read differs
+        why = "the fast reader split the lines otherwise than the header line"
     if why:
         return _read_text_table(path, READING_COLUMNS, "readings", why=why)
     table.columns = header

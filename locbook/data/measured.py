@@ -72,6 +72,7 @@ import numpy as np
 import pandas as pd
 from scipy.spatial import cKDTree
 
+from .._text import decode_utf8
 from ..errors import LocbookError, ParameterError
 
 __all__ = [
@@ -173,22 +174,13 @@ def _check_line_lengths(data: bytes, path: Path, what: str, first_line: int = 1)
 
 def _decode_utf8(data: bytes, path: Path, what: str) -> str:
     """The file's text; a byte that is not UTF-8 is an error naming its line and its byte in the line."""
-    bom = data.startswith(b"\xef\xbb\xbf")             # a UTF-8 byte-order mark (Excel writes one): not data
-    try:
-        return data[3:].decode("utf-8") if bom else data.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        offset = exc.start + (3 if bom else 0)
-        # lines end at LF, CR or CRLF, as the csv reader counts them (a CR-only file has no LF at all)
-        line_start = max(data.rfind(b"\n", 0, offset), data.rfind(b"\r", 0, offset)) + 1
-        ends = [i for i in (data.find(b"\n", offset), data.find(b"\r", offset)) if i >= 0]
-        line_end = min(ends) if ends else len(data)
-        line_text = data[line_start:min(line_end, line_start + 4 * MAX_QUOTED_CHARS)].decode("utf-8", errors="replace")
-        before = data[:offset]
-        line = before.count(b"\n") + before.count(b"\r") - before.count(b"\r\n") + 1
+    def fail(line, column, offset, line_bytes):
+        line_text = line_bytes[:4 * MAX_QUOTED_CHARS].decode("utf-8", errors="replace")
         raise DataFormatError(
-            f"{what} file {path}, line {line}, byte {offset - line_start + 1} of the "
+            f"{what} file {path}, line {line}, byte {column} of the "
             f"line (byte {offset + 1} of the file): 0x{data[offset]:02x} is not UTF-8 ({_shown(line_text.rstrip())}); "
-            "locbook reads UTF-8 only: re-save the file as UTF-8 (e.g. iconv -f cp1252 -t utf-8)") from None
+            "locbook reads UTF-8 only: re-save the file as UTF-8 (e.g. iconv -f cp1252 -t utf-8)")
+    return decode_utf8(data, fail)
 
 
 def _read_text_table(path, required: tuple[str, ...], what: str, why: str = "") -> tuple[pd.DataFrame, np.ndarray]:

@@ -58,6 +58,7 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
+from .._text import decode_utf8
 from ..errors import LocbookError
 
 __all__ = ["Reading", "ReadingsError", "readings", "readings_for", "load_reading_file", "READINGS_DIR",
@@ -104,15 +105,10 @@ def read_declaration(path, error: type[Exception] = ReadingsError, what: str = "
 def utf8_text(data: bytes, path, error: type[Exception] = ReadingsError) -> str:
     """``data`` (the bytes of the text file ``path``) decoded as UTF-8 (a leading byte-order mark dropped); a byte
     that is not UTF-8 raises ``error`` naming the file, the line and the column (1-based, in bytes)."""
-    bom = data.startswith(b"\xef\xbb\xbf")
-    try:
-        return data[3:].decode("utf-8") if bom else data.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        offset = exc.start + (3 if bom else 0)
-        line_start = data.rfind(b"\n", 0, offset) + 1
-        line = data.count(b"\n", 0, offset) + 1
-        raise error(f"{path}, line {line}, column {offset - line_start + 1}: byte 0x{data[offset]:02x} is not "
-                    "UTF-8 text; save the file as UTF-8") from None
+    def fail(line, column, offset, _line_bytes):
+        raise error(f"{path}, line {line}, column {column}: byte 0x{data[offset]:02x} is not UTF-8 text; save the "
+                    "file as UTF-8")
+    return decode_utf8(data, fail)
 
 
 _NAME = re.compile(r"[a-z][a-z0-9_]*\Z")

@@ -273,7 +273,7 @@ CELLS = {
     "fitted": st.sampled_from(["", "[]", "[1.3]", "[2]", "[9.9]", "x"]),
     "low": st.sampled_from(["", "0.0", "1", "-1e300", "nan", "'x'", "5.5"]),
     "high": st.sampled_from(["", "2.0", "4", "1e300", "inf", "0.5"]),
-    "basis": st.sampled_from(["printed", "assumed", "fitted_to_output", "assumed", "printed", "guessed"]),
+    "basis": st.sampled_from(["printed", "assumed", "fitted", "assumed", "printed", "guessed"]),
     "source": st.sampled_from(["Table 9", "Table 9", "", "a, b", '"quoted, comma"', "T\u00e4ble"]),
     "reason": st.sampled_from(["why", "why", "", "x" * 50]),
     "requires": st.sampled_from(["", "{ b = 0.5 }", "{ a = 1.0 }", "{ tag = 'p' }", "{ nope = 1 }", "x", "[1]"]),

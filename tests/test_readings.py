@@ -158,7 +158,37 @@ def test_dogan_q_reading_offers_the_printed_constant():
 
 def test_every_calibration_reading_can_be_swept_away_from_its_fit():
     fitted = [r for r in ALL if r.is_calibration]
-    assert fitted and all(r.alternatives or r.low is not None for r in fitted)
+    assert all(r.alternatives or r.low is not None for r in fitted)
+
+
+#: a quoted passage of the source: at least three words between quotation marks ('...', "..." or curly quotes)
+_QUOTED = re.compile(r"""(?:'[^']*\w+\W+\w+\W+\w+[^']*'|"[^"]*\w+\W+\w+\W+\w+[^"]*"|“[^”]*\w+\W+\w+\W+\w+[^”]*”)""")
+_PLACE = re.compile(r"\b(Sec|Secs|Section|Ch|Chapter|Table|Tables|Eq|Eqs|Fig|Figs|Figure|Appendix|Abstract|Algorithm|line)\b")
+
+
+@pytest.mark.parametrize("reading", [r for r in ALL if r.basis in ("printed", "textual")], ids=_id)
+def test_a_printed_or_textual_reading_quotes_the_text_it_rests_on(reading):
+    # issue 45: the default is the reading the text supports best, argued from quotes (section, and line)
+    assert _QUOTED.search(reading.quotes), f"{reading.document}:{reading.name}: quotes holds no quoted passage"
+    assert _PLACE.search(reading.quotes), f"{reading.document}:{reading.name}: quotes names no section or table"
+
+
+@pytest.mark.parametrize("reading", [r for r in ALL if r.basis == "fitted" or r.fitted], ids=_id)
+def test_a_fitted_value_says_why_no_text_supports_it(reading):
+    # issue 45: `fitted` means only that nothing in the text supports it and it was chosen because it fits
+    assert re.search(r"no (?:text|word|sentence|passage)|not supported by the text|the text (?:does not|never)",
+                     reading.reason), f"{reading.document}:{reading.name}: the reason does not say why no text supports it"
+
+
+def test_the_basis_of_each_value():
+    r = Reading("doc", "x", ("e",), "p", "", "a", ("b", "c"), None, None, "textual", "Sec. 1", "why", ("c",),
+                "Sec. 1: 'the words of the text'")
+    assert (r.alternative_basis("a"), r.alternative_basis("b"), r.alternative_basis("c")) == \
+        ("textual", "textual", "fitted")
+    silent = Reading("doc", "y", ("e",), "p", "", 1.0, (2.0,), 0.5, 3.0, "assumed", "Sec. 1", "why")
+    assert silent.alternative_basis(2) == "assumed" and silent.alternative_basis(1.0) == "assumed"
+    fit = Reading("doc", "z", ("e",), "p", "", 1.0, (2.0,), None, None, "fitted", "Sec. 1", "why")
+    assert fit.alternative_basis(1.0) == "fitted" and fit.alternative_basis(2.0) == "textual"
 
 
 # -- validation ----------------------------------------------------------------------------------------------------
@@ -205,7 +235,7 @@ def test_a_good_file_loads(tmp_path):
     ({"fitted": "[0.7]"}, "fitted names [0.7], which are not among the alternatives"),
     ({"fitted": "0.5"}, "fitted must be a TOML array"),
     ({"default": "'rest'", "alternatives": "['moving']"}, "needs a numeric default"),
-    ({"basis": "fitted_to_output", "alternatives": "", "low": "", "high": ""}, "needs at least one alternative"),
+    ({"basis": "fitted", "alternatives": "", "low": "", "high": ""}, "needs at least one alternative"),
     ({"parameter": "", "where": ""}, "needs a parameter or"),
     ({"parameter": "", "where": "not a path"}, "must be a dotted path"),
     ({"name": "Speed"}, "must be snake_case"),

@@ -20,16 +20,30 @@ One CSV per document, ``locbook/data/readings/<document>.csv`` (package data, be
 ``alternatives``
     a TOML array of the other plausible values (empty or ``[]``: none named).
 ``fitted``
-    a TOML array of those alternatives that were chosen because they fit printed results (empty: none); rows
-    computed under one are calibrations, and a bracket marks it ``[fitted]`` where it reaches a row.
+    a TOML array of those alternatives that nothing in the text supports and that were chosen because they fit
+    printed results (empty: none); rows computed under one are calibrations, and a bracket marks it ``[fitted]``
+    where it reaches a row. Every other alternative has the basis :meth:`Reading.alternative_basis` gives:
+    ``textual`` (another reading the text supports) unless the reading is ``assumed`` (the text is silent: a
+    plausible value).
 ``low``, ``high``
     a plausible range of a numeric reading (both or neither).
 ``basis``
-    one of :data:`BASES`: ``printed`` (the text prints it), ``assumed`` (not printed: our choice, with a reason),
-    ``fitted_to_output`` (chosen because it fits printed results: rows that use it are calibrations).
-``source``, ``reason``
-    where the source prints the value or leaves it open (section, equation, table), and why the default and the
-    alternatives (both required).
+    one of :data:`BASES`, the basis of the default (issue 45, "the rule for a reading's basis"):
+    ``printed`` (the text prints the value), ``textual`` (not printed as a value, but the text supports it: the
+    ``quotes`` say which words), ``assumed`` (the text says nothing that decides it: our choice, the field's
+    standard model or a plausible range, as ``reason`` says), ``fitted`` (nothing in the text supports it and it was
+    chosen because it fits printed results: rows that use it are calibrations). Agreement with the printed numbers
+    is never an argument for or against a reading.
+``source``
+    where the source prints the value or leaves it open (section, equation, table).
+``quotes``
+    the words of the source the default and the alternatives rest on, quoted, each with its section (and, where
+    useful, the line of the text): required for a ``printed`` or ``textual`` basis (``tests/test_readings.py``
+    checks that each such reading quotes the text); for ``assumed``, what the text says around the gap, if
+    anything.
+``reason``
+    why the default and why the alternatives, argued from the quotes (required); where two readings are equally
+    textual, it says so and names the field's standard model the default follows.
 ``requires`` (optional last column, :data:`OPTIONAL_READING_COLUMNS`)
     a TOML inline table of other parameters this reading acts only together with (``{ r_mode = 'isotropic' }``:
     George's isotropic R is used only when ``r_mode`` is ``'isotropic'``); a bracket sets them at each of this
@@ -39,7 +53,7 @@ Rules (:func:`readings` raises :class:`ReadingsError` naming the file, the line 
 columns exactly as above; a known basis; a unique snake_case name; at least one experiment; ``parameter`` or
 ``where``; every TOML value parses (``alternatives`` and ``fitted`` as arrays); the default is not among the alternatives, and every fitted value is;
 ``requires`` a table of parameter names other than the reading's own (and only with a ``parameter``);
-``low <= high``, both numbers, and a numeric default inside ``[low, high]``; a ``fitted_to_output`` reading names at
+``low <= high``, both numbers, and a numeric default inside ``[low, high]``; a ``fitted`` reading names at
 least one alternative or a range, so that a sweep can test the printed numbers under a reading not chosen from them.
 
 This module only declares and validates; it imports nothing from the suite (the suite's tests check each
@@ -67,11 +81,12 @@ __all__ = ["Reading", "ReadingsError", "readings", "readings_for", "load_reading
 
 READINGS_DIR = Path(__file__).resolve().parents[1] / "data" / "readings"    # package data of locbook.data
 READING_COLUMNS = ("name", "experiments", "parameter", "where", "default", "alternatives", "fitted", "low", "high",
-                   "basis", "source", "reason")
+                   "basis", "source", "quotes", "reason")
 #: columns a readings file may add after :data:`READING_COLUMNS`
 OPTIONAL_READING_COLUMNS = ("requires",)
-#: The basis of a reading's default: printed by the source, assumed by us, or fitted to the source's printed output.
-BASES = ("printed", "assumed", "fitted_to_output")
+#: The basis of a reading's default: printed by the source, supported by its text, assumed where the text is silent,
+#: or fitted to the source's printed output with no textual support.
+BASES = ("printed", "textual", "assumed", "fitted")
 
 
 
@@ -137,6 +152,8 @@ class Reading:
     source: str
     reason: str
     fitted: tuple = ()
+    #: the source's words the default and the alternatives rest on (the ``quotes`` column)
+    quotes: str = ""
     #: other parameters set with each of this reading's values (the ``requires`` column): name -> value
     requires: dict = field(default_factory=dict, hash=False, compare=False)
 
@@ -148,11 +165,21 @@ class Reading:
     @property
     def is_calibration(self) -> bool:
         """True when the default was chosen because it fits printed output (rows using it are calibrations)."""
-        return self.basis == "fitted_to_output"
+        return self.basis == "fitted"
 
     def is_fitted(self, value) -> bool:
         """True when ``value`` is one of the alternatives chosen because it fits printed results."""
         return any(_key(value) == _key(f) for f in self.fitted)
+
+    def alternative_basis(self, value) -> str:
+        """The basis of one of this reading's values: the declared basis for the default, ``fitted`` for a fitted
+        alternative, ``assumed`` for another value of an assumed reading (the text is silent), else ``textual``
+        (another reading the text supports)."""
+        if self.default is not None and _key(value) == _key(self.default):
+            return self.basis
+        if self.is_fitted(value):
+            return "fitted"
+        return "assumed" if self.basis == "assumed" else "textual"
 
     @property
     def values(self) -> tuple:
@@ -248,8 +275,8 @@ def _reading(document: str, row: dict, where: str) -> Reading:
         if default is not None and not low <= default <= high:
             raise ReadingsError(f"{where}: the default {cells['default']} is outside [low, high] = "
                                 f"[{cells['low']}, {cells['high']}]")
-    if cells["basis"] == "fitted_to_output" and not alternatives and low is None:
-        raise ReadingsError(f"{where}: a fitted_to_output reading needs at least one alternative or a range "
+    if cells["basis"] == "fitted" and not alternatives and low is None:
+        raise ReadingsError(f"{where}: a fitted reading needs at least one alternative or a range "
                             f"[low, high], so that a sweep can test the printed numbers under a reading not chosen "
                             f"from them")
     requires = {} if cells["requires"] == "" else _toml_value(cells["requires"], where, "requires")
@@ -261,7 +288,7 @@ def _reading(document: str, row: dict, where: str) -> Reading:
     if cells["parameter"] in requires:
         raise ReadingsError(f"{where}: requires names the reading's own parameter {cells['parameter']!r}")
     return Reading(document, name, experiments, cells["parameter"], cells["where"], default, alternatives, low, high,
-                   cells["basis"], cells["source"], cells["reason"], tuple(fitted), dict(requires))
+                   cells["basis"], cells["source"], cells["reason"], tuple(fitted), cells["quotes"], dict(requires))
 
 
 def load_reading_file(path: str | Path, document: str | None = None) -> tuple[Reading, ...]:

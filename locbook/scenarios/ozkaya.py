@@ -92,9 +92,9 @@ CELL_MARGIN_M = 0.5
 #: The contested readings of the Sec. 7.2 simulations (locbook/data/readings/ozkaya2011.csv): reading name -> its
 #: values, the first being the default. Each is a notebook parameter of the same name.
 SIM_READINGS = {
-    # how the median and 90th percentile were computed (Sec. 7.2.1 lists them, not how)
-    "percentile_convention": ("pooled_last_recursion", "pooled_all_recursions", "per_run_then_averaged",
-                              "over_run_rmses"),
+    # how the median and 90th percentile are taken: from the same errors as the RMSE, mean and std (Sec. 7.2.1,
+    # 'From total estimation error data ... using CDF plot'), or two per-run summaries the text does not describe
+    "percentile_convention": ("pooled", "per_run_then_averaged", "over_run_rmses"),
     # where a target 'placed at random in the room' (Sec. 7.2.1) is drawn: the room, 1 m in, or the cells' area
     "target_sampling": ("room", "inner", "cell_cores"),
     # the k-NN weights of Eq. (3.3): corrected, as printed, or plain averaging
@@ -316,31 +316,40 @@ _STATISTIC_FUNCTIONS = {"rmse_m": rmse_m, "mean_m": mean_error_m, "median_m": me
 _PERCENTILES = {"median_m": 50.0, "p90_m": 90.0}
 
 
-def _percentile_over_runs(errors_m, q: float, convention: str):
+def _sample(errors_m, over_recursions: bool):
+    """The errors every statistic of a table is taken from (issue 45: one population): of every recursion of every
+    run ``(..., R*T)`` when ``over_recursions``, else of recursion rt of every run ``(..., R)``; ``errors_m`` is
+    ``(..., R, T)``."""
+    if over_recursions:
+        return errors_m.reshape(errors_m.shape[:-2] + (-1,))
+    return errors_m[..., -1]
+
+
+def _percentile_over_runs(errors_m, q: float, convention: str, over_recursions: bool = False):
     """The ``q``-th percentile of per-step errors ``(..., R, T)`` under a percentile convention, one per leading
-    index: pooled over the runs' last recursion, pooled over every recursion, the mean over runs of each run's
-    percentile over its recursions, or the percentile over runs of each run's RMSE over its recursions."""
-    lead = errors_m.shape[:-2]
-    if convention == "pooled_last_recursion":
-        return np.percentile(errors_m[..., -1], q, axis=-1)
-    if convention == "pooled_all_recursions":
-        return np.percentile(errors_m.reshape(lead + (-1,)), q, axis=-1)
+    index, always over the recursions the other statistics use (:func:`_sample`): ``pooled``, the percentile of
+    those errors themselves (the CDF of 'total estimation error data', Sec. 7.2.1); ``per_run_then_averaged``, the
+    mean over runs of each run's percentile over its recursions (recursion rt alone: its error); ``over_run_rmses``,
+    the percentile over runs of each run's RMSE over its recursions (recursion rt alone: its error)."""
+    if convention == "pooled":
+        return np.percentile(_sample(errors_m, over_recursions), q, axis=-1)
+    per_run = errors_m if over_recursions else errors_m[..., -1:]
     if convention == "per_run_then_averaged":
-        return np.mean(np.percentile(errors_m, q, axis=-1), axis=-1)
-    return np.percentile(np.sqrt(np.mean(np.square(errors_m), axis=-1)), q, axis=-1)      # over_run_rmses
+        return np.mean(np.percentile(per_run, q, axis=-1), axis=-1)
+    return np.percentile(np.sqrt(np.mean(np.square(per_run), axis=-1)), q, axis=-1)      # over_run_rmses
 
 
 def summarize(errors, rng: np.random.Generator | None = None, *,
-              percentile_convention: str = "pooled_last_recursion", over_recursions: bool = False) -> dict:
+              percentile_convention: str = "pooled", over_recursions: bool = False) -> dict:
     """The printed statistics (Sec. 7.2.1: RMSE, mean, median, 90th percentile, std) of the errors, and with ``rng``
     their Monte-Carlo standard errors (``<statistic>_se``).
 
     ``errors``: one last-recursion error per run ``(R,)``, or the per-step errors ``(R, T)`` (the last column being
-    recursion rt). Two readings the thesis does not print (locbook/data/readings/ozkaya2011.csv):
-    ``percentile_convention`` (:data:`SIM_READINGS`) says how the median and the 90th percentile are taken (see
-    :func:`_percentile_over_runs`); ``over_recursions`` takes the RMSE, mean and std over the errors of every
-    recursion instead of recursion rt (the ``"mean_over_recursions"`` mobile protocol). For a one-shot method
-    (T = 1) the conventions agree except ``per_run_then_averaged``, whose percentiles are then the mean error.
+    recursion rt). All five statistics come from the same errors (Sec. 7.2.1: 'From total estimation error data we
+    calculate the mean ..., RMSE, and std. ... using CDF plot we give median ... and 90 percentile error'): recursion
+    rt of every run, or with ``over_recursions`` every recursion of every run (the ``"mean_over_recursions"``
+    mobile protocol). ``percentile_convention`` (:data:`SIM_READINGS`, :func:`_percentile_over_runs`) is
+    ``"pooled"`` by default; its two per-run alternatives are kept for exploration, not declared as readings.
 
     Standard errors: the delta method for the RMSE (over the runs' mean squared errors) and the bootstrap over
     whole runs for the rest (a run's recursions are not independent).
@@ -350,7 +359,7 @@ def summarize(errors, rng: np.random.Generator | None = None, *,
     if errors.ndim not in (1, 2):
         raise ParameterError(f"errors must be (runs,) or (runs, recursions), got shape {errors.shape}")
     per_step = errors if errors.ndim == 2 else errors[:, None]
-    if percentile_convention == "pooled_last_recursion" and not over_recursions:
+    if percentile_convention == "pooled" and not over_recursions:
         last = per_step[:, -1]
         out = {k: float(f(last)) for k, f in _STATISTIC_FUNCTIONS.items()}
         out["rmse_se_m"] = float(rmse_standard_error_m(last))
@@ -360,9 +369,10 @@ def summarize(errors, rng: np.random.Generator | None = None, *,
         return out
 
     def statistics(e):            # (..., R, T) -> {statistic: (...)}
-        sample = e.reshape(e.shape[:-2] + (-1,)) if over_recursions else e[..., -1]
+        sample = _sample(e, over_recursions)
         got = {k: _STATISTIC_FUNCTIONS[k](sample, axis=-1) for k in ("rmse_m", "mean_m", "std_m")}
-        got.update({k: _percentile_over_runs(e, q, percentile_convention) for k, q in _PERCENTILES.items()})
+        got.update({k: _percentile_over_runs(e, q, percentile_convention, over_recursions)
+                    for k, q in _PERCENTILES.items()})
         return got
 
     got = statistics(per_step)

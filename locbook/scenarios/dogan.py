@@ -9,15 +9,16 @@ CRLB (Ch. 4).
 Every printed value used here is read from ``locbook/data/printed/dogan2015.csv`` (Table 3.6, Eqs. (3.20) and
 (3.24), the Sec. 3.5 rates, the Sec. 5.4 area). The thesis prints neither the room of Ch. 3, nor the trajectory,
 nor the time step. Every such value is a named default here, with its reason beside it: the room is the test-bed room
-7.6 m x 9.2 m (inferred), the trajectory a 24 m polyline walked at 0.3 m/s in 80 s (our choice), one 20 Hz grid
-for every filter with RSS at every 10th step (the step is not printed), and the MLE an unconstrained grid +
+7.6 m x 9.2 m (inferred), the trajectory a 24 m polyline walked at 0.3 m/s in 80 s (our choice), a 20 Hz grid
+for the fused filters with RSS at every 10th step (Table 3.5), the ONLY-RSS filters stepping once per RSS epoch
+(:data:`RSS_ONLY_STEPS`; the 20 Hz grid is the declared alternative), and the MLE an unconstrained grid +
 Levenberg-Marquardt search (the thesis names no solver).
 
 The fusion reading (how the filter's Q and P_0 relate to sigma_ACC, and how the node starts) is a named option,
 :data:`NOISE_READINGS` and :data:`START_MODES`. The defaults follow the printed text (issue 28's rule): Q and
 P_0,acc as the constants of Eqs. (3.20), (3.24) and a node starting from rest, as the thesis's own x_0. A reading
-chosen because it fits printed output (Q scaled with sigma_ACC, fitted to Table 3.9; the walking speed under the
-moving start, fitted to Fig. 3.2) is a named alternative, and every row computed under it is ``calibrated`` and names
+chosen because it fits printed output (Q scaled with sigma_ACC, fitted to Table 3.9; the moving start with its
+walking speed, fitted to Fig. 3.2) is a named alternative, and every row computed under it is ``calibrated`` and names
 it (:func:`fitted_readings`).
 """
 from __future__ import annotations
@@ -56,6 +57,7 @@ __all__ = [
     "fusion_gain_pct", "mean_rmse_m", "printed_fusion_gains_pct", "REPEATED_ROWS", "readings_summary",
     "RMSE_TABLES", "TABLE_SIGMA_ACC_MPS2", "TABLE_36_CHANNEL", "SIGMA_ACC_SWEEP_CHANNELS", "MLE_R_READINGS",
     "divergence_table", "MLE_BOUNDS", "RMSE_EPOCHS", "PCRLB_MSE_MLE", "room_waypoints", "scored_errors",
+    "RSS_ONLY_STEPS", "DEFAULT_RSS_ONLY_STEP", "rss_grid", "filter_grid", "MOVING_START_FITTED",
 ]
 
 #: Everything the thesis prints (locbook/data/printed/dogan2015.csv).
@@ -144,6 +146,10 @@ DEFAULT_START = "rest"
 #: velocity uncertainty per step than the accelerometer noise). Measured trade-off (dogan2015-tracking,
 #: readings_summary): it brings KF (MLE) to within about 1-2 % of the printed sigma_ACC <= 0.0075 cells, but with Q
 #: this small a few EKF runs lock onto a wrong position, which inflates the EKFs' RMSE.
+MOVING_START_FITTED = ("start 'moving' (the node walks from t = 0) chosen because, at the walking speed 0.3 m/s, its "
+                       "unobserved initial velocity gives Fig. 3.2's 'reaches to 24 meter after 80 seconds'; no text "
+                       "supports a moving start (Eqs. (3.19)-(3.20) start the filter at zero velocity, and Fig. 3.2's text "
+                       "blames 'the error of the acceleration')")
 NOISE_READINGS = ("printed", "sigma_acc")
 DEFAULT_NOISE_READING = "printed"
 NOISE_CALIBRATED_FROM = ("noise reading 'sigma_acc' (Q = sigma_ACC^2/10 I_6, P_0,acc = sigma_ACC^2 per row) chosen "
@@ -175,6 +181,16 @@ RMSE_EPOCHS = ("rss_epochs", "every_step")
 #: one MSE per axis averaged over runs and epochs, for P_0 and every epoch's R of the linear bound) or
 #: ``"per_epoch"``: averaged over runs at each epoch, P_0 from the first epoch's, the linear bound's R_k per epoch.
 PCRLB_MSE_MLE = ("runs_and_epochs", "per_epoch")
+#: The step of the ONLY-RSS filters (KF (MLE), parallel and serial EKF without the accelerometer; not printed, and Q of
+#: Eq. (3.24) is per step, so the step sets their process noise): ``"rss_rate"`` (default), one prediction and one
+#: update per RSS epoch (0.5 s at Sec. 3.5's 2 Hz, 2 s on the test bed's packet period): the recursion of Eqs.
+#: (3.3)-(3.5) and Tables 3.1-3.4, each k a prediction and a measurement update, "the filtering process is repeated
+#: when a new measurement is available" (Sec. 3.3), and only the RSS feeds them; ``"imu_rate"``: the grid of the
+#: fused filters (Table 3.5, 20 Hz "In RSS/IMU fusion case"), predicting 9 times between RSS epochs with Q each
+#: time (the same per-step Q and the same grid for every filter of the ONLY RSS / RSS-IMU comparisons). The fused
+#: filters always step on the trajectory's grid (Table 3.5).
+RSS_ONLY_STEPS = ("rss_rate", "imu_rate")
+DEFAULT_RSS_ONLY_STEP = "rss_rate"
 
 
 def filter_noise(reading: str, sigma_acc_mps2: float | None) -> tuple[float, float]:
@@ -197,17 +213,20 @@ def fitted_readings(start: str = DEFAULT_START, noise_reading: str = DEFAULT_NOI
     """The readings fitted to printed output that a row computed under ``start`` and ``noise_reading`` used, as the
     row's ``calibrated_from`` text, ``"; "``-joined; ``""`` when none (the row is then a ``reproduction``).
 
-    Issue 28's rule: the walking speed :data:`SPEED_MPS` is fitted to Fig. 3.2's drift under the ``"moving"`` start
-    only (:data:`SPEED_CALIBRATED_FROM`; another speed there is an assumption), and the ``"sigma_acc"`` noise reading
-    is fitted to Table 3.9 (:data:`NOISE_CALIBRATED_FROM`); the ``"rest"`` start and the ``"printed"`` reading are
-    the text's own (Eqs. (3.19)-(3.20), (3.24))."""
+    Issue 45's rule (fitted: no text supports it and it was chosen because it fits): the ``"moving"`` start
+    (:data:`MOVING_START_FITTED`), with the walking speed :data:`SPEED_MPS` fitted to Fig. 3.2's drift under it
+    (:data:`SPEED_CALIBRATED_FROM`), and the ``"sigma_acc"`` noise reading fitted to Table 3.9
+    (:data:`NOISE_CALIBRATED_FROM`); the ``"rest"`` start and the ``"printed"`` reading are the text's own
+    (Eqs. (3.19)-(3.20), (3.24)). The ONLY-RSS step (:data:`RSS_ONLY_STEPS`) is textual either way."""
     if start not in START_MODES:
         raise ParameterError(f"start must be one of {START_MODES}, got {start!r}")
     if noise_reading not in NOISE_READINGS:
         raise ParameterError(f"noise_reading must be one of {NOISE_READINGS}, got {noise_reading!r}")
     used = []
-    if start == "moving" and float(speed_mps) == SPEED_MPS:
-        used.append(SPEED_CALIBRATED_FROM)
+    if start == "moving":               # issue 45: no text supports it; it was declared for Fig. 3.2's drift
+        used.append(MOVING_START_FITTED)
+        if float(speed_mps) == SPEED_MPS:
+            used.append(SPEED_CALIBRATED_FROM)
     if noise_reading == "sigma_acc":
         used.append(NOISE_CALIBRATED_FROM)
     return "; ".join(used)
@@ -239,6 +258,35 @@ def walk_trajectory(waypoints_m=WAYPOINTS_M, speed_m_s: float = SPEED_MPS, dt_s:
     polyline at constant speed, sampled at the accelerometer's rate, RSS every ``rss_every``-th sample (Sec. 3.5)."""
     return polyline_trajectory(waypoints_m, speed_m_s=speed_m_s, dt_s=dt_s, start=start, ramp_s=ramp_s,
                                rss_every=rss_every)
+
+
+def rss_grid(trajectory: Trajectory) -> Trajectory:
+    """``trajectory`` sampled at its RSS epochs only (``rss_steps`` then ``0 .. E - 1``): the grid of an ONLY-RSS filter
+    stepping at the RSS rate (:data:`RSS_ONLY_STEPS`). The epochs must be evenly spaced (one step)."""
+    steps = np.asarray(trajectory.rss_steps)
+    spacing = np.diff(steps)
+    if steps.size < 2 or np.any(spacing != spacing[0]):
+        raise ParameterError("the RSS-rate grid needs at least two evenly spaced RSS epochs")
+
+    def at(a, axis):
+        return None if a is None else np.take(a, steps, axis=axis)
+    return replace(trajectory, time_s=trajectory.time_s[steps], position_m=at(trajectory.position_m, -2),
+                   velocity_m_s=at(trajectory.velocity_m_s, -2), acceleration_m_s2=at(trajectory.acceleration_m_s2, -2),
+                   heading_rad=at(trajectory.heading_rad, -1), yaw_rate_rad_s=at(trajectory.yaw_rate_rad_s, -1),
+                   arc_length_m=at(trajectory.arc_length_m, -1), rss_steps=np.arange(steps.size))
+
+
+def filter_grid(trajectory: Trajectory, fusion: bool, rss_only_step: str = DEFAULT_RSS_ONLY_STEP) -> Trajectory:
+    """The grid a filter of Tables 3.7-3.12 steps on: the trajectory's for a fused filter (Table 3.5: a prediction at
+    every accelerometer sample) and for an ONLY-RSS filter under ``"imu_rate"``; its RSS epochs (:func:`rss_grid`) for
+    an ONLY-RSS filter under ``"rss_rate"`` (:data:`RSS_ONLY_STEPS`)."""
+    if rss_only_step not in RSS_ONLY_STEPS:
+        raise ParameterError(f"rss_only_step must be one of {RSS_ONLY_STEPS}, got {rss_only_step!r}")
+    return trajectory if fusion or rss_only_step == "imu_rate" else rss_grid(trajectory)
+
+
+def _step_s(trajectory: Trajectory) -> float:
+    return float(trajectory.time_s[1] - trajectory.time_s[0])
 
 
 def motion_model(dt_s: float = DT_S, q_per_step: float = Q_PER_STEP) -> KinematicModel:
@@ -472,7 +520,8 @@ def run_channel(trajectory: Trajectory, sigma_rss_db: float, path_loss_exp: floa
                 ref_power_dbm: float = REF_POWER_DBM, serial_order: str = "descending",
                 noise_reading: str = DEFAULT_NOISE_READING, anchors_m=ANCHORS_M, mle_r: str = "constant",
                 keep_estimates: bool = False, room_m=ROOM_M, mle_grid_step_m: float = MLE_GRID_STEP_M,
-                mle_bounds: str = "unconstrained", rmse_epochs: str = "rss_epochs") -> ChannelRun:
+                mle_bounds: str = "unconstrained", rmse_epochs: str = "rss_epochs",
+                rss_only_step: str = DEFAULT_RSS_ONLY_STEP) -> ChannelRun:
     """Simulate one channel setting and run the MLE and the requested filters, ONLY RSS and/or fused with an
     accelerometer of each ``sigma_acc_values``; all cases share the same RSS draws (common random numbers, so
     the fusion gain is measured on identical RSS). The MLE's per-axis MSE sets R and P_0 of KF (MLE) and
@@ -481,13 +530,16 @@ def run_channel(trajectory: Trajectory, sigma_rss_db: float, path_loss_exp: floa
     KF (MLE)'s R from the MSE per axis over runs and epochs (``"constant"``) or per epoch over runs
     (``"per_epoch"``). The MLE (:func:`mle_positions`) searches ``room_m`` (with ``anchors_m``) at
     ``mle_grid_step_m``, bounded by ``mle_bounds``; ``rmse_epochs="every_step"`` also keeps every filter's errors at
-    every grid step (:func:`scored_errors`)."""
+    every grid step (:func:`scored_errors`). The ONLY-RSS filters step on :func:`filter_grid` of ``rss_only_step``
+    (:data:`RSS_ONLY_STEPS`): under ``"rss_rate"`` once per RSS epoch, so their "every step" errors are those at the
+    RSS epochs, the only steps they have; their NIS guard's steps are mapped back to the trajectory's grid."""
     if rmse_epochs not in RMSE_EPOCHS:
         raise ParameterError(f"rmse_epochs must be one of {RMSE_EPOCHS}, got {rmse_epochs!r}")
+    if rss_only_step not in RSS_ONLY_STEPS:
+        raise ParameterError(f"rss_only_step must be one of {RSS_ONLY_STEPS}, got {rss_only_step!r}")
     if mle_r not in MLE_R_READINGS:
         raise ParameterError(f"mle_r must be one of {MLE_R_READINGS}, got {mle_r!r}")
     channel = PathLossModel(ref_power_dbm, path_loss_exp, sigma_rss_db)
-    dt_s = float(trajectory.time_s[1] - trajectory.time_s[0])
     truth, rss, mle, mse = _simulate_channel(trajectory, channel, n_runs, rng, anchors_m, room_m, mle_grid_step_m,
                                              mle_bounds)
     fix = mle.position_m
@@ -502,19 +554,24 @@ def run_channel(trajectory: Trajectory, sigma_rss_db: float, path_loss_exp: floa
     for sigma_acc in cases:
         acc = None if sigma_acc is None else trajectory.acceleration_m_s2 + sigma_acc * unit_noise
         q, p0_acc = filter_noise(noise_reading, sigma_acc)
-        model = motion_model(dt_s, q)
+        grid = filter_grid(trajectory, sigma_acc is not None, rss_only_step)
+        model = motion_model(_step_s(grid), q)          # Q of Eq. (3.24) per step of this filter's grid
         for name in filters:
             r_mse = np.mean((fix - truth) ** 2, axis=0) if (mle_r == "per_epoch" and name == "kalman_filter") else mse
-            track = run_filter(name, trajectory, rss, fix, r_mse, channel, acc_mps2=acc, sigma_acc_mps2=sigma_acc,
+            track = run_filter(name, grid, rss, fix, r_mse, channel, acc_mps2=acc, sigma_acc_mps2=sigma_acc,
                                model=model, p0_acc_var=p0_acc, serial_order=serial_order, anchors_m=anchors_m,
                                every_step=rmse_epochs == "every_step")
             pos = track.x[..., model.position_index]
             if rmse_epochs == "every_step":
-                every = np.linalg.norm(pos - trajectory.position_m[..., track.steps, :], axis=-1)
+                every = np.linalg.norm(pos - grid.position_m[..., track.steps, :], axis=-1)
                 out.errors[("every_step", name, sigma_acc)] = every
-                pos = pos[..., trajectory.rss_steps - track.steps[0], :]      # the same estimates at the RSS epochs
+                pos = pos[..., grid.rss_steps - track.steps[0], :]      # the same estimates at the RSS epochs
             out.errors[(name, sigma_acc)] = np.linalg.norm(pos - truth, axis=-1)
-            out.divergence[(name, sigma_acc)] = DivergenceFlags.of(track)
+            flags = DivergenceFlags.of(track)
+            if grid is not trajectory:                   # the RSS-rate grid's step e is the trajectory's rss_steps[e]
+                flags = replace(flags, diverged_step=np.where(
+                    flags.diverged, trajectory.rss_steps[np.clip(flags.diverged_step, 0, grid.time_s.size - 1)], -1))
+            out.divergence[(name, sigma_acc)] = flags
             if keep_estimates:
                 out.errors[("estimates", name, sigma_acc)] = pos
     return out
@@ -523,7 +580,8 @@ def run_channel(trajectory: Trajectory, sigma_rss_db: float, path_loss_exp: floa
 def noise_fit(trajectory: Trajectory, sigma_rss_db: float, path_loss_exp: float, n_runs: int,
               rng: np.random.Generator, *, name: str = "parallel_ekf", noise_reading: str = DEFAULT_NOISE_READING,
               ref_power_dbm: float = REF_POWER_DBM, anchors_m=ANCHORS_M, room_m=ROOM_M,
-              mle_grid_step_m: float = MLE_GRID_STEP_M, mle_bounds: str = "unconstrained") -> dict:
+              mle_grid_step_m: float = MLE_GRID_STEP_M, mle_bounds: str = "unconstrained",
+              rss_only_step: str = DEFAULT_RSS_ONLY_STEP) -> dict:
     """Maximum-likelihood noise levels of an ONLY-RSS filter of Tables 3.7-3.12 beside the thesis's hand-set ones.
 
     The thesis sets ``Q = q I`` by hand (Eq. (3.24), q = 2.3e-5 per step) and ``R = sigma_RSS^2 I`` at the simulated
@@ -541,9 +599,10 @@ def noise_fit(trajectory: Trajectory, sigma_rss_db: float, path_loss_exp: float,
     if name not in ("parallel_ekf", "serial_ekf"):
         raise ParameterError(f"noise_fit fits the RSS EKFs (parallel_ekf, serial_ekf), got {name!r}")
     channel = PathLossModel(ref_power_dbm, path_loss_exp, sigma_rss_db)
-    dt_s = float(trajectory.time_s[1] - trajectory.time_s[0])
     truth, rss, mle, mse = _simulate_channel(trajectory, channel, n_runs, rng, anchors_m, room_m, mle_grid_step_m,
                                              mle_bounds)
+    trajectory = filter_grid(trajectory, False, rss_only_step)     # an ONLY-RSS filter's grid (RSS_ONLY_STEPS)
+    dt_s = _step_s(trajectory)
     fix = mle.position_m
     q, p0_acc = filter_noise(noise_reading, None)
     model = motion_model(dt_s, q)
@@ -646,7 +705,7 @@ def run_tables(trajectory: Trajectory, n_runs: int, seed: int, *, channels=None,
                anchors_m=ANCHORS_M, mle_r: str = "constant", **mle_options) -> dict:
     """Every channel setting of Tables 3.7-3.12 (or the ``channels`` subset of :data:`CHANNELS`), each with its
     own random stream spawned from ``seed``; returns ``{(sigma_RSS, alpha): ChannelRun}``. ``mle_options``: ``room_m``,
-    ``mle_grid_step_m``, ``mle_bounds``, ``rmse_epochs`` of :func:`run_channel`."""
+    ``mle_grid_step_m``, ``mle_bounds``, ``rmse_epochs``, ``rss_only_step`` of :func:`run_channel`."""
     plan = table_channels()
     chosen = CHANNELS if channels is None else tuple(channels)
     unknown = [c for c in chosen if c not in plan]
@@ -983,12 +1042,11 @@ def ordering_rows(rows) -> list[dict]:
 
 
 def bound_rows(runs: dict, trajectory: Trajectory, *, noise_reading: str = DEFAULT_NOISE_READING,
-               anchors_m=ANCHORS_M) -> list[dict]:
+               anchors_m=ANCHORS_M, rss_only_step: str = DEFAULT_RSS_ONLY_STEP) -> list[dict]:
     """Every filter's RMSE beside the truth-conditioned PCRLB of its own information (ONLY RSS or fused, same
     trajectory, Q, R and P_0 as the filter under ``noise_reading``), both as the RMS over the RSS epochs; KF (MLE)
-    also beside the linear bound."""
-    n = trajectory.time_s.size
-    dt_s = float(trajectory.time_s[1] - trajectory.time_s[0])
+    also beside the linear bound. An ONLY-RSS filter's bound uses its own grid and Q per step (:func:`filter_grid` of
+    ``rss_only_step``)."""
     out = []
     for (sigma, ple), run in runs.items():
         for key, err in run.errors.items():
@@ -996,17 +1054,18 @@ def bound_rows(runs: dict, trajectory: Trajectory, *, noise_reading: str = DEFAU
                 continue
             name, sigma_acc = key
             q, p0_acc = filter_noise(noise_reading, sigma_acc)
+            grid = filter_grid(trajectory, sigma_acc is not None, rss_only_step)
             common = dict(fusion=sigma_acc is not None, sigma_rss_db=sigma, path_loss_exp=ple,
-                          sigma_acc_mps2=sigma_acc or SIGMA_ACC_MPS2, mse_mle_m2=run.mse_mle_m2, n_steps=n,
-                          model=motion_model(dt_s, q), p0_acc_var=p0_acc, rss_every=int(np.diff(trajectory.rss_steps[:2])[0]),
-                          anchors_m=anchors_m)
-            bound = pcrlb_m("truth", trajectory=trajectory, **common)[trajectory.rss_steps]
+                          sigma_acc_mps2=sigma_acc or SIGMA_ACC_MPS2, mse_mle_m2=run.mse_mle_m2, n_steps=grid.time_s.size,
+                          model=motion_model(_step_s(grid), q), p0_acc_var=p0_acc,
+                          rss_every=int(np.diff(grid.rss_steps[:2])[0]), anchors_m=anchors_m)
+            bound = pcrlb_m("truth", trajectory=grid, **common)[grid.rss_steps]
             row = dict(sigma_rss_db=sigma, ple=ple, sigma_acc=sigma_acc, filter=name, rmse_m=float(rmse_m(err)),
                        pcrlb_m=float(np.sqrt(np.mean(bound**2))))
             if key in run.divergence:
                 row["runs flagged diverged"] = run.divergence[key].n_diverged
             if name == "kalman_filter":
-                lin = pcrlb_m("linear", **common)[trajectory.rss_steps]
+                lin = pcrlb_m("linear", **common)[grid.rss_steps]
                 row["linear_pcrlb_m"] = float(np.sqrt(np.mean(lin**2)))
             row["ratio"] = row["rmse_m"] / row["pcrlb_m"]
             out.append(row)

@@ -14,7 +14,7 @@ from locbook.suite.cli import main
 from test_study import stoy  # noqa: F401  (a fixture: the toy repository with george-study, quick seed = 3)
 from test_suite import toy  # noqa: F401
 
-HEADER = ",".join(READING_COLUMNS)
+HEADER = ",".join(c for c in READING_COLUMNS if c != "quotes")   # a file without quotes loads
 #: a = 1.3 gives value 16.0 (printed, within); b never reaches value; twice's window is always loose
 READINGS = f"""{HEADER}
 slope,george-study,a,,1.0,[1.3],,0.0,2.0,assumed,Table 9,toy slope
@@ -124,14 +124,14 @@ def test_a_toy_bracket_gives_each_row_its_verdict_and_the_site_shows_it(stoy, tm
                  str(stoy / "reports"), "--progress", "plain"]) == 0
     assert bracket(stoy, _readings(tmp_path, READINGS), "--jobs", "2") == 0
     out = capsys.readouterr().out
-    assert "5 executed" in out and "bracket of george-study: 0 default, 1 reachable, 0 open, 1 loose, 0 outside" in out
+    assert "5 executed" in out and "bracket of george-study: 0 default, 1 other_reading, 0 fitted_only, 0 between, 0 outside, 0 open, 1 loose" in out
     folder = stoy / "reports" / "brackets" / "george-study"
     rows = {r["quantity"]: r for r in _table(folder / "bracket.csv")}
     assert tuple(_table(folder / "bracket.csv")[0]) == BRACKET_COLUMNS
     # value = 10 a + b + 3: 13 by default (window 16 +- (0.05 + 2 x 0.375 + 1) = 14.2 .. 17.8: a miss), 16 at
     # a = 1.3; over the points a = 1.3, 0, 2 and b = 0.5 it spans 3 .. 23
     value = rows["value"]
-    assert value["verdict"] == "miss" and value["bracket"] == "reachable"
+    assert value["verdict"] == "miss" and value["bracket"] == "other_reading"
     assert value["reached_by"] == "slope: a=1.3" and value["closest_reading"] == "slope: a=1.3"
     assert float(value["band_low"]) == pytest.approx(3.0) and float(value["band_high"]) == pytest.approx(23.0)
     assert float(value["closest"]) == pytest.approx(16.0) and value["points"] == "5"
@@ -145,12 +145,12 @@ def test_a_toy_bracket_gives_each_row_its_verdict_and_the_site_shows_it(stoy, tm
     import json     # the points ran without figures (only their numbers are read); the suite's own run with them
     assert json.loads((folder / "george-study-default" / "manifest.json").read_text())["figures_saved"] is False
     assert "figures_saved" not in json.loads((stoy / "reports" / "quick" / "george-study" / "manifest.json").read_text())
-    findings = (stoy / "reports" / "brackets" / "george-findings.md").read_text()
-    assert "## Reachable: within under another reading (1)" in findings and "slope: a=1.3" in findings
+    # every scored row under every point, for the conclusions pages
+    values = _table(folder / "values.csv")
+    assert len(values) == 2 * 5 and {v["basis"] for v in values} == {"default", "assumed", "textual"}
     # a second bracket serves every point from its cache (figureless reports validate as such)
     assert bracket(stoy, _readings(tmp_path, READINGS), "--jobs", "2") == 0
     assert "0 executed, 5 cached" in capsys.readouterr().out
-    assert "## Outside: no declared reading reaches the printed number (0)" in findings
 
     # the suite's numbers.csv carries each row's bracket once the site is rebuilt (any later run; --force renders
     # the experiment's page again too)
@@ -159,16 +159,20 @@ def test_a_toy_bracket_gives_each_row_its_verdict_and_the_site_shows_it(stoy, tm
     site = _table(stoy / "reports" / "quick" / "numbers.csv")
     assert tuple(site[0]) == SITE_NUMBER_COLUMNS
     by = {r["quantity"]: r for r in site}
-    assert (by["value"]["bracket"], by["value"]["bracket_readings"]) == ("reachable", "at quick: slope: a=1.3")
+    assert (by["value"]["bracket"], by["value"]["bracket_readings"]) == ("other_reading", "at quick: slope: a=1.3")
     assert (by["twice"]["bracket"], by["twice"]["bracket_readings"]) == (
         "loose", "this report; at quick: slope: a=1.3; slope: a=2.0; offset: b=0.5")
     # the experiment's page (rendered when it ran, after the bracket) shows each row's bracket beside its verdict
     page = (stoy / "reports" / "quick" / "george-study" / "report.md").read_text()
-    assert "| verdict | bracket | bracket_readings |" in page and "| reachable | at quick: slope: a=1.3 |" in page
+    assert "| verdict | bracket | bracket_readings |" in page and "| other_reading | at quick: slope: a=1.3 |" in page
     index = (stoy / "reports" / "quick" / "index.md").read_text()
-    assert ("Reading brackets of the 2 scored rows: 0 within by default, 1 reachable under another declared reading "
-            "(0 of them only under a reading fitted to printed output)") in index
-    assert "[george](../brackets/george-findings.md)" in index
+    assert ("Reading brackets of the 2 scored rows (`quick` profile): 0 reproduced under the default reading; 1 "
+            "reproduced only under another textual (or assumed) reading; 0 reached only under a reading fitted") in index
+    assert "[george](george-findings.md)" in index and "This is the `quick` profile" in index
+    # the findings page is written from the same rows as numbers.csv and the index
+    findings = (stoy / "reports" / "quick" / "george-findings.md").read_text()
+    assert "default 0; other reading 1; fitted only 0; between 0; outside 0; open 0; loose 1" in findings
+    assert "## Other reading (1)" in findings and "slope: a=1.3" in findings
 
     # a -p run's rows were computed under another reading than the bracket's default: no bracket there
     assert main(["--suite", str(stoy / "notebooks" / "experiments.toml"), "run", "george-study", "--reports",
@@ -188,7 +192,7 @@ def test_a_toy_bracket_gives_each_row_its_verdict_and_the_site_shows_it(stoy, tm
 def test_the_site_bracket_of_a_row_follows_its_own_verdict_first():
     """bracket_of_rows: a row within in this report is 'default' whatever the bracket's profile said; otherwise
     the bracket's other readings decide; unscored and unmatched rows have none."""
-    bracket = [{"printed_id": "p", "quantity": "q", "where": "w", "bracket": "reachable", "reached_by": "r: x=1",
+    bracket = [{"printed_id": "p", "quantity": "q", "where": "w", "bracket": "other_reading", "reached_by": "r: x=1",
                 "open_readings": "", "band_low": "1", "band_high": "2", "points": "3", "profile": "quick"},
                {"printed_id": "o", "quantity": "q (500 runs)", "where": "w", "bracket": "outside", "reached_by": "",
                 "open_readings": "", "band_low": "1", "band_high": "2", "points": "3", "profile": "quick"}]
@@ -201,7 +205,7 @@ def test_the_site_bracket_of_a_row_follows_its_own_verdict_first():
                            {**row, "printed_id": "o", "quantity": "q (20 runs)", "verdict": "loose"},
                            {**row, "printed_id": "z", "verdict": "miss"}], bracket)
     assert [(r["bracket"], r["bracket_readings"]) for r in out] == [
-        ("default", ""), ("reachable", "at quick: r: x=1"), ("", ""), ("outside", "at quick: band 1 .. 2 over 3 runs"),
+        ("default", ""), ("other_reading", "at quick: r: x=1"), ("", ""), ("outside", "at quick: band 1 .. 2 over 3 runs"),
         ("loose", "this report"), ("", "")]
     # within under the default at the bracket's profile, a miss here (another profile's window): open, not outside,
     # and not reachable either (the other readings were judged by the wider windows too)
@@ -214,13 +218,13 @@ def test_the_site_bracket_of_a_row_follows_its_own_verdict_first():
     same, other, fine = bracket_of_rows([{**row, "verdict": "miss", "reproduced": "1.5000000000001"},
                                          {**row, "verdict": "miss", "reproduced": "1.6"},
                                          {**row, "verdict": "within", "reproduced": "1.6"}], [b], "quick")
-    assert same["bracket"] == "reachable"
+    assert same["bracket"] == "other_reading"
     assert other["bracket"] == "open" and other["bracket_readings"] == (
         "this report and its quick bracket disagree: the bracket's default run gave 1.5, this report 1.6 (made by "
         "other code or parameters; run the older of the two again)")
     assert fine["bracket"] == "default"                 # within here whatever the bracket says
     (full,) = bracket_of_rows([{**row, "verdict": "miss", "reproduced": "1.6"}], [b], "full")
-    assert full["bracket"] == "reachable"               # another profile's run: values differ by design
+    assert full["bracket"] == "other_reading"               # another profile's run: values differ by design
 
 
 # -- verdicts from hand-written point reports (no notebook) ---------------------------------------------------
@@ -342,7 +346,10 @@ def test_a_bracket_setting_may_not_touch_what_the_readings_sweep(stoy, tmp_path)
 
 @pytest.mark.parametrize("table, message", [
     ('[experiment.bracket]\nparameters = { tag = "q" }\n', r"sets parameters without a 'reason'"),
-    ('[experiment.bracket]\nparams = { tag = "q" }\nreason = "x"\n', r"takes a table 'parameters' and a string 'reason'"),
+    ('[experiment.bracket]\nparams = { tag = "q" }\nreason = "x"\n', r"takes a table 'parameters', a string 'reason'"),
+    ('[experiment.bracket]\nfactorial = ["a"]\n', r"factorial must list two or more distinct reading names"),
+    ('[experiment.bracket]\nlargest_error_m = -1.0\nlargest_error_reason = "x"\n', r"largest_error_m must be a positive"),
+    ('[experiment.bracket]\nlargest_error_m = 9.4\n', r"largest_error_m and largest_error_reason go together"),
 ])
 def test_a_malformed_bracket_table_is_refused(stoy, table, message):
     with pytest.raises(SuiteError, match=message):
@@ -449,7 +456,9 @@ def test_the_fitted_together_point_is_not_a_run_of_one_range_reading(stoy, tmp_p
     for p, value in zip(points, ("13", "14", "3", "14.5", "13.5", "30")):
         _numbers(folder / p.key, {"reproduced": value, "verdict": "miss"})
     (row,) = bracket_rows(exp, points, folder, {p.key: "ok" for p in points}, [], "quick")
-    assert row["bracket"] == "outside", row
+    # no crossing of one range reading is claimed; the printed 16 lies between the runs 14.5 and 30
+    assert row["bracket"] == "between" and row["open_readings"] == "", row
+    assert row["between"] == "slope: a=2.0 (14.5) and fitted readings together [fitted]: a=1.3, b=0.5 (30)"
 
 
 def test_a_bracket_setting_a_profile_sets_is_refused(stoy, tmp_path):

@@ -24,7 +24,8 @@ from locbook.reproduce.report import NUMBER_COLUMNS, Table
 from locbook.suite import SuiteError, load_suite
 from locbook.suite import runner
 from locbook.suite.bracket import (BRACKET_COLUMNS, SITE_NUMBER_COLUMNS, bracket_points, experiment_readings,
-                                   find_experiment, findings_markdown, write_bracket_outputs)
+                                   find_experiment, write_bracket_outputs)
+from locbook.suite.findings import findings_markdown
 from locbook.suite.cli import main
 from locbook.suite.runner import Outcome, SuiteRun, cache_key
 from locbook.suite import study as study_module
@@ -195,7 +196,7 @@ def test_an_interrupted_forced_bracket_keeps_its_band(stoy, tmp_path, monkeypatc
     (before,) = [r for r in _table(folder / "bracket.csv") if r["quantity"] == "value"]
     assert (float(before["band_low"]), float(before["band_high"]), int(before["points"])) == \
         (values[0], values[-1], len(points))
-    assert before["bracket"] == "reachable" and before["reached_by"] == "slope: a=1.3"
+    assert before["bracket"] == "other_reading" and before["reached_by"] == "slope: a=1.3"
     monkeypatch.setattr(runner, "run_tasks", _fake_run_tasks(finished=1))
     code = main(["--suite", str(stoy / "notebooks" / "experiments.toml"), "bracket", "george-study", "--readings",
                  str(readings_path), "--force", "--reports", str(stoy / "reports"), "--progress", "quiet"])
@@ -205,7 +206,7 @@ def test_an_interrupted_forced_bracket_keeps_its_band(stoy, tmp_path, monkeypatc
     assert [r["status"] for r in _table(folder / "points.csv")] == ["ok"] + ["cached"] * (len(points) - 1)
     out, err = capsys.readouterr()
     assert f"bracket.csv was rebuilt from the {len(points)} of {len(points)} points" in err
-    assert "bracket of george-study: 0 default, 1 reachable" in out
+    assert "bracket of george-study: 0 default, 1 other_reading" in out
 
 
 def test_a_bracket_whose_default_point_was_interrupted_is_rebuilt_from_its_earlier_report(stoy, tmp_path):
@@ -339,14 +340,14 @@ def test_a_copy_without_its_brackets_keeps_every_rows_bracket_columns(toy):
         for eid, value in (("george-one", "0.5"), ("george-two", "0.125")):
             writer.writerow({"experiment": eid, "document": "george", "printed_id": "Table 1 | mean | ",
                              "quantity": "mean", "where": "Table 1", "kind": "reproduction", "printed": "0.0",
-                             "reproduced": value, "verdict": "miss", "bracket": "reachable",
+                             "reproduced": value, "verdict": "miss", "bracket": "other_reading",
                              "bracket_readings": "at quick: offset: b=0.5"})
     runner.write_suite_reports(suite, report_dir)
     rows = {r["experiment"]: r for r in _table(report_dir / "numbers.csv")}
     assert (rows["george-one"]["bracket"], rows["george-one"]["bracket_readings"]) == \
-        ("reachable", "at quick: offset: b=0.5")
+        ("other_reading", "at quick: offset: b=0.5")
     assert (rows["george-two"]["bracket"], rows["george-two"]["bracket_readings"]) == ("", "")   # 0.125 -> 0.25
-    assert "1 reachable" in (report_dir / "index.md").read_text()
+    assert "1 reproduced only under another textual" in (report_dir / "index.md").read_text()
 
 
 def test_the_index_links_every_data_set_folder_present_whatever_page_it_holds(toy):
@@ -427,14 +428,11 @@ def test_figure_and_table_captions_are_text_in_markdown(tmp_path, stoy):
 
 
 def test_findings_and_markdown_tables_show_html_as_text():
-    row = {c: "" for c in BRACKET_COLUMNS}
-    row.update({"experiment": "george-study", "printed_id": "T | <b>v</b>", "printed": "16.0", "ours": "13",
-                "verdict": "miss", "bracket": "reachable", "reached_by": "slope: tag='<script>alert(1)</script>'",
-                "profile": "quick"})
-    point = {"point": "1", "readings": "slope", "parameter": "tag", "value": "'<iframe src=x>'", "status": "ok",
-             "generated_by": "", "settings": ""}
-    md = findings_markdown("george", {"george-study": [row]}, {"george-study": [point]})
-    assert "<script" not in md and "<b>" not in md and "<iframe" not in md
+    row = {"experiment": "george-study", "printed_id": "T | <b>v</b>", "printed": "16.0", "reproduced": "13",
+           "verdict": "miss", "kind": "reproduction", "bracket": "other_reading",
+           "bracket_readings": "at quick: slope: tag='<script>alert(1)</script>'", "note": "<iframe src=x>"}
+    md = findings_markdown("george", "A <i>B</i>", 2015, [row], "quick")
+    assert "<script" not in md and "<b>" not in md and "<i>" not in md
     assert "&lt;script>alert(1)&lt;/script>" in md
     table = Table([{"note": "N_eff < 0.5 <a href=x>link</a>", "<th>": 1}]).to_markdown()
     assert "<a" not in table and "<th>" not in table and "N_eff < 0.5 &lt;a href=x>link&lt;/a>" in table

@@ -36,7 +36,7 @@ One CSV per document, ``locbook/data/readings/<document>.csv`` (package data, be
     is never an argument for or against a reading.
 ``source``
     where the source prints the value or leaves it open (section, equation, table).
-``quotes``
+``quotes`` (a file without this column loads, its quotes empty)
     the words of the source the default and the alternatives rest on, quoted, each with its section (and, where
     useful, the line of the text): required for a ``printed`` or ``textual`` basis (``tests/test_readings.py``
     checks that each such reading quotes the text); for ``assumed``, what the text says around the gap, if
@@ -307,7 +307,10 @@ def load_reading_file(path: str | Path, document: str | None = None) -> tuple[Re
         columns = tuple(reader.fieldnames or ())
     except csv.Error as exc:
         raise ReadingsError(f"{path}, line {lines[0][0]}: not a well-formed CSV header ({exc})") from None
-    if columns not in (READING_COLUMNS, READING_COLUMNS + OPTIONAL_READING_COLUMNS):
+    # a file of one's own written before the quotes column (issue 45) still loads: its quotes are empty
+    unquoted = tuple(c for c in READING_COLUMNS if c != "quotes")
+    if columns not in (READING_COLUMNS, READING_COLUMNS + OPTIONAL_READING_COLUMNS, unquoted,
+                       unquoted + OPTIONAL_READING_COLUMNS):
         raise ReadingsError(f"{path}, line {lines[0][0]}: columns must be {', '.join(READING_COLUMNS)} (then "
                             f"optionally {', '.join(OPTIONAL_READING_COLUMNS)}); got {', '.join(columns)}")
     out, seen = [], {}

@@ -72,16 +72,25 @@ from .spec import Experiment, Suite, SuiteError, finite_float
 from .study import Aggregate, _atomic, _canonical, current_points
 
 __all__ = ["BracketPoint", "find_experiment", "brackets_root", "SITE_NUMBER_COLUMNS", "BRACKET_ROW_COLUMNS",
-           "experiment_readings", "bracket_settings", "write_findings", "counts", "read_readings_option", "bracket_points", "bracket_gaps", "run_bracket", "bracket_folder", "bracket_rows",
+           "experiment_readings", "bracket_settings", "counts", "VALUE_COLUMNS", "load_values", "read_readings_option", "bracket_points", "bracket_gaps", "run_bracket", "bracket_folder", "bracket_rows",
            "bracket_of_rows", "load_bracket", "NoBracket", "BRACKETS", "BRACKET_COLUMNS", "POINT_COLUMNS"]
 
-BRACKETS = ("default", "reachable", "open", "loose", "outside")
+#: The bracket verdicts (issue 45's tiers), in the order the headline counts them: reproduced under the default
+#: reading; under another textual (or, where the text is silent, assumed) reading; only under a reading fitted to
+#: printed output; between readings (the printed value inside the band of our values, no single reading within);
+#: outside every reading (beyond the band widened by both Monte-Carlo errors); open (a setting that could matter not
+#: swept, a point not run, or a margin Monte-Carlo error could close); loose (a window too wide to decide).
+BRACKETS = ("default", "other_reading", "fitted_only", "between", "outside", "open", "loose")
 #: the columns a suite's numbers.csv adds to an experiment's (:data:`~locbook.reproduce.report.NUMBER_COLUMNS`)
 BRACKET_ROW_COLUMNS = ("bracket", "bracket_readings")
 SITE_NUMBER_COLUMNS = (*NUMBER_COLUMNS, *BRACKET_ROW_COLUMNS)
 BRACKET_COLUMNS = ("experiment", "printed_id", "quantity", "where", "unit", "kind", "printed", "ours", "verdict",
-                   "bracket", "reached_by", "open_readings", "loose_under", "band_low", "band_high", "closest", "closest_reading",
-                   "points", "profile")
+                   "bracket", "reached_by", "open_readings", "loose_under", "between", "band_low", "band_high",
+                   "outside_margin", "implausible", "closest", "closest_reading", "points", "profile")
+#: the columns of a bracket's values.csv: every scored row under every point (the conclusions pages judge each
+#: claim under every reading from it)
+VALUE_COLUMNS = ("experiment", "printed_id", "quantity", "where", "point", "reading", "basis", "ours",
+                 "mc_std_error", "verdict")
 POINT_COLUMNS = ("point", "readings", "parameter", "value", "status", "folder", "generated_by", "readings_file",
                  "settings")
 DEFAULT_POINT = "default"
@@ -104,6 +113,26 @@ class BracketPoint:
     requires: dict = field(default_factory=dict, hash=False)
     #: each reading's own value at this point (reading name -> value; a shared point holds several)
     reading_values: dict = field(default_factory=dict, hash=False)
+    #: a joint point of the ``factorial`` readings (``together`` then holds its values; not fitted)
+    combined: bool = False
+
+    @property
+    def fitted(self) -> bool:
+        """True when a value of this point was fitted to printed results (rows under it are calibrations)."""
+        if self.together and not self.combined:
+            return True
+        return any(r.is_fitted(self.reading_values.get(r.name, self.value)) for r in self.readings)
+
+    @property
+    def basis(self) -> str:
+        """``default``, ``fitted`` (a fitted value), ``assumed`` (every value a reading the text is silent on), or
+        ``textual`` (:meth:`~locbook.reproduce.readings.Reading.alternative_basis` of its values)."""
+        if not self.readings:
+            return DEFAULT_POINT
+        if self.fitted:
+            return "fitted"
+        bases = {r.alternative_basis(self.reading_values.get(r.name, self.value)) for r in self.readings}
+        return "assumed" if bases == {"assumed"} else "textual"
 
     @property
     def label(self) -> str:
@@ -111,6 +140,8 @@ class BracketPoint:
         ``fitted readings together [fitted]: p=v, q=w``, or ``default``."""
         if not self.readings:
             return DEFAULT_POINT
+        if self.together and self.combined:
+            return "readings together: " + ", ".join(f"{k}={_text(v)}" for k, v in self.together.items())
         if self.together:
             return "fitted readings together [fitted]: " + ", ".join(f"{k}={_text(v)}" for k, v in self.together.items())
         names = ", ".join(r.name + (" [fitted]" if r.is_fitted(self.reading_values.get(r.name, self.value)) else "")
@@ -274,9 +305,51 @@ def bracket_points(exp: Experiment, profile: str, readings: tuple[Reading, ...])
             fitted.setdefault(reading.parameter, (reading, reading.fitted[0]))
     if len(fitted) >= 2:
         together = {p: check_value(declared[p], v, exp.rules.get(p)) for p, (_r, v) in fitted.items()}
-        points.append(BracketPoint(_point_key(exp, together, taken), exp, tuple(r for r, _v in fitted.values()), "", None,
+        key = _point_key(exp, together, taken)
+        taken[key] = _canonical(together)
+        by_value[_canonical(together)] = len(points)
+        points.append(BracketPoint(key, exp, tuple(r for r, _v in fitted.values()), "", None,
                                    {**base, **together}, together))
+    points += _factorial_points(exp, readings, declared, base, by_value, taken)
     return points
+
+
+def _factorial_points(exp: Experiment, readings: tuple[Reading, ...], declared: dict, base: dict,
+                      by_value: dict, taken: dict) -> list[BracketPoint]:
+    """The joint points of ``[experiment.bracket] factorial``: every combination of the named readings' values that
+    are not fitted (the default, the textual or assumed alternatives, a range's ends) in which two or more differ
+    from the default (one alone is a single reading's point); combinations that repeat a point are not run twice."""
+    import itertools
+    if not exp.bracket_factorial:
+        return []
+    by_name = {r.name: r for r in readings}
+    chosen = []
+    for name in exp.bracket_factorial:
+        reading = by_name.get(name)
+        if reading is None or reading.is_gap:
+            raise SuiteError(f"[experiment.bracket] factorial of {exp.id!r} names {name!r}, which is not a reading "
+                             f"of it that a notebook parameter sets (its readings: {', '.join(sorted(by_name))})")
+        param = declared[reading.parameter]
+        profiled = base.get(reading.parameter, param.default)
+        values = [v for v in _sweep_values(reading, param.annotation) if not reading.is_fitted(v)]
+        checked = [_checked(exp, declared, reading.parameter, v, f"reading {reading.document}/{reading.name} of "
+                            f"{exp.id!r}") for v in values]
+        chosen.append((reading, [profiled] + [v for v in checked if not _same(v, profiled)]))
+    out = []
+    for combo in itertools.product(*(values for _r, values in chosen)):
+        change = {r.parameter: v for (r, values), v in zip(chosen, combo) if not _same(v, values[0])}
+        if len(change) < 2:
+            continue
+        text = _canonical(change)
+        if text in by_value:
+            continue
+        key = _point_key(exp, change, taken)
+        taken[key] = text
+        by_value[text] = -1          # run once (a joint point is never shared by a later reading)
+        values = {r.name: v for (r, _values), v in zip(chosen, combo) if r.parameter in change}
+        out.append(BracketPoint(key, exp, tuple(r for r, _v in chosen if r.parameter in change), "", None,
+                                {**base, **change}, dict(change), reading_values=values, combined=True))
+    return out
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -343,13 +416,42 @@ def _crossings(printed: float | None, points: list[BracketPoint], values: dict[s
     return out
 
 
+#: The source's own Monte-Carlo error of a printed number, taken equal to ours: the full profile runs the source's
+#: run count where it is printed (Ozkaya's 1000 runs), so an ``outside`` verdict needs the printed value beyond our
+#: nearest value by more than the rounding, the ambiguity and 2 standard errors of the difference of two such runs.
+SOURCE_SE_FACTOR = 1.0
+
+
+def _margin(row: dict) -> float:
+    """The half-width an ``outside`` verdict must clear around our value of ``row`` (a numbers row): rounding +
+    ambiguity + 2 standard errors of (ours - printed), both Monte-Carlo errors (:data:`SOURCE_SE_FACTOR`)."""
+    def num(column):
+        v = finite_float(row.get(column, ""))
+        return 0.0 if v is None else abs(v)
+    se = num("mc_std_error")
+    return num("rounding") + num("ambiguity") + 2.0 * se * math.sqrt(1.0 + SOURCE_SE_FACTOR ** 2)
+
+
+def _implausible(exp: Experiment, row: dict, value: float | None) -> bool:
+    """A value no plausible reading gives: an error in metres over the experiment's ``largest_error_m`` (the
+    area's diagonal, ``[experiment.bracket]``)."""
+    return (exp.largest_error_m is not None and value is not None and row.get("unit") == "m"
+            and value > exp.largest_error_m)
+
+
 def bracket_rows(exp: Experiment, points: list[BracketPoint], folder: Path, status: dict[str, str],
-                 gaps: list[Reading], profile: str) -> list[dict]:
+                 gaps: list[Reading], profile: str, values_out: list | None = None) -> list[dict]:
     """The bracket.csv rows: one per scored row of the default point (none if the default point did not run).
 
     ``status``: each point's outcome (``ok``, ``cached``, ``failed``, ``interrupted``, ``not run``). A point that did
     not finish, or finished without producing the row (renamed, linked, damaged numbers.csv), leaves the row
-    ``open``, as does a range reading whose runs straddle the printed value (:func:`_crossings`)."""
+    ``open``, as does a range reading whose runs straddle the printed value (:func:`_crossings`). The verdict, in
+    :data:`BRACKETS` order: ``default``; ``other_reading`` (within under a point with no fitted value);
+    ``fitted_only``; then, reached by none: ``open``; ``loose``; ``between`` (the printed value inside the band of
+    our plausible values: ``between`` names the two points either side); ``outside`` when the printed value
+    also clears the band's nearest edge by :func:`_margin` (else ``open``: Monte-Carlo error could close the gap).
+    A point whose value is implausible (:func:`_implausible`) is named in ``implausible`` and counts for nothing.
+    ``values_out``: filled with the :data:`VALUE_COLUMNS` rows (every scored row under every point)."""
     from .site import _read_csv
 
     done = {k for k, st in status.items() if st in ("ok", "cached")}
@@ -364,43 +466,76 @@ def bracket_rows(exp: Experiment, points: list[BracketPoint], folder: Path, stat
         if not _scored(r):
             continue
         printed = finite_float(r["printed"])
-        values = [(DEFAULT_POINT, finite_float(r["reproduced"]))]
-        by_key = {points[0].key: (values[0][1], r["verdict"])}
-        reached, inside, missing = [], [DEFAULT_POINT] if r["verdict"] == "loose" else [], []
+        ours = finite_float(r["reproduced"])
+        # (label, value, numbers row, point) of every point that produced the row
+        runs = [(DEFAULT_POINT, ours, r, points[0])]
+        by_key = {points[0].key: (ours, r["verdict"])}
+        missing = []
         for p, indexed in others:
             alt = _find(indexed, r)
             if alt is None or alt.get("verdict") not in ("within", "loose", "miss"):
                 missing.append(f"{p.label} (row not produced)")
                 continue
             value = finite_float(alt.get("reproduced", ""))
-            values.append((p.label, value))
+            runs.append((p.label, value, alt, p))
             by_key[p.key] = (value, alt["verdict"])
-            if alt["verdict"] == "within":
-                reached.append(p.label)
-            elif alt["verdict"] == "loose":
-                inside.append(p.label)
+        if values_out is not None:
+            values_out += [{"experiment": exp.id, "printed_id": r["printed_id"], "quantity": r["quantity"],
+                            "where": r["where"], "point": p.key, "reading": label, "basis": p.basis,
+                            "ours": row.get("reproduced", ""), "mc_std_error": row.get("mc_std_error", ""),
+                            "verdict": row.get("verdict", "")} for label, _v, row, p in runs]
+        implausible = [f"{label} gave {v:.4g} m, over the largest plausible error {exp.largest_error_m:g} m "
+                       f"({exp.largest_error_reason})" for label, v, row, _p in runs if _implausible(exp, row, v)]
+        plausible = [(label, v, row, p) for label, v, row, p in runs if not _implausible(exp, row, v)]
+        reached = [label for label, _v, row, p in plausible[1:] if row["verdict"] == "within"]
+        reached_textual = [label for label, _v, row, p in plausible[1:] if row["verdict"] == "within" and not p.fitted]
+        inside = [label for label, _v, row, _p in plausible if row["verdict"] == "loose"]
         open_names = gap_names + unfinished + missing + _crossings(printed, points, by_key)
-        if r["verdict"] == "within":
+        finite = [(label, v, row) for label, v, row, _p in plausible if v is not None]
+        low = min(finite, key=lambda x: x[1], default=None)
+        high = max(finite, key=lambda x: x[1], default=None)
+        between, margin_note = "", ""
+        if printed is not None and low is not None:
+            below = max((x for x in finite if x[1] <= printed), key=lambda x: x[1], default=None)
+            above = min((x for x in finite if x[1] >= printed), key=lambda x: x[1], default=None)
+            if below is not None and above is not None:
+                between = f"{below[0]} ({below[1]:.4g}) and {above[0]} ({above[1]:.4g})"
+            edge = low if printed < low[1] else high if printed > high[1] else None
+            if edge is not None:
+                margin = _margin(edge[2])
+                gap = abs(printed - edge[1])
+                margin_note = (f"{gap:.4g} from {edge[0]} ({edge[1]:.4g}), "
+                               f"{'within' if gap <= margin else 'beyond'} its margin {margin:.4g} (rounding, "
+                               "ambiguity, 2 SE of ours and the source's)")
+        if r["verdict"] == "within" and not _implausible(exp, r, ours):
             verdict = "default"
+        elif reached_textual:
+            verdict = "other_reading"
         elif reached:
-            verdict = "reachable"
+            verdict = "fitted_only"
         elif open_names:
             verdict = "open"
         elif inside:
             verdict = "loose"
+        elif between:
+            verdict = "between"
+        elif margin_note and "within its margin" in margin_note:
+            verdict = "open"
+            open_names = [f"Monte-Carlo error: the printed value is {margin_note}; more runs would decide"]
         else:
             verdict = "outside"
-        finite = [(label, v) for label, v in values if v is not None]
-        closest = (min(finite, key=lambda lv: abs(lv[1] - printed)) if finite and printed is not None
-                   else ("", None))
+        closest = (min(finite, key=lambda x: abs(x[1] - printed)) if finite and printed is not None
+                   else ("", None, None))
         rows.append({"experiment": exp.id, "printed_id": r["printed_id"], "quantity": r["quantity"],
                      "where": r["where"], "unit": r["unit"], "kind": r["kind"], "printed": r["printed"],
                      "ours": r["reproduced"], "verdict": r["verdict"], "bracket": verdict,
                      "reached_by": "; ".join(reached),
                      "open_readings": "; ".join(open_names) if verdict == "open" else "",
                      "loose_under": "; ".join(inside) if not reached else "",
-                     "band_low": _fmt(min((v for _, v in finite), default=None)),
-                     "band_high": _fmt(max((v for _, v in finite), default=None)),
+                     "between": between if verdict == "between" else "",
+                     "band_low": _fmt(low[1] if low else None), "band_high": _fmt(high[1] if high else None),
+                     "outside_margin": margin_note if verdict in ("outside", "open") else "",
+                     "implausible": "; ".join(implausible),
                      "closest": _fmt(closest[1]), "closest_reading": closest[0], "points": len(finite),
                      "profile": profile})
     return rows
@@ -429,7 +564,8 @@ def _same_number(a, b) -> bool:
 def bracket_of_rows(rows: list[dict], bracket: list[dict], profile: str | None = None) -> list[dict]:
     """``rows`` (numbers.csv rows of one experiment) with ``bracket`` and ``bracket_readings`` set from that
     experiment's ``bracket`` rows: ``default`` when the row itself is within here, else what the bracket's other
-    readings gave (reachable / open / loose / outside, each reading named with the bracket's profile, e.g.
+    readings gave (other_reading / fitted_only / open / between / loose / outside, each reading named with the
+    bracket's profile, e.g.
     ``at quick: ...``). A row loose here is at worst ``loose``; a row the bracket had within under the default but
     that is not within here (another profile's window) is ``open`` whatever the other readings gave there: they
     were not run at this profile. ``profile``: the report's; where it is the bracket's, a row whose value here
@@ -460,17 +596,22 @@ def bracket_of_rows(rows: list[dict], bracket: list[dict], profile: str | None =
             # verdicts there say nothing about this report's window
             verdict, readings = "open", (f"within {at[:-2]} under the default reading, not here: the readings were "
                                          "not run at this profile")
-        elif b.get("reached_by"):
-            verdict, readings = "reachable", at + b["reached_by"]
+        elif b.get("bracket") in ("other_reading", "fitted_only"):
+            verdict, readings = b["bracket"], at + b["reached_by"]
         elif b.get("open_readings") or b.get("bracket") == "open":
             verdict, readings = "open", at + (b.get("open_readings") or "")
+        elif b.get("bracket") == "between":
+            verdict, readings = "between", f"{at}between {b.get('between')}"
         elif r["verdict"] == "loose" or b.get("loose_under"):
             under = [x for x in (b.get("loose_under") or "").split("; ") if x and x != DEFAULT_POINT]
             verdict, readings = "loose", "; ".join((["this report"] if r["verdict"] == "loose" else [])
                                                    + ([at + "; ".join(under)] if under else []))
         else:
-            verdict, readings = "outside", (f"{at}band {b.get('band_low')} .. {b.get('band_high')} over "
-                                            f"{b.get('points')} runs")
+            verdict, readings = "outside", (f"{at}band {_short(b.get('band_low', ''))} .. "
+                                            f"{_short(b.get('band_high', ''))} over {b.get('points')} runs"
+                                            + (f"; {b['outside_margin']}" if b.get("outside_margin") else ""))
+        if b.get("implausible"):
+            readings += f" (implausible, left out of the band: {b['implausible']})"
         out.append({**r, "bracket": verdict, "bracket_readings": readings})
     return out
 
@@ -542,6 +683,21 @@ def load_bracket(folder: Path) -> list[dict]:
     return rows
 
 
+def load_values(folder: Path) -> list[dict]:
+    """The rows of ``<folder>/values.csv`` (every scored row under every point), empty if absent, damaged or of
+    another layout."""
+    path = Path(folder) / "values.csv"
+    try:
+        with open(path, newline="", encoding="utf-8") as fh:
+            reader = csv.DictReader(fh)
+            if tuple(reader.fieldnames or ()) != VALUE_COLUMNS:
+                return []
+            rows = list(reader)
+    except (OSError, ValueError, csv.Error):
+        return []
+    return [] if any(None in r or any(v is None for v in r.values()) for r in rows) else rows
+
+
 def _write_table(path: Path, columns, rows) -> None:
     out = io.StringIO()
     writer = csv.DictWriter(out, fieldnames=columns, lineterminator="\n")
@@ -566,78 +722,9 @@ def _md_cell(text) -> str:
     return _md_line(text).replace("|", "\\|")
 
 
-def findings_markdown(document: str, brackets: dict[str, list[dict]], points: dict[str, list[dict]]) -> str:
-    """The findings page of ``document`` from its experiments' bracket rows and points (module docstring)."""
-    rows = [r for eid in sorted(brackets) for r in brackets[eid]]
-    counts = {b: sum(r["bracket"] == b for r in rows) for b in BRACKETS}
-    lines = [f"# Findings: {document}", "",
-             f"Scored rows bracketed: {len(rows)} ({', '.join(f'{b} {n}' for b, n in counts.items())}), from the "
-             f"brackets of {', '.join(sorted(brackets))}. A bracket runs the experiment under each declared reading "
-             "of what the source left unprinted, one reading at a time, plus one run with every value fitted to printed "
-             "output together (docs/studies-and-brackets.md, \"Reading brackets\"). Values below are rounded to 4 significant digits; "
-             "bracket.csv has them in full.", ""]
-    sections = [("outside", "Outside: no declared reading reaches the printed number",
-                 "Every declared reading was run; the printed number lies outside every window. Evidence: our values "
-                 "over all readings (band) and the closest one."),
-                ("reachable", "Reachable: within under another reading", "The reading(s) that reach each row."),
-                ("open", "Open: a reading that could matter was not swept", "The readings not swept."),
-                ("loose", "Loose: inside a wide window, never within",
-                 "Under these readings the printed value lies inside a window wider than +-25 %: the comparison "
-                 "cannot decide.")]
-    for verdict, title, text in sections:
-        chosen = [r for r in rows if r["bracket"] == verdict]
-        lines += [f"## {title} ({len(chosen)})", "", text, ""]
-        if not chosen:
-            lines += ["None.", ""]
-            continue
-        lines += ["| experiment | printed quantity | printed | ours (default) | verdict | band | closest (reading) | "
-                  + ("readings |" if verdict != "outside" else "points |"),
-                  "|---|---|---|---|---|---|---|---|"]
-        for r in chosen:
-            extra = {"outside": r["points"], "reachable": r["reached_by"], "open": r["open_readings"],
-                     "loose": r["loose_under"]}[verdict]
-            lines.append(f"| {_md_cell(r['experiment'])} | {_md_cell(r['printed_id'])} | {_md_cell(r['printed'])} | "
-                         f"{_md_cell(_short(r['ours']))} | {_md_cell(r['verdict'])} | "
-                         f"{_md_cell(_short(r['band_low']))} "
-                         f".. {_md_cell(_short(r['band_high']))} | {_md_cell(_short(r['closest']))} "
-                         f"({_md_cell(r['closest_reading'])}) | {_md_cell(extra)} |")
-        lines.append("")
-    lines += ["## Readings swept", ""]
-    for eid in sorted(points):
-        made = points[eid][0].get("generated_by") if points[eid] else ""
-        lines.append(_md_line(f"- {eid} ({brackets[eid][0]['profile'] if brackets.get(eid) else '?'} profile"
-                     + (f", made by locbook {made}" if made else "") + "): "
-                     + "; ".join(f"{p['readings'] or 'default'}"
-                                 + (f" = {p['value']}" if p["parameter"] else "")
-                                 + ("" if p["status"] in ("ok", "cached") else f" [{p['status']}]")
-                                 for p in points[eid])
-                     + (f". Every point sets {points[eid][0]['settings']}"
-                        if points[eid] and points[eid][0].get("settings") else "")))
-    return "\n".join(lines) + "\n"
-
-
-def write_findings(report_root: Path, document: str, suite: Suite) -> Path | None:
-    """Rewrite ``<report_root>/brackets/<document>-findings.md`` from the brackets of ``document`` present."""
-    from .site import _read_csv
-    brackets, points = {}, {}
-    for exp in suite.experiments:
-        if exp.document.key != document:
-            continue
-        folder = report_root / "brackets" / exp.id
-        if (folder / "bracket.csv").is_file():
-            brackets[exp.id] = load_bracket(folder)
-            points[exp.id] = _read_csv(folder / "points.csv")
-    if not brackets:
-        return None
-    path = report_root / "brackets" / f"{document}-findings.md"
-    text = findings_markdown(document, brackets, points)
-    _atomic(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
-    return path
-
-
 def write_bracket_outputs(exp: Experiment, points: list[BracketPoint], folder: Path, outcomes, gaps: list[Reading],
                           profile: str, suite: Suite, readings_file: str = "", wrote: list | None = None) -> Aggregate:
-    """bracket.csv, points.csv and the document's findings page, from every point with an up-to-date report (this
+    """bracket.csv, values.csv and points.csv, from every point with an up-to-date report (this
     run's and earlier ones: :func:`~locbook.suite.study.current_points`), so an interrupted or failed run never
     drops a point that still holds; a row is ``open`` while a point it needs has none. Without an up-to-date default
     point nothing is written (an earlier bracket is kept as it was). Each file is replaced atomically. ``wrote``: the
@@ -650,7 +737,9 @@ def write_bracket_outputs(exp: Experiment, points: list[BracketPoint], folder: P
         if wrote is not None:
             wrote.append(aggregate)
         return aggregate
-    rows = bracket_rows(exp, points, folder, status, gaps, profile)
+    values: list[dict] = []
+    rows = bracket_rows(exp, points, folder, status, gaps, profile, values)
+    _write_table(folder / "values.csv", VALUE_COLUMNS, values)
     _write_table(path, BRACKET_COLUMNS, rows)
     aggregate = Aggregate(path, done, len(points))
     if wrote is not None:
@@ -665,7 +754,6 @@ def write_bracket_outputs(exp: Experiment, points: list[BracketPoint], folder: P
          "settings": "" if not exp.bracket_parameters else
          ", ".join(f"{k}={_text(v)}" for k, v in exp.bracket_parameters.items()) + f" ({exp.bracket_reason})"}
         for i, p in enumerate(points)])
-    write_findings(folder.parent.parent, exp.document.key, suite)
     return aggregate
 
 

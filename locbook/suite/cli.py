@@ -251,7 +251,8 @@ def main(argv: list[str] | None = None) -> int:
         if aggregate is not None and aggregate.written:
             found = counts(load_bracket(see.parent))
             print(f"bracket of {args.experiment}: " + ", ".join(f"{n} {b}" for b, n in found.items())
-                  + f" (scored rows; findings: {see.parent.parent / (exp.document.key + '-findings.md')})")
+                  + f" (scored rows at the {args.profile} profile; the next `locbook run --profile {args.profile}` "
+                    f"rebuilds the site's columns, findings and conclusions pages from it)")
         else:
             print(f"bracket of {args.experiment} incomplete: its default point has no up-to-date report, so no "
                   "verdict was written (an earlier bracket.csv is kept as it was)", file=sys.stderr)

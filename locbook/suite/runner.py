@@ -437,7 +437,9 @@ def _cached(folder: Path, exp: Experiment, key: str, figures: bool = True) -> tu
 
 def write_suite_reports(suite: Suite, report_dir: Path, *, list_all: bool = True) -> None:
     """Rebuild ``numbers.csv``, ``index.html`` and ``index.md`` from the experiment folders present (and the
-    reading brackets in ``<reports>/brackets/``: :mod:`locbook.suite.bracket`).
+    reading brackets in ``<reports>/brackets/``: :mod:`locbook.suite.bracket`); in a profile's folder also each
+    document's findings page (:mod:`locbook.suite.findings`) and conclusions page (:mod:`locbook.suite.conclusions`),
+    from the same rows.
 
     An experiment's rows come from its own folder, whatever run wrote it, so a partial run leaves the
     others' results as they were. ``list_all=False`` (folders of ``-p`` runs) lists only the experiments
@@ -466,8 +468,17 @@ def write_suite_reports(suite: Suite, report_dir: Path, *, list_all: bool = True
     for r in rows:
         writer.writerow({c: r.get(c, "") for c in SITE_NUMBER_COLUMNS})
     _write_atomic(report_dir / "numbers.csv", out.getvalue())
-    _write_atomic(report_dir / "index.html", site.index_html(report_dir, entries, rows, locbook_version()))
-    _write_atomic(report_dir / "index.md", site.index_markdown(report_dir, entries, rows))
+    # the findings pages, the conclusions pages and the index from the same rows as numbers.csv (one tally)
+    from .findings import write_findings
+    from .conclusions import write_conclusions
+    profile = site._profile_of(report_dir)
+    if report_dir.name in PROFILES:
+        write_findings(report_dir, entries, rows, profile, lambda path, text: _write_atomic(path, text))
+    conclusions = write_conclusions(report_dir, suite, entries, rows,
+                                    lambda path, text: _write_atomic(path, text)) if report_dir.name in PROFILES else {}
+    _write_atomic(report_dir / "index.html", site.index_html(report_dir, entries, rows, locbook_version(),
+                                                             conclusions))
+    _write_atomic(report_dir / "index.md", site.index_markdown(report_dir, entries, rows, conclusions))
 
 
 # ---------------------------------------------------------------------------------------------------

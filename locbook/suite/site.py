@@ -84,37 +84,28 @@ def _headline(rows) -> str:
 
 
 def _bracket_counts(rows) -> dict | None:
-    """Bracket verdicts of the scored rows (reproduction, calibrated, claim; each printed quantity once), or None
-    when no row has a bracket (no ``locbook bracket`` ran for these experiments)."""
-    scored = [r for r in rows if r.get("kind") in JUDGED_KINDS and not r.get("same_as")
-              and r.get("verdict") in ("within", "loose", "miss")]
-    from .bracket import BRACKETS
-    c = Counter(r.get("bracket", "") for r in scored)
-    if not any(c[b] for b in BRACKETS):
-        return None
-    # a reading fitted to printed output reaching a row it was chosen from shows consistency, not a reproduction
-    fitted_only = sum(1 for r in scored if r.get("bracket") == "reachable"
-                      and all("[fitted]" in part for part in r.get("bracket_readings", "").split("; ")))
-    return {"n": len(scored), **{b: c[b] for b in BRACKETS}, "fitted_only": fitted_only, "none": c[""]}
+    """The tier tally of the scored rows (:func:`locbook.suite.findings.tier_counts`)."""
+    from .findings import tier_counts
+    return tier_counts(rows)
 
 
-def _bracket_headline(rows) -> str:
-    b = _bracket_counts(rows)
-    if b is None:
-        return ""
-    return (f"**Reading brackets of the {b['n']} scored rows: {b['default']} within by default, {b['reachable']} "
-            f"reachable under another declared reading ({b['fitted_only']} of them only under a reading fitted to "
-            f"printed output), {b['outside']} outside every declared reading, {b['open']} open (a reading not swept, "
-            f"or not run at this profile), {b['loose']} loose under every reading that ran (a window too wide to "
-            f"decide), {b['none']} not bracketed** (`locbook bracket`, each reading judged by its own run at the "
-            "bracket's profile, named in `bracket_readings`; the `bracket` and "
-            "`bracket_readings` columns of numbers.csv, and the findings page of each document).")
+def _profile_of(report_dir: Path) -> str:
+    """The profile whose reports a folder holds (``reports/quick``; ``reports/full/data-x`` is the full profile's),
+    '' for another folder (a ``-p`` run's, ``--out``)."""
+    from .spec import PROFILES
+    folder = Path(report_dir)
+    return next((f.name for f in (folder, folder.parent) if f.name in PROFILES), "")
+
+
+def _bracket_headline(rows, profile: str = "full") -> str:
+    from .findings import bracket_headline
+    return bracket_headline(rows, profile)
 
 
 def _findings(report_dir: Path) -> list[tuple[str, str]]:
-    """(document, relative link) of every findings page beside this reports folder."""
-    root = Path(report_dir).parent / "brackets"
-    return [(p.name[:-len("-findings.md")], f"../brackets/{p.name}") for p in sorted(root.glob("*-findings.md"))]
+    """(document, relative link) of every findings page of this reports folder."""
+    from .findings import findings_links
+    return findings_links(report_dir)
 
 
 def _reasons(rows) -> list[dict]:
@@ -263,7 +254,8 @@ def page_markdown(exp, profile: str, params: dict, folder: Path, numbers: list[d
 
 _TEMPLATES = Path(__file__).with_name("templates")
 #: verdicts whose cells are coloured (site.css, ``.v-<verdict>``); "no verdict" and "linked" stay plain
-_COLORED = ("within", "loose", "miss", "consistent", "inconsistent", "default", "reachable", "open", "outside")
+_COLORED = ("within", "loose", "miss", "consistent", "inconsistent", "default", "other_reading", "fitted_only",
+            "between", "open", "outside")
 #: a table a notebook saved is shown inline up to this many rows (longer ones: the link to the CSV file)
 _INLINE_TABLE_ROWS = 200
 
@@ -439,7 +431,7 @@ def printed_versus_ours(numbers: list[dict]) -> list[dict]:
                          f'x2="{x(printed)}" y2="{y(high)}" class="window"/>'
                          f'<circle cx="{x(printed)}" cy="{y(ours)}" r="3.5" class="ours"/>'
                          + (f'<circle cx="{x(printed)}" cy="{y(ours)}" r="6" class="reached"/>'
-                            if r.get("bracket") == "reachable" else "") + '</g>')
+                            if r.get("bracket") in ("other_reading", "fitted_only") else "") + '</g>')
         parts.append("</svg>")
         out.append({"title": location + (f" ({unit})" if unit else ""), "svg": "".join(parts), "n": len(items)})
     return out
@@ -531,8 +523,14 @@ def _datasets(report_dir: Path, page: str = "index.html") -> list[tuple[str, str
     return out
 
 
-def index_markdown(report_dir: Path, entries, rows) -> str:
-    lines = [f"# locbook reports, `{report_dir.name}`", "",
+def index_markdown(report_dir: Path, entries, rows, conclusions: dict | None = None) -> str:
+    from .findings import leniency_note, one_screen, one_screen_markdown
+    profile = _profile_of(report_dir)
+    lines = [f"# locbook reports, `{report_dir.name}`", ""]
+    lines += one_screen_markdown(one_screen(entries, rows, conclusions), profile)
+    if not lines[2:] and leniency_note(profile):
+        lines += [leniency_note(profile), ""]
+    lines += [
              "Every printed number beside ours: [numbers.csv](numbers.csv). A row's kind says what agreement "
              "means: `reproduction` (our own simulation or analysis, no input chosen from the printed number), "
              "`calibrated` (an input was chosen from a printed number; the row names it), `arithmetic` (the "
@@ -540,11 +538,14 @@ def index_markdown(report_dir: Path, entries, rows) -> str:
              "nothing to compare). Verdicts: `within` (inside a window no wider than +-25 %: printed rounding + "
              "2 Monte-Carlo standard errors + a named ambiguity), `loose` (inside a wider window), `miss`.", "",
              _headline(rows), ""]
-    if _bracket_headline(rows):
-        lines += [_bracket_headline(rows), ""]
-        if _findings(report_dir):      # (none beside a copy of the folder without its brackets)
+    if _bracket_headline(rows, profile):
+        lines += [_bracket_headline(rows, profile), ""]
+        if _findings(report_dir):
             lines += ["Findings per document: " + ", ".join(f"[{doc}]({link})" for doc, link in _findings(report_dir)),
                       ""]
+    if _conclusion_pages(report_dir):
+        lines += ["Conclusions per document (each claim of the source judged from the rows): " + ", ".join(
+            f"[{doc}]({link})" for doc, link in _conclusion_pages(report_dir)), ""]
     if _datasets(report_dir, "index.md"):
         lines += ["The measured-data experiments on other data sets (`locbook run --data`): " + ", ".join(
             f"[{name}]({link})" for name, link in _datasets(report_dir, "index.md")), ""]
@@ -573,8 +574,10 @@ def index_markdown(report_dir: Path, entries, rows) -> str:
                       "generated by": e["report"].get("locbook", "")})
     lines += [Table(table).to_markdown(), ""]
     reasons = _reasons(rows)
-    if reasons:
-        lines += ["## Misses and loose rows, by reason", "", Table(reasons).to_markdown(), ""]
+    if reasons:       # long: folded (GitHub renders <details>); each reason once per experiment and verdict
+        lines += ["## Misses and loose rows, by reason", "", "<details><summary>" + _plural(len(reasons), "reason")
+                  + f" over {sum(g['rows'] for g in reasons)} rows</summary>", "", Table(reasons).to_markdown(), "",
+                  "</details>", ""]
     return "\n".join(lines)
 
 
@@ -616,7 +619,7 @@ def _index_entry(report_dir: Path, e) -> dict:
             "stamp": e["report"].get("locbook", ""), "links": links}
 
 
-def index_html(report_dir: Path, entries, rows, version: str) -> str:
+def index_html(report_dir: Path, entries, rows, version: str, conclusions: dict | None = None) -> str:
     """``index.html`` of a reports folder: links only to the files present in it."""
     report_dir = Path(report_dir)
     experiments = [_index_entry(report_dir, e) for e in entries]
@@ -628,10 +631,30 @@ def index_html(report_dir: Path, entries, rows, version: str) -> str:
     return _render(
         "index.html", version=version, folder=report_dir.name, numbers_csv=(report_dir / "numbers.csv").is_file(),
         headline=_headline_counts(rows), brackets=_bracket_counts(rows), findings=_findings(report_dir),
+        bracket_headline=_bracket_headline(rows, _profile_of(report_dir)),
+        answers=_one_screen(entries, rows, conclusions), leniency=_leniency(report_dir),
+        conclusion_pages=_conclusion_pages(report_dir),
         twice=double_counted(rows), datasets=_datasets(report_dir),
         total=_counts_table(scoreboard_counts(rows)) if rows else None, documents=documents,
         experiments=experiments, n_present=sum(1 for e in entries if e["present"]), reasons=reasons,
         summary=findings_summary(entries, rows))
+
+
+def _conclusion_pages(report_dir: Path) -> list[tuple[str, str]]:
+    """(document, file name) of the conclusions pages in a reports folder."""
+    from .conclusions import CONCLUSIONS_SUFFIX
+    return [(p.name[:-len(CONCLUSIONS_SUFFIX)], p.name)
+            for p in sorted(Path(report_dir).glob(f"*{CONCLUSIONS_SUFFIX}"))]
+
+
+def _one_screen(entries, rows, conclusions):
+    from .findings import one_screen
+    return one_screen(entries, rows, conclusions)
+
+
+def _leniency(report_dir: Path) -> str:
+    from .findings import leniency_note
+    return leniency_note(_profile_of(report_dir)).replace("**", "")
 
 
 def _read_json(path: Path, default):

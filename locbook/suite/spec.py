@@ -17,6 +17,9 @@ Schema::
     [experiment.bracket]          # optional: parameters every point of ``locbook bracket`` sets (never a scored
     parameters = { ... }          # quantity's input, never a declared reading), and the reason, shown with the
     reason = "..."                # bracket's findings (e.g. a notebook's own sweep of readings the bracket runs)
+    factorial = ["a", "b"]        # optional: readings that interact; the bracket also runs their combinations
+    largest_error_m = 9.43        # optional: the largest plausible error in metres (the area's diagonal) and
+    largest_error_reason = "..."  # where the area is printed: a point whose error exceeds it is implausible
 
     [parameter_rules]             # allowed values by parameter name, for every experiment declaring it
     n_runs = { ge = 2 }           # keys: ge, gt, le, lt, allow_inf, min_items, max_items (ParameterRule)
@@ -80,6 +83,11 @@ class Experiment:
     #: ``[experiment.bracket]``: parameter -> value set at every bracket point, and why (empty: none)
     bracket_parameters: dict = field(default_factory=dict, hash=False)
     bracket_reason: str = ""
+    #: ``[experiment.bracket] factorial``: the readings whose textual values the bracket also runs in combination
+    bracket_factorial: tuple = ()
+    #: ``[experiment.bracket] largest_error_m``: the largest plausible error (m; None: not declared), and its source
+    largest_error_m: float | None = None
+    largest_error_reason: str = ""
 
     def declared_parameters(self) -> dict[str, NotebookParameter]:
         return read_parameters(self.notebook)
@@ -223,15 +231,32 @@ def load_suite(path: Path | None = None) -> Suite:
             raise SuiteError(f"{path}: experiment {eid!r}: notebook {raw['notebook']} does not exist")
         rules = {**suite_rules, **_rules(raw.get("parameter_rules", {}), f"{path}: experiment {eid!r}")}
         bracket = raw.get("bracket", {})
-        if not isinstance(bracket, dict) or set(bracket) - {"parameters", "reason"} \
+        if not isinstance(bracket, dict) or set(bracket) - {"parameters", "reason", "factorial", "largest_error_m",
+                                                             "largest_error_reason"} \
                 or not isinstance(bracket.get("parameters", {}), dict):
-            raise SuiteError(f"{path}: experiment {eid!r}: [experiment.bracket] takes a table 'parameters' and a "
-                             "string 'reason'")
+            raise SuiteError(f"{path}: experiment {eid!r}: [experiment.bracket] takes a table 'parameters', a "
+                             "string 'reason', a list 'factorial' of reading names, and 'largest_error_m' (a "
+                             "positive number) with 'largest_error_reason'")
+        factorial = bracket.get("factorial", [])
+        if not isinstance(factorial, list) or not all(isinstance(n, str) and n for n in factorial) \
+                or len(set(factorial)) != len(factorial) or len(factorial) == 1:
+            raise SuiteError(f"{path}: experiment {eid!r}: [experiment.bracket] factorial must list two or more "
+                             f"distinct reading names, got {factorial!r}")
+        largest = bracket.get("largest_error_m")
+        if largest is not None and (isinstance(largest, bool) or not isinstance(largest, (int, float))
+                                    or not math.isfinite(largest) or largest <= 0):
+            raise SuiteError(f"{path}: experiment {eid!r}: [experiment.bracket] largest_error_m must be a positive "
+                             f"number of metres, got {largest!r}")
+        if (largest is None) != (not str(bracket.get("largest_error_reason", "")).strip()):
+            raise SuiteError(f"{path}: experiment {eid!r}: [experiment.bracket] largest_error_m and "
+                             "largest_error_reason go together (the reason says where the area is printed)")
         if not isinstance(bracket.get("reason", ""), str):
             raise SuiteError(f"{path}: experiment {eid!r}: [experiment.bracket] reason must be a string")
         if bracket.get("parameters") and not bracket.get("reason", "").strip():
             raise SuiteError(f"{path}: experiment {eid!r}: [experiment.bracket] sets parameters without a 'reason'")
         experiments.append(Experiment(eid, documents[dkey], raw["title"], raw["section"], notebook,
                                       {p: dict(raw["profiles"][p]) for p in PROFILES}, rules,
-                                      dict(bracket.get("parameters", {})), str(bracket.get("reason", "")).strip()))
+                                      dict(bracket.get("parameters", {})), str(bracket.get("reason", "")).strip(),
+                                      tuple(factorial), None if largest is None else float(largest),
+                                      str(bracket.get("largest_error_reason", "")).strip()))
     return Suite(path.resolve(), documents, experiments)

@@ -2,18 +2,21 @@
 indication (RSSI) based indoor localization and tracking methods using active RFID devices", M.Sc. thesis,
 METU, 2011. Chapter 7 simulations.
 
-The simulation protocol is the one stated in Sec. 7.2.1, its unprinted parts read as the text reads plainly
-(issue 28: a reading chosen because it fits the printed output is never the default): a 5 m x 8 m room without
-walls, readers at three (or four) corners, alpha = -52 dBm, n = 2.3 for every reader, Gaussian noise added to "the
-target transmit power" (one draw per measurement, shared by every reader), 1000 runs per setting. A *mobile* target
-starts uniformly in the room, takes one Gaussian step of std D_0 per recursion (reflected at the walls), is
-estimated at every step ("estimation will be done for every step if the target is mobile") and its statistics are
-taken over every recursion of the run; a *fixed* target is uniform in the room, gets a new noise draw with every
-measurement, and its error is taken at the last recursion rt. NN methods take one shot.
+The simulation protocol is the one stated in Sec. 7.2.1, each unprinted part read as the text supports best (issue
+45: argued from quotes in locbook/data/readings/ozkaya2011.csv, never from a fit to the printed numbers): a 5 m x 8 m
+room without walls, readers at three (or four) corners, alpha = -52 dBm, n = 2.3 for every reader, zero-mean Gaussian
+noise independent per reader (the product of one Gaussian per reader of Eq. (A.6), the model the filters and the CRLB
+use), 1000 runs per setting. A *mobile* target starts uniformly in the room and takes one Gaussian step of std D_0
+per recursion (reflected at the walls, an assumption), with fresh noise at every step, and its error is taken at
+recursion rt, after the wait "for a sufficient recursion time for the filter to settle" (Sec. 7.2.2.2); a *fixed*
+target is uniform in the room and its noise is drawn once per run (one erroneous measurement at a location, the
+thesis's "worst case scenario"). NN methods take one shot.
 
-The readings fitted to the printed tables by re-simulation (:data:`FITTED_VALUES`: noise independent per reader, a
-fixed target's noise frozen per run, a mobile run's error taken at recursion rt) are named alternatives
-(:data:`SIM_READINGS`, locbook/data/readings/ozkaya2011.csv); rows computed under them are ``calibrated``.
+The other readings the text supports (common-mode noise "added on the transmit power", fresh noise at every
+recursion of a fixed target, a mobile run's statistics over every recursion) are named alternatives
+(:data:`SIM_READINGS`); rows computed under them are reproductions too. Only the values that no text supports and that
+were chosen because they fit printed output (:data:`FITTED_VALUES`: the CRLB columns' n = 2 and the mean over the
+cells) make a row ``calibrated``.
 
 Every printed simulation result (Tables 7.1-7.25, 7.45, 7.46) is mapped to a :class:`SimCase` by
 :func:`simulation_cases`; settings the thesis does not print are the documented defaults of the fields.
@@ -73,12 +76,16 @@ STATISTICS = ("rmse_m", "mean_m", "median_m", "p90_m", "std_m")
 
 #: Reader layouts. Corners: Sec. 7.2.1's separations of 5 m and 8 m (which three corners is not printed; any
 #: three are equivalent by symmetry).
-#: "half3": the half-separation layout of Fig. 7.6 (2.5 m and 4 m); its positions are not printed, so this
-#: is our guess, centred in the room; it does not reproduce Table 7.5.
+#: "half3": the half-separation layout of Fig. 7.6 (separations 2.5 m and 4 m, "to inner region of the
+#: environment", Sec. 7.2.2.1 E); its positions are not printed: the corner triangle scaled by 1/2 about the room's
+#: centre. "half3_centroid": the same triangle moved so that its centroid is the room's centre
+#: (:data:`HALF_SEPARATION_LAYOUTS`, the reading ``half_separation_layout``).
+#: "large3"/"large4": the 10 m x 16 m room's corners (separations "twice of the default", Sec. 7.2.2.1 F).
 LAYOUTS = {
     "corners3": ((0.0, 0.0), (5.0, 0.0), (0.0, 8.0)),
     "corners4": ((0.0, 0.0), (5.0, 0.0), (0.0, 8.0), (5.0, 8.0)),
     "half3": ((1.25, 2.0), (3.75, 2.0), (1.25, 6.0)),
+    "half3_centroid": ((5.0 / 3.0, 8.0 / 3.0), (25.0 / 6.0, 8.0 / 3.0), (5.0 / 3.0, 20.0 / 3.0)),
     "large3": ((0.0, 0.0), (10.0, 0.0), (0.0, 16.0)),
     "large4": ((0.0, 0.0), (10.0, 0.0), (0.0, 16.0), (10.0, 16.0)),
 }
@@ -88,6 +95,12 @@ LAYOUTS = {
 CELL_PATTERNS = {6: (2, 3), 8: (2, 4), 16: (4, 4), 28: (4, 7), 56: (7, 8), 98: (7, 14), 112: (8, 14), 135: (9, 15)}
 #: The cells tile the room shrunk by this margin on every side (Fig. 7.2: 28 cells at x 1..4, y 1..7).
 CELL_MARGIN_M = 0.5
+#: The reading ``half_separation_layout`` -> the layout of :data:`LAYOUTS` it places Table 7.5's half-separation
+#: readers at.
+HALF_SEPARATION_LAYOUTS = {"scaled_about_centre": "half3", "centroid_at_centre": "half3_centroid"}
+#: How a mobile target's Gaussian step that would leave the room is handled (not printed): mirrored at the wall,
+#: stopped at the wall, or drawn again until it lands inside.
+WALL_HANDLINGS = ("reflect", "clip", "redraw")
 
 #: The contested readings of the Sec. 7.2 simulations (locbook/data/readings/ozkaya2011.csv): reading name -> its
 #: values, the first being the default. Each is a notebook parameter of the same name.
@@ -99,14 +112,22 @@ SIM_READINGS = {
     "target_sampling": ("room", "inner", "cell_cores"),
     # the k-NN weights of Eq. (3.3): corrected, as printed, or plain averaging
     "nn_weights": ("inverse_square", "literal_ozkaya2011", "uniform"),
-    # one draw on 'the target transmit power' shared by every reader (Sec. 7.2.1), or i.i.d. noise per reader
-    # (fitted to the printed tables)
-    "reader_noise": ("common_mode", "independent_per_reader"),
-    # a fixed target's noise: afresh with every measurement, or drawn once per run (static shadowing; fitted)
-    "fixed_target_noise": ("fresh_per_step", "frozen_per_run"),
-    # a mobile target's RMSE, mean and std: of the errors of every recursion (estimated at every step, Sec. 7.2.1),
-    # or of the error at recursion rt (fitted)
-    "mobile_protocol": ("mean_over_recursions", "reflect_error_at_rt"),
+    # noise independent per reader (Eq. (A.6)'s product of one Gaussian per reader, the model the filters and the
+    # CRLB use), or one draw 'added on the transmit power' shared by every reader (Secs. 7.2.2.2, 7.2.2.3)
+    "reader_noise": ("independent_per_reader", "common_mode"),
+    # a fixed target's noise: drawn once per run (one erroneous measurement at a location, 'a worst case scenario'),
+    # or afresh with every measurement
+    "fixed_target_noise": ("frozen_per_run", "fresh_per_step"),
+    # a mobile target's statistics: of the error at recursion rt (after the wait 'for the filter to settle'), or of
+    # the errors of every recursion ('estimation will be done for every step', Sec. 7.2.1)
+    "mobile_protocol": ("reflect_error_at_rt", "mean_over_recursions"),
+    # a mobile target's step that would leave the room: mirrored, stopped at the wall, or drawn again (not printed)
+    "wall_handling": WALL_HANDLINGS,
+    # where Table 7.5's half-separation readers stand (Fig. 7.6, not printed): HALF_SEPARATION_LAYOUTS
+    "half_separation_layout": tuple(HALF_SEPARATION_LAYOUTS),
+    # Table 7.21's 'known initial location': every particle / all the belief at the true start, or spread about it
+    # with the filter's D (a Gaussian prior on the initial state)
+    "known_initial_location": ("exact", "gaussian_d"),
     # Table 7.24's N_t = 0.5: a fraction of N, or N_eff < 0.5 particles as printed (never true: N_eff >= 1)
     "resample_threshold": ("fraction_of_n", "absolute"),
 }
@@ -158,7 +179,8 @@ class SimCase:
     """One simulated setting. Defaults are the thesis's stated controls (Sec. 7.2.1-7.2.2).
 
     method: ``"nn"`` (parameter-based NN, offline parameters), ``"grid"`` or ``"sir"``.
-    target: ``"fixed"`` (noise frozen per run), ``"mobile"`` (Gaussian steps of ``motion_m``, fresh noise),
+    target: ``"fixed"`` (a uniform position), ``"mobile"`` (Gaussian steps of ``motion_m``, fresh noise; a step leaving
+        the room handled per ``wall_handling``: ``"reflect"``, ``"clip"`` or ``"redraw"``, :data:`WALL_HANDLINGS`),
         ``"const_velocity"`` (Table 7.20: +0.5 m in y per recursion from y = 1, random x, fresh noise).
     sigma0_db / sigma_db: simulated noise / the filter's model. spread_m: the filter's D (inf = uniform).
     filter_region / target_region: ``"room"``, ``"inner"`` (1 m from the walls, Table 7.22) or ``"cell_cores"``
@@ -166,10 +188,12 @@ class SimCase:
     resample_threshold: None = every step (basic SIR); else the N_eff threshold, read per ``resample_threshold_unit``:
         ``"fraction_of_n"`` (N_eff < threshold N) or ``"absolute"`` (N_eff < threshold, as Table 7.24 prints it).
     nn_weights: the k-NN weighting of Eq. (3.3) (:data:`~locbook.static.fingerprint.KNN_WEIGHTINGS`).
-    reader_noise: ``"common_mode"`` (one draw per run and step shared by every reader: noise on the target's
-        transmit power, Sec. 7.2.1) or ``"independent_per_reader"`` (fitted to the printed tables).
-    fixed_target_noise: ``"fresh_per_step"`` (a new draw with every measurement) or ``"frozen_per_run"`` (a fixed
-        target's noise drawn once; fitted to the printed tables).
+    reader_noise: ``"independent_per_reader"`` (i.i.d. per reader, Eq. (A.6)) or ``"common_mode"`` (one draw per
+        run and step shared by every reader: noise "added on the transmit power", Secs. 7.2.2.2-7.2.2.3).
+    fixed_target_noise: ``"frozen_per_run"`` (a fixed target's noise drawn once per run) or ``"fresh_per_step"`` (a new
+        draw with every measurement).
+    known_initial / initial_location: Table 7.21's known start: ``"exact"`` (every particle, or all the grid belief,
+        at the true start) or ``"gaussian_d"`` (spread about it with the filter's D).
     """
 
     method: str
@@ -194,9 +218,11 @@ class SimCase:
     alpha_dbm: float = ALPHA_DBM
     path_loss_exp: float = PATH_LOSS_EXP
     nn_weights: str = "inverse_square"
-    reader_noise: str = "common_mode"
-    fixed_target_noise: str = "fresh_per_step"
+    reader_noise: str = "independent_per_reader"
+    fixed_target_noise: str = "frozen_per_run"
     resample_threshold_unit: str = "fraction_of_n"
+    wall_handling: str = "reflect"
+    initial_location: str = "exact"
 
     def describe(self) -> str:
         base = SimCase(self.method)
@@ -222,8 +248,9 @@ def case_seed_sequence(seed: int, case: SimCase) -> np.random.SeedSequence:
     steps). Settings that differ only in the estimator (k_NN, cells, D, N, resampling, weights) therefore see
     the same targets and noise: common random numbers, so a sweep's rows differ by the method alone, as the
     thesis's repeated rows do. Adding a setting never shifts another's numbers. The noise readings
-    (``reader_noise``, ``fixed_target_noise``) are left out of the key on purpose: the targets are drawn before the
-    noise, so a setting under another noise reading sees the same targets."""
+    (``reader_noise``, ``fixed_target_noise``) and the wall handling are left out of the key on purpose: the targets'
+    steps are drawn before the noise, so a setting under another noise reading sees the same targets, and one under
+    another wall handling the same steps (``"redraw"`` then draws more)."""
     key = {f: getattr(case, f) for f in _TRUTH_FIELDS}
     key["steps"] = 1 if case.method == "nn" else case.rt
     return np.random.SeedSequence([seed, seed_from_values(key)])
@@ -237,6 +264,7 @@ def simulate_truth_and_rss(case: SimCase, n_runs: int, rng: np.random.Generator)
     run for a fixed target (the same vector at every recursion)."""
     _check_reading("reader_noise", case.reader_noise)
     _check_reading("fixed_target_noise", case.fixed_target_noise)
+    _check_reading("wall_handling", case.wall_handling)
     room = room_for(case.layout)
     readers = readers_for(case.layout)
     lo, hi = _region(case.target_region, room)
@@ -252,7 +280,7 @@ def simulate_truth_and_rss(case: SimCase, n_runs: int, rng: np.random.Generator)
             truth = np.empty((n_runs, steps, 2))
             truth[:, 0] = start
             for t in range(1, steps):
-                truth[:, t] = reflect_into_box(truth[:, t - 1] + moves[:, t], lo, hi)
+                truth[:, t] = _step_inside(truth[:, t - 1], moves[:, t], lo, hi, case, rng)
         elif case.target == "fixed":
             truth = np.broadcast_to(start[:, None, :], (n_runs, steps, 2))
         else:
@@ -263,6 +291,23 @@ def simulate_truth_and_rss(case: SimCase, n_runs: int, rng: np.random.Generator)
     noise_shape = (n_runs, 1 if frozen else steps, 1 if case.reader_noise == "common_mode" else readers.shape[0])
     rss = mean + case.sigma0_db * rng.standard_normal(noise_shape)
     return np.asarray(truth), rss
+
+
+def _step_inside(previous_m, move_m, lo, hi, case: SimCase, rng: np.random.Generator, max_redraws: int = 1000):
+    """One mobile step ``previous + move`` kept in the box ``[lo, hi]`` per ``case.wall_handling``: mirrored at the
+    walls (``"reflect"``), stopped at the wall it crosses (``"clip"``), or the step drawn again from
+    ``N(0, motion_m^2 I)`` until it lands inside (``"redraw"``, a truncated Gaussian step)."""
+    moved = previous_m + move_m
+    if case.wall_handling == "reflect":
+        return reflect_into_box(moved, lo, hi)
+    if case.wall_handling == "clip":
+        return np.clip(moved, lo, hi)
+    for _ in range(max_redraws):
+        outside = np.any((moved < lo) | (moved > hi), axis=-1)
+        if not outside.any():
+            return moved
+        moved[outside] = previous_m[outside] + case.motion_m * rng.standard_normal((int(outside.sum()), 2))
+    return np.clip(moved, lo, hi)          # a step that never lands inside (a tiny box): stop at the wall
 
 
 def resample_fraction(case: SimCase) -> float | None:
@@ -292,8 +337,14 @@ def run_case(case: SimCase, n_runs: int, seed: int, *, return_all: bool = False)
         velocity = (0.0, case.velocity_m) if case.known_velocity else None
         initial = None
         if case.known_initial:
-            initial = np.zeros((n_runs, cells.shape[0]))
-            initial[np.arange(n_runs), np.argmin(np.sum((cells[None] - truth[:, :1]) ** 2, -1), -1)] = 1.0
+            _check_reading("known_initial_location", case.initial_location)
+            if case.initial_location == "exact":
+                initial = np.zeros((n_runs, cells.shape[0]))
+                initial[np.arange(n_runs), np.argmin(np.sum((cells[None] - truth[:, :1]) ** 2, -1), -1)] = 1.0
+            else:                                           # Gaussian about the start with the filter's D
+                d2 = np.sum((cells[None] - truth[:, :1]) ** 2, -1)
+                initial = np.exp(-(d2 - d2.min(-1, keepdims=True)) / (2.0 * case.spread_m ** 2))
+                initial /= initial.sum(-1, keepdims=True)
         res = grid_bayes_filter(rss, cells, filter_model, case.spread_m, velocity_m=velocity, initial_belief=initial)
         estimate = res.mean_m if case.estimator == "mmse" else res.map_m
     elif case.method == "sir":
@@ -301,6 +352,7 @@ def run_case(case: SimCase, n_runs: int, seed: int, *, return_all: bool = False)
             rss, filter_model, rng, n_particles=case.n_particles, region_m=_region(case.filter_region, room),
             spread_m=case.spread_m, velocity_m=(0.0, case.velocity_m) if case.known_velocity else None,
             initial_position_m=truth[:, 0] if case.known_initial else None,
+            initial_sd_m=_initial_sd_m(case),
             resample_threshold=resample_fraction(case), weight_smoothing=case.weight_smoothing)
         estimate = res.mean_m if case.estimator == "mmse" else res.map_m
     else:
@@ -309,6 +361,15 @@ def run_case(case: SimCase, n_runs: int, seed: int, *, return_all: bool = False)
     if return_all:
         return errors[:, -1], errors, truth, estimate
     return errors[:, -1]
+
+
+def _initial_sd_m(case: SimCase) -> float:
+    """The spread of the SIR's particles about a known start (Table 7.21): 0 (every particle at it) under
+    ``initial_location="exact"``, the filter's D under ``"gaussian_d"``; 0 when the start is not known."""
+    if not case.known_initial:
+        return 0.0
+    _check_reading("known_initial_location", case.initial_location)
+    return float(case.spread_m) if case.initial_location == "gaussian_d" and np.isfinite(case.spread_m) else 0.0
 
 
 _STATISTIC_FUNCTIONS = {"rmse_m": rmse_m, "mean_m": mean_error_m, "median_m": median_error_m,
@@ -390,15 +451,17 @@ def summarize(errors, rng: np.random.Generator | None = None, *,
     return out
 
 
-#: The value of each reading that was chosen by re-simulating the printed output (issue 28: such a reading is a
-#: calibration; readings CSV, basis fitted_to_output): reading name -> the fitted value.
-FITTED_VALUES = {"reader_noise": "independent_per_reader", "fixed_target_noise": "frozen_per_run",
-                 "mobile_protocol": "reflect_error_at_rt", "crlb_average": "cells_mean", "crlb_exponent": 2.0}
+#: The values that nothing in the text supports and that were chosen because they fit printed output (issue 45,
+#: readings CSV column ``fitted``): reading name -> the fitted value. Rows computed under one are calibrations. The
+#: simulation readings are not here: each of their values is supported by the text (readings CSV, ``quotes``).
+FITTED_VALUES = {"crlb_average": "cells_mean", "crlb_exponent": 2.0}
 
 
-def _can_move(name: str, case: SimCase) -> bool:
+def _can_move(name: str, case: SimCase | None) -> bool:
     """Whether reading ``name`` can change the errors of ``case`` (noise readings need noise; the fixed target's
-    noise needs recursions; the mobile protocol a mobile target)."""
+    noise needs recursions; the mobile protocol a mobile target); None: any case."""
+    if case is None:
+        return True
     if name == "reader_noise":
         return case.sigma0_db > 0
     if name == "fixed_target_noise":
@@ -409,11 +472,10 @@ def _can_move(name: str, case: SimCase) -> bool:
 
 
 def fitted_readings(chosen: dict, case: SimCase | None = None) -> tuple[str, ...]:
-    """The names of the ``chosen`` readings (name -> value) set to the value fitted to the printed output
+    """The names of the ``chosen`` readings (name -> value) set to a value fitted to the printed output
     (:data:`FITTED_VALUES`); with ``case``, only those that can move that case's numbers. A row computed under any of
-    them is ``calibrated`` (issue 28) and names them (:func:`fitted_calibrated_from`)."""
-    return tuple(n for n, v in chosen.items() if n in FITTED_VALUES and v == FITTED_VALUES[n]
-                 and (case is None or _can_move(n, case)))
+    them is ``calibrated`` and names them (:func:`fitted_calibrated_from`)."""
+    return tuple(n for n, v in chosen.items() if n in FITTED_VALUES and v == FITTED_VALUES[n] and _can_move(n, case))
 
 
 def fitted_calibrated_from(chosen: dict, case: SimCase | None = None) -> str:
@@ -421,45 +483,59 @@ def fitted_calibrated_from(chosen: dict, case: SimCase | None = None) -> str:
     names = fitted_readings(chosen, case)
     if not names:
         return ""
-    return ("; ".join(f"{n} = {chosen[n]!r}" for n in names) + " chosen by re-simulating the printed simulation "
-            "tables (readings fitted to the output, locbook/data/readings/ozkaya2011.csv)")
+    return ("; ".join(f"{n} = {chosen[n]!r}" for n in names) + " chosen because they reproduce the printed output "
+            "(readings no text supports, locbook/data/readings/ozkaya2011.csv)")
 
 
-#: How each reading of :data:`FITTED_VALUES` reads in a miss note: reading name -> value -> words.
+#: How each contested reading reads in a miss note: reading name -> value -> words. The first value of each is the
+#: declared default.
 _READING_WORDS = {
-    "reader_noise": {"common_mode": "common-mode noise on the transmit power",
-                     "independent_per_reader": "independent noise per reader"},
-    "fixed_target_noise": {"fresh_per_step": "a fixed target's noise drawn afresh at every recursion",
-                           "frozen_per_run": "a fixed target's noise frozen over the run"},
-    "mobile_protocol": {"mean_over_recursions": "a mobile run's statistics over every recursion",
-                        "reflect_error_at_rt": "a mobile run's error at recursion rt"},
+    "reader_noise": {"independent_per_reader": "noise independent per reader",
+                     "common_mode": "common-mode noise on the transmit power"},
+    "fixed_target_noise": {"frozen_per_run": "a fixed target's noise frozen over the run",
+                           "fresh_per_step": "a fixed target's noise drawn afresh at every recursion"},
+    "mobile_protocol": {"reflect_error_at_rt": "a mobile run's error at recursion rt",
+                        "mean_over_recursions": "a mobile run's statistics over every recursion"},
     "crlb_exponent": {PATH_LOSS_EXP: f"n = {PATH_LOSS_EXP:g}", 2.0: "n = 2"},
     "crlb_average": {"area_rms": "the RMS over the room", "cells_mean": "the mean over the 1 m cells"},
 }
 
 
 def unfitted_readings(chosen: dict, case: SimCase | None = None) -> tuple[str, ...]:
-    """The names of the readings of :data:`FITTED_VALUES` that ``chosen`` sets to another value than the fitted one
-    (the text's reading, by default); with ``case``, only those that can move that case's numbers."""
-    return tuple(n for n, v in chosen.items() if n in FITTED_VALUES and v != FITTED_VALUES[n]
-                 and (case is None or _can_move(n, case)))
+    """The names of the contested readings (:data:`_READING_WORDS`) that ``chosen`` sets and that can move ``case``
+    (any case when None), other than those set to a value fitted to the output: the readings a miss note names."""
+    return tuple(n for n, v in chosen.items() if n in _READING_WORDS and _can_move(n, case)
+                 and not (n in FITTED_VALUES and v == FITTED_VALUES[n]))
+
+
+def _other_values(name: str, value) -> list:
+    return [v for v in _READING_WORDS[name] if v != value]
 
 
 def text_reading_note(chosen: dict, case: SimCase | None, experiment: str, reproduced: float, printed_value: float,
                       *, fitted_to: str = "the printed tables") -> str:
-    """One line saying why a row computed under the text's readings misses (issue 28): which of ``chosen``'s
-    readings not fitted to the output can move ``case`` (:func:`unfitted_readings`), where our value falls, and that
-    the reading fitted to ``fitted_to`` is an alternative that ``locbook bracket <experiment>`` runs. Empty when no
-    such reading moves the case."""
+    """One line saying which contested readings a missed row was computed under (:func:`unfitted_readings`: those
+    that can move ``case``), where our value falls, and which other readings ``locbook bracket <experiment>`` runs:
+    each named ``textual`` (another reading the text supports) or as fitted to ``fitted_to`` (no text supports it).
+    Empty when no such reading moves the case."""
     names = unfitted_readings(chosen, case)
     if not names:
         return ""
     ours = " and ".join(_READING_WORDS[n].get(chosen[n], f"{n} = {chosen[n]!r}") for n in names)
-    fitted = " and ".join(_READING_WORDS[n][FITTED_VALUES[n]] for n in names)
+    others = [(n, v) for n in names for v in _other_values(n, chosen[n])]
+    textual = [_READING_WORDS[n][v] for n, v in others if not (n in FITTED_VALUES and v == FITTED_VALUES[n])]
+    fitted = [_READING_WORDS[n][v] for n, v in others if n in FITTED_VALUES and v == FITTED_VALUES[n]]
     side = "below" if reproduced < printed_value else "above"
-    s, are, them = ("s", "are alternatives", "them") if len(names) > 1 else ("", "is an alternative", "it")
-    return (f"under the text's reading{s} ({ours}) ours is {side} the printed value; the reading{s} fitted to "
-            f"{fitted_to} ({fitted}) {are}: locbook bracket {experiment} runs {them}")
+    parts = []
+    if textual:
+        parts.append(f"the other textual reading{'s' if len(textual) > 1 else ''} ({' and '.join(textual)})")
+    if fitted:
+        parts.append(f"the reading{'s' if len(fitted) > 1 else ''} fitted to {fitted_to}, which no text supports "
+                     f"({' and '.join(fitted)})")
+    many = len(textual) + len(fitted) > 1
+    return (f"under the readings run ({ours}) ours is {side} the printed value; " + " and ".join(parts)
+            + (" are alternatives" if many else " is an alternative")
+            + f": locbook bracket {experiment} runs {'them' if many else 'it'}")
 
 
 def _check_reading(name: str, value) -> None:
@@ -480,11 +556,18 @@ def sim_readings(**chosen) -> dict:
 def with_readings(case: SimCase, readings: dict | None = None) -> SimCase:
     """``case`` under the simulation ``readings`` (:func:`sim_readings`): a target the thesis places 'at random in
     the room' (``target_region="room"``) is drawn per ``target_sampling``; a region the thesis prints (Table 7.22's
-    1 m from the walls) is kept. The noise, weight and threshold readings set their fields."""
+    1 m from the walls) is kept. The noise, weight, threshold, wall and known-start readings set their fields, and
+    ``half_separation_layout`` the readers of a half-separation case (Table 7.5)."""
     r = sim_readings(**(readings or {}))
+    layout = HALF_SEPARATION_LAYOUTS[r["half_separation_layout"]] if case.layout in LAYOUTS_OF_HALF else case.layout
     return replace(case, target_region=r["target_sampling"] if case.target_region == "room" else case.target_region,
                    nn_weights=r["nn_weights"], reader_noise=r["reader_noise"],
-                   fixed_target_noise=r["fixed_target_noise"], resample_threshold_unit=r["resample_threshold"])
+                   fixed_target_noise=r["fixed_target_noise"], resample_threshold_unit=r["resample_threshold"],
+                   wall_handling=r["wall_handling"], initial_location=r["known_initial_location"], layout=layout)
+
+
+#: The layouts a half-separation case may hold (:data:`HALF_SEPARATION_LAYOUTS`).
+LAYOUTS_OF_HALF = frozenset(HALF_SEPARATION_LAYOUTS.values())
 
 
 def run_summary(case: SimCase, n_runs: int, seed: int, readings: dict | None = None,
@@ -634,8 +717,9 @@ def thesis_monte_carlo_ambiguity(standard_error: float, n_runs: int) -> Ambiguit
 #: Why a printed simulation cell is expected to be missed.
 KNOWN_MISSES = {
     ("7.5", "Half of default (2.5 m, 4 m)"): (
-        "reader positions of Fig. 7.6 are not printed; our guessed layout is not the thesis's, and "
-        "its printed CRLB 0.76 cannot come from the scale-invariant printed formula either"),
+        "reader positions of Fig. 7.6 are not printed: the reading half_separation_layout declares two assumed "
+        "placements (the corner triangle halved about the room's centre, or with its centroid there); the thesis's "
+        "may be neither"),
     ("7.19", "Uniform over the area"): (
         "the thesis's 'uniform proposal' is not a memoryless uniform draw (which ignores all motion and gives about "
         "1.75 m); its exact form is not stated"),
@@ -733,9 +817,10 @@ def is_crlb_row(row: dict) -> bool:
 
 def record_tables(report, rows, n_runs: int) -> None:
     """Record every printed error statistic of ``rows`` (from :func:`run_tables`) as a ``reproduction``, or as
-    ``calibrated`` when a reading fitted to the printed tables moves it (:func:`fitted_calibrated_from`). A miss or
-    loose row computed under the text's readings says so first (:func:`text_reading_note`; the bracket runs the fitted
-    alternatives); under the fitted readings it carries the known cause (:data:`KNOWN_MISSES`) or a generic one.
+    ``calibrated`` when a reading fitted to the printed tables moves it (:func:`fitted_calibrated_from`; no simulation
+    reading is: each value of theirs is textual). A miss or loose row names the contested readings it was computed
+    under and the other readings the bracket runs (:func:`text_reading_note`), then the known cause
+    (:data:`KNOWN_MISSES`) or a generic one.
 
     Window: the printed rounding, 2 of our standard errors and the thesis's own Monte-Carlo error
     (:func:`thesis_monte_carlo_ambiguity`). A setting the thesis prints again with the same value is compared
@@ -756,9 +841,9 @@ def record_tables(report, rows, n_runs: int) -> None:
         text_note = text_reading_note(r.get("readings") or sim_readings(), r["case"], report.experiment,
                                       r["reproduced"], p.value) if judged.verdict in ("miss", "loose") else ""
         if text_note:
-            # the reading is the first suspect; a known cause was measured under the fitted readings
+            # the readings are the first suspect; a known cause is named after them
             known = KNOWN_MISSES.get((r["table"], r["row"]), "")
-            note = f"{text_note}. Under the fitted readings: {known}" if known else text_note
+            note = f"{text_note}. Also: {known}" if known else text_note
         elif judged.verdict in ("miss", "loose"):
             note = KNOWN_MISSES.get((r["table"], r["row"]), "")
             if not note and judged.verdict == "miss":
@@ -812,12 +897,16 @@ def crlb_rows() -> list[dict]:
     return rows
 
 
-def record_crlb(report, path_loss_exp: float = PATH_LOSS_EXP, average: str = "area_rms") -> None:
+def record_crlb(report, path_loss_exp: float = PATH_LOSS_EXP, average: str = "area_rms",
+                half_separation_layout: str = SIM_READINGS["half_separation_layout"][0]) -> None:
     """Record every printed CRLB cell (:func:`crlb_rows`, each compared once) against :func:`thesis_crlb_m` under
     the readings ``crlb_exponent`` = ``path_loss_exp`` and ``crlb_average`` = ``average``: ``calibrated`` when either
     is the value fitted to the printed columns (:data:`FITTED_VALUES`), naming it; else a ``reproduction`` whose miss
-    says the fitted readings are the alternatives the bracket runs (:func:`text_reading_note`). The layouts the
-    scale-invariant printed formula cannot give keep their own note (:data:`CRLB_NOT_FROM_FORMULA`)."""
+    says the fitted readings are the alternatives the bracket runs (:func:`text_reading_note`). Table 7.5's
+    half-separation bound is taken with the readers the reading ``half_separation_layout`` places
+    (:data:`HALF_SEPARATION_LAYOUTS`). The layouts the scale-invariant printed formula cannot give keep their own note
+    (:data:`CRLB_NOT_FROM_FORMULA`)."""
+    _check_reading("half_separation_layout", half_separation_layout)
     chosen = {"crlb_exponent": path_loss_exp, "crlb_average": average}
     fitted = fitted_readings(chosen)
     what = {"crlb_exponent": f"n = {path_loss_exp:g} (not the simulations' {PATH_LOSS_EXP:g})",
@@ -827,7 +916,8 @@ def record_crlb(report, path_loss_exp: float = PATH_LOSS_EXP, average: str = "ar
                        + chosen_because + " the printed CRLB columns (Fig. 7.1, Tables 7.1-7.6)") if fitted else ""
     for r in crlb_rows():
         p = r["printed"]
-        ours = thesis_crlb_m(r["layout"], r["sigma_db"], path_loss_exp, average=average)
+        layout = HALF_SEPARATION_LAYOUTS[half_separation_layout] if r["layout"] in LAYOUTS_OF_HALF else r["layout"]
+        ours = thesis_crlb_m(layout, r["sigma_db"], path_loss_exp, average=average)
         miss_note = "" if r["layout"] in ("half3", "large3", "large4") else text_reading_note(
             chosen, None, report.experiment, ours, p.value, fitted_to="the printed CRLB columns")
         report.number("CRLB (thesis form)", p, ours, kind="calibrated" if fitted else "reproduction",

@@ -467,3 +467,82 @@ def test_a_bracket_setting_a_profile_sets_is_refused(stoy, tmp_path):
                           "george-study")
     with pytest.raises(SuiteError, match="sets 'seed', which a profile sets"):
         bracket_points(exp, "quick", load_reading_file(_readings(tmp_path, OFFSET_ONLY)))
+
+
+# -- issue 45: tiers, combinations, Monte-Carlo margins, implausible values -------------------------------------
+
+def test_the_factorial_runs_every_combination_of_the_textual_values(stoy, tmp_path):
+    # a = 1.0 (default) or 1.3 (textual) or 2.0 (fitted); b = 0.0 or 0.5: the fitted value is never combined
+    text = (f"{HEADER}\nslope,george-study,a,,1.0,\"[1.3, 2.0]\",[2.0],,,printed,s,r\n"
+            f"offset,george-study,b,,0.0,[0.5],,,,printed,s,r\n")
+    suite = _with_bracket_table(stoy, '[experiment.bracket]\nfactorial = ["slope", "offset"]\n')
+    exp = find_experiment(suite, "george-study")
+    points = bracket_points(exp, "quick", load_reading_file(_readings(tmp_path, text)))
+    assert [p.label for p in points] == ["default", "slope: a=1.3", "slope [fitted]: a=2.0", "offset: b=0.5",
+                                         "readings together: a=1.3, b=0.5"]
+    joint = points[-1]
+    assert joint.parameters == {"seed": 3, "a": 1.3, "b": 0.5} and not joint.fitted and joint.basis == "textual"
+    assert points[2].fitted and points[2].basis == "fitted" and points[0].basis == "default"
+    assert len({p.key for p in points}) == len(points)
+    toml = stoy / "notebooks" / "experiments.toml"
+    toml.write_text(toml.read_text().replace('factorial = ["slope", "offset"]', 'factorial = ["slope", "nope"]'))
+    unknown = _suite(stoy)
+    with pytest.raises(SuiteError, match="factorial of 'george-study' names 'nope', which is not a reading"):
+        bracket_points(find_experiment(unknown, "george-study"), "quick",
+                       load_reading_file(_readings(tmp_path, text)))
+
+
+def _tier_points(stoy, tmp_path):
+    text = (f"{HEADER}\nslope,george-study,a,,1.0,\"[1.3, 2.0]\",[2.0],,,printed,s,r\n")
+    return _hand_points(stoy, tmp_path, text)       # default, slope a=1.3 (textual), slope a=2.0 (fitted)
+
+
+@pytest.mark.parametrize("values, verdicts, tier", [
+    (("13", "16", "16.1"), ("miss", "within", "within"), "other_reading"),   # a textual point reaches it
+    (("13", "14", "16.1"), ("miss", "miss", "within"), "fitted_only"),       # only the fitted point does
+    (("13", "19", "25"), ("miss", "miss", "miss"), "between"),               # 16 lies inside the band 13 .. 25
+])
+def test_a_row_reached_only_by_a_fitted_value_is_its_own_tier(stoy, tmp_path, values, verdicts, tier):
+    exp, points = _tier_points(stoy, tmp_path)
+    folder = tmp_path / "b"
+    for p, value, verdict in zip(points, values, verdicts):
+        _numbers(folder / p.key, {"reproduced": value, "verdict": verdict})
+    (row,) = bracket_rows(exp, points, folder, {p.key: "ok" for p in points}, [], "quick")
+    assert row["bracket"] == tier, row
+    if tier == "between":
+        assert row["between"] == "default (13) and slope: a=1.3 (19)"
+
+
+@pytest.mark.parametrize("se, tier", [("0.5", "open"), ("0.1", "outside")])
+def test_outside_needs_the_printed_value_beyond_both_monte_carlo_errors(stoy, tmp_path, se, tier):
+    """Printed 16.0; every point misses low, the nearest at 14.6 (a gap of 1.4). The margin is the rounding plus 2
+    standard errors of the difference of two runs of equal error: 0.05 + 2 * 0.5 * sqrt(2) = 1.46 covers the gap
+    (open: more runs would decide); 0.05 + 2 * 0.1 * sqrt(2) = 0.33 does not (outside)."""
+    exp, points = _tier_points(stoy, tmp_path)
+    folder = tmp_path / "b"
+    for p, value in zip(points, ("13", "14.6", "12")):
+        _numbers(folder / p.key, {"reproduced": value, "verdict": "miss", "mc_std_error": se, "rounding": "0.05"})
+    (row,) = bracket_rows(exp, points, folder, {p.key: "ok" for p in points}, [], "quick")
+    margin = 0.05 + 2 * float(se) * 2 ** 0.5
+    assert (1.4 <= margin) == (tier == "open")          # the fact the verdict must follow
+    assert row["bracket"] == tier, row
+    assert f"1.4 from slope: a=1.3 (14.6)" in (row["outside_margin"] or row["open_readings"])
+
+
+def test_an_implausible_value_is_named_and_left_out_of_the_band(stoy, tmp_path):
+    suite = _with_bracket_table(stoy, '[experiment.bracket]\nlargest_error_m = 9.43\n'
+                                      'largest_error_reason = "the 5 m x 8 m room\'s diagonal"\n')
+    exp = find_experiment(suite, "george-study")
+    points = bracket_points(exp, "quick", load_reading_file(_readings(
+        tmp_path, f"{HEADER}\nslope,george-study,a,,1.0,\"[1.3, 2.0]\",,,,printed,s,r\n")))
+    folder = tmp_path / "b"
+    # printed 16 m: the 45.6 m point would put it between; it is implausible (over 9.43 m), so nothing reaches 16
+    for p, value in zip(points, ("3", "45.6", "4")):
+        _numbers(folder / p.key, {"reproduced": value, "verdict": "miss", "unit": "m", "printed": "6.0"})
+    (row,) = bracket_rows(exp, points, folder, {p.key: "ok" for p in points}, [], "quick")
+    assert row["implausible"].startswith("slope: a=1.3 gave 45.6 m, over the largest plausible error 9.43 m")
+    assert (row["band_low"], row["band_high"]) == ("3", "4") and row["bracket"] == "outside"
+    (site,) = bracket_of_rows([{"printed_id": row["printed_id"], "quantity": row["quantity"], "where": row["where"],
+                                "kind": "reproduction", "verdict": "miss", "reproduced": "3"}], [row])
+    assert site["bracket"] == "outside" and "implausible, left out of the band: slope: a=1.3 gave 45.6 m" in \
+        site["bracket_readings"]

@@ -17,40 +17,56 @@ is checked against the parameter's type and rule before anything runs (a reading
 notebook refuses is a :class:`~locbook.suite.spec.SuiteError`). Readings act one at a time: a printed number
 that only a combination of readings reaches is not found (declare the combination as a reading of its own).
 
+The points also include, for the readings an experiment's ``[experiment.bracket] factorial`` names, every
+combination of their non-fitted values in which two or more differ from the default (``readings together: ...``):
+readings that interact are judged together, not only one at a time.
+
 The bracket verdict of a scored row (kind ``reproduction``, ``calibrated`` or ``claim`` with a within / loose /
-miss verdict; arithmetic, shown and linked rows have none), in this order:
+miss verdict; arithmetic, shown and linked rows have none), issue 45's tiers (:data:`BRACKETS`), decided in this
+order:
 
 ``default``
     within under the default reading;
-``reachable``
-    within under at least one other declared reading (``reached_by`` names each: ``reading: parameter=value``,
-    with ``[fitted]`` after a value declared fitted to printed results: rows under it are calibrations);
+``other_reading``
+    within under another declared reading that is not fitted (textual, or assumed where the text is silent):
+    ``reached_by`` names each (``reading: parameter=value``);
+``fitted_only``
+    within only under a value fitted to printed output (``[fitted]``: rows under it are calibrations);
 ``open``
     not reached, and a reading that could matter was not swept: a gap (a reading no notebook parameter sets yet,
-    with alternatives or a range) or a point that failed (``open_readings`` names them);
+    with alternatives or a range), a point that failed, a range whose runs straddle the printed value
+    (``open_readings`` names them), or a printed value beyond every run but within the Monte-Carlo margin of the
+    nearest (below);
 ``loose``
-    every declared reading was swept, none makes it within, but under at least one the printed value lies inside
-    a window wider than +-25 % (``loose_under`` names them): the comparison cannot decide either way;
+    under at least one reading the printed value lies inside a window wider than +-25 % (``loose_under``): the
+    comparison cannot decide;
+``between``
+    no run within, but the printed value lies inside the band of our values: ``between`` names the two runs on
+    either side (a reading in between, not declared, might reach it);
 ``outside``
-    every declared reading was swept and every one misses it: the printed number disagrees with every plausible
-    reading of its own description.
+    beyond the band, and beyond the nearest run by more than its margin (``outside_margin``): the rounding, the
+    ambiguity and two standard errors of the difference between two runs of that error, ours and the source's
+    (:data:`SOURCE_SE_FACTOR`): the printed number disagrees with every plausible reading of its description.
 
-"Within" is the point's own verdict, i.e. under that run's window (rounding, 2 Monte-Carlo standard errors at the
-bracket's profile, the named ambiguity). ``band_low`` / ``band_high`` are the smallest and largest of our values
-over every point, ``closest`` the value nearest the printed one and ``closest_reading`` its point.
+A run whose error exceeds the experiment's ``largest_error_m`` (``[experiment.bracket]``, the diagonal of the area
+the source prints) is implausible: it is named in ``implausible`` and counts for nothing (neither band nor
+verdict). "Within" is the point's own verdict, i.e. under that run's window (rounding, 2 Monte-Carlo standard errors
+at the bracket's profile, the named ambiguity). ``band_low`` / ``band_high`` are the smallest and largest of our
+plausible values over every point, ``closest`` the value nearest the printed one and ``closest_reading`` its point.
 
 Outputs in ``<reports>/brackets/<experiment>/``: ``bracket.csv`` (:data:`BRACKET_COLUMNS`, one row per scored
-row of the default point), ``points.csv`` (:data:`POINT_COLUMNS`: what each point changed and how it ended) and one
-report folder per point; ``<reports>/brackets/<document>-findings.md`` lists, from every bracket of the document
-present, the ``outside`` rows with their evidence, then the reachable, open and loose rows. The site (index, pages,
-``numbers.csv``) shows the bracket of each row (:func:`bracket_of_rows`) in the folders of a profile
-(``reports/quick``, ``reports/full``; not a ``-p`` run's folder), rebuilt by the next ``locbook run`` (a cached run
-costs nothing): ``default`` when the row is within in that report, else what the bracket's other readings gave,
-named with the bracket's profile; where no bracket.csv exists at all, a row keeps the bracket columns the folder's
-numbers.csv gave it while its value and verdict are unchanged. After every bracket run, also an interrupted or
-failed one, bracket.csv and points.csv are rebuilt from every point with an up-to-date report, this run's and
-earlier ones (:func:`~locbook.suite.study.current_points`); a bracket whose default point has none writes nothing
-(an earlier one is kept).
+row of the default point), ``values.csv`` (:data:`VALUE_COLUMNS`: every scored row under every point, with the
+point's basis, for the conclusions pages), ``points.csv`` (:data:`POINT_COLUMNS`: what each point changed and how it
+ended) and one report folder per point. The site (index, pages, ``numbers.csv``, and each document's findings and
+conclusions pages: :mod:`locbook.suite.findings`, :mod:`locbook.suite.conclusions`) shows the bracket of each row
+(:func:`bracket_of_rows`) in the folders of a profile (``reports/quick``, ``reports/full``; not a ``-p`` run's
+folder), rebuilt by the next ``locbook run`` (a cached run costs nothing): ``default`` when the row is within in
+that report, else what the bracket's other readings gave, named with the bracket's profile; where no bracket.csv
+exists at all, a row keeps the bracket columns the folder's numbers.csv gave it while its value and verdict are
+unchanged. After every bracket run, also an interrupted or failed one, bracket.csv, values.csv and points.csv are
+rebuilt from every point with an up-to-date report, this run's and earlier ones
+(:func:`~locbook.suite.study.current_points`); a bracket whose default point has none writes nothing (an earlier
+one is kept).
 """
 from __future__ import annotations
 

@@ -1,6 +1,7 @@
 """The Ozkaya (2011) simulation readings (locbook/data/readings/ozkaya2011.csv) as library options: each alternative
-checked against what it means (an independent computation or an invariant); the defaults are the text's readings and
-the readings fitted to the printed output are named alternatives (issue 28)."""
+checked against what it means (an independent computation or an invariant). Issue 45: every default is the reading the
+text supports best (the readings file quotes it); only the values no text supports and that were chosen because they fit
+(the CRLB columns' n = 2 and mean over the cells) are ``fitted``, and only rows computed under them are calibrated."""
 from dataclasses import replace
 
 import numpy as np
@@ -157,7 +158,7 @@ def test_run_tables_defaults_equal_explicit_default_readings():
     a = oz.run_tables(["7.2"], 30, 3)
     b = oz.run_tables(["7.2"], 30, 3, readings=oz.sim_readings())
     assert [r["reproduced"] for r in a] == [r["reproduced"] for r in b]
-    c = oz.run_tables(["7.2"], 30, 3, readings={"reader_noise": "independent_per_reader"})
+    c = oz.run_tables(["7.2"], 30, 3, readings={"reader_noise": "common_mode"})
     assert [r["reproduced"] for r in a if r["column"] == "rmse_m"] != \
         [r["reproduced"] for r in c if r["column"] == "rmse_m"]
 
@@ -166,21 +167,46 @@ def test_every_simulation_reading_is_declared_with_the_librarys_values():
     declared = {r.name: r for r in readings("ozkaya2011")}
     for name, values in oz.SIM_READINGS.items():
         r = declared[name]
-        # every declared value is one the library knows; the per-run percentile conventions are library options
-        # the text does not support, so they are not declared (issue 45)
+        # every declared value is one the library knows; library options the text does not support (the per-run
+        # percentile conventions, 1 m in from the walls outside Table 7.22) are not declared (issue 45)
         assert r.parameter == name and r.default == values[0] and set(r.values) <= set(values)
-        assert set(r.values) == set(values) or name == "percentile_convention"
+        assert set(r.values) == set(values) or name in ("percentile_convention", "target_sampling")
     assert declared["percentile_convention"].values == ("pooled",)
+    assert declared["target_sampling"].values == ("room", "cell_cores")
     assert set(declared["crlb_average"].values) == {"cells_mean", "area_rms"}
 
 
-# -- readings fitted to the output (issue 28): never the default; rows computed under them are calibrated ----------
-def test_fitted_values_are_declared_alternatives_never_defaults():
+# -- the rule for a reading's basis (issue 45) ----------------------------------------------------------------------
+def test_no_default_is_fitted_and_fitted_values_are_the_library_s():
     declared = {r.name: r for r in readings("ozkaya2011")}
+    assert not any(r.is_calibration for r in declared.values())           # no default may be fitted
+    fitted = {(r.name, v) for r in declared.values() for v in r.fitted}
+    assert fitted == {(n, v) for n, v in oz.FITTED_VALUES.items()} | {("testbed_crlb_exponent", 2.0),
+                                                                      ("testbed_crlb_average", "cells_mean")}
     for name, value in oz.FITTED_VALUES.items():
-        assert value in declared[name].alternatives and value != declared[name].default, name
-        assert not declared[name].is_calibration, name        # the basis describes the default, which is not fitted
-    assert all(r.name.startswith("testbed_") for r in declared.values() if r.is_calibration)   # the test bed's own
+        assert value in declared[name].alternatives and declared[name].alternative_basis(value) == "fitted"
+    # the three re-judged simulation readings: textual defaults with a textual alternative, none fitted
+    for name, default, other in (("reader_noise", "independent_per_reader", "common_mode"),
+                                 ("fixed_target_noise", "frozen_per_run", "fresh_per_step"),
+                                 ("mobile_protocol", "reflect_error_at_rt", "mean_over_recursions")):
+        r = declared[name]
+        assert (r.default, r.basis, r.alternatives, r.fitted) == (default, "textual", (other,), ())
+        assert r.alternative_basis(other) == "textual" and name not in oz.FITTED_VALUES
+
+
+def test_the_quotes_are_the_thesis_s_words_at_the_lines_they_name():
+    """Each quoted passage of the re-judged readings is in the thesis text at the line given (the words checked here
+    are copied from the thesis, Secs. 7.2.1-7.2.2.3 and Appendix A)."""
+    declared = {r.name: r for r in readings("ozkaya2011")}
+    for name, line, words in (
+            ("reader_noise", 1137, "zero mean Gaussian noise added"), ("reader_noise", 1309, "added on the transmit power"),
+            ("fixed_target_noise", 1323, "worst case scenario"), ("fixed_target_noise", 1415, "drastically increases"),
+            ("fixed_target_noise", 1543, "if the measurement is erroneous"),
+            ("mobile_protocol", 1373, "wait for a sufficient recursion time for the filter to settle"),
+            ("mobile_protocol", 1137, "estimation will be done for every step if the target is mobile"),
+            ("crlb_average", 2286, "Square root of (A.13) is used in the thesis to compare with RMS error")):
+        quotes = declared[name].quotes
+        assert f"line {line}" in quotes and words in quotes, (name, line)
 
 
 def test_library_defaults_equal_the_declared_defaults():
@@ -198,57 +224,134 @@ def test_library_defaults_equal_the_declared_defaults():
     assert case.nn_weights == declared["nn_weights"].default
     assert case.resample_threshold_unit == declared["resample_threshold"].default
     assert case.target_region == declared["target_sampling"].default
+    assert case.wall_handling == declared["wall_handling"].default
+    assert case.initial_location == declared["known_initial_location"].default
     for function in (oz.thesis_crlb_m, oz.record_crlb):
         params = inspect.signature(function).parameters
         assert params["path_loss_exp"].default == declared["crlb_exponent"].default
         assert params["average"].default == declared["crlb_average"].default
+    assert inspect.signature(oz.record_crlb).parameters["half_separation_layout"].default == \
+        declared["half_separation_layout"].default
     assert declared["crlb_exponent"].default == oz.PATH_LOSS_EXP          # the simulations' n of Sec. 7.2.1
     assert oz.fitted_readings(defaults) == ()
-    # under the defaults a mobile run's statistics are over every recursion (run_summary passes over_recursions)
+    # under the defaults a mobile run's statistics are those of recursion rt (run_summary passes no over_recursions)
     mobile = oz.SimCase("grid", "mobile", rt=4)
-    _, per_step, _, _ = oz.run_case(mobile, 20, 3, return_all=True)
-    assert oz.run_summary(mobile, 20, 3)["rmse_m"] == pytest.approx(np.sqrt(np.mean(per_step**2)), rel=1e-12)
+    last, per_step, _, _ = oz.run_case(mobile, 20, 3, return_all=True)
+    assert oz.run_summary(mobile, 20, 3)["rmse_m"] == pytest.approx(np.sqrt(np.mean(last**2)), rel=1e-12)
+    pooled = oz.run_summary(mobile, 20, 3, {"mobile_protocol": "mean_over_recursions"})
+    assert pooled["rmse_m"] == pytest.approx(np.sqrt(np.mean(per_step**2)), rel=1e-12)
 
 
-def test_fitted_readings_are_those_that_can_move_the_case():
-    fitted = oz.sim_readings(**{n: v for n, v in oz.FITTED_VALUES.items() if n in oz.SIM_READINGS})
-    assert oz.fitted_readings(fitted) == ("reader_noise", "fixed_target_noise", "mobile_protocol")
-    assert oz.fitted_readings(fitted, oz.SimCase("nn")) == ("reader_noise",)              # one shot, no recursions
-    assert oz.fitted_readings(fitted, oz.SimCase("grid", "fixed")) == ("reader_noise", "fixed_target_noise")
-    assert oz.fitted_readings(fitted, oz.SimCase("sir", "mobile")) == ("reader_noise", "mobile_protocol")
-    assert oz.fitted_readings(fitted, oz.SimCase("grid", "fixed", sigma0_db=0.0)) == ()      # no noise to read
-    text = oz.sim_readings()
-    assert oz.fitted_readings(text) == () and oz.fitted_calibrated_from(text, oz.SimCase("nn")) == ""
+def test_no_simulation_reading_makes_a_row_calibrated():
+    every = [dict(zip(oz.SIM_READINGS, values)) for values in
+             [tuple(v[i % len(v)] for v in oz.SIM_READINGS.values()) for i in range(3)]]
+    for chosen in every:
+        for case in (oz.SimCase("nn"), oz.SimCase("grid", "fixed"), oz.SimCase("sir", "mobile")):
+            assert oz.fitted_readings(chosen, case) == () and oz.fitted_calibrated_from(chosen, case) == ""
     assert oz.fitted_readings({"crlb_exponent": 2.0, "crlb_average": "area_rms"}) == ("crlb_exponent",)
-    assert "reader_noise = 'independent_per_reader'" in oz.fitted_calibrated_from(fitted, oz.SimCase("nn"))
-    # the text's readings that can move a case are the complement
+    assert "crlb_average = 'cells_mean'" in oz.fitted_calibrated_from({"crlb_average": "cells_mean"})
+
+
+def test_the_readings_a_miss_note_names_are_those_that_can_move_the_case():
+    text = oz.sim_readings()
+    assert oz.unfitted_readings(text, oz.SimCase("nn")) == ("reader_noise",)              # one shot, no recursions
     assert oz.unfitted_readings(text, oz.SimCase("grid", "fixed")) == ("reader_noise", "fixed_target_noise")
-    assert oz.unfitted_readings(fitted, oz.SimCase("grid", "fixed")) == ()
+    assert oz.unfitted_readings(text, oz.SimCase("sir", "mobile")) == ("reader_noise", "mobile_protocol")
+    assert oz.unfitted_readings(text, oz.SimCase("grid", "fixed", sigma0_db=0.0)) == ()   # no noise to read
 
 
 def test_text_reading_note_names_the_readings_the_side_and_the_bracket():
     text = oz.sim_readings()
     note = oz.text_reading_note(text, oz.SimCase("nn"), "ozkaya2011-nn-sim", 1.5, 1.95)
-    assert note.startswith("under the text's reading (common-mode noise on the transmit power) ours is below")
-    assert "(independent noise per reader) is an alternative: locbook bracket ozkaya2011-nn-sim runs it" in note
+    assert note.startswith("under the readings run (noise independent per reader) ours is below")
+    assert ("the other textual reading (common-mode noise on the transmit power) is an alternative: "
+            "locbook bracket ozkaya2011-nn-sim runs it") in note
     both = oz.text_reading_note(text, oz.SimCase("sir", "mobile"), "ozkaya2011-sir-sim", 1.3, 1.14)
-    assert "ours is above" in both and "over every recursion" in both and "at recursion rt" in both
-    assert "are alternatives" in both and "runs them" in both
-    # nothing to say under the fitted readings, or where no reading can move the case (no noise)
-    fitted = {**text, "reader_noise": "independent_per_reader"}
-    assert oz.text_reading_note(fitted, oz.SimCase("nn"), "x", 1.0, 2.0) == ""
+    assert "ours is above" in both and "at recursion rt" in both and "over every recursion" in both
+    assert "other textual readings" in both and "are alternatives" in both and "runs them" in both
+    # under the alternative the default is named as the other reading; nothing to say where no reading moves the case
+    alt = oz.text_reading_note({**text, "reader_noise": "common_mode"}, oz.SimCase("nn"), "x", 1.0, 2.0)
+    assert "(common-mode noise on the transmit power) ours" in alt and "(noise independent per reader) is" in alt
     assert oz.text_reading_note(text, oz.SimCase("grid", "fixed", sigma0_db=0.0), "x", 1.0, 2.0) == ""
 
 
-def test_rows_under_no_fitted_reading_are_reproductions_and_misses_name_the_fitted_alternative(tmp_path, monkeypatch):
+def test_rows_under_the_default_readings_are_reproductions_and_misses_name_the_alternative(tmp_path, monkeypatch):
     monkeypatch.setenv("LOCBOOK_OUTPUT_DIR", str(tmp_path))
     monkeypatch.setenv("LOCBOOK_EXPERIMENT", "ozkaya2011-nn-sim")
     report = lb.Report()
-    rows = oz.run_tables(["7.2", "7.3"], 60, 5)
+    rows = oz.run_tables(["7.2", "7.3"], 60, 5, readings={"reader_noise": "common_mode"})
     oz.record_tables(report, rows, 60)
     assert report.numbers and all(r["kind"] == "reproduction" and not r["calibrated_from"] for r in report.numbers)
     misses = [r for r in report.numbers if r["verdict"] in ("miss", "loose")]
     assert misses and all("locbook bracket ozkaya2011-nn-sim" in r["note"] for r in misses)
+
+
+# -- the readings declared for issue 45 -------------------------------------------------------------------------
+def test_frozen_noise_cannot_be_averaged_away_while_fresh_noise_can():
+    """Without noise the grid filter settles on a fixed target; with the noise frozen per run its error stays that of
+    one noisy measurement, larger than under fresh noise, which the recursions average (the invariant that makes the
+    fixed target 'a worst case scenario' under the default)."""
+    base = oz.SimCase("grid", "fixed", rt=12)
+    frozen = oz.summarize(oz.run_case(base, 300, 2))["rmse_m"]
+    fresh = oz.summarize(oz.run_case(replace(base, fixed_target_noise="fresh_per_step"), 300, 2))["rmse_m"]
+    assert frozen > fresh
+
+
+@pytest.mark.parametrize("handling", oz.WALL_HANDLINGS)
+def test_every_wall_handling_keeps_a_mobile_target_in_the_room(handling):
+    case = oz.SimCase("grid", "mobile", rt=30, motion_m=2.0, wall_handling=handling)
+    truth, _ = oz.simulate_truth_and_rss(case, 200, np.random.default_rng(6))
+    assert np.all(truth >= 0.0) and np.all(truth <= np.array(oz.ROOM_M))
+    steps = np.linalg.norm(np.diff(truth, axis=1), axis=-1)
+    if handling == "clip":                                   # a clipped step ends on a wall
+        on_wall = np.any(np.isclose(truth[:, 1:], 0.0) | np.isclose(truth[:, 1:], np.array(oz.ROOM_M)), axis=-1)
+        assert on_wall.any()
+    if handling == "redraw":                                 # steps are drawn whole: never shortened by a wall
+        assert steps.max() > 2.0
+    # every handling starts from the same uniform draws
+    ref, _ = oz.simulate_truth_and_rss(replace(case, wall_handling="reflect"), 200, np.random.default_rng(6))
+    np.testing.assert_array_equal(truth[:, 0], ref[:, 0])
+
+
+def test_clip_stops_a_step_at_the_wall_it_crosses():
+    lo, hi = np.zeros(2), np.array([5.0, 8.0])
+    case = oz.SimCase("grid", "mobile", wall_handling="clip")
+    got = oz._step_inside(np.array([[4.5, 1.0]]), np.array([[1.0, -2.0]]), lo, hi, case, np.random.default_rng(0))
+    np.testing.assert_allclose(got, [[5.0, 0.0]])
+    reflected = oz._step_inside(np.array([[4.5, 1.0]]), np.array([[1.0, -2.0]]), lo, hi,
+                                replace(case, wall_handling="reflect"), np.random.default_rng(0))
+    np.testing.assert_allclose(reflected, [[4.5, 1.0]])      # 5.5 -> 4.5 and -1 -> 1: mirrored at both walls
+
+
+def test_half_separation_layouts_have_the_printed_separations_inside_the_room():
+    """Table 7.5: separations of 2.5 m and 4 m (Sec. 7.2.2.1 E), readers toward the room's inner region."""
+    for reading, key in oz.HALF_SEPARATION_LAYOUTS.items():
+        r = oz.readers_for(key)
+        assert sorted(np.round([np.linalg.norm(r[1] - r[0]), np.linalg.norm(r[2] - r[0])], 12)) == [2.5, 4.0]
+        assert np.all(r > 0) and np.all(r < np.array(oz.ROOM_M))
+    np.testing.assert_allclose(oz.readers_for("half3"), (oz.readers_for("corners3") - [2.5, 4.0]) / 2 + [2.5, 4.0])
+    np.testing.assert_allclose(oz.readers_for("half3_centroid").mean(0), [2.5, 4.0])
+    case = oz.with_readings(oz.SimCase("nn", layout="half3"), {"half_separation_layout": "centroid_at_centre"})
+    assert case.layout == "half3_centroid"
+    assert oz.with_readings(oz.SimCase("nn"), {"half_separation_layout": "centroid_at_centre"}).layout == "corners3"
+
+
+def test_the_large_room_readers_are_its_corners_with_twice_the_separations():
+    for m in (3, 4):
+        r = oz.readers_for(f"large{m}")
+        np.testing.assert_allclose(r, 2 * oz.readers_for(f"corners{m}"))
+    assert oz.cell_centres(oz.LARGE_ROOM_M, *oz.CELL_PATTERNS[135]).shape == (135, 2)
+
+
+def test_a_known_initial_location_is_exact_or_spread_by_d():
+    case = oz.SimCase("grid", "mobile", rt=1, known_initial=True)
+    truth, rss = oz.simulate_truth_and_rss(case, 5, np.random.default_rng(3))
+    assert oz._initial_sd_m(case) == 0.0 and oz._initial_sd_m(replace(case, known_initial=False)) == 0.0
+    assert oz._initial_sd_m(replace(case, initial_location="gaussian_d", spread_m=0.7)) == 0.7
+    assert oz._initial_sd_m(replace(case, initial_location="gaussian_d", spread_m=np.inf)) == 0.0
+    with pytest.raises(ParameterError, match="known_initial_location"):
+        oz._initial_sd_m(replace(case, initial_location="roughly"))
+    assert oz.with_readings(case, {"known_initial_location": "gaussian_d"}).initial_location == "gaussian_d"
 
 
 def test_crlb_exponent_scales_the_printed_bound_as_one_over_n():
@@ -281,5 +384,11 @@ def test_record_crlb_calibrated_only_under_a_fitted_reading(tmp_path, monkeypatc
     five = next(r for r in text.numbers if r["verdict"] and float(r["printed"]) == 0.80)
     assert float(five["reproduced"]) == pytest.approx(oz.thesis_crlb_m("corners3", 5.2), rel=1e-12)
     assert five["verdict"] == "miss" and "locbook bracket ozkaya2011-crlb" in five["note"]
-    assert "(n = 2 and the mean over the 1 m cells) are alternatives" in five["note"]
+    assert "fitted to the printed CRLB columns, which no text supports (n = 2 and the mean over the 1 m cells) are " \
+        "alternatives" in five["note"]
+    # the half-separation bound (Table 7.5) follows the declared placement of its readers
+    moved = lb.Report()
+    oz.record_crlb(moved, half_separation_layout="centroid_at_centre")
+    half = next(r for r in moved.numbers if r["printed_id"].startswith("Table 7.5 | Half"))
+    assert float(half["reproduced"]) == pytest.approx(oz.thesis_crlb_m("half3_centroid", 5.2), rel=1e-12)
     assert by_id.keys() == {r["printed_id"] for r in fitted.numbers}

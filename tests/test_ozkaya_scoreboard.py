@@ -44,13 +44,12 @@ def test_record_tables_compares_each_printed_value_once(tmp_path, monkeypatch):
     monkeypatch.setenv("LOCBOOK_EXPERIMENT", "ozkaya2011-nn-sim")
     report = lb.Report()
     n_runs = 60
-    # i.i.d. reader noise (an alternative) was chosen by re-simulating the tables: every row computed under it is
-    # calibrated and says so
-    rows = oz.run_tables(["7.2", "7.3", "7.6"], n_runs, 5, readings={"reader_noise": "independent_per_reader"})
+    # every simulation reading is supported by the text (issue 45): rows computed under either noise reading are
+    # reproductions
+    rows = oz.run_tables(["7.2", "7.3", "7.6"], n_runs, 5, readings={"reader_noise": "common_mode"})
     oz.record_tables(report, rows, n_runs)
     recorded = report.numbers
-    assert all(r["kind"] == "calibrated" and r["calibrated_from"].startswith("reader_noise = 'independent_per_reader'")
-               for r in recorded)
+    assert all(r["kind"] == "reproduction" and not r["calibrated_from"] for r in recorded)
     assert not any("crlb" in r["printed_id"] for r in recorded)       # CRLB is compared in ozkaya2011-crlb only
     judged = [r["printed_id"] for r in recorded if r["verdict"]]
     assert len(judged) == len(set(judged))
@@ -76,4 +75,5 @@ def test_statistic_standard_errors_shrink_with_the_number_of_runs():
     se = {n: oz.summarize(oz.run_case(case, n, 3), np.random.default_rng(0)) for n in (400, 6400)}
     for stat in oz.STATISTICS:
         ratio = se[400][stat + "_se"] / se[6400][stat + "_se"]
-        assert 2.5 < ratio < 6.5, stat                                # sqrt(16) = 4 within bootstrap scatter
+        # sqrt(16) = 4 within bootstrap scatter (no shrinking gives 1, a 1/n law 16)
+        assert 2.0 < ratio < 8.0, stat

@@ -212,24 +212,43 @@ def test_printed_inputs_are_read_from_the_printed_file():
     assert tb.run_testbed.__kwdefaults__["monopole_noise_scale"] == tb.MONOPOLE_NOISE_SCALE
 
 
-def test_testbed_crlb_is_the_printed_form_bound_averaged_over_the_cells():
-    # independent: the printed-form bound (1/d^2 Fisher information, Ozkaya A.10-A.12) written out by hand
+def _printed_form_bounds(points, n, sigma):
+    """The printed-form bound (1/d^2 Fisher information, Ozkaya A.10-A.12) written out by hand; ``n`` one per reader."""
     readers = np.asarray(oz.TESTBED_READERS_M)
-    cells = np.asarray(tb.TESTBED_CELLS_M)
-    assert cells.shape == (36, 2)
-    n, sigma = 2.0, tb.TESTBED_SIGMA_DB
-    b = (10 * n / (sigma * np.log(10))) ** 2
+    b = (10 * np.asarray(n, float) / (sigma * np.log(10))) ** 2 * np.ones(len(readers))
     bounds = []
-    for p in cells:
+    for p in points:
         diff = p - readers
         d2 = np.sum(diff**2, -1)
-        fxx = b * np.sum(diff[:, 0] ** 2 / d2)          # printed form: d^2 where d^4 belongs (Eqs. (A.10)-(A.12))
-        fyy = b * np.sum(diff[:, 1] ** 2 / d2)
-        fxy = b * np.sum(diff[:, 0] * diff[:, 1] / d2)
+        fxx = np.sum(b * diff[:, 0] ** 2 / d2)          # printed form: d^2 where d^4 belongs (Eqs. (A.10)-(A.12))
+        fyy = np.sum(b * diff[:, 1] ** 2 / d2)
+        fxy = np.sum(b * diff[:, 0] * diff[:, 1] / d2)
         bounds.append(np.sqrt((fxx + fyy) / (fxx * fyy - fxy**2)))
-    assert tb.testbed_crlb_m() == pytest.approx(np.mean(bounds), rel=1e-9)
+    return np.array(bounds)
+
+
+def test_testbed_crlb_fitted_form_is_the_printed_form_bound_averaged_over_the_cells():
+    cells = np.asarray(tb.TESTBED_CELLS_M)
+    assert cells.shape == (36, 2)
+    bounds = _printed_form_bounds(cells, 2.0, tb.TESTBED_SIGMA_DB)
+    assert tb.testbed_crlb_m(2.0, average="cells_mean") == pytest.approx(np.mean(bounds), rel=1e-9)
     # the correct bound (1/d^4) is larger than the printed form wherever every reader is more than 1 m away
-    assert tb.testbed_crlb_m(np.asarray(oz.OFFLINE_PARAMETERS["path_loss_exp"]), form="correct") > tb.testbed_crlb_m()
+    assert tb.testbed_crlb_m(np.asarray(oz.OFFLINE_PARAMETERS["path_loss_exp"]), form="correct") > \
+        tb.testbed_crlb_m(2.0, average="cells_mean")
+
+
+def test_testbed_crlb_default_is_the_rms_over_the_area_with_table_6_1_exponents():
+    """Issue 45: the default bound is that of 'the experimented system setup' (Table 6.1's n per reader) as the RMS
+    over the area (Appendix A compares it with RMS errors), not the readings fitted to the simulation columns."""
+    assert tb.TESTBED_CRLB_PATH_LOSS_EXP == tuple(lb.printed("ozkaya2011").get("Table 6.1", f"Reader {j}",
+                                                                                "path_loss_exp").value for j in (1, 2, 3))
+    step = 0.05
+    xs, ys = np.arange(step / 2, 9.0, step), np.arange(step / 2, 4.0, step)
+    points = np.stack(np.meshgrid(xs, ys, indexing="ij"), -1).reshape(-1, 2)
+    bounds = _printed_form_bounds(points, tb.TESTBED_CRLB_PATH_LOSS_EXP, tb.TESTBED_SIGMA_DB)
+    assert tb.testbed_crlb_m() == pytest.approx(np.sqrt(np.mean(bounds**2)), rel=1e-9)
+    with pytest.raises(ValueError, match="average"):
+        tb.testbed_crlb_m(average="median")
 
 
 def test_first_printings_follow_the_thesis_order():
@@ -279,10 +298,8 @@ def test_recorded_rows_have_kinds_links_windows_and_notes(tmp_path, monkeypatch)
     ids = set(judged)
     for r, n in zip(rows, recorded, strict=True):
         assert n["printed"] == r["printed"].text
-        if r["experiment"] == "monopole":
-            assert n["kind"] == "calibrated" and n["calibrated_from"] == tb.MONOPOLE_CALIBRATED_FROM
-        else:
-            assert n["kind"] == "reproduction" and not n["calibrated_from"]
+        # the monopole scale is the text's own explanation (Sec. 7.3.2.6): reproductions by default
+        assert n["kind"] == "reproduction" and not n["calibrated_from"]
         if r["first_printed"].id != r["printed"].id:
             assert n["same_as"] == r["first_printed"].id and n["same_as"] in ids and n["verdict"] == ""
             continue
@@ -299,9 +316,9 @@ def test_recorded_rows_have_kinds_links_windows_and_notes(tmp_path, monkeypatch)
             assert half <= 0.25 * r["printed"].value
     # the window is wide (about 0.9 m): most statistics near 1.5 m are loose, none of them "within"
     assert any(n["verdict"] == "loose" for n in recorded)
-    # a hand-set monopole noise scale is not chosen from printed numbers: reproductions then
-    again = tb.record_table_rows(report, [r for r in rows if r["experiment"] == "monopole"], monopole_calibrated_from=None)
-    assert again and all(n["kind"] == "reproduction" for n in again)
+    # a monopole scale named as calibrated from a fit makes its rows calibrated
+    again = tb.record_table_rows(report, [r for r in rows if r["experiment"] == "monopole"], monopole_calibrated_from="x")
+    assert again and all(n["kind"] == "calibrated" and n["calibrated_from"] == "x" for n in again)
 
 
 def test_a_repeat_printed_with_another_text_is_compared_and_says_so(tmp_path, monkeypatch):

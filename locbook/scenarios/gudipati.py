@@ -18,7 +18,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .._validate import check_choice
+from .._validate import check_choice, check_scalar
 from ..bounds.crlb import rss_crlb_m
 from ..bounds.pcrlb import position_bound_m, posterior_crlb, rss_state_information
 from ..reproduce.printed_values import printed
@@ -41,7 +41,9 @@ from ..tracking.divergence import DivergenceFlags, divergence_note
 __all__ = [
     "DOCUMENT", "PRINTED", "ROOM_M", "ANCHOR_IDS", "ANCHOR_LAYOUTS", "DEFAULT_ANCHOR_LAYOUT", "ANCHOR_POSITIONS_M",
     "ANCHOR_SETS", "REF_POWER_DBM", "FUSED_METHODS",
-    "PATH_LOSS_EXP", "REPORT_SPACING_M", "PATHS", "UKF_ALPHA", "UKF_BETA", "CALIBRATION_STEP_M",
+    "PATH_LOSS_EXP", "REPORT_SPACING_M", "PATHS", "LINEAR_PATHS_Y_M", "U_PATH_MARGINS_M", "DEFAULT_LINEAR_PATH",
+    "DEFAULT_U_PATH", "path_waypoints_m", "FIGURE_PATHS", "ORIENTATION_LOSS_DB", "DYNAMIC_WEIGHTING", "FUSION_SCHEME",
+    "filter_step_s", "UKF_ALPHA", "UKF_BETA", "CALIBRATION_STEP_M",
     "CALIBRATION_SPAN_M", "CALIBRATION_SAMPLES", "CALIBRATION_TERMS", "WalkSettings", "channel_model",
     "path_trajectory", "Walk", "simulate_walk", "rss_only_fixes", "METHODS", "track", "noise_fit", "WalkErrors", "walk_errors",
     "table_5_1", "calibration_distances_m", "ed_register_dbm", "simulate_calibration_walk", "rss_only_mean_error", "calibrate_shadowing",
@@ -76,10 +78,42 @@ ANCHOR_POSITIONS_M = ANCHOR_LAYOUTS[DEFAULT_ANCHOR_LAYOUT]
 ANCHOR_SETS = {4: ANCHOR_IDS[:4], 6: ANCHOR_IDS}
 #: "sent to the base station at every 1m distance" (Sec. 5.3): the report points where errors are evaluated.
 REPORT_SPACING_M = PRINTED.get("Sec. 5.3 text", "report", "spacing").value
-#: ASSUMED paths (geometry not printed): the linear path along the middle of the hall, end to end; the U-path 2 m from
-#: the walls, out along y = 2 m, across at x = 28 m, back along y = 8 m. "over the length of the room" (Sec. 5.3).
-PATHS = {"linear": ((0.0, ROOM_M[1] / 2), (ROOM_M[0], ROOM_M[1] / 2)),
-         "u": ((2.0, 2.0), (ROOM_M[0] - 2.0, 2.0), (ROOM_M[0] - 2.0, ROOM_M[1] - 2.0), (2.0, ROOM_M[1] - 2.0))}
+#: ASSUMED path geometries, by label (Sec. 5.3, line 500, prints none: "moved along a linear path and a U-path over the
+#: length of the room"). The linear path runs end to end along ``y = LINEAR_PATHS_Y_M[label]``; the U-path goes out
+#: along ``y = m``, across at ``x = 30 - m`` and back along ``y = 10 - m``, ``m = U_PATH_MARGINS_M[label]``.
+LINEAR_PATHS_Y_M = {"middle": ROOM_M[1] / 2, "quarter_width": ROOM_M[1] / 4}
+U_PATH_MARGINS_M = {"2m_from_walls": 2.0, "1m_from_walls": 1.0, "quarter_width": ROOM_M[1] / 4}
+DEFAULT_LINEAR_PATH, DEFAULT_U_PATH = "middle", "2m_from_walls"
+
+
+def path_waypoints_m(linear_path: str = DEFAULT_LINEAR_PATH, u_path: str = DEFAULT_U_PATH) -> dict:
+    """The waypoints of both paths under the labels of :data:`LINEAR_PATHS_Y_M` and :data:`U_PATH_MARGINS_M`."""
+    check_choice("linear_path", linear_path, tuple(LINEAR_PATHS_Y_M))
+    check_choice("u_path", u_path, tuple(U_PATH_MARGINS_M))
+    y, m = LINEAR_PATHS_Y_M[linear_path], U_PATH_MARGINS_M[u_path]
+    return {"linear": ((0.0, y), (ROOM_M[0], y)),
+            "u": ((m, m), (ROOM_M[0] - m, m), (ROOM_M[0] - m, ROOM_M[1] - m), (m, ROOM_M[1] - m))}
+
+
+#: The default geometry of both paths (keys: the two paths of Sec. 5.3).
+PATHS = path_waypoints_m()
+#: TEXTUAL: the path and anchor set of each figure of Sec. 5.3 (None: both sets). Figs. 5.4-5.6 show the linear path:
+#: the U-path comes only after them, "further experiments were conducted by moving the mobile node along a U-path"
+#: (line 522), and Fig. 5.6 is "Localization accuracy evaluation in a linear path"; Fig. 5.4 has the first set of
+#: Sec. 5.1 ("four anchor nodes were placed in the four corners"), Fig. 5.5 "six anchor nodes" (line 518).
+FIGURE_PATHS = {"Fig. 5.4": ("linear", 4), "Fig. 5.5": ("linear", 6), "Fig. 5.6": ("linear", None),
+                "Fig. 5.7": ("u", None)}
+#: GAPS (not modelled; the rows they touch are open). Sec. 5.3 blames the turn error on "the change in antenna
+#: orientation" (line 527) and Sec. 5.1 says orientation "affects the signal strength" (line 466), with no size:
+#: the simulated RSS has no orientation term (0 dB).
+ORIENTATION_LOSS_DB = 0.0
+#: "we dynamically assigned weights to the sensor values based on how close the values were to the estimated
+#: position" (Ch. I, line 100): the rule is never given; no weighting beyond the filters' own gains.
+DYNAMIC_WEIGHTING = "none"
+#: How the EKF/UKF take the two measurement vectors: Eqs. (4.8)-(4.9) fuse Z^1 and Z^2 before the filter, which as
+#: printed mixes N powers with 4 inertial values; both are stacked into one update instead ('stacked'), which for
+#: independent noises is what (4.8)-(4.9) give when both vectors measure the same quantity.
+FUSION_SCHEME = "stacked"
 #: Sec. 3.6: "Typical values for alpha is 10^{-3}", beta = 2; kappa >= 0 (0 taken).
 UKF_ALPHA = PRINTED.get("Sec. 3.6 text", "unscented parameters", "alpha").value
 UKF_BETA = PRINTED.get("Sec. 3.6 text", "unscented parameters", "beta").value
@@ -135,6 +169,7 @@ class WalkSettings:
     P_0 and the start at the true start point at rest. All defaults are ours.
     ``imu_frame``: ``"body"`` (readings rotated by the heading; default) or the literal ``"world"``.
     ``anchor_layout``: where anchors 16 and 17 stand, a key of :data:`ANCHOR_LAYOUTS` (Sec. 5.1 does not say).
+    ``linear_path``, ``u_path``: the paths' geometry, keys of :data:`LINEAR_PATHS_Y_M` and :data:`U_PATH_MARGINS_M`.
     """
 
     speed_m_s: float = 0.5
@@ -156,6 +191,8 @@ class WalkSettings:
     initial_rate_sd: float = 0.3
     imu_frame: str = "body"
     anchor_layout: str = DEFAULT_ANCHOR_LAYOUT
+    linear_path: str = DEFAULT_LINEAR_PATH
+    u_path: str = DEFAULT_U_PATH
 
     @property
     def rss_sigma_db(self) -> float:
@@ -168,10 +205,22 @@ class WalkSettings:
         return self.imu_rate_hz * self.dt_s
 
 
+def filter_step_s(dt_s: float | None, speed_m_s: float) -> float:
+    """The filter step (s): ``dt_s``, or for None one step per report point, the time to travel
+    :data:`REPORT_SPACING_M` at ``speed_m_s`` (the text's reading: the measurement is "the average received power"
+    (Sec. 3.4, line 264), "computed at each position" and sent "at every 1m distance" (Sec. 5.3, line 500))."""
+    if dt_s is None:
+        check_scalar("speed_m_s", speed_m_s, gt=0)
+        return float(REPORT_SPACING_M / speed_m_s)
+    check_scalar("dt_s", dt_s, gt=0)
+    return float(dt_s)
+
+
 def path_trajectory(path: str, settings: WalkSettings) -> Trajectory:
     if path not in PATHS:
         raise ValueError(f"path must be one of {tuple(PATHS)}, got {path!r}")
-    return waypoint_trajectory(PATHS[path], speed_m_s=settings.speed_m_s, accel_m_s2=settings.accel_m_s2,
+    waypoints = path_waypoints_m(settings.linear_path, settings.u_path)[path]
+    return waypoint_trajectory(waypoints, speed_m_s=settings.speed_m_s, accel_m_s2=settings.accel_m_s2,
                                dt_s=settings.dt_s, turn_radius_m=settings.turn_radius_m if path == "u" else 0.0)
 
 
@@ -611,10 +660,11 @@ METHOD_LABELS = {"rss_only": "RSS only", "inertial_only": "inertial only", "posi
 #: finds the UKF best, the default); the linear KF, the EKF and the position fusion of Eqs. (4.8)-(4.9) are the
 #: other readings.
 FUSED_METHODS = ("ukf", "kf", "ekf", "position_fusion")
-NOTE_FUSED = ("the fused error depends on every unprinted setting (residual IMU biases, q, packet rate, shadowing "
-              "correlation); see the sensitivity tables below")
-NOTE_U_RSS = ("the U-path's RSS-only error follows from the calibrated shadowing and the assumed U geometry (2 m from the "
-              "walls); turns and antenna orientation changes (Sec. 5.3) are not modelled")
+NOTE_FUSED = ("the fused error depends on every unprinted setting (shadowing level and correlation, residual IMU biases, "
+              "q, the filter step) and on the 'dynamic' sensor weights of Ch. I, which the text never defines (not "
+              "modelled: DYNAMIC_WEIGHTING); see the sensitivity tables below")
+NOTE_U_RSS = ("the U-path's RSS-only error follows from the declared shadowing and the assumed U geometry (u_path); the "
+              "antenna-orientation change at the turns that Sec. 5.3 blames is not modelled (ORIENTATION_LOSS_DB)")
 
 
 def _unproven(reason: str) -> dict:
@@ -667,7 +717,8 @@ def record_ch6(report, errors: dict, flags: dict, *, headline_anchors: int, shad
                   same_as=PRINTED.get("Ch. VI text", "linear path", "fused"))
     claim = dict(kind="claim", relation=">", threshold=0.0)
     # Fig. 5.4's caption: every fusion filter better than each individual sensor (RSS only, inertial only)
-    gains = {(i, f): paired("linear", 4, i, f) for i in ("rss_only", "inertial_only") for f in ("kf", "ekf", "ukf")}
+    fig54 = FIGURE_PATHS["Fig. 5.4"]          # the linear path, 4 anchors (textual)
+    gains = {(i, f): paired(*fig54, i, f) for i in ("rss_only", "inertial_only") for f in ("kf", "ekf", "ukf")}
     weakest = min(gains, key=lambda k: gains[k][0])
     report.number(f"Fig. 5.4: smallest margin of a fusion filter over an individual sensor ({label[weakest[0]]} minus "
                   f"{label[weakest[1]]}) (m)", PRINTED.get("Fig. 5.4 caption", "fusion versus individual sensors", "claim"),
@@ -675,7 +726,7 @@ def record_ch6(report, errors: dict, flags: dict, *, headline_anchors: int, shad
                       "the linear KF follows the gyro-rotated accelerations between fixes; their residual biases are not "
                       "in its model (the sensitivity table, 6 anchors, shows the KF without them)"))
     # "least when using the UKF" (Fig. 5.4: 4 anchors, linear path): the closest competitor minus the UKF
-    diffs = {m: paired("linear", 4, m, "ukf") for m in ("rss_only", "position_fusion", "kf", "ekf")}
+    diffs = {m: paired(*fig54, m, "ukf") for m in ("rss_only", "position_fusion", "kf", "ekf")}
     closest = min(diffs, key=lambda m: diffs[m][0])
     report.number(f"Fig. 5.4: mean error of the closest other method ({label[closest]}) minus the UKF's (m)",
                   PRINTED.get("Sec. 5.3 text", "Fig. 5.4, UKF", "claim"), diffs[closest][0], mc_std_error=diffs[closest][1],

@@ -90,6 +90,18 @@ def test_the_committed_brackets_are_complete_and_from_committed_code():
         assert all(p["generated_by"] and "uncommitted" not in p["generated_by"]
                    for p in points if p["status"] in ("ok", "cached")), points_csv
         assert not any(p["readings_file"] for p in points), points_csv     # the packaged readings only
+        # issue 45: every point at the full profile's run count, so a verdict survives its Monte-Carlo error
+        assert {b["profile"] for b in load_bracket(points_csv.parent)} == {"full"}, points_csv
+        assert (points_csv.parent / "values.csv").is_file(), points_csv
+
+
+def test_no_outside_row_rests_on_a_margin_monte_carlo_error_could_close(rows):
+    """Issue 45: an outside row names its margin, and the printed value clears it."""
+    folder = FULL.parent / "brackets"
+    for bracket_csv in sorted(folder.glob("*/bracket.csv")):
+        for b in load_bracket(bracket_csv.parent):
+            if b["bracket"] == "outside":
+                assert "beyond its margin" in b["outside_margin"], b
 
 
 def test_every_experiment_with_compared_numbers_gets_printed_versus_ours_figures(rows):

@@ -1040,8 +1040,9 @@ def record_simulation_assumptions(report, readings: dict | None = None) -> None:
         ("room_m", ROOM_M, "Sec. 7.2.1: single 5 m x 8 m room, no walls"),
         ("anchors_m", LAYOUTS["corners3"], "three corners (separations 5 m and 8 m, Sec. 7.2.1); which three is not "
          "printed and is equivalent by symmetry"),
-        ("target_protocol", "mobile: uniform start, Gaussian steps reflected at the walls, fresh noise each step; "
-         "fixed: uniform position", "not fully printed (Sec. 7.2.1); the contested parts are the readings below"),
+        ("target_protocol", "mobile: uniform start, Gaussian steps kept in the room per wall_handling, fresh noise "
+         "each step; fixed: uniform position", "not fully printed (Sec. 7.2.1); the contested parts are the readings "
+         "below"),
         ("cells", "nx x ny partition of the room shrunk by 0.5 m", "gives the printed 28 cells at x 1..4, y 1..7 and the "
          "0.5 m and 2 m grids; the 6/16/56/98 patterns are not printed"),
         ("min_distance_m", 0.1, "avoids log10(0) at a reader (ours)"),

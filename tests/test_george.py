@@ -100,3 +100,16 @@ def test_the_setup_agrees_with_the_numbers_the_paper_prints():
     assert (levels[0], levels[-1]) == (value("Sec. 2.C", "TX power level", "lowest"),
                                        value("Sec. 2.C", "TX power level", "highest"))
 
+
+
+def test_no_george_default_is_fitted_and_the_fitted_sigma_is_only_an_alternative():
+    # issue 45: 1.83 dB was chosen from the printed C without filter; the default is the assumed sigma
+    from locbook.reproduce.readings import readings
+    rows = {r.name: r for r in readings("george")}
+    assert all(r.basis != "fitted" for r in rows.values())
+    for name in ("shadowing", "crlb_shadowing"):
+        r = rows[name]
+        assert george.SIGMA_FITTED_DB in r.fitted and r.default != george.SIGMA_FITTED_DB
+        assert r.low <= r.default <= r.high
+    # Eq. (8) differences the other anchors against anchor 1, the first listed corner (Sec. 5): reference row 0
+    assert rows["reference_anchor"].default == 0 and tuple(george.ANCHORS_M[0]) == (0.0, 0.0)

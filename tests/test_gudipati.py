@@ -260,3 +260,57 @@ def test_imu_frame_world_takes_the_readings_as_world_accelerations():
     spun = replace(world, gyro_rad_s=world.gyro_rad_s + 0.3)
     np.testing.assert_array_equal(gu.inertial_only(spun), gu.inertial_only(world))
     assert not np.allclose(gu.inertial_only(replace(body, gyro_rad_s=body.gyro_rad_s + 0.3)), gu.inertial_only(body))
+
+
+# -- issue 45: the readings under the rule, the path geometry and the filter step ------------------------------------
+
+def test_no_gudipati_default_is_fitted_and_the_fitted_shadowing_is_an_alternative():
+    from locbook.reproduce.readings import readings
+    rows = {r.name: r for r in readings("gudipati2017")}
+    assert all(r.basis != "fitted" for r in rows.values())
+    shadow = rows["tracking_shadowing"]
+    assert shadow.fitted and all(v in shadow.alternatives for v in shadow.fitted)
+    assert shadow.default == gu.WalkSettings().shadowing_sigma_db      # one assumed channel with the calibration notebook
+    assert shadow.default == rows["calibration_shadowing"].default
+
+
+@pytest.mark.parametrize("linear", list(gu.LINEAR_PATHS_Y_M))
+@pytest.mark.parametrize("u", list(gu.U_PATH_MARGINS_M))
+def test_every_declared_path_geometry_runs_over_the_length_of_the_hall(linear, u):
+    # Sec. 5.3: "a linear path and a U-path over the length of the room" (30 m x 10 m, Sec. 5.1)
+    paths = gu.path_waypoints_m(linear, u)
+    L, W = gu.ROOM_M
+    (x0, y0), (x1, y1) = paths["linear"]
+    assert (x0, x1) == (0.0, L) and y0 == y1 == gu.LINEAR_PATHS_Y_M[linear] and 0 < y0 < W
+    m = gu.U_PATH_MARGINS_M[u]
+    (a, b, c, d) = (np.array(p) for p in paths["u"])
+    np.testing.assert_allclose([a, b, c, d], [[m, m], [L - m, m], [L - m, W - m], [m, W - m]])
+    assert 0 < m < W / 2                                        # two legs along the long walls, inside the hall
+    tr = gu.path_trajectory("u", replace(gu.WalkSettings(), linear_path=linear, u_path=u))
+    legs = 2 * (L - 2 * m) + (W - 2 * m)
+    r = gu.WalkSettings().turn_radius_m
+    assert tr.length_m == pytest.approx(legs - 4 * r + np.pi * r, abs=1e-9)
+    assert np.all((tr.position_m >= 0) & (tr.position_m <= [L, W]))
+    with pytest.raises(ValueError, match="u_path"):
+        gu.path_waypoints_m(linear, "along_the_walls")
+
+
+def test_the_default_paths_are_the_default_labels_and_each_figure_names_a_path_and_anchor_set():
+    assert gu.PATHS == gu.path_waypoints_m()
+    for path, anchors in gu.FIGURE_PATHS.values():
+        assert path in gu.PATHS and (anchors is None or anchors in gu.ANCHOR_SETS)
+
+
+@pytest.mark.parametrize("speed", [0.3, 0.5, 1.5])
+def test_the_default_filter_step_is_one_step_per_report_point(speed):
+    # dt_s None: the time to travel the 1 m report spacing, so each report point is one filter step
+    dt = gu.filter_step_s(None, speed)
+    assert dt == pytest.approx(gu.REPORT_SPACING_M / speed)
+    assert gu.filter_step_s(0.1, speed) == 0.1
+    s = replace(gu.WalkSettings(), speed_m_s=speed, dt_s=dt)
+    tr = gu.path_trajectory("linear", s)
+    cruise = np.isclose(np.linalg.norm(tr.velocity_m_s, axis=-1), speed)
+    steps = np.diff(tr.arc_length_m)[cruise[1:] & cruise[:-1]]
+    np.testing.assert_allclose(steps, gu.REPORT_SPACING_M, rtol=1e-9)
+    with pytest.raises(ValueError, match="dt_s"):
+        gu.filter_step_s(0.0, speed)

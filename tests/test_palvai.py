@@ -158,3 +158,19 @@ def test_the_sequential_schedule_runs_one_iteration_per_location_and_the_others_
     assert res.mean_m.shape == (2, 4, 2)
     with pytest.raises(ValueError, match="schedule must be one of"):
         pv.pf_iterations("random", 3, 4)
+
+
+def test_fig7_default_exact_locations_without_shadowing_give_the_exact_batch_fix():
+    # issue 45: Fig. 7 is Fig. 8 without shadowing, with the locations known exactly (Sec. 2.6): the differenced
+    # system of Eqs. (2.27)-(2.29) is then consistent and its least-squares solution is the target itself
+    rng = np.random.default_rng(3)
+    setup = pv.Setup(dim=3, sigma_db=0.0, receiver_sigma_m=0.0)
+    loc = pv.draw_locations(4, 20, 3, rng)
+    z = pv.measure(setup, loc, rng)
+    seen = pv.observed_locations(setup, loc, rng)
+    np.testing.assert_array_equal(seen, loc)
+    est = pv.lsf_by_count(setup, seen, z, [5, 10, 20])
+    assert pv.errors_m(est, setup.target).max() < 1e-6
+    from locbook.reproduce.readings import readings
+    fig7 = {r.name: r for r in readings("palvai2008")}["fig7_gps_noise"]
+    assert fig7.default == 0.0 and pv.SIGMA3_M in fig7.alternatives

@@ -289,8 +289,8 @@ class HeadingKinematicModel:
 def reflect_into_box(position_m, lower_m, upper_m):
     """Fold positions ``(..., dim)`` back into the box ``[lower, upper]`` by mirror reflection at its
     walls (repeatedly, for steps longer than the box). Used for targets and particles confined to a room
-    (Ozkaya 2011, Sec. 7.2 simulations: the boundary handling is not stated; reflection reproduces the
-    printed tables).
+    (Ozkaya 2011, Sec. 7.2 simulations: the boundary handling is not stated; reflection is the assumed default of
+    the declared reading ``wall_handling``, whose alternatives clip at the wall or redraw the step).
     """
     lower = as_array("lower_m", lower_m)
     width = as_array("upper_m", upper_m) - lower

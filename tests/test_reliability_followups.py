@@ -48,7 +48,7 @@ def test_a_list_of_masked_rows_keeps_every_rows_mask():
 def test_a_bad_reading_after_a_blank_line_is_named_by_its_own_line(tmp_path):
     from locbook.reproduce.readings import READING_COLUMNS, ReadingsError, load_reading_file
     path = tmp_path / "r.csv"
-    path.write_text(",".join(READING_COLUMNS) + "\n\n" + "slope,george-study,a,,1.0,[1.0],,,,assumed,s,r\n")
+    path.write_text(",".join(READING_COLUMNS) + "\n\n" + "slope,george-study,a,,1.0,[1.0],,,,assumed,s,,r\n")
     with pytest.raises(ReadingsError, match=r"r\.csv, line 3 \(slope\)"):
         load_reading_file(path)
 

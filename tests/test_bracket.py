@@ -546,3 +546,41 @@ def test_an_implausible_value_is_named_and_left_out_of_the_band(stoy, tmp_path):
                                 "kind": "reproduction", "verdict": "miss", "reproduced": "3"}], [row])
     assert site["bracket"] == "outside" and "implausible, left out of the band: slope: a=1.3 gave 45.6 m" in \
         site["bracket_readings"]
+
+
+def test_an_implausible_default_run_neither_hides_a_reading_nor_makes_a_crossing(stoy, tmp_path):
+    """Review of issue 45: the default run being implausible must not drop the first other reading, and an
+    implausible range end must not make the row open by 'straddling' the printed value."""
+    suite = _with_bracket_table(stoy, '[experiment.bracket]\nlargest_error_m = 9.43\nlargest_error_reason = "room"\n')
+    exp = find_experiment(suite, "george-study")
+    text = f"{HEADER}\nslope,george-study,a,,1.0,\"[1.3, 2.0]\",,,,printed,s,r\n"
+    points = bracket_points(exp, "quick", load_reading_file(_readings(tmp_path, text)))
+    folder = tmp_path / "b"
+    for p, value, verdict in zip(points, ("20", "4.0", "3"), ("miss", "within", "miss")):
+        _numbers(folder / p.key, {"reproduced": value, "verdict": verdict, "unit": "m", "printed": "4.0"})
+    (row,) = bracket_rows(exp, points, folder, {p.key: "ok" for p in points}, [], "quick")
+    assert row["bracket"] == "other_reading" and row["reached_by"] == "slope: a=1.3", row
+    ranged = f"{HEADER}\nslope,george-study,a,,1.0,[],,0.5,2.0,printed,s,r\n"
+    points = bracket_points(exp, "quick", load_reading_file(_readings(tmp_path, ranged)))
+    folder = tmp_path / "c"
+    for p, value in zip(points, ("3", "2", "45")):          # default 3, a = 0.5 gives 2, a = 2 gives 45 m
+        _numbers(folder / p.key, {"reproduced": value, "verdict": "miss", "unit": "m", "printed": "4.0"})
+    (row,) = bracket_rows(exp, points, folder, {p.key: "ok" for p in points}, [], "quick")
+    assert row["open_readings"] == "" and row["bracket"] == "outside" and "45 m" in row["implausible"], row
+
+
+def test_a_row_no_run_gave_a_value_is_open_not_outside(stoy, tmp_path):
+    exp, points = _tier_points(stoy, tmp_path)
+    folder = tmp_path / "b"
+    for p in points:
+        _numbers(folder / p.key, {"reproduced": "nan", "verdict": "miss"})
+    (row,) = bracket_rows(exp, points, folder, {p.key: "ok" for p in points}, [], "quick")
+    assert row["bracket"] == "open" and row["open_readings"] == "no plausible run produced a value"
+
+
+def test_the_margin_counts_the_sources_monte_carlo_error_once():
+    from locbook.suite.bracket import _margin
+    row = {"rounding": "0.005", "mc_std_error": "0.1", "ambiguity": "0.2"}
+    assert _margin(row) == pytest.approx(0.005 + 0.2 + 2 * 0.1 * 2 ** 0.5)
+    own = {**row, "ambiguity_basis": "Monte-Carlo error of the thesis's own 1000-run statistic (2 standard errors)"}
+    assert _margin(own) == pytest.approx(0.005 + 0.2 + 2 * 0.1)

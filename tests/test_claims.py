@@ -119,11 +119,45 @@ def test_a_claim_is_judged_on_printed_values_on_ours_and_under_every_other_readi
          "ours": "1.50", "mc_std_error": "0.01", "verdict": "miss"},
         {"point": "p0", "reading": "default", "basis": "default", "printed_id": "Table 1 | MAP | rmse_m",
          "ours": "1.40", "mc_std_error": "0.01", "verdict": "miss"}]}
+    # values.csv holds every scored row under every point: MMSE too, unchanged here
+    values["doc-sim"] += [{"point": p, "reading": r, "basis": b, "printed_id": "Table 1 | MMSE | rmse_m",
+                           "ours": "1.20", "mc_std_error": "0.01", "verdict": "within"}
+                          for p, r, b in (("p1", "noise: n='x'", "textual"), ("p2", "noise [fitted]: n='y'", "fitted"),
+                                          ("p0", "default", "default"))]
     j = judge_claim(c, rows, values)
     assert (j["printed"], j["ours"], j["readings"]) == (True, True, 2)      # 1.30 > 1.22 as printed; 1.40 > 1.20
     assert j["changed_by"] == ["noise: n='x' [textual]: fails"]
     page = conclusions_markdown("doc", "A. Author", 2011, [j], "full")
     assert "1 hold, 0 fail and 0 are undecidable" in page and "changes under noise: n='x' [textual]: fails" in page
+    # a bracket whose default run is not this report's (another profile, other code) judges no other reading
+    stale = {k: {**v, "reproduced": "1.41"} if "MAP" in k[1] else v for k, v in rows.items()}
+    j3 = judge_claim(c, stale, values)
+    assert j3["readings"] == 0 and "its bracket's default run differs from this report" in j3["not_judged"][0]
+    # a linked evidence row follows its master's value under each reading
+    linked = {**rows, ("doc-sim", "Table 2 | MAP | rmse_m"): {**rows[("doc-sim", "Table 1 | MAP | rmse_m")],
+                                                               "printed_id": "Table 2 | MAP | rmse_m",
+                                                               "same_as": "Table 1 | MAP | rmse_m", "verdict": ""}}
+    c2 = load_claims_file(_write(tmp_path, {**GOOD, "evidence": GOOD["evidence"].replace("Table 1 | MAP",
+                                                                                            "Table 2 | MAP")}))[0]
+    assert judge_claim(c2, linked, values)["changed_by"] == ["noise: n='x' [textual]: fails"]
     # a row missing from the folder leaves the claim undecidable, saying which
     (j2,) = [judge_claim(c, {k: v for k, v in rows.items() if "MAP" not in k[1]}, {})]
     assert j2["ours"] is None and "Table 1 | MAP | rmse_m is not in this folder's numbers.csv" in j2["why"]
+
+
+@pytest.mark.parametrize("test, problem", [
+    ("verdict(map) < 1", "is a truth where a number is needed"),
+    ("map + (map < mmse) > 0", "is a truth where a number is needed"),
+    ("(map < mmse) < 1", "is a truth where a number is needed"),
+    ("abs(map < mmse) > 0", "is a truth where a number is needed"),
+    ("increasing(map, mmse) < 1", "is a truth where a number is needed"),
+    ("abs() > 0", "abs() takes one argument"),
+    ("abs < map", "abs is a function; call it"),
+    ("verdict(increasing)", "increasing is a function; call it"),
+    ("increasing(map)", "needs two or more arguments"),
+    ("map", "is a number, not a statement"),
+    ("not map", "is a number where a truth is needed"),
+])
+def test_a_test_that_mixes_numbers_and_truths_is_refused_when_the_file_loads(tmp_path, test, problem):
+    with pytest.raises(ClaimsError, match=re.escape(problem)):
+        load_claims_file(_write(tmp_path, {**GOOD, "test": test}))

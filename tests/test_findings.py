@@ -58,6 +58,12 @@ def test_the_headline_and_the_findings_page_count_the_same_rows():
     hand = _counter(rows)
     want = {"n": sum(hand.values()), **{t: hand[t] for t in BRACKETS}, "none": hand[""]}
     assert tier_counts(rows) == want and len(scored_rows(rows)) == want["n"]
+    assert sum(want[t] for t in BRACKETS) + want["none"] == want["n"]
+    # a retired tier name (an older numbers.csv) counts as not bracketed: the parts still add up
+    old = [{**r, "bracket": "reachable"} if r["bracket"] == "other_reading" else r for r in rows]
+    got = tier_counts(old)
+    assert got["other_reading"] == 0 and got["none"] == want["none"] + want["other_reading"]
+    assert sum(got[t] for t in BRACKETS) + got["none"] == got["n"]
     assert _headline_counts(bracket_headline(rows, "full")) == want
     page = findings_markdown("doc", "A. Author", 2011, rows, "full")
     assert _page_counts(page) == {k: v for k, v in want.items() if k != "none"}
@@ -78,8 +84,14 @@ def test_the_committed_index_findings_and_numbers_agree():
     index = (FULL / "index.md").read_text(encoding="utf-8")
     got = _headline_counts(index)
     assert got == {"n": sum(hand.values()), **{t: hand[t] for t in BRACKETS}, "none": hand[""]}
+    assert sum(got[t] for t in BRACKETS) + got["none"] == got["n"]
     pages = sorted(FULL.glob("*-findings.md"))
     assert pages
+    # the pages add up to the index: a document without a page has no bracketed row
+    with_page = {p.name[:-len("-findings.md")] for p in pages}
+    unpaged = sum(_counter([r for r in rows if r["document"] not in with_page]).values())
+    assert sum(_page_counts(p.read_text(encoding="utf-8"))["n"] for p in pages) + unpaged == got["n"]
+    assert not any(_counter([r for r in rows if r["document"] not in with_page])[t] for t in BRACKETS)
     for page in pages:
         document = page.name[:-len("-findings.md")]
         mine = _counter([r for r in rows if r["document"] == document])

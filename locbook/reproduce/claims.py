@@ -129,7 +129,53 @@ def _parse(text: str, names: set[str], where: str) -> ast.Expression:
         if isinstance(node, ast.Name) and node.id not in _FUNCTIONS and node.id not in names:
             raise ClaimsError(f"{where}: test {text!r} names {node.id!r}, which is not in evidence "
                               f"({', '.join(sorted(names)) or 'empty'})")
+    _kind(tree.body, text, where)
     return tree
+
+
+def _kind(node, text: str, where: str) -> str:
+    """``number`` or ``truth``: what ``node`` yields; a number where a truth is needed (or the reverse), a bare
+    function name, or a function given the wrong number of arguments is refused here, at load time."""
+    def need(child, want):
+        got = _kind(child, text, where)
+        if got != want:
+            raise ClaimsError(f"{where}: test {text!r}: {ast.unparse(child)!r} is a {got} where a {want} is "
+                              "needed")
+    if isinstance(node, ast.Constant):
+        return "number"
+    if isinstance(node, ast.Name):
+        if node.id in _FUNCTIONS:
+            raise ClaimsError(f"{where}: test {text!r}: {node.id} is a function; call it")
+        return "number"
+    if isinstance(node, ast.BoolOp):
+        for v in node.values:
+            need(v, "truth")
+        return "truth"
+    if isinstance(node, ast.UnaryOp):
+        need(node.operand, "truth" if isinstance(node.op, ast.Not) else "number")
+        return "truth" if isinstance(node.op, ast.Not) else "number"
+    if isinstance(node, ast.BinOp):
+        need(node.left, "number")
+        need(node.right, "number")
+        return "number"
+    if isinstance(node, ast.Compare):
+        for child in (node.left, *node.comparators):
+            need(child, "number")
+        return "truth"
+    if isinstance(node, ast.Call):
+        name, args = node.func.id, node.args
+        if name == "verdict":
+            if args[0].id in _FUNCTIONS:
+                raise ClaimsError(f"{where}: test {text!r}: {args[0].id} is a function; call it")
+            return "truth"
+        if name == "abs" and len(args) != 1:
+            raise ClaimsError(f"{where}: test {text!r}: abs() takes one argument")
+        if name in ("increasing", "decreasing") and len(args) < 2:
+            raise ClaimsError(f"{where}: test {text!r}: {name}() needs two or more arguments")
+        for a in args:
+            need(a, "number")
+        return "number" if name == "abs" else "truth"
+    raise ClaimsError(f"{where}: test {text!r} uses {type(node).__name__}")
 
 
 def _and(values):
@@ -209,15 +255,15 @@ def _eval(node, env: dict[str, Value]):
 
 
 def _truth(x):
-    if isinstance(x, Value):
-        raise ClaimsError("a test must end in a comparison, increasing(), decreasing() or verdict(), not a number")
-    return x
+    return None if isinstance(x, Value) else x        # (a number where a truth is needed is refused at load time)
 
 
 def evaluate(test: str, env: dict[str, Value]):
     """The three-valued outcome of ``test`` on ``env`` (evidence name -> :class:`Value`): True (holds), False
     (fails) or None (undecidable: within Monte-Carlo error, a missing or non-finite value, a loose claim row)."""
     tree = _parse(test, set(env), "test")
+    if _kind(tree.body, test, "test") != "truth":
+        raise ClaimsError(f"test {test!r} is a number, not a statement that holds or fails (compare it)")
     if any(not math.isfinite(v.value) for v in env.values() if isinstance(v, Value) and not v.verdict):
         return None
     return _truth(_eval(tree, env))
@@ -253,7 +299,10 @@ def _claim(document: str, row: dict, where: str) -> Claim:
         if cells[column]:
             if not evidence:
                 raise ClaimsError(f"{where}: {column} needs evidence")
-            _parse(cells[column], set(evidence), f"{where}: {column}")
+            tree = _parse(cells[column], set(evidence), f"{where}: {column}")
+            if _kind(tree.body, cells[column], where) != "truth":
+                raise ClaimsError(f"{where}: {column} {cells[column]!r} is a number, not a statement that holds or "
+                                  "fails (compare it)")
     if bool(cells["ambiguity"]) != bool(cells["alt_test"]) and cells["test"]:
         raise ClaimsError(f"{where}: ambiguity and alt_test go together (the test under the other reading)")
     return Claim(document, cells["id"], cells["location"], cells["claim"], cells["kind"], evidence, cells["test"],

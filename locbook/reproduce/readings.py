@@ -36,7 +36,8 @@ One CSV per document, ``locbook/data/readings/<document>.csv`` (package data, be
     is never an argument for or against a reading.
 ``source``
     where the source prints the value or leaves it open (section, equation, table).
-``quotes`` (a file without this column loads, its quotes empty)
+``quotes`` (a file written before issue 45 loads: without this column its quotes are empty, and its basis
+``fitted_to_output`` reads as ``fitted``)
     the words of the source the default and the alternatives rest on, quoted, each with its section (and, where
     useful, the line of the text): required for a ``printed`` or ``textual`` basis (``tests/test_readings.py``
     checks that each such reading quotes the text); for ``assumed``, what the text says around the gap, if
@@ -227,6 +228,8 @@ def _reading(document: str, row: dict, where: str) -> Reading:
     if not _NAME.match(name):
         raise ReadingsError(f"{where}: name {name!r} must be snake_case (lower-case letters, digits, underscores)")
     where = f"{where} ({name})"
+    if cells["basis"] == "fitted_to_output":      # the name before issue 45, in a file of one's own
+        cells["basis"] = "fitted"
     if cells["basis"] not in BASES:
         raise ReadingsError(f"{where}: unknown basis {cells['basis']!r}; allowed: {', '.join(BASES)}")
     experiments = tuple(cells["experiments"].split())

@@ -76,6 +76,7 @@ import io
 import json
 import math
 import os
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -432,26 +433,36 @@ def _crossings(printed: float | None, points: list[BracketPoint], values: dict[s
     return out
 
 
-#: The source's own Monte-Carlo error of a printed number, taken equal to ours: the full profile runs the source's
-#: run count where it is printed (Ozkaya's 1000 runs), so an ``outside`` verdict needs the printed value beyond our
-#: nearest value by more than the rounding, the ambiguity and 2 standard errors of the difference of two such runs.
+#: The source's own Monte-Carlo error of a printed number, taken equal to ours where a row does not already hold it
+#: in its ambiguity: the full profile runs the source's run count where it is printed (Ozkaya's 1000 runs), so an
+#: ``outside`` verdict needs the printed value beyond our nearest value by more than the rounding, the ambiguity and
+#: 2 standard errors of the difference of two such runs.
 SOURCE_SE_FACTOR = 1.0
+#: an ambiguity that already is the source's own Monte-Carlo error (Ozkaya's and Dogan's simulation rows)
+_SOURCE_MC = re.compile(r"(thesis|source|paper)'s own[^;]*Monte-Carlo|Monte-Carlo error of the (thesis|source|paper)",
+                        re.IGNORECASE)
 
 
 def _margin(row: dict) -> float:
     """The half-width an ``outside`` verdict must clear around our value of ``row`` (a numbers row): rounding +
-    ambiguity + 2 standard errors of (ours - printed), both Monte-Carlo errors (:data:`SOURCE_SE_FACTOR`)."""
+    ambiguity + 2 standard errors of (ours - printed), ours and the source's (:data:`SOURCE_SE_FACTOR`), the
+    source's counted once: not again where the row's ambiguity already is it."""
     def num(column):
         v = finite_float(row.get(column, ""))
         return 0.0 if v is None else abs(v)
     se = num("mc_std_error")
-    return num("rounding") + num("ambiguity") + 2.0 * se * math.sqrt(1.0 + SOURCE_SE_FACTOR ** 2)
+    source = 0.0 if _SOURCE_MC.search(row.get("ambiguity_basis", "") or "") else SOURCE_SE_FACTOR
+    return num("rounding") + num("ambiguity") + 2.0 * se * math.sqrt(1.0 + source ** 2)
+
+
+_EXTREME = re.compile(r"\b(worst|max|maximum|largest)\b", re.IGNORECASE)
 
 
 def _implausible(exp: Experiment, row: dict, value: float | None) -> bool:
-    """A value no plausible reading gives: an error in metres over the experiment's ``largest_error_m`` (the
-    area's diagonal, ``[experiment.bracket]``)."""
+    """A value no plausible reading gives: a typical error in metres (not a worst case or maximum, which may leave
+    the area) over the experiment's ``largest_error_m`` (the area's diagonal, ``[experiment.bracket]``)."""
     return (exp.largest_error_m is not None and value is not None and row.get("unit") == "m"
+            and not _EXTREME.search(f"{row.get('quantity', '')} {row.get('printed_id', '')}")
             and value > exp.largest_error_m)
 
 
@@ -503,10 +514,14 @@ def bracket_rows(exp: Experiment, points: list[BracketPoint], folder: Path, stat
         implausible = [f"{label} gave {v:.4g} m, over the largest plausible error {exp.largest_error_m:g} m "
                        f"({exp.largest_error_reason})" for label, v, row, _p in runs if _implausible(exp, row, v)]
         plausible = [(label, v, row, p) for label, v, row, p in runs if not _implausible(exp, row, v)]
-        reached = [label for label, _v, row, p in plausible[1:] if row["verdict"] == "within"]
-        reached_textual = [label for label, _v, row, p in plausible[1:] if row["verdict"] == "within" and not p.fitted]
+        others_ok = [(label, v, row, p) for label, v, row, p in runs[1:] if not _implausible(exp, row, v)]
+        reached = [label for label, _v, row, p in others_ok if row["verdict"] == "within"]
+        reached_textual = [label for label, _v, row, p in others_ok if row["verdict"] == "within" and not p.fitted]
         inside = [label for label, _v, row, _p in plausible if row["verdict"] == "loose"]
-        open_names = gap_names + unfinished + missing + _crossings(printed, points, by_key)
+        # an implausible run counts for no verdict: not for a crossing either
+        kept = {p.key for _l, _v, _r, p in plausible}
+        open_names = gap_names + unfinished + missing + _crossings(
+            printed, points, {k: v for k, v in by_key.items() if k in kept})
         finite = [(label, v, row) for label, v, row, _p in plausible if v is not None]
         low = min(finite, key=lambda x: x[1], default=None)
         high = max(finite, key=lambda x: x[1], default=None)
@@ -529,6 +544,9 @@ def bracket_rows(exp: Experiment, points: list[BracketPoint], folder: Path, stat
             verdict = "other_reading"
         elif reached:
             verdict = "fitted_only"
+        elif not finite:
+            verdict = "open"
+            open_names = ["no plausible run produced a value"]
         elif open_names:
             verdict = "open"
         elif inside:
@@ -600,7 +618,7 @@ def bracket_of_rows(rows: list[dict], bracket: list[dict], profile: str | None =
             out.append({**r, "bracket": "", "bracket_readings": ""})
             continue
         at = f"at {b.get('profile') or '?'}: "
-        if r["verdict"] == "within":
+        if r["verdict"] == "within" and not (b.get("implausible") or "").startswith(DEFAULT_POINT + " gave"):
             verdict, readings = "default", ""
         elif profile is not None and profile == b.get("profile") and not _same_number(r.get("reproduced"),
                                                                                        b.get("ours")):
@@ -651,7 +669,7 @@ def _previous_columns(bracket_folder: Path, profile: str | None) -> dict[tuple, 
     for r in rows:
         if None in r or r.get("bracket") is None or r.get("bracket_readings") is None:
             return {}      # another layout, or a short row
-        if r["bracket"]:
+        if r["bracket"] in BRACKETS:         # a retired tier name (an older numbers.csv) is no verdict of today's
             out[_site_key(r)] = {"bracket": r["bracket"], "bracket_readings": r["bracket_readings"]}
     return out
 

@@ -14,6 +14,7 @@ from pathlib import Path
 from ..reproduce.claims import Claim, ClaimsError, Value, claims, evaluate, outcome_word
 from ..reproduce.printed_values import printed_number
 from ..reproduce.report import markdown_text
+from .bracket import _same_number
 from .spec import finite_float
 
 __all__ = ["judge_claim", "conclusions_markdown", "write_conclusions", "CONCLUSIONS_SUFFIX"]
@@ -59,7 +60,7 @@ def _outcome(test: str, env):
         return None
     try:
         return evaluate(test, env)
-    except ClaimsError:
+    except (ClaimsError, ArithmeticError, ValueError):     # (a test is type-checked when its file loads)
         return None
 
 
@@ -67,20 +68,36 @@ def judge_claim(claim: Claim, by_id: dict, values_by_experiment: dict[str, list[
     """The verdicts of one claim: ``printed`` and ``ours`` (True / False / None), ``why`` (when it cannot be
     judged), ``alt`` (ours under the other reading of ambiguous wording), ``readings`` (how many other bracket
     points were judged) and ``changed_by`` (the points whose verdict differs from the default's, with their basis)."""
-    out = {"claim": claim, "printed": None, "ours": None, "why": "", "alt": None, "readings": 0, "changed_by": []}
+    out = {"claim": claim, "printed": None, "ours": None, "why": "", "alt": None, "readings": 0, "changed_by": [],
+           "printed_na": False, "not_judged": []}
     if not claim.testable:
         out["why"] = claim.note or "no row measures it"
         return out
     ours_env = _env(claim, by_id, _ours)
-    out["printed"] = _outcome(claim.test, _env(claim, by_id, _printed))
+    printed_env = _env(claim, by_id, _printed)
+    out["printed_na"] = isinstance(printed_env, str)     # a claim row, or a printed text without one number
+    out["printed"] = _outcome(claim.test, printed_env)
     out["ours"] = _outcome(claim.test, ours_env)
     out["alt"] = _outcome(claim.alt_test, ours_env) if claim.alt_test else None
     if isinstance(ours_env, str):
         out["why"] = ours_env
         return out
-    # under each other reading: the evidence rows of that experiment take the point's values
+    # under each other reading: the evidence rows of that experiment take the point's values (a linked row its
+    # master's); a point that lacks one of them does not judge the claim
+    def master(row):
+        return (row.get("experiment", ""), row.get("same_as") or row.get("printed_id", ""))
     experiments = {exp for exp, _pid in claim.evidence.values()}
     for exp in sorted(experiments):
+        rows = [by_id[key] for key in claim.evidence.values() if key[0] == exp]
+        default = {(exp, v["printed_id"]): v for v in values_by_experiment.get(exp, []) if v["basis"] == "default"}
+        if not default:
+            continue
+        # the bracket's default run must be this report's: else it was made at another profile or by other code
+        if any(master(row) in default and not _same_number(default[master(row)]["ours"], row.get("reproduced"))
+               for row in rows):
+            out["not_judged"].append(f"{exp}: its bracket's default run differs from this report (another profile "
+                                     "or other code), so the other readings are not judged here")
+            continue
         points = defaultdict(dict)
         labels = {}
         for v in values_by_experiment.get(exp, []):
@@ -89,8 +106,10 @@ def judge_claim(claim: Claim, by_id: dict, values_by_experiment: dict[str, list[
             points[v["point"]][(exp, v["printed_id"])] = v
             labels[v["point"]] = (v["reading"], v["basis"])
         for point, table in points.items():
+            if any(master(row) not in table for row in rows):
+                continue
             def pick(row, table=table):
-                alt = table.get((row.get("experiment", ""), row.get("printed_id", "")))
+                alt = table.get(master(row))
                 if alt is None:
                     return _ours(row)
                 return _ours({"reproduced": alt["ours"], "mc_std_error": alt["mc_std_error"],
@@ -123,7 +142,7 @@ def conclusions_markdown(document: str, authors: str, year, judged: list[dict], 
     """The conclusions page of one document from its judged claims (:func:`judge_claim`)."""
     holds = sum(j["ours"] is True for j in judged)
     fails = sum(j["ours"] is False for j in judged)
-    lines = [f"# Conclusions: {authors} ({year}), `{document}`", "",
+    lines = [f"# Conclusions: {_cell(authors)} ({year}), `{document}`", "",
              (f"Profile `{profile}`. " if profile else "")
              + f"{len(judged)} claims and conclusions of the source, each judged from the rows of numbers.csv: "
              f"{holds} hold, {fails} fail and {len(judged) - holds - fails} are undecidable under the default "
@@ -141,11 +160,12 @@ def conclusions_markdown(document: str, authors: str, year, judged: list[dict], 
             notes.append(f"**source inconsistent**: {c.inconsistency}")
         if j["why"]:
             notes.append(j["why"])
+        notes += j.get("not_judged", [])
         if c.note and c.note != j["why"]:
             notes.append(c.note)
         evidence = ", ".join(f"{name}: {exp} | {pid}" for name, (exp, pid) in c.evidence.items())
         lines.append(f"| `{c.id}`: {_cell(c.claim)} | {_cell(c.location)} | {c.kind} | "
-                     f"{outcome_word(j['printed']) if c.testable else '-'} | "
+                     f"{'-' if not c.testable or j.get('printed_na') else outcome_word(j['printed'])} | "
                      f"{outcome_word(j['ours']) if c.testable else 'untested'} | {_cell(_robust(j))} | "
                      f"{_cell('; '.join(notes))}" + (f" (rows: {_cell(evidence)})" if evidence else "") + " |")
     return "\n".join(lines) + "\n"

@@ -51,7 +51,9 @@ def tier_counts(rows) -> dict | None:
     """``{"n": scored rows, <tier>: rows, ..., "none": rows not bracketed}`` over :func:`scored_rows`, or None
     when no row has a bracket verdict."""
     scored = scored_rows(rows)
-    c = Counter(r.get("bracket", "") for r in scored)
+    # a tier name that is not today's (a copied older numbers.csv) is no verdict: counted as not bracketed, so the
+    # parts always add up to the scored rows
+    c = Counter(r.get("bracket", "") if r.get("bracket", "") in _tiers() else "" for r in scored)
     if not any(c[t] for t in _tiers()):
         return None
     return {"n": len(scored), **{t: c[t] for t in _tiers()}, "none": c[""]}
@@ -107,7 +109,7 @@ def findings_markdown(document: str, authors: str, year, doc_rows: list[dict], p
     for tier in _tiers():
         if tier == "default":
             continue
-        chosen = [r for r in scored if r.get("bracket") == tier]
+        chosen = [r for r in scored if r.get("bracket") == tier]     # (tier_counts' count of the tier)
         lines += [f"## {_SHORT[tier].capitalize()} ({len(chosen)})", "", TIER_WORDS[tier].capitalize() + ".", ""]
         if not chosen:
             lines += ["None.", ""]
@@ -204,9 +206,11 @@ def one_screen(entries, rows, conclusions: dict | None = None) -> list[dict]:
             sentences.append(f"The reason most of the rest give ({k} of {len(rest)} rows): {why}.")
         c = (conclusions or {}).get(key)
         if c:
-            sentences.append(f"Conclusions: {len(c['holds'])} hold, {len(c['fails'])} fail, {c['undecidable']} "
-                             "cannot be decided from our rows"
-                             + (f"; failing: {'; '.join(c['fails'][:3])}" if c["fails"] else "") + ".")
+            sentences.append(f"Conclusions (claims of the source judged from our rows): {len(c['holds'])} hold, "
+                             f"{len(c['fails'])} fail, {c['undecidable']} cannot be decided"
+                             + (f"; holding, e.g.: {', '.join(c['holds'][:3])}" if c["holds"] else "")
+                             + (f"; failing, e.g.: {', '.join(c['fails'][:3])}" if c["fails"] else "")
+                             + f" (the {key} conclusions page lists every one).")
         out.append({"key": key, "authors": doc.authors, "year": doc.year, "counts": counts, "n": n,
                     "sentences": sentences})
     return out
@@ -225,7 +229,7 @@ def one_screen_markdown(answers: list[dict], profile: str) -> list[str]:
     if leniency_note(profile):
         lines += [leniency_note(profile), ""]
     for a in answers:
-        lines += [f"- **{a['authors']} ({a['year']})**, `{a['key']}`: " + markdown_text(" ".join(a["sentences"]))]
+        lines += [f"- **{_cell(a['authors'])} ({a['year']})**, `{a['key']}`: " + markdown_text(" ".join(a["sentences"]))]
     lines += ["", "| document | scored | " + " | ".join(_SHORT[t] for t in _tiers()) + " |",
               "|---|---|" + "---|" * len(_tiers())]
     lines += [f"| `{a['key']}` | {a['n']} | " + " | ".join(str(a["counts"][t]) for t in _tiers()) + " |"

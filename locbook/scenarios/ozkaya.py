@@ -866,6 +866,20 @@ CRLB_NOT_FROM_FORMULA = ("not reproducible: the printed CRLB formula is scale-in
                          "the formula behind it is not printed")
 
 
+#: The CRLB as the text states it outside the tables' columns: (location, item, sigma_0 in dB) of
+#: locbook/data/printed/ozkaya2011.csv; the default 3-reader layout of Fig. 7.2 in each.
+TEXT_CRLB = (("Sec. 7.2.2.1 text (Fig. 7.5)", "k_NN sweep, sigma_0 = 11 dB", 11.0),
+             ("Sec. 7.2.2.1 text (Table 7.1)", "changing number of grid cells", 5.2),
+             ("Fig. 7.4 caption", "k_NN sweep, sigma_0 = 5.2 dB", 5.2),
+             ("Table 7.8 caption", "changing number of grid cells", 5.2),
+             ("Table 7.12 caption", "different D = D_0", 5.2),
+             ("Table 7.13 caption", "changing filter D", 5.2),
+             ("Table 7.17 caption", "SIR with changing D = D_0", 5.2),
+             ("Table 7.18 caption", "SIR with changing D, fixed target", 5.2),
+             ("Table 7.45 caption", "all simulated methods, fixed target", 5.2),
+             ("Table 7.46 caption", "probabilistic methods, mobile target", 5.2))
+
+
 def crlb_rows() -> list[dict]:
     """Every printed CRLB cell of the simulation tables with its layout and sigma (from the table's case), the first
     printing of the same (layout, sigma) (``first_printed``), and how to record it: ``same_as`` is that first
@@ -887,6 +901,12 @@ def crlb_rows() -> list[dict]:
             p = printed_cell(table, "CRLB", f"rmse_m@sigma={s:g}")
             first.setdefault(("corners3", s), p)
             rows.append({"printed": p, "layout": "corners3", "sigma_db": s, "first_printed": first[("corners3", s)]})
+    # the bound the text states outside the tables' CRLB columns: Fig. 7.5's 1.70 m at sigma_0 = 11 dB (printed
+    # nowhere else) and the captions' restatements of the default 0.80 m (linked to its first printing)
+    for location, item, sigma in TEXT_CRLB:
+        p = PRINTED.get(location, item, "crlb_m")
+        first.setdefault(("corners3", sigma), p)
+        rows.append({"printed": p, "layout": "corners3", "sigma_db": sigma, "first_printed": first[("corners3", sigma)]})
     for r in rows:
         p, again = r["printed"], r["first_printed"]
         r["same_as"] = again if again.id != p.id and again.value == p.value else None

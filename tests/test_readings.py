@@ -173,6 +173,12 @@ def test_a_printed_or_textual_reading_quotes_the_text_it_rests_on(reading):
     assert _PLACE.search(reading.quotes), f"{reading.document}:{reading.name}: quotes names no section or table"
 
 
+@pytest.mark.parametrize("reading", ALL, ids=_id)
+def test_every_reading_says_where_the_text_stands_on_it(reading):
+    # issue 45: an assumed reading too says what the text says around the gap (section, line), so a reader can check
+    assert reading.quotes.strip() and _PLACE.search(reading.quotes), f"{reading.document}:{reading.name}"
+
+
 @pytest.mark.parametrize("reading", [r for r in ALL if r.basis == "fitted" or r.fitted], ids=_id)
 def test_a_fitted_value_says_why_no_text_supports_it(reading):
     # issue 45: `fitted` means only that nothing in the text supports it and it was chosen because it fits

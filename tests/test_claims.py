@@ -126,9 +126,9 @@ def test_a_claim_is_judged_on_printed_values_on_ours_and_under_every_other_readi
                                           ("p0", "default", "default"))]
     j = judge_claim(c, rows, values)
     assert (j["printed"], j["ours"], j["readings"]) == (True, True, 2)      # 1.30 > 1.22 as printed; 1.40 > 1.20
-    assert j["changed_by"] == ["noise: n='x' [textual]: fails"]
+    assert j["changed_by"] == ["doc-sim, noise: n='x' [textual]: fails"]
     page = conclusions_markdown("doc", "A. Author", 2011, [j], "full")
-    assert "1 hold, 0 fail and 0 are undecidable" in page and "changes under noise: n='x' [textual]: fails" in page
+    assert "1 hold, 0 fail and 0 are undecidable" in page and "changes under doc-sim, noise: n='x' [textual]: fails" in page
     # a bracket whose default run is not this report's (another profile, other code) judges no other reading
     stale = {k: {**v, "reproduced": "1.41"} if "MAP" in k[1] else v for k, v in rows.items()}
     j3 = judge_claim(c, stale, values)
@@ -139,7 +139,17 @@ def test_a_claim_is_judged_on_printed_values_on_ours_and_under_every_other_readi
                                                                "same_as": "Table 1 | MAP | rmse_m", "verdict": ""}}
     c2 = load_claims_file(_write(tmp_path, {**GOOD, "evidence": GOOD["evidence"].replace("Table 1 | MAP",
                                                                                             "Table 2 | MAP")}))[0]
-    assert judge_claim(c2, linked, values)["changed_by"] == ["noise: n='x' [textual]: fails"]
+    assert judge_claim(c2, linked, values)["changed_by"] == ["doc-sim, noise: n='x' [textual]: fails"]
+    # a repeat in another experiment (a comparison table) follows its master's experiment's bracket
+    other = {**rows, ("doc-cmp", "Table 2 | MAP | rmse_m"): {**rows[("doc-sim", "Table 1 | MAP | rmse_m")],
+                                                              "experiment": "doc-cmp", "document": "doc",
+                                                              "printed_id": "Table 2 | MAP | rmse_m",
+                                                              "same_as": "Table 1 | MAP | rmse_m", "verdict": ""}}
+    for k in list(other):
+        other[k] = {"document": "doc", **other[k]}
+    c3 = load_claims_file(_write(tmp_path, {**GOOD, "evidence": GOOD["evidence"].replace(
+        "doc-sim | Table 1 | MAP", "doc-cmp | Table 2 | MAP")}))[0]
+    assert judge_claim(c3, other, values)["changed_by"] == ["doc-sim, noise: n='x' [textual]: fails"]
     # a row missing from the folder leaves the claim undecidable, saying which
     (j2,) = [judge_claim(c, {k: v for k, v in rows.items() if "MAP" not in k[1]}, {})]
     assert j2["ours"] is None and "Table 1 | MAP | rmse_m is not in this folder's numbers.csv" in j2["why"]

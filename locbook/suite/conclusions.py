@@ -64,7 +64,15 @@ def _outcome(test: str, env):
         return None
 
 
-def judge_claim(claim: Claim, by_id: dict, values_by_experiment: dict[str, list[dict]]) -> dict:
+def _primary(rows) -> dict[tuple[str, str], tuple[str, str]]:
+    """(document, printed_id) -> (experiment, printed_id) of the row where each printed quantity is compared (not a
+    linked repeat)."""
+    return {(r.get("document", ""), r.get("printed_id", "")): (r.get("experiment", ""), r.get("printed_id", ""))
+            for r in rows if not r.get("same_as")}
+
+
+def judge_claim(claim: Claim, by_id: dict, values_by_experiment: dict[str, list[dict]],
+                primary: dict | None = None) -> dict:
     """The verdicts of one claim: ``printed`` and ``ours`` (True / False / None), ``why`` (when it cannot be
     judged), ``alt`` (ours under the other reading of ambiguous wording), ``readings`` (how many other bracket
     points were judged) and ``changed_by`` (the points whose verdict differs from the default's, with their basis)."""
@@ -82,19 +90,25 @@ def judge_claim(claim: Claim, by_id: dict, values_by_experiment: dict[str, list[
     if isinstance(ours_env, str):
         out["why"] = ours_env
         return out
-    # under each other reading: the evidence rows of that experiment take the point's values (a linked row its
-    # master's); a point that lacks one of them does not judge the claim
+    # under each other reading: the evidence rows take the point's values, a linked row (same_as) its master's,
+    # wherever the master was compared (another experiment of the document); a point that lacks one of the rows
+    # does not judge the claim
+    primary = primary if primary is not None else _primary(by_id.values())
+
     def master(row):
-        return (row.get("experiment", ""), row.get("same_as") or row.get("printed_id", ""))
-    experiments = {exp for exp, _pid in claim.evidence.values()}
-    for exp in sorted(experiments):
-        rows = [by_id[key] for key in claim.evidence.values() if key[0] == exp]
+        if row.get("same_as"):
+            return primary.get((row.get("document", ""), row["same_as"]), (row.get("experiment", ""), row["same_as"]))
+        return (row.get("experiment", ""), row.get("printed_id", ""))
+    rows = [by_id[key] for key in claim.evidence.values()]
+    masters = {master(row) for row in rows}
+    for exp in sorted({key[0] for key in masters}):
+        mine = [row for row in rows if master(row)[0] == exp]
         default = {(exp, v["printed_id"]): v for v in values_by_experiment.get(exp, []) if v["basis"] == "default"}
         if not default:
             continue
         # the bracket's default run must be this report's: else it was made at another profile or by other code
         if any(master(row) in default and not _same_number(default[master(row)]["ours"], row.get("reproduced"))
-               for row in rows):
+               for row in mine):
             out["not_judged"].append(f"{exp}: its bracket's default run differs from this report (another profile "
                                      "or other code), so the other readings are not judged here")
             continue
@@ -106,11 +120,12 @@ def judge_claim(claim: Claim, by_id: dict, values_by_experiment: dict[str, list[
             points[v["point"]][(exp, v["printed_id"])] = v
             labels[v["point"]] = (v["reading"], v["basis"])
         for point, table in points.items():
-            if any(master(row) not in table for row in rows):
+            if any(master(row) not in table for row in mine):
                 continue
+
             def pick(row, table=table):
                 alt = table.get(master(row))
-                if alt is None:
+                if alt is None:          # a row of another experiment: its default value
                     return _ours(row)
                 return _ours({"reproduced": alt["ours"], "mc_std_error": alt["mc_std_error"],
                               "verdict": alt["verdict"], "kind": row.get("kind", "")})
@@ -118,7 +133,7 @@ def judge_claim(claim: Claim, by_id: dict, values_by_experiment: dict[str, list[
             out["readings"] += 1
             if outcome != out["ours"]:
                 label, basis = labels[point]
-                out["changed_by"].append(f"{label} [{basis}]: {outcome_word(outcome)}")
+                out["changed_by"].append(f"{exp}, {label} [{basis}]: {outcome_word(outcome)}")
     return out
 
 
@@ -183,9 +198,10 @@ def write_conclusions(report_dir: Path, suite, entries, rows, write) -> dict:
         declared = claims(key)
         if not declared:
             continue
-        experiments = {exp for c in declared for exp, _pid in c.evidence.values()}
-        values = {exp: load_values(brackets_root(report_dir) / exp) for exp in experiments}
-        judged = [judge_claim(c, by_id, values) for c in declared]
+        primary = _primary(rows)
+        values = {exp.id: load_values(brackets_root(report_dir) / exp.id) for exp in suite.experiments
+                  if exp.document.key == key}
+        judged = [judge_claim(c, by_id, values, primary) for c in declared]
         from .site import _profile_of
         write(Path(report_dir) / f"{key}{CONCLUSIONS_SUFFIX}",
               conclusions_markdown(key, doc.authors, doc.year, judged, _profile_of(report_dir)))

@@ -158,16 +158,15 @@ def findings_links(report_dir: Path) -> list[tuple[str, str]]:
 
 
 def _reading_names(text: str) -> list[str]:
-    """The reading names a ``bracket_readings`` text of a reached row names (``name: parameter=value``)."""
+    """The readings a ``bracket_readings`` text of a reached row names, each as ``parameter=value`` (a joint
+    point as its label)."""
     text = re.sub(r"^at [a-z]+: ", "", text or "")
     names = []
     for part in text.split("; "):
-        head = part.split(":", 1)[0]
-        if head.startswith("readings together") or head.startswith("fitted readings together"):
-            names.append(head)
-            continue
-        names += [n.replace(" [fitted]", "").strip() for n in head.split(",") if n.strip()]
-    return names
+        head, _, value = part.partition(": ")
+        names.append(part.strip() if head.endswith("together") or head.endswith("together [fitted]")
+                     else (value.strip() or head.strip()))
+    return [n for n in names if n]
 
 
 def one_screen(entries, rows, conclusions: dict | None = None) -> list[dict]:
@@ -189,9 +188,10 @@ def one_screen(entries, rows, conclusions: dict | None = None) -> list[dict]:
             sentences.append(f"{within} of {n} scored printed numbers are within their window (no bracket ran).")
         else:
             sentences.append(f"Of {n} scored printed numbers, {counts['default']} are reproduced under the default "
-                             f"reading and {counts['other_reading']} more under another textual reading; "
+                             f"reading and {counts['other_reading']} more under another textual (or assumed) reading; "
                              f"{counts['fitted_only']} only under a fitted one, {counts['between']} lie between "
-                             f"readings, {counts['outside']} outside every reading and {counts['open']} are open.")
+                             f"readings, {counts['outside']} outside every reading, {counts['open']} are open, "
+                             f"{counts['loose']} loose and {b['none']} not bracketed.")
         rest = [r for r in scored if r.get("bracket") not in ("default", "")] if b else \
             [r for r in scored if r["verdict"] != "within"]
         reached = Counter(name for r in rest if r.get("bracket") in ("other_reading", "fitted_only")
@@ -199,11 +199,11 @@ def one_screen(entries, rows, conclusions: dict | None = None) -> list[dict]:
         notes = Counter(_first_clause(r.get("note", "")) for r in rest if (r.get("note") or "").strip())
         if reached and reached.most_common(1)[0][1] >= max(notes.most_common(1)[0][1] if notes else 0, 1):
             name, k = reached.most_common(1)[0]
-            sentences.append(f"The reading that explains most of the rest: {name} reaches {k} of the {len(rest)} "
-                             "rows not reproduced by default.")
+            sentences.append(f"The reading that reaches the most of the rest: {name} ({k} of the {len(rest)} rows "
+                             "not reproduced by default).")
         elif notes:
             why, k = notes.most_common(1)[0]
-            sentences.append(f"The reason most of the rest give ({k} of {len(rest)} rows): {why}.")
+            sentences.append(f"The reason given most often for the rest ({k} of {len(rest)} rows): {why}.")
         c = (conclusions or {}).get(key)
         if c:
             sentences.append(f"Conclusions (claims of the source judged from our rows): {len(c['holds'])} hold, "

@@ -697,6 +697,20 @@ class NoBracket(list):
         self.folder = Path(folder)
 
 
+def _read_table(path: Path, columns) -> list[dict] | None:
+    """The rows of the CSV file ``path`` if its header is ``columns`` and every row is whole; None if it is
+    damaged or of another layout (a file is never read other than as written)."""
+    try:
+        with open(path, newline="", encoding="utf-8") as fh:
+            reader = csv.DictReader(fh)
+            if tuple(reader.fieldnames or ()) != columns:
+                return None
+            rows = list(reader)
+    except (OSError, ValueError, csv.Error):
+        return None
+    return None if any(None in r or any(v is None for v in r.values()) for r in rows) else rows
+
+
 def load_bracket(folder: Path) -> list[dict]:
     """The rows of ``<folder>/bracket.csv``; empty if it is damaged or of another layout (a header other than
     :data:`BRACKET_COLUMNS`, a short row): a report is never labelled from a file that cannot be read as written;
@@ -704,32 +718,13 @@ def load_bracket(folder: Path) -> list[dict]:
     path = Path(folder) / "bracket.csv"
     if not path.is_file():
         return NoBracket(folder)
-    try:
-        with open(path, newline="", encoding="utf-8") as fh:
-            reader = csv.DictReader(fh)
-            if tuple(reader.fieldnames or ()) != BRACKET_COLUMNS:
-                return []
-            rows = list(reader)
-    except (OSError, ValueError, csv.Error):
-        return []
-    if any(None in r or any(v is None for v in r.values()) for r in rows):
-        return []
-    return rows
+    return _read_table(path, BRACKET_COLUMNS) or []
 
 
 def load_values(folder: Path) -> list[dict]:
     """The rows of ``<folder>/values.csv`` (every scored row under every point), empty if absent, damaged or of
     another layout."""
-    path = Path(folder) / "values.csv"
-    try:
-        with open(path, newline="", encoding="utf-8") as fh:
-            reader = csv.DictReader(fh)
-            if tuple(reader.fieldnames or ()) != VALUE_COLUMNS:
-                return []
-            rows = list(reader)
-    except (OSError, ValueError, csv.Error):
-        return []
-    return [] if any(None in r or any(v is None for v in r.values()) for r in rows) else rows
+    return _read_table(Path(folder) / "values.csv", VALUE_COLUMNS) or []
 
 
 def _write_table(path: Path, columns, rows) -> None:

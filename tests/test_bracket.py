@@ -584,3 +584,13 @@ def test_the_margin_counts_the_sources_monte_carlo_error_once():
     assert _margin(row) == pytest.approx(0.005 + 0.2 + 2 * 0.1 * 2 ** 0.5)
     own = {**row, "ambiguity_basis": "Monte-Carlo error of the thesis's own 1000-run statistic (2 standard errors)"}
     assert _margin(own) == pytest.approx(0.005 + 0.2 + 2 * 0.1)
+
+
+def test_a_printed_value_written_with_words_or_a_unit_is_read_as_its_number(stoy, tmp_path):
+    # review of the regenerated reports: Gudipati's '3.83m' lay inside the band and was called outside
+    exp, points = _tier_points(stoy, tmp_path)
+    folder = tmp_path / "b"
+    for p, value in zip(points, ("3", "20", "5")):
+        _numbers(folder / p.key, {"reproduced": value, "verdict": "miss", "printed": "3.83m"})
+    (row,) = bracket_rows(exp, points, folder, {p.key: "ok" for p in points}, [], "quick")
+    assert row["bracket"] == "between" and row["closest"] == "3", row

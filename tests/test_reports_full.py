@@ -83,7 +83,9 @@ def test_every_miss_and_loose_reproduction_or_calibrated_row_has_a_bracket_verdi
 def test_the_committed_brackets_are_complete_and_from_committed_code():
     folder = FULL.parent / "brackets"
     for points_csv in sorted(folder.glob("*/points.csv")):
-        assert load_bracket(points_csv.parent), points_csv.parent       # bracket.csv beside it, readable
+        # bracket.csv beside it, readable (header only for an experiment without scored rows)
+        from locbook.suite.bracket import BRACKET_COLUMNS, _read_table
+        assert _read_table(points_csv.parent / "bracket.csv", BRACKET_COLUMNS) is not None, points_csv.parent
         with open(points_csv, newline="") as fh:
             points = list(csv.DictReader(fh))
         assert points and points[0]["status"] in ("ok", "cached"), points_csv        # the default point ran
@@ -91,7 +93,7 @@ def test_the_committed_brackets_are_complete_and_from_committed_code():
                    for p in points if p["status"] in ("ok", "cached")), points_csv
         assert not any(p["readings_file"] for p in points), points_csv     # the packaged readings only
         # issue 45: every point at the full profile's run count, so a verdict survives its Monte-Carlo error
-        assert {b["profile"] for b in load_bracket(points_csv.parent)} == {"full"}, points_csv
+        assert {b["profile"] for b in load_bracket(points_csv.parent)} <= {"full"}, points_csv
         assert (points_csv.parent / "values.csv").is_file(), points_csv
 
 

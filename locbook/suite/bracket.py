@@ -443,6 +443,16 @@ _SOURCE_MC = re.compile(r"(thesis|source|paper)'s own[^;]*Monte-Carlo|Monte-Carl
                         re.IGNORECASE)
 
 
+def _printed_number(text: str) -> float | None:
+    """The number in a printed text ('3.83m', 'reach accuracy 1 m'), None if it holds none or several."""
+    from ..reproduce.printed_values import printed_number
+    try:
+        value = printed_number(text)
+    except ValueError:
+        return None
+    return value if math.isfinite(value) else None
+
+
 def _margin(row: dict) -> float:
     """The half-width an ``outside`` verdict must clear around our value of ``row`` (a numbers row): rounding +
     ambiguity + 2 standard errors of (ours - printed), ours and the source's (:data:`SOURCE_SE_FACTOR`), the
@@ -492,7 +502,7 @@ def bracket_rows(exp: Experiment, points: list[BracketPoint], folder: Path, stat
     for r in default:
         if not _scored(r):
             continue
-        printed = finite_float(r["printed"])
+        printed = _printed_number(r["printed"])
         ours = finite_float(r["reproduced"])
         # (label, value, numbers row, point) of every point that produced the row
         runs = [(DEFAULT_POINT, ours, r, points[0])]

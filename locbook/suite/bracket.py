@@ -82,7 +82,7 @@ from pathlib import Path
 
 from ..errors import ParameterError
 from ..reproduce.readings import Reading, load_reading_file, readings_for
-from ..reproduce.report import NUMBER_COLUMNS, markdown_text
+from ..reproduce.report import NUMBER_COLUMNS
 from ..reproduce.scoring import JUDGED_KINDS
 from .params import check_value
 from .spec import Experiment, Suite, SuiteError, finite_float
@@ -746,19 +746,9 @@ def _write_table(path: Path, columns, rows) -> None:
 
 
 def _short(text: str) -> str:
-    """A number of bracket.csv to 4 significant digits for the findings page (text as it is)."""
+    """A number of bracket.csv to 4 significant digits for a row's bracket_readings (text as it is)."""
     value = finite_float(text)
     return text if value is None else f"{value:.4g}"
-
-
-def _md_line(text) -> str:
-    """Text of the findings page on one line, HTML shown as text (a readings file may be anyone's)."""
-    return markdown_text(text).replace("\r", " ").replace("\n", " ")
-
-
-def _md_cell(text) -> str:
-    """A findings table cell: :func:`_md_line` with "|" escaped."""
-    return _md_line(text).replace("|", "\\|")
 
 
 def write_bracket_outputs(exp: Experiment, points: list[BracketPoint], folder: Path, outcomes, gaps: list[Reading],

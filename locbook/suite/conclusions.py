@@ -13,8 +13,8 @@ from pathlib import Path
 
 from ..reproduce.claims import Claim, ClaimsError, Value, claims, evaluate, outcome_word
 from ..reproduce.printed_values import printed_number
-from ..reproduce.report import markdown_text
 from .bracket import _same_number
+from .findings import md_cell
 from .spec import finite_float
 
 __all__ = ["judge_claim", "conclusions_markdown", "write_conclusions", "CONCLUSIONS_SUFFIX"]
@@ -137,10 +137,6 @@ def judge_claim(claim: Claim, by_id: dict, values_by_experiment: dict[str, list[
     return out
 
 
-def _cell(text) -> str:
-    return markdown_text(str(text)).replace("\r", " ").replace("\n", " ").replace("|", "\\|")
-
-
 def _robust(j: dict) -> str:
     if j["ours"] is None and not j["readings"]:
         return "-"
@@ -157,7 +153,7 @@ def conclusions_markdown(document: str, authors: str, year, judged: list[dict], 
     """The conclusions page of one document from its judged claims (:func:`judge_claim`)."""
     holds = sum(j["ours"] is True for j in judged)
     fails = sum(j["ours"] is False for j in judged)
-    lines = [f"# Conclusions: {_cell(authors)} ({year}), `{document}`", "",
+    lines = [f"# Conclusions: {md_cell(authors)} ({year}), `{document}`", "",
              (f"Profile `{profile}`. " if profile else "")
              + f"{len(judged)} claims and conclusions of the source, each judged from the rows of numbers.csv: "
              f"{holds} hold, {fails} fail and {len(judged) - holds - fails} are undecidable under the default "
@@ -179,10 +175,10 @@ def conclusions_markdown(document: str, authors: str, year, judged: list[dict], 
         if c.note and c.note != j["why"]:
             notes.append(c.note)
         evidence = ", ".join(f"{name}: {exp} | {pid}" for name, (exp, pid) in c.evidence.items())
-        lines.append(f"| `{c.id}`: {_cell(c.claim)} | {_cell(c.location)} | {c.kind} | "
+        lines.append(f"| `{c.id}`: {md_cell(c.claim)} | {md_cell(c.location)} | {c.kind} | "
                      f"{'-' if not c.testable or j.get('printed_na') else outcome_word(j['printed'])} | "
-                     f"{outcome_word(j['ours']) if c.testable else 'untested'} | {_cell(_robust(j))} | "
-                     f"{_cell('; '.join(notes))}" + (f" (rows: {_cell(evidence)})" if evidence else "") + " |")
+                     f"{outcome_word(j['ours']) if c.testable else 'untested'} | {md_cell(_robust(j))} | "
+                     f"{md_cell('; '.join(notes))}" + (f" (rows: {md_cell(evidence)})" if evidence else "") + " |")
     return "\n".join(lines) + "\n"
 
 

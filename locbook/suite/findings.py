@@ -16,7 +16,7 @@ from ..reproduce.report import markdown_text
 from ..reproduce.scoring import JUDGED_KINDS
 
 __all__ = ["scored_rows", "tier_counts", "TIER_WORDS", "bracket_headline", "leniency_note", "findings_markdown",
-           "write_findings", "findings_links", "one_screen", "one_screen_markdown", "FINDINGS_SUFFIX"]
+           "write_findings", "findings_links", "md_cell", "one_screen", "one_screen_markdown", "FINDINGS_SUFFIX"]
 
 FINDINGS_SUFFIX = "-findings.md"
 
@@ -82,8 +82,10 @@ def bracket_headline(rows, profile: str = "full") -> str:
             "every tier.")
 
 
-def _cell(text) -> str:
-    return markdown_text(text).replace("\r", " ").replace("\n", " ").replace("|", "\\|")
+def md_cell(text) -> str:
+    """Text in one Markdown table cell or heading: HTML shown as text (a claims or readings file may be anyone's),
+    on one line, "|" escaped."""
+    return markdown_text(str(text)).replace("\r", " ").replace("\n", " ").replace("|", "\\|")
 
 
 def _reason_of(row: dict) -> str:
@@ -97,7 +99,7 @@ def findings_markdown(document: str, authors: str, year, doc_rows: list[dict], p
     and the index's), then each tier but ``default``, its rows grouped by the reason they share (written once)."""
     b = tier_counts(doc_rows) or {"n": 0, **{t: 0 for t in _tiers()}, "none": 0}
     scored = scored_rows(doc_rows)
-    lines = [f"# Findings: {_cell(authors)} ({year}), `{document}`", "",
+    lines = [f"# Findings: {md_cell(authors)} ({year}), `{document}`", "",
              (f"Profile `{profile}`. " if profile else "") + f"Scored rows: {b['n']}: " + "; ".join(f"{_SHORT[t]} {b[t]}" for t in _tiers())
              + f"; not bracketed {b['none']}. These counts are those of numbers.csv and of the index (one table).",
              ""]
@@ -118,22 +120,15 @@ def findings_markdown(document: str, authors: str, year, doc_rows: list[dict], p
         for r in chosen:
             groups[_reason_of(r)].append(r)
         for reason, members in sorted(groups.items(), key=lambda g: (-len(g[1]), g[0])):
-            lines += [f"**{_cell(reason)}** ({len(members)} row{'s' if len(members) != 1 else ''})", ""]
+            lines += [f"**{md_cell(reason)}** ({len(members)} row{'s' if len(members) != 1 else ''})", ""]
             table = ["| experiment | printed quantity | printed | ours (default) | verdict |", "|---|---|---|---|---|"]
-            table += [f"| {_cell(r['experiment'])} | {_cell(r['printed_id'])} | {_cell(r['printed'])} | "
-                      f"{_cell(_short_number(r.get('reproduced', '')))} | {_cell(r['verdict'])} |" for r in members]
+            table += [f"| {md_cell(r['experiment'])} | {md_cell(r['printed_id'])} | {md_cell(r['printed'])} | "
+                      f"{md_cell(_short(r.get('reproduced', '')))} | {md_cell(r['verdict'])} |" for r in members]
             if len(members) > 6:      # a long list folds (GitHub renders <details>)
                 lines += ["<details><summary>the rows</summary>", ""] + table + ["", "</details>", ""]
             else:
                 lines += table + [""]
     return "\n".join(lines) + "\n"
-
-
-def _short_number(text: str) -> str:
-    try:
-        return f"{float(text):.4g}"
-    except (TypeError, ValueError):
-        return str(text)
 
 
 def write_findings(report_dir: Path, entries, rows, profile: str, write) -> list[tuple[str, str]]:
@@ -169,6 +164,16 @@ def _reading_names(text: str) -> list[str]:
     return [n for n in names if n]
 
 
+def _short(text) -> str:
+    from .bracket import _short as four_digits
+    return four_digits(str(text))
+
+
+def _first_clause(note: str, limit: int) -> str:
+    from .site import _short as first_clause
+    return first_clause(note, limit)
+
+
 def one_screen(entries, rows, conclusions: dict | None = None) -> list[dict]:
     """Per document with scored rows: ``{"key", "authors", "year", "counts" (tier -> rows), "sentences"}``: how
     many printed numbers are reproduced by tier, which conclusions hold and fail (``conclusions``: document ->
@@ -196,7 +201,7 @@ def one_screen(entries, rows, conclusions: dict | None = None) -> list[dict]:
             [r for r in scored if r["verdict"] != "within"]
         reached = Counter(name for r in rest if r.get("bracket") in ("other_reading", "fitted_only")
                           for name in dict.fromkeys(_reading_names(r.get("bracket_readings", ""))))
-        notes = Counter(_first_clause(r.get("note", "")) for r in rest if (r.get("note") or "").strip())
+        notes = Counter(_first_clause(r.get("note", ""), 140) for r in rest if (r.get("note") or "").strip())
         if reached and reached.most_common(1)[0][1] >= max(notes.most_common(1)[0][1] if notes else 0, 1):
             name, k = reached.most_common(1)[0]
             sentences.append(f"The reading that reaches the most of the rest: {name} ({k} of the {len(rest)} rows "
@@ -216,11 +221,6 @@ def one_screen(entries, rows, conclusions: dict | None = None) -> list[dict]:
     return out
 
 
-def _first_clause(note: str, limit: int = 140) -> str:
-    first = re.split(r"(?<=[.;])\s", note.strip(), maxsplit=1)[0].rstrip(".;")
-    return first if len(first) <= limit else first[:limit].rsplit(" ", 1)[0] + " ..."
-
-
 def one_screen_markdown(answers: list[dict], profile: str) -> list[str]:
     """The one-screen answer as Markdown lines (a paragraph per document, then one small table)."""
     if not answers:
@@ -229,7 +229,7 @@ def one_screen_markdown(answers: list[dict], profile: str) -> list[str]:
     if leniency_note(profile):
         lines += [leniency_note(profile), ""]
     for a in answers:
-        lines += [f"- **{_cell(a['authors'])} ({a['year']})**, `{a['key']}`: " + markdown_text(" ".join(a["sentences"]))]
+        lines += [f"- **{md_cell(a['authors'])} ({a['year']})**, `{a['key']}`: " + markdown_text(" ".join(a["sentences"]))]
     lines += ["", "| document | scored | " + " | ".join(_SHORT[t] for t in _tiers()) + " |",
               "|---|---|" + "---|" * len(_tiers())]
     lines += [f"| `{a['key']}` | {a['n']} | " + " | ".join(str(a["counts"][t]) for t in _tiers()) + " |"

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["draw_room", "draw_path", "mean_with_band", "error_cdf", "heat_map"]
+__all__ = ["draw_room", "draw_path", "mean_with_band", "error_cdf", "heat_map", "heat_map_notes"]
 
 
 def draw_room(ax, size_m, anchors_m=None, *, label_anchors: bool = True, margin_m: float = 0.0):
@@ -58,16 +58,39 @@ def error_cdf(ax, errors_m, label: str = "", **style):
     ax.set_ylabel("CDF")
 
 
+#: Hatch of a cell whose ratio is n/a (a degenerate bound): unlike the "//" of a column that does not apply.
+NA_CELL_HATCH = "xx"
+#: Face colour of an n/a cell: a neutral grey, outside the map's blue-red scale.
+NA_CELL_COLOUR = "0.88"
+
+
+def _ratio(value) -> float:
+    """A row's ratio as a float (a table's empty cell, ``None``, is NaN: no ratio)."""
+    return float("nan") if value is None else float(value)
+
+
+def _na_note(row) -> str:
+    """The note of a row drawn as an n/a cell (NaN ratio and a note saying why), else ``""``."""
+    note = row.get("ratio_note") or ""
+    return note if note and np.isnan(_ratio(row["ratio"])) else ""
+
+
 def heat_map(ax, rows, kind: str, methods, scenarios, not_applicable=None, *, vmax_log2: float = 3.0):
     """Error / bound (RMSE over RMS bound) of each method (rows) on each scenario (columns), log2 colour scale centred
-    on 1; a column that does not apply is hatched and labelled."""
+    on 1; a column that does not apply is hatched and labelled. A row whose ``ratio`` is NaN (or ``None``) and whose
+    ``ratio_note`` is not empty (e.g. the bound is degenerate, :func:`locbook.bounds.summary.error_bound_ratio`) is a
+    grey cell hatched ``"xx"`` and labelled "n/a", never coloured and never given a number; its note belongs in the
+    caption (:func:`heat_map_notes`)."""
     import matplotlib.colors as mcolors
     from matplotlib.patches import Rectangle
 
     grid = np.full((len(methods), len(scenarios)), np.nan)
+    na_cell = np.zeros(grid.shape, dtype=bool)
     for r in rows:
         if r["kind"] == kind and r["method"] in methods and r["scenario"] in scenarios:
-            grid[list(methods).index(r["method"]), list(scenarios).index(r["scenario"])] = r["ratio"]
+            i, j = list(methods).index(r["method"]), list(scenarios).index(r["scenario"])
+            grid[i, j] = _ratio(r["ratio"])
+            na_cell[i, j] = bool(_na_note(r))
     norm = mcolors.TwoSlopeNorm(vcenter=0.0, vmin=-vmax_log2, vmax=vmax_log2)
     with np.errstate(divide="ignore", invalid="ignore"):
         image = ax.imshow(np.clip(np.log2(grid), -vmax_log2, vmax_log2), cmap="RdBu_r", norm=norm, aspect="auto")
@@ -76,10 +99,30 @@ def heat_map(ax, rows, kind: str, methods, scenarios, not_applicable=None, *, vm
             if np.isfinite(grid[i, j]):
                 ax.text(j, i, f"{grid[i, j]:.2f}", ha="center", va="center", fontsize=8,
                         color="white" if abs(np.log2(grid[i, j])) > 0.6 * vmax_log2 else "black")
+    column_na = [bool(not_applicable and key in not_applicable) for key in scenarios]
+    for i, j in zip(*np.nonzero(na_cell)):
+        if not column_na[j]:            # a column that does not apply is labelled once, as a whole
+            ax.add_patch(Rectangle((j - 0.5, i - 0.5), 1, 1, facecolor=NA_CELL_COLOUR, hatch=NA_CELL_HATCH,
+                                   edgecolor="0.6", lw=0.0))
+            ax.text(j, i, "n/a", ha="center", va="center", fontsize=8, color="0.3")
     for j, key in enumerate(scenarios):
-        if not_applicable and key in not_applicable:
+        if column_na[j]:
             ax.add_patch(Rectangle((j - 0.5, -0.5), 1, len(methods), fill=False, hatch="//", edgecolor="0.6"))
             ax.text(j, (len(methods) - 1) / 2, "n/a", ha="center", va="center", fontsize=9, color="0.3")
     ax.set_xticks(range(len(scenarios)), scenarios, rotation=30, ha="right", fontsize=8)
     ax.set_yticks(range(len(methods)), methods, fontsize=8)
     return image
+
+
+def heat_map_notes(rows, kind: str) -> list[str]:
+    """Why each n/a cell of :func:`heat_map` has no ratio, for the figure's caption: ``"scenario / method: note"``
+    for every row of ``kind`` with a NaN ratio and a ``ratio_note``, in the rows' order; the methods of one scenario
+    that share a note are named together (``"scenario / a, b: note"``)."""
+    grouped: dict[tuple[str, str], list[str]] = {}
+    for r in rows:
+        note = _na_note(r) if r["kind"] == kind else ""
+        if note:
+            methods = grouped.setdefault((r["scenario"], note), [])
+            if r["method"] not in methods:
+                methods.append(r["method"])
+    return [f"{scenario} / {', '.join(methods)}: {note}" for (scenario, note), methods in grouped.items()]

@@ -10,18 +10,23 @@ and any unbiased estimator has ``E|p_hat - p|^2 >= tr J^{-1}`` (Ozkaya Eq. (A.5)
 Ozkaya's Appendix A prints ``d_j^2`` in the denominators (Eqs. (A.10)-(A.12)), which makes the bound
 dimensionless and scale-invariant; it is kept as ``form="ozkaya_printed"`` (flagged) because, with
 n = 2, it reproduces the thesis's CRLB numbers (our finding; the simulations themselves use n = 2.3).
+
+On measured data each epoch hears its own anchors: :func:`rss_crlb_checked_m` gives the bound where it means something
+and NaN with a reason elsewhere (fewer than :data:`MIN_ANCHORS_FOR_BOUND` anchors heard, or a condition number above
+:data:`MAX_BOUND_CONDITION`), so that no near-singular epoch (a bound of 1e8 m) swamps an RMS over a recording.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from ..errors import DegenerateGeometryError
+from ..errors import DegenerateGeometryError, ParameterError
 from .._validate import as_array, check_choice, check_scalar
 from ..models.channel import PathLossModel
 from ..models.rss import RssModel
 from ..static.localization import check_anchor_geometry
 
-__all__ = ["rss_fisher_information", "rss_position_information", "rss_crlb_m", "crlb_rms_over_area_m", "CRLB_FORMS"]
+__all__ = ["rss_fisher_information", "rss_position_information", "rss_crlb_m", "crlb_rms_over_area_m", "CRLB_FORMS",
+           "MIN_ANCHORS_FOR_BOUND", "MAX_BOUND_CONDITION", "check_position_information", "rss_crlb_checked_m"]
 
 CRLB_FORMS = ("correct", "ozkaya_printed")
 
@@ -152,3 +157,142 @@ def crlb_rms_over_area_m(points_m, anchors_m, path_loss_exp, sigma_db, form: str
         raise ValueError(f"points_m must hold at least one position, got shape {points_m.shape}")
     bound = rss_crlb_m(points_m, anchors_m, path_loss_exp, sigma_db, form, tag_height_m=tag_height_m)
     return float(np.sqrt(np.mean(bound**2)))
+
+
+# ------------------------------------------------------------------------------------- checked per-epoch bounds
+
+#: Fewest anchors heard for a plan bound. RSS ranges from two anchors meet in two points (a two-fold ambiguity
+#: mirrored about their baseline) and their information is near-singular near that line, so the bound of a plan
+#: position from RSS alone needs three anchors (a fix), as lateration does.
+MIN_ANCHORS_FOR_BOUND = 3
+
+#: Largest condition number ``lambda_max / lambda_min`` of a 2x2 position information accepted for a bound. The
+#: bound ``sqrt(tr J^{-1})`` is then dominated by the weak direction, whose standard deviation is
+#: ``sqrt(condition)`` times the strong one's: beyond 1e6 (a factor of 1000, e.g. 0.5 m across and 500 m along)
+#: the ellipse is a line, not a fix, and its size (far beyond any floor) describes no estimator's error.
+MAX_BOUND_CONDITION = 1e6
+
+#: The reason given to an epoch whose true position is unknown (NaN): :mod:`locbook.bounds.summary` counts it as
+#: "no truth".
+NO_TRUTH_REASON = "no true position"
+
+
+def _too_few_reason(k: int, needed: int) -> str:
+    return f"heard {k} anchor{'' if k == 1 else 's'}, a plan fix needs {needed}"
+
+
+def check_position_information(information, n_heard=None, *, min_anchors: int = MIN_ANCHORS_FOR_BOUND,
+                               max_condition: float = MAX_BOUND_CONDITION):
+    """``(bound_m (...), reason (...))``: the bound ``sqrt(tr J^{-1})`` of a plan position from its 2x2 information
+    ``J`` ``(..., 2, 2)`` (1/m^2), where it is meaningful, else NaN and one short reason.
+
+    ``sqrt(tr J^{-1}) = sqrt((J_xx + J_yy) / (J_xx J_yy - J_xy^2))`` (Ozkaya 2011, Eq. (A.5)). ``reason`` (an
+    object array of str) is ``""`` where the bound is defined, else, first that applies:
+
+    - ``"heard k anchors, a plan fix needs 3"`` where ``n_heard`` (``(...)``, anchors heard at each epoch; ``None``
+      skips this check, e.g. for a posterior information where a prior supplies the rest) is below ``min_anchors``
+      (:data:`MIN_ANCHORS_FOR_BOUND`);
+    - ``"no information (NaN)"`` where ``J`` holds NaN (nothing was computed for that epoch);
+    - ``"singular information (rank below 2)"`` where ``det J <= 0`` (after rounding);
+    - ``"near-singular information (condition 3.2e+09)"`` where the condition number
+      ``lambda_max / lambda_min = lambda_max^2 / det J`` exceeds ``max_condition`` (:data:`MAX_BOUND_CONDITION`).
+
+    Where the reason is not empty the bound is NaN (never inf, never the huge number a near-singular ``J`` gives).
+    """
+    info = as_array("information", information, min_ndim=2, trailing=(2, 2), nan_ok=True)
+    batch = info.shape[:-2]
+    min_anchors = int(check_scalar("min_anchors", min_anchors, ge=1, integer=True))
+    max_condition = check_scalar("max_condition", max_condition, gt=1, allow_inf=True)
+    flat = info.reshape(-1, 2, 2)                       # epochs on one axis (a single epoch is a batch of one)
+    a, b, c, d = flat[:, 0, 0], flat[:, 0, 1], flat[:, 1, 0], flat[:, 1, 1]
+    missing = np.isnan(flat).any(axis=(-2, -1))
+    with np.errstate(invalid="ignore"):
+        negative = (a < 0) | (d < 0)
+        asym = np.abs(b - c) > 1e-9 * np.maximum(np.abs(a) + np.abs(d), np.finfo(float).tiny)
+    for bad, what in ((negative, "positive semi-definite (a negative diagonal)"), (asym & ~missing, "symmetric")):
+        if bad.any():
+            first = int(np.argmax(bad))
+            where = str([int(i) for i in np.unravel_index(first, batch)]) if batch else ""
+            raise ParameterError(f"information must be {what}; information{where} = {flat[first].tolist()}")
+    reason = np.full(flat.shape[0], "", dtype=object)
+    trace = a + d
+    det = a * d - b * c                                   # J_xx J_yy - J_xy^2
+    # eigenvalues tr/2 +- sqrt(((J_xx - J_yy)/2)^2 + J_xy^2); lambda_min = det / lambda_max avoids cancellation
+    with np.errstate(invalid="ignore"):
+        lam_max = 0.5 * trace + np.sqrt(0.25 * (a - d) ** 2 + b * c)
+    singular = ~missing & ~(det > 0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        condition = np.where(singular | missing, np.inf, lam_max**2 / np.where(det > 0, det, 1.0))
+    near = ~missing & ~singular & (condition > max_condition)
+    for i in np.flatnonzero(near):                       # the flagged epochs only: each its own number
+        reason[i] = f"near-singular information (condition {condition[i]:.1e})"
+    reason[singular] = "singular information (rank below 2)"
+    reason[missing] = "no information (NaN)"
+    if n_heard is not None:
+        heard_n = np.asarray(n_heard)
+        if not np.issubdtype(heard_n.dtype, np.integer) or np.any(heard_n < 0):
+            raise ParameterError(f"n_heard must be counts of anchors heard (integers >= 0), got {heard_n.dtype} "
+                                 f"values")
+        try:
+            heard_n = np.broadcast_to(heard_n, batch).ravel()
+        except ValueError:
+            raise ParameterError(f"n_heard must broadcast to the information's batch shape {batch}, got shape "
+                                 f"{heard_n.shape}") from None
+        few = heard_n < min_anchors
+        for k in np.unique(heard_n[few]):           # one reason per count heard (a few values), not per epoch
+            reason[few & (heard_n == k)] = _too_few_reason(int(k), min_anchors)
+    ok = reason == ""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        bound = np.where(ok, np.sqrt(trace / np.where(ok, det, 1.0)), np.nan)   # sqrt((J_xx + J_yy) / det J)
+    bound, reason = bound.reshape(batch), reason.reshape(batch)
+    return bound, reason
+
+
+def rss_crlb_checked_m(position_m, anchors_m, path_loss_exp, sigma_db, *, tag_height_m: float | None = None,
+                       heard=None, min_anchors: int = MIN_ANCHORS_FOR_BOUND,
+                       max_condition: float = MAX_BOUND_CONDITION):
+    """``(bound_m (...), reason (...))``: :func:`rss_crlb_m` (``form="correct"``) at plan positions ``(..., 2)``,
+    checked epoch by epoch: NaN with a short reason where the bound says nothing (:func:`check_position_information`).
+
+    Anchors ``(m, 2)``, or ``(m, 3)`` with ``tag_height_m`` (the tag at that known height: each anchor's height
+    above the tag enters the distance, as in :func:`rss_crlb_m`). ``heard`` ``(..., m)`` booleans (False = the
+    anchor heard nothing at that epoch; ``None`` = every anchor heard): the information is that of the anchors heard
+    (:func:`rss_position_information`), and an epoch that heard fewer than ``min_anchors`` has
+    ``"heard k anchors, a plan fix needs 3"``. A position holding NaN (true position unknown) has
+    ``"no true position"``. Where the bound is defined it equals :func:`rss_crlb_m`'s.
+    """
+    anchors = as_array("anchors_m", anchors_m, ndim=2)
+    if tag_height_m is not None:
+        if anchors.shape[1] != 3:
+            raise ParameterError(f"tag_height_m needs 3-D anchors (m, 3) with their heights, got shape "
+                                 f"{anchors.shape}")
+        check_scalar("tag_height_m", tag_height_m)
+        plan, height = anchors[:, :2], anchors[:, 2] - tag_height_m
+    elif anchors.shape[1] != 2:
+        raise ParameterError(f"anchors_m must be plan anchors (m, 2), or (m, 3) with tag_height_m (the bound is "
+                             f"that of a plan position), got shape {anchors.shape}")
+    else:
+        plan, height = anchors, 0.0
+    m = plan.shape[0]
+    position = as_array("position_m", position_m, min_ndim=1, trailing=(2,), nan_ok=True)
+    batch = position.shape[:-1]
+    if heard is None:
+        heard_b = np.ones(batch + (m,), dtype=bool)
+    else:
+        heard_b = np.asarray(heard)
+        if heard_b.dtype != bool:
+            raise ParameterError(f"heard must be booleans (False = not heard), got dtype {heard_b.dtype}")
+        try:
+            heard_b = np.broadcast_to(heard_b, batch + (m,))
+        except ValueError:
+            raise ParameterError(f"heard must broadcast to (..., {m}) = {batch + (m,)}, got shape "
+                                 f"{heard_b.shape}") from None
+    known = ~np.isnan(position).any(axis=-1)
+    info = np.full(batch + (2, 2), np.nan)
+    if known.any():     # the information of the epochs with a true position only (NaN is no position)
+        info[known] = rss_position_information(position[known], plan, path_loss_exp, sigma_db,
+                                               height_offset_m=height, heard=heard_b[known])
+    bound, reason = check_position_information(info, heard_b.sum(axis=-1), min_anchors=min_anchors,
+                                               max_condition=max_condition)
+    reason[~known] = NO_TRUTH_REASON
+    return bound, reason

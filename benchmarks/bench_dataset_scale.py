@@ -59,16 +59,14 @@ t = time.perf_counter()
 model = me.channel(me.calibrate(ds))
 steps["calibrate"] = time.perf_counter() - t
 t = time.perf_counter()
-n_fixes = 0
-for name in me.scored_recordings(ds):
-    test = me.TestEpochs.of(ds, name)
-    fixes = me.static_fixes(ds, model, test.rss_dbm, grid_spacing_m=GRID)
-    n_fixes += sum(len(v) for v in fixes.values())
+proto = me.protocol(ds, model, grid_spacing_m=GRID, knn_k=5, q=0.05, spread_m=1.0)
+static = me.static_results(ds, model, proto, seed=1, n_bootstrap=2, block_s=10.0)
+n_fixes = sum(len(v) for fixes in static["fixes"].values() for v in fixes.values())
 steps["static fixes"] = time.perf_counter() - t
 t = time.perf_counter()
-fix_cov = me.fix_covariance_from_calibration(ds, model, grid_spacing_m=GRID)
-reg, ticks, tracks = me.tracks(ds, model, "walk_a", np.random.default_rng(1), q=0.05, fix_cov_m2=fix_cov, spread_m=1.0,
-                               n_particles=PARTICLES, particle_runs=1, grid_spacing_m=GRID)
+tracking = me.tracking_results(ds, model, proto, seed=1, n_particles=PARTICLES, particle_runs=1, n_bootstrap=2,
+                               block_s=10.0, recordings=["walk_a"])
+reg = tracking["tracks"]["walk_a"][0].measured_rss_dbm
 steps["trackers (walk_a)"] = time.perf_counter() - t
 print(json.dumps({"steps": steps, "cpu_s": time.process_time() - c0, "fixes": n_fixes, "ticks": len(reg),
                   "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))

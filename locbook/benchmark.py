@@ -28,147 +28,22 @@ One protocol for every cell (each choice a named setting, reported with the cell
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-
 import numpy as np
 
-from .bounds.crlb import rss_position_information
-from .bounds.pcrlb import posterior_crlb, position_bound_m, rss_state_information
-from .data.measured import regular_epochs
-from .geometry import box_outline, grid_in_outline, outline_box
+from .battery import (STATIC_METHODS, TRACKER_PRIORS, TRACKERS, ProtocolChoice, StaticScenario, TrackerSettings, TrackingScenario,
+                      channel_settings, initial_states, run_trackers, static_bound_m, static_fixes, tracking_bound_m)
+from .geometry import box_outline
 from .metrics import accuracy_metrics, position_error_m, rmse_standard_error_m
 from .montecarlo import seed_from_values
 from .models.channel import PathLossModel
-from .models.motion import constant_velocity
-from .static.calibration import fix_error_covariance
-from .static.fingerprint import knn_position, model_fingerprints
-from .static.localization import (grid_ml_position, lateration_box_ls, lateration_ls, lateration_wls,
-                                   rss_ml_position)
-from .models.rss import RssModel
-from .tracking.bayes import grid_bayes_filter
-from .tracking.particle import particle_filter
-from .tracking.kalman import extended_kalman_filter
-from .tracking.streams import LinearMeasurement, RssMeasurement
-from .tracking.unscented import unscented_kalman_filter
 from .scenarios import dogan, george, gudipati, measured, ozkaya, palvai
-from .tracking.divergence import DivergenceFlags
+from .scenarios.measured import measured_static_scenario, measured_tracking_scenario
 
 __all__ = ["ProtocolChoice", "StaticScenario", "TrackingScenario", "STATIC_SCENARIOS", "TRACKING_SCENARIOS",
            "measured_static_scenario", "measured_tracking_scenario",
            "STATIC_METHODS", "TRACKERS", "NOT_APPLICABLE", "TrackerSettings", "static_scenario", "tracking_scenario",
            "static_fixes", "static_bound_m", "run_trackers", "tracking_bound_m", "initial_states", "score",
-           "scenario_rng", "static_cells", "tracking_cells", "settings_rows"]
-
-
-@dataclass(frozen=True)
-class ProtocolChoice:
-    """One named choice of a scenario or a method: its value and where it comes from."""
-
-    name: str
-    value: str
-    source: str
-
-
-@dataclass(frozen=True)
-class _AnchorReadings:
-    """What the static and tracking scenarios share: their name, document and title, the anchors, channel and floor,
-    the anchor distances of plan positions and channel draws at them, whether the readings are measured, and the
-    floor's bounding box (the scenario adds ``tag_height_m`` and ``measured_rss_dbm``)."""
-
-    key: str
-    document: str
-    title: str
-    anchors_m: np.ndarray
-    channel: PathLossModel
-    outline_m: np.ndarray
-
-    @property
-    def measured(self) -> bool:
-        return self.measured_rss_dbm is not None
-
-    @property
-    def box_m(self):
-        return outline_box(self.outline_m)
-
-    def distances_m(self, points_m) -> np.ndarray:
-        """Anchor distances ``(..., m)`` (3-D when the anchors carry heights: the tag at ``tag_height_m``)."""
-        p = np.asarray(points_m, float)
-        if self.tag_height_m is not None:
-            p = np.concatenate([p, np.full(p.shape[:-1] + (1,), self.tag_height_m)], axis=-1)
-        return np.linalg.norm(p[..., None, :] - self.anchors_m, axis=-1)
-
-    def _sample_rss_dbm(self, points_m, n_runs: int, rng: np.random.Generator) -> np.ndarray:
-        """``n_runs`` independent channel draws at ``points_m``: ``(n_runs, ..., m)``."""
-        d = self.distances_m(points_m)
-        return self.channel.sample_rss_dbm(np.broadcast_to(d, (n_runs,) + d.shape), rng)
-
-
-@dataclass(frozen=True)
-class StaticScenario(_AnchorReadings):
-    """A static localization problem: anchors ``(m, 2)`` (or ``(m, 3)`` with ``tag_height_m``), the channel (the
-    truth and what the estimators know), the floor (``outline_m``; the region of box-LS is its bounding box),
-    evaluation positions ``points_m (P, 2)``, the pitch of the grid methods' grid; for measured data the readings
-    ``measured_rss_dbm (P, m)`` (NaN = not heard) and the k-NN radio map ``(cells, fingerprints)``."""
-
-    points_m: np.ndarray
-    grid_spacing_m: float
-    settings: tuple[ProtocolChoice, ...]
-    tag_height_m: float | None = None
-    measured_rss_dbm: np.ndarray | None = None
-    radio_map: tuple | None = field(default=None, repr=False)
-
-    def grid_m(self, spacing_m: float | None = None) -> np.ndarray:
-        return grid_in_outline(self.outline_m, self.grid_spacing_m if spacing_m is None else spacing_m)
-
-    def rss_dbm(self, n_runs: int, rng: np.random.Generator) -> np.ndarray:
-        """Readings ``(R, P, m)``: the measured ones (``R = 1``), or ``n_runs`` draws of the channel."""
-        if self.measured:
-            return self.measured_rss_dbm[None]
-        return self._sample_rss_dbm(self.points_m, n_runs, rng)
-
-
-@dataclass(frozen=True)
-class TrackingScenario(_AnchorReadings):
-    """A tracking problem on a fixed clock ``dt_s``: true plan positions ``truth_m (T, 2)`` at every tick (NaN where
-    the truth is unknown), the ticks that are scored (``scored (T,)``), the anchors and channel, the floor, and for
-    measured data the readings ``measured_rss_dbm (T, m)`` on the clock (a tick without readings is all NaN)."""
-
-    truth_m: np.ndarray
-    dt_s: float
-    spread_m: float
-    grid_spacing_m: float
-    settings: tuple[ProtocolChoice, ...]
-    tag_height_m: float | None = None
-    measured_rss_dbm: np.ndarray | None = None
-    scored: np.ndarray | None = None
-    fix_cov_m2: np.ndarray | None = None
-
-    @property
-    def scored_steps(self) -> np.ndarray:
-        return np.arange(len(self.truth_m)) if self.scored is None else np.flatnonzero(self.scored)
-
-    def initial_state(self) -> np.ndarray:
-        """True ``[x, y, vx, vy]`` at the first tick (velocity from the first scored displacement)."""
-        steps = self.scored_steps
-        a, b = steps[0], steps[1]
-        return np.r_[self.truth_m[a], (self.truth_m[b] - self.truth_m[a]) / ((b - a) * self.dt_s)]
-
-    def rss_dbm(self, n_runs: int, rng: np.random.Generator) -> np.ndarray:
-        """Readings ``(R, T, m)``: the measured ones repeated ``n_runs`` times, or ``n_runs`` draws of the channel."""
-        if self.measured:
-            return np.broadcast_to(self.measured_rss_dbm, (n_runs,) + self.measured_rss_dbm.shape)
-        return self._sample_rss_dbm(self.truth_m, n_runs, rng)
-
-
-def _fmt(values) -> str:
-    a = np.atleast_1d(np.asarray(values, float))
-    return f"{a[0]:g}" if a.size == 1 or np.all(a == a[0]) else "[" + ", ".join(f"{v:g}" for v in a) + "]"
-
-
-def _channel_settings(model: PathLossModel, source: str) -> tuple[ProtocolChoice, ...]:
-    return (ProtocolChoice("P0 (dBm at 1 m)", _fmt(model.ref_power_dbm), source),
-            ProtocolChoice("path-loss exponent", _fmt(model.path_loss_exp), source),
-            ProtocolChoice("shadowing sigma (dB)", _fmt(model.sigma_db), source))
+           "scenario_rng", "static_cells", "tracking_cells", "settings_rows", "TRACKER_PRIORS"]
 
 
 # ---------------------------------------------------------------------------------------------------- scenarios
@@ -182,7 +57,7 @@ def _george_static() -> StaticScenario:
         "george-corridor", "george", "2.1 x 7.8 m corridor, 4 corner anchors", george.ANCHORS_M, model,
         box_outline((0, 0), (w, h)), george.trajectory_m("centerline"), 0.05,
         (ProtocolChoice("anchors", "4 corners (0,0) (2.1,0) (0,7.8) (2.1,7.8)", "Sec. 5"),
-         *_channel_settings(model, src),
+         *channel_settings(model, src),
          ProtocolChoice("positions", "the 25 marked points on the centre line, y 0.3-7.5 m", "not printed; our default"),
          ProtocolChoice("grid pitch", "0.05 m", "benchmark: fine against the corridor's 2.1 m width")))
 
@@ -193,7 +68,7 @@ def _ozkaya_static() -> StaticScenario:
         "ozkaya2011-room", "ozkaya2011", "5 x 8 m room, 3 corner readers", ozkaya.readers_for("corners3"), model,
         box_outline((0, 0), ozkaya.ROOM_M), ozkaya.cell_centres(ozkaya.ROOM_M, *ozkaya.CELL_PATTERNS[28]), 0.1,
         (ProtocolChoice("readers", "3 corners (layout corners3)", "Sec. 7.2.1 (which three: not printed)"),
-         *_channel_settings(model, "Table 6.1, Reader 2 (the simulation channel, Sec. 7.2.1)"),
+         *channel_settings(model, "Table 6.1, Reader 2 (the simulation channel, Sec. 7.2.1)"),
          ProtocolChoice("positions", "the 28 cell centres (x 1-4 m, y 1-7 m)", "Fig. 7.2"),
          ProtocolChoice("grid pitch", "0.1 m", "benchmark")))
 
@@ -204,7 +79,7 @@ def _dogan_static() -> StaticScenario:
     return StaticScenario(
         "dogan2015-room", "dogan2015", "7.6 x 9.2 m room, 4 corner anchors", dogan.ANCHORS_M, model,
         box_outline((0, 0), dogan.ROOM_M), walk.position_m[walk.rss_steps], 0.1,
-        (ProtocolChoice("anchors", "4 corners", "Sec. 5.4"), *_channel_settings(model, "Table 3.6"),
+        (ProtocolChoice("anchors", "4 corners", "Sec. 5.4"), *channel_settings(model, "Table 3.6"),
          ProtocolChoice("positions", f"the walk's {len(walk.rss_steps)} RSS epochs (0.3 m/s polyline, 2 Hz)",
                  "path not printed (our default); where the thesis's MLE is computed"),
          ProtocolChoice("grid pitch", "0.1 m", "benchmark")))
@@ -233,7 +108,7 @@ def _gudipati_static() -> StaticScenario:
         "gudipati2017-hall", "gudipati2017", "30 x 10 m hall, 6 anchors", gudipati.anchors_m(gudipati.ANCHOR_SETS[6]),
         model, box_outline((0, 0), gudipati.ROOM_M), pos[marks], 0.2,
         (ProtocolChoice("anchors", "12-15 at the corners, 16-17 mid long walls", "Sec. 5.1 (which ID where: ours)"),
-         *_channel_settings(model, "Table 5.2 (S, C per anchor); sigma: 3 dB shadowing and 1 dB per packet "
+         *channel_settings(model, "Table 5.2 (S, C per anchor); sigma: 3 dB shadowing and 1 dB per packet "
                                    "(our defaults) as one i.i.d. term (the bounds' model; the thesis's walk has "
                                    "correlated shadowing)"),
          ProtocolChoice("positions", f"the U-path's report points every {gudipati.REPORT_SPACING_M:g} m ({len(marks)})",
@@ -255,51 +130,10 @@ def _palvai_static() -> StaticScenario:
         box_outline((0, 0), (palvai.AREA_M, palvai.AREA_M)), setup.target[None], 0.25,
         (ProtocolChoice("receivers", f"{palvai.N_LOCATIONS} positions uniform in the area, drawn once (seed "
                               f"{PALVAI_GEOMETRY_SEED}), exactly known", "Sec. 4.4 (N = 25; law ours); sigma_3 = 0"),
-         *_channel_settings(model, "Secs. 2.6, 4.4 (sigma_1, eta); K = -20 dBm at 1 m (not printed; ours)"),
+         *channel_settings(model, "Secs. 2.6, 4.4 (sigma_1, eta); K = -20 dBm at 1 m (not printed; ours)"),
          ProtocolChoice("positions", "the emitter at the area's centre (25, 25)", "not printed (ours)"),
          ProtocolChoice("plane", "2-D (the thesis's equations are 3-D)", "ours (Sec. 5.4 reads its clouds in 2-D)"),
          ProtocolChoice("grid pitch", "0.25 m", "benchmark: 40,000 cells over the area")))
-
-
-def _measured_parts(data, fit: str = "closed_form"):
-    ds = measured.load(data)
-    return ds, measured.channel(measured.calibrate(ds, fit=fit))
-
-
-def _measured_settings(ds, model: PathLossModel, fit: str) -> tuple[ProtocolChoice, ...]:
-    heights = ds.anchors_m[:, 2]
-    return (ProtocolChoice("data", f"{ds.title}; {ds.license}", f"{ds.root.name}/dataset.toml"),
-            ProtocolChoice("anchors", f"{len(heights)}, at {heights.min():g}-{heights.max():g} m height; tag at "
-                                      f"{ds.tag_height_m:g} m (3-D distances)", "the data set's manifest"),
-            ProtocolChoice("channel", f"per-anchor {fit} fit on the calibration recordings "
-                                      f"({', '.join(ds.recordings_with('calibration'))}; never a scored one)",
-                           "measured-calibration"),
-            *_channel_settings(model, "the fit (sigma = residual spread per anchor)"))
-
-
-def measured_static_scenario(data, fit: str = "closed_form") -> StaticScenario | None:
-    """The static scenario of a data set (a :class:`~locbook.data.dataset.Dataset`, a shipped name or a folder):
-    every epoch with a true position of its scored recordings (:func:`locbook.scenarios.measured.scored_recordings`)
-    is a test point with its measured readings; k-NN's radio map is the calibration epochs. None when no recording
-    has a true position per epoch (nothing to score)."""
-    ds, model = _measured_parts(data, fit)
-    names = measured.scored_recordings(ds)
-    if not names:
-        return None
-    tests = [measured.TestEpochs.of(ds, n) for n in names]
-    truth = np.concatenate([t.truth_m for t in tests])
-    rss = np.concatenate([t.rss_dbm for t in tests])
-    cells, fingerprints, filled = measured.radio_map(ds, model)
-    return StaticScenario(
-        f"data-{ds.name}", ds.name, f"measured: {ds.name}, {len(ds.anchor_ids)} anchors", ds.anchors_m, model,
-        np.asarray(ds.outline_m, float), truth, 0.1,
-        (*_measured_settings(ds, model, fit),
-         ProtocolChoice("positions", f"the {len(truth)} epochs with a true position of {', '.join(names)}",
-                        "the data set"),
-         ProtocolChoice("k-NN map", f"the calibration epochs; {100 * filled:.1f} % of readings not heard, filled with "
-                                    "the fitted mean", "measured-localization"),
-         ProtocolChoice("grid pitch", "0.1 m inside the floor outline", "measured-localization")),
-        tag_height_m=ds.tag_height_m, measured_rss_dbm=rss, radio_map=(cells, fingerprints))
 
 
 STATIC_SCENARIOS = {"george-corridor": _george_static, "ozkaya2011-room": _ozkaya_static,
@@ -361,32 +195,6 @@ def _gudipati_tracking() -> TrackingScenario:
                                    "path and timing not printed (ours); GUDIPATI_TRACKING_DT_S")))
 
 
-def measured_tracking_scenario(data, fit: str = "closed_form") -> TrackingScenario | None:
-    """The tracking scenario of a data set: its first track with a true position per epoch, on its epoch clock
-    (a tick without readings is all NaN and unscored); None when no track has per-epoch truth."""
-    ds, model = _measured_parts(data, fit)
-    names = [n for n in ds.recordings_with("track") if ds.recording(n).has_truth]
-    if not names:
-        return None
-    name = names[0]
-    dt = measured.epoch_s(ds, name)
-    ep = ds.epochs(name)
-    reg, ticks = regular_epochs(ep, dt, tolerance_s=0.1 * dt)
-    truth = np.full((reg.rss_dbm.shape[0], 2), np.nan)
-    truth[ticks] = ep.position_m[:, :2]
-    scored = np.isfinite(truth).all(axis=1)
-    return TrackingScenario(
-        f"data-{ds.name}", ds.name, f"measured: {ds.name}, track {name}, {dt:g} s epochs", ds.anchors_m, model,
-        np.asarray(ds.outline_m, float), truth, dt, 0.3, 0.1,
-        (*_measured_settings(ds, model, fit),
-         ProtocolChoice("path", f"the track {name!r} on a {dt:g} s clock ({int(scored.sum())} epochs scored against "
-                                "its truth)", "the data set; measured-tracking"),
-         ProtocolChoice("KF-on-ML R", "covariance of RSS-ML fix errors on the calibration epochs",
-                        "measured.fix_covariance_from_calibration")),
-        tag_height_m=ds.tag_height_m, measured_rss_dbm=reg.rss_dbm, scored=scored,
-        fix_cov_m2=measured.fix_covariance_from_calibration(ds, model))
-
-
 TRACKING_SCENARIOS = {"george-walk": _george_tracking, "ozkaya2011-constant-velocity": _ozkaya_tracking,
                       "dogan2015-walk": _dogan_tracking, "gudipati2017-u-path": _gudipati_tracking}
 
@@ -400,239 +208,6 @@ def tracking_scenario(key: str, **kwargs) -> TrackingScenario:
         raise ValueError(f"unknown tracking scenario {key!r}; declared: {sorted(TRACKING_SCENARIOS)}")
     return TRACKING_SCENARIOS[key](**kwargs)
 
-
-# ------------------------------------------------------------------------------------------------ static methods
-
-def _flat(rss):
-    return rss.reshape(-1, rss.shape[-1])
-
-
-def _lls(sc, rss, opts):
-    return lateration_ls(sc.anchors_m, sc.channel.range_m(_flat(rss)), tag_height_m=sc.tag_height_m).position_m
-
-
-def _wls(sc, rss, opts):
-    ranges = sc.channel.range_m(_flat(rss))
-    w = 1.0 / np.where(np.isnan(ranges[:, 1:]), 1.0, ranges[:, 1:]) ** 4
-    return lateration_wls(sc.anchors_m, ranges, w / np.max(w, axis=-1, keepdims=True),
-                          tag_height_m=sc.tag_height_m).position_m
-
-
-def _box_ls(sc, rss, opts):
-    lower, upper = sc.box_m
-    return lateration_box_ls(sc.anchors_m, sc.channel.range_m(_flat(rss)), lower, upper,
-                             tag_height_m=sc.tag_height_m).position_m
-
-
-def _grid_ml(sc, rss, opts):
-    return grid_ml_position(sc.anchors_m, _flat(rss), sc.channel, sc.grid_m(), tag_height_m=sc.tag_height_m).position_m
-
-
-def _rss_ml(sc, rss, opts):
-    start = opts.get("grid_ml")
-    if start is None:
-        start = _grid_ml(sc, rss, opts)
-    return rss_ml_position(sc.anchors_m, _flat(rss), sc.channel, start, tag_height_m=sc.tag_height_m).position_m
-
-
-def _bayes_model(sc) -> RssModel:
-    m = sc.channel
-    return RssModel(sc.anchors_m, PathLossModel(np.asarray(m.ref_power_dbm, float), np.asarray(m.path_loss_exp, float),
-                                                np.asarray(m.sigma_db, float), m.ref_distance_m, m.wall_attenuation_db,
-                                                float(m.min_distance_m) if m.min_distance_m > 0 else 0.1),
-                    tag_height_m=sc.tag_height_m)
-
-
-#: problems per block of the grid posterior: beliefs of about 32 MiB at a time
-GRID_BLOCK_VALUES = 1 << 22
-
-
-def _grid_mmse(sc, rss, opts):
-    # one step of the grid Bayes filter from a uniform belief (no transition at the first step): the posterior mean
-    flat = _flat(rss)
-    cells, model = sc.grid_m(), _bayes_model(sc)
-    block = max(1, GRID_BLOCK_VALUES // cells.shape[0])
-    return np.concatenate([grid_bayes_filter(flat[i:i + block, None, :], cells, model, 1.0).mean_m[:, 0]
-                           for i in range(0, flat.shape[0], block)])
-
-
-def _knn(sc, rss, opts):
-    if sc.radio_map is not None:
-        cells, fingerprints = sc.radio_map
-    else:
-        cells = sc.grid_m(opts["knn_map_spacing_m"])
-        fingerprints = model_fingerprints(cells, sc.anchors_m, PathLossModel(sc.channel.ref_power_dbm,
-                                                                             sc.channel.path_loss_exp))
-    return knn_position(_flat(rss), fingerprints, cells, opts["knn_k"], chunk=4096)
-
-
-#: name -> (function, what it is, its settings)
-STATIC_METHODS = {
-    "lls": (_lls, "linearized LS on the inverted ranges (reference anchor 0)", "no region"),
-    "wls": (_wls, "weighted linearized LS, weights 1/d^4 of the inverted ranges", "no region"),
-    "box_ls": (_box_ls, "box-constrained LS (exact active set)", "box = the floor's bounding box"),
-    "rss_ml": (_rss_ml, "RSS maximum likelihood (Gauss-Newton) from the grid-ML fix", "unconstrained after the start"),
-    "grid_ml": (_grid_ml, "grid maximum likelihood", "grid inside the floor at the scenario's pitch"),
-    "grid_mmse": (_grid_mmse, "grid posterior mean, uniform prior over the floor", "grid inside the floor"),
-    "knn": (_knn, "weighted k-NN fingerprinting (inverse-square weights)",
-            "map: the channel's mean on a lattice (synthetic), the calibration set (measured)"),
-}
-
-
-def static_fixes(sc: StaticScenario, rss_dbm, *, knn_k: int = 4, knn_map_spacing_m: float = 0.5,
-                 methods=None) -> dict[str, np.ndarray]:
-    """Every declared static method on readings ``(R, P, m)`` -> fixes ``(R, P, 2)`` (NaN where it has none)."""
-    rss = np.asarray(rss_dbm, float)
-    opts = {"knn_k": knn_k, "knn_map_spacing_m": knn_map_spacing_m}
-    out = {}
-    for name in (STATIC_METHODS if methods is None else methods):
-        fn = STATIC_METHODS[name][0]
-        out[name] = np.asarray(fn(sc, rss, opts), float).reshape(rss.shape[:-1] + (2,))
-        if name == "grid_ml":
-            opts["grid_ml"] = out[name].reshape(-1, 2)
-    return out
-
-
-def _information(sc, positions_m, heard=None):
-    anchors = sc.anchors_m
-    height = 0.0 if sc.tag_height_m is None else anchors[:, 2] - sc.tag_height_m
-    return rss_position_information(positions_m, anchors[:, :2], sc.channel.path_loss_exp, sc.channel.sigma_db,
-                                    min_distance_m=float(sc.channel.min_distance_m), height_offset_m=height,
-                                    heard=heard)
-
-
-def _trace_inverse_2d(info):
-    det = info[..., 0, 0] * info[..., 1, 1] - info[..., 0, 1] ** 2
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(det > 0, (info[..., 0, 0] + info[..., 1, 1]) / np.where(det > 0, det, 1.0), np.inf)
-
-
-def static_bound_m(sc: StaticScenario) -> np.ndarray:
-    """CRLB ``sqrt(tr J^-1)`` at each evaluation position ``(P,)``; for measured data from the anchors heard at that
-    epoch (inf where fewer than two are heard: the position is not identifiable from that epoch)."""
-    heard = None if not sc.measured else ~np.isnan(sc.measured_rss_dbm)
-    return np.sqrt(_trace_inverse_2d(_information(sc, sc.points_m, heard)))
-
-
-# ------------------------------------------------------------------------------------------------------ trackers
-
-@dataclass(frozen=True)
-class TrackerSettings:
-    """The trackers' shared settings: ``q`` the constant-velocity model's white-acceleration intensity (m^2/s^3),
-    the prior ``P_0 = diag(sd_p^2, sd_p^2, sd_v^2, sd_v^2)``, particles, the UKF's alpha, the ML fixes' start grid."""
-
-    q: float = 0.05
-    initial_position_sd_m: float = 1.0
-    initial_velocity_sd_m_s: float = 0.5
-    n_particles: int = 1000
-    ukf_alpha: float = 0.5
-    ml_start_spacing_m: float = 0.5
-
-    @property
-    def P0(self) -> np.ndarray:
-        return np.diag([self.initial_position_sd_m**2] * 2 + [self.initial_velocity_sd_m_s**2] * 2)
-
-
-def initial_states(sc: TrackingScenario, ts: TrackerSettings, n_runs: int, rng: np.random.Generator) -> np.ndarray:
-    """``x_0`` per run ``(R, 4)``: the true initial state plus a draw of ``N(0, P_0)`` (the prior of the bound)."""
-    return sc.initial_state() + rng.standard_normal((n_runs, 4)) @ np.linalg.cholesky(ts.P0).T
-
-
-def _ml_fixes(sc, rss, ts):
-    flat = _flat(rss)
-    heard = (~np.isnan(flat)).sum(axis=-1) >= 3
-    out = np.full((flat.shape[0], 2), np.nan)
-    start = grid_ml_position(sc.anchors_m, flat[heard], sc.channel, grid_in_outline(sc.outline_m, ts.ml_start_spacing_m),
-                             tag_height_m=sc.tag_height_m).position_m
-    out[heard] = rss_ml_position(sc.anchors_m, flat[heard], sc.channel, start, tag_height_m=sc.tag_height_m).position_m
-    return out.reshape(rss.shape[:-1] + (2,))
-
-
-def _fix_cov(sc, ts, rng):
-    """``R`` of the KF on ML fixes: given (measured data: from the calibration set), else the covariance of RSS-ML fix
-    errors along the path over 200 independent draws (a calibration stream, never the scored runs)."""
-    if sc.fix_cov_m2 is not None:
-        return np.asarray(sc.fix_cov_m2, float)
-    rss = sc.rss_dbm(200, rng)
-    fixes = _ml_fixes(sc, rss, ts)
-    ok = np.isfinite(fixes).all(axis=-1)
-    return fix_error_covariance(fixes[ok], np.broadcast_to(sc.truth_m, fixes.shape)[ok])
-
-
-def _gaussian_belief(cells, x0, P0_pos):
-    inv = np.linalg.inv(P0_pos)
-    d = cells[None] - x0[:, None, :2]
-    logp = -0.5 * np.einsum("rci,ij,rcj->rc", d, inv, d)
-    p = np.exp(logp - logp.max(axis=-1, keepdims=True))
-    return p / p.sum(axis=-1, keepdims=True)
-
-
-TRACKERS = {
-    "kf_on_ml": "constant-velocity KF on RSS-ML fixes (R: fix-error covariance from a calibration stream)",
-    "ekf": "constant-velocity EKF on the raw RSS, parallel (stacked) update",
-    "ekf_serial": "constant-velocity EKF on the raw RSS, serial scalar updates (descending RSS)",
-    "ukf": "constant-velocity UKF on the raw RSS",
-    "particle": "SIR particle filter, random walk (spread per step) reflected into the floor's box, resampled at "
-                "N_eff < N/2",
-    "grid_bayes": "grid Bayes filter, the same random walk on a grid inside the floor (separable transition)",
-}
-
-
-def run_trackers(sc: TrackingScenario, rss_dbm, x0, ts: TrackerSettings, rng: np.random.Generator, *,
-                 trackers=None, with_divergence: bool = False):
-    """Every declared tracker on readings ``(R, T, m)`` from initial states ``(R, 4)`` -> positions ``(R, T, 2)``.
-    ``with_divergence=True`` returns ``(positions, {tracker: flags})``, the NIS guard per run of each Kalman-family
-    tracker (:class:`locbook.tracking.divergence.DivergenceFlags`, steps of the scenario's clock)."""
-    rss = np.asarray(rss_dbm, float)
-    rng_cov, rng_pf = rng.spawn(2)
-    chosen = tuple(TRACKERS if trackers is None else trackers)
-    motion = constant_velocity(sc.dt_s, ts.q, dim=2)
-    P0 = np.broadcast_to(ts.P0, (len(x0), 4, 4))
-    idx = np.array([0, 1])
-    out, flags = {}, {}
-    if "kf_on_ml" in chosen:
-        H = np.hstack([np.eye(2), np.zeros((2, 2))])
-        fixes = _ml_fixes(sc, rss, ts)
-        res = extended_kalman_filter(motion.F, motion.Q, x0, P0, [LinearMeasurement(fixes, H, _fix_cov(sc, ts, rng_cov))])
-        out["kf_on_ml"], flags["kf_on_ml"] = res.x[..., :2], DivergenceFlags.of(res)
-    for name, mode in (("ekf", "parallel"), ("ekf_serial", "serial")):
-        if name in chosen:
-            stream = RssMeasurement(rss, sc.anchors_m, sc.channel, idx, mode=mode, tag_height_m=sc.tag_height_m)
-            res = extended_kalman_filter(motion.F, motion.Q, x0, P0, [stream])
-            out[name], flags[name] = res.x[..., :2], DivergenceFlags.of(res)
-    if "ukf" in chosen:
-        stream = RssMeasurement(rss, sc.anchors_m, sc.channel, idx, tag_height_m=sc.tag_height_m)
-        res = unscented_kalman_filter(motion.F, motion.Q, x0, P0, [stream], alpha=ts.ukf_alpha)
-        out["ukf"], flags["ukf"] = res.x[..., :2], DivergenceFlags.of(res)
-    model = _bayes_model(sc)
-    if "particle" in chosen:
-        out["particle"] = particle_filter(rss, model, rng_pf, n_particles=ts.n_particles, region_m=sc.box_m,
-                                          spread_m=sc.spread_m, initial_position_m=x0[:, :2],
-                                          initial_sd_m=ts.initial_position_sd_m, resample_threshold=0.5).mean_m
-    if "grid_bayes" in chosen:
-        cells = grid_in_outline(sc.outline_m, sc.grid_spacing_m)
-        out["grid_bayes"] = grid_bayes_filter(rss, cells, model, sc.spread_m,
-                                              initial_belief=_gaussian_belief(cells, x0, ts.P0[:2, :2])).mean_m
-    out = {k: out[k] for k in chosen}
-    return (out, flags) if with_divergence else out
-
-
-def tracking_bound_m(sc: TrackingScenario, ts: TrackerSettings) -> np.ndarray:
-    """Position PCRLB ``(T,)`` at every tick: the Tichavsky recursion of the constant-velocity model (``ts.q``) from
-    ``J_0 = P_0^-1``, with the RSS information at the true positions (only the anchors heard, for measured data; a
-    tick with no truth or no reading adds none). Tick ``k`` is ``J_{k+1}`` (the filters predict before each step)."""
-    motion = constant_velocity(sc.dt_s, ts.q, dim=2)
-    truth = np.where(np.isfinite(sc.truth_m), sc.truth_m, 0.0)
-    states = np.concatenate([truth, np.zeros_like(truth)], axis=-1)
-    heard = np.isfinite(sc.truth_m).all(axis=-1)[:, None]
-    if sc.measured:
-        heard = heard & ~np.isnan(sc.measured_rss_dbm)
-    anchors = sc.anchors_m
-    height = 0.0 if sc.tag_height_m is None else anchors[:, 2] - sc.tag_height_m
-    jz = rss_state_information(states, anchors[:, :2], sc.channel.path_loss_exp, sc.channel.sigma_db, [0, 1],
-                               min_distance_m=float(sc.channel.min_distance_m), height_offset_m=height, heard=heard)
-    info = posterior_crlb(np.linalg.inv(ts.P0), motion.F, motion.Q, jz, form="riccati")
-    return position_bound_m(info[1:], [0, 1])
 
 
 # ------------------------------------------------------------------------------------------------------ scoring
@@ -674,9 +249,19 @@ def scenario_rng(seed: int, kind: str, key: str) -> np.random.Generator:
     return np.random.default_rng(np.random.SeedSequence([seed, seed_from_values(kind, key)]))
 
 
+def _ratio_note(ratio: float, prior: str) -> str:
+    """Why a ratio below 1 can be (the method's prior the bound does not have); "" otherwise."""
+    if not (np.isfinite(ratio) and ratio < 1):
+        return ""
+    return f"below 1: {prior}" if prior else ("below 1 without a prior: the bound holds for unbiased estimators; a "
+                                              "biased one (pulled toward the anchors' centre) can beat it")
+
+
 def _row(kind, sc, method, cell, settings, runs, points, bound_name):
+    prior = STATIC_METHODS[method].prior if kind == "static" else TRACKER_PRIORS.get(method, "")
     return {"kind": kind, "scenario": sc.key, "document": sc.document, "data": "measured" if sc.measured else "synthetic",
-            "method": method, "runs": runs, "points": points, **cell, "bound": bound_name, "settings": settings}
+            "method": method, "runs": runs, "points": points, **cell, "ratio_note": _ratio_note(cell["ratio"], prior),
+            "bound": bound_name, "settings": settings}
 
 
 def static_cells(sc: StaticScenario, n_runs: int, rng: np.random.Generator, *, knn_k: int, knn_map_spacing_m: float,
@@ -688,7 +273,7 @@ def static_cells(sc: StaticScenario, n_runs: int, rng: np.random.Generator, *, k
     bound = static_bound_m(sc)
     knobs = {"knn": f"k = {knn_k}" + ("" if sc.radio_map is not None else f", map pitch {knn_map_spacing_m:g} m"),
              "grid_ml": f"pitch {sc.grid_spacing_m:g} m", "grid_mmse": f"pitch {sc.grid_spacing_m:g} m",
-             "rss_ml": f"start: grid ML at {sc.grid_spacing_m:g} m"}
+             "rss_ml": f"start: grid ML at {sc.grid_spacing_m:g} m", "rss_ml_free": f"start: grid ML at {sc.grid_spacing_m:g} m"}
     rows = []
     for name, f in fixes.items():
         cell = score(position_error_m(f, sc.points_m), bound, measured=sc.measured, rng=rng_boot,
@@ -712,7 +297,7 @@ def tracking_cells(sc: TrackingScenario, ts: TrackerSettings, n_runs: int, rng: 
     bound = tracking_bound_m(sc, ts)
     steps = sc.scored_steps
     common = f"q = {ts.q:g} m^2/s^3, dt = {sc.dt_s:g} s, P0 sd {ts.initial_position_sd_m:g} m / {ts.initial_velocity_sd_m_s:g} m/s"
-    knobs = {"kf_on_ml": common + f"; ML start grid {ts.ml_start_spacing_m:g} m",
+    knobs = {"kf_on_ml": common + f"; fixes: rss_ml (grid-ML start at {sc.grid_spacing_m:g} m)",
              "ekf": common, "ekf_serial": common, "ukf": common + f"; alpha = {ts.ukf_alpha:g}, beta = 2, kappa = 0",
              "particle": f"N = {ts.n_particles}, random walk {sc.spread_m:g} m/step, start N(x0, P0)",
              "grid_bayes": f"pitch {sc.grid_spacing_m:g} m, random walk {sc.spread_m:g} m/step, start N(x0, P0)"}

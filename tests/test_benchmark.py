@@ -95,7 +95,8 @@ def test_grid_mmse_blocks_equal_one_solve(monkeypatch):
     sc = bm.static_scenario("ozkaya2011-room")
     rss = sc.rss_dbm(5, np.random.default_rng(3))
     whole = bm.static_fixes(sc, rss, methods=["grid_mmse"])["grid_mmse"]
-    monkeypatch.setattr(bm, "GRID_BLOCK_VALUES", sc.grid_m().shape[0] * 7)     # blocks of 7 problems
+    from locbook import battery
+    monkeypatch.setattr(battery, "GRID_BLOCK_VALUES", sc.grid_m().shape[0] * 7)     # blocks of 7 problems
     blocks = bm.static_fixes(sc, rss, methods=["grid_mmse"])["grid_mmse"]
     np.testing.assert_allclose(blocks, whole, rtol=0, atol=1e-12)
 

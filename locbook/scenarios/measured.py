@@ -1,54 +1,65 @@
-"""Any measured data set (:mod:`locbook.data.dataset`) run through locbook's methods: the protocol of the
-``measured-*`` experiments and of the measured columns of the cross-document benchmark.
+"""Any measured data set (:mod:`locbook.data.dataset`) run through locbook's battery (:mod:`locbook.battery`): the one
+protocol of the ``measured-*`` experiments and of a data set's columns in the cross-document benchmark. Every page
+calls the functions below, so one method name gives the same numbers on every page of one run.
 
 Protocol (every choice a named constant or argument, with its reason; nothing here depends on which data set):
 
 - the channel is fitted on the data set's calibration recordings only, and every method is scored on its static and
-  track recordings, which the fit never sees; distances are 3-D, the tag at the data set's known height
-  (``tag_height_m`` of the manifest);
+  track recordings, which the fit never sees; distances are 3-D with the tag at the data set's known height
+  (``tag_height_m``), or in the plane for a 2-D data set (anchors without ``z``);
 - missing readings (not heard) follow the library's one rule (NaN), in the fit, the estimators and the filters; the
   radio map of k-NN needs a value for each (point, anchor): a reading an anchor did not hear at a calibration epoch is
   filled with the fitted channel's mean there (:func:`radio_map`), stated;
-- positions stay inside the floor outline where the method allows it: grid ML, grid Bayes and k-NN work on points
-  inside it, box-LS and RSS ML on its bounding box (RSS ML started from the grid-ML fix; ``rss_ml_free`` is the same
-  without the box, to show what the bound does); the fraction of fixes outside the outline is reported for every
-  method;
-- trackers run on the recording's epoch clock (the manifest's ``window_s``); a tick without an epoch is all NaN and
-  the filters predict through it;
-- the bound is the CRLB of the fitted per-anchor log-normal channel at each true position (3-D distances, the tag's
-  height known: the 2-D bound of the plan position).
+- settings come from the data by stated rules, the same for every method, and the reports name each and how it was
+  obtained (:class:`Protocol`): the grid pitch (:func:`grid_pitch_m`), k-NN's k by leave-one-point-out
+  cross-validation on the calibration map (:func:`choose_knn_k`), every tracker's motion from the track's own
+  readings (:func:`fit_motion`: the constant-velocity intensity ``q`` by maximum likelihood of the EKF's
+  innovations, the random walk of the particle and grid filters by maximum likelihood of its innovations on the
+  fixes ``kf_on_ml`` filters); a value
+  given by the user (``-p``) replaces the rule and is named as given;
+- every tracker starts from the same state: the first ``rss_ml`` fix of the track, at rest, with
+  :data:`START_POSITION_SD_M` and :data:`START_VELOCITY_SD_M_S`;
+- bounds are per epoch: the CRLB of the fitted channel at the truth from the anchors each epoch heard (static), the
+  posterior CRLB of the trackers' constant-velocity model at the fitted ``q`` from that start (tracking); an epoch
+  whose bound is undefined or near-singular is left out of the bound's summary and counted
+  (:mod:`locbook.bounds.summary`), and no ratio is drawn from a degenerate bound;
+- intervals: the circular block bootstrap over each recording's epochs in time order, blocks of ``block_s``
+  seconds (neighbouring epochs share their shadowing); too few blocks and the interval is reported as not
+  estimable (:func:`locbook.accuracy_metrics`).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..bounds.crlb import rss_crlb_m
+from ..battery import (STATIC_METHODS as BATTERY_STATIC, TRACKER_PRIORS, TRACKERS as BATTERY_TRACKERS,
+                       ProtocolChoice, StaticScenario, TrackerSettings, TrackingScenario, channel_settings,
+                       run_trackers, static_fixes as battery_static_fixes, tracking_bound_m, initial_states,
+                       KF_FIX_MIN_ANCHORS, _ml_fixes)
+from ..bounds.crlb import rss_crlb_checked_m, rss_crlb_m
+from ..bounds.summary import error_bound_ratio, summarize_bound
 from ..data.dataset import Dataset, load_dataset
 from ..data.measured import regular_epochs
 from ..errors import ConvergenceError, ParameterError
 from ..geometry import grid_in_outline, inside_outline, outline_box
+from ..metrics import accuracy_metrics
 from ..models.channel import PathLossModel
 from ..models.motion import constant_velocity
 from ..models.rss import RssModel
-from ..montecarlo import moving_block_indices
+from ..montecarlo import moving_block_indices, seed_from_values
 from ..static.calibration import PathLossFit, calibrate_path_loss, fix_error_covariance
 from ..static.fingerprint import knn_position
-from ..static.localization import (grid_ml_position, lateration_box_ls, lateration_ls, lateration_wls,
-                                   rss_ml_position)
-from ..tracking.bayes import grid_bayes_filter
-from ..tracking.divergence import DivergenceFlags
-from ..tracking.kalman import extended_kalman_filter
-from ..tracking.particle import particle_filter
-from ..tracking.streams import LinearMeasurement, RssMeasurement
-from ..tracking.unscented import unscented_kalman_filter
 
 __all__ = ["PATH_LOSS_EXP_BOUNDS", "REF_POWER_BOUNDS_DBM", "HUBER_DELTA_DB", "NEAR_FIELD_M", "STATIC_METHODS",
-           "TRACKERS", "load", "calibration_set", "calibrate", "channel", "ranging_errors", "radio_map",
-           "scored_recordings", "TestEpochs", "static_fixes", "crlb_m", "epoch_s", "tracks", "noise_fit",
+           "TRACKERS", "GRID_SPACING_M", "MAX_GRID_CELLS", "KNN_CANDIDATES", "KNN_CV_CELL_M", "Q_START",
+           "START_POSITION_SD_M", "START_VELOCITY_SD_M_S", "SPREAD_START_M", "load", "calibration_set", "calibrate", "channel",
+           "ranging_errors", "radio_map", "scored_recordings", "TestEpochs", "crlb_m", "epoch_s", "plan_distances_m",
+           "grid_pitch_m", "choose_knn_k", "fit_motion", "Protocol", "protocol", "static_scenario",
+           "tracking_scenario", "static_results", "tracking_results", "RESULT_COLUMNS", "result_row",
            "bayes_measurement_model", "fix_covariance_from_calibration", "outside_fraction",
-           "calibration_block_bootstrap", "record_dataset"]
+           "calibration_block_bootstrap", "record_dataset", "geometry_text", "measured_static_scenario",
+           "measured_tracking_scenario", "benchmark_rows", "keyed_stream", "checked_crlb_m"]
 
 #: bounded fit: exponents and 1-m powers a radio link can physically have (free space n = 2; indoor 1.5-6,
 #: Rappaport, Wireless Communications, Table 4.2); wide enough never to bind on data that follow the model
@@ -58,8 +69,26 @@ REF_POWER_BOUNDS_DBM = (-90.0, -20.0)
 HUBER_DELTA_DB = 6.0
 #: near-field clamp of the fitted channel (m): below any anchor-to-tag distance of a room-scale deployment
 NEAR_FIELD_M = 0.1
-STATIC_METHODS = ("lls", "wls", "box_ls", "rss_ml", "rss_ml_free", "grid_ml", "knn", "grid_bayes")
-TRACKERS = ("kf_on_ml", "ekf", "ukf", "particle", "grid_bayes")
+#: the battery's methods run on a data set (every one of :mod:`locbook.battery`)
+STATIC_METHODS = tuple(BATTERY_STATIC)
+TRACKERS = tuple(BATTERY_TRACKERS)
+#: grid pitch of grid ML, grid MMSE and grid Bayes (m): a tenth of a metre, far below any method's error indoors...
+GRID_SPACING_M = 0.1
+#: ...unless the floor needs more cells than this at that pitch; then the pitch that gives this many (memory and
+#: time grow with the cells; 250,000 cells is a 50 m x 50 m floor at 0.1 m)
+MAX_GRID_CELLS = 250_000
+#: k-NN's candidate k, chosen by leave-one-point-out cross-validation on the calibration map (:func:`choose_knn_k`)
+KNN_CANDIDATES = tuple(range(1, 21))
+#: without a point column, the calibration epochs are grouped for the cross-validation by the square of this side
+#: (m) they lie in: neighbouring epochs of a walked calibration share their place and would make k = 1 look perfect
+KNN_CV_CELL_M = 1.0
+#: the constant-velocity intensity (m^2/s^3) the maximum-likelihood fit of :func:`fit_motion` starts from (a
+#: walking-pace prior; the fit moves it by a factor within 1e-4..1e4)
+Q_START = 0.05
+#: every tracker's start: the first rss_ml fix with this standard deviation (m; a fix's error on the shipped sets is
+#: 1-3 m) and at rest with this velocity standard deviation (m/s; walkers and robots move at up to ~1.5 m/s)
+START_POSITION_SD_M = 2.0
+START_VELOCITY_SD_M_S = 1.0
 
 
 def load(data) -> Dataset:
@@ -67,15 +96,49 @@ def load(data) -> Dataset:
     return data if isinstance(data, Dataset) else load_dataset(data)
 
 
+def _tag_height(data: Dataset):
+    """The tag's known height (m), None for a 2-D data set (anchors without z: the problem is in the plane)."""
+    return None if data.anchors_m.shape[1] == 2 else data.tag_height_m
+
+
+def plan_distances_m(data: Dataset, positions_m) -> np.ndarray:
+    """Anchor distances ``(..., m)`` of plan positions ``(..., 2)``: 3-D with the tag at the data set's known height,
+    in the plane for a 2-D data set."""
+    p = np.asarray(positions_m, float)[..., :2]
+    anchors = data.anchors_m
+    if anchors.shape[1] == 3:
+        p = np.concatenate([p, np.full(p.shape[:-1] + (1,), data.tag_height_m)], axis=-1)
+    return np.linalg.norm(p[..., None, :] - anchors, axis=-1)
+
+
+def geometry_text(data: Dataset) -> str:
+    """One sentence on the problem's geometry for every report: 2-D, or 3-D distances with the tag's height."""
+    text = getattr(data, "geometry_text", None)
+    if isinstance(text, str) and text:
+        return text
+    if data.anchors_m.shape[1] == 2:
+        return "2-D: anchors and tag in one plane (the anchors have no z); distances in the plane"
+    z = data.anchors_m[:, 2]
+    return (f"3-D distances: anchors at {z.min():g}-{z.max():g} m height, the tag at its known height "
+            f"{data.tag_height_m:g} m; positions are estimated in the plan")
+
+
 def calibration_set(data: Dataset):
-    """``(positions (L, 2), 3-D distances (L, m), RSSI (L, m) with NaN = not heard)`` of the calibration epochs
-    (every calibration recording, in manifest order); epochs without a true position are left out."""
+    """``(positions (L, 2), distances (L, m), RSSI (L, m) with NaN = not heard)`` of the calibration epochs (every
+    calibration recording, in manifest order); epochs without a true position are left out. Distances are 3-D from
+    each epoch's true position (its true height where recorded, else the tag's known height), in the plane for a
+    2-D data set."""
     ep = data.epochs_of("calibration")
     known = np.isfinite(ep.position_m[:, :2]).all(axis=1)
     if not known.any():
         raise ParameterError(f"data set {data.name!r}: no calibration epoch has a true position (x_m, y_m)")
     pos = ep.position_m[known]
-    distance = np.linalg.norm(pos[:, None, :] - data.anchors_m, axis=-1)
+    if data.anchors_m.shape[1] == 2:
+        distance = np.linalg.norm(pos[:, None, :2] - data.anchors_m, axis=-1)
+    else:
+        pos = pos.copy()
+        pos[:, 2] = np.where(np.isfinite(pos[:, 2]), pos[:, 2], data.tag_height_m)
+        distance = np.linalg.norm(pos[:, None, :] - data.anchors_m, axis=-1)
     return pos[:, :2], distance, ep.rss_dbm[known]
 
 
@@ -159,31 +222,6 @@ class TestEpochs:
         return cls(ep.rss_dbm[known], ep.position_m[known, :2], ep.time_s[known], point)
 
 
-def static_fixes(data: Dataset, model: PathLossModel, rss_dbm, *, grid_spacing_m: float = 0.1, knn_k: int = 5,
-                 chunk: int = 4096) -> dict[str, np.ndarray]:
-    """Every static estimator on the readings ``(T, m)`` (one fix per epoch, NaN where a method has none):
-    linearized LS, weighted LS (weights ``1 / d_i^4`` of the inverted ranges: the squared-range equations'
-    variance grows as ``d^4`` under log-normal shadowing), box-LS on the outline's bounding box, RSS ML started
-    at the grid-ML fix on the outline's bounding box (``rss_ml``) and on the whole plane (``rss_ml_free``), grid ML
-    on a grid inside the outline, and k-NN on :func:`radio_map`."""
-    anchors, height = data.anchors_m, data.tag_height_m
-    ranges = model.range_m(rss_dbm)
-    lower, upper = outline_box(data.outline_m)
-    grid = grid_in_outline(data.outline_m, grid_spacing_m)
-    out = {"lls": lateration_ls(anchors, ranges, tag_height_m=height).position_m}
-    w = 1.0 / np.where(np.isnan(ranges[:, 1:]), 1.0, ranges[:, 1:]) ** 4
-    out["wls"] = lateration_wls(anchors, ranges, w / np.max(w, axis=-1, keepdims=True), tag_height_m=height).position_m
-    out["box_ls"] = lateration_box_ls(anchors, ranges, lower, upper, tag_height_m=height).position_m
-    grid_fix = grid_ml_position(anchors, rss_dbm, model, grid, chunk=chunk, tag_height_m=height).position_m
-    out["grid_ml"] = grid_fix
-    out["rss_ml"] = rss_ml_position(anchors, rss_dbm, model, grid_fix, tag_height_m=height,
-                                    region_m=(lower, upper)).position_m
-    out["rss_ml_free"] = rss_ml_position(anchors, rss_dbm, model, grid_fix, tag_height_m=height).position_m
-    cells, fingerprints, _ = radio_map(data, model)
-    out["knn"] = knn_position(rss_dbm, fingerprints, cells, knn_k)
-    return out
-
-
 def crlb_m(data: Dataset, model: PathLossModel, positions_m, rss_dbm=None):
     """``sqrt(trace(J^-1))`` of the plan position for the fitted per-anchor channel at plan positions ``(..., 2)``,
     the tag at the data set's known height (3-D distances; the 2-D bound of :func:`locbook.rss_crlb_m`). With the
@@ -191,122 +229,30 @@ def crlb_m(data: Dataset, model: PathLossModel, positions_m, rss_dbm=None):
     not heard tells nothing), and an epoch with too few of them for a fix has NaN (no bound)."""
     heard = None if rss_dbm is None else ~np.isnan(np.asarray(rss_dbm, float))
     bound = rss_crlb_m(positions_m, data.anchors_m, model.path_loss_exp, model.sigma_db,
-                       tag_height_m=data.tag_height_m, heard=heard)
+                       tag_height_m=_tag_height(data), heard=heard)
     return bound if heard is None else np.where(np.isfinite(bound), bound, np.nan)
 
 
+def checked_crlb_m(data: Dataset, model: PathLossModel, positions_m, rss_dbm):
+    """``(bound (E,), reason (E,))``: :func:`crlb_m` from the anchors each epoch heard, NaN with a reason where the
+    bound is undefined or near-singular (:func:`locbook.bounds.crlb.rss_crlb_checked_m`)."""
+    heard = ~np.isnan(np.asarray(rss_dbm, float))
+    return rss_crlb_checked_m(positions_m, data.anchors_m, model.path_loss_exp, model.sigma_db,
+                              tag_height_m=_tag_height(data), heard=heard)
+
+
 def epoch_s(data: Dataset, recording: str) -> float:
-    """The epoch clock of a recording (its window, s): the filters' time step."""
+    """The epoch clock of a recording (s), the filters' time step: its window, or for native scans (``window_s =
+    0``: each row time is an epoch) the median spacing of its epochs."""
     window = data.recording(recording).epoch_rule.window_s
-    if not window:
-        raise ParameterError(f"recording {recording!r} of {data.name!r} has no epoch window (window_s = 0: its rows "
-                             "are epochs at their own times); a tracker needs a clock: give the recording a window_s")
-    return float(window)
-
-
-def _ml_fixes(data: Dataset, model: PathLossModel, rss, grid):
-    """RSS-ML fixes ``(E, 2)`` on the outline's bounding box, started at the best point of ``grid`` (NaN where an epoch
-    heard no anchor)."""
-    lower, upper = outline_box(data.outline_m)
-    heard = ~np.isnan(rss).all(axis=-1)
-    ml = np.full((rss.shape[0], 2), np.nan)
-    grid_fix = grid_ml_position(data.anchors_m, rss[heard], model, grid, tag_height_m=data.tag_height_m).position_m
-    ml[heard] = rss_ml_position(data.anchors_m, rss[heard], model, grid_fix, tag_height_m=data.tag_height_m,
-                                region_m=(lower, upper)).position_m
-    return ml
-
-
-def _kalman_start(data: Dataset, recording: str, ml):
-    """The Kalman filters' start (:func:`tracks`): the first RSS-ML fix with a 2 m standard deviation, at rest."""
-    fixed = np.flatnonzero(np.isfinite(ml).all(axis=1))
-    if fixed.size == 0:
-        raise ParameterError(f"recording {recording!r} of {data.name!r}: no epoch gives an RSS-ML fix to start from")
-    return np.r_[ml[fixed[0]], 0.0, 0.0], np.diag([4.0, 4.0, 1.0, 1.0])
-
-
-def tracks(data: Dataset, model: PathLossModel, recording: str, rng: np.random.Generator, *, q: float,
-           fix_cov_m2, spread_m: float, n_particles: int, particle_runs: int, grid_spacing_m: float = 0.1,
-           ukf_alpha: float = 0.5, with_divergence: bool = False):
-    """Every tracker on one recording put on its epoch clock (:func:`epoch_s`; a tick without an epoch is all NaN:
-    the filters predict through it). Returns ``(regular epochs, ticks of the recording's epochs, {tracker: plan
-    positions at every tick (T, 2)})``; the particle filter's entry is ``(particle_runs, T, 2)`` (independent
-    streams of ``rng``: the spread over them is the filter's own randomness).
-
-    - ``kf_on_ml``: constant-velocity KF (``q``, m^2/s^3 white-acceleration PSD per axis, discrete form) on the
-      RSS-ML fixes (on the outline's bounding box) with ``R = fix_cov_m2`` (calibrated on the calibration epochs,
-      not on this recording);
-    - ``ekf`` (parallel update) and ``ukf`` (``ukf_alpha``): the same motion model on the raw RSSI, per-anchor
-      channel, 3-D distances;
-    - ``particle``: SIR, ``L_t = L_t-1 + N(0, spread_m^2 I)`` reflected into the outline's box, resampled when
-      ``N_eff < N / 2``;
-    - ``grid_bayes``: the same random walk on a grid inside the outline (separable transition).
-    The starting state of the Kalman filters is the first RSS-ML fix with a 2 m standard deviation, at rest.
-
-    ``with_divergence=True`` appends ``{tracker: flags}`` for ``kf_on_ml``, ``ekf`` and ``ukf``: the NIS guard of the
-    one run on the recording (:class:`locbook.tracking.divergence.DivergenceFlags`, steps of the regular clock)."""
-    dt = epoch_s(data, recording)
-    reg, ticks = regular_epochs(data.epochs(recording), dt, tolerance_s=0.1 * dt)
-    rss = reg.rss_dbm
-    anchors, height = data.anchors_m, data.tag_height_m
-    lower, upper = outline_box(data.outline_m)
-    grid = grid_in_outline(data.outline_m, grid_spacing_m)
-    ml = _ml_fixes(data, model, rss, grid)
-    motion = constant_velocity(dt, q, dim=2)
-    x0, P0 = _kalman_start(data, recording, ml)
-    H = np.hstack([np.eye(2), np.zeros((2, 2))])
-    rss_stream = RssMeasurement(rss, anchors, model, np.array([0, 1]), tag_height_m=height)
-    kalman = {"kf_on_ml": extended_kalman_filter(motion.F, motion.Q, x0, P0,
-                                                 [LinearMeasurement(ml, H, np.asarray(fix_cov_m2, float))]),
-              "ekf": extended_kalman_filter(motion.F, motion.Q, x0, P0, [rss_stream]),
-              "ukf": unscented_kalman_filter(motion.F, motion.Q, x0, P0, [rss_stream], alpha=ukf_alpha)}
-    out = {name: res.x[:, :2] for name, res in kalman.items()}
-    bayes_model = bayes_measurement_model(data, model)
-    runs = np.broadcast_to(rss, (particle_runs,) + rss.shape)
-    out["particle"] = particle_filter(runs, bayes_model, rng, n_particles=n_particles, region_m=(lower, upper),
-                                      spread_m=spread_m, resample_threshold=0.5).mean_m
-    out["grid_bayes"] = grid_bayes_filter(rss[None], grid, bayes_model, spread_m).mean_m[0]
-    out["rss_ml"] = ml
-    if with_divergence:
-        return reg, ticks, out, {name: DivergenceFlags.of(res) for name, res in kalman.items()}
-    return reg, ticks, out
-
-
-def noise_fit(data: Dataset, model: PathLossModel, recording: str, *, q: float, grid_spacing_m: float = 0.1) -> dict:
-    """Maximum-likelihood noise levels of the EKF of :func:`tracks` on one recording, beside the ones it uses.
-
-    The EKF uses a walking-pace prior ``q`` (not tuned) and the channel's sigma_db fitted on the calibration
-    recordings. Here the innovations of this recording's own readings choose a multiplier of each
-    (:func:`locbook.fit_noise_ml`: Q -> e^a Q, every anchor's sigma_db^2 -> e^b sigma_db^2, the calibrated ratios
-    between anchors kept); no truth is used. The EKF is then rerun at the estimate. Returns a dict: ``q`` and
-    ``q_ml``, ``sigma_db`` (the calibration's, mean over anchors) and ``sigma_ml_db``, the log-likelihoods, the
-    multipliers at their bound, and ``mean_error_m`` / ``mean_error_ml_m`` where the recording has a true position
-    per epoch (else None)."""
-    from ..tracking.noise import fit_noise_ml
-    dt = epoch_s(data, recording)
-    reg, ticks = regular_epochs(data.epochs(recording), dt, tolerance_s=0.1 * dt)
-    rss = reg.rss_dbm
-    anchors, height = data.anchors_m, data.tag_height_m
-    heard = np.flatnonzero(~np.isnan(rss).all(axis=-1))
-    # as tracks(): the first RSS-ML fix, at rest (each epoch's fix is its own problem: the first alone suffices)
-    ml = _ml_fixes(data, model, rss[heard[:1]], grid_in_outline(data.outline_m, grid_spacing_m))
-    x0, P0 = _kalman_start(data, recording, ml)
-    motion = constant_velocity(dt, q, dim=2)
-    stream = RssMeasurement(rss, anchors, model, np.array([0, 1]), tag_height_m=height)
-    fit = fit_noise_ml(motion.F, motion.Q, x0, P0, stream, kind="ekf", fit_Q="scale", fit_R="scale", per_run=False)
-    sigma = np.asarray(model.sigma_db, dtype=float)
-    out = {"recording": recording, "q": q, "q_ml": float(q * fit.q_scale[0]),
-           "sigma_db": float(np.mean(sigma)), "sigma_ml_db": float(np.mean(sigma * np.sqrt(fit.r_scale[0][0]))),
-           "log_likelihood": float(fit.initial_log_likelihood), "log_likelihood_ml": float(fit.log_likelihood),
-           "at_bound": bool(np.any(fit.at_bound)), "mean_error_m": None, "mean_error_ml_m": None}
-    ep = data.epochs(recording)
-    known = np.isfinite(ep.position_m[:, :2]).all(axis=1)
-    if known.any():
-        ml_stream = RssMeasurement(rss, anchors, replace(model, sigma_db=fit.R[0]), np.array([0, 1]),
-                                   tag_height_m=height)
-        for key, Q, st in (("mean_error_m", motion.Q, stream), ("mean_error_ml_m", fit.Q, ml_stream)):
-            x = extended_kalman_filter(motion.F, Q, x0, P0, [st]).x[:, :2]
-            out[key] = float(np.mean(np.linalg.norm(x[ticks[known]] - ep.position_m[known, :2], axis=-1)))
-    return out
+    if window:
+        return float(window)
+    t = np.unique(data.epochs(recording).time_s)
+    spacing = np.diff(t)
+    if spacing.size == 0 or not np.median(spacing) > 0:
+        raise ParameterError(f"recording {recording!r} of {data.name!r} has native scans (window_s = 0) but fewer than "
+                             "2 distinct scan times: a tracker needs a clock")
+    return float(np.median(spacing))
 
 
 def bayes_measurement_model(data: Dataset, model: PathLossModel) -> RssModel:
@@ -316,19 +262,7 @@ def bayes_measurement_model(data: Dataset, model: PathLossModel) -> RssModel:
                                                   np.asarray(model.path_loss_exp, float),
                                                   np.asarray(model.sigma_db, float), model.ref_distance_m,
                                                   model.wall_attenuation_db, min_distance_m=NEAR_FIELD_M),
-                    tag_height_m=data.tag_height_m)
-
-
-def fix_covariance_from_calibration(data: Dataset, model: PathLossModel, *, grid_spacing_m: float = 0.1):
-    """``R`` of the KF on ML fixes: the covariance of RSS-ML fix errors over the calibration epochs (the set the
-    channel was fitted on, never a scored recording)."""
-    xy, _, rss = calibration_set(data)
-    grid = grid_in_outline(data.outline_m, grid_spacing_m)
-    grid_fix = grid_ml_position(data.anchors_m, rss, model, grid, tag_height_m=data.tag_height_m).position_m
-    fixes = rss_ml_position(data.anchors_m, rss, model, grid_fix, tag_height_m=data.tag_height_m,
-                            region_m=outline_box(data.outline_m)).position_m
-    ok = np.isfinite(fixes).all(axis=1)
-    return fix_error_covariance(fixes[ok], xy[ok])
+                    tag_height_m=_tag_height(data))
 
 
 def outside_fraction(data: Dataset, positions_m) -> float:
@@ -365,8 +299,466 @@ def record_dataset(report, data: Dataset) -> list[dict]:
         report.assumption("changes from the source", data.changes, where)
     for key, note in data.notes.items():
         report.assumption(key.replace("_", " "), note, where)
-    if "tag_height_m" not in data.notes:
+    report.assumption("geometry", geometry_text(data), where)
+    if "tag_height_m" not in data.notes and _tag_height(data) is not None:
         report.assumption("tag height", f"{data.tag_height_m:g} m", where)
     for name, rec in data.recordings.items():
         report.assumption(f"epochs of {name}", rec.epoch_rule.describe(), where)
     return dataset_summary(data)
+
+
+# -------------------------------------------------------------------------------------------- settings from data
+
+def keyed_stream(seed: int, *key) -> np.random.Generator:
+    """A stream keyed by its use (data set, kind, recording, method): every page that computes one number draws it
+    from the same stream, whatever else it computes."""
+    return np.random.default_rng(np.random.SeedSequence([int(seed), seed_from_values(*key)]))
+
+
+def grid_pitch_m(data: Dataset, requested: float | None = None) -> tuple[float, str]:
+    """``(pitch (m), how it was obtained)`` of the grid methods: ``requested`` if given, else
+    :data:`GRID_SPACING_M`, coarsened to give at most :data:`MAX_GRID_CELLS` cells over the outline's box."""
+    if requested is not None:
+        return float(requested), "given (-p grid_spacing_m)"
+    lower, upper = outline_box(data.outline_m)
+    area = float(np.prod(np.asarray(upper) - np.asarray(lower)))
+    pitch = max(GRID_SPACING_M, float(np.ceil(np.sqrt(area / MAX_GRID_CELLS) * 100) / 100))
+    how = (f"rule: {GRID_SPACING_M:g} m" if pitch == GRID_SPACING_M else
+           f"rule: {GRID_SPACING_M:g} m coarsened to {pitch:g} m to keep at most {MAX_GRID_CELLS:,} cells")
+    return pitch, how
+
+
+def _cv_groups(data: Dataset, xy) -> np.ndarray:
+    """The calibration epochs' groups for leave-one-out: the point column where every calibration recording has
+    one, else the :data:`KNN_CV_CELL_M` square each epoch lies in."""
+    names = data.recordings_with("calibration")
+    columns = [data.recording(n).point_column for n in names]
+    if all(c is not None for c in columns):
+        ep = data.epochs_of("calibration")
+        known = np.isfinite(ep.position_m[:, :2]).all(axis=1)
+        labels = np.concatenate([np.asarray(data.epochs(n).extra[c], dtype=object)
+                                 for n, c in zip(names, columns)])
+        recs = np.concatenate([np.full(len(data.epochs(n)), i) for i, n in enumerate(names)])
+        keys = [f"{r}/{v}" for r, v in zip(recs[known], labels[known])]
+        return np.unique(keys, return_inverse=True)[1]
+    cells = np.floor(np.asarray(xy) / KNN_CV_CELL_M).astype(np.int64)
+    return np.unique(cells, axis=0, return_inverse=True)[1].ravel()
+
+
+def choose_knn_k(data: Dataset, model: PathLossModel, requested: int | None = None):
+    """``(k, how it was obtained, table)``: k-NN's k by leave-one-point-out cross-validation on the calibration map
+    (each group of :func:`_cv_groups` located by the map without it; the k of :data:`KNN_CANDIDATES` with the
+    smallest mean error, the smaller on a tie); ``requested`` if given. ``table``: ``[{k, mean error}]``."""
+    if requested is not None:
+        return int(requested), "given (-p knn_k)", []
+    xy, fingerprints, _ = radio_map(data, model)
+    _, _, rss = calibration_set(data)
+    groups = _cv_groups(data, xy)
+    n_groups = int(groups.max()) + 1 if groups.size else 0
+    candidates = [k for k in KNN_CANDIDATES if k < len(xy)]
+    if n_groups < 2 or not candidates:
+        k = min(KNN_CANDIDATES[-1], max(1, len(xy) - 1))
+        return k, f"fallback k = {k}: the calibration map has fewer than 2 groups to cross-validate", []
+    errors = np.full((len(candidates), len(xy)), np.nan)
+    for g in range(n_groups):
+        out = groups == g
+        keep = ~out
+        if keep.sum() < max(candidates):
+            continue
+        for i, k in enumerate(candidates):
+            est = knn_position(rss[out], fingerprints[keep], xy[keep], k)
+            errors[i, out] = np.linalg.norm(est - xy[out], axis=-1)
+    mean = np.nanmean(errors, axis=1)
+    best = int(np.nanargmin(mean))
+    table = [{"k": k, "mean error (m), leave-one-point-out": round(float(m), 3)} for k, m in zip(candidates, mean)]
+    how = (f"rule: leave-one-point-out cross-validation on the calibration map ({n_groups} groups), k = 1..."
+           f"{candidates[-1]}: mean error {mean[best]:.2f} m" + (" (the largest candidate)" if best == len(candidates) - 1
+                                                                   else ""))
+    return candidates[best], how, table
+
+
+def _start(data: Dataset, recording: str, first_fix) -> np.ndarray:
+    fixed = np.flatnonzero(np.isfinite(first_fix).all(axis=1))
+    if fixed.size == 0:
+        raise ParameterError(f"recording {recording!r} of {data.name!r}: no epoch heard the {KF_FIX_MIN_ANCHORS} anchors "
+                             "an rss_ml fix to start the trackers from needs")
+    return np.r_[first_fix[fixed[0]], 0.0, 0.0]
+
+
+#: the random walk's standard deviation per epoch (m) its maximum-likelihood fit starts from (the fit moves its
+#: variance by a factor within 1e-4..1e4)
+SPREAD_START_M = 0.3
+
+
+def fit_motion(data: Dataset, model: PathLossModel, recording: str, *, grid_spacing_m: float, fix_cov_m2,
+               q_start: float = Q_START) -> dict:
+    """Every tracker's motion setting from the track's own readings, by one rule: the maximum-likelihood value of the
+    motion model's innovations (:func:`locbook.fit_noise_ml`; no truth is used).
+
+    - ``q`` (m^2/s^3), the constant-velocity intensity of the Kalman-family trackers: the EKF on the raw readings,
+      the channel (sigma per anchor) kept as calibrated, a multiplier of ``q_start``'s Q fitted;
+    - ``spread_m`` (m per epoch), the random walk ``L_t = L_t-1 + N(0, s^2 I)`` of the particle and grid Bayes
+      filters: the same walk as a Kalman filter (F = I) on the fixes ``kf_on_ml`` filters (``rss_ml``, epochs that heard
+      at least 3 anchors) with their calibrated covariance ``fix_cov_m2``, a multiplier of :data:`SPREAD_START_M`'s
+      variance fitted (the particle and grid filters' own likelihood of the raw readings has no closed form; the walk
+      is the same), and at least half the grid pitch (a narrower walk cannot move on the grid).
+    Returns ``{q, spread_m, log_likelihood_gain, spread_log_likelihood_gain, at_bound}``."""
+    from ..tracking.noise import fit_noise_ml
+    from ..tracking.streams import LinearMeasurement, RssMeasurement
+    sc = tracking_scenario(data, model, recording, grid_spacing_m=grid_spacing_m, q=q_start, spread_m=1.0)
+    rss = sc.measured_rss_dbm
+    motion = constant_velocity(sc.dt_s, q_start, dim=2)
+    P0 = _settings(q_start, 1, 1.0).P0
+    stream = RssMeasurement(rss, data.anchors_m, model, np.array([0, 1]), tag_height_m=_tag_height(data))
+    fit = fit_noise_ml(motion.F, motion.Q, sc.start_state, P0, stream, kind="ekf", fit_Q="scale", fit_R=None,
+                       per_run=False)
+    fixes = _ml_fixes(sc, rss)
+    walk = fit_noise_ml(np.eye(2), SPREAD_START_M**2 * np.eye(2), sc.start_state[:2], P0[:2, :2],
+                        LinearMeasurement(fixes, np.eye(2), np.asarray(fix_cov_m2, float)), kind="kf", fit_Q="scale",
+                        fit_R=None, per_run=False)
+    spread = max(0.5 * grid_spacing_m, SPREAD_START_M * float(np.sqrt(walk.q_scale[0])))
+    return {"q": float(q_start * fit.q_scale[0]), "spread_m": spread,
+            "log_likelihood_gain": float(fit.log_likelihood - fit.initial_log_likelihood),
+            "spread_log_likelihood_gain": float(walk.log_likelihood - walk.initial_log_likelihood),
+            "at_bound": bool(np.any(fit.at_bound) or np.any(walk.at_bound))}
+
+
+def _settings(q: float, n_particles: int, ukf_alpha: float) -> TrackerSettings:
+    return TrackerSettings(q=q, initial_position_sd_m=START_POSITION_SD_M, initial_velocity_sd_m_s=START_VELOCITY_SD_M_S,
+                           n_particles=n_particles, ukf_alpha=ukf_alpha)
+
+
+@dataclass(frozen=True)
+class Protocol:
+    """Every setting of the battery on one data set, each with how it was obtained (:func:`protocol`)."""
+
+    fit: str
+    grid_spacing_m: float
+    knn_k: int
+    motion: dict = field(default_factory=dict)      # recording -> fit_motion's dict (or the given values)
+    choices: tuple = ()                              # ({method, setting, value, how}, ...)
+    knn_table: tuple = ()
+
+    def rows(self) -> list[dict]:
+        return [dict(c) for c in self.choices]
+
+
+def protocol(data: Dataset, model: PathLossModel, *, fit: str = "closed_form", grid_spacing_m: float | None = None,
+             knn_k: int | None = None, q: float | None = None, spread_m: float | None = None,
+             tracks: bool = True) -> Protocol:
+    """The settings of every method on ``data`` by the module's rules (its docstring); a value given replaces its
+    rule and is named as given. ``tracks=False`` skips the trackers' motion fits (a static report)."""
+    pitch, pitch_how = grid_pitch_m(data, grid_spacing_m)
+    k, k_how, table = choose_knn_k(data, model, knn_k)
+    choices = [{"method": "every method", "setting": "channel", "value": f"per-anchor {fit} fit",
+                "how": f"fitted on the calibration recordings ({', '.join(data.recordings_with('calibration'))})"},
+               {"method": "every method", "setting": "geometry", "value": geometry_text(data), "how": "the manifest"},
+               {"method": "grid_ml, grid_mmse, grid_bayes, rss_ml start", "setting": "grid pitch (m)",
+                "value": f"{pitch:g}", "how": pitch_how},
+               {"method": "knn", "setting": "k", "value": str(k), "how": k_how}]
+    motion = {}
+    if tracks and data.recordings_with("track"):
+        fix_cov = fix_covariance_from_calibration(data, model, grid_spacing_m=pitch)
+        for name in data.recordings_with("track"):
+            if q is None or spread_m is None:
+                m = fit_motion(data, model, name, grid_spacing_m=pitch, fix_cov_m2=fix_cov)
+            else:
+                m = {}
+            m = {**m, **({"q": float(q)} if q is not None else {}),
+                 **({"spread_m": float(spread_m)} if spread_m is not None else {})}
+            motion[name] = m
+            q_how = "given (-p q)" if q is not None else (
+                f"rule: maximum likelihood of the EKF's innovations on this track's readings (log-likelihood +"
+                f"{m['log_likelihood_gain']:.1f} over q = {Q_START:g}{'; at the fit bound' if m['at_bound'] else ''})")
+            s_how = "given (-p spread_m)" if spread_m is not None else (
+                "rule: maximum likelihood of the random walk's innovations on this track's rss_ml fixes (log-likelihood "
+                f"+{m['spread_log_likelihood_gain']:.1f} over {SPREAD_START_M:g} m)")
+            choices += [{"method": "kf_on_ml, ekf, ekf_serial, ukf", "setting": f"q (m^2/s^3), {name}",
+                         "value": f"{m['q']:.3g}", "how": q_how},
+                        {"method": "particle, grid_bayes", "setting": f"random walk (m per epoch), {name}",
+                         "value": f"{m['spread_m']:.3g}", "how": s_how}]
+        if motion:
+            choices.append({"method": "every tracker", "setting": "start",
+                            "value": f"the first rss_ml fix, sd {START_POSITION_SD_M:g} m, at rest (sd "
+                                     f"{START_VELOCITY_SD_M_S:g} m/s)", "how": "rule (no knowledge of the start)"})
+    return Protocol(fit, pitch, k, motion, tuple(choices), tuple(table))
+
+
+# ---------------------------------------------------------------------------------------------------- problems
+
+def _channel_choices(data: Dataset, model: PathLossModel, fit: str) -> tuple[ProtocolChoice, ...]:
+    return (ProtocolChoice("data", f"{data.title}; {data.license}", f"{data.root.name}/dataset.toml"),
+            ProtocolChoice("geometry", geometry_text(data), "the data set's manifest"),
+            ProtocolChoice("channel", f"per-anchor {fit} fit on the calibration recordings "
+                                      f"({', '.join(data.recordings_with('calibration'))}; never a scored one)",
+                           "measured-calibration"),
+            *channel_settings(model, "the fit (sigma = residual spread per anchor)"))
+
+
+def static_scenario(data: Dataset, model: PathLossModel, recordings=None, *, grid_spacing_m: float,
+                    fit: str = "closed_form") -> StaticScenario | None:
+    """The static problem of ``recordings`` (default: every scored recording, :func:`scored_recordings`): every epoch
+    with a true position is a test point with its measured readings; k-NN's radio map is the calibration epochs.
+    None when there is nothing to score."""
+    names = scored_recordings(data) if recordings is None else list(recordings)
+    if not names:
+        return None
+    tests = [TestEpochs.of(data, n) for n in names]
+    truth = np.concatenate([t.truth_m for t in tests])
+    rss = np.concatenate([t.rss_dbm for t in tests])
+    cells, fingerprints, filled = radio_map(data, model)
+    return StaticScenario(
+        f"data-{data.name}", data.name, f"measured: {data.name}, {len(data.anchor_ids)} anchors", data.anchors_m,
+        model, np.asarray(data.outline_m, float), truth, grid_spacing_m,
+        (*_channel_choices(data, model, fit),
+         ProtocolChoice("positions", f"the {len(truth)} epochs with a true position of {', '.join(names)}",
+                        "the data set"),
+         ProtocolChoice("k-NN map", f"the calibration epochs; {100 * filled:.1f} % of readings not heard, filled with "
+                                    "the fitted mean", "measured.radio_map"),
+         ProtocolChoice("grid pitch", f"{grid_spacing_m:g} m inside the floor outline", "measured.grid_pitch_m")),
+        tag_height_m=_tag_height(data), measured_rss_dbm=rss, radio_map=(cells, fingerprints))
+
+
+def fix_covariance_from_calibration(data: Dataset, model: PathLossModel, *, grid_spacing_m: float):
+    """``R`` of ``kf_on_ml``: the covariance of the errors of the fixes it filters (the ``rss_ml`` method, epochs
+    that heard at least 3 anchors) over the calibration epochs (the set the channel was fitted on, never a scored
+    recording)."""
+    xy, _, rss = calibration_set(data)
+    sc = StaticScenario("calibration", data.name, "calibration", data.anchors_m, model, np.asarray(data.outline_m, float),
+                        xy, grid_spacing_m, (), tag_height_m=_tag_height(data), measured_rss_dbm=rss)
+    fixes = _ml_fixes(sc, rss)
+    ok = np.isfinite(fixes).all(axis=1)
+    return fix_error_covariance(fixes[ok], xy[ok])
+
+
+def tracking_scenario(data: Dataset, model: PathLossModel, recording: str, *, grid_spacing_m: float, q: float,
+                      spread_m: float, fix_cov_m2=None, fit: str = "closed_form") -> TrackingScenario:
+    """One track on its epoch clock (:func:`epoch_s`; a tick without an epoch is all NaN and unscored), truth at the
+    ticks of the epochs with a true position, and the start every tracker takes (the first rss_ml fix, at rest)."""
+    dt = epoch_s(data, recording)
+    ep = data.epochs(recording)
+    reg, ticks = regular_epochs(ep, dt, tolerance_s=0.5 * dt if not data.recording(recording).epoch_rule.window_s
+                                else 0.1 * dt)
+    truth = np.full((reg.rss_dbm.shape[0], 2), np.nan)
+    known = np.isfinite(ep.position_m[:, :2]).all(axis=1)
+    truth[ticks[known]] = ep.position_m[known, :2]
+    scored = np.isfinite(truth).all(axis=1)
+    base = StaticScenario(recording, data.name, recording, data.anchors_m, model, np.asarray(data.outline_m, float),
+                          np.zeros((0, 2)), grid_spacing_m, (), tag_height_m=_tag_height(data))
+    start = _start(data, recording, _ml_fixes(base, reg.rss_dbm))
+    return TrackingScenario(
+        f"data-{data.name}", data.name, f"measured: {data.name}, track {recording}, {dt:g} s epochs", data.anchors_m,
+        model, np.asarray(data.outline_m, float), truth, dt, spread_m, grid_spacing_m,
+        (*_channel_choices(data, model, fit),
+         ProtocolChoice("path", f"the track {recording!r} on a {dt:g} s clock ({int(scored.sum())} epochs with truth)",
+                        "the data set")),
+        tag_height_m=_tag_height(data), measured_rss_dbm=reg.rss_dbm, scored=scored,
+        fix_cov_m2=fix_cov_m2, start_state=start)
+
+
+# ----------------------------------------------------------------------------------------------------- results
+
+#: the columns of a results table (``results.csv`` of measured-localization and measured-tracking; the benchmark's
+#: data columns are the ``pooled`` rows)
+RESULT_COLUMNS = ("kind", "recording", "method", "settings", "epochs", "runs", "coverage", "mean_m", "median_m",
+                  "p90_m", "ce95_m", "rmse_m", "mean_low_m", "mean_high_m", "rmse_low_m", "rmse_high_m", "interval",
+                  "interval_note", "bound", "bound_median_m", "bound_rms_m", "bound_trimmed_rms_m", "bound_excluded",
+                  "bound_excluded_why", "ratio", "ratio_note", "outside_outline")
+_NO_PRIOR = ("below the bound without a prior: the bound holds for unbiased estimators and for readings that follow "
+             "the fitted model; a biased estimator (pulled toward the anchors' centre) or readings less noisy than "
+             "the fitted sigma can beat it")
+
+
+def _r(v):
+    return None if v is None or not np.isfinite(v) else round(float(v), 3)
+
+
+def _block(time_s, block_s: float) -> int:
+    t = np.asarray(time_s, float)
+    step = float(np.median(np.diff(t))) if t.size > 1 else 1.0
+    return max(1, int(round(block_s / step))) if step > 0 else 1
+
+
+def result_row(kind: str, recording: str, method: str, errors_m, bound_m, reason, rng: np.random.Generator, *,
+               n_bootstrap: int, block: int, settings: str, prior: str, bound_name: str, outside: float) -> dict:
+    """One row of :data:`RESULT_COLUMNS`: the errors ``(E, R)`` of ``R`` runs at ``E`` epochs in time order (one run
+    for a deterministic method) scored by :func:`locbook.accuracy_metrics` (statistics over every run and epoch;
+    the circular block bootstrap over blocks of ``block`` epochs, all runs of an epoch together), beside the bound
+    ``(E,)`` summarised without its undefined epochs (``reason``; :func:`locbook.bounds.summary.summarize_bound`)
+    and the ratio RMSE / RMS bound over the epochs where the bound is defined (n/a with the reason when it is
+    degenerate). A ratio below 1 carries why it can be (``prior``: what the method knows that the bound does not)."""
+    e = np.asarray(errors_m, float)
+    e = e[:, None] if e.ndim == 1 else e
+    m = accuracy_metrics(e.ravel(), rng, n_bootstrap=n_bootstrap, block_length=block * e.shape[1])
+    summary = summarize_bound(bound_m, reason)
+    ratio, note = error_bound_ratio(e.T, summary)
+    if not note and np.isfinite(ratio) and ratio < 1:
+        note = f"below 1: {prior}" if prior else _NO_PRIOR
+    notes = [m.get("interval_note", "")] + [m.get(f"{s}_note", "") for s in ("mean_m", "rmse_m")]
+    row = {"kind": kind, "recording": recording, "method": method, "settings": settings, "epochs": int(e.shape[0]),
+            "runs": int(e.shape[1]), "coverage": _r(m["coverage"]), "mean_m": _r(m["mean_m"]),
+            "median_m": _r(m["median_m"]), "p90_m": _r(m["p90_m"]), "ce95_m": _r(m["ce95_m"]), "rmse_m": _r(m["rmse_m"]),
+            "mean_low_m": _r(m["mean_m_low"]), "mean_high_m": _r(m["mean_m_high"]), "rmse_low_m": _r(m["rmse_m_low"]),
+            "rmse_high_m": _r(m["rmse_m_high"]), "interval": m.get("interval", ""),
+            "interval_note": "; ".join(dict.fromkeys(n for n in notes if n)), "bound": bound_name,
+            **{k: (_r(v) if isinstance(v, float) else v) for k, v in summary.row().items()},
+            "ratio": _r(ratio), "ratio_note": note, "outside_outline": _r(outside)}
+    return {k: row[k] for k in RESULT_COLUMNS}
+
+
+def _static_settings(name: str, proto: Protocol) -> str:
+    extra = {"knn": f"k = {proto.knn_k} (calibration map)", "grid_ml": f"pitch {proto.grid_spacing_m:g} m",
+             "grid_mmse": f"pitch {proto.grid_spacing_m:g} m",
+             "rss_ml": f"start: grid ML at {proto.grid_spacing_m:g} m",
+             "rss_ml_free": f"start: grid ML at {proto.grid_spacing_m:g} m"}.get(name, "")
+    return "; ".join(x for x in (BATTERY_STATIC[name].settings, extra) if x)
+
+
+def static_results(data: Dataset, model: PathLossModel, proto: Protocol, *, seed: int, n_bootstrap: int,
+                   block_s: float) -> dict | None:
+    """Every static method on every scored recording (one problem: each epoch is located on its own), scored per
+    recording and pooled (:func:`result_row`; the CRLB from the anchors each epoch heard). None when nothing is
+    scored. Returns ``{"recordings", "tests", "fixes", "errors", "bounds", "rows"}`` (per recording: fixes and errors
+    ``{method: (E, 2) / (E,)}``, bounds ``(bound, reason)``)."""
+    names = scored_recordings(data)
+    sc = static_scenario(data, model, names, grid_spacing_m=proto.grid_spacing_m, fit=proto.fit)
+    if sc is None:
+        return None
+    tests = {n: TestEpochs.of(data, n) for n in names}
+    pooled = battery_static_fixes(sc, sc.measured_rss_dbm[None], knn_k=proto.knn_k)
+    cuts = np.cumsum([0] + [len(t.truth_m) for t in tests.values()])
+    fixes, errors, bounds, rows = {}, {}, {}, []
+    for i, n in enumerate(names):
+        fixes[n] = {k: v[0, cuts[i]:cuts[i + 1]] for k, v in pooled.items()}
+        errors[n] = {k: np.linalg.norm(v - tests[n].truth_m, axis=-1) for k, v in fixes[n].items()}
+        bounds[n] = checked_crlb_m(data, model, tests[n].truth_m, tests[n].rss_dbm)
+    groups = [("pooled", names)] + [(n, [n]) for n in names]
+    for label, members in groups:
+        time_blocks = [_block(tests[n].time_s, block_s) for n in members]
+        block = int(np.median(time_blocks))
+        bound = np.concatenate([bounds[n][0] for n in members])
+        reason = np.concatenate([bounds[n][1] for n in members])
+        for method in pooled:
+            e = np.concatenate([errors[n][method] for n in members])
+            f = np.concatenate([fixes[n][method] for n in members])
+            rows.append(result_row("static", label, method, e, bound, reason,
+                                   keyed_stream(seed, data.name, "static", members[0] if len(members) == 1 else label,
+                                                method), n_bootstrap=n_bootstrap,
+                                   block=block, settings=_static_settings(method, proto),
+                                   prior=BATTERY_STATIC[method].prior, bound_name="CRLB (fitted channel, anchors heard)",
+                                   outside=outside_fraction(data, f)))
+    return {"recordings": names, "tests": tests, "fixes": fixes, "errors": errors, "bounds": bounds, "rows": rows,
+            "scenario": sc}
+
+
+_KALMAN = ("kf_on_ml", "ekf", "ekf_serial", "ukf")
+
+
+def tracking_results(data: Dataset, model: PathLossModel, proto: Protocol, *, seed: int, n_particles: int,
+                     particle_runs: int, n_bootstrap: int, block_s: float, ukf_alpha: float = 0.5,
+                     recordings=None) -> dict | None:
+    """Every tracker on every track (:func:`tracking_scenario`, the motion of :class:`Protocol`), scored per track
+    with a true position and pooled over them (:func:`result_row`; the posterior CRLB of the constant-velocity model
+    at the track's fitted ``q`` from the trackers' start). The Kalman-family trackers and grid Bayes are
+    deterministic (one run); the particle filter runs ``particle_runs`` times on independent streams and is scored
+    over all its runs. ``recordings``: the tracks to run (default every one). None without a track. Returns ``{"tracks": {name: (scenario, {tracker: (R, T, 2)}, flags,
+    bound (T,))}, "rows"}``."""
+    names = data.recordings_with("track") if recordings is None else list(recordings)
+    if not names:
+        return None
+    fix_cov = fix_covariance_from_calibration(data, model, grid_spacing_m=proto.grid_spacing_m)
+    out, per = {}, {}
+    for name in names:
+        motion = proto.motion[name]
+        sc = tracking_scenario(data, model, name, grid_spacing_m=proto.grid_spacing_m, q=motion["q"],
+                               spread_m=motion["spread_m"], fix_cov_m2=fix_cov, fit=proto.fit)
+        ts = _settings(motion["q"], n_particles, ukf_alpha)
+        rss = sc.measured_rss_dbm
+        x0 = initial_states(sc, ts, 1, None)
+        est, flags = run_trackers(sc, rss[None], x0, ts, keyed_stream(seed, data.name, "tracking", name, "kalman"),
+                                  trackers=[t for t in TRACKERS if t != "particle"], with_divergence=True)
+        runs = np.broadcast_to(rss, (particle_runs,) + rss.shape)
+        est["particle"] = run_trackers(sc, runs, np.repeat(x0, particle_runs, axis=0), ts,
+                                       keyed_stream(seed, data.name, "tracking", name, "particle"),
+                                       trackers=["particle"])["particle"]
+        est = {t: est[t] for t in TRACKERS}
+        bound = tracking_bound_m(sc, ts)
+        out[name] = (sc, est, flags, bound)
+        if sc.scored is not None and sc.scored.any():
+            steps = sc.scored_steps
+            per[name] = {"steps": steps, "block": _block(steps * sc.dt_s, block_s), "bound": bound[steps],
+                         "errors": {t: np.linalg.norm(v[:, steps] - sc.truth_m[steps], axis=-1).T
+                                    for t, v in est.items()},
+                         "est": {t: v[:, steps] for t, v in est.items()},
+                         "knobs": _tracker_knobs(proto, name, ts, sc)}
+    rows = []
+    groups = ([("pooled", list(per))] if per else []) + [(n, [n]) for n in per]
+    for label, members in groups:
+        block = int(np.median([per[n]["block"] for n in members]))
+        bound = np.concatenate([per[n]["bound"] for n in members])
+        for tracker in TRACKERS:
+            e = np.concatenate([per[n]["errors"][tracker] for n in members])
+            settings = per[members[0]]["knobs"][tracker] if len(members) == 1 else \
+                "motion fitted per track (see each track's row)"
+            rows.append(result_row("tracking", label, tracker, e, bound, None,
+                                   keyed_stream(seed, data.name, "tracking", members[0] if len(members) == 1 else label,
+                                                tracker, "bootstrap"),
+                                   n_bootstrap=n_bootstrap, block=block, settings=settings,
+                                   prior=TRACKER_PRIORS[tracker],
+                                   bound_name="PCRLB (constant velocity at the fitted q, from the trackers' start)",
+                                   outside=outside_fraction(data, np.concatenate([per[n]["est"][tracker].reshape(-1, 2)
+                                                                                  for n in members]))))
+    return {"tracks": out, "rows": rows}
+
+
+def _tracker_knobs(proto: Protocol, name: str, ts: TrackerSettings, sc: TrackingScenario) -> dict:
+    common = (f"q = {ts.q:.3g} m^2/s^3 (fitted), dt = {sc.dt_s:g} s, start: first rss_ml fix, sd "
+              f"{ts.initial_position_sd_m:g} m / {ts.initial_velocity_sd_m_s:g} m/s")
+    walk = f"random walk {sc.spread_m:.3g} m/epoch (fitted)"
+    return {"kf_on_ml": common + "; R: rss_ml fix errors on the calibration epochs", "ekf": common,
+            "ekf_serial": common, "ukf": common + f"; alpha = {ts.ukf_alpha:g}",
+            "particle": f"N = {ts.n_particles}, {walk}", "grid_bayes": f"pitch {sc.grid_spacing_m:g} m, {walk}"}
+
+
+def benchmark_rows(data: Dataset, static: dict | None, tracking: dict | None) -> list[dict]:
+    """A data set's cells of the cross-document benchmark: the ``pooled`` rows of :func:`static_results` and
+    :func:`tracking_results`, in the benchmark's columns (the same numbers as the data set's own reports)."""
+    rows = []
+    for kind, res in (("static", static), ("tracking", tracking)):
+        if res is None:
+            continue
+        for r in res["rows"]:
+            if r["recording"] != "pooled":
+                continue
+            rows.append({"kind": kind, "scenario": f"data-{data.name}", "document": data.name, "data": "measured",
+                         "method": r["method"], "runs": r["runs"], "points": r["epochs"], "rmse_m": r["rmse_m"],
+                         "rmse_low_m": r["rmse_low_m"], "rmse_high_m": r["rmse_high_m"], "interval": r["interval"],
+                         "mean_m": r["mean_m"], "median_m": r["median_m"], "p90_m": r["p90_m"],
+                         "missing": _r(1.0 - r["coverage"]) if r["coverage"] is not None else None,
+                         "bound_rms_m": r["bound_rms_m"], "bound_median_m": r["bound_median_m"],
+                         "bound_excluded": r["bound_excluded"], "ratio": r["ratio"], "ratio_note": r["ratio_note"],
+                         "bound": "CRLB" if kind == "static" else "PCRLB", "settings": r["settings"]})
+    return rows
+
+
+def measured_static_scenario(data, fit: str = "closed_form") -> StaticScenario | None:
+    """The static problem of a data set (every scored recording; :func:`static_scenario` at the rule's grid pitch);
+    None when nothing is scored."""
+    ds = load(data)
+    model = channel(calibrate(ds, fit=fit))
+    return static_scenario(ds, model, grid_spacing_m=grid_pitch_m(ds)[0], fit=fit)
+
+
+def measured_tracking_scenario(data, fit: str = "closed_form") -> TrackingScenario | None:
+    """The first track with a true position per epoch (:func:`tracking_scenario`, its motion by :func:`fit_motion`);
+    None when no track has truth."""
+    ds = load(data)
+    model = channel(calibrate(ds, fit=fit))
+    names = [n for n in ds.recordings_with("track") if ds.recording(n).has_truth]
+    if not names:
+        return None
+    pitch = grid_pitch_m(ds)[0]
+    fix_cov = fix_covariance_from_calibration(ds, model, grid_spacing_m=pitch)
+    m = fit_motion(ds, model, names[0], grid_spacing_m=pitch, fix_cov_m2=fix_cov)
+    return tracking_scenario(ds, model, names[0], grid_spacing_m=pitch, q=m["q"], spread_m=m["spread_m"],
+                             fix_cov_m2=fix_cov, fit=fit)

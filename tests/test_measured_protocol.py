@@ -1,0 +1,132 @@
+"""The measured-data protocol (locbook.scenarios.measured): one definition per method on every page, settings from the
+data by stated rules, bounds that cannot lie."""
+import numpy as np
+import pytest
+
+import locbook as lb
+from locbook import battery
+from locbook.data.example import write_example_dataset
+from locbook.scenarios import measured as me
+
+
+@pytest.fixture(scope="module")
+def example(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("protocol") / "example"
+    write_example_dataset(folder, np.random.default_rng(5), walk_s=40.0)
+    ds = me.load(folder)
+    return ds, me.channel(me.calibrate(ds))
+
+
+def _knn_by_hand(query, fingerprints, cells, k):
+    """Weighted k-NN written out (inverse-square weights of the RSS distance over the anchors heard)."""
+    out = np.full((len(query), 2), np.nan)
+    for i, q in enumerate(query):
+        heard = ~np.isnan(q)
+        if heard.sum() < min(3, len(q)):
+            continue
+        d2 = np.sum((fingerprints[:, heard] - q[heard]) ** 2, axis=1)
+        near = np.argsort(d2, kind="stable")[:k]
+        w = 1.0 / np.maximum(d2[near], 1e-12)
+        out[i] = (w[:, None] * cells[near]).sum(axis=0) / w.sum()
+    return out
+
+
+def test_knn_k_is_the_leave_one_point_out_minimum(example):
+    ds, model = example
+    k, how, table = me.choose_knn_k(ds, model)
+    xy, fingerprints, _ = me.radio_map(ds, model)
+    _, _, rss = me.calibration_set(ds)
+    groups = me._cv_groups(ds, xy)
+    means = {}
+    for cand in (1, 3, k):
+        err = []
+        for g in np.unique(groups):
+            out = groups == g
+            est = _knn_by_hand(rss[out], fingerprints[~out], xy[~out], cand)
+            err.append(np.linalg.norm(est - xy[out], axis=1))
+        means[cand] = np.nanmean(np.concatenate(err))
+    by_k = {row["k"]: row["mean error (m), leave-one-point-out"] for row in table}
+    for cand, value in means.items():
+        assert by_k[cand] == pytest.approx(value, abs=2e-3)
+    assert by_k[k] == min(by_k.values()) and "leave-one-point-out" in how
+    assert me.choose_knn_k(ds, model, 3)[:2] == (3, "given (-p knn_k)")
+
+
+def test_grid_pitch_is_coarsened_only_past_the_cell_limit(example, monkeypatch):
+    ds, _ = example
+    assert me.grid_pitch_m(ds) == (me.GRID_SPACING_M, f"rule: {me.GRID_SPACING_M:g} m")
+    monkeypatch.setattr(me, "MAX_GRID_CELLS", 1000)              # the hall's 240 m^2 at 0.1 m is 24,000 cells
+    pitch, how = me.grid_pitch_m(ds)
+    assert pitch > me.GRID_SPACING_M and "coarsened" in how
+    assert lb.grid_in_outline(ds.outline_m, pitch).shape[0] <= 1000 * 1.1
+
+
+def test_static_results_pooled_rows_are_the_recordings_together(example):
+    ds, model = example
+    proto = me.protocol(ds, model, tracks=False)
+    res = me.static_results(ds, model, proto, seed=3, n_bootstrap=50, block_s=5.0)
+    rows = {(r["recording"], r["method"]): r for r in res["rows"]}
+    assert [r["recording"] for r in res["rows"][:len(me.STATIC_METHODS)]] == ["pooled"] * len(me.STATIC_METHODS)
+    for method in me.STATIC_METHODS:
+        e = np.concatenate([res["errors"][n][method] for n in res["recordings"]])
+        ok = np.isfinite(e)
+        assert rows["pooled", method]["mean_m"] == pytest.approx(np.mean(e[ok]), abs=5e-4)
+        assert rows["pooled", method]["rmse_m"] == pytest.approx(np.sqrt(np.mean(e[ok] ** 2)), abs=5e-4)
+        assert rows["pooled", method]["epochs"] == e.size
+        assert tuple(rows["pooled", method]) == me.RESULT_COLUMNS
+    # every fix of one method equals the battery's fix of the same epoch computed on its own recording
+    name = res["recordings"][0]
+    sc = me.static_scenario(ds, model, [name], grid_spacing_m=proto.grid_spacing_m)
+    alone = battery.static_fixes(sc, sc.measured_rss_dbm[None], knn_k=proto.knn_k, methods=["lls", "grid_ml", "knn"])
+    for method, fix in alone.items():
+        np.testing.assert_allclose(fix[0], res["fixes"][name][method], atol=1e-9)
+
+
+def test_a_ratio_below_one_says_why_and_no_ratio_comes_from_a_degenerate_bound(example):
+    ds, model = example
+    proto = me.protocol(ds, model, tracks=False)
+    res = me.static_results(ds, model, proto, seed=3, n_bootstrap=50, block_s=5.0)
+    for r in res["rows"]:
+        if r["ratio"] is not None and r["ratio"] < 1:
+            assert r["ratio_note"].startswith("below 1")
+    # epochs that heard two anchors only: their bound is excluded and counted, never summarised as a number
+    t = res["tests"][res["recordings"][0]]
+    rss = t.rss_dbm.copy()
+    rss[:, 2:] = np.nan
+    bound, reason = me.checked_crlb_m(ds, model, t.truth_m, rss)
+    assert np.isnan(bound).all() and all(reason)
+    row = me.result_row("static", "two anchors", "lls", np.ones(len(bound)), bound, reason, np.random.default_rng(0),
+                        n_bootstrap=20, block=1, settings="", prior="", bound_name="CRLB", outside=0.0)
+    assert row["ratio"] is None and row["ratio_note"].startswith("n/a")
+    assert row["bound_excluded"] == len(bound)
+
+
+def test_every_tracker_starts_at_the_first_fix_and_the_benchmark_cells_are_the_pooled_rows(example):
+    ds, model = example
+    proto = me.protocol(ds, model)
+    assert set(proto.motion) == set(ds.recordings_with("track"))
+    static = me.static_results(ds, model, proto, seed=4, n_bootstrap=30, block_s=5.0)
+    tracking = me.tracking_results(ds, model, proto, seed=4, n_particles=200, particle_runs=2, n_bootstrap=30,
+                                   block_s=5.0)
+    for name, (sc, est, flags, bound) in tracking["tracks"].items():
+        first = np.flatnonzero(~np.isnan(sc.measured_rss_dbm).all(axis=1))
+        assert set(est) == set(me.TRACKERS) and est["particle"].shape[0] == 2
+        assert est["ekf"].shape == (1, len(sc.truth_m), 2)
+        assert np.isfinite(sc.start_state[:2]).all() and np.all(sc.start_state[2:] == 0)
+        assert first.size
+    cells = me.benchmark_rows(ds, static, tracking)
+    pooled = {(r["kind"], r["method"]): r for r in static["rows"] + tracking["rows"] if r["recording"] == "pooled"}
+    assert len(cells) == len(pooled)
+    for c in cells:
+        r = pooled[c["kind"], c["method"]]
+        assert (c["rmse_m"], c["mean_m"], c["median_m"], c["p90_m"], c["ratio"]) == \
+               (r["rmse_m"], r["mean_m"], r["median_m"], r["p90_m"], r["ratio"])
+
+
+def test_the_same_parameters_give_the_same_rows(example):
+    ds, model = example
+    proto = me.protocol(ds, model, q=0.1, spread_m=0.5)
+    assert all(m == {"q": 0.1, "spread_m": 0.5} for m in proto.motion.values())
+    a = me.tracking_results(ds, model, proto, seed=9, n_particles=100, particle_runs=2, n_bootstrap=20, block_s=5.0)
+    b = me.tracking_results(ds, model, proto, seed=9, n_particles=100, particle_runs=2, n_bootstrap=20, block_s=5.0)
+    assert a["rows"] == b["rows"]

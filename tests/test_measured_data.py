@@ -112,7 +112,11 @@ def test_epoch_with_two_true_positions(tmp_path):
 
 
 def test_anchor_rules(tmp_path):
-    refuses(tmp_path, ANCHORS.replace(",z", ""), "missing column(s) ['z']", reader=read_anchors)
+    # issue 46: no z column is a 2-D anchors file (tests/test_data_format46.py); a z column needs every height
+    refuses(tmp_path, ANCHORS.replace(",z", ""), "line 2", "4 fields, the header 3", reader=read_anchors)
+    refuses(tmp_path, rows(ANCHORS, 3, "B,5,0,"), "line 3", "'z'", "the height is empty", "no z column",
+            reader=read_anchors)
+    refuses(tmp_path, ANCHORS.replace("y,z", "z,q"), "missing column(s) ['y']", reader=read_anchors)
     refuses(tmp_path, rows(ANCHORS, 4, "A,0,5,2.3"), "line 4", "'id'", "appears twice", reader=read_anchors)
     refuses(tmp_path, rows(ANCHORS, 3, "B,5,,2.4"), "line 3", "'y'", "missing", reader=read_anchors)
     refuses(tmp_path, rows(ANCHORS, 2, "A,0,0,nan2"), "line 2", "'z'", "not a finite number", reader=read_anchors)

@@ -25,12 +25,13 @@ The manifest (every key below; ``[units]`` describes the files, every other valu
     backward_time = "refuse"            # refuse | sort: a file whose time goes back (sort: counted and reported)
 
     [geometry]
-    anchors = "anchors.csv"             # id, x, y, z
+    anchors = "anchors.csv"             # id, x, y, z; or id, x, y (no z column): a 2-D data set, one plane
     outline = "outline.csv"             # optional floor outline (x, y); default: the box around anchors and truth;
                                         # every true position (and reference path vertex) lies inside it or
                                         # within OUTLINE_TOLERANCE_M (0.5 m)
     tag_height_m = 1.3                  # the tag's height, known to the estimators; optional where every true
-                                        # position has z_m (then their median); within 100 m of the anchors' heights
+                                        # position has z_m (then their median); within 100 m of the anchors' heights;
+                                        # refused for a 2-D data set (no heights: its z_m are ignored)
 
     [epochs]                            # raw packets -> epochs (locbook.data.measured.epochs)
     window_s = 1.0                      # 0: each distinct time already is an epoch
@@ -45,10 +46,17 @@ The manifest (every key below; ``[units]`` describes the files, every other valu
                                         # track (a moving tag, on the epoch clock)
     point_column = "point"              # optional: an extra column naming the point; epochs never mix points
     reference_path = "path.csv"         # optional, track: segments x0, y0, x1, y1 the walker followed
-    window_s = 0                        # optional: this recording's own epoch window
-                                        # (a track needs one that gives it at least 2 epochs)
+    window_s = 0                        # optional: this recording's own epoch window; 0: native scans (each
+                                        # distinct time is an epoch; a track's clock is then the median spacing of
+                                        # its scan times, Dataset.scan_interval_s). A track needs at least 2 epochs
 
-A data set needs at least one calibration recording and at least one static or track recording. Every file the
+A data set needs at least one calibration recording; static and track recordings are optional (a calibration-only
+data set fits the channel and localizes nothing: the notes say so). Anchors without z make a 2-D data set
+(:attr:`Dataset.dimension` 2, :attr:`Dataset.anchors_m` ``(m, 2)``, :attr:`Dataset.tag_height_m` None); with z,
+every anchor has one. A ``device`` column in the readings names each row's device (default: the transmitter id); a
+track holds one. Calibration recordings holding several devices are noted (``notes["devices"]``: which, with their
+epochs), and so is a static or track recording holding a device no calibration recording holds (its receiver offset
+is not calibrated: 0 dB is assumed). Every file the
 manifest names is a relative path whose target, every symlink resolved, is a regular file inside the data set's
 folder: a link out of it is refused before any byte is read, naming the link and its target. A scored recording
 (static, or a track with truth) that reads the same file as a calibration recording (the same target or the same
@@ -70,9 +78,10 @@ import numpy as np
 import pandas as pd
 
 from ..errors import ParameterError
-from .measured import (AGGREGATES, MAX_MIN_READINGS, MIN_WINDOW_S, OPTIONAL_READING_COLUMNS, READING_COLUMNS,
-                       DataFormatError, Epochs, _decode_utf8, _reading_options, _shown, _shown_names, epochs,
-                       read_anchors, read_outline, read_path_segments, read_readings_table, validate_readings_file)
+from .measured import (AGGREGATES, DEVICE_COLUMN, MAX_MIN_READINGS, MIN_WINDOW_S, OPTIONAL_READING_COLUMNS,
+                       READING_COLUMNS, DataFormatError, Epochs, _decode_utf8, _reading_options, _shown, _shown_names,
+                       epochs, read_anchors, read_outline, read_path_segments, read_readings_table, scan_interval_s,
+                       validate_readings_file)
 
 __all__ = ["Dataset", "Recording", "EpochRule", "load_dataset", "shipped_datasets", "datasets_dir", "name_problem",
            "MAX_NAME_CHARS", "MAX_TAG_HEIGHT_OFFSET_M", "MAX_MANIFEST_BYTES", "OUTLINE_TOLERANCE_M",
@@ -159,7 +168,10 @@ class Recording:
 @dataclass(frozen=True)
 class Dataset:
     """A measured data set read from its folder (module docstring). ``epochs(name)`` gives a recording's epochs
-    by the data set's rule; ``recordings_with(role)`` lists recordings by role."""
+    by the data set's rule; ``recordings_with(role)`` lists recordings by role and ``has_role(role)`` says whether
+    there is one; ``devices(name)`` the devices of a recording; ``scan_interval_s(name)`` its epoch clock.
+    ``dimension`` is 2 for anchors without z (then ``anchors_m`` is ``(m, 2)`` and ``tag_height_m`` None), else 3;
+    ``geometry_text`` says which, in one sentence for the reports."""
 
     name: str
     title: str
@@ -168,7 +180,8 @@ class Dataset:
     attribution: str
     anchors: pd.DataFrame = field(repr=False)
     outline_m: np.ndarray = field(repr=False)
-    tag_height_m: float
+    #: the tag's known height (m); None for a 2-D data set (anchors without z)
+    tag_height_m: float | None
     recordings: dict[str, Recording] = field(repr=False)
     changes: str = ""
     license_file: Path | None = None
@@ -176,6 +189,8 @@ class Dataset:
     notes: dict[str, str] = field(default_factory=dict)
     #: every file the manifest names (itself included): what a report computed from the data set depends on
     files: tuple[Path, ...] = ()
+    #: where the tag height came from: "manifest" ([geometry] tag_height_m), "median of the true z", or "" (2-D)
+    tag_height_source: str = ""
     _cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     @property
@@ -183,14 +198,46 @@ class Dataset:
         return tuple(self.anchors["id"])
 
     @property
+    def dimension(self) -> int:
+        """3 where the anchors carry heights (z), 2 for a 2-D data set (anchors.csv without z: one plane)."""
+        return 3 if "z" in self.anchors.columns else 2
+
+    @property
     def anchors_m(self) -> np.ndarray:
-        """Anchor positions ``(m, 3)`` in the order of :attr:`anchor_ids` (metres)."""
-        return self.anchors[["x", "y", "z"]].to_numpy(float)
+        """Anchor positions ``(m, 3)`` (``(m, 2)`` for a 2-D data set) in the order of :attr:`anchor_ids` (metres)."""
+        return self.anchors[["x", "y", "z"][:self.dimension]].to_numpy(float)
+
+    @property
+    def geometry_text(self) -> str:
+        """One sentence on the problem's geometry, for every report: 2-D (distances in the plane), or 3-D distances
+        with the anchors' heights and the tag's known height and where it came from."""
+        if self.dimension == 2:
+            return "2-D: anchors and tag in one plane (the anchors file has no z); distances in the plane"
+        z = self.anchors["z"].to_numpy(float)
+        heights = f"{z.min():g} m" if z.min() == z.max() else f"{z.min():g}-{z.max():g} m"
+        source = {"manifest": " ([geometry] tag_height_m)", "median of the true z": " (median of the true z)"}.get(
+            self.tag_height_source, "")
+        return f"3-D distances: anchors at {heights}, the tag at its known height {self.tag_height_m:g} m{source}"
+
+    def has_role(self, role: str) -> bool:
+        """Whether some recording has ``role`` (one of :data:`ROLES`)."""
+        return bool(self.recordings_with(role))
 
     def recordings_with(self, role: str) -> list[str]:
         if role not in ROLES:
             raise ParameterError(f"role must be one of {ROLES}, got {role!r}")
         return [name for name, rec in self.recordings.items() if rec.role == role]
+
+    def devices(self, recording: str) -> tuple[str, ...]:
+        """The devices of a recording's epochs, sorted: its ``device`` column's values, or (without one) its
+        transmitter ids."""
+        return tuple(sorted(set(self.epochs(recording).device.tolist())))
+
+    def scan_interval_s(self, recording: str) -> float:
+        """The epoch clock (s) of a recording of native scans (``window_s = 0``): the median spacing of its epoch
+        times (:func:`locbook.data.measured.scan_interval_s`); a recording with a window has that window."""
+        window = self.recording(recording).epoch_rule.window_s
+        return float(window) if window else scan_interval_s(self.epochs(recording), name=recording)
 
     def recording(self, name: str) -> Recording:
         if name not in self.recordings:
@@ -198,7 +245,13 @@ class Dataset:
         return self.recordings[name]
 
     def epochs(self, name: str) -> Epochs:
-        """The recording's epochs by the data set's epoch rule (cached: the arrays are shared, do not modify)."""
+        """The recording's epochs by the data set's epoch rule (cached: the arrays are shared, do not modify).
+
+        A windowed epoch's true position is the mean of the true positions on the window's rows, coordinate by
+        coordinate (a coordinate equal on all of them kept exactly), NaN where no row has one; a native scan's
+        (``window_s = 0``) is its rows' (:func:`locbook.data.measured.epochs`). A 2-D data set's epochs have NaN
+        heights (its z_m is ignored); a 3-D one's heights are the rows' z_m, the tag's known height where a row has
+        a position but no z_m."""
         if name not in self._cache:
             rec = self.recording(name)
             rule = rec.epoch_rule
@@ -219,7 +272,8 @@ class Dataset:
                       np.concatenate([p.position_m for p in parts]), np.concatenate([p.heading_rad for p in parts]),
                       np.concatenate([p.transmitter for p in parts]), self.anchor_ids,
                       np.concatenate([p.n_readings for p in parts]),
-                      {k: np.concatenate([p.extra[k] for p in parts]) for k in sorted(keys)})
+                      {k: np.concatenate([p.extra[k] for p in parts]) for k in sorted(keys)},
+                      np.concatenate([p.device for p in parts]))
 
 
 # -- reading the manifest --------------------------------------------------------------------------------------
@@ -404,8 +458,9 @@ def load_dataset(path) -> Dataset:
     geometry = raw.get("geometry", {})
     anchors = read_anchors(_file(manifest, root, _string(manifest, geometry, "anchors", "[geometry] "),
                                  "[geometry] anchors: "))
+    axes = [c for c in ("x", "y", "z") if c in anchors.columns]     # no z: a 2-D data set
     if length_scale != 1.0:
-        anchors[["x", "y", "z"]] *= length_scale
+        anchors[axes] *= length_scale
 
     rule_raw = raw.get("epochs", {})
     default_rule = _epoch_rule(manifest, rule_raw, "[epochs] ", None)
@@ -435,8 +490,6 @@ def load_dataset(path) -> Dataset:
         point_column = _string(manifest, rec, "point_column", where, required=False) or None
         rule = _epoch_rule(manifest, {**rule_raw, **({"window_s": rec["window_s"]} if "window_s" in rec else {})},
                            where, default_rule)
-        if role == "track" and not rule.window_s:
-            _fail(manifest, f"{where}a track needs an epoch window (window_s > 0): the filters step on that clock")
         if role == "track" and point_column is not None:
             _fail(manifest, f"{where}point_column belongs to calibration and static recordings (a tag standing at "
                             "named points); a track moves")
@@ -456,12 +509,13 @@ def load_dataset(path) -> Dataset:
             raw_rssi = pd.to_numeric(pd.Series(table["rssi_dbm"]).astype(object), errors="coerce").to_numpy(float)
             invalid_found[rname] = int(np.isin(raw_rssi, sentinels).sum())
         if role == "track":
-            senders = readings["transmitter"].unique()
-            if len(senders) > 1:
-                _fail(manifest, f"{where}{path.name} holds {len(senders)} transmitters "
-                                f"({', '.join(map(_shown, senders[:5]))}"
-                                f"{', ...' if len(senders) > 5 else ''}); a track follows one tag: give each "
-                                "transmitter's rows their own file and [[recording]]")
+            for column, what in (("transmitter", "transmitters"), (DEVICE_COLUMN, "devices")):
+                senders = readings[column].unique() if column in readings.columns else ()
+                if len(senders) > 1:
+                    _fail(manifest, f"{where}{path.name} holds {len(senders)} {what} "
+                                    f"({', '.join(map(_shown, senders[:5]))}"
+                                    f"{', ...' if len(senders) > 5 else ''}); a track follows one tag: give each "
+                                    f"{what[:-1]}'s rows their own file and [[recording]]")
         reference = None
         if "reference_path" in rec:
             if role != "track":
@@ -473,8 +527,6 @@ def load_dataset(path) -> Dataset:
     if "calibration" not in roles:
         _fail(manifest, "no recording has role 'calibration': the channel is fitted on it (and never on the "
                         "recordings it is scored on)")
-    if not roles & {"static", "track"}:
-        _fail(manifest, "no recording has role 'static' or 'track': there is nothing to localize")
 
     for rec in recordings.values():
         if rec.role == "calibration" and not rec.has_truth:
@@ -484,26 +536,38 @@ def load_dataset(path) -> Dataset:
     truth_z = np.concatenate([r.readings["z_m"].to_numpy(float) for r in recordings.values()])
     truth_xy = np.concatenate([r.readings[["x_m", "y_m"]].to_numpy(float) for r in recordings.values()])
     with_xy = np.isfinite(truth_xy).all(axis=1)
-    if "tag_height_m" in geometry:
+    tag_height, height_source = None, ""
+    if "z" not in anchors.columns:          # 2-D: one plane, no heights anywhere
+        if "tag_height_m" in geometry:
+            _fail(manifest, "[geometry] tag_height_m: anchors have no z: a 2-D data set has no tag height (give the "
+                            "anchors' z in the anchors file for 3-D distances, or drop tag_height_m)")
+        with_z = [r.name for r in recordings.values() if r.readings["z_m"].notna().any()]
+        if with_z:
+            notes["z_m"] = (f"the anchors have no z (a 2-D data set): the true heights (z_m) of "
+                            f"{', '.join(map(repr, with_z))} are ignored; distances are in the plane")
+        for rec in recordings.values():
+            rec.readings["z_m"] = np.nan
+    elif "tag_height_m" in geometry:
         tag_height = _number(manifest, geometry, "tag_height_m", "[geometry] ")
         notes["tag_height_m"] = f"{tag_height:g} m (manifest)"
-        source = "[geometry] tag_height_m"
+        source, height_source = "[geometry] tag_height_m", "manifest"
     elif with_xy.any() and np.isfinite(truth_z[with_xy]).all():
         tag_height = float(np.median(truth_z[with_xy]))
         notes["tag_height_m"] = f"{tag_height:g} m: the median of the recorded true heights (z_m)"
-        source = "the tag's height (the median of the recordings' z_m)"
+        source, height_source = "the tag's height (the median of the recordings' z_m)", "median of the true z"
     else:
         _fail(manifest, "[geometry] tag_height_m is required: the estimators need the tag's height, and not every "
-                        "true position has a z_m")
-    z = anchors["z"].to_numpy(float)
-    low, high = z.min() - MAX_TAG_HEIGHT_OFFSET_M, z.max() + MAX_TAG_HEIGHT_OFFSET_M
-    if not low <= tag_height <= high:
-        _fail(manifest, f"{source} = {tag_height:g} m is not within {MAX_TAG_HEIGHT_OFFSET_M:g} m of the anchors' "
-                        f"heights ({z.min():g} to {z.max():g} m; allowed {low:g} to {high:g} m, "
-                        "MAX_TAG_HEIGHT_OFFSET_M): a unit or sign error? (the manifest's values are in metres)")
-    for rec in recordings.values():     # a true position without a height is at the tag's known height
-        r = rec.readings
-        r.loc[r["x_m"].notna() & r["z_m"].isna(), "z_m"] = tag_height
+                        "true position has a z_m (a 2-D data set has no z column in its anchors file)")
+    if tag_height is not None:
+        z = anchors["z"].to_numpy(float)
+        low, high = z.min() - MAX_TAG_HEIGHT_OFFSET_M, z.max() + MAX_TAG_HEIGHT_OFFSET_M
+        if not low <= tag_height <= high:
+            _fail(manifest, f"{source} = {tag_height:g} m is not within {MAX_TAG_HEIGHT_OFFSET_M:g} m of the "
+                            f"anchors' heights ({z.min():g} to {z.max():g} m; allowed {low:g} to {high:g} m, "
+                            "MAX_TAG_HEIGHT_OFFSET_M): a unit or sign error? (the manifest's values are in metres)")
+        for rec in recordings.values():     # a true position without a height is at the tag's known height
+            r = rec.readings
+            r.loc[r["x_m"].notna() & r["z_m"].isna(), "z_m"] = tag_height
     if "outline" in geometry:
         outline = read_outline(_file(manifest, root, _string(manifest, geometry, "outline", "[geometry] "),
                                      "[geometry] outline: ")) * length_scale
@@ -531,7 +595,10 @@ def load_dataset(path) -> Dataset:
             "; ".join(f"{s} (scored) reads the same file as calibration recording {c} ({f})" for s, c, f in shared)
             + ": the channel is fitted on the epochs these recordings are scored on, so their errors are in-sample "
               "(optimistic); give the scored recordings files of their own")
-    if not any(r.role == "static" or (r.role == "track" and r.has_truth) for r in recordings.values()):
+    if not roles & {"static", "track"}:
+        notes["scoring"] = ("calibration only: no static or track recording, so nothing is localized or scored; "
+                            "the channel is fitted on the calibration recordings")
+    elif not any(r.role == "static" or (r.role == "track" and r.has_truth) for r in recordings.values()):
         notes["scoring"] = ("no static or track recording has a true position per epoch: the static methods are "
                             "not scored (tracks with a reference path are scored by their distance to it)")
     files = [manifest, root / _string(manifest, geometry, "anchors", "[geometry] ")]
@@ -540,14 +607,38 @@ def load_dataset(path) -> Dataset:
     for rec in records:
         files += [recordings[rec["name"]].file] + ([root / rec["reference_path"]] if "reference_path" in rec else [])
     data = Dataset(name, title, root, license_, attribution, anchors, outline, tag_height, recordings, changes,
-                   license_file, notes, tuple(files))
+                   license_file, notes, tuple(files), height_source)
     for rname, rec in recordings.items():    # every recording's epochs now: a problem is named with its file
         try:
             data.epochs(rname)
         except DataFormatError as exc:
             raise DataFormatError(f"readings file {rec.file} (recording {rname!r}): {exc}") from None
         _check_epochs_kept(manifest, data, rname)
+    _device_notes(data)
     return data
+
+
+def _device_notes(data: Dataset) -> None:
+    """Notes on the devices (``device`` column, default the transmitter id): calibration recordings that hold more
+    than one (which, and how many epochs each: a pooled fit mixes their receiver offsets), and a scored recording
+    holding a device that no calibration recording holds (its offset is not calibrated: 0 dB is assumed). Warnings,
+    never refusals: the methods run, the reports say it."""
+    calibration = [data.epochs(n).device for n in data.recordings_with("calibration")]
+    names, counts = np.unique(np.concatenate(calibration).astype(str), return_counts=True)
+    if len(names) > 1:
+        each = ", ".join(f"{_shown(str(d))} ({int(c):,} epochs)" for d, c in zip(names, counts))
+        data.notes["devices"] = (f"the calibration recordings hold {len(names)} devices: {each}; their receiver "
+                                 "offsets (dB) differ, which a fit per device (calibrate_path_loss_devices) "
+                                 "separates and a pooled fit mixes")
+    known = set(names.tolist())
+    for rname, rec in data.recordings.items():
+        if rec.role == "calibration":
+            continue
+        new = [d for d in data.devices(rname) if d not in known]
+        if new:
+            data.notes[f"uncalibrated device {rname}"] = (
+                f"recording {rname!r} holds device(s) {', '.join(map(_shown, new))}, which no calibration recording "
+                "holds: its receiver offset is not calibrated: assumed 0 dB")
 
 
 def _check_epochs_kept(manifest: Path, data: Dataset, rname: str) -> None:
@@ -558,9 +649,14 @@ def _check_epochs_kept(manifest: Path, data: Dataset, rname: str) -> None:
     rule, where = rec.epoch_rule, f"[[recording]] {rname!r}: "
     if rec.role == "track" and len(ep) < 2:
         t = rec.readings["time_s"].to_numpy(float)
-        _fail(manifest, f"{where}a track needs at least 2 epochs, {rec.file.name} makes {len(ep)} at window_s = "
-                        f"{rule.window_s:g} s (its times span {float(np.ptp(t)) if len(t) else 0.0:g} s): the window "
-                        "is longer than the recording, or [units] time is not the file's unit")
+        span = f"its times span {float(np.ptp(t)) if len(t) else 0.0:g} s"
+        if rule.window_s:
+            _fail(manifest, f"{where}a track needs at least 2 epochs, {rec.file.name} makes {len(ep)} at window_s = "
+                            f"{rule.window_s:g} s ({span}): the window is longer than the recording, or [units] time "
+                            "is not the file's unit")
+        _fail(manifest, f"{where}a track needs at least 2 epochs, {rec.file.name} makes {len(ep)} as native scans "
+                        f"(window_s = 0: one epoch per distinct time; {span}): the trackers step on the scans' clock, "
+                        "which takes 2 scan times or more")
     if rule.window_s and rule.min_readings > 1 and not np.isfinite(ep.rss_dbm).any():
         every = epochs(rec.readings, data.anchor_ids, window_s=rule.window_s, aggregate=rule.aggregate,
                        group_by=() if rec.point_column is None else (rec.point_column,))
@@ -630,7 +726,7 @@ def _shared_files(recordings: dict) -> list[tuple[str, str, str]]:
 def _check_point_column(table: pd.DataFrame, lines, column: str, path: Path, manifest: Path, where: str) -> None:
     """The point column is an extra column of the file, and every row names its point (an empty id would make one
     'point' of rows in transit)."""
-    reserved = READING_COLUMNS + OPTIONAL_READING_COLUMNS
+    reserved = READING_COLUMNS + OPTIONAL_READING_COLUMNS + (DEVICE_COLUMN,)
     if column in reserved or column not in table.columns:
         extra = [c for c in table.columns if c not in reserved]
         raise DataFormatError(f"{manifest}: {where}point_column {_shown(column)} must name an extra column of "

@@ -10,6 +10,11 @@ The site (every value a named constant): a 20 m x 12 m hall, 8 anchors 2.5-3.0 m
 log-distance channel per anchor (``P_0`` -45 +- 3 dBm, ``n`` 2.0-2.6, i.i.d. shadowing 4 dB per packet), packets
 below -95 dBm lost and 10 % of the others dropped at random. Recordings: a calibration survey on a 2 m grid (5 s at
 each point), 12 static test points (10 s each), and two walks around the hall at 1 m/s.
+
+Variants (keyword options of :func:`write_example_dataset`; the defaults write the set above): the walkers' speed
+(``speed_m_s``), which recordings are written (``roles``: a static-only, a track-only or a calibration-only set),
+a 2-D site (``two_d``: anchors without z, distances in the plane, no tag height) and tracks logged as native scans
+(``native_scans``: one row per anchor per scan, every anchor of a scan at one time, 1 Hz, ``window_s = 0``).
 """
 from __future__ import annotations
 
@@ -18,7 +23,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-__all__ = ["write_example_dataset", "EXAMPLE_SITE"]
+__all__ = ["write_example_dataset", "EXAMPLE_SITE", "EXAMPLE_ROLES"]
 
 #: the example site's constants (all SI): hall size, anchors, tag height, channel, packet rate and losses
 EXAMPLE_SITE = {
@@ -36,7 +41,10 @@ EXAMPLE_SITE = {
     "sentinel_dbm": 0.0,
     "packet_rate_hz": 4.0,
     "walk_speed_m_s": 1.0,
+    "scan_rate_hz": 1.0,             # native scans (native_scans=True): a phone's BLE scan results, about 1 Hz
 }
+#: the recordings of the example by role (``roles`` of :func:`write_example_dataset` picks among them)
+EXAMPLE_ROLES = ("calibration", "static", "track")
 
 _MANIFEST = '''# A synthetic example data set written by locbook.data.example (locbook data example DIR):
 # raw BLE packets from a log-distance channel with known truth, in the long format, with the faults real data bring.
@@ -63,29 +71,16 @@ tag_height_m = 1.2
 window_s = 1.0                  # raw packets -> one epoch per second
 aggregate = "mean"
 min_readings = 1
-
-[[recording]]
-name = "survey"
-file = "survey.csv"
-role = "calibration"
-point_column = "point"
-
-[[recording]]
-name = "points"
-file = "points.csv"
-role = "static"
-point_column = "point"
-
-[[recording]]
-name = "walk_a"
-file = "walk_a.csv"
-role = "track"
-
-[[recording]]
-name = "walk_b"
-file = "walk_b.csv"
-role = "track"
 '''
+#: the [[recording]] blocks of the manifest, by role, in the manifest's order
+_RECORDINGS = {
+    "calibration": ['\n[[recording]]\nname = "survey"\nfile = "survey.csv"\nrole = "calibration"\n'
+                    'point_column = "point"\n'],
+    "static": ['\n[[recording]]\nname = "points"\nfile = "points.csv"\nrole = "static"\npoint_column = "point"\n'],
+    "track": ['\n[[recording]]\nname = "walk_a"\nfile = "walk_a.csv"\nrole = "track"\n',
+              '\n[[recording]]\nname = "walk_b"\nfile = "walk_b.csv"\nrole = "track"\n'],
+}
+_NATIVE_WINDOW = "window_s = 0                    # native scans: each row time is one scan, already an epoch\n"
 
 
 def _toml_string(text: str) -> str:
@@ -96,16 +91,22 @@ def _toml_string(text: str) -> str:
     return f'"{escaped}"'
 
 
-def _packets(positions_m, time_s, rng, site) -> pd.DataFrame:
-    """Packets of a tag at ``positions_m (T, 2)`` at ``time_s (T,)`` heard by every anchor, with the losses."""
+def _packets(positions_m, time_s, rng, site, *, two_d: bool = False, scans: bool = False) -> pd.DataFrame:
+    """Packets of a tag at ``positions_m (T, 2)`` at ``time_s (T,)`` heard by every anchor, with the losses.
+    ``two_d``: distances in the plane (no heights); ``scans``: every anchor's reading of one time at that time (a
+    scan's rows), not at each anchor's own phase."""
     anchors = site["anchors_m"]
     m = len(anchors)
-    pos3 = np.column_stack([positions_m, np.full(len(positions_m), site["tag_height_m"])])
-    d = np.maximum(np.linalg.norm(pos3[:, None, :] - anchors, axis=-1), 0.1)
+    if two_d:
+        d = np.maximum(np.linalg.norm(positions_m[:, None, :] - anchors[:, :2], axis=-1), 0.1)
+    else:
+        pos3 = np.column_stack([positions_m, np.full(len(positions_m), site["tag_height_m"])])
+        d = np.maximum(np.linalg.norm(pos3[:, None, :] - anchors, axis=-1), 0.1)
     mean = site["ref_power_dbm"] - 10.0 * site["path_loss_exp"] * np.log10(d)
     rss = np.round(mean + site["sigma_db"] * rng.standard_normal(mean.shape))    # receivers report whole dBm
-    # each anchor samples at its own phase within the packet interval
-    t = time_s[:, None] + rng.uniform(0, 1.0 / site["packet_rate_hz"], size=(1, m))
+    # each anchor samples at its own phase within the packet interval (a scan: all at the scan's time)
+    t = np.repeat(time_s[:, None], m, axis=1) if scans else \
+        time_s[:, None] + rng.uniform(0, 1.0 / site["packet_rate_hz"], size=(1, m))
     kept = (rss >= site["sensitivity_dbm"]) & (rng.random(rss.shape) >= site["drop_fraction"])
     row, col = np.nonzero(kept)
     out = pd.DataFrame({"time_s": np.round(t[row, col], 4), "transmitter": "tag1",
@@ -119,37 +120,48 @@ def _packets(positions_m, time_s, rng, site) -> pd.DataFrame:
     return out.sort_values("time_s", kind="stable").reset_index(drop=True)
 
 
-def _dwell(points_m, ids, seconds: float, t0: float, rng, site):
+def _dwell(points_m, ids, seconds: float, t0: float, rng, site, *, two_d: bool = False):
     """Packets of a tag standing ``seconds`` at each point in turn (2 s walking between points)."""
     per = int(round(seconds * site["packet_rate_hz"]))
     pos = np.repeat(points_m, per, axis=0)
     start = t0 + np.arange(len(points_m)) * (seconds + 2.0)
     t = (start[:, None] + np.arange(per) / site["packet_rate_hz"]).reshape(-1)
-    out = _packets(pos, t, rng, site)
+    out = _packets(pos, t, rng, site, two_d=two_d)
     which = np.minimum(((out["time_s"].to_numpy() - t0) // (seconds + 2.0)).astype(int), len(ids) - 1)
     out.insert(6, "point", np.asarray(ids, dtype=object)[which])
     return out
 
 
-def _loop(duration_s: float, offset_m: float, rng, site, t0: float = 0.0):
-    """Packets of a tag walking a rectangle ``offset_m`` inside the hall's walls at the site's walking speed."""
+def _loop(duration_s: float, offset_m: float, rng, site, t0: float = 0.0, *, two_d: bool = False,
+          scans: bool = False):
+    """Packets of a tag walking a rectangle ``offset_m`` inside the hall's walls at the site's walking speed
+    (``scans``: as scans at the site's scan rate)."""
     w, h = site["hall_m"]
     corners = np.array([[offset_m, offset_m], [w - offset_m, offset_m], [w - offset_m, h - offset_m],
                         [offset_m, h - offset_m], [offset_m, offset_m]])
     seg = np.linalg.norm(np.diff(corners, axis=0), axis=1)
     cum = np.r_[0.0, np.cumsum(seg)]
-    t = t0 + np.arange(int(duration_s * site["packet_rate_hz"])) / site["packet_rate_hz"]
+    rate = site["scan_rate_hz"] if scans else site["packet_rate_hz"]
+    t = t0 + np.arange(int(duration_s * rate)) / rate
     s = (site["walk_speed_m_s"] * (t - t0)) % cum[-1]
     pos = np.column_stack([np.interp(s, cum, corners[:, k]) for k in range(2)])
-    return _packets(pos, t, rng, site)
+    return _packets(pos, t, rng, site, two_d=two_d, scans=scans)
 
 
 def write_example_dataset(folder, rng: np.random.Generator, *, name: str = "example", walk_s: float = 120.0,
-                          seed_note: int | str = "given", force: bool = False) -> Path:
+                          seed_note: int | str = "given", force: bool = False, speed_m_s: float | None = None,
+                          roles=EXAMPLE_ROLES, two_d: bool = False, native_scans: bool = False) -> Path:
     """Write the example data set (module docstring) to ``folder`` (created; a folder that holds files is refused
     unless ``force``, so a typo never overwrites a data set) and return it. ``walk_s``: length of each walk (s): 120 s
     gives about 30,000 readings in all; the loader benchmark scales it up. ``name``: the manifest's name (it names
-    the reports folder)."""
+    the reports folder).
+
+    Variants (the defaults write today's set, byte for byte): ``speed_m_s``, the walkers' speed (default
+    ``EXAMPLE_SITE["walk_speed_m_s"]``, 1 m/s); ``roles``, the recordings written, a subset of
+    :data:`EXAMPLE_ROLES` holding ``"calibration"`` (e.g. ``("calibration", "static")`` for a static-only set,
+    ``("calibration", "track")`` for a track-only one); ``two_d``, anchors without z (a 2-D site: readings from
+    distances in the plane, no ``tag_height_m``); ``native_scans``, the tracks written as scans (every anchor of a
+    scan at one time, ``EXAMPLE_SITE["scan_rate_hz"]``) with ``window_s = 0``."""
     from ..errors import ParameterError
     from .dataset import name_problem
     if not isinstance(rng, np.random.Generator):
@@ -158,32 +170,58 @@ def write_example_dataset(folder, rng: np.random.Generator, *, name: str = "exam
     if problem:
         raise ParameterError(f"name (--name): {problem}")
     site = EXAMPLE_SITE
+    if speed_m_s is not None:
+        if isinstance(speed_m_s, bool) or not isinstance(speed_m_s, (int, float)) or not 0 < speed_m_s < np.inf:
+            raise ParameterError(f"speed_m_s must be a positive finite speed (m/s), got {speed_m_s!r}")
+        site = {**site, "walk_speed_m_s": float(speed_m_s)}
+    roles = (roles,) if isinstance(roles, str) else tuple(roles)
+    unknown = [r for r in roles if r not in EXAMPLE_ROLES]
+    if unknown or "calibration" not in roles:
+        raise ParameterError(f"roles must be some of {EXAMPLE_ROLES}, 'calibration' among them (a data set needs a "
+                             f"calibration recording), got {roles!r}")
+    for key, value in (("two_d", two_d), ("native_scans", native_scans)):
+        if not isinstance(value, bool):
+            raise ParameterError(f"{key} must be True or False, got {value!r}")
     folder = Path(folder)
     if folder.exists() and (not folder.is_dir() or (any(folder.iterdir()) and not force)):
         raise ParameterError(f"{folder} exists and is not an empty folder; the example is written to a new or empty "
                              "folder (force=True, `--force`, to overwrite its files)")
     folder.mkdir(parents=True, exist_ok=True)
     w, h = site["hall_m"]
-    pd.DataFrame({"id": [f"A{j + 1}" for j in range(len(site["anchors_m"]))], "x": site["anchors_m"][:, 0],
-                  "y": site["anchors_m"][:, 1], "z": site["anchors_m"][:, 2]}).to_csv(folder / "anchors.csv",
-                                                                                         index=False)
+    columns = {"id": [f"A{j + 1}" for j in range(len(site["anchors_m"]))], "x": site["anchors_m"][:, 0],
+               "y": site["anchors_m"][:, 1]}
+    if not two_d:
+        columns["z"] = site["anchors_m"][:, 2]
+    pd.DataFrame(columns).to_csv(folder / "anchors.csv", index=False)
     pd.DataFrame({"x": [0.0, w, w, 0.0], "y": [0.0, 0.0, h, h]}).to_csv(folder / "outline.csv", index=False)
     gx, gy = np.meshgrid(np.arange(1.0, w, 2.0), np.arange(1.0, h, 2.0))
     grid = np.column_stack([gx.ravel(), gy.ravel()])
-    _dwell(grid, [f"C{k + 1:03d}" for k in range(len(grid))], 5.0, 0.0, rng, site).to_csv(
+    _dwell(grid, [f"C{k + 1:03d}" for k in range(len(grid))], 5.0, 0.0, rng, site, two_d=two_d).to_csv(
         folder / "survey.csv", index=False)
-    tests = np.column_stack([rng.uniform(2.0, w - 2.0, 12), rng.uniform(2.0, h - 2.0, 12)]).round(2)
-    _dwell(tests, [f"T{k + 1:02d}" for k in range(len(tests))], 10.0, 0.0, rng, site).to_csv(
-        folder / "points.csv", index=False)
-    _loop(walk_s, 2.0, rng, site).to_csv(folder / "walk_a.csv", index=False)
-    walk_b = _loop(walk_s, 3.0, rng, site)
-    # logged out of order: a few pairs of neighbouring rows swapped (a buffered receiver flushing late)
-    swap = rng.choice(np.arange(1, len(walk_b) - 1, 2), size=max(1, len(walk_b) // 500), replace=False)
-    order = np.arange(len(walk_b))
-    order[swap], order[swap + 1] = swap + 1, swap
-    walk_b = walk_b.iloc[order]
-    walk_b.to_csv(folder / "walk_b.csv", index=False)
+    if "static" in roles:
+        tests = np.column_stack([rng.uniform(2.0, w - 2.0, 12), rng.uniform(2.0, h - 2.0, 12)]).round(2)
+        _dwell(tests, [f"T{k + 1:02d}" for k in range(len(tests))], 10.0, 0.0, rng, site, two_d=two_d).to_csv(
+            folder / "points.csv", index=False)
+    if "track" in roles:
+        _loop(walk_s, 2.0, rng, site, two_d=two_d, scans=native_scans).to_csv(folder / "walk_a.csv", index=False)
+        walk_b = _loop(walk_s, 3.0, rng, site, two_d=two_d, scans=native_scans)
+        # logged out of order: a few pairs of neighbouring rows swapped (a buffered receiver flushing late)
+        swap = rng.choice(np.arange(1, len(walk_b) - 1, 2), size=max(1, len(walk_b) // 500), replace=False)
+        order = np.arange(len(walk_b))
+        order[swap], order[swap + 1] = swap + 1, swap
+        walk_b = walk_b.iloc[order]
+        walk_b.to_csv(folder / "walk_b.csv", index=False)
     attribution = f"Synthetic data generated by locbook (locbook.data.example.write_example_dataset, seed {seed_note})"
     text = _MANIFEST.format(name=_toml_string(name), attribution=_toml_string(attribution))
+    if two_d:
+        text = text.replace("tag_height_m = 1.2\n", "")
+        text = text.replace("8 anchors, raw packets", "8 anchors in one plane (2-D), raw packets")
+    if native_scans and "track" in roles:
+        text = text.replace(", raw packets at 4 Hz",
+                            f", raw packets at 4 Hz, walks as {site['scan_rate_hz']:g} Hz scans")
+    for role in EXAMPLE_ROLES:
+        if role in roles:
+            text += "".join(block + (_NATIVE_WINDOW if native_scans and role == "track" else "")
+                            for block in _RECORDINGS[role])
     (folder / "dataset.toml").write_text(text, encoding="utf-8")
     return folder

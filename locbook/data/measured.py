@@ -8,14 +8,23 @@ Bringing a new data set into locbook is a file conversion, not code. Three files
 column         required meaning
 ============== ======== ========================================================================================
 ``time_s``     yes      time of the reading in seconds (any origin); non-decreasing within a transmitter
-``transmitter``yes      id of the device that sent the packet (the tag), any text
-``receiver``   yes      id of the device that measured the RSSI: an ``id`` of the anchors file
+``transmitter``yes      id of the moving tag, any text (see "Link direction" below)
+``receiver``   yes      id of the fixed device of the link: an ``id`` of the anchors file
 ``rssi_dbm``   yes      received power in dBm; empty or ``NaN`` = the receiver heard no packet (not heard)
 ``x_m``        no       true position of the transmitter (m), where known; empty = unknown
 ``y_m``        no       (``x_m`` and ``y_m`` are given together or not at all, row by row)
 ``z_m``        no       true height of the transmitter (m), where known
 ``heading_rad``no       true heading of the transmitter (rad), where known
+``device``     no       the hardware that measured the tag's side of the link (a phone model, a tag type), text;
+                        default: the transmitter id. Devices differ by a receiver offset (dB); see
+                        :func:`locbook.static.calibration.calibrate_path_loss_devices`
 ============== ======== ========================================================================================
+
+**Link direction.** The anchor, the fixed device, always goes in ``receiver`` and the moving tag in
+``transmitter``, whichever end physically transmits: a phone scanning fixed beacons writes the beacon's id in
+``receiver`` and the phone's in ``transmitter``. The channel is the same either way (the path loss is
+reciprocal), and the estimators only need to know which end is fixed. A readings file whose ``receiver`` ids are not
+anchors while its ``transmitter`` ids are is refused with this rule in the message.
 
 Other columns are kept (an epoch keeps those with one value within it, e.g. a point id). Every row has exactly the
 header's number of fields: an empty value is an empty field (``0.5,tag,A,`` = not heard), while a row with a field
@@ -39,10 +48,11 @@ pandas' C reader at about 7 bytes of memory per byte of file, any other file thr
 24 bytes per byte, which takes files of at most :data:`MAX_EXACT_READ_BYTES` (64 MiB) and refuses a larger one
 naming the line that needs it. Messages quote at most :data:`MAX_QUOTED_CHARS` characters of a file.
 
-**Anchors** (CSV): ``id, x, y, z`` in metres (``z`` is the anchor height; required, so that ranges are
-three-dimensional). Ids are unique; coordinates finite and less than :data:`MAX_COORDINATE_M` in magnitude; no two
-anchors within :data:`ANCHOR_MIN_SEPARATION_M`
-(1 mm) of each other.
+**Anchors** (CSV): ``id, x, y, z`` in metres (``z`` is the anchor height: ranges are three-dimensional, the tag at
+its known height), or ``id, x, y`` with no ``z`` column for a 2-D problem (anchors and tag in one plane, ranges in
+the plane). A ``z`` column gives every anchor's height: one left empty is refused naming its line. Ids are unique;
+coordinates finite and less than :data:`MAX_COORDINATE_M` in magnitude; no two anchors within
+:data:`ANCHOR_MIN_SEPARATION_M` (1 mm) of each other.
 
 **Floor outline** (CSV, optional): ``x, y`` vertices of a closed polygon in metres (at least 3 vertices, the
 closing vertex may repeat the first).
@@ -79,13 +89,20 @@ __all__ = [
     "DataFormatError", "MeasuredDataWarning", "READING_COLUMNS", "OPTIONAL_READING_COLUMNS", "RSSI_RANGE_DBM",
     "MAX_TIME_S", "ANCHOR_MIN_SEPARATION_M", "MAX_REGULAR_EPOCHS", "AGGREGATES", "Epochs", "RSSI_LIMITS_DBM",
     "MAX_COORDINATE_M", "MAX_LINE_BYTES", "MAX_EXACT_READ_BYTES", "MAX_READINGS_FILE_BYTES", "MAX_MIN_READINGS",
-    "MIN_WINDOW_S",
+    "MIN_WINDOW_S", "DEVICE_COLUMN", "LINK_DIRECTION_RULE",
     "read_readings", "read_anchors", "read_outline", "read_path_segments", "validate_readings", "epochs",
-    "regular_epochs",
+    "regular_epochs", "scan_interval_s",
 ]
 
 READING_COLUMNS = ("time_s", "transmitter", "receiver", "rssi_dbm")
 OPTIONAL_READING_COLUMNS = ("x_m", "y_m", "z_m", "heading_rad")
+#: the optional text column naming the measuring hardware of the tag's side of a link (default: the transmitter id):
+#: devices differ by a constant receiver offset in dB, which a calibration can fit per device
+DEVICE_COLUMN = "device"
+#: which end of a link goes in which column, quoted by the messages a swap of the two columns surfaces as
+LINK_DIRECTION_RULE = ("the anchor (the fixed device) always goes in 'receiver' and the moving tag in 'transmitter', "
+                       "whichever end physically transmits (a phone scanning fixed beacons: the beacon's id is the "
+                       "receiver)")
 #: a received power outside this interval (dBm) is a unit or sign error, never a reading
 RSSI_RANGE_DBM = (-150.0, 20.0)
 #: the widest ``valid_range_dbm`` a caller may declare (dBm): -300 dBm is 1e-33 W, +100 dBm 10 MW; a range beyond
@@ -421,6 +438,15 @@ def validate_readings(table: pd.DataFrame, *, source: str, lines=None, anchor_id
         out[col] = (_numeric(text, col, source, lines, missing_ok=True, coordinate=col != "heading_rad")
                     if col in text.columns
                     else np.full(len(text), np.nan))
+    if DEVICE_COLUMN in text.columns:
+        devices = _ids(text[DEVICE_COLUMN])
+        empty = devices.isna().to_numpy()
+        if empty.any():
+            i = int(np.flatnonzero(empty)[0])
+            raise DataFormatError(f"{source}, line {lines[i]}, column {DEVICE_COLUMN!r}: the device is empty "
+                                  f"({int(empty.sum())} such row(s)); a device column names the device on every row "
+                                  "(without the column, each transmitter id is its own device)")
+        out[DEVICE_COLUMN] = devices.array
     half = np.isnan(out["x_m"].to_numpy()) != np.isnan(out["y_m"].to_numpy())
     if half.any():
         i = int(np.flatnonzero(half)[0])
@@ -433,7 +459,8 @@ def validate_readings(table: pd.DataFrame, *, source: str, lines=None, anchor_id
         if unknown.any():
             i = int(np.flatnonzero(unknown)[0])
             raise DataFormatError(f"{source}, line {lines[i]}, column 'receiver': {_shown(out['receiver'].iloc[i])} is "
-                                  f"not an anchor id (the anchors are {_shown_names(sorted(known))})")
+                                  f"not an anchor id (the anchors are {_shown_names(sorted(known))})"
+                                  f"{_link_direction_hint(out['transmitter'], known)}")
     key = out[["time_s", "transmitter", "receiver"]]
     dup = key.duplicated(keep="first").to_numpy()
     if dup.any():
@@ -464,6 +491,18 @@ def validate_readings(table: pd.DataFrame, *, source: str, lines=None, anchor_id
     for col in extra:
         out[col] = text[col].array
     return out
+
+
+def _link_direction_hint(transmitters: pd.Series, anchor_ids) -> str:
+    """The end of the message for a receiver that is not an anchor: the link-direction rule, and whether the
+    transmitter column holds anchor ids (the two columns swapped: a phone log of the beacons it heard)."""
+    known = {str(a) for a in anchor_ids}
+    sent = pd.Series(pd.Series(transmitters).unique()).astype(str)
+    swapped = sent[sent.isin(known)]
+    if len(swapped):
+        return (f"; the transmitter column holds anchor ids ({_shown_names(swapped.tolist(), limit=4)}): the two "
+                f"columns are swapped? {LINK_DIRECTION_RULE[0].upper()}{LINK_DIRECTION_RULE[1:]}")
+    return f"; {LINK_DIRECTION_RULE}"
 
 
 def _ids(column: pd.Series) -> pd.Series:
@@ -682,12 +721,15 @@ def read_readings(path, *, anchor_ids=None, invalid_values_dbm=None, valid_range
 
 
 def read_anchors(path, *, min_separation_m: float = ANCHOR_MIN_SEPARATION_M) -> pd.DataFrame:
-    """Read and check an anchors CSV: ``id, x, y, z`` (metres), ids unique (text: ``NA`` is an id), coordinates
-    finite, no two anchors closer than ``min_separation_m`` (default 1 mm: two ids at one point are a copy-paste
-    error, and would make the geometry degenerate)."""
+    """Read and check an anchors CSV: ``id, x, y, z`` (metres) for a 3-D data set, ``id, x, y`` (no ``z`` column)
+    for a 2-D one (anchors and tag in one plane). Ids are unique (text: ``NA`` is an id), coordinates finite, no
+    two anchors closer than ``min_separation_m`` (default 1 mm: two ids at one point are a copy-paste error, and
+    would make the geometry degenerate). A ``z`` column holds a height on every line: one left empty while others
+    are given is refused naming its line (a 2-D file has no ``z`` column at all). Returns columns ``id, x, y`` and,
+    for 3-D, ``z``."""
     if not (isinstance(min_separation_m, (int, float)) and math.isfinite(min_separation_m) and min_separation_m >= 0):
         raise ParameterError(f"min_separation_m must be a finite number of metres >= 0, got {min_separation_m!r}")
-    table, lines = _read_text_table(path, ("id", "x", "y", "z"), "anchors")
+    table, lines = _read_text_table(path, ("id", "x", "y"), "anchors")
     source = f"anchors file {path}"
     if len(table) == 0:
         raise DataFormatError(f"{source}: no anchors")
@@ -698,17 +740,29 @@ def read_anchors(path, *, min_separation_m: float = ANCHOR_MIN_SEPARATION_M) -> 
     if dup.any():
         i = int(np.flatnonzero(dup)[0])
         raise DataFormatError(f"{source}, line {lines[i]}, column 'id': anchor id {_shown(ids.iloc[i])} appears twice")
+    axes = ("x", "y", "z") if "z" in table.columns else ("x", "y")
     out = pd.DataFrame({"id": ids.to_numpy()})
-    for col in ("x", "y", "z"):
+    for col in ("x", "y"):
         out[col] = _numeric(table, col, source, lines, missing_ok=False, coordinate=True)
-    xyz = out[["x", "y", "z"]].to_numpy(float)
-    pairs = cKDTree(xyz).query_pairs(min_separation_m, output_type="ndarray") if len(xyz) > 1 else np.zeros((0, 2))
+    if "z" in axes:
+        z = _numeric(table, "z", source, lines, missing_ok=True, coordinate=True)
+        empty = np.isnan(z)
+        if empty.any():
+            i = int(np.flatnonzero(empty)[0])
+            raise DataFormatError(
+                f"{source}, line {lines[i]}, column 'z': the height is empty ({int(empty.sum())} of the {len(z)} "
+                f"anchors have none): a 3-D data set gives every anchor's z; a 2-D one (anchors and tag in one "
+                "plane) has no z column at all")
+        out["z"] = z
+    pos = out[list(axes)].to_numpy(float)
+    pairs = cKDTree(pos).query_pairs(min_separation_m, output_type="ndarray") if len(pos) > 1 else np.zeros((0, 2))
     if len(pairs):
         pairs = np.sort(pairs, axis=1)
         i, j = (int(v) for v in pairs[np.lexsort((pairs[:, 0], pairs[:, 1]))[0]])   # the first in file order
         raise DataFormatError(
-            f"{source}, lines {lines[i]} and {lines[j]}, columns 'x','y','z': anchors {_shown(ids.iloc[i])} and "
-            f"{_shown(ids.iloc[j])} are at the same position ({', '.join(f'{v:g}' for v in xyz[i])}) m (within "
+            f"{source}, lines {lines[i]} and {lines[j]}, columns {','.join(repr(a) for a in axes)}: anchors "
+            f"{_shown(ids.iloc[i])} and "
+            f"{_shown(ids.iloc[j])} are at the same position ({', '.join(f'{v:g}' for v in pos[i])}) m (within "
             f"{min_separation_m:g} m; {len(pairs)} such pair(s)); two receivers at one point are a copy error or one "
             "device: fix the coordinates or keep one id")
     return out
@@ -752,7 +806,8 @@ class Epochs:
     the ``transmitter`` of each epoch and the anchor ids of the columns. ``n_readings (T, m)``: how many readings
     made each entry (0 where not heard). ``extra``: the readings file's other columns (a point id, a label) that
     hold one value within every epoch, one value per epoch (a column that varies within an epoch is not kept:
-    name it in ``group_by`` to split epochs by it)."""
+    name it in ``group_by`` to split epochs by it). ``device (T,)``: the device of each epoch (the readings'
+    ``device`` column; default, and where not given, the transmitter id)."""
 
     time_s: np.ndarray
     rss_dbm: np.ndarray
@@ -762,6 +817,11 @@ class Epochs:
     anchor_ids: tuple[str, ...]
     n_readings: np.ndarray | None = None
     extra: dict = field(default_factory=dict)
+    device: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.device is None:          # the default: each transmitter is its own device
+            object.__setattr__(self, "device", np.asarray(self.transmitter, dtype=object).copy())
 
     def __len__(self) -> int:
         return self.time_s.shape[0]
@@ -771,7 +831,7 @@ class Epochs:
         return Epochs(self.time_s[mask], self.rss_dbm[mask], self.position_m[mask], self.heading_rad[mask],
                       self.transmitter[mask], self.anchor_ids,
                       None if self.n_readings is None else self.n_readings[mask],
-                      {k: v[mask] for k, v in self.extra.items()})
+                      {k: v[mask] for k, v in self.extra.items()}, self.device[mask])
 
 
 def _check_epoch_rule(window_s, aggregate: str, min_readings: int, group_by, readings: pd.DataFrame):
@@ -786,7 +846,7 @@ def _check_epoch_rule(window_s, aggregate: str, min_readings: int, group_by, rea
         raise ParameterError(f"min_readings must be an integer from 1 to {MAX_MIN_READINGS:,} (MAX_MIN_READINGS), "
                              f"got {_shown(min_readings)}")
     group_by = (group_by,) if isinstance(group_by, str) else tuple(group_by)
-    reserved = set(READING_COLUMNS) | set(OPTIONAL_READING_COLUMNS)
+    reserved = set(READING_COLUMNS) | set(OPTIONAL_READING_COLUMNS) | {DEVICE_COLUMN}
     for col in group_by:
         if col in reserved:
             raise ParameterError(f"group_by names extra columns of the readings (e.g. a point id), not {col!r}")
@@ -802,26 +862,36 @@ def epochs(readings: pd.DataFrame, anchor_ids, *, window_s: float | None = None,
     that order), NaN where the anchor heard nothing (the library's one rule for missing readings). Epochs are in
     time order (ties: the transmitter's first appearance).
 
-    ``window_s=None`` (or 0): the rows already are epochs: every distinct (time, transmitter) is one epoch, and
-    its true position must be the same on all of its rows (else :class:`DataFormatError`).
+    ``window_s=None`` (or 0): the rows already are epochs (native scans: a phone's scan, a logger's averaged
+    interval): every distinct (time, transmitter) is one epoch, and its true position must be the same on all of
+    its rows (else :class:`DataFormatError`); the epoch's time is that time and its truth that of its rows.
 
     ``window_s > 0``: raw packets -> epochs. A transmitter's readings go to the window of the nearest tick of a
     clock of period ``window_s`` started at that transmitter's first reading (tick ``k`` holds ``[t0 + (k - 1/2) w,
-    t0 + (k + 1/2) w)``, so rows already on such a clock keep one epoch each), and the readings of one anchor in one window are
-    combined by ``aggregate`` (``"mean"``, ``"median"`` or ``"max"`` of the dBm values); an anchor with fewer than
-    ``min_readings`` readings in the window is NaN (not heard). The epoch's time is its tick; its true position is
-    the mean of its rows' positions (a moving tag: the window's mean), its heading their circular mean.
+    t0 + (k + 1/2) w)``, so rows already on such a clock keep one epoch each), and the readings of one anchor in one
+    window are combined by ``aggregate`` (``"mean"``, ``"median"`` or ``"max"`` of the dBm values); an anchor with
+    fewer than ``min_readings`` readings in the window is NaN (not heard). The epoch's time is its tick.
+
+    The true position of a windowed epoch is the mean, coordinate by coordinate, of the true positions written on
+    the window's rows (every row of the epoch that has one, heard or not: one row per reading, so a time logged by
+    four anchors counts four times), not the row nearest the tick: the readings were taken along that stretch, so
+    the mean is the position their aggregate describes. A coordinate that is the same on every such row (a tag
+    standing still, rows already epochs) is kept exactly, not averaged. The heading is the circular mean of the
+    rows' headings. NaN where no row of the window has a true position (heading: no row has one). A moving tag's
+    first window is only half full (``[t0, t0 + w/2)``), so its mean lies about ``w/4`` of travel after the tick.
 
     ``group_by``: extra columns (a point id) whose values never share an epoch: epochs are split by them, so a
-    window never mixes two static points. Extra columns that hold one value within every epoch are kept in
-    :attr:`Epochs.extra`."""
+    window never mixes two static points. Epochs are split by the readings' ``device`` column too (a window never
+    mixes two devices); :attr:`Epochs.device` holds it (default: the transmitter id). Extra columns that hold one
+    value within every epoch are kept in :attr:`Epochs.extra`."""
     anchor_ids = tuple(str(a) for a in anchor_ids)
     group_by = _check_epoch_rule(window_s, aggregate, min_readings, group_by, readings)
     col = {a: j for j, a in enumerate(anchor_ids)}
     receivers = pd.Series(readings["receiver"].map(col), dtype=float)
     if receivers.isna().any():
         bad = readings["receiver"][receivers.isna().to_numpy()].iloc[0]
-        raise DataFormatError(f"receiver {_shown(bad)} is not one of the anchor ids {_shown_names(anchor_ids)}")
+        raise DataFormatError(f"receiver {_shown(bad)} is not one of the anchor ids {_shown_names(anchor_ids)}"
+                              f"{_link_direction_hint(readings['transmitter'], anchor_ids)}")
     receivers = receivers.to_numpy(int)
     time_s = readings["time_s"].to_numpy(float)
     tx_codes, tx_names = pd.factorize(readings["transmitter"])
@@ -835,7 +905,9 @@ def epochs(readings: pd.DataFrame, anchor_ids, *, window_s: float | None = None,
         epoch_time = first + tick * window_s
     else:
         epoch_time = time_s
-    keys = [pd.Series(epoch_time), pd.Series(tx_codes)] + [pd.Series(pd.factorize(readings[c])[0]) for c in group_by]
+    has_device = DEVICE_COLUMN in readings.columns
+    splits = group_by + ((DEVICE_COLUMN,) if has_device else ())
+    keys = [pd.Series(epoch_time), pd.Series(tx_codes)] + [pd.Series(pd.factorize(readings[c])[0]) for c in splits]
     row, uniques = pd.MultiIndex.from_arrays(keys).factorize()
     n, m = len(uniques), len(anchor_ids)
     # epochs in time order, ties by the transmitter's first appearance, then by first appearance of the group
@@ -890,7 +962,7 @@ def epochs(readings: pd.DataFrame, anchor_ids, *, window_s: float | None = None,
                                   "has different true positions or headings on its rows")
         position, heading = per_epoch[:, :3], per_epoch[:, 3]
     extra = {}
-    reserved = set(READING_COLUMNS) | set(OPTIONAL_READING_COLUMNS)
+    reserved = set(READING_COLUMNS) | set(OPTIONAL_READING_COLUMNS) | {DEVICE_COLUMN}
     for name in [c for c in readings.columns if c not in reserved]:
         values = readings[name].reset_index(drop=True)
         if name not in group_by and (values.groupby(row).nunique(dropna=False) > 1).any():
@@ -899,7 +971,11 @@ def epochs(readings: pd.DataFrame, anchor_ids, *, window_s: float | None = None,
         kept[row[::-1]] = values.to_numpy(object)[::-1]
         extra[name] = kept
     tx = np.asarray(tx_names, dtype=object)[utx[order]]
-    return Epochs(utime[order], rss, position, heading, tx, anchor_ids, counts, extra)
+    device = None
+    if has_device:                                     # one device per epoch: the epochs are split by it
+        device = np.empty(n, dtype=object)
+        device[row[::-1]] = readings[DEVICE_COLUMN].astype(str).to_numpy(object)[::-1]
+    return Epochs(utime[order], rss, position, heading, tx, anchor_ids, counts, extra, device)
 
 
 def _count(value: float) -> str:
@@ -977,5 +1053,36 @@ def regular_epochs(ep: Epochs, dt_s: float, *, tolerance_s: float | None = None,
         extra[name] = np.full(n, None, dtype=object)
         extra[name][tick] = values
     reg = Epochs(t0 + np.arange(n) * dt_s, spread(ep.rss_dbm, (n, m)), spread(ep.position_m, (n, 3)),
-                 spread(ep.heading_rad, (n,)), tx, ep.anchor_ids, counts, extra)
+                 spread(ep.heading_rad, (n,)), tx, ep.anchor_ids, counts, extra,
+                 np.full(n, ep.device[0], dtype=object))
     return reg, tick
+
+
+def scan_interval_s(ep: Epochs, *, name: str | None = None) -> float:
+    """The clock of native scans (rows already epochs, ``window_s = 0``): the median spacing (s) of the epoch times
+    of one transmitter, ``median(diff(sorted(time_s)))``, the filters' time step for such a recording. The median,
+    not the mean: a scanner that pauses (a phone's scan throttling, a logger's gap) leaves a few long spacings that
+    would set a clock slower than nearly every scan.
+
+    ``name`` names the recording in messages. Fewer than 2 epochs, epochs of several transmitters or devices, times
+    that are not finite, or a median spacing of 0 (most epochs at one time) are refused (:class:`ParameterError`)."""
+    what = f"recording {name!r}" if name else "the epochs"
+    if not isinstance(ep, Epochs):
+        raise ParameterError(f"scan_interval_s takes Epochs, got {type(ep).__name__}")
+    time_s = np.asarray(ep.time_s, dtype=float)
+    if len(time_s) < 2:
+        raise ParameterError(f"{what}: {len(time_s)} epoch(s); the scan interval is the median spacing of at least "
+                             "2 epoch times")
+    senders = set(ep.transmitter.tolist())
+    if len(senders) > 1 or len(set(ep.device.tolist())) > 1:
+        raise ParameterError(f"{what}: epochs of {len(senders)} transmitter(s) and {len(set(ep.device.tolist()))} "
+                             "device(s); the scan interval is that of one transmitter's scans (select them first)")
+    if not np.isfinite(time_s).all():
+        i = int(np.flatnonzero(~np.isfinite(time_s))[0])
+        raise ParameterError(f"{what}: epoch {i} has time {time_s[i]!r} s; times must be finite")
+    spacing = float(np.median(np.diff(np.sort(time_s))))
+    if not spacing > 0:
+        raise ParameterError(f"{what}: the median spacing of its {len(time_s)} epoch times is 0 s (most epochs share "
+                             f"one time, {_seconds(np.median(time_s))}): no scan clock; are the times in the unit "
+                             "[units] time says?")
+    return spacing

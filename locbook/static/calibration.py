@@ -48,6 +48,7 @@ __all__ = [
     "fix_error_covariance",
     "fit_path_loss_closed_form",
     "calibrate_path_loss",
+    "calibrate_path_loss_devices",
     "CALIBRATION_MODES",
     "CALIBRATION_SOLVERS",
     "CALIBRATION_LOSSES",
@@ -462,6 +463,119 @@ def calibrate_path_loss(distance_m, rss_dbm, mode: str = "per_location_mean", **
     if mode == "per_anchor":
         return fit_path_loss(np.swapaxes(distance_m, -1, -2), np.swapaxes(rss_dbm, -1, -2), **fit_kwargs)
     raise ValueError(f"calibration mode must be one of {CALIBRATION_MODES}, got {mode!r}")
+
+
+def calibrate_path_loss_devices(distance_m, rss_dbm, device, *, reference=None,
+                                ref_distance_m: float = 1.0) -> tuple[PathLossFit, dict[str, float]]:
+    """Per-anchor log-distance fit jointly with one receiver offset per device:
+    ``rss_la = P0_a - 10 n_a log10(d_la / d0) + o_d(l) + e_la``, one linear least-squares problem over the finite
+    readings (NaN = not heard, left out), the reference device's offset fixed at 0 dB.
+
+    ``distance_m, rss_dbm``: ``(L, m)``, location (epoch) ``l`` at distance ``d_la`` from anchor ``a``;
+    ``device``: ``(L,)``, the device of each location (text). ``reference``: the device whose offset is 0 (default:
+    the one with most finite readings; ties: the first in sorted order). Returns the fit, a :class:`PathLossFit`
+    of the kind ``calibrate_path_loss(distance_m, rss_dbm, "per_anchor", solver="closed_form")`` returns (arrays
+    of length m), and ``{device: o_d}`` in dB (a device that reads 3 dB strong has +3).
+
+    Solved by the Frisch-Waugh-Lovell theorem: the offsets are the least-squares solution of the readings and the
+    device indicators each residualised on its anchor's ``[1, L]`` (``L = 10 log10(d/d0)``), then each anchor's
+    ``(P0_a, n_a)`` is the closed form (:func:`fit_path_loss_closed_form`) on the readings with the offsets
+    removed; with one device that is exactly the per-anchor closed form. With several, the residuals (offsets
+    removed) give ``residual_sigma_db_a = sqrt(SSR_a / (N_a - 2 - K N_a / N))``, the K = D - 1 offsets' degrees of
+    freedom shared in proportion to the readings, and ``covariance_a`` the OLS covariance of ``(P0_a, n_a)``
+    under per-anchor noise ``sigma_a``: ``s_a^2 (M_a^T M_a)^{-1} + G_a Cov(o) G_a^T``, ``G_a`` the regression of
+    the device indicators on ``M_a`` and ``Cov(o)`` the sandwich ``A^{-1} Z~^T S Z~ A^{-1}``, ``A = Z~^T Z~``.
+
+    Raises :class:`DegenerateGeometryError` for a device with no finite reading, an anchor whose finite readings
+    span fewer than two distinct distances, or offsets the readings cannot separate from the anchors' ``P0``
+    (devices that share no anchor, through other devices, with the reference).
+    """
+    from ..errors import ParameterError
+    distance_m = as_array("distance_m", distance_m, ndim=2)
+    rss_dbm = as_array("rss_dbm", rss_dbm, ndim=2, nan_ok=True)
+    check_scalar("ref_distance_m", ref_distance_m, gt=0)
+    if distance_m.shape != rss_dbm.shape or 0 in distance_m.shape:
+        raise ParameterError(f"distance_m {distance_m.shape} and rss_dbm {rss_dbm.shape} must both have the shape "
+                             "(locations, anchors), at least one of each")
+    _positive_distances(distance_m)
+    n_loc, m = rss_dbm.shape
+    device = np.asarray(device, dtype=object)
+    if device.shape != (n_loc,):
+        raise ParameterError(f"device must give one device per location, shape ({n_loc},), got {device.shape}")
+    if any(d is None or (isinstance(d, float) and not np.isfinite(d)) or not str(d).strip() for d in device.tolist()):
+        raise ParameterError("device holds an empty or missing device name; every location names its device")
+    names, code = np.unique(device.astype(str), return_inverse=True)
+    heard = np.isfinite(rss_dbm)
+    per_device = np.bincount(code, weights=heard.sum(axis=1), minlength=len(names))
+    if (per_device == 0).any():
+        d = str(names[int(np.flatnonzero(per_device == 0)[0])])
+        raise DegenerateGeometryError(f"device {d!r} has no finite reading (all not heard): its offset cannot be "
+                                      "fitted; leave its locations out")
+    if reference is None:
+        ref_index = int(np.argmax(per_device))                 # the first of the largest, in sorted order
+    elif str(reference) in names:
+        ref_index = int(np.flatnonzero(names == str(reference))[0])
+    else:
+        raise ParameterError(f"reference {reference!r} is not one of the devices {names.tolist()}")
+    log_d = log_distance_regressor_db(distance_m, ref_distance_m)      # L = 10 log10(d/d0), (L, m)
+    lw = np.where(heard, log_d, 0.0)
+    s0, s1, s2 = heard.sum(0).astype(float), lw.sum(0), (lw**2).sum(0)   # per anchor: N_a, sum L, sum L^2
+    few = ~_distinct(np.where(heard, log_d, 0.0).T, heard.T)
+    if few.any():
+        raise DegenerateGeometryError(
+            f"anchor(s) {np.flatnonzero(few)[:5].tolist()} (columns) have fewer than two distinct distances among "
+            "their finite readings: their exponent, and so the device offsets, cannot be fitted")
+    others = np.delete(np.arange(len(names)), ref_index)
+    k = len(others)
+    offsets = np.zeros(len(names))
+    if k:
+        from scipy.sparse.csgraph import connected_components
+        hears = np.zeros((len(names), m))                     # device x anchor: readings shared
+        np.add.at(hears, code, heard.astype(float))
+        graph = sp.bmat([[None, sp.csr_matrix(hears)], [sp.csr_matrix(hears.T), None]])
+        _, label = connected_components(graph, directed=False)
+        apart = [str(names[i]) for i in range(len(names)) if label[i] != label[ref_index]]
+        if apart:
+            raise DegenerateGeometryError(
+                f"device(s) {apart} share no anchor, directly or through other devices, with the reference device "
+                f"{str(names[ref_index])!r}: their offsets cannot be told from the anchors' reference powers")
+        det = s0 * s2 - s1 * s1
+
+        def sol(a, b):
+            """Per anchor, [[N_a, S1_a], [S1_a, S2_a]]^-1 [a, b]: the regression on [1, L] (a, b: (m, ...))."""
+            col = (slice(None),) + (None,) * (np.ndim(a) - 1)
+            return ((s2[col] * a - s1[col] * b) / det[col], (s0[col] * b - s1[col] * a) / det[col])
+        # the readings, residualised on each anchor's [1, L]
+        y = np.where(heard, rss_dbm, 0.0)
+        b0, b1 = sol(y.sum(0), (lw * y).sum(0))
+        y_res = (rss_dbm - b0 - b1 * log_d)[heard]
+        # each non-reference device's indicator, residualised likewise: (locations, anchors, k)
+        z = (code[:, None] == others[None, :]).astype(float)                       # (L, k)
+        zh = heard[:, :, None] * z[:, None, :]
+        c0, c1 = sol(zh.sum(0), (lw[:, :, None] * zh).sum(0))                      # (m, k)
+        z_res = (z[:, None, :] - c0 - c1 * log_d[:, :, None])[heard]               # (N, k)
+        o, _, rank, _ = np.linalg.lstsq(z_res, y_res, rcond=None)
+        if rank < k:
+            raise DegenerateGeometryError("the device offsets are not identifiable from these readings (the device "
+                                          "indicators are collinear with the anchors' [1, log-distance] terms)")
+        offsets[others] = o
+    fit = calibrate_path_loss(distance_m, rss_dbm - offsets[code][:, None], "per_anchor", solver="closed_form",
+                              ref_distance_m=ref_distance_m)
+    if k:
+        n_all = s0.sum()
+        resid = np.where(heard, rss_dbm - offsets[code][:, None]
+                         - (fit.ref_power_dbm - fit.path_loss_exp * log_d), 0.0)
+        dof = s0 - 2.0 - k * s0 / n_all                  # the offsets' k degrees of freedom, shared by readings
+        sigma2 = (resid**2).sum(0) / np.where(dof > 0, dof, 1.0)
+        weight = np.broadcast_to(sigma2, heard.shape)[heard]                       # S = diag(sigma_a(i)^2)
+        a_inv = np.linalg.inv(z_res.T @ z_res)
+        cov_o = a_inv @ (z_res.T @ (weight[:, None] * z_res)) @ a_inv              # (k, k)
+        g = np.stack([c0, -c1], axis=1)                  # (m, 2, k): indicators on [1, -L], the (P0, n) columns
+        inv_mtm = np.stack([np.stack([s2, s1], -1), np.stack([s1, s0], -1)], -2) / det[:, None, None]
+        cov = sigma2[:, None, None] * inv_mtm + g @ cov_o @ np.swapaxes(g, 1, 2)
+        fit = PathLossFit(fit.ref_power_dbm, fit.path_loss_exp, np.sqrt(sigma2), cov, fit.n_samples, fit.status,
+                          problem_status=fit.problem_status)
+    return fit, {str(d): float(o) for d, o in zip(names, offsets)}
 
 
 def _exponent_inputs(distance_m, rss_dbm, ref_power_dbm, ref_distance_m):

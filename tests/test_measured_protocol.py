@@ -130,3 +130,54 @@ def test_the_same_parameters_give_the_same_rows(example):
     a = me.tracking_results(ds, model, proto, seed=9, n_particles=100, particle_runs=2, n_bootstrap=20, block_s=5.0)
     b = me.tracking_results(ds, model, proto, seed=9, n_particles=100, particle_runs=2, n_bootstrap=20, block_s=5.0)
     assert a["rows"] == b["rows"]
+
+
+def test_a_second_device_in_the_calibration_gets_its_offset_and_every_reading_is_corrected(tmp_path):
+    """Half the survey's points measured by a phone that reads 4 dB strong: the joint fit finds +4 dB (to the
+    shadowing's error), and after the correction the channel fit equals the one of the survey without the shift."""
+    import pandas as pd
+    folder = write_example_dataset(tmp_path / "two", np.random.default_rng(8), walk_s=20.0,
+                                   roles=("calibration", "static"))
+    plain = me.load(folder)
+    base = me.channel(me.calibrate(plain))
+    survey = folder / "survey.csv"
+    table = pd.read_csv(survey)
+    phone = table["point"].astype("category").cat.codes % 2 == 1
+    table["device"] = np.where(phone, "phone", "tag")
+    table.loc[phone & (table["rssi_dbm"] != 0.0), "rssi_dbm"] += 4.0      # not the 0 dBm "no reading" sentinel
+    table.to_csv(survey, index=False)
+    ds = me.load(folder)
+    offsets = me.device_offsets_db(ds)
+    assert set(offsets) == {"phone", "tag"} and 0.0 in offsets.values()          # one reference device
+    assert offsets["phone"] - offsets["tag"] == pytest.approx(4.0, abs=0.5)
+    fitted = me.channel(me.calibrate(ds))
+    ref = "tag" if offsets["tag"] == 0.0 else "phone"
+    shift = 0.0 if ref == "tag" else 4.0
+    np.testing.assert_allclose(np.asarray(fitted.path_loss_exp), np.asarray(base.path_loss_exp), atol=0.15)
+    np.testing.assert_allclose(np.asarray(fitted.ref_power_dbm) - shift, np.asarray(base.ref_power_dbm), atol=1.0)
+
+
+@pytest.mark.parametrize("variant", ["two_d", "native_scans"])
+def test_a_2d_set_and_native_scans_run_the_whole_battery(tmp_path, variant):
+    folder = write_example_dataset(tmp_path / variant.replace("_", "-"), np.random.default_rng(6), walk_s=30.0,
+                                   **{variant: True})
+    ds = me.load(folder)
+    model = me.channel(me.calibrate(ds))
+    proto = me.protocol(ds, model)
+    static = me.static_results(ds, model, proto, seed=1, n_bootstrap=20, block_s=5.0)
+    tracking = me.tracking_results(ds, model, proto, seed=1, n_particles=100, particle_runs=2, n_bootstrap=20,
+                                   block_s=5.0)
+    assert static["rows"] and tracking["rows"]
+    sc = static["scenario"]
+    if variant == "two_d":
+        assert ds.anchors_m.shape[1] == 2 and sc.tag_height_m is None
+        assert "2-D" in me.geometry_text(ds)
+        # distances in the plane: the channel's mean at a true position uses the plan distance
+        np.testing.assert_allclose(me.plan_distances_m(ds, sc.points_m[:3]),
+                                   np.linalg.norm(sc.points_m[:3, None] - ds.anchors_m, axis=-1))
+    else:
+        name = ds.recordings_with("track")[0]
+        t = np.unique(ds.epochs(name).time_s)
+        assert me.epoch_s(ds, name) == pytest.approx(np.median(np.diff(t)))
+    for name, (tsc, est, flags, bound) in tracking["tracks"].items():
+        assert np.isfinite(est["ekf"][0, tsc.scored_steps]).all()

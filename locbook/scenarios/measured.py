@@ -59,7 +59,7 @@ __all__ = ["PATH_LOSS_EXP_BOUNDS", "REF_POWER_BOUNDS_DBM", "HUBER_DELTA_DB", "NE
            "tracking_scenario", "static_results", "tracking_results", "RESULT_COLUMNS", "result_row",
            "bayes_measurement_model", "fix_covariance_from_calibration", "outside_fraction",
            "calibration_block_bootstrap", "record_dataset", "geometry_text", "measured_static_scenario",
-           "measured_tracking_scenario", "benchmark_rows", "keyed_stream", "checked_crlb_m"]
+           "measured_tracking_scenario", "benchmark_rows", "device_offsets_db", "device_corrected", "keyed_stream", "checked_crlb_m"]
 
 #: bounded fit: exponents and 1-m powers a radio link can physically have (free space n = 2; indoor 1.5-6,
 #: Rappaport, Wireless Communications, Table 4.2); wide enough never to bind on data that follow the model
@@ -123,6 +123,46 @@ def geometry_text(data: Dataset) -> str:
             f"{data.tag_height_m:g} m; positions are estimated in the plan")
 
 
+def device_offsets_db(data: Dataset) -> dict[str, float]:
+    """Each device's receiver offset (dB; a device that reads 3 dB strong has +3), fitted jointly with the
+    per-anchor channel on the calibration epochs (:func:`locbook.static.calibration.calibrate_path_loss_devices`)
+    when the calibration recordings hold more than one device (the readings' ``device`` column, else each
+    transmitter); ``{}`` with one device. Every reading of a device is corrected by its offset before any method
+    sees it (:func:`device_corrected`); a device the calibration never saw keeps 0 dB (the data set's notes say so)."""
+    if "device_offsets_db" not in data._cache:
+        ep = data.epochs_of("calibration")
+        known = np.isfinite(ep.position_m[:, :2]).all(axis=1)
+        devices = np.asarray(ep.device, dtype=object)[known]
+        offsets = {}
+        if len(set(devices.tolist())) > 1:
+            from ..static.calibration import calibrate_path_loss_devices
+            _, distance, rss = _calibration_arrays(data, ep, known)
+            offsets = {str(k): float(v) for k, v in calibrate_path_loss_devices(distance, rss, devices)[1].items()}
+        data._cache["device_offsets_db"] = offsets
+    return data._cache["device_offsets_db"]
+
+
+def device_corrected(data: Dataset, ep):
+    """The epochs ``ep`` with each reading corrected by its device's offset (:func:`device_offsets_db`): the
+    readings of the reference device, which the channel fit describes. Unchanged with one device."""
+    offsets = device_offsets_db(data)
+    if not offsets:
+        return ep
+    shift = np.array([offsets.get(str(d), 0.0) for d in np.asarray(ep.device, dtype=object)], float)
+    return replace(ep, rss_dbm=ep.rss_dbm - shift[:, None])
+
+
+def _calibration_arrays(data: Dataset, ep, known):
+    pos = ep.position_m[known]
+    if data.anchors_m.shape[1] == 2:
+        distance = np.linalg.norm(pos[:, None, :2] - data.anchors_m, axis=-1)
+    else:
+        pos = pos.copy()
+        pos[:, 2] = np.where(np.isfinite(pos[:, 2]), pos[:, 2], data.tag_height_m)
+        distance = np.linalg.norm(pos[:, None, :] - data.anchors_m, axis=-1)
+    return pos[:, :2], distance, ep.rss_dbm[known]
+
+
 def calibration_set(data: Dataset):
     """``(positions (L, 2), distances (L, m), RSSI (L, m) with NaN = not heard)`` of the calibration epochs (every
     calibration recording, in manifest order); epochs without a true position are left out. Distances are 3-D from
@@ -132,14 +172,7 @@ def calibration_set(data: Dataset):
     known = np.isfinite(ep.position_m[:, :2]).all(axis=1)
     if not known.any():
         raise ParameterError(f"data set {data.name!r}: no calibration epoch has a true position (x_m, y_m)")
-    pos = ep.position_m[known]
-    if data.anchors_m.shape[1] == 2:
-        distance = np.linalg.norm(pos[:, None, :2] - data.anchors_m, axis=-1)
-    else:
-        pos = pos.copy()
-        pos[:, 2] = np.where(np.isfinite(pos[:, 2]), pos[:, 2], data.tag_height_m)
-        distance = np.linalg.norm(pos[:, None, :] - data.anchors_m, axis=-1)
-    return pos[:, :2], distance, ep.rss_dbm[known]
+    return _calibration_arrays(data, device_corrected(data, ep), known)
 
 
 def calibrate(data: Dataset, *, mode: str = "per_anchor", fit: str = "closed_form") -> PathLossFit:
@@ -215,7 +248,7 @@ class TestEpochs:
 
     @classmethod
     def of(cls, data: Dataset, recording: str) -> "TestEpochs":
-        ep = data.epochs(recording)
+        ep = device_corrected(data, data.epochs(recording))
         known = np.isfinite(ep.position_m[:, :2]).all(axis=1)
         column = data.recording(recording).point_column
         point = None if column is None else ep.extra[column][known]
@@ -243,16 +276,8 @@ def checked_crlb_m(data: Dataset, model: PathLossModel, positions_m, rss_dbm):
 
 def epoch_s(data: Dataset, recording: str) -> float:
     """The epoch clock of a recording (s), the filters' time step: its window, or for native scans (``window_s =
-    0``: each row time is an epoch) the median spacing of its epochs."""
-    window = data.recording(recording).epoch_rule.window_s
-    if window:
-        return float(window)
-    t = np.unique(data.epochs(recording).time_s)
-    spacing = np.diff(t)
-    if spacing.size == 0 or not np.median(spacing) > 0:
-        raise ParameterError(f"recording {recording!r} of {data.name!r} has native scans (window_s = 0) but fewer than "
-                             "2 distinct scan times: a tracker needs a clock")
-    return float(np.median(spacing))
+    0``: each scan time is an epoch) the median spacing of its epochs (:meth:`Dataset.scan_interval_s`)."""
+    return data.scan_interval_s(recording)
 
 
 def bayes_measurement_model(data: Dataset, model: PathLossModel) -> RssModel:
@@ -536,7 +561,7 @@ def tracking_scenario(data: Dataset, model: PathLossModel, recording: str, *, gr
     """One track on its epoch clock (:func:`epoch_s`; a tick without an epoch is all NaN and unscored), truth at the
     ticks of the epochs with a true position, and the start every tracker takes (the first rss_ml fix, at rest)."""
     dt = epoch_s(data, recording)
-    ep = data.epochs(recording)
+    ep = device_corrected(data, data.epochs(recording))
     reg, ticks = regular_epochs(ep, dt, tolerance_s=0.5 * dt if not data.recording(recording).epoch_rule.window_s
                                 else 0.1 * dt)
     truth = np.full((reg.rss_dbm.shape[0], 2), np.nan)

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .bounds.pcrlb import posterior_crlb, position_bound_m, rss_state_information
-from .bounds.crlb import rss_position_information
+from .bounds.crlb import check_position_information, rss_position_information
 from .geometry import grid_in_outline, outline_box
 from .models.channel import PathLossModel
 from .models.motion import constant_velocity
@@ -32,7 +32,7 @@ from .tracking.streams import LinearMeasurement, RssMeasurement
 from .tracking.unscented import unscented_kalman_filter
 
 __all__ = ["ProtocolChoice", "StaticScenario", "TrackingScenario", "Method", "STATIC_METHODS", "TRACKERS",
-           "TrackerSettings", "static_fixes", "static_bound_m", "run_trackers", "tracking_bound_m",
+           "TrackerSettings", "static_fixes", "static_bound_m", "static_bound_checked", "run_trackers", "tracking_bound_m",
            "initial_states", "channel_settings", "TRACKER_PRIORS",
            "KF_FIX_MIN_ANCHORS"]
 
@@ -290,17 +290,18 @@ def _information(sc, positions_m, heard=None):
                                     heard=heard)
 
 
-def _trace_inverse_2d(info):
-    det = info[..., 0, 0] * info[..., 1, 1] - info[..., 0, 1] ** 2
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(det > 0, (info[..., 0, 0] + info[..., 1, 1]) / np.where(det > 0, det, 1.0), np.inf)
-
-
 def static_bound_m(sc: StaticScenario) -> np.ndarray:
     """CRLB ``sqrt(tr J^-1)`` at each evaluation position ``(P,)``; for measured data from the anchors heard at that
-    epoch (inf where fewer than two are heard: the position is not identifiable from that epoch)."""
-    heard = None if not sc.measured else ~np.isnan(sc.measured_rss_dbm)
-    return np.sqrt(_trace_inverse_2d(_information(sc, sc.points_m, heard)))
+    epoch, NaN where that bound is undefined or near-singular (:func:`static_bound_checked`)."""
+    return static_bound_checked(sc)[0]
+
+
+def static_bound_checked(sc: StaticScenario):
+    """``(bound (P,), reason (P,))``: the static CRLB at each evaluation position, NaN with the reason where it is
+    undefined (fewer than 3 anchors heard) or near-singular (:func:`locbook.bounds.crlb.check_position_information`);
+    every anchor counts as heard in a synthetic scenario."""
+    heard = np.ones((len(sc.points_m), len(sc.anchors_m)), bool) if not sc.measured else ~np.isnan(sc.measured_rss_dbm)
+    return check_position_information(_information(sc, sc.points_m, heard if sc.measured else None), heard.sum(-1))
 
 
 # ------------------------------------------------------------------------------------------------------ trackers

@@ -181,3 +181,48 @@ def test_a_2d_set_and_native_scans_run_the_whole_battery(tmp_path, variant):
         assert me.epoch_s(ds, name) == pytest.approx(np.median(np.diff(t)))
     for name, (tsc, est, flags, bound) in tracking["tracks"].items():
         assert np.isfinite(est["ekf"][0, tsc.scored_steps]).all()
+
+
+def _reports_with_benchmark():
+    from pathlib import Path
+    root = Path(__file__).resolve().parents[1] / "reports"
+    return sorted(p.parent.parent for p in root.glob("*/benchmark-cross-document/benchmark.csv")) + \
+        sorted(p.parent.parent for p in root.glob("*/data-*/benchmark-cross-document/benchmark.csv"))
+
+
+def _data_set_of(report_dir, experiment):
+    """The data set an experiment's report was computed from: its recorded parameter, else the notebook's default."""
+    import json
+    from locbook.suite import load_suite
+    params = json.loads((report_dir / experiment / "report.json").read_text())["parameters"]
+    if "data" in params:
+        return me.load(params["data"]).name
+    exp = next(e for e in load_suite().experiments if e.id == experiment)
+    return me.load(exp.declared_parameters()["data"].default).name
+
+
+@pytest.mark.parametrize("report_dir", _reports_with_benchmark(), ids=lambda p: p.name)
+def test_every_method_name_gives_the_same_numbers_on_every_page_of_a_run(report_dir):
+    """The committed reports of one run: a data set's column of the benchmark (its `pooled` cells) holds the numbers
+    of the data set's own measured-localization and measured-tracking results, method by method."""
+    import pandas as pd
+    bench = pd.read_csv(report_dir / "benchmark-cross-document" / "benchmark.csv")
+    pages = {}
+    for folder in [report_dir, *report_dir.glob("data-*")]:
+        for experiment, kind in (("measured-localization", "static"), ("measured-tracking", "tracking")):
+            if (folder / experiment / "results.csv").is_file():
+                pages[_data_set_of(folder, experiment), kind] = pd.read_csv(folder / experiment / "results.csv")
+    compared = 0
+    for (name, kind), results in pages.items():
+        cells = bench[(bench["scenario"] == f"data-{name}") & (bench["kind"] == kind)]
+        if cells.empty:
+            continue
+        pooled = results[results["recording"] == "pooled"].set_index("method")
+        assert set(cells["method"]) == set(pooled.index)
+        for _, c in cells.iterrows():
+            for col in ("rmse_m", "mean_m", "median_m", "p90_m", "ratio"):
+                a, b = c[col], pooled.loc[c["method"], col]
+                assert (pd.isna(a) and pd.isna(b)) or a == pytest.approx(b, abs=1e-9), (name, kind, c["method"], col)
+            compared += 1
+    if not compared:
+        pytest.skip(f"{report_dir}: no data set's own reports beside its benchmark column")

@@ -36,7 +36,7 @@ from .geometry import box_outline
 from .metrics import accuracy_metrics, position_error_m, rmse_standard_error_m
 from .montecarlo import seed_from_values
 from .models.channel import PathLossModel
-from .scenarios import dogan, george, gudipati, measured, ozkaya, palvai
+from .scenarios import dogan, george, gudipati, ozkaya, palvai
 from .scenarios.measured import measured_static_scenario, measured_tracking_scenario
 
 __all__ = ["ProtocolChoice", "StaticScenario", "TrackingScenario", "STATIC_SCENARIOS", "TRACKING_SCENARIOS",

@@ -42,7 +42,7 @@ from ..bounds.summary import error_bound_ratio, summarize_bound
 from ..data.dataset import Dataset, load_dataset
 from ..data.measured import regular_epochs
 from ..errors import ConvergenceError, ParameterError
-from ..geometry import grid_in_outline, inside_outline, outline_box
+from ..geometry import inside_outline, outline_box
 from ..metrics import accuracy_metrics
 from ..models.channel import PathLossModel
 from ..models.motion import constant_velocity

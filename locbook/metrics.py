@@ -18,12 +18,12 @@ import warnings
 import numpy as np
 
 from ._validate import as_array, check_scalar
-from .montecarlo import moving_block_indices
+from .montecarlo import circular_block_indices
 
 __all__ = [
     "position_error_m", "mean_error_m", "rmse_m", "median_error_m", "percentile_error_m",
     "error_std_m", "empirical_cdf", "reduction_pct", "error_summary", "error_summary_per_run",
-    "rmse_standard_error_m", "accuracy_metrics", "ACCURACY_STATISTICS",
+    "rmse_standard_error_m", "accuracy_metrics", "ACCURACY_STATISTICS", "MIN_BLOCKS",
 ]
 
 
@@ -163,18 +163,98 @@ def _accuracy_stats(e, axis=-1):
         }
 
 
+#: the fewest blocks (finite epochs / block length) for which :func:`accuracy_metrics` gives a bootstrap interval. The
+#: rule is ours: the block bootstrap is consistent only as the number of blocks grows (block length ``L -> inf`` with
+#: ``L / n -> 0``; Kuensch 1989, Politis and Romano 1992, Lahiri 2003, *Resampling Methods for Dependent Data*,
+#: Ch. 3), and the theory gives no finite count. A percentile interval needs the resampled statistic to vary: from
+#: two or three blocks it takes a handful of distinct values, and its 2.5 % and 97.5 % points say more about which
+#: blocks were drawn than about the statistic (a 24 s track in 10 s blocks gave a mean's interval that excluded the
+#: mean). Ten blocks is the count below which we call the interval not estimable.
+MIN_BLOCKS = 10
+
+#: relative slack of the check that an interval holds its estimate: a resample holding the series' values in another
+#: order sums them in another order, and its statistic can differ from the estimate by rounding, not an exclusion
+_EXCLUSION_RTOL = 1e-9
+
+#: an exclusion in a series of fewer than this many times ``min_blocks`` blocks names the block count as its likely
+#: cause (our rule: near the minimum the resampled statistic still takes few distinct values); above it, the skew
+_FEW_BLOCKS_FACTOR = 3
+
+#: statistics set by the few largest errors; their bootstrap distribution lies mostly at or below the estimate (a
+#: resample's maximum never exceeds the sample's), so an interval that misses them is a skew at the edge
+_EDGE_STATISTICS = ("p90_m", "ce95_m", "max_m")
+
+_LABELS = {"mean_m": "mean", "median_m": "median", "rmse_m": "RMSE", "p75_m": "75th percentile",
+           "p90_m": "90th percentile", "ce95_m": "CE95", "max_m": "maximum"}
+
+
+def _distinct_text(estimate: float, low: float, high: float) -> tuple[str, str, str]:
+    """The three numbers with the fewest decimals (2 to 6) at which the estimate still reads outside the interval,
+    so the note never says "0.80 outside [0.54, 0.80]"."""
+    for digits in range(2, 7):
+        e, lo, hi = (f"{v:.{digits}f}" for v in (estimate, low, high))
+        if not float(lo) <= float(e) <= float(hi):
+            break
+    return e, lo, hi
+
+
+def _below_text(value: float, limit: float) -> str:
+    """``value`` (below ``limit``) to 3 significant digits, more if those would round it up to ``limit``."""
+    for digits in range(3, 16):
+        text = f"{value:.{digits}g}"
+        if float(text) < limit:
+            return text
+    return repr(value)
+
+
+def _exclusion_note(name: str, estimate: float, low: float, high: float, boot: np.ndarray, n_blocks: float,
+                    block_length: int, min_blocks: float) -> str:
+    """"" when ``[low, high]`` holds ``estimate`` (or either is NaN), else one line saying it does not and why."""
+    if not (np.isfinite(estimate) and np.isfinite(low) and np.isfinite(high)):
+        return ""
+    slack = _EXCLUSION_RTOL * max(abs(estimate), abs(low), abs(high))
+    if low - slack <= estimate <= high + slack:
+        return ""
+    b = boot[np.isfinite(boot)]
+    side = "below" if estimate > high else "above"
+    share = float(np.mean(b < estimate) if side == "below" else np.mean(b > estimate))
+    label = _LABELS[name]
+    if name in _EDGE_STATISTICS:
+        reason = f"the {label} is a skewed statistic at the edge of its bootstrap distribution (set by the few largest errors)"
+    elif n_blocks < _FEW_BLOCKS_FACTOR * min_blocks:
+        few = (f"blocks for the {label} ({n_blocks:.3g} blocks of {block_length} epochs)" if block_length > 1 else
+               f"epochs for the {label} ({n_blocks:g})")
+        reason = f"few {few}, so the resampled statistic takes few distinct values"
+    else:
+        reason = f"the bootstrap distribution of the {label} is skewed"
+    e, lo, hi = _distinct_text(estimate, low, high)
+    return (f"the interval excludes the estimate ({e} outside [{lo}, {hi}]): {reason}; "
+            f"{100 * share:.1f} % of the resamples fall {side} it")
+
+
 def accuracy_metrics(error_m, rng: np.random.Generator, *, n_bootstrap: int = 1000, level: float = 0.95,
-                     block_length: int = 1) -> dict:
+                     block_length: int = 1, min_blocks: float = MIN_BLOCKS) -> dict:
     """Point-accuracy statistics of one method on one data set, with bootstrap intervals.
 
-    ``error_m``: horizontal errors ``(n,)`` of every epoch scored, NaN where the method gave no estimate (too few
-    anchors heard, a failed solve). The statistics (:data:`ACCURACY_STATISTICS`: mean, median, RMSE, 75th and 90th
-    percentile, CE95 = the 95th percentile of the horizontal error, and the maximum; ISO/IEC 18305 and EvAAL/IPIN)
-    are taken over the epochs with an estimate, and ``coverage`` says what fraction that is (a method is never
-    scored silently on fewer epochs than it claims). Intervals: percentile bootstrap at ``level`` over
-    ``n_bootstrap`` resamples of the epochs; ``block_length > 1`` resamples blocks of consecutive epochs (the
-    moving-block bootstrap), needed for a track whose errors are correlated in time. Returns
-    ``{stat: value, stat + "_low": ..., stat + "_high": ..., "coverage": ..., "n": ...}``."""
+    ``error_m``: horizontal errors ``(n,)`` of every epoch scored, in time order, NaN where the method gave no
+    estimate (too few anchors heard, a failed solve). The statistics (:data:`ACCURACY_STATISTICS`: mean, median,
+    RMSE, 75th and 90th percentile, CE95 = the 95th percentile of the horizontal error, and the maximum; ISO/IEC
+    18305 and EvAAL/IPIN) are taken over the epochs with an estimate, and ``coverage`` says what fraction that is (a
+    method is never scored silently on fewer epochs than it claims).
+
+    Intervals: the percentile bootstrap at ``level`` over ``n_bootstrap`` resamples of the epochs (the NaN epochs
+    resampled with the others and left out of each resample's statistic). ``block_length = 1`` resamples single
+    epochs (the i.i.d. bootstrap); ``block_length > 1`` resamples blocks of that many consecutive epochs by the
+    circular block bootstrap (Politis and Romano 1992; :func:`locbook.montecarlo.circular_block_indices`), needed
+    for a track whose errors are correlated in time, and unbiased for the mean where the moving-block bootstrap is
+    not. With fewer than ``min_blocks`` blocks (``n_blocks`` = epochs with an estimate / ``block_length``;
+    :data:`MIN_BLOCKS`) the intervals are not estimable: every ``_low`` / ``_high`` is NaN and ``interval_note``
+    says why. An interval that does not hold its own estimate is kept as computed (never widened) and flagged in
+    ``<stat>_note``.
+
+    Returns ``{stat: value, stat + "_low": ..., stat + "_high": ..., stat + "_note": "" or why the interval excludes
+    the estimate, "coverage": ..., "n": ..., "n_blocks": float, "interval": how it was taken, "interval_note": ""
+    or why there is none}``."""
     e = as_array("error_m", error_m, ndim=1, nan_ok=True)
     if e.size < 2:
         raise ValueError(f"error_m needs at least 2 epochs, got {e.size}")
@@ -185,13 +265,34 @@ def accuracy_metrics(error_m, rng: np.random.Generator, *, n_bootstrap: int = 10
     check_scalar("n_bootstrap", n_bootstrap, ge=2, integer=True)
     check_scalar("level", level, gt=0, lt=1)
     check_scalar("block_length", block_length, ge=1, integer=True)
-    n = e.size
-    idx = moving_block_indices(n, int(block_length), int(n_bootstrap), rng)
+    check_scalar("min_blocks", min_blocks, ge=1)
+    n, block, n_boot = e.size, int(block_length), int(n_bootstrap)
+    n_finite = int(np.isfinite(e).sum())
+    n_blocks = n_finite / block
+    # drawn whatever the block count, so a stream shared by several calls advances the same way
+    idx = circular_block_indices(n, block, n_boot, rng)
     point, boot = _accuracy_stats(e), _accuracy_stats(e[idx], axis=-1)
+    estimable = n_blocks >= min_blocks
     tail = 50.0 * (1.0 - level)
-    out = {"n": int(n), "coverage": float(np.mean(np.isfinite(e)))}
+    how = (f"bootstrap over epochs (i.i.d., {n_boot} resamples)" if block == 1 else
+           f"circular block bootstrap, blocks of {block} epochs ({n_boot} resamples)")
+    if estimable:
+        note = ""
+    elif block == 1:
+        note = f"not estimable: {n_finite} epochs with an estimate; the rule needs at least {min_blocks:g}"
+    else:
+        held = "epochs" if n_finite == n else "epochs with an estimate"
+        note = (f"not estimable: {n_finite} {held} hold {_below_text(n_blocks, min_blocks)} blocks of {block}; the "
+                f"rule needs at least {min_blocks:g} blocks")
+    out = {"n": int(n), "coverage": float(np.mean(np.isfinite(e))), "n_blocks": float(n_blocks), "interval": how,
+           "interval_note": note}
     for name in ACCURACY_STATISTICS:
         out[name] = float(point[name])
-        low, high = np.nanpercentile(boot[name], [tail, 100.0 - tail]) if np.isfinite(boot[name]).any() else (np.nan,) * 2
-        out[name + "_low"], out[name + "_high"] = float(low), float(high)
+        if estimable and np.isfinite(boot[name]).any():
+            low, high = (float(v) for v in np.nanpercentile(boot[name], [tail, 100.0 - tail]))
+        else:
+            low = high = float("nan")
+        out[name + "_low"], out[name + "_high"] = low, high
+        out[name + "_note"] = _exclusion_note(name, out[name], low, high, boot[name], n_blocks, block,
+                                             min_blocks)
     return out

@@ -26,7 +26,7 @@ from .errors import ParameterError
 
 __all__ = ["spawn_generators", "streams", "mc_standard_error", "bootstrap_standard_error", "jackknife_standard_error",
            "replicate_standard_error", "single_run_interval", "seed_from_values", "canonical_encoding",
-           "moving_block_indices"]
+           "moving_block_indices", "circular_block_indices"]
 
 
 def spawn_generators(seed: int | np.random.SeedSequence, n: int) -> list[np.random.Generator]:
@@ -70,21 +70,49 @@ def bootstrap_standard_error(samples, statistic, rng: np.random.Generator, n_res
     return float(np.std(statistic(resamples, axis=-1), ddof=1))
 
 
-def moving_block_indices(n: int, block_length: int, n_resamples: int, rng: np.random.Generator) -> np.ndarray:
-    """Index arrays ``(n_resamples, n)`` of the moving-block bootstrap (Kuensch 1989): each resample joins
-    ``ceil(n / L)`` blocks of ``L = min(block_length, n)`` consecutive indices, each block starting uniformly in
-    ``[0, n - L]``, cut to ``n``. ``block_length = 1`` is the ordinary bootstrap. For series whose neighbours are
-    correlated (a track's errors, calibration points recorded along a path), whose ordinary bootstrap understates
-    the spread of a statistic."""
+def _block_arguments(n, block_length, n_resamples, rng) -> tuple[int, int, int]:
+    """The checked ``(n, L, n_resamples)`` of a block bootstrap, ``L = min(block_length, n)``."""
     check_scalar("n", n, ge=1, integer=True)
     check_scalar("block_length", block_length, ge=1, integer=True)
     check_scalar("n_resamples", n_resamples, ge=1, integer=True)
     if not isinstance(rng, np.random.Generator):
         raise ParameterError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
-    length = min(int(block_length), int(n))
-    n_blocks = -(-int(n) // length)
-    starts = rng.integers(0, int(n) - length + 1, size=(int(n_resamples), n_blocks))
-    return (starts[..., None] + np.arange(length)).reshape(int(n_resamples), -1)[:, :int(n)]
+    return int(n), min(int(block_length), int(n)), int(n_resamples)
+
+
+def moving_block_indices(n: int, block_length: int, n_resamples: int, rng: np.random.Generator) -> np.ndarray:
+    """Index arrays ``(n_resamples, n)`` of the moving-block bootstrap (Kuensch 1989): each resample joins
+    ``ceil(n / L)`` blocks of ``L = min(block_length, n)`` consecutive indices, each block starting uniformly in
+    ``[0, n - L]``, cut to ``n``. ``block_length = 1`` is the ordinary bootstrap. For series whose neighbours are
+    correlated (a track's errors, calibration points recorded along a path), whose ordinary bootstrap understates
+    the spread of a statistic.
+
+    An index near either end lies in fewer possible blocks than one in the middle (index 0 in one of the
+    ``n - L + 1``, an index at least ``L - 1`` from both ends in ``L``), so the ends are under-weighted and the
+    resampled mean is biased away from the sample mean when the ends differ from the middle;
+    :func:`circular_block_indices` has no such bias."""
+    n, length, n_resamples = _block_arguments(n, block_length, n_resamples, rng)
+    n_blocks = -(-n // length)
+    starts = rng.integers(0, n - length + 1, size=(n_resamples, n_blocks))
+    return (starts[..., None] + np.arange(length)).reshape(n_resamples, -1)[:, :n]
+
+
+def circular_block_indices(n: int, block_length: int, n_resamples: int, rng: np.random.Generator) -> np.ndarray:
+    """Index arrays ``(n_resamples, n)`` of the circular block bootstrap (Politis and Romano 1992, "A circular
+    block-resampling procedure for stationary data", in LePage and Billard (eds.), *Exploring the Limits of
+    Bootstrap*, Wiley, pp. 263-270): the series is wrapped on a circle, and each resample joins ``ceil(n / L)``
+    blocks of ``L = min(block_length, n)`` indices ``(s, s + 1, ..., s + L - 1) mod n``, each start ``s`` uniform in
+    ``[0, n - 1]``, cut to ``n``.
+
+    Every position of a resample holds each index with probability exactly ``1 / n`` (``s -> (s + j) mod n`` is a
+    bijection), so every epoch is equally likely and the bootstrap expectation of the resampled mean is the sample
+    mean, where :func:`moving_block_indices` under-weights both ends. ``block_length = 1`` draws the same starts
+    from ``rng`` as :func:`moving_block_indices` and is the ordinary (i.i.d.) bootstrap."""
+    n, length, n_resamples = _block_arguments(n, block_length, n_resamples, rng)
+    n_blocks = -(-n // length)
+    starts = rng.integers(0, n, size=(n_resamples, n_blocks))
+    # index (s + j) mod n: the block wraps past the last epoch to the first
+    return ((starts[..., None] + np.arange(length)) % n).reshape(n_resamples, -1)[:, :n]
 
 
 def jackknife_standard_error(statistic, *per_run) -> float:

@@ -140,7 +140,9 @@ def test_compiled_ukf_equals_numpy_ukf(kind):
                            **_case(kind, np.random.default_rng(CASES.index(kind)))[5])
     assert compiled, "the compiled path did not run"
     assert np.isfinite(a.x).all() and (a.nis_dof > 0).any() and len(np.unique(a.nis_dof)) > 1    # some missing
-    _assert_same(a, b)
+    # the printed weights do not sum to 1 (2n / c): every step scales the round-off of the two summation orders, and
+    # with numpy 2.4 the state (about 100) differs by 2e-9 after 48 steps; 1e-8 still catches a wrong formula
+    _assert_same(a, b, tol=1e-8 if kind == "printed_weights_of_eq_3_22" else TOL)
 
 
 @pytest.mark.parametrize("B, most_lanes", [(1, None), (70, None), (70, 32)])

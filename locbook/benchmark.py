@@ -227,9 +227,10 @@ def score(error_m, bound_m, *, measured: bool, rng: np.random.Generator, n_boots
     rmse = float(np.sqrt(np.mean(ef**2))) if ef.size else float("nan")
     if measured or e.shape[0] < 2:
         per_epoch = np.sqrt(np.nanmean(e**2, axis=0))
-        m = accuracy_metrics(per_epoch[np.isfinite(per_epoch)], rng, n_bootstrap=n_bootstrap, block_length=block_length)
+        # every epoch kept in time order (NaN = no fix): blocks never join epochs across a gap
+        m = accuracy_metrics(per_epoch, rng, n_bootstrap=n_bootstrap, block_length=block_length)
         low, high = m["rmse_m_low"], m["rmse_m_high"]
-        how = f"bootstrap over epochs (blocks of {block_length})"
+        how = m["interval"] + (f"; {m['interval_note']}" if m["interval_note"] else "")
     else:
         # a run's root-mean-square error: the runs are the independent samples
         se = float(rmse_standard_error_m(np.sqrt(np.nanmean(e**2, axis=1))))

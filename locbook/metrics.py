@@ -233,7 +233,7 @@ def _exclusion_note(name: str, estimate: float, low: float, high: float, boot: n
 
 
 def accuracy_metrics(error_m, rng: np.random.Generator, *, n_bootstrap: int = 1000, level: float = 0.95,
-                     block_length: int = 1, min_blocks: float = MIN_BLOCKS) -> dict:
+                     block_length: int = 1, min_blocks: float = MIN_BLOCKS, values_per_epoch: int = 1) -> dict:
     """Point-accuracy statistics of one method on one data set, with bootstrap intervals.
 
     ``error_m``: horizontal errors ``(n,)`` of every epoch scored, in time order, NaN where the method gave no
@@ -252,6 +252,11 @@ def accuracy_metrics(error_m, rng: np.random.Generator, *, n_bootstrap: int = 10
     says why. An interval that does not hold its own estimate is kept as computed (never widened) and flagged in
     ``<stat>_note``.
 
+    ``values_per_epoch = k``: ``error_m`` holds ``k`` values per epoch, epoch-major (the errors of ``k`` runs of a
+    randomised method at each epoch): the statistics are taken over every value, and the bootstrap resamples epochs,
+    each with all its ``k`` values (blocks and ``n_blocks`` count epochs; an epoch with an estimate is one where any
+    run has one).
+
     Returns ``{stat: value, stat + "_low": ..., stat + "_high": ..., stat + "_note": "" or why the interval excludes
     the estimate, "coverage": ..., "n": ..., "n_blocks": float, "interval": how it was taken, "interval_note": ""
     or why there is none}``."""
@@ -266,11 +271,17 @@ def accuracy_metrics(error_m, rng: np.random.Generator, *, n_bootstrap: int = 10
     check_scalar("level", level, gt=0, lt=1)
     check_scalar("block_length", block_length, ge=1, integer=True)
     check_scalar("min_blocks", min_blocks, ge=1)
-    n, block, n_boot = e.size, int(block_length), int(n_bootstrap)
-    n_finite = int(np.isfinite(e).sum())
+    check_scalar("values_per_epoch", values_per_epoch, ge=1, integer=True)
+    k = int(values_per_epoch)
+    if e.size % k:
+        raise ValueError(f"error_m holds {e.size} values, not a whole number of epochs of values_per_epoch = {k}")
+    n, block, n_boot = e.size // k, int(block_length), int(n_bootstrap)
+    n_finite = int(np.isfinite(e.reshape(n, k)).any(axis=1).sum())
     n_blocks = n_finite / block
     # drawn whatever the block count, so a stream shared by several calls advances the same way
     idx = circular_block_indices(n, block, n_boot, rng)
+    if k > 1:                          # every value of a drawn epoch, in order
+        idx = (idx[..., None] * k + np.arange(k)).reshape(n_boot, -1)
     point, boot = _accuracy_stats(e), _accuracy_stats(e[idx], axis=-1)
     estimable = n_blocks >= min_blocks
     tail = 50.0 * (1.0 - level)
@@ -284,7 +295,7 @@ def accuracy_metrics(error_m, rng: np.random.Generator, *, n_bootstrap: int = 10
         held = "epochs" if n_finite == n else "epochs with an estimate"
         note = (f"not estimable: {n_finite} {held} hold {_below_text(n_blocks, min_blocks)} blocks of {block}; the "
                 f"rule needs at least {min_blocks:g} blocks")
-    out = {"n": int(n), "coverage": float(np.mean(np.isfinite(e))), "n_blocks": float(n_blocks), "interval": how,
+    out = {"n": int(e.size), "coverage": float(np.mean(np.isfinite(e))), "n_blocks": float(n_blocks), "interval": how,
            "interval_note": note}
     for name in ACCURACY_STATISTICS:
         out[name] = float(point[name])

@@ -234,3 +234,18 @@ def test_circular_indices_refuse_a_seed_for_a_generator():
     from locbook.errors import ParameterError
     with pytest.raises(ParameterError, match="rng must be a numpy.random.Generator"):
         circular_block_indices(10, 2, 5, 0)
+
+
+def test_values_per_epoch_resamples_whole_epochs():
+    """k runs per epoch: the bootstrap draws epochs, each with all its runs. With k identical copies of every epoch the
+    mean and RMSE and their intervals are those of one copy under the same draws (a second computation), and the
+    block count is the epochs'."""
+    e = np.abs(np.random.default_rng(3).normal(1.0, 0.5, 60))
+    one = accuracy_metrics(e, np.random.default_rng(9), n_bootstrap=300, block_length=3)
+    three = accuracy_metrics(np.repeat(e, 3), np.random.default_rng(9), n_bootstrap=300, block_length=3,
+                                values_per_epoch=3)
+    for key in ("mean_m", "mean_m_low", "mean_m_high", "rmse_m", "rmse_m_low", "rmse_m_high", "n_blocks"):
+        assert three[key] == pytest.approx(one[key], rel=1e-12), key
+    assert three["n"] == 180
+    with pytest.raises(ValueError, match="values_per_epoch"):
+        accuracy_metrics(np.ones(7), np.random.default_rng(0), values_per_epoch=3)

@@ -608,13 +608,13 @@ def result_row(kind: str, recording: str, method: str, errors_m, bound_m, reason
                n_bootstrap: int, block: int, settings: str, prior: str, bound_name: str, outside: float) -> dict:
     """One row of :data:`RESULT_COLUMNS`: the errors ``(E, R)`` of ``R`` runs at ``E`` epochs in time order (one run
     for a deterministic method) scored by :func:`locbook.accuracy_metrics` (statistics over every run and epoch;
-    the circular block bootstrap over blocks of ``block`` epochs, all runs of an epoch together), beside the bound
+    the circular block bootstrap over blocks of ``block`` epochs, each epoch with all its runs), beside the bound
     ``(E,)`` summarised without its undefined epochs (``reason``; :func:`locbook.bounds.summary.summarize_bound`)
     and the ratio RMSE / RMS bound over the epochs where the bound is defined (n/a with the reason when it is
     degenerate). A ratio below 1 carries why it can be (``prior``: what the method knows that the bound does not)."""
     e = np.asarray(errors_m, float)
     e = e[:, None] if e.ndim == 1 else e
-    m = accuracy_metrics(e.ravel(), rng, n_bootstrap=n_bootstrap, block_length=block * e.shape[1])
+    m = accuracy_metrics(e.ravel(), rng, n_bootstrap=n_bootstrap, block_length=block, values_per_epoch=e.shape[1])
     summary = summarize_bound(bound_m, reason)
     ratio, note = error_bound_ratio(e.T, summary)
     if not note and np.isfinite(ratio) and ratio < 1:

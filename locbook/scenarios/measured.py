@@ -47,7 +47,7 @@ from ..metrics import accuracy_metrics
 from ..models.channel import PathLossModel
 from ..models.motion import constant_velocity
 from ..models.rss import RssModel
-from ..montecarlo import moving_block_indices, seed_from_values
+from ..montecarlo import seed_from_values
 from ..static.calibration import PathLossFit, calibrate_path_loss, fix_error_covariance
 from ..static.fingerprint import knn_position
 
@@ -299,17 +299,28 @@ def outside_fraction(data: Dataset, positions_m) -> float:
 
 def calibration_block_bootstrap(data: Dataset, rng: np.random.Generator, *, n_bootstrap: int, block_s: float,
                                 mode: str = "per_anchor"):
-    """The per-anchor closed-form fit refitted on ``n_bootstrap`` moving-block resamples of the calibration epochs
-    in time order (blocks of ``block_s`` seconds' worth of epochs at the median spacing): neighbouring epochs share
-    their shadowing, so resampling single epochs (``block_s`` below one spacing) understates the spread. Returns
-    ``(fits of the resamples (a batch PathLossFit), block length in epochs)``."""
+    """The per-anchor closed-form fit refitted on ``n_bootstrap`` circular block resamples
+    (:func:`locbook.montecarlo.circular_block_indices`) of the calibration epochs in time order (blocks of ``block_s``
+    seconds' worth of epochs at the median spacing): neighbouring epochs share their shadowing, so resampling single
+    epochs (``block_s`` below one spacing) understates the spread. Returns ``(fits of the resamples (a batch
+    PathLossFit), block length in epochs, note)``: ``note`` is "" or, when the epochs hold fewer than
+    :data:`locbook.metrics.MIN_BLOCKS` blocks, why the spread is not estimable (the fits are then all NaN)."""
+    from ..metrics import MIN_BLOCKS
+    from ..montecarlo import circular_block_indices
     ep = data.epochs_of("calibration")
     _, distance, rss = calibration_set(data)
     time_s = ep.time_s[np.isfinite(ep.position_m[:, :2]).all(axis=1)]
     spacing = float(np.median(np.diff(time_s))) if time_s.size > 1 else 1.0
     block = max(1, int(round(block_s / spacing))) if spacing > 0 else 1
-    idx = moving_block_indices(len(time_s), block, n_bootstrap, rng)
-    return calibrate_path_loss(distance[idx], rss[idx], mode), block
+    idx = circular_block_indices(len(time_s), block, n_bootstrap, rng)
+    fits = calibrate_path_loss(distance[idx], rss[idx], mode)
+    blocks = len(time_s) / block
+    if blocks >= MIN_BLOCKS:
+        return fits, block, ""
+    note = (f"not estimable: {len(time_s)} calibration epochs hold {blocks:.1f} blocks of {block}; the rule needs at "
+            f"least {MIN_BLOCKS:g} blocks")
+    nan = np.full_like(np.asarray(fits.path_loss_exp, float), np.nan)
+    return replace(fits, ref_power_dbm=nan, path_loss_exp=nan.copy()), block, note
 
 
 def record_dataset(report, data: Dataset) -> list[dict]:

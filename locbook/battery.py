@@ -308,7 +308,8 @@ def static_bound_checked(sc: StaticScenario):
 
 @dataclass(frozen=True)
 class TrackerSettings:
-    """The trackers' shared settings: ``q`` the constant-velocity model's white-acceleration intensity (m^2/s^3),
+    """The trackers' shared settings: ``q`` the constant-velocity model's white-acceleration variance per step
+    (m^2/s^4; the discrete form, Q = q G G^T with G = [dt^2/2, dt]),
     the prior ``P_0 = diag(sd_p^2, sd_p^2, sd_v^2, sd_v^2)``, particles and the UKF's alpha."""
 
     q: float = 0.05
@@ -316,10 +317,22 @@ class TrackerSettings:
     initial_velocity_sd_m_s: float = 0.5
     n_particles: int = 1000
     ukf_alpha: float = 0.5
+    #: a full position covariance of the start (m^2, (2, 2)) in place of ``initial_position_sd_m^2 I`` (measured
+    #: data: the calibrated covariance of the fix the trackers start from); the particles then start with the
+    #: isotropic ``sqrt(tr / 2)``
+    initial_position_cov_m2: np.ndarray | None = None
 
     @property
     def P0(self) -> np.ndarray:
-        return np.diag([self.initial_position_sd_m**2] * 2 + [self.initial_velocity_sd_m_s**2] * 2)
+        P = np.diag([self.initial_position_sd_m**2] * 2 + [self.initial_velocity_sd_m_s**2] * 2)
+        if self.initial_position_cov_m2 is not None:
+            P[:2, :2] = np.asarray(self.initial_position_cov_m2, float)
+        return P
+
+    @property
+    def particle_start_sd_m(self) -> float:
+        """The particles' isotropic start spread (m): the position block's ``sqrt(trace / 2)``."""
+        return float(np.sqrt(np.trace(self.P0[:2, :2]) / 2.0))
 
 
 def initial_states(sc: TrackingScenario, ts: TrackerSettings, n_runs: int, rng: np.random.Generator) -> np.ndarray:
@@ -416,7 +429,7 @@ def run_trackers(sc: TrackingScenario, rss_dbm, x0, ts: TrackerSettings, rng: np
     if "particle" in chosen:
         out["particle"] = particle_filter(rss, model, rng_pf, n_particles=ts.n_particles, region_m=sc.box_m,
                                           spread_m=sc.spread_m, initial_position_m=x0[:, :2],
-                                          initial_sd_m=ts.initial_position_sd_m, resample_threshold=0.5).mean_m
+                                          initial_sd_m=ts.particle_start_sd_m, resample_threshold=0.5).mean_m
     if "grid_bayes" in chosen:
         cells = grid_in_outline(sc.outline_m, sc.grid_spacing_m)
         out["grid_bayes"] = grid_bayes_filter(rss, cells, model, sc.spread_m,

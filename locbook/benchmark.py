@@ -1,8 +1,9 @@
 """The cross-document benchmark: every static method on every document's static scenario and on the measured data,
 every tracker on every tracking scenario, each beside its bound.
 
-Scenarios and methods are declared in registries (:data:`STATIC_SCENARIOS`, :data:`TRACKING_SCENARIOS`,
-:data:`STATIC_METHODS`, :data:`TRACKERS`): adding an entry adds a column or a row of the table and the heat map.
+Scenarios are declared in registries here (:data:`STATIC_SCENARIOS`, :data:`TRACKING_SCENARIOS`), methods once in
+:mod:`locbook.battery` (:data:`STATIC_METHODS`, :data:`TRACKERS`): adding an entry adds a column or a row of the
+table and the heat map.
 No source printed these numbers; nothing here is scored against a printed value.
 
 One protocol for every cell (each choice a named setting, reported with the cell):
@@ -11,20 +12,22 @@ One protocol for every cell (each choice a named setting, reported with the cell
   stated default where it prints none, cited per setting) with i.i.d. log-normal shadowing, the model both
   bounds assume. The estimators know the true channel, so a cell measures the method and the geometry, not a
   calibration. All methods of a scenario see the same draws (common random numbers).
-- A measured scenario is built from any data set (:func:`measured_static_scenario`, :func:`measured_tracking_scenario`;
-  the notebook's ``data`` parameter lists them): the channel fitted on its calibration recordings
-  (:mod:`locbook.scenarios.measured`), scored on its other recordings; its bound uses only the anchors heard at
-  each epoch.
+- A data set's column (the notebook's ``data`` parameter lists them) is not computed here: it is the ``pooled`` rows
+  of the measured-data protocol (:func:`locbook.scenarios.measured.static_results`,
+  :func:`~locbook.scenarios.measured.tracking_results`, :func:`~locbook.scenarios.measured.benchmark_rows`), the
+  same calls as the data set's own reports (its settings from the data, its trackers started from the first fix,
+  its bound without the epochs where it is undefined).
 - Static bound: the CRLB ``sqrt(tr J^-1)`` at each true position; the cell's ratio is the RMSE over all fixes
   divided by the RMS of the bound over the positions. Methods that know the room (box-LS, grid ML, grid MMSE,
   k-NN) use information the CRLB does not have and may fall below it.
 - Tracking bound: the posterior CRLB (Tichavsky recursion, :func:`locbook.bounds.pcrlb.posterior_crlb`) of the
-  constant-velocity model the Kalman trackers use (white-acceleration intensity ``q``), with the prior ``N(x_0, P_0)``
+  constant-velocity model the Kalman trackers use (white-acceleration variance ``q``), with the prior ``N(x_0, P_0)``
   every tracker starts from, evaluated along the true path (Dogan's truth-conditioned bound). The paths are the
   documents' deterministic ones, not draws of that model, so the bound is the reference of the filters' own model
   and a ratio below 1 is possible.
-- Every tracker starts from the same prior: the true initial state plus a draw of ``N(0, P_0)`` per run (the Kalman
-  filters' mean; the particles drawn around it; the grid's belief the same Gaussian).
+- Every tracker of a synthetic scenario starts from the same prior: the true initial state plus a draw of
+  ``N(0, P_0)`` per run (the Kalman filters' mean; the particles drawn around it; the grid's belief the same
+  Gaussian).
 """
 from __future__ import annotations
 
@@ -286,9 +289,9 @@ def static_cells(sc: StaticScenario, n_runs: int, rng: np.random.Generator, *, k
 
 def tracking_cells(sc: TrackingScenario, ts: TrackerSettings, n_runs: int, rng: np.random.Generator, *,
                    n_bootstrap: int, block_length: int = 30, with_divergence: bool = False):
-    """Every tracker on one scenario: ``n_runs`` runs (fresh readings for synthetic data; for measured data the one
-    recording, the runs differing in the prior draw and the particles), scored at the scored ticks beside the
-    PCRLB. Returns the rows, the estimates ``{tracker: (R, T, 2)}`` and the bound ``(T,)``; with
+    """Every tracker on one scenario: ``n_runs`` runs (fresh readings and prior draws; a measured scenario's one
+    recording repeated, the runs differing in the prior draw and the particles: the benchmark's data columns come
+    from :func:`locbook.scenarios.measured.tracking_results` instead), scored at the scored ticks beside the PCRLB. Returns the rows, the estimates ``{tracker: (R, T, 2)}`` and the bound ``(T,)``; with
     ``with_divergence`` also ``{tracker: flags}`` of the Kalman-family trackers (:func:`run_trackers`). Every cell
     keeps every run."""
     rng_rss, rng_x0, rng_filters, rng_boot = rng.spawn(4)
@@ -297,7 +300,7 @@ def tracking_cells(sc: TrackingScenario, ts: TrackerSettings, n_runs: int, rng: 
     est, flags = run_trackers(sc, rss, x0, ts, rng_filters, with_divergence=True)
     bound = tracking_bound_m(sc, ts)
     steps = sc.scored_steps
-    common = f"q = {ts.q:g} m^2/s^3, dt = {sc.dt_s:g} s, P0 sd {ts.initial_position_sd_m:g} m / {ts.initial_velocity_sd_m_s:g} m/s"
+    common = f"q = {ts.q:g} m^2/s^4, dt = {sc.dt_s:g} s, P0 sd {ts.initial_position_sd_m:g} m / {ts.initial_velocity_sd_m_s:g} m/s"
     knobs = {"kf_on_ml": common + f"; fixes: rss_ml (grid-ML start at {sc.grid_spacing_m:g} m)",
              "ekf": common, "ekf_serial": common, "ukf": common + f"; alpha = {ts.ukf_alpha:g}, beta = 2, kappa = 0",
              "particle": f"N = {ts.n_particles}, random walk {sc.spread_m:g} m/step, start N(x0, P0)",

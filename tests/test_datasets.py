@@ -377,7 +377,8 @@ def test_motion_fit_is_the_maximum_likelihood_of_each_motion_model_and_starts_wh
     fixes = _ml_fixes(sc, sc.measured_rss_dbm)
     first = np.flatnonzero(np.isfinite(fixes).all(axis=1))[0]
     np.testing.assert_array_equal(sc.start_state, np.r_[fixes[first], 0.0, 0.0])
-    P0 = np.diag([me.START_POSITION_SD_M**2] * 2 + [me.START_VELOCITY_SD_M_S**2] * 2)
+    P0 = np.zeros((4, 4))
+    P0[:2, :2], P0[2:, 2:] = fix_cov, me.START_VELOCITY_SD_M_S**2 * np.eye(2)       # the calibrated fix covariance
     stream = lb.RssMeasurement(sc.measured_rss_dbm, ds.anchors_m, model, np.array([0, 1]), tag_height_m=ds.tag_height_m)
 
     def ekf_ll(q):

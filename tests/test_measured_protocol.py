@@ -1,5 +1,7 @@
 """The measured-data protocol (locbook.scenarios.measured): one definition per method on every page, settings from the
 data by stated rules, bounds that cannot lie."""
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -93,7 +95,8 @@ def test_a_ratio_below_one_says_why_and_no_ratio_comes_from_a_degenerate_bound(e
     t = res["tests"][res["recordings"][0]]
     rss = t.rss_dbm.copy()
     rss[:, 2:] = np.nan
-    bound, reason = me.checked_crlb_m(ds, model, t.truth_m, rss)
+    sc = me.static_scenario(ds, model, [res["recordings"][0]], grid_spacing_m=proto.grid_spacing_m)
+    bound, reason = battery.static_bound_checked(replace(sc, measured_rss_dbm=rss))
     assert np.isnan(bound).all() and all(reason)
     row = me.result_row("static", "two anchors", "lls", np.ones(len(bound)), bound, reason, np.random.default_rng(0),
                         n_bootstrap=20, block=1, settings="", prior="", bound_name="CRLB", outside=0.0)
@@ -226,3 +229,25 @@ def test_every_method_name_gives_the_same_numbers_on_every_page_of_a_run(report_
             compared += 1
     if not compared:
         pytest.skip(f"{report_dir}: no data set's own reports beside its benchmark column")
+
+
+def test_native_scans_with_jittered_times_run_on_their_median_clock(tmp_path):
+    """Phone scans are not evenly spaced: two scans closer than half the median spacing share a tick and are
+    averaged, never an error; every scan lands on a tick of the clock."""
+    import pandas as pd
+    folder = write_example_dataset(tmp_path / "scans", np.random.default_rng(4), walk_s=30.0, native_scans=True)
+    name = me.load(folder).recordings_with("track")[0]
+    path = folder / me.load(folder).recording(name).file.name
+    table = pd.read_csv(path)
+    times = np.unique(table["time_s"])
+    shift = dict(zip(times, times + np.random.default_rng(0).uniform(-0.45, 0.45, times.size)))
+    table["time_s"] = table["time_s"].map(shift).clip(lower=0.0)
+    table.sort_values("time_s", kind="stable").to_csv(path, index=False)
+    ds = me.load(folder)
+    model = me.channel(me.calibrate(ds))
+    sc = me.tracking_scenario(ds, model, name, grid_spacing_m=0.1, q=0.05, spread_m=1.0)
+    t = np.unique(ds.epochs(name).time_s)
+    assert sc.dt_s == pytest.approx(np.median(np.diff(t)))
+    assert sc.measured_rss_dbm.shape[0] == int(round((t[-1] - t[0]) / sc.dt_s)) + 1
+    heard = ~np.isnan(sc.measured_rss_dbm).all(axis=1)
+    assert heard.sum() < len(t) and heard.sum() >= len(t) // 2       # some scans shared a tick, none was lost

@@ -93,6 +93,8 @@ _TIME_SCALE = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
 _LENGTH_SCALE = {"m": 1.0, "cm": 1e-2, "mm": 1e-3}
 _NAME = re.compile(r"[a-z0-9]+(-[a-z0-9]+)*")            # fullmatch: "$" would let a final newline in
 _RECORDING_NAME = re.compile(r"[a-z0-9][a-z0-9_-]*")
+#: recording names the reports use for themselves ("pooled": every scored recording together)
+RESERVED_RECORDING_NAMES = ("pooled",)
 #: margin (m) around anchors and true positions of the default outline, a data set without one
 DEFAULT_OUTLINE_MARGIN_M = 0.5
 #: how far (m) a true position (or a reference path's vertex) may lie outside the outline: position truth (a camera
@@ -483,6 +485,9 @@ def load_dataset(path) -> Dataset:
                             f"and '-', at most {MAX_NAME_CHARS} characters (MAX_NAME_CHARS)")
         if rname in recordings:
             _fail(manifest, f"{where}the name appears twice")
+        if rname in RESERVED_RECORDING_NAMES:
+            _fail(manifest, f"{where}the name is reserved: the results tables name every scored recording together "
+                            f"{rname!r}; rename the recording")
         role = _string(manifest, rec, "role", where)
         if role not in ROLES:
             _fail(manifest, f"{where}role must be one of {ROLES}, got {_shown(role)}")

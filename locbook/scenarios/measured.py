@@ -13,12 +13,12 @@ Protocol (every choice a named constant or argument, with its reason; nothing he
 - settings come from the data by stated rules, the same for every method, and the reports name each and how it was
   obtained (:class:`Protocol`): the grid pitch (:func:`grid_pitch_m`), k-NN's k by leave-one-point-out
   cross-validation on the calibration map (:func:`choose_knn_k`), every tracker's motion from the track's own
-  readings (:func:`fit_motion`: the constant-velocity intensity ``q`` by maximum likelihood of the EKF's
+  readings (:func:`fit_motion`: the white-acceleration variance ``q`` (m^2/s^4) by maximum likelihood of the EKF's
   innovations, the random walk of the particle and grid filters by maximum likelihood of its innovations on the
   fixes ``kf_on_ml`` filters); a value
   given by the user (``-p``) replaces the rule and is named as given;
 - every tracker starts from the same state: the first ``rss_ml`` fix of the track, at rest, with
-  :data:`START_POSITION_SD_M` and :data:`START_VELOCITY_SD_M_S`;
+  the calibrated covariance of such fixes as the position block of P_0 and :data:`START_VELOCITY_SD_M_S`;
 - bounds are per epoch: the CRLB of the fitted channel at the truth from the anchors each epoch heard (static), the
   posterior CRLB of the trackers' constant-velocity model at the fitted ``q`` from that start (tracking); an epoch
   whose bound is undefined or near-singular is left out of the bound's summary and counted
@@ -35,9 +35,10 @@ import numpy as np
 
 from ..battery import (STATIC_METHODS as BATTERY_STATIC, TRACKER_PRIORS, TRACKERS as BATTERY_TRACKERS,
                        ProtocolChoice, StaticScenario, TrackerSettings, TrackingScenario, channel_settings,
-                       run_trackers, static_fixes as battery_static_fixes, tracking_bound_m, initial_states,
+                       run_trackers, static_bound_checked, static_fixes as battery_static_fixes, tracking_bound_m,
+                       initial_states,
                        KF_FIX_MIN_ANCHORS, _ml_fixes)
-from ..bounds.crlb import rss_crlb_checked_m, rss_crlb_m
+from ..bounds.crlb import rss_crlb_m
 from ..bounds.summary import error_bound_ratio, summarize_bound
 from ..data.dataset import Dataset, load_dataset
 from ..data.measured import regular_epochs
@@ -53,13 +54,13 @@ from ..static.fingerprint import knn_position
 
 __all__ = ["PATH_LOSS_EXP_BOUNDS", "REF_POWER_BOUNDS_DBM", "HUBER_DELTA_DB", "NEAR_FIELD_M", "STATIC_METHODS",
            "TRACKERS", "GRID_SPACING_M", "MAX_GRID_CELLS", "KNN_CANDIDATES", "KNN_CV_CELL_M", "Q_START",
-           "START_POSITION_SD_M", "START_VELOCITY_SD_M_S", "SPREAD_START_M", "load", "calibration_set", "calibrate", "channel",
+           "START_VELOCITY_SD_M_S", "SPREAD_START_M", "load", "calibration_set", "calibrate", "channel",
            "ranging_errors", "radio_map", "scored_recordings", "TestEpochs", "crlb_m", "epoch_s", "plan_distances_m",
            "grid_pitch_m", "choose_knn_k", "fit_motion", "Protocol", "protocol", "static_scenario",
            "tracking_scenario", "static_results", "tracking_results", "RESULT_COLUMNS", "result_row",
            "bayes_measurement_model", "fix_covariance_from_calibration", "outside_fraction",
            "calibration_block_bootstrap", "record_dataset", "geometry_text", "measured_static_scenario",
-           "measured_tracking_scenario", "benchmark_rows", "device_offsets_db", "device_corrected", "keyed_stream", "checked_crlb_m"]
+           "measured_tracking_scenario", "benchmark_rows", "device_offsets_db", "device_corrected", "keyed_stream", "POOLED"]
 
 #: bounded fit: exponents and 1-m powers a radio link can physically have (free space n = 2; indoor 1.5-6,
 #: Rappaport, Wireless Communications, Table 4.2); wide enough never to bind on data that follow the model
@@ -77,17 +78,18 @@ GRID_SPACING_M = 0.1
 #: ...unless the floor needs more cells than this at that pitch; then the pitch that gives this many (memory and
 #: time grow with the cells; 250,000 cells is a 50 m x 50 m floor at 0.1 m)
 MAX_GRID_CELLS = 250_000
-#: k-NN's candidate k, chosen by leave-one-point-out cross-validation on the calibration map (:func:`choose_knn_k`)
-KNN_CANDIDATES = tuple(range(1, 21))
+#: k-NN's candidate k, chosen by leave-one-point-out cross-validation on the calibration map (:func:`choose_knn_k`);
+#: a map holds many epochs per point (about 20 on danis2022), so k runs to a few points' worth of epochs
+KNN_CANDIDATES = (*range(1, 11), 12, 15, 20, 25, 30, 40, 50, 60, 80, 100, 150, 200)
 #: without a point column, the calibration epochs are grouped for the cross-validation by the square of this side
 #: (m) they lie in: neighbouring epochs of a walked calibration share their place and would make k = 1 look perfect
 KNN_CV_CELL_M = 1.0
-#: the constant-velocity intensity (m^2/s^3) the maximum-likelihood fit of :func:`fit_motion` starts from (a
+#: the constant-velocity intensity (m^2/s^4) the maximum-likelihood fit of :func:`fit_motion` starts from (a
 #: walking-pace prior; the fit moves it by a factor within 1e-4..1e4)
 Q_START = 0.05
-#: every tracker's start: the first rss_ml fix with this standard deviation (m; a fix's error on the shipped sets is
-#: 1-3 m) and at rest with this velocity standard deviation (m/s; walkers and robots move at up to ~1.5 m/s)
-START_POSITION_SD_M = 2.0
+#: every tracker's start: the first rss_ml fix with the calibrated covariance of such fixes (the position block of
+#: P_0: :func:`fix_covariance_from_calibration`), at rest with this velocity standard deviation (m/s; walkers and
+#: robots move at up to ~1.5 m/s)
 START_VELOCITY_SD_M_S = 1.0
 
 
@@ -266,14 +268,6 @@ def crlb_m(data: Dataset, model: PathLossModel, positions_m, rss_dbm=None):
     return bound if heard is None else np.where(np.isfinite(bound), bound, np.nan)
 
 
-def checked_crlb_m(data: Dataset, model: PathLossModel, positions_m, rss_dbm):
-    """``(bound (E,), reason (E,))``: :func:`crlb_m` from the anchors each epoch heard, NaN with a reason where the
-    bound is undefined or near-singular (:func:`locbook.bounds.crlb.rss_crlb_checked_m`)."""
-    heard = ~np.isnan(np.asarray(rss_dbm, float))
-    return rss_crlb_checked_m(positions_m, data.anchors_m, model.path_loss_exp, model.sigma_db,
-                              tag_height_m=_tag_height(data), heard=heard)
-
-
 def epoch_s(data: Dataset, recording: str) -> float:
     """The epoch clock of a recording (s), the filters' time step: its window, or for native scans (``window_s =
     0``: each scan time is an epoch) the median spacing of its epochs (:meth:`Dataset.scan_interval_s`)."""
@@ -407,7 +401,7 @@ def choose_knn_k(data: Dataset, model: PathLossModel, requested: int | None = No
     mean = np.nanmean(errors, axis=1)
     best = int(np.nanargmin(mean))
     table = [{"k": k, "mean error (m), leave-one-point-out": round(float(m), 3)} for k, m in zip(candidates, mean)]
-    how = (f"rule: leave-one-point-out cross-validation on the calibration map ({n_groups} groups), k = 1..."
+    how = (f"rule: leave-one-point-out cross-validation on the calibration map ({n_groups} groups), k = 1-"
            f"{candidates[-1]}: mean error {mean[best]:.2f} m" + (" (the largest candidate)" if best == len(candidates) - 1
                                                                    else ""))
     return candidates[best], how, table
@@ -431,20 +425,21 @@ def fit_motion(data: Dataset, model: PathLossModel, recording: str, *, grid_spac
     """Every tracker's motion setting from the track's own readings, by one rule: the maximum-likelihood value of the
     motion model's innovations (:func:`locbook.fit_noise_ml`; no truth is used).
 
-    - ``q`` (m^2/s^3), the constant-velocity intensity of the Kalman-family trackers: the EKF on the raw readings,
+    - ``q`` (m^2/s^4), the white-acceleration variance per step of the Kalman-family trackers: the EKF on the raw readings,
       the channel (sigma per anchor) kept as calibrated, a multiplier of ``q_start``'s Q fitted;
     - ``spread_m`` (m per epoch), the random walk ``L_t = L_t-1 + N(0, s^2 I)`` of the particle and grid Bayes
       filters: the same walk as a Kalman filter (F = I) on the fixes ``kf_on_ml`` filters (``rss_ml``, epochs that heard
       at least 3 anchors) with their calibrated covariance ``fix_cov_m2``, a multiplier of :data:`SPREAD_START_M`'s
       variance fitted (the particle and grid filters' own likelihood of the raw readings has no closed form; the walk
       is the same), and at least half the grid pitch (a narrower walk cannot move on the grid).
-    Returns ``{q, spread_m, log_likelihood_gain, spread_log_likelihood_gain, at_bound}``."""
+    Returns ``{q, spread_m, log_likelihood_gain, spread_log_likelihood_gain, at_bound, spread_at_bound,
+    spread_floor}`` (``at_bound``: a multiplier ended at its limit; ``spread_floor``: the half-pitch floor decided)."""
     from ..tracking.noise import fit_noise_ml
     from ..tracking.streams import LinearMeasurement, RssMeasurement
     sc = tracking_scenario(data, model, recording, grid_spacing_m=grid_spacing_m, q=q_start, spread_m=1.0)
     rss = sc.measured_rss_dbm
     motion = constant_velocity(sc.dt_s, q_start, dim=2)
-    P0 = _settings(q_start, 1, 1.0).P0
+    P0 = _settings(q_start, 1, 1.0, fix_cov_m2).P0
     stream = RssMeasurement(rss, data.anchors_m, model, np.array([0, 1]), tag_height_m=_tag_height(data))
     fit = fit_noise_ml(motion.F, motion.Q, sc.start_state, P0, stream, kind="ekf", fit_Q="scale", fit_R=None,
                        per_run=False)
@@ -456,12 +451,16 @@ def fit_motion(data: Dataset, model: PathLossModel, recording: str, *, grid_spac
     return {"q": float(q_start * fit.q_scale[0]), "spread_m": spread,
             "log_likelihood_gain": float(fit.log_likelihood - fit.initial_log_likelihood),
             "spread_log_likelihood_gain": float(walk.log_likelihood - walk.initial_log_likelihood),
-            "at_bound": bool(np.any(fit.at_bound) or np.any(walk.at_bound))}
+            "at_bound": bool(np.any(fit.at_bound)), "spread_at_bound": bool(np.any(walk.at_bound)),
+            "spread_floor": bool(spread == 0.5 * grid_spacing_m)}
 
 
-def _settings(q: float, n_particles: int, ukf_alpha: float) -> TrackerSettings:
-    return TrackerSettings(q=q, initial_position_sd_m=START_POSITION_SD_M, initial_velocity_sd_m_s=START_VELOCITY_SD_M_S,
-                           n_particles=n_particles, ukf_alpha=ukf_alpha)
+def _settings(q: float, n_particles: int, ukf_alpha: float, fix_cov_m2) -> TrackerSettings:
+    """The trackers' settings on a track: the start's position covariance is the calibrated fix covariance."""
+    cov = np.asarray(fix_cov_m2, float)
+    return TrackerSettings(q=q, initial_position_sd_m=float(np.sqrt(np.trace(cov) / 2.0)),
+                           initial_velocity_sd_m_s=START_VELOCITY_SD_M_S, n_particles=n_particles,
+                           ukf_alpha=ukf_alpha, initial_position_cov_m2=cov)
 
 
 @dataclass(frozen=True)
@@ -495,6 +494,7 @@ def protocol(data: Dataset, model: PathLossModel, *, fit: str = "closed_form", g
     motion = {}
     if tracks and data.recordings_with("track"):
         fix_cov = fix_covariance_from_calibration(data, model, grid_spacing_m=pitch)
+        sd = np.sqrt(np.diag(fix_cov))
         for name in data.recordings_with("track"):
             if q is None or spread_m is None:
                 m = fit_motion(data, model, name, grid_spacing_m=pitch, fix_cov_m2=fix_cov)
@@ -508,15 +508,19 @@ def protocol(data: Dataset, model: PathLossModel, *, fit: str = "closed_form", g
                 f"{m['log_likelihood_gain']:.1f} over q = {Q_START:g}{'; at the fit bound' if m['at_bound'] else ''})")
             s_how = "given (-p spread_m)" if spread_m is not None else (
                 "rule: maximum likelihood of the random walk's innovations on this track's rss_ml fixes (log-likelihood "
-                f"+{m['spread_log_likelihood_gain']:.1f} over {SPREAD_START_M:g} m)")
-            choices += [{"method": "kf_on_ml, ekf, ekf_serial, ukf", "setting": f"q (m^2/s^3), {name}",
+                f"+{m['spread_log_likelihood_gain']:.1f} over {SPREAD_START_M:g} m"
+                f"{'; at the fit bound' if m.get('spread_at_bound') else ''}"
+                f"{'; raised to half the grid pitch' if m.get('spread_floor') else ''})")
+            choices += [{"method": "kf_on_ml, ekf, ekf_serial, ukf", "setting": f"q (m^2/s^4), {name}",
                          "value": f"{m['q']:.3g}", "how": q_how},
                         {"method": "particle, grid_bayes", "setting": f"random walk (m per epoch), {name}",
                          "value": f"{m['spread_m']:.3g}", "how": s_how}]
         if motion:
             choices.append({"method": "every tracker", "setting": "start",
-                            "value": f"the first rss_ml fix, sd {START_POSITION_SD_M:g} m, at rest (sd "
-                                     f"{START_VELOCITY_SD_M_S:g} m/s)", "how": "rule (no knowledge of the start)"})
+                            "value": f"the first rss_ml fix, sd {sd[0]:.2f} m / {sd[1]:.2f} m (x / y), at rest (sd "
+                                     f"{START_VELOCITY_SD_M_S:g} m/s)",
+                            "how": "rule: the calibrated covariance of rss_ml fixes (the first epoch's readings also "
+                                   "update it: a small double use, stated)"})
     return Protocol(fit, pitch, k, motion, tuple(choices), tuple(table))
 
 
@@ -569,12 +573,21 @@ def fix_covariance_from_calibration(data: Dataset, model: PathLossModel, *, grid
 
 def tracking_scenario(data: Dataset, model: PathLossModel, recording: str, *, grid_spacing_m: float, q: float,
                       spread_m: float, fix_cov_m2=None, fit: str = "closed_form") -> TrackingScenario:
-    """One track on its epoch clock (:func:`epoch_s`; a tick without an epoch is all NaN and unscored), truth at the
-    ticks of the epochs with a true position, and the start every tracker takes (the first rss_ml fix, at rest)."""
+    """One track on its epoch clock (:func:`epoch_s`; a tick without an epoch is all NaN and unscored; native scans
+    are put in windows of the clock's period, so scans with jittered times never share a tick), truth at the ticks of
+    the epochs with a true position, and the start every tracker takes (the first rss_ml fix, at rest)."""
     dt = epoch_s(data, recording)
-    ep = device_corrected(data, data.epochs(recording))
-    reg, ticks = regular_epochs(ep, dt, tolerance_s=0.5 * dt if not data.recording(recording).epoch_rule.window_s
-                                else 0.1 * dt)
+    rec = data.recording(recording)
+    if rec.epoch_rule.window_s:
+        ep = device_corrected(data, data.epochs(recording))
+        reg, ticks = regular_epochs(ep, dt, tolerance_s=0.1 * dt)
+    else:
+        # native scans on the clock of their median spacing: jittered scan times can put two scans on one tick, so
+        # the scans are put in windows of that spacing (the mean of an anchor's scans in a window, as a windowed
+        # recording's epochs)
+        from ..data.measured import epochs as make_epochs
+        ep = device_corrected(data, make_epochs(rec.readings, data.anchor_ids, window_s=dt, aggregate="mean"))
+        reg, ticks = regular_epochs(ep, dt, tolerance_s=0.5 * dt)
     truth = np.full((reg.rss_dbm.shape[0], 2), np.nan)
     known = np.isfinite(ep.position_m[:, :2]).all(axis=1)
     truth[ticks[known]] = ep.position_m[known, :2]
@@ -594,6 +607,8 @@ def tracking_scenario(data: Dataset, model: PathLossModel, recording: str, *, gr
 
 # ----------------------------------------------------------------------------------------------------- results
 
+#: the results tables' name for every scored recording together (a name the loader reserves)
+POOLED = "pooled"
 #: the columns of a results table (``results.csv`` of measured-localization and measured-tracking; the benchmark's
 #: data columns are the ``pooled`` rows)
 RESULT_COLUMNS = ("kind", "recording", "method", "settings", "epochs", "runs", "coverage", "mean_m", "median_m",
@@ -609,10 +624,18 @@ def _r(v):
     return None if v is None or not np.isfinite(v) else round(float(v), 3)
 
 
-def _block(time_s, block_s: float) -> int:
+def _block(time_s, block_s: float, point=None) -> int:
+    """Bootstrap block (epochs): ``block_s`` at the median epoch spacing, and at least the median number of epochs a
+    static point holds (epochs at one point share their place and their shadowing: the point is the unit that is
+    independent, not the epoch)."""
     t = np.asarray(time_s, float)
     step = float(np.median(np.diff(t))) if t.size > 1 else 1.0
-    return max(1, int(round(block_s / step))) if step > 0 else 1
+    block = max(1, int(round(block_s / step))) if step > 0 else 1
+    if point is not None and len(point):
+        changes = np.flatnonzero(np.asarray(point[1:], dtype=object) != np.asarray(point[:-1], dtype=object))
+        dwell = np.diff(np.r_[0, changes + 1, len(point)])
+        block = max(block, int(np.median(dwell)))
+    return block
 
 
 def result_row(kind: str, recording: str, method: str, errors_m, bound_m, reason, rng: np.random.Generator, *,
@@ -645,8 +668,8 @@ def result_row(kind: str, recording: str, method: str, errors_m, bound_m, reason
 def _static_settings(name: str, proto: Protocol) -> str:
     extra = {"knn": f"k = {proto.knn_k} (calibration map)", "grid_ml": f"pitch {proto.grid_spacing_m:g} m",
              "grid_mmse": f"pitch {proto.grid_spacing_m:g} m",
-             "rss_ml": f"start: grid ML at {proto.grid_spacing_m:g} m",
-             "rss_ml_free": f"start: grid ML at {proto.grid_spacing_m:g} m"}.get(name, "")
+             "rss_ml": f"grid ML at {proto.grid_spacing_m:g} m", "rss_ml_free": f"grid ML at {proto.grid_spacing_m:g} m"
+             }.get(name, "")
     return "; ".join(x for x in (BATTERY_STATIC[name].settings, extra) if x)
 
 
@@ -663,15 +686,16 @@ def static_results(data: Dataset, model: PathLossModel, proto: Protocol, *, seed
     tests = {n: TestEpochs.of(data, n) for n in names}
     pooled = battery_static_fixes(sc, sc.measured_rss_dbm[None], knn_k=proto.knn_k)
     cuts = np.cumsum([0] + [len(t.truth_m) for t in tests.values()])
+    pooled_bound = static_bound_checked(sc)          # the anchors each epoch heard
     fixes, errors, bounds, rows = {}, {}, {}, []
     for i, n in enumerate(names):
         fixes[n] = {k: v[0, cuts[i]:cuts[i + 1]] for k, v in pooled.items()}
         errors[n] = {k: np.linalg.norm(v - tests[n].truth_m, axis=-1) for k, v in fixes[n].items()}
-        bounds[n] = checked_crlb_m(data, model, tests[n].truth_m, tests[n].rss_dbm)
-    groups = [("pooled", names)] + [(n, [n]) for n in names]
+        bounds[n] = tuple(v[cuts[i]:cuts[i + 1]] for v in pooled_bound)
+    groups = [(POOLED, names)] + [(n, [n]) for n in names]
     for label, members in groups:
-        time_blocks = [_block(tests[n].time_s, block_s) for n in members]
-        block = int(np.median(time_blocks))
+        # the largest member's block: a pooled row is never resampled in finer units than one of its recordings
+        block = max(_block(tests[n].time_s, block_s, tests[n].point) for n in members)
         bound = np.concatenate([bounds[n][0] for n in members])
         reason = np.concatenate([bounds[n][1] for n in members])
         for method in pooled:
@@ -708,7 +732,7 @@ def tracking_results(data: Dataset, model: PathLossModel, proto: Protocol, *, se
         motion = proto.motion[name]
         sc = tracking_scenario(data, model, name, grid_spacing_m=proto.grid_spacing_m, q=motion["q"],
                                spread_m=motion["spread_m"], fix_cov_m2=fix_cov, fit=proto.fit)
-        ts = _settings(motion["q"], n_particles, ukf_alpha)
+        ts = _settings(motion["q"], n_particles, ukf_alpha, fix_cov)
         rss = sc.measured_rss_dbm
         x0 = initial_states(sc, ts, 1, None)
         est, flags = run_trackers(sc, rss[None], x0, ts, keyed_stream(seed, data.name, "tracking", name, "kalman"),
@@ -728,14 +752,14 @@ def tracking_results(data: Dataset, model: PathLossModel, proto: Protocol, *, se
                          "est": {t: v[:, steps] for t, v in est.items()},
                          "knobs": _tracker_knobs(proto, name, ts, sc)}
     rows = []
-    groups = ([("pooled", list(per))] if per else []) + [(n, [n]) for n in per]
+    groups = ([(POOLED, list(per))] if per else []) + [(n, [n]) for n in per]
     for label, members in groups:
-        block = int(np.median([per[n]["block"] for n in members]))
+        block = max(per[n]["block"] for n in members)
         bound = np.concatenate([per[n]["bound"] for n in members])
         for tracker in TRACKERS:
             e = np.concatenate([per[n]["errors"][tracker] for n in members])
             settings = per[members[0]]["knobs"][tracker] if len(members) == 1 else \
-                "motion fitted per track (see each track's row)"
+                "motion per track (see each track's row)"
             rows.append(result_row("tracking", label, tracker, e, bound, None,
                                    keyed_stream(seed, data.name, "tracking", members[0] if len(members) == 1 else label,
                                                 tracker, "bootstrap"),
@@ -748,9 +772,11 @@ def tracking_results(data: Dataset, model: PathLossModel, proto: Protocol, *, se
 
 
 def _tracker_knobs(proto: Protocol, name: str, ts: TrackerSettings, sc: TrackingScenario) -> dict:
-    common = (f"q = {ts.q:.3g} m^2/s^3 (fitted), dt = {sc.dt_s:g} s, start: first rss_ml fix, sd "
-              f"{ts.initial_position_sd_m:g} m / {ts.initial_velocity_sd_m_s:g} m/s")
-    walk = f"random walk {sc.spread_m:.3g} m/epoch (fitted)"
+    fitted = "log_likelihood_gain" in proto.motion[name]
+    common = (f"q = {ts.q:.3g} m^2/s^4 ({'fitted' if fitted else 'given'}), dt = {sc.dt_s:g} s, start: first rss_ml "
+              f"fix, calibrated fix covariance, at rest (sd {ts.initial_velocity_sd_m_s:g} m/s)")
+    walk = (f"random walk {sc.spread_m:.3g} m/epoch "
+            f"({'fitted' if 'spread_log_likelihood_gain' in proto.motion[name] else 'given'})")
     return {"kf_on_ml": common + "; R: rss_ml fix errors on the calibration epochs", "ekf": common,
             "ekf_serial": common, "ukf": common + f"; alpha = {ts.ukf_alpha:g}",
             "particle": f"N = {ts.n_particles}, {walk}", "grid_bayes": f"pitch {sc.grid_spacing_m:g} m, {walk}"}
@@ -764,7 +790,7 @@ def benchmark_rows(data: Dataset, static: dict | None, tracking: dict | None) ->
         if res is None:
             continue
         for r in res["rows"]:
-            if r["recording"] != "pooled":
+            if r["recording"] != POOLED:
                 continue
             rows.append({"kind": kind, "scenario": f"data-{data.name}", "document": data.name, "data": "measured",
                          "method": r["method"], "runs": r["runs"], "points": r["epochs"], "rmse_m": r["rmse_m"],

@@ -273,3 +273,31 @@ def test_every_link_and_image_of_the_site_resolves(browser, site_dir, tmp_path):
     assert "v-loose" in verdict.get_attribute("class")
     assert "test window (toy Sec. 1)" in text and "small, to keep the test fast" in text
     assert "samples.csv" in links
+
+
+def test_a_data_sets_page_shows_its_results_table_first(browser, tmp_path):
+    """Issue 46: a data set's page (reports/<profile>/data-<name>/index.html) opens with the answer: the first table
+    a reader sees is the results table, and every link and image of the page resolves."""
+    from selenium.webdriver.common.by import By
+    from test_data_runs import example, write_data_folder
+
+    folder = example(tmp_path / "set", ("calibration", "static"), name="mine")
+    report_dir = tmp_path / "reports" / "quick" / "data-mine"
+    record = write_data_folder(report_dir, folder, load_suite())
+    index = report_dir / "index.html"
+    broken, external, _pages = check_page(browser, index)
+    assert broken == [] and external == []
+    assert browser.find_element(By.TAG_NAME, "h1").text == record["title"]
+    first = next(t for t in browser.find_elements(By.TAG_NAME, "table") if t.is_displayed())
+    assert "results" in first.get_attribute("class").split()
+    head = [th.text for th in first.find_elements(By.CSS_SELECTOR, "thead th")]
+    assert head[:5] == ["method", "recording", "epochs", "coverage", "mean (m)"] and "ratio" in head
+    cells = [td.text for td in first.find_element(By.CSS_SELECTOR, "tbody tr").find_elements(By.TAG_NAME, "td")]
+    assert cells[:2] == ["lls", "pooled"]                      # each method's pooled row first
+    # the table sits above the fold of a 1400 x 1000 window: the page opens with it
+    assert first.location["y"] < 1000
+    assert record["attribution"] in browser.find_element(By.TAG_NAME, "body").text
+    for shot in (tmp_path / "data-index.png", _screenshot_dir() / "data-index.png"):
+        assert browser.save_screenshot(str(shot))
+        data = shot.read_bytes()
+        assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 1000

@@ -122,8 +122,9 @@ def main(argv: list[str] | None = None) -> int:
                           "the reports go to their own folder, never to reports/<profile>/")
     run.add_argument("--data", metavar="DIR_OR_NAME",
                      help="run on this data set (a folder with dataset.toml, or a shipped name such as "
-                          "kolakowski2021): every experiment that takes one (default: all of them); the reports go "
-                          "to <reports>/<profile>/data-<name>/")
+                          "kolakowski2021): every experiment that takes one and that the data set can run (default: "
+                          "all of them; one it cannot run is left out, in one line, and asking for it by id is an "
+                          "error); the reports go to <reports>/<profile>/data-<name>/")
     run.add_argument("--reports", type=Path, help="reports folder (default: <repository>/reports)")
     run.add_argument("--out", type=Path, help="write this run's reports to this folder (a path; its last part "
                                                 "[a-z0-9-] only)")
@@ -163,6 +164,15 @@ def main(argv: list[str] | None = None) -> int:
     data.add_argument("--name", default="example",
                       help="example: the data set's name in its manifest (names the reports folder; default example)")
     data.add_argument("--force", action="store_true", help="example: write into a folder that already holds files")
+    data.add_argument("--speed", type=lambda t: _positive(float, t), metavar="M_S",
+                      help="example: the walkers' speed in m/s (default: the example site's, 1 m/s)")
+    data.add_argument("--roles", type=_roles, metavar="ROLES",
+                      help="example: the recordings written, a comma list of calibration, static, track with "
+                           "calibration among them (default: all three; calibration,static: a static-only set)")
+    data.add_argument("--two-d", action="store_true",
+                      help="example: anchors without heights (a 2-D site: distances in the plane)")
+    data.add_argument("--native-scans", action="store_true",
+                      help="example: the tracks written as scans (every anchor of a scan at one time, window_s = 0)")
     for command in (lst, show, nbs, run, study, bracket, data):   # --suite after the command too; SUPPRESS keeps one given before it
         command.add_argument("--suite", type=Path, default=argparse.SUPPRESS, help=suite_help)
     args = parser.parse_args(argv)
@@ -180,12 +190,15 @@ def main(argv: list[str] | None = None) -> int:
             if args.action == "example":
                 import numpy as np
                 from ..data.example import write_example_dataset
+                from ..data.example import EXAMPLE_ROLES
                 folder = write_example_dataset(args.dataset, np.random.default_rng(args.seed), seed_note=args.seed,
-                                               name=args.name, force=args.force)
+                                               name=args.name, force=args.force, speed_m_s=args.speed,
+                                               roles=args.roles or EXAMPLE_ROLES, two_d=args.two_d,
+                                               native_scans=args.native_scans)
                 print(f"wrote the example data set to {folder}; check it with `locbook data check {folder}` and run "
                       f"the battery with `locbook run --data {folder}`")
                 return 0
-            print(_dataset_text(args.dataset))
+            print(_dataset_text(args.dataset, suite))
             return 0
         if args.command == "notebooks":
             from .catalog import copy_notebooks
@@ -213,6 +226,9 @@ def main(argv: list[str] | None = None) -> int:
                 experiments = [e for e in suite.experiments if "data" in e.declared_parameters()]
             else:
                 experiments = suite.select(args.ids)
+            # an experiment named by its exact id must run on the data set; one selected by a document key or with
+            # no ids is left out when the data set cannot run it (runner.select_for_data)
+            requested = {i for i in args.ids if any(e.id == i for e in suite.experiments)}
             from .runner import run_suite, split_overrides
             overrides = _parse_overrides(args.parameter)
             kept, own, left_out = split_overrides(experiments, overrides)
@@ -223,7 +239,8 @@ def main(argv: list[str] | None = None) -> int:
             result = run_suite(suite, experiments, args.profile, jobs=args.jobs, force=args.force,
                                overrides=overrides, report_root=args.reports,
                                out_dir=args.out, timeout_s=args.timeout, progress=args.progress,
-                               executor=args.executor, scheduler=args.scheduler, data=args.data)
+                               executor=args.executor, scheduler=args.scheduler, data=args.data,
+                               requested=requested)
     except (ParameterError, ReadingsError, LocbookError) as exc:   # LocbookError: a malformed data set too
         print("locbook: error: " + " ".join(str(exc).split("\n")), file=sys.stderr)   # one line, whatever raised it
         return EXIT_BAD_INPUT
@@ -265,20 +282,37 @@ def main(argv: list[str] | None = None) -> int:
     return _exit_status(result)
 
 
-def _dataset_text(path: str) -> str:
-    """What ``locbook data`` prints: the data set's provenance, geometry, notes and one line per recording."""
+def _roles(text: str) -> tuple[str, ...]:
+    """argparse type of ``--roles``: a comma list of recording roles (the generator checks which it accepts)."""
+    roles = tuple(r.strip() for r in text.split(",") if r.strip())
+    if not roles:
+        raise argparse.ArgumentTypeError(f"expects a comma list such as calibration,static, got {text!r}")
+    return roles
+
+
+def _dataset_text(path: str, suite=None) -> str:
+    """What ``locbook data`` prints: the data set's provenance, geometry, notes and one line per recording; with the
+    experiment list ``suite``, which experiments ``locbook run --data`` runs on it and which it leaves out."""
     from ..data.dataset import dataset_summary, load_dataset
     from ..reproduce.report import Table
     ds = load_dataset(path)
     lo, hi = ds.outline_m.min(axis=0), ds.outline_m.max(axis=0)
     lines = [f"data set {ds.name!r}: {ds.title}", f"  folder: {ds.root}", f"  licence: {ds.license}",
              f"  attribution: {ds.attribution}",
-             f"  anchors: {len(ds.anchor_ids)} ({', '.join(ds.anchor_ids[:12])}{', ...' if len(ds.anchor_ids) > 12 else ''}), "
-             f"heights {ds.anchors_m[:, 2].min():g}-{ds.anchors_m[:, 2].max():g} m; tag height {ds.tag_height_m:g} m",
+             f"  anchors: {len(ds.anchor_ids)} ({', '.join(ds.anchor_ids[:12])}{', ...' if len(ds.anchor_ids) > 12 else ''})",
+             f"  geometry: {ds.geometry_text}",     # 2-D (no heights) or 3-D with the tag's height and its source
              f"  outline: {len(ds.outline_m)} vertices, x {lo[0]:g}..{hi[0]:g} m, y {lo[1]:g}..{hi[1]:g} m"]
     lines += [f"  {key.replace('_', ' ')}: {note}" for key, note in ds.notes.items()]
-    lines += ["", Table(dataset_summary(ds)).to_markdown(), "",
-              f"ok: `locbook run --data {path}` runs the measured-data experiments and the benchmark on it"]
+    lines += ["", Table(dataset_summary(ds)).to_markdown(), ""]
+    if suite is None:
+        lines.append(f"ok: `locbook run --data {path}` runs the measured-data experiments and the benchmark on it")
+        return "\n".join(lines)
+    from .runner import data_kinds
+    kinds = data_kinds(ds)
+    why = {e.id: e.data_run.missing(kinds) for e in suite.experiments if e.data_run is not None}
+    runs = [eid for eid, reason in why.items() if not reason]
+    lines.append(f"ok: `locbook run --data {path}` runs {', '.join(runs) or 'no experiment'}"
+                 + "".join(f"; {eid}: left out: {reason}" for eid, reason in why.items() if reason))
     return "\n".join(lines)
 
 

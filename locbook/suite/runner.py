@@ -13,6 +13,8 @@ Layout of a reports folder (``reports/<profile>/``, or its own folder for a run 
     .staging/<run>/<id>/                     experiments in progress, one folder per run
     .failed/<id>/                            the last failed attempt, kept for inspection
     status.json                              the last attempt of each experiment
+    dataset.json                             a data run's folder only: the data set it holds (identity, title,
+                                             attribution, licence, manifest, geometry, the experiments left out)
 
 Guarantees (docs/running.md, "Interrupts, concurrent runs and the cache"):
 
@@ -67,7 +69,7 @@ from .progress import expected_seconds, make_progress
 from .spec import PROFILES, SAFE_NAME, Experiment, Suite, SuiteError
 
 __all__ = ["KERNEL_NAME", "run_suite", "run_tasks", "Task", "cache_key", "Outcome", "SuiteRun",
-           "write_suite_reports", "override_folder_name"]
+           "write_suite_reports", "override_folder_name", "data_kinds", "select_for_data"]
 
 #: Every notebook runs on this kernel; jupyter_client maps it to the running interpreter.
 KERNEL_NAME = "python3"
@@ -114,6 +116,9 @@ class SuiteRun:
     disk_full: str | None = None
     #: why the executor could run nothing more (a lost Dask scheduler); the run stopped there
     executor_error: str = ""
+    #: a data run: the selected experiments left out because the data set does not meet their
+    #: ``[experiment.data_run] needs``, each with why (:func:`select_for_data`); they are no outcome of the run
+    left_out: dict[str, str] = field(default_factory=dict)
 
     def count(self, status: str) -> int:
         return sum(o.status == status for o in self.outcomes)
@@ -447,11 +452,14 @@ def write_suite_reports(suite: Suite, report_dir: Path, *, list_all: bool = True
     from .bracket import SITE_NUMBER_COLUMNS, bracket_of_rows, brackets_root, load_bracket
 
     status = _read_json(report_dir / "status.json", {})
+    dataset = site.dataset_record(report_dir)       # a data run's folder: the data set's page, not the scoreboard
     rows, entries = [], []
     for exp in suite.experiments:
         folder = report_dir / exp.id
         present = (folder / "summary.md").is_file()
-        if not present and not list_all:
+        # a data set's page names every experiment that takes a data set: those run, those failed, those left out
+        listed = present or list_all or (dataset is not None and (exp.data_run is not None or exp.id in status))
+        if not listed:
             continue
         numbers = _read_csv(folder / "numbers.csv") if present else []
         # each row's reading bracket, from <reports>/brackets/<id>/bracket.csv when one was run (else empty); not
@@ -468,6 +476,10 @@ def write_suite_reports(suite: Suite, report_dir: Path, *, list_all: bool = True
     for r in rows:
         writer.writerow({c: r.get(c, "") for c in SITE_NUMBER_COLUMNS})
     _write_atomic(report_dir / "numbers.csv", out.getvalue())
+    if dataset is not None:
+        _write_atomic(report_dir / "index.html", site.data_index_html(report_dir, entries, dataset, locbook_version()))
+        _write_atomic(report_dir / "index.md", site.data_index_markdown(report_dir, entries, dataset))
+        return
     # the findings pages, the conclusions pages and the index from the same rows as numbers.csv (one tally)
     from .findings import write_findings
     from .conclusions import write_conclusions
@@ -566,13 +578,17 @@ def run_suite(suite: Suite, experiments: list[Experiment], profile: str, *, jobs
               overrides: dict[str, str] | None = None, report_root: Path | None = None,
               out_dir: Path | None = None, timeout_s: float = 1800, retries: int = 1,
               kernel_name: str = KERNEL_NAME, progress="plain", executor: str = "local",
-              scheduler: str | None = None, data: str | None = None) -> SuiteRun:
+              scheduler: str | None = None, data: str | None = None, requested=None) -> SuiteRun:
     """Run experiments and write their reports; see the module docstring for the guarantees.
 
     ``data``: a data set (a shipped name or a folder with ``dataset.toml``; :func:`locbook.data.dataset.load_dataset`
     checks it first) for every selected experiment, each of which must take one (a ``data`` parameter: the measured-
     data experiments and the cross-document benchmark). Its reports go to ``data-<name>/`` inside the folder the run
-    would otherwise write (``<report_root>/<profile>/data-<name>/``), and its files join the cache key.
+    would otherwise write (``<report_root>/<profile>/data-<name>/``), and its files join the cache key. An experiment
+    whose ``[experiment.data_run] needs`` the data set does not meet is left out before anything runs (one message
+    each; :attr:`SuiteRun.left_out`; recorded for the data set's page), unless its id is in ``requested`` (the ids
+    asked for by name; default: every experiment given): that is an error (:func:`select_for_data`). The values of
+    ``[experiment.data_run] parameters`` apply to a data run, under ``overrides``.
 
     Parameters of every selected experiment are checked before any executes (raises ParameterError); with several
     experiments, each takes the ``overrides`` it declares and those declaring none are left out
@@ -590,12 +606,14 @@ def run_suite(suite: Suite, experiments: list[Experiment], profile: str, *, jobs
     data_roots: list[str] = []
     per_experiment: dict[str, dict] = {}
     dataset_name = identity = None
+    facts: dict = {}
+    left_out: dict[str, str] = {}
     if "data" in overrides:
         if data is not None:
             raise SuiteError("give the data set once: --data or -p data=..., not both")
         data = overrides.pop("data")          # -p data=X is --data X: checked, hashed, its own folder
     if data is not None:
-        dataset_name, value, data_roots, identity = _dataset_argument(data)
+        ds, dataset_name, value, data_roots, identity = _load_data_argument(data)
         for exp in experiments:
             declared = exp.declared_parameters()
             if "data" not in declared:
@@ -605,6 +623,9 @@ def run_suite(suite: Suite, experiments: list[Experiment], profile: str, *, jobs
             as_list = str(declared["data"].annotation).replace(" ", "").startswith("list")
             # override text as `-p` takes it: a str parameter verbatim, a list as a TOML array
             per_experiment[exp.id] = {"data": json.dumps([value]) if as_list else value}
+        kinds = data_kinds(ds)
+        experiments, left_out = select_for_data(experiments, kinds, requested)
+        facts = _dataset_facts(ds, identity, suite, kinds)
     # every user path made absolute here, once: the workers and kernels run in other folders (a kernel runs in
     # its notebook's folder), so a relative staging path would point elsewhere there
     root = _absolute(report_root) if report_root else _absolute(suite.default_reports())
@@ -620,16 +641,57 @@ def run_suite(suite: Suite, experiments: list[Experiment], profile: str, *, jobs
     if dataset_name is not None and out_dir is None:
         report_dir = report_dir / f"data-{dataset_name}"
     if identity is not None:
-        _claim_dataset_folder(report_dir, dataset_name, identity)
+        _claim_dataset_folder(report_dir, dataset_name, identity, facts)
     experiments, own, _ = split_overrides(experiments, overrides)
-    tasks = [Task(exp.id, exp, exp.parameters(profile, {**own[exp.id], **per_experiment.get(exp.id, {})}))
+    tasks = [Task(exp.id, exp, exp.parameters(profile, {**own[exp.id], **per_experiment.get(exp.id, {})},
+                                              data_run=data is not None))
              for exp in experiments]  # validation first
     custom_folder = bool(overrides) or out_dir is not None or dataset_name is not None
-    return run_tasks(suite, tasks, profile, report_dir, jobs=jobs, force=force, timeout_s=timeout_s,
-                     retries=retries, kernel_name=kernel_name, progress=progress, executor=executor,
-                     scheduler=scheduler, data_roots=data_roots,
-                     write_reports=lambda folder, _outcomes: _write_reports(suite, folder, custom_folder,
-                                                                            dataset_name is not None and out_dir is None))
+    if isinstance(progress, str):
+        progress = make_progress(progress)
+    for eid, why in left_out.items():
+        progress.message(f"{eid}: left out: {why}")
+    run = run_tasks(suite, tasks, profile, report_dir, jobs=jobs, force=force, timeout_s=timeout_s,
+                    retries=retries, kernel_name=kernel_name, progress=progress, executor=executor,
+                    scheduler=scheduler, data_roots=data_roots,
+                    write_reports=lambda folder, _outcomes: _write_reports(suite, folder, custom_folder,
+                                                                           dataset_name is not None and out_dir is None))
+    run.left_out = dict(left_out)
+    return run
+
+
+def data_kinds(ds) -> frozenset[str]:
+    """The kinds of :data:`locbook.suite.spec.DATA_KINDS` a loaded data set (:class:`locbook.data.dataset.Dataset`)
+    holds: each role with a recording, and "scored" when it has a recording the static methods are scored on
+    (:func:`locbook.scenarios.measured.scored_recordings`)."""
+    from ..data.dataset import ROLES
+    from ..scenarios.measured import scored_recordings
+    kinds = {role for role in ROLES if ds.has_role(role)}
+    if scored_recordings(ds):
+        kinds.add("scored")
+    return frozenset(kinds)
+
+
+def select_for_data(experiments: list[Experiment], kinds, requested=None) -> tuple[list[Experiment], dict[str, str]]:
+    """The experiments a data set holding ``kinds`` (:func:`data_kinds`) can run: ``(kept, {id: why left out})``,
+    by each one's ``[experiment.data_run] needs`` (one without the table runs on every data set). ``requested``:
+    the ids asked for by name (default: all of ``experiments``); one of them that the data set cannot run is an
+    error (SuiteError, one line), as is a selection of which none can run."""
+    requested = {e.id for e in experiments} if requested is None else set(requested)
+    kept, left_out = [], {}
+    for exp in experiments:
+        why = exp.data_run.missing(kinds) if exp.data_run is not None else ""
+        if not why:
+            kept.append(exp)
+        elif exp.id in requested:
+            raise SuiteError(f"{exp.id} cannot run on this data set: {why} (`locbook run --data DIR` without ids "
+                             "runs every experiment the data set can run)")
+        else:
+            left_out[exp.id] = why
+    if experiments and not kept:
+        raise SuiteError("no selected experiment can run on this data set: " + "; ".join(
+            f"{eid}: {why}" for eid, why in left_out.items()))
+    return kept, left_out
 
 
 def _write_reports(suite: Suite, folder: Path, custom_folder: bool, nested: bool) -> None:
@@ -648,30 +710,50 @@ def _write_reports(suite: Suite, folder: Path, custom_folder: bool, nested: bool
             lock.release()
 
 
-def _dataset_argument(data: str) -> tuple[str, str, list[str], str]:
-    """``(name, parameter value, data roots, identity)`` of a data set given to ``--data``: checked by loading it (a
-    malformed one fails here, before anything runs). A shipped data set is passed by name, any other by its absolute
-    folder. The roots hold every file its manifest names (a symbolic link's target folder too), so that each file
-    a report read joins its cache record; the identity ("shipped:<name>" or the folder) tells two data sets of one
-    name apart."""
+def _load_data_argument(data: str):
+    """``(data set, name, parameter value, data roots, identity)`` of a data set given to ``--data``: checked by
+    loading it (a malformed one fails here, before anything runs). A shipped data set is passed by name, any other
+    by its absolute folder. The roots hold every file its manifest names (a symbolic link's target folder too), so
+    that each file a report read joins its cache record; the identity ("shipped:<name>" or the folder) tells two
+    data sets of one name apart."""
     from ..data.dataset import datasets_dir, load_dataset
     ds = load_dataset(data)
     shipped = ds.root.resolve() == (datasets_dir() / ds.name).resolve()
     roots = sorted({str(ds.root), *(str(Path(f).resolve().parent) for f in ds.files)})
-    return ds.name, (ds.name if shipped else str(ds.root)), roots, (f"shipped:{ds.name}" if shipped else str(ds.root))
+    return (ds, ds.name, (ds.name if shipped else str(ds.root)), roots,
+            (f"shipped:{ds.name}" if shipped else str(ds.root)))
 
 
-def _claim_dataset_folder(report_dir: Path, name: str, identity: str) -> None:
+def _dataset_argument(data: str) -> tuple[str, str, list[str], str]:
+    """``(name, parameter value, data roots, identity)`` of :func:`_load_data_argument`."""
+    return _load_data_argument(data)[1:]
+
+
+def _dataset_facts(ds, identity: str, suite: Suite, kinds) -> dict:
+    """What a data set's page says of it, read from the loaded data set (its manifest): title, attribution,
+    licence, the manifest's path (a shipped one's inside the package, so that committed reports name no machine's
+    folder), the geometry sentence, and every experiment of the suite it cannot run, with why."""
+    from ..data.dataset import MANIFEST
+    manifest = (f"locbook/data/datasets/{ds.name}/{MANIFEST}" if identity.startswith("shipped:")
+                else str(Path(ds.root) / MANIFEST))
+    left_out = {e.id: e.data_run.missing(kinds) for e in suite.experiments
+                if e.data_run is not None and e.data_run.missing(kinds)}
+    return {"title": ds.title, "attribution": ds.attribution, "licence": ds.license, "manifest": manifest,
+            "geometry": getattr(ds, "geometry_text", ""), "left out": left_out}
+
+
+def _claim_dataset_folder(report_dir: Path, name: str, identity: str, facts: dict | None = None) -> None:
     """``data-<name>/`` holds one data set's reports: refuse a different data set of the same name (its reports
-    would replace the others'), else record which one it holds (``dataset.json``)."""
+    would replace the others'), else record which one it holds and what its page says of it (``dataset.json``:
+    name, identity, and ``facts``, :func:`_dataset_facts`), rewritten at every run."""
     record = report_dir / "dataset.json"
     held = _read_json(record, {}).get("data set")
     if held and held != identity:
         raise SuiteError(f"{report_dir} holds the reports of another data set named {name!r} ({held}); give yours "
                          "another name in its dataset.toml (name = ...), or remove that folder")
-    if not held:
+    if not held or facts:
         report_dir.mkdir(parents=True, exist_ok=True)
-        _write_atomic(record, json.dumps({"name": name, "data set": identity}, indent=1) + "\n")
+        _write_atomic(record, json.dumps({"name": name, "data set": identity, **(facts or {})}, indent=1) + "\n")
 
 
 def _check_options(timeout_s: float, jobs: int, executor: str, scheduler: str | None) -> None:
@@ -1007,10 +1089,12 @@ def _promote(exp, profile, params, staging: Path, folder: Path, stamp: str, key:
     bracket = load_bracket(brackets_root(folder.parent) / exp.id) if folder.parent.name in PROFILES else []
     if bracket:
         numbers = bracket_of_rows(numbers, bracket, profile)
-    (staging / "summary.md").write_text(site.summary_markdown(exp, profile, numbers, stamp), encoding="utf-8")
-    (staging / "report.md").write_text(site.page_markdown(exp, profile, params, staging, numbers, stamp),
+    dataset = site.dataset_record(folder.parent)       # a data run's pages name the data set, not the document
+    (staging / "summary.md").write_text(site.summary_markdown(exp, profile, numbers, stamp, dataset),
+                                        encoding="utf-8")
+    (staging / "report.md").write_text(site.page_markdown(exp, profile, params, staging, numbers, stamp, dataset),
                                        encoding="utf-8")
-    (staging / "report.html").write_text(site.page_html(exp, profile, params, staging, numbers, stamp),
+    (staging / "report.html").write_text(site.page_html(exp, profile, params, staging, numbers, stamp, dataset),
                                          encoding="utf-8")
     (staging / "report.json").write_text(json.dumps(
         {"experiment": exp.id, "profile": profile, "parameters": params, "locbook": stamp,

@@ -20,6 +20,12 @@ Schema::
     factorial = ["a", "b"]        # optional: readings that interact; the bracket also runs their combinations
     largest_error_m = 9.43        # optional: the largest plausible error in metres (the area's diagonal) and
     largest_error_reason = "..."  # where the area is printed: a point whose error exceeds it is implausible
+    [experiment.data_run]         # an experiment that takes a data set (a ``data`` parameter; ``locbook run --data``)
+    needs = ["track"]             # the data set holds at least one of these kinds (DATA_KINDS), else the experiment
+                                  # is left out of a data run (and asking for it by id is an error); without the
+                                  # table it runs on every data set
+    parameters = { ... }          # optional: parameters a data run sets (before -p), e.g. the benchmark's
+                                  # { synthetic = false }: a data run holds the data set's scenarios only
 
     [parameter_rules]             # allowed values by parameter name, for every experiment declaring it
     n_runs = { ge = 2 }           # keys: ge, gt, le, lt, allow_inf, min_items, max_items (ParameterRule)
@@ -39,8 +45,8 @@ from pathlib import Path
 from ..errors import ParameterError
 from .params import NotebookParameter, ParameterRule, is_numeric_annotation, read_parameters, resolve_parameters
 
-__all__ = ["Suite", "Experiment", "Document", "PROFILES", "DOCUMENT_KEYS", "load_suite", "find_suite_file",
-           "packaged_suite_file"]
+__all__ = ["Suite", "Experiment", "Document", "DataRun", "PROFILES", "DOCUMENT_KEYS", "DATA_KINDS", "load_suite",
+           "find_suite_file", "packaged_suite_file"]
 
 PROFILES = ("quick", "full")
 #: the five source documents, the measured data sets (any data set: ``locbook run --data``), and the cross-document
@@ -49,6 +55,12 @@ DOCUMENT_KEYS = ("dogan2015", "gudipati2017", "palvai2008", "george", "ozkaya201
 SUITE_FILE = Path("notebooks") / "experiments.toml"
 #: experiment ids and report folder names: lower-case letters, digits and single hyphens
 SAFE_NAME = re.compile(r"^[a-z0-9]+(-[a-z0-9]+)*$")
+#: what a data set can hold, as ``[experiment.data_run] needs`` names it: a recording of each role of
+#: :data:`locbook.data.dataset.ROLES`, and "scored": a recording the static methods are scored on (a static one, or a
+#: track with a true position per epoch: :func:`locbook.scenarios.measured.scored_recordings`)
+DATA_KINDS = {"calibration": "calibration recording", "static": "static recording", "track": "track recording",
+              "scored": "scored recording (a static recording, or a track with a true position per epoch)"}
+_DATA_RUN_KEYS = ("needs", "parameters")
 
 
 class SuiteError(ParameterError):
@@ -72,6 +84,23 @@ class Document:
 
 
 @dataclass(frozen=True)
+class DataRun:
+    """``[experiment.data_run]``: how an experiment runs on a data set. ``needs``: the kinds (:data:`DATA_KINDS`) of
+    which the data set must hold at least one; ``parameters``: values a data run sets (after the profile's, before
+    ``-p``)."""
+
+    needs: tuple[str, ...]
+    parameters: dict = field(default_factory=dict, hash=False)
+
+    def missing(self, kinds) -> str:
+        """'' when a data set holding ``kinds`` meets :attr:`needs`, else why not, in words ("the data set has no
+        track recording")."""
+        if set(self.needs) & set(kinds):
+            return ""
+        return "the data set has no " + " and no ".join(DATA_KINDS[k] for k in self.needs)
+
+
+@dataclass(frozen=True)
 class Experiment:
     id: str
     document: Document
@@ -88,16 +117,26 @@ class Experiment:
     #: ``[experiment.bracket] largest_error_m``: the largest plausible error (m; None: not declared), and its source
     largest_error_m: float | None = None
     largest_error_reason: str = ""
+    #: ``[experiment.data_run]``: what it needs of a data set and what a data run sets (None: not declared)
+    data_run: DataRun | None = None
 
     def declared_parameters(self) -> dict[str, NotebookParameter]:
         return read_parameters(self.notebook)
 
-    def parameters(self, profile: str, overrides: dict[str, str] | None = None) -> dict:
-        """Checked parameters for a profile with ``-p`` overrides (text) applied."""
+    def parameters(self, profile: str, overrides: dict[str, str] | None = None, *, data_run: bool = False) -> dict:
+        """Checked parameters for a profile with ``-p`` overrides (text) applied. ``data_run``: the run has a data
+        set, so the values of ``[experiment.data_run] parameters`` apply too (over the profile's, under ``-p``); a
+        name the notebook does not declare fails here, as any unknown parameter does."""
         if profile not in self.profiles:
             raise SuiteError(f"experiment {self.id!r} has no profile {profile!r}")
-        return resolve_parameters(self.notebook, self.declared_parameters(), self.profiles[profile],
-                                  overrides or {}, f"experiment {self.id!r}, profile {profile!r}", self.rules)
+        declared = self.declared_parameters()
+        values = dict(self.profiles[profile])
+        if data_run and self.data_run is not None and self.data_run.parameters:
+            resolve_parameters(self.notebook, declared, self.data_run.parameters, {},
+                               f"experiment {self.id!r}, [experiment.data_run] parameters", self.rules)
+            values.update(self.data_run.parameters)
+        return resolve_parameters(self.notebook, declared, values, overrides or {},
+                                  f"experiment {self.id!r}, profile {profile!r}", self.rules)
 
     def unruled_numeric_parameters(self) -> list[str]:
         """Numeric parameters without a range rule (the suite's test requires none)."""
@@ -193,6 +232,33 @@ def finite_float(value) -> float | None:
     return x if math.isfinite(x) else None
 
 
+def _data_run(raw, where: str) -> DataRun | None:
+    """``[experiment.data_run]`` checked (one line naming the file, the experiment and the key), or None."""
+    if raw is None:
+        return None
+    if not isinstance(raw, dict):
+        raise SuiteError(f"{where}: [experiment.data_run] must be a table with the keys {', '.join(_DATA_RUN_KEYS)}")
+    unknown = sorted(set(raw) - set(_DATA_RUN_KEYS))
+    if unknown:
+        raise SuiteError(f"{where}: [experiment.data_run] has unknown key {unknown[0]!r}; expected "
+                         f"{', '.join(_DATA_RUN_KEYS)}")
+    needs = raw.get("needs")
+    if not isinstance(needs, list) or not needs or not all(isinstance(k, str) for k in needs) \
+            or len(set(needs)) != len(needs):
+        raise SuiteError(f"{where}: [experiment.data_run] needs must list one or more distinct kinds of "
+                         f"{', '.join(DATA_KINDS)}, got {needs!r}")
+    bad = [k for k in needs if k not in DATA_KINDS]
+    if bad:
+        raise SuiteError(f"{where}: [experiment.data_run] needs: unknown kind {bad[0]!r}; expected one of "
+                         f"{', '.join(DATA_KINDS)}")
+    parameters = raw.get("parameters", {})
+    if not isinstance(parameters, dict):
+        raise SuiteError(f"{where}: [experiment.data_run] parameters must be a table of parameter values")
+    if "data" in parameters:
+        raise SuiteError(f"{where}: [experiment.data_run] parameters cannot set 'data' (the run's data set sets it)")
+    return DataRun(tuple(needs), dict(parameters))
+
+
 def load_suite(path: Path | None = None) -> Suite:
     path = Path(path) if path else find_suite_file()
     data = read_toml(path, "the experiment list")
@@ -258,5 +324,6 @@ def load_suite(path: Path | None = None) -> Suite:
                                       {p: dict(raw["profiles"][p]) for p in PROFILES}, rules,
                                       dict(bracket.get("parameters", {})), str(bracket.get("reason", "")).strip(),
                                       tuple(factorial), None if largest is None else float(largest),
-                                      str(bracket.get("largest_error_reason", "")).strip()))
+                                      str(bracket.get("largest_error_reason", "")).strip(),
+                                      _data_run(raw.get("data_run"), f"{path}: experiment {eid!r}")))
     return Suite(path.resolve(), documents, experiments)

@@ -251,3 +251,20 @@ def test_native_scans_with_jittered_times_run_on_their_median_clock(tmp_path):
     assert sc.measured_rss_dbm.shape[0] == int(round((t[-1] - t[0]) / sc.dt_s)) + 1
     heard = ~np.isnan(sc.measured_rss_dbm).all(axis=1)
     assert heard.sum() < len(t) and heard.sum() >= len(t) // 2       # some scans shared a tick, none was lost
+
+
+@pytest.mark.slow
+def test_the_python_example_of_docs_your_data_runs():
+    """docs/your-data.md's code block, run as written (fewer resamples and particles)."""
+    import re
+    from pathlib import Path
+    page = Path(__file__).resolve().parents[1] / "docs" / "your-data.md"
+    if not page.exists():
+        pytest.skip("the docs are not beside the tests (an installed package)")
+    code = re.findall(r"```python\n(.*?)```", page.read_text(encoding="utf-8"), flags=re.S)[0]
+    code = code.replace("n_bootstrap=1000", "n_bootstrap=20").replace("n_particles=1000", "n_particles=100")
+    scope = {}
+    exec(compile(code, str(page), "exec"), scope)
+    rows = scope["rows"]
+    assert rows and all(tuple(r) == me.RESULT_COLUMNS for r in rows)
+    assert {r["kind"] for r in rows} == {"static", "tracking"}

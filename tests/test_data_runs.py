@@ -26,9 +26,10 @@ from locbook.suite.spec import SuiteError
 
 #: the reproduction vocabulary no page about a data set may use (words, so "within" but not "withinness")
 BANNED = re.compile(r"\b(reproduc\w*|within|loose|miss|missed|printed|calibrated within)\b", re.I)
-#: what the brief declares each data experiment needs (kinds of locbook.suite.spec.DATA_KINDS)
+#: what each data experiment needs (kinds of locbook.suite.spec.DATA_KINDS); the benchmark's data scenarios are both
+#: built from scored recordings (its tracking one from the tracks with truth: benchmark.measured_tracking_scenario)
 NEEDS = {"measured-calibration": ("calibration",), "measured-localization": ("scored",),
-         "measured-tracking": ("track",), "benchmark-cross-document": ("scored", "track")}
+         "measured-tracking": ("track",), "benchmark-cross-document": ("scored",)}
 
 
 @pytest.fixture(scope="module")
@@ -179,9 +180,13 @@ def test_a_track_only_set_runs_everything_and_without_truth_no_static_scoring(su
     assert kinds == {"calibration", "track", "scored"} and kept == list(NEEDS) and left_out == {}
     kinds, kept, left_out = _selection(suite, example(tmp_path / "u", ("calibration", "track"), truth=False))
     assert kinds == {"calibration", "track"}
-    assert kept == ["measured-calibration", "measured-tracking", "benchmark-cross-document"]
-    assert list(left_out) == ["measured-localization"] and left_out["measured-localization"].startswith(
-        "the data set has no scored recording")
+    assert kept == ["measured-calibration", "measured-tracking"]
+    assert list(left_out) == ["measured-localization", "benchmark-cross-document"]
+    assert all(why.startswith("the data set has no scored recording") for why in left_out.values())
+    # the benchmark's data scenarios: none from tracks without truth (so it would have nothing to run)
+    from locbook import benchmark as bm
+    ds = load_dataset(tmp_path / "u")
+    assert bm.measured_static_scenario(ds) is None and bm.measured_tracking_scenario(ds) is None
 
 
 def test_a_calibration_only_set_runs_the_calibration_only(suite, tmp_path):
@@ -189,7 +194,13 @@ def test_a_calibration_only_set_runs_the_calibration_only(suite, tmp_path):
     assert kinds == {"calibration"} and kept == ["measured-calibration"]
     assert set(left_out) == {"measured-localization", "measured-tracking", "benchmark-cross-document"}
     assert left_out["benchmark-cross-document"] == ("the data set has no scored recording (a static recording, or a "
-                                                    "track with a true position per epoch) and no track recording")
+                                                    "track with a true position per epoch)")
+    # a declaration that accepts several kinds names each it did not find
+    from locbook.suite.spec import DataRun
+    assert DataRun(("scored", "track")).missing({"calibration"}) == (
+        "the data set has no scored recording (a static recording, or a track with a true position per epoch) and "
+        "no track recording")
+    assert DataRun(("scored", "track")).missing({"calibration", "track"}) == ""
 
 
 def test_an_inapplicable_experiment_asked_for_by_id_is_refused(suite, tmp_path):
@@ -452,4 +463,20 @@ def test_a_static_only_data_set_runs_clean_end_to_end(tmp_path):
     assert set(results["recording"]) == {"pooled", "points"}
     bench = pd.read_csv(page / "benchmark-cross-document" / "benchmark.csv")
     assert set(bench["scenario"]) == {"data-stat"}                  # the data set's scenarios only
+    assert BANNED.search(md) is None
+
+
+@pytest.mark.slow
+@pytest.mark.notebooks
+def test_a_track_only_data_set_without_truth_runs_clean_end_to_end(tmp_path):
+    """Tracks with no true position (a reference path or nothing): the calibration and the trackers run, the static
+    methods and the benchmark (nothing of theirs can be scored) are left out, and the run exits 0."""
+    from locbook.suite.cli import main
+    folder = example(tmp_path / "t", ("calibration", "track"), truth=False, name="walks")
+    assert main(["run", "--data", str(folder), "--profile", "quick", "--reports", str(tmp_path / "r"), "--quiet"]) == 0
+    page = tmp_path / "r" / "quick" / "data-walks"
+    assert sorted(p.name for p in page.iterdir() if p.is_dir() and not p.name.startswith(".")) == [
+        "measured-calibration", "measured-tracking"]
+    md = (page / "index.md").read_text()
+    assert "measured-localization: left out: the data set has no scored recording" in md
     assert BANNED.search(md) is None

@@ -268,3 +268,21 @@ def test_the_python_example_of_docs_your_data_runs():
     rows = scope["rows"]
     assert rows and all(tuple(r) == me.RESULT_COLUMNS for r in rows)
     assert {r["kind"] for r in rows} == {"static", "tracking"}
+
+
+@pytest.mark.parametrize("profile", ["quick", "full"])
+def test_the_pages_of_a_data_run_share_every_setting_they_both_declare(profile):
+    """measured-localization, measured-tracking and the benchmark compute a data set's numbers by the same calls; they
+    give the same numbers only if every parameter two of them declare resolves to the same value in every profile
+    (the particle settings once differed: the benchmark's particle row was not measured-tracking's)."""
+    from locbook.suite import load_suite
+    suite = load_suite()
+    ids = ("measured-localization", "measured-tracking", "benchmark-cross-document")
+    resolved = {e.id: {**{k: v.default for k, v in e.declared_parameters().items()},
+                       **e.parameters(profile, data_run=True)} for e in suite.experiments if e.id in ids}
+    assert set(resolved) == set(ids)
+    shared = ("seed", "fit", "n_bootstrap", "block_s", "n_particles", "particle_runs", "ukf_alpha", "grid_spacing_m",
+              "knn_k", "q", "spread_m")
+    for name in shared:
+        values = {i: p[name] for i, p in resolved.items() if name in p}
+        assert len(values) >= 2 and len({repr(v) for v in values.values()}) == 1, (name, values)

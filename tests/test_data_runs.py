@@ -445,6 +445,27 @@ def test_an_experiment_page_of_a_data_run_names_the_data_set_not_the_document(da
     assert "reproducing" in site.summary_markdown(exp, "quick", [], "v")
 
 
+def test_a_data_run_page_says_which_parameters_the_data_run_set(data_folder, suite, tmp_path):
+    """The parameters table names who set each value: --data sets `data`, [experiment.data_run] sets the benchmark's
+    `synthetic = false` (a -p giving another value is the user's), the profile the rest."""
+    from locbook.suite import site
+    _report_dir, record, _ds = data_folder
+    bench = next(e for e in suite.experiments if e.id == "benchmark-cross-document")
+
+    def set_by(params, dataset):
+        lines = site.page_markdown(bench, "quick", params, tmp_path, [], "v", dataset).splitlines()
+        return {c[0]: c[2] for c in ([x.strip() for x in line.strip("|").split("|")] for line in lines
+                                     if line.startswith("| ")) if len(c) == 4}
+
+    run = {"data": ["/x"], "synthetic": False, "n_runs": 40}
+    seen = set_by(run, record)
+    assert (seen["data"], seen["synthetic"], seen["n_runs"]) == ("--data", "data run ([experiment.data_run])",
+                                                               "profile / -p")
+    assert seen["seed"] == "notebook default"
+    assert set_by({**run, "synthetic": True}, record)["synthetic"] == "profile / -p"     # -p synthetic=true
+    assert set(set_by(run, None)[k] for k in run) == {"profile / -p"}                   # the suite's own page
+
+
 # -- end to end ------------------------------------------------------------------------------------------------
 
 @pytest.mark.slow

@@ -220,12 +220,26 @@ def _page_columns(numbers: list[dict]) -> tuple[str, ...]:
     return (*_PAGE_COLUMNS[:at], "bracket", "bracket_readings", *_PAGE_COLUMNS[at:])
 
 
-def _page_parts(exp, params: dict, folder: Path, numbers: list[dict]):
+def _set_by(exp, name: str, params: dict, dataset: dict | None) -> str:
+    """Who set a parameter, for a page's parameters table: the notebook's default, a data run (``data`` from
+    ``--data``; a value of ``[experiment.data_run] parameters``, unless ``-p`` gave another), or the profile / ``-p``."""
+    if name not in params:
+        return "notebook default"
+    if dataset:
+        run = exp.data_run.parameters if exp.data_run is not None else {}
+        if name == "data":
+            return "--data"
+        if name in run and params[name] == run[name]:
+            return "data run ([experiment.data_run])"
+    return "profile / -p"
+
+
+def _page_parts(exp, params: dict, folder: Path, numbers: list[dict], dataset: dict | None = None):
     manifest = _read_json(folder / "manifest.json", {"figures": [], "tables": []})
     assumptions = _read_csv(folder / "assumptions.csv")
     declared = exp.declared_parameters()
     parameters = [{"name": name, "value": json.dumps(params.get(name, p.default)),
-                   "set by": "profile / -p" if name in params else "notebook default", "meaning": p.help}
+                   "set by": _set_by(exp, name, params, dataset), "meaning": p.help}
                   for name, p in declared.items()]
     shown = [{c: r.get(c, "") for c in _page_columns(numbers)} for r in numbers]
     for row in shown:
@@ -243,7 +257,7 @@ def page_markdown(exp, profile: str, params: dict, folder: Path, numbers: list[d
                   dataset: dict | None = None) -> str:
     """``<id>/report.md``; ``dataset`` as for :func:`summary_markdown` (a data run's page compares no printed
     number: that section is left out when it has none)."""
-    shown, parameters, assumptions, manifest = _page_parts(exp, params, folder, numbers)
+    shown, parameters, assumptions, manifest = _page_parts(exp, params, folder, numbers, dataset)
     lines = _header(exp, profile, stamp, dataset) + ["[Summary](summary.md).", ""]
     if shown or not dataset:
         lines += ["## Reproduced versus printed", ""]
@@ -482,7 +496,7 @@ def page_html(exp, profile: str, params: dict, folder: Path, numbers: list[dict]
     files present there and to ``../index.html``, which every run (re)writes. ``dataset`` as for
     :func:`summary_markdown`."""
     folder = Path(folder)
-    shown, parameters, assumptions, manifest = _page_parts(exp, params, folder, numbers)
+    shown, parameters, assumptions, manifest = _page_parts(exp, params, folder, numbers, dataset)
     for row in shown:
         for c in ("window_low", "window_high"):
             row[c] = _number(row[c], 6)

@@ -50,7 +50,7 @@ def measure(spacing: float = 0.1, particles: int = 3000, knn_queries: int = 10_0
     cells, fingerprints, _ = ko.radio_map(data, model)
     reg, ticks = lb.regular_epochs(data.epochs("robot"), epoch_s, tolerance_s=0.1 * epoch_s)
     bayes_model = ko.bayes_measurement_model(data, model)
-    fix_cov = ko.fix_covariance_from_calibration(data, model)
+    fix_cov = ko.fix_covariance_from_calibration(data, model, grid_spacing_m=0.1)
     motion = lb.constant_velocity(epoch_s, 0.05)
     x0, P0 = np.r_[truth[0], 0.0, 0.0], np.diag([4.0, 4.0, 1.0, 1.0])
     stream = lb.RssMeasurement(reg.rss_dbm, anchors, model, np.array([0, 1]), tag_height_m=h)

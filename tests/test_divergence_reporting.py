@@ -209,16 +209,19 @@ def test_benchmark_trackers_return_flags_of_the_kalman_trackers():
 def test_measured_tracks_return_flags_of_the_kalman_trackers():
     data = ko.load("kolakowski2021")
     model = ko.channel(ko.calibrate(data))
-    kw = dict(q=0.05, fix_cov_m2=ko.fix_covariance_from_calibration(data, model), spread_m=0.3, n_particles=20,
-              particle_runs=1)
-    reg, ticks, out, flags = ko.tracks(data, model, "robot", np.random.default_rng(13), with_divergence=True, **kw)
-    assert set(flags) == {"kf_on_ml", "ekf", "ukf"}
-    assert all(f.n_runs == 1 and np.shape(f.diverged) == () for f in flags.values())
+    kw = dict(seed=13, n_particles=20, particle_runs=1, n_bootstrap=20, block_s=10.0, recordings=["robot"])
+
+    def flags_of(m):
+        proto = ko.protocol(data, m, knn_k=5, q=0.05, spread_m=0.3)
+        return ko.tracking_results(data, m, proto, **kw)["tracks"]["robot"][2]
+
+    flags = flags_of(model)
+    assert set(flags) == {"kf_on_ml", "ekf", "ekf_serial", "ukf"}
+    assert all(f.n_runs == 1 for f in flags.values())
     # the same recording with the readings' noise assumed 100 times smaller: the EKF loses consistency at once
     tight = lb.PathLossModel(model.ref_power_dbm, model.path_loss_exp, np.asarray(model.sigma_db) / 100,
                              min_distance_m=model.min_distance_m)
-    *_, bad = ko.tracks(data, tight, "robot", np.random.default_rng(13), with_divergence=True, **kw)
-    assert bad["ekf"].n_diverged == 1
+    assert flags_of(tight)["ekf"].n_diverged == 1
 
 
 # ------------------------------------------------------------------------------------------------ Dogan's tables

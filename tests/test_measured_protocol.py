@@ -176,7 +176,7 @@ def test_a_2d_set_and_native_scans_run_the_whole_battery(tmp_path, variant):
         assert ds.anchors_m.shape[1] == 2 and sc.tag_height_m is None
         assert "2-D" in me.geometry_text(ds)
         # distances in the plane: the channel's mean at a true position uses the plan distance
-        np.testing.assert_allclose(me.plan_distances_m(ds, sc.points_m[:3]),
+        np.testing.assert_allclose(sc.distances_m(sc.points_m[:3]),
                                    np.linalg.norm(sc.points_m[:3, None] - ds.anchors_m, axis=-1))
     else:
         name = ds.recordings_with("track")[0]

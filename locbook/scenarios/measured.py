@@ -55,7 +55,7 @@ from ..static.fingerprint import knn_position
 __all__ = ["PATH_LOSS_EXP_BOUNDS", "REF_POWER_BOUNDS_DBM", "HUBER_DELTA_DB", "NEAR_FIELD_M", "STATIC_METHODS",
            "TRACKERS", "GRID_SPACING_M", "MAX_GRID_CELLS", "KNN_CANDIDATES", "KNN_CV_CELL_M", "Q_START",
            "START_VELOCITY_SD_M_S", "SPREAD_START_M", "load", "calibration_set", "calibrate", "channel",
-           "ranging_errors", "radio_map", "scored_recordings", "TestEpochs", "crlb_m", "epoch_s", "plan_distances_m",
+           "ranging_errors", "radio_map", "scored_recordings", "TestEpochs", "crlb_m", "epoch_s",
            "grid_pitch_m", "choose_knn_k", "fit_motion", "Protocol", "protocol", "static_scenario",
            "tracking_scenario", "static_results", "tracking_results", "RESULT_COLUMNS", "result_row",
            "bayes_measurement_model", "fix_covariance_from_calibration", "outside_fraction",
@@ -98,31 +98,9 @@ def load(data) -> Dataset:
     return data if isinstance(data, Dataset) else load_dataset(data)
 
 
-def _tag_height(data: Dataset):
-    """The tag's known height (m), None for a 2-D data set (anchors without z: the problem is in the plane)."""
-    return None if data.anchors_m.shape[1] == 2 else data.tag_height_m
-
-
-def plan_distances_m(data: Dataset, positions_m) -> np.ndarray:
-    """Anchor distances ``(..., m)`` of plan positions ``(..., 2)``: 3-D with the tag at the data set's known height,
-    in the plane for a 2-D data set."""
-    p = np.asarray(positions_m, float)[..., :2]
-    anchors = data.anchors_m
-    if anchors.shape[1] == 3:
-        p = np.concatenate([p, np.full(p.shape[:-1] + (1,), data.tag_height_m)], axis=-1)
-    return np.linalg.norm(p[..., None, :] - anchors, axis=-1)
-
-
 def geometry_text(data: Dataset) -> str:
-    """One sentence on the problem's geometry for every report: 2-D, or 3-D distances with the tag's height."""
-    text = getattr(data, "geometry_text", None)
-    if isinstance(text, str) and text:
-        return text
-    if data.anchors_m.shape[1] == 2:
-        return "2-D: anchors and tag in one plane (the anchors have no z); distances in the plane"
-    z = data.anchors_m[:, 2]
-    return (f"3-D distances: anchors at {z.min():g}-{z.max():g} m height, the tag at its known height "
-            f"{data.tag_height_m:g} m; positions are estimated in the plan")
+    """One sentence on the problem's geometry for every report (:attr:`Dataset.geometry_text`)."""
+    return data.geometry_text
 
 
 def device_offsets_db(data: Dataset) -> dict[str, float]:
@@ -264,7 +242,7 @@ def crlb_m(data: Dataset, model: PathLossModel, positions_m, rss_dbm=None):
     not heard tells nothing), and an epoch with too few of them for a fix has NaN (no bound)."""
     heard = None if rss_dbm is None else ~np.isnan(np.asarray(rss_dbm, float))
     bound = rss_crlb_m(positions_m, data.anchors_m, model.path_loss_exp, model.sigma_db,
-                       tag_height_m=_tag_height(data), heard=heard)
+                       tag_height_m=data.tag_height_m, heard=heard)
     return bound if heard is None else np.where(np.isfinite(bound), bound, np.nan)
 
 
@@ -281,7 +259,7 @@ def bayes_measurement_model(data: Dataset, model: PathLossModel) -> RssModel:
                                                   np.asarray(model.path_loss_exp, float),
                                                   np.asarray(model.sigma_db, float), model.ref_distance_m,
                                                   model.wall_attenuation_db, min_distance_m=NEAR_FIELD_M),
-                    tag_height_m=_tag_height(data))
+                    tag_height_m=data.tag_height_m)
 
 
 def outside_fraction(data: Dataset, positions_m) -> float:
@@ -330,7 +308,7 @@ def record_dataset(report, data: Dataset) -> list[dict]:
     for key, note in data.notes.items():
         report.assumption(key.replace("_", " "), note, where)
     report.assumption("geometry", geometry_text(data), where)
-    if "tag_height_m" not in data.notes and _tag_height(data) is not None:
+    if "tag_height_m" not in data.notes and data.tag_height_m is not None:
         report.assumption("tag height", f"{data.tag_height_m:g} m", where)
     for name, rec in data.recordings.items():
         report.assumption(f"epochs of {name}", rec.epoch_rule.describe(), where)
@@ -440,7 +418,7 @@ def fit_motion(data: Dataset, model: PathLossModel, recording: str, *, grid_spac
     rss = sc.measured_rss_dbm
     motion = constant_velocity(sc.dt_s, q_start, dim=2)
     P0 = _settings(q_start, 1, 1.0, fix_cov_m2).P0
-    stream = RssMeasurement(rss, data.anchors_m, model, np.array([0, 1]), tag_height_m=_tag_height(data))
+    stream = RssMeasurement(rss, data.anchors_m, model, np.array([0, 1]), tag_height_m=data.tag_height_m)
     fit = fit_noise_ml(motion.F, motion.Q, sc.start_state, P0, stream, kind="ekf", fit_Q="scale", fit_R=None,
                        per_run=False)
     fixes = _ml_fixes(sc, rss)
@@ -556,7 +534,7 @@ def static_scenario(data: Dataset, model: PathLossModel, recordings=None, *, gri
          ProtocolChoice("k-NN map", f"the calibration epochs; {100 * filled:.1f} % of readings not heard, filled with "
                                     "the fitted mean", "measured.radio_map"),
          ProtocolChoice("grid pitch", f"{grid_spacing_m:g} m inside the floor outline", "measured.grid_pitch_m")),
-        tag_height_m=_tag_height(data), measured_rss_dbm=rss, radio_map=(cells, fingerprints))
+        tag_height_m=data.tag_height_m, measured_rss_dbm=rss, radio_map=(cells, fingerprints))
 
 
 def fix_covariance_from_calibration(data: Dataset, model: PathLossModel, *, grid_spacing_m: float):
@@ -565,7 +543,7 @@ def fix_covariance_from_calibration(data: Dataset, model: PathLossModel, *, grid
     recording)."""
     xy, _, rss = calibration_set(data)
     sc = StaticScenario("calibration", data.name, "calibration", data.anchors_m, model, np.asarray(data.outline_m, float),
-                        xy, grid_spacing_m, (), tag_height_m=_tag_height(data), measured_rss_dbm=rss)
+                        xy, grid_spacing_m, (), tag_height_m=data.tag_height_m, measured_rss_dbm=rss)
     fixes = _ml_fixes(sc, rss)
     ok = np.isfinite(fixes).all(axis=1)
     return fix_error_covariance(fixes[ok], xy[ok])
@@ -593,7 +571,7 @@ def tracking_scenario(data: Dataset, model: PathLossModel, recording: str, *, gr
     truth[ticks[known]] = ep.position_m[known, :2]
     scored = np.isfinite(truth).all(axis=1)
     base = StaticScenario(recording, data.name, recording, data.anchors_m, model, np.asarray(data.outline_m, float),
-                          np.zeros((0, 2)), grid_spacing_m, (), tag_height_m=_tag_height(data))
+                          np.zeros((0, 2)), grid_spacing_m, (), tag_height_m=data.tag_height_m)
     start = _start(data, recording, _ml_fixes(base, reg.rss_dbm))
     return TrackingScenario(
         f"data-{data.name}", data.name, f"measured: {data.name}, track {recording}, {dt:g} s epochs", data.anchors_m,
@@ -601,7 +579,7 @@ def tracking_scenario(data: Dataset, model: PathLossModel, recording: str, *, gr
         (*_channel_choices(data, model, fit),
          ProtocolChoice("path", f"the track {recording!r} on a {dt:g} s clock ({int(scored.sum())} epochs with truth)",
                         "the data set")),
-        tag_height_m=_tag_height(data), measured_rss_dbm=reg.rss_dbm, scored=scored,
+        tag_height_m=data.tag_height_m, measured_rss_dbm=reg.rss_dbm, scored=scored,
         fix_cov_m2=fix_cov_m2, start_state=start)
 
 

@@ -22,8 +22,8 @@ def _cv_case(seed, T=40, runs=3, missing=True):
     z = truth + rng.normal(0, 1.0, (runs, T, 2))
     if missing:
         z[:, 7:10] = np.nan                         # three steps without a reading
-        z[0, 15, 1] = np.nan                        # one component missing in one run
-        z[1, 17, 0] = np.nan
+        z[0, 4, 1] = np.nan                         # one component missing in one run
+        z[1, 11, 0] = np.nan
     x0 = rng.normal(0, 1.0, (runs, 4))
     P0 = np.diag([4.0, 4.0, 1.0, 1.0])
     return model.F, model.Q, H, R, z, x0, P0
@@ -151,3 +151,161 @@ def test_filterpy_fixed_lag_smoother_is_not_exact_where_ours_matches_the_oracle(
           f"(vs the augmented oracle {gap_oracle:.3g}); the filter itself is {np.abs(run.x[0] - ours)[rows].max():.3g} "
           "from the exact answer")
     assert gap > 0.1 and gap_oracle > 0.1
+
+
+def _pendulum_case(seed, T=50, runs=3):
+    """Sarkka's (2013) pendulum: state (angle rad, angular rate rad/s), x_k = f(x_{k-1}) + w, reading sin(angle) + v;
+    a few readings missing."""
+    rng = np.random.default_rng(seed)
+    dt, g = 0.05, 9.81
+    f = lambda x: np.stack([x[..., 0] + dt * x[..., 1], x[..., 1] - dt * g * np.sin(x[..., 0])], axis=-1)
+
+    def jac(x):
+        J = np.zeros(x.shape + (2,))
+        J[..., 0, 0], J[..., 0, 1] = 1.0, dt
+        J[..., 1, 0], J[..., 1, 1] = -dt * g * np.cos(x[..., 0]), 1.0
+        return J
+    motion = lb.NonlinearMotion(f, jac)
+    q = 0.3
+    Q = q * np.array([[dt ** 3 / 3, dt ** 2 / 2], [dt ** 2 / 2, dt]])
+    x = np.broadcast_to([1.2, 0.0], (runs, 2)).copy()
+    z = np.empty((runs, T, 1))
+    for k in range(T):
+        x = f(x) + rng.multivariate_normal([0, 0], Q, runs)
+        z[:, k, 0] = np.sin(x[:, 0]) + rng.normal(0, 0.3, runs)
+    z[:, 20:24] = np.nan
+    meas = lambda zz: lb.NonlinearMeasurement(zz, lambda s: np.sin(s[..., :1]), [[0.09]],
+                                              lambda s: np.stack([np.cos(s[..., :1]), np.zeros(s.shape[:-1] + (1,))],
+                                                                 axis=-1))
+    x0 = np.broadcast_to([1.0, 0.0], (runs, 2))
+    return motion, Q, x0, np.diag([0.5, 0.5]), z, meas
+
+
+@pytest.mark.parametrize("kind", ["ekf", "ukf"])
+def test_ekf_and_ukf_runs_are_smoothed_exactly(kind):
+    motion, Q, x0, P0, z, meas = _pendulum_case(6)
+    T = z.shape[1]
+    filt = lb.extended_kalman_filter if kind == "ekf" else lb.unscented_kalman_filter
+    run = filt(motion, Q, x0, P0, meas(z), outputs=OUT)
+    full = lb.rts_smoother(run)
+    for lag in (T - 1, T + 3):
+        fl = fixed_lag_smoother(run, lag)
+        np.testing.assert_allclose(fl.x, full.x, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(fl.P, full.P, rtol=0, atol=1e-12)
+    lag = 6
+    fl = fixed_lag_smoother(run, lag)
+    assert np.isfinite(fl.x).all() and np.isfinite(fl.P).all()
+    for k in (lag, 22, 27, T - 1):     # windows before, across and after the missing readings
+        short = lb.rts_smoother(filt(motion, Q, x0, P0, meas(z[:, :k + 1]), outputs=OUT))
+        np.testing.assert_allclose(fl.x[:, k - lag], short.x[:, k - lag], rtol=0, atol=1e-10)
+        np.testing.assert_allclose(fl.P[:, k - lag], short.P[:, k - lag], rtol=0, atol=1e-10)
+
+
+def test_a_residual_of_states_is_used_as_the_difference():
+    F, Q, H, R, z, x0, P0 = _cv_case(7, T=20)
+    run = _kf(F, Q, H, R, z, x0, P0)
+    plain = fixed_lag_smoother(run, 3)
+    calls = []
+
+    def residual(a, b):
+        calls.append(a.shape)
+        return a - b
+    fl = fixed_lag_smoother(run, 3, residual=residual)
+    np.testing.assert_allclose(fl.x, plain.x, rtol=0, atol=1e-12)
+    assert (3, 17, 4) in calls                      # called once per offset on every window of every run
+    with pytest.raises(ValueError, match=r"residual\(a, b\) must return the states' shape"):
+        fixed_lag_smoother(run, 3, residual=lambda a, b: (a - b)[..., :2])
+
+
+def test_online_form_equals_the_batch_form():
+    F, Q, H, R, z, x0, P0 = _cv_case(8, T=30)
+    run = _kf(F, Q, H, R, z, x0, P0)
+    lag = 4
+    batch = fixed_lag_smoother(run, lag)
+    online, rows = OnlineFixedLagSmoother(lag), []
+    online_F = OnlineFixedLagSmoother(lag, F=F)     # the cross-covariances from F instead
+    for k in range(30):
+        out = online.update(run.x[:, k], run.P[:, k], run.x_pred[:, k], run.P_pred[:, k], run.P_cross[:, k])
+        out_F = online_F.update(run.x[:, k], run.P[:, k], run.x_pred[:, k], run.P_pred[:, k])
+        if k < lag:
+            assert out is None and out_F is None
+            continue
+        rows.append(out)
+        np.testing.assert_allclose(out_F[0], out[0], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(np.stack([r[0] for r in rows], axis=-2), batch.x[:, :30 - lag], rtol=0, atol=1e-10)
+    np.testing.assert_allclose(np.stack([r[1] for r in rows], axis=-3), batch.P[:, :30 - lag], rtol=0, atol=1e-10)
+    tail = online.tail()
+    np.testing.assert_array_equal(tail.steps, np.arange(30 - lag, 30))
+    np.testing.assert_array_equal(tail.given_to, np.full(lag, 29))
+    np.testing.assert_allclose(tail.x, batch.x[:, 30 - lag:], rtol=0, atol=1e-10)
+    np.testing.assert_allclose(tail.P, batch.P[:, 30 - lag:], rtol=0, atol=1e-10)
+
+
+def test_online_smoother_takes_the_online_filter_steps():
+    F, Q, H, R, z, x0, P0 = _cv_case(9, T=15)
+    batch = fixed_lag_smoother(_kf(F, Q, H, R, z, x0, P0), 2)
+    filt = lb.OnlineFilter("kf", F, Q, x0, P0, outputs=OUT)
+    online = OnlineFixedLagSmoother(2)
+    got = [online.step(filt.step(lb.LinearMeasurement(z[:, k:k + 1], H, R))) for k in range(15)]
+    assert got[0] is None and got[1] is None
+    np.testing.assert_allclose(np.stack([g[0] for g in got[2:]], axis=-2), batch.x[:, :13], rtol=0, atol=1e-9)
+    # fewer steps than the lag: nothing returned, the tail is the full smoother of what was fed
+    run5 = _kf(F, Q, H, R, z[:, :5], x0, P0)
+    short = OnlineFixedLagSmoother(10)
+    for k in range(5):
+        assert short.update(run5.x[:, k], run5.P[:, k], run5.x_pred[:, k], run5.P_pred[:, k],
+                            run5.P_cross[:, k]) is None
+    tail = short.tail()
+    np.testing.assert_array_equal(tail.steps, np.arange(5))
+    np.testing.assert_allclose(tail.x, lb.rts_smoother(run5).x, rtol=0, atol=1e-10)
+
+
+def test_short_and_empty_runs():
+    F, Q, H, R, z, x0, P0 = _cv_case(10, T=12)
+    one = _kf(F, Q, H, R, z[:, :1], x0, P0)
+    for lag in (0, 3):
+        fl = fixed_lag_smoother(one, lag)
+        np.testing.assert_array_equal(fl.x, one.x)
+        np.testing.assert_array_equal(fl.given_to, [0])
+    none = _kf(F, Q, H, R, z[:, :0], x0, P0)
+    fl = fixed_lag_smoother(none, 2)
+    assert fl.x.shape == (3, 0, 4) and fl.steps.shape == (0,) and fl.given_to.shape == (0,)
+    # no run at all: the shapes of the empty batch
+    zero = _kf(F, Q, H, R, z[:0], x0[:0], P0)
+    assert fixed_lag_smoother(zero, 2).x.shape == (0, 12, 4)
+
+
+def test_bad_input_is_one_line_naming_it():
+    F, Q, H, R, z, x0, P0 = _cv_case(11, T=12)
+    run = _kf(F, Q, H, R, z, x0, P0)
+    for lag in (-1, 2.5, "3", True, None, np.nan, np.inf, [2]):
+        with pytest.raises(ValueError, match="^lag must") as info:
+            fixed_lag_smoother(run, lag)
+        assert "\n" not in str(info.value)
+        with pytest.raises(ValueError, match="^lag must"):
+            OnlineFixedLagSmoother(lag)
+    bare = lb.kalman_filter(F, Q, x0, P0, lb.LinearMeasurement(z, H, R))
+    with pytest.raises(ValueError, match=r"P_pred.*outputs=\('x_pred', 'P_pred', 'P_cross'\)"):
+        fixed_lag_smoother(bare, 2)
+    no_cross = lb.kalman_filter(F, Q, x0, P0, lb.LinearMeasurement(z, H, R), outputs=("x_pred", "P_pred"))
+    with pytest.raises(ValueError, match="^fixed_lag_smoother needs the cross-covariances"):
+        fixed_lag_smoother(no_cross, 2)
+    every_other = lb.kalman_filter(F, Q, x0, P0, lb.LinearMeasurement(z, H, R), record=np.arange(0, 12, 2),
+                                   outputs=OUT)
+    with pytest.raises(ValueError, match="^fixed_lag_smoother needs every step recorded"):
+        fixed_lag_smoother(every_other, 2)
+    george = lb.kalman_filter(F, Q, x0, P0, lb.LinearMeasurement(z, H, R), variant="literal_george", outputs=OUT)
+    with pytest.raises(ValueError, match="standard run"):
+        fixed_lag_smoother(george, 2)
+    with pytest.raises(TypeError, match="KalmanResult"):
+        fixed_lag_smoother(run.x, 2)
+    online = OnlineFixedLagSmoother(2)
+    online.update(run.x[:, 0], run.P[:, 0], run.x_pred[:, 0], run.P_pred[:, 0])
+    with pytest.raises(ValueError, match="^P_cross is needed"):
+        online.update(run.x[:, 1], run.P[:, 1], run.x_pred[:, 1], run.P_pred[:, 1])
+    with pytest.raises(ValueError, match="^x must keep the shape"):
+        online.update(run.x[0, 1], run.P[0, 1], run.x_pred[0, 1], run.P_pred[0, 1], run.P_cross[0, 1])
+    with pytest.raises(ValueError, match="^P_pred must have shape"):
+        online.update(run.x[:, 1], run.P[:, 1], run.x_pred[:, 1], run.P_pred[:, 1, :2], run.P_cross[:, 1])
+    with pytest.raises(ValueError, match="^P must be finite"):
+        online.update(run.x[:, 1], run.P[:, 1] * np.nan, run.x_pred[:, 1], run.P_pred[:, 1], run.P_cross[:, 1])

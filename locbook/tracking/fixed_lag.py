@@ -181,7 +181,8 @@ class OnlineFixedLagSmoother:
         P = as_array("P", P, min_ndim=2)
         x_pred = as_array("x_pred", x_pred, min_ndim=1, nan_ok=True)
         P_pred = as_array("P_pred", P_pred, min_ndim=2)
-        for name, a, want in (("P", P, x.shape + (n,)), ("x_pred", x_pred, x.shape), ("P_pred", P_pred, x.shape + (n,))):
+        square = x.shape + (n,)
+        for name, a, want in (("P", P, square), ("x_pred", x_pred, x.shape), ("P_pred", P_pred, square)):
             if a.shape != want:
                 raise ValueError(f"{name} must have shape {want} (x is {x.shape}), got {a.shape}")
         if self._shapes is not None and x.shape != self._shapes:

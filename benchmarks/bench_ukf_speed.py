@@ -56,8 +56,8 @@ def setting(runs: int, steps: int | None = None, seed: int = 0) -> dict:
     x0, P0 = gu._initial(w, model, 8)
     imu, rss = gu._imu_stream(w, False), gu._rss_stream(w, model)
     if steps is not None:
-        imu = replace(imu, z=np.asarray(imu.z)[:, :steps])
-        rss = replace(rss, rss_dbm=np.asarray(rss.rss_dbm)[:, :steps])
+        imu = imu.replace(z=np.asarray(imu.z)[:, :steps])
+        rss = rss.replace(z=np.asarray(rss.z)[:, :steps])
     return dict(settings=s, model=model, x0=x0, P0=P0, imu=imu, rss=rss, anchors=w.anchors_m)
 
 
@@ -74,7 +74,7 @@ def filterpy_ukf(st: dict, runs: int, alpha: float):
     model, imu, rss, a = st["model"], st["imu"], st["rss"], st["anchors"]
     ch = rss.channel
     points = MerweScaledSigmaPoints(8, alpha=alpha, beta=2.0, kappa=0.0)
-    h_imu = imu.h
+    h_imu = lambda x: imu.model.mean(x, step=0)          # noqa: E731 - the model's h (one state: (n,) -> (3,))
     z_imu, z_rss = np.asarray(imu.z), np.asarray(rss.rss_dbm)
     p0 = np.broadcast_to(ch.ref_power_dbm, a.shape[:1])
     ple = np.broadcast_to(ch.path_loss_exp, a.shape[:1])
@@ -104,8 +104,8 @@ def filterpy_ukf(st: dict, runs: int, alpha: float):
 
 def _first_steps(st: dict, steps: int) -> dict:
     """The setting ``st`` cut to its first ``steps`` steps (the same walk)."""
-    return dict(st, imu=replace(st["imu"], z=np.asarray(st["imu"].z)[:, :steps]),
-                rss=replace(st["rss"], rss_dbm=np.asarray(st["rss"].rss_dbm)[:, :steps]))
+    return dict(st, imu=st["imu"].replace(z=np.asarray(st["imu"].z)[:, :steps]),
+                rss=st["rss"].replace(z=np.asarray(st["rss"].z)[:, :steps]))
 
 
 def _filterpy_agreement(n: int, steps: int, alpha: float):

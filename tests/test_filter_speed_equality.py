@@ -365,8 +365,7 @@ def test_compiled_ekf_with_the_inertial_stream_equals_numpy(upath, frame):
     m, imu = upath["model"], upath["imu"]
     z = np.array(imu.z)
     z[np.random.default_rng(1).random(z.shape) < 0.1] = np.nan
-    imu = lb.NonlinearMeasurement(z, lb.inertial_measurement_function(frame), imu.R,
-                                  jacobian=lb.inertial_measurement_jacobian(8, frame))
+    imu = lb.Stream(z, lb.InertialMeasurement(imu.R, n_state=8, frame=frame))
     a, b, compiled = _both(m.F, m.Q, upath["x0"], upath["P0"], [imu, upath["rss"]])
     assert compiled
     assert (a.nis_dof > 0).all() and len(np.unique(a.nis_dof)) > 2          # some readings missing
@@ -377,35 +376,29 @@ def test_compiled_ekf_with_the_inertial_stream_equals_numpy(upath, frame):
     np.testing.assert_array_equal(b.nis_dof, a.nis_dof)
 
 
-@pytest.mark.parametrize("why", ["own_jacobian", "jacobian_of_other_indices", "jacobian_for_other_state_size",
-                                 "index_from_the_end", "state_dependent_R"])
-def test_inertial_streams_the_kernel_cannot_check_stay_in_numpy(monkeypatch, why):
-    """The kernel computes the Jacobian of imu's h itself, so it runs only when the stream's Jacobian is imu's for the
-    same indices and state size (else the user's Jacobian is what the filter must use), with indices from 0 and a fixed
-    R."""
+@pytest.mark.parametrize("why", ["function_model", "index_from_the_end"])
+def test_inertial_streams_the_kernel_cannot_take_stay_in_numpy(monkeypatch, why):
+    """The compiled backend knows models by type (its registry): the inertial model runs compiled, the same functions
+    given as a user's function model (NonlinearMeasurement) run in numpy, and so does an inertial model with a numpy
+    index from the end (the kernels count from 0); each gives the numpy loop's numbers."""
     monkeypatch.setattr(K, "_NUMBA_MIN_WORK", 0)
     n = 8
-    h = lb.inertial_measurement_function("body")
-    jac = lb.inertial_measurement_jacobian(n, "body")
+    z = np.random.default_rng(3).normal(0.0, 0.3, (2, 5, 3))
     R = 0.1 * np.eye(3)
-    if why == "own_jacobian":
-        jac = lambda x: lb.inertial_measurement_jacobian(n, "body")(x)          # noqa: E731
-    elif why == "jacobian_of_other_indices":
-        jac = lb.inertial_measurement_jacobian(n, "body", acceleration_index=(2, 3))
-    elif why == "jacobian_for_other_state_size":
-        jac = lb.inertial_measurement_jacobian(9, "body")
-    elif why == "index_from_the_end":
-        h = lb.inertial_measurement_function("body", heading_index=-2)
-        jac = lb.inertial_measurement_jacobian(n, "body", heading_index=-2)
-    elif why == "state_dependent_R":
-        R = lambda x: 0.1 * np.eye(3)                                           # noqa: E731
-    meas = lb.NonlinearMeasurement(np.zeros((2, 5, 3)), h, R, jacobian=jac)
-    setup = _loop._setup(np.eye(n), 0.01 * np.eye(n), np.zeros(n), np.eye(n), [meas], None, "ekf")
+    if why == "function_model":
+        meas = lb.NonlinearMeasurement(z, lb.inertial_measurement_function("body"), R,
+                                       jacobian=lb.inertial_measurement_jacobian(n, "body"))
+    else:
+        meas = lb.Stream(z, lb.InertialMeasurement(R, n_state=n, heading_index=-2))
+    F, Q, x0, P0 = np.eye(n), 0.01 * np.eye(n), np.zeros(n), np.eye(n)
+    setup = _loop._setup(F, Q, x0, P0, [meas], None, "ekf")
     assert K._compiled_ekf(setup, [meas], True) is None
-    good = lb.NonlinearMeasurement(np.zeros((2, 5, 3)), lb.inertial_measurement_function("body"), 0.1 * np.eye(3),
-                                   jacobian=lb.inertial_measurement_jacobian(n, "body"))
+    good = lb.Stream(z, lb.InertialMeasurement(R, n_state=n))
     if HAVE_NUMBA:
         assert K._compiled_ekf(setup, [good], True) is not None
+    if why == "function_model":          # the same model either way: the same numbers
+        np.testing.assert_allclose(lb.extended_kalman_filter(F, Q, x0, P0, [meas]).x,
+                                   lb.extended_kalman_filter(F, Q, x0, P0, [good]).x, rtol=0, atol=1e-12)
 
 
 def test_nonlinear_streams_stay_in_numpy(monkeypatch):

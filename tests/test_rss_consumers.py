@@ -10,7 +10,7 @@ from filterpy.kalman import ExtendedKalmanFilter
 
 import locbook as lb
 from locbook.tracking import _kernels, unscented
-from locbook.tracking.streams import _rss_mean_jacobian
+from locbook.models.rss import rss_mean_jacobian
 
 ANCHORS = np.array([[0.0, 0.0], [8.0, 0.5], [1.0, 7.0], [7.5, 6.0]])
 CHANNEL = lb.PathLossModel(np.array([-44.0, -47.0, -50.0, -46.0]), np.array([2.0, 2.4, 2.8, 1.9]), 3.0)
@@ -64,10 +64,12 @@ def test_stream_mean_and_jacobian_are_the_models_with_the_channels_clamp():
     assert meas.clamp_m == 0.5
     model = lb.RssModel(ANCHORS, ch)
     pos = np.array([[0.3, 0.1], [4.0, 3.0], [7.6, 6.2], [8.0, 0.5]])     # inside, outside, inside, on an anchor
-    h, grad, d = _rss_mean_jacobian(meas, pos[:, None, :] - ANCHORS, ch.ref_power_dbm, ch.path_loss_exp)
+    h = meas.model.mean(pos, step=0)                   # the stream's model in points form: 4 points, no run axis
+    grad = meas.model.jacobian(pos, step=0)
     np.testing.assert_array_equal(h, model.mean_rss_dbm(pos)[0])
     np.testing.assert_array_equal(grad, model.jacobian(pos)[0])
-    np.testing.assert_array_equal(d, model.distance_m(pos)[0])
+    variance = np.diagonal(meas.model.covariance(pos, step=0), axis1=-2, axis2=-1)
+    np.testing.assert_array_equal(variance, np.broadcast_to(ch.sigma_db**2, (4, 4)))
 
 
 def test_ukf_h_is_the_models_mean():
@@ -75,8 +77,7 @@ def test_ukf_h_is_the_models_mean():
     model = lb.RssModel(ANCHORS, CLAMPED)
     sigma_points = np.random.default_rng(3).uniform(-1, 9, (9, 4))
     sigma_points[0, :2] = ANCHORS[2] + 1e-4                                # one within the clamp
-    np.testing.assert_array_equal(unscented._rss_function(meas, 0)(sigma_points),
-                                  model.mean_rss_dbm(sigma_points[:, :2])[0])
+    np.testing.assert_array_equal(meas.model.mean(sigma_points, step=0), model.mean_rss_dbm(sigma_points[:, :2])[0])
 
 
 def test_crlb_information_is_the_models_fisher_information_and_its_closed_form():
@@ -130,7 +131,8 @@ def test_compiled_row_kernel_is_the_numpy_model():
                                 np.nan, 2, 1.0, clamp, anchor_sigma, Hr, nu, var, valid, dof, *scratch)
     assert got == 3 and dof.tolist() == [1, 1, 1, 0] and valid[0].tolist() == [True, True, True, False]
     for w in range(3):
-        h, grad, d = _rss_mean_jacobian(meas, x[:2, w] - ANCHORS[j], p0, ple)
+        h, grad, d2 = rss_mean_jacobian(x[:2, w] - ANCHORS[j], p0, ple, min_distance_m=clamp)
+        d = np.sqrt(d2)
         # the logarithm is musl's (vectorised) against numpy's: within 2 ulp of each other (tests/test_vecmath.py)
         assert abs(nu[0, w] - (z[w] - h)) <= 4 * np.spacing(abs(h))
         # the kernel may fuse a multiply and an add (one rounding instead of two): a few ulp

@@ -14,7 +14,6 @@ import numpy as np
 import pytest
 
 import locbook as lb
-from locbook.models.imu import inertial_measurement_function
 from locbook.tracking import _compiled as K
 from locbook.tracking import unscented as U
 
@@ -121,8 +120,10 @@ def _case(kind, rng, B=5, T=50):
         streams = [lb.LinearMeasurement(fixes, lb.per_step(Hs), lb.per_step(Rs)), rss()]
     elif kind == "inertial_world_frame":                          # the readings read the velocity as "acceleration"
         acc = np.concatenate([np.diff(truth, axis=1, prepend=truth[:, :1]) / 0.5, rng.normal(0, 0.1, (B, T, 1))], -1)
-        h = inertial_measurement_function("world", acceleration_index=(2, 3), heading_index=0, yaw_rate_index=1)
-        streams = [lb.NonlinearMeasurement(acc, h, np.diag([0.5, 0.5, 1.0]), name="velocity + noise"), rss()]
+        imu = lb.InertialMeasurement(np.diag([0.5, 0.5, 1.0]), n_state=model.F.shape[0], frame="world",
+                                     acceleration_index=(2, 3), heading_index=0, yaw_rate_index=1,
+                                     name="velocity + noise")
+        streams = [lb.Stream(acc, imu), rss()]
     else:
         raise ValueError(kind)
     return model.F, model.Q, x0, P0, streams, kw
@@ -247,16 +248,14 @@ def test_inertial_stream_with_an_index_from_the_end_equals_the_numpy_ukf(monkeyp
     """The inertial h takes numpy indices, -2 included (the heading of an 8-state model); the kernel counts from 0,
     so such a stream stays in numpy (-2), and a positive index is compiled (6): both equal the numpy loop. Q per
     run is compiled too."""
-    from locbook.models.imu import inertial_measurement_function
     rng = np.random.default_rng(0)
     n, B, T = 8, 6, 40
     F = np.eye(n)
     F[0, 2] = F[1, 3] = F[2, 4] = F[3, 5] = F[6, 7] = 0.1
     Q = np.stack([np.eye(n) * 0.01 * (1 + i) for i in range(B)])
     x0, P0 = rng.normal(0.0, 1.0, (B, n)), 0.5 * np.eye(n)
-    h = inertial_measurement_function("body", acceleration_index=(4, 5), heading_index=heading_index,
-                                      yaw_rate_index=7)
-    meas = lb.NonlinearMeasurement(rng.normal(0.0, 1.0, (B, T, 3)), h, 0.1 * np.eye(3))
+    meas = lb.Stream(rng.normal(0.0, 1.0, (B, T, 3)),
+                     lb.InertialMeasurement(0.1 * np.eye(3), n_state=n, heading_index=heading_index))
     monkeypatch.setattr(K, "_NUMBA_MIN_WORK", 0)
     monkeypatch.setattr(K, "_NUMBA_ENABLED", False)
     ref = lb.unscented_kalman_filter(F, Q, x0, P0, [meas], alpha=0.5)

@@ -23,7 +23,7 @@ import numpy as np
 from .._validate import as_array, check_choice
 
 from .crlb import rss_position_information
-from ..tracking._linalg import _mT
+from .._linalg import _mT
 
 __all__ = ["posterior_crlb", "position_bound_m", "rss_state_information", "linear_measurement_information",
            "PCRLB_FORMS"]

@@ -19,9 +19,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._linalg import _covariance
 from .._validate import as_array, check_choice, check_scalar
+from .base import MeasurementModel
 
-__all__ = ["IMU_FRAMES", "INTEGRATION_RULES", "rotation_2d", "world_to_body", "body_to_world",
+__all__ = ["InertialMeasurement", "IMU_FRAMES", "INTEGRATION_RULES", "rotation_2d", "world_to_body", "body_to_world",
            "accelerometer_readings", "gyroscope_readings", "stationary_bias", "integrate", "dead_reckon",
            "inertial_measurement_function", "inertial_measurement_jacobian"]
 
@@ -122,9 +124,6 @@ def inertial_measurement_function(frame: str = "body", *, acceleration_index=(4,
         a = x[..., ia]
         acc = world_to_body(a, x[..., heading_index]) if frame == "body" else a
         return np.concatenate([acc, x[..., yaw_rate_index:yaw_rate_index + 1]], axis=-1)
-    # what h computes, for the compiled EKF and UKF (locbook.tracking._compiled._inertial_parameters), which then
-    # evaluate the same function in their kernels instead of calling h
-    h.inertial = (frame == "body", tuple(int(i) for i in ia.reshape(-1)), int(heading_index), int(yaw_rate_index))
     return h
 
 
@@ -149,7 +148,75 @@ def inertial_measurement_jacobian(n_state: int = 8, frame: str = "body", *, acce
             H[..., 0, ia[0]] = H[..., 1, ia[1]] = 1.0
         H[..., 2, yaw_rate_index] = 1.0
         return H
-    # what it differentiates (inertial_measurement_function's record) and for how many states, for the compiled EKF
-    jacobian.inertial = (frame == "body", tuple(int(i) for i in ia.reshape(-1)), int(heading_index),
-                         int(yaw_rate_index), int(n_state))
     return jacobian
+
+
+class InertialMeasurement(MeasurementModel):
+    """The inertial measurement model ``z = [acc_1, acc_2, gyro] + v``, ``v ~ N(0, R)``, on the measurement-model
+    protocol (:mod:`locbook.models.base`): :func:`inertial_measurement_function` and its Jacobian
+    :func:`inertial_measurement_jacobian` for a state of ``n_state`` components with world-frame acceleration,
+    heading and yaw rate at the given indices (Gudipati 2017, Eqs. (3.9), (3.11)); ``R`` ``(3, 3)`` or with run axes
+    ``batch + (3, 3)``. The compiled EKF and UKF evaluate the same function in their kernels
+    (:mod:`locbook.tracking._compiled`)."""
+
+    checks_own_output = True
+
+    def __init__(self, R, *, n_state: int = 8, frame: str = "body", acceleration_index=(4, 5), heading_index: int = 6,
+                 yaw_rate_index: int = 7, name: str = "inertial"):
+        check_choice("frame", frame, IMU_FRAMES)
+        self.name, self.frame, self.n_state = name, frame, int(n_state)
+        self.acceleration_index = tuple(int(i) for i in np.asarray(acceleration_index).reshape(-1))
+        self.heading_index, self.yaw_rate_index = int(heading_index), int(yaw_rate_index)
+        if len(self.acceleration_index) != 2:
+            raise ValueError(f"{name}: acceleration_index must hold two state indices, got {acceleration_index!r}")
+        index = self.acceleration_index + (self.heading_index, self.yaw_rate_index)
+        if min(index) < -self.n_state or max(index) >= self.n_state:
+            raise ValueError(f"{name}: the state indices {index} are outside the {self.n_state}-state")
+        self._given_R = R
+        self.R = _covariance(f"{name}: R", R, 3)
+        self._h = inertial_measurement_function(frame, acceleration_index=self.acceleration_index,
+                                                heading_index=self.heading_index, yaw_rate_index=self.yaw_rate_index)
+        self._jacobian = inertial_measurement_jacobian(self.n_state, frame, acceleration_index=self.acceleration_index,
+                                                       heading_index=self.heading_index,
+                                                       yaw_rate_index=self.yaw_rate_index)
+
+    @property
+    def n_readings(self) -> int:
+        return 3
+
+    def mean(self, x, *, step: int = 0):
+        return self._h(x)
+
+    def jacobian(self, x, *, step: int = 0):
+        return self._jacobian(x)
+
+    def covariance(self, x, *, step: int = 0):
+        return self.R if self.R.ndim == 2 else self.R[..., None, :, :]
+
+    def innovation(self, x, z, *, step: int = 0):
+        valid = np.isfinite(z)
+        h = self._h(x)
+        return np.where(valid, z, h) - h, self._jacobian(x), self.R
+
+    def independent_readings(self) -> bool:
+        return not np.any(self.R - self.R * np.eye(3))
+
+    def noise(self):
+        return "covariance", self.R
+
+    def with_noise(self, value) -> "InertialMeasurement":
+        out = object.__new__(InertialMeasurement)
+        out.__dict__.update(self.__dict__)
+        out.R = out._given_R = value
+        return out
+
+    def listed_matrices(self) -> list:
+        return [(f"{self.name}.R", self._given_R, False)]
+
+    def run_shapes(self) -> list:
+        return [(f"{self.name}.R", self.R.shape[:-2])]
+
+    def check_readings(self, z, n_state: int) -> None:
+        super().check_readings(z, n_state)
+        if n_state != self.n_state:
+            raise ValueError(f"{self.name}: the model is for a {self.n_state}-state, the filter's state has {n_state}")

@@ -21,15 +21,17 @@ pooled online sigma of Ozkaya Eq. (6.7)); ``step`` picks the step. Anchors are `
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
+from .._linalg import _STATE_NOT_FINITE, _Singular
 from .._validate import as_array, check_scalar
+from .base import MeasurementModel
 from .channel import (PathLossModel, log_distance_gradient, log_distance_mean_dbm, require_path_loss_model,
                       wall_crossings)
 
-__all__ = ["RssModel", "rss_mean_jacobian", "LIKELIHOOD_BLOCK_VALUES"]
+__all__ = ["RssModel", "RssMeasurementModel", "rss_mean_jacobian", "LIKELIHOOD_BLOCK_VALUES"]
 
 _LOG_2PI = float(np.log(2.0 * np.pi))
 #: runs per block of :meth:`RssModel.log_likelihood`: about this many values in each temporary (32 MiB)
@@ -324,3 +326,182 @@ class RssModel:
             except ValueError:
                 raise ValueError(f"heard must broadcast to {gain.shape}, got shape {heard.shape}") from None
         return np.einsum("...j,...ji,...jk->...ik", gain, grad, grad)
+
+
+_ON_ANCHOR = ("the state is on an anchor at step {step} and the channel has no near-field clamp (min_distance_m = 0), "
+              "where the log-distance mean is infinite: give the channel a min_distance_m (e.g. 1e-3 m)")
+
+
+def _anchor_axis(value):
+    """A channel parameter (scalar, ``(m,)`` or ``batch + (1 or m,)``) made to broadcast against points-form values
+    ``batch + (K, m)``."""
+    value = np.asarray(value, dtype=float)
+    return value[..., None, :] if value.ndim >= 2 else value
+
+
+@dataclass(frozen=True)
+class RssMeasurementModel(MeasurementModel):
+    """The RSS model of the Kalman family's streams (:func:`locbook.RssMeasurement`), on the measurement-model
+    protocol (:mod:`locbook.models.base`): readings ``z_kj = h_j(p_k) + e_kj``, ``e ~ N(0, sigma_db^2)`` i.i.d., ``h``
+    the log-distance mean of :func:`rss_mean_jacobian` (Dogan Eq. (2.2)) with the channel's near-field clamp
+    ``min_distance_m`` (:attr:`clamp_m`; within it the mean is flat and its Jacobian 0). Without a clamp the mean is
+    infinite on an anchor: a state (or sigma point) exactly on one is an error naming the step.
+
+    ``anchors_m``: fixed ``(m, dim)``, or per step ``batch + (T, m, dim)`` (a moving receiver, or measurement
+    locations drawn per Monte-Carlo run: Palvai 2008, Eq. (4.28)). ``channel``: its ``ref_power_dbm``,
+    ``path_loss_exp`` and ``sigma_db`` scalars, per anchor ``(m,)``, or with run axes ``batch + (1 or m,)``.
+    ``position_index``: the state's position components. ``anchor_sigma_m``: the anchors' positions are known only to
+    this standard deviation (Palvai's sigma_3); the variance is then ``sigma^2 + (10 n / ln 10)^2 anchor_sigma^2 /
+    d^2`` (0 added within the clamp) at the linearisation point (first-order propagation; an extension: Palvai 2008,
+    Sec. 4.4, does not say how sigma_3 enters the EKF). ``tag_height_m``: the anchors are ``(m, 3)`` (x, y, height),
+    the tag moves in the plane ``z = tag_height_m`` and ``position_index`` names x and y only; distances are 3-D.
+    """
+
+    anchors_m: np.ndarray
+    channel: PathLossModel
+    position_index: np.ndarray
+    anchor_sigma_m: float = 0.0
+    tag_height_m: float | None = None
+    name: str = "RssMeasurement"
+    checks_own_output = True
+
+    def __post_init__(self):
+        require_path_loss_model(self.channel, "channel")
+        anchors = as_array(f"{self.name}.anchors_m", self.anchors_m, min_ndim=2)
+        object.__setattr__(self, "anchors_m", anchors)
+        m, dim = anchors.shape[-2], anchors.shape[-1]
+        idx = np.asarray(self.position_index)
+        object.__setattr__(self, "position_index", idx)
+        if self.tag_height_m is not None:
+            check_scalar("tag_height_m", self.tag_height_m)
+            if dim != 3:
+                raise ValueError(f"{self.name} with tag_height_m needs anchors (m, 3) (x, y, height), got "
+                                 f"{anchors.shape}")
+        n_free = dim - (self.tag_height_m is not None)
+        if idx.shape != (n_free,):
+            raise ValueError(f"{self.name}.position_index must hold {n_free} state indices (one per axis of the "
+                             f"anchors{', the height known' if n_free < dim else ''}), got {self.position_index!r}")
+        check_scalar("anchor_sigma_m", self.anchor_sigma_m, ge=0)
+        for name in ("ref_power_dbm", "path_loss_exp", "sigma_db"):
+            value = as_array(f"{self.name}.channel.{name}", getattr(self.channel, name))
+            if value.ndim and value.shape[-1] not in (1, m):
+                raise ValueError(f"{self.name}.channel.{name} must be a scalar or end in (1,) or ({m},) (one per "
+                                 f"anchor), got shape {value.shape}")
+
+    @property
+    def n_readings(self) -> int:
+        return self.anchors_m.shape[-2]
+
+    @property
+    def clamp_m(self) -> float:
+        """The model's near-field clamp: the channel's ``min_distance_m``."""
+        return float(self.channel.min_distance_m)
+
+    def lift(self, positions_m):
+        """Positions ``(..., k)`` from the state, with the known tag height appended when there is one."""
+        if self.tag_height_m is None:
+            return positions_m
+        return np.concatenate([positions_m, np.full(positions_m.shape[:-1] + (1,), float(self.tag_height_m))], -1)
+
+    def anchors_at(self, step: int) -> np.ndarray:
+        """Anchor positions at ``step``: ``(m, dim)`` or ``batch + (m, dim)``."""
+        a = self.anchors_m
+        return a if a.ndim == 2 else a[..., min(step, a.shape[-3] - 1), :, :]
+
+    def variance_db2(self, distance_m, path_loss_exp, sigma_db):
+        """Measurement variance per reading: ``sigma^2``, inflated for ``anchor_sigma_m`` (class docstring) by
+        ``anchor_sigma^2 |dh/dp|^2``, ``|dh/dp| = 10 n / (d ln 10)`` outside the clamp and 0 inside."""
+        var = np.asarray(sigma_db, dtype=float) ** 2
+        if self.anchor_sigma_m > 0:
+            slope = 10.0 * np.asarray(path_loss_exp, dtype=float) / np.log(10.0)
+            clamp = self.clamp_m
+            inflation = (slope * self.anchor_sigma_m / np.maximum(distance_m, clamp)) ** 2
+            var = var + np.where(np.asarray(distance_m) < clamp, 0.0, inflation)
+        return var
+
+    def _refuse_on_anchor(self, d2, batch_ndim: int | None) -> None:
+        """Without a clamp the mean is infinite on an anchor: a named error for the runs (``batch_ndim`` leading axes
+        of the squared distances ``d2``; the rest are reduced) whose point lies on one."""
+        if self.clamp_m == 0 and not np.all(d2 != 0):
+            on = d2 == 0
+            if batch_ndim is not None:
+                on = on.reshape(on.shape[:batch_ndim] + (-1,)).any(axis=-1)
+            raise _Singular(on, _ON_ANCHOR)
+
+    def _points_offsets(self, x, step: int):
+        """``p - a_j`` ``batch + (K, m, dim)`` at points-form states ``batch + (K, n)``."""
+        a = self.anchors_at(step)
+        a = a if a.ndim == 2 else a[..., None, :, :]
+        return self.lift(x[..., self.position_index])[..., None, :] - a
+
+    def mean(self, x, *, step: int = 0):
+        ch = self.channel
+        mean, _, d2 = rss_mean_jacobian(self._points_offsets(x, step), _anchor_axis(ch.ref_power_dbm),
+                                        _anchor_axis(ch.path_loss_exp), ref_distance_m=ch.ref_distance_m,
+                                        min_distance_m=self.clamp_m, jacobian=False)
+        self._refuse_on_anchor(d2, np.ndim(x) - 2)
+        return mean
+
+    def jacobian(self, x, *, step: int = 0):
+        ch = self.channel
+        _, grad, d2 = rss_mean_jacobian(self._points_offsets(x, step), _anchor_axis(ch.ref_power_dbm),
+                                        _anchor_axis(ch.path_loss_exp), ref_distance_m=ch.ref_distance_m,
+                                        min_distance_m=self.clamp_m)
+        self._refuse_on_anchor(d2, np.ndim(x) - 2)
+        H = np.zeros(grad.shape[:-1] + (np.shape(x)[-1],))
+        H[..., self.position_index] = grad[..., :self.position_index.size]
+        return H
+
+    def covariance(self, x, *, step: int = 0):
+        """``diag(sigma^2)`` per reading, inflated at the points' distances for ``anchor_sigma_m``."""
+        diff = self._points_offsets(x, step)
+        d = np.sqrt(np.einsum("...i,...i->...", diff, diff))
+        ch = self.channel
+        var = np.broadcast_to(self.variance_db2(d, _anchor_axis(ch.path_loss_exp), _anchor_axis(ch.sigma_db)),
+                              d.shape)
+        return var[..., :, None] * np.eye(self.n_readings)
+
+    def innovation(self, x, z, *, step: int = 0):
+        """Table 3.4's linearisation at the states ``x`` ``batch + (n,)``: ``z - h(x)``, the stacked Jacobian and
+        ``R = sigma^2 I`` (inflated for uncertain anchor positions)."""
+        idx = self.position_index
+        ch = self.channel
+        offset = self.lift(x[..., idx])[..., None, :] - self.anchors_at(step)
+        h, grad, d2 = rss_mean_jacobian(offset, np.asarray(ch.ref_power_dbm), np.asarray(ch.path_loss_exp),
+                                        ref_distance_m=ch.ref_distance_m, min_distance_m=self.clamp_m)
+        self._refuse_on_anchor(d2, x.ndim - 1)
+        d = np.sqrt(d2)
+        H = np.zeros(grad.shape[:-1] + (x.shape[-1],))
+        H[..., idx] = grad[..., :idx.size]
+        far = ~np.all(np.isfinite(d), axis=-1)
+        if far.any():                   # the state ran away (an overflow, e.g. after a reading of 1e300 dBm)
+            raise _Singular(far, _STATE_NOT_FINITE)
+        m = z.shape[-1]
+        sigma2 = np.broadcast_to(self.variance_db2(d, ch.path_loss_exp, ch.sigma_db), z.shape)
+        return z - h, H, sigma2[..., :, None] * np.eye(m)
+
+    def independent_readings(self) -> bool:
+        return True
+
+    def noise(self):
+        return "variances", np.asarray(self.channel.sigma_db, dtype=float) ** 2
+
+    def with_noise(self, value) -> "RssMeasurementModel":
+        return replace(self, channel=replace(self.channel, sigma_db=np.sqrt(value)))
+
+    def run_shapes(self) -> list:
+        ch = self.channel
+        return [(f"{self.name}.anchors_m", self.anchors_m.shape[:-3])] + \
+            [(f"{self.name}.channel.{v}", np.shape(getattr(ch, v))[:-1]) for v in ("ref_power_dbm", "path_loss_exp",
+                                                                                  "sigma_db")]
+
+    def check_readings(self, z, n_state: int) -> None:
+        m = self.n_readings
+        if np.shape(z)[-1] != m:
+            raise ValueError(f"{self.name}.rss_dbm has {np.shape(z)[-1]} anchors on its last axis, anchors_m has {m}")
+        anchors = self.anchors_m
+        if anchors.ndim > 2 and anchors.shape[-3] not in (1, np.shape(z)[-2]):
+            raise ValueError(f"{self.name}.anchors_m per step must have shape batch + (T, m, dim) with T = "
+                             f"{np.shape(z)[-2]} steps (or 1), got {anchors.shape}")
+        if np.max(self.position_index) >= n_state:
+            raise ValueError(f"{self.name}.position_index {self.position_index} is outside the {n_state}-state")

@@ -25,15 +25,15 @@ from ..reproduce.printed_values import printed
 from ..metrics import position_error_m
 from ..models.channel import (PathLossModel, correlated_shadowing_db, log_distance_gradient, pairwise_distance_m,
                               quantize_db)
-from ..models.imu import (accelerometer_readings, body_to_world, dead_reckon, gyroscope_readings, integrate,
-                          inertial_measurement_function, inertial_measurement_jacobian)
+from ..models.imu import (InertialMeasurement, accelerometer_readings, body_to_world, dead_reckon, gyroscope_readings,
+                          integrate, inertial_measurement_jacobian)
 from ..models.motion import HeadingKinematicModel, KinematicModel
 from ..models.trajectory import Trajectory, waypoint_trajectory
 from ..static.calibration import fix_error_covariance
 from ..static.localization import lateration_box_ls, lateration_ls
 from ..tracking.fusion import fuse_estimates
 from ..tracking.kalman import extended_kalman_filter
-from ..tracking.streams import LinearMeasurement, NonlinearMeasurement, RssMeasurement
+from ..tracking.streams import LinearMeasurement, NonlinearMeasurement, RssMeasurement, Stream
 from ..tracking.unscented import unscented_kalman_filter
 from ..montecarlo import mc_standard_error
 from ..tracking.divergence import DivergenceFlags, divergence_note
@@ -316,7 +316,7 @@ def _initial(walk: Walk, model, n_state):
     return x0, np.diag(var)
 
 
-def _imu_stream(walk: Walk, with_jacobian: bool) -> NonlinearMeasurement:
+def _imu_stream(walk: Walk, with_jacobian: bool) -> Stream:
     s = walk.settings
     per_step = np.sqrt(s.imu_samples_per_step)
     z = np.concatenate([walk.acc_m_s2, walk.gyro_rad_s[..., None]], axis=-1)
@@ -324,9 +324,7 @@ def _imu_stream(walk: Walk, with_jacobian: bool) -> NonlinearMeasurement:
     # the residual biases are not in the model: their variance is added to R (a constant error is not white;
     # this only keeps the filter from trusting the inertial rows beyond their real accuracy)
     R = R + np.diag([s.accel_residual_bias_m_s2**2] * 2 + [s.gyro_residual_bias_rad_s**2])
-    return NonlinearMeasurement(z, inertial_measurement_function(s.imu_frame), R,
-                                jacobian=inertial_measurement_jacobian(8, s.imu_frame) if with_jacobian else None,
-                                name="accelerometer + gyroscope")
+    return Stream(z, InertialMeasurement(R, n_state=8, frame=s.imu_frame, name="accelerometer + gyroscope"))
 
 
 RSS_SIGNS = ("corrected", "printed_3_12")
@@ -485,7 +483,9 @@ def noise_fit(walk: Walk, method: str = "ekf", *, ukf_alpha: float = UKF_ALPHA, 
     kind = options.pop("kind")
 
     def mean_error(Q, imu_R, sigma_db):
-        st = [replace(streams[0], R=imu_R), replace(streams[1], channel=replace(streams[1].channel, sigma_db=sigma_db))]
+        rss_model = streams[1].model
+        st = [streams[0].replace(model=streams[0].model.with_noise(np.asarray(imu_R, dtype=float))),
+              streams[1].replace(model=replace(rss_model, channel=replace(rss_model.channel, sigma_db=sigma_db)))]
         res = filt(model.F, Q, x0, P0, st, record=walk.report_steps, **options)
         return float(walk_errors(walk, res.x[..., :2]).mean_m.mean())
 

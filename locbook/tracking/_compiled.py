@@ -19,10 +19,12 @@ import warnings
 
 import numpy as np
 
-from ._linalg import _mT
+from .._linalg import _mT
 from ._loop import _Setup
 from .results import KalmanResult
-from .streams import LinearMeasurement, NonlinearMeasurement, RssMeasurement
+from ..models.base import LinearGaussian
+from ..models.imu import InertialMeasurement
+from ..models.rss import RssMeasurementModel
 from .transition import PerStep
 
 _NUMBA_ENABLED = os.environ.get("LOCBOOK_NUMBA", "1").strip().lower() not in ("0", "false", "no", "off")
@@ -33,6 +35,7 @@ _BLOCK_LANES = 256
 #: runs up to which the compiled EKF runs even where the numpy loop would compute one covariance for all runs
 _SMALL_BATCH = 64
 _LINEAR_PARALLEL, _LINEAR_SERIAL, _RSS_PARALLEL, _RSS_SERIAL, _INERTIAL = 0, 1, 2, 3, 4
+_LINEAR_KINDS = (_LINEAR_PARALLEL, _LINEAR_SERIAL, _INERTIAL)     # the kinds whose rows use the packed H's columns
 
 
 def _small_batch(setup: _Setup) -> bool:
@@ -107,46 +110,83 @@ def _side_by_side(streams) -> np.ndarray:
     return Z
 
 
+def _pack_linear(meas, batch, B, n, T):
+    """A linear stream (:class:`~locbook.models.base.LinearGaussian`): its H and R, per run and step."""
+    model, m = meas.model, meas.model.n_readings
+    if meas.mode == "serial" and meas.order != "given":
+        return None                 # a per-run order of linear rows: numpy
+    return (_LINEAR_PARALLEL if meas.mode == "parallel" else _LINEAR_SERIAL,
+            (_leading_steps(model.H, batch, B, (m, n), T), _leading_steps(model.R, batch, B, (m, m), T)), None, None)
+
+
+def _pack_rss(meas, batch, B, n, T):
+    """An RSS stream (:class:`~locbook.models.rss.RssMeasurementModel`): anchors, channel and its scalars."""
+    model = meas.model
+    ch, m = model.channel, model.n_readings
+    anchors = np.asarray(model.anchors_m, dtype=float)
+    dim = anchors.shape[-1]
+    if dim > 3 or not np.isfinite(ch.wall_attenuation_db):
+        return None
+    if anchors.ndim == 2:
+        a = anchors[None, None]
+    elif anchors.ndim == 3:
+        a = anchors[None]
+    else:
+        a = np.broadcast_to(anchors, batch + anchors.shape[-3:]).reshape((B,) + anchors.shape[-3:])
+    idx = np.asarray(model.position_index, dtype=np.int64)
+    tag = np.nan if model.tag_height_m is None else float(model.tag_height_m)
+    return (_RSS_PARALLEL if meas.mode == "parallel" else _RSS_SERIAL, None,
+            (dim, a, *(_leading(v, batch, B, (m,)) for v in (ch.ref_power_dbm, ch.path_loss_exp, ch.sigma_db))),
+            (dim, float(ch.ref_distance_m), model.clamp_m, float(model.anchor_sigma_m), tag,
+             tuple(idx) + (0,) * (3 - idx.size), idx.size, meas.order == "descending"))
+
+
+def _pack_inertial(meas, batch, B, n, T):
+    """An inertial stream (:class:`~locbook.models.imu.InertialMeasurement`): packed as a linear stream's readings
+    and R, H marking the four components the readings depend on; its parameters ``(body frame, acceleration indices,
+    heading index, yaw-rate index)`` for the kernels, which evaluate the same function."""
+    model = meas.model
+    index = model.acceleration_index + (model.heading_index, model.yaw_rate_index)
+    if meas.mode != "parallel" or min(index) < 0 or max(index) >= n or len(set(index)) != 4:
+        return None                 # an index from the end (numpy's h takes it; the kernels count from 0)
+    H = np.zeros((3, n))
+    H[0, list(index)] = 1.0
+    R = _leading(model.R, batch, B, (3, 3))[:, None]
+    return (_INERTIAL, (np.ascontiguousarray(H[None, None]), R), None,
+            None, (int(model.frame == "body"),) + index)
+
+
+# The compiled backend's registry: a packer per model type (exact type: a subclass may change the arithmetic). A
+# stream whose model has no packer runs the whole filter on the numpy path.
+_PACKERS = {LinearGaussian: _pack_linear, RssMeasurementModel: _pack_rss, InertialMeasurement: _pack_inertial}
+
+
 def _pack_streams(setup: _Setup, measurements, B):
-    """The linear and RSS streams as the kernels' flat arrays (readings side by side on one axis), or None if one is
-    not supported (a NonlinearMeasurement: :func:`_pack_with_inertial` packs the inertial one)."""
-    batch, T, n = setup.batch, setup.T, setup.F.shape[-1]
-    kinds, cols, lin, rss, scal = [], [0], [], [], []
+    """The streams as the kernels' flat arrays (readings side by side on one axis) and the inertial parameters
+    ``(streams, 5)`` (zeros for the other streams), or None if a stream's model has no packer (:data:`_PACKERS`) or
+    its packer declines."""
+    batch, T, n = setup.batch, setup.T, setup.n
+    kinds, cols, lin, rss, scal, iner = [], [0], [], [], [], []
+    for meas in measurements:
+        packer = _PACKERS.get(type(meas.model))
+        entry = None if packer is None else packer(meas, batch, B, n, T)
+        if entry is None:
+            return None
+        m = meas.model.n_readings
+        c0 = cols[-1]
+        cols.append(c0 + m)
+        kind, lin_part, rss_part, scalars = entry[:4]
+        kinds.append(kind)
+        if lin_part is not None:
+            lin.append((c0, m) + lin_part)
+        if rss_part is not None:
+            rss.append((c0, m) + rss_part)
+        scal.append(scalars if scalars is not None else (2, 1.0, 1.0, 0.0, 0.0, (0, 0, 0), 0, False))
+        iner.append(entry[4] if len(entry) > 4 else (0, 0, 0, 0, 0))
     # the readings (B, T, M): a step's readings of all streams side by side (one stream: its own array when it is
     # already laid out so, no copy)
     flat = [z.reshape((B,) + z.shape[-2:]) for z in setup.zs]
     Z = _kernel_array(flat[0], float) if len(flat) == 1 else _side_by_side(flat)
-    for meas, z in zip(measurements, setup.zs):
-        m = z.shape[-1]
-        c0 = cols[-1]
-        cols.append(c0 + m)
-        if isinstance(meas, LinearMeasurement):
-            kinds.append(_LINEAR_PARALLEL if meas.mode == "parallel" else _LINEAR_SERIAL)
-            lin.append((c0, m, _leading_steps(meas.H, batch, B, (m, n), T),
-                        _leading_steps(meas.R, batch, B, (m, m), T)))
-            scal.append((2, 1.0, 1.0, 0.0, 0.0, (0, 0, 0), 0, False))
-        elif isinstance(meas, RssMeasurement):
-            ch = meas.channel
-            anchors = np.asarray(meas.anchors_m, dtype=float)
-            dim = anchors.shape[-1]
-            if dim > 3 or not np.isfinite(ch.wall_attenuation_db):
-                return None
-            if anchors.ndim == 2:
-                a = anchors[None, None]
-            elif anchors.ndim == 3:
-                a = anchors[None]
-            else:
-                a = np.broadcast_to(anchors, batch + anchors.shape[-3:]).reshape((B,) + anchors.shape[-3:])
-            kinds.append(_RSS_PARALLEL if meas.mode == "parallel" else _RSS_SERIAL)
-            rss.append((c0, m, dim, a, *(_leading(v, batch, B, (m,)) for v in (ch.ref_power_dbm, ch.path_loss_exp,
-                                                                                ch.sigma_db))))
-            idx = np.asarray(meas.position_index, dtype=np.int64)
-            tag = np.nan if meas.tag_height_m is None else float(meas.tag_height_m)
-            scal.append((dim, float(ch.ref_distance_m), meas.clamp_m,
-                         float(meas.anchor_sigma_m), tag, tuple(idx) + (0,) * (3 - idx.size), idx.size,
-                         meas.order == "descending"))
-        else:
-            return None
     M = cols[-1]
     BH, TH = (max([h.shape[i] for _, _, h, _ in lin] + [1]) for i in (0, 1))
     BR, TR = (max([r.shape[i] for _, _, _, r in lin] + [1]) for i in (0, 1))
@@ -164,59 +204,13 @@ def _pack_streams(setup: _Setup, measurements, B):
     dims, ref_d, clamp, anchor_sigma, tag_h, pidx, npos, desc = (np.array(v) for v in zip(*scal))
     nz, nnz = np.zeros((len(kinds), n), np.int64), np.zeros(len(kinds), np.int64)
     for s, (kind, c0, c1) in enumerate(zip(kinds, cols[:-1], cols[1:])):     # the columns a row can use
-        used = np.flatnonzero(np.any(H[:, :, c0:c1] != 0, axis=(0, 1, 2))) if kind <= _LINEAR_SERIAL else \
+        used = np.flatnonzero(np.any(H[:, :, c0:c1] != 0, axis=(0, 1, 2))) if kind in _LINEAR_KINDS else \
             np.asarray(pidx[s][:npos[s]], np.int64)
         nz[s, :used.size], nnz[s] = used, used.size
-    return (np.array(kinds, np.int64), np.array(cols, np.int64), nz, nnz, Z, H, R, A, P0c, PLE, SIG,
-            dims.astype(np.int64), ref_d.astype(float), clamp.astype(float), anchor_sigma.astype(float),
-            tag_h.astype(float), pidx.astype(np.int64).reshape(-1, 3), npos.astype(np.int64), desc.astype(np.bool_))
-
-
-def _inertial_parameters(meas: NonlinearMeasurement, n: int, *, with_jacobian: bool):
-    """``(body frame, acceleration indices, heading index, yaw-rate index)`` when the stream's ``h`` was made by
-    :func:`locbook.models.imu.inertial_measurement_function` (which records them on ``h.inertial``), with a fixed R, the
-    linear residual and mean, and indices the kernels can take (from 0, below ``n``, distinct); with
-    ``with_jacobian`` (the EKF) also its ``jacobian`` made by :func:`locbook.models.imu.inertial_measurement_jacobian`
-    for the same indices and ``n`` states. Else None: the stream stays in numpy."""
-    spec = getattr(meas.h, "inertial", None)
-    if (spec is None or callable(meas.R) or meas.residual is not None or meas.mean is not None
-            or np.shape(meas.z)[-1] != 3 or len(spec[1]) != 2):
-        return None
-    if with_jacobian and getattr(meas.jacobian, "inertial", None) != spec + (n,):
-        return None
-    body, ia, heading, yaw_rate = spec
-    index = ia + (heading, yaw_rate)
-    if min(index) < 0 or max(index) >= n or len(set(index)) != 4:
-        return None                 # an index from the end (numpy's h takes it; the kernels count from 0)
-    return bool(body), ia[0], ia[1], heading, yaw_rate
-
-
-def _pack_with_inertial(setup: _Setup, measurements, B, *, with_jacobian: bool):
-    """:func:`_pack_streams` where inertial streams (:func:`_inertial_parameters`) are allowed too: their kind is
-    ``_INERTIAL`` (the readings and R packed as a linear stream's, H marking the four components they depend on), and
-    ``iner`` ``(streams, 5)`` gives their parameters (zeros for the other streams). Returns ``(packed, iner)`` or None
-    when a stream is not supported."""
-    n = setup.n
-    packable, inertial = [], []
-    for meas in measurements:
-        if isinstance(meas, (LinearMeasurement, RssMeasurement)):
-            packable.append(meas)
-            inertial.append((0, 0, 0, 0, 0))
-            continue
-        params = (_inertial_parameters(meas, n, with_jacobian=with_jacobian)
-                  if isinstance(meas, NonlinearMeasurement) else None)
-        if params is None:
-            return None
-        H = np.zeros((3, n))
-        H[0, list(params[1:])] = 1.0             # marks the components the readings depend on
-        packable.append(LinearMeasurement(np.zeros((1, 3)), H, meas.R))
-        inertial.append(tuple(int(v) for v in params))
-    packed = _pack_streams(setup, packable, B)
-    if packed is None:
-        return None
-    kinds = packed[0].copy()
-    kinds[np.array([isinstance(meas, NonlinearMeasurement) for meas in measurements])] = _INERTIAL
-    return (kinds,) + packed[1:], np.array(inertial, dtype=np.int64)
+    packed = (np.array(kinds, np.int64), np.array(cols, np.int64), nz, nnz, Z, H, R, A, P0c, PLE, SIG,
+              dims.astype(np.int64), ref_d.astype(float), clamp.astype(float), anchor_sigma.astype(float),
+              tag_h.astype(float), pidx.astype(np.int64).reshape(-1, 3), npos.astype(np.int64), desc.astype(np.bool_))
+    return packed, np.array(iner, dtype=np.int64)
 
 
 # The one rule of every compiled path (EKF/KF, UKF, grid Bayes, particle filter, box LS): where numba cannot compile
@@ -281,7 +275,7 @@ def _compiled_ekf(setup: _Setup, measurements, predict_first: bool):
         return None                 # the kernel keeps P exactly symmetric (it computes one triangle of F P F^T + Q)
     if not _numba_ready():
         return None
-    packing = _pack_with_inertial(setup, measurements, B, with_jacobian=True)
+    packing = _pack_streams(setup, measurements, B)
     if packing is None:
         return None
     packed, iner = packing

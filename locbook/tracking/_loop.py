@@ -14,12 +14,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._validate import as_array, call_user, function_output
-from ._linalg import (_Singular, _apply, _batch_shape, _check_state, _covariance, _mT, _raise_singular,
+from .._linalg import (_Singular, _apply, _batch_shape, _check_state, _covariance, _mT, _raise_singular,
                       _refuse_not_finite)
-from .functional import _linear_update_shared
+from .functional import _linear_update_shared, _Out
 from .results import KALMAN_OUTPUTS, KalmanResult
-from .streams import (MEASUREMENT_TYPES, LinearMeasurement, NonlinearMeasurement, RssMeasurement, _per_step_stream,
-                      _stream_at, _stream_name, _serial_linear, _stream_readings)
+from .streams import Stream
 from .transition import NonlinearMotion, PerStep, _control_drift, _matrix_arg, step_matrix
 
 @dataclass
@@ -45,7 +44,6 @@ class _Setup:
     Q_steps: bool = False
     drift: np.ndarray | None = None     # the control input B_k u_k, batch + (T or 1, n)
     motion: NonlinearMotion | None = None   # nonlinear motion (F is then None)
-    per_step_streams: tuple = ()   # per stream: True when its H or R is given per step
 
     @property
     def plain_motion(self) -> bool:
@@ -64,13 +62,17 @@ class _Setup:
 
 def _streams(measurements) -> list:
     """The streams as a list: one stream, or a sequence of them."""
-    if isinstance(measurements, MEASUREMENT_TYPES):
+    if isinstance(measurements, Stream):
         return [measurements]
     try:
-        return list(measurements)
+        streams = list(measurements)
     except TypeError:
         raise ValueError(f"measurements must be a measurement stream or a list of them, got "
                          f"{type(measurements).__name__}") from None
+    if not all(isinstance(m, Stream) for m in streams):
+        raise ValueError("measurements must be measurement streams (Stream, LinearMeasurement, RssMeasurement, "
+                         f"NonlinearMeasurement), got {[type(m).__name__ for m in streams]}")
+    return streams
 
 
 def _check_outputs(outputs) -> frozenset:
@@ -107,16 +109,9 @@ def _setup(F, Q, x0, P0, measurements, record, filter_name, B=None, u=None) -> _
                              f"NonlinearMotion, got shape {shape}")
         n = shape[-1]
     measurements = _streams(measurements)
-    if not all(isinstance(m, MEASUREMENT_TYPES) for m in measurements):
-        raise ValueError("measurements must be LinearMeasurement, RssMeasurement or NonlinearMeasurement streams, got "
-                         f"{[type(m).__name__ for m in measurements]}")
     for meas in measurements:
-        if isinstance(meas, LinearMeasurement) and np.shape(meas.H)[-1] != n:
-            raise ValueError(f"LinearMeasurement.H must have shape (m, {n}) or batch + (m, {n}) (one column per state "
-                             f"component), got {np.shape(meas.H)}")
-        if isinstance(meas, RssMeasurement) and np.max(meas.position_index) >= n:
-            raise ValueError(f"RssMeasurement.position_index {meas.position_index} is outside the {n}-state")
-    streams = [_stream_readings(m) for m in measurements]
+        meas.model.check_readings(meas.z, n)
+    streams = [m.z for m in measurements]
     if not streams:
         raise ValueError(f"{filter_name} needs at least one measurement stream")
     T = {np.shape(s)[-2] for s in streams}
@@ -154,11 +149,12 @@ def _setup(F, Q, x0, P0, measurements, record, filter_name, B=None, u=None) -> _
         raise ValueError(f"record must be distinct integer step indices in [0, {T}), got {record!r}")
     slot = np.full(T, -1)
     slot[steps] = np.arange(steps.size)
-    zs = [np.broadcast_to(_offset_readings(m, s), batch + np.shape(s)[-2:]) for m, s in zip(measurements, streams)]
+    zs = [np.broadcast_to(np.asarray(m.model.prepare_readings(s), dtype=float), batch + np.shape(s)[-2:])
+          for m, s in zip(measurements, streams)]
     active = [_steps_with_readings(z) for z in zs]
     cols = np.concatenate([[0], np.cumsum([z.shape[-1] for z in zs])]).astype(np.int64)
     return _Setup(F, Q, x, P, batch, T, steps, slot, zs, active, cols, n=n, F_steps=F_steps, Q_steps=Q_steps,
-                  drift=drift, motion=motion, per_step_streams=tuple(_per_step_stream(m) for m in measurements))
+                  drift=drift, motion=motion)
 
 
 def _refuse_ambiguous_stacks(measurements, streams, T: int, x, P, F_batch, Q_given, Q_batch, B) -> None:
@@ -176,7 +172,7 @@ def _refuse_ambiguous_stacks(measurements, streams, T: int, x, P, F_batch, Q_giv
         return                      # the call has runs: the run axes are what they say
     for meas, z in zip(measurements, streams):
         if T == 1 and np.ndim(z) == 3 and np.shape(z)[-2:] == (1, 1) and np.shape(z)[0] > 1:
-            name, k = f"{_stream_name(meas)}.{'rss_dbm' if isinstance(meas, RssMeasurement) else 'z'}", np.shape(z)[0]
+            name, k = f"{meas.name}.z", np.shape(z)[0]
             raise ValueError(f"{name} has shape {np.shape(z)}, {k} runs of one step with one reading each; for one "
                              f"reading at each of {k} steps (filterpy's column z) pass shape ({k}, 1), e.g. z[..., 0]; "
                              f"for {k} runs of one step give x0 its run axis")
@@ -187,13 +183,9 @@ def _refuse_ambiguous_stacks(measurements, streams, T: int, x, P, F_batch, Q_giv
     if B is not None and not isinstance(B, PerStep):
         named.append(("B", np.shape(B)[:-2]))
     for meas in measurements:
-        if isinstance(meas, LinearMeasurement):
-            if not isinstance(meas.H, PerStep):
-                named.append(("LinearMeasurement.H", np.shape(meas.H)[:-2]))
-            if listed(meas.R):
-                named.append(("LinearMeasurement.R", np.shape(meas.R)[:-2]))
-        elif isinstance(meas, NonlinearMeasurement) and listed(meas.R):
-            named.append((f"{_stream_name(meas)}.R", np.shape(meas.R)[:-2]))
+        for name, value, matrix in meas.model.listed_matrices():
+            if (matrix and not isinstance(value, PerStep)) or listed(value):
+                named.append((name, np.shape(value)[:-2]))
     for name, run_axes in named:
         if run_axes and run_axes[-1] == T:
             raise ValueError(f"{name} has {T} matrices on its leading axis, as many as the readings' steps: an "
@@ -202,31 +194,9 @@ def _refuse_ambiguous_stacks(measurements, streams, T: int, x, P, F_batch, Q_giv
                              "runs give the readings (or x0) their run axis")
 
 
-def _offset_readings(meas, z):
-    """The readings with a linear stream's offset taken off (``z - d = H x + v``), as floats."""
-    z = np.asarray(z, dtype=float)
-    offset = getattr(meas, "offset", None)
-    return z if offset is None else z - np.asarray(offset, dtype=float)
-
-
 def _stream_batch_shapes(meas, z):
-    """The run axes that a stream's arrays carry, named: its readings ``batch + (T, m)`` and its parameters (H, R,
-    anchors per step ``batch + (T, m, dim)``, channel parameters ``batch + (1 or m,)``)."""
-    name = _stream_name(meas)
-    if isinstance(meas, RssMeasurement):
-        ch = meas.channel
-        return [(f"{name}.rss_dbm", np.shape(z)[:-2]), (f"{name}.anchors_m", np.shape(meas.anchors_m)[:-3])] + \
-            [(f"{name}.channel.{v}", np.shape(getattr(ch, v))[:-1]) for v in ("ref_power_dbm", "path_loss_exp",
-                                                                              "sigma_db")]
-    run_axes = lambda v: v.shape[:-3] if isinstance(v, PerStep) else np.shape(v)[:-2]
-    shapes = [(f"{name}.z", np.shape(z)[:-2])]
-    if not callable(meas.R):
-        shapes.append((f"{name}.R", run_axes(meas.R)))
-    if isinstance(meas, LinearMeasurement):
-        shapes.append((f"{name}.H", run_axes(meas.H)))
-        if meas.offset is not None and np.ndim(meas.offset) > 1:
-            shapes.append((f"{name}.offset", np.shape(meas.offset)[:-2]))
-    return shapes
+    """The run axes that a stream's arrays carry, named: its readings ``batch + (T, m)`` and its model's parameters."""
+    return [(f"{meas.name}.z", np.shape(z)[:-2])] + meas.model.run_shapes()
 
 
 def _steps_with_readings(z):
@@ -256,15 +226,15 @@ def _covariance_shared_throughout(setup: _Setup, measurements) -> bool:
     covariance per step, which beats running the runs one by one."""
     if not _motion_shared(setup) or setup.P.ndim != 2:
         return False
-    if not all(isinstance(meas, LinearMeasurement) and _unbatched(meas.H) and _unbatched(meas.R)
-               for meas in measurements):
+    if not all(_shared_terms(meas) for meas in measurements):
         return False                # (before the readings' pass below, which reads every reading)
     return all(_shared_pattern(z) is not None for z in setup.zs)
 
 
-def _unbatched(matrix) -> bool:
-    """A stream matrix without run axes (``(r, c)``, or per step ``(T, r, c)``)."""
-    return matrix.value.ndim == 3 if isinstance(matrix, PerStep) else np.ndim(matrix) == 2
+def _shared_terms(meas) -> bool:
+    """A stream whose model is linear with H and R without run axes (:meth:`constant_terms`; at step 0: a model's
+    per-step H and R carry their run axes at every step)."""
+    return meas.model.constant_terms(0) is not None
 
 
 def _motion_shared(setup: _Setup) -> bool:
@@ -272,24 +242,47 @@ def _motion_shared(setup: _Setup) -> bool:
     return (setup.motion is None and setup.F.ndim == 2 + setup.F_steps and setup.Q.ndim == 2 + setup.Q_steps)
 
 
-def _shared_linear_update(x, P, z, meas, joseph: bool = True, want: bool = False):
-    """The update of a :class:`LinearMeasurement` on an unbatched covariance ``P (n, n)`` when H and R have no batch
-    axes and the same components are present in every run; else None (the caller goes batched)."""
-    if not isinstance(meas, LinearMeasurement):
+def _shared_linear_update(x, P, z, meas, step: int, joseph: bool = True, want: bool = False):
+    """The update of a linear stream (:meth:`constant_terms`) on an unbatched covariance ``P (n, n)`` when H and R have
+    no run axes and the same components are present in every run; else None (the caller goes batched)."""
+    terms = meas.model.constant_terms(step)
+    if terms is None:
         return None
-    H, R = np.asarray(meas.H, float), np.asarray(meas.R, float)
-    if H.ndim != 2 or R.ndim != 2:
-        return None
+    H, R = (np.asarray(v, float) for v in terms)
     finite = np.isfinite(z)
     m = finite.shape[-1]
     flat = finite.reshape(-1, m)
     if flat.shape[0] == 0 or not (flat == flat[0]).all():
         return None
     present = flat[0]
-    if meas.mode == "parallel":
+    if meas.mode == "parallel" or meas.order != "given":
+        if meas.mode == "serial":
+            return None             # a per-run order: batched
         return _linear_update_shared(x, P, z, present, H, R, joseph=joseph, want=want)
-    return _serial_linear(x, P, m, lambda x, P, j: _linear_update_shared(
+    return _serial_shared(x, P, m, lambda x, P, j: _linear_update_shared(
         x, P, z[..., j:j + 1], present[j:j + 1], H[j:j + 1], R[j:j + 1, j:j + 1], joseph=joseph, want=want), want)
+
+
+def _serial_shared(x, P, m: int, update, want: bool) -> _Out:
+    """Scalar updates ``update(x, P, j)`` of the components ``j = 0 .. m-1`` in order on the shared covariance (a
+    diagonal R), each from the previous one's posterior; NIS, dof and log-likelihood summed, innovations side by
+    side, S diagonal."""
+    nis = ll = 0.0
+    dof = 0
+    nus, var = [], []
+    for j in range(m):
+        o = update(x, P, j)
+        x, P, nis, dof, ll = o.x, o.P, nis + o.nis, dof + o.dof, ll + o.ll
+        if want:
+            nus.append(o.nu[..., 0])
+            var.append(o.S[..., 0, 0])
+    if not want:
+        return _Out(x, P, nis, dof, ll)
+    nu = np.stack(np.broadcast_arrays(*nus), axis=-1)
+    v = np.stack(np.broadcast_arrays(*var), axis=-1)
+    S = np.where(np.eye(m, dtype=bool), v[..., :, None], 0.0)
+    S = np.where(np.isnan(v)[..., :, None] | np.isnan(v)[..., None, :], np.nan, S)
+    return _Out(x, P, nis, dof, ll, nu, S)
 
 
 _MOTION_FINITE = "for a finite state: f (and its jacobian) must return finite values"
@@ -408,12 +401,10 @@ def _run(setup: _Setup, measurements, update, predict_first: bool, *, shared: bo
         for i, (meas, z, act) in enumerate(zip(measurements, setup.zs, setup.active)):
             if not act[k]:
                 continue
-            if setup.per_step_streams[i]:
-                meas = _stream_at(meas, k)
             try:
                 out = None
                 if shared:
-                    out = _shared_linear_update(x, P, z[..., k, :], meas, joseph, want)
+                    out = _shared_linear_update(x, P, z[..., k, :], meas, k, joseph, want)
                     if out is None:
                         shared = False
                         P = np.broadcast_to(P, batch + (n, n)).copy()
@@ -422,7 +413,7 @@ def _run(setup: _Setup, measurements, update, predict_first: bool, *, shared: bo
                 if out is None:
                     out = update(x, P, z[..., k, :], meas, k, want)
             except _Singular as exc:
-                _raise_singular(k, exc.bad, f"innovation covariance of the {_stream_name(meas)} update", exc.message)
+                _raise_singular(k, exc.bad, f"innovation covariance of the {meas.name} update", exc.message)
             x, P = out.x, out.P
             nis, dof, ll = nis + out.nis, dof + out.dof, ll + out.ll
             if want and s >= 0:

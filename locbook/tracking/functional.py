@@ -26,7 +26,7 @@ import numpy as np
 
 from .._validate import as_array
 from ..errors import SingularCovarianceError
-from ._linalg import (_UPDATE_OVERFLOW, _Singular, _apply, _batch_shape, _covariance, _first_bad,
+from .._linalg import (_UPDATE_OVERFLOW, _Singular, _apply, _batch_shape, _covariance, _first_bad,
                       _gaussian_log_likelihood, _inv_small, _joseph, _logdet, _matrix, _mT, _not_positive_definite,
                       _solve_active)
 

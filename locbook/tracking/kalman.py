@@ -25,7 +25,7 @@ from .._validate import check_choice
 from . import _compiled
 from ._loop import _check_outputs, _covariance_shared_throughout, _run, _setup, _streams
 from .results import DIVERGENCE_PROBABILITY, DIVERGENCE_WINDOW, KalmanResult, _check_guard, _flag
-from .streams import LinearMeasurement, _ekf_update
+from .streams import _ekf_update
 from .transition import NonlinearMotion
 
 __all__ = ["kalman_filter", "extended_kalman_filter", "KF_VARIANTS"]
@@ -76,9 +76,9 @@ def kalman_filter(F, Q, x0, P0, measurements, *, B=None, u=None, record=None, pr
     if isinstance(F, NonlinearMotion):
         raise ValueError("kalman_filter takes a linear motion F; a NonlinearMotion needs extended_kalman_filter or "
                          "unscented_kalman_filter")
-    if not all(isinstance(m, LinearMeasurement) for m in measurements):
-        raise ValueError("kalman_filter takes LinearMeasurement streams, got "
-                         f"{[type(m).__name__ for m in measurements]} (RSS and nonlinear streams: "
+    if not all(m.model.linear for m in measurements):
+        raise ValueError("kalman_filter takes LinearMeasurement streams (linear models), got "
+                         f"{[m.name for m in measurements]} (RSS and nonlinear streams: "
                          "extended_kalman_filter or unscented_kalman_filter)")
     setup = _setup(F, Q, x0, P0, measurements, record, "kalman_filter", B, u)
     if variant == "standard" and joseph and not outputs and (

@@ -36,7 +36,8 @@ from ..errors import ConvergenceError
 from ._loop import _streams
 from .kalman import kalman_filter
 from .smoother import rts_smoother
-from .streams import LinearMeasurement, RssMeasurement, _replace_unchecked
+from ..models.base import LinearGaussian
+from .streams import Stream
 from .transition import NonlinearMotion, PerStep, _control_drift
 from .online import KALMAN_FILTERS
 
@@ -77,16 +78,10 @@ class NoiseFit:
     flat: np.ndarray | None = None
 
 
-def _stream_noise(meas):
-    """A stream's noise as a variance-like array: R ``(.., m, m)`` or an RSS stream's sigma_db^2 ``(.., 1 or m)``."""
-    if isinstance(meas, RssMeasurement):
-        return np.asarray(meas.channel.sigma_db, dtype=float) ** 2
-    if callable(meas.R):
-        raise ValueError(f"{getattr(meas, 'name', type(meas).__name__)}: a noise given by a function of the state "
-                         "cannot be fitted; give fit_R=None for this stream")
-    if isinstance(meas.R, PerStep):
-        raise ValueError("a LinearMeasurement with R per step cannot be fitted; give fit_R=None for this stream")
-    return np.asarray(meas.R, dtype=float)
+def _per_reading(meas) -> bool:
+    """True when the stream's model gives its noise as per-reading variances (an RSS stream's sigma_db^2), not a
+    covariance."""
+    return meas.model.noise()[0] == "variances"
 
 
 def _groups(name: str, form, size: int, free=None) -> np.ndarray:
@@ -128,10 +123,11 @@ class _Parameters:
         for i, (meas, form) in enumerate(zip(streams, fit_R)):
             if form is None:
                 continue
-            base = _stream_noise(meas)
-            if isinstance(meas, RssMeasurement):
+            kind, base = meas.model.noise()
+            base = np.asarray(base, dtype=float)
+            if kind == "variances":
                 base = base.reshape(base.shape + (1,)) if base.ndim == 0 else base
-                m = np.shape(meas.rss_dbm)[-1]
+                m = np.shape(meas.z)[-1]
                 M = _groups(f"fit_R[{i}]", form, m)
                 if M.shape[0] > 1 or M.shape[1] != base.shape[-1]:
                     base = np.broadcast_to(base, base.shape[:-1] + (m,))     # one sigma per anchor
@@ -156,13 +152,13 @@ class _Parameters:
                 Q = d[..., :, None] * base * d[..., None, :]
                 continue
             meas = streams[target]
-            if isinstance(meas, RssMeasurement):
+            if _per_reading(meas):
                 sigma2 = np.exp(log_var if base.shape[-1] > 1 else log_var[..., :1]) * base
-                streams[target] = replace(meas, channel=replace(meas.channel, sigma_db=np.sqrt(sigma2)))
+                streams[target] = meas.replace(model=meas.model.with_noise(sigma2))
                 continue
             d = np.exp(0.5 * log_var)
             # a congruence of a checked covariance: a covariance again
-            streams[target] = _replace_unchecked(meas, R=d[..., :, None] * base * d[..., None, :])
+            streams[target] = meas.replace(model=meas.model.with_noise(d[..., :, None] * base * d[..., None, :]))
         return Q, streams
 
     def unpack(self, theta):
@@ -248,7 +244,7 @@ def fit_noise_ml(F, Q, x0, P0, measurements, *, kind: str = "kf", fit_Q: str | N
     Qf, st = params.apply(theta)       # pooled: one Q and R for every run
     q, r = params.unpack(np.where(flat, np.nan, theta))
     at_bound = ((theta <= np.log(lo) + 1e-6) | (theta >= np.log(hi) - 1e-6)) & ~flat
-    R = [(s.channel.sigma_db if isinstance(s, RssMeasurement) else s.R) if form is not None else None
+    R = [(np.sqrt(s.model.noise()[1]) if _per_reading(s) else s.model.noise()[1]) if form is not None else None
          for s, form in zip(st, fit_R)]
     if flat.any():                      # an undetermined multiplier: NaN in what it scales (the status is `flat`)
         Qf, R = _blank_flat(params, flat, Qf, R)
@@ -293,7 +289,7 @@ def _blank_flat(params, flat, Q, R: list):
         if not hit.any():
             continue
         value = np.array(Q if target == -1 else R[target], dtype=float)
-        if target != -1 and isinstance(params.streams[target], RssMeasurement):
+        if target != -1 and _per_reading(params.streams[target]):
             hit = np.broadcast_to(hit.any(axis=-1, keepdims=True) if value.shape[-1:] == (1,) else hit,
                                   np.broadcast_shapes(hit.shape[:-1] + value.shape[-1:], value.shape))
             value = np.where(hit, np.nan, value)
@@ -394,7 +390,7 @@ def _newton_per_run(log_likelihood, runs, p: int, lo: float, hi: float, max_iter
                            f"{max_iter} damped Newton iterations; raise max_iter or check the model")
 
 
-def fit_noise_em(F, Q, x0, P0, measurement: LinearMeasurement, *, B=None, u=None, n_iter: int = 10,
+def fit_noise_em(F, Q, x0, P0, measurement, *, B=None, u=None, n_iter: int = 10,
                  fit=("Q", "R"), per_run: bool = True) -> NoiseFit:
     """Expectation-maximisation of the full Q and R of a linear-Gaussian model (module docstring; Shumway and Stoffer
     1982), ``x_k = F_k x_{k-1} + B_k u_k + w_k``, ``z_k = H x_k + d + v_k``, the prior ``x0, P0`` at step 0
@@ -412,8 +408,9 @@ def fit_noise_em(F, Q, x0, P0, measurement: LinearMeasurement, *, B=None, u=None
     else the runs' statistics are pooled. ``history``: the log-likelihood before each iteration and at the end (it never
     decreases, up to round-off)."""
     check_scalar("n_iter", n_iter, ge=1, integer=True)
-    if not isinstance(measurement, LinearMeasurement) or isinstance(measurement.H, PerStep) \
-            or isinstance(measurement.R, PerStep) or measurement.mode != "parallel" or np.ndim(measurement.H) != 2:
+    model = getattr(measurement, "model", None)
+    if not getattr(model, "linear", False) or isinstance(model.H, PerStep) \
+            or isinstance(model.R, PerStep) or measurement.mode != "parallel" or np.ndim(model.H) != 2:
         raise ValueError("fit_noise_em takes one parallel LinearMeasurement with one constant H (m, n) and R")
     if isinstance(F, NonlinearMotion) or isinstance(Q, PerStep) or np.ndim(Q) != 2:
         raise ValueError("fit_noise_em fits the linear model: F a matrix (n, n) or per_step(F), Q one (n, n) "
@@ -431,7 +428,7 @@ def fit_noise_em(F, Q, x0, P0, measurement: LinearMeasurement, *, B=None, u=None
     # (the R M-step of a partly observed step has no closed form; leaving such steps out of the M-step only would
     # break the monotone likelihood of EM)
     z = np.where(np.all(np.isfinite(z), axis=-1, keepdims=True), z, np.nan)
-    measurement = replace(measurement, z=z, offset=None)
+    measurement = Stream(z, LinearGaussian(H, R, name=measurement.name))
     T, n = z.shape[-2], H.shape[-1]
     if T < 2:
         raise ValueError("fit_noise_em needs at least two steps")
@@ -441,7 +438,7 @@ def fit_noise_em(F, Q, x0, P0, measurement: LinearMeasurement, *, B=None, u=None
     history = []
 
     for it in range(n_iter + 1):
-        run = kalman_filter(F, Q, x0, P0, replace(measurement, R=R), B=B, u=u, predict_first=False,
+        run = kalman_filter(F, Q, x0, P0, measurement.replace(model=measurement.model.with_noise(R)), B=B, u=u, predict_first=False,
                             outputs=("x_pred", "P_pred", "P_cross"), divergence_window=0)
         history.append(run.total_log_likelihood)
         _check_em_step(history, per_run, it, z)

@@ -21,7 +21,7 @@ import numpy as np
 from .._validate import as_array
 from .kalman import extended_kalman_filter, kalman_filter
 from .results import DIVERGENCE_PROBABILITY, DIVERGENCE_WINDOW, KalmanResult, _check_guard, nis_divergence
-from .streams import RssMeasurement
+from .streams import Stream
 from .transition import NonlinearMotion, PerStep
 from .unscented import unscented_kalman_filter
 
@@ -117,8 +117,7 @@ class OnlineFilter:
         rule, so runs of one reading each are runs (the batch filters refuse ``(B, 1, 1)`` readings with a prior
         without run axes as ambiguous with a column of B readings; here it is not)."""
         try:
-            batch = np.broadcast_shapes(*(np.shape(s.rss_dbm if isinstance(s, RssMeasurement) else s.z)[:-2]
-                                          for s in streams), self.x.shape[:-1])
+            batch = np.broadcast_shapes(*(np.shape(s.z)[:-2] for s in streams), self.x.shape[:-1])
         except ValueError:
             return self.x           # the filter names the axes that do not broadcast
         return np.broadcast_to(self.x, batch + self.x.shape[-1:])
@@ -136,10 +135,9 @@ def _shifted(motion, k: int):
 def _one_step(stream):
     """A stream of one step: readings ``batch + (1, m)`` (the step axis is required: ``(1, m)`` alone would be
     ambiguous between one run and one step)."""
-    from .streams import LinearMeasurement, NonlinearMeasurement, RssMeasurement
-    if not isinstance(stream, (LinearMeasurement, NonlinearMeasurement, RssMeasurement)):
+    if not isinstance(stream, Stream):
         raise ValueError(f"measurements must be measurement streams, got {type(stream).__name__}")
-    z = np.shape(stream.rss_dbm if isinstance(stream, RssMeasurement) else stream.z)
+    z = np.shape(stream.z)
     if z[-2] != 1:
         raise ValueError(f"OnlineFilter.step takes one step of readings, batch + (1, m); got shape {z}")
     return stream

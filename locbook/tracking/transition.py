@@ -32,42 +32,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._validate import as_array, function_output
+from ..models.base import PerStep, per_step, step_matrix
 
 __all__ = ["PerStep", "per_step", "NonlinearMotion"]
-
-
-class PerStep:
-    """An array whose axis ``-3`` is time: a matrix per step ``batch + (T, r, c)`` (made by :func:`per_step`)."""
-
-    __slots__ = ("value",)
-
-    def __init__(self, value, name: str = "per_step value"):
-        value = as_array(name, value.value if isinstance(value, PerStep) else value)
-        if value.ndim < 3:
-            raise ValueError(f"{name} must have shape batch + (T, rows, cols) (a matrix per step), got {value.shape}")
-        self.value = value
-
-    @property
-    def shape(self) -> tuple:
-        return self.value.shape
-
-    def at(self, step: int) -> np.ndarray:
-        """The matrix of ``step``: ``batch + (r, c)`` (:func:`step_matrix`)."""
-        return step_matrix(self.value, step)
-
-    def __repr__(self) -> str:
-        return f"per_step(array of shape {self.value.shape})"
-
-
-def step_matrix(value: np.ndarray, step: int) -> np.ndarray:
-    """The matrix of ``step`` from a per-step array ``batch + (T, r, c)``; a time axis of length 1 holds one matrix
-    for every step."""
-    return value[..., min(step, value.shape[-3] - 1), :, :]
-
-
-def per_step(value) -> PerStep:
-    """Mark ``value`` ``batch + (T, r, c)`` as one matrix per time step (F, Q, B, or a LinearMeasurement's H and R)."""
-    return PerStep(value)
 
 
 @dataclass(frozen=True)

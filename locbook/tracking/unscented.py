@@ -47,13 +47,13 @@ import numpy as np
 
 from .._validate import check_choice, check_scalar, function_output
 from ..models.rss import rss_mean_jacobian
-from ._linalg import (_UPDATE_OVERFLOW, _gaussian_log_likelihood, _inv_small, _logdet, _mT, _not_positive_definite,
+from .._linalg import (_UPDATE_OVERFLOW, _gaussian_log_likelihood, _inv_small, _logdet, _mT, _not_positive_definite,
                       _refuse_not_finite, _Singular, _singular_runs)
 from ._loop import _check_outputs, _motion_apply, _run, _setup, _streams
 from .functional import _missing_as_nan, _Out
 from .results import DIVERGENCE_PROBABILITY, DIVERGENCE_WINDOW, KalmanResult, _check_guard, _flag
-from .streams import (LinearMeasurement, NonlinearMeasurement, RssMeasurement, _pick_anchor, _refuse_on_anchor,
-                      _serial_linear, _serial_order)
+from ..models.base import check_output
+from .streams import _diagonal_entry, _row, _Serial, _serial_order
 
 __all__ = ["UKF_WEIGHTS", "SIGMA_POINT_SETS", "UnscentedWeights", "unscented_weights", "sigma_points", "unscented_transform",
            "unscented_kalman_filter"]
@@ -184,13 +184,13 @@ def unscented_transform(points, values, weights: UnscentedWeights):
 
 
 def _ukf_update(x, P, z, h, R, weights: UnscentedWeights, innovation_noise: bool, guard: list,
-                want: bool = False, meas=None, step: int = 0) -> _Out:
+                want: bool = False, model=None, step: int = 0) -> _Out:
     """One unscented update with measurement function ``h`` (sigma points -> values); NaN rows of ``z`` are left
     out. ``guard[0]`` counts the updates whose ``R~`` needed flooring. Returns the posterior with the NIS
     ``nu^T S^{-1} nu`` of the components present (from the inverse that gives the gain), their number and the
     Gaussian log-likelihood ``log N(nu; 0, S)``; ``want``: also the innovation ``z - z^`` and ``S`` (NaN where
-    missing). ``meas``: a NonlinearMeasurement whose ``residual`` and ``mean`` replace the linear forms (its
-    functions' outputs checked, :class:`~locbook.tracking.streams.NonlinearMeasurement`; ``step`` names the step)."""
+    missing). ``model``: a measurement model whose ``residual`` and ``mean_of`` replace the linear forms (their outputs
+    checked for a user's model; ``step`` names the step), or None for the linear forms."""
     valid = np.isfinite(z)
     dof = valid.sum(axis=-1)
     if not valid.any():
@@ -200,15 +200,16 @@ def _ukf_update(x, P, z, h, R, weights: UnscentedWeights, innovation_noise: bool
         return _Out(x, P, zero, dof, zero, np.full(z.shape, np.nan), np.full(z.shape + (z.shape[-1],), np.nan))
     X, L = _sigma_points(x, P, weights.lam)
     nb = X.ndim - 2                                  # the run axes
-    Y = h(X) if meas is None else meas.readings_at(X, valid[..., None, :], step, nb)
+    Y = h(X, valid[..., None, :])
     n, m = x.shape[-1], z.shape[-1]
     c = n + weights.lam                              # L L^T = c P
+    meas = model if model is not None and not model.linear_residual else None
     if meas is not None:                             # its mean, e.g. a circular mean of bearings, or Eq. (3.25)
-        z_hat = meas.mean_of(Y, weights.mean, valid, step, nb)
+        z_hat = _checked(meas, "mean_of", meas.mean_of(Y, weights.mean), Y.shape[:-2] + Y.shape[-1:], valid, step, nb)
     else:
         z_hat = weights.mean @ Y                     # Eq. (3.25)
-    dv = Y - z_hat[..., None, :] if meas is None else meas.residual_of(Y, z_hat[..., None, :], valid[..., None, :],
-                                                                       step, nb)
+    dv = Y - z_hat[..., None, :] if meas is None else _checked(
+        meas, "residual", meas.residual(Y, z_hat[..., None, :]), Y.shape, valid[..., None, :], step, nb)
     Pzz = _mT(weights.cov[:, None] * dv) @ dv        # Eq. (3.26) without R
     Pzz = 0.5 * (Pzz + _mT(Pzz))
     # P_xz = sum_i W_c^i (X^i - x-)(gamma^i - z^)^T (Eq. (3.27)) = L D, D = L^{-1} P_xz
@@ -231,7 +232,8 @@ def _ukf_update(x, P, z, h, R, weights: UnscentedWeights, innovation_noise: bool
         over = bad & ~(np.all(np.isfinite(Y), axis=(-2, -1)) & np.all(np.isfinite(S), axis=(-2, -1)))
         raise _Singular(over, _SIGMA_OVERFLOW) if over.any() else _Singular(bad)
     nu = np.where(valid, (z - z_hat) if meas is None else
-                  meas.residual_of(np.where(valid, z, z_hat), z_hat, valid, step, nb), 0.0)
+                  _checked(meas, "residual", meas.residual(np.where(valid, z, z_hat), z_hat), z_hat.shape, valid,
+                           step, nb), 0.0)
     S_use = S if row_ok.all() else np.where(row_ok[..., None, None], S, np.eye(m))
     S_inv = _inverse(S_use, row_ok)
     K = Pxz @ S_inv                                  # K = P_xz S^{-1}
@@ -288,50 +290,60 @@ def _clearly_well_conditioned(A, rel):
     return True
 
 
-def _anchor_axis(value):
-    """A channel parameter (scalar, ``(m,)`` or ``batch + (1 or m,)``) made to broadcast against sigma-point
-    values ``batch + (2n + 1, m)``."""
-    value = np.asarray(value, dtype=float)
-    return value[..., None, :] if value.ndim >= 2 else value
+def _checked(model, what: str, value, shape, present, step: int, batch_ndim: int):
+    """A model's ``residual`` or ``mean_of`` output, checked for a user's model (real, of ``shape``, finite where a
+    reading is ``present``)."""
+    if model.checks_own_output:
+        return value
+    name = f"{model.label}: {model.function_name(what)}"
+    out = function_output(name, value, shape, 1, shape)
+    _refuse_not_finite(name, out, present & ~np.isfinite(out), batch_ndim, step, _PRESENT)
+    return out
 
 
-def _rss_function(meas: RssMeasurement, step: int, anchor=None):
-    """``h`` of an RSS stream over sigma points: the one RSS model's mean (:func:`locbook.models.rss.rss_mean_jacobian`,
-    the stream's clamp) at each anchor (or at the one anchor per run ``anchor`` ``batch``, for serial updates)."""
-    idx = np.asarray(meas.position_index)
-    anchors = meas.anchors_at(step)
-    ch = meas.channel
-    p0, ple = _anchor_axis(ch.ref_power_dbm), _anchor_axis(ch.path_loss_exp)
+_PRESENT = ("for a reading that is present: it must be finite wherever z has a reading (a missing reading is a NaN "
+            "in z, not in the model's output)")
 
-    def h(X):
-        pos = meas.lift(X[..., idx])
-        if anchor is None:
-            a = anchors if anchors.ndim == 2 else anchors[..., None, :, :]        # batch + (1, m, dim)
-            diff = pos[..., None, :] - a                                        # batch + (N, m, dim)
-            mean, _, d2 = rss_mean_jacobian(diff, p0, ple, ref_distance_m=ch.ref_distance_m,
-                                            min_distance_m=meas.clamp_m, jacobian=False)
-        else:
-            diff = pos - _pick_anchor(anchors, anchor)[..., None, :]             # batch + (N, dim)
-            pick = lambda v: np.take_along_axis(np.broadcast_to(np.asarray(v, float),
-                                                                anchor.shape + (anchors.shape[-2],)),
-                                                anchor[..., None], -1)  # batch + (1,)
-            mean, _, d2 = rss_mean_jacobian(diff, pick(ch.ref_power_dbm), pick(ch.path_loss_exp),
-                                            ref_distance_m=ch.ref_distance_m, min_distance_m=meas.clamp_m,
-                                            jacobian=False)
-            mean = mean[..., None]
-        _refuse_on_anchor(meas, d2, X.ndim - 2)
-        return mean
+
+def _model_function(model, step: int, row=None):
+    """``h`` over sigma points ``batch + (N, n)`` from the model's mean (checked for a user's model), all readings or
+    the one reading ``row`` (an int or per-run indices ``batch``) of a serial update."""
+    m = model.n_readings
+
+    def h(X, present):
+        Y = model.mean(X, step=step)
+        if not model.checks_own_output:
+            Y = check_output(model, "mean", Y, X, (m,), present if row is None else True, step)
+        return Y if row is None else _row(Y, row if isinstance(row, int) else row[..., None], -1)[..., None]
     return h
 
 
-def _rss_noise(meas: RssMeasurement, x, z, step: int):
-    """Per-reading variance ``batch + (m,)`` at the predicted mean (inflated for uncertain anchor positions)."""
-    idx = np.asarray(meas.position_index)
-    anchors = meas.anchors_at(step)
-    diff = meas.lift(x[..., None, idx]) - anchors
-    d = np.sqrt(np.einsum("...i,...i->...", diff, diff))
-    ch = meas.channel
-    return np.broadcast_to(meas.variance_db2(d, ch.path_loss_exp, ch.sigma_db), z.shape)
+def _model_noise(model, x, step: int):
+    """``R`` at the predicted mean ``x`` ``batch + (n,)`` (the model's covariance at the one point)."""
+    return model.covariance_at(x, step=step)
+
+
+def _unscented_stream_update(x, P, z, stream, step: int, want: bool, weights, innovation_noise: bool, guard: list):
+    """The UKF update of one stream: one unscented update of all its readings, or (serial) one per reading in the
+    stream's order, each with fresh sigma points (Gudipati 2017, Sec. 3.6, corrected)."""
+    model = stream.model
+    if stream.mode == "parallel":
+        return _ukf_update(x, P, z, _model_function(model, step), _model_noise(model, x, step), weights,
+                           innovation_noise, guard, want, model, step)
+    m = z.shape[-1]
+    order = _serial_order(z, stream.order)
+    acc, dof = _Serial(x.shape[:-1], m, want), 0
+    for j in range(m):
+        a = j if order is None else order[..., j]
+        zj = z[..., j:j + 1] if order is None else np.take_along_axis(z, a[..., None], -1)
+        R = np.asarray(_model_noise(model, x, step), dtype=float)
+        Rj = R[..., j:j + 1, j:j + 1] if order is None else _diagonal_entry(R, a)[..., None, None]
+        o = _ukf_update(x, P, zj, _model_function(model, step, a), Rj, weights, innovation_noise, guard, want, model,
+                        step)
+        x, P, dof = o.x, o.P, dof + o.dof
+        acc.add(o.nu[..., 0] if want else None, o.S[..., 0, 0] if want else None, np.isfinite(zj[..., 0]), a,
+                nis=o.nis, ll=o.ll)
+    return acc.out(x, P, dof)
 
 
 def _checked_motion(motion, field: str, value, shape, batch_ndim: int, step: int) -> np.ndarray:
@@ -421,7 +433,7 @@ def unscented_kalman_filter(F, Q, x0, P0, measurements, *, B=None, u=None, alpha
         except _Singular as exc:
             if exc.message:                  # the state covariance: already says what failed
                 raise
-            name = meas.name if isinstance(meas, NonlinearMeasurement) else type(meas).__name__
+            name = meas.name
             form = "P_zz + R" if innovation_noise else "P_zz without R (Eq. (3.26) as printed)"
             printed_weights = " with the printed weights of Eq. (3.22)" if weights == "literal_gudipati2017" else ""
             raise _Singular(exc.bad, f"the unscented innovation covariance S = {form} of the {name} update"
@@ -429,42 +441,7 @@ def unscented_kalman_filter(F, Q, x0, P0, measurements, *, B=None, u=None, alpha
                                      "{step}") from None
 
     def _update(x, P, z, meas, step, want):
-        if isinstance(meas, LinearMeasurement):
-            H, R = np.asarray(meas.H, float), np.asarray(meas.R, float)
-            if meas.mode == "parallel":
-                return _ukf_update(x, P, z, lambda X: X @ _mT(H) if H.ndim == 2 else np.einsum("...mn,...kn->...km", H, X),
-                                   R, w, innovation_noise, guard, want)
-            return _serial_linear(x, P, z.shape[-1], lambda x, P, j: _ukf_update(
-                x, P, z[..., j:j + 1], lambda X: np.einsum("...mn,...kn->...km", H[..., j:j + 1, :], X),
-                R[..., j:j + 1, j:j + 1], w, innovation_noise, guard, want), want)
-        if isinstance(meas, NonlinearMeasurement):
-            return _ukf_update(x, P, z, meas.h, meas.noise_at(x), w, innovation_noise, guard, want, meas, step)
-        m = z.shape[-1]
-        if meas.mode == "parallel":
-            sigma2 = _rss_noise(meas, x, z, step)
-            return _ukf_update(x, P, z, _rss_function(meas, step), sigma2[..., :, None] * np.eye(m), w,
-                               innovation_noise, guard, want)
-        order = _serial_order(z, meas.order)
-        nis = ll = 0.0
-        dof = 0          # scalar innovations of one step: independent under the model, their NIS add up
-        nu = np.full(x.shape[:-1] + (m,), np.nan) if want else None
-        var = np.full(x.shape[:-1] + (m,), np.nan) if want else None
-        for j in range(m):
-            a = order[..., j]
-            zj = np.take_along_axis(z, a[..., None], -1)
-            o = _ukf_update(x, P, zj, _rss_function(meas, step, a),
-                            np.take_along_axis(_rss_noise(meas, x, z, step), a[..., None], -1)[..., None],
-                            w, innovation_noise, guard, want)
-            x, P, nis, dof, ll = o.x, o.P, nis + o.nis, dof + o.dof, ll + o.ll
-            if want:                         # reading j of the order goes to its anchor's column
-                col = np.broadcast_to(a, nu.shape[:-1])[..., None]
-                np.put_along_axis(nu, col, np.broadcast_to(o.nu, nu.shape[:-1] + (1,)), -1)
-                np.put_along_axis(var, col, np.broadcast_to(o.S[..., 0], nu.shape[:-1] + (1,)), -1)
-        if not want:
-            return _Out(x, P, nis, dof, ll)
-        S = np.where(np.eye(m, dtype=bool), var[..., :, None], 0.0)
-        S = np.where(np.isnan(var)[..., :, None] | np.isnan(var)[..., None, :], np.nan, S)
-        return _Out(x, P, nis, dof, ll, nu, S)
+        return _unscented_stream_update(x, P, z, meas, step, want, w, innovation_noise, guard)
 
     if not outputs:
         compiled = _compiled_ukf(setup, measurements, predict_first, w, innovation_noise)
@@ -493,7 +470,7 @@ def _compiled_ukf(setup, measurements, predict_first: bool, weights: UnscentedWe
     n = setup.n
     if not _compiled._numba_ready():
         return None
-    packing = _compiled._pack_with_inertial(setup, measurements, B, with_jacobian=False)
+    packing = _compiled._pack_streams(setup, measurements, B)
     if packing is None:
         return None
     packed, iner = packing

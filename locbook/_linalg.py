@@ -1,12 +1,12 @@
-"""Linear-algebra helpers of the Kalman family (internal): covariance checks with errors that name the argument,
+"""Linear-algebra helpers of the filters and models (internal): covariance checks with errors that name the argument,
 batched small-matrix inverses and solves, the Joseph form, and the errors an update raises (module docstring of
 :mod:`locbook.tracking.results`, "Batch isolation")."""
 from __future__ import annotations
 
 import numpy as np
 
-from .._validate import as_array
-from ..errors import SingularCovarianceError
+from ._validate import as_array
+from .errors import SingularCovarianceError
 
 #: asymmetry and negative eigenvalues a covariance may have, as a fraction of its entries' scale (the round-off of
 #: products such as F P F^T is some 1e-16; a matrix typed or built wrong is off by far more); inputs of lower precision

@@ -10,7 +10,8 @@ import pytest
 
 import locbook as lb
 from locbook.tracking import _compiled, bayes
-from locbook.tracking.bayes import _BandedLattice, _table_log_likelihood, grid_bayes_filter, grid_transition_matrix
+from locbook.models.rss import _table_log_likelihood
+from locbook.tracking.bayes import _BandedLattice, grid_bayes_filter, grid_transition_matrix
 
 ANCHORS = np.array([[0.0, 0.0], [5.0, 0.0], [0.0, 4.0], [5.0, 4.0]])
 CHANNEL = lb.PathLossModel(-40.0, 2.5, 3.0, min_distance_m=0.1)
@@ -216,7 +217,6 @@ def test_table_likelihood_is_the_model_likelihood_bit_for_bit(kind, monkeypatch)
     rss = rng.normal(-60, 5, (5, 2, 4))
     rss[0, 1, 1] = rss[3, 0] = np.nan
     monkeypatch.setattr(lb.models.rss, "LIKELIHOOD_BLOCK_VALUES", 3000)       # several blocks of runs
-    monkeypatch.setattr(bayes, "LIKELIHOOD_BLOCK_VALUES", 3000)
     table = model.mean_rss_dbm(cells, 0)
     for t in range(2):
         np.testing.assert_array_equal(_table_log_likelihood(rss[:, t], table, model._sigma(0, "x"), 2),

@@ -147,6 +147,15 @@ class MeasurementModel:
         dof = valid.sum(axis=-1)
         return -0.5 * (np.einsum("...i,...i->...", w, w) + logdet + dof * _LOG_2PI)
 
+    def relative_log_likelihood(self, z, x, *, step: int = 0):
+        """:meth:`log_likelihood` up to a constant per run (what the particle and grid filters' normalised weights
+        need; a model may leave out the terms that do not depend on the state)."""
+        return self.log_likelihood(z, x, step=step)
+
+    #: the dimension of the positions the model reads (the filters hand it a state's position components), or None
+    #: for a model of full states
+    position_dim = None
+
     def innovation(self, x, z, *, step: int = 0):
         """The EKF's linearisation at states ``x`` ``batch + (n,)`` for readings ``z`` ``batch + (m,)``: the
         innovation ``nu = z - h(x)`` (the model's residual; NaN where a reading is missing), ``H = dh/dx`` ``batch +
@@ -432,6 +441,15 @@ class FunctionMeasurement(MeasurementModel):
 
     def residual(self, a, b):
         return a - b if self.residual_fn is None else self._call("residual", self.residual_fn, a, b)
+
+    def relative_log_likelihood(self, z, x, *, step: int = 0):
+        """:meth:`log_likelihood` up to a constant per run (what the particle and grid filters' normalised weights
+        need; a model may leave out the terms that do not depend on the state)."""
+        return self.log_likelihood(z, x, step=step)
+
+    #: the dimension of the positions the model reads (the filters hand it a state's position components), or None
+    #: for a model of full states
+    position_dim = None
 
     def innovation(self, x, z, *, step: int = 0):
         """The EKF's linearisation at ``x`` ``batch + (n,)``: ``h`` and its Jacobian called with the states as they are

@@ -36,6 +36,27 @@ __all__ = ["RssModel", "RssMeasurementModel", "rss_mean_jacobian", "LIKELIHOOD_B
 _LOG_2PI = float(np.log(2.0 * np.pi))
 #: runs per block of :meth:`RssModel.log_likelihood`: about this many values in each temporary (32 MiB)
 LIKELIHOOD_BLOCK_VALUES = 1 << 22
+#: the largest per-run mean table (runs x cells x anchors values) :meth:`RssModel.points_log_likelihood` keeps
+TABLE_MAX_VALUES = 1 << 24
+
+
+def _table_log_likelihood(rss, table, sigma, dim: int):
+    """:meth:`RssModel.log_likelihood` (``constant=False``) of the readings ``(R, m)`` from the mean table ``(1 or
+    R, C, m)``: the same arithmetic on the same blocks of runs, so the same bits."""
+    n_runs, n_cells = rss.shape[0], table.shape[1]
+    block = max(1, LIKELIHOOD_BLOCK_VALUES // max(1, n_cells * rss.shape[1] * (dim + 1)))
+    out = np.empty((n_runs, n_cells))
+    for start in range(0, n_runs, block):
+        rows = slice(start, start + block)
+        r = rss[rows]
+        resid = r[:, None, :] - (table[rows] if table.shape[0] > 1 else table)
+        resid = np.where(np.isnan(r)[:, None, :], 0.0, resid)
+        if np.ndim(sigma) == 1:
+            resid = resid / sigma
+            out[rows] = -0.5 * np.einsum("rpm,rpm->rp", resid, resid)
+        else:
+            out[rows] = -0.5 * np.einsum("rpm,rpm->rp", resid, resid) / np.square(sigma)
+    return out
 
 
 def rss_mean_jacobian(offset_m, ref_power_dbm, path_loss_exp, *, ref_distance_m: float = 1.0,
@@ -58,7 +79,7 @@ def rss_mean_jacobian(offset_m, ref_power_dbm, path_loss_exp, *, ref_distance_m:
 
 
 @dataclass(frozen=True)
-class RssModel:
+class RssModel(MeasurementModel):
     """Log-distance RSS readings from ``anchors_m`` through ``channel`` (module docstring).
 
     ``anchors_m``: ``(m, dim)`` or per run ``(R, m, dim)``; with ``tag_height_m`` ``(m, 3)`` or ``(R, m, 3)``, the
@@ -72,6 +93,8 @@ class RssModel:
     channel: PathLossModel
     walls_m: np.ndarray | None = None
     tag_height_m: float | None = None
+    name: str = "RssModel"
+    checks_own_output = True
 
     def __post_init__(self):
         require_path_loss_model(self.channel, "channel")
@@ -150,7 +173,52 @@ class RssModel:
                 n_steps is not None and step >= n_steps):
             raise ValueError(f"step must be an integer in [0, {'inf' if n_steps is None else n_steps}), got {step!r}")
 
-    def check_readings(self, rss_dbm, *, ndim: int) -> np.ndarray:
+    # -- the measurement-model protocol (locbook.models.base; its states are the positions) ----------------
+    @property
+    def n_readings(self) -> int:
+        return self.n_anchors
+
+    @property
+    def position_dim(self) -> int:
+        """The model reads positions of this dimension (the filters hand it a state's position components)."""
+        return self.dim
+
+    def mean(self, x, *, step: int = 0):
+        """``h`` at positions ``(P, dim)`` or per run ``(R, P, dim)``: :meth:`mean_rss_dbm`."""
+        return self.mean_rss_dbm(x, step)
+
+    def covariance(self, x, *, step: int = 0):
+        """``diag(sigma_j^2)`` at the step, broadcasting to ``(R|1, P, m, m)``."""
+        sigma = np.asarray(self._per_step(self.channel.sigma_db, step, False), dtype=float)   # (), (m,) or (R, 1)
+        var = np.broadcast_to(np.square(sigma), np.broadcast_shapes(sigma.shape, (self.n_anchors,)))
+        return var[..., None, :, None] * np.eye(self.n_anchors)
+
+    def independent_readings(self) -> bool:
+        return True
+
+    def relative_log_likelihood(self, z, x, *, step: int = 0):
+        """:meth:`log_likelihood` without its position-free constant (``constant=False``)."""
+        return self.log_likelihood(z, x, step, constant=False)
+
+    def check_readings(self, z, n_state=None) -> None:
+        self.readings(z, ndim=np.ndim(z) if np.ndim(z) in (2, 3) else 3)
+
+    def points_log_likelihood(self, rss_dbm, points, n_runs: int):
+        """The log-likelihood ``(R, C)`` (up to a constant per run) of each step's readings ``rss_dbm`` ``(R, T, m)``
+        at fixed ``points`` ``(C, dim)`` (a grid's cells), as a function of the step. When the mean does not change
+        with the step (no per-step parameters) and a per-run table fits in :data:`TABLE_MAX_VALUES`, the cell-by-anchor
+        mean table is computed once and each step's log-likelihood from it, by the arithmetic of
+        :meth:`log_likelihood` on the same blocks of runs (the same bits)."""
+        table = sigma = None
+        runs = self.runs
+        if self.steps is None and rss_dbm.shape[1] and not (
+                runs is not None and runs * points.shape[0] * self.n_anchors > TABLE_MAX_VALUES):
+            sigma, table = self._sigma(0, "the likelihood"), self.mean_rss_dbm(points, 0)
+        if table is None:
+            return lambda t: self.log_likelihood(rss_dbm[:, t], points, t, constant=False)
+        return lambda t: _table_log_likelihood(rss_dbm[:, t], table, sigma, self.dim)
+
+    def readings(self, rss_dbm, *, ndim: int) -> np.ndarray:
         """Readings ``(R, m)`` (``ndim=2``) or ``(R, T, m)`` (``ndim=3``) against the model's anchors, runs and
         steps; NaN = not heard."""
         m = self.n_anchors
@@ -272,7 +340,7 @@ class RssModel:
         position: the particle and grid filters normalise their weights per run and use this form. Runs are
         evaluated in blocks of about :data:`LIKELIHOOD_BLOCK_VALUES` temporaries (each run's arithmetic is the same
         in any block)."""
-        rss = self.check_readings(rss_dbm, ndim=2)
+        rss = self.readings(rss_dbm, ndim=2)
         positions_m = self._positions(positions_m)
         if positions_m.ndim == 3 and positions_m.shape[0] != rss.shape[0]:
             raise ValueError(f"positions_m per run {positions_m.shape} must have the {rss.shape[0]} runs of rss_dbm "

@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .._validate import as_array, check_choice, check_scalar
-from ..models.rss import LIKELIHOOD_BLOCK_VALUES, RssModel
+from ..models.base import MeasurementModel
 from . import _compiled
 from .resampling import effective_sample_size
 
@@ -99,14 +99,19 @@ def weighted_moments(weights, points_m):
     return mean, np.einsum("rn,rni,rnj->rij", weights, dev, dev)
 
 
-def _check_inputs(rss_dbm, model: RssModel, *, cells_m=None):
-    """``rss_dbm (R, T, m)`` against the model's ``m`` anchors (NaN = not heard); cells ``(C, dim)`` in the model's
-    position space."""
-    if not isinstance(model, RssModel):
-        raise ValueError(f"model must be an RssModel, got {type(model).__name__}")
-    rss_dbm = model.check_readings(rss_dbm, ndim=3)
+def _check_inputs(rss_dbm, model: MeasurementModel, *, cells_m=None):
+    """``rss_dbm (R, T, m)`` against the model's ``m`` readings (NaN = not heard); cells ``(C, dim)`` in the model's
+    position space (a model of positions) or of any dimension."""
+    if not isinstance(model, MeasurementModel):
+        raise ValueError(f"model must be a measurement model (e.g. an RssModel), got {type(model).__name__}")
+    rss_dbm = as_array("rss_dbm", rss_dbm, ndim=3, nan_ok=True)
+    model.check_readings(rss_dbm, None)
+    if rss_dbm.shape[-1] != model.n_readings:
+        raise ValueError(f"rss_dbm must have shape (runs, steps, {model.n_readings}) for the model's "
+                         f"{model.n_readings} readings, got {rss_dbm.shape}")
     if cells_m is not None:
-        cells_m = as_array("cells_m", cells_m, ndim=2, trailing=(None, model.dim))
+        dim = getattr(model, "position_dim", None)
+        cells_m = as_array("cells_m", cells_m, ndim=2, trailing=(None, dim) if dim is not None else None)
     return rss_dbm, cells_m
 
 
@@ -287,8 +292,6 @@ class _SeparableTransition:
 #: runs x steps x cells from which grid_bayes_filter runs the compiled kernels (smaller problems stay in numpy, with
 #: no compilation wait)
 _GRID_MIN_WORK = 200_000
-#: the largest per-run mean table (runs x cells x anchors values, 128 MiB) computed once; above it, per step
-_TABLE_MAX_VALUES = 1 << 24
 _EPS_LOG = 53 * np.log(2.0)                 # -log(2^-53): a tap below exp(-_EPS_LOG) of the largest is rounding
 
 
@@ -433,36 +436,20 @@ def _grid_kernels():
     return _compiled._kernel_module("locbook.tracking._grid_kernels", _grid_trial, "grid filter", stacklevel=4)
 
 
-def _fix_mean_table(fixed: dict, model: RssModel, cells_m, n_runs: int) -> None:
-    """The cell-by-anchor mean table ``(1 or R, C, m)`` and the sigma of ``model`` into ``fixed`` when its mean does
-    not change with the step (no per-step parameters; walls are fixed per cell too) and a per-run table fits in
-    :data:`_TABLE_MAX_VALUES`; else ``fixed`` stays empty and each step evaluates the model."""
-    if model.steps is not None:
-        return
-    runs = model.runs
-    if runs is not None and runs * cells_m.shape[0] * model.n_anchors > _TABLE_MAX_VALUES:
-        return
-    fixed["sigma"] = model._sigma(0, "the likelihood")
-    fixed["table"] = model.mean_rss_dbm(cells_m, 0)
+def _points_log_likelihood(model: MeasurementModel, rss_dbm, cells_m, n_runs: int):
+    """``t -> (R, C)``: the model's log-likelihood of step ``t``'s readings on the cells (up to a constant per run),
+    through the model's own fixed-points form when it has one (an RssModel's mean table), else its
+    :meth:`~locbook.models.base.MeasurementModel.log_likelihood`, checked."""
+    fixed = getattr(model, "points_log_likelihood", None)
+    if fixed is not None:
+        return fixed(rss_dbm, cells_m, n_runs)
 
-
-def _table_log_likelihood(rss, table, sigma, dim: int):
-    """:meth:`RssModel.log_likelihood` (``constant=False``) of the readings ``(R, m)`` from the mean table ``(1 or
-    R, C, m)``: the same arithmetic on the same blocks of runs, so the same bits."""
-    n_runs, n_cells = rss.shape[0], table.shape[1]
-    block = max(1, LIKELIHOOD_BLOCK_VALUES // max(1, n_cells * rss.shape[1] * (dim + 1)))
-    out = np.empty((n_runs, n_cells))
-    for start in range(0, n_runs, block):
-        rows = slice(start, start + block)
-        r = rss[rows]
-        resid = r[:, None, :] - (table[rows] if table.shape[0] > 1 else table)
-        resid = np.where(np.isnan(r)[:, None, :], 0.0, resid)
-        if np.ndim(sigma) == 1:
-            resid = resid / sigma
-            out[rows] = -0.5 * np.einsum("rpm,rpm->rp", resid, resid)
-        else:
-            out[rows] = -0.5 * np.einsum("rpm,rpm->rp", resid, resid) / np.square(sigma)
-    return out
+    def ll(t):
+        out = np.asarray(model.log_likelihood(rss_dbm[:, t], cells_m, step=t), dtype=float)
+        if out.shape != (n_runs, cells_m.shape[0]):
+            out = np.broadcast_to(out, (n_runs, cells_m.shape[0]))
+        return out
+    return ll
 
 
 def grid_bayes_filter(rss_dbm, cells_m, model, spread_m: float = 0.5, *, n_steps: int | None = None,
@@ -492,7 +479,7 @@ def grid_bayes_filter(rss_dbm, cells_m, model, spread_m: float = 0.5, *, n_steps
 
     Speed (issue 31). With an :class:`~locbook.models.rss.RssModel` whose mean does not change with the step (no
     per-step ``ref_power_dbm``, ``path_loss_exp`` or ``sigma_db``; walls allowed), the cell-by-anchor mean table is
-    computed once per call (per run for per-run anchors, up to :data:`_TABLE_MAX_VALUES` values) and each step's
+    computed once per call (per run for per-run anchors, up to :data:`locbook.models.rss.TABLE_MAX_VALUES` values) and each step's
     log-likelihood from it, by the same arithmetic as :meth:`RssModel.log_likelihood
     <locbook.models.rss.RssModel.log_likelihood>` (the same bits). From :data:`_GRID_MIN_WORK` runs x steps x
     cells on, with numba (``LOCBOOK_NUMBA=0`` turns it off), compiled kernels (:mod:`locbook.tracking._grid_kernels`)
@@ -512,20 +499,21 @@ def grid_bayes_filter(rss_dbm, cells_m, model, spread_m: float = 0.5, *, n_steps
     not a result).
     """
     first = None                                    # the callable's step-0 output, which gives the number of runs
-    if isinstance(model, RssModel):
+    is_model = isinstance(model, MeasurementModel)
+    if is_model:
         if rss_dbm is None:
-            raise ValueError("rss_dbm must be the readings (runs, steps, m) of the RssModel model")
+            raise ValueError(f"rss_dbm must be the readings (runs, steps, m) of the {model.label} model")
         rss_dbm, cells_m = _check_inputs(rss_dbm, model, cells_m=cells_m)
         if n_steps is not None and n_steps != rss_dbm.shape[1]:
             raise ValueError(f"n_steps {n_steps} disagrees with the {rss_dbm.shape[1]} steps of rss_dbm")
         n_runs, n_steps, _ = rss_dbm.shape
         detail, what = _reading_detail(rss_dbm), _LIKELIHOOD
-        fixed = {}                                  # the mean table, once (when the model's mean is fixed)
+        fixed = {}                                  # the model's likelihood on the cells, made once
 
         def log_likelihood(t):
-            if "table" in fixed:
-                return _table_log_likelihood(rss_dbm[:, t], fixed["table"], fixed["sigma"], model.dim)
-            return model.log_likelihood(rss_dbm[:, t], cells_m, t, constant=False)
+            if "ll" not in fixed:
+                fixed["ll"] = _points_log_likelihood(model, rss_dbm, cells_m, n_runs)
+            return fixed["ll"](t)
     elif callable(model):
         n_steps = _callable_steps(rss_dbm, n_steps)
         cells_m = as_array("cells_m", cells_m, ndim=2)
@@ -540,8 +528,8 @@ def grid_bayes_filter(rss_dbm, cells_m, model, spread_m: float = 0.5, *, n_steps
                                  f"at every step, got {ll.shape} at step {t}")
             return ll
     else:
-        raise ValueError(f"model must be an RssModel or a callable log_likelihood(cells, t), "
-                         f"got {type(model).__name__}")
+        raise ValueError(f"model must be an RssModel or a callable log_likelihood(cells, t) (or any measurement "
+                         f"model, locbook.models.base), got {type(model).__name__}")
     check_scalar("spread_m", spread_m, gt=0, allow_inf=True)
     check_choice("transition", transition, GRID_TRANSITIONS)
     n_cells, dim = cells_m.shape
@@ -559,7 +547,7 @@ def grid_bayes_filter(rss_dbm, cells_m, model, spread_m: float = 0.5, *, n_steps
         if np.any(initial_belief < 0) or np.any(initial_belief.sum(axis=-1) <= 0):
             raise ValueError("initial_belief must be non-negative with a positive sum over the cells")
     # size guards (MAX_ARRAY_BYTES), before anything of the size of the grid is allocated
-    runs_name = "rss_dbm" if isinstance(model, RssModel) else "log_likelihood"
+    runs_name = "rss_dbm" if is_model else "log_likelihood"
     _check_size("cells_m", "the belief (runs x cells)", (n_runs, n_cells), "use fewer cells or run the runs in blocks")
     _check_size(runs_name, "the covariance output (runs x steps x dim x dim)", (n_runs, n_steps, dim, dim),
                 "run the runs or the steps in blocks")
@@ -583,8 +571,8 @@ def grid_bayes_filter(rss_dbm, cells_m, model, spread_m: float = 0.5, *, n_steps
     separable = banded = None
     if use_separable:
         separable = _SeparableTransition(cells_m, spread_m)
-    if isinstance(model, RssModel) and n_steps:
-        _fix_mean_table(fixed, model, cells_m, n_runs)
+    if is_model and n_steps:
+        fixed["ll"] = _points_log_likelihood(model, rss_dbm, cells_m, n_runs)
     kernels = None
     if n_runs * n_steps * n_cells >= _GRID_MIN_WORK:
         kernels = _grid_kernels()

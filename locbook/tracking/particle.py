@@ -56,9 +56,10 @@ import numpy as np
 
 from .._validate import as_array, check_choice, check_scalar
 from ..models.motion import KinematicModel, reflect_into_box
+from ..models.base import MeasurementModel
 from ..models.rss import RssModel
-from .bayes import (BayesFilterResult, _LIKELIHOOD, _callable_steps, _check_size, _collapse_error, _normalise_log,
-                    _reading_detail, _velocity_schedule, _warn_collapse, weighted_moments)
+from .bayes import (BayesFilterResult, _LIKELIHOOD, _callable_steps, _check_inputs, _check_size, _collapse_error,
+                    _normalise_log, _reading_detail, _velocity_schedule, _warn_collapse, weighted_moments)
 from .resampling import RESAMPLING_CDFS, RESAMPLING_METHODS, effective_sample_size, resample, systematic_resample
 from . import _compiled
 
@@ -138,6 +139,11 @@ def _fused_rss_log_likelihood(model: RssModel, rss_dbm, particles, step: int, po
         return out
     positions = x if position_index is None else x[..., pidx]
     return model.log_likelihood(z, positions, step, constant=False)
+
+
+# The compiled likelihoods, a registry keyed by model type (exact type): a model without one is evaluated by its
+# own relative_log_likelihood in numpy.
+_FUSED_LIKELIHOODS = {RssModel: _fused_rss_log_likelihood}
 
 
 @dataclass(frozen=True)
@@ -329,14 +335,15 @@ def particle_filter(rss_dbm, model, rng: np.random.Generator, *, n_steps: int | 
 
     # -- one run without the run axis ----------------------------------------------------------------
     single = False
-    if isinstance(model, RssModel):
+    is_model = isinstance(model, MeasurementModel)
+    if is_model:
         single = np.ndim(rss_dbm) == 2
     elif callable(model):
         single = (initial_particles_m is not None and np.ndim(initial_particles_m) == 2
                   or initial_particles_m is None and initial_position_m is not None
                   and np.ndim(initial_position_m) == 1)
     if single:
-        if isinstance(model, RssModel):
+        if is_model:
             rss_dbm = as_array("rss_dbm", rss_dbm, nan_ok=True)[None]   # a masked entry is not heard (NaN)
             for name, value, nd in (("initial_particles_m", initial_particles_m, 2),
                                     ("initial_position_m", initial_position_m, 1)):
@@ -367,41 +374,39 @@ def particle_filter(rss_dbm, model, rng: np.random.Generator, *, n_steps: int | 
 
     # -- the likelihood ------------------------------------------------------------------------------
     detail, what = None, "log_likelihood"
-    if isinstance(model, RssModel):
+    fused = None
+    if is_model:
         if rss_dbm is None:
-            raise ValueError("rss_dbm must be the readings (runs, steps, m) of the RssModel model")
-        rss_dbm = model.check_readings(rss_dbm, ndim=3)
+            raise ValueError(f"rss_dbm must be the readings (runs, steps, m) of the {model.label} model")
+        rss_dbm = _check_inputs(rss_dbm, model)[0]
         if n_steps is not None and n_steps != rss_dbm.shape[1]:
             raise ValueError(f"n_steps {n_steps} disagrees with the {rss_dbm.shape[1]} steps of rss_dbm")
         n_runs, n_steps = rss_dbm.shape[:2]
         detail, what = _reading_detail(rss_dbm), _LIKELIHOOD
+        fused = _FUSED_LIKELIHOODS.get(type(model))
+        pidx = None if kin is None else kin.position_index
+        # a model of positions sees a state's position components; any other model the full states
+        of_positions = pidx is not None and getattr(model, "position_dim", None) is not None
 
-        if kin is None:
-            def log_likelihood(particles, t, out=None):
-                if compiled:
-                    ll = _fused_rss_log_likelihood(model, rss_dbm[:, t], particles, t, out=out)
-                    if ll is not None:
-                        return ll
-                return model.log_likelihood(rss_dbm[:, t], particles, t, constant=False)
-        else:
-            def log_likelihood(particles, t, out=None):   # the RSS model sees the positions of the states
-                if compiled:
-                    ll = _fused_rss_log_likelihood(model, rss_dbm[:, t], particles, t, kin.position_index, out)
-                    if ll is not None:
-                        return ll
-                return model.log_likelihood(rss_dbm[:, t], particles[..., kin.position_index], t, constant=False)
+        def log_likelihood(particles, t, out=None):
+            if compiled and fused is not None:
+                ll = fused(model, rss_dbm[:, t], particles, t, pidx, out)
+                if ll is not None:
+                    return ll
+            return model.relative_log_likelihood(rss_dbm[:, t], particles[..., pidx] if of_positions else particles,
+                                                 step=t)
     elif callable(model):
         n_steps, n_runs, log_likelihood = _callable_steps(rss_dbm, n_steps), None, model
     else:
-        raise ValueError(f"model must be an RssModel or a callable log_likelihood(particles, t), "
-                         f"got {type(model).__name__}")
+        raise ValueError(f"model must be an RssModel or a callable log_likelihood(particles, t) (or any measurement "
+                         f"model, locbook.models.base), got {type(model).__name__}")
 
     # -- the prior -----------------------------------------------------------------------------------
     # dim: the length of a particle (the state with motion); pos_dim: of its position (what region_m bounds)
-    pos_dim = model.dim if isinstance(model, RssModel) else None
+    pos_dim = getattr(model, "position_dim", None) if is_model else None
     if kin is not None:
         if pos_dim is not None and kin.position_index.size != pos_dim:
-            raise ValueError(f"motion has {kin.position_index.size} position axes, the RssModel {pos_dim}")
+            raise ValueError(f"motion has {kin.position_index.size} position axes, the {model.label} {pos_dim}")
         pos_dim = kin.position_index.size
     dim = kin.n_state if kin is not None else pos_dim
     bounds = None if region_m is None else _region(region_m, pos_dim)
@@ -519,7 +524,7 @@ def particle_filter(rss_dbm, model, rng: np.random.Generator, *, n_steps: int | 
         raise ValueError(f"transition must be a callable transition(particles, t, rng), got {type(transition).__name__}")
 
     # -- the recursion -------------------------------------------------------------------------------
-    _check_size("rss_dbm" if isinstance(model, RssModel) else "n_steps",
+    _check_size("rss_dbm" if is_model else "n_steps",
                 "the covariance output (runs x steps x state x state)", (R, n_steps, d, d),
                 "run the runs or the steps in blocks")
     try:
@@ -543,7 +548,7 @@ def particle_filter(rss_dbm, model, rng: np.random.Generator, *, n_steps: int | 
     fast = compiled and weight_smoothing == "none"
     if fast:
         w = np.empty((R, n))
-        ll_buf = np.empty((R, n)) if isinstance(model, RssModel) else None
+        ll_buf = np.empty((R, n)) if fused is not None else None
         spare = np.empty((R, n, d)) if not given_transition else None
     for t in range(n_steps):
         last = t == n_steps - 1

@@ -1,0 +1,216 @@
+"""A measurement model is one class: models defined in this module alone (ranges to anchors, a barometer) run through
+the KF, the EKF, the UKF, the particle and the grid filter, and give what independent implementations of the same
+model give (filterpy's filters, a Bayes rule written here, the library's own models)."""
+import numpy as np
+import pytest
+from filterpy.kalman import ExtendedKalmanFilter, KalmanFilter, MerweScaledSigmaPoints, UnscentedKalmanFilter
+
+import locbook as lb
+from locbook.models.base import MeasurementModel
+
+ANCHORS = np.array([[0.0, 0.0], [10.0, 0.0], [0.0, 8.0]])
+SIGMA_M = 0.3
+
+
+class Ranges(MeasurementModel):
+    """Ranges from the position (state components 0 and 1) to fixed anchors, ``z_j = |p - a_j| + v_j``."""
+
+    name = "ranges"
+
+    def __init__(self, anchors_m, sigma_m):
+        self.anchors_m, self.sigma_m = np.asarray(anchors_m, float), float(sigma_m)
+
+    @property
+    def n_readings(self):
+        return len(self.anchors_m)
+
+    def mean(self, x, *, step=0):
+        return np.linalg.norm(x[..., None, :2] - self.anchors_m, axis=-1)
+
+    def jacobian(self, x, *, step=0):
+        diff = x[..., None, :2] - self.anchors_m
+        J = np.zeros(x.shape[:-1] + (self.n_readings, x.shape[-1]))
+        J[..., :2] = diff / np.linalg.norm(diff, axis=-1, keepdims=True)
+        return J
+
+    def covariance(self, x, *, step=0):
+        return self.sigma_m**2 * np.eye(self.n_readings)
+
+    def independent_readings(self):
+        return True
+
+
+class Barometer(MeasurementModel):
+    """A barometric altitude ``z = h + b + v`` of the state's height (component 0) with a known bias ``b``: linear,
+    so the Kalman filter takes it."""
+
+    name = "barometer"
+    linear = True
+
+    def __init__(self, bias_m, sigma_m):
+        self.bias_m, self.sigma_m = bias_m, sigma_m
+
+    @property
+    def n_readings(self):
+        return 1
+
+    def mean(self, x, *, step=0):
+        return x[..., :1] + self.bias_m
+
+    def jacobian(self, x, *, step=0):
+        return np.broadcast_to(np.eye(1, x.shape[-1]), x.shape[:-1] + (1, x.shape[-1]))
+
+    def covariance(self, x, *, step=0):
+        return np.array([[self.sigma_m**2]])
+
+
+def _track(runs=3, steps=25, seed=0):
+    model = lb.constant_velocity(1.0, 0.05)
+    rng = np.random.default_rng(seed)
+    x = np.zeros((runs, steps, 4))
+    x[:, 0] = [3.0, 2.0, 0.3, 0.2]
+    for k in range(1, steps):
+        x[:, k] = x[:, k - 1] @ model.F.T + rng.multivariate_normal(np.zeros(4), model.Q, runs)
+    z = np.linalg.norm(x[..., None, :2] - ANCHORS, axis=-1) + rng.normal(0, SIGMA_M, (runs, steps, 3))
+    z[0, min(5, steps - 1), 1] = np.nan                                  # a missing range
+    z[min(2, runs - 1), 3:5, :] = np.nan                                 # two steps that heard nothing
+    return model, x, z
+
+
+def _filterpy_ekf(model, z, x0, P0):
+    f = ExtendedKalmanFilter(4, 3)
+    f.x, f.P, f.F, f.Q, f.R = x0.copy(), P0.copy(), model.F, model.Q, SIGMA_M**2 * np.eye(3)
+    ranges = Ranges(ANCHORS, SIGMA_M)
+    out = []
+    for zk in z:
+        f.predict()
+        present = np.isfinite(zk)
+        if present.any():
+            f.update(zk[present], lambda x: ranges.jacobian(x[None])[0][present],
+                     lambda x: ranges.mean(x[None])[0][present], R=SIGMA_M**2 * np.eye(int(present.sum())))
+        out.append(f.x.copy())
+    return np.array(out)
+
+
+def test_a_new_model_runs_in_the_ekf_and_equals_filterpy():
+    model, _, z = _track()
+    x0, P0 = np.array([3.0, 2.0, 0.0, 0.0]), np.diag([1.0, 1.0, 0.5, 0.5])
+    stream = lb.Stream(z, Ranges(ANCHORS, SIGMA_M))
+    ours = lb.extended_kalman_filter(model.F, model.Q, x0, P0, stream)
+    for r in range(z.shape[0]):
+        np.testing.assert_allclose(ours.x[r], _filterpy_ekf(model, z[r], x0, P0), rtol=0, atol=1e-9)
+    serial = lb.extended_kalman_filter(model.F, model.Q, x0, P0, lb.Stream(z, Ranges(ANCHORS, SIGMA_M), mode="serial"))
+    assert np.all(np.isfinite(serial.x)) and np.abs(serial.x - ours.x).max() < 0.5    # re-linearised per range
+    assert not np.allclose(serial.x, ours.x, atol=1e-6)
+
+
+def test_a_new_model_runs_in_the_ukf_and_equals_filterpy():
+    model, _, z = _track(runs=2)
+    x0, P0 = np.array([3.0, 2.0, 0.0, 0.0]), np.diag([1.0, 1.0, 0.5, 0.5])
+    ours = lb.unscented_kalman_filter(model.F, model.Q, x0, P0, lb.Stream(z, Ranges(ANCHORS, SIGMA_M)), alpha=0.5)
+    ranges = Ranges(ANCHORS, SIGMA_M)
+    for r in range(z.shape[0]):
+        pts = MerweScaledSigmaPoints(4, alpha=0.5, beta=2.0, kappa=0.0)
+        f = UnscentedKalmanFilter(4, 3, 1.0, hx=lambda x: ranges.mean(x[None])[0], fx=lambda x, dt: model.F @ x,
+                                  points=pts)
+        f.x, f.P, f.Q, f.R = x0.copy(), P0.copy(), model.Q, SIGMA_M**2 * np.eye(3)
+        for k, zk in enumerate(z[r]):
+            f.predict()
+            present = np.isfinite(zk)
+            if present.all():
+                f.update(zk)
+                np.testing.assert_allclose(ours.x[r, k], f.x, rtol=0, atol=1e-8)
+            elif not present.any():
+                np.testing.assert_allclose(ours.x[r, k], f.x, rtol=0, atol=1e-8)
+            else:                            # a partial step: filterpy has no missing component; stop comparing
+                break
+
+
+def test_a_new_linear_model_runs_in_the_kalman_filter_and_equals_filterpy():
+    rng = np.random.default_rng(1)
+    F, Q = np.array([[1.0, 1.0], [0.0, 1.0]]), np.diag([0.01, 0.02])
+    height = np.cumsum(rng.normal(0, 0.3, (2, 40)), axis=1)
+    z = (height + 4.0 + rng.normal(0, 0.5, height.shape))[..., None]
+    z[1, 10:12] = np.nan
+    x0, P0 = np.zeros(2), np.eye(2)
+    ours = lb.kalman_filter(F, Q, x0, P0, lb.Stream(z, Barometer(4.0, 0.5)))
+    for r in range(2):
+        f = KalmanFilter(2, 1)
+        f.x, f.P, f.F, f.Q, f.H, f.R = x0[:, None].copy(), P0.copy(), F, Q, np.eye(1, 2), np.array([[0.25]])
+        for k in range(40):
+            f.predict()
+            if np.isfinite(z[r, k, 0]):
+                f.update(z[r, k] - 4.0)
+            np.testing.assert_allclose(ours.x[r, k], f.x[:, 0], rtol=0, atol=1e-10)
+
+
+def test_a_new_model_runs_in_the_grid_filter_as_its_own_likelihood_written_out():
+    _, x, z = _track(runs=2, steps=6)
+    xs, ys = np.meshgrid(np.linspace(0, 10, 41), np.linspace(0, 8, 33))
+    cells = np.column_stack([xs.ravel(), ys.ravel()])
+    ranges = Ranges(ANCHORS, SIGMA_M)
+    ours = lb.grid_bayes_filter(z, cells, ranges, spread_m=0.5)
+
+    def written_out(c, t):                 # the Gaussian range likelihood by hand, missing ranges left out
+        d = np.linalg.norm(c[:, None, :] - ANCHORS, axis=-1)
+        r = np.where(np.isfinite(z[:, t, None, :]), z[:, t, None, :] - d, 0.0)
+        return -0.5 * np.sum(r * r, axis=-1) / SIGMA_M**2
+    ref = lb.grid_bayes_filter(None, cells, written_out, spread_m=0.5, n_steps=z.shape[1])
+    np.testing.assert_allclose(ours.mean_m, ref.mean_m, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(ours.weights, ref.weights, rtol=0, atol=1e-12)
+
+
+def test_a_new_model_runs_in_the_particle_filter_as_its_own_likelihood_written_out():
+    _, x, z = _track(runs=3, steps=10)
+    ranges = Ranges(ANCHORS, SIGMA_M)
+    start = np.random.default_rng(4).uniform((0.0, 0.0), (10.0, 8.0), (3, 2000, 2))
+    kw = dict(initial_particles_m=start, region_m=((0.0, 0.0), (10.0, 8.0)), spread_m=0.4)
+    ours = lb.particle_filter(z, ranges, np.random.default_rng(5), **kw)
+
+    def written_out(p, t):
+        d = np.linalg.norm(p[..., None, :] - ANCHORS, axis=-1)
+        r = np.where(np.isfinite(z[:, t, None, :]), z[:, t, None, :] - d, 0.0)
+        dof = np.isfinite(z[:, t]).sum(-1)[:, None]
+        return -0.5 * np.sum(r * r, axis=-1) / SIGMA_M**2 - dof * (np.log(SIGMA_M) + 0.5 * np.log(2 * np.pi))
+    ref = lb.particle_filter(None, written_out, np.random.default_rng(5), n_steps=z.shape[1], **kw)
+    np.testing.assert_allclose(ours.mean_m, ref.mean_m, rtol=0, atol=1e-9)
+    error = np.linalg.norm(ours.mean_m[:, 5:] - x[:, 5:, :2], axis=-1)
+    prior = np.linalg.norm(np.array([5.0, 4.0]) - x[:, 5:, :2], axis=-1)          # the uniform prior's mean
+    assert np.sqrt(np.mean(error**2)) < 0.4 * np.sqrt(np.mean(prior**2))     # and it tracks (measured: 0.62 m vs 2.6 m)
+
+
+def test_the_rss_models_are_models_of_the_protocol_in_every_filter():
+    """The library's own models are of the same protocol: the grid filter's RSS likelihood through the generic
+    Gaussian log-likelihood of the protocol equals its table fast path."""
+    channel = lb.PathLossModel(-40.0, 2.2, 3.0, min_distance_m=0.1)
+    model = lb.RssModel(ANCHORS, channel)
+    assert isinstance(model, MeasurementModel) and isinstance(lb.RssMeasurement(np.zeros((2, 3)), ANCHORS, channel,
+                                                                                [0, 1]).model, MeasurementModel)
+    cells = np.random.default_rng(2).uniform(0, 8, (50, 2))
+    rss = np.random.default_rng(3).normal(-60, 4, (4, 3))
+    rss[1, 2] = np.nan
+    generic = MeasurementModel.log_likelihood(model, rss, cells, step=0)
+    np.testing.assert_allclose(generic, model.log_likelihood(rss, cells, 0), rtol=1e-12)
+
+
+def test_a_model_that_is_not_a_model_is_refused_by_name():
+    with pytest.raises(ValueError, match="a Stream's model must be a MeasurementModel"):
+        lb.Stream(np.zeros((3, 2)), object())
+    with pytest.raises(ValueError, match="serial updates need independent readings"):
+        lb.Stream(np.zeros((3, 1)), Barometer(0.0, 1.0), mode="serial")
+    with pytest.raises(ValueError, match="kalman_filter takes LinearMeasurement streams"):
+        lb.kalman_filter(np.eye(4), np.eye(4), np.zeros(4), np.eye(4), lb.Stream(np.zeros((3, 3)),
+                                                                                 Ranges(ANCHORS, SIGMA_M)))
+
+
+class NoJacobian(Ranges):
+    jacobian = MeasurementModel.jacobian
+
+
+def test_a_model_without_a_jacobian_runs_in_the_ukf_and_is_refused_by_the_ekf_by_name():
+    model, _, z = _track(runs=1, steps=5)
+    stream = lb.Stream(z, NoJacobian(ANCHORS, SIGMA_M))
+    x0, P0 = np.array([3.0, 2.0, 0.0, 0.0]), np.eye(4)
+    assert np.isfinite(lb.unscented_kalman_filter(model.F, model.Q, x0, P0, stream).x).all()
+    with pytest.raises(ValueError, match="ranges: the EKF needs the model's jacobian"):
+        lb.extended_kalman_filter(model.F, model.Q, x0, P0, stream)

@@ -16,7 +16,7 @@ ANCHORS = np.array([[0.0, 0.0], [20.0, 0.0], [20.0, 20.0], [0.0, 20.0]])
 CHANNEL = lb.PathLossModel(-40.0, 2.5, 2.0)
 
 
-# -- a coordinated turn with unknown turn rate: state [x, y, vx, vy, omega] (Bar-Shalom et al. 2001, Sec. 11.7.1) --
+# -- a coordinated turn with unknown turn rate, state [x, y, vx, vy, omega] (Li and Jilkov 2003, Part I) --
 
 def _ct_terms(w, dt):
     """sin(u)/w, (1 - cos u)/w and their w-derivatives, u = w dt (series below |u| = 1e-2, where the closed forms
@@ -51,6 +51,12 @@ def ct_jacobian(x, dt=DT):
 
 
 CT = lb.NonlinearMotion(ct_f, ct_jacobian, name="coordinated turn")
+
+
+def _moments(res):
+    """A KalmanResult's posterior means and covariances (``mean``/``cov`` in the issue-47 vocabulary, ``x``/``P``
+    before it)."""
+    return (res.mean, res.cov) if hasattr(res, "cov") else (res.x, res.P)
 
 
 def test_coordinated_turn_jacobian_matches_finite_differences():
@@ -186,6 +192,38 @@ def test_steps_without_readings_move_the_mode_probabilities_through_the_markov_c
     assert not np.allclose(res.mode_probabilities[3], mu0 @ np.linalg.matrix_power(trans, 4))
 
 
+@pytest.mark.parametrize("mu0", [[0.3, 0.7], [1.0, 0.0]])
+def test_without_switching_the_imm_is_bayesian_model_averaging_of_two_kalman_filters(mu0):
+    """transition = I: no mode ever switches, the mixing weights are the identity and each mode runs its own Kalman
+    filter, so the mode probabilities are the exact Bayesian model posterior mu_j prop. to mu0_j prod_k N(nu_jk; 0,
+    S_jk) (the two KFs' log-likelihoods, with steps where some components are missing) and the estimate their
+    average. With mu0 = (1, 0) the second mode has probability 0 throughout (log 0 = -inf, no warning, no NaN)."""
+    import warnings
+    ca, modes = _cv_ca_modes()
+    rng = np.random.default_rng(2)
+    z = np.cumsum(rng.normal(0.3, 1.0, (2, 15, 2)), axis=1)
+    z[rng.random(z.shape) < 0.2] = np.nan
+    meas = lb.LinearMeasurement(z, ca.position_measurement_matrix(), 0.5 * np.eye(2))
+    x0, P0 = np.zeros(6), np.diag([4.0, 4.0, 1.0, 1.0, 0.5, 0.5])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        res = imm_filter(modes, np.eye(2), x0, P0, meas, mode_probabilities=mu0, outputs=("mode_x", "mode_P"))
+    kfs = [lb.kalman_filter(F, Q, x0, P0, meas) for F, Q in [modes[0], (modes[1].F, modes[1].Q)]]
+    with np.errstate(divide="ignore"):
+        a = np.log(mu0)[:, None, None] + np.stack([np.cumsum(np.nan_to_num(kf.log_likelihood), axis=-1)
+                                                  for kf in kfs])
+    mu = np.exp(a - logsumexp(a, axis=0))
+    np.testing.assert_allclose(np.moveaxis(res.mode_probabilities, -1, 0), mu, rtol=1e-9, atol=1e-300)
+    for j, kf in enumerate(kfs):
+        np.testing.assert_allclose(res.mode_x[..., j, :], _moments(kf)[0], rtol=1e-10, atol=1e-10)
+        np.testing.assert_allclose(res.mode_P[..., j, :, :], _moments(kf)[1], rtol=1e-10, atol=1e-10)
+    x = np.einsum("j...,j...n->...n", mu, np.stack([_moments(kf)[0] for kf in kfs]))
+    np.testing.assert_allclose(res.x, x, rtol=1e-9, atol=1e-9)
+    if mu0[1] == 0.0:
+        assert np.all(res.mode_probabilities[..., 1] == 0.0)
+        np.testing.assert_allclose(res.P, _moments(kfs[0])[1], rtol=1e-12, atol=1e-12)
+
+
 # -- r = 1 is the plain KF / EKF --------------------------------------------------------------------------------
 
 def _rss_case(rng, B=4, T=30):
@@ -218,8 +256,8 @@ def test_one_mode_equals_the_ekf(predict_first):
         F, Q = (motion.F, motion.Q) if hasattr(motion, "F") else motion
         ekf = lb.extended_kalman_filter(F, Q, x0_, P0_, streams, predict_first=predict_first)
         res = imm_filter([motion], np.ones((1, 1)), x0_, P0_, streams, predict_first=predict_first)
-        np.testing.assert_allclose(res.x, ekf.x, rtol=1e-12, atol=1e-12)
-        np.testing.assert_allclose(res.P, ekf.P, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(res.x, _moments(ekf)[0], rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(res.P, _moments(ekf)[1], rtol=1e-12, atol=1e-12)
         np.testing.assert_allclose(res.log_likelihood, ekf.log_likelihood, rtol=1e-12, atol=1e-12)
         np.testing.assert_array_equal(np.isnan(res.log_likelihood), np.isnan(ekf.log_likelihood))
         np.testing.assert_array_equal(res.mode_probabilities, 1.0)
@@ -296,7 +334,7 @@ def test_imm_beats_the_single_cv_ekf_in_a_turn_and_its_turn_mode_rises():
     ekf = lb.extended_kalman_filter(cv.F, cv.Q, x0[:, :4], P0[:4, :4], rss)
     window = slice(turn.start, turn.stop + 3)
     rmse = lambda est: np.sqrt(np.mean(np.sum((est[:, window, :2] - truth[window, :2]) ** 2, axis=-1)))
-    rmse_imm, rmse_cv = rmse(imm.x), rmse(ekf.x)
+    rmse_imm, rmse_cv = rmse(imm.x), rmse(_moments(ekf)[0])
     p_turn = imm.mode_probabilities[..., 1].mean(axis=0)
     before, peak, after = p_turn[5:turn.start].mean(), p_turn[window].max(), p_turn[turn.stop + 8:].mean()
     print(f"RMSE over the turn: IMM {rmse_imm:.3f} m, CV EKF {rmse_cv:.3f} m; turn mode {before:.3f} -> peak "

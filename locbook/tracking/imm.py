@@ -31,10 +31,11 @@ Wiley, 2001, Sec. 11.6.6) keeps r filters, one per mode, on one state vector, an
 
 Modes and state. All modes share one state vector of size n. A smaller model sits inside a larger state through
 :func:`embed`, which sets the states outside it to zero at each of its predictions (mean and variance): e.g. a
-constant-velocity mode in a constant-acceleration state, whose acceleration it keeps at 0 (as in Bar-Shalom et al.
-2001, Sec. 11.7). A coordinated turn with the turn rate as a state (Bar-Shalom et al. 2001, Sec. 11.7.1) is a
+constant-velocity mode in a constant-acceleration state, whose acceleration it keeps at 0. A coordinated turn with
+the turn rate as a state (X. R. Li and V. P. Jilkov, "Survey of maneuvering target tracking. Part I: Dynamic models",
+IEEE Trans. Aerospace and Electronic Systems 39(4), 2003, the coordinated-turn model with unknown turn rate) is a
 :class:`~locbook.tracking.transition.NonlinearMotion` with its Jacobian; the constant-velocity mode beside it embeds
-the 4-state model and keeps the turn rate at 0.
+the 4-state model and keeps the turn rate at 0 (tests/test_imm.py builds the pair).
 
 Vectorization. The modes are a leading axis of the filters' arrays (``(r,) + batch + (n,)`` inside; the results put
 them after the run axes), so every update is one call for all runs and modes, and the measurement models' own run axes
@@ -86,6 +87,16 @@ class ImmResult:
     steps: np.ndarray
     mode_x: np.ndarray | None = None
     mode_P: np.ndarray | None = None
+
+    @property
+    def mean(self) -> np.ndarray:
+        """``x``, under the name the other filter results use for the posterior mean."""
+        return self.x
+
+    @property
+    def cov(self) -> np.ndarray:
+        """``P``, under the name the other filter results use for the posterior covariance."""
+        return self.P
 
     def position_m(self, index) -> np.ndarray:
         """The combined position estimates ``batch + (R, d)``: the state components ``index`` (e.g. a motion model's
@@ -311,13 +322,15 @@ def imm_filter(motions, transition, x0, P0, measurements, *, mode_probabilities=
     out_mP = np.empty(batch + (R, r, n, n)) if "mode_P" in want else None
     out_ll = np.full(batch + (T,), np.nan)
     pair = P_mat[(slice(None), slice(None)) + (None,) * len(batch)]     # p_ij over (i, j) + batch
+    own = np.eye(r)[(slice(None), slice(None)) + (None,) * len(batch)]
 
     for k in range(T):
         if predict_first or k > 0:
             c = np.einsum("ij,i...->j...", P_mat, mu)          # predicted mode probabilities c_j
-            # mixing weights mu_{i|j}; a mode of zero predicted probability keeps mu_i (its weight stays 0)
+            # mixing weights mu_{i|j}; a mode of zero predicted probability (0/0) keeps its own estimate, the limit
+            # of mu_{i|j} without switching (its probability stays 0, so it adds nothing to the estimate)
             safe = np.where(c > 0, c, 1.0)
-            w = np.where(c[None] > 0, pair * mu[:, None] / safe[None], mu[:, None])
+            w = np.where(c[None] > 0, pair * mu[:, None] / safe[None], own)
             x_mix = np.einsum("ij...,i...n->j...n", w, X)
             d = X[:, None] - x_mix[None]                          # x_i - x0_j over (i, j) + batch + (n,)
             P_mix = (np.einsum("ij...,i...ab->j...ab", w, P)

@@ -33,6 +33,7 @@ from .._validate import as_array, check_choice, check_scalar
 from ..models.base import MeasurementModel
 from . import _compiled
 from .resampling import effective_sample_size
+from .results import FilterResult
 
 __all__ = ["BayesFilterResult", "grid_bayes_filter", "grid_transition_matrix", "GRID_TRANSITIONS", "MAX_ARRAY_BYTES"]
 
@@ -62,33 +63,44 @@ def _gib(nbytes: int) -> str:
 
 
 @dataclass(frozen=True)
-class BayesFilterResult:
-    """The posterior of a particle or grid filter, per run ``R`` and step ``T``.
+class BayesFilterResult(FilterResult):
+    """The posterior of a particle or grid filter, per run ``R`` and step ``T``, in the vocabulary of every filter
+    result (:class:`~locbook.tracking.results.FilterResult`).
 
-    ``mean_m`` ``(R, T, dim)``: the posterior mean (MMSE, Ozkaya Eq. (4.8)); ``covariance_m2`` ``(R, T, dim, dim)``:
-    the weighted covariance of the particles or cells about it; ``map_m`` ``(R, T, dim)``: the highest-weight
-    particle or the most probable cell (Eq. (4.9)); ``n_eff`` ``(R, T)``: ``1 / sum w^2`` of the weights before any
-    resampling (Eq. (4.28); for the grid, of the cell probabilities); ``resampled`` ``(R, T)`` (always False for
-    the grid); ``particles_m`` ``(R, N, dim)`` and ``weights`` ``(R, N)``: the final posterior as weighted points
-    (the particles, or the cells and their belief); ``clouds``: the particles after the update, before resampling,
-    at the steps asked for, ``{t: (R, N, dim)}``; ``degenerate`` and ``degenerate_step`` ``(R,)`` (-1 where not):
-    the runs whose likelihood collapsed and the step, NaN from that step on."""
+    ``mean`` ``(R, T, dim)``: the posterior mean (MMSE, Ozkaya Eq. (4.8)); ``cov`` ``(R, T, dim, dim)``: the
+    weighted covariance of the particles or cells about it (positions in m, covariances in m^2; with the particle
+    filter's ``motion=`` the full state); ``steps``: every step, ``arange(T)``; ``log_likelihood``: None (the filters
+    weigh by the likelihood up to a constant per run, and the compiled paths keep no normaliser: no exact predictive
+    log-likelihood to give); ``diverged`` and ``diverged_step`` ``(R,)`` (-1 where not): filter divergence here is
+    the collapse of the likelihood (-inf, NaN or +inf on every particle or cell), its runs NaN from that step on.
+    The extras: ``map_m`` ``(R, T, dim)``: the highest-weight particle or the most probable cell (Eq. (4.9));
+    ``n_eff`` ``(R, T)``: ``1 / sum w^2`` of the weights before any resampling (Eq. (4.28); for the grid, of the cell
+    probabilities); ``resampled`` ``(R, T)`` (always False for the grid); ``particles_m`` ``(R, N, dim)`` and
+    ``weights`` ``(R, N)``: the final posterior as weighted points (the particles, or the cells and their belief);
+    ``clouds``: the particles after the update, before resampling, at the steps asked for, ``{t: (R, N, dim)}``.
+    ``mean_m``, ``covariance_m2``, ``degenerate``, ``degenerate_step`` and ``n_degenerate`` (before issue 47) are
+    deprecated aliases of ``mean``, ``cov``, ``diverged``, ``diverged_step`` and ``n_diverged``."""
 
-    mean_m: np.ndarray
-    covariance_m2: np.ndarray
+    _RENAMED = {"mean_m": "mean", "covariance_m2": "cov", "degenerate": "diverged",
+                "degenerate_step": "diverged_step", "n_degenerate": "n_diverged"}
+    _WHOLE_MEAN_IS_POSITION = True
+
+    mean: np.ndarray
+    cov: np.ndarray
     map_m: np.ndarray
     n_eff: np.ndarray
     resampled: np.ndarray
     particles_m: np.ndarray
     weights: np.ndarray
-    degenerate: np.ndarray
-    degenerate_step: np.ndarray
+    diverged: np.ndarray
+    diverged_step: np.ndarray
     clouds: dict = field(default_factory=dict)
+    log_likelihood: np.ndarray | None = None
 
     @property
-    def n_degenerate(self) -> int:
-        """The number of runs whose likelihood collapsed."""
-        return int(np.count_nonzero(self.degenerate))
+    def steps(self) -> np.ndarray:
+        """The recorded step indices: every step, ``arange(T)``."""
+        return np.arange(np.shape(self.mean)[-2])
 
 
 def weighted_moments(weights, points_m):
@@ -138,7 +150,7 @@ def _warn_collapse(dead, dead_step, function: str, what: str, detail=None) -> No
     run, step = _first_collapse(dead_step)
     extra = detail(run, step) if detail is not None else ""
     warnings.warn(f"{function}: {what} collapsed in {int(dead.sum())} of {dead.size} runs (first: run {run}, step "
-                  f"{step}{extra}); those runs are NaN from their step on (see degenerate, degenerate_step), the "
+                  f"{step}{extra}); those runs are NaN from their step on (see diverged, diverged_step), the "
                   "others are unaffected", RuntimeWarning, stacklevel=3)
 
 
@@ -492,7 +504,7 @@ def grid_bayes_filter(rss_dbm, cells_m, model, spread_m: float = 0.5, *, n_steps
     negligible against the tail.
 
     A run whose posterior collapses at a step (the likelihood is -inf, or NaN, on every cell the belief allows, e.g.
-    a reading of 1e300 dBm) is flagged ``degenerate`` with that ``degenerate_step``; its estimates and final belief
+    a reading of 1e300 dBm) is flagged ``diverged`` with that ``diverged_step``; its estimates and final belief
     are NaN from that step on, and the other runs are unaffected. The call then emits one ``RuntimeWarning`` (the
     number of such runs, the first run and step, its readings); when every run collapses it raises a ValueError
     naming ``rss_dbm`` (or ``log_likelihood``) and the first step instead (nothing can be estimated: a units bug,

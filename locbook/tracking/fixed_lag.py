@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._validate import as_array, check_scalar
-from .results import KalmanResult
+from .results import FilterResult, KalmanResult
 from .smoother import rts_smoother
 from .transition import PerStep
 
@@ -38,21 +38,29 @@ __all__ = ["FixedLagResult", "fixed_lag_smoother", "OnlineFixedLagSmoother"]
 
 
 @dataclass(frozen=True)
-class FixedLagResult:
+class FixedLagResult(FilterResult):
     """The fixed-lag estimates of a run with T steps and state size n (``batch``: the run's leading axes).
 
-    - ``x`` ``batch + (R, n)``, ``P`` ``batch + (R, n, n)``: row i is the estimate of step ``steps[i]`` given the
-      readings of steps 0 .. ``given_to[i]``;
+    - ``mean`` ``batch + (R, n)``, ``cov`` ``batch + (R, n, n)``: row i is the estimate of step ``steps[i]`` given the
+      readings of steps 0 .. ``given_to[i]`` (``x`` and ``P`` before issue 47: deprecated aliases);
     - ``steps`` ``(R,)``: the step each row estimates (for :func:`fixed_lag_smoother` every step, ``0 .. T - 1``);
     - ``given_to`` ``(R,)``: the last step whose readings the row uses, ``min(steps + lag, T - 1)``;
-    - ``lag``: the lag L asked for (a lag of T - 1 or more gives the full-interval smoother).
+    - ``lag``: the lag L asked for (a lag of T - 1 or more gives the full-interval smoother);
+    - ``log_likelihood`` ``batch + (T,)``, ``diverged``, ``diverged_step`` ``batch``: the filter run's, carried over
+      (as :class:`~locbook.tracking.smoother.SmoothedResult` carries them); None from
+      :meth:`OnlineFixedLagSmoother.tail`, which is fed moments only.
     """
 
-    x: np.ndarray
-    P: np.ndarray
+    _RENAMED = {"x": "mean", "P": "cov"}
+
+    mean: np.ndarray
+    cov: np.ndarray
     lag: int
     steps: np.ndarray
     given_to: np.ndarray
+    log_likelihood: np.ndarray | None = None
+    diverged: np.ndarray | None = None
+    diverged_step: np.ndarray | None = None
 
 
 def _check_lag(lag) -> int:
@@ -95,7 +103,7 @@ def fixed_lag_smoother(result: KalmanResult, lag: int, *, F=None, residual=None)
     step j given the readings of steps 0 .. ``given_to[j] = min(j + lag, T - 1)``: for ``j < T - lag`` the fixed-lag
     estimate ``x_{j|j+L}``, ``P_{j|j+L}`` (what an online smoother reports at step j + L), for the last ``lag`` steps
     the estimates given all the readings (there is no later reading to wait for; they equal the full-interval RTS
-    smoother's). So ``lag=0`` gives the filter's ``x``, ``P`` and ``lag >= T - 1`` gives :func:`locbook.rts_smoother`
+    smoother's). So ``lag=0`` gives the filter's ``mean``, ``cov`` and ``lag >= T - 1`` gives :func:`locbook.rts_smoother`
     on the whole run. Row j equals ``rts_smoother`` of the run truncated at step ``given_to[j]``, its row j.
 
     ``result``, ``F``, ``residual``: as :func:`locbook.rts_smoother` takes them (a standard run that recorded every
@@ -114,12 +122,13 @@ def fixed_lag_smoother(result: KalmanResult, lag: int, *, F=None, residual=None)
     # rts_smoother checks the run (shapes, every step recorded, finite covariances, F) and gives the gains C_j, the
     # same for every window, and the last rows (given all the readings)
     full = _rts(result, F, residual, "fixed_lag_smoother")
-    x, P = np.asarray(result.x, float), np.asarray(result.P, float)
+    x, P = np.asarray(result.mean, float), np.asarray(result.cov, float)
     T = x.shape[-2]
     steps = np.arange(T)
     given_to = np.minimum(steps + min(L, T), T - 1) if T else steps
+    carried = (full.log_likelihood, full.diverged, full.diverged_step)      # the run's (rts_smoother carries them)
     if L >= T - 1 or x.size == 0:          # no window ends before the last step: the full-interval smoother
-        return FixedLagResult(full.x, full.P, L, steps, given_to)
+        return FixedLagResult(full.mean, full.cov, L, steps, given_to, *carried)
     x_pred, P_pred = np.asarray(result.x_pred, float), np.asarray(result.P_pred, float)
     gain = full.gain
     diff = _differ(residual)
@@ -134,9 +143,9 @@ def fixed_lag_smoother(result: KalmanResult, lag: int, *, F=None, residual=None)
         C = gain[..., j, :, :]
         Pj = P[..., j, :, :] + C @ (Ps - P_pred[..., j1, :, :]) @ np.swapaxes(C, -1, -2)
         Ps = 0.5 * (Pj + np.swapaxes(Pj, -1, -2))       # symmetric, as the RTS smoother keeps it
-    x_out = np.concatenate([xs, full.x[..., W:, :]], axis=-2)
-    P_out = np.concatenate([Ps, full.P[..., W:, :, :]], axis=-3)
-    return FixedLagResult(x_out, P_out, L, steps, given_to)
+    x_out = np.concatenate([xs, full.mean[..., W:, :]], axis=-2)
+    P_out = np.concatenate([Ps, full.cov[..., W:, :, :]], axis=-3)
+    return FixedLagResult(x_out, P_out, L, steps, given_to, *carried)
 
 
 class OnlineFixedLagSmoother:
@@ -147,7 +156,8 @@ class OnlineFixedLagSmoother:
     passes each step's ``P_cross``). ``residual(a, b)``: the difference of states, as :func:`locbook.rts_smoother`.
 
     :meth:`update` takes the new step's filter moments (``x`` ``batch + (n,)``, ``P``, ``x_pred``, ``P_pred``,
-    ``P_cross`` ``batch + (n, n)``, the fields of a :class:`~locbook.tracking.results.KalmanResult` at that step;
+    ``P_cross`` ``batch + (n, n)``: a :class:`~locbook.tracking.results.KalmanResult`'s ``mean``, ``cov``, ``x_pred``,
+    ``P_pred``, ``P_cross`` at that step;
     :meth:`step` takes a one-step KalmanResult, e.g. from :meth:`locbook.OnlineFilter.step` with ``outputs=("x_pred",
     "P_pred", "P_cross")``). It keeps the last L + 1 steps and, from the (L + 1)-th step k = L on, returns ``(x, P)``
     of step k - L given the readings to step k, the RTS smoother of the buffered window (module docstring); before
@@ -209,7 +219,7 @@ class OnlineFixedLagSmoother:
         if self.count <= self.lag:
             return None
         smooth = self._window()
-        return smooth.x[..., 0, :], smooth.P[..., 0, :, :]
+        return smooth.mean[..., 0, :], smooth.cov[..., 0, :, :]
 
     def step(self, result: KalmanResult):
         """:meth:`update` with the moments of a one-step :class:`~locbook.tracking.results.KalmanResult` that
@@ -222,10 +232,10 @@ class OnlineFixedLagSmoother:
         if result.x_pred is None or result.P_pred is None:
             raise ValueError("result needs its predictions (result.x_pred, result.P_pred): filter with "
                              "outputs=('x_pred', 'P_pred', 'P_cross')")
-        if np.shape(result.x)[-2:-1] != (1,):
-            raise ValueError(f"result must hold one step, got x of shape {np.shape(result.x)}")
+        if np.shape(result.mean)[-2:-1] != (1,):
+            raise ValueError(f"result must hold one step, got a mean of shape {np.shape(result.mean)}")
         cross = None if result.P_cross is None else np.asarray(result.P_cross)[..., 0, :, :]
-        return self.update(np.asarray(result.x)[..., 0, :], np.asarray(result.P)[..., 0, :, :],
+        return self.update(np.asarray(result.mean)[..., 0, :], np.asarray(result.cov)[..., 0, :, :],
                            np.asarray(result.x_pred)[..., 0, :], np.asarray(result.P_pred)[..., 0, :, :], cross)
 
     def tail(self) -> FixedLagResult:
@@ -237,8 +247,8 @@ class OnlineFixedLagSmoother:
         if not self._buffer:
             return FixedLagResult(np.zeros((0, 0)), np.zeros((0, 0, 0)), self.lag, steps, given_to)
         smooth = self._window()
-        return FixedLagResult(smooth.x[..., smooth.x.shape[-2] - m:, :], smooth.P[..., smooth.x.shape[-2] - m:, :, :],
-                              self.lag, steps, given_to)
+        first = smooth.mean.shape[-2] - m
+        return FixedLagResult(smooth.mean[..., first:, :], smooth.cov[..., first:, :, :], self.lag, steps, given_to)
 
     def _window(self):
         """:func:`rts_smoother` of the buffered steps (its first step's P_cross, outside the window, is not used)."""

@@ -102,7 +102,7 @@ class OnlineFilter:
                                         B=B if u is not None else None, u=u,
                                         predict_first=self._predict_next, outputs=self._outputs, divergence_window=0,
                                         **self._options)
-        self.x, self.P = res.x[..., -1, :], res.P[..., -1, :, :]
+        self.x, self.P = res.mean[..., -1, :], res.cov[..., -1, :, :]
         self._predict_next = True
         self.step_index += 1
         self.log_likelihood = self.log_likelihood + np.nan_to_num(res.log_likelihood[..., -1])

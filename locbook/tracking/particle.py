@@ -29,7 +29,7 @@ every output of the result loses its leading run axis.
 
 A collapsed run is isolated (issue 26): where a run's log-likelihood is -inf for every particle (no particle
 explains the reading), or NaN or +inf for any particle (garbage), its weights cannot be normalised. That run is
-flagged ``degenerate`` with the first such step (``degenerate_step``, -1 elsewhere), its estimates are NaN from that
+flagged ``diverged`` with the first such step (``diverged_step``, -1 elsewhere), its estimates are NaN from that
 step on and its final particles and weights are NaN; the other runs go on as if that run were sane (its particles are
 still propagated and resampled with equal weights; every resampling draw is made for every run whether or not it
 resamples, so the other runs are bit-identical). -inf for some particles only is a zero weight.
@@ -151,10 +151,10 @@ class ParticleFilterResult(BayesFilterResult):
     """:class:`~locbook.tracking.bayes.BayesFilterResult` of :func:`particle_filter`, with ``log_weights``
     ``(R, N)``: the final normalised log-weights, computed in the log domain at the last update (``-inf`` = a zero
     weight; ``exp(log_weights)`` equals ``weights`` except below 1e-300, where ``weights`` keeps the filter's floor;
-    NaN for a collapsed run). With ``motion=`` the estimates and particles are over the full state ``n`` (``mean_m``
-    ``(R, T, n)``, ``covariance_m2`` ``(R, T, n, n)``, ``particles_m`` ``(R, N, n)``: positions in m, velocities in
-    m/s, ...). For a single run (no run axis given) every array lacks the leading ``R`` axis (``degenerate`` and
-    ``degenerate_step`` are 0-d)."""
+    NaN for a collapsed run). With ``motion=`` the estimates and particles are over the full state ``n`` (``mean``
+    ``(R, T, n)``, ``cov`` ``(R, T, n, n)``, ``particles_m`` ``(R, N, n)``: positions in m, velocities in m/s, ...;
+    ``position_m(motion.position_index)`` the positions). For a single run (no run axis given) every array lacks the
+    leading ``R`` axis (``diverged`` and ``diverged_step`` are 0-d)."""
 
     log_weights: np.ndarray | None = None
 
@@ -647,8 +647,8 @@ def particle_filter(rss_dbm, model, rng: np.random.Generator, *, n_steps: int | 
         particles = particles.copy()
         particles[dead], weights[dead], final_log_w[dead] = np.nan, np.nan, np.nan
         _warn_collapse(dead, dead_step, "particle_filter", what, detail)
-    out = dict(mean_m=mean, covariance_m2=cov, map_m=best, n_eff=n_eff, resampled=resampled, particles_m=particles,
-               weights=weights, degenerate=dead, degenerate_step=dead_step, log_weights=final_log_w)
+    out = dict(mean=mean, cov=cov, map_m=best, n_eff=n_eff, resampled=resampled, particles_m=particles,
+               weights=weights, diverged=dead, diverged_step=dead_step, log_weights=final_log_w)
     if single:                        # one run given without the run axis: none in the result either
         return ParticleFilterResult(**{k: a[0, ...] for k, a in out.items()},
                                     clouds={t: c[0] for t, c in clouds.items()})

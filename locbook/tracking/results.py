@@ -1,4 +1,22 @@
-"""The result of every Kalman-family filter and the consistency guard on its innovations.
+"""The result vocabulary of every filter, the result of every Kalman-family filter and the consistency guard on its
+innovations.
+
+One vocabulary (issue 47; :class:`FilterResult`). Every filter result (:class:`KalmanResult`, the smoothers'
+:class:`~locbook.tracking.smoother.SmoothedResult` and :class:`~locbook.tracking.fixed_lag.FixedLagResult`, the particle
+and grid filters' :class:`~locbook.tracking.bayes.BayesFilterResult`) has
+
+- ``mean`` ``batch + (R, n)`` and ``cov`` ``batch + (R, n, n)``: the posterior mean and covariance at ``steps``;
+- ``steps`` ``(R,)``: the recorded step indices (every step, ``arange(T)``, for the particle and grid filters);
+- ``log_likelihood`` ``batch + (T,)``: the per-step log-likelihood of the readings where the filter gives it exactly
+  (the Kalman family, module text below; the smoothers carry their filter run's), else None;
+- ``diverged`` ``batch`` (bool) and ``diverged_step`` ``batch`` (-1 where not), :attr:`~FilterResult.n_diverged`: filter
+  divergence, by each family's own test: the NIS guard below for the Kalman family (the smoothers carry their run's),
+  the collapse of the likelihood for the particle and grid filters;
+- :meth:`~FilterResult.position_m`: the mean's position components.
+
+The old names (``x``, ``P``; ``mean_m``, ``covariance_m2``, ``degenerate``, ``degenerate_step``, ``n_degenerate``)
+are kept for one release as read-only aliases that emit a ``DeprecationWarning`` naming the new one; given to a
+constructor (or to ``dataclasses.replace``) an old field name is mapped to the new one with the same warning.
 
 :class:`KalmanResult` is what :func:`locbook.kalman_filter`, :func:`locbook.extended_kalman_filter` (parallel and
 serial) and :func:`locbook.unscented_kalman_filter` return: posterior means and covariances at the recorded steps, the
@@ -17,7 +35,7 @@ log-likelihood, ``log N(nu; 0, S)`` of the present readings, is therefore the su
 streams, to first order for RSS and other nonlinear streams). A missing reading is NaN in ``innovation`` and in its row
 and column of ``S``.
 
-Memory. ``x``, ``P`` and the optional ``x_pred``, ``P_pred``, ``innovation`` (``batch + (R, M)``) and ``S``
+Memory. ``mean``, ``cov`` and the optional ``x_pred``, ``P_pred``, ``innovation`` (``batch + (R, M)``) and ``S``
 (``batch + (R, M, M)``) are kept at the ``record`` steps only (``R`` of them; default every step), and the optional ones
 only when named in ``outputs``; ``log_likelihood``, ``nis`` and ``nis_dof`` are ``batch + (T,)`` scalars per step.
 
@@ -69,13 +87,15 @@ is planned for every path; until then such a run is an error, never a NaN or a c
 from __future__ import annotations
 
 import sys
+import warnings
 from dataclasses import dataclass, replace
 
 import numpy as np
 
 from .._validate import as_array, check_scalar
 
-__all__ = ["KalmanResult", "nis_divergence", "nees", "DIVERGENCE_WINDOW", "DIVERGENCE_PROBABILITY", "KALMAN_OUTPUTS"]
+__all__ = ["FilterResult", "KalmanResult", "nis_divergence", "nees", "DIVERGENCE_WINDOW", "DIVERGENCE_PROBABILITY",
+           "KALMAN_OUTPUTS"]
 
 #: defaults of the consistency guard (module docstring): consecutive updates, and the chi-square probability
 DIVERGENCE_WINDOW = 20
@@ -85,11 +105,85 @@ DIVERGENCE_PROBABILITY = 0.999
 KALMAN_OUTPUTS = ("x_pred", "P_pred", "P_cross", "innovation", "S")
 
 
+def _warn_renamed(what: str, new: str) -> None:
+    """The one ``DeprecationWarning`` of an old name, attributed to the first frame outside this module and
+    :mod:`dataclasses` (the caller's line, also through ``dataclasses.replace``)."""
+    level, frame = 2, sys._getframe(1)
+    while frame is not None and frame.f_globals.get("__name__") in (__name__, "dataclasses"):
+        level, frame = level + 1, frame.f_back
+    warnings.warn(f"{what} is deprecated: use {new}", DeprecationWarning, stacklevel=level)
+
+
+def _renamed_alias(old: str, new: str) -> property:
+    def get(self):
+        _warn_renamed(f"{type(self).__name__}.{old}", f".{new}")
+        return getattr(self, new)
+    get.__name__ = old
+    get.__doc__ = f"Deprecated alias of :attr:`{new}` (one release): the same object, with a DeprecationWarning."
+    return property(get)
+
+
+class _Renames(type):
+    """The metaclass of the results: a class's ``_RENAMED`` (old name -> new name) become read-only aliases that
+    warn, and old field names given to the constructor (directly or through ``dataclasses.replace``, which passes
+    every field's current value too) are mapped to the new ones, the old keyword winning, with the same warning."""
+
+    def __new__(mcls, name, bases, namespace):
+        cls = super().__new__(mcls, name, bases, namespace)
+        for old, new in namespace.get("_RENAMED", {}).items():
+            setattr(cls, old, _renamed_alias(old, new))
+        return cls
+
+    def __call__(cls, *args, **kwargs):
+        if kwargs:
+            fields = getattr(cls, "__dataclass_fields__", {})
+            for base in cls.__mro__:
+                for old, new in vars(base).get("_RENAMED", {}).items():
+                    if old in kwargs and old not in fields:
+                        _warn_renamed(f"{cls.__name__}({old}=...)", f"{new}=")
+                        kwargs[new] = kwargs.pop(old)
+        return super().__call__(*args, **kwargs)
+
+
+class FilterResult(metaclass=_Renames):
+    """The vocabulary every filter result shares (module docstring): ``mean``, ``cov``, ``steps``,
+    ``log_likelihood``, ``diverged``, ``diverged_step`` (attributes of each result class), and here
+    :attr:`n_diverged` and :meth:`position_m`."""
+
+    #: position_m without an index: the whole mean (a filter whose state is a position) or an error (a state of
+    #: several physical quantities, e.g. position and velocity: the index is the caller's to say)
+    _WHOLE_MEAN_IS_POSITION = False
+
+    @property
+    def n_diverged(self) -> int:
+        """The number of runs flagged ``diverged``."""
+        return 0 if self.diverged is None else int(np.count_nonzero(self.diverged))
+
+    def position_m(self, index=None) -> np.ndarray:
+        """The position estimates ``batch + (R, d)``: the mean's components ``index`` (e.g. a motion model's
+        ``position_index``). A Kalman-family or smoother result needs ``index`` (its state is whatever the model
+        made it); a particle or grid result gives its whole mean by default (its state is the position, unless
+        filtered with ``motion=``: then give the motion's ``position_index``)."""
+        mean = self.mean
+        n = np.shape(mean)[-1]
+        if index is None:
+            if self._WHOLE_MEAN_IS_POSITION:
+                return mean
+            raise ValueError(f"index must give the position components of the {type(self).__name__}'s state "
+                             f"(0..{n - 1}; e.g. the motion model's position_index)")
+        idx = np.atleast_1d(np.asarray(index))
+        if idx.ndim != 1 or idx.size == 0 or not np.issubdtype(idx.dtype, np.integer) or idx.min() < 0 \
+                or idx.max() >= n:
+            raise ValueError(f"index must be state components in 0..{n - 1}, got {index!r}")
+        return mean[..., idx]
+
+
 @dataclass(frozen=True)
-class KalmanResult:
+class KalmanResult(FilterResult):
     """Output of every Kalman-family filter (module docstring); ``batch`` the runs' axes, ``R`` recorded steps.
 
-    - ``x`` ``batch + (R, n)``, ``P`` ``batch + (R, n, n)``: posterior means and covariances at ``steps`` ``(R,)``;
+    - ``mean`` ``batch + (R, n)``, ``cov`` ``batch + (R, n, n)``: posterior means and covariances at ``steps``
+      ``(R,)`` (``x`` and ``P`` before issue 47: deprecated aliases);
     - ``x_pred``, ``P_pred``: the prior each step's update starts from (the one-step prediction; for the KF's
       ``literal_george`` variant the previous posterior, which the printed update uses); ``innovation``
       ``batch + (R, M)`` and ``S`` ``batch + (R, M, M)``: the readings' innovations and their covariance, block
@@ -105,8 +199,10 @@ class KalmanResult:
       whose ``x_pred``/``P_pred`` are the previous posterior: no smoother applies to it).
     """
 
-    x: np.ndarray
-    P: np.ndarray
+    _RENAMED = {"x": "mean", "P": "cov"}
+
+    mean: np.ndarray
+    cov: np.ndarray
     steps: np.ndarray
     x_pred: np.ndarray | None = None
     P_pred: np.ndarray | None = None
@@ -120,11 +216,6 @@ class KalmanResult:
     floored_updates: int = 0
     P_cross: np.ndarray | None = None
     variant: str = "standard"
-
-    @property
-    def n_diverged(self) -> int:
-        """The number of runs flagged ``diverged``."""
-        return 0 if self.diverged is None else int(np.count_nonzero(self.diverged))
 
     @property
     def total_log_likelihood(self) -> np.ndarray:

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._validate import as_array
-from .results import KalmanResult
+from .results import FilterResult, KalmanResult
 from .transition import PerStep
 
 __all__ = ["SmoothedResult", "rts_smoother", "PINV_RTOL"]
@@ -32,13 +32,23 @@ PINV_RTOL = 1e-12
 
 
 @dataclass(frozen=True)
-class SmoothedResult:
-    """``x`` ``batch + (T, n)`` and ``P`` ``batch + (T, n, n)``: the smoothed means and covariances at every step;
-    ``gain`` ``batch + (T - 1, n, n)``: the smoother gains ``C_k = P_k F^T P_{k+1|k}^{-1}``."""
+class SmoothedResult(FilterResult):
+    """``mean`` ``batch + (T, n)`` and ``cov`` ``batch + (T, n, n)``: the smoothed means and covariances at every
+    step (``x`` and ``P`` before issue 47: deprecated aliases); ``gain`` ``batch + (T - 1, n, n)``: the smoother gains
+    ``C_k = P_k F^T P_{k+1|k}^{-1}``. The rest of the result vocabulary (:class:`~locbook.tracking.results.FilterResult`)
+    is the filter run's, carried over: ``steps`` (every step), ``log_likelihood`` (the readings' likelihood is that of
+    the filter: smoothing conditions on the same readings), ``diverged`` and ``diverged_step`` (the NIS guard on the
+    filter's innovations); None in a result built without them."""
 
-    x: np.ndarray
-    P: np.ndarray
+    _RENAMED = {"x": "mean", "P": "cov"}
+
+    mean: np.ndarray
+    cov: np.ndarray
     gain: np.ndarray
+    steps: np.ndarray | None = None
+    log_likelihood: np.ndarray | None = None
+    diverged: np.ndarray | None = None
+    diverged_step: np.ndarray | None = None
 
 
 def rts_smoother(result: KalmanResult, F=None, *, residual=None) -> SmoothedResult:
@@ -68,9 +78,9 @@ def rts_smoother(result: KalmanResult, F=None, *, residual=None) -> SmoothedResu
     if result.x_pred is None or result.P_pred is None:
         raise ValueError("rts_smoother needs the run's predictions: filter with outputs=('x_pred', 'P_pred', "
                          "'P_cross')")
-    x, P = np.asarray(result.x, float), np.asarray(result.P, float)
+    x, P = np.asarray(result.mean, float), np.asarray(result.cov, float)
     if x.ndim < 2 or P.shape != x.shape + x.shape[-1:]:
-        raise ValueError(f"rts_smoother: the run's x must be batch + (T, n) and P batch + (T, n, n), got shapes "
+        raise ValueError(f"rts_smoother: the run's mean must be batch + (T, n) and cov batch + (T, n, n), got shapes "
                          f"{x.shape} and {P.shape}")
     T, n = x.shape[-2], x.shape[-1]
     steps = np.asarray(result.steps)
@@ -89,9 +99,9 @@ def rts_smoother(result: KalmanResult, F=None, *, residual=None) -> SmoothedResu
     for name, a, want in (("x_pred", x_pred, x.shape), ("P_pred", P_pred, P.shape), ("P_cross", cross, P.shape)):
         if a.shape != want:
             raise ValueError(f"rts_smoother: the run's {name} must have the shape {want} of its "
-                             f"{'x' if name == 'x_pred' else 'P'}, got {a.shape}")
+                             f"{'mean' if name == 'x_pred' else 'cov'}, got {a.shape}")
     # the covariances of a filter run are finite; NaN or inf here is a broken result (a NaN mean is carried as NaN)
-    for name, a in (("P", P), ("P_pred", P_pred), ("P_cross", cross[..., 1:, :, :])):
+    for name, a in (("cov", P), ("P_pred", P_pred), ("P_cross", cross[..., 1:, :, :])):
         bad = ~np.isfinite(a)
         if bad.any():
             at = tuple(int(i) for i in np.argwhere(bad)[0])
@@ -100,7 +110,7 @@ def rts_smoother(result: KalmanResult, F=None, *, residual=None) -> SmoothedResu
                              f"{f' of run {at[:len(batch)]}' if batch else ''} (entry {at[len(batch) + 1:]}); "
                              "the smoother needs the finite covariances of a filter run")
     if x.size == 0:                  # no run (a zero-length run axis), no step or no state: nothing to smooth
-        return SmoothedResult(x.copy(), P.copy(), np.zeros(batch + (max(T - 1, 0), n, n)))
+        return SmoothedResult(x.copy(), P.copy(), np.zeros(batch + (max(T - 1, 0), n, n)), *_carried(result))
     if residual is None:
         diff = lambda a, b: a - b
     elif not callable(residual):
@@ -122,7 +132,12 @@ def rts_smoother(result: KalmanResult, F=None, *, residual=None) -> SmoothedResu
         xs[..., k, :] = x[..., k, :] + np.einsum("...ij,...j->...i", gain[..., k, :, :],
                                                  diff(xs[..., k + 1, :], x_pred[..., k + 1, :]))
     full = lambda a: a if a.shape[:-3] == batch else np.broadcast_to(a, batch + a.shape).copy()
-    return SmoothedResult(xs, full(Ps), full(gain))
+    return SmoothedResult(xs, full(Ps), full(gain), *_carried(result))
+
+
+def _carried(result: KalmanResult):
+    """What a smoothed result carries of its filter run (:class:`SmoothedResult`): steps, log-likelihood, flags."""
+    return result.steps, result.log_likelihood, result.diverged, result.diverged_step
 
 
 def _same_in_every_run(batch, *arrays) -> bool:

@@ -35,7 +35,8 @@ import numpy as np
 from .._linalg import _LOG_2PI, _covariance, _refuse_not_finite
 from .._validate import as_array, call_user, function_output
 
-__all__ = ["MeasurementModel", "LinearGaussian", "FunctionMeasurement", "PerStep", "per_step", "step_matrix"]
+__all__ = ["MeasurementModel", "LinearGaussian", "FunctionMeasurement", "MotionModel", "LinearMotion", "PerStep",
+           "per_step", "step_matrix"]
 
 
 class PerStep:
@@ -509,3 +510,91 @@ class FunctionMeasurement(MeasurementModel):
                                  f"(filterpy's (m, 1) z); pass batch + (T, m), e.g. z[..., 0] of shape "
                                  f"{np.shape(z)[:-1]}")
         super().check_readings(z, n_state)
+
+
+class MotionModel:
+    """The protocol of a motion model ``x_k = f_k(x_{k-1}) + w_k``, ``w_k ~ N(0, Q_k)`` (after Stone Soup's
+    ``TransitionModel``): :meth:`apply` ``f`` (states ``(..., n)`` over any leading axes: the runs' posteriors, the
+    UKF's sigma points, particles), :meth:`jacobian_at` ``df/dx`` (the EKF's), :meth:`covariance` ``Q_k``,
+    :meth:`sample` (a draw of ``x_k`` given ``x_{k-1}``), and for states on a circle :meth:`difference` and
+    :meth:`mean_of`. A linear model (:attr:`linear`) also has its matrices ``F`` and ``Q`` (constant, with run axes,
+    or :func:`per_step`), which the Kalman filter and the compiled paths take as they are."""
+
+    name: str = ""
+    #: True for ``x_k = F_k x_{k-1} + w_k`` with the attributes ``F`` and ``Q``
+    linear: bool = False
+    #: True for the library's own models, which check their outputs themselves (the filters check a user model's)
+    checks_own_output: bool = False
+
+    @property
+    def label(self) -> str:
+        return self.name or type(self).__name__
+
+    def apply(self, x, step: int = 0):
+        """``f(x)`` ``(..., n)``."""
+        raise NotImplementedError(f"{type(self).__name__} must define apply(x, step)")
+
+    def jacobian_at(self, x, step: int = 0):
+        """``df/dx`` ``(..., n, n)`` at ``x`` (the EKF's)."""
+        raise ValueError(f"{self.label}: the EKF needs the motion's jacobian (the UKF does not)")
+
+    def covariance(self, step: int = 0):
+        """``Q_k`` ``(n, n)`` (or with run axes)."""
+        raise ValueError(f"{self.label}: the motion has no covariance of its own; give Q")
+
+    def difference(self, a, b):
+        """``a - b`` of states (override for states on a circle)."""
+        return a - b
+
+    def mean_of(self, points, weights):
+        """The weighted mean of points ``(..., N, n)`` with weights ``(N,)`` (override for a circular mean)."""
+        return weights @ points
+
+    @property
+    def linear_differences(self) -> bool:
+        """True when :meth:`difference` and :meth:`mean_of` are the linear forms."""
+        cls = type(self)
+        return cls.difference is MotionModel.difference and cls.mean_of is MotionModel.mean_of
+
+    def sample(self, x, *, step: int = 0, rng: np.random.Generator):
+        """A draw of ``x_k`` given states ``x`` ``(..., n)``: ``f(x) + w``, ``w ~ N(0, Q_k)`` (a positive
+        semi-definite Q through its symmetric square root, so a singular Q draws in its range only)."""
+        x_next = np.asarray(self.apply(x, step), dtype=float)
+        Q = np.asarray(self.covariance(step), dtype=float)
+        w, v = np.linalg.eigh(Q)
+        root = v * np.sqrt(np.maximum(w, 0.0))[..., None, :]
+        noise = rng.standard_normal(x_next.shape)
+        return x_next + np.einsum("...ij,...j->...i", root, noise)
+
+    def shifted(self, k: int) -> "MotionModel":
+        """The model whose step is counted from ``k`` (the online filter's one-step calls; default: itself)."""
+        return self
+
+
+class LinearMotion(MotionModel):
+    """``x_k = F_k x_{k-1} + w_k``, ``w_k ~ N(0, Q_k)``: ``F`` ``(n, n)``, with run axes ``batch + (n, n)`` or
+    :func:`per_step`; ``Q`` likewise (checked: a covariance)."""
+
+    linear = True
+    checks_own_output = True
+
+    def __init__(self, F, Q, *, name: str = "linear motion"):
+        self.name = name
+        Fv = F.value if isinstance(F, PerStep) else as_array(f"{name}: F", F)
+        if Fv.ndim < 2 or Fv.shape[-1] != Fv.shape[-2]:
+            raise ValueError(f"{name}: F must be square (n, n), batch + (n, n) or per_step(...), got {Fv.shape}")
+        _covariance(f"{name}: Q", Q.value if isinstance(Q, PerStep) else Q, Fv.shape[-1])
+        self.F, self.Q = F if isinstance(F, PerStep) else Fv, Q if isinstance(Q, PerStep) else np.asarray(Q, float)
+
+    def _at(self, value, step: int):
+        return value.at(step) if isinstance(value, PerStep) else value
+
+    def apply(self, x, step: int = 0):
+        F = self._at(self.F, step)
+        return x @ F.T if F.ndim == 2 else np.einsum("...ij,...j->...i", F, x)
+
+    def jacobian_at(self, x, step: int = 0):
+        return self._at(self.F, step)
+
+    def covariance(self, step: int = 0):
+        return self._at(self.Q, step)

@@ -31,6 +31,7 @@ from math import factorial
 import numpy as np
 
 from .._validate import as_array, check_choice, check_scalar
+from .base import MotionModel
 
 __all__ = ["KinematicModel", "constant_velocity", "constant_acceleration", "STATE_LAYOUTS", "NOISE_MODELS",
            "reflect_into_box", "simulate_states", "HeadingKinematicModel", "HEADING_MODELS"]
@@ -39,8 +40,24 @@ STATE_LAYOUTS = ("derivative_major", "axis_major")
 NOISE_MODELS = ("discrete", "continuous", "isotropic", "wiener")
 
 
+class _LinearKinematics(MotionModel):
+    """The motion-model protocol (:mod:`locbook.models.base`) of a model with constant matrices ``F`` and ``Q``."""
+
+    linear = True
+    checks_own_output = True
+
+    def apply(self, x, step: int = 0):
+        return np.asarray(x, dtype=float) @ self.F.T
+
+    def jacobian_at(self, x, step: int = 0):
+        return self.F
+
+    def covariance(self, step: int = 0):
+        return self.Q
+
+
 @dataclass(frozen=True)
-class KinematicModel:
+class KinematicModel(_LinearKinematics):
     """Linear kinematic model with ``dim`` axes and ``order`` derivatives beyond position.
 
     Attributes
@@ -199,7 +216,7 @@ HEADING_MODELS = ("yaw_rate", "literal_gudipati2017")
 
 
 @dataclass(frozen=True)
-class HeadingKinematicModel:
+class HeadingKinematicModel(_LinearKinematics):
     """Planar nearly-constant-acceleration motion with two angular states (Gudipati 2017, Sec. 3.2).
 
     The thesis prints an 8-D state ``[x, y, vx, vy, ax, ay, theta_x, theta_y]`` but 6 x 6 matrices A (3.2) and

@@ -19,7 +19,7 @@ from .._linalg import (_Singular, _apply, _batch_shape, _check_state, _covarianc
 from .functional import _linear_update_shared, _Out
 from .results import KALMAN_OUTPUTS, KalmanResult
 from .streams import Stream
-from .transition import NonlinearMotion, PerStep, _control_drift, _matrix_arg, step_matrix
+from .transition import MotionModel, PerStep, _control_drift, _matrix_arg, step_matrix
 
 @dataclass
 class _Setup:
@@ -43,7 +43,7 @@ class _Setup:
     F_steps: bool = False          # F is batch + (T, n, n): one matrix per step
     Q_steps: bool = False
     drift: np.ndarray | None = None     # the control input B_k u_k, batch + (T or 1, n)
-    motion: NonlinearMotion | None = None   # nonlinear motion (F is then None)
+    motion: MotionModel | None = None   # nonlinear motion (F is then None)
 
     @property
     def plain_motion(self) -> bool:
@@ -96,7 +96,11 @@ def _setup(F, Q, x0, P0, measurements, record, filter_name, B=None, u=None) -> _
     if isinstance(P0, PerStep) or isinstance(x0, PerStep):
         raise ValueError("x0 and P0 are the prior of one step: they have no time axis (per_step is for F, Q, B and a "
                          "LinearMeasurement's H and R)")
-    motion = F if isinstance(F, NonlinearMotion) else None
+    if isinstance(F, MotionModel) and F.linear:        # its matrices, as a matrix argument (the compiled paths')
+        F, Q = F.F, (F.Q if Q is None else Q)
+    motion = F if isinstance(F, MotionModel) else None
+    if motion is not None and Q is None:
+        Q = motion.covariance(0)
     if motion is not None:
         x = as_array("x0", x0)
         if x.ndim < 1:
@@ -105,8 +109,8 @@ def _setup(F, Q, x0, P0, measurements, record, filter_name, B=None, u=None) -> _
     else:
         shape = F.shape if isinstance(F, PerStep) else np.shape(F)
         if len(shape) < 2 or shape[-1] != shape[-2]:
-            raise ValueError(f"F must be square (n, n) or batch + (n, n), per_step(batch + (T, n, n)) or a "
-                             f"NonlinearMotion, got shape {shape}")
+            raise ValueError(f"F must be square (n, n) or batch + (n, n), per_step(batch + (T, n, n)) or a motion model "
+                             f"(a NonlinearMotion, a KinematicModel), got shape {shape}")
         n = shape[-1]
     measurements = _streams(measurements)
     for meas in measurements:
@@ -288,34 +292,27 @@ def _serial_shared(x, P, m: int, update, want: bool) -> _Out:
 _MOTION_FINITE = "for a finite state: f (and its jacobian) must return finite values"
 
 
-def _motion_call(motion: NonlinearMotion, field: str, x, k: int):
-    """The motion's ``f`` or ``jacobian`` at ``x`` (``f(x)``, or ``f(x, k)`` with ``uses_step``); a function whose
-    signature does not take those arguments (filterpy's ``fx(x, dt)``) is a one-line error saying what to pass."""
-    form = f"{field}(x, k)" if motion.uses_step else f"{field}(x)"
-    hint = ("uses_step=False for f(x)" if motion.uses_step else
-            "bind the time step, e.g. NonlinearMotion(lambda x: fx(x, dt)), or uses_step=True for f(x, k) "
-            "with k the step predicted to")
-    return call_user(getattr(motion, field), (x, k) if motion.uses_step else (x,),
-                     lambda exc: f"{motion.name}: {field} cannot be called as {form} (states (..., n)"
-                                 f"{', k the step' if motion.uses_step else ''}): {exc}; {hint}")
-
-
-def _motion_apply(motion: NonlinearMotion, x, k: int, batch_ndim: int) -> np.ndarray:
-    """``f(x)`` checked (:func:`locbook._validate.function_output`; finite: a NaN from f is named, not taken for
-    an overflow of the filter). ``batch_ndim``: the run axes of ``x`` (the rest: a sigma point's, the state's)."""
-    out = function_output(f"{motion.name}: f", _motion_call(motion, "f", x, k), np.shape(x), 1, np.shape(x))
-    _refuse_not_finite(f"{motion.name}: f", out, ~np.isfinite(out), batch_ndim, k, _MOTION_FINITE)
+def _motion_apply(motion: MotionModel, x, k: int, batch_ndim: int) -> np.ndarray:
+    """``f(x)`` of any motion model, checked for a user's model (:func:`locbook._validate.function_output`; finite:
+    a NaN from f is named, not taken for an overflow of the filter). ``batch_ndim``: the run axes of ``x`` (the rest:
+    a sigma point's, the state's)."""
+    out = motion.apply(x, k)
+    if motion.checks_own_output:
+        return out
+    out = function_output(f"{motion.label}: f", out, np.shape(x), 1, np.shape(x))
+    _refuse_not_finite(f"{motion.label}: f", out, ~np.isfinite(out), batch_ndim, k, _MOTION_FINITE)
     return out
 
 
-def _motion_jacobian(motion: NonlinearMotion, x, k: int) -> np.ndarray:
-    """The EKF's ``df/dx`` ``(..., n, n)`` at ``x`` ``batch + (n,)``, checked (unbatched ``(n, n)`` kept as given)."""
-    if motion.jacobian is None:
-        raise ValueError(f"{motion.name}: the EKF needs the motion's jacobian (the UKF does not)")
+def _motion_jacobian(motion: MotionModel, x, k: int) -> np.ndarray:
+    """The EKF's ``df/dx`` ``(..., n, n)`` at ``x`` ``batch + (n,)``, checked for a user's model (unbatched ``(n, n)``
+    kept as given)."""
+    J = motion.jacobian_at(x, k)
+    if motion.checks_own_output:
+        return J
     n = np.shape(x)[-1]
-    J = function_output(f"{motion.name}: jacobian", _motion_call(motion, "jacobian", x, k), np.shape(x)[:-1] + (n, n),
-                        2, np.shape(x), broadcast=False)
-    _refuse_not_finite(f"{motion.name}: jacobian", J, np.broadcast_to(~np.isfinite(J), np.shape(x)[:-1] + (n, n)),
+    J = function_output(f"{motion.label}: jacobian", J, np.shape(x)[:-1] + (n, n), 2, np.shape(x), broadcast=False)
+    _refuse_not_finite(f"{motion.label}: jacobian", J, np.broadcast_to(~np.isfinite(J), np.shape(x)[:-1] + (n, n)),
                        np.ndim(x) - 1, k, _MOTION_FINITE)
     return J
 

@@ -26,7 +26,7 @@ from . import _compiled
 from ._loop import _check_outputs, _covariance_shared_throughout, _run, _setup, _streams
 from .results import DIVERGENCE_PROBABILITY, DIVERGENCE_WINDOW, KalmanResult, _check_guard, _flag
 from .streams import _ekf_update
-from .transition import NonlinearMotion
+from .transition import MotionModel
 
 __all__ = ["kalman_filter", "extended_kalman_filter", "KF_VARIANTS"]
 
@@ -73,7 +73,7 @@ def kalman_filter(F, Q, x0, P0, measurements, *, B=None, u=None, record=None, pr
     window, probability = _check_guard(divergence_window, divergence_probability)
     outputs = _check_outputs(outputs)
     measurements = _streams(measurements)
-    if isinstance(F, NonlinearMotion):
+    if isinstance(F, MotionModel) and not F.linear:
         raise ValueError("kalman_filter takes a linear motion F; a NonlinearMotion needs extended_kalman_filter or "
                          "unscented_kalman_filter")
     if not all(m.model.linear for m in measurements):

@@ -38,7 +38,7 @@ from .kalman import kalman_filter
 from .smoother import rts_smoother
 from ..models.base import LinearGaussian
 from .streams import Stream
-from .transition import NonlinearMotion, PerStep, _control_drift
+from .transition import MotionModel, PerStep, _control_drift
 from .online import KALMAN_FILTERS
 
 __all__ = ["NoiseFit", "fit_noise_ml", "fit_noise_em", "NOISE_FORMS"]
@@ -412,7 +412,9 @@ def fit_noise_em(F, Q, x0, P0, measurement, *, B=None, u=None, n_iter: int = 10,
     if not getattr(model, "linear", False) or isinstance(model.H, PerStep) \
             or isinstance(model.R, PerStep) or measurement.mode != "parallel" or np.ndim(model.H) != 2:
         raise ValueError("fit_noise_em takes one parallel LinearMeasurement with one constant H (m, n) and R")
-    if isinstance(F, NonlinearMotion) or isinstance(Q, PerStep) or np.ndim(Q) != 2:
+    if isinstance(F, MotionModel) and F.linear:
+        F, Q = F.F, (F.Q if Q is None else Q)
+    if isinstance(F, MotionModel) or isinstance(Q, PerStep) or np.ndim(Q) != 2:
         raise ValueError("fit_noise_em fits the linear model: F a matrix (n, n) or per_step(F), Q one (n, n) "
                          "covariance (a NonlinearMotion or a per-step Q has no closed-form M-step here)")
     unknown = set(fit) - {"Q", "R"}

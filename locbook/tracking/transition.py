@@ -27,18 +27,18 @@ so one smoother (:func:`locbook.rts_smoother`) serves the KF, the EKF and the UK
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .._validate import as_array, function_output
-from ..models.base import PerStep, per_step, step_matrix
+from .._validate import as_array, call_user, function_output
+from ..models.base import LinearMotion, MotionModel, PerStep, per_step, step_matrix
 
-__all__ = ["PerStep", "per_step", "NonlinearMotion"]
+__all__ = ["PerStep", "per_step", "NonlinearMotion", "LinearMotion", "MotionModel"]
 
 
 @dataclass(frozen=True)
-class NonlinearMotion:
+class NonlinearMotion(MotionModel):
     """A nonlinear motion model ``x_k = f(x_{k-1}) + B u_k + w_k``, ``w_k ~ N(0, Q_k)`` (module docstring).
 
     ``f``: maps states ``(..., n)`` to ``(..., n)`` over any leading axes (the EKF calls it with the runs'
@@ -65,23 +65,49 @@ class NonlinearMotion:
             if (value is not None or field == "f") and not callable(value):
                 raise ValueError(f"{self.name}: {field} must be a function, got {type(value).__name__}")
 
-    def apply(self, x, step: int):
+    def _call(self, field: str, x, step: int):
+        """The model's ``f`` or ``jacobian`` at ``x`` (``f(x)``, or ``f(x, k)`` with ``uses_step``); a function whose
+        signature does not take those arguments (filterpy's ``fx(x, dt)``) is a one-line error saying what to pass."""
+        form = f"{field}(x, k)" if self.uses_step else f"{field}(x)"
+        hint = ("uses_step=False for f(x)" if self.uses_step else
+                "bind the time step, e.g. NonlinearMotion(lambda x: fx(x, dt)), or uses_step=True for f(x, k) "
+                "with k the step predicted to")
+        return call_user(getattr(self, field), (x, step) if self.uses_step else (x,),
+                         lambda exc: f"{self.name}: {field} cannot be called as {form} (states (..., n)"
+                                     f"{', k the step' if self.uses_step else ''}): {exc}; {hint}")
+
+    def apply(self, x, step: int = 0):
         """``f(x)`` (or ``f(x, step)``), checked to keep the state's shape and to be real (a complex output is
         refused, not cut to its real part)."""
-        out = self.f(x, step) if self.uses_step else self.f(x)
-        return np.asarray(function_output(f"{self.name}: f", out, np.shape(x), np.ndim(x), np.shape(x)))
+        return np.asarray(function_output(f"{self.name}: f", self._call("f", x, step), np.shape(x), 1, np.shape(x)))
 
-    def jacobian_at(self, x, step: int):
-        """The Jacobian ``df/dx`` ``(..., n, n)`` at ``x`` (the EKF's), checked."""
+    def jacobian_at(self, x, step: int = 0):
+        """The Jacobian ``df/dx`` ``(..., n, n)`` at ``x`` (the EKF's), checked (an unbatched ``(n, n)`` kept as
+        given)."""
         if self.jacobian is None:
             raise ValueError(f"{self.name}: the EKF needs the motion's jacobian (the UKF does not)")
-        J = self.jacobian(x, step) if self.uses_step else self.jacobian(x)
         n = np.shape(x)[-1]
-        return function_output(f"{self.name}: jacobian", J, np.shape(x)[:-1] + (n, n), 2, np.shape(x), broadcast=False)
+        return function_output(f"{self.name}: jacobian", self._call("jacobian", x, step), np.shape(x)[:-1] + (n, n), 2,
+                               np.shape(x), broadcast=False)
 
     def difference(self, a, b):
         """``a - b`` of states, through ``residual`` when given."""
-        return np.asarray(self.residual(a, b), dtype=float) if self.residual is not None else a - b
+        return self.residual(a, b) if self.residual is not None else a - b
+
+    def mean_of(self, points, weights):
+        """The weighted mean of points, through ``mean`` when given."""
+        return self.mean(points, weights) if self.mean is not None else weights @ points
+
+    @property
+    def linear_differences(self) -> bool:
+        return self.residual is None and self.mean is None
+
+    def shifted(self, k: int) -> "NonlinearMotion":
+        """A step-aware motion whose step is counted from ``k`` (a one-step call sees step 0)."""
+        if not self.uses_step:
+            return self
+        shift = lambda fn: None if fn is None else (lambda x, step: fn(x, step + k))
+        return replace(self, f=shift(self.f), jacobian=shift(self.jacobian))
 
 
 def _matrix_arg(name: str, value, rows: int, cols: int, T: int):

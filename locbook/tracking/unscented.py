@@ -347,8 +347,8 @@ def _unscented_stream_update(x, P, z, stream, step: int, want: bool, weights, in
 
 
 def _checked_motion(motion, field: str, value, shape, batch_ndim: int, step: int) -> np.ndarray:
-    """The output of a NonlinearMotion's ``mean`` or ``residual``, checked: real, of ``shape``, finite."""
-    name = f"{motion.name}: {field}"
+    """The output of a motion model's ``mean`` or ``residual``, checked: real, of ``shape``, finite."""
+    name = f"{motion.label}: {field}"
     out = function_output(name, value, shape, 1)
     _refuse_not_finite(name, out, ~np.isfinite(out), batch_ndim, step,
                        "for finite states: it must return finite values")
@@ -368,12 +368,14 @@ def _unscented_predictor(setup, weights: UnscentedWeights):
         d = setup.drift_at(k)
         if d is not None:
             Y = Y + d[..., None, :]
-        if motion.mean is not None:
-            x_pred = _checked_motion(motion, "mean", motion.mean(Y, weights.mean), Y.shape[:-2] + Y.shape[-1:], nb, k)
+        linear = motion.linear_differences
+        if not linear:
+            x_pred = _checked_motion(motion, "mean", motion.mean_of(Y, weights.mean), Y.shape[:-2] + Y.shape[-1:], nb,
+                                     k)
         else:
             x_pred = weights.mean @ Y
-        dY = Y - x_pred[..., None, :] if motion.residual is None else _checked_motion(
-            motion, "residual", motion.residual(Y, x_pred[..., None, :]), Y.shape, nb, k)
+        dY = Y - x_pred[..., None, :] if linear else _checked_motion(
+            motion, "residual", motion.difference(Y, x_pred[..., None, :]), Y.shape, nb, k)
         wdY = weights.cov[:, None] * dY
         P_pred = _mT(dY) @ wdY
         P_pred = 0.5 * (P_pred + _mT(P_pred)) + setup.Q_at(k)

@@ -1,5 +1,5 @@
 """The compiled EKF kernels (numba), module-level functions compiled on first call (numba caches the machine code on
-disk), with the serial RSS order the UKF kernels share and the NIS guard's pass. Imported only when a compiled path
+disk), with the serial RSS order the UKF kernels share. Imported only when a compiled path
 runs (:func:`locbook.tracking._compiled._compiled_ekf`, the UKF kernels), so that ``import locbook`` never loads
 numba. Without numba they are plain Python (the same arithmetic, slowly: the tests run them that way). Each kernel
 works on ``W`` runs at once on the innermost axis (the last axis of its arrays): blocks of equal width up to 256 runs
@@ -504,29 +504,3 @@ def _nb_ekf(Fi, Fj, Fv, Q, x0, P0, predict_first, slot, active, kind, col, nz, n
                         for j in range(n):
                             out_P[b0 + w, slot[k], i, j] = P[i, j, w]
     return 0
-
-
-@_jit
-def _nb_nis_streaks(nis, dof, table, window, start):
-    """The consistency guard's rule (:func:`locbook.tracking.results.nis_divergence`) run by run, in one pass that
-    stops at the first window: ``start[b]`` the first step of the first ``window`` consecutive exceedances of
-    ``table[dof]`` among run ``b``'s updates (a step with ``dof`` 0 or a NaN NIS is skipped: it neither counts nor
-    breaks a streak), -1 where there is none. ``nis``, ``dof`` ``(B, T)``."""
-    B, T = nis.shape
-    for b in range(B):
-        start[b] = -1
-        streak = 0
-        first = 0
-        for k in range(T):
-            d, v = dof[b, k], nis[b, k]
-            if d == 0 or v != v:
-                continue
-            if v > table[d]:
-                if streak == 0:
-                    first = k
-                streak += 1
-                if streak == window:
-                    start[b] = first
-                    break
-            else:
-                streak = 0

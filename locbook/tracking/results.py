@@ -274,12 +274,6 @@ def nis_divergence(nis, nis_dof, window: int | None = DIVERGENCE_WINDOW,
     table = np.concatenate([[np.inf], chdtri(np.arange(1, max(int(dof.max()), 1) + 1, dtype=float), 1.0 - probability)])
     T = nis.shape[-1]
     nis, dof = nis.reshape(-1, T), dof.reshape(-1, T)
-    kernels = _guard_kernels(nis.size)
-    if kernels is not None:                     # the same rule in one compiled pass per run
-        from ._compiled import _kernel_array
-        start = np.empty(nis.shape[0], np.int64)
-        kernels._nb_nis_streaks(_kernel_array(nis, float), _kernel_array(dof, np.int64), table, window, start)
-        return (start >= 0).reshape(batch), start.reshape(batch)
     exceed = nis > np.take(table, dof)          # NaN > bound is False: a skipped step never counts
     diverged, start = np.zeros(nis.shape[0], bool), np.full(nis.shape[0], -1, np.int64)
     # only a run with at least `window` exceedances in all can hold `window` consecutive ones (most runs of a
@@ -299,24 +293,6 @@ def nis_divergence(nis, nis_dof, window: int | None = DIVERGENCE_WINDOW,
         diverged[some] = hits
         start[some] = np.where(hits, np.argmax(count >= first, axis=-1), -1)  # the window's first exceedance
     return diverged.reshape(batch), start.reshape(batch)
-
-
-def _guard_trial():
-    def run(kernels):
-        kernels._nb_nis_streaks(np.ones((1, 3)), np.ones((1, 3), np.int64), np.array([np.inf, 0.5]), 2,
-                                np.empty(1, np.int64))
-    return run
-
-
-def _guard_kernels(size: int):
-    """:mod:`locbook.tracking._kernels` for the guard's compiled pass when the NIS has at least
-    ``_compiled._NUMBA_MIN_WORK`` values, the compiled paths are on and a compiled filter has already loaded that
-    module in this session (:func:`locbook.tracking._compiled._kernel_module`), else None: numpy's passes give the same
-    flags, and loading numba for the guard alone would cost more than it saves."""
-    from . import _compiled                     # lazy: _compiled imports this module
-    if size < _compiled._NUMBA_MIN_WORK or "locbook.tracking._kernels" not in sys.modules:
-        return None
-    return _compiled._kernel_module("locbook.tracking._kernels", _guard_trial, "NIS guard", stacklevel=4)
 
 
 def nees(x_true, x, P, *, index=None):

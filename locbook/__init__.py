@@ -17,7 +17,7 @@ _API = (
         "pairwise_distance_m", "correlated_shadowing_db", "wall_crossings", "small_scale_fading_db",
         "log_normal_range_moments", "correct_range_bias")),
     ("measurement and motion models", "models.base", ("MeasurementModel", "LinearGaussian", "FunctionMeasurement",
-        "MotionModel", "LinearMotion")),
+        "MotionModel", "LinearMotion", "per_state")),
     ("RSS measurement model", "models.rss", ("RssModel", "RssMeasurementModel")),
     ("calibration", "static.calibration", ("PathLossFit", "fit_path_loss", "fit_path_loss_closed_form",
         "calibrate_path_loss", "calibrate_path_loss_devices", "fix_error_covariance", "path_loss_exp_ratio_estimate",

@@ -34,6 +34,8 @@ def as_array(name: str, value, *, ndim: int | None = None, min_ndim: int | None 
         value = _stack_masked(name, value)      # np.asarray of a list of masked rows would drop their masks
     if np.ma.isMaskedArray(value):
         value = _unmasked(name, value, nan_ok)
+    if nan_ok and isinstance(value, (list, tuple)):
+        value = _none_rows(value)               # filterpy's z = None: a step without a reading
     if _is_complex(value):                      # numpy would drop the imaginary part with a warning
         raise ValueError(_COMPLEX.format(name=name))
     try:
@@ -96,6 +98,21 @@ def _unmasked(name: str, value, nan_ok: bool) -> np.ndarray:
         return np.ma.filled(value.astype(float), np.nan)
     except (TypeError, ValueError):
         raise ValueError(f"{name} must be numeric, got a masked array of dtype {value.dtype}") from None
+
+
+def _none_rows(value):
+    """A list of readings where a whole row is None (filterpy's ``z = None``: nothing read at that step) with those
+    rows as NaN, the length of the other rows; rows of different lengths, or a None inside a row, stay for the checks
+    (a None entry of a row is NaN by numpy's conversion of a float array; see :func:`_not_numeric`)."""
+    rows = [v for v in value if v is not None]
+    if len(rows) == len(value) or not rows:
+        return value
+    if all(isinstance(v, (list, tuple, np.ndarray)) for v in rows):
+        shapes = {np.shape(v) for v in rows}
+        if len(shapes) == 1:
+            blank = np.full(shapes.pop(), np.nan)
+            return [blank if v is None else v for v in value]
+    return value
 
 
 def _none_at(value, at=()):

@@ -82,8 +82,8 @@ def test_nan_from_h_where_the_reading_is_missing_is_not_used_and_equals_the_filt
     J = lambda x: np.broadcast_to(np.array([[1.0, 0, 0, 0], [np.nan] * 4]), np.shape(x)[:-1] + (2, 4)).copy()
     res = filt(MODEL.F, MODEL.Q, X0, P0, lb.NonlinearMeasurement(z, h, np.diag([0.5, 0.8]), jacobian=J))
     ref = lb.kalman_filter(MODEL.F, MODEL.Q, X0, P0, lb.LinearMeasurement(z[:, :1], H[:1], [[0.5]]))
-    np.testing.assert_allclose(res.x, ref.x, rtol=0, atol=1e-8)
-    np.testing.assert_allclose(res.P, ref.P, rtol=0, atol=1e-8)
+    np.testing.assert_allclose(res.mean, ref.mean, rtol=0, atol=1e-8)
+    np.testing.assert_allclose(res.cov, ref.cov, rtol=0, atol=1e-8)
 
 
 @pytest.mark.parametrize("filt", [EKF, UKF], ids=["ekf", "ukf"])
@@ -122,9 +122,9 @@ def test_masked_readings_are_missing_readings_in_every_kalman_filter(filt):
     where[3, 0] = where[5] = where[8, 1] = True
     got = filt(MODEL.F, MODEL.Q, X0, P0, lb.LinearMeasurement(_masked(z, where), H, R))
     ref = filt(MODEL.F, MODEL.Q, X0, P0, lb.LinearMeasurement(np.where(where, np.nan, z), H, R))
-    np.testing.assert_array_equal(got.x, ref.x)
-    np.testing.assert_array_equal(got.P, ref.P)
-    assert np.all(np.abs(got.x[..., :2] - z).max() < 50)      # the 1e3 under the mask was never read
+    np.testing.assert_array_equal(got.mean, ref.mean)
+    np.testing.assert_array_equal(got.cov, ref.cov)
+    assert np.all(np.abs(got.mean[..., :2] - z).max() < 50)      # the 1e3 under the mask was never read
 
 
 def test_masked_rss_readings_are_not_heard():
@@ -137,7 +137,7 @@ def test_masked_rss_readings_are_not_heard():
     x0 = np.array([2.0, 3.0, 1.0, 1.0])
     for filt in (EKF, UKF):
         run = lambda p: filt(MODEL.F, MODEL.Q, x0, P0, lb.RssMeasurement(p, anchors, channel, MODEL.position_index))
-        np.testing.assert_array_equal(run(_masked(power, where)).x, run(np.where(where, np.nan, power)).x)
+        np.testing.assert_array_equal(run(_masked(power, where)).mean, run(np.where(where, np.nan, power)).mean)
 
 
 def test_pykalman_robot_masked_observations_agree_with_pykalman():
@@ -158,9 +158,9 @@ def test_pykalman_robot_masked_observations_agree_with_pykalman():
                                d.observation_covariance, d.transition_offsets, d.observation_offset,
                                d.initial_state_mean, d.initial_state_covariance)
     means, covs = kf.filter(obs)
-    np.testing.assert_allclose(run.x, means, rtol=0, atol=1e-9)
-    np.testing.assert_allclose(run.P, covs, rtol=0, atol=1e-9)
-    np.testing.assert_allclose(run.x[:500], d.filtered_state_means[:500], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(run.mean, means, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(run.cov, covs, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(run.mean[:500], d.filtered_state_means[:500], rtol=0, atol=1e-9)
 
 
 ANCHORS = np.array([[0.0, 0.0], [20.0, 0.0], [0.0, 20.0], [20.0, 20.0], [10.0, -5.0]])
@@ -235,8 +235,8 @@ def test_per_step_F_equals_filterpy_batch_filter_with_its_list_of_Fs():
     kf.x, kf.P, kf.Q, kf.H, kf.R = X0.copy(), P0.copy(), MODEL.Q, H, R
     means, covs, _, _ = kf.batch_filter(list(z), Fs=Fs)
     res = lb.kalman_filter(lb.per_step(np.stack(Fs)), MODEL.Q, X0, P0, lb.LinearMeasurement(z, H, R))
-    np.testing.assert_allclose(res.x, means, rtol=0, atol=1e-9)
-    np.testing.assert_allclose(res.P, covs, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(res.mean, means, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(res.cov, covs, rtol=0, atol=1e-9)
 
 
 @pytest.mark.parametrize("name, stack", [("H", np.stack), ("Q", list), ("R", list)], ids=["H", "Q_list", "R_list"])
@@ -254,7 +254,7 @@ def test_an_array_of_covariances_stays_a_documented_run_axis():
     res = lb.kalman_filter(MODEL.F, scales[:, None, None] * MODEL.Q, X0, P0, lb.LinearMeasurement(z, H, R))
     for i in (0, 7):
         one = lb.kalman_filter(MODEL.F, scales[i] * MODEL.Q, X0, P0, lb.LinearMeasurement(z, H, R))
-        np.testing.assert_allclose(res.x[i], one.x, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(res.mean[i], one.mean, rtol=0, atol=1e-12)
 
 
 def test_fit_noise_ml_candidates_are_runs_even_when_as_many_as_the_steps():
@@ -272,7 +272,7 @@ def test_a_stack_with_runs_elsewhere_in_the_call_is_still_runs():
     res = lb.kalman_filter(Fs, MODEL.Q, np.broadcast_to(X0, (T, 4)), P0, lb.LinearMeasurement(z, H, R))
     for i in (0, 5):
         one = lb.kalman_filter(Fs[i], MODEL.Q, X0, P0, lb.LinearMeasurement(z, H, R))
-        np.testing.assert_allclose(res.x[i], one.x, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(res.mean[i], one.mean, rtol=0, atol=1e-12)
 
 
 def test_column_shaped_readings_are_refused_with_the_shape_to_pass():
@@ -289,7 +289,7 @@ def test_column_shaped_readings_are_refused_with_the_shape_to_pass():
     Pp = MODEL.F @ P0 @ MODEL.F.T + MODEL.Q
     xp = MODEL.F @ X0
     K = Pp[:, :1] / (Pp[0, 0] + R[0, 0])
-    np.testing.assert_allclose(runs.x[:, 0], xp + (z[:, :1] - xp[0]) @ K.T, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(runs.mean[:, 0], xp + (z[:, :1] - xp[0]) @ K.T, rtol=0, atol=1e-12)
 
 
 def test_online_filter_runs_of_one_reading_each_stay_runs():
@@ -298,7 +298,7 @@ def test_online_filter_runs_of_one_reading_each_stay_runs():
     step = online.step(lb.LinearMeasurement(z[:, None, :], H[:1], R[:1, :1]))
     batch = lb.kalman_filter(MODEL.F, MODEL.Q, np.broadcast_to(X0, (T, 4)), P0,
                              lb.LinearMeasurement(z[:, None, :], H[:1], R[:1, :1]))
-    np.testing.assert_allclose(step.x, batch.x, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(step.mean, batch.mean, rtol=0, atol=1e-12)
 
 
 @pytest.mark.parametrize("points, kw, needle", [("julier", dict(alpha=0.5), "alpha=0.5"),
@@ -330,24 +330,29 @@ def test_filterpy_style_fx_x_dt_gets_a_line_saying_what_to_pass():
         _one_line(exc, "cv:", "cannot be called as", "lambda x: fx(x, dt)", "uses_step=True")
     # bound as the line says, the motion is the KF's (a linear f): equal results
     bound = lb.NonlinearMotion(lambda x: fx(x, 1.0), jacobian=lambda x: MODEL.F)
-    np.testing.assert_allclose(EKF(bound, MODEL.Q, X0, P0, lb.LinearMeasurement(_track(), H, R)).x,
-                               lb.kalman_filter(MODEL.F, MODEL.Q, X0, P0, lb.LinearMeasurement(_track(), H, R)).x,
+    np.testing.assert_allclose(EKF(bound, MODEL.Q, X0, P0, lb.LinearMeasurement(_track(), H, R)).mean,
+                               lb.kalman_filter(MODEL.F, MODEL.Q, X0, P0, lb.LinearMeasurement(_track(), H, R)).mean,
                                rtol=0, atol=1e-12)
 
 
-def test_a_list_with_none_says_to_use_nan():
+def test_a_list_with_none_is_a_step_without_a_reading_and_a_ragged_one_says_to_use_nan():
     z = _track().tolist()
     z[4] = None                                  # filterpy's batch_filter takes None for a step without reading
+    with_none = lb.LinearMeasurement(z, H, R)    # taken as filterpy means it: that step's readings are all missing
+    assert np.isnan(with_none.z[4]).all() and np.isfinite(np.delete(with_none.z, 4, axis=0)).all()
+    ragged = [row for row in z]
+    ragged[3] = [ragged[3][0], None]             # a None inside a row of a list whose rows differ: use NaN
+    ragged[4] = [1.0]
     with pytest.raises(ValueError) as exc:
-        lb.LinearMeasurement(z, H, R)
-    _one_line(exc, "LinearMeasurement.z holds None at index (4,)", "use NaN")
-    z[4] = [np.nan, np.nan]                      # as it says: the step is prediction only, as filterpy's None
+        lb.LinearMeasurement(ragged, H, R)
+    _one_line(exc, "LinearMeasurement.z", "NaN")
+    z[4] = [np.nan, np.nan]                      # the same step written with NaN: prediction only, as filterpy's None
     filterpy_kalman = pytest.importorskip("filterpy.kalman")
     kf = filterpy_kalman.KalmanFilter(dim_x=4, dim_z=2)
     kf.x, kf.P, kf.F, kf.Q, kf.H, kf.R = X0.copy(), P0.copy(), MODEL.F, MODEL.Q, H, R
     zs = [None if i == 4 else np.array(row) for i, row in enumerate(z)]
     means, _, _, _ = kf.batch_filter(zs)
-    np.testing.assert_allclose(lb.kalman_filter(MODEL.F, MODEL.Q, X0, P0, lb.LinearMeasurement(z, H, R)).x, means,
+    np.testing.assert_allclose(lb.kalman_filter(MODEL.F, MODEL.Q, X0, P0, lb.LinearMeasurement(z, H, R)).mean, means,
                                rtol=0, atol=1e-9)
 
 

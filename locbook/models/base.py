@@ -36,7 +36,7 @@ from .._linalg import _LOG_2PI, _covariance, _refuse_not_finite
 from .._validate import as_array, call_user, function_output
 
 __all__ = ["MeasurementModel", "LinearGaussian", "FunctionMeasurement", "MotionModel", "LinearMotion", "PerStep",
-           "per_step", "step_matrix"]
+           "per_step", "step_matrix", "per_state"]
 
 
 class PerStep:
@@ -78,6 +78,39 @@ def at_points(value, tail: int):
     the point axis dropped; an output without it (a constant, ``tail`` axes only) kept as it is."""
     value = np.asarray(value)
     return value[(Ellipsis, 0) + (slice(None),) * tail] if value.ndim > tail else value
+
+
+def per_state(fn):
+    """A function of one state ``(n,)`` (filterpy's ``hx(x)``, ``fx(x)``) made a function of states ``(..., n)`` over
+    any leading axes, as every locbook filter calls it (all runs, sigma points or particles at once): ``fn`` applied
+    to each state in turn (a Python loop: slow for many runs; write ``fn`` over leading axes where speed matters)."""
+    def over_states(x, *args):
+        x = np.asarray(x, dtype=float)
+        lead = x.shape[:-1]
+        flat = x.reshape((-1, x.shape[-1]))
+        out = [np.asarray(fn(state, *args), dtype=float) for state in flat]
+        tail = out[0].shape if out else ()
+        return np.stack(out).reshape(lead + tail) if out else np.zeros(lead + tail)
+    over_states.__name__ = getattr(fn, "__name__", "per_state")
+    return over_states
+
+
+def per_state_hint(name: str, fn, x, args=(), tail=None) -> str | None:
+    """When ``fn`` failed on states ``x`` ``(..., n)`` with leading axes: the one-line refusal saying so if ``fn``
+    works on one state (a per-state function, filterpy's form: an output of shape ``tail``, or at least one axis),
+    else None (its own error stands)."""
+    x = np.asarray(x)
+    if x.ndim < 2:
+        return None
+    try:
+        out = np.asarray(fn(x[(0,) * (x.ndim - 1)], *args), dtype=float)
+    except Exception:                       # noqa: BLE001 - not a per-state function either: its own error stands
+        return None
+    if out.ndim == 0 or (tail is not None and out.shape != tuple(tail)) or not np.all(np.isfinite(out)):
+        return None
+    return (f"{name} works on one state (n,) but not on states of shape {x.shape}: locbook calls it with every run "
+            "(and the UKF's sigma points) at once, states (..., n); write it over leading axes (x[..., 0] for x[0], "
+            "H @ x[..., None] for H @ x) or wrap it with locbook.per_state")
 
 
 class MeasurementModel:
@@ -223,6 +256,10 @@ class MeasurementModel:
         ``"mean_of"``)."""
         return what
 
+    def user_function(self, what: str):
+        """The user's function behind ``what`` (a model given by functions), else None."""
+        return None
+
     def run_shapes(self) -> list:
         """The run axes the model's own parameters carry, named: ``[(name, shape), ...]`` (default none)."""
         return []
@@ -248,7 +285,14 @@ def check_output(model, what: str, value, x, tail: tuple, present, step: int, *,
     it). One ValueError line naming the model, the function and the step otherwise."""
     x_shape = np.shape(x)
     name = f"{model.label}: {model.function_name(what)}"
-    out = function_output(name, value, x_shape[:-1] + tail, len(tail), x_shape)
+    try:
+        out = function_output(name, value, x_shape[:-1] + tail, len(tail), x_shape)
+    except ValueError as exc:
+        fn = model.user_function(what)
+        why = None if fn is None or what == "residual" else per_state_hint(name, fn, x, tail=tail)
+        if why is None:
+            raise
+        raise ValueError(f"{why} ({exc})") from None
     _refuse_not_finite(name, out, present & ~np.isfinite(out), len(x_shape) - 1 - points, step, _PRESENT)
     return out
 
@@ -414,6 +458,9 @@ class FunctionMeasurement(MeasurementModel):
     def function_name(self, what: str) -> str:
         return {"mean": "h", "mean_of": "mean"}.get(what, what)
 
+    def user_function(self, what: str):
+        return {"mean": self.h, "jacobian": self.jacobian_fn}.get(what)
+
     def _call(self, field: str, fn, *args):
         """``fn(*args)``; a signature that does not take them (filterpy's ``h(x, *hx_args)``) is one line saying what
         to pass."""
@@ -422,7 +469,15 @@ class FunctionMeasurement(MeasurementModel):
         hint = {"h": "bind its other arguments: write lambda x: h(x, arg)",
                 "jacobian": "bind its other arguments: write jacobian=lambda x: H(x, arg)"}.get(
                     field, f"give a function called as {form}")
-        return call_user(fn, args, lambda exc: f"{self.name}: {field} cannot be called as {form}: {exc}; {hint}")
+        try:
+            return call_user(fn, args, lambda exc: f"{self.name}: {field} cannot be called as {form}: {exc}; {hint}")
+        except Exception as exc:
+            tail = {"h": (self._m,), "R": (self._m, self._m)}.get(field)
+            why = per_state_hint(f"{self.name}: {field}", fn, args[0], args[1:], tail) \
+                if field in ("h", "jacobian", "R") else None
+            if why is None:
+                raise
+            raise ValueError(f"{why} (it raised {type(exc).__name__}: {exc})") from None
 
     def mean(self, x, *, step: int = 0):
         return self._call("h", self.h, x)

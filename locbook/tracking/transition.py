@@ -32,7 +32,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .._validate import as_array, call_user, function_output
-from ..models.base import LinearMotion, MotionModel, PerStep, per_step, step_matrix
+from ..models.base import LinearMotion, MotionModel, PerStep, per_state_hint, per_step, step_matrix
 
 __all__ = ["PerStep", "per_step", "NonlinearMotion", "LinearMotion", "MotionModel"]
 
@@ -72,14 +72,29 @@ class NonlinearMotion(MotionModel):
         hint = ("uses_step=False for f(x)" if self.uses_step else
                 "bind the time step, e.g. NonlinearMotion(lambda x: fx(x, dt)), or uses_step=True for f(x, k) "
                 "with k the step predicted to")
-        return call_user(getattr(self, field), (x, step) if self.uses_step else (x,),
-                         lambda exc: f"{self.name}: {field} cannot be called as {form} (states (..., n)"
-                                     f"{', k the step' if self.uses_step else ''}): {exc}; {hint}")
+        args = (x, step) if self.uses_step else (x,)
+        try:
+            return call_user(getattr(self, field), args,
+                             lambda exc: f"{self.name}: {field} cannot be called as {form} (states (..., n)"
+                                         f"{', k the step' if self.uses_step else ''}): {exc}; {hint}")
+        except Exception as exc:
+            n = np.shape(x)[-1:]
+            why = per_state_hint(f"{self.name}: {field}", getattr(self, field), x, args[1:], n if field == "f" else n * 2)
+            if why is None:
+                raise
+            raise ValueError(f"{why} (it raised {type(exc).__name__}: {exc})") from None
 
     def apply(self, x, step: int = 0):
         """``f(x)`` (or ``f(x, step)``), checked to keep the state's shape and to be real (a complex output is
         refused, not cut to its real part)."""
-        return np.asarray(function_output(f"{self.name}: f", self._call("f", x, step), np.shape(x), 1, np.shape(x)))
+        out = self._call("f", x, step)
+        try:
+            return np.asarray(function_output(f"{self.name}: f", out, np.shape(x), 1, np.shape(x)))
+        except ValueError as exc:
+            why = per_state_hint(f"{self.name}: f", self.f, x, (step,) if self.uses_step else (), np.shape(x)[-1:])
+            if why is None:
+                raise
+            raise ValueError(f"{why} ({exc})") from None
 
     def jacobian_at(self, x, step: int = 0):
         """The Jacobian ``df/dx`` ``(..., n, n)`` at ``x`` (the EKF's), checked (an unbatched ``(n, n)`` kept as

@@ -214,3 +214,19 @@ def test_a_model_without_a_jacobian_runs_in_the_ukf_and_is_refused_by_the_ekf_by
     assert np.isfinite(lb.unscented_kalman_filter(model.F, model.Q, x0, P0, stream).x).all()
     with pytest.raises(ValueError, match="ranges: the EKF needs the model's jacobian"):
         lb.extended_kalman_filter(model.F, model.Q, x0, P0, stream)
+
+
+def test_the_architecture_pages_sensor_example_runs():
+    """docs/architecture.md's 'Adding a sensor' example, executed (skipped where the docs are not beside the tests)."""
+    from pathlib import Path
+    page = Path(__file__).resolve().parents[1] / "docs" / "architecture.md"
+    if not page.exists():
+        pytest.skip("docs/architecture.md is not beside the tests")
+    text = page.read_text()
+    start = text.index("```python\n", text.index("## Adding a sensor")) + len("```python\n")
+    code = text[start:text.index("\n```", start)]
+    model, x, z = _track(runs=2, steps=20)
+    names = {"z": z, "anchors": ANCHORS, "cv": model, "x0": np.array([3.0, 2.0, 0.0, 0.0]), "P0": np.eye(4)}
+    exec(compile(code, str(page), "exec"), names)
+    assert np.linalg.norm(names["track"].mean[..., -1, :2] - x[:, -1, :2], axis=-1).max() < 1.5
+    assert names["cloud"].mean.shape == (2, 20, 2)

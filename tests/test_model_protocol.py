@@ -230,3 +230,34 @@ def test_the_architecture_pages_sensor_example_runs():
     exec(compile(code, str(page), "exec"), names)
     assert np.linalg.norm(names["track"].mean[..., -1, :2] - x[:, -1, :2], axis=-1).max() < 1.5
     assert names["cloud"].mean.shape == (2, 20, 2)
+
+
+def test_the_grid_filter_takes_the_rss_models_mean_table_once(monkeypatch):
+    """The RSS model's fast path (its cell-by-anchor mean table, which the compiled grid kernels read) is asked for
+    once per call and used, not bypassed by the protocol's generic per-step likelihood."""
+    from locbook.models.rss import RssModel
+    calls = []
+    original = RssModel.mean_table
+    monkeypatch.setattr(RssModel, "mean_table", lambda self, *a: calls.append(1) or original(self, *a))
+    monkeypatch.setattr(RssModel, "log_likelihood", lambda *a, **k: pytest.fail("per-step likelihood used"))
+    model = RssModel(ANCHORS, lb.PathLossModel(-40.0, 2.2, 3.0, min_distance_m=0.1))
+    cells = np.random.default_rng(0).uniform(0, 8, (60, 2))
+    rss = np.random.default_rng(1).normal(-60, 4, (3, 4, 3))
+    res = lb.grid_bayes_filter(rss, cells, model, spread_m=0.5)
+    assert np.isfinite(res.mean).all() and len(calls) == 1
+
+
+def test_the_particle_filter_takes_the_rss_models_compiled_likelihood(monkeypatch):
+    """The RSS model's compiled likelihood (a registry keyed by model type) is what the particle filter calls when
+    the compiled path is on, not the protocol's generic likelihood."""
+    from locbook.tracking import _compiled, particle
+    if not (_compiled._NUMBA_ENABLED and _compiled._numba_ready()):
+        pytest.skip("the compiled paths are off")
+    calls = []
+    fused = particle._FUSED_LIKELIHOODS[lb.RssModel]
+    monkeypatch.setitem(particle._FUSED_LIKELIHOODS, lb.RssModel, lambda *a, **k: calls.append(1) or fused(*a, **k))
+    model = lb.RssModel(ANCHORS, lb.PathLossModel(-40.0, 2.2, 3.0, min_distance_m=0.1))
+    rss = np.random.default_rng(1).normal(-60, 4, (2, 3, 3))
+    n = max(particle._NUMBA_MIN_PARTICLES, 100)
+    lb.particle_filter(rss, model, np.random.default_rng(2), n_particles=n, region_m=((0, 0), (8, 8)))
+    assert len(calls) == 3                      # one per step

@@ -203,19 +203,24 @@ class RssModel(MeasurementModel):
     def check_readings(self, z, n_state=None) -> None:
         self.readings(z, ndim=np.ndim(z) if np.ndim(z) in (2, 3) else 3)
 
-    def points_log_likelihood(self, rss_dbm, points, n_runs: int):
-        """The log-likelihood ``(R, C)`` (up to a constant per run) of each step's readings ``rss_dbm`` ``(R, T, m)``
-        at fixed ``points`` ``(C, dim)`` (a grid's cells), as a function of the step. When the mean does not change
-        with the step (no per-step parameters) and a per-run table fits in :data:`TABLE_MAX_VALUES`, the cell-by-anchor
-        mean table is computed once and each step's log-likelihood from it, by the arithmetic of
-        :meth:`log_likelihood` on the same blocks of runs (the same bits)."""
-        table = sigma = None
+    def mean_table(self, points, n_runs: int):
+        """``(table, sigma)``: the cell-by-anchor mean ``(1 or R, C, m)`` at fixed ``points`` ``(C, dim)`` and the
+        sigma, when the mean does not change with the step (no per-step parameters; walls are fixed per cell too) and a
+        per-run table fits in :data:`TABLE_MAX_VALUES`; else None (each step evaluates the model)."""
         runs = self.runs
-        if self.steps is None and rss_dbm.shape[1] and not (
-                runs is not None and runs * points.shape[0] * self.n_anchors > TABLE_MAX_VALUES):
-            sigma, table = self._sigma(0, "the likelihood"), self.mean_rss_dbm(points, 0)
-        if table is None:
+        if self.steps is not None or (runs is not None and runs * points.shape[0] * self.n_anchors > TABLE_MAX_VALUES):
+            return None
+        return self.mean_rss_dbm(points, 0), self._sigma(0, "the likelihood")
+
+    def points_log_likelihood(self, rss_dbm, points, n_runs: int, *, table=False):
+        """The log-likelihood ``(R, C)`` (up to a constant per run) of each step's readings ``rss_dbm`` ``(R, T, m)``
+        at fixed ``points`` ``(C, dim)`` (a grid's cells), as a function of the step: from the mean table
+        (:meth:`mean_table`) by the arithmetic of :meth:`log_likelihood` on the same blocks of runs (the same bits),
+        or the model at each step. ``table``: the :meth:`mean_table` already computed (None: there is none)."""
+        fixed = table if table is not False else (self.mean_table(points, n_runs) if rss_dbm.shape[1] else None)
+        if fixed is None:
             return lambda t: self.log_likelihood(rss_dbm[:, t], points, t, constant=False)
+        table, sigma = fixed
         return lambda t: _table_log_likelihood(rss_dbm[:, t], table, sigma, self.dim)
 
     def readings(self, rss_dbm, *, ndim: int) -> np.ndarray:

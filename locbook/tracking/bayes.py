@@ -584,7 +584,13 @@ def grid_bayes_filter(rss_dbm, cells_m, model, spread_m: float = 0.5, *, n_steps
     if use_separable:
         separable = _SeparableTransition(cells_m, spread_m)
     if is_model and n_steps:
-        fixed["ll"] = _points_log_likelihood(model, rss_dbm, cells_m, n_runs)
+        table = getattr(model, "mean_table", None)       # a Gaussian model's mean table: the kernels' likelihood
+        table = table(cells_m, n_runs) if table is not None else None
+        if table is not None:
+            fixed["table"], fixed["sigma"] = table
+            fixed["ll"] = model.points_log_likelihood(rss_dbm, cells_m, n_runs, table=table)
+        else:
+            fixed["ll"] = _points_log_likelihood(model, rss_dbm, cells_m, n_runs)
     kernels = None
     if n_runs * n_steps * n_cells >= _GRID_MIN_WORK:
         kernels = _grid_kernels()

@@ -129,7 +129,7 @@ def filterpy_ukf(st, runs: int):
 def _head(result, n: int):
     """Copies of the first ``n`` runs' means and covariances: all the agreement check needs (the harness keeps every
     call's result, so the full arrays are dropped inside the timed call rather than held over the repeats)."""
-    return result.x[:n].copy(), result.P[:n].copy()
+    return result.mean[:n].copy(), result.cov[:n].copy()
 
 
 #: the same arithmetic in another order: round-off, relative to the largest entry (at least 1), as the filterpy

@@ -107,7 +107,7 @@ def run(size: str = "full"):
     warm = time.perf_counter() - t0
 
     def agree(ours, ref):
-        d = np.linalg.norm(ours.mean_m - ref, axis=-1)
+        d = np.linalg.norm(ours.mean - ref, axis=-1)
         return (f"|posterior mean - scipy.ndimage| max {d.max():.2g} m, median {np.median(d):.2g} m (gaussian_filter "
                 "truncates at 4 sigma and renormalises globally at the walls)")
 
@@ -127,8 +127,8 @@ def run(size: str = "full"):
     rss2 = _readings(runs2, steps2, rng)
 
     def agree_dense(ours, ref):
-        dm = np.abs(ours.mean_m - ref.mean_m).max()
-        dc = np.abs(ours.covariance_m2 - ref.covariance_m2).max()
+        dm = np.abs(ours.mean - ref.mean).max()
+        dc = np.abs(ours.cov - ref.cov).max()
         if not (dm <= 1e-10 and dc <= 1e-10):
             raise AssertionError(f"max |dmean| {dm:.2g} m, |dcov| {dc:.2g} m^2")
         return f"max |dmean| {dm:.2g} m, max |dcov| {dc:.2g} m^2 against transition='dense' (numpy)"
@@ -149,7 +149,7 @@ def run(size: str = "full"):
     cells3 = oz.cell_centres(oz.ROOM_M, 4, 7)
 
     def agree_small(ours, ref):
-        return f"max |dmean| {np.abs(ours.mean_m - ref.mean_m).max():.2g} m"
+        return f"max |dmean| {np.abs(ours.mean - ref.mean).max():.2g} m"
 
     m3 = hx.compare(lambda: lb.grid_bayes_filter(rss3, cells3, model3, 0.5),
                     lambda: _numpy_path(lambda: lb.grid_bayes_filter(rss3, cells3, model3, 0.5)), agree=agree_small)

@@ -124,7 +124,7 @@ def measure(runs: int = 10_000, pf_runs: int = 12, particles: int = 10_000, iter
 
     def pf():
         return pv.pf_run(s25, observed, z, np.random.default_rng(5), n_particles=particles,
-                         n_iterations=iterations).mean_m[:, -1]
+                         n_iterations=iterations).mean[:, -1]
 
     # compiled kernels (numba) compiled or loaded from their cache before the timed call
     pv.pf_run(s25, observed[:1], z[:1], np.random.default_rng(5), n_particles=100, n_iterations=2)

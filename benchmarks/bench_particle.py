@@ -90,7 +90,7 @@ def measure(runs: int, particles: int, steps: int, repeats: int = 5):
 
     def ours():
         return lb.particle_filter(rss, model, np.random.default_rng(1), n_particles=particles,
-                                  region_m=(LOWER_M, UPPER_M), spread_m=SPREAD_M).mean_m
+                                  region_m=(LOWER_M, UPPER_M), spread_m=SPREAD_M).mean
 
     def reference():
         return numpy_sir(rss, particles, np.random.default_rng(2))

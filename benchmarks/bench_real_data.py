@@ -80,22 +80,22 @@ def measure(spacing: float = 0.1, particles: int = 3000, knn_queries: int = 10_0
          lambda: lb.knn_position(queries, fingerprints, cells, 5), "once"),
         ("KF on ML fixes", f"{len(reg.time_s)} ticks",
          lambda: lb.extended_kalman_filter(motion.F, motion.Q, x0, P0, [lb.LinearMeasurement(
-             ml_fixes, np.hstack([np.eye(2), np.zeros((2, 2))]), fix_cov)]).x[ticks, :2], "fix"),
+             ml_fixes, np.hstack([np.eye(2), np.zeros((2, 2))]), fix_cov)]).mean[ticks, :2], "fix"),
         ("EKF (parallel RSS update)", f"{len(reg.time_s)} ticks",
-         lambda: lb.extended_kalman_filter(motion.F, motion.Q, x0, P0, [stream]).x[ticks, :2], "fix"),
+         lambda: lb.extended_kalman_filter(motion.F, motion.Q, x0, P0, [stream]).mean[ticks, :2], "fix"),
         ("UKF", f"{len(reg.time_s)} ticks",
-         lambda: lb.unscented_kalman_filter(motion.F, motion.Q, x0, P0, [stream], alpha=0.5).x[ticks, :2], "fix"),
+         lambda: lb.unscented_kalman_filter(motion.F, motion.Q, x0, P0, [stream], alpha=0.5).mean[ticks, :2], "fix"),
         (f"particle filter ({particles} particles)", f"{len(reg.time_s)} ticks, 1 run",
          lambda: lb.particle_filter(reg.rss_dbm[None], bayes_model, np.random.default_rng(1), n_particles=particles,
-                                    region_m=(lower, upper), spread_m=0.3, resample_threshold=0.5).mean_m[0, ticks],
+                                    region_m=(lower, upper), spread_m=0.3, resample_threshold=0.5).mean[0, ticks],
          "fix once"),
         (f"grid Bayes, separable ({spacing} m)", f"{len(reg.time_s)} ticks x {len(grid)} cells",
-         lambda: lb.grid_bayes_filter(reg.rss_dbm[None], grid, bayes_model, 0.3).mean_m[0, ticks], "fix"),
+         lambda: lb.grid_bayes_filter(reg.rss_dbm[None], grid, bayes_model, 0.3).mean[0, ticks], "fix"),
     ]
     if dense_check:
         cases.append((f"grid Bayes, dense ({spacing} m)", f"{len(reg.time_s)} ticks x {len(grid)} cells",
                       lambda: lb.grid_bayes_filter(reg.rss_dbm[None], grid, bayes_model, 0.3,
-                                                   transition="dense").mean_m[0, ticks], "fix"))
+                                                   transition="dense").mean[0, ticks], "fix"))
     gc.collect()
     gc.freeze()     # the imported modules' objects out of the collector: the harness collects before every call
     # compiled kernels (numba) compiled or loaded from their cache on 3 ticks, so no timed call (and no peak) holds

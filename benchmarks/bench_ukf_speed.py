@@ -116,8 +116,8 @@ def _filterpy_agreement(n: int, steps: int, alpha: float):
 
     def agree(ours, ref):
         ref_x, ref_P = ref
-        dx = float(np.max(np.abs(ours.x[:n, :steps] - ref_x)))
-        dP = float(np.max(np.abs(ours.P[:n, :steps] - ref_P)))
+        dx = float(np.max(np.abs(ours.mean[:n, :steps] - ref_x)))
+        dP = float(np.max(np.abs(ours.cov[:n, :steps] - ref_P)))
         tx, tP = rel * float(np.max(np.abs(ref_x))), rel * float(np.max(np.abs(ref_P)))
         text = (f"max |x - filterpy| {dx:.1e} (tolerance {tx:.1e}), |P - filterpy| {dP:.1e} (tolerance {tP:.1e}) on "
                 f"{n} run{'s' * (n > 1)} x {steps} steps; {ours.floored_updates} floored updates")

@@ -66,8 +66,8 @@ def measure(steps: int = 100_000, alpha: float = 1e-3, runs: int = 1, seed: int 
                                           alpha=alpha)
 
     def figures(res):
-        P = res.P
-        e = res.x[..., :2] - truth.position_m[sl]
+        P = res.cov
+        e = res.mean[..., :2] - truth.position_m[sl]
         err = np.linalg.norm(e, axis=-1)
         last = slice(max(0, T - int(56.0 / (speed * dt))), T)
         # the position error in the filter's own units (NEES, chi-square with 2 degrees of freedom if the filter's

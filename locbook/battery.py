@@ -212,7 +212,7 @@ def _grid_mmse(sc, rss, opts):
     flat = _flat(rss)
     cells, model = sc.grid_m(), _bayes_model(sc)
     block = max(1, GRID_BLOCK_VALUES // cells.shape[0])
-    return np.concatenate([grid_bayes_filter(flat[i:i + block, None, :], cells, model, 1.0).mean_m[:, 0]
+    return np.concatenate([grid_bayes_filter(flat[i:i + block, None, :], cells, model, 1.0).mean[:, 0]
                            for i in range(0, flat.shape[0], block)])
 
 
@@ -415,25 +415,25 @@ def run_trackers(sc: TrackingScenario, rss_dbm, x0, ts: TrackerSettings, rng: np
         H = np.hstack([np.eye(2), np.zeros((2, 2))])
         fixes = _ml_fixes(sc, rss, ts)
         res = extended_kalman_filter(motion.F, motion.Q, x0, P0, [LinearMeasurement(fixes, H, _fix_cov(sc, ts, rng_cov))])
-        out["kf_on_ml"], flags["kf_on_ml"] = res.x[..., :2], DivergenceFlags.of(res)
+        out["kf_on_ml"], flags["kf_on_ml"] = res.position_m([0, 1]), DivergenceFlags.of(res)
     for name, mode in (("ekf", "parallel"), ("ekf_serial", "serial")):
         if name in chosen:
             stream = RssMeasurement(rss, sc.anchors_m, sc.channel, idx, mode=mode, tag_height_m=sc.tag_height_m)
             res = extended_kalman_filter(motion.F, motion.Q, x0, P0, [stream])
-            out[name], flags[name] = res.x[..., :2], DivergenceFlags.of(res)
+            out[name], flags[name] = res.position_m([0, 1]), DivergenceFlags.of(res)
     if "ukf" in chosen:
         stream = RssMeasurement(rss, sc.anchors_m, sc.channel, idx, tag_height_m=sc.tag_height_m)
         res = unscented_kalman_filter(motion.F, motion.Q, x0, P0, [stream], alpha=ts.ukf_alpha)
-        out["ukf"], flags["ukf"] = res.x[..., :2], DivergenceFlags.of(res)
+        out["ukf"], flags["ukf"] = res.position_m([0, 1]), DivergenceFlags.of(res)
     model = _bayes_model(sc)
     if "particle" in chosen:
         out["particle"] = particle_filter(rss, model, rng_pf, n_particles=ts.n_particles, region_m=sc.box_m,
                                           spread_m=sc.spread_m, initial_position_m=x0[:, :2],
-                                          initial_sd_m=ts.particle_start_sd_m, resample_threshold=0.5).mean_m
+                                          initial_sd_m=ts.particle_start_sd_m, resample_threshold=0.5).mean
     if "grid_bayes" in chosen:
         cells = grid_in_outline(sc.outline_m, sc.grid_spacing_m)
         out["grid_bayes"] = grid_bayes_filter(rss, cells, model, sc.spread_m,
-                                              initial_belief=_gaussian_belief(cells, x0, ts.P0[:2, :2])).mean_m
+                                              initial_belief=_gaussian_belief(cells, x0, ts.P0[:2, :2])).mean
     out = {k: out[k] for k in chosen}
     return (out, flags) if with_divergence else out
 

@@ -92,7 +92,7 @@ def test_grid_filter_with_uniform_transition_is_the_normalised_likelihood():
     for r in range(2):
         lik = _independent_likelihood(rss[r, -1], cells, 5.2)
         np.testing.assert_allclose(res.weights[r], lik / lik.sum(), rtol=1e-10)
-        np.testing.assert_allclose(res.mean_m[r, -1], (lik / lik.sum()) @ cells, rtol=1e-10)
+        np.testing.assert_allclose(res.mean[r, -1], (lik / lik.sum()) @ cells, rtol=1e-10)
 
 
 def test_log_likelihood_is_the_gaussian_log_density_up_to_a_constant_per_run():
@@ -188,9 +188,9 @@ def test_sir_converges_to_the_grid_posterior_mean():
     grid = lb.grid_bayes_filter(rss, _cells(0.02), model, spread_m=np.inf)
     pf = lb.particle_filter(np.repeat(rss, 20, axis=0), model, np.random.default_rng(6),
                             n_particles=50_000, region_m=ROOM)
-    spread = np.sqrt(grid.weights[0] @ np.sum((_cells(0.02) - grid.mean_m[0, 0]) ** 2, axis=-1))
+    spread = np.sqrt(grid.weights[0] @ np.sum((_cells(0.02) - grid.mean[0, 0]) ** 2, axis=-1))
     se = spread / np.sqrt(50_000 * 20)
-    np.testing.assert_allclose(pf.mean_m[:, 0].mean(axis=0), grid.mean_m[0, 0], atol=6 * se + 2e-3)
+    np.testing.assert_allclose(pf.mean[:, 0].mean(axis=0), grid.mean[0, 0], atol=6 * se + 2e-3)
 
 
 def test_sir_with_gaussian_prior_converges_to_the_grid_filter_over_steps():
@@ -203,7 +203,7 @@ def test_sir_with_gaussian_prior_converges_to_the_grid_filter_over_steps():
     grid = lb.grid_bayes_filter(rss, _cells(0.1), model, spread_m=0.3)
     pf = lb.particle_filter(np.repeat(rss, 40, axis=0), model, np.random.default_rng(8), n_particles=20_000,
                             region_m=ROOM, spread_m=0.3, resample_threshold=0.5)
-    np.testing.assert_allclose(pf.mean_m[:, -1].mean(axis=0), grid.mean_m[0, -1], atol=0.01)   # D = 0.6 is 0.06 off
+    np.testing.assert_allclose(pf.mean[:, -1].mean(axis=0), grid.mean[0, -1], atol=0.01)   # D = 0.6 is 0.06 off
 
 
 def test_particle_filter_options_and_invariants():
@@ -213,7 +213,7 @@ def test_particle_filter_options_and_invariants():
     basic = lb.particle_filter(rss, model, np.random.default_rng(1), **kw)
     assert basic.resampled.all()
     again = lb.particle_filter(rss, model, np.random.default_rng(1), **kw)
-    np.testing.assert_array_equal(basic.mean_m, again.mean_m)        # same stream, same numbers
+    np.testing.assert_array_equal(basic.mean, again.mean)        # same stream, same numbers
     improved = lb.particle_filter(rss, model, np.random.default_rng(1), resample_threshold=0.5,
                                   weight_smoothing="sqrt", **kw)
     np.testing.assert_allclose(improved.weights.sum(-1), 1.0)
@@ -222,10 +222,10 @@ def test_particle_filter_options_and_invariants():
     inner = (np.ones(2), np.array([4.0, 7.0]))
     con = lb.particle_filter(rss, model, np.random.default_rng(1), n_particles=200, region_m=inner)
     assert (con.particles_m >= 1.0).all() and (con.particles_m[..., 0] <= 4.0).all()
-    assert (con.particles_m[..., 1] <= 7.0).all() and (con.mean_m >= 1.0).all() and (con.mean_m <= [4.0, 7.0]).all()
+    assert (con.particles_m[..., 1] <= 7.0).all() and (con.mean >= 1.0).all() and (con.mean <= [4.0, 7.0]).all()
     start = np.tile([2.0, 3.0], (30, 1))
     known = lb.particle_filter(rss[:, :1], model, np.random.default_rng(1), initial_position_m=start, **kw)
-    np.testing.assert_allclose(known.mean_m[:, 0], start)
+    np.testing.assert_allclose(known.mean[:, 0], start)
     with pytest.raises(ValueError, match="fraction of N"):
         lb.particle_filter(rss, model, np.random.default_rng(1), resample_threshold=5.0, **kw)
 

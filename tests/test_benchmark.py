@@ -40,7 +40,7 @@ def test_particle_filter_gaussian_start():
     start = np.array([10.0, 8.0])
     res = lb.particle_filter(nothing_heard, model, rng, n_particles=1, region_m=((0, 0), (20, 20)), spread_m=0.5,
                              initial_position_m=np.tile(start, (runs, 1)), initial_sd_m=1.5)
-    draws = res.mean_m[:, 0]
+    draws = res.mean[:, 0]
     se = 1.5 / np.sqrt(runs)
     assert np.all(np.abs(draws.mean(axis=0) - start) < 4 * se)
     assert np.all(np.abs(draws.std(axis=0, ddof=1) - 1.5) < 4 * 1.5 / np.sqrt(2 * runs))

@@ -116,7 +116,7 @@ def test_nis_of_the_rss_ekf_numpy_and_compiled_agree_with_a_direct_computation(m
             out[path] = lb.extended_kalman_filter(model.F, model.Q, x0, P0, [meas])
         res = out["numpy"]
         k = 7                                               # step k from the posterior of step k - 1
-        x, P = res.x[:, k - 1] @ model.F.T, model.F @ res.P[:, k - 1] @ model.F.T + model.Q
+        x, P = res.mean[:, k - 1] @ model.F.T, model.F @ res.cov[:, k - 1] @ model.F.T + model.Q
         for b in range(z.shape[0]):
             heard = np.isfinite(z[b, k])
             if mode == "parallel":
@@ -297,9 +297,9 @@ def test_ukf_that_loses_track_at_alpha_1_is_flagged_and_the_ekf_is_not():
     x0, P0 = np.array([5.0, 5.0]), np.eye(2)
     ukf = lb.unscented_kalman_filter(F, Q, x0, P0, [meas], alpha=1.0)
     ekf = lb.extended_kalman_filter(F, Q, x0, P0, [meas])
-    err_u = np.linalg.norm(ukf.x - pos, axis=-1)
-    err_e = np.linalg.norm(ekf.x - pos, axis=-1)
-    sd_u = np.sqrt(np.trace(ukf.P, axis1=-2, axis2=-1))
+    err_u = np.linalg.norm(ukf.mean - pos, axis=-1)
+    err_e = np.linalg.norm(ekf.mean - pos, axis=-1)
+    sd_u = np.sqrt(np.trace(ukf.cov, axis1=-2, axis2=-1))
     assert err_u.max(axis=-1).min() > 1e4 * sd_u.min()             # every run lost, far beyond its covariance
     assert np.all(ukf.diverged) and ukf.n_diverged == 6
     assert np.all((ukf.diverged_step >= 0) & (ukf.diverged_step < 10))
@@ -307,7 +307,7 @@ def test_ukf_that_loses_track_at_alpha_1_is_flagged_and_the_ekf_is_not():
     # the guard off: nothing flagged, the same estimates
     off = lb.unscented_kalman_filter(F, Q, x0, P0, [meas], alpha=1.0, divergence_window=0)
     assert off.n_diverged == 0 and np.all(off.diverged_step == -1)
-    np.testing.assert_array_equal(off.x, ukf.x)
+    np.testing.assert_array_equal(off.mean, ukf.mean)
 
 
 def test_ukf_at_the_default_alpha_with_missing_readings_is_flagged_once_it_lost_track():
@@ -328,7 +328,7 @@ def test_ukf_at_the_default_alpha_with_missing_readings_is_flagged_once_it_lost_
     P0 = np.diag([0.04, 0.04, 0.01, 0.01])
     res = lb.unscented_kalman_filter(model.F, model.Q, x0, P0,
                                      [lb.RssMeasurement(z, ANCHORS, ch, model.position_index)])
-    assert np.all(np.linalg.eigvalsh(res.P)[..., 0] > 0)             # no existing guard notices
+    assert np.all(np.linalg.eigvalsh(res.cov)[..., 0] > 0)             # no existing guard notices
     np.testing.assert_array_equal(res.diverged, lost)
     assert np.all(res.diverged_step[lost] == 0)
 

@@ -71,8 +71,8 @@ def test_rss_ekf_equals_filterpy(mode, fusion):
             else []) + [lb.RssMeasurement(power, ANCHORS, channel, model.position_index, mode=mode)]
     ours = lb.extended_kalman_filter(model.F, model.Q, x0, P0, meas)
     xs, Ps = _filterpy_track(model, channel, power, acc, x0, P0, mode, fusion)
-    np.testing.assert_allclose(ours.x, xs, atol=1e-9)
-    np.testing.assert_allclose(ours.P, Ps, atol=1e-9)
+    np.testing.assert_allclose(ours.mean, xs, atol=1e-9)
+    np.testing.assert_allclose(ours.cov, Ps, atol=1e-9)
 
 
 def test_serial_order_matters_for_rss():
@@ -80,7 +80,7 @@ def test_serial_order_matters_for_rss():
     on the order (Tables 3.3-3.4)."""
     model, channel, power, acc, x0, P0 = _scenario(seed=3)
     runs = [lb.extended_kalman_filter(model.F, model.Q, x0, P0, [lb.RssMeasurement(
-        power, ANCHORS, channel, model.position_index, mode="serial", order=o)]).x for o in ("descending", "given")]
+        power, ANCHORS, channel, model.position_index, mode="serial", order=o)]).mean for o in ("descending", "given")]
     assert np.max(np.abs(runs[0] - runs[1])) > 1e-3
 
 
@@ -97,23 +97,23 @@ def test_serial_parallel_and_kf_agree_on_a_linear_model():
     par = lb.extended_kalman_filter(model.F, model.Q, x0, P0, [lb.LinearMeasurement(z, H, R)])
     ser = lb.extended_kalman_filter(model.F, model.Q, x0, P0, [lb.LinearMeasurement(z, H, R, mode="serial")])
     kf = lb.kalman_filter(model.F, model.Q, x0, P0, lb.LinearMeasurement(z, H, R))
-    np.testing.assert_allclose(ser.x, par.x, atol=1e-9)
-    np.testing.assert_allclose(ser.P, par.P, atol=1e-12)
-    np.testing.assert_allclose(par.x, kf.x, atol=1e-9)
+    np.testing.assert_allclose(ser.mean, par.mean, atol=1e-9)
+    np.testing.assert_allclose(ser.cov, par.cov, atol=1e-12)
+    np.testing.assert_allclose(par.mean, kf.mean, atol=1e-9)
     f = KalmanFilter(6, 4)
     f.x, f.P, f.F, f.Q, f.H, f.R = x0.copy(), P0.copy(), model.F, model.Q, H, R
     for k in range(T):
         f.predict()
         f.update(z[0, k])
-        np.testing.assert_allclose(par.x[0, k], f.x, atol=1e-9)
-        np.testing.assert_allclose(par.P[0, k], f.P, atol=1e-9)
+        np.testing.assert_allclose(par.mean[0, k], f.x, atol=1e-9)
+        np.testing.assert_allclose(par.cov[0, k], f.P, atol=1e-9)
     # position rows only every 10th step: identical to a two-stream filter (acc every step, position sometimes)
     zm = z.copy()
     zm[:, np.arange(T) % 10 != 0, :2] = np.nan
     one = lb.extended_kalman_filter(model.F, model.Q, x0, P0, [lb.LinearMeasurement(zm, H, R)])
     two = lb.extended_kalman_filter(model.F, model.Q, x0, P0, [
         lb.LinearMeasurement(zm[..., 2:], H[2:], R[2:, 2:]), lb.LinearMeasurement(zm[..., :2], H[:2], R[:2, :2])])
-    np.testing.assert_allclose(one.x, two.x, atol=1e-9)
+    np.testing.assert_allclose(one.mean, two.mean, atol=1e-9)
     with pytest.raises(ValueError, match="diagonal R"):
         lb.LinearMeasurement(z, H, R + 0.1, mode="serial")
 

@@ -215,11 +215,11 @@ def test_per_epoch_r_equals_the_filter_run_one_segment_at_a_time(fusion):
         part = [lb.LinearMeasurement(m.z[..., start:end + 1, :], m.H, m.R) for m in acc_streams]
         part.append(lb.LinearMeasurement(z[..., start:end + 1, :], H, np.diag(mse[min(e, len(mse) - 1)])))
         track = lb.extended_kalman_filter(model.F, model.Q, x, P, part)
-        x, P = track.x[..., -1, :], track.P[..., -1, :, :]
+        x, P = track.mean[..., -1, :], track.cov[..., -1, :, :]
         xs.append(x)
         nis.append(track.nis)
         start = end + 1
-    np.testing.assert_allclose(ours.x, np.stack(xs[:-1], axis=-2), rtol=0, atol=1e-9)
+    np.testing.assert_allclose(ours.mean, np.stack(xs[:-1], axis=-2), rtol=0, atol=1e-9)
     np.testing.assert_allclose(ours.nis[..., -z.shape[-2]:], np.concatenate(nis, axis=-1), rtol=1e-9)
 
 
@@ -237,7 +237,7 @@ def test_per_epoch_r_with_equal_epochs_equals_the_constant_r(fusion):
     kw = dict(acc_mps2=acc, sigma_acc_mps2=0.0075 if fusion else None)
     one = dg.run_filter("kalman_filter", tr, rss, fix, mse, channel, **kw)
     seg = dg.run_filter("kalman_filter", tr, rss, fix, np.tile(mse, (tr.rss_steps.size, 1)), channel, **kw)
-    np.testing.assert_allclose(seg.x, one.x, atol=1e-10)
-    np.testing.assert_allclose(seg.P, np.broadcast_to(one.P, seg.P.shape), atol=1e-12)
+    np.testing.assert_allclose(seg.mean, one.mean, atol=1e-10)
+    np.testing.assert_allclose(seg.cov, np.broadcast_to(one.cov, seg.cov.shape), atol=1e-12)
     with pytest.raises(lb.ParameterError, match="per-epoch"):
         dg.run_filter("serial_ekf", tr, rss, fix, np.tile(mse, (tr.rss_steps.size, 1)), channel)

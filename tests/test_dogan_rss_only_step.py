@@ -53,7 +53,7 @@ def test_kf_covariance_after_one_rss_period_is_the_closed_form(step):
     predicted = powers[n] @ P0 @ powers[n].T + sum(p @ (dg.Q_PER_STEP * np.eye(6)) @ p.T for p in powers[:n])
     H = model.position_measurement_matrix()
     expected = np.linalg.inv(np.linalg.inv(predicted) + H.T @ np.diag(1 / mse) @ H)
-    np.testing.assert_allclose(track.P[0, 1], expected, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(track.cov[0, 1], expected, rtol=1e-9, atol=1e-12)
 
 
 def test_the_two_steps_differ_by_the_process_noise_of_the_skipped_predictions():

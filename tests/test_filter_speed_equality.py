@@ -52,7 +52,7 @@ def test_dogan_filters_equal_filterpy(dogan, name, path):
     ours = bd.locbook_filter(name, dogan)
     ref_x, ref_P = bd.filterpy_filter(name, dogan, 20)
     dx, dP = bd.max_difference(dogan, ours, ref_x, ref_P)
-    assert ours.x.shape == (20, dogan["tr"].rss_steps.size, 6)
+    assert ours.mean.shape == (20, dogan["tr"].rss_steps.size, 6)
     assert dx < TOL and dP < TOL, (dx, dP)
 
 
@@ -86,8 +86,8 @@ def test_a_covariance_shared_by_many_runs_stays_in_numpy(monkeypatch):
     small = {k: (v[:64] if isinstance(v, np.ndarray) and v.ndim >= 2 and v.shape[0] == 65 else v) for k, v in s.items()}
     compiled = bd.locbook_filter("kalman_filter", small)
     assert len(calls) == 1 and calls[0] is not None
-    np.testing.assert_allclose(compiled.x, shared.x[:64], rtol=0, atol=1e-10)
-    np.testing.assert_allclose(compiled.P, shared.P[:64], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(compiled.mean, shared.mean[:64], rtol=0, atol=1e-10)
+    np.testing.assert_allclose(compiled.cov, shared.cov[:64], rtol=0, atol=1e-12)
 
 
 def _kf_reference(z, F, H, Q, R, x0, P0):
@@ -122,12 +122,12 @@ def test_kalman_filter_on_dogan_fixes_equals_filterpy(dogan, uniform):
     H = model.position_measurement_matrix()
     res = lb.kalman_filter(model.F, model.Q, x0, P0, lb.LinearMeasurement(z, H, R), outputs=("innovation",))
     ref_x, ref_P = _kf_reference(z, model.F, H, model.Q, R, x0, P0)
-    np.testing.assert_allclose(res.x, ref_x, rtol=0, atol=TOL)
-    np.testing.assert_allclose(res.P, ref_P, rtol=0, atol=TOL)
+    np.testing.assert_allclose(res.mean, ref_x, rtol=0, atol=TOL)
+    np.testing.assert_allclose(res.cov, ref_P, rtol=0, atol=TOL)
     for b in (0, 3):                  # batched = one run at a time
         one = lb.kalman_filter(model.F, model.Q, x0[b], P0, lb.LinearMeasurement(z[b], H, R),
                                outputs=("innovation",))
-        np.testing.assert_allclose(res.x[b], one.x, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(res.mean[b], one.mean, rtol=0, atol=1e-12)
         np.testing.assert_allclose(res.innovation[b], one.innovation, rtol=0, atol=1e-12)
 
 
@@ -149,8 +149,8 @@ def test_ukf_on_the_u_path_equals_filterpy(upath, alpha, runs, tol):
     ours = bu.locbook_ukf(upath, alpha)
     ref_x, ref_P = bu.filterpy_ukf(upath, runs, alpha)
     assert np.isnan(np.asarray(upath["rss"].rss_dbm)[:runs]).any()        # some steps with an anchor not heard
-    np.testing.assert_allclose(ours.x[:runs], ref_x, rtol=0, atol=tol)
-    np.testing.assert_allclose(ours.P[:runs], ref_P, rtol=0, atol=tol)
+    np.testing.assert_allclose(ours.mean[:runs], ref_x, rtol=0, atol=tol)
+    np.testing.assert_allclose(ours.cov[:runs], ref_P, rtol=0, atol=tol)
     assert ours.floored_updates == 0
 
 
@@ -253,10 +253,10 @@ def test_compiled_ekf_equals_numpy_ekf(kind):
     F, Q, x0, P0, streams, kw = _case(kind, np.random.default_rng(CASES.index(kind)))
     a, b, compiled = _both(F, Q, x0, P0, streams, **kw)
     assert compiled
-    assert a.x.shape == b.x.shape and a.P.shape == b.P.shape
+    assert a.mean.shape == b.mean.shape and a.cov.shape == b.cov.shape
     np.testing.assert_array_equal(a.steps, b.steps)
-    np.testing.assert_allclose(b.x, a.x, rtol=0, atol=TOL)
-    np.testing.assert_allclose(b.P, a.P, rtol=0, atol=TOL)
+    np.testing.assert_allclose(b.mean, a.mean, rtol=0, atol=TOL)
+    np.testing.assert_allclose(b.cov, a.cov, rtol=0, atol=TOL)
     # the guard's inputs too: NIS and the log-likelihood (log det S through the kernels' own log)
     np.testing.assert_array_equal(b.nis_dof, a.nis_dof)
     np.testing.assert_allclose(b.nis, a.nis, rtol=1e-9, atol=TOL)
@@ -272,9 +272,9 @@ def test_compiled_ekf_over_several_blocks_equals_numpy_ekf(kind, monkeypatch):
     assert K._block_width(70) == 24 and K._block_width(500) == 32 and K._block_width(64) == 32
     F, Q, x0, P0, streams, kw = _case(kind, np.random.default_rng(11), B=70)
     a, b, compiled = _both(F, Q, x0, P0, streams, **kw)
-    assert compiled and b.x.shape[0] == 70
-    np.testing.assert_allclose(b.x, a.x, rtol=0, atol=TOL)
-    np.testing.assert_allclose(b.P, a.P, rtol=0, atol=TOL)
+    assert compiled and b.mean.shape[0] == 70
+    np.testing.assert_allclose(b.mean, a.mean, rtol=0, atol=TOL)
+    np.testing.assert_allclose(b.cov, a.cov, rtol=0, atol=TOL)
     np.testing.assert_array_equal(b.nis_dof, a.nis_dof)
     np.testing.assert_allclose(b.nis, a.nis, rtol=1e-9, atol=TOL)
 
@@ -331,8 +331,8 @@ def test_rows_of_F_without_entries_before_others():
         _both(F_full, Q, x0, P0, streams)
         a, b, compiled = _both(F_empty, Q, x0, P0, streams)
         assert compiled
-        np.testing.assert_allclose(b.x, a.x, rtol=0, atol=TOL)
-        np.testing.assert_allclose(b.P, a.P, rtol=0, atol=TOL)
+        np.testing.assert_allclose(b.mean, a.mean, rtol=0, atol=TOL)
+        np.testing.assert_allclose(b.cov, a.cov, rtol=0, atol=TOL)
 
 
 @pytest.mark.skipif(not HAVE_NUMBA, reason="numba is not installed: only the numpy path exists")
@@ -369,8 +369,8 @@ def test_compiled_ekf_with_the_inertial_stream_equals_numpy(upath, frame):
     a, b, compiled = _both(m.F, m.Q, upath["x0"], upath["P0"], [imu, upath["rss"]])
     assert compiled
     assert (a.nis_dof > 0).all() and len(np.unique(a.nis_dof)) > 2          # some readings missing
-    np.testing.assert_allclose(b.x, a.x, rtol=0, atol=TOL)
-    np.testing.assert_allclose(b.P, a.P, rtol=0, atol=TOL)
+    np.testing.assert_allclose(b.mean, a.mean, rtol=0, atol=TOL)
+    np.testing.assert_allclose(b.cov, a.cov, rtol=0, atol=TOL)
     np.testing.assert_allclose(b.nis, a.nis, rtol=0, atol=TOL * 100)
     np.testing.assert_allclose(b.log_likelihood, a.log_likelihood, rtol=0, atol=TOL * 100)
     np.testing.assert_array_equal(b.nis_dof, a.nis_dof)
@@ -397,8 +397,8 @@ def test_inertial_streams_the_kernel_cannot_take_stay_in_numpy(monkeypatch, why)
     if HAVE_NUMBA:
         assert K._compiled_ekf(setup, [good], True) is not None
     if why == "function_model":          # the same model either way: the same numbers
-        np.testing.assert_allclose(lb.extended_kalman_filter(F, Q, x0, P0, [meas]).x,
-                                   lb.extended_kalman_filter(F, Q, x0, P0, [good]).x, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(lb.extended_kalman_filter(F, Q, x0, P0, [meas]).mean,
+                                   lb.extended_kalman_filter(F, Q, x0, P0, [good]).mean, rtol=0, atol=1e-12)
 
 
 def test_nonlinear_streams_stay_in_numpy(monkeypatch):
@@ -412,7 +412,7 @@ def test_nonlinear_streams_stay_in_numpy(monkeypatch):
     lin = lb.extended_kalman_filter(model.F, model.Q, np.zeros(4), np.eye(4), [lb.LinearMeasurement(z, np.eye(2, 4),
                                                                                                     np.eye(2))])
     non = lb.extended_kalman_filter(model.F, model.Q, np.zeros(4), np.eye(4), [meas])
-    np.testing.assert_allclose(non.x, lin.x, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(non.mean, lin.mean, rtol=0, atol=1e-12)
 
 
 @pytest.mark.parametrize("kernel", ["numba" if HAVE_NUMBA else "plain Python"])
@@ -434,7 +434,7 @@ def test_zero_steps_do_not_turn_the_compiled_ekf_off(monkeypatch, kernel):
         warnings.simplefilter("error")                        # no "the compiled EKF failed" warning
         for z in (np.empty((3, 0, 2)), np.empty((0, 5, 2)), np.empty((0, 0, 2))):
             res = lb.extended_kalman_filter(model.F, model.Q, x0, P0, [lb.LinearMeasurement(z, H, R)])
-            assert res.x.shape == z.shape[:-1] + (4,)
+            assert res.mean.shape == z.shape[:-1] + (4,)
     assert K._NUMBA_ENABLED is True
     # and the compiled path is still taken: a batch whose missing components differ between runs
     z = np.random.default_rng(0).normal(size=(2, 3, 2))
@@ -448,7 +448,7 @@ def test_zero_steps_do_not_turn_the_compiled_ekf_off(monkeypatch, kernel):
     assert len(calls) == 1 and calls[0] is not None
     monkeypatch.setattr(K, "_NUMBA_ENABLED", False)
     ref = lb.extended_kalman_filter(model.F, model.Q, x0, P0, [lb.LinearMeasurement(z, H, R)])
-    np.testing.assert_allclose(res.x, ref.x, rtol=0, atol=TOL)
+    np.testing.assert_allclose(res.mean, ref.mean, rtol=0, atol=TOL)
 
 
 @pytest.mark.parametrize("widths", [(2, 4), (1, 3, 2), (2, 2), (3, 0, 1), (0, 0)])

@@ -101,8 +101,8 @@ def test_noisy_1d(column):
         f.R, f.Q = 5, 0.0001
         for t in range(T):
             f.update(zs[r, t])
-            _close(loop.x[r, t], np.ravel(f.x))
-            _close(loop.P[r, t], f.P)
+            _close(loop.mean[r, t], np.ravel(f.x))
+            _close(loop.cov[r, t], f.P)
             assert np.sqrt(loop.nis[r, t]) == pytest.approx(f.mahalanobis, rel=1e-12)
             assert loop.log_likelihood[r, t] == pytest.approx(f.log_likelihood, rel=1e-12)
             f.predict()
@@ -112,8 +112,8 @@ def test_noisy_1d(column):
         f.x = np.array([[2.0, 0]]).T
         f.P = np.eye(2) * 100.0
         m, c, mp, cp = f.batch_filter(list(zs[r]), update_first=False)
-        _close(batch.x[r], np.reshape(m, (T, 2)))
-        _close(batch.P[r], c)
+        _close(batch.mean[r], np.reshape(m, (T, 2)))
+        _close(batch.cov[r], c)
         _close(batch.x_pred[r], np.reshape(mp, (T, 2)))
         _close(batch.P_pred[r], cp)
 
@@ -156,9 +156,9 @@ def test_sequential_3d():
                 else:
                     for a, b in steps[key]:
                         f.update_sequential(a, zt[a:b] if b - a > 1 else zt[a])
-                _close(ours[key].x[r, t], f.x[:, 0])
-                _close(ours[key].P[r, t], f.P)
-                _close(ours[key].x[r, t], ours["a"].x[r, t])
+                _close(ours[key].mean[r, t], f.x[:, 0])
+                _close(ours[key].cov[r, t], f.P)
+                _close(ours[key].mean[r, t], ours["a"].mean[r, t])
 
 
 def test_batch_filter_both_orders():
@@ -173,7 +173,7 @@ def test_batch_filter_both_orders():
     meas = lb.LinearMeasurement(zs[..., None], H_POS, R)
     first = lb.kalman_filter(F, Q, np.broadcast_to([2.0, 0.0], (runs, 2)), 1000.0 * np.eye(2), meas,
                              outputs=("x_pred", "P_pred"))
-    second = lb.kalman_filter(F, Q, first.x[:, -1], first.P[:, -1], meas, predict_first=False,
+    second = lb.kalman_filter(F, Q, first.mean[:, -1], first.cov[:, -1], meas, predict_first=False,
                               outputs=("x_pred", "P_pred"))
     for r in range(runs):
         f = filterpy_kalman.KalmanFilter(dim_x=2, dim_z=1)
@@ -182,13 +182,13 @@ def test_batch_filter_both_orders():
         f.R, f.Q = 5, 0.0001
         z = [None if np.isnan(v) else v for v in zs[r]]
         m, c, mp, cp = f.batch_filter(z, update_first=False)
-        _close(first.x[r], m)
-        _close(first.P[r], c)
+        _close(first.mean[r], m)
+        _close(first.cov[r], c)
         _close(first.x_pred[r], mp)
         _close(first.P_pred[r], cp)
         m, c, mp, cp = f.batch_filter(z, update_first=True)
-        _close(second.x[r], m)
-        _close(second.P[r], c)
+        _close(second.mean[r], m)
+        _close(second.cov[r], c)
         # updating first, filterpy's predictions are those after each step's update: locbook's of the next step
         _close(second.x_pred[r, 1:], mp[:-1])
         _close(second.P_pred[r, 1:], cp[:-1])
@@ -217,8 +217,8 @@ def test_univariate():
             else:
                 f.predict(u=u[r, i])
             f.update(i)
-            _close(res.x[r, i], f.x[:, 0])
-            _close(res.P[r, i], f.P)
+            _close(res.mean[r, i], f.x[:, 0])
+            _close(res.cov[r, i], f.P)
 
 
 @pytest.mark.slow
@@ -239,8 +239,8 @@ def test_procedure_form():
     res = lb.kalman_filter(model.F, model.Q, x0, np.eye(2), lb.LinearMeasurement(z[..., None], H_POS, R))
     online = lb.OnlineFilter("kf", model.F, model.Q, x0, np.eye(2))
     steps = [online.step(lb.LinearMeasurement(z[:, k:k + 1, None], H_POS, R)) for k in range(500)]
-    _close(np.concatenate([s.x for s in steps], axis=1), res.x[:, :500])
-    _close(np.concatenate([s.P for s in steps], axis=1), res.P[:, :500])
+    _close(np.concatenate([s.mean for s in steps], axis=1), res.mean[:, :500])
+    _close(np.concatenate([s.cov for s in steps], axis=1), res.cov[:, :500])
     for r in range(runs):
         x, P = np.array([[0.0], [0.0]]), np.eye(2)
         xs, Ps = [], []
@@ -249,8 +249,8 @@ def test_procedure_form():
             x, P, _, _, _, _ = filterpy_kalman.update(x, P, z[r, t], R, H_POS, True)
             xs.append(x[:, 0])
             Ps.append(P)
-        _close(res.x[r], xs)
-        _close(res.P[r], Ps)
+        _close(res.mean[r], xs)
+        _close(res.cov[r], Ps)
 
 
 def test_procedural_batch_filter():
@@ -277,10 +277,10 @@ def test_procedural_batch_filter():
         mp, cp, _, _ = filterpy_kalman.batch_filter(np.array([2.0, 0]), P0.copy(), z, [F] * n, [Q] * n, [H] * n,
                                                     [R] * n)
         for res in (const, steps):
-            _close(res.x[r], m)
-            _close(res.P[r], c)
-            _close(res.x[r], mp)
-            _close(res.P[r], cp)
+            _close(res.mean[r], m)
+            _close(res.cov[r], c)
+            _close(res.mean[r], mp)
+            _close(res.cov[r], cp)
 
 
 def test_functions():
@@ -291,29 +291,29 @@ def test_functions():
     x, P = filterpy_kalman.update(x=x, P=P, z=12.0, R=3.5**2)
     res = lb.kalman_filter([[1.0]], [[4.0]], [10.0], [[3.0]], lb.LinearMeasurement([[12.0]], [[1.0]], [[12.25]]),
                            B=[[1.0]], u=[[1.0]])
-    _close(res.x[0], np.ravel(x))
-    _close(res.P[0], np.reshape(P, (1, 1)))
-    assert res.x[0, 0] == pytest.approx(11.0 + 7.0 / 19.25, abs=1e-12)      # the closed form: K = 7 / (7 + 12.25)
+    _close(res.mean[0], np.ravel(x))
+    _close(res.cov[0], np.reshape(P, (1, 1)))
+    assert res.mean[0, 0] == pytest.approx(11.0 + 7.0 / 19.25, abs=1e-12)      # the closed form: K = 7 / (7 + 12.25)
 
     H, Q0 = np.array([[1.0, 0]]), np.zeros((2, 2))
     x, P = filterpy_kalman.predict(x=np.array([1.0, 0]), P=np.eye(2), Q=Q0)
     x, P = filterpy_kalman.update(x, P, z=[1], R=np.array([[1.0]]), H=H)
     x1, P1 = filterpy_kalman.predict(x=x, P=P, Q=Q0)
     first = lb.kalman_filter(np.eye(2), Q0, [1.0, 0], np.eye(2), lb.LinearMeasurement([[1.0], [np.nan]], H, [[1.0]]))
-    _close(first.x[0], x)
-    _close(first.P[0], P)
-    _close(first.x[1], x1)
-    _close(first.P[1], P1)
-    np.testing.assert_array_equal(first.x, [[1.0, 0.0], [1.0, 0.0]])
+    _close(first.mean[0], x)
+    _close(first.cov[0], P)
+    _close(first.mean[1], x1)
+    _close(first.cov[1], P1)
+    np.testing.assert_array_equal(first.mean, [[1.0, 0.0], [1.0, 0.0]])
     x1 = x1.copy()
     x1[1] = 1.0
     F = _cv(1.0)
     x2, P2 = filterpy_kalman.predict(x=x1, F=F, P=P1, Q=Q0)
     x3, P3 = filterpy_kalman.predict(x=x2, F=F, P=P2, Q=Q0)
-    moving = lb.kalman_filter(F, Q0, x1, first.P[1], lb.LinearMeasurement(np.full((2, 1), np.nan), H, [[1.0]]))
-    _close(moving.x, [x2, x3])
-    _close(moving.P, [P2, P3])
-    np.testing.assert_array_equal(moving.x, [[2.0, 1.0], [3.0, 1.0]])
+    moving = lb.kalman_filter(F, Q0, x1, first.cov[1], lb.LinearMeasurement(np.full((2, 1), np.nan), H, [[1.0]]))
+    _close(moving.mean, [x2, x3])
+    _close(moving.cov, [P2, P3])
+    np.testing.assert_array_equal(moving.mean, [[2.0, 1.0], [3.0, 1.0]])
 
 
 def test_steadystate_standard_half():
@@ -340,9 +340,9 @@ def test_steadystate_standard_half():
         S.append(cv.S[0, 0])
         low.append(np.linalg.eigvalsh(0.5 * (cv.P + cv.P.T)).min())
         if i < compared:
-            np.testing.assert_allclose(res.x[i], cv.x[:, 0], rtol=0, atol=ATOL * np.abs(cv.x).max())
-            np.testing.assert_allclose(res.P[i], cv.P, rtol=0, atol=ATOL * np.abs(cv.P).max())
-    assert np.abs(res.P[-1]).max() > 1e12                  # the unobservable combinations did grow
+            np.testing.assert_allclose(res.mean[i], cv.x[:, 0], rtol=0, atol=ATOL * np.abs(cv.x).max())
+            np.testing.assert_allclose(res.cov[i], cv.P, rtol=0, atol=ATOL * np.abs(cv.P).max())
+    assert np.abs(res.cov[-1]).max() > 1e12                  # the unobservable combinations did grow
     # filterpy's covariance from round-off: negative eigenvalues (and, with some numpy builds, a negative S)
     assert min(low) < 0 or min(S) < 0
     with pytest.raises(lb.SingularCovarianceError, match="at step"):
@@ -403,8 +403,8 @@ def test_ekf_radar():
         rk.P *= 50
         for i in range(T):
             rk.update(np.asarray([z[r, i]]), H_of, hx, R=hx(rk.x) * err)
-            _close(res.x[r, i], rk.x)
-            _close(res.P[r, i], rk.P)
+            _close(res.mean[r, i], rk.x)
+            _close(res.cov[r, i], rk.P)
             assert np.sqrt(res.nis[r, i]) == pytest.approx(rk.mahalanobis, rel=1e-9)
             assert res.log_likelihood[r, i] == pytest.approx(rk.log_likelihood, rel=1e-9)
             rk.predict()
@@ -438,10 +438,10 @@ def test_kf_rts():
         mu, cov, _, _ = fk.batch_filter(list(zs[r]))
         M, P, K, Pp = fk.rts_smoother(mu, cov, Qs=[Q] * T)
         assert np.abs(fk.rts_smoother(mu, cov)[0] - M).max() > 1e-3      # the scalar Q read as 0.001 [[1, 1], [1, 1]]
-        _close(res.x[r], mu)
-        _close(res.P[r], cov)
-        _close(smooth.x[r], M)
-        _close(smooth.P[r], P)
+        _close(res.mean[r], mu)
+        _close(res.cov[r], cov)
+        _close(smooth.mean[r], M)
+        _close(smooth.cov[r], P)
         _close(smooth.gain[r], K[:-1])
         _close(res.P_pred[r, 1:], Pp[:-1])
 
@@ -480,8 +480,8 @@ def test_ukf_radar():
             kf.predict()
             kf.update(z=[z[r, i]])
             for res in (sigma, linear):
-                _close(res.x[r, i], kf.x)
-                _close(res.P[r, i], kf.P)
+                _close(res.mean[r, i], kf.x)
+                _close(res.cov[r, i], kf.P)
             assert np.sqrt(sigma.nis[r, i]) == pytest.approx(kf.mahalanobis, rel=1e-9)
 
 
@@ -516,10 +516,10 @@ def test_ukf_linear_2d_merwe():
         kf = _fp_ukf_2d(dt, filterpy_kalman.MerweScaledSigmaPoints(4, 0.1, 2.0, -1), [-1.0, 1, -1, 1], np.eye(4) * 1.1)
         Ms, Ps = kf.batch_filter(list(zs[r]))
         smooth_x, smooth_P, _ = kf.rts_smoother(Ms, Ps, dts=dt)
-        _close(res.x[r], Ms)
-        _close(res.P[r], Ps)
-        _close(smooth.x[r], smooth_x)
-        _close(smooth.P[r], smooth_P)
+        _close(res.mean[r], Ms)
+        _close(res.cov[r], Ps)
+        _close(smooth.mean[r], smooth_x)
+        _close(smooth.cov[r], smooth_P)
 
 
 def test_ukf_linear_2d_simplex():
@@ -547,11 +547,11 @@ def test_ukf_linear_2d_simplex():
         Ms, Ps = kf.batch_filter(list(zs[r]))
         smooth_x, smooth_P, _ = kf.rts_smoother(Ms, Ps, dts=dt)
         for run in (kf_run, ukf_run):
-            _close(run.x[r], Ms)
-            _close(run.P[r], Ps)
+            _close(run.mean[r], Ms)
+            _close(run.cov[r], Ps)
             smooth = lb.rts_smoother(run)
-            _close(smooth.x[r], smooth_x)
-            _close(smooth.P[r], smooth_P)
+            _close(smooth.mean[r], smooth_x)
+            _close(smooth.cov[r], smooth_P)
 
 
 def test_ukf_ekf_comparison_vhartman():
@@ -590,10 +590,10 @@ def test_ukf_ekf_comparison_vhartman():
             ukf.update(list(zs[r, k]))
             ekf.update(list(zs[r, k]), lambda x: np.array([[1]]), lambda x: np.array([x[0]]))
             for run in (ukf_run, ekf_run, kf_run):
-                _close(run.x[r, k], ukf.x)
-                _close(run.P[r, k], ukf.P)
-                _close(run.x[r, k], np.ravel(ekf.x))
-                _close(run.P[r, k], ekf.P)
+                _close(run.mean[r, k], ukf.x)
+                _close(run.cov[r, k], ukf.P)
+                _close(run.mean[r, k], np.ravel(ekf.x))
+                _close(run.cov[r, k], ekf.P)
 
 
 def test_ukf_linear_1d():
@@ -615,8 +615,8 @@ def test_ukf_linear_1d():
         for k in range(zs.shape[1]):
             kf.predict()
             kf.update(np.array([zs[r, k]]))
-            _close(res.x[r, k], kf.x)
-            _close(res.P[r, k], kf.P)
+            _close(res.mean[r, k], kf.x)
+            _close(res.cov[r, k], kf.P)
 
 
 def test_ukf_batch_missing_data():
@@ -635,8 +635,8 @@ def test_ukf_batch_missing_data():
         kf = _fp_ukf_2d(dt, filterpy_kalman.MerweScaledSigmaPoints(4, 0.1, 2.0, -1), [-1.0, 1, -1, 1],
                         np.eye(4) * 0.0001)
         Ms, Ps = kf.batch_filter([None if np.isnan(z).any() else z for z in zs[r]])
-        _close(res.x[r], Ms)
-        _close(res.P[r], Ps)
+        _close(res.mean[r], Ms)
+        _close(res.cov[r], Ps)
 
 
 @pytest.mark.slow
@@ -672,10 +672,10 @@ def test_ukf_rts(kappa):
         M, P = kf.batch_filter(list(z[r]))
         assert np.array_equal(M, xs)
         M2, P2, _ = kf.rts_smoother(Xs=M, Ps=P, Qs=[kf.Q] * T)
-        _close(res.x[r], M)
-        _close(res.P[r], P)
-        _close(smooth.x[r], M2)
-        _close(smooth.P[r], P2)
+        _close(res.mean[r], M)
+        _close(res.cov[r], P)
+        _close(smooth.mean[r], M2)
+        _close(smooth.cov[r], P2)
 
 
 def test_ukf_fixed_lag_window():
@@ -690,10 +690,10 @@ def test_ukf_fixed_lag_window():
     full = lb.unscented_kalman_filter(_radar_motion(), Q, np.broadcast_to([0.0, 90.0, 1100.0], (runs, 3)), np.eye(3),
                                       meas(z), points="julier", kappa=0.0)
     start = i_at - N                                    # the window is steps start + 1 .. i_at
-    window = lb.unscented_kalman_filter(_radar_motion(), Q, full.x[:, start], full.P[:, start],
+    window = lb.unscented_kalman_filter(_radar_motion(), Q, full.mean[:, start], full.cov[:, start],
                                         meas(z[:, start + 1:i_at + 1]), points="julier", kappa=0.0,
                                         outputs=("x_pred", "P_pred", "P_cross"))
-    _close(window.x, full.x[:, start + 1:i_at + 1])
+    _close(window.mean, full.mean[:, start + 1:i_at + 1])
     smooth = lb.rts_smoother(window)
     for r in range(runs):
         kf = filterpy_kalman.UnscentedKalmanFilter(3, 1, dt, fx=lambda x, dt: RADAR_F.dot(x),
@@ -709,10 +709,10 @@ def test_ukf_fixed_lag_window():
             kf.update(z=[z[r, i]])
             M.append(kf.x)
             P.append(kf.P)
-        _close(full.x[r, :i_at + 1], M)
+        _close(full.mean[r, :i_at + 1], M)
         M2, P2, _ = kf.rts_smoother(Xs=np.asarray(M)[-N:], Ps=np.asarray(P)[-N:])
-        _close(smooth.x[r], M2)
-        _close(smooth.P[r], P2)
+        _close(smooth.mean[r], M2)
+        _close(smooth.cov[r], P2)
 
 
 def _polar_to_xy_deg(x):
@@ -769,10 +769,10 @@ def test_ukf_circle():
             kf.predict()
             kf.update(zs[r, t])
             if t % 7 == 0 or t == T - 1:            # every 7th step compared (all are filtered)
-                _close(ukf_run.x[r, t], f.x)
-                _close(ukf_run.P[r, t], f.P)
-                _close(kf_run.x[r, t], kf.x)
-                _close(kf_run.P[r, t], kf.P)
+                _close(ukf_run.mean[r, t], f.x)
+                _close(ukf_run.cov[r, t], f.P)
+                _close(kf_run.mean[r, t], kf.x)
+                _close(kf_run.cov[r, t], kf.P)
 
 
 @pytest.mark.slow
@@ -798,8 +798,8 @@ def test_kf_circle_polar():
         for t in range(T):
             kf.predict()
             kf.update(zs[r, t])
-            _close(res.x[r, t], kf.x)
-            _close(res.P[r, t], kf.P)
+            _close(res.mean[r, t], kf.x)
+            _close(res.cov[r, t], kf.P)
 
 
 def test_ukf_two_radar():
@@ -846,11 +846,11 @@ def test_ukf_two_radar():
         f.Q[2:4, 2:4] = q
         xs, Ps = f.batch_filter(zs[r])
         ms, mP, _ = f.rts_smoother(xs, Ps)
-        _close(res.x[r], xs)
-        _close(res.P[r], Ps)
-        _close(smooth.x[r], ms)
-        _close(smooth.P[r], mP)
-    assert np.sqrt(np.mean((res.x[..., [0, 2]] - track) ** 2)) < 0.01     # the 1 mm / 1 mrad readings pin it down
+        _close(res.mean[r], xs)
+        _close(res.cov[r], Ps)
+        _close(smooth.mean[r], ms)
+        _close(smooth.cov[r], mP)
+    assert np.sqrt(np.mean((res.mean[..., [0, 2]] - track) ** 2)) < 0.01     # the 1 mm / 1 mrad readings pin it down
 
 
 def test_linear_rts():
@@ -882,15 +882,15 @@ def test_linear_rts():
         x_ukf, P_ukf, _ = ukf.rts_smoother(mu_ukf, cov_ukf)
         mu_kf, cov_kf, _, _ = kf.batch_filter(list(X_obs[r]))
         x_kf, P_kf, _, _ = kf.rts_smoother(mu_kf, cov_kf)
-        _close(kf_run.x[r], mu_kf[..., 0])
-        _close(kf_run.P[r], cov_kf)
-        _close(kf_s.x[r], x_kf[..., 0])
-        _close(kf_s.P[r], P_kf)
-        _close(ukf_run.x[r], mu_ukf)
-        _close(ukf_run.P[r], cov_ukf)
-        _close(ukf_s.x[r], x_ukf)
-        _close(ukf_s.P[r], P_ukf)
-    for ours, theirs in ((ukf_run.x, kf_run.x), (ukf_s.x, kf_s.x)):
+        _close(kf_run.mean[r], mu_kf[..., 0])
+        _close(kf_run.cov[r], cov_kf)
+        _close(kf_s.mean[r], x_kf[..., 0])
+        _close(kf_s.cov[r], P_kf)
+        _close(ukf_run.mean[r], mu_ukf)
+        _close(ukf_run.cov[r], cov_ukf)
+        _close(ukf_s.mean[r], x_ukf)
+        _close(ukf_s.cov[r], P_ukf)
+    for ours, theirs in ((ukf_run.mean, kf_run.mean), (ukf_s.mean, kf_s.mean)):
         np.testing.assert_allclose(ours[..., 0], theirs[..., 0], rtol=0, atol=1e-7)
         np.testing.assert_allclose(ours[..., 1], theirs[..., 1], rtol=0, atol=1e-6)
 
@@ -915,8 +915,8 @@ def test_ukf_log_likelihood():
         for k in range(T):
             kf.predict()
             kf.update(zs[r, k])
-            _close(res.x[r, k], kf.x)
-            _close(res.P[r, k], kf.P)
+            _close(res.mean[r, k], kf.x)
+            _close(res.cov[r, k], kf.P)
             assert res.log_likelihood[r, k] == pytest.approx(kf.log_likelihood, rel=1e-9)
             assert np.sqrt(res.nis[r, k]) == pytest.approx(kf.mahalanobis, rel=1e-9)
     assert res.total_log_likelihood.shape == (runs,)
@@ -993,12 +993,12 @@ def test_ckf_1d(q_position):
             for kf in filters:
                 kf.predict()
                 kf.update(z[0])
-                _close(res.x[r, i], kf.x)
-                _close(res.P[r, i], kf.P)
+                _close(res.mean[r, i], kf.x)
+                _close(res.cov[r, i], kf.P)
             if q_position == 0.0:
-                _close(res.x[r, i], ckf.x[:, 0])
-                _close(res.P[r, i], ckf.P)
-            ckf_gap = max(ckf_gap, np.abs(res.x[r, i] - ckf.x[:, 0]).max())
+                _close(res.mean[r, i], ckf.x[:, 0])
+                _close(res.cov[r, i], ckf.P)
+            ckf_gap = max(ckf_gap, np.abs(res.mean[r, i] - ckf.x[:, 0]).max())
     if q_position > 0:
         assert ckf_gap > 1e-3          # the CKF's update without Q: the documented difference is real
 
@@ -1043,13 +1043,13 @@ def test_sensor_fusion():
         for k in range(i.size):
             kf1.predict()
             kf1.update(np.array([[wheel[r, k]]]))
-            _close(single.x[r, k], kf1.x[:, 0])
-            _close(single.P[r, k], kf1.P)
+            _close(single.mean[r, k], kf1.x[:, 0])
+            _close(single.cov[r, k], kf1.P)
             for gps_sigma, f in kf2.items():
                 m1 = gps[r, k] if gps_sigma == 4.0 else -1e40
                 f.predict()
                 f.update(np.array([[wheel[r, k]], [m1]]))
-                _close(fused[gps_sigma].x[r, k], f.x[:, 0])
-                _close(fused[gps_sigma].P[r, k], f.P)
-    spread = lambda res: np.std(i - res.x[..., 0], axis=-1).mean()
+                _close(fused[gps_sigma].mean[r, k], f.x[:, 0])
+                _close(fused[gps_sigma].cov[r, k], f.P)
+    spread = lambda res: np.std(i - res.mean[..., 0], axis=-1).mean()
     assert spread(fused[4.0]) < spread(single)

@@ -37,18 +37,18 @@ def test_pykalman_robot_data_filtered_smoothed_and_log_likelihood():
     d, z = _robot()
     run = _robot_filter(d, z)
     # the data set's own filtered and smoothed moments (a MATLAB implementation), then pykalman's
-    np.testing.assert_allclose(run.x[:500], d.filtered_state_means[:500], atol=1e-9)
-    np.testing.assert_allclose(run.P[:500], d.filtered_state_covariances[:500], atol=1e-9)
+    np.testing.assert_allclose(run.mean[:500], d.filtered_state_means[:500], atol=1e-9)
+    np.testing.assert_allclose(run.cov[:500], d.filtered_state_covariances[:500], atol=1e-9)
     smooth = lb.rts_smoother(run)
-    np.testing.assert_allclose(smooth.x, d.smoothed_state_means, atol=1e-9)
-    np.testing.assert_allclose(smooth.P, d.smoothed_state_covariances, atol=1e-9)
+    np.testing.assert_allclose(smooth.mean, d.smoothed_state_means, atol=1e-9)
+    np.testing.assert_allclose(smooth.cov, d.smoothed_state_covariances, atol=1e-9)
     kf = pykalman.KalmanFilter(d.transition_matrix, d.observation_matrix, d.transition_covariance,
                                d.observation_covariance, d.transition_offsets, d.observation_offset,
                                d.initial_state_mean, d.initial_state_covariance)
     masked = np.ma.masked_invalid(z)
     xf, Pf = kf.filter(masked)
-    np.testing.assert_allclose(run.x, xf, atol=1e-9)
-    np.testing.assert_allclose(run.P, Pf, atol=1e-9)
+    np.testing.assert_allclose(run.mean, xf, atol=1e-9)
+    np.testing.assert_allclose(run.cov, Pf, atol=1e-9)
     assert run.total_log_likelihood == pytest.approx(kf.loglikelihood(masked), abs=1e-9)
 
 
@@ -58,8 +58,8 @@ def test_per_step_matrices_equal_constant_ones_bit_for_bit():
     const = _robot_filter(d, z)
     steps = _robot_filter(d, z, Q=lb.per_step(np.broadcast_to(d.transition_covariance, (T, n, n))),
                           R=lb.per_step(np.broadcast_to(d.observation_covariance, (T, 2, 2))))
-    np.testing.assert_array_equal(steps.x, const.x)
-    np.testing.assert_array_equal(steps.P, const.P)
+    np.testing.assert_array_equal(steps.mean, const.mean)
+    np.testing.assert_array_equal(steps.cov, const.cov)
 
 
 def _random_spd(rng, shape, n, scale):
@@ -81,15 +81,15 @@ def test_time_varying_model_with_control_equals_filterpy_on_every_run():
     x0, P0 = rng.normal(size=n), _random_spd(rng, (), n, 1.0)
     run = lb.kalman_filter(lb.per_step(Fs), lb.per_step(Qs), np.broadcast_to(x0, (runs, n)), P0,
                            lb.LinearMeasurement(z, lb.per_step(Hs), lb.per_step(Rs)), B=B, u=u)
-    assert np.abs(run.x).max() > 0.5
+    assert np.abs(run.mean).max() > 0.5
     for r in range(runs):
         kf = filterpy_kalman.KalmanFilter(dim_x=n, dim_z=m, dim_u=p)
         kf.x, kf.P = x0.copy(), P0.copy()
         zs = [None if np.isnan(zk).any() else zk for zk in z[r]]
         means, covs, _, _ = kf.batch_filter(zs, Fs=list(Fs), Qs=list(Qs), Hs=list(Hs), Rs=list(Rs),
                                             Bs=[B] * T, us=list(u[r]))
-        np.testing.assert_allclose(run.x[r], means, atol=1e-9)
-        np.testing.assert_allclose(run.P[r], covs, atol=1e-9)
+        np.testing.assert_allclose(run.mean[r], means, atol=1e-9)
+        np.testing.assert_allclose(run.cov[r], covs, atol=1e-9)
 
 
 def test_time_varying_smoother_equals_filterpy():
@@ -106,14 +106,14 @@ def test_time_varying_smoother_equals_filterpy():
     by_F = lb.rts_smoother(lb.kalman_filter(lb.per_step(Fs), lb.per_step(Qs), np.broadcast_to(x0, (runs, n)), P0,
                                             lb.LinearMeasurement(z, H, R), outputs=("x_pred", "P_pred")),
                            lb.per_step(Fs))
-    np.testing.assert_allclose(by_F.x, smooth.x, atol=1e-12)
+    np.testing.assert_allclose(by_F.mean, smooth.mean, atol=1e-12)
     for r in range(runs):
         kf = filterpy_kalman.KalmanFilter(dim_x=n, dim_z=m)
         kf.x, kf.P, kf.H, kf.R = x0.copy(), P0.copy(), H, R
         means, covs, _, _ = kf.batch_filter(list(z[r]), Fs=list(Fs), Qs=list(Qs))
         xs, Ps, Ks, _ = kf.rts_smoother(means, covs, Fs=list(Fs), Qs=list(Qs))
-        np.testing.assert_allclose(smooth.x[r], xs, atol=1e-9)
-        np.testing.assert_allclose(smooth.P[r], Ps, atol=1e-9)
+        np.testing.assert_allclose(smooth.mean[r], xs, atol=1e-9)
+        np.testing.assert_allclose(smooth.cov[r], Ps, atol=1e-9)
 
 
 # a unicycle: state (x, y, heading, speed), moved by f over dt; ranges to three anchors, noise growing with range
@@ -194,9 +194,9 @@ def test_ekf_with_nonlinear_motion_and_state_dependent_noise_equals_filterpy():
             R = _range_noise(prior)[np.ix_(present, present)]
             ekf.update(z[r, k, present][:, None], lambda x: _ranges_jacobian(x[:, 0])[present],
                        lambda x: _ranges(x[:, 0])[present][:, None], R=R)
-            np.testing.assert_allclose(run.x[r, k], ekf.x[:, 0], atol=1e-9)
-            np.testing.assert_allclose(run.P[r, k], ekf.P, atol=1e-9)
-    assert np.sqrt(np.mean(np.sum((run.x[..., :2] - truth[..., :2]) ** 2, -1))) < 1.0
+            np.testing.assert_allclose(run.mean[r, k], ekf.x[:, 0], atol=1e-9)
+            np.testing.assert_allclose(run.cov[r, k], ekf.P, atol=1e-9)
+    assert np.sqrt(np.mean(np.sum((run.mean[..., :2] - truth[..., :2]) ** 2, -1))) < 1.0
 
 
 class _CubaturePoints:
@@ -238,11 +238,11 @@ def test_ukf_with_nonlinear_motion_and_its_smoother_equal_filterpy(points):
             ukf.update(z[r, k], R=_range_noise(ukf.x))
             xs.append(ukf.x.copy())
             Ps.append(ukf.P.copy())
-        np.testing.assert_allclose(run.x[r], xs, atol=1e-9)
-        np.testing.assert_allclose(run.P[r], Ps, atol=1e-9)
+        np.testing.assert_allclose(run.mean[r], xs, atol=1e-9)
+        np.testing.assert_allclose(run.cov[r], Ps, atol=1e-9)
         sx, sP, _ = ukf.rts_smoother(np.array(xs), np.array(Ps))
-        np.testing.assert_allclose(smooth.x[r], sx, atol=1e-9)
-        np.testing.assert_allclose(smooth.P[r], sP, atol=1e-9)
+        np.testing.assert_allclose(smooth.mean[r], sx, atol=1e-9)
+        np.testing.assert_allclose(smooth.cov[r], sP, atol=1e-9)
 
 
 def _wrap(angle):
@@ -289,9 +289,9 @@ def test_bearing_range_track_crossing_pi_with_wrapping_equals_filterpy():
         for k in range(z.shape[1]):
             ukf.predict()
             ukf.update(z[r, k])
-            np.testing.assert_allclose(run.x[r, k], ukf.x, atol=1e-9)
-            np.testing.assert_allclose(run.P[r, k], ukf.P, atol=1e-9)
-    error = lambda res: np.sqrt(np.mean(np.sum((res.x[..., :2] - truth[..., :2]) ** 2, -1)))
+            np.testing.assert_allclose(run.mean[r, k], ukf.x, atol=1e-9)
+            np.testing.assert_allclose(run.cov[r, k], ukf.P, atol=1e-9)
+    error = lambda res: np.sqrt(np.mean(np.sum((res.mean[..., :2] - truth[..., :2]) ** 2, -1)))
     # the crossing is tracked (without wrapping this UKF happens to do as well: sigma points on both sides of the cut
     # give readings near +pi and -pi, a large P_zz, and the bearing is all but ignored there; the EKF, which has no
     # such spread, loses the track without wrapping: the next test)
@@ -321,8 +321,8 @@ def test_ekf_residual_wraps_the_bearing_innovation_as_filterpy():
             ekf.predict()
             ekf.update(z[r, k][:, None], lambda x: jac(x[:, 0]), lambda x: _bearing_range(x[:, 0])[:, None],
                        residual=lambda a, b: _bearing_range_residual(a[:, 0], b[:, 0])[:, None])
-            np.testing.assert_allclose(run.x[r, k], ekf.x[:, 0], atol=1e-9)
-    error = lambda res: np.sqrt(np.mean(np.sum((res.x[..., :2] - truth[..., :2]) ** 2, -1)))
+            np.testing.assert_allclose(run.mean[r, k], ekf.x[:, 0], atol=1e-9)
+    error = lambda res: np.sqrt(np.mean(np.sum((res.mean[..., :2] - truth[..., :2]) ** 2, -1)))
     assert error(run) < 0.3
     assert error(plain) > 10 * error(run)    # without wrapping a reading across the cut is a 2 pi innovation
 
@@ -349,10 +349,10 @@ def test_stonesoup_unscented_and_cubature_updater_case(points):
                  lb.NonlinearMeasurement(np.array([[-6.23]]), lambda x: x[..., :1], [[0.04]])):
         res = lb.unscented_kalman_filter(np.eye(2), np.zeros((2, 2)), mean, cov, meas, predict_first=False,
                                          points=points, alpha=1.0 if points == "merwe" else 1e-3)
-        np.testing.assert_allclose(res.x[0], np.asarray(ref.mean, float)[:, 0], atol=1e-12)
-        np.testing.assert_allclose(res.P[0], np.asarray(ref.covar, float), atol=1e-12)
-        np.testing.assert_allclose(res.x[0], exact_mean, atol=1e-12)
-        np.testing.assert_allclose(res.P[0], exact_cov, atol=1e-12)
+        np.testing.assert_allclose(res.mean[0], np.asarray(ref.mean, float)[:, 0], atol=1e-12)
+        np.testing.assert_allclose(res.cov[0], np.asarray(ref.covar, float), atol=1e-12)
+        np.testing.assert_allclose(res.mean[0], exact_mean, atol=1e-12)
+        np.testing.assert_allclose(res.cov[0], exact_cov, atol=1e-12)
 
 
 def test_the_literal_kf_variant_cannot_be_smoothed():

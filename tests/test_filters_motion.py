@@ -59,25 +59,25 @@ def test_kalman_equals_filterpy(joseph):
             kf.predict()
             kf.update(zz)
             xs.append(kf.x.copy()); ps.append(kf.P.copy())
-        np.testing.assert_allclose(res.x[b], xs, atol=1e-10)
-        np.testing.assert_allclose(res.P[b], ps, atol=1e-10)
+        np.testing.assert_allclose(res.mean[b], xs, atol=1e-10)
+        np.testing.assert_allclose(res.cov[b], ps, atol=1e-10)
 
 
 def test_batched_per_run_R_equals_loop():
     model, H, z, _, x0, _ = _scenario(batch=4)
     Rs = np.array([np.diag([a, b]) for a, b in [(1, 2), (3, 0.5), (8.6, 0.66), (0.1, 0.1)]])
     P0 = np.eye(4)
-    batched = lb.kalman_filter(model.F, model.Q, x0, P0, lb.LinearMeasurement(z, H, Rs)).x
+    batched = lb.kalman_filter(model.F, model.Q, x0, P0, lb.LinearMeasurement(z, H, Rs)).mean
     for b in range(4):
-        np.testing.assert_allclose(batched[b], lb.kalman_filter(model.F, model.Q, x0, P0, lb.LinearMeasurement(z[b], H, Rs[b])).x, atol=1e-13)
+        np.testing.assert_allclose(batched[b], lb.kalman_filter(model.F, model.Q, x0, P0, lb.LinearMeasurement(z[b], H, Rs[b])).mean, atol=1e-13)
 
 
 def test_static_model_filter_is_recursive_least_squares():
     # F = I, Q = 0, flat prior: the filtered state is the batch least-squares mean of all measurements
     z = np.random.default_rng(3).normal(size=(40, 2))
     res = lb.kalman_filter(np.eye(2), np.zeros((2, 2)), np.zeros(2), 1e12 * np.eye(2), lb.LinearMeasurement(z, np.eye(2), np.eye(2)), predict_first=False)
-    np.testing.assert_allclose(res.x, np.cumsum(z, 0) / np.arange(1, 41)[:, None], atol=1e-9)
-    np.testing.assert_allclose(res.P[-1], np.eye(2) / 40, atol=1e-12)
+    np.testing.assert_allclose(res.mean, np.cumsum(z, 0) / np.arange(1, 41)[:, None], atol=1e-9)
+    np.testing.assert_allclose(res.cov[-1], np.eye(2) / 40, atol=1e-12)
 
 
 def test_covariance_converges_to_riccati_solution():
@@ -92,9 +92,9 @@ def test_covariance_converges_to_riccati_solution():
 def test_gain_limits():
     model, H, z, _, x0, P0 = _scenario(batch=1)
     follow = lb.kalman_filter(model.F, model.Q, x0, P0, lb.LinearMeasurement(z, H, 1e-12 * np.eye(2)))
-    np.testing.assert_allclose(model.position(follow.x), z, atol=1e-6)      # R -> 0 follows the fixes
+    np.testing.assert_allclose(model.position(follow.mean), z, atol=1e-6)      # R -> 0 follows the fixes
     keep = lb.kalman_filter(model.F, model.Q, x0, P0, lb.LinearMeasurement(z, H, 1e12 * np.eye(2)))
-    np.testing.assert_allclose(keep.x, 0.0, atol=1e-6)                       # R -> inf keeps the prediction
+    np.testing.assert_allclose(keep.mean, 0.0, atol=1e-6)                       # R -> inf keeps the prediction
 
 
 def test_missing_measurements_predict_only():
@@ -102,8 +102,8 @@ def test_missing_measurements_predict_only():
     z = z.copy()
     z[0, 2] = np.nan
     res = lb.kalman_filter(model.F, model.Q, x0, P0, lb.LinearMeasurement(z, H, R))
-    np.testing.assert_allclose(res.x[0, 2], model.F @ res.x[0, 1])
-    np.testing.assert_allclose(res.P[0, 2], model.F @ res.P[0, 1] @ model.F.T + model.Q, rtol=1e-12)   # no update
+    np.testing.assert_allclose(res.mean[0, 2], model.F @ res.mean[0, 1])
+    np.testing.assert_allclose(res.cov[0, 2], model.F @ res.cov[0, 1] @ model.F.T + model.Q, rtol=1e-12)   # no update
 
 
 def test_literal_george_variant_is_running_average():
@@ -112,7 +112,7 @@ def test_literal_george_variant_is_running_average():
     model = lb.constant_velocity(1.0, 1.0)
     res = lb.kalman_filter(model.F, model.Q, np.r_[z[0], 0, 0], np.diag([1.0, 1.0, 1.0, 1.0]), lb.LinearMeasurement(z, model.position_measurement_matrix(), np.eye(2)), variant="literal_george")
     k = np.arange(2, 22)[:, None]
-    np.testing.assert_allclose(res.x[:, :2], (z[0] + np.cumsum(z, 0)) / k, atol=1e-12)
+    np.testing.assert_allclose(res.mean[:, :2], (z[0] + np.cumsum(z, 0)) / k, atol=1e-12)
 
 
 def test_corridor_kf_first_fix_start():
@@ -170,7 +170,7 @@ def test_batched_process_noise_equals_loop():
     model, H, z, R, x0, P0 = _scenario(batch=1)
     qs = [1e-4, 1e-2, 1.0]
     Qs = np.stack([lb.constant_velocity(1.0, q).Q for q in qs])
-    batched = lb.kalman_filter(model.F, Qs, x0, P0, lb.LinearMeasurement(z[0], H, R)).x
+    batched = lb.kalman_filter(model.F, Qs, x0, P0, lb.LinearMeasurement(z[0], H, R)).mean
     assert batched.shape == (3, z.shape[1], 4)
     for i, Q in enumerate(Qs):
-        np.testing.assert_allclose(batched[i], lb.kalman_filter(model.F, Q, x0, P0, lb.LinearMeasurement(z[0], H, R)).x, atol=1e-13)
+        np.testing.assert_allclose(batched[i], lb.kalman_filter(model.F, Q, x0, P0, lb.LinearMeasurement(z[0], H, R)).mean, atol=1e-13)

@@ -78,32 +78,32 @@ def test_each_row_is_the_rts_smoother_of_the_run_truncated_at_its_last_reading(l
     np.testing.assert_array_equal(fl.given_to, np.minimum(np.arange(T) + lag, T - 1))
     for k in (lag, lag + 3, 9, 16, 23, T - 2, T - 1):   # window ends around the missing readings and at the end
         short = lb.rts_smoother(_kf(F, Q, H, R, z[:, :k + 1], x0, P0))
-        np.testing.assert_allclose(fl.x[:, k - lag], short.x[:, k - lag], rtol=0, atol=1e-10)
-        np.testing.assert_allclose(fl.P[:, k - lag], short.P[:, k - lag], rtol=0, atol=1e-10)
+        np.testing.assert_allclose(fl.mean[:, k - lag], short.mean[:, k - lag], rtol=0, atol=1e-10)
+        np.testing.assert_allclose(fl.cov[:, k - lag], short.cov[:, k - lag], rtol=0, atol=1e-10)
     # the last `lag` rows are given every reading: the full-interval smoother's
     full = lb.rts_smoother(_kf(F, Q, H, R, z, x0, P0))
-    np.testing.assert_allclose(fl.x[:, T - lag:], full.x[:, T - lag:], rtol=0, atol=1e-10)
-    np.testing.assert_allclose(fl.P[:, T - lag:], full.P[:, T - lag:], rtol=0, atol=1e-10)
+    np.testing.assert_allclose(fl.mean[:, T - lag:], full.mean[:, T - lag:], rtol=0, atol=1e-10)
+    np.testing.assert_allclose(fl.cov[:, T - lag:], full.cov[:, T - lag:], rtol=0, atol=1e-10)
 
 
 def test_lag_zero_is_the_filter_and_a_long_lag_the_full_smoother():
     F, Q, H, R, z, x0, P0 = _cv_case(2, T=25)
     run = _kf(F, Q, H, R, z, x0, P0)
     zero = fixed_lag_smoother(run, 0)
-    np.testing.assert_array_equal(zero.x, run.x)
-    np.testing.assert_array_equal(zero.P, run.P)
+    np.testing.assert_array_equal(zero.mean, run.mean)
+    np.testing.assert_array_equal(zero.cov, run.cov)
     np.testing.assert_array_equal(zero.given_to, np.arange(25))
     full = lb.rts_smoother(run)
     for lag in (24, 25, 10 ** 6):
         fl = fixed_lag_smoother(run, lag)
-        np.testing.assert_allclose(fl.x, full.x, rtol=0, atol=1e-12)
-        np.testing.assert_allclose(fl.P, full.P, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(fl.mean, full.mean, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(fl.cov, full.cov, rtol=0, atol=1e-12)
         np.testing.assert_array_equal(fl.given_to, np.full(25, 24))
         assert fl.lag == lag
     # one step short of the whole run: only row 0 lacks the last reading, and it differs from the full smoother's
     fl = fixed_lag_smoother(run, 23)
-    np.testing.assert_allclose(fl.x[:, 1:], full.x[:, 1:], rtol=0, atol=1e-12)
-    assert np.abs(fl.x[:, 0] - full.x[:, 0]).max() > 1e-6
+    np.testing.assert_allclose(fl.mean[:, 1:], full.mean[:, 1:], rtol=0, atol=1e-12)
+    assert np.abs(fl.mean[:, 0] - full.mean[:, 0]).max() > 1e-6
 
 
 @pytest.mark.parametrize("lag", [2, 5])
@@ -113,12 +113,12 @@ def test_equals_the_state_augmentation_kalman_filter(lag):
     means, covs = _augmented_oracle(F, Q, H, R, z, x0, P0, lag)
     T = z.shape[1]
     # rows j < T - lag: block `lag` of the augmented state at step j + lag
-    np.testing.assert_allclose(fl.x[:, :T - lag], means[:, lag:, lag], rtol=0, atol=1e-8)
-    np.testing.assert_allclose(fl.P[:, :T - lag], covs[:, lag:, lag], rtol=0, atol=1e-8)
+    np.testing.assert_allclose(fl.mean[:, :T - lag], means[:, lag:, lag], rtol=0, atol=1e-8)
+    np.testing.assert_allclose(fl.cov[:, :T - lag], covs[:, lag:, lag], rtol=0, atol=1e-8)
     # the last rows: block i at the last step is x_{T-1-i|T-1}
     for i in range(lag):
-        np.testing.assert_allclose(fl.x[:, T - 1 - i], means[:, T - 1, i], rtol=0, atol=1e-8)
-        np.testing.assert_allclose(fl.P[:, T - 1 - i], covs[:, T - 1, i], rtol=0, atol=1e-8)
+        np.testing.assert_allclose(fl.mean[:, T - 1 - i], means[:, T - 1, i], rtol=0, atol=1e-8)
+        np.testing.assert_allclose(fl.cov[:, T - 1 - i], covs[:, T - 1, i], rtol=0, atol=1e-8)
 
 
 def test_without_p_cross_the_motion_f_gives_the_same_rows():
@@ -126,8 +126,8 @@ def test_without_p_cross_the_motion_f_gives_the_same_rows():
     run = lb.kalman_filter(F, Q, x0, P0, lb.LinearMeasurement(z, H, R), outputs=("x_pred", "P_pred"))
     a = fixed_lag_smoother(run, 3, F=F)
     b = fixed_lag_smoother(_kf(F, Q, H, R, z, x0, P0), 3)
-    np.testing.assert_allclose(a.x, b.x, rtol=0, atol=1e-12)
-    np.testing.assert_allclose(a.P, b.P, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(a.mean, b.mean, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(a.cov, b.cov, rtol=0, atol=1e-12)
 
 
 def test_filterpy_fixed_lag_smoother_is_not_exact_where_ours_matches_the_oracle():
@@ -137,18 +137,18 @@ def test_filterpy_fixed_lag_smoother_is_not_exact_where_ours_matches_the_oracle(
     lag, T = 4, 60
     F, Q, H, R, z, x0, P0 = _cv_case(5, T=T, runs=1, missing=False)
     run = _kf(F, Q, H, R, z, x0, P0)
-    ours = fixed_lag_smoother(run, lag).x[0]
+    ours = fixed_lag_smoother(run, lag).mean[0]
     oracle = _augmented_oracle(F, Q, H, R, z, x0, P0, lag)[0][0, lag:, lag]
     np.testing.assert_allclose(ours[:T - lag], oracle, rtol=0, atol=1e-8)
     fls = filterpy_kalman.FixedLagSmoother(dim_x=4, dim_z=2, N=lag + 1)
     fls.x, fls.P, fls.F, fls.Q, fls.H, fls.R = x0[0].copy(), P0.copy(), F, Q, H, R
     theirs, filtered = fls.smooth_batch(list(z[0]), N=lag + 1)
-    np.testing.assert_allclose(filtered, run.x[0], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(filtered, run.mean[0], rtol=0, atol=1e-9)
     rows = slice(lag + 2, T - lag)
     gap = np.abs(theirs[rows] - ours[rows]).max()
     gap_oracle = np.abs(theirs[rows] - oracle[rows]).max()
     print(f"filterpy FixedLagSmoother(N={lag + 1}) vs exact x_(j|j+{lag}): max |difference| {gap:.3g} "
-          f"(vs the augmented oracle {gap_oracle:.3g}); the filter itself is {np.abs(run.x[0] - ours)[rows].max():.3g} "
+          f"(vs the augmented oracle {gap_oracle:.3g}); the filter itself is {np.abs(run.mean[0] - ours)[rows].max():.3g} "
           "from the exact answer")
     assert gap > 0.1 and gap_oracle > 0.1
 
@@ -190,15 +190,15 @@ def test_ekf_and_ukf_runs_are_smoothed_exactly(kind):
     full = lb.rts_smoother(run)
     for lag in (T - 1, T + 3):
         fl = fixed_lag_smoother(run, lag)
-        np.testing.assert_allclose(fl.x, full.x, rtol=0, atol=1e-12)
-        np.testing.assert_allclose(fl.P, full.P, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(fl.mean, full.mean, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(fl.cov, full.cov, rtol=0, atol=1e-12)
     lag = 6
     fl = fixed_lag_smoother(run, lag)
-    assert np.isfinite(fl.x).all() and np.isfinite(fl.P).all()
+    assert np.isfinite(fl.mean).all() and np.isfinite(fl.cov).all()
     for k in (lag, 22, 27, T - 1):     # windows before, across and after the missing readings
         short = lb.rts_smoother(filt(motion, Q, x0, P0, meas(z[:, :k + 1]), outputs=OUT))
-        np.testing.assert_allclose(fl.x[:, k - lag], short.x[:, k - lag], rtol=0, atol=1e-10)
-        np.testing.assert_allclose(fl.P[:, k - lag], short.P[:, k - lag], rtol=0, atol=1e-10)
+        np.testing.assert_allclose(fl.mean[:, k - lag], short.mean[:, k - lag], rtol=0, atol=1e-10)
+        np.testing.assert_allclose(fl.cov[:, k - lag], short.cov[:, k - lag], rtol=0, atol=1e-10)
 
 
 def test_a_residual_of_states_is_used_as_the_difference():
@@ -211,7 +211,7 @@ def test_a_residual_of_states_is_used_as_the_difference():
         calls.append(a.shape)
         return a - b
     fl = fixed_lag_smoother(run, 3, residual=residual)
-    np.testing.assert_allclose(fl.x, plain.x, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(fl.mean, plain.mean, rtol=0, atol=1e-12)
     assert (3, 17, 4) in calls                      # called once per offset on every window of every run
     with pytest.raises(ValueError, match=r"residual\(a, b\) must return the states' shape"):
         fixed_lag_smoother(run, 3, residual=lambda a, b: (a - b)[..., :2])
@@ -225,20 +225,20 @@ def test_online_form_equals_the_batch_form():
     online, rows = OnlineFixedLagSmoother(lag), []
     online_F = OnlineFixedLagSmoother(lag, F=F)     # the cross-covariances from F instead
     for k in range(30):
-        out = online.update(run.x[:, k], run.P[:, k], run.x_pred[:, k], run.P_pred[:, k], run.P_cross[:, k])
-        out_F = online_F.update(run.x[:, k], run.P[:, k], run.x_pred[:, k], run.P_pred[:, k])
+        out = online.update(run.mean[:, k], run.cov[:, k], run.x_pred[:, k], run.P_pred[:, k], run.P_cross[:, k])
+        out_F = online_F.update(run.mean[:, k], run.cov[:, k], run.x_pred[:, k], run.P_pred[:, k])
         if k < lag:
             assert out is None and out_F is None
             continue
         rows.append(out)
         np.testing.assert_allclose(out_F[0], out[0], rtol=0, atol=1e-12)
-    np.testing.assert_allclose(np.stack([r[0] for r in rows], axis=-2), batch.x[:, :30 - lag], rtol=0, atol=1e-10)
-    np.testing.assert_allclose(np.stack([r[1] for r in rows], axis=-3), batch.P[:, :30 - lag], rtol=0, atol=1e-10)
+    np.testing.assert_allclose(np.stack([r[0] for r in rows], axis=-2), batch.mean[:, :30 - lag], rtol=0, atol=1e-10)
+    np.testing.assert_allclose(np.stack([r[1] for r in rows], axis=-3), batch.cov[:, :30 - lag], rtol=0, atol=1e-10)
     tail = online.tail()
     np.testing.assert_array_equal(tail.steps, np.arange(30 - lag, 30))
     np.testing.assert_array_equal(tail.given_to, np.full(lag, 29))
-    np.testing.assert_allclose(tail.x, batch.x[:, 30 - lag:], rtol=0, atol=1e-10)
-    np.testing.assert_allclose(tail.P, batch.P[:, 30 - lag:], rtol=0, atol=1e-10)
+    np.testing.assert_allclose(tail.mean, batch.mean[:, 30 - lag:], rtol=0, atol=1e-10)
+    np.testing.assert_allclose(tail.cov, batch.cov[:, 30 - lag:], rtol=0, atol=1e-10)
 
 
 def test_online_smoother_takes_the_online_filter_steps():
@@ -248,16 +248,16 @@ def test_online_smoother_takes_the_online_filter_steps():
     online = OnlineFixedLagSmoother(2)
     got = [online.step(filt.step(lb.LinearMeasurement(z[:, k:k + 1], H, R))) for k in range(15)]
     assert got[0] is None and got[1] is None
-    np.testing.assert_allclose(np.stack([g[0] for g in got[2:]], axis=-2), batch.x[:, :13], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(np.stack([g[0] for g in got[2:]], axis=-2), batch.mean[:, :13], rtol=0, atol=1e-9)
     # fewer steps than the lag: nothing returned, the tail is the full smoother of what was fed
     run5 = _kf(F, Q, H, R, z[:, :5], x0, P0)
     short = OnlineFixedLagSmoother(10)
     for k in range(5):
-        assert short.update(run5.x[:, k], run5.P[:, k], run5.x_pred[:, k], run5.P_pred[:, k],
+        assert short.update(run5.mean[:, k], run5.cov[:, k], run5.x_pred[:, k], run5.P_pred[:, k],
                             run5.P_cross[:, k]) is None
     tail = short.tail()
     np.testing.assert_array_equal(tail.steps, np.arange(5))
-    np.testing.assert_allclose(tail.x, lb.rts_smoother(run5).x, rtol=0, atol=1e-10)
+    np.testing.assert_allclose(tail.mean, lb.rts_smoother(run5).mean, rtol=0, atol=1e-10)
 
 
 def test_short_and_empty_runs():
@@ -265,14 +265,14 @@ def test_short_and_empty_runs():
     one = _kf(F, Q, H, R, z[:, :1], x0, P0)
     for lag in (0, 3):
         fl = fixed_lag_smoother(one, lag)
-        np.testing.assert_array_equal(fl.x, one.x)
+        np.testing.assert_array_equal(fl.mean, one.mean)
         np.testing.assert_array_equal(fl.given_to, [0])
     none = _kf(F, Q, H, R, z[:, :0], x0, P0)
     fl = fixed_lag_smoother(none, 2)
-    assert fl.x.shape == (3, 0, 4) and fl.steps.shape == (0,) and fl.given_to.shape == (0,)
+    assert fl.mean.shape == (3, 0, 4) and fl.steps.shape == (0,) and fl.given_to.shape == (0,)
     # no run at all: the shapes of the empty batch
     zero = _kf(F, Q, H, R, z[:0], x0[:0], P0)
-    assert fixed_lag_smoother(zero, 2).x.shape == (0, 12, 4)
+    assert fixed_lag_smoother(zero, 2).mean.shape == (0, 12, 4)
 
 
 def test_bad_input_is_one_line_naming_it():
@@ -298,14 +298,14 @@ def test_bad_input_is_one_line_naming_it():
     with pytest.raises(ValueError, match="standard run"):
         fixed_lag_smoother(george, 2)
     with pytest.raises(TypeError, match="KalmanResult"):
-        fixed_lag_smoother(run.x, 2)
+        fixed_lag_smoother(run.mean, 2)
     online = OnlineFixedLagSmoother(2)
-    online.update(run.x[:, 0], run.P[:, 0], run.x_pred[:, 0], run.P_pred[:, 0])
+    online.update(run.mean[:, 0], run.cov[:, 0], run.x_pred[:, 0], run.P_pred[:, 0])
     with pytest.raises(ValueError, match="^P_cross is needed"):
-        online.update(run.x[:, 1], run.P[:, 1], run.x_pred[:, 1], run.P_pred[:, 1])
+        online.update(run.mean[:, 1], run.cov[:, 1], run.x_pred[:, 1], run.P_pred[:, 1])
     with pytest.raises(ValueError, match="^x must keep the shape"):
-        online.update(run.x[0, 1], run.P[0, 1], run.x_pred[0, 1], run.P_pred[0, 1], run.P_cross[0, 1])
+        online.update(run.mean[0, 1], run.cov[0, 1], run.x_pred[0, 1], run.P_pred[0, 1], run.P_cross[0, 1])
     with pytest.raises(ValueError, match="^P_pred must have shape"):
-        online.update(run.x[:, 1], run.P[:, 1], run.x_pred[:, 1], run.P_pred[:, 1, :2], run.P_cross[:, 1])
+        online.update(run.mean[:, 1], run.cov[:, 1], run.x_pred[:, 1], run.P_pred[:, 1, :2], run.P_cross[:, 1])
     with pytest.raises(ValueError, match="^P must be finite"):
-        online.update(run.x[:, 1], run.P[:, 1] * np.nan, run.x_pred[:, 1], run.P_pred[:, 1], run.P_cross[:, 1])
+        online.update(run.mean[:, 1], run.cov[:, 1] * np.nan, run.x_pred[:, 1], run.P_pred[:, 1], run.P_cross[:, 1])

@@ -6,7 +6,7 @@ and the weights; empty batches, zero steps, int and float32 dtypes, non-contiguo
 
 - a correct answer: equal to filterpy (per run, the components present) on finite well-posed input, and equal to
   the float64 contiguous answer for int / float32 / strided input;
-- or NaN with a per-run flag (particle filters: ``degenerate``);
+- or NaN with a per-run flag (particle filters: ``diverged``, the collapse of the likelihood);
 - or a clear locbook error (LocbookError, or a ValueError whose message names the argument);
 - never a raw numpy / scipy exception (IndexError, LinAlgError, ZeroDivisionError, FloatingPointError, a broadcast
   or reshape ValueError), never a finite (or NaN) answer from non-finite input without a flag.
@@ -157,12 +157,12 @@ def _check_kalman_like(kind, res, args64, target, value, reference):
     non-finite input, the guard's fields of the batch's shape; equal to filterpy on well-posed input."""
     if target != "none" and not np.isfinite(value) and not (target == "z" and np.isnan(value)):
         pytest.fail(f"{kind}: an answer from a non-finite {target} ({value}) without an error")
-    assert np.all(np.isfinite(res.x)) and np.all(np.isfinite(res.P)), f"{kind}: non-finite output without a flag"
-    batch = res.x.shape[:-2]
+    assert np.all(np.isfinite(res.mean)) and np.all(np.isfinite(res.cov)), f"{kind}: non-finite output without a flag"
+    batch = res.mean.shape[:-2]
     assert res.diverged.shape == batch and res.diverged_step.shape == batch
     assert res.nis.shape == batch + (args64["z"].shape[-2],)
     if _well_posed(target, value) and reference is not None:
-        np.testing.assert_allclose(res.x, reference, rtol=1e-7, atol=1e-7, err_msg=kind)
+        np.testing.assert_allclose(res.mean, reference, rtol=1e-7, atol=1e-7, err_msg=kind)
 
 
 FILTER_NAMES = ["kalman_filter", "ekf numpy", "ekf numba", "ukf", "ekf nonlinear", "ukf nonlinear"]
@@ -202,7 +202,7 @@ def test_fuzz_kalman_family(kind, problem):
     if dtype != "float64" or layout != "contiguous":
         status64, res64 = outcome(lambda: _run(kind, args64), ("z",))
         assert status64 == "ok"
-        np.testing.assert_allclose(res.x, res64.x, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(res.mean, res64.mean, rtol=1e-12, atol=1e-12)
         np.testing.assert_array_equal(res.diverged, res64.diverged)
 
 
@@ -241,9 +241,9 @@ def test_fuzz_rss_streams(problem, path, unscented):
         return
     finite_input = not np.isinf(z).any()
     assert finite_input, "an answer from an infinite reading without an error"
-    assert np.all(np.isfinite(res.x)) and np.all(np.isfinite(res.P))
+    assert np.all(np.isfinite(res.mean)) and np.all(np.isfinite(res.cov))
     ref = call(np.asarray(given_z, dtype=float).copy())
-    np.testing.assert_allclose(res.x, ref.x, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(res.mean, ref.mean, rtol=1e-12, atol=1e-12)
 
 
 @st.composite
@@ -264,11 +264,11 @@ def particle_problems(draw):
 def _check_flags(res, rss, corrupt, estimates):
     """A collapsed run is flagged with NaN estimates from its step; no other run is NaN; flags have the runs' shape."""
     runs = rss.shape[0]
-    assert res.degenerate.shape == (runs,) and res.degenerate_step.shape == (runs,)
+    assert res.diverged.shape == (runs,) and res.diverged_step.shape == (runs,)
     for r in range(runs):
         est = estimates[r]
-        if res.degenerate[r]:
-            k = res.degenerate_step[r]
+        if res.diverged[r]:
+            k = res.diverged_step[r]
             assert corrupt is not None and corrupt[0] == r and k == corrupt[1]
             assert np.all(np.isnan(est[k:])) and np.all(np.isfinite(est[:k]))
         else:
@@ -302,13 +302,13 @@ def test_fuzz_bayes_filters(problem, which):
         else:
             assert np.isinf(values[corrupt]), "an error on finite readings"
         return
-    _check_flags(res, values, corrupt, res.mean_m)
+    _check_flags(res, values, corrupt, res.mean)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         ref = call(np.asarray(given_rss, dtype=float).copy())
     told = [w for w in caught if issubclass(w.category, RuntimeWarning) and "collapsed in" in str(w.message)]
-    assert len(told) == (1 if res.n_degenerate else 0), "a collapse must be told once (and only a collapse)"
-    np.testing.assert_array_equal(res.mean_m, ref.mean_m)
+    assert len(told) == (1 if res.n_diverged else 0), "a collapse must be told once (and only a collapse)"
+    np.testing.assert_array_equal(res.mean, ref.mean)
 
 
 @settings(max_examples=40, **SETTINGS)
@@ -334,10 +334,10 @@ def test_fuzz_particle_filter_callback_likelihood(runs, steps, bad, method):
                                                str(res)), res
         return
     assert status == "ok"
-    assert res.degenerate.shape == (runs,)
-    assert res.degenerate.tolist() == ([True] + [False] * (runs - 1) if collapse else [False] * runs)
-    finite = np.isfinite(res.mean_m).all(axis=(-2, -1))
-    np.testing.assert_array_equal(finite, ~res.degenerate)
+    assert res.diverged.shape == (runs,)
+    assert res.diverged.tolist() == ([True] + [False] * (runs - 1) if collapse else [False] * runs)
+    finite = np.isfinite(res.mean).all(axis=(-2, -1))
+    np.testing.assert_array_equal(finite, ~res.diverged)
 
 
 @settings(max_examples=60, **SETTINGS)
@@ -410,5 +410,5 @@ def test_property_masked_readings_equal_nan_readings_on_every_path(seed, batch, 
     with ekf_path(path):
         got = run(F0, Q0, X00, P00, lb.LinearMeasurement(np.ma.array(np.where(where, garbage, z), mask=where), H0, R0))
         ref = run(F0, Q0, X00, P00, lb.LinearMeasurement(np.where(where, np.nan, z), H0, R0))
-    np.testing.assert_array_equal(got.x, ref.x)
-    np.testing.assert_array_equal(got.P, ref.P)
+    np.testing.assert_array_equal(got.mean, ref.mean)
+    np.testing.assert_array_equal(got.cov, ref.cov)

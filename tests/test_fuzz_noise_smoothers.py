@@ -137,20 +137,20 @@ def test_fuzz_rts_smoother(problem, predict_first):
     status, sm = outcome(lambda: rts_smoother(run))
     event(f"smoother: {status}")
     if status == "error":
-        assert not np.isfinite(run.P).all() or not np.isfinite(run.P_pred).all(), f"refused a finite run: {sm}"
+        assert not np.isfinite(run.cov).all() or not np.isfinite(run.P_pred).all(), f"refused a finite run: {sm}"
         return
-    T, n = run.x.shape[-2:]
-    assert sm.x.shape == run.x.shape and sm.P.shape == run.P.shape and sm.gain.shape == run.P.shape[:-3] + (
+    T, n = run.mean.shape[-2:]
+    assert sm.mean.shape == run.mean.shape and sm.cov.shape == run.cov.shape and sm.gain.shape == run.cov.shape[:-3] + (
         T - 1, n, n)
-    if sm.x.size == 0:
+    if sm.mean.size == 0:
         return
-    np.testing.assert_array_equal(sm.x[..., -1, :], run.x[..., -1, :])
-    scale = max(1.0, float(np.abs(run.P).max()))
-    assert np.all(_min_eig(sm.P) >= -1e-9 * scale), "a smoothed covariance that is not a covariance"
-    assert np.all(_min_eig(run.P - sm.P) >= -1e-9 * scale), "smoothing added uncertainty"
+    np.testing.assert_array_equal(sm.mean[..., -1, :], run.mean[..., -1, :])
+    scale = max(1.0, float(np.abs(run.cov).max()))
+    assert np.all(_min_eig(sm.cov) >= -1e-9 * scale), "a smoothed covariance that is not a covariance"
+    assert np.all(_min_eig(run.cov - sm.cov) >= -1e-9 * scale), "smoothing added uncertainty"
     flat = lambda a, tail: a.reshape((-1,) + a.shape[a.ndim - tail:])
     for r, (x, P, xp, Pp, D, xs, Ps) in enumerate(zip(*(flat(a, t) for a, t in (
-            (run.x, 2), (run.P, 3), (run.x_pred, 2), (run.P_pred, 3), (run.P_cross, 3), (sm.x, 2), (sm.P, 3))))):
+            (run.mean, 2), (run.cov, 3), (run.x_pred, 2), (run.P_pred, 3), (run.P_cross, 3), (sm.mean, 2), (sm.cov, 3))))):
         ref_x, ref_P = _reference_rts(x, P, xp, Pp, D)
         tol = 1e-6 * max(1.0, float(np.abs(ref_x).max()), scale)
         np.testing.assert_allclose(xs, ref_x, rtol=0, atol=tol, err_msg=f"run {r}")
@@ -222,10 +222,10 @@ def test_fuzz_online_filter_equals_the_batch_call(problem, kind):
     if status == "error" or status_online == "error":
         return        # the online filter may refuse at a later step what the batch call refuses up front, and both
         # refuse with a clear line (checked by outcome)
-    assert np.all(np.isfinite(full.x)) and np.all(np.isfinite(full.P))
+    assert np.all(np.isfinite(full.mean)) and np.all(np.isfinite(full.cov))
     if last is not None:
-        np.testing.assert_allclose(last.x[..., -1, :], full.x[..., -1, :], rtol=1e-9, atol=1e-9)
-        np.testing.assert_allclose(last.P[..., -1, :, :], full.P[..., -1, :, :], rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(last.mean[..., -1, :], full.mean[..., -1, :], rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(last.cov[..., -1, :, :], full.cov[..., -1, :, :], rtol=1e-9, atol=1e-9)
 
 
 def _online(kind, args, stream):

@@ -66,8 +66,8 @@ def _rss_log_lik(rss, cells, anchors, p0_dbm, n_exp, sigma_db, d_min_m):
 
 def _assert_matches(res, ref, cells):
     mean, cov, belief, n_eff = ref
-    np.testing.assert_allclose(res.mean_m, mean, rtol=0, atol=1e-12)
-    np.testing.assert_allclose(res.covariance_m2, cov, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(res.mean, mean, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(res.cov, cov, rtol=0, atol=1e-12)
     np.testing.assert_allclose(res.n_eff, n_eff, rtol=1e-12)
     np.testing.assert_allclose(res.weights, belief[:, -1], rtol=0, atol=1e-12)
     # the MAP is a cell of the reference's largest belief (any of them where the belief ties, e.g. uniform)
@@ -184,7 +184,7 @@ def test_an_rss_model_as_a_callable_gives_the_same_numbers():
     direct = grid_bayes_filter(rss, cells, model, 0.5, velocity_m=(0.1, 0.2))
     wrapped = grid_bayes_filter(None, cells, lambda c, t: model.log_likelihood(rss[:, t], c, t, constant=False),
                                 0.5, n_steps=6, velocity_m=(0.1, 0.2))
-    for name in ("mean_m", "covariance_m2", "map_m", "n_eff", "weights", "particles_m"):
+    for name in ("mean", "cov", "map_m", "n_eff", "weights", "particles_m"):
         np.testing.assert_array_equal(getattr(wrapped, name), getattr(direct, name))
 
 
@@ -271,7 +271,7 @@ def _grid_1d(z, h, half_width_m=60.0):
 
 
 def _errors(grid, kf):
-    return (np.abs(grid.mean_m[..., 0] - kf.x[..., 0]), np.abs(grid.covariance_m2[..., 0, 0] - kf.P[..., 0, 0]))
+    return (np.abs(grid.mean[..., 0] - kf.mean[..., 0]), np.abs(grid.cov[..., 0, 0] - kf.cov[..., 0, 0]))
 
 
 def test_grid_posterior_equals_the_kalman_posterior_on_a_fine_grid():
@@ -279,8 +279,8 @@ def test_grid_posterior_equals_the_kalman_posterior_on_a_fine_grid():
     so the tolerance is round-off (1e-12 on values of order 10 m). The grid spans +-60 m, the estimates stay within
     +-20 m: the belief at the edges is exp(-40^2 / (2 * 1.21)) = 1e-287 of its peak (edges play no part)."""
     z, kf = _random_walk_1d()
-    P = kf.P[0, :, 0, 0]
-    assert np.abs(kf.x).max() < 20.0
+    P = kf.cov[0, :, 0, 0]
+    assert np.abs(kf.mean).max() < 20.0
     mean_bound, var_bound = _kf_error_bound(P, Q1, 0.25)
     assert mean_bound.max() < 1e-20 and var_bound.max() < 1e-20
     e_mean, e_var = _errors(_grid_1d(z, 0.25), kf)
@@ -292,7 +292,7 @@ def test_grid_error_is_within_the_poisson_summation_bound(h):
     """At spacings where the discretisation error is well above round-off (1e-6 to 6e-2), it stays within the
     bound derived in the module docstring (not fitted to the data) at every run and step."""
     z, kf = _random_walk_1d()
-    mean_bound, var_bound = _kf_error_bound(kf.P[0, :, 0, 0], Q1, h)
+    mean_bound, var_bound = _kf_error_bound(kf.cov[0, :, 0, 0], Q1, h)
     e_mean, e_var = _errors(_grid_1d(z, h), kf)
     assert np.all(e_mean <= mean_bound + 1e-13)
     assert np.all(e_var <= var_bound + 1e-13)
@@ -305,7 +305,7 @@ def test_grid_error_shrinks_exponentially_when_the_spacing_halves(h):
     h/2 the log of the largest error falls by 6 pi^2 s^2 / h^2 (10.2 to 15.9 here). The prefactor is a slowly
     varying function of h, allowed 20 % of that log; an O(h^2) error would fall by log 4 = 1.4."""
     z, kf = _random_walk_1d()
-    P = kf.P[0, -1, 0, 0]
+    P = kf.cov[0, -1, 0, 0]
     s2 = P * Q1 / (P + Q1)
     coarse, fine = _errors(_grid_1d(z, h), kf), _errors(_grid_1d(z, h / 2), kf)
     predicted = 6 * np.pi**2 * s2 / h**2
@@ -331,10 +331,10 @@ def test_grid_posterior_equals_the_kalman_posterior_in_two_dimensions():
     kf = lb.kalman_filter(np.eye(2), q * np.eye(2), np.broadcast_to(m0, (runs, 2)), P0,
                           lb.LinearMeasurement(z, np.eye(2), R_cov), B=np.eye(2),
                           u=np.broadcast_to(v, (runs, T, 2)), predict_first=False)
-    lam = np.linalg.eigvalsh(kf.P[0]).min(axis=-1)                                # (T,)
+    lam = np.linalg.eigvalsh(kf.cov[0]).min(axis=-1)                                # (T,)
     s2 = lam[:-1] * q / (lam[:-1] + q)
     assert np.all(np.exp(-2 * np.pi**2 * np.minimum(s2, lam[1:]) / h**2) < 1e-20)
-    assert np.abs(kf.x - m0).max() < 12.0                    # 13 m or more from the +-25 m edges
+    assert np.abs(kf.mean - m0).max() < 12.0                    # 13 m or more from the +-25 m edges
     axis = np.arange(-25.0, 25.0 + h / 2, h)
     cells = np.stack(np.meshgrid(axis, axis), -1).reshape(-1, 2)
     inv_p0, inv_r = np.linalg.inv(P0), np.linalg.inv(R_cov)
@@ -345,8 +345,8 @@ def test_grid_posterior_equals_the_kalman_posterior_in_two_dimensions():
         return -0.5 * np.einsum("rci,ij,rcj->rc", dev, inv_r, dev)
 
     grid = grid_bayes_filter(None, cells, ll, np.sqrt(q), n_steps=T, velocity_m=v, initial_belief=prior)
-    np.testing.assert_allclose(grid.mean_m, kf.x, rtol=0, atol=1e-12)
-    np.testing.assert_allclose(grid.covariance_m2, kf.P, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(grid.mean, kf.mean, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(grid.cov, kf.cov, rtol=0, atol=1e-12)
 
 
 # -- the callable's contract -------------------------------------------------------------------------------
@@ -363,11 +363,11 @@ def test_callable_collapse_is_isolated_and_named():
 
     with pytest.warns(RuntimeWarning, match=r"log_likelihood collapsed in 1 of 3 runs \(first: run 1, step 2"):
         res = grid_bayes_filter(None, cells, ll, 0.5, n_steps=5)
-    assert res.degenerate.tolist() == [False, True, False] and res.degenerate_step.tolist() == [-1, 2, -1]
-    assert np.isnan(res.mean_m[1, 2:]).all() and np.isfinite(res.mean_m[1, :2]).all()
+    assert res.diverged.tolist() == [False, True, False] and res.diverged_step.tolist() == [-1, 2, -1]
+    assert np.isnan(res.mean[1, 2:]).all() and np.isfinite(res.mean[1, :2]).all()
     alone = grid_bayes_filter(None, cells, lambda c, t: -0.5 * np.sum((c[None] - z[::2, t, None, :]) ** 2, -1),
                               0.5, n_steps=5)
-    np.testing.assert_array_equal(res.mean_m[::2], alone.mean_m)
+    np.testing.assert_array_equal(res.mean[::2], alone.mean)
     with pytest.raises(ValueError, match="log_likelihood collapsed in every run"):
         grid_bayes_filter(None, cells, lambda c, t: np.full((2, len(c)), np.nan), 0.5, n_steps=3)
 
@@ -447,7 +447,7 @@ def test_the_repositorys_grids_are_inside_the_limit():
     xs, ys = np.arange(0, 24, 0.1), np.arange(0, 15, 0.1)
     cells = np.stack(np.meshgrid(xs, ys), -1).reshape(-1, 2)
     res = grid_bayes_filter(np.full((2, 3, 3), -60.0), cells, _guard_model(), 0.5)
-    assert np.isfinite(res.mean_m).all()
+    assert np.isfinite(res.mean).all()
 
 
 def test_no_cells_is_one_line_not_a_division_by_zero():

@@ -44,8 +44,8 @@ def _reference(log_lik, cells, spread_m, velocity, prior):
 
 def _assert_same(res, ref, runs=slice(None)):
     mean, cov, belief = ref
-    np.testing.assert_allclose(res.mean_m[runs], mean, rtol=0, atol=TOL)
-    np.testing.assert_allclose(res.covariance_m2[runs], cov, rtol=0, atol=TOL)
+    np.testing.assert_allclose(res.mean[runs], mean, rtol=0, atol=TOL)
+    np.testing.assert_allclose(res.cov[runs], cov, rtol=0, atol=TOL)
     np.testing.assert_allclose(res.weights[runs], belief, rtol=0, atol=TOL)
 
 
@@ -159,12 +159,12 @@ def test_a_collapsing_run_is_flagged_and_the_others_unaffected(path):
     model = lb.RssModel(ANCHORS, CHANNEL)
     with pytest.warns(RuntimeWarning, match=r"1 of 3 runs \(first: run 1, step 2"):
         res = grid_bayes_filter(rss, cells, model, 0.5)
-    assert res.degenerate.tolist() == [False, True, False] and res.degenerate_step.tolist() == [-1, 2, -1]
+    assert res.diverged.tolist() == [False, True, False] and res.diverged_step.tolist() == [-1, 2, -1]
     good = [0, 2]
     ref = _reference(lambda t: model.log_likelihood(rss[good, t], cells, t, constant=False), cells, 0.5,
                      np.zeros((6, 2)), np.ones((2, len(cells))))
     _assert_same(res, ref, good)
-    assert np.isnan(res.mean_m[1, 2:]).all() and np.isfinite(res.mean_m[1, :2]).all()
+    assert np.isnan(res.mean[1, 2:]).all() and np.isfinite(res.mean[1, :2]).all()
     assert np.isnan(res.weights[1]).all()
     rss[:, 4, 2] = 1e300                                    # every run: the error names the first step and run
     with pytest.raises(ValueError, match=r"rss_dbm collapsed in every run \(3 of 3\).*step 2 \(run 1\)"):
@@ -184,7 +184,7 @@ def test_posterior_below_the_belief_floor_takes_the_log_domain(path):
     ref = _reference(lambda t: model.log_likelihood(rss[:, t], cells, t, constant=False), cells, 0.1,
                      np.zeros((3, 2)), prior)
     _assert_same(res, ref)
-    assert np.linalg.norm(res.mean_m[0, 0] - target) < 0.3
+    assert np.linalg.norm(res.mean[0, 0] - target) < 0.3
 
 
 def test_compiled_path_equals_numpy_path_on_a_large_grid(monkeypatch):
@@ -200,7 +200,7 @@ def test_compiled_path_equals_numpy_path_on_a_large_grid(monkeypatch):
     fast = grid_bayes_filter(rss, cells, model, 0.4, velocity_m=(0.05, 0.1))
     monkeypatch.setattr(_compiled, "_NUMBA_ENABLED", False)
     slow = grid_bayes_filter(rss, cells, model, 0.4, velocity_m=(0.05, 0.1))
-    for name in ("mean_m", "covariance_m2"):
+    for name in ("mean", "cov"):
         np.testing.assert_allclose(getattr(fast, name), getattr(slow, name), rtol=0, atol=TOL)
     np.testing.assert_allclose(fast.n_eff, slow.n_eff, rtol=1e-11)
     np.testing.assert_array_equal(fast.map_m, slow.map_m)

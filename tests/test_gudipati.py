@@ -108,8 +108,8 @@ def test_fusion_ukf_equals_an_independent_filterpy_loop(alpha):
         f.update(z_imu[k], R=r_imu, hx=h_imu)
         f.sigmas_f = points.sigma_points(f.x, f.P)
         f.update(w.rss_dbm[0, k], R=r_rss, hx=h_rss)
-        np.testing.assert_allclose(ours.x[0, k], f.x, atol=1e-5, err_msg=f"step {k}")
-        np.testing.assert_allclose(ours.P[0, k], f.P, atol=1e-5, err_msg=f"step {k}")
+        np.testing.assert_allclose(ours.mean[0, k], f.x, atol=1e-5, err_msg=f"step {k}")
+        np.testing.assert_allclose(ours.cov[0, k], f.P, atol=1e-5, err_msg=f"step {k}")
 
 
 def test_report_windows_equal_a_brute_force_average_and_unheard_packets_are_left_out():

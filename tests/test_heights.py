@@ -122,5 +122,5 @@ def test_ekf_with_known_height_equals_a_3d_state_with_a_frozen_height():
         P03[np.ix_(keep, keep)] = P0
         b = extended_kalman_filter(space.F, Q, x03, P03, [RssMeasurement(power, ANCHORS, MODEL, np.array([0, 1, 2]),
                                                                          mode=mode)])
-        np.testing.assert_allclose(a.x[..., [0, 1]], b.x[..., [0, 1]], atol=1e-10)
-        np.testing.assert_allclose(b.x[..., 2], H, atol=1e-12)
+        np.testing.assert_allclose(a.mean[..., [0, 1]], b.mean[..., [0, 1]], atol=1e-10)
+        np.testing.assert_allclose(b.mean[..., 2], H, atol=1e-12)

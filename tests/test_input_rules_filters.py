@@ -49,8 +49,8 @@ def test_kalman_filter_updates_with_the_components_present():
     for joseph in (True, False):      # the short form (I - K H) P equals Joseph's in exact arithmetic
         res = lb.kalman_filter(MODEL.F, MODEL.Q, X0, P0, lb.LinearMeasurement(z, H, R), joseph=joseph,
                                outputs=("innovation",))
-        np.testing.assert_allclose(res.x, x_ref, rtol=0, atol=1e-9)
-        np.testing.assert_allclose(res.P, P_ref, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(res.mean, x_ref, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(res.cov, P_ref, rtol=0, atol=1e-9)
     assert np.isnan(res.innovation[3, 0]) and np.isfinite(res.innovation[3, 1])
 
 
@@ -60,10 +60,10 @@ def test_property_random_masks_kf_and_ekf_agree_with_filterpy(mask):
     z = np.where(mask, np.nan, _track(3, 12))
     x_ref, P_ref = filterpy_reference(z)
     kf = lb.kalman_filter(MODEL.F, MODEL.Q, X0, P0, lb.LinearMeasurement(z, H, R))
-    np.testing.assert_allclose(kf.x, x_ref, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(kf.mean, x_ref, rtol=0, atol=1e-9)
     ekf = lb.extended_kalman_filter(MODEL.F, MODEL.Q, X0, P0, [lb.LinearMeasurement(z, H, R)])
-    np.testing.assert_allclose(ekf.x, x_ref, rtol=0, atol=1e-9)
-    np.testing.assert_allclose(ekf.P, P_ref, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(ekf.mean, x_ref, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(ekf.cov, P_ref, rtol=0, atol=1e-9)
 
 
 def test_singular_innovation_covariance_is_an_error_naming_the_step():
@@ -95,10 +95,10 @@ def test_a_missing_component_with_zero_noise_does_not_stop_the_filter():
         assert kf.P[0, 0] == 0.0                          # the full S really is singular at every step
         if np.isfinite(zk[1]):
             kf.update(zk[1:], R=r_zero[1:, 1:], H=H[1:])
-        np.testing.assert_allclose(res.x[k], kf.x, rtol=0, atol=1e-9)
-        np.testing.assert_allclose(res.P[k], kf.P, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(res.mean[k], kf.x, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(res.cov[k], kf.P, rtol=0, atol=1e-9)
     ekf = lb.extended_kalman_filter(MODEL.F, q0, X0, p0, [lb.LinearMeasurement(z, H, r_zero)])
-    np.testing.assert_allclose(ekf.x, res.x, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(ekf.mean, res.mean, rtol=0, atol=1e-9)
 
 
 def test_singular_three_component_update_names_the_offending_run():
@@ -265,12 +265,12 @@ def test_kalman_filter_with_zero_steps_returns_an_empty_result():
     for z in (np.empty((0, 2)), np.empty((3, 0, 2))):
         res = lb.kalman_filter(MODEL.F, MODEL.Q, X0, P0, lb.LinearMeasurement(z, H, R), outputs=("innovation",))
         batch = z.shape[:-2]
-        assert res.x.shape == batch + (0, 4) and res.P.shape == batch + (0, 4, 4)
+        assert res.mean.shape == batch + (0, 4) and res.cov.shape == batch + (0, 4, 4)
         assert res.innovation.shape == batch + (0, 2) and res.nis.shape == batch + (0,)
         assert res.diverged.shape == batch and res.n_diverged == 0
     for flt in (lb.extended_kalman_filter, lb.unscented_kalman_filter):
         res = flt(MODEL.F, MODEL.Q, X0, P0, [lb.LinearMeasurement(np.empty((3, 0, 2)), H, R)])
-        assert res.x.shape == (3, 0, 4) and res.diverged.shape == (3,) and res.n_diverged == 0
+        assert res.mean.shape == (3, 0, 4) and res.diverged.shape == (3,) and res.n_diverged == 0
 
 
 def _per_run_filterpy(z, Fs, Hs, Qs, x0, P):
@@ -298,14 +298,14 @@ def test_run_axes_on_F_H_and_Q_equal_one_filter_per_run():
     zb = np.broadcast_to(z, (runs,) + z.shape)
     ref = _per_run_filterpy(zb, Fs, Hs, Qs, X0, P0)
     res = lb.kalman_filter(Fs, Qs, X0, P0, lb.LinearMeasurement(z, Hs, R))                   # run axes on F, H, Q only
-    np.testing.assert_allclose(res.x, ref, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(res.mean, ref, rtol=0, atol=1e-9)
     Hb = np.broadcast_to(H, (runs,) + H.shape)
     ref = _per_run_filterpy(zb, Fs, Hb, Qs, X0, P0)
     for flt in (lb.extended_kalman_filter, lb.unscented_kalman_filter):
         out = flt(Fs, Qs, X0, P0, [lb.LinearMeasurement(z, H, R)])
-        np.testing.assert_allclose(out.x, ref, rtol=0, atol=1e-8)
+        np.testing.assert_allclose(out.mean, ref, rtol=0, atol=1e-8)
         out = flt(MODEL.F, Qs, X0, P0, [lb.LinearMeasurement(z, H, R)])  # a batched Q alone
-        np.testing.assert_allclose(out.x, _per_run_filterpy(zb, [MODEL.F] * runs, Hb, Qs, X0, P0), rtol=0, atol=1e-8)
+        np.testing.assert_allclose(out.mean, _per_run_filterpy(zb, [MODEL.F] * runs, Hb, Qs, X0, P0), rtol=0, atol=1e-8)
 
 
 def test_run_axes_that_do_not_broadcast_are_named():
@@ -340,11 +340,11 @@ def test_a_singular_float32_sample_covariance_is_accepted():
         kf.update(zk)
         ref.append(kf.x.copy())
     res = lb.kalman_filter(MODEL.F, MODEL.Q, X0, P0, lb.LinearMeasurement(z, H, R32))
-    np.testing.assert_allclose(res.x, np.array(ref), rtol=0, atol=1e-9)
+    np.testing.assert_allclose(res.mean, np.array(ref), rtol=0, atol=1e-9)
     for call in _every_filter(R_=R32):
-        assert np.all(np.isfinite(call().x))
+        assert np.all(np.isfinite(call().mean))
     for call in _every_filter(Q=np.kron(np.eye(2, dtype=np.float32), R32) * np.float32(0.01)):     # a float32 Q alike
-        assert np.all(np.isfinite(call().x))
+        assert np.all(np.isfinite(call().mean))
     # float32 precision is no licence for a real negative eigenvalue
     with pytest.raises(ValueError, match="R must be positive semi-definite"):
         lb.kalman_filter(MODEL.F, MODEL.Q, X0, P0, lb.LinearMeasurement(z, H, R32 - np.float32(1e-3) * np.eye(2, dtype=np.float32)))

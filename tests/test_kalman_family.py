@@ -140,7 +140,7 @@ def test_serial_updates_and_several_streams_give_the_joint_density():
                                                                lb.LinearMeasurement(z[..., 1:], H[1:], R[1:, 1:])],
                                     outputs=full)
     for res in (ser, two):
-        np.testing.assert_allclose(res.x, par.x, rtol=1e-10, atol=1e-10)
+        np.testing.assert_allclose(res.mean, par.mean, rtol=1e-10, atol=1e-10)
         np.testing.assert_allclose(res.log_likelihood, par.log_likelihood, rtol=1e-10)
         assert (res.S[..., 0, 1] == 0).all() and (res.S[..., 1, 0] == 0).all()          # block diagonal
         # the first reading's innovation is taken at the prior, the second at the state updated by the first
@@ -209,8 +209,8 @@ def test_literal_george_records_the_previous_posterior_as_its_prior():
     z, R, x0, P0 = _problem(batch=2, steps=6)
     res = lb.kalman_filter(MODEL.F, MODEL.Q, x0, P0, lb.LinearMeasurement(z, H, R), variant="literal_george",
                            outputs=("x_pred", "P_pred"))
-    np.testing.assert_array_equal(res.x_pred[:, 1:], res.x[:, :-1])
-    np.testing.assert_array_equal(res.P_pred[:, 1:], res.P[:, :-1])
+    np.testing.assert_array_equal(res.x_pred[:, 1:], res.mean[:, :-1])
+    np.testing.assert_array_equal(res.P_pred[:, 1:], res.cov[:, :-1])
 
 
 def test_one_argument_order_and_clear_refusals():
@@ -218,7 +218,7 @@ def test_one_argument_order_and_clear_refusals():
     stream = lb.LinearMeasurement(z, H, R)
     a = lb.kalman_filter(MODEL.F, MODEL.Q, x0, P0, stream)
     b = lb.extended_kalman_filter(MODEL.F, MODEL.Q, x0, P0, [stream])
-    np.testing.assert_array_equal(a.x, b.x)
+    np.testing.assert_array_equal(a.mean, b.mean)
     with pytest.raises(ValueError, match="kalman_filter takes LinearMeasurement streams"):
         lb.kalman_filter(MODEL.F, MODEL.Q, x0, P0, lb.RssMeasurement(z, np.zeros((2, 2)), lb.PathLossModel(-40, 2, 3),
                                                                      np.array([0, 1])))

@@ -41,8 +41,8 @@ def test_online_filter_equals_the_batch_call():
     online = lb.OnlineFilter("kf", lb.per_step(Fs), model.Q, np.broadcast_to(x0, (4, 4)), P0, B=B)
     for k in range(T):
         step = online.step(lb.LinearMeasurement(z[:, k:k + 1], H, R), u=u[:, k])
-        np.testing.assert_allclose(step.x[:, 0], batch.x[:, k], atol=1e-12)
-        np.testing.assert_allclose(step.P[:, 0], batch.P[:, k], atol=1e-12)
+        np.testing.assert_allclose(step.mean[:, 0], batch.mean[:, k], atol=1e-12)
+        np.testing.assert_allclose(step.cov[:, 0], batch.cov[:, k], atol=1e-12)
     np.testing.assert_allclose(online.log_likelihood, batch.total_log_likelihood, atol=1e-9)
 
 
@@ -61,7 +61,7 @@ def test_online_ekf_and_ukf_equal_batch_and_flag_the_same_divergence():
         online = lb.OnlineFilter(kind, model.F, model.Q, x0, P0, divergence_window=5)
         for k in range(rss.shape[1]):
             step = online.step(meas(rss[:, k:k + 1]))
-            np.testing.assert_allclose(step.x[:, 0], batch.x[:, k], atol=1e-10)
+            np.testing.assert_allclose(step.mean[:, 0], batch.mean[:, k], atol=1e-10)
         assert batch.diverged.any()                         # the case exercises the guard
         np.testing.assert_array_equal(step.diverged, batch.diverged)
         np.testing.assert_array_equal(step.diverged_step, batch.diverged_step)
@@ -92,7 +92,7 @@ def test_online_nonlinear_motion_with_the_step_equals_batch():
         online = lb.OnlineFilter(kind, motion, Q, x0, P0)
         for k in range(30):
             step = online.step(lb.LinearMeasurement(z[:, k:k + 1], H, np.eye(2)))
-            np.testing.assert_allclose(step.x[:, 0], batch.x[:, k], atol=1e-12)
+            np.testing.assert_allclose(step.mean[:, 0], batch.mean[:, k], atol=1e-12)
 
 
 def test_online_filter_refuses_what_the_batch_call_refuses():
@@ -117,13 +117,13 @@ def test_nees_closed_form_and_chi_square_mean_over_runs():
     M = 400
     model, H, R, truth, z = _cv_runs(rng, runs=M, T=25, missing=False)
     run = lb.kalman_filter(model.F, model.Q, np.zeros((M, 4)), 1e-9 * np.eye(4), lb.LinearMeasurement(z, H, R))
-    e = lb.nees(truth, run.x, run.P)
+    e = lb.nees(truth, run.mean, run.cov)
     assert e.shape == (M, 25)
     # the filter is the exact posterior of the simulated model: the mean NEES over runs is chi^2(4 M) / M
     lo, hi = chi2.ppf([1e-4, 1 - 1e-4], 4 * M) / M
     mean = e[:, -1].mean()
     assert lo < mean < hi
-    pos = lb.nees(truth, run.x, run.P, index=[0, 1])[:, -1].mean()
+    pos = lb.nees(truth, run.mean, run.cov, index=[0, 1])[:, -1].mean()
     lo2, hi2 = chi2.ppf([1e-4, 1 - 1e-4], 2 * M) / M
     assert lo2 < pos < hi2
     assert np.isnan(lb.nees(np.full(2, np.nan), x, P))

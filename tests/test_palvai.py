@@ -47,9 +47,9 @@ def test_particle_filter_schedules_run_and_concentrate(schedule):
     loc = pv.draw_locations(3, 20, 2, rng)
     z = pv.measure(setup, loc, rng)
     res = pv.pf_run(setup, loc, z, rng, n_particles=3000, n_iterations=20, schedule=schedule, true_locations_m=loc)
-    assert res.mean_m.shape == (3, 20, 2)
-    assert np.all(pv.errors_m(res.mean_m[:, -1], setup.target) < 8.0)
-    variance = np.trace(res.covariance_m2, axis1=-2, axis2=-1)
+    assert res.mean.shape == (3, 20, 2)
+    assert np.all(pv.errors_m(res.mean[:, -1], setup.target) < 8.0)
+    variance = np.trace(res.cov, axis1=-2, axis2=-1)
     assert np.all(variance[:, -1] < variance[:, 0])
     with pytest.raises(ValueError, match="n_iterations <= 20"):
         pv.pf_run(setup, loc, z, rng, n_particles=10, n_iterations=21, schedule="sequential")
@@ -155,7 +155,7 @@ def test_the_sequential_schedule_runs_one_iteration_per_location_and_the_others_
     z = pv.measure(setup, loc, rng)
     res = pv.pf_run(setup, loc, z, rng, n_particles=50, n_iterations=pv.pf_iterations("sequential", 30, 4),
                     schedule="sequential")
-    assert res.mean_m.shape == (2, 4, 2)
+    assert res.mean.shape == (2, 4, 2)
     with pytest.raises(ValueError, match="schedule must be one of"):
         pv.pf_iterations("random", 3, 4)
 

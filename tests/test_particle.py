@@ -30,10 +30,10 @@ def test_sir_posterior_of_a_linear_gaussian_problem_equals_the_kalman_posterior(
     post_P = np.linalg.inv(info)
     post_m = (post_P @ (np.linalg.solve(P0, m0)[:, None] + z.sum(axis=1).T / r)).T
     tol = 5 * np.sqrt(np.diag(post_P) / (Ns / 10))           # resampling leaves ~Ns/10 distinct ancestors
-    assert np.all(np.abs(res.mean_m[:, -1] - post_m) < tol)
-    np.testing.assert_allclose(np.diagonal(res.covariance_m2[:, -1], axis1=-2, axis2=-1).mean(axis=0), np.diag(post_P),
+    assert np.all(np.abs(res.mean[:, -1] - post_m) < tol)
+    np.testing.assert_allclose(np.diagonal(res.cov[:, -1], axis1=-2, axis2=-1).mean(axis=0), np.diag(post_P),
                                rtol=0.1)
-    np.testing.assert_allclose(res.covariance_m2[:, -1].mean(axis=0)[0, 1], post_P[0, 1], atol=0.1 * post_P[0, 0])
+    np.testing.assert_allclose(res.cov[:, -1].mean(axis=0)[0, 1], post_P[0, 1], atol=0.1 * post_P[0, 0])
     assert res.resampled.all()
 
 
@@ -83,7 +83,7 @@ def _rss_runs(runs=4, steps=8, seed=3):
 @pytest.mark.parametrize("threshold", [None, 0.5])
 def test_particle_filter_isolates_a_run_whose_rss_reading_overflows_the_likelihood(threshold):
     """A reading of 1e300 dBm overflows every particle's likelihood to -inf: that run used to abort the whole batch
-    with "weights must be finite" naming no run or step. Now that run is flagged degenerate at that step with NaN
+    with "weights must be finite" naming no run or step. Now that run is flagged diverged at that step with NaN
     estimates from there on, and every other run is bit-identical to the batch where that reading was sane."""
     good = _rss_runs()
     bad = good.copy()
@@ -92,14 +92,14 @@ def test_particle_filter_isolates_a_run_whose_rss_reading_overflows_the_likeliho
     ref = lb.particle_filter(good, BAYES_MODEL, np.random.default_rng(7), **kw)
     with pytest.warns(RuntimeWarning, match=r"1 of 4 runs \(first: run 2, step 5"):
         res = lb.particle_filter(bad, BAYES_MODEL, np.random.default_rng(7), **kw)
-    assert res.degenerate.tolist() == [False, False, True, False]
-    assert res.degenerate_step.tolist() == [-1, -1, 5, -1]
-    assert ref.n_degenerate == 0 and res.n_degenerate == 1
+    assert res.diverged.tolist() == [False, False, True, False]
+    assert res.diverged_step.tolist() == [-1, -1, 5, -1]
+    assert ref.n_diverged == 0 and res.n_diverged == 1
     others = [0, 1, 3]
-    for name in ("mean_m", "covariance_m2", "map_m", "n_eff", "resampled", "particles_m", "weights"):
+    for name in ("mean", "cov", "map_m", "n_eff", "resampled", "particles_m", "weights"):
         np.testing.assert_array_equal(getattr(res, name)[others], getattr(ref, name)[others], err_msg=name)
-    np.testing.assert_array_equal(res.mean_m[2, :5], ref.mean_m[2, :5])
-    assert np.isnan(res.mean_m[2, 5:]).all() and np.isnan(res.covariance_m2[2, 5:]).all()
+    np.testing.assert_array_equal(res.mean[2, :5], ref.mean[2, :5])
+    assert np.isnan(res.mean[2, 5:]).all() and np.isnan(res.cov[2, 5:]).all()
     assert np.isnan(res.map_m[2, 5:]).all() and np.isnan(res.n_eff[2, 5:]).all()
     assert np.isnan(res.weights[2]).all() and np.isnan(res.particles_m[2]).all()
 
@@ -127,11 +127,11 @@ def test_particle_filter_isolates_a_run_whose_likelihood_collapses(method, colla
     ref = lb.particle_filter(None, loglik, np.random.default_rng(1), **kw)
     with pytest.warns(RuntimeWarning, match=r"1 of 3 runs \(first: run 1, step 3"):
         res = lb.particle_filter(None, lambda x, k: loglik(x, k, True), np.random.default_rng(1), **kw)
-    assert res.degenerate.tolist() == [False, True, False] and res.degenerate_step.tolist() == [-1, 3, -1]
-    for name in ("mean_m", "covariance_m2", "map_m", "n_eff", "resampled", "particles_m", "weights"):
+    assert res.diverged.tolist() == [False, True, False] and res.diverged_step.tolist() == [-1, 3, -1]
+    for name in ("mean", "cov", "map_m", "n_eff", "resampled", "particles_m", "weights"):
         np.testing.assert_array_equal(getattr(res, name)[[0, 2]], getattr(ref, name)[[0, 2]], err_msg=name)
-    np.testing.assert_array_equal(res.mean_m[1, :3], ref.mean_m[1, :3])
-    assert np.isnan(res.mean_m[1, 3:]).all() and np.isnan(res.covariance_m2[1, 3:]).all()
+    np.testing.assert_array_equal(res.mean[1, :3], ref.mean[1, :3])
+    assert np.isnan(res.mean[1, 3:]).all() and np.isnan(res.cov[1, 3:]).all()
     assert np.isnan(res.weights[1]).all() and not res.resampled[1, 3:].any()
 
 
@@ -141,8 +141,8 @@ def test_sir_particles_with_minus_inf_likelihood_are_only_dropped():
     start = rng.normal(0, 1, (2, 400, 1))
     res = lb.particle_filter(None, lambda x, k: np.where(x[..., 0] > 0, 0.0, -np.inf), rng, n_steps=1,
                              initial_particles_m=start)
-    assert not res.degenerate.any()
-    assert np.all(res.mean_m[:, 0, 0] > 0)
+    assert not res.diverged.any()
+    assert np.all(res.mean[:, 0, 0] > 0)
 
 
 def test_grid_bayes_filter_isolates_a_run_whose_likelihood_collapses():
@@ -154,12 +154,12 @@ def test_grid_bayes_filter_isolates_a_run_whose_likelihood_collapses():
     ref = lb.grid_bayes_filter(good, cells, BAYES_MODEL, 1.0)
     with pytest.warns(RuntimeWarning, match=r"1 of 3 runs \(first: run 1, step 2"):
         res = lb.grid_bayes_filter(bad, cells, BAYES_MODEL, 1.0)
-    assert res.degenerate.tolist() == [False, True, False] and res.degenerate_step.tolist() == [-1, 2, -1]
-    assert ref.n_degenerate == 0 and res.n_degenerate == 1
-    for name in ("mean_m", "covariance_m2", "map_m", "n_eff", "weights"):
+    assert res.diverged.tolist() == [False, True, False] and res.diverged_step.tolist() == [-1, 2, -1]
+    assert ref.n_diverged == 0 and res.n_diverged == 1
+    for name in ("mean", "cov", "map_m", "n_eff", "weights"):
         np.testing.assert_array_equal(getattr(res, name)[[0, 2]], getattr(ref, name)[[0, 2]])
-    np.testing.assert_array_equal(res.mean_m[1, :2], ref.mean_m[1, :2])
-    assert np.isnan(res.mean_m[1, 2:]).all() and np.isnan(res.weights[1]).all()
+    np.testing.assert_array_equal(res.mean[1, :2], ref.mean[1, :2])
+    assert np.isnan(res.mean[1, 2:]).all() and np.isnan(res.weights[1]).all()
 
 
 def test_sir_without_particles_is_a_clear_error():
@@ -184,7 +184,7 @@ def _bayes_filters():
 
 
 def test_every_run_collapsing_is_an_error_naming_the_likelihood_and_the_first_step():
-    """With every run collapsed the filters returned all-NaN with n_degenerate equal to the run count: a units bug
+    """With every run collapsed the filters returned all-NaN with n_diverged equal to the run count: a units bug
     (1e300 dBm in every run, a likelihood that is -inf everywhere) became NaN instead of an error. Now a ValueError
     names the likelihood (or rss_dbm), the first step and run, before anything is returned."""
     start = np.random.default_rng(0).normal(0, 1, (3, 50, 2))
@@ -216,8 +216,8 @@ def test_some_runs_collapsing_give_one_warning_with_the_count_and_the_first_run_
             res = call(rss)
         assert len(record) == 1, [str(w.message) for w in record]
         assert re.search(r"3 of 4 runs.*run 2, step 5", str(record[0].message)), str(record[0].message)
-        assert res.degenerate.tolist() == [False, True, True, True]
-        assert res.degenerate_step.tolist() == [-1, 6, 5, 6]
+        assert res.diverged.tolist() == [False, True, True, True]
+        assert res.diverged_step.tolist() == [-1, 6, 5, 6]
     start = np.random.default_rng(0).normal(0, 1, (3, 50, 2))
 
     def loglik(x, k):
@@ -235,7 +235,7 @@ def test_some_runs_collapsing_give_one_warning_with_the_count_and_the_first_run_
         for name, call in _bayes_filters():
             call(_rss_runs())
         assert lb.particle_filter(None, lambda x, k: np.zeros(x.shape[:2]), np.random.default_rng(0), n_steps=2,
-                                  initial_particles_m=np.zeros((0, 5, 2))).n_degenerate == 0   # no runs: nothing collapsed
+                                  initial_particles_m=np.zeros((0, 5, 2))).n_diverged == 0   # no runs: nothing collapsed
 
 
 # -- size guard (issue 44, item 7) ------------------------------------------------------------------------------------

@@ -193,8 +193,8 @@ def test_n_out_equal_to_n_is_the_default_draw_and_counts_to_indices_takes_a_tota
 ANCHORS = np.array([[0.0, 0.0], [10.0, 0.0], [0.0, 8.0], [10.0, 8.0]])
 RSS = lb.RssModel(ANCHORS, lb.PathLossModel(-40.0, 2.5, 4.0, min_distance_m=0.1))
 BOX = ([0.0, 0.0], [10.0, 8.0])
-FIELDS = ("mean_m", "covariance_m2", "map_m", "n_eff", "resampled", "particles_m", "weights", "degenerate",
-          "degenerate_step", "log_weights")
+FIELDS = ("mean", "cov", "map_m", "n_eff", "resampled", "particles_m", "weights", "diverged", "diverged_step",
+          "log_weights")
 
 
 def _readings(seed, runs=None, steps=6):
@@ -229,8 +229,8 @@ def test_one_run_of_readings_t_by_m_gives_the_one_run_result_without_the_run_axi
                               **{k: np.asarray(v)[None] for k, v in extra.items()})
     _assert_single_is_run_0(one, batched)
     d = 4 if "motion" in kwargs else 2
-    assert one.mean_m.shape == (6, d) and one.covariance_m2.shape == (6, d, d) and one.particles_m.shape == (300, d)
-    assert one.degenerate.shape == () and not one.degenerate and one.degenerate_step == -1
+    assert one.mean.shape == (6, d) and one.cov.shape == (6, d, d) and one.particles_m.shape == (300, d)
+    assert one.diverged.shape == () and not one.diverged and one.diverged_step == -1
     with pytest.raises(ValueError, match=r"single run .* initial_position_m without the run axis"):
         particle_filter(rss, RSS, np.random.default_rng(1), n_particles=10, initial_position_m=[[5.0, 4.0]])
 
@@ -258,7 +258,7 @@ def test_one_run_with_callables_sees_and_returns_arrays_without_the_run_axis():
     # a start (dim,) is one run too
     one = particle_filter(None, loglik_one, np.random.default_rng(4), n_steps=5, initial_position_m=[0.5, 0.5],
                           n_particles=50, initial_covariance=np.diag([1.0, 0.0]))
-    assert one.mean_m.shape == (5, 2) and one.particles_m.shape == (50, 2)
+    assert one.mean.shape == (5, 2) and one.particles_m.shape == (50, 2)
     with pytest.raises(ValueError, match=r"log_likelihood must return \(400,\) for a single run"):
         particle_filter(None, lambda x, t: loglik_one(x, t)[None], np.random.default_rng(3), n_steps=2,
                         initial_particles_m=start)
@@ -338,18 +338,18 @@ def test_the_particle_posterior_of_a_linear_gaussian_track_is_the_kalman_filters
                                initial_position_m=np.broadcast_to(x0, (runs, 4)), initial_covariance=P0)
 
     res = run(motion)
-    assert res.mean_m.shape == (runs, steps, 4) and res.covariance_m2.shape == (runs, steps, 4, 4)
-    mean, se = res.mean_m.mean(axis=0), res.mean_m.std(axis=0, ddof=1) / np.sqrt(runs)
-    sd = np.sqrt(np.diagonal(kf.P, axis1=-2, axis2=-1))
+    assert res.mean.shape == (runs, steps, 4) and res.cov.shape == (runs, steps, 4, 4)
+    mean, se = res.mean.mean(axis=0), res.mean.std(axis=0, ddof=1) / np.sqrt(runs)
+    sd = np.sqrt(np.diagonal(kf.cov, axis1=-2, axis2=-1))
     assert np.all(se < 0.02 * sd)                              # the window is narrow against the posterior
-    assert np.all(np.abs(mean - kf.x) <= 5 * se), np.max(np.abs(mean - kf.x) / se)
-    dev = res.mean_m - mean
+    assert np.all(np.abs(mean - kf.mean) <= 5 * se), np.max(np.abs(mean - kf.mean) / se)
+    dev = res.mean - mean
     var_of_mean = np.einsum("rti,rtj->tij", dev, dev) / (runs - 1)
-    cov, cov_se = res.covariance_m2.mean(axis=0), res.covariance_m2.std(axis=0, ddof=1) / np.sqrt(runs)
-    assert np.all(np.abs(cov + var_of_mean - kf.P) <= 5 * cov_se), np.max(np.abs(cov + var_of_mean - kf.P) / cov_se)
+    cov, cov_se = res.cov.mean(axis=0), res.cov.std(axis=0, ddof=1) / np.sqrt(runs)
+    assert np.all(np.abs(cov + var_of_mean - kf.cov) <= 5 * cov_se), np.max(np.abs(cov + var_of_mean - kf.cov) / cov_se)
     # the window can fail: a process noise of 3 q is seen far outside it (the covariances grow)
     wrong = run(lb.constant_velocity(1.0, 0.15))
-    assert np.max(np.abs(wrong.covariance_m2.mean(axis=0) - kf.P) / cov_se) > 20
+    assert np.max(np.abs(wrong.cov.mean(axis=0) - kf.cov) / cov_se) > 20
 
 
 def test_an_rss_model_sees_the_positions_in_either_state_layout():
@@ -369,8 +369,8 @@ def test_an_rss_model_sees_the_positions_in_either_state_layout():
     kw_axis = dict(initial_particles_m=start[..., perm])
     np.testing.assert_array_equal(cv_axis.position_index, [0, 2])
     axis = particle_filter(rss, RSS, np.random.default_rng(40), motion=cv_axis, **kw_axis)
-    np.testing.assert_allclose(axis.mean_m, res.mean_m[..., perm], rtol=0, atol=1e-12)
-    np.testing.assert_allclose(axis.covariance_m2, res.covariance_m2[..., perm[:, None], perm], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(axis.mean, res.mean[..., perm], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(axis.cov, res.cov[..., perm[:, None], perm], rtol=0, atol=1e-12)
     # a position start is a state at rest
     rest = particle_filter(rss, RSS, np.random.default_rng(41), motion=cv, n_particles=50,
                            initial_position_m=[[5.0, 4.0], [4.0, 5.0]], cloud_steps=(0,))
@@ -431,7 +431,7 @@ def test_motion_refuses_the_random_walk_arguments_and_unknown_models():
     # a heading model without a region moves by its F and Q (drawn from an eigen-factor of Q)
     res = particle_filter(rss, RSS, np.random.default_rng(0), motion=heading, n_particles=30,
                           initial_position_m=[[5.0, 4.0]])
-    assert res.mean_m.shape == (1, 6, 8)
+    assert res.mean.shape == (1, 6, 8)
 
 
 def test_a_gaussian_prior_with_initial_covariance_has_that_covariance_even_if_singular():

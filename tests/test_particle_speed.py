@@ -238,7 +238,7 @@ def test_the_filter_gives_the_same_results_with_numba_on_and_off(monkeypatch, ca
     np.testing.assert_array_equal(fast.particles_m, plain.particles_m)
     np.testing.assert_array_equal(fast.resampled, plain.resampled)
     np.testing.assert_array_equal(fast.map_m, plain.map_m)
-    for name in ("mean_m", "covariance_m2", "n_eff", "weights"):
+    for name in ("mean", "cov", "n_eff", "weights"):
         np.testing.assert_allclose(getattr(fast, name), getattr(plain, name), rtol=1e-11, atol=1e-13, err_msg=name)
     np.testing.assert_allclose(fast.log_weights, plain.log_weights, rtol=1e-11, atol=1e-11)
     assert fast.clouds.keys() == plain.clouds.keys()
@@ -252,7 +252,7 @@ def test_the_filter_with_motion_and_a_callable_likelihood_matches_with_numba_on_
     kw = dict(n_particles=2000, region_m=([0.0, 0.0], [20.0, 15.0]), motion=cv)
     plain, fast = _both(monkeypatch, lambda: lb.particle_filter(rss, model, np.random.default_rng(5), **kw))
     np.testing.assert_array_equal(fast.particles_m, plain.particles_m)
-    np.testing.assert_allclose(fast.mean_m, plain.mean_m, rtol=1e-11, atol=1e-12)
+    np.testing.assert_allclose(fast.mean, plain.mean, rtol=1e-11, atol=1e-12)
 
     def loglik(x, t):
         return model.log_likelihood(rss[:, t], x, t, constant=False)
@@ -266,7 +266,7 @@ def test_the_filter_with_motion_and_a_callable_likelihood_matches_with_numba_on_
     assert not plain.resampled.all() and plain.resampled.any()
     np.testing.assert_array_equal(fast.particles_m, plain.particles_m)     # the same likelihood: the same decisions
     np.testing.assert_allclose(fast.weights, plain.weights, rtol=1e-13, atol=0)   # exp within 2 ulp of numpy's
-    np.testing.assert_allclose(fast.mean_m, plain.mean_m, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(fast.mean, plain.mean, rtol=1e-12, atol=1e-12)
 
 
 def test_a_collapsed_run_is_isolated_the_same_way_on_the_compiled_path(monkeypatch):
@@ -280,8 +280,8 @@ def test_a_collapsed_run_is_isolated_the_same_way_on_the_compiled_path(monkeypat
             return lb.particle_filter(bad, model, np.random.default_rng(8), **kw)
 
     plain, fast = _both(monkeypatch, run)
-    assert fast.degenerate.tolist() == [False, False, True, False] and fast.degenerate_step[2] == 3
-    for name in ("mean_m", "particles_m", "weights"):
+    assert fast.diverged.tolist() == [False, False, True, False] and fast.diverged_step[2] == 3
+    for name in ("mean", "particles_m", "weights"):
         a, b = getattr(fast, name), getattr(plain, name)
         np.testing.assert_array_equal(np.isnan(a), np.isnan(b))
         np.testing.assert_allclose(a[[0, 1, 3]], b[[0, 1, 3]], rtol=1e-11, atol=1e-12)
@@ -329,4 +329,4 @@ def test_kernels_that_cannot_compile_turn_the_compiled_path_off_with_a_warning(m
         res = lb.particle_filter(rss, model, np.random.default_rng(10), **kw)
     assert [w.filename for w in caught] == [__file__]                 # once, at the caller's line
     assert _compiled._NUMBA_ENABLED is False
-    np.testing.assert_array_equal(res.mean_m, plain.mean_m)
+    np.testing.assert_array_equal(res.mean, plain.mean)

@@ -114,7 +114,7 @@ def test_tichavsky_form_equals_riccati_form_and_the_kf_covariance():
     info = lb.posterior_crlb(np.linalg.inv(P0), model.F, Q, np.broadcast_to(lb.linear_measurement_information(Hs, R),
                                                                             (steps, 6, 6)))
     kf = lb.kalman_filter(model.F, Q, np.zeros(6), P0, lb.LinearMeasurement(rng.normal(size=(steps, 4)), Hs, R))
-    np.testing.assert_allclose(np.linalg.inv(info[1:]), kf.P, rtol=1e-7, atol=1e-14)
+    np.testing.assert_allclose(np.linalg.inv(info[1:]), kf.cov, rtol=1e-7, atol=1e-14)
 
 
 def test_rss_information_regularisations():

@@ -45,11 +45,11 @@ def test_filters_predict_through_the_real_gaps(real):
     motion = lb.constant_velocity(dt, 0.05)
     stream = lb.RssMeasurement(reg.rss_dbm, data.anchors_m, model, np.array([0, 1]), tag_height_m=data.tag_height_m)
     res = lb.extended_kalman_filter(motion.F, motion.Q, np.r_[4.0, 3.0, 0, 0], np.diag([4.0, 4, 1, 1]), [stream])
-    assert np.isfinite(res.x).all()
+    assert np.isfinite(res.mean).all()
     # through a silent stretch the filter only predicts: position variance grows, the velocity is carried
     run = np.flatnonzero(silent[1:] & silent[:-1])[0] + 1
-    assert res.P[run, 0, 0] > res.P[run - 1, 0, 0]
-    np.testing.assert_allclose(res.x[run, :2], res.x[run - 1, :2] + dt * res.x[run - 1, 2:], rtol=1e-12)
+    assert res.cov[run, 0, 0] > res.cov[run - 1, 0, 0]
+    np.testing.assert_allclose(res.mean[run, :2], res.mean[run - 1, :2] + dt * res.mean[run - 1, 2:], rtol=1e-12)
 
 
 def _ray_casting(point, polygon):

@@ -27,8 +27,8 @@ def test_per_run_receivers_equal_runs_one_by_one(run, mode):
     batched = run(F, Q, x0, P0, [lb.RssMeasurement(z, receivers, CH, np.arange(3), mode=mode)])
     for r in range(R):
         one = run(F, Q, x0, P0, [lb.RssMeasurement(z[r], receivers[r], CH, np.arange(3), mode=mode)])
-        np.testing.assert_allclose(batched.x[r], one.x, atol=1e-9)
-        np.testing.assert_allclose(batched.P[r], one.P, atol=1e-9)
+        np.testing.assert_allclose(batched.mean[r], one.mean, atol=1e-9)
+        np.testing.assert_allclose(batched.cov[r], one.cov, atol=1e-9)
 
 
 def test_receivers_repeated_over_steps_equal_fixed_anchors():
@@ -39,7 +39,7 @@ def test_receivers_repeated_over_steps_equal_fixed_anchors():
     fixed = lb.extended_kalman_filter(F, Q, np.full(3, 25.0), 100 * np.eye(3), [lb.RssMeasurement(z, anchors, CH, np.arange(3))])
     per_step = lb.extended_kalman_filter(F, Q, np.full(3, 25.0), 100 * np.eye(3),
                                          [lb.RssMeasurement(z, np.broadcast_to(anchors, (2, 7, 5, 3)), CH, np.arange(3))])
-    np.testing.assert_allclose(per_step.x, fixed.x, atol=1e-12)
+    np.testing.assert_allclose(per_step.mean, fixed.mean, atol=1e-12)
 
 
 def test_variance_inflation_is_the_first_order_propagation_of_the_receiver_error():
@@ -58,7 +58,7 @@ def test_variance_inflation_is_the_first_order_propagation_of_the_receiver_error
     h = -20 - 40 * np.log10(d)
     S = H @ P0 @ H.T + np.diag(var)
     K = P0 @ H.T @ np.linalg.inv(S)
-    np.testing.assert_allclose(inflated.x[0], x0 + K @ (z[0] - h), atol=1e-9)
+    np.testing.assert_allclose(inflated.mean[0], x0 + K @ (z[0] - h), atol=1e-9)
     # the inflation term against Monte Carlo: variance of 40 log10 |x - (s + e)|, e ~ N(0, sig3^2 I)
     e = sig3 * rng.standard_normal((200_000, 3))
     mc = np.var(40 * np.log10(np.linalg.norm(x0 - (s[0] + e), axis=-1)))

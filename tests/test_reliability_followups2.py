@@ -94,7 +94,7 @@ def test_a_filterpy_style_h_with_a_second_argument_gets_a_hint_not_a_bare_type_e
         return len(3)
     with pytest.raises(TypeError, match="has no len"):
         _ekf(broken)
-    assert np.allclose(_ekf(lambda x: x).x[-1], 1.0, atol=0.5)
+    assert np.allclose(_ekf(lambda x: x).mean[-1], 1.0, atol=0.5)
 
 
 def test_fit_noise_ml_names_an_option_its_filter_kind_does_not_take():
@@ -111,4 +111,4 @@ def test_rts_smoother_of_a_run_with_no_steps_is_empty():
     run = lb.kalman_filter(np.eye(2), 0.01 * np.eye(2), np.zeros(2), np.eye(2), [meas],
                            outputs=("x_pred", "P_pred", "P_cross"))
     s = lb.rts_smoother(run)
-    assert s.x.shape == (0, 2) and s.P.shape == (0, 2, 2) and s.gain.shape == (0, 2, 2)
+    assert s.mean.shape == (0, 2) and s.cov.shape == (0, 2, 2) and s.gain.shape == (0, 2, 2)

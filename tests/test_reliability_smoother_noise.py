@@ -59,8 +59,8 @@ def test_rts_smoother_with_a_singular_prediction_equals_pykalmans_smoother(case)
     z = _readings(np.random.default_rng(1))
     smooth = rts_smoother(_run(Q, P0, z))
     means, covs = _pykalman(Q, P0).smooth(np.ma.masked_invalid(z))
-    np.testing.assert_allclose(smooth.x, means, rtol=0, atol=1e-9)
-    np.testing.assert_allclose(smooth.P, covs, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(smooth.mean, means, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(smooth.cov, covs, rtol=0, atol=1e-9)
 
 
 def test_rts_smoother_of_deterministic_motion_is_the_motion_itself():
@@ -68,8 +68,8 @@ def test_rts_smoother_of_deterministic_motion_is_the_motion_itself():
     F = _model().F
     smooth = rts_smoother(_run(np.zeros((4, 4)), np.zeros((4, 4)), _readings(np.random.default_rng(2))))
     expected = np.array([np.linalg.matrix_power(F, k) @ X0 for k in range(25)])
-    np.testing.assert_allclose(smooth.x, expected, rtol=0, atol=1e-12)
-    np.testing.assert_array_equal(smooth.P, 0.0)
+    np.testing.assert_allclose(smooth.mean, expected, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(smooth.cov, 0.0)
     np.testing.assert_array_equal(smooth.gain, 0.0)
 
 
@@ -82,15 +82,15 @@ def test_a_singular_run_leaves_the_other_runs_of_the_batch_bit_identical():
                            predict_first=False, outputs=("x_pred", "P_pred", "P_cross"))
     smooth = rts_smoother(run)
     for r in range(3):
-        alone = rts_smoother(KalmanResult(run.x[r], run.P[r], run.steps, run.x_pred[r], run.P_pred[r],
+        alone = rts_smoother(KalmanResult(run.mean[r], run.cov[r], run.steps, run.x_pred[r], run.P_pred[r],
                                           P_cross=run.P_cross[r]))
-        np.testing.assert_array_equal(smooth.x[r], alone.x)
-        np.testing.assert_array_equal(smooth.P[r], alone.P)
+        np.testing.assert_array_equal(smooth.mean[r], alone.mean)
+        np.testing.assert_array_equal(smooth.cov[r], alone.cov)
     means, covs = _pykalman(Q, P0[1]).smooth(np.ma.masked_invalid(z[1]))
-    np.testing.assert_allclose(smooth.x[1], means, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(smooth.mean[1], means, rtol=0, atol=1e-9)
     # smoothing never adds uncertainty, and the smoothed covariances are covariances
-    assert np.linalg.eigvalsh(run.P - smooth.P).min() > -1e-12
-    assert np.linalg.eigvalsh(smooth.P).min() > -1e-12
+    assert np.linalg.eigvalsh(run.cov - smooth.cov).min() > -1e-12
+    assert np.linalg.eigvalsh(smooth.cov).min() > -1e-12
 
 
 def test_rts_smoother_of_zero_runs_is_empty():
@@ -98,14 +98,14 @@ def test_rts_smoother_of_zero_runs_is_empty():
     run = lb.kalman_filter(_model().F, _model().Q, X0, np.eye(4), lb.LinearMeasurement(z, H, R),
                            outputs=("x_pred", "P_pred", "P_cross"))
     smooth = rts_smoother(run)
-    assert smooth.x.shape == (0, 25, 4) and smooth.P.shape == (0, 25, 4, 4) and smooth.gain.shape == (0, 24, 4, 4)
+    assert smooth.mean.shape == (0, 25, 4) and smooth.cov.shape == (0, 25, 4, 4) and smooth.gain.shape == (0, 24, 4, 4)
 
 
 def test_rts_smoother_refuses_a_non_finite_covariance_in_one_line():
     run = _run(_model().Q, np.eye(4), _readings(np.random.default_rng(4)))
     P_pred = run.P_pred.copy()
     P_pred[7, 1, 1] = np.nan
-    broken = KalmanResult(run.x, run.P, run.steps, run.x_pred, P_pred, P_cross=run.P_cross)
+    broken = KalmanResult(run.mean, run.cov, run.steps, run.x_pred, P_pred, P_cross=run.P_cross)
     with pytest.raises(ValueError) as exc:
         rts_smoother(broken)
     assert "P_pred is not finite at step 7" in _one_line(exc)
@@ -113,7 +113,7 @@ def test_rts_smoother_refuses_a_non_finite_covariance_in_one_line():
 
 def test_rts_smoother_refuses_mismatched_shapes_in_one_line():
     run = _run(_model().Q, np.eye(4), _readings(np.random.default_rng(5)))
-    broken = KalmanResult(run.x, run.P, run.steps, run.x_pred[:-1], run.P_pred, P_cross=run.P_cross)
+    broken = KalmanResult(run.mean, run.cov, run.steps, run.x_pred[:-1], run.P_pred, P_cross=run.P_cross)
     with pytest.raises(ValueError) as exc:
         rts_smoother(broken)
     assert "x_pred must have the shape (25, 4)" in _one_line(exc)
@@ -228,8 +228,8 @@ def test_rts_smoother_of_one_step_runs_is_the_filter():
     run = lb.kalman_filter(_model().F, _model().Q, np.broadcast_to(X0, (3, 4)), np.eye(4),
                            lb.LinearMeasurement(z, H, R), outputs=("x_pred", "P_pred", "P_cross"))
     smooth = rts_smoother(run)
-    np.testing.assert_array_equal(smooth.x, run.x)
-    np.testing.assert_array_equal(smooth.P, run.P)
+    np.testing.assert_array_equal(smooth.mean, run.mean)
+    np.testing.assert_array_equal(smooth.cov, run.cov)
     assert smooth.gain.shape == (3, 0, 4, 4)
 
 

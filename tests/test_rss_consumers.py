@@ -40,8 +40,8 @@ def test_parallel_ekf_update_is_filterpys_with_the_models_mean_and_jacobian(x_po
     ekf = ExtendedKalmanFilter(dim_x=4, dim_z=4)
     ekf.x, ekf.P, ekf.R = x0[:, None].copy(), P0.copy(), 9.0 * np.eye(4)
     ekf.update(z[0][:, None], hjac, lambda x: model.mean_rss_dbm(x[None, :2, 0])[0, 0][:, None])
-    np.testing.assert_allclose(res.x[0], ekf.x[:, 0], rtol=1e-10, atol=1e-12)
-    np.testing.assert_allclose(res.P[0], ekf.P, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(res.mean[0], ekf.x[:, 0], rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(res.cov[0], ekf.P, rtol=1e-9, atol=1e-12)
     if np.hypot(*x_pos) < 1e-3:                                 # inside the clamp of anchor 0: no correction from it
         assert np.all(hjac(x0)[0] == 0.0)
 
@@ -55,7 +55,7 @@ def test_a_state_on_an_anchor_without_a_clamp_is_a_named_error_and_a_clamp_makes
         with pytest.raises(lb.SingularCovarianceError, match="on an anchor at step 0 .*no near-field clamp"):
             run(*args, _stream(z, mode), predict_first=False)
     res = lb.extended_kalman_filter(*args, _stream(z, mode, channel=CLAMPED), predict_first=False)
-    assert np.isfinite(res.x).all()
+    assert np.isfinite(res.mean).all()
 
 
 def test_stream_mean_and_jacobian_are_the_models_with_the_channels_clamp():

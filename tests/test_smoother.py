@@ -33,10 +33,10 @@ def test_rts_smoother_equals_filterpy_on_every_run():
         kf.x, kf.P, kf.F, kf.Q, kf.H, kf.R = x0.copy(), P0.copy(), model.F, model.Q, H, R
         zs = [None if np.isnan(zk).any() else zk for zk in z[r]]
         means, covs, _, _ = kf.batch_filter(zs)
-        np.testing.assert_allclose(run.x[r], means, atol=1e-9)
+        np.testing.assert_allclose(run.mean[r], means, atol=1e-9)
         xs, Ps, Ks, _ = kf.rts_smoother(means, covs)
-        np.testing.assert_allclose(smooth.x[r], xs, atol=1e-9)
-        np.testing.assert_allclose(smooth.P[r], Ps, atol=1e-9)
+        np.testing.assert_allclose(smooth.mean[r], xs, atol=1e-9)
+        np.testing.assert_allclose(smooth.cov[r], Ps, atol=1e-9)
         np.testing.assert_allclose(smooth.gain[r], Ks[:-1], atol=1e-9)
 
 
@@ -46,9 +46,9 @@ def test_the_last_step_is_the_filter_and_smoothing_never_adds_uncertainty():
     run = lb.kalman_filter(model.F, model.Q, np.broadcast_to(x0, (2, 4)), P0, lb.LinearMeasurement(z, H, R),
                            outputs=("x_pred", "P_pred"))
     smooth = rts_smoother(run, model.F)
-    np.testing.assert_array_equal(smooth.x[:, -1], run.x[:, -1])
+    np.testing.assert_array_equal(smooth.mean[:, -1], run.mean[:, -1])
     # P_filtered - P_smoothed is positive semi-definite at every step
-    assert np.linalg.eigvalsh(run.P - smooth.P).min() > -1e-10
+    assert np.linalg.eigvalsh(run.cov - smooth.cov).min() > -1e-10
 
 
 def test_rts_smoother_refuses_a_run_without_its_predictions():
@@ -73,8 +73,8 @@ def test_one_covariance_for_every_run_gives_the_per_run_smoother():
                            outputs=("x_pred", "P_pred", "P_cross"))
     smooth = rts_smoother(run)
     for r in range(3):
-        alone = rts_smoother(KalmanResult(run.x[r], run.P[r], run.steps, run.x_pred[r], run.P_pred[r],
+        alone = rts_smoother(KalmanResult(run.mean[r], run.cov[r], run.steps, run.x_pred[r], run.P_pred[r],
                                           P_cross=run.P_cross[r]))
-        np.testing.assert_allclose(smooth.x[r], alone.x, atol=1e-12)
-        np.testing.assert_allclose(smooth.P[r], alone.P, atol=1e-12)
+        np.testing.assert_allclose(smooth.mean[r], alone.mean, atol=1e-12)
+        np.testing.assert_allclose(smooth.cov[r], alone.cov, atol=1e-12)
         np.testing.assert_allclose(smooth.gain[r], alone.gain, atol=1e-12)

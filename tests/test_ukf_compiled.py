@@ -43,8 +43,8 @@ def _both(F, Q, x0, P0, streams, **kw):
 
 
 def _assert_same(a, b, tol=TOL):
-    np.testing.assert_allclose(b.x, a.x, rtol=0, atol=tol)
-    np.testing.assert_allclose(b.P, a.P, rtol=0, atol=tol)
+    np.testing.assert_allclose(b.mean, a.mean, rtol=0, atol=tol)
+    np.testing.assert_allclose(b.cov, a.cov, rtol=0, atol=tol)
     np.testing.assert_allclose(b.nis, a.nis, rtol=0, atol=tol * 100)       # NaN where no update, in both
     np.testing.assert_allclose(b.log_likelihood, a.log_likelihood, rtol=0, atol=tol * 100)
     np.testing.assert_array_equal(b.nis_dof, a.nis_dof)
@@ -140,7 +140,7 @@ def test_compiled_ukf_equals_numpy_ukf(kind):
     a, b, compiled = _both(*_case(kind, np.random.default_rng(CASES.index(kind)))[:5],
                            **_case(kind, np.random.default_rng(CASES.index(kind)))[5])
     assert compiled, "the compiled path did not run"
-    assert np.isfinite(a.x).all() and (a.nis_dof > 0).any() and len(np.unique(a.nis_dof)) > 1    # some missing
+    assert np.isfinite(a.mean).all() and (a.nis_dof > 0).any() and len(np.unique(a.nis_dof)) > 1    # some missing
     # the printed weights do not sum to 1 (2n / c): every step scales the round-off of the two summation orders, and
     # with numpy 2.4 the state (about 100) differs by 2e-9 after 48 steps; 1e-8 still catches a wrong formula
     _assert_same(a, b, tol=1e-8 if kind == "printed_weights_of_eq_3_22" else TOL)
@@ -164,7 +164,7 @@ def test_blocks_of_runs_and_a_single_run(B, most_lanes, monkeypatch):
                                                          lb.RssMeasurement(streams[1].rss_dbm[r], ANCHORS,
                                                                            streams[1].channel, [0, 1], mode="serial",
                                                                            order="given")], **kw)
-    np.testing.assert_allclose(b.x[r], alone.x, rtol=0, atol=TOL)
+    np.testing.assert_allclose(b.mean[r], alone.mean, rtol=0, atol=TOL)
 
 
 @pytest.fixture(scope="module")
@@ -182,8 +182,8 @@ def test_compiled_ukf_on_the_u_path_equals_numpy_and_filterpy(upath, alpha):
     assert compiled
     _assert_same(a, b)
     ref_x, ref_P = bu.filterpy_ukf(upath, 3, alpha)
-    np.testing.assert_allclose(b.x[:3], ref_x, rtol=0, atol=TOL)
-    np.testing.assert_allclose(b.P[:3], ref_P, rtol=0, atol=TOL)
+    np.testing.assert_allclose(b.mean[:3], ref_x, rtol=0, atol=TOL)
+    np.testing.assert_allclose(b.cov[:3], ref_P, rtol=0, atol=TOL)
 
 
 def test_compiled_ukf_at_alpha_1e_3_agrees_to_the_amplified_round_off(upath):
@@ -195,7 +195,7 @@ def test_compiled_ukf_at_alpha_1e_3_agrees_to_the_amplified_round_off(upath):
     assert compiled
     _assert_same(a, b, tol=1e-6)
     ref_x, ref_P = bu.filterpy_ukf(upath, 3, 1e-3)
-    np.testing.assert_allclose(b.x[:3], ref_x, rtol=0, atol=1e-6)
+    np.testing.assert_allclose(b.mean[:3], ref_x, rtol=0, atol=1e-6)
 
 
 def test_the_compiled_path_keeps_the_numpy_errors(monkeypatch):
@@ -265,8 +265,8 @@ def test_inertial_stream_with_an_index_from_the_end_equals_the_numpy_ukf(monkeyp
     monkeypatch.setattr(U, "_compiled_ukf", lambda *a: calls.append(original(*a)) or calls[-1])
     ours = lb.unscented_kalman_filter(F, Q, x0, P0, [meas], alpha=0.5)
     assert (calls[0] is not None) == (heading_index >= 0)
-    np.testing.assert_allclose(ours.x, ref.x, rtol=0, atol=1e-10)
-    np.testing.assert_allclose(ours.P, ref.P, rtol=0, atol=1e-10)
+    np.testing.assert_allclose(ours.mean, ref.mean, rtol=0, atol=1e-10)
+    np.testing.assert_allclose(ours.cov, ref.cov, rtol=0, atol=1e-10)
 
 
 @pytest.mark.parametrize("which", ["EKF", "UKF"])
@@ -292,5 +292,5 @@ def test_a_kernel_that_cannot_run_warns_once_and_the_numpy_loop_answers(monkeypa
         ours = run(F, Q, x0, P0, streams, **kw)
     assert [w.filename for w in caught] == [__file__]                 # once, at the caller's line
     assert K._NUMBA_ENABLED is False
-    np.testing.assert_array_equal(ours.x, ref.x)
-    np.testing.assert_array_equal(ours.P, ref.P)
+    np.testing.assert_array_equal(ours.mean, ref.mean)
+    np.testing.assert_array_equal(ours.cov, ref.cov)

@@ -61,8 +61,8 @@ def test_ukf_equals_kf_on_a_linear_model(alpha):
     x0, P0 = np.zeros(4), np.diag([4.0, 4.0, 1.0, 1.0])
     kf = lb.kalman_filter(model.F, model.Q, x0, P0, lb.LinearMeasurement(z, H, R))
     ukf = lb.unscented_kalman_filter(model.F, model.Q, x0, P0, [lb.LinearMeasurement(z, H, R)], alpha=alpha)
-    np.testing.assert_allclose(ukf.x, kf.x, atol=1e-9)
-    np.testing.assert_allclose(ukf.P, kf.P, atol=1e-9)
+    np.testing.assert_allclose(ukf.mean, kf.mean, atol=1e-9)
+    np.testing.assert_allclose(ukf.cov, kf.cov, atol=1e-9)
     assert ukf.floored_updates == 0
 
 
@@ -106,8 +106,8 @@ def test_rss_ukf_equals_an_independent_filterpy_loop(alpha):
     ours = lb.unscented_kalman_filter(model.F, model.Q, x0, P0,
                                       [lb.RssMeasurement(z, ANCHORS, channel, model.position_index)], alpha=alpha)
     ref_x, ref_P = _filterpy_ukf(model, channel, z, x0, P0, alpha)
-    np.testing.assert_allclose(ours.x, ref_x, atol=1e-8)
-    np.testing.assert_allclose(ours.P, ref_P, atol=1e-8)
+    np.testing.assert_allclose(ours.mean, ref_x, atol=1e-8)
+    np.testing.assert_allclose(ours.cov, ref_P, atol=1e-8)
 
 
 def test_rss_ukf_batched_equals_runs_one_by_one_and_a_nan_drops_that_anchor():
@@ -121,17 +121,17 @@ def test_rss_ukf_batched_equals_runs_one_by_one_and_a_nan_drops_that_anchor():
     batched = lb.unscented_kalman_filter(model.F, model.Q, x0, P0, meas(z))
     for i in range(3):
         one = lb.unscented_kalman_filter(model.F, model.Q, x0, P0, meas(z[i]))
-        np.testing.assert_allclose(batched.x[i], one.x, atol=1e-9)
+        np.testing.assert_allclose(batched.mean[i], one.mean, atol=1e-9)
     # step 5 of run 1 without anchor 2 equals an update with three anchors only
     before = lb.unscented_kalman_filter(model.F, model.Q, x0, P0, meas(z[1, :5]))
-    x_prior = before.x[-1] @ model.F.T
-    P_prior = model.F @ before.P[-1] @ model.F.T + model.Q
+    x_prior = before.mean[-1] @ model.F.T
+    P_prior = model.F @ before.cov[-1] @ model.F.T + model.Q
     keep = [0, 1, 3]
     three = lb.PathLossModel(channel.ref_power_dbm[keep], channel.path_loss_exp[keep], channel.sigma_db)
     alone = lb.unscented_kalman_filter(np.eye(4), np.zeros((4, 4)), x_prior, P_prior,
                                        [lb.RssMeasurement(z[1, 5:6][:, keep], ANCHORS[keep], three, model.position_index)])
-    np.testing.assert_allclose(batched.x[1, 5], alone.x[0], atol=1e-9)
-    np.testing.assert_allclose(batched.P[1, 5], alone.P[0], atol=1e-9)
+    np.testing.assert_allclose(batched.mean[1, 5], alone.mean[0], atol=1e-9)
+    np.testing.assert_allclose(batched.cov[1, 5], alone.cov[0], atol=1e-9)
 
 
 def test_serial_rss_ukf_in_given_order_equals_scalar_updates_one_by_one():
@@ -145,9 +145,9 @@ def test_serial_rss_ukf_in_given_order_equals_scalar_updates_one_by_one():
         ch = lb.PathLossModel(channel.ref_power_dbm[j:j + 1], channel.path_loss_exp[j:j + 1], channel.sigma_db)
         r = lb.unscented_kalman_filter(np.eye(4), np.zeros((4, 4)), x, P, [lb.RssMeasurement(
             z[:, j:j + 1], ANCHORS[j:j + 1], ch, model.position_index)], alpha=1.0, predict_first=False)
-        x, P = r.x[0], r.P[0]
-    np.testing.assert_allclose(serial.x[0], x, atol=1e-10)
-    np.testing.assert_allclose(serial.P[0], P, atol=1e-10)
+        x, P = r.mean[0], r.cov[0]
+    np.testing.assert_allclose(serial.mean[0], x, atol=1e-10)
+    np.testing.assert_allclose(serial.cov[0], P, atol=1e-10)
 
 
 def test_nonlinear_measurement_stream_equals_the_rss_stream():
@@ -169,8 +169,8 @@ def test_nonlinear_measurement_stream_equals_the_rss_stream():
     for run in (lb.unscented_kalman_filter, lb.extended_kalman_filter):
         a = run(model.F, model.Q, start, P0, [generic])
         b = run(model.F, model.Q, start, P0, [rss])
-        np.testing.assert_allclose(a.x, b.x, atol=1e-9)
-        np.testing.assert_allclose(a.P, b.P, atol=1e-9)
+        np.testing.assert_allclose(a.mean, b.mean, atol=1e-9)
+        np.testing.assert_allclose(a.cov, b.cov, atol=1e-9)
     with pytest.raises(ValueError, match="rss as a function: the EKF needs its jacobian"):
         lb.extended_kalman_filter(model.F, model.Q, start, P0, [lb.NonlinearMeasurement(z, h, np.eye(4), name="rss as a function")])
 
@@ -250,8 +250,8 @@ def test_rss_ukf_equals_stone_soup(alpha):
     F, Q, ref_x, ref_P = _stonesoup_ukf(z, x0, P0, ANCHORS, channel, alpha)
     ours = lb.unscented_kalman_filter(F, Q, x0, P0, [lb.RssMeasurement(z, ANCHORS, channel, np.array([0, 2]))],
                                       alpha=alpha, beta=2.0, kappa=0.0)
-    np.testing.assert_allclose(ours.x, ref_x, atol=1e-8)
-    np.testing.assert_allclose(ours.P, ref_P, atol=1e-8)
+    np.testing.assert_allclose(ours.mean, ref_x, atol=1e-8)
+    np.testing.assert_allclose(ours.cov, ref_P, atol=1e-8)
 
 
 @pytest.mark.slow
@@ -266,8 +266,8 @@ def test_covariance_stays_symmetric_positive_definite_over_1e5_steps_at_alpha_1e
     z = ch.sample_rss_dbm(lb.pairwise_distance_m(pos, anchors), rng)
     res = lb.unscented_kalman_filter(model.F, model.Q, np.r_[pos[0], 0.0, 0.0], np.eye(4),
                                      [lb.RssMeasurement(z, anchors, ch, model.position_index)], alpha=1e-3)
-    assert np.linalg.eigvalsh(res.P).min() > 0
-    np.testing.assert_array_equal(res.P, np.swapaxes(res.P, -1, -2))
+    assert np.linalg.eigvalsh(res.cov).min() > 0
+    np.testing.assert_array_equal(res.cov, np.swapaxes(res.cov, -1, -2))
     assert res.floored_updates == 0
-    err = np.linalg.norm(res.x[:, :2] - pos, axis=-1)
-    assert err[-10_000:].mean() < 2.0 and np.isfinite(res.x).all()
+    err = np.linalg.norm(res.mean[:, :2] - pos, axis=-1)
+    assert err[-10_000:].mean() < 2.0 and np.isfinite(res.mean).all()

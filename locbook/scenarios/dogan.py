@@ -440,8 +440,8 @@ def run_filter(name: str, trajectory: Trajectory, rss_dbm, mle_fix_m, mse_mle_m2
     # the guard is judged on the trajectory's grid (_on_trajectory_grid): the filter's own, on its grid, is not needed
     track = extended_kalman_filter(model.F, model.Q, x0, P0, measurements, record=None if every_step else at,
                                    divergence_window=0)
-    x = np.concatenate([np.broadcast_to(x0[..., None, :], track.x.shape[:-2] + (1, 6)), track.x], axis=-2)
-    P = np.concatenate([np.broadcast_to(P0[..., None, :, :], track.P.shape[:-3] + (1, 6, 6)), track.P], axis=-3)
+    x = np.concatenate([np.broadcast_to(x0[..., None, :], track.mean.shape[:-2] + (1, 6)), track.mean], axis=-2)
+    P = np.concatenate([np.broadcast_to(P0[..., None, :, :], track.cov.shape[:-3] + (1, 6, 6)), track.cov], axis=-3)
     recorded = np.arange(steps[0], n_steps) if every_step else steps
     return _on_trajectory_grid(KalmanResult(x, P, recorded), track.nis, track.nis_dof, n_steps)
 
@@ -471,8 +471,8 @@ def _per_epoch_kf(model, x0, P0, acc_streams, z, mse, at, steps, n_steps, every_
     track = extended_kalman_filter(model.F, model.Q, x0, P0,
                                    [*acc_streams, LinearMeasurement(z, H, per_step(r_steps))],
                                    record=None if every_step else at, divergence_window=0)
-    x = np.concatenate([np.broadcast_to(x0[..., None, :], track.x.shape[:-2] + (1, 6)), track.x], axis=-2)
-    P = np.concatenate([np.broadcast_to(P0[..., None, :, :], track.P.shape[:-3] + (1, 6, 6)), track.P], axis=-3)
+    x = np.concatenate([np.broadcast_to(x0[..., None, :], track.mean.shape[:-2] + (1, 6)), track.mean], axis=-2)
+    P = np.concatenate([np.broadcast_to(P0[..., None, :, :], track.cov.shape[:-3] + (1, 6, 6)), track.cov], axis=-3)
     recorded = np.arange(steps[0], n_steps) if every_step else steps
     return _on_trajectory_grid(KalmanResult(x, P, recorded), track.nis, track.nis_dof, n_steps)
 
@@ -561,7 +561,7 @@ def run_channel(trajectory: Trajectory, sigma_rss_db: float, path_loss_exp: floa
             track = run_filter(name, grid, rss, fix, r_mse, channel, acc_mps2=acc, sigma_acc_mps2=sigma_acc,
                                model=model, p0_acc_var=p0_acc, serial_order=serial_order, anchors_m=anchors_m,
                                every_step=rmse_epochs == "every_step")
-            pos = track.x[..., model.position_index]
+            pos = track.position_m(model.position_index)
             if rmse_epochs == "every_step":
                 every = np.linalg.norm(pos - grid.position_m[..., track.steps, :], axis=-1)
                 out.errors[("every_step", name, sigma_acc)] = every
@@ -616,7 +616,7 @@ def noise_fit(trajectory: Trajectory, sigma_rss_db: float, path_loss_exp: float,
         ch = PathLossModel(ref_power_dbm, path_loss_exp, sigma)
         track = run_filter(name, trajectory, rss, fix, mse, ch, model=motion_model(dt_s, q * q_scale),
                            p0_acc_var=p0_acc, anchors_m=anchors_m)
-        pos = track.x[..., model.position_index]
+        pos = track.position_m(model.position_index)
         return float(np.sqrt(np.mean(np.sum((pos - truth) ** 2, axis=-1))))
 
     qs, rs = float(pooled.q_scale[0]), float(pooled.r_scale[0][0])
@@ -1120,7 +1120,7 @@ def only_acc_errors(trajectory: Trajectory, sigma_acc_mps2: float, n_runs: int, 
     _, P0 = initial_state(np.zeros(2), np.full(2, 1e-6), acc_var=p0_acc)
     track = extended_kalman_filter(model.F, model.Q, x0, P0, [LinearMeasurement(
         acc[:, 1:], model.derivative_measurement_matrix(2), sigma_acc_mps2**2 * np.eye(2))])
-    err = np.linalg.norm(track.x[..., model.position_index] - trajectory.position_m[1:], axis=-1)
+    err = np.linalg.norm(track.position_m(model.position_index) - trajectory.position_m[1:], axis=-1)
     return (err, DivergenceFlags.of(track, step_offset=1)) if with_divergence else err
 
 

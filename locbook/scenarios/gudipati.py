@@ -429,7 +429,7 @@ def track(walk: Walk, method: str, *, fix_covariance=None, ukf_alpha: float = UK
         res = extended_kalman_filter(model.F, model.Q, x0, P0, [
             LinearMeasurement(acc, model.derivative_measurement_matrix(2), r_acc),
             LinearMeasurement(fixes, model.position_measurement_matrix(), fix_covariance)], record=steps)
-        return (res.x[..., :2], DivergenceFlags.of(res)) if with_divergence else res.x[..., :2]
+        return (res.position_m([0, 1]), DivergenceFlags.of(res)) if with_divergence else res.position_m([0, 1])
     if state_model not in STATE_MODELS:
         raise ValueError(f"state_model must be one of {STATE_MODELS}, got {state_model!r}")
     model = HeadingKinematicModel(s.dt_s, s.q, s.q_angular, heading="yaw_rate" if state_model == "heading" else "literal_gudipati2017")
@@ -448,7 +448,7 @@ def track(walk: Walk, method: str, *, fix_covariance=None, ukf_alpha: float = UK
     else:
         res = unscented_kalman_filter(model.F, model.Q, x0, P0, streams, alpha=ukf_alpha, beta=UKF_BETA, kappa=0.0,
                                       weights=ukf_weights, innovation_noise=ukf_innovation_noise, record=steps)
-    return (res.x[..., :2], DivergenceFlags.of(res)) if with_divergence else res.x[..., :2]
+    return (res.position_m([0, 1]), DivergenceFlags.of(res)) if with_divergence else res.position_m([0, 1])
 
 
 def noise_fit(walk: Walk, method: str = "ekf", *, ukf_alpha: float = UKF_ALPHA, per_walk: bool = False) -> dict:
@@ -487,7 +487,7 @@ def noise_fit(walk: Walk, method: str = "ekf", *, ukf_alpha: float = UKF_ALPHA, 
         st = [streams[0].replace(model=streams[0].model.with_noise(np.asarray(imu_R, dtype=float))),
               streams[1].replace(model=replace(rss_model, channel=replace(rss_model.channel, sigma_db=sigma_db)))]
         res = filt(model.F, Q, x0, P0, st, record=walk.report_steps, **options)
-        return float(walk_errors(walk, res.x[..., :2]).mean_m.mean())
+        return float(walk_errors(walk, res.position_m([0, 1])).mean_m.mean())
 
     imu_R, sigma = np.asarray(streams[0].R), float(streams[1].channel.sigma_db)
     acc_var, gyro_var = imu_R[0, 0], imu_R[2, 2]

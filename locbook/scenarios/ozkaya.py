@@ -346,7 +346,7 @@ def run_case(case: SimCase, n_runs: int, seed: int, *, return_all: bool = False)
                 initial = np.exp(-(d2 - d2.min(-1, keepdims=True)) / (2.0 * case.spread_m ** 2))
                 initial /= initial.sum(-1, keepdims=True)
         res = grid_bayes_filter(rss, cells, filter_model, case.spread_m, velocity_m=velocity, initial_belief=initial)
-        estimate = res.mean_m if case.estimator == "mmse" else res.map_m
+        estimate = res.mean if case.estimator == "mmse" else res.map_m
     elif case.method == "sir":
         res = particle_filter(
             rss, filter_model, rng, n_particles=case.n_particles, region_m=_region(case.filter_region, room),
@@ -354,7 +354,7 @@ def run_case(case: SimCase, n_runs: int, seed: int, *, return_all: bool = False)
             initial_position_m=truth[:, 0] if case.known_initial else None,
             initial_sd_m=_initial_sd_m(case),
             resample_threshold=resample_fraction(case), weight_smoothing=case.weight_smoothing)
-        estimate = res.mean_m if case.estimator == "mmse" else res.map_m
+        estimate = res.mean if case.estimator == "mmse" else res.map_m
     else:
         raise ValueError(f"unknown method {case.method!r}")
     errors = position_error_m(estimate, truth)

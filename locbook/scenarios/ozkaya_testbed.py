@@ -360,7 +360,7 @@ def _estimate(method: Method, rss, tags, calibration, settings: MethodSettings, 
     sigma = calibration.sigma_db if method.online_sigma else settings.sigma_db
     model = RssModel(readers, PathLossModel(alpha, n, sigma, wall_attenuation_db=oz.WAF_DB, min_distance_m=0.1), walls)
     if method.estimator == "grid":
-        return grid_bayes_filter(rss, TESTBED_CELLS_M, model, settings.spread_m, velocity_m=velocity_m).mean_m
+        return grid_bayes_filter(rss, TESTBED_CELLS_M, model, settings.spread_m, velocity_m=velocity_m).mean
     if method.estimator != "sir":
         raise ValueError(f"unknown estimator {method.estimator!r}")
     n_runs = rss.shape[0]
@@ -374,7 +374,7 @@ def _estimate(method: Method, rss, tags, calibration, settings: MethodSettings, 
                               region_m=((0.0, 0.0), oz.TESTBED_SIZE_M), spread_m=settings.spread_m,
                               velocity_m=velocity_m, resample_threshold=settings.resample_threshold,
                               weight_smoothing="sqrt")
-        out.append(res.mean_m)
+        out.append(res.mean)
     return np.concatenate(out, axis=0)
 
 

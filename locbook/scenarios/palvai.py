@@ -204,7 +204,7 @@ def ekf_path(setup: Setup, anchors_m, rss_dbm, x0, P0, *, process_sd_m: float = 
 
 
 def _with_flags(result, with_divergence: bool):
-    return (result.x, DivergenceFlags.of(result)) if with_divergence else result.x
+    return (result.mean, DivergenceFlags.of(result)) if with_divergence else result.mean
 
 
 SCHEDULES = ("all", "sequential", "cyclic")
@@ -275,7 +275,7 @@ def pf_estimate_m(result, estimate: str = "mean") -> np.ndarray:
     particles as candidates, a subsample of the posterior)."""
     check_choice("estimate", estimate, PF_ESTIMATES)
     if estimate == "mean":
-        return result.mean_m[:, -1]
+        return result.mean[:, -1]
     if estimate == "highest_weight":
         return result.map_m[:, -1]
     return kernel_map_estimate(result.particles_m, result.weights)

@@ -134,7 +134,8 @@ def filterpy_filter(name: str, s: dict, n: int):
 def max_difference(s: dict, ours, ref_x, ref_P) -> tuple[float, float]:
     """Largest |state| and |covariance| difference on the common runs, at the recorded RSS epochs."""
     n, at = ref_x.shape[0], s["tr"].rss_steps[1:] - 1
-    return (float(np.max(np.abs(ours.mean[:n, 1:] - ref_x[:, at]))), float(np.max(np.abs(ours.cov[:n, 1:] - ref_P[:, at]))))
+    return (float(np.max(np.abs(ours.mean[:n, 1:] - ref_x[:, at]))),
+            float(np.max(np.abs(ours.cov[:n, 1:] - ref_P[:, at]))))
 
 
 def _path(numba: bool):

@@ -39,7 +39,7 @@ _API = (
     ("Kalman family", "tracking.unscented", ("unscented_kalman_filter", "unscented_weights", "UnscentedWeights",
         "sigma_points", "unscented_transform")),
     ("Kalman family", "tracking.streams", ("Stream", "LinearMeasurement", "RssMeasurement", "NonlinearMeasurement")),
-    ("Kalman family", "tracking.results", ("KalmanResult", "nis_divergence", "nees")),
+    ("Kalman family", "tracking.results", ("FilterResult", "KalmanResult", "nis_divergence", "nees")),
     ("Kalman family", "tracking.functional", ("predict", "update", "KalmanUpdate")),
     ("Kalman family", "models.base", ("per_step", "PerStep")),
     ("Kalman family", "tracking.transition", ("NonlinearMotion",)),

@@ -56,7 +56,7 @@ CT = lb.NonlinearMotion(ct_f, ct_jacobian, name="coordinated turn")
 def _moments(res):
     """A KalmanResult's posterior means and covariances (``mean``/``cov`` in the issue-47 vocabulary, ``x``/``P``
     before it)."""
-    return (res.mean, res.cov) if hasattr(res, "cov") else (res.x, res.P)
+    return (res.mean, res.cov) if hasattr(res, "cov") else (res.mean, res.cov)
 
 
 def test_coordinated_turn_jacobian_matches_finite_differences():
@@ -119,8 +119,8 @@ def test_matches_filterpy_imm_estimator_run_by_run():
             imm.predict()
             cbar = imm.cbar.copy()
             imm.update(z[b, k][:, None])
-            np.testing.assert_allclose(res.x[b, k], imm.x[:, 0], rtol=1e-9, atol=1e-9)
-            np.testing.assert_allclose(res.P[b, k], imm.P, rtol=1e-9, atol=1e-9)
+            np.testing.assert_allclose(res.mean[b, k], imm.x[:, 0], rtol=1e-9, atol=1e-9)
+            np.testing.assert_allclose(res.cov[b, k], imm.P, rtol=1e-9, atol=1e-9)
             np.testing.assert_allclose(res.mode_probabilities[b, k], imm.mu, rtol=1e-9, atol=1e-12)
             for j, f in enumerate(filters):
                 np.testing.assert_allclose(res.mode_x[b, k, j], f.x[:, 0], rtol=1e-9, atol=1e-9)
@@ -169,8 +169,8 @@ def test_first_step_is_the_exact_mixture_posterior_even_at_underflowing_likeliho
     if far:
         assert ll < -5000 and np.exp(ll) == 0.0
     np.testing.assert_allclose(res.mode_probabilities[0], mu, rtol=1e-9, atol=1e-300)
-    np.testing.assert_allclose(res.x[0], x, rtol=1e-9, atol=1e-9)
-    np.testing.assert_allclose(res.P[0], P, rtol=1e-8, atol=1e-9)
+    np.testing.assert_allclose(res.mean[0], x, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(res.cov[0], P, rtol=1e-8, atol=1e-9)
     np.testing.assert_allclose(res.log_likelihood[0], ll, rtol=1e-12)
     assert np.all(np.isfinite(res.mode_probabilities))
 
@@ -218,10 +218,10 @@ def test_without_switching_the_imm_is_bayesian_model_averaging_of_two_kalman_fil
         np.testing.assert_allclose(res.mode_x[..., j, :], _moments(kf)[0], rtol=1e-10, atol=1e-10)
         np.testing.assert_allclose(res.mode_P[..., j, :, :], _moments(kf)[1], rtol=1e-10, atol=1e-10)
     x = np.einsum("j...,j...n->...n", mu, np.stack([_moments(kf)[0] for kf in kfs]))
-    np.testing.assert_allclose(res.x, x, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(res.mean, x, rtol=1e-9, atol=1e-9)
     if mu0[1] == 0.0:
         assert np.all(res.mode_probabilities[..., 1] == 0.0)
-        np.testing.assert_allclose(res.P, _moments(kfs[0])[1], rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(res.cov, _moments(kfs[0])[1], rtol=1e-12, atol=1e-12)
 
 
 # -- r = 1 is the plain KF / EKF --------------------------------------------------------------------------------
@@ -256,8 +256,8 @@ def test_one_mode_equals_the_ekf(predict_first):
         F, Q = (motion.F, motion.Q) if hasattr(motion, "F") else motion
         ekf = lb.extended_kalman_filter(F, Q, x0_, P0_, streams, predict_first=predict_first)
         res = imm_filter([motion], np.ones((1, 1)), x0_, P0_, streams, predict_first=predict_first)
-        np.testing.assert_allclose(res.x, _moments(ekf)[0], rtol=1e-12, atol=1e-12)
-        np.testing.assert_allclose(res.P, _moments(ekf)[1], rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(res.mean, _moments(ekf)[0], rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(res.cov, _moments(ekf)[1], rtol=1e-12, atol=1e-12)
         np.testing.assert_allclose(res.log_likelihood, ekf.log_likelihood, rtol=1e-12, atol=1e-12)
         np.testing.assert_array_equal(np.isnan(res.log_likelihood), np.isnan(ekf.log_likelihood))
         np.testing.assert_array_equal(res.mode_probabilities, 1.0)
@@ -283,15 +283,15 @@ def test_a_batch_equals_each_run_alone():
     streams = lambda z, fx, H: [lb.RssMeasurement(z, ANCHORS, CHANNEL, [0, 1]),
                                 lb.LinearMeasurement(fx, H, 1.0 * np.eye(1))]
     res = imm_filter(modes, trans, x0, P0, streams(z, fx, Hs), mode_probabilities=mu0, outputs=("mode_x",))
-    assert res.x.shape == (2, 3, 20, 5) and res.mode_x.shape == (2, 3, 20, 2, 5) and res.mode_P is None
+    assert res.mean.shape == (2, 3, 20, 5) and res.mode_x.shape == (2, 3, 20, 2, 5) and res.mode_P is None
     for i in range(2):
         for j in range(3):
             one = imm_filter(modes, trans, x0[i, j], P0, streams(z[i, j], fx[i, j], Hs[i, j]),
                              mode_probabilities=mu0[i, j], outputs=("mode_x",))
-            for name in ("x", "P", "mode_probabilities", "log_likelihood", "mode_x"):
+            for name in ("mean", "cov", "mode_probabilities", "log_likelihood", "mode_x"):
                 np.testing.assert_allclose(getattr(res, name)[i, j], getattr(one, name), rtol=1e-12, atol=1e-12,
                                            err_msg=name)
-    np.testing.assert_array_equal(res.position_m([0, 1]), res.x[..., :2])
+    np.testing.assert_array_equal(res.position_m([0, 1]), res.mean[..., :2])
 
 
 # -- a turn from RSS readings ----------------------------------------------------------------------------------
@@ -334,7 +334,7 @@ def test_imm_beats_the_single_cv_ekf_in_a_turn_and_its_turn_mode_rises():
     ekf = lb.extended_kalman_filter(cv.F, cv.Q, x0[:, :4], P0[:4, :4], rss)
     window = slice(turn.start, turn.stop + 3)
     rmse = lambda est: np.sqrt(np.mean(np.sum((est[:, window, :2] - truth[window, :2]) ** 2, axis=-1)))
-    rmse_imm, rmse_cv = rmse(imm.x), rmse(_moments(ekf)[0])
+    rmse_imm, rmse_cv = rmse(imm.mean), rmse(_moments(ekf)[0])
     p_turn = imm.mode_probabilities[..., 1].mean(axis=0)
     before, peak, after = p_turn[5:turn.start].mean(), p_turn[window].max(), p_turn[turn.stop + 8:].mean()
     print(f"RMSE over the turn: IMM {rmse_imm:.3f} m, CV EKF {rmse_cv:.3f} m; turn mode {before:.3f} -> peak "

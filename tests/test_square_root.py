@@ -18,7 +18,7 @@ MODEL = lb.constant_velocity(1.0, 0.05)
 H_POS = MODEL.position_measurement_matrix()
 ANCHORS = np.array([[0.0, 0.0], [10.0, 0.0], [0.0, 10.0], [10.0, 10.0]])
 OUTPUTS = ("x_pred", "P_pred", "P_cross", "innovation", "S")
-FIELDS = ("x", "P", "log_likelihood", "nis") + OUTPUTS
+FIELDS = ("mean", "cov", "log_likelihood", "nis") + OUTPUTS
 
 
 def _equal(a, b, fields=FIELDS, tol=1e-9):
@@ -129,7 +129,7 @@ def test_factor_output_is_a_triangular_square_root_of_P():
     res = square_root_kalman_filter(MODEL.F, MODEL.Q, np.zeros(4), 10 * np.eye(4),
                                     lb.LinearMeasurement(z, H_POS, np.eye(2)), outputs=("P_sqrt", "P_pred_sqrt"))
     assert res.P_pred is None and res.x_pred is None          # the prior's factor only, as asked
-    for S, P in ((res.P_sqrt, res.P), (res.P_pred_sqrt, None)):
+    for S, P in ((res.P_sqrt, res.cov), (res.P_pred_sqrt, None)):
         assert S.shape == (5, 20, 4, 4)
         np.testing.assert_array_equal(np.triu(S, 1), 0.0)
         assert (np.diagonal(S, axis1=-2, axis2=-1) > 0).all()
@@ -159,8 +159,8 @@ def test_equals_filterpy_square_root_kalman_filter_run_by_run():
         for k in range(T):
             kf.predict()
             kf.update(z[b, k][:, None])
-            np.testing.assert_allclose(res.x[b, k], kf.x[:, 0], rtol=1e-9, atol=1e-9)
-            np.testing.assert_allclose(res.P[b, k], kf.P, rtol=1e-9, atol=1e-9)
+            np.testing.assert_allclose(res.mean[b, k], kf.x[:, 0], rtol=1e-9, atol=1e-9)
+            np.testing.assert_allclose(res.cov[b, k], kf.P, rtol=1e-9, atol=1e-9)
             np.testing.assert_allclose(res.innovation[b, k], kf.y[:, 0], rtol=1e-9, atol=1e-9)
             np.testing.assert_allclose(res.S[b, k], kf.S, rtol=1e-9, atol=1e-9)
 
@@ -237,15 +237,15 @@ def test_ill_conditioned_measurement_keeps_positive_definite_and_exact(delta, mo
     assert abs(ratio - 1) < 1e-7
     SS = _mul(_fractions(S), _transpose(_fractions(S)))
     assert max(abs(float(a - b)) for ra, rb in zip(SS, P_exact) for a, b in zip(ra, rb)) < 1e-8
-    np.testing.assert_allclose(res.P[0], [[float(v) for v in r] for r in P_exact], rtol=0, atol=1e-8)
-    assert np.abs(res.x[0] - x_e).max() < 1e-7 * np.abs(x_e).max()
+    np.testing.assert_allclose(res.cov[0], [[float(v) for v in r] for r in P_exact], rtol=0, atol=1e-8)
+    assert np.abs(res.mean[0] - x_e).max() < 1e-7 * np.abs(x_e).max()
     if delta == 1e-8 and mode == "parallel":
         with pytest.raises(SingularCovarianceError):
             lb.kalman_filter(*args, predict_first=False, joseph=False)
         return
     short = lb.kalman_filter(*args, predict_first=False, joseph=False)
-    assert np.linalg.eigvalsh(short.P[0])[0] < -1e-11        # indefinite: far beyond the round-off of 1e-16
-    assert np.abs(short.x[0] - x_e).max() > 1e-3 * np.abs(x_e).max()
+    assert np.linalg.eigvalsh(short.cov[0])[0] < -1e-11        # indefinite: far beyond the round-off of 1e-16
+    assert np.abs(short.mean[0] - x_e).max() > 1e-3 * np.abs(x_e).max()
 
 
 # -- bad input ------------------------------------------------------------------------------------------------------

@@ -51,6 +51,7 @@ import numpy as np
 from .._linalg import _Singular, _check_state, _covariance, _mT, _raise_singular
 from .._validate import as_array
 from ._loop import _motion_apply, _motion_jacobian, _setup, _streams
+from .results import FilterResult
 from .streams import _ekf_update
 from .transition import NonlinearMotion, PerStep
 
@@ -68,10 +69,11 @@ _SUM_TOL = 1e-9
 
 
 @dataclass(frozen=True)
-class ImmResult:
-    """What :func:`imm_filter` returns (``batch`` the run axes, ``R`` the recorded steps, ``r`` the modes):
+class ImmResult(FilterResult):
+    """What :func:`imm_filter` returns (``batch`` the run axes, ``R`` the recorded steps, ``r`` the modes), in the
+    vocabulary of every filter result (:class:`~locbook.tracking.results.FilterResult`):
 
-    - ``x`` ``batch + (R, n)``, ``P`` ``batch + (R, n, n)``: the combined estimate (module docstring, step 5);
+    - ``mean`` ``batch + (R, n)``, ``cov`` ``batch + (R, n, n)``: the combined estimate (module docstring, step 5);
     - ``mode_probabilities`` ``batch + (R, r)``: the posterior mode probabilities ``mu_j`` at those steps;
     - ``log_likelihood`` ``batch + (T,)``: the step's predictive log-likelihood of its readings under the mixture,
       ``log sum_j c_j Lambda_j`` (NaN at a step without readings in that run);
@@ -80,33 +82,16 @@ class ImmResult:
       for in ``outputs`` (else None).
     """
 
-    x: np.ndarray
-    P: np.ndarray
+    mean: np.ndarray
+    cov: np.ndarray
     mode_probabilities: np.ndarray
     log_likelihood: np.ndarray
     steps: np.ndarray
     mode_x: np.ndarray | None = None
     mode_P: np.ndarray | None = None
-
-    @property
-    def mean(self) -> np.ndarray:
-        """``x``, under the name the other filter results use for the posterior mean."""
-        return self.x
-
-    @property
-    def cov(self) -> np.ndarray:
-        """``P``, under the name the other filter results use for the posterior covariance."""
-        return self.P
-
-    def position_m(self, index) -> np.ndarray:
-        """The combined position estimates ``batch + (R, d)``: the state components ``index`` (e.g. a motion model's
-        ``position_index``)."""
-        idx = np.atleast_1d(np.asarray(index))
-        n = self.x.shape[-1]
-        if idx.ndim != 1 or idx.size == 0 or not np.issubdtype(idx.dtype, np.integer) or idx.min() < 0 \
-                or idx.max() >= n:
-            raise ValueError(f"index must be state components in 0..{n - 1}, got {index!r}")
-        return self.x[..., idx]
+    #: no consistency guard runs on the mixture (its innovations are not one Gaussian): never flagged
+    diverged: np.ndarray | None = None
+    diverged_step: np.ndarray | None = None
 
     @property
     def total_log_likelihood(self) -> np.ndarray:

@@ -447,7 +447,7 @@ def fit_noise_em(F, Q, x0, P0, measurement, *, B=None, u=None, n_iter: int = 10,
         if it == n_iter:
             break
         sm = rts_smoother(run)
-        m, V, G = sm.x, sm.P, sm.gain
+        m, V, G = sm.mean, sm.cov, sm.gain
         batch = m.shape[:-2]
         # an overflow of the squares is caught by _finite_iterate (one line), not warned about on the way
         with np.errstate(over="ignore", invalid="ignore"):

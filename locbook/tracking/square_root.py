@@ -253,6 +253,6 @@ def square_root_kalman_filter(F, Q, x0, P0, measurements, *, B=None, u=None, rec
     S_pred = res.P_pred
     out = SquareRootKalmanResult(
         **{f: getattr(res, f) for f in KalmanResult.__dataclass_fields__},
-        P_sqrt=res.P if "P_sqrt" in names else None, P_pred_sqrt=S_pred if "P_pred_sqrt" in names else None)
-    out = replace(out, P=_product(res.P), P_pred=_product(S_pred) if "P_pred" in names else None)
+        P_sqrt=res.cov if "P_sqrt" in names else None, P_pred_sqrt=S_pred if "P_pred_sqrt" in names else None)
+    out = replace(out, cov=_product(res.cov), P_pred=_product(S_pred) if "P_pred" in names else None)
     return _flag(out, window, probability)

@@ -26,6 +26,7 @@ from .static.localization import (grid_ml_position, lateration_box_ls, lateratio
                                    rss_ml_position)
 from .tracking.bayes import grid_bayes_filter
 from .tracking.divergence import DivergenceFlags
+from .tracking.imm import imm_filter
 from .tracking.kalman import extended_kalman_filter
 from .tracking.particle import particle_filter
 from .tracking.streams import LinearMeasurement, RssMeasurement
@@ -317,6 +318,11 @@ class TrackerSettings:
     initial_velocity_sd_m_s: float = 0.5
     n_particles: int = 1000
     ukf_alpha: float = 0.5
+    #: the IMM's manoeuvre mode: a constant-velocity model with this many times q (locbook's choice, not a source's:
+    #: a mode an order of magnitude noisier for turns and stops beside the quiet one of the single-model filters)
+    imm_q_ratio: float = 10.0
+    #: the IMM's probability per step of leaving a mode (locbook's choice: a mode lasts 20 steps on average)
+    imm_switch_probability: float = 0.05
     #: a full position covariance of the start (m^2, (2, 2)) in place of ``initial_position_sd_m^2 I`` (measured
     #: data: the calibrated covariance of the fix the trackers start from); the particles then start with the
     #: isotropic ``sqrt(tr / 2)``
@@ -384,6 +390,8 @@ TRACKERS = {
     "ekf": "constant-velocity EKF on the raw RSS, parallel (stacked) update",
     "ekf_serial": "constant-velocity EKF on the raw RSS, serial scalar updates (descending RSS)",
     "ukf": "constant-velocity UKF on the raw RSS",
+    "imm": "IMM of two constant-velocity modes (q and imm_q_ratio x q, switching with imm_switch_probability per "
+           "step), an EKF per mode on the raw RSS, parallel update",
     "particle": "SIR particle filter, random walk (spread per step) reflected into the floor's box, resampled at "
                 "N_eff < N/2",
     "grid_bayes": "grid Bayes filter, the same random walk on a grid inside the floor (separable transition)",
@@ -395,7 +403,9 @@ _KALMAN_PRIOR = ("the posterior bound is that of the filter's own constant-veloc
 _WALK_PRIOR = "its random walk stays inside the floor (the posterior bound knows no floor)"
 #: why each tracker may fall below the posterior CRLB (Method.prior of the static methods)
 TRACKER_PRIORS = {"kf_on_ml": _KALMAN_PRIOR + "; its fixes lie in the floor's bounding box", "ekf": _KALMAN_PRIOR,
-                  "ekf_serial": _KALMAN_PRIOR, "ukf": _KALMAN_PRIOR, "particle": _WALK_PRIOR,
+                  "ekf_serial": _KALMAN_PRIOR, "ukf": _KALMAN_PRIOR,
+                  "imm": "the posterior bound is that of one constant-velocity model (the quiet mode's)",
+                  "particle": _WALK_PRIOR,
                   "grid_bayes": _WALK_PRIOR}
 
 
@@ -425,6 +435,12 @@ def run_trackers(sc: TrackingScenario, rss_dbm, x0, ts: TrackerSettings, rng: np
         stream = RssMeasurement(rss, sc.anchors_m, sc.channel, idx, tag_height_m=sc.tag_height_m)
         res = unscented_kalman_filter(motion.F, motion.Q, x0, P0, [stream], alpha=ts.ukf_alpha)
         out["ukf"], flags["ukf"] = res.position_m([0, 1]), DivergenceFlags.of(res)
+    if "imm" in chosen:
+        stream = RssMeasurement(rss, sc.anchors_m, sc.channel, idx, tag_height_m=sc.tag_height_m)
+        agile = constant_velocity(sc.dt_s, ts.q * ts.imm_q_ratio, dim=2)
+        p = ts.imm_switch_probability
+        res = imm_filter([motion, agile], [[1.0 - p, p], [p, 1.0 - p]], x0, P0, [stream])
+        out["imm"] = res.position_m([0, 1])
     model = _bayes_model(sc)
     if "particle" in chosen:
         out["particle"] = particle_filter(rss, model, rng_pf, n_particles=ts.n_particles, region_m=sc.box_m,

@@ -489,11 +489,17 @@ def protocol(data: Dataset, model: PathLossModel, *, fit: str = "closed_form", g
                 f"+{m['spread_log_likelihood_gain']:.1f} over {SPREAD_START_M:g} m"
                 f"{'; at the fit bound' if m.get('spread_at_bound') else ''}"
                 f"{'; raised to half the grid pitch' if m.get('spread_floor') else ''})")
-            choices += [{"method": "kf_on_ml, ekf, ekf_serial, ukf", "setting": f"q (m^2/s^4), {name}",
+            choices += [{"method": "kf_on_ml, ekf, ekf_serial, ukf, imm (its quiet mode)",
+                         "setting": f"q (m^2/s^4), {name}",
                          "value": f"{m['q']:.3g}", "how": q_how},
                         {"method": "particle, grid_bayes", "setting": f"random walk (m per epoch), {name}",
                          "value": f"{m['spread_m']:.3g}", "how": s_how}]
         if motion:
+            ts0 = TrackerSettings()
+            choices.append({"method": "imm", "setting": "manoeuvre mode, switching",
+                            "value": f"{ts0.imm_q_ratio:g} q, {ts0.imm_switch_probability:g} per step",
+                            "how": "assumed: locbook's choice (a second constant-velocity mode an order of magnitude "
+                                   "noisier; a mode lasts 20 epochs on average), not fitted"})
             choices.append({"method": "every tracker", "setting": "start",
                             "value": f"the first rss_ml fix, sd {sd[0]:.2f} m / {sd[1]:.2f} m (x / y), at rest (sd "
                                      f"{START_VELOCITY_SD_M_S:g} m/s)",
@@ -757,6 +763,8 @@ def _tracker_knobs(proto: Protocol, name: str, ts: TrackerSettings, sc: Tracking
             f"({'fitted' if 'spread_log_likelihood_gain' in proto.motion[name] else 'given'})")
     return {"kf_on_ml": common + "; R: rss_ml fix errors on the calibration epochs", "ekf": common,
             "ekf_serial": common, "ukf": common + f"; alpha = {ts.ukf_alpha:g}",
+            "imm": common + f"; manoeuvre mode {ts.imm_q_ratio:g} q, switching {ts.imm_switch_probability:g} per step "
+                            "(locbook's choice)",
             "particle": f"N = {ts.n_particles}, {walk}", "grid_bayes": f"pitch {sc.grid_spacing_m:g} m, {walk}"}
 
 

@@ -55,12 +55,12 @@ def measure(steps: int = 100_000, alpha: float = 1e-3, runs: int = 1, seed: int 
     gyro = lb.gyroscope_readings(truth.yaw_rate_rad_s[sl], bias_rad_s=0.0, sigma_rad_s=0.01, rng=rng)
     z_imu = np.concatenate([acc, np.broadcast_to(gyro[:, None], (runs, T, 1))], axis=-1)
     model = lb.HeadingKinematicModel(dt, q=0.05, q_angular=0.01)
-    h_imu, R_imu = lb.inertial_measurement_function("body"), np.diag([0.05**2, 0.05**2, 0.01**2])
+    R_imu = np.diag([0.05**2, 0.05**2, 0.01**2])
     x0 = model.state_from(truth.position_m[0], angular=(truth.heading_rad[0], 0.0))
     P0 = np.diag([1.0, 1.0, 0.1, 0.1, 0.1, 0.1, 0.01, 0.01])
 
     def ukf(k=T):
-        imu = lb.NonlinearMeasurement(z_imu[:, :k], h_imu, R_imu, name="accelerometer + gyroscope")
+        imu = lb.Stream(z_imu[:, :k], lb.InertialMeasurement(R_imu, frame="body", name="accelerometer + gyroscope"))
         return lb.unscented_kalman_filter(model.F, model.Q, x0, P0,
                                           [imu, lb.RssMeasurement(rss[:, :k], ANCHORS, channel, model.position_index)],
                                           alpha=alpha)

@@ -166,13 +166,18 @@ _UPDATE_OVERFLOW = ("the state overflowed in the update at step {step}: the upda
                     "or P0)")
 
 
-class _Singular(Exception):
-    """Raised inside an update; the time loop turns it into a SingularCovarianceError naming the step."""
+class _Singular(SingularCovarianceError):
+    """Raised inside an update; the time loop turns it into a SingularCovarianceError naming the step. Raised out of
+    a model called directly (no step to name), it is that error itself, its message without the step."""
 
     def __init__(self, bad, message: str = ""):
         super().__init__()
         self.bad = bad
         self.message = message      # "": the innovation covariance; else the text of the failure ({step} filled in)
+
+    def __str__(self) -> str:
+        text = self.message or ("the innovation covariance is singular, not positive definite or not finite")
+        return text.replace(" at step {step}", "").replace("{step}", "?") + _first_bad(self.bad)
 
 
 def _refuse_not_finite(name: str, values, bad, batch_ndim: int, step: int, what: str) -> None:

@@ -261,3 +261,89 @@ def test_the_particle_filter_takes_the_rss_models_compiled_likelihood(monkeypatc
     n = max(particle._NUMBA_MIN_PARTICLES, 100)
     lb.particle_filter(rss, model, np.random.default_rng(2), n_particles=n, region_m=((0, 0), (8, 8)))
     assert len(calls) == 3                      # one per step
+
+
+class GrowingNoise(lb.MotionModel):
+    """A user motion model: constant velocity whose process noise grows with the step (a step-dependent Q)."""
+    name = "growing"
+
+    def __init__(self):
+        self.cv = lb.constant_velocity(1.0, 0.05)
+
+    def apply(self, x, step=0):
+        return x @ self.cv.F.T
+
+    def jacobian_at(self, x, step=0):
+        return self.cv.F
+
+    def covariance(self, step=0):
+        return self.cv.Q * (1.0 + step)
+
+
+def test_a_user_motion_model_brings_its_step_dependent_covariance_and_the_online_filter_counts_its_steps():
+    model, _, z = _track(runs=2, steps=12)
+    stream = lb.Stream(z, Ranges(ANCHORS, SIGMA_M))
+    x0, P0 = np.array([3.0, 2.0, 0.0, 0.0]), np.eye(4)
+    motion = GrowingNoise()
+    ours = lb.extended_kalman_filter(motion, None, x0, P0, stream)
+    Qs = lb.per_step(np.stack([motion.covariance(k) for k in range(12)]))
+    ref = lb.extended_kalman_filter(motion.cv.F, Qs, x0, P0, stream)
+    np.testing.assert_allclose(ours.mean, ref.mean, rtol=0, atol=1e-12)
+    online = lb.OnlineFilter("ekf", motion, None, np.broadcast_to(x0, (2, 4)), P0)
+    steps = [online.step(lb.Stream(z[:, k:k + 1], Ranges(ANCHORS, SIGMA_M))).mean[:, -1] for k in range(12)]
+    np.testing.assert_allclose(np.stack(steps, axis=1), ref.mean, rtol=0, atol=1e-10)
+
+
+def test_a_user_motion_model_runs_in_the_imm():
+    model, _, z = _track(runs=2, steps=10)
+    stream = lb.Stream(z, Ranges(ANCHORS, SIGMA_M))
+    x0, P0 = np.array([3.0, 2.0, 0.0, 0.0]), np.eye(4)
+    res = lb.imm_filter([GrowingNoise()], [[1.0]], x0, P0, [stream])
+    ref = lb.extended_kalman_filter(GrowingNoise(), None, x0, P0, stream)
+    assert res.mean.shape == ref.mean.shape and np.isfinite(res.mean).all()
+
+
+class PerRunNoise(Ranges):
+    def covariance(self, x, *, step=0):                 # per run, without the point axis: ambiguous, refused
+        return np.array([1.0, 2.0, 3.0])[:, None, None] * SIGMA_M**2 * np.eye(3)
+
+
+def test_a_covariance_without_the_point_axis_is_refused_by_name():
+    model, _, z = _track(runs=3, steps=5)
+    for filt in (lb.extended_kalman_filter, lb.unscented_kalman_filter):
+        with pytest.raises(ValueError, match=r"ranges: covariance returned shape \(3, 3, 3\)"):
+            filt(model.F, model.Q, np.array([3.0, 2.0, 0.0, 0.0]), np.eye(4), lb.Stream(z, PerRunNoise(ANCHORS, 0.3)))
+
+
+def test_library_models_cross_filters_or_are_refused_by_name():
+    from locbook.models.base import LinearGaussian
+    cells = np.random.default_rng(0).uniform(0, 8, (40, 2))
+    fixes = np.random.default_rng(1).normal(4, 1, (2, 5, 2))
+    assert np.isfinite(lb.grid_bayes_filter(fixes, cells, LinearGaussian(np.eye(2), np.eye(2))).mean).all()
+    rss = np.random.default_rng(2).normal(-60, 3, (2, 5, 3))
+    with pytest.raises(ValueError, match="RssModel reads positions.*RssMeasurement"):
+        lb.extended_kalman_filter(np.eye(2), np.eye(2), np.zeros(2), np.eye(2),
+                                  lb.Stream(rss, lb.RssModel(ANCHORS, lb.PathLossModel(-40.0, 2.2, 3.0))))
+
+
+def test_the_noise_fit_takes_a_kinematic_model_with_its_own_q():
+    cv = lb.constant_velocity(1.0, 0.05)
+    z = np.random.default_rng(3).normal(0, 1, (4, 30, 2)).cumsum(axis=1)
+    stream = lb.LinearMeasurement(z, np.eye(2, 4), np.eye(2))
+    a = lb.fit_noise_ml(cv, None, np.zeros(4), np.eye(4), stream, per_run=False)
+    b = lb.fit_noise_ml(cv.F, cv.Q, np.zeros(4), np.eye(4), stream, per_run=False)
+    np.testing.assert_allclose(a.q_scale, b.q_scale, rtol=0, atol=0)
+
+
+def test_a_serial_linear_stream_in_descending_order_equals_the_parallel_update():
+    """One H for every run and a per-run reading order (descending): the serial form of a diagonal-R update is the
+    parallel one to round-off, in the KF, the EKF and the square-root form."""
+    from locbook.models.base import LinearGaussian
+    cv = lb.constant_velocity(1.0, 0.1)
+    z = np.random.default_rng(0).normal(size=(3, 10, 2))
+    z[0, 2, 0] = np.nan
+    model = LinearGaussian(np.eye(2, 4), np.diag([1.0, 2.0]))
+    ref = lb.kalman_filter(cv.F, cv.Q, np.zeros(4), np.eye(4), lb.Stream(z, model))
+    serial = lb.Stream(z, model, mode="serial", order="descending")
+    for filt in (lb.kalman_filter, lb.extended_kalman_filter, lb.square_root_kalman_filter):
+        np.testing.assert_allclose(filt(cv.F, cv.Q, np.zeros(4), np.eye(4), serial).mean, ref.mean, rtol=0, atol=1e-12)

@@ -147,7 +147,12 @@ class MeasurementModel:
     def covariance_at(self, x, *, step: int = 0):
         """``R`` at states ``x`` ``batch + (n,)`` (one point per run; the UKF's R at its predicted mean), broadcasting
         to ``batch + (m, m)``."""
-        return at_points(self.covariance(x[..., None, :], step=step), 2)
+        X = x[..., None, :]
+        return at_points(self._checked_covariance(self.covariance(X, step=step), X, step), 2)
+
+    def _checked_covariance(self, value, x, step: int):
+        """A user model's covariance at points ``x``, checked (:func:`check_covariance`); the library's as given."""
+        return value if self.checks_own_output else check_covariance(self, value, x, step)
 
     def residual(self, a, b):
         """``a - b`` of readings (override for readings on a circle)."""
@@ -168,8 +173,11 @@ class MeasurementModel:
         """``log N(z; h(x), R(x))`` ``batch + (K,)`` of readings ``z`` ``batch + (m,)`` at states ``batch + (K, n)``,
         over the readings present (NaN = not heard: left out; no reading present gives 0)."""
         z = np.asarray(z, dtype=float)[..., None, :]
+        valid_any = np.isfinite(z)
         h = np.asarray(self.mean(x, step=step), dtype=float)
-        R = np.asarray(self.covariance(x, step=step), dtype=float)
+        if not self.checks_own_output:
+            h = check_output(self, "mean", h, x, (self.n_readings,), valid_any, step)
+        R = np.asarray(self._checked_covariance(self.covariance(x, step=step), x, step), dtype=float)
         valid = np.isfinite(z)
         nu = np.where(valid, self.residual(np.where(valid, z, h), h), 0.0)
         m = nu.shape[-1]
@@ -206,7 +214,7 @@ class MeasurementModel:
         else:
             nu = check_output(self, "residual", self.residual(np.where(valid, z, h), h), x, (self.n_readings,),
                               valid, step, points=False)
-        return nu, H, at_points(self.covariance(X, step=step), 2)
+        return nu, H, at_points(self._checked_covariance(self.covariance(X, step=step), X, step), 2)
 
     def linearized(self, x, z, *, step: int = 0):
         """The linear-Gaussian model ``z' = H x + v``, ``v ~ N(0, R)``, the (parallel) EKF update uses at ``x``:
@@ -264,8 +272,9 @@ class MeasurementModel:
         """The run axes the model's own parameters carry, named: ``[(name, shape), ...]`` (default none)."""
         return []
 
-    def check_readings(self, z, n_state: int) -> None:
-        """Refuse readings ``batch + (T, m)`` (or a state size) the model cannot take, in one line."""
+    def check_readings(self, z, n_state: int | None) -> None:
+        """Refuse readings ``batch + (T, m)`` (or a state size; None: the particle and grid filters, whose particle
+        size the model does not fix) the model cannot take, in one line."""
         if np.shape(z)[-1] != self.n_readings:
             raise ValueError(f"{self.label}: the readings have {np.shape(z)[-1]} components per step on their last "
                              f"axis, the model {self.n_readings}")
@@ -294,6 +303,23 @@ def check_output(model, what: str, value, x, tail: tuple, present, step: int, *,
             raise
         raise ValueError(f"{why} ({exc})") from None
     _refuse_not_finite(name, out, present & ~np.isfinite(out), len(x_shape) - 1 - points, step, _PRESENT)
+    return out
+
+
+def check_covariance(model, value, x, step: int):
+    """A model's covariance at points ``x`` ``batch + (K, n)``, checked: real, ending in ``(m, m)`` with leading
+    axes that broadcast to ``batch + (K,)`` (a per-run R is ``batch + (1, m, m)`` in points form: a ``batch + (m,
+    m)`` one would be read as K points), finite, with no negative variance. One ValueError line naming the model and
+    the step otherwise."""
+    m = model.n_readings
+    x_shape = np.shape(x)
+    name = f"{model.label}: covariance"
+    out = function_output(name, value, x_shape[:-1] + (m, m), 2, x_shape, broadcast=False)
+    _refuse_not_finite(name, out, ~np.isfinite(out), max(len(x_shape) - 2, 0), step,
+                       "(a covariance must be finite)")
+    if np.any(np.diagonal(out, axis1=-2, axis2=-1) < 0):
+        raise ValueError(f"{name} returned a negative variance at step {step}: a covariance has a non-negative "
+                         "diagonal")
     return out
 
 
@@ -373,7 +399,7 @@ class LinearGaussian(MeasurementModel):
                              f"(filterpy's (m, 1) z); pass batch + (T, m), e.g. z[..., 0] of shape {np.shape(z)[:-1]}")
         if m != self.n_readings:
             raise ValueError(f"{self.label}.H must have {m} rows (one per component of z), got shape {np.shape(self.H)}")
-        if self.n_state != n_state:
+        if n_state is not None and self.n_state != n_state:
             raise ValueError(f"{self.label}.H must have shape (m, {n_state}) or batch + (m, {n_state}) (one column per "
                              f"state component), got {np.shape(self.H)}")
         for field in ("H", "R"):
@@ -622,8 +648,39 @@ class MotionModel:
         return x_next + np.einsum("...ij,...j->...i", root, noise)
 
     def shifted(self, k: int) -> "MotionModel":
-        """The model whose step is counted from ``k`` (the online filter's one-step calls; default: itself)."""
-        return self
+        """The model whose step is counted from ``k`` (the online filter's one-step calls see step 0): a view that adds
+        ``k`` to the step of :meth:`apply`, :meth:`jacobian_at` and :meth:`covariance`."""
+        return self if k == 0 else _ShiftedMotion(self, k)
+
+
+class _ShiftedMotion(MotionModel):
+    """:meth:`MotionModel.shifted`'s view: ``model`` with its steps counted from ``k``."""
+
+    def __init__(self, model: MotionModel, k: int):
+        self.model, self.k = model, int(k)
+        self.name, self.linear, self.checks_own_output = model.label, model.linear, model.checks_own_output
+
+    def apply(self, x, step: int = 0):
+        return self.model.apply(x, step + self.k)
+
+    def jacobian_at(self, x, step: int = 0):
+        return self.model.jacobian_at(x, step + self.k)
+
+    def covariance(self, step: int = 0):
+        return self.model.covariance(step + self.k)
+
+    def difference(self, a, b):
+        return self.model.difference(a, b)
+
+    def mean_of(self, points, weights):
+        return self.model.mean_of(points, weights)
+
+    @property
+    def linear_differences(self) -> bool:
+        return self.model.linear_differences
+
+    def shifted(self, k: int) -> MotionModel:
+        return self.model.shifted(self.k + k)
 
 
 class LinearMotion(MotionModel):

@@ -218,5 +218,5 @@ class InertialMeasurement(MeasurementModel):
 
     def check_readings(self, z, n_state: int) -> None:
         super().check_readings(z, n_state)
-        if n_state != self.n_state:
+        if n_state is not None and n_state != self.n_state:
             raise ValueError(f"{self.name}: the model is for a {self.n_state}-state, the filter's state has {n_state}")

@@ -201,6 +201,9 @@ class RssModel(MeasurementModel):
         return self.log_likelihood(z, x, step, constant=False)
 
     def check_readings(self, z, n_state=None) -> None:
+        if n_state is not None:         # a Kalman-family stream: its states are more than positions
+            raise ValueError("RssModel reads positions (the particle and grid filters, the estimators and the bounds); "
+                             "a Kalman-family stream takes RssMeasurement(rss_dbm, anchors_m, channel, position_index)")
         self.readings(z, ndim=np.ndim(z) if np.ndim(z) in (2, 3) else 3)
 
     def mean_table(self, points, n_runs: int):
@@ -330,6 +333,10 @@ class RssModel(MeasurementModel):
         (:func:`~locbook.models.channel.log_distance_gradient`); the Fisher information of such a reading is 0."""
         return self._evaluate(positions_m, step, jacobian=True)[2]
 
+    def sigma_at(self, step: int = 0):
+        """``sigma_db`` at ``step``: a scalar, ``(m,)``, or per run ``(R, 1)`` (checked positive)."""
+        return self._sigma(step, "the likelihood")
+
     def _sigma(self, step: int, where: str):
         sigma = self._per_step(self.channel.sigma_db, step, False)
         if np.any(np.asarray(sigma) <= 0):     # a model with sigma 0 gives mean readings, not a density
@@ -443,7 +450,10 @@ class RssMeasurementModel(MeasurementModel):
         anchors = as_array(f"{self.name}.anchors_m", self.anchors_m, min_ndim=2)
         object.__setattr__(self, "anchors_m", anchors)
         m, dim = anchors.shape[-2], anchors.shape[-1]
-        idx = np.asarray(self.position_index)
+        given = self.position_index
+        idx = np.asarray(given)
+        if idx.dtype == object or (idx.size and not np.issubdtype(idx.dtype, np.integer)):
+            raise ValueError(f"{self.name}.position_index must hold integer state indices, got {given!r}")
         object.__setattr__(self, "position_index", idx)
         if self.tag_height_m is not None:
             check_scalar("tag_height_m", self.tag_height_m)
@@ -453,7 +463,7 @@ class RssMeasurementModel(MeasurementModel):
         n_free = dim - (self.tag_height_m is not None)
         if idx.shape != (n_free,):
             raise ValueError(f"{self.name}.position_index must hold {n_free} state indices (one per axis of the "
-                             f"anchors{', the height known' if n_free < dim else ''}), got {self.position_index!r}")
+                             f"anchors{', the height known' if n_free < dim else ''}), got {given!r}")
         check_scalar("anchor_sigma_m", self.anchor_sigma_m, ge=0)
         for name in ("ref_power_dbm", "path_loss_exp", "sigma_db"):
             value = as_array(f"{self.name}.channel.{name}", getattr(self.channel, name))
@@ -576,5 +586,5 @@ class RssMeasurementModel(MeasurementModel):
         if anchors.ndim > 2 and anchors.shape[-3] not in (1, np.shape(z)[-2]):
             raise ValueError(f"{self.name}.anchors_m per step must have shape batch + (T, m, dim) with T = "
                              f"{np.shape(z)[-2]} steps (or 1), got {anchors.shape}")
-        if np.max(self.position_index) >= n_state:
+        if n_state is not None and np.max(self.position_index) >= n_state:
             raise ValueError(f"{self.name}.position_index {self.position_index} is outside the {n_state}-state")

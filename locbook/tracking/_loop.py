@@ -99,8 +99,6 @@ def _setup(F, Q, x0, P0, measurements, record, filter_name, B=None, u=None) -> _
     if isinstance(F, MotionModel) and F.linear:        # its matrices, as a matrix argument (the compiled paths')
         F, Q = F.F, (F.Q if Q is None else Q)
     motion = F if isinstance(F, MotionModel) else None
-    if motion is not None and Q is None:
-        Q = motion.covariance(0)
     if motion is not None:
         x = as_array("x0", x0)
         if x.ndim < 1:
@@ -128,6 +126,10 @@ def _setup(F, Q, x0, P0, measurements, record, filter_name, B=None, u=None) -> _
         F, F_steps, F_batch = _matrix_arg("F", F, n, n, T)
     else:
         F = None
+    if motion is not None and Q is None:       # the model's own covariance, step by step (one matrix if constant)
+        Qs = [np.asarray(motion.covariance(k), dtype=float) for k in range(max(T, 1))]
+        same = all(q.shape == Qs[0].shape and np.array_equal(q, Qs[0]) for q in Qs[1:])
+        Q = Qs[0] if same else PerStep(np.stack(np.broadcast_arrays(*Qs), axis=-3), f"{motion.label}: covariance")
     Q_given, Q_steps = Q, isinstance(Q, PerStep)
     if Q_steps:
         Q = _covariance("Q (per step)", Q.value, n)

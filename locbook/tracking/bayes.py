@@ -31,6 +31,7 @@ import numpy as np
 
 from .._validate import as_array, check_choice, check_scalar
 from ..models.base import MeasurementModel
+from ..models.rss import RssModel
 from . import _compiled
 from .resampling import effective_sample_size
 from .results import FilterResult
@@ -448,13 +449,17 @@ def _grid_kernels():
     return _compiled._kernel_module("locbook.tracking._grid_kernels", _grid_trial, "grid filter", stacklevel=4)
 
 
+# The models whose likelihood the compiled grid kernels evaluate from a mean table (a registry keyed by model type,
+# exact type): ``table(model, cells, n_runs) -> (table (1|R, C, m), sigma) or None``.
+_MEAN_TABLES = {RssModel: lambda model, cells, n_runs: model.mean_table(cells, n_runs)}
+
+
 def _points_log_likelihood(model: MeasurementModel, rss_dbm, cells_m, n_runs: int):
     """``t -> (R, C)``: the model's log-likelihood of step ``t``'s readings on the cells (up to a constant per run),
     through the model's own fixed-points form when it has one (an RssModel's mean table), else its
     :meth:`~locbook.models.base.MeasurementModel.log_likelihood`, checked."""
-    fixed = getattr(model, "points_log_likelihood", None)
-    if fixed is not None:
-        return fixed(rss_dbm, cells_m, n_runs)
+    if type(model) in _MEAN_TABLES:
+        return model.points_log_likelihood(rss_dbm, cells_m, n_runs)
 
     def ll(t):
         out = np.asarray(model.log_likelihood(rss_dbm[:, t], cells_m, step=t), dtype=float)
@@ -584,8 +589,8 @@ def grid_bayes_filter(rss_dbm, cells_m, model, spread_m: float = 0.5, *, n_steps
     if use_separable:
         separable = _SeparableTransition(cells_m, spread_m)
     if is_model and n_steps:
-        table = getattr(model, "mean_table", None)       # a Gaussian model's mean table: the kernels' likelihood
-        table = table(cells_m, n_runs) if table is not None else None
+        table = _MEAN_TABLES.get(type(model))            # a Gaussian model's mean table: the kernels' likelihood
+        table = table(model, cells_m, n_runs) if table is not None else None
         if table is not None:
             fixed["table"], fixed["sigma"] = table
             fixed["ll"] = model.points_log_likelihood(rss_dbm, cells_m, n_runs, table=table)

@@ -53,7 +53,7 @@ from .._validate import as_array
 from ._loop import _motion_apply, _motion_jacobian, _setup, _streams
 from .results import FilterResult
 from .streams import _ekf_update
-from .transition import NonlinearMotion, PerStep
+from .transition import MotionModel, PerStep
 
 __all__ = ["imm_filter", "ImmResult", "embed", "IMM_OUTPUTS"]
 
@@ -114,7 +114,7 @@ def embed(motion, index, n_state: int):
         modes = [embed(cv, np.concatenate([ca.position_index, ca.velocity_index]), ca.n_state), ca]
     """
     F, Q = _pair(motion, "motion")
-    if isinstance(F, NonlinearMotion):
+    if _nonlinear(F):
         raise ValueError("embed takes a linear motion (F a matrix); wrap a NonlinearMotion's f instead")
     F = as_array("motion F", F, ndim=2)
     m = F.shape[0]
@@ -136,10 +136,18 @@ def embed(motion, index, n_state: int):
     return F_full, Q_full
 
 
+def _nonlinear(F) -> bool:
+    """A motion model that is not linear (its f through the protocol: apply, jacobian_at)."""
+    return isinstance(F, MotionModel) and not F.linear
+
+
 def _pair(motion, name: str):
-    """``(F, Q)`` of a motion given as a pair or as a model with ``.F`` and ``.Q``."""
+    """``(F, Q)`` of a motion given as a pair, as a model with ``.F`` and ``.Q``, or as a nonlinear motion model with
+    its own covariance (``(model, model.covariance(0))``: a constant Q)."""
     if hasattr(motion, "F") and hasattr(motion, "Q"):
         return motion.F, motion.Q
+    if _nonlinear(motion):
+        return motion, motion.covariance(0)
     if isinstance(motion, (tuple, list)) and len(motion) == 2:
         return motion[0], motion[1]
     raise ValueError(f"{name} must be a pair (F, Q) or a model with .F and .Q (e.g. locbook.constant_velocity(...)), "
@@ -160,7 +168,7 @@ def _motions(motions):
         if isinstance(F, PerStep):
             raise ValueError(f"motions[{i}]: F must be a constant matrix (n, n) or a NonlinearMotion (per_step is not "
                              "taken by imm_filter)")
-        if not isinstance(F, NonlinearMotion):
+        if not _nonlinear(F):
             F = as_array(f"motions[{i}] F", F)
             if F.ndim != 2 or F.shape[0] != F.shape[1]:
                 raise ValueError(f"motions[{i}]: F must be a square matrix (n, n) without run axes or a "
@@ -280,16 +288,16 @@ def imm_filter(motions, transition, x0, P0, measurements, *, mode_probabilities=
     P_mat = _transition(transition, r)
     want = _check_outputs(outputs)
     measurements = _streams(measurements)
-    F0, Q0 = next(((F, Q) for F, Q in modes if not isinstance(F, NonlinearMotion)), modes[0])
+    F0, Q0 = next(((F, Q) for F, Q in modes if not _nonlinear(F)), modes[0])
     setup = _setup(F0, Q0, x0, P0, measurements, record, "imm_filter")
     batch, n, T = setup.batch, setup.n, setup.T
     for i, (F, Q) in enumerate(modes):
         if Q.shape[0] != n:
             raise ValueError(f"motions[{i}] has a state of {Q.shape[0]}, x0 of {n}")
-        if isinstance(F, NonlinearMotion) and F.jacobian is None:
+        if _nonlinear(F) and getattr(F, "jacobian", True) is None:
             raise ValueError(f"motions[{i}] ({F.name}): the IMM's mode-matched EKF needs the motion's jacobian")
     mu = _initial_probabilities(mode_probabilities, r, batch)
-    lin = [j for j, (F, _) in enumerate(modes) if not isinstance(F, NonlinearMotion)]
+    lin = [j for j, (F, _) in enumerate(modes) if not _nonlinear(F)]
     nonlin = [j for j in range(r) if j not in lin]
     expand = (slice(None),) + (None,) * len(batch)           # (r_lin, n, n) -> (r_lin, 1, ..., 1, n, n)
     F_lin = np.stack([modes[j][0] for j in lin])[expand] if lin else None

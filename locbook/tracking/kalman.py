@@ -98,14 +98,18 @@ def extended_kalman_filter(F, Q, x0, P0, measurements, *, B=None, u=None, record
     """Multi-rate (extended) Kalman filter on one time grid, vectorized over leading Monte-Carlo axes.
 
     At every step: predict with ``x = F x + B u``, ``P = F P F^T + Q`` (F, Q constant, with run axes or
-    ``per_step``; or a :class:`~locbook.tracking.transition.NonlinearMotion` ``f`` with its Jacobian J: ``x = f(x) +
-    B u``, ``P = J P J^T + Q``; :mod:`locbook.tracking.transition`; what f and J return is checked: real, the state's
+    ``per_step``; or any motion model of the protocol (:class:`~locbook.models.base.MotionModel`): a linear one, e.g.
+    a :class:`~locbook.models.motion.KinematicModel`, by its F and Q (``Q=None``: the model's own), a nonlinear one,
+    e.g. a :class:`~locbook.tracking.transition.NonlinearMotion` ``f`` with its Jacobian J: ``x = f(x) + B u``,
+    ``P = J P J^T + Q``; :mod:`locbook.tracking.transition`; what a user's f and J return is checked: real, the state's
     shape, finite, else one line naming the motion, the function and the step, and a filterpy-style ``fx(x, dt)`` gets
     a line saying how to bind dt), then apply
     the ``measurements`` in the given order, each update starting from the previous one's posterior (Dogan
-    Table 3.5: acceleration first, then RSS at RSS epochs). Each entry is a :class:`LinearMeasurement` (KF,
-    e.g. accelerometer or MLE position fixes), a :class:`RssMeasurement` (parallel or serial EKF) or a
-    :class:`NonlinearMeasurement` with its Jacobian (one stream may be given without a list). Covariance updates use
+    Table 3.5: acceleration first, then RSS at RSS epochs). Each entry is a :class:`~locbook.tracking.streams.Stream`
+    of readings and any measurement model (:class:`~locbook.models.base.MeasurementModel`, linearised at the state so
+    far; one stream may be given without a list): the library's :func:`LinearMeasurement` (KF, e.g. accelerometer or
+    MLE position fixes), :func:`RssMeasurement` (parallel or serial EKF), :func:`NonlinearMeasurement` with its
+    Jacobian, or a user's model. Covariance updates use
     the Joseph form (Tables 3.1-3.4 print ``P - K S K^T``; equal in exact arithmetic).
 
     ``x0``, ``P0``: ``batch + (n,)``, ``batch + (n, n)``; with ``predict_first`` (filterpy's convention) they

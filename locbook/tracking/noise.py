@@ -208,6 +208,10 @@ def fit_noise_ml(F, Q, x0, P0, measurements, *, kind: str = "kf", fit_Q: str | N
     lo, hi = (float(v) for v in scale_bounds)
     if not 0 < lo <= 1 <= hi:
         raise ValueError(f"scale_bounds must be (low, high) with 0 < low <= 1 <= high, got {scale_bounds!r}")
+    if Q is None and isinstance(F, MotionModel):    # the motion's own Q, the starting point of the fit
+        Q = F.Q if F.linear else F.covariance(0)
+    if Q is None:
+        raise ValueError("fit_noise_ml needs Q (n, n): the starting point and the shape of what is fitted")
     params = _Parameters(Q, streams, fit_Q, fit_R)
     p = params.size
     filt = KALMAN_FILTERS[kind]
@@ -409,8 +413,8 @@ def fit_noise_em(F, Q, x0, P0, measurement, *, B=None, u=None, n_iter: int = 10,
     decreases, up to round-off)."""
     check_scalar("n_iter", n_iter, ge=1, integer=True)
     model = getattr(measurement, "model", None)
-    if not getattr(model, "linear", False) or isinstance(model.H, PerStep) \
-            or isinstance(model.R, PerStep) or measurement.mode != "parallel" or np.ndim(model.H) != 2:
+    terms = model.constant_terms(0) if getattr(model, "linear", False) else None
+    if terms is None or measurement.mode != "parallel" or getattr(model, "per_step_fields", lambda: False)():
         raise ValueError("fit_noise_em takes one parallel LinearMeasurement with one constant H (m, n) and R")
     if isinstance(F, MotionModel) and F.linear:
         F, Q = F.F, (F.Q if Q is None else Q)
@@ -421,11 +425,8 @@ def fit_noise_em(F, Q, x0, P0, measurement, *, B=None, u=None, n_iter: int = 10,
     if unknown or not fit:
         raise ValueError(f"fit must name 'Q' and/or 'R', got {fit!r}")
     Q = np.asarray(Q, dtype=float)
-    R = np.asarray(measurement.R, dtype=float)
-    H = np.asarray(measurement.H, dtype=float)
-    z = np.asarray(measurement.z, dtype=float)
-    if measurement.offset is not None:
-        z = z - np.asarray(measurement.offset, dtype=float)
+    H, R = (np.asarray(v, dtype=float) for v in terms)
+    z = np.asarray(model.prepare_readings(measurement.z), dtype=float)
     # pykalman's rule: a step with a missing component is missing as a whole, in the E-step and the M-step alike
     # (the R M-step of a partly observed step has no closed form; leaving such steps out of the M-step only would
     # break the monotone likelihood of EM)

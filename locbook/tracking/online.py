@@ -22,7 +22,7 @@ from .._validate import as_array
 from .kalman import extended_kalman_filter, kalman_filter
 from .results import DIVERGENCE_PROBABILITY, DIVERGENCE_WINDOW, KalmanResult, _check_guard, nis_divergence
 from .streams import Stream
-from .transition import NonlinearMotion, PerStep
+from .transition import MotionModel, PerStep
 from .unscented import unscented_kalman_filter
 
 __all__ = ["OnlineFilter", "KALMAN_FILTERS"]
@@ -124,12 +124,9 @@ class OnlineFilter:
 
 
 def _shifted(motion, k: int):
-    """A step-aware NonlinearMotion whose step is counted from ``k`` (a one-step call sees step 0); other motions
-    as they are."""
-    if isinstance(motion, NonlinearMotion) and motion.uses_step:
-        shift = lambda fn: None if fn is None else (lambda x, step: fn(x, step + k))
-        return replace(motion, f=shift(motion.f), jacobian=shift(motion.jacobian))
-    return motion
+    """A motion model whose step is counted from ``k`` (a one-step call sees step 0:
+    :meth:`~locbook.models.base.MotionModel.shifted`); matrices as they are."""
+    return motion.shifted(k) if isinstance(motion, MotionModel) and not motion.linear else motion
 
 
 def _one_step(stream):

@@ -113,7 +113,7 @@ def _fused_rss_log_likelihood(model: RssModel, rss_dbm, particles, step: int, po
         return None
     walls = np.ascontiguousarray(model.walls_m, dtype=float) if with_walls else np.zeros((0, 2, 2))
     from . import _particle_kernels as K          # lazy: numba loads only when the compiled path runs
-    sigma = np.asarray(model._sigma(step, "the likelihood"), dtype=float)
+    sigma = np.asarray(model.sigma_at(step), dtype=float)
     z = np.ascontiguousarray(rss_dbm, dtype=float)
     x = np.asarray(particles, dtype=float)
     x3 = x if x.ndim == 3 else x[None]

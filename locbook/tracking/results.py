@@ -241,9 +241,8 @@ def nis_divergence(nis, nis_dof, window: int | None = DIVERGENCE_WINDOW,
     ``dof == 0`` are skipped, and so are steps whose NIS is NaN: they carry no evidence either way, e.g. a foreign
     update function that returns no NIS); ``diverged_step`` is the first step of the first such window, -1 where
     none. ``nis_dof``: non-negative integers (an integer or float array with integral values).
-    Vectorized over runs (numpy passes over the runs that have at least ``window`` exceedances), or, from
-    ``_compiled._NUMBA_MIN_WORK`` values on once a compiled filter has loaded the kernels, one compiled pass per run
-    that stops at its first window (:func:`locbook.tracking._kernels._nb_nis_streaks`); the two give the same flags."""
+    Vectorized over runs (numpy passes over the runs that have at least ``window`` exceedances; the rule's one
+    implementation)."""
     window, probability = _check_guard(window, probability)
     nis = np.asarray(nis, dtype=float)
     dof = np.asarray(nis_dof)

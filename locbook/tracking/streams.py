@@ -105,7 +105,7 @@ def LinearMeasurement(z, H, R, mode: str = "parallel", offset=None) -> Stream:
     ``"parallel"`` (one stacked update) or ``"serial"`` (one scalar update per row in the given order; needs a
     diagonal R, and then equals the parallel update to round-off)."""
     zz = as_array("LinearMeasurement.z", z, min_ndim=2, nan_ok=True)
-    shape_H = np.shape(H.value if hasattr(H, "value") else H)
+    shape_H = (H.value if hasattr(H, "value") else as_array("LinearMeasurement.H", H)).shape
     if len(shape_H) >= 2 and zz.shape[-1] != shape_H[-2]:       # z against H first: R is checked against H
         LinearGaussian(np.zeros(shape_H[-2:]), np.eye(shape_H[-2]), name="LinearMeasurement").check_readings(
             zz, shape_H[-1])
@@ -165,12 +165,16 @@ def _serial_order(z, order: str):
 
 def _row(values, a, axis: int):
     """Row ``a`` (an int, or per run ``batch`` indices) of ``values`` on ``axis`` (-1 for readings, -2 for a
-    Jacobian's rows), the axis dropped."""
+    Jacobian's rows), the axis dropped; ``values`` without the runs' axes (one H for all runs) are broadcast to them."""
     if isinstance(a, (int, np.integer)):
         return np.take(values, a, axis=axis)
-    idx = a[(...,) + (None,) * (-axis)]
-    return np.take_along_axis(values, np.broadcast_to(idx, values.shape[:values.ndim + axis] + (1,) +
-                                                      values.shape[values.ndim + axis + 1:]), axis).squeeze(axis)
+    values = np.asarray(values)
+    lead = values.ndim + axis                      # the axes before the row axis
+    batch = np.broadcast_shapes(values.shape[:lead], np.shape(a))
+    values = np.broadcast_to(values, batch + values.shape[lead:])
+    idx = np.asarray(a)[(...,) + (None,) * (-axis)]
+    idx = np.broadcast_to(idx, batch + (1,) + values.shape[len(batch) + 1:])
+    return np.take_along_axis(values, idx, len(batch)).squeeze(len(batch))
 
 
 def _diagonal_entry(R, a):

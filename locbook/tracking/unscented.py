@@ -32,8 +32,9 @@ be evaluated (an ``n x m`` times ``n x m`` product) and has no variant.
 Missing readings follow the library's rule: a NaN component is left out of the update (zero gain column).
 
 Speed (issue 31). With numba installed and enabled (``LOCBOOK_NUMBA``, :mod:`locbook.tracking._compiled`), linear
-motion (F without run axes; Q may differ per run) and LinearMeasurement, RssMeasurement and inertial
-(:func:`locbook.models.imu.inertial_measurement_function`) streams, the same recursion runs compiled on blocks of runs
+motion (F without run axes; Q may differ per run) and streams of the library's linear, RSS and inertial models
+(:class:`~locbook.models.imu.InertialMeasurement`; the compiled registry, :mod:`locbook.tracking._compiled`), the same
+recursion runs compiled on blocks of runs
 (:mod:`locbook.tracking._ukf_kernels`); anything it cannot do (a covariance that is not positive definite, the
 eigenvalue guard on a multi-reading update, a state that overflows) sends the problem back to the numpy loop, which
 raises the library's error or applies the guard. Both paths give the same numbers to round-off
@@ -296,7 +297,7 @@ def _checked(model, what: str, value, shape, present, step: int, batch_ndim: int
     if model.checks_own_output:
         return value
     name = f"{model.label}: {model.function_name(what)}"
-    out = function_output(name, value, shape, 1, shape)
+    out = function_output(name, value, shape, 1, np.shape(value))
     _refuse_not_finite(name, out, present & ~np.isfinite(out), batch_ndim, step, _PRESENT)
     return out
 
@@ -416,8 +417,8 @@ def unscented_kalman_filter(F, Q, x0, P0, measurements, *, B=None, u=None, alpha
     round-off of alpha = 1e-3 over 1e5 steps): its error then grows far beyond the reported covariance, the NIS
     exceeds the chi-square bound at every update and the run is flagged ``diverged`` (with ``diverged_step``).
 
-    Speed: with numba installed, linear motion (F without run axes, Q per run or shared, no control input), LinearMeasurement,
-    RssMeasurement and inertial (:func:`locbook.models.imu.inertial_measurement_function`) streams and no ``outputs``,
+    Speed: with numba installed, linear motion (F without run axes, Q per run or shared, no control input), streams of
+    the library's linear, RSS and inertial (:class:`~locbook.models.imu.InertialMeasurement`) models and no ``outputs``,
     compiled loops run blocks of runs (:mod:`locbook.tracking._ukf_kernels`; ``LOCBOOK_NUMBA=0`` turns them off), else
     the numpy loop; both give the same numbers to round-off (amplified some 1e6 times at alpha = 1e-3).
     """

@@ -303,6 +303,8 @@ def tracking_cells(sc: TrackingScenario, ts: TrackerSettings, n_runs: int, rng: 
     common = f"q = {ts.q:g} m^2/s^4, dt = {sc.dt_s:g} s, P0 sd {ts.initial_position_sd_m:g} m / {ts.initial_velocity_sd_m_s:g} m/s"
     knobs = {"kf_on_ml": common + f"; fixes: rss_ml (grid-ML start at {sc.grid_spacing_m:g} m)",
              "ekf": common, "ekf_serial": common, "ukf": common + f"; alpha = {ts.ukf_alpha:g}, beta = 2, kappa = 0",
+             "imm": common + f"; manoeuvre mode {ts.imm_q_ratio:g} q, switching {ts.imm_switch_probability:g} per "
+                             "step (locbook's choice)",
              "particle": f"N = {ts.n_particles}, random walk {sc.spread_m:g} m/step, start N(x0, P0)",
              "grid_bayes": f"pitch {sc.grid_spacing_m:g} m, random walk {sc.spread_m:g} m/step, start N(x0, P0)"}
     rows = []

@@ -323,6 +323,15 @@ def check_covariance(model, value, x, step: int):
     return out
 
 
+def with_covariance(model, R):
+    """A copy of a model that keeps its covariance in ``R`` (and ``_given_R``) with ``R`` replaced, not checked again
+    (a noise fit's candidate: a congruence of a checked covariance)."""
+    out = object.__new__(type(model))
+    out.__dict__.update(model.__dict__)
+    out.R = out._given_R = R
+    return out
+
+
 class LinearGaussian(MeasurementModel):
     """``z_k = H_k x_k + d_k + v_k``, ``v_k ~ N(0, R_k)`` (the Kalman filter's model).
 
@@ -430,10 +439,7 @@ class LinearGaussian(MeasurementModel):
         return "covariance", self.R
 
     def with_noise(self, value) -> "LinearGaussian":
-        out = object.__new__(LinearGaussian)        # a congruence of a checked covariance: not checked again
-        out.__dict__.update(self.__dict__)
-        out.R = out._given_R = value
-        return out
+        return with_covariance(self, value)
 
 
 class FunctionMeasurement(MeasurementModel):
@@ -575,10 +581,7 @@ class FunctionMeasurement(MeasurementModel):
         return "covariance", self.R
 
     def with_noise(self, value) -> "FunctionMeasurement":
-        out = object.__new__(FunctionMeasurement)
-        out.__dict__.update(self.__dict__)
-        out.R = out._given_R = value
-        return out
+        return with_covariance(self, value)
 
     def run_shapes(self) -> list:
         return [] if callable(self.R) else [(f"{self.name}.R", np.shape(self.R)[:-2])]

@@ -21,7 +21,7 @@ import numpy as np
 
 from .._linalg import _covariance
 from .._validate import as_array, check_choice, check_scalar
-from .base import MeasurementModel
+from .base import MeasurementModel, with_covariance
 
 __all__ = ["InertialMeasurement", "IMU_FRAMES", "INTEGRATION_RULES", "rotation_2d", "world_to_body", "body_to_world",
            "accelerometer_readings", "gyroscope_readings", "stationary_bias", "integrate", "dead_reckon",
@@ -205,10 +205,7 @@ class InertialMeasurement(MeasurementModel):
         return "covariance", self.R
 
     def with_noise(self, value) -> "InertialMeasurement":
-        out = object.__new__(InertialMeasurement)
-        out.__dict__.update(self.__dict__)
-        out.R = out._given_R = value
-        return out
+        return with_covariance(self, value)
 
     def listed_matrices(self) -> list:
         return [(f"{self.name}.R", self._given_R, False)]

@@ -75,17 +75,17 @@ def _streams(measurements) -> list:
     return streams
 
 
-def _check_outputs(outputs) -> frozenset:
-    """The optional outputs asked for: names among KALMAN_OUTPUTS."""
+def _check_outputs(outputs, allowed=KALMAN_OUTPUTS) -> frozenset:
+    """The optional outputs asked for: names among ``allowed`` (a filter's outputs; default KALMAN_OUTPUTS)."""
     if isinstance(outputs, str):
         outputs = (outputs,)
     try:
         names = frozenset(outputs or ())
     except TypeError:
-        raise ValueError(f"outputs must be a sequence of names among {KALMAN_OUTPUTS}, got {outputs!r}") from None
-    unknown = sorted(str(v) for v in names - set(KALMAN_OUTPUTS))
+        raise ValueError(f"outputs must be a sequence of names among {allowed}, got {outputs!r}") from None
+    unknown = sorted(str(v) for v in names - set(allowed))
     if unknown:
-        raise ValueError(f"outputs must name fields among {KALMAN_OUTPUTS}, got {unknown}")
+        raise ValueError(f"outputs must name fields among {allowed}, got {unknown}")
     return names
 
 

@@ -51,6 +51,7 @@ import numpy as np
 from .._linalg import _Singular, _check_state, _covariance, _mT, _raise_singular
 from .._validate import as_array
 from ._loop import _motion_apply, _motion_jacobian, _setup, _streams
+from ._loop import _check_outputs as _loop_check_outputs
 from .results import FilterResult
 from .streams import _ekf_update
 from .transition import MotionModel, PerStep
@@ -234,16 +235,8 @@ def _initial_probabilities(mode_probabilities, r: int, batch: tuple) -> np.ndarr
 
 
 def _check_outputs(outputs) -> frozenset:
-    if isinstance(outputs, str):
-        outputs = (outputs,)
-    try:
-        names = frozenset(outputs or ())
-    except TypeError:
-        raise ValueError(f"outputs must be a sequence of names among {IMM_OUTPUTS}, got {outputs!r}") from None
-    unknown = sorted(str(v) for v in names - set(IMM_OUTPUTS))
-    if unknown:
-        raise ValueError(f"outputs must name fields among {IMM_OUTPUTS}, got {unknown}")
-    return names
+    """The optional outputs asked for: names among IMM_OUTPUTS."""
+    return _loop_check_outputs(outputs, IMM_OUTPUTS)
 
 
 def _runs_mask(bad, shape: tuple) -> np.ndarray:

@@ -40,6 +40,7 @@ import numpy as np
 
 from .._linalg import _UPDATE_OVERFLOW, _Singular, _apply, _gaussian_log_likelihood, _mT
 from ._loop import _motion_apply, _motion_jacobian, _run, _setup, _streams
+from ._loop import _check_outputs as _loop_check_outputs
 from .functional import _Out
 from .results import DIVERGENCE_PROBABILITY, DIVERGENCE_WINDOW, KALMAN_OUTPUTS, KalmanResult, _check_guard, _flag
 from .streams import Stream, _diagonal_entry, _row, _Serial, _serial_order
@@ -197,16 +198,7 @@ def _predictor(setup, Q_sqrt):
 
 def _check_outputs(outputs) -> frozenset:
     """The optional outputs asked for: names among SQUARE_ROOT_OUTPUTS."""
-    if isinstance(outputs, str):
-        outputs = (outputs,)
-    try:
-        names = frozenset(outputs or ())
-    except TypeError:
-        raise ValueError(f"outputs must be a sequence of names among {SQUARE_ROOT_OUTPUTS}, got {outputs!r}") from None
-    unknown = sorted(str(v) for v in names - set(SQUARE_ROOT_OUTPUTS))
-    if unknown:
-        raise ValueError(f"outputs must name fields among {SQUARE_ROOT_OUTPUTS}, got {unknown}")
-    return names
+    return _loop_check_outputs(outputs, SQUARE_ROOT_OUTPUTS)
 
 
 def _product(S):

@@ -31,7 +31,7 @@ import numpy as np
 
 from .._validate import as_array, check_scalar
 from .results import FilterResult, KalmanResult
-from .smoother import rts_smoother
+from .smoother import check_predictions, rts_smoother
 from .transition import PerStep
 
 __all__ = ["FixedLagResult", "fixed_lag_smoother", "OnlineFixedLagSmoother"]
@@ -113,12 +113,7 @@ def fixed_lag_smoother(result: KalmanResult, lag: int, *, F=None, residual=None)
     offsets)."""
     L = _check_lag(lag)
     if isinstance(result, KalmanResult):
-        if result.variant != "standard":
-            raise ValueError(f"fixed_lag_smoother needs a standard run: the {result.variant!r} variant's x_pred and "
-                             "P_pred are the previous posterior, not a prediction")
-        if result.x_pred is None or result.P_pred is None:
-            raise ValueError("fixed_lag_smoother needs the run's predictions (result.x_pred, result.P_pred): filter "
-                             "with outputs=('x_pred', 'P_pred', 'P_cross')")
+        check_predictions(result, "fixed_lag_smoother needs")
     # rts_smoother checks the run (shapes, every step recorded, finite covariances, F) and gives the gains C_j, the
     # same for every window, and the last rows (given all the readings)
     full = _rts(result, F, residual, "fixed_lag_smoother")
@@ -224,14 +219,7 @@ class OnlineFixedLagSmoother:
     def step(self, result: KalmanResult):
         """:meth:`update` with the moments of a one-step :class:`~locbook.tracking.results.KalmanResult` that
         recorded ``x_pred``, ``P_pred`` (and ``P_cross``, or the constructor's ``F``)."""
-        if not isinstance(result, KalmanResult):
-            raise TypeError(f"result must be a KalmanResult, got {type(result).__name__}")
-        if result.variant != "standard":
-            raise ValueError(f"result must be a standard run: the {result.variant!r} variant's x_pred and P_pred are "
-                             "the previous posterior, not a prediction")
-        if result.x_pred is None or result.P_pred is None:
-            raise ValueError("result needs its predictions (result.x_pred, result.P_pred): filter with "
-                             "outputs=('x_pred', 'P_pred', 'P_cross')")
+        check_predictions(result, "OnlineFixedLagSmoother.step needs")
         if np.shape(result.mean)[-2:-1] != (1,):
             raise ValueError(f"result must hold one step, got a mean of shape {np.shape(result.mean)}")
         cross = None if result.P_cross is None else np.asarray(result.P_cross)[..., 0, :, :]

@@ -52,6 +52,19 @@ class SmoothedResult(FilterResult):
     diverged_step: np.ndarray | None = None
 
 
+def check_predictions(result, who: str) -> None:
+    """Refuse, in one line starting with ``who`` (e.g. ``"rts_smoother needs"``), a result that is not a standard
+    Kalman-family run with its predictions (what every smoother of this package starts from)."""
+    if not isinstance(result, KalmanResult):
+        raise TypeError(f"result must be a KalmanResult, got {type(result).__name__}")
+    if result.variant != "standard":
+        raise ValueError(f"{who} a standard run: the {result.variant!r} variant's x_pred and P_pred are the previous "
+                         "posterior, not a prediction")
+    if result.x_pred is None or result.P_pred is None:
+        raise ValueError(f"{who} the run's predictions (result.x_pred, result.P_pred): filter with "
+                         "outputs=('x_pred', 'P_pred', 'P_cross')")
+
+
 def rts_smoother(result: KalmanResult, F=None, *, residual=None) -> SmoothedResult:
     """Rauch-Tung-Striebel smoother of a filter run (the KF, the EKF, and the UKF's unscented RTS smoother):
 
@@ -71,14 +84,7 @@ def rts_smoother(result: KalmanResult, F=None, *, residual=None) -> SmoothedResu
     ``P_{k+1|k}`` takes the pseudo-inverse (module docstring); a run of zero runs, of no step or of one step is returned
     as it is (no step: empty arrays, no gain);
     covariances that are not finite, or arrays of the wrong shapes (a result built by hand), are refused in one line."""
-    if not isinstance(result, KalmanResult):
-        raise TypeError(f"result must be a KalmanResult, got {type(result).__name__}")
-    if result.variant != "standard":
-        raise ValueError(f"rts_smoother needs a standard run: the {result.variant!r} variant's x_pred and P_pred are "
-                         "the previous posterior, not a prediction")
-    if result.x_pred is None or result.P_pred is None:
-        raise ValueError("rts_smoother needs the run's predictions: filter with outputs=('x_pred', 'P_pred', "
-                         "'P_cross')")
+    check_predictions(result, "rts_smoother needs")
     x, P = np.asarray(result.mean, float), np.asarray(result.cov, float)
     if x.ndim < 2 or P.shape != x.shape + x.shape[-1:]:
         raise ValueError(f"rts_smoother: the run's mean must be batch + (T, n) and cov batch + (T, n, n), got shapes "

@@ -43,7 +43,7 @@ from ._loop import _motion_apply, _motion_jacobian, _run, _setup, _streams
 from ._loop import _check_outputs as _loop_check_outputs
 from .functional import _Out
 from .results import DIVERGENCE_PROBABILITY, DIVERGENCE_WINDOW, KALMAN_OUTPUTS, KalmanResult, _check_guard, _flag
-from .streams import Stream, _diagonal_entry, _row, _Serial, _serial_order
+from .streams import Stream, _Serial, _serial_order, _serial_row
 
 __all__ = ["square_root_kalman_filter", "SquareRootKalmanResult", "SQUARE_ROOT_OUTPUTS"]
 
@@ -150,15 +150,14 @@ def _serial_array_update(x, S, z, stream: Stream, step: int, want: bool) -> _Out
     acc, dof = _Serial(np.broadcast_shapes(x.shape[:-1], z.shape[:-1]), m, want), np.isfinite(z).sum(axis=-1)
     for j in range(m):
         a = j if order is None else order[..., j]
-        valid = np.isfinite(_row(z, a, -1))
-        if not valid.any():
+        row = _serial_row(model, x, z, a, step)
+        if row is None:
             continue
-        nu_all, H, R = model.innovation(x, z, step=step)
-        h = np.broadcast_to(_row(H, a, -2), x.shape)
-        nu = np.where(valid, _row(nu_all, a, -1), np.nan)
+        valid, nu, h, var = row
+        nu = np.where(valid, nu, np.nan)
         # the linear model of this reading at x: z' = nu + h x, so that its innovation z' - h x is nu
         z_lin = (nu + np.einsum("...i,...i->...", h, x))[..., None]
-        o = _array_update(x, S, z_lin, h[..., None, :], np.asarray(_diagonal_entry(R, a))[..., None, None], True)
+        o = _array_update(x, S, z_lin, h[..., None, :], np.asarray(var)[..., None, None], True)
         acc.add(np.where(valid, nu, 0.0), o.S[..., 0, 0], valid, a, nis=o.nis, ll=o.ll)
         x, S = o.x, o.P             # (_Out's P slot holds the factor, its S the innovation covariance)
     return acc.out(x, S, dof)

@@ -220,6 +220,17 @@ class _Serial:
         return _Out(x, P, self.nis, dof, self.ll, self.nu, S)
 
 
+def _serial_row(model: MeasurementModel, x, z, a, step: int):
+    """The linearisation of reading ``a`` (an int, or per run ``batch``) at the state so far ``x``: ``(present,
+    innovation (NaN where missing), the Jacobian's row batch + (n,), the reading's variance)``, or None when no run
+    has that reading (one serial update of :func:`_serial_ekf_update` and the square-root form)."""
+    valid = np.isfinite(_row(z, a, -1))
+    if not valid.any():
+        return None
+    nu_all, H, R = model.innovation(x, z, step=step)
+    return valid, _row(nu_all, a, -1), np.broadcast_to(_row(H, a, -2), x.shape), _diagonal_entry(R, a)
+
+
 def _serial_ekf_update(x, P, z, stream: Stream, step: int, want: bool, joseph: bool) -> _Out:
     """Scalar updates, one per reading in the stream's order, each re-linearised at the state updated so far (Dogan
     2015, Table 3.3; for a linear model the exact sequential form of the parallel update)."""
@@ -231,13 +242,11 @@ def _serial_ekf_update(x, P, z, stream: Stream, step: int, want: bool, joseph: b
     acc, dof = _Serial(x.shape[:-1], m, want), np.isfinite(z).sum(axis=-1)
     for j in range(m):
         a = j if order is None else order[..., j]
-        valid = np.isfinite(_row(z, a, -1))
-        if not valid.any():
+        row = _serial_row(model, x, z, a, step)
+        if row is None:
             continue
-        nu_all, H, R = model.innovation(x, z, step=step)
-        nu = np.where(valid, _row(nu_all, a, -1), 0.0)
-        h_row = np.broadcast_to(_row(H, a, -2), x.shape)
-        var = _diagonal_entry(R, a)
+        valid, nu, h_row, var = row
+        nu = np.where(valid, nu, 0.0)
         ph = (P @ h_row[..., None])[..., 0]                   # P H^T
         s = np.einsum("...i,...i->...", h_row, ph) + var
         if (valid & ~(s > 0)).any():

@@ -347,3 +347,13 @@ def test_a_serial_linear_stream_in_descending_order_equals_the_parallel_update()
     serial = lb.Stream(z, model, mode="serial", order="descending")
     for filt in (lb.kalman_filter, lb.extended_kalman_filter, lb.square_root_kalman_filter):
         np.testing.assert_allclose(filt(cv.F, cv.Q, np.zeros(4), np.eye(4), serial).mean, ref.mean, rtol=0, atol=1e-12)
+
+
+def test_a_motion_models_sample_draws_its_transition_density():
+    """MotionModel.sample: draws of x_k given x_{k-1} have mean F x and covariance Q (a constant-velocity model whose
+    Q is singular, so the draw goes through its square root), within the Monte-Carlo error of 200,000 draws."""
+    cv = lb.constant_velocity(1.0, 0.2)
+    x = np.array([1.0, 2.0, 0.5, -0.3])
+    draws = cv.sample(np.broadcast_to(x, (200_000, 4)), step=0, rng=np.random.default_rng(7))
+    np.testing.assert_allclose(draws.mean(axis=0), cv.F @ x, rtol=0, atol=5 * np.sqrt(np.diag(cv.Q).max() / 2e5))
+    np.testing.assert_allclose(np.cov(draws.T), cv.Q, rtol=0, atol=5 * np.sqrt(2.0 / 2e5) * np.diag(cv.Q).max())

@@ -279,10 +279,6 @@ class MeasurementModel:
             raise ValueError(f"{self.label}: the readings have {np.shape(z)[-1]} components per step on their last "
                              f"axis, the model {self.n_readings}")
 
-    def steps(self) -> int | None:
-        """The number of steps the model's per-step parameters cover (None: no per-step parameter)."""
-        return None
-
 
 _PRESENT = ("for a reading that is present: it must be finite wherever z has a reading (a missing reading is a NaN "
             "in z, not in the model's output)")

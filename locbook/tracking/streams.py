@@ -21,7 +21,7 @@ import numpy as np
 
 from .._linalg import _LOG_2PI, _UPDATE_OVERFLOW, _Singular, _joseph
 from .._validate import as_array, check_choice
-from ..models.base import FunctionMeasurement, LinearGaussian, MeasurementModel, check_output
+from ..models.base import FunctionMeasurement, LinearGaussian, MeasurementModel
 from ..models.channel import PathLossModel
 from ..models.rss import RssMeasurementModel
 from .functional import _linear_update, _Out
@@ -272,11 +272,3 @@ def _ekf_update(x, P, z, stream: Stream, step, want: bool = False, joseph: bool 
         return _serial_ekf_update(x, P, z, stream, step, want, joseph)
     z_lin, H, R = stream.model.linearized(x, z, step=step)
     return _linear_update(x, P, z_lin, H, R, joseph=joseph, want=want)
-
-
-def _checked_mean(model: MeasurementModel, X, present, step: int):
-    """``h`` at points ``X`` ``batch + (K, n)``, checked for a user's model (``present``: the readings there)."""
-    Y = model.mean(X, step=step)
-    if model.checks_own_output:
-        return Y
-    return check_output(model, "mean", Y, X, (model.n_readings,), present, step)

@@ -321,9 +321,17 @@ def test_library_models_cross_filters_or_are_refused_by_name():
     fixes = np.random.default_rng(1).normal(4, 1, (2, 5, 2))
     assert np.isfinite(lb.grid_bayes_filter(fixes, cells, LinearGaussian(np.eye(2), np.eye(2))).mean).all()
     rss = np.random.default_rng(2).normal(-60, 3, (2, 5, 3))
-    with pytest.raises(ValueError, match="RssModel reads positions.*RssMeasurement"):
-        lb.extended_kalman_filter(np.eye(2), np.eye(2), np.zeros(2), np.eye(2),
-                                  lb.Stream(rss, lb.RssModel(ANCHORS, lb.PathLossModel(-40.0, 2.2, 3.0))))
+    channel = lb.PathLossModel(-40.0, 2.2, 3.0)
+    # the one RssModel in a Kalman stream: a state of positions as it is, a larger state through position_index
+    alone = lb.extended_kalman_filter(np.eye(2), np.eye(2), np.array([3.0, 2.0]), np.eye(2),
+                                      lb.Stream(rss, lb.RssModel(ANCHORS, channel)))
+    factory = lb.extended_kalman_filter(np.eye(2), np.eye(2), np.array([3.0, 2.0]), np.eye(2),
+                                        lb.RssMeasurement(rss, ANCHORS, channel, [0, 1]))
+    np.testing.assert_array_equal(alone.mean, factory.mean)
+    with pytest.raises(ValueError, match=r"give RssModel\(\.\.\., position_index=\.\.\.\) \(2 state indices\) for a "
+                                         r"4-state"):
+        lb.extended_kalman_filter(np.eye(4), np.eye(4), np.array([3.0, 2.0, 0.0, 0.0]), np.eye(4),
+                                  lb.Stream(rss, lb.RssModel(ANCHORS, channel)))
 
 
 def test_the_noise_fit_takes_a_kinematic_model_with_its_own_q():

@@ -34,7 +34,7 @@ def test_parallel_ekf_update_is_filterpys_with_the_models_mean_and_jacobian(x_po
 
     def hjac(x):
         H = np.zeros((4, 4))
-        H[:, :2] = model.jacobian(np.ravel(x)[None, :2])[0, 0]          # filterpy's states are columns
+        H[:, :2] = model.position_jacobian(np.ravel(x)[None, :2])[0, 0]          # filterpy's states are columns
         return H
 
     ekf = ExtendedKalmanFilter(dim_x=4, dim_z=4)
@@ -67,7 +67,7 @@ def test_stream_mean_and_jacobian_are_the_models_with_the_channels_clamp():
     h = meas.model.mean(pos, step=0)                   # the stream's model in points form: 4 points, no run axis
     grad = meas.model.jacobian(pos, step=0)
     np.testing.assert_array_equal(h, model.mean_rss_dbm(pos)[0])
-    np.testing.assert_array_equal(grad, model.jacobian(pos)[0])
+    np.testing.assert_array_equal(grad, model.position_jacobian(pos)[0])
     variance = np.diagonal(meas.model.covariance(pos, step=0), axis1=-2, axis2=-1)
     np.testing.assert_array_equal(variance, np.broadcast_to(ch.sigma_db**2, (4, 4)))
 
@@ -103,8 +103,8 @@ def test_rss_ml_fix_is_a_stationary_point_of_the_models_cost():
     fix = lb.rss_ml_position(ANCHORS, z, CHANNEL, tol_m=1e-12)
     assert fix.converged.all()
     resid = z - model.mean_rss_dbm(fix.position_m)[0]
-    gradient = np.einsum("pj,pji->pi", resid, model.jacobian(fix.position_m)[0])    # -(1/2) d cost / dp
-    assert np.max(np.abs(gradient)) < 1e-6 * np.max(np.abs(model.jacobian(fix.position_m)))
+    gradient = np.einsum("pj,pji->pi", resid, model.position_jacobian(fix.position_m)[0])    # -(1/2) d cost / dp
+    assert np.max(np.abs(gradient)) < 1e-6 * np.max(np.abs(model.position_jacobian(fix.position_m)))
 
 
 def test_compiled_row_kernel_is_the_numpy_model():

@@ -23,7 +23,8 @@ def _models():
                                             tag_height_m=TAG_HEIGHT_M)
     yield "per_run_step", lb.RssModel(ANCHORS, lb.PathLossModel(rng.uniform(-50, -40, (2, 3, 4)),
                                                                 rng.uniform(1.8, 3.0, (2, 3, 4)),
-                                                                rng.uniform(2.0, 6.0, (2, 3))))
+                                                                rng.uniform(2.0, 6.0, (2, 3, 1))),
+                                      per_step_channel=True)
 
 
 def _positions(runs=2, count=9, seed=1):
@@ -34,7 +35,7 @@ def _positions(runs=2, count=9, seed=1):
 def test_jacobian_equals_central_differences(name, model):
     pos = _positions()
     step = 2 if name == "per_run_step" else 0
-    jac = model.jacobian(pos, step)
+    jac = model.position_jacobian(pos, step)
     assert jac.shape == (2, 9, 4, 2)
     h = 1e-6
     for axis in range(2):
@@ -50,7 +51,7 @@ def test_jacobian_inside_the_clamp_is_the_derivative_of_the_clamped_mean():
     (the same as the model without that anchor). Replaces the earlier capped-extension convention (issue 27)."""
     model = lb.RssModel(ANCHORS, lb.PathLossModel(-45.0, 2.3, 4.0, min_distance_m=0.5))
     p = np.array([[0.1, 0.2]])                                  # 0.22 m from anchor 0
-    jac = model.jacobian(p)[0, 0]
+    jac = model.position_jacobian(p)[0, 0]
     assert np.all(jac[0] == 0.0) and np.all(jac[1:] != 0.0)
     h = 1e-6
     for axis in range(2):
@@ -60,7 +61,7 @@ def test_jacobian_inside_the_clamp_is_the_derivative_of_the_clamped_mean():
         np.testing.assert_allclose(jac[:, axis], fd, rtol=1e-6, atol=1e-12)
     without = lb.RssModel(ANCHORS[1:], lb.PathLossModel(-45.0, 2.3, 4.0, min_distance_m=0.5))
     np.testing.assert_allclose(model.fisher_information(p), without.fisher_information(p), rtol=1e-15)
-    on_anchor = model.jacobian(ANCHORS[:1])[0, 0]               # finite at the anchor itself
+    on_anchor = model.position_jacobian(ANCHORS[:1])[0, 0]               # finite at the anchor itself
     assert np.all(on_anchor[0] == 0.0) and np.all(np.isfinite(on_anchor))
 
 
@@ -73,8 +74,8 @@ def test_log_likelihood_is_the_sum_of_normal_log_densities_over_heard_readings(n
     rss[1, 2] = np.nan                                                    # anchor 2 not heard in run 1
     ll = model.log_likelihood(rss, pos, step)
     mean = model.mean_rss_dbm(pos, step)
-    sigma = np.broadcast_to(np.asarray(model.channel.sigma_db, float)[:, step, None]
-                            if np.ndim(model.channel.sigma_db) == 2 else model.channel.sigma_db, (2, 4))
+    sigma = np.broadcast_to(np.asarray(model.channel.sigma_db, float)[:, step]
+                            if np.ndim(model.channel.sigma_db) == 3 else model.channel.sigma_db, (2, 4))
     for r in range(2):
         heard = ~np.isnan(rss[r])
         want = norm.logpdf(rss[r, heard], mean[r][:, heard], sigma[r, heard]).sum(axis=-1)
@@ -107,7 +108,7 @@ def test_fisher_information_equals_the_closed_form_and_bounds_crlb():
     rng = np.random.default_rng(4)
     p = pos[:1]
     z = model.mean_rss_dbm(p)[0, 0] + sigma * rng.standard_normal((200_000, 4))
-    score = np.einsum("sj,jd->sd", (z - model.mean_rss_dbm(p)[0, 0]) / sigma**2, model.jacobian(p)[0, 0])
+    score = np.einsum("sj,jd->sd", (z - model.mean_rss_dbm(p)[0, 0]) / sigma**2, model.position_jacobian(p)[0, 0])
     np.testing.assert_allclose(score.T @ score / len(z), info[0], rtol=0.02, atol=0.02 * np.abs(info[0]).max())
 
 
@@ -123,7 +124,7 @@ def test_per_run_anchors_equal_one_model_per_run():
     for r in range(3):
         alone = lb.RssModel(anchors[r], ch)
         np.testing.assert_array_equal(ll[r], alone.log_likelihood(rss[r:r + 1], pos[r])[0])
-        np.testing.assert_array_equal(joint.jacobian(pos)[r], alone.jacobian(pos[r])[0])
+        np.testing.assert_array_equal(joint.position_jacobian(pos)[r], alone.position_jacobian(pos[r])[0])
     with pytest.raises(ValueError, match="runs"):
         joint.log_likelihood(rss[:2], pos[:2])
 
@@ -159,7 +160,7 @@ def test_walls_attenuate_the_mean_and_select_runs_keeps_them():
 def test_model_inputs_are_checked_and_named():
     with pytest.raises(ValueError, match="channel must be a PathLossModel"):
         lb.RssModel(ANCHORS, -45.0)
-    with pytest.raises(ValueError, match=r"channel.ref_power_dbm must be a scalar, \(4,\)"):
+    with pytest.raises(ValueError, match=r"channel.ref_power_dbm must be a scalar or end in \(1,\) or \(4,\)"):
         lb.RssModel(ANCHORS, lb.PathLossModel(np.zeros(3), 2.0, 4.0))
     with pytest.raises(ValueError, match="disagree on the number of runs"):
         lb.RssModel(np.zeros((2, 4, 2)) + ANCHORS, lb.PathLossModel(np.zeros((3, 1, 4)), 2.0, 4.0))

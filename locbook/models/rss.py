@@ -21,13 +21,15 @@ pooled online sigma of Ozkaya Eq. (6.7)); ``step`` picks the step. Anchors are `
 """
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, replace
+from functools import cached_property
 
 import numpy as np
 
 from .._linalg import _STATE_NOT_FINITE, _Singular
 from .._validate import as_array, check_scalar
-from .base import MeasurementModel
+from .base import MeasurementModel, PerStep, step_matrix
 from .channel import (PathLossModel, log_distance_gradient, log_distance_mean_dbm, require_path_loss_model,
                       wall_crossings)
 
@@ -78,21 +80,56 @@ def rss_mean_jacobian(offset_m, ref_power_dbm, path_loss_exp, *, ref_distance_m:
     return mean, grad, d2
 
 
+_ON_ANCHOR = ("the state is on an anchor at step {step} and the channel has no near-field clamp (min_distance_m = 0), "
+              "where the log-distance mean is infinite: give the channel a min_distance_m (e.g. 1e-3 m)")
+_CHANNEL_FIELDS = ("ref_power_dbm", "path_loss_exp", "sigma_db")
+
+
+def _anchor_axis(value):
+    """A channel parameter (scalar, ``(m,)`` or ``batch + (1 or m,)``) made to broadcast against points-form values
+    ``batch + (K, m)``."""
+    value = np.asarray(value, dtype=float)
+    return value[..., None, :] if value.ndim >= 2 else value
+
+
 @dataclass(frozen=True)
 class RssModel(MeasurementModel):
-    """Log-distance RSS readings from ``anchors_m`` through ``channel`` (module docstring).
+    """Log-distance RSS readings from ``anchors_m`` through ``channel`` (module docstring): the one RSS model of the
+    library. The particle and grid filters, the static estimators and the bounds evaluate it at positions; the Kalman
+    family's streams (:func:`locbook.RssMeasurement`, or ``Stream(rss_dbm, model)``) at states, whose position
+    components are ``position_index``.
 
-    ``anchors_m``: ``(m, dim)`` or per run ``(R, m, dim)``; with ``tag_height_m`` ``(m, 3)`` or ``(R, m, 3)``, the
-    last coordinate the anchor's height and the positions 2-D. ``channel``: a :class:`PathLossModel`; its
-    ``ref_power_dbm`` and ``path_loss_exp`` are scalars, ``(m,)`` or ``(R, T, m)``, its ``sigma_db`` a scalar,
-    ``(m,)`` or ``(R, T)``, its ``min_distance_m`` the near-field clamp (0: none; a position on an anchor then has
-    an infinite mean) and its ``wall_attenuation_db`` the loss per wall of ``walls_m`` ``(W, 2, 2)`` (2-D only).
+    ``anchors_m``: ``(m, dim)``; per run ``batch + (m, dim)``; per step ``per_step(batch + (T, m, dim))`` (a moving
+    receiver, or measurement locations drawn per Monte-Carlo run: Palvai 2008, Eq. (4.28); the Kalman family only).
+    With ``tag_height_m`` the anchors are ``(..., m, 3)``, the last coordinate the anchor's height, the positions 2-D
+    (the tag moves in the plane ``z = tag_height_m``) and distances 3-D.
+
+    ``channel``: a :class:`PathLossModel`. Its ``ref_power_dbm``, ``path_loss_exp`` and ``sigma_db`` are scalars, per
+    anchor ``(m,)``, or with leading run axes ``batch + (1 or m,)``. With ``per_step_channel=True`` every one of them
+    with two axes or more carries a step axis before the anchor axis, ``batch + (T, 1 or m)`` (a time axis of length 1
+    holds for every step), e.g. the online calibration of Ozkaya 2011, Eqs. (6.5)-(6.7), whose pooled sigma is
+    ``(R, T, 1)``. Its ``min_distance_m`` is the near-field clamp (0: none; a position on an anchor then has an
+    infinite mean) and its ``wall_attenuation_db`` the loss per wall of ``walls_m`` ``(W, 2, 2)`` (2-D only).
+
+    ``position_index``: the states' position components (the Kalman family; None: the states are the positions).
+    ``anchor_sigma_m``: the anchors' positions are known only to this standard deviation (Palvai's sigma_3); the
+    Kalman family's variance is then ``sigma^2 + (10 n / ln 10)^2 anchor_sigma^2 / d^2`` (0 added within the clamp) at
+    the linearisation point (first-order propagation; an extension: Palvai 2008, Sec. 4.4, does not say how sigma_3
+    enters the EKF).
+
+    The evaluation at positions (:meth:`mean_rss_dbm`, :meth:`log_likelihood`, :meth:`fisher_information`, the
+    particle and grid filters) takes one run axis: positions ``(P, dim)`` or ``(R, P, dim)``, anchors ``(m, dim)`` or
+    ``(R, m, dim)``, parameters per run ``(R, 1 or m)`` or per run and step; a per-anchor sigma per run is not taken
+    there (one sigma per run and step, or one per anchor shared by the runs).
     """
 
-    anchors_m: np.ndarray
+    anchors_m: np.ndarray | PerStep
     channel: PathLossModel
     walls_m: np.ndarray | None = None
     tag_height_m: float | None = None
+    position_index: np.ndarray | None = None
+    anchor_sigma_m: float = 0.0
+    per_step_channel: bool = False
     name: str = "RssModel"
     checks_own_output = True
 
@@ -100,23 +137,45 @@ class RssModel(MeasurementModel):
         require_path_loss_model(self.channel, "channel")
         if self.tag_height_m is not None:
             check_scalar("tag_height_m", self.tag_height_m)
-        anchors = as_array("anchors_m", self.anchors_m, min_ndim=2)
-        if self.tag_height_m is not None and (anchors.ndim > 3 or anchors.shape[-1] != 3):
-            raise ValueError(f"anchors_m must have shape (m, 3) or (R, m, 3) (x, y, height) with tag_height_m (the tag "
-                             f"moves in the plane z = tag_height_m), got {anchors.shape}")
-        if anchors.ndim > 3 or anchors.shape[-1] < 1:
-            raise ValueError(f"anchors_m must have shape (m, dim) or (R, m, dim), got {anchors.shape}")
-        object.__setattr__(self, "anchors_m", anchors)
+        given = self.anchors_m
+        per_step_anchors = isinstance(given, PerStep)
+        anchors = as_array("anchors_m", given.value if per_step_anchors else given, min_ndim=3 if per_step_anchors else 2)
+        if self.tag_height_m is not None and anchors.shape[-1] != 3:
+            raise ValueError(f"anchors_m must end in (m, 3) (x, y, height) with tag_height_m (the tag moves in the "
+                             f"plane z = tag_height_m), got {anchors.shape}")
+        if anchors.shape[-1] < 1:
+            raise ValueError(f"anchors_m must have shape (m, dim) or batch + (m, dim), got {anchors.shape}")
+        object.__setattr__(self, "anchors_m", PerStep(anchors, "anchors_m") if per_step_anchors else anchors)
         m = anchors.shape[-2]
+        if self.position_index is not None:
+            idx = np.asarray(self.position_index)
+            if idx.dtype == object or (idx.size and not np.issubdtype(idx.dtype, np.integer)):
+                raise ValueError(f"{self.name}.position_index must hold integer state indices, got "
+                                 f"{self.position_index!r}")
+            if idx.shape != (self.dim,):
+                raise ValueError(f"{self.name}.position_index must hold {self.dim} state indices (one per axis of the "
+                                 f"anchors{', the height known' if self.tag_height_m is not None else ''}), got "
+                                 f"{self.position_index!r}")
+            object.__setattr__(self, "position_index", idx)
+        check_scalar("anchor_sigma_m", self.anchor_sigma_m, ge=0)
+        if not isinstance(self.per_step_channel, (bool, np.bool_)):
+            raise ValueError(f"per_step_channel must be True or False, got {self.per_step_channel!r}")
         ch = self.channel
-        for name in ("ref_power_dbm", "path_loss_exp"):
+        sigma_shape = np.shape(ch.sigma_db)
+        if not self.per_step_channel and (np.ndim(ch.ref_power_dbm) == 3 or np.ndim(ch.path_loss_exp) == 3 or (
+                len(sigma_shape) == 2 and sigma_shape[-1] not in (1, m))):
+            # the old unmarked per-run-and-step form: (R, T, m) parameters, an (R, T) pooled sigma
+            warnings.warn("RssModel: channel parameters (R, T, m) and sigma (R, T) per run and step are deprecated "
+                          "unmarked; give per_step_channel=True with sigma (R, T, 1)", DeprecationWarning, stacklevel=3)
+            if len(sigma_shape) == 2:
+                ch = replace(ch, sigma_db=np.asarray(ch.sigma_db, float)[..., None])
+            object.__setattr__(self, "channel", ch)
+            object.__setattr__(self, "per_step_channel", True)
+        for name in _CHANNEL_FIELDS:
             value = np.asarray(getattr(ch, name), float)
-            if value.ndim not in (0, 1, 3) or (value.ndim and value.shape[-1] != m):
-                raise ValueError(f"channel.{name} must be a scalar, ({m},) or (R, T, {m}), got shape {value.shape}")
-        sigma = np.asarray(ch.sigma_db, float)
-        if sigma.ndim not in (0, 1, 2) or (sigma.ndim == 1 and sigma.shape != (m,)):
-            raise ValueError(f"channel.sigma_db must be a scalar, ({m},) (one per anchor) or (R, T), "
-                             f"got shape {sigma.shape}")
+            if value.ndim and value.shape[-1] not in (1, m):
+                raise ValueError(f"channel.{name} must be a scalar or end in (1,) or ({m},) (one per anchor), got shape "
+                                 f"{value.shape}")
         if np.any(np.asarray(ch.path_loss_exp) <= 0):
             raise ValueError(f"channel.path_loss_exp must be positive, got {ch.path_loss_exp!r}")
         if self.walls_m is not None:
@@ -124,47 +183,90 @@ class RssModel(MeasurementModel):
             if self.dim != 2:
                 raise ValueError(f"walls_m needs 2-D positions, the anchors give {self.dim}-D")
             object.__setattr__(self, "walls_m", walls)
-        _ = self.runs                    # per-run axes must agree
+        if self.position_index is None:
+            _ = self._one_run_axis      # a model of positions: its per-run axes must agree (checked once, here)
 
     # -- shapes --------------------------------------------------------------------------------------
     @property
+    def _anchor_values(self) -> np.ndarray:
+        a = self.anchors_m
+        return a.value if isinstance(a, PerStep) else a
+
+    @property
     def n_anchors(self) -> int:
-        return self.anchors_m.shape[-2]
+        return self._anchor_values.shape[-2]
 
     @property
     def dim(self) -> int:
         """The dimension of the positions (the anchors' minus the height column)."""
-        return self.anchors_m.shape[-1] - (self.tag_height_m is not None)
+        return self._anchor_values.shape[-1] - (self.tag_height_m is not None)
+
+    @cached_property
+    def _one_run_axis(self) -> dict:
+        """The parameters in the form the evaluation at positions reads (class docstring): ``ref_power_dbm`` and
+        ``path_loss_exp`` a scalar, ``(m,)`` or ``(R or 1, T or 1, 1 or m)``; ``sigma_db`` a scalar, ``(m,)`` or
+        ``(R or 1, T or 1)``; with ``"runs"`` (None or R) and ``"steps"`` (None or the shortest per-step T > 1).
+        Refused in one line when the model has more than one run axis, per-step anchors or a per-anchor sigma per
+        run."""
+        if isinstance(self.anchors_m, PerStep):
+            raise ValueError(f"{self.name}: per-step anchors (per_step(anchors_m)) are read by the Kalman family only; "
+                             f"the particle and grid filters, the estimators and the bounds take (m, dim) or per run "
+                             f"(R, m, dim)")
+        if self.anchors_m.ndim > 3:
+            raise ValueError(f"{self.name}: anchors_m {self.anchors_m.shape} has more than one run axis; the particle "
+                             f"and grid filters, the estimators and the bounds take (m, dim) or per run (R, m, dim)")
+        out, runs, steps = {}, set(), []
+        if self.anchors_m.ndim == 3:
+            runs.add(self.anchors_m.shape[0])
+        for name in _CHANNEL_FIELDS:
+            value = np.asarray(getattr(self.channel, name), float)
+            if value.ndim >= 2:
+                if value.ndim > 2 + self.per_step_channel:
+                    raise ValueError(
+                        f"{self.name}: channel.{name} {value.shape} has more than one run axis"
+                        f"{'' if self.per_step_channel else ' (per-step values: give per_step_channel=True)'}; the "
+                        f"particle and grid filters, the estimators and the bounds take one")
+                if not self.per_step_channel:
+                    value = value[:, None, :]                           # (R, one step for all, k)
+                elif value.ndim == 2:
+                    value = value[None]                                 # (one run for all, T, k)
+                if value.shape[0] > 1 or np.ndim(getattr(self.channel, name)) == 2 + self.per_step_channel:
+                    runs.add(value.shape[0])
+                if value.shape[1] > 1:
+                    steps.append(value.shape[1])
+                if name == "sigma_db":
+                    if value.shape[-1] != 1:
+                        raise ValueError(f"{self.name}: channel.sigma_db {np.shape(self.channel.sigma_db)} gives a "
+                                         f"sigma per anchor per run; the particle and grid filters, the estimators and "
+                                         f"the bounds take one sigma per run (R, 1) (and step), or per anchor (m,)")
+                    value = value[..., 0]
+            out[name] = value
+        if len(runs) > 1:
+            raise ValueError(f"per-run anchors and parameters disagree on the number of runs: {sorted(runs)}")
+        out["runs"] = runs.pop() if runs else None
+        out["steps"] = min(steps) if steps else None
+        return out
 
     @property
     def runs(self) -> int | None:
         """The number of runs of per-run anchors or parameters (None when everything is shared)."""
-        ch = self.channel
-        runs = {np.shape(v)[0] for v in (ch.ref_power_dbm, ch.path_loss_exp) if np.ndim(v) == 3}
-        runs |= {np.shape(ch.sigma_db)[0]} if np.ndim(ch.sigma_db) == 2 else set()
-        runs |= {self.anchors_m.shape[0]} if self.anchors_m.ndim == 3 else set()
-        if len(runs) > 1:
-            raise ValueError(f"per-run anchors and parameters disagree on the number of runs: {sorted(runs)}")
-        return runs.pop() if runs else None
+        return self._one_run_axis["runs"]
 
     @property
     def steps(self) -> int | None:
-        """The number of steps of per-step parameters (None when none is per step)."""
-        ch = self.channel
-        steps = [np.shape(v)[1] for v in (ch.ref_power_dbm, ch.path_loss_exp) if np.ndim(v) == 3]
-        steps += [np.shape(ch.sigma_db)[1]] if np.ndim(ch.sigma_db) == 2 else []
-        return min(steps) if steps else None
+        """The number of steps of per-step parameters (None when none is per step, or all hold for every step)."""
+        return self._one_run_axis["steps"]
 
     def select_runs(self, runs) -> "RssModel":
         """The model of the runs ``runs`` (a slice or indices) of its per-run anchors and parameters."""
         ch = self.channel
+        n_core = 2 if self.per_step_channel else 1
 
-        def part(value, per_run_ndim):
-            return np.asarray(value)[runs] if np.ndim(value) == per_run_ndim else value
+        def part(value, core):
+            return np.asarray(value)[runs] if np.ndim(value) > core else value
 
-        channel = PathLossModel(part(ch.ref_power_dbm, 3), part(ch.path_loss_exp, 3), part(ch.sigma_db, 2),
-                                ch.ref_distance_m, ch.wall_attenuation_db, ch.min_distance_m)
-        return RssModel(part(self.anchors_m, 3), channel, self.walls_m, self.tag_height_m)
+        channel = replace(ch, **{name: part(getattr(ch, name), n_core) for name in _CHANNEL_FIELDS})
+        return replace(self, anchors_m=part(self.anchors_m, 2), channel=channel)
 
     def check_step(self, step) -> None:
         """``step`` must index the per-step parameters (no negative wrap-around)."""
@@ -173,39 +275,199 @@ class RssModel(MeasurementModel):
                 n_steps is not None and step >= n_steps):
             raise ValueError(f"step must be an integer in [0, {'inf' if n_steps is None else n_steps}), got {step!r}")
 
-    # -- the measurement-model protocol (locbook.models.base; its states are the positions) ----------------
+    def channel_at(self, step: int = 0) -> PathLossModel:
+        """The channel at ``step`` in the one-run-axis form: ``ref_power_dbm`` and ``path_loss_exp`` scalars, ``(m,)``
+        or per run ``(R, m)``; ``sigma_db`` a scalar, ``(m,)`` or per run ``(R, 1)``."""
+        self.check_step(step)
+        values = {name: self._per_step(name, step) for name in _CHANNEL_FIELDS}
+        for name in ("ref_power_dbm", "path_loss_exp"):
+            if values[name].ndim == 3:                                  # (R|1, 1, 1|m) -> (R|1, m)
+                values[name] = np.broadcast_to(values[name][:, 0, :], (values[name].shape[0], self.n_anchors))
+        return replace(self.channel, **values)
+
+    # -- the measurement-model protocol (locbook.models.base) ---------------------------------------
     @property
     def n_readings(self) -> int:
         return self.n_anchors
 
     @property
     def position_dim(self) -> int:
-        """The model reads positions of this dimension (the filters hand it a state's position components)."""
+        """The model reads positions of this dimension (the particle and grid filters hand it a state's position
+        components)."""
         return self.dim
 
+    @property
+    def state_position_index(self) -> np.ndarray:
+        """The states' position components: ``position_index``, or the first ``dim`` (the states are positions)."""
+        return np.arange(self.dim) if self.position_index is None else self.position_index
+
+    @property
+    def clamp_m(self) -> float:
+        """The model's near-field clamp: the channel's ``min_distance_m``."""
+        return float(self.channel.min_distance_m)
+
+    def lift(self, positions_m):
+        """Positions ``(..., k)`` from the state, with the known tag height appended when there is one."""
+        if self.tag_height_m is None:
+            return positions_m
+        return np.concatenate([positions_m, np.full(positions_m.shape[:-1] + (1,), float(self.tag_height_m))], -1)
+
+    def anchors_at(self, step: int) -> np.ndarray:
+        """Anchor positions at ``step``: ``(m, dim)`` or ``batch + (m, dim)``."""
+        a = self.anchors_m
+        return step_matrix(a.value, step) if isinstance(a, PerStep) else a
+
+    def _param(self, name: str, step: int) -> np.ndarray:
+        """A channel parameter at ``step``: a scalar, ``(m,)`` or ``batch + (1 or m,)`` (the Kalman family's form)."""
+        value = np.asarray(getattr(self.channel, name), dtype=float)
+        if self.per_step_channel and value.ndim >= 2:
+            return value[..., min(step, value.shape[-2] - 1), :]
+        return value
+
+    def variance_db2(self, distance_m, path_loss_exp, sigma_db):
+        """Measurement variance per reading: ``sigma^2``, inflated for ``anchor_sigma_m`` (class docstring) by
+        ``anchor_sigma^2 |dh/dp|^2``, ``|dh/dp| = 10 n / (d ln 10)`` outside the clamp and 0 inside."""
+        var = np.asarray(sigma_db, dtype=float) ** 2
+        if self.anchor_sigma_m > 0:
+            slope = 10.0 * np.asarray(path_loss_exp, dtype=float) / np.log(10.0)
+            clamp = self.clamp_m
+            inflation = (slope * self.anchor_sigma_m / np.maximum(distance_m, clamp)) ** 2
+            var = var + np.where(np.asarray(distance_m) < clamp, 0.0, inflation)
+        return var
+
+    def _refuse_on_anchor(self, d2, batch_ndim: int | None) -> None:
+        """Without a clamp the mean is infinite on an anchor: a named error for the runs (``batch_ndim`` leading axes
+        of the squared distances ``d2``; the rest are reduced) whose point lies on one."""
+        if self.clamp_m == 0 and not np.all(d2 != 0):
+            on = d2 == 0
+            if batch_ndim is not None:
+                on = on.reshape(on.shape[:batch_ndim] + (-1,)).any(axis=-1)
+            raise _Singular(on, _ON_ANCHOR)
+
+    def _points_offsets(self, x, step: int):
+        """``p - a_j`` ``batch + (K, m, dim)`` at points-form states ``batch + (K, n)``."""
+        if self.position_index is None and np.shape(x)[-1] != self.dim:
+            raise ValueError(f"positions_m must have shape (..., *, {self.dim}) (the model's states are positions; a "
+                             f"larger state needs position_index), got {np.shape(x)}")
+        a = self.anchors_at(step)
+        a = a if a.ndim == 2 else a[..., None, :, :]
+        return self.lift(x[..., self.state_position_index])[..., None, :] - a
+
+    def _wall_loss_db(self, x, step: int):
+        """The walls' loss ``nW_j(p) WAF`` ``batch + (K, m)`` at points-form states (0 without walls)."""
+        if self.walls_m is None or self.channel.wall_attenuation_db == 0.0:
+            return 0.0
+        plan = self.anchors_at(step)[..., :2]
+        if plan.ndim != 2:
+            raise ValueError(f"{self.name}: walls with per-run or per-step anchors are not evaluated at states; give "
+                             f"(m, 2) anchors")
+        pos = np.asarray(x, dtype=float)[..., self.state_position_index]
+        crossings = wall_crossings(pos.reshape(-1, 2), plan, self.walls_m).reshape(pos.shape[:-1] + (plan.shape[0],))
+        return self.channel.wall_attenuation_db * crossings
+
     def mean(self, x, *, step: int = 0):
-        """``h`` at positions ``(P, dim)`` or per run ``(R, P, dim)``: :meth:`mean_rss_dbm`."""
-        return self.mean_rss_dbm(x, step)
+        """``h`` ``batch + (K, m)`` at points-form states ``batch + (K, n)`` (their ``position_index`` components)."""
+        ch = self.channel
+        mean, _, d2 = rss_mean_jacobian(self._points_offsets(x, step), _anchor_axis(self._param("ref_power_dbm", step)),
+                                        _anchor_axis(self._param("path_loss_exp", step)),
+                                        ref_distance_m=ch.ref_distance_m, min_distance_m=self.clamp_m, jacobian=False)
+        self._refuse_on_anchor(d2, np.ndim(x) - 2)
+        return mean - self._wall_loss_db(x, step)
+
+    def jacobian(self, x, *, step: int = 0):
+        """``dh_j/dx`` ``batch + (K, m, n)``: ``dh_j/dp = -(10 n_j / ln 10) (p - a_j) / d_j^2`` in the position
+        components (the EKF Jacobian of Dogan 2015, Table 3.2, not printed there; ``d_j`` the 3-D distance when the
+        anchors have heights), 0 in the others. Walls add a piecewise-constant term (zero derivative almost
+        everywhere). Within the near-field clamp (``d_j < d_min``) the mean ``P_0 - 10 n log10(d_min / d0)`` is
+        constant, so the derivative is exactly 0 there (:func:`~locbook.models.channel.log_distance_gradient`)."""
+        ch = self.channel
+        _, grad, d2 = rss_mean_jacobian(self._points_offsets(x, step), _anchor_axis(self._param("ref_power_dbm", step)),
+                                        _anchor_axis(self._param("path_loss_exp", step)),
+                                        ref_distance_m=ch.ref_distance_m, min_distance_m=self.clamp_m)
+        self._refuse_on_anchor(d2, np.ndim(x) - 2)
+        idx = self.state_position_index
+        H = np.zeros(grad.shape[:-1] + (np.shape(x)[-1],))
+        H[..., idx] = grad[..., :idx.size]
+        return H
 
     def covariance(self, x, *, step: int = 0):
-        """``diag(sigma_j^2)`` at the step, broadcasting to ``(R|1, P, m, m)``."""
-        sigma = np.asarray(self._per_step(self.channel.sigma_db, step, False), dtype=float)   # (), (m,) or (R, 1)
-        var = np.broadcast_to(np.square(sigma), np.broadcast_shapes(sigma.shape, (self.n_anchors,)))
-        return var[..., None, :, None] * np.eye(self.n_anchors)
+        """``diag(sigma^2)`` per reading, inflated at the points' distances for ``anchor_sigma_m``."""
+        diff = self._points_offsets(x, step)
+        d = np.sqrt(np.einsum("...i,...i->...", diff, diff))
+        var = np.broadcast_to(self.variance_db2(d, _anchor_axis(self._param("path_loss_exp", step)),
+                                                _anchor_axis(self._param("sigma_db", step))), d.shape)
+        return var[..., :, None] * np.eye(self.n_readings)
+
+    def innovation(self, x, z, *, step: int = 0):
+        """Table 3.4's linearisation at the states ``x`` ``batch + (n,)``: ``z - h(x)``, the stacked Jacobian and
+        ``R = sigma^2 I`` (inflated for uncertain anchor positions)."""
+        idx = self.state_position_index
+        ch = self.channel
+        path_loss_exp = self._param("path_loss_exp", step)
+        offset = self.lift(x[..., idx])[..., None, :] - self.anchors_at(step)
+        h, grad, d2 = rss_mean_jacobian(offset, self._param("ref_power_dbm", step), path_loss_exp,
+                                        ref_distance_m=ch.ref_distance_m, min_distance_m=self.clamp_m)
+        self._refuse_on_anchor(d2, x.ndim - 1)
+        d = np.sqrt(d2)
+        H = np.zeros(grad.shape[:-1] + (x.shape[-1],))
+        H[..., idx] = grad[..., :idx.size]
+        far = ~np.all(np.isfinite(d), axis=-1)
+        if far.any():                   # the state ran away (an overflow, e.g. after a reading of 1e300 dBm)
+            raise _Singular(far, _STATE_NOT_FINITE)
+        if self.walls_m is not None and ch.wall_attenuation_db != 0.0:
+            h = h - self._wall_loss_db(x[..., None, :], step)[..., 0, :]
+        m = z.shape[-1]
+        sigma2 = np.broadcast_to(self.variance_db2(d, path_loss_exp, self._param("sigma_db", step)), z.shape)
+        return z - h, H, sigma2[..., :, None] * np.eye(m)
 
     def independent_readings(self) -> bool:
         return True
+
+    def noise(self):
+        if self.per_step_channel:
+            raise ValueError(f"{self.name}: a per-step channel's noise is not fitted; give fit_R=None for this stream")
+        return "variances", np.asarray(self.channel.sigma_db, dtype=float) ** 2
+
+    def with_noise(self, value) -> "RssModel":
+        return replace(self, channel=replace(self.channel, sigma_db=np.sqrt(value)))
+
+    def run_shapes(self) -> list:
+        a = self.anchors_m
+        core = 1 + self.per_step_channel
+        shapes = [(f"{self.name}.anchors_m", a.value.shape[:-3] if isinstance(a, PerStep) else a.shape[:-2])]
+        for name in _CHANNEL_FIELDS:
+            value = np.shape(getattr(self.channel, name))
+            shapes.append((f"{self.name}.channel.{name}", value[:-core] if len(value) >= core else ()))
+        return shapes
 
     def relative_log_likelihood(self, z, x, *, step: int = 0):
         """:meth:`log_likelihood` without its position-free constant (``constant=False``)."""
         return self.log_likelihood(z, x, step, constant=False)
 
     def check_readings(self, z, n_state=None) -> None:
-        if n_state is not None:         # a Kalman-family stream: its states are more than positions
-            raise ValueError("RssModel reads positions (the particle and grid filters, the estimators and the bounds); "
-                             "a Kalman-family stream takes RssMeasurement(rss_dbm, anchors_m, channel, position_index)")
-        self.readings(z, ndim=np.ndim(z) if np.ndim(z) in (2, 3) else 3)
+        if n_state is None:             # the particle and grid filters: positions
+            self.readings(z, ndim=np.ndim(z) if np.ndim(z) in (2, 3) else 3)
+            return
+        m = self.n_readings
+        if np.shape(z)[-1] != m:
+            raise ValueError(f"{self.name}.rss_dbm has {np.shape(z)[-1]} anchors on its last axis, anchors_m has {m}")
+        if self.position_index is None and n_state != self.dim:
+            raise ValueError(f"{self.name} in a Kalman-family stream reads the state's position components: give "
+                             f"RssModel(..., position_index=...) ({self.dim} state indices) for a {n_state}-state")
+        a = self.anchors_m
+        if isinstance(a, PerStep) and a.value.shape[-3] not in (1, np.shape(z)[-2]):
+            raise ValueError(f"{self.name}.anchors_m per step must have shape batch + (T, m, dim) with T = "
+                             f"{np.shape(z)[-2]} steps (or 1), got {a.value.shape}")
+        if self.per_step_channel:
+            for name in _CHANNEL_FIELDS:
+                value = np.shape(getattr(self.channel, name))
+                if len(value) >= 2 and value[-2] not in (1, np.shape(z)[-2]):
+                    raise ValueError(f"{self.name}.channel.{name} per step must have shape batch + (T, 1 or m) with "
+                                     f"T = {np.shape(z)[-2]} steps (or 1), got {value}")
+        if np.max(self.state_position_index) >= n_state:
+            raise ValueError(f"{self.name}.position_index {self.state_position_index} is outside the {n_state}-state")
 
+    # -- evaluation at positions (one run axis: the particle and grid filters, the estimators, the bounds) ------
     def mean_table(self, points, n_runs: int):
         """``(table, sigma)``: the cell-by-anchor mean ``(1 or R, C, m)`` at fixed ``points`` ``(C, dim)`` and the
         sigma, when the mean does not change with the step (no per-step parameters; walls are fixed per cell too) and a
@@ -242,7 +504,6 @@ class RssModel(MeasurementModel):
             self.check_step(rss.shape[1] - 1)       # per-step parameters must cover every step
         return rss
 
-    # -- geometry ------------------------------------------------------------------------------------
     def _positions(self, positions_m) -> np.ndarray:
         positions_m = as_array("positions_m", positions_m, trailing=(None, self.dim))
         if positions_m.ndim not in (2, 3):
@@ -285,13 +546,14 @@ class RssModel(MeasurementModel):
         distance = np.sqrt(self._checked_d2(d2, positions_m))
         return distance if distance.ndim == 3 else distance[None]
 
-    def _per_step(self, value, step: int, per_anchor: bool):
-        value = np.asarray(value, dtype=float)
-        if per_anchor:
-            return value[:, step, None, :] if value.ndim == 3 else value          # (R, 1, m) or (m,)
-        return value[:, step, None] if value.ndim == 2 else value                   # (R, 1) or scalar
+    def _per_step(self, name: str, step: int):
+        """A parameter at ``step`` in the one-run-axis form: ``(R|1, 1, 1|m)`` or a scalar / ``(m,)`` for
+        ``ref_power_dbm`` and ``path_loss_exp``; ``(R|1, 1)`` or a scalar / ``(m,)`` for ``sigma_db``."""
+        value = self._one_run_axis[name]
+        if name != "sigma_db":
+            return value[:, min(step, value.shape[1] - 1), None, :] if value.ndim == 3 else value
+        return value[:, min(step, value.shape[1] - 1), None] if value.ndim == 2 else value
 
-    # -- the model -----------------------------------------------------------------------------------
     def _evaluate(self, positions_m, step: int, jacobian: bool):
         """:func:`rss_mean_jacobian` at checked positions and step: (positions, mean, Jacobian or None), the run
         axis present."""
@@ -300,8 +562,8 @@ class RssModel(MeasurementModel):
         ch = self.channel
         diff, vertical2 = self._offsets(positions_m)
         with np.errstate(over="ignore", invalid="ignore"):
-            mean, grad, d2 = rss_mean_jacobian(diff, self._per_step(ch.ref_power_dbm, step, True),
-                                               self._per_step(ch.path_loss_exp, step, True),
+            mean, grad, d2 = rss_mean_jacobian(diff, self._per_step("ref_power_dbm", step),
+                                               self._per_step("path_loss_exp", step),
                                                ref_distance_m=ch.ref_distance_m, min_distance_m=ch.min_distance_m,
                                                vertical_m2=vertical2, jacobian=jacobian)
         self._checked_d2(d2, positions_m)
@@ -324,13 +586,9 @@ class RssModel(MeasurementModel):
             mean = mean - ch.wall_attenuation_db * crossings
         return mean
 
-    def jacobian(self, positions_m, step: int = 0) -> np.ndarray:
-        """``dh_j/dp = -(10 n_j / ln 10) (p - a_j) / d_j^2`` ``(R|1, P, m, dim)`` (the EKF Jacobian of Dogan 2015,
-        Table 3.2, not printed there), with
-        ``d_j`` the 3-D distance when the anchors have heights. Walls add a piecewise-constant term (zero
-        derivative almost everywhere). Within the near-field clamp (``d_j < d_min``) the mean
-        ``P_0 - 10 n log10(d_min / d0)`` is constant, so the derivative is exactly 0 there
-        (:func:`~locbook.models.channel.log_distance_gradient`); the Fisher information of such a reading is 0."""
+    def position_jacobian(self, positions_m, step: int = 0) -> np.ndarray:
+        """``dh_j/dp`` ``(R|1, P, m, dim)`` at positions ``(P, dim)`` or ``(R, P, dim)`` (:meth:`jacobian`'s values
+        with the run axis always present)."""
         return self._evaluate(positions_m, step, jacobian=True)[2]
 
     def sigma_at(self, step: int = 0):
@@ -338,7 +596,7 @@ class RssModel(MeasurementModel):
         return self._sigma(step, "the likelihood")
 
     def _sigma(self, step: int, where: str):
-        sigma = self._per_step(self.channel.sigma_db, step, False)
+        sigma = self._per_step("sigma_db", step)
         if np.any(np.asarray(sigma) <= 0):     # a model with sigma 0 gives mean readings, not a density
             raise ValueError(f"{where} needs sigma_db > 0 (channel.sigma_db), got {self.channel.sigma_db!r} at step "
                              f"{step}")
@@ -390,9 +648,9 @@ class RssModel(MeasurementModel):
     def fisher_information(self, positions_m, step: int = 0, *, heard=None) -> np.ndarray:
         """``J(p) = sum_j grad h_j grad h_j^T / sigma_j^2`` ``(R|1, P, dim, dim)``, i.e.
         ``(10 n / (sigma ln 10))^2 sum_j (p - a_j)(p - a_j)^T / d_j^4`` (Patwari et al. 2003, Eq. (5); Ozkaya 2011,
-        App. A corrected; Dogan 2015, Eq. (4.19)), from :meth:`jacobian`. ``heard``: booleans broadcastable to
-        ``(R|1, P, m)``, False where an anchor gave no reading (its term is left out)."""
-        grad = self.jacobian(positions_m, step)
+        App. A corrected; Dogan 2015, Eq. (4.19)), from :meth:`position_jacobian`. ``heard``: booleans broadcastable
+        to ``(R|1, P, m)``, False where an anchor gave no reading (its term is left out)."""
+        grad = self.position_jacobian(positions_m, step)
         sigma = self._sigma(step, "the Fisher information")
         gain = 1.0 / np.square(np.asarray(sigma, float))
         gain = gain[..., None] if np.ndim(gain) == 2 else gain                     # (R, 1) -> (R, 1, 1)
@@ -408,183 +666,14 @@ class RssModel(MeasurementModel):
         return np.einsum("...j,...ji,...jk->...ik", gain, grad, grad)
 
 
-_ON_ANCHOR = ("the state is on an anchor at step {step} and the channel has no near-field clamp (min_distance_m = 0), "
-              "where the log-distance mean is infinite: give the channel a min_distance_m (e.g. 1e-3 m)")
-
-
-def _anchor_axis(value):
-    """A channel parameter (scalar, ``(m,)`` or ``batch + (1 or m,)``) made to broadcast against points-form values
-    ``batch + (K, m)``."""
-    value = np.asarray(value, dtype=float)
-    return value[..., None, :] if value.ndim >= 2 else value
-
-
-@dataclass(frozen=True)
-class RssMeasurementModel(MeasurementModel):
-    """The RSS model of the Kalman family's streams (:func:`locbook.RssMeasurement`), on the measurement-model
-    protocol (:mod:`locbook.models.base`): readings ``z_kj = h_j(p_k) + e_kj``, ``e ~ N(0, sigma_db^2)`` i.i.d., ``h``
-    the log-distance mean of :func:`rss_mean_jacobian` (Dogan Eq. (2.2)) with the channel's near-field clamp
-    ``min_distance_m`` (:attr:`clamp_m`; within it the mean is flat and its Jacobian 0). Without a clamp the mean is
-    infinite on an anchor: a state (or sigma point) exactly on one is an error naming the step.
-
-    ``anchors_m``: fixed ``(m, dim)``, or per step ``batch + (T, m, dim)`` (a moving receiver, or measurement
-    locations drawn per Monte-Carlo run: Palvai 2008, Eq. (4.28)). ``channel``: its ``ref_power_dbm``,
-    ``path_loss_exp`` and ``sigma_db`` scalars, per anchor ``(m,)``, or with run axes ``batch + (1 or m,)``.
-    ``position_index``: the state's position components. ``anchor_sigma_m``: the anchors' positions are known only to
-    this standard deviation (Palvai's sigma_3); the variance is then ``sigma^2 + (10 n / ln 10)^2 anchor_sigma^2 /
-    d^2`` (0 added within the clamp) at the linearisation point (first-order propagation; an extension: Palvai 2008,
-    Sec. 4.4, does not say how sigma_3 enters the EKF). ``tag_height_m``: the anchors are ``(m, 3)`` (x, y, height),
-    the tag moves in the plane ``z = tag_height_m`` and ``position_index`` names x and y only; distances are 3-D.
-    """
-
-    anchors_m: np.ndarray
-    channel: PathLossModel
-    position_index: np.ndarray
-    anchor_sigma_m: float = 0.0
-    tag_height_m: float | None = None
-    name: str = "RssMeasurement"
-    checks_own_output = True
-
-    def __post_init__(self):
-        require_path_loss_model(self.channel, "channel")
-        anchors = as_array(f"{self.name}.anchors_m", self.anchors_m, min_ndim=2)
-        object.__setattr__(self, "anchors_m", anchors)
-        m, dim = anchors.shape[-2], anchors.shape[-1]
-        given = self.position_index
-        idx = np.asarray(given)
-        if idx.dtype == object or (idx.size and not np.issubdtype(idx.dtype, np.integer)):
-            raise ValueError(f"{self.name}.position_index must hold integer state indices, got {given!r}")
-        object.__setattr__(self, "position_index", idx)
-        if self.tag_height_m is not None:
-            check_scalar("tag_height_m", self.tag_height_m)
-            if dim != 3:
-                raise ValueError(f"{self.name} with tag_height_m needs anchors (m, 3) (x, y, height), got "
-                                 f"{anchors.shape}")
-        n_free = dim - (self.tag_height_m is not None)
-        if idx.shape != (n_free,):
-            raise ValueError(f"{self.name}.position_index must hold {n_free} state indices (one per axis of the "
-                             f"anchors{', the height known' if n_free < dim else ''}), got {given!r}")
-        check_scalar("anchor_sigma_m", self.anchor_sigma_m, ge=0)
-        for name in ("ref_power_dbm", "path_loss_exp", "sigma_db"):
-            value = as_array(f"{self.name}.channel.{name}", getattr(self.channel, name))
-            if value.ndim and value.shape[-1] not in (1, m):
-                raise ValueError(f"{self.name}.channel.{name} must be a scalar or end in (1,) or ({m},) (one per "
-                                 f"anchor), got shape {value.shape}")
-
-    @property
-    def n_readings(self) -> int:
-        return self.anchors_m.shape[-2]
-
-    @property
-    def clamp_m(self) -> float:
-        """The model's near-field clamp: the channel's ``min_distance_m``."""
-        return float(self.channel.min_distance_m)
-
-    def lift(self, positions_m):
-        """Positions ``(..., k)`` from the state, with the known tag height appended when there is one."""
-        if self.tag_height_m is None:
-            return positions_m
-        return np.concatenate([positions_m, np.full(positions_m.shape[:-1] + (1,), float(self.tag_height_m))], -1)
-
-    def anchors_at(self, step: int) -> np.ndarray:
-        """Anchor positions at ``step``: ``(m, dim)`` or ``batch + (m, dim)``."""
-        a = self.anchors_m
-        return a if a.ndim == 2 else a[..., min(step, a.shape[-3] - 1), :, :]
-
-    def variance_db2(self, distance_m, path_loss_exp, sigma_db):
-        """Measurement variance per reading: ``sigma^2``, inflated for ``anchor_sigma_m`` (class docstring) by
-        ``anchor_sigma^2 |dh/dp|^2``, ``|dh/dp| = 10 n / (d ln 10)`` outside the clamp and 0 inside."""
-        var = np.asarray(sigma_db, dtype=float) ** 2
-        if self.anchor_sigma_m > 0:
-            slope = 10.0 * np.asarray(path_loss_exp, dtype=float) / np.log(10.0)
-            clamp = self.clamp_m
-            inflation = (slope * self.anchor_sigma_m / np.maximum(distance_m, clamp)) ** 2
-            var = var + np.where(np.asarray(distance_m) < clamp, 0.0, inflation)
-        return var
-
-    def _refuse_on_anchor(self, d2, batch_ndim: int | None) -> None:
-        """Without a clamp the mean is infinite on an anchor: a named error for the runs (``batch_ndim`` leading axes
-        of the squared distances ``d2``; the rest are reduced) whose point lies on one."""
-        if self.clamp_m == 0 and not np.all(d2 != 0):
-            on = d2 == 0
-            if batch_ndim is not None:
-                on = on.reshape(on.shape[:batch_ndim] + (-1,)).any(axis=-1)
-            raise _Singular(on, _ON_ANCHOR)
-
-    def _points_offsets(self, x, step: int):
-        """``p - a_j`` ``batch + (K, m, dim)`` at points-form states ``batch + (K, n)``."""
-        a = self.anchors_at(step)
-        a = a if a.ndim == 2 else a[..., None, :, :]
-        return self.lift(x[..., self.position_index])[..., None, :] - a
-
-    def mean(self, x, *, step: int = 0):
-        ch = self.channel
-        mean, _, d2 = rss_mean_jacobian(self._points_offsets(x, step), _anchor_axis(ch.ref_power_dbm),
-                                        _anchor_axis(ch.path_loss_exp), ref_distance_m=ch.ref_distance_m,
-                                        min_distance_m=self.clamp_m, jacobian=False)
-        self._refuse_on_anchor(d2, np.ndim(x) - 2)
-        return mean
-
-    def jacobian(self, x, *, step: int = 0):
-        ch = self.channel
-        _, grad, d2 = rss_mean_jacobian(self._points_offsets(x, step), _anchor_axis(ch.ref_power_dbm),
-                                        _anchor_axis(ch.path_loss_exp), ref_distance_m=ch.ref_distance_m,
-                                        min_distance_m=self.clamp_m)
-        self._refuse_on_anchor(d2, np.ndim(x) - 2)
-        H = np.zeros(grad.shape[:-1] + (np.shape(x)[-1],))
-        H[..., self.position_index] = grad[..., :self.position_index.size]
-        return H
-
-    def covariance(self, x, *, step: int = 0):
-        """``diag(sigma^2)`` per reading, inflated at the points' distances for ``anchor_sigma_m``."""
-        diff = self._points_offsets(x, step)
-        d = np.sqrt(np.einsum("...i,...i->...", diff, diff))
-        ch = self.channel
-        var = np.broadcast_to(self.variance_db2(d, _anchor_axis(ch.path_loss_exp), _anchor_axis(ch.sigma_db)),
-                              d.shape)
-        return var[..., :, None] * np.eye(self.n_readings)
-
-    def innovation(self, x, z, *, step: int = 0):
-        """Table 3.4's linearisation at the states ``x`` ``batch + (n,)``: ``z - h(x)``, the stacked Jacobian and
-        ``R = sigma^2 I`` (inflated for uncertain anchor positions)."""
-        idx = self.position_index
-        ch = self.channel
-        offset = self.lift(x[..., idx])[..., None, :] - self.anchors_at(step)
-        h, grad, d2 = rss_mean_jacobian(offset, np.asarray(ch.ref_power_dbm), np.asarray(ch.path_loss_exp),
-                                        ref_distance_m=ch.ref_distance_m, min_distance_m=self.clamp_m)
-        self._refuse_on_anchor(d2, x.ndim - 1)
-        d = np.sqrt(d2)
-        H = np.zeros(grad.shape[:-1] + (x.shape[-1],))
-        H[..., idx] = grad[..., :idx.size]
-        far = ~np.all(np.isfinite(d), axis=-1)
-        if far.any():                   # the state ran away (an overflow, e.g. after a reading of 1e300 dBm)
-            raise _Singular(far, _STATE_NOT_FINITE)
-        m = z.shape[-1]
-        sigma2 = np.broadcast_to(self.variance_db2(d, ch.path_loss_exp, ch.sigma_db), z.shape)
-        return z - h, H, sigma2[..., :, None] * np.eye(m)
-
-    def independent_readings(self) -> bool:
-        return True
-
-    def noise(self):
-        return "variances", np.asarray(self.channel.sigma_db, dtype=float) ** 2
-
-    def with_noise(self, value) -> "RssMeasurementModel":
-        return replace(self, channel=replace(self.channel, sigma_db=np.sqrt(value)))
-
-    def run_shapes(self) -> list:
-        ch = self.channel
-        return [(f"{self.name}.anchors_m", self.anchors_m.shape[:-3])] + \
-            [(f"{self.name}.channel.{v}", np.shape(getattr(ch, v))[:-1]) for v in ("ref_power_dbm", "path_loss_exp",
-                                                                                  "sigma_db")]
-
-    def check_readings(self, z, n_state: int) -> None:
-        m = self.n_readings
-        if np.shape(z)[-1] != m:
-            raise ValueError(f"{self.name}.rss_dbm has {np.shape(z)[-1]} anchors on its last axis, anchors_m has {m}")
-        anchors = self.anchors_m
-        if anchors.ndim > 2 and anchors.shape[-3] not in (1, np.shape(z)[-2]):
-            raise ValueError(f"{self.name}.anchors_m per step must have shape batch + (T, m, dim) with T = "
-                             f"{np.shape(z)[-2]} steps (or 1), got {anchors.shape}")
-        if n_state is not None and np.max(self.position_index) >= n_state:
-            raise ValueError(f"{self.name}.position_index {self.position_index} is outside the {n_state}-state")
+def RssMeasurementModel(anchors_m, channel, position_index, anchor_sigma_m: float = 0.0, tag_height_m=None,
+                        name: str = "RssMeasurement") -> RssModel:
+    """Deprecated: :class:`RssModel` with ``position_index`` (one RSS model; unmarked anchors ``batch + (T, m, dim)``
+    were per step here, now ``per_step(anchors_m)``)."""
+    warnings.warn("RssMeasurementModel is deprecated: use RssModel(anchors_m, channel, position_index=..., "
+                  "anchor_sigma_m=..., tag_height_m=...) (per-step anchors as per_step(anchors_m))", DeprecationWarning,
+                  stacklevel=2)
+    if not isinstance(anchors_m, PerStep) and np.ndim(anchors_m) > 2:
+        anchors_m = PerStep(anchors_m, "anchors_m")
+    return RssModel(anchors_m, channel, position_index=position_index, anchor_sigma_m=anchor_sigma_m,
+                    tag_height_m=tag_height_m, name=name)

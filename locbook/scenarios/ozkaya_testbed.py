@@ -357,8 +357,10 @@ def _estimate(method: Method, rss, tags, calibration, settings: MethodSettings, 
     if method.estimator == "nn":
         fp = model_fingerprints(TESTBED_CELLS_M, readers, PathLossModel(alpha, n, wall_attenuation_db=oz.WAF_DB), walls)
         return knn_position(rss, fp, TESTBED_CELLS_M, min(k, TESTBED_CELLS_M.shape[0]))
-    sigma = calibration.sigma_db if method.online_sigma else settings.sigma_db
-    model = RssModel(readers, PathLossModel(alpha, n, sigma, wall_attenuation_db=oz.WAF_DB, min_distance_m=0.1), walls)
+    sigma = calibration.sigma_db[..., None] if method.online_sigma else settings.sigma_db          # (R, T, 1): pooled
+    per_step = method.online_sigma or method.parameters != "offline"           # the online calibration's (R, T) axes
+    model = RssModel(readers, PathLossModel(alpha, n, sigma, wall_attenuation_db=oz.WAF_DB, min_distance_m=0.1), walls,
+                     per_step_channel=per_step)
     if method.estimator == "grid":
         return grid_bayes_filter(rss, TESTBED_CELLS_M, model, settings.spread_m, velocity_m=velocity_m).mean
     if method.estimator != "sir":

@@ -21,6 +21,7 @@ from ..static.localization import lateration_ls, lateration_system
 from ..tracking.kalman import extended_kalman_filter
 from ..tracking.streams import NonlinearMeasurement, RssMeasurement
 from ..tracking.divergence import DivergenceFlags
+from ..models.base import per_step
 from ..models.rss import RssModel
 from ..tracking.particle import kernel_map_estimate, particle_filter
 
@@ -183,11 +184,11 @@ def ekf_path(setup: Setup, anchors_m, rss_dbm, x0, P0, *, process_sd_m: float = 
     if schedule == "batch":
         if variant != "corrected":
             raise ValueError("the batch schedule is offered for the corrected EKF only")
-        meas = RssMeasurement(np.asarray(rss_dbm)[:, None, :], s[:, None], setup.channel, np.arange(dim),
+        meas = RssMeasurement(np.asarray(rss_dbm)[:, None, :], per_step(s[:, None]), setup.channel, np.arange(dim),
                               anchor_sigma_m=setup.receiver_sigma_m if inflate else 0.0)
         return _with_flags(extended_kalman_filter(F, Q, x0, P0, [meas]), with_divergence)
     if variant == "corrected":
-        meas = RssMeasurement(np.asarray(rss_dbm)[..., None], s[:, :, None, :], setup.channel, np.arange(dim),
+        meas = RssMeasurement(np.asarray(rss_dbm)[..., None], per_step(s[:, :, None, :]), setup.channel, np.arange(dim),
                               anchor_sigma_m=setup.receiver_sigma_m if inflate else 0.0)
         return _with_flags(extended_kalman_filter(F, Q, x0, P0, [meas]), with_divergence)
     # printed form: one location per step through the "diagonal" of an (N, N) stream (NaN off the diagonal)

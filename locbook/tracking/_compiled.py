@@ -24,7 +24,7 @@ from ._loop import _Setup
 from .results import KalmanResult
 from ..models.base import LinearGaussian
 from ..models.imu import InertialMeasurement
-from ..models.rss import RssMeasurementModel
+from ..models.rss import RssModel
 from .transition import PerStep
 
 _NUMBA_ENABLED = os.environ.get("LOCBOOK_NUMBA", "1").strip().lower() not in ("0", "false", "no", "off")
@@ -120,20 +120,25 @@ def _pack_linear(meas, batch, B, n, T):
 
 
 def _pack_rss(meas, batch, B, n, T):
-    """An RSS stream (:class:`~locbook.models.rss.RssMeasurementModel`): anchors, channel and its scalars."""
+    """An RSS stream (:class:`~locbook.models.rss.RssModel`): anchors ``(1 or B, 1 or T, m, dim)``, channel and its
+    scalars; None (the numpy path) for walls, per-step channel parameters or more than three dimensions."""
     model = meas.model
     ch, m = model.channel, model.n_readings
-    anchors = np.asarray(model.anchors_m, dtype=float)
-    dim = anchors.shape[-1]
-    if dim > 3 or not np.isfinite(ch.wall_attenuation_db):
+    walls = model.walls_m is not None and ch.wall_attenuation_db != 0.0
+    if model.dim + (model.tag_height_m is not None) > 3 or walls or model.per_step_channel or \
+            not np.isfinite(ch.wall_attenuation_db):
         return None
-    if anchors.ndim == 2:
-        a = anchors[None, None]
-    elif anchors.ndim == 3:
+    given = model.anchors_m
+    per_step = isinstance(given, PerStep)
+    anchors = np.asarray(given.value if per_step else given, dtype=float)
+    dim = anchors.shape[-1]
+    if not per_step:                            # fixed or per run: one time slot
+        anchors = anchors[..., None, :, :]
+    if anchors.ndim == 3:
         a = anchors[None]
     else:
         a = np.broadcast_to(anchors, batch + anchors.shape[-3:]).reshape((B,) + anchors.shape[-3:])
-    idx = np.asarray(model.position_index, dtype=np.int64)
+    idx = np.asarray(model.state_position_index, dtype=np.int64)
     tag = np.nan if model.tag_height_m is None else float(model.tag_height_m)
     return (_RSS_PARALLEL if meas.mode == "parallel" else _RSS_SERIAL, None,
             (dim, a, *(_leading(v, batch, B, (m,)) for v in (ch.ref_power_dbm, ch.path_loss_exp, ch.sigma_db))),
@@ -158,7 +163,7 @@ def _pack_inertial(meas, batch, B, n, T):
 
 # The compiled backend's registry: a packer per model type (exact type: a subclass may change the arithmetic). A
 # stream whose model has no packer runs the whole filter on the numpy path.
-_PACKERS = {LinearGaussian: _pack_linear, RssMeasurementModel: _pack_rss, InertialMeasurement: _pack_inertial}
+_PACKERS = {LinearGaussian: _pack_linear, RssModel: _pack_rss, InertialMeasurement: _pack_inertial}
 
 
 def _pack_streams(setup: _Setup, measurements, B):

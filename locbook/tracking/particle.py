@@ -124,16 +124,18 @@ def _fused_rss_log_likelihood(model: RssModel, rss_dbm, particles, step: int, po
     vert2 = (np.zeros((1, m)) if model.tag_height_m is None
              else np.ascontiguousarray(np.square(anchors[..., -1] - model.tag_height_m)))
 
+    ch_t = model.channel_at(step)
+
     def per_step(value):                          # (1|R, m) at the step
         value = np.asarray(value, dtype=float)
-        return np.ascontiguousarray(value[:, step] if value.ndim == 3 else np.broadcast_to(value, (m,))[None])
+        return np.ascontiguousarray(value if value.ndim == 2 else np.broadcast_to(value, (m,))[None])
 
-    tenn = 10.0 * np.asarray(ch.path_loss_exp, dtype=float)       # numpy's (10 n) log10(d / d0), the same rounding
+    tenn = 10.0 * np.asarray(ch_t.path_loss_exp, dtype=float)     # numpy's (10 n) log10(d / d0), the same rounding
     per_anchor = sigma.ndim == 1
     sig = (sigma[None] if per_anchor else sigma.reshape(-1, 1)).astype(float)
     R = z.shape[0]
     out = np.empty((R, x3.shape[1])) if out is None else out
-    if K._nb_rss_loglik(x3, pidx, plan, vert2, z, per_step(ch.ref_power_dbm), per_step(tenn),
+    if K._nb_rss_loglik(x3, pidx, plan, vert2, z, per_step(ch_t.ref_power_dbm), per_step(tenn),
                         np.ascontiguousarray(sig), per_anchor, float(ch.min_distance_m), float(ch.ref_distance_m),
                         walls, float(waf) if with_walls else 0.0, out):
         return out

@@ -15,15 +15,16 @@ dof and Gaussian log-likelihood of the readings present, and on request their in
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+import warnings
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from .._linalg import _LOG_2PI, _UPDATE_OVERFLOW, _Singular, _joseph
 from .._validate import as_array, check_choice
-from ..models.base import FunctionMeasurement, LinearGaussian, MeasurementModel
+from ..models.base import FunctionMeasurement, LinearGaussian, MeasurementModel, PerStep
 from ..models.channel import PathLossModel
-from ..models.rss import RssMeasurementModel
+from ..models.rss import RssModel
 from .functional import _linear_update, _Out
 
 __all__ = ["Stream", "LinearMeasurement", "RssMeasurement", "NonlinearMeasurement", "RSS_UPDATE_MODES",
@@ -116,24 +117,44 @@ def LinearMeasurement(z, H, R, mode: str = "parallel", offset=None) -> Stream:
     return Stream(zz, model, mode=mode)
 
 
-def RssMeasurement(rss_dbm, anchors_m, channel: PathLossModel, position_index, mode: str = "parallel",
+def RssMeasurement(rss_dbm, model, channel: PathLossModel | None = None, position_index=None, mode: str = "parallel",
                    order: str = "descending", anchor_sigma_m: float = 0.0, tag_height_m: float | None = None) -> Stream:
-    """Received powers from fixed anchors for the EKF and the UKF (:class:`~locbook.models.rss.RssMeasurementModel`,
-    Dogan 2015, Ch. 3): ``rss_dbm`` ``batch + (T, m)``, NaN where an anchor gave no reading. ``mode``:
-    ``"parallel"`` (one stacked update, Table 3.4) or ``"serial"`` (scalar updates, each re-linearised at the state
-    updated so far, Table 3.3, in ``order`` ``"descending"`` RSS as printed or the ``"given"`` anchor order; loop
-    bound j <= N, the print's "for each j < N" would skip the last anchor; corrected). ``anchors_m``, ``channel``,
-    ``position_index``, ``anchor_sigma_m``, ``tag_height_m``: the model's."""
+    """Received powers for the EKF and the UKF (Dogan 2015, Ch. 3): ``rss_dbm`` ``batch + (T, m)``, NaN where an
+    anchor gave no reading, read through ``model``, an :class:`~locbook.models.rss.RssModel` with its
+    ``position_index`` (the state's position components). ``mode``: ``"parallel"`` (one stacked update, Table 3.4)
+    or ``"serial"`` (scalar updates, each re-linearised at the state updated so far, Table 3.3, in ``order``
+    ``"descending"`` RSS as printed or the ``"given"`` anchor order; loop bound j <= N, the print's "for each j < N"
+    would skip the last anchor; corrected).
+
+    The model's fields may be given in its place: ``RssMeasurement(rss_dbm, anchors_m, channel, position_index,
+    anchor_sigma_m=..., tag_height_m=...)``; there, anchors ``batch + (T, m, dim)`` are per step (the form's old
+    reading: a DeprecationWarning asks for ``per_step(anchors_m)``, which means the same)."""
     check_choice("mode", mode, RSS_UPDATE_MODES)
     check_choice("order", order, SERIAL_ORDERS)
-    model = RssMeasurementModel(anchors_m, channel, position_index, anchor_sigma_m, tag_height_m)
-    z = as_array("RssMeasurement.rss_dbm", rss_dbm, min_ndim=2, nan_ok=True)
-    if z.shape[-1] != model.n_readings:
-        raise ValueError(f"RssMeasurement.rss_dbm has {z.shape[-1]} anchors on its last axis, anchors_m has "
-                         f"{model.n_readings}")
-    if model.anchors_m.ndim > 2 and model.anchors_m.shape[-3] not in (1, z.shape[-2]):
-        raise ValueError(f"RssMeasurement.anchors_m per step must have shape batch + (T, m, dim) with T = "
-                         f"{z.shape[-2]} steps (or 1), got {model.anchors_m.shape}")
+    if isinstance(model, RssModel):
+        if channel is not None or anchor_sigma_m != 0.0 or tag_height_m is not None:
+            raise ValueError("RssMeasurement(rss_dbm, model): the channel, anchor_sigma_m and tag_height_m are the "
+                             "RssModel's own fields; give them there")
+        if position_index is not None:
+            model = replace(model, position_index=position_index)
+    else:
+        anchors_m = model
+        if channel is None or position_index is None:
+            raise ValueError(f"RssMeasurement takes (rss_dbm, model: RssModel) or (rss_dbm, anchors_m, channel, "
+                             f"position_index); got a {type(model).__name__} without "
+                             f"{'channel' if channel is None else 'position_index'}")
+        if not isinstance(anchors_m, PerStep) and np.ndim(anchors_m) > 2:
+            warnings.warn("RssMeasurement: anchors_m with more than two axes are per step; mark them "
+                          "per_step(anchors_m) (unmarked leading axes are run axes in RssModel)", DeprecationWarning,
+                          stacklevel=2)
+            anchors_m = PerStep(anchors_m, "RssMeasurement.anchors_m")
+        model = RssModel(anchors_m, channel, position_index=position_index, anchor_sigma_m=anchor_sigma_m,
+                         tag_height_m=tag_height_m, name="RssMeasurement")
+    if model.position_index is None:
+        raise ValueError(f"{model.name}: a Kalman-family stream reads the state's position components: give "
+                         f"position_index (RssModel(..., position_index=...))")
+    z = as_array(f"{model.name}.rss_dbm", rss_dbm, min_ndim=2, nan_ok=True)
+    model.check_readings(z, int(np.max(model.state_position_index)) + 1)      # the stream's own shapes (the filter checks n)
     return Stream(z, model, mode=mode, order=order)
 
 

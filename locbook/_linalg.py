@@ -260,3 +260,16 @@ def _gaussian_log_likelihood(nis, logdet, dof):
     """``log N(nu; 0, S) = -(nu^T S^{-1} nu + log det S + dof log 2 pi) / 2`` from its three parts (0 when dof = 0:
     no reading, the likelihood of nothing is 1)."""
     return -0.5 * (nis + logdet + dof * _LOG_2PI)
+
+
+def psd_root(name: str, cov) -> np.ndarray:
+    """A factor ``L`` ``(..., n, k)`` with ``cov = L L^T`` from the eigen-decomposition, so that a singular
+    (positive semi-definite) covariance is fine; only the directions of positive variance are kept. A covariance that
+    is not symmetric positive semi-definite is refused naming ``name``."""
+    w, v = np.linalg.eigh(cov)
+    scale = np.max(np.abs(w), initial=0.0)
+    if np.any(w < -1e-9 * max(scale, 1e-300)) or not np.allclose(cov, np.swapaxes(cov, -1, -2), rtol=0,
+                                                                   atol=1e-12 * max(scale, 1e-300)):
+        raise ValueError(f"{name} must be symmetric positive semi-definite, its smallest eigenvalue is {w.min()}")
+    keep = np.any(w > 4 * w.shape[-1] * np.finfo(float).eps * scale, axis=tuple(range(w.ndim - 1)))
+    return v[..., keep] * np.sqrt(np.clip(w[..., keep], 0.0, None))[..., None, :]

@@ -365,3 +365,72 @@ def test_a_motion_models_sample_draws_its_transition_density():
     draws = cv.sample(np.broadcast_to(x, (200_000, 4)), step=0, rng=np.random.default_rng(7))
     np.testing.assert_allclose(draws.mean(axis=0), cv.F @ x, rtol=0, atol=5 * np.sqrt(np.diag(cv.Q).max() / 2e5))
     np.testing.assert_allclose(np.cov(draws.T), cv.Q, rtol=0, atol=5 * np.sqrt(2.0 / 2e5) * np.diag(cv.Q).max())
+
+
+class MyConstantVelocity(lb.MotionModel):
+    """A user's constant-velocity model written against the protocol alone (no F or Q attributes)."""
+
+    n_state = 4
+    position_index = np.array([0, 1])
+
+    def __init__(self, dt_s, q):
+        self.ref = lb.constant_velocity(dt_s, q, noise="continuous")
+
+    def apply(self, x, step=0):
+        return np.asarray(x, dtype=float) @ self.ref.F.T
+
+    def covariance(self, step=0):
+        return self.ref.Q
+
+    def mirrored_index(self):
+        return np.array([[2, 3]])
+
+
+class Pulsed(lb.MotionModel):
+    """Stands still (f = identity); the noise is switched on at even steps only."""
+
+    n_state = 2
+    position_index = np.array([0, 1])
+
+    def apply(self, x, step=0):
+        return np.asarray(x, dtype=float)
+
+    def covariance(self, step=0):
+        return (step % 2 == 0) * 0.25 * np.eye(2)
+
+
+def test_a_users_motion_model_moves_the_particles_as_the_library_model_with_the_same_matrices():
+    rss = np.random.default_rng(4).normal(-60.0, 3.0, (2, 8, 3))
+    model = lb.RssModel(ANCHORS, lb.PathLossModel(-40.0, 2.2, 3.0, min_distance_m=0.1))
+    box = ([0.0, 0.0], [10.0, 8.0])
+    mine = lb.particle_filter(rss, model, np.random.default_rng(1), n_particles=300, region_m=box,
+                              motion=MyConstantVelocity(1.0, 0.05))
+    ref = lb.particle_filter(rss, model, np.random.default_rng(1), n_particles=300, region_m=box,
+                             motion=lb.constant_velocity(1.0, 0.05, noise="continuous"))
+    np.testing.assert_array_equal(mine.mean, ref.mean)
+
+
+def test_a_users_motion_model_draws_its_noise_at_each_step_from_its_own_covariance():
+    n = 20_000
+    start = np.zeros((1, n, 2))
+    res = lb.particle_filter(None, lambda x, t: np.zeros(x.shape[:2]), np.random.default_rng(2), n_steps=4,
+                             initial_particles_m=start, motion=Pulsed(), cloud_steps=(1, 2, 3))
+    var = [res.clouds[t][0].var(axis=0).mean() for t in (1, 2, 3)]
+    # step 1: no noise (odd); step 2: 0.25 added; step 3: no noise. Resampling with equal weights keeps the spread
+    # up to its Monte-Carlo error (the variance of a variance over 20,000 draws: about 1 %)
+    assert var[0] == 0.0
+    assert var[1] == pytest.approx(0.25, rel=0.05) and var[2] == pytest.approx(var[1], rel=0.05)
+
+
+def test_a_motion_without_position_index_or_a_mirror_is_refused_by_name():
+    class Bare(lb.MotionModel):
+        def apply(self, x, step=0):
+            return x
+    model = lb.RssModel(ANCHORS, lb.PathLossModel(-40.0, 2.2, 3.0))
+    rss = np.zeros((1, 3, 3))
+    with pytest.raises(ValueError, match="motion Bare needs position_index"):
+        lb.particle_filter(rss, model, np.random.default_rng(0), n_particles=5, region_m=([0, 0], [9, 9]),
+                           motion=Bare())
+    with pytest.raises(ValueError, match="region_m mirrors the motion at the walls; motion=Pulsed"):
+        lb.particle_filter(rss, model, np.random.default_rng(0), n_particles=5, region_m=([0, 0], [9, 9]),
+                           motion=type("Pulsed", (Pulsed,), {"mirrored_index": lambda self: None})())

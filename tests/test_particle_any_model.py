@@ -413,10 +413,10 @@ def test_motion_refuses_the_random_walk_arguments_and_unknown_models():
                         (dict(transition=lambda x, t, rng: x), "transition")):
         with pytest.raises(ValueError, match=f"motion moves the particles .* excludes {name}"):
             particle_filter(rss, RSS, np.random.default_rng(0), motion=cv, **base, **extra)
-    with pytest.raises(ValueError, match="motion must be a KinematicModel"):
+    with pytest.raises(ValueError, match="motion must be a motion model"):
         particle_filter(rss, RSS, np.random.default_rng(0), motion="cv", **base)
     heading = lb.HeadingKinematicModel(1.0, 0.1, 0.01)
-    with pytest.raises(ValueError, match="region_m mirrors the velocity"):
+    with pytest.raises(ValueError, match=r"region_m mirrors the motion at the walls; motion=HeadingKinematicModel"):
         particle_filter(rss, RSS, np.random.default_rng(0), motion=heading, **base)
     with pytest.raises(ValueError, match="motion has 3 position axes, the RssModel 2"):
         particle_filter(rss, RSS, np.random.default_rng(0), motion=lb.constant_velocity(1.0, 0.1, dim=3), **base)

@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._linalg import _LOG_2PI, _covariance, _refuse_not_finite
+from .._linalg import _LOG_2PI, _covariance, _refuse_not_finite, psd_root
 from .._validate import as_array, call_user, function_output
 
 __all__ = ["MeasurementModel", "LinearGaussian", "FunctionMeasurement", "MotionModel", "LinearMotion", "PerStep",
@@ -645,6 +645,21 @@ class MotionModel:
         root = v * np.sqrt(np.maximum(w, 0.0))[..., None, :]
         noise = rng.standard_normal(x_next.shape)
         return x_next + np.einsum("...ij,...j->...i", root, noise)
+
+    def noise_factor(self, step: int = 0):
+        """``L`` ``(n, k)`` with ``Q_k = L L^T`` (the particle filter draws ``w = L e``, ``e ~ N(0, I_k)``), or None
+        when ``Q_k = 0`` (nothing drawn): by default the symmetric root of :meth:`covariance` over its directions of
+        positive variance (:func:`locbook._linalg.psd_root`); a model with a known factor (``Q = q G G^T``) gives it."""
+        Q = np.asarray(self.covariance(step), dtype=float)
+        return None if not np.any(Q) else psd_root(f"{self.label}: covariance at step {step}", Q)
+
+    def mirrored_index(self) -> np.ndarray:
+        """The state components whose sign a mirror reflection of the position reverses (velocity, acceleration),
+        ``(k, dim)``: each row one derivative's components, aligned with the position components (the particle filter
+        flips them when it folds a particle back into ``region_m``); an empty ``(0, dim)`` array folds the positions
+        alone. None by default: the mirror image of the motion is not defined, and the particle filter refuses
+        ``region_m`` with it."""
+        return None
 
     def shifted(self, k: int) -> "MotionModel":
         """The model whose step is counted from ``k`` (the online filter's one-step calls see step 0): a view that adds

@@ -160,6 +160,17 @@ class KinematicModel(_LinearKinematics):
     def position_index(self) -> np.ndarray:
         return self.index(0)
 
+    def noise_factor(self, step: int = 0):
+        """``sqrt(q) G`` for ``noise="discrete"`` or ``"wiener"`` (``Q = q G G^T`` exactly: ``dim`` draws per state);
+        the protocol's symmetric root otherwise; None for ``q = 0``."""
+        if not np.any(self.Q):
+            return None
+        return np.sqrt(self.q) * self.G if self.noise in ("discrete", "wiener") else super().noise_factor(step)
+
+    def mirrored_index(self) -> np.ndarray:
+        """Velocity (and acceleration) ``(order, dim)``: a mirror reflection of the position reverses them."""
+        return np.stack([self.index(k) for k in range(1, self.order + 1)]).astype(np.int64)
+
     @property
     def velocity_index(self) -> np.ndarray:
         return self.index(1)

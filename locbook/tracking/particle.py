@@ -55,8 +55,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._validate import as_array, check_choice, check_scalar
-from ..models.motion import KinematicModel, reflect_into_box
-from ..models.base import MeasurementModel
+from .._linalg import psd_root
+from ..models.motion import reflect_into_box
+from ..models.base import LinearMotion, MeasurementModel, MotionModel
 from ..models.rss import RssModel
 from .bayes import (BayesFilterResult, _LIKELIHOOD, _callable_steps, _check_inputs, _check_size, _collapse_error,
                     _normalise_log, _reading_detail, _velocity_schedule, _warn_collapse, weighted_moments)
@@ -185,44 +186,37 @@ def _check_cloud(name: str, shape) -> None:
                 "use fewer particles, or run the runs in blocks")
 
 
-def _psd_root(name: str, cov) -> np.ndarray:
-    """A factor ``L`` ``(..., n, k)`` with ``cov = L L^T`` from the eigen-decomposition, so that a singular
-    (positive semi-definite) covariance is fine; only the directions of positive variance are kept."""
-    w, v = np.linalg.eigh(cov)
-    scale = np.max(np.abs(w), initial=0.0)
-    if np.any(w < -1e-9 * max(scale, 1e-300)) or not np.allclose(cov, np.swapaxes(cov, -1, -2), rtol=0,
-                                                                   atol=1e-12 * max(scale, 1e-300)):
-        raise ValueError(f"{name} must be symmetric positive semi-definite, its smallest eigenvalue is {w.min()}")
-    keep = np.any(w > 4 * w.shape[-1] * np.finfo(float).eps * scale, axis=tuple(range(w.ndim - 1)))
-    return v[..., keep] * np.sqrt(np.clip(w[..., keep], 0.0, None))[..., None, :]
-
-
-class _Kinematics:
-    """A linear motion model given as ``motion=``: its F, the factor of its Q and its position / derivative indices,
-    and the mirror reflection at the walls of a region."""
+class _Motion:
+    """The motion given as ``motion=``: any :class:`~locbook.models.base.MotionModel` with ``position_index`` (a
+    peer's object with ``F``, ``Q`` and ``position_index`` is taken as the linear model ``LinearMotion(F, Q)``),
+    moved by ``x_t = f_t(x) + L_t e``, ``e ~ N(0, I)`` (:meth:`~locbook.models.base.MotionModel.noise_factor`), and
+    mirrored at the walls of a region (:meth:`~locbook.models.base.MotionModel.mirrored_index`)."""
 
     def __init__(self, motion):
-        if not all(hasattr(motion, a) for a in ("F", "Q", "position_index")):
-            raise ValueError(f"motion must be a KinematicModel (constant_velocity, constant_acceleration) or a model "
-                             f"with F, Q and position_index, got {type(motion).__name__}")
-        self.F = as_array("motion.F", motion.F, ndim=2)
-        n = self.F.shape[0]
-        if self.F.shape != (n, n):
-            raise ValueError(f"motion.F must be square, got shape {self.F.shape}")
-        Q = as_array("motion.Q", motion.Q, ndim=2)
-        if Q.shape != (n, n):
-            raise ValueError(f"motion.Q must have the shape {(n, n)} of motion.F, got {Q.shape}")
-        self.n_state = n
-        self.position_index = np.asarray(motion.position_index, dtype=np.int64).ravel()
-        if not np.any(Q):
-            self.root = None                                  # q = 0: deterministic motion, nothing drawn
-        elif isinstance(motion, KinematicModel) and motion.noise in ("discrete", "wiener"):
-            self.root = np.sqrt(motion.q) * motion.G          # Q = q G G^T exactly: dim draws per particle
+        if not isinstance(motion, MotionModel):
+            if not all(hasattr(motion, a) for a in ("F", "Q", "position_index")):
+                raise ValueError(f"motion must be a motion model (locbook.models.base.MotionModel: a KinematicModel, "
+                                 f"constant_velocity, ...) with position_index, or a model with F, Q and "
+                                 f"position_index, got {type(motion).__name__}")
+            F = as_array("motion.F", motion.F, ndim=2)
+            if F.shape != (F.shape[0],) * 2:
+                raise ValueError(f"motion.F must be square, got shape {F.shape}")
+            Q = as_array("motion.Q", motion.Q, ndim=2)
+            if Q.shape != F.shape:
+                raise ValueError(f"motion.Q must have the shape {F.shape} of motion.F, got {Q.shape}")
+            position_index, motion = motion.position_index, LinearMotion(F, Q, name=type(motion).__name__)
+        elif not hasattr(motion, "position_index"):
+            raise ValueError(f"motion {motion.label} needs position_index (the state's position components, which the "
+                             f"likelihood and region_m read)")
         else:
-            self.root = _psd_root("motion.Q", Q)
-        # the derivatives whose sign a mirror reflection of the position reverses (velocity, acceleration)
-        self.derivatives = ([motion.index(k) for k in range(1, motion.order + 1)]
-                            if isinstance(motion, KinematicModel) else None)
+            position_index = motion.position_index
+        self.model = motion
+        self.position_index = np.asarray(position_index, dtype=np.int64).ravel()
+        n = getattr(motion, "n_state", None)
+        self.n_state = int(n) if n is not None else (motion.F.shape[-1] if motion.linear else None)
+        mirrored = motion.mirrored_index()
+        self.derivatives = None if mirrored is None else np.asarray(mirrored, dtype=np.int64)
+        self.root = motion.noise_factor(0)      # refused here when not positive semi-definite
 
     def state_from_positions(self, positions):
         out = np.zeros(positions.shape[:-1] + (self.n_state,))
@@ -241,10 +235,11 @@ class _Kinematics:
             x[..., idx] *= sign
         return x
 
-    def step(self, x, rng, bounds):
-        x = x @ self.F.T
-        if self.root is not None:
-            x = x + rng.standard_normal(x.shape[:-1] + (self.root.shape[-1],)) @ self.root.T
+    def step(self, x, t, rng, bounds):
+        x = np.asarray(self.model.apply(x, t), dtype=float)
+        root = self.root if t == 0 else self.model.noise_factor(t)
+        if root is not None:
+            x = x + rng.standard_normal(x.shape[:-1] + (root.shape[-1],)) @ root.T
         return x if bounds is None else self.mirror(x, *bounds)
 
 
@@ -275,13 +270,16 @@ def particle_filter(rss_dbm, model, rng: np.random.Generator, *, n_steps: int | 
     uniform proposal over the region (Tables 7.18-7.19), whose particles start from equal weights (the previous
     weights belonged to the replaced particles).
 
-    ``motion``: a kinematic model (:class:`~locbook.models.motion.KinematicModel`; module docstring) instead of the
-    random walk: the particles are full states ``(R, N, n)`` moved by ``x = F x + w``, ``w ~ N(0, Q)``; an
-    RssModel's likelihood sees ``x[..., motion.position_index]``, a callable likelihood the full states. The prior
-    is then over the full state: ``initial_particles_m`` ``(R, N, n)``; ``initial_position_m`` a state ``(R, n)``
-    or a position ``(R, dim)`` (at rest: the other derivatives 0), spread over the positions by ``initial_sd_m``
-    or over the state by ``initial_covariance`` ``(n, n)``; or ``n_particles`` uniform over ``region_m``, at rest.
-    With ``region_m`` (a KinematicModel only) a particle leaving the region is mirrored back and its velocity and
+    ``motion``: a motion model (:class:`~locbook.models.base.MotionModel` with ``position_index``: a
+    :class:`~locbook.models.motion.KinematicModel`, a heading model, or one of your own) instead of the random walk:
+    the particles are full states ``(R, N, n)`` moved by ``x_t = f_t(x) + w``, ``w ~ N(0, Q_t)`` (drawn through the
+    model's :meth:`~locbook.models.base.MotionModel.noise_factor`); an RssModel's likelihood sees
+    ``x[..., motion.position_index]``, a callable likelihood the full states. The prior is then over the full state:
+    ``initial_particles_m`` ``(R, N, n)``; ``initial_position_m`` a state ``(R, n)`` or, for a model with ``n_state``,
+    a position ``(R, dim)`` (at rest: the other components 0), spread over the positions by ``initial_sd_m`` or over
+    the state by ``initial_covariance`` ``(n, n)``; or ``n_particles`` uniform over ``region_m``, at rest. With
+    ``region_m`` a particle leaving the region is mirrored back and the components the model names in
+    :meth:`~locbook.models.base.MotionModel.mirrored_index` (a KinematicModel's velocity and
     acceleration on that axis reversed. ``motion`` excludes ``transition``, ``spread_m`` and ``velocity_m``.
 
     Resampling (``resampling``: one of :data:`~locbook.tracking.resampling.RESAMPLING_METHODS`): at every step by
@@ -330,10 +328,10 @@ def particle_filter(rss_dbm, model, rng: np.random.Generator, *, n_steps: int | 
         if given:
             raise ValueError(f"motion moves the particles by x = F x + w, w ~ N(0, Q); it excludes "
                              f"{' and '.join(given)} (got motion={type(motion).__name__} and {', '.join(given)})")
-        kin = _Kinematics(motion)
+        kin = _Motion(motion)
         if region_m is not None and kin.derivatives is None:
-            raise ValueError(f"region_m mirrors the velocity of a KinematicModel at the walls; "
-                             f"motion={type(motion).__name__} has no derivative layout to mirror")
+            raise ValueError(f"region_m mirrors the motion at the walls; motion={kin.model.label} does not say what a "
+                             f"mirror reverses (its mirrored_index() is None)")
 
     # -- one run without the run axis ----------------------------------------------------------------
     single = False
@@ -436,6 +434,9 @@ def particle_filter(rss_dbm, model, rng: np.random.Generator, *, n_steps: int | 
             if n_runs is None:
                 raise ValueError("with a log_likelihood callable give initial_particles_m or initial_position_m "
                                  "(the number of runs)")
+            if kin is not None and kin.n_state is None:
+                raise ValueError(f"motion {kin.model.label} has no n_state: give initial_particles_m or "
+                                 f"initial_position_m as full states")
             shape = (n_runs, int(n_particles), bounds[0].size)
             _check_cloud("n_particles", shape[:2] + ((kin.n_state,) if kin is not None else shape[2:]))
             particles = bounds[0] + (bounds[1] - bounds[0]) * rng.random(shape)
@@ -443,7 +444,7 @@ def particle_filter(rss_dbm, model, rng: np.random.Generator, *, n_steps: int | 
                 particles = kin.state_from_positions(particles)
         else:
             start = as_array("initial_position_m", initial_position_m)
-            if kin is not None and start.ndim == 2 and start.shape[-1] == pos_dim:
+            if kin is not None and kin.n_state is not None and start.ndim == 2 and start.shape[-1] == pos_dim:
                 start = kin.state_from_positions(start)   # a position: at rest
             want = (n_runs if n_runs is not None else start.shape[0] if start.ndim == 2 else None,
                     dim if dim is not None else start.shape[-1] if start.ndim == 2 else None)
@@ -465,7 +466,7 @@ def particle_filter(rss_dbm, model, rng: np.random.Generator, *, n_steps: int | 
                 if cov.shape not in ((d, d), (shape[0], d, d)):
                     raise ValueError(f"initial_covariance must have shape ({d}, {d}) or ({shape[0]}, {d}, {d}), "
                                      f"got {cov.shape}")
-                root = _psd_root("initial_covariance", cov)
+                root = psd_root("initial_covariance", cov)
                 z = rng.standard_normal(shape[:2] + (root.shape[-1],))
                 particles = confine(particles + (z @ root.T if root.ndim == 2 else
                                                  np.einsum("rnk,rdk->rnd", z, root)))
@@ -485,7 +486,7 @@ def particle_filter(rss_dbm, model, rng: np.random.Generator, *, n_steps: int | 
     fresh = False
     if kin is not None:
         def transition(x, t, rng):
-            return kin.step(x, rng, bounds)
+            return kin.step(x, t, rng, bounds)
     elif transition is None:
         try:
             spread = np.asarray(DEFAULT_SPREAD_M if spread_m is None else spread_m, dtype=float)

@@ -124,7 +124,8 @@ def test_grid_ml_noiseless_picks_true_grid_point():
     model = lb.PathLossModel(-45.0, 2.0)
     grid = np.stack(np.meshgrid(np.arange(0.05, 2.1, 0.1), np.arange(0.05, 7.8, 0.1)), -1).reshape(-1, 2)
     truth = grid[[10, 200, 777]]
-    res = lb.grid_ml_position(model.mean_rss_dbm(lb.pairwise_distance_m(truth, ANCHORS)), lb.RssModel(ANCHORS, model), grid, chunk=2)
+    res = lb.grid_ml_position(model.mean_rss_dbm(lb.pairwise_distance_m(truth, ANCHORS)), lb.RssModel(ANCHORS, model),
+                              grid, chunk=2)
     np.testing.assert_allclose(res.position_m, truth)
 
 

@@ -44,6 +44,9 @@ def _old_fingerprints_call(args, kwargs):
     before issue 47 (cells, anchors, a PathLossModel, walls) goes to the same arithmetic, :func:`_fingerprints`,
     directly (its parameters may carry any batch axes ``(..., m)``, more than an RssModel holds)."""
     if not _is_old_form(args, kwargs, ("cells_m", "anchors_m")):
+        if "walls_m" in kwargs:
+            raise ValueError("model_fingerprints: walls_m is the model's: pass RssModel(anchors_m, channel, walls_m) "
+                             "as model")
         return None
     given = inspect.signature(_model_fingerprints_v1).bind(*args, **kwargs).arguments
     return ("model_fingerprints(cells_m, anchors_m, channel, walls_m, ...)",

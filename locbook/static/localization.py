@@ -986,8 +986,8 @@ def _rss_model_parts(model, who: str, *, form: str | None = None, walls: bool = 
                                  f"{np.shape(getattr(ch, name))}; it takes scalar or per-anchor (m,) parameters: "
                                  "give each run and step its own RssModel")
     if not walls and model.walls_m is not None and ch.wall_attenuation_db != 0.0:
-        raise ValueError(f"{who}: model.walls_m ({model.walls_m.shape[0]} walls of {ch.wall_attenuation_db:g} dB) is "
-                         "not modelled by this estimator: give it a model without walls (walls_m=None)")
+        raise ValueError(f"{who}: model.walls_m ({model.walls_m.shape[0]} wall(s), {ch.wall_attenuation_db:g} dB each) "
+                         "is not modelled by this estimator: give it a model without walls (walls_m=None)")
     if not heights and model.tag_height_m is not None:
         raise ValueError(f"{who}: model.tag_height_m is not supported (the map uses plan distances): give it a model "
                          "with plan anchors (m, 2) and no tag height")
@@ -1041,6 +1041,9 @@ def _old_estimator_call(args, kwargs, who: str, v1):
         return (f"{who}(anchors_m, rss_dbm, channel, ...)",
                 f"{who}(rss_dbm, RssModel(anchors_m, channel, tag_height_m=...), ...)",
                 lambda new: new(rss_dbm, RssModel(anchors_m, channel, tag_height_m=tag_height_m), **given))
+    if "tag_height_m" in kwargs:
+        raise ValueError(f"{who}: tag_height_m is the model's: pass RssModel(anchors_m, channel, "
+                         "tag_height_m=...) as model")
     if "grid_m" in kwargs:
         if "cells_m" in kwargs or len(args) > 2:
             raise TypeError(f"{who}() got cells_m and grid_m, its old spelling: give cells_m only")

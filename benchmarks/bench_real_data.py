@@ -56,9 +56,8 @@ def measure(spacing: float = 0.1, particles: int = 3000, knn_queries: int = 10_0
     stream = lb.RssMeasurement(reg.rss_dbm, anchors, model, np.array([0, 1]), tag_height_m=h)
     queries = np.resize(rss, (knn_queries, rss.shape[1]))
     ml_fixes = np.full((len(reg.time_s), 2), np.nan)             # the KF's input: RSS-ML fixes on the clock
-    ml_fixes[ticks] = lb.rss_ml_position(anchors, rss, model, lb.grid_ml_position(anchors, rss, model, grid,
-                                                                                   tag_height_m=h).position_m,
-                                         tag_height_m=h).position_m
+    rss_model = lb.RssModel(anchors, model, tag_height_m=h)      # the static estimators' model
+    ml_fixes[ticks] = lb.rss_ml_position(rss, rss_model, lb.grid_ml_position(rss, rss_model, grid).position_m).position_m
 
     cases = [("fit per anchor (closed form)", "4,104 points x 6 anchors", lambda: ko.calibrate(data), None)]
     if cvxpy_fits:
@@ -71,10 +70,10 @@ def measure(spacing: float = 0.1, particles: int = 3000, knn_queries: int = 10_0
         ("box-LS", "719 epochs", lambda: lb.lateration_box_ls(anchors, ranges, lower, upper,
                                                                                 tag_height_m=h).position_m, "fix"),
         (f"grid ML ({spacing} m)", f"719 epochs x {len(grid)} cells",
-         lambda: lb.grid_ml_position(anchors, rss, model, grid, tag_height_m=h).position_m, "fix"),
+         lambda: lb.grid_ml_position(rss, rss_model, grid).position_m, "fix"),
         ("RSS ML (LM from grid ML)", "719 epochs",
-         lambda: lb.rss_ml_position(anchors, rss, model, lb.grid_ml_position(anchors, rss, model, grid, tag_height_m=h)
-                                    .position_m, tag_height_m=h).position_m, "fix"),
+         lambda: lb.rss_ml_position(rss, rss_model, lb.grid_ml_position(rss, rss_model, grid).position_m).position_m,
+         "fix"),
         ("k-NN (k = 5)", f"719 epochs x {len(cells)} map points", lambda: lb.knn_position(rss, fingerprints, cells, 5), "fix"),
         ("k-NN (k = 5), many queries", f"{knn_queries:,} queries x {len(cells)} map points",
          lambda: lb.knn_position(queries, fingerprints, cells, 5), "once"),

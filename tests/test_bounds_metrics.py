@@ -30,7 +30,7 @@ def test_ml_attains_bound_at_high_snr():
     p = np.array([1.3, 2.6])
     power = model.sample_rss_dbm(np.broadcast_to(lb.pairwise_distance_m(p, SQUARE), (20000, 4)),
                                    np.random.default_rng(11))
-    err2 = np.sum((lb.rss_ml_position(SQUARE, power, model).position_m - p) ** 2, axis=-1)
+    err2 = np.sum((lb.rss_ml_position(power, lb.RssModel(SQUARE, model)).position_m - p) ** 2, axis=-1)
     bound = lb.rss_crlb_m(p, SQUARE, 2.5, 0.5)
     se = err2.std() / np.sqrt(err2.size)
     assert abs(err2.mean() - bound**2) < 4 * se + 0.02 * bound**2

@@ -208,8 +208,9 @@ def test_a_fit_becomes_the_model_it_estimates():
     assert np.isclose(shared.ref_power_dbm, -40.0) and np.isclose(shared.path_loss_exp, 1.8)
     assert np.isclose(shared.sigma_db, 0.0, atol=1e-9) and shared.min_distance_m == 0.1   # residual sigma
     with pytest.raises(ValueError, match=r"a path-loss fit becomes one with fit.model\(\)"):
-        lb.rss_ml_position(np.array([[0.0, 0.0], [10.0, 0.0], [0.0, 10.0]]), np.array([-50.0, -60.0, -60.0]),
-                           lb.calibrate_path_loss(d, rss, "per_anchor"))
+        lb.rss_ml_position(np.array([-50.0, -60.0, -60.0]),
+                           lb.RssModel(np.array([[0.0, 0.0], [10.0, 0.0], [0.0, 10.0]]),
+                                       lb.calibrate_path_loss(d, rss, "per_anchor")))
 
 
 def test_a_fit_of_independent_problems_or_a_failed_fit_is_not_a_model():

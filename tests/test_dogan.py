@@ -166,7 +166,7 @@ def test_mle_reaches_the_grid_optimum():
     est = dg.mle_positions(power, channel)
     xs, ys = np.arange(-3, 10.6, 0.05), np.arange(-3, 12.2, 0.05)
     fine = np.stack(np.meshgrid(xs, ys, indexing="ij"), -1).reshape(-1, 2)
-    best = lb.grid_ml_position(ANCHORS, power, channel, fine)
+    best = lb.grid_ml_position(power, lb.RssModel(ANCHORS, channel), fine)
     cost = np.sum((power - channel.mean_rss_dbm(lb.pairwise_distance_m(est.position_m, ANCHORS))) ** 2, -1)
     assert np.all(cost <= best.cost + 1e-9) and np.all(est.converged)
 

@@ -20,7 +20,7 @@ def test_eq24_cost_is_the_rss_likelihood_scaled_and_has_the_grid_ml_minimiser():
     rss_domain = np.sum((rss[:, None, :] - channel.mean_rss_dbm(lb.pairwise_distance_m(grid, dg.ANCHORS_M))) ** 2, -1)
     np.testing.assert_allclose(cost * 30.0**2, rss_domain, rtol=1e-9)                # (10 alpha)^2 = 900
     np.testing.assert_array_equal(grid[np.argmin(cost, axis=1)],
-                                  lb.grid_ml_position(dg.ANCHORS_M, rss, channel, grid).position_m)
+                                  lb.grid_ml_position(rss, lb.RssModel(dg.ANCHORS_M, channel), grid).position_m)
 
 
 def test_calibration_ls_matches_cvxpy_and_its_sampling_law():

@@ -197,6 +197,21 @@ ESTIMATORS = ("ls", "wls", "box", "ml", "grid", "knn")
 GRID = np.stack(np.meshgrid(np.arange(0.0, 10.5, 0.5), np.arange(0.0, 10.5, 0.5)), -1).reshape(-1, 2)
 
 
+def rss_ml_position(rss_dbm, anchors_m, model):
+    """:func:`locbook.rss_ml_position` with its RssModel built in the call (the model's refusals count as its own)."""
+    return lb.rss_ml_position(rss_dbm, lb.RssModel(anchors_m, model))
+
+
+def grid_ml_position(rss_dbm, anchors_m, model, cells_m):
+    """:func:`locbook.grid_ml_position` with its RssModel built in the call."""
+    return lb.grid_ml_position(rss_dbm, lb.RssModel(anchors_m, model), cells_m)
+
+
+def model_fingerprints(cells_m, anchors_m, model):
+    """:func:`locbook.model_fingerprints` with its RssModel built in the call."""
+    return lb.model_fingerprints(cells_m, lb.RssModel(anchors_m, model))
+
+
 def run_estimator(name: str, anchors, readings, scale: float):
     """``readings`` are ranges for the lateration family, powers for the others."""
     if name == "ls":
@@ -207,10 +222,10 @@ def run_estimator(name: str, anchors, readings, scale: float):
     if name == "box":
         return call(lb.lateration_box_ls, anchors, readings, -scale, 11.0 * scale)
     if name == "ml":
-        return call(lb.rss_ml_position, anchors, readings, MODEL)
+        return call(rss_ml_position, readings, anchors, MODEL)
     if name == "grid":
-        return call(lb.grid_ml_position, anchors, readings, MODEL, GRID * scale)
-    maps = call(lb.model_fingerprints, GRID * scale, anchors, MODEL)
+        return call(grid_ml_position, readings, anchors, MODEL, GRID * scale)
+    maps = call(model_fingerprints, GRID * scale, anchors, MODEL)
     return call(lb.knn_position, readings, maps, GRID * scale, 1)
 
 
@@ -474,7 +489,7 @@ def test_calibrate_from_reference_tags(steps, tags, kind, bounded, specials, dty
     tag_positions = rng.uniform(0.5, 9.5, (tags, 2))
     model = lb.PathLossModel(-47.0, 2.1)
     with np.errstate(all="ignore"):
-        rss = np.broadcast_to(refused_or(lb.model_fingerprints, tag_positions, readers, model)
+        rss = np.broadcast_to(refused_or(model_fingerprints, tag_positions, readers, model)
                               if tags else np.zeros((0, len(readers))), (steps, tags, len(readers)))
     rss = inject(rss, specials, rng)
     kw = {} if bounded else {"ref_power_bounds_dbm": None, "path_loss_exp_bounds": None}
@@ -501,7 +516,7 @@ def test_messages_found_naming_no_argument_now_name_one(case):
     """Found by the fuzzing: a negative distance, and cells, tags or readers so far apart that their distances
     overflow, were refused with messages that blamed no argument (or an internal distance_m); each names one now."""
     fn, args = {"lateration_ls_pairs": (partial(lb.lateration_ls, pairs="consecutive"), (GRID[:3], [1.0, -1.0, 2.0])),
-                "model_fingerprints": (lb.model_fingerprints, (GRID[:3] * 1e300, -GRID[:4] * 1e300, MODEL)),
+                "model_fingerprints": (model_fingerprints, (GRID[:3] * 1e300, -GRID[:4] * 1e300, MODEL)),
                 "calibrate_from_reference_tags": (lb.calibrate_from_reference_tags,
                                                   (np.full((1, 3, 4), -60.0), GRID[:3] + 1.0,
                                                    np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]])
@@ -519,8 +534,8 @@ MASK_ESTIMATORS = {
     "lateration_ls pairs": lambda d, p: lb.lateration_ls(MASK_ANCHORS, d, pairs="last"),
     "lateration_wls": lambda d, p: lb.lateration_wls(MASK_ANCHORS, d, np.ones(4)),
     "lateration_box_ls": lambda d, p: lb.lateration_box_ls(MASK_ANCHORS, d, 0.0, 20.0),
-    "rss_ml_position": lambda d, p: lb.rss_ml_position(MASK_ANCHORS, p, MODEL),
-    "grid_ml_position": lambda d, p: lb.grid_ml_position(MASK_ANCHORS, p, MODEL, MASK_GRID),
+    "rss_ml_position": lambda d, p: lb.rss_ml_position(p, lb.RssModel(MASK_ANCHORS, MODEL)),
+    "grid_ml_position": lambda d, p: lb.grid_ml_position(p, lb.RssModel(MASK_ANCHORS, MODEL), MASK_GRID),
 }
 
 

@@ -47,8 +47,8 @@ def test_anchors_at_the_tag_height_reduce_to_the_plan_problem():
     flat[:, 2] = H
     rng = np.random.default_rng(1)
     power = rng.normal(-70, 6, (20, 6))
-    a = rss_ml_position(flat, power, MODEL, tag_height_m=H)
-    b = rss_ml_position(flat[:, :2], power, MODEL)
+    a = rss_ml_position(power, RssModel(flat, MODEL, tag_height_m=H))
+    b = rss_ml_position(power, RssModel(flat[:, :2], MODEL))
     np.testing.assert_allclose(a.position_m, b.position_m, atol=1e-9)
 
 
@@ -56,7 +56,7 @@ def test_rss_ml_with_height_matches_an_independent_scipy_solve():
     rng = np.random.default_rng(2)
     truth = rng.uniform([0.5, 0.5], [8.5, 6.5], (25, 2))
     power = MODEL.mean_rss_dbm(ranges_3d(truth)) + rng.normal(0, 3.0, (25, 6))
-    res = rss_ml_position(ANCHORS, power, MODEL, tag_height_m=H)
+    res = rss_ml_position(power, RssModel(ANCHORS, MODEL, tag_height_m=H))
     assert res.converged.all()
     for k in range(25):
         def resid(p, k=k):
@@ -75,9 +75,9 @@ def test_grid_ml_with_height_equals_the_3d_grid_at_that_height():
     grid = np.stack(np.meshgrid(np.arange(0, 9.1, 0.25), np.arange(0, 7.1, 0.25)), -1).reshape(-1, 2)
     power = rng.normal(-70, 6, (30, 6))
     power[3, 2] = np.nan
-    a = grid_ml_position(ANCHORS, power, MODEL, grid, tag_height_m=H)
+    a = grid_ml_position(power, RssModel(ANCHORS, MODEL, tag_height_m=H), grid)
     grid3 = np.column_stack([grid, np.full(len(grid), H)])
-    b = grid_ml_position(ANCHORS, power, MODEL, grid3)
+    b = grid_ml_position(power, RssModel(ANCHORS, MODEL), grid3)
     np.testing.assert_array_equal(a.position_m, b.position_m[:, :2])
 
 

@@ -244,7 +244,7 @@ def test_pooled_sigma_leaves_out_readings_not_heard():
 def test_reference_tag_calibration_with_a_tag_not_heard():
     tags = np.array([[1.0, 1.0], [4.0, 1.0], [1.0, 6.0], [5.0, 5.0]])
     readers = np.array([[0.0, 0.0], [6.0, 0.0], [0.0, 8.0]])
-    rss = lb.model_fingerprints(tags, readers, lb.PathLossModel(-45.0, 2.2)) \
+    rss = lb.model_fingerprints(tags, lb.RssModel(readers, lb.PathLossModel(-45.0, 2.2))) \
         + np.random.default_rng(4).normal(0.0, 2.0, (2, 4, 3))
     rss[1, 2, 0] = np.nan                                                # step 1: reader 0 did not hear tag 2
     cal = lb.calibrate_from_reference_tags(rss, tags, readers, ref_power_bounds_dbm=None, path_loss_exp_bounds=None)
@@ -436,7 +436,8 @@ def test_reference_tags_a_reader_that_heard_one_tag_is_named():
     no parameters, and the maps built from it would have none), naming the step and the reader."""
     tags = np.array([[1.0, 1.0], [4.0, 1.0], [1.0, 6.0], [5.0, 5.0]])
     readers = np.array([[0.0, 0.0], [6.0, 0.0], [0.0, 8.0]])
-    rss = np.broadcast_to(lb.model_fingerprints(tags, readers, lb.PathLossModel(-45.0, 2.2)), (3, 4, 3)).copy()
+    rss = np.broadcast_to(lb.model_fingerprints(tags, lb.RssModel(readers, lb.PathLossModel(-45.0, 2.2))),
+                          (3, 4, 3)).copy()
     rss[2, 1:, 1] = np.nan                                   # step 2: reader 1 heard tag 0 only
     with pytest.raises(lb.DegenerateGeometryError, match=r"ref_rss_dbm.*step \(2,\).*reader 1.*fewer than two"):
         lb.calibrate_from_reference_tags(rss, tags, readers)

@@ -19,6 +19,7 @@ from locbook.static import localization
 
 ANCHORS = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 8.0], [0.0, 8.0], [5.0, 12.0]])
 MODEL = lb.PathLossModel(-45.0, 2.5, 4.0)
+RSS_MODEL = lb.RssModel(ANCHORS, MODEL)
 BOX = ([-1.0, -1.0], [11.0, 13.0])
 
 
@@ -33,9 +34,9 @@ ESTIMATORS = {
     "ls": lambda a, p, **kw: lb.lateration_ls(a, MODEL.range_m(p), **kw),
     "wls": lambda a, p, **kw: lb.lateration_wls(a, MODEL.range_m(p), np.arange(1.0, a.shape[0]), **kw),
     "box": lambda a, p, **kw: lb.lateration_box_ls(a, MODEL.range_m(p), *BOX, **kw),
-    "ml": lambda a, p, **kw: lb.rss_ml_position(a, p, MODEL, **kw),
-    "grid": lambda a, p, **kw: lb.grid_ml_position(a, p, MODEL, np.stack(np.meshgrid(np.arange(0, 10.5, 0.5),
-                                                                                 np.arange(0, 12.5, 0.5)), -1).reshape(-1, 2), **kw),
+    "ml": lambda a, p, **kw: lb.rss_ml_position(p, lb.RssModel(a, MODEL), **kw),
+    "grid": lambda a, p, **kw: lb.grid_ml_position(p, lb.RssModel(a, MODEL), np.stack(np.meshgrid(np.arange(0, 10.5, 0.5),
+                                                                                         np.arange(0, 12.5, 0.5)), -1).reshape(-1, 2), **kw),
 }
 
 
@@ -66,17 +67,17 @@ def test_grid_ml_ignores_a_missing_anchor_instead_of_returning_cell_zero():
     power = MODEL.mean_rss_dbm(lb.pairwise_distance_m(truth, ANCHORS))
     power[0, 1] = np.nan
     grid = np.stack(np.meshgrid(np.arange(0, 10.5, 0.5), np.arange(0, 12.5, 0.5)), -1).reshape(-1, 2)
-    res = lb.grid_ml_position(ANCHORS, power, MODEL, grid)
+    res = lb.grid_ml_position(power, RSS_MODEL, grid)
     np.testing.assert_array_equal(res.position_m[0], truth[0])                  # noiseless: the true cell
 
 
 def test_rss_ml_with_a_silent_anchor_is_not_a_confident_answer():
     power = np.full((1, 5), np.nan)
     power[0, :2] = [-60.0, -62.0]
-    res = lb.rss_ml_position(ANCHORS, power, MODEL)
+    res = lb.rss_ml_position(power, RSS_MODEL)
     assert np.isnan(res.position_m).all() and not res.converged[0] and res.status[0] == "too_few_anchors"
     with pytest.raises(lb.ConvergenceError, match="too_few_anchors"):
-        lb.rss_ml_position(ANCHORS, power, MODEL, raise_on_failure=True)
+        lb.rss_ml_position(power, RSS_MODEL, raise_on_failure=True)
 
 
 def test_collinear_heard_anchors_are_marked_degenerate():
@@ -142,19 +143,19 @@ def test_one_failing_box_problem_does_not_cost_its_batch(monkeypatch):
     (lambda: lb.lateration_wls(ANCHORS, np.ones(5), [1.0, -1.0, 1.0, 1.0]), "weights must be non-negative, got -1.0"),
     (lambda: lb.lateration_ls(ANCHORS, np.ones(5), min_anchors=6), r"min_anchors must be <= the number of anchors \(5\)"),
     (lambda: lb.lateration_box_ls(ANCHORS, np.ones(5), 0.0, 10.0, min_anchors=3.5), "min_anchors must be an integer"),
-    (lambda: lb.rss_ml_position(ANCHORS, -60 * np.ones((2, 5)), MODEL, initial_m=[[np.nan, 1.0], [2.0, 2.0]]),
+    (lambda: lb.rss_ml_position(-60 * np.ones((2, 5)), RSS_MODEL, initial_m=[[np.nan, 1.0], [2.0, 2.0]]),
      r"initial_m must be finite, or all NaN.*\[nan, 1.0\]"),
-    (lambda: lb.rss_ml_position(ANCHORS, -60 * np.ones(5), MODEL, initial_m=[np.inf, 1.0]), "initial_m must be finite"),
-    (lambda: lb.grid_ml_position(ANCHORS, -60 * np.ones(5), MODEL, [[1.0, np.nan]]), "grid_m must be finite"),
+    (lambda: lb.rss_ml_position(-60 * np.ones(5), RSS_MODEL, initial_m=[np.inf, 1.0]), "initial_m must be finite"),
+    (lambda: lb.grid_ml_position(-60 * np.ones(5), RSS_MODEL, [[1.0, np.nan]]), "cells_m must be finite"),
     (lambda: lb.knn_position(np.zeros((5, 4)), np.zeros((3, 10, 4)), np.zeros((10, 2)), 2),
      r"batch axes of rss_dbm \(5,\).*fingerprints_dbm \(3,\)"),
     (lambda: lb.knn_position(np.zeros(3), np.zeros((10, 4)), np.zeros((10, 2)), 2), r"rss_dbm must have shape \(\.\.\., 4\)"),
     (lambda: lb.knn_position(np.zeros(4), np.zeros((10, 4)), np.zeros((9, 2)), 2), "fingerprints_dbm has 10 cells.*cells_m has 9"),
-    (lambda: lb.model_fingerprints(np.zeros((5, 3)), ANCHORS, MODEL), r"cells_m must have shape \(\.\.\., 2\), got \(5, 3\)"),
-    (lambda: lb.model_fingerprints(np.zeros((5, 2)), ANCHORS, lb.PathLossModel(np.zeros(3), 2.0)),
-     r"model.ref_power_dbm must be a scalar or have shape \(\.\.\., 5\)"),
-    (lambda: lb.model_fingerprints(np.zeros((5, 2)), ANCHORS, MODEL, np.zeros((2, 3))), r"walls_m must have shape"),
-    (lambda: lb.model_fingerprints(ANCHORS, ANCHORS, MODEL, min_distance_m=0.0), "min_distance_m must be > 0"),
+    (lambda: lb.model_fingerprints(np.zeros((5, 3)), RSS_MODEL), r"cells_m must have shape \(\.\.\., 2\), got \(5, 3\)"),
+    (lambda: lb.model_fingerprints(np.zeros((5, 2)), MODEL), r"model must be an RssModel.*got PathLossModel"),
+    (lambda: lb.model_fingerprints(np.zeros((5, 2)), lb.RssModel(ANCHORS, MODEL, np.full((1, 2, 2), np.nan))),
+     "walls_m must be finite"),
+    (lambda: lb.model_fingerprints(ANCHORS, RSS_MODEL, min_distance_m=0.0), "min_distance_m must be > 0"),
     (lambda: lb.pattern_fingerprints(np.zeros((6, 40, 4)), axis=-1), "axis must be a sample axis"),
     (lambda: lb.pattern_fingerprints(np.full((6, 40, 4), np.inf)), "rss_dbm must be finite"),
     (lambda: lb.rss_crlb_m(np.zeros((4, 3)), ANCHORS, 2.0, 4.0), r"position_m must have shape \(\.\.\., 2\)"),
@@ -162,10 +163,11 @@ def test_one_failing_box_problem_does_not_cost_its_batch(monkeypatch):
     (lambda: lb.rss_crlb_m([1.0, 1.0], ANCHORS, [2.0, 2.0], 4.0), r"path_loss_exp must be a positive scalar or \(5,\)"),
     (lambda: lb.crlb_rms_over_area_m(np.zeros((0, 2)), ANCHORS, 2.0, 4.0), "points_m must hold at least one"),
     (lambda: lb.lateration_box_ls(ANCHORS, np.ones(5), [0, 0, 0], [1, 1]), r"lower_m must be a scalar or have shape \(2,\)"),
-    (lambda: lb.rss_ml_position(ANCHORS, np.ones(5), lb.PathLossModel(np.zeros(3), 2.0)), r"model.ref_power_dbm must be a scalar or have shape \(5,\)"),
-    (lambda: lb.rss_ml_position(ANCHORS, -60 * np.ones(5), MODEL, initial_m=np.zeros(3)), "initial_m must broadcast"),
-    (lambda: lb.grid_ml_position(ANCHORS, -60 * np.ones(5), MODEL, np.zeros((4, 3))), r"grid_m must have shape"),
-    (lambda: lb.rss_ml_position(ANCHORS, -60 * np.ones(5), MODEL, min_anchors=2), "min_anchors must be >= 3"),
+    (lambda: lb.rss_ml_position(np.ones(5), MODEL), r"model must be an RssModel.*pass rss_ml_position\(rss_dbm, RssModel"),
+    (lambda: lb.grid_ml_position(np.ones(5), MODEL, ANCHORS), r"model must be an RssModel.*pass grid_ml_position\(rss_dbm, Rss"),
+    (lambda: lb.rss_ml_position(-60 * np.ones(5), RSS_MODEL, initial_m=np.zeros(3)), "initial_m must broadcast"),
+    (lambda: lb.grid_ml_position(-60 * np.ones(5), RSS_MODEL, np.zeros((4, 3))), r"cells_m must have shape"),
+    (lambda: lb.rss_ml_position(-60 * np.ones(5), RSS_MODEL, min_anchors=2), "min_anchors must be >= 3"),
 ])
 def test_bad_input_names_the_argument(call, message):
     with pytest.raises(ValueError, match=message):
@@ -176,7 +178,7 @@ def test_target_on_an_anchor_is_found():
     d = lb.pairwise_distance_m(ANCHORS[2], ANCHORS)          # zero distance to anchor 2
     np.testing.assert_allclose(lb.lateration_ls(ANCHORS, d).position_m, ANCHORS[2], atol=1e-9)
     power = MODEL.mean_rss_dbm(np.maximum(d, 1e-3))
-    np.testing.assert_allclose(lb.rss_ml_position(ANCHORS, power, MODEL).position_m, ANCHORS[2], atol=1e-3)
+    np.testing.assert_allclose(lb.rss_ml_position(power, RSS_MODEL).position_m, ANCHORS[2], atol=1e-3)
 
 
 @settings(max_examples=60, deadline=None, derandomize=True)
@@ -270,13 +272,13 @@ def test_rss_ml_without_a_finite_start_fails_alone():
     """A power of -20000 dBm is finite, but its range overflows, so the linearized start does not exist."""
     _, power = _batch(6)
     holed = _with_overflow(power, 1, 0, -20000.0)
-    res = lb.rss_ml_position(ANCHORS, holed, MODEL)
+    res = lb.rss_ml_position(holed, RSS_MODEL)
     keep = [0, 2, 3, 4, 5]
     assert res.status[1] == "solver_failed" and not res.converged[1] and np.isnan(res.position_m[1]).all()
-    np.testing.assert_array_equal(res.position_m[keep], lb.rss_ml_position(ANCHORS, power[keep], MODEL).position_m)
+    np.testing.assert_array_equal(res.position_m[keep], lb.rss_ml_position(power[keep], RSS_MODEL).position_m)
     assert res.converged[keep].all()
     with pytest.raises(lb.ConvergenceError, match="solver_failed"):
-        lb.rss_ml_position(ANCHORS, holed, MODEL, raise_on_failure=True)
+        lb.rss_ml_position(holed, RSS_MODEL, raise_on_failure=True)
 
 
 def test_grid_ml_with_an_overflowing_cost_fails_alone():
@@ -285,10 +287,10 @@ def test_grid_ml_with_an_overflowing_cost_fails_alone():
     grid = ANCHORS + 0.5
     holed = _with_overflow(power, 2, 0, -1e160)
     with np.errstate(over="ignore"):
-        res = lb.grid_ml_position(ANCHORS, holed, MODEL, grid)
+        res = lb.grid_ml_position(holed, RSS_MODEL, grid)
     assert res.status.tolist() == ["ok", "ok", "solver_failed", "ok"] and np.isnan(res.position_m[2]).all()
     np.testing.assert_array_equal(res.position_m[[0, 1, 3]],
-                                  lb.grid_ml_position(ANCHORS, power[[0, 1, 3]], MODEL, grid).position_m)
+                                  lb.grid_ml_position(power[[0, 1, 3]], RSS_MODEL, grid).position_m)
 
 
 @pytest.mark.parametrize("name", list(ESTIMATORS))
@@ -303,22 +305,22 @@ def test_nan_start_rows_take_the_default_start_so_a_grid_fix_chains():
     _, power = _batch(6)
     holed = _with_overflow(power, 3, [0, 1, 2], np.nan)
     grid = np.stack(np.meshgrid(np.arange(-1, 11.5, 0.5), np.arange(-1, 13.5, 0.5)), -1).reshape(-1, 2)
-    start = lb.grid_ml_position(ANCHORS, holed, MODEL, grid).position_m
+    start = lb.grid_ml_position(holed, RSS_MODEL, grid).position_m
     assert np.isnan(start[3]).all()
-    res = lb.rss_ml_position(ANCHORS, holed, MODEL, start)
+    res = lb.rss_ml_position(holed, RSS_MODEL, start)
     keep = [0, 1, 2, 4, 5]
     assert res.status[3] == "too_few_anchors" and res.converged[keep].all()
     np.testing.assert_array_equal(res.position_m[keep],
-                                  lb.rss_ml_position(ANCHORS, power[keep], MODEL, start[keep]).position_m)
+                                  lb.rss_ml_position(power[keep], RSS_MODEL, start[keep]).position_m)
     # all heard, some rows without a start: those rows equal the default-start answer
     mixed = start.copy()
     mixed[3] = start[0]
     mixed[[0, 4]] = np.nan
-    res = lb.rss_ml_position(ANCHORS, power, MODEL, mixed)
-    np.testing.assert_allclose(res.position_m[[0, 4]], lb.rss_ml_position(ANCHORS, power[[0, 4]], MODEL).position_m,
+    res = lb.rss_ml_position(power, RSS_MODEL, mixed)
+    np.testing.assert_allclose(res.position_m[[0, 4]], lb.rss_ml_position(power[[0, 4]], RSS_MODEL).position_m,
                                rtol=0, atol=1e-9)
     np.testing.assert_array_equal(res.position_m[[1, 2, 3, 5]],
-                                  lb.rss_ml_position(ANCHORS, power[[1, 2, 3, 5]], MODEL, mixed[[1, 2, 3, 5]]).position_m)
+                                  lb.rss_ml_position(power[[1, 2, 3, 5]], RSS_MODEL, mixed[[1, 2, 3, 5]]).position_m)
 
 
 @pytest.mark.parametrize("name", ["ls", "wls", "box", "grid"])
@@ -330,7 +332,7 @@ def test_target_on_an_anchor_with_another_anchor_missing(name):
             power = MODEL.mean_rss_dbm(np.maximum(np.nan_to_num(holed, nan=1.0), 1e-6))
             power[np.isnan(holed)] = np.nan
             grid = np.stack(np.meshgrid(np.arange(0, 10.5, 0.5), np.arange(0, 12.5, 0.5)), -1).reshape(-1, 2)
-            res = lb.grid_ml_position(ANCHORS, power, MODEL, grid)
+            res = lb.grid_ml_position(power, RSS_MODEL, grid)
         else:
             res = {"ls": lambda: lb.lateration_ls(ANCHORS, holed),
                    "wls": lambda: lb.lateration_wls(ANCHORS, holed, [1.0, 2.0, 3.0, 4.0]),
@@ -471,8 +473,8 @@ def test_physically_impossible_powers_get_their_own_status(name, value):
     the near-field clamp, here P_0 + 60 n dB at 1 mm, and 10 sigma above that has probability < 1e-23). Before, the
     ML returned the centre of the square with converged=True (cost inf at 1e300) and the grid a grid point."""
     grid = np.stack(np.meshgrid(np.arange(0, 10.5, 0.5), np.arange(0, 10.5, 0.5)), -1).reshape(-1, 2)
-    est = {"ml": lambda p: lb.rss_ml_position(SQUARE, p, SQUARE_MODEL),
-           "grid": lambda p: lb.grid_ml_position(SQUARE, p, SQUARE_MODEL, grid)}[name]
+    est = {"ml": lambda p: lb.rss_ml_position(p, lb.RssModel(SQUARE, SQUARE_MODEL)),
+           "grid": lambda p: lb.grid_ml_position(p, lb.RssModel(SQUARE, SQUARE_MODEL), grid)}[name]
     truth = np.array([[2.0, 3.0], [7.0, 6.0], [4.0, 8.0]])
     power = SQUARE_MODEL.mean_rss_dbm(lb.pairwise_distance_m(truth, SQUARE))
     bad = power.copy()
@@ -498,7 +500,8 @@ def test_an_infinite_cost_is_never_converged():
     truth = np.array([[2.0, 3.0], [7.0, 6.0]])
     power = SQUARE_MODEL.mean_rss_dbm(lb.pairwise_distance_m(truth, SQUARE))
     with np.errstate(over="ignore", invalid="ignore"):
-        res = lb.rss_ml_position(SQUARE, power, SQUARE_MODEL, initial_m=[[np.nan, np.nan], [1e300, 1e300]])
+        res = lb.rss_ml_position(power, lb.RssModel(SQUARE, SQUARE_MODEL),
+                                 initial_m=[[np.nan, np.nan], [1e300, 1e300]])
     assert res.status.tolist() == ["ok", "solver_failed"] and res.converged.tolist() == [True, False]
     assert np.isnan(res.position_m[1]).all()
     np.testing.assert_allclose(res.position_m[0], truth[0], atol=1e-9)
@@ -531,8 +534,8 @@ def test_nearly_collinear_heard_anchors_fail_their_problem_alone():
     holed[1, 3] = np.nan
     for res in (lb.lateration_ls(anchors, holed), lb.lateration_wls(anchors, holed, [1.0, 1.0, 1.0]),
                 lb.lateration_box_ls(anchors, holed, -1.0, 11.0),
-                lb.rss_ml_position(anchors, np.where(np.isnan(holed), np.nan, SQUARE_MODEL.mean_rss_dbm(d)),
-                                   SQUARE_MODEL)):
+                lb.rss_ml_position(np.where(np.isnan(holed), np.nan, SQUARE_MODEL.mean_rss_dbm(d)),
+                                   lb.RssModel(anchors, SQUARE_MODEL))):
         assert res.status.tolist() == ["ok", "degenerate_geometry"] and np.isnan(res.position_m[1]).all()
         np.testing.assert_allclose(res.position_m[0], truth[0], atol=1e-6)
 
@@ -596,8 +599,8 @@ def test_a_single_overflowing_range_gives_nan_not_infinity(name):
 
 # -- issue 26 follow-up: readings impossible together, a goodness-of-fit status ----------------------------------
 SQUARE_GRID = np.stack(np.meshgrid(np.arange(0, 10.25, 0.25), np.arange(0, 10.25, 0.25)), -1).reshape(-1, 2)
-ML_ESTIMATORS = {"ml": lambda a, p, model, **kw: lb.rss_ml_position(a, p, model, **kw),
-                 "grid": lambda a, p, model, **kw: lb.grid_ml_position(a, p, model, SQUARE_GRID, **kw)}
+ML_ESTIMATORS = {"ml": lambda a, p, model, **kw: lb.rss_ml_position(p, lb.RssModel(a, model), **kw),
+                 "grid": lambda a, p, model, **kw: lb.grid_ml_position(p, lb.RssModel(a, model), SQUARE_GRID, **kw)}
 
 
 @pytest.mark.parametrize("name", ["ml", "grid"])
@@ -678,9 +681,9 @@ def test_implausible_reading_states_its_physical_assumption():
     model = lb.PathLossModel(-40.0, 2.0)                      # sigma_db = 0, min_distance_m = 0 (the defaults)
     truth = np.array([5e-4, 0.0])                             # 0.5 mm from anchor 0
     power = model.mean_rss_dbm(lb.pairwise_distance_m(truth, SQUARE))
-    assert lb.rss_ml_position(SQUARE, power, model).status == "implausible_reading"
+    assert lb.rss_ml_position(power, lb.RssModel(SQUARE, model)).status == "implausible_reading"
     far = model.mean_rss_dbm(lb.pairwise_distance_m(np.array([2e-3, 0.0]), SQUARE))   # 2 mm: taken
-    assert lb.rss_ml_position(SQUARE, far, model).status != "implausible_reading"
+    assert lb.rss_ml_position(far, lb.RssModel(SQUARE, model)).status != "implausible_reading"
     import inspect
     source = inspect.getsource(localization)
     assert "no real reading is refused" not in source
@@ -697,8 +700,8 @@ def test_grid_ml_overflow_is_consistent_with_rss_ml_and_silent(value):
     holed = _with_overflow(power, 2, 0, value)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        grid = lb.grid_ml_position(ANCHORS, holed, MODEL, ANCHORS + 0.5)
-        ml = lb.rss_ml_position(ANCHORS, holed, MODEL)
+        grid = lb.grid_ml_position(holed, RSS_MODEL, ANCHORS + 0.5)
+        ml = lb.rss_ml_position(holed, RSS_MODEL)
     for res in (grid, ml):
         assert res.status[2] == "solver_failed" and not res.converged[2]
         assert np.isnan(res.position_m[2]).all() and np.isnan(res.cost[2])

@@ -75,11 +75,11 @@ def ml_problems():
 def test_rss_ml_noiseless_and_against_scipy(points, ml_problems):
     model = ML_MODEL
     d = lb.pairwise_distance_m(points, ANCHORS)
-    exact = lb.rss_ml_position(ANCHORS, model.mean_rss_dbm(d), model)
+    exact = lb.rss_ml_position(model.mean_rss_dbm(d), lb.RssModel(ANCHORS, model))
     np.testing.assert_allclose(exact.position_m, points, atol=1e-6)
     power = model.sample_rss_dbm(d, np.random.default_rng(4))
     np.testing.assert_array_equal(power, ml_problems["power"])
-    ml = lb.rss_ml_position(ANCHORS, power, model)
+    ml = lb.rss_ml_position(power, lb.RssModel(ANCHORS, model))
     assert ml.converged.all()
     for i in range(0, 50, 5):
         ref = least_squares(lambda p: power[i] - model.mean_rss_dbm(lb.pairwise_distance_m(p, ANCHORS)),
@@ -93,7 +93,7 @@ def test_rss_ml_noiseless_and_against_scipy(points, ml_problems):
     # started in the global basin (the best brute-force grid point, not locbook's answer), locbook's iteration
     # reaches the global minimum that scipy found from independent starts, for every problem
     best_x, best_cost = ml_problems["best_x"], ml_problems["best_cost"]
-    from_grid = lb.rss_ml_position(ANCHORS, power, model, initial_m=ml_problems["grid_start"])
+    from_grid = lb.rss_ml_position(power, lb.RssModel(ANCHORS, model), initial_m=ml_problems["grid_start"])
     assert from_grid.converged.all()
     assert np.all(from_grid.cost <= best_cost * (1 + 1e-9) + 1e-9)
     np.testing.assert_allclose(from_grid.position_m, best_x, atol=1e-4)
@@ -105,7 +105,7 @@ def test_rss_ml_converged_means_a_stationary_point_of_the_cost(ml_problems):
     starts). What ``converged`` promises is a local minimum: the cost's gradient, taken here by central
     differences (independent of locbook's Jacobian), vanishes, and no nearby point is lower."""
     power = ml_problems["power"]
-    ml = lb.rss_ml_position(ANCHORS, power, ML_MODEL)
+    ml = lb.rss_ml_position(power, lb.RssModel(ANCHORS, ML_MODEL))
     assert ml.converged.all()
     cost = lambda p: np.sum((power - ML_MODEL.mean_rss_dbm(lb.pairwise_distance_m(p[:, None, :], ANCHORS)[:, 0])) ** 2, -1)
     h = 1e-6
@@ -124,7 +124,8 @@ def test_grid_ml_noiseless_picks_true_grid_point():
     model = lb.PathLossModel(-45.0, 2.0)
     grid = np.stack(np.meshgrid(np.arange(0.05, 2.1, 0.1), np.arange(0.05, 7.8, 0.1)), -1).reshape(-1, 2)
     truth = grid[[10, 200, 777]]
-    res = lb.grid_ml_position(ANCHORS, model.mean_rss_dbm(lb.pairwise_distance_m(truth, ANCHORS)), model, grid, chunk=2)
+    res = lb.grid_ml_position(model.mean_rss_dbm(lb.pairwise_distance_m(truth, ANCHORS)), lb.RssModel(ANCHORS, model),
+                              grid, chunk=2)
     np.testing.assert_allclose(res.position_m, truth)
 
 
@@ -135,7 +136,7 @@ def test_degenerate_anchor_geometry_raises(anchors, message):
     with pytest.raises(lb.DegenerateGeometryError, match=message):
         lb.lateration_ls(anchors, np.ones(len(anchors)))
     with pytest.raises(lb.DegenerateGeometryError, match=message):
-        lb.rss_ml_position(anchors, np.full(len(anchors), -60.0), lb.PathLossModel(-40.0, 2.0))
+        lb.rss_ml_position(np.full(len(anchors), -60.0), lb.RssModel(anchors, lb.PathLossModel(-40.0, 2.0)))
 
 
 def test_wrong_number_of_ranges_raises():
@@ -156,16 +157,16 @@ def test_rss_ml_on_a_box_is_the_bounded_optimum_of_scipy():
         cost = lambda p: np.sum((rss - model.mean_rss_dbm(np.linalg.norm(p - anchors, axis=1))) ** 2)
         ref = minimize(cost, [5.0, 5.0], method="L-BFGS-B", bounds=[(1, 9), (1, 9)],
                        options=dict(ftol=1e-15, gtol=1e-10))
-        got = lb.rss_ml_position(anchors, rss, model, np.array([5.0, 5.0]), region_m=box)
+        got = lb.rss_ml_position(rss, lb.RssModel(anchors, model), np.array([5.0, 5.0]), region_m=box)
         assert got.status == "ok"
         np.testing.assert_allclose(got.position_m, ref.x, atol=1e-4)
-        free = lb.rss_ml_position(anchors, rss, model, np.array([5.0, 5.0]))
+        free = lb.rss_ml_position(rss, lb.RssModel(anchors, model), np.array([5.0, 5.0]))
         inside = np.all((free.position_m >= 1) & (free.position_m <= 9))
         assert inside == (true == [3.0, 7.0])
         if inside:
             np.testing.assert_allclose(got.position_m, free.position_m, atol=1e-9)
     with pytest.raises(ValueError, match="lower < upper"):
-        lb.rss_ml_position(anchors, rss, model, region_m=([1.0, 1.0], [1.0, 9.0]))
+        lb.rss_ml_position(rss, lb.RssModel(anchors, model), region_m=([1.0, 1.0], [1.0, 9.0]))
 
 
 def test_rss_ml_on_a_box_converges_to_points_where_the_projected_gradient_vanishes():
@@ -177,7 +178,7 @@ def test_rss_ml_on_a_box_converges_to_points_where_the_projected_gradient_vanish
     true = rng.uniform(-6, 16, (500, 2))
     rss = model.mean_rss_dbm(np.linalg.norm(true[:, None] - anchors, axis=-1)) + rng.normal(0, 6, (500, 4))
     lower, upper = np.array([1.0, 1.0]), np.array([9.0, 9.0])
-    res = lb.rss_ml_position(anchors, rss, model, np.full((500, 2), 5.0), region_m=(lower, upper))
+    res = lb.rss_ml_position(rss, lb.RssModel(anchors, model), np.full((500, 2), 5.0), region_m=(lower, upper))
     assert np.all(res.converged)            # (a few are "poor_fit": converged on readings 6 dB noise rarely gives)
     p = res.position_m
     assert np.all((p >= lower) & (p <= upper))

@@ -20,7 +20,7 @@ def test_pooled_sigma_eq_6_7_is_half_the_variance_and_the_dof_variant_is_unbiase
     rng = np.random.default_rng(3)
     sigma, steps = 3.0, 5000
     tags, readers = np.asarray(oz.REFERENCE_TAGS_M), np.asarray(oz.TESTBED_READERS_M)
-    mean = lb.model_fingerprints(tags, readers, lb.PathLossModel(-45.0, 2.3))
+    mean = lb.model_fingerprints(tags, lb.RssModel(readers, lb.PathLossModel(-45.0, 2.3)))
     obs = mean + sigma * rng.standard_normal((steps,) + mean.shape)
     kw = dict(ref_power_bounds_dbm=None, path_loss_exp_bounds=None)
     printed = lb.calibrate_from_reference_tags(obs, tags, readers, **kw).sigma_db ** 2

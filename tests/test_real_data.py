@@ -20,7 +20,7 @@ def test_static_methods_use_the_heard_anchors_of_each_real_epoch(real):
     heard = (~np.isnan(rss)).sum(axis=1)
     pick = np.r_[np.flatnonzero(heard == 6)[:20], np.flatnonzero(heard == 4)[:20], np.flatnonzero(heard == 2)[:5]]
     grid = lb.grid_in_outline(data.outline_m, 0.25)
-    res = lb.grid_ml_position(data.anchors_m, rss[pick], model, grid, tag_height_m=data.tag_height_m)
+    res = lb.grid_ml_position(rss[pick], lb.RssModel(data.anchors_m, model, tag_height_m=data.tag_height_m), grid)
     assert np.isnan(res.position_m[heard[pick] < 3]).all()
     assert set(res.status[heard[pick] < 3]) == {"too_few_anchors"}
     assert np.isfinite(res.position_m[heard[pick] >= 3]).all()
@@ -30,7 +30,8 @@ def test_static_methods_use_the_heard_anchors_of_each_real_epoch(real):
         keep = ~np.isnan(row)
         sub = lb.PathLossModel(model.ref_power_dbm[keep], model.path_loss_exp[keep], model.sigma_db[keep],
                                min_distance_m=model.min_distance_m)
-        alone = lb.grid_ml_position(data.anchors_m[keep], row[keep], sub, grid, tag_height_m=data.tag_height_m)
+        alone = lb.grid_ml_position(row[keep], lb.RssModel(data.anchors_m[keep], sub, tag_height_m=data.tag_height_m),
+                                    grid)
         np.testing.assert_array_equal(res.position_m[k], alone.position_m)
     knn = lb.knn_position(rss[pick], ko.radio_map(data, model)[1], ko.radio_map(data, model)[0], 5)
     assert np.isnan(knn[heard[pick] < 3]).all() and np.isfinite(knn[heard[pick] >= 3]).all()

@@ -194,12 +194,12 @@ def test_rss_estimators_with_masked_powers_equal_the_nan_readings():
     where = np.zeros(d.shape, bool)
     where[0, 2] = where[3, 4] = True
     grid = np.stack(np.meshgrid(np.arange(0.0, 20.5, 0.5), np.arange(0.0, 20.5, 0.5)), -1).reshape(-1, 2)
-    for solve in (lambda p: lb.rss_ml_position(ANCHORS, p, model),
-                  lambda p: lb.grid_ml_position(ANCHORS, p, model, grid)):
+    for solve in (lambda p: lb.rss_ml_position(p, lb.RssModel(ANCHORS, model)),
+                  lambda p: lb.grid_ml_position(p, lb.RssModel(ANCHORS, model), grid)):
         got = solve(_masked(power, where))
         np.testing.assert_array_equal(got.position_m, solve(np.where(where, np.nan, power)).position_m)
-    np.testing.assert_allclose(lb.rss_ml_position(ANCHORS, _masked(power, where), model).position_m, truth,
-                               atol=1e-5)
+    np.testing.assert_allclose(lb.rss_ml_position(_masked(power, where), lb.RssModel(ANCHORS, model)).position_m,
+                               truth, atol=1e-5)
 
 
 def test_a_mask_where_no_reading_is_accepted_is_an_error_naming_the_argument():

@@ -100,7 +100,7 @@ def test_rss_ml_fix_is_a_stationary_point_of_the_models_cost():
     truth = np.array([[3.0, 2.0], [5.5, 4.5], [1.5, 5.0]])
     model = lb.RssModel(ANCHORS, CHANNEL)
     z = model.mean_rss_dbm(truth)[0] + np.random.default_rng(5).normal(0, 3.0, (3, 4))
-    fix = lb.rss_ml_position(ANCHORS, z, CHANNEL, tol_m=1e-12)
+    fix = lb.rss_ml_position(z, model, tol_m=1e-12)
     assert fix.converged.all()
     resid = z - model.mean_rss_dbm(fix.position_m)[0]
     gradient = np.einsum("pj,pji->pi", resid, model.position_jacobian(fix.position_m)[0])    # -(1/2) d cost / dp

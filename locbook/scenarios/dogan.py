@@ -39,6 +39,7 @@ from ..tracking.streams import LinearMeasurement, RssMeasurement
 from ..tracking.transition import per_step
 from ..static.localization import grid_ml_position, rss_ml_position
 from ..models.motion import KinematicModel, constant_acceleration, simulate_states
+from ..models.rss import RssModel
 from ..models.trajectory import POLYLINE_STARTS, Trajectory, polyline_trajectory
 from ..bounds.pcrlb import linear_measurement_information, position_bound_m, posterior_crlb, rss_state_information
 from ..tracking.divergence import DivergenceFlags, divergence_note, divergence_rows
@@ -326,8 +327,9 @@ def mle_positions(rss_dbm, channel: PathLossModel, anchors_m=ANCHORS_M, *, room_
     xs = np.arange(-margin_m, room_m[0] + margin_m + 1e-9, grid_step_m)
     ys = np.arange(-margin_m, room_m[1] + margin_m + 1e-9, grid_step_m)
     grid = np.stack(np.meshgrid(xs, ys, indexing="ij"), axis=-1).reshape(-1, 2)
-    start = grid_ml_position(anchors_m, rss_dbm, channel, grid).position_m
-    fix = rss_ml_position(anchors_m, rss_dbm, channel, start)
+    model = RssModel(anchors_m, channel)
+    start = grid_ml_position(rss_dbm, model, grid).position_m
+    fix = rss_ml_position(rss_dbm, model, start)
     if bounds == "room":
         inset = MLE_ROOM_INSET_M
         fix = replace(fix, position_m=np.clip(fix.position_m, inset, np.asarray(room_m) - inset))

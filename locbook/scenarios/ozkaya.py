@@ -331,7 +331,7 @@ def run_case(case: SimCase, n_runs: int, seed: int, *, return_all: bool = False)
     if case.method in ("nn", "grid"):
         cells = cell_centres(room, *CELL_PATTERNS[case.k_cell])
     if case.method == "nn":
-        fp = model_fingerprints(cells, readers, PathLossModel(case.alpha_dbm, case.path_loss_exp))
+        fp = model_fingerprints(cells, RssModel(readers, PathLossModel(case.alpha_dbm, case.path_loss_exp)))
         estimate = knn_position(rss, fp, cells, case.k_nn, case.nn_weights)
     elif case.method == "grid":
         velocity = (0.0, case.velocity_m) if case.known_velocity else None

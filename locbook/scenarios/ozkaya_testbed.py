@@ -179,7 +179,7 @@ class TestbedChannel:
         """Mean RSSI ``(P, m)`` at points ``(P, 2)``: Eq. (6.3)/(6.4) with the wall at x = 3 m."""
         model = PathLossModel(np.asarray(self.ref_power_dbm, float), np.asarray(self.path_loss_exp, float),
                               wall_attenuation_db=self.waf_db)
-        return model_fingerprints(points_m, oz.TESTBED_READERS_M, model, oz.TESTBED_WALLS_M)
+        return model_fingerprints(points_m, RssModel(oz.TESTBED_READERS_M, model, oz.TESTBED_WALLS_M))
 
 
 @dataclass(frozen=True)
@@ -355,7 +355,8 @@ def _estimate(method: Method, rss, tags, calibration, settings: MethodSettings, 
     else:
         alpha, n = calibration.ref_power_dbm, calibration.path_loss_exp                # (R, T, m)
     if method.estimator == "nn":
-        fp = model_fingerprints(TESTBED_CELLS_M, readers, PathLossModel(alpha, n, wall_attenuation_db=oz.WAF_DB), walls)
+        fp = model_fingerprints(TESTBED_CELLS_M, RssModel(readers, PathLossModel(alpha, n, wall_attenuation_db=oz.WAF_DB),
+                                                          walls))
         return knn_position(rss, fp, TESTBED_CELLS_M, min(k, TESTBED_CELLS_M.shape[0]))
     sigma = calibration.sigma_db[..., None] if method.online_sigma else settings.sigma_db          # (R, T, 1): pooled
     per_step = method.online_sigma or method.parameters != "offline"           # the online calibration's (R, T) axes

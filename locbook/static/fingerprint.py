@@ -14,30 +14,70 @@ the normalised form, LANDMARC's, reproduces the simulation tables); it is kept a
 
 Two ways to build the map (Ozkaya 2011, Sec. 3.1):
 - pattern based: the stored mean RSSI vector measured at each training location (:func:`pattern_fingerprints`);
-- parameter based: the path-loss model evaluated at each cell centre (:func:`model_fingerprints`),
-  Eq. (3.4) (printed as "3.14"), ``R_ij = alpha_i - 10 n_i log10(d_ij/d0) - c_ij WAF``.
+- parameter based: the path-loss model evaluated at each cell centre (:func:`model_fingerprints`, the cells then the
+  one RSS model, :class:`locbook.RssModel`), Eq. (3.4) (printed as "3.14"),
+  ``R_ij = alpha_i - 10 n_i log10(d_ij/d0) - c_ij WAF``.
 """
 from __future__ import annotations
 
+import inspect
 from dataclasses import replace
 
 import numpy as np
 
 from .._validate import as_array, check_choice, check_scalar
 from ..models.channel import PathLossModel, pairwise_distance_m, require_path_loss_model, wall_crossings
+from ..models.rss import RssModel
+from .localization import _accepts_old_form, _is_old_form, _rss_model_parts
 
 __all__ = ["KNN_WEIGHTINGS", "KNN_BLOCK_BYTES", "knn_position", "model_fingerprints", "pattern_fingerprints"]
 
 KNN_WEIGHTINGS = ("inverse_square", "literal_ozkaya2011", "uniform")
 
 
-def model_fingerprints(cells_m, anchors_m, model: PathLossModel, walls_m=None, min_distance_m: float = 0.1):
-    """Parameter-based map: mean RSSI ``(..., C, m)`` of the model at cell centres ``(C, 2)``.
+def _model_fingerprints_v1(cells_m, anchors_m, model, walls_m=None, min_distance_m=None):
+    """The signature of :func:`model_fingerprints` before issue 47 (deprecated calls are bound to it)."""
 
-    Model parameters broadcast against the reader axis; a leading batch axis on them (e.g. online
-    calibration per step, shape ``(..., m)``) gives one map per batch entry. Distances below
-    ``min_distance_m`` (> 0) are clipped (a cell centre on a reader). ``anchors_m`` ``(m, 2)`` must be finite,
-    like the cells; ``walls_m`` is checked by :func:`locbook.wall_crossings`.
+
+def _old_fingerprints_call(args, kwargs):
+    """:func:`~locbook.static.localization._accepts_old_form`'s ``old_call`` of :func:`model_fingerprints`: the form
+    before issue 47 (cells, anchors, a PathLossModel, walls) goes to the same arithmetic, :func:`_fingerprints`,
+    directly (its parameters may carry any batch axes ``(..., m)``, more than an RssModel holds)."""
+    if not _is_old_form(args, kwargs, ("cells_m", "anchors_m")):
+        if "walls_m" in kwargs:
+            raise ValueError("model_fingerprints: walls_m is the model's: pass RssModel(anchors_m, channel, walls_m) "
+                             "as model")
+        return None
+    given = inspect.signature(_model_fingerprints_v1).bind(*args, **kwargs).arguments
+    return ("model_fingerprints(cells_m, anchors_m, channel, walls_m, ...)",
+            "model_fingerprints(cells_m, RssModel(anchors_m, channel, walls_m), ...)",
+            lambda new: _fingerprints(given["cells_m"], given["anchors_m"], given["model"], given.get("walls_m"),
+                                      given.get("min_distance_m", 0.1)))
+
+
+@_accepts_old_form(_old_fingerprints_call)
+def model_fingerprints(cells_m, model: RssModel, *, min_distance_m: float = 0.1):
+    """Parameter-based map: mean RSSI ``(..., C, m)`` of the RSS model ``model`` (:class:`locbook.RssModel`: its
+    anchors ``(m, dim)``, its channel, its walls ``model.walls_m``) at cell centres ``(C, dim)``, Eq. (3.4).
+
+    The channel's parameters broadcast against the reader axis; per-run and per-step parameters (e.g. online
+    calibration per step, ``(R, T, m)``) give one map per run and step, ``(R, T, C, m)``. Distances below
+    ``min_distance_m`` (> 0) are clipped (a cell centre on a reader; the channel's own ``min_distance_m`` if larger).
+    The cells must be finite. Per-run anchors and a tag height are refused by name.
+
+    The form before issue 47, ``model_fingerprints(cells_m, anchors_m, channel, walls_m=None, min_distance_m=0.1)`` (a
+    :class:`~locbook.PathLossModel` third), is deprecated: it warns and gives the same map.
+    """
+    anchors_m, channel, _ = _rss_model_parts(model, "model_fingerprints", walls=True, per_step=True, heights=False,
+                                             form="model_fingerprints(cells_m, RssModel(anchors_m, channel, walls_m))")
+    return _fingerprints(cells_m, anchors_m, channel, model.walls_m, min_distance_m)
+
+
+def _fingerprints(cells_m, anchors_m, model: PathLossModel, walls_m=None, min_distance_m: float = 0.1):
+    """:func:`model_fingerprints` of the anchors ``(m, 2)``, the channel ``model`` and the walls: mean RSSI
+    ``(..., C, m)``. The channel's parameters broadcast against the reader axis; leading batch axes on them, any
+    ``(..., m)``, give one map per batch entry (the reference-tag calibration's per-step fits). ``anchors_m`` must be
+    finite, like the cells; ``walls_m`` is checked by :func:`locbook.wall_crossings`.
     """
     require_path_loss_model(model)
     anchors_m = as_array("anchors_m", anchors_m, ndim=2)

@@ -1,7 +1,11 @@
 """Static localization from ranges or received powers, batched over many problems.
 
 Every estimator takes anchors ``(m, 2)`` shared by all problems and measurements with leading batch
-axes ``(..., m)``, and returns a :class:`LocalizationResult` whose ``position_m`` has shape ``(..., 2)``.
+axes ``(..., m)``, and returns a :class:`LocalizationResult` whose ``position_m`` has shape ``(..., 2)``. The
+distance-based lateration family takes ``(anchors_m, distance_m, ...)``; the RSS estimators take the readings first,
+then the one RSS measurement model, :class:`locbook.RssModel` (its anchors, channel and tag height), then keyword-only
+options: ``rss_ml_position(rss_dbm, model, initial_m)``, ``grid_ml_position(rss_dbm, model, cells_m)`` (the form
+before issue 47, anchors, readings and a :class:`~locbook.PathLossModel`, is deprecated for one release).
 
 - :func:`lateration_ls`: linearized least squares, Eq. (8) of George and Vadivukkarasi:
   subtracting the circle of a reference anchor r from circle i gives the linear system
@@ -36,14 +40,18 @@ non-finite anchors, model parameters, grids, boxes and weights, are rejected wit
 argument; so are shapes that do not match (nothing is broadcast silently).
 
 Anchor heights (measured data, e.g. anchors near the ceiling and a tag carried at 1.3 m): every estimator takes
-``tag_height_m``. Then ``anchors_m`` is ``(m, 3)`` (x, y, height), the tag moves in the plane
-``z = tag_height_m``, positions are ``(..., 2)`` and every range and power is that of the 3-D distance
-``sqrt(|p - a_xy|^2 + (a_z - tag_height_m)^2)``. The linearized systems stay exact (the known height moves to the
-right-hand side: ``|p - a_xy|^2 = d^2 - (a_z - h)^2``); the geometry checks apply to the anchors' plan positions.
+``tag_height_m`` (the RSS estimators read it from the model, ``model.tag_height_m``). Then ``anchors_m`` is
+``(m, 3)`` (x, y, height), the tag moves in the plane ``z = tag_height_m``, positions are ``(..., 2)`` and every
+range and power is that of the 3-D distance ``sqrt(|p - a_xy|^2 + (a_z - tag_height_m)^2)``. The linearized systems
+stay exact (the known height moves to the right-hand side: ``|p - a_xy|^2 = d^2 - (a_z - h)^2``); the geometry checks
+apply to the anchors' plan positions.
 Without ``tag_height_m`` the anchors' dimension is the position's (2-D or 3-D alike).
 """
 from __future__ import annotations
 
+import functools
+import inspect
+import warnings
 from dataclasses import dataclass, replace
 from functools import lru_cache
 from itertools import product
@@ -53,7 +61,7 @@ import numpy as np
 from .._cvx import cp, solve
 from .._validate import as_array, check_choice, check_scalar
 from ..models.channel import PathLossModel, log_distance_mean_dbm, pairwise_distance_m, require_path_loss_model
-from ..models.rss import rss_mean_jacobian
+from ..models.rss import RssModel, rss_mean_jacobian
 from ..errors import ConvergenceError, DegenerateGeometryError, ParameterError
 
 __all__ = [
@@ -956,6 +964,95 @@ def lateration_box_ls(anchors_m, distance_m, lower_m, upper_m, ref_index: int = 
                               _status(ok).reshape(batch))
 
 
+# -- the RSS model of the estimators (issue 47: the readings first, then one RssModel) ------------------------------
+def _rss_model_parts(model, who: str, *, form: str | None = None, walls: bool = False, per_step: bool = False,
+                     heights: bool = True):
+    """``(anchors_m, channel, tag_height_m)`` of the :class:`~locbook.RssModel` ``model`` given to ``who``; what
+    ``who`` cannot honour is refused by name in one line: anything but an RssModel (``form``: the call to write),
+    per-run anchors, per-run or per-step channel parameters (unless ``per_step``), walls that attenuate (unless
+    ``walls``), a tag height (unless ``heights``)."""
+    form = form or f"{who}(rss_dbm, RssModel(anchors_m, channel, tag_height_m=...), ...)"
+    if not isinstance(model, RssModel):
+        raise ValueError(f"{who}: model must be an RssModel (the anchors, the channel and the tag height in one "
+                         f"object), got {type(model).__name__}: pass {form}")
+    if model.anchors_m.ndim == 3:
+        raise ValueError(f"{who}: model.anchors_m is per run, shape {model.anchors_m.shape}; it takes one layout "
+                         "(m, dim) shared by every problem: give each run its own RssModel")
+    ch = model.channel
+    if not per_step:
+        for name, per_run_ndim in (("ref_power_dbm", 3), ("path_loss_exp", 3), ("sigma_db", 2)):
+            if np.ndim(getattr(ch, name)) == per_run_ndim:
+                raise ValueError(f"{who}: model.channel.{name} is per run and step, shape "
+                                 f"{np.shape(getattr(ch, name))}; it takes scalar or per-anchor (m,) parameters: "
+                                 "give each run and step its own RssModel")
+    if not walls and model.walls_m is not None and ch.wall_attenuation_db != 0.0:
+        raise ValueError(f"{who}: model.walls_m ({model.walls_m.shape[0]} wall(s), {ch.wall_attenuation_db:g} dB each) "
+                         "is not modelled by this estimator: give it a model without walls (walls_m=None)")
+    if not heights and model.tag_height_m is not None:
+        raise ValueError(f"{who}: model.tag_height_m is not supported (the map uses plan distances): give it a model "
+                         "with plan anchors (m, 2) and no tag height")
+    return model.anchors_m, ch, model.tag_height_m
+
+
+def _is_old_form(args, kwargs, leading) -> bool:
+    """Whether a call is in the form before issue 47: a :class:`~locbook.PathLossModel` third (positionally, or as
+    ``model=`` after the two ``leading`` arguments), or ``anchors_m=`` given; an RssModel second is the new form."""
+    model = kwargs["model"] if "model" in kwargs else (args[2] if len(args) > 2 else None)
+    return "anchors_m" in kwargs or (isinstance(model, PathLossModel)
+                                     and len(args) + sum(name in kwargs for name in leading) >= 2)
+
+
+def _accepts_old_form(old_call):
+    """Decorator of a public function (its signature, the new form, is the one :func:`inspect.signature` shows):
+    ``old_call(args, kwargs)`` is None for a call in the new form, else ``(old, new, call)``: the deprecated form, the
+    one to use (a DeprecationWarning of one line naming it, pointing at the caller) and ``call(function)``, the same
+    result."""
+    def decorate(function):
+        @functools.wraps(function)
+        def public(*args, **kwargs):
+            old = old_call(args, kwargs)
+            if old is None:
+                return function(*args, **kwargs)
+            form, use, call = old
+            warnings.warn(f"{form} is deprecated: use {use}", DeprecationWarning, stacklevel=2)
+            return call(function)
+        return public
+    return decorate
+
+
+def _rss_ml_position_v1(anchors_m, rss_dbm, model, initial_m=None, *, max_iter=None, tol_m=None, min_distance_m=None,
+                        raise_on_failure=None, min_anchors=None, tag_height_m=None, region_m=None):
+    """The signature of :func:`rss_ml_position` before issue 47 (deprecated calls are bound to it)."""
+
+
+def _grid_ml_position_v1(anchors_m, rss_dbm, model, grid_m, *, chunk=None, min_anchors=None, tag_height_m=None):
+    """The signature of :func:`grid_ml_position` before issue 47 (deprecated calls are bound to it)."""
+
+
+def _old_estimator_call(args, kwargs, who: str, v1):
+    """:func:`_accepts_old_form`'s ``old_call`` of the RSS ML estimators: the form before issue 47 (anchors, readings,
+    a PathLossModel, ..., ``tag_height_m=``) builds the RssModel; ``grid_m=`` is the old spelling of ``cells_m=``."""
+    if _is_old_form(args, kwargs, ("anchors_m", "rss_dbm")):
+        given = inspect.signature(v1).bind(*args, **kwargs).arguments      # a TypeError as the old function gave
+        anchors_m, rss_dbm, channel = given.pop("anchors_m"), given.pop("rss_dbm"), given.pop("model")
+        tag_height_m = given.pop("tag_height_m", None)
+        if "grid_m" in given:
+            given["cells_m"] = given.pop("grid_m")
+        return (f"{who}(anchors_m, rss_dbm, channel, ...)",
+                f"{who}(rss_dbm, RssModel(anchors_m, channel, tag_height_m=...), ...)",
+                lambda new: new(rss_dbm, RssModel(anchors_m, channel, tag_height_m=tag_height_m), **given))
+    if "tag_height_m" in kwargs:
+        raise ValueError(f"{who}: tag_height_m is the model's: pass RssModel(anchors_m, channel, "
+                         "tag_height_m=...) as model")
+    if "grid_m" in kwargs:
+        if "cells_m" in kwargs or len(args) > 2:
+            raise TypeError(f"{who}() got cells_m and grid_m, its old spelling: give cells_m only")
+        kwargs = dict(kwargs)
+        kwargs["cells_m"] = kwargs.pop("grid_m")
+        return f"{who}(..., grid_m=...)", f"{who}(..., cells_m=...)", lambda new: new(*args, **kwargs)
+    return None
+
+
 def _default_start(anchors_m, rss_dbm, model: PathLossModel, tag_height_m=None) -> np.ndarray:
     """The convex start of :func:`rss_ml_position`: the linearized LS fix on the model's ranges. A problem
     whose ranges overflow (infinite) has no such fix: NaN."""
@@ -1028,11 +1125,13 @@ def _newton_matrix(resid, jac, d2, pos, anchors, model, clamp_m, held=None):
     return np.where((eig_min > 1e-9 * np.trace(jtj, axis1=-2, axis2=-1))[..., None, None], full, jtj)
 
 
-def rss_ml_position(anchors_m, rss_dbm, model: PathLossModel, initial_m=None, *,
+@_accepts_old_form(lambda args, kwargs: _old_estimator_call(args, kwargs, "rss_ml_position", _rss_ml_position_v1))
+def rss_ml_position(rss_dbm, model: RssModel, initial_m=None, *,
                     max_iter: int = 10_000, tol_m: float = 1e-7, min_distance_m: float = 1e-3,
                     raise_on_failure: bool = False, min_anchors: int | None = None,
-                    tag_height_m: float | None = None, region_m=None) -> LocalizationResult:
-    """Maximum-likelihood position from received powers ``(..., m)`` under Gaussian shadowing.
+                    region_m=None) -> LocalizationResult:
+    """Maximum-likelihood position from received powers ``(..., m)`` under Gaussian shadowing, for the RSS model
+    ``model`` (:class:`locbook.RssModel`: its anchors ``(m, dim)``, its channel, its tag height).
 
     Minimises ``sum_j (P_j - P_0 + 10 n log10 |p - a_j|)^2``, which equals Dogan's MLE cost (2.4)
     up to the factor ``(10 n)^{-2}`` (by Eq. (2.3), ``log10 d_hat_j - log10 d_j = -(P_j - P(d_j)) / (10 n)``).
@@ -1048,8 +1147,10 @@ def rss_ml_position(anchors_m, rss_dbm, model: PathLossModel, initial_m=None, *,
     Only the problems still iterating are computed, so the converged ones cost nothing more. ``converged`` (status ``"ok"``) means a local minimum of the cost was reached, not
     necessarily the global one: from the default convex start a problem can stop in another basin (Dogan's
     initialiser study, ``dogan2015-models``: about 3 % of draws). For the global minimum start from a grid
-    (``initial_m=grid_ml_position(...).position_m``), as the Dogan scenarios do.
-    The model's parameters must be scalars or per-anchor ``(m,)`` arrays.
+    (``initial_m=grid_ml_position(rss_dbm, model, cells_m).position_m``), as the Dogan scenarios do.
+    The channel's parameters must be scalars or per-anchor ``(m,)`` arrays and the anchors one layout ``(m, dim)``
+    shared by every problem; the estimator does not model walls: a model with per-run anchors, per-run or per-step
+    parameters, or walls that attenuate (``walls_m`` with a non-zero ``wall_attenuation_db``) is refused by name.
     A NaN power is an anchor not heard (module docstring): the problem is solved on the anchors it heard.
 
     ``initial_m`` has shape ``(dim,)`` or ``(..., dim)`` broadcasting to the batch; a row that is all NaN
@@ -1057,10 +1158,10 @@ def rss_ml_position(anchors_m, rss_dbm, model: PathLossModel, initial_m=None, *,
     be passed on as it is). A problem without a finite start (its ranges overflow, e.g. for a tiny exponent)
     gets NaN and ``status="solver_failed"`` alone; ``raise_on_failure`` raises :class:`ConvergenceError` if any
     problem of the batch did not converge, whatever the reason.
-    ``tag_height_m``: anchors ``(m, 3)`` with heights and plan positions (module docstring).
+    ``model.tag_height_m``: anchors ``(m, 3)`` with heights and plan positions (module docstring).
 
     Garbage never gives a confident answer: a problem with an implausible power (more than
-    :data:`IMPLAUSIBLE_SIGMAS` sigma above the model's mean at ``max(min_distance_m, model.min_distance_m)``, e.g.
+    :data:`IMPLAUSIBLE_SIGMAS` sigma above the model's mean at ``max(min_distance_m, channel.min_distance_m)``, e.g.
     +500 dBm; the assumption: a reading implying a tag closer than 1 mm, the default clamp, to an anchor's antenna
     is not a reading of this channel) gets NaN and ``status="implausible_reading"`` before any iteration, and a
     problem whose cost is infinite or NaN (at the start or at the end) gets NaN and ``status="solver_failed"``, never
@@ -1075,7 +1176,22 @@ def rss_ml_position(anchors_m, rss_dbm, model: PathLossModel, initial_m=None, *,
     constrained optimum, where the unconstrained one lies outside. Without it a fix can land far outside the room
     when the readings point there (deep fades, a biased channel). The cost is not convex: like the free problem,
     the boxed one can stop in another local minimum than a different solver started at the same point.
+
+    The form before issue 47, ``rss_ml_position(anchors_m, rss_dbm, channel, initial_m, ..., tag_height_m=...)`` (a
+    :class:`~locbook.PathLossModel` third), is deprecated: it warns and builds the :class:`~locbook.RssModel`.
     """
+    anchors_m, channel, tag_height_m = _rss_model_parts(model, "rss_ml_position")
+    return _rss_ml(anchors_m, rss_dbm, channel, initial_m, max_iter=max_iter, tol_m=tol_m,
+                   min_distance_m=min_distance_m, raise_on_failure=raise_on_failure, min_anchors=min_anchors,
+                   tag_height_m=tag_height_m, region_m=region_m)
+
+
+def _rss_ml(anchors_m, rss_dbm, model: PathLossModel, initial_m=None, *,
+            max_iter: int = 10_000, tol_m: float = 1e-7, min_distance_m: float = 1e-3,
+            raise_on_failure: bool = False, min_anchors: int | None = None,
+            tag_height_m: float | None = None, region_m=None) -> LocalizationResult:
+    """:func:`rss_ml_position` on the model's anchors ``(m, k)``, channel ``model`` and tag height; the problems or
+    anchors it sets apart (implausible readings, anchors not heard, no finite start) are solved by calls to itself."""
     plan, vertical = _planar(anchors_m, tag_height_m)
     anchors_full = np.asarray(anchors_m, dtype=float)        # with heights: what recursive calls are given
     anchors_m = check_anchor_geometry(plan)
@@ -1103,11 +1219,11 @@ def rss_ml_position(anchors_m, rss_dbm, model: PathLossModel, initial_m=None, *,
         flat, batch = rss_dbm.reshape(-1, m), rss_dbm.shape[:-1]
         start = None if initial_m is None else initial_m.reshape(-1, dim)
         res = _solve_where(~implausible, batch, dim,
-                           lambda sel: rss_ml_position(anchors_full, flat[sel], model,
-                                                       None if start is None else start[sel], max_iter=max_iter,
-                                                       tol_m=tol_m, min_distance_m=min_distance_m,
-                                                       min_anchors=min_anchors, tag_height_m=tag_height_m,
-                                                       region_m=region_m),
+                           lambda sel: _rss_ml(anchors_full, flat[sel], model,
+                                               None if start is None else start[sel], max_iter=max_iter,
+                                               tol_m=tol_m, min_distance_m=min_distance_m,
+                                               min_anchors=min_anchors, tag_height_m=tag_height_m,
+                                               region_m=region_m),
                            "rss_ml_lm", "implausible_reading")
         return _raise_if_failed(res, raise_on_failure)
     if np.isnan(rss_dbm).any():
@@ -1115,7 +1231,7 @@ def rss_ml_position(anchors_m, rss_dbm, model: PathLossModel, initial_m=None, *,
         start = None if initial_m is None else initial_m.reshape(-1, dim)
         res = _by_heard_anchors(
             anchors_m, rss_dbm, min_anchors,
-            lambda heard, sel: rss_ml_position(
+            lambda heard, sel: _rss_ml(
                 anchors_full[heard], flat[np.ix_(sel, heard)], _model_subset(model, heard, m),
                 None if start is None else start[sel], max_iter=max_iter, tol_m=tol_m,
                 min_distance_m=min_distance_m, tag_height_m=tag_height_m, region_m=region_m),
@@ -1133,9 +1249,9 @@ def rss_ml_position(anchors_m, rss_dbm, model: PathLossModel, initial_m=None, *,
     if not startable.all():           # no finite start: those problems fail alone
         flat = rss_dbm.reshape(-1, m)
         res = _solve_where(startable, batch, dim,
-                           lambda sel: rss_ml_position(anchors_full, flat[sel], model, pos[sel], max_iter=max_iter,
-                                                       tol_m=tol_m, min_distance_m=min_distance_m,
-                                                       tag_height_m=tag_height_m, region_m=region_m),
+                           lambda sel: _rss_ml(anchors_full, flat[sel], model, pos[sel], max_iter=max_iter,
+                                               tol_m=tol_m, min_distance_m=min_distance_m,
+                                               tag_height_m=tag_height_m, region_m=region_m),
                            "rss_ml_lm", "solver_failed")
         return _raise_if_failed(res, raise_on_failure)
     if lower is not None:
@@ -1239,22 +1355,22 @@ def _grid_ml_block(chunk, n_problems: int, n_cells: int) -> int:
     row = 8 * n_cells
     smallest = min(n_problems, 2)
     if smallest * row > GRID_ML_BLOCK_BYTES:
-        raise ValueError(f"grid_m has {n_cells} cells: a block of {smallest} problem(s) of costs would take "
+        raise ValueError(f"cells_m has {n_cells} cells: a block of {smallest} problem(s) of costs would take "
                          f"{smallest * row / 2**20:.4g} MiB, over the limit GRID_ML_BLOCK_BYTES = "
                          f"{GRID_ML_BLOCK_BYTES / 2**20:.4g} MiB; use a coarser grid (or a smaller outline)")
     fit = GRID_ML_BLOCK_BYTES // row
     return max(smallest, min(fit, int(chunk) if chunk is not None else fit))
 
 
-def grid_ml_position(anchors_m, rss_dbm, model: PathLossModel, grid_m, *,
-                     chunk: int | None = None, min_anchors: int | None = None,
-                     tag_height_m: float | None = None) -> LocalizationResult:
-    """Grid maximum likelihood: the candidate point of ``grid_m`` ``(G, dim)`` with the smallest
-    RSS-domain squared residual, for every problem; evaluated in chunks to bound memory. ``cost`` is that
-    residual; a grid point on an anchor is taken 1 micrometre from it.
+@_accepts_old_form(lambda args, kwargs: _old_estimator_call(args, kwargs, "grid_ml_position", _grid_ml_position_v1))
+def grid_ml_position(rss_dbm, model: RssModel, cells_m, *,
+                     chunk: int | None = None, min_anchors: int | None = None) -> LocalizationResult:
+    """Grid maximum likelihood: the candidate point of ``cells_m`` ``(G, dim)`` with the smallest RSS-domain squared
+    residual of the RSS model ``model`` (:class:`locbook.RssModel`), for every problem; evaluated in chunks to bound
+    memory. ``cost`` is that residual; a grid point on an anchor is taken 1 micrometre from it.
     A NaN power is an anchor not heard (module docstring): the residual runs over the heard anchors; with fewer
     than ``min_anchors`` heard the problem gets a NaN position, NaN cost and ``converged=False``. An implausible
-    power (above the model's mean at its clamp, ``max(model.min_distance_m, 1e-6)``, by more than
+    power (above the model's mean at its clamp, ``max(channel.min_distance_m, 1e-6)``, by more than
     :data:`IMPLAUSIBLE_SIGMAS` sigma: a reading implying a tag closer than 1 micrometre to an anchor's antenna)
     gives NaN and ``status="implausible_reading"``; a cost that overflows (e.g. a reading of -1e300 dBm) NaN
     position and cost and ``status="solver_failed"``, without a warning, like :func:`rss_ml_position`. A best cost
@@ -1262,52 +1378,67 @@ def grid_ml_position(anchors_m, rss_dbm, model: PathLossModel, grid_m, *,
     sigma^2; model with ``sigma_db > 0``) gives
     ``status="poor_fit"``, position and ``converged`` kept; the cost at a grid point includes the grid's
     discretisation, so a grid far coarser than the shadowing can be flagged too (no grid point fits the readings).
-    ``tag_height_m``: anchors ``(m, 3)`` with heights, a plan grid ``(G, 2)`` (module docstring).
+    ``model.tag_height_m``: anchors ``(m, 3)`` with heights, a plan grid ``(G, 2)`` (module docstring). What the model
+    may hold and what is refused by name (per-run anchors, per-run or per-step parameters, walls): as
+    :func:`rss_ml_position`.
 
     Memory is bounded whatever the sizes: the problems are scored against the grid in blocks of at most ``chunk``
     problems (default: as many as fit :data:`GRID_ML_BLOCK_BYTES` of costs, 256 MiB; an explicit ``chunk`` is capped
     there too), each problem's arithmetic being the same in any block, so the result does not depend on ``chunk``. A
     grid so large that two problems' costs (one, for a single problem) exceed the limit is refused in one line naming
-    ``grid_m``, before anything of its size is allocated."""
+    ``cells_m``, before anything of its size is allocated.
+
+    The form before issue 47, ``grid_ml_position(anchors_m, rss_dbm, channel, grid_m, ..., tag_height_m=...)`` (a
+    :class:`~locbook.PathLossModel` third), is deprecated: it warns and builds the :class:`~locbook.RssModel`;
+    ``grid_m=`` is the old spelling of ``cells_m=`` (deprecated too)."""
+    anchors_m, channel, tag_height_m = _rss_model_parts(model, "grid_ml_position")
+    return _grid_ml(anchors_m, rss_dbm, channel, cells_m, chunk=chunk, min_anchors=min_anchors,
+                    tag_height_m=tag_height_m)
+
+
+def _grid_ml(anchors_m, rss_dbm, model: PathLossModel, cells_m, *, chunk: int | None = None,
+             min_anchors: int | None = None, tag_height_m: float | None = None) -> LocalizationResult:
+    """:func:`grid_ml_position` on the model's anchors ``(m, k)``, channel ``model`` and tag height; the problems or
+    anchors it sets apart are solved by calls to itself."""
     plan, vertical = _planar(anchors_m, tag_height_m)
     anchors_full = np.asarray(anchors_m, dtype=float)
     anchors_m = check_anchor_geometry(plan)
     m, dim = anchors_m.shape
-    grid_m = as_array("grid_m", grid_m, ndim=2, trailing=(dim,))
-    if grid_m.shape[0] < 1:
-        raise ValueError("grid_m must hold at least one candidate point")
+    cells_m = as_array("cells_m", cells_m, ndim=2, trailing=(dim,))
+    if cells_m.shape[0] < 1:
+        raise ValueError("cells_m must hold at least one candidate point")
     power = _readings("rss_dbm", rss_dbm, m)
     _check_model(model, m)
     if chunk is not None:
         check_scalar("chunk", chunk, ge=1, integer=True)
-    block_rows = _grid_ml_block(chunk, int(np.prod(power.shape[:-1], dtype=np.int64)), grid_m.shape[0])
+    block_rows = _grid_ml_block(chunk, int(np.prod(power.shape[:-1], dtype=np.int64)), cells_m.shape[0])
     min_anchors = _min_anchors(min_anchors, dim, m)
     implausible = implausible_powers(power, model, max(model.min_distance_m, 1e-6)).reshape(-1)
     if implausible.any():
         flat_power = power.reshape(-1, m)
         return _solve_where(~implausible, power.shape[:-1], dim,
-                            lambda sel: grid_ml_position(anchors_full, flat_power[sel], model, grid_m, chunk=chunk,
-                                                         min_anchors=min_anchors, tag_height_m=tag_height_m),
+                            lambda sel: _grid_ml(anchors_full, flat_power[sel], model, cells_m, chunk=chunk,
+                                                 min_anchors=min_anchors, tag_height_m=tag_height_m),
                             "grid_ml", "implausible_reading")
     if np.isnan(power).any():
         flat_power = power.reshape(-1, m)
         return _by_heard_anchors(
             anchors_m, power, min_anchors,
-            lambda heard, sel: grid_ml_position(anchors_full[heard], flat_power[np.ix_(sel, heard)],
-                                                _model_subset(model, heard, m), grid_m, chunk=chunk,
-                                                tag_height_m=tag_height_m),
+            lambda heard, sel: _grid_ml(anchors_full[heard], flat_power[np.ix_(sel, heard)],
+                                        _model_subset(model, heard, m), cells_m, chunk=chunk,
+                                        tag_height_m=tag_height_m),
             "grid_ml")
     batch = power.shape[:-1]
     flat = power.reshape(-1, power.shape[-1])
     with np.errstate(over="ignore", invalid="ignore"):
         # the one RSS model's mean (G, m); a node may sit on an anchor: clamped at 1 micrometre at least
-        mean_grid, _, d2 = rss_mean_jacobian(grid_m[:, None, :] - anchors_m, np.asarray(model.ref_power_dbm),
+        mean_grid, _, d2 = rss_mean_jacobian(cells_m[:, None, :] - anchors_m, np.asarray(model.ref_power_dbm),
                                              np.asarray(model.path_loss_exp), ref_distance_m=model.ref_distance_m,
                                              min_distance_m=max(model.min_distance_m, 1e-6),
                                              vertical_m2=None if vertical is None else vertical**2, jacobian=False)
     if not np.all(np.isfinite(d2)):            # finite coordinates (checked): only overflow gets here
-        raise ValueError(f"the distances between grid_m and anchors_m overflow: their coordinates reach "
-                         f"{max(np.abs(grid_m).max(initial=0), np.abs(anchors_m).max(initial=0)):.3g} m")
+        raise ValueError(f"the distances between cells_m and anchors_m overflow: their coordinates reach "
+                         f"{max(np.abs(cells_m).max(initial=0), np.abs(anchors_m).max(initial=0)):.3g} m")
     best = np.empty(flat.shape[0], dtype=int)
     best_cost = np.empty(flat.shape[0])
     # a finite power of absurd size (-1e300 dBm: a tag very far away is not implausible) overflows its squares; that
@@ -1326,7 +1457,7 @@ def grid_ml_position(anchors_m, rss_dbm, model: PathLossModel, grid_m, *,
             idx = np.argmin(cost, axis=1)
             best[start:stop] = idx
             best_cost[start:stop] = cost[np.arange(len(idx)), idx] + (block**2).sum(1)
-    pos = grid_m[best].reshape(batch + (grid_m.shape[1],))
+    pos = cells_m[best].reshape(batch + (cells_m.shape[1],))
     ok = np.isfinite(best_cost)
     # a cost that overflowed has no meaningful minimum: NaN position and cost, as rss_ml_position gives
     pos = np.where(ok.reshape(batch)[..., None], pos, np.nan)

@@ -25,7 +25,7 @@ from .._validate import as_array, check_scalar
 from .calibration import PathLossFit, fit_path_loss
 from ..errors import ConvergenceError, DegenerateGeometryError
 from ..models.channel import PathLossModel, pairwise_distance_m, wall_crossings
-from .fingerprint import model_fingerprints
+from .fingerprint import _fingerprints
 
 __all__ = ["OnlineCalibration", "calibrate_from_reference_tags", "pooled_sigma_db", "smooth_rssi",
            "OZKAYA_REF_POWER_BOUNDS_DBM", "OZKAYA_PATH_LOSS_EXP_BOUNDS"]
@@ -109,8 +109,9 @@ def calibrate_from_reference_tags(ref_rss_dbm, ref_positions_m, anchors_m, *, wa
         raise ConvergenceError(f"reference-tag calibration: the path-loss fit ended with status "
                                f"{fit.status!r}; no calibration is returned")
     ref, exp = fit.ref_power_dbm, fit.path_loss_exp                                 # (..., m)
-    expected = model_fingerprints(ref_positions_m, anchors_m, PathLossModel(ref, exp, wall_attenuation_db=wall_attenuation_db),
-                                  walls_m)
+    # the model's map at the tags (model_fingerprints' arithmetic; the per-step fits carry any batch axes (..., m))
+    expected = _fingerprints(ref_positions_m, anchors_m,
+                             PathLossModel(ref, exp, wall_attenuation_db=wall_attenuation_db), walls_m)
     sigma = pooled_sigma_db(ref_rss_dbm - expected, ddof=sigma_ddof)
     return OnlineCalibration(ref, exp, sigma, expected, fit)
 

@@ -109,8 +109,8 @@ def test_new_forms_compute_what_the_model_says():
 
 
 PER_RUN = lb.RssModel(np.broadcast_to(SQUARE, (2, 4, 2)), lb.PathLossModel(-45.0, 2.2, 2.0))
-PER_STEP = lb.RssModel(SQUARE, lb.PathLossModel(np.full((2, 5, 4), -45.0), 2.2, 2.0))
-PER_STEP_SIGMA = lb.RssModel(SQUARE, lb.PathLossModel(-45.0, 2.2, np.full((2, 5), 2.0)))
+PER_STEP = lb.RssModel(SQUARE, lb.PathLossModel(np.full((2, 5, 4), -45.0), 2.2, 2.0), per_step_channel=True)
+PER_STEP_SIGMA = lb.RssModel(SQUARE, lb.PathLossModel(-45.0, 2.2, np.full((2, 5, 1), 2.0)), per_step_channel=True)
 WALLED = lb.RssModel(SQUARE, lb.PathLossModel(-45.0, 2.2, 2.0, wall_attenuation_db=3.0), WALLS)
 HEIGHTS = lb.RssModel(ANCHORS_3D, CHANNEL, tag_height_m=H)
 POWER = np.full(4, -60.0)
@@ -126,11 +126,11 @@ POWER = np.full(4, -60.0)
      r"^model_fingerprints: model must be an RssModel .* got PathLossModel: pass model_fingerprints\(cells_m, "
      r"RssModel\(anchors_m, channel, walls_m\)\)$"),
     (lambda: lb.rss_ml_position(POWER, SQUARE), r"model must be an RssModel .* got ndarray"),
-    (lambda: lb.rss_ml_position(np.full((2, 4), -60.0), PER_RUN), r"rss_ml_position: model.anchors_m is per run, shape"),
-    (lambda: lb.model_fingerprints(CELLS, PER_RUN), r"model_fingerprints: model.anchors_m is per run"),
+    (lambda: lb.rss_ml_position(np.full((2, 4), -60.0), PER_RUN), r"rss_ml_position: model.anchors_m is per run or per step, shape"),
+    (lambda: lb.model_fingerprints(CELLS, PER_RUN), r"model_fingerprints: model.anchors_m is per run or per step"),
     (lambda: lb.grid_ml_position(POWER, PER_STEP, CELLS),
-     r"grid_ml_position: model.channel.ref_power_dbm is per run and step, shape \(2, 5, 4\)"),
-    (lambda: lb.rss_ml_position(POWER, PER_STEP_SIGMA), r"rss_ml_position: model.channel.sigma_db is per run and step"),
+     r"grid_ml_position: model.channel.ref_power_dbm is per run or per step, shape \(2, 5, 4\)"),
+    (lambda: lb.rss_ml_position(POWER, PER_STEP_SIGMA), r"rss_ml_position: model.channel.sigma_db is per run or per step"),
     (lambda: lb.rss_ml_position(POWER, WALLED), r"rss_ml_position: model.walls_m \(1 wall\(s\), 3 dB each\) is not modelled"),
     (lambda: lb.grid_ml_position(POWER, WALLED, CELLS), r"grid_ml_position: model.walls_m .* is not modelled"),
     (lambda: lb.model_fingerprints(CELLS, HEIGHTS), r"model_fingerprints: model.tag_height_m is not supported"),

@@ -354,12 +354,12 @@ def _estimate(method: Method, rss, tags, calibration, settings: MethodSettings, 
         alpha, n = np.asarray(oz.OFFLINE_PARAMETERS["alpha_dbm"]), np.asarray(oz.OFFLINE_PARAMETERS["path_loss_exp"])
     else:
         alpha, n = calibration.ref_power_dbm, calibration.path_loss_exp                # (R, T, m)
+    per_step = method.online_sigma or method.parameters != "offline"           # the online calibration's (R, T) axes
     if method.estimator == "nn":
         fp = model_fingerprints(TESTBED_CELLS_M, RssModel(readers, PathLossModel(alpha, n, wall_attenuation_db=oz.WAF_DB),
-                                                          walls))
+                                                          walls, per_step_channel=per_step))
         return knn_position(rss, fp, TESTBED_CELLS_M, min(k, TESTBED_CELLS_M.shape[0]))
     sigma = calibration.sigma_db[..., None] if method.online_sigma else settings.sigma_db          # (R, T, 1): pooled
-    per_step = method.online_sigma or method.parameters != "offline"           # the online calibration's (R, T) axes
     model = RssModel(readers, PathLossModel(alpha, n, sigma, wall_attenuation_db=oz.WAF_DB, min_distance_m=0.1), walls,
                      per_step_channel=per_step)
     if method.estimator == "grid":

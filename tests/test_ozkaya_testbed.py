@@ -233,7 +233,7 @@ def test_testbed_crlb_fitted_form_is_the_printed_form_bound_averaged_over_the_ce
     bounds = _printed_form_bounds(cells, 2.0, tb.TESTBED_SIGMA_DB)
     assert tb.testbed_crlb_m(2.0, average="cells_mean") == pytest.approx(np.mean(bounds), rel=1e-9)
     # the correct bound (1/d^4) is larger than the printed form wherever every reader is more than 1 m away
-    assert tb.testbed_crlb_m(np.asarray(oz.OFFLINE_PARAMETERS["path_loss_exp"]), form="correct") > \
+    assert tb.testbed_crlb_m(np.asarray(oz.OFFLINE_PARAMETERS["path_loss_exp"]), variant="corrected") > \
         tb.testbed_crlb_m(2.0, average="cells_mean")
 
 

@@ -29,6 +29,7 @@ call; so do the old ``form=`` values ``"correct"`` and ``"ozkaya_printed"`` give
 from __future__ import annotations
 
 import functools
+import inspect
 
 import numpy as np
 
@@ -74,11 +75,17 @@ def _variant(variant, who: str) -> str:
 def _old_form(old):
     """Decorator: a call whose second argument is an array (the anchors: the form before issue 47) goes to ``old``,
     which warns and calls the new form; an RssModel (or anything else, refused by :func:`_bound_model`) to the new."""
+    old_signature = inspect.signature(old)
+
     def wrap(new):
         @functools.wraps(new)
         def call(*args, **kwargs):
             second = args[1] if len(args) > 1 else kwargs.get("anchors_m")
             if isinstance(second, (np.ndarray, list, tuple)):
+                try:
+                    old_signature.bind(*args, **kwargs)
+                except TypeError:   # neither form: an array where the model goes
+                    _bound_model(second, new.__name__)
                 return old(*args, **kwargs)
             return new(*args, **kwargs)
         return call

@@ -12,7 +12,7 @@ import warnings
 from ._validate import check_choice
 
 __all__ = ["CORRECTED", "RENAMED_CRLB_FORMS", "RENAMED_KF_VARIANTS", "warn_deprecated", "check_variant",
-           "renamed_keyword"]
+           "renamed_keyword", "old_keyword"]
 
 #: the default variant of every function with a source-literal form
 CORRECTED = "corrected"
@@ -64,3 +64,17 @@ def renamed_keyword(old: str, new: str, values=None):
             return fn(*args, **kwargs)
         return call
     return wrap
+
+
+def old_keyword(where: str, old: str, old_value, new: str, new_value, default):
+    """The value of keyword ``new`` when the function also takes its old name ``old`` in its signature (default None,
+    for one release): ``new_value``, or a given ``old_value`` after a ``DeprecationWarning`` naming ``where(new=...)``
+    (attributed to the caller of the function that asks); both given is a TypeError. For a function whose frames are
+    counted by a warning of its own (a decorator would add one)."""
+    if old_value is None:
+        return new_value
+    if new_value != default:
+        raise TypeError(f"{where}() got {old}= (deprecated) and {new}=: give {new}= only")
+    warn_deprecated(f"{where}({old}={old_value!r})", f"{where}({new}={old_value!r})",
+                    skip=(sys._getframe(1).f_globals.get("__name__"),))
+    return old_value

@@ -48,7 +48,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .._validate import check_choice, check_scalar, function_output
-from .._variants import renamed_keyword
+from .._variants import old_keyword
 from ..models.rss import rss_mean_jacobian
 from .._linalg import (_UPDATE_OVERFLOW, _gaussian_log_likelihood, _inv_small, _logdet, _mT, _not_positive_definite,
                       _refuse_not_finite, _Singular, _singular_runs)
@@ -388,12 +388,12 @@ def _unscented_predictor(setup, weights: UnscentedWeights):
     return predict
 
 
-@renamed_keyword("weights", "variant")
 def unscented_kalman_filter(F, Q, x0, P0, measurements, *, B=None, u=None, alpha: float = 1e-3, beta: float = 2.0,
                             kappa: float = 0.0, variant: str = "corrected", points: str = "merwe",
                             innovation_noise: bool = True, record=None, predict_first: bool = True, outputs=(),
                             divergence_window: int | None = DIVERGENCE_WINDOW,
-                            divergence_probability: float = DIVERGENCE_PROBABILITY) -> KalmanResult:
+                            divergence_probability: float = DIVERGENCE_PROBABILITY,
+                            weights: str | None = None) -> KalmanResult:
     """Unscented Kalman filter, vectorized over leading Monte-Carlo axes (Gudipati 2017, Sec. 3.6, corrected; see the
     module docstring for the printed errors and the covariance guard).
 
@@ -412,7 +412,7 @@ def unscented_kalman_filter(F, Q, x0, P0, measurements, *, B=None, u=None, alpha
 
     ``alpha``, ``beta``, ``kappa``: sigma-point spread; defaults are the thesis's (alpha = 1e-3, beta = 2,
     kappa = 0). ``variant``: ``"corrected"`` or the flagged ``"literal_gudipati2017"`` (Eq. (3.22) as printed; the
-    keyword was ``weights=`` before issue 47: deprecated).
+    keyword was ``weights=`` before issue 47: accepted for one release with a DeprecationWarning).
     ``innovation_noise=False``: Eq. (3.26) as printed, without R (flagged: with more measurements than the
     state's spread can explain, P_zz is singular and the update stops with a clear error).
 
@@ -427,6 +427,7 @@ def unscented_kalman_filter(F, Q, x0, P0, measurements, *, B=None, u=None, alpha
     compiled loops run blocks of runs (:mod:`locbook.tracking._ukf_kernels`; ``LOCBOOK_NUMBA=0`` turns them off), else
     the numpy loop; both give the same numbers to round-off (amplified some 1e6 times at alpha = 1e-3).
     """
+    variant = old_keyword("unscented_kalman_filter", "weights", weights, "variant", variant, "corrected")
     check_choice("variant", variant, UKF_VARIANTS)
     window, probability = _check_guard(divergence_window, divergence_probability)
     outputs = _check_outputs(outputs)

@@ -11,11 +11,9 @@ import warnings
 
 from ._validate import check_choice
 
-__all__ = ["CORRECTED", "RENAMED_CRLB_FORMS", "RENAMED_KF_VARIANTS", "warn_deprecated", "check_variant",
+__all__ = ["RENAMED_CRLB_FORMS", "RENAMED_KF_VARIANTS", "warn_deprecated", "check_variant",
            "renamed_keyword", "old_keyword"]
 
-#: the default variant of every function with a source-literal form
-CORRECTED = "corrected"
 #: the bounds' ``form=`` values before issue 47 and their variants (:data:`locbook.bounds.crlb.CRLB_VARIANTS`)
 RENAMED_CRLB_FORMS = {"correct": "corrected", "ozkaya_printed": "literal_ozkaya2011"}
 #: the Kalman filter's ``variant=`` value before issue 47 (:data:`locbook.tracking.kalman.KF_VARIANTS`)

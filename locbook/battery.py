@@ -286,7 +286,7 @@ def static_fixes(sc: StaticScenario, rss_dbm, *, knn_k: int = 4, knn_map_spacing
 def _information(sc, positions_m, heard=None):
     ch = sc.channel
     model = RssModel(sc.anchors_m, PathLossModel(0.0, ch.path_loss_exp, ch.sigma_db, min_distance_m=ch.min_distance_m),
-                     tag_height_m=sc.tag_height_m)    # the bound's model: anchors (heights above the tag), n, sigma, clamp
+                     tag_height_m=sc.tag_height_m)    # the bound's model: anchors (heights over the tag), n, sigma, clamp
     return rss_position_information(positions_m, model, heard=heard)
 
 

@@ -52,7 +52,7 @@ def _bound_model(model, who: str = "the bound") -> RssModel:
     what to pass: an RssModel without walls, with one set of anchors and parameters (no run or step axes)."""
     if not isinstance(model, RssModel):
         got = type(model).__name__
-        hint = (" (give it to RssModel(anchors_m, channel, tag_height_m=...))" if isinstance(model, PathLossModel) else "")
+        hint = " (give it to RssModel(anchors_m, channel, tag_height_m=...))" if isinstance(model, PathLossModel) else ""
         raise ValueError(f"{who} takes model = RssModel(anchors_m, channel) (the anchors and a PathLossModel with the "
                          f"exponent, sigma and clamp), got {got}{hint}")
     if model.walls_m is not None:
@@ -408,9 +408,9 @@ def rss_crlb_checked_m(position_m, model, *, heard=None, min_anchors: int = MIN_
     """
     model = _bound_model(model, "rss_crlb_checked_m")
     if model.dim != 2:
-        raise ParameterError(f"rss_crlb_checked_m gives the bound of a plan position: the model must read 2-D positions "
-                             f"(anchors (m, 2), or (m, 3) with tag_height_m), its anchors {model.anchors_m.shape} give "
-                             f"{model.dim}-D")
+        raise ParameterError(f"rss_crlb_checked_m gives the bound of a plan position: the model must read 2-D "
+                             f"positions (anchors (m, 2), or (m, 3) with tag_height_m), its anchors "
+                             f"{model.anchors_m.shape} give {model.dim}-D")
     m = model.n_anchors
     position = as_array("position_m", position_m, min_ndim=1, trailing=(2,), nan_ok=True)
     batch = position.shape[:-1]

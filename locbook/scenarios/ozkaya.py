@@ -592,8 +592,8 @@ def _area_points(room_m, step_m: float = 0.05):
 def thesis_crlb_m(layout: str, sigma_db: float, path_loss_exp: float = PATH_LOSS_EXP,
                   average: str = "area_rms") -> float:
     """The thesis's CRLB columns: Eqs. (A.10)-(A.13) as printed (1/d^2, flagged ``variant="literal_ozkaya2011"``), by
-    default with the simulations' n = 2.3 (Sec. 7.2.1) and as the RMS over the room ("Square root of (A.13) is used in the
-    thesis to compare with RMS error", Appendix A): 0.711 / 0.557 m for 3 / 4 corner readers at 5.2 dB.
+    default with the simulations' n = 2.3 (Sec. 7.2.1) and as the RMS over the room ("Square root of (A.13) is used in
+    the thesis to compare with RMS error", Appendix A): 0.711 / 0.557 m for 3 / 4 corner readers at 5.2 dB.
 
     Which exponent and which averaging over target positions gave the printed CRLB columns is not stated. The readings
     fitted to them (:data:`FITTED_VALUES`, named alternatives) are n = 2 and ``"cells_mean"``, the mean of the

@@ -285,11 +285,10 @@ def static_fixes(sc: StaticScenario, rss_dbm, *, knn_k: int = 4, knn_map_spacing
 
 
 def _information(sc, positions_m, heard=None):
-    anchors = sc.anchors_m
-    height = 0.0 if sc.tag_height_m is None else anchors[:, 2] - sc.tag_height_m
-    return rss_position_information(positions_m, anchors[:, :2], sc.channel.path_loss_exp, sc.channel.sigma_db,
-                                    min_distance_m=float(sc.channel.min_distance_m), height_offset_m=height,
-                                    heard=heard)
+    ch = sc.channel
+    model = RssModel(sc.anchors_m, PathLossModel(0.0, ch.path_loss_exp, ch.sigma_db, min_distance_m=ch.min_distance_m),
+                     tag_height_m=sc.tag_height_m)    # the bound's model: anchors (heights over the tag), n, sigma, clamp
+    return rss_position_information(positions_m, model, heard=heard)
 
 
 def static_bound_m(sc: StaticScenario) -> np.ndarray:
@@ -465,9 +464,9 @@ def tracking_bound_m(sc: TrackingScenario, ts: TrackerSettings) -> np.ndarray:
     heard = np.isfinite(sc.truth_m).all(axis=-1)[:, None]
     if sc.measured:
         heard = heard & ~np.isnan(sc.measured_rss_dbm)
-    anchors = sc.anchors_m
-    height = 0.0 if sc.tag_height_m is None else anchors[:, 2] - sc.tag_height_m
-    jz = rss_state_information(states, anchors[:, :2], sc.channel.path_loss_exp, sc.channel.sigma_db, [0, 1],
-                               min_distance_m=float(sc.channel.min_distance_m), height_offset_m=height, heard=heard)
+    ch = sc.channel
+    model = RssModel(sc.anchors_m, PathLossModel(0.0, ch.path_loss_exp, ch.sigma_db, min_distance_m=ch.min_distance_m),
+                     tag_height_m=sc.tag_height_m)
+    jz = rss_state_information(states, model, [0, 1], heard=heard)
     info = posterior_crlb(np.linalg.inv(ts.P0), motion.F, motion.Q, jz, form="riccati")
     return position_bound_m(info[1:], [0, 1])

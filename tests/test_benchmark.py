@@ -19,17 +19,20 @@ def test_heard_mask_equals_leaving_the_anchors_out():
     n = np.array([2.0, 2.5, 3.0, 1.8, 2.2])
     sigma = np.array([4.0, 5.0, 6.0, 3.0, 7.0])
     heard = rng.random((7, 5)) < 0.6
-    got = lb.rss_position_information(points, anchors, n, sigma, heard=heard, height_offset_m=1.1)
+    def rss(keep=slice(None)):          # the anchors 1.1 m above the tag's plane
+        return lb.RssModel(np.column_stack([anchors[keep], np.full(len(anchors[keep]), 1.1)]),
+                           lb.PathLossModel(0.0, n[keep], sigma[keep]), tag_height_m=0.0)
+
+    got = lb.rss_position_information(points, rss(), heard=heard)
     for p, h, info in zip(points, heard, got):
-        want = lb.rss_position_information(p, anchors[h], n[h], sigma[h], height_offset_m=1.1) if h.any() \
-            else np.zeros((2, 2))
+        want = lb.rss_position_information(p, rss(h)) if h.any() else np.zeros((2, 2))
         np.testing.assert_allclose(info, want, rtol=1e-12, atol=1e-15)
     state = np.concatenate([points, np.zeros((7, 2))], axis=1)
-    full = lb.rss_state_information(state, anchors, n, sigma, [0, 1], heard=heard, height_offset_m=1.1)
+    full = lb.rss_state_information(state, rss(), [0, 1], heard=heard)
     np.testing.assert_allclose(full[:, :2, :2], got, rtol=1e-12)
     assert np.all(full[:, 2:, :] == 0)
     with pytest.raises(ValueError, match="heard must be booleans"):
-        lb.rss_position_information(points, anchors, n, sigma, heard=heard.astype(int))
+        lb.rss_position_information(points, rss(), heard=heard.astype(int))
 
 
 def test_particle_filter_gaussian_start():
@@ -68,7 +71,8 @@ def test_per_reader_sigma_likelihood_matches_scipy():
 @pytest.mark.parametrize("key", list(bm.STATIC_SCENARIOS))
 def test_static_bound_is_the_closed_form_crlb(key):
     sc = bm.static_scenario(key)
-    want = lb.rss_crlb_m(sc.points_m, sc.anchors_m, sc.channel.path_loss_exp, sc.channel.sigma_db)
+    want = lb.rss_crlb_m(sc.points_m, lb.RssModel(sc.anchors_m, lb.PathLossModel(0.0, sc.channel.path_loss_exp,
+                                                                                  sc.channel.sigma_db)))
     np.testing.assert_allclose(bm.static_bound_m(sc), want, rtol=1e-10)
 
 

@@ -13,9 +13,16 @@ from locbook.bounds import (MAX_BOUND_CONDITION, MIN_ANCHORS_FOR_BOUND, TRIM_FRA
                             check_position_information, error_bound_ratio, rss_crlb_checked_m, summarize_bound)
 from locbook.bounds.crlb import rss_crlb_m
 from locbook.errors import ParameterError
+from locbook.models.channel import PathLossModel
+from locbook.models.rss import RssModel
 
 N_EXP, SIGMA_DB = 2.2, 4.0
 SQUARE_M = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]])
+
+
+def rss(anchors_m, tag_height_m=None):
+    """The bounds' RSS model of these anchors (n = N_EXP, sigma = SIGMA_DB)."""
+    return RssModel(anchors_m, PathLossModel(0.0, N_EXP, SIGMA_DB), tag_height_m=tag_height_m)
 
 
 def closed_form_information(position_m, anchors_m, heard, n=N_EXP, sigma_db=SIGMA_DB, height_m=None):
@@ -47,7 +54,7 @@ def test_epochs_that_heard_two_anchors_have_no_bound_and_the_summary_leaves_them
     heard[:8, 2:] = False                   # 8 epochs heard anchors 0 and 1 only
     heard[8:10, 1:] = False                 # 2 epochs heard anchor 0 only
     heard[10:14, 3] = False                 # 4 epochs heard three anchors: still a fix
-    bound, reason = rss_crlb_checked_m(positions, SQUARE_M, N_EXP, SIGMA_DB, heard=heard)
+    bound, reason = rss_crlb_checked_m(positions, rss(SQUARE_M), heard=heard)
 
     assert bound.shape == reason.shape == (30,)
     assert list(reason[:10]) == ["heard 2 anchors, a plan fix needs 3"] * 8 + ["heard 1 anchor, a plan fix needs 3"] * 2
@@ -75,7 +82,7 @@ def test_epochs_that_heard_two_anchors_have_no_bound_and_the_summary_leaves_them
 def test_near_collinear_geometry_is_near_singular_and_an_unknown_position_has_no_truth():
     anchors = np.array([[0.0, 0.0], [5.0, 0.0], [10.0, 0.0]])     # collinear
     positions = np.array([[3.0, 1e-3], [3.0, 0.0], [3.0, 2.0], [np.nan, np.nan]])
-    bound, reason = rss_crlb_checked_m(positions, anchors, N_EXP, SIGMA_DB)
+    bound, reason = rss_crlb_checked_m(positions, rss(anchors))
 
     J = closed_form_information(positions[:1], anchors, [[True] * 3])[0]
     eig = np.linalg.eigvalsh(J)
@@ -89,7 +96,7 @@ def test_near_collinear_geometry_is_near_singular_and_an_unknown_position_has_no
     np.testing.assert_allclose(bound[2], closed_form_bound_m(J2)[0], rtol=1e-12)
 
     # the same epoch is defined without the condition check: it is the check, not the formula, that refuses it
-    lax, why = rss_crlb_checked_m(positions[:1], anchors, N_EXP, SIGMA_DB, max_condition=np.inf)
+    lax, why = rss_crlb_checked_m(positions[:1], rss(anchors), max_condition=np.inf)
     assert why[0] == ""
     np.testing.assert_allclose(lax[0], closed_form_bound_m(J[None])[0], rtol=1e-6)
 
@@ -122,20 +129,19 @@ def test_anchors_with_heights_and_a_known_tag_height_match_the_unchecked_bound()
     heard = np.ones((12, 4), dtype=bool)
     heard[:3, :2] = False                   # two anchors heard
     heard[3:6, 0] = False                   # three heard
-    bound, reason = rss_crlb_checked_m(positions, anchors, N_EXP, SIGMA_DB, tag_height_m=tag_height_m, heard=heard)
+    bound, reason = rss_crlb_checked_m(positions, rss(anchors, tag_height_m), heard=heard)
     assert (reason[:3] == "heard 2 anchors, a plan fix needs 3").all() and np.isnan(bound[:3]).all()
     assert (reason[3:] == "").all()
-    unchecked = rss_crlb_m(positions[3:], anchors, N_EXP, SIGMA_DB, tag_height_m=tag_height_m, heard=heard[3:])
+    unchecked = rss_crlb_m(positions[3:], rss(anchors, tag_height_m), heard=heard[3:])
     np.testing.assert_allclose(bound[3:], unchecked, rtol=1e-12)
     own = closed_form_bound_m(closed_form_information(positions[3:], anchors, heard[3:],
                                                       height_m=anchors[:, 2] - tag_height_m))
     np.testing.assert_allclose(bound[3:], own, rtol=1e-12)
-    everyone, why = rss_crlb_checked_m(positions, anchors, N_EXP, SIGMA_DB, tag_height_m=tag_height_m)
+    everyone, why = rss_crlb_checked_m(positions, rss(anchors, tag_height_m))
     assert (why == "").all()
-    np.testing.assert_allclose(everyone, rss_crlb_m(positions, anchors, N_EXP, SIGMA_DB, tag_height_m=tag_height_m),
-                               rtol=1e-12)
-    with pytest.raises(ParameterError, match="anchors_m"):
-        rss_crlb_checked_m(positions, anchors, N_EXP, SIGMA_DB)     # 3-D anchors need the tag's height
+    np.testing.assert_allclose(everyone, rss_crlb_m(positions, rss(anchors, tag_height_m)), rtol=1e-12)
+    with pytest.raises(ParameterError, match="must read 2-D positions"):
+        rss_crlb_checked_m(positions, rss(anchors))     # 3-D anchors need the tag's height
 
 
 def test_trimmed_rms_drops_the_largest_five_percent():

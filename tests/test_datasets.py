@@ -329,8 +329,8 @@ def test_the_measured_bound_uses_the_anchors_each_epoch_heard():
     got = me.crlb_m(ds, model, t.truth_m[:3], rss)
     np.testing.assert_allclose(got[0], me.crlb_m(ds, model, t.truth_m[:1])[0], rtol=1e-12)
     keep = [1, 2, 3, 5]
-    alone = lb.rss_crlb_m(t.truth_m[1], ds.anchors_m[keep], model.path_loss_exp[keep], model.sigma_db[keep],
-                          tag_height_m=ds.tag_height_m)
+    alone = lb.rss_crlb_m(t.truth_m[1], lb.RssModel(ds.anchors_m[keep], lb.PathLossModel(
+        0.0, model.path_loss_exp[keep], model.sigma_db[keep]), tag_height_m=ds.tag_height_m))
     np.testing.assert_allclose(got[1], alone, rtol=1e-10)
     assert np.isnan(got[2])
 

@@ -295,7 +295,7 @@ def test_bad_input_is_one_line_naming_it():
     with pytest.raises(ValueError, match="^fixed_lag_smoother needs every step recorded"):
         fixed_lag_smoother(every_other, 2)
     george = lb.kalman_filter(F, Q, x0, P0, lb.LinearMeasurement(z, H, R), variant="literal_george", outputs=OUT)
-    with pytest.raises(ValueError, match="standard run"):
+    with pytest.raises(ValueError, match="run of the corrected update"):
         fixed_lag_smoother(george, 2)
     with pytest.raises(TypeError, match="KalmanResult"):
         fixed_lag_smoother(run.mean, 2)

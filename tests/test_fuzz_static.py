@@ -301,6 +301,11 @@ def test_static_estimators(name, kind, shape, specials, dtype, strided, seed):
         np.testing.assert_allclose(res.position_m, truth, rtol=0, atol=1e-6)
 
 
+def rss_crlb_m(position_m, anchors_m):
+    """The CRLB of the anchors' RSS model (n = 2.2, sigma = 3 dB), its construction inside the refused call."""
+    return lb.rss_crlb_m(position_m, lb.RssModel(anchors_m, lb.PathLossModel(0.0, 2.2, 3.0)))
+
+
 @FUZZ
 @given(kind=st.sampled_from(LAYOUTS), shape=st.integers(0, 4), specials=st.lists(st.sampled_from(sorted(SPECIALS)),
                                                                                 max_size=2),
@@ -311,11 +316,10 @@ def test_crlb(kind, shape, specials, dtype, strided, seed):
     batch = batch_shape(shape)
     position = inject(rng.uniform(0.5, 9.5, batch + (2,)) * {"tiny": 1e-300, "huge": 1e300}.get(kind, 1.0),
                       specials, rng)
-    bound = refused_or(lb.rss_crlb_m, position, anchors, 2.2, 3.0)
+    bound = refused_or(rss_crlb_m, position, anchors)
     other = as_dtype(position, dtype, strided)
-    same_result(refused_or(lb.rss_crlb_m, other, as_dtype(anchors, dtype, False), 2.2, 3.0),
-                refused_or(lb.rss_crlb_m, np.asarray(other, float), as_dtype(anchors, dtype, False).astype(float),
-                           2.2, 3.0))
+    same_result(refused_or(rss_crlb_m, other, as_dtype(anchors, dtype, False)),
+                refused_or(rss_crlb_m, np.asarray(other, float), as_dtype(anchors, dtype, False).astype(float)))
     if bound is None:
         return
     bound = np.asarray(bound)
@@ -324,7 +328,7 @@ def test_crlb(kind, shape, specials, dtype, strided, seed):
     if kind == "good" and not specials:
         # the bound scales with the layout (exact for a power of two): an invariant of the formula
         assert np.isfinite(bound).all()
-        np.testing.assert_allclose(lb.rss_crlb_m(2.0 * position, 2.0 * anchors, 2.2, 3.0), 2.0 * bound, rtol=1e-12)
+        np.testing.assert_allclose(rss_crlb_m(2.0 * position, 2.0 * anchors), 2.0 * bound, rtol=1e-12)
 
 
 # -- Palvai's lateration from receivers per problem, recursive least squares ------------------------------------

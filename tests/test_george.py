@@ -113,3 +113,14 @@ def test_no_george_default_is_fitted_and_the_fitted_sigma_is_only_an_alternative
         assert r.low <= r.default <= r.high
     # Eq. (8) differences the other anchors against anchor 1, the first listed corner (Sec. 5): reference row 0
     assert rows["reference_anchor"].default == 0 and tuple(george.ANCHORS_M[0]) == (0.0, 0.0)
+
+
+def test_track_with_kalman_old_standard_variant_warns_at_the_caller_and_gives_the_same_numbers():
+    """``variant="standard"`` (before issue 47) is ``"corrected"`` for one release."""
+    truth = george.trajectory_m("centerline")
+    fixes = truth + np.random.default_rng(2).standard_normal((4,) + truth.shape)
+    with pytest.warns(DeprecationWarning, match=r"track_with_kalman\(variant='standard'\) is deprecated: use "
+                                                r"track_with_kalman\(variant='corrected'\)") as caught:
+        old = george.track_with_kalman(fixes, truth, q=0.05, variant="standard")
+    assert len(caught) == 1 and caught[0].filename == __file__
+    np.testing.assert_array_equal(old, george.track_with_kalman(fixes, truth, q=0.05))

@@ -314,3 +314,13 @@ def test_the_default_filter_step_is_one_step_per_report_point(speed):
     np.testing.assert_allclose(steps, gu.REPORT_SPACING_M, rtol=1e-9)
     with pytest.raises(ValueError, match="dt_s"):
         gu.filter_step_s(0.0, speed)
+
+
+def test_track_old_ukf_weights_keyword_warns_at_the_caller_and_gives_the_same_numbers():
+    """``ukf_weights=`` (before issue 47) is ``ukf_variant=`` for one release."""
+    w = gu.simulate_walk("linear", 4, gu.WalkSettings(), 1, np.random.default_rng(8))
+    with pytest.warns(DeprecationWarning, match=r"track\(ukf_weights='corrected'\) is deprecated: use "
+                                                r"track\(ukf_variant='corrected'\)") as caught:
+        old = gu.track(w, "ukf", ukf_weights="corrected")
+    assert len(caught) == 1 and caught[0].filename == __file__
+    np.testing.assert_array_equal(old, gu.track(w, "ukf", ukf_variant="corrected"))

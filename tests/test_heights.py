@@ -92,7 +92,7 @@ def test_bayes_model_with_height_uses_3d_distances():
 
 def test_crlb_height_offsets_per_anchor():
     p = np.array([3.0, 4.0])
-    info = rss_position_information(p, ANCHORS[:, :2], 2.2, 3.0, height_offset_m=ANCHORS[:, 2] - H)
+    info = rss_position_information(p, RssModel(ANCHORS, MODEL, tag_height_m=H))
     diff = p - ANCHORS[:, :2]
     d2 = ranges_3d(p) ** 2
     beta2 = (22.0 / (3.0 * np.log(10))) ** 2

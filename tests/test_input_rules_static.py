@@ -158,10 +158,10 @@ def test_one_failing_box_problem_does_not_cost_its_batch(monkeypatch):
     (lambda: lb.model_fingerprints(ANCHORS, RSS_MODEL, min_distance_m=0.0), "min_distance_m must be > 0"),
     (lambda: lb.pattern_fingerprints(np.zeros((6, 40, 4)), axis=-1), "axis must be a sample axis"),
     (lambda: lb.pattern_fingerprints(np.full((6, 40, 4), np.inf)), "rss_dbm must be finite"),
-    (lambda: lb.rss_crlb_m(np.zeros((4, 3)), ANCHORS, 2.0, 4.0), r"position_m must have shape \(\.\.\., 2\)"),
-    (lambda: lb.rss_crlb_m([1.0, np.nan], ANCHORS, 2.0, 4.0), "position_m must be finite"),
-    (lambda: lb.rss_crlb_m([1.0, 1.0], ANCHORS, [2.0, 2.0], 4.0), r"path_loss_exp must be a positive scalar or \(5,\)"),
-    (lambda: lb.crlb_rms_over_area_m(np.zeros((0, 2)), ANCHORS, 2.0, 4.0), "points_m must hold at least one"),
+    (lambda: lb.rss_crlb_m(np.zeros((4, 3)), lb.RssModel(ANCHORS, MODEL)), r"position_m must have shape \(\.\.\., 2\)"),
+    (lambda: lb.rss_crlb_m([1.0, np.nan], lb.RssModel(ANCHORS, MODEL)), "position_m must be finite"),
+    (lambda: lb.rss_crlb_m([1.0, 1.0], lb.RssModel(ANCHORS, lb.PathLossModel(0.0, [2.0, 2.0], 4.0))), r"channel.path_loss_exp must be a scalar, \(5,\)"),
+    (lambda: lb.crlb_rms_over_area_m(np.zeros((0, 2)), lb.RssModel(ANCHORS, MODEL)), "points_m must hold at least one"),
     (lambda: lb.lateration_box_ls(ANCHORS, np.ones(5), [0, 0, 0], [1, 1]), r"lower_m must be a scalar or have shape \(2,\)"),
     (lambda: lb.rss_ml_position(np.ones(5), MODEL), r"model must be an RssModel.*pass rss_ml_position\(rss_dbm, RssModel"),
     (lambda: lb.grid_ml_position(np.ones(5), MODEL, ANCHORS), r"model must be an RssModel.*pass grid_ml_position\(rss_dbm, Rss"),
@@ -387,7 +387,7 @@ def test_crlb_in_3d_is_the_trace_of_the_inverse_numerical_fisher_information():
                      - model.mean_rss_dbm(lb.pairwise_distance_m(p - eps * e, anchors))) / (2 * eps)
                     for e in np.eye(3)], axis=1)
     expected = np.sqrt(np.trace(np.linalg.inv(jac.T @ jac / 16.0)))
-    assert lb.rss_crlb_m(p, anchors, 2.3, 4.0) == pytest.approx(expected, rel=1e-6)
+    assert lb.rss_crlb_m(p, lb.RssModel(anchors, model)) == pytest.approx(expected, rel=1e-6)
 
 
 # -- properties: random masks with a minimum, collinear subsets, degenerate anchors ------------------------------

@@ -213,6 +213,21 @@ def test_literal_george_records_the_previous_posterior_as_its_prior():
     np.testing.assert_array_equal(res.P_pred[:, 1:], res.cov[:, :-1])
 
 
+def test_the_old_standard_variant_warns_at_the_caller_and_gives_the_same_numbers():
+    """``variant="standard"`` (before issue 47) is ``"corrected"`` for one release; the result says ``"corrected"``."""
+    z, R, x0, P0 = _problem(batch=3, steps=8)
+    with pytest.warns(DeprecationWarning, match=r"kalman_filter\(variant='standard'\) is deprecated: use "
+                                                r"kalman_filter\(variant='corrected'\)") as caught:
+        old = lb.kalman_filter(MODEL.F, MODEL.Q, x0, P0, lb.LinearMeasurement(z, H, R), variant="standard")
+    assert len(caught) == 1 and caught[0].filename == __file__
+    new = lb.kalman_filter(MODEL.F, MODEL.Q, x0, P0, lb.LinearMeasurement(z, H, R))
+    np.testing.assert_array_equal(old.mean, new.mean)
+    np.testing.assert_array_equal(old.cov, new.cov)
+    assert old.variant == new.variant == "corrected" and lb.tracking.kalman.KF_VARIANTS == ("corrected", "literal_george")
+    with pytest.raises(ValueError, match=r"variant must be one of \('corrected', 'literal_george'\)"):
+        lb.kalman_filter(MODEL.F, MODEL.Q, x0, P0, lb.LinearMeasurement(z, H, R), variant="literal_george2015")
+
+
 def test_one_argument_order_and_clear_refusals():
     z, R, x0, P0 = _problem(batch=2, steps=5)
     stream = lb.LinearMeasurement(z, H, R)

@@ -366,9 +366,12 @@ def test_crlb_exponent_scales_the_printed_bound_as_one_over_n():
 def test_area_rms_is_the_rms_of_the_bound_over_the_room():
     xs, ys = np.arange(0.025, 5.0, 0.05), np.arange(0.025, 8.0, 0.05)
     points = np.stack(np.meshgrid(xs, ys, indexing="ij"), -1).reshape(-1, 2)
-    bound = lb.rss_crlb_m(points, oz.readers_for("corners3"), 2.3, 5.2, "ozkaya_printed")
+    bound = lb.rss_crlb_m(points, lb.RssModel(oz.readers_for("corners3"), lb.PathLossModel(0.0, 2.3, 5.2)),
+                          variant="literal_ozkaya2011")
     assert oz.thesis_crlb_m("corners3", 5.2) == pytest.approx(np.sqrt(np.mean(bound**2)), rel=1e-9)
-    cells = lb.rss_crlb_m(oz.cell_centres(oz.ROOM_M, 4, 7), oz.readers_for("corners3"), 2.0, 5.2, "ozkaya_printed")
+    cells = lb.rss_crlb_m(oz.cell_centres(oz.ROOM_M, 4, 7), lb.RssModel(oz.readers_for("corners3"),
+                                                                        lb.PathLossModel(0.0, 2.0, 5.2)),
+                          variant="literal_ozkaya2011")
     assert oz.thesis_crlb_m("corners3", 5.2, 2.0, "cells_mean") == pytest.approx(np.mean(cells), rel=1e-12)
 
 

@@ -233,7 +233,7 @@ def test_testbed_crlb_fitted_form_is_the_printed_form_bound_averaged_over_the_ce
     bounds = _printed_form_bounds(cells, 2.0, tb.TESTBED_SIGMA_DB)
     assert tb.testbed_crlb_m(2.0, average="cells_mean") == pytest.approx(np.mean(bounds), rel=1e-9)
     # the correct bound (1/d^4) is larger than the printed form wherever every reader is more than 1 m away
-    assert tb.testbed_crlb_m(np.asarray(oz.OFFLINE_PARAMETERS["path_loss_exp"]), form="correct") > \
+    assert tb.testbed_crlb_m(np.asarray(oz.OFFLINE_PARAMETERS["path_loss_exp"]), variant="corrected") > \
         tb.testbed_crlb_m(2.0, average="cells_mean")
 
 
@@ -330,3 +330,13 @@ def test_a_repeat_printed_with_another_text_is_compared_and_says_so(tmp_path, mo
     (n,) = tb.record_table_rows(report, [{**first, "printed": altered}])
     assert n["verdict"] and not n["same_as"]
     assert first["first_printed"].where in n["note"] and "both printed values are compared" in n["note"]
+
+
+@pytest.mark.parametrize("old, new", [("correct", "corrected"), ("ozkaya_printed", "literal_ozkaya2011")])
+def test_testbed_crlb_old_form_keyword_warns_at_the_caller_and_gives_the_same_number(old, new):
+    """``form=`` (before issue 47) is ``variant=`` for one release, its values mapped."""
+    with pytest.warns(DeprecationWarning, match=fr"testbed_crlb_m\(form='{old}'\) is deprecated: use "
+                                                fr"testbed_crlb_m\(variant='{new}'\)") as caught:
+        got = tb.testbed_crlb_m(2.0, form=old, average="cells_mean")
+    assert len(caught) == 1 and caught[0].filename == __file__
+    assert got == tb.testbed_crlb_m(2.0, variant=new, average="cells_mean")

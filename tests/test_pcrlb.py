@@ -75,7 +75,7 @@ def test_truth_conditioned_rss_bound_equals_stonesoup():
     truth = np.zeros((steps + 1, 6))
     truth[:, 0], truth[:, 3] = np.linspace(1.0, 3.0, steps + 1), np.linspace(1.5, 6.0, steps + 1)
     prior = np.diag([4.9, 0.0065, 0.00023, 4.9, 0.0065, 0.00023])
-    jz = lb.rss_state_information(truth[1:], anchors, 3.0, sigma, model.position_index)
+    jz = lb.rss_state_information(truth[1:], lb.RssModel(anchors, lb.PathLossModel(0.0, 3.0, sigma)), model.position_index)
     info = lb.posterior_crlb(np.linalg.inv(prior), model.F, Q, jz)
 
     class _CA:            # a transition model Stone Soup can use: our F and Q
@@ -121,23 +121,29 @@ def test_rss_information_regularisations():
     idx = np.array([0, 3])
     state = np.zeros(6); state[[0, 3]] = [0.3, 0.4]                     # 0.5 m from the anchor at the origin
     anchors = np.array([[0.0, 0.0]])
+
+    def rss(min_distance_m=0.0, height_m=None):        # the anchor, height_m above the tag
+        a = anchors if height_m is None else np.column_stack([anchors, [height_m]])
+        return lb.RssModel(a, lb.PathLossModel(0.0, 3.0, 6.0, min_distance_m=min_distance_m),
+                           tag_height_m=None if height_m is None else 0.0)
+
     beta2 = (10 * 3.0 / (6.0 * np.log(10))) ** 2
-    plain = lb.rss_state_information(state, anchors, 3.0, 6.0, idx)
+    plain = lb.rss_state_information(state, rss(), idx)
     u = np.array([0.6, 0.8])
     np.testing.assert_allclose(plain[np.ix_(idx, idx)], beta2 * np.outer(u, u) / 0.25)
     assert np.count_nonzero(plain) == 4
     # the clamped model's mean is flat within d_min (its derivative is 0: a reading there carries no information);
     # outside d_min the clamp changes nothing
-    clipped = lb.rss_state_information(state, anchors, 3.0, 6.0, idx, min_distance_m=1.0)
+    clipped = lb.rss_state_information(state, rss(1.0), idx)
     np.testing.assert_array_equal(clipped, 0.0)
     channel = lb.PathLossModel(-40.0, 3.0, min_distance_m=1.0)
     eps = 1e-6
     for e in np.eye(2) * eps:
         assert channel.mean_rss_dbm(np.linalg.norm(state[idx] + e)) == channel.mean_rss_dbm(np.linalg.norm(state[idx] - e))
-    np.testing.assert_array_equal(lb.rss_state_information(state, anchors, 3.0, 6.0, idx, min_distance_m=0.4), plain)
-    np.testing.assert_array_equal(lb.rss_state_information(np.zeros(6), anchors, 3.0, 6.0, idx, min_distance_m=1.0), 0.0)
-    lifted = lb.rss_state_information(state, anchors, 3.0, 6.0, idx, height_offset_m=1.2)
+    np.testing.assert_array_equal(lb.rss_state_information(state, rss(0.4), idx), plain)
+    np.testing.assert_array_equal(lb.rss_state_information(np.zeros(6), rss(1.0), idx), 0.0)
+    lifted = lb.rss_state_information(state, rss(height_m=1.2), idx)
     d2 = 0.25 + 1.44
     np.testing.assert_allclose(lifted[np.ix_(idx, idx)], beta2 * np.outer([0.3, 0.4], [0.3, 0.4]) / d2**2)
     with pytest.raises(lb.DegenerateGeometryError, match="undefined at an anchor"):
-        lb.rss_state_information(np.zeros(6), anchors, 3.0, 6.0, idx)
+        lb.rss_state_information(np.zeros(6), rss(), idx)

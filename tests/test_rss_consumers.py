@@ -84,16 +84,18 @@ def test_crlb_information_is_the_models_fisher_information_and_its_closed_form()
     rng = np.random.default_rng(4)
     pos = rng.uniform(0.5, 7.5, (6, 2))
     n, sigma = 2.6, 4.0
-    info = lb.rss_position_information(pos, ANCHORS, n, sigma, min_distance_m=0.2)
     model = lb.RssModel(ANCHORS, lb.PathLossModel(0.0, n, sigma, min_distance_m=0.2))
+    info = lb.rss_position_information(pos, model)
     np.testing.assert_array_equal(info, model.fisher_information(pos)[0])
     diff = pos[:, None, :] - ANCHORS
     d2 = np.sum(diff**2, -1)
     beta2 = (10 * n / (sigma * np.log(10))) ** 2                              # Patwari et al. (2003), Eq. (5)
     np.testing.assert_allclose(info, beta2 * np.einsum("pj,pji,pjk->pik", 1 / d2**2, diff, diff), rtol=1e-13)
     near = ANCHORS[1] + [0.1, -0.05]                                          # within 0.2 m of anchor 1: no term
-    np.testing.assert_allclose(lb.rss_position_information(near, ANCHORS, n, sigma, min_distance_m=0.2),
-                               lb.rss_position_information(near, ANCHORS[[0, 2, 3]], n, sigma), rtol=1e-14)
+    np.testing.assert_allclose(lb.rss_position_information(near, model),
+                               lb.rss_position_information(near, lb.RssModel(ANCHORS[[0, 2, 3]],
+                                                                             lb.PathLossModel(0.0, n, sigma))),
+                               rtol=1e-14)
 
 
 def test_rss_ml_fix_is_a_stationary_point_of_the_models_cost():

@@ -1,6 +1,6 @@
 """The one RSS measurement model against independent facts: its Jacobian against central finite differences, its
 log-likelihood against sums of scipy.stats.norm.logpdf, its Fisher information against the closed form and against
-bounds.crlb.rss_fisher_information on the same inputs; run blocks that change no bit; the one resampling module."""
+bounds.crlb.rss_fisher_information of the same model; run blocks that change no bit; the one resampling module."""
 import numpy as np
 import pytest
 from scipy.stats import norm
@@ -95,15 +95,15 @@ def test_fisher_information_equals_the_closed_form_and_bounds_crlb():
     beta2 = (10 * n / (sigma * np.log(10))) ** 2                        # Patwari et al. (2003), Eq. (5)
     closed = np.einsum("pj,pji,pjk->pik", beta2 / d2**2, diff, diff)
     np.testing.assert_allclose(info, closed, rtol=1e-12)
-    np.testing.assert_allclose(info, lb.rss_fisher_information(pos, ANCHORS, n, sigma), rtol=1e-12)
+    np.testing.assert_allclose(info, lb.rss_fisher_information(pos, model), rtol=1e-12)
     heard = np.array([True, False, True, True])
     np.testing.assert_allclose(model.fisher_information(pos, heard=heard)[0],
-                               lb.rss_position_information(pos, ANCHORS, n, sigma, heard=heard), rtol=1e-12)
-    # with heights: the 3-D distance, as the bound's height offset
+                               lb.rss_position_information(pos, model, heard=heard), rtol=1e-12)
+    # with heights: the 3-D distance, as the bound's anchors at their heights above the tag
     high = lb.RssModel(ANCHORS_3D, lb.PathLossModel(-45.0, n, sigma), tag_height_m=TAG_HEIGHT_M)
-    np.testing.assert_allclose(high.fisher_information(pos)[0],
-                               lb.rss_position_information(pos, ANCHORS, n, sigma,
-                                                           height_offset_m=ANCHORS_3D[:, 2] - TAG_HEIGHT_M), rtol=1e-12)
+    offsets = lb.RssModel(np.column_stack([ANCHORS, ANCHORS_3D[:, 2] - TAG_HEIGHT_M]), lb.PathLossModel(0.0, n, sigma),
+                          tag_height_m=0.0)
+    np.testing.assert_allclose(high.fisher_information(pos)[0], lb.rss_position_information(pos, offsets), rtol=1e-12)
     # the information is the expected outer product of the score (Monte Carlo over readings)
     rng = np.random.default_rng(4)
     p = pos[:1]

@@ -110,7 +110,7 @@ def _case(kind, rng, B=5, T=50):
         del kw["alpha"]                                     # julier and cubature take no alpha (refused if given)
     elif kind == "printed_weights_of_eq_3_22":                   # the flagged variant: mean weights sum to 2n / c
         streams = [lb.LinearMeasurement(fixes, H, np.diag([1.0, 1.5])), rss(mode="serial", order="given")]
-        kw.update(weights="literal_gudipati2017")
+        kw.update(variant="literal_gudipati2017")
     elif kind == "alpha_1_beta_0_kappa_1":
         streams = [rss(mode="serial")]
         kw.update(alpha=1.0, beta=0.0, kappa=1.0)

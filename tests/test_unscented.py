@@ -29,6 +29,24 @@ def test_printed_weight_of_eq_3_22_sums_to_2n_over_n_plus_lambda():
     assert w.mean[0] == pytest.approx(n / n_plus_lambda, rel=1e-12)
 
 
+def test_the_old_weights_keyword_warns_at_the_caller_and_gives_the_same_numbers():
+    """``weights=`` (before issue 47) is ``variant=`` for one release: one DeprecationWarning naming it, the same run."""
+    model = lb.constant_velocity(1.0, 0.05)
+    z = np.random.default_rng(2).normal(size=(3, 8, 2)) + np.arange(8)[:, None]
+    args = (model.F, model.Q, np.zeros(4), np.eye(4), lb.LinearMeasurement(z, model.position_measurement_matrix(),
+                                                                            np.eye(2)))
+    with pytest.warns(DeprecationWarning, match=r"unscented_kalman_filter\(weights='literal_gudipati2017'\) is "
+                                                r"deprecated: use unscented_kalman_filter\(variant='literal_gudipati2017'\)") \
+            as caught:
+        old = lb.unscented_kalman_filter(*args, alpha=1.0, weights="literal_gudipati2017")
+    assert len(caught) == 1 and caught[0].filename == __file__
+    new = lb.unscented_kalman_filter(*args, alpha=1.0, variant="literal_gudipati2017")
+    np.testing.assert_array_equal(old.mean, new.mean)
+    np.testing.assert_array_equal(old.cov, new.cov)
+    with pytest.raises(TypeError, match="give variant= only"):
+        lb.unscented_kalman_filter(*args, weights="corrected", variant="literal_gudipati2017")
+
+
 def test_sigma_points_reproduce_mean_and_covariance():
     rng = np.random.default_rng(1)
     A = rng.standard_normal((3, 5, 5))

@@ -7,79 +7,217 @@ information of the position p is (Patwari et al. 2003, Eq. (5); Ozkaya 2011, App
 
 and any unbiased estimator has ``E|p_hat - p|^2 >= tr J^{-1}`` (Ozkaya Eq. (A.5): (F_xx + F_yy) / det F).
 
+Every bound takes the one RSS measurement model, :class:`locbook.models.rss.RssModel` (the points first, then the
+model, then keyword-only options): its anchors, its channel's exponent ``n``, sigma and near-field clamp
+``min_distance_m``, and with ``tag_height_m`` the anchors' heights above the tag (3-D distances, plan positions).
+What a bound of one reading per anchor cannot honour is refused by name: walls (``walls_m``) and per-run or
+per-step anchors or parameters.
+
 Ozkaya's Appendix A prints ``d_j^2`` in the denominators (Eqs. (A.10)-(A.12)), which makes the bound
-dimensionless and scale-invariant; it is kept as ``form="ozkaya_printed"`` (flagged) because, with
-n = 2, it reproduces the thesis's CRLB numbers (our finding; the simulations themselves use n = 2.3).
+dimensionless and scale-invariant; it is kept as ``variant="literal_ozkaya2011"`` (flagged) because, with
+n = 2, it reproduces the thesis's CRLB numbers (our finding; the simulations themselves use n = 2.3). It uses the
+same model's n, sigma and clamp.
 
 On measured data each epoch hears its own anchors: :func:`rss_crlb_checked_m` gives the bound where it means something
 and NaN with a reason elsewhere (fewer than :data:`MIN_ANCHORS_FOR_BOUND` anchors heard, or a condition number above
 :data:`MAX_BOUND_CONDITION`), so that no near-singular epoch (a bound of 1e8 m) swamps an RMS over a recording.
+
+The call forms before issue 47 (``rss_crlb_m(position_m, anchors_m, path_loss_exp, sigma_db, form="correct", ...)``,
+told apart by an array in the second place) still work for one release, with a ``DeprecationWarning`` naming the new
+call; so do the old ``form=`` values ``"correct"`` and ``"ozkaya_printed"`` given as ``variant=``.
 """
 from __future__ import annotations
+
+import functools
+import inspect
 
 import numpy as np
 
 from ..errors import DegenerateGeometryError, ParameterError
 from .._validate import as_array, check_choice, check_scalar
+from .._variants import RENAMED_CRLB_FORMS, check_variant, warn_deprecated
 from ..models.channel import PathLossModel
 from ..models.rss import RssModel
 from ..static.localization import check_anchor_geometry
 
-__all__ = ["rss_fisher_information", "rss_position_information", "rss_crlb_m", "crlb_rms_over_area_m", "CRLB_FORMS",
+__all__ = ["rss_fisher_information", "rss_position_information", "rss_crlb_m", "crlb_rms_over_area_m", "CRLB_VARIANTS",
            "MIN_ANCHORS_FOR_BOUND", "MAX_BOUND_CONDITION", "check_position_information", "rss_crlb_checked_m"]
 
-CRLB_FORMS = ("correct", "ozkaya_printed")
+#: the bound's forms: the corrected Fisher information (1/d^4) and Ozkaya's printed one (1/d^2, flagged)
+CRLB_VARIANTS = ("corrected", "literal_ozkaya2011")
 
 
-def rss_fisher_information(position_m, anchors_m, path_loss_exp, sigma_db, form: str = "correct", *,
-                           min_distance_m: float = 0.0, height_offset_m: float = 0.0):
-    """Fisher information ``(..., 2, 2)`` of the position from RSS at ``position_m`` ``(..., 2)``.
+def _bound_model(model, who: str = "the bound") -> RssModel:
+    """``model`` if it is an :class:`~locbook.models.rss.RssModel` a bound can use, else one ValueError line naming
+    what to pass: an RssModel without walls, with one set of anchors and parameters (no run or step axes)."""
+    if not isinstance(model, RssModel):
+        got = type(model).__name__
+        hint = " (give it to RssModel(anchors_m, channel, tag_height_m=...))" if isinstance(model, PathLossModel) else ""
+        raise ValueError(f"{who} takes model = RssModel(anchors_m, channel) (the anchors and a PathLossModel with the "
+                         f"exponent, sigma and clamp), got {got}{hint}")
+    if model.walls_m is not None:
+        raise ValueError(f"{who} cannot honour the model's walls (walls_m): the bound is that of the log-distance mean "
+                         "alone; pass dataclasses.replace(model, walls_m=None)")
+    ch = model.channel
+    per_run = [f"anchors_m {model.anchors_m.shape} per run"] if model.anchors_m.ndim == 3 else []
+    per_run += [f"channel.{name} {np.shape(getattr(ch, name))} per run and step" for name, ndim in
+                (("ref_power_dbm", 3), ("path_loss_exp", 3), ("sigma_db", 2)) if np.ndim(getattr(ch, name)) == ndim]
+    if per_run:
+        raise ValueError(f"{who} takes one set of anchors and parameters, the model has {', '.join(per_run)}: pass "
+                         "one run's and step's model (e.g. model.select_runs(r) for run r)")
+    return model
 
-    ``path_loss_exp`` and ``sigma_db`` may be scalars or per-anchor arrays ``(m,)``. The anchors must resolve a
-    position on their own (at least 3, not collinear); :func:`rss_position_information` is the same formula
-    without that check, for bounds where a prior or a motion model supplies the rest (the posterior CRLB).
-    """
-    return rss_position_information(position_m, check_anchor_geometry(anchors_m), path_loss_exp, sigma_db, form,
-                                    min_distance_m=min_distance_m, height_offset_m=height_offset_m)
+
+def _variant(variant, who: str) -> str:
+    return check_variant(variant, CRLB_VARIANTS, where=who, renamed=RENAMED_CRLB_FORMS)
 
 
-def rss_position_information(position_m, anchors_m, path_loss_exp, sigma_db, form: str = "correct", *,
-                             min_distance_m: float = 0.0, height_offset_m: float = 0.0, heard=None):
-    """``beta^2 sum_j (p - a_j)(p - a_j)^T / d_j^4``, ``beta = 10 n / (sigma ln 10)``, for any anchors ``(m, 2)``.
+def _old_form(old):
+    """Decorator: a call whose second argument is an array (the anchors: the form before issue 47) goes to ``old``,
+    which warns and calls the new form; an RssModel (or anything else, refused by :func:`_bound_model`) to the new."""
+    old_signature = inspect.signature(old)
 
-    ``E[1/d^2]`` diverges for position densities positive at an anchor (so the sample average of Dogan 2015,
-    Eq. (4.22), has infinite variance), so two regularisations
-    are offered: ``height_offset_m`` (antenna height difference, a scalar or one per anchor,
-    ``d^2 = |p - a|^2 + h^2``, the exact information of that model, e.g. anchors near the ceiling and a tag at a
-    known height) and ``min_distance_m`` (the near-field clamp of the model, ``max(d, d_min)`` in the law: its mean
-    is flat within ``d_min`` of an anchor, so a reading there carries no information and its term is 0). The
-    information is :meth:`locbook.models.rss.RssModel.fisher_information` of that model (``form="correct"``);
-    ``form="ozkaya_printed"`` uses ``d^2`` in the denominator (flagged, see module docstring; within the clamp
-    ``d_min^2``).
-    ``heard``: booleans broadcastable to ``(..., m)``, False where an anchor gave no reading (NaN = not heard, the
-    library's rule): a reading that is not there carries no information, so its term is left out.
-    """
-    check_choice("form", form, CRLB_FORMS)
+    def wrap(new):
+        @functools.wraps(new)
+        def call(*args, **kwargs):
+            second = args[1] if len(args) > 1 else kwargs.get("anchors_m")
+            if isinstance(second, (np.ndarray, list, tuple)):
+                try:
+                    old_signature.bind(*args, **kwargs)
+                except TypeError:   # neither form: an array where the model goes
+                    _bound_model(second, new.__name__)
+                return old(*args, **kwargs)
+            return new(*args, **kwargs)
+        return call
+    return wrap
+
+
+def _old_model(anchors_m, path_loss_exp, sigma_db, *, min_distance_m=0.0, height_offset_m=0.0,
+               tag_height_m=None) -> RssModel:
+    """The RssModel of an old-form call, with the old form's checks (the same model, so the same bits, as before)."""
     anchors_m = as_array("anchors_m", anchors_m, ndim=2)
     m = anchors_m.shape[0]
-    position_m = as_array("position_m", position_m, min_ndim=1, trailing=(anchors_m.shape[1],))
     for name, value in (("path_loss_exp", path_loss_exp), ("sigma_db", sigma_db)):
         value = as_array(name, value)
         if value.ndim > 1 or value.size not in (1, m) or np.any(value <= 0):
             raise ValueError(f"{name} must be a positive scalar or ({m},) array (one per anchor), got {value.tolist()}")
     check_scalar("min_distance_m", min_distance_m, ge=0)
+    channel = PathLossModel(0.0, np.asarray(path_loss_exp, float), np.asarray(sigma_db, float),
+                            min_distance_m=float(min_distance_m))
+    if tag_height_m is not None:
+        if anchors_m.shape[1] != 3:
+            raise ValueError(f"tag_height_m needs 3-D anchors (m, 3) with their heights, got shape {anchors_m.shape}")
+        check_scalar("tag_height_m", tag_height_m)
+        return RssModel(anchors_m, channel, tag_height_m=tag_height_m)
     height = as_array("height_offset_m", height_offset_m)
     if height.ndim > 1 or height.size not in (1, m):
         raise ValueError(f"height_offset_m must be a scalar or ({m},) array (one per anchor: anchor height minus tag "
                          f"height), got shape {height.shape}")
-    diff = position_m[..., None, :] - anchors_m  # (..., m, 2)
-    d2 = np.einsum("...i,...i->...", diff, diff) + height**2
+    if np.any(height != 0):         # the anchors' heights above the tag's plane z = 0
+        if anchors_m.shape[1] != 2:
+            raise ValueError(f"height_offset_m needs plan anchors (m, 2) (the tag in a plane), got {anchors_m.shape}")
+        return RssModel(np.column_stack([anchors_m, np.broadcast_to(height, (m,))]), channel, tag_height_m=0.0)
+    return RssModel(anchors_m, channel)
+
+
+def _old_variant(form) -> str:
+    check_choice("form", form, tuple(RENAMED_CRLB_FORMS) + CRLB_VARIANTS)
+    return RENAMED_CRLB_FORMS.get(form, form)
+
+
+def _warn_old(name: str, old: str, new: str) -> None:
+    warn_deprecated(f"{name}({old})", f"{name}({new})", skip=(__name__,))
+
+
+_NEW_MODEL = "RssModel(anchors_m, PathLossModel(0.0, path_loss_exp, sigma_db, min_distance_m=...){})"
+
+
+def _old_fisher_information(position_m, anchors_m, path_loss_exp, sigma_db, form: str = "correct", *,
+                            min_distance_m: float = 0.0, height_offset_m: float = 0.0):
+    _warn_old("rss_fisher_information", "position_m, anchors_m, path_loss_exp, sigma_db, form, ...",
+              "position_m, " + _NEW_MODEL.format("") + ", variant=...")
+    variant = _old_variant(form)
+    check_anchor_geometry(anchors_m)
+    return rss_fisher_information(position_m, _old_model(anchors_m, path_loss_exp, sigma_db,
+                                                         min_distance_m=min_distance_m,
+                                                         height_offset_m=height_offset_m), variant=variant)
+
+
+def _old_position_information(position_m, anchors_m, path_loss_exp, sigma_db, form: str = "correct", *,
+                              min_distance_m: float = 0.0, height_offset_m: float = 0.0, heard=None):
+    _warn_old("rss_position_information", "position_m, anchors_m, path_loss_exp, sigma_db, form, ...",
+              "position_m, " + _NEW_MODEL.format("") + ", variant=..., heard=...")
+    variant = _old_variant(form)
+    return rss_position_information(position_m, _old_model(anchors_m, path_loss_exp, sigma_db,
+                                                           min_distance_m=min_distance_m,
+                                                           height_offset_m=height_offset_m),
+                                    variant=variant, heard=heard)
+
+
+def _old_crlb_m(position_m, anchors_m, path_loss_exp, sigma_db, form: str = "correct", *,
+                tag_height_m: float | None = None, heard=None):
+    _warn_old("rss_crlb_m", "position_m, anchors_m, path_loss_exp, sigma_db, form, tag_height_m=...",
+              "position_m, " + _NEW_MODEL.format(", tag_height_m=...") + ", variant=..., heard=...")
+    variant = _old_variant(form)
+    return rss_crlb_m(position_m, _old_model(anchors_m, path_loss_exp, sigma_db, tag_height_m=tag_height_m),
+                      variant=variant, heard=heard)
+
+
+def _old_rms_over_area_m(points_m, anchors_m, path_loss_exp, sigma_db, form: str = "correct", *,
+                         tag_height_m: float | None = None):
+    _warn_old("crlb_rms_over_area_m", "points_m, anchors_m, path_loss_exp, sigma_db, form, tag_height_m=...",
+              "points_m, " + _NEW_MODEL.format(", tag_height_m=...") + ", variant=...")
+    variant = _old_variant(form)
+    return crlb_rms_over_area_m(points_m, _old_model(anchors_m, path_loss_exp, sigma_db, tag_height_m=tag_height_m),
+                                variant=variant)
+
+
+@_old_form(_old_fisher_information)
+def rss_fisher_information(position_m, model, *, variant: str = "corrected"):
+    """Fisher information ``(..., dim, dim)`` of the position from RSS at ``position_m`` ``(..., dim)``, for the RSS
+    model ``model`` (:class:`~locbook.models.rss.RssModel`; the channel's ``path_loss_exp`` and ``sigma_db`` scalars
+    or per anchor ``(m,)``). The anchors must resolve a position on their own (at least ``dim + 1``, not collinear);
+    :func:`rss_position_information` is the same formula without that check, for bounds where a prior or a motion
+    model supplies the rest (the posterior CRLB).
+    """
+    model = _bound_model(model, "rss_fisher_information")
+    variant = _variant(variant, "rss_fisher_information")
+    check_anchor_geometry(model.anchors_m[:, :model.dim])
+    return rss_position_information(position_m, model, variant=variant)
+
+
+@_old_form(_old_position_information)
+def rss_position_information(position_m, model, *, variant: str = "corrected", heard=None):
+    """``beta^2 sum_j (p - a_j)(p - a_j)^T / d_j^4``, ``beta = 10 n / (sigma ln 10)``, for any anchors of ``model``.
+
+    ``E[1/d^2]`` diverges for position densities positive at an anchor (so the sample average of Dogan 2015,
+    Eq. (4.22), has infinite variance), so the model's two regularisations apply: anchors with heights
+    (``tag_height_m`` and anchors ``(m, 3)``: ``d^2 = |p - a|^2 + (z_j - h)^2``, the exact information of that model,
+    e.g. anchors near the ceiling and a tag at a known height) and the channel's ``min_distance_m`` (the near-field
+    clamp of the model, ``max(d, d_min)`` in the law: its mean is flat within ``d_min`` of an anchor, so a reading
+    there carries no information and its term is 0). The information is
+    :meth:`locbook.models.rss.RssModel.fisher_information` of that model (``variant="corrected"``);
+    ``variant="literal_ozkaya2011"`` uses ``d^2`` in the denominator (flagged, see module docstring; within the clamp
+    ``d_min^2``).
+    ``heard``: booleans broadcastable to ``(..., m)``, False where an anchor gave no reading (NaN = not heard, the
+    library's rule): a reading that is not there carries no information, so its term is left out.
+    """
+    model = _bound_model(model, "rss_position_information")
+    variant = _variant(variant, "rss_position_information")
+    m, dim = model.n_anchors, model.dim
+    position_m = as_array("position_m", position_m, min_ndim=1, trailing=(dim,))
+    ch = model.channel
+    min_distance_m = ch.min_distance_m
+    anchors = model.anchors_m
+    diff = position_m[..., None, :] - anchors[:, :dim]  # (..., m, dim)
+    vertical = 0.0 if model.tag_height_m is None else anchors[:, -1] - model.tag_height_m
+    d2 = np.einsum("...i,...i->...", diff, diff) + vertical**2
     if min_distance_m == 0 and np.any(d2 == 0):
         where = tuple(int(i) for i in np.argwhere(d2 == 0)[0])
         raise DegenerateGeometryError(f"the RSS Fisher information is undefined at an anchor position (d = 0): "
                                       f"position_m{list(where[:-1])} = {position_m[where[:-1]].tolist()} is anchor "
-                                      f"{where[-1]}; give height_offset_m (antenna height difference) or "
-                                      f"min_distance_m (the near-field clamp)")
+                                      f"{where[-1]}; give the model anchor heights (anchors (m, 3) with "
+                                      f"tag_height_m) or the channel a min_distance_m (the near-field clamp)")
     if heard is not None:
         heard = np.asarray(heard)
         if heard.dtype != bool:
@@ -88,53 +226,43 @@ def rss_position_information(position_m, anchors_m, path_loss_exp, sigma_db, for
             heard = np.broadcast_to(heard, d2.shape)
         except ValueError:
             raise ValueError(f"heard must broadcast to (..., {m}) = {d2.shape}, got shape {heard.shape}") from None
-    if form == "ozkaya_printed":    # a flagged variant of the bound, not of the model: d^2 where the model has d^4
-        gain = (10.0 * np.asarray(path_loss_exp, float) / (np.asarray(sigma_db, float) * np.log(10.0))) ** 2
+    if variant == "literal_ozkaya2011":    # a flagged variant of the bound, not of the model: d^2 where it has d^4
+        sigma = np.asarray(ch.sigma_db, float)
+        if np.any(sigma <= 0):
+            raise ValueError(f"the Fisher information needs sigma_db > 0 (channel.sigma_db), got {ch.sigma_db!r}")
+        gain = (10.0 * np.asarray(ch.path_loss_exp, float) / (sigma * np.log(10.0))) ** 2
         gain = np.broadcast_to(gain, d2.shape) if heard is None else gain * heard
-        return np.einsum("...j,...ji,...jk->...ik", gain / np.maximum(d2, min_distance_m**2), diff, diff)
+        return np.einsum("...j,...ji,...jk->...ik", gain / np.maximum(d2, float(min_distance_m)**2), diff, diff)
     # the one RSS model's information (its Jacobian, exactly 0 within the clamp, where the clamped mean is flat)
-    channel = PathLossModel(0.0, np.asarray(path_loss_exp, float), np.asarray(sigma_db, float),
-                            min_distance_m=float(min_distance_m))
-    if np.any(height != 0):         # the anchors' heights above the tag's plane z = 0
-        if anchors_m.shape[1] != 2:
-            raise ValueError(f"height_offset_m needs plan anchors (m, 2) (the tag in a plane), got {anchors_m.shape}")
-        model = RssModel(np.column_stack([anchors_m, np.broadcast_to(height, (m,))]), channel, tag_height_m=0.0)
-    else:
-        model = RssModel(anchors_m, channel)
     batch = position_m.shape[:-1]
-    flat = position_m.reshape(-1, anchors_m.shape[1])
+    flat = position_m.reshape(-1, dim)
     info = model.fisher_information(flat, heard=None if heard is None else heard.reshape(1, -1, m))
     return info.reshape(batch + info.shape[-2:])
 
 
-def rss_crlb_m(position_m, anchors_m, path_loss_exp, sigma_db, form: str = "correct", *,
-               tag_height_m: float | None = None, heard=None):
-    """Position RMSE bound ``sqrt(tr J^{-1})`` (m) at each position ``(..., 2)`` -> ``(...)``.
+@_old_form(_old_crlb_m)
+def rss_crlb_m(position_m, model, *, variant: str = "corrected", heard=None):
+    """Position RMSE bound ``sqrt(tr J^{-1})`` (m) at each position ``(..., dim)`` -> ``(...)`` for the RSS model
+    ``model`` (:class:`~locbook.models.rss.RssModel`).
 
     In 2-D by Ozkaya's closed form (A.5); for anchors in another dimension ``(m, dim)`` (positions
     ``(..., dim)``) by the trace of the inverse. Positions must be finite and off the anchors.
 
-    With 3-D anchors ``(m, 3)`` the choice is explicit: without ``tag_height_m`` the bound is the 3-D one of a
+    With 3-D anchors ``(m, 3)`` the choice is the model's: without ``tag_height_m`` the bound is the 3-D one of a
     position whose height is unknown too (positions ``(..., 3)``; often mostly height error); with
     ``tag_height_m`` it is the 2-D bound of ``(x, y)`` (positions ``(..., 2)``) for a tag at that known height:
-    each anchor's height above the tag enters the distance (``rss_fisher_information``'s ``height_offset_m``),
-    i.e. the ``(x, y)`` block of the 3-D information, not its Schur complement.
+    each anchor's height above the tag enters the distance, i.e. the ``(x, y)`` block of the 3-D information, not
+    its Schur complement.
 
     ``heard`` ``(..., m)`` booleans (measured data: False = the anchor heard nothing at that epoch): the bound of
     the anchors each position heard (2-D positions only); where those cannot fix a position (fewer than two, or
     aligned with it) the bound is ``inf``."""
+    variant = _variant(variant, "rss_crlb_m")
     # with a heard mask a position may see too few anchors: no up-front geometry check, inf where singular
-    information = rss_fisher_information if heard is None else rss_position_information
-    extra = {} if heard is None else {"heard": heard}
-    if tag_height_m is not None:
-        anchors = as_array("anchors_m", anchors_m, ndim=2)
-        if anchors.shape[1] != 3:
-            raise ValueError(f"tag_height_m needs 3-D anchors (m, 3) with their heights, got shape {anchors.shape}")
-        check_scalar("tag_height_m", tag_height_m)
-        info = information(position_m, anchors[:, :2], path_loss_exp, sigma_db, form,
-                           height_offset_m=anchors[:, 2] - tag_height_m, **extra)
+    if heard is None:
+        info = rss_fisher_information(position_m, model, variant=variant)
     else:
-        info = information(position_m, anchors_m, path_loss_exp, sigma_db, form, **extra)
+        info = rss_position_information(position_m, model, variant=variant, heard=heard)
     if info.shape[-1] != 2:
         if heard is not None:
             raise ValueError("heard= gives the bound of 2-D positions (plan anchors, or 3-D ones with tag_height_m)")
@@ -148,14 +276,15 @@ def rss_crlb_m(position_m, anchors_m, path_loss_exp, sigma_db, form: str = "corr
         return np.where(ok, np.sqrt(trace / np.where(ok, det, 1.0)), np.inf)
 
 
-def crlb_rms_over_area_m(points_m, anchors_m, path_loss_exp, sigma_db, form: str = "correct", *,
-                         tag_height_m: float | None = None):
-    """RMS of the bound over target positions ``(P, 2)``: ``sqrt(mean_p tr J(p)^{-1})``, the
-    area-average used by Ozkaya (2011) for Fig. 7.1 and the CRLB columns (``tag_height_m``: :func:`rss_crlb_m`)."""
+@_old_form(_old_rms_over_area_m)
+def crlb_rms_over_area_m(points_m, model, *, variant: str = "corrected"):
+    """RMS of the bound over target positions ``(P, dim)``: ``sqrt(mean_p tr J(p)^{-1})``, the
+    area-average used by Ozkaya (2011) for Fig. 7.1 and the CRLB columns (``model``, ``variant``:
+    :func:`rss_crlb_m`)."""
     points_m = as_array("points_m", points_m, min_ndim=1)
     if points_m.size == 0:
         raise ValueError(f"points_m must hold at least one position, got shape {points_m.shape}")
-    bound = rss_crlb_m(points_m, anchors_m, path_loss_exp, sigma_db, form, tag_height_m=tag_height_m)
+    bound = rss_crlb_m(points_m, model, variant=_variant(variant, "crlb_rms_over_area_m"))
     return float(np.sqrt(np.mean(bound**2)))
 
 
@@ -248,32 +377,41 @@ def check_position_information(information, n_heard=None, *, min_anchors: int = 
     return bound, reason
 
 
-def rss_crlb_checked_m(position_m, anchors_m, path_loss_exp, sigma_db, *, tag_height_m: float | None = None,
-                       heard=None, min_anchors: int = MIN_ANCHORS_FOR_BOUND,
-                       max_condition: float = MAX_BOUND_CONDITION):
-    """``(bound_m (...), reason (...))``: :func:`rss_crlb_m` (``form="correct"``) at plan positions ``(..., 2)``,
-    checked epoch by epoch: NaN with a short reason where the bound says nothing (:func:`check_position_information`).
-
-    Anchors ``(m, 2)``, or ``(m, 3)`` with ``tag_height_m`` (the tag at that known height: each anchor's height
-    above the tag enters the distance, as in :func:`rss_crlb_m`). ``heard`` ``(..., m)`` booleans (False = the
-    anchor heard nothing at that epoch; ``None`` = every anchor heard): the information is that of the anchors heard
-    (:func:`rss_position_information`), and an epoch that heard fewer than ``min_anchors`` has
-    ``"heard k anchors, a plan fix needs 3"``. A position holding NaN (true position unknown) has
-    ``"no true position"``. Where the bound is defined it equals :func:`rss_crlb_m`'s.
-    """
+def _old_crlb_checked_m(position_m, anchors_m, path_loss_exp, sigma_db, *, tag_height_m: float | None = None,
+                        heard=None, min_anchors: int = MIN_ANCHORS_FOR_BOUND,
+                        max_condition: float = MAX_BOUND_CONDITION):
+    _warn_old("rss_crlb_checked_m", "position_m, anchors_m, path_loss_exp, sigma_db, tag_height_m=...",
+              "position_m, " + _NEW_MODEL.format(", tag_height_m=...") + ", heard=...")
     anchors = as_array("anchors_m", anchors_m, ndim=2)
-    if tag_height_m is not None:
-        if anchors.shape[1] != 3:
-            raise ParameterError(f"tag_height_m needs 3-D anchors (m, 3) with their heights, got shape "
-                                 f"{anchors.shape}")
-        check_scalar("tag_height_m", tag_height_m)
-        plan, height = anchors[:, :2], anchors[:, 2] - tag_height_m
-    elif anchors.shape[1] != 2:
+    if tag_height_m is not None and anchors.shape[1] != 3:
+        raise ParameterError(f"tag_height_m needs 3-D anchors (m, 3) with their heights, got shape "
+                             f"{anchors.shape}")
+    if tag_height_m is None and anchors.shape[1] != 2:
         raise ParameterError(f"anchors_m must be plan anchors (m, 2), or (m, 3) with tag_height_m (the bound is "
                              f"that of a plan position), got shape {anchors.shape}")
-    else:
-        plan, height = anchors, 0.0
-    m = plan.shape[0]
+    return rss_crlb_checked_m(position_m, _old_model(anchors, path_loss_exp, sigma_db, tag_height_m=tag_height_m),
+                              heard=heard, min_anchors=min_anchors, max_condition=max_condition)
+
+
+@_old_form(_old_crlb_checked_m)
+def rss_crlb_checked_m(position_m, model, *, heard=None, min_anchors: int = MIN_ANCHORS_FOR_BOUND,
+                       max_condition: float = MAX_BOUND_CONDITION):
+    """``(bound_m (...), reason (...))``: :func:`rss_crlb_m` (``variant="corrected"``) at plan positions ``(..., 2)``,
+    checked epoch by epoch: NaN with a short reason where the bound says nothing (:func:`check_position_information`).
+
+    ``model``: an :class:`~locbook.models.rss.RssModel` of plan positions, anchors ``(m, 2)``, or ``(m, 3)`` with
+    ``tag_height_m`` (the tag at that known height: each anchor's height above the tag enters the distance, as in
+    :func:`rss_crlb_m`). ``heard`` ``(..., m)`` booleans (False = the anchor heard nothing at that epoch; ``None`` =
+    every anchor heard): the information is that of the anchors heard (:func:`rss_position_information`), and an
+    epoch that heard fewer than ``min_anchors`` has ``"heard k anchors, a plan fix needs 3"``. A position holding NaN
+    (true position unknown) has ``"no true position"``. Where the bound is defined it equals :func:`rss_crlb_m`'s.
+    """
+    model = _bound_model(model, "rss_crlb_checked_m")
+    if model.dim != 2:
+        raise ParameterError(f"rss_crlb_checked_m gives the bound of a plan position: the model must read 2-D "
+                             f"positions (anchors (m, 2), or (m, 3) with tag_height_m), its anchors "
+                             f"{model.anchors_m.shape} give {model.dim}-D")
+    m = model.n_anchors
     position = as_array("position_m", position_m, min_ndim=1, trailing=(2,), nan_ok=True)
     batch = position.shape[:-1]
     if heard is None:
@@ -290,8 +428,7 @@ def rss_crlb_checked_m(position_m, anchors_m, path_loss_exp, sigma_db, *, tag_he
     known = ~np.isnan(position).any(axis=-1)
     info = np.full(batch + (2, 2), np.nan)
     if known.any():     # the information of the epochs with a true position only (NaN is no position)
-        info[known] = rss_position_information(position[known], plan, path_loss_exp, sigma_db,
-                                               height_offset_m=height, heard=heard_b[known])
+        info[known] = rss_position_information(position[known], model, heard=heard_b[known])
     bound, reason = check_position_information(info, heard_b.sum(axis=-1), min_anchors=min_anchors,
                                                max_condition=max_condition)
     reason[~known] = NO_TRUTH_REASON

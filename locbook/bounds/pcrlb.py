@@ -22,7 +22,8 @@ import numpy as np
 
 from .._validate import as_array, check_choice
 
-from .crlb import rss_position_information
+from .crlb import _bound_model, _old_form, _old_model, rss_position_information
+from .._variants import warn_deprecated
 from .._linalg import _mT
 
 __all__ = ["posterior_crlb", "position_bound_m", "rss_state_information", "linear_measurement_information",
@@ -94,21 +95,31 @@ def linear_measurement_information(H, R):
     return _mT(H) @ _inv(R) @ H
 
 
-def rss_state_information(states, anchors_m, path_loss_exp, sigma_db, position_index, *,
-                          min_distance_m: float = 0.0, height_offset_m: float = 0.0, heard=None):
+def _old_state_information(states, anchors_m, path_loss_exp, sigma_db, position_index, *,
+                           min_distance_m: float = 0.0, height_offset_m: float = 0.0, heard=None):
+    warn_deprecated("rss_state_information(states, anchors_m, path_loss_exp, sigma_db, position_index, ...)",
+                    "rss_state_information(states, RssModel(anchors_m, PathLossModel(0.0, path_loss_exp, sigma_db, "
+                    "min_distance_m=...)), position_index, heard=...)", skip=(__name__, "locbook.bounds.crlb"))
+    return rss_state_information(states, _old_model(anchors_m, path_loss_exp, sigma_db, min_distance_m=min_distance_m,
+                                                    height_offset_m=height_offset_m), position_index, heard=heard)
+
+
+@_old_form(_old_state_information)
+def rss_state_information(states, model, position_index, *, heard=None):
     """Fisher information of RSS from every anchor about the full state, ``(..., n, n)`` for states ``(..., n)``.
 
     ``Lambda(x) = H(x)^T R^{-1} H(x)`` (Dogan Eq. (4.19)), ``R = sigma^2 I``: the one RSS model's Fisher information
-    (:meth:`locbook.models.rss.RssModel.fisher_information`, through
-    :func:`locbook.bounds.crlb.rss_position_information` with its near-anchor regularisations, the clamp giving 0
-    within ``min_distance_m``, and its ``heard`` mask for readings that are not there) in the position block.
+    (``model``, an :class:`~locbook.models.rss.RssModel`: :meth:`locbook.models.rss.RssModel.fisher_information`,
+    through :func:`locbook.bounds.crlb.rss_position_information` with the model's near-anchor regularisations, the
+    anchors' heights above the tag and the channel's clamp giving 0 within ``min_distance_m``, and its ``heard`` mask
+    for readings that are not there) in the position block ``position_index``.
     """
+    model = _bound_model(model, "rss_state_information")
     states = as_array("states", states, min_ndim=1)
     idx = np.asarray(position_index)
     if idx.ndim != 1 or idx.size == 0 or idx.max() >= states.shape[-1]:
         raise ValueError(f"position_index must index the {states.shape[-1]} state entries, got {position_index!r}")
-    block = rss_position_information(states[..., idx], anchors_m, path_loss_exp, sigma_db,
-                                     min_distance_m=min_distance_m, height_offset_m=height_offset_m, heard=heard)
+    block = rss_position_information(states[..., idx], model, heard=heard)
     out = np.zeros(states.shape + (states.shape[-1],))
     out[..., idx[:, None], idx[None, :]] = block
     return out

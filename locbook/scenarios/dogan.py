@@ -812,7 +812,13 @@ def pcrlb_m(kind: str, *, fusion: bool, sigma_rss_db: float, mse_mle_m2, n_steps
         jz[:] = acc_info
         if not acc_at_rss_epochs:
             jz[rss_steps - 1] = 0.0
-    regularise = dict(min_distance_m=min_distance_m, height_offset_m=height_offset_m)
+    def rss_model():       # the RSS model of the bound: the anchors height_offset_m above the tag, the clamp
+        anchors, height = np.asarray(anchors_m, float), np.asarray(height_offset_m, float)
+        channel = PathLossModel(0.0, path_loss_exp, sigma_rss_db, min_distance_m=min_distance_m)
+        if np.any(height != 0):
+            return RssModel(np.column_stack([anchors, np.broadcast_to(height, anchors.shape[:1])]), channel,
+                            tag_height_m=0.0)
+        return RssModel(anchors, channel)
     if kind == "linear" and per_epoch:        # R_k per epoch (Table 4.1's R_{k+1}); epoch 0 is P_0's
         H = model.position_measurement_matrix()
         rss_info = np.stack([linear_measurement_information(H, np.diag(m)) for m in mse[1:rss_steps.size + 1]])
@@ -821,14 +827,12 @@ def pcrlb_m(kind: str, *, fusion: bool, sigma_rss_db: float, mse_mle_m2, n_steps
     elif kind == "truth":
         if trajectory is None or trajectory.time_s.size < n_steps:
             raise ParameterError("the truth-conditioned bound needs a trajectory of at least n_steps steps")
-        rss_info = rss_state_information(trajectory.states(model)[rss_steps], anchors_m, path_loss_exp, sigma_rss_db, idx,
-                                         **regularise)
+        rss_info = rss_state_information(trajectory.states(model)[rss_steps], rss_model(), idx)
     else:
         if rng is None:
             raise ParameterError("the Monte-Carlo (smc) bound needs rng")
         states = smc_trajectories(n_trajectories, n_steps, rng, model=model, room_m=room_m)
-        rss_info = rss_state_information(states[:, rss_steps], anchors_m, path_loss_exp, sigma_rss_db, idx,
-                                         **regularise).mean(axis=0)               # Eq. (4.22)
+        rss_info = rss_state_information(states[:, rss_steps], rss_model(), idx).mean(axis=0)    # Eq. (4.22)
     jz[rss_steps - 1] += rss_info
     info = posterior_crlb(np.linalg.inv(P0), model.F, model.Q, jz)
     return position_bound_m(info, idx)

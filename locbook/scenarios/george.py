@@ -18,7 +18,8 @@ import numpy as np
 
 from ..static.calibration import calibrate_path_loss, fix_error_covariance
 from ..models.channel import PathLossModel, pairwise_distance_m
-from ..tracking.kalman import kalman_filter
+from ..tracking.kalman import KF_VARIANTS, kalman_filter
+from .._variants import RENAMED_KF_VARIANTS, check_variant
 from ..tracking.streams import LinearMeasurement
 from ..static.localization import lateration_ls
 from ..reproduce.printed_values import printed
@@ -180,7 +181,7 @@ def simulate_corridor(n_runs: int, truth_m, true_model: PathLossModel, *, rng_ca
 
 def track_with_kalman(fixes_m, truth_m, *, q: float, dt_s: float = 1.0, r_mode: str = "empirical",
                       r_iso_m2: float = 3.3, init: str = "first_measurement", init_velocity_var: float = 1.0,
-                      variant: str = "standard", with_divergence: bool = False):
+                      variant: str = "corrected", with_divergence: bool = False):
     """Filter the fixes with the constant-velocity KF of Eqs. (9)-(13); returns positions (runs, T, 2).
 
     Q = q G G^T (white acceleration; the paper prints no Q, only that it was "tuned" to minimise
@@ -190,10 +191,14 @@ def track_with_kalman(fixes_m, truth_m, *, q: float, dt_s: float = 1.0, r_mode: 
     velocity to zero"): the first fix (``"first_measurement"``) or the true start (``"true_start"``), with
     P0 = diag(R_xx, R_yy, v, v). With the first-fix start the first output is that fix.
 
+    ``variant``: the KF's (:func:`locbook.kalman_filter`): ``"corrected"`` or the printed update
+    ``"literal_george"`` (``"standard"`` before issue 47: deprecated).
+
     ``with_divergence=True`` returns ``(positions, flags)``, ``flags`` the KF's NIS guard per run
     (:class:`locbook.tracking.divergence.DivergenceFlags`, steps indexed by marked point): runs without fixes (failed
     calibration) are not filtered, so neither flagged nor counted.
     """
+    variant = check_variant(variant, KF_VARIANTS, where="track_with_kalman", renamed=RENAMED_KF_VARIANTS)
     if r_mode not in R_MODES:
         raise ValueError(f"r_mode must be one of {R_MODES}, got {r_mode!r}")
     if init not in INIT_MODES:

@@ -20,6 +20,7 @@ import numpy as np
 
 from .._validate import check_choice, check_scalar
 from ..bounds.crlb import rss_crlb_m
+from .._variants import renamed_keyword
 from ..bounds.pcrlb import position_bound_m, posterior_crlb, rss_state_information
 from ..reproduce.printed_values import printed
 from ..metrics import position_error_m
@@ -28,6 +29,7 @@ from ..models.channel import (PathLossModel, correlated_shadowing_db, log_distan
 from ..models.imu import (InertialMeasurement, accelerometer_readings, body_to_world, dead_reckon, gyroscope_readings,
                           integrate, inertial_measurement_jacobian)
 from ..models.motion import HeadingKinematicModel, KinematicModel
+from ..models.rss import RssModel
 from ..models.trajectory import Trajectory, waypoint_trajectory
 from ..static.calibration import fix_error_covariance
 from ..static.localization import lateration_box_ls, lateration_ls
@@ -381,7 +383,8 @@ def position_fusion(walk: Walk, fix_covariance) -> tuple[np.ndarray, np.ndarray]
 STATE_MODELS = ("heading", "literal_gudipati2017")
 
 
-def track(walk: Walk, method: str, *, fix_covariance=None, ukf_alpha: float = UKF_ALPHA, ukf_weights: str = "corrected",
+@renamed_keyword("ukf_weights", "ukf_variant")
+def track(walk: Walk, method: str, *, fix_covariance=None, ukf_alpha: float = UKF_ALPHA, ukf_variant: str = "corrected",
           ukf_innovation_noise: bool = True, rss_sign: str = "corrected", state_model: str = "heading",
           with_divergence: bool = False):
     """Position estimates ``(R, K, 2)`` at the report points for one method (the methods of Ch. V; their inputs are
@@ -397,7 +400,8 @@ def track(walk: Walk, method: str, *, fix_covariance=None, ukf_alpha: float = UK
       frame by the integrated gyroscope as linear measurements at every step;
     - ``ekf`` / ``ukf``: the 8-D model with heading and yaw rate (:class:`HeadingKinematicModel`), the RSS of every
       packet (Eq. (3.12) sign corrected) and the inertial readings (body frame) stacked at every step; the UKF with
-      the thesis's alpha, beta = 2, kappa = 0 and the corrected equations of Sec. 3.6 (``ukf_weights="literal_gudipati2017"``
+      the thesis's alpha, beta = 2, kappa = 0 and the corrected equations of Sec. 3.6
+      (``ukf_variant="literal_gudipati2017"``, ``ukf_weights=`` before issue 47: deprecated,
       and ``ukf_innovation_noise=False``: the printed Eqs. (3.22) and (3.26), flagged; ``rss_sign="printed_3_12"``:
       h with the printed leading minus, flagged; ``state_model="literal_gudipati2017"``: the 8-D state as printed, theta_x and
       theta_y random walks, with Z^2 = [a_x, a_y, theta_x, theta_y] a linear measurement and the readings taken as
@@ -447,7 +451,7 @@ def track(walk: Walk, method: str, *, fix_covariance=None, ukf_alpha: float = UK
         res = extended_kalman_filter(model.F, model.Q, x0, P0, streams, record=steps)
     else:
         res = unscented_kalman_filter(model.F, model.Q, x0, P0, streams, alpha=ukf_alpha, beta=UKF_BETA, kappa=0.0,
-                                      weights=ukf_weights, innovation_noise=ukf_innovation_noise, record=steps)
+                                      variant=ukf_variant, innovation_noise=ukf_innovation_noise, record=steps)
     return (res.position_m([0, 1]), DivergenceFlags.of(res)) if with_divergence else res.position_m([0, 1])
 
 
@@ -535,8 +539,9 @@ def posterior_crlb_m(walk: Walk) -> np.ndarray:
     states[:, :2], states[:, 2:4], states[:, 4:6] = tr.position_m, tr.velocity_m_s, tr.acceleration_m_s2
     states[:, 6], states[:, 7] = tr.heading_rad, tr.yaw_rate_rad_s
     ch = channel_model(walk.anchor_ids)
-    j_rss = rss_state_information(states, walk.anchors_m, ch.path_loss_exp, s.rss_sigma_db, model.position_index,
-                                  min_distance_m=ch.min_distance_m)
+    j_rss = rss_state_information(states, RssModel(walk.anchors_m, PathLossModel(0.0, ch.path_loss_exp, s.rss_sigma_db,
+                                                                               min_distance_m=ch.min_distance_m)),
+                                  model.position_index)
     H = inertial_measurement_jacobian(8, s.imu_frame)(states)
     R_inv = np.linalg.inv(_imu_stream(walk, False).R)
     j_imu = np.swapaxes(H, -1, -2) @ R_inv @ H
@@ -554,7 +559,7 @@ def crlb_map_m(n_anchors: int, sigma_db: float, spacing_m: float = 0.25, layout:
     grid = np.stack(np.meshgrid(x, y), -1)
     ids = ANCHOR_SETS[n_anchors]
     ch = channel_model(ids)
-    return x, y, rss_crlb_m(grid, anchors_m(ids, layout), ch.path_loss_exp, sigma_db)
+    return x, y, rss_crlb_m(grid, RssModel(anchors_m(ids, layout), PathLossModel(0.0, ch.path_loss_exp, sigma_db)))
 
 
 def fix_covariance_from(walk: Walk) -> np.ndarray:

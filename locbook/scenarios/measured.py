@@ -241,8 +241,8 @@ def crlb_m(data: Dataset, model: PathLossModel, positions_m, rss_dbm=None):
     epochs' readings ``rss_dbm (..., m)`` the information of each epoch is that of the anchors it heard (an anchor
     not heard tells nothing), and an epoch with too few of them for a fix has NaN (no bound)."""
     heard = None if rss_dbm is None else ~np.isnan(np.asarray(rss_dbm, float))
-    bound = rss_crlb_m(positions_m, data.anchors_m, model.path_loss_exp, model.sigma_db,
-                       tag_height_m=data.tag_height_m, heard=heard)
+    bound = rss_crlb_m(positions_m, RssModel(data.anchors_m, PathLossModel(0.0, model.path_loss_exp, model.sigma_db),
+                                             tag_height_m=data.tag_height_m), heard=heard)
     return bound if heard is None else np.where(np.isfinite(bound), bound, np.nan)
 
 

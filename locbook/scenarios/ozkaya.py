@@ -591,9 +591,9 @@ def _area_points(room_m, step_m: float = 0.05):
 
 def thesis_crlb_m(layout: str, sigma_db: float, path_loss_exp: float = PATH_LOSS_EXP,
                   average: str = "area_rms") -> float:
-    """The thesis's CRLB columns: Eqs. (A.10)-(A.13) as printed (1/d^2, flagged ``ozkaya_printed``), by default
-    with the simulations' n = 2.3 (Sec. 7.2.1) and as the RMS over the room ("Square root of (A.13) is used in the
-    thesis to compare with RMS error", Appendix A): 0.711 / 0.557 m for 3 / 4 corner readers at 5.2 dB.
+    """The thesis's CRLB columns: Eqs. (A.10)-(A.13) as printed (1/d^2, flagged ``variant="literal_ozkaya2011"``), by
+    default with the simulations' n = 2.3 (Sec. 7.2.1) and as the RMS over the room ("Square root of (A.13) is used in
+    the thesis to compare with RMS error", Appendix A): 0.711 / 0.557 m for 3 / 4 corner readers at 5.2 dB.
 
     Which exponent and which averaging over target positions gave the printed CRLB columns is not stated. The readings
     fitted to them (:data:`FITTED_VALUES`, named alternatives) are n = 2 and ``"cells_mean"``, the mean of the
@@ -602,18 +602,20 @@ def thesis_crlb_m(layout: str, sigma_db: float, path_loss_exp: float = PATH_LOSS
     bound is proportional to sigma / n (Eqs. A.10-A.12 scale as (n / sigma)^2).
     """
     room = room_for(layout)
+    model = RssModel(readers_for(layout), PathLossModel(0.0, path_loss_exp, sigma_db))
     if average == "cells_mean":
         points = cell_centres(room, int(room[0]) - 1, int(room[1]) - 1)
-        return float(np.mean(rss_crlb_m(points, readers_for(layout), path_loss_exp, sigma_db, "ozkaya_printed")))
+        return float(np.mean(rss_crlb_m(points, model, variant="literal_ozkaya2011")))
     if average == "area_rms":
-        return crlb_rms_over_area_m(_area_points(room), readers_for(layout), path_loss_exp, sigma_db, "ozkaya_printed")
+        return crlb_rms_over_area_m(_area_points(room), model, variant="literal_ozkaya2011")
     raise ValueError(f"average must be 'cells_mean' or 'area_rms', got {average!r}")
 
 
 def correct_crlb_m(layout: str, sigma_db: float, path_loss_exp: float = PATH_LOSS_EXP) -> float:
     """The correct RSS CRLB (1/d^4, Patwari et al. 2003) with the simulation's n, RMS over the room."""
     room = room_for(layout)
-    return crlb_rms_over_area_m(_area_points(room), readers_for(layout), path_loss_exp, sigma_db, "correct")
+    return crlb_rms_over_area_m(_area_points(room), RssModel(readers_for(layout), PathLossModel(0.0, path_loss_exp,
+                                                                                              sigma_db)))
 
 
 # -- the printed simulation tables as cases -----------------------------------------------------------

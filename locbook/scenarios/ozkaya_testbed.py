@@ -34,7 +34,8 @@ import numpy as np
 from ..models.rss import RssModel
 from ..tracking.bayes import grid_bayes_filter
 from ..tracking.particle import particle_filter
-from ..bounds.crlb import crlb_rms_over_area_m, rss_crlb_m
+from ..bounds.crlb import CRLB_VARIANTS, crlb_rms_over_area_m, rss_crlb_m
+from .._variants import RENAMED_CRLB_FORMS, check_variant, renamed_keyword
 from ..models.channel import (PathLossModel, attenuation_bursts_db, correlated_shadowing_db, pairwise_distance_m,
                               quantize_db)
 from ..static.fingerprint import knn_position, model_fingerprints
@@ -521,21 +522,25 @@ def near_tag_mask(points_m=FIXED_POINTS_M, radius_m: float = NEAR_TAG_RADIUS_M):
     return pairwise_distance_m(np.asarray(points_m, float), np.asarray(oz.REFERENCE_TAGS_M)).min(-1) <= radius_m
 
 
+@renamed_keyword("form", "variant", RENAMED_CRLB_FORMS)
 def testbed_crlb_m(path_loss_exp=TESTBED_CRLB_PATH_LOSS_EXP, sigma_db: float = TESTBED_SIGMA_DB,
-                   form: str = "ozkaya_printed", average: str = "area_rms") -> float:
+                   variant: str = "literal_ozkaya2011", average: str = "area_rms") -> float:
     """The bound of the test bed for the assumed reader layout (:data:`~locbook.scenarios.ozkaya.TESTBED_READERS_M`),
     by default in the printed form (Eqs. A.10-A.13, 1/d^2) with the test bed's exponents of Table 6.1 (one per reader)
     and sigma = 5.2 dB (Sec. 7.3.1.3), as the RMS over the area ("Square root of (A.13) is used in the thesis to
     compare with RMS error", Appendix A): ``average="area_rms"`` over a 5 cm lattice of the 9 m x 4 m plan, or
     ``"cells_mean"``, the mean of the per-cell bound over the 36 cells (with n = 2: the readings fitted to the
-    simulation CRLB columns). ``form="correct"`` gives the correct bound (1/d^4)."""
+    simulation CRLB columns). ``variant="corrected"`` gives the correct bound (1/d^4) (``form=`` before issue 47:
+    deprecated)."""
+    variant = check_variant(variant, CRLB_VARIANTS, where="testbed_crlb_m", renamed=RENAMED_CRLB_FORMS)
+    model = RssModel(oz.TESTBED_READERS_M, PathLossModel(0.0, path_loss_exp, sigma_db))
     if average == "cells_mean":
-        return float(np.mean(rss_crlb_m(TESTBED_CELLS_M, oz.TESTBED_READERS_M, path_loss_exp, sigma_db, form)))
+        return float(np.mean(rss_crlb_m(TESTBED_CELLS_M, model, variant=variant)))
     if average == "area_rms":
         step = 0.05
         xs, ys = (np.arange(step / 2, size, step) for size in oz.TESTBED_SIZE_M)
         points = np.stack(np.meshgrid(xs, ys, indexing="ij"), -1).reshape(-1, 2)
-        return crlb_rms_over_area_m(points, oz.TESTBED_READERS_M, path_loss_exp, sigma_db, form)
+        return crlb_rms_over_area_m(points, model, variant=variant)
     raise ValueError(f"average must be 'area_rms' or 'cells_mean', got {average!r}")
 
 

@@ -443,7 +443,7 @@ def _run(setup: _Setup, measurements, update, predict_first: bool, *, shared: bo
             out_P.put(s, P)
     covariance = lambda record: None if record is None else record.array()
     return KalmanResult(out_x, out_P.array(), steps, out_xp, covariance(out_Pp), out_nu, out_S, out_ll, out_nis, out_dof,
-                        P_cross=covariance(out_Pc), variant="literal_george" if literal else "standard")
+                        P_cross=covariance(out_Pc), variant="literal_george" if literal else "corrected")
 
 
 class _CovarianceRecord:

@@ -11,8 +11,9 @@ Standard recursion (filterpy / Dogan 2015, Table 3.1 notation; :mod:`locbook.tra
 
 Document 003 (George and Vadivukkarasi, Eqs. (9)-(13)) prints the update with ``X_{k-1}`` and
 ``P_{k-1}`` in place of the predicted quantities, so the prediction of Eqs. (9)-(10) is computed and
-then discarded. That literal form is available as ``variant="literal_george"`` (flagged): it
-reduces to a running average of the measurements.
+then discarded. That literal form is available as ``variant="literal_george"`` (flagged; the paper prints no
+year, so the name has none): it reduces to a running average of the measurements. The default is
+``variant="corrected"`` (``"standard"`` before issue 47: accepted for one release with a ``DeprecationWarning``).
 
 The module's layout (issue 27): the streams and their updates in :mod:`locbook.tracking.streams`, the functional
 predict / update in :mod:`locbook.tracking.functional`, the shared time loop in ``_loop``, the compiled EKF in
@@ -21,7 +22,7 @@ predict / update in :mod:`locbook.tracking.functional`, the shared time loop in 
 """
 from __future__ import annotations
 
-from .._validate import check_choice
+from .._variants import RENAMED_KF_VARIANTS, check_variant
 from . import _compiled
 from ._loop import _check_outputs, _covariance_shared_throughout, _run, _setup, _streams
 from .results import DIVERGENCE_PROBABILITY, DIVERGENCE_WINDOW, KalmanResult, _check_guard, _flag
@@ -30,11 +31,12 @@ from .transition import MotionModel
 
 __all__ = ["kalman_filter", "extended_kalman_filter", "KF_VARIANTS"]
 
-KF_VARIANTS = ("standard", "literal_george")
+#: the KF's update forms: the corrected (standard) recursion and George and Vadivukkarasi's printed one (flagged)
+KF_VARIANTS = ("corrected", "literal_george")
 
 
 def kalman_filter(F, Q, x0, P0, measurements, *, B=None, u=None, record=None, predict_first: bool = True,
-                  variant: str = "standard", joseph: bool = True, outputs=(),
+                  variant: str = "corrected", joseph: bool = True, outputs=(),
                   divergence_window: int | None = DIVERGENCE_WINDOW,
                   divergence_probability: float = DIVERGENCE_PROBABILITY) -> KalmanResult:
     """Linear Kalman filter over one or several :class:`LinearMeasurement` streams, vectorized over leading
@@ -58,8 +60,9 @@ def kalman_filter(F, Q, x0, P0, measurements, *, B=None, u=None, record=None, pr
         and a step without any is prediction only. ``T = 0`` steps give an empty result.
     record : step indices to keep (default all); ``outputs``: optional fields among ``("x_pred", "P_pred",
         "P_cross", "innovation", "S")`` to keep at those steps (:class:`~locbook.tracking.results.KalmanResult`).
-    variant : ``"standard"`` or ``"literal_george"`` (Eqs. (11)-(13) of George and Vadivukkarasi as printed: each update starts
-        from the previous posterior; ``x_pred``/``P_pred`` are then that posterior).
+    variant : ``"corrected"`` (the standard recursion) or ``"literal_george"`` (Eqs. (11)-(13) of George and
+        Vadivukkarasi as printed: each update starts from the previous posterior; ``x_pred``/``P_pred`` are then that
+        posterior).
     joseph : the Joseph-form covariance update (keeps P symmetric positive definite); False: ``(I - K H) P``.
     divergence_window, divergence_probability : the consistency guard (:mod:`locbook.tracking.results`): a run whose
         NIS exceeds ``chi2.ppf(divergence_probability, dof)`` at ``divergence_window`` consecutive updates is flagged
@@ -69,7 +72,7 @@ def kalman_filter(F, Q, x0, P0, measurements, *, B=None, u=None, record=None, pr
     loops over blocks of runs; with the same components missing in every run and F, Q, P0, H, R without run axes,
     more than 64 runs share one covariance recursion, once per step in numpy).
     """
-    check_choice("variant", variant, KF_VARIANTS)
+    variant = check_variant(variant, KF_VARIANTS, where="kalman_filter", renamed=RENAMED_KF_VARIANTS)
     window, probability = _check_guard(divergence_window, divergence_probability)
     outputs = _check_outputs(outputs)
     measurements = _streams(measurements)
@@ -81,7 +84,7 @@ def kalman_filter(F, Q, x0, P0, measurements, *, B=None, u=None, record=None, pr
                          f"{[m.name for m in measurements]} (RSS and nonlinear streams: "
                          "extended_kalman_filter or unscented_kalman_filter)")
     setup = _setup(F, Q, x0, P0, measurements, record, "kalman_filter", B, u)
-    if variant == "standard" and joseph and not outputs and (
+    if variant == "corrected" and joseph and not outputs and (
             _compiled._small_batch(setup) or not _covariance_shared_throughout(setup, measurements)):
         compiled = _compiled._compiled_ekf(setup, measurements, predict_first)
         if compiled is not None:

@@ -195,7 +195,7 @@ class KalmanResult(FilterResult):
       step has no update), :attr:`total_log_likelihood` their sum;
     - ``nis``, ``nis_dof``, ``diverged``, ``diverged_step``: the consistency guard (module docstring);
     - ``floored_updates``: the unscented filter's count of covariance updates its guard floored (0 for KF and EKF);
-    - ``variant``: the update form that produced the run (``"standard"``, or the KF's flagged ``"literal_george"``,
+    - ``variant``: the update form that produced the run (``"corrected"``, or the KF's flagged ``"literal_george"``,
       whose ``x_pred``/``P_pred`` are the previous posterior: no smoother applies to it).
     """
 
@@ -215,7 +215,7 @@ class KalmanResult(FilterResult):
     diverged_step: np.ndarray | None = None
     floored_updates: int = 0
     P_cross: np.ndarray | None = None
-    variant: str = "standard"
+    variant: str = "corrected"
 
     @property
     def total_log_likelihood(self) -> np.ndarray:

@@ -57,9 +57,9 @@ def check_predictions(result, who: str) -> None:
     Kalman-family run with its predictions (what every smoother of this package starts from)."""
     if not isinstance(result, KalmanResult):
         raise TypeError(f"result must be a KalmanResult, got {type(result).__name__}")
-    if result.variant != "standard":
-        raise ValueError(f"{who} a standard run: the {result.variant!r} variant's x_pred and P_pred are the previous "
-                         "posterior, not a prediction")
+    if result.variant != "corrected":
+        raise ValueError(f"{who} a run of the corrected update: the {result.variant!r} variant's x_pred and P_pred are "
+                         "the previous posterior, not a prediction")
     if result.x_pred is None or result.P_pred is None:
         raise ValueError(f"{who} the run's predictions (result.x_pred, result.P_pred): filter with "
                          "outputs=('x_pred', 'P_pred', 'P_cross')")

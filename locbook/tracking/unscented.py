@@ -25,8 +25,9 @@ which equals ``P- - K P_zz K^T`` in exact arithmetic (``K P_zz K^T = K P_xz^T``)
 semi-definite whenever ``R~`` is. ``R~`` is symmetrised and its eigenvalues floored at 0 (the guard); the number
 of floored updates is returned, so a run can show it is rarely or never needed.
 
-The thesis-literal forms are flagged variants: ``weights="literal_gudipati2017"`` (Eq. (3.22) as printed; the weights then
-sum to ``2n / (n + lambda)``) and ``innovation_noise=False`` (Eq. (3.26) without R). Eq. (3.30) as printed cannot
+The thesis-literal forms are flagged variants: ``variant="literal_gudipati2017"`` (Eq. (3.22) as printed; the weights
+then sum to ``2n / (n + lambda)``; the filter's ``weights=`` before issue 47, deprecated) and ``innovation_noise=False``
+(Eq. (3.26) without R). Eq. (3.30) as printed cannot
 be evaluated (an ``n x m`` times ``n x m`` product) and has no variant.
 
 Missing readings follow the library's rule: a NaN component is left out of the update (zero gain column).
@@ -47,6 +48,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .._validate import check_choice, check_scalar, function_output
+from .._variants import old_keyword
 from ..models.rss import rss_mean_jacobian
 from .._linalg import (_UPDATE_OVERFLOW, _gaussian_log_likelihood, _inv_small, _logdet, _mT, _not_positive_definite,
                       _refuse_not_finite, _Singular, _singular_runs)
@@ -56,10 +58,11 @@ from .results import DIVERGENCE_PROBABILITY, DIVERGENCE_WINDOW, KalmanResult, _c
 from ..models.base import check_output
 from .streams import _diagonal_entry, _row, _Serial, _serial_order
 
-__all__ = ["UKF_WEIGHTS", "SIGMA_POINT_SETS", "UnscentedWeights", "unscented_weights", "sigma_points", "unscented_transform",
+__all__ = ["UKF_VARIANTS", "SIGMA_POINT_SETS", "UnscentedWeights", "unscented_weights", "sigma_points", "unscented_transform",
            "unscented_kalman_filter"]
 
-UKF_WEIGHTS = ("corrected", "literal_gudipati2017")
+#: the weights' forms: corrected (they sum to 1) and Gudipati's printed W_m^0 (Eq. (3.22), flagged)
+UKF_VARIANTS = ("corrected", "literal_gudipati2017")
 #: the sigma-point sets of :func:`unscented_weights`
 SIGMA_POINT_SETS = ("merwe", "julier", "cubature")
 
@@ -102,7 +105,7 @@ def unscented_weights(n: int, alpha: float = _DEFAULT_ALPHA, beta: float = _DEFA
     check_scalar("alpha", alpha, gt=0)
     check_scalar("beta", beta)
     check_scalar("kappa", kappa)
-    check_choice("variant", variant, UKF_WEIGHTS)
+    check_choice("variant", variant, UKF_VARIANTS)
     check_choice("points", points, SIGMA_POINT_SETS)
     if points != "merwe" and variant != "corrected":
         raise ValueError(f"variant={variant!r} is a variant of the printed scaled (merwe) weights; points={points!r} "
@@ -386,10 +389,11 @@ def _unscented_predictor(setup, weights: UnscentedWeights):
 
 
 def unscented_kalman_filter(F, Q, x0, P0, measurements, *, B=None, u=None, alpha: float = 1e-3, beta: float = 2.0,
-                            kappa: float = 0.0, weights: str = "corrected", points: str = "merwe",
+                            kappa: float = 0.0, variant: str = "corrected", points: str = "merwe",
                             innovation_noise: bool = True, record=None, predict_first: bool = True, outputs=(),
                             divergence_window: int | None = DIVERGENCE_WINDOW,
-                            divergence_probability: float = DIVERGENCE_PROBABILITY) -> KalmanResult:
+                            divergence_probability: float = DIVERGENCE_PROBABILITY,
+                            weights: str | None = None) -> KalmanResult:
     """Unscented Kalman filter, vectorized over leading Monte-Carlo axes (Gudipati 2017, Sec. 3.6, corrected; see the
     module docstring for the printed errors and the covariance guard).
 
@@ -407,7 +411,8 @@ def unscented_kalman_filter(F, Q, x0, P0, measurements, *, B=None, u=None, alpha
     transform too, which is exact for them (so the UKF equals the KF on a linear model, a tested invariant).
 
     ``alpha``, ``beta``, ``kappa``: sigma-point spread; defaults are the thesis's (alpha = 1e-3, beta = 2,
-    kappa = 0). ``weights``: ``"corrected"`` or the flagged ``"literal_gudipati2017"`` (Eq. (3.22) as printed).
+    kappa = 0). ``variant``: ``"corrected"`` or the flagged ``"literal_gudipati2017"`` (Eq. (3.22) as printed; the
+    keyword was ``weights=`` before issue 47: accepted for one release with a DeprecationWarning).
     ``innovation_noise=False``: Eq. (3.26) as printed, without R (flagged: with more measurements than the
     state's spread can explain, P_zz is singular and the update stops with a clear error).
 
@@ -422,12 +427,13 @@ def unscented_kalman_filter(F, Q, x0, P0, measurements, *, B=None, u=None, alpha
     compiled loops run blocks of runs (:mod:`locbook.tracking._ukf_kernels`; ``LOCBOOK_NUMBA=0`` turns them off), else
     the numpy loop; both give the same numbers to round-off (amplified some 1e6 times at alpha = 1e-3).
     """
-    check_choice("weights", weights, UKF_WEIGHTS)
+    variant = old_keyword("unscented_kalman_filter", "weights", weights, "variant", variant, "corrected")
+    check_choice("variant", variant, UKF_VARIANTS)
     window, probability = _check_guard(divergence_window, divergence_probability)
     outputs = _check_outputs(outputs)
     measurements = _streams(measurements)
     setup = _setup(F, Q, x0, P0, measurements, record, "unscented_kalman_filter", B, u)
-    w = unscented_weights(setup.n, alpha, beta, kappa, weights, points)
+    w = unscented_weights(setup.n, alpha, beta, kappa, variant, points)
     guard = [0]
 
     def update(x, P, z, meas, step, want):
@@ -438,7 +444,7 @@ def unscented_kalman_filter(F, Q, x0, P0, measurements, *, B=None, u=None, alpha
                 raise
             name = meas.name
             form = "P_zz + R" if innovation_noise else "P_zz without R (Eq. (3.26) as printed)"
-            printed_weights = " with the printed weights of Eq. (3.22)" if weights == "literal_gudipati2017" else ""
+            printed_weights = " with the printed weights of Eq. (3.22)" if variant == "literal_gudipati2017" else ""
             raise _Singular(exc.bad, f"the unscented innovation covariance S = {form} of the {name} update"
                                      f"{printed_weights} is singular, not positive definite or not finite at step "
                                      "{step}") from None

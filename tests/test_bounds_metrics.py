@@ -175,7 +175,7 @@ def test_rss_crlb_with_a_known_tag_height_is_the_xy_block_of_the_3d_information(
     assert np.all(full3d >= known)
     assert lb.crlb_rms_over_area_m(xy, rss(anchors, 2.2, 4.0, h)) == pytest.approx(
         float(np.sqrt(np.mean(known**2))), rel=1e-12)
-    with pytest.raises(ValueError, match=r"anchors_m must have shape \(m, 3\).*with tag_height_m"):
+    with pytest.raises(ValueError, match=r"anchors_m must end in \(m, 3\).*with tag_height_m"):
         lb.rss_crlb_m(xy, rss(anchors[:, :2], 2.2, 4.0, h))
 
 
@@ -200,10 +200,12 @@ def test_the_bound_of_the_anchors_heard_is_the_bound_of_that_subset():
     (SQUARE, r"takes model = RssModel\(anchors_m, channel\).*got ndarray"),
     (lb.RssModel(SQUARE, lb.PathLossModel(0.0, 2.0, 4.0, wall_attenuation_db=3.0), walls_m=[[1.0, -1.0], [1.0, 5.0]]),
      r"cannot honour the model's walls \(walls_m\).*replace\(model, walls_m=None\)"),
-    (lb.RssModel(np.stack([SQUARE, SQUARE + 0.1]), lb.PathLossModel(0.0, 2.0, 4.0)), r"anchors_m \(2, 4, 2\) per run"),
-    (lb.RssModel(SQUARE, lb.PathLossModel(0.0, np.full((1, 3, 4), 2.0), 4.0)),
-     r"channel.path_loss_exp \(1, 3, 4\) per run and step"),
-    (lb.RssModel(SQUARE, lb.PathLossModel(0.0, 2.0, np.full((2, 3), 4.0))), r"channel.sigma_db \(2, 3\) per run and step"),
+    (lb.RssModel(np.stack([SQUARE, SQUARE + 0.1]), lb.PathLossModel(0.0, 2.0, 4.0)), r"anchors_m \(2, 4, 2\) per run or step"),
+    (lb.RssModel(SQUARE, lb.PathLossModel(0.0, np.full((1, 3, 4), 2.0), 4.0), per_step_channel=True),
+     r"channel.path_loss_exp \(1, 3, 4\) per run or step"),
+    (lb.RssModel(SQUARE, lb.PathLossModel(0.0, 2.0, np.full((2, 3, 1), 4.0)), per_step_channel=True),
+     r"channel.sigma_db \(2, 3, 1\) per run or step"),
+    (lb.RssModel(SQUARE, lb.PathLossModel(0.0, 2.0, np.full((2, 1), 4.0))), r"channel.sigma_db \(2, 1\) per run or step"),
 ])
 def test_a_bound_refuses_what_it_cannot_honour_by_name(model, message):
     for call in (lambda: lb.rss_crlb_m([1.0, 2.0], model), lambda: lb.rss_position_information([1.0, 2.0], model),

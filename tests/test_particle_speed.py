@@ -35,8 +35,8 @@ def _models(R, T):
     yield "per anchor", lb.RssModel(ANCHORS, lb.PathLossModel(rng.uniform(-45, -35, m), rng.uniform(2, 3, m),
                                                               rng.uniform(2, 6, m), ref_distance_m=2.0))
     yield "per run and step", lb.RssModel(ANCHORS, lb.PathLossModel(
-        rng.uniform(-45, -35, (R, T, m)), rng.uniform(2, 3, (R, T, m)), rng.uniform(2, 6, (R, T)),
-        min_distance_m=0.5))
+        rng.uniform(-45, -35, (R, T, m)), rng.uniform(2, 3, (R, T, m)), rng.uniform(2, 6, (R, T, 1)),
+        min_distance_m=0.5), per_step_channel=True)
     yield "per-run anchors", lb.RssModel(ANCHORS + rng.uniform(-1, 1, (R, m, 2)),
                                          lb.PathLossModel(-40.0, 2.5, 4.0, min_distance_m=1.0))
     heights = np.column_stack([ANCHORS, rng.uniform(2, 3, m)])

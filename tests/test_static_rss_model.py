@@ -98,7 +98,7 @@ def test_new_forms_compute_what_the_model_says():
     np.testing.assert_allclose(lb.model_fingerprints(CELLS, walled), walled.mean_rss_dbm(CELLS)[0], rtol=0,
                                atol=1e-12)
     per_step = np.random.default_rng(1).uniform(-50.0, -40.0, (2, 3, 4))
-    maps = lb.model_fingerprints(CELLS, lb.RssModel(SQUARE, lb.PathLossModel(per_step, 2.2)))
+    maps = lb.model_fingerprints(CELLS, lb.RssModel(SQUARE, lb.PathLossModel(per_step, 2.2), per_step_channel=True))
     assert maps.shape == (2, 3, len(CELLS), 4)
     np.testing.assert_array_equal(maps[1, 2], lb.model_fingerprints(CELLS, lb.RssModel(SQUARE, lb.PathLossModel(
         per_step[1, 2], 2.2))))

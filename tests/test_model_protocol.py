@@ -324,12 +324,12 @@ def test_library_models_cross_filters_or_are_refused_by_name():
     channel = lb.PathLossModel(-40.0, 2.2, 3.0)
     # the one RssModel in a Kalman stream: a state of positions as it is, a larger state through position_index
     alone = lb.extended_kalman_filter(np.eye(2), np.eye(2), np.array([3.0, 2.0]), np.eye(2),
-                                      lb.Stream(rss, lb.RssModel(ANCHORS, channel)))
+                                      lb.Stream(rss, lb.RssModel(ANCHORS, channel, position_index=[0, 1])))
     factory = lb.extended_kalman_filter(np.eye(2), np.eye(2), np.array([3.0, 2.0]), np.eye(2),
                                         lb.RssMeasurement(rss, ANCHORS, channel, [0, 1]))
     np.testing.assert_array_equal(alone.mean, factory.mean)
-    with pytest.raises(ValueError, match=r"give RssModel\(\.\.\., position_index=\.\.\.\) \(2 state indices\) for a "
-                                         r"4-state"):
+    with pytest.raises(ValueError, match=r"is a model of states: give RssModel\(\.\.\., position_index=\.\.\.\) "
+                                         r"\(2 state indices of the 4-state\)"):
         lb.extended_kalman_filter(np.eye(4), np.eye(4), np.array([3.0, 2.0, 0.0, 0.0]), np.eye(4),
                                   lb.Stream(rss, lb.RssModel(ANCHORS, channel)))
 

@@ -35,7 +35,7 @@ def _positions(runs=2, count=9, seed=1):
 def test_jacobian_equals_central_differences(name, model):
     pos = _positions()
     step = 2 if name == "per_run_step" else 0
-    jac = model.position_jacobian(pos, step)
+    jac = model.jacobian(pos, step)
     assert jac.shape == (2, 9, 4, 2)
     h = 1e-6
     for axis in range(2):
@@ -51,7 +51,7 @@ def test_jacobian_inside_the_clamp_is_the_derivative_of_the_clamped_mean():
     (the same as the model without that anchor). Replaces the earlier capped-extension convention (issue 27)."""
     model = lb.RssModel(ANCHORS, lb.PathLossModel(-45.0, 2.3, 4.0, min_distance_m=0.5))
     p = np.array([[0.1, 0.2]])                                  # 0.22 m from anchor 0
-    jac = model.position_jacobian(p)[0, 0]
+    jac = model.jacobian(p)[0, 0]
     assert np.all(jac[0] == 0.0) and np.all(jac[1:] != 0.0)
     h = 1e-6
     for axis in range(2):
@@ -61,7 +61,7 @@ def test_jacobian_inside_the_clamp_is_the_derivative_of_the_clamped_mean():
         np.testing.assert_allclose(jac[:, axis], fd, rtol=1e-6, atol=1e-12)
     without = lb.RssModel(ANCHORS[1:], lb.PathLossModel(-45.0, 2.3, 4.0, min_distance_m=0.5))
     np.testing.assert_allclose(model.fisher_information(p), without.fisher_information(p), rtol=1e-15)
-    on_anchor = model.position_jacobian(ANCHORS[:1])[0, 0]               # finite at the anchor itself
+    on_anchor = model.jacobian(ANCHORS[:1])[0, 0]               # finite at the anchor itself
     assert np.all(on_anchor[0] == 0.0) and np.all(np.isfinite(on_anchor))
 
 
@@ -108,7 +108,7 @@ def test_fisher_information_equals_the_closed_form_and_bounds_crlb():
     rng = np.random.default_rng(4)
     p = pos[:1]
     z = model.mean_rss_dbm(p)[0, 0] + sigma * rng.standard_normal((200_000, 4))
-    score = np.einsum("sj,jd->sd", (z - model.mean_rss_dbm(p)[0, 0]) / sigma**2, model.position_jacobian(p)[0, 0])
+    score = np.einsum("sj,jd->sd", (z - model.mean_rss_dbm(p)[0, 0]) / sigma**2, model.jacobian(p)[0, 0])
     np.testing.assert_allclose(score.T @ score / len(z), info[0], rtol=0.02, atol=0.02 * np.abs(info[0]).max())
 
 
@@ -124,7 +124,7 @@ def test_per_run_anchors_equal_one_model_per_run():
     for r in range(3):
         alone = lb.RssModel(anchors[r], ch)
         np.testing.assert_array_equal(ll[r], alone.log_likelihood(rss[r:r + 1], pos[r])[0])
-        np.testing.assert_array_equal(joint.position_jacobian(pos)[r], alone.position_jacobian(pos[r])[0])
+        np.testing.assert_array_equal(joint.jacobian(pos)[r], alone.jacobian(pos[r])[0])
     with pytest.raises(ValueError, match="runs"):
         joint.log_likelihood(rss[:2], pos[:2])
 
@@ -204,3 +204,36 @@ def test_scheduled_resampling_and_a_callable_transition():
     with pytest.raises(ValueError, match="transition must return"):
         lb.particle_filter(None, lambda x, k: x[..., 0], rng, n_steps=2, initial_particles_m=start,
                            transition=lambda x, t, rng: x[:, :5])
+
+
+def test_a_model_of_positions_keeps_its_one_run_axis_forms_and_a_model_of_states_reads_states():
+    channel = lb.PathLossModel(np.array([-44.0, -47.0, -50.0, -46.0]), 2.3, np.array([3.0, 4.5, 6.0, 5.0]))
+    of_positions = lb.RssModel(ANCHORS, channel)
+    p = _positions(runs=1, count=5)[0]                                   # (5, 2)
+    assert of_positions.mean(p).shape == (1, 5, 4) and of_positions.jacobian(p, 0).shape == (1, 5, 4, 2)
+    np.testing.assert_array_equal(of_positions.jacobian(p), of_positions.position_jacobian(p))
+    np.testing.assert_array_equal(np.broadcast_to(of_positions.covariance(p), (1, 5, 4, 4))[0, 3],
+                                  np.diag(np.square(channel.sigma_db)))
+    # the same model of states [x, y, vx, vy]: the position block of its Jacobian is the one above, the rest 0
+    of_states = lb.RssModel(ANCHORS, channel, position_index=[0, 1])
+    x = np.concatenate([p, np.ones((5, 2))], axis=-1)
+    H = of_states.jacobian(x)
+    np.testing.assert_array_equal(H[..., :2], of_positions.jacobian(p)[0])
+    assert not H[..., 2:].any()
+    np.testing.assert_array_equal(of_states.mean(x), of_positions.mean(p)[0])
+    with pytest.raises(ValueError, match=r"step must be an integer in \[0, 3\)"):
+        lb.RssModel(lb.per_step(np.broadcast_to(ANCHORS, (3, 4, 2))), channel, position_index=[0, 1]).mean(x, step=3)
+
+
+def test_the_old_unmarked_per_run_and_step_form_warns_and_reads_as_before():
+    rng = np.random.default_rng(6)
+    ref, exp, sigma = rng.uniform(-50, -40, (2, 4, 4)), rng.uniform(1.8, 3.0, (2, 4, 4)), rng.uniform(2, 6, (2, 4))
+    with pytest.warns(DeprecationWarning, match="per_step_channel=True with sigma") as caught:
+        old = lb.RssModel(ANCHORS, lb.PathLossModel(ref, exp, sigma))       # T = m = 4: a sigma per run and step
+    assert caught[0].filename == __file__
+    new = lb.RssModel(ANCHORS, lb.PathLossModel(ref, exp, sigma[..., None]), per_step_channel=True)
+    pos = _positions()
+    z = rng.normal(-65.0, 6.0, (2, 4))
+    for step in range(4):
+        np.testing.assert_array_equal(old.log_likelihood(z, pos, step), new.log_likelihood(z, pos, step))
+        np.testing.assert_array_equal(old.sigma_at(step), sigma[:, step, None])

@@ -12,12 +12,17 @@ independently across readers, with the channel's parameters and near-field clamp
 distance in the position's space or, with ``tag_height_m``, the 3-D distance to anchors that carry a height
 (``d^2 = |p - a_j|^2 + (z_j - h)^2``, the tag in the plane ``z = h``).
 
-Shapes: positions are ``(P, dim)`` or per run ``(R, P, dim)``; results carry a run axis ``R`` (1 when nothing is
-per run) and the position axis ``P``: mean ``(R, P, m)``, Jacobian ``(R, P, m, dim)``, Fisher information
-``(R, P, dim, dim)``, log-likelihood ``(R, P)`` for readings ``(R, m)``. Parameters may be scalars, per reader
-``(m,)``, or per run and step (``ref_power_dbm``, ``path_loss_exp``: ``(R, T, m)``; ``sigma_db``: ``(R, T)``, the
-pooled online sigma of Ozkaya Eq. (6.7)); ``step`` picks the step. Anchors are ``(m, k)`` or per run ``(R, m, k)``
-(measurement locations drawn per Monte-Carlo run, Palvai 2008). NaN readings mean "not heard" and are left out.
+Two readings of one model. A model of positions (no ``position_index``: the particle and grid filters, the static
+estimators, the bounds) takes positions ``(P, dim)`` or per run ``(R, P, dim)``; its results carry a run axis ``R``
+(1 when nothing is per run) and the position axis ``P``: mean ``(R, P, m)``, Jacobian ``(R, P, m, dim)``, Fisher
+information ``(R, P, dim, dim)``, log-likelihood ``(R, P)`` for readings ``(R, m)``. A model of states (with
+``position_index``: the Kalman family) takes points-form states ``batch + (K, n)`` (:mod:`locbook.models.base`).
+Parameters are scalars, per reader ``(m,)``, per run ``batch + (1 or m,)``, or, with ``per_step_channel=True``, per
+step ``batch + (T, 1 or m)`` (e.g. the online calibration of Ozkaya Eqs. (6.5)-(6.7) with its pooled sigma
+``(R, T, 1)``). Anchors are ``(m, k)``, per run ``(R, m, k)`` (measurement locations drawn per Monte-Carlo run,
+Palvai 2008), or per step ``per_step(batch + (T, m, k))`` (states only). NaN readings mean "not heard" and are left
+out. For one release a model of positions still reads unmarked ``(R, T, m)`` parameters and an ``(R, T)`` sigma as per
+run and step (deprecated: a DeprecationWarning asks for ``per_step_channel=True`` and sigma ``(R, T, 1)``).
 """
 from __future__ import annotations
 
@@ -162,8 +167,9 @@ class RssModel(MeasurementModel):
             raise ValueError(f"per_step_channel must be True or False, got {self.per_step_channel!r}")
         ch = self.channel
         sigma_shape = np.shape(ch.sigma_db)
-        if not self.per_step_channel and (np.ndim(ch.ref_power_dbm) == 3 or np.ndim(ch.path_loss_exp) == 3 or (
-                len(sigma_shape) == 2 and sigma_shape[-1] not in (1, m))):
+        if self.position_index is None and not self.per_step_channel and (
+                np.ndim(ch.ref_power_dbm) == 3 or np.ndim(ch.path_loss_exp) == 3 or (
+                    len(sigma_shape) == 2 and sigma_shape[-1] != 1)):
             # the old unmarked per-run-and-step form: (R, T, m) parameters, an (R, T) pooled sigma
             warnings.warn("RssModel: channel parameters (R, T, m) and sigma (R, T) per run and step are deprecated "
                           "unmarked; give per_step_channel=True with sigma (R, T, 1)", DeprecationWarning, stacklevel=3)
@@ -346,9 +352,6 @@ class RssModel(MeasurementModel):
 
     def _points_offsets(self, x, step: int):
         """``p - a_j`` ``batch + (K, m, dim)`` at points-form states ``batch + (K, n)``."""
-        if self.position_index is None and np.shape(x)[-1] != self.dim:
-            raise ValueError(f"positions_m must have shape (..., *, {self.dim}) (the model's states are positions; a "
-                             f"larger state needs position_index), got {np.shape(x)}")
         a = self.anchors_at(step)
         a = a if a.ndim == 2 else a[..., None, :, :]
         return self.lift(x[..., self.state_position_index])[..., None, :] - a
@@ -365,8 +368,24 @@ class RssModel(MeasurementModel):
         crossings = wall_crossings(pos.reshape(-1, 2), plan, self.walls_m).reshape(pos.shape[:-1] + (plan.shape[0],))
         return self.channel.wall_attenuation_db * crossings
 
-    def mean(self, x, *, step: int = 0):
-        """``h`` ``batch + (K, m)`` at points-form states ``batch + (K, n)`` (their ``position_index`` components)."""
+    def _check_state_step(self, step) -> None:
+        """``step`` must be a step the per-step anchors and parameters hold (a time axis of length 1 holds every
+        step)."""
+        lengths = [self.anchors_m.value.shape[-3]] if isinstance(self.anchors_m, PerStep) else []
+        if self.per_step_channel:
+            lengths += [np.shape(getattr(self.channel, n))[-2] for n in _CHANNEL_FIELDS
+                        if np.ndim(getattr(self.channel, n)) >= 2]
+        lengths = [t for t in lengths if t > 1]
+        if isinstance(step, (bool, np.bool_)) or not isinstance(step, (int, np.integer)) or step < 0 or (
+                lengths and step >= min(lengths)):
+            raise ValueError(f"step must be an integer in [0, {min(lengths) if lengths else 'inf'}), got {step!r}")
+
+    def mean(self, x, step: int = 0):
+        """A model of positions: ``h(p)`` ``(R|1, P, m)`` (:meth:`mean_rss_dbm`). A model of states: ``h``
+        ``batch + (K, m)`` at points-form states ``batch + (K, n)`` (their ``position_index`` components)."""
+        if self.position_index is None:
+            return self.mean_rss_dbm(x, step)
+        self._check_state_step(step)
         ch = self.channel
         mean, _, d2 = rss_mean_jacobian(self._points_offsets(x, step), _anchor_axis(self._param("ref_power_dbm", step)),
                                         _anchor_axis(self._param("path_loss_exp", step)),
@@ -374,12 +393,16 @@ class RssModel(MeasurementModel):
         self._refuse_on_anchor(d2, np.ndim(x) - 2)
         return mean - self._wall_loss_db(x, step)
 
-    def jacobian(self, x, *, step: int = 0):
-        """``dh_j/dx`` ``batch + (K, m, n)``: ``dh_j/dp = -(10 n_j / ln 10) (p - a_j) / d_j^2`` in the position
+    def jacobian(self, x, step: int = 0):
+        """A model of positions: ``dh_j/dp`` ``(R|1, P, m, dim)`` (:meth:`position_jacobian`). A model of states:
+        ``dh_j/dx`` ``batch + (K, m, n)``: ``dh_j/dp = -(10 n_j / ln 10) (p - a_j) / d_j^2`` in the position
         components (the EKF Jacobian of Dogan 2015, Table 3.2, not printed there; ``d_j`` the 3-D distance when the
         anchors have heights), 0 in the others. Walls add a piecewise-constant term (zero derivative almost
         everywhere). Within the near-field clamp (``d_j < d_min``) the mean ``P_0 - 10 n log10(d_min / d0)`` is
         constant, so the derivative is exactly 0 there (:func:`~locbook.models.channel.log_distance_gradient`)."""
+        if self.position_index is None:
+            return self.position_jacobian(x, step)
+        self._check_state_step(step)
         ch = self.channel
         _, grad, d2 = rss_mean_jacobian(self._points_offsets(x, step), _anchor_axis(self._param("ref_power_dbm", step)),
                                         _anchor_axis(self._param("path_loss_exp", step)),
@@ -390,8 +413,15 @@ class RssModel(MeasurementModel):
         H[..., idx] = grad[..., :idx.size]
         return H
 
-    def covariance(self, x, *, step: int = 0):
-        """``diag(sigma^2)`` per reading, inflated at the points' distances for ``anchor_sigma_m``."""
+    def covariance(self, x, step: int = 0):
+        """A model of positions: ``diag(sigma_j^2)`` at the step, broadcasting to ``(R|1, P, m, m)``. A model of
+        states: ``diag(sigma^2)`` per reading ``batch + (K, m, m)``, inflated at the points' distances for
+        ``anchor_sigma_m``."""
+        if self.position_index is None:
+            sigma = np.asarray(self._per_step("sigma_db", step), dtype=float)        # (), (m,) or (R, 1)
+            var = np.broadcast_to(np.square(sigma), np.broadcast_shapes(sigma.shape, (self.n_anchors,)))
+            return var[..., None, :, None] * np.eye(self.n_anchors)
+        self._check_state_step(step)
         diff = self._points_offsets(x, step)
         d = np.sqrt(np.einsum("...i,...i->...", diff, diff))
         var = np.broadcast_to(self.variance_db2(d, _anchor_axis(self._param("path_loss_exp", step)),
@@ -400,7 +430,8 @@ class RssModel(MeasurementModel):
 
     def innovation(self, x, z, *, step: int = 0):
         """Table 3.4's linearisation at the states ``x`` ``batch + (n,)``: ``z - h(x)``, the stacked Jacobian and
-        ``R = sigma^2 I`` (inflated for uncertain anchor positions)."""
+        ``R = sigma^2 I`` (inflated for uncertain anchor positions); a model of states only."""
+        self._check_state_step(step)
         idx = self.state_position_index
         ch = self.channel
         path_loss_exp = self._param("path_loss_exp", step)
@@ -451,9 +482,9 @@ class RssModel(MeasurementModel):
         m = self.n_readings
         if np.shape(z)[-1] != m:
             raise ValueError(f"{self.name}.rss_dbm has {np.shape(z)[-1]} anchors on its last axis, anchors_m has {m}")
-        if self.position_index is None and n_state != self.dim:
-            raise ValueError(f"{self.name} in a Kalman-family stream reads the state's position components: give "
-                             f"RssModel(..., position_index=...) ({self.dim} state indices) for a {n_state}-state")
+        if self.position_index is None:
+            raise ValueError(f"{self.name} in a Kalman-family stream is a model of states: give "
+                             f"RssModel(..., position_index=...) ({self.dim} state indices of the {n_state}-state)")
         a = self.anchors_m
         if isinstance(a, PerStep) and a.value.shape[-3] not in (1, np.shape(z)[-2]):
             raise ValueError(f"{self.name}.anchors_m per step must have shape batch + (T, m, dim) with T = "

@@ -85,9 +85,9 @@ def _fingerprints(cells_m, anchors_m, model: PathLossModel, walls_m=None, min_di
     cells_m = as_array("cells_m", cells_m, ndim=2, trailing=(dim,))
     for name in ("ref_power_dbm", "path_loss_exp"):
         value = np.asarray(getattr(model, name))
-        if value.ndim and value.shape[-1] != m:
-            raise ValueError(f"model.{name} must be a scalar or have shape (..., {m}) (one per reader), "
-                             f"got shape {value.shape}")
+        if value.ndim and value.shape[-1] not in (1, m):
+            raise ValueError(f"model.channel.{name} must be a scalar or have shape (..., 1) or (..., {m}) (one per "
+                             f"reader), got shape {value.shape}")
     check_scalar("min_distance_m", min_distance_m, gt=0)
     distance = pairwise_distance_m(cells_m, anchors_m, names=("cells_m", "anchors_m"))
     n_walls = 0 if walls_m is None else wall_crossings(cells_m, anchors_m, walls_m)

@@ -249,10 +249,10 @@ def _nb_rss_rows(x, r, run, jrow, k, ta, c0, Z, A, P0c, PLE, SIG, pidx, npos, ta
     number of lanes with a reading.
 
     The one RSS model's formula (:func:`locbook.models.rss.rss_mean_jacobian`, as
-    :meth:`locbook.models.rss.RssMeasurementModel.innovation` evaluates it), compiled:
+    :meth:`locbook.models.rss.RssModel.innovation` evaluates it), compiled:
     ``h = P_0 - 10 n log10(max(d, clamp) / d0)``, ``dh/dp = -(10 n / ln 10) (p - a) / d^2`` outside the clamp and 0
     within it (``d^2 < clamp^2``, where h is flat), variance ``sigma^2 + anchor_sigma^2 |dh/dp|^2``
-    (:meth:`locbook.models.rss.RssMeasurementModel.variance_db2`); ``clamp`` the model's ``clamp_m``, ``tag_h`` the
+    (:meth:`locbook.models.rss.RssModel.variance_db2`); ``clamp`` the model's ``clamp_m``, ``tag_h`` the
     height of a tag whose state has fewer position components than the anchors. No branch depends on a lane: the
     loops vectorise, and the logarithm is :func:`locbook.tracking._vecmath._log10_block` over the lanes (``zb``,
     ``d2``, ``dh``, ``lg``, ``work``: scratch of one value per lane)."""

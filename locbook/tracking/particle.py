@@ -217,6 +217,7 @@ class _Motion:
         mirrored = motion.mirrored_index()
         self.derivatives = None if mirrored is None else np.asarray(mirrored, dtype=np.int64)
         self.root = motion.noise_factor(0)      # refused here when not positive semi-definite
+        self._root_step, self._root_Q = 0, np.asarray(motion.covariance(0), dtype=float)
 
     def state_from_positions(self, positions):
         out = np.zeros(positions.shape[:-1] + (self.n_state,))
@@ -235,9 +236,19 @@ class _Motion:
             x[..., idx] *= sign
         return x
 
+    def _root(self, t: int):
+        """The noise factor at step ``t``: the last one again while the model's covariance is the same matrix (the
+        factor's eigen-decomposition is done once for a constant Q)."""
+        if t != self._root_step:
+            Q = np.asarray(self.model.covariance(t), dtype=float)
+            if not np.array_equal(Q, self._root_Q):
+                self.root, self._root_Q = self.model.noise_factor(t), Q
+            self._root_step = t
+        return self.root
+
     def step(self, x, t, rng, bounds):
         x = np.asarray(self.model.apply(x, t), dtype=float)
-        root = self.root if t == 0 else self.model.noise_factor(t)
+        root = self._root(t)
         if root is not None:
             x = x + rng.standard_normal(x.shape[:-1] + (root.shape[-1],)) @ root.T
         return x if bounds is None else self.mirror(x, *bounds)
@@ -280,7 +291,7 @@ def particle_filter(rss_dbm, model, rng: np.random.Generator, *, n_steps: int | 
     the state by ``initial_covariance`` ``(n, n)``; or ``n_particles`` uniform over ``region_m``, at rest. With
     ``region_m`` a particle leaving the region is mirrored back and the components the model names in
     :meth:`~locbook.models.base.MotionModel.mirrored_index` (a KinematicModel's velocity and
-    acceleration on that axis reversed. ``motion`` excludes ``transition``, ``spread_m`` and ``velocity_m``.
+    acceleration) reversed on that axis. ``motion`` excludes ``transition``, ``spread_m`` and ``velocity_m``.
 
     Resampling (``resampling``: one of :data:`~locbook.tracking.resampling.RESAMPLING_METHODS`): at every step by
     default (basic SIR, Table 4.4); with ``resample_threshold`` only where ``N_eff < resample_threshold * N`` (the
@@ -326,7 +337,7 @@ def particle_filter(rss_dbm, model, rng: np.random.Generator, *, n_steps: int | 
         given = [name for name, value in (("transition", transition), ("spread_m", spread_m),
                                           ("velocity_m", velocity_m)) if value is not None]
         if given:
-            raise ValueError(f"motion moves the particles by x = F x + w, w ~ N(0, Q); it excludes "
+            raise ValueError(f"motion moves the particles by x = f(x) + w, w ~ N(0, Q) (its own model); it excludes "
                              f"{' and '.join(given)} (got motion={type(motion).__name__} and {', '.join(given)})")
         kin = _Motion(motion)
         if region_m is not None and kin.derivatives is None:

@@ -117,8 +117,9 @@ def LinearMeasurement(z, H, R, mode: str = "parallel", offset=None) -> Stream:
     return Stream(zz, model, mode=mode)
 
 
-def RssMeasurement(rss_dbm, model, channel: PathLossModel | None = None, position_index=None, mode: str = "parallel",
-                   order: str = "descending", anchor_sigma_m: float = 0.0, tag_height_m: float | None = None) -> Stream:
+def RssMeasurement(rss_dbm, model=None, channel: PathLossModel | None = None, position_index=None,
+                   mode: str = "parallel", order: str = "descending", anchor_sigma_m: float = 0.0,
+                   tag_height_m: float | None = None, *, anchors_m=None) -> Stream:
     """Received powers for the EKF and the UKF (Dogan 2015, Ch. 3): ``rss_dbm`` ``batch + (T, m)``, NaN where an
     anchor gave no reading, read through ``model``, an :class:`~locbook.models.rss.RssModel` with its
     ``position_index`` (the state's position components). ``mode``: ``"parallel"`` (one stacked update, Table 3.4)
@@ -128,7 +129,8 @@ def RssMeasurement(rss_dbm, model, channel: PathLossModel | None = None, positio
 
     The model's fields may be given in its place: ``RssMeasurement(rss_dbm, anchors_m, channel, position_index,
     anchor_sigma_m=..., tag_height_m=...)``; there, anchors ``batch + (T, m, dim)`` are per step (the form's old
-    reading: a DeprecationWarning asks for ``per_step(anchors_m)``, which means the same)."""
+    reading: a DeprecationWarning asks for ``per_step(anchors_m)``, which means the same). Channel parameters with
+    leading axes are per run (``batch + (1 or m,)``) in both forms."""
     check_choice("mode", mode, RSS_UPDATE_MODES)
     check_choice("order", order, SERIAL_ORDERS)
     if isinstance(model, RssModel):
@@ -138,11 +140,15 @@ def RssMeasurement(rss_dbm, model, channel: PathLossModel | None = None, positio
         if position_index is not None:
             model = replace(model, position_index=position_index)
     else:
-        anchors_m = model
-        if channel is None or position_index is None:
-            raise ValueError(f"RssMeasurement takes (rss_dbm, model: RssModel) or (rss_dbm, anchors_m, channel, "
-                             f"position_index); got a {type(model).__name__} without "
-                             f"{'channel' if channel is None else 'position_index'}")
+        if anchors_m is not None and model is not None:
+            raise ValueError("RssMeasurement: give the model (an RssModel) or anchors_m=, not both")
+        anchors_m = model if anchors_m is None else anchors_m
+        if isinstance(anchors_m, PathLossModel) or anchors_m is None or channel is None or position_index is None:
+            got = "nothing" if anchors_m is None else type(anchors_m).__name__
+            raise ValueError(f"RssMeasurement takes (rss_dbm, model) with model an RssModel (with position_index), or "
+                             f"(rss_dbm, anchors_m, channel, position_index); got {got} as the model"
+                             + ("" if isinstance(anchors_m, PathLossModel) or anchors_m is None else
+                                f" without {'channel' if channel is None else 'position_index'}"))
         if not isinstance(anchors_m, PerStep) and np.ndim(anchors_m) > 2:
             warnings.warn("RssMeasurement: anchors_m with more than two axes are per step; mark them "
                           "per_step(anchors_m) (unmarked leading axes are run axes in RssModel)", DeprecationWarning,

@@ -46,14 +46,14 @@ def measure(runs: int = 1000, particles: int = 250, steps: int = 10, loop_runs: 
     cells = oz.cell_centres(oz.ROOM_M, 4, 7)
 
     def sir(r, rng):
-        return lb.particle_filter(r, model, rng, n_particles=particles, region_m=region).mean
+        return lb.particle_filter(r, model, rng=rng, n_particles=particles, region_m=region).mean
 
     def improved(r, rng):
-        return lb.particle_filter(r, model, rng, n_particles=particles, region_m=region,
+        return lb.particle_filter(r, model, rng=rng, n_particles=particles, region_m=region,
                                   resample_threshold=0.5, weight_smoothing="sqrt").mean
 
     def grid(r, rng):
-        return lb.grid_bayes_filter(r, cells, model, 0.5).mean
+        return lb.grid_bayes_filter(r, model, cells, 0.5).mean
 
     n = min(loop_runs, runs)
     sub = rss[:n]

@@ -103,7 +103,7 @@ def run(size: str = "full"):
     xs, ys, cells = _grid(h)
     rss = _readings(runs, steps, rng)
     t0 = time.perf_counter()
-    lb.grid_bayes_filter(rss[:1, :8], cells, model, SPREAD_M)             # compile (or load) the kernels
+    lb.grid_bayes_filter(rss[:1, :8], model, cells, SPREAD_M)             # compile (or load) the kernels
     warm = time.perf_counter() - t0
 
     def agree(ours, ref):
@@ -111,7 +111,7 @@ def run(size: str = "full"):
         return (f"|posterior mean - scipy.ndimage| max {d.max():.2g} m, median {np.median(d):.2g} m (gaussian_filter "
                 "truncates at 4 sigma and renormalises globally at the walls)")
 
-    m = hx.compare(lambda: lb.grid_bayes_filter(rss, cells, model, SPREAD_M),
+    m = hx.compare(lambda: lb.grid_bayes_filter(rss, model, cells, SPREAD_M),
                    lambda: scipy_grid_filter(rss, xs, ys, h), agree=agree)
     per = runs * steps
     yield hx.row(f"grid Bayes filter ({cells.shape[0]:,} cells)",
@@ -133,8 +133,8 @@ def run(size: str = "full"):
             raise AssertionError(f"max |dmean| {dm:.2g} m, |dcov| {dc:.2g} m^2")
         return f"max |dmean| {dm:.2g} m, max |dcov| {dc:.2g} m^2 against transition='dense' (numpy)"
 
-    m2 = hx.compare(lambda: lb.grid_bayes_filter(rss2, cells2, model, SPREAD_M),
-                    lambda: _numpy_path(lambda: lb.grid_bayes_filter(rss2, cells2, model, SPREAD_M,
+    m2 = hx.compare(lambda: lb.grid_bayes_filter(rss2, model, cells2, SPREAD_M),
+                    lambda: _numpy_path(lambda: lb.grid_bayes_filter(rss2, model, cells2, SPREAD_M,
                                                                      transition="dense")), agree=agree_dense)
     yield hx.row(f"grid Bayes filter vs its dense transition ({cells2.shape[0]:,} cells)",
                  f"{runs2} runs x {steps2} steps, grid {h2:g} m over 24 m x 15 m", m2,
@@ -151,8 +151,8 @@ def run(size: str = "full"):
     def agree_small(ours, ref):
         return f"max |dmean| {np.abs(ours.mean - ref.mean).max():.2g} m"
 
-    m3 = hx.compare(lambda: lb.grid_bayes_filter(rss3, cells3, model3, 0.5),
-                    lambda: _numpy_path(lambda: lb.grid_bayes_filter(rss3, cells3, model3, 0.5)), agree=agree_small)
+    m3 = hx.compare(lambda: lb.grid_bayes_filter(rss3, model3, cells3, 0.5),
+                    lambda: _numpy_path(lambda: lb.grid_bayes_filter(rss3, model3, cells3, 0.5)), agree=agree_small)
     yield hx.row(f"grid Bayes filter ({cells3.shape[0]} cells)",
                  f"Ozkaya Table 7.16 setting, {runs3} runs x 10 steps", m3, "locbook numpy path (numba off)")
 

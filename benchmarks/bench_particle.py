@@ -89,7 +89,7 @@ def measure(runs: int, particles: int, steps: int, repeats: int = 5):
     model, rss, truth = scenario(runs, steps)
 
     def ours():
-        return lb.particle_filter(rss, model, np.random.default_rng(1), n_particles=particles,
+        return lb.particle_filter(rss, model, rng=np.random.default_rng(1), n_particles=particles,
                                   region_m=(LOWER_M, UPPER_M), spread_m=SPREAD_M).mean
 
     def reference():
@@ -103,7 +103,7 @@ def measure(runs: int, particles: int, steps: int, repeats: int = 5):
         return (f"mean error locbook {ea:.4f} m, numpy SIR {eb:.4f} m: difference {diff:+.4f} m "
                 f"(standard error {se:.4f} m over {runs} runs)")
 
-    lb.particle_filter(rss[:2, :2], model, np.random.default_rng(0), n_particles=particles,
+    lb.particle_filter(rss[:2, :2], model, rng=np.random.default_rng(0), n_particles=particles,
                        region_m=(LOWER_M, UPPER_M))                       # warm-up: compiled kernels loaded
     m = hx.compare(ours, reference, repeats=repeats, agree=agree)
     work = f"{runs} runs x {particles} particles x {steps} steps, 2-D, {len(ANCHORS_M)} anchors"

@@ -85,15 +85,15 @@ def measure(spacing: float = 0.1, particles: int = 3000, knn_queries: int = 10_0
         ("UKF", f"{len(reg.time_s)} ticks",
          lambda: lb.unscented_kalman_filter(motion.F, motion.Q, x0, P0, [stream], alpha=0.5).mean[ticks, :2], "fix"),
         (f"particle filter ({particles} particles)", f"{len(reg.time_s)} ticks, 1 run",
-         lambda: lb.particle_filter(reg.rss_dbm[None], bayes_model, np.random.default_rng(1), n_particles=particles,
+         lambda: lb.particle_filter(reg.rss_dbm[None], bayes_model, rng=np.random.default_rng(1), n_particles=particles,
                                     region_m=(lower, upper), spread_m=0.3, resample_threshold=0.5).mean[0, ticks],
          "fix once"),
         (f"grid Bayes, separable ({spacing} m)", f"{len(reg.time_s)} ticks x {len(grid)} cells",
-         lambda: lb.grid_bayes_filter(reg.rss_dbm[None], grid, bayes_model, 0.3).mean[0, ticks], "fix"),
+         lambda: lb.grid_bayes_filter(reg.rss_dbm[None], bayes_model, grid, 0.3).mean[0, ticks], "fix"),
     ]
     if dense_check:
         cases.append((f"grid Bayes, dense ({spacing} m)", f"{len(reg.time_s)} ticks x {len(grid)} cells",
-                      lambda: lb.grid_bayes_filter(reg.rss_dbm[None], grid, bayes_model, 0.3,
+                      lambda: lb.grid_bayes_filter(reg.rss_dbm[None], bayes_model, grid, 0.3,
                                                    transition="dense").mean[0, ticks], "fix"))
     gc.collect()
     gc.freeze()     # the imported modules' objects out of the collector: the harness collects before every call
@@ -102,9 +102,9 @@ def measure(spacing: float = 0.1, particles: int = 3000, knn_queries: int = 10_0
     short = lb.RssMeasurement(reg.rss_dbm[:3], anchors, model, np.array([0, 1]), tag_height_m=h)
     lb.extended_kalman_filter(motion.F, motion.Q, x0, P0, [short])
     lb.unscented_kalman_filter(motion.F, motion.Q, x0, P0, [short], alpha=0.5)
-    lb.particle_filter(reg.rss_dbm[None, :3], bayes_model, np.random.default_rng(1), n_particles=50,
+    lb.particle_filter(reg.rss_dbm[None, :3], bayes_model, rng=np.random.default_rng(1), n_particles=50,
                        region_m=(lower, upper), spread_m=0.3, resample_threshold=0.5)
-    lb.grid_bayes_filter(reg.rss_dbm[None, :3], grid, bayes_model, 0.3)
+    lb.grid_bayes_filter(reg.rss_dbm[None, :3], bayes_model, grid, 0.3)
 
     def error(out):
         return f"mean error {np.nanmean(np.linalg.norm(out - truth, axis=-1)):.2f} m"

@@ -65,7 +65,7 @@ def measure(n: int = 10_000, loop_n: int | None = None, scipy_n: int | None = No
     rng = np.random.default_rng(0)
     truth = rng.uniform(BOX_LO, BOX_HI, (n, 2))
     model = lb.PathLossModel(-45.0, 2.1843, 1.83)
-    power = model.sample_rss_dbm(lb.pairwise_distance_m(truth, anchors), rng)
+    power = model.sample_rss_dbm(lb.pairwise_distance_m(truth, anchors), rng=rng)
     ranges = model.range_m(power)
     a_mat, b = lb.lateration_system(anchors, ranges)
     workload = f"{n:,} problems, 4 anchors (corridor of document 003)"

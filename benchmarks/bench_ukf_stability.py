@@ -49,7 +49,7 @@ def measure(steps: int = 100_000, alpha: float = 1e-3, runs: int = 1, seed: int 
     sl = slice(0, T)
     channel = lb.PathLossModel(S_DBM, C, 4.0)
     d = lb.pairwise_distance_m(truth.position_m[sl], ANCHORS)
-    rss = channel.sample_rss_dbm(np.broadcast_to(d, (runs,) + d.shape), rng)
+    rss = channel.sample_rss_dbm(np.broadcast_to(d, (runs,) + d.shape), rng=rng)
     acc = lb.accelerometer_readings(truth.acceleration_m_s2[sl], truth.heading_rad[sl], bias_m_s2=0.0,
                                     sigma_m_s2=0.05, rng=rng) + np.zeros((runs, 1, 1))
     gyro = lb.gyroscope_readings(truth.yaw_rate_rad_s[sl], bias_rad_s=0.0, sigma_rad_s=0.01, rng=rng)

@@ -82,7 +82,7 @@ class _AnchorReadings:
     def _sample_rss_dbm(self, points_m, n_runs: int, rng: np.random.Generator) -> np.ndarray:
         """``n_runs`` independent channel draws at ``points_m``: ``(n_runs, ..., m)``."""
         d = self.distances_m(points_m)
-        return self.channel.sample_rss_dbm(np.broadcast_to(d, (n_runs,) + d.shape), rng)
+        return self.channel.sample_rss_dbm(np.broadcast_to(d, (n_runs,) + d.shape), rng=rng)
 
 
 @dataclass(frozen=True)
@@ -214,7 +214,7 @@ def _grid_mmse(sc, rss, opts):
     flat = _flat(rss)
     cells, model = sc.grid_m(), _bayes_model(sc)
     block = max(1, GRID_BLOCK_VALUES // cells.shape[0])
-    return np.concatenate([grid_bayes_filter(flat[i:i + block, None, :], cells, model, 1.0).mean[:, 0]
+    return np.concatenate([grid_bayes_filter(flat[i:i + block, None, :], model, cells, 1.0).mean[:, 0]
                            for i in range(0, flat.shape[0], block)])
 
 
@@ -443,12 +443,12 @@ def run_trackers(sc: TrackingScenario, rss_dbm, x0, ts: TrackerSettings, rng: np
         out["imm"] = res.position_m([0, 1])
     model = _bayes_model(sc)
     if "particle" in chosen:
-        out["particle"] = particle_filter(rss, model, rng_pf, n_particles=ts.n_particles, region_m=sc.box_m,
+        out["particle"] = particle_filter(rss, model, rng=rng_pf, n_particles=ts.n_particles, region_m=sc.box_m,
                                           spread_m=sc.spread_m, initial_position_m=x0[:, :2],
                                           initial_sd_m=ts.particle_start_sd_m, resample_threshold=0.5).mean
     if "grid_bayes" in chosen:
         cells = grid_in_outline(sc.outline_m, sc.grid_spacing_m)
-        out["grid_bayes"] = grid_bayes_filter(rss, cells, model, sc.spread_m,
+        out["grid_bayes"] = grid_bayes_filter(rss, model, cells, sc.spread_m,
                                               initial_belief=_gaussian_belief(cells, x0, ts.P0[:2, :2])).mean
     out = {k: out[k] for k in chosen}
     return (out, flags) if with_divergence else out

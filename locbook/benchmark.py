@@ -231,7 +231,7 @@ def score(error_m, bound_m, *, measured: bool, rng: np.random.Generator, n_boots
     if measured or e.shape[0] < 2:
         per_epoch = np.sqrt(np.nanmean(e**2, axis=0))
         # every epoch kept in time order (NaN = no fix): blocks never join epochs across a gap
-        m = accuracy_metrics(per_epoch, rng, n_bootstrap=n_bootstrap, block_length=block_length)
+        m = accuracy_metrics(per_epoch, rng=rng, n_bootstrap=n_bootstrap, block_length=block_length)
         low, high = m["rmse_m_low"], m["rmse_m_high"]
         how = m["interval"] + (f"; {m['interval_note']}" if m["interval_note"] else "")
     else:

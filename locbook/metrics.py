@@ -17,6 +17,7 @@ import warnings
 
 import numpy as np
 
+from ._deprecation import keyword_rng
 from ._validate import as_array, check_scalar
 from .montecarlo import circular_block_indices
 
@@ -232,7 +233,8 @@ def _exclusion_note(name: str, estimate: float, low: float, high: float, boot: n
             f"{100 * share:.1f} % of the resamples fall {side} it")
 
 
-def accuracy_metrics(error_m, rng: np.random.Generator, *, n_bootstrap: int = 1000, level: float = 0.95,
+@keyword_rng(1)
+def accuracy_metrics(error_m, *, rng: np.random.Generator, n_bootstrap: int = 1000, level: float = 0.95,
                      block_length: int = 1, min_blocks: float = MIN_BLOCKS, values_per_epoch: int = 1) -> dict:
     """Point-accuracy statistics of one method on one data set, with bootstrap intervals.
 
@@ -255,7 +257,8 @@ def accuracy_metrics(error_m, rng: np.random.Generator, *, n_bootstrap: int = 10
     ``values_per_epoch = k``: ``error_m`` holds ``k`` values per epoch, epoch-major (the errors of ``k`` runs of a
     randomised method at each epoch): the statistics are taken over every value, and the bootstrap resamples epochs,
     each with all its ``k`` values (blocks and ``n_blocks`` count epochs; an epoch with an estimate is one where any
-    run has one).
+    run has one). ``rng`` (keyword-only; the positional form ``accuracy_metrics(error_m, rng)`` is deprecated) draws
+    the resamples.
 
     Returns ``{stat: value, stat + "_low": ..., stat + "_high": ..., stat + "_note": "" or why the interval excludes
     the estimate, "coverage": ..., "n": ..., "n_blocks": float, "interval": how it was taken, "interval_note": ""
@@ -279,7 +282,7 @@ def accuracy_metrics(error_m, rng: np.random.Generator, *, n_bootstrap: int = 10
     n_finite = int(np.isfinite(e.reshape(n, k)).any(axis=1).sum())
     n_blocks = n_finite / block
     # drawn whatever the block count, so a stream shared by several calls advances the same way
-    idx = circular_block_indices(n, block, n_boot, rng)
+    idx = circular_block_indices(n, block, n_boot, rng=rng)
     if k > 1:                          # every value of a drawn epoch, in order
         idx = (idx[..., None] * k + np.arange(k)).reshape(n_boot, -1)
     point, boot = _accuracy_stats(e), _accuracy_stats(e[idx], axis=-1)

@@ -21,6 +21,7 @@ from numbers import Integral, Real
 
 import numpy as np
 
+from ._deprecation import keyword_rng
 from ._validate import as_array, check_scalar
 from .errors import ParameterError
 
@@ -55,12 +56,15 @@ def mc_standard_error(samples, axis: int = 0) -> np.ndarray:
     return np.std(samples, axis=axis, ddof=1) / np.sqrt(n)
 
 
-def bootstrap_standard_error(samples, statistic, rng: np.random.Generator, n_resamples: int = 200) -> float:
+@keyword_rng(2, "n_resamples")
+def bootstrap_standard_error(samples, statistic, *, rng: np.random.Generator, n_resamples: int = 200) -> float:
     """Bootstrap standard error of ``statistic`` over independent run-level ``samples`` (1-D).
 
     ``statistic(x, axis=-1)`` is evaluated on ``n_resamples`` resamples drawn with replacement, all in one
     array; the standard error is their standard deviation. For statistics without a simple closed form
     (median, percentiles); the samples must be independent (one value per Monte-Carlo run, not per step).
+    ``rng`` and ``n_resamples`` are keyword-only (the positional form ``(samples, statistic, rng, n_resamples)`` is
+    deprecated).
     """
     x = np.asarray(samples, float).ravel()
     check_scalar("n_resamples", n_resamples, ge=2, integer=True)
@@ -80,7 +84,8 @@ def _block_arguments(n, block_length, n_resamples, rng) -> tuple[int, int, int]:
     return int(n), min(int(block_length), int(n)), int(n_resamples)
 
 
-def moving_block_indices(n: int, block_length: int, n_resamples: int, rng: np.random.Generator) -> np.ndarray:
+@keyword_rng(3)
+def moving_block_indices(n: int, block_length: int, n_resamples: int, *, rng: np.random.Generator) -> np.ndarray:
     """Index arrays ``(n_resamples, n)`` of the moving-block bootstrap (Kuensch 1989): each resample joins
     ``ceil(n / L)`` blocks of ``L = min(block_length, n)`` consecutive indices, each block starting uniformly in
     ``[0, n - L]``, cut to ``n``. ``block_length = 1`` is the ordinary bootstrap. For series whose neighbours are
@@ -90,14 +95,16 @@ def moving_block_indices(n: int, block_length: int, n_resamples: int, rng: np.ra
     An index near either end lies in fewer possible blocks than one in the middle (index 0 in one of the
     ``n - L + 1``, an index at least ``L - 1`` from both ends in ``L``), so the ends are under-weighted and the
     resampled mean is biased away from the sample mean when the ends differ from the middle;
-    :func:`circular_block_indices` has no such bias."""
+    :func:`circular_block_indices` has no such bias. ``rng`` is keyword-only (the positional form ``(n,
+    block_length, n_resamples, rng)`` is deprecated)."""
     n, length, n_resamples = _block_arguments(n, block_length, n_resamples, rng)
     n_blocks = -(-n // length)
     starts = rng.integers(0, n - length + 1, size=(n_resamples, n_blocks))
     return (starts[..., None] + np.arange(length)).reshape(n_resamples, -1)[:, :n]
 
 
-def circular_block_indices(n: int, block_length: int, n_resamples: int, rng: np.random.Generator) -> np.ndarray:
+@keyword_rng(3)
+def circular_block_indices(n: int, block_length: int, n_resamples: int, *, rng: np.random.Generator) -> np.ndarray:
     """Index arrays ``(n_resamples, n)`` of the circular block bootstrap (Politis and Romano 1992, "A circular
     block-resampling procedure for stationary data", in LePage and Billard (eds.), *Exploring the Limits of
     Bootstrap*, Wiley, pp. 263-270): the series is wrapped on a circle, and each resample joins ``ceil(n / L)``
@@ -107,7 +114,8 @@ def circular_block_indices(n: int, block_length: int, n_resamples: int, rng: np.
     Every position of a resample holds each index with probability exactly ``1 / n`` (``s -> (s + j) mod n`` is a
     bijection), so every epoch is equally likely and the bootstrap expectation of the resampled mean is the sample
     mean, where :func:`moving_block_indices` under-weights both ends. ``block_length = 1`` draws the same starts
-    from ``rng`` as :func:`moving_block_indices` and is the ordinary (i.i.d.) bootstrap."""
+    from ``rng`` as :func:`moving_block_indices` and is the ordinary (i.i.d.) bootstrap. ``rng`` is keyword-only (the
+    positional form ``(n, block_length, n_resamples, rng)`` is deprecated)."""
     n, length, n_resamples = _block_arguments(n, block_length, n_resamples, rng)
     n_blocks = -(-n // length)
     starts = rng.integers(0, n, size=(n_resamples, n_blocks))

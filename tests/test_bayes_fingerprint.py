@@ -88,7 +88,7 @@ def test_grid_filter_with_uniform_transition_is_the_normalised_likelihood():
     cells = _cells(1.0)
     model = _model(-52.0, 2.3, 5.2)
     rss = np.random.default_rng(3).normal(-70.0, 4.0, (2, 4, 3))
-    res = lb.grid_bayes_filter(rss, cells, model, spread_m=np.inf)
+    res = lb.grid_bayes_filter(rss, model, cells, spread_m=np.inf)
     for r in range(2):
         lik = _independent_likelihood(rss[r, -1], cells, 5.2)
         np.testing.assert_allclose(res.weights[r], lik / lik.sum(), rtol=1e-10)
@@ -138,7 +138,7 @@ def test_grid_filter_recursion_equals_explicit_loop():
     model = _model(-52.0, 2.3, 4.0)
     rss = np.random.default_rng(4).normal(-68.0, 5.0, (1, 5, 3))
     v = np.array([0.0, 0.5])
-    res = lb.grid_bayes_filter(rss, cells, model, spread_m=0.7, velocity_m=v)
+    res = lb.grid_bayes_filter(rss, model, cells, spread_m=0.7, velocity_m=v)
     bel = np.full(len(cells), 1.0 / len(cells))
     for t in range(5):
         if t:
@@ -185,8 +185,8 @@ def test_sir_converges_to_the_grid_posterior_mean():
     # one update from a uniform prior: the grid posterior on a fine grid is the continuous one
     model = _model(-52.0, 2.3, 5.2)
     rss = np.array([[[-66.0, -70.0, -72.0]]])
-    grid = lb.grid_bayes_filter(rss, _cells(0.02), model, spread_m=np.inf)
-    pf = lb.particle_filter(np.repeat(rss, 20, axis=0), model, np.random.default_rng(6),
+    grid = lb.grid_bayes_filter(rss, model, _cells(0.02), spread_m=np.inf)
+    pf = lb.particle_filter(np.repeat(rss, 20, axis=0), model, rng=np.random.default_rng(6),
                             n_particles=50_000, region_m=ROOM)
     spread = np.sqrt(grid.weights[0] @ np.sum((_cells(0.02) - grid.mean[0, 0]) ** 2, axis=-1))
     se = spread / np.sqrt(50_000 * 20)
@@ -200,8 +200,8 @@ def test_sir_with_gaussian_prior_converges_to_the_grid_filter_over_steps():
     truth = np.array([2.5, 4.0])
     mean = model.mean_rss_dbm(truth[None])[0, 0]
     rss = (mean + np.random.default_rng(7).normal(0, 2.0, (4, 3)))[None]
-    grid = lb.grid_bayes_filter(rss, _cells(0.1), model, spread_m=0.3)
-    pf = lb.particle_filter(np.repeat(rss, 40, axis=0), model, np.random.default_rng(8), n_particles=20_000,
+    grid = lb.grid_bayes_filter(rss, model, _cells(0.1), spread_m=0.3)
+    pf = lb.particle_filter(np.repeat(rss, 40, axis=0), model, rng=np.random.default_rng(8), n_particles=20_000,
                             region_m=ROOM, spread_m=0.3, resample_threshold=0.5)
     np.testing.assert_allclose(pf.mean[:, -1].mean(axis=0), grid.mean[0, -1], atol=0.01)   # D = 0.6 is 0.06 off
 
@@ -210,24 +210,24 @@ def test_particle_filter_options_and_invariants():
     model = _model(-52.0, 2.3, 5.2)
     rss = np.random.default_rng(9).normal(-68.0, 5.0, (30, 6, 3))
     kw = dict(n_particles=200, region_m=ROOM)
-    basic = lb.particle_filter(rss, model, np.random.default_rng(1), **kw)
+    basic = lb.particle_filter(rss, model, rng=np.random.default_rng(1), **kw)
     assert basic.resampled.all()
-    again = lb.particle_filter(rss, model, np.random.default_rng(1), **kw)
+    again = lb.particle_filter(rss, model, rng=np.random.default_rng(1), **kw)
     np.testing.assert_array_equal(basic.mean, again.mean)        # same stream, same numbers
-    improved = lb.particle_filter(rss, model, np.random.default_rng(1), resample_threshold=0.5,
+    improved = lb.particle_filter(rss, model, rng=np.random.default_rng(1), resample_threshold=0.5,
                                   weight_smoothing="sqrt", **kw)
     np.testing.assert_allclose(improved.weights.sum(-1), 1.0)
     assert (improved.n_eff[improved.resampled] < 100).all() and (improved.n_eff[~improved.resampled] >= 100).all()
     assert improved.resampled.any() and not improved.resampled.all()          # both branches above are exercised
     inner = (np.ones(2), np.array([4.0, 7.0]))
-    con = lb.particle_filter(rss, model, np.random.default_rng(1), n_particles=200, region_m=inner)
+    con = lb.particle_filter(rss, model, rng=np.random.default_rng(1), n_particles=200, region_m=inner)
     assert (con.particles_m >= 1.0).all() and (con.particles_m[..., 0] <= 4.0).all()
     assert (con.particles_m[..., 1] <= 7.0).all() and (con.mean >= 1.0).all() and (con.mean <= [4.0, 7.0]).all()
     start = np.tile([2.0, 3.0], (30, 1))
-    known = lb.particle_filter(rss[:, :1], model, np.random.default_rng(1), initial_position_m=start, **kw)
+    known = lb.particle_filter(rss[:, :1], model, rng=np.random.default_rng(1), initial_position_m=start, **kw)
     np.testing.assert_allclose(known.mean[:, 0], start)
     with pytest.raises(ValueError, match="fraction of N"):
-        lb.particle_filter(rss, model, np.random.default_rng(1), resample_threshold=5.0, **kw)
+        lb.particle_filter(rss, model, rng=np.random.default_rng(1), resample_threshold=5.0, **kw)
 
 
 # -- reference tags --------------------------------------------------------------------------------------
@@ -297,8 +297,8 @@ def test_thesis_crlb_sweep_reproduces_every_printed_value():
 def test_small_scale_fading_has_unit_mean_power_and_deep_fades():
     rng = np.random.default_rng(12)
     x = np.linspace(0, 50, 20000)
-    rayleigh = lb.small_scale_fading_db(x, 0.33, rng)
+    rayleigh = lb.small_scale_fading_db(x, 0.33, rng=rng)
     assert np.mean(10 ** (rayleigh / 10)) == pytest.approx(1.0, abs=0.1)
     assert rayleigh.min() < -20.0                      # Rayleigh: fades beyond 20 dB over many wavelengths
-    rician = lb.small_scale_fading_db(x, 0.33, rng, k_factor=10.0)
+    rician = lb.small_scale_fading_db(x, 0.33, rng=rng, k_factor=10.0)
     assert rician.min() > rayleigh.min()

@@ -41,14 +41,14 @@ def test_particle_filter_gaussian_start():
     runs = 4000
     nothing_heard = np.full((runs, 1, 3), np.nan)                  # flat likelihood: the estimate is the particle
     start = np.array([10.0, 8.0])
-    res = lb.particle_filter(nothing_heard, model, rng, n_particles=1, region_m=((0, 0), (20, 20)), spread_m=0.5,
+    res = lb.particle_filter(nothing_heard, model, rng=rng, n_particles=1, region_m=((0, 0), (20, 20)), spread_m=0.5,
                              initial_position_m=np.tile(start, (runs, 1)), initial_sd_m=1.5)
     draws = res.mean[:, 0]
     se = 1.5 / np.sqrt(runs)
     assert np.all(np.abs(draws.mean(axis=0) - start) < 4 * se)
     assert np.all(np.abs(draws.std(axis=0, ddof=1) - 1.5) < 4 * 1.5 / np.sqrt(2 * runs))
     with pytest.raises(ValueError, match="initial_position_m too"):
-        lb.particle_filter(nothing_heard, model, rng, n_particles=1, region_m=((0, 0), (20, 20)), initial_sd_m=1.0)
+        lb.particle_filter(nothing_heard, model, rng=rng, n_particles=1, region_m=((0, 0), (20, 20)), initial_sd_m=1.0)
 
 
 def test_per_reader_sigma_likelihood_matches_scipy():

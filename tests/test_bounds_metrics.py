@@ -35,7 +35,7 @@ def test_ml_attains_bound_at_high_snr():
     model = lb.PathLossModel(-45.0, 2.5, 0.5)
     p = np.array([1.3, 2.6])
     power = model.sample_rss_dbm(np.broadcast_to(lb.pairwise_distance_m(p, SQUARE), (20000, 4)),
-                                   np.random.default_rng(11))
+                                   rng=np.random.default_rng(11))
     err2 = np.sum((lb.rss_ml_position(power, lb.RssModel(SQUARE, model)).position_m - p) ** 2, axis=-1)
     bound = lb.rss_crlb_m(p, rss(SQUARE, 2.5, 0.5))
     se = err2.std() / np.sqrt(err2.size)
@@ -124,12 +124,12 @@ def test_bootstrap_standard_error_matches_closed_forms():
     for k in range(20):
         x = np.random.default_rng(k).normal(3.0, sigma, n)
         for stat in ratios:
-            se = lb.bootstrap_standard_error(x, stat, np.random.default_rng(1000 + k), n_resamples=400)
+            se = lb.bootstrap_standard_error(x, stat, rng=np.random.default_rng(1000 + k), n_resamples=400)
             ratios[stat].append(se / closed[stat])
     assert np.mean(ratios[np.mean]) == pytest.approx(1.0, abs=0.04)
     assert np.mean(ratios[np.median]) == pytest.approx(1.0, abs=0.08)
     with pytest.raises(ValueError, match="two"):
-        lb.bootstrap_standard_error([1.0], np.mean, np.random.default_rng(0))
+        lb.bootstrap_standard_error([1.0], np.mean, rng=np.random.default_rng(0))
 
 
 def test_jackknife_standard_error_closed_forms():

@@ -20,7 +20,7 @@ def _grid_call():
     cells = np.stack(np.meshgrid(np.arange(0, 5.01, 0.25), np.arange(0, 4.01, 0.25)), -1).reshape(-1, 2)
     model = lb.RssModel(ANCHORS, lb.PathLossModel(-40.0, 2.5, 3.0, min_distance_m=0.1))
     rss = model.mean_rss_dbm(np.tile([[2.0, 1.5]], (3, 1)))[0][None] + np.random.default_rng(0).normal(0, 3, (1, 3, 4))
-    return lb.grid_bayes_filter(rss, cells, model, 0.5).mean
+    return lb.grid_bayes_filter(rss, model, cells, 0.5).mean
 
 
 def _box_call():

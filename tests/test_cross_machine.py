@@ -61,7 +61,7 @@ def test_rss_ml_runs_to_a_stationary_point_where_a_cap_of_100_would_stop_problem
     truth_m = george.trajectory_m("centerline")
     model = lb.PathLossModel(-45.0, george.PRINTED_N.value, 6.0)
     power = model.sample_rss_dbm(
-        np.broadcast_to(lb.pairwise_distance_m(truth_m, george.ANCHORS_M), (400, 25, 4)), np.random.default_rng(5))
+        np.broadcast_to(lb.pairwise_distance_m(truth_m, george.ANCHORS_M), (400, 25, 4)), rng=np.random.default_rng(5))
     capped = lb.rss_ml_position(power, lb.RssModel(george.ANCHORS_M, model), max_iter=100)
     assert not capped.converged.all()                  # the workload needs more than 100 steps for some problems
     res = lb.rss_ml_position(power, lb.RssModel(george.ANCHORS_M, model))

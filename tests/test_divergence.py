@@ -104,7 +104,7 @@ def test_nis_of_the_rss_ekf_numpy_and_compiled_agree_with_a_direct_computation(m
     ch = lb.PathLossModel(-40.0, 2.2, 2.0)
     model = lb.constant_velocity(1.0, 0.05)
     pos = 5 + np.cumsum(0.1 * rng.standard_normal((30, 12, 2)), axis=1)
-    z = ch.sample_rss_dbm(np.linalg.norm(pos[:, :, None] - ANCHORS, axis=-1), rng)
+    z = ch.sample_rss_dbm(np.linalg.norm(pos[:, :, None] - ANCHORS, axis=-1), rng=rng)
     z[rng.random(z.shape) < 0.2] = np.nan
     x0, P0 = model.state_from(np.array([5.0, 5.0])), np.eye(4)
     monkeypatch.setattr(K, "_NUMBA_MIN_WORK", 0)
@@ -288,7 +288,7 @@ def _ukf_scenario_1(runs=6, steps=60, seed=0):
     rng = np.random.default_rng(seed)
     ch = lb.PathLossModel(-40.0, 2.0, 1e-3)
     pos = 5 + np.cumsum(0.05 * rng.standard_normal((runs, steps, 2)), axis=1)
-    z = ch.sample_rss_dbm(np.linalg.norm(pos[:, :, None] - ANCHORS, axis=-1), rng)
+    z = ch.sample_rss_dbm(np.linalg.norm(pos[:, :, None] - ANCHORS, axis=-1), rng=rng)
     return pos, lb.RssMeasurement(z, ANCHORS, ch, [0, 1]), np.eye(2), 1e4 * np.eye(2)
 
 
@@ -319,7 +319,7 @@ def test_ukf_at_the_default_alpha_with_missing_readings_is_flagged_once_it_lost_
     ch = lb.PathLossModel(-40.0, 2.0, 2.0)
     runs, steps = 8, 80
     pos = 5 + np.cumsum(0.02 * rng.standard_normal((runs, steps, 2)), axis=1)
-    z = ch.sample_rss_dbm(np.linalg.norm(pos[:, :, None] - ANCHORS, axis=-1), rng)
+    z = ch.sample_rss_dbm(np.linalg.norm(pos[:, :, None] - ANCHORS, axis=-1), rng=rng)
     z[rng.random(z.shape) < 0.2] = np.nan
     x0 = np.zeros((runs, 4))
     x0[:, :2] = 5.0

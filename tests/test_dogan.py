@@ -20,7 +20,7 @@ def _scenario(seed=0, runs=3, steps=240):
     for k in range(1, steps):
         truth[:, k] = truth[:, k - 1] @ F.T + rng.multivariate_normal(np.zeros(6), Q, runs)
     channel = lb.PathLossModel(dg.REF_POWER_DBM, dg.PATH_LOSS_EXP, dg.SIGMA_RSS_DB)
-    power = channel.sample_rss_dbm(lb.pairwise_distance_m(truth[..., model.position_index], ANCHORS), rng)
+    power = channel.sample_rss_dbm(lb.pairwise_distance_m(truth[..., model.position_index], ANCHORS), rng=rng)
     power[:, np.arange(steps) % 10 != 0] = np.nan
     acc = truth[..., model.acceleration_index] + 0.015 * rng.standard_normal((runs, steps, 2))
     x0 = truth[:, 0] + rng.normal(0, 1, (runs, 6)) * [1, 0.08, 0.015, 1, 0.08, 0.015]
@@ -162,7 +162,7 @@ def test_mle_reaches_the_grid_optimum():
     rng = np.random.default_rng(11)
     channel = lb.PathLossModel(-48.0, 3.0, 6.0)
     truth = rng.uniform([0, 0], [7.6, 9.2], (40, 2))
-    power = channel.sample_rss_dbm(lb.pairwise_distance_m(truth, ANCHORS), rng)
+    power = channel.sample_rss_dbm(lb.pairwise_distance_m(truth, ANCHORS), rng=rng)
     est = dg.mle_positions(power, channel)
     xs, ys = np.arange(-3, 10.6, 0.05), np.arange(-3, 12.2, 0.05)
     fine = np.stack(np.meshgrid(xs, ys, indexing="ij"), -1).reshape(-1, 2)
@@ -244,7 +244,7 @@ def test_mle_bounds_room_projects_the_fix_onto_the_room():
     rng = np.random.default_rng(3)
     channel = lb.PathLossModel(-48.0, 3.0, 8.0)
     truth = rng.uniform([0, 0], [7.6, 9.2], (200, 2))
-    power = channel.sample_rss_dbm(lb.pairwise_distance_m(truth, ANCHORS), rng)
+    power = channel.sample_rss_dbm(lb.pairwise_distance_m(truth, ANCHORS), rng=rng)
     free = dg.mle_positions(power, channel).position_m
     room = dg.mle_positions(power, channel, bounds="room").position_m
     lo, hi = dg.MLE_ROOM_INSET_M, np.array([7.6, 9.2]) - dg.MLE_ROOM_INSET_M
@@ -268,7 +268,7 @@ def test_mle_grid_step_sets_the_start_grid_the_fix_descends_from(step):
     rng = np.random.default_rng(7)
     channel = lb.PathLossModel(-48.0, 3.0, 6.0)
     truth = rng.uniform([0, 0], [7.6, 9.2], (30, 2))
-    power = channel.sample_rss_dbm(lb.pairwise_distance_m(truth, ANCHORS), rng)
+    power = channel.sample_rss_dbm(lb.pairwise_distance_m(truth, ANCHORS), rng=rng)
     est = dg.mle_positions(power, channel, grid_step_m=step)
     xs, ys = np.arange(-3, 10.6 + 1e-9, step), np.arange(-3, 12.2 + 1e-9, step)
     grid = np.stack(np.meshgrid(xs, ys, indexing="ij"), -1).reshape(-1, 2)

@@ -15,7 +15,7 @@ def test_eq24_cost_is_the_rss_likelihood_scaled_and_has_the_grid_ml_minimiser():
     # off the anchors (the cost clips d at 1e-9 there)
     grid = np.stack(np.meshgrid(np.arange(-2.95, 10.6, 0.1), np.arange(-2.95, 12.2, 0.1)), -1).reshape(-1, 2)
     truth = rng.uniform((0, 0), dg.ROOM_M, (20, 2))
-    rss = channel.sample_rss_dbm(lb.pairwise_distance_m(truth, dg.ANCHORS_M), rng)
+    rss = channel.sample_rss_dbm(lb.pairwise_distance_m(truth, dg.ANCHORS_M), rng=rng)
     cost = dg.mle_cost_eq24(grid, rss, channel)                                        # (20, G)
     rss_domain = np.sum((rss[:, None, :] - channel.mean_rss_dbm(lb.pairwise_distance_m(grid, dg.ANCHORS_M))) ** 2, -1)
     np.testing.assert_allclose(cost * 30.0**2, rss_domain, rtol=1e-9)                # (10 alpha)^2 = 900

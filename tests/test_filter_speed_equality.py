@@ -180,7 +180,7 @@ def _case(kind, rng, B=5):
     anchors = np.array([[0.0, 0.0], [12.0, 0.0], [12.0, 9.0], [0.0, 9.0], [6.0, 4.5]])
     truth = np.cumsum(rng.normal(0, 0.3, (B, T, 2)), axis=1) + [6.0, 4.5]
     ch = lb.PathLossModel(-40.0, 2.5, 3.0)
-    power = ch.sample_rss_dbm(lb.pairwise_distance_m(truth, anchors), rng)
+    power = ch.sample_rss_dbm(lb.pairwise_distance_m(truth, anchors), rng=rng)
     power[rng.random(power.shape) < 0.2] = np.nan
     x0 = np.concatenate([truth[:, 0] + rng.normal(0, 0.5, (B, 2)), np.zeros((B, 2))], axis=1)
     P0 = np.diag([1.0, 1.0, 0.3, 0.3])

@@ -212,7 +212,7 @@ def rss_problems(draw):
     T = draw(st.sampled_from([0, 1, 4]))
     rng = np.random.default_rng(draw(st.integers(0, 50)))
     pos = 5 + np.cumsum(0.3 * rng.standard_normal(batch + (T, 2)), axis=-2)
-    z = CHANNEL.sample_rss_dbm(np.linalg.norm(pos[..., None, :] - ANCHORS, axis=-1), rng)
+    z = CHANNEL.sample_rss_dbm(np.linalg.norm(pos[..., None, :] - ANCHORS, axis=-1), rng=rng)
     if z.size:
         z.reshape(-1)[draw(st.integers(0, z.size - 1))] = draw(st.sampled_from(SPECIAL))
     mode = draw(st.sampled_from(["parallel", "serial"]))
@@ -288,8 +288,8 @@ def test_fuzz_bayes_filters(problem, which):
 
     def call(values):
         if which == "grid":
-            return lb.grid_bayes_filter(values, cells, model, 1.0)
-        return lb.particle_filter(values, model, np.random.default_rng(0), n_particles=50,
+            return lb.grid_bayes_filter(values, model, cells, 1.0)
+        return lb.particle_filter(values, model, rng=np.random.default_rng(0), n_particles=50,
                                   region_m=([0.0, 0.0], [10.0, 10.0]))
 
     status, res = outcome(lambda: call(given_rss), ("rss_dbm",))
@@ -325,7 +325,7 @@ def test_fuzz_particle_filter_callback_likelihood(runs, steps, bad, method):
             out[0, :3] = bad
         return out
 
-    status, res = outcome(lambda: lb.particle_filter(None, loglik, np.random.default_rng(1), n_steps=steps,
+    status, res = outcome(lambda: lb.particle_filter(None, loglik, rng=np.random.default_rng(1), n_steps=steps,
                                                      initial_particles_m=start, spread_m=0.1, resampling=method),
                           ("log_likelihood",))
     collapse = bad is not None and runs and (np.isnan(bad) or bad == np.inf)
@@ -357,8 +357,8 @@ def test_fuzz_resampling(n, rows, bad, method, dtype, is_strided, where):
 
     def call(values, seed=5):
         if where:
-            return lb.resample_where(values, np.random.default_rng(seed), method, threshold=n / 2)[0]
-        return lb.resample(values, np.random.default_rng(seed), method)
+            return lb.resample_where(values, rng=np.random.default_rng(seed), method=method, threshold=n / 2)[0]
+        return lb.resample(values, rng=np.random.default_rng(seed), method=method)
 
     status, idx = outcome(lambda: call(given_w), ("weights",))
     values = np.asarray(given_w, dtype=float)

@@ -103,7 +103,7 @@ def test_rss_grid_filter_equals_an_independent_dense_recursion(cells_kind, sprea
     prior = rng.dirichlet(np.ones(len(cells)), R)
     model = lb.RssModel(ANCHORS, lb.PathLossModel(ref_power_dbm=CHANNEL["p0_dbm"], path_loss_exp=CHANNEL["n_exp"],
                                                   sigma_db=CHANNEL["sigma_db"], min_distance_m=CHANNEL["d_min_m"]))
-    res = grid_bayes_filter(rss, cells, model, spread_m, velocity_m=velocity, initial_belief=prior,
+    res = grid_bayes_filter(rss, model, cells, spread_m, velocity_m=velocity, initial_belief=prior,
                             transition=transition)
     ref = _dense_reference(cells, _rss_log_lik(rss, cells, ANCHORS, **CHANNEL), spread_m, velocity, prior)
     _assert_matches(res, ref, cells)
@@ -133,7 +133,7 @@ def test_callable_grid_filter_equals_an_independent_dense_recursion(transition):
     ranges = np.linalg.norm(truth - beacon, axis=-1) + rng.normal(0, 0.3, (R, T))
     ll = _fix_and_range(z_fix, cov_fix, beacon, ranges, 0.3)
     velocity = np.array([0.2, -0.1])
-    res = grid_bayes_filter(None, cells, ll, 0.5, n_steps=T, velocity_m=velocity, transition=transition)
+    res = grid_bayes_filter(None, ll, cells, 0.5, n_steps=T, velocity_m=velocity, transition=transition)
     log_lik = np.stack([ll(cells, t) for t in range(T)], 1)
     ref = _dense_reference(cells, log_lik, 0.5, np.broadcast_to(velocity, (T, 2)), np.ones((R, len(cells))))
     _assert_matches(res, ref, cells)
@@ -154,7 +154,7 @@ def test_callable_grid_filter_in_one_and_three_dimensions(dim, transition):
 
     velocity = rng.normal(0, 0.2, (T, dim))
     prior = rng.dirichlet(np.ones(len(cells)), R)
-    res = grid_bayes_filter(None, cells, ll, 0.45, n_steps=T, velocity_m=velocity, initial_belief=prior,
+    res = grid_bayes_filter(None, ll, cells, 0.45, n_steps=T, velocity_m=velocity, initial_belief=prior,
                             transition=transition)
     ref = _dense_reference(cells, np.stack([ll(cells, t) for t in range(T)], 1), 0.45, velocity, prior)
     _assert_matches(res, ref, cells)
@@ -169,7 +169,7 @@ def test_rss_grid_filter_in_three_dimensions():
     axes = [np.arange(0, 3.01, 0.5)] * 2 + [np.arange(0, 2.01, 0.5)]
     cells = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
     rss = rng.normal(-55, 4, (2, 5, 4))
-    res = grid_bayes_filter(rss, cells, model, 0.6)
+    res = grid_bayes_filter(rss, model, cells, 0.6)
     ref = _dense_reference(cells, _rss_log_lik(rss, cells, anchors, -40.0, 2.0, 2.0, 0.1), 0.6, np.zeros((5, 3)),
                            np.ones((2, len(cells))))
     _assert_matches(res, ref, cells)
@@ -181,8 +181,8 @@ def test_an_rss_model_as_a_callable_gives_the_same_numbers():
     model = lb.RssModel(ANCHORS, lb.PathLossModel(-40.0, 2.5, 3.0, min_distance_m=0.1))
     rss = rng.normal(-60, 5, (3, 6, 4))
     rss[1, 2, 0] = np.nan
-    direct = grid_bayes_filter(rss, cells, model, 0.5, velocity_m=(0.1, 0.2))
-    wrapped = grid_bayes_filter(None, cells, lambda c, t: model.log_likelihood(rss[:, t], c, t, constant=False),
+    direct = grid_bayes_filter(rss, model, cells, 0.5, velocity_m=(0.1, 0.2))
+    wrapped = grid_bayes_filter(None, lambda c, t: model.log_likelihood(rss[:, t], c, t, constant=False), cells,
                                 0.5, n_steps=6, velocity_m=(0.1, 0.2))
     for name in ("mean", "cov", "map_m", "n_eff", "weights", "particles_m"):
         np.testing.assert_array_equal(getattr(wrapped, name), getattr(direct, name))
@@ -266,7 +266,7 @@ def _random_walk_1d():
 def _grid_1d(z, h, half_width_m=60.0):
     cells = np.arange(-half_width_m, half_width_m + h / 2, h)[:, None]
     prior = np.exp(-0.5 * (cells[:, 0] - M0) ** 2 / P0_1)      # the KF's prior, sampled
-    return grid_bayes_filter(None, cells, lambda c, t: -0.5 * (z[:, t, None] - c[None, :, 0]) ** 2 / R1,
+    return grid_bayes_filter(None, lambda c, t: -0.5 * (z[:, t, None] - c[None, :, 0]) ** 2 / R1, cells,
                              np.sqrt(Q1), n_steps=T1, initial_belief=prior)
 
 
@@ -344,7 +344,7 @@ def test_grid_posterior_equals_the_kalman_posterior_in_two_dimensions():
         dev = c[None] - z[:, t, None, :]
         return -0.5 * np.einsum("rci,ij,rcj->rc", dev, inv_r, dev)
 
-    grid = grid_bayes_filter(None, cells, ll, np.sqrt(q), n_steps=T, velocity_m=v, initial_belief=prior)
+    grid = grid_bayes_filter(None, ll, cells, np.sqrt(q), n_steps=T, velocity_m=v, initial_belief=prior)
     np.testing.assert_allclose(grid.mean, kf.mean, rtol=0, atol=1e-12)
     np.testing.assert_allclose(grid.cov, kf.cov, rtol=0, atol=1e-12)
 
@@ -362,14 +362,14 @@ def test_callable_collapse_is_isolated_and_named():
         return out
 
     with pytest.warns(RuntimeWarning, match=r"log_likelihood collapsed in 1 of 3 runs \(first: run 1, step 2"):
-        res = grid_bayes_filter(None, cells, ll, 0.5, n_steps=5)
+        res = grid_bayes_filter(None, ll, cells, 0.5, n_steps=5)
     assert res.diverged.tolist() == [False, True, False] and res.diverged_step.tolist() == [-1, 2, -1]
     assert np.isnan(res.mean[1, 2:]).all() and np.isfinite(res.mean[1, :2]).all()
-    alone = grid_bayes_filter(None, cells, lambda c, t: -0.5 * np.sum((c[None] - z[::2, t, None, :]) ** 2, -1),
+    alone = grid_bayes_filter(None, lambda c, t: -0.5 * np.sum((c[None] - z[::2, t, None, :]) ** 2, -1), cells,
                               0.5, n_steps=5)
     np.testing.assert_array_equal(res.mean[::2], alone.mean)
     with pytest.raises(ValueError, match="log_likelihood collapsed in every run"):
-        grid_bayes_filter(None, cells, lambda c, t: np.full((2, len(c)), np.nan), 0.5, n_steps=3)
+        grid_bayes_filter(None, lambda c, t: np.full((2, len(c)), np.nan), cells, 0.5, n_steps=3)
 
 
 @pytest.mark.parametrize("kwargs, message", [
@@ -387,18 +387,18 @@ def test_callable_bad_input_names_the_argument(kwargs, message):
     call = dict(rss_dbm=None, ll=lambda c, t: np.zeros((2, len(c))), n_steps=3) | kwargs
     rss, ll, n_steps = call.pop("rss_dbm"), call.pop("ll"), call.pop("n_steps")
     with pytest.raises(ValueError, match=message):
-        grid_bayes_filter(rss, cells, ll, 0.5, n_steps=n_steps, **call)
+        grid_bayes_filter(rss, ll, cells, 0.5, n_steps=n_steps, **call)
 
 
 def test_rss_model_needs_its_readings():
     model = lb.RssModel(ANCHORS, lb.PathLossModel(-40.0, 2.5, 3.0, min_distance_m=0.1))
     with pytest.raises(ValueError, match="rss_dbm must be the readings"):
-        grid_bayes_filter(None, _l_shaped_grid(1.0), model, 0.5, n_steps=3)
+        grid_bayes_filter(None, model, _l_shaped_grid(1.0), 0.5, n_steps=3)
     with pytest.raises(ValueError, match="n_steps 4 disagrees"):
-        grid_bayes_filter(np.zeros((1, 3, 4)), _l_shaped_grid(1.0), model, 0.5, n_steps=4)
+        grid_bayes_filter(np.zeros((1, 3, 4)), model, _l_shaped_grid(1.0), 0.5, n_steps=4)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        grid_bayes_filter(np.full((1, 3, 4), -60.0), _l_shaped_grid(1.0), model, 0.5, n_steps=3)
+        grid_bayes_filter(np.full((1, 3, 4), -60.0), model, _l_shaped_grid(1.0), 0.5, n_steps=3)
 
 
 # -- size guard (issue 44, item 7) ------------------------------------------------------------------------------------
@@ -414,7 +414,7 @@ def test_scattered_cells_beyond_the_limit_are_refused_before_anything_is_allocat
     tracemalloc.start()
     try:
         with pytest.raises(ValueError) as exc:
-            grid_bayes_filter(np.full((1, 5, 3), -60.0), cells, _guard_model(), 0.5, transition=transition)
+            grid_bayes_filter(np.full((1, 5, 3), -60.0), _guard_model(), cells, 0.5, transition=transition)
         peak = tracemalloc.get_traced_memory()[1]
     finally:
         tracemalloc.stop()
@@ -436,7 +436,7 @@ def test_grid_transition_matrix_checks_its_size_first(monkeypatch):
     with pytest.raises(ValueError, match="^cells_m: the dense transition"):
         grid_transition_matrix(cells, 0.5)
     with pytest.raises(ValueError, match="^cells_m: the dense transition"):
-        grid_bayes_filter(np.full((1, 3, 3), -60.0), cells * 10, _guard_model(), 0.5, transition="dense")
+        grid_bayes_filter(np.full((1, 3, 3), -60.0), _guard_model(), cells * 10, 0.5, transition="dense")
 
 
 def test_the_repositorys_grids_are_inside_the_limit():
@@ -446,13 +446,13 @@ def test_the_repositorys_grids_are_inside_the_limit():
     assert 8 * 12 * 36_000 < MAX_ARRAY_BYTES and 8 * 10_000**2 * 2 < MAX_ARRAY_BYTES
     xs, ys = np.arange(0, 24, 0.1), np.arange(0, 15, 0.1)
     cells = np.stack(np.meshgrid(xs, ys), -1).reshape(-1, 2)
-    res = grid_bayes_filter(np.full((2, 3, 3), -60.0), cells, _guard_model(), 0.5)
+    res = grid_bayes_filter(np.full((2, 3, 3), -60.0), _guard_model(), cells, 0.5)
     assert np.isfinite(res.mean).all()
 
 
 def test_no_cells_is_one_line_not_a_division_by_zero():
     """Before: ZeroDivisionError (the uniform prior 1 / C) and numpy's "zero-size array to reduction"."""
     with pytest.raises(ValueError, match=r"^cells_m must hold at least one cell, got shape \(0, 2\)$"):
-        grid_bayes_filter(np.full((2, 3, 3), -60.0), np.zeros((0, 2)), _guard_model(), 0.5)
+        grid_bayes_filter(np.full((2, 3, 3), -60.0), _guard_model(), np.zeros((0, 2)), 0.5)
     with pytest.raises(ValueError, match=r"^cells_m must hold at least one cell"):
         grid_transition_matrix(np.zeros((0, 2)), 0.5)

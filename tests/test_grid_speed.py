@@ -92,7 +92,7 @@ def test_rss_filter_equals_the_dense_recursion(path, cells_kind):
     model = lb.RssModel(ANCHORS, CHANNEL)
     rss = _rss(rng, R, T, model, velocity)
     prior = rng.dirichlet(np.ones(len(cells)), R)
-    res = grid_bayes_filter(rss, cells, model, 0.5, velocity_m=velocity, initial_belief=prior)
+    res = grid_bayes_filter(rss, model, cells, 0.5, velocity_m=velocity, initial_belief=prior)
     ref = _reference(lambda t: model.log_likelihood(rss[:, t], cells, t, constant=False), cells, 0.5, velocity, prior)
     _assert_same(res, ref)
 
@@ -110,7 +110,7 @@ def test_callable_filter_in_one_and_three_dimensions(path, dim):
         return -0.5 * np.sum((c[None] - z[:, t, None, :]) ** 2, axis=-1) / 0.2
 
     velocity = rng.normal(0, 0.2, (T, dim))
-    res = grid_bayes_filter(None, cells, ll, 0.4, n_steps=T, velocity_m=velocity)
+    res = grid_bayes_filter(None, ll, cells, 0.4, n_steps=T, velocity_m=velocity)
     ref = _reference(lambda t: ll(cells, t), cells, 0.4, velocity, np.ones((R, len(cells))))
     _assert_same(res, ref)
 
@@ -122,7 +122,7 @@ def test_rss_filter_in_three_dimensions(path):
     axes = [np.arange(0, 3.01, 0.3)] * 2 + [np.arange(0, 2.01, 0.4)]
     cells = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
     rss = _rss(rng, 2, 5, model, (0.1, -0.2, 0.05), 0.6)
-    res = grid_bayes_filter(rss, cells, model, 0.6, velocity_m=(0.1, -0.2, 0.05))
+    res = grid_bayes_filter(rss, model, cells, 0.6, velocity_m=(0.1, -0.2, 0.05))
     ref = _reference(lambda t: model.log_likelihood(rss[:, t], cells, t, constant=False), cells, 0.6,
                      np.tile([0.1, -0.2, 0.05], (5, 1)), np.ones((2, len(cells))))
     _assert_same(res, ref)
@@ -145,7 +145,7 @@ def test_rss_model_variants(path, kind):
         model = lb.RssModel(ANCHORS, lb.PathLossModel(-40.0, 2.5, np.array([2.0, 3.0, 4.0, 2.5]), min_distance_m=0.1))
     velocity = rng.normal(0, 0.2, (T, 2))
     rss = _rss(rng, R, T, None if kind == "per_step_parameters" else model, velocity)
-    res = grid_bayes_filter(rss, cells, model, 0.5, velocity_m=velocity)
+    res = grid_bayes_filter(rss, model, cells, 0.5, velocity_m=velocity)
     ref = _reference(lambda t: model.log_likelihood(rss[:, t], cells, t, constant=False), cells, 0.5, velocity,
                      np.ones((R, len(cells))))
     _assert_same(res, ref)
@@ -158,7 +158,7 @@ def test_a_collapsing_run_is_flagged_and_the_others_unaffected(path):
     rss[1, 2, 0] = 1e300                                    # overflows the Gaussian: -inf on every cell
     model = lb.RssModel(ANCHORS, CHANNEL)
     with pytest.warns(RuntimeWarning, match=r"1 of 3 runs \(first: run 1, step 2"):
-        res = grid_bayes_filter(rss, cells, model, 0.5)
+        res = grid_bayes_filter(rss, model, cells, 0.5)
     assert res.diverged.tolist() == [False, True, False] and res.diverged_step.tolist() == [-1, 2, -1]
     good = [0, 2]
     ref = _reference(lambda t: model.log_likelihood(rss[good, t], cells, t, constant=False), cells, 0.5,
@@ -168,7 +168,7 @@ def test_a_collapsing_run_is_flagged_and_the_others_unaffected(path):
     assert np.isnan(res.weights[1]).all()
     rss[:, 4, 2] = 1e300                                    # every run: the error names the first step and run
     with pytest.raises(ValueError, match=r"rss_dbm collapsed in every run \(3 of 3\).*step 2 \(run 1\)"):
-        grid_bayes_filter(rss, cells, model, 0.5)
+        grid_bayes_filter(rss, model, cells, 0.5)
 
 
 def test_posterior_below_the_belief_floor_takes_the_log_domain(path):
@@ -180,7 +180,7 @@ def test_posterior_below_the_belief_floor_takes_the_log_domain(path):
     model = lb.RssModel(ANCHORS, lb.PathLossModel(-40.0, 2.5, 0.3, min_distance_m=0.1))
     target = np.array([2.9, 3.9])
     rss = model.mean_rss_dbm(target[None])[0, 0][None, None].repeat(3, axis=1)
-    res = grid_bayes_filter(rss, cells, model, 0.1, initial_belief=prior)
+    res = grid_bayes_filter(rss, model, cells, 0.1, initial_belief=prior)
     ref = _reference(lambda t: model.log_likelihood(rss[:, t], cells, t, constant=False), cells, 0.1,
                      np.zeros((3, 2)), prior)
     _assert_same(res, ref)
@@ -197,9 +197,9 @@ def test_compiled_path_equals_numpy_path_on_a_large_grid(monkeypatch):
     rss = _rss(rng, 6, 8, model, (0.05, 0.1), 0.4, low=(2.0, 2.0), high=(5.0, 4.0))
     assert rss.shape[0] * rss.shape[1] * len(cells) >= bayes._GRID_MIN_WORK
     monkeypatch.setattr(_compiled, "_NUMBA_ENABLED", True)
-    fast = grid_bayes_filter(rss, cells, model, 0.4, velocity_m=(0.05, 0.1))
+    fast = grid_bayes_filter(rss, model, cells, 0.4, velocity_m=(0.05, 0.1))
     monkeypatch.setattr(_compiled, "_NUMBA_ENABLED", False)
-    slow = grid_bayes_filter(rss, cells, model, 0.4, velocity_m=(0.05, 0.1))
+    slow = grid_bayes_filter(rss, model, cells, 0.4, velocity_m=(0.05, 0.1))
     for name in ("mean", "cov"):
         np.testing.assert_allclose(getattr(fast, name), getattr(slow, name), rtol=0, atol=TOL)
     np.testing.assert_allclose(fast.n_eff, slow.n_eff, rtol=1e-11)

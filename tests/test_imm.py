@@ -228,7 +228,7 @@ def test_without_switching_the_imm_is_bayesian_model_averaging_of_two_kalman_fil
 
 def _rss_case(rng, B=4, T=30):
     pos = np.array([6.0, 7.0]) + np.cumsum(0.4 * rng.standard_normal((B, T, 2)), axis=1)
-    z = CHANNEL.sample_rss_dbm(np.linalg.norm(pos[..., None, :] - ANCHORS, axis=-1), rng)
+    z = CHANNEL.sample_rss_dbm(np.linalg.norm(pos[..., None, :] - ANCHORS, axis=-1), rng=rng)
     z[rng.random(z.shape) < 0.25] = np.nan
     z[:, 5] = np.nan                                    # a step without any reading
     return z
@@ -321,7 +321,7 @@ def test_imm_beats_the_single_cv_ekf_in_a_turn_and_its_turn_mode_rises():
     truth, turn = _turn_track()
     T, B = truth.shape[0], 200
     d = np.linalg.norm(truth[:, None, :2] - ANCHORS, axis=-1)
-    z = CHANNEL.sample_rss_dbm(np.broadcast_to(d, (B, T, 4)), rng)
+    z = CHANNEL.sample_rss_dbm(np.broadcast_to(d, (B, T, 4)), rng=rng)
     cv = lb.constant_velocity(DT, 0.02)
     start = truth[0] - np.array([1.5 * DT, 0.0, 0.0, 0.0, 0.0])  # the prior one step before step 0
     x0 = start + rng.normal(0.0, 0.5, (B, 5)) * np.array([1, 1, 0.3, 0.3, 0])

@@ -190,7 +190,7 @@ def test_wall_crossings_shapes_and_counts():
 def test_fading_arguments_are_checked(kwargs, message):
     args = dict(wavelength_m=0.33) | kwargs
     with pytest.raises(ValueError, match=message):
-        lb.small_scale_fading_db(np.linspace(0, 1, 5), args.pop("wavelength_m"), np.random.default_rng(0), **args)
+        lb.small_scale_fading_db(np.linspace(0, 1, 5), args.pop("wavelength_m"), rng=np.random.default_rng(0), **args)
 
 
 def test_register_conversions_keep_missing_readings():

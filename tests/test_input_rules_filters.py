@@ -125,20 +125,20 @@ _BAYES = lb.RssModel(_READERS, lb.PathLossModel(-52.0, 2.3, sigma_db=3.0, min_di
      r"channel.sigma_db must be a scalar or end in \(1,\) or \(3,\)"),
     (lambda: lb.RssModel(_READERS, lb.PathLossModel(-40.0, 2.0, 3.0)).jacobian(np.zeros((5, 3))),
      r"positions_m must have shape \(\.\.\., \*, 2\)"),
-    (lambda: lb.particle_filter(np.zeros((2, 3, 3)), _BAYES, np.random.default_rng(0), n_particles=10,
+    (lambda: lb.particle_filter(np.zeros((2, 3, 3)), _BAYES, rng=np.random.default_rng(0), n_particles=10,
                                 region_m=([0, 0], [8, 6]), spread_m=float("nan")), "spread_m must be finite"),
-    (lambda: lb.particle_filter(np.zeros((2, 3, 3)), _BAYES, np.random.default_rng(0), n_particles=10,
+    (lambda: lb.particle_filter(np.zeros((2, 3, 3)), _BAYES, rng=np.random.default_rng(0), n_particles=10,
                                 region_m=([0, 0], [8, -6])), "region_m needs upper > lower"),
-    (lambda: lb.particle_filter(np.zeros((2, 3, 4)), _BAYES, np.random.default_rng(0), n_particles=10,
+    (lambda: lb.particle_filter(np.zeros((2, 3, 4)), _BAYES, rng=np.random.default_rng(0), n_particles=10,
                                 region_m=([0, 0], [8, 6])), r"rss_dbm must have shape \(runs, steps, 3\)"),
-    (lambda: lb.particle_filter(np.zeros((2, 3, 3)), _BAYES, np.random.default_rng(0), n_particles=10,
+    (lambda: lb.particle_filter(np.zeros((2, 3, 3)), _BAYES, rng=np.random.default_rng(0), n_particles=10,
                                 region_m=([0, 0], [8, 6]), initial_position_m=[1.0, 1.0]),
      r"initial_position_m must have shape \(runs, 2\)"),
-    (lambda: lb.grid_bayes_filter(np.zeros((2, 3, 3)), np.zeros((5, 3)), _BAYES), r"cells_m must have shape \(\.\.\., \*, 2\)"),
-    (lambda: lb.grid_bayes_filter(np.zeros((2, 3, 3)), np.zeros((5, 2)), _BAYES, float("nan")), "spread_m must be finite"),
-    (lambda: lb.grid_bayes_filter(np.zeros((2, 3, 3)), np.zeros((5, 2)), _BAYES, velocity_m=np.zeros((4, 2))),
+    (lambda: lb.grid_bayes_filter(np.zeros((2, 3, 3)), _BAYES, np.zeros((5, 3))), r"cells_m must have shape \(\.\.\., \*, 2\)"),
+    (lambda: lb.grid_bayes_filter(np.zeros((2, 3, 3)), _BAYES, np.zeros((5, 2)), float("nan")), "spread_m must be finite"),
+    (lambda: lb.grid_bayes_filter(np.zeros((2, 3, 3)), _BAYES, np.zeros((5, 2)), velocity_m=np.zeros((4, 2))),
      r"velocity_m must have shape \(2,\) or \(steps, 2\)"),
-    (lambda: lb.grid_bayes_filter(np.zeros((2, 3, 3)), np.zeros((5, 2)), _BAYES, initial_belief=np.ones(4)),
+    (lambda: lb.grid_bayes_filter(np.zeros((2, 3, 3)), _BAYES, np.zeros((5, 2)), initial_belief=np.ones(4)),
      r"initial_belief must have shape \(5,\) or \(2, 5\)"),
     (lambda: _BAYES.log_likelihood(np.zeros((2, 4)), np.zeros((5, 2))), r"rss_dbm must have shape \(\.\.\., 3\)"),
     (lambda: _BAYES.log_likelihood(np.zeros((2, 3)), np.zeros((1, 5, 2))), "no silent broadcasting"),
@@ -173,9 +173,9 @@ def test_bad_input_names_the_argument_more(call, message):
     (lambda: lb.RssModel(np.zeros((3, 2)), lb.PathLossModel(-52.0, 2.3, sigma_db=-1.0)), "sigma_db must be (a )?non-negative"),
     (lambda: lb.RssModel(np.ones((3, 2)), lb.PathLossModel(-52.0, 2.3, sigma_db=0.0)).log_likelihood(np.zeros((1, 3)), np.zeros((2, 2))),
      "the likelihood needs sigma_db > 0"),
-    (lambda: lb.grid_bayes_filter(np.zeros((2, 3, 4)), np.zeros((5, 2)), lb.RssModel(np.zeros((3, 2)), lb.PathLossModel(-52.0, 2.3, 5.0))),
+    (lambda: lb.grid_bayes_filter(np.zeros((2, 3, 4)), lb.RssModel(np.zeros((3, 2)), lb.PathLossModel(-52.0, 2.3, 5.0)), np.zeros((5, 2))),
      r"rss_dbm must have shape \(runs, steps, 3\)"),
-    (lambda: lb.simulate_states(MODEL.F, np.diag([1.0, 1.0, -1.0, 1.0]), X0, 3, np.random.default_rng(0)),
+    (lambda: lb.simulate_states(MODEL.F, np.diag([1.0, 1.0, -1.0, 1.0]), X0, 3, rng=np.random.default_rng(0)),
      "Q must be positive semi-definite"),
     (lambda: lb.posterior_crlb(np.eye(4), MODEL.F, np.ones(4), np.zeros((3, 4, 4))), r"Q must have shape"),
 ])
@@ -203,7 +203,7 @@ def test_uniform_proposal_starts_from_equal_weights():
     model = lb.RssModel(readers, lb.PathLossModel(-52.0, 2.3, sigma_db=3.0, min_distance_m=0.1))
     rng = np.random.default_rng(5)
     rss = model.mean_rss_dbm(np.array([[2.0, 3.0]]))[0, 0] + rng.normal(scale=3.0, size=(2, 4, 3))
-    res = lb.particle_filter(rss, model, np.random.default_rng(1), n_particles=200, region_m=([0, 0], [8, 6]),
+    res = lb.particle_filter(rss, model, rng=np.random.default_rng(1), n_particles=200, region_m=([0, 0], [8, 6]),
                              spread_m=np.inf, resample_threshold=1e-6)       # never resamples
     assert not res.resampled.any()
     loglik = model.log_likelihood(rss[:, -1], res.particles_m, 3)
@@ -221,7 +221,7 @@ CHANNEL = lb.PathLossModel(-40.0, 2.0, 2.0)
 def _rss(T=6):
     rng = np.random.default_rng(4)
     pos = 5 + np.cumsum(0.2 * rng.standard_normal((T, 2)), axis=0)
-    return CHANNEL.sample_rss_dbm(np.linalg.norm(pos[:, None] - ANCHORS, axis=-1), rng)
+    return CHANNEL.sample_rss_dbm(np.linalg.norm(pos[:, None] - ANCHORS, axis=-1), rng=rng)
 
 
 def _every_filter(Q=MODEL.Q, R_=R, P=P0):
@@ -393,7 +393,7 @@ def _overflowing_filters():
     z[1, 2:] = 1.5e308
     uneven = z.copy()
     uneven[0, 1, 1] = np.nan                             # a missing pattern that differs between runs: batched paths
-    power = CHANNEL.sample_rss_dbm(np.linalg.norm(5 + rng.normal(size=(3, 8, 1, 2)) - ANCHORS, axis=-1), rng)
+    power = CHANNEL.sample_rss_dbm(np.linalg.norm(5 + rng.normal(size=(3, 8, 1, 2)) - ANCHORS, axis=-1), rng=rng)
     power[1, 2:] = 1.5e308
     x0 = MODEL.state_from(np.array([5.0, 5.0]))
     yield "kalman_filter (one covariance)", lambda: lb.kalman_filter(MODEL.F, MODEL.Q, x0, P0, lb.LinearMeasurement(z, H, R))

@@ -26,7 +26,7 @@ BOX = ([-1.0, -1.0], [11.0, 13.0])
 def _batch(n=40, seed=3):
     rng = np.random.default_rng(seed)
     truth = rng.uniform([0, 0], [10, 12], (n, 2))
-    power = MODEL.sample_rss_dbm(lb.pairwise_distance_m(truth, ANCHORS), rng)
+    power = MODEL.sample_rss_dbm(lb.pairwise_distance_m(truth, ANCHORS), rng=rng)
     return truth, power
 
 
@@ -630,7 +630,7 @@ def test_model_consistent_readings_are_never_a_poor_fit(name, sigma_db):
     model = lb.PathLossModel(-40.0, 2.5, sigma_db)
     rng = np.random.default_rng(26)
     truth = rng.uniform(0.5, 9.5, (2000, 2))
-    power = model.sample_rss_dbm(lb.pairwise_distance_m(truth, SQUARE), rng)
+    power = model.sample_rss_dbm(lb.pairwise_distance_m(truth, SQUARE), rng=rng)
     res = ML_ESTIMATORS[name](SQUARE, power, model)
     assert "poor_fit" not in set(res.status.tolist())
     assert res.converged.all()
@@ -645,7 +645,7 @@ def test_a_poor_fit_is_flagged_alone_in_its_batch(name):
     shadowing model) flags nothing."""
     rng = np.random.default_rng(5)
     truth = rng.uniform(1, 9, (8, 2))
-    power = SQUARE_MODEL.sample_rss_dbm(lb.pairwise_distance_m(truth, SQUARE), rng)
+    power = SQUARE_MODEL.sample_rss_dbm(lb.pairwise_distance_m(truth, SQUARE), rng=rng)
     power[3] = -30.0
     power[5, 2] = np.nan
     res = ML_ESTIMATORS[name](SQUARE, power, SQUARE_MODEL)

@@ -28,7 +28,7 @@ def test_circular_blocks_hold_every_epoch_once_per_position_over_all_starts(n, b
     """Over all n starts, every position of a resample holds each epoch exactly once ((s + j) mod n is a bijection),
     so each epoch is equally likely: the count of every epoch is n, exactly."""
     g = _EveryStart(np.random.PCG64(0))
-    idx = circular_block_indices(n, block, n, g)
+    idx = circular_block_indices(n, block, n, rng=g)
     assert g.asked[:2] == (0, n)                                   # starts anywhere on the circle
     assert idx.shape == (n, n)
     for j in range(n):
@@ -41,7 +41,7 @@ def test_moving_blocks_over_all_starts_under_weight_the_ends():
     min(i + 1, L, n - i, n - L + 1) blocks, so the ends are covered less often than the middle."""
     n, block = 12, 4
     g = _EveryStart(np.random.PCG64(0))
-    idx = moving_block_indices(n, block, n - block + 1, g)
+    idx = moving_block_indices(n, block, n - block + 1, rng=g)
     assert g.asked[:2] == (0, n - block + 1)
     # the blocks of each start (one resample per start; its first block is that start's block)
     first = idx[:, :block]
@@ -56,17 +56,17 @@ def test_the_bootstrap_mean_of_resampled_means_is_the_sample_mean():
     rng = np.random.default_rng(5)
     n, block, reps = 200, 20, 20000
     x = np.linspace(0.0, 10.0, n) ** 2 + rng.normal(0.0, 1.0, n)
-    means = x[circular_block_indices(n, block, reps, np.random.default_rng(6))].mean(axis=1)
+    means = x[circular_block_indices(n, block, reps, rng=np.random.default_rng(6))].mean(axis=1)
     se = means.std(ddof=1) / np.sqrt(reps)
     assert abs(means.mean() - x.mean()) < 4 * se
-    moving = x[moving_block_indices(n, block, reps, np.random.default_rng(6))].mean(axis=1)
+    moving = x[moving_block_indices(n, block, reps, rng=np.random.default_rng(6))].mean(axis=1)
     assert abs(moving.mean() - x.mean()) > 10 * moving.std(ddof=1) / np.sqrt(reps)
 
 
 def test_too_few_blocks_give_no_interval_and_say_why():
     """24 epochs in blocks of 10 are 2.4 blocks: every interval NaN, the statistics still computed, one note."""
     e = np.abs(np.random.default_rng(1).normal(size=24))
-    m = accuracy_metrics(e, np.random.default_rng(2), block_length=10)
+    m = accuracy_metrics(e, rng=np.random.default_rng(2), block_length=10)
     assert m["n_blocks"] == pytest.approx(2.4)
     assert m["interval_note"] == "not estimable: 24 epochs hold 2.4 blocks of 10; the rule needs at least 10 blocks"
     assert m["interval"] == "circular block bootstrap, blocks of 10 epochs (1000 resamples)"
@@ -81,23 +81,23 @@ def test_the_block_count_is_taken_over_the_epochs_with_an_estimate():
     e = np.linspace(0.1, 3.0, 100)
     missing = e.copy()
     missing[[3, 30, 50, 70, 99]] = np.nan
-    m = accuracy_metrics(missing, np.random.default_rng(0), n_bootstrap=200, block_length=10)
+    m = accuracy_metrics(missing, rng=np.random.default_rng(0), n_bootstrap=200, block_length=10)
     assert m["n_blocks"] == pytest.approx(9.5) and np.isnan(m["mean_m_low"])
     assert m["interval_note"] == ("not estimable: 95 epochs with an estimate hold 9.5 blocks of 10; the rule needs at "
                                   "least 10 blocks")
-    full = accuracy_metrics(e, np.random.default_rng(0), n_bootstrap=200, block_length=10)
+    full = accuracy_metrics(e, rng=np.random.default_rng(0), n_bootstrap=200, block_length=10)
     assert full["n_blocks"] == MIN_BLOCKS and full["interval_note"] == ""
     assert full["mean_m_low"] <= full["mean_m"] <= full["mean_m_high"]
-    short = accuracy_metrics(e[:MIN_BLOCKS - 1], np.random.default_rng(0), n_bootstrap=200)
+    short = accuracy_metrics(e[:MIN_BLOCKS - 1], rng=np.random.default_rng(0), n_bootstrap=200)
     assert np.isnan(short["rmse_m_low"]) and short["interval_note"] == (
         f"not estimable: {MIN_BLOCKS - 1} epochs with an estimate; the rule needs at least {MIN_BLOCKS}")
     assert short["interval"] == "bootstrap over epochs (i.i.d., 200 resamples)"
-    relaxed = accuracy_metrics(e[:24], np.random.default_rng(0), n_bootstrap=200, block_length=10, min_blocks=2)
+    relaxed = accuracy_metrics(e[:24], rng=np.random.default_rng(0), n_bootstrap=200, block_length=10, min_blocks=2)
     assert relaxed["interval_note"] == "" and np.isfinite(relaxed["mean_m_low"])
 
 
 def test_no_estimate_at_all_gives_no_interval():
-    m = accuracy_metrics(np.full(50, np.nan), np.random.default_rng(0), n_bootstrap=50)
+    m = accuracy_metrics(np.full(50, np.nan), rng=np.random.default_rng(0), n_bootstrap=50)
     assert m["coverage"] == 0 and m["n_blocks"] == 0 and np.isnan(m["mean_m"]) and np.isnan(m["mean_m_high"])
     assert m["interval_note"].startswith("not estimable: 0 epochs")
 
@@ -123,10 +123,10 @@ def test_circular_block_interval_of_an_ar1_mean_has_the_width_of_the_theory():
     s_estimate = 0.5 * np.sqrt(4.0 / 3.0 * block / n)
     s_mc = np.sqrt(2 * p * (1 - p) / (reps * norm.pdf(z) ** 2)) / (2 * z)
     window = 4 * np.hypot(s_estimate, s_mc)
-    m = accuracy_metrics(x, np.random.default_rng(7), n_bootstrap=reps, block_length=block)
+    m = accuracy_metrics(x, rng=np.random.default_rng(7), n_bootstrap=reps, block_length=block)
     ratio = (m["mean_m_high"] - m["mean_m_low"]) / (2 * z * sd_mean)
     assert abs(ratio - shrink) < window
-    iid = accuracy_metrics(x, np.random.default_rng(7), n_bootstrap=reps)
+    iid = accuracy_metrics(x, rng=np.random.default_rng(7), n_bootstrap=reps)
     assert abs((iid["mean_m_high"] - iid["mean_m_low"]) / (2 * z * sd_mean) - shrink) > window
 
 
@@ -137,15 +137,15 @@ def test_an_interval_that_excludes_its_estimate_is_flagged(monkeypatch):
     epoch is as likely as any, gives an interval that reaches the maximum and no note."""
     e = np.random.default_rng(3).uniform(0.0, 1.0, 1000)
     e[-1] = 5.0
-    fine = accuracy_metrics(e, np.random.default_rng(4), n_bootstrap=2000, block_length=100)
+    fine = accuracy_metrics(e, rng=np.random.default_rng(4), n_bootstrap=2000, block_length=100)
     assert fine["max_m_high"] == 5.0 and fine["max_m_note"] == ""
     monkeypatch.setattr(metrics, "circular_block_indices", moving_block_indices)
-    m = accuracy_metrics(e, np.random.default_rng(4), n_bootstrap=2000, block_length=100)
+    m = accuracy_metrics(e, rng=np.random.default_rng(4), n_bootstrap=2000, block_length=100)
     low, high = m["max_m_low"], m["max_m_high"]
     assert high < 1.0 and m["max_m"] == 5.0                          # not widened
     assert m["max_m_note"].startswith(f"the interval excludes the estimate (5.00 outside [{low:.2f}, {high:.2f}]): "
                                       "the maximum is a skewed statistic at the edge of its bootstrap distribution")
-    idx = moving_block_indices(1000, 100, 2000, np.random.default_rng(4))
+    idx = moving_block_indices(1000, 100, 2000, rng=np.random.default_rng(4))
     share = 100 * np.mean(~(idx == 999).any(axis=1))                 # resamples without the last epoch
     assert m["max_m_note"].endswith(f"; {share:.1f} % of the resamples fall below it")
     for s in ACCURACY_STATISTICS:                                    # every other interval holds its estimate
@@ -159,11 +159,11 @@ def test_the_moving_block_bias_of_the_issue_is_flagged_and_the_circular_bootstra
     below 1.4 and the interval misses it: flagged, with the block count named. The circular resamples hold it."""
     e = np.ones(1000)
     e[:50] = e[-50:] = 5.0
-    fine = accuracy_metrics(e, np.random.default_rng(4), n_bootstrap=2000, block_length=100)
+    fine = accuracy_metrics(e, rng=np.random.default_rng(4), n_bootstrap=2000, block_length=100)
     assert fine["mean_m_low"] <= 1.4 <= fine["mean_m_high"]
     assert all(fine[s + "_note"] == "" for s in ACCURACY_STATISTICS)
     monkeypatch.setattr(metrics, "circular_block_indices", moving_block_indices)
-    m = accuracy_metrics(e, np.random.default_rng(4), n_bootstrap=2000, block_length=100)
+    m = accuracy_metrics(e, rng=np.random.default_rng(4), n_bootstrap=2000, block_length=100)
     assert m["mean_m"] == pytest.approx(1.4) and m["mean_m_high"] < 1.4
     assert m["mean_m_note"].startswith(f"the interval excludes the estimate (1.40 outside [{m['mean_m_low']:.2f}, "
                                        f"{m['mean_m_high']:.2f}]): few blocks for the mean (10 blocks of 100 epochs), "
@@ -198,7 +198,7 @@ def test_iid_bootstrap_numbers_are_unchanged(level):
     e = np.abs(np.random.default_rng(8).normal(0.0, 2.0, 300))
     e[[4, 40, 200]] = np.nan
     ours, theirs = np.random.default_rng(9), np.random.default_rng(9)
-    m = accuracy_metrics(e, ours, n_bootstrap=400, level=level)
+    m = accuracy_metrics(e, rng=ours, n_bootstrap=400, level=level)
     old = _old_accuracy_metrics(e, theirs, 400, level)
     for key, value in old.items():
         assert m[key] == value, key
@@ -212,14 +212,14 @@ def test_moving_block_indices_keep_their_numbers():
     n, block, reps = 37, 5, 50
     starts = np.random.default_rng(1).integers(0, n - block + 1, size=(reps, -(-n // block)))
     old = (starts[..., None] + np.arange(block)).reshape(reps, -1)[:, :n]
-    np.testing.assert_array_equal(moving_block_indices(n, block, reps, np.random.default_rng(1)), old)
+    np.testing.assert_array_equal(moving_block_indices(n, block, reps, rng=np.random.default_rng(1)), old)
 
 
 def test_circular_block_one_draws_as_the_ordinary_bootstrap():
-    a = circular_block_indices(40, 1, 30, np.random.default_rng(3))
+    a = circular_block_indices(40, 1, 30, rng=np.random.default_rng(3))
     np.testing.assert_array_equal(a, np.random.default_rng(3).integers(0, 40, size=(30, 40)))
     # a block longer than the series is the series itself, rotated
-    r = circular_block_indices(6, 50, 4, np.random.default_rng(3))
+    r = circular_block_indices(6, 50, 4, rng=np.random.default_rng(3))
     np.testing.assert_array_equal((r - r[:, :1]) % 6, np.tile(np.arange(6), (4, 1)))
 
 
@@ -227,13 +227,13 @@ def test_circular_block_one_draws_as_the_ordinary_bootstrap():
                                            ({"block_length": 0}, "block_length"), ({"block_length": 2.5}, "block_length")])
 def test_bad_interval_options_name_the_argument(kwargs, match):
     with pytest.raises(ValueError, match=match):
-        accuracy_metrics(np.ones(30), np.random.default_rng(0), **kwargs)
+        accuracy_metrics(np.ones(30), rng=np.random.default_rng(0), **kwargs)
 
 
 def test_circular_indices_refuse_a_seed_for_a_generator():
     from locbook.errors import ParameterError
     with pytest.raises(ParameterError, match="rng must be a numpy.random.Generator"):
-        circular_block_indices(10, 2, 5, 0)
+        circular_block_indices(10, 2, 5, rng=0)
 
 
 def test_values_per_epoch_resamples_whole_epochs():
@@ -241,11 +241,11 @@ def test_values_per_epoch_resamples_whole_epochs():
     mean and RMSE and their intervals are those of one copy under the same draws (a second computation), and the
     block count is the epochs'."""
     e = np.abs(np.random.default_rng(3).normal(1.0, 0.5, 60))
-    one = accuracy_metrics(e, np.random.default_rng(9), n_bootstrap=300, block_length=3)
-    three = accuracy_metrics(np.repeat(e, 3), np.random.default_rng(9), n_bootstrap=300, block_length=3,
+    one = accuracy_metrics(e, rng=np.random.default_rng(9), n_bootstrap=300, block_length=3)
+    three = accuracy_metrics(np.repeat(e, 3), rng=np.random.default_rng(9), n_bootstrap=300, block_length=3,
                                 values_per_epoch=3)
     for key in ("mean_m", "mean_m_low", "mean_m_high", "rmse_m", "rmse_m_low", "rmse_m_high", "n_blocks"):
         assert three[key] == pytest.approx(one[key], rel=1e-12), key
     assert three["n"] == 180
     with pytest.raises(ValueError, match="values_per_epoch"):
-        accuracy_metrics(np.ones(7), np.random.default_rng(0), values_per_epoch=3)
+        accuracy_metrics(np.ones(7), rng=np.random.default_rng(0), values_per_epoch=3)

@@ -57,7 +57,7 @@ def ml_problems():
     """50 noisy RSS problems and their global minima found without locbook: a brute-force grid of the cost over
     the corridor and 3 m around it, then scipy's least_squares from the true position and the 3 best grid points."""
     points = np.random.default_rng(2).uniform([0, 0], [2.1, 7.8], (50, 2))
-    power = ML_MODEL.sample_rss_dbm(lb.pairwise_distance_m(points, ANCHORS), np.random.default_rng(4))
+    power = ML_MODEL.sample_rss_dbm(lb.pairwise_distance_m(points, ANCHORS), rng=np.random.default_rng(4))
     xs, ys = np.meshgrid(np.arange(-2.95, 5.1, 0.3), np.arange(-2.95, 10.8, 0.3))    # never on an anchor
     grid = np.stack([xs.ravel(), ys.ravel()], -1)
     grid_mean = ML_MODEL.mean_rss_dbm(lb.pairwise_distance_m(grid, ANCHORS))
@@ -77,7 +77,7 @@ def test_rss_ml_noiseless_and_against_scipy(points, ml_problems):
     d = lb.pairwise_distance_m(points, ANCHORS)
     exact = lb.rss_ml_position(model.mean_rss_dbm(d), lb.RssModel(ANCHORS, model))
     np.testing.assert_allclose(exact.position_m, points, atol=1e-6)
-    power = model.sample_rss_dbm(d, np.random.default_rng(4))
+    power = model.sample_rss_dbm(d, rng=np.random.default_rng(4))
     np.testing.assert_array_equal(power, ml_problems["power"])
     ml = lb.rss_ml_position(power, lb.RssModel(ANCHORS, model))
     assert ml.converged.all()

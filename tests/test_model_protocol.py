@@ -149,13 +149,13 @@ def test_a_new_model_runs_in_the_grid_filter_as_its_own_likelihood_written_out()
     xs, ys = np.meshgrid(np.linspace(0, 10, 41), np.linspace(0, 8, 33))
     cells = np.column_stack([xs.ravel(), ys.ravel()])
     ranges = Ranges(ANCHORS, SIGMA_M)
-    ours = lb.grid_bayes_filter(z, cells, ranges, spread_m=0.5)
+    ours = lb.grid_bayes_filter(z, ranges, cells, spread_m=0.5)
 
     def written_out(c, t):                 # the Gaussian range likelihood by hand, missing ranges left out
         d = np.linalg.norm(c[:, None, :] - ANCHORS, axis=-1)
         r = np.where(np.isfinite(z[:, t, None, :]), z[:, t, None, :] - d, 0.0)
         return -0.5 * np.sum(r * r, axis=-1) / SIGMA_M**2
-    ref = lb.grid_bayes_filter(None, cells, written_out, spread_m=0.5, n_steps=z.shape[1])
+    ref = lb.grid_bayes_filter(None, written_out, cells, spread_m=0.5, n_steps=z.shape[1])
     np.testing.assert_allclose(ours.mean_m, ref.mean_m, rtol=0, atol=1e-9)
     np.testing.assert_allclose(ours.weights, ref.weights, rtol=0, atol=1e-12)
 
@@ -165,14 +165,14 @@ def test_a_new_model_runs_in_the_particle_filter_as_its_own_likelihood_written_o
     ranges = Ranges(ANCHORS, SIGMA_M)
     start = np.random.default_rng(4).uniform((0.0, 0.0), (10.0, 8.0), (3, 2000, 2))
     kw = dict(initial_particles_m=start, region_m=((0.0, 0.0), (10.0, 8.0)), spread_m=0.4)
-    ours = lb.particle_filter(z, ranges, np.random.default_rng(5), **kw)
+    ours = lb.particle_filter(z, ranges, rng=np.random.default_rng(5), **kw)
 
     def written_out(p, t):
         d = np.linalg.norm(p[..., None, :] - ANCHORS, axis=-1)
         r = np.where(np.isfinite(z[:, t, None, :]), z[:, t, None, :] - d, 0.0)
         dof = np.isfinite(z[:, t]).sum(-1)[:, None]
         return -0.5 * np.sum(r * r, axis=-1) / SIGMA_M**2 - dof * (np.log(SIGMA_M) + 0.5 * np.log(2 * np.pi))
-    ref = lb.particle_filter(None, written_out, np.random.default_rng(5), n_steps=z.shape[1], **kw)
+    ref = lb.particle_filter(None, written_out, rng=np.random.default_rng(5), n_steps=z.shape[1], **kw)
     np.testing.assert_allclose(ours.mean_m, ref.mean_m, rtol=0, atol=1e-9)
     error = np.linalg.norm(ours.mean_m[:, 5:] - x[:, 5:, :2], axis=-1)
     prior = np.linalg.norm(np.array([5.0, 4.0]) - x[:, 5:, :2], axis=-1)          # the uniform prior's mean
@@ -243,7 +243,7 @@ def test_the_grid_filter_takes_the_rss_models_mean_table_once(monkeypatch):
     model = RssModel(ANCHORS, lb.PathLossModel(-40.0, 2.2, 3.0, min_distance_m=0.1))
     cells = np.random.default_rng(0).uniform(0, 8, (60, 2))
     rss = np.random.default_rng(1).normal(-60, 4, (3, 4, 3))
-    res = lb.grid_bayes_filter(rss, cells, model, spread_m=0.5)
+    res = lb.grid_bayes_filter(rss, model, cells, spread_m=0.5)
     assert np.isfinite(res.mean).all() and len(calls) == 1
 
 
@@ -259,7 +259,7 @@ def test_the_particle_filter_takes_the_rss_models_compiled_likelihood(monkeypatc
     model = lb.RssModel(ANCHORS, lb.PathLossModel(-40.0, 2.2, 3.0, min_distance_m=0.1))
     rss = np.random.default_rng(1).normal(-60, 4, (2, 3, 3))
     n = max(particle._NUMBA_MIN_PARTICLES, 100)
-    lb.particle_filter(rss, model, np.random.default_rng(2), n_particles=n, region_m=((0, 0), (8, 8)))
+    lb.particle_filter(rss, model, rng=np.random.default_rng(2), n_particles=n, region_m=((0, 0), (8, 8)))
     assert len(calls) == 3                      # one per step
 
 
@@ -319,7 +319,7 @@ def test_library_models_cross_filters_or_are_refused_by_name():
     from locbook.models.base import LinearGaussian
     cells = np.random.default_rng(0).uniform(0, 8, (40, 2))
     fixes = np.random.default_rng(1).normal(4, 1, (2, 5, 2))
-    assert np.isfinite(lb.grid_bayes_filter(fixes, cells, LinearGaussian(np.eye(2), np.eye(2))).mean).all()
+    assert np.isfinite(lb.grid_bayes_filter(fixes, LinearGaussian(np.eye(2), np.eye(2)), cells).mean).all()
     rss = np.random.default_rng(2).normal(-60, 3, (2, 5, 3))
     channel = lb.PathLossModel(-40.0, 2.2, 3.0)
     # the one RssModel in a Kalman stream: a state of positions as it is, a larger state through position_index
@@ -403,9 +403,9 @@ def test_a_users_motion_model_moves_the_particles_as_the_library_model_with_the_
     rss = np.random.default_rng(4).normal(-60.0, 3.0, (2, 8, 3))
     model = lb.RssModel(ANCHORS, lb.PathLossModel(-40.0, 2.2, 3.0, min_distance_m=0.1))
     box = ([0.0, 0.0], [10.0, 8.0])
-    mine = lb.particle_filter(rss, model, np.random.default_rng(1), n_particles=300, region_m=box,
+    mine = lb.particle_filter(rss, model, rng=np.random.default_rng(1), n_particles=300, region_m=box,
                               motion=MyConstantVelocity(1.0, 0.05))
-    ref = lb.particle_filter(rss, model, np.random.default_rng(1), n_particles=300, region_m=box,
+    ref = lb.particle_filter(rss, model, rng=np.random.default_rng(1), n_particles=300, region_m=box,
                              motion=lb.constant_velocity(1.0, 0.05, noise="continuous"))
     np.testing.assert_array_equal(mine.mean, ref.mean)
 
@@ -413,7 +413,7 @@ def test_a_users_motion_model_moves_the_particles_as_the_library_model_with_the_
 def test_a_users_motion_model_draws_its_noise_at_each_step_from_its_own_covariance():
     n = 20_000
     start = np.zeros((1, n, 2))
-    res = lb.particle_filter(None, lambda x, t: np.zeros(x.shape[:2]), np.random.default_rng(2), n_steps=4,
+    res = lb.particle_filter(None, lambda x, t: np.zeros(x.shape[:2]), rng=np.random.default_rng(2), n_steps=4,
                              initial_particles_m=start, motion=Pulsed(), cloud_steps=(1, 2, 3))
     var = [res.clouds[t][0].var(axis=0).mean() for t in (1, 2, 3)]
     # step 1: no noise (odd); step 2: 0.25 added; step 3: no noise. Resampling with equal weights keeps the spread
@@ -429,8 +429,8 @@ def test_a_motion_without_position_index_or_a_mirror_is_refused_by_name():
     model = lb.RssModel(ANCHORS, lb.PathLossModel(-40.0, 2.2, 3.0))
     rss = np.zeros((1, 3, 3))
     with pytest.raises(ValueError, match="motion Bare needs position_index"):
-        lb.particle_filter(rss, model, np.random.default_rng(0), n_particles=5, region_m=([0, 0], [9, 9]),
+        lb.particle_filter(rss, model, rng=np.random.default_rng(0), n_particles=5, region_m=([0, 0], [9, 9]),
                            motion=Bare())
     with pytest.raises(ValueError, match="region_m mirrors the motion at the walls; motion=Pulsed"):
-        lb.particle_filter(rss, model, np.random.default_rng(0), n_particles=5, region_m=([0, 0], [9, 9]),
+        lb.particle_filter(rss, model, rng=np.random.default_rng(0), n_particles=5, region_m=([0, 0], [9, 9]),
                            motion=type("Pulsed", (Pulsed,), {"mirrored_index": lambda self: None})())

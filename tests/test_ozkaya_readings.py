@@ -147,7 +147,7 @@ def test_absolute_resample_threshold_never_resamples():
     model = lb.RssModel(oz.readers_for("corners3"), lb.PathLossModel(oz.ALPHA_DBM, oz.PATH_LOSS_EXP, oz.SIGMA_DB,
                                                                      min_distance_m=0.1))
     region = (np.zeros(2), np.array(oz.ROOM_M))
-    results = {c.resample_threshold_unit: lb.particle_filter(rss, model, np.random.default_rng(9), n_particles=200,
+    results = {c.resample_threshold_unit: lb.particle_filter(rss, model, rng=np.random.default_rng(9), n_particles=200,
                                                              region_m=region, resample_threshold=oz.resample_fraction(c))
                for c in (base, absolute)}
     assert results["fraction_of_n"].resampled.any() and not results["absolute"].resampled.any()

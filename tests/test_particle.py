@@ -23,7 +23,7 @@ def test_sir_posterior_of_a_linear_gaussian_problem_equals_the_kalman_posterior(
     def loglik(x, k):
         return -0.5 * np.sum((z[:, k, None, :] - x) ** 2, axis=-1) / r
 
-    res = lb.particle_filter(None, loglik, rng, n_steps=K, initial_particles_m=particles, spread_m=0.0,
+    res = lb.particle_filter(None, loglik, rng=rng, n_steps=K, initial_particles_m=particles, spread_m=0.0,
                              resampling=method)
     # conjugate posterior after all K steps (static state, z_k = x + v)
     info = np.linalg.inv(P0) + K / r * np.eye(2)
@@ -60,7 +60,7 @@ def test_kernel_map_finds_the_mode_and_neff_triggers_resampling():
     w = np.full((1, 4000), 1 / 4000)
     mode = lb.kernel_map_estimate(x, w)
     assert np.linalg.norm(mode[0] - 3.0) < 0.6
-    res = lb.particle_filter(None, lambda p, k: -0.5 * p[..., 0] ** 2 * (k + 1), rng, n_steps=4,
+    res = lb.particle_filter(None, lambda p, k: -0.5 * p[..., 0] ** 2 * (k + 1), rng=rng, n_steps=4,
                              initial_particles_m=rng.normal(0, 1, (3, 500, 1)), spread_m=0.0, resample_threshold=0.5)
     np.testing.assert_array_equal(res.resampled, res.n_eff < 250.0)
     assert res.resampled.any() and not res.resampled.all()
@@ -89,9 +89,9 @@ def test_particle_filter_isolates_a_run_whose_rss_reading_overflows_the_likeliho
     bad = good.copy()
     bad[2, 5, 1] = 1e300
     kw = dict(n_particles=300, region_m=([0.0, 0.0], [10.0, 10.0]), resample_threshold=threshold)
-    ref = lb.particle_filter(good, BAYES_MODEL, np.random.default_rng(7), **kw)
+    ref = lb.particle_filter(good, BAYES_MODEL, rng=np.random.default_rng(7), **kw)
     with pytest.warns(RuntimeWarning, match=r"1 of 4 runs \(first: run 2, step 5"):
-        res = lb.particle_filter(bad, BAYES_MODEL, np.random.default_rng(7), **kw)
+        res = lb.particle_filter(bad, BAYES_MODEL, rng=np.random.default_rng(7), **kw)
     assert res.diverged.tolist() == [False, False, True, False]
     assert res.diverged_step.tolist() == [-1, -1, 5, -1]
     assert ref.n_diverged == 0 and res.n_diverged == 1
@@ -124,9 +124,9 @@ def test_particle_filter_isolates_a_run_whose_likelihood_collapses(method, colla
         return out
 
     kw = dict(n_steps=6, initial_particles_m=start, spread_m=0.1, resampling=method)
-    ref = lb.particle_filter(None, loglik, np.random.default_rng(1), **kw)
+    ref = lb.particle_filter(None, loglik, rng=np.random.default_rng(1), **kw)
     with pytest.warns(RuntimeWarning, match=r"1 of 3 runs \(first: run 1, step 3"):
-        res = lb.particle_filter(None, lambda x, k: loglik(x, k, True), np.random.default_rng(1), **kw)
+        res = lb.particle_filter(None, lambda x, k: loglik(x, k, True), rng=np.random.default_rng(1), **kw)
     assert res.diverged.tolist() == [False, True, False] and res.diverged_step.tolist() == [-1, 3, -1]
     for name in ("mean", "cov", "map_m", "n_eff", "resampled", "particles_m", "weights"):
         np.testing.assert_array_equal(getattr(res, name)[[0, 2]], getattr(ref, name)[[0, 2]], err_msg=name)
@@ -139,7 +139,7 @@ def test_sir_particles_with_minus_inf_likelihood_are_only_dropped():
     """-inf for some particles is a legitimate zero weight (an impossible state), not a collapse."""
     rng = np.random.default_rng(2)
     start = rng.normal(0, 1, (2, 400, 1))
-    res = lb.particle_filter(None, lambda x, k: np.where(x[..., 0] > 0, 0.0, -np.inf), rng, n_steps=1,
+    res = lb.particle_filter(None, lambda x, k: np.where(x[..., 0] > 0, 0.0, -np.inf), rng=rng, n_steps=1,
                              initial_particles_m=start)
     assert not res.diverged.any()
     assert np.all(res.mean[:, 0, 0] > 0)
@@ -151,9 +151,9 @@ def test_grid_bayes_filter_isolates_a_run_whose_likelihood_collapses():
     bad = good.copy()
     bad[1, 2, 0] = 1e300
     cells = np.stack(np.meshgrid(np.arange(0.5, 10, 1.0), np.arange(0.5, 10, 1.0)), -1).reshape(-1, 2)
-    ref = lb.grid_bayes_filter(good, cells, BAYES_MODEL, 1.0)
+    ref = lb.grid_bayes_filter(good, BAYES_MODEL, cells, 1.0)
     with pytest.warns(RuntimeWarning, match=r"1 of 3 runs \(first: run 1, step 2"):
-        res = lb.grid_bayes_filter(bad, cells, BAYES_MODEL, 1.0)
+        res = lb.grid_bayes_filter(bad, BAYES_MODEL, cells, 1.0)
     assert res.diverged.tolist() == [False, True, False] and res.diverged_step.tolist() == [-1, 2, -1]
     assert ref.n_diverged == 0 and res.n_diverged == 1
     for name in ("mean", "cov", "map_m", "n_eff", "weights"):
@@ -165,7 +165,7 @@ def test_grid_bayes_filter_isolates_a_run_whose_likelihood_collapses():
 def test_sir_without_particles_is_a_clear_error():
     """Used to end in numpy's "zero-size array to reduction operation maximum"."""
     with pytest.raises(ValueError, match=r"initial_particles_m must hold at least one particle.*\(2, 0, 2\)"):
-        lb.particle_filter(None, lambda x, k: np.zeros(x.shape[:2]), np.random.default_rng(0), n_steps=2,
+        lb.particle_filter(None, lambda x, k: np.zeros(x.shape[:2]), rng=np.random.default_rng(0), n_steps=2,
                            initial_particles_m=np.zeros((2, 0, 2)))
 
 
@@ -178,9 +178,9 @@ def _grid_cells():
 
 def _bayes_filters():
     """particle_filter and grid_bayes_filter on the same readings."""
-    yield "particle_filter", lambda rss: lb.particle_filter(rss, BAYES_MODEL, np.random.default_rng(7), n_particles=200,
+    yield "particle_filter", lambda rss: lb.particle_filter(rss, BAYES_MODEL, rng=np.random.default_rng(7), n_particles=200,
                                                             region_m=([0.0, 0.0], [10.0, 10.0]))
-    yield "grid_bayes_filter", lambda rss: lb.grid_bayes_filter(rss, _grid_cells(), BAYES_MODEL, 1.0)
+    yield "grid_bayes_filter", lambda rss: lb.grid_bayes_filter(rss, BAYES_MODEL, _grid_cells(), 1.0)
 
 
 def test_every_run_collapsing_is_an_error_naming_the_likelihood_and_the_first_step():
@@ -189,7 +189,7 @@ def test_every_run_collapsing_is_an_error_naming_the_likelihood_and_the_first_st
     names the likelihood (or rss_dbm), the first step and run, before anything is returned."""
     start = np.random.default_rng(0).normal(0, 1, (3, 50, 2))
     with pytest.raises(ValueError, match=r"log_likelihood.*every run \(3 of 3\).*step 0 \(run 0\)"):
-        lb.particle_filter(None, lambda x, k: np.full(x.shape[:2], -np.inf), np.random.default_rng(1), n_steps=4,
+        lb.particle_filter(None, lambda x, k: np.full(x.shape[:2], -np.inf), rng=np.random.default_rng(1), n_steps=4,
                            initial_particles_m=start)
 
     def staggered(x, k):                # run 1 collapses at step 1, the others at step 2
@@ -198,7 +198,7 @@ def test_every_run_collapsing_is_an_error_naming_the_likelihood_and_the_first_st
         out[:] = np.nan if k >= 2 else out
         return out
     with pytest.raises(ValueError, match=r"log_likelihood.*every run \(3 of 3\).*step 1 \(run 1\)"):
-        lb.particle_filter(None, staggered, np.random.default_rng(1), n_steps=4, initial_particles_m=start)
+        lb.particle_filter(None, staggered, rng=np.random.default_rng(1), n_steps=4, initial_particles_m=start)
     rss = _rss_runs()
     rss[:, 3, 1] = 1e300                                                           # every run: a units bug
     for name, call in _bayes_filters():
@@ -226,15 +226,15 @@ def test_some_runs_collapsing_give_one_warning_with_the_count_and_the_first_run_
             out[2] = np.nan
         return out
     with pytest.warns(RuntimeWarning) as record:
-        res = lb.particle_filter(None, loglik, np.random.default_rng(1), n_steps=4, initial_particles_m=start)
+        res = lb.particle_filter(None, loglik, rng=np.random.default_rng(1), n_steps=4, initial_particles_m=start)
     assert len(record) == 1 and re.search(r"log_likelihood.*1 of 3 runs.*run 2, step 2", str(record[0].message))
     with warnings.catch_warnings():
         warnings.simplefilter("error")                                            # no collapse: no warning
-        lb.particle_filter(None, lambda x, k: -0.5 * np.sum(x ** 2, axis=-1), np.random.default_rng(1), n_steps=4,
+        lb.particle_filter(None, lambda x, k: -0.5 * np.sum(x ** 2, axis=-1), rng=np.random.default_rng(1), n_steps=4,
                            initial_particles_m=start)
         for name, call in _bayes_filters():
             call(_rss_runs())
-        assert lb.particle_filter(None, lambda x, k: np.zeros(x.shape[:2]), np.random.default_rng(0), n_steps=2,
+        assert lb.particle_filter(None, lambda x, k: np.zeros(x.shape[:2]), rng=np.random.default_rng(0), n_steps=2,
                                   initial_particles_m=np.zeros((0, 5, 2))).n_diverged == 0   # no runs: nothing collapsed
 
 
@@ -253,7 +253,7 @@ def test_a_billion_particles_are_refused_before_anything_is_allocated(prior):
     tracemalloc.start()
     try:
         with pytest.raises(ValueError) as exc:
-            lb.particle_filter(np.full((1, 5, 3), -60.0), _guard_model(), np.random.default_rng(0),
+            lb.particle_filter(np.full((1, 5, 3), -60.0), _guard_model(), rng=np.random.default_rng(0),
                                n_particles=10**9, **kw)
         peak = tracemalloc.get_traced_memory()[1]
     finally:
@@ -270,13 +270,13 @@ def test_the_particle_size_limit_is_the_stated_bytes_of_runs_x_particles_x_state
     R, N, d = 3, 1000, 2
     rss = np.full((R, 4, 3), -60.0)
     monkeypatch.setattr(bayes, "MAX_ARRAY_BYTES", 8 * R * N * d)             # exactly one cloud: allowed
-    res = lb.particle_filter(rss, _guard_model(), np.random.default_rng(0), n_particles=N, region_m=((0, 0), (10, 10)))
+    res = lb.particle_filter(rss, _guard_model(), rng=np.random.default_rng(0), n_particles=N, region_m=((0, 0), (10, 10)))
     assert res.particles_m.shape == (R, N, d)
     monkeypatch.setattr(bayes, "MAX_ARRAY_BYTES", 8 * R * N * d - 1)
     with pytest.raises(ValueError, match="^n_particles: a particle cloud"):
-        lb.particle_filter(rss, _guard_model(), np.random.default_rng(0), n_particles=N, region_m=((0, 0), (10, 10)))
+        lb.particle_filter(rss, _guard_model(), rng=np.random.default_rng(0), n_particles=N, region_m=((0, 0), (10, 10)))
     with pytest.raises(ValueError, match="^initial_particles_m: a particle cloud"):
-        lb.particle_filter(rss, _guard_model(), np.random.default_rng(0), initial_particles_m=np.ones((R, N, d)))
+        lb.particle_filter(rss, _guard_model(), rng=np.random.default_rng(0), initial_particles_m=np.ones((R, N, d)))
 
 
 def test_the_repositorys_largest_particle_workloads_are_inside_the_limit():
@@ -309,7 +309,7 @@ def test_the_clouds_kept_count_against_the_limit(monkeypatch):
     import locbook.tracking.bayes as bayes
     rss = np.full((2, 6, 3), -60.0)
     monkeypatch.setattr(bayes, "MAX_ARRAY_BYTES", 8 * 3 * 2 * 100 * 2)       # three clouds of 2 runs x 100 x 2
-    run = lambda steps: lb.particle_filter(rss, _guard_model(), np.random.default_rng(0), n_particles=100,
+    run = lambda steps: lb.particle_filter(rss, _guard_model(), rng=np.random.default_rng(0), n_particles=100,
                                            region_m=((0, 0), (10, 10)), cloud_steps=steps)
     assert sorted(run([0, 2, 5, 9]).clouds) == [0, 2, 5]           # step 9 does not exist: nothing kept
     with pytest.raises(ValueError, match=r"^cloud_steps: the 4 clouds kept .* 4 x 2 x 100 x 2 float64 values"):

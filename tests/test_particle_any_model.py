@@ -46,13 +46,13 @@ def test_systematic_and_stratified_give_stone_soups_indices_on_the_same_uniforms
         u if method == "stratified" else u[0]))
     theirs = _stone_soup({"systematic": ss_particle.SystematicResampler(),
                           "stratified": ss_particle.StratifiedResampler()}[method], w, n_out)
-    ours = lb.resample(w[order], np.random.default_rng(100 + seed), method, n_out=n_out)
+    ours = lb.resample(w[order], rng=np.random.default_rng(100 + seed), method=method, n_out=n_out)
     assert ours.shape == (m,)
     np.testing.assert_array_equal(order[ours], theirs)
     # the same from unnormalised log-weights far beyond exp's range, -inf for the zero weights
     with np.errstate(divide="ignore"):
         log_w = np.log(w[order]) + 1500.0
-    ours_log = lb.resample(log_w, np.random.default_rng(100 + seed), method, n_out=n_out, log_weights=True)
+    ours_log = lb.resample(log_w, rng=np.random.default_rng(100 + seed), method=method, n_out=n_out, log_weights=True)
     np.testing.assert_array_equal(order[ours_log], theirs)
     assert np.all(w[theirs] > 0)
 
@@ -100,7 +100,7 @@ def test_multinomial_counts_have_the_multinomial_law_like_stone_soups(n_out, mon
     gen = np.random.default_rng(8)
     monkeypatch.setattr(np.random, "rand", lambda *shape: gen.random(shape))
     theirs = _count_rows([_stone_soup(ss_particle.MultinomialResampler(), W8, n_out) for _ in range(DRAWS)], n)
-    ours = _count_rows(lb.resample(np.broadcast_to(W8, (DRAWS, n)), np.random.default_rng(9), "multinomial",
+    ours = _count_rows(lb.resample(np.broadcast_to(W8, (DRAWS, n)), rng=np.random.default_rng(9), method="multinomial",
                                    n_out=n_out), n)
     for counts in (ours, theirs):
         assert np.all(counts.sum(axis=1) == m)
@@ -113,13 +113,15 @@ def test_residual_resampling_equals_stone_soup_where_it_is_deterministic_and_has
     theirs = _stone_soup(ss_particle.ResidualResampler(), w)
     np.testing.assert_array_equal(np.sort(theirs), [0, 0, 0, 2, 2, 3, 5, 6])
     for seed in range(3):
-        np.testing.assert_array_equal(lb.resample(w, np.random.default_rng(seed), "residual"), np.sort(theirs))
+        np.testing.assert_array_equal(lb.resample(w, rng=np.random.default_rng(seed), method="residual"),
+                                      np.sort(theirs))
     # general weights: floor(N w) copies plus a multinomial draw of the rest from the residuals (Douc et al. 2005)
     n = W8.size
     gen = np.random.default_rng(10)
     monkeypatch.setattr(np.random, "rand", lambda *shape: gen.random(shape))
     theirs = _count_rows([_stone_soup(ss_particle.ResidualResampler(), W8) for _ in range(DRAWS)], n)
-    ours = _count_rows(lb.resample(np.broadcast_to(W8, (DRAWS, n)), np.random.default_rng(11), "residual"), n)
+    ours = _count_rows(lb.resample(np.broadcast_to(W8, (DRAWS, n)), rng=np.random.default_rng(11), method="residual"),
+                       n)
     floor = np.floor(n * W8)
     rest = n - floor.sum()
     r = (n * W8 - floor) / rest
@@ -133,7 +135,7 @@ def test_residual_resampling_to_another_count_keeps_floor_m_w_copies(n_out):
     """Stone Soup's residual resampler refuses nparts != N; locbook's copies floor(M w_j) and draws M - sum floor(M w)
     from the residuals: unbiased (E[c_j] = M w_j) with the residual multinomial's variance."""
     n = W8.size
-    counts = _count_rows(lb.resample(np.broadcast_to(W8, (DRAWS, n)), np.random.default_rng(12), "residual",
+    counts = _count_rows(lb.resample(np.broadcast_to(W8, (DRAWS, n)), rng=np.random.default_rng(12), method="residual",
                                      n_out=n_out), n)
     floor = np.floor(n_out * W8)
     rest = n_out - floor.sum()
@@ -151,13 +153,13 @@ def test_log_weights_resample_like_their_normalised_exponentials_in_batches(meth
     log_w[0, 1, :5] = -np.inf
     w = np.exp(log_w - logsumexp(log_w, axis=-1, keepdims=True))          # scipy's normalisation
     for n_out in (None, 7, 60):
-        ours = lb.resample(log_w, np.random.default_rng(14), method, n_out=n_out, log_weights=True)
-        ref = lb.resample(w, np.random.default_rng(14), method, n_out=n_out)
+        ours = lb.resample(log_w, rng=np.random.default_rng(14), method=method, n_out=n_out, log_weights=True)
+        ref = lb.resample(w, rng=np.random.default_rng(14), method=method, n_out=n_out)
         np.testing.assert_array_equal(ours, ref)
         assert ours.shape == (3, 4, 25 if n_out is None else n_out)
         assert not np.any(np.take_along_axis(np.isneginf(log_w), ours, -1) if n_out is None else
                           np.isneginf(log_w[0, 1, ours[0, 1]]))
-    idx, done = lb.resample_where(log_w, np.random.default_rng(15), method, threshold=5.0, log_weights=True)
+    idx, done = lb.resample_where(log_w, rng=np.random.default_rng(15), method=method, threshold=5.0, log_weights=True)
     np.testing.assert_array_equal(done, lb.effective_sample_size(w) < 5.0)
 
 
@@ -165,24 +167,24 @@ def test_log_weights_without_any_weight_or_with_nan_name_the_row():
     log_w = np.zeros((2, 3, 4))
     log_w[1, 2] = -np.inf
     with pytest.raises(ValueError, match=r"row \(1, 2\) is -inf for every particle"):
-        lb.resample(log_w, np.random.default_rng(0), log_weights=True)
+        lb.resample(log_w, rng=np.random.default_rng(0), log_weights=True)
     for bad in (np.nan, np.inf):
         log_w = np.zeros((2, 3, 4))
         log_w[0, 1, 3] = bad
         with pytest.raises(ValueError, match=r"row \(0, 1\) holds 1 NaN or \+inf value\(s\), the first at particle 3"):
-            lb.resample(log_w, np.random.default_rng(0), "residual", log_weights=True)
+            lb.resample(log_w, rng=np.random.default_rng(0), method="residual", log_weights=True)
         with pytest.raises(ValueError, match=r"row \(0, 1\)"):
             lb.systematic_resample(log_w, np.zeros((2, 3)), log_weights=True)
     for n_out, message in ((0, "n_out must be >= 1"), (2.5, "n_out must be an integer")):
         with pytest.raises(ValueError, match=message):
-            lb.resample(W8, np.random.default_rng(0), n_out=n_out)
+            lb.resample(W8, rng=np.random.default_rng(0), n_out=n_out)
 
 
 def test_n_out_equal_to_n_is_the_default_draw_and_counts_to_indices_takes_a_total():
     for method in RESAMPLING_METHODS:
         w = np.random.default_rng(16).random((5, 30))
-        np.testing.assert_array_equal(lb.resample(w, np.random.default_rng(17), method),
-                                      lb.resample(w, np.random.default_rng(17), method, n_out=30))
+        np.testing.assert_array_equal(lb.resample(w, rng=np.random.default_rng(17), method=method),
+                                      lb.resample(w, rng=np.random.default_rng(17), method=method, n_out=30))
     np.testing.assert_array_equal(counts_to_indices([2, 0, 3, 1], n_out=6), [0, 0, 2, 2, 2, 3])
     np.testing.assert_array_equal(counts_to_indices([[0, 1], [1, 0]], n_out=1), [[1], [0]])
     with pytest.raises(ValueError, match="must sum to n_out = 5"):
@@ -224,15 +226,15 @@ def _assert_single_is_run_0(one, batched):
 def test_one_run_of_readings_t_by_m_gives_the_one_run_result_without_the_run_axis(kwargs):
     rss = _readings(0)
     extra = {"initial_position_m": [5.0, 4.0]} if "initial_sd_m" in kwargs else {}
-    one = particle_filter(rss, RSS, np.random.default_rng(1), **kwargs, **extra)
-    batched = particle_filter(rss[None], RSS, np.random.default_rng(1), **kwargs,
+    one = particle_filter(rss, RSS, rng=np.random.default_rng(1), **kwargs, **extra)
+    batched = particle_filter(rss[None], RSS, rng=np.random.default_rng(1), **kwargs,
                               **{k: np.asarray(v)[None] for k, v in extra.items()})
     _assert_single_is_run_0(one, batched)
     d = 4 if "motion" in kwargs else 2
     assert one.mean.shape == (6, d) and one.cov.shape == (6, d, d) and one.particles_m.shape == (300, d)
     assert one.diverged.shape == () and not one.diverged and one.diverged_step == -1
     with pytest.raises(ValueError, match=r"single run .* initial_position_m without the run axis"):
-        particle_filter(rss, RSS, np.random.default_rng(1), n_particles=10, initial_position_m=[[5.0, 4.0]])
+        particle_filter(rss, RSS, rng=np.random.default_rng(1), n_particles=10, initial_position_m=[[5.0, 4.0]])
 
 
 def test_one_run_with_callables_sees_and_returns_arrays_without_the_run_axis():
@@ -248,19 +250,19 @@ def test_one_run_with_callables_sees_and_returns_arrays_without_the_run_axis():
     def move_one(x, t, rng):
         return 0.9 * x + 0.3 * rng.standard_normal(x.shape)
 
-    one = particle_filter(None, loglik_one, np.random.default_rng(3), n_steps=5, initial_particles_m=start,
+    one = particle_filter(None, loglik_one, rng=np.random.default_rng(3), n_steps=5, initial_particles_m=start,
                           transition=move_one, resampling="stratified", cloud_steps=(2,))
     assert set(seen) == {(400, 2)}
-    batched = particle_filter(None, lambda x, t: loglik_one(x[0], t)[None], np.random.default_rng(3), n_steps=5,
+    batched = particle_filter(None, lambda x, t: loglik_one(x[0], t)[None], rng=np.random.default_rng(3), n_steps=5,
                               initial_particles_m=start[None], transition=lambda x, t, rng: move_one(x, t, rng),
                               resampling="stratified", cloud_steps=(2,))
     _assert_single_is_run_0(one, batched)
     # a start (dim,) is one run too
-    one = particle_filter(None, loglik_one, np.random.default_rng(4), n_steps=5, initial_position_m=[0.5, 0.5],
+    one = particle_filter(None, loglik_one, rng=np.random.default_rng(4), n_steps=5, initial_position_m=[0.5, 0.5],
                           n_particles=50, initial_covariance=np.diag([1.0, 0.0]))
     assert one.mean.shape == (5, 2) and one.particles_m.shape == (50, 2)
     with pytest.raises(ValueError, match=r"log_likelihood must return \(400,\) for a single run"):
-        particle_filter(None, lambda x, t: loglik_one(x, t)[None], np.random.default_rng(3), n_steps=2,
+        particle_filter(None, lambda x, t: loglik_one(x, t)[None], rng=np.random.default_rng(3), n_steps=2,
                         initial_particles_m=start)
 
 
@@ -283,7 +285,7 @@ def test_the_process_noise_drawn_has_covariance_q_even_when_q_is_singular(name):
     n = motion.n_state
     rng = np.random.default_rng(20)
     start = rng.normal(0.0, 2.0, (3, 20000, n))
-    res = particle_filter(None, lambda x, t: np.zeros(x.shape[:2]), np.random.default_rng(21), n_steps=2,
+    res = particle_filter(None, lambda x, t: np.zeros(x.shape[:2]), rng=np.random.default_rng(21), n_steps=2,
                           initial_particles_m=start, motion=motion, resample_every=5, cloud_steps=(0, 1))
     assert not res.resampled.any()
     np.testing.assert_array_equal(res.clouds[0], start)
@@ -309,7 +311,7 @@ def _kalman_problem(seed, steps=15):
     r = 0.5
     x0, P0 = np.array([0.0, 0.0, 1.0, 0.5]), np.diag([1.0, 1.0, 0.25, 0.25])
     rng = np.random.default_rng(seed)
-    truth = lb.simulate_states(motion.F, motion.Q, rng.multivariate_normal(x0, P0), steps - 1, rng)
+    truth = lb.simulate_states(motion.F, motion.Q, rng.multivariate_normal(x0, P0), steps - 1, rng=rng)
     z = truth[:, :2] + np.sqrt(r) * rng.standard_normal((steps, 2))
     return motion, r, x0, P0, z
 
@@ -334,7 +336,7 @@ def test_the_particle_posterior_of_a_linear_gaussian_track_is_the_kalman_filters
         return -0.5 * np.sum((z[t] - x[..., motion.position_index]) ** 2, axis=-1) / r
 
     def run(m):
-        return particle_filter(None, loglik, np.random.default_rng(31), n_steps=steps, motion=m, n_particles=5000,
+        return particle_filter(None, loglik, rng=np.random.default_rng(31), n_steps=steps, motion=m, n_particles=5000,
                                initial_position_m=np.broadcast_to(x0, (runs, 4)), initial_covariance=P0)
 
     res = run(motion)
@@ -360,19 +362,19 @@ def test_an_rss_model_sees_the_positions_in_either_state_layout():
     start = (np.array([[5.0, 4.0, 0.0, 0.0], [4.0, 5.0, 0.1, 0.0]])[:, None]
              + np.random.default_rng(39).normal(0.0, 1.0, (2, 500, 4)) * np.sqrt([1.0, 1.0, 0.1, 0.1]))
     kw = dict(initial_particles_m=start)
-    res = particle_filter(rss, RSS, np.random.default_rng(40), motion=cv, **kw)
+    res = particle_filter(rss, RSS, rng=np.random.default_rng(40), motion=cv, **kw)
     direct = particle_filter(None, lambda x, t: RSS.log_likelihood(rss[:, t], x[..., [0, 1]], t, constant=False),
-                             np.random.default_rng(40), n_steps=rss.shape[1], motion=cv, **kw)
+                             rng=np.random.default_rng(40), n_steps=rss.shape[1], motion=cv, **kw)
     for f in FIELDS:
         np.testing.assert_array_equal(getattr(res, f), getattr(direct, f), err_msg=f)
     perm = np.array([0, 2, 1, 3])                   # axis-major state = derivative-major state[perm]
     kw_axis = dict(initial_particles_m=start[..., perm])
     np.testing.assert_array_equal(cv_axis.position_index, [0, 2])
-    axis = particle_filter(rss, RSS, np.random.default_rng(40), motion=cv_axis, **kw_axis)
+    axis = particle_filter(rss, RSS, rng=np.random.default_rng(40), motion=cv_axis, **kw_axis)
     np.testing.assert_allclose(axis.mean, res.mean[..., perm], rtol=0, atol=1e-12)
     np.testing.assert_allclose(axis.cov, res.cov[..., perm[:, None], perm], rtol=0, atol=1e-12)
     # a position start is a state at rest
-    rest = particle_filter(rss, RSS, np.random.default_rng(41), motion=cv, n_particles=50,
+    rest = particle_filter(rss, RSS, rng=np.random.default_rng(41), motion=cv, n_particles=50,
                            initial_position_m=[[5.0, 4.0], [4.0, 5.0]], cloud_steps=(0,))
     np.testing.assert_array_equal(rest.clouds[0][0, 0], [5.0, 4.0, 0.0, 0.0])
 
@@ -388,7 +390,7 @@ def test_a_particle_leaving_the_region_is_mirrored_with_its_velocity_and_acceler
     a0 = np.array([[0.2, -0.1], [0.5, 0.3]]) if motion.order == 2 else np.zeros((2, 2))
     start = motion.state_from(p0, v0, a0 if motion.order == 2 else None)[None]       # (1 run, 2 particles, n)
     steps = 9
-    res = particle_filter(None, lambda x, t: np.zeros(x.shape[:2]), np.random.default_rng(0), n_steps=steps,
+    res = particle_filter(None, lambda x, t: np.zeros(x.shape[:2]), rng=np.random.default_rng(0), n_steps=steps,
                           initial_particles_m=start, motion=motion, region_m=(lower, upper), resample_every=100)
     t = steps - 1
     free_p, free_v = p0 + v0 * t + a0 * t ** 2 / 2, v0 + a0 * t
@@ -412,24 +414,25 @@ def test_motion_refuses_the_random_walk_arguments_and_unknown_models():
     for extra, name in ((dict(spread_m=0.5), "spread_m"), (dict(velocity_m=[0.1, 0.0]), "velocity_m"),
                         (dict(transition=lambda x, t, rng: x), "transition")):
         with pytest.raises(ValueError, match=f"motion moves the particles .* excludes {name}"):
-            particle_filter(rss, RSS, np.random.default_rng(0), motion=cv, **base, **extra)
+            particle_filter(rss, RSS, rng=np.random.default_rng(0), motion=cv, **base, **extra)
     with pytest.raises(ValueError, match="motion must be a motion model"):
-        particle_filter(rss, RSS, np.random.default_rng(0), motion="cv", **base)
+        particle_filter(rss, RSS, rng=np.random.default_rng(0), motion="cv", **base)
     heading = lb.HeadingKinematicModel(1.0, 0.1, 0.01)
     with pytest.raises(ValueError, match=r"region_m mirrors the motion at the walls; motion=HeadingKinematicModel"):
-        particle_filter(rss, RSS, np.random.default_rng(0), motion=heading, **base)
+        particle_filter(rss, RSS, rng=np.random.default_rng(0), motion=heading, **base)
     with pytest.raises(ValueError, match="motion has 3 position axes, the RssModel 2"):
-        particle_filter(rss, RSS, np.random.default_rng(0), motion=lb.constant_velocity(1.0, 0.1, dim=3), **base)
+        particle_filter(rss, RSS, rng=np.random.default_rng(0), motion=lb.constant_velocity(1.0, 0.1, dim=3), **base)
     with pytest.raises(ValueError, match=r"initial_position_m must have shape \(runs, 4\) or \(runs, 2\)"):
-        particle_filter(rss, RSS, np.random.default_rng(0), motion=cv, n_particles=5, initial_position_m=[[1.0] * 3])
+        particle_filter(rss, RSS, rng=np.random.default_rng(0), motion=cv, n_particles=5,
+                        initial_position_m=[[1.0] * 3])
     with pytest.raises(ValueError, match="initial_covariance must be symmetric positive semi-definite"):
-        particle_filter(rss, RSS, np.random.default_rng(0), n_particles=5, initial_position_m=[[1.0, 1.0]],
+        particle_filter(rss, RSS, rng=np.random.default_rng(0), n_particles=5, initial_position_m=[[1.0, 1.0]],
                         initial_covariance=np.diag([1.0, -1.0]))
     with pytest.raises(ValueError, match="initial_sd_m .* or initial_covariance, not both"):
-        particle_filter(rss, RSS, np.random.default_rng(0), n_particles=5, initial_position_m=[[1.0, 1.0]],
+        particle_filter(rss, RSS, rng=np.random.default_rng(0), n_particles=5, initial_position_m=[[1.0, 1.0]],
                         initial_sd_m=1.0, initial_covariance=np.eye(2))
     # a heading model without a region moves by its F and Q (drawn from an eigen-factor of Q)
-    res = particle_filter(rss, RSS, np.random.default_rng(0), motion=heading, n_particles=30,
+    res = particle_filter(rss, RSS, rng=np.random.default_rng(0), motion=heading, n_particles=30,
                           initial_position_m=[[5.0, 4.0]])
     assert res.mean.shape == (1, 6, 8)
 
@@ -438,7 +441,7 @@ def test_a_gaussian_prior_with_initial_covariance_has_that_covariance_even_if_si
     P0 = np.array([[2.0, 0.6, 0.0, 0.0], [0.6, 0.5, 0.0, 0.0], [0.0, 0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 0.3]])
     x0 = np.array([1.0, -1.0, 0.5, 2.0])
     m = 2 * 30000
-    res = particle_filter(None, lambda x, t: np.zeros(x.shape[:2]), np.random.default_rng(50), n_steps=1,
+    res = particle_filter(None, lambda x, t: np.zeros(x.shape[:2]), rng=np.random.default_rng(50), n_steps=1,
                           initial_position_m=np.broadcast_to(x0, (2, 4)), initial_covariance=P0, n_particles=m // 2,
                           motion=lb.constant_velocity(1.0, 0.1), resample_every=3, cloud_steps=(0,))
     x = res.clouds[0].reshape(-1, 4)
@@ -458,7 +461,7 @@ def test_log_weights_of_the_last_update_are_exact_where_the_weights_underflow():
     ll = -rng.uniform(0.0, 3000.0, (2, 300))
     ll[0, :4] = -np.inf
     kw = dict(n_steps=1, initial_particles_m=start, resample_every=2)
-    res = particle_filter(None, lambda x, t: ll, np.random.default_rng(61), **kw)
+    res = particle_filter(None, lambda x, t: ll, rng=np.random.default_rng(61), **kw)
     expected = ll - logsumexp(ll, axis=-1, keepdims=True)
     np.testing.assert_array_equal(np.isneginf(res.log_weights), np.isneginf(ll))
     finite = np.isfinite(ll)
@@ -467,9 +470,9 @@ def test_log_weights_of_the_last_update_are_exact_where_the_weights_underflow():
     big = expected > np.log(1e-290)
     np.testing.assert_allclose(np.exp(res.log_weights[big]), res.weights[big], rtol=1e-10)
     # "sqrt" smoothing tempers the likelihood: log w = ll / 2 normalised
-    res = particle_filter(None, lambda x, t: ll, np.random.default_rng(61), weight_smoothing="sqrt", **kw)
+    res = particle_filter(None, lambda x, t: ll, rng=np.random.default_rng(61), weight_smoothing="sqrt", **kw)
     np.testing.assert_allclose(res.log_weights[finite], (ll / 2 - logsumexp(ll / 2, axis=-1, keepdims=True))[finite],
                                rtol=1e-12, atol=1e-9)
     # resampled at the last step: equal weights
-    res = particle_filter(None, lambda x, t: ll, np.random.default_rng(61), n_steps=1, initial_particles_m=start)
+    res = particle_filter(None, lambda x, t: ll, rng=np.random.default_rng(61), n_steps=1, initial_particles_m=start)
     np.testing.assert_allclose(res.log_weights, -np.log(300), rtol=1e-14)

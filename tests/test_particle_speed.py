@@ -234,7 +234,7 @@ def test_the_filter_gives_the_same_results_with_numba_on_and_off(monkeypatch, ca
     kw = dict(n_particles=3000, region_m=([0.0, 0.0], [20.0, 15.0]), **CASES[case])
     if "walls" in kw:
         model = lb.RssModel(ANCHORS, lb.PathLossModel(-40.0, 2.5, 4.0, wall_attenuation_db=3.5), kw.pop("walls"))
-    plain, fast = _both(monkeypatch, lambda: lb.particle_filter(rss, model, np.random.default_rng(4), **kw))
+    plain, fast = _both(monkeypatch, lambda: lb.particle_filter(rss, model, rng=np.random.default_rng(4), **kw))
     np.testing.assert_array_equal(fast.particles_m, plain.particles_m)
     np.testing.assert_array_equal(fast.resampled, plain.resampled)
     np.testing.assert_array_equal(fast.map_m, plain.map_m)
@@ -250,7 +250,7 @@ def test_the_filter_with_motion_and_a_callable_likelihood_matches_with_numba_on_
     model, rss = _scenario()
     cv = lb.constant_velocity(1.0, 0.05)
     kw = dict(n_particles=2000, region_m=([0.0, 0.0], [20.0, 15.0]), motion=cv)
-    plain, fast = _both(monkeypatch, lambda: lb.particle_filter(rss, model, np.random.default_rng(5), **kw))
+    plain, fast = _both(monkeypatch, lambda: lb.particle_filter(rss, model, rng=np.random.default_rng(5), **kw))
     np.testing.assert_array_equal(fast.particles_m, plain.particles_m)
     np.testing.assert_allclose(fast.mean, plain.mean, rtol=1e-11, atol=1e-12)
 
@@ -259,7 +259,7 @@ def test_the_filter_with_motion_and_a_callable_likelihood_matches_with_numba_on_
 
     start = np.random.default_rng(6).uniform(0, 15, (6, 2000, 2))
     # resampled only when N_eff drops below half, so that the final weights are not all 1/N
-    plain, fast = _both(monkeypatch, lambda: lb.particle_filter(None, loglik, np.random.default_rng(7),
+    plain, fast = _both(monkeypatch, lambda: lb.particle_filter(None, loglik, rng=np.random.default_rng(7),
                                                                 n_steps=rss.shape[1], initial_particles_m=start,
                                                                 resample_threshold=0.5))
     assert not np.all(plain.weights == plain.weights[:, :1])
@@ -277,7 +277,7 @@ def test_a_collapsed_run_is_isolated_the_same_way_on_the_compiled_path(monkeypat
 
     def run():
         with pytest.warns(RuntimeWarning, match=r"1 of 4 runs \(first: run 2, step 3"):
-            return lb.particle_filter(bad, model, np.random.default_rng(8), **kw)
+            return lb.particle_filter(bad, model, rng=np.random.default_rng(8), **kw)
 
     plain, fast = _both(monkeypatch, run)
     assert fast.diverged.tolist() == [False, False, True, False] and fast.diverged_step[2] == 3
@@ -296,7 +296,8 @@ def test_the_compiled_filter_allocates_no_readings_times_particles_temporary(mon
 
     def peak():
         def run():
-            lb.particle_filter(rss, model, np.random.default_rng(9), n_particles=n, region_m=([0.0, 0.0], [20.0, 15.0]))
+            lb.particle_filter(rss, model, rng=np.random.default_rng(9), n_particles=n,
+                               region_m=([0.0, 0.0], [20.0, 15.0]))
         run()                               # numba compiles or loads its kernels (Python objects) outside the count
         tracemalloc.start()
         try:
@@ -316,7 +317,7 @@ def test_kernels_that_cannot_compile_turn_the_compiled_path_off_with_a_warning(m
     model, rss = _scenario(R=2, T=3)
     kw = dict(n_particles=500, region_m=([0.0, 0.0], [20.0, 15.0]))
     monkeypatch.setattr(_compiled, "_NUMBA_ENABLED", False)
-    plain = lb.particle_filter(rss, model, np.random.default_rng(10), **kw)
+    plain = lb.particle_filter(rss, model, rng=np.random.default_rng(10), **kw)
 
     def broken(*args):
         raise RuntimeError("no compiler here")
@@ -326,7 +327,7 @@ def test_kernels_that_cannot_compile_turn_the_compiled_path_off_with_a_warning(m
     monkeypatch.setattr(_compiled, "_KERNEL_MODULES", {})              # not tried yet in this session
     monkeypatch.setattr(K, "_nb_moments", broken)
     with pytest.warns(RuntimeWarning, match="compiled particle filter failed.*no compiler here") as caught:
-        res = lb.particle_filter(rss, model, np.random.default_rng(10), **kw)
+        res = lb.particle_filter(rss, model, rng=np.random.default_rng(10), **kw)
     assert [w.filename for w in caught] == [__file__]                 # once, at the caller's line
     assert _compiled._NUMBA_ENABLED is False
     np.testing.assert_array_equal(res.mean, plain.mean)

@@ -89,7 +89,7 @@ def test_accuracy_metrics_against_direct_numpy():
     rng = np.random.default_rng(1)
     e = np.abs(rng.normal(0, 1.0, 4000))
     e[[5, 17]] = np.nan
-    m = lb.accuracy_metrics(e, rng, n_bootstrap=2000)
+    m = lb.accuracy_metrics(e, rng=rng, n_bootstrap=2000)
     f = e[np.isfinite(e)]
     assert m["coverage"] == pytest.approx(3998 / 4000) and m["n"] == 4000
     assert m["mean_m"] == pytest.approx(f.mean()) and m["median_m"] == pytest.approx(np.median(f))
@@ -109,8 +109,8 @@ def test_block_bootstrap_widens_the_interval_of_correlated_errors():
     for t in range(1, n):
         x[t] = phi * x[t - 1] + rng.normal()
     e = np.abs(x)
-    iid = lb.accuracy_metrics(e, np.random.default_rng(3), n_bootstrap=500)
-    blocks = lb.accuracy_metrics(e, np.random.default_rng(3), n_bootstrap=500, block_length=100)
+    iid = lb.accuracy_metrics(e, rng=np.random.default_rng(3), n_bootstrap=500)
+    blocks = lb.accuracy_metrics(e, rng=np.random.default_rng(3), n_bootstrap=500, block_length=100)
     width = lambda m: m["mean_m_high"] - m["mean_m_low"]
     assert width(blocks) > 2.5 * width(iid)       # variance inflation ~(1 + phi) / (1 - phi) = 39, ratio ~6
 

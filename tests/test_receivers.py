@@ -20,7 +20,7 @@ def test_per_run_receivers_equal_runs_one_by_one(run, mode):
     R, T, m = 3, 6, 4
     receivers = rng.uniform(0, 50, (R, T, m, 3))
     target = np.array([25.0, 20.0, 30.0])
-    z = CH.sample_rss_dbm(np.linalg.norm(receivers - target, axis=-1), rng)
+    z = CH.sample_rss_dbm(np.linalg.norm(receivers - target, axis=-1), rng=rng)
     z[1, 2, 3] = np.nan
     F, Q = _static()
     x0, P0 = np.full(3, 25.0), 100.0 * np.eye(3)
@@ -34,7 +34,7 @@ def test_per_run_receivers_equal_runs_one_by_one(run, mode):
 def test_receivers_repeated_over_steps_equal_fixed_anchors():
     rng = np.random.default_rng(1)
     anchors = rng.uniform(0, 50, (5, 3))
-    z = CH.sample_rss_dbm(np.broadcast_to(np.linalg.norm(anchors - 20.0, axis=-1), (2, 7, 5)), rng)
+    z = CH.sample_rss_dbm(np.broadcast_to(np.linalg.norm(anchors - 20.0, axis=-1), (2, 7, 5)), rng=rng)
     F, Q = _static()
     fixed = lb.extended_kalman_filter(F, Q, np.full(3, 25.0), 100 * np.eye(3), [lb.RssMeasurement(z, anchors, CH, np.arange(3))])
     per_step = lb.extended_kalman_filter(F, Q, np.full(3, 25.0), 100 * np.eye(3),

@@ -16,8 +16,8 @@ def test_a_single_runs_masked_reading_is_not_heard_in_the_particle_filter():
     where[::2, 1] = True
     masked = np.ma.array(np.where(where, 1e3, power), mask=where)      # 1e3 dBm under the mask: never read
     kw = dict(n_particles=200, region_m=([0.0, 0.0], [10.0, 10.0]))
-    got = lb.particle_filter(masked, MODEL, np.random.default_rng(7), **kw)
-    ref = lb.particle_filter(np.where(where, np.nan, power), MODEL, np.random.default_rng(7), **kw)
+    got = lb.particle_filter(masked, MODEL, rng=np.random.default_rng(7), **kw)
+    ref = lb.particle_filter(np.where(where, np.nan, power), MODEL, rng=np.random.default_rng(7), **kw)
     np.testing.assert_array_equal(got.mean, ref.mean)
 
 

@@ -20,7 +20,7 @@ def _counts(indices):
 @pytest.mark.parametrize("method", RESAMPLING_METHODS)
 def test_each_scheme_is_unbiased(method):
     rng = np.random.default_rng(1)
-    idx = lb.resample(np.broadcast_to(W, (DRAWS, N)), rng, method)
+    idx = lb.resample(np.broadcast_to(W, (DRAWS, N)), rng=rng, method=method)
     counts = _counts(idx)
     assert np.all(counts.sum(axis=1) == N)
     se = counts.std(axis=0, ddof=1) / np.sqrt(DRAWS)
@@ -34,7 +34,7 @@ def test_each_scheme_is_unbiased(method):
 
 def test_residual_counts_are_the_floor_plus_a_multinomial_of_the_rest():
     rng = np.random.default_rng(2)
-    counts = _counts(lb.resample(np.broadcast_to(W, (DRAWS, N)), rng, "residual"))
+    counts = _counts(lb.resample(np.broadcast_to(W, (DRAWS, N)), rng=rng, method="residual"))
     floor = np.floor(N * W)
     assert np.all(counts >= floor)
     rest = N - floor.sum()
@@ -49,7 +49,7 @@ def test_matches_filterpy_in_distribution(method, theirs, monkeypatch):
     gen = np.random.default_rng(3)
     monkeypatch.setattr(fp_resampling, "random", lambda size=None: gen.random(size))
     ref = np.array([np.bincount(theirs(W), minlength=N) for _ in range(DRAWS // 4)])
-    ours = _counts(lb.resample(np.broadcast_to(W, (DRAWS // 4, N)), np.random.default_rng(4), method))
+    ours = _counts(lb.resample(np.broadcast_to(W, (DRAWS // 4, N)), rng=np.random.default_rng(4), method=method))
     se = np.sqrt((ref.var(axis=0, ddof=1) + ours.var(axis=0, ddof=1)) / ref.shape[0])
     assert np.all(np.abs(ours.mean(axis=0) - ref.mean(axis=0)) <= 4 * se + 1e-12)
     # the spread of each particle's count is the scheme's signature (systematic: count in {floor, ceil})
@@ -60,11 +60,11 @@ def test_matches_filterpy_in_distribution(method, theirs, monkeypatch):
 
 def test_neff_triggered_resampling_keeps_rows_above_the_threshold():
     w = np.stack([np.full(N, 1 / N), W])
-    idx, done = lb.resample_where(w, np.random.default_rng(0), threshold=5.0)   # N_eff of W is 4.54
+    idx, done = lb.resample_where(w, rng=np.random.default_rng(0), threshold=5.0)   # N_eff of W is 4.54
     assert done.tolist() == [False, True]
     np.testing.assert_array_equal(idx[0], np.arange(N))
     with pytest.raises(ValueError, match="non-negative"):
-        lb.resample(np.array([0.5, -0.1, 0.6]), np.random.default_rng(0))
+        lb.resample(np.array([0.5, -0.1, 0.6]), rng=np.random.default_rng(0))
 
 
 SIZES = sorted(set(range(1, 300)) | {20, 49, 500, 999, 1000, 1024, 2000, 4096, 10000})
@@ -84,7 +84,7 @@ def test_residual_resampling_of_uniform_weights_is_deterministic_like_filterpy(m
                 np.testing.assert_array_equal(fp_resampling.residual_resample(np.full(n, 1.0 / n)), expected)
         for weights in (ones, np.full(n, 1.0 / n), np.full((3, n), 7.3)):
             for seed in (0, 1):
-                idx = lb.resample(weights, np.random.default_rng(seed), "residual")
+                idx = lb.resample(weights, rng=np.random.default_rng(seed), method="residual")
                 np.testing.assert_array_equal(idx, np.broadcast_to(expected, np.shape(weights)), err_msg=f"N = {n}")
 
 
@@ -95,7 +95,7 @@ def test_residual_resampling_counts_never_exceed_n_near_integers():
     for n in (2, 3, 20, 49, 1000):
         eps = np.finfo(float).eps
         w = np.full(n, 1.0 / n) * (1 + eps * np.where(np.arange(n) % 2, -4, 4))
-        idx = lb.resample(w, rng, "residual")
+        idx = lb.resample(w, rng=rng, method="residual")
         counts = np.bincount(idx, minlength=n)
         assert counts.sum() == n
         assert np.all(np.abs(counts - n * w / w.sum()) < 1 + 1e-9)

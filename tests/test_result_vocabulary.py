@@ -93,10 +93,10 @@ def _all_results():
         out = _kalman_runs(z)
         out["rts_smoother"] = lb.rts_smoother(out["kalman_filter"])
         out["fixed_lag_smoother"] = lb.fixed_lag_smoother(out["kalman_filter"], 2)
-        out["particle_filter"] = lb.particle_filter(None, _fix_log_likelihood(fixes), np.random.default_rng(5),
+        out["particle_filter"] = lb.particle_filter(None, _fix_log_likelihood(fixes), rng=np.random.default_rng(5),
                                                     n_steps=T, initial_particles_m=start, spread_m=0.3,
                                                     cloud_steps=(0,))
-        out["grid_bayes_filter"] = lb.grid_bayes_filter(None, CELLS, _fix_log_likelihood(fixes), np.inf, n_steps=T)
+        out["grid_bayes_filter"] = lb.grid_bayes_filter(None, _fix_log_likelihood(fixes), CELLS, np.inf, n_steps=T)
     return z, fixes, start, out
 
 
@@ -236,7 +236,7 @@ def test_position_m_of_kalman_and_bayes_results():
     # a particle filter with motion=: the state is position and velocity, position_m takes the motion's index
     start = np.concatenate([z[:, :1] + rng.normal(0, 0.5, (2, 300, 2)), np.zeros((2, 300, 2))], axis=-1)
     pf = lb.particle_filter(None, lambda x, t: -0.5 * np.sum((x[..., idx] - z[:, t, None]) ** 2, axis=-1) / 0.3,
-                            np.random.default_rng(2), n_steps=10, initial_particles_m=start, motion=cv)
+                            rng=np.random.default_rng(2), n_steps=10, initial_particles_m=start, motion=cv)
     assert pf.mean.shape == (2, 10, 4)
     np.testing.assert_array_equal(pf.position_m(cv.position_index), pf.mean[..., idx])
     np.testing.assert_array_equal(pf.position_m(), pf.mean)
@@ -252,9 +252,10 @@ def test_a_collapsed_particle_or_grid_run_is_diverged_at_its_step():
         return out
     start = np.random.default_rng(0).normal(0, 1, (3, 100, 2))
     with pytest.warns(RuntimeWarning, match=r"1 of 3 runs \(first: run 1, step 2"):
-        pf = lb.particle_filter(None, ll, np.random.default_rng(1), n_steps=5, initial_particles_m=start, spread_m=0.1)
+        pf = lb.particle_filter(None, ll, rng=np.random.default_rng(1), n_steps=5, initial_particles_m=start,
+                                spread_m=0.1)
     with pytest.warns(RuntimeWarning, match=r"1 of 3 runs \(first: run 1, step 2"):
-        grid = lb.grid_bayes_filter(None, CELLS, ll, 0.5, n_steps=5)
+        grid = lb.grid_bayes_filter(None, ll, CELLS, 0.5, n_steps=5)
     for res in (pf, grid):
         assert res.diverged.tolist() == [False, True, False] and res.diverged_step.tolist() == [-1, 2, -1]
         assert res.n_diverged == 1

@@ -194,15 +194,15 @@ def test_scheduled_resampling_and_a_callable_transition():
         calls.append(t)
         return x + 1.0
 
-    res = lb.particle_filter(None, lambda x, k: -0.5 * x[..., 0] ** 2, np.random.default_rng(1), n_steps=6,
+    res = lb.particle_filter(None, lambda x, k: -0.5 * x[..., 0] ** 2, rng=np.random.default_rng(1), n_steps=6,
                              initial_particles_m=start, transition=walk, resample_every=3)
     assert calls == [1, 2, 3, 4, 5]
     np.testing.assert_array_equal(res.resampled, np.tile([False, False, True, False, False, True], (2, 1)))
     with pytest.raises(ValueError, match="not both"):
-        lb.particle_filter(None, lambda x, k: x[..., 0], rng, n_steps=2, initial_particles_m=start, resample_every=2,
-                           resample_threshold=0.5)
+        lb.particle_filter(None, lambda x, k: x[..., 0], rng=rng, n_steps=2, initial_particles_m=start,
+                           resample_every=2, resample_threshold=0.5)
     with pytest.raises(ValueError, match="transition must return"):
-        lb.particle_filter(None, lambda x, k: x[..., 0], rng, n_steps=2, initial_particles_m=start,
+        lb.particle_filter(None, lambda x, k: x[..., 0], rng=rng, n_steps=2, initial_particles_m=start,
                            transition=lambda x, t, rng: x[:, :5])
 
 

@@ -52,8 +52,8 @@ def test_separable_grid_transition_equals_dense(spread_m, velocity_m):
     rss = rng.normal(-60, 5, (3, 15, 4))
     rss[0, 3, 1] = np.nan
     rss[2, 5] = np.nan                                      # a step where nothing was heard
-    dense = grid_bayes_filter(rss, cells, model, spread_m, velocity_m=velocity_m, transition="dense")
-    separable = grid_bayes_filter(rss, cells, model, spread_m, velocity_m=velocity_m, transition="separable")
+    dense = grid_bayes_filter(rss, model, cells, spread_m, velocity_m=velocity_m, transition="dense")
+    separable = grid_bayes_filter(rss, model, cells, spread_m, velocity_m=velocity_m, transition="separable")
     np.testing.assert_allclose(separable.weights, dense.weights, rtol=1e-9, atol=1e-14)
     np.testing.assert_allclose(separable.mean, dense.mean, rtol=0, atol=1e-12)
     np.testing.assert_array_equal(separable.map_m, dense.map_m)
@@ -83,5 +83,5 @@ def test_auto_transition_never_builds_the_dense_matrix_on_a_grid(monkeypatch):
 
     monkeypatch.setattr(bayes, "grid_transition_matrix", refuse)
     model = RssModel(np.array([[0, 0], [5, 0], [0, 4.0]]), PathLossModel(-40.0, 2.5, 3.0, min_distance_m=0.1))
-    res = grid_bayes_filter(np.full((1, 4, 3), -60.0), cells, model, 0.5)
+    res = grid_bayes_filter(np.full((1, 4, 3), -60.0), model, cells, 0.5)
     assert np.isfinite(res.mean).all()

@@ -63,7 +63,7 @@ def test_rss_ekf_equals_extended_kalman_filter(mode, order):
     ch = lb.PathLossModel(-40.0, 2.2, 2.0)
     runs, T = 8, 30
     pos = 5 + np.cumsum(0.1 * rng.standard_normal((runs, T, 2)), axis=1)
-    z = ch.sample_rss_dbm(np.linalg.norm(pos[:, :, None] - ANCHORS, axis=-1), rng)
+    z = ch.sample_rss_dbm(np.linalg.norm(pos[:, :, None] - ANCHORS, axis=-1), rng=rng)
     z[rng.random(z.shape) < 0.2] = np.nan
     meas = lb.RssMeasurement(z, ANCHORS, ch, MODEL.position_index, mode=mode, order=order)
     x0, P0 = MODEL.state_from(np.array([5.0, 5.0])), _per_run_P0(runs, 4, rng)

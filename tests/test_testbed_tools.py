@@ -15,7 +15,7 @@ def test_shadowing_field_correlation_at_each_lag_is_exponential():
     decorrelation, n = 1.5, 40_000
     x = np.arange(0.0, 4.01, 0.5)
     pts = np.stack([x, np.zeros_like(x)], -1)
-    field = lb.correlated_shadowing_db(pts, 4.0, decorrelation, np.random.default_rng(11), size=(n,))
+    field = lb.correlated_shadowing_db(pts, 4.0, decorrelation, rng=np.random.default_rng(11), size=(n,))
     assert field.shape == (n, x.size)
     assert field.std() == pytest.approx(4.0, rel=0.02)
     corr = np.corrcoef(field.T)
@@ -25,13 +25,13 @@ def test_shadowing_field_correlation_at_each_lag_is_exponential():
         se = (1 - rho**2) / np.sqrt(n)                      # large-sample s.e. of a correlation coefficient
         assert np.all(np.abs(empirical - rho) < 5 * se), (lag, empirical, rho)
     # no correlation length: independent draws
-    iid = lb.correlated_shadowing_db(pts, 4.0, 0.0, np.random.default_rng(12), size=(n,))
+    iid = lb.correlated_shadowing_db(pts, 4.0, 0.0, rng=np.random.default_rng(12), size=(n,))
     assert np.all(np.abs(np.corrcoef(iid.T)[np.triu_indices(x.size, 1)]) < 5 / np.sqrt(n))
 
 
 def test_attenuation_bursts_follow_the_binomial_and_uniform_laws():
     p, (lo, hi), shape = 0.3, (5.0, 10.0), (200, 500)
-    loss = attenuation_bursts_db(shape, p, (lo, hi), np.random.default_rng(3))
+    loss = attenuation_bursts_db(shape, p, (lo, hi), rng=np.random.default_rng(3))
     assert loss.shape == shape and np.all(loss <= 0)
     hit = loss < 0
     n = hit.size
@@ -42,8 +42,8 @@ def test_attenuation_bursts_follow_the_binomial_and_uniform_laws():
     assert abs(depth.mean() - (lo + hi) / 2) < 4 * (hi - lo) / np.sqrt(12 * depth.size)
     assert depth.var() == pytest.approx((hi - lo) ** 2 / 12, rel=0.05)
     assert loss.mean() == pytest.approx(-p * (lo + hi) / 2, rel=0.03)
-    assert np.all(attenuation_bursts_db(shape, 0.0, (lo, hi), np.random.default_rng(4)) == 0)
-    assert np.all(attenuation_bursts_db(shape, 1.0, (lo, lo), np.random.default_rng(5)) == -lo)
+    assert np.all(attenuation_bursts_db(shape, 0.0, (lo, hi), rng=np.random.default_rng(4)) == 0)
+    assert np.all(attenuation_bursts_db(shape, 1.0, (lo, lo), rng=np.random.default_rng(5)) == -lo)
 
 
 @pytest.mark.parametrize("kwargs", [dict(probability=1.5), dict(probability=-0.1), dict(loss_range_db=(10.0, 5.0)),
@@ -51,7 +51,7 @@ def test_attenuation_bursts_follow_the_binomial_and_uniform_laws():
 def test_attenuation_bursts_refuse_bad_arguments(kwargs):
     args = dict(probability=0.1, loss_range_db=(5.0, 10.0)) | kwargs
     with pytest.raises(ValueError):
-        attenuation_bursts_db((3,), args["probability"], args["loss_range_db"], np.random.default_rng(0))
+        attenuation_bursts_db((3,), args["probability"], args["loss_range_db"], rng=np.random.default_rng(0))
 
 
 def test_error_summary_per_run_equals_numpy_row_by_row():

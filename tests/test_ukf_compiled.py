@@ -61,7 +61,7 @@ def _case(kind, rng, B=5, T=50):
     model = lb.constant_velocity(0.5, 0.05)
     truth = np.cumsum(rng.normal(0, 0.3, (B, T, 2)), axis=1) + [6.0, 4.5]
     ch = lb.PathLossModel(-40.0, 2.5, 3.0, min_distance_m=0.1)
-    power = ch.sample_rss_dbm(lb.pairwise_distance_m(truth, ANCHORS), rng)
+    power = ch.sample_rss_dbm(lb.pairwise_distance_m(truth, ANCHORS), rng=rng)
     power[rng.random(power.shape) < 0.2] = np.nan
     power[:, 5] = np.nan                                           # a step without any RSS reading
     x0 = np.concatenate([truth[:, 0] + rng.normal(0, 0.5, (B, 2)), np.zeros((B, 2))], axis=1)
@@ -204,7 +204,7 @@ def test_the_compiled_path_keeps_the_numpy_errors(monkeypatch):
     rng = np.random.default_rng(4)
     model = lb.constant_velocity(1.0, 0.05)
     ch = lb.PathLossModel(-40.0, 2.5, 3.0)
-    z = ch.sample_rss_dbm(lb.pairwise_distance_m(np.array([[5.0, 4.0]] * 10), ANCHORS[:4]), rng)
+    z = ch.sample_rss_dbm(lb.pairwise_distance_m(np.array([[5.0, 4.0]] * 10), ANCHORS[:4]), rng=rng)
     start = np.array([5.0, 4.0, 0.0, 0.0])
     meas = lb.RssMeasurement(z, ANCHORS[:4], ch, model.position_index)
     monkeypatch.setattr(K, "_NUMBA_ENABLED", True)

@@ -63,7 +63,7 @@ def test_sigma_points_reproduce_mean_and_covariance():
 
 def _linear_setup(rng, batch=(5,), T=40):
     model = lb.constant_velocity(0.5, 0.3)
-    truth = lb.simulate_states(model.F, model.Q, np.array([1.0, 2.0, 0.5, -0.2]), T - 1, rng)
+    truth = lb.simulate_states(model.F, model.Q, np.array([1.0, 2.0, 0.5, -0.2]), T - 1, rng=rng)
     H = model.position_measurement_matrix()
     R = np.array([[0.8, 0.1], [0.1, 0.5]])
     z = truth[..., :2] + rng.multivariate_normal(np.zeros(2), R, size=batch + (T,))
@@ -87,10 +87,10 @@ def test_ukf_equals_kf_on_a_linear_model(alpha):
 def _rss_data(rng, T=30, sigma_db=4.0):
     model = lb.constant_velocity(1.0, 0.05)
     start = np.array([3.0, 4.0, 0.6, 0.1])
-    truth = lb.simulate_states(model.F, model.Q, start, T - 1, rng)
+    truth = lb.simulate_states(model.F, model.Q, start, T - 1, rng=rng)
     channel = lb.PathLossModel(np.array([-40.0, -45.0, -42.0, -38.0]), np.array([1.8, 3.1, 1.7, 1.2]), sigma_db)
     d = lb.pairwise_distance_m(truth[:, :2], ANCHORS)
-    z = channel.sample_rss_dbm(d, rng)
+    z = channel.sample_rss_dbm(d, rng=rng)
     return model, channel, start, z
 
 
@@ -262,7 +262,7 @@ def test_rss_ukf_equals_stone_soup(alpha):
     rng = np.random.default_rng(8)
     channel = lb.PathLossModel(np.array([-40.0, -45.0, -42.0, -38.0]), np.array([1.8, 3.1, 1.7, 1.2]), 4.0)
     truth = np.stack([np.linspace(3, 20, 25), np.full(25, 4.0)], -1) + 0.2 * rng.standard_normal((25, 2))
-    z = channel.sample_rss_dbm(lb.pairwise_distance_m(truth, ANCHORS), rng)
+    z = channel.sample_rss_dbm(lb.pairwise_distance_m(truth, ANCHORS), rng=rng)
     x0 = np.array([4.0, 0.5, 3.0, 0.0])                                   # axis-major [x, vx, y, vy]
     P0 = np.diag([2.0, 0.5, 2.0, 0.5])
     F, Q, ref_x, ref_P = _stonesoup_ukf(z, x0, P0, ANCHORS, channel, alpha)
@@ -281,7 +281,7 @@ def test_covariance_stays_symmetric_positive_definite_over_1e5_steps_at_alpha_1e
     t = np.arange(T) * 0.1
     pos = np.stack([10 + 5 * np.cos(0.05 * t), 6 + 4 * np.sin(0.05 * t)], -1)       # laps around the anchors
     ch = lb.PathLossModel(-40.0, 2.5, 3.0)
-    z = ch.sample_rss_dbm(lb.pairwise_distance_m(pos, anchors), rng)
+    z = ch.sample_rss_dbm(lb.pairwise_distance_m(pos, anchors), rng=rng)
     res = lb.unscented_kalman_filter(model.F, model.Q, np.r_[pos[0], 0.0, 0.0], np.eye(4),
                                      [lb.RssMeasurement(z, anchors, ch, model.position_index)], alpha=1e-3)
     assert np.linalg.eigvalsh(res.cov).min() > 0

@@ -35,7 +35,7 @@ import numpy as np
 
 from ..errors import DegenerateGeometryError, ParameterError
 from .._validate import as_array, check_choice, check_scalar
-from .._variants import RENAMED_CRLB_FORMS, check_variant, warn_deprecated
+from .._deprecation import RENAMED_CRLB_FORMS, check_variant, warn_deprecated
 from ..models.channel import PathLossModel
 from ..models.base import PerStep
 from ..models.rss import RssModel

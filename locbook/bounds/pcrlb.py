@@ -23,7 +23,7 @@ import numpy as np
 from .._validate import as_array, check_choice
 
 from .crlb import _bound_model, _old_form, _old_model, rss_position_information
-from .._variants import warn_deprecated
+from .._deprecation import warn_deprecated
 from .._linalg import _mT
 
 __all__ = ["posterior_crlb", "position_bound_m", "rss_state_information", "linear_measurement_information",

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .._deprecation import keyword_rng
 from .._validate import as_array, check_scalar
 
 __all__ = [
@@ -199,8 +200,10 @@ class PathLossModel:
                                      ref_distance_m=self.ref_distance_m, min_distance_m=self.min_distance_m,
                                      n_walls=np.asarray(n_walls), wall_attenuation_db=self.wall_attenuation_db)
 
-    def sample_rss_dbm(self, distance_m, rng: np.random.Generator, n_walls=0):
-        """Mean power plus i.i.d. Gaussian shadowing ``w ~ N(0, sigma_db^2)``, one draw per entry."""
+    @keyword_rng(2, "n_walls")
+    def sample_rss_dbm(self, distance_m, *, rng: np.random.Generator, n_walls=0):
+        """Mean power plus i.i.d. Gaussian shadowing ``w ~ N(0, sigma_db^2)``, one draw per entry (``rng`` and
+        ``n_walls`` keyword-only; the positional form ``sample_rss_dbm(distance_m, rng, n_walls)`` is deprecated)."""
         if not isinstance(rng, np.random.Generator):
             raise ValueError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
         mean = self.mean_rss_dbm(distance_m, n_walls)
@@ -266,14 +269,16 @@ def _check_walls_count(n_walls) -> None:
         raise ValueError(f"n_walls must be non-negative wall counts, got a minimum of {counts.min()}")
 
 
-def correlated_shadowing_db(points_m, sigma_db: float, decorrelation_m: float,
+@keyword_rng(3, "size")
+def correlated_shadowing_db(points_m, sigma_db: float, decorrelation_m: float, *,
                             rng: np.random.Generator, size: tuple[int, ...] = ()):
     """Spatially correlated log-normal shadowing at fixed points (Gudmundson model).
 
     Covariance ``sigma^2 exp(-|p_i - p_j| / d_c)`` between points ``(P, dim)``; returns draws of
     shape ``size + (P,)``. Used where a source needs shadowing that averaging over packets does not
     remove (our synthetic stand-ins for Gudipati 2017's Fig. 5.1 calibration walk and for
-    Ozkaya 2011's test bed, Sec. 7.3). ``decorrelation_m = 0`` gives i.i.d. draws.
+    Ozkaya 2011's test bed, Sec. 7.3). ``decorrelation_m = 0`` gives i.i.d. draws. ``rng`` and ``size`` are
+    keyword-only (the positional form ``(points_m, sigma_db, decorrelation_m, rng, size)`` is deprecated).
     """
     points_m = np.atleast_2d(as_array("points_m", points_m))
     check_scalar("sigma_db", sigma_db, ge=0)
@@ -289,7 +294,8 @@ def correlated_shadowing_db(points_m, sigma_db: float, decorrelation_m: float,
     return sigma_db * z @ chol.T
 
 
-def attenuation_bursts_db(shape, probability: float, loss_range_db: tuple[float, float], rng: np.random.Generator):
+@keyword_rng(3)
+def attenuation_bursts_db(shape, probability: float, loss_range_db: tuple[float, float], *, rng: np.random.Generator):
     """Intermittent attenuation bursts (dB, <= 0): at each entry, with probability ``probability``, a loss drawn
     uniformly from ``loss_range_db = (low, high)`` (both >= 0), else no loss.
 
@@ -297,7 +303,8 @@ def attenuation_bursts_db(shape, probability: float, loss_range_db: tuple[float,
     body or object next to the receiver shading it as a whole ("reader-wide" attenuation: our synthetic stand-in for
     the obstructed readers of Ozkaya 2011, Sec. 7.3, Tables 7.38 and 7.44); the caller broadcasts the ``shape``
     draw over the transmitters. Returns an array of ``shape``: ``-U(low, high)`` where a burst occurs, ``0``
-    elsewhere. The expected value is ``-probability (low + high) / 2``.
+    elsewhere. The expected value is ``-probability (low + high) / 2``. ``rng`` is keyword-only (the positional
+    form ``(shape, probability, loss_range_db, rng)`` is deprecated).
     """
     check_scalar("probability", probability, ge=0, le=1)
     if len(loss_range_db) != 2:
@@ -346,14 +353,16 @@ def wall_crossings(points_m, anchors_m, walls_m):
     return count
 
 
-def small_scale_fading_db(distance_m, wavelength_m: float, rng: np.random.Generator, *, n_paths: int = 64,
+@keyword_rng(2)
+def small_scale_fading_db(distance_m, wavelength_m: float, *, rng: np.random.Generator, n_paths: int = 64,
                           k_factor: float = 0.0):
     """Multipath envelope (dB, relative to the mean power) along a line, by a sum of plane waves.
 
     ``n_paths`` scattered waves with uniform arrival angles and phases and equal power, plus (``k_factor`` > 0)
     a line-of-sight wave carrying ``K`` times the scattered power: Rayleigh fading for ``K = 0``, Rician
     otherwise (Ozkaya 2011, Sec. 5.1.1; Rappaport 2002, Ch. 5). Fades of 20-40 dB within a fraction of a
-    wavelength are what the thesis illustrates at 910 MHz (lambda about 33 cm).
+    wavelength are what the thesis illustrates at 910 MHz (lambda about 33 cm). ``rng`` is keyword-only (the
+    positional form ``(distance_m, wavelength_m, rng)`` is deprecated).
     """
     x = as_array("distance_m", distance_m)
     check_scalar("wavelength_m", wavelength_m, gt=0)

@@ -30,6 +30,7 @@ from math import factorial
 
 import numpy as np
 
+from .._deprecation import keyword_rng
 from .._validate import as_array, check_choice, check_scalar
 from .base import MotionModel
 
@@ -331,10 +332,12 @@ def reflect_into_box(position_m, lower_m, upper_m):
     return lower + np.where(folded > width, 2.0 * width - folded, folded)
 
 
-def simulate_states(F, Q, initial_state, n_steps: int, rng: np.random.Generator):
+@keyword_rng(4)
+def simulate_states(F, Q, initial_state, n_steps: int, *, rng: np.random.Generator):
     """Sample trajectories of ``x_k = F x_{k-1} + w_k``, ``w_k ~ N(0, Q)``: ``(..., n_steps + 1, n)`` from initial
     states ``(..., n)`` (the "trajectories that exactly follow the constant acceleration model" of Dogan's
-    Sec. 4.1.2). ``Q`` may be singular (it is factored by eigen-decomposition)."""
+    Sec. 4.1.2). ``Q`` may be singular (it is factored by eigen-decomposition). ``rng`` is keyword-only (the
+    positional form ``(F, Q, initial_state, n_steps, rng)`` is deprecated)."""
     F = as_array("F", F, ndim=2)
     n = F.shape[0]
     if F.shape != (n, n):

@@ -763,7 +763,7 @@ def smc_trajectories(n_trajectories: int, n_steps: int, rng: np.random.Generator
     start = model.state_from(rng.uniform((0.0, 0.0), _room(room_m), (n_trajectories, 2)),
                              np.sqrt(P00_VEL_VAR) * rng.standard_normal((n_trajectories, 2)),
                              np.sqrt(P00_ACC_VAR) * rng.standard_normal((n_trajectories, 2)))
-    return simulate_states(model.F, model.Q, start, n_steps - 1, rng)
+    return simulate_states(model.F, model.Q, start, n_steps - 1, rng=rng)
 
 
 def smc_trajectory(states, rss_every: int = RSS_EVERY, dt_s: float = DT_S) -> Trajectory:

@@ -97,7 +97,7 @@ def simulate_calibration(points_m, channel: PathLossModel, n_packets: int, rng: 
         raise ParameterError("n_packets and n_runs must be at least 1")
     distance = pairwise_distance_m(np.asarray(points_m, float), anchors_m)
     shape = (n_runs, distance.shape[0], n_packets, distance.shape[1])
-    power = channel.sample_rss_dbm(np.broadcast_to(distance[None, :, None, :], shape), rng)
+    power = channel.sample_rss_dbm(np.broadcast_to(distance[None, :, None, :], shape), rng=rng)
     if quantize_step_db:
         power = quantize_db(power, quantize_step_db)
     return power, distance

@@ -19,7 +19,7 @@ import numpy as np
 from ..static.calibration import calibrate_path_loss, fix_error_covariance
 from ..models.channel import PathLossModel, pairwise_distance_m
 from ..tracking.kalman import KF_VARIANTS, kalman_filter
-from .._variants import RENAMED_KF_VARIANTS, check_variant
+from .._deprecation import RENAMED_KF_VARIANTS, check_variant
 from ..tracking.streams import LinearMeasurement
 from ..static.localization import lateration_ls
 from ..reproduce.printed_values import printed
@@ -161,7 +161,7 @@ def simulate_corridor(n_runs: int, truth_m, true_model: PathLossModel, *, rng_ca
     truth_m = np.asarray(truth_m, float)
     cal_pts = np.asarray(calibration_points_m, float)
     cal_dist = pairwise_distance_m(cal_pts, ANCHORS_M)                         # (L, 4)
-    cal_power = true_model.sample_rss_dbm(np.broadcast_to(cal_dist, (n_runs,) + cal_dist.shape), rng_calibration)
+    cal_power = true_model.sample_rss_dbm(np.broadcast_to(cal_dist, (n_runs,) + cal_dist.shape), rng=rng_calibration)
     fit = calibrate_path_loss(np.broadcast_to(cal_dist, cal_power.shape), cal_power, mode=calib_mode,
                               solver="closed_form")
     if calib_mode == "per_anchor":
@@ -169,7 +169,7 @@ def simulate_corridor(n_runs: int, truth_m, true_model: PathLossModel, *, rng_ca
     else:
         ref, exp = fit.ref_power_dbm[:, None, None], fit.path_loss_exp[:, None, None]
     dist = pairwise_distance_m(truth_m, ANCHORS_M)                              # (T, 4)
-    power = true_model.sample_rss_dbm(np.broadcast_to(dist, (n_runs,) + dist.shape), rng_tracking)
+    power = true_model.sample_rss_dbm(np.broadcast_to(dist, (n_runs,) + dist.shape), rng=rng_tracking)
     ok = np.all(fit.path_loss_exp.reshape(n_runs, -1) >= min_path_loss_exp, axis=-1) if use_calibrated_model \
         else np.ones(n_runs, bool)
     ranging = PathLossModel(ref, np.where(ok.reshape((n_runs,) + (1,) * (exp.ndim - 1)), exp, 1.0)) \

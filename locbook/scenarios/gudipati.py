@@ -20,7 +20,7 @@ import numpy as np
 
 from .._validate import check_choice, check_scalar
 from ..bounds.crlb import rss_crlb_m
-from .._variants import renamed_keyword
+from .._deprecation import renamed_keyword
 from ..bounds.pcrlb import position_bound_m, posterior_crlb, rss_state_information
 from ..reproduce.printed_values import printed
 from ..metrics import position_error_m
@@ -255,7 +255,7 @@ def simulate_walk(path: str, n_anchors: int, settings: WalkSettings, n_runs: int
     d = pairwise_distance_m(truth.position_m, a)                                   # (T, m)
     mean = channel_model(ids).mean_rss_dbm(d)
     T, m = d.shape
-    shadow = correlated_shadowing_db(truth.position_m, settings.shadowing_sigma_db, settings.decorrelation_m, rng,
+    shadow = correlated_shadowing_db(truth.position_m, settings.shadowing_sigma_db, settings.decorrelation_m, rng=rng,
                                      size=(n_runs, m))                             # (R, m, T)
     rss = mean + np.swapaxes(shadow, -1, -2) + settings.fast_sigma_db * rng.standard_normal((n_runs, T, m))
     # the ED register (Sec. 3.3, AT86RF230 datasheet); packets below its floor are not heard (anchor 13, C = 3.1,
@@ -622,7 +622,7 @@ def simulate_calibration_walk(anchor_id: str, distances_m, *, shadowing_sigma_db
     d = np.asarray(distances_m, dtype=float)
     ch = channel_model((anchor_id,))
     pts = np.stack([d, np.zeros_like(d)], -1)
-    shadow = correlated_shadowing_db(pts, shadowing_sigma_db, decorrelation_m, rng, size=(n_runs,))
+    shadow = correlated_shadowing_db(pts, shadowing_sigma_db, decorrelation_m, rng=rng, size=(n_runs,))
     mean = ch.mean_rss_dbm(d[:, None])[:, 0] + shadow
     packets = ed_register_dbm(mean[..., None] + fast_sigma_db * rng.standard_normal(mean.shape + (samples,)))
     ref_mean = ch.mean_rss_dbm(np.array([1.0]))[0] + shadowing_sigma_db * rng.standard_normal(n_runs)

@@ -284,7 +284,7 @@ def calibration_block_bootstrap(data: Dataset, rng: np.random.Generator, *, n_bo
     time_s = ep.time_s[np.isfinite(ep.position_m[:, :2]).all(axis=1)]
     spacing = float(np.median(np.diff(time_s))) if time_s.size > 1 else 1.0
     block = max(1, int(round(block_s / spacing))) if spacing > 0 else 1
-    idx = circular_block_indices(len(time_s), block, n_bootstrap, rng)
+    idx = circular_block_indices(len(time_s), block, n_bootstrap, rng=rng)
     fits = calibrate_path_loss(distance[idx], rss[idx], mode)
     blocks = len(time_s) / block
     if blocks >= MIN_BLOCKS:
@@ -632,7 +632,7 @@ def result_row(kind: str, recording: str, method: str, errors_m, bound_m, reason
     degenerate). A ratio below 1 carries why it can be (``prior``: what the method knows that the bound does not)."""
     e = np.asarray(errors_m, float)
     e = e[:, None] if e.ndim == 1 else e
-    m = accuracy_metrics(e.ravel(), rng, n_bootstrap=n_bootstrap, block_length=block, values_per_epoch=e.shape[1])
+    m = accuracy_metrics(e.ravel(), rng=rng, n_bootstrap=n_bootstrap, block_length=block, values_per_epoch=e.shape[1])
     summary = summarize_bound(bound_m, reason)
     ratio, note = error_bound_ratio(e.T, summary)
     if not note and np.isfinite(ratio) and ratio < 1:

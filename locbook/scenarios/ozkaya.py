@@ -345,11 +345,11 @@ def run_case(case: SimCase, n_runs: int, seed: int, *, return_all: bool = False)
                 d2 = np.sum((cells[None] - truth[:, :1]) ** 2, -1)
                 initial = np.exp(-(d2 - d2.min(-1, keepdims=True)) / (2.0 * case.spread_m ** 2))
                 initial /= initial.sum(-1, keepdims=True)
-        res = grid_bayes_filter(rss, cells, filter_model, case.spread_m, velocity_m=velocity, initial_belief=initial)
+        res = grid_bayes_filter(rss, filter_model, cells, case.spread_m, velocity_m=velocity, initial_belief=initial)
         estimate = res.mean if case.estimator == "mmse" else res.map_m
     elif case.method == "sir":
         res = particle_filter(
-            rss, filter_model, rng, n_particles=case.n_particles, region_m=_region(case.filter_region, room),
+            rss, filter_model, rng=rng, n_particles=case.n_particles, region_m=_region(case.filter_region, room),
             spread_m=case.spread_m, velocity_m=(0.0, case.velocity_m) if case.known_velocity else None,
             initial_position_m=truth[:, 0] if case.known_initial else None,
             initial_sd_m=_initial_sd_m(case),
@@ -426,7 +426,7 @@ def summarize(errors, rng: np.random.Generator | None = None, *,
         out["rmse_se_m"] = float(rmse_standard_error_m(last))
         if rng is not None:
             for k, f in _STATISTIC_FUNCTIONS.items():
-                out[k + "_se"] = out["rmse_se_m"] if k == "rmse_m" else bootstrap_standard_error(last, f, rng)
+                out[k + "_se"] = out["rmse_se_m"] if k == "rmse_m" else bootstrap_standard_error(last, f, rng=rng)
         return out
 
     def statistics(e):            # (..., R, T) -> {statistic: (...)}

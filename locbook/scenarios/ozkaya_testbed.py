@@ -35,7 +35,7 @@ from ..models.rss import RssModel
 from ..tracking.bayes import grid_bayes_filter
 from ..tracking.particle import particle_filter
 from ..bounds.crlb import CRLB_VARIANTS, crlb_rms_over_area_m, rss_crlb_m
-from .._variants import RENAMED_CRLB_FORMS, check_variant, renamed_keyword
+from .._deprecation import RENAMED_CRLB_FORMS, check_variant, renamed_keyword
 from ..models.channel import (PathLossModel, attenuation_bursts_db, correlated_shadowing_db, pairwise_distance_m,
                               quantize_db)
 from ..static.fingerprint import knn_position, model_fingerprints
@@ -218,7 +218,7 @@ def draw_testbed(channel: TestbedChannel, n_realizations: int, rng: np.random.Ge
     points = _all_points()
     m = len(oz.TESTBED_READERS_M)
     field_db = correlated_shadowing_db(points, channel.noise_scale * channel.static_sigma_db, channel.decorrelation_m,
-                                       rng, size=(n_realizations, m))                     # (Z, m, P)
+                                       rng=rng, size=(n_realizations, m))                     # (Z, m, P)
     tag_o = channel.noise_scale * channel.orientation_sigma_db * rng.standard_normal(
         (n_realizations, len(oz.REFERENCE_TAGS_M), m))
     return Testbed(channel, points, np.swapaxes(field_db, -1, -2), tag_o)
@@ -249,7 +249,7 @@ def measure_sessions(testbed: Testbed, positions_m, rng: np.random.Generator, *,
     tag_idx = testbed.index(oz.REFERENCE_TAGS_M)                                       # (K,)
     k = tag_idx.size
     scale = ch.noise_scale
-    common = attenuation_bursts_db((z, n_sessions, n_steps, m), p, ch.burst_loss_db, rng)
+    common = attenuation_bursts_db((z, n_sessions, n_steps, m), p, ch.burst_loss_db, rng=rng)
     if extra_loss_db is not None:
         common = common - np.asarray(extra_loss_db, float)[:, None, None, :]
     orient = scale * ch.orientation_sigma_db * rng.standard_normal((z, n_sessions, 1, m))
@@ -274,7 +274,7 @@ def measure_pattern_map(testbed: Testbed, rng: np.random.Generator, n_samples: i
     samples = (ch.mean_rss_dbm(PATTERN_LOCATIONS_M)[:, None, :] + testbed.field_db[:, idx, None, :]
                + ch.noise_scale * (ch.orientation_sigma_db * rng.standard_normal(shape)
                                    + ch.dynamic_sigma_db * rng.standard_normal(shape))
-               + attenuation_bursts_db(shape, ch.burst_probability, ch.burst_loss_db, rng))
+               + attenuation_bursts_db(shape, ch.burst_probability, ch.burst_loss_db, rng=rng))
     return _read(ch, samples).mean(axis=-2)
 
 
@@ -364,7 +364,7 @@ def _estimate(method: Method, rss, tags, calibration, settings: MethodSettings, 
     model = RssModel(readers, PathLossModel(alpha, n, sigma, wall_attenuation_db=oz.WAF_DB, min_distance_m=0.1), walls,
                      per_step_channel=per_step)
     if method.estimator == "grid":
-        return grid_bayes_filter(rss, TESTBED_CELLS_M, model, settings.spread_m, velocity_m=velocity_m).mean
+        return grid_bayes_filter(rss, model, TESTBED_CELLS_M, settings.spread_m, velocity_m=velocity_m).mean
     if method.estimator != "sir":
         raise ValueError(f"unknown estimator {method.estimator!r}")
     n_runs = rss.shape[0]
@@ -374,7 +374,7 @@ def _estimate(method: Method, rss, tags, calibration, settings: MethodSettings, 
     for start, child in zip(starts, seed_sequence.spawn(len(starts))):
         sl = slice(start, start + block)
         block_model = model.select_runs(sl)
-        res = particle_filter(rss[sl], block_model, np.random.default_rng(child), n_particles=settings.n_particles,
+        res = particle_filter(rss[sl], block_model, rng=np.random.default_rng(child), n_particles=settings.n_particles,
                               region_m=((0.0, 0.0), oz.TESTBED_SIZE_M), spread_m=settings.spread_m,
                               velocity_m=velocity_m, resample_threshold=settings.resample_threshold,
                               weight_smoothing="sqrt")

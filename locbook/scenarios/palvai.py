@@ -109,7 +109,7 @@ def measure(setup: Setup, locations_m, rng: np.random.Generator) -> np.ndarray:
     shadowing ``N(0, sigma_1^2)``."""
     loc = np.asarray(locations_m)
     d = np.linalg.norm(loc - setup.target_for(loc), axis=-1)
-    return setup.channel.sample_rss_dbm(d, rng)
+    return setup.channel.sample_rss_dbm(d, rng=rng)
 
 
 def observed_locations(setup: Setup, locations_m, rng: np.random.Generator) -> np.ndarray:
@@ -258,7 +258,7 @@ def pf_run(setup: Setup, anchors_m, rss_dbm, rng: np.random.Generator, *, n_part
     init = rng.uniform(0.0, AREA_M, (R_, n_particles, dim))
     if process_sd_m > 0:        # every iteration predicts before its update, the first one too (Sec. 5.3.1)
         init = init + process_sd_m * rng.standard_normal(init.shape)
-    return particle_filter(readings, model, rng, initial_particles_m=init, spread_m=process_sd_m,
+    return particle_filter(readings, model, rng=rng, initial_particles_m=init, spread_m=process_sd_m,
                            resampling=resampling, cloud_steps=cloud_steps)
 
 

@@ -19,6 +19,7 @@ import warnings
 
 import numpy as np
 
+from .._deprecation import past_wrappers
 from .._linalg import _mT
 from ._loop import _Setup
 from .results import KalmanResult
@@ -227,11 +228,13 @@ _KERNEL_MODULES: dict = {}
 
 def _compiled_failed(what: str, exc: Exception, stacklevel: int) -> None:
     """The rule above, for the compiled ``what`` that raised ``exc``; ``stacklevel`` counts from the caller (as
-    ``warnings.warn``'s from its caller: the warning points at the user's line)."""
+    ``warnings.warn``'s from its caller: the warning points at the user's line; a deprecation wrapper of the public
+    function, :func:`locbook._deprecation.old_form`, is not counted)."""
     global _NUMBA_ENABLED
     _NUMBA_ENABLED = False
     warnings.warn(f"locbook: the compiled {what} failed ({type(exc).__name__}: {exc}); using numpy from now on "
-                  "(set LOCBOOK_NUMBA=0 to skip the attempt)", RuntimeWarning, stacklevel=stacklevel + 1)
+                  "(set LOCBOOK_NUMBA=0 to skip the attempt)", RuntimeWarning,
+                  stacklevel=past_wrappers(stacklevel + 1))
 
 
 def _kernel_module(name: str, trial, what: str, stacklevel: int):

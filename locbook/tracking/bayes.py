@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .._deprecation import old_form, past_wrappers
 from .._validate import as_array, check_choice, check_scalar
 from ..models.base import MeasurementModel
 from ..models.rss import RssModel
@@ -152,7 +153,7 @@ def _warn_collapse(dead, dead_step, function: str, what: str, detail=None) -> No
     extra = detail(run, step) if detail is not None else ""
     warnings.warn(f"{function}: {what} collapsed in {int(dead.sum())} of {dead.size} runs (first: run {run}, step "
                   f"{step}{extra}); those runs are NaN from their step on (see diverged, diverged_step), the "
-                  "others are unaffected", RuntimeWarning, stacklevel=3)
+                  "others are unaffected", RuntimeWarning, stacklevel=past_wrappers(3))
 
 
 def _reading_detail(rss_dbm):
@@ -469,7 +470,30 @@ def _points_log_likelihood(model: MeasurementModel, rss_dbm, cells_m, n_runs: in
     return ll
 
 
-def grid_bayes_filter(rss_dbm, cells_m, model, spread_m: float = 0.5, *, n_steps: int | None = None,
+def _is_likelihood(value) -> bool:
+    """A measurement model or a callable log-likelihood: what :func:`grid_bayes_filter` takes as ``model``."""
+    return isinstance(value, MeasurementModel) or callable(value)
+
+
+def _old_grid_order(function, args, kwargs):
+    """:func:`~locbook._deprecation.old_form`'s detector of :func:`grid_bayes_filter`: the order before issue 47, the
+    cells second (an array, not a model or a callable) and the model or callable third (positionally or as
+    ``model=``), is swapped into the new one."""
+    if len(args) < 2 or _is_likelihood(args[1]):
+        return None
+    if len(args) > 2 and "model" not in kwargs and _is_likelihood(args[2]):
+        args = (args[0], args[2], args[1], *args[3:])
+    elif len(args) == 2 and "cells_m" not in kwargs and _is_likelihood(kwargs.get("model")):
+        kwargs = dict(kwargs)
+        args = (args[0], kwargs.pop("model"), args[1])
+    else:
+        return None
+    return ("grid_bayes_filter(rss_dbm, cells_m, model, ...)", "grid_bayes_filter(rss_dbm, model, cells_m, ...)",
+            args, kwargs)
+
+
+@old_form(_old_grid_order)
+def grid_bayes_filter(rss_dbm, model, cells_m, spread_m: float = 0.5, *, n_steps: int | None = None,
                       velocity_m=None, initial_belief=None, transition: str = "auto") -> BayesFilterResult:
     """Grid-based Bayes filter (Ozkaya 2011, Eqs. (4.10)-(4.15)) over runs ``R`` and steps ``T``.
 
@@ -485,6 +509,8 @@ def grid_bayes_filter(rss_dbm, cells_m, model, spread_m: float = 0.5, *, n_steps
     ``rss_dbm=None`` and ``n_steps`` given, the cells ``(C, dim)`` of any dimension, the number of runs that of its
     output. ``velocity_m``: a known displacement per step, ``(dim,)`` or ``(T, dim)`` (the mean of the process model
     in the thesis's constant-velocity experiment). ``initial_belief``: ``(C,)`` or ``(R, C)``; uniform if None.
+    The model comes second, as in every RSS filter and estimator; the order before issue 47, ``(rss_dbm, cells_m,
+    model, ...)``, is deprecated (one release: a DeprecationWarning, the same result).
 
     ``transition``: ``"dense"`` builds the ``C x C`` matrix (memory quadratic in the cells: its construction peaks
     at ``8 C^2 (dim + 3)`` bytes, 4 GB at 10,000 cells in 2-D); ``"separable"`` applies the same transition as one

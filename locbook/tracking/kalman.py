@@ -22,7 +22,7 @@ predict / update in :mod:`locbook.tracking.functional`, the shared time loop in 
 """
 from __future__ import annotations
 
-from .._variants import RENAMED_KF_VARIANTS, check_variant
+from .._deprecation import RENAMED_KF_VARIANTS, check_variant
 from . import _compiled
 from ._loop import _check_outputs, _covariance_shared_throughout, _run, _setup, _streams
 from .results import DIVERGENCE_PROBABILITY, DIVERGENCE_WINDOW, KalmanResult, _check_guard, _flag

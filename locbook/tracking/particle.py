@@ -54,6 +54,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .._deprecation import keyword_rng
 from .._validate import as_array, check_choice, check_scalar
 from .._linalg import psd_root
 from ..models.motion import reflect_into_box
@@ -254,7 +255,8 @@ class _Motion:
         return x if bounds is None else self.mirror(x, *bounds)
 
 
-def particle_filter(rss_dbm, model, rng: np.random.Generator, *, n_steps: int | None = None,
+@keyword_rng(2)
+def particle_filter(rss_dbm, model, *, rng: np.random.Generator, n_steps: int | None = None,
                     n_particles: int | None = None, region_m=None, initial_particles_m=None, initial_position_m=None,
                     initial_sd_m: float = 0.0, initial_covariance=None, spread_m=None, velocity_m=None,
                     transition=None, motion=None, resampling: str = "systematic",
@@ -637,7 +639,7 @@ def particle_filter(rss_dbm, model, rng: np.random.Generator, *, n_steps: int | 
                 u = rng.random(R)
                 idx = systematic_resample(draw_w[do], u[do], resampling_cdf) if do.any() else None
             else:
-                idx = resample(draw_w, rng, resampling)[do]
+                idx = resample(draw_w, rng=rng, method=resampling)[do]
             if do.any():
                 particles[do] = particles[do][np.arange(idx.shape[0])[:, None], idx]
                 if weight_smoothing == "sqrt_corrected":

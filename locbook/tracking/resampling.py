@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._deprecation import keyword_rng
 from .._validate import as_array, check_choice, check_scalar
 
 __all__ = ["RESAMPLING_METHODS", "RESAMPLING_CDFS", "resample", "systematic_resample", "counts_to_indices",
@@ -141,7 +142,8 @@ def counts_to_indices(counts, *, n_out: int | None = None):
     return _search_rows(c / m, np.broadcast_to((np.arange(m) + 0.5) / m, (c.shape[0], m))).reshape(batch + (m,))
 
 
-def resample(weights, rng: np.random.Generator, method: str = "systematic", *, n_out: int | None = None,
+@keyword_rng(1, "method")
+def resample(weights, *, rng: np.random.Generator, method: str = "systematic", n_out: int | None = None,
              log_weights: bool = False):
     """Ancestor indices ``(..., M)`` for every row of ``weights (..., N)`` (normalised here), ``M = n_out``
     (default ``N``: the same draws, bit for bit, as without it).
@@ -156,7 +158,8 @@ def resample(weights, rng: np.random.Generator, method: str = "systematic", *, n
     These are Stone Soup's ``SystematicResampler``, ``StratifiedResampler``, ``MultinomialResampler`` and
     ``ResidualResampler`` (``nparts = n_out``; its residual scheme keeps ``M = N``) up to the order of the cumulative
     sum: Stone Soup sums the weights sorted ascending, locbook in the particles' order. ``log_weights=True``:
-    ``weights`` are unnormalised log-weights (``-inf`` = zero weight; module docstring).
+    ``weights`` are unnormalised log-weights (``-inf`` = zero weight; module docstring). ``rng`` and ``method`` are
+    keyword-only (the positional form ``resample(weights, rng, method)`` is deprecated, for one release).
     """
     check_choice("method", method, RESAMPLING_METHODS)
     if not isinstance(rng, np.random.Generator):
@@ -190,15 +193,16 @@ def resample(weights, rng: np.random.Generator, method: str = "systematic", *, n
     return counts_to_indices(det + extra, n_out=m).reshape(batch + (m,))
 
 
-def resample_where(weights, rng: np.random.Generator, method: str = "systematic", *, threshold=None,
+@keyword_rng(1, "method")
+def resample_where(weights, *, rng: np.random.Generator, method: str = "systematic", threshold=None,
                    log_weights: bool = False):
     """Resample only the rows whose effective sample size ``1 / sum w^2`` is below ``threshold`` (default: always,
     the SIR filter's every-step resampling). Returns ``(indices (..., N), resampled (...) bool)``; rows not
-    resampled keep the identity indices (and the caller keeps their weights). ``log_weights``: as in
-    :func:`resample`."""
+    resampled keep the identity indices (and the caller keeps their weights). ``log_weights``, ``rng`` and ``method``
+    (keyword-only): as in :func:`resample`."""
     w = _check_weights(weights, log_weights)
     n = w.shape[-1]
-    idx = resample(w, rng, method)
+    idx = resample(w, rng=rng, method=method)
     if threshold is None:
         return idx, np.ones(w.shape[:-1], bool)
     do = effective_sample_size(w) < threshold

@@ -48,7 +48,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .._validate import check_choice, check_scalar, function_output
-from .._variants import old_keyword
+from .._deprecation import old_keyword
 from ..models.rss import rss_mean_jacobian
 from .._linalg import (_UPDATE_OVERFLOW, _gaussian_log_likelihood, _inv_small, _logdet, _mT, _not_positive_definite,
                       _refuse_not_finite, _Singular, _singular_runs)

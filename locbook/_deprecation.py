@@ -92,13 +92,18 @@ def old_form(old_call):
     """Decorator of a public function whose signature changed (the new form, the one :func:`inspect.signature` shows,
     which follows ``__wrapped__``): ``old_call(function, args, kwargs)`` is None for a call in the new form, else
     ``(old, new, args, kwargs)``: the deprecated form and the one to use, named in one ``DeprecationWarning`` line
-    attributed to the caller's line, and the same call's arguments in the new form (so the same numbers)."""
+    attributed to the caller's line, and the same call's arguments in the new form (so the same numbers); or
+    ``(old, new, run)`` where the old form is not a call of the new one: ``run(function)`` gives its result."""
     def wrap(function):
         @functools.wraps(function)
         def call(*args, **kwargs):
             old = old_call(function, args, kwargs)
             if old is None:
                 return function(*args, **kwargs)
+            if len(old) == 3:
+                form, use, run = old
+                warn_deprecated(form, use)
+                return run(function)
             form, use, args, kwargs = old
             warn_deprecated(form, use)
             return function(*args, **kwargs)
@@ -148,3 +153,15 @@ def past_wrappers(stacklevel: int) -> int:
         if frame is not None and frame.f_globals.get("__name__") == __name__:
             extra += 1
     return stacklevel + extra
+
+
+def renamed_constants(module: str, renamed: dict):
+    """A module ``__getattr__`` that gives each old constant name of ``renamed`` (``{old: (new name, value)}``) for one
+    release, with a DeprecationWarning naming the new one."""
+    def __getattr__(name):
+        if name in renamed:
+            new, value = renamed[name]
+            warnings.warn(f"{module}.{name} is deprecated: use {module}.{new}", DeprecationWarning, stacklevel=2)
+            return value
+        raise AttributeError(f"module {module!r} has no attribute {name!r}")
+    return __getattr__

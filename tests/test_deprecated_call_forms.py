@@ -160,3 +160,24 @@ def test_the_collapse_warning_of_a_wrapped_filter_points_at_the_callers_line(whi
             lb.grid_bayes_filter(rss, MODEL, CELLS)
     collapsed = [w for w in caught if "collapsed in 1 of 3 runs" in str(w.message)]
     assert len(collapsed) == 1 and collapsed[0].filename == __file__
+
+
+def test_the_renamed_constants_warn_and_keep_their_values():
+    from locbook.bounds import crlb
+    from locbook.tracking import unscented
+    with pytest.warns(DeprecationWarning, match=r"locbook.bounds.crlb.CRLB_FORMS is deprecated: use "
+                                                r"locbook.bounds.crlb.CRLB_VARIANTS"):
+        assert crlb.CRLB_FORMS == ("correct", "ozkaya_printed")
+    with pytest.warns(DeprecationWarning, match="UKF_WEIGHTS is deprecated"):
+        assert unscented.UKF_WEIGHTS == unscented.UKF_VARIANTS
+    with pytest.raises(AttributeError, match="has no attribute 'CRLB_FORM'"):
+        crlb.CRLB_FORM
+
+
+def test_a_bound_takes_walls_that_attenuate_nothing_as_no_walls():
+    square = np.array([[0.0, 0.0], [8.0, 0.0], [8.0, 6.0], [0.0, 6.0]])
+    channel = lb.PathLossModel(-40.0, 2.2, 3.0)
+    walls = np.array([[[4.0, -1.0], [4.0, 7.0]]])
+    points = np.array([[1.0, 2.0], [6.0, 3.0]])
+    np.testing.assert_array_equal(lb.rss_crlb_m(points, lb.RssModel(square, channel, walls)),
+                                  lb.rss_crlb_m(points, lb.RssModel(square, channel)))

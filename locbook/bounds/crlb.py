@@ -35,7 +35,7 @@ import numpy as np
 
 from ..errors import DegenerateGeometryError, ParameterError
 from .._validate import as_array, check_choice, check_scalar
-from .._deprecation import RENAMED_CRLB_FORMS, check_variant, warn_deprecated
+from .._deprecation import RENAMED_CRLB_FORMS, check_variant, renamed_constants, warn_deprecated
 from ..models.channel import PathLossModel
 from ..models.base import PerStep
 from ..models.rss import RssModel
@@ -46,6 +46,8 @@ __all__ = ["rss_fisher_information", "rss_position_information", "rss_crlb_m", "
 
 #: the bound's forms: the corrected Fisher information (1/d^4) and Ozkaya's printed one (1/d^2, flagged)
 CRLB_VARIANTS = ("corrected", "literal_ozkaya2011")
+#: the old name and spellings (``form=``), one release
+__getattr__ = renamed_constants(__name__, {"CRLB_FORMS": ("CRLB_VARIANTS", tuple(RENAMED_CRLB_FORMS))})
 
 
 def _bound_model(model, who: str = "the bound") -> RssModel:
@@ -56,7 +58,7 @@ def _bound_model(model, who: str = "the bound") -> RssModel:
         hint = " (give it to RssModel(anchors_m, channel, tag_height_m=...))" if isinstance(model, PathLossModel) else ""
         raise ValueError(f"{who} takes model = RssModel(anchors_m, channel) (the anchors and a PathLossModel with the "
                          f"exponent, sigma and clamp), got {got}{hint}")
-    if model.walls_m is not None:
+    if model.walls_m is not None and model.channel.wall_attenuation_db != 0.0:
         raise ValueError(f"{who} cannot honour the model's walls (walls_m): the bound is that of the log-distance mean "
                          "alone; pass dataclasses.replace(model, walls_m=None)")
     ch = model.channel

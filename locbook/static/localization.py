@@ -49,9 +49,7 @@ Without ``tag_height_m`` the anchors' dimension is the position's (2-D or 3-D al
 """
 from __future__ import annotations
 
-import functools
 import inspect
-import warnings
 from dataclasses import dataclass, replace
 from functools import lru_cache
 from itertools import product
@@ -60,6 +58,7 @@ import numpy as np
 
 from .._cvx import cp, solve
 from .._validate import as_array, check_choice, check_scalar
+from .._deprecation import old_form
 from ..models.base import PerStep
 from ..models.channel import PathLossModel, log_distance_mean_dbm, pairwise_distance_m, require_path_loss_model
 from ..models.rss import RssModel, rss_mean_jacobian
@@ -1005,21 +1004,10 @@ def _is_old_form(args, kwargs, leading) -> bool:
 
 
 def _accepts_old_form(old_call):
-    """Decorator of a public function (its signature, the new form, is the one :func:`inspect.signature` shows):
-    ``old_call(args, kwargs)`` is None for a call in the new form, else ``(old, new, call)``: the deprecated form, the
-    one to use (a DeprecationWarning of one line naming it, pointing at the caller) and ``call(function)``, the same
+    """:func:`locbook._deprecation.old_form` of a public function whose ``old_call(args, kwargs)`` is None for a call in
+    the new form, else ``(old, new, run)``: the deprecated form, the one to use, and ``run(function)``, the same
     result."""
-    def decorate(function):
-        @functools.wraps(function)
-        def public(*args, **kwargs):
-            old = old_call(args, kwargs)
-            if old is None:
-                return function(*args, **kwargs)
-            form, use, call = old
-            warnings.warn(f"{form} is deprecated: use {use}", DeprecationWarning, stacklevel=2)
-            return call(function)
-        return public
-    return decorate
+    return old_form(lambda function, args, kwargs: old_call(args, kwargs))
 
 
 def _rss_ml_position_v1(anchors_m, rss_dbm, model, initial_m=None, *, max_iter=None, tol_m=None, min_distance_m=None,

@@ -48,7 +48,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .._validate import check_choice, check_scalar, function_output
-from .._deprecation import old_keyword
+from .._deprecation import old_keyword, renamed_constants
 from ..models.rss import rss_mean_jacobian
 from .._linalg import (_UPDATE_OVERFLOW, _gaussian_log_likelihood, _inv_small, _logdet, _mT, _not_positive_definite,
                       _refuse_not_finite, _Singular, _singular_runs)
@@ -63,6 +63,8 @@ __all__ = ["UKF_VARIANTS", "SIGMA_POINT_SETS", "UnscentedWeights", "unscented_we
 
 #: the weights' forms: corrected (they sum to 1) and Gudipati's printed W_m^0 (Eq. (3.22), flagged)
 UKF_VARIANTS = ("corrected", "literal_gudipati2017")
+#: the old name (``weights=``), one release
+__getattr__ = renamed_constants(__name__, {"UKF_WEIGHTS": ("UKF_VARIANTS", UKF_VARIANTS)})
 #: the sigma-point sets of :func:`unscented_weights`
 SIGMA_POINT_SETS = ("merwe", "julier", "cubature")
 

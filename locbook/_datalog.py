@@ -128,3 +128,16 @@ def install_from_environment() -> None:
         append(log, path, link)
 
     sys.addaudithook(hook)
+
+
+def record_read(path: str, sha256: str) -> None:
+    """Log a file the kernel ran or read that the audit hook does not log (a user method's Python source: the hook
+    skips ``.py`` files, and a command line's file lies under no data root) with the hash of the content used, so
+    that it joins the report's cache record (``run.json`` "data"): editing it reruns the report. A no-op outside
+    ``locbook run`` (no ``LOCBOOK_DATA_LOG``)."""
+    log_path = os.environ.get("LOCBOOK_DATA_LOG")
+    if not log_path:
+        return
+    import json
+    with open(log_path, "a", encoding="utf-8") as fh:       # an append: the hook ignores it
+        fh.write(json.dumps({"path": os.path.realpath(path), "sha256": sha256}) + "\n")

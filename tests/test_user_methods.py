@@ -541,3 +541,23 @@ def test_a_data_run_scores_a_users_methods_in_every_report_and_a_failing_one_fai
     assert "locbook/scenarios" not in boom["traceback"] and "locbook/user_methods" not in boom["traceback"]
     page = (b / "index.md").read_text()
     assert "| boom |" in page and "failed" in page
+    # the code a report ran is in its cache record: unchanged, everything is cached (and the failure said again);
+    # an edit to the command line's file reruns the reports that run its methods, and only those
+    cli = str((tmp_path / "cli.py").resolve())
+    run = json.loads((b / "measured-localization" / "run.json").read_text())
+    assert run["data"][cli] == runner._sha256(Path(cli))
+    assert cli not in json.loads((b / "measured-tracking" / "run.json").read_text())["data"]
+    again = [*base, "--reports", str(tmp_path / "b"), "--method", "centroid=cli.py:weighted_centroid",
+             "--method", "boom=cli.py:boom"]
+    assert main(again) == 1
+    out, err = capsys.readouterr()
+    assert "done: 0 executed, 4 cached, 0 failed" in out and "user method 'boom' (static, " in err
+    with open(tmp_path / "cli.py", "a") as fh:
+        fh.write("\n# edited\n")
+    assert main(again) == 1
+    out = capsys.readouterr().out
+    assert "done: 2 executed, 2 cached, 0 failed" in out
+    status = json.loads((b / "status.json").read_text())
+    assert {k: v["status"] for k, v in status.items()} == {
+        "measured-calibration": "cached", "measured-localization": "ok", "measured-tracking": "cached",
+        "benchmark-cross-document": "ok"}

@@ -671,9 +671,14 @@ def run_suite(suite: Suite, experiments: list[Experiment], profile: str, *, jobs
         progress = make_progress(progress)
     for eid, why in left_out.items():
         progress.message(f"{eid}: left out: {why}")
-    if trackers and not ds.has_role("track"):
-        progress.message(f"--tracker {', '.join(m.name for m in trackers)}: the data set has no track recording, so "
-                         "no report runs it")
+    for flag, name, mine in (("--method", "methods", methods), ("--tracker", "trackers", trackers)):
+        takers = [e.id for e in experiments if name in e.declared_parameters()]
+        if mine and not takers:
+            progress.message(f"{flag} {', '.join(m.name for m in mine)}: no experiment of this run takes it "
+                             f"(those that do: {', '.join(e.id for e in suite.experiments if name in e.declared_parameters())})")
+        elif mine and name == "trackers" and not ds.has_role("track"):
+            progress.message(f"--tracker {', '.join(m.name for m in mine)}: the data set has no track recording, so "
+                             "no report runs it")
     run = run_tasks(suite, tasks, profile, report_dir, jobs=jobs, force=force, timeout_s=timeout_s,
                     retries=retries, kernel_name=kernel_name, progress=progress, executor=executor,
                     scheduler=scheduler, data_roots=data_roots,

@@ -259,7 +259,8 @@ def method_name_problem(name) -> str:
     if name.lower() in battery:
         return (f"method name {name!r} is a battery method's ({', '.join(battery)}): give yours another name")
     if name.lower() in RESERVED_METHOD_NAMES:
-        return f"method name {name!r} is reserved (the reports use {', '.join(RESERVED_METHOD_NAMES)}): give yours another"
+        return (f"method name {name!r} is reserved (the reports use {', '.join(RESERVED_METHOD_NAMES)}): give yours "
+                "another")
     return ""
 
 
@@ -369,7 +370,8 @@ def check_output(name: str, output, n_epochs: int) -> tuple[np.ndarray, np.ndarr
         bad = fixed & ~np.isfinite(c).all(axis=(1, 2))
         if bad.any():
             i = int(np.flatnonzero(bad)[0])
-            raise MethodOutputError(f"{head} a non-finite covariance at epoch {i} ({c[i].tolist()}), where it gives a fix")
+            raise MethodOutputError(f"{head} a non-finite covariance at epoch {i} ({c[i].tolist()}), where it "
+                                    "gives a fix")
         if fixed.any():
             cf = c[fixed]
             scale = np.maximum(np.abs(cf).max(axis=(1, 2)), 1e-300)

@@ -738,10 +738,10 @@ def user_method_rows(*results) -> list[dict]:
 
 def user_settings_rows(methods, kind: str | None = None) -> list[dict]:
     """The settings table's rows of the user methods (of ``kind``, default every one): ``user method <spec>``."""
+    sees = {"static": "static: every scored epoch on its own", "tracker": "tracker: each track in time order"}
     return [{"method": m.name, "setting": "function", "value": m.described,
              "how": ("the manifest's [[method]] table" if m.source == "manifest" else
-                     f"{'--method' if m.kind == 'static' else '--tracker'} on the command line")
-                    + f" ({'static: every scored epoch on its own' if m.kind == 'static' else 'tracker: each track in time order'})"}
+                     f"{'--method' if m.kind == 'static' else '--tracker'} on the command line") + f" ({sees[m.kind]})"}
             for m in methods if kind is None or m.kind == kind]
 
 

@@ -674,8 +674,9 @@ def run_suite(suite: Suite, experiments: list[Experiment], profile: str, *, jobs
     for flag, name, mine in (("--method", "methods", methods), ("--tracker", "trackers", trackers)):
         takers = [e.id for e in experiments if name in e.declared_parameters()]
         if mine and not takers:
-            progress.message(f"{flag} {', '.join(m.name for m in mine)}: no experiment of this run takes it "
-                             f"(those that do: {', '.join(e.id for e in suite.experiments if name in e.declared_parameters())})")
+            every = [e.id for e in suite.experiments if name in e.declared_parameters()]
+            progress.message(f"{flag} {', '.join(m.name for m in mine)}: no experiment of this run takes it (those "
+                             f"that do: {', '.join(every)})")
         elif mine and name == "trackers" and not ds.has_role("track"):
             progress.message(f"--tracker {', '.join(m.name for m in mine)}: the data set has no track recording, so "
                              "no report runs it")

@@ -3,7 +3,8 @@
 The public API is the table ``_API`` below (role, home module, names), listed in docs/architecture.md under "Public API": the
 channel and the one RSS measurement model; calibration and static localization; motion models, trajectories and
 inertial sensors; the Kalman family, particle and grid filters; bounds, metrics and Monte-Carlo helpers; measured
-data and floor geometry; errors; and the reproduction layer (:class:`Report`, :func:`printed`, :class:`Ambiguity`).
+data, methods of your own beside the battery (:class:`MethodInput`) and floor geometry; errors; and the reproduction
+layer (:class:`Report`, :func:`printed`, :class:`Ambiguity`).
 """
 __version__ = "0.1.0"
 
@@ -72,6 +73,7 @@ _API = (
         "regular_epochs", "scan_interval_s")),
     ("measured data", "data.dataset", ("Dataset", "Recording", "load_dataset", "shipped_datasets",
         "dataset_summary")),
+    ("methods of your own", "user_methods", ("MethodInput", "UserMethod")),
     ("floor geometry", "geometry", ("inside_outline", "grid_in_outline", "outline_box", "box_outline",
         "distance_to_segments")),
     ("errors", "errors", ("LocbookError", "ParameterError", "DegenerateGeometryError", "ConvergenceError",

@@ -16,7 +16,9 @@ differs); the runner also reads the plain path lines of an older locbook. The ha
 own open (the audit event precedes it), through an ``open`` the hook ignores (its thread is marked busy), so an edit
 after it is seen as a change. A cached report is reused only while every file it read is unchanged.
 
-The hook sees every read (``open``, numpy, pandas, csv alike), so no data access has to remember to register itself.
+The hook sees every read (``open``, numpy, pandas, csv alike), so no data access has to remember to register itself;
+the one exception is a method of your own (:mod:`locbook.user_methods`): its Python source is code the hook skips and
+may lie under no data root, so its loader logs the file with the hash of the bytes it ran (:func:`record_read`).
 Files under ``__pycache__`` (byte code, numba's caches) are build artefacts, not data. Outside ``locbook run`` nothing is installed.
 
 With ``LOCBOOK_MODULE_LOG`` (a file) the hook also logs the source of every locbook module the kernel imports (the
@@ -128,3 +130,16 @@ def install_from_environment() -> None:
         append(log, path, link)
 
     sys.addaudithook(hook)
+
+
+def record_read(path: str, sha256: str) -> None:
+    """Log a file the kernel ran or read that the audit hook does not log (a user method's Python source: the hook
+    skips ``.py`` files, and a command line's file lies under no data root) with the hash of the content used, so
+    that it joins the report's cache record (``run.json`` "data"): editing it reruns the report. A no-op outside
+    ``locbook run`` (no ``LOCBOOK_DATA_LOG``)."""
+    log_path = os.environ.get("LOCBOOK_DATA_LOG")
+    if not log_path:
+        return
+    import json
+    with open(log_path, "a", encoding="utf-8") as fh:       # an append: the hook ignores it
+        fh.write(json.dumps({"path": os.path.realpath(path), "sha256": sha256}) + "\n")

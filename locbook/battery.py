@@ -124,6 +124,8 @@ class TrackingScenario(_AnchorReadings):
     #: measured data: the state every tracker starts from ``[x, y, vx, vy]`` (the first ``rss_ml`` fix, at rest),
     #: with the settings' P_0; None (synthetic): the true initial state plus a draw of ``N(0, P_0)`` per run
     start_state: np.ndarray | None = None
+    #: measured data: the time of every tick ``(T,)`` (s; the first epoch's time plus ``k dt_s``); None (synthetic)
+    time_s: np.ndarray | None = None
 
     @property
     def scored_steps(self) -> np.ndarray:

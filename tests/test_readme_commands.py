@@ -1,7 +1,8 @@
 """Issue 32: every command README.md shows is executed here, in the order written, as a user of a clone would type it
 (the reports in a temporary folder instead of the clone's `reports/`), and must succeed. The install line and the
 test commands are what `.ci/run` itself runs (checked to be there); `jupyter lab` opens a server, so its notebook is
-checked to exist and JupyterLab to be installed. README's Python block runs as written."""
+checked to exist and JupyterLab to be installed. README's Python blocks run as written, and a block a command's
+``--method NAME=FILE.py:function`` names is saved to that file first."""
 import importlib.util
 import re
 import shlex
@@ -50,10 +51,24 @@ def test_readme_shows_commands_of_every_kind():
     assert "python -m pytest -q" in commands
 
 
+def _method_files(commands: list[str]) -> dict[str, str]:
+    """The files README's ``--method`` / ``--tracker`` options name (``NAME=FILE.py:function``), each the Python block
+    that defines its function: written where the commands run, as a reader would save it."""
+    files = {}
+    for command in commands:
+        for file, function in re.findall(r"--(?:method|tracker)\s+\S+?=(\S+\.py):(\w+)", command):
+            block = next((b for b in _blocks("python") if f"def {function}(" in b), None)
+            assert block is not None, f"README's {command!r} names {function}, which no Python block defines"
+            files[file] = block
+    return files
+
+
 def test_every_readme_command_runs(clone, tmp_path):
     ci = (REPO / ".ci" / "run").read_text()
     reports = tmp_path / "reports"
     ran = []
+    for file, block in _method_files(_commands()).items():
+        (tmp_path / file).write_text(block, encoding="utf-8")
     for command in _commands():
         args = shlex.split(command)
         if args[0] in ("python3", "python") and args[1:3] == ["-m", "venv"] or args[0] == ".":

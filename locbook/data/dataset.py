@@ -50,6 +50,14 @@ The manifest (every key below; ``[units]`` describes the files, every other valu
                                         # distinct time is an epoch; a track's clock is then the median spacing of
                                         # its scan times, Dataset.scan_interval_s). A track needs at least 2 epochs
 
+    [[method]]                          # optional, one per method of your own run beside the battery's
+    name = "centroid"                   # its name in every table and figure: letters, digits, '_' and '-', from a
+                                        # letter, at most 64 characters; no battery method's (lls, ..., grid_bayes)
+    function = "methods.py:centroid"    # package.module:function (importable), or path/to/file.py:function: a
+                                        # file relative to this folder, inside it (as every file the manifest names)
+    kind = "static"                     # static (each scored epoch on its own) | tracker (each track in time
+                                        # order); the signature: locbook.MethodInput
+
 A data set needs at least one calibration recording; static and track recordings are optional (a calibration-only
 data set fits the channel and localizes nothing: the notes say so). Anchors without z make a 2-D data set
 (:attr:`Dataset.dimension` 2, :attr:`Dataset.anchors_m` ``(m, 2)``, :attr:`Dataset.tag_height_m` None); with z,
@@ -62,7 +70,9 @@ folder: a link out of it is refused before any byte is read, naming the link and
 (static, or a track with truth) that reads the same file as a calibration recording (the same target or the same
 bytes) loads with a note ("in-sample scoring") in :attr:`Dataset.notes`, which ``locbook data check`` prints and
 every report lists. Every failure raises :class:`~locbook.data.measured.DataFormatError` naming the manifest (and
-key) or the file, line and column; a manifest is UTF-8 and at most :data:`MAX_MANIFEST_BYTES`.
+key) or the file, line and column; a manifest is UTF-8 and at most :data:`MAX_MANIFEST_BYTES`. A ``[[method]]``
+runs its code whenever the data set is run (``locbook run --data``) or checked (``locbook data check`` imports it):
+register only code you trust, and run only data sets whose methods you have read (:mod:`locbook.user_methods`).
 """
 from __future__ import annotations
 
@@ -112,12 +122,13 @@ MAX_TAG_HEIGHT_OFFSET_M = 100.0
 MAX_MANIFEST_BYTES = 1 << 20
 
 _TOP = {"name", "title", "license", "license_file", "attribution", "changes", "units", "readings", "geometry",
-        "epochs", "recording"}
+        "epochs", "recording", "method"}
 _SECTIONS = {"units": {"time", "length", "rssi"},
              "readings": {"valid_range_dbm", "invalid_values_dbm", "backward_time"},
              "geometry": {"anchors", "outline", "tag_height_m"},
              "epochs": {"window_s", "aggregate", "min_readings"}}
 _RECORDING_KEYS = {"name", "file", "role", "point_column", "reference_path", "window_s"}
+_METHOD_KEYS = {"name", "function", "kind"}
 
 
 def datasets_dir() -> Path:
@@ -193,6 +204,8 @@ class Dataset:
     files: tuple[Path, ...] = ()
     #: where the tag height came from: "manifest" ([geometry] tag_height_m), "median of the true z", or "" (2-D)
     tag_height_source: str = ""
+    #: the manifest's methods of your own (``[[method]]``, :class:`locbook.user_methods.UserMethod`), in its order
+    methods: tuple = ()
     _cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     @property
@@ -606,13 +619,15 @@ def load_dataset(path) -> Dataset:
     elif not any(r.role == "static" or (r.role == "track" and r.has_truth) for r in recordings.values()):
         notes["scoring"] = ("no static or track recording has a true position per epoch: the static methods are "
                             "not scored (tracks with a reference path are scored by their distance to it)")
+    methods = _methods(manifest, root, raw.get("method", []))
     files = [manifest, root / _string(manifest, geometry, "anchors", "[geometry] ")]
     files += [root / geometry["outline"]] if "outline" in geometry else []
     files += [license_file] if license_file else []
     for rec in records:
         files += [recordings[rec["name"]].file] + ([root / rec["reference_path"]] if "reference_path" in rec else [])
+    files += [m.path for m in methods if m.path is not None]
     data = Dataset(name, title, root, license_, attribution, anchors, outline, tag_height, recordings, changes,
-                   license_file, notes, tuple(files), height_source)
+                   license_file, notes, tuple(files), height_source, methods=methods)
     for rname, rec in recordings.items():    # every recording's epochs now: a problem is named with its file
         try:
             data.epochs(rname)
@@ -621,6 +636,44 @@ def load_dataset(path) -> Dataset:
         _check_epochs_kept(manifest, data, rname)
     _device_notes(data)
     return data
+
+
+def _methods(manifest: Path, root: Path, raw) -> tuple:
+    """The ``[[method]]`` tables: each with ``name``, ``function`` and ``kind`` (no other key), checked as the
+    command line's are (:meth:`locbook.user_methods.UserMethod.parse`; a file through :func:`_file`: relative, inside
+    the folder), no name twice. Nothing is imported here: ``locbook data check`` says whether each imports."""
+    from ..user_methods import METHOD_KINDS, UserMethod
+    if not isinstance(raw, list):
+        _fail(manifest, "[[method]] must be an array of tables ([[method]] with name, function and kind)")
+    out, seen = [], {}
+    for i, rec in enumerate(raw):
+        where = f"[[method]] {i + 1}: "
+        if not isinstance(rec, dict):
+            _fail(manifest, f"{where}must be a table")
+        name = rec.get("name")
+        if isinstance(name, str) and name.strip():
+            where = f"[[method]] {_shown(name.strip())}: "
+        _unknown_keys(manifest, rec, _METHOD_KEYS, where)
+        for key in ("name", "function", "kind"):
+            value = rec.get(key)
+            if not isinstance(value, str) or not value.strip():
+                _fail(manifest, f"{where}{key!r} is required, a non-empty string" if value is None else
+                      f"{where}{key!r} must be a non-empty string, got {_shown(value)}")
+        kind, function = rec["kind"].strip(), rec["function"].strip()
+        if kind not in METHOD_KINDS:
+            _fail(manifest, f"{where}kind must be one of {METHOD_KINDS}, got {_shown(kind)}")
+        target = function.rpartition(":")[0]
+        if target.endswith(".py"):
+            _file(manifest, root, target, f"{where}function: ")
+        try:
+            method = UserMethod.parse(rec["name"].strip(), function, kind, base=root, source="manifest")
+        except ParameterError as exc:
+            _fail(manifest, f"{where}{exc}")
+        if method.name.lower() in seen:
+            _fail(manifest, f"{where}the name appears twice")
+        seen[method.name.lower()] = method
+        out.append(method)
+    return tuple(out)
 
 
 def _device_notes(data: Dataset) -> None:

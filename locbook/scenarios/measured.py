@@ -51,6 +51,7 @@ from ..models.rss import RssModel
 from ..montecarlo import seed_from_values
 from ..static.calibration import PathLossFit, calibrate_path_loss, fix_error_covariance
 from ..static.fingerprint import knn_position
+from ..user_methods import MethodFailure, MethodInput, UserMethod, frozen, registered_methods, run_method
 
 __all__ = ["PATH_LOSS_EXP_BOUNDS", "REF_POWER_BOUNDS_DBM", "HUBER_DELTA_DB", "NEAR_FIELD_M", "STATIC_METHODS",
            "TRACKERS", "GRID_SPACING_M", "MAX_GRID_CELLS", "KNN_CANDIDATES", "KNN_CV_CELL_M", "Q_START",
@@ -60,7 +61,9 @@ __all__ = ["PATH_LOSS_EXP_BOUNDS", "REF_POWER_BOUNDS_DBM", "HUBER_DELTA_DB", "NE
            "tracking_scenario", "static_results", "tracking_results", "RESULT_COLUMNS", "result_row",
            "bayes_measurement_model", "fix_covariance_from_calibration", "outside_fraction",
            "calibration_block_bootstrap", "record_dataset", "geometry_text", "measured_static_scenario",
-           "measured_tracking_scenario", "benchmark_rows", "device_offsets_db", "device_corrected", "keyed_stream", "POOLED"]
+           "measured_tracking_scenario", "benchmark_rows", "device_offsets_db", "device_corrected", "keyed_stream", "POOLED",
+           "FAILURE_COLUMN", "USER_PRIOR", "user_methods", "method_input", "failed_row", "user_method_rows",
+           "user_settings_rows", "scored_methods"]
 
 #: bounded fit: exponents and 1-m powers a radio link can physically have (free space n = 2; indoor 1.5-6,
 #: Rappaport, Wireless Communications, Table 4.2); wide enough never to bind on data that follow the model
@@ -586,7 +589,7 @@ def tracking_scenario(data: Dataset, model: PathLossModel, recording: str, *, gr
          ProtocolChoice("path", f"the track {recording!r} on a {dt:g} s clock ({int(scored.sum())} epochs with truth)",
                         "the data set")),
         tag_height_m=data.tag_height_m, measured_rss_dbm=reg.rss_dbm, scored=scored,
-        fix_cov_m2=fix_cov_m2, start_state=start)
+        fix_cov_m2=fix_cov_m2, start_state=start, time_s=reg.time_s)
 
 
 # ----------------------------------------------------------------------------------------------------- results
@@ -602,6 +605,15 @@ RESULT_COLUMNS = ("kind", "recording", "method", "settings", "epochs", "runs", "
 _NO_PRIOR = ("below the bound without a prior: the bound holds for unbiased estimators and for readings that follow "
              "the fitted model; a biased estimator (pulled toward the anchors' centre) or readings less noisy than "
              "the fitted sigma can beat it")
+#: a row of a user method that gave no positions (it raised, or returned what
+#: :func:`locbook.user_methods.check_output` refuses) says why in this column, after :data:`RESULT_COLUMNS`; the
+#: column is there only in a run with user methods ("" on every row that ran), so a run without one writes the
+#: columns it always did
+FAILURE_COLUMN = "failure"
+#: why a user method may fall below the bound (the ratio note of a ratio below 1): locbook cannot know its prior
+USER_PRIOR = ("a user method: the bound holds for unbiased estimators that know only the readings and the fitted "
+              "channel; whatever else the method uses (the floor, a map, a motion model, a bias toward the room's "
+              "centre) can take it below")
 
 
 def _r(v):
@@ -649,6 +661,90 @@ def result_row(kind: str, recording: str, method: str, errors_m, bound_m, reason
     return {k: row[k] for k in RESULT_COLUMNS}
 
 
+def failed_row(kind: str, recording: str, method: str, n_epochs: int, bound_m, reason, *, settings: str,
+               bound_name: str, failure: str) -> dict:
+    """The row of :data:`RESULT_COLUMNS` of a user method that failed (:class:`locbook.user_methods.MethodFailure`):
+    no statistic, the bound's summary as every other method's row has it, and its one-line error in
+    :data:`FAILURE_COLUMN`."""
+    summary = summarize_bound(bound_m, reason)
+    row = {c: None for c in RESULT_COLUMNS}
+    row.update(kind=kind, recording=recording, method=method, settings=settings, epochs=int(n_epochs), runs=0,
+               interval="", interval_note="", bound=bound_name, ratio_note="",
+               **{k: (_r(v) if isinstance(v, float) else v) for k, v in summary.row().items() if k in row})
+    return {**{k: row[k] for k in RESULT_COLUMNS}, FAILURE_COLUMN: f"failed: {failure}"}
+
+
+def user_methods(data: Dataset, *, methods=(), trackers=()) -> tuple[UserMethod, ...]:
+    """The user methods of a run on ``data``: its manifest's ``[[method]]`` tables, then the command line's static
+    ``methods`` and ``trackers`` (``NAME=SPEC``; :func:`locbook.user_methods.registered_methods`)."""
+    return registered_methods(data, methods=methods, trackers=trackers)
+
+
+def method_input(data: Dataset, model: PathLossModel, recording: str, rss_dbm, time_s,
+                 rng: np.random.Generator | None) -> MethodInput:
+    """What a user method is called with on one recording's epochs (:class:`locbook.MethodInput`): read-only
+    copies of the readings, times, anchors and outline, and a copy of the fitted channel with the one
+    :class:`RssModel` built from it, so that no method can change what the next one sees."""
+    from copy import deepcopy
+    channel_copy = deepcopy(model)
+    return MethodInput(frozen(rss_dbm), frozen(time_s), recording, data.recording(recording).role, data.tag_height_m,
+                       frozen(data.anchors_m), channel_copy,
+                       RssModel(frozen(data.anchors_m), channel_copy, tag_height_m=data.tag_height_m),
+                       frozen(data.outline_m), rng)
+
+
+def _run_user(methods, kind: str, inputs_of) -> tuple[dict, dict, dict]:
+    """``(positions {method: {recording: (E, 2)}}, covariances {method: {recording: (E, 2, 2) or None}},
+    failures {method: MethodFailure})`` of the user methods of ``kind``; ``inputs_of(method)`` gives its
+    ``{recording: MethodInput}``."""
+    positions, covariances, failures = {}, {}, {}
+    for m in methods:
+        if m.kind != kind:
+            continue
+        got = run_method(m, inputs_of(m))
+        if isinstance(got, MethodFailure):
+            failures[m.name] = got
+            continue
+        positions[m.name] = {n: v[0] for n, v in got.items()}
+        covariances[m.name] = {n: v[1] for n, v in got.items()}
+    return positions, covariances, failures
+
+
+def scored_methods(res: dict | None) -> list[str]:
+    """The methods of a :func:`static_results` or :func:`tracking_results` that gave positions, in table order:
+    the battery's, then the user methods that ran (a failed one has rows, no figure)."""
+    if res is None:
+        return []
+    return [*res["battery"], *(m.name for m in res["user"] if m.name not in res["failures"])]
+
+
+def user_method_rows(*results) -> list[dict]:
+    """One row per user method of the ``results`` (:func:`static_results`, :func:`tracking_results`; None skipped):
+    name, kind, function (``user method <spec>``), where it was registered, ``ok`` or ``failed``, its one-line
+    error and its own traceback. The table the command line reads to say which user method failed."""
+    rows = []
+    for res in results:
+        if res is None:
+            continue
+        for m in res["user"]:
+            f = res["failures"].get(m.name)
+            rows.append({"method": m.name, "kind": m.kind, "function": res["described"][m.name],
+                         "registered": "[[method]] of the manifest" if m.source == "manifest" else
+                         ("--method" if m.kind == "static" else "--tracker") + " on the command line",
+                         "status": "failed" if f else "ok", "recording": f.recording if f else "",
+                         "error": f.error if f else "", "traceback": f.traceback if f else ""})
+    return rows
+
+
+def user_settings_rows(methods, kind: str | None = None) -> list[dict]:
+    """The settings table's rows of the user methods (of ``kind``, default every one): ``user method <spec>``."""
+    sees = {"static": "static: every scored epoch on its own", "tracker": "tracker: each track in time order"}
+    return [{"method": m.name, "setting": "function", "value": m.described,
+             "how": ("the manifest's [[method]] table" if m.source == "manifest" else
+                     f"{'--method' if m.kind == 'static' else '--tracker'} on the command line") + f" ({sees[m.kind]})"}
+            for m in methods if kind is None or m.kind == kind]
+
+
 def _static_settings(name: str, proto: Protocol) -> str:
     extra = {"knn": f"k = {proto.knn_k} (calibration map)", "grid_ml": f"pitch {proto.grid_spacing_m:g} m",
              "grid_mmse": f"pitch {proto.grid_spacing_m:g} m",
@@ -658,11 +754,19 @@ def _static_settings(name: str, proto: Protocol) -> str:
 
 
 def static_results(data: Dataset, model: PathLossModel, proto: Protocol, *, seed: int, n_bootstrap: int,
-                   block_s: float) -> dict | None:
+                   block_s: float, user_methods=()) -> dict | None:
     """Every static method on every scored recording (one problem: each epoch is located on its own), scored per
     recording and pooled (:func:`result_row`; the CRLB from the anchors each epoch heard). None when nothing is
     scored. Returns ``{"recordings", "tests", "fixes", "errors", "bounds", "rows"}`` (per recording: fixes and errors
-    ``{method: (E, 2) / (E,)}``, bounds ``(bound, reason)``)."""
+    ``{method: (E, 2) / (E,)}``, bounds ``(bound, reason)``).
+
+    ``user_methods``: :class:`locbook.user_methods.UserMethod` (its static ones run; a tracker is left to
+    :func:`tracking_results`), each called once per scored recording (:func:`method_input`) after the battery and
+    scored the same way, its rows after the battery's in each group and its bootstrap stream keyed by its name, so
+    no battery number changes. One that fails has rows saying so (:func:`failed_row`) and no fixes. The result also
+    holds ``"battery"`` (the battery's names), ``"user"`` (the static user methods), ``"described"`` (``user method
+    <spec>`` of each), ``"covariances"`` (``{recording: {method: (E, 2, 2) or None}}``) and ``"failures"``
+    (``{method: MethodFailure}``)."""
     names = scored_recordings(data)
     sc = static_scenario(data, model, names, grid_spacing_m=proto.grid_spacing_m, fit=proto.fit)
     if sc is None:
@@ -676,23 +780,40 @@ def static_results(data: Dataset, model: PathLossModel, proto: Protocol, *, seed
         fixes[n] = {k: v[0, cuts[i]:cuts[i + 1]] for k, v in pooled.items()}
         errors[n] = {k: np.linalg.norm(v - tests[n].truth_m, axis=-1) for k, v in fixes[n].items()}
         bounds[n] = tuple(v[cuts[i]:cuts[i + 1]] for v in pooled_bound)
+    user = tuple(m for m in user_methods if m.kind == "static")
+    described = {m.name: m.described for m in user}
+    got, covariances, failures = _run_user(user, "static", lambda m: {
+        n: method_input(data, model, n, tests[n].rss_dbm, tests[n].time_s,
+                        keyed_stream(seed, data.name, "user", "static", n, m.name)) for n in names})
+    for name, per_recording in got.items():
+        for n in names:
+            fixes[n][name] = per_recording[n]
+            errors[n][name] = np.linalg.norm(per_recording[n] - tests[n].truth_m, axis=-1)
+    bound_name = "CRLB (fitted channel, anchors heard)"
     groups = [(POOLED, names)] + [(n, [n]) for n in names]
     for label, members in groups:
         # the largest member's block: a pooled row is never resampled in finer units than one of its recordings
         block = max(_block(tests[n].time_s, block_s, tests[n].point) for n in members)
         bound = np.concatenate([bounds[n][0] for n in members])
         reason = np.concatenate([bounds[n][1] for n in members])
-        for method in pooled:
+        for method in [*pooled, *described]:
+            if method in failures:
+                rows.append(failed_row("static", label, method, len(bound), bound, reason,
+                                       settings=described[method], bound_name=bound_name,
+                                       failure=failures[method].error))
+                continue
             e = np.concatenate([errors[n][method] for n in members])
             f = np.concatenate([fixes[n][method] for n in members])
-            rows.append(result_row("static", label, method, e, bound, reason,
-                                   keyed_stream(seed, data.name, "static", members[0] if len(members) == 1 else label,
-                                                method), n_bootstrap=n_bootstrap,
-                                   block=block, settings=_static_settings(method, proto),
-                                   prior=BATTERY_STATIC[method].prior, bound_name="CRLB (fitted channel, anchors heard)",
-                                   outside=outside_fraction(data, f)))
+            row = result_row("static", label, method, e, bound, reason,
+                             keyed_stream(seed, data.name, "static", members[0] if len(members) == 1 else label,
+                                          method), n_bootstrap=n_bootstrap,
+                             block=block, settings=described.get(method) or _static_settings(method, proto),
+                             prior=BATTERY_STATIC[method].prior if method in BATTERY_STATIC else USER_PRIOR,
+                             bound_name=bound_name, outside=outside_fraction(data, f))
+            rows.append(row if method in BATTERY_STATIC else {**row, FAILURE_COLUMN: ""})
     return {"recordings": names, "tests": tests, "fixes": fixes, "errors": errors, "bounds": bounds, "rows": rows,
-            "scenario": sc}
+            "scenario": sc, "battery": list(pooled), "user": user, "described": described, "failures": failures,
+            "covariances": {n: {k: v[n] for k, v in covariances.items()} for n in names}}
 
 
 _KALMAN = ("kf_on_ml", "ekf", "ekf_serial", "ukf")
@@ -700,13 +821,18 @@ _KALMAN = ("kf_on_ml", "ekf", "ekf_serial", "ukf")
 
 def tracking_results(data: Dataset, model: PathLossModel, proto: Protocol, *, seed: int, n_particles: int,
                      particle_runs: int, n_bootstrap: int, block_s: float, ukf_alpha: float = 0.5,
-                     recordings=None) -> dict | None:
+                     recordings=None, user_methods=()) -> dict | None:
     """Every tracker on every track (:func:`tracking_scenario`, the motion of :class:`Protocol`), scored per track
     with a true position and pooled over them (:func:`result_row`; the posterior CRLB of the constant-velocity model
     at the track's fitted ``q`` from the trackers' start). The Kalman-family trackers and grid Bayes are
     deterministic (one run); the particle filter runs ``particle_runs`` times on independent streams and is scored
     over all its runs. ``recordings``: the tracks to run (default every one). None without a track. Returns ``{"tracks": {name: (scenario, {tracker: (R, T, 2)}, flags,
-    bound (T,))}, "rows"}``."""
+    bound (T,))}, "rows"}``.
+
+    ``user_methods``: as for :func:`static_results`; its trackers run once on each track (every tick of its clock,
+    in time order: :func:`method_input`), one run, no NIS guard, after the battery, with the same bound and rows
+    (``"battery"``, ``"user"``, ``"described"``, ``"covariances"`` ``{track: {tracker: (T, 2, 2) or None}}`` and
+    ``"failures"`` as there)."""
     names = data.recordings_with("track") if recordings is None else list(recordings)
     if not names:
         return None
@@ -735,24 +861,44 @@ def tracking_results(data: Dataset, model: PathLossModel, proto: Protocol, *, se
                                     for t, v in est.items()},
                          "est": {t: v[:, steps] for t, v in est.items()},
                          "knobs": _tracker_knobs(proto, name, ts, sc)}
+    user = tuple(m for m in user_methods if m.kind == "tracker")
+    described = {m.name: m.described for m in user}
+    got, covariances, failures = _run_user(user, "tracker", lambda m: {
+        n: method_input(data, model, n, out[n][0].measured_rss_dbm, out[n][0].time_s,
+                        keyed_stream(seed, data.name, "user", "tracking", n, m.name)) for n in names})
+    for tracker, per_track in got.items():
+        for n in names:
+            out[n][1][tracker] = per_track[n][None]           # one run: (1, T, 2), as every tracker's (R, T, 2)
+            if n in per:
+                steps = per[n]["steps"]
+                per[n]["errors"][tracker] = np.linalg.norm(per_track[n][None][:, steps] - out[n][0].truth_m[steps],
+                                                           axis=-1).T
+                per[n]["est"][tracker] = per_track[n][None][:, steps]
     rows = []
+    bound_name = "PCRLB (constant velocity at the fitted q, from the trackers' start)"
     groups = ([(POOLED, list(per))] if per else []) + [(n, [n]) for n in per]
     for label, members in groups:
         block = max(per[n]["block"] for n in members)
         bound = np.concatenate([per[n]["bound"] for n in members])
-        for tracker in TRACKERS:
+        for tracker in [*TRACKERS, *described]:
+            if tracker in failures:
+                rows.append(failed_row("tracking", label, tracker, len(bound), bound, None,
+                                       settings=described[tracker], bound_name=bound_name,
+                                       failure=failures[tracker].error))
+                continue
             e = np.concatenate([per[n]["errors"][tracker] for n in members])
-            settings = per[members[0]]["knobs"][tracker] if len(members) == 1 else \
-                "motion per track (see each track's row)"
-            rows.append(result_row("tracking", label, tracker, e, bound, None,
-                                   keyed_stream(seed, data.name, "tracking", members[0] if len(members) == 1 else label,
-                                                tracker, "bootstrap"),
-                                   n_bootstrap=n_bootstrap, block=block, settings=settings,
-                                   prior=TRACKER_PRIORS[tracker],
-                                   bound_name="PCRLB (constant velocity at the fitted q, from the trackers' start)",
-                                   outside=outside_fraction(data, np.concatenate([per[n]["est"][tracker].reshape(-1, 2)
-                                                                                  for n in members]))))
-    return {"tracks": out, "rows": rows}
+            settings = described.get(tracker) or (per[members[0]]["knobs"][tracker] if len(members) == 1 else
+                                                  "motion per track (see each track's row)")
+            row = result_row("tracking", label, tracker, e, bound, None,
+                             keyed_stream(seed, data.name, "tracking", members[0] if len(members) == 1 else label,
+                                          tracker, "bootstrap"),
+                             n_bootstrap=n_bootstrap, block=block, settings=settings,
+                             prior=TRACKER_PRIORS.get(tracker, USER_PRIOR), bound_name=bound_name,
+                             outside=outside_fraction(data, np.concatenate([per[n]["est"][tracker].reshape(-1, 2)
+                                                                            for n in members])))
+            rows.append(row if tracker in TRACKER_PRIORS else {**row, FAILURE_COLUMN: ""})
+    return {"tracks": out, "rows": rows, "battery": list(TRACKERS), "user": user, "described": described,
+            "failures": failures, "covariances": {n: {k: v[n] for k, v in covariances.items()} for n in names}}
 
 
 def _tracker_knobs(proto: Protocol, name: str, ts: TrackerSettings, sc: TrackingScenario) -> dict:
@@ -785,7 +931,8 @@ def benchmark_rows(data: Dataset, static: dict | None, tracking: dict | None) ->
                          "missing": _r(1.0 - r["coverage"]) if r["coverage"] is not None else None,
                          "bound_rms_m": r["bound_rms_m"], "bound_median_m": r["bound_median_m"],
                          "bound_excluded": r["bound_excluded"], "ratio": r["ratio"], "ratio_note": r["ratio_note"],
-                         "bound": "CRLB" if kind == "static" else "PCRLB", "settings": r["settings"]})
+                         "bound": "CRLB" if kind == "static" else "PCRLB", "settings": r["settings"],
+                         **({FAILURE_COLUMN: r[FAILURE_COLUMN]} if FAILURE_COLUMN in r else {})})
     return rows
 
 

@@ -1,9 +1,11 @@
 """``locbook`` command line: list the experiments, run the notebook suite, run a study or a reading bracket.
 
 Exit status of ``run``, ``study`` and ``bracket`` (docs/running.md, "Interrupts, concurrent runs and the cache"): 0 all
-good; 1 some experiment failed (or the Dask scheduler was lost); 2 bad input (parameters, experiment list, notebook file,
-unwritable folder); 3 no space left on the device (or quota) holding the reports: the run stopped, the path is
-named, earlier reports are kept; 130 / 143 interrupted by SIGINT / SIGTERM (finished reports are kept).
+good; 1 some experiment failed (or the Dask scheduler was lost), or a method of your own (``--method``, ``--tracker``, a
+data set's ``[[method]]``) failed in a report that is otherwise complete; 2 bad input (parameters, experiment list,
+notebook file, unwritable folder, a method's name or spec); 3 no space left on the device (or quota) holding the
+reports: the run stopped, the path is named, earlier reports are kept; 130 / 143 interrupted by SIGINT / SIGTERM
+(finished reports are kept). ``data check`` exits 1 when a registered method does not import.
 """
 from __future__ import annotations
 
@@ -74,6 +76,35 @@ def _print_summary(run, progress: str = "plain", see: Path | None = None, rebuil
         print(f"  {rebuilt}", file=sys.stderr)
 
 
+METHOD_HELP = ("a static method of your own beside the battery's (repeatable): NAME=SPEC, SPEC package.module:function "
+               "or path/to/file.py:function (relative to this folder); the signature: locbook.MethodInput")
+TRACKER_HELP = "a tracker of your own beside the battery's (repeatable): NAME=SPEC as for --method"
+
+
+def _method_options(command: argparse.ArgumentParser) -> None:
+    command.add_argument("--method", dest="methods", action="append", default=[], metavar="NAME=SPEC",
+                         help=METHOD_HELP)
+    command.add_argument("--tracker", dest="trackers", action="append", default=[], metavar="NAME=SPEC",
+                         help=TRACKER_HELP)
+
+
+def _user_methods(args) -> tuple[list, list]:
+    """The ``--method`` and ``--tracker`` options as :class:`locbook.user_methods.UserMethod` (a file relative to
+    the current folder), or one ParameterError line."""
+    if not (args.methods or args.trackers):
+        return [], []
+    from ..user_methods import parse_method_option
+    return ([parse_method_option(t, "static") for t in args.methods],
+            [parse_method_option(t, "tracker") for t in args.trackers])
+
+
+def _print_method_failures(failures) -> None:
+    """One line per user method that failed (:func:`locbook.suite.runner.user_method_failures`)."""
+    for f in failures:
+        print(f"locbook: user method {f['method']!r} ({f['kind']}, {f['function']}) failed in "
+              f"{', '.join(f['experiments'])}: {f['error']}; its traceback: {f['page']}", file=sys.stderr)
+
+
 def _point_options(command: argparse.ArgumentParser, writes: str) -> None:
     """The runner options of a command that runs many points (study, bracket)."""
     command.add_argument("--jobs", "-j", type=lambda t: _positive(int, t), default=2,
@@ -125,6 +156,7 @@ def main(argv: list[str] | None = None) -> int:
                           "kolakowski2021): every experiment that takes one and that the data set can run (default: "
                           "all of them; one it cannot run is left out, in one line, and asking for it by id is an "
                           "error); the reports go to <reports>/<profile>/data-<name>/")
+    _method_options(run)
     run.add_argument("--reports", type=Path, help="reports folder (default: <repository>/reports)")
     run.add_argument("--out", type=Path, help="write this run's reports to this folder (a path; its last part "
                                                 "[a-z0-9-] only)")
@@ -173,6 +205,10 @@ def main(argv: list[str] | None = None) -> int:
                       help="example: anchors without heights (a 2-D site: distances in the plane)")
     data.add_argument("--native-scans", action="store_true",
                       help="example: the tracks written as scans (every anchor of a scan at one time, window_s = 0)")
+    data.add_argument("--method", dest="methods", action="append", default=[], metavar="NAME=SPEC",
+                      help="check: also import this static method of your own (as for run)")
+    data.add_argument("--tracker", dest="trackers", action="append", default=[], metavar="NAME=SPEC",
+                      help="check: also import this tracker of your own (as for run)")
     for command in (lst, show, nbs, run, study, bracket, data):   # --suite after the command too; SUPPRESS keeps one given before it
         command.add_argument("--suite", type=Path, default=argparse.SUPPRESS, help=suite_help)
     args = parser.parse_args(argv)
@@ -198,8 +234,10 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"wrote the example data set to {folder}; check it with `locbook data check {folder}` and run "
                       f"the battery with `locbook run --data {folder}`")
                 return 0
-            print(_dataset_text(args.dataset, suite))
-            return 0
+            methods, trackers = _user_methods(args)
+            text, unimportable = _dataset_check(args.dataset, suite, methods, trackers)
+            print(text)
+            return EXIT_FAILED if unimportable else 0
         if args.command == "notebooks":
             from .catalog import copy_notebooks
             dest = copy_notebooks(suite, args.dest, force=args.force)
@@ -231,6 +269,10 @@ def main(argv: list[str] | None = None) -> int:
             requested = {i for i in args.ids if any(e.id == i for e in suite.experiments)}
             from .runner import run_suite, split_overrides
             overrides = _parse_overrides(args.parameter)
+            methods, trackers = _user_methods(args)
+            if (methods or trackers) and args.data is None and "data" not in overrides:
+                raise ParameterError("--method and --tracker run beside the battery on a data set: give one with "
+                                     "--data DIR (a shipped one by name: --data kolakowski2021)")
             kept, own, left_out = split_overrides(experiments, overrides)
             if left_out:
                 taken = sorted({k for e in kept for k in own[e.id] if k != "data"})
@@ -240,7 +282,7 @@ def main(argv: list[str] | None = None) -> int:
                                overrides=overrides, report_root=args.reports,
                                out_dir=args.out, timeout_s=args.timeout, progress=args.progress,
                                executor=args.executor, scheduler=args.scheduler, data=args.data,
-                               requested=requested)
+                               requested=requested, methods=methods, trackers=trackers)
     except (ParameterError, ReadingsError, LocbookError) as exc:   # LocbookError: a malformed data set too
         print("locbook: error: " + " ".join(str(exc).split("\n")), file=sys.stderr)   # one line, whatever raised it
         return EXIT_BAD_INPUT
@@ -279,7 +321,11 @@ def main(argv: list[str] | None = None) -> int:
     elif result.report_dir.name != args.profile:
         print(f"reports of this run: {result.report_dir.resolve()} (reports/{args.profile}/ is unchanged)")
     _print_summary(result, args.progress)
-    return _exit_status(result)
+    from .runner import user_method_failures
+    failures = user_method_failures(result)
+    _print_method_failures(failures)
+    status = _exit_status(result)
+    return EXIT_FAILED if failures and status == EXIT_OK else status
 
 
 def _roles(text: str) -> tuple[str, ...]:
@@ -288,6 +334,27 @@ def _roles(text: str) -> tuple[str, ...]:
     if not roles:
         raise argparse.ArgumentTypeError(f"expects a comma list such as calibration,static, got {text!r}")
     return roles
+
+
+def _dataset_check(path: str, suite=None, methods=(), trackers=()) -> tuple[str, list[str]]:
+    """``locbook data check``: :func:`_dataset_text` and a line per method of your own (the manifest's
+    ``[[method]]``, then ``--method`` / ``--tracker``) saying whether it imports; returns ``(text, the names of the
+    methods that do not import)``."""
+    from ..data.dataset import load_dataset
+    from ..user_methods import check_import, registered_methods
+    text = _dataset_text(path, suite)
+    registered = registered_methods(load_dataset(path), methods=methods, trackers=trackers)
+    if not registered:
+        return text, []
+    lines, failed = ["", f"methods of your own ({len(registered)}; they run beside the battery's):"], []
+    for m in registered:
+        why = check_import(m)
+        where = "[[method]]" if m.source == "manifest" else ("--method" if m.kind == "static" else "--tracker")
+        lines.append(f"  {m.name} ({m.kind}, {where}): {m.described}: " + (f"does not import: {why}" if why else
+                                                                              "imports"))
+        if why:
+            failed.append(m.name)
+    return text + "\n" + "\n".join(lines), failed
 
 
 def _dataset_text(path: str, suite=None) -> str:

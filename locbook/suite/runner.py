@@ -69,7 +69,8 @@ from .progress import expected_seconds, make_progress
 from .spec import PROFILES, SAFE_NAME, Experiment, Suite, SuiteError
 
 __all__ = ["KERNEL_NAME", "run_suite", "run_tasks", "Task", "cache_key", "Outcome", "SuiteRun",
-           "write_suite_reports", "override_folder_name", "data_kinds", "select_for_data"]
+           "write_suite_reports", "override_folder_name", "data_kinds", "select_for_data", "user_method_failures",
+           "USER_METHODS_TABLE"]
 
 #: Every notebook runs on this kernel; jupyter_client maps it to the running interpreter.
 KERNEL_NAME = "python3"
@@ -578,7 +579,8 @@ def run_suite(suite: Suite, experiments: list[Experiment], profile: str, *, jobs
               overrides: dict[str, str] | None = None, report_root: Path | None = None,
               out_dir: Path | None = None, timeout_s: float = 1800, retries: int = 1,
               kernel_name: str = KERNEL_NAME, progress="plain", executor: str = "local",
-              scheduler: str | None = None, data: str | None = None, requested=None) -> SuiteRun:
+              scheduler: str | None = None, data: str | None = None, requested=None, methods=(),
+              trackers=()) -> SuiteRun:
     """Run experiments and write their reports; see the module docstring for the guarantees.
 
     ``data``: a data set (a shipped name or a folder with ``dataset.toml``; :func:`locbook.data.dataset.load_dataset`
@@ -589,6 +591,12 @@ def run_suite(suite: Suite, experiments: list[Experiment], profile: str, *, jobs
     each; :attr:`SuiteRun.left_out`; recorded for the data set's page), unless its id is in ``requested`` (the ids
     asked for by name; default: every experiment given): that is an error (:func:`select_for_data`). The values of
     ``[experiment.data_run] parameters`` apply to a data run, under ``overrides``.
+
+    ``methods`` / ``trackers``: static methods and trackers of your own (:class:`locbook.user_methods.UserMethod`,
+    ``--method`` / ``--tracker``), a data run's only: each experiment that declares a ``methods`` (``trackers``)
+    parameter gets them, ``NAME=SPEC`` with a file absolute, so they join its cache key (and the kernel records the
+    content of the code it ran, :func:`locbook._datalog.record_read`); the report folder stays the data run's. A
+    name the data set's own ``[[method]]`` tables use too is refused before anything runs.
 
     Parameters of every selected experiment are checked before any executes (raises ParameterError); with several
     experiments, each takes the ``overrides`` it declares and those declaring none are left out
@@ -612,8 +620,17 @@ def run_suite(suite: Suite, experiments: list[Experiment], profile: str, *, jobs
         if data is not None:
             raise SuiteError("give the data set once: --data or -p data=..., not both")
         data = overrides.pop("data")          # -p data=X is --data X: checked, hashed, its own folder
+    given = [k for k in ("methods", "trackers") if k in overrides]
+    if given:
+        raise SuiteError(f"-p {given[0]}: give methods of your own with --method NAME=SPEC and --tracker NAME=SPEC "
+                         "(a file relative to this folder)")
+    methods, trackers = list(methods or ()), list(trackers or ())
+    if (methods or trackers) and data is None:
+        raise SuiteError("--method and --tracker run on a data set: give one with --data DIR")
     if data is not None:
         ds, dataset_name, value, data_roots, identity = _load_data_argument(data)
+        from ..user_methods import registered_methods
+        registered_methods(ds, methods=methods, trackers=trackers)        # a name given twice: one line, here
         for exp in experiments:
             declared = exp.declared_parameters()
             if "data" not in declared:
@@ -623,6 +640,9 @@ def run_suite(suite: Suite, experiments: list[Experiment], profile: str, *, jobs
             as_list = str(declared["data"].annotation).replace(" ", "").startswith("list")
             # override text as `-p` takes it: a str parameter verbatim, a list as a TOML array
             per_experiment[exp.id] = {"data": json.dumps([value]) if as_list else value}
+            for name, mine in (("methods", methods), ("trackers", trackers)):
+                if mine and name in declared:
+                    per_experiment[exp.id][name] = json.dumps([m.option() for m in mine])
         kinds = data_kinds(ds)
         experiments, left_out = select_for_data(experiments, kinds, requested)
         facts = _dataset_facts(ds, identity, suite, kinds)
@@ -651,6 +671,15 @@ def run_suite(suite: Suite, experiments: list[Experiment], profile: str, *, jobs
         progress = make_progress(progress)
     for eid, why in left_out.items():
         progress.message(f"{eid}: left out: {why}")
+    for flag, name, mine in (("--method", "methods", methods), ("--tracker", "trackers", trackers)):
+        takers = [e.id for e in experiments if name in e.declared_parameters()]
+        if mine and not takers:
+            every = [e.id for e in suite.experiments if name in e.declared_parameters()]
+            progress.message(f"{flag} {', '.join(m.name for m in mine)}: no experiment of this run takes it (those "
+                             f"that do: {', '.join(every)})")
+        elif mine and name == "trackers" and not ds.has_role("track"):
+            progress.message(f"--tracker {', '.join(m.name for m in mine)}: the data set has no track recording, so "
+                             "no report runs it")
     run = run_tasks(suite, tasks, profile, report_dir, jobs=jobs, force=force, timeout_s=timeout_s,
                     retries=retries, kernel_name=kernel_name, progress=progress, executor=executor,
                     scheduler=scheduler, data_roots=data_roots,
@@ -658,6 +687,39 @@ def run_suite(suite: Suite, experiments: list[Experiment], profile: str, *, jobs
                                                                            dataset_name is not None and out_dir is None))
     run.left_out = dict(left_out)
     return run
+
+
+#: the table a data run's notebook saves when it runs methods of your own (:func:`locbook.scenarios.measured.
+#: user_method_rows`): which ran, which failed and why
+USER_METHODS_TABLE = "user_methods.csv"
+
+
+def user_method_failures(run: SuiteRun) -> list[dict]:
+    """The methods of your own that failed in the reports of ``run`` (executed or cached: a cached report's failure
+    is still the state of that method), read from each report's :data:`USER_METHODS_TABLE`: one dict per method,
+    ``{method, kind, function, error, experiments, page}`` (``page``: the first report that shows its traceback)."""
+    out: dict[str, dict] = {}
+    for o in run.outcomes:
+        if o.status not in ("ok", "cached"):
+            continue
+        folder = run.report_dir / o.id
+        table = folder / USER_METHODS_TABLE
+        if not table.is_file():
+            continue
+        try:
+            with open(table, newline="", encoding="utf-8") as fh:
+                rows = list(csv.DictReader(fh))
+        except (OSError, UnicodeDecodeError, csv.Error):
+            continue
+        for r in rows:
+            if r.get("status") != "failed" or not r.get("method"):
+                continue
+            f = out.setdefault(r["method"], {"method": r["method"], "kind": r.get("kind", ""),
+                                             "function": r.get("function", ""), "error": r.get("error", ""),
+                                             "experiments": [], "page": str(folder / "report.html")})
+            if o.id not in f["experiments"]:
+                f["experiments"].append(o.id)
+    return list(out.values())
 
 
 def data_kinds(ds) -> frozenset[str]:

@@ -229,6 +229,8 @@ def _set_by(exp, name: str, params: dict, dataset: dict | None) -> str:
         run = exp.data_run.parameters if exp.data_run is not None else {}
         if name == "data":
             return "--data"
+        if name in ("methods", "trackers"):
+            return "--method" if name == "methods" else "--tracker"
         if name in run and params[name] == run[name]:
             return "data run ([experiment.data_run])"
     return "profile / -p"
@@ -803,6 +805,8 @@ def _result_table(rows: list[dict]) -> tuple[list[dict], list[dict]]:
                 cells[shown] = f"[{numbered.setdefault(note, len(numbered) + 1)}]" if note else ""
             else:
                 cells[shown] = r.get(column) or ""
+        if (r.get("failure") or "").strip():         # a method of your own that gave no positions, and why
+            cells["mean (m)"], cells["mean interval (m)"] = "failed", r["failure"].strip()
         cells["pooled"] = str(r.get("recording")).startswith(POOLED)
         out.append(cells)
     return out, [{"n": n, "text": t} for t, n in numbered.items()]

@@ -53,7 +53,7 @@ _DOTTED = re.compile(rf"{_IDENT}(\.{_IDENT})*")
 _SPEC_HELP = "package.module:function (importable) or path/to/file.py:function"
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class MethodInput:
     """What a user method is called with: the documented signature of ``function(inp: MethodInput)``.
 

@@ -161,9 +161,10 @@ def test_the_rule_takes_lists_whole_numbers_nan_rows_and_covariances_where_there
 # -- running one --------------------------------------------------------------------------------------------------
 
 def _input(n=5):
-    ds_like = lb.MethodInput(np.full((n, 3), -60.0), np.arange(n, dtype=float), "points", "static", 1.0,
-                             np.array([[0.0, 0, 2], [4, 0, 2], [0, 4, 2]]), lb.PathLossModel(-40.0, 2.0, 3.0),
-                             None, np.array([[0.0, 0], [4, 0], [4, 4], [0, 4]]))
+    ds_like = lb.MethodInput(rss_dbm=np.full((n, 3), -60.0), time_s=np.arange(n, dtype=float), recording="points",
+                             kind="static", tag_height_m=1.0, anchors_m=np.array([[0.0, 0, 2], [4, 0, 2], [0, 4, 2]]),
+                             channel=lb.PathLossModel(-40.0, 2.0, 3.0), model=None,
+                             outline_m=np.array([[0.0, 0], [4, 0], [4, 4], [0, 4]]))
     return ds_like
 
 
@@ -271,8 +272,9 @@ def test_a_user_method_is_scored_like_the_battery_and_equals_its_own_output_scor
     for name in st["recordings"]:
         ep = ds.epochs(name)
         known = np.isfinite(ep.position_m[:, :2]).all(axis=1)
-        inp = lb.MethodInput(ep.rss_dbm[known], ep.time_s[known], name, "static", ds.tag_height_m, ds.anchors_m,
-                             model, None, ds.outline_m)
+        inp = lb.MethodInput(rss_dbm=ep.rss_dbm[known], time_s=ep.time_s[known], recording=name, kind="static",
+                             tag_height_m=ds.tag_height_m, anchors_m=ds.anchors_m, channel=model, model=None,
+                             outline_m=ds.outline_m)
         errors[name] = lb.position_error_m(ex.weighted_centroid(inp), ep.position_m[known, :2])
     for label, e in [("pooled", np.concatenate(list(errors.values()))), *errors.items()]:
         r = rows[label]
@@ -290,8 +292,9 @@ def test_a_user_method_is_scored_like_the_battery_and_equals_its_own_output_scor
     rows = {r["recording"]: r for r in _rows(tr, "smooth")}
     assert set(rows) == {"pooled", "walk_a", "walk_b"}
     for name, (sc, est, flags, bound) in tr["tracks"].items():
-        inp = lb.MethodInput(sc.measured_rss_dbm, sc.time_s, name, "track", ds.tag_height_m, ds.anchors_m, model,
-                             None, ds.outline_m)
+        inp = lb.MethodInput(rss_dbm=sc.measured_rss_dbm, time_s=sc.time_s, recording=name, kind="track",
+                             tag_height_m=ds.tag_height_m, anchors_m=ds.anchors_m, channel=model, model=None,
+                             outline_m=ds.outline_m)
         mine = ex.smoothed_centroid(inp)
         assert np.array_equal(est["smooth"][0], mine, equal_nan=True) and "smooth" not in flags
         steps = sc.scored_steps
@@ -505,8 +508,9 @@ def test_a_data_run_scores_a_users_methods_in_every_report_and_a_failing_one_fai
     for name in me.scored_recordings(ds):
         ep = ds.epochs(name)
         known = np.isfinite(ep.position_m[:, :2]).all(axis=1)
-        inp = lb.MethodInput(ep.rss_dbm[known], ep.time_s[known], name, "static", ds.tag_height_m, ds.anchors_m,
-                             model, None, ds.outline_m)
+        inp = lb.MethodInput(rss_dbm=ep.rss_dbm[known], time_s=ep.time_s[known], recording=name, kind="static",
+                             tag_height_m=ds.tag_height_m, anchors_m=ds.anchors_m, channel=model, model=None,
+                             outline_m=ds.outline_m)
         e = lb.position_error_m(ex.weighted_centroid(inp), ep.position_m[known, :2])
         pooled.append(e)
         assert float(loc[name]["mean_m"]) == round(lb.mean_error_m(e), 3)

@@ -687,10 +687,11 @@ def method_input(data: Dataset, model: PathLossModel, recording: str, rss_dbm, t
     :class:`RssModel` built from it, so that no method can change what the next one sees."""
     from copy import deepcopy
     channel_copy = deepcopy(model)
-    return MethodInput(frozen(rss_dbm), frozen(time_s), recording, data.recording(recording).role, data.tag_height_m,
-                       frozen(data.anchors_m), channel_copy,
-                       RssModel(frozen(data.anchors_m), channel_copy, tag_height_m=data.tag_height_m),
-                       frozen(data.outline_m), rng)
+    return MethodInput(rss_dbm=frozen(rss_dbm), time_s=frozen(time_s), recording=recording,
+                       kind=data.recording(recording).role, tag_height_m=data.tag_height_m,
+                       anchors_m=frozen(data.anchors_m), channel=channel_copy,
+                       model=RssModel(frozen(data.anchors_m), channel_copy, tag_height_m=data.tag_height_m),
+                       outline_m=frozen(data.outline_m), rng=rng)
 
 
 def _run_user(methods, kind: str, inputs_of) -> tuple[dict, dict, dict]:

@@ -102,9 +102,10 @@ def test_log_likelihood_is_the_gaussian_log_density_up_to_a_constant_per_run():
     rng = np.random.default_rng(13)
     R, T, P = 2, 3, 40
     alpha = rng.uniform(-55.0, -40.0, (R, T, 3))
-    sigma = rng.uniform(3.0, 7.0, (R, T))
+    sigma = rng.uniform(3.0, 7.0, (R, T, 1))                                # pooled per run and step
     n = np.array([2.1, 2.6, 1.9])
-    model = lb.RssModel(READERS, lb.PathLossModel(alpha, n, sigma, wall_attenuation_db=3.5, min_distance_m=0.1), walls_m=walls)
+    model = lb.RssModel(READERS, lb.PathLossModel(alpha, n, sigma, wall_attenuation_db=3.5, min_distance_m=0.1), walls_m=walls,
+                        per_step_channel=True)
     pos = rng.uniform([0.0, 0.0], [5.0, 8.0], (R, P, 2))
     pos[0, 0] = READERS[0] + [0.03, 0.04]                                   # 0.05 m from reader 0
     rss = rng.normal(-65.0, 6.0, (R, 3))

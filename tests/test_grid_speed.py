@@ -139,8 +139,8 @@ def test_rss_model_variants(path, kind):
     elif kind == "per_run_anchors":
         model = lb.RssModel(ANCHORS + rng.normal(0, 0.3, (R, 4, 2)), CHANNEL)
     elif kind == "per_step_parameters":
-        model = lb.RssModel(ANCHORS, lb.PathLossModel(rng.normal(-40, 1, (R, T, 4)), 2.5, rng.uniform(2, 4, (R, T)),
-                                                      min_distance_m=0.1))
+        model = lb.RssModel(ANCHORS, lb.PathLossModel(rng.normal(-40, 1, (R, T, 4)), 2.5, rng.uniform(2, 4, (R, T, 1)),
+                                                      min_distance_m=0.1), per_step_channel=True)
     else:
         model = lb.RssModel(ANCHORS, lb.PathLossModel(-40.0, 2.5, np.array([2.0, 3.0, 4.0, 2.5]), min_distance_m=0.1))
     velocity = rng.normal(0, 0.2, (T, 2))

@@ -143,7 +143,8 @@ _BAYES = lb.RssModel(_READERS, lb.PathLossModel(-52.0, 2.3, sigma_db=3.0, min_di
     (lambda: _BAYES.log_likelihood(np.zeros((2, 4)), np.zeros((5, 2))), r"rss_dbm must have shape \(\.\.\., 3\)"),
     (lambda: _BAYES.log_likelihood(np.zeros((2, 3)), np.zeros((1, 5, 2))), "no silent broadcasting"),
     (lambda: _BAYES.log_likelihood(np.zeros((2, 3)), np.full((5, 2), np.nan)), "positions_m must be finite"),
-    (lambda: lb.RssModel(_READERS, lb.PathLossModel(ref_power_dbm=np.zeros((2, 4, 3)), path_loss_exp=2.3, sigma_db=5.0)).log_likelihood(
+    (lambda: lb.RssModel(_READERS, lb.PathLossModel(ref_power_dbm=np.zeros((2, 4, 3)), path_loss_exp=2.3, sigma_db=5.0),
+                                per_step_channel=True).log_likelihood(
         np.zeros((2, 3)), np.zeros((5, 2)), step=-1), r"step must be an integer in \[0, 4\)"),
     (lambda: lb.systematic_resample([0.5, -0.1, 0.6], 0.3), "weights must be non-negative"),
     (lambda: lb.systematic_resample([[0.5, 0.5]], [0.3, 0.2]), r"uniforms must be draws in \[0, 1\)"),

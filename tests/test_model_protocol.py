@@ -98,10 +98,10 @@ def test_a_new_model_runs_in_the_ekf_and_equals_filterpy():
     stream = lb.Stream(z, Ranges(ANCHORS, SIGMA_M))
     ours = lb.extended_kalman_filter(model.F, model.Q, x0, P0, stream)
     for r in range(z.shape[0]):
-        np.testing.assert_allclose(ours.x[r], _filterpy_ekf(model, z[r], x0, P0), rtol=0, atol=1e-9)
+        np.testing.assert_allclose(ours.mean[r], _filterpy_ekf(model, z[r], x0, P0), rtol=0, atol=1e-9)
     serial = lb.extended_kalman_filter(model.F, model.Q, x0, P0, lb.Stream(z, Ranges(ANCHORS, SIGMA_M), mode="serial"))
-    assert np.all(np.isfinite(serial.x)) and np.abs(serial.x - ours.x).max() < 0.5    # re-linearised per range
-    assert not np.allclose(serial.x, ours.x, atol=1e-6)
+    assert np.all(np.isfinite(serial.mean)) and np.abs(serial.mean - ours.mean).max() < 0.5    # re-linearised per range
+    assert not np.allclose(serial.mean, ours.mean, atol=1e-6)
 
 
 def test_a_new_model_runs_in_the_ukf_and_equals_filterpy():
@@ -119,9 +119,9 @@ def test_a_new_model_runs_in_the_ukf_and_equals_filterpy():
             present = np.isfinite(zk)
             if present.all():
                 f.update(zk)
-                np.testing.assert_allclose(ours.x[r, k], f.x, rtol=0, atol=1e-8)
+                np.testing.assert_allclose(ours.mean[r, k], f.x, rtol=0, atol=1e-8)
             elif not present.any():
-                np.testing.assert_allclose(ours.x[r, k], f.x, rtol=0, atol=1e-8)
+                np.testing.assert_allclose(ours.mean[r, k], f.x, rtol=0, atol=1e-8)
             else:                            # a partial step: filterpy has no missing component; stop comparing
                 break
 
@@ -141,7 +141,7 @@ def test_a_new_linear_model_runs_in_the_kalman_filter_and_equals_filterpy():
             f.predict()
             if np.isfinite(z[r, k, 0]):
                 f.update(z[r, k] - 4.0)
-            np.testing.assert_allclose(ours.x[r, k], f.x[:, 0], rtol=0, atol=1e-10)
+            np.testing.assert_allclose(ours.mean[r, k], f.x[:, 0], rtol=0, atol=1e-10)
 
 
 def test_a_new_model_runs_in_the_grid_filter_as_its_own_likelihood_written_out():
@@ -156,7 +156,7 @@ def test_a_new_model_runs_in_the_grid_filter_as_its_own_likelihood_written_out()
         r = np.where(np.isfinite(z[:, t, None, :]), z[:, t, None, :] - d, 0.0)
         return -0.5 * np.sum(r * r, axis=-1) / SIGMA_M**2
     ref = lb.grid_bayes_filter(None, written_out, cells, spread_m=0.5, n_steps=z.shape[1])
-    np.testing.assert_allclose(ours.mean_m, ref.mean_m, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(ours.mean, ref.mean, rtol=0, atol=1e-9)
     np.testing.assert_allclose(ours.weights, ref.weights, rtol=0, atol=1e-12)
 
 
@@ -173,8 +173,8 @@ def test_a_new_model_runs_in_the_particle_filter_as_its_own_likelihood_written_o
         dof = np.isfinite(z[:, t]).sum(-1)[:, None]
         return -0.5 * np.sum(r * r, axis=-1) / SIGMA_M**2 - dof * (np.log(SIGMA_M) + 0.5 * np.log(2 * np.pi))
     ref = lb.particle_filter(None, written_out, rng=np.random.default_rng(5), n_steps=z.shape[1], **kw)
-    np.testing.assert_allclose(ours.mean_m, ref.mean_m, rtol=0, atol=1e-9)
-    error = np.linalg.norm(ours.mean_m[:, 5:] - x[:, 5:, :2], axis=-1)
+    np.testing.assert_allclose(ours.mean, ref.mean, rtol=0, atol=1e-9)
+    error = np.linalg.norm(ours.mean[:, 5:] - x[:, 5:, :2], axis=-1)
     prior = np.linalg.norm(np.array([5.0, 4.0]) - x[:, 5:, :2], axis=-1)          # the uniform prior's mean
     assert np.sqrt(np.mean(error**2)) < 0.4 * np.sqrt(np.mean(prior**2))     # and it tracks (measured: 0.62 m vs 2.6 m)
 
@@ -211,7 +211,7 @@ def test_a_model_without_a_jacobian_runs_in_the_ukf_and_is_refused_by_the_ekf_by
     model, _, z = _track(runs=1, steps=5)
     stream = lb.Stream(z, NoJacobian(ANCHORS, SIGMA_M))
     x0, P0 = np.array([3.0, 2.0, 0.0, 0.0]), np.eye(4)
-    assert np.isfinite(lb.unscented_kalman_filter(model.F, model.Q, x0, P0, stream).x).all()
+    assert np.isfinite(lb.unscented_kalman_filter(model.F, model.Q, x0, P0, stream).mean).all()
     with pytest.raises(ValueError, match="ranges: the EKF needs the model's jacobian"):
         lb.extended_kalman_filter(model.F, model.Q, x0, P0, stream)
 

@@ -24,9 +24,9 @@ def test_per_run_receivers_equal_runs_one_by_one(run, mode):
     z[1, 2, 3] = np.nan
     F, Q = _static()
     x0, P0 = np.full(3, 25.0), 100.0 * np.eye(3)
-    batched = run(F, Q, x0, P0, [lb.RssMeasurement(z, receivers, CH, np.arange(3), mode=mode)])
+    batched = run(F, Q, x0, P0, [lb.RssMeasurement(z, lb.per_step(receivers), CH, np.arange(3), mode=mode)])
     for r in range(R):
-        one = run(F, Q, x0, P0, [lb.RssMeasurement(z[r], receivers[r], CH, np.arange(3), mode=mode)])
+        one = run(F, Q, x0, P0, [lb.RssMeasurement(z[r], lb.per_step(receivers[r]), CH, np.arange(3), mode=mode)])
         np.testing.assert_allclose(batched.mean[r], one.mean, atol=1e-9)
         np.testing.assert_allclose(batched.cov[r], one.cov, atol=1e-9)
 
@@ -38,7 +38,8 @@ def test_receivers_repeated_over_steps_equal_fixed_anchors():
     F, Q = _static()
     fixed = lb.extended_kalman_filter(F, Q, np.full(3, 25.0), 100 * np.eye(3), [lb.RssMeasurement(z, anchors, CH, np.arange(3))])
     per_step = lb.extended_kalman_filter(F, Q, np.full(3, 25.0), 100 * np.eye(3),
-                                         [lb.RssMeasurement(z, np.broadcast_to(anchors, (2, 7, 5, 3)), CH, np.arange(3))])
+                                         [lb.RssMeasurement(z, lb.per_step(np.broadcast_to(anchors, (2, 7, 5, 3))), CH,
+                                                            np.arange(3))])
     np.testing.assert_allclose(per_step.mean, fixed.mean, atol=1e-12)
 
 

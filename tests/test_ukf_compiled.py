@@ -95,8 +95,8 @@ def _case(kind, rng, B=5, T=50):
                    lb.RssMeasurement(power, a3, ch, model.position_index, mode="serial", tag_height_m=1.0)]
     elif kind == "moving_receivers":
         moving = ANCHORS + rng.normal(0, 0.2, (B, T, 5, 2))
-        streams = [lb.RssMeasurement(power, moving, ch, model.position_index, anchor_sigma_m=0.2),
-                   lb.RssMeasurement(power, moving, ch, model.position_index, mode="serial")]
+        streams = [lb.RssMeasurement(power, lb.per_step(moving), ch, model.position_index, anchor_sigma_m=0.2),
+                   lb.RssMeasurement(power, lb.per_step(moving), ch, model.position_index, mode="serial")]
     elif kind == "record_and_no_predict_first":
         streams = [lb.LinearMeasurement(fixes, H, np.eye(2)), rss()]
         kw.update(record=[0, 7, 30, T - 1], predict_first=False)

@@ -211,7 +211,7 @@ class RssModel(MeasurementModel):
     def _one_run_axis(self) -> dict:
         """The parameters in the form the evaluation at positions reads (class docstring): ``ref_power_dbm`` and
         ``path_loss_exp`` a scalar, ``(m,)`` or ``(R or 1, T or 1, 1 or m)``; ``sigma_db`` a scalar, ``(m,)`` or
-        ``(R or 1, T or 1)``; with ``"runs"`` (None or R) and ``"steps"`` (None or the shortest per-step T > 1).
+        ``(R or 1, T or 1)``; with ``"runs"`` (None or R).
         Refused in one line when the model has more than one run axis, per-step anchors or a per-anchor sigma per
         run."""
         if isinstance(self.anchors_m, PerStep):
@@ -221,7 +221,7 @@ class RssModel(MeasurementModel):
         if self.anchors_m.ndim > 3:
             raise ValueError(f"{self.name}: anchors_m {self.anchors_m.shape} has more than one run axis; the particle "
                              f"and grid filters, the estimators and the bounds take (m, dim) or per run (R, m, dim)")
-        out, runs, steps = {}, set(), []
+        out, runs = {}, set()
         if self.anchors_m.ndim == 3:
             runs.add(self.anchors_m.shape[0])
         for name in _CHANNEL_FIELDS:
@@ -238,8 +238,6 @@ class RssModel(MeasurementModel):
                     value = value[None]                                 # (one run for all, T, k)
                 if value.shape[0] > 1 or np.ndim(getattr(self.channel, name)) == 2 + self.per_step_channel:
                     runs.add(value.shape[0])
-                if value.shape[1] > 1:
-                    steps.append(value.shape[1])
                 if name == "sigma_db":
                     if value.shape[-1] != 1:
                         raise ValueError(f"{self.name}: channel.sigma_db {np.shape(self.channel.sigma_db)} gives a "
@@ -250,7 +248,6 @@ class RssModel(MeasurementModel):
         if len(runs) > 1:
             raise ValueError(f"per-run anchors and parameters disagree on the number of runs: {sorted(runs)}")
         out["runs"] = runs.pop() if runs else None
-        out["steps"] = min(steps) if steps else None
         return out
 
     @property
@@ -260,8 +257,14 @@ class RssModel(MeasurementModel):
 
     @property
     def steps(self) -> int | None:
-        """The number of steps of per-step parameters (None when none is per step, or all hold for every step)."""
-        return self._one_run_axis["steps"]
+        """The number of steps the per-step anchors and parameters hold (None when none is per step, or all hold for
+        every step: a time axis of length 1)."""
+        lengths = [self.anchors_m.value.shape[-3]] if isinstance(self.anchors_m, PerStep) else []
+        if self.per_step_channel:
+            lengths += [np.shape(getattr(self.channel, n))[-2] for n in _CHANNEL_FIELDS
+                        if np.ndim(getattr(self.channel, n)) >= 2]
+        lengths = [t for t in lengths if t > 1]
+        return min(lengths) if lengths else None
 
     def select_runs(self, runs) -> "RssModel":
         """The model of the runs ``runs`` (a slice or indices) of its per-run anchors and parameters."""
@@ -368,30 +371,25 @@ class RssModel(MeasurementModel):
         crossings = wall_crossings(pos.reshape(-1, 2), plan, self.walls_m).reshape(pos.shape[:-1] + (plan.shape[0],))
         return self.channel.wall_attenuation_db * crossings
 
-    def _check_state_step(self, step) -> None:
-        """``step`` must be a step the per-step anchors and parameters hold (a time axis of length 1 holds every
-        step)."""
-        lengths = [self.anchors_m.value.shape[-3]] if isinstance(self.anchors_m, PerStep) else []
-        if self.per_step_channel:
-            lengths += [np.shape(getattr(self.channel, n))[-2] for n in _CHANNEL_FIELDS
-                        if np.ndim(getattr(self.channel, n)) >= 2]
-        lengths = [t for t in lengths if t > 1]
-        if isinstance(step, (bool, np.bool_)) or not isinstance(step, (int, np.integer)) or step < 0 or (
-                lengths and step >= min(lengths)):
-            raise ValueError(f"step must be an integer in [0, {min(lengths) if lengths else 'inf'}), got {step!r}")
+    def _at_states(self, x, step: int, jacobian: bool):
+        """:func:`rss_mean_jacobian` at points-form states ``batch + (K, n)`` (a model of states): the mean ``batch +
+        (K, m)`` (walls left out) and the position gradient (None with ``jacobian=False``); a state on an anchor
+        without a clamp is refused."""
+        self.check_step(step)
+        ch = self.channel
+        mean, grad, d2 = rss_mean_jacobian(self._points_offsets(x, step), _anchor_axis(self._param("ref_power_dbm", step)),
+                                           _anchor_axis(self._param("path_loss_exp", step)),
+                                           ref_distance_m=ch.ref_distance_m, min_distance_m=self.clamp_m,
+                                           jacobian=jacobian)
+        self._refuse_on_anchor(d2, np.ndim(x) - 2)
+        return mean, grad
 
     def mean(self, x, step: int = 0):
         """A model of positions: ``h(p)`` ``(R|1, P, m)`` (:meth:`mean_rss_dbm`). A model of states: ``h``
         ``batch + (K, m)`` at points-form states ``batch + (K, n)`` (their ``position_index`` components)."""
         if self.position_index is None:
             return self.mean_rss_dbm(x, step)
-        self._check_state_step(step)
-        ch = self.channel
-        mean, _, d2 = rss_mean_jacobian(self._points_offsets(x, step), _anchor_axis(self._param("ref_power_dbm", step)),
-                                        _anchor_axis(self._param("path_loss_exp", step)),
-                                        ref_distance_m=ch.ref_distance_m, min_distance_m=self.clamp_m, jacobian=False)
-        self._refuse_on_anchor(d2, np.ndim(x) - 2)
-        return mean - self._wall_loss_db(x, step)
+        return self._at_states(x, step, jacobian=False)[0] - self._wall_loss_db(x, step)
 
     def jacobian(self, x, step: int = 0):
         """A model of positions: ``dh_j/dp`` ``(R|1, P, m, dim)`` (:meth:`position_jacobian`). A model of states:
@@ -402,12 +400,7 @@ class RssModel(MeasurementModel):
         constant, so the derivative is exactly 0 there (:func:`~locbook.models.channel.log_distance_gradient`)."""
         if self.position_index is None:
             return self.position_jacobian(x, step)
-        self._check_state_step(step)
-        ch = self.channel
-        _, grad, d2 = rss_mean_jacobian(self._points_offsets(x, step), _anchor_axis(self._param("ref_power_dbm", step)),
-                                        _anchor_axis(self._param("path_loss_exp", step)),
-                                        ref_distance_m=ch.ref_distance_m, min_distance_m=self.clamp_m)
-        self._refuse_on_anchor(d2, np.ndim(x) - 2)
+        grad = self._at_states(x, step, jacobian=True)[1]
         idx = self.state_position_index
         H = np.zeros(grad.shape[:-1] + (np.shape(x)[-1],))
         H[..., idx] = grad[..., :idx.size]
@@ -421,7 +414,7 @@ class RssModel(MeasurementModel):
             sigma = np.asarray(self._per_step("sigma_db", step), dtype=float)        # (), (m,) or (R, 1)
             var = np.broadcast_to(np.square(sigma), np.broadcast_shapes(sigma.shape, (self.n_anchors,)))
             return var[..., None, :, None] * np.eye(self.n_anchors)
-        self._check_state_step(step)
+        self.check_step(step)
         diff = self._points_offsets(x, step)
         d = np.sqrt(np.einsum("...i,...i->...", diff, diff))
         var = np.broadcast_to(self.variance_db2(d, _anchor_axis(self._param("path_loss_exp", step)),
@@ -431,7 +424,7 @@ class RssModel(MeasurementModel):
     def innovation(self, x, z, *, step: int = 0):
         """Table 3.4's linearisation at the states ``x`` ``batch + (n,)``: ``z - h(x)``, the stacked Jacobian and
         ``R = sigma^2 I`` (inflated for uncertain anchor positions); a model of states only."""
-        self._check_state_step(step)
+        self.check_step(step)
         idx = self.state_position_index
         ch = self.channel
         path_loss_exp = self._param("path_loss_exp", step)

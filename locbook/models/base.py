@@ -637,14 +637,14 @@ class MotionModel:
         return cls.difference is MotionModel.difference and cls.mean_of is MotionModel.mean_of
 
     def sample(self, x, *, step: int = 0, rng: np.random.Generator):
-        """A draw of ``x_k`` given states ``x`` ``(..., n)``: ``f(x) + w``, ``w ~ N(0, Q_k)`` (a positive
-        semi-definite Q through its symmetric square root, so a singular Q draws in its range only)."""
+        """A draw of ``x_k`` given states ``x`` ``(..., n)``: ``f(x) + L e``, ``e ~ N(0, I)``, with ``Q_k = L L^T``
+        from :meth:`noise_factor` (a singular Q draws in its range only; ``Q = 0`` draws nothing)."""
         x_next = np.asarray(self.apply(x, step), dtype=float)
-        Q = np.asarray(self.covariance(step), dtype=float)
-        w, v = np.linalg.eigh(Q)
-        root = v * np.sqrt(np.maximum(w, 0.0))[..., None, :]
-        noise = rng.standard_normal(x_next.shape)
-        return x_next + np.einsum("...ij,...j->...i", root, noise)
+        root = self.noise_factor(step)
+        if root is None:
+            return x_next
+        noise = rng.standard_normal(np.broadcast_shapes(x_next.shape[:-1], root.shape[:-2]) + root.shape[-1:])
+        return x_next + np.einsum("...ik,...k->...i", root, noise)
 
     def noise_factor(self, step: int = 0):
         """``L`` ``(n, k)`` with ``Q_k = L L^T`` (the particle filter draws ``w = L e``, ``e ~ N(0, I_k)``), or None

@@ -37,7 +37,6 @@ from ..errors import DegenerateGeometryError, ParameterError
 from .._validate import as_array, check_choice, check_scalar
 from .._deprecation import RENAMED_CRLB_FORMS, check_variant, renamed_constants, warn_deprecated
 from ..models.channel import PathLossModel
-from ..models.base import PerStep
 from ..models.rss import RssModel
 from ..static.localization import check_anchor_geometry
 
@@ -61,11 +60,7 @@ def _bound_model(model, who: str = "the bound") -> RssModel:
     if model.walls_m is not None and model.channel.wall_attenuation_db != 0.0:
         raise ValueError(f"{who} cannot honour the model's walls (walls_m): the bound is that of the log-distance mean "
                          "alone; pass dataclasses.replace(model, walls_m=None)")
-    ch = model.channel
-    per_run = [f"anchors_m {model.anchors_m.shape} per run or step"] if (
-        isinstance(model.anchors_m, PerStep) or model.anchors_m.ndim > 2) else []
-    per_run += [f"channel.{name} {np.shape(getattr(ch, name))} per run or step" for name in
-                ("ref_power_dbm", "path_loss_exp", "sigma_db") if np.ndim(getattr(ch, name)) >= 2]
+    per_run = [f"{name} {shape} per run or step" for name, shape in model.per_run_or_step().items()]
     if per_run:
         raise ValueError(f"{who} takes one set of anchors and parameters, the model has {', '.join(per_run)}: pass "
                          "one run's and step's model (e.g. model.select_runs(r) for run r)")

@@ -266,6 +266,15 @@ class RssModel(MeasurementModel):
         lengths = [t for t in lengths if t > 1]
         return min(lengths) if lengths else None
 
+    def per_run_or_step(self) -> dict:
+        """``{field: shape}`` of the anchors and channel parameters that carry a run or step axis (``"anchors_m"``,
+        ``"channel.ref_power_dbm"``, ...): what an estimator or a bound of one layout and one channel refuses."""
+        a = self.anchors_m
+        out = {"anchors_m": a.shape} if isinstance(a, PerStep) or a.ndim > 2 else {}
+        out.update({f"channel.{n}": np.shape(getattr(self.channel, n)) for n in _CHANNEL_FIELDS
+                    if np.ndim(getattr(self.channel, n)) >= 2})
+        return out
+
     def select_runs(self, runs) -> "RssModel":
         """The model of the runs ``runs`` (a slice or indices) of its per-run anchors and parameters."""
         ch = self.channel

@@ -59,7 +59,6 @@ import numpy as np
 from .._cvx import cp, solve
 from .._validate import as_array, check_choice, check_scalar
 from .._deprecation import old_form
-from ..models.base import PerStep
 from ..models.channel import PathLossModel, log_distance_mean_dbm, pairwise_distance_m, require_path_loss_model
 from ..models.rss import RssModel, rss_mean_jacobian
 from ..errors import ConvergenceError, DegenerateGeometryError, ParameterError
@@ -975,17 +974,15 @@ def _rss_model_parts(model, who: str, *, form: str | None = None, walls: bool = 
     if not isinstance(model, RssModel):
         raise ValueError(f"{who}: model must be an RssModel (the anchors, the channel and the tag height in one "
                          f"object), got {type(model).__name__}: pass {form}")
-    if isinstance(model.anchors_m, PerStep) or model.anchors_m.ndim > 2:
-        shape = model.anchors_m.shape
-        raise ValueError(f"{who}: model.anchors_m is per run or per step, shape {shape}; it takes one layout "
-                         "(m, dim) shared by every problem: give each run its own RssModel")
+    varying = model.per_run_or_step()
+    if "anchors_m" in varying:
+        raise ValueError(f"{who}: model.anchors_m is per run or per step, shape {varying['anchors_m']}; it takes one "
+                         "layout (m, dim) shared by every problem: give each run its own RssModel")
     ch = model.channel
-    if not per_step:
-        for name in ("ref_power_dbm", "path_loss_exp", "sigma_db"):
-            if np.ndim(getattr(ch, name)) >= 2:
-                raise ValueError(f"{who}: model.channel.{name} is per run or per step, shape "
-                                 f"{np.shape(getattr(ch, name))}; it takes scalar or per-anchor (m,) parameters: "
-                                 "give each run and step its own RssModel")
+    channel_axes = [name for name in varying if name != "anchors_m"]
+    if channel_axes and not per_step:
+        raise ValueError(f"{who}: model.{channel_axes[0]} is per run or per step, shape {varying[channel_axes[0]]}; it "
+                         "takes scalar or per-anchor (m,) parameters: give each run and step its own RssModel")
     if not walls and model.walls_m is not None and ch.wall_attenuation_db != 0.0:
         raise ValueError(f"{who}: model.walls_m ({model.walls_m.shape[0]} wall(s), {ch.wall_attenuation_db:g} dB each) "
                          "is not modelled by this estimator: give it a model without walls (walls_m=None)")

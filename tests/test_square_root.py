@@ -218,9 +218,9 @@ def test_ill_conditioned_measurement_keeps_positive_definite_and_exact(delta, mo
     The conventional short form (kalman_filter(joseph=False)) returns a P whose smallest eigenvalue has lost every
     digit (-0.19 for d = 3e-8 parallel; +-1.6e-10 for d = 1e-8 serial, its sign round-off, against an exact ~1e-17)
     with the state off by 1 % and 47 % of its size; at d = 1e-8 parallel its S = H P H^T + R is not positive
-    definite and it refuses. The square-root form keeps a nonsingular triangular factor S (P = S S^T positive definite exactly), det(S)^2 equals the exact det P+ to 1e-7, S S^T (in
-    exact arithmetic) the exact P+ to 1e-8 and x the exact x+ to 1e-7 of its size (measured: 1.5e-9 .. 3.5e-9 and
-    1e-8)."""
+    definite and it refuses. The square-root form keeps a nonsingular triangular factor S (P = S S^T positive
+    definite exactly), det(S)^2 equals the exact det P+ to 1e-7, S S^T (in exact arithmetic) the exact P+ to 1e-8
+    and x the exact x+ to 1e-7 of its size (measured: 1.5e-9 .. 3.5e-9 and 1e-8)."""
     H = np.array([[1.0, 1.0, 1.0], [1.0, 1.0, 1.0 + delta]])
     R, z = delta ** 2 * np.eye(2), np.array([[1.0, 2.0]])
     assert (1.0 + delta ** 2) - 1.0 != delta ** 2             # the regime of the example: 1 + d^2 loses d^2's digits

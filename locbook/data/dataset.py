@@ -861,7 +861,8 @@ def _epoch_rule(manifest, raw: dict, where: str, default: EpochRule | None) -> E
 
 def dataset_summary(data: Dataset) -> list[dict]:
     """One row per recording: role, readings, epochs, share of (epoch, anchor) entries heard, readings per heard
-    entry, duration, truth, rows sorted; what ``locbook data check`` prints and every report's first table shows."""
+    entry, duration, truth, rows sorted (and, in a data set with ranges, the (epoch, anchor) entries with a range);
+    what ``locbook data check`` prints and every report's first table shows."""
     rows = []
     for name, rec in data.recordings.items():
         ep = data.epochs(name)
@@ -878,4 +879,9 @@ def dataset_summary(data: Dataset) -> list[dict]:
             "points": (len(set(ep.extra[rec.point_column].tolist())) if rec.point_column else ""),
             "rows sorted": rec.sorted_rows,
         })
+    if any(rec.ranges is not None for rec in data.recordings.values()):   # a column only where there are ranges
+        for row in rows:
+            rec = data.recording(row["recording"])
+            row["ranges (epoch, anchor)"] = (int(np.isfinite(data.ranges(rec.name)[0]).sum())
+                                             if rec.ranges is not None else "")
     return rows

@@ -493,3 +493,23 @@ def test_the_range_methods_names_are_reserved():
     from locbook.user_methods import method_name_problem
     for name in mr.RANGE_METHOD_NAMES:
         assert "battery method" in method_name_problem(name)
+
+
+def test_the_command_writes_the_ranges_of_every_variant_and_check_counts_them(tmp_path, capsys):
+    from locbook.suite.cli import main
+    assert main(["data", "example", str(tmp_path / "cli"), "--ranges", "--two-d", "--native-scans", "--seed", "3",
+                 "--roles", "calibration,track"]) == 0
+    lib = write_example_dataset(tmp_path / "lib", np.random.default_rng(3), seed_note=3, two_d=True, native_scans=True,
+                                roles=("calibration", "track"), ranges=True)
+    assert _digest(tmp_path / "cli") == _digest(lib)
+    ds = lb.load_dataset(lib)
+    assert not ds.notes.get("ranges walk_a") and ds.dimension == 2
+    for name in ("walk_a", "walk_b"):            # native scans: a ranging round at each scan, on its epoch
+        ranges, std = ds.ranges(name)
+        ep = ds.epochs(name)
+        assert np.isfinite(ranges).mean() > 0.9 and np.nanmax(np.abs(std - 0.3)) < 1e-12
+        d = np.linalg.norm(ep.position_m[:, None, :2] - ds.anchors_m, axis=-1)        # in the plane
+        assert np.nanstd(ranges - d) == pytest.approx(0.3, rel=0.1)
+    capsys.readouterr()
+    assert main(["data", "check", str(lib)]) == 0
+    assert "| ranges (epoch, anchor) |" in capsys.readouterr().out

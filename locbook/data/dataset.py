@@ -187,7 +187,8 @@ class Recording:
 @dataclass(frozen=True)
 class Dataset:
     """A measured data set read from its folder (module docstring). ``epochs(name)`` gives a recording's epochs
-    by the data set's rule; ``recordings_with(role)`` lists recordings by role and ``has_role(role)`` says whether
+    by the data set's rule; ``ranges(name)`` its ranges on those epochs (a recording with ``ranges = "FILE"``;
+    ``has_ranges(name)``); ``recordings_with(role)`` lists recordings by role and ``has_role(role)`` says whether
     there is one; ``devices(name)`` the devices of a recording; ``scan_interval_s(name)`` its epoch clock.
     ``dimension`` is 2 for anchors without z (then ``anchors_m`` is ``(m, 2)`` and ``tag_height_m`` None), else 3;
     ``geometry_text`` says which, in one sentence for the reports."""

@@ -513,3 +513,24 @@ def test_the_command_writes_the_ranges_of_every_variant_and_check_counts_them(tm
     capsys.readouterr()
     assert main(["data", "check", str(lib)]) == 0
     assert "| ranges (epoch, anchor) |" in capsys.readouterr().out
+
+
+def test_a_method_of_your_own_gets_the_ranges_on_its_epochs(ranged, tmp_path):
+    from locbook.user_methods import registered_methods
+    code = tmp_path / "tri.py"
+    code.write_text("import numpy as np\nimport locbook as lb\n\n\ndef tri(inp):\n"
+                    "    if inp.range_m is None:\n        return np.full((inp.n_epochs, 2), np.nan)\n"
+                    "    return lb.lateration_ls(inp.anchors_m, inp.range_m, tag_height_m=inp.tag_height_m).position_m\n")
+    ds, proto, st, tr = ranged["with"]
+    model = me.channel(me.calibrate(ds))
+    user = registered_methods(methods=[f"tri={code}:tri"], trackers=[f"tri_track={code}:tri"])
+    mine = me.static_results(ds, model, proto, user_methods=user, **RUN)
+    for name in mine["recordings"]:
+        ep = ds.epochs(name)
+        known = np.isfinite(ep.position_m[:, 0])
+        want = lb.lateration_ls(ds.anchors_m, ds.ranges(name)[0][known], tag_height_m=ds.tag_height_m).position_m
+        np.testing.assert_array_equal(mine["fixes"][name]["tri"], want)
+    assert [r for r in mine["rows"] if "failure" not in r] == st["rows"]      # every other row as it was
+    tracks = me.tracking_results(ds, model, proto, user_methods=user, **TRACK_RUN)["tracks"]
+    sc, est, _, _ = tracks["walk_a"]
+    assert np.isfinite(est["tri_track"][0]).all(axis=1).mean() > 0.9         # the ranges on the track's clock

@@ -690,17 +690,20 @@ def user_methods(data: Dataset, *, methods=(), trackers=()) -> tuple[UserMethod,
 
 
 def method_input(data: Dataset, model: PathLossModel, recording: str, rss_dbm, time_s,
-                 rng: np.random.Generator | None) -> MethodInput:
+                 rng: np.random.Generator | None, ranges=None) -> MethodInput:
     """What a user method is called with on one recording's epochs (:class:`locbook.MethodInput`): read-only
     copies of the readings, times, anchors and outline, and a copy of the fitted channel with the one
-    :class:`RssModel` built from it, so that no method can change what the next one sees."""
+    :class:`RssModel` built from it, so that no method can change what the next one sees. ``ranges``: ``(range_m,
+    range_std_m)`` on the same epochs, or None (:mod:`locbook.scenarios.measured_ranges`)."""
     from copy import deepcopy
     channel_copy = deepcopy(model)
     return MethodInput(rss_dbm=frozen(rss_dbm), time_s=frozen(time_s), recording=recording,
                        kind=data.recording(recording).role, tag_height_m=data.tag_height_m,
                        anchors_m=frozen(data.anchors_m), channel=channel_copy,
                        model=RssModel(frozen(data.anchors_m), channel_copy, tag_height_m=data.tag_height_m),
-                       outline_m=frozen(data.outline_m), rng=rng)
+                       outline_m=frozen(data.outline_m), rng=rng,
+                       range_m=None if ranges is None else frozen(ranges[0]),
+                       range_std_m=None if ranges is None else frozen(ranges[1]))
 
 
 def _run_user(methods, kind: str, inputs_of) -> tuple[dict, dict, dict]:
@@ -800,7 +803,8 @@ def static_results(data: Dataset, model: PathLossModel, proto: Protocol, *, seed
     described = {m.name: m.described for m in user}
     got, covariances, failures = _run_user(user, "static", lambda m: {
         n: method_input(data, model, n, tests[n].rss_dbm, tests[n].time_s,
-                        keyed_stream(seed, data.name, "user", "static", n, m.name)) for n in names})
+                        keyed_stream(seed, data.name, "user", "static", n, m.name),
+                        ranging.user_ranges(data, n)) for n in names})
     for name, per_recording in got.items():
         for n in names:
             fixes[n][name] = per_recording[n]
@@ -895,7 +899,10 @@ def tracking_results(data: Dataset, model: PathLossModel, proto: Protocol, *, se
     described = {m.name: m.described for m in user}
     got, covariances, failures = _run_user(user, "tracker", lambda m: {
         n: method_input(data, model, n, out[n][0].measured_rss_dbm, out[n][0].time_s,
-                        keyed_stream(seed, data.name, "user", "tracking", n, m.name)) for n in names})
+                        keyed_stream(seed, data.name, "user", "tracking", n, m.name),
+                        ranging.user_ranges(data, n, track_epochs(data, n), len(out[n][0].time_s))
+                        if data.has_ranges(n) else None)
+        for n in names})
     for tracker, per_track in got.items():
         for n in names:
             out[n][1][tracker] = per_track[n][None]           # one run: (1, T, 2), as every tracker's (R, T, 2)

@@ -41,7 +41,7 @@ from ..tracking.unscented import unscented_kalman_filter
 
 __all__ = ["RANGE_STATIC_METHODS", "RANGE_TRACKERS", "RANGE_TRACKER_PRIORS", "RANGE_METHOD_NAMES",
            "RANGE_BOUND_NAME", "range_noise", "recording_ranges", "range_choices", "static_range_results",
-           "run_range_trackers", "range_tracker_knobs", "ranged_scored", "ranged_tracks"]
+           "run_range_trackers", "range_tracker_knobs", "ranged_scored", "ranged_tracks", "user_ranges", "track_ranges"]
 
 #: the static method the ranges add (:class:`locbook.battery.Method`: what, settings, prior)
 RANGE_STATIC_METHODS = {
@@ -193,6 +193,22 @@ def track_ranges(data: Dataset, name: str, ep, ticks, n_ticks: int):
     z, s = np.full((n_ticks, m), np.nan), np.full((n_ticks, m), _UNUSED_SIGMA_M)
     z[ticks], s[ticks] = ranges, sigma
     return z, s
+
+
+def user_ranges(data: Dataset, name: str, track=None, n_ticks: int | None = None):
+    """``(range_m, range_std_m)`` a user method gets (:class:`locbook.MethodInput`) on a recording: on its scored
+    epochs (those with a true position), or on a track's clock (``track``: :func:`locbook.scenarios.measured.
+    track_epochs`'s ``(epochs, on the clock, ticks)``, ``n_ticks`` ticks); the std NaN where there is no range.
+    None where the recording has no usable ranges."""
+    if not _usable(data, name):
+        return None
+    if track is None:
+        ep = data.epochs(name)
+        known = np.isfinite(ep.position_m[:, :2]).all(axis=1)
+        ranges, sigma = (v[known] for v in recording_ranges(data, name))
+    else:
+        ranges, sigma = track_ranges(data, name, track[0], track[2], n_ticks)
+    return ranges, np.where(np.isfinite(ranges), sigma, np.nan)
 
 
 def run_range_trackers(data: Dataset, name: str, sc: TrackingScenario, ep, ticks, x0, ts: TrackerSettings):

@@ -7,7 +7,8 @@ from matplotlib.path import Path as _PolygonPath
 
 from ._validate import as_array, check_scalar
 
-__all__ = ["inside_outline", "grid_in_outline", "outline_box", "box_outline", "distance_to_segments"]
+__all__ = ["inside_outline", "grid_in_outline", "outline_box", "box_outline", "distance_to_segments",
+           "nearest_on_segments", "nearest_on_outline"]
 
 
 def _outline(outline_m) -> np.ndarray:
@@ -64,9 +65,9 @@ def grid_in_outline(outline_m, spacing_m: float) -> np.ndarray:
     return cells
 
 
-def distance_to_segments(points_m, segments_m):
-    """Distance ``(...)`` from each point ``(..., 2)`` to the nearest of the straight segments ``(S, 2, 2)``
-    (``[[x0, y0], [x1, y1]]`` each). NaN points give NaN."""
+def nearest_on_segments(points_m, segments_m):
+    """``(nearest (..., 2), distance (...))``: the nearest point of the straight segments ``(S, 2, 2)``
+    (``[[x0, y0], [x1, y1]]`` each) to each point ``(..., 2)``, and its distance. NaN points give NaN."""
     segments = as_array("segments_m", segments_m, ndim=3, trailing=(None, 2, 2))
     points = as_array("points_m", points_m, min_ndim=1, trailing=(2,), nan_ok=True)
     a, b = segments[:, 0], segments[:, 1]
@@ -78,4 +79,18 @@ def distance_to_segments(points_m, segments_m):
     t = np.clip(t, 0.0, 1.0)
     nearest = a + t[..., None] * ab
     gap = np.linalg.norm(points[..., None, :] - nearest, axis=-1)
-    return np.min(gap, axis=-1)
+    best = np.argmin(np.where(np.isnan(gap), np.inf, gap), axis=-1)
+    point = np.take_along_axis(nearest, best[..., None, None], axis=-2)[..., 0, :]
+    return np.where(np.isnan(points), np.nan, point), np.min(gap, axis=-1)
+
+
+def distance_to_segments(points_m, segments_m):
+    """Distance ``(...)`` from each point ``(..., 2)`` to the nearest of the straight segments ``(S, 2, 2)``
+    (``[[x0, y0], [x1, y1]]`` each). NaN points give NaN."""
+    return nearest_on_segments(points_m, segments_m)[1]
+
+
+def nearest_on_outline(points_m, outline_m) -> np.ndarray:
+    """The nearest point ``(..., 2)`` of the outline's boundary (its closed polygon ``(V, 2)``) to each point."""
+    outline = _outline(outline_m)
+    return nearest_on_segments(points_m, np.stack([outline, np.roll(outline, -1, axis=0)], axis=1))[0]

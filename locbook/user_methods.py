@@ -75,7 +75,11 @@ class MethodInput:
       ``mean_rss_dbm`` and ``log_likelihood`` the battery's likelihood methods evaluate;
     - ``outline_m`` ``(V, 2)``: the floor outline (its vertices, m);
     - ``rng``: a generator of your own, keyed by the data set, the recording and the method's name (a randomised
-      method draws the same numbers on every page of a run).
+      method draws the same numbers on every page of a run);
+    - ``range_m`` ``(E, m)`` and ``range_std_m`` ``(E, m)``: where the recording has ranges (``ranges = "FILE"``,
+      :mod:`locbook.data.ranges`), each epoch's range to each anchor (m; NaN = not measured) and its sigma (the
+      reported std of the window's mean, else the data set's fitted rule; NaN where there is no range), on the same
+      epochs as ``rss_dbm``; None without ranges.
 
     Every array is a read-only copy. The function returns the positions ``(E, 2)`` in metres (a NaN row: no fix at
     that epoch; a list or any array-like is taken), or the tuple ``(positions (E, 2), covariances (E, 2, 2))`` with a
@@ -93,6 +97,8 @@ class MethodInput:
     model: "RssModel"
     outline_m: np.ndarray
     rng: np.random.Generator | None = None
+    range_m: np.ndarray | None = None
+    range_std_m: np.ndarray | None = None
 
     @property
     def n_epochs(self) -> int:
@@ -255,7 +261,8 @@ def method_name_problem(name) -> str:
         return (f"method name {_shown(name)} must be letters, digits, '_' and '-', starting with a letter, at most "
                 f"{MAX_METHOD_NAME_CHARS} characters")
     from .battery import STATIC_METHODS, TRACKERS
-    battery = (*STATIC_METHODS, *TRACKERS)
+    from .scenarios.measured_ranges import RANGE_METHOD_NAMES
+    battery = (*STATIC_METHODS, *TRACKERS, *RANGE_METHOD_NAMES)
     if name.lower() in battery:
         return (f"method name {name!r} is a battery method's ({', '.join(battery)}): give yours another name")
     if name.lower() in RESERVED_METHOD_NAMES:

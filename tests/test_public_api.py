@@ -107,8 +107,11 @@ FAMILIES = (
     Family("lateration", ("anchors_m", "distance_m"), (),
            ("lateration_ls", "lateration_wls", "lateration_box_ls", "lateration_system"),
            "`LocalizationResult` (`lateration_system`: its matrices `A`, `b`)"),
+    Family("range lateration", ("range_m", "anchors_m"), (), ("range_nls_position",), "`LocalizationResult`"),
     Family("static bounds", ("position_m", "model"), ("variant",),
            ("rss_crlb_m", "rss_fisher_information", "rss_position_information"),
+           "the bound (m) `(...)`; the information `(..., dim, dim)`"),
+    Family("range bounds", ("position_m", "model"), (), ("range_crlb_m", "range_position_information"),
            "the bound (m) `(...)`; the information `(..., dim, dim)`"),
     Family("bound over an area", ("points_m", "model"), ("variant",), ("crlb_rms_over_area_m",),
            "the RMS of the bound (m)"),
@@ -151,6 +154,7 @@ UNGROUPED = (
     "read_readings", "read_anchors", "read_outline", "read_path_segments", "validate_readings", "epochs",
     "regular_epochs", "scan_interval_s", "load_dataset", "shipped_datasets", "dataset_summary",
     "inside_outline", "grid_in_outline", "outline_box", "box_outline", "distance_to_segments", "printed",
+    "read_ranges", "align_ranges", "nearest_on_outline",
 )
 
 #: the one result vocabulary of every filter (locbook/tracking/results.py, FilterResult)

@@ -18,6 +18,10 @@ dimensionless and scale-invariant; it is kept as ``variant="literal_ozkaya2011"`
 n = 2, it reproduces the thesis's CRLB numbers (our finding; the simulations themselves use n = 2.3). It uses the
 same model's n, sigma and clamp.
 
+Ranges (RTT / ToA, :class:`locbook.models.range.RangeModel`, ``z_j = d_j + v_j``, ``v_j ~ N(0, sigma_j^2)``) have
+the information ``J = sum_j u_j u_j^T / sigma_j^2`` with ``u_j`` the unit vector from anchor ``j`` to the position
+(:func:`range_position_information`, :func:`range_crlb_m`, :func:`range_crlb_checked_m`).
+
 On measured data each epoch hears its own anchors: :func:`rss_crlb_checked_m` gives the bound where it means something
 and NaN with a reason elsewhere (fewer than :data:`MIN_ANCHORS_FOR_BOUND` anchors heard, or a condition number above
 :data:`MAX_BOUND_CONDITION`), so that no near-singular epoch (a bound of 1e8 m) swamps an RMS over a recording.
@@ -41,7 +45,8 @@ from ..models.rss import RssModel
 from ..static.localization import check_anchor_geometry
 
 __all__ = ["rss_fisher_information", "rss_position_information", "rss_crlb_m", "crlb_rms_over_area_m", "CRLB_VARIANTS",
-           "MIN_ANCHORS_FOR_BOUND", "MAX_BOUND_CONDITION", "check_position_information", "rss_crlb_checked_m"]
+           "MIN_ANCHORS_FOR_BOUND", "MAX_BOUND_CONDITION", "check_position_information", "rss_crlb_checked_m",
+           "range_position_information", "range_crlb_m", "range_crlb_checked_m"]
 
 #: the bound's forms: the corrected Fisher information (1/d^4) and Ozkaya's printed one (1/d^2, flagged)
 CRLB_VARIANTS = ("corrected", "literal_ozkaya2011")
@@ -428,6 +433,83 @@ def rss_crlb_checked_m(position_m, model, *, heard=None, min_anchors: int = MIN_
     info = np.full(batch + (2, 2), np.nan)
     if known.any():     # the information of the epochs with a true position only (NaN is no position)
         info[known] = rss_position_information(position[known], model, heard=heard_b[known])
+    bound, reason = check_position_information(info, heard_b.sum(axis=-1), min_anchors=min_anchors,
+                                               max_condition=max_condition)
+    reason[~known] = NO_TRUTH_REASON
+    return bound, reason
+
+
+# ------------------------------------------------------------------------------------------------ range bounds
+
+def _range_model(model, who: str):
+    from ..models.range import RangeModel
+    if not isinstance(model, RangeModel):
+        raise ValueError(f"{who} takes model = RangeModel(anchors_m, sigma_m, tag_height_m=...), got "
+                         f"{type(model).__name__}")
+    if model.per_step_sigma:
+        raise ValueError(f"{who}: give one sigma per position (sigma_m (m,) or (P, m), per_step_sigma=False)")
+    return model
+
+
+def range_position_information(position_m, model, *, heard=None):
+    """The range Fisher information of the position ``J = sum_j u_j u_j^T / sigma_j^2`` ``(..., dim, dim)`` at
+    ``position_m`` ``(..., dim)``, ``u_j = (p - a_j)_plan / d_j`` the unit vector from anchor ``j`` (its plan part
+    for anchors with heights above a tag at ``tag_height_m``), for the range model ``model``
+    (:class:`locbook.models.range.RangeModel`: ``z_j = d_j + v_j``, ``v_j ~ N(0, sigma_j^2)``; the Gaussian location
+    information ``dh^T dh / sigma^2``). ``model.sigma_m``: a scalar, ``(m,)`` or per position ``(..., m)`` broadcasting
+    against the positions (e.g. each epoch's reported std). ``heard``: booleans broadcastable to ``(..., m)``, False
+    where an anchor gave no range (its term is left out)."""
+    model = _range_model(model, "range_position_information")
+    m, dim = model.n_anchors, model.dim
+    position_m = as_array("position_m", position_m, min_ndim=1, trailing=(dim,))
+    unit = model.unit_vectors(position_m)[1]
+    gain = 1.0 / np.square(np.broadcast_to(model.sigma_m, unit.shape[:-1]))
+    if heard is not None:
+        heard = np.asarray(heard)
+        if heard.dtype != bool:
+            raise ValueError(f"heard must be booleans (False = not heard), got dtype {heard.dtype}")
+        try:
+            gain = gain * np.broadcast_to(heard, gain.shape)
+        except ValueError:
+            raise ValueError(f"heard must broadcast to (..., {m}) = {gain.shape}, got shape {heard.shape}") from None
+    return np.einsum("...j,...ji,...jk->...ik", gain, unit, unit)
+
+
+def range_crlb_m(position_m, model, *, heard=None):
+    """Position RMSE bound ``sqrt(tr J^{-1})`` (m) from ranges at each position ``(..., dim)`` -> ``(...)``
+    (:func:`range_position_information`); for plan positions the closed form ``sqrt((J_xx + J_yy) / det J)``
+    (Ozkaya 2011, Eq. (A.5), for the range information). Where the ranges heard cannot fix a position (fewer than
+    two, or aligned with it) the bound is ``inf``. :func:`range_crlb_checked_m` gives NaN with a reason instead."""
+    info = range_position_information(position_m, model, heard=heard)
+    if info.shape[-1] != 2:
+        return np.sqrt(np.trace(np.linalg.inv(info), axis1=-2, axis2=-1))
+    det = info[..., 0, 0] * info[..., 1, 1] - info[..., 0, 1] ** 2
+    trace = info[..., 0, 0] + info[..., 1, 1]
+    ok = det > 1e-12 * trace**2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(ok, np.sqrt(trace / np.where(ok, det, 1.0)), np.inf)
+
+
+def range_crlb_checked_m(position_m, model, *, heard=None, min_anchors: int = MIN_ANCHORS_FOR_BOUND,
+                         max_condition: float = MAX_BOUND_CONDITION):
+    """``(bound_m (...), reason (...))``: :func:`range_crlb_m` at plan positions ``(..., 2)`` checked epoch by
+    epoch as the RSS bound is (:func:`check_position_information`): NaN with a reason where fewer than
+    ``min_anchors`` ranges were heard (two ranges meet in two points, as two RSS ranges do), where the information is
+    near-singular, or where the true position is unknown (NaN)."""
+    model = _range_model(model, "range_crlb_checked_m")
+    if model.dim != 2:
+        raise ParameterError(f"range_crlb_checked_m gives the bound of a plan position: anchors (m, 2), or (m, 3) "
+                             f"with tag_height_m; the model's give {model.dim}-D")
+    m = model.n_anchors
+    position = as_array("position_m", position_m, min_ndim=1, trailing=(2,), nan_ok=True)
+    batch = position.shape[:-1]
+    heard_b = np.ones(batch + (m,), bool) if heard is None else np.broadcast_to(np.asarray(heard, bool), batch + (m,))
+    known = ~np.isnan(position).any(axis=-1)
+    info = np.full(batch + (2, 2), np.nan)
+    if known.any():
+        sigma = np.broadcast_to(model.sigma_m, batch + (m,)) if np.ndim(model.sigma_m) >= 2 else model.sigma_m
+        sub = model if np.ndim(model.sigma_m) < 2 else model.with_noise(np.square(sigma[known]))
+        info[known] = range_position_information(position[known], sub, heard=heard_b[known])
     bound, reason = check_position_information(info, heard_b.sum(axis=-1), min_anchors=min_anchors,
                                                max_condition=max_condition)
     reason[~known] = NO_TRUTH_REASON

@@ -49,6 +49,9 @@ The manifest (every key below; ``[units]`` describes the files, every other valu
     window_s = 0                        # optional: this recording's own epoch window; 0: native scans (each
                                         # distinct time is an epoch; a track's clock is then the median spacing of
                                         # its scan times, Dataset.scan_interval_s). A track needs at least 2 epochs
+    ranges = "survey_ranges.csv"        # optional: RTT / ToA ranges of this recording (time_s, transmitter,
+                                        # receiver, range_m[, range_std_m]; locbook.data.ranges), aligned with its
+                                        # RSS epochs by the same window rule: Dataset.ranges(name)
 
     [[method]]                          # optional, one per method of your own run beside the battery's
     name = "centroid"                   # its name in every table and figure: letters, digits, '_' and '-', from a
@@ -127,7 +130,7 @@ _SECTIONS = {"units": {"time", "length", "rssi"},
              "readings": {"valid_range_dbm", "invalid_values_dbm", "backward_time"},
              "geometry": {"anchors", "outline", "tag_height_m"},
              "epochs": {"window_s", "aggregate", "min_readings"}}
-_RECORDING_KEYS = {"name", "file", "role", "point_column", "reference_path", "window_s"}
+_RECORDING_KEYS = {"name", "file", "role", "point_column", "reference_path", "window_s", "ranges"}
 _METHOD_KEYS = {"name", "function", "kind"}
 
 
@@ -172,6 +175,9 @@ class Recording:
     point_column: str | None = None
     reference_path_m: np.ndarray | None = None
     sorted_rows: int = 0
+    #: the recording's range readings (``ranges = "FILE"``; :func:`locbook.data.ranges.read_ranges`), or None
+    ranges: pd.DataFrame | None = field(default=None, repr=False)
+    ranges_file: Path | None = None
 
     @property
     def has_truth(self) -> bool:
@@ -181,7 +187,8 @@ class Recording:
 @dataclass(frozen=True)
 class Dataset:
     """A measured data set read from its folder (module docstring). ``epochs(name)`` gives a recording's epochs
-    by the data set's rule; ``recordings_with(role)`` lists recordings by role and ``has_role(role)`` says whether
+    by the data set's rule; ``ranges(name)`` its ranges on those epochs (a recording with ``ranges = "FILE"``;
+    ``has_ranges(name)``); ``recordings_with(role)`` lists recordings by role and ``has_role(role)`` says whether
     there is one; ``devices(name)`` the devices of a recording; ``scan_interval_s(name)`` its epoch clock.
     ``dimension`` is 2 for anchors without z (then ``anchors_m`` is ``(m, 2)`` and ``tag_height_m`` None), else 3;
     ``geometry_text`` says which, in one sentence for the reports."""
@@ -274,6 +281,27 @@ class Dataset:
                                        aggregate=rule.aggregate, min_readings=rule.min_readings,
                                        group_by=() if rec.point_column is None else (rec.point_column,))
         return self._cache[name]
+
+    def ranges(self, name: str):
+        """The recording's ranges on the rows of :meth:`epochs` (cached): ``(range_m (E, m), range_std_m (E, m) or
+        None)``, NaN where an anchor has no range in the epoch's window; the mean of the window's ranges and the std of
+        that mean (:func:`locbook.data.ranges.align_ranges`). A recording without a ranges file is refused."""
+        key = ("ranges", name)
+        if key not in self._cache:
+            rec = self.recording(name)
+            if rec.ranges is None:
+                raise ParameterError(f"recording {name!r} of data set {self.name!r} has no ranges file (its "
+                                     "[[recording]] has no ranges = \"FILE\")")
+            from .ranges import align_ranges
+            rule = rec.epoch_rule
+            self._cache[key] = align_ranges(self.epochs(name), rec.readings, rec.ranges, window_s=rule.window_s or None,
+                                            group_by=() if rec.point_column is None else (rec.point_column,),
+                                            source=f"ranges file {rec.ranges_file}")
+        return self._cache[key]
+
+    def has_ranges(self, name: str) -> bool:
+        """Whether the recording has a ranges file."""
+        return self.recording(name).ranges is not None
 
     def epochs_of(self, role: str) -> Epochs:
         """The epochs of every recording of ``role``, one after the other (in manifest order)."""
@@ -540,7 +568,15 @@ def load_dataset(path) -> Dataset:
                 _fail(manifest, f"{where}reference_path belongs to a track, not a {role} recording")
             reference = read_path_segments(_file(manifest, root, _string(manifest, rec, "reference_path", where),
                                                  where + "reference_path: ")) * length_scale
-        recordings[rname] = Recording(rname, role, path, readings, rule, point_column, reference, sorted_rows)
+        ranges, ranges_file = None, None
+        if "ranges" in rec:
+            from .ranges import read_ranges, time_origin
+            ranges_file = _file(manifest, root, _string(manifest, rec, "ranges", where), where + "ranges: ")
+            ranges = read_ranges(ranges_file, anchor_ids=anchors["id"], transmitters=readings["transmitter"].unique(),
+                                 time_scale=time_scale, length_scale=length_scale,
+                                 time_origin_raw=time_origin(table["time_s"]) if time_scale != 1.0 else None)
+        recordings[rname] = Recording(rname, role, path, readings, rule, point_column, reference, sorted_rows,
+                                      ranges, ranges_file)
     roles = {r.role for r in recordings.values()}
     if "calibration" not in roles:
         _fail(manifest, "no recording has role 'calibration': the channel is fitted on it (and never on the "
@@ -625,6 +661,7 @@ def load_dataset(path) -> Dataset:
     files += [license_file] if license_file else []
     for rec in records:
         files += [recordings[rec["name"]].file] + ([root / rec["reference_path"]] if "reference_path" in rec else [])
+        files += [recordings[rec["name"]].ranges_file] if "ranges" in rec else []
     files += [m.path for m in methods if m.path is not None]
     data = Dataset(name, title, root, license_, attribution, anchors, outline, tag_height, recordings, changes,
                    license_file, notes, tuple(files), height_source, methods=methods)
@@ -634,6 +671,13 @@ def load_dataset(path) -> Dataset:
         except DataFormatError as exc:
             raise DataFormatError(f"readings file {rec.file} (recording {rname!r}): {exc}") from None
         _check_epochs_kept(manifest, data, rname)
+        if rec.ranges is not None:
+            unaligned = data.ranges(rname).unaligned
+            if unaligned:
+                data.notes[f"ranges {rname}"] = (
+                    f"{unaligned:,} range(s) of {rec.ranges_file.name} fall on no epoch of recording {rname!r} (before "
+                    "the transmitter's first reading, in a window without RSS rows, or at a time no scan has): not "
+                    "used")
     _device_notes(data)
     return data
 
@@ -818,7 +862,8 @@ def _epoch_rule(manifest, raw: dict, where: str, default: EpochRule | None) -> E
 
 def dataset_summary(data: Dataset) -> list[dict]:
     """One row per recording: role, readings, epochs, share of (epoch, anchor) entries heard, readings per heard
-    entry, duration, truth, rows sorted; what ``locbook data check`` prints and every report's first table shows."""
+    entry, duration, truth, rows sorted (and, in a data set with ranges, the (epoch, anchor) entries with a range);
+    what ``locbook data check`` prints and every report's first table shows."""
     rows = []
     for name, rec in data.recordings.items():
         ep = data.epochs(name)
@@ -835,4 +880,9 @@ def dataset_summary(data: Dataset) -> list[dict]:
             "points": (len(set(ep.extra[rec.point_column].tolist())) if rec.point_column else ""),
             "rows sorted": rec.sorted_rows,
         })
+    if any(rec.ranges is not None for rec in data.recordings.values()):   # a column only where there are ranges
+        for row in rows:
+            rec = data.recording(row["recording"])
+            row["ranges (epoch, anchor)"] = (int(np.isfinite(data.ranges(rec.name)[0]).sum())
+                                             if rec.ranges is not None else "")
     return rows

@@ -42,6 +42,11 @@ EXAMPLE_SITE = {
     "packet_rate_hz": 4.0,
     "walk_speed_m_s": 1.0,
     "scan_rate_hz": 1.0,             # native scans (native_scans=True): a phone's BLE scan results, about 1 Hz
+    # ranges (ranges=True): RTT-like ranging rounds to every anchor, the true 3-D distance plus N(0, sigma^2): 0.3 m is
+    # the order of Wi-Fi RTT's (IEEE 802.11mc) spread with a clear line of sight; the device reports that std
+    "range_sigma_m": 0.3,
+    "range_rate_hz": 2.0,            # ranging rounds per second (native scans: one per scan, at the scan's time)
+    "range_missing_fraction": 0.05,  # ranges logged empty (the round failed for that anchor)
 }
 #: the recordings of the example by role (``roles`` of :func:`write_example_dataset` picks among them)
 EXAMPLE_ROLES = ("calibration", "static", "track")
@@ -132,25 +137,66 @@ def _dwell(points_m, ids, seconds: float, t0: float, rng, site, *, two_d: bool =
     return out
 
 
-def _loop(duration_s: float, offset_m: float, rng, site, t0: float = 0.0, *, two_d: bool = False,
-          scans: bool = False):
-    """Packets of a tag walking a rectangle ``offset_m`` inside the hall's walls at the site's walking speed
-    (``scans``: as scans at the site's scan rate)."""
+def _loop_positions(time_s, offset_m: float, site, t0: float = 0.0) -> np.ndarray:
+    """Positions ``(T, 2)`` at ``time_s`` of a tag walking a rectangle ``offset_m`` inside the hall's walls at the
+    site's walking speed, from its corner at ``t0``."""
     w, h = site["hall_m"]
     corners = np.array([[offset_m, offset_m], [w - offset_m, offset_m], [w - offset_m, h - offset_m],
                         [offset_m, h - offset_m], [offset_m, offset_m]])
     seg = np.linalg.norm(np.diff(corners, axis=0), axis=1)
     cum = np.r_[0.0, np.cumsum(seg)]
-    rate = site["scan_rate_hz"] if scans else site["packet_rate_hz"]
-    t = t0 + np.arange(int(duration_s * rate)) / rate
-    s = (site["walk_speed_m_s"] * (t - t0)) % cum[-1]
-    pos = np.column_stack([np.interp(s, cum, corners[:, k]) for k in range(2)])
-    return _packets(pos, t, rng, site, two_d=two_d, scans=scans)
+    s = (site["walk_speed_m_s"] * (time_s - t0)) % cum[-1]
+    return np.column_stack([np.interp(s, cum, corners[:, k]) for k in range(2)])
+
+
+def _loop_times(duration_s: float, rate_hz: float, t0: float = 0.0) -> np.ndarray:
+    return t0 + np.arange(int(duration_s * rate_hz)) / rate_hz
+
+
+def _loop(duration_s: float, offset_m: float, rng, site, t0: float = 0.0, *, two_d: bool = False,
+          scans: bool = False):
+    """Packets of a tag walking a rectangle ``offset_m`` inside the hall's walls at the site's walking speed
+    (``scans``: as scans at the site's scan rate)."""
+    t = _loop_times(duration_s, site["scan_rate_hz"] if scans else site["packet_rate_hz"], t0)
+    return _packets(_loop_positions(t, offset_m, site, t0), t, rng, site, two_d=two_d, scans=scans)
+
+
+def _ranges(positions_m, time_s, rng, site, *, two_d: bool = False, extra=None) -> pd.DataFrame:
+    """A ranging round to every anchor at each of ``time_s (T,)`` from the tag at ``positions_m (T, 2)``: the true
+    distance (3-D, the tag at the site's height; in the plane for ``two_d``) plus ``N(0, range_sigma_m^2)``, clipped
+    at 0 m (a device reports no negative distance; at these 1.3 m+ distances and 0.3 m it never binds) and logged in
+    mm, with its reported std; ``range_missing_fraction`` of them empty (not measured). ``extra``: columns per time
+    (a point id)."""
+    anchors = site["anchors_m"]
+    m = len(anchors)
+    if two_d:
+        d = np.linalg.norm(positions_m[:, None, :] - anchors[:, :2], axis=-1)
+    else:
+        pos3 = np.column_stack([positions_m, np.full(len(positions_m), site["tag_height_m"])])
+        d = np.linalg.norm(pos3[:, None, :] - anchors, axis=-1)
+    value = np.maximum(d + site["range_sigma_m"] * rng.standard_normal(d.shape), 0.0).round(3)
+    out = pd.DataFrame({"time_s": np.round(np.repeat(time_s, m), 4), "transmitter": "tag1",
+                        "receiver": np.tile([f"A{j + 1}" for j in range(m)], len(time_s)),
+                        "range_m": value.reshape(-1).astype(object), "range_std_m": site["range_sigma_m"]})
+    out.loc[rng.random(len(out)) < site["range_missing_fraction"], "range_m"] = ""
+    for name, values in (extra or {}).items():
+        out[name] = np.repeat(np.asarray(values, dtype=object), m)
+    return out
+
+
+def _dwell_ranges(points_m, ids, seconds: float, t0: float, rng, site, *, two_d: bool = False) -> pd.DataFrame:
+    """The ranges of :func:`_dwell`'s tag: rounds at the site's ranging rate while it stands at each point."""
+    per = int(round(seconds * site["range_rate_hz"]))
+    start = t0 + np.arange(len(points_m)) * (seconds + 2.0)
+    t = (start[:, None] + np.arange(per) / site["range_rate_hz"]).reshape(-1)
+    return _ranges(np.repeat(points_m, per, axis=0), t, rng, site, two_d=two_d,
+                   extra={"point": np.repeat(np.asarray(ids, dtype=object), per)})
 
 
 def write_example_dataset(folder, rng: np.random.Generator, *, name: str = "example", walk_s: float = 120.0,
                           seed_note: int | str = "given", force: bool = False, speed_m_s: float | None = None,
-                          roles=EXAMPLE_ROLES, two_d: bool = False, native_scans: bool = False) -> Path:
+                          roles=EXAMPLE_ROLES, two_d: bool = False, native_scans: bool = False,
+                          ranges: bool = False) -> Path:
     """Write the example data set (module docstring) to ``folder`` (created; a folder that holds files is refused
     unless ``force``, so a typo never overwrites a data set) and return it. ``walk_s``: length of each walk (s): 120 s
     gives about 30,000 readings in all; the loader benchmark scales it up. ``name``: the manifest's name (it names
@@ -161,7 +207,12 @@ def write_example_dataset(folder, rng: np.random.Generator, *, name: str = "exam
     :data:`EXAMPLE_ROLES` holding ``"calibration"`` (e.g. ``("calibration", "static")`` for a static-only set,
     ``("calibration", "track")`` for a track-only one); ``two_d``, anchors without z (a 2-D site: readings from
     distances in the plane, no ``tag_height_m``); ``native_scans``, the tracks written as scans (every anchor of a
-    scan at one time, ``EXAMPLE_SITE["scan_rate_hz"]``) with ``window_s = 0``."""
+    scan at one time, ``EXAMPLE_SITE["scan_rate_hz"]``) with ``window_s = 0``; ``ranges``, a ranges file per
+    recording (``<name>_ranges.csv``, :mod:`locbook.data.ranges`): RTT-like ranges to every anchor at
+    ``EXAMPLE_SITE["range_rate_hz"]`` (the tracks' native scans: at each scan), the true 3-D distance plus
+    ``N(0, range_sigma_m^2)`` (0.3 m) with that std reported, ``range_missing_fraction`` (5 %) empty, drawn from a
+    generator seeded by one draw of ``rng`` after every other draw, so the other files are those written without
+    it, byte for byte."""
     from ..errors import ParameterError
     from .dataset import name_problem
     if not isinstance(rng, np.random.Generator):
@@ -179,7 +230,7 @@ def write_example_dataset(folder, rng: np.random.Generator, *, name: str = "exam
     if unknown or "calibration" not in roles:
         raise ParameterError(f"roles must be some of {EXAMPLE_ROLES}, 'calibration' among them (a data set needs a "
                              f"calibration recording), got {roles!r}")
-    for key, value in (("two_d", two_d), ("native_scans", native_scans)):
+    for key, value in (("two_d", two_d), ("native_scans", native_scans), ("ranges", ranges)):
         if not isinstance(value, bool):
             raise ParameterError(f"{key} must be True or False, got {value!r}")
     folder = Path(folder)
@@ -196,12 +247,12 @@ def write_example_dataset(folder, rng: np.random.Generator, *, name: str = "exam
     pd.DataFrame({"x": [0.0, w, w, 0.0], "y": [0.0, 0.0, h, h]}).to_csv(folder / "outline.csv", index=False)
     gx, gy = np.meshgrid(np.arange(1.0, w, 2.0), np.arange(1.0, h, 2.0))
     grid = np.column_stack([gx.ravel(), gy.ravel()])
-    _dwell(grid, [f"C{k + 1:03d}" for k in range(len(grid))], 5.0, 0.0, rng, site, two_d=two_d).to_csv(
-        folder / "survey.csv", index=False)
+    grid_ids = [f"C{k + 1:03d}" for k in range(len(grid))]
+    _dwell(grid, grid_ids, 5.0, 0.0, rng, site, two_d=two_d).to_csv(folder / "survey.csv", index=False)
     if "static" in roles:
         tests = np.column_stack([rng.uniform(2.0, w - 2.0, 12), rng.uniform(2.0, h - 2.0, 12)]).round(2)
-        _dwell(tests, [f"T{k + 1:02d}" for k in range(len(tests))], 10.0, 0.0, rng, site, two_d=two_d).to_csv(
-            folder / "points.csv", index=False)
+        test_ids = [f"T{k + 1:02d}" for k in range(len(tests))]
+        _dwell(tests, test_ids, 10.0, 0.0, rng, site, two_d=two_d).to_csv(folder / "points.csv", index=False)
     if "track" in roles:
         _loop(walk_s, 2.0, rng, site, two_d=two_d, scans=native_scans).to_csv(folder / "walk_a.csv", index=False)
         walk_b = _loop(walk_s, 3.0, rng, site, two_d=two_d, scans=native_scans)
@@ -211,6 +262,21 @@ def write_example_dataset(folder, rng: np.random.Generator, *, name: str = "exam
         order[swap], order[swap + 1] = swap + 1, swap
         walk_b = walk_b.iloc[order]
         walk_b.to_csv(folder / "walk_b.csv", index=False)
+    if ranges:      # after every other draw, from a stream of its own: the files above are unchanged
+        range_rng = np.random.default_rng(rng.integers(2**63))
+        _dwell_ranges(grid, grid_ids, 5.0, 0.0, range_rng, site, two_d=two_d).to_csv(
+            folder / "survey_ranges.csv", index=False)
+        if "static" in roles:
+            _dwell_ranges(tests, test_ids, 10.0, 0.0, range_rng, site, two_d=two_d).to_csv(
+                folder / "points_ranges.csv", index=False)
+        if "track" in roles:
+            for walk, offset in (("walk_a", 2.0), ("walk_b", 3.0)):
+                # rounds centred on the 1 s windows (k - 1/4, k + 1/4 s: their mean time is the window's tick); as
+                # scans, at each scan's time (the epoch of a native scan)
+                t = (_loop_times(walk_s, site["scan_rate_hz"]) if native_scans else
+                     _loop_times(walk_s, site["range_rate_hz"]) + 0.5 / site["range_rate_hz"])
+                _ranges(_loop_positions(t, offset, site), t, range_rng, site, two_d=two_d).to_csv(
+                    folder / f"{walk}_ranges.csv", index=False)
     attribution = f"Synthetic data generated by locbook (locbook.data.example.write_example_dataset, seed {seed_note})"
     text = _MANIFEST.format(name=_toml_string(name), attribution=_toml_string(attribution))
     if two_d:
@@ -219,9 +285,12 @@ def write_example_dataset(folder, rng: np.random.Generator, *, name: str = "exam
     if native_scans and "track" in roles:
         text = text.replace(", raw packets at 4 Hz",
                             f", raw packets at 4 Hz, walks as {site['scan_rate_hz']:g} Hz scans")
+    if ranges:
+        text = text.replace(", raw packets at 4 Hz", f", raw packets at 4 Hz, ranges ({site['range_sigma_m']:g} m)", 1)
     for role in EXAMPLE_ROLES:
         if role in roles:
             text += "".join(block + (_NATIVE_WINDOW if native_scans and role == "track" else "")
+                            + (f'ranges = "{block.split(chr(34))[1]}_ranges.csv"\n' if ranges else "")
                             for block in _RECORDINGS[role])
     (folder / "dataset.toml").write_text(text, encoding="utf-8")
     return folder

@@ -52,6 +52,7 @@ from ..montecarlo import seed_from_values
 from ..static.calibration import PathLossFit, calibrate_path_loss, fix_error_covariance
 from ..static.fingerprint import knn_position
 from ..user_methods import MethodFailure, MethodInput, UserMethod, frozen, registered_methods, run_method
+from . import measured_ranges as ranging
 
 __all__ = ["PATH_LOSS_EXP_BOUNDS", "REF_POWER_BOUNDS_DBM", "HUBER_DELTA_DB", "NEAR_FIELD_M", "STATIC_METHODS",
            "TRACKERS", "GRID_SPACING_M", "MAX_GRID_CELLS", "KNN_CANDIDATES", "KNN_CV_CELL_M", "Q_START",
@@ -508,6 +509,7 @@ def protocol(data: Dataset, model: PathLossModel, *, fit: str = "closed_form", g
                                      f"{START_VELOCITY_SD_M_S:g} m/s)",
                             "how": "rule: the calibrated covariance of rss_ml fixes (the first epoch's readings also "
                                    "update it: a small double use, stated)"})
+    choices += ranging.range_choices(data)        # the range stream's sigma (none without ranges)
     return Protocol(fit, pitch, k, motion, tuple(choices), tuple(table))
 
 
@@ -558,23 +560,30 @@ def fix_covariance_from_calibration(data: Dataset, model: PathLossModel, *, grid
     return fix_error_covariance(fixes[ok], xy[ok])
 
 
-def tracking_scenario(data: Dataset, model: PathLossModel, recording: str, *, grid_spacing_m: float, q: float,
-                      spread_m: float, fix_cov_m2=None, fit: str = "closed_form") -> TrackingScenario:
-    """One track on its epoch clock (:func:`epoch_s`; a tick without an epoch is all NaN and unscored; native scans
-    are put in windows of the clock's period, so scans with jittered times never share a tick), truth at the ticks of
-    the epochs with a true position, and the start every tracker takes (the first rss_ml fix, at rest)."""
+def track_epochs(data: Dataset, recording: str):
+    """``(epochs, epochs on the clock, tick of each epoch)`` of a track (:func:`tracking_scenario`): its epochs
+    (device-corrected) put on its epoch clock (:func:`epoch_s`) by :func:`locbook.data.measured.regular_epochs`;
+    native scans are first put in windows of the clock's period (the mean of an anchor's scans in a window, as a
+    windowed recording's epochs), since jittered scan times can put two scans on one tick."""
     dt = epoch_s(data, recording)
     rec = data.recording(recording)
     if rec.epoch_rule.window_s:
         ep = device_corrected(data, data.epochs(recording))
         reg, ticks = regular_epochs(ep, dt, tolerance_s=0.1 * dt)
     else:
-        # native scans on the clock of their median spacing: jittered scan times can put two scans on one tick, so
-        # the scans are put in windows of that spacing (the mean of an anchor's scans in a window, as a windowed
-        # recording's epochs)
         from ..data.measured import epochs as make_epochs
         ep = device_corrected(data, make_epochs(rec.readings, data.anchor_ids, window_s=dt, aggregate="mean"))
         reg, ticks = regular_epochs(ep, dt, tolerance_s=0.5 * dt)
+    return ep, reg, ticks
+
+
+def tracking_scenario(data: Dataset, model: PathLossModel, recording: str, *, grid_spacing_m: float, q: float,
+                      spread_m: float, fix_cov_m2=None, fit: str = "closed_form") -> TrackingScenario:
+    """One track on its epoch clock (:func:`epoch_s`; a tick without an epoch is all NaN and unscored; native scans
+    are put in windows of the clock's period, so scans with jittered times never share a tick), truth at the ticks of
+    the epochs with a true position, and the start every tracker takes (the first rss_ml fix, at rest)."""
+    dt = epoch_s(data, recording)
+    ep, reg, ticks = track_epochs(data, recording)
     truth = np.full((reg.rss_dbm.shape[0], 2), np.nan)
     known = np.isfinite(ep.position_m[:, :2]).all(axis=1)
     truth[ticks[known]] = ep.position_m[known, :2]
@@ -681,17 +690,20 @@ def user_methods(data: Dataset, *, methods=(), trackers=()) -> tuple[UserMethod,
 
 
 def method_input(data: Dataset, model: PathLossModel, recording: str, rss_dbm, time_s,
-                 rng: np.random.Generator | None) -> MethodInput:
+                 rng: np.random.Generator | None, ranges=None) -> MethodInput:
     """What a user method is called with on one recording's epochs (:class:`locbook.MethodInput`): read-only
     copies of the readings, times, anchors and outline, and a copy of the fitted channel with the one
-    :class:`RssModel` built from it, so that no method can change what the next one sees."""
+    :class:`RssModel` built from it, so that no method can change what the next one sees. ``ranges``: ``(range_m,
+    range_std_m)`` on the same epochs, or None (:mod:`locbook.scenarios.measured_ranges`)."""
     from copy import deepcopy
     channel_copy = deepcopy(model)
     return MethodInput(rss_dbm=frozen(rss_dbm), time_s=frozen(time_s), recording=recording,
                        kind=data.recording(recording).role, tag_height_m=data.tag_height_m,
                        anchors_m=frozen(data.anchors_m), channel=channel_copy,
                        model=RssModel(frozen(data.anchors_m), channel_copy, tag_height_m=data.tag_height_m),
-                       outline_m=frozen(data.outline_m), rng=rng)
+                       outline_m=frozen(data.outline_m), rng=rng,
+                       range_m=None if ranges is None else frozen(ranges[0]),
+                       range_std_m=None if ranges is None else frozen(ranges[1]))
 
 
 def _run_user(methods, kind: str, inputs_of) -> tuple[dict, dict, dict]:
@@ -781,11 +793,18 @@ def static_results(data: Dataset, model: PathLossModel, proto: Protocol, *, seed
         fixes[n] = {k: v[0, cuts[i]:cuts[i + 1]] for k, v in pooled.items()}
         errors[n] = {k: np.linalg.norm(v - tests[n].truth_m, axis=-1) for k, v in fixes[n].items()}
         bounds[n] = tuple(v[cuts[i]:cuts[i + 1]] for v in pooled_bound)
+    ranged = ranging.static_range_results(data, names)     # range_nls where the recordings have ranges
+    stream = list(ranging.RANGE_STATIC_METHODS) if ranged is not None else []
+    for method in stream:
+        for n in names:
+            fixes[n][method] = ranged["fixes"][n]
+            errors[n][method] = np.linalg.norm(ranged["fixes"][n] - tests[n].truth_m, axis=-1)
     user = tuple(m for m in user_methods if m.kind == "static")
     described = {m.name: m.described for m in user}
     got, covariances, failures = _run_user(user, "static", lambda m: {
         n: method_input(data, model, n, tests[n].rss_dbm, tests[n].time_s,
-                        keyed_stream(seed, data.name, "user", "static", n, m.name)) for n in names})
+                        keyed_stream(seed, data.name, "user", "static", n, m.name),
+                        ranging.user_ranges(data, n)) for n in names})
     for name, per_recording in got.items():
         for n in names:
             fixes[n][name] = per_recording[n]
@@ -797,7 +816,7 @@ def static_results(data: Dataset, model: PathLossModel, proto: Protocol, *, seed
         block = max(_block(tests[n].time_s, block_s, tests[n].point) for n in members)
         bound = np.concatenate([bounds[n][0] for n in members])
         reason = np.concatenate([bounds[n][1] for n in members])
-        for method in [*pooled, *described]:
+        for method in [*pooled, *stream, *described]:
             if method in failures:
                 rows.append(failed_row("static", label, method, len(bound), bound, reason,
                                        settings=described[method], bound_name=bound_name,
@@ -805,15 +824,21 @@ def static_results(data: Dataset, model: PathLossModel, proto: Protocol, *, seed
                 continue
             e = np.concatenate([errors[n][method] for n in members])
             f = np.concatenate([fixes[n][method] for n in members])
-            row = result_row("static", label, method, e, bound, reason,
+            own = ranging.RANGE_STATIC_METHODS.get(method)      # a range method: beside the range CRLB
+            row = result_row("static", label, method, e,
+                             np.concatenate([ranged["bounds"][n][0] for n in members]) if own else bound,
+                             np.concatenate([ranged["bounds"][n][1] for n in members]) if own else reason,
                              keyed_stream(seed, data.name, "static", members[0] if len(members) == 1 else label,
                                           method), n_bootstrap=n_bootstrap,
-                             block=block, settings=described.get(method) or _static_settings(method, proto),
-                             prior=BATTERY_STATIC[method].prior if method in BATTERY_STATIC else USER_PRIOR,
-                             bound_name=bound_name, outside=outside_fraction(data, f))
-            rows.append(row if method in BATTERY_STATIC else {**row, FAILURE_COLUMN: ""})
+                             block=block, settings=described.get(method) or (own.settings if own else
+                                                                             _static_settings(method, proto)),
+                             prior=BATTERY_STATIC[method].prior if method in BATTERY_STATIC else
+                             own.prior if own else USER_PRIOR,
+                             bound_name=ranging.RANGE_BOUND_NAME if own else bound_name,
+                             outside=outside_fraction(data, f))
+            rows.append(row if method in BATTERY_STATIC or own else {**row, FAILURE_COLUMN: ""})
     return {"recordings": names, "tests": tests, "fixes": fixes, "errors": errors, "bounds": bounds, "rows": rows,
-            "scenario": sc, "battery": list(pooled), "user": user, "described": described, "failures": failures,
+            "scenario": sc, "battery": [*pooled, *stream], "user": user, "described": described, "failures": failures,
             "covariances": {n: {k: v[n] for k, v in covariances.items()} for n in names}}
 
 
@@ -838,6 +863,7 @@ def tracking_results(data: Dataset, model: PathLossModel, proto: Protocol, *, se
     if not names:
         return None
     fix_cov = fix_covariance_from_calibration(data, model, grid_spacing_m=proto.grid_spacing_m)
+    stream = list(ranging.RANGE_TRACKERS) if ranging.ranged_tracks(data, names) else []
     out, per = {}, {}
     for name in names:
         motion = proto.motion[name]
@@ -853,6 +879,11 @@ def tracking_results(data: Dataset, model: PathLossModel, proto: Protocol, *, se
                                        keyed_stream(seed, data.name, "tracking", name, "particle"),
                                        trackers=["particle"])["particle"]
         est = {t: est[t] for t in TRACKERS}
+        if stream:              # the fusion trackers: the RSS stream and the track's ranges
+            ep, _, ticks = track_epochs(data, name)
+            more, more_flags = ranging.run_range_trackers(data, name, sc, ep, ticks, x0, ts)
+            est.update(more)
+            flags.update(more_flags)
         bound = tracking_bound_m(sc, ts)
         out[name] = (sc, est, flags, bound)
         if sc.scored is not None and sc.scored.any():
@@ -862,11 +893,16 @@ def tracking_results(data: Dataset, model: PathLossModel, proto: Protocol, *, se
                                     for t, v in est.items()},
                          "est": {t: v[:, steps] for t, v in est.items()},
                          "knobs": _tracker_knobs(proto, name, ts, sc)}
+            if stream:
+                per[name]["knobs"].update(ranging.range_tracker_knobs(data, name, per[name]["knobs"]["ekf"], ts))
     user = tuple(m for m in user_methods if m.kind == "tracker")
     described = {m.name: m.described for m in user}
     got, covariances, failures = _run_user(user, "tracker", lambda m: {
         n: method_input(data, model, n, out[n][0].measured_rss_dbm, out[n][0].time_s,
-                        keyed_stream(seed, data.name, "user", "tracking", n, m.name)) for n in names})
+                        keyed_stream(seed, data.name, "user", "tracking", n, m.name),
+                        ranging.user_ranges(data, n, track_epochs(data, n), len(out[n][0].time_s))
+                        if data.has_ranges(n) else None)
+        for n in names})
     for tracker, per_track in got.items():
         for n in names:
             out[n][1][tracker] = per_track[n][None]           # one run: (1, T, 2), as every tracker's (R, T, 2)
@@ -881,7 +917,7 @@ def tracking_results(data: Dataset, model: PathLossModel, proto: Protocol, *, se
     for label, members in groups:
         block = max(per[n]["block"] for n in members)
         bound = np.concatenate([per[n]["bound"] for n in members])
-        for tracker in [*TRACKERS, *described]:
+        for tracker in [*TRACKERS, *stream, *described]:
             if tracker in failures:
                 rows.append(failed_row("tracking", label, tracker, len(bound), bound, None,
                                        settings=described[tracker], bound_name=bound_name,
@@ -894,11 +930,13 @@ def tracking_results(data: Dataset, model: PathLossModel, proto: Protocol, *, se
                              keyed_stream(seed, data.name, "tracking", members[0] if len(members) == 1 else label,
                                           tracker, "bootstrap"),
                              n_bootstrap=n_bootstrap, block=block, settings=settings,
-                             prior=TRACKER_PRIORS.get(tracker, USER_PRIOR), bound_name=bound_name,
+                             prior=TRACKER_PRIORS.get(tracker) or ranging.RANGE_TRACKER_PRIORS.get(tracker, USER_PRIOR),
+                             bound_name=bound_name,
                              outside=outside_fraction(data, np.concatenate([per[n]["est"][tracker].reshape(-1, 2)
                                                                             for n in members])))
-            rows.append(row if tracker in TRACKER_PRIORS else {**row, FAILURE_COLUMN: ""})
-    return {"tracks": out, "rows": rows, "battery": list(TRACKERS), "user": user, "described": described,
+            rows.append(row if tracker in TRACKER_PRIORS or tracker in ranging.RANGE_TRACKERS else
+                        {**row, FAILURE_COLUMN: ""})
+    return {"tracks": out, "rows": rows, "battery": [*TRACKERS, *stream], "user": user, "described": described,
             "failures": failures, "covariances": {n: {k: v[n] for k, v in covariances.items()} for n in names}}
 
 

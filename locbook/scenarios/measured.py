@@ -512,9 +512,10 @@ def protocol(data: Dataset, model: PathLossModel, *, fit: str = "closed_form", g
                                    "update it: a small double use, stated)"})
         from .measured_inertial import fusion_choices, fusion_inputs, inertial_tracks
         for name in inertial_tracks(data):      # tracks with an inertial stream: the fusion trackers' settings
-            inertial[name] = fusion_inputs(data, model, name, grid_spacing_m=pitch, fix_cov_m2=fix_cov,
-                                           q=motion[name]["q"])
-            choices += fusion_choices(name, inertial[name])
+            fus = fusion_inputs(data, model, name, grid_spacing_m=pitch, fix_cov_m2=fix_cov, q=motion[name]["q"])
+            choices += fusion_choices(name, fus, first=not inertial)
+            if fus is not None:
+                inertial[name] = fus
     return Protocol(fit, pitch, k, motion, tuple(choices), tuple(table), inertial)
 
 

@@ -9,7 +9,7 @@ import numpy as np
 from ..data.dataset import Dataset
 from ..data.inertial import MAX_SUB_STEPS, align
 from ..inertial_trackers import (FUSION_TRACKERS, HEADING_CANDIDATES_DEG, HEADING_REFINE_DEG, HEADING_START_SD_RAD,
-                                 NO_GYRO_FRAME, Q_ACC_START, Q_ANGULAR_START, START_ACCELERATION_SD_M_S2,
+                                 NO_GYRO_FRAME, Q_ACC_START, Q_ANGULAR_START, Q_IMU_START, START_ACCELERATION_SD_M_S2,
                                  FusionInputs, ImuNoise, fit_fusion, stationary_noise)
 from ..models.channel import PathLossModel
 
@@ -45,31 +45,40 @@ def inertial_grid(data: Dataset, recording: str, time_s, dt_s: float):
 
 
 def fusion_inputs(data: Dataset, model: PathLossModel, recording: str, *, grid_spacing_m: float, fix_cov_m2,
-                  q: float) -> FusionInputs:
+                  q: float) -> FusionInputs | None:
     """The fusion trackers' inputs and settings on one track with an inertial stream
     (:func:`locbook.inertial_trackers.fit_fusion`: heading start and q by maximum likelihood, the calibration of
-    :func:`imu_noise`), from the RSS trackers' start and its covariance (``q``: the RSS trackers', for their P_0)."""
+    :func:`imu_noise`), from the RSS trackers' start and its covariance (``q``: the RSS trackers', for their P_0).
+    None when no accelerometer sample falls within the track's epochs (the files do not overlap in time: no fusion)."""
     from .measured import _settings, tracking_scenario
     sc = tracking_scenario(data, model, recording, grid_spacing_m=grid_spacing_m, q=q, spread_m=1.0)
     grid = inertial_grid(data, recording, sc.time_s, sc.dt_s)
+    if not grid.counts.any():
+        return None
     return fit_fusion(sc, grid, imu_noise(data), _settings(q, 1, 1.0, fix_cov_m2).P0)
 
 
-def fusion_choices(name: str, fus: FusionInputs) -> list[dict]:
-    """The settings table's rows of the fusion trackers on track ``name``: each setting, its value and its rule."""
+def fusion_choices(name: str, fus: FusionInputs | None, *, first: bool = True) -> list[dict]:
+    """The settings table's rows of the fusion trackers on track ``name``: each setting, its value and its rule (the
+    sensors' calibration, the data set's, with the ``first`` track only); ``fus`` None: one row saying why none ran."""
+    if fus is None:
+        return [{"method": ", ".join(FUSION_TRACKERS), "setting": f"inertial stream, {name}", "value": "not run",
+                 "how": "no accelerometer sample falls within the track's epochs (the inertial file's times do not "
+                        "overlap the readings': another time unit or origin?)"}]
     g, noise = fus.grid, fus.noise
     acc_sd = np.sqrt(noise.acc_var_m2_s4)
     rows = [{"method": ", ".join(fus.trackers), "setting": f"sub-step grid, {name}",
              "value": f"{g.n_sub} sub-steps of {g.dt_s:.4g} s per epoch; {fus.samples_per_step:g} samples per sub-step",
              "how": f"rule: the IMU's median interval, at most {MAX_SUB_STEPS} sub-steps per epoch "
                     "(locbook.data.inertial.sub_steps; Dogan 2015: RSS at every 10th accelerometer step)"},
-            {"method": ", ".join(fus.trackers), "setting": "accelerometer bias, sd per sample (m/s^2)",
-             "value": f"bias ({noise.acc_bias_m_s2[0]:.4g}, {noise.acc_bias_m_s2[1]:.4g}), sd ({acc_sd[0]:.4g}, "
-                      f"{acc_sd[1]:.4g})", "how": noise.source}]
-    if fus.has_gyro:
+            *([{"method": ", ".join(fus.trackers), "setting": "accelerometer bias, sd per sample (m/s^2)",
+                "value": f"bias ({noise.acc_bias_m_s2[0]:.4g}, {noise.acc_bias_m_s2[1]:.4g}), sd ({acc_sd[0]:.4g}, "
+                         f"{acc_sd[1]:.4g})", "how": noise.source}] if first else [])]
+    if fus.has_gyro and first:
         rows.append({"method": ", ".join(fus.trackers), "setting": "gyroscope bias, sd per sample (rad/s)",
                      "value": f"bias {noise.gyro_bias_rad_s:.4g}, sd {np.sqrt(noise.gyro_var_rad2_s2):.4g}",
                      "how": noise.source})
+    if fus.has_gyro:
         rows.append({"method": ", ".join(fus.trackers), "setting": f"initial heading (deg), {name}",
                      "value": f"{np.rad2deg(fus.heading_rad):.1f}",
                      "how": f"rule: maximum likelihood of ekf_rss_acc's innovations over headings every "
@@ -82,7 +91,7 @@ def fusion_choices(name: str, fus: FusionInputs) -> list[dict]:
                      "how": "assumed: no gyroscope, so no heading to rotate body-frame readings by "
                             "(locbook.inertial_trackers.NO_GYRO_FRAME); wrong for a tag that turns"})
     acc = fus.fits.get("acc", {})
-    rows.append({"method": "ekf_rss_acc", "setting": f"q ((m/s^2)^2 per sub-step), {name}",
+    rows.append({"method": "ekf_rss_acc", "setting": f"q (Q = q I per sub-step, Dogan's Eq. (3.24) form), {name}",
                  "value": f"{fus.q_acc:.3g}",
                  "how": f"rule: maximum likelihood of the fusion EKF's innovations on this track's readings "
                         f"(log-likelihood +{acc.get('gain', 0.0):.1f} over q = {Q_ACC_START:g}"
@@ -93,7 +102,7 @@ def fusion_choices(name: str, fus: FusionInputs) -> list[dict]:
         rows.append({"method": "ekf_rss_imu, ukf_rss_imu", "setting": f"q, q_angular (per sub-step), {name}",
                      "value": f"{fus.q_imu[0]:.3g} (m/s^2)^2, {fus.q_imu[1]:.3g} (rad/s)^2",
                      "how": f"rule: maximum likelihood of ekf_rss_imu's innovations, the translational and the "
-                            f"angular blocks of Q (log-likelihood +{imu.get('gain', 0.0):.1f} over q = ekf_rss_acc's, "
+                            f"angular blocks of Q (log-likelihood +{imu.get('gain', 0.0):.1f} over q = {Q_IMU_START:g}, "
                             f"q_angular = {Q_ANGULAR_START:g}{'; at the fit bound' if imu.get('at_bound') else ''}); "
                             "the UKF takes the EKF's"})
     return rows
@@ -105,7 +114,7 @@ def fusion_knobs(fus: FusionInputs, ukf_alpha: float) -> dict:
     grid = f"{g.n_sub} x {g.dt_s:.3g} s sub-steps per epoch"
     frame = (f"heading start {np.rad2deg(fus.heading_rad):.0f} deg (ML) + gyroscope" if fus.has_gyro
              else f"readings as {NO_GYRO_FRAME}-frame (no gyroscope)")
-    out = {"ekf_rss_acc": f"q = {fus.q_acc:.3g} (m/s^2)^2 per sub-step (fitted), {grid}, {frame}; start: first "
+    out = {"ekf_rss_acc": f"Q = q I, q = {fus.q_acc:.3g} per sub-step (fitted), {grid}, {frame}; start: first "
                           "rss_ml fix at rest"}
     if fus.q_imu is not None:
         common = (f"q = {fus.q_imu[0]:.3g}, q_angular = {fus.q_imu[1]:.3g} per sub-step (fitted), {grid}, heading start "

@@ -252,3 +252,28 @@ def test_default_example_bytes_unchanged(tmp_path):
     for name in ("anchors.csv", "outline.csv", "points.csv", "survey.csv"):
         assert with_imu[name] == _DEFAULT_BYTES[name]
     assert {"survey_imu.csv", "points_imu.csv", "walk_a_imu.csv", "walk_b_imu.csv"} <= set(with_imu)
+
+
+def test_without_a_gyroscope_only_the_accelerometer_ekf_runs(fused, tmp_path):
+    """Walk files without gyro_z: no heading to rotate by, so ekf_rss_acc takes the readings as world-frame (named
+    in the settings) and the 8-state trackers, which need the gyroscope, do not run."""
+    folder, ds, model, proto, res = fused
+    bare = tmp_path / "bare"
+    bare.mkdir()
+    for f in folder.iterdir():
+        (bare / f.name).write_bytes(f.read_bytes())
+    for name in ("walk_a_imu.csv", "walk_b_imu.csv"):
+        frame = pd.read_csv(bare / name)
+        frame.drop(columns="gyro_z").to_csv(bare / name, index=False)
+    ds2 = me.load(bare)
+    assert ds2.recording("walk_a").inertial.gyro_rad_s is None
+    model2 = me.channel(me.calibrate(ds2))
+    proto2 = me.protocol(ds2, model2)
+    assert proto2.inertial["walk_a"].trackers == ("ekf_rss_acc",) and proto2.inertial["walk_a"].heading_rad is None
+    frames = [r for r in proto2.rows() if r["setting"].startswith("accelerometer frame")]
+    assert len(frames) == 2 and all(r["value"].startswith("world") for r in frames)
+    res2 = me.tracking_results(ds2, model2, proto2, seed=11, n_particles=100, particle_runs=1, n_bootstrap=20,
+                               block_s=10.0, recordings=["walk_b"])
+    assert res2["fusion"] == ["ekf_rss_acc"]
+    assert {r["method"] for r in res2["rows"]} >= {"ekf", "ekf_rss_acc"}
+    assert not {"ekf_rss_imu", "ukf_rss_imu"} & {r["method"] for r in res2["rows"]}

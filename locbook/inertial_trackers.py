@@ -9,10 +9,10 @@ so its positions ``(R, T, 2)`` are on the same clock as every other tracker's.
 
 - ``ekf_rss_acc`` (Dogan 2015, Sec. 3.5, Table 3.5): the 6-state nearly-constant-acceleration model ``[x, y, vx, vy,
   ax, ay]`` (:class:`~locbook.models.motion.KinematicModel`, order 2) with Dogan's full-rank per-step ``Q = q I``
-  (Eq. (3.24), ``noise="isotropic"``): the velocity gets noise of its own, so an error of the start (a first fix
-  metres off, the tag already walking) is corrected by the RSS, where the Wiener form's velocity, driven only through
-  an acceleration the accelerometer pins, keeps it (measured on the example: 6.7 m mean error with the Wiener form,
-  2.2 m with Dogan's, from the same start 4.5 m off), the accelerometer a linear measurement of the acceleration states
+  (Eq. (3.24), ``noise="isotropic"``), the thesis's own form (the velocity and position get noise of their own; on
+  the example, seed 1, walk_a, whose first fix is 4.5 m off: 0.78 m mean error, the Wiener form of the 8-state model
+  0.59 m, both with the serial RSS update; with one stacked update 2.24 m and 6.71 m), the accelerometer a linear
+  measurement of the acceleration states
   (``LinearMeasurement``, R = the stationary noise variance over the samples per sub-step), rotated to the world
   frame by the heading ``psi_0 + integral of the gyroscope`` where the track has one, else taken as world-frame
   readings (:data:`NO_GYRO_FRAME`, the literal reading of Dogan's and Gudipati's texts, flagged in the settings);
@@ -76,7 +76,7 @@ NO_GYRO_FRAME = "world"
 #: far (Dogan 2015, Table 3.3; the battery's ekf_serial). A fusion model is confident about its velocity (the
 #: accelerometer pins the acceleration), and from a start metres off one stacked update linearised at the start sends
 #: it away: on the example (seed 1, 120 s, walk_a's first fix 4.5 m off) the parallel update gave 2.2 m (ekf_rss_acc)
-#: and 5.7 m (ekf_rss_imu) mean errors, the serial 0.78 m and 0.64 m (the RSS-only ekf 1.64 m)
+#: and 5.7 m (ekf_rss_imu) mean errors, the serial 0.78 m and 0.64 m (the RSS-only ekf 1.64 m, ekf_serial 1.21 m)
 RSS_UPDATE = "serial"
 #: the initial heading's candidates (deg) for its maximum-likelihood choice, then a refinement around the best
 HEADING_CANDIDATES_DEG = tuple(range(0, 360, 10))

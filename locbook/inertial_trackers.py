@@ -17,6 +17,9 @@ so its positions ``(R, T, 2)`` are on the same clock as every other tracker's.
   frame by the heading ``psi_0 + integral of the gyroscope`` where the track has one, else taken as world-frame
   readings (:data:`NO_GYRO_FRAME`, the literal reading of Dogan's and Gudipati's texts, flagged in the settings);
   the RSS of every epoch (``RssMeasurement``, the calibrated channel, serial updates: :data:`RSS_UPDATE`).
+- ``kf_acc`` (Dogan 2015's "KF (MLE)" fused with the accelerometer, Eq. (3.21)): ``ekf_rss_acc``'s model, Q and
+  accelerometer, the ``rss_ml`` fixes that ``kf_on_ml`` filters (epochs that heard at least 3 anchors) as linear
+  position measurements with their calibrated covariance in place of the raw RSS (Dogan uses one Q for every filter).
 - ``ekf_rss_imu`` / ``ukf_rss_imu`` (Gudipati 2017, Secs. 3.2-3.6): the 8-state
   :class:`~locbook.models.motion.HeadingKinematicModel` (heading and yaw rate), the body-frame accelerometer and the
   gyroscope through :class:`~locbook.models.imu.InertialMeasurement` (``frame="body"``), the RSS as above; only on a
@@ -54,6 +57,9 @@ __all__ = ["FUSION_TRACKERS", "FUSION_PRIORS", "NO_GYRO_FRAME", "HEADING_CANDIDA
            "FusionInputs", "stationary_noise", "default_noise", "fit_fusion", "run_fusion", "needs_gyro"]
 
 FUSION_TRACKERS = {
+    "kf_acc": "accelerometer KF on the rss_ml fixes (Dogan 2015's KF (MLE) with the accelerometer): the model and the "
+              "accelerometer of ekf_rss_acc, the fixes kf_on_ml filters as linear position measurements (R: their "
+              "calibrated covariance)",
     "ekf_rss_acc": "RSS + accelerometer EKF (Dogan 2015): constant-acceleration model on the inertial sub-step grid, "
                    "the accelerometer a linear measurement of the acceleration (rotated by the gyro-integrated heading, "
                    "or taken as world-frame without a gyroscope), RSS at every epoch",
@@ -66,6 +72,7 @@ _IMU_PRIOR = ("it fuses inertial readings the bound does not have (the bound is 
               "PCRLB); a path smoother than the model lets it beat it too")
 #: why each fusion tracker may fall below the posterior CRLB of the rows (the RSS trackers' bound)
 FUSION_PRIORS = {name: _IMU_PRIOR for name in FUSION_TRACKERS}
+FUSION_PRIORS["kf_acc"] = _IMU_PRIOR + "; its fixes lie in the floor's bounding box"
 #: the trackers that need a gyroscope (the others run with an accelerometer alone)
 needs_gyro = ("ekf_rss_imu", "ukf_rss_imu")
 #: without a gyroscope the heading is unknown: ekf_rss_acc takes the accelerometer's readings as world-frame
@@ -345,7 +352,18 @@ def run_fusion(sc, name: str, rss_dbm, x0, P0, *, ukf_alpha: float):
         raise ParameterError(f"tracker {name!r} needs a gyroscope (gyro_z); the track's inertial file has none")
     rss = np.asarray(rss_dbm, float)
     record = fus.grid.rss_steps
-    if name == "ekf_rss_acc":
+    if name == "kf_acc":         # Dogan's KF (MLE): the rss_ml fixes in place of the raw RSS, one Q for both
+        from .battery import _ml_fixes
+        if sc.fix_cov_m2 is None:
+            raise ParameterError("kf_acc needs the scenario's fix covariance (fix_cov_m2): the rss_ml fixes' R")
+        model, x, P, streams = _acc_setup(sc, fus, rss, x0, P0, fus.q_acc,
+                                          fus.heading_rad if fus.heading_rad is not None else 0.0)
+        fixes = fus.grid.on_grid(_ml_fixes(sc, rss))
+        streams = [streams[0], LinearMeasurement(np.broadcast_to(fixes, (streams[0].z.shape[0],) + fixes.shape[1:]),
+                                                 model.position_measurement_matrix(),
+                                                 np.asarray(sc.fix_cov_m2, float))]
+        res = extended_kalman_filter(model.F, model.Q, x, P, streams, record=record)
+    elif name == "ekf_rss_acc":
         model, x, P, streams = _acc_setup(sc, fus, rss, x0, P0, fus.q_acc,
                                           fus.heading_rad if fus.heading_rad is not None else 0.0)
         res = extended_kalman_filter(model.F, model.Q, x, P, streams, record=record)

@@ -188,7 +188,7 @@ def test_heading_start_is_found_without_truth(fused):
 def test_fusion_beats_rss_alone_and_stays_near_the_bound(fused):
     folder, ds, model, proto, res = fused
     rows = {(r["recording"], r["method"]): r for r in res["rows"]}
-    assert res["fusion"] == ["ekf_rss_acc", "ekf_rss_imu", "ukf_rss_imu"]
+    assert res["fusion"] == ["kf_acc", "ekf_rss_acc", "ekf_rss_imu", "ukf_rss_imu"]
     ekf = rows[("pooled", "ekf")]
     for name in res["fusion"]:
         row = rows[("pooled", name)]
@@ -202,7 +202,7 @@ def test_fusion_beats_rss_alone_and_stays_near_the_bound(fused):
         assert np.mean(err) < 2.0
     assert 0.3 < ekf["ratio"] < 3.0
     bench = me.benchmark_rows(ds, None, res)
-    assert {"ekf_rss_acc", "ekf_rss_imu", "ukf_rss_imu"} <= {r["method"] for r in bench}
+    assert set(res["fusion"]) <= {r["method"] for r in bench}
 
 
 def test_without_inertial_files_nothing_changes(fused, tmp_path):
@@ -255,8 +255,8 @@ def test_default_example_bytes_unchanged(tmp_path):
 
 
 def test_without_a_gyroscope_only_the_accelerometer_ekf_runs(fused, tmp_path):
-    """Walk files without gyro_z: no heading to rotate by, so ekf_rss_acc takes the readings as world-frame (named
-    in the settings) and the 8-state trackers, which need the gyroscope, do not run."""
+    """Walk files without gyro_z: no heading to rotate by, so kf_acc and ekf_rss_acc take the readings as world-frame
+    (named in the settings) and the 8-state trackers, which need the gyroscope, do not run."""
     folder, ds, model, proto, res = fused
     bare = tmp_path / "bare"
     bare.mkdir()
@@ -269,11 +269,11 @@ def test_without_a_gyroscope_only_the_accelerometer_ekf_runs(fused, tmp_path):
     assert ds2.recording("walk_a").inertial.gyro_rad_s is None
     model2 = me.channel(me.calibrate(ds2))
     proto2 = me.protocol(ds2, model2)
-    assert proto2.inertial["walk_a"].trackers == ("ekf_rss_acc",) and proto2.inertial["walk_a"].heading_rad is None
+    assert proto2.inertial["walk_a"].trackers == ("kf_acc", "ekf_rss_acc") and proto2.inertial["walk_a"].heading_rad is None
     frames = [r for r in proto2.rows() if r["setting"].startswith("accelerometer frame")]
     assert len(frames) == 2 and all(r["value"].startswith("world") for r in frames)
     res2 = me.tracking_results(ds2, model2, proto2, seed=11, n_particles=100, particle_runs=1, n_bootstrap=20,
                                block_s=10.0, recordings=["walk_b"])
-    assert res2["fusion"] == ["ekf_rss_acc"]
-    assert {r["method"] for r in res2["rows"]} >= {"ekf", "ekf_rss_acc"}
+    assert res2["fusion"] == ["kf_acc", "ekf_rss_acc"]
+    assert {r["method"] for r in res2["rows"]} >= {"ekf", "kf_acc", "ekf_rss_acc"}
     assert not {"ekf_rss_imu", "ukf_rss_imu"} & {r["method"] for r in res2["rows"]}

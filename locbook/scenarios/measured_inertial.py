@@ -86,17 +86,18 @@ def fusion_choices(name: str, fus: FusionInputs | None, *, first: bool = True) -
                             f"{HEADING_REFINE_DEG[1] - HEADING_REFINE_DEG[0]} deg around the best (no truth); the 8-state "
                             f"filters start there with sd {np.rad2deg(HEADING_START_SD_RAD):g} deg"})
     else:
-        rows.append({"method": "ekf_rss_acc", "setting": f"accelerometer frame, {name}",
+        rows.append({"method": "kf_acc, ekf_rss_acc", "setting": f"accelerometer frame, {name}",
                      "value": f"{NO_GYRO_FRAME}: the readings taken as world-frame accelerations",
                      "how": "assumed: no gyroscope, so no heading to rotate body-frame readings by "
                             "(locbook.inertial_trackers.NO_GYRO_FRAME); wrong for a tag that turns"})
     acc = fus.fits.get("acc", {})
-    rows.append({"method": "ekf_rss_acc", "setting": f"q (Q = q I per sub-step, Dogan's Eq. (3.24) form), {name}",
+    rows.append({"method": "kf_acc, ekf_rss_acc", "setting": f"q (Q = q I per sub-step, Dogan's Eq. (3.24) form), {name}",
                  "value": f"{fus.q_acc:.3g}",
                  "how": f"rule: maximum likelihood of the fusion EKF's innovations on this track's readings "
                         f"(log-likelihood +{acc.get('gain', 0.0):.1f} over q = {Q_ACC_START:g}"
                         f"{'; at the fit bound' if acc.get('at_bound') else ''}); start at rest, acceleration sd "
-                        f"{START_ACCELERATION_SD_M_S2:g} m/s^2"})
+                        f"{START_ACCELERATION_SD_M_S2:g} m/s^2; kf_acc takes ekf_rss_acc's (Dogan: one Q for every "
+                        "filter)"})
     if fus.q_imu is not None:
         imu = fus.fits.get("imu", {})
         rows.append({"method": "ekf_rss_imu, ukf_rss_imu", "setting": f"q, q_angular (per sub-step), {name}",
@@ -116,6 +117,7 @@ def fusion_knobs(fus: FusionInputs, ukf_alpha: float) -> dict:
              else f"readings as {NO_GYRO_FRAME}-frame (no gyroscope)")
     out = {"ekf_rss_acc": f"Q = q I, q = {fus.q_acc:.3g} per sub-step (fitted), {grid}, {frame}; start: first "
                           "rss_ml fix at rest"}
+    out["kf_acc"] = out["ekf_rss_acc"] + "; R: rss_ml fix errors on the calibration epochs"
     if fus.q_imu is not None:
         common = (f"q = {fus.q_imu[0]:.3g}, q_angular = {fus.q_imu[1]:.3g} per sub-step (fitted), {grid}, heading start "
                   f"{np.rad2deg(fus.heading_rad):.0f} deg (ML); start: first rss_ml fix at rest")

@@ -26,7 +26,8 @@ so its positions ``(R, T, 2)`` are on the same clock as every other tracker's.
   track with a gyroscope.
 
 The settings (:func:`fit_fusion`), each by a stated rule: the sensors' bias and noise variance from the calibration
-recordings' samples while the tag dwells at a point (Gudipati 2017, Sec. 3.3, :func:`locbook.models.imu.stationary_bias`;
+recordings' samples while the tag dwells at a point (Gudipati 2017, Sec. 3.3,
+:func:`locbook.models.imu.stationary_bias`;
 :func:`stationary_noise`), else the defaults of :class:`locbook.scenarios.gudipati.WalkSettings` with no bias removed;
 the initial heading ``psi_0`` (unknown to a method: the truth's heading is never used) by maximum likelihood of
 ``ekf_rss_acc``'s innovations over :data:`HEADING_CANDIDATES_DEG` then :data:`HEADING_REFINE_DEG` around the best;
@@ -61,7 +62,8 @@ FUSION_TRACKERS = {
               "accelerometer of ekf_rss_acc, the fixes kf_on_ml filters as linear position measurements (R: their "
               "calibrated covariance)",
     "ekf_rss_acc": "RSS + accelerometer EKF (Dogan 2015): constant-acceleration model on the inertial sub-step grid, "
-                   "the accelerometer a linear measurement of the acceleration (rotated by the gyro-integrated heading, "
+                   "the accelerometer a linear measurement of the acceleration (rotated by the gyro-integrated "
+                   "heading, "
                    "or taken as world-frame without a gyroscope), RSS at every epoch",
     "ekf_rss_imu": "RSS + accelerometer + gyroscope EKF (Gudipati 2017): 8-state heading model, body-frame inertial "
                    "measurement, RSS at every epoch, on the inertial sub-step grid",
@@ -329,7 +331,8 @@ def fit_fusion(sc, grid: InertialGrid, noise: ImuNoise, P0) -> FusionInputs:
     else:
         fit = fit_q(None)
     q_acc = float(Q_ACC_START * fit.q_scale[0])
-    fits["acc"] = {"gain": float(fit.log_likelihood - fit.initial_log_likelihood), "at_bound": bool(np.any(fit.at_bound))}
+    fits["acc"] = {"gain": float(fit.log_likelihood - fit.initial_log_likelihood),
+                   "at_bound": bool(np.any(fit.at_bound))}
     q_imu = None
     if grid.gyro_rad_s is not None:
         fus = FusionInputs(grid, noise, heading, q_acc, (Q_IMU_START, Q_ANGULAR_START))

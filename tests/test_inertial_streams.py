@@ -269,7 +269,8 @@ def test_without_a_gyroscope_only_the_accelerometer_ekf_runs(fused, tmp_path):
     assert ds2.recording("walk_a").inertial.gyro_rad_s is None
     model2 = me.channel(me.calibrate(ds2))
     proto2 = me.protocol(ds2, model2)
-    assert proto2.inertial["walk_a"].trackers == ("kf_acc", "ekf_rss_acc") and proto2.inertial["walk_a"].heading_rad is None
+    assert proto2.inertial["walk_a"].trackers == ("kf_acc", "ekf_rss_acc")
+    assert proto2.inertial["walk_a"].heading_rad is None
     frames = [r for r in proto2.rows() if r["setting"].startswith("accelerometer frame")]
     assert len(frames) == 2 and all(r["value"].startswith("world") for r in frames)
     res2 = me.tracking_results(ds2, model2, proto2, seed=11, n_particles=100, particle_runs=1, n_bootstrap=20,

@@ -83,7 +83,8 @@ def fusion_choices(name: str, fus: FusionInputs | None, *, first: bool = True) -
                      "value": f"{np.rad2deg(fus.heading_rad):.1f}",
                      "how": f"rule: maximum likelihood of ekf_rss_acc's innovations over headings every "
                             f"{HEADING_CANDIDATES_DEG[1] - HEADING_CANDIDATES_DEG[0]} deg, then every "
-                            f"{HEADING_REFINE_DEG[1] - HEADING_REFINE_DEG[0]} deg around the best (no truth); the 8-state "
+                            f"{HEADING_REFINE_DEG[1] - HEADING_REFINE_DEG[0]} deg around the best (no truth); the "
+                            "8-state "
                             f"filters start there with sd {np.rad2deg(HEADING_START_SD_RAD):g} deg"})
     else:
         rows.append({"method": "kf_acc, ekf_rss_acc", "setting": f"accelerometer frame, {name}",
@@ -91,7 +92,8 @@ def fusion_choices(name: str, fus: FusionInputs | None, *, first: bool = True) -
                      "how": "assumed: no gyroscope, so no heading to rotate body-frame readings by "
                             "(locbook.inertial_trackers.NO_GYRO_FRAME); wrong for a tag that turns"})
     acc = fus.fits.get("acc", {})
-    rows.append({"method": "kf_acc, ekf_rss_acc", "setting": f"q (Q = q I per sub-step, Dogan's Eq. (3.24) form), {name}",
+    rows.append({"method": "kf_acc, ekf_rss_acc",
+                 "setting": f"q (Q = q I per sub-step, Dogan's Eq. (3.24) form), {name}",
                  "value": f"{fus.q_acc:.3g}",
                  "how": f"rule: maximum likelihood of the fusion EKF's innovations on this track's readings "
                         f"(log-likelihood +{acc.get('gain', 0.0):.1f} over q = {Q_ACC_START:g}"
@@ -103,7 +105,8 @@ def fusion_choices(name: str, fus: FusionInputs | None, *, first: bool = True) -
         rows.append({"method": "ekf_rss_imu, ukf_rss_imu", "setting": f"q, q_angular (per sub-step), {name}",
                      "value": f"{fus.q_imu[0]:.3g} (m/s^2)^2, {fus.q_imu[1]:.3g} (rad/s)^2",
                      "how": f"rule: maximum likelihood of ekf_rss_imu's innovations, the translational and the "
-                            f"angular blocks of Q (log-likelihood +{imu.get('gain', 0.0):.1f} over q = {Q_IMU_START:g}, "
+                            f"angular blocks of Q (log-likelihood +{imu.get('gain', 0.0):.1f} over q = "
+                            f"{Q_IMU_START:g}, "
                             f"q_angular = {Q_ANGULAR_START:g}{'; at the fit bound' if imu.get('at_bound') else ''}); "
                             "the UKF takes the EKF's"})
     return rows
@@ -119,7 +122,8 @@ def fusion_knobs(fus: FusionInputs, ukf_alpha: float) -> dict:
                           "rss_ml fix at rest"}
     out["kf_acc"] = out["ekf_rss_acc"] + "; R: rss_ml fix errors on the calibration epochs"
     if fus.q_imu is not None:
-        common = (f"q = {fus.q_imu[0]:.3g}, q_angular = {fus.q_imu[1]:.3g} per sub-step (fitted), {grid}, heading start "
+        common = (f"q = {fus.q_imu[0]:.3g}, q_angular = {fus.q_imu[1]:.3g} per sub-step (fitted), {grid}, heading "
+                  "start "
                   f"{np.rad2deg(fus.heading_rad):.0f} deg (ML); start: first rss_ml fix at rest")
         out["ekf_rss_imu"] = common
         out["ukf_rss_imu"] = common + f"; alpha = {ukf_alpha:g}"

@@ -126,6 +126,9 @@ class TrackingScenario(_AnchorReadings):
     start_state: np.ndarray | None = None
     #: measured data: the time of every tick ``(T,)`` (s; the first epoch's time plus ``k dt_s``); None (synthetic)
     time_s: np.ndarray | None = None
+    #: a track with an inertial stream: what the fusion trackers need (:class:`locbook.inertial_trackers.FusionInputs`:
+    #: the readings on the sub-step grid, their calibration, heading start and q); None: no fusion tracker runs
+    inertial: object | None = field(default=None, repr=False)
 
     @property
     def scored_steps(self) -> np.ndarray:
@@ -415,7 +418,10 @@ def run_trackers(sc: TrackingScenario, rss_dbm, x0, ts: TrackerSettings, rng: np
                  trackers=None, with_divergence: bool = False):
     """Every declared tracker on readings ``(R, T, m)`` from initial states ``(R, 4)`` -> positions ``(R, T, 2)``.
     ``with_divergence=True`` returns ``(positions, {tracker: flags})``, the NIS guard per run of each Kalman-family
-    tracker (:class:`locbook.tracking.divergence.DivergenceFlags`, steps of the scenario's clock)."""
+    tracker (:class:`locbook.tracking.divergence.DivergenceFlags`, steps of the scenario's clock). ``trackers`` may
+    name the fusion trackers (:data:`locbook.inertial_trackers.FUSION_TRACKERS`) of a scenario with an inertial
+    stream (``sc.inertial``); the default runs :data:`TRACKERS` only."""
+    from .inertial_trackers import FUSION_TRACKERS, run_fusion
     rss = np.asarray(rss_dbm, float)
     rng_cov, rng_pf = rng.spawn(2)
     chosen = tuple(TRACKERS if trackers is None else trackers)
@@ -452,6 +458,9 @@ def run_trackers(sc: TrackingScenario, rss_dbm, x0, ts: TrackerSettings, rng: np
         cells = grid_in_outline(sc.outline_m, sc.grid_spacing_m)
         out["grid_bayes"] = grid_bayes_filter(rss, model, cells, sc.spread_m,
                                               initial_belief=_gaussian_belief(cells, x0, ts.P0[:2, :2])).mean
+    for name in chosen:
+        if name in FUSION_TRACKERS:
+            out[name], flags[name] = run_fusion(sc, name, rss, x0, ts.P0, ukf_alpha=ts.ukf_alpha)
     out = {k: out[k] for k in chosen}
     return (out, flags) if with_divergence else out
 

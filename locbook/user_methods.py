@@ -261,8 +261,9 @@ def method_name_problem(name) -> str:
         return (f"method name {_shown(name)} must be letters, digits, '_' and '-', starting with a letter, at most "
                 f"{MAX_METHOD_NAME_CHARS} characters")
     from .battery import STATIC_METHODS, TRACKERS
+    from .inertial_trackers import FUSION_TRACKERS
     from .scenarios.measured_ranges import RANGE_METHOD_NAMES
-    battery = (*STATIC_METHODS, *TRACKERS, *RANGE_METHOD_NAMES)
+    battery = (*STATIC_METHODS, *TRACKERS, *RANGE_METHOD_NAMES, *FUSION_TRACKERS)
     if name.lower() in battery:
         return (f"method name {name!r} is a battery method's ({', '.join(battery)}): give yours another name")
     if name.lower() in RESERVED_METHOD_NAMES:

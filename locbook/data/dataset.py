@@ -17,6 +17,8 @@ The manifest (every key below; ``[units]`` describes the files, every other valu
     time = "s"                          # s | ms | us | ns; not seconds: shifted to the file's first time, scaled
     length = "m"                        # m | cm | mm: anchors, outline, true positions, reference paths
     rssi = "dBm"                        # dBm only
+    acceleration = "m/s2"               # m/s2 | g (9.80665 m/s^2): inertial files' acc_x, acc_y (default m/s2)
+    angular_rate = "rad/s"              # rad/s | deg/s: inertial files' gyro_z (default rad/s)
 
     [readings]                          # optional
     valid_range_dbm = [-120.0, -10.0]   # a reading outside is refused (default [-150, 20]; finite, within
@@ -52,6 +54,10 @@ The manifest (every key below; ``[units]`` describes the files, every other valu
     ranges = "survey_ranges.csv"        # optional: RTT / ToA ranges of this recording (time_s, transmitter,
                                         # receiver, range_m[, range_std_m]; locbook.data.ranges), aligned with its
                                         # RSS epochs by the same window rule: Dataset.ranges(name)
+    inertial = "survey_imu.csv"         # optional: the recording's inertial samples (locbook.data.inertial):
+                                        # time_s, acc_x, acc_y[, gyro_z][, mag_x, mag_y], body frame of the tag
+                                        # (x forward, y left, yaw rate counter-clockwise positive), time in the
+                                        # readings' unit and on their time axis (shifted by the readings' origin)
 
     [[method]]                          # optional, one per method of your own run beside the battery's
     name = "centroid"                   # its name in every table and figure: letters, digits, '_' and '-', from a
@@ -93,8 +99,8 @@ import pandas as pd
 from ..errors import ParameterError
 from .measured import (AGGREGATES, DEVICE_COLUMN, MAX_MIN_READINGS, MIN_WINDOW_S, OPTIONAL_READING_COLUMNS,
                        READING_COLUMNS, DataFormatError, Epochs, _decode_utf8, _reading_options, _shown, _shown_names,
-                       epochs, read_anchors, read_outline, read_path_segments, read_readings_table, scan_interval_s,
-                       validate_readings_file)
+                       epochs, file_time_origin, read_anchors, read_outline, read_path_segments, read_readings_table,
+                       scan_interval_s, validate_readings_file)
 
 __all__ = ["Dataset", "Recording", "EpochRule", "load_dataset", "shipped_datasets", "datasets_dir", "name_problem",
            "MAX_NAME_CHARS", "MAX_TAG_HEIGHT_OFFSET_M", "MAX_MANIFEST_BYTES", "OUTLINE_TOLERANCE_M",
@@ -126,11 +132,11 @@ MAX_MANIFEST_BYTES = 1 << 20
 
 _TOP = {"name", "title", "license", "license_file", "attribution", "changes", "units", "readings", "geometry",
         "epochs", "recording", "method"}
-_SECTIONS = {"units": {"time", "length", "rssi"},
+_SECTIONS = {"units": {"time", "length", "rssi", "acceleration", "angular_rate"},
              "readings": {"valid_range_dbm", "invalid_values_dbm", "backward_time"},
              "geometry": {"anchors", "outline", "tag_height_m"},
              "epochs": {"window_s", "aggregate", "min_readings"}}
-_RECORDING_KEYS = {"name", "file", "role", "point_column", "reference_path", "window_s", "ranges"}
+_RECORDING_KEYS = {"name", "file", "role", "point_column", "reference_path", "window_s", "ranges", "inertial"}
 _METHOD_KEYS = {"name", "function", "kind"}
 
 
@@ -165,7 +171,8 @@ class EpochRule:
 class Recording:
     """One readings file of a data set: its ``role``, validated ``readings`` (long format, SI), epoch rule, the
     optional point column and reference path, and ``sorted_rows``: how many rows went back in time and were put
-    in order (``backward_time = "sort"``; 0 otherwise)."""
+    in order (``backward_time = "sort"``; 0 otherwise). ``inertial``: the recording's inertial samples
+    (:class:`locbook.data.inertial.InertialSamples`, the manifest's ``inertial`` key), None without."""
 
     name: str
     role: str
@@ -178,6 +185,7 @@ class Recording:
     #: the recording's range readings (``ranges = "FILE"``; :func:`locbook.data.ranges.read_ranges`), or None
     ranges: pd.DataFrame | None = field(default=None, repr=False)
     ranges_file: Path | None = None
+    inertial: object = field(default=None, repr=False)
 
     @property
     def has_truth(self) -> bool:
@@ -488,6 +496,12 @@ def load_dataset(path) -> Dataset:
     if units.get("rssi", "dBm") != "dBm":
         _fail(manifest, f"[units] rssi must be 'dBm' (convert the readings to dBm), got {_shown(units.get('rssi'))}")
     time_scale, length_scale = _TIME_SCALE[time_unit], _LENGTH_SCALE[length_unit]
+    from .inertial import ACCELERATION_UNITS, ANGULAR_RATE_UNITS
+    acc_unit, rate_unit = units.get("acceleration", "m/s2"), units.get("angular_rate", "rad/s")
+    if not isinstance(acc_unit, str) or acc_unit not in ACCELERATION_UNITS:
+        _fail(manifest, f"[units] acceleration must be one of {sorted(ACCELERATION_UNITS)}, got {_shown(acc_unit)}")
+    if not isinstance(rate_unit, str) or rate_unit not in ANGULAR_RATE_UNITS:
+        _fail(manifest, f"[units] angular_rate must be one of {sorted(ANGULAR_RATE_UNITS)}, got {_shown(rate_unit)}")
 
     opts = raw.get("readings", {})
     try:
@@ -569,14 +583,21 @@ def load_dataset(path) -> Dataset:
             reference = read_path_segments(_file(manifest, root, _string(manifest, rec, "reference_path", where),
                                                  where + "reference_path: ")) * length_scale
         ranges, ranges_file = None, None
+        origin = file_time_origin(table["time_s"]) if time_scale != 1.0 else None
         if "ranges" in rec:
-            from .ranges import read_ranges, time_origin
+            from .ranges import read_ranges
             ranges_file = _file(manifest, root, _string(manifest, rec, "ranges", where), where + "ranges: ")
             ranges = read_ranges(ranges_file, anchor_ids=anchors["id"], transmitters=readings["transmitter"].unique(),
-                                 time_scale=time_scale, length_scale=length_scale,
-                                 time_origin_raw=time_origin(table["time_s"]) if time_scale != 1.0 else None)
+                                 time_scale=time_scale, length_scale=length_scale, time_origin_raw=origin)
+        inertial = None
+        if "inertial" in rec:
+            from .inertial import read_inertial
+            inertial = read_inertial(_file(manifest, root, _string(manifest, rec, "inertial", where),
+                                           where + "inertial: "),
+                                     time_scale=time_scale, time_origin=origin,
+                                     acceleration=acc_unit, angular_rate=rate_unit, sort=backward == "sort")
         recordings[rname] = Recording(rname, role, path, readings, rule, point_column, reference, sorted_rows,
-                                      ranges, ranges_file)
+                                      ranges, ranges_file, inertial)
     roles = {r.role for r in recordings.values()}
     if "calibration" not in roles:
         _fail(manifest, "no recording has role 'calibration': the channel is fitted on it (and never on the "
@@ -639,6 +660,9 @@ def load_dataset(path) -> Dataset:
         if rec.sorted_rows:
             notes[f"sorted {rec.name}"] = (f"{rec.sorted_rows} row(s) of {rec.file.name} went back in time and were "
                                            "put in time order (backward_time = 'sort')")
+    for rec in recordings.values():
+        if rec.inertial is not None:
+            notes[f"inertial {rec.name}"] = rec.inertial.describe()
     if sentinels.size:
         values = ", ".join(f"{v:g}" for v in sentinels)
         found = ", ".join(f"{n} in {k}" for k, n in invalid_found.items() if n) or "none found"
@@ -662,6 +686,7 @@ def load_dataset(path) -> Dataset:
     for rec in records:
         files += [recordings[rec["name"]].file] + ([root / rec["reference_path"]] if "reference_path" in rec else [])
         files += [recordings[rec["name"]].ranges_file] if "ranges" in rec else []
+        files += [recordings[rec["name"]].inertial.file] if recordings[rec["name"]].inertial is not None else []
     files += [m.path for m in methods if m.path is not None]
     data = Dataset(name, title, root, license_, attribution, anchors, outline, tag_height, recordings, changes,
                    license_file, notes, tuple(files), height_source, methods=methods)

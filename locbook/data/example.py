@@ -15,6 +15,18 @@ Variants (keyword options of :func:`write_example_dataset`; the defaults write t
 (``speed_m_s``), which recordings are written (``roles``: a static-only, a track-only or a calibration-only set),
 a 2-D site (``two_d``: anchors without z, distances in the plane, no tag height) and tracks logged as native scans
 (``native_scans``: one row per anchor per scan, every anchor of a scan at one time, 1 Hz, ``window_s = 0``).
+
+``inertial=True`` adds an inertial file per recording (``<recording>_imu.csv``, manifest key ``inertial``;
+:mod:`locbook.data.inertial`): a 50 Hz accelerometer and gyroscope in the tag's body frame (x forward = the walking
+direction, y left), reading ``true + bias + noise`` with white noise N(0, 0.05 m/s^2) per axis and N(0, 0.005
+rad/s), and a constant bias (0.03, -0.02) m/s^2 and 0.002 rad/s (``EXAMPLE_SITE["imu"]``), drawn from a generator
+seeded from ``rng`` after every other draw (so the other files' draws are those of the same variant without it).
+The walks then go round rectangles with corners rounded to ``EXAMPLE_SITE["imu"]["corner_radius_m"]`` (2 m) at a
+constant speed, so the true acceleration is finite: zero on the straights, ``v^2 / r`` to the left on the arcs
+(a step at each arc's ends, not an impulse), and the yaw rate ``v / r`` there; the walks' positions, and so their
+readings, differ from the sharp-cornered default's (a variant of its own). The survey and the static points are
+stationary while the tag dwells at a point (true acceleration and rate 0); their files hold samples only during
+the dwells (the 2 s between points are gaps, which the loader counts).
 """
 from __future__ import annotations
 
@@ -47,6 +59,10 @@ EXAMPLE_SITE = {
     "range_sigma_m": 0.3,
     "range_rate_hz": 2.0,            # ranging rounds per second (native scans: one per scan, at the scan's time)
     "range_missing_fraction": 0.05,  # ranges logged empty (the round failed for that anchor)
+    # inertial=True: the tag's IMU (body frame, reading = true + bias + white noise; a phone-grade MEMS unit's
+    # order of magnitude: 0.05 m/s^2 and 0.005 rad/s per sample at 50 Hz, Gudipati 2017's WalkSettings scale)
+    "imu": {"rate_hz": 50.0, "acc_sigma_m_s2": 0.05, "gyro_sigma_rad_s": 0.005,
+            "acc_bias_m_s2": (0.03, -0.02), "gyro_bias_rad_s": 0.002, "corner_radius_m": 2.0},
 }
 #: the recordings of the example by role (``roles`` of :func:`write_example_dataset` picks among them)
 EXAMPLE_ROLES = ("calibration", "static", "track")
@@ -137,9 +153,40 @@ def _dwell(points_m, ids, seconds: float, t0: float, rng, site, *, two_d: bool =
     return out
 
 
-def _loop_positions(time_s, offset_m: float, site, t0: float = 0.0) -> np.ndarray:
+def _rounded_loop(s_m, offset_m: float, radius_m: float, site):
+    """Position ``(N, 2)``, heading ``(N,)`` (rad) and curvature ``(N,)`` (1/m, left positive) at arc lengths
+    ``s_m`` along the rectangle ``offset_m`` inside the hall's walls with corners rounded to ``radius_m``, walked
+    counter-clockwise from ``(offset_m + radius_m, offset_m)`` heading along +x."""
+    w, h = site["hall_m"]
+    lo, hi = np.array([offset_m, offset_m]), np.array([w - offset_m, h - offset_m])
+    r = radius_m
+    sides = np.array([hi[0] - lo[0] - 2 * r, hi[1] - lo[1] - 2 * r] * 2)
+    arc = 0.5 * np.pi * r
+    pieces = np.ravel(np.column_stack([sides, np.full(4, arc)]))        # side, arc, side, arc, ...
+    cum = np.r_[0.0, np.cumsum(pieces)]
+    s = np.mod(np.asarray(s_m, float), cum[-1])
+    k = np.minimum(np.searchsorted(cum, s, side="right") - 1, 7)
+    u = s - cum[k]
+    side = k // 2
+    start = np.array([[lo[0] + r, lo[1]], [hi[0], lo[1] + r], [hi[0] - r, hi[1]], [lo[0], hi[1] - r]])
+    centre = np.array([[hi[0] - r, lo[1] + r], [hi[0] - r, hi[1] - r], [lo[0] + r, hi[1] - r], [lo[0] + r, lo[1] + r]])
+    heading0 = side * 0.5 * np.pi
+    straight = k % 2 == 0
+    along = np.column_stack([np.cos(heading0), np.sin(heading0)])
+    pos_straight = start[side] + u[:, None] * along
+    phi = heading0 - 0.5 * np.pi + u / r                                # the angle seen from the centre
+    pos_arc = centre[side] + r * np.column_stack([np.cos(phi), np.sin(phi)])
+    pos = np.where(straight[:, None], pos_straight, pos_arc)
+    heading = np.where(straight, heading0, heading0 + u / r)
+    return pos, heading, np.where(straight, 0.0, 1.0 / r)
+
+
+def _loop_positions(time_s, offset_m: float, site, t0: float = 0.0, corner_radius_m: float = 0.0) -> np.ndarray:
     """Positions ``(T, 2)`` at ``time_s`` of a tag walking a rectangle ``offset_m`` inside the hall's walls at the
-    site's walking speed, from its corner at ``t0``."""
+    site's walking speed, from its corner at ``t0`` (``corner_radius_m > 0``: corners rounded,
+    :func:`_rounded_loop`)."""
+    if corner_radius_m > 0:
+        return _rounded_loop(site["walk_speed_m_s"] * (time_s - t0), offset_m, corner_radius_m, site)[0]
     w, h = site["hall_m"]
     corners = np.array([[offset_m, offset_m], [w - offset_m, offset_m], [w - offset_m, h - offset_m],
                         [offset_m, h - offset_m], [offset_m, offset_m]])
@@ -154,11 +201,12 @@ def _loop_times(duration_s: float, rate_hz: float, t0: float = 0.0) -> np.ndarra
 
 
 def _loop(duration_s: float, offset_m: float, rng, site, t0: float = 0.0, *, two_d: bool = False,
-          scans: bool = False):
+          scans: bool = False, corner_radius_m: float = 0.0):
     """Packets of a tag walking a rectangle ``offset_m`` inside the hall's walls at the site's walking speed
-    (``scans``: as scans at the site's scan rate)."""
+    (``scans``: as scans at the site's scan rate; ``corner_radius_m > 0``: corners rounded,
+    :func:`_rounded_loop`)."""
     t = _loop_times(duration_s, site["scan_rate_hz"] if scans else site["packet_rate_hz"], t0)
-    return _packets(_loop_positions(t, offset_m, site, t0), t, rng, site, two_d=two_d, scans=scans)
+    return _packets(_loop_positions(t, offset_m, site, t0, corner_radius_m), t, rng, site, two_d=two_d, scans=scans)
 
 
 def _ranges(positions_m, time_s, rng, site, *, two_d: bool = False, extra=None) -> pd.DataFrame:
@@ -193,10 +241,39 @@ def _dwell_ranges(points_m, ids, seconds: float, t0: float, rng, site, *, two_d:
                    extra={"point": np.repeat(np.asarray(ids, dtype=object), per)})
 
 
+def _imu_frame(time_s, acc_body_m_s2, rate_rad_s, rng, site) -> pd.DataFrame:
+    """An inertial file's rows: ``true + bias + white noise`` (``site["imu"]``) at ``time_s``."""
+    imu = site["imu"]
+    n = len(time_s)
+    acc = acc_body_m_s2 + np.asarray(imu["acc_bias_m_s2"]) + imu["acc_sigma_m_s2"] * rng.standard_normal((n, 2))
+    gyro = rate_rad_s + imu["gyro_bias_rad_s"] + imu["gyro_sigma_rad_s"] * rng.standard_normal(n)
+    return pd.DataFrame({"time_s": np.round(time_s, 4), "acc_x": np.round(acc[:, 0], 5),
+                         "acc_y": np.round(acc[:, 1], 5), "gyro_z": np.round(gyro, 6)})
+
+
+def _walk_imu(duration_s: float, offset_m: float, rng, site) -> pd.DataFrame:
+    """The IMU of a walk of :func:`_loop` with rounded corners: body-frame acceleration (0, v^2 kappa) and yaw rate
+    v kappa at the site's IMU rate, from a phase of half a sample."""
+    imu = site["imu"]
+    t = (np.arange(int(duration_s * imu["rate_hz"])) + 0.5) / imu["rate_hz"]
+    v = site["walk_speed_m_s"]
+    kappa = _rounded_loop(v * t, offset_m, imu["corner_radius_m"], site)[2]
+    return _imu_frame(t, np.column_stack([np.zeros_like(t), v * v * kappa]), v * kappa, rng, site)
+
+
+def _dwell_imu(n_points: int, seconds: float, t0: float, rng, site) -> pd.DataFrame:
+    """The IMU of :func:`_dwell`'s tag: at rest during each dwell, no samples between points."""
+    imu = site["imu"]
+    per = int(round(seconds * imu["rate_hz"]))
+    start = t0 + np.arange(n_points) * (seconds + 2.0)
+    t = (start[:, None] + (np.arange(per) + 0.5) / imu["rate_hz"]).reshape(-1)
+    return _imu_frame(t, np.zeros((len(t), 2)), np.zeros(len(t)), rng, site)
+
+
 def write_example_dataset(folder, rng: np.random.Generator, *, name: str = "example", walk_s: float = 120.0,
                           seed_note: int | str = "given", force: bool = False, speed_m_s: float | None = None,
                           roles=EXAMPLE_ROLES, two_d: bool = False, native_scans: bool = False,
-                          ranges: bool = False) -> Path:
+                          ranges: bool = False, inertial: bool = False) -> Path:
     """Write the example data set (module docstring) to ``folder`` (created; a folder that holds files is refused
     unless ``force``, so a typo never overwrites a data set) and return it. ``walk_s``: length of each walk (s): 120 s
     gives about 30,000 readings in all; the loader benchmark scales it up. ``name``: the manifest's name (it names
@@ -212,7 +289,8 @@ def write_example_dataset(folder, rng: np.random.Generator, *, name: str = "exam
     ``EXAMPLE_SITE["range_rate_hz"]`` (the tracks' native scans: at each scan), the true 3-D distance plus
     ``N(0, range_sigma_m^2)`` (0.3 m) with that std reported, ``range_missing_fraction`` (5 %) empty, drawn from a
     generator seeded by one draw of ``rng`` after every other draw, so the other files are those written without
-    it, byte for byte."""
+    it, byte for byte; ``inertial``, an inertial file per recording and walks with rounded corners (module
+    docstring), from a generator of its own drawn after the ranges' (the same rule)."""
     from ..errors import ParameterError
     from .dataset import name_problem
     if not isinstance(rng, np.random.Generator):
@@ -230,7 +308,7 @@ def write_example_dataset(folder, rng: np.random.Generator, *, name: str = "exam
     if unknown or "calibration" not in roles:
         raise ParameterError(f"roles must be some of {EXAMPLE_ROLES}, 'calibration' among them (a data set needs a "
                              f"calibration recording), got {roles!r}")
-    for key, value in (("two_d", two_d), ("native_scans", native_scans), ("ranges", ranges)):
+    for key, value in (("two_d", two_d), ("native_scans", native_scans), ("ranges", ranges), ("inertial", inertial)):
         if not isinstance(value, bool):
             raise ParameterError(f"{key} must be True or False, got {value!r}")
     folder = Path(folder)
@@ -253,9 +331,11 @@ def write_example_dataset(folder, rng: np.random.Generator, *, name: str = "exam
         tests = np.column_stack([rng.uniform(2.0, w - 2.0, 12), rng.uniform(2.0, h - 2.0, 12)]).round(2)
         test_ids = [f"T{k + 1:02d}" for k in range(len(tests))]
         _dwell(tests, test_ids, 10.0, 0.0, rng, site, two_d=two_d).to_csv(folder / "points.csv", index=False)
+    radius = site["imu"]["corner_radius_m"] if inertial else 0.0
     if "track" in roles:
-        _loop(walk_s, 2.0, rng, site, two_d=two_d, scans=native_scans).to_csv(folder / "walk_a.csv", index=False)
-        walk_b = _loop(walk_s, 3.0, rng, site, two_d=two_d, scans=native_scans)
+        _loop(walk_s, 2.0, rng, site, two_d=two_d, scans=native_scans, corner_radius_m=radius).to_csv(
+            folder / "walk_a.csv", index=False)
+        walk_b = _loop(walk_s, 3.0, rng, site, two_d=two_d, scans=native_scans, corner_radius_m=radius)
         # logged out of order: a few pairs of neighbouring rows swapped (a buffered receiver flushing late)
         swap = rng.choice(np.arange(1, len(walk_b) - 1, 2), size=max(1, len(walk_b) // 500), replace=False)
         order = np.arange(len(walk_b))
@@ -275,8 +355,19 @@ def write_example_dataset(folder, rng: np.random.Generator, *, name: str = "exam
                 # scans, at each scan's time (the epoch of a native scan)
                 t = (_loop_times(walk_s, site["scan_rate_hz"]) if native_scans else
                      _loop_times(walk_s, site["range_rate_hz"]) + 0.5 / site["range_rate_hz"])
-                _ranges(_loop_positions(t, offset, site), t, range_rng, site, two_d=two_d).to_csv(
-                    folder / f"{walk}_ranges.csv", index=False)
+                _ranges(_loop_positions(t, offset, site, corner_radius_m=radius), t, range_rng, site,
+                        two_d=two_d).to_csv(folder / f"{walk}_ranges.csv", index=False)
+    imu_files = {}
+    if inertial:        # after every other draw: the other files are those of the variant without it
+        imu_rng = np.random.default_rng(rng.integers(2**63))
+        imu_files["survey"] = _dwell_imu(len(grid), 5.0, 0.0, imu_rng, site)
+        if "static" in roles:
+            imu_files["points"] = _dwell_imu(12, 10.0, 0.0, imu_rng, site)
+        if "track" in roles:
+            imu_files["walk_a"] = _walk_imu(walk_s, 2.0, imu_rng, site)
+            imu_files["walk_b"] = _walk_imu(walk_s, 3.0, imu_rng, site)
+        for rec, frame in imu_files.items():
+            frame.to_csv(folder / f"{rec}_imu.csv", index=False)
     attribution = f"Synthetic data generated by locbook (locbook.data.example.write_example_dataset, seed {seed_note})"
     text = _MANIFEST.format(name=_toml_string(name), attribution=_toml_string(attribution))
     if two_d:
@@ -287,10 +378,15 @@ def write_example_dataset(folder, rng: np.random.Generator, *, name: str = "exam
                             f", raw packets at 4 Hz, walks as {site['scan_rate_hz']:g} Hz scans")
     if ranges:
         text = text.replace(", raw packets at 4 Hz", f", raw packets at 4 Hz, ranges ({site['range_sigma_m']:g} m)", 1)
+    if inertial:
+        text = text.replace('rssi = "dBm"\n', 'rssi = "dBm"\nacceleration = "m/s2"            # the inertial files\n'
+                                              'angular_rate = "rad/s"\n')
+        text = text.replace(", raw packets at 4 Hz", ", raw packets at 4 Hz, 50 Hz IMU files (rounded corners)")
     for role in EXAMPLE_ROLES:
         if role in roles:
             text += "".join(block + (_NATIVE_WINDOW if native_scans and role == "track" else "")
                             + (f'ranges = "{block.split(chr(34))[1]}_ranges.csv"\n' if ranges else "")
+                            + (f'inertial = "{block.split(chr(34))[1]}_imu.csv"\n' if inertial else "")
                             for block in _RECORDINGS[role])
     (folder / "dataset.toml").write_text(text, encoding="utf-8")
     return folder

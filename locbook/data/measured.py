@@ -376,6 +376,44 @@ def _check_time_unit(time_s: np.ndarray, raw: pd.Series, source: str, lines) -> 
                           f"magnitude){guess} ({int(huge.sum())} such value(s) in the column)")
 
 
+def file_time_origin(raw_time):
+    """The origin a readings file's times are shifted by when ``[units] time`` is not seconds (the rule of
+    :func:`locbook.data.dataset._convert`), from its time column as written: the smallest time, an ``int`` where
+    every field is an integer (so that nanoseconds since 1970 keep every digit), else a float; None where no time is
+    a number. A recording's other files (ranges, inertial samples) are shifted by the same origin, so they stay on
+    its readings' clock."""
+    raw = pd.Series(raw_time)
+    if pd.api.types.is_numeric_dtype(raw) and not isinstance(raw.dtype, pd.CategoricalDtype):
+        v = raw.to_numpy(float)
+        return float(np.nanmin(v)) if np.isfinite(v).any() else None
+    text = raw.astype(object).where(raw.notna(), "").astype(str).str.strip()
+    if len(text) and text.str.fullmatch(r"[+-]?\d{1,19}").all():
+        try:
+            return int(text.astype(np.int64).min())
+        except (OverflowError, ValueError):
+            pass
+    v = pd.to_numeric(text, errors="coerce").to_numpy(float)
+    return float(np.min(v[np.isfinite(v)])) if np.isfinite(v).any() else None
+
+
+def shifted_seconds(table: pd.DataFrame, source: str, lines, time_scale: float, origin) -> np.ndarray:
+    """A recording's other file's ``time_s`` in seconds on its readings' clock: as written (``time_scale`` 1, or no
+    ``origin``; refused beyond :data:`MAX_TIME_S` as the readings are), else ``(t - origin) * time_scale`` with
+    ``origin`` the readings file's :func:`file_time_origin` (integers shifted as integers)."""
+    raw = table["time_s"]
+    if time_scale == 1.0 or origin is None:
+        t = _numeric(table, "time_s", source, lines, missing_ok=False)
+        _check_time_unit(t, raw, source, lines)
+        return t * time_scale
+    text = raw.astype(object).where(raw.notna(), "").astype(str).str.strip()
+    if isinstance(origin, int) and len(text) and text.str.fullmatch(r"[+-]?\d{1,19}").all():
+        try:
+            return (text.astype(np.int64).to_numpy() - origin).astype(float) * time_scale
+        except (OverflowError, ValueError):
+            pass
+    return (_numeric(table, "time_s", source, lines, missing_ok=False) - float(origin)) * time_scale
+
+
 def validate_readings(table: pd.DataFrame, *, source: str, lines=None, anchor_ids=None, invalid_values_dbm=None,
                       valid_range_dbm=None, sort: bool = False) -> pd.DataFrame:
     """Check a readings table of the long format (module docstring) and return it typed: ``time_s``,

@@ -40,50 +40,14 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .measured import (DEVICE_COLUMN, DataFormatError, Epochs, _check_time_unit, _ids,
-                       _link_direction_hint, _numeric, _read_text_table, _seconds, _shown, _shown_names)
+from .measured import (DEVICE_COLUMN, DataFormatError, Epochs, _ids, _link_direction_hint, _numeric,
+                       _read_text_table, _seconds, _shown, _shown_names, shifted_seconds)
 
-__all__ = ["RANGE_COLUMNS", "RANGE_STD_COLUMN", "read_ranges", "validate_ranges", "align_ranges", "RangeAlignment",
-           "time_origin"]
+__all__ = ["RANGE_COLUMNS", "RANGE_STD_COLUMN", "read_ranges", "validate_ranges", "align_ranges", "RangeAlignment"]
 
 RANGE_COLUMNS = ("time_s", "transmitter", "receiver", "range_m")
 #: the optional column of the reported standard deviation of each range (m)
 RANGE_STD_COLUMN = "range_std_m"
-
-
-def time_origin(raw_time: pd.Series):
-    """The first time of a readings file as written (before any unit conversion): the origin a non-seconds clock is
-    shifted by (:func:`locbook.data.dataset._convert`). Integers are kept as integers (nanoseconds since 1970 would
-    lose digits as floats); None when the column holds no number."""
-    if pd.api.types.is_numeric_dtype(raw_time) and not isinstance(raw_time.dtype, pd.CategoricalDtype):
-        v = raw_time.to_numpy(float)
-        return float(np.nanmin(v)) if np.isfinite(v).any() else None
-    text = raw_time.astype(object).where(raw_time.notna(), "").astype(str).str.strip()
-    if len(text) and text.str.fullmatch(r"[+-]?\d{1,19}").all():
-        try:
-            return int(text.astype(np.int64).min())
-        except (OverflowError, ValueError):
-            pass
-    v = pd.to_numeric(text, errors="coerce").to_numpy(float)
-    return float(np.min(v[np.isfinite(v)])) if np.isfinite(v).any() else None
-
-
-def _times(table: pd.DataFrame, source: str, lines, time_scale: float, origin) -> np.ndarray:
-    """``time_s`` in seconds: as written (``time_scale`` 1), else shifted by the readings file's ``origin`` (the same
-    shift its readings got) and scaled; integers are shifted as integers."""
-    raw = table["time_s"]
-    if time_scale == 1.0 or origin is None:
-        t = _numeric(table, "time_s", source, lines, missing_ok=False)
-        _check_time_unit(t, raw, source, lines)
-        return t * time_scale
-    text = raw.astype(object).where(raw.notna(), "").astype(str).str.strip()
-    if isinstance(origin, int) and len(text) and text.str.fullmatch(r"[+-]?\d{1,19}").all():
-        try:
-            return (text.astype(np.int64).to_numpy() - origin).astype(float) * time_scale
-        except (OverflowError, ValueError):
-            pass
-    t = _numeric(table, "time_s", source, lines, missing_ok=False)
-    return (t - float(origin)) * time_scale
 
 
 def validate_ranges(table: pd.DataFrame, *, source: str, lines=None, anchor_ids, transmitters=None,
@@ -92,7 +56,7 @@ def validate_ranges(table: pd.DataFrame, *, source: str, lines=None, anchor_ids,
     and ``range_std_m`` (when given) as floats in s and m, ids as text, other columns kept. ``transmitters``: the
     transmitter ids of the recording's readings (a range of another one is refused); ``time_scale`` and
     ``length_scale``: the data set's [units]; ``time_origin_raw``: the readings file's first time as written
-    (:func:`time_origin`)."""
+    (:func:`locbook.data.measured.file_time_origin`)."""
     lines = np.arange(len(table)) + 2 if lines is None else np.asarray(lines)
     missing = [c for c in RANGE_COLUMNS if c not in table.columns]
     if missing:
@@ -100,7 +64,7 @@ def validate_ranges(table: pd.DataFrame, *, source: str, lines=None, anchor_ids,
                               f"(required: {list(RANGE_COLUMNS)})")
     text = table.reset_index(drop=True)
     out = pd.DataFrame(index=text.index)
-    out["time_s"] = _times(text, source, lines, time_scale, time_origin_raw)
+    out["time_s"] = shifted_seconds(text, source, lines, time_scale, time_origin_raw)
     for col in ("transmitter", "receiver"):
         ids = _ids(text[col])
         empty = ids.isna().to_numpy()

@@ -455,6 +455,8 @@ class Protocol:
     motion: dict = field(default_factory=dict)      # recording -> fit_motion's dict (or the given values)
     choices: tuple = ()                              # ({method, setting, value, how}, ...)
     knn_table: tuple = ()
+    #: track -> the fusion trackers' inputs (locbook.inertial_trackers.FusionInputs), tracks with inertial streams only
+    inertial: dict = field(default_factory=dict)
 
     def rows(self) -> list[dict]:
         return [dict(c) for c in self.choices]
@@ -473,7 +475,7 @@ def protocol(data: Dataset, model: PathLossModel, *, fit: str = "closed_form", g
                {"method": "grid_ml, grid_mmse, grid_bayes, rss_ml start", "setting": "grid pitch (m)",
                 "value": f"{pitch:g}", "how": pitch_how},
                {"method": "knn", "setting": "k", "value": str(k), "how": k_how}]
-    motion = {}
+    motion, inertial = {}, {}
     if tracks and data.recordings_with("track"):
         fix_cov = fix_covariance_from_calibration(data, model, grid_spacing_m=pitch)
         sd = np.sqrt(np.diag(fix_cov))
@@ -509,8 +511,14 @@ def protocol(data: Dataset, model: PathLossModel, *, fit: str = "closed_form", g
                                      f"{START_VELOCITY_SD_M_S:g} m/s)",
                             "how": "rule: the calibrated covariance of rss_ml fixes (the first epoch's readings also "
                                    "update it: a small double use, stated)"})
+        from .measured_inertial import fusion_choices, fusion_inputs, inertial_tracks
+        for name in inertial_tracks(data):      # tracks with an inertial stream: the fusion trackers' settings
+            fus = fusion_inputs(data, model, name, grid_spacing_m=pitch, fix_cov_m2=fix_cov, q=motion[name]["q"])
+            choices += fusion_choices(name, fus, first=not inertial)
+            if fus is not None:
+                inertial[name] = fus
     choices += ranging.range_choices(data)        # the range stream's sigma (none without ranges)
-    return Protocol(fit, pitch, k, motion, tuple(choices), tuple(table))
+    return Protocol(fit, pitch, k, motion, tuple(choices), tuple(table), inertial)
 
 
 # ---------------------------------------------------------------------------------------------------- problems
@@ -578,10 +586,11 @@ def track_epochs(data: Dataset, recording: str):
 
 
 def tracking_scenario(data: Dataset, model: PathLossModel, recording: str, *, grid_spacing_m: float, q: float,
-                      spread_m: float, fix_cov_m2=None, fit: str = "closed_form") -> TrackingScenario:
+                      spread_m: float, fix_cov_m2=None, fit: str = "closed_form", inertial=None) -> TrackingScenario:
     """One track on its epoch clock (:func:`epoch_s`; a tick without an epoch is all NaN and unscored; native scans
     are put in windows of the clock's period, so scans with jittered times never share a tick), truth at the ticks of
-    the epochs with a true position, and the start every tracker takes (the first rss_ml fix, at rest)."""
+    the epochs with a true position, and the start every tracker takes (the first rss_ml fix, at rest). ``inertial``:
+    the fusion trackers' inputs of the track (:attr:`Protocol.inertial`), None without."""
     dt = epoch_s(data, recording)
     ep, reg, ticks = track_epochs(data, recording)
     truth = np.full((reg.rss_dbm.shape[0], 2), np.nan)
@@ -598,7 +607,7 @@ def tracking_scenario(data: Dataset, model: PathLossModel, recording: str, *, gr
          ProtocolChoice("path", f"the track {recording!r} on a {dt:g} s clock ({int(scored.sum())} epochs with truth)",
                         "the data set")),
         tag_height_m=data.tag_height_m, measured_rss_dbm=reg.rss_dbm, scored=scored,
-        fix_cov_m2=fix_cov_m2, start_state=start, time_s=reg.time_s)
+        fix_cov_m2=fix_cov_m2, start_state=start, time_s=reg.time_s, inertial=inertial)
 
 
 # ----------------------------------------------------------------------------------------------------- results
@@ -862,23 +871,33 @@ def tracking_results(data: Dataset, model: PathLossModel, proto: Protocol, *, se
     names = data.recordings_with("track") if recordings is None else list(recordings)
     if not names:
         return None
+    from .measured_inertial import fusion_knobs
+    from ..inertial_trackers import FUSION_PRIORS, FUSION_TRACKERS
     fix_cov = fix_covariance_from_calibration(data, model, grid_spacing_m=proto.grid_spacing_m)
     stream = list(ranging.RANGE_TRACKERS) if ranging.ranged_tracks(data, names) else []
     out, per = {}, {}
     for name in names:
         motion = proto.motion[name]
+        fus = proto.inertial.get(name)
         sc = tracking_scenario(data, model, name, grid_spacing_m=proto.grid_spacing_m, q=motion["q"],
-                               spread_m=motion["spread_m"], fix_cov_m2=fix_cov, fit=proto.fit)
+                               spread_m=motion["spread_m"], fix_cov_m2=fix_cov, fit=proto.fit, inertial=fus)
         ts = _settings(motion["q"], n_particles, ukf_alpha, fix_cov)
         rss = sc.measured_rss_dbm
         x0 = initial_states(sc, ts, 1, None)
         est, flags = run_trackers(sc, rss[None], x0, ts, keyed_stream(seed, data.name, "tracking", name, "kalman"),
                                   trackers=[t for t in TRACKERS if t != "particle"], with_divergence=True)
+        fused = {}
+        if fus is not None:      # the fusion trackers (deterministic: one run), after the battery's draws
+            fused, fused_flags = run_trackers(sc, rss[None], x0, ts,
+                                              keyed_stream(seed, data.name, "tracking", name, "fusion"),
+                                              trackers=list(fus.trackers),
+                                              with_divergence=True)
+            flags.update(fused_flags)
         runs = np.broadcast_to(rss, (particle_runs,) + rss.shape)
         est["particle"] = run_trackers(sc, runs, np.repeat(x0, particle_runs, axis=0), ts,
                                        keyed_stream(seed, data.name, "tracking", name, "particle"),
                                        trackers=["particle"])["particle"]
-        est = {t: est[t] for t in TRACKERS}
+        est = {**{t: est[t] for t in TRACKERS}, **fused}
         if stream:              # the fusion trackers: the RSS stream and the track's ranges
             ep, _, ticks = track_epochs(data, name)
             more, more_flags = ranging.run_range_trackers(data, name, sc, ep, ticks, x0, ts)
@@ -892,7 +911,8 @@ def tracking_results(data: Dataset, model: PathLossModel, proto: Protocol, *, se
                          "errors": {t: np.linalg.norm(v[:, steps] - sc.truth_m[steps], axis=-1).T
                                     for t, v in est.items()},
                          "est": {t: v[:, steps] for t, v in est.items()},
-                         "knobs": _tracker_knobs(proto, name, ts, sc)}
+                         "knobs": {**_tracker_knobs(proto, name, ts, sc),
+                                   **(fusion_knobs(fus, ukf_alpha) if fus is not None else {})}}
             if stream:
                 per[name]["knobs"].update(ranging.range_tracker_knobs(data, name, per[name]["knobs"]["ekf"], ts))
     user = tuple(m for m in user_methods if m.kind == "tracker")
@@ -914,10 +934,13 @@ def tracking_results(data: Dataset, model: PathLossModel, proto: Protocol, *, se
     rows = []
     bound_name = "PCRLB (constant velocity at the fitted q, from the trackers' start)"
     groups = ([(POOLED, list(per))] if per else []) + [(n, [n]) for n in per]
+    # the fusion trackers that ran on some track; a row of one pools only groups whose every track has it
+    fusion = [t for t in FUSION_TRACKERS if any(t in out[n][1] for n in names)]
     for label, members in groups:
         block = max(per[n]["block"] for n in members)
         bound = np.concatenate([per[n]["bound"] for n in members])
-        for tracker in [*TRACKERS, *stream, *described]:
+        for tracker in [*TRACKERS, *stream, *(t for t in fusion if all(t in per[n]["errors"] for n in members)),
+                        *described]:
             if tracker in failures:
                 rows.append(failed_row("tracking", label, tracker, len(bound), bound, None,
                                        settings=described[tracker], bound_name=bound_name,
@@ -930,13 +953,15 @@ def tracking_results(data: Dataset, model: PathLossModel, proto: Protocol, *, se
                              keyed_stream(seed, data.name, "tracking", members[0] if len(members) == 1 else label,
                                           tracker, "bootstrap"),
                              n_bootstrap=n_bootstrap, block=block, settings=settings,
-                             prior=TRACKER_PRIORS.get(tracker) or ranging.RANGE_TRACKER_PRIORS.get(tracker, USER_PRIOR),
+                             prior=TRACKER_PRIORS.get(tracker, ranging.RANGE_TRACKER_PRIORS.get(
+                                 tracker, FUSION_PRIORS.get(tracker, USER_PRIOR))),
                              bound_name=bound_name,
                              outside=outside_fraction(data, np.concatenate([per[n]["est"][tracker].reshape(-1, 2)
                                                                             for n in members])))
-            rows.append(row if tracker in TRACKER_PRIORS or tracker in ranging.RANGE_TRACKERS else
-                        {**row, FAILURE_COLUMN: ""})
-    return {"tracks": out, "rows": rows, "battery": [*TRACKERS, *stream], "user": user, "described": described,
+            rows.append(row if tracker in TRACKER_PRIORS or tracker in ranging.RANGE_TRACKERS or tracker in FUSION_PRIORS
+                        else {**row, FAILURE_COLUMN: ""})
+    return {"tracks": out, "rows": rows, "battery": [*TRACKERS, *stream, *fusion], "fusion": fusion, "user": user,
+            "described": described,
             "failures": failures, "covariances": {n: {k: v[n] for k, v in covariances.items()} for n in names}}
 
 

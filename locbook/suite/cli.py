@@ -207,6 +207,9 @@ def main(argv: list[str] | None = None) -> int:
                       help="example: the tracks written as scans (every anchor of a scan at one time, window_s = 0)")
     data.add_argument("--ranges", action="store_true",
                       help="example: a ranges file per recording (RTT-like ranges, 0.3 m std, reported)")
+    data.add_argument("--inertial", action="store_true",
+                      help="example: a 50 Hz accelerometer and gyroscope file per recording (walks with rounded "
+                           "corners); the tracking battery adds its fusion trackers")
     data.add_argument("--method", dest="methods", action="append", default=[], metavar="NAME=SPEC",
                       help="check: also import this static method of your own (as for run)")
     data.add_argument("--tracker", dest="trackers", action="append", default=[], metavar="NAME=SPEC",
@@ -232,7 +235,8 @@ def main(argv: list[str] | None = None) -> int:
                 folder = write_example_dataset(args.dataset, np.random.default_rng(args.seed), seed_note=args.seed,
                                                name=args.name, force=args.force, speed_m_s=args.speed,
                                                roles=args.roles or EXAMPLE_ROLES, two_d=args.two_d,
-                                               native_scans=args.native_scans, ranges=args.ranges)
+                                               native_scans=args.native_scans, ranges=args.ranges,
+                                               inertial=args.inertial)
                 print(f"wrote the example data set to {folder}; check it with `locbook data check {folder}` and run "
                       f"the battery with `locbook run --data {folder}`")
                 return 0

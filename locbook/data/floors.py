@@ -266,9 +266,18 @@ def require_one_floor(data) -> None:
 def floor_runs(data: str) -> list[str]:
     """The ``--data`` values a data run of ``data`` makes: ``[data]`` for a data set without floors or with a floor
     selected, else one ``DATA@FLOOR`` per floor, in the anchors file's order (each its own reports folder)."""
-    from .dataset import load_dataset
+    import tomllib
+    from .dataset import _resolve
+    from .measured import read_anchors
     base, floor = split_floor_selector(data)
     if floor is not None:
         return [data]
-    ds = load_dataset(data)
-    return [f"{data}{FLOOR_SELECTOR}{f}" for f in ds.floors] if ds.floors else [data]
+    try:        # only the manifest and the anchors file: each floor's run loads (and checks) its data set
+        root, manifest = _resolve(data)
+        anchors = read_anchors(root / tomllib.loads(manifest.read_text(encoding="utf-8"))["geometry"]["anchors"])
+    except Exception:           # a malformed data set: the run's own loading names the problem
+        return [data]
+    if FLOOR_COLUMN not in anchors.columns:
+        return [data]
+    used = anchors[USED_COLUMN].to_numpy(bool) if USED_COLUMN in anchors.columns else np.ones(len(anchors), bool)
+    return [f"{data}{FLOOR_SELECTOR}{f}" for f in dict.fromkeys(anchors[FLOOR_COLUMN][used])]

@@ -5,7 +5,7 @@ import numpy as np
 
 __all__ = ["draw_room", "draw_path", "mean_with_band", "error_cdf", "heat_map", "heat_map_notes", "map_view_m",
            "map_layout", "map_panels", "draw_floor", "MAP_MARGIN_M", "MAP_FIGURE_WIDTH_IN", "MAP_FIGURE_ASPECT",
-           "MAP_PANEL_PAD_IN", "MAP_MAX_PANEL_HEIGHT_IN"]
+           "MAP_PANEL_PAD_IN", "MAP_MAX_PANEL_HEIGHT_IN", "tracks_figure"]
 
 
 def draw_room(ax, size_m, anchors_m=None, *, label_anchors: bool = True, margin_m: float = 0.0):
@@ -205,3 +205,29 @@ def draw_floor(ax, data, *, anchor_ms: float = 5.0, view_m=None) -> None:
     ax.set_xlim(x0, x1)
     ax.set_ylim(y0, y1)
     ax.set_aspect("equal")
+
+
+def tracks_figure(data, tracks, trackers, **layout):
+    """The tracks figure of a data set: one map panel per tracker (:func:`map_panels`, every name in
+    ``trackers``, yours included, in that order), each drawing its estimates of every track in one colour per track
+    (tab10; the first run where a tracker has several) over the truth (grey points) or the reference path (grey
+    segments), on the floor (:func:`draw_floor`). ``tracks``: ``{name: (truth_m (T, 2) with NaN rows where
+    unknown, reference path (S, 2, 2) or None, {tracker: (R, T, 2)})}``; a tracker a track lacks is not drawn
+    there. Returns the figure."""
+    import matplotlib.pyplot as plt
+    colours = plt.get_cmap("tab10").colors
+    fig, axes = map_panels(data, len(trackers), **layout)
+    for ax, tracker in zip(axes, trackers):
+        draw_floor(ax, data, anchor_ms=4)
+        for i, (name, (truth_m, path_m, est)) in enumerate(tracks.items()):
+            if np.isfinite(truth_m[:, 0]).any():
+                ax.plot(truth_m[:, 0], truth_m[:, 1], ".", color="0.6", ms=2)
+            for seg in ([] if path_m is None else path_m):
+                ax.plot(seg[:, 0], seg[:, 1], "-", color="0.5", lw=3)
+            if tracker in est:
+                ax.plot(est[tracker][0, :, 0], est[tracker][0, :, 1], lw=0.8, color=colours[i % len(colours)],
+                        label=name)
+        ax.set_title(tracker, fontsize=9)
+    if axes and axes[0].get_legend_handles_labels()[0]:
+        axes[0].legend(fontsize=7, title="track", title_fontsize=7)
+    return fig

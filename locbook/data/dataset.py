@@ -32,6 +32,10 @@ The manifest (every key below; ``[units]`` describes the files, every other valu
     tag_height_m = 1.3                  # the tag's height, known to the estimators; optional where every true
                                         # position has z_m (then their median); within 100 m of the anchors' heights;
                                         # refused for a 2-D data set (no heights: its z_m are ignored)
+    floor_plan = "plan.png"             # optional: a PNG in the folder drawn under the maps and tracks, with...
+    floor_plan_extent_m = [-1.0, 21.0, -1.0, 13.0]   # ...its georeference: [x0, x1, y0, y1] m, imshow's extent
+                                        # outline, tag_height_m, floor_plan and floor_plan_extent_m may be tables
+                                        # keyed by floor ([geometry.outline] F1 = "f1.csv"): locbook.data.floors
 
     [epochs]                            # raw packets -> epochs (locbook.data.measured.epochs)
     window_s = 1.0                      # 0: each distinct time already is an epoch
@@ -58,7 +62,9 @@ The manifest (every key below; ``[units]`` describes the files, every other valu
     kind = "static"                     # static (each scored epoch on its own) | tracker (each track in time
                                         # order); the signature: locbook.MethodInput
 
-A data set needs at least one calibration recording; static and track recordings are optional (a calibration-only
+Floors (zones, scenes): a ``floor`` column in the anchors file and in every readings file, and placeholder anchors
+(``used = false``), are :mod:`locbook.data.floors`; one floor loads as a data set of its own
+(``load_dataset(DIR, floor="F1")`` or ``"DIR@F1"``, named ``<name>-<floor>``). A data set needs at least one calibration recording; static and track recordings are optional (a calibration-only
 data set fits the channel and localizes nothing: the notes say so). Anchors without z make a 2-D data set
 (:attr:`Dataset.dimension` 2, :attr:`Dataset.anchors_m` ``(m, 2)``, :attr:`Dataset.tag_height_m` None); with z,
 every anchor has one. A ``device`` column in the readings names each row's device (default: the transmitter id); a

@@ -52,7 +52,9 @@ naming the line that needs it. Messages quote at most :data:`MAX_QUOTED_CHARS` c
 its known height), or ``id, x, y`` with no ``z`` column for a 2-D problem (anchors and tag in one plane, ranges in
 the plane). A ``z`` column gives every anchor's height: one left empty is refused naming its line. Ids are unique;
 coordinates finite and less than :data:`MAX_COORDINATE_M` in magnitude; no two anchors within
-:data:`ANCHOR_MIN_SEPARATION_M` (1 mm) of each other.
+:data:`ANCHOR_MIN_SEPARATION_M` (1 mm) of each other. Optional columns ``floor`` (each anchor's floor) and ``used``
+(false: a placeholder, which may share a point; the separation rule holds among used anchors of one floor):
+:mod:`locbook.data.floors`.
 
 **Floor outline** (CSV, optional): ``x, y`` vertices of a closed polygon in metres (at least 3 vertices, the
 closing vertex may repeat the first).

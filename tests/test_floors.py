@@ -10,7 +10,7 @@ import pytest
 
 import locbook as lb
 from locbook.data import floors as fl
-from locbook.data.example import (EXAMPLE_SITE, FLOOR_ATTENUATION_DB, FLOOR_HEIGHT_M, PLAN_FLOOR_RGB,
+from locbook.data.example import (EXAMPLE_SITE, FLOOR_ATTENUATION_DB, FLOOR_HEIGHT_M, PLAN_FLOOR_RGB, PLAN_WALL_RGB,
                                   write_example_dataset)
 from locbook.data.measured import DataFormatError
 from locbook.scenarios import measured as me
@@ -238,22 +238,24 @@ def test_placeholder_anchors_at_one_point_load_and_are_ignored(tmp_path):
 
 
 # -- the floor plan --------------------------------------------------------------------------------------------------
-def _pixels(fig):
-    """The figure's RGB pixels (top row first) and each axes' pixel box (x0, x1, top, bottom)."""
+def _pixels(fig, points_m=()):
+    """The figure's RGB pixels (top row first), each axes' pixel box (x0, x1, top, bottom), and the pixel
+    (column, row) of each data point ``(x, y)`` of the first axes."""
     import matplotlib.image as mpimg
     import matplotlib.pyplot as plt
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=60)
-    height = fig.get_size_inches()[1] * 60
+    fig.savefig(buf, format="png", dpi=fig.dpi)
+    height = fig.get_size_inches()[1] * fig.dpi
     boxes = []
     for ax in fig.axes:
         if ax.get_visible():
-            b = ax.get_window_extent(fig.canvas.get_renderer()).transformed(fig.dpi_scale_trans.inverted())
-            boxes.append((int(b.x0 * 60) + 2, int(b.x1 * 60) - 2, int(height - b.y1 * 60) + 2,
-                          int(height - b.y0 * 60) - 2))
+            b = ax.get_window_extent(fig.canvas.get_renderer())
+            boxes.append((int(b.x0) + 2, int(b.x1) - 2, int(height - b.y1) + 2, int(height - b.y0) - 2))
+    at = [(int(round(u)), int(round(height - v))) for u, v in fig.axes[0].transData.transform(np.asarray(points_m))]\
+        if len(points_m) else []
     plt.close(fig)
     buf.seek(0)
-    return mpimg.imread(buf)[..., :3], boxes
+    return mpimg.imread(buf)[..., :3], boxes, at
 
 
 def _tint(rgb):
@@ -267,7 +269,12 @@ def test_the_floor_plan_is_drawn_under_the_map(building):
     for ax in axes:
         draw_floor(ax, ds)
         ax.plot([2.0, 18.0], [6.0, 6.0], "-", color="tab:blue", lw=3)      # a track drawn over the plan
-    rgb, boxes = _pixels(fig)
+    # the plan's georeference (write_floor_plan: an inner wall at x = 0.4 w from y = 0 to 0.3 h and from 0.6 h to
+    # h): wall pixels where the walls are, the floor's tint in the door gap, so x and y are neither shifted nor flipped
+    probes = [(8.0, 1.5), (8.0, 10.0), (8.0, 4.0), (6.0, 4.0)]
+    rgb, boxes, at = _pixels(fig, probes)
+    wall = (np.abs(rgb - np.asarray(PLAN_WALL_RGB)) < 0.05).all(axis=-1)
+    assert [bool(wall[r - 1:r + 2, c - 1:c + 2].any()) for c, r in at] == [True, True, False, False]
     tint = _tint(rgb)
     inside = np.zeros(tint.shape, bool)
     for x0, x1, top, bottom in boxes:
@@ -284,6 +291,16 @@ def test_the_floor_plan_is_drawn_under_the_map(building):
     fig, axes = map_panels(plain, 1)
     draw_floor(axes[0], plain)
     assert not _tint(_pixels(fig)[0]).any()
+    # deterministic bytes: the same map drawn twice saves the same PNG (as report.figure saves it)
+    saved = []
+    for _ in range(2):
+        fig, axes = map_panels(ds, 2)
+        for ax in axes:
+            draw_floor(ax, ds)
+        buf = io.BytesIO()
+        fig.savefig(buf, format="png", bbox_inches="tight", metadata={"Software": None})
+        saved.append(buf.getvalue())
+    assert saved[0] == saved[1]
 
 
 def test_bad_floor_plans_and_extents_are_refused_in_one_line(building, tmp_path):

@@ -190,7 +190,7 @@ def write_floor_plan(path, hall_m, *, margin_m: float = PLAN_MARGIN_M) -> tuple[
     ax.add_patch(Rectangle((0.0, 0.0), w, h, facecolor=PLAN_FLOOR_RGB, edgecolor="none"))
     wall = {"color": PLAN_WALL_RGB, "lw": 3, "solid_capstyle": "butt"}
     ax.plot([0, w, w, 0, 0], [0, 0, h, h, 0], **wall)
-    ax.plot([0.4 * w, 0.4 * w], [0.0, 0.4 * h], **wall)          # inner walls, each with a door gap
+    ax.plot([0.4 * w, 0.4 * w], [0.0, 0.3 * h], **wall)          # inner walls, each with a door gap
     ax.plot([0.4 * w, 0.4 * w], [0.6 * h, h], **wall)
     ax.plot([0.4 * w, 0.55 * w], [0.5 * h, 0.5 * h], **wall)
     ax.plot([0.7 * w, w], [0.5 * h, 0.5 * h], **wall)

@@ -155,7 +155,8 @@ def main(argv: list[str] | None = None) -> int:
                      help="run on this data set (a folder with dataset.toml, or a shipped name such as "
                           "kolakowski2021): every experiment that takes one and that the data set can run (default: "
                           "all of them; one it cannot run is left out, in one line, and asking for it by id is an "
-                          "error); the reports go to <reports>/<profile>/data-<name>/")
+                          "error); the reports go to <reports>/<profile>/data-<name>/; a data set with floors runs "
+                          "each floor as its own data run (data-<name>-<floor>/), DIR@FLOOR one of them")
     _method_options(run)
     run.add_argument("--reports", type=Path, help="reports folder (default: <repository>/reports)")
     run.add_argument("--out", type=Path, help="write this run's reports to this folder (a path; its last part "

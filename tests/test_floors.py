@@ -395,3 +395,38 @@ def test_the_default_example_is_unchanged_by_the_new_options(tmp_path):
     assert extra == {'floor_plan = "plan.png"', "floor_plan_extent_m = [-1, 21, -1, 13]"}
     assert (c / "plan.png").read_bytes() == write_example_dataset(tmp_path / "d", np.random.default_rng(2),
                                                                   floor_plan=True).joinpath("plan.png").read_bytes()
+
+
+def test_a_run_on_a_building_is_one_data_run_per_floor(building, tmp_path, monkeypatch, capsys):
+    """`locbook run --data DIR` on a data set with floors: one data run per floor, each its own folder
+    (data-<name>-<floor>/) whose tasks get DIR@FLOOR; `--data DIR@F2` runs that floor alone (run_tasks stood in
+    for, as in test_data_runs: the command line up to where notebooks would run)."""
+    import json
+
+    from locbook.suite import runner
+    from locbook.suite.cli import main
+    seen = []
+
+    def run_tasks(suite, tasks, profile, report_dir, *, write_reports, progress="plain", **_kwargs):
+        seen.append((report_dir.name, {t.key: t.parameters["data"] for t in tasks}))
+        report_dir.mkdir(parents=True, exist_ok=True)
+        outcomes = [runner.Outcome(t.key, "ok", 0.0) for t in tasks]
+        write_reports(report_dir, outcomes)
+        return runner.SuiteRun(outcomes, report_dir)
+
+    monkeypatch.setattr(runner, "run_tasks", run_tasks)
+    assert main(["run", "--data", str(building), "--reports", str(tmp_path / "r"), "--quiet"]) == 0
+    assert [name for name, _ in seen] == ["data-example-f1", "data-example-f2"]
+    for (name, data), floor in zip(seen, ("F1", "F2")):
+        values = {v if isinstance(v, str) else v[0] for v in data.values()}
+        assert values == {f"{building}@{floor}"} and "measured-tracking" in data
+        record = json.loads((tmp_path / "r" / "quick" / name / "dataset.json").read_text())
+        assert record["data set"] == f"{building}@{floor}" and record["name"] == name[len("data-"):]
+    out = capsys.readouterr().out
+    assert f"data set {building}@F1" in out and f"data set {building}@F2" in out
+    seen.clear()
+    assert main(["run", "--data", f"{building}@F2", "--reports", str(tmp_path / "r"), "--quiet"]) == 0
+    assert [name for name, _ in seen] == ["data-example-f2"]
+    # a building given to the runner itself (not through the command line's loop) is refused in one line
+    with pytest.raises(lb.ParameterError, match="one floor at a time"):
+        runner._load_data_argument(str(building))

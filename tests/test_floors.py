@@ -430,3 +430,24 @@ def test_a_run_on_a_building_is_one_data_run_per_floor(building, tmp_path, monke
     # a building given to the runner itself (not through the command line's loop) is refused in one line
     with pytest.raises(lb.ParameterError, match="one floor at a time"):
         runner._load_data_argument(str(building))
+
+
+def test_per_floor_tables_of_plan_and_height(building, tmp_path):
+    dest = tmp_path / "tables"
+    shutil.copytree(building, dest)
+    text = (dest / "dataset.toml").read_text()
+    text = re.sub(r"floor_plan.*\n", "", text)
+    text = text.replace("[epochs]", '[geometry.floor_plan]\nF2 = "plan.png"\n\n[geometry.floor_plan_extent_m]\n'
+                                     'F2 = [-1.0, 21.0, -1.0, 13.0]\n\n[geometry.tag_height_m]\nF1 = 1.1\nF2 = 4.3\n\n'
+                                     "[epochs]")
+    _write(dest / "dataset.toml", text)
+    whole = lb.load_dataset(dest)
+    assert whole.floor_plan is None and whole.floors == ("F1", "F2")
+    f1, f2 = (lb.load_dataset(dest, floor=f) for f in ("F1", "F2"))
+    assert (f1.floor_plan, f2.floor_plan) == (None, dest / "plan.png")
+    assert (f1.tag_height_m, f2.tag_height_m) == (1.1, 4.3) and f1.tag_height_source == "manifest"
+    _write(dest / "dataset.toml", text.replace('[geometry.floor_plan]\nF2 = "plan.png"', '[geometry.floor_plan]\n'
+                                                                                        'F1 = "plan.png"'))
+    with pytest.raises(DataFormatError) as exc:
+        lb.load_dataset(dest)
+    assert "floor 'F1': a floor_plan needs its floor_plan_extent_m" in _one_line(exc)

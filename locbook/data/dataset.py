@@ -597,6 +597,9 @@ def load_dataset(path, *, floor: str | None = None) -> Dataset:
     with_xy = np.isfinite(truth_xy).all(axis=1)
     tag_height, height_source = None, ""
     height_value = fl.per_floor(manifest, geometry, "tag_height_m", floors, floor)
+    if isinstance(height_value, list):      # the whole building, heights per floor: their median, for the check only
+        finite = [v for v in height_value if isinstance(v, (int, float)) and not isinstance(v, bool)]
+        height_value = float(np.median(finite)) if len(finite) == len(height_value) else height_value[0]
     if "z" not in anchors.columns:          # 2-D: one plane, no heights anywhere
         if "tag_height_m" in geometry:
             _fail(manifest, "[geometry] tag_height_m: anchors have no z: a 2-D data set has no tag height (give the "
@@ -607,7 +610,7 @@ def load_dataset(path, *, floor: str | None = None) -> Dataset:
                             f"{', '.join(map(repr, with_z))} are ignored; distances are in the plane")
         for rec in recordings.values():
             rec.readings["z_m"] = np.nan
-    elif height_value is not None and not isinstance(height_value, list):   # a list: a building's, per floor
+    elif height_value is not None:
         tag_height = _number(manifest, {"tag_height_m": height_value}, "tag_height_m", "[geometry] ")
         notes["tag_height_m"] = f"{tag_height:g} m (manifest)"
         source, height_source = "[geometry] tag_height_m", "manifest"
@@ -722,22 +725,24 @@ def _floor_plan(manifest: Path, root: Path, geometry: dict, floors, floor):
                         "floor_plan_extent_m = [x0, x1, y0, y1] (m)")
     if floor is None and any(isinstance(geometry[k], dict) for k in ("floor_plan", "floor_plan_extent_m")):
         # the whole building with plans per floor: check every floor's, draw none
-        plans, extents = geometry["floor_plan"], geometry["floor_plan_extent_m"]
         for f in floors:
-            p = plans.get(f) if isinstance(plans, dict) else plans
-            e = extents.get(f) if isinstance(extents, dict) and not isinstance(extents, list) else extents
-            if (p is None) != (e is None):
-                _fail(manifest, f"[geometry] floor {f!r}: a floor_plan needs its floor_plan_extent_m and the other "
-                                "way round")
-            if p is not None:
-                fl.read_floor_plan(manifest, root, p, f"[geometry] floor {f!r}: ")
-                fl.floor_plan_extent(manifest, e, f"[geometry] floor {f!r}: ")
+            _one_plan(manifest, root, geometry, fl.per_floor(manifest, geometry, "floor_plan", floors, f),
+                      fl.per_floor(manifest, geometry, "floor_plan_extent_m", floors, f), f"[geometry] floor {f!r}: ")
         return None, None
-    if plan is None and extent is None:
+    return _one_plan(manifest, root, geometry, plan, extent,
+                     "[geometry] " if floor is None else f"[geometry] floor {floor!r}: ")
+
+
+def _one_plan(manifest: Path, root: Path, geometry: dict, plan, extent, where: str):
+    """One floor's ``(plan, extent)``: none where a plan table leaves the floor out (an extent table naming it is
+    then refused), else both checked."""
+    from . import floors as fl
+    if plan is None:
+        if extent is not None and isinstance(geometry["floor_plan_extent_m"], dict):
+            _fail(manifest, f"{where}floor_plan_extent_m without a floor_plan for this floor")
         return None, None
-    where = "[geometry] " if floor is None else f"[geometry] floor {floor!r}: "
-    if (plan is None) != (extent is None):
-        _fail(manifest, f"{where}a floor_plan needs its floor_plan_extent_m and the other way round")
+    if extent is None:
+        _fail(manifest, f"{where}a floor_plan needs its floor_plan_extent_m (the table names none for this floor)")
     return fl.read_floor_plan(manifest, root, plan, where), fl.floor_plan_extent(manifest, extent, where)
 
 

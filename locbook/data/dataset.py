@@ -64,7 +64,9 @@ The manifest (every key below; ``[units]`` describes the files, every other valu
 
 Floors (zones, scenes): a ``floor`` column in the anchors file and in every readings file, and placeholder anchors
 (``used = false``), are :mod:`locbook.data.floors`; one floor loads as a data set of its own
-(``load_dataset(DIR, floor="F1")`` or ``"DIR@F1"``, named ``<name>-<floor>``). A data set needs at least one calibration recording; static and track recordings are optional (a calibration-only
+(``load_dataset(DIR, floor="F1")`` or ``"DIR@F1"``, named ``<name>-<floor>``).
+
+A data set needs at least one calibration recording; static and track recordings are optional (a calibration-only
 data set fits the channel and localizes nothing: the notes say so). Anchors without z make a 2-D data set
 (:attr:`Dataset.dimension` 2, :attr:`Dataset.anchors_m` ``(m, 2)``, :attr:`Dataset.tag_height_m` None); with z,
 every anchor has one. A ``device`` column in the readings names each row's device (default: the transmitter id); a

@@ -99,8 +99,9 @@ def anchor_columns(table: pd.DataFrame, lines, source: str):
         bad = ~text.isin(_TRUE | _FALSE).to_numpy()
         if bad.any():
             i = int(np.flatnonzero(bad)[0])
-            raise DataFormatError(f"{source}, line {lines[i]}, column {USED_COLUMN!r}: {_shown(table[USED_COLUMN].iloc[i])}"
-                                  " is not true or false (a placeholder anchor is 'false'; every row says which)")
+            raise DataFormatError(f"{source}, line {lines[i]}, column {USED_COLUMN!r}: "
+                                  f"{_shown(table[USED_COLUMN].iloc[i])} is not true or false (a placeholder anchor "
+                                  "is 'false'; every row says which)")
         used = text.isin(_TRUE).to_numpy()
         if not used.any():
             raise DataFormatError(f"{source}, column {USED_COLUMN!r}: every anchor is a placeholder (used = false); "

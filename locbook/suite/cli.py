@@ -398,7 +398,8 @@ def _dataset_text(path: str, suite=None) -> str:
     runs = [eid for eid, reason in why.items() if not reason]
     if ds.floors and ds.floor is None:      # a building: each floor is a data run of its own (locbook.data.floors)
         lines.append(f"ok: `locbook run --data {path}` runs each floor as a data set of its own: "
-                     + ", ".join(f"{f} (--data {path}@{f}, reports data-{ds.name}-{floor_slug(f)}/)" for f in ds.floors))
+                     + ", ".join(f"{f} (--data {path}@{f}, reports data-{ds.name}-{floor_slug(f)}/)"
+                                 for f in ds.floors))
         return "\n".join(lines)
     lines.append(f"ok: `locbook run --data {path}` runs {', '.join(runs) or 'no experiment'}"
                  + "".join(f"; {eid}: left out: {reason}" for eid, reason in why.items() if reason))

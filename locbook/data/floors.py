@@ -167,15 +167,18 @@ def select_rows(readings: pd.DataFrame, anchors: pd.DataFrame, floor: str | None
     the placeholders' rows dropped, the rows of the tag on other floors, and the rows of the tag on ``floor`` heard
     by other floors' anchors (ignored)."""
     ids = anchors["id"].astype(str)
-    receiver = readings["receiver"].astype(str)
     placeholder_ids = set(ids[~anchors[USED_COLUMN]]) if USED_COLUMN in anchors.columns else set()
+    counts = {"rows": len(readings), "placeholder": 0, "other floors": 0, "cross-floor": 0}
+    if not placeholder_ids and floor is None:       # a data set without floors or placeholders: as it was read
+        return readings, counts
+    receiver = readings["receiver"]                 # ids as text (categories or objects): compared, never copied
     placeholder = receiver.isin(placeholder_ids).to_numpy()
     keep = ~placeholder
-    counts = {"rows": len(readings), "placeholder": int(placeholder.sum()), "other floors": 0, "cross-floor": 0}
+    counts["placeholder"] = int(placeholder.sum())
     if floor is not None:
         on_floor = (_text(readings[FLOOR_COLUMN]) == floor).to_numpy()
         floor_of = dict(zip(ids, anchors[FLOOR_COLUMN]))
-        heard_here = (receiver.map(floor_of) == floor).to_numpy()
+        heard_here = (receiver.map(floor_of).astype(object) == floor).to_numpy()
         counts["other floors"] = int((~on_floor & keep).sum())
         counts["cross-floor"] = int((on_floor & ~heard_here & keep).sum())
         keep &= on_floor & heard_here

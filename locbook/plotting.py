@@ -3,7 +3,9 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["draw_room", "draw_path", "mean_with_band", "error_cdf", "heat_map", "heat_map_notes"]
+__all__ = ["draw_room", "draw_path", "mean_with_band", "error_cdf", "heat_map", "heat_map_notes", "map_view_m",
+           "map_layout", "map_panels", "draw_floor", "MAP_MARGIN_M", "MAP_FIGURE_WIDTH_IN", "MAP_FIGURE_ASPECT",
+           "MAP_PANEL_PAD_IN", "MAP_MAX_PANEL_HEIGHT_IN", "tracks_figure"]
 
 
 def draw_room(ax, size_m, anchors_m=None, *, label_anchors: bool = True, margin_m: float = 0.0):
@@ -126,3 +128,106 @@ def heat_map_notes(rows, kind: str) -> list[str]:
             if r["method"] not in methods:
                 methods.append(r["method"])
     return [f"{scenario} / {', '.join(methods)}: {note}" for (scenario, note), methods in grouped.items()]
+
+
+# -- maps of a floor: the measured experiments' map and track figures -------------------------------------------
+#: margin (m) of a map's view around the floor outline
+MAP_MARGIN_M = 0.5
+#: a map figure's widest width (in): the report pages' figure width
+MAP_FIGURE_WIDTH_IN = 15.0
+#: the width / height a map figure's grid of panels aims at: near-square on a screen, so a long room gets fewer,
+#: wider columns (a 26 m x 9 m hall: 2 columns, not 4 of tiny panels) and a square room more
+MAP_FIGURE_ASPECT = 1.0
+#: height (in) each panel needs beyond the floor's own drawing: its title and tick labels
+MAP_PANEL_PAD_IN = 0.7
+#: the tallest a panel's floor drawing gets (in): a long narrow corridor drawn upright stays on a screen
+MAP_MAX_PANEL_HEIGHT_IN = 8.0
+
+
+def map_view_m(outline_m, margin_m: float = MAP_MARGIN_M) -> tuple[float, float, float, float]:
+    """The view ``(x0, x1, y0, y1)`` (m) of a map: the outline's box with ``margin_m`` around it."""
+    outline_m = np.asarray(outline_m, float)
+    lo, hi = outline_m.min(axis=0) - margin_m, outline_m.max(axis=0) + margin_m
+    return float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1])
+
+
+def map_layout(view_m, n_panels: int, *, width_in: float = MAP_FIGURE_WIDTH_IN, aspect: float = MAP_FIGURE_ASPECT,
+               pad_in: float = MAP_PANEL_PAD_IN, max_panel_height_in: float = MAP_MAX_PANEL_HEIGHT_IN):
+    """``(nrows, ncols, (width_in, height_in))`` of a figure of ``n_panels`` maps of the view ``(x0, x1, y0, y1)``.
+
+    Each panel's slot has the floor's own aspect (its drawing, at equal scale on both axes, fills the slot's width:
+    ``slot height = slot width x (y1 - y0) / (x1 - x0) + pad_in``, the drawing at most ``max_panel_height_in``
+    high), and the number of columns is the one whose whole figure is nearest ``aspect`` (width over height) in
+    ratio, ``|log(figure aspect / aspect)|`` smallest (ties: fewer columns); the figure size follows."""
+    x0, x1, y0, y1 = (float(v) for v in view_m)
+    if not (x1 > x0 and y1 > y0) or n_panels < 1:
+        raise ValueError(f"map_layout needs a view with x1 > x0, y1 > y0 and at least one panel, got {view_m}, "
+                         f"{n_panels}")
+    ratio = (y1 - y0) / (x1 - x0)
+    best = None
+    for ncols in range(1, n_panels + 1):
+        nrows = -(-n_panels // ncols)
+        slot_w = min(width_in / ncols, max_panel_height_in / ratio)
+        size = (ncols * slot_w, nrows * (slot_w * ratio + pad_in))
+        score = abs(np.log(size[0] / size[1] / aspect))
+        if best is None or score < best[0] - 1e-12:
+            best = (score, nrows, ncols, size)
+    return best[1], best[2], (round(best[3][0], 3), round(best[3][1], 3))
+
+
+def map_panels(data, n_panels: int, **layout):
+    """A figure of ``n_panels`` map panels of a data set's floor (:func:`map_layout` of its :func:`map_view_m`):
+    ``(fig, axes)``, ``axes`` the ``n_panels`` axes in reading order, the grid's spare slots hidden. ``data``: a
+    :class:`locbook.data.dataset.Dataset` (its ``outline_m``)."""
+    import matplotlib.pyplot as plt
+    nrows, ncols, size = map_layout(map_view_m(data.outline_m), n_panels, **layout)
+    fig, grid = plt.subplots(nrows, ncols, figsize=size, squeeze=False)
+    axes = list(grid.ravel())
+    for ax in axes[n_panels:]:
+        ax.set_visible(False)
+    return fig, axes[:n_panels]
+
+
+def draw_floor(ax, data, *, anchor_ms: float = 5.0, view_m=None) -> None:
+    """A data set's floor on a map panel: its floor plan under everything (``floor_plan`` at
+    ``floor_plan_extent_m``, matplotlib's imshow extent, image top at y1; zorder below every line), the outline,
+    the anchors (black triangles), the view (:func:`map_view_m`) at equal scale. ``data``: a
+    :class:`locbook.data.dataset.Dataset` (``outline_m``, ``anchors_m``, ``floor_plan``, ``floor_plan_extent_m``)."""
+    plan = getattr(data, "floor_plan", None)
+    if plan is not None:
+        from .data.floors import plan_image
+        ax.imshow(plan_image(plan), extent=tuple(data.floor_plan_extent_m), origin="upper", zorder=0,
+                  interpolation="nearest")
+    outline = np.vstack([data.outline_m, data.outline_m[:1]])
+    ax.plot(outline[:, 0], outline[:, 1], "k-", lw=1)
+    ax.plot(data.anchors_m[:, 0], data.anchors_m[:, 1], "k^", ms=anchor_ms)
+    x0, x1, y0, y1 = map_view_m(data.outline_m) if view_m is None else view_m
+    ax.set_xlim(x0, x1)
+    ax.set_ylim(y0, y1)
+    ax.set_aspect("equal")
+
+
+def tracks_figure(data, tracks, trackers, **layout):
+    """The tracks figure of a data set: one map panel per tracker (:func:`map_panels`, every name in
+    ``trackers``, yours included, in that order), each drawing its estimates of every track in one colour per track
+    (tab10; the first run where a tracker has several) over the truth (grey points) or the reference path (grey
+    segments), on the floor (:func:`draw_floor`). ``tracks``: ``{name: (truth_m (T, 2) with NaN rows where
+    unknown, reference path (S, 2, 2) or None, {tracker: (R, T, 2)})}``; a tracker a track lacks is not drawn
+    there. Returns the figure."""
+    import matplotlib.pyplot as plt
+    colours = plt.get_cmap("tab10").colors
+    fig, axes = map_panels(data, len(trackers), **layout)
+    for ax, tracker in zip(axes, trackers):
+        draw_floor(ax, data, anchor_ms=4)
+        for i, (name, (truth_m, path_m, est)) in enumerate(tracks.items()):
+            if np.isfinite(truth_m[:, 0]).any():
+                ax.plot(truth_m[:, 0], truth_m[:, 1], ".", color="0.6", ms=2)
+            for seg in ([] if path_m is None else path_m):
+                ax.plot(seg[:, 0], seg[:, 1], "-", color="0.5", lw=3)
+            if tracker in est:
+                ax.plot(est[tracker][0, :, 0], est[tracker][0, :, 1], lw=0.8, color=colours[i % len(colours)],
+                        label=name)
+        ax.set_title(tracker, fontsize=9)
+    if axes and axes[0].get_legend_handles_labels()[0]:
+        axes[0].legend(fontsize=7, title="track", title_fontsize=7)
+    return fig

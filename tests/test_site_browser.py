@@ -301,3 +301,48 @@ def test_a_data_sets_page_shows_its_results_table_first(browser, tmp_path):
         assert browser.save_screenshot(str(shot))
         data = shot.read_bytes()
         assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 1000
+
+
+def test_a_floor_plan_is_drawn_under_the_map_on_a_data_sets_page(browser, tmp_path):
+    """Issue 48: on a data run whose data set has a floor plan, the page's map image loads and shows the plan: the
+    plan's floor tint fills most of the map as the browser draws it (a screenshot of the image element)."""
+    import io
+
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.image as mpimg
+    import matplotlib.pyplot as plt
+    import numpy as np
+    from selenium.webdriver.common.by import By
+
+    import locbook as lb
+    from locbook.data.example import PLAN_FLOOR_RGB, write_example_dataset
+    from locbook.plotting import draw_floor, map_panels
+    from test_data_runs import write_data_folder
+
+    folder = write_example_dataset(tmp_path / "set", np.random.default_rng(3), name="mine", walk_s=30.0,
+                                   roles=("calibration", "static"), floor_plan=True)
+    ds = lb.load_dataset(folder)
+    report_dir = tmp_path / "reports" / "quick" / "data-mine"
+    loc = report_dir / "measured-localization"
+    loc.mkdir(parents=True)
+    truth = ds.epochs("points").position_m[:, :2]
+    fig, axes = map_panels(ds, 2)              # the map figure as measured-localization draws it
+    for ax in axes:
+        draw_floor(ax, ds)
+        ax.plot(truth[:, 0], truth[:, 1], ".", color="0.6", ms=2)
+    fig.savefig(loc / "maps.png", dpi=110, bbox_inches="tight", metadata={"Software": None})
+    plt.close(fig)
+    write_data_folder(report_dir, folder, load_suite())
+    index = report_dir / "index.html"
+    broken, external, _pages = check_page(browser, index)
+    assert broken == [] and external == []
+    img = next(i for i in browser.find_elements(By.CSS_SELECTOR, "img") if i.get_attribute("src").endswith(
+        "/measured-localization/maps.png"))
+    assert browser.execute_script("return arguments[0].complete && arguments[0].naturalWidth > 0", img)
+    browser.execute_script("arguments[0].scrollIntoView()", img)
+    shot = mpimg.imread(io.BytesIO(img.screenshot_as_png))[..., :3]
+    tint = (np.abs(shot - np.asarray(PLAN_FLOOR_RGB)) < 4 / 255).all(axis=-1)
+    assert tint.mean() > 0.3                    # the hall's floor tint: the plan is under the map
+    for target in (tmp_path / "data-floor-plan.png", _screenshot_dir() / "data-floor-plan.png"):
+        assert img.screenshot(str(target))

@@ -34,6 +34,10 @@ The manifest (every key below; ``[units]`` describes the files, every other valu
     tag_height_m = 1.3                  # the tag's height, known to the estimators; optional where every true
                                         # position has z_m (then their median); within 100 m of the anchors' heights;
                                         # refused for a 2-D data set (no heights: its z_m are ignored)
+    floor_plan = "plan.png"             # optional: a PNG in the folder drawn under the maps and tracks, with...
+    floor_plan_extent_m = [-1.0, 21.0, -1.0, 13.0]   # ...its georeference: [x0, x1, y0, y1] m, imshow's extent
+                                        # outline, tag_height_m, floor_plan and floor_plan_extent_m may be tables
+                                        # keyed by floor ([geometry.outline] F1 = "f1.csv"): locbook.data.floors
 
     [epochs]                            # raw packets -> epochs (locbook.data.measured.epochs)
     window_s = 1.0                      # 0: each distinct time already is an epoch
@@ -66,6 +70,10 @@ The manifest (every key below; ``[units]`` describes the files, every other valu
                                         # file relative to this folder, inside it (as every file the manifest names)
     kind = "static"                     # static (each scored epoch on its own) | tracker (each track in time
                                         # order); the signature: locbook.MethodInput
+
+Floors (zones, scenes): a ``floor`` column in the anchors file and in every readings file, and placeholder anchors
+(``used = false``), are :mod:`locbook.data.floors`; one floor loads as a data set of its own
+(``load_dataset(DIR, floor="F1")`` or ``"DIR@F1"``, named ``<name>-<floor>``).
 
 A data set needs at least one calibration recording; static and track recordings are optional (a calibration-only
 data set fits the channel and localizes nothing: the notes say so). Anchors without z make a 2-D data set
@@ -134,7 +142,7 @@ _TOP = {"name", "title", "license", "license_file", "attribution", "changes", "u
         "epochs", "recording", "method"}
 _SECTIONS = {"units": {"time", "length", "rssi", "acceleration", "angular_rate"},
              "readings": {"valid_range_dbm", "invalid_values_dbm", "backward_time"},
-             "geometry": {"anchors", "outline", "tag_height_m"},
+             "geometry": {"anchors", "outline", "tag_height_m", "floor_plan", "floor_plan_extent_m"},
              "epochs": {"window_s", "aggregate", "min_readings"}}
 _RECORDING_KEYS = {"name", "file", "role", "point_column", "reference_path", "window_s", "ranges", "inertial"}
 _METHOD_KEYS = {"name", "function", "kind"}
@@ -221,6 +229,15 @@ class Dataset:
     tag_height_source: str = ""
     #: the manifest's methods of your own (``[[method]]``, :class:`locbook.user_methods.UserMethod`), in its order
     methods: tuple = ()
+    #: the floors of the building (anchors' ``floor`` column, :mod:`locbook.data.floors`), () without one
+    floors: tuple[str, ...] = ()
+    #: the floor this data set is (its anchors and rows), None for a data set without floors or a whole building
+    floor: str | None = None
+    #: the manifest's ``name`` (a floor's :attr:`name` adds the floor's slug)
+    manifest_name: str = ""
+    #: the floor plan drawn under the maps (a PNG in the folder) and its imshow extent [x0, x1, y0, y1] (m)
+    floor_plan: Path | None = None
+    floor_plan_extent_m: tuple | None = None
     _cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     @property
@@ -248,6 +265,12 @@ class Dataset:
         source = {"manifest": " ([geometry] tag_height_m)", "median of the true z": " (median of the true z)"}.get(
             self.tag_height_source, "")
         return f"3-D distances: anchors at {heights}, the tag at its known height {self.tag_height_m:g} m{source}"
+
+    @property
+    def selector(self) -> str:
+        """``"@F1"`` for floor F1 of a data set with floors (``DIR@F1`` loads it), else ``""``."""
+        from .floors import FLOOR_SELECTOR
+        return f"{FLOOR_SELECTOR}{self.floor}" if self.floor is not None else ""
 
     def has_role(self, role: str) -> bool:
         """Whether some recording has ``role`` (one of :data:`ROLES`)."""
@@ -455,11 +478,16 @@ def _backward_rows(time_s: np.ndarray, transmitter) -> int:
     return int((frame["t"] < earlier).sum())
 
 
-def load_dataset(path) -> Dataset:
+def load_dataset(path, *, floor: str | None = None) -> Dataset:
     """Read and check a data set: a shipped name (``"kolakowski2021"``), its folder, or its ``dataset.toml``.
 
     Every file is read and validated here (long format rules, the manifest's sentinels, range, units and clock
-    handling), so a data set that loads is one every experiment can run on."""
+    handling), so a data set that loads is one every experiment can run on. ``floor`` (or ``path`` written
+    ``DIR@F1``): one floor of a data set with floors, a data set of its own (:mod:`locbook.data.floors`); without
+    it a data set with floors loads as the whole building, every floor checked, for ``locbook data check``."""
+    from . import floors as fl
+    if floor is None:
+        path, floor = fl.split_floor_selector(path)
     root, manifest = _resolve(path)
     size = manifest.stat().st_size
     if size > MAX_MANIFEST_BYTES:
@@ -515,6 +543,11 @@ def load_dataset(path) -> Dataset:
     geometry = raw.get("geometry", {})
     anchors = read_anchors(_file(manifest, root, _string(manifest, geometry, "anchors", "[geometry] "),
                                  "[geometry] anchors: "))
+    used = anchors[fl.USED_COLUMN].to_numpy(bool) if fl.USED_COLUMN in anchors.columns else np.ones(len(anchors), bool)
+    floors = (tuple(dict.fromkeys(anchors[fl.FLOOR_COLUMN][used])) if fl.FLOOR_COLUMN in anchors.columns else ())
+    if floor is not None and floor not in floors:
+        raise ParameterError(f"data set {name!r} ({root}) has no floor {floor!r}" + (
+            f"; its floors are {', '.join(floors)}" if floors else ": its anchors file has no floor column"))
     axes = [c for c in ("x", "y", "z") if c in anchors.columns]     # no z: a 2-D data set
     if length_scale != 1.0:
         anchors[axes] *= length_scale
@@ -528,6 +561,8 @@ def load_dataset(path) -> Dataset:
                         f"({', '.join(ROLES)})")
     recordings: dict[str, Recording] = {}
     invalid_found: dict[str, int] = {}
+    dropped: dict[str, dict] = {}
+    left_out: list[str] = []
     for i, rec in enumerate(records):
         where = f"[[recording]] {i + 1}: "
         if not isinstance(rec, dict):
@@ -554,12 +589,17 @@ def load_dataset(path) -> Dataset:
             _fail(manifest, f"{where}point_column belongs to calibration and static recordings (a tag standing at "
                             "named points); a track moves")
         table, lines = read_readings_table(path, time_as_text=time_scale != 1.0)
+        fl.check_readings_floors(table, lines, path, floors)
         if point_column is not None:
             _check_point_column(table, lines, point_column, path, manifest, where)
         readings = validate_readings_file(path, table, lines, lambda t: _convert(t, time_scale, length_scale),
                                           anchor_ids=anchors["id"], invalid_values_dbm=sentinels,
                                           # None when not declared: readings >= 0 dBm then warn
                                           valid_range_dbm=opts.get("valid_range_dbm"), sort=backward == "sort")
+        readings, dropped[rname] = fl.select_rows(readings, anchors, floor)
+        if floor is not None and not len(readings):
+            left_out.append(rname)          # no row on this floor: not one of its recordings
+            continue
         sorted_rows = 0
         if backward == "sort":     # counted on the file's order (validate_readings has sorted its copy)
             t = _convert(table, time_scale, length_scale)["time_s"]
@@ -582,6 +622,10 @@ def load_dataset(path) -> Dataset:
                 _fail(manifest, f"{where}reference_path belongs to a track, not a {role} recording")
             reference = read_path_segments(_file(manifest, root, _string(manifest, rec, "reference_path", where),
                                                  where + "reference_path: ")) * length_scale
+        if floors and ("ranges" in rec or "inertial" in rec):
+            _fail(manifest, f"{where}{'ranges' if 'ranges' in rec else 'inertial'}: a data set with floors takes "
+                            "RSS readings only (its streams are not split by floor yet); give each floor a data set "
+                            "of its own to use its ranges or inertial samples")
         ranges, ranges_file = None, None
         origin = file_time_origin(table["time_s"]) if time_scale != 1.0 else None
         if "ranges" in rec:
@@ -598,10 +642,13 @@ def load_dataset(path) -> Dataset:
                                      acceleration=acc_unit, angular_rate=rate_unit, sort=backward == "sort")
         recordings[rname] = Recording(rname, role, path, readings, rule, point_column, reference, sorted_rows,
                                       ranges, ranges_file, inertial)
+    anchors = anchors[used & ((anchors[fl.FLOOR_COLUMN] == floor).to_numpy() if floor is not None else True)]
+    anchors = anchors.drop(columns=[fl.USED_COLUMN], errors="ignore").reset_index(drop=True)
     roles = {r.role for r in recordings.values()}
     if "calibration" not in roles:
-        _fail(manifest, "no recording has role 'calibration': the channel is fitted on it (and never on the "
-                        "recordings it is scored on)")
+        _fail(manifest, ("no recording has role 'calibration'" if floor is None else
+                         f"floor {floor!r}: no calibration recording has a row on this floor")
+              + ": the channel is fitted on it (and never on the recordings it is scored on)")
 
     for rec in recordings.values():
         if rec.role == "calibration" and not rec.has_truth:
@@ -612,6 +659,10 @@ def load_dataset(path) -> Dataset:
     truth_xy = np.concatenate([r.readings[["x_m", "y_m"]].to_numpy(float) for r in recordings.values()])
     with_xy = np.isfinite(truth_xy).all(axis=1)
     tag_height, height_source = None, ""
+    height_value = fl.per_floor(manifest, geometry, "tag_height_m", floors, floor)
+    if isinstance(height_value, list):      # the whole building, heights per floor: their median, for the check only
+        finite = [v for v in height_value if isinstance(v, (int, float)) and not isinstance(v, bool)]
+        height_value = float(np.median(finite)) if len(finite) == len(height_value) else height_value[0]
     if "z" not in anchors.columns:          # 2-D: one plane, no heights anywhere
         if "tag_height_m" in geometry:
             _fail(manifest, "[geometry] tag_height_m: anchors have no z: a 2-D data set has no tag height (give the "
@@ -622,8 +673,8 @@ def load_dataset(path) -> Dataset:
                             f"{', '.join(map(repr, with_z))} are ignored; distances are in the plane")
         for rec in recordings.values():
             rec.readings["z_m"] = np.nan
-    elif "tag_height_m" in geometry:
-        tag_height = _number(manifest, geometry, "tag_height_m", "[geometry] ")
+    elif height_value is not None:
+        tag_height = _number(manifest, {"tag_height_m": height_value}, "tag_height_m", "[geometry] ")
         notes["tag_height_m"] = f"{tag_height:g} m (manifest)"
         source, height_source = "[geometry] tag_height_m", "manifest"
     elif with_xy.any() and np.isfinite(truth_z[with_xy]).all():
@@ -643,9 +694,15 @@ def load_dataset(path) -> Dataset:
         for rec in recordings.values():     # a true position without a height is at the tag's known height
             r = rec.readings
             r.loc[r["x_m"].notna() & r["z_m"].isna(), "z_m"] = tag_height
-    if "outline" in geometry:
-        outline = read_outline(_file(manifest, root, _string(manifest, geometry, "outline", "[geometry] "),
-                                     "[geometry] outline: ")) * length_scale
+    outline_value = fl.per_floor(manifest, geometry, "outline", floors, floor)
+    if isinstance(outline_value, list):      # a whole building of outlines per floor: the box around them all
+        parts = [read_outline(_file(manifest, root, _string(manifest, {"outline": v}, "outline", "[geometry] "),
+                                    "[geometry] outline: ")) * length_scale for v in outline_value]
+        lo, hi = np.vstack(parts).min(axis=0), np.vstack(parts).max(axis=0)
+        outline = np.array([[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]]])
+    elif outline_value is not None:
+        outline = read_outline(_file(manifest, root, _string(manifest, {"outline": outline_value}, "outline",
+                                                             "[geometry] "), "[geometry] outline: ")) * length_scale
     else:
         paths = [r.reference_path_m.reshape(-1, 2) for r in recordings.values() if r.reference_path_m is not None]
         pts = np.vstack([anchors[["x", "y"]].to_numpy(float), truth_xy[with_xy], *paths])
@@ -654,8 +711,9 @@ def load_dataset(path) -> Dataset:
         notes["outline"] = (f"none given: the box around the anchors and the true positions with a "
                             f"{DEFAULT_OUTLINE_MARGIN_M:g} m margin")
     _check_outline(manifest, outline, anchors[["x", "y"]].to_numpy(float), truth_xy[with_xy])
-    if "outline" in geometry:
+    if outline_value is not None:
         _check_truth_in_outline(manifest, outline, recordings)
+    plan, extent = _floor_plan(manifest, root, geometry, floors, floor)
     for rec in recordings.values():
         if rec.sorted_rows:
             notes[f"sorted {rec.name}"] = (f"{rec.sorted_rows} row(s) of {rec.file.name} went back in time and were "
@@ -681,15 +739,24 @@ def load_dataset(path) -> Dataset:
                             "not scored (tracks with a reference path are scored by their distance to it)")
     methods = _methods(manifest, root, raw.get("method", []))
     files = [manifest, root / _string(manifest, geometry, "anchors", "[geometry] ")]
-    files += [root / geometry["outline"]] if "outline" in geometry else []
+    for key in ("outline", "floor_plan"):
+        value = geometry.get(key)
+        files += [root / v for v in (value.values() if isinstance(value, dict) else [value] if value else [])
+                  if isinstance(v, str)]
     files += [license_file] if license_file else []
     for rec in records:
-        files += [recordings[rec["name"]].file] + ([root / rec["reference_path"]] if "reference_path" in rec else [])
-        files += [recordings[rec["name"]].ranges_file] if "ranges" in rec else []
-        files += [recordings[rec["name"]].inertial.file] if recordings[rec["name"]].inertial is not None else []
+        files += [root / rec["file"]] + ([root / rec["reference_path"]] if "reference_path" in rec else [])
+        files += [root / rec["ranges"]] if "ranges" in rec else []
+        files += [root / rec["inertial"]] if "inertial" in rec else []
     files += [m.path for m in methods if m.path is not None]
-    data = Dataset(name, title, root, license_, attribution, anchors, outline, tag_height, recordings, changes,
-                   license_file, notes, tuple(files), height_source, methods=methods)
+    _floor_notes(notes, dropped, floor, left_out, recordings)
+    data = Dataset(name if floor is None else f"{name}-{fl.floor_slug(floor)}", title if floor is None else
+                   f"{title} (floor {floor})", root, license_, attribution, anchors, outline, tag_height, recordings,
+                   changes, license_file, notes, tuple(files), height_source, methods=methods, floors=floors,
+                   floor=floor, manifest_name=name, floor_plan=plan, floor_plan_extent_m=extent)
+    if floor is not None and name_problem(data.name):
+        _fail(manifest, f"floor {floor!r}: the floor's data set name {data.name!r} (the manifest's name and the "
+                        f"floor's slug) is not a data set name: {name_problem(data.name)}")
     for rname, rec in recordings.items():    # every recording's epochs now: a problem is named with its file
         try:
             data.epochs(rname)
@@ -704,7 +771,77 @@ def load_dataset(path) -> Dataset:
                     "the transmitter's first reading, in a window without RSS rows, or at a time no scan has): not "
                     "used")
     _device_notes(data)
+    if floors and floor is None:      # the whole building: every floor loads as a data set of its own
+        for f in floors:
+            try:
+                part = load_dataset(root, floor=f)
+            except DataFormatError as exc:
+                raise DataFormatError(f"floor {f!r}: {exc}") from None
+            notes[f"floor {f}"] = (f"data set {part.name!r}: {len(part.anchor_ids)} anchors, recordings "
+                                   + ", ".join(part.recordings) + "; " + "; ".join(
+                                       f"{k}: {v}" for k, v in part.notes.items() if k.startswith(("split", "cross",
+                                                                                                  "left out"))))
     return data
+
+
+def _floor_plan(manifest: Path, root: Path, geometry: dict, floors, floor):
+    """``(plan path, extent)`` of this data set (or floor): :func:`locbook.data.floors.read_floor_plan` and
+    :func:`~locbook.data.floors.floor_plan_extent`, both given or neither; a whole building with plans per floor
+    checks each and draws none."""
+    from . import floors as fl
+    plan = fl.per_floor(manifest, geometry, "floor_plan", floors, floor)
+    extent = fl.per_floor(manifest, geometry, "floor_plan_extent_m", floors, floor)
+    if "floor_plan" not in geometry and "floor_plan_extent_m" not in geometry:
+        return None, None
+    if ("floor_plan" in geometry) != ("floor_plan_extent_m" in geometry):
+        given, absent = ("floor_plan", "floor_plan_extent_m") if "floor_plan" in geometry else (
+            "floor_plan_extent_m", "floor_plan")
+        _fail(manifest, f"[geometry] {given} needs {absent} too: a plan is drawn at its georeference, "
+                        "floor_plan_extent_m = [x0, x1, y0, y1] (m)")
+    if floor is None and any(isinstance(geometry[k], dict) for k in ("floor_plan", "floor_plan_extent_m")):
+        # the whole building with plans per floor: check every floor's, draw none
+        for f in floors:
+            _one_plan(manifest, root, geometry, fl.per_floor(manifest, geometry, "floor_plan", floors, f),
+                      fl.per_floor(manifest, geometry, "floor_plan_extent_m", floors, f), f"[geometry] floor {f!r}: ")
+        return None, None
+    return _one_plan(manifest, root, geometry, plan, extent,
+                     "[geometry] " if floor is None else f"[geometry] floor {floor!r}: ")
+
+
+def _one_plan(manifest: Path, root: Path, geometry: dict, plan, extent, where: str):
+    """One floor's ``(plan, extent)``: none where a plan table leaves the floor out (an extent table naming it is
+    then refused), else both checked."""
+    from . import floors as fl
+    if plan is None:
+        if extent is not None and isinstance(geometry["floor_plan_extent_m"], dict):
+            _fail(manifest, f"{where}floor_plan_extent_m without a floor_plan for this floor")
+        return None, None
+    if extent is None:
+        _fail(manifest, f"{where}a floor_plan needs its floor_plan_extent_m (the table names none for this floor)")
+    return fl.read_floor_plan(manifest, root, plan, where), fl.floor_plan_extent(manifest, extent, where)
+
+
+def _floor_notes(notes: dict, dropped: dict, floor, left_out, recordings) -> None:
+    """Notes on the rows a floor's (or a data set's) battery ignores: placeholders' readings, the rows of a
+    recording on other floors (split), other floors' anchors hearing this floor's tag (cross-floor)."""
+    placeholder = {r: c["placeholder"] for r, c in dropped.items() if c["placeholder"]}
+    if placeholder:
+        notes["placeholder anchors"] = ("readings logged by placeholder anchors (used = false) are ignored: "
+                                        + ", ".join(f"{n:,} in {r}" for r, n in placeholder.items()))
+    if floor is None:
+        return
+    split = {r: c for r, c in dropped.items() if c["other floors"] and r in recordings}
+    if split:
+        notes["split recordings"] = (f"recordings spanning floors, split by floor: " + "; ".join(
+            f"{r}: {c['rows'] - c['other floors'] - c['placeholder']:,} of its {c['rows']:,} rows on floor {floor}"
+            for r, c in split.items()))
+    cross = {r: c["cross-floor"] for r, c in dropped.items() if c["cross-floor"]}
+    if cross:
+        notes["cross-floor readings"] = (f"readings of the tag on floor {floor} by other floors' anchors, ignored (a "
+                                         "floor's battery uses its own anchors; floor detection is out of scope): "
+                                         + ", ".join(f"{n:,} in {r}" for r, n in cross.items()))
+    if left_out:
+        notes["left out"] = f"recordings with no row on floor {floor}: {', '.join(left_out)}"
 
 
 def _methods(manifest: Path, root: Path, raw) -> tuple:

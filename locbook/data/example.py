@@ -27,6 +27,14 @@ constant speed, so the true acceleration is finite: zero on the straights, ``v^2
 readings, differ from the sharp-cornered default's (a variant of its own). The survey and the static points are
 stationary while the tag dwells at a point (true acceleration and rate 0); their files hold samples only during
 the dwells (the 2 s between points are gaps, which the loader counts).
+
+A building (``floors=2``): the same hall on each floor (``F1``, ``F2``, ...; :data:`FLOOR_HEIGHT_M` apart), 8
+anchors per floor at that floor's heights (``A1``-``A8`` on F1, ``B1``-``B8`` on F2), a ``floor`` column in the
+anchors and the readings (the tag's floor on every row, its true height in ``z_m``). Every anchor of every floor
+hears the tag, :data:`FLOOR_ATTENUATION_DB` weaker per floor between them (the cross-floor readings a floor's
+battery ignores). The survey and the static points visit every floor in turn (recordings spanning floors, split by
+the loader); ``walk_a`` walks F1 and ``walk_b`` the top floor. ``floor_plan=True`` adds ``plan.png``, a plan of the
+hall drawn by matplotlib (walls as lines over a floor tint), with its extent in the manifest.
 """
 from __future__ import annotations
 
@@ -35,7 +43,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-__all__ = ["write_example_dataset", "EXAMPLE_SITE", "EXAMPLE_ROLES"]
+__all__ = ["write_example_dataset", "EXAMPLE_SITE", "EXAMPLE_ROLES", "FLOOR_ATTENUATION_DB", "FLOOR_HEIGHT_M",
+           "MAX_EXAMPLE_FLOORS", "PLAN_MARGIN_M", "PLAN_FLOOR_RGB", "PLAN_WALL_RGB", "write_floor_plan"]
 
 #: the example site's constants (all SI): hall size, anchors, tag height, channel, packet rate and losses
 EXAMPLE_SITE = {
@@ -64,6 +73,20 @@ EXAMPLE_SITE = {
     "imu": {"rate_hz": 50.0, "acc_sigma_m_s2": 0.05, "gyro_sigma_rad_s": 0.005,
             "acc_bias_m_s2": (0.03, -0.02), "gyro_bias_rad_s": 0.002, "corner_radius_m": 2.0},
 }
+#: extra path loss (dB) per floor between the tag and an anchor: the floor penetration loss of ITU-R P.1238 (Table
+#: 3, offices at 1.8-2 GHz: L_f = 15 + 4 (n - 1) dB for n floors; its one-floor value, taken per floor crossed)
+FLOOR_ATTENUATION_DB = 15.0
+#: storey height (m): floor k's anchors and tag are k x this above floor 0's
+FLOOR_HEIGHT_M = 3.0
+#: the most floors the example writes (anchor ids A1..A8, B1..B8, ...)
+MAX_EXAMPLE_FLOORS = 4
+#: the plan image covers the hall and this margin (m) around it: its extent is [-m, w + m, -m, h + m]
+PLAN_MARGIN_M = 1.0
+#: the plan's colours (RGB in [0, 1]): the hall's floor tint and its walls (a pixel test looks for them)
+PLAN_FLOOR_RGB = (0.96, 0.90, 0.78)
+PLAN_WALL_RGB = (0.45, 0.30, 0.15)
+#: the plan's resolution (pixels per metre)
+PLAN_PX_PER_M = 20
 #: the recordings of the example by role (``roles`` of :func:`write_example_dataset` picks among them)
 EXAMPLE_ROLES = ("calibration", "static", "track")
 
@@ -270,10 +293,136 @@ def _dwell_imu(n_points: int, seconds: float, t0: float, rng, site) -> pd.DataFr
     return _imu_frame(t, np.zeros((len(t), 2)), np.zeros(len(t)), rng, site)
 
 
+def write_floor_plan(path, hall_m, *, margin_m: float = PLAN_MARGIN_M) -> tuple[float, float, float, float]:
+    """Draw a plan of the hall ``(w, h)`` with matplotlib and save it as a PNG at ``path``: the floor tinted
+    :data:`PLAN_FLOOR_RGB`, the outer walls and two inner walls with door gaps as lines of :data:`PLAN_WALL_RGB`,
+    white outside; the image covers ``[-margin, w + margin] x [-margin, h + margin]`` exactly (returned, the
+    manifest's ``floor_plan_extent_m``). Deterministic bytes (no metadata that changes)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    from matplotlib.patches import Rectangle
+    w, h = hall_m
+    extent = (-margin_m, w + margin_m, -margin_m, h + margin_m)
+    dpi = 100
+    fig = Figure(figsize=((w + 2 * margin_m) * PLAN_PX_PER_M / dpi, (h + 2 * margin_m) * PLAN_PX_PER_M / dpi),
+                 dpi=dpi)
+    FigureCanvasAgg(fig)
+    ax = fig.add_axes((0.0, 0.0, 1.0, 1.0))
+    ax.set_axis_off()
+    ax.add_patch(Rectangle((0.0, 0.0), w, h, facecolor=PLAN_FLOOR_RGB, edgecolor="none"))
+    wall = {"color": PLAN_WALL_RGB, "lw": 3, "solid_capstyle": "butt"}
+    ax.plot([0, w, w, 0, 0], [0, 0, h, h, 0], **wall)
+    ax.plot([0.4 * w, 0.4 * w], [0.0, 0.3 * h], **wall)          # inner walls, each with a door gap
+    ax.plot([0.4 * w, 0.4 * w], [0.6 * h, h], **wall)
+    ax.plot([0.4 * w, 0.55 * w], [0.5 * h, 0.5 * h], **wall)
+    ax.plot([0.7 * w, w], [0.5 * h, 0.5 * h], **wall)
+    ax.set_xlim(extent[0], extent[1])
+    ax.set_ylim(extent[2], extent[3])
+    fig.savefig(path, dpi=dpi, metadata={"Software": None})
+    return extent
+
+
+def _floor_site(site, k: int, n_floors: int) -> dict:
+    """The site as heard by a tag on floor ``k`` of ``n_floors``: every floor's anchors (floor j's at j storeys
+    up), each reading :data:`FLOOR_ATTENUATION_DB` weaker per floor between, the tag's height on floor k."""
+    anchors = np.vstack([site["anchors_m"] + [0.0, 0.0, j * FLOOR_HEIGHT_M] for j in range(n_floors)])
+    between = np.repeat(np.abs(np.arange(n_floors) - k), len(site["anchors_m"]))
+    return {**site, "anchors_m": anchors, "path_loss_exp": np.tile(site["path_loss_exp"], n_floors),
+            "ref_power_dbm": np.tile(site["ref_power_dbm"], n_floors) - FLOOR_ATTENUATION_DB * between,
+            "tag_height_m": site["tag_height_m"] + k * FLOOR_HEIGHT_M}
+
+
+def _on_floor(frame: pd.DataFrame, k: int, n_anchors: int) -> pd.DataFrame:
+    """Packets of a tag on floor ``k`` (from a :func:`_floor_site`): anchors renamed by floor (A1..A8, B1..B8),
+    the tag's true height and floor on every row."""
+    index = frame["receiver"].str[1:].astype(int) - 1
+    frame["receiver"] = [f"{chr(ord('A') + i // n_anchors)}{i % n_anchors + 1}" for i in index]
+    at = list(frame.columns).index("y_m") + 1
+    frame.insert(at, "z_m", round(EXAMPLE_SITE["tag_height_m"] + k * FLOOR_HEIGHT_M, 3))
+    frame.insert(at + 1, "floor", f"F{k + 1}")
+    return frame
+
+
+def _write_floors(folder: Path, rng, site, n_floors: int, walk_s: float, roles) -> None:
+    """The building's files (module docstring): anchors with floors, recordings spanning floors and walks."""
+    m = len(site["anchors_m"])
+    anchors = pd.DataFrame({
+        "id": [f"{chr(ord('A') + j)}{i + 1}" for j in range(n_floors) for i in range(m)],
+        "x": np.tile(site["anchors_m"][:, 0], n_floors), "y": np.tile(site["anchors_m"][:, 1], n_floors),
+        "z": np.concatenate([site["anchors_m"][:, 2] + j * FLOOR_HEIGHT_M for j in range(n_floors)]),
+        "floor": [f"F{j + 1}" for j in range(n_floors) for _ in range(m)]})
+    anchors.to_csv(folder / "anchors.csv", index=False)
+    w, h = site["hall_m"]
+    gx, gy = np.meshgrid(np.arange(1.0, w, 2.0), np.arange(1.0, h, 2.0))
+    grid = np.column_stack([gx.ravel(), gy.ravel()])
+
+    def visits(points, prefix, seconds):
+        """The tag standing at ``points`` on every floor in turn (one file spanning the floors)."""
+        parts, t0 = [], 0.0
+        for k in range(n_floors):
+            ids = [f"F{k + 1}-{prefix}{i + 1:03d}" for i in range(len(points))]
+            parts.append(_on_floor(_dwell(points, ids, seconds, t0, rng, _floor_site(site, k, n_floors)), k, m))
+            t0 += len(points) * (seconds + 2.0) + 10.0
+        return pd.concat(parts, ignore_index=True)
+
+    visits(grid, "C", 5.0).to_csv(folder / "survey.csv", index=False)
+    if "static" in roles:
+        tests = np.column_stack([rng.uniform(2.0, w - 2.0, 12), rng.uniform(2.0, h - 2.0, 12)]).round(2)
+        visits(tests, "T", 10.0).to_csv(folder / "points.csv", index=False)
+    if "track" in roles:
+        _on_floor(_loop(walk_s, 2.0, rng, _floor_site(site, 0, n_floors)), 0, m).to_csv(folder / "walk_a.csv",
+                                                                                        index=False)
+        top = n_floors - 1
+        walk_b = _on_floor(_loop(walk_s, 3.0, rng, _floor_site(site, top, n_floors)), top, m)
+        swap = rng.choice(np.arange(1, len(walk_b) - 1, 2), size=max(1, len(walk_b) // 500), replace=False)
+        order = np.arange(len(walk_b))
+        order[swap], order[swap + 1] = swap + 1, swap
+        walk_b.iloc[order].to_csv(folder / "walk_b.csv", index=False)
+
+
+def _check_floor_options(floors, floor_plan, two_d: bool, native_scans: bool) -> None:
+    from ..errors import ParameterError
+    if isinstance(floors, bool) or not isinstance(floors, int) or not 1 <= floors <= MAX_EXAMPLE_FLOORS:
+        raise ParameterError(f"floors must be an integer from 1 to {MAX_EXAMPLE_FLOORS} (MAX_EXAMPLE_FLOORS), got "
+                             f"{floors!r}")
+    if not isinstance(floor_plan, bool):
+        raise ParameterError(f"floor_plan must be True or False, got {floor_plan!r}")
+    if floors > 1 and (two_d or native_scans):
+        raise ParameterError("floors: a building of several floors is written in 3-D with raw packets (not with "
+                             "two_d or native_scans)")
+
+
+def _with_floor_plan(folder: Path, site, text: str) -> str:
+    """The manifest ``text`` with the plan (written to ``plan.png``, :func:`write_floor_plan`) and its extent."""
+    extent = write_floor_plan(folder / "plan.png", site["hall_m"])
+    return text.replace('outline = "outline.csv"\n', 'outline = "outline.csv"\nfloor_plan = "plan.png"\n'
+                        f"floor_plan_extent_m = [{', '.join(f'{v:g}' for v in extent)}]\n")
+
+
+def _write_building(folder: Path, rng, site, n_floors: int, walk_s: float, roles, name: str, seed_note,
+                    floor_plan: bool) -> Path:
+    """The example building (module docstring): its files (:func:`_write_floors`) and manifest, the one-floor
+    example's with each floor's tag height from its rows' z_m."""
+    w, h = site["hall_m"]
+    pd.DataFrame({"x": [0.0, w, w, 0.0], "y": [0.0, 0.0, h, h]}).to_csv(folder / "outline.csv", index=False)
+    _write_floors(folder, rng, site, n_floors, walk_s, roles)
+    attribution = f"Synthetic data generated by locbook (locbook.data.example.write_example_dataset, seed {seed_note})"
+    text = _MANIFEST.format(name=_toml_string(name), attribution=_toml_string(attribution))
+    text = text.replace("tag_height_m = 1.2\n", "")       # each floor's: the median of its rows' z_m
+    text = text.replace("Synthetic example: 20 m x 12 m hall, 8 anchors,",
+                        f"Synthetic example: {n_floors} floors of a 20 m x 12 m hall, 8 anchors each,")
+    if floor_plan:
+        text = _with_floor_plan(folder, site, text)
+    text += "".join(block for role in EXAMPLE_ROLES if role in roles for block in _RECORDINGS[role])
+    (folder / "dataset.toml").write_text(text, encoding="utf-8")
+    return folder
+
+
 def write_example_dataset(folder, rng: np.random.Generator, *, name: str = "example", walk_s: float = 120.0,
                           seed_note: int | str = "given", force: bool = False, speed_m_s: float | None = None,
                           roles=EXAMPLE_ROLES, two_d: bool = False, native_scans: bool = False,
-                          ranges: bool = False, inertial: bool = False) -> Path:
+                          ranges: bool = False, inertial: bool = False, floors: int = 1,
+                          floor_plan: bool = False) -> Path:
     """Write the example data set (module docstring) to ``folder`` (created; a folder that holds files is refused
     unless ``force``, so a typo never overwrites a data set) and return it. ``walk_s``: length of each walk (s): 120 s
     gives about 30,000 readings in all; the loader benchmark scales it up. ``name``: the manifest's name (it names
@@ -290,7 +439,10 @@ def write_example_dataset(folder, rng: np.random.Generator, *, name: str = "exam
     ``N(0, range_sigma_m^2)`` (0.3 m) with that std reported, ``range_missing_fraction`` (5 %) empty, drawn from a
     generator seeded by one draw of ``rng`` after every other draw, so the other files are those written without
     it, byte for byte; ``inertial``, an inertial file per recording and walks with rounded corners (module
-    docstring), from a generator of its own drawn after the ranges' (the same rule)."""
+    docstring), from a generator of its own drawn after the ranges' (the same rule); ``floors``, the floors of a
+    building (1 to :data:`MAX_EXAMPLE_FLOORS`; 2 or more: module docstring; not with ``two_d``, ``native_scans``,
+    ``ranges`` or ``inertial``);
+    ``floor_plan``, a plan image (:func:`write_floor_plan`) and its extent in the manifest."""
     from ..errors import ParameterError
     from .dataset import name_problem
     if not isinstance(rng, np.random.Generator):
@@ -311,11 +463,17 @@ def write_example_dataset(folder, rng: np.random.Generator, *, name: str = "exam
     for key, value in (("two_d", two_d), ("native_scans", native_scans), ("ranges", ranges), ("inertial", inertial)):
         if not isinstance(value, bool):
             raise ParameterError(f"{key} must be True or False, got {value!r}")
+    _check_floor_options(floors, floor_plan, two_d, native_scans)
+    if floors != 1 and (ranges or inertial):
+        raise ParameterError("floors: a building's example writes RSS readings only (a data set with floors takes no "
+                             "ranges or inertial streams yet); leave out ranges / inertial, or floors")
     folder = Path(folder)
     if folder.exists() and (not folder.is_dir() or (any(folder.iterdir()) and not force)):
         raise ParameterError(f"{folder} exists and is not an empty folder; the example is written to a new or empty "
                              "folder (force=True, `--force`, to overwrite its files)")
     folder.mkdir(parents=True, exist_ok=True)
+    if floors > 1:                  # a building: its own files and draws (the one-floor example below is untouched)
+        return _write_building(folder, rng, site, floors, walk_s, roles, name, seed_note, floor_plan)
     w, h = site["hall_m"]
     columns = {"id": [f"A{j + 1}" for j in range(len(site["anchors_m"]))], "x": site["anchors_m"][:, 0],
                "y": site["anchors_m"][:, 1]}
@@ -388,5 +546,7 @@ def write_example_dataset(folder, rng: np.random.Generator, *, name: str = "exam
                             + (f'ranges = "{block.split(chr(34))[1]}_ranges.csv"\n' if ranges else "")
                             + (f'inertial = "{block.split(chr(34))[1]}_imu.csv"\n' if inertial else "")
                             for block in _RECORDINGS[role])
+    if floor_plan:
+        text = _with_floor_plan(folder, site, text)
     (folder / "dataset.toml").write_text(text, encoding="utf-8")
     return folder

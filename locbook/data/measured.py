@@ -52,7 +52,9 @@ naming the line that needs it. Messages quote at most :data:`MAX_QUOTED_CHARS` c
 its known height), or ``id, x, y`` with no ``z`` column for a 2-D problem (anchors and tag in one plane, ranges in
 the plane). A ``z`` column gives every anchor's height: one left empty is refused naming its line. Ids are unique;
 coordinates finite and less than :data:`MAX_COORDINATE_M` in magnitude; no two anchors within
-:data:`ANCHOR_MIN_SEPARATION_M` (1 mm) of each other.
+:data:`ANCHOR_MIN_SEPARATION_M` (1 mm) of each other. Optional columns ``floor`` (each anchor's floor) and ``used``
+(false: a placeholder, which may share a point; the separation rule holds among used anchors of one floor):
+:mod:`locbook.data.floors`.
 
 **Floor outline** (CSV, optional): ``x, y`` vertices of a closed polygon in metres (at least 3 vertices, the
 closing vertex may repeat the first).
@@ -763,8 +765,10 @@ def read_anchors(path, *, min_separation_m: float = ANCHOR_MIN_SEPARATION_M) -> 
     for a 2-D one (anchors and tag in one plane). Ids are unique (text: ``NA`` is an id), coordinates finite, no
     two anchors closer than ``min_separation_m`` (default 1 mm: two ids at one point are a copy-paste error, and
     would make the geometry degenerate). A ``z`` column holds a height on every line: one left empty while others
-    are given is refused naming its line (a 2-D file has no ``z`` column at all). Returns columns ``id, x, y`` and,
-    for 3-D, ``z``."""
+    are given is refused naming its line (a 2-D file has no ``z`` column at all). Optional columns
+    (:mod:`locbook.data.floors`): ``floor`` (every anchor's floor) and ``used`` (false: a placeholder, which may share
+    a point; the separation rule applies to used anchors of one floor). Returns columns ``id, x, y`` and, for 3-D,
+    ``z``, then ``floor`` and ``used`` where the file has them."""
     if not (isinstance(min_separation_m, (int, float)) and math.isfinite(min_separation_m) and min_separation_m >= 0):
         raise ParameterError(f"min_separation_m must be a finite number of metres >= 0, got {min_separation_m!r}")
     table, lines = _read_text_table(path, ("id", "x", "y"), "anchors")
@@ -792,8 +796,22 @@ def read_anchors(path, *, min_separation_m: float = ANCHOR_MIN_SEPARATION_M) -> 
                 f"anchors have none): a 3-D data set gives every anchor's z; a 2-D one (anchors and tag in one "
                 "plane) has no z column at all")
         out["z"] = z
+    from .floors import FLOOR_COLUMN, USED_COLUMN, anchor_columns, check_floor_labels
+    floors, used = anchor_columns(table, lines, source)       # optional floor and used (placeholder) columns
+    if floors is not None:
+        out[FLOOR_COLUMN] = floors
+        check_floor_labels(floors[used], source)
+    if USED_COLUMN in table.columns:
+        out[USED_COLUMN] = used
     pos = out[list(axes)].to_numpy(float)
-    pairs = cKDTree(pos).query_pairs(min_separation_m, output_type="ndarray") if len(pos) > 1 else np.zeros((0, 2))
+    # the separation rule among used anchors of one floor: placeholders may share a point, floors a plan position
+    group = np.where(used, 0 if floors is None else pd.factorize(floors)[0], -1)
+    pairs = np.zeros((0, 2), dtype=int)
+    for g in np.unique(group[group >= 0]):
+        members = np.flatnonzero(group == g)
+        if len(members) > 1:
+            found = cKDTree(pos[members]).query_pairs(min_separation_m, output_type="ndarray")
+            pairs = np.concatenate([pairs, members[found].reshape(-1, 2)])
     if len(pairs):
         pairs = np.sort(pairs, axis=1)
         i, j = (int(v) for v in pairs[np.lexsort((pairs[:, 0], pairs[:, 1]))[0]])   # the first in file order

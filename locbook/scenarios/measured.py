@@ -151,7 +151,9 @@ def calibration_set(data: Dataset):
     """``(positions (L, 2), distances (L, m), RSSI (L, m) with NaN = not heard)`` of the calibration epochs (every
     calibration recording, in manifest order); epochs without a true position are left out. Distances are 3-D from
     each epoch's true position (its true height where recorded, else the tag's known height), in the plane for a
-    2-D data set."""
+    2-D data set. A whole building with floors is refused (one floor at a time: :mod:`locbook.data.floors`)."""
+    from ..data.floors import require_one_floor
+    require_one_floor(data)
     ep = data.epochs_of("calibration")
     known = np.isfinite(ep.position_m[:, :2]).all(axis=1)
     if not known.any():

@@ -155,7 +155,8 @@ def main(argv: list[str] | None = None) -> int:
                      help="run on this data set (a folder with dataset.toml, or a shipped name such as "
                           "kolakowski2021): every experiment that takes one and that the data set can run (default: "
                           "all of them; one it cannot run is left out, in one line, and asking for it by id is an "
-                          "error); the reports go to <reports>/<profile>/data-<name>/")
+                          "error); the reports go to <reports>/<profile>/data-<name>/; a data set with floors runs "
+                          "each floor as its own data run (data-<name>-<floor>/), DIR@FLOOR one of them")
     _method_options(run)
     run.add_argument("--reports", type=Path, help="reports folder (default: <repository>/reports)")
     run.add_argument("--out", type=Path, help="write this run's reports to this folder (a path; its last part "
@@ -210,6 +211,11 @@ def main(argv: list[str] | None = None) -> int:
     data.add_argument("--inertial", action="store_true",
                       help="example: a 50 Hz accelerometer and gyroscope file per recording (walks with rounded "
                            "corners); the tracking battery adds its fusion trackers")
+    data.add_argument("--floors", type=lambda t: _positive(int, t), default=1, metavar="N",
+                      help="example: a building of N floors (F1, F2, ...; the same hall on each, 8 anchors per floor, "
+                           "readings across floors 15 dB weaker per floor; default 1)")
+    data.add_argument("--floor-plan", action="store_true",
+                      help="example: also write plan.png, a floor plan drawn under the maps, with its extent")
     data.add_argument("--method", dest="methods", action="append", default=[], metavar="NAME=SPEC",
                       help="check: also import this static method of your own (as for run)")
     data.add_argument("--tracker", dest="trackers", action="append", default=[], metavar="NAME=SPEC",
@@ -236,7 +242,8 @@ def main(argv: list[str] | None = None) -> int:
                                                name=args.name, force=args.force, speed_m_s=args.speed,
                                                roles=args.roles or EXAMPLE_ROLES, two_d=args.two_d,
                                                native_scans=args.native_scans, ranges=args.ranges,
-                                               inertial=args.inertial)
+                                               inertial=args.inertial, floors=args.floors,
+                                               floor_plan=args.floor_plan)
                 print(f"wrote the example data set to {folder}; check it with `locbook data check {folder}` and run "
                       f"the battery with `locbook run --data {folder}`")
                 return 0
@@ -284,11 +291,18 @@ def main(argv: list[str] | None = None) -> int:
                 taken = sorted({k for e in kept for k in own[e.id] if k != "data"})
                 print(f"-p {', '.join(taken)}: {len(kept)} of {len(experiments)} selected experiments declare it and "
                       f"run ({', '.join(e.id for e in kept)}); left out: {', '.join(left_out)}")
-            result = run_suite(suite, experiments, args.profile, jobs=args.jobs, force=args.force,
-                               overrides=overrides, report_root=args.reports,
-                               out_dir=args.out, timeout_s=args.timeout, progress=args.progress,
-                               executor=args.executor, scheduler=args.scheduler, data=args.data,
-                               requested=requested, methods=methods, trackers=trackers)
+            # a data set with floors runs floor by floor, each its own data run (locbook.data.floors.floor_runs)
+            from ..data.floors import floor_runs
+            given = args.data if args.data is not None else overrides.get("data")
+            floor_results = []
+            for one in floor_runs(given) if given is not None else [None]:
+                result = run_suite(suite, experiments, args.profile, jobs=args.jobs, force=args.force,
+                                   overrides={**overrides, **({"data": one} if "data" in overrides else {})},
+                                   report_root=args.reports, out_dir=args.out, timeout_s=args.timeout,
+                                   progress=args.progress, executor=args.executor, scheduler=args.scheduler,
+                                   data=one if args.data is not None else None, requested=requested,
+                                   methods=methods, trackers=trackers)
+                floor_results.append((one, result))
     except (ParameterError, ReadingsError, LocbookError) as exc:   # LocbookError: a malformed data set too
         print("locbook: error: " + " ".join(str(exc).split("\n")), file=sys.stderr)   # one line, whatever raised it
         return EXIT_BAD_INPUT
@@ -322,16 +336,19 @@ def main(argv: list[str] | None = None) -> int:
             print(f"bracket of {args.experiment} incomplete: its default point has no up-to-date report, so no "
                   "verdict was written (an earlier bracket.csv is kept as it was)", file=sys.stderr)
         return _exit_status(result)
-    if result.report_dir.name != args.profile and args.data is not None:
-        print(f"reports of this run: {result.report_dir.resolve()} (data set {args.data})")
-    elif result.report_dir.name != args.profile:
-        print(f"reports of this run: {result.report_dir.resolve()} (reports/{args.profile}/ is unchanged)")
-    _print_summary(result, args.progress)
     from .runner import user_method_failures
-    failures = user_method_failures(result)
-    _print_method_failures(failures)
-    status = _exit_status(result)
-    return EXIT_FAILED if failures and status == EXIT_OK else status
+    worst = EXIT_OK
+    for data, result in floor_results:        # one run, or one per floor of a data set with floors
+        if result.report_dir.name != args.profile and data is not None:
+            print(f"reports of this run: {result.report_dir.resolve()} (data set {data})")
+        elif result.report_dir.name != args.profile:
+            print(f"reports of this run: {result.report_dir.resolve()} (reports/{args.profile}/ is unchanged)")
+        _print_summary(result, args.progress)
+        failures = user_method_failures(result)
+        _print_method_failures(failures)
+        status = _exit_status(result)
+        worst = max(worst, EXIT_FAILED if failures and status == EXIT_OK else status)
+    return worst
 
 
 def _roles(text: str) -> tuple[str, ...]:
@@ -367,6 +384,7 @@ def _dataset_text(path: str, suite=None) -> str:
     """What ``locbook data`` prints: the data set's provenance, geometry, notes and one line per recording; with the
     experiment list ``suite``, which experiments ``locbook run --data`` runs on it and which it leaves out."""
     from ..data.dataset import dataset_summary, load_dataset
+    from ..data.floors import floor_slug
     from ..reproduce.report import Table
     ds = load_dataset(path)
     lo, hi = ds.outline_m.min(axis=0), ds.outline_m.max(axis=0)
@@ -384,6 +402,11 @@ def _dataset_text(path: str, suite=None) -> str:
     kinds = data_kinds(ds)
     why = {e.id: e.data_run.missing(kinds) for e in suite.experiments if e.data_run is not None}
     runs = [eid for eid, reason in why.items() if not reason]
+    if ds.floors and ds.floor is None:      # a building: each floor is a data run of its own (locbook.data.floors)
+        lines.append(f"ok: `locbook run --data {path}` runs each floor as a data set of its own: "
+                     + ", ".join(f"{f} (--data {path}@{f}, reports data-{ds.name}-{floor_slug(f)}/)"
+                                 for f in ds.floors))
+        return "\n".join(lines)
     lines.append(f"ok: `locbook run --data {path}` runs {', '.join(runs) or 'no experiment'}"
                  + "".join(f"; {eid}: left out: {reason}" for eid, reason in why.items() if reason))
     return "\n".join(lines)

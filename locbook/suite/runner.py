@@ -779,11 +779,14 @@ def _load_data_argument(data: str):
     that each file a report read joins its cache record; the identity ("shipped:<name>" or the folder) tells two
     data sets of one name apart."""
     from ..data.dataset import datasets_dir, load_dataset
+    from ..data.floors import require_one_floor
     ds = load_dataset(data)
-    shipped = ds.root.resolve() == (datasets_dir() / ds.name).resolve()
+    require_one_floor(ds)                 # a building runs floor by floor (floors.floor_runs: the CLI's loop)
+    base = ds.manifest_name or ds.name    # one floor of a data set: DIR@F1, its name the manifest's and the floor's
+    shipped = ds.root.resolve() == (datasets_dir() / base).resolve()
     roots = sorted({str(ds.root), *(str(Path(f).resolve().parent) for f in ds.files)})
-    return (ds, ds.name, (ds.name if shipped else str(ds.root)), roots,
-            (f"shipped:{ds.name}" if shipped else str(ds.root)))
+    return (ds, ds.name, (base if shipped else str(ds.root)) + ds.selector, roots,
+            (f"shipped:{base}" if shipped else str(ds.root)) + ds.selector)
 
 
 def _dataset_argument(data: str) -> tuple[str, str, list[str], str]:

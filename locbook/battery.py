@@ -465,10 +465,13 @@ def run_trackers(sc: TrackingScenario, rss_dbm, x0, ts: TrackerSettings, rng: np
     return (out, flags) if with_divergence else out
 
 
-def tracking_bound_m(sc: TrackingScenario, ts: TrackerSettings) -> np.ndarray:
+def tracking_bound_m(sc: TrackingScenario, ts: TrackerSettings, *, extra_position_information=None) -> np.ndarray:
     """Position PCRLB ``(T,)`` at every tick: the Tichavsky recursion of the constant-velocity model (``ts.q``) from
     ``J_0 = P_0^-1``, with the RSS information at the true positions (only the anchors heard, for measured data; a
-    tick with no truth or no reading adds none). Tick ``k`` is ``J_{k+1}`` (the filters predict before each step)."""
+    tick with no truth or no reading adds none). Tick ``k`` is ``J_{k+1}`` (the filters predict before each step).
+    ``extra_position_information`` ``(T, 2, 2)``: the information of another stream about the position at each
+    tick (independent of the RSS: the information matrices add), e.g. the ranges'
+    (:func:`locbook.bounds.crlb.range_position_information`)."""
     motion = constant_velocity(sc.dt_s, ts.q, dim=2)
     truth = np.where(np.isfinite(sc.truth_m), sc.truth_m, 0.0)
     states = np.concatenate([truth, np.zeros_like(truth)], axis=-1)
@@ -479,5 +482,8 @@ def tracking_bound_m(sc: TrackingScenario, ts: TrackerSettings) -> np.ndarray:
     model = RssModel(sc.anchors_m, PathLossModel(0.0, ch.path_loss_exp, ch.sigma_db, min_distance_m=ch.min_distance_m),
                      tag_height_m=sc.tag_height_m)
     jz = rss_state_information(states, model, [0, 1], heard=heard)
+    if extra_position_information is not None:
+        jz = jz.copy()
+        jz[..., :2, :2] += np.asarray(extra_position_information, float)
     info = posterior_crlb(np.linalg.inv(ts.P0), motion.F, motion.Q, jz, form="riccati")
     return position_bound_m(info[1:], [0, 1])

@@ -301,12 +301,6 @@ def fit_fusion(sc, grid: InertialGrid, noise: ImuNoise, P0) -> FusionInputs:
     fits = {}
     heading = None
 
-    if grid.gyro_rad_s is not None:
-        def best(candidates_rad):
-            model, x, P, streams = _acc_setup(sc, fus, rss, x0, P0, Q_ACC_START, candidates_rad)
-            ll = extended_kalman_filter(model.F, model.Q, x, P, streams, record=[0],
-                                        divergence_window=0).total_log_likelihood
-            return float(candidates_rad[int(np.nanargmax(ll))]), ll
     def fit_q(heading):
         model, x, P, streams = _acc_setup(sc, fus, rss, x0, P0, Q_ACC_START, heading if heading is not None else 0.0)
         return fit_noise_ml(model.F, model.Q, x, P, streams, kind="ekf", fit_Q="scale", fit_R=None, per_run=False)
@@ -327,7 +321,6 @@ def fit_fusion(sc, grid: InertialGrid, noise: ImuNoise, P0) -> FusionInputs:
             fit = fit_q(heading)
             q_acc = float(Q_ACC_START * fit.q_scale[0])
         fits["heading_log_likelihood_spread"] = float(np.nanmax(ll) - np.nanmin(ll))
-        fus = FusionInputs(grid, noise, heading, Q_ACC_START, None)
     else:
         fit = fit_q(None)
     q_acc = float(Q_ACC_START * fit.q_scale[0])

@@ -440,8 +440,12 @@ def test_the_fusion_trackers_beat_the_rss_only_ones_on_every_track(ranged):
     for track in ("walk_a", "walk_b", "pooled"):
         for fused, alone in (("ekf_rss_range", "ekf"), ("ukf_rss_range", "ukf")):
             f, a = _row(tr, fused, track), _row(tr, alone, track)
-            assert f["mean_m"] < 0.5 * a["mean_m"] and f["bound"] == a["bound"]
-            assert f["bound_rms_m"] == a["bound_rms_m"] and f["ratio_note"].startswith("below 1")
+            assert f["mean_m"] < 0.5 * a["mean_m"]
+            # beside the bound of the readings they see: the ranges' information adds to the RSS', so the bound
+            # is lower on every track, and a near-efficient filter's ratio is near 1 against it (RSS alone: ~0.2)
+            assert f["bound"] == me.ranging.RANGE_TRACKING_BOUND_NAME != a["bound"]
+            assert f["bound_rms_m"] < 0.5 * a["bound_rms_m"]
+            assert 0.7 < f["ratio"] < 2.0
     assert {"ekf_rss_range", "ukf_rss_range"} <= set(tr["tracks"]["walk_a"][2])           # the NIS guard's table
     sigma = [c for c in proto.rows() if c["setting"].startswith("range sigma")]
     assert [c["setting"] for c in sigma] == ["range sigma (m), points", "range sigma (m), walk_a",

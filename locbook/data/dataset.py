@@ -764,12 +764,17 @@ def load_dataset(path, *, floor: str | None = None) -> Dataset:
             raise DataFormatError(f"readings file {rec.file} (recording {rname!r}): {exc}") from None
         _check_epochs_kept(manifest, data, rname)
         if rec.ranges is not None:
-            unaligned = data.ranges(rname).unaligned
-            if unaligned:
-                data.notes[f"ranges {rname}"] = (
-                    f"{unaligned:,} range(s) of {rec.ranges_file.name} fall on no epoch of recording {rname!r} (before "
-                    "the transmitter's first reading, in a window without RSS rows, or at a time no scan has): not "
-                    "used")
+            aligned = data.ranges(rname)
+            said = []
+            if aligned.unaligned:
+                said.append(f"{aligned.unaligned:,} range(s) of {rec.ranges_file.name} fall on no epoch of recording "
+                            f"{rname!r} (before the transmitter's first reading, in a window without RSS rows, or at a "
+                            "time no scan has): not used")
+            if aligned.ignored:
+                said.append(f"{aligned.ignored:,} range(s) of {rec.ranges_file.name} are of anchors that are not "
+                            "anchors of this data set (placeholders, used = false): ignored")
+            if said:
+                data.notes[f"ranges {rname}"] = "; ".join(said)
     _device_notes(data)
     if floors and floor is None:      # the whole building: every floor loads as a data set of its own
         for f in floors:

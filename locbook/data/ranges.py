@@ -139,11 +139,12 @@ def read_ranges(path, *, anchor_ids, transmitters=None, time_scale: float = 1.0,
 
 class RangeAlignment(tuple):
     """``(range_m (E, m), range_std_m (E, m) or None)`` on a recording's epochs (:func:`align_ranges`), with
-    ``unaligned``: how many ranges fell on no epoch, and ``n_ranges (E, m)``: how many ranges made each entry."""
+    ``unaligned``: how many ranges fell on no epoch, ``n_ranges (E, m)``: how many ranges made each entry, and
+    ``ignored``: how many were of an anchor the epochs do not hold (a placeholder, an anchor outside a subset)."""
 
-    def __new__(cls, range_m, range_std_m, unaligned: int, n_ranges):
+    def __new__(cls, range_m, range_std_m, unaligned: int, n_ranges, ignored: int = 0):
         out = super().__new__(cls, (range_m, range_std_m))
-        out.unaligned, out.n_ranges = int(unaligned), n_ranges
+        out.unaligned, out.n_ranges, out.ignored = int(unaligned), n_ranges, int(ignored)
         return out
 
 
@@ -198,8 +199,12 @@ def align_ranges(ep: Epochs, readings: pd.DataFrame, ranges: pd.DataFrame, *, wi
                                   f"devices); give the ranges file the column(s) {_shown_names(missing)} to say which")
     receivers = ranges["receiver"].map(col).to_numpy(float)
     value = ranges["range_m"].to_numpy(float)
-    ok = np.isfinite(row) & on_clock & np.isfinite(value)
-    unaligned = int((~(np.isfinite(row) & on_clock) & np.isfinite(value)).sum())
+    # a range of an anchor the epochs do not hold (a placeholder, used = false; an anchor left out of a subset) is
+    # ignored and counted, as that anchor's RSS readings are
+    anchored = np.isfinite(receivers)
+    ignored = int((~anchored & np.isfinite(value)).sum())
+    ok = np.isfinite(row) & on_clock & np.isfinite(value) & anchored
+    unaligned = int((~(np.isfinite(row) & on_clock) & np.isfinite(value) & anchored).sum())
     flat = row[ok].astype(np.int64) * m + receivers[ok].astype(np.int64)
     counts = np.bincount(flat, minlength=n * m).astype(float)
     total = np.bincount(flat, weights=value[ok], minlength=n * m)
@@ -210,4 +215,4 @@ def align_ranges(ep: Epochs, readings: pd.DataFrame, ranges: pd.DataFrame, *, wi
             var = np.bincount(flat, weights=np.square(ranges[RANGE_STD_COLUMN].to_numpy(float)[ok]), minlength=n * m)
             # the std of the mean of n independent ranges: sqrt(mean(std_i^2) / n) = sqrt(sum std_i^2) / n
             std = np.where(counts > 0, np.sqrt(var) / np.where(counts > 0, counts, 1.0), np.nan).reshape(n, m)
-    return RangeAlignment(mean, std, unaligned, counts.reshape(n, m).astype(int))
+    return RangeAlignment(mean, std, unaligned, counts.reshape(n, m).astype(int), ignored)

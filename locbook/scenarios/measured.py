@@ -876,7 +876,8 @@ def tracking_results(data: Dataset, model: PathLossModel, proto: Protocol, *, se
     from .measured_inertial import fusion_knobs
     from ..inertial_trackers import FUSION_PRIORS, FUSION_TRACKERS
     fix_cov = fix_covariance_from_calibration(data, model, grid_spacing_m=proto.grid_spacing_m)
-    stream = list(ranging.RANGE_TRACKERS) if ranging.ranged_tracks(data, names) else []
+    ranged = ranging.ranged(data, names)
+    stream = list(ranging.RANGE_TRACKERS) if ranged else []
     out, per = {}, {}
     for name in names:
         motion = proto.motion[name]
@@ -900,22 +901,25 @@ def tracking_results(data: Dataset, model: PathLossModel, proto: Protocol, *, se
                                        keyed_stream(seed, data.name, "tracking", name, "particle"),
                                        trackers=["particle"])["particle"]
         est = {**{t: est[t] for t in TRACKERS}, **fused}
-        if stream:              # the fusion trackers: the RSS stream and the track's ranges
+        range_bound = None
+        if name in ranged:      # the range trackers: the RSS stream and the track's ranges
             ep, _, ticks = track_epochs(data, name)
             more, more_flags = ranging.run_range_trackers(data, name, sc, ep, ticks, x0, ts)
             est.update(more)
             flags.update(more_flags)
+            range_bound = ranging.range_tracking_bound_m(data, name, sc, ep, ticks, ts)
         bound = tracking_bound_m(sc, ts)
         out[name] = (sc, est, flags, bound)
         if sc.scored is not None and sc.scored.any():
             steps = sc.scored_steps
             per[name] = {"steps": steps, "block": _block(steps * sc.dt_s, block_s), "bound": bound[steps],
+                         "range_bound": None if range_bound is None else range_bound[steps],
                          "errors": {t: np.linalg.norm(v[:, steps] - sc.truth_m[steps], axis=-1).T
                                     for t, v in est.items()},
                          "est": {t: v[:, steps] for t, v in est.items()},
                          "knobs": {**_tracker_knobs(proto, name, ts, sc),
                                    **(fusion_knobs(fus, ukf_alpha) if fus is not None else {})}}
-            if stream:
+            if name in ranged:
                 per[name]["knobs"].update(ranging.range_tracker_knobs(data, name, per[name]["knobs"]["ekf"], ts))
     user = tuple(m for m in user_methods if m.kind == "tracker")
     described = {m.name: m.described for m in user}
@@ -941,7 +945,8 @@ def tracking_results(data: Dataset, model: PathLossModel, proto: Protocol, *, se
     for label, members in groups:
         block = max(per[n]["block"] for n in members)
         bound = np.concatenate([per[n]["bound"] for n in members])
-        for tracker in [*TRACKERS, *stream, *(t for t in fusion if all(t in per[n]["errors"] for n in members)),
+        # a stream's tracker pools only groups whose every track has its stream
+        for tracker in [*TRACKERS, *(t for t in [*stream, *fusion] if all(t in per[n]["errors"] for n in members)),
                         *described]:
             if tracker in failures:
                 rows.append(failed_row("tracking", label, tracker, len(bound), bound, None,
@@ -949,15 +954,18 @@ def tracking_results(data: Dataset, model: PathLossModel, proto: Protocol, *, se
                                        failure=failures[tracker].error))
                 continue
             e = np.concatenate([per[n]["errors"][tracker] for n in members])
+            # the range trackers are beside the bound of the readings they see: RSS and ranges
+            ranged_row = tracker in ranging.RANGE_TRACKERS
+            row_bound = np.concatenate([per[n]["range_bound"] for n in members]) if ranged_row else bound
             settings = described.get(tracker) or (per[members[0]]["knobs"][tracker] if len(members) == 1 else
                                                   "motion per track (see each track's row)")
-            row = result_row("tracking", label, tracker, e, bound, None,
+            row = result_row("tracking", label, tracker, e, row_bound, None,
                              keyed_stream(seed, data.name, "tracking", members[0] if len(members) == 1 else label,
                                           tracker, "bootstrap"),
                              n_bootstrap=n_bootstrap, block=block, settings=settings,
                              prior=TRACKER_PRIORS.get(tracker, ranging.RANGE_TRACKER_PRIORS.get(
                                  tracker, FUSION_PRIORS.get(tracker, USER_PRIOR))),
-                             bound_name=bound_name,
+                             bound_name=ranging.RANGE_TRACKING_BOUND_NAME if ranged_row else bound_name,
                              outside=outside_fraction(data, np.concatenate([per[n]["est"][tracker].reshape(-1, 2)
                                                                             for n in members])))
             rows.append(row if tracker in TRACKER_PRIORS or tracker in ranging.RANGE_TRACKERS or tracker in FUSION_PRIORS

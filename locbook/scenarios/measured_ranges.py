@@ -11,8 +11,8 @@ carry ranges (``ranges = "FILE"``, :mod:`locbook.data.ranges`) adds to it, by th
 - **Tracking** (measured-tracking): ``ekf_rss_range`` and ``ukf_rss_range``, the battery's constant-velocity EKF
   and UKF with the RSS stream (the fitted channel, as ``ekf`` and ``ukf``) and a range stream
   (:class:`locbook.models.range.RangeModel`, per-epoch sigma), at the same fitted ``q``, from the same start, beside
-  the same posterior CRLB as every tracker (that of RSS alone: the fusion trackers may go below it, and their rows say
-  why).
+  the posterior CRLB of the readings they see: the battery's recursion with the ranges' information added
+  (:func:`range_tracking_bound_m`; the RSS-only bound would put them far "below" it, a ratio that says nothing).
 - **Sigma** of each epoch's range: the reported std (``range_std_m``; an epoch's range is the mean of its window's
   ranges, with the std of that mean, :func:`locbook.data.ranges.align_ranges`); without a ``range_std_m`` column, the
   rule :func:`range_noise`: the residual standard deviation of the calibration recordings' epoch ranges against the
@@ -20,8 +20,10 @@ carry ranges (``ranges = "FILE"``, :mod:`locbook.data.ranges`) adds to it, by th
   never on a scored one). A recording whose ranges have no std and a data set whose calibration recordings have no
   ranges: its range methods have no sigma and are not run (the settings table says so).
 
-A recording without a ranges file gives these methods no range: ``range_nls`` has no fix there (counted as missing),
-the fusion trackers are their RSS-only filters (the range stream is all NaN). A data set without any ranges gives no
+A recording without a ranges file (or whose file holds no range on its epochs) gives these methods no range:
+``range_nls`` has no fix there (counted as missing); the range trackers do not run on such a track, and their pooled
+row pools only groups whose every track has ranges (the rule of the inertial fusion trackers:
+:mod:`locbook.scenarios.measured_inertial`). A data set without any ranges gives no
 new row and changes no number: every stream is keyed by its method.
 """
 from __future__ import annotations
@@ -29,7 +31,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..battery import Method, TRACKER_PRIORS, TrackerSettings, TrackingScenario
-from ..bounds.crlb import range_crlb_checked_m
+from ..battery import tracking_bound_m
+from ..bounds.crlb import range_crlb_checked_m, range_position_information
 from ..data.dataset import Dataset
 from ..data.ranges import align_ranges
 from ..models.range import RangeModel
@@ -40,8 +43,8 @@ from ..tracking.streams import RssMeasurement, Stream
 from ..tracking.unscented import unscented_kalman_filter
 
 __all__ = ["RANGE_STATIC_METHODS", "RANGE_TRACKERS", "RANGE_TRACKER_PRIORS", "RANGE_METHOD_NAMES",
-           "RANGE_BOUND_NAME", "range_noise", "recording_ranges", "range_choices", "static_range_results",
-           "run_range_trackers", "range_tracker_knobs", "ranged_scored", "ranged_tracks", "user_ranges", "track_ranges"]
+           "RANGE_BOUND_NAME", "RANGE_TRACKING_BOUND_NAME", "range_tracking_bound_m", "range_noise", "recording_ranges", "range_choices", "static_range_results",
+           "run_range_trackers", "range_tracker_knobs", "ranged", "user_ranges", "track_ranges"]
 
 #: the static method the ranges add (:class:`locbook.battery.Method`: what, settings, prior)
 RANGE_STATIC_METHODS = {
@@ -56,9 +59,10 @@ RANGE_TRACKERS = {
     "ekf_rss_range": "constant-velocity EKF on the raw RSS and the ranges (two streams, parallel updates)",
     "ukf_rss_range": "constant-velocity UKF on the raw RSS and the ranges (two streams)",
 }
-#: why each may fall below the posterior CRLB of the battery (that of RSS alone)
-RANGE_TRACKER_PRIORS = {name: TRACKER_PRIORS["ekf"] + "; it also updates on the ranges, which the RSS posterior "
-                                                      "bound does not count" for name in RANGE_TRACKERS}
+#: why each may fall below its bound, the posterior CRLB of RSS and ranges (:func:`range_tracking_bound_m`)
+RANGE_TRACKER_PRIORS = {name: TRACKER_PRIORS["ekf"] for name in RANGE_TRACKERS}
+#: the bound the range trackers' rows are beside
+RANGE_TRACKING_BOUND_NAME = "PCRLB (constant velocity at the fitted q, from the trackers' start; RSS + ranges)"
 RANGE_METHOD_NAMES = (*RANGE_STATIC_METHODS, *RANGE_TRACKERS)
 RANGE_BOUND_NAME = "range CRLB (sigma of each epoch's ranges, anchors ranged)"
 #: the sigma (m) a missing range carries in the models (never used: a missing range is a NaN reading, left out)
@@ -103,14 +107,18 @@ def _sigma_source(data: Dataset, name: str) -> str | None:
 
 
 def _usable(data: Dataset, name: str) -> bool:
-    return data.has_ranges(name) and _sigma_source(data, name) is not None
+    """Whether a recording's ranges can be used: a ranges file with at least one range on its epochs, and a sigma
+    (a file without one range, or of none that falls on an epoch, is a recording without ranges)."""
+    return (data.has_ranges(name) and bool(np.isfinite(data.ranges(name)[0]).any())
+            and _sigma_source(data, name) is not None)
 
 
-def recording_ranges(data: Dataset, name: str, ep=None):
-    """``(range_m (E, m), sigma_m (E, m))`` of a recording's epochs (``ep``: other epochs of its readings, e.g. a
-    track's native scans in windows, aligned by :func:`locbook.data.ranges.align_ranges`; default
-    :meth:`Dataset.epochs`): NaN ranges where none (everywhere without a usable ranges file), the sigma of each
-    (reported, else the fitted rule; :data:`_UNUSED_SIGMA_M` where there is no range)."""
+def recording_ranges(data: Dataset, name: str, ep=None, *, window_s: float | None = None):
+    """``(range_m (E, m), sigma_m (E, m))`` of a recording's epochs (``ep``: other epochs of its readings, made with
+    the window ``window_s``, e.g. a track's native scans put in windows of its clock, aligned by
+    :func:`locbook.data.ranges.align_ranges` by that window; default :meth:`Dataset.epochs`): NaN ranges where none
+    (everywhere without a usable ranges file), the sigma of each (reported, else the fitted rule;
+    :data:`_UNUSED_SIGMA_M` where there is no range)."""
     rows = len(data.epochs(name)) if ep is None else len(ep)
     m = len(data.anchor_ids)
     if not _usable(data, name):
@@ -119,7 +127,7 @@ def recording_ranges(data: Dataset, name: str, ep=None):
         ranges, std = data.ranges(name)
     else:
         rec = data.recording(name)
-        ranges, std = align_ranges(ep, rec.readings, rec.ranges, window_s=rec.epoch_rule.window_s or None,
+        ranges, std = align_ranges(ep, rec.readings, rec.ranges, window_s=window_s or rec.epoch_rule.window_s or None,
                                    group_by=() if rec.point_column is None else (rec.point_column,),
                                    source=f"ranges file {rec.ranges_file}")
     if std is None:
@@ -127,14 +135,10 @@ def recording_ranges(data: Dataset, name: str, ep=None):
     return ranges, np.where(np.isfinite(ranges), std, _UNUSED_SIGMA_M)
 
 
-def ranged_scored(data: Dataset, names) -> bool:
-    """Whether one of the scored recordings ``names`` has ranges the methods can use (then ``range_nls`` runs)."""
-    return any(_usable(data, n) for n in names)
-
-
-def ranged_tracks(data: Dataset, names) -> bool:
-    """Whether one of the tracks ``names`` has ranges the methods can use (then the fusion trackers run)."""
-    return any(_usable(data, n) for n in names)
+def ranged(data: Dataset, names) -> list[str]:
+    """The recordings of ``names`` whose ranges the methods can use: ``range_nls`` runs when a scored one has them,
+    the range trackers run on each track that has them (and on no other)."""
+    return [n for n in names if _usable(data, n)]
 
 
 def range_choices(data: Dataset) -> list[dict]:
@@ -168,7 +172,7 @@ def static_range_results(data: Dataset, names) -> dict | None:
     """``range_nls`` on the scored epochs (those with a true position) of each recording ``names``, and its bound:
     ``{"fixes": {recording: (E, 2)}, "bounds": {recording: (bound (E,), reason (E,))}, "status": {recording: (E,)}}``;
     None when no recording has usable ranges."""
-    if not ranged_scored(data, names):
+    if not ranged(data, names):
         return None
     fixes, bounds, status = {}, {}, {}
     tag = data.tag_height_m
@@ -188,7 +192,10 @@ def static_range_results(data: Dataset, names) -> dict | None:
 def track_ranges(data: Dataset, name: str, ep, ticks, n_ticks: int):
     """A track's ranges on its clock: ``(range_m (T, m), sigma_m (T, m))`` from its epochs ``ep`` and their ticks
     (:func:`locbook.scenarios.measured.track_epochs`); NaN (and the unused sigma) at a tick without a range."""
-    ranges, sigma = recording_ranges(data, name, None if data.recording(name).epoch_rule.window_s else ep)
+    # native scans were put in windows of the clock's period (track_epochs): the ranges go to those windows
+    native = not data.recording(name).epoch_rule.window_s
+    ranges, sigma = recording_ranges(data, name, ep if native else None,
+                                     window_s=data.scan_interval_s(name) if native else None)
     m = ranges.shape[1]
     z, s = np.full((n_ticks, m), np.nan), np.full((n_ticks, m), _UNUSED_SIGMA_M)
     z[ticks], s[ticks] = ranges, sigma
@@ -242,3 +249,16 @@ def range_tracker_knobs(data: Dataset, name: str, common: str, ts: TrackerSettin
               "fitted": f"ranges: sigma {range_noise(data)['sigma_m'] or float('nan'):.3g} m (fitted on calibration)",
               None: "no ranges on this track: RSS only"}[source]
     return {"ekf_rss_range": f"{common}; {ranges}", "ukf_rss_range": f"{common}; alpha = {ts.ukf_alpha:g}; {ranges}"}
+
+
+def range_tracking_bound_m(data: Dataset, name: str, sc: TrackingScenario, ep, ticks, ts: TrackerSettings):
+    """The range trackers' bound on track ``name``: the battery's posterior CRLB (:func:`locbook.battery.
+    tracking_bound_m`, constant velocity at ``ts.q``) with the ranges' position information added at every tick
+    with a true position (:func:`locbook.bounds.crlb.range_position_information` of the ranges that tick measured,
+    at their sigma: the readings the range trackers see). ``(T,)`` m."""
+    z, sigma = track_ranges(data, name, ep, ticks, len(sc.truth_m))
+    known = np.isfinite(sc.truth_m).all(axis=-1)
+    truth = np.where(known[:, None], sc.truth_m, 0.0)
+    info = range_position_information(truth, RangeModel(data.anchors_m, sigma, tag_height_m=data.tag_height_m),
+                                      heard=np.isfinite(z) & known[:, None])
+    return tracking_bound_m(sc, ts, extra_position_information=info)

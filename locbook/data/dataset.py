@@ -39,6 +39,11 @@ The manifest (every key below; ``[units]`` describes the files, every other valu
     min_readings = 1                    # fewer readings of an anchor in a window: NaN (not heard); at most 10^6
                                         # and at most the most readings a window of each recording holds
 
+    [run]                               # optional: what a run of the battery uses
+    anchors = ["A1", "A2", "A4"]        # a subset of the anchors file's ids (at least 3): the other anchors' readings
+                                        # are ignored and counted (locbook.data.selection.with_anchors); default:
+                                        # every anchor; ``-p anchors=...`` replaces it for one run
+
     [[recording]]                       # one per readings file
     name = "survey"                     # [a-z0-9_-], at most 64 characters
     file = "survey.csv"
@@ -122,11 +127,12 @@ MAX_TAG_HEIGHT_OFFSET_M = 100.0
 MAX_MANIFEST_BYTES = 1 << 20
 
 _TOP = {"name", "title", "license", "license_file", "attribution", "changes", "units", "readings", "geometry",
-        "epochs", "recording", "method"}
+        "epochs", "recording", "method", "run"}
 _SECTIONS = {"units": {"time", "length", "rssi"},
              "readings": {"valid_range_dbm", "invalid_values_dbm", "backward_time"},
              "geometry": {"anchors", "outline", "tag_height_m"},
-             "epochs": {"window_s", "aggregate", "min_readings"}}
+             "epochs": {"window_s", "aggregate", "min_readings"},
+             "run": {"anchors"}}
 _RECORDING_KEYS = {"name", "file", "role", "point_column", "reference_path", "window_s"}
 _METHOD_KEYS = {"name", "function", "kind"}
 
@@ -206,6 +212,9 @@ class Dataset:
     tag_height_source: str = ""
     #: the manifest's methods of your own (``[[method]]``, :class:`locbook.user_methods.UserMethod`), in its order
     methods: tuple = ()
+    #: the manifest's ``[run] anchors``: the subset of :attr:`anchor_ids` a run uses (empty: every anchor); applied by
+    #: :func:`locbook.data.selection.select`, not here, so the data set holds every anchor as recorded
+    run_anchors: tuple[str, ...] = ()
     _cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     @property
@@ -474,6 +483,7 @@ def load_dataset(path) -> Dataset:
     anchors = read_anchors(_file(manifest, root, _string(manifest, geometry, "anchors", "[geometry] "),
                                  "[geometry] anchors: "))
     axes = [c for c in ("x", "y", "z") if c in anchors.columns]     # no z: a 2-D data set
+    run_anchors = _run_anchors(manifest, raw.get("run", {}), tuple(anchors["id"]))
     if length_scale != 1.0:
         anchors[axes] *= length_scale
 
@@ -607,12 +617,9 @@ def load_dataset(path) -> Dataset:
         values = ", ".join(f"{v:g}" for v in sentinels)
         found = ", ".join(f"{n} in {k}" for k, n in invalid_found.items() if n) or "none found"
         notes["invalid readings"] = f"values {values} dBm are 'no reading' and load as NaN (not heard): {found}"
-    shared = _shared_files(recordings)
-    if shared:
-        notes["in-sample scoring"] = (
-            "; ".join(f"{s} (scored) reads the same file as calibration recording {c} ({f})" for s, c, f in shared)
-            + ": the channel is fitted on the epochs these recordings are scored on, so their errors are in-sample "
-              "(optimistic); give the scored recordings files of their own")
+    in_sample = _in_sample_note(recordings)
+    if in_sample:
+        notes["in-sample scoring"] = in_sample
     if not roles & {"static", "track"}:
         notes["scoring"] = ("calibration only: no static or track recording, so nothing is localized or scored; "
                             "the channel is fitted on the calibration recordings")
@@ -627,7 +634,7 @@ def load_dataset(path) -> Dataset:
         files += [recordings[rec["name"]].file] + ([root / rec["reference_path"]] if "reference_path" in rec else [])
     files += [m.path for m in methods if m.path is not None]
     data = Dataset(name, title, root, license_, attribution, anchors, outline, tag_height, recordings, changes,
-                   license_file, notes, tuple(files), height_source, methods=methods)
+                   license_file, notes, tuple(files), height_source, methods=methods, run_anchors=run_anchors)
     for rname, rec in recordings.items():    # every recording's epochs now: a problem is named with its file
         try:
             data.epochs(rname)
@@ -636,6 +643,21 @@ def load_dataset(path) -> Dataset:
         _check_epochs_kept(manifest, data, rname)
     _device_notes(data)
     return data
+
+
+def _run_anchors(manifest: Path, run: dict, known: tuple) -> tuple[str, ...]:
+    """``[run] anchors``: a list of anchor ids, checked by the rule of ``-p anchors``
+    (:func:`locbook.data.selection.check_anchor_ids`: each an anchor, none twice, at least 3)."""
+    if "anchors" not in run:
+        return ()
+    from .selection import check_anchor_ids
+    value = run["anchors"]
+    if not isinstance(value, list) or not value or not all(isinstance(v, str) for v in value):
+        _fail(manifest, f"[run] anchors must be a non-empty list of anchor ids (strings), got {_shown(value)}")
+    try:
+        return check_anchor_ids(value, known, "[run] anchors")
+    except ParameterError as exc:
+        raise DataFormatError(f"{manifest}: {exc}") from None
 
 
 def _methods(manifest: Path, root: Path, raw) -> tuple:
@@ -763,6 +785,16 @@ def _check_outline(manifest: Path, outline: np.ndarray, anchors_xy: np.ndarray, 
     _fail(manifest, f"[geometry] outline (x {lo[0]:g}..{hi[0]:g}, y {lo[1]:g}..{hi[1]:g} m) contains none of the "
                     f"{len(anchors_xy)} anchors and none of the {len(truth_xy)} true positions: it is not this "
                     "site's floor (another unit, another file?)")
+
+
+def _in_sample_note(recordings: dict) -> str:
+    """The note "in-sample scoring" (:func:`_shared_files`), or "" when no scored recording shares a file."""
+    shared = _shared_files(recordings)
+    if not shared:
+        return ""
+    return ("; ".join(f"{s} (scored) reads the same file as calibration recording {c} ({f})" for s, c, f in shared)
+            + ": the channel is fitted on the epochs these recordings are scored on, so their errors are in-sample "
+              "(optimistic); give the scored recordings files of their own")
 
 
 def _shared_files(recordings: dict) -> list[tuple[str, str, str]]:

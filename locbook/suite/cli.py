@@ -454,6 +454,9 @@ def _dataset_text(path: str, suite=None) -> str:
     lines = [f"data set {ds.name!r}: {ds.title}", f"  folder: {ds.root}", f"  licence: {ds.license}",
              f"  attribution: {ds.attribution}",
              f"  anchors: {len(ds.anchor_ids)} ({', '.join(ds.anchor_ids[:12])}{', ...' if len(ds.anchor_ids) > 12 else ''})",
+             *([f"  run anchors: {len(ds.run_anchors)} of {len(ds.anchor_ids)} ({', '.join(ds.run_anchors)}; "
+                f"[run] anchors: a run ignores the other anchors' readings, -p anchors=... replaces it)"]
+               if getattr(ds, "run_anchors", ()) else []),
              f"  geometry: {ds.geometry_text}",     # 2-D (no heights) or 3-D with the tag's height and its source
              f"  outline: {len(ds.outline_m)} vertices, x {lo[0]:g}..{hi[0]:g} m, y {lo[1]:g}..{hi[1]:g} m"]
     lines += [f"  {key.replace('_', ' ')}: {note}" for key, note in ds.notes.items()]

@@ -192,9 +192,9 @@ def run_loro(suite: Suite, experiments, profile: str, *, data: str, overrides: d
     experiments = list(experiments) if experiments else [e for e in suite.experiments if e.id in LORO_EXPERIMENTS]
     for exp in experiments:
         if "calibration" not in exp.declared_parameters():
-            raise SuiteError(f"--split loro: experiment {exp.id!r} takes no calibration parameter; the experiments that "
-                             "do: " + ", ".join(e.id for e in suite.experiments if "calibration" in
-                                                e.declared_parameters()))
+            takers = [e.id for e in suite.experiments if "calibration" in e.declared_parameters()]
+            raise SuiteError(f"--split loro: experiment {exp.id!r} takes no calibration parameter; the experiments "
+                             f"that do: {', '.join(takers)}")
     out = LoroRun(folder=_data_folder(suite, report_root, profile, name) / "loro")
     for held, calibration in splits:
         kinds = data_kinds(select(base, calibration=",".join(calibration)))
@@ -361,12 +361,17 @@ def anchor_density_study(suite: Suite, data: str, *, profile: str = "quick", sub
     :class:`locbook.suite.study.Study` of ``list`` points (``anchors`` = each subset, ``data`` = the data set) of
     :data:`DENSITY_EXPERIMENT`; the subsets by :func:`anchor_subsets` from ``default_rng(sample_seed)`` among the
     anchors a run uses (the manifest's ``[run] anchors``, else every anchor)."""
+    return _density_plan(suite, data, profile=profile, subsets=subsets, sizes=sizes, sample_seed=sample_seed)[:3]
+
+
+def _density_plan(suite: Suite, data: str, *, profile: str, subsets: int, sizes, sample_seed: int):
+    """:func:`anchor_density_study` and the data set's ``(name, data roots, identity)`` for the runner."""
     from ..data.selection import select
     from .runner import _load_data_argument
     from .study import Study
     if isinstance(sample_seed, bool) or not isinstance(sample_seed, int) or sample_seed < 0:
         raise ParameterError(f"--sample-seed must be a whole number >= 0, got {sample_seed!r}")
-    ds, _name, value, _roots, _identity = _load_data_argument(data)
+    ds, name, value, roots, identity = _load_data_argument(data)
     ds = select(ds)
     ks = density_sizes(len(ds.anchor_ids), sizes)
     drawn = anchor_subsets(ds.anchor_ids, ks, subsets, rng=np.random.default_rng(sample_seed))
@@ -377,7 +382,7 @@ def anchor_density_study(suite: Suite, data: str, *, profile: str = "quick", sub
     study = Study("anchor-density", (exp,), profile, 1, "seed", 0, sample_seed, (),
                   {"anchors": ("list", [",".join(s) for s in drawn]), "data": ("list", [value] * len(drawn))},
                   Path(f"<anchor-density of {value}>"))
-    return study, ds, drawn
+    return study, ds, drawn, name, roots, identity
 
 
 def run_density(suite: Suite, data: str, *, profile: str = "quick", subsets: int = DENSITY_SUBSETS, sizes=None,
@@ -386,12 +391,11 @@ def run_density(suite: Suite, data: str, *, profile: str = "quick", subsets: int
     ``<reports>/<profile>/data-<name>/anchor-density/`` and write its table and plot (also after an interrupt: the
     points finished so far, by :func:`locbook.suite.study.current_points`). Returns the runner's SuiteRun with
     ``aggregate`` (:class:`locbook.suite.study.Aggregate` of density.csv)."""
-    from .runner import Task, _claim_dataset_folder, _load_data_argument, run_tasks
+    from .runner import Task, _claim_dataset_folder, run_tasks
     from .study import Aggregate, current_points, expand_study
-    study, ds, _drawn = anchor_density_study(suite, data, profile=profile, subsets=subsets, sizes=sizes,
-                                             sample_seed=sample_seed)
+    study, ds, _drawn, name, roots, identity = _density_plan(suite, data, profile=profile, subsets=subsets,
+                                                             sizes=sizes, sample_seed=sample_seed)
     points = expand_study(study)            # every value checked before anything runs
-    _ds, name, _value, roots, identity = _load_data_argument(data)
     folder = _data_folder(suite, report_root, profile, name) / "anchor-density"
     folder.parent.mkdir(parents=True, exist_ok=True)
     _claim_dataset_folder(folder.parent, name, identity)

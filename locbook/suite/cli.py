@@ -179,7 +179,8 @@ def main(argv: list[str] | None = None) -> int:
     study = sub.add_parser("study", help="run a declared parameter study and write reports/studies/<name>/ "
                                          "(study.csv, plots/)")
     study.add_argument("study", metavar="NAME_OR_PATH",
-                       help="a study declared in the experiment list ([[study]]) or a TOML file holding one")
+                       help="a study declared in the experiment list ([[study]]) or a TOML file holding one; or "
+                            "anchor-density with --data DIR (the battery on subsets of the data set's anchors)")
     _point_options(study, "the study writes <reports>/studies/<name>/")
     study.add_argument("--data", metavar="DIR_OR_NAME",
                        help="anchor-density: the data set whose anchor subsets are swept (writes "

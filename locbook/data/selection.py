@@ -28,6 +28,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+import pandas as pd
 
 from ..bounds.crlb import MIN_ANCHORS_FOR_BOUND
 from ..errors import ParameterError
@@ -143,7 +144,11 @@ def with_anchors(data, ids, *, parameter: str = "anchors", source: str | None = 
         r = rec.readings
         kept = r["receiver"].astype(str).isin(keep).to_numpy()
         ignored += int(np.isfinite(r["rssi_dbm"].to_numpy(float)[~kept]).sum())     # readings: heard rows
-        recordings[rname] = replace(rec, readings=r[kept].reset_index(drop=True))
+        changes = {"readings": r[kept].reset_index(drop=True)}
+        ranges = getattr(rec, "ranges", None)      # range readings (a recording's ``ranges`` file): the same rule
+        if isinstance(ranges, pd.DataFrame) and "receiver" in ranges.columns:
+            changes["ranges"] = ranges[ranges["receiver"].astype(str).isin(keep)].reset_index(drop=True)
+        recordings[rname] = replace(rec, **changes)
     notes = {k: v for k, v in data.notes.items() if k not in ("devices",) and not k.startswith("uncalibrated device ")}
     notes["anchor subset"] = (f"{source or '-p ' + parameter}: the battery runs on {len(ids)} of the "
                               f"{len(data.anchor_ids)} anchors ({', '.join(a for a in data.anchor_ids if a in keep)}); "

@@ -282,7 +282,7 @@ def test_the_pages_of_a_data_run_share_every_setting_they_both_declare(profile):
                        **e.parameters(profile, data_run=True)} for e in suite.experiments if e.id in ids}
     assert set(resolved) == set(ids)
     shared = ("seed", "fit", "n_bootstrap", "block_s", "n_particles", "particle_runs", "ukf_alpha", "grid_spacing_m",
-              "knn_k", "q", "spread_m")
+              "knn_k", "q", "spread_m", "calibration", "anchors")
     for name in shared:
         values = {i: p[name] for i, p in resolved.items() if name in p}
         assert len(values) >= 2 and len({repr(v) for v in values.values()}) == 1, (name, values)

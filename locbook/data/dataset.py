@@ -45,6 +45,11 @@ The manifest (every key below; ``[units]`` describes the files, every other valu
     min_readings = 1                    # fewer readings of an anchor in a window: NaN (not heard); at most 10^6
                                         # and at most the most readings a window of each recording holds
 
+    [run]                               # optional: what a run of the battery uses
+    anchors = ["A1", "A2", "A4"]        # a subset of the anchors file's ids (at least 3): the other anchors' readings
+                                        # are ignored and counted (locbook.data.selection.with_anchors); default:
+                                        # every anchor; ``-p anchors=...`` replaces it for one run
+
     [[recording]]                       # one per readings file
     name = "survey"                     # [a-z0-9_-], at most 64 characters
     file = "survey.csv"
@@ -139,11 +144,12 @@ MAX_TAG_HEIGHT_OFFSET_M = 100.0
 MAX_MANIFEST_BYTES = 1 << 20
 
 _TOP = {"name", "title", "license", "license_file", "attribution", "changes", "units", "readings", "geometry",
-        "epochs", "recording", "method"}
+        "epochs", "recording", "method", "run"}
 _SECTIONS = {"units": {"time", "length", "rssi", "acceleration", "angular_rate"},
              "readings": {"valid_range_dbm", "invalid_values_dbm", "backward_time"},
              "geometry": {"anchors", "outline", "tag_height_m", "floor_plan", "floor_plan_extent_m"},
-             "epochs": {"window_s", "aggregate", "min_readings"}}
+             "epochs": {"window_s", "aggregate", "min_readings"},
+             "run": {"anchors"}}
 _RECORDING_KEYS = {"name", "file", "role", "point_column", "reference_path", "window_s", "ranges", "inertial"}
 _METHOD_KEYS = {"name", "function", "kind"}
 
@@ -238,6 +244,9 @@ class Dataset:
     #: the floor plan drawn under the maps (a PNG in the folder) and its imshow extent [x0, x1, y0, y1] (m)
     floor_plan: Path | None = None
     floor_plan_extent_m: tuple | None = None
+    #: the manifest's ``[run] anchors``: the subset of :attr:`anchor_ids` a run uses (empty: every anchor); applied by
+    #: :func:`locbook.data.selection.select`, not here, so the data set holds every anchor as recorded
+    run_anchors: tuple[str, ...] = ()
     _cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     @property
@@ -549,6 +558,7 @@ def load_dataset(path, *, floor: str | None = None) -> Dataset:
         raise ParameterError(f"data set {name!r} ({root}) has no floor {floor!r}" + (
             f"; its floors are {', '.join(floors)}" if floors else ": its anchors file has no floor column"))
     axes = [c for c in ("x", "y", "z") if c in anchors.columns]     # no z: a 2-D data set
+    run_anchors = _run_anchors(manifest, raw.get("run", {}), tuple(anchors["id"]))
     if length_scale != 1.0:
         anchors[axes] *= length_scale
 
@@ -725,12 +735,9 @@ def load_dataset(path, *, floor: str | None = None) -> Dataset:
         values = ", ".join(f"{v:g}" for v in sentinels)
         found = ", ".join(f"{n} in {k}" for k, n in invalid_found.items() if n) or "none found"
         notes["invalid readings"] = f"values {values} dBm are 'no reading' and load as NaN (not heard): {found}"
-    shared = _shared_files(recordings)
-    if shared:
-        notes["in-sample scoring"] = (
-            "; ".join(f"{s} (scored) reads the same file as calibration recording {c} ({f})" for s, c, f in shared)
-            + ": the channel is fitted on the epochs these recordings are scored on, so their errors are in-sample "
-              "(optimistic); give the scored recordings files of their own")
+    in_sample = _in_sample_note(recordings)
+    if in_sample:
+        notes["in-sample scoring"] = in_sample
     if not roles & {"static", "track"}:
         notes["scoring"] = ("calibration only: no static or track recording, so nothing is localized or scored; "
                             "the channel is fitted on the calibration recordings")
@@ -753,7 +760,8 @@ def load_dataset(path, *, floor: str | None = None) -> Dataset:
     data = Dataset(name if floor is None else f"{name}-{fl.floor_slug(floor)}", title if floor is None else
                    f"{title} (floor {floor})", root, license_, attribution, anchors, outline, tag_height, recordings,
                    changes, license_file, notes, tuple(files), height_source, methods=methods, floors=floors,
-                   floor=floor, manifest_name=name, floor_plan=plan, floor_plan_extent_m=extent)
+                   floor=floor, manifest_name=name, floor_plan=plan, floor_plan_extent_m=extent,
+                   run_anchors=run_anchors)
     if floor is not None and name_problem(data.name):
         _fail(manifest, f"floor {floor!r}: the floor's data set name {data.name!r} (the manifest's name and the "
                         f"floor's slug) is not a data set name: {name_problem(data.name)}")
@@ -847,6 +855,21 @@ def _floor_notes(notes: dict, dropped: dict, floor, left_out, recordings) -> Non
                                          + ", ".join(f"{n:,} in {r}" for r, n in cross.items()))
     if left_out:
         notes["left out"] = f"recordings with no row on floor {floor}: {', '.join(left_out)}"
+
+
+def _run_anchors(manifest: Path, run: dict, known: tuple) -> tuple[str, ...]:
+    """``[run] anchors``: a list of anchor ids, checked by the rule of ``-p anchors``
+    (:func:`locbook.data.selection.check_anchor_ids`: each an anchor, none twice, at least 3)."""
+    if "anchors" not in run:
+        return ()
+    from .selection import check_anchor_ids
+    value = run["anchors"]
+    if not isinstance(value, list) or not value or not all(isinstance(v, str) for v in value):
+        _fail(manifest, f"[run] anchors must be a non-empty list of anchor ids (strings), got {_shown(value)}")
+    try:
+        return check_anchor_ids(value, known, "[run] anchors")
+    except ParameterError as exc:
+        raise DataFormatError(f"{manifest}: {exc}") from None
 
 
 def _methods(manifest: Path, root: Path, raw) -> tuple:
@@ -974,6 +997,16 @@ def _check_outline(manifest: Path, outline: np.ndarray, anchors_xy: np.ndarray, 
     _fail(manifest, f"[geometry] outline (x {lo[0]:g}..{hi[0]:g}, y {lo[1]:g}..{hi[1]:g} m) contains none of the "
                     f"{len(anchors_xy)} anchors and none of the {len(truth_xy)} true positions: it is not this "
                     "site's floor (another unit, another file?)")
+
+
+def _in_sample_note(recordings: dict) -> str:
+    """The note "in-sample scoring" (:func:`_shared_files`), or "" when no scored recording shares a file."""
+    shared = _shared_files(recordings)
+    if not shared:
+        return ""
+    return ("; ".join(f"{s} (scored) reads the same file as calibration recording {c} ({f})" for s, c, f in shared)
+            + ": the channel is fitted on the epochs these recordings are scored on, so their errors are in-sample "
+              "(optimistic); give the scored recordings files of their own")
 
 
 def _shared_files(recordings: dict) -> list[tuple[str, str, str]]:

@@ -97,9 +97,15 @@ Q_START = 0.05
 START_VELOCITY_SD_M_S = 1.0
 
 
-def load(data) -> Dataset:
-    """A data set: a :class:`Dataset` as it is, else a shipped name or a folder (:func:`load_dataset`)."""
-    return data if isinstance(data, Dataset) else load_dataset(data)
+def load(data, *, calibration="", anchors="") -> Dataset:
+    """A data set: a :class:`Dataset` as it is, else a shipped name or a folder (:func:`load_dataset`), on the
+    recordings and anchors a run uses (:func:`locbook.data.selection.select`: ``calibration``, the recordings the
+    channel is fitted on, and ``anchors``, a subset, each a comma list; empty: the manifest's roles and its ``[run]
+    anchors``, else every anchor). The selection applies to a Dataset given too when a value is given."""
+    from ..data.selection import select
+    if isinstance(data, Dataset) and not (calibration or anchors):
+        return data
+    return select(data if isinstance(data, Dataset) else load_dataset(data), calibration=calibration, anchors=anchors)
 
 
 def geometry_text(data: Dataset) -> str:

@@ -158,6 +158,11 @@ def main(argv: list[str] | None = None) -> int:
                           "error); the reports go to <reports>/<profile>/data-<name>/; a data set with floors runs "
                           "each floor as its own data run (data-<name>-<floor>/), DIR@FLOOR one of them")
     _method_options(run)
+    run.add_argument("--split", choices=("loro",),
+                     help="with --data: loro, leave one recording out: for each recording with true positions, the "
+                          "battery with the channel fitted on every other one and scored on it (each split its own "
+                          "cached reports), and one table and plot of every split and their spread in "
+                          "<reports>/<profile>/data-<name>/loro/")
     run.add_argument("--reports", type=Path, help="reports folder (default: <repository>/reports)")
     run.add_argument("--out", type=Path, help="write this run's reports to this folder (a path; its last part "
                                                 "[a-z0-9-] only)")
@@ -175,8 +180,20 @@ def main(argv: list[str] | None = None) -> int:
     study = sub.add_parser("study", help="run a declared parameter study and write reports/studies/<name>/ "
                                          "(study.csv, plots/)")
     study.add_argument("study", metavar="NAME_OR_PATH",
-                       help="a study declared in the experiment list ([[study]]) or a TOML file holding one")
+                       help="a study declared in the experiment list ([[study]]) or a TOML file holding one; or "
+                            "anchor-density with --data DIR (the battery on subsets of the data set's anchors)")
     _point_options(study, "the study writes <reports>/studies/<name>/")
+    study.add_argument("--data", metavar="DIR_OR_NAME",
+                       help="anchor-density: the data set whose anchor subsets are swept (writes "
+                            "<reports>/<profile>/data-<name>/anchor-density/)")
+    study.add_argument("--profile", choices=("quick", "full"),
+                       help="anchor-density: the profile of its runs (default quick; a declared study names its own)")
+    study.add_argument("--subsets", type=lambda t: _positive(int, t), default=None, metavar="S",
+                       help="anchor-density: subsets drawn per size (default 5; every subset where there are fewer)")
+    study.add_argument("--sizes", type=_sizes, metavar="K,K,...",
+                       help="anchor-density: the subset sizes (default 3..m, at most 4 evenly spaced, m included)")
+    study.add_argument("--sample-seed", type=int, default=0,
+                       help="anchor-density: the seed of the subsets' draws (default 0)")
     bracket = sub.add_parser("bracket", help="run an experiment under each declared reading of what its source left "
                                              "unprinted and give every scored row a bracket verdict "
                                              "(reports/brackets/<experiment>/)")
@@ -257,7 +274,25 @@ def main(argv: list[str] | None = None) -> int:
             print(f"copied {len(suite.experiments)} notebooks and experiments.toml to {dest}; open them with "
                   f"`jupyter lab {dest}`, or run them with `locbook run --suite {dest / 'experiments.toml'}`")
             return 0
-        if args.command == "study":
+        if args.command == "study" and (args.data is not None or args.study == DENSITY_STUDY):
+            from .splits import DENSITY_SUBSETS, run_density
+            if args.study != DENSITY_STUDY:
+                raise ParameterError(f"--data belongs to the built-in study {DENSITY_STUDY!r} (a declared study "
+                                     "names its experiments' parameters); run `locbook study "
+                                     f"{DENSITY_STUDY} --data DIR`")
+            if args.data is None:
+                raise ParameterError(f"the study {DENSITY_STUDY!r} sweeps the anchors of a data set: give it with "
+                                     "--data DIR (a shipped one by name: --data kolakowski2021)")
+            result = run_density(suite, args.data, profile=args.profile or "quick",
+                                 subsets=args.subsets or DENSITY_SUBSETS, sizes=args.sizes,
+                                 sample_seed=args.sample_seed, report_root=args.reports, jobs=args.jobs,
+                                 force=args.force, timeout_s=args.timeout, progress=args.progress,
+                                 executor=args.executor, scheduler=args.scheduler)
+            see = result.aggregate.path
+        elif args.command == "study":
+            if args.profile or args.subsets or args.sizes or args.sample_seed:
+                raise ParameterError("--profile, --subsets, --sizes and --sample-seed belong to the built-in study "
+                                     f"{DENSITY_STUDY!r}; a declared study names them in its declaration")
             from .study import load_study, run_study, study_folder
             declared = load_study(suite, args.study)
             see = study_folder(suite, declared, args.reports) / "study.csv"
@@ -286,6 +321,19 @@ def main(argv: list[str] | None = None) -> int:
             if (methods or trackers) and args.data is None and "data" not in overrides:
                 raise ParameterError("--method and --tracker run beside the battery on a data set: give one with "
                                      "--data DIR (a shipped one by name: --data kolakowski2021)")
+            if args.split is not None:
+                if args.data is None:
+                    raise ParameterError(f"--split {args.split} splits the recordings of one data set: give it with "
+                                         "--data DIR (a shipped one by name: --data kolakowski2021)")
+                if args.out is not None:
+                    raise ParameterError("--split loro writes each split to its own folder and the table to "
+                                         "<reports>/<profile>/data-<name>/loro/: --out does not apply")
+                from .splits import run_loro
+                loro = run_loro(suite, suite.select(args.ids) if args.ids else [], args.profile, data=args.data,
+                                overrides=overrides, report_root=args.reports, progress=args.progress,
+                                methods=methods, trackers=trackers, jobs=args.jobs, force=args.force,
+                                timeout_s=args.timeout, executor=args.executor, scheduler=args.scheduler)
+                return _loro_summary(loro, args.progress)
             kept, own, left_out = split_overrides(experiments, overrides)
             if left_out:
                 taken = sorted({k for e in kept for k in own[e.id] if k != "data"})
@@ -351,6 +399,46 @@ def main(argv: list[str] | None = None) -> int:
     return worst
 
 
+#: the built-in study of a data set's anchor subsets (locbook.suite.splits.run_density)
+DENSITY_STUDY = "anchor-density"
+
+
+def _sizes(text: str) -> tuple[int, ...]:
+    """argparse type of ``--sizes``: a comma list of whole numbers (the study checks their range)."""
+    try:
+        sizes = tuple(int(t) for t in text.split(",") if t.strip())
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expects a comma list of whole numbers such as 3,4,6, got {text!r}") from None
+    if not sizes:
+        raise argparse.ArgumentTypeError(f"expects a comma list of whole numbers such as 3,4,6, got {text!r}")
+    return sizes
+
+
+def _loro_summary(loro, progress: str) -> int:
+    """The end of ``--split loro``: each split's scoreboard line, where the table is, and the exit status (the
+    worst of the splits': an interrupt, a full disk, a failure, a method of your own that failed)."""
+    from .runner import user_method_failures
+    failures = []
+    for held, calibration, run, note in loro.splits:
+        if run is None:
+            print(f"split {held}: {note}")
+            continue
+        print(f"split {held} (the channel fitted on {', '.join(calibration)}):")
+        _print_summary(run, progress)
+        failures += [f for f in user_method_failures(run) if f not in failures]
+    _print_method_failures(failures)
+    if loro.written:
+        print(f"leave-one-recording-out: {sum(r is not None for _h, _c, r, _n in loro.splits)} split(s); table "
+              f"{loro.folder / 'loro.csv'} (and loro.md), plot {loro.folder / 'loro.png'}")
+    else:
+        print("leave-one-recording-out: no split has an up-to-date report; no table was written", file=sys.stderr)
+    statuses = [_exit_status(run) for run in loro.runs]
+    worst = next((s for s in statuses if s not in (EXIT_OK, EXIT_FAILED)), None)
+    if worst is not None:
+        return worst
+    return EXIT_FAILED if (EXIT_FAILED in statuses or failures) else EXIT_OK
+
+
 def _roles(text: str) -> tuple[str, ...]:
     """argparse type of ``--roles``: a comma list of recording roles (the generator checks which it accepts)."""
     roles = tuple(r.strip() for r in text.split(",") if r.strip())
@@ -391,6 +479,9 @@ def _dataset_text(path: str, suite=None) -> str:
     lines = [f"data set {ds.name!r}: {ds.title}", f"  folder: {ds.root}", f"  licence: {ds.license}",
              f"  attribution: {ds.attribution}",
              f"  anchors: {len(ds.anchor_ids)} ({', '.join(ds.anchor_ids[:12])}{', ...' if len(ds.anchor_ids) > 12 else ''})",
+             *([f"  run anchors: {len(ds.run_anchors)} of {len(ds.anchor_ids)} ({', '.join(ds.run_anchors)}; "
+                f"[run] anchors: a run ignores the other anchors' readings, -p anchors=... replaces it)"]
+               if getattr(ds, "run_anchors", ()) else []),
              f"  geometry: {ds.geometry_text}",     # 2-D (no heights) or 3-D with the tag's height and its source
              f"  outline: {len(ds.outline_m)} vertices, x {lo[0]:g}..{hi[0]:g} m, y {lo[1]:g}..{hi[1]:g} m"]
     lines += [f"  {key.replace('_', ' ')}: {note}" for key, note in ds.notes.items()]

@@ -627,8 +627,16 @@ def run_suite(suite: Suite, experiments: list[Experiment], profile: str, *, jobs
     methods, trackers = list(methods or ()), list(trackers or ())
     if (methods or trackers) and data is None:
         raise SuiteError("--method and --tracker run on a data set: give one with --data DIR")
+    chosen = [k for k in ("calibration", "anchors") if k in overrides]
+    if chosen and data is None:
+        raise SuiteError(f"-p {chosen[0]} names {'recordings' if chosen[0] == 'calibration' else 'anchors'} of one "
+                         "data set: give it with --data DIR (a shipped one by name: --data kolakowski2021)")
     if data is not None:
         ds, dataset_name, value, data_roots, identity = _load_data_argument(data)
+        # the split and anchor subset every experiment will see (locbook.data.selection.select): a bad value is one
+        # line here, before anything runs, and an experiment the selection leaves nothing to run on is left out
+        from ..data.selection import select
+        ds = select(ds, calibration=overrides.get("calibration", ""), anchors=overrides.get("anchors", ""))
         from ..user_methods import registered_methods
         registered_methods(ds, methods=methods, trackers=trackers)        # a name given twice: one line, here
         for exp in experiments:

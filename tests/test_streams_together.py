@@ -70,3 +70,28 @@ def test_a_building_refuses_streams_in_one_line_naming_the_recording_and_key(tmp
         load_dataset(folder, floor="F1")
     message = str(err.value)
     assert "\n" not in message and "'survey'" in message and "ranges" in message and "floors" in message
+
+
+def test_an_anchor_subset_of_a_ranged_data_set_equals_the_data_set_written_with_those_anchors_only(tmp_path):
+    import pandas as pd
+
+    from locbook.data.selection import select
+    folder = write_example_dataset(tmp_path / "full", np.random.default_rng(4), walk_s=20.0, ranges=True)
+    keep = ["A1", "A2", "A4", "A6", "A7"]
+    sub = select(load_dataset(folder), anchors=",".join(keep))
+    # the independent construction: every file filtered by pandas to the kept anchors, loaded afresh
+    cut = tmp_path / "cut"
+    cut.mkdir()
+    for path in folder.iterdir():
+        if path.suffix == ".csv" and path.name != "outline.csv":
+            table = pd.read_csv(path, dtype=str, keep_default_na=False)
+            column = "id" if path.name == "anchors.csv" else "receiver"
+            table[table[column].isin(keep)].to_csv(cut / path.name, index=False)
+        else:
+            (cut / path.name).write_bytes(path.read_bytes())
+    alone = load_dataset(cut)
+    assert sub.anchor_ids == alone.anchor_ids == tuple(keep)
+    for name in sub.recordings:
+        np.testing.assert_array_equal(sub.epochs(name).rss_dbm, alone.epochs(name).rss_dbm)
+        for a, b in zip(sub.ranges(name), alone.ranges(name)):
+            np.testing.assert_array_equal(a, b)

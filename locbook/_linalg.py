@@ -273,3 +273,19 @@ def psd_root(name: str, cov) -> np.ndarray:
         raise ValueError(f"{name} must be symmetric positive semi-definite, its smallest eigenvalue is {w.min()}")
     keep = np.any(w > 4 * w.shape[-1] * np.finfo(float).eps * scale, axis=tuple(range(w.ndim - 1)))
     return v[..., keep] * np.sqrt(np.clip(w[..., keep], 0.0, None))[..., None, :]
+
+
+def _location_information(gain, gradient, heard=None):
+    """The Fisher information ``sum_j w_j g_j g_j^T`` ``(..., d, d)`` of independent Gaussian readings about a
+    location, from each reading's weight ``gain`` ``(..., m)`` (``1 / sigma_j^2``) and gradient ``gradient``
+    ``(..., m, d)``; ``heard``: booleans broadcastable to the weights, False where a reading is not there (its term
+    is left out). The one form of the RSS and the range information."""
+    if heard is not None:
+        heard = np.asarray(heard)
+        if heard.dtype != bool:
+            raise ValueError(f"heard must be booleans (False = not heard), got dtype {heard.dtype}")
+        try:
+            gain = gain * np.broadcast_to(heard, gain.shape)
+        except ValueError:
+            raise ValueError(f"heard must broadcast to {gain.shape}, got shape {heard.shape}") from None
+    return np.einsum("...j,...ji,...jk->...ik", gain, gradient, gradient)

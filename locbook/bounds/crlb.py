@@ -39,6 +39,7 @@ import numpy as np
 
 from ..errors import DegenerateGeometryError, ParameterError
 from .._validate import as_array, check_choice, check_scalar
+from .._linalg import _location_information
 from .._deprecation import RENAMED_CRLB_FORMS, check_variant, renamed_constants, warn_deprecated
 from ..models.channel import PathLossModel
 from ..models.rss import RssModel
@@ -460,19 +461,11 @@ def range_position_information(position_m, model, *, heard=None):
     against the positions (e.g. each epoch's reported std). ``heard``: booleans broadcastable to ``(..., m)``, False
     where an anchor gave no range (its term is left out)."""
     model = _range_model(model, "range_position_information")
-    m, dim = model.n_anchors, model.dim
+    dim = model.dim
     position_m = as_array("position_m", position_m, min_ndim=1, trailing=(dim,))
     unit = model.unit_vectors(position_m)[1]
     gain = 1.0 / np.square(np.broadcast_to(model.sigma_m, unit.shape[:-1]))
-    if heard is not None:
-        heard = np.asarray(heard)
-        if heard.dtype != bool:
-            raise ValueError(f"heard must be booleans (False = not heard), got dtype {heard.dtype}")
-        try:
-            gain = gain * np.broadcast_to(heard, gain.shape)
-        except ValueError:
-            raise ValueError(f"heard must broadcast to (..., {m}) = {gain.shape}, got shape {heard.shape}") from None
-    return np.einsum("...j,...ji,...jk->...ik", gain, unit, unit)
+    return _location_information(gain, unit, heard)
 
 
 def range_crlb_m(position_m, model, *, heard=None):

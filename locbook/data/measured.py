@@ -494,13 +494,7 @@ def validate_readings(table: pd.DataFrame, *, source: str, lines=None, anchor_id
         raise DataFormatError(f"{source}, line {lines[i]}, column {absent!r}: missing while {given!r} is given "
                               "(a true position has both coordinates or neither)")
     if anchor_ids is not None:
-        known = {str(a) for a in anchor_ids}
-        unknown = ~out["receiver"].isin(known).to_numpy()
-        if unknown.any():
-            i = int(np.flatnonzero(unknown)[0])
-            raise DataFormatError(f"{source}, line {lines[i]}, column 'receiver': {_shown(out['receiver'].iloc[i])} is "
-                                  f"not an anchor id (the anchors are {_shown_names(sorted(known))})"
-                                  f"{_link_direction_hint(out['transmitter'], known)}")
+        _check_receivers(out, anchor_ids, source, lines)
     key = out[["time_s", "transmitter", "receiver"]]
     dup = key.duplicated(keep="first").to_numpy()
     if dup.any():
@@ -531,6 +525,18 @@ def validate_readings(table: pd.DataFrame, *, source: str, lines=None, anchor_id
     for col in extra:
         out[col] = text[col].array
     return out
+
+
+def _check_receivers(table: pd.DataFrame, anchor_ids, source: str, lines) -> None:
+    """Refuse a row whose ``receiver`` is not an anchor id (the readings' and the ranges' one rule), naming its
+    line, with the link-direction hint where the transmitters are the anchors."""
+    known = {str(a) for a in anchor_ids}
+    unknown = ~table["receiver"].isin(known).to_numpy()
+    if unknown.any():
+        i = int(np.flatnonzero(unknown)[0])
+        raise DataFormatError(f"{source}, line {lines[i]}, column 'receiver': {_shown(table['receiver'].iloc[i])} is "
+                              f"not an anchor id (the anchors are {_shown_names(sorted(known))})"
+                              f"{_link_direction_hint(table['transmitter'], known)}")
 
 
 def _link_direction_hint(transmitters: pd.Series, anchor_ids) -> str:

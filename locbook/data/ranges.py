@@ -40,7 +40,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .measured import (DEVICE_COLUMN, DataFormatError, Epochs, _ids, _link_direction_hint, _numeric,
+from .measured import (DEVICE_COLUMN, DataFormatError, Epochs, _check_receivers, _ids, _numeric,
                        _read_text_table, _seconds, _shown, _shown_names, shifted_seconds)
 
 __all__ = ["RANGE_COLUMNS", "RANGE_STD_COLUMN", "read_ranges", "validate_ranges", "align_ranges", "RangeAlignment"]
@@ -72,13 +72,7 @@ def validate_ranges(table: pd.DataFrame, *, source: str, lines=None, anchor_ids,
             i = int(np.flatnonzero(empty)[0])
             raise DataFormatError(f"{source}, line {lines[i]}, column {col!r}: the id is empty")
         out[col] = ids.astype(str).to_numpy(object)
-    known = {str(a) for a in anchor_ids}
-    unknown = ~out["receiver"].isin(known).to_numpy()
-    if unknown.any():
-        i = int(np.flatnonzero(unknown)[0])
-        raise DataFormatError(f"{source}, line {lines[i]}, column 'receiver': {_shown(out['receiver'].iloc[i])} is not "
-                              f"an anchor id (the anchors are {_shown_names(sorted(known))})"
-                              f"{_link_direction_hint(out['transmitter'], known)}")
+    _check_receivers(out, anchor_ids, source, lines)
     if transmitters is not None:
         senders = {str(t) for t in transmitters}
         other = ~out["transmitter"].isin(senders).to_numpy()

@@ -32,7 +32,7 @@ from functools import cached_property
 
 import numpy as np
 
-from .._linalg import _STATE_NOT_FINITE, _Singular
+from .._linalg import _STATE_NOT_FINITE, _Singular, _location_information
 from .._validate import as_array, check_scalar
 from .base import MeasurementModel, PerStep, step_matrix
 from .channel import (PathLossModel, log_distance_gradient, log_distance_mean_dbm, require_path_loss_model,
@@ -688,15 +688,7 @@ class RssModel(MeasurementModel):
         gain = 1.0 / np.square(np.asarray(sigma, float))
         gain = gain[..., None] if np.ndim(gain) == 2 else gain                     # (R, 1) -> (R, 1, 1)
         gain = np.broadcast_to(gain, np.broadcast_shapes(np.shape(gain), grad.shape[:-1]))
-        if heard is not None:
-            heard = np.asarray(heard)
-            if heard.dtype != bool:
-                raise ValueError(f"heard must be booleans (False = not heard), got dtype {heard.dtype}")
-            try:
-                gain = gain * np.broadcast_to(heard, gain.shape)
-            except ValueError:
-                raise ValueError(f"heard must broadcast to {gain.shape}, got shape {heard.shape}") from None
-        return np.einsum("...j,...ji,...jk->...ik", gain, grad, grad)
+        return _location_information(gain, grad, heard)
 
 
 def RssMeasurementModel(anchors_m, channel, position_index, anchor_sigma_m: float = 0.0, tag_height_m=None,

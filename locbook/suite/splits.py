@@ -45,6 +45,7 @@ import numpy as np
 
 from ..errors import ParameterError
 from .spec import Suite, SuiteError
+from .study import _atomic
 
 __all__ = ["LORO_EXPERIMENTS", "DENSITY_EXPERIMENT", "DENSITY_SUBSETS", "DENSITY_MAX_SIZES", "SPLIT_MODES",
            "loro_splits", "run_loro", "loro_tables", "density_sizes", "anchor_subsets", "anchor_density_study",
@@ -95,13 +96,7 @@ def _read_rows(path: Path) -> list[dict]:
 
 
 def _atomic_text(path: Path, text: str) -> None:
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        tmp.write_text(text, encoding="utf-8")
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+    _atomic(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
 
 
 def _write_csv(path: Path, rows: list[dict], columns) -> None:
@@ -305,10 +300,10 @@ def _loro_plot(table, split_names, path: Path, name: str) -> None:
                      fontsize=9)
         ax.legend(fontsize=7)
     fig.tight_layout()
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    fig.savefig(tmp, format="png", dpi=100)
-    plt.close(fig)
-    os.replace(tmp, path)
+    try:
+        _atomic(path, lambda tmp: fig.savefig(tmp, format="png", dpi=100))
+    finally:
+        plt.close(fig)
 
 
 # ------------------------------------------------------------------------------------------------ anchor density
@@ -482,7 +477,7 @@ def _density_plot(table, path: Path, name: str, n_anchors: int) -> None:
     ax.set_title(f"{name}: mean error against the number of anchors (band: smallest to largest subset)", fontsize=9)
     ax.legend(fontsize=7)
     fig.tight_layout()
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    fig.savefig(tmp, format="png", dpi=100)
-    plt.close(fig)
-    os.replace(tmp, path)
+    try:
+        _atomic(path, lambda tmp: fig.savefig(tmp, format="png", dpi=100))
+    finally:
+        plt.close(fig)

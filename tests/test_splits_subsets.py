@@ -340,3 +340,44 @@ def test_loro_and_density_end_to_end(tmp_path):
     grid = rows[rows["method"] == "grid_ml"].set_index("k")["mean_m"]
     assert grid[8] < grid[3]                                   # more anchors, smaller error (generated truth)
     assert math.isfinite(grid[8])
+
+
+def test_a_stopped_loro_run_keeps_the_earlier_table_and_never_shrinks_it(example, tmp_path, monkeypatch):
+    """An interrupt after the first split leaves the complete table of an earlier run as it was (bytes)."""
+    import locbook.suite.runner as runner
+    from locbook.suite import load_suite
+
+    suite = load_suite()
+    rng = np.random.default_rng(1)
+    calls, runs = [], iter(range(1000))
+
+    def fake_run_suite(suite_, experiments, profile, *, overrides, report_root, data, **_kw):
+        held = next(n for n in ("survey", "points", "walk_a", "walk_b")
+                    if n not in overrides["calibration"].split(","))
+        folder = tmp_path / "runs" / f"{next(runs)}-{held}"
+        _results(folder / "measured-localization", [("static", held, "lls", 10, rng.uniform(1, 5), 0, 0)])
+        calls.append(held)
+        stop = interrupt_after is not None and len(calls) > interrupt_after
+        return SimpleNamespace(outcomes=[Outcome("measured-localization", "ok", 1.0)], report_dir=folder,
+                               interrupted_by="SIGINT" if stop else None, disk_full=None, executor_error=None)
+
+    monkeypatch.setattr(runner, "run_suite", fake_run_suite)
+    interrupt_after = None
+    whole = splits.run_loro(suite, None, "quick", data=str(example), report_root=tmp_path / "reports",
+                            progress="quiet")
+    assert whole.written and not whole.stopped and len(calls) == 4
+    table = whole.folder / "loro.csv"
+    before = table.read_bytes()
+    assert len(pd.read_csv(table)) == 1 and pd.read_csv(table)["splits"].item() == 4
+    calls.clear()
+    interrupt_after = 1
+    stopped = splits.run_loro(suite, None, "quick", data=str(example), report_root=tmp_path / "reports",
+                              progress="quiet")
+    assert stopped.stopped and stopped.kept and not stopped.written and len(calls) == 2
+    assert table.read_bytes() == before
+    # with no earlier table, a stopped run writes the splits it has (nothing to shrink)
+    shutil.rmtree(whole.folder)
+    calls.clear()
+    first = splits.run_loro(suite, None, "quick", data=str(example), report_root=tmp_path / "reports",
+                            progress="quiet")
+    assert first.stopped and first.written and pd.read_csv(first.folder / "loro.csv")["splits"].item() == 2

@@ -430,6 +430,9 @@ def _loro_summary(loro, progress: str) -> int:
     if loro.written:
         print(f"leave-one-recording-out: {sum(r is not None for _h, _c, r, _n in loro.splits)} split(s); table "
               f"{loro.folder / 'loro.csv'} (and loro.md), plot {loro.folder / 'loro.png'}")
+    elif loro.kept:
+        print(f"leave-one-recording-out: stopped before its last split; the earlier table {loro.folder / 'loro.csv'} "
+              "is kept as it was", file=sys.stderr)
     else:
         print("leave-one-recording-out: no split has an up-to-date report; no table was written", file=sys.stderr)
     statuses = [_exit_status(run) for run in loro.runs]

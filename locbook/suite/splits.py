@@ -136,6 +136,10 @@ class LoroRun:
     splits: list = field(default_factory=list)
     folder: Path = Path()
     written: bool = False
+    #: the run stopped before its last split (an interrupt, a full disk, an executor error)
+    stopped: bool = False
+    #: a stopped run left an earlier loro.csv (and its page and plot) as it was
+    kept: bool = False
 
     @property
     def runs(self) -> list:
@@ -171,7 +175,8 @@ def run_loro(suite: Suite, experiments, profile: str, *, data: str, overrides: d
     """Leave-one-recording-out on ``data`` (module docstring): one :func:`locbook.suite.runner.run_suite` per split
     (``overrides`` and ``runner``'s options passed on to each; ``experiments`` default :data:`LORO_EXPERIMENTS`),
     then the table and the plot from every split whose reports are up to date. An interrupted or full-disk split
-    stops the rest; the table then holds the splits done."""
+    stops the rest; the table then holds the splits done, unless an earlier run's table is there: a stopped run
+    never replaces it with fewer splits (``kept``)."""
     from ..data.selection import select
     from .progress import make_progress
     from .runner import _claim_dataset_folder, _load_data_argument, data_kinds, run_suite
@@ -205,12 +210,15 @@ def run_loro(suite: Suite, experiments, profile: str, *, data: str, overrides: d
                         trackers=trackers, **runner)
         out.splits.append((held, calibration, run, ""))
         if run.interrupted_by is not None or run.disk_full is not None or run.executor_error:
+            out.stopped = True
             break
     folder = out.folder
     folder.parent.mkdir(parents=True, exist_ok=True)
     _claim_dataset_folder(folder.parent, name, identity)
     table, per_split = loro_tables(base, out.splits)
-    if per_split:
+    # a stopped run holds fewer splits than the table an earlier run wrote: that table is kept, never shrunk
+    out.kept = out.stopped and (folder / "loro.csv").exists()
+    if per_split and not out.kept:
         folder.mkdir(exist_ok=True)
         split_names = [s[0] for s in splits]
         _write_csv(folder / "loro.csv", table, ["kind", "method", *_STAT_COLUMNS,

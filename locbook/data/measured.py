@@ -449,13 +449,7 @@ def validate_readings(table: pd.DataFrame, *, source: str, lines=None, anchor_id
     out = pd.DataFrame(index=text.index)
     out["time_s"] = time_s
     for col in ("transmitter", "receiver"):
-        # ids are text: "NA", "N/A" or "nan" are ids, only an empty field is no id
-        ids = _ids(text[col])
-        empty = ids.isna().to_numpy()
-        if empty.any():
-            i = int(np.flatnonzero(empty)[0])
-            raise DataFormatError(f"{source}, line {lines[i]}, column {col!r}: the id is empty")
-        out[col] = ids.array
+        out[col] = _id_column(text, col, source, lines).array
     rssi = _numeric(text, "rssi_dbm", source, lines, missing_ok=True)
     rssi = np.where(np.isin(rssi, sentinels), np.nan, rssi)     # declared sentinels: not heard
     outside = np.isfinite(rssi) & ((rssi < low) | (rssi > high))
@@ -525,6 +519,17 @@ def validate_readings(table: pd.DataFrame, *, source: str, lines=None, anchor_id
     for col in extra:
         out[col] = text[col].array
     return out
+
+
+def _id_column(table: pd.DataFrame, column: str, source: str, lines) -> pd.Series:
+    """A column of ids (:func:`_ids`), a row without one refused naming its line: ids are text, so "NA", "N/A" or
+    "nan" are ids, and only an empty field is no id."""
+    ids = _ids(table[column])
+    empty = ids.isna().to_numpy()
+    if empty.any():
+        i = int(np.flatnonzero(empty)[0])
+        raise DataFormatError(f"{source}, line {lines[i]}, column {column!r}: the id is empty")
+    return ids
 
 
 def _check_receivers(table: pd.DataFrame, anchor_ids, source: str, lines) -> None:

@@ -40,7 +40,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .measured import (DEVICE_COLUMN, DataFormatError, Epochs, _check_receivers, _ids, _numeric,
+from .measured import (DEVICE_COLUMN, DataFormatError, Epochs, _check_receivers, _id_column, _numeric,
                        _read_text_table, _seconds, _shown, _shown_names, shifted_seconds)
 
 __all__ = ["RANGE_COLUMNS", "RANGE_STD_COLUMN", "read_ranges", "validate_ranges", "align_ranges", "RangeAlignment"]
@@ -66,12 +66,7 @@ def validate_ranges(table: pd.DataFrame, *, source: str, lines=None, anchor_ids,
     out = pd.DataFrame(index=text.index)
     out["time_s"] = shifted_seconds(text, source, lines, time_scale, time_origin_raw)
     for col in ("transmitter", "receiver"):
-        ids = _ids(text[col])
-        empty = ids.isna().to_numpy()
-        if empty.any():
-            i = int(np.flatnonzero(empty)[0])
-            raise DataFormatError(f"{source}, line {lines[i]}, column {col!r}: the id is empty")
-        out[col] = ids.astype(str).to_numpy(object)
+        out[col] = _id_column(text, col, source, lines).astype(str).to_numpy(object)
     _check_receivers(out, anchor_ids, source, lines)
     if transmitters is not None:
         senders = {str(t) for t in transmitters}

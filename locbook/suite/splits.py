@@ -99,6 +99,16 @@ def _atomic_text(path: Path, text: str) -> None:
     _atomic(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
 
 
+def _save_png(fig, path: Path) -> None:
+    """A figure to ``path`` by the study's atomic write, closed whatever happens."""
+    import matplotlib.pyplot as plt
+    fig.tight_layout()
+    try:
+        _atomic(path, lambda tmp: fig.savefig(tmp, format="png", dpi=100))
+    finally:
+        plt.close(fig)
+
+
 def _write_csv(path: Path, rows: list[dict], columns) -> None:
     out = io.StringIO()
     writer = csv.DictWriter(out, fieldnames=list(columns), lineterminator="\n", extrasaction="ignore")
@@ -307,11 +317,7 @@ def _loro_plot(table, split_names, path: Path, name: str) -> None:
         ax.set_title(f"{name}: {'static methods' if kind == 'static' else 'trackers'}, leave one recording out",
                      fontsize=9)
         ax.legend(fontsize=7)
-    fig.tight_layout()
-    try:
-        _atomic(path, lambda tmp: fig.savefig(tmp, format="png", dpi=100))
-    finally:
-        plt.close(fig)
+    _save_png(fig, path)
 
 
 # ------------------------------------------------------------------------------------------------ anchor density
@@ -484,8 +490,4 @@ def _density_plot(table, path: Path, name: str, n_anchors: int) -> None:
     ax.set_ylabel("pooled mean horizontal error (m)")
     ax.set_title(f"{name}: mean error against the number of anchors (band: smallest to largest subset)", fontsize=9)
     ax.legend(fontsize=7)
-    fig.tight_layout()
-    try:
-        _atomic(path, lambda tmp: fig.savefig(tmp, format="png", dpi=100))
-    finally:
-        plt.close(fig)
+    _save_png(fig, path)

@@ -1,13 +1,14 @@
 """locbook: rerun, check and extend published RSSI indoor localization and tracking experiments.
 
-The public API is the table ``_API`` below (role, home module, names), listed in docs/architecture.md under "Public API": the
-channel and the one RSS measurement model; calibration and static localization; motion models, trajectories and
-inertial sensors; the Kalman family, particle and grid filters; bounds, metrics and Monte-Carlo helpers; measured
-data, methods of your own beside the battery (:class:`MethodInput`) and floor geometry; errors; and the reproduction
-layer (:class:`Report`, :func:`printed`, :class:`Ambiguity`).
+The public API is the table ``_API`` below (role, home module, names), listed in docs/architecture.md under
+"Public API": the channel and the one RSS measurement model; calibration and static localization; motion models,
+trajectories and inertial sensors; the Kalman family, particle and grid filters; bounds, metrics and Monte-Carlo
+helpers; measured data, methods of your own beside the battery (:class:`MethodInput`) and floor geometry; errors;
+and the reproduction layer (:class:`Report`, :func:`printed`, :class:`Ambiguity`).
 """
 __version__ = "0.1.0"
 
+from ._datalog import install_from_environment as _install_data_log
 from ._lazy import lazy_exports
 
 # (role, home module, names): the names a user calls, each imported on first use from its one home (PEP 562), so
@@ -88,7 +89,5 @@ _API = (
 _HOME = {name: module for _, module, names in _API for name in names}
 __all__ = ["__version__", *_HOME]
 __getattr__, __dir__ = lazy_exports(__name__, _HOME)
-
-from ._datalog import install_from_environment as _install_data_log
 
 _install_data_log()   # records the data files read under `locbook run` (no-op otherwise)

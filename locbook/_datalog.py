@@ -19,7 +19,8 @@ after it is seen as a change. A cached report is reused only while every file it
 The hook sees every read (``open``, numpy, pandas, csv alike), so no data access has to remember to register itself;
 the one exception is a method of your own (:mod:`locbook.user_methods`): its Python source is code the hook skips and
 may lie under no data root, so its loader logs the file with the hash of the bytes it ran (:func:`record_read`).
-Files under ``__pycache__`` (byte code, numba's caches) are build artefacts, not data. Outside ``locbook run`` nothing is installed.
+Files under ``__pycache__`` (byte code, numba's caches) are build artefacts, not data. Outside ``locbook run``
+nothing is installed.
 
 With ``LOCBOOK_MODULE_LOG`` (a file) the hook also logs the source of every locbook module the kernel imports (the
 import opens its ``.py`` or cached ``.pyc``; the modules imported before the hook, ``locbook/__init__.py`` and its

@@ -33,12 +33,25 @@ from __future__ import annotations
 
 import numpy as np
 
-from .battery import (STATIC_METHODS, TRACKER_PRIORS, TRACKERS, ProtocolChoice, StaticScenario, TrackerSettings, TrackingScenario,
-                      channel_settings, initial_states, run_trackers, static_bound_m, static_fixes, tracking_bound_m)
+from .battery import (
+    STATIC_METHODS,
+    TRACKER_PRIORS,
+    TRACKERS,
+    ProtocolChoice,
+    StaticScenario,
+    TrackerSettings,
+    TrackingScenario,
+    channel_settings,
+    initial_states,
+    run_trackers,
+    static_bound_m,
+    static_fixes,
+    tracking_bound_m,
+)
 from .geometry import box_outline
 from .metrics import accuracy_metrics, position_error_m, rmse_standard_error_m
-from .montecarlo import seed_from_values
 from .models.channel import PathLossModel
+from .montecarlo import seed_from_values
 from .scenarios import dogan, george, gudipati, ozkaya, palvai
 from .scenarios.measured import measured_static_scenario, measured_tracking_scenario
 
@@ -61,7 +74,8 @@ def _george_static() -> StaticScenario:
         box_outline((0, 0), (w, h)), george.trajectory_m("centerline"), 0.05,
         (ProtocolChoice("anchors", "4 corners (0,0) (2.1,0) (0,7.8) (2.1,7.8)", "Sec. 5"),
          *channel_settings(model, src),
-         ProtocolChoice("positions", "the 25 marked points on the centre line, y 0.3-7.5 m", "not printed; our default"),
+         ProtocolChoice("positions", "the 25 marked points on the centre line, y 0.3-7.5 m",
+                        "not printed; our default"),
          ProtocolChoice("grid pitch", "0.05 m", "benchmark: fine against the corridor's 2.1 m width")))
 
 
@@ -88,7 +102,8 @@ def _dogan_static() -> StaticScenario:
          ProtocolChoice("grid pitch", "0.1 m", "benchmark")))
 
 
-#: Gudipati's readings: shadowing 3 dB plus 1 dB per-packet noise (our defaults), as one i.i.d. term of the same variance
+#: Gudipati's readings: shadowing 3 dB plus 1 dB per-packet noise (our defaults), as one i.i.d. term of the same
+#: variance
 GUDIPATI_SIGMA_DB = float(np.hypot(gudipati.WalkSettings().shadowing_sigma_db, gudipati.WalkSettings().fast_sigma_db))
 
 
@@ -193,9 +208,10 @@ def _gudipati_tracking() -> TrackingScenario:
     return TrackingScenario(
         "gudipati2017-u-path", "gudipati2017", "U-path at 0.5 m/s, RSS every 0.5 s", st.anchors_m, st.channel,
         st.outline_m, pos, GUDIPATI_TRACKING_DT_S, 0.25, 0.2,
-        (*st.settings[:4], ProtocolChoice("path", "the U-path (2 m from the walls) at 0.5 m/s with 0.25 m/s^2 ramps and 1 m "
-                                           "turn radius; a step every 0.5 s (the thesis: 0.1 s); RSS only",
-                                   "path and timing not printed (ours); GUDIPATI_TRACKING_DT_S")))
+        (*st.settings[:4], ProtocolChoice("path",
+                                          "the U-path (2 m from the walls) at 0.5 m/s with 0.25 m/s^2 ramps and 1 m "
+                                          "turn radius; a step every 0.5 s (the thesis: 0.1 s); RSS only",
+                                          "path and timing not printed (ours); GUDIPATI_TRACKING_DT_S")))
 
 
 TRACKING_SCENARIOS = {"george-walk": _george_tracking, "ozkaya2011-constant-velocity": _ozkaya_tracking,
@@ -263,7 +279,8 @@ def _ratio_note(ratio: float, prior: str) -> str:
 
 def _row(kind, sc, method, cell, settings, runs, points, bound_name):
     prior = STATIC_METHODS[method].prior if kind == "static" else TRACKER_PRIORS.get(method, "")
-    return {"kind": kind, "scenario": sc.key, "document": sc.document, "data": "measured" if sc.measured else "synthetic",
+    return {"kind": kind, "scenario": sc.key, "document": sc.document,
+            "data": "measured" if sc.measured else "synthetic",
             "method": method, "runs": runs, "points": points, **cell, "ratio_note": _ratio_note(cell["ratio"], prior),
             "bound": bound_name, "settings": settings}
 
@@ -277,7 +294,8 @@ def static_cells(sc: StaticScenario, n_runs: int, rng: np.random.Generator, *, k
     bound = static_bound_m(sc)
     knobs = {"knn": f"k = {knn_k}" + ("" if sc.radio_map is not None else f", map pitch {knn_map_spacing_m:g} m"),
              "grid_ml": f"pitch {sc.grid_spacing_m:g} m", "grid_mmse": f"pitch {sc.grid_spacing_m:g} m",
-             "rss_ml": f"start: grid ML at {sc.grid_spacing_m:g} m", "rss_ml_free": f"start: grid ML at {sc.grid_spacing_m:g} m"}
+             "rss_ml": f"start: grid ML at {sc.grid_spacing_m:g} m",
+             "rss_ml_free": f"start: grid ML at {sc.grid_spacing_m:g} m"}
     rows = []
     for name, f in fixes.items():
         cell = score(position_error_m(f, sc.points_m), bound, measured=sc.measured, rng=rng_boot,
@@ -291,7 +309,8 @@ def tracking_cells(sc: TrackingScenario, ts: TrackerSettings, n_runs: int, rng: 
                    n_bootstrap: int, block_length: int = 30, with_divergence: bool = False):
     """Every tracker on one scenario: ``n_runs`` runs (fresh readings and prior draws; a measured scenario's one
     recording repeated, the runs differing in the prior draw and the particles: the benchmark's data columns come
-    from :func:`locbook.scenarios.measured.tracking_results` instead), scored at the scored ticks beside the PCRLB. Returns the rows, the estimates ``{tracker: (R, T, 2)}`` and the bound ``(T,)``; with
+    from :func:`locbook.scenarios.measured.tracking_results` instead), scored at the scored ticks beside the PCRLB.
+    Returns the rows, the estimates ``{tracker: (R, T, 2)}`` and the bound ``(T,)``; with
     ``with_divergence`` also ``{tracker: flags}`` of the Kalman-family trackers (:func:`run_trackers`). Every cell
     keeps every run."""
     rng_rss, rng_x0, rng_filters, rng_boot = rng.spawn(4)
@@ -300,7 +319,8 @@ def tracking_cells(sc: TrackingScenario, ts: TrackerSettings, n_runs: int, rng: 
     est, flags = run_trackers(sc, rss, x0, ts, rng_filters, with_divergence=True)
     bound = tracking_bound_m(sc, ts)
     steps = sc.scored_steps
-    common = f"q = {ts.q:g} m^2/s^4, dt = {sc.dt_s:g} s, P0 sd {ts.initial_position_sd_m:g} m / {ts.initial_velocity_sd_m_s:g} m/s"
+    common = (f"q = {ts.q:g} m^2/s^4, dt = {sc.dt_s:g} s, "
+              f"P0 sd {ts.initial_position_sd_m:g} m / {ts.initial_velocity_sd_m_s:g} m/s")
     knobs = {"kf_on_ml": common + f"; fixes: rss_ml (grid-ML start at {sc.grid_spacing_m:g} m)",
              "ekf": common, "ekf_serial": common, "ukf": common + f"; alpha = {ts.ukf_alpha:g}, beta = 2, kappa = 0",
              "imm": common + f"; manoeuvre mode {ts.imm_q_ratio:g} q, switching {ts.imm_switch_probability:g} per "

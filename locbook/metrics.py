@@ -7,7 +7,8 @@ with ``axis=-1``.
 Missing estimates: a problem an estimator could not solve has a NaN position (the library's missing-reading
 rule), and NaN propagates through these summaries on purpose, so a statistic is never silently computed over
 fewer problems than it claims. A numpy masked array follows the same rule: a masked entry is a NaN (the library's
-one converter, :func:`locbook._validate.as_array`), never left out silently. Drop them explicitly (``e[np.isfinite(e)]``) and report how many were dropped.
+one converter, :func:`locbook._validate.as_array`), never left out silently. Drop them explicitly
+(``e[np.isfinite(e)]``) and report how many were dropped.
 Infinite errors are never valid (an overflowed estimate is a failure to mark NaN, not a distance): they raise
 ``ValueError`` naming the argument, as do empty inputs and out-of-range options.
 """
@@ -110,7 +111,9 @@ def empirical_cdf(error_m):
 
 
 def reduction_pct(before, after):
-    """Relative reduction ``100 (before - after) / before`` (George and Vadivukkarasi: 2.2867 -> 1.0378 m is 54.62 %)."""
+    """Relative reduction ``100 (before - after) / before``.
+
+    George and Vadivukkarasi: 2.2867 -> 1.0378 m is 54.62 %."""
     before_arr, after_arr = as_array("before", before, nan_ok=True), as_array("after", after, nan_ok=True)
     if before_arr.ndim and after_arr.ndim and before_arr.shape != after_arr.shape:
         raise ValueError(f"before {before_arr.shape} and after {after_arr.shape} must have the same shape "
@@ -221,7 +224,8 @@ def _exclusion_note(name: str, estimate: float, low: float, high: float, boot: n
     share = float(np.mean(b < estimate) if side == "below" else np.mean(b > estimate))
     label = _LABELS[name]
     if name in _EDGE_STATISTICS:
-        reason = f"the {label} is a skewed statistic at the edge of its bootstrap distribution (set by the few largest errors)"
+        reason = (f"the {label} is a skewed statistic at the edge of its bootstrap distribution "
+                  "(set by the few largest errors)")
     elif n_blocks < _FEW_BLOCKS_FACTOR * min_blocks:
         few = (f"blocks for the {label} ({n_blocks:.3g} blocks of {block_length} epochs)" if block_length > 1 else
                f"epochs for the {label} ({n_blocks:g})")

@@ -48,7 +48,8 @@ def mc_standard_error(samples, axis: int = 0) -> np.ndarray:
     """Standard error of the mean along ``axis``: ``std(ddof=1) / sqrt(N)``. NaN (or a masked entry, which is a NaN)
     gives NaN: a standard error is never taken silently over fewer samples than it claims."""
     samples = as_array("samples", samples, nan_ok=True, inf_ok=True)
-    if not isinstance(axis, (int, np.integer)) or isinstance(axis, (bool, np.bool_)) or not -samples.ndim <= axis < samples.ndim:
+    if (not isinstance(axis, (int, np.integer)) or isinstance(axis, (bool, np.bool_))
+            or not -samples.ndim <= axis < samples.ndim):
         raise ValueError(f"axis must be an axis of samples (shape {samples.shape}), got {axis!r}")
     n = samples.shape[axis]
     if n < 2:

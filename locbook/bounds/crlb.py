@@ -37,10 +37,10 @@ import inspect
 
 import numpy as np
 
-from ..errors import DegenerateGeometryError, ParameterError
-from .._validate import as_array, check_choice, check_scalar
-from .._linalg import _location_information
 from .._deprecation import RENAMED_CRLB_FORMS, check_variant, renamed_constants, warn_deprecated
+from .._linalg import _location_information
+from .._validate import as_array, check_choice, check_scalar
+from ..errors import DegenerateGeometryError, ParameterError
 from ..models.channel import PathLossModel
 from ..models.rss import RssModel
 from ..static.localization import check_anchor_geometry
@@ -60,7 +60,8 @@ def _bound_model(model, who: str = "the bound") -> RssModel:
     what to pass: an RssModel without walls, with one set of anchors and parameters (no run or step axes)."""
     if not isinstance(model, RssModel):
         got = type(model).__name__
-        hint = " (give it to RssModel(anchors_m, channel, tag_height_m=...))" if isinstance(model, PathLossModel) else ""
+        hint = (" (give it to RssModel(anchors_m, channel, tag_height_m=...))" if isinstance(model, PathLossModel)
+                else "")
         raise ValueError(f"{who} takes model = RssModel(anchors_m, channel) (the anchors and a PathLossModel with the "
                          f"exponent, sigma and clamp), got {got}{hint}")
     if model.walls_m is not None and model.channel.wall_attenuation_db != 0.0:

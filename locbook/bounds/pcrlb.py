@@ -20,11 +20,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._validate import as_array, check_choice
-
-from .crlb import _bound_model, _old_form, _old_model, rss_position_information
 from .._deprecation import warn_deprecated
 from .._linalg import _mT
+from .._validate import as_array, check_choice
+from .crlb import _bound_model, _old_form, _old_model, rss_position_information
 
 __all__ = ["posterior_crlb", "position_bound_m", "rss_state_information", "linear_measurement_information",
            "PCRLB_FORMS"]
@@ -91,7 +90,8 @@ def linear_measurement_information(H, R):
     H = as_array("H", H, min_ndim=2)
     R = as_array("R", R, min_ndim=2)
     if R.shape[-2:] != (H.shape[-2],) * 2:
-        raise ValueError(f"R must have shape ({H.shape[-2]}, {H.shape[-2]}) for H with {H.shape[-2]} rows, got {R.shape}")
+        raise ValueError(f"R must have shape ({H.shape[-2]}, {H.shape[-2]}) for H with {H.shape[-2]} rows, "
+                         f"got {R.shape}")
     return _mT(H) @ _inv(R) @ H
 
 

@@ -19,8 +19,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import ParameterError
 from .._validate import as_array
+from ..errors import ParameterError
 from .crlb import NO_TRUTH_REASON
 
 __all__ = ["TRIM_FRACTION", "MIN_VALID_FRACTION", "MIN_VALID_EPOCHS", "BoundSummary", "summarize_bound",

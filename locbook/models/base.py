@@ -347,7 +347,8 @@ class LinearGaussian(MeasurementModel):
         self.H, self.R = H if isinstance(H, PerStep) else Hv, R if isinstance(R, PerStep) else np.asarray(R, float)
         self.offset = None if offset is None else as_array(f"{self.label}.offset", offset, min_ndim=1)
         if self.offset is not None and self.offset.shape[-1] != m:
-            raise ValueError(f"{self.label}: offset must have shape ({m},) or batch + (T, {m}), got {self.offset.shape}")
+            raise ValueError(f"{self.label}: offset must have shape ({m},) or batch + (T, {m}), "
+                             f"got {self.offset.shape}")
 
     @property
     def n_readings(self) -> int:
@@ -403,7 +404,8 @@ class LinearGaussian(MeasurementModel):
             raise ValueError(f"{self.label}.z has shape {np.shape(z)}, a column of {self.n_readings} readings per step "
                              f"(filterpy's (m, 1) z); pass batch + (T, m), e.g. z[..., 0] of shape {np.shape(z)[:-1]}")
         if m != self.n_readings:
-            raise ValueError(f"{self.label}.H must have {m} rows (one per component of z), got shape {np.shape(self.H)}")
+            raise ValueError(f"{self.label}.H must have {m} rows (one per component of z), "
+                             f"got shape {np.shape(self.H)}")
         if n_state is not None and self.n_state != n_state:
             raise ValueError(f"{self.label}.H must have shape (m, {n_state}) or batch + (m, {n_state}) (one column per "
                              f"state component), got {np.shape(self.H)}")

@@ -60,15 +60,17 @@ class RangeModel(MeasurementModel):
         self.per_step_sigma = bool(per_step_sigma)
         sigma = as_array(f"{name}: sigma_m", sigma_m, min_ndim=2 if per_step_sigma else 0)
         if sigma.ndim and sigma.shape[-1] not in (1, self.n_anchors):
-            raise ValueError(f"{name}: sigma_m must be a scalar or end in (1,) or ({self.n_anchors},) (one per anchor), "
-                             f"got shape {sigma.shape}")
+            raise ValueError(f"{name}: sigma_m must be a scalar or end in (1,) or ({self.n_anchors},) "
+                             f"(one per anchor), got shape {sigma.shape}")
         if not np.all(sigma > 0):
-            raise ValueError(f"{name}: sigma_m must be positive (m): a range's standard deviation; a missing range is a "
-                             "NaN reading, whose sigma is not used (give any positive value there)")
+            raise ValueError(f"{name}: sigma_m must be positive (m): a range's standard deviation; "
+                             "a missing range is a NaN reading, whose sigma is not used "
+                             "(give any positive value there)")
         self.sigma_m = sigma
         if position_index is not None:
             idx = np.asarray(position_index)
-            if idx.dtype == object or (idx.size and not np.issubdtype(idx.dtype, np.integer)) or idx.shape != (self.dim,):
+            if (idx.dtype == object or (idx.size and not np.issubdtype(idx.dtype, np.integer))
+                    or idx.shape != (self.dim,)):
                 raise ValueError(f"{name}: position_index must hold {self.dim} integer state indices (one per axis of "
                                  f"the positions), got {position_index!r}")
             position_index = idx
@@ -213,7 +215,8 @@ class RangeModel(MeasurementModel):
         if n_state is not None:
             if self.position_index is None:
                 raise ValueError(f"{self.name} in a Kalman-family stream is a model of states: give "
-                                 f"RangeModel(..., position_index=...) ({self.dim} state indices of the {n_state}-state)")
+                                 f"RangeModel(..., position_index=...) "
+                                 f"({self.dim} state indices of the {n_state}-state)")
             if np.max(self.position_index) >= n_state:
                 raise ValueError(f"{self.name}: position_index {self.position_index} is outside the {n_state}-state")
 

@@ -32,11 +32,16 @@ from functools import cached_property
 
 import numpy as np
 
-from .._linalg import _STATE_NOT_FINITE, _Singular, _location_information
+from .._linalg import _STATE_NOT_FINITE, _location_information, _Singular
 from .._validate import as_array, check_scalar
 from .base import MeasurementModel, PerStep, step_matrix
-from .channel import (PathLossModel, log_distance_gradient, log_distance_mean_dbm, require_path_loss_model,
-                      wall_crossings)
+from .channel import (
+    PathLossModel,
+    log_distance_gradient,
+    log_distance_mean_dbm,
+    require_path_loss_model,
+    wall_crossings,
+)
 
 __all__ = ["RssModel", "RssMeasurementModel", "rss_mean_jacobian", "LIKELIHOOD_BLOCK_VALUES"]
 
@@ -144,7 +149,8 @@ class RssModel(MeasurementModel):
             check_scalar("tag_height_m", self.tag_height_m)
         given = self.anchors_m
         per_step_anchors = isinstance(given, PerStep)
-        anchors = as_array("anchors_m", given.value if per_step_anchors else given, min_ndim=3 if per_step_anchors else 2)
+        anchors = as_array("anchors_m", given.value if per_step_anchors else given,
+                           min_ndim=3 if per_step_anchors else 2)
         if self.tag_height_m is not None and anchors.shape[-1] != 3:
             raise ValueError(f"anchors_m must end in (m, 3) (x, y, height) with tag_height_m (the tag moves in the "
                              f"plane z = tag_height_m), got {anchors.shape}")
@@ -180,8 +186,8 @@ class RssModel(MeasurementModel):
         for name in _CHANNEL_FIELDS:
             value = np.asarray(getattr(ch, name), float)
             if value.ndim and value.shape[-1] not in (1, m):
-                raise ValueError(f"channel.{name} must be a scalar or end in (1,) or ({m},) (one per anchor), got shape "
-                                 f"{value.shape}")
+                raise ValueError(f"channel.{name} must be a scalar or end in (1,) or ({m},) (one per anchor), "
+                                 f"got shape {value.shape}")
         if np.any(np.asarray(ch.path_loss_exp) <= 0):
             raise ValueError(f"channel.path_loss_exp must be positive, got {ch.path_loss_exp!r}")
         if self.walls_m is not None:
@@ -386,7 +392,8 @@ class RssModel(MeasurementModel):
         without a clamp is refused."""
         self.check_step(step)
         ch = self.channel
-        mean, grad, d2 = rss_mean_jacobian(self._points_offsets(x, step), _anchor_axis(self._param("ref_power_dbm", step)),
+        mean, grad, d2 = rss_mean_jacobian(self._points_offsets(x, step),
+                                           _anchor_axis(self._param("ref_power_dbm", step)),
                                            _anchor_axis(self._param("path_loss_exp", step)),
                                            ref_distance_m=ch.ref_distance_m, min_distance_m=self.clamp_m,
                                            jacobian=jacobian)

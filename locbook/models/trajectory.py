@@ -54,7 +54,8 @@ class Trajectory:
 
     def _arc_length(self) -> np.ndarray:
         if self.arc_length_m is None:
-            raise ParameterError("this trajectory has no arc_length_m (its maker did not record the travelled distance)")
+            raise ParameterError("this trajectory has no arc_length_m "
+                                 "(its maker did not record the travelled distance)")
         return self.arc_length_m
 
     def indices_every(self, spacing_m: float) -> np.ndarray:

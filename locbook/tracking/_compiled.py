@@ -21,11 +21,11 @@ import numpy as np
 
 from .._deprecation import past_wrappers
 from .._linalg import _mT
-from ._loop import _Setup
-from .results import KalmanResult
 from ..models.base import LinearGaussian
 from ..models.imu import InertialMeasurement
 from ..models.rss import RssModel
+from ._loop import _Setup
+from .results import KalmanResult
 from .transition import PerStep
 
 _NUMBA_ENABLED = os.environ.get("LOCBOOK_NUMBA", "1").strip().lower() not in ("0", "false", "no", "off")
@@ -270,9 +270,9 @@ def _call_kernel(kernel, args, name: str):
 
 def _compiled_ekf(setup: _Setup, measurements, predict_first: bool):
     """:func:`locbook.extended_kalman_filter` by the compiled kernel when it applies (numba installed and enabled, F
-    without run axes, the streams of the module docstring, a large enough problem), else None: the numpy loop then runs. It
-    also returns None when an update fails (a covariance that is not positive definite, a state that is not finite): the
-    numpy loop then redoes the filter and raises the library's error for it."""
+    without run axes, the streams of the module docstring, a large enough problem), else None: the numpy loop then runs.
+    It also returns None when an update fails (a covariance that is not positive definite, a state that is not finite):
+    the numpy loop then redoes the filter and raises the library's error for it."""
     F, Q, batch, T = setup.F, setup.Q, setup.batch, setup.T
     B = int(np.prod(batch, dtype=np.int64))
     if not _NUMBA_ENABLED or not setup.plain_motion:
@@ -296,7 +296,7 @@ def _compiled_ekf(setup: _Setup, measurements, predict_first: bool):
             np.ascontiguousarray(setup.x.reshape(B, n)), np.ascontiguousarray(P0), bool(predict_first),
             setup.slot.astype(np.int64), np.array(setup.active, dtype=np.bool_).reshape(-1, T), *packed, iner, out_x,
             out_P, out_nis, out_dof, out_ll, _block_width(B))
-    from . import _kernels           # lazy: numba loads only when the compiled path runs
+    from . import _kernels  # lazy: numba loads only when the compiled path runs
     status = _call_kernel(_kernels._nb_ekf, args, "EKF")
     if status is None or status:
         return None

@@ -13,13 +13,23 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._validate import as_array, call_user, function_output
-from .._linalg import (_Singular, _apply, _batch_shape, _check_state, _covariance, _mT, _raise_singular,
-                      _refuse_not_finite)
+from .._linalg import (
+    _apply,
+    _batch_shape,
+    _check_state,
+    _covariance,
+    _mT,
+    _raise_singular,
+    _refuse_not_finite,
+    _Singular,
+)
+from .._validate import as_array, function_output
+from ..models.base import step_matrix
 from .functional import _linear_update_shared, _Out
 from .results import KALMAN_OUTPUTS, KalmanResult
 from .streams import Stream
-from .transition import MotionModel, PerStep, _control_drift, _matrix_arg, step_matrix
+from .transition import MotionModel, PerStep, _control_drift, _matrix_arg
+
 
 @dataclass
 class _Setup:
@@ -107,8 +117,8 @@ def _setup(F, Q, x0, P0, measurements, record, filter_name, B=None, u=None) -> _
     else:
         shape = F.shape if isinstance(F, PerStep) else np.shape(F)
         if len(shape) < 2 or shape[-1] != shape[-2]:
-            raise ValueError(f"F must be square (n, n) or batch + (n, n), per_step(batch + (T, n, n)) or a motion model "
-                             f"(a NonlinearMotion, a KinematicModel), got shape {shape}")
+            raise ValueError("F must be square (n, n) or batch + (n, n), per_step(batch + (T, n, n)) "
+                             f"or a motion model (a NonlinearMotion, a KinematicModel), got shape {shape}")
         n = shape[-1]
     measurements = _streams(measurements)
     for meas in measurements:
@@ -442,8 +452,8 @@ def _run(setup: _Setup, measurements, update, predict_first: bool, *, shared: bo
             out_x[..., s, :] = x
             out_P.put(s, P)
     covariance = lambda record: None if record is None else record.array()
-    return KalmanResult(out_x, out_P.array(), steps, out_xp, covariance(out_Pp), out_nu, out_S, out_ll, out_nis, out_dof,
-                        P_cross=covariance(out_Pc), variant="literal_george" if literal else "corrected")
+    return KalmanResult(out_x, out_P.array(), steps, out_xp, covariance(out_Pp), out_nu, out_S, out_ll, out_nis,
+                        out_dof, P_cross=covariance(out_Pc), variant="literal_george" if literal else "corrected")
 
 
 class _CovarianceRecord:

@@ -515,15 +515,16 @@ def grid_bayes_filter(rss_dbm, model, cells_m, spread_m: float = 0.5, *, n_steps
     ``transition``: ``"dense"`` builds the ``C x C`` matrix (memory quadratic in the cells: its construction peaks
     at ``8 C^2 (dim + 3)`` bytes, 4 GB at 10,000 cells in 2-D); ``"separable"`` applies the same transition as one
     small matrix product per axis on the lattice of the cells' distinct coordinates (memory linear in the cells for a
-    grid, possibly masked by a floor outline; equal to the dense one up to rounding); ``"auto"`` (default) takes the separable form when that lattice
-    has at most 4 points per cell, which every regular grid has. Every array of the call (the belief, the outputs, the
-    dense construction's ``C x C x dim`` difference, the separable lattice per run) is checked against
-    :data:`MAX_ARRAY_BYTES` before it is allocated: beyond it, a ValueError naming ``cells_m`` (or the readings).
+    grid, possibly masked by a floor outline; equal to the dense one up to rounding); ``"auto"`` (default) takes the
+    separable form when that lattice has at most 4 points per cell, which every regular grid has. Every array of the
+    call (the belief, the outputs, the dense construction's ``C x C x dim`` difference, the separable lattice per run)
+    is checked against :data:`MAX_ARRAY_BYTES` before it is allocated: beyond it, a ValueError naming ``cells_m`` (or
+    the readings).
 
     Speed (issue 31). With an :class:`~locbook.models.rss.RssModel` whose mean does not change with the step (no
     per-step ``ref_power_dbm``, ``path_loss_exp`` or ``sigma_db``; walls allowed), the cell-by-anchor mean table is
-    computed once per call (per run for per-run anchors, up to :data:`locbook.models.rss.TABLE_MAX_VALUES` values) and each step's
-    log-likelihood from it, by the same arithmetic as :meth:`RssModel.log_likelihood
+    computed once per call (per run for per-run anchors, up to :data:`locbook.models.rss.TABLE_MAX_VALUES` values)
+    and each step's log-likelihood from it, by the same arithmetic as :meth:`RssModel.log_likelihood
     <locbook.models.rss.RssModel.log_likelihood>` (the same bits). From :data:`_GRID_MIN_WORK` runs x steps x
     cells on, with numba (``LOCBOOK_NUMBA=0`` turns it off), compiled kernels (:mod:`locbook.tracking._grid_kernels`)
     run the update (likelihood, posterior, moments, MAP, ``n_eff`` in a few passes per run) and, on a lattice whose

@@ -104,7 +104,8 @@ def fixed_lag_smoother(result: KalmanResult, lag: int, *, F=None, residual=None)
     estimate ``x_{j|j+L}``, ``P_{j|j+L}`` (what an online smoother reports at step j + L), for the last ``lag`` steps
     the estimates given all the readings (there is no later reading to wait for; they equal the full-interval RTS
     smoother's). So ``lag=0`` gives the filter's ``mean``, ``cov`` and ``lag >= T - 1`` gives
-    :func:`locbook.rts_smoother` on the whole run. Row j equals ``rts_smoother`` of the run truncated at step ``given_to[j]``, its row j.
+    :func:`locbook.rts_smoother` on the whole run. Row j equals ``rts_smoother`` of the run truncated at step
+    ``given_to[j]``, its row j.
 
     ``result``, ``F``, ``residual``: as :func:`locbook.rts_smoother` takes them (a standard run that recorded every
     step with ``outputs=("x_pred", "P_pred", "P_cross")``, or without ``P_cross`` its linear motion ``F``;

@@ -24,11 +24,24 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .._linalg import (
+    _UPDATE_OVERFLOW,
+    _apply,
+    _batch_shape,
+    _covariance,
+    _first_bad,
+    _gaussian_log_likelihood,
+    _inv_small,
+    _joseph,
+    _logdet,
+    _matrix,
+    _mT,
+    _not_positive_definite,
+    _Singular,
+    _solve_active,
+)
 from .._validate import as_array
 from ..errors import SingularCovarianceError
-from .._linalg import (_UPDATE_OVERFLOW, _Singular, _apply, _batch_shape, _covariance, _first_bad,
-                      _gaussian_log_likelihood, _inv_small, _joseph, _logdet, _matrix, _mT, _not_positive_definite,
-                      _solve_active)
 
 __all__ = ["predict", "update", "KalmanUpdate"]
 
@@ -166,8 +179,8 @@ def _linear_update(x, P, z, H, R, *, joseph: bool = True, want: bool = False) ->
     else:                                                     # K' = S^{-1} H P and S^{-1} nu from one solve
         n = P.shape[-1]
         both = np.broadcast_shapes(nu.shape[:-1], HP.shape[:-2])
-        rhs = np.concatenate([np.broadcast_to(HP, both + HP.shape[-2:]), np.broadcast_to(nu, both + nu.shape[-1:])[..., None]],
-                             axis=-1)
+        rhs = np.concatenate([np.broadcast_to(HP, both + HP.shape[-2:]),
+                              np.broadcast_to(nu, both + nu.shape[-1:])[..., None]], axis=-1)
         sol = _solve_active(S, rhs, valid.any(axis=-1))
         K = _mT(sol[..., :n])
         nis = np.einsum("...i,...i->...", nu, sol[..., n])

@@ -48,10 +48,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._linalg import _Singular, _check_state, _covariance, _mT, _raise_singular
+from .._linalg import _check_state, _covariance, _mT, _raise_singular, _Singular
 from .._validate import as_array
-from ._loop import _motion_apply, _motion_jacobian, _setup, _streams
 from ._loop import _check_outputs as _loop_check_outputs
+from ._loop import _motion_apply, _motion_jacobian, _setup, _streams
 from .results import FilterResult
 from .streams import _ekf_update
 from .transition import MotionModel, PerStep

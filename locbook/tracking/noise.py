@@ -26,20 +26,20 @@ exact for a linear-Gaussian model and to first order for the EKF's and UKF's lin
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
 import inspect
+from dataclasses import dataclass
 
 import numpy as np
 
 from .._validate import check_choice, check_scalar
 from ..errors import ConvergenceError
+from ..models.base import LinearGaussian
 from ._loop import _streams
 from .kalman import kalman_filter
+from .online import KALMAN_FILTERS
 from .smoother import rts_smoother
-from ..models.base import LinearGaussian
 from .streams import Stream
 from .transition import MotionModel, PerStep, _control_drift
-from .online import KALMAN_FILTERS
 
 __all__ = ["NoiseFit", "fit_noise_ml", "fit_noise_em", "NOISE_FORMS"]
 
@@ -314,7 +314,7 @@ _EXPAND = 2.0 ** np.arange(8)   # the per-run Newton tries its step times each o
 def _lbfgs_pooled(log_likelihood, runs, p: int, lo: float, hi: float, max_iter: int, tol: float, scale: float):
     """One multiplier vector for all runs: scipy's L-BFGS-B on the summed log-likelihood, its central-difference
     gradient from one filter call with the ``2p + 1`` candidates on a leading axis."""
-    from scipy.optimize import minimize           # lazy: keeps `import locbook` fast
+    from scipy.optimize import minimize  # lazy: keeps `import locbook` fast
     steps = np.concatenate([np.zeros((1, p)), _H * np.eye(p), -_H * np.eye(p)])     # centre, +h e_j, -h e_j
 
     def objective(theta):
@@ -441,8 +441,8 @@ def fit_noise_em(F, Q, x0, P0, measurement, *, B=None, u=None, n_iter: int = 10,
     history = []
 
     for it in range(n_iter + 1):
-        run = kalman_filter(F, Q, x0, P0, measurement.replace(model=measurement.model.with_noise(R)), B=B, u=u, predict_first=False,
-                            outputs=("x_pred", "P_pred", "P_cross"), divergence_window=0)
+        run = kalman_filter(F, Q, x0, P0, measurement.replace(model=measurement.model.with_noise(R)), B=B, u=u,
+                            predict_first=False, outputs=("x_pred", "P_pred", "P_cross"), divergence_window=0)
         history.append(run.total_log_likelihood)
         _check_em_step(history, per_run, it, z)
         if it == n_iter:

@@ -36,16 +36,17 @@ class OnlineFilter:
 
     ``kind``: ``"kf"``, ``"ekf"`` or ``"ukf"``. ``F``, ``Q``, ``B``: the motion as the batch filters take it (a
     ``per_step`` matrix is indexed by the step counter, and stepping past its last step is an error, as in the batch
-    call; a :class:`~locbook.tracking.transition.NonlinearMotion` with ``uses_step`` sees the step counter too). ``x0``, ``P0``: as the batch filters' (``predict_first``: the first
-    step predicts from them, else they are the prior of the first step). ``options``: the filter's other keywords
-    (``joseph``, ``alpha``, ``points``, ``divergence_window``, ...; ``record`` and ``outputs`` are per step: every
-    step's result holds its one step).
+    call; a :class:`~locbook.tracking.transition.NonlinearMotion` with ``uses_step`` sees the step counter too). ``x0``,
+    ``P0``: as the batch filters' (``predict_first``: the first step predicts from them, else they are the prior of the
+    first step). ``options``: the filter's other keywords (``joseph``, ``alpha``, ``points``, ``divergence_window``,
+    ...; ``record`` and ``outputs`` are per step: every step's result holds its one step).
 
-    :meth:`step` takes that step's measurement streams, their readings ``batch + (1, m)`` (one step), and optionally this step's ``F``, ``Q``, ``B``, ``u`` (``batch + (p,)``) in place of
-    the constructor's (this step's matrices: a ``per_step`` array is refused there; a step-aware NonlinearMotion sees
-    the step counter); it returns the step's :class:`~locbook.tracking.results.KalmanResult` and keeps the posterior.
-    Its ``diverged`` and ``diverged_step`` are the guard's verdict on every step so far (:func:`locbook.nis_divergence`
-    on the NIS history), as the batch call on the same steps would give.
+    :meth:`step` takes that step's measurement streams, their readings ``batch + (1, m)`` (one step), and optionally
+    this step's ``F``, ``Q``, ``B``, ``u`` (``batch + (p,)``) in place of the constructor's (this step's matrices: a
+    ``per_step`` array is refused there; a step-aware NonlinearMotion sees the step counter); it returns the step's
+    :class:`~locbook.tracking.results.KalmanResult` and keeps the posterior. Its ``diverged`` and ``diverged_step`` are
+    the guard's verdict on every step so far (:func:`locbook.nis_divergence` on the NIS history), as the batch call on
+    the same steps would give.
     """
 
     def __init__(self, kind: str, F, Q, x0, P0, *, B=None, predict_first: bool = True, outputs=(),

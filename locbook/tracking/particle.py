@@ -45,8 +45,9 @@ with ``weight_smoothing="none"``, the normalisation, the moments, N_eff and syst
 cumulative sum; the other schemes draw in numpy). The random stream is the numpy path's draw for draw, and so are the
 normalisation's sum (numpy's pairwise sum) and the systematic ancestors given the weights; the likelihood and the
 weights differ from numpy's in the last bits (the likelihood's log10 and the normalisation's exp are within 2 ulp of
-numpy's, the sum over the anchors is in order), so the weights agree to about 1e-14 relative, the resampling decisions and particles are the numpy path's unless a sample point falls within that
-of a cumulative weight, and the estimates agree to round-off (tests/test_particle_speed.py).
+numpy's, the sum over the anchors is in order), so the weights agree to about 1e-14 relative, the resampling decisions
+and particles are the numpy path's unless a sample point falls within that of a cumulative weight, and the estimates
+agree to round-off (tests/test_particle_speed.py).
 """
 from __future__ import annotations
 
@@ -55,15 +56,26 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._deprecation import keyword_rng
-from .._validate import as_array, check_choice, check_scalar
 from .._linalg import psd_root
-from ..models.motion import reflect_into_box
+from .._validate import as_array, check_choice, check_scalar
 from ..models.base import LinearMotion, MeasurementModel, MotionModel
+from ..models.motion import reflect_into_box
 from ..models.rss import RssModel
-from .bayes import (BayesFilterResult, _LIKELIHOOD, _callable_steps, _check_inputs, _check_size, _collapse_error,
-                    _normalise_log, _reading_detail, _velocity_schedule, _warn_collapse, weighted_moments)
-from .resampling import RESAMPLING_CDFS, RESAMPLING_METHODS, effective_sample_size, resample, systematic_resample
 from . import _compiled
+from .bayes import (
+    _LIKELIHOOD,
+    BayesFilterResult,
+    _callable_steps,
+    _check_inputs,
+    _check_size,
+    _collapse_error,
+    _normalise_log,
+    _reading_detail,
+    _velocity_schedule,
+    _warn_collapse,
+    weighted_moments,
+)
+from .resampling import RESAMPLING_CDFS, RESAMPLING_METHODS, effective_sample_size, resample, systematic_resample
 
 __all__ = ["particle_filter", "ParticleFilterResult", "kernel_map_estimate", "WEIGHT_SMOOTHINGS"]
 
@@ -114,7 +126,7 @@ def _fused_rss_log_likelihood(model: RssModel, rss_dbm, particles, step: int, po
     if with_walls and waf.ndim != 0:
         return None
     walls = np.ascontiguousarray(model.walls_m, dtype=float) if with_walls else np.zeros((0, 2, 2))
-    from . import _particle_kernels as K          # lazy: numba loads only when the compiled path runs
+    from . import _particle_kernels as K  # lazy: numba loads only when the compiled path runs
     sigma = np.asarray(model.sigma_at(step), dtype=float)
     z = np.ascontiguousarray(rss_dbm, dtype=float)
     x = np.asarray(particles, dtype=float)
@@ -436,7 +448,8 @@ def particle_filter(rss_dbm, model, *, rng: np.random.Generator, n_steps: int | 
             _check_cloud("initial_particles_m", np.shape(initial_particles_m))
         particles = as_array("initial_particles_m", initial_particles_m, ndim=3).copy()
         if particles.shape[1] == 0:
-            raise ValueError(f"initial_particles_m must hold at least one particle per run, got shape {particles.shape}")
+            raise ValueError("initial_particles_m must hold at least one particle per run, "
+                             f"got shape {particles.shape}")
     else:
         if n_particles is None:
             raise ValueError("give n_particles (with region_m or initial_position_m), or initial_particles_m")
@@ -493,7 +506,7 @@ def particle_filter(rss_dbm, model, *, rng: np.random.Generator, n_steps: int | 
     # -- the motion model ----------------------------------------------------------------------------
     compiled = _use_compiled(R * n)
     if compiled:
-        from . import _particle_kernels as K      # lazy: numba loads only when the compiled path runs
+        from . import _particle_kernels as K  # lazy: numba loads only when the compiled path runs
         particles = np.ascontiguousarray(particles, dtype=float)
     own_motion = False                        # the compiled random walk moves our own buffer in place
     fresh = False
@@ -537,7 +550,8 @@ def particle_filter(rss_dbm, model, *, rng: np.random.Generator, n_steps: int | 
                 x = x + velocity[t]
             return x if bounds is None else reflect_into_box(x, *bounds)
     elif not callable(transition):
-        raise ValueError(f"transition must be a callable transition(particles, t, rng), got {type(transition).__name__}")
+        raise ValueError("transition must be a callable transition(particles, t, rng), "
+                         f"got {type(transition).__name__}")
 
     # -- the recursion -------------------------------------------------------------------------------
     _check_size("rss_dbm" if is_model else "n_steps",

@@ -268,7 +268,7 @@ def nis_divergence(nis, nis_dof, window: int | None = DIVERGENCE_WINDOW,
     batch = nis.shape[:-1]
     if window == 0 or nis.shape[-1] < window or nis.size == 0:
         return np.zeros(batch, bool), np.full(batch, -1, np.int64)
-    from scipy.special import chdtri            # lazy: keeps `import locbook` fast
+    from scipy.special import chdtri  # lazy: keeps `import locbook` fast
     # the dimensions are small integers: one quantile each, looked up (inf for dof 0: never exceeded)
     table = np.concatenate([[np.inf], chdtri(np.arange(1, max(int(dof.max()), 1) + 1, dtype=float), 1.0 - probability)])
     T = nis.shape[-1]

@@ -2,8 +2,9 @@
 
 :func:`rts_smoother` is the Rauch-Tung-Striebel smoother (H. E. Rauch, F. Tung and C. T. Striebel, "Maximum
 likelihood estimates of linear dynamic systems", AIAA Journal 3(8), 1965) on the filtered and predicted moments and
-cross-covariances a :func:`~locbook.tracking.kalman.kalman_filter`, :func:`~locbook.tracking.kalman.extended_kalman_filter`
-or :func:`~locbook.tracking.unscented.unscented_kalman_filter` run records (for the UKF with nonlinear motion it is the
+cross-covariances a :func:`~locbook.tracking.kalman.kalman_filter`,
+:func:`~locbook.tracking.kalman.extended_kalman_filter` or :func:`~locbook.tracking.unscented.unscented_kalman_filter`
+run records (for the UKF with nonlinear motion it is the
 unscented RTS smoother), vectorized over the run's leading Monte-Carlo axes (the backward pass loops over time only).
 
 A singular predicted covariance (a deterministic state: Q = 0 with a known start, a zero-variance component) has a
@@ -121,7 +122,8 @@ def rts_smoother(result: KalmanResult, F=None, *, residual=None) -> SmoothedResu
     if residual is None:
         diff = lambda a, b: a - b
     elif not callable(residual):
-        raise ValueError(f"residual must be a callable residual(a, b) -> a - b of states, got {type(residual).__name__}")
+        raise ValueError("residual must be a callable residual(a, b) -> a - b of states, "
+                         f"got {type(residual).__name__}")
     else:
         def diff(a, b):
             out = np.asarray(residual(a, b), dtype=float)

@@ -38,9 +38,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .._linalg import _UPDATE_OVERFLOW, _Singular, _apply, _gaussian_log_likelihood, _mT
-from ._loop import _motion_apply, _motion_jacobian, _run, _setup, _streams
+from .._linalg import _UPDATE_OVERFLOW, _apply, _gaussian_log_likelihood, _mT, _Singular
 from ._loop import _check_outputs as _loop_check_outputs
+from ._loop import _motion_apply, _motion_jacobian, _run, _setup, _streams
 from .functional import _Out
 from .results import DIVERGENCE_PROBABILITY, DIVERGENCE_WINDOW, KALMAN_OUTPUTS, KalmanResult, _check_guard, _flag
 from .streams import Stream, _Serial, _serial_order, _serial_row

@@ -20,7 +20,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .._linalg import _LOG_2PI, _UPDATE_OVERFLOW, _Singular, _joseph
+from .._linalg import _LOG_2PI, _UPDATE_OVERFLOW, _joseph, _Singular
 from .._validate import as_array, check_choice
 from ..models.base import FunctionMeasurement, LinearGaussian, MeasurementModel, PerStep
 from ..models.channel import PathLossModel
@@ -160,7 +160,8 @@ def RssMeasurement(rss_dbm, model=None, channel: PathLossModel | None = None, po
         raise ValueError(f"{model.name}: a Kalman-family stream reads the state's position components: give "
                          f"position_index (RssModel(..., position_index=...))")
     z = as_array(f"{model.name}.rss_dbm", rss_dbm, min_ndim=2, nan_ok=True)
-    model.check_readings(z, int(np.max(model.state_position_index)) + 1)      # the stream's own shapes (the filter checks n)
+    # the stream's own shapes (the filter checks n)
+    model.check_readings(z, int(np.max(model.state_position_index)) + 1)
     return Stream(z, model, mode=mode, order=order)
 
 

@@ -32,7 +32,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .._validate import as_array, call_user, function_output
-from ..models.base import LinearMotion, MotionModel, PerStep, per_state_hint, per_step, step_matrix
+from ..models.base import LinearMotion, MotionModel, PerStep, per_state_hint, per_step
 
 __all__ = ["PerStep", "per_step", "NonlinearMotion", "LinearMotion", "MotionModel"]
 
@@ -79,7 +79,8 @@ class NonlinearMotion(MotionModel):
                                          f"{', k the step' if self.uses_step else ''}): {exc}; {hint}")
         except Exception as exc:
             n = np.shape(x)[-1:]
-            why = per_state_hint(f"{self.name}: {field}", getattr(self, field), x, args[1:], n if field == "f" else n * 2)
+            why = per_state_hint(f"{self.name}: {field}", getattr(self, field), x, args[1:],
+                                 n if field == "f" else n * 2)
             if why is None:
                 raise
             raise ValueError(f"{why} (it raised {type(exc).__name__}: {exc})") from None

@@ -47,19 +47,27 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .._validate import check_choice, check_scalar, function_output
 from .._deprecation import old_keyword, renamed_constants
-from ..models.rss import rss_mean_jacobian
-from .._linalg import (_UPDATE_OVERFLOW, _gaussian_log_likelihood, _inv_small, _logdet, _mT, _not_positive_definite,
-                      _refuse_not_finite, _Singular, _singular_runs)
+from .._linalg import (
+    _UPDATE_OVERFLOW,
+    _gaussian_log_likelihood,
+    _inv_small,
+    _logdet,
+    _mT,
+    _not_positive_definite,
+    _refuse_not_finite,
+    _Singular,
+    _singular_runs,
+)
+from .._validate import check_choice, check_scalar, function_output
+from ..models.base import check_output
 from ._loop import _check_outputs, _motion_apply, _run, _setup, _streams
 from .functional import _missing_as_nan, _Out
 from .results import DIVERGENCE_PROBABILITY, DIVERGENCE_WINDOW, KalmanResult, _check_guard, _flag
-from ..models.base import check_output
 from .streams import _diagonal_entry, _row, _Serial, _serial_order
 
-__all__ = ["UKF_VARIANTS", "SIGMA_POINT_SETS", "UnscentedWeights", "unscented_weights", "sigma_points", "unscented_transform",
-           "unscented_kalman_filter"]
+__all__ = ["UKF_VARIANTS", "SIGMA_POINT_SETS", "UnscentedWeights", "unscented_weights", "sigma_points",
+           "unscented_transform", "unscented_kalman_filter"]
 
 #: the weights' forms: corrected (they sum to 1) and Gudipati's printed W_m^0 (Eq. (3.22), flagged)
 UKF_VARIANTS = ("corrected", "literal_gudipati2017")
@@ -465,10 +473,10 @@ def unscented_kalman_filter(F, Q, x0, P0, measurements, *, B=None, u=None, alpha
 
 def _compiled_ukf(setup, measurements, predict_first: bool, weights: UnscentedWeights, innovation_noise: bool):
     """The UKF by the compiled kernel (:mod:`locbook.tracking._ukf_kernels`) when it applies (numba installed and
-    enabled, F without run axes (Q may have them) and no control input, LinearMeasurement, RssMeasurement and inertial streams,
-    at least ``_NUMBA_MIN_WORK`` run-steps, the EKF's threshold), else None: the numpy loop then runs. Also None when
-    an update fails or needs the eigenvalue guard on more than one reading (status of the kernel): the numpy loop then
-    redoes the filter and raises the library's error or applies the guard."""
+    enabled, F without run axes (Q may have them) and no control input, LinearMeasurement, RssMeasurement and inertial
+    streams, at least ``_NUMBA_MIN_WORK`` run-steps, the EKF's threshold), else None: the numpy loop then runs. Also
+    None when an update fails or needs the eigenvalue guard on more than one reading (status of the kernel): the numpy
+    loop then redoes the filter and raises the library's error or applies the guard."""
     from . import _compiled
     F, Q, batch, T = setup.F, setup.Q, setup.batch, setup.T
     B = int(np.prod(batch, dtype=np.int64))
@@ -494,12 +502,14 @@ def _compiled_ukf(setup, measurements, predict_first: bool, weights: UnscentedWe
     out_x, out_P = np.empty((B, S, n)), np.empty((B, S, n, n))
     out_nis, out_dof, out_ll = np.empty((B, T)), np.empty((B, T), np.int64), np.empty((B, T))
     out_floored = np.zeros(B, np.int64)
-    args = (Fi.astype(np.int64), Fj.astype(np.int64), np.ascontiguousarray(F[Fi, Fj]), _compiled._leading(Q, batch, B, (n, n)),
-            np.ascontiguousarray(setup.x.reshape(B, n)), np.ascontiguousarray(P0), bool(predict_first),
+    args = (Fi.astype(np.int64), Fj.astype(np.int64), np.ascontiguousarray(F[Fi, Fj]),
+            _compiled._leading(Q, batch, B, (n, n)), np.ascontiguousarray(setup.x.reshape(B, n)),
+            np.ascontiguousarray(P0), bool(predict_first),
             setup.slot.astype(np.int64), np.array(setup.active, dtype=np.bool_).reshape(-1, T), *packed, iner, umax,
-            np.ascontiguousarray(weights.mean, dtype=float), np.ascontiguousarray(weights.cov, dtype=float), float(n + weights.lam), bool(innovation_noise),
+            np.ascontiguousarray(weights.mean, dtype=float), np.ascontiguousarray(weights.cov, dtype=float),
+            float(n + weights.lam), bool(innovation_noise),
             lanes, out_x, out_P, out_nis, out_dof, out_ll, out_floored)
-    from . import _ukf_kernels       # lazy: numba loads only when the compiled path runs
+    from . import _ukf_kernels  # lazy: numba loads only when the compiled path runs
     done = _compiled._call_kernel(_ukf_kernels._nb_ukf, args, "UKF")
     if done is None or done[0]:     # (status, block): a failed update, the numpy loop redoes the filter
         return None

@@ -43,6 +43,7 @@ class PerStep:
     """An array whose axis ``-3`` is time: a matrix per step ``batch + (T, r, c)`` (made by :func:`per_step`)."""
 
     __slots__ = ("value",)
+    value: np.ndarray
 
     def __init__(self, value, name: str = "per_step value"):
         value = as_array(name, value.value if isinstance(value, PerStep) else value)
@@ -398,7 +399,7 @@ class LinearGaussian(MeasurementModel):
             shapes.append((f"{self.label}.offset", self.offset.shape[:-2]))
         return shapes
 
-    def check_readings(self, z, n_state: int) -> None:
+    def check_readings(self, z, n_state: int | None) -> None:
         T, m = np.shape(z)[-2:]
         if np.ndim(z) >= 3 and m == 1 and np.shape(z)[-2] == self.n_readings != 1:
             raise ValueError(f"{self.label}.z has shape {np.shape(z)}, a column of {self.n_readings} readings per step "
@@ -584,7 +585,7 @@ class FunctionMeasurement(MeasurementModel):
     def run_shapes(self) -> list:
         return [] if callable(self.R) else [(f"{self.name}.R", np.shape(self.R)[:-2])]
 
-    def check_readings(self, z, n_state: int) -> None:
+    def check_readings(self, z, n_state: int | None) -> None:
         if not callable(self.R):
             R = np.shape(self.R)
             if np.shape(z)[-1] == 1 and np.ndim(z) >= 3 and R[-1] == np.shape(z)[-2] != 1:
@@ -655,7 +656,7 @@ class MotionModel:
         Q = np.asarray(self.covariance(step), dtype=float)
         return None if not np.any(Q) else psd_root(f"{self.label}: covariance at step {step}", Q)
 
-    def mirrored_index(self) -> np.ndarray:
+    def mirrored_index(self) -> np.ndarray | None:
         """The state components whose sign a mirror reflection of the position reverses (velocity, acceleration),
         ``(k, dim)``: each row one derivative's components, aligned with the position components (the particle filter
         flips them when it folds a particle back into ``region_m``); an empty ``(0, dim)`` array folds the positions

@@ -213,7 +213,7 @@ class InertialMeasurement(MeasurementModel):
     def run_shapes(self) -> list:
         return [(f"{self.name}.R", self.R.shape[:-2])]
 
-    def check_readings(self, z, n_state: int) -> None:
+    def check_readings(self, z, n_state: int | None) -> None:
         super().check_readings(z, n_state)
         if n_state is not None and n_state != self.n_state:
             raise ValueError(f"{self.name}: the model is for a {self.n_state}-state, the filter's state has {n_state}")

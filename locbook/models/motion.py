@@ -27,6 +27,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from math import factorial
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -46,6 +47,11 @@ class _LinearKinematics(MotionModel):
 
     linear = True
     checks_own_output = True
+    if TYPE_CHECKING:   # each subclass computes its own
+        @property
+        def F(self) -> np.ndarray: ...
+        @property
+        def Q(self) -> np.ndarray: ...
 
     def apply(self, x, step: int = 0):
         return np.asarray(x, dtype=float) @ self.F.T

@@ -90,8 +90,8 @@ class RangeModel(MeasurementModel):
         """The dimension of the positions (the anchors' minus the height column)."""
         return self.anchors_m.shape[1] - (self.tag_height_m is not None)
 
-    @property
-    def position_dim(self) -> int:
+    @property   # the base's class default None, a read-only property here: the model is of positions
+    def position_dim(self) -> int:  # type: ignore[override]
         return self.dim
 
     @property

@@ -29,6 +29,7 @@ from __future__ import annotations
 import warnings
 from dataclasses import dataclass, replace
 from functools import cached_property
+from typing import Any
 
 import numpy as np
 
@@ -227,6 +228,8 @@ class RssModel(MeasurementModel):
         if self.anchors_m.ndim > 3:
             raise ValueError(f"{self.name}: anchors_m {self.anchors_m.shape} has more than one run axis; the particle "
                              f"and grid filters, the estimators and the bounds take (m, dim) or per run (R, m, dim)")
+        out: dict[str, Any]
+        runs: set[int]
         out, runs = {}, set()
         if self.anchors_m.ndim == 3:
             runs.add(self.anchors_m.shape[0])
@@ -314,8 +317,8 @@ class RssModel(MeasurementModel):
     def n_readings(self) -> int:
         return self.n_anchors
 
-    @property
-    def position_dim(self) -> int:
+    @property   # the base's class default None, a read-only property here: the model is of positions
+    def position_dim(self) -> int:  # type: ignore[override]
         """The model reads positions of this dimension (the particle and grid filters hand it a state's position
         components)."""
         return self.dim
@@ -617,6 +620,7 @@ class RssModel(MeasurementModel):
         positions_m, mean, _ = self._evaluate(positions_m, step, jacobian=False)
         ch = self.channel
         if self.walls_m is not None and ch.wall_attenuation_db != 0.0:
+            assert isinstance(self.anchors_m, np.ndarray)   # _evaluate's _one_run_axis refuses per-step anchors
             plan = self.anchors_m[..., :2]
             if plan.ndim == 3:
                 crossings = np.stack([wall_crossings(positions_m[r] if positions_m.ndim == 3 else positions_m,

@@ -14,6 +14,7 @@ or one per Monte-Carlo run) and two ways to make one along a waypoint path.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
@@ -75,9 +76,10 @@ class Trajectory:
     def head(self, n_steps: int) -> "Trajectory":
         """The first ``n_steps`` samples (and the RSS steps among them)."""
         n = int(check_scalar("n_steps", n_steps, gt=0))
-        cut = {name: None if getattr(self, name) is None else getattr(self, name)[..., :n]
+        cut: dict[str, Any] = {name: None if getattr(self, name) is None else getattr(self, name)[..., :n]
                for name in ("time_s", "heading_rad", "yaw_rate_rad_s", "arc_length_m")}
-        motion = {name: getattr(self, name)[..., :n, :] for name in ("position_m", "velocity_m_s", "acceleration_m_s2")}
+        motion: dict[str, Any] = {name: getattr(self, name)[..., :n, :]
+                                  for name in ("position_m", "velocity_m_s", "acceleration_m_s2")}
         rss = None if self.rss_steps is None else self.rss_steps[self.rss_steps < n]
         return replace(self, **cut, **motion, rss_steps=rss)
 

@@ -89,10 +89,14 @@ from __future__ import annotations
 import sys
 import warnings
 from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
 from .._validate import as_array, check_scalar
+
+if TYPE_CHECKING:
+    from types import FrameType
 
 __all__ = ["FilterResult", "KalmanResult", "nis_divergence", "nees", "DIVERGENCE_WINDOW", "DIVERGENCE_PROBABILITY",
            "KALMAN_OUTPUTS"]
@@ -108,6 +112,7 @@ KALMAN_OUTPUTS = ("x_pred", "P_pred", "P_cross", "innovation", "S")
 def _warn_renamed(what: str, new: str) -> None:
     """The one ``DeprecationWarning`` of an old name, attributed to the first frame outside this module and
     :mod:`dataclasses` (the caller's line, also through ``dataclasses.replace``)."""
+    frame: FrameType | None
     level, frame = 2, sys._getframe(1)
     while frame is not None and frame.f_globals.get("__name__") in (__name__, "dataclasses"):
         level, frame = level + 1, frame.f_back
@@ -153,6 +158,10 @@ class FilterResult(metaclass=_Renames):
     #: position_m without an index: the whole mean (a filter whose state is a position) or an error (a state of
     #: several physical quantities, e.g. position and velocity: the index is the caller's to say)
     _WHOLE_MEAN_IS_POSITION = False
+
+    if TYPE_CHECKING:   # every result class declares these two among its dataclass fields
+        mean: np.ndarray
+        diverged: np.ndarray | None
 
     @property
     def n_diverged(self) -> int:
@@ -221,7 +230,8 @@ class KalmanResult(FilterResult):
     def total_log_likelihood(self) -> np.ndarray:
         """``batch``: the log-likelihood of all the readings, the sum over the steps (those without an update add
         nothing)."""
-        return np.nansum(self.log_likelihood, axis=-1)
+        # every filter records it; None only in a result built by hand without it, which numpy then refuses
+        return np.nansum(cast(np.ndarray, self.log_likelihood), axis=-1)
 
 
 def _check_guard(window, probability):

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass, field
+from typing import Any, cast
 
 import numpy as np
 
@@ -256,6 +257,10 @@ class _SeparableTransition:
     between numerator and ``Z``), as the dense matrix subtracts its column maxima, so that a narrow kernel does not
     underflow."""
 
+    _v: np.ndarray | None       # the velocity the kernels _k and normaliser _z are for (None: not prepared)
+    _k: list[np.ndarray]
+    _z: np.ndarray
+
     def __init__(self, cells_m: np.ndarray, spread_m: float):
         self.dim = cells_m.shape[1]
         axes = [np.unique(cells_m[:, a], return_inverse=True) for a in range(self.dim)]
@@ -265,7 +270,8 @@ class _SeparableTransition:
         self.n_cells = cells_m.shape[0]
         self.mask = np.zeros(tuple(values.size for values in reversed(self.coords)))
         self.mask[self.index] = 1.0
-        self._v, self._k, self._z = None, None, None
+        # None until _prepare, which every reader of _k and _z calls first
+        self._v, self._k, self._z = None, None, None  # type: ignore[assignment]
 
     @staticmethod
     def lattice_size(cells_m: np.ndarray) -> int:
@@ -337,6 +343,10 @@ class _BandedLattice:
     spanning more than 700 in the exponent (a velocity carrying the targets far outside the lattice), are left to
     :class:`_SeparableTransition` (``prepare`` returns False). The work per run is ``C (K_x + K_y)`` multiply-adds
     (``K`` the number of taps: 85 per axis at ``D = 5 h``) instead of ``C (n_x + n_y)``."""
+
+    _v: np.ndarray | None       # the velocity the plan is for (None: not prepared)
+    _plan: dict | None          # None: not applicable at that velocity
+    _zinv: np.ndarray | None
 
     def __init__(self, cells_m: np.ndarray, spread_m: float, spacing):
         self.dim = cells_m.shape[1]
@@ -459,8 +469,8 @@ def _points_log_likelihood(model: MeasurementModel, rss_dbm, cells_m, n_runs: in
     """``t -> (R, C)``: the model's log-likelihood of step ``t``'s readings on the cells (up to a constant per run),
     through the model's own fixed-points form when it has one (an RssModel's mean table), else its
     :meth:`~locbook.models.base.MeasurementModel.log_likelihood`, checked."""
-    if type(model) in _MEAN_TABLES:
-        return model.points_log_likelihood(rss_dbm, cells_m, n_runs)
+    if type(model) in _MEAN_TABLES:     # an RssModel (the table's one key)
+        return cast(RssModel, model).points_log_likelihood(rss_dbm, cells_m, n_runs)
 
     def ll(t):
         out = np.asarray(model.log_likelihood(rss_dbm[:, t], cells_m, step=t), dtype=float)
@@ -628,6 +638,8 @@ def grid_bayes_filter(rss_dbm, model, cells_m, spread_m: float = 0.5, *, n_steps
         kernels = _grid_kernels()
         if kernels is not None and separable is not None:
             banded = _BandedLattice.build(cells_m, spread_m)
+    dense: np.ndarray | None
+    last_v: Any        # the velocity dense is for (None: not built yet)
     dense, last_v = None, None
     dead = np.zeros(n_runs, bool)
     dead_step = np.full(n_runs, -1, np.int64)

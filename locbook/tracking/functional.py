@@ -20,7 +20,7 @@ The filters (:func:`locbook.kalman_filter`, :func:`locbook.extended_kalman_filte
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -69,11 +69,12 @@ class _Out(NamedTuple):
 
     x: np.ndarray
     P: np.ndarray
-    nis: object
-    dof: object
-    ll: object
-    nu: object = None
-    S: object = None
+    nis: np.ndarray
+    dof: np.ndarray | int
+    ll: np.ndarray
+    # arrays when the caller asked for them (its ``want``), else None: Any, as only that flag tells which
+    nu: Any = None
+    S: Any = None
 
 
 def _square(name: str, value) -> np.ndarray:

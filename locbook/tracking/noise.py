@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import inspect
 from dataclasses import dataclass
+from typing import Any, cast
 
 import numpy as np
 
@@ -209,7 +210,8 @@ def fit_noise_ml(F, Q, x0, P0, measurements, *, kind: str = "kf", fit_Q: str | N
     if not 0 < lo <= 1 <= hi:
         raise ValueError(f"scale_bounds must be (low, high) with 0 < low <= 1 <= high, got {scale_bounds!r}")
     if Q is None and isinstance(F, MotionModel):    # the motion's own Q, the starting point of the fit
-        Q = F.Q if F.linear else F.covariance(0)
+        # a linear motion model holds constant F and Q (the protocol's `linear`)
+        Q = cast(Any, F).Q if F.linear else F.covariance(0)
     if Q is None:
         raise ValueError("fit_noise_ml needs Q (n, n): the starting point and the shape of what is fitted")
     params = _Parameters(Q, streams, fit_Q, fit_R)
@@ -325,15 +327,19 @@ def _lbfgs_pooled(log_likelihood, runs, p: int, lo: float, hi: float, max_iter: 
             return np.inf, np.zeros(p)
         return value, -(ll[1:p + 1] - ll[p + 1:]) / (2 * _H)
 
+    # (scipy-stubs types options as a TypedDict of float | numpy floating entries; this dict, built once for both
+    # calls, is inferred dict[str, float], which no overload takes: the ignores below)
     options = {"maxiter": max_iter, "ftol": tol, "gtol": 1e-7 * max(scale, 1.0)}
-    res = minimize(objective, np.zeros(p), jac=True, method="L-BFGS-B", bounds=[(lo, hi)] * p, options=options)
+    res = minimize(objective, np.zeros(p), jac=True, method="L-BFGS-B",  # type: ignore[call-overload]
+                   bounds=[(lo, hi)] * p, options=options)
     if not res.success and "ABNORMAL" in str(res.message):
         # the line search failed: near the optimum the central-difference gradient of a large summed log-likelihood
         # carries round-off that can contradict the step (the same point ends "converged" or "abnormal" with the
         # compiled kernels' or numpy's summation order). Restart once from there with a fresh curvature memory: a
         # restart that cannot lower the objective either confirms the point is as converged as the objective's
         # precision allows; one that moves it continues from there
-        again = minimize(objective, res.x, jac=True, method="L-BFGS-B", bounds=[(lo, hi)] * p, options=options)
+        again = minimize(objective, res.x, jac=True, method="L-BFGS-B",  # type: ignore[call-overload]
+                         bounds=[(lo, hi)] * p, options=options)
         if again.success:
             res = again
         elif again.fun >= res.fun - tol * max(abs(res.fun), 1.0):
@@ -351,7 +357,7 @@ def _newton_per_run(log_likelihood, runs, p: int, lo: float, hi: float, max_iter
     doubled as long as the likelihood keeps rising. A run stops when its accepted step changes no multiplier by more
     than 1e-6 (relative) or raises its log-likelihood by no more than ``tol`` (relative)."""
     pairs = [(i, j) for i in range(p) for j in range(i + 1, p)]
-    stencil = [np.zeros(p)] + [s * _H * np.eye(p)[i] for s in (1, -1) for i in range(p)] + \
+    stencil: Any = [np.zeros(p)] + [s * _H * np.eye(p)[i] for s in (1, -1) for i in range(p)] + \
         [_H * (np.eye(p)[i] + np.eye(p)[j]) for i, j in pairs]
     stencil = np.array(stencil).reshape((len(stencil),) + (1,) * len(runs) + (p,))
     theta = np.zeros(runs + (p,))
@@ -412,12 +418,12 @@ def fit_noise_em(F, Q, x0, P0, measurement, *, B=None, u=None, n_iter: int = 10,
     else the runs' statistics are pooled. ``history``: the log-likelihood before each iteration and at the end (it never
     decreases, up to round-off)."""
     check_scalar("n_iter", n_iter, ge=1, integer=True)
-    model = getattr(measurement, "model", None)
+    model: Any = getattr(measurement, "model", None)   # whatever it is: checked by what it has, below
     terms = model.constant_terms(0) if getattr(model, "linear", False) else None
     if terms is None or measurement.mode != "parallel" or getattr(model, "per_step_fields", lambda: False)():
         raise ValueError("fit_noise_em takes one parallel LinearMeasurement with one constant H (m, n) and R")
-    if isinstance(F, MotionModel) and F.linear:
-        F, Q = F.F, (F.Q if Q is None else Q)
+    if isinstance(F, MotionModel) and F.linear:    # a linear motion model holds constant F and Q
+        F, Q = cast(Any, F).F, (cast(Any, F).Q if Q is None else Q)
     if isinstance(F, MotionModel) or isinstance(Q, PerStep) or np.ndim(Q) != 2:
         raise ValueError("fit_noise_em fits the linear model: F a matrix (n, n) or per_step(F), Q one (n, n) "
                          "covariance (a NonlinearMotion or a per-step Q has no closed-form M-step here)")
@@ -438,7 +444,7 @@ def fit_noise_em(F, Q, x0, P0, measurement, *, B=None, u=None, n_iter: int = 10,
     _check_em_readings(z, per_run)
     Fs = F.value if isinstance(F, PerStep) else np.asarray(F, dtype=float)[..., None, :, :]
     drift, _ = _control_drift(B, u, n, T)
-    history = []
+    history: Any = []      # one log-likelihood per iteration; one array at the end
 
     for it in range(n_iter + 1):
         run = kalman_filter(F, Q, x0, P0, measurement.replace(model=measurement.model.with_noise(R)), B=B, u=u,

@@ -74,7 +74,8 @@ class OnlineFilter:
         self._options = options
         self._window, self._probability = _check_guard(divergence_window, divergence_probability)
         self.log_likelihood = 0.0
-        self._nis, self._dof = [], []
+        self._nis: list[np.ndarray] = []
+        self._dof: list[np.ndarray] = []
 
     def _at(self, value, k: int, name: str):
         """A constructor argument at step ``k``: a per-step matrix sliced to its step (kept per step), a step-aware
@@ -103,6 +104,8 @@ class OnlineFilter:
                                         B=B if u is not None else None, u=u,
                                         predict_first=self._predict_next, outputs=self._outputs, divergence_window=0,
                                         **self._options)
+        # every Kalman-family filter records these three (None only in a result built by hand)
+        assert res.log_likelihood is not None and res.nis is not None and res.nis_dof is not None
         self.x, self.P = res.mean[..., -1, :], res.cov[..., -1, :, :]
         self._predict_next = True
         self.step_index += 1

@@ -52,6 +52,7 @@ agree to round-off (tests/test_particle_speed.py).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -133,6 +134,7 @@ def _fused_rss_log_likelihood(model: RssModel, rss_dbm, particles, step: int, po
     x3 = x if x.ndim == 3 else x[None]
     m, dim = model.n_anchors, model.dim
     pidx = np.arange(dim, dtype=np.int64) if position_index is None else np.asarray(position_index, np.int64)
+    assert isinstance(model.anchors_m, np.ndarray)  # per-step anchors: refused by the filter's input check
     anchors = model.anchors_m if model.anchors_m.ndim == 3 else model.anchors_m[None]
     plan = np.ascontiguousarray(anchors[..., :dim], dtype=float)
     vert2 = (np.zeros((1, m)) if model.tag_height_m is None
@@ -428,7 +430,7 @@ def particle_filter(rss_dbm, model, *, rng: np.random.Generator, n_steps: int | 
 
     # -- the prior -----------------------------------------------------------------------------------
     # dim: the length of a particle (the state with motion); pos_dim: of its position (what region_m bounds)
-    pos_dim = getattr(model, "position_dim", None) if is_model else None
+    pos_dim: int | None = getattr(model, "position_dim", None) if is_model else None
     if kin is not None:
         if pos_dim is not None and kin.position_index.size != pos_dim:
             raise ValueError(f"motion has {kin.position_index.size} position axes, the {model.label} {pos_dim}")
@@ -484,6 +486,7 @@ def particle_filter(rss_dbm, model, *, rng: np.random.Generator, n_steps: int | 
                 if kin is None:
                     particles = particles + initial_sd_m * rng.standard_normal(shape)
                 else:
+                    assert pos_dim is not None      # the motion's position axes (set with kin above)
                     particles[..., kin.position_index] += initial_sd_m * rng.standard_normal(shape[:2] + (pos_dim,))
                 particles = confine(particles)
             elif initial_covariance is not None:
@@ -496,6 +499,8 @@ def particle_filter(rss_dbm, model, *, rng: np.random.Generator, n_steps: int | 
                 z = rng.standard_normal(shape[:2] + (root.shape[-1],))
                 particles = confine(particles + (z @ root.T if root.ndim == 2 else
                                                  np.einsum("rnk,rdk->rnd", z, root)))
+    R: int     # (the shape of an array: ints)
+    n: int
     R, n, d = particles.shape
     if n_runs is not None and R != n_runs or dim is not None and d != dim:
         raise ValueError(f"the particles {particles.shape} must be (runs, N, dim) with the {n_runs} runs of rss_dbm "
@@ -649,6 +654,7 @@ def particle_filter(rss_dbm, model, *, rng: np.random.Generator, n_steps: int | 
             if last and do.any():
                 final_log_w[do] = np.log(1.0 / n)
         else:
+            idx: Any        # the ancestors of the runs resampled (None when none is)
             if resampling == "systematic":
                 u = rng.random(R)
                 idx = systematic_resample(draw_w[do], u[do], resampling_cdf) if do.any() else None
@@ -670,7 +676,8 @@ def particle_filter(rss_dbm, model, *, rng: np.random.Generator, n_steps: int | 
             if t in cloud_steps:
                 clouds[t][dead] = np.nan
     if fast:
-        w = ll_buf = spare = None             # the loop's buffers go before the result's arrays are made
+        # the loop's buffers go before the result's arrays are made (none is read after this)
+        w = ll_buf = spare = None  # type: ignore[assignment]
     weights = np.exp(log_w)
     weights /= weights.sum(axis=-1, keepdims=True)
     if dead.any():

@@ -89,7 +89,7 @@ from __future__ import annotations
 import sys
 import warnings
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, cast
+from typing import TYPE_CHECKING, TypeVar, cast
 
 import numpy as np
 
@@ -332,7 +332,10 @@ def nees(x_true, x, P, *, index=None):
     return np.where(ok, np.einsum("...i,...i->...", e, sol), np.nan)
 
 
-def _flag(res: KalmanResult, window: int, probability: float) -> KalmanResult:
+_KalmanLike = TypeVar("_KalmanLike", bound="KalmanResult")    # _flag keeps the result's class
+
+
+def _flag(res: _KalmanLike, window: int, probability: float) -> _KalmanLike:
     """``res`` with the guard's ``diverged`` and ``diverged_step`` (module docstring)."""
     diverged, step = nis_divergence(res.nis, res.nis_dof, window, probability)
     return replace(res, diverged=diverged, diverged_step=step)

@@ -91,7 +91,8 @@ class Stream:
     def __repr__(self) -> str:
         return f"Stream(z of shape {self.z.shape}, {type(self.model).__name__} {self.name!r}, mode={self.mode!r})"
 
-    __hash__ = None             # readings are arrays: a stream is not hashable
+    # readings are arrays: a stream is not hashable (mypy types object's __hash__ as a method, never None)
+    __hash__ = None  # type: ignore[assignment]
 
 
 def LinearMeasurement(z, H, R, mode: str = "parallel", offset=None) -> Stream:
@@ -171,7 +172,7 @@ def NonlinearMeasurement(z, h, R, jacobian=None, name: str = "nonlinear measurem
     (:class:`~locbook.models.base.FunctionMeasurement`: ``h``, its ``jacobian`` for the EKF, ``R`` fixed or a function
     of the state, ``residual`` and ``mean`` for readings on a circle). ``z``: ``batch + (T, m)``, NaN = missing."""
     zz = as_array(f"{name}: z", z, min_ndim=2, nan_ok=True)
-    R_shape = () if callable(R) else np.shape(R)
+    R_shape: tuple[int, ...] = () if callable(R) else np.shape(R)
     if zz.shape[-1] == 1 and zz.ndim >= 3 and len(R_shape) >= 2 and R_shape[-1] == R_shape[-2] == zz.shape[-2] != 1:
         raise ValueError(f"{name}: z has shape {zz.shape}, a column of {R_shape[-1]} readings per step "
                          f"(filterpy's (m, 1) z); pass batch + (T, m), e.g. z[..., 0] of shape {zz.shape[:-1]}")
@@ -242,13 +243,15 @@ class _Serial:
     def out(self, x, P, dof) -> _Out:
         if self.nu is None:
             return _Out(x, P, self.nis, dof, self.ll)
+        assert self.var is not None     # made together with nu
         m = self.nu.shape[-1]
         S = np.where(np.eye(m, dtype=bool), self.var[..., :, None], 0.0)
         S = np.where(np.isnan(self.var)[..., :, None] | np.isnan(self.var)[..., None, :], np.nan, S)
         return _Out(x, P, self.nis, dof, self.ll, self.nu, S)
 
 
-def _serial_row(model: MeasurementModel, x, z, a, step: int):
+def _serial_row(model: MeasurementModel, x, z, a, step: int
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
     """The linearisation of reading ``a`` (an int, or per run ``batch``) at the state so far ``x``: ``(present,
     innovation (NaN where missing), the Jacobian's row batch + (n,), the reading's variance)``, or None when no run
     has that reading (one serial update of :func:`_serial_ekf_update` and the square-root form)."""

@@ -44,6 +44,7 @@ raises the library's error or applies the guard. Both paths give the same number
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
@@ -346,6 +347,8 @@ def _unscented_stream_update(x, P, z, stream, step: int, want: bool, weights, in
                            innovation_noise, guard, want, model, step)
     m = z.shape[-1]
     order = _serial_order(z, stream.order)
+    a: Any      # reading j, or per run an array of indices when the stream has an order
+    dof: np.ndarray | int
     acc, dof = _Serial(x.shape[:-1], m, want), 0
     for j in range(m):
         a = j if order is None else order[..., j]

@@ -194,7 +194,7 @@ def _velocity_schedule(velocity_m, n_steps, dim: int = 2):
 def grid_transition_matrix(cells_m, spread_m: float, velocity_m=None):
     """Transition ``T[l, l'] = P(L_t = c_l | L_t-1 = c_l')`` on cells ``(C, dim)``: the process model
     ``L_t = L_t-1 + v + N(0, D^2 I)`` of Ozkaya (2011), Eq. (4.2), with ``D = spread_m`` (Eqs. (4.10)-(4.15) state
-    the Gaussian model of std D; its discretisation on the grid is ours),
+    the Gaussian model of std D; its discretisation on the grid is ours)::
 
         T[l, l'] = K(c_l - c_l' - v) / sum_k K(c_k - c_l' - v),   K(u) = exp(-|u|^2 / (2 D^2)),
 

@@ -58,10 +58,11 @@ def kalman_filter(F, Q, x0, P0, measurements, *, B=None, u=None, record=None, pr
     measurements : a :class:`LinearMeasurement` (readings ``batch + (T, m)``, H, R) or a list of them on one time
         grid, applied in order at each step. A NaN reading is a missing component: the update uses those present
         and a step without any is prediction only. ``T = 0`` steps give an empty result.
-    record : step indices to keep (default all); ``outputs``: optional fields among ``("x_pred", "P_pred",
-        "P_cross", "innovation", "S")`` to keep at those steps (:class:`~locbook.tracking.results.KalmanResult`).
+    record : step indices to keep (default all).
+    outputs : optional fields to keep at those steps, among
+        ``("x_pred", "P_pred", "P_cross", "innovation", "S")`` (:class:`~locbook.tracking.results.KalmanResult`).
     variant : ``"corrected"`` (the standard recursion) or ``"literal_george"`` (Eqs. (11)-(13) of George and
-        Vadivukkarasi as printed: each update starts from the previous posterior; ``x_pred``/``P_pred`` are then that
+        Vadivukkarasi as printed: each update starts from the previous posterior; ``x_pred`` and ``P_pred`` are then that
         posterior).
     joseph : the Joseph-form covariance update (keeps P symmetric positive definite); False: ``(I - K H) P``.
     divergence_window, divergence_probability : the consistency guard (:mod:`locbook.tracking.results`): a run whose

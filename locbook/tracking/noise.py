@@ -401,7 +401,7 @@ def fit_noise_em(F, Q, x0, P0, measurement, *, B=None, u=None, n_iter: int = 10,
     (``predict_first=False``: pykalman's convention; the step that moves the prior is not part of the model).
 
     E-step: :func:`locbook.kalman_filter` and :func:`locbook.rts_smoother` give the smoothed means ``m_k``,
-    covariances ``V_k`` and lag-one cross-covariances ``V_{k+1,k} = V_{k+1} G_k^T`` (G the smoother gains). M-step:
+    covariances ``V_k`` and lag-one cross-covariances ``V_{k+1,k} = V_{k+1} G_k^T`` (G the smoother gains). M-step::
 
         Q = 1/(T-1) sum_k [e_k e_k^T + F V_k F^T + V_{k+1} - V_{k+1,k} F^T - F V_{k+1,k}^T],
             e_k = m_{k+1} - F m_k - B u_{k+1}      (F = F_{k+1})

@@ -66,7 +66,16 @@ def mean_error_m(error_m, axis=None):
 
 
 def rmse_m(error_m, axis=None):
-    """Root mean square of the Euclidean errors."""
+    """Root mean square of the Euclidean errors.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import locbook as lb
+    >>> errors = lb.position_error_m(np.array([[3.0, 4.0], [0.0, 0.0]]), np.zeros(2))
+    >>> print(errors, round(float(lb.rmse_m(errors)), 4))              # sqrt((25 + 0) / 2)
+    [5. 0.] 3.5355
+    """
     error_m = _errors("error_m", error_m)
     return np.sqrt(np.mean(np.square(error_m), axis=axis))
 

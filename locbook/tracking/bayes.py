@@ -540,6 +540,19 @@ def grid_bayes_filter(rss_dbm, model, cells_m, spread_m: float = 0.5, *, n_steps
     number of such runs, the first run and step, its readings); when every run collapses it raises a ValueError
     naming ``rss_dbm`` (or ``log_likelihood``) and the first step instead (nothing can be estimated: a units bug,
     not a result).
+
+    Examples
+    --------
+    The readings of :func:`locbook.particle_filter`'s example on a 0.5 m grid: the posterior mean is on the bisector
+    (x = 5 m), and by symmetry at y = 0.
+
+    >>> import numpy as np
+    >>> import locbook as lb
+    >>> model = lb.RssModel(np.array([[0.0, 0.0], [10.0, 0.0]]), lb.PathLossModel(-40.0, 2.0, sigma_db=3.0))
+    >>> x, y = np.meshgrid(np.arange(0.25, 10.0, 0.5), np.arange(-4.75, 5.0, 0.5), indexing="ij")
+    >>> result = lb.grid_bayes_filter(np.full((1, 10, 2), -60.0), model, np.stack([x.ravel(), y.ravel()], -1), 0.5)
+    >>> print(result.mean.shape, f"{result.mean[0, -1, 0]:.2f} {abs(result.mean[0, -1, 1]):.2f}")
+    (1, 10, 2) 5.00 0.00
     """
     first = None                                    # the callable's step-0 output, which gives the number of runs
     is_model = isinstance(model, MeasurementModel)

@@ -39,13 +39,9 @@ from .results import FilterResult
 
 __all__ = ["BayesFilterResult", "grid_bayes_filter", "grid_transition_matrix", "GRID_TRANSITIONS", "MAX_ARRAY_BYTES"]
 
-#: the largest array (bytes) one grid or particle filter call may allocate, checked from the arguments before
-#: anything is allocated: a particle cloud (runs x particles x state values), the per-step outputs (runs x steps x
-#: dim x dim), the grid's belief (runs x cells), the dense transition's construction (cells x cells x dim) and the
-#: separable transition's lattice (runs x lattice points), 8 bytes a value. A call holds a few such arrays at once.
-#: 2 GiB leaves the repository's largest workloads far inside (clouds of at most 2,000,000 run-particle pairs, 32 MB
-#: in 2-D: Ozkaya's test bed in blocks; 36,000 cells separable; 5,111 cells dense, 418 MB to build). Read at call
-#: time: raise it on a machine with more memory.
+#: the largest array (bytes) one grid or particle filter call may allocate, checked from the arguments before anything
+#: is allocated (which arrays, and the repository's largest: docs/filters.md, "Size guards"). Read at call time: raise
+#: it on a machine with more memory.
 MAX_ARRAY_BYTES = 2 * 2**30
 
 

@@ -4,7 +4,8 @@ are run, the Examples section of every public name's docstring (``locbook._API``
 the Sphinx build passes with warnings as errors.
 
 A block that cannot run here is fenced ```python no-run: REASON (the reason is required). README's commands and
-Python blocks are run by tests/test_readme_commands.py, not again here."""
+Python blocks are run by tests/test_readme_commands.py, and docs/your-data.md's by tests/test_measured_protocol.py (with
+fewer resamples), not again here."""
 import argparse
 import doctest
 import importlib
@@ -26,8 +27,9 @@ GENERATED = ("_build", "api")                 # the build's output and its gener
 PAGES = sorted(p for p in DOCS.rglob("*.md") if not set(p.relative_to(DOCS).parts) & set(GENERATED)) \
     if DOCS.is_dir() else []
 FENCE = re.compile(r"^```([^\n]*)\n(.*?)^```", re.S | re.M)
-#: pages whose blocks take minutes (the whole measured-data protocol): run with the slow tests
-SLOW_PAGES = {"your-data.md"}
+#: pages whose blocks another test runs (the whole measured-data protocol takes minutes as written: that test runs it
+#: with fewer resamples)
+RUN_ELSEWHERE = {"your-data.md": "tests/test_measured_protocol.py::test_the_python_example_of_docs_your_data_runs"}
 #: `locbook` commands cheap enough to run as written (in a temporary folder)
 CHEAP = re.compile(r"^locbook (--help|--version|list\b|show \S+$|data example )")
 
@@ -53,11 +55,11 @@ def _page_id(page: Path) -> str:
 
 
 def _page_params():
-    return [pytest.param(p, id=_page_id(p), marks=[pytest.mark.slow] if _page_id(p) in SLOW_PAGES else [])
-            for p in PAGES if any(not info.startswith("no-run") for info, _ in _blocks(p, "python"))]
+    return [p for p in PAGES if _page_id(p) not in RUN_ELSEWHERE
+            and any(not info.startswith("no-run") for info, _ in _blocks(p, "python"))]
 
 
-@pytest.mark.parametrize("page", _page_params())
+@pytest.mark.parametrize("page", _page_params(), ids=_page_id)
 def test_every_python_block_of_a_page_runs(page, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)               # whatever a block writes lands here
     monkeypatch.setenv("MPLBACKEND", "Agg")

@@ -67,7 +67,16 @@ def mean_error_m(error_m, axis=None):
 
 
 def rmse_m(error_m, axis=None):
-    """Root mean square of the Euclidean errors."""
+    """Root mean square of the Euclidean errors.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import locbook as lb
+    >>> errors = lb.position_error_m(np.array([[3.0, 4.0], [0.0, 0.0]]), np.zeros(2))
+    >>> print(errors, round(float(lb.rmse_m(errors)), 4))              # sqrt((25 + 0) / 2)
+    [5. 0.] 3.5355
+    """
     error_m = _errors("error_m", error_m)
     return np.sqrt(np.mean(np.square(error_m), axis=axis))
 
@@ -167,13 +176,8 @@ def _accuracy_stats(e, axis=-1):
         }
 
 
-#: the fewest blocks (finite epochs / block length) for which :func:`accuracy_metrics` gives a bootstrap interval. The
-#: rule is ours: the block bootstrap is consistent only as the number of blocks grows (block length ``L -> inf`` with
-#: ``L / n -> 0``; Kuensch 1989, Politis and Romano 1992, Lahiri 2003, *Resampling Methods for Dependent Data*,
-#: Ch. 3), and the theory gives no finite count. A percentile interval needs the resampled statistic to vary: from
-#: two or three blocks it takes a handful of distinct values, and its 2.5 % and 97.5 % points say more about which
-#: blocks were drawn than about the statistic (a 24 s track in 10 s blocks gave a mean's interval that excluded the
-#: mean). Ten blocks is the count below which we call the interval not estimable.
+#: the fewest blocks (finite epochs / block length) for which :func:`accuracy_metrics` gives a bootstrap interval: a
+#: rule of ours, argued in docs/your-data.md, "Intervals"
 MIN_BLOCKS = 10
 
 #: relative slack of the check that an interval holds its estimate: a resample holding the series' values in another

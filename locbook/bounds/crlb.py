@@ -262,7 +262,19 @@ def rss_crlb_m(position_m, model, *, variant: str = "corrected", heard=None):
 
     ``heard`` ``(..., m)`` booleans (measured data: False = the anchor heard nothing at that epoch): the bound of
     the anchors each position heard (2-D positions only); where those cannot fix a position (fewer than two, or
-    aligned with it) the bound is ``inf``."""
+    aligned with it) the bound is ``inf``.
+
+    Examples
+    --------
+    The centre of a 10 m square of anchors, sigma 3 dB, exponent 2:
+
+    >>> import numpy as np
+    >>> import locbook as lb
+    >>> anchors = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]])
+    >>> model = lb.RssModel(anchors, lb.PathLossModel(-40.0, 2.0, sigma_db=3.0))
+    >>> print(np.round(lb.rss_crlb_m(np.array([[5.0, 5.0]]), model), 3))
+    [2.442]
+    """
     variant = _variant(variant, "rss_crlb_m")
     # with a heard mask a position may see too few anchors: no up-front geometry check, inf where singular
     if heard is None:

@@ -42,6 +42,19 @@ def posterior_crlb(prior_information, F, Q, measurement_information, *, form: st
     ``measurement_information``: ``J_z`` for steps 1..K, ``(K, ..., n, n)`` (zeros where no measurement arrives).
     ``form="tichavsky"`` is Eq. (4.7) as printed (needs an invertible Q); ``"riccati"`` is the equivalent
     information-filter form.
+
+    Examples
+    --------
+    A constant-velocity state whose position is measured with variance 1/4 at each of three steps, from a unit prior:
+    the position bound (the root of the first diagonal entry of ``J^-1``) falls from 1 m towards the measurement's
+    0.5 m.
+
+    >>> import numpy as np
+    >>> import locbook as lb
+    >>> F, Q = np.array([[1.0, 1.0], [0.0, 1.0]]), 0.01 * np.eye(2)
+    >>> J = lb.posterior_crlb(np.eye(2), F, Q, np.broadcast_to(np.diag([4.0, 0.0]), (3, 2, 2)))
+    >>> print(J.shape, np.round(np.sqrt(np.linalg.inv(J)[:, 0, 0]), 3))
+    (4, 2, 2) [1.    0.472 0.448 0.429]
     """
     check_choice("form", form, PCRLB_FORMS)
     F = as_array("F", F)

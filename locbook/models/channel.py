@@ -166,6 +166,16 @@ class PathLossModel:
         Near-field clamp of :func:`log_distance_mean_dbm` (0: none, and distances must be positive).
 
     No field has a default taken from one document: the reference power and the exponent are always given.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import locbook as lb
+    >>> channel = lb.PathLossModel(ref_power_dbm=-40.0, path_loss_exp=2.0, sigma_db=3.0)
+    >>> print(channel.mean_rss_dbm(np.array([1.0, 10.0, 100.0])))      # P0 - 10 n log10(d / d0)
+    [-40. -60. -80.]
+    >>> print(channel.range_m(np.array([-60.0])))                       # the inverse, in metres
+    [10.]
     """
 
     ref_power_dbm: float | np.ndarray

@@ -220,7 +220,20 @@ class KinematicModel(_LinearKinematics):
 
 def constant_velocity(dt_s: float, q: float, dim: int = 2, layout: str = "derivative_major",
                       noise: str = "discrete") -> KinematicModel:
-    """Nearly constant velocity model (document 003 Eq. (9); Dogan Eq. (3.9))."""
+    """Nearly constant velocity model (document 003 Eq. (9); Dogan Eq. (3.9)).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import locbook as lb
+    >>> cv = lb.constant_velocity(0.5, 0.1, dim=1)          # dt = 0.5 s; state (position, velocity)
+    >>> print(cv.F)
+    [[1.  0.5]
+     [0.  1. ]]
+    >>> print(cv.Q)                                          # q G G^T, G = [dt^2/2, dt] (noise="discrete")
+    [[0.0015625 0.00625  ]
+     [0.00625   0.025    ]]
+    """
     return KinematicModel(dt_s, q, order=1, dim=dim, layout=layout, noise=noise)
 
 

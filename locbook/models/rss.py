@@ -132,6 +132,17 @@ class RssModel(MeasurementModel):
     particle and grid filters) takes one run axis: positions ``(P, dim)`` or ``(R, P, dim)``, anchors ``(m, dim)`` or
     ``(R, m, dim)``, parameters per run ``(R, 1 or m)`` or per run and step; a per-anchor sigma per run is not taken
     there (one sigma per run and step, or one per anchor shared by the runs).
+
+    Examples
+    --------
+    Two anchors 10 m apart; the mean powers at two positions (a run axis of one, then positions, then anchors):
+
+    >>> import numpy as np
+    >>> import locbook as lb
+    >>> model = lb.RssModel(np.array([[0.0, 0.0], [10.0, 0.0]]), lb.PathLossModel(-40.0, 2.0, sigma_db=3.0))
+    >>> print(np.round(model.mean_rss_dbm(np.array([[1.0, 0.0], [5.0, 0.0]])), 2))
+    [[[-40.   -59.08]
+      [-53.98 -53.98]]]
     """
 
     anchors_m: np.ndarray | PerStep

@@ -48,9 +48,8 @@ def _small_batch(setup: _Setup) -> bool:
 def _block_width(B: int) -> int:
     """Runs per block of the compiled EKF and UKF for ``B`` runs: blocks of equal width up to ``_BLOCK_LANES`` (500
     runs: 2 blocks of 250), so that the last block pads few lanes. Wide blocks pay each loop's fixed cost once for
-    more runs: 256 lanes against 64 took the Dogan EKF kernel from 79-82 to 61-65 ms at 500 runs and the U-path UKF
-    from 953 to 766 ms on this project's 2-core AMD EPYC (benchmarks/RESULTS.md); the scratch of a block (about
-    0.5 MiB for n = 6) stays in a core's L2 cache."""
+    more runs (the measured gain of 256 lanes over 64: benchmarks/RESULTS.md, "Lane width of the compiled
+    kernels"); the scratch of a block (about 0.5 MiB for n = 6) stays in a core's L2 cache."""
     blocks = -(-B // _BLOCK_LANES)
     return -(-B // blocks)
 

@@ -135,7 +135,7 @@ def _nb_predict(belief, zinv, dead, scatter, gather, dims, xb, lx, tx, bx, yb, l
 
 def _reduction(fn):
     """A reduction loop of the update: reassociation allowed (:func:`locbook._numba.jit`), so that LLVM accumulates it
-    in vector registers side by side: 4-6x faster than four scalar partial sums here. Each sum still runs in blocks of
+    in vector registers side by side (faster than four scalar partial sums: docs/speed.md). Each sum runs in blocks of
     ``_BLOCK`` cells whose partial results are added in order, which bounds the error by that of ``_BLOCK`` / (the
     partial sums of a block) plus ``C / _BLOCK`` additions."""
     return jit(fn, contract=True, reassoc=True)

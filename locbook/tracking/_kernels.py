@@ -13,7 +13,7 @@ from .._numba import jit as _jit
 from ._vecmath import _log10_block, _log_positive
 
 # the filter's arithmetic may fuse a * b + c into one multiply-add (one rounding instead of two: the results agree
-# with the numpy loop's to round-off, as before): 9-14 % faster here, where the CPU has FMA (a no-op where it has not)
+# with the numpy loop's to round-off, as before), faster where the CPU has FMA (docs/speed.md; a no-op without)
 _jit_fma = _jit(contract=True)
 _LOG_2PI = float(np.log(2.0 * np.pi))
 _LN_10 = float(np.log(10.0))

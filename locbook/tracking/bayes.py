@@ -40,13 +40,9 @@ from .results import FilterResult
 
 __all__ = ["BayesFilterResult", "grid_bayes_filter", "grid_transition_matrix", "GRID_TRANSITIONS", "MAX_ARRAY_BYTES"]
 
-#: the largest array (bytes) one grid or particle filter call may allocate, checked from the arguments before
-#: anything is allocated: a particle cloud (runs x particles x state values), the per-step outputs (runs x steps x
-#: dim x dim), the grid's belief (runs x cells), the dense transition's construction (cells x cells x dim) and the
-#: separable transition's lattice (runs x lattice points), 8 bytes a value. A call holds a few such arrays at once.
-#: 2 GiB leaves the repository's largest workloads far inside (clouds of at most 2,000,000 run-particle pairs, 32 MB
-#: in 2-D: Ozkaya's test bed in blocks; 36,000 cells separable; 5,111 cells dense, 418 MB to build). Read at call
-#: time: raise it on a machine with more memory.
+#: the largest array (bytes) one grid or particle filter call may allocate, checked from the arguments before anything
+#: is allocated (which arrays, and the repository's largest: docs/filters.md, "Size guards"). Read at call time: raise
+#: it on a machine with more memory.
 MAX_ARRAY_BYTES = 2 * 2**30
 
 
@@ -195,7 +191,7 @@ def _velocity_schedule(velocity_m, n_steps, dim: int = 2):
 def grid_transition_matrix(cells_m, spread_m: float, velocity_m=None):
     """Transition ``T[l, l'] = P(L_t = c_l | L_t-1 = c_l')`` on cells ``(C, dim)``: the process model
     ``L_t = L_t-1 + v + N(0, D^2 I)`` of Ozkaya (2011), Eq. (4.2), with ``D = spread_m`` (Eqs. (4.10)-(4.15) state
-    the Gaussian model of std D; its discretisation on the grid is ours),
+    the Gaussian model of std D; its discretisation on the grid is ours)::
 
         T[l, l'] = K(c_l - c_l' - v) / sum_k K(c_k - c_l' - v),   K(u) = exp(-|u|^2 / (2 D^2)),
 
@@ -551,6 +547,19 @@ def grid_bayes_filter(rss_dbm, model, cells_m, spread_m: float = 0.5, *, n_steps
     number of such runs, the first run and step, its readings); when every run collapses it raises a ValueError
     naming ``rss_dbm`` (or ``log_likelihood``) and the first step instead (nothing can be estimated: a units bug,
     not a result).
+
+    Examples
+    --------
+    The readings of :func:`locbook.particle_filter`'s example on a 0.5 m grid: the posterior mean is on the bisector
+    (x = 5 m), and by symmetry at y = 0.
+
+    >>> import numpy as np
+    >>> import locbook as lb
+    >>> model = lb.RssModel(np.array([[0.0, 0.0], [10.0, 0.0]]), lb.PathLossModel(-40.0, 2.0, sigma_db=3.0))
+    >>> x, y = np.meshgrid(np.arange(0.25, 10.0, 0.5), np.arange(-4.75, 5.0, 0.5), indexing="ij")
+    >>> result = lb.grid_bayes_filter(np.full((1, 10, 2), -60.0), model, np.stack([x.ravel(), y.ravel()], -1), 0.5)
+    >>> print(result.mean.shape, f"{result.mean[0, -1, 0]:.2f} {abs(result.mean[0, -1, 1]):.2f}")
+    (1, 10, 2) 5.00 0.00
     """
     first = None                                    # the callable's step-0 output, which gives the number of runs
     is_model = isinstance(model, MeasurementModel)

@@ -58,10 +58,11 @@ def kalman_filter(F, Q, x0, P0, measurements, *, B=None, u=None, record=None, pr
     measurements : a :class:`LinearMeasurement` (readings ``batch + (T, m)``, H, R) or a list of them on one time
         grid, applied in order at each step. A NaN reading is a missing component: the update uses those present
         and a step without any is prediction only. ``T = 0`` steps give an empty result.
-    record : step indices to keep (default all); ``outputs``: optional fields among ``("x_pred", "P_pred",
-        "P_cross", "innovation", "S")`` to keep at those steps (:class:`~locbook.tracking.results.KalmanResult`).
+    record : step indices to keep (default all).
+    outputs : optional fields to keep at those steps, among
+        ``("x_pred", "P_pred", "P_cross", "innovation", "S")`` (:class:`~locbook.tracking.results.KalmanResult`).
     variant : ``"corrected"`` (the standard recursion) or ``"literal_george"`` (Eqs. (11)-(13) of George and
-        Vadivukkarasi as printed: each update starts from the previous posterior; ``x_pred``/``P_pred`` are then that
+        Vadivukkarasi as printed: each update starts from the previous posterior; ``x_pred`` and ``P_pred`` are then that
         posterior).
     joseph : the Joseph-form covariance update (keeps P symmetric positive definite); False: ``(I - K H) P``.
     divergence_window, divergence_probability : the consistency guard (:mod:`locbook.tracking.results`): a run whose
@@ -71,6 +72,17 @@ def kalman_filter(F, Q, x0, P0, measurements, *, B=None, u=None, record=None, pr
     Returns a :class:`~locbook.tracking.results.KalmanResult`. Speed: as :func:`extended_kalman_filter` (compiled
     loops over blocks of runs; with the same components missing in every run and F, Q, P0, H, R without run axes,
     more than 64 runs share one covariance recursion, once per step in numpy).
+
+    Examples
+    --------
+    A constant, read twice as 2.0 with unit variance from the prior N(0, 1): the posterior means are 2 k / (k + 1) and
+    the variances 1 / (k + 1) after k readings.
+
+    >>> import numpy as np
+    >>> import locbook as lb
+    >>> run = lb.kalman_filter([[1.0]], [[0.0]], [0.0], [[1.0]], lb.LinearMeasurement([[2.0], [2.0]], [[1.0]], [[1.0]]))
+    >>> print(np.round(run.mean[:, 0], 4), np.round(run.cov[:, 0, 0], 4))
+    [1.     1.3333] [0.5    0.3333]
     """
     variant = check_variant(variant, KF_VARIANTS, where="kalman_filter", renamed=RENAMED_KF_VARIANTS)
     window, probability = _check_guard(divergence_window, divergence_probability)
@@ -136,6 +148,24 @@ def extended_kalman_filter(F, Q, x0, P0, measurements, *, B=None, u=None, record
     same in every run of a large batch (more than one block of runs): numpy then updates it once per step for all runs.
     ``LOCBOOK_NUMBA=0`` turns the compiled loops off; they do not produce ``outputs`` and do not take nonlinear or
     time-varying motion (the numpy loop runs those). All paths give the same numbers to round-off.
+
+    Examples
+    --------
+    A static tag at (3, 4) m ranged from three anchors, starting from (5, 5) m:
+
+    >>> import numpy as np
+    >>> import locbook as lb
+    >>> anchors = np.array([[0.0, 0.0], [10.0, 0.0], [0.0, 10.0]])
+    >>> def ranges(x):                                   # states (..., 2) -> ranges (..., 3)
+    ...     return np.linalg.norm(x[..., None, :] - anchors, axis=-1)
+    >>> def jacobian(x):                                 # (..., 3, 2)
+    ...     d = x[..., None, :] - anchors
+    ...     return d / np.linalg.norm(d, axis=-1, keepdims=True)
+    >>> z = np.tile(ranges(np.array([3.0, 4.0])), (5, 1))            # five steps of exact ranges (T, m)
+    >>> run = lb.extended_kalman_filter(np.eye(2), 1e-6 * np.eye(2), [5.0, 5.0], 4.0 * np.eye(2),
+    ...                                 lb.NonlinearMeasurement(z, ranges, 0.01 * np.eye(3), jacobian))
+    >>> print(np.round(run.mean[-1], 3))
+    [3.013 4.002]
     """
     window, probability = _check_guard(divergence_window, divergence_probability)
     outputs = _check_outputs(outputs)

@@ -47,6 +47,19 @@ class OnlineFilter:
     :class:`~locbook.tracking.results.KalmanResult` and keeps the posterior. Its ``diverged`` and ``diverged_step`` are
     the guard's verdict on every step so far (:func:`locbook.nis_divergence` on the NIS history), as the batch call on
     the same steps would give.
+
+    Examples
+    --------
+    The example of :func:`locbook.kalman_filter`, one step at a time (readings ``(1, m)`` per step):
+
+    >>> import numpy as np
+    >>> import locbook as lb
+    >>> online = lb.OnlineFilter("kf", [[1.0]], [[0.0]], [0.0], [[1.0]])
+    >>> for z in (2.0, 2.0):
+    ...     step = online.step(lb.LinearMeasurement([[z]], [[1.0]], [[1.0]]))
+    ...     print(round(float(step.mean[0, 0]), 4))
+    1.0
+    1.3333
     """
 
     def __init__(self, kind: str, F, Q, x0, P0, *, B=None, predict_first: bool = True, outputs=(),

@@ -1,16 +1,16 @@
 """The result vocabulary of every filter, the result of every Kalman-family filter and the consistency guard on its
 innovations.
 
-One vocabulary (issue 47; :class:`FilterResult`). Every filter result (:class:`KalmanResult`, the smoothers'
+One vocabulary (:class:`FilterResult`). Every filter result (:class:`KalmanResult`, the smoothers'
 :class:`~locbook.tracking.smoother.SmoothedResult` and :class:`~locbook.tracking.fixed_lag.FixedLagResult`, the particle
 and grid filters' :class:`~locbook.tracking.bayes.BayesFilterResult`) has
 
 - ``mean`` ``batch + (R, n)`` and ``cov`` ``batch + (R, n, n)``: the posterior mean and covariance at ``steps``;
 - ``steps`` ``(R,)``: the recorded step indices (every step, ``arange(T)``, for the particle and grid filters);
 - ``log_likelihood`` ``batch + (T,)``: the per-step log-likelihood of the readings where the filter gives it exactly
-  (the Kalman family, module text below; the smoothers carry their filter run's), else None;
+  (the Kalman family; the smoothers carry their filter run's), else None;
 - ``diverged`` ``batch`` (bool) and ``diverged_step`` ``batch`` (-1 where not), :attr:`~FilterResult.n_diverged`: filter
-  divergence, by each family's own test: the NIS guard below for the Kalman family (the smoothers carry their run's),
+  divergence, by each family's own test: the NIS guard for the Kalman family (the smoothers carry their run's),
   the collapse of the likelihood for the particle and grid filters;
 - :meth:`~FilterResult.position_m`: the mean's position components.
 
@@ -18,70 +18,10 @@ The old names (``x``, ``P``; ``mean_m``, ``covariance_m2``, ``degenerate``, ``de
 are kept for one release as read-only aliases that emit a ``DeprecationWarning`` naming the new one; given to a
 constructor (or to ``dataclasses.replace``) an old field name is mapped to the new one with the same warning.
 
-:class:`KalmanResult` is what :func:`locbook.kalman_filter`, :func:`locbook.extended_kalman_filter` (parallel and
-serial) and :func:`locbook.unscented_kalman_filter` return: posterior means and covariances at the recorded steps, the
-per-step Gaussian log-likelihood of the innovations, the normalised innovation squared (NIS) and the guard's flags; on
-request (``outputs=``) the priors, innovations and innovation covariances at the recorded steps.
-
-Innovations of several streams and of serial updates. A step's readings are laid side by side on one axis of ``M``
-columns: the streams in the order given, each stream's readings in its own column order (a serial RSS stream's column
-``j`` is anchor ``j``, whatever the update order). A sequential update's innovation is taken at the state updated so
-far (the previous streams' or readings' posterior), as the filter uses it. Under the filter's model the innovations of
-the sequential updates of one step are independent (each is conditioned on the previous ones), so the covariance of
-the stacked innovations is block diagonal: ``S`` holds each update's innovation covariance on its block (a parallel
-stream: its ``m x m`` block; a serial stream: one ``1 x 1`` block per reading) and zeros off the blocks. The step's
-log-likelihood, ``log N(nu; 0, S)`` of the present readings, is therefore the sum over its updates of
-``-(nu_u^T S_u^{-1} nu_u + log det S_u + m_u log 2 pi) / 2`` (the prediction-error decomposition; exact for linear
-streams, to first order for RSS and other nonlinear streams). A missing reading is NaN in ``innovation`` and in its row
-and column of ``S``.
-
-Memory. ``mean``, ``cov`` and the optional ``x_pred``, ``P_pred``, ``innovation`` (``batch + (R, M)``) and ``S``
-(``batch + (R, M, M)``) are kept at the ``record`` steps only (``R`` of them; default every step), and the optional ones
-only when named in ``outputs``; ``log_likelihood``, ``nis`` and ``nis_dof`` are ``batch + (T,)`` scalars per step.
-
-Consistency guard (issue 26). Every Kalman-family filter (:func:`locbook.kalman_filter` and
-:func:`locbook.extended_kalman_filter`, numpy and compiled paths, and :func:`locbook.unscented_kalman_filter`) returns
-the normalised innovation squared of each run and step,
-
-    NIS_k = sum over the updates u of step k of  nu_u^T S_u^{-1} nu_u,      dof_k = sum of their dimensions,
-
-(``nu`` the innovation, ``S`` its covariance, the components present only; NaN where step k has no update). It is a
-by-product of the update (the solve or Cholesky of S that gives the gain also gives ``S^{-1} nu``). Under the filter's
-own model the innovations of one step are independent Gaussians (the sequential updates of one step, e.g. the serial
-EKF's scalar updates or several streams, are each conditioned on the previous ones, so their innovations are
-independent), so ``NIS_k ~ chi^2(dof_k)``, and the NIS of different steps are independent. That is exact for linear
-streams (the KF; LinearMeasurement streams in the EKF and UKF) and holds to first order for RSS and other nonlinear
-streams (their innovation is Gaussian only as far as h is linear over the state's spread). A run is flagged
-``diverged`` when its NIS exceeds ``chi2.ppf(divergence_probability, dof_k)`` at ``divergence_window`` consecutive
-updates (steps without an update, or whose NIS is NaN, neither count nor break the streak); ``diverged_step`` is the
-first step of the first such window (-1 where not diverged). On a consistent filter each update exceeds the bound with
-probability 1 - p, so a run of T updates is flagged with the probability of a streak of w among T Bernoulli(1 - p)
-trials, at most ``(T - w + 1) (1 - p)^w`` (``(1 - p)^w = 1e-60`` at the defaults w = 20, p = 0.999).
-
-What the guard flags: runs whose innovations stay inconsistent with the filter's own S. A filter that has lost track
-(an error far beyond its reported covariance) exceeds the bound at every update; but so, at many readings per step,
-does a filter whose noise level is badly mis-specified. With sigma underestimated by half and R dominating S the NIS
-is 4 chi^2(dof), each update exceeds the bound with probability q = chi2.sf(chi2.ppf(p, dof) / 4, dof), and the exact
-probability that a run of T updates is flagged at the defaults (a streak of 20 exceedances) is
-
-    dof                1        2        4        6        8        9        10       12
-    q per update:      0.1      0.18     0.33     0.47     0.59     0.64     0.69     0.77
-    flagged, T = 1e3:  8.7e-18  8.1e-13  1.4e-07  0.00013  0.0098   0.046    0.16     0.69
-    flagged, T = 1e4:  8.8e-17  8.2e-12  1.5e-06  0.0013   0.095    0.38     0.82     1
-
-(dof: the readings of one update, e.g. 2 for a position fix, one per anchor heard for RSS). Up to about 6 readings per
-step such a filter is practically never flagged; from 8 a growing share of long runs is, from 12 nearly every run. A
-flag says "this run's innovations contradict its covariance" (lost, or a noise level far off), not "this run lost
-track". ``divergence_window=0`` (or None) turns the guard off (nothing is flagged; NIS is still returned). The flags
-never change the estimates; a diverged run is the caller's to count and show, not to average silently.
-
-Batch isolation: the one exception. Elsewhere in locbook a bad problem of a batch gets NaN and a status while the others
-go on. Here a run whose state or covariance overflows (a reading of 1.5e308 dBm, fixes of 1e300 m, a huge F, Q or P0)
-or whose innovation covariance is singular raises a SingularCovarianceError for the whole batch, naming the step and
-the first such run. Why: on the shared-covariance paths (above) one P, S and K serve every run, so there is no per-run
-covariance to set aside; on the batched and compiled paths a failed run would have to be carried to the end as a dead
-lane (left out of every update and check, NaN in the output) so that the others go on untouched. That dead-lane mask
-is planned for every path; until then such a run is an error, never a NaN or a confident answer.
+The layout of several streams' innovations (``S`` block diagonal over the sequential updates), what is kept in memory,
+the guard's rule (NIS above ``chi2.ppf(divergence_probability, dof)`` at ``divergence_window`` consecutive updates) with
+its exact false-alarm and detection probabilities, and why a run that overflows stops its whole batch: docs/filters.md,
+"Results, innovations and the divergence guard".
 """
 
 from __future__ import annotations

@@ -84,7 +84,20 @@ def rts_smoother(result: KalmanResult, F=None, *, residual=None) -> SmoothedResu
     ``residual``). A step without readings is smoothed like any other (its posterior is its prediction). A singular
     ``P_{k+1|k}`` takes the pseudo-inverse (module docstring); a run of zero runs, of no step or of one step is returned
     as it is (no step: empty arrays, no gain);
-    covariances that are not finite, or arrays of the wrong shapes (a result built by hand), are refused in one line."""
+    covariances that are not finite, or arrays of the wrong shapes (a result built by hand), are refused in one line.
+
+    Examples
+    --------
+    With no process noise every smoothed step is the last posterior (the example of :func:`locbook.kalman_filter`):
+
+    >>> import numpy as np
+    >>> import locbook as lb
+    >>> run = lb.kalman_filter([[1.0]], [[0.0]], [0.0], [[1.0]], lb.LinearMeasurement([[2.0], [2.0]], [[1.0]], [[1.0]]),
+    ...                        outputs=("x_pred", "P_pred", "P_cross"))
+    >>> smooth = lb.rts_smoother(run)
+    >>> print(np.round(smooth.mean[:, 0], 4), np.round(smooth.cov[:, 0, 0], 4))
+    [1.3333 1.3333] [0.3333 0.3333]
+    """
     check_predictions(result, "rts_smoother needs")
     x, P = np.asarray(result.mean, float), np.asarray(result.cov, float)
     if x.ndim < 2 or P.shape != x.shape + x.shape[-1:]:

@@ -439,6 +439,17 @@ def unscented_kalman_filter(F, Q, x0, P0, measurements, *, B=None, u=None, alpha
     the library's linear, RSS and inertial (:class:`~locbook.models.imu.InertialMeasurement`) models and no ``outputs``,
     compiled loops run blocks of runs (:mod:`locbook.tracking._ukf_kernels`; ``LOCBOOK_NUMBA=0`` turns them off), else
     the numpy loop; both give the same numbers to round-off (amplified some 1e6 times at alpha = 1e-3).
+
+    Examples
+    --------
+    On a linear model the UKF is the Kalman filter (the example of :func:`locbook.kalman_filter`):
+
+    >>> import numpy as np
+    >>> import locbook as lb
+    >>> run = lb.unscented_kalman_filter([[1.0]], [[0.0]], [0.0], [[1.0]],
+    ...                                  lb.LinearMeasurement([[2.0], [2.0]], [[1.0]], [[1.0]]))
+    >>> print(np.round(run.mean[:, 0], 4))
+    [1.     1.3333]
     """
     variant = old_keyword("unscented_kalman_filter", "weights", weights, "variant", variant, "corrected")
     check_choice("variant", variant, UKF_VARIANTS)

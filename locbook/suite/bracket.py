@@ -71,7 +71,6 @@ one is kept).
 from __future__ import annotations
 
 import csv
-import hashlib
 import io
 import json
 import math
@@ -81,23 +80,19 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import ParameterError
+from ..reproduce.printed_values import printed_number
 from ..reproduce.readings import Reading, load_reading_file, readings_for
 from ..reproduce.report import NUMBER_COLUMNS
-from ..reproduce.scoring import JUDGED_KINDS
+from ..reproduce.scoring import BRACKETS, JUDGED_KINDS, SCORED_VERDICTS
+from .files import point_key, point_text, read_csv, write_text_atomic
 from .params import check_value
-from .spec import Experiment, Suite, SuiteError, finite_float
-from .study import Aggregate, _atomic, _canonical, current_points
+from .spec import PROFILES, Experiment, Suite, SuiteError, finite_float
+from .study import Aggregate, current_points
 
 __all__ = ["BracketPoint", "find_experiment", "brackets_root", "SITE_NUMBER_COLUMNS", "BRACKET_ROW_COLUMNS",
            "experiment_readings", "bracket_settings", "counts", "VALUE_COLUMNS", "load_values", "read_readings_option", "bracket_points", "bracket_gaps", "run_bracket", "bracket_folder", "bracket_rows",
            "bracket_of_rows", "load_bracket", "NoBracket", "BRACKETS", "BRACKET_COLUMNS", "POINT_COLUMNS"]
 
-#: The bracket verdicts (issue 45's tiers), in the order the headline counts them: reproduced under the default
-#: reading; under another textual (or, where the text is silent, assumed) reading; only under a reading fitted to
-#: printed output; between readings (the printed value inside the band of our values, no single reading within);
-#: outside every reading (beyond the band widened by both Monte-Carlo errors); open (a setting that could matter not
-#: swept, a point not run, or a margin Monte-Carlo error could close); loose (a window too wide to decide).
-BRACKETS = ("default", "other_reading", "fitted_only", "between", "outside", "open", "loose")
 #: the columns a suite's numbers.csv adds to an experiment's (:data:`~locbook.reproduce.report.NUMBER_COLUMNS`)
 BRACKET_ROW_COLUMNS = ("bracket", "bracket_readings")
 SITE_NUMBER_COLUMNS = (*NUMBER_COLUMNS, *BRACKET_ROW_COLUMNS)
@@ -189,10 +184,7 @@ def _point_key(exp: Experiment, values: dict, taken: dict[str, str] | None = Non
     """The folder of a bracket point: the experiment id and the first 10 hex digits of the SHA-256 of its values (as
     committed in points.csv), or all 64 when those 10 are already ``taken`` (key -> values) by other values: a
     bracket has a few dozen points, and two of them never share a folder."""
-    text = _canonical(values)
-    digest = hashlib.sha256(text.encode()).hexdigest()
-    key = f"{exp.id}-{digest[:10]}"
-    return key if (taken or {}).get(key, text) == text else f"{exp.id}-{digest}"
+    return point_key(exp.id, values, 10, taken)
 
 
 def _same(a, b) -> bool:
@@ -302,7 +294,7 @@ def bracket_points(exp: Experiment, profile: str, readings: tuple[Reading, ...])
                 change[reading.parameter] = checked
             if not change:
                 continue       # the profile's own value: the default point
-            text = _canonical(change)
+            text = point_text(change)
             if text in by_value:   # another reading names the same values: one run serves both
                 i = by_value[text]
                 if reading not in points[i].readings:
@@ -323,8 +315,8 @@ def bracket_points(exp: Experiment, profile: str, readings: tuple[Reading, ...])
     if len(fitted) >= 2:
         together = {p: check_value(declared[p], v, exp.rules.get(p)) for p, (_r, v) in fitted.items()}
         key = _point_key(exp, together, taken)
-        taken[key] = _canonical(together)
-        by_value[_canonical(together)] = len(points)
+        taken[key] = point_text(together)
+        by_value[point_text(together)] = len(points)
         points.append(BracketPoint(key, exp, tuple(r for r, _v in fitted.values()), "", None,
                                    {**base, **together}, together))
     points += _factorial_points(exp, readings, declared, base, by_value, taken)
@@ -357,7 +349,7 @@ def _factorial_points(exp: Experiment, readings: tuple[Reading, ...], declared: 
         change = {r.parameter: v for (r, values), v in zip(chosen, combo) if not _same(v, values[0])}
         if len(change) < 2:
             continue
-        text = _canonical(change)
+        text = point_text(change)
         if text in by_value:
             continue
         key = _point_key(exp, change, taken)
@@ -394,7 +386,7 @@ def _find(indexed: tuple[dict, dict], r: dict) -> dict | None:
 
 
 def _scored(r: dict) -> bool:
-    return r.get("kind") in JUDGED_KINDS and r.get("verdict") in ("within", "loose", "miss")
+    return r.get("kind") in JUDGED_KINDS and r.get("verdict") in SCORED_VERDICTS
 
 
 def _crossings(printed: float | None, points: list[BracketPoint], values: dict[str, tuple]) -> list[str]:
@@ -445,7 +437,6 @@ _SOURCE_MC = re.compile(r"(thesis|source|paper)'s own[^;]*Monte-Carlo|Monte-Carl
 
 def _printed_number(text: str) -> float | None:
     """The number in a printed text ('3.83m', 'reach accuracy 1 m'), None if it holds none or several."""
-    from ..reproduce.printed_values import printed_number
     try:
         value = printed_number(text)
     except ValueError:
@@ -489,13 +480,11 @@ def bracket_rows(exp: Experiment, points: list[BracketPoint], folder: Path, stat
     also clears the band's nearest edge by :func:`_margin` (else ``open``: Monte-Carlo error could close the gap).
     A point whose value is implausible (:func:`_implausible`) is named in ``implausible`` and counts for nothing.
     ``values_out``: filled with the :data:`VALUE_COLUMNS` rows (every scored row under every point)."""
-    from .site import _read_csv
-
     done = {k for k, st in status.items() if st in ("ok", "cached")}
     if points[0].key not in done:
         return []
-    default = _read_csv(folder / points[0].key / "numbers.csv")
-    others = [(p, _index(_read_csv(folder / p.key / "numbers.csv"))) for p in points[1:] if p.key in done]
+    default = read_csv(folder / points[0].key / "numbers.csv")
+    others = [(p, _index(read_csv(folder / p.key / "numbers.csv"))) for p in points[1:] if p.key in done]
     unfinished = [f"{p.label} ({status.get(p.key, 'not run')})" for p in points[1:] if p.key not in done]
     gap_names = [f"{r.name} (gap: {r.where})" for r in gaps]
     rows = []
@@ -670,11 +659,9 @@ def _previous_columns(bracket_folder: Path, profile: str | None) -> dict[tuple, 
     """The bracket columns of the rows of ``numbers.csv`` in the profile's reports folder beside the brackets
     (``<reports>/<profile>/`` for ``<reports>/brackets/<experiment>``), by :func:`_site_key`; empty for a report of
     no known profile or a folder without one (its numbers are read as written: a damaged file keeps nothing)."""
-    from .site import _read_csv
-    from .spec import PROFILES
     if profile not in PROFILES:
         return {}
-    rows = _read_csv(Path(bracket_folder).parent.parent / profile / "numbers.csv")
+    rows = read_csv(Path(bracket_folder).parent.parent / profile / "numbers.csv")
     out = {}
     for r in rows:
         if None in r or r.get("bracket") is None or r.get("bracket_readings") is None:
@@ -742,7 +729,7 @@ def _write_table(path: Path, columns, rows) -> None:
     writer = csv.DictWriter(out, fieldnames=columns, lineterminator="\n")
     writer.writeheader()
     writer.writerows(rows)
-    _atomic(path, lambda tmp: tmp.write_text(out.getvalue(), encoding="utf-8"))
+    write_text_atomic(path, out.getvalue())
 
 
 def _short(text: str) -> str:

@@ -4,7 +4,7 @@ one-screen answer at the top of an index (issue 45, "one tally everywhere").
 Everything here is computed from the rows of a reports folder's ``numbers.csv`` (the experiments' rows with the
 ``bracket`` and ``bracket_readings`` columns :func:`locbook.suite.bracket.bracket_of_rows` gave them), so the index,
 the findings pages and numbers.csv give the same counts by construction (``tests/test_findings.py`` reads all three
-back and compares them). The tiers are :data:`locbook.suite.bracket.BRACKETS`.
+back and compares them). The tiers are :data:`locbook.reproduce.scoring.BRACKETS`.
 """
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ from collections import Counter, defaultdict
 from pathlib import Path
 
 from ..reproduce.report import markdown_text
-from ..reproduce.scoring import JUDGED_KINDS
+from ..reproduce.scoring import BRACKETS, JUDGED_KINDS
 
 __all__ = ["scored_rows", "tier_counts", "TIER_WORDS", "bracket_headline", "leniency_note", "findings_markdown",
            "write_findings", "findings_links", "md_cell", "one_screen", "one_screen_markdown", "FINDINGS_SUFFIX"]
@@ -36,7 +36,6 @@ _SHORT = {"default": "default", "other_reading": "other reading", "fitted_only":
 
 
 def _tiers() -> tuple[str, ...]:
-    from .bracket import BRACKETS
     return BRACKETS
 
 

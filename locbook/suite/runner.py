@@ -60,9 +60,8 @@ from pathlib import Path
 from . import site
 from ..errors import ParameterError
 from ..reproduce.report import NUMBER_COLUMNS
-from .catalog import machine_label
+from .files import machine_label, read_csv, read_json, write_text_atomic
 from .params import read_notebook
-from .site import _read_csv, _read_json
 from .executors import make_executor
 from .worker import disk_full_path
 from .progress import expected_seconds, make_progress
@@ -236,16 +235,6 @@ def override_folder_name(profile: str, overrides: dict[str, str]) -> str:
 # ---------------------------------------------------------------------------------------------------
 # small file helpers: every suite-level file is written to a temporary name, then renamed
 
-def _write_atomic(path: Path, text: str) -> None:
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        tmp.write_text(text, encoding="utf-8")
-        os.replace(tmp, path)
-    except BaseException:     # a full disk, an interrupt: no half-written temporary file is left behind
-        tmp.unlink(missing_ok=True)
-        raise
-
-
 def _is_folder(path: Path) -> bool:
     """``path`` is a real folder (not a file, nor a symbolic link, even one to a folder)."""
     return path.is_dir() and not path.is_symlink()
@@ -296,7 +285,7 @@ def _validate_report(folder: Path, exp_id: str, figures: bool = True) -> str:
         read_notebook(folder / f"{exp_id}.ipynb")
     except Exception as exc:
         return f"executed notebook unreadable ({exc})"
-    manifest = _read_json(folder / "manifest.json", None)
+    manifest = read_json(folder / "manifest.json", None)
     if not isinstance(manifest, dict):
         return "manifest.json missing or malformed (the notebook did not create a locbook Report)"
     unsaved = manifest.get("figures_saved") is False      # a bracket point's figures were not drawn
@@ -428,7 +417,7 @@ def _cached(folder: Path, exp: Experiment, key: str, figures: bool = True) -> tu
     """``(True, "")`` when the report in ``folder`` is up to date and intact; ``(False, why)`` when it
     would be up to date but is damaged (``why`` says what is wrong), ``(False, "")`` when it is stale or absent.
     A damaged report is never served: it is executed again."""
-    run = _read_json(folder / "run.json", {})
+    run = read_json(folder / "run.json", {})
     data, modules, links = run.get("data", {}), run.get("modules"), run.get("links", {})
     if not (run.get("cache_key") == key and run.get("status") == "ok" and isinstance(data, dict)
             and isinstance(modules, dict) and isinstance(links, dict) and _data_unchanged(data)
@@ -452,7 +441,7 @@ def write_suite_reports(suite: Suite, report_dir: Path, *, list_all: bool = True
     present."""
     from .bracket import SITE_NUMBER_COLUMNS, bracket_of_rows, brackets_root, load_bracket
 
-    status = _read_json(report_dir / "status.json", {})
+    status = read_json(report_dir / "status.json", {})
     dataset = site.dataset_record(report_dir)       # a data run's folder: the data set's page, not the scoreboard
     rows, entries = [], []
     for exp in suite.experiments:
@@ -462,36 +451,36 @@ def write_suite_reports(suite: Suite, report_dir: Path, *, list_all: bool = True
         listed = present or list_all or (dataset is not None and (exp.data_run is not None or exp.id in status))
         if not listed:
             continue
-        numbers = _read_csv(folder / "numbers.csv") if present else []
+        numbers = read_csv(folder / "numbers.csv") if present else []
         # each row's reading bracket, from <reports>/brackets/<id>/bracket.csv when one was run (else empty); not
         # for a -p run's folder, whose rows were computed under other readings than the bracket's default
         bracket = load_bracket(brackets_root(report_dir) / exp.id) if report_dir.name in PROFILES else []
-        numbers = bracket_of_rows(numbers, bracket, _read_json(folder / "report.json", {}).get("profile"))
+        numbers = bracket_of_rows(numbers, bracket, read_json(folder / "report.json", {}).get("profile"))
         rows += numbers
-        entries.append({"exp": exp, "present": present, "report": _read_json(folder / "report.json", {}),
-                        "run": _read_json(folder / "run.json", {}), "last": status.get(exp.id, {}),
+        entries.append({"exp": exp, "present": present, "report": read_json(folder / "report.json", {}),
+                        "run": read_json(folder / "run.json", {}), "last": status.get(exp.id, {}),
                         "numbers": numbers})
     out = io.StringIO()
     writer = csv.DictWriter(out, fieldnames=SITE_NUMBER_COLUMNS)
     writer.writeheader()
     for r in rows:
         writer.writerow({c: r.get(c, "") for c in SITE_NUMBER_COLUMNS})
-    _write_atomic(report_dir / "numbers.csv", out.getvalue())
+    write_text_atomic(report_dir / "numbers.csv", out.getvalue())
     if dataset is not None:
-        _write_atomic(report_dir / "index.html", site.data_index_html(report_dir, entries, dataset, locbook_version()))
-        _write_atomic(report_dir / "index.md", site.data_index_markdown(report_dir, entries, dataset))
+        write_text_atomic(report_dir / "index.html", site.data_index_html(report_dir, entries, dataset, locbook_version()))
+        write_text_atomic(report_dir / "index.md", site.data_index_markdown(report_dir, entries, dataset))
         return
     # the findings pages, the conclusions pages and the index from the same rows as numbers.csv (one tally)
     from .findings import write_findings
     from .conclusions import write_conclusions
     profile = site._profile_of(report_dir)
     if report_dir.name in PROFILES:
-        write_findings(report_dir, entries, rows, profile, lambda path, text: _write_atomic(path, text))
+        write_findings(report_dir, entries, rows, profile, lambda path, text: write_text_atomic(path, text))
     conclusions = write_conclusions(report_dir, suite, entries, rows,
-                                    lambda path, text: _write_atomic(path, text)) if report_dir.name in PROFILES else {}
-    _write_atomic(report_dir / "index.html", site.index_html(report_dir, entries, rows, locbook_version(),
+                                    lambda path, text: write_text_atomic(path, text)) if report_dir.name in PROFILES else {}
+    write_text_atomic(report_dir / "index.html", site.index_html(report_dir, entries, rows, locbook_version(),
                                                              conclusions))
-    _write_atomic(report_dir / "index.md", site.index_markdown(report_dir, entries, rows, conclusions))
+    write_text_atomic(report_dir / "index.md", site.index_markdown(report_dir, entries, rows, conclusions))
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -820,13 +809,13 @@ def _claim_dataset_folder(report_dir: Path, name: str, identity: str, facts: dic
     would replace the others'), else record which one it holds and what its page says of it (``dataset.json``:
     name, identity, and ``facts``, :func:`_dataset_facts`), rewritten at every run."""
     record = report_dir / "dataset.json"
-    held = _read_json(record, {}).get("data set")
+    held = read_json(record, {}).get("data set")
     if held and held != identity:
         raise SuiteError(f"{report_dir} holds the reports of another data set named {name!r} ({held}); give yours "
                          "another name in its dataset.toml (name = ...), or remove that folder")
     if not held or facts:
         report_dir.mkdir(parents=True, exist_ok=True)
-        _write_atomic(record, json.dumps({"name": name, "data set": identity, **(facts or {})}, indent=1) + "\n")
+        write_text_atomic(record, json.dumps({"name": name, "data set": identity, **(facts or {})}, indent=1) + "\n")
 
 
 def _check_options(timeout_s: float, jobs: int, executor: str, scheduler: str | None) -> None:
@@ -915,7 +904,7 @@ def _run_locked(suite, tasks, profile, report_dir, data_roots, force, timeout_s,
     rev, dirty = _git_state(suite.repository)
     stamp = locbook_version() + (f" (source {rev}{' + uncommitted changes' if dirty else ''})" if rev else "")
     status_path = report_dir / "status.json"
-    status = _read_json(status_path, {})
+    status = read_json(status_path, {})
     by_id = {t.key: t for t in tasks}
     keys = {t.key: cache_key(t.experiment, profile, t.parameters, source=source, versions=versions,
                              figures=t.figures) for t in tasks}
@@ -935,7 +924,7 @@ def _run_locked(suite, tasks, profile, report_dir, data_roots, force, timeout_s,
             status[outcome.id] = {"status": outcome.status, "seconds": round(outcome.seconds, 2),
                                   "error": outcome.error}
             try:
-                _write_atomic(status_path, json.dumps(status, indent=1, sort_keys=True))
+                write_text_atomic(status_path, json.dumps(status, indent=1, sort_keys=True))
             except OSError as exc:
                 path = disk_full_path(exc, str(status_path))
                 if path is None:
@@ -992,7 +981,7 @@ def _run_locked(suite, tasks, profile, report_dir, data_roots, force, timeout_s,
 
     def complete(eid: str, handle, staging: Path, attempt: int, started: float | None):
         seconds = time.perf_counter() - started if started is not None else 0.0
-        result = _read_json(staging / ".result.json", None)
+        result = read_json(staging / ".result.json", None)
         if not isinstance(result, dict):
             result = {"seconds": seconds, **pool.no_result(handle, staging)}
         result.setdefault("seconds", seconds)
@@ -1156,7 +1145,7 @@ def _promote(exp, profile, params, staging: Path, folder: Path, stamp: str, key:
     data, links, changed = _data_hashes(staging)
     modules, _module_links, changed_modules = _data_hashes(staging, ".modules-read.log")
     _strip_worker_files(staging)
-    numbers = _read_csv(staging / "numbers.csv")
+    numbers = read_csv(staging / "numbers.csv")
     # the pages show each row's reading bracket when the experiment was bracketed (<reports>/brackets/<id>/)
     from .bracket import bracket_of_rows, brackets_root, load_bracket
     bracket = load_bracket(brackets_root(folder.parent) / exp.id) if folder.parent.name in PROFILES else []

@@ -32,31 +32,14 @@ from pathlib import Path
 
 from ..reproduce.printed_values import printed_number
 from ..reproduce.report import Table, markdown_text
-from ..reproduce.scoring import JUDGED_KINDS, KINDS
+from ..reproduce.scoring import (BRACKETS, JUDGED_KINDS, KINDS, SCORED_VERDICTS, VERDICT_COLUMNS,
+                                 scoreboard_counts, verdict_column)
 from .findings import md_cell
 from .spec import finite_float
 
 __all__ = ["VERDICT_COLUMNS", "scoreboard_counts", "summary_markdown", "page_markdown", "page_html",
            "index_markdown", "index_html", "double_counted", "dataset_record", "data_page", "data_index_markdown",
            "data_index_html", "dataset_sections"]
-
-#: verdict columns of the kind-by-verdict tables ("linked": repeats of a quantity compared elsewhere)
-VERDICT_COLUMNS = ("within", "loose", "miss", "consistent", "inconsistent", "no verdict", "linked")
-
-
-def _column(row: dict) -> str:
-    if row.get("same_as"):
-        return "linked"
-    return row.get("verdict") or "no verdict"
-
-
-def scoreboard_counts(rows) -> dict[str, Counter]:
-    """``{kind: Counter(verdict column -> rows)}`` over ``numbers.csv`` rows (kinds in :data:`KINDS` order)."""
-    counts = {k: Counter() for k in KINDS}
-    for r in rows:
-        counts.setdefault(r.get("kind", ""), Counter())[_column(r)] += 1
-    return {k: c for k, c in counts.items() if c}
-
 
 def double_counted(rows) -> list[tuple[str, str, list[str]]]:
     """Printed quantities that carry a verdict in more than one row: ``(document, printed_id, experiments)``.
@@ -340,14 +323,13 @@ def _shares(counter: Counter) -> str:
 
 
 def _chips(rows) -> list[tuple[str, int]]:
-    c = Counter(_column(r) for r in rows)
+    c = Counter(verdict_column(r) for r in rows)
     return [(v, c[v]) for v in VERDICT_COLUMNS if c[v]]
 
 
 def _bracket_chips(rows) -> list[tuple[str, int]]:
     """Bracket verdict counts of an experiment's rows (none when it was not bracketed)."""
     c = Counter(r.get("bracket", "") for r in rows)
-    from .bracket import BRACKETS
     return [(b, c[b]) for b in BRACKETS if c[b]]
 
 
@@ -404,15 +386,11 @@ def _page_outputs(folder: Path, manifest: dict) -> tuple[list[dict], list[dict]]
     return figures, tables
 
 
-#: the verdicts a compared row can have; its point takes the class ``v-<verdict>`` (colours in site.css)
-_SCORED_VERDICTS = ("within", "loose", "miss")
-
-
 def _scored_point(row: dict):
     """(printed, ours, window low, window high) of a scored row (a reproduction or calibration with a verdict; not a
     repeat of another row), the printed number read as the scorer reads it (:func:`printed_number`), else None."""
     if (row.get("kind") not in ("reproduction", "calibrated") or row.get("same_as")
-            or row.get("verdict") not in _SCORED_VERDICTS):
+            or row.get("verdict") not in SCORED_VERDICTS):
         return None
     try:
         printed = printed_number(row.get("printed", ""))

@@ -45,7 +45,7 @@ import numpy as np
 
 from ..errors import ParameterError
 from .spec import Suite, SuiteError
-from .study import _atomic
+from .files import atomic_write, write_text_atomic
 
 __all__ = ["LORO_EXPERIMENTS", "DENSITY_EXPERIMENT", "DENSITY_SUBSETS", "DENSITY_MAX_SIZES", "SPLIT_MODES",
            "loro_splits", "run_loro", "loro_tables", "density_sizes", "anchor_subsets", "anchor_density_study",
@@ -95,16 +95,12 @@ def _read_rows(path: Path) -> list[dict]:
         return []
 
 
-def _atomic_text(path: Path, text: str) -> None:
-    _atomic(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
-
-
 def _save_png(fig, path: Path) -> None:
     """A figure to ``path`` by the study's atomic write, closed whatever happens."""
     import matplotlib.pyplot as plt
     fig.tight_layout()
     try:
-        _atomic(path, lambda tmp: fig.savefig(tmp, format="png", dpi=100))
+        atomic_write(path, lambda tmp: fig.savefig(tmp, format="png", dpi=100))
     finally:
         plt.close(fig)
 
@@ -114,7 +110,7 @@ def _write_csv(path: Path, rows: list[dict], columns) -> None:
     writer = csv.DictWriter(out, fieldnames=list(columns), lineterminator="\n", extrasaction="ignore")
     writer.writeheader()
     writer.writerows([{k: ("" if r.get(k) is None else r.get(k)) for k in columns} for r in rows])
-    _atomic_text(path, out.getvalue())
+    write_textatomic_write(path, out.getvalue())
 
 
 def _markdown(rows: list[dict], columns) -> str:
@@ -237,7 +233,7 @@ def run_loro(suite: Suite, experiments, profile: str, *, data: str, overrides: d
         listing = [{"split": held, "scored": held, "role in the manifest": base.recording(held).role,
                     "calibration": ", ".join(cal), "report": str(run.report_dir) if run is not None else note}
                    for held, cal, run, note in out.splits]
-        _atomic_text(folder / "loro.md", _loro_markdown(base, table, listing, split_names))
+        write_textatomic_write(folder / "loro.md", _loro_markdown(base, table, listing, split_names))
         _loro_plot(table, split_names, folder / "loro.png", base.name)
         out.written = True
     return out
@@ -423,7 +419,7 @@ def run_density(suite: Suite, data: str, *, profile: str = "quick", subsets: int
         _write_csv(path, table, ["k", "method", "subsets", "mean_m", "std_m", "min_m", "max_m"])
         _write_csv(where / "subsets.csv", rows, ["k", "subset", "method", "epochs", "coverage", "mean_m", "median_m",
                                                  "rmse_m", "ratio", "folder"])
-        _atomic_text(where / "density.md", _density_markdown(ds, table, sample_seed, subsets))
+        write_textatomic_write(where / "density.md", _density_markdown(ds, table, sample_seed, subsets))
         wrote.append(Aggregate(path, len(done), len(points)))
         _density_plot(table, where / "density.png", ds.name, len(ds.anchor_ids))
 

@@ -65,6 +65,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ParameterError
+from .files import atomic_write, point_key, point_text, read_csv, read_json, write_text_atomic
 from .params import check_value
 from .spec import SAFE_NAME, Experiment, Suite, SuiteError, finite_float, read_toml
 
@@ -312,17 +313,6 @@ def _parameter_points(study: Study) -> list[dict]:
     return [{k: v for part in combo for k, v in part.items()} for combo in itertools.product(*blocks)]
 
 
-def _canonical(values: dict) -> str:
-    """The checked values of a point as one text (what makes two points the same point)."""
-    return json.dumps(values, sort_keys=True)
-
-
-def _point_key(exp: Experiment, values: dict) -> str:
-    """The folder of a study point: the experiment id and the whole SHA-256 of its values (a 40-bit prefix made
-    points collide from about 10^6 points on; the duplicate check compares the values themselves)."""
-    return f"{exp.id}-{hashlib.sha256(_canonical(values).encode()).hexdigest()}"
-
-
 def expand_study(study: Study) -> list[StudyPoint]:
     """Every task of the study (experiment x parameter point x replicate), each value checked against the
     parameter's type and rule; raises a SuiteError naming the point and the value otherwise."""
@@ -353,12 +343,12 @@ def expand_study(study: Study) -> list[StudyPoint]:
                                                                        exp.rules.get(study.seed_parameter))
                     except ParameterError as exc:
                         raise _err(study.name, study.source, f"replicate {r} of {exp.id!r}: {exc}") from None
-                text = (exp.id, _canonical(run_values))
+                text = (exp.id, point_text(run_values))
                 if text in seen:       # the same values (after checking: 1 and 1.0 of a float are one value)
                     raise _err(study.name, study.source, f"point {i} of {exp.id!r} repeats point {seen[text]} "
                                                          f"({values}); every point must differ")
                 seen[text] = i
-                key = _point_key(exp, run_values)
+                key = point_key(exp.id, run_values)
                 if keys.setdefault(key, text) != text:    # a SHA-256 collision: refused, never merged
                     raise _err(study.name, study.source, f"point {i} of {exp.id!r}: its folder key {key} is "
                                                          "that of another point")
@@ -369,25 +359,13 @@ def expand_study(study: Study) -> list[StudyPoint]:
 # ---------------------------------------------------------------------------------------------------
 # outputs
 
-def _atomic(path: Path, write) -> None:
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        write(tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-
-
 def study_rows(study: Study, points: list[StudyPoint], folder: Path, done: set[str]) -> list[dict]:
     """The study.csv rows of the points in ``done`` (keys whose report is up to date), in point order."""
-    from .site import _read_csv
-
     rows = []
     for p in points:
         if p.key not in done:
             continue
-        for r in _read_csv(folder / p.key / "numbers.csv"):
+        for r in read_csv(folder / p.key / "numbers.csv"):
             if study.collect and r["quantity"] not in study.collect and r["printed_id"] not in study.collect:
                 continue
             seed = "" if p.replicate_seed is None else p.replicate_seed
@@ -404,7 +382,7 @@ def _write_csv(study: Study, rows: list[dict], path: Path) -> None:
     writer = csv.DictWriter(out, fieldnames=[*_LEAD, *study.parameters, *_TAIL], lineterminator="\n")
     writer.writeheader()
     writer.writerows(rows)
-    _atomic(path, lambda tmp: tmp.write_text(out.getvalue(), encoding="utf-8"))
+    write_textatomic_write(path, out.getvalue())
 
 
 def _slug(text: str, limit: int = 50) -> str:
@@ -447,7 +425,7 @@ def _write_plots(study: Study, rows: list[dict], plots: Path) -> list[Path]:
             fig.tight_layout()
             digest = hashlib.sha256(printed_id.encode()).hexdigest()[:6]
             path = plots / f"{eid}-{_slug(printed_id)}-{digest}-{_slug(pname)}.png"
-            _atomic(path, lambda tmp: fig.savefig(tmp, format="png", dpi=100))
+            atomic_write(path, lambda tmp: fig.savefig(tmp, format="png", dpi=100))
             plt.close(fig)
             written.append(path)
     for old in plots.glob("*.png"):    # plots of quantities or parameters the study no longer has
@@ -544,9 +522,7 @@ def check_claim(study: Study, folder: Path) -> None:
     another file with a different declaration (``study.json`` records the file and the declaration's fingerprint).
     The same file edited is the same study (its points are cached by their values); an identical declaration in
     another file (a copy) shares the folder too."""
-    from .site import _read_json
-
-    held = _read_json(folder / "study.json", {})
+    held = read_json(folder / "study.json", {})
     mine = _record(study)
     if held.get("declared_in") and held.get("declared_in") != mine["declared_in"] \
             and held.get("fingerprint") != mine["fingerprint"]:
@@ -560,7 +536,7 @@ def _claim(study: Study, folder: Path) -> None:
     text = json.dumps(_record(study), indent=1) + "\n"
     path = folder / "study.json"
     if not path.is_file() or path.read_text(encoding="utf-8", errors="replace") != text:
-        _atomic(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
+        atomic_write(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
 
 
 def study_folder(suite: Suite, study: Study, report_root: Path | None = None) -> Path:

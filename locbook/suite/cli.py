@@ -315,7 +315,7 @@ def main(argv: list[str] | None = None) -> int:
             # an experiment named by its exact id must run on the data set; one selected by a document key or with
             # no ids is left out when the data set cannot run it (runner.select_for_data)
             requested = {i for i in args.ids if any(e.id == i for e in suite.experiments)}
-            from .runner import run_suite, split_overrides
+            from .run import run_suite, split_overrides
             overrides = _parse_overrides(args.parameter)
             methods, trackers = _user_methods(args)
             if (methods or trackers) and args.data is None and "data" not in overrides:
@@ -384,7 +384,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"bracket of {args.experiment} incomplete: its default point has no up-to-date report, so no "
                   "verdict was written (an earlier bracket.csv is kept as it was)", file=sys.stderr)
         return _exit_status(result)
-    from .runner import user_method_failures
+    from .run import user_method_failures
     worst = EXIT_OK
     for data, result in floor_results:        # one run, or one per floor of a data set with floors
         if result.report_dir.name != args.profile and data is not None:
@@ -417,7 +417,7 @@ def _sizes(text: str) -> tuple[int, ...]:
 def _loro_summary(loro, progress: str) -> int:
     """The end of ``--split loro``: each split's scoreboard line, where the table is, and the exit status (the
     worst of the splits': an interrupt, a full disk, a failure, a method of your own that failed)."""
-    from .runner import user_method_failures
+    from .run import user_method_failures
     failures = []
     for held, calibration, run, note in loro.splits:
         if run is None:
@@ -492,7 +492,7 @@ def _dataset_text(path: str, suite=None) -> str:
     if suite is None:
         lines.append(f"ok: `locbook run --data {path}` runs the measured-data experiments and the benchmark on it")
         return "\n".join(lines)
-    from .runner import data_kinds
+    from .run import data_kinds
     kinds = data_kinds(ds)
     why = {e.id: e.data_run.missing(kinds) for e in suite.experiments if e.data_run is not None}
     runs = [eid for eid, reason in why.items() if not reason]

@@ -44,8 +44,12 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ParameterError
-from .spec import Suite, SuiteError
 from .files import atomic_write, write_text_atomic
+from .progress import make_progress
+from .run import claim_dataset_folder, data_kinds, load_data_argument, run_suite, run_tasks
+from .runner import Task
+from .spec import Suite, SuiteError
+from .study import Aggregate, Study, current_points, expand_study
 
 __all__ = ["LORO_EXPERIMENTS", "DENSITY_EXPERIMENT", "DENSITY_SUBSETS", "DENSITY_MAX_SIZES", "SPLIT_MODES",
            "loro_splits", "run_loro", "loro_tables", "density_sizes", "anchor_subsets", "anchor_density_study",
@@ -110,7 +114,7 @@ def _write_csv(path: Path, rows: list[dict], columns) -> None:
     writer = csv.DictWriter(out, fieldnames=list(columns), lineterminator="\n", extrasaction="ignore")
     writer.writeheader()
     writer.writerows([{k: ("" if r.get(k) is None else r.get(k)) for k in columns} for r in rows])
-    write_textatomic_write(path, out.getvalue())
+    write_text_atomic(path, out.getvalue())
 
 
 def _markdown(rows: list[dict], columns) -> str:
@@ -184,15 +188,13 @@ def run_loro(suite: Suite, experiments, profile: str, *, data: str, overrides: d
     stops the rest; the table then holds the splits done, unless an earlier run's table is there: a stopped run
     never replaces it with fewer splits (``kept``)."""
     from ..data.selection import select
-    from .progress import make_progress
-    from .runner import _claim_dataset_folder, _load_data_argument, data_kinds, run_suite
     overrides = dict(overrides or {})
     if "calibration" in overrides:
         raise SuiteError("--split loro chooses the calibration recordings of each split: give --split loro or "
                          "-p calibration=..., not both")
     if "data" in overrides:
         raise SuiteError("with --split loro give the data set with --data DIR")
-    ds, name, _value, _roots, identity = _load_data_argument(data)
+    ds, name, _value, _roots, identity = load_data_argument(data)
     base = select(ds, anchors=overrides.get("anchors", ""))
     splits = loro_splits(base)
     experiments = list(experiments) if experiments else [e for e in suite.experiments if e.id in LORO_EXPERIMENTS]
@@ -220,7 +222,7 @@ def run_loro(suite: Suite, experiments, profile: str, *, data: str, overrides: d
             break
     folder = out.folder
     folder.parent.mkdir(parents=True, exist_ok=True)
-    _claim_dataset_folder(folder.parent, name, identity)
+    claim_dataset_folder(folder.parent, name, identity)
     table, per_split = loro_tables(base, out.splits)
     # a stopped run holds fewer splits than the table an earlier run wrote: that table is kept, never shrunk
     out.kept = out.stopped and (folder / "loro.csv").exists()
@@ -233,7 +235,7 @@ def run_loro(suite: Suite, experiments, profile: str, *, data: str, overrides: d
         listing = [{"split": held, "scored": held, "role in the manifest": base.recording(held).role,
                     "calibration": ", ".join(cal), "report": str(run.report_dir) if run is not None else note}
                    for held, cal, run, note in out.splits]
-        write_textatomic_write(folder / "loro.md", _loro_markdown(base, table, listing, split_names))
+        write_text_atomic(folder / "loro.md", _loro_markdown(base, table, listing, split_names))
         _loro_plot(table, split_names, folder / "loro.png", base.name)
         out.written = True
     return out
@@ -372,11 +374,9 @@ def anchor_density_study(suite: Suite, data: str, *, profile: str = "quick", sub
 def _density_plan(suite: Suite, data: str, *, profile: str, subsets: int, sizes, sample_seed: int):
     """:func:`anchor_density_study` and the data set's ``(name, data roots, identity)`` for the runner."""
     from ..data.selection import select
-    from .runner import _load_data_argument
-    from .study import Study
     if isinstance(sample_seed, bool) or not isinstance(sample_seed, int) or sample_seed < 0:
         raise ParameterError(f"--sample-seed must be a whole number >= 0, got {sample_seed!r}")
-    ds, name, value, roots, identity = _load_data_argument(data)
+    ds, name, value, roots, identity = load_data_argument(data)
     ds = select(ds)
     ks = density_sizes(len(ds.anchor_ids), sizes)
     drawn = anchor_subsets(ds.anchor_ids, ks, subsets, rng=np.random.default_rng(sample_seed))
@@ -396,14 +396,12 @@ def run_density(suite: Suite, data: str, *, profile: str = "quick", subsets: int
     ``<reports>/<profile>/data-<name>/anchor-density/`` and write its table and plot (also after an interrupt: the
     points finished so far, by :func:`locbook.suite.study.current_points`). Returns the runner's SuiteRun with
     ``aggregate`` (:class:`locbook.suite.study.Aggregate` of density.csv)."""
-    from .runner import Task, _claim_dataset_folder, run_tasks
-    from .study import Aggregate, current_points, expand_study
     study, ds, _drawn, name, roots, identity = _density_plan(suite, data, profile=profile, subsets=subsets,
                                                              sizes=sizes, sample_seed=sample_seed)
     points = expand_study(study)            # every value checked before anything runs
     folder = _data_folder(suite, report_root, profile, name) / "anchor-density"
     folder.parent.mkdir(parents=True, exist_ok=True)
-    _claim_dataset_folder(folder.parent, name, identity)
+    claim_dataset_folder(folder.parent, name, identity)
     tasks = [Task(p.key, p.experiment, p.parameters) for p in points]
     wrote: list = []
 
@@ -419,7 +417,7 @@ def run_density(suite: Suite, data: str, *, profile: str = "quick", subsets: int
         _write_csv(path, table, ["k", "method", "subsets", "mean_m", "std_m", "min_m", "max_m"])
         _write_csv(where / "subsets.csv", rows, ["k", "subset", "method", "epochs", "coverage", "mean_m", "median_m",
                                                  "rmse_m", "ratio", "folder"])
-        write_textatomic_write(where / "density.md", _density_markdown(ds, table, sample_seed, subsets))
+        write_text_atomic(where / "density.md", _density_markdown(ds, table, sample_seed, subsets))
         wrote.append(Aggregate(path, len(done), len(points)))
         _density_plot(table, where / "density.png", ds.name, len(ds.anchor_ids))
 

@@ -65,8 +65,12 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ParameterError
+from . import cachekey
+from .cachekey import cache_key, dependency_versions
 from .files import atomic_write, point_key, point_text, read_csv, read_json, write_text_atomic
 from .params import check_value
+from .run import run_tasks
+from .runner import KERNEL_NAME, Task, report_cached
 from .spec import SAFE_NAME, Experiment, Suite, SuiteError, finite_float, read_toml
 
 __all__ = ["Study", "StudyPoint", "Aggregate", "load_study", "load_studies", "expand_study", "run_study",
@@ -382,7 +386,7 @@ def _write_csv(study: Study, rows: list[dict], path: Path) -> None:
     writer = csv.DictWriter(out, fieldnames=[*_LEAD, *study.parameters, *_TAIL], lineterminator="\n")
     writer.writeheader()
     writer.writerows(rows)
-    write_textatomic_write(path, out.getvalue())
+    write_text_atomic(path, out.getvalue())
 
 
 def _slug(text: str, limit: int = 50) -> str:
@@ -440,8 +444,6 @@ def current_points(folder: Path, profile: str, points, outcomes) -> dict[str, st
     cache test: an interrupted, failed or full-disk ``--force`` run leaves those reports as they were, and they
     count); else its outcome (``failed``, ``interrupted``, ``not run``). ``points``: ``(key, experiment, parameters,
     figures)`` of every point."""
-    from .runner import _cached, _dependency_versions, _runner_fingerprint, cache_key
-
     status = {o.id: o.status for o in outcomes}
     fingerprint = None
     out = {}
@@ -449,8 +451,8 @@ def current_points(folder: Path, profile: str, points, outcomes) -> dict[str, st
         state = status.get(key, "not run")
         if state not in ("ok", "cached") and (folder / key / "run.json").is_file():
             if fingerprint is None:      # computed once: it hashes the runner's sources
-                fingerprint = {"source": _runner_fingerprint(), "versions": _dependency_versions()}
-            up_to_date, _damaged = _cached(folder / key, exp, cache_key(exp, profile, parameters, figures=figures,
+                fingerprint = {"source": cachekey.runner_fingerprint(), "versions": dependency_versions()}
+            up_to_date, _damaged = report_cached(folder / key, exp, cache_key(exp, profile, parameters, figures=figures,
                                                                         **fingerprint), figures)
             if up_to_date:
                 state = "cached"
@@ -550,7 +552,6 @@ def run_study(suite: Suite, study: Study, *, report_root: Path | None = None, jo
     """Run every point of ``study`` in one runner session into ``<report_root>/studies/<name>/`` and write its
     study.csv and plots (also after an interrupt: the points finished so far). Returns the
     :class:`~locbook.suite.runner.SuiteRun` (one outcome per point, by folder key)."""
-    from .runner import KERNEL_NAME, Task, run_tasks
 
     points = expand_study(study)     # every value checked before anything runs
     folder = study_folder(suite, study, report_root)

@@ -154,7 +154,7 @@ def test_a_full_disk_never_empties_the_study_or_deletes_its_plots(stoy, monkeypa
 
     def full(path, write):
         raise OSError(28, "No space left on device", str(path))
-    monkeypatch.setattr("locbook.suite.study._atomic", full)
+    monkeypatch.setattr("locbook.suite.study.atomic_write", full)
     with pytest.raises(OSError):
         write_study_outputs(study, points, folder, [Outcome(p.key, "ok", 1.0) for p in points[:2]])
     assert (folder / "study.csv").read_bytes() == before
@@ -166,7 +166,7 @@ def test_a_study_whose_aggregate_could_not_be_written_says_so(stoy, monkeypatch,
 
     def full(path, write):
         raise OSError(28, "No space left on device", str(path))
-    monkeypatch.setattr("locbook.suite.study._atomic", full)
+    monkeypatch.setattr("locbook.suite.study.atomic_write", full)
     monkeypatch.setattr(runner, "run_tasks", _fake_run_tasks(finished=1, signum=None, fail_writes=True))
     code = main(["--suite", str(stoy / "notebooks" / "experiments.toml"), "study", "toy", "--force", "--reports",
                  str(stoy / "reports"), "--progress", "quiet"])

@@ -67,7 +67,7 @@ import numpy as np
 from ..errors import ParameterError
 from . import cachekey
 from .cachekey import cache_key, dependency_versions
-from .files import atomic_write, point_key, point_text, read_csv, read_json, write_text_atomic
+from .files import atomic_write, point_key, point_text, read_csv, read_json
 from .params import check_value
 from .run import run_tasks
 from .runner import KERNEL_NAME, Task, report_cached
@@ -386,7 +386,7 @@ def _write_csv(study: Study, rows: list[dict], path: Path) -> None:
     writer = csv.DictWriter(out, fieldnames=[*_LEAD, *study.parameters, *_TAIL], lineterminator="\n")
     writer.writeheader()
     writer.writerows(rows)
-    write_text_atomic(path, out.getvalue())
+    atomic_write(path, lambda tmp: tmp.write_text(out.getvalue(), encoding="utf-8"))
 
 
 def _slug(text: str, limit: int = 50) -> str:

@@ -14,6 +14,7 @@ import sys
 from importlib import metadata
 from pathlib import Path
 
+from .. import __version__
 from .params import read_notebook
 from .spec import Experiment
 
@@ -26,7 +27,6 @@ _DEPENDENCIES = ("numpy", "scipy", "cvxpy", "clarabel", "osqp", "scs", "matplotl
 
 
 def locbook_version() -> str:
-    from .. import __version__
     return __version__
 
 

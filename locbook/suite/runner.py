@@ -53,7 +53,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..reproduce.report import NUMBER_COLUMNS
-from . import cachekey
+from . import cachekey, notebook_html
 from .cachekey import (cache_key, data_hashes, data_unchanged, dependency_versions, links_unchanged, locbook_version,
                        package_dir)
 from .files import machine_label, read_json, write_text_atomic
@@ -603,10 +603,9 @@ def _export_page(staging: Path, exp_id: str) -> dict:
     notebook = staging / f"{exp_id}.ipynb"
     if not notebook.exists():         # nothing to export: the validation says what is missing
         return {}
-    from .notebook_html import export_html
     page = staging / f"{exp_id}.html"
     try:
-        body = export_html(notebook)      # self-contained: the math drawn to SVG, no script from a CDN
+        body = notebook_html.export_html(notebook)      # self-contained: the math drawn to SVG, no script from a CDN
         page.write_text(body, encoding="utf-8")
     except Exception as exc:  # an HTML failure must not hide the notebook's own result
         path = disk_full_path(exc, str(page))

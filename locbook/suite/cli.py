@@ -99,7 +99,7 @@ def _user_methods(args) -> tuple[list, list]:
 
 
 def _print_method_failures(failures) -> None:
-    """One line per user method that failed (:func:`locbook.suite.runner.user_method_failures`)."""
+    """One line per user method that failed (:func:`locbook.suite.run.user_method_failures`)."""
     for f in failures:
         print(f"locbook: user method {f['method']!r} ({f['kind']}, {f['function']}) failed in "
               f"{', '.join(f['experiments'])}: {f['error']}; its traceback: {f['page']}", file=sys.stderr)
@@ -313,7 +313,7 @@ def main(argv: list[str] | None = None) -> int:
             else:
                 experiments = suite.select(args.ids)
             # an experiment named by its exact id must run on the data set; one selected by a document key or with
-            # no ids is left out when the data set cannot run it (runner.select_for_data)
+            # no ids is left out when the data set cannot run it (run.select_for_data)
             requested = {i for i in args.ids if any(e.id == i for e in suite.experiments)}
             from .run import run_suite, split_overrides
             overrides = _parse_overrides(args.parameter)

@@ -22,7 +22,7 @@ __all__ = ["scored_rows", "tier_counts", "TIER_WORDS", "bracket_headline", "leni
 
 FINDINGS_SUFFIX = "-findings.md"
 
-#: How the headline and the pages name each tier (:data:`~locbook.suite.bracket.BRACKETS`).
+#: How the headline and the pages name each tier (:data:`~locbook.reproduce.scoring.BRACKETS`).
 TIER_WORDS = {
     "default": "reproduced under the default reading",
     "other_reading": "reproduced only under another textual (or assumed) reading",

@@ -110,7 +110,7 @@ def _resolve(mode: str, stream) -> str:
 
 
 class _Base:
-    """Event sink of :func:`~locbook.suite.runner.run_suite`."""
+    """Event sink of :func:`~locbook.suite.run.run_suite`."""
 
     def __init__(self, stream=None):
         self.stream = stream if stream is not None else sys.stdout

@@ -109,7 +109,7 @@ class SuiteRun:
     #: why the executor could run nothing more (a lost Dask scheduler); the run stopped there
     executor_error: str = ""
     #: a data run: the selected experiments left out because the data set does not meet their
-    #: ``[experiment.data_run] needs``, each with why (:func:`select_for_data`); they are no outcome of the run
+    #: ``[experiment.data_run] needs``, each with why (:func:`locbook.suite.run.select_for_data`); they are no outcome of the run
     left_out: dict[str, str] = field(default_factory=dict)
 
     def count(self, status: str) -> int:
@@ -343,7 +343,7 @@ def run_tasks(suite: Suite, tasks: list[Task], profile: str, report_dir: Path, *
     an interrupt; one :class:`Outcome` per task) to rebuild the folder's aggregate files. ``write_pages(exp,
     profile, params, staging, folder, stamp)`` writes one report's pages into its validated staging folder
     (:func:`locbook.suite.site.write_experiment_pages`): the pages are the site's, passed in, so that the runner
-    imports no page code. :func:`run_suite` and
+    imports no page code. :func:`locbook.suite.run.run_suite` and
     ``locbook study`` (:func:`locbook.suite.study.run_study`) both run here."""
     from filelock import FileLock
 

@@ -158,7 +158,7 @@ def _answer_text(parts: list[dict]) -> str:
 
 def data_page(report_dir: Path, entries, record: dict) -> dict:
     """What a data set's page shows (:func:`data_index_markdown`, :func:`data_index_html`), read from the folder:
-    ``entries`` as :func:`locbook.suite.runner.write_suite_reports` builds them, ``record`` its dataset.json."""
+    ``entries`` as :func:`locbook.suite.site.write_suite_reports` builds them, ``record`` its dataset.json."""
     report_dir = Path(report_dir)
     status = read_json(report_dir / "status.json", {})
     by_id = {e["exp"].id: e for e in entries}

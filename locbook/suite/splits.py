@@ -5,7 +5,7 @@ of :mod:`locbook.data.selection`, by the suite's own runner, each gathered into 
 can be scored (one with true positions, :func:`locbook.data.selection.scorable_recordings`, in manifest order): the
 channel is fitted on every OTHER recording with truth (``-p calibration=<the others>``) and the battery is scored on
 that one; recordings without truth (a track with only a reference path) keep their role. Each split is a data run of
-its own (:func:`locbook.suite.runner.run_suite` with that ``calibration``), so its reports are the cached reports of
+its own (:func:`locbook.suite.run.run_suite` with that ``calibration``), so its reports are the cached reports of
 that parameter, the same as ``locbook run --data DIR -p calibration=...`` writes. The experiments are
 :data:`LORO_EXPERIMENTS` unless ids are given; one a split cannot feed (no track left) is left out of that split. The
 held-out recording's own rows (``recording`` = its name) of each split's ``results.csv`` are gathered into
@@ -182,7 +182,7 @@ def _data_folder(suite: Suite, report_root, profile: str, name: str) -> Path:
 
 def run_loro(suite: Suite, experiments, profile: str, *, data: str, overrides: dict | None = None,
              report_root: Path | None = None, progress="plain", methods=(), trackers=(), **runner) -> LoroRun:
-    """Leave-one-recording-out on ``data`` (module docstring): one :func:`locbook.suite.runner.run_suite` per split
+    """Leave-one-recording-out on ``data`` (module docstring): one :func:`locbook.suite.run.run_suite` per split
     (``overrides`` and ``runner``'s options passed on to each; ``experiments`` default :data:`LORO_EXPERIMENTS`),
     then the table and the plot from every split whose reports are up to date. An interrupted or full-disk split
     stops the rest; the table then holds the splits done, unless an earlier run's table is there: a stopped run

@@ -65,7 +65,7 @@ that report, else what the bracket's other readings gave, named with the bracket
 exists at all, a row keeps the bracket columns the folder's numbers.csv gave it while its value and verdict are
 unchanged. After every bracket run, also an interrupted or failed one, bracket.csv, values.csv and points.csv are
 rebuilt from every point with an up-to-date report, this run's and earlier ones
-(:func:`~locbook.suite.study.current_points`); a bracket whose default point has none writes nothing (an earlier
+(:func:`~locbook.suite.sweep.current_points`); a bracket whose default point has none writes nothing (an earlier
 one is kept).
 """
 from __future__ import annotations
@@ -89,9 +89,8 @@ from .spec import Experiment, Suite, SuiteError, finite_float
 from .bracket_table import (BRACKET_COLUMNS, BRACKET_ROW_COLUMNS, DEFAULT_POINT, POINT_COLUMNS, SITE_NUMBER_COLUMNS,
                             VALUE_COLUMNS, NoBracket, find_row, index_rows, is_scored, bracket_of_rows, brackets_root, counts,
                             load_bracket, load_values)
-from .run import run_tasks
-from .runner import KERNEL_NAME, Task
-from .study import Aggregate, current_points
+from .runner import Task
+from .sweep import Aggregate, current_points, run_sweep
 
 __all__ = ["BracketPoint", "find_experiment", "brackets_root", "SITE_NUMBER_COLUMNS", "BRACKET_ROW_COLUMNS",
            "experiment_readings", "bracket_settings", "counts", "VALUE_COLUMNS", "load_values", "read_readings_option", "bracket_points", "bracket_gaps", "run_bracket", "bracket_folder", "bracket_rows",
@@ -563,10 +562,10 @@ def _write_table(path: Path, columns, rows) -> None:
 def write_bracket_outputs(exp: Experiment, points: list[BracketPoint], folder: Path, outcomes, gaps: list[Reading],
                           profile: str, suite: Suite, readings_file: str = "", wrote: list | None = None) -> Aggregate:
     """bracket.csv, values.csv and points.csv, from every point with an up-to-date report (this
-    run's and earlier ones: :func:`~locbook.suite.study.current_points`), so an interrupted or failed run never
+    run's and earlier ones: :func:`~locbook.suite.sweep.current_points`), so an interrupted or failed run never
     drops a point that still holds; a row is ``open`` while a point it needs has none. Without an up-to-date default
     point nothing is written (an earlier bracket is kept as it was). Each file is replaced atomically. ``wrote``: the
-    :class:`~locbook.suite.study.Aggregate` is appended as soon as bracket.csv is in place (or known unwritten)."""
+    :class:`~locbook.suite.sweep.Aggregate` is appended as soon as bracket.csv is in place (or known unwritten)."""
     status = current_points(folder, profile, [(p.key, exp, p.parameters, False) for p in points], outcomes)
     done = sum(st in ("ok", "cached") for st in status.values())
     path = folder / "bracket.csv"
@@ -617,15 +616,13 @@ def run_bracket(suite: Suite, exp: Experiment, *, profile: str = "quick", readin
     gaps = bracket_gaps(found)
     folder = bracket_folder(suite, exp, report_root)
     tasks = [Task(p.key, exp, p.parameters, figures=False) for p in points]   # only their numbers are read
-    wrote: list[Aggregate] = []
-    run = run_tasks(suite, tasks, profile, folder, jobs=jobs, force=force, timeout_s=timeout_s, retries=retries,
-                    kernel_name=kernel_name or KERNEL_NAME, progress=progress, executor=executor,
-                    scheduler=scheduler,
-                    write_reports=lambda where, outcomes: write_bracket_outputs(exp, points, where, outcomes, gaps,
-                                                                                 profile, suite, readings_file, wrote))
-    # what bracket.csv holds now, for the CLI to say (not rewritten: no up-to-date default point, or a failed write)
-    run.aggregate = wrote[-1] if wrote else Aggregate(folder / "bracket.csv", 0, len(points), written=False)
-    return run
+    # run.aggregate: what bracket.csv holds now, for the CLI to say (not rewritten: no up-to-date default point, or a
+    # failed write)
+    return run_sweep(suite, tasks, profile, folder,
+                     lambda where, outcomes, wrote: write_bracket_outputs(exp, points, where, outcomes, gaps, profile,
+                                                                          suite, readings_file, wrote),
+                     folder / "bracket.csv", jobs=jobs, force=force, timeout_s=timeout_s, retries=retries,
+                     kernel_name=kernel_name, progress=progress, executor=executor, scheduler=scheduler)
 
 
 def read_readings_option(path: Path | None) -> tuple[Reading, ...] | None:

@@ -46,7 +46,7 @@ def _positive(kind, text: str):
 
 def _print_summary(run, progress: str = "plain", see: Path | None = None, rebuilt: str = "") -> None:
     """The scoreboard and the end of a run. ``rebuilt``: what the run's aggregate files hold now (for ``run``: the
-    index and numbers.csv; a study's or bracket's :class:`~locbook.suite.study.Aggregate`), said after a stop."""
+    index and numbers.csv; a study's or bracket's :class:`~locbook.suite.sweep.Aggregate`), said after a stop."""
     names = {"ok": "executed", "cached": "cached", "failed": "failed", "interrupted": "interrupted",
              "not run": "not started"}
     counts = ", ".join(f"{run.count(s)} {w}" for s, w in names.items() if run.count(s) or s in ("ok", "cached", "failed"))

@@ -49,7 +49,8 @@ from .progress import make_progress
 from .run import claim_dataset_folder, data_kinds, load_data_argument, run_suite, run_tasks
 from .runner import Task
 from .spec import Suite, SuiteError
-from .study import Aggregate, Study, current_points, expand_study
+from .study import Study, expand_study
+from .sweep import Aggregate, current_points
 
 __all__ = ["LORO_EXPERIMENTS", "DENSITY_EXPERIMENT", "DENSITY_SUBSETS", "DENSITY_MAX_SIZES", "SPLIT_MODES",
            "loro_splits", "run_loro", "loro_tables", "density_sizes", "anchor_subsets", "anchor_density_study",
@@ -394,8 +395,8 @@ def run_density(suite: Suite, data: str, *, profile: str = "quick", subsets: int
                 sample_seed: int = 0, report_root: Path | None = None, **runner):
     """Run the anchor-density study of ``data`` (module docstring) in one runner session into
     ``<reports>/<profile>/data-<name>/anchor-density/`` and write its table and plot (also after an interrupt: the
-    points finished so far, by :func:`locbook.suite.study.current_points`). Returns the runner's SuiteRun with
-    ``aggregate`` (:class:`locbook.suite.study.Aggregate` of density.csv)."""
+    points finished so far, by :func:`locbook.suite.sweep.current_points`). Returns the runner's SuiteRun with
+    ``aggregate`` (:class:`locbook.suite.sweep.Aggregate` of density.csv)."""
     study, ds, _drawn, name, roots, identity = _density_plan(suite, data, profile=profile, subsets=subsets,
                                                              sizes=sizes, sample_seed=sample_seed)
     points = expand_study(study)            # every value checked before anything runs

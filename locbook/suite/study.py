@@ -65,13 +65,11 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ParameterError
-from . import cachekey
-from .cachekey import cache_key, dependency_versions
 from .files import atomic_write, point_key, point_text, read_csv, read_json
 from .params import check_value
-from .run import run_tasks
-from .runner import KERNEL_NAME, Task, report_cached
+from .runner import Task
 from .spec import SAFE_NAME, Experiment, Suite, SuiteError, finite_float, read_toml
+from .sweep import Aggregate, current_points, run_sweep
 
 __all__ = ["Study", "StudyPoint", "Aggregate", "load_study", "load_studies", "expand_study", "run_study",
            "study_size", "current_points", "check_claim", "STUDY_COLUMNS", "MAX_STUDY_RUNS"]
@@ -438,47 +436,6 @@ def _write_plots(study: Study, rows: list[dict], plots: Path) -> list[Path]:
     return written
 
 
-def current_points(folder: Path, profile: str, points, outcomes) -> dict[str, str]:
-    """Each point's status for an aggregate (study.csv, bracket.csv): its outcome in this run when ``ok`` or
-    ``cached``; else ``cached`` when its folder still holds the up-to-date report of an earlier run (the runner's own
-    cache test: an interrupted, failed or full-disk ``--force`` run leaves those reports as they were, and they
-    count); else its outcome (``failed``, ``interrupted``, ``not run``). ``points``: ``(key, experiment, parameters,
-    figures)`` of every point."""
-    status = {o.id: o.status for o in outcomes}
-    fingerprint = None
-    out = {}
-    for key, exp, parameters, figures in points:
-        state = status.get(key, "not run")
-        if state not in ("ok", "cached") and (folder / key / "run.json").is_file():
-            if fingerprint is None:      # computed once: it hashes the runner's sources
-                fingerprint = {"source": cachekey.runner_fingerprint(), "versions": dependency_versions()}
-            up_to_date, _damaged = report_cached(folder / key, exp, cache_key(exp, profile, parameters, figures=figures,
-                                                                        **fingerprint), figures)
-            if up_to_date:
-                state = "cached"
-        out[key] = state
-    return out
-
-
-@dataclass(frozen=True)
-class Aggregate:
-    """What a study or bracket wrote: ``path`` (study.csv, bracket.csv) from ``kept`` of ``points`` points (those
-    with an up-to-date report); ``written`` False when nothing was rewritten (the earlier file is as it was)."""
-
-    path: Path
-    kept: int
-    points: int
-    written: bool = True
-
-    def describe(self) -> str:
-        if not self.written:
-            return f"{self.path.name} was not rewritten (an earlier one is kept as it was)"
-        rest = "" if self.kept == self.points else (f"; the other {self.points - self.kept} have no up-to-date "
-                                                    "report yet: run it again to complete it")
-        return (f"{self.path.name} was rebuilt from the {self.kept} of {self.points} points with an up-to-date "
-                f"report{rest}")
-
-
 def write_study_outputs(study: Study, points: list[StudyPoint], folder: Path, outcomes,
                         wrote: list | None = None) -> Aggregate:
     """study.csv and the plots from every point with an up-to-date report (:func:`current_points`: this run's and
@@ -557,11 +514,8 @@ def run_study(suite: Suite, study: Study, *, report_root: Path | None = None, jo
     folder = study_folder(suite, study, report_root)
     check_claim(study, folder)       # another study of this name: refused before anything runs
     tasks = [Task(p.key, p.experiment, p.parameters) for p in points]
-    wrote: list[Aggregate] = []
-    run = run_tasks(suite, tasks, study.profile, folder, jobs=jobs, force=force, timeout_s=timeout_s,
-                    retries=retries, kernel_name=kernel_name or KERNEL_NAME, progress=progress, executor=executor,
-                    scheduler=scheduler,
-                    write_reports=lambda where, outcomes: write_study_outputs(study, points, where, outcomes, wrote))
-    # what study.csv holds now, for the CLI to say (not rewritten: none up to date, or its write failed)
-    run.aggregate = wrote[-1] if wrote else Aggregate(folder / "study.csv", 0, len(points), written=False)
-    return run
+    # run.aggregate: what study.csv holds now, for the CLI to say (not rewritten: none up to date, or its write failed)
+    return run_sweep(suite, tasks, study.profile, folder,
+                     lambda where, outcomes, wrote: write_study_outputs(study, points, where, outcomes, wrote),
+                     folder / "study.csv", jobs=jobs, force=force, timeout_s=timeout_s, retries=retries,
+                     kernel_name=kernel_name, progress=progress, executor=executor, scheduler=scheduler)

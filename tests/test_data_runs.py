@@ -21,7 +21,8 @@ import pytest
 from locbook.data.dataset import load_dataset
 from locbook.data.example import EXAMPLE_ROLES, write_example_dataset
 from locbook.errors import ParameterError
-from locbook.suite import load_suite, runner
+from locbook.suite import load_suite, runner, site
+from locbook.suite import run as suite_run
 from locbook.suite.spec import SuiteError
 
 #: the reproduction vocabulary no page about a data set may use (words, so "within" but not "withinness")
@@ -162,9 +163,9 @@ def test_data_run_parameters_apply_to_a_data_run_only_and_an_undeclared_one_fail
 # -- which experiments a data set can run ------------------------------------------------------------------------
 
 def _selection(suite, folder):
-    kinds = runner.data_kinds(load_dataset(folder))
+    kinds = suite_run.data_kinds(load_dataset(folder))
     data = [e for e in suite.experiments if e.id in NEEDS]
-    kept, left_out = runner.select_for_data(data, kinds, requested=())
+    kept, left_out = suite_run.select_for_data(data, kinds, requested=())
     return kinds, [e.id for e in kept], left_out
 
 
@@ -206,9 +207,9 @@ def test_a_calibration_only_set_runs_the_calibration_only(suite, tmp_path):
 def test_an_inapplicable_experiment_asked_for_by_id_is_refused(suite, tmp_path):
     data = [e for e in suite.experiments if e.id in NEEDS]
     with pytest.raises(SuiteError, match="measured-tracking cannot run on this data set: the data set has no track"):
-        runner.select_for_data(data, frozenset({"calibration", "static", "scored"}), requested={"measured-tracking"})
+        suite_run.select_for_data(data, frozenset({"calibration", "static", "scored"}), requested={"measured-tracking"})
     with pytest.raises(SuiteError, match="no selected experiment can run on this data set"):
-        runner.select_for_data([e for e in data if e.id == "measured-tracking"], frozenset({"calibration"}), ())
+        suite_run.select_for_data([e for e in data if e.id == "measured-tracking"], frozenset({"calibration"}), ())
 
 
 # -- the command line, without executing a notebook --------------------------------------------------------------
@@ -325,11 +326,11 @@ STATIC_ROWS = [("points", "lls", "3.1"), ("pooled", "lls", "3.0"), ("walk_a", "l
 def write_data_folder(report_dir: Path, folder: Path, suite) -> dict:
     """A data set's reports folder from hand-written files: dataset.json as a data run claims it (the data set at
     ``folder``, static-only: tracking left out), measured-localization's results.csv and cdf.png, measured-
-    calibration's fits.csv; then its pages (runner.write_suite_reports). Returns the dataset.json record."""
+    calibration's fits.csv; then its pages (site.write_suite_reports). Returns the dataset.json record."""
     ds = load_dataset(folder)
     identity = str(ds.root)
-    runner._claim_dataset_folder(report_dir, ds.name, identity,
-                                 runner._dataset_facts(ds, identity, suite, runner.data_kinds(ds)))
+    suite_run.claim_dataset_folder(report_dir, ds.name, identity,
+                                 suite_run._dataset_facts(ds, identity, suite, suite_run.data_kinds(ds)))
     loc = report_dir / "measured-localization"
     rows = [_row("static", r, m, mean) for r, m, mean in STATIC_ROWS]
     rows[1].update(ratio="", ratio_note="n/a: the bound is degenerate at 2 of 40 epochs")
@@ -352,7 +353,7 @@ def write_data_folder(report_dir: Path, folder: Path, suite) -> dict:
     (cal / "summary.md").write_text("# summary\n")
     (report_dir / "status.json").write_text(json.dumps({"measured-calibration": {"status": "cached", "seconds": 0},
                                                         "measured-localization": {"status": "ok", "seconds": 3.2}}))
-    runner.write_suite_reports(suite, report_dir, list_all=False)
+    site.write_suite_reports(suite, report_dir, list_all=False)
     return json.loads((report_dir / "dataset.json").read_text())
 
 
@@ -422,7 +423,7 @@ def test_the_data_pages_first_html_table_is_the_results_table(data_folder):
 
 def test_the_profile_index_shows_each_data_set_by_its_manifest_answer_first(data_folder, suite):
     report_dir, _record, ds = data_folder
-    runner.write_suite_reports(suite, report_dir.parent)
+    site.write_suite_reports(suite, report_dir.parent)
     md = (report_dir.parent / "index.md").read_text()
     line = next(x for x in md.splitlines() if x.startswith("- [mine](data-mine/index.md): "))
     assert line.index("Lowest mean error") < line.index(ds.attribution)

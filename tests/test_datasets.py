@@ -341,10 +341,10 @@ def test_data_sets_of_one_name_never_share_a_reports_folder(tmp_path):
     suite = load_suite()
     exp = [e for e in suite.experiments if e.id == "measured-calibration"]
     first, second = make(folder(tmp_path, "one")), make(folder(tmp_path, "two"))
-    from locbook.suite.runner import _claim_dataset_folder, _dataset_argument
+    from locbook.suite.run import _dataset_argument, claim_dataset_folder
     name, _, roots, identity = _dataset_argument(str(first))
     assert str(first) in roots and identity == str(first)
-    _claim_dataset_folder(tmp_path / "r" / "quick" / "data-tiny", name, identity)
+    claim_dataset_folder(tmp_path / "r" / "quick" / "data-tiny", name, identity)
     with pytest.raises(SuiteError, match="another data set named 'tiny'"):
         run_suite(suite, exp, "quick", report_root=tmp_path / "r", overrides={"data": str(second)},
                   out_dir=None, progress="quiet")

@@ -403,6 +403,7 @@ def test_a_run_on_a_building_is_one_data_run_per_floor(building, tmp_path, monke
     for, as in test_data_runs: the command line up to where notebooks would run)."""
     import json
 
+    from locbook.suite import run as suite_run
     from locbook.suite import runner
     from locbook.suite.cli import main
     seen = []
@@ -429,7 +430,7 @@ def test_a_run_on_a_building_is_one_data_run_per_floor(building, tmp_path, monke
     assert [name for name, _ in seen] == ["data-example-f2"]
     # a building given to the runner itself (not through the command line's loop) is refused in one line
     with pytest.raises(lb.ParameterError, match="one floor at a time"):
-        runner._load_data_argument(str(building))
+        suite_run.load_data_argument(str(building))
 
 
 def test_per_floor_tables_of_plan_and_height(building, tmp_path):

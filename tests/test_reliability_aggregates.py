@@ -4,7 +4,7 @@ readings files are one line (exit status 2); studies too large to run are refuse
 points have collision-free keys and one folder per declaration; the Markdown writers show HTML as text.
 
 No notebook executes here: a point's report is written as the runner promotes one (the files
-:func:`locbook.suite.runner._cached` checks, with the cache key of the point), and a "run" is a stand-in for
+:func:`locbook.suite.runner.report_cached` checks, with the cache key of the point), and a "run" is a stand-in for
 :func:`locbook.suite.runner.run_tasks` that writes this run's reports and then the aggregates, as the runner does.
 The toy notebook's arithmetic is known (value = 10 a + b + seed, tests/test_study.py), so every row is checked
 against it."""
@@ -22,7 +22,7 @@ from nbformat.v4 import new_notebook
 from locbook.reproduce.readings import ReadingsError, load_reading_file
 from locbook.reproduce.report import NUMBER_COLUMNS, Table
 from locbook.suite import SuiteError, load_suite
-from locbook.suite import runner
+from locbook.suite import runner, site
 from locbook.suite.bracket import (BRACKET_COLUMNS, SITE_NUMBER_COLUMNS, bracket_points, experiment_readings,
                                    find_experiment, write_bracket_outputs)
 from locbook.suite.findings import findings_markdown
@@ -154,7 +154,7 @@ def test_a_full_disk_never_empties_the_study_or_deletes_its_plots(stoy, monkeypa
 
     def full(path, write):
         raise OSError(28, "No space left on device", str(path))
-    monkeypatch.setattr("locbook.suite.study._atomic", full)
+    monkeypatch.setattr("locbook.suite.study.atomic_write", full)
     with pytest.raises(OSError):
         write_study_outputs(study, points, folder, [Outcome(p.key, "ok", 1.0) for p in points[:2]])
     assert (folder / "study.csv").read_bytes() == before
@@ -166,7 +166,7 @@ def test_a_study_whose_aggregate_could_not_be_written_says_so(stoy, monkeypatch,
 
     def full(path, write):
         raise OSError(28, "No space left on device", str(path))
-    monkeypatch.setattr("locbook.suite.study._atomic", full)
+    monkeypatch.setattr("locbook.suite.study.atomic_write", full)
     monkeypatch.setattr(runner, "run_tasks", _fake_run_tasks(finished=1, signum=None, fail_writes=True))
     code = main(["--suite", str(stoy / "notebooks" / "experiments.toml"), "study", "toy", "--force", "--reports",
                  str(stoy / "reports"), "--progress", "quiet"])
@@ -342,7 +342,7 @@ def test_a_copy_without_its_brackets_keeps_every_rows_bracket_columns(toy):
                              "quantity": "mean", "where": "Table 1", "kind": "reproduction", "printed": "0.0",
                              "reproduced": value, "verdict": "miss", "bracket": "other_reading",
                              "bracket_readings": "at quick: offset: b=0.5"})
-    runner.write_suite_reports(suite, report_dir)
+    site.write_suite_reports(suite, report_dir)
     rows = {r["experiment"]: r for r in _table(report_dir / "numbers.csv")}
     assert (rows["george-one"]["bracket"], rows["george-one"]["bracket_readings"]) == \
         ("other_reading", "at quick: offset: b=0.5")
@@ -357,7 +357,7 @@ def test_the_index_links_every_data_set_folder_present_whatever_page_it_holds(to
     (report_dir / "data-danis2022").mkdir()
     (report_dir / "data-danis2022" / "index.md").write_text("# committed: no index.html\n")
     (report_dir / "data-empty").mkdir()          # neither page: not a data set's reports
-    runner.write_suite_reports(suite, report_dir)
+    site.write_suite_reports(suite, report_dir)
     md = (report_dir / "index.md").read_text()
     html = (report_dir / "index.html").read_text()
     assert "[danis2022](data-danis2022/index.md)" in md and "data-empty" not in md
@@ -409,7 +409,8 @@ def test_two_declarations_of_one_name_never_share_a_folder(stoy, tmp_path, monke
 
 
 def test_figure_and_table_captions_are_text_in_markdown(tmp_path, stoy):
-    from locbook.suite.site import _md_captions, page_html, page_markdown
+    from locbook.suite.pages import md_captions
+    from locbook.suite.site import page_html, page_markdown
     exp = find_experiment(_suite(stoy), "george-study")
     caption = 'sigma = <script>alert("x")</script> & <img src=x onerror=alert(1)>'
     (tmp_path / "f.png").write_bytes(b"png")
@@ -422,7 +423,7 @@ def test_figure_and_table_captions_are_text_in_markdown(tmp_path, stoy):
     # a folder without its manifest (committed reports) reads the captions back from report.md as typed
     (tmp_path / "report.md").write_text(md)
     (tmp_path / "manifest.json").unlink()
-    assert _md_captions(tmp_path) == {"f.png": caption, "t.csv": caption}
+    assert md_captions(tmp_path) == {"f.png": caption, "t.csv": caption}
     html = page_html(exp, "quick", {}, tmp_path, [], "v")
     assert "<script>alert" not in html and "&lt;script&gt;alert" in html
 

@@ -18,7 +18,7 @@ from test_suite import alive, cli, processes_mentioning, run, set_profile, toy, 
 @pytest.fixture(autouse=True)
 def fixed_source(monkeypatch):
     """Other work may edit locbook's source while these tests run: the cache key's source part is held fixed."""
-    monkeypatch.setattr("locbook.suite.runner._runner_fingerprint", lambda: "fixed source")
+    monkeypatch.setattr("locbook.suite.cachekey.runner_fingerprint", lambda: "fixed source")
 
 
 def _sha256(path) -> str:
@@ -189,7 +189,7 @@ def test_a_file_read_through_a_symbolic_link_is_logged_with_the_link_and_its_tar
 
 
 def test_the_runner_keeps_what_was_read_and_names_what_changed_since(tmp_path):
-    from locbook.suite.runner import _data_hashes, _links_unchanged
+    from locbook.suite.cachekey import data_hashes, links_unchanged
     data = tmp_path / "data"
     data.mkdir()
     for name in ("a.csv", "b.csv", "same.csv"):
@@ -202,11 +202,11 @@ def test_the_runner_keeps_what_was_read_and_names_what_changed_since(tmp_path):
     (data / "a.csv").write_text("edited while the experiment ran")
     (data / "walk.csv").unlink()
     (data / "walk.csv").symlink_to("b.csv")                           # ... and re-pointed
-    hashes, links, changed = _data_hashes(tmp_path)
+    hashes, links, changed = data_hashes(tmp_path)
     assert hashes == {str(data / "a.csv"): read["a.csv"], str(data / "same.csv"): read["same.csv"]}
     assert links == {str(data / "walk.csv"): str(data / "a.csv")}
     assert changed == sorted([str(data / "a.csv"), str(data / "walk.csv")])
-    assert not _links_unchanged(links) and _links_unchanged({str(data / "walk.csv"): str(data / "b.csv")})
+    assert not links_unchanged(links) and links_unchanged({str(data / "walk.csv"): str(data / "b.csv")})
 
 
 @pytest.mark.notebooks

@@ -84,8 +84,8 @@ def test_the_committed_brackets_are_complete_and_from_committed_code():
     folder = FULL.parent / "brackets"
     for points_csv in sorted(folder.glob("*/points.csv")):
         # bracket.csv beside it, readable (header only for an experiment without scored rows)
-        from locbook.suite.bracket import BRACKET_COLUMNS, _read_table
-        assert _read_table(points_csv.parent / "bracket.csv", BRACKET_COLUMNS) is not None, points_csv.parent
+        from locbook.suite.bracket_table import BRACKET_COLUMNS, read_table
+        assert read_table(points_csv.parent / "bracket.csv", BRACKET_COLUMNS) is not None, points_csv.parent
         with open(points_csv, newline="") as fh:
             points = list(csv.DictReader(fh))
         assert points and points[0]["status"] in ("ok", "cached"), points_csv        # the default point ran

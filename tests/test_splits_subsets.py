@@ -344,7 +344,6 @@ def test_loro_and_density_end_to_end(tmp_path):
 
 def test_a_stopped_loro_run_keeps_the_earlier_table_and_never_shrinks_it(example, tmp_path, monkeypatch):
     """An interrupt after the first split leaves the complete table of an earlier run as it was (bytes)."""
-    import locbook.suite.runner as runner
     from locbook.suite import load_suite
 
     suite = load_suite()
@@ -361,7 +360,7 @@ def test_a_stopped_loro_run_keeps_the_earlier_table_and_never_shrinks_it(example
         return SimpleNamespace(outcomes=[Outcome("measured-localization", "ok", 1.0)], report_dir=folder,
                                interrupted_by="SIGINT" if stop else None, disk_full=None, executor_error=None)
 
-    monkeypatch.setattr(runner, "run_suite", fake_run_suite)
+    monkeypatch.setattr(splits, "run_suite", fake_run_suite)
     interrupt_after = None
     whole = splits.run_loro(suite, None, "quick", data=str(example), report_root=tmp_path / "reports",
                             progress="quiet")

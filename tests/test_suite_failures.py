@@ -24,7 +24,7 @@ pytestmark = pytest.mark.notebooks
 def fixed_source(monkeypatch):
     """Other work may edit locbook's source while these tests run; the cache key's source part is held fixed
     so that 'cached' depends on what each test does only."""
-    monkeypatch.setattr("locbook.suite.runner._runner_fingerprint", lambda: "fixed source")
+    monkeypatch.setattr("locbook.suite.cachekey.runner_fingerprint", lambda: "fixed source")
 
 
 def _suite_args(toy):

@@ -206,7 +206,7 @@ def test_a_bad_parameters_cell_is_named_with_its_notebook(tmp_path, source, mess
 def test_the_runners_cache_key_does_not_depend_on_what_else_the_process_imported():
     import subprocess
     import sys
-    code = ("import sys\n{}\nfrom locbook.suite import runner\nprint(runner._runner_fingerprint())")
+    code = ("import sys\n{}\nfrom locbook.suite import cachekey\nprint(cachekey.runner_fingerprint())")
     plain = subprocess.run([sys.executable, "-c", code.format("")], capture_output=True, text=True, check=True)
     more = subprocess.run([sys.executable, "-c", code.format("import locbook.tracking.unscented, locbook.benchmark")],
                           capture_output=True, text=True, check=True)

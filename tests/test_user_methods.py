@@ -24,7 +24,8 @@ from locbook.data.example import write_example_dataset
 from locbook.data.measured import DataFormatError
 from locbook.errors import ParameterError
 from locbook.scenarios import measured as me
-from locbook.suite import runner
+from locbook.suite import cachekey, runner
+from locbook.suite import run as suite_run
 from locbook.user_methods import (MethodFailure, UserMethod, check_output, method_name_problem, parse_method_option,
                                   registered_methods, run_method, user_traceback)
 
@@ -216,16 +217,16 @@ def test_the_code_a_method_ran_joins_the_reports_cache_record(tmp_path, monkeypa
     source.write_text("import numpy as np\n\ndef f(inp):\n    return np.zeros((inp.n_epochs, 2))\n")
     got = run_method(UserMethod.parse("m", "m.py:f", "static", base=tmp_path), {"points": _input()})
     assert not isinstance(got, MethodFailure)
-    hashes, _links, changed = runner._data_hashes(tmp_path)
+    hashes, _links, changed = cachekey.data_hashes(tmp_path)
     assert list(hashes) == [str(source.resolve())] and not changed
-    assert runner._data_unchanged(hashes)
+    assert cachekey.data_unchanged(hashes)
     source.write_text(source.read_text().replace("zeros", "ones"))
-    assert not runner._data_unchanged(hashes)                 # edited: the report that ran it is not served cached
+    assert not cachekey.data_unchanged(hashes)                 # edited: the report that ran it is not served cached
     # a module spec records its module's source the same way
     log.unlink()
     got = run_method(UserMethod.parse("m", "user_method_examples:weighted_centroid", "static", base=HERE),
                      {"points": _input()})
-    assert list(runner._data_hashes(tmp_path)[0]) == [str(EXAMPLES)]
+    assert list(cachekey.data_hashes(tmp_path)[0]) == [str(EXAMPLES)]
 
 
 # -- scored by the protocol ----------------------------------------------------------------------------------------
@@ -370,7 +371,7 @@ def no_execution(monkeypatch):
             folder.mkdir(parents=True, exist_ok=True)
             names = [o.partition("=")[0] for k in ("methods", "trackers") for o in t.parameters.get(k, [])]
             if names:
-                with open(folder / runner.USER_METHODS_TABLE, "w", newline="", encoding="utf-8") as fh:
+                with open(folder / suite_run.USER_METHODS_TABLE, "w", newline="", encoding="utf-8") as fh:
                     writer = csv.DictWriter(fh, ["method", "kind", "function", "status", "error"])
                     writer.writeheader()
                     for n in names:
@@ -461,7 +462,7 @@ def test_data_check_lists_the_registered_methods_and_whether_each_imports(tmp_pa
 
 
 def test_the_data_page_shows_a_failed_method_as_failed():
-    from locbook.suite.site import _result_table
+    from locbook.suite.site_data import _result_table
     cells, _notes = _result_table([{"method": "boom", "recording": "pooled", "mean_m": "", "ratio": "",
                                     "failure": "failed: ZeroDivisionError: division by zero"},
                                    {"method": "lls", "recording": "pooled", "mean_m": "1.2", "ratio": "1.1"}])
@@ -549,7 +550,7 @@ def test_a_data_run_scores_a_users_methods_in_every_report_and_a_failing_one_fai
     # an edit to the command line's file reruns the reports that run its methods, and only those
     cli = str((tmp_path / "cli.py").resolve())
     run = json.loads((b / "measured-localization" / "run.json").read_text())
-    assert run["data"][cli] == runner._sha256(Path(cli))
+    assert run["data"][cli] == cachekey.sha256_file(Path(cli))
     assert cli not in json.loads((b / "measured-tracking" / "run.json").read_text())["data"]
     again = [*base, "--reports", str(tmp_path / "b"), "--method", "centroid=cli.py:weighted_centroid",
              "--method", "boom=cli.py:boom"]

@@ -35,6 +35,7 @@ compared elsewhere (``same_as``): each printed quantity is counted once.
 from __future__ import annotations
 
 import math
+from collections import Counter
 from dataclasses import dataclass
 
 import numpy as np
@@ -42,7 +43,7 @@ import numpy as np
 from .printed_values import printed_number, printed_rounding
 
 __all__ = ["KINDS", "VERDICTS", "JUDGED_KINDS", "CLAIM_RELATIONS", "WITHIN_LIMIT", "Ambiguity", "Score",
-           "score"]
+           "score", "SCORED_VERDICTS", "VERDICT_COLUMNS", "BRACKETS", "verdict_column", "scoreboard_counts"]
 
 KINDS = ("reproduction", "calibrated", "arithmetic", "claim", "shown")
 #: kinds that get within / loose / miss
@@ -51,6 +52,31 @@ VERDICTS = ("within", "loose", "miss", "consistent", "inconsistent", "")
 CLAIM_RELATIONS = (">", ">=", "<", "<=")
 #: a window wider than this fraction of the printed value gives "loose", never "within"
 WITHIN_LIMIT = 0.25
+#: the verdicts a judged row (:data:`JUDGED_KINDS`) can have
+SCORED_VERDICTS = ("within", "loose", "miss")
+#: verdict columns of the kind-by-verdict tables ("linked": repeats of a quantity compared elsewhere)
+VERDICT_COLUMNS = ("within", "loose", "miss", "consistent", "inconsistent", "no verdict", "linked")
+#: The bracket verdicts (issue 45's tiers), in the order the headline counts them: reproduced under the default
+#: reading; under another textual (or, where the text is silent, assumed) reading; only under a reading fitted to
+#: printed output; between readings (the printed value inside the band of our values, no single reading within);
+#: outside every reading (beyond the band widened by both Monte-Carlo errors); open (a setting that could matter not
+#: swept, a point not run, or a margin Monte-Carlo error could close); loose (a window too wide to decide).
+BRACKETS = ("default", "other_reading", "fitted_only", "between", "outside", "open", "loose")
+
+
+def verdict_column(row: dict) -> str:
+    """The column of :data:`VERDICT_COLUMNS` a ``numbers.csv`` row is counted in."""
+    if row.get("same_as"):
+        return "linked"
+    return row.get("verdict") or "no verdict"
+
+
+def scoreboard_counts(rows) -> dict[str, Counter]:
+    """``{kind: Counter(verdict column -> rows)}`` over ``numbers.csv`` rows (kinds in :data:`KINDS` order)."""
+    counts: dict[str, Counter] = {k: Counter() for k in KINDS}
+    for r in rows:
+        counts.setdefault(r.get("kind", ""), Counter())[verdict_column(r)] += 1
+    return {k: c for k, c in counts.items() if c}
 
 @dataclass(frozen=True)
 class Ambiguity:

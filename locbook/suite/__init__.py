@@ -7,9 +7,9 @@ from .._lazy import lazy_exports
 
 _EXPORTS = {
     "NotebookParameter": "params", "ParameterRule": "params", "read_parameters": "params",
-    "KERNEL_NAME": "runner", "Outcome": "runner", "SuiteRun": "runner", "cache_key": "runner",
-    "override_folder_name": "runner", "run_suite": "runner", "write_suite_reports": "runner",
-    "Task": "runner", "run_tasks": "runner",
+    "KERNEL_NAME": "runner", "Outcome": "runner", "SuiteRun": "runner", "cache_key": "cachekey",
+    "override_folder_name": "run", "run_suite": "run", "write_suite_reports": "site",
+    "Task": "runner", "run_tasks": "run",
     "Study": "study", "StudyPoint": "study", "load_study": "study", "load_studies": "study",
     "expand_study": "study", "run_study": "study", "STUDY_COLUMNS": "study",
     "DOCUMENT_KEYS": "spec", "PROFILES": "spec", "Experiment": "spec", "Suite": "spec", "SuiteError": "spec",

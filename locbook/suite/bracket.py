@@ -65,13 +65,12 @@ that report, else what the bracket's other readings gave, named with the bracket
 exists at all, a row keeps the bracket columns the folder's numbers.csv gave it while its value and verdict are
 unchanged. After every bracket run, also an interrupted or failed one, bracket.csv, values.csv and points.csv are
 rebuilt from every point with an up-to-date report, this run's and earlier ones
-(:func:`~locbook.suite.study.current_points`); a bracket whose default point has none writes nothing (an earlier
+(:func:`~locbook.suite.sweep.current_points`); a bracket whose default point has none writes nothing (an earlier
 one is kept).
 """
 from __future__ import annotations
 
 import csv
-import hashlib
 import io
 import json
 import math
@@ -81,36 +80,21 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import ParameterError
+from ..reproduce.printed_values import printed_number
 from ..reproduce.readings import Reading, load_reading_file, readings_for
-from ..reproduce.report import NUMBER_COLUMNS
-from ..reproduce.scoring import JUDGED_KINDS
+from ..reproduce.scoring import BRACKETS
+from .files import point_key, point_text, read_csv, write_text_atomic
 from .params import check_value
 from .spec import Experiment, Suite, SuiteError, finite_float
-from .study import Aggregate, _atomic, _canonical, current_points
+from .bracket_table import (BRACKET_COLUMNS, BRACKET_ROW_COLUMNS, DEFAULT_POINT, POINT_COLUMNS, SITE_NUMBER_COLUMNS,
+                            VALUE_COLUMNS, NoBracket, find_row, index_rows, is_scored, bracket_of_rows, brackets_root, counts,
+                            load_bracket, load_values)
+from .runner import Task
+from .sweep import Aggregate, current_points, run_sweep
 
 __all__ = ["BracketPoint", "find_experiment", "brackets_root", "SITE_NUMBER_COLUMNS", "BRACKET_ROW_COLUMNS",
            "experiment_readings", "bracket_settings", "counts", "VALUE_COLUMNS", "load_values", "read_readings_option", "bracket_points", "bracket_gaps", "run_bracket", "bracket_folder", "bracket_rows",
            "bracket_of_rows", "load_bracket", "NoBracket", "BRACKETS", "BRACKET_COLUMNS", "POINT_COLUMNS"]
-
-#: The bracket verdicts (issue 45's tiers), in the order the headline counts them: reproduced under the default
-#: reading; under another textual (or, where the text is silent, assumed) reading; only under a reading fitted to
-#: printed output; between readings (the printed value inside the band of our values, no single reading within);
-#: outside every reading (beyond the band widened by both Monte-Carlo errors); open (a setting that could matter not
-#: swept, a point not run, or a margin Monte-Carlo error could close); loose (a window too wide to decide).
-BRACKETS = ("default", "other_reading", "fitted_only", "between", "outside", "open", "loose")
-#: the columns a suite's numbers.csv adds to an experiment's (:data:`~locbook.reproduce.report.NUMBER_COLUMNS`)
-BRACKET_ROW_COLUMNS = ("bracket", "bracket_readings")
-SITE_NUMBER_COLUMNS = (*NUMBER_COLUMNS, *BRACKET_ROW_COLUMNS)
-BRACKET_COLUMNS = ("experiment", "printed_id", "quantity", "where", "unit", "kind", "printed", "ours", "verdict",
-                   "bracket", "reached_by", "open_readings", "loose_under", "between", "band_low", "band_high",
-                   "outside_margin", "implausible", "closest", "closest_reading", "points", "profile")
-#: the columns of a bracket's values.csv: every scored row under every point (the conclusions pages judge each
-#: claim under every reading from it)
-VALUE_COLUMNS = ("experiment", "printed_id", "quantity", "where", "point", "reading", "basis", "ours",
-                 "mc_std_error", "verdict")
-POINT_COLUMNS = ("point", "readings", "parameter", "value", "status", "folder", "generated_by", "readings_file",
-                 "settings")
-DEFAULT_POINT = "default"
 
 
 @dataclass(frozen=True)
@@ -189,10 +173,7 @@ def _point_key(exp: Experiment, values: dict, taken: dict[str, str] | None = Non
     """The folder of a bracket point: the experiment id and the first 10 hex digits of the SHA-256 of its values (as
     committed in points.csv), or all 64 when those 10 are already ``taken`` (key -> values) by other values: a
     bracket has a few dozen points, and two of them never share a folder."""
-    text = _canonical(values)
-    digest = hashlib.sha256(text.encode()).hexdigest()
-    key = f"{exp.id}-{digest[:10]}"
-    return key if (taken or {}).get(key, text) == text else f"{exp.id}-{digest}"
+    return point_key(exp.id, values, 10, taken)
 
 
 def _same(a, b) -> bool:
@@ -302,7 +283,7 @@ def bracket_points(exp: Experiment, profile: str, readings: tuple[Reading, ...])
                 change[reading.parameter] = checked
             if not change:
                 continue       # the profile's own value: the default point
-            text = _canonical(change)
+            text = point_text(change)
             if text in by_value:   # another reading names the same values: one run serves both
                 i = by_value[text]
                 if reading not in points[i].readings:
@@ -323,8 +304,8 @@ def bracket_points(exp: Experiment, profile: str, readings: tuple[Reading, ...])
     if len(fitted) >= 2:
         together = {p: check_value(declared[p], v, exp.rules.get(p)) for p, (_r, v) in fitted.items()}
         key = _point_key(exp, together, taken)
-        taken[key] = _canonical(together)
-        by_value[_canonical(together)] = len(points)
+        taken[key] = point_text(together)
+        by_value[point_text(together)] = len(points)
         points.append(BracketPoint(key, exp, tuple(r for r, _v in fitted.values()), "", None,
                                    {**base, **together}, together))
     points += _factorial_points(exp, readings, declared, base, by_value, taken)
@@ -357,7 +338,7 @@ def _factorial_points(exp: Experiment, readings: tuple[Reading, ...], declared: 
         change = {r.parameter: v for (r, values), v in zip(chosen, combo) if not _same(v, values[0])}
         if len(change) < 2:
             continue
-        text = _canonical(change)
+        text = point_text(change)
         if text in by_value:
             continue
         key = _point_key(exp, change, taken)
@@ -371,30 +352,6 @@ def _factorial_points(exp: Experiment, readings: tuple[Reading, ...], declared: 
 
 # ---------------------------------------------------------------------------------------------------
 # verdicts
-
-def _row_key(r: dict) -> tuple[str, str, str]:
-    return (r["printed_id"], r["quantity"], r["where"])
-
-
-def _index(rows: list[dict]) -> tuple[dict, dict]:
-    """Rows by (printed_id, quantity, where), and by (printed_id, where) where that pair is unique (quantities
-    that name a run count differ between profiles)."""
-    full, loose, seen = {}, {}, {}
-    for r in rows:
-        full.setdefault(_row_key(r), r)
-        pair = (r["printed_id"], r["where"])
-        seen[pair] = seen.get(pair, 0) + 1
-        loose[pair] = r
-    return full, {k: v for k, v in loose.items() if seen[k] == 1}
-
-
-def _find(indexed: tuple[dict, dict], r: dict) -> dict | None:
-    full, loose = indexed
-    return full.get(_row_key(r)) or loose.get((r.get("printed_id", ""), r.get("where", "")))
-
-
-def _scored(r: dict) -> bool:
-    return r.get("kind") in JUDGED_KINDS and r.get("verdict") in ("within", "loose", "miss")
 
 
 def _crossings(printed: float | None, points: list[BracketPoint], values: dict[str, tuple]) -> list[str]:
@@ -445,7 +402,6 @@ _SOURCE_MC = re.compile(r"(thesis|source|paper)'s own[^;]*Monte-Carlo|Monte-Carl
 
 def _printed_number(text: str) -> float | None:
     """The number in a printed text ('3.83m', 'reach accuracy 1 m'), None if it holds none or several."""
-    from ..reproduce.printed_values import printed_number
     try:
         value = printed_number(text)
     except ValueError:
@@ -489,18 +445,16 @@ def bracket_rows(exp: Experiment, points: list[BracketPoint], folder: Path, stat
     also clears the band's nearest edge by :func:`_margin` (else ``open``: Monte-Carlo error could close the gap).
     A point whose value is implausible (:func:`_implausible`) is named in ``implausible`` and counts for nothing.
     ``values_out``: filled with the :data:`VALUE_COLUMNS` rows (every scored row under every point)."""
-    from .site import _read_csv
-
     done = {k for k, st in status.items() if st in ("ok", "cached")}
     if points[0].key not in done:
         return []
-    default = _read_csv(folder / points[0].key / "numbers.csv")
-    others = [(p, _index(_read_csv(folder / p.key / "numbers.csv"))) for p in points[1:] if p.key in done]
+    default = read_csv(folder / points[0].key / "numbers.csv")
+    others = [(p, index_rows(read_csv(folder / p.key / "numbers.csv"))) for p in points[1:] if p.key in done]
     unfinished = [f"{p.label} ({status.get(p.key, 'not run')})" for p in points[1:] if p.key not in done]
     gap_names = [f"{r.name} (gap: {r.where})" for r in gaps]
     rows = []
     for r in default:
-        if not _scored(r):
+        if not is_scored(r):
             continue
         printed = _printed_number(r["printed"])
         ours = finite_float(r["reproduced"])
@@ -509,7 +463,7 @@ def bracket_rows(exp: Experiment, points: list[BracketPoint], folder: Path, stat
         by_key = {points[0].key: (ours, r["verdict"])}
         missing = []
         for p, indexed in others:
-            alt = _find(indexed, r)
+            alt = find_row(indexed, r)
             if alt is None or alt.get("verdict") not in ("within", "loose", "miss"):
                 missing.append(f"{p.label} (row not produced)")
                 continue
@@ -589,101 +543,6 @@ def _fmt(value: float | None) -> str:
     return "" if value is None else f"{value:.10g}"
 
 
-#: Relative tolerance within which a report's value and its bracket's default run are one result: what another
-#: machine of the same kind gives for the same code and parameters (docs/reports.md, "Across machines": numpy's
-#: and numba's vector code; measured at most 5e-8 over the full profile), with a margin of 20. A stale bracket
-#: (other code or parameters) moves a Monte-Carlo result by far more.
-SAME_RESULT_RTOL = 1e-6
-
-
-def _same_number(a, b) -> bool:
-    """Two CSV cells of ``ours`` hold the same result (numbers within :data:`SAME_RESULT_RTOL`, anything else as
-    text)."""
-    x, y = finite_float(a), finite_float(b)
-    if x is None or y is None:
-        return str(a).strip() == str(b).strip()
-    return math.isclose(x, y, rel_tol=SAME_RESULT_RTOL, abs_tol=1e-12)
-
-
-def bracket_of_rows(rows: list[dict], bracket: list[dict], profile: str | None = None) -> list[dict]:
-    """``rows`` (numbers.csv rows of one experiment) with ``bracket`` and ``bracket_readings`` set from that
-    experiment's ``bracket`` rows: ``default`` when the row itself is within here, else what the bracket's other
-    readings gave (other_reading / fitted_only / open / between / loose / outside, each reading named with the
-    bracket's profile, e.g.
-    ``at quick: ...``). A row loose here is at worst ``loose``; a row the bracket had within under the default but
-    that is not within here (another profile's window) is ``open`` whatever the other readings gave there: they
-    were not run at this profile. ``profile``: the report's; where it is the bracket's, a row whose value here
-    differs from the bracket's default run is ``open``: the bracket is stale (made by other code or parameters).
-    Empty for rows the bracket does not cover or does not score. Where no bracket.csv exists at all (``bracket`` a
-    :class:`NoBracket`), a row keeps the bracket columns the profile's numbers.csv gave it, if its value and verdict
-    there are the same (:func:`_previous_columns`): a missing bracket is no new verdict."""
-    if isinstance(bracket, NoBracket):
-        kept = _previous_columns(bracket.folder, profile)
-        return [{**r, **kept.get(_site_key(r), {"bracket": "", "bracket_readings": ""})} for r in rows]
-    indexed = _index(bracket)
-    out = []
-    for r in rows:
-        b = _find(indexed, r) if _scored(r) else None
-        if b is None:
-            out.append({**r, "bracket": "", "bracket_readings": ""})
-            continue
-        at = f"at {b.get('profile') or '?'}: "
-        if r["verdict"] == "within" and not (b.get("implausible") or "").startswith(DEFAULT_POINT + " gave"):
-            verdict, readings = "default", ""
-        elif profile is not None and profile == b.get("profile") and not _same_number(r.get("reproduced"),
-                                                                                       b.get("ours")):
-            verdict, readings = "open", (f"this report and its {profile} bracket disagree: the bracket's default "
-                                         f"run gave {b.get('ours')}, this report {r.get('reproduced')} (made by "
-                                         "other code or parameters; run the older of the two again)")
-        elif b.get("bracket") == "default":
-            # within under the default at the bracket's profile (a wider window), not here: the other readings'
-            # verdicts there say nothing about this report's window
-            verdict, readings = "open", (f"within {at[:-2]} under the default reading, not here: the readings were "
-                                         "not run at this profile")
-        elif b.get("bracket") in ("other_reading", "fitted_only"):
-            verdict, readings = b["bracket"], at + b["reached_by"]
-        elif b.get("open_readings") or b.get("bracket") == "open":
-            verdict, readings = "open", at + (b.get("open_readings") or "")
-        elif b.get("bracket") == "between":
-            verdict, readings = "between", f"{at}between {b.get('between')}"
-        elif r["verdict"] == "loose" or b.get("loose_under"):
-            under = [x for x in (b.get("loose_under") or "").split("; ") if x and x != DEFAULT_POINT]
-            verdict, readings = "loose", "; ".join((["this report"] if r["verdict"] == "loose" else [])
-                                                   + ([at + "; ".join(under)] if under else []))
-        else:
-            verdict, readings = "outside", (f"{at}band {_short(b.get('band_low', ''))} .. "
-                                            f"{_short(b.get('band_high', ''))} over {b.get('points')} runs"
-                                            + (f"; {b['outside_margin']}" if b.get("outside_margin") else ""))
-        if b.get("implausible"):
-            readings += f" (implausible, left out of the band: {b['implausible']})"
-        out.append({**r, "bracket": verdict, "bracket_readings": readings})
-    return out
-
-
-def _site_key(r: dict) -> tuple:
-    """A numbers row as the bracket columns belong to it: the row and what it said (value, verdict)."""
-    return (r.get("experiment", ""), r.get("printed_id", ""), r.get("quantity", ""), r.get("where", ""),
-            str(r.get("reproduced", "")).strip(), r.get("verdict", ""))
-
-
-def _previous_columns(bracket_folder: Path, profile: str | None) -> dict[tuple, dict]:
-    """The bracket columns of the rows of ``numbers.csv`` in the profile's reports folder beside the brackets
-    (``<reports>/<profile>/`` for ``<reports>/brackets/<experiment>``), by :func:`_site_key`; empty for a report of
-    no known profile or a folder without one (its numbers are read as written: a damaged file keeps nothing)."""
-    from .site import _read_csv
-    from .spec import PROFILES
-    if profile not in PROFILES:
-        return {}
-    rows = _read_csv(Path(bracket_folder).parent.parent / profile / "numbers.csv")
-    out = {}
-    for r in rows:
-        if None in r or r.get("bracket") is None or r.get("bracket_readings") is None:
-            return {}      # another layout, or a short row
-        if r["bracket"] in BRACKETS:         # a retired tier name (an older numbers.csv) is no verdict of today's
-            out[_site_key(r)] = {"bracket": r["bracket"], "bracket_readings": r["bracket_readings"]}
-    return out
-
-
 # ---------------------------------------------------------------------------------------------------
 # outputs
 
@@ -692,72 +551,21 @@ def bracket_folder(suite: Suite, exp: Experiment, report_root: Path | None = Non
     return root / "brackets" / exp.id
 
 
-def brackets_root(report_dir: Path) -> Path:
-    """Where the brackets of a run's reports folder live: ``<reports>/brackets`` beside ``<reports>/<profile>``."""
-    return Path(report_dir).parent / "brackets"
-
-
-class NoBracket(list):
-    """What :func:`load_bracket` returns where no bracket.csv exists (an empty list): ``folder`` is where it looked,
-    so that :func:`bracket_of_rows` keeps the bracket columns a profile's numbers.csv already holds (a copy of
-    ``reports/<profile>`` without ``reports/brackets`` beside it has lost no verdict)."""
-
-    def __init__(self, folder: Path):
-        super().__init__()
-        self.folder = Path(folder)
-
-
-def _read_table(path: Path, columns) -> list[dict] | None:
-    """The rows of the CSV file ``path`` if its header is ``columns`` and every row is whole; None if it is
-    damaged or of another layout (a file is never read other than as written)."""
-    try:
-        with open(path, newline="", encoding="utf-8") as fh:
-            reader = csv.DictReader(fh)
-            if tuple(reader.fieldnames or ()) != columns:
-                return None
-            rows = list(reader)
-    except (OSError, ValueError, csv.Error):
-        return None
-    return None if any(None in r or any(v is None for v in r.values()) for r in rows) else rows
-
-
-def load_bracket(folder: Path) -> list[dict]:
-    """The rows of ``<folder>/bracket.csv``; empty if it is damaged or of another layout (a header other than
-    :data:`BRACKET_COLUMNS`, a short row): a report is never labelled from a file that cannot be read as written;
-    a :class:`NoBracket` (empty) if there is none."""
-    path = Path(folder) / "bracket.csv"
-    if not path.is_file():
-        return NoBracket(folder)
-    return _read_table(path, BRACKET_COLUMNS) or []
-
-
-def load_values(folder: Path) -> list[dict]:
-    """The rows of ``<folder>/values.csv`` (every scored row under every point), empty if absent, damaged or of
-    another layout."""
-    return _read_table(Path(folder) / "values.csv", VALUE_COLUMNS) or []
-
-
 def _write_table(path: Path, columns, rows) -> None:
     out = io.StringIO()
     writer = csv.DictWriter(out, fieldnames=columns, lineterminator="\n")
     writer.writeheader()
     writer.writerows(rows)
-    _atomic(path, lambda tmp: tmp.write_text(out.getvalue(), encoding="utf-8"))
-
-
-def _short(text: str) -> str:
-    """A number of bracket.csv to 4 significant digits for a row's bracket_readings (text as it is)."""
-    value = finite_float(text)
-    return text if value is None else f"{value:.4g}"
+    write_text_atomic(path, out.getvalue())
 
 
 def write_bracket_outputs(exp: Experiment, points: list[BracketPoint], folder: Path, outcomes, gaps: list[Reading],
                           profile: str, suite: Suite, readings_file: str = "", wrote: list | None = None) -> Aggregate:
     """bracket.csv, values.csv and points.csv, from every point with an up-to-date report (this
-    run's and earlier ones: :func:`~locbook.suite.study.current_points`), so an interrupted or failed run never
+    run's and earlier ones: :func:`~locbook.suite.sweep.current_points`), so an interrupted or failed run never
     drops a point that still holds; a row is ``open`` while a point it needs has none. Without an up-to-date default
     point nothing is written (an earlier bracket is kept as it was). Each file is replaced atomically. ``wrote``: the
-    :class:`~locbook.suite.study.Aggregate` is appended as soon as bracket.csv is in place (or known unwritten)."""
+    :class:`~locbook.suite.sweep.Aggregate` is appended as soon as bracket.csv is in place (or known unwritten)."""
     status = current_points(folder, profile, [(p.key, exp, p.parameters, False) for p in points], outcomes)
     done = sum(st in ("ok", "cached") for st in status.values())
     path = folder / "bracket.csv"
@@ -801,8 +609,6 @@ def run_bracket(suite: Suite, exp: Experiment, *, profile: str = "quick", readin
     """Run the bracket of ``exp`` (module docstring) into ``<report_root>/brackets/<experiment>/``. ``readings``:
     the readings to sweep (default: those the package declares for ``exp``). Returns the runner's
     :class:`~locbook.suite.runner.SuiteRun` (one outcome per point, by folder key)."""
-    from .runner import KERNEL_NAME, Task, run_tasks
-
     found = experiment_readings(exp, readings)
     # a readings file of one's own is named in points.csv (the packaged ones: empty)
     readings_file = "" if readings is None else "; ".join(sorted({r.document for r in found})) + " (--readings)"
@@ -810,23 +616,17 @@ def run_bracket(suite: Suite, exp: Experiment, *, profile: str = "quick", readin
     gaps = bracket_gaps(found)
     folder = bracket_folder(suite, exp, report_root)
     tasks = [Task(p.key, exp, p.parameters, figures=False) for p in points]   # only their numbers are read
-    wrote: list[Aggregate] = []
-    run = run_tasks(suite, tasks, profile, folder, jobs=jobs, force=force, timeout_s=timeout_s, retries=retries,
-                    kernel_name=kernel_name or KERNEL_NAME, progress=progress, executor=executor,
-                    scheduler=scheduler,
-                    write_reports=lambda where, outcomes: write_bracket_outputs(exp, points, where, outcomes, gaps,
-                                                                                 profile, suite, readings_file, wrote))
-    # what bracket.csv holds now, for the CLI to say (not rewritten: no up-to-date default point, or a failed write)
-    run.aggregate = wrote[-1] if wrote else Aggregate(folder / "bracket.csv", 0, len(points), written=False)
-    return run
+    # run.aggregate: what bracket.csv holds now, for the CLI to say (not rewritten: no up-to-date default point, or a
+    # failed write)
+    return run_sweep(suite, tasks, profile, folder,
+                     lambda where, outcomes, wrote: write_bracket_outputs(exp, points, where, outcomes, gaps, profile,
+                                                                          suite, readings_file, wrote),
+                     folder / "bracket.csv", jobs=jobs, force=force, timeout_s=timeout_s, retries=retries,
+                     kernel_name=kernel_name, progress=progress, executor=executor, scheduler=scheduler)
 
 
 def read_readings_option(path: Path | None) -> tuple[Reading, ...] | None:
     """``--readings FILE``: a readings CSV of one's own (the columns of locbook/data/readings), else None."""
     return None if path is None else load_reading_file(path)
 
-
-def counts(rows: list[dict]) -> dict[str, int]:
-    """Bracket verdict counts of bracket.csv rows (or numbers rows with a ``bracket`` column)."""
-    return {b: sum(r.get("bracket") == b for r in rows) for b in BRACKETS}
 

@@ -5,49 +5,25 @@ last result (``locbook show KEY``), and a copy of the notebooks for interactive 
 from __future__ import annotations
 
 import csv
-import functools
-import json
 import math
-import os
 import shutil
 from pathlib import Path
 
+from .files import machine_label, read_json
 from .params import FINITE, is_numeric_annotation
 from .spec import PROFILES, Experiment, Suite, SuiteError
 
 __all__ = ["last_result", "list_text", "show_text", "copy_notebooks"]
 
 
-def _read_json(path: Path) -> dict:
-    try:
-        value = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return {}
-    return value if isinstance(value, dict) else {}
-
-
-@functools.lru_cache(maxsize=1)
-def machine_label() -> str:
-    """The machine a run time was measured on, as ``locbook list`` shows it: the CPU model and the logical CPUs
-    (``AMD EPYC 9B14, 2 CPUs``); no host name."""
-    import platform
-    cpu = platform.processor() or platform.machine() or "unknown CPU"
-    try:
-        for line in Path("/proc/cpuinfo").read_text(encoding="utf-8", errors="replace").splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    return f"{cpu}, {os.cpu_count() or '?'} CPUs"
 
 
 def last_result(exp: Experiment, reports_root: Path, profile: str, *, counts: bool = True) -> dict:
     """The experiment's last report at a profile: ``{"seconds", "status", "counts", "stamp"}`` (empty if none);
     ``counts=False`` leaves out the verdict counts (``locbook list`` shows none, and they need numpy)."""
     folder = reports_root / profile / exp.id
-    report = _read_json(folder / "report.json")
-    status = _read_json(reports_root / profile / "status.json").get(exp.id, {})
+    report = read_json(folder / "report.json", {})
+    status = read_json(reports_root / profile / "status.json", {}).get(exp.id, {})
     status = status if isinstance(status, dict) else {}
     out = {}
     seconds = report.get("seconds", status.get("seconds"))
@@ -63,7 +39,8 @@ def last_result(exp: Experiment, reports_root: Path, profile: str, *, counts: bo
         out["machine"] = report["machine"]
     if not counts:
         return out
-    from .site import scoreboard_counts   # here: the report site imports numpy
+    # here, not at the top: reproduce.scoring imports numpy, which `locbook list` never loads
+    from ..reproduce.scoring import scoreboard_counts
     try:
         with open(folder / "numbers.csv", newline="", encoding="utf-8") as fh:
             out["counts"] = scoreboard_counts(list(csv.DictReader(fh)))
@@ -75,7 +52,7 @@ def last_result(exp: Experiment, reports_root: Path, profile: str, *, counts: bo
 def _counts_text(counts) -> str:
     if not counts:
         return "no printed numbers"
-    from .site import VERDICT_COLUMNS
+    from ..reproduce.scoring import VERDICT_COLUMNS     # here: as scoreboard_counts in last_result (numpy)
     parts = []
     for kind, c in counts.items():
         inner = ", ".join(f"{c[v]} {v}" for v in VERDICT_COLUMNS if c.get(v))

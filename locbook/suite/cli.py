@@ -46,7 +46,7 @@ def _positive(kind, text: str):
 
 def _print_summary(run, progress: str = "plain", see: Path | None = None, rebuilt: str = "") -> None:
     """The scoreboard and the end of a run. ``rebuilt``: what the run's aggregate files hold now (for ``run``: the
-    index and numbers.csv; a study's or bracket's :class:`~locbook.suite.study.Aggregate`), said after a stop."""
+    index and numbers.csv; a study's or bracket's :class:`~locbook.suite.sweep.Aggregate`), said after a stop."""
     names = {"ok": "executed", "cached": "cached", "failed": "failed", "interrupted": "interrupted",
              "not run": "not started"}
     counts = ", ".join(f"{run.count(s)} {w}" for s, w in names.items() if run.count(s) or s in ("ok", "cached", "failed"))
@@ -99,7 +99,7 @@ def _user_methods(args) -> tuple[list, list]:
 
 
 def _print_method_failures(failures) -> None:
-    """One line per user method that failed (:func:`locbook.suite.runner.user_method_failures`)."""
+    """One line per user method that failed (:func:`locbook.suite.run.user_method_failures`)."""
     for f in failures:
         print(f"locbook: user method {f['method']!r} ({f['kind']}, {f['function']}) failed in "
               f"{', '.join(f['experiments'])}: {f['error']}; its traceback: {f['page']}", file=sys.stderr)
@@ -313,9 +313,9 @@ def main(argv: list[str] | None = None) -> int:
             else:
                 experiments = suite.select(args.ids)
             # an experiment named by its exact id must run on the data set; one selected by a document key or with
-            # no ids is left out when the data set cannot run it (runner.select_for_data)
+            # no ids is left out when the data set cannot run it (run.select_for_data)
             requested = {i for i in args.ids if any(e.id == i for e in suite.experiments)}
-            from .runner import run_suite, split_overrides
+            from .run import run_suite, split_overrides
             overrides = _parse_overrides(args.parameter)
             methods, trackers = _user_methods(args)
             if (methods or trackers) and args.data is None and "data" not in overrides:
@@ -384,7 +384,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"bracket of {args.experiment} incomplete: its default point has no up-to-date report, so no "
                   "verdict was written (an earlier bracket.csv is kept as it was)", file=sys.stderr)
         return _exit_status(result)
-    from .runner import user_method_failures
+    from .run import user_method_failures
     worst = EXIT_OK
     for data, result in floor_results:        # one run, or one per floor of a data set with floors
         if result.report_dir.name != args.profile and data is not None:
@@ -417,7 +417,7 @@ def _sizes(text: str) -> tuple[int, ...]:
 def _loro_summary(loro, progress: str) -> int:
     """The end of ``--split loro``: each split's scoreboard line, where the table is, and the exit status (the
     worst of the splits': an interrupt, a full disk, a failure, a method of your own that failed)."""
-    from .runner import user_method_failures
+    from .run import user_method_failures
     failures = []
     for held, calibration, run, note in loro.splits:
         if run is None:
@@ -492,7 +492,7 @@ def _dataset_text(path: str, suite=None) -> str:
     if suite is None:
         lines.append(f"ok: `locbook run --data {path}` runs the measured-data experiments and the benchmark on it")
         return "\n".join(lines)
-    from .runner import data_kinds
+    from .run import data_kinds
     kinds = data_kinds(ds)
     why = {e.id: e.data_run.missing(kinds) for e in suite.experiments if e.data_run is not None}
     runs = [eid for eid, reason in why.items() if not reason]

@@ -13,8 +13,8 @@ from pathlib import Path
 
 from ..reproduce.claims import Claim, ClaimsError, Value, claims, evaluate, outcome_word
 from ..reproduce.printed_values import printed_number
-from .bracket import _same_number
-from .findings import md_cell
+from .bracket_table import brackets_root, load_values, same_number
+from .findings import by_document, md_cell, profile_of
 from .spec import finite_float
 
 __all__ = ["judge_claim", "conclusions_markdown", "write_conclusions", "CONCLUSIONS_SUFFIX"]
@@ -107,7 +107,7 @@ def judge_claim(claim: Claim, by_id: dict, values_by_experiment: dict[str, list[
         if not default:
             continue
         # the bracket's default run must be this report's: else it was made at another profile or by other code
-        if any(master(row) in default and not _same_number(default[master(row)]["ours"], row.get("reproduced"))
+        if any(master(row) in default and not same_number(default[master(row)]["ours"], row.get("reproduced"))
                for row in mine):
             out["not_judged"].append(f"{exp}: its bracket's default run differs from this report (another profile "
                                      "or other code), so the other readings are not judged here")
@@ -186,11 +186,9 @@ def write_conclusions(report_dir: Path, suite, entries, rows, write) -> dict:
     """Write ``<report_dir>/<document>-conclusions.md`` for every document with declared claims (``write(path,
     text)`` writes atomically); returns document -> {"holds", "fails" (claim texts), "undecidable" (count)} for
     the one-screen answer."""
-    from .bracket import brackets_root, load_values
-    from .site import _by_document
     by_id = _rows_by_id(rows)
     out = {}
-    for key, doc, _doc_rows in _by_document(entries, rows):
+    for key, doc, _doc_rows in by_document(entries, rows):
         declared = claims(key)
         if not declared:
             continue
@@ -198,9 +196,8 @@ def write_conclusions(report_dir: Path, suite, entries, rows, write) -> dict:
         values = {exp.id: load_values(brackets_root(report_dir) / exp.id) for exp in suite.experiments
                   if exp.document.key == key}
         judged = [judge_claim(c, by_id, values, primary) for c in declared]
-        from .site import _profile_of
         write(Path(report_dir) / f"{key}{CONCLUSIONS_SUFFIX}",
-              conclusions_markdown(key, doc.authors, doc.year, judged, _profile_of(report_dir)))
+              conclusions_markdown(key, doc.authors, doc.year, judged, profile_of(report_dir)))
         out[key] = {"holds": [j["claim"].id for j in judged if j["ours"] is True],
                     "fails": [j["claim"].id for j in judged if j["ours"] is False],
                     "undecidable": sum(j["ours"] is None for j in judged)}

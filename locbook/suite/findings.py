@@ -4,7 +4,7 @@ one-screen answer at the top of an index (issue 45, "one tally everywhere").
 Everything here is computed from the rows of a reports folder's ``numbers.csv`` (the experiments' rows with the
 ``bracket`` and ``bracket_readings`` columns :func:`locbook.suite.bracket.bracket_of_rows` gave them), so the index,
 the findings pages and numbers.csv give the same counts by construction (``tests/test_findings.py`` reads all three
-back and compares them). The tiers are :data:`locbook.suite.bracket.BRACKETS`.
+back and compares them). The tiers are :data:`locbook.reproduce.scoring.BRACKETS`.
 """
 from __future__ import annotations
 
@@ -13,14 +13,16 @@ from collections import Counter, defaultdict
 from pathlib import Path
 
 from ..reproduce.report import markdown_text
-from ..reproduce.scoring import JUDGED_KINDS
+from ..reproduce.scoring import BRACKETS, JUDGED_KINDS
+from .bracket_table import four_digits
+from .spec import PROFILES
 
 __all__ = ["scored_rows", "tier_counts", "TIER_WORDS", "bracket_headline", "leniency_note", "findings_markdown",
            "write_findings", "findings_links", "md_cell", "one_screen", "one_screen_markdown", "FINDINGS_SUFFIX"]
 
 FINDINGS_SUFFIX = "-findings.md"
 
-#: How the headline and the pages name each tier (:data:`~locbook.suite.bracket.BRACKETS`).
+#: How the headline and the pages name each tier (:data:`~locbook.reproduce.scoring.BRACKETS`).
 TIER_WORDS = {
     "default": "reproduced under the default reading",
     "other_reading": "reproduced only under another textual (or assumed) reading",
@@ -36,7 +38,6 @@ _SHORT = {"default": "default", "other_reading": "other reading", "fitted_only":
 
 
 def _tiers() -> tuple[str, ...]:
-    from .bracket import BRACKETS
     return BRACKETS
 
 
@@ -61,7 +62,6 @@ def tier_counts(rows) -> dict | None:
 
 def leniency_note(profile: str) -> str:
     """What a profile's verdicts mean beside the judged full profile's ('' for the full profile)."""
-    from .spec import PROFILES
     if profile == "full" or profile not in PROFILES:
         return ""
     return (f"**This is the `{profile}` profile: it runs fewer Monte-Carlo runs than the judged `full` profile, so "
@@ -134,9 +134,8 @@ def findings_markdown(document: str, authors: str, year, doc_rows: list[dict], p
 def write_findings(report_dir: Path, entries, rows, profile: str, write) -> list[tuple[str, str]]:
     """Write ``<report_dir>/<document>-findings.md`` for every document with bracketed rows (``write(path, text)``
     writes atomically) and remove the pages of documents no longer bracketed; returns (document, file name)."""
-    from .site import _by_document
     out = []
-    for key, doc, doc_rows in _by_document(entries, rows):
+    for key, doc, doc_rows in by_document(entries, rows):
         path = Path(report_dir) / f"{key}{FINDINGS_SUFFIX}"
         if tier_counts(doc_rows) is None:
             if path.is_file():
@@ -165,22 +164,36 @@ def _reading_names(text: str) -> list[str]:
 
 
 def _short(text) -> str:
-    from .bracket import _short as four_digits
     return four_digits(str(text))
 
 
-def _first_clause(note: str, limit: int) -> str:
-    from .site import _short as first_clause
-    return first_clause(note, limit)
+def first_clause(note: str, limit: int = 160) -> str:
+    """A note's first sentence (or clause), at most ``limit`` characters."""
+    first = re.split(r"(?<=[.;])\s", note.strip(), maxsplit=1)[0].rstrip(".;")
+    return first if len(first) <= limit else first[:limit].rsplit(" ", 1)[0] + " ..."
+
+
+def profile_of(report_dir: Path) -> str:
+    """The profile whose reports a folder holds (``reports/quick``; ``reports/full/data-x`` is the full profile's),
+    '' for another folder (a ``-p`` run's, ``--out``)."""
+    folder = Path(report_dir)
+    return next((f.name for f in (folder, folder.parent) if f.name in PROFILES), "")
+
+
+def by_document(entries, rows):
+    """(document key, document, its rows) per document of ``entries``, in the order they first appear."""
+    docs = {}
+    for e in entries:
+        docs.setdefault(e["exp"].document.key, e["exp"].document)
+    return [(key, doc, [r for r in rows if r.get("document") == key]) for key, doc in docs.items()]
 
 
 def one_screen(entries, rows, conclusions: dict | None = None) -> list[dict]:
     """Per document with scored rows: ``{"key", "authors", "year", "counts" (tier -> rows), "sentences"}``: how
     many printed numbers are reproduced by tier, which conclusions hold and fail (``conclusions``: document ->
     {"holds": [...], "fails": [...], "undecidable": n}), and the one reason that explains most of the rest."""
-    from .site import _by_document
     out = []
-    for key, doc, doc_rows in _by_document(entries, rows):
+    for key, doc, doc_rows in by_document(entries, rows):
         scored = scored_rows(doc_rows)
         if not scored:
             continue
@@ -201,7 +214,7 @@ def one_screen(entries, rows, conclusions: dict | None = None) -> list[dict]:
             [r for r in scored if r["verdict"] != "within"]
         reached = Counter(name for r in rest if r.get("bracket") in ("other_reading", "fitted_only")
                           for name in dict.fromkeys(_reading_names(r.get("bracket_readings", ""))))
-        notes = Counter(_first_clause(r.get("note", ""), 140) for r in rest if (r.get("note") or "").strip())
+        notes = Counter(first_clause(r.get("note", ""), 140) for r in rest if (r.get("note") or "").strip())
         if reached and reached.most_common(1)[0][1] >= max(notes.most_common(1)[0][1] if notes else 0, 1):
             name, k = reached.most_common(1)[0]
             sentences.append(f"The reading that reaches the most of the rest: {name} ({k} of the {len(rest)} rows "

@@ -17,7 +17,8 @@ import sys
 import time
 from pathlib import Path
 
-from .site import _read_csv, _read_json, scoreboard_counts
+from .files import read_csv, read_json
+from ..reproduce.scoring import KINDS, scoreboard_counts
 
 __all__ = ["MODES", "make_progress", "expected_seconds", "scoreboard_rows", "scoreboard_text", "print_scoreboard"]
 
@@ -28,7 +29,7 @@ def expected_seconds(report_dir: Path, ids) -> dict[str, float]:
     """Run time of each experiment's last report in this folder (``report.json``), where one is recorded."""
     out = {}
     for eid in ids:
-        seconds = _read_json(report_dir / eid / "report.json", {}).get("seconds")
+        seconds = read_json(report_dir / eid / "report.json", {}).get("seconds")
         if isinstance(seconds, (int, float)) and seconds > 0:
             out[eid] = float(seconds)
     return out
@@ -52,10 +53,10 @@ def scoreboard_rows(run) -> list[dict]:
     rows = []
     for o in run.outcomes:
         folder = run.report_dir / o.id
-        numbers = _read_csv(folder / "numbers.csv") if (folder / "summary.md").is_file() else []
+        numbers = read_csv(folder / "numbers.csv") if (folder / "summary.md").is_file() else []
         counts = scoreboard_counts(numbers)
         seconds = o.seconds if o.status in ("ok", "failed", "interrupted") else \
-            _read_json(folder / "report.json", {}).get("seconds")
+            read_json(folder / "report.json", {}).get("seconds")
         status = o.status
         if o.status in ("failed", "interrupted") and numbers:
             status += " (last good report kept)"
@@ -65,7 +66,6 @@ def scoreboard_rows(run) -> list[dict]:
 
 
 def _columns(rows) -> list[str]:
-    from ..reproduce.scoring import KINDS
     kinds = [k for k in KINDS if any(r.get(k) for r in rows)]
     return ["experiment", "status", "time", *kinds]
 
@@ -110,7 +110,7 @@ def _resolve(mode: str, stream) -> str:
 
 
 class _Base:
-    """Event sink of :func:`~locbook.suite.runner.run_suite`."""
+    """Event sink of :func:`~locbook.suite.run.run_suite`."""
 
     def __init__(self, stream=None):
         self.stream = stream if stream is not None else sys.stdout

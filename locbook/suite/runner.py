@@ -40,42 +40,33 @@ Guarantees (docs/running.md, "Interrupts, concurrent runs and the cache"):
 from __future__ import annotations
 
 import csv
-import hashlib
-import io
 import json
 import os
-import re
 import shutil
 import signal
 import subprocess
-import sys
 import threading
 import time
 import uuid
 from collections import deque
 from dataclasses import dataclass, field
-from importlib import metadata
 from pathlib import Path
 
-from . import site
-from ..errors import ParameterError
 from ..reproduce.report import NUMBER_COLUMNS
-from .catalog import machine_label
+from . import cachekey, notebook_html
+from .cachekey import (cache_key, data_hashes, data_unchanged, dependency_versions, links_unchanged, locbook_version,
+                       package_dir)
+from .files import machine_label, read_json, write_text_atomic
 from .params import read_notebook
-from .site import _read_csv, _read_json
 from .executors import make_executor
 from .worker import disk_full_path
 from .progress import expected_seconds, make_progress
-from .spec import PROFILES, SAFE_NAME, Experiment, Suite, SuiteError
+from .spec import PROFILES, Experiment, Suite, SuiteError
 
-__all__ = ["KERNEL_NAME", "run_suite", "run_tasks", "Task", "cache_key", "Outcome", "SuiteRun",
-           "write_suite_reports", "override_folder_name", "data_kinds", "select_for_data", "user_method_failures",
-           "USER_METHODS_TABLE"]
+__all__ = ["KERNEL_NAME", "run_tasks", "Task", "cache_key", "Outcome", "SuiteRun", "check_options", "report_cached"]
 
 #: Every notebook runs on this kernel; jupyter_client maps it to the running interpreter.
 KERNEL_NAME = "python3"
-_DEPENDENCIES = ("numpy", "scipy", "cvxpy", "clarabel", "osqp", "scs", "matplotlib", "papermill",
-                 "nbclient", "nbconvert", "nbformat", "ipykernel", "numba")
 _WORKER_FILES = (".runtime", ".result.json", ".result.json.tmp", ".task.json", ".data-read.log", ".modules-read.log",
                  ".stop", ".ended")
 
@@ -118,83 +109,11 @@ class SuiteRun:
     #: why the executor could run nothing more (a lost Dask scheduler); the run stopped there
     executor_error: str = ""
     #: a data run: the selected experiments left out because the data set does not meet their
-    #: ``[experiment.data_run] needs``, each with why (:func:`select_for_data`); they are no outcome of the run
+    #: ``[experiment.data_run] needs``, each with why (:func:`locbook.suite.run.select_for_data`); they are no outcome of the run
     left_out: dict[str, str] = field(default_factory=dict)
 
     def count(self, status: str) -> int:
         return sum(o.status == status for o in self.outcomes)
-
-
-def locbook_version() -> str:
-    from .. import __version__
-    return __version__
-
-
-def _package_dir() -> Path:
-    return Path(__file__).resolve().parents[1]
-
-
-#: the runner process's locbook code (package-relative patterns): the suite, the reproduction layer it imports, the
-#: package's own start-up modules and errors, and the templates of the report pages
-_RUNNER_SOURCES = ("suite/*.py", "suite/templates/**/*", "reproduce/*.py", "__init__.py", "_lazy.py", "_datalog.py",
-                   "errors.py")
-
-
-def _runner_fingerprint() -> str:
-    """The runner's side of a report: the sources of the suite (which writes the pages) and of what it imports from
-    locbook (:data:`_RUNNER_SOURCES`), and the report site's templates. A fixed set, so a run from the command line
-    and one from Python share their cache. The kernel's side, the library code the notebook ran, is recorded per
-    experiment (``run.json`` "modules", like its data files)."""
-    package = _package_dir()
-    files = {path for pattern in _RUNNER_SOURCES for path in package.glob(pattern) if path.is_file()}
-    h = hashlib.sha256()
-    for path in sorted(files):
-        h.update(str(path.relative_to(package)).encode())
-        h.update(path.read_bytes())
-    return h.hexdigest()
-
-
-def _dependency_versions() -> dict[str, str]:
-    versions = {"python": sys.version.split()[0]}
-    for name in _DEPENDENCIES:
-        try:
-            versions[name] = metadata.version(name)
-        except metadata.PackageNotFoundError:
-            versions[name] = "absent"
-    return versions
-
-
-def _notebook_fingerprint(path: Path) -> str:
-    nb = read_notebook(path)
-    h = hashlib.sha256()
-    for cell in nb.cells:  # sources and tags only: outputs and execution counts do not matter
-        h.update(cell.cell_type.encode())
-        h.update(cell.source.encode())
-        h.update(json.dumps(cell.get("metadata", {}).get("tags", [])).encode())
-    return h.hexdigest()
-
-
-def cache_key(exp: Experiment, profile: str, params: dict, *, source: str | None = None,
-              versions: dict | None = None, figures: bool = True) -> str:
-    """Hash of notebook, parameters, profile, the runner's locbook source (:func:`_runner_fingerprint`) and
-    dependency versions. The data files an experiment reads and the library modules its kernel imports are checked
-    separately, by their hashes recorded in ``run.json``."""
-    payload = {
-        "experiment": exp.id, "profile": profile, "parameters": params,
-        "notebook": _notebook_fingerprint(exp.notebook),
-        "locbook": source or _runner_fingerprint(),
-        "versions": versions or _dependency_versions(),
-        **({} if figures else {"figures": False}),      # the keys of runs with figures are unchanged
-    }
-    return hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()
-
-
-def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
 
 
 def _git_state(root: Path | None) -> tuple[str, str]:
@@ -224,27 +143,8 @@ def _committed_reports(root: Path, report_dir: Path) -> bool:
     return bool(out.strip())
 
 
-def override_folder_name(profile: str, overrides: dict[str, str]) -> str:
-    """Folder of a run with ``-p`` overrides: the profile, the overrides in words, and a hash of them
-    (``quick-sigma-db-2-5-a1b2c3d4``), ``[a-z0-9-]`` only."""
-    words = "-".join(f"{k}-{overrides[k]}" for k in sorted(overrides))
-    slug = re.sub(r"[^a-z0-9]+", "-", words.lower()).strip("-")[:60].strip("-")
-    digest = hashlib.sha256(json.dumps(overrides, sort_keys=True).encode()).hexdigest()[:8]
-    return "-".join(p for p in (profile, slug, digest) if p)
-
-
 # ---------------------------------------------------------------------------------------------------
 # small file helpers: every suite-level file is written to a temporary name, then renamed
-
-def _write_atomic(path: Path, text: str) -> None:
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        tmp.write_text(text, encoding="utf-8")
-        os.replace(tmp, path)
-    except BaseException:     # a full disk, an interrupt: no half-written temporary file is left behind
-        tmp.unlink(missing_ok=True)
-        raise
-
 
 def _is_folder(path: Path) -> bool:
     """``path`` is a real folder (not a file, nor a symbolic link, even one to a folder)."""
@@ -296,7 +196,7 @@ def _validate_report(folder: Path, exp_id: str, figures: bool = True) -> str:
         read_notebook(folder / f"{exp_id}.ipynb")
     except Exception as exc:
         return f"executed notebook unreadable ({exc})"
-    manifest = _read_json(folder / "manifest.json", None)
+    manifest = read_json(folder / "manifest.json", None)
     if not isinstance(manifest, dict):
         return "manifest.json missing or malformed (the notebook did not create a locbook Report)"
     unsaved = manifest.get("figures_saved") is False      # a bracket point's figures were not drawn
@@ -327,77 +227,6 @@ def _validate_report(folder: Path, exp_id: str, figures: bool = True) -> str:
     return ""
 
 
-def _data_hashes(staging: Path, log: str = ".data-read.log") -> tuple[dict[str, str], dict[str, str], list[str]]:
-    """``(hashes, links, changed)`` of every data file (or, with ``log=".modules-read.log"``, every locbook module
-    source) the kernel logged as read (see locbook._datalog): ``hashes`` maps each file to the SHA-256 of the content
-    the kernel read (hashed as it opened it), ``links`` each path opened through a symbolic link to its target then,
-    and ``changed`` lists the files that differ now from what the kernel read (edited, removed or, for a link,
-    re-pointed while the experiment ran). The record keeps what was read, so such a report is not served as cached:
-    the next run sees the change and executes it again. A plain path line (an older kernel's locbook) is hashed
-    now, as before."""
-    logged = staging / log
-    try:
-        lines = logged.read_text(encoding="utf-8").splitlines()
-    except FileNotFoundError:
-        lines = []
-    hashes: dict[str, str] = {}
-    links: dict[str, str] = {}
-    changed: set[str] = set()
-    for line in lines:
-        entry = _log_entry(line)
-        if entry is None:
-            continue
-        path, digest, link = entry
-        try:
-            now = _sha256(Path(path)) if Path(path).is_file() else None
-        except OSError:
-            now = None
-        if digest is None:              # no hash from the kernel: what is there now (a file gone is no file read)
-            if now is None:
-                continue
-            digest = now
-        first = hashes.setdefault(path, digest)          # a file read twice: the record keeps the first read
-        if now != digest or first != digest:
-            changed.add(path)
-        if link is not None:
-            first = links.setdefault(link, path)
-            if os.path.realpath(link) != path or first != path:
-                changed.add(link)
-    return dict(sorted(hashes.items())), dict(sorted(links.items())), sorted(changed)
-
-
-def _log_entry(line: str) -> tuple[str, str | None, str | None] | None:
-    """``(target, sha256 or None, link or None)`` of one line of a read log: a JSON object, or a plain path."""
-    if not line.startswith("{"):
-        return (line, None, None) if line else None
-    try:
-        entry = json.loads(line)
-        path, digest, link = entry["path"], entry["sha256"], entry.get("link")
-    except (ValueError, KeyError, TypeError, AttributeError):     # a line cut short (a worker killed writing it)
-        return None
-    if not (isinstance(path, str) and isinstance(digest, str) and isinstance(link, (str, type(None)))):
-        return None
-    return path, digest, link
-
-
-def _data_unchanged(recorded: dict[str, str]) -> bool:
-    for path, digest in recorded.items():
-        try:
-            if _sha256(Path(path)) != digest:
-                return False
-        except (OSError, TypeError, ValueError):     # gone, unreadable, or a damaged record
-            return False
-    return True
-
-
-def _links_unchanged(recorded: dict[str, str]) -> bool:
-    """Every symbolic link a report read through still points where it did (re-pointed: another file was read)."""
-    try:
-        return all(os.path.realpath(link) == target for link, target in recorded.items())
-    except (OSError, TypeError, ValueError):         # a damaged record
-        return False
-
-
 def _validate_promoted(folder: Path, exp_id: str, figures: bool = True) -> str:
     """'' if ``folder`` holds a complete promoted report of ``exp_id`` (:func:`_validate_report` plus the files
     :func:`_promote` writes), else what is wrong."""
@@ -424,15 +253,15 @@ def _validate_promoted(folder: Path, exp_id: str, figures: bool = True) -> str:
     return ""
 
 
-def _cached(folder: Path, exp: Experiment, key: str, figures: bool = True) -> tuple[bool, str]:
+def report_cached(folder: Path, exp: Experiment, key: str, figures: bool = True) -> tuple[bool, str]:
     """``(True, "")`` when the report in ``folder`` is up to date and intact; ``(False, why)`` when it
     would be up to date but is damaged (``why`` says what is wrong), ``(False, "")`` when it is stale or absent.
     A damaged report is never served: it is executed again."""
-    run = _read_json(folder / "run.json", {})
+    run = read_json(folder / "run.json", {})
     data, modules, links = run.get("data", {}), run.get("modules"), run.get("links", {})
     if not (run.get("cache_key") == key and run.get("status") == "ok" and isinstance(data, dict)
-            and isinstance(modules, dict) and isinstance(links, dict) and _data_unchanged(data)
-            and _data_unchanged(modules) and _links_unchanged(links)):
+            and isinstance(modules, dict) and isinstance(links, dict) and data_unchanged(data)
+            and data_unchanged(modules) and links_unchanged(links)):
         return False, ""
     why = _validate_promoted(folder, exp.id, figures)
     return not why, why
@@ -440,58 +269,6 @@ def _cached(folder: Path, exp: Experiment, key: str, figures: bool = True) -> tu
 
 # ---------------------------------------------------------------------------------------------------
 # reports
-
-def write_suite_reports(suite: Suite, report_dir: Path, *, list_all: bool = True) -> None:
-    """Rebuild ``numbers.csv``, ``index.html`` and ``index.md`` from the experiment folders present (and the
-    reading brackets in ``<reports>/brackets/``: :mod:`locbook.suite.bracket`); in a profile's folder also each
-    document's findings page (:mod:`locbook.suite.findings`) and conclusions page (:mod:`locbook.suite.conclusions`),
-    from the same rows.
-
-    An experiment's rows come from its own folder, whatever run wrote it, so a partial run leaves the
-    others' results as they were. ``list_all=False`` (folders of ``-p`` runs) lists only the experiments
-    present."""
-    from .bracket import SITE_NUMBER_COLUMNS, bracket_of_rows, brackets_root, load_bracket
-
-    status = _read_json(report_dir / "status.json", {})
-    dataset = site.dataset_record(report_dir)       # a data run's folder: the data set's page, not the scoreboard
-    rows, entries = [], []
-    for exp in suite.experiments:
-        folder = report_dir / exp.id
-        present = (folder / "summary.md").is_file()
-        # a data set's page names every experiment that takes a data set: those run, those failed, those left out
-        listed = present or list_all or (dataset is not None and (exp.data_run is not None or exp.id in status))
-        if not listed:
-            continue
-        numbers = _read_csv(folder / "numbers.csv") if present else []
-        # each row's reading bracket, from <reports>/brackets/<id>/bracket.csv when one was run (else empty); not
-        # for a -p run's folder, whose rows were computed under other readings than the bracket's default
-        bracket = load_bracket(brackets_root(report_dir) / exp.id) if report_dir.name in PROFILES else []
-        numbers = bracket_of_rows(numbers, bracket, _read_json(folder / "report.json", {}).get("profile"))
-        rows += numbers
-        entries.append({"exp": exp, "present": present, "report": _read_json(folder / "report.json", {}),
-                        "run": _read_json(folder / "run.json", {}), "last": status.get(exp.id, {}),
-                        "numbers": numbers})
-    out = io.StringIO()
-    writer = csv.DictWriter(out, fieldnames=SITE_NUMBER_COLUMNS)
-    writer.writeheader()
-    for r in rows:
-        writer.writerow({c: r.get(c, "") for c in SITE_NUMBER_COLUMNS})
-    _write_atomic(report_dir / "numbers.csv", out.getvalue())
-    if dataset is not None:
-        _write_atomic(report_dir / "index.html", site.data_index_html(report_dir, entries, dataset, locbook_version()))
-        _write_atomic(report_dir / "index.md", site.data_index_markdown(report_dir, entries, dataset))
-        return
-    # the findings pages, the conclusions pages and the index from the same rows as numbers.csv (one tally)
-    from .findings import write_findings
-    from .conclusions import write_conclusions
-    profile = site._profile_of(report_dir)
-    if report_dir.name in PROFILES:
-        write_findings(report_dir, entries, rows, profile, lambda path, text: _write_atomic(path, text))
-    conclusions = write_conclusions(report_dir, suite, entries, rows,
-                                    lambda path, text: _write_atomic(path, text)) if report_dir.name in PROFILES else {}
-    _write_atomic(report_dir / "index.html", site.index_html(report_dir, entries, rows, locbook_version(),
-                                                             conclusions))
-    _write_atomic(report_dir / "index.md", site.index_markdown(report_dir, entries, rows, conclusions))
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -545,291 +322,7 @@ def _acquire(lock, report_dir: Path, stop: _Stop, progress) -> bool:
     return False
 
 
-def _absolute(path) -> Path:
-    """``path`` (``~`` expanded) as an absolute path, without resolving symbolic links."""
-    return Path(os.path.abspath(Path(path).expanduser()))
-
-
-def split_overrides(experiments: list[Experiment], overrides: dict[str, str]):
-    """``-p`` on several experiments: each takes the overrides its notebook declares, and one that declares none of
-    them is left out (it would only rerun its defaults). Returns ``(kept experiments, {id: its overrides}, left-out
-    ids)``. A name that no selected experiment declares is refused (ParameterError naming the experiments); with one
-    experiment every name must be its own (the usual check, in :meth:`Experiment.parameters`)."""
-    names = [k for k in overrides if k != "data"]
-    if len(experiments) <= 1 or not names:
-        return list(experiments), {e.id: dict(overrides) for e in experiments}, []
-    declared = {e.id: e.declared_parameters() for e in experiments}
-    nobody = [k for k in names if not any(k in d for d in declared.values())]
-    if nobody:
-        raise ParameterError(f"unknown parameter {', '.join(repr(k) for k in nobody)}: none of the "
-                             f"{len(experiments)} selected experiments declares it "
-                             f"({', '.join(e.id for e in experiments)}); `locbook show ID` lists an experiment's")
-    kept, each, left_out = [], {}, []
-    for e in experiments:
-        mine = {k: v for k, v in overrides.items() if k in declared[e.id] or k == "data"}
-        if any(k in declared[e.id] for k in names):
-            kept.append(e)
-            each[e.id] = mine
-        else:
-            left_out.append(e.id)
-    return kept, each, left_out
-
-
-def run_suite(suite: Suite, experiments: list[Experiment], profile: str, *, jobs: int = 1, force: bool = False,
-              overrides: dict[str, str] | None = None, report_root: Path | None = None,
-              out_dir: Path | None = None, timeout_s: float = 1800, retries: int = 1,
-              kernel_name: str = KERNEL_NAME, progress="plain", executor: str = "local",
-              scheduler: str | None = None, data: str | None = None, requested=None, methods=(),
-              trackers=()) -> SuiteRun:
-    """Run experiments and write their reports; see the module docstring for the guarantees.
-
-    ``data``: a data set (a shipped name or a folder with ``dataset.toml``; :func:`locbook.data.dataset.load_dataset`
-    checks it first) for every selected experiment, each of which must take one (a ``data`` parameter: the measured-
-    data experiments and the cross-document benchmark). Its reports go to ``data-<name>/`` inside the folder the run
-    would otherwise write (``<report_root>/<profile>/data-<name>/``), and its files join the cache key. An experiment
-    whose ``[experiment.data_run] needs`` the data set does not meet is left out before anything runs (one message
-    each; :attr:`SuiteRun.left_out`; recorded for the data set's page), unless its id is in ``requested`` (the ids
-    asked for by name; default: every experiment given): that is an error (:func:`select_for_data`). The values of
-    ``[experiment.data_run] parameters`` apply to a data run, under ``overrides``.
-
-    ``methods`` / ``trackers``: static methods and trackers of your own (:class:`locbook.user_methods.UserMethod`,
-    ``--method`` / ``--tracker``), a data run's only: each experiment that declares a ``methods`` (``trackers``)
-    parameter gets them, ``NAME=SPEC`` with a file absolute, so they join its cache key (and the kernel records the
-    content of the code it ran, :func:`locbook._datalog.record_read`); the report folder stays the data run's. A
-    name the data set's own ``[[method]]`` tables use too is refused before anything runs.
-
-    Parameters of every selected experiment are checked before any executes (raises ParameterError); with several
-    experiments, each takes the ``overrides`` it declares and those declaring none are left out
-    (:func:`split_overrides`).
-    The reports go to ``<report_root>/<profile>/``, or, with ``overrides``, to their own folder
-    (:func:`override_folder_name`) so that the profile's default report is never touched; ``out_dir``
-    names the folder explicitly. ``retries``: further attempts for an experiment whose worker or kernel died.
-    ``progress``: a mode of :func:`locbook.suite.progress.make_progress` ("auto", "live", "plain", "quiet") or
-    a view object. ``executor``: "local" (worker processes on this machine, ``jobs`` at a time) or "dask"
-    (each experiment a task on dask.distributed: the cluster at ``scheduler``, or a LocalCluster of ``jobs``
-    workers); both run the same worker, so caching, locking, retries and numbers are the same.
-    """
-    overrides = dict(overrides or {})
-    _check_options(timeout_s, jobs, executor, scheduler)
-    data_roots: list[str] = []
-    per_experiment: dict[str, dict] = {}
-    dataset_name = identity = None
-    facts: dict = {}
-    left_out: dict[str, str] = {}
-    if "data" in overrides:
-        if data is not None:
-            raise SuiteError("give the data set once: --data or -p data=..., not both")
-        data = overrides.pop("data")          # -p data=X is --data X: checked, hashed, its own folder
-    given = [k for k in ("methods", "trackers") if k in overrides]
-    if given:
-        raise SuiteError(f"-p {given[0]}: give methods of your own with --method NAME=SPEC and --tracker NAME=SPEC "
-                         "(a file relative to this folder)")
-    methods, trackers = list(methods or ()), list(trackers or ())
-    if (methods or trackers) and data is None:
-        raise SuiteError("--method and --tracker run on a data set: give one with --data DIR")
-    chosen = [k for k in ("calibration", "anchors") if k in overrides]
-    if chosen and data is None:
-        raise SuiteError(f"-p {chosen[0]} names {'recordings' if chosen[0] == 'calibration' else 'anchors'} of one "
-                         "data set: give it with --data DIR (a shipped one by name: --data kolakowski2021)")
-    if data is not None:
-        ds, dataset_name, value, data_roots, identity = _load_data_argument(data)
-        # the split and anchor subset every experiment will see (locbook.data.selection.select): a bad value is one
-        # line here, before anything runs, and an experiment the selection leaves nothing to run on is left out
-        from ..data.selection import select
-        ds = select(ds, calibration=overrides.get("calibration", ""), anchors=overrides.get("anchors", ""))
-        from ..user_methods import registered_methods
-        registered_methods(ds, methods=methods, trackers=trackers)        # a name given twice: one line, here
-        for exp in experiments:
-            declared = exp.declared_parameters()
-            if "data" not in declared:
-                takes = [e.id for e in suite.experiments if "data" in e.declared_parameters()]
-                raise SuiteError(f"experiment {exp.id!r} takes no data set; with --data run the experiments that do: "
-                                 f"{', '.join(takes)} (`locbook run --data DIR` runs them all)")
-            as_list = str(declared["data"].annotation).replace(" ", "").startswith("list")
-            # override text as `-p` takes it: a str parameter verbatim, a list as a TOML array
-            per_experiment[exp.id] = {"data": json.dumps([value]) if as_list else value}
-            for name, mine in (("methods", methods), ("trackers", trackers)):
-                if mine and name in declared:
-                    per_experiment[exp.id][name] = json.dumps([m.option() for m in mine])
-        kinds = data_kinds(ds)
-        experiments, left_out = select_for_data(experiments, kinds, requested)
-        facts = _dataset_facts(ds, identity, suite, kinds)
-    # every user path made absolute here, once: the workers and kernels run in other folders (a kernel runs in
-    # its notebook's folder), so a relative staging path would point elsewhere there
-    root = _absolute(report_root) if report_root else _absolute(suite.default_reports())
-    if out_dir is not None:
-        report_dir = _absolute(out_dir)
-        if not SAFE_NAME.match(report_dir.name):
-            raise SuiteError(f"output folder name {report_dir.name!r} must be lower-case letters, digits and "
-                             "hyphens ([a-z0-9-])")
-    elif overrides:
-        report_dir = root / override_folder_name(profile, overrides)
-    else:
-        report_dir = root / profile
-    if dataset_name is not None and out_dir is None:
-        report_dir = report_dir / f"data-{dataset_name}"
-    if identity is not None:
-        _claim_dataset_folder(report_dir, dataset_name, identity, facts)
-    experiments, own, _ = split_overrides(experiments, overrides)
-    tasks = [Task(exp.id, exp, exp.parameters(profile, {**own[exp.id], **per_experiment.get(exp.id, {})},
-                                              data_run=data is not None))
-             for exp in experiments]  # validation first
-    custom_folder = bool(overrides) or out_dir is not None or dataset_name is not None
-    if isinstance(progress, str):
-        progress = make_progress(progress)
-    for eid, why in left_out.items():
-        progress.message(f"{eid}: left out: {why}")
-    for flag, name, mine in (("--method", "methods", methods), ("--tracker", "trackers", trackers)):
-        takers = [e.id for e in experiments if name in e.declared_parameters()]
-        if mine and not takers:
-            every = [e.id for e in suite.experiments if name in e.declared_parameters()]
-            progress.message(f"{flag} {', '.join(m.name for m in mine)}: no experiment of this run takes it (those "
-                             f"that do: {', '.join(every)})")
-        elif mine and name == "trackers" and not ds.has_role("track"):
-            progress.message(f"--tracker {', '.join(m.name for m in mine)}: the data set has no track recording, so "
-                             "no report runs it")
-    run = run_tasks(suite, tasks, profile, report_dir, jobs=jobs, force=force, timeout_s=timeout_s,
-                    retries=retries, kernel_name=kernel_name, progress=progress, executor=executor,
-                    scheduler=scheduler, data_roots=data_roots,
-                    write_reports=lambda folder, _outcomes: _write_reports(suite, folder, custom_folder,
-                                                                           dataset_name is not None and out_dir is None))
-    run.left_out = dict(left_out)
-    return run
-
-
-#: the table a data run's notebook saves when it runs methods of your own (:func:`locbook.scenarios.measured.
-#: user_method_rows`): which ran, which failed and why
-USER_METHODS_TABLE = "user_methods.csv"
-
-
-def user_method_failures(run: SuiteRun) -> list[dict]:
-    """The methods of your own that failed in the reports of ``run`` (executed or cached: a cached report's failure
-    is still the state of that method), read from each report's :data:`USER_METHODS_TABLE`: one dict per method,
-    ``{method, kind, function, error, experiments, page}`` (``page``: the first report that shows its traceback)."""
-    out: dict[str, dict] = {}
-    for o in run.outcomes:
-        if o.status not in ("ok", "cached"):
-            continue
-        folder = run.report_dir / o.id
-        table = folder / USER_METHODS_TABLE
-        if not table.is_file():
-            continue
-        try:
-            with open(table, newline="", encoding="utf-8") as fh:
-                rows = list(csv.DictReader(fh))
-        except (OSError, UnicodeDecodeError, csv.Error):
-            continue
-        for r in rows:
-            if r.get("status") != "failed" or not r.get("method"):
-                continue
-            f = out.setdefault(r["method"], {"method": r["method"], "kind": r.get("kind", ""),
-                                             "function": r.get("function", ""), "error": r.get("error", ""),
-                                             "experiments": [], "page": str(folder / "report.html")})
-            if o.id not in f["experiments"]:
-                f["experiments"].append(o.id)
-    return list(out.values())
-
-
-def data_kinds(ds) -> frozenset[str]:
-    """The kinds of :data:`locbook.suite.spec.DATA_KINDS` a loaded data set (:class:`locbook.data.dataset.Dataset`)
-    holds: each role with a recording, and "scored" when it has a recording the static methods are scored on
-    (:func:`locbook.scenarios.measured.scored_recordings`)."""
-    from ..data.dataset import ROLES
-    from ..scenarios.measured import scored_recordings
-    kinds = {role for role in ROLES if ds.has_role(role)}
-    if scored_recordings(ds):
-        kinds.add("scored")
-    return frozenset(kinds)
-
-
-def select_for_data(experiments: list[Experiment], kinds, requested=None) -> tuple[list[Experiment], dict[str, str]]:
-    """The experiments a data set holding ``kinds`` (:func:`data_kinds`) can run: ``(kept, {id: why left out})``,
-    by each one's ``[experiment.data_run] needs`` (one without the table runs on every data set). ``requested``:
-    the ids asked for by name (default: all of ``experiments``); one of them that the data set cannot run is an
-    error (SuiteError, one line), as is a selection of which none can run."""
-    requested = {e.id for e in experiments} if requested is None else set(requested)
-    kept, left_out = [], {}
-    for exp in experiments:
-        why = exp.data_run.missing(kinds) if exp.data_run is not None else ""
-        if not why:
-            kept.append(exp)
-        elif exp.id in requested:
-            raise SuiteError(f"{exp.id} cannot run on this data set: {why} (`locbook run --data DIR` without ids "
-                             "runs every experiment the data set can run)")
-        else:
-            left_out[exp.id] = why
-    if experiments and not kept:
-        raise SuiteError("no selected experiment can run on this data set: " + "; ".join(
-            f"{eid}: {why}" for eid, why in left_out.items()))
-    return kept, left_out
-
-
-def _write_reports(suite: Suite, folder: Path, custom_folder: bool, nested: bool) -> None:
-    write_suite_reports(suite, folder, list_all=not custom_folder)
-    parent = folder.parent
-    if nested and (parent / "index.html").is_file():     # the profile's index links its data-<name>/ folders
-        from filelock import FileLock, Timeout
-        lock = FileLock(str(parent / ".lock"))
-        try:
-            lock.acquire(timeout=0)       # a run writing that folder rebuilds its index itself, link included
-        except Timeout:
-            return
-        try:
-            write_suite_reports(suite, parent, list_all=parent.name in PROFILES)
-        finally:
-            lock.release()
-
-
-def _load_data_argument(data: str):
-    """``(data set, name, parameter value, data roots, identity)`` of a data set given to ``--data``: checked by
-    loading it (a malformed one fails here, before anything runs). A shipped data set is passed by name, any other
-    by its absolute folder. The roots hold every file its manifest names (a symbolic link's target folder too), so
-    that each file a report read joins its cache record; the identity ("shipped:<name>" or the folder) tells two
-    data sets of one name apart."""
-    from ..data.dataset import datasets_dir, load_dataset
-    from ..data.floors import require_one_floor
-    ds = load_dataset(data)
-    require_one_floor(ds)                 # a building runs floor by floor (floors.floor_runs: the CLI's loop)
-    base = ds.manifest_name or ds.name    # one floor of a data set: DIR@F1, its name the manifest's and the floor's
-    shipped = ds.root.resolve() == (datasets_dir() / base).resolve()
-    roots = sorted({str(ds.root), *(str(Path(f).resolve().parent) for f in ds.files)})
-    return (ds, ds.name, (base if shipped else str(ds.root)) + ds.selector, roots,
-            (f"shipped:{base}" if shipped else str(ds.root)) + ds.selector)
-
-
-def _dataset_argument(data: str) -> tuple[str, str, list[str], str]:
-    """``(name, parameter value, data roots, identity)`` of :func:`_load_data_argument`."""
-    return _load_data_argument(data)[1:]
-
-
-def _dataset_facts(ds, identity: str, suite: Suite, kinds) -> dict:
-    """What a data set's page says of it, read from the loaded data set (its manifest): title, attribution,
-    licence, the manifest's path (a shipped one's inside the package, so that committed reports name no machine's
-    folder), the geometry sentence, and every experiment of the suite it cannot run, with why."""
-    from ..data.dataset import MANIFEST
-    manifest = (f"locbook/data/datasets/{ds.name}/{MANIFEST}" if identity.startswith("shipped:")
-                else str(Path(ds.root) / MANIFEST))
-    left_out = {e.id: e.data_run.missing(kinds) for e in suite.experiments
-                if e.data_run is not None and e.data_run.missing(kinds)}
-    return {"title": ds.title, "attribution": ds.attribution, "licence": ds.license, "manifest": manifest,
-            "geometry": getattr(ds, "geometry_text", ""), "left out": left_out}
-
-
-def _claim_dataset_folder(report_dir: Path, name: str, identity: str, facts: dict | None = None) -> None:
-    """``data-<name>/`` holds one data set's reports: refuse a different data set of the same name (its reports
-    would replace the others'), else record which one it holds and what its page says of it (``dataset.json``:
-    name, identity, and ``facts``, :func:`_dataset_facts`), rewritten at every run."""
-    record = report_dir / "dataset.json"
-    held = _read_json(record, {}).get("data set")
-    if held and held != identity:
-        raise SuiteError(f"{report_dir} holds the reports of another data set named {name!r} ({held}); give yours "
-                         "another name in its dataset.toml (name = ...), or remove that folder")
-    if not held or facts:
-        report_dir.mkdir(parents=True, exist_ok=True)
-        _write_atomic(record, json.dumps({"name": name, "data set": identity, **(facts or {})}, indent=1) + "\n")
-
-
-def _check_options(timeout_s: float, jobs: int, executor: str, scheduler: str | None) -> None:
+def check_options(timeout_s: float, jobs: int, executor: str, scheduler: str | None) -> None:
     if not timeout_s > 0:
         raise SuiteError(f"the timeout must be a positive number of seconds, got {timeout_s}")
     if jobs < 1:
@@ -840,17 +333,21 @@ def _check_options(timeout_s: float, jobs: int, executor: str, scheduler: str | 
         raise SuiteError("a scheduler address needs --executor dask")
 
 
-def run_tasks(suite: Suite, tasks: list[Task], profile: str, report_dir: Path, *, write_reports, jobs: int = 1,
+def run_tasks(suite: Suite, tasks: list[Task], profile: str, report_dir: Path, *, write_reports, write_pages,
+              jobs: int = 1,
               force: bool = False, timeout_s: float = 1800, retries: int = 1, kernel_name: str = KERNEL_NAME,
               progress="plain", executor: str = "local", scheduler: str | None = None,
               data_roots: list[str] | None = None) -> SuiteRun:
     """Run ``tasks`` (checked parameters; distinct keys) into ``report_dir`` (an absolute path) under its lock,
     with every guarantee of the module docstring, then call ``write_reports(report_dir, outcomes)`` (also after
-    an interrupt; one :class:`Outcome` per task) to rebuild the folder's aggregate files. :func:`run_suite` and
+    an interrupt; one :class:`Outcome` per task) to rebuild the folder's aggregate files. ``write_pages(exp,
+    profile, params, staging, folder, stamp)`` writes one report's pages into its validated staging folder
+    (:func:`locbook.suite.site.write_experiment_pages`): the pages are the site's, passed in, so that the runner
+    imports no page code. :func:`locbook.suite.run.run_suite` and
     ``locbook study`` (:func:`locbook.suite.study.run_study`) both run here."""
     from filelock import FileLock
 
-    _check_options(timeout_s, jobs, executor, scheduler)
+    check_options(timeout_s, jobs, executor, scheduler)
     if len({t.key for t in tasks}) != len(tasks):
         raise SuiteError("every task of a run needs its own key (it names the task's folder)")
     if isinstance(progress, str):
@@ -871,7 +368,7 @@ def run_tasks(suite: Suite, tasks: list[Task], profile: str, report_dir: Path, *
             raise          # not bad input: the CLI says which path, with the full-disk exit status
         raise SuiteError(f"cannot write to the reports folder {report_dir}: {exc.strerror}") from None
     # data files read under these folders are hashed into the cache record (a changed file reruns the report)
-    data_roots = [str(_package_dir()), str(suite.root.parent / "shared"), *(data_roots or [])]
+    data_roots = [str(package_dir()), str(suite.root.parent / "shared"), *(data_roots or [])]
     run = SuiteRun([], report_dir)
     with _Stop() as stop:
         lock = FileLock(str(report_dir / ".lock"))
@@ -886,7 +383,7 @@ def run_tasks(suite: Suite, tasks: list[Task], profile: str, report_dir: Path, *
             try:
                 with make_executor(executor, jobs, scheduler) as pool:
                     _run_locked(suite, tasks, profile, report_dir, data_roots, force, timeout_s, retries,
-                                kernel_name, write_reports, stop, run, progress, pool)
+                                kernel_name, write_reports, write_pages, stop, run, progress, pool)
             finally:
                 progress.end(run)
         finally:
@@ -910,12 +407,12 @@ def _longest_first(report_dir: Path, profile: str, ids):
 
 
 def _run_locked(suite, tasks, profile, report_dir, data_roots, force, timeout_s, retries, kernel_name,
-                write_reports, stop, run, progress, pool):
-    source, versions = _runner_fingerprint(), _dependency_versions()
+                write_reports, write_pages, stop, run, progress, pool):
+    source, versions = cachekey.runner_fingerprint(), dependency_versions()
     rev, dirty = _git_state(suite.repository)
     stamp = locbook_version() + (f" (source {rev}{' + uncommitted changes' if dirty else ''})" if rev else "")
     status_path = report_dir / "status.json"
-    status = _read_json(status_path, {})
+    status = read_json(status_path, {})
     by_id = {t.key: t for t in tasks}
     keys = {t.key: cache_key(t.experiment, profile, t.parameters, source=source, versions=versions,
                              figures=t.figures) for t in tasks}
@@ -935,7 +432,7 @@ def _run_locked(suite, tasks, profile, report_dir, data_roots, force, timeout_s,
             status[outcome.id] = {"status": outcome.status, "seconds": round(outcome.seconds, 2),
                                   "error": outcome.error}
             try:
-                _write_atomic(status_path, json.dumps(status, indent=1, sort_keys=True))
+                write_text_atomic(status_path, json.dumps(status, indent=1, sort_keys=True))
             except OSError as exc:
                 path = disk_full_path(exc, str(status_path))
                 if path is None:
@@ -945,7 +442,7 @@ def _run_locked(suite, tasks, profile, report_dir, data_roots, force, timeout_s,
 
     queue: deque = deque()
     for t in tasks:
-        cached, damaged = (False, "") if force else _cached(report_dir / t.key, t.experiment, keys[t.key], t.figures)
+        cached, damaged = (False, "") if force else report_cached(report_dir / t.key, t.experiment, keys[t.key], t.figures)
         if cached:
             finish(Outcome(t.key, "cached", 0.0))
         else:
@@ -992,7 +489,7 @@ def _run_locked(suite, tasks, profile, report_dir, data_roots, force, timeout_s,
 
     def complete(eid: str, handle, staging: Path, attempt: int, started: float | None):
         seconds = time.perf_counter() - started if started is not None else 0.0
-        result = _read_json(staging / ".result.json", None)
+        result = read_json(staging / ".result.json", None)
         if not isinstance(result, dict):
             result = {"seconds": seconds, **pool.no_result(handle, staging)}
         result.setdefault("seconds", seconds)
@@ -1019,7 +516,7 @@ def _run_locked(suite, tasks, profile, report_dir, data_roots, force, timeout_s,
                 progress.message(f"{eid}: {final} was {kind}, not a report folder; replaced by the new report")
             try:
                 changed = _promote(by_id[eid].experiment, profile, by_id[eid].parameters, staging, report_dir / eid,
-                                   stamp, keys[eid], result)
+                                   stamp, keys[eid], result, write_pages)
                 if changed:
                     more = f" (and {len(changed) - 1} more)" if len(changed) > 1 else ""
                     progress.message(f"{eid}: {changed[0]}{more} changed while it ran, after its kernel read it; the "
@@ -1106,10 +603,9 @@ def _export_page(staging: Path, exp_id: str) -> dict:
     notebook = staging / f"{exp_id}.ipynb"
     if not notebook.exists():         # nothing to export: the validation says what is missing
         return {}
-    from .notebook_html import export_html
     page = staging / f"{exp_id}.html"
     try:
-        body = export_html(notebook)      # self-contained: the math drawn to SVG, no script from a CDN
+        body = notebook_html.export_html(notebook)      # self-contained: the math drawn to SVG, no script from a CDN
         page.write_text(body, encoding="utf-8")
     except Exception as exc:  # an HTML failure must not hide the notebook's own result
         path = disk_full_path(exc, str(page))
@@ -1148,27 +644,16 @@ def _keep_failed(staging: Path, failed: Path) -> None:
     _replace_dir(staging, failed)
 
 
-def _promote(exp, profile, params, staging: Path, folder: Path, stamp: str, key: str, result: dict) -> list[str]:
+def _promote(exp, profile, params, staging: Path, folder: Path, stamp: str, key: str, result: dict,
+             write_pages) -> list[str]:
     """Write the summary and the records into the validated staging folder, then swap it into place. The cache
     record (run.json) is written before the swap, inside the new folder, so it only ever describes a
     complete report. Returns the files (and links) read that changed while the experiment ran: the record holds
     what the kernel read, so the next run executes this report again."""
-    data, links, changed = _data_hashes(staging)
-    modules, _module_links, changed_modules = _data_hashes(staging, ".modules-read.log")
+    data, links, changed = data_hashes(staging)
+    modules, _module_links, changed_modules = data_hashes(staging, ".modules-read.log")
     _strip_worker_files(staging)
-    numbers = _read_csv(staging / "numbers.csv")
-    # the pages show each row's reading bracket when the experiment was bracketed (<reports>/brackets/<id>/)
-    from .bracket import bracket_of_rows, brackets_root, load_bracket
-    bracket = load_bracket(brackets_root(folder.parent) / exp.id) if folder.parent.name in PROFILES else []
-    if bracket:
-        numbers = bracket_of_rows(numbers, bracket, profile)
-    dataset = site.dataset_record(folder.parent)       # a data run's pages name the data set, not the document
-    (staging / "summary.md").write_text(site.summary_markdown(exp, profile, numbers, stamp, dataset),
-                                        encoding="utf-8")
-    (staging / "report.md").write_text(site.page_markdown(exp, profile, params, staging, numbers, stamp, dataset),
-                                       encoding="utf-8")
-    (staging / "report.html").write_text(site.page_html(exp, profile, params, staging, numbers, stamp, dataset),
-                                         encoding="utf-8")
+    write_pages(exp, profile, params, staging, folder, stamp)
     (staging / "report.json").write_text(json.dumps(
         {"experiment": exp.id, "profile": profile, "parameters": params, "locbook": stamp,
          "seconds": round(result["seconds"], 1), "machine": result.get("machine") or machine_label()}, indent=1,

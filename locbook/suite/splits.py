@@ -5,7 +5,7 @@ of :mod:`locbook.data.selection`, by the suite's own runner, each gathered into 
 can be scored (one with true positions, :func:`locbook.data.selection.scorable_recordings`, in manifest order): the
 channel is fitted on every OTHER recording with truth (``-p calibration=<the others>``) and the battery is scored on
 that one; recordings without truth (a track with only a reference path) keep their role. Each split is a data run of
-its own (:func:`locbook.suite.runner.run_suite` with that ``calibration``), so its reports are the cached reports of
+its own (:func:`locbook.suite.run.run_suite` with that ``calibration``), so its reports are the cached reports of
 that parameter, the same as ``locbook run --data DIR -p calibration=...`` writes. The experiments are
 :data:`LORO_EXPERIMENTS` unless ids are given; one a split cannot feed (no track left) is left out of that split. The
 held-out recording's own rows (``recording`` = its name) of each split's ``results.csv`` are gathered into
@@ -44,8 +44,13 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ParameterError
+from .files import atomic_write, write_text_atomic
+from .progress import make_progress
+from .run import claim_dataset_folder, data_kinds, load_data_argument, run_suite, run_tasks
+from .runner import Task
 from .spec import Suite, SuiteError
-from .study import _atomic
+from .study import Study, expand_study
+from .sweep import Aggregate, current_points
 
 __all__ = ["LORO_EXPERIMENTS", "DENSITY_EXPERIMENT", "DENSITY_SUBSETS", "DENSITY_MAX_SIZES", "SPLIT_MODES",
            "loro_splits", "run_loro", "loro_tables", "density_sizes", "anchor_subsets", "anchor_density_study",
@@ -95,16 +100,12 @@ def _read_rows(path: Path) -> list[dict]:
         return []
 
 
-def _atomic_text(path: Path, text: str) -> None:
-    _atomic(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
-
-
 def _save_png(fig, path: Path) -> None:
     """A figure to ``path`` by the study's atomic write, closed whatever happens."""
     import matplotlib.pyplot as plt
     fig.tight_layout()
     try:
-        _atomic(path, lambda tmp: fig.savefig(tmp, format="png", dpi=100))
+        atomic_write(path, lambda tmp: fig.savefig(tmp, format="png", dpi=100))
     finally:
         plt.close(fig)
 
@@ -114,7 +115,7 @@ def _write_csv(path: Path, rows: list[dict], columns) -> None:
     writer = csv.DictWriter(out, fieldnames=list(columns), lineterminator="\n", extrasaction="ignore")
     writer.writeheader()
     writer.writerows([{k: ("" if r.get(k) is None else r.get(k)) for k in columns} for r in rows])
-    _atomic_text(path, out.getvalue())
+    write_text_atomic(path, out.getvalue())
 
 
 def _markdown(rows: list[dict], columns) -> str:
@@ -182,21 +183,19 @@ def _data_folder(suite: Suite, report_root, profile: str, name: str) -> Path:
 
 def run_loro(suite: Suite, experiments, profile: str, *, data: str, overrides: dict | None = None,
              report_root: Path | None = None, progress="plain", methods=(), trackers=(), **runner) -> LoroRun:
-    """Leave-one-recording-out on ``data`` (module docstring): one :func:`locbook.suite.runner.run_suite` per split
+    """Leave-one-recording-out on ``data`` (module docstring): one :func:`locbook.suite.run.run_suite` per split
     (``overrides`` and ``runner``'s options passed on to each; ``experiments`` default :data:`LORO_EXPERIMENTS`),
     then the table and the plot from every split whose reports are up to date. An interrupted or full-disk split
     stops the rest; the table then holds the splits done, unless an earlier run's table is there: a stopped run
     never replaces it with fewer splits (``kept``)."""
     from ..data.selection import select
-    from .progress import make_progress
-    from .runner import _claim_dataset_folder, _load_data_argument, data_kinds, run_suite
     overrides = dict(overrides or {})
     if "calibration" in overrides:
         raise SuiteError("--split loro chooses the calibration recordings of each split: give --split loro or "
                          "-p calibration=..., not both")
     if "data" in overrides:
         raise SuiteError("with --split loro give the data set with --data DIR")
-    ds, name, _value, _roots, identity = _load_data_argument(data)
+    ds, name, _value, _roots, identity = load_data_argument(data)
     base = select(ds, anchors=overrides.get("anchors", ""))
     splits = loro_splits(base)
     experiments = list(experiments) if experiments else [e for e in suite.experiments if e.id in LORO_EXPERIMENTS]
@@ -224,7 +223,7 @@ def run_loro(suite: Suite, experiments, profile: str, *, data: str, overrides: d
             break
     folder = out.folder
     folder.parent.mkdir(parents=True, exist_ok=True)
-    _claim_dataset_folder(folder.parent, name, identity)
+    claim_dataset_folder(folder.parent, name, identity)
     table, per_split = loro_tables(base, out.splits)
     # a stopped run holds fewer splits than the table an earlier run wrote: that table is kept, never shrunk
     out.kept = out.stopped and (folder / "loro.csv").exists()
@@ -237,7 +236,7 @@ def run_loro(suite: Suite, experiments, profile: str, *, data: str, overrides: d
         listing = [{"split": held, "scored": held, "role in the manifest": base.recording(held).role,
                     "calibration": ", ".join(cal), "report": str(run.report_dir) if run is not None else note}
                    for held, cal, run, note in out.splits]
-        _atomic_text(folder / "loro.md", _loro_markdown(base, table, listing, split_names))
+        write_text_atomic(folder / "loro.md", _loro_markdown(base, table, listing, split_names))
         _loro_plot(table, split_names, folder / "loro.png", base.name)
         out.written = True
     return out
@@ -376,11 +375,9 @@ def anchor_density_study(suite: Suite, data: str, *, profile: str = "quick", sub
 def _density_plan(suite: Suite, data: str, *, profile: str, subsets: int, sizes, sample_seed: int):
     """:func:`anchor_density_study` and the data set's ``(name, data roots, identity)`` for the runner."""
     from ..data.selection import select
-    from .runner import _load_data_argument
-    from .study import Study
     if isinstance(sample_seed, bool) or not isinstance(sample_seed, int) or sample_seed < 0:
         raise ParameterError(f"--sample-seed must be a whole number >= 0, got {sample_seed!r}")
-    ds, name, value, roots, identity = _load_data_argument(data)
+    ds, name, value, roots, identity = load_data_argument(data)
     ds = select(ds)
     ks = density_sizes(len(ds.anchor_ids), sizes)
     drawn = anchor_subsets(ds.anchor_ids, ks, subsets, rng=np.random.default_rng(sample_seed))
@@ -398,16 +395,14 @@ def run_density(suite: Suite, data: str, *, profile: str = "quick", subsets: int
                 sample_seed: int = 0, report_root: Path | None = None, **runner):
     """Run the anchor-density study of ``data`` (module docstring) in one runner session into
     ``<reports>/<profile>/data-<name>/anchor-density/`` and write its table and plot (also after an interrupt: the
-    points finished so far, by :func:`locbook.suite.study.current_points`). Returns the runner's SuiteRun with
-    ``aggregate`` (:class:`locbook.suite.study.Aggregate` of density.csv)."""
-    from .runner import Task, _claim_dataset_folder, run_tasks
-    from .study import Aggregate, current_points, expand_study
+    points finished so far, by :func:`locbook.suite.sweep.current_points`). Returns the runner's SuiteRun with
+    ``aggregate`` (:class:`locbook.suite.sweep.Aggregate` of density.csv)."""
     study, ds, _drawn, name, roots, identity = _density_plan(suite, data, profile=profile, subsets=subsets,
                                                              sizes=sizes, sample_seed=sample_seed)
     points = expand_study(study)            # every value checked before anything runs
     folder = _data_folder(suite, report_root, profile, name) / "anchor-density"
     folder.parent.mkdir(parents=True, exist_ok=True)
-    _claim_dataset_folder(folder.parent, name, identity)
+    claim_dataset_folder(folder.parent, name, identity)
     tasks = [Task(p.key, p.experiment, p.parameters) for p in points]
     wrote: list = []
 
@@ -423,7 +418,7 @@ def run_density(suite: Suite, data: str, *, profile: str = "quick", subsets: int
         _write_csv(path, table, ["k", "method", "subsets", "mean_m", "std_m", "min_m", "max_m"])
         _write_csv(where / "subsets.csv", rows, ["k", "subset", "method", "epochs", "coverage", "mean_m", "median_m",
                                                  "rmse_m", "ratio", "folder"])
-        _atomic_text(where / "density.md", _density_markdown(ds, table, sample_seed, subsets))
+        write_text_atomic(where / "density.md", _density_markdown(ds, table, sample_seed, subsets))
         wrote.append(Aggregate(path, len(done), len(points)))
         _density_plot(table, where / "density.png", ds.name, len(ds.anchor_ids))
 

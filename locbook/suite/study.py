@@ -65,8 +65,11 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ParameterError
+from .files import atomic_write, point_key, point_text, read_csv, read_json
 from .params import check_value
+from .runner import Task
 from .spec import SAFE_NAME, Experiment, Suite, SuiteError, finite_float, read_toml
+from .sweep import Aggregate, current_points, run_sweep
 
 __all__ = ["Study", "StudyPoint", "Aggregate", "load_study", "load_studies", "expand_study", "run_study",
            "study_size", "current_points", "check_claim", "STUDY_COLUMNS", "MAX_STUDY_RUNS"]
@@ -312,17 +315,6 @@ def _parameter_points(study: Study) -> list[dict]:
     return [{k: v for part in combo for k, v in part.items()} for combo in itertools.product(*blocks)]
 
 
-def _canonical(values: dict) -> str:
-    """The checked values of a point as one text (what makes two points the same point)."""
-    return json.dumps(values, sort_keys=True)
-
-
-def _point_key(exp: Experiment, values: dict) -> str:
-    """The folder of a study point: the experiment id and the whole SHA-256 of its values (a 40-bit prefix made
-    points collide from about 10^6 points on; the duplicate check compares the values themselves)."""
-    return f"{exp.id}-{hashlib.sha256(_canonical(values).encode()).hexdigest()}"
-
-
 def expand_study(study: Study) -> list[StudyPoint]:
     """Every task of the study (experiment x parameter point x replicate), each value checked against the
     parameter's type and rule; raises a SuiteError naming the point and the value otherwise."""
@@ -353,12 +345,12 @@ def expand_study(study: Study) -> list[StudyPoint]:
                                                                        exp.rules.get(study.seed_parameter))
                     except ParameterError as exc:
                         raise _err(study.name, study.source, f"replicate {r} of {exp.id!r}: {exc}") from None
-                text = (exp.id, _canonical(run_values))
+                text = (exp.id, point_text(run_values))
                 if text in seen:       # the same values (after checking: 1 and 1.0 of a float are one value)
                     raise _err(study.name, study.source, f"point {i} of {exp.id!r} repeats point {seen[text]} "
                                                          f"({values}); every point must differ")
                 seen[text] = i
-                key = _point_key(exp, run_values)
+                key = point_key(exp.id, run_values)
                 if keys.setdefault(key, text) != text:    # a SHA-256 collision: refused, never merged
                     raise _err(study.name, study.source, f"point {i} of {exp.id!r}: its folder key {key} is "
                                                          "that of another point")
@@ -369,25 +361,13 @@ def expand_study(study: Study) -> list[StudyPoint]:
 # ---------------------------------------------------------------------------------------------------
 # outputs
 
-def _atomic(path: Path, write) -> None:
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        write(tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-
-
 def study_rows(study: Study, points: list[StudyPoint], folder: Path, done: set[str]) -> list[dict]:
     """The study.csv rows of the points in ``done`` (keys whose report is up to date), in point order."""
-    from .site import _read_csv
-
     rows = []
     for p in points:
         if p.key not in done:
             continue
-        for r in _read_csv(folder / p.key / "numbers.csv"):
+        for r in read_csv(folder / p.key / "numbers.csv"):
             if study.collect and r["quantity"] not in study.collect and r["printed_id"] not in study.collect:
                 continue
             seed = "" if p.replicate_seed is None else p.replicate_seed
@@ -404,7 +384,7 @@ def _write_csv(study: Study, rows: list[dict], path: Path) -> None:
     writer = csv.DictWriter(out, fieldnames=[*_LEAD, *study.parameters, *_TAIL], lineterminator="\n")
     writer.writeheader()
     writer.writerows(rows)
-    _atomic(path, lambda tmp: tmp.write_text(out.getvalue(), encoding="utf-8"))
+    atomic_write(path, lambda tmp: tmp.write_text(out.getvalue(), encoding="utf-8"))
 
 
 def _slug(text: str, limit: int = 50) -> str:
@@ -447,56 +427,13 @@ def _write_plots(study: Study, rows: list[dict], plots: Path) -> list[Path]:
             fig.tight_layout()
             digest = hashlib.sha256(printed_id.encode()).hexdigest()[:6]
             path = plots / f"{eid}-{_slug(printed_id)}-{digest}-{_slug(pname)}.png"
-            _atomic(path, lambda tmp: fig.savefig(tmp, format="png", dpi=100))
+            atomic_write(path, lambda tmp: fig.savefig(tmp, format="png", dpi=100))
             plt.close(fig)
             written.append(path)
     for old in plots.glob("*.png"):    # plots of quantities or parameters the study no longer has
         if old not in written:
             old.unlink(missing_ok=True)
     return written
-
-
-def current_points(folder: Path, profile: str, points, outcomes) -> dict[str, str]:
-    """Each point's status for an aggregate (study.csv, bracket.csv): its outcome in this run when ``ok`` or
-    ``cached``; else ``cached`` when its folder still holds the up-to-date report of an earlier run (the runner's own
-    cache test: an interrupted, failed or full-disk ``--force`` run leaves those reports as they were, and they
-    count); else its outcome (``failed``, ``interrupted``, ``not run``). ``points``: ``(key, experiment, parameters,
-    figures)`` of every point."""
-    from .runner import _cached, _dependency_versions, _runner_fingerprint, cache_key
-
-    status = {o.id: o.status for o in outcomes}
-    fingerprint = None
-    out = {}
-    for key, exp, parameters, figures in points:
-        state = status.get(key, "not run")
-        if state not in ("ok", "cached") and (folder / key / "run.json").is_file():
-            if fingerprint is None:      # computed once: it hashes the runner's sources
-                fingerprint = {"source": _runner_fingerprint(), "versions": _dependency_versions()}
-            up_to_date, _damaged = _cached(folder / key, exp, cache_key(exp, profile, parameters, figures=figures,
-                                                                        **fingerprint), figures)
-            if up_to_date:
-                state = "cached"
-        out[key] = state
-    return out
-
-
-@dataclass(frozen=True)
-class Aggregate:
-    """What a study or bracket wrote: ``path`` (study.csv, bracket.csv) from ``kept`` of ``points`` points (those
-    with an up-to-date report); ``written`` False when nothing was rewritten (the earlier file is as it was)."""
-
-    path: Path
-    kept: int
-    points: int
-    written: bool = True
-
-    def describe(self) -> str:
-        if not self.written:
-            return f"{self.path.name} was not rewritten (an earlier one is kept as it was)"
-        rest = "" if self.kept == self.points else (f"; the other {self.points - self.kept} have no up-to-date "
-                                                    "report yet: run it again to complete it")
-        return (f"{self.path.name} was rebuilt from the {self.kept} of {self.points} points with an up-to-date "
-                f"report{rest}")
 
 
 def write_study_outputs(study: Study, points: list[StudyPoint], folder: Path, outcomes,
@@ -544,9 +481,7 @@ def check_claim(study: Study, folder: Path) -> None:
     another file with a different declaration (``study.json`` records the file and the declaration's fingerprint).
     The same file edited is the same study (its points are cached by their values); an identical declaration in
     another file (a copy) shares the folder too."""
-    from .site import _read_json
-
-    held = _read_json(folder / "study.json", {})
+    held = read_json(folder / "study.json", {})
     mine = _record(study)
     if held.get("declared_in") and held.get("declared_in") != mine["declared_in"] \
             and held.get("fingerprint") != mine["fingerprint"]:
@@ -560,7 +495,7 @@ def _claim(study: Study, folder: Path) -> None:
     text = json.dumps(_record(study), indent=1) + "\n"
     path = folder / "study.json"
     if not path.is_file() or path.read_text(encoding="utf-8", errors="replace") != text:
-        _atomic(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
+        atomic_write(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
 
 
 def study_folder(suite: Suite, study: Study, report_root: Path | None = None) -> Path:
@@ -574,17 +509,13 @@ def run_study(suite: Suite, study: Study, *, report_root: Path | None = None, jo
     """Run every point of ``study`` in one runner session into ``<report_root>/studies/<name>/`` and write its
     study.csv and plots (also after an interrupt: the points finished so far). Returns the
     :class:`~locbook.suite.runner.SuiteRun` (one outcome per point, by folder key)."""
-    from .runner import KERNEL_NAME, Task, run_tasks
 
     points = expand_study(study)     # every value checked before anything runs
     folder = study_folder(suite, study, report_root)
     check_claim(study, folder)       # another study of this name: refused before anything runs
     tasks = [Task(p.key, p.experiment, p.parameters) for p in points]
-    wrote: list[Aggregate] = []
-    run = run_tasks(suite, tasks, study.profile, folder, jobs=jobs, force=force, timeout_s=timeout_s,
-                    retries=retries, kernel_name=kernel_name or KERNEL_NAME, progress=progress, executor=executor,
-                    scheduler=scheduler,
-                    write_reports=lambda where, outcomes: write_study_outputs(study, points, where, outcomes, wrote))
-    # what study.csv holds now, for the CLI to say (not rewritten: none up to date, or its write failed)
-    run.aggregate = wrote[-1] if wrote else Aggregate(folder / "study.csv", 0, len(points), written=False)
-    return run
+    # run.aggregate: what study.csv holds now, for the CLI to say (not rewritten: none up to date, or its write failed)
+    return run_sweep(suite, tasks, study.profile, folder,
+                     lambda where, outcomes, wrote: write_study_outputs(study, points, where, outcomes, wrote),
+                     folder / "study.csv", jobs=jobs, force=force, timeout_s=timeout_s, retries=retries,
+                     kernel_name=kernel_name, progress=progress, executor=executor, scheduler=scheduler)

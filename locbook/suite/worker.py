@@ -29,6 +29,8 @@ from pathlib import Path
 import psutil   # at import, not in the SIGTERM handler: an import there could wait on the import lock
 from threadpoolctl import threadpool_limits
 
+from .files import machine_label, write_text_atomic
+
 #: one BLAS/OpenMP thread per worker: set before the kernel starts, so its numpy loads BLAS with one thread (``--jobs
 #: N`` workers then use N cores, not N x cores: 2 workers x 2 OpenBLAS threads on 2 cores cost the grid filter 4x its
 #: CPU time); the worker's own libraries are limited through threadpoolctl (_run)
@@ -122,7 +124,6 @@ def execute(task: dict) -> dict:
     # per experiment, does it pay nbconvert's start
     if disk_full:
         error = f"no space left on device writing {disk_full}"
-    from .catalog import machine_label
     # "machine": where the seconds were measured, this worker's machine (on a cluster, not the runner's)
     return {"error": error, "kernel_failure": kernel_failure, "disk_full": disk_full, "seconds": seconds,
             "machine": machine_label()}
@@ -152,13 +153,8 @@ def main(task_path: str, parent: int | None = None) -> int:
 
 
 def _write_result(staging: Path, result: dict) -> None:
-    tmp = staging / ".result.json.tmp"
-    try:
-        tmp.write_text(json.dumps(result))
-        os.replace(tmp, staging / ".result.json")
-    except OSError:
-        tmp.unlink(missing_ok=True)
-        raise
+    # the temporary name is fixed: the runner strips it with the other worker files
+    write_text_atomic(staging / ".result.json", json.dumps(result), tmp=staging / ".result.json.tmp")
 
 
 def _run(task: dict, staging: Path) -> int:

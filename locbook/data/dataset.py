@@ -5,9 +5,6 @@ the shipped ones (``locbook/data/datasets/<name>/``) and a user's own are read t
 
 The manifest, ``dataset.toml``, is :mod:`locbook.data.manifest` (every key, its schema).
 
-    kind = "static"                     # static (each scored epoch on its own) | tracker (each track in time
-                                        # order); the signature: locbook.MethodInput
-
 Floors (zones, scenes): a ``floor`` column in the anchors file and in every readings file, and placeholder anchors
 (``used = false``), are :mod:`locbook.data.floors`; one floor loads as a data set of its own
 (``load_dataset(DIR, floor="F1")`` or ``"DIR@F1"``, named ``<name>-<floor>``).

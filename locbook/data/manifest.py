@@ -71,6 +71,12 @@ The manifest (every key below; ``[units]`` describes the files, every other valu
                                         # letter, at most 64 characters; no battery method's (lls, ..., grid_bayes)
     function = "methods.py:centroid"    # package.module:function (importable), or path/to/file.py:function: a
                                         # file relative to this folder, inside it (as every file the manifest names)
+    kind = "static"                     # static (each scored epoch on its own) | tracker (each track in time
+                                        # order); the signature: locbook.MethodInput
+
+Every key is checked by the schema, the pydantic models below (:class:`Manifest`; unknown keys, types,
+ranges), and a broken rule raises :class:`~locbook.data.measured.DataFormatError` in one line naming the
+manifest, the key and the value.
 """
 from __future__ import annotations
 

@@ -602,7 +602,7 @@ def _floor_notes(notes: dict, dropped: dict, floor, left_out, recordings) -> Non
         return
     split = {r: c for r, c in dropped.items() if c["other floors"] and r in recordings}
     if split:
-        notes["split recordings"] = (f"recordings spanning floors, split by floor: " + "; ".join(
+        notes["split recordings"] = ("recordings spanning floors, split by floor: " + "; ".join(
             f"{r}: {c['rows'] - c['other floors'] - c['placeholder']:,} of its {c['rows']:,} rows on floor {floor}"
             for r, c in split.items()))
     cross = {r: c["cross-floor"] for r, c in dropped.items() if c["cross-floor"]}

@@ -384,17 +384,17 @@ def load_dataset(path, *, floor: str | None = None) -> Dataset:
                 senders = readings[column].unique() if column in readings.columns else ()
                 if len(senders) > 1:
                     fail(manifest, f"{where}{path.name} holds {len(senders)} {what} "
-                                    f"({', '.join(map(shown, senders[:5]))}"
-                                    f"{', ...' if len(senders) > 5 else ''}); a track follows one tag: give each "
-                                    f"{what[:-1]}'s rows their own file and [[recording]]")
+                                   f"({', '.join(map(shown, senders[:5]))}"
+                                   f"{', ...' if len(senders) > 5 else ''}); a track follows one tag: give each "
+                                   f"{what[:-1]}'s rows their own file and [[recording]]")
         reference = None
         if rec.reference_path is not None:
             reference = read_path_segments(manifest_file(manifest, root, rec.reference_path,
                                                          where + "reference_path: ")) * length_scale
         if floors and (rec.ranges is not None or rec.inertial is not None):
             fail(manifest, f"{where}{'ranges' if rec.ranges is not None else 'inertial'}: a data set with floors takes "
-                            "RSS readings only (its streams are not split by floor yet); give each floor a data set "
-                            "of its own to use its ranges or inertial samples")
+                           "RSS readings only (its streams are not split by floor yet); give each floor a data set "
+                           "of its own to use its ranges or inertial samples")
         ranges, ranges_file = None, None
         origin = file_time_origin(table["time_s"]) if time_scale != 1.0 else None
         if rec.ranges is not None:
@@ -421,7 +421,7 @@ def load_dataset(path, *, floor: str | None = None) -> Dataset:
     for rec in recordings.values():
         if rec.role == "calibration" and not rec.has_truth:
             fail(manifest, f"[[recording]] {rec.name!r}: a calibration recording needs true positions (x_m, y_m): "
-                            "the channel is fitted on the distances from them to the anchors")
+                           "the channel is fitted on the distances from them to the anchors")
     notes = {}
     truth_z = np.concatenate([r.readings["z_m"].to_numpy(float) for r in recordings.values()])
     truth_xy = np.concatenate([r.readings[["x_m", "y_m"]].to_numpy(float) for r in recordings.values()])
@@ -434,7 +434,7 @@ def load_dataset(path, *, floor: str | None = None) -> Dataset:
     if "z" not in anchors.columns:          # 2-D: one plane, no heights anywhere
         if "tag_height_m" in geometry:
             fail(manifest, "[geometry] tag_height_m: anchors have no z: a 2-D data set has no tag height (give the "
-                            "anchors' z in the anchors file for 3-D distances, or drop tag_height_m)")
+                           "anchors' z in the anchors file for 3-D distances, or drop tag_height_m)")
         with_z = [r.name for r in recordings.values() if r.readings["z_m"].notna().any()]
         if with_z:
             notes["z_m"] = (f"the anchors have no z (a 2-D data set): the true heights (z_m) of "
@@ -451,14 +451,14 @@ def load_dataset(path, *, floor: str | None = None) -> Dataset:
         source, height_source = "the tag's height (the median of the recordings' z_m)", "median of the true z"
     else:
         fail(manifest, "[geometry] tag_height_m is required: the estimators need the tag's height, and not every "
-                        "true position has a z_m (a 2-D data set has no z column in its anchors file)")
+                       "true position has a z_m (a 2-D data set has no z column in its anchors file)")
     if tag_height is not None:
         z = anchors["z"].to_numpy(float)
         low, high = z.min() - MAX_TAG_HEIGHT_OFFSET_M, z.max() + MAX_TAG_HEIGHT_OFFSET_M
         if not low <= tag_height <= high:
             fail(manifest, f"{source} = {tag_height:g} m is not within {MAX_TAG_HEIGHT_OFFSET_M:g} m of the "
-                            f"anchors' heights ({z.min():g} to {z.max():g} m; allowed {low:g} to {high:g} m, "
-                            "MAX_TAG_HEIGHT_OFFSET_M): a unit or sign error? (the manifest's values are in metres)")
+                           f"anchors' heights ({z.min():g} to {z.max():g} m; allowed {low:g} to {high:g} m, "
+                           "MAX_TAG_HEIGHT_OFFSET_M): a unit or sign error? (the manifest's values are in metres)")
         for rec in recordings.values():     # a true position without a height is at the tag's known height
             r = rec.readings
             r.loc[r["x_m"].notna() & r["z_m"].isna(), "z_m"] = tag_height
@@ -521,7 +521,7 @@ def load_dataset(path, *, floor: str | None = None) -> Dataset:
                    run_anchors=run_anchors)
     if floor is not None and name_problem(data.name):
         fail(manifest, f"floor {floor!r}: the floor's data set name {data.name!r} (the manifest's name and the "
-                        f"floor's slug) is not a data set name: {name_problem(data.name)}")
+                       f"floor's slug) is not a data set name: {name_problem(data.name)}")
     for rname, rec in recordings.items():    # every recording's epochs now: a problem is named with its file
         try:
             data.epochs(rname)
@@ -567,7 +567,7 @@ def _floor_plan(manifest: Path, root: Path, geometry: dict, floors, floor):
         given, absent = ("floor_plan", "floor_plan_extent_m") if "floor_plan" in geometry else (
             "floor_plan_extent_m", "floor_plan")
         fail(manifest, f"[geometry] {given} needs {absent} too: a plan is drawn at its georeference, "
-                        "floor_plan_extent_m = [x0, x1, y0, y1] (m)")
+                       "floor_plan_extent_m = [x0, x1, y0, y1] (m)")
     if floor is None and any(isinstance(geometry[k], dict) for k in ("floor_plan", "floor_plan_extent_m")):
         # the whole building with plans per floor: check every floor's, draw none
         for f in floors:
@@ -626,20 +626,20 @@ def _check_epochs_kept(manifest: Path, data: Dataset, rname: str) -> None:
         span = f"its times span {float(np.ptp(t)) if len(t) else 0.0:g} s"
         if rule.window_s:
             fail(manifest, f"{where}a track needs at least 2 epochs, {rec.file.name} makes {len(ep)} at window_s = "
-                            f"{rule.window_s:g} s ({span}): the window is longer than the recording, or [units] time "
-                            "is not the file's unit")
+                           f"{rule.window_s:g} s ({span}): the window is longer than the recording, or [units] time "
+                           "is not the file's unit")
         fail(manifest, f"{where}a track needs at least 2 epochs, {rec.file.name} makes {len(ep)} as native scans "
-                        f"(window_s = 0: one epoch per distinct time; {span}): the trackers step on the scans' clock, "
-                        "which takes 2 scan times or more")
+                       f"(window_s = 0: one epoch per distinct time; {span}): the trackers step on the scans' clock, "
+                       "which takes 2 scan times or more")
     if rule.window_s and rule.min_readings > 1 and not np.isfinite(ep.rss_dbm).any():
         every = epochs(rec.readings, data.anchor_ids, window_s=rule.window_s, aggregate=rule.aggregate,
                        group_by=() if rec.point_column is None else (rec.point_column,))
         most = int(every.n_readings.max()) if every.n_readings is not None and every.n_readings.size else 0
         if most < rule.min_readings:
             fail(manifest, f"[epochs] min_readings = {rule.min_readings:,} leaves no entry of recording {rname!r} "
-                            f"({rec.file.name}) heard: "
-                            f"the most readings of one anchor in one {rule.window_s:g} s window is {most:,}; "
-                            f"min_readings must be at most {most:,} (or the window longer)")
+                           f"({rec.file.name}) heard: "
+                           f"the most readings of one anchor in one {rule.window_s:g} s window is {most:,}; "
+                           f"min_readings must be at most {most:,} (or the window longer)")
 
 
 def _check_truth_in_outline(manifest: Path, outline: np.ndarray, recordings: dict) -> None:
@@ -663,9 +663,9 @@ def _check_truth_in_outline(manifest: Path, outline: np.ndarray, recordings: dic
             if far.any():
                 i = int(np.flatnonzero(far)[0])
                 fail(manifest, f"[geometry] outline: {int(far.sum()):,} of the {len(xy):,} {what} of recording "
-                                f"{rec.name!r} lie more than {OUTLINE_TOLERANCE_M:g} m (OUTLINE_TOLERANCE_M) outside "
-                                f"it, the first ({out[i, 0]:g}, {out[i, 1]:g}) m, {gap[i]:.3g} m out: every true "
-                                "position lies inside the outline (a unit error, another site's outline?)")
+                               f"{rec.name!r} lie more than {OUTLINE_TOLERANCE_M:g} m (OUTLINE_TOLERANCE_M) outside "
+                               f"it, the first ({out[i, 0]:g}, {out[i, 1]:g}) m, {gap[i]:.3g} m out: every true "
+                               "position lies inside the outline (a unit error, another site's outline?)")
 
 
 def _check_outline(manifest: Path, outline: np.ndarray, anchors_xy: np.ndarray, truth_xy: np.ndarray) -> None:
@@ -677,8 +677,8 @@ def _check_outline(manifest: Path, outline: np.ndarray, anchors_xy: np.ndarray, 
         return
     lo, hi = outline.min(axis=0), outline.max(axis=0)
     fail(manifest, f"[geometry] outline (x {lo[0]:g}..{hi[0]:g}, y {lo[1]:g}..{hi[1]:g} m) contains none of the "
-                    f"{len(anchors_xy)} anchors and none of the {len(truth_xy)} true positions: it is not this "
-                    "site's floor (another unit, another file?)")
+                   f"{len(anchors_xy)} anchors and none of the {len(truth_xy)} true positions: it is not this "
+                   "site's floor (another unit, another file?)")
 
 
 

@@ -199,7 +199,7 @@ def per_floor(manifest: Path, section: dict, key: str, floors, floor: str | None
     unknown = [k for k in value if k not in floors]
     if unknown:
         fail(manifest, f"{where}{key}: floor(s) {shown_names(unknown)} have no anchor (the floors are "
-                        f"{shown_names(floors)})")
+                       f"{shown_names(floors)})")
     return list(value.values()) if floor is None else value.get(floor)
 
 
@@ -212,17 +212,17 @@ def read_floor_plan(manifest: Path, root: Path, value, where: str) -> Path:
     size = path.stat().st_size
     if size > MAX_FLOOR_PLAN_BYTES:
         fail(manifest, f"{where}floor_plan {path.name}: {size:,} bytes; a floor plan is at most "
-                        f"{MAX_FLOOR_PLAN_BYTES:,} (MAX_FLOOR_PLAN_BYTES)")
+                       f"{MAX_FLOOR_PLAN_BYTES:,} (MAX_FLOOR_PLAN_BYTES)")
     with open(path, "rb") as fh:
         head = fh.read(len(PNG_SIGNATURE))
     if head != PNG_SIGNATURE:
         fail(manifest, f"{where}floor_plan {path.name} is not a PNG (it does not start with the PNG signature); "
-                        "save the plan as PNG")
+                       "save the plan as PNG")
     try:
         image = plan_image(path)
     except Exception as exc:        # a truncated or corrupt PNG: whatever the decoder raises, one line
         fail(manifest, f"{where}floor_plan {path.name}: matplotlib cannot read it ({type(exc).__name__}: "
-                        f"{' '.join(str(exc).split())[:120]})")
+                       f"{' '.join(str(exc).split())[:120]})")
     if image.ndim not in (2, 3) or min(image.shape[:2]) < 1:
         fail(manifest, f"{where}floor_plan {path.name}: not an image (shape {image.shape})")
     return path
@@ -242,14 +242,14 @@ def floor_plan_extent(manifest: Path, value, where: str) -> tuple[float, float, 
           and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value))
     if not ok:
         fail(manifest, f"{where}floor_plan_extent_m must be four finite numbers [x0, x1, y0, y1] (metres), got "
-                        f"{shown(value)}")
+                       f"{shown(value)}")
     x0, x1, y0, y1 = (float(v) for v in value)
     if not (x0 < x1 and y0 < y1):
         fail(manifest, f"{where}floor_plan_extent_m = {value}: needs x0 < x1 and y0 < y1 (the plan's left, right, "
-                        "bottom and top edges, as matplotlib's imshow extent)")
+                       "bottom and top edges, as matplotlib's imshow extent)")
     if max(abs(v) for v in (x0, x1, y0, y1)) >= MAX_COORDINATE_M:
         fail(manifest, f"{where}floor_plan_extent_m = {value}: coordinates are less than {MAX_COORDINATE_M:g} m "
-                        "(MAX_COORDINATE_M)")
+                       "(MAX_COORDINATE_M)")
     return (x0, x1, y0, y1)
 
 

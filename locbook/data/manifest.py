@@ -143,7 +143,6 @@ class EpochRule:
                 f"{self.min_readings} reading(s) per anchor (else not heard)")
 
 
-
 def name_problem(name) -> str:
     """``""`` if ``name`` is a valid data set name (the manifest's ``name``; it names the reports folder), else
     what is wrong with it, for a message."""
@@ -158,6 +157,8 @@ def fail(manifest: Path, message: str):
 
 
 def manifest_string(manifest, raw: dict, key: str, where: str, *, required: bool = True, default: str = "") -> str:
+    """``raw[key]`` as a non-empty string, stripped: a value the schema cannot type before the anchors file is read
+    (a floor's entry of a table keyed by floor, :func:`locbook.data.floors.per_floor`)."""
     value = raw.get(key, None)
     if value is None:
         if required:
@@ -169,12 +170,13 @@ def manifest_string(manifest, raw: dict, key: str, where: str, *, required: bool
 
 
 def manifest_number(manifest, raw: dict, key: str, where: str, *, ge: float | None = None, gt: float | None = None):
+    """``raw[key]`` as a finite float (``ge``/``gt``: its bound), for per-floor values as :func:`manifest_string`."""
     value = raw[key]
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
         fail(manifest, f"{where}{key!r} must be a finite number, got {shown(value)}")
     if (ge is not None and value < ge) or (gt is not None and value <= gt):
         fail(manifest, f"{where}{key!r} must be {'>= ' + str(ge) if ge is not None else '> ' + str(gt)}, "
-                        f"got {value!r}")
+                       f"got {value!r}")
     return float(value)
 
 
@@ -190,10 +192,10 @@ def manifest_file(manifest: Path, root: Path, value: str, where: str) -> Path:
         target = Path(os.path.realpath(path))
         if not target.is_relative_to(Path(os.path.realpath(root))):
             fail(manifest, f"{where}{shown(value)} is a link to {str(target)!r}, outside the data set's folder "
-                            f"{root}; a data set's files lie inside its folder: copy the file in")
+                           f"{root}; a data set's files lie inside its folder: copy the file in")
         if not target.is_file():
             fail(manifest, f"{where}file {shown(value)} does not exist in {root}" if not target.exists() else
-                  f"{where}{shown(value)} is not a regular file")
+                 f"{where}{shown(value)} is not a regular file")
     except (OSError, ValueError) as exc:       # a NUL byte, a name too long, a link loop
         if isinstance(exc, DataFormatError):
             raise

@@ -31,7 +31,9 @@ from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
 import locbook as lb
+import locbook.data.csvfile as csvfile
 import locbook.data.measured as measured
+import locbook.data.readings_file as fast_reader
 from locbook.data.dataset import load_dataset
 from locbook.data.measured import RSSI_RANGE_DBM, read_anchors, read_readings, validate_readings
 
@@ -259,7 +261,7 @@ def test_a_fuzzed_data_set_loads_physically_or_is_refused_in_one_line(scratch, e
 
 
 def _exact(path):
-    table, lines = measured._read_text_table(path, measured.READING_COLUMNS, "readings")
+    table, lines = csvfile.read_text_table(path, measured.READING_COLUMNS, "readings")
     return validate_readings(table, source=f"readings file {path}", lines=lines)
 
 
@@ -273,8 +275,8 @@ def test_a_random_readings_file_loads_or_is_refused_and_both_readers_agree(scrat
     assert (out is None) == (exact is None), "one reader refused the file, the other took it"
     if out is None:
         with pytest.MonkeyPatch.context() as mp:         # refused as a large file too, in one line
-            mp.setattr(measured, "MAX_EXACT_READ_BYTES", 0)
-            mp.setattr(measured, "_LOCATE_CHUNK_ROWS", 2)
+            mp.setattr(csvfile, "MAX_EXACT_READ_BYTES", 0)
+            mp.setattr(fast_reader, "_LOCATE_CHUNK_ROWS", 2)
             assert refusal_or(read_readings, path) is None
         return
     event("loaded")
@@ -287,8 +289,8 @@ def test_a_random_readings_file_loads_or_is_refused_and_both_readers_agree(scrat
     assert_same_table(out, exact)
     # as a "large" file (over the exact reader's limit): the same table from the fast reader, or a one-line refusal
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(measured, "MAX_EXACT_READ_BYTES", 0)
-        mp.setattr(measured, "_LOCATE_CHUNK_ROWS", 2)
+        mp.setattr(csvfile, "MAX_EXACT_READ_BYTES", 0)
+        mp.setattr(fast_reader, "_LOCATE_CHUNK_ROWS", 2)
         large = refusal_or(read_readings, path)
     if large is not None:
         event("loaded as a large file")

@@ -9,7 +9,9 @@ import numpy as np
 import pytest
 
 import locbook.data.dataset as dataset_module
+import locbook.data.csvfile as csvfile
 import locbook.data.measured as measured
+import locbook.data.readings_file as fast_reader
 from locbook.data.dataset import load_dataset
 from locbook.data.example import write_example_dataset
 from locbook.data.measured import DataFormatError, epochs, read_anchors, read_readings, read_readings_table, validate_readings
@@ -149,11 +151,11 @@ def test_a_line_over_the_limit_is_refused_by_either_reader_naming_it(tmp_path):
 def test_a_quoted_field_keeps_a_large_file_on_the_fast_reader(tmp_path, monkeypatch):
     rows = "".join(f"{t},tag,A,-{50 + t % 40},P{t}\n" for t in range(300))
     path = readings_file(tmp_path / "r.csv", body=rows.replace(",P7\n", ',"P,7"\n').replace(",P9\n", ',"P""9"\n'))
-    monkeypatch.setattr(measured, "MAX_EXACT_READ_BYTES", 1024)          # the file is "large": 6 kB
+    monkeypatch.setattr(csvfile, "MAX_EXACT_READ_BYTES", 1024)          # the file is "large": 6 kB
 
     def no_exact_reader(*args, **kwargs):
         raise AssertionError("the exact reader was used")
-    monkeypatch.setattr(measured, "_read_text_table", no_exact_reader)
+    monkeypatch.setattr(fast_reader, "read_text_table", no_exact_reader)
     table, lines = read_readings_table(path)
     assert table.attrs.get("parsed") and lines[-1] == 301
     out = read_readings(path)
@@ -169,7 +171,7 @@ def test_a_quoted_field_keeps_a_large_file_on_the_fast_reader(tmp_path, monkeypa
 def test_a_large_file_the_exact_reader_would_take_is_refused_before_reading(tmp_path, monkeypatch, edit, reason):
     rows = "".join(f"{t},tag,A,-{50 + t % 40},P{t}\n" for t in range(300))
     path = readings_file(tmp_path / "r.csv", body=edit(rows))
-    monkeypatch.setattr(measured, "MAX_EXACT_READ_BYTES", 1024)
+    monkeypatch.setattr(csvfile, "MAX_EXACT_READ_BYTES", 1024)
     read = []
     monkeypatch.setattr(type(path), "read_bytes", lambda self: read.append(self) or b"")
     with pytest.raises(DataFormatError) as info:
@@ -180,7 +182,7 @@ def test_a_large_file_the_exact_reader_would_take_is_refused_before_reading(tmp_
 
 
 def test_a_file_without_line_ends_is_refused_without_reading_it_whole(tmp_path, monkeypatch):
-    monkeypatch.setattr(measured, "MAX_LINE_BYTES", 4096)
+    monkeypatch.setattr(csvfile, "MAX_LINE_BYTES", 4096)
     path = tmp_path / "one-line.csv"
     path.write_bytes(b"time_s,transmitter,receiver,rssi_dbm," + b"9" * 4_000_000)
     tracemalloc.start()
@@ -195,8 +197,8 @@ def test_a_file_without_line_ends_is_refused_without_reading_it_whole(tmp_path, 
 
 def test_a_readings_file_over_the_limit_is_refused_naming_size_and_limit(tmp_path, monkeypatch):
     path = readings_file(tmp_path / "r.csv", rows=200)
-    monkeypatch.setattr(measured, "MAX_READINGS_FILE_BYTES", 1000)
-    monkeypatch.setattr(measured, "_scan_records", lambda *a: pytest.fail("scanned"))
+    monkeypatch.setattr(fast_reader, "MAX_READINGS_FILE_BYTES", 1000)
+    monkeypatch.setattr(fast_reader, "_scan_records", lambda *a: pytest.fail("scanned"))
     with pytest.raises(DataFormatError, match=r"r.csv is [\d.]+ MiB: reading it would take about .* at most "
                                               r".*MAX_READINGS_FILE_BYTES"):
         read_readings(path)
@@ -206,14 +208,14 @@ def test_a_large_file_names_the_line_of_a_field_that_is_not_a_number(tmp_path, m
     rows = [f"{t},tag,A,-{50 + t % 40},P{t}\n" for t in range(300)]
     rows[123] = "123,tag,A,True,P123\n"                       # line 125 (header line 1, rows from line 2)
     path = readings_file(tmp_path / "r.csv", body="".join(rows))
-    monkeypatch.setattr(measured, "MAX_EXACT_READ_BYTES", 1024)
-    monkeypatch.setattr(measured, "_LOCATE_CHUNK_ROWS", 50)
+    monkeypatch.setattr(csvfile, "MAX_EXACT_READ_BYTES", 1024)
+    monkeypatch.setattr(fast_reader, "_LOCATE_CHUNK_ROWS", 50)
     with pytest.raises(DataFormatError, match=r"r.csv, line 125, column 'rssi_dbm': 'True' is not a finite number"):
         read_readings(path)
     # a rule broken in a large file: the parsed table's message, the file never read again as text
     rows[123] = "123,tag,A,-500,P123\n"
     path = readings_file(tmp_path / "r.csv", body="".join(rows))
-    monkeypatch.setattr(measured, "_read_text_table", lambda *a, **k: pytest.fail("read as text"))
+    monkeypatch.setattr(fast_reader, "read_text_table", lambda *a, **k: pytest.fail("read as text"))
     with pytest.raises(DataFormatError, match=r"line 125, column 'rssi_dbm': -500 dBm is outside"):
         read_readings(path)
 
@@ -386,7 +388,7 @@ def test_the_text_true_is_never_a_reading(tmp_path, monkeypatch):
     body = "0,tag,A,-50,P0\n1,tag,A,True,P1\n"
     for size in (None, 10):
         if size:
-            monkeypatch.setattr(measured, "MAX_EXACT_READ_BYTES", size)
+            monkeypatch.setattr(csvfile, "MAX_EXACT_READ_BYTES", size)
         with pytest.raises(DataFormatError, match="line 3, column 'rssi_dbm': 'True' is not a finite number"):
             read_readings(readings_file(tmp_path / "t.csv", body=body))
 

@@ -40,6 +40,7 @@ import numpy as np
 import pandas as pd
 
 from ..errors import ParameterError
+from .csvfile import MAX_COORDINATE_M, DataFormatError, shown, shown_names
 
 __all__ = ["FLOOR_COLUMN", "USED_COLUMN", "FLOOR_SELECTOR", "MAX_FLOOR_LABEL_CHARS", "MAX_FLOOR_PLAN_BYTES",
            "PNG_SIGNATURE", "floor_slug", "split_floor_selector", "anchor_columns", "check_readings_floors",
@@ -87,7 +88,6 @@ def anchor_columns(table: pd.DataFrame, lines, source: str):
     """``(floor labels (m,) or None, used (m,) bool)`` of an anchors table (:func:`locbook.data.measured.
     read_anchors`): the ``floor`` column, every row labelled (module docstring), and the ``used`` column (default
     every anchor used). Raises DataFormatError naming the line and column."""
-    from .measured import DataFormatError, _shown
     floors = None
     if FLOOR_COLUMN in table.columns:
         text = _text(table[FLOOR_COLUMN])
@@ -100,7 +100,7 @@ def anchor_columns(table: pd.DataFrame, lines, source: str):
         if bad.any():
             i = int(np.flatnonzero(bad)[0])
             raise DataFormatError(f"{source}, line {lines[i]}, column {USED_COLUMN!r}: "
-                                  f"{_shown(table[USED_COLUMN].iloc[i])} is not true or false (a placeholder anchor "
+                                  f"{shown(table[USED_COLUMN].iloc[i])} is not true or false (a placeholder anchor "
                                   "is 'false'; every row says which)")
         used = text.isin(_TRUE).to_numpy()
         if not used.any():
@@ -110,7 +110,6 @@ def anchor_columns(table: pd.DataFrame, lines, source: str):
 
 
 def _check_labels(labels, lines, source: str, rule: str) -> None:
-    from .measured import DataFormatError, _shown
     empty = labels == ""
     if empty.any():
         i = int(np.flatnonzero(empty)[0])
@@ -119,7 +118,7 @@ def _check_labels(labels, lines, source: str, rule: str) -> None:
     for value in pd.unique(labels):
         if not _LABEL.fullmatch(value) or len(value) > MAX_FLOOR_LABEL_CHARS:
             i = int(np.flatnonzero(labels == value)[0])
-            raise DataFormatError(f"{source}, line {lines[i]}, column {FLOOR_COLUMN!r}: floor {_shown(value)} must be "
+            raise DataFormatError(f"{source}, line {lines[i]}, column {FLOOR_COLUMN!r}: floor {shown(value)} must be "
                                   f"letters, digits, '_' and '-', from a letter or digit, at most "
                                   f"{MAX_FLOOR_LABEL_CHARS} characters (MAX_FLOOR_LABEL_CHARS): it names a reports "
                                   "folder")
@@ -127,7 +126,6 @@ def _check_labels(labels, lines, source: str, rule: str) -> None:
 
 def check_floor_labels(floors, source: str) -> tuple[str, ...]:
     """The floors of the anchors (labels in file order), refusing two labels of one slug (one reports folder)."""
-    from .measured import DataFormatError
     labels = tuple(dict.fromkeys(floors))
     slugs: dict[str, str] = {}
     for label in labels:
@@ -141,12 +139,11 @@ def check_floor_labels(floors, source: str) -> tuple[str, ...]:
 def check_readings_floors(table: pd.DataFrame, lines, path: Path, floors) -> None:
     """The ``floor`` column of a readings table (from :func:`read_readings_table`, lines as in the file): present
     exactly when the anchors have floors (``floors``: their labels, or None), on every row, naming a known floor."""
-    from .measured import DataFormatError, _shown, _shown_names
     source = f"readings file {path}"
     if FLOOR_COLUMN not in table.columns:
         if floors:
             raise DataFormatError(f"{source}: no {FLOOR_COLUMN!r} column, but the anchors have floors "
-                                  f"({_shown_names(floors)}): every readings file names the tag's floor on each row")
+                                  f"({shown_names(floors)}): every readings file names the tag's floor on each row")
         return
     if not floors:
         raise DataFormatError(f"{source}: a {FLOOR_COLUMN!r} column, but the anchors file has none: give each "
@@ -156,8 +153,8 @@ def check_readings_floors(table: pd.DataFrame, lines, path: Path, floors) -> Non
     unknown = ~np.isin(text, np.asarray(floors, dtype=object))
     if unknown.any():
         i = int(np.flatnonzero(unknown)[0])
-        raise DataFormatError(f"{source}, line {lines[i]}, column {FLOOR_COLUMN!r}: floor {_shown(text[i])} has no "
-                              f"anchor (the anchors' floors are {_shown_names(floors)})")
+        raise DataFormatError(f"{source}, line {lines[i]}, column {FLOOR_COLUMN!r}: floor {shown(text[i])} has no "
+                              f"anchor (the anchors' floors are {shown_names(floors)})")
 
 
 def select_rows(readings: pd.DataFrame, anchors: pd.DataFrame, floor: str | None) -> tuple[pd.DataFrame, dict]:
@@ -191,43 +188,43 @@ def per_floor(manifest: Path, section: dict, key: str, floors, floor: str | None
     """The value of ``section[key]`` for ``floor``: the value itself (every floor), or, for a table keyed by floor
     label (``[geometry.outline] F1 = "f1.csv"``), the floor's entry (None where it names none; every key a known
     floor). ``floor`` None (the whole building) returns the table's values as a list. Absent: None."""
-    from .dataset import _fail
-    from .measured import _shown_names
+    from .manifest import fail
     if key not in section:
         return None
     value = section[key]
     if not isinstance(value, dict):
         return value
     if not floors:
-        _fail(manifest, f"{where}{key} is a table keyed by floor, but the anchors have no floor column")
+        fail(manifest, f"{where}{key} is a table keyed by floor, but the anchors have no floor column")
     unknown = [k for k in value if k not in floors]
     if unknown:
-        _fail(manifest, f"{where}{key}: floor(s) {_shown_names(unknown)} have no anchor (the floors are "
-                        f"{_shown_names(floors)})")
+        fail(manifest, f"{where}{key}: floor(s) {shown_names(unknown)} have no anchor (the floors are "
+                       f"{shown_names(floors)})")
     return list(value.values()) if floor is None else value.get(floor)
 
 
 def read_floor_plan(manifest: Path, root: Path, value, where: str) -> Path:
-    """The floor-plan file: a relative path inside the folder (:func:`locbook.data.dataset._file`), a PNG (its
+    """The floor-plan file: a relative path inside the folder (:func:`locbook.data.manifest.manifest_file`), a PNG (its
     signature) of at most :data:`MAX_FLOOR_PLAN_BYTES` that matplotlib reads. Raises DataFormatError in one line."""
-    from .dataset import _fail, _file, _string
-    path = _file(manifest, root, _string(manifest, {"floor_plan": value}, "floor_plan", where), where + "floor_plan: ")
+    from .manifest import fail, manifest_file, manifest_string
+    name = manifest_string(manifest, {"floor_plan": value}, "floor_plan", where)
+    path = manifest_file(manifest, root, name, where + "floor_plan: ")
     size = path.stat().st_size
     if size > MAX_FLOOR_PLAN_BYTES:
-        _fail(manifest, f"{where}floor_plan {path.name}: {size:,} bytes; a floor plan is at most "
-                        f"{MAX_FLOOR_PLAN_BYTES:,} (MAX_FLOOR_PLAN_BYTES)")
+        fail(manifest, f"{where}floor_plan {path.name}: {size:,} bytes; a floor plan is at most "
+                       f"{MAX_FLOOR_PLAN_BYTES:,} (MAX_FLOOR_PLAN_BYTES)")
     with open(path, "rb") as fh:
         head = fh.read(len(PNG_SIGNATURE))
     if head != PNG_SIGNATURE:
-        _fail(manifest, f"{where}floor_plan {path.name} is not a PNG (it does not start with the PNG signature); "
-                        "save the plan as PNG")
+        fail(manifest, f"{where}floor_plan {path.name} is not a PNG (it does not start with the PNG signature); "
+                       "save the plan as PNG")
     try:
         image = plan_image(path)
     except Exception as exc:        # a truncated or corrupt PNG: whatever the decoder raises, one line
-        _fail(manifest, f"{where}floor_plan {path.name}: matplotlib cannot read it ({type(exc).__name__}: "
-                        f"{' '.join(str(exc).split())[:120]})")
+        fail(manifest, f"{where}floor_plan {path.name}: matplotlib cannot read it ({type(exc).__name__}: "
+                       f"{' '.join(str(exc).split())[:120]})")
     if image.ndim not in (2, 3) or min(image.shape[:2]) < 1:
-        _fail(manifest, f"{where}floor_plan {path.name}: not an image (shape {image.shape})")
+        fail(manifest, f"{where}floor_plan {path.name}: not an image (shape {image.shape})")
     return path
 
 
@@ -240,20 +237,19 @@ def plan_image(path) -> np.ndarray:
 def floor_plan_extent(manifest: Path, value, where: str) -> tuple[float, float, float, float]:
     """``floor_plan_extent_m = [x0, x1, y0, y1]``: four finite numbers (metres), ``x0 < x1``, ``y0 < y1``, each less
     than MAX_COORDINATE_M in magnitude."""
-    from .dataset import _fail
-    from .measured import MAX_COORDINATE_M, _shown
+    from .manifest import fail
     ok = (isinstance(value, list) and len(value) == 4
           and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value))
     if not ok:
-        _fail(manifest, f"{where}floor_plan_extent_m must be four finite numbers [x0, x1, y0, y1] (metres), got "
-                        f"{_shown(value)}")
+        fail(manifest, f"{where}floor_plan_extent_m must be four finite numbers [x0, x1, y0, y1] (metres), got "
+                       f"{shown(value)}")
     x0, x1, y0, y1 = (float(v) for v in value)
     if not (x0 < x1 and y0 < y1):
-        _fail(manifest, f"{where}floor_plan_extent_m = {value}: needs x0 < x1 and y0 < y1 (the plan's left, right, "
-                        "bottom and top edges, as matplotlib's imshow extent)")
+        fail(manifest, f"{where}floor_plan_extent_m = {value}: needs x0 < x1 and y0 < y1 (the plan's left, right, "
+                       "bottom and top edges, as matplotlib's imshow extent)")
     if max(abs(v) for v in (x0, x1, y0, y1)) >= MAX_COORDINATE_M:
-        _fail(manifest, f"{where}floor_plan_extent_m = {value}: coordinates are less than {MAX_COORDINATE_M:g} m "
-                        "(MAX_COORDINATE_M)")
+        fail(manifest, f"{where}floor_plan_extent_m = {value}: coordinates are less than {MAX_COORDINATE_M:g} m "
+                       "(MAX_COORDINATE_M)")
     return (x0, x1, y0, y1)
 
 
@@ -271,13 +267,13 @@ def floor_runs(data: str) -> list[str]:
     """The ``--data`` values a data run of ``data`` makes: ``[data]`` for a data set without floors or with a floor
     selected, else one ``DATA@FLOOR`` per floor, in the anchors file's order (each its own reports folder)."""
     import tomllib
-    from .dataset import _resolve
+    from .manifest import resolve_dataset
     from .measured import read_anchors
     base, floor = split_floor_selector(data)
     if floor is not None:
         return [data]
     try:        # only the manifest and the anchors file: each floor's run loads (and checks) its data set
-        root, manifest = _resolve(data)
+        root, manifest = resolve_dataset(data)
         anchors = read_anchors(root / tomllib.loads(manifest.read_text(encoding="utf-8"))["geometry"]["anchors"])
     except Exception:           # a malformed data set: the run's own loading names the problem
         return [data]

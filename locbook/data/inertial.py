@@ -53,7 +53,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ParameterError
-from .measured import DataFormatError, _check_time_unit, _numeric, _read_text_table, _seconds, _shown, shifted_seconds
+from .csvfile import DataFormatError, numeric_column, read_text_table, seconds_text, shown
+from .long_format import check_time_unit, shifted_seconds
 
 __all__ = ["InertialSamples", "InertialGrid", "read_inertial", "align", "INERTIAL_COLUMNS",
            "OPTIONAL_INERTIAL_COLUMNS", "ACCELERATION_UNITS", "ANGULAR_RATE_UNITS", "STANDARD_GRAVITY_M_S2",
@@ -115,7 +116,7 @@ class InertialSamples:
 def _pair(table, names, source, lines, scale: float, limit: float, unit: str):
     """Columns ``names`` as floats times ``scale``, given together (both or neither per row) and within
     ``limit`` in magnitude (SI)."""
-    cols = [_numeric(table, c, source, lines, missing_ok=True) * scale for c in names]
+    cols = [numeric_column(table, c, source, lines, missing_ok=True) * scale for c in names]
     if len(cols) == 2:
         half = np.isnan(cols[0]) != np.isnan(cols[1])
         if half.any():
@@ -128,7 +129,7 @@ def _pair(table, names, source, lines, scale: float, limit: float, unit: str):
             far = np.abs(v) > limit                   # NaN compares False
             if far.any():
                 i = int(np.flatnonzero(far)[0])
-                raise DataFormatError(f"{source}, line {lines[i]}, column {c!r}: {_shown(table[c].iloc[i])} is "
+                raise DataFormatError(f"{source}, line {lines[i]}, column {c!r}: {shown(table[c].iloc[i])} is "
                                       f"{abs(v[i]):.4g} {unit} in magnitude, beyond the {limit:.4g} {unit} a MEMS "
                                       f"sensor measures ({int(far.sum())} such value(s)): a unit error? (declare "
                                       "[units] acceleration / angular_rate)")
@@ -148,7 +149,7 @@ def read_inertial(path, *, time_scale: float = 1.0, time_origin=None, accelerati
     if angular_rate not in ANGULAR_RATE_UNITS:
         raise ParameterError(f"angular_rate unit must be one of {sorted(ANGULAR_RATE_UNITS)}, got {angular_rate!r}")
     path = Path(path)
-    table, lines = _read_text_table(path, INERTIAL_COLUMNS, "inertial")
+    table, lines = read_text_table(path, INERTIAL_COLUMNS, "inertial")
     source = f"inertial file {path}"
     if len(table) < 2:
         raise DataFormatError(f"{source}: {len(table)} sample(s); an inertial stream has at least 2 (its sampling "
@@ -158,8 +159,8 @@ def read_inertial(path, *, time_scale: float = 1.0, time_origin=None, accelerati
         raise DataFormatError(f"{source}: column {have!r} without its pair; the magnetometer is mag_x and mag_y "
                               "together (or neither)")
     if time_scale == 1.0:
-        time_s = _numeric(table, "time_s", source, lines, missing_ok=False)
-        _check_time_unit(time_s, table["time_s"], source, lines)
+        time_s = numeric_column(table, "time_s", source, lines, missing_ok=False)
+        check_time_unit(time_s, table["time_s"], source, lines)
     else:
         if time_origin is None:
             raise ParameterError("time_origin is required for a time unit that is not seconds: the origin of the "
@@ -175,8 +176,8 @@ def read_inertial(path, *, time_scale: float = 1.0, time_origin=None, accelerati
     if bad.size:
         k = int(bad[0])
         how = "repeats" if step[k] == 0 else "goes back from"
-        raise DataFormatError(f"{source}, line {lines[k + 1]}, column 'time_s': the time {_seconds(time_s[k + 1])} "
-                              f"{how} {_seconds(time_s[k])} on line {lines[k]} ({bad.size} such row(s)); inertial "
+        raise DataFormatError(f"{source}, line {lines[k + 1]}, column 'time_s': the time {seconds_text(time_s[k + 1])} "
+                              f"{how} {seconds_text(time_s[k])} on line {lines[k]} ({bad.size} such row(s)); inertial "
                               "times are strictly increasing"
                               + ("" if sort else " (a data set with backward_time = 'sort' sorts them first)"))
     acc = _pair(table, ("acc_x", "acc_y"), source, lines, ACCELERATION_UNITS[acceleration], MAX_ACCELERATION_M_S2,

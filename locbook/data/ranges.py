@@ -40,8 +40,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .measured import (DEVICE_COLUMN, DataFormatError, Epochs, _check_receivers, _id_column, _numeric,
-                       _read_text_table, _seconds, _shown, _shown_names, shifted_seconds)
+from .csvfile import DataFormatError, numeric_column, read_text_table, seconds_text, shown, shown_names
+from .epoching import Epochs
+from .long_format import DEVICE_COLUMN, check_receivers, id_column, shifted_seconds
 
 __all__ = ["RANGE_COLUMNS", "RANGE_STD_COLUMN", "read_ranges", "validate_ranges", "align_ranges", "RangeAlignment"]
 
@@ -60,39 +61,39 @@ def validate_ranges(table: pd.DataFrame, *, source: str, lines=None, anchor_ids,
     lines = np.arange(len(table)) + 2 if lines is None else np.asarray(lines)
     missing = [c for c in RANGE_COLUMNS if c not in table.columns]
     if missing:
-        raise DataFormatError(f"{source}: missing column(s) {missing}; it has {_shown_names(table.columns)} "
+        raise DataFormatError(f"{source}: missing column(s) {missing}; it has {shown_names(table.columns)} "
                               f"(required: {list(RANGE_COLUMNS)})")
     text = table.reset_index(drop=True)
     out = pd.DataFrame(index=text.index)
     out["time_s"] = shifted_seconds(text, source, lines, time_scale, time_origin_raw)
     for col in ("transmitter", "receiver"):
-        out[col] = _id_column(text, col, source, lines).astype(str).to_numpy(object)
-    _check_receivers(out, anchor_ids, source, lines)
+        out[col] = id_column(text, col, source, lines).astype(str).to_numpy(object)
+    check_receivers(out, anchor_ids, source, lines)
     if transmitters is not None:
         senders = {str(t) for t in transmitters}
         other = ~out["transmitter"].isin(senders).to_numpy()
         if other.any():
             i = int(np.flatnonzero(other)[0])
-            raise DataFormatError(f"{source}, line {lines[i]}, column 'transmitter': {_shown(out['transmitter'].iloc[i])}"
+            raise DataFormatError(f"{source}, line {lines[i]}, column 'transmitter': {shown(out['transmitter'].iloc[i])}"
                                   f" has no readings in the recording's readings file (its transmitters: "
-                                  f"{_shown_names(sorted(senders))}); ranges are aligned with a transmitter's RSS "
+                                  f"{shown_names(sorted(senders))}); ranges are aligned with a transmitter's RSS "
                                   "epochs")
-    rng = _numeric(text, "range_m", source, lines, missing_ok=True, coordinate=True) * length_scale
+    rng = numeric_column(text, "range_m", source, lines, missing_ok=True, coordinate=True) * length_scale
     negative = rng < 0                                          # NaN compares False
     if negative.any():
         i = int(np.flatnonzero(negative)[0])
-        raise DataFormatError(f"{source}, line {lines[i]}, column 'range_m': {_shown(str(text['range_m'].iloc[i]).strip())}"
+        raise DataFormatError(f"{source}, line {lines[i]}, column 'range_m': {shown(str(text['range_m'].iloc[i]).strip())}"
                               f" is negative ({int(negative.sum())} such value(s)); a range is a distance (>= 0 m): "
                               "a device that reports negative ranges near an anchor needs them clipped, or left empty "
                               "(not measured)")
     out["range_m"] = rng
     if RANGE_STD_COLUMN in text.columns:
-        std = _numeric(text, RANGE_STD_COLUMN, source, lines, missing_ok=True, coordinate=True) * length_scale
+        std = numeric_column(text, RANGE_STD_COLUMN, source, lines, missing_ok=True, coordinate=True) * length_scale
         bad = np.isfinite(std) & ~(std > 0)
         if bad.any():
             i = int(np.flatnonzero(bad)[0])
             raise DataFormatError(f"{source}, line {lines[i]}, column {RANGE_STD_COLUMN!r}: "
-                                  f"{_shown(str(text[RANGE_STD_COLUMN].iloc[i]).strip())} is not a standard deviation "
+                                  f"{shown(str(text[RANGE_STD_COLUMN].iloc[i]).strip())} is not a standard deviation "
                                   f"(> 0 m; {int(bad.sum())} such value(s))")
         absent = np.isfinite(rng) & np.isnan(std)
         if absent.any():
@@ -108,8 +109,8 @@ def validate_ranges(table: pd.DataFrame, *, source: str, lines=None, anchor_ids,
         i = int(np.flatnonzero(dup)[0])
         first = int(np.flatnonzero((key == key.iloc[i]).all(axis=1).to_numpy())[0])
         raise DataFormatError(f"{source}, line {lines[i]}, columns 'time_s','transmitter','receiver': the range "
-                              f"({_seconds(out['time_s'].iloc[i])}, {_shown(out['transmitter'].iloc[i])}, "
-                              f"{_shown(out['receiver'].iloc[i])}) repeats line {lines[first]}")
+                              f"({seconds_text(out['time_s'].iloc[i])}, {shown(out['transmitter'].iloc[i])}, "
+                              f"{shown(out['receiver'].iloc[i])}) repeats line {lines[first]}")
     for col in [c for c in text.columns if c not in out.columns]:
         out[col] = text[col].astype(object).where(text[col].notna(), "").astype(str).str.strip().to_numpy(object)
     out.attrs["lines"] = lines
@@ -120,7 +121,7 @@ def read_ranges(path, *, anchor_ids, transmitters=None, time_scale: float = 1.0,
                 time_origin_raw=None) -> pd.DataFrame:
     """Read and check a ranges CSV (module docstring; options: :func:`validate_ranges`)."""
     path = Path(path)
-    table, lines = _read_text_table(path, RANGE_COLUMNS, "ranges")
+    table, lines = read_text_table(path, RANGE_COLUMNS, "ranges")
     return validate_ranges(table, source=f"ranges file {path}", lines=lines, anchor_ids=anchor_ids,
                            transmitters=transmitters, time_scale=time_scale, length_scale=length_scale,
                            time_origin_raw=time_origin_raw)
@@ -183,9 +184,9 @@ def align_ranges(ep: Epochs, readings: pd.DataFrame, ranges: pd.DataFrame, *, wi
             i = int(np.flatnonzero(hit)[0])
             lines = ranges.attrs.get("lines", np.arange(len(ranges)) + 2)
             missing = [c for c in splits if c not in use] or list(group_by) or [DEVICE_COLUMN]
-            raise DataFormatError(f"{source}, line {lines[i]}: the range at {_seconds(time_s[i])} of transmitter "
-                                  f"{_shown(tx[i])} falls in a window holding several epochs of it (several points or "
-                                  f"devices); give the ranges file the column(s) {_shown_names(missing)} to say which")
+            raise DataFormatError(f"{source}, line {lines[i]}: the range at {seconds_text(time_s[i])} of transmitter "
+                                  f"{shown(tx[i])} falls in a window holding several epochs of it (several points or "
+                                  f"devices); give the ranges file the column(s) {shown_names(missing)} to say which")
     receivers = ranges["receiver"].map(col).to_numpy(float)
     value = ranges["range_m"].to_numpy(float)
     # a range of an anchor the epochs do not hold (a placeholder, used = false; an anchor left out of a subset) is

@@ -173,11 +173,11 @@ def select(data, *, calibration="", anchors=""):
 def _renote(data) -> None:
     """The notes that depend on the roles or the anchors, recomputed on a selected data set by the loader's own
     rules (in-sample scoring, devices) and a note when nothing is left to score."""
-    from .dataset import _device_notes, _in_sample_note
-    in_sample = _in_sample_note(data.recordings)
+    from .summary import device_notes, in_sample_note
+    in_sample = in_sample_note(data.recordings)
     if in_sample:
         data.notes["in-sample scoring"] = in_sample
     if not any(r.role == "static" or (r.role == "track" and r.has_truth) for r in data.recordings.values()):
         data.notes["scoring"] = ("no static recording and no track with truth is left after the split: nothing is "
                                  "scored (tracks with a reference path are scored by their distance to it)")
-    _device_notes(data)
+    device_notes(data)

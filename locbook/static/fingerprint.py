@@ -28,7 +28,7 @@ import numpy as np
 from .._validate import as_array, check_choice, check_scalar
 from ..models.channel import PathLossModel, pairwise_distance_m, require_path_loss_model, wall_crossings
 from ..models.rss import RssModel
-from .localization import _accepts_old_form, _is_old_form, _rss_model_parts
+from .rss_form import accepts_old_form, is_old_form, rss_model_parts
 
 __all__ = ["KNN_WEIGHTINGS", "KNN_BLOCK_BYTES", "knn_position", "model_fingerprints", "pattern_fingerprints"]
 
@@ -40,10 +40,10 @@ def _model_fingerprints_v1(cells_m, anchors_m, model, walls_m=None, min_distance
 
 
 def _old_fingerprints_call(args, kwargs):
-    """:func:`~locbook.static.localization._accepts_old_form`'s ``old_call`` of :func:`model_fingerprints`: the form
+    """:func:`~locbook.static.rss_form.accepts_old_form`'s ``old_call`` of :func:`model_fingerprints`: the form
     before issue 47 (cells, anchors, a PathLossModel, walls) goes to the same arithmetic, :func:`_fingerprints`,
     directly (its parameters may carry any batch axes ``(..., m)``, more than an RssModel holds)."""
-    if not _is_old_form(args, kwargs, ("cells_m", "anchors_m")):
+    if not is_old_form(args, kwargs, ("cells_m", "anchors_m")):
         if "walls_m" in kwargs:
             raise ValueError("model_fingerprints: walls_m is the model's: pass RssModel(anchors_m, channel, walls_m) "
                              "as model")
@@ -55,7 +55,7 @@ def _old_fingerprints_call(args, kwargs):
                                       given.get("min_distance_m", 0.1)))
 
 
-@_accepts_old_form(_old_fingerprints_call)
+@accepts_old_form(_old_fingerprints_call)
 def model_fingerprints(cells_m, model: RssModel, *, min_distance_m: float = 0.1):
     """Parameter-based map: mean RSSI ``(..., C, m)`` of the RSS model ``model`` (:class:`locbook.RssModel`: its
     anchors ``(m, dim)``, its channel, its walls ``model.walls_m``) at cell centres ``(C, dim)``, Eq. (3.4).
@@ -68,7 +68,7 @@ def model_fingerprints(cells_m, model: RssModel, *, min_distance_m: float = 0.1)
     The form before issue 47, ``model_fingerprints(cells_m, anchors_m, channel, walls_m=None, min_distance_m=0.1)`` (a
     :class:`~locbook.PathLossModel` third), is deprecated: it warns and gives the same map.
     """
-    anchors_m, channel, _ = _rss_model_parts(model, "model_fingerprints", walls=True, per_step=True, heights=False,
+    anchors_m, channel, _ = rss_model_parts(model, "model_fingerprints", walls=True, per_step=True, heights=False,
                                              form="model_fingerprints(cells_m, RssModel(anchors_m, channel, walls_m))")
     return _fingerprints(cells_m, anchors_m, channel, model.walls_m, min_distance_m)
 

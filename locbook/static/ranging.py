@@ -6,7 +6,7 @@
 
 the maximum-likelihood position of the range model :class:`locbook.models.range.RangeModel` (independent Gaussian
 range errors of std ``sigma_j``), by :func:`scipy.optimize.least_squares` (trust-region reflective, analytic Jacobian)
-started from the linearized least-squares fix of the same ranges (:func:`locbook.static.localization.lateration_ls`,
+started from the linearized least-squares fix of the same ranges (:func:`locbook.static.lateration.lateration_ls`,
 the closed form; a problem it cannot solve starts at the centroid of its anchors) and bounded to the outline's
 bounding box. A non-rectangular outline is then honoured by moving a solution that lies outside it to the nearest
 point of its boundary (the nearest floor point: the projection, not the constrained minimiser, which for a convex
@@ -25,7 +25,9 @@ from scipy.optimize import least_squares
 
 from .._validate import as_array, check_scalar
 from ..geometry import inside_outline, nearest_on_outline, outline_box
-from .localization import LocalizationResult, _planar, check_anchor_geometry, lateration_ls
+from .checks import check_anchor_geometry, plan_anchors
+from .lateration import lateration_ls
+from .result import LocalizationResult
 
 __all__ = ["range_nls_position", "RANGE_NLS_TOLERANCE"]
 
@@ -42,13 +44,13 @@ def range_nls_position(range_m, anchors_m, *, outline_m=None, tag_height_m: floa
     anchors have no height and its distances are in the plane). ``range_std_m``: each range's std, broadcasting to
     ``range_m`` (None: equal weights); finite and positive where a range is given. ``outline_m`` ``(V, 2)``: the
     floor (bounds and the nearest-point rule). ``x0`` ``(..., 2)``: the start (default: the linearized LS fix).
-    Returns a :class:`~locbook.static.localization.LocalizationResult` with the cost ``sum_j w_j^2`` at the solution."""
+    Returns a :class:`~locbook.static.result.LocalizationResult` with the cost ``sum_j w_j^2`` at the solution."""
     anchors = as_array("anchors_m", anchors_m, ndim=2)
     if tag_height_m is not None:
         check_scalar("tag_height_m", tag_height_m)
         if anchors.shape[1] != 3:
             raise ValueError(f"anchors_m must be (m, 3) (x, y, height) with tag_height_m, got {anchors.shape}")
-    plan, vertical = _planar(anchors, tag_height_m)
+    plan, vertical = plan_anchors(anchors, tag_height_m)
     check_anchor_geometry(plan)
     m, dim = plan.shape
     ranges = as_array("range_m", range_m, min_ndim=1, nan_ok=True, trailing=(m,))

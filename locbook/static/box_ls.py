@@ -203,7 +203,7 @@ def _box_guided_sets(dim: int) -> np.ndarray:
 def _box_guided_code(p_star, lo, hi) -> np.ndarray:
     """The code (:func:`_box_guided_sets`) of the active set that holds each coordinate of ``p_star (n, dim)``
     outside the box at the bound it crosses: the KKT set of most problems (those whose coordinates do not pull one
-    another across the bounds: 79 % of the 3-D benchmark's problems outside the box)."""
+    another across the bounds: most problems outside the box, docs/speed.md)."""
     code = np.zeros(len(p_star), np.int64)
     for j in range(p_star.shape[1]):
         code = 3 * code + np.where(p_star[:, j] < lo[j], 1, np.where(p_star[:, j] > hi[j], 2, 0))
@@ -281,35 +281,81 @@ def _box_least_feasible(p_star, lo, hi, levels, a_mat, tol):
 def lateration_box_ls(anchors_m, distance_m, lower_m, upper_m, ref_index: int = 0, *,
                       min_anchors: int | None = None, tag_height_m: float | None = None,
                       solver: str = "exact") -> LocalizationResult:
-    """Linearized least squares constrained to the box ``lower_m <= p <= upper_m``:
-    ``min |A p - b|^2`` over the box, with ``A, b`` of :func:`lateration_system` (2-D or 3-D).
+    """Linearized least squares constrained to a box, ``min |A p - b|^2`` over ``lower_m <= p <= upper_m``.
 
-    An optional extension to George and Vadivukkarasi (which does not constrain its estimates: "some of the results go
-    beyond the boundaries"); a fix kept inside the room.
+    ``A, b`` are those of :func:`locbook.static.lateration.lateration_system` (2-D or 3-D): a fix kept inside the
+    room, an optional extension to George and Vadivukkarasi (which does not constrain its estimates: "some of the
+    results go beyond the boundaries"). Where the unconstrained fix is inside the box it is the answer (bit for bit
+    that of :func:`~locbook.static.lateration.lateration_ls`); elsewhere the answer is not that fix clipped into the
+    box, which is wrong in general (correlated coordinates: holding one at its bound moves the best value of
+    another).
 
-    ``solver="exact"`` (default): KKT active-set enumeration, exact (no iterations, no solver tolerance). Each
-    of the ``3^dim`` (9 or 27) ways to hold every coordinate free, at its lower or at its upper bound gives the
-    reduced unconstrained LS in closed form; its reduced matrices depend only on ``A`` and the box, so they are
-    computed once per anchors and box (cached). From 256 problems on, one compiled loop (numba; ``LOCBOOK_NUMBA=0``
-    turns it off) tries the active sets problem by problem, stopping at the first that passes; otherwise numpy
-    evaluates them with matrix products over many problems at once (blocks of about a thousand). Both give the same
-    answers (to 1e-12; tests/test_box_ls_speed.py). The answer is the candidate
-    that is feasible and meets the KKT sign conditions (gradient ``A^T (A p - b)`` >= 0 at a lower bound, <= 0
-    at an upper one, 0 on free coordinates); for this strictly convex QP it is unique (:func:`_box_ls_exact`).
-    Where the unconstrained fix is inside the box it is the answer (bit for bit that of :func:`lateration_ls`);
-    elsewhere the answer is not that fix clipped into the box, which is wrong in general (correlated
-    coordinates: holding one at its bound moves the best value of another).
+    Parameters
+    ----------
+    anchors_m : array_like, shape (m, dim)
+        Anchor positions shared by every problem; ``(m, 3)`` with ``tag_height_m``.
+    distance_m : array_like, shape (..., m)
+        Ranges (m); NaN is an anchor not heard (:mod:`locbook.static.missing`).
+    lower_m, upper_m : float or array_like, shape (dim,)
+        The box's corners (a scalar serves every coordinate); ``lower_m <= upper_m``.
+    ref_index : int, default 0
+        The reference anchor of the linearized system.
+    min_anchors : int, optional
+        Heard anchors a problem needs (default ``dim + 1``).
+    tag_height_m : float, optional
+        The tag's known height: anchors with heights, the box on ``(x, y)`` (:mod:`locbook.static.checks`).
+    solver : {"exact", "cvxpy"}, default "exact"
+        :data:`BOX_LS_SOLVERS`. ``"exact"``: KKT active-set enumeration, exact (no iterations, no solver
+        tolerance). ``"cvxpy"``: the reference, one stacked cvxpy QP (Clarabel, tight tolerances).
 
-    ``solver="cvxpy"``: the reference. All problems are stacked into one cvxpy QP (Clarabel, tight
-    tolerances), built once per (batch size, anchors, box) with the right-hand sides as a Parameter and
-    re-solved by setting its value; if the solve fails, the batch is halved until the failing problems are
-    alone. It agrees with the exact solver to Clarabel's tolerance, which is relative to the stacked objective:
-    about 1e-6 m for a few problems, up to about 1e-3 m for thousands stacked (one problem per solve at tighter
-    tolerances agrees to 1e-7 m; ``tests/test_exact_solvers.py``).
+    Returns
+    -------
+    LocalizationResult
+        ``position_m`` ``(..., dim)`` inside the box; ``cost`` None. A problem the solver fails on (or whose
+        arithmetic does not give a finite fix) gets a NaN position and ``status="solver_failed"``, alone.
 
-    A problem the solver fails on (or whose arithmetic does not give a finite fix) gets a NaN position and
-    ``status="solver_failed"``; the others are kept. NaN distances are anchors not heard;
-    ``tag_height_m``: anchors with heights, the box on ``(x, y)`` (:mod:`locbook.static.checks`).
+    Raises
+    ------
+    DegenerateGeometryError
+        Anchors that are too few, coincident or collinear.
+    ValueError
+        An empty box (``lower_m > upper_m``), a box of the wrong shape, negative or infinite ranges.
+
+    Notes
+    -----
+    ``solver="exact"``: each of the ``3^dim`` (9 or 27) ways to hold every coordinate free, at its lower or at its
+    upper bound gives the reduced unconstrained LS in closed form; its reduced matrices depend only on ``A`` and the
+    box, so they are computed once per anchors and box (cached). From 256 problems on, one compiled loop (numba;
+    ``LOCBOOK_NUMBA=0`` turns it off) tries the active sets problem by problem, stopping at the first that passes;
+    otherwise numpy evaluates them with matrix products over many problems at once (blocks of about a thousand).
+    Both give the same answers (to 1e-12; tests/test_box_ls_speed.py). The answer is the candidate that is feasible
+    and meets the KKT sign conditions (gradient ``A^T (A p - b)`` >= 0 at a lower bound, <= 0 at an upper one, 0 on
+    free coordinates); for this strictly convex QP it is unique (:func:`_box_ls_exact`).
+
+    ``solver="cvxpy"``: all problems are stacked into one QP, built once per (batch size, anchors, box) with the
+    right-hand sides as a Parameter and re-solved by setting its value; if the solve fails, the batch is halved
+    until the failing problems are alone. It agrees with the exact solver to Clarabel's tolerance, which is
+    relative to the stacked objective: about 1e-6 m for a few problems, up to about 1e-3 m for thousands stacked
+    (one problem per solve at tighter tolerances agrees to 1e-7 m; ``tests/test_exact_solvers.py``).
+
+    References
+    ----------
+    George and Vadivukkarasi, Eq. (8): the linearized system; the box and its KKT conditions (Karush-Kuhn-Tucker
+    for a convex QP with bound constraints) are this library's extension.
+
+    Examples
+    --------
+    A tag outside the room: the unconstrained fix leaves the box, the constrained one stays on its wall:
+
+    >>> import numpy as np
+    >>> import locbook as lb
+    >>> anchors = np.array([[0.0, 0.0], [10.0, 0.0], [0.0, 10.0], [10.0, 10.0]])
+    >>> ranges = lb.pairwise_distance_m(np.array([12.0, 4.0]), anchors)
+    >>> print(np.round(lb.lateration_ls(anchors, ranges).position_m, 2))
+    [12.  4.]
+    >>> fix = lb.lateration_box_ls(anchors, ranges, 0.0, 10.0)
+    >>> print(np.round(fix.position_m, 2), fix.status)
+    [10.  5.] ok
     """
     distance_m = given_readings("distance_m", distance_m)
     check_choice("solver", solver, BOX_LS_SOLVERS)

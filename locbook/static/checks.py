@@ -21,46 +21,28 @@ from ..errors import DegenerateGeometryError
 __all__ = ["check_anchor_geometry", "ANCHOR_CONDITION_RTOL", "implausible_powers", "IMPLAUSIBLE_SIGMAS",
            "GOODNESS_OF_FIT_ALPHA"]
 
-#: A received power more than this many shadowing standard deviations above the model's mean at the estimator's
-#: near-field clamp is taken as not a reading of that channel: :func:`rss_ml_position` (clamp
-#: ``max(min_distance_m, model.min_distance_m)``, 1 mm by default) and :func:`grid_ml_position` (clamp
-#: ``max(model.min_distance_m, 1e-6)``) give its problem ``status="implausible_reading"``. The physical assumption:
-#: a reading that implies a tag closer than the clamp (1 mm) to an anchor's antenna is implausible (a unit error, a
-#: sentinel, an overflow), not a tag touching the antenna. It is an assumption, not a certainty: a real reading of a
-#: tag closer than the clamp can be refused (the model's own ``min_distance_m`` being 0): with ``sigma_db = 0`` (the
-#: default) any power above the clamp mean is, e.g. the noise-free reading of a tag 0.5 mm from an anchor. For a tag
-#: at least the clamp away, a reading 10 sigma above the clamp mean has probability below 1e-23.
+#: A heard power more than this many shadowing sigmas above the model's mean at the estimator's near-field clamp
+#: is not a reading of that channel (``status="implausible_reading"``: :func:`implausible_powers`); why 10 and
+#: what it refuses: docs/architecture.md, "Static localization: thresholds".
 IMPLAUSIBLE_SIGMAS = 10.0
 
-#: False-alarm probability of the ML estimators' goodness-of-fit test (the static analogue of the filters' NIS
-#: guard): a converged problem whose minimised cost over the shadowing variance, ``sum_j r_j^2 / sigma^2``, exceeds
-#: ``chi2.ppf(1 - GOODNESS_OF_FIT_ALPHA, m_heard - dim)`` gets ``status="poor_fit"``. Under the model the statistic
-#: is chi-square with ``m_heard - dim`` degrees of freedom (to first order: the residual sum of squares of a linear
-#: Gaussian model fitted by least squares, Cochran's theorem), so a reading set drawn from the model is flagged once
-#: in a billion problems, while readings that no single position explains (four corners of a 10 m square all at
-#: +100 dBm: about 48 sigma per anchor) are flagged at any sigma. Why so small: the flag must say "these readings
-#: are not this channel", not "an unlucky draw"; real mismodelling (walls, a sentinel, a wrong P_0) is many sigma
-#: away.
+#: False-alarm probability of the ML estimators' goodness-of-fit test (``status="poor_fit"``: the minimised cost
+#: over sigma^2 beyond ``chi2.ppf(1 - GOODNESS_OF_FIT_ALPHA, m_heard - dim)``); why so small: docs/architecture.md,
+#: "Static localization: thresholds".
 GOODNESS_OF_FIT_ALPHA = 1e-9
 
 
 #: Anchors whose centred coordinates have a smallest singular value below this fraction of the largest are
-#: treated as collinear (coplanar in 3-D): :func:`check_anchor_geometry`. Why 1e-6: the ratio ``r`` is how far
-#: the layout is from a line, relative to its size, and a fix across that line moves by about ``1/r`` times the
-#: range errors (the linearized system's smallest singular value is ``r`` times its largest); at ``r = 1e-6`` a
-#: millimetre of range error is already a kilometre across the line, so no layout below it can give an answer
-#: worth reporting. It is scale-invariant, lies well above float64 round-off (the squared ranges' rounding alone
-#: moves the fix by about ``eps / r`` of the layout's size, 2e-10 at the bound) and far below every layout the
-#: notebooks and the shipped data use (the least full layout, the 2.1 m x 7.8 m corridor, has 0.27 and 0.23 on a
-#: subset of three; the least of all, a subset of three of the Kolakowski 2021 anchors, 0.022).
+#: collinear (coplanar in 3-D): :func:`check_anchor_geometry`; why 1e-6: docs/architecture.md, "Static
+#: localization: thresholds".
 ANCHOR_CONDITION_RTOL = 1e-6
 
 
 def check_anchor_geometry(anchors_m) -> np.ndarray:
     """Validate anchors ``(m, dim)``: finite, at least ``dim + 1`` anchors, no two at one point (closer than
     1 nm), not on one line (plane), nor nearly so: the smallest singular value of the centred anchor matrix must
-    exceed :data:`ANCHOR_CONDITION_RTOL` (1e-6) times the largest (a scale-invariant conditioning criterion; the
-    constant's comment says why 1e-6).
+    exceed :data:`ANCHOR_CONDITION_RTOL` (1e-6) times the largest (a scale-invariant conditioning criterion;
+    docs/architecture.md says why 1e-6).
 
     Raises :class:`DegenerateGeometryError` naming the problem (``ValueError`` for a wrong shape or a
     non-finite coordinate).

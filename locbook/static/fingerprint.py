@@ -132,21 +132,66 @@ KNN_BLOCK_BYTES = 64 * 2**20
 
 def knn_position(rss_dbm, fingerprints_dbm, cells_m, k: int, weighting: str = "inverse_square", *,
                  min_anchors: int = 3, chunk: int | None = None):
-    """Weighted k-nearest-neighbour position, Eqs. (3.1)-(3.3) of Ozkaya (2011), weights corrected.
+    """Weighted k-nearest-neighbour position in RSSI space, Eqs. (3.1)-(3.3) of Ozkaya (2011), weights corrected.
 
-    ``rss_dbm``: ``(..., m)`` target RSSI vectors; ``fingerprints_dbm``: ``(C, m)`` or ``(..., C, m)``
-    (one map per batch entry); ``cells_m``: ``(C, 2)``. Returns positions ``(..., 2)``.
-    ``k = C`` (all cells) is the weighted centroid used in the thesis's experiments.
+    Each query ``s`` is compared with every cell's fingerprint ``R_j`` by the Euclidean distance in RSSI space,
+    ``E_j = |R_j - s|``; the ``k`` nearest cells are kept and the estimate is their weighted centroid
+    ``x = sum_i w_i x_i`` (module docstring). ``k = C`` (all cells) is the weighted centroid used in the thesis's
+    experiments.
 
-    Missing readings: a NaN in ``rss_dbm`` is a reader not heard; that query is compared with the map over the
-    readers it heard, and with fewer than ``min(min_anchors, m)`` heard its position is NaN (a query that heard
-    every reader is always compared). The map itself must be complete (a cell a reader never heard has no
-    fingerprint to compare: fill it, or drop that reader); a NaN in it is an error naming the cell and reader.
-    The batch axes of ``rss_dbm`` and of a batched map must broadcast against each other.
+    Parameters
+    ----------
+    rss_dbm : array_like, shape (..., m)
+        Target RSSI vectors. A NaN is a reader not heard: that query is compared with the map over the readers it
+        heard, and with fewer than ``min(min_anchors, m)`` heard its position is NaN (a query that heard every
+        reader is always compared).
+    fingerprints_dbm : array_like, shape (C, m) or (..., C, m)
+        The map (one map per batch entry if batched; its batch axes must broadcast against those of ``rss_dbm``).
+        It must be complete: a cell a reader never heard has no fingerprint to compare (fill it, or drop that
+        reader).
+    cells_m : array_like, shape (C, 2)
+        The cells' positions.
+    k : int
+        Neighbours kept, from 1 to ``C``.
+    weighting : {"inverse_square", "literal_ozkaya2011", "uniform"}, default "inverse_square"
+        :data:`KNN_WEIGHTINGS`: ``w_i = (1/E_i^2) / sum_j (1/E_j^2)`` (LANDMARC's normalised form), Eq. (3.3) as
+        printed (not normalised), or equal weights.
+    min_anchors : int, default 3
+        Heard readers a query needs.
+    chunk : int, optional
+        Queries per block (default: as many as fit :data:`KNN_BLOCK_BYTES` of differences, 64 MiB). Each query's
+        arithmetic is the same in any block, so the result does not depend on ``chunk``.
 
-    Memory is bounded whatever the sizes: the queries are compared with the map in blocks of ``chunk`` queries
-    (default: as many as fit :data:`KNN_BLOCK_BYTES` of differences, 64 MiB), each query's arithmetic being the
-    same in any block, so the result does not depend on ``chunk``.
+    Returns
+    -------
+    numpy.ndarray, shape (..., 2)
+        The positions (NaN for a query that heard too few readers).
+
+    Raises
+    ------
+    ValueError
+        A NaN in the map (naming the cell and reader), shapes that do not match or do not broadcast, ``k`` out of
+        range, an unknown ``weighting``.
+
+    References
+    ----------
+    Ozkaya (2011), Eq. (3.1) (the RSSI-space distance), Eqs. (3.2)-(3.3) (the weighted centroid; Eq. (3.3) as
+    printed divides by ``sum_j E_j^2``, kept as ``weighting="literal_ozkaya2011"``).
+
+    Examples
+    --------
+    A query equal to a cell's fingerprint gives that cell:
+
+    >>> import numpy as np
+    >>> import locbook as lb
+    >>> anchors = np.array([[0.0, 0.0], [10.0, 0.0], [0.0, 10.0], [10.0, 10.0]])
+    >>> channel = lb.PathLossModel(-40.0, 2.5)
+    >>> xs = np.arange(0.5, 10.0, 1.0)
+    >>> cells = np.stack(np.meshgrid(xs, xs, indexing="ij"), axis=-1).reshape(-1, 2)
+    >>> fingerprints = channel.mean_rss_dbm(lb.pairwise_distance_m(cells, anchors))
+    >>> query = channel.mean_rss_dbm(lb.pairwise_distance_m(np.array([3.5, 4.5]), anchors))
+    >>> print(np.round(lb.knn_position(query, fingerprints, cells, 1), 2))
+    [3.5 4.5]
     """
     check_choice("weighting", weighting, KNN_WEIGHTINGS)
     fingerprints_dbm = as_array("fingerprints_dbm", fingerprints_dbm, min_ndim=2, nan_ok=True)

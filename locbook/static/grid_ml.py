@@ -45,32 +45,79 @@ def _grid_ml_block(chunk, n_problems: int, n_cells: int) -> int:
 @accepts_old_form(lambda args, kwargs: old_estimator_call(args, kwargs, "grid_ml_position", _grid_ml_position_v1))
 def grid_ml_position(rss_dbm, model: RssModel, cells_m, *,
                      chunk: int | None = None, min_anchors: int | None = None) -> LocalizationResult:
-    """Grid maximum likelihood: the candidate point of ``cells_m`` ``(G, dim)`` with the smallest RSS-domain squared
-    residual of the RSS model ``model`` (:class:`locbook.RssModel`), for every problem; evaluated in chunks to bound
-    memory. ``cost`` is that residual; a grid point on an anchor is taken 1 micrometre from it.
-    A NaN power is an anchor not heard (:mod:`locbook.static.missing`): the residual runs over the heard anchors; with fewer
-    than ``min_anchors`` heard the problem gets a NaN position, NaN cost and ``converged=False``. An implausible
-    power (above the model's mean at its clamp, ``max(channel.min_distance_m, 1e-6)``, by more than
-    :data:`IMPLAUSIBLE_SIGMAS` sigma: a reading implying a tag closer than 1 micrometre to an anchor's antenna)
-    gives NaN and ``status="implausible_reading"``; a cost that overflows (e.g. a reading of -1e300 dBm) NaN
-    position and cost and ``status="solver_failed"``, without a warning, like :func:`rss_ml_position`. A best cost
-    beyond the chi-square bound of :data:`GOODNESS_OF_FIT_ALPHA` (``m_heard - dim`` degrees of freedom, cost over
-    sigma^2; model with ``sigma_db > 0``) gives
-    ``status="poor_fit"``, position and ``converged`` kept; the cost at a grid point includes the grid's
-    discretisation, so a grid far coarser than the shadowing can be flagged too (no grid point fits the readings).
-    ``model.tag_height_m``: anchors ``(m, 3)`` with heights, a plan grid ``(G, 2)`` (:mod:`locbook.static.checks`). What the model
-    may hold and what is refused by name (per-run anchors, per-run or per-step parameters, walls): as
-    :func:`rss_ml_position`.
+    """Grid maximum likelihood: the candidate point with the smallest RSS-domain squared residual, per problem.
 
-    Memory is bounded whatever the sizes: the problems are scored against the grid in blocks of at most ``chunk``
-    problems (default: as many as fit :data:`GRID_ML_BLOCK_BYTES` of costs, 256 MiB; an explicit ``chunk`` is capped
-    there too), each problem's arithmetic being the same in any block, so the result does not depend on ``chunk``. A
-    grid so large that two problems' costs (one, for a single problem) exceed the limit is refused in one line naming
-    ``cells_m``, before anything of its size is allocated.
+    For every problem the point of ``cells_m`` whose mean powers under ``model`` are nearest the readings in the
+    least-squares sense; evaluated in blocks to bound memory. A grid point on an anchor is taken 1 micrometre
+    from it.
 
+    Parameters
+    ----------
+    rss_dbm : array_like, shape (..., m)
+        Received powers (dBm); NaN is an anchor not heard (:mod:`locbook.static.missing`): the residual runs over
+        the heard anchors.
+    model : RssModel
+        The one RSS measurement model; ``model.tag_height_m``: anchors ``(m, 3)`` with heights, a plan grid
+        ``(G, 2)`` (:mod:`locbook.static.checks`). What the model may hold and what is refused by name (per-run
+        anchors, per-run or per-step parameters, walls): as :func:`~locbook.static.rss_ml.rss_ml_position`.
+    cells_m : array_like, shape (G, dim)
+        The candidate points.
+    chunk : int, optional
+        At most this many problems per block (default: as many as fit :data:`GRID_ML_BLOCK_BYTES` of costs, 256
+        MiB; an explicit ``chunk`` is capped there too). Each problem's arithmetic is the same in any block, so the
+        result does not depend on ``chunk``.
+    min_anchors : int, optional
+        Heard anchors a problem needs (default ``dim + 1``); with fewer the problem gets a NaN position, NaN cost
+        and ``converged=False``.
+
+    Returns
+    -------
+    LocalizationResult
+        ``position_m`` ``(..., dim)`` (a point of ``cells_m``), ``cost`` the residual there (dB^2), ``status``. An
+        implausible power (above the model's mean at its clamp, ``max(channel.min_distance_m, 1e-6)``, by more
+        than :data:`~locbook.static.checks.IMPLAUSIBLE_SIGMAS` sigma: a reading implying a tag closer than 1
+        micrometre to an anchor's antenna) gives NaN and ``status="implausible_reading"``; a cost that overflows
+        (e.g. a reading of -1e300 dBm) NaN position and cost and ``status="solver_failed"``, without a warning, like
+        :func:`~locbook.static.rss_ml.rss_ml_position`. A best cost beyond the chi-square bound of
+        :data:`~locbook.static.checks.GOODNESS_OF_FIT_ALPHA` (``m_heard - dim`` degrees of freedom, cost over
+        sigma^2; model with ``sigma_db > 0``) gives ``status="poor_fit"``, position and ``converged`` kept; the
+        cost at a grid point includes the grid's discretisation, so a grid far coarser than the shadowing can be
+        flagged too (no grid point fits the readings).
+
+    Raises
+    ------
+    ValueError
+        A grid so large that two problems' costs (one, for a single problem) exceed :data:`GRID_ML_BLOCK_BYTES`,
+        refused in one line naming ``cells_m`` before anything of its size is allocated; a model the estimator
+        cannot honour (named); shapes that do not match.
+    DegenerateGeometryError
+        Anchors that are too few, coincident or collinear.
+
+    Notes
+    -----
     The form before issue 47, ``grid_ml_position(anchors_m, rss_dbm, channel, grid_m, ..., tag_height_m=...)`` (a
     :class:`~locbook.PathLossModel` third), is deprecated: it warns and builds the :class:`~locbook.RssModel`;
-    ``grid_m=`` is the old spelling of ``cells_m=`` (deprecated too)."""
+    ``grid_m=`` is the old spelling of ``cells_m=`` (deprecated too).
+
+    References
+    ----------
+    Dogan (2015), Eq. (2.4): the maximum-likelihood cost, minimised here over a finite set of points.
+
+    Examples
+    --------
+    Noise-free powers of a tag on a grid point give that point back, at zero cost:
+
+    >>> import numpy as np
+    >>> import locbook as lb
+    >>> anchors = np.array([[0.0, 0.0], [10.0, 0.0], [0.0, 10.0], [10.0, 10.0]])
+    >>> channel = lb.PathLossModel(-40.0, 2.5)
+    >>> xs = np.arange(0.0, 10.01, 0.5)
+    >>> cells = np.stack(np.meshgrid(xs, xs, indexing="ij"), axis=-1).reshape(-1, 2)
+    >>> power = channel.mean_rss_dbm(lb.pairwise_distance_m(np.array([3.0, 4.0]), anchors))
+    >>> fix = lb.grid_ml_position(power, lb.RssModel(anchors, channel), cells)
+    >>> print(np.round(fix.position_m, 2), fix.status, np.round(fix.cost, 6))
+    [3. 4.] ok 0.0
+    """
     anchors_m, channel, tag_height_m = rss_model_parts(model, "grid_ml_position")
     return _grid_ml(anchors_m, rss_dbm, channel, cells_m, chunk=chunk, min_anchors=min_anchors,
                     tag_height_m=tag_height_m)

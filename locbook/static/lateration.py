@@ -177,25 +177,79 @@ def _shared_pair_least_squares(anchors_m, distance_m, pairs: str, variant: str) 
 
 def lateration_ls(anchors_m, distance_m, ref_index: int = 0, *, pairs: str | None = None, variant: str = "corrected",
                   min_anchors: int | None = None, tag_height_m: float | None = None) -> LocalizationResult:
-    """Linearized least squares ``p = (A^T A)^{-1} A^T b`` (Eq. (8), George and Vadivukkarasi) of
-    :func:`lateration_system`, the one entry point for a linearized lateration fix (weights:
-    :func:`lateration_wls`; a box: :func:`lateration_box_ls`; recursively:
-    :func:`locbook.static.least_squares.recursive_least_squares` of the same rows).
+    """Linearized least-squares position from ranges, batched over problems.
 
-    Unconstrained: estimates may leave the room, as the paper observes ("some of the results go
-    beyond the boundaries"). The result depends slightly on ``ref_index`` (anchor 1 in the paper).
-    NaN distances are anchors not heard; ``tag_height_m``: anchors with heights (:mod:`locbook.static.checks`).
-    Shared anchors: ``pinv(A)`` once for the batch. With ``pairs`` (Palvai 2008, Eq. (2.29); anchors may differ per
-    problem, ``(..., N, dim)``): the normal equations per problem, the rows with a missing reading left out
-    (``min_anchors`` and ``tag_height_m`` do not apply). ``variant``: :data:`LATERATION_VARIANTS`.
+    The one entry point for a linearized lateration fix: ``p = (A^T A)^{-1} A^T b`` of :func:`lateration_system`
+    (weights: :func:`lateration_wls`; a box: :func:`locbook.static.box_ls.lateration_box_ls`; recursively:
+    :func:`locbook.static.least_squares.recursive_least_squares` of the same rows). Unconstrained: estimates may
+    leave the room, as the paper observes ("some of the results go beyond the boundaries"). The result depends
+    slightly on ``ref_index`` (anchor 1 in the paper). Shared anchors: ``pinv(A)`` once for the batch.
 
-    Degenerate geometry and missing readings, one convention on both paths: shared anchors ``(m, dim)`` that are
-    too few, coincident or collinear raise :class:`DegenerateGeometryError` (``pairs="consecutive"`` excepted: its
-    rows are judged per problem); a problem whose heard anchors are too few or collinear gets NaN and the status
-    ``too_few_anchors`` or ``degenerate_geometry``, as does every problem of per-problem anchors. A reference that
-    was not heard is replaced by a heard anchor: the first heard for ``ref_index`` and ``pairs="first"``, the last
-    heard for ``pairs="last"``. Remaining difference: per-problem anchors are judged by the rank of ``H^T H``
-    (1e-10), shared ones by :func:`check_anchor_geometry` (1e-6 on the centred anchors).
+    Parameters
+    ----------
+    anchors_m : array_like, shape (m, dim)
+        Anchor positions shared by every problem; ``(m, 3)`` (x, y, height) with ``tag_height_m``. With ``pairs``
+        also per problem, ``(..., N, dim)``.
+    distance_m : array_like, shape (..., m)
+        Ranges (m), non-negative; NaN is an anchor not heard (:mod:`locbook.static.missing`).
+    ref_index : int, default 0
+        The reference anchor whose circle is subtracted from the others (not with ``pairs``).
+    pairs : {None, "consecutive", "first", "last"}, optional
+        Difference the sphere equations in pairs (:data:`LATERATION_PAIRS`; Palvai 2008): the normal equations per
+        problem, the rows with a missing reading left out (``min_anchors`` and ``tag_height_m`` do not apply).
+    variant : {"corrected", "literal_palvai2008"}, default "corrected"
+        :data:`LATERATION_VARIANTS`: the literal variant drops the factor 2 of the rows (twice the coordinates).
+    min_anchors : int, optional
+        Heard anchors a problem needs (default ``dim + 1``, at most ``m``).
+    tag_height_m : float, optional
+        The tag's known height: anchors with heights, plan positions (:mod:`locbook.static.checks`).
+
+    Returns
+    -------
+    LocalizationResult
+        ``position_m`` ``(..., dim)``; ``cost`` None; ``status`` per problem (:class:`LocalizationResult`).
+
+    Raises
+    ------
+    DegenerateGeometryError
+        Shared anchors ``(m, dim)`` that are too few, coincident or collinear (``pairs="consecutive"`` excepted: its
+        rows are judged per problem).
+    ValueError
+        Negative or infinite ranges, shapes that do not match, a ``ref_index`` out of range.
+
+    Notes
+    -----
+    Degenerate geometry and missing readings follow one convention on both paths: a problem whose heard anchors
+    are too few or collinear gets NaN and the status ``too_few_anchors`` or ``degenerate_geometry``, as does every
+    problem of per-problem anchors. A reference that was not heard is replaced by a heard anchor: the first heard
+    for ``ref_index`` and ``pairs="first"``, the last heard for ``pairs="last"``. Remaining difference: per-problem
+    anchors are judged by the rank of ``H^T H`` (1e-10), shared ones by :func:`check_anchor_geometry` (1e-6 on the
+    centred anchors).
+
+    References
+    ----------
+    George and Vadivukkarasi, Eq. (8): ``2 (a_r - a_i)^T p = d_i^2 - d_r^2 - |a_i|^2 + |a_r|^2``, solved by least
+    squares. Palvai (2008), Eqs. (2.27)-(2.29): the differenced pairs and their normal equations.
+
+    Examples
+    --------
+    Noise-free ranges give the true position back:
+
+    >>> import numpy as np
+    >>> import locbook as lb
+    >>> anchors = np.array([[0.0, 0.0], [10.0, 0.0], [0.0, 10.0], [10.0, 10.0]])
+    >>> ranges = lb.pairwise_distance_m(np.array([3.0, 4.0]), anchors)
+    >>> fix = lb.lateration_ls(anchors, ranges)
+    >>> print(np.round(fix.position_m, 2), fix.status)
+    [3. 4.] ok
+
+    Leading axes are problems; a NaN range is an anchor not heard:
+
+    >>> batch = np.array([ranges, ranges])
+    >>> batch[1, 2] = np.nan
+    >>> print(np.round(lb.lateration_ls(anchors, batch).position_m, 2))
+    [[3. 4.]
+     [3. 4.]]
     """
     distance_m = given_readings("distance_m", distance_m)
     if pairs is not None:

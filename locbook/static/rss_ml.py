@@ -116,55 +116,99 @@ def rss_ml_position(rss_dbm, model: RssModel, initial_m=None, *,
                     max_iter: int = 10_000, tol_m: float = 1e-7, min_distance_m: float = 1e-3,
                     raise_on_failure: bool = False, min_anchors: int | None = None,
                     region_m=None) -> LocalizationResult:
-    """Maximum-likelihood position from received powers ``(..., m)`` under Gaussian shadowing, for the RSS model
-    ``model`` (:class:`locbook.RssModel`: its anchors ``(m, dim)``, its channel, its tag height).
+    """Maximum-likelihood position from received powers under Gaussian shadowing, batched over problems.
 
-    Minimises ``sum_j (P_j - P_0 + 10 n log10 |p - a_j|)^2``, which equals Dogan's MLE cost (2.4)
-    up to the factor ``(10 n)^{-2}`` (by Eq. (2.3), ``log10 d_hat_j - log10 d_j = -(P_j - P(d_j)) / (10 n)``).
-    The problem is non-convex; every problem
-    starts from ``initial_m`` or, by default, the linearized LS fix on the model's ranges (the convex
-    initialiser), and is refined by damped Newton steps (Levenberg-Marquardt with the exact Hessian where it is
+    Minimises ``sum_j (P_j - P_0 + 10 n log10 |p - a_j|)^2`` for the RSS model ``model``: a non-convex problem,
+    every problem started from ``initial_m`` or, by default, the linearized LS fix on the model's ranges (the convex
+    initialiser), and refined by damped Newton steps (Levenberg-Marquardt with the exact Hessian where it is
     positive definite), vectorized over the batch; each iteration works only on the problems that have not
-    converged yet. Problems that do not converge in ``max_iter`` steps are flagged in ``converged``
-    (or raise if asked). The default cap is high on purpose: far from the anchors the cost is flat and a problem
-    can need a thousand steps or more (George's corridor at 6 dB: up to about 1,500), and a walk stopped midway
-    ends wherever its last step left it, which depends on the last bits of every step (numpy's vector ``log10``
-    differs between AVX-512 and AVX2): with a cap of 100, such problems moved an RMSE by per cent across machines.
-    Only the problems still iterating are computed, so the converged ones cost nothing more. ``converged`` (status ``"ok"``) means a local minimum of the cost was reached, not
-    necessarily the global one: from the default convex start a problem can stop in another basin (Dogan's
-    initialiser study, ``dogan2015-models``: about 3 % of draws). For the global minimum start from a grid
-    (``initial_m=grid_ml_position(rss_dbm, model, cells_m).position_m``), as the Dogan scenarios do.
-    The channel's parameters must be scalars or per-anchor ``(m,)`` arrays and the anchors one layout ``(m, dim)``
-    shared by every problem; the estimator does not model walls: a model with per-run anchors, per-run or per-step
-    parameters, or walls that attenuate (``walls_m`` with a non-zero ``wall_attenuation_db``) is refused by name.
-    A NaN power is an anchor not heard (:mod:`locbook.static.missing`): the problem is solved on the anchors it heard.
+    converged yet, so the converged ones cost nothing more.
 
-    ``initial_m`` has shape ``(dim,)`` or ``(..., dim)`` broadcasting to the batch; a row that is all NaN
-    means "no start given" and gets the default start (so a grid fix that was NaN for too few heard anchors can
-    be passed on as it is). A problem without a finite start (its ranges overflow, e.g. for a tiny exponent)
-    gets NaN and ``status="solver_failed"`` alone; ``raise_on_failure`` raises :class:`ConvergenceError` if any
-    problem of the batch did not converge, whatever the reason.
-    ``model.tag_height_m``: anchors ``(m, 3)`` with heights and plan positions (:mod:`locbook.static.checks`).
+    Parameters
+    ----------
+    rss_dbm : array_like, shape (..., m)
+        Received powers (dBm); NaN is an anchor not heard (:mod:`locbook.static.missing`): the problem is solved on
+        the anchors it heard.
+    model : RssModel
+        The one RSS measurement model: anchors ``(m, dim)`` shared by every problem, the channel (scalars or
+        per-anchor ``(m,)`` parameters) and ``model.tag_height_m`` (anchors ``(m, 3)`` with heights and plan
+        positions, :mod:`locbook.static.checks`). A model with per-run anchors, per-run or per-step parameters, or
+        walls that attenuate (``walls_m`` with a non-zero ``wall_attenuation_db``) is refused by name.
+    initial_m : array_like, shape (dim,) or (..., dim), optional
+        The start, broadcasting to the batch; a row that is all NaN means "no start given" and gets the default
+        start (so a grid fix that was NaN for too few heard anchors can be passed on as it is).
+    max_iter : int, default 10000
+        Iteration cap. High on purpose: far from the anchors the cost is flat and a problem can need a thousand
+        steps or more (George's corridor at 6 dB: up to about 1,500), and a walk stopped midway ends wherever its
+        last step left it, which depends on the last bits of every step (numpy's vector ``log10`` differs between
+        AVX-512 and AVX2): with a cap of 100, such problems moved an RMSE by per cent across machines.
+    tol_m : float, default 1e-7
+        Relative step size (m) below which an accepted step ends the iterations.
+    min_distance_m : float, default 1e-3
+        The estimator's near-field clamp (m), at least the channel's ``min_distance_m``.
+    raise_on_failure : bool, default False
+        Raise :class:`ConvergenceError` if any problem of the batch did not converge, whatever the reason.
+    min_anchors : int, optional
+        Heard anchors a problem needs (default ``dim + 1``).
+    region_m : (lower, upper), optional
+        The maximum likelihood over that box (a room's bounding box, e.g. :func:`locbook.geometry.outline_box`)
+        instead of the whole plane: the start is clipped into it and every step is projected onto it (projected
+        Levenberg-Marquardt), so no fix leaves the box; a fix on its boundary is the constrained optimum, where the
+        unconstrained one lies outside. Without it a fix can land far outside the room when the readings point
+        there (deep fades, a biased channel). The boxed cost is not convex either.
 
+    Returns
+    -------
+    LocalizationResult
+        ``position_m`` ``(..., dim)``, ``cost`` (the minimised sum of squares, dB^2), ``n_iter``, ``status``.
+        ``converged`` (status ``"ok"``) means a local minimum of the cost was reached, not necessarily the global
+        one: from the default convex start a problem can stop in another basin (Dogan's initialiser study,
+        ``dogan2015-models``: about 3 % of draws). For the global minimum start from a grid
+        (``initial_m=grid_ml_position(rss_dbm, model, cells_m).position_m``), as the Dogan scenarios do. A
+        problem without a finite start (its ranges overflow, e.g. for a tiny exponent) gets NaN and
+        ``status="solver_failed"`` alone; one that does not converge in ``max_iter`` steps ``"not_converged"``.
+
+    Raises
+    ------
+    ConvergenceError
+        With ``raise_on_failure=True``, if a problem did not converge.
+    DegenerateGeometryError
+        Anchors that are too few, coincident or collinear.
+    ValueError
+        A model the estimator cannot honour (named), infinite readings, shapes that do not match.
+
+    Notes
+    -----
     Garbage never gives a confident answer: a problem with an implausible power (more than
-    :data:`IMPLAUSIBLE_SIGMAS` sigma above the model's mean at ``max(min_distance_m, channel.min_distance_m)``, e.g.
-    +500 dBm; the assumption: a reading implying a tag closer than 1 mm, the default clamp, to an anchor's antenna
-    is not a reading of this channel) gets NaN and ``status="implausible_reading"`` before any iteration, and a
-    problem whose cost is infinite or NaN (at the start or at the end) gets NaN and ``status="solver_failed"``, never
-    ``converged``.
-    Readings that are each possible but impossible together get ``status="poor_fit"`` (position and ``converged``
-    kept): a converged problem whose cost over ``sigma^2`` exceeds ``chi2.ppf(1 - alpha, m_heard - dim)``,
-    :data:`GOODNESS_OF_FIT_ALPHA` (model with ``sigma_db > 0`` only).
-
-    ``region_m=(lower, upper)``: the maximum likelihood over that box (a room's bounding box, e.g.
-    :func:`locbook.geometry.outline_box`) instead of the whole plane: the start is clipped into it and every step
-    is projected onto it (projected Levenberg-Marquardt), so no fix leaves the box; a fix on its boundary is the
-    constrained optimum, where the unconstrained one lies outside. Without it a fix can land far outside the room
-    when the readings point there (deep fades, a biased channel). The cost is not convex: like the free problem,
-    the boxed one can stop in another local minimum than a different solver started at the same point.
+    :data:`~locbook.static.checks.IMPLAUSIBLE_SIGMAS` sigma above the model's mean at
+    ``max(min_distance_m, channel.min_distance_m)``, e.g. +500 dBm; the assumption: a reading implying a tag
+    closer than 1 mm, the default clamp, to an anchor's antenna is not a reading of this channel) gets NaN and
+    ``status="implausible_reading"`` before any iteration, and a problem whose cost is infinite or NaN (at the
+    start or at the end) gets NaN and ``status="solver_failed"``, never ``converged``. Readings that are each
+    possible but impossible together get ``status="poor_fit"`` (position and ``converged`` kept): a converged
+    problem whose cost over ``sigma^2`` exceeds ``chi2.ppf(1 - alpha, m_heard - dim)``,
+    :data:`~locbook.static.checks.GOODNESS_OF_FIT_ALPHA` (model with ``sigma_db > 0`` only).
 
     The form before issue 47, ``rss_ml_position(anchors_m, rss_dbm, channel, initial_m, ..., tag_height_m=...)`` (a
     :class:`~locbook.PathLossModel` third), is deprecated: it warns and builds the :class:`~locbook.RssModel`.
+
+    References
+    ----------
+    Dogan (2015), Eq. (2.4): the MLE cost, which the cost above equals up to the factor ``(10 n)^{-2}`` (by
+    Eq. (2.3), ``log10 d_hat_j - log10 d_j = -(P_j - P(d_j)) / (10 n)``).
+
+    Examples
+    --------
+    Noise-free powers give the true position back:
+
+    >>> import numpy as np
+    >>> import locbook as lb
+    >>> anchors = np.array([[0.0, 0.0], [10.0, 0.0], [0.0, 10.0], [10.0, 10.0]])
+    >>> channel = lb.PathLossModel(-40.0, 2.5)
+    >>> power = channel.mean_rss_dbm(lb.pairwise_distance_m(np.array([3.0, 4.0]), anchors))
+    >>> fix = lb.rss_ml_position(power, lb.RssModel(anchors, channel))
+    >>> print(np.round(fix.position_m, 2), fix.status)
+    [3. 4.] ok
     """
     anchors_m, channel, tag_height_m = rss_model_parts(model, "rss_ml_position")
     return _rss_ml(anchors_m, rss_dbm, channel, initial_m, max_iter=max_iter, tol_m=tol_m,

@@ -103,24 +103,25 @@ def _box_active_sets(a_key, lower, upper):
 def _box_ls_exact(a_mat, b, lower, upper):
     """Box-constrained LS of every row of ``b`` ``(k, rows)``, exactly, by KKT active-set enumeration.
 
-    The unconstrained minimiser ``p* = pinv(A) b`` (that of :func:`lateration_ls`) is the answer where it lies
-    in the box. For the other problems the set that holds each coordinate outside the box at the bound it crosses
-    is tried first (:func:`_box_guided_code`: the answer of most problems); the problems it does not settle visit
-    the active sets (:func:`_box_active_sets`) by the number of
-    coordinates held at a bound, 1 to ``dim``, every set of a level tested for the problems still open with one
-    matrix product per block of problems (blocks keep the temporaries small: on some machines fresh large
-    arrays cost more in page faults than the arithmetic). A candidate is a KKT point if it is primal feasible (its free coordinates within the
-    box) and the gradient ``g = A^T (A p - b)`` has the sign of its bounds (``g_i >= 0`` at a lower bound,
-    ``g_i <= 0`` at an upper one; zero on the free coordinates by construction). A KKT point of a convex QP is
-    a global minimiser, so a problem is settled by the first KKT candidate found (any other has the same
-    objective, e.g. when ``A`` is rank-deficient); for a strictly convex QP (``A`` of full column rank) it is
-    the unique minimiser, exact up to rounding. The tests allow 1e-9 relative rounding; should rounding leave a
-    problem with no KKT candidate, the primal-feasible candidate of least objective is taken (a corner always
-    is feasible). Returns positions ``(k, dim)`` (clipped into the box) and success flags (finite).
+    The unconstrained minimiser ``p* = pinv(A) b`` (that of :func:`~locbook.static.lateration.lateration_ls`) is the
+    answer where it lies in
+    the box. For the other problems the set that holds each coordinate outside the box at the bound it crosses is
+    tried first (:func:`_box_guided_code`: the answer of most problems); the problems it does not settle visit the
+    active sets (:func:`_box_active_sets`) by the number of coordinates held at a bound, 1 to ``dim``, every set of
+    a level tested for the problems still open with one matrix product per block of problems (blocks keep the
+    temporaries small: on some machines fresh large arrays cost more in page faults than the arithmetic). A
+    candidate is a KKT point if it is primal feasible (its free coordinates within the box) and the gradient ``g =
+    A^T (A p - b)`` has the sign of its bounds (``g_i >= 0`` at a lower bound, ``g_i <= 0`` at an upper one; zero on
+    the free coordinates by construction). A KKT point of a convex QP is a global minimiser, so a problem is settled
+    by the first KKT candidate found (any other has the same objective, e.g. when ``A`` is rank-deficient); for a
+    strictly convex QP (``A`` of full column rank) it is the unique minimiser, exact up to rounding. The tests allow
+    1e-9 relative rounding; should rounding leave a problem with no KKT candidate, the primal-feasible candidate of
+    least objective is taken (a corner always is feasible). Returns positions ``(k, dim)`` (clipped into the box)
+    and success flags (finite).
 
-    With numba (:func:`_box_kernel_module`: enabled, at least ``_BOX_NUMBA_MIN_PROBLEMS`` problems) the same search runs
-    problem by problem in one compiled loop (:func:`locbook.static._box_kernels._nb_box_ls`): the same sets in the
-    same order, acceptance rule, tolerance and fallback, so the same answers up to the rounding of the products
+    With numba (:func:`_box_kernel_module`: enabled, at least ``_BOX_NUMBA_MIN_PROBLEMS`` problems) the same search
+    runs problem by problem in one compiled loop (:func:`locbook.static._box_kernels._nb_box_ls`): the same sets in
+    the same order, acceptance rule, tolerance and fallback, so the same answers up to the rounding of the products
     (1e-12, ``tests/test_box_ls_speed.py``); a problem inside the box keeps ``p*`` bit for bit either way.
     """
     key = tuple(map(tuple, a_mat.tolist()))

@@ -21,13 +21,10 @@ distinct distances among its heard samples) or whose arithmetic overflows (power
 parameters and its own ``PathLossFit.problem_status``, and every other problem of the batch is what fitting it
 alone gives.
 
-Solvers: the unconstrained least-squares fit is the closed form (normal equations from running sums: time and
-memory linear in the samples, any size). The bounded least-squares fit is exact too: the two-parameter box QP
-solved by KKT enumeration over the running sums (the unconstrained fit if it is inside the bounds, else the
-best of the four edges, each a one-parameter closed form clipped to its bounds), see :func:`fit_path_loss`.
-cvxpy solves the robust (Huber) variant, which needs an iterative solver, and is the oracle for the closed
-forms (``solver="cvxpy"``: all problems stacked into one convex problem). A cvxpy fit that does not reach an
-optimum returns NaN parameters with the solver's status in ``PathLossFit.status``; it never raises.
+Solvers (:func:`fit_path_loss`, ``solver``): the closed form (normal equations from running sums: time and memory
+linear in the samples), the exact bounded fit (KKT enumeration over the running sums) and cvxpy (the robust Huber
+variant, and the oracle). A cvxpy fit that does not reach an optimum returns NaN parameters with the solver's
+status in ``PathLossFit.status``; it never raises.
 """
 from __future__ import annotations
 
@@ -38,7 +35,7 @@ import scipy.sparse as sp
 
 from .._cvx import cp, solve
 from .._validate import as_array, check_choice, check_scalar
-from ..errors import ConvergenceError, DegenerateGeometryError
+from ..errors import ConvergenceError, DegenerateGeometryError, ParameterError
 from ..models.channel import PathLossModel, log_distance_regressor_db
 
 __all__ = [
@@ -340,14 +337,12 @@ def fit_path_loss(distance_m, rss_dbm, *, ref_distance_m: float = 1.0,
         Bounds on ``P_0`` and ``n`` for every problem (Ozkaya 2011, Sec. 6.2: alpha in [-55, -40] dBm, n in
         [1.5, 3]).
     solver : {"auto", "closed_form", "exact", "cvxpy"}, default "auto"
-        :data:`CALIBRATION_SOLVERS`. ``"auto"`` uses the closed form for the unconstrained least-squares fit, the
-        exact bounded fit when bounds are given, and cvxpy for ``loss="huber"``. ``"closed_form"`` insists on the
-        normal equations (unconstrained squared loss only). ``"exact"``: the bounded least-squares fit in closed
-        form with the box handled exactly (KKT enumeration: the unconstrained fit if it is inside the bounds, else
-        the best edge, one parameter at a bound and the other in closed form, clipped; no iterations, no
-        tolerance; without bounds it is the closed form), status ``"optimal"``; squared loss only (the Huber fit
-        has no closed form and genuinely needs an iterative solver, so it stays on cvxpy). ``"cvxpy"`` solves all
-        problems as one stacked convex problem (the oracle, Clarabel at tight tolerances).
+        :data:`CALIBRATION_SOLVERS`. ``"auto"``: the closed form unbounded, ``"exact"`` bounded, cvxpy for
+        ``loss="huber"``. ``"closed_form"``: the normal equations (unconstrained squared loss only). ``"exact"``:
+        the bounded fit with the box handled exactly (KKT enumeration: the unconstrained fit if inside the bounds,
+        else the best edge, one parameter at a bound and the other in closed form, clipped; no iterations), status
+        ``"optimal"``; squared loss only (the Huber fit has no closed form). ``"cvxpy"``: all problems as one
+        stacked convex problem (the oracle, Clarabel at tight tolerances).
     loss : {"squared", "huber"}, default "squared"
         ``"huber"`` is the robust variant: residuals beyond ``huber_delta_db`` count linearly (cvxpy's
         ``huber``), so a few gross outliers (a blocked link) do not drag the fit.
@@ -567,7 +562,6 @@ def calibrate_path_loss_devices(distance_m, rss_dbm, device, *, reference=None,
     span fewer than two distinct distances, or offsets the readings cannot separate from the anchors' ``P0``
     (devices that share no anchor, through other devices, with the reference).
     """
-    from ..errors import ParameterError
     distance_m = as_array("distance_m", distance_m, ndim=2)
     rss_dbm = as_array("rss_dbm", rss_dbm, ndim=2, nan_ok=True)
     check_scalar("ref_distance_m", ref_distance_m, gt=0)

@@ -87,8 +87,8 @@ def implausible_powers(rss_dbm, model: PathLossModel, clamp_m: float) -> np.ndar
     the clamp mean); for a tag at least ``clamp_m`` away the model gives such a reading probability below 1e-23.
     NaN (not heard) is never implausible."""
     check_scalar("clamp_m", clamp_m, gt=0)     # 0 would give an infinite bound (nothing refused), NaN no bound
-    top = (log_distance_mean_dbm(clamp_m, np.asarray(model.ref_power_dbm, float), np.asarray(model.path_loss_exp, float),
-                                 ref_distance_m=model.ref_distance_m)
+    top = (log_distance_mean_dbm(clamp_m, np.asarray(model.ref_power_dbm, float),
+                                 np.asarray(model.path_loss_exp, float), ref_distance_m=model.ref_distance_m)
            + IMPLAUSIBLE_SIGMAS * np.asarray(model.sigma_db, float))
     return np.any(rss_dbm > top, axis=-1)
 

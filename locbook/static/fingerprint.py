@@ -222,7 +222,8 @@ def knn_position(rss_dbm, fingerprints_dbm, cells_m, k: int, weighting: str = "i
     block = int(chunk) if chunk is not None else max(1, KNN_BLOCK_BYTES // (8 * n_cells * max(m, 1)))
     queries = np.broadcast_to(rss_dbm, batch + (m,)).reshape(-1, m)
     maps = (fingerprints_dbm if fingerprints_dbm.ndim == 2 else
-            np.broadcast_to(fingerprints_dbm, batch + fingerprints_dbm.shape[-2:]).reshape((-1,) + fingerprints_dbm.shape[-2:]))
+            np.broadcast_to(fingerprints_dbm, batch + fingerprints_dbm.shape[-2:])
+            .reshape((-1,) + fingerprints_dbm.shape[-2:]))
     out = np.empty((n_queries, cells_m.shape[1]))
     for start in range(0, n_queries, block):
         stop = min(start + block, n_queries)
@@ -286,7 +287,8 @@ def _knn_by_heard_readers(rss_dbm, fingerprints_dbm, cells_m, k, weighting, min_
     batch = np.broadcast_shapes(rss_dbm.shape[:-1], fingerprints_dbm.shape[:-2])
     flat = np.broadcast_to(rss_dbm, batch + (m,)).reshape(-1, m)
     maps = (None if fingerprints_dbm.ndim == 2 else
-            np.broadcast_to(fingerprints_dbm, batch + fingerprints_dbm.shape[-2:]).reshape((-1,) + fingerprints_dbm.shape[-2:]))
+            np.broadcast_to(fingerprints_dbm, batch + fingerprints_dbm.shape[-2:])
+            .reshape((-1,) + fingerprints_dbm.shape[-2:]))
     out = np.full((flat.shape[0], cells_m.shape[1]), np.nan)
     patterns, inverse = np.unique(~np.isnan(flat), axis=0, return_inverse=True)
     inverse = inverse.reshape(-1)

@@ -41,7 +41,8 @@ LATERATION_VARIANTS = ("corrected", "literal_palvai2008")
 
 def lateration_by_heard(anchors_m, distance_m, ref_index: int, min_anchors: int, solve, method: str,
                          tag_height_m=None):
-    """:func:`by_heard_anchors` for the linearized systems: ``solve(anchors, distances, ref_index)`` on each
+    """:func:`~locbook.static.missing.by_heard_anchors` for the linearized systems: ``solve(anchors, distances,
+    ref_index)`` on each
     group's heard anchors, the reference kept if heard (geometry judged on the plan positions with a known
     tag height)."""
     anchors_m, distance_m = np.asarray(anchors_m, float), np.asarray(distance_m, float)
@@ -73,16 +74,18 @@ def lateration_system(anchors_m, distance_m, ref_index: int = 0, *, pairs: str |
     factor = 2.0 if variant == "corrected" else 1.0
     if pairs is not None:
         if tag_height_m is not None or ref_index != 0:
-            raise ParameterError("pairs: differenced pairs take neither ref_index nor tag_height_m (the pairs name every "
-                             "reference; anchor heights are not supported there)")
+            raise ParameterError("pairs: differenced pairs take neither ref_index nor tag_height_m (the pairs name "
+                                 "every reference; anchor heights are not supported there)")
         return _pair_rows(anchors_m, distance_m, pairs, factor)
     plan, vertical = plan_anchors(anchors_m, tag_height_m)
     anchors_m = check_anchor_geometry(plan)
     m = anchors_m.shape[0]
     distance_m = checked_readings("distance_m", distance_m, m)
     if np.any(distance_m < 0):
-        raise ValueError(f"distance_m must be non-negative (NaN = not heard), got {float(distance_m[distance_m < 0][0])!r}")
-    if isinstance(ref_index, (bool, np.bool_)) or not isinstance(ref_index, (int, np.integer)) or not -m <= ref_index < m:
+        raise ValueError(f"distance_m must be non-negative (NaN = not heard), got "
+                         f"{float(distance_m[distance_m < 0][0])!r}")
+    if (isinstance(ref_index, (bool, np.bool_)) or not isinstance(ref_index, (int, np.integer))
+            or not -m <= ref_index < m):
         raise ValueError(f"ref_index must be an anchor index in [-{m}, {m - 1}], got {ref_index!r}")
     ref_index %= m
     others = np.array([i for i in range(m) if i != ref_index])
@@ -150,9 +153,11 @@ def _pair_least_squares(anchors_m, distance_m, pairs: str, variant: str) -> Loca
 def _shared_pair_least_squares(anchors_m, distance_m, pairs: str, variant: str) -> LocalizationResult:
     """:func:`_pair_least_squares` for anchors ``(n, dim)`` shared by every problem and ``pairs`` "first" or "last",
     the conventions of the reference-anchor path: the shared layout is judged once
-    (:func:`check_anchor_geometry` raises :class:`DegenerateGeometryError`), and a problem that did not hear the
+    (:func:`~locbook.static.checks.check_anchor_geometry` raises :class:`DegenerateGeometryError`), and a problem that
+    did not hear the
     pair reference (anchor 0, or n - 1) takes the first (last) anchor it heard instead, as
-    :func:`ref_in_subset` does, rather than losing every row. Problems that heard the reference are solved exactly
+    :func:`~locbook.static.missing.ref_in_subset` does, rather than losing every row. Problems that heard the reference
+    are solved exactly
     as before; the others are solved on their anchors with the new reference swapped into the reference's place
     (a per-problem layout; a heard subset too small or collinear gets its status)."""
     check_anchor_geometry(anchors_m)
@@ -207,7 +212,8 @@ def lateration_ls(anchors_m, distance_m, ref_index: int = 0, *, pairs: str | Non
     Returns
     -------
     LocalizationResult
-        ``position_m`` ``(..., dim)``; ``cost`` None; ``status`` per problem (:class:`LocalizationResult`).
+        ``position_m`` ``(..., dim)``; ``cost`` None; ``status`` per problem
+        (:class:`~locbook.static.result.LocalizationResult`).
 
     Raises
     ------
@@ -223,7 +229,8 @@ def lateration_ls(anchors_m, distance_m, ref_index: int = 0, *, pairs: str | Non
     are too few or collinear gets NaN and the status ``too_few_anchors`` or ``degenerate_geometry``, as does every
     problem of per-problem anchors. A reference that was not heard is replaced by a heard anchor: the first heard
     for ``ref_index`` and ``pairs="first"``, the last heard for ``pairs="last"``. Remaining difference: per-problem
-    anchors are judged by the rank of ``H^T H`` (1e-10), shared ones by :func:`check_anchor_geometry` (1e-6 on the
+    anchors are judged by the rank of ``H^T H`` (1e-10), shared ones by
+    :func:`~locbook.static.checks.check_anchor_geometry` (1e-6 on the
     centred anchors).
 
     References
@@ -338,7 +345,7 @@ def lateration_wls(anchors_m, distance_m, weights, ref_index: int = 0, *,
 
 def _zero_weights_degenerate(anchors_m, ref_index: int, w) -> np.ndarray:
     """Per problem (flattened): whether the reference and the anchors with a positive weight fail
-    :func:`check_anchor_geometry` (too few, coincident or collinear)."""
+    :func:`~locbook.static.checks.check_anchor_geometry` (too few, coincident or collinear)."""
     m = anchors_m.shape[0]
     ref = ref_index % m
     others = np.array([i for i in range(m) if i != ref])

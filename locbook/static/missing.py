@@ -105,7 +105,8 @@ def solve_where(usable, batch, dim: int, solve, method: str, failure: str) -> Lo
     if usable.any():
         sel = np.flatnonzero(usable)
         res = solve(sel)
-        pos[sel], converged[sel], status[sel] = res.position_m.reshape(-1, dim), res.converged.ravel(), res.status.ravel()
+        pos[sel], converged[sel] = res.position_m.reshape(-1, dim), res.converged.ravel()
+        status[sel] = res.status.ravel()
         if res.cost is not None:
             cost[sel] = res.cost.ravel()
         n_iter = res.n_iter

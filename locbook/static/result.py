@@ -37,17 +37,20 @@ class LocalizationResult:
     - ``"ok"``: converged;
     - ``"too_few_anchors"``: fewer than ``min_anchors`` anchors heard (:mod:`locbook.static.missing`);
     - ``"degenerate_geometry"``: the anchors the problem uses are collinear or coincide (for
-      :func:`lateration_wls` also: the anchors with a positive weight);
+      :func:`~locbook.static.lateration.lateration_wls` also: the anchors with a positive weight);
     - ``"solver_failed"``: the solver did not reach an optimum, or the arithmetic did not give a finite
       estimate (e.g. ranges so large that their squares overflow, or no finite start for the iterations);
     - ``"not_converged"``: the iteration limit was reached (the last iterate is returned);
-    - ``"implausible_reading"`` (RSS estimators): a heard power more than :data:`IMPLAUSIBLE_SIGMAS` shadowing
+    - ``"implausible_reading"`` (RSS estimators): a heard power more than
+      :data:`~locbook.static.checks.IMPLAUSIBLE_SIGMAS` shadowing
       standard deviations above the model's mean at the estimator's near-field clamp, e.g. +500 dBm or 1e300 dBm
-      (:func:`implausible_powers`): a reading implying a tag closer than 1 mm (the RSS ML's default clamp) to an
+      (:func:`~locbook.static.checks.implausible_powers`): a reading implying a tag closer than 1 mm (the RSS ML's
+      default clamp) to an
       anchor's antenna is taken as implausible;
     - ``"poor_fit"`` (RSS estimators, model with ``sigma_db > 0``): converged, but the readings do not fit the model
       together: the minimised cost over the shadowing variance exceeds the chi-square bound of
-      :data:`GOODNESS_OF_FIT_ALPHA` with ``m_heard - dim`` degrees of freedom (e.g. four equal powers of +100 dBm
+      :data:`~locbook.static.checks.GOODNESS_OF_FIT_ALPHA` with ``m_heard - dim`` degrees of freedom (e.g. four equal
+      powers of +100 dBm
       around a 10 m square). The position (the ML answer for those readings) and ``converged=True`` are kept.
 
     ``converged`` is never True with an infinite or NaN ``cost``.

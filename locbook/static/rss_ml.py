@@ -28,8 +28,9 @@ def _rss_ml_position_v1(anchors_m, rss_dbm, model, initial_m=None, *, max_iter=N
 
 def _raise_if_failed(res: LocalizationResult, raise_on_failure: bool) -> LocalizationResult:
     if raise_on_failure and not np.all(res.converged):
+        failed = sorted(set(res.status.ravel().tolist()) - {'ok'})
         raise ConvergenceError(f"RSS maximum likelihood: {int(np.sum(~res.converged))} of {res.converged.size} "
-                               f"problems did not converge (statuses: {sorted(set(res.status.ravel().tolist()) - {'ok'})})")
+                               f"problems did not converge (statuses: {failed})")
     return res
 
 
@@ -241,9 +242,10 @@ def _rss_ml(anchors_m, rss_dbm, model: PathLossModel, initial_m=None, *,
             raise ValueError(f"initial_m must broadcast to {rss_dbm.shape[:-1] + (dim,)}, got shape "
                              f"{initial_m.shape}") from None
         no_start = np.isnan(initial_m)
-        if np.any(no_start.any(axis=-1) & ~no_start.all(axis=-1)):
+        partly = no_start.any(axis=-1) & ~no_start.all(axis=-1)
+        if np.any(partly):
             raise ValueError("initial_m must be finite, or all NaN in a problem's row (no start: the default), got "
-                             f"a partly NaN row {initial_m[no_start.any(axis=-1) & ~no_start.all(axis=-1)][0].tolist()}")
+                             f"a partly NaN row {initial_m[partly][0].tolist()}")
     implausible = implausible_powers(rss_dbm, model, max(float(min_distance_m), model.min_distance_m)).reshape(-1)
     if implausible.any():             # those problems fail alone, before any arithmetic on their readings
         flat, batch = rss_dbm.reshape(-1, m), rss_dbm.shape[:-1]

@@ -42,9 +42,8 @@ LATERATION_VARIANTS = ("corrected", "literal_palvai2008")
 def lateration_by_heard(anchors_m, distance_m, ref_index: int, min_anchors: int, solve, method: str,
                          tag_height_m=None):
     """:func:`~locbook.static.missing.by_heard_anchors` for the linearized systems: ``solve(anchors, distances,
-    ref_index)`` on each
-    group's heard anchors, the reference kept if heard (geometry judged on the plan positions with a known
-    tag height)."""
+    ref_index)`` on each group's heard anchors, the reference kept if heard (geometry judged on the plan positions
+    with a known tag height)."""
     anchors_m, distance_m = np.asarray(anchors_m, float), np.asarray(distance_m, float)
     m = anchors_m.shape[0]
     flat = distance_m.reshape(-1, m)
@@ -154,12 +153,10 @@ def _shared_pair_least_squares(anchors_m, distance_m, pairs: str, variant: str) 
     """:func:`_pair_least_squares` for anchors ``(n, dim)`` shared by every problem and ``pairs`` "first" or "last",
     the conventions of the reference-anchor path: the shared layout is judged once
     (:func:`~locbook.static.checks.check_anchor_geometry` raises :class:`DegenerateGeometryError`), and a problem that
-    did not hear the
-    pair reference (anchor 0, or n - 1) takes the first (last) anchor it heard instead, as
-    :func:`~locbook.static.missing.ref_in_subset` does, rather than losing every row. Problems that heard the reference
-    are solved exactly
-    as before; the others are solved on their anchors with the new reference swapped into the reference's place
-    (a per-problem layout; a heard subset too small or collinear gets its status)."""
+    did not hear the pair reference (anchor 0, or n - 1) takes the first (last) anchor it heard instead, as
+    :func:`~locbook.static.missing.ref_in_subset` does, rather than losing every row. Problems that heard the
+    reference are solved exactly as before; the others are solved on their anchors with the new reference swapped
+    into the reference's place (a per-problem layout; a heard subset too small or collinear gets its status)."""
     check_anchor_geometry(anchors_m)
     res = _pair_least_squares(anchors_m, distance_m, pairs, variant)
     d = as_array("distance_m", distance_m, min_ndim=1, nan_ok=True)
@@ -230,8 +227,7 @@ def lateration_ls(anchors_m, distance_m, ref_index: int = 0, *, pairs: str | Non
     problem of per-problem anchors. A reference that was not heard is replaced by a heard anchor: the first heard
     for ``ref_index`` and ``pairs="first"``, the last heard for ``pairs="last"``. Remaining difference: per-problem
     anchors are judged by the rank of ``H^T H`` (1e-10), shared ones by
-    :func:`~locbook.static.checks.check_anchor_geometry` (1e-6 on the
-    centred anchors).
+    :func:`~locbook.static.checks.check_anchor_geometry` (1e-6 on the centred anchors).
 
     References
     ----------

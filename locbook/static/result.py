@@ -42,16 +42,15 @@ class LocalizationResult:
       estimate (e.g. ranges so large that their squares overflow, or no finite start for the iterations);
     - ``"not_converged"``: the iteration limit was reached (the last iterate is returned);
     - ``"implausible_reading"`` (RSS estimators): a heard power more than
-      :data:`~locbook.static.checks.IMPLAUSIBLE_SIGMAS` shadowing
-      standard deviations above the model's mean at the estimator's near-field clamp, e.g. +500 dBm or 1e300 dBm
-      (:func:`~locbook.static.checks.implausible_powers`): a reading implying a tag closer than 1 mm (the RSS ML's
-      default clamp) to an
-      anchor's antenna is taken as implausible;
+      :data:`~locbook.static.checks.IMPLAUSIBLE_SIGMAS` shadowing standard deviations above the model's mean at the
+      estimator's near-field clamp, e.g. +500 dBm or 1e300 dBm (:func:`~locbook.static.checks.implausible_powers`):
+      a reading implying a tag closer than 1 mm (the RSS ML's default clamp) to an anchor's antenna is taken as
+      implausible;
     - ``"poor_fit"`` (RSS estimators, model with ``sigma_db > 0``): converged, but the readings do not fit the model
       together: the minimised cost over the shadowing variance exceeds the chi-square bound of
       :data:`~locbook.static.checks.GOODNESS_OF_FIT_ALPHA` with ``m_heard - dim`` degrees of freedom (e.g. four equal
-      powers of +100 dBm
-      around a 10 m square). The position (the ML answer for those readings) and ``converged=True`` are kept.
+      powers of +100 dBm around a 10 m square). The position (the ML answer for those readings) and
+      ``converged=True`` are kept.
 
     ``converged`` is never True with an infinite or NaN ``cost``.
 

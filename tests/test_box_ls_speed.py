@@ -1,7 +1,7 @@
 """The compiled box-LS search (issue 31: box-LS within 2x of the closed-form linear LS).
 
 :func:`locbook.static._box_kernels._nb_box_ls` runs the KKT active-set search of
-:func:`locbook.static.localization._box_active_set_search` problem by problem in numba. It must give the numpy
+:func:`locbook.static.box_ls._box_active_set_search` problem by problem in numba. It must give the numpy
 search's answers to 1e-12 (same sets, order, acceptance rule, tie-breaking and fallback), keep ``p*`` bit for bit
 inside the box, keep the missing-reading and overflow rules, and be switched off by ``_NUMBA_ENABLED``.
 Independent oracles: scipy's ``lsq_linear`` (BVLS) and the KKT conditions checked on the answer.
@@ -12,7 +12,7 @@ import pytest
 from scipy.optimize import lsq_linear
 
 import locbook as lb
-from locbook.static import localization
+from locbook.static import box_ls
 from locbook.tracking import _compiled
 
 pytest.importorskip("numba")
@@ -36,22 +36,22 @@ def _problems(dim, k, seed):
 
 def _both(monkeypatch, fn):
     """``fn()`` with the compiled search (forced: no minimum size, the numpy search must not run) and with numpy."""
-    monkeypatch.setattr(localization, "_BOX_NUMBA_MIN_PROBLEMS", 0)
-    numpy_search = localization._box_active_set_search
+    monkeypatch.setattr(box_ls, "_BOX_NUMBA_MIN_PROBLEMS", 0)
+    numpy_search = box_ls._box_active_set_search
 
     def must_not_run(*args):
         raise AssertionError("the numpy search ran on the compiled path")
 
     monkeypatch.setattr(_compiled, "_NUMBA_ENABLED", True)
-    monkeypatch.setattr(localization, "_box_active_set_search", must_not_run)
+    monkeypatch.setattr(box_ls, "_box_active_set_search", must_not_run)
     compiled = fn()
-    monkeypatch.setattr(localization, "_box_active_set_search", numpy_search)
+    monkeypatch.setattr(box_ls, "_box_active_set_search", numpy_search)
     monkeypatch.setattr(_compiled, "_NUMBA_ENABLED", False)
     return compiled, fn()
 
 
 def _exact(a_mat, b, lo, hi):
-    return localization._box_ls_exact(a_mat, b, tuple(map(float, lo)), tuple(map(float, hi)))
+    return box_ls._box_ls_exact(a_mat, b, tuple(map(float, lo)), tuple(map(float, hi)))
 
 
 def _kkt_holds(a_mat, b, p, lo, hi, tol=1e-7):
@@ -142,7 +142,7 @@ def test_compiled_fallback_is_the_least_feasible_candidate(dim):
     anchors, d, lo, hi = _problems(dim, 400, seed=40 + dim)
     a_mat, b = lb.lateration_system(anchors, d)
     key = tuple(map(tuple, a_mat.tolist()))
-    pinv_t, levels = localization._box_active_sets(key, tuple(lo), tuple(hi))
+    pinv_t, levels = box_ls._box_active_sets(key, tuple(lo), tuple(hi))
     p_star = b @ pinv_t
     outside = np.any((p_star < lo) | (p_star > hi), axis=-1)
     spoiled = []
@@ -150,9 +150,9 @@ def test_compiled_fallback_is_the_least_feasible_candidate(dim):
         per_set = weights.shape[0] // n_sets
         kkt_row = (np.arange(weights.shape[0]) % per_set) < per_set - dim
         spoiled.append((weights, offsets - 1e6 * kkt_row[:, None], n_sets))
-    want = localization._box_active_set_search(p_star[outside], lo, hi, spoiled, a_mat)
+    want = box_ls._box_active_set_search(p_star[outside], lo, hi, spoiled, a_mat)
     pos, ok = np.empty(p_star.shape), np.empty(len(b), bool)
-    tables = localization._box_kernel_tables(key, tuple(lo), tuple(hi))
+    tables = box_ls._box_kernel_tables(key, tuple(lo), tuple(hi))
     bound = float(np.max(np.maximum(np.abs(lo), np.abs(hi))))
     _box_kernels._nb_box_ls(p_star, lo, hi, bound, *tables, a_mat, True, pos, ok)
     np.testing.assert_allclose(pos[outside], want, rtol=0, atol=1e-12)
@@ -203,16 +203,16 @@ def test_non_finite_unconstrained_fix_fails_alone(monkeypatch):
 def test_switch_and_minimum_size_select_numpy(monkeypatch):
     anchors, d, lo, hi = _problems(2, 300, seed=70)
     calls = []
-    numpy_search = localization._box_active_set_search
-    monkeypatch.setattr(localization, "_box_active_set_search", lambda *a: calls.append(1) or numpy_search(*a))
+    numpy_search = box_ls._box_active_set_search
+    monkeypatch.setattr(box_ls, "_box_active_set_search", lambda *a: calls.append(1) or numpy_search(*a))
     monkeypatch.setattr(_compiled, "_NUMBA_ENABLED", False)
     lb.lateration_box_ls(anchors, d, lo, hi)
     assert calls == [1]                                             # LOCBOOK_NUMBA=0: numpy
     monkeypatch.setattr(_compiled, "_NUMBA_ENABLED", True)
-    monkeypatch.setattr(localization, "_BOX_NUMBA_MIN_PROBLEMS", 301)
+    monkeypatch.setattr(box_ls, "_BOX_NUMBA_MIN_PROBLEMS", 301)
     lb.lateration_box_ls(anchors, d, lo, hi)
     assert calls == [1, 1]                                          # too few problems: numpy
-    monkeypatch.setattr(localization, "_BOX_NUMBA_MIN_PROBLEMS", 300)
+    monkeypatch.setattr(box_ls, "_BOX_NUMBA_MIN_PROBLEMS", 300)
     lb.lateration_box_ls(anchors, d, lo, hi)
     assert calls == [1, 1]                                          # compiled
 
@@ -225,7 +225,7 @@ def test_the_guided_set_of_each_pattern_holds_those_coordinates_at_those_bounds(
     rng = np.random.default_rng(dim)
     a_mat = rng.normal(size=(dim + 2, dim))
     lo, hi = -rng.uniform(1, 2, dim), rng.uniform(1, 2, dim)
-    weights, offsets, start, n_kkt, guided = localization._box_kernel_tables(
+    weights, offsets, start, n_kkt, guided = box_ls._box_kernel_tables(
         tuple(map(tuple, a_mat.tolist())), tuple(lo), tuple(hi))
     assert guided[0] == -1 and sorted(guided[1:]) == list(range(3**dim - 1))
     p = rng.normal(size=dim) * 5
@@ -240,4 +240,4 @@ def test_the_guided_set_of_each_pattern_holds_those_coordinates_at_those_bounds(
                 assert cand[j] == (lo[j] if kind == 1 else hi[j])
         assert n_kkt[s] == 2 * dim - sum(k > 0 for k in kinds)
         outside = np.where(np.array(kinds) == 1, lo - 1.0, np.where(np.array(kinds) == 2, hi + 1.0, 0.5 * (lo + hi)))
-        assert localization._box_guided_code(outside[None], lo, hi)[0] == code
+        assert box_ls._box_guided_code(outside[None], lo, hi)[0] == code

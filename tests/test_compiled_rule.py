@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import locbook as lb
-from locbook.static import localization
+from locbook.static import box_ls
 from locbook.tracking import _compiled, bayes
 
 pytest.importorskip("numba")
@@ -38,7 +38,7 @@ def test_a_kernel_that_cannot_compile_warns_at_the_callers_line_and_turns_every_
     import importlib
     module, kernel, call = CASES[what]
     monkeypatch.setattr(bayes, "_GRID_MIN_WORK", 0)
-    monkeypatch.setattr(localization, "_BOX_NUMBA_MIN_PROBLEMS", 0)
+    monkeypatch.setattr(box_ls, "_BOX_NUMBA_MIN_PROBLEMS", 0)
     monkeypatch.setattr(_compiled, "_NUMBA_ENABLED", False)
     plain = call()
 

@@ -16,7 +16,7 @@ import pytest
 from scipy.optimize import lsq_linear
 
 import locbook as lb
-from locbook.static import calibration, localization
+from locbook.static import box_ls, calibration
 from locbook.static.calibration import path_loss_design_matrix
 
 # Clarabel for one small problem at a time: tight enough for 1e-6 m (the library's stacked solve is looser)
@@ -170,7 +170,7 @@ def test_rank_deficient_matrix_gives_a_least_objective_kkt_point():
     rng = np.random.default_rng(7)
     b = rng.normal(0.0, 20.0, (300, 3))
     lo, hi = (0.0, -1.0), (3.0, 2.0)
-    pos, ok = localization._box_ls_exact(a_mat, b, lo, hi)
+    pos, ok = box_ls._box_ls_exact(a_mat, b, lo, hi)
     assert ok.all() and np.all(pos >= lo) and np.all(pos <= hi)
     ref, status = _cvxpy_each(a_mat, b, np.array(lo), np.array(hi))
     good = status == "optimal"
@@ -184,7 +184,7 @@ def test_fallback_least_feasible_candidate_is_exact_too(dim):
     is taken. Forced here for every problem (the KKT quantities pushed negative), it still equals BVLS."""
     anchors, d, lo, hi = _problems(dim, 400, seed=45 + dim)
     a_mat, b = lb.lateration_system(anchors, d)
-    pinv_t, levels = localization._box_active_sets(tuple(map(tuple, a_mat.tolist())), tuple(lo), tuple(hi))
+    pinv_t, levels = box_ls._box_active_sets(tuple(map(tuple, a_mat.tolist())), tuple(lo), tuple(hi))
     spoiled = []
     for weights, offsets, n_sets in levels:
         per_set = weights.shape[0] // n_sets
@@ -192,7 +192,7 @@ def test_fallback_least_feasible_candidate_is_exact_too(dim):
         spoiled.append((weights, offsets - 1e6 * kkt_row[:, None], n_sets))
     p_star = b @ pinv_t
     outside = np.any((p_star < lo) | (p_star > hi), axis=-1)
-    got = localization._box_active_set_search(p_star[outside], lo, hi, spoiled, a_mat)
+    got = box_ls._box_active_set_search(p_star[outside], lo, hi, spoiled, a_mat)
     for i, row in zip(np.flatnonzero(outside)[::5], got[::5]):
         ref = lsq_linear(a_mat, b[i], bounds=(lo, hi), method="bvls", tol=1e-14).x
         np.testing.assert_allclose(row, ref, rtol=0, atol=1e-9)
@@ -221,7 +221,7 @@ def test_cvxpy_box_path_still_isolates_a_failing_problem(monkeypatch):
     """The stacked cvxpy path's halving (kept for solver="cvxpy"): one problem the solver fails on fails alone."""
     anchors, d, lo, hi = _problems(2, 8, seed=60)
     good = lb.lateration_box_ls(anchors, d, lo, hi, solver="cvxpy")
-    real_solve = localization.solve
+    real_solve = box_ls.solve
     poison = lb.lateration_system(anchors, d[3])[1]
 
     def flaky(problem, what):
@@ -230,7 +230,7 @@ def test_cvxpy_box_path_still_isolates_a_failing_problem(monkeypatch):
             raise lb.ConvergenceError("deliberate")
         real_solve(problem, what)
 
-    monkeypatch.setattr(localization, "solve", flaky)
+    monkeypatch.setattr(box_ls, "solve", flaky)
     res = lb.lateration_box_ls(anchors, d, lo, hi, solver="cvxpy")
     others = np.setdiff1d(np.arange(8), [3])
     np.testing.assert_allclose(res.position_m[others], good.position_m[others], atol=1e-6)

@@ -27,7 +27,9 @@ from hypothesis import strategies as st
 
 import locbook as lb
 from locbook.static.calibration import CALIBRATION_MODES, FIT_PROBLEM_STATUSES
-from locbook.static.localization import GOODNESS_OF_FIT_ALPHA, LATERATION_PAIRS, LOCALIZATION_STATUSES
+from locbook.static.checks import GOODNESS_OF_FIT_ALPHA
+from locbook.static.lateration import LATERATION_PAIRS
+from locbook.static.result import LOCALIZATION_STATUSES
 from scipy.stats import chi2
 
 FUZZ = settings(max_examples=200, deadline=None, derandomize=True,

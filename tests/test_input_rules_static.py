@@ -14,8 +14,8 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 import locbook as lb
-from locbook.static.localization import LOCALIZATION_STATUSES
-from locbook.static import localization
+from locbook.static.result import LOCALIZATION_STATUSES
+from locbook.static import box_ls, checks, grid_ml, result, rss_ml
 
 ANCHORS = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 8.0], [0.0, 8.0], [5.0, 12.0]])
 MODEL = lb.PathLossModel(-45.0, 2.5, 4.0)
@@ -113,7 +113,7 @@ def test_one_failing_box_problem_does_not_cost_its_batch(monkeypatch):
     _, power = _batch(8)
     ranges = MODEL.range_m(power)
     good = lb.lateration_box_ls(ANCHORS, ranges, *BOX, solver="cvxpy")   # the stacked QP's failure isolation
-    real_solve = localization.solve
+    real_solve = box_ls.solve
 
     def flaky(problem, what):                     # the solver fails on any batch holding problem 3's data
         b = [p for p in problem.parameters() if p.name() == "b"][0].value
@@ -121,7 +121,7 @@ def test_one_failing_box_problem_does_not_cost_its_batch(monkeypatch):
             raise lb.ConvergenceError("deliberate")
         real_solve(problem, what)
 
-    monkeypatch.setattr(localization, "solve", flaky)
+    monkeypatch.setattr(box_ls, "solve", flaky)
     res = lb.lateration_box_ls(ANCHORS, ranges, *BOX, solver="cvxpy")
     others = np.setdiff1d(np.arange(8), [3])
     np.testing.assert_allclose(res.position_m[others], good.position_m[others], atol=1e-6)
@@ -580,7 +580,7 @@ def test_the_notebooks_anchor_layouts_are_far_from_the_conditioning_bound():
         ratios = [(_condition_ratio(layout[list(sub)]), sub) for k in sizes for sub in combinations(range(m), k)]
         ratios = [(r, sub) for r, sub in ratios if r > 1e-12]
         least[name] = min(ratios)
-        assert least[name][0] >= 1000 * localization.ANCHOR_CONDITION_RTOL, (name, least[name])
+        assert least[name][0] >= 1000 * checks.ANCHOR_CONDITION_RTOL, (name, least[name])
         lb.check_anchor_geometry(layout)
     assert least["kolakowski2021 shipped anchors"][0] < 0.03     # the data set's near-line triple is covered
     assert len(least) >= 17, sorted(least)
@@ -614,7 +614,7 @@ def test_readings_impossible_together_are_a_poor_fit(name, power, model):
     from scipy.stats import chi2
     res = ML_ESTIMATORS[name](SQUARE, np.full(4, power), model)
     assert res.status == "poor_fit"
-    assert res.cost / model.sigma_db**2 > chi2.ppf(1 - localization.GOODNESS_OF_FIT_ALPHA, 2)
+    assert res.cost / model.sigma_db**2 > chi2.ppf(1 - checks.GOODNESS_OF_FIT_ALPHA, 2)
     # the ML answer is kept: position and converged flag as they were (the status says the readings do not fit)
     assert res.converged and np.isfinite(res.position_m).all()
     if name == "ml":     # the reviewer's answer: the centre (the grid's best point is a corner, at the 1 um clamp)
@@ -660,7 +660,7 @@ def test_a_poor_fit_is_flagged_alone_in_its_batch(name):
 
 def test_poor_fit_is_a_documented_status():
     assert "poor_fit" in LOCALIZATION_STATUSES and "poor_fit" in lb.LocalizationResult.__doc__
-    assert 0 < localization.GOODNESS_OF_FIT_ALPHA <= 1e-6
+    assert 0 < checks.GOODNESS_OF_FIT_ALPHA <= 1e-6
 
 
 @pytest.mark.parametrize("clamp_m", [0.0, -1e-3, np.inf, np.nan])
@@ -685,8 +685,8 @@ def test_implausible_reading_states_its_physical_assumption():
     far = model.mean_rss_dbm(lb.pairwise_distance_m(np.array([2e-3, 0.0]), SQUARE))   # 2 mm: taken
     assert lb.rss_ml_position(far, lb.RssModel(SQUARE, model)).status != "implausible_reading"
     import inspect
-    source = inspect.getsource(localization)
-    assert "no real reading is refused" not in source
+    for module in (checks, result, rss_ml, grid_ml):      # the homes of the estimators and the rule
+        assert "no real reading is refused" not in inspect.getsource(module)
     for doc in (lb.implausible_powers.__doc__, lb.rss_ml_position.__doc__, lb.LocalizationResult.__doc__):
         assert "closer than 1 mm" in " ".join(doc.split()), doc
 

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import locbook as lb
-from locbook.static.localization import LATERATION_PAIRS
+from locbook.static.lateration import LATERATION_PAIRS
 
 
 @pytest.mark.parametrize("dim", [2, 3])

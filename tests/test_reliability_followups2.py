@@ -5,7 +5,7 @@ import pytest
 
 import locbook as lb
 from locbook import metrics
-from locbook.static import localization
+from locbook.static import grid_ml
 
 
 def _grid_problem(n_problems=41, n_cells=301, seed=3):
@@ -28,23 +28,23 @@ def test_grid_ml_result_does_not_depend_on_chunk_or_the_block_limit(monkeypatch)
     mean = -40.0 - 25.0 * np.log10(np.linalg.norm(grid[:, None] - anchors, axis=-1))
     brute = np.argmin(((rss[:, None, :] - mean) ** 2).sum(-1), axis=1)
     assert np.array_equal(ref.position_m, grid[brute])
-    monkeypatch.setattr(localization, "GRID_ML_BLOCK_BYTES", 8 * grid.shape[0] * 3)   # blocks of 3 problems
+    monkeypatch.setattr(grid_ml, "GRID_ML_BLOCK_BYTES", 8 * grid.shape[0] * 3)   # blocks of 3 problems
     got = lb.grid_ml_position(rss, lb.RssModel(anchors, model), grid)
     assert np.array_equal(got.position_m, ref.position_m) and np.array_equal(got.cost, ref.cost)
 
 
 def test_grid_ml_refuses_a_grid_whose_smallest_block_is_over_the_limit_before_allocating(monkeypatch):
     anchors, rss, model, grid = _grid_problem()
-    monkeypatch.setattr(localization, "GRID_ML_BLOCK_BYTES", 8 * grid.shape[0] * 2 - 1)
+    monkeypatch.setattr(grid_ml, "GRID_ML_BLOCK_BYTES", 8 * grid.shape[0] * 2 - 1)
     with pytest.raises(ValueError, match=r"^cells_m has 301 cells: .* MiB, over the limit GRID_ML_BLOCK_BYTES") as e:
         lb.grid_ml_position(rss, lb.RssModel(anchors, model), grid)
     assert "\n" not in str(e.value)
     one = lb.grid_ml_position(rss[:1], lb.RssModel(anchors, model), grid)      # one problem: one row fits
     assert np.isfinite(one.cost).all()
     # the block size is decided from the sizes alone: 10^4 problems on 10^7 cells fit 3 problems in 256 MiB
-    monkeypatch.setattr(localization, "GRID_ML_BLOCK_BYTES", 256 * 2**20)
-    assert localization._grid_ml_block(None, 10**4, 10**7) == 3
-    assert localization._grid_ml_block(2048, 10**4, 10**7) == 3
+    monkeypatch.setattr(grid_ml, "GRID_ML_BLOCK_BYTES", 256 * 2**20)
+    assert grid_ml._grid_ml_block(None, 10**4, 10**7) == 3
+    assert grid_ml._grid_ml_block(2048, 10**4, 10**7) == 3
 
 
 MASKED = np.ma.array([1.0, 2.0, 3.0, 1000.0], mask=[0, 0, 0, 1])

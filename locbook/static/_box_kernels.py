@@ -1,11 +1,11 @@
-"""The compiled box-constrained LS kernel (numba) of :func:`locbook.static.localization.lateration_box_ls`, compiled
+"""The compiled box-constrained LS kernel (numba) of :func:`locbook.static.box_ls.lateration_box_ls`, compiled
 on first call (numba caches the machine code on disk). Imported only by
-:func:`locbook.static.localization._box_ls_exact` when the compiled path runs, so that ``import locbook`` never loads
+:func:`locbook.static.box_ls._box_ls_exact` when the compiled path runs, so that ``import locbook`` never loads
 numba. Without numba it is plain Python (the same arithmetic, slowly: the tests may run it that way).
 
-The kernel is the KKT active-set enumeration of :func:`locbook.static.localization._box_active_set_search` run
-problem by problem: the active sets' affine maps ``weights @ p* + offsets`` (:func:`~locbook.static.localization.
-_box_active_sets`, flattened by :func:`~locbook.static.localization._box_kernel_tables`) are evaluated for one
+The kernel is the KKT active-set enumeration of :func:`locbook.static.box_ls._box_active_set_search` run
+problem by problem: the active sets' affine maps ``weights @ p* + offsets`` (:func:`~locbook.static.box_ls.
+_box_active_sets`, flattened by :func:`~locbook.static.box_ls._box_kernel_tables`) are evaluated for one
 unconstrained minimiser ``p*`` at a time, in the same order (by the number of coordinates at a bound, then
 ``itertools.product`` order), the first set whose KKT quantities are all ``>= tol`` settling the problem (the numpy
 search's ``argmax``); no temporaries per set, and a problem stops at its first KKT set. As in numpy, the set that holds
@@ -34,7 +34,7 @@ def _nb_box_ls(p_star, lo, hi, bound, weights, offsets, start, n_kkt, guided, a_
     """Box LS of every unconstrained minimiser ``p_star (n, dim)``, in place into ``pos (n, dim)`` and ``ok (n,)``.
 
     A problem with a non-finite ``p*`` fails (NaN, ``ok`` False); one inside the box keeps ``p*`` bit for bit; for
-    the others the set ``guided[code]`` (:func:`~locbook.static.localization._box_guided_sets`: each coordinate outside
+    the others the set ``guided[code]`` (:func:`~locbook.static.box_ls._box_guided_sets`: each coordinate outside
     the box held at the bound it crosses) is tried first, then the active sets ``s`` (rows ``start[s]``: ``n_kkt[s]``
     KKT quantities, then the ``dim`` coordinates of the candidate) are visited in order; the first whose quantities
     are all ``>= tol`` (``tol = -1e-9 (1 + bound +

@@ -21,13 +21,10 @@ distinct distances among its heard samples) or whose arithmetic overflows (power
 parameters and its own ``PathLossFit.problem_status``, and every other problem of the batch is what fitting it
 alone gives.
 
-Solvers: the unconstrained least-squares fit is the closed form (normal equations from running sums: time and
-memory linear in the samples, any size). The bounded least-squares fit is exact too: the two-parameter box QP
-solved by KKT enumeration over the running sums (the unconstrained fit if it is inside the bounds, else the
-best of the four edges, each a one-parameter closed form clipped to its bounds), see :func:`fit_path_loss`.
-cvxpy solves the robust (Huber) variant, which needs an iterative solver, and is the oracle for the closed
-forms (``solver="cvxpy"``: all problems stacked into one convex problem). A cvxpy fit that does not reach an
-optimum returns NaN parameters with the solver's status in ``PathLossFit.status``; it never raises.
+Solvers (:func:`fit_path_loss`, ``solver``): the closed form (normal equations from running sums: time and memory
+linear in the samples), the exact bounded fit (KKT enumeration over the running sums) and cvxpy (the robust Huber
+variant, and the oracle). A cvxpy fit that does not reach an optimum returns NaN parameters with the solver's
+status in ``PathLossFit.status``; it never raises.
 """
 from __future__ import annotations
 
@@ -38,7 +35,7 @@ import scipy.sparse as sp
 
 from .._cvx import cp, solve
 from .._validate import as_array, check_choice, check_scalar
-from ..errors import ConvergenceError, DegenerateGeometryError
+from ..errors import ConvergenceError, DegenerateGeometryError, ParameterError
 from ..models.channel import PathLossModel, log_distance_regressor_db
 
 __all__ = [
@@ -296,9 +293,8 @@ def _bounded_closed_form(log_d, power, mask, ref_bounds, exp_bounds):
 def _stacked_problem(log_d, power, mask, ref_bounds, exp_bounds, loss="squared", huber_delta_db=None):
     """One cvxpy problem for all ``k`` fits: ``min sum_i ||P_i - P0_i + n_i L_i||^2`` over the observed samples.
 
-    The data enter as constants of one sparse matrix, so building it costs time and memory linear in ``k``.
-    (A parameterized, cached DPP form was tried first: its canonicalisation grows quadratically with the
-    number of stacked fits, about 9 GB at 4000 fits, and the test bed of Ozkaya 2011 needs ~10^5.)
+    The data enter as constants of one sparse matrix, so building it costs time and memory linear in ``k``
+    (not a parameterized DPP form: docs/speed.md).
     """
     k = log_d.shape[0]
     problem_of, _ = np.nonzero(mask)                                  # sample -> problem, row-major
@@ -322,29 +318,70 @@ def fit_path_loss(distance_m, rss_dbm, *, ref_distance_m: float = 1.0,
                   ref_power_bounds_dbm: tuple[float, float] | None = None,
                   path_loss_exp_bounds: tuple[float, float] | None = None,
                   solver: str = "auto", loss: str = "squared", huber_delta_db: float = 6.0) -> PathLossFit:
-    """Least-squares fit of ``(ref_power_dbm, path_loss_exp)`` for every problem in the batch.
+    """Least-squares fit of the log-distance model's ``(ref_power_dbm, path_loss_exp)`` for every problem.
 
-    ``distance_m, rss_dbm``: shape ``(..., N)``, one problem per leading index (distances may be shared by
-    all problems). Bounds, if given, constrain every problem (Ozkaya 2011, Sec. 6.2: alpha in [-55, -40] dBm,
-    n in [1.5, 3]). ``loss="huber"`` is the robust variant: residuals beyond ``huber_delta_db`` count
-    linearly (cvxpy's ``huber``), so a few gross outliers (a blocked link) do not drag the fit.
+    The model ``P_i = P_0 - 10 n log10(d_i/d0) + e_i`` is linear in ``[P_0, n]``; the fit is
+    ``(M^T M)^{-1} M^T P`` with rows ``M_i = [1, -10 log10(d_i/d0)]`` (module docstring), bounded or robust on
+    request.
 
-    ``solver``: ``"auto"`` (default) uses the closed form for the unconstrained least-squares fit, the exact
-    bounded fit when bounds are given, and cvxpy for ``loss="huber"``;
-    ``"closed_form"`` insists on the normal equations (unconstrained squared loss only);
-    ``"exact"``: the bounded least-squares fit in closed form with the box handled exactly (KKT enumeration:
-    the unconstrained fit if it is inside the bounds, else the best edge, one parameter at a bound and the other
-    in closed form, clipped; no iterations, no tolerance; without bounds it is the closed form), status
-    ``"optimal"``; squared loss only: the Huber fit has no closed form and genuinely needs an iterative solver,
-    so it stays on cvxpy;
-    ``"cvxpy"`` solves all problems as one stacked convex problem (the oracle, Clarabel at tight tolerances). A
-    cvxpy solve that does not reach an optimum gives NaN parameters and its status (``PathLossFit.status``,
-    ``PathLossFit.ok``).
+    Parameters
+    ----------
+    distance_m : array_like, shape (..., N)
+        Distances (m), one problem per leading index (may be shared by all problems). A NaN distance pads a
+        ragged problem and must pair with a NaN power.
+    rss_dbm : array_like, shape (..., N)
+        Received powers (dBm); NaN is a sample not heard.
+    ref_distance_m : float, default 1.0
+        The reference distance ``d0`` (m).
+    ref_power_bounds_dbm, path_loss_exp_bounds : (lower, upper), optional
+        Bounds on ``P_0`` and ``n`` for every problem (Ozkaya 2011, Sec. 6.2: alpha in [-55, -40] dBm, n in
+        [1.5, 3]).
+    solver : {"auto", "closed_form", "exact", "cvxpy"}, default "auto"
+        :data:`CALIBRATION_SOLVERS`. ``"auto"``: the closed form unbounded, ``"exact"`` bounded, cvxpy for
+        ``loss="huber"``. ``"closed_form"``: the normal equations (unconstrained squared loss only). ``"exact"``:
+        the bounded fit with the box handled exactly (KKT enumeration: the unconstrained fit if inside the bounds,
+        else the best edge, one parameter at a bound and the other in closed form, clipped; no iterations), status
+        ``"optimal"``; squared loss only (the Huber fit has no closed form). ``"cvxpy"``: all problems as one
+        stacked convex problem (the oracle, Clarabel at tight tolerances).
+    loss : {"squared", "huber"}, default "squared"
+        ``"huber"`` is the robust variant: residuals beyond ``huber_delta_db`` count linearly (cvxpy's
+        ``huber``), so a few gross outliers (a blocked link) do not drag the fit.
+    huber_delta_db : float, default 6.0
+        The Huber threshold (dB).
 
-    Raises :class:`DegenerateGeometryError` when a problem's given distances (heard or not) are all equal: the
-    design cannot identify the exponent. A problem that heard fewer than two distinct distances, or whose
-    arithmetic overflows, gets NaN parameters and its ``problem_status``, alone (module docstring). An empty batch
-    gives an empty fit in every mode (status ``"closed_form"`` or ``"optimal"``).
+    Returns
+    -------
+    PathLossFit
+        The parameters, residual sigma and covariance with the problems' batch shape. A cvxpy solve that does not
+        reach an optimum gives NaN parameters and its status (``PathLossFit.status``, ``PathLossFit.ok``). A
+        problem that heard fewer than two distinct distances, or whose arithmetic overflows, gets NaN parameters
+        and its ``problem_status``, alone. An empty batch gives an empty fit in every mode (status
+        ``"closed_form"`` or ``"optimal"``).
+
+    Raises
+    ------
+    DegenerateGeometryError
+        A problem's given distances (heard or not) are all equal: the design cannot identify the exponent.
+    ValueError
+        Bounds that are not ``(lower, upper)``, a solver that cannot do what is asked (the closed form with bounds
+        or the Huber loss; ``"exact"`` with the Huber loss).
+
+    References
+    ----------
+    George and Vadivukkarasi, Eq. (6) (the sign of the second column corrected); Dogan (2015), Eq. (5.1); Ozkaya
+    (2011), Eqs. (6.4)-(6.6) and their bounded variant.
+
+    Examples
+    --------
+    Noise-free powers give the channel back:
+
+    >>> import numpy as np
+    >>> import locbook as lb
+    >>> distance = np.array([1.0, 2.0, 4.0, 8.0])
+    >>> power = -40.0 - 10 * 2.5 * np.log10(distance)
+    >>> fit = lb.fit_path_loss(distance, power)
+    >>> print(np.round(fit.ref_power_dbm, 2), np.round(fit.path_loss_exp, 2), fit.status)
+    -40.0 2.5 closed_form
     """
     check_choice("solver", solver, CALIBRATION_SOLVERS)
     check_choice("loss", loss, CALIBRATION_LOSSES)
@@ -422,17 +459,52 @@ def _solve_stacked(log_d, power, mask, bounds, loss, huber_delta_db):
 def calibrate_path_loss(distance_m, rss_dbm, mode: str = "per_location_mean", **fit_kwargs) -> PathLossFit:
     """Calibrate one shared ``(P_0, n)`` from measurements at known locations.
 
-    ``distance_m, rss_dbm``: shape ``(..., L, m)``, location ``l`` at distance ``d_lj`` from anchor
-    ``j``, with ``rss_dbm`` the mean received power of that link; leading axes are independent
-    calibrations (e.g. Monte-Carlo runs).
+    Parameters
+    ----------
+    distance_m : array_like, shape (..., L, m)
+        Distance ``d_lj`` (m) of location ``l`` from anchor ``j``; leading axes are independent calibrations (e.g.
+        Monte-Carlo runs).
+    rss_dbm : array_like, shape (..., L, m)
+        The mean received power of each link (dBm); NaN is a link not heard.
+    mode : {"per_location_mean", "pooled", "per_anchor"}, default "per_location_mean"
+        :data:`CALIBRATION_MODES`. ``"per_location_mean"`` (George and Vadivukkarasi, Simulation Results): fit
+        each location's m links, then average the L estimates; ``per_location`` holds the L fits and the
+        covariance is that of the mean of L independent fits. ``"pooled"``: one fit over all ``L*m`` pairs.
+        ``"per_anchor"``: one fit per anchor over its L links (column-wise), giving arrays of length m.
+    **fit_kwargs
+        Passed to :func:`fit_path_loss` (bounds, solver, loss).
 
-    Modes
-    -----
-    ``"per_location_mean"``  (George and Vadivukkarasi, Simulation Results): fit each location's m links, then
-        average the L estimates; ``per_location`` holds the L fits. The covariance is that of the mean
-        of L independent fits.
-    ``"pooled"``: one fit over all ``L*m`` pairs.
-    ``"per_anchor"``: one fit per anchor over its L links (column-wise), giving arrays of length m.
+    Returns
+    -------
+    PathLossFit
+        The calibration (batch shape ``(...)``, or ``(..., m)`` per anchor).
+
+    Raises
+    ------
+    ValueError
+        Shapes that differ or hold no location or no anchor, an unknown ``mode``.
+    DegenerateGeometryError
+        As :func:`fit_path_loss`: a location (or anchor, or the pool) whose distances are all equal.
+
+    References
+    ----------
+    George and Vadivukkarasi, Eq. (6) and the Simulation Results' per-location average.
+
+    Examples
+    --------
+    Noise-free powers at three locations give the channel back:
+
+    >>> import numpy as np
+    >>> import locbook as lb
+    >>> anchors = np.array([[0.0, 0.0], [10.0, 0.0], [0.0, 10.0], [10.0, 10.0]])
+    >>> locations = np.array([[2.0, 3.0], [6.0, 5.0], [8.0, 1.0]])
+    >>> distance = lb.pairwise_distance_m(locations, anchors)
+    >>> power = lb.PathLossModel(-40.0, 2.5).mean_rss_dbm(distance)
+    >>> fit = lb.calibrate_path_loss(distance, power)
+    >>> print(np.round(fit.ref_power_dbm, 2), np.round(fit.path_loss_exp, 2))
+    -40.0 2.5
+    >>> print(np.round(lb.calibrate_path_loss(distance, power, mode="per_anchor").path_loss_exp, 2))
+    [2.5 2.5 2.5 2.5]
     """
     check_choice("mode", mode, CALIBRATION_MODES)
     distance_m = as_array("distance_m", distance_m)
@@ -490,7 +562,6 @@ def calibrate_path_loss_devices(distance_m, rss_dbm, device, *, reference=None,
     span fewer than two distinct distances, or offsets the readings cannot separate from the anchors' ``P0``
     (devices that share no anchor, through other devices, with the reference).
     """
-    from ..errors import ParameterError
     distance_m = as_array("distance_m", distance_m, ndim=2)
     rss_dbm = as_array("rss_dbm", rss_dbm, ndim=2, nan_ok=True)
     check_scalar("ref_distance_m", ref_distance_m, gt=0)

@@ -28,7 +28,7 @@ import numpy as np
 from .._validate import as_array, check_choice, check_scalar
 from ..models.channel import PathLossModel, pairwise_distance_m, require_path_loss_model, wall_crossings
 from ..models.rss import RssModel
-from .localization import _accepts_old_form, _is_old_form, _rss_model_parts
+from .rss_form import accepts_old_form, is_old_form, rss_model_parts
 
 __all__ = ["KNN_WEIGHTINGS", "KNN_BLOCK_BYTES", "knn_position", "model_fingerprints", "pattern_fingerprints"]
 
@@ -40,10 +40,10 @@ def _model_fingerprints_v1(cells_m, anchors_m, model, walls_m=None, min_distance
 
 
 def _old_fingerprints_call(args, kwargs):
-    """:func:`~locbook.static.localization._accepts_old_form`'s ``old_call`` of :func:`model_fingerprints`: the form
+    """:func:`~locbook.static.rss_form.accepts_old_form`'s ``old_call`` of :func:`model_fingerprints`: the form
     before issue 47 (cells, anchors, a PathLossModel, walls) goes to the same arithmetic, :func:`_fingerprints`,
     directly (its parameters may carry any batch axes ``(..., m)``, more than an RssModel holds)."""
-    if not _is_old_form(args, kwargs, ("cells_m", "anchors_m")):
+    if not is_old_form(args, kwargs, ("cells_m", "anchors_m")):
         if "walls_m" in kwargs:
             raise ValueError("model_fingerprints: walls_m is the model's: pass RssModel(anchors_m, channel, walls_m) "
                              "as model")
@@ -55,7 +55,7 @@ def _old_fingerprints_call(args, kwargs):
                                       given.get("min_distance_m", 0.1)))
 
 
-@_accepts_old_form(_old_fingerprints_call)
+@accepts_old_form(_old_fingerprints_call)
 def model_fingerprints(cells_m, model: RssModel, *, min_distance_m: float = 0.1):
     """Parameter-based map: mean RSSI ``(..., C, m)`` of the RSS model ``model`` (:class:`locbook.RssModel`: its
     anchors ``(m, dim)``, its channel, its walls ``model.walls_m``) at cell centres ``(C, dim)``, Eq. (3.4).
@@ -68,7 +68,7 @@ def model_fingerprints(cells_m, model: RssModel, *, min_distance_m: float = 0.1)
     The form before issue 47, ``model_fingerprints(cells_m, anchors_m, channel, walls_m=None, min_distance_m=0.1)`` (a
     :class:`~locbook.PathLossModel` third), is deprecated: it warns and gives the same map.
     """
-    anchors_m, channel, _ = _rss_model_parts(model, "model_fingerprints", walls=True, per_step=True, heights=False,
+    anchors_m, channel, _ = rss_model_parts(model, "model_fingerprints", walls=True, per_step=True, heights=False,
                                              form="model_fingerprints(cells_m, RssModel(anchors_m, channel, walls_m))")
     return _fingerprints(cells_m, anchors_m, channel, model.walls_m, min_distance_m)
 
@@ -132,21 +132,66 @@ KNN_BLOCK_BYTES = 64 * 2**20
 
 def knn_position(rss_dbm, fingerprints_dbm, cells_m, k: int, weighting: str = "inverse_square", *,
                  min_anchors: int = 3, chunk: int | None = None):
-    """Weighted k-nearest-neighbour position, Eqs. (3.1)-(3.3) of Ozkaya (2011), weights corrected.
+    """Weighted k-nearest-neighbour position in RSSI space, Eqs. (3.1)-(3.3) of Ozkaya (2011), weights corrected.
 
-    ``rss_dbm``: ``(..., m)`` target RSSI vectors; ``fingerprints_dbm``: ``(C, m)`` or ``(..., C, m)``
-    (one map per batch entry); ``cells_m``: ``(C, 2)``. Returns positions ``(..., 2)``.
-    ``k = C`` (all cells) is the weighted centroid used in the thesis's experiments.
+    Each query ``s`` is compared with every cell's fingerprint ``R_j`` by the Euclidean distance in RSSI space,
+    ``E_j = |R_j - s|``; the ``k`` nearest cells are kept and the estimate is their weighted centroid
+    ``x = sum_i w_i x_i`` (module docstring). ``k = C`` (all cells) is the weighted centroid used in the thesis's
+    experiments.
 
-    Missing readings: a NaN in ``rss_dbm`` is a reader not heard; that query is compared with the map over the
-    readers it heard, and with fewer than ``min(min_anchors, m)`` heard its position is NaN (a query that heard
-    every reader is always compared). The map itself must be complete (a cell a reader never heard has no
-    fingerprint to compare: fill it, or drop that reader); a NaN in it is an error naming the cell and reader.
-    The batch axes of ``rss_dbm`` and of a batched map must broadcast against each other.
+    Parameters
+    ----------
+    rss_dbm : array_like, shape (..., m)
+        Target RSSI vectors. A NaN is a reader not heard: that query is compared with the map over the readers it
+        heard, and with fewer than ``min(min_anchors, m)`` heard its position is NaN (a query that heard every
+        reader is always compared).
+    fingerprints_dbm : array_like, shape (C, m) or (..., C, m)
+        The map (one map per batch entry if batched; its batch axes must broadcast against those of ``rss_dbm``).
+        It must be complete: a cell a reader never heard has no fingerprint to compare (fill it, or drop that
+        reader).
+    cells_m : array_like, shape (C, 2)
+        The cells' positions.
+    k : int
+        Neighbours kept, from 1 to ``C``.
+    weighting : {"inverse_square", "literal_ozkaya2011", "uniform"}, default "inverse_square"
+        :data:`KNN_WEIGHTINGS`: ``w_i = (1/E_i^2) / sum_j (1/E_j^2)`` (LANDMARC's normalised form), Eq. (3.3) as
+        printed (not normalised), or equal weights.
+    min_anchors : int, default 3
+        Heard readers a query needs.
+    chunk : int, optional
+        Queries per block (default: as many as fit :data:`KNN_BLOCK_BYTES` of differences, 64 MiB). Each query's
+        arithmetic is the same in any block, so the result does not depend on ``chunk``.
 
-    Memory is bounded whatever the sizes: the queries are compared with the map in blocks of ``chunk`` queries
-    (default: as many as fit :data:`KNN_BLOCK_BYTES` of differences, 64 MiB), each query's arithmetic being the
-    same in any block, so the result does not depend on ``chunk``.
+    Returns
+    -------
+    numpy.ndarray, shape (..., 2)
+        The positions (NaN for a query that heard too few readers).
+
+    Raises
+    ------
+    ValueError
+        A NaN in the map (naming the cell and reader), shapes that do not match or do not broadcast, ``k`` out of
+        range, an unknown ``weighting``.
+
+    References
+    ----------
+    Ozkaya (2011), Eq. (3.1) (the RSSI-space distance), Eqs. (3.2)-(3.3) (the weighted centroid; Eq. (3.3) as
+    printed divides by ``sum_j E_j^2``, kept as ``weighting="literal_ozkaya2011"``).
+
+    Examples
+    --------
+    A query equal to a cell's fingerprint gives that cell:
+
+    >>> import numpy as np
+    >>> import locbook as lb
+    >>> anchors = np.array([[0.0, 0.0], [10.0, 0.0], [0.0, 10.0], [10.0, 10.0]])
+    >>> channel = lb.PathLossModel(-40.0, 2.5)
+    >>> xs = np.arange(0.5, 10.0, 1.0)
+    >>> cells = np.stack(np.meshgrid(xs, xs, indexing="ij"), axis=-1).reshape(-1, 2)
+    >>> fingerprints = channel.mean_rss_dbm(lb.pairwise_distance_m(cells, anchors))
+    >>> query = channel.mean_rss_dbm(lb.pairwise_distance_m(np.array([3.5, 4.5]), anchors))
+    >>> print(np.round(lb.knn_position(query, fingerprints, cells, 1), 2))
+    [3.5 4.5]
     """
     check_choice("weighting", weighting, KNN_WEIGHTINGS)
     fingerprints_dbm = as_array("fingerprints_dbm", fingerprints_dbm, min_ndim=2, nan_ok=True)
@@ -177,7 +222,8 @@ def knn_position(rss_dbm, fingerprints_dbm, cells_m, k: int, weighting: str = "i
     block = int(chunk) if chunk is not None else max(1, KNN_BLOCK_BYTES // (8 * n_cells * max(m, 1)))
     queries = np.broadcast_to(rss_dbm, batch + (m,)).reshape(-1, m)
     maps = (fingerprints_dbm if fingerprints_dbm.ndim == 2 else
-            np.broadcast_to(fingerprints_dbm, batch + fingerprints_dbm.shape[-2:]).reshape((-1,) + fingerprints_dbm.shape[-2:]))
+            np.broadcast_to(fingerprints_dbm, batch + fingerprints_dbm.shape[-2:])
+            .reshape((-1,) + fingerprints_dbm.shape[-2:]))
     out = np.empty((n_queries, cells_m.shape[1]))
     for start in range(0, n_queries, block):
         stop = min(start + block, n_queries)
@@ -241,7 +287,8 @@ def _knn_by_heard_readers(rss_dbm, fingerprints_dbm, cells_m, k, weighting, min_
     batch = np.broadcast_shapes(rss_dbm.shape[:-1], fingerprints_dbm.shape[:-2])
     flat = np.broadcast_to(rss_dbm, batch + (m,)).reshape(-1, m)
     maps = (None if fingerprints_dbm.ndim == 2 else
-            np.broadcast_to(fingerprints_dbm, batch + fingerprints_dbm.shape[-2:]).reshape((-1,) + fingerprints_dbm.shape[-2:]))
+            np.broadcast_to(fingerprints_dbm, batch + fingerprints_dbm.shape[-2:])
+            .reshape((-1,) + fingerprints_dbm.shape[-2:]))
     out = np.full((flat.shape[0], cells_m.shape[1]), np.nan)
     patterns, inverse = np.unique(~np.isnan(flat), axis=0, return_inverse=True)
     inverse = inverse.reshape(-1)

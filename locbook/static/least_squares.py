@@ -1,8 +1,8 @@
 """Recursive least squares over the rows of a linear system: the recursive form of the linearized lateration fix.
 
 Palvai (2008) locates a static emitter from ranges measured at N receiver positions; its LSF is the batch solution
-``(H^T H)^{-1} H^T Y`` of the differenced sphere equations (:func:`locbook.static.localization.lateration_ls` with
-``pairs``, rows from :func:`locbook.static.localization.lateration_system`), and its RLSF, Eqs. (2.49)-(2.58), is
+``(H^T H)^{-1} H^T Y`` of the differenced sphere equations (:func:`locbook.static.lateration.lateration_ls` with
+``pairs``, rows from :func:`locbook.static.lateration.lateration_system`), and its RLSF, Eqs. (2.49)-(2.58), is
 :func:`recursive_least_squares` of the same rows, which equals the batch solution as the prior information goes to
 zero. A NaN row (a missing reading) is skipped.
 """

@@ -6,7 +6,7 @@
 
 the maximum-likelihood position of the range model :class:`locbook.models.range.RangeModel` (independent Gaussian
 range errors of std ``sigma_j``), by :func:`scipy.optimize.least_squares` (trust-region reflective, analytic Jacobian)
-started from the linearized least-squares fix of the same ranges (:func:`locbook.static.localization.lateration_ls`,
+started from the linearized least-squares fix of the same ranges (:func:`locbook.static.lateration.lateration_ls`,
 the closed form; a problem it cannot solve starts at the centroid of its anchors) and bounded to the outline's
 bounding box. A non-rectangular outline is then honoured by moving a solution that lies outside it to the nearest
 point of its boundary (the nearest floor point: the projection, not the constrained minimiser, which for a convex
@@ -25,7 +25,9 @@ from scipy.optimize import least_squares
 
 from .._validate import as_array, check_scalar
 from ..geometry import inside_outline, nearest_on_outline, outline_box
-from .localization import LocalizationResult, _planar, check_anchor_geometry, lateration_ls
+from .checks import check_anchor_geometry, plan_anchors
+from .lateration import lateration_ls
+from .result import LocalizationResult
 
 __all__ = ["range_nls_position", "RANGE_NLS_TOLERANCE"]
 
@@ -36,19 +38,66 @@ RANGE_NLS_TOLERANCE = 1e-12
 
 def range_nls_position(range_m, anchors_m, *, outline_m=None, tag_height_m: float | None = None, range_std_m=None,
                        x0=None) -> LocalizationResult:
-    """Weighted nonlinear least-squares positions ``(..., 2)`` from ranges ``(..., m)`` (module docstring).
+    """Weighted nonlinear least-squares positions ``(..., 2)`` from measured ranges ``(..., m)``.
 
-    ``anchors_m``: ``(m, 2)``, or ``(m, 3)`` with ``tag_height_m`` (3-D distances, plan positions; a 2-D data set's
-    anchors have no height and its distances are in the plane). ``range_std_m``: each range's std, broadcasting to
-    ``range_m`` (None: equal weights); finite and positive where a range is given. ``outline_m`` ``(V, 2)``: the
-    floor (bounds and the nearest-point rule). ``x0`` ``(..., 2)``: the start (default: the linearized LS fix).
-    Returns a :class:`~locbook.static.localization.LocalizationResult` with the cost ``sum_j w_j^2`` at the solution."""
+    Per problem the minimiser of ``sum_j ((|[p, h] - a_j| - r_j) / sigma_j)^2`` by scipy's trust-region reflective
+    least squares, started from the linearized LS fix and bounded to the outline's bounding box; a solution outside
+    a non-rectangular outline is moved to the nearest point of its boundary (module docstring).
+
+    Parameters
+    ----------
+    range_m : array_like, shape (..., m)
+        Ranges (m), non-negative; NaN is a range not measured (left out). A problem with fewer than three ranges
+        gets a NaN position and ``status="too_few_anchors"``.
+    anchors_m : array_like, shape (m, 2) or (m, 3)
+        Anchor positions; ``(m, 3)`` with ``tag_height_m`` (3-D distances, plan positions; a 2-D data set's
+        anchors have no height and its distances are in the plane).
+    outline_m : array_like, shape (V, 2), optional
+        The floor: the bounds and the nearest-point rule (without it the problem is unbounded).
+    tag_height_m : float, optional
+        The tag's known height.
+    range_std_m : array_like, optional
+        Each range's standard deviation (m), broadcasting to ``range_m`` (None: equal weights); finite and positive
+        where a range is given.
+    x0 : array_like, shape (..., 2), optional
+        The start (default: the linearized LS fix, :func:`locbook.static.lateration.lateration_ls`).
+
+    Returns
+    -------
+    LocalizationResult
+        ``position_m`` ``(..., 2)``, with the cost ``sum_j w_j^2`` (the weighted squared residuals) at the
+        solution and a status per problem.
+
+    Raises
+    ------
+    DegenerateGeometryError
+        Anchors that are too few, coincident or collinear.
+    ValueError
+        Negative ranges, anchors without heights given ``tag_height_m``, shapes that do not match.
+
+    References
+    ----------
+    The maximum-likelihood position of the range model :class:`locbook.models.range.RangeModel` (independent
+    Gaussian range errors of std ``sigma_j``).
+
+    Examples
+    --------
+    Noise-free ranges give the true position back:
+
+    >>> import numpy as np
+    >>> import locbook as lb
+    >>> anchors = np.array([[0.0, 0.0], [10.0, 0.0], [0.0, 10.0], [10.0, 10.0]])
+    >>> ranges = lb.pairwise_distance_m(np.array([3.0, 4.0]), anchors)
+    >>> fix = lb.range_nls_position(ranges, anchors)
+    >>> print(np.round(fix.position_m, 2), fix.status)
+    [3. 4.] ok
+    """
     anchors = as_array("anchors_m", anchors_m, ndim=2)
     if tag_height_m is not None:
         check_scalar("tag_height_m", tag_height_m)
         if anchors.shape[1] != 3:
             raise ValueError(f"anchors_m must be (m, 3) (x, y, height) with tag_height_m, got {anchors.shape}")
-    plan, vertical = _planar(anchors, tag_height_m)
+    plan, vertical = plan_anchors(anchors, tag_height_m)
     check_anchor_geometry(plan)
     m, dim = plan.shape
     ranges = as_array("range_m", range_m, min_ndim=1, nan_ok=True, trailing=(m,))

@@ -142,7 +142,8 @@ def smooth_rssi(rss_dbm, ref_rss_dbm, ref_expected_dbm, threshold: float = 0.4):
     w = inv / inv.sum(axis=-1, keepdims=True)
     nearest = np.argmax(w, axis=-1)
     w_max = np.take_along_axis(w, nearest[..., None], -1)[..., 0]
-    error = np.take_along_axis(ref_rss_dbm - np.asarray(ref_expected_dbm, float), nearest[..., None, None], -2)[..., 0, :]
+    error = np.take_along_axis(ref_rss_dbm - np.asarray(ref_expected_dbm, float), nearest[..., None, None],
+                               -2)[..., 0, :]
     applied = w_max > threshold
     smoothed = np.where(applied[..., None], rss_dbm - w_max[..., None] * error, rss_dbm)
     return smoothed, nearest, applied

@@ -30,6 +30,8 @@ from locbook.static.calibration import CALIBRATION_MODES, FIT_PROBLEM_STATUSES
 from locbook.static.localization import GOODNESS_OF_FIT_ALPHA, LATERATION_PAIRS, LOCALIZATION_STATUSES
 from scipy.stats import chi2
 
+pytestmark = pytest.mark.fuzz
+
 FUZZ = settings(max_examples=200, deadline=None, derandomize=True,
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much])
 FUZZ_SLOW = settings(max_examples=30, deadline=None, derandomize=True,

@@ -15,6 +15,8 @@ import locbook as lb
 from locbook.static import box_ls
 from locbook.tracking import _compiled
 
+pytestmark = pytest.mark.compiled
+
 pytest.importorskip("numba")
 
 ROOMS = {2: (np.array([0.0, 0.0]), np.array([2.1, 7.8])),

@@ -3,6 +3,10 @@ The times themselves are measured by benchmarks/bench_startup.py, not asserted h
 import subprocess
 import sys
 
+import pytest
+
+pytestmark = pytest.mark.installed
+
 HEAVY = ("numpy", "scipy", "pandas", "matplotlib", "cvxpy", "pydantic", "papermill", "nbformat", "jinja2", "rich")
 
 

@@ -11,6 +11,8 @@ import locbook as lb
 from locbook.static import box_ls
 from locbook.tracking import _compiled, bayes
 
+pytestmark = pytest.mark.compiled
+
 pytest.importorskip("numba")
 
 ANCHORS = np.array([[0.0, 0.0], [5.0, 0.0], [0.0, 4.0], [5.0, 4.0]])

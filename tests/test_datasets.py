@@ -168,6 +168,7 @@ def test_rows_already_on_the_clock_are_one_epoch_each():
 
 
 # -- the shipped data sets ------------------------------------------------------------------------------------
+@pytest.mark.installed
 def test_every_shipped_data_set_loads_with_its_licence():
     assert "kolakowski2021" in shipped_datasets()
     for name in shipped_datasets():
@@ -352,6 +353,7 @@ def test_data_sets_of_one_name_never_share_a_reports_folder(tmp_path):
         write_example_dataset(first, np.random.default_rng(1))
 
 
+@pytest.mark.installed
 def test_danis2022_facts():
     """The second shipped data set as its README describes it."""
     ds = load_dataset("danis2022")

@@ -451,6 +451,7 @@ def test_the_guard_is_its_rule_run_by_run():
     assert 0 < np.count_nonzero(expected >= 0) < runs  # both kinds among the random runs too
 
 
+@pytest.mark.compiled
 def test_the_guard_never_loads_numba_by_itself():
     """A large NIS judged in a fresh interpreter where no compiled filter ran: numpy's passes answer, and numba stays
     unloaded (loading it for the guard alone would cost more than the pass saves)."""

@@ -23,6 +23,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 import bench_dogan_filters as bd  # noqa: E402
 import bench_ukf_speed as bu  # noqa: E402
 
+pytestmark = pytest.mark.compiled
+
 try:
     import numba  # noqa: F401
     HAVE_NUMBA = True

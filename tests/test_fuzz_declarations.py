@@ -34,6 +34,8 @@ from locbook.suite.study import expand_study, load_studies
 
 from builders import toml_key, toml_value as toml
 
+pytestmark = pytest.mark.fuzz
+
 FUZZ = settings(max_examples=300, deadline=None, derandomize=True,
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much,
                                        HealthCheck.function_scoped_fixture])

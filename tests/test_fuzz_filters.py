@@ -26,6 +26,8 @@ from locbook.tracking.resampling import RESAMPLING_METHODS
 from locbook.errors import LocbookError
 from locbook.tracking import _compiled as K
 
+pytestmark = pytest.mark.fuzz
+
 MODEL = lb.constant_velocity(1.0, 0.05)
 F0, Q0 = MODEL.F, MODEL.Q
 H0 = MODEL.position_measurement_matrix()

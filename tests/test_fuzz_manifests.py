@@ -39,6 +39,8 @@ from locbook.data.measured import RSSI_RANGE_DBM, read_anchors, read_readings, v
 
 from builders import ANCHORS, TRACK, calibration_csv, toml_document
 
+pytestmark = pytest.mark.fuzz
+
 MAX_COORDINATE_M = getattr(measured, "MAX_COORDINATE_M", 1e7)       # getattr: the module collects on older code
 
 FUZZ = settings(max_examples=150, deadline=None, derandomize=True,

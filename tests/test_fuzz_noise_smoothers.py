@@ -25,6 +25,8 @@ import locbook as lb
 from locbook.errors import LocbookError
 from locbook.tracking.smoother import rts_smoother
 
+pytestmark = pytest.mark.fuzz
+
 SPECIAL = [np.nan, np.inf, -np.inf, 1e300, -5.0, 0.0]
 TARGETS = ["none", "z", "F", "Q", "R", "x0", "P0"]
 RAW = ("could not be broadcast", "operands could not", "cannot reshape", "shape mismatch", "out of bounds",

@@ -32,6 +32,8 @@ from locbook.static.lateration import LATERATION_PAIRS
 from locbook.static.result import LOCALIZATION_STATUSES
 from scipy.stats import chi2
 
+pytestmark = pytest.mark.fuzz
+
 FUZZ = settings(max_examples=200, deadline=None, derandomize=True,
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much])
 FUZZ_SLOW = settings(max_examples=30, deadline=None, derandomize=True,

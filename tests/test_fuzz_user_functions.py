@@ -22,6 +22,8 @@ from hypothesis import strategies as st
 
 import locbook as lb
 
+pytestmark = pytest.mark.fuzz
+
 MODEL = lb.constant_velocity(1.0, 0.05)
 F, Q = MODEL.F, MODEL.Q
 H = MODEL.position_measurement_matrix()

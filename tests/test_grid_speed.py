@@ -13,6 +13,8 @@ from locbook.tracking import _compiled, bayes
 from locbook.models.rss import _table_log_likelihood
 from locbook.tracking.bayes import _BandedLattice, grid_bayes_filter, grid_transition_matrix
 
+pytestmark = pytest.mark.compiled
+
 ANCHORS = np.array([[0.0, 0.0], [5.0, 0.0], [0.0, 4.0], [5.0, 4.0]])
 CHANNEL = lb.PathLossModel(-40.0, 2.5, 3.0, min_distance_m=0.1)
 TOL = 1e-12

@@ -247,6 +247,7 @@ def test_the_grid_filter_takes_the_rss_models_mean_table_once(monkeypatch):
     assert np.isfinite(res.mean).all() and len(calls) == 1
 
 
+@pytest.mark.compiled
 def test_the_particle_filter_takes_the_rss_models_compiled_likelihood(monkeypatch):
     """The RSS model's compiled likelihood (a registry keyed by model type) is what the particle filter calls when
     the compiled path is on, not the protocol's generic likelihood."""

@@ -5,6 +5,7 @@ import base64
 import re
 
 import nbformat
+import pytest
 from nbformat.v4 import new_code_cell, new_markdown_cell, new_notebook
 
 from locbook.suite.notebook_html import _rewrite, export_html, render_math
@@ -28,6 +29,7 @@ def test_tex_mathtext_cannot_read_is_rewritten_or_shown_as_code():
     assert out == "<code>\\begin{bmatrix} 1 &amp; 0 \\end{bmatrix}</code>"
 
 
+@pytest.mark.installed
 def test_the_exported_page_loads_nothing_from_the_network(tmp_path):
     nb = new_notebook()
     nb.metadata["kernelspec"] = {"name": "python3", "display_name": "Python 3", "language": "python"}

@@ -1,8 +1,11 @@
 """Every notebook of the suite, executed at the quick profile, produces its reports."""
 import csv
 import json
+from pathlib import Path
 
 import pytest
+
+import locbook
 
 from locbook.suite.bracket import SITE_NUMBER_COLUMNS
 from locbook.suite import load_suite, read_parameters, run_suite
@@ -11,6 +14,7 @@ SUITE = load_suite()
 pytestmark = pytest.mark.notebooks
 
 
+@pytest.mark.installed
 def test_every_notebook_declares_typed_parameters_and_is_committed_without_outputs():
     import nbformat
     for exp in SUITE.experiments:
@@ -21,6 +25,28 @@ def test_every_notebook_declares_typed_parameters_and_is_committed_without_outpu
             exp.parameters(profile)                        # profile values match the declared types
         nb = nbformat.read(str(exp.notebook), as_version=4)
         assert all(not c.get("outputs") for c in nb.cells if c.cell_type == "code"), exp.id
+
+
+@pytest.mark.installed
+def test_one_notebook_per_document_runs_from_the_package_and_reads_its_own_data(tmp_path):
+    """The installed pass's notebook check (docs/testing.md): the first experiment of every document, run at the
+    quick profile, writes its page, summary and figures and the site's index, and every data file its kernel read
+    is one of the data files of the locbook this process imported (the installed copy, in that pass)."""
+    first = {}
+    for exp in SUITE.experiments:
+        first.setdefault(exp.document.key, exp)
+    assert len(first) == len({e.document.key for e in SUITE.experiments}) > 1
+    run = run_suite(SUITE, list(first.values()), "quick", jobs=2, report_root=tmp_path, progress="quiet")
+    assert {o.id: o.status for o in run.outcomes} == {e.id: "ok" for e in first.values()}, \
+        [o.error for o in run.outcomes]
+    folder, package = run.report_dir, Path(locbook.__file__).resolve().parent
+    assert (folder / "index.html").exists()
+    for exp in first.values():
+        assert (folder / exp.id / f"{exp.id}.html").exists() and (folder / exp.id / "summary.md").exists(), exp.id
+        assert list((folder / exp.id).glob("*.png")), exp.id
+        data = json.loads((folder / exp.id / "run.json").read_text())["data"]
+        assert data, exp.id
+        assert all(Path(p).resolve().is_relative_to(package) for p in data), (exp.id, package, list(data))
 
 
 @pytest.fixture(scope="module")

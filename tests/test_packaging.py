@@ -16,6 +16,8 @@ from locbook.suite.catalog import copy_notebooks, list_text, show_text
 from locbook.suite.cli import main
 from locbook.suite.spec import SuiteError
 
+pytestmark = pytest.mark.installed
+
 REPO = Path(__file__).resolve().parents[1]
 
 
@@ -59,6 +61,18 @@ def test_list_says_which_machine_each_profiles_times_came_from(tmp_path):
     text = list_text(suite, tmp_path)
     assert f"quick times measured on: {machine_label()} (this machine)" in text
     assert "full times measured on: Some CPU, 64 CPUs; a machine not recorded" in text
+
+
+def test_the_console_script_and_python_m_locbook_answer_with_the_distributions_version(tmp_path):
+    """The entry points the package declares (pyproject's [project.scripts] and locbook/__main__.py), started from a
+    folder outside the source tree, print the version the installed distribution's metadata records."""
+    from importlib.metadata import version
+    script = Path(sys.executable).parent / "locbook"
+    if not script.exists():
+        pytest.skip(f"no console script beside {sys.executable} (locbook not installed into this environment)")
+    for command in ([str(script), "--version"], [sys.executable, "-m", "locbook", "--version"]):
+        done = subprocess.run(command, cwd=tmp_path, capture_output=True, text=True, check=True)
+        assert done.stdout.strip() == f"locbook {version('locbook')}", command
 
 
 def test_copy_notebooks_never_overwrites_without_force(tmp_path):

@@ -14,6 +14,8 @@ from locbook.tracking import particle as P
 pytest.importorskip("numba")
 from locbook.tracking import _particle_kernels as K  # noqa: E402
 
+pytestmark = pytest.mark.compiled
+
 ANCHORS = np.array([[0.0, 0.0], [20.0, 0.0], [20.0, 15.0], [0.0, 15.0], [10.0, 7.5]])
 # an office's walls: a long one, a short one, a diagonal, and one through an anchor's column
 WALLS = np.array([[[5.0, -1.0], [5.0, 16.0]], [[12.0, 4.0], [12.0, 9.0]], [[0.0, 10.0], [8.0, 14.0]],

@@ -21,7 +21,7 @@ import pytest
 from locbook.suite import load_suite, run_suite
 from test_suite import _notebook   # the toy notebook writer of the suite tests
 
-pytestmark = pytest.mark.notebooks   # executes (toy) notebooks with papermill
+pytestmark = [pytest.mark.notebooks, pytest.mark.browser]   # executes (toy) notebooks with papermill
 
 REPO = Path(__file__).resolve().parents[1]
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")

@@ -20,6 +20,8 @@ from locbook.tracking import unscented as U
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 import bench_ukf_speed as bu  # noqa: E402
 
+pytestmark = pytest.mark.compiled
+
 numba = pytest.importorskip("numba")
 
 TOL = 1e-9

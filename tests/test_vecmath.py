@@ -7,6 +7,8 @@ import pytest
 numba = pytest.importorskip("numba")
 from locbook.tracking import _vecmath as V  # noqa: E402
 
+pytestmark = pytest.mark.compiled
+
 # compiled here without the disk cache: a cached caller keeps the callee's code it was compiled with (numba checks
 # only the caller's own file), and these tests must see the current one
 

@@ -104,7 +104,7 @@ class PathLossFit:
     @property
     def problem_ok(self) -> np.ndarray:
         """Per problem (the batch shape): whether its parameters can be used."""
-        return self.problem_status == "ok"
+        return np.asarray(self.problem_status) == "ok"
 
     @property
     def ok(self) -> bool:
@@ -126,7 +126,7 @@ class PathLossFit:
         axes (independent problems) has no single model; a fit with a problem that is not ``"ok"`` is refused.
         """
         if not self.ok:
-            bad = sorted(set(np.atleast_1d(self.problem_status).tolist()) - {"ok"}) or [self.status]
+            bad = sorted(set(np.atleast_1d(np.asarray(self.problem_status)).tolist()) - {"ok"}) or [self.status]
             raise ValueError(f"this path-loss fit cannot become a model: status {self.status!r}, problems {bad}")
         if np.ndim(self.ref_power_dbm) > 1:
             raise ValueError(f"a fit of shape {np.shape(self.ref_power_dbm)} holds independent problems; a model "
@@ -386,12 +386,12 @@ def fit_path_loss(distance_m, rss_dbm, *, ref_distance_m: float = 1.0,
     check_choice("solver", solver, CALIBRATION_SOLVERS)
     check_choice("loss", loss, CALIBRATION_LOSSES)
     bounded = ref_power_bounds_dbm is not None or path_loss_exp_bounds is not None
-    bounds = []
-    for name, pair in (("ref_power_bounds_dbm", ref_power_bounds_dbm), ("path_loss_exp_bounds", path_loss_exp_bounds)):
-        if pair is None:
+    bounds: list[tuple[float, ...] | None] = []
+    for name, given in (("ref_power_bounds_dbm", ref_power_bounds_dbm), ("path_loss_exp_bounds", path_loss_exp_bounds)):
+        if given is None:
             bounds.append(None)
             continue
-        pair = as_array(name, pair)
+        pair = as_array(name, given)
         if pair.shape != (2,) or not pair[0] <= pair[1]:
             raise ValueError(f"{name} must be (lower, upper) with lower <= upper, got {pair.tolist()}")
         bounds.append(tuple(map(float, pair)))

@@ -14,8 +14,8 @@ from __future__ import annotations
 import numpy as np
 
 from .._validate import as_array, check_scalar
-from ..models.channel import PathLossModel, log_distance_mean_dbm, pairwise_distance_m, require_path_loss_model
 from ..errors import DegenerateGeometryError
+from ..models.channel import PathLossModel, log_distance_mean_dbm, pairwise_distance_m, require_path_loss_model
 
 # the public API (locbook._API); goodness_of_fit, check_channel and plan_anchors serve the estimators
 __all__ = ["check_anchor_geometry", "ANCHOR_CONDITION_RTOL", "implausible_powers", "IMPLAUSIBLE_SIGMAS",
@@ -107,7 +107,7 @@ def goodness_of_fit(status: np.ndarray, cost: np.ndarray, model: PathLossModel, 
     dof = m - dim
     if not sigma_max > 0 or dof <= 0:
         return status
-    from scipy.special import chdtri            # lazy: keeps `import locbook` fast
+    from scipy.special import chdtri  # lazy: keeps `import locbook` fast
     bound = chdtri(dof, GOODNESS_OF_FIT_ALPHA)  # upper quantile: P(chi2_dof > bound) = alpha
     with np.errstate(over="ignore"):            # a huge finite cost over a tiny sigma is inf: still beyond the bound
         poor = (status == "ok") & (np.asarray(cost) / sigma_max**2 > bound)

@@ -23,8 +23,15 @@ import numpy as np
 from .._validate import as_array, check_choice
 from ..errors import DegenerateGeometryError, ParameterError
 from .checks import check_anchor_geometry, plan_anchors
-from .missing import (by_heard_anchors, check_min_anchors, checked_readings, given_readings, has_missing,
-                      ref_in_subset, solve_where)
+from .missing import (
+    by_heard_anchors,
+    check_min_anchors,
+    checked_readings,
+    given_readings,
+    has_missing,
+    ref_in_subset,
+    solve_where,
+)
 from .result import LocalizationResult, status_array
 
 # lateration_by_heard serves the box LS too

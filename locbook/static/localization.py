@@ -15,8 +15,13 @@ The estimators now live along their seams (import from there in new code):
 - :mod:`locbook.static.rss_form`: the RSS estimators' call form (one RssModel; the form before issue 47).
 """
 from .box_ls import BOX_LS_SOLVERS, lateration_box_ls
-from .checks import (ANCHOR_CONDITION_RTOL, GOODNESS_OF_FIT_ALPHA, IMPLAUSIBLE_SIGMAS, check_anchor_geometry,
-                     implausible_powers)
+from .checks import (
+    ANCHOR_CONDITION_RTOL,
+    GOODNESS_OF_FIT_ALPHA,
+    IMPLAUSIBLE_SIGMAS,
+    check_anchor_geometry,
+    implausible_powers,
+)
 from .grid_ml import GRID_ML_BLOCK_BYTES, grid_ml_position
 from .lateration import LATERATION_PAIRS, LATERATION_VARIANTS, lateration_ls, lateration_system, lateration_wls
 from .result import LOCALIZATION_STATUSES, LocalizationResult

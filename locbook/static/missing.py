@@ -16,8 +16,8 @@ from dataclasses import replace
 import numpy as np
 
 from .._validate import as_array, check_scalar
-from ..models.channel import PathLossModel
 from ..errors import DegenerateGeometryError
+from ..models.channel import PathLossModel
 from .checks import check_anchor_geometry
 from .result import LocalizationResult
 

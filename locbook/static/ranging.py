@@ -20,6 +20,8 @@ to ``m`` residuals, about a millisecond).
 """
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from scipy.optimize import least_squares
 
@@ -137,7 +139,7 @@ def range_nls_position(range_m, anchors_m, *, outline_m=None, tag_height_m: floa
     v2 = 0.0 if vertical is None else np.square(vertical)
     for i in np.flatnonzero(enough):        # one scipy solve per problem (module docstring)
         a, r, s = plan[heard[i]], flat[i, heard[i]], std[i, heard[i]]
-        vz2 = v2 if np.ndim(v2) == 0 else v2[heard[i]]
+        vz2 = v2 if np.ndim(v2) == 0 else np.asarray(v2)[heard[i]]
         p0 = start[i] if np.isfinite(start[i]).all() else a.mean(axis=0)
         if lower is not None:               # trf starts strictly inside its bounds
             span = upper - lower
@@ -150,10 +152,11 @@ def range_nls_position(range_m, anchors_m, *, outline_m=None, tag_height_m: floa
             d = np.sqrt(np.sum((p - a) ** 2, axis=-1) + vz2)
             return (p - a) / np.where(d > 0, d, 1.0)[:, None] / s[:, None]
 
+        # Any: scipy-stubs' bounds type has no member for the (array, array) pair the outline gives
+        bounds: Any = (-np.inf, np.inf) if lower is None else (lower, upper)
         try:
             sol = least_squares(residual, p0, jac=jacobian, method="trf", xtol=RANGE_NLS_TOLERANCE,
-                                ftol=RANGE_NLS_TOLERANCE, gtol=RANGE_NLS_TOLERANCE,
-                                bounds=(-np.inf, np.inf) if lower is None else (lower, upper))
+                                ftol=RANGE_NLS_TOLERANCE, gtol=RANGE_NLS_TOLERANCE, bounds=bounds)
         except (ValueError, np.linalg.LinAlgError):
             status[i] = "solver_failed"
             continue

@@ -22,9 +22,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._validate import as_array, check_scalar
-from .calibration import PathLossFit, fit_path_loss
 from ..errors import ConvergenceError, DegenerateGeometryError
 from ..models.channel import PathLossModel, pairwise_distance_m, wall_crossings
+from .calibration import PathLossFit, fit_path_loss
 from .fingerprint import _fingerprints
 
 __all__ = ["OnlineCalibration", "calibrate_from_reference_tags", "pooled_sigma_db", "smooth_rssi",

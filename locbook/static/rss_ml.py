@@ -9,9 +9,9 @@ from __future__ import annotations
 import numpy as np
 
 from .._validate import as_array, check_scalar
+from ..errors import ConvergenceError
 from ..models.channel import PathLossModel
 from ..models.rss import RssModel, rss_mean_jacobian
-from ..errors import ConvergenceError
 from .checks import check_anchor_geometry, check_channel, goodness_of_fit, implausible_powers, plan_anchors
 from .lateration import lateration_ls
 from .missing import by_heard_anchors, channel_subset, check_min_anchors, checked_readings, solve_where
@@ -28,7 +28,7 @@ def _rss_ml_position_v1(anchors_m, rss_dbm, model, initial_m=None, *, max_iter=N
 
 def _raise_if_failed(res: LocalizationResult, raise_on_failure: bool) -> LocalizationResult:
     if raise_on_failure and not np.all(res.converged):
-        failed = sorted(set(res.status.ravel().tolist()) - {'ok'})
+        failed = sorted(set(np.asarray(res.status).ravel().tolist()) - {'ok'})
         raise ConvergenceError(f"RSS maximum likelihood: {int(np.sum(~res.converged))} of {res.converged.size} "
                                f"problems did not converge (statuses: {failed})")
     return res

@@ -17,8 +17,8 @@ disagreement.
 """
 from __future__ import annotations
 
-import gc
 import argparse
+import gc
 import sys
 from pathlib import Path
 
@@ -26,7 +26,6 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import _harness as hx  # noqa: E402
-
 import locbook as lb  # noqa: E402
 from locbook.scenarios import ozkaya as oz  # noqa: E402
 

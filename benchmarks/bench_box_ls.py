@@ -34,9 +34,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import _harness as hx  # noqa: E402
-from _tolerances import LIBRARY_TIGHT, solver_bound  # noqa: E402
-
 import locbook as lb  # noqa: E402
+from _tolerances import LIBRARY_TIGHT, solver_bound  # noqa: E402
 
 TIGHT = {"tol_gap_abs": 1e-12, "tol_gap_rel": 1e-12, "tol_feas": 1e-12, "tol_ktratio": 1e-10}
 #: pairs for the millisecond comparisons (exact against the closed form)

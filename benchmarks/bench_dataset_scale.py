@@ -92,6 +92,7 @@ def run(size: str = "full", readings: int | None = None):
     10^4. Each stage timed once, in its own process."""
     hx.check_size(size)
     import numpy as np
+
     from locbook.data.example import write_example_dataset
 
     target = readings or (FULL_READINGS if size == "full" else 30_000)

@@ -22,7 +22,6 @@ from filterpy.kalman import ExtendedKalmanFilter, KalmanFilter
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import _harness as hx  # noqa: E402
-
 import locbook as lb  # noqa: E402
 from locbook.scenarios import dogan as dg  # noqa: E402
 from locbook.tracking import _compiled  # noqa: E402

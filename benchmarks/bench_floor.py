@@ -40,7 +40,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import _harness as hx  # noqa: E402
 import bench_dogan_filters as bd  # noqa: E402
 
-
 try:
     import numba
 except ImportError:                     # numba is a dependency of locbook; this only guards a broken install

@@ -30,7 +30,6 @@ import scipy.ndimage as ndi
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import _harness as hx  # noqa: E402
-
 import locbook as lb  # noqa: E402
 from locbook.tracking import _compiled  # noqa: E402
 

@@ -30,10 +30,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import _harness as hx  # noqa: E402
-
-from _tolerances import EPS, ls_round_off_m  # noqa: E402
-
 import locbook as lb  # noqa: E402
+from _tolerances import EPS, ls_round_off_m  # noqa: E402
 from locbook.scenarios import palvai as pv  # noqa: E402
 
 

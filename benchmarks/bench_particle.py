@@ -25,7 +25,6 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import _harness as hx  # noqa: E402
-
 import locbook as lb  # noqa: E402
 from locbook.models.motion import reflect_into_box  # noqa: E402
 from locbook.tracking.particle import _fused_rss_log_likelihood  # noqa: E402

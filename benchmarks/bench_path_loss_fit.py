@@ -18,7 +18,6 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import _harness as hx  # noqa: E402
-
 import locbook as lb  # noqa: E402
 
 #: the parameters the samples are drawn with

@@ -27,7 +27,6 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import _harness as hx  # noqa: E402
-
 import locbook as lb  # noqa: E402
 from locbook.scenarios import measured as ko  # noqa: E402
 

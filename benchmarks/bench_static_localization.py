@@ -17,8 +17,8 @@ step within its tol_m): the cost is not convex and the two may stop in different
 """
 from __future__ import annotations
 
-import gc
 import argparse
+import gc
 import sys
 from pathlib import Path
 
@@ -28,11 +28,9 @@ from scipy.optimize import least_squares
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import _harness as hx  # noqa: E402
-from _tolerances import CLARABEL_DEFAULT, ls_round_off_m, solver_bound  # noqa: E402
-
 import locbook as lb  # noqa: E402
+from _tolerances import CLARABEL_DEFAULT, ls_round_off_m, solver_bound  # noqa: E402
 from locbook.scenarios import george  # noqa: E402
-
 
 #: scipy least_squares' default ftol and xtol; rss_ml_position's default tol_m
 SCIPY_FTOL, SCIPY_XTOL, ML_TOL_M = 1e-8, 1e-8, 1e-7

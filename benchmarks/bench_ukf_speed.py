@@ -42,9 +42,8 @@ from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import _harness as hx  # noqa: E402
-from _tolerances import sigma_sum_round_off  # noqa: E402
-
 import locbook as lb  # noqa: E402
+from _tolerances import sigma_sum_round_off  # noqa: E402
 from locbook.scenarios import gudipati as gu  # noqa: E402
 
 

@@ -26,10 +26,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import _harness as hx  # noqa: E402
-
-from _tolerances import sigma_sum_round_off  # noqa: E402
-
 import locbook as lb  # noqa: E402
+from _tolerances import sigma_sum_round_off  # noqa: E402
 
 #: the mean NEES (2-D position) allowed: exceeded with a probability below 1.3e-4 if the covariance is right
 NEES_BOUND = 25.0

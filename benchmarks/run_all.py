@@ -128,7 +128,7 @@ def machine_facts() -> dict:
         numba_version = numba.__version__
     except ImportError:
         numba_version = "not installed"
-    from locbook.suite.catalog import machine_label        # the CPU as report.json and `locbook list` name it
+    from locbook.suite.catalog import machine_label  # the CPU as report.json and `locbook list` name it
     commit = _git("rev-parse", "--short", "HEAD") or "unknown"
     dirty = _git("--no-optional-locks", "status", "--porcelain", "--untracked-files=no")   # read-only
     try:

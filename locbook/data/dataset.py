@@ -37,9 +37,25 @@ from ..errors import ParameterError
 from .csvfile import DataFormatError, shown, shown_names
 from .epoching import Epochs, epochs, scan_interval_s
 from .long_format import DEVICE_COLUMN, OPTIONAL_READING_COLUMNS, READING_COLUMNS, file_time_origin
-from .manifest import (LENGTH_SCALES, MANIFEST, MAX_MANIFEST_BYTES, MAX_NAME_CHARS, ROLES, TIME_SCALES, EpochRule,
-                       datasets_dir, fail, manifest_file, manifest_methods, manifest_number, manifest_string,
-                       name_problem, read_manifest, resolve_dataset, shipped_datasets)
+from .manifest import (
+    LENGTH_SCALES,
+    MANIFEST,
+    MAX_MANIFEST_BYTES,
+    MAX_NAME_CHARS,
+    ROLES,
+    TIME_SCALES,
+    EpochRule,
+    datasets_dir,
+    fail,
+    manifest_file,
+    manifest_methods,
+    manifest_number,
+    manifest_string,
+    name_problem,
+    read_manifest,
+    resolve_dataset,
+    shipped_datasets,
+)
 from .manifest import run_anchors as check_run_anchors
 from .measured import read_anchors, read_outline, read_path_segments
 from .readings_file import read_readings_table, validate_readings_file

@@ -267,6 +267,7 @@ def floor_runs(data: str) -> list[str]:
     """The ``--data`` values a data run of ``data`` makes: ``[data]`` for a data set without floors or with a floor
     selected, else one ``DATA@FLOOR`` per floor, in the anchors file's order (each its own reports folder)."""
     import tomllib
+
     from .manifest import resolve_dataset
     from .measured import read_anchors
     base, floor = split_floor_selector(data)

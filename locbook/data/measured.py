@@ -84,15 +84,47 @@ import pandas as pd
 from scipy.spatial import cKDTree
 
 from ..errors import ParameterError
-from .csvfile import (EXACT_READER_BYTES_PER_BYTE, MAX_COORDINATE_M, MAX_EXACT_READ_BYTES, MAX_LINE_BYTES,
-                      MAX_QUOTED_CHARS, DataFormatError, numeric_column, read_text_table, shown)
-from .epoching import (AGGREGATES, MAX_MIN_READINGS, MAX_REGULAR_EPOCHS, MIN_WINDOW_S, Epochs, epochs,
-                       regular_epochs, scan_interval_s)
-from .long_format import (DEVICE_COLUMN, LINK_DIRECTION_RULE, MAX_TIME_S, OPTIONAL_READING_COLUMNS, READING_COLUMNS,
-                          RSSI_LIMITS_DBM, RSSI_RANGE_DBM, MeasuredDataWarning, file_time_origin, shifted_seconds,
-                          validate_readings)
-from .readings_file import (FAST_READER_BYTES_PER_BYTE, MAX_READINGS_FILE_BYTES, read_readings, read_readings_table,
-                            validate_readings_file)
+from .csvfile import (
+    EXACT_READER_BYTES_PER_BYTE,
+    MAX_COORDINATE_M,
+    MAX_EXACT_READ_BYTES,
+    MAX_LINE_BYTES,
+    MAX_QUOTED_CHARS,
+    DataFormatError,
+    numeric_column,
+    read_text_table,
+    shown,
+)
+from .epoching import (
+    AGGREGATES,
+    MAX_MIN_READINGS,
+    MAX_REGULAR_EPOCHS,
+    MIN_WINDOW_S,
+    Epochs,
+    epochs,
+    regular_epochs,
+    scan_interval_s,
+)
+from .long_format import (
+    DEVICE_COLUMN,
+    LINK_DIRECTION_RULE,
+    MAX_TIME_S,
+    OPTIONAL_READING_COLUMNS,
+    READING_COLUMNS,
+    RSSI_LIMITS_DBM,
+    RSSI_RANGE_DBM,
+    MeasuredDataWarning,
+    file_time_origin,
+    shifted_seconds,
+    validate_readings,
+)
+from .readings_file import (
+    FAST_READER_BYTES_PER_BYTE,
+    MAX_READINGS_FILE_BYTES,
+    read_readings,
+    read_readings_table,
+    validate_readings_file,
+)
 
 __all__ = [
     "DataFormatError", "MeasuredDataWarning", "READING_COLUMNS", "OPTIONAL_READING_COLUMNS", "RSSI_RANGE_DBM",

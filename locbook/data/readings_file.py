@@ -9,9 +9,18 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from . import csvfile      # its MAX_LINE_BYTES and MAX_EXACT_READ_BYTES are read when used (tests lower them)
-from .csvfile import (MISSING_TEXT, DataFormatError, check_line_lengths, file_lines, numeric_column, read_text_table,
-                      shown, shown_names, size_text)
+from . import csvfile  # its MAX_LINE_BYTES and MAX_EXACT_READ_BYTES are read when used (tests lower them)
+from .csvfile import (
+    MISSING_TEXT,
+    DataFormatError,
+    check_line_lengths,
+    file_lines,
+    numeric_column,
+    read_text_table,
+    shown,
+    shown_names,
+    size_text,
+)
 from .long_format import OPTIONAL_READING_COLUMNS, READING_COLUMNS, validate_readings
 
 __all__ = ["MAX_READINGS_FILE_BYTES", "FAST_READER_BYTES_PER_BYTE", "read_readings_table", "validate_readings_file",

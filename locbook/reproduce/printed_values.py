@@ -14,7 +14,6 @@ from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
 
-
 __all__ = ["Printed", "PrintedValues", "printed", "printed_number", "printed_rounding", "PRINTED_DIR",
            "PRINTED_COLUMNS"]
 

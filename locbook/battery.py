@@ -359,7 +359,7 @@ def initial_states(sc: TrackingScenario, ts: TrackerSettings, n_runs: int, rng: 
 KF_FIX_MIN_ANCHORS = 3
 
 
-def _ml_fixes(sc, rss, ts=None):
+def ml_fixes(sc, rss, ts=None):
     """The ``rss_ml`` method's fixes ``(..., 2)`` (grid-ML start at the scenario's pitch, the floor's box), NaN where
     an epoch heard fewer than :data:`KF_FIX_MIN_ANCHORS` anchors: what ``kf_on_ml`` filters."""
     flat = _flat(rss)
@@ -376,7 +376,7 @@ def _fix_cov(sc, ts, rng):
     if sc.fix_cov_m2 is not None:
         return np.asarray(sc.fix_cov_m2, float)
     rss = sc.rss_dbm(200, rng)
-    fixes = _ml_fixes(sc, rss, ts)
+    fixes = ml_fixes(sc, rss, ts)
     ok = np.isfinite(fixes).all(axis=-1)
     return fix_error_covariance(fixes[ok], np.broadcast_to(sc.truth_m, fixes.shape)[ok])
 
@@ -431,7 +431,7 @@ def run_trackers(sc: TrackingScenario, rss_dbm, x0, ts: TrackerSettings, rng: np
     out, flags = {}, {}
     if "kf_on_ml" in chosen:
         H = np.hstack([np.eye(2), np.zeros((2, 2))])
-        fixes = _ml_fixes(sc, rss, ts)
+        fixes = ml_fixes(sc, rss, ts)
         res = extended_kalman_filter(motion.F, motion.Q, x0, P0, [LinearMeasurement(fixes, H, _fix_cov(sc, ts, rng_cov))])
         out["kf_on_ml"], flags["kf_on_ml"] = res.position_m([0, 1]), DivergenceFlags.of(res)
     for name, mode in (("ekf", "parallel"), ("ekf_serial", "serial")):

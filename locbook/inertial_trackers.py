@@ -349,12 +349,12 @@ def run_fusion(sc, name: str, rss_dbm, x0, P0, *, ukf_alpha: float):
     rss = np.asarray(rss_dbm, float)
     record = fus.grid.rss_steps
     if name == "kf_acc":         # Dogan's KF (MLE): the rss_ml fixes in place of the raw RSS, one Q for both
-        from .battery import _ml_fixes
+        from .battery import ml_fixes
         if sc.fix_cov_m2 is None:
             raise ParameterError("kf_acc needs the scenario's fix covariance (fix_cov_m2): the rss_ml fixes' R")
         model, x, P, streams = _acc_setup(sc, fus, rss, x0, P0, fus.q_acc,
                                           fus.heading_rad if fus.heading_rad is not None else 0.0)
-        fixes = fus.grid.on_grid(_ml_fixes(sc, rss))
+        fixes = fus.grid.on_grid(ml_fixes(sc, rss))
         streams = [streams[0], LinearMeasurement(np.broadcast_to(fixes, (streams[0].z.shape[0],) + fixes.shape[1:]),
                                                  model.position_measurement_matrix(),
                                                  np.asarray(sc.fix_cov_m2, float))]

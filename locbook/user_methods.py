@@ -260,6 +260,8 @@ def method_name_problem(name) -> str:
     if not isinstance(name, str) or not _NAME.fullmatch(name) or len(name) > MAX_METHOD_NAME_CHARS:
         return (f"method name {_shown(name)} must be letters, digits, '_' and '-', starting with a letter, at most "
                 f"{MAX_METHOD_NAME_CHARS} characters")
+    # lazy for start-up time, not for a circle: the battery's modules take seconds to import (numba), and a data
+    # set's manifest is checked without running any method
     from .battery import STATIC_METHODS, TRACKERS
     from .inertial_trackers import FUSION_TRACKERS
     from .scenarios.measured_ranges import RANGE_METHOD_NAMES

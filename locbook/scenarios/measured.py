@@ -43,7 +43,7 @@ from ..battery import (STATIC_METHODS as BATTERY_STATIC, TRACKER_PRIORS, StaticS
                        static_fixes as battery_static_fixes, tracking_bound_m)
 from ..bounds.summary import error_bound_ratio, summarize_bound
 from ..data.dataset import Dataset
-from ..inertial_trackers import FUSION_PRIORS, FUSION_TRACKERS
+from ..inertial_trackers import FUSION_PRIORS, FUSION_TRACKERS, run_fusion
 from ..metrics import accuracy_metrics
 from ..models.channel import PathLossModel
 from ..models.rss import RssModel
@@ -424,11 +424,8 @@ def tracking_results(data: Dataset, model: PathLossModel, proto: Protocol, *, se
                                   trackers=[t for t in TRACKERS if t != "particle"], with_divergence=True)
         fused = {}
         if fus is not None:      # the fusion trackers (deterministic: one run), after the battery's draws
-            fused, fused_flags = run_trackers(sc, rss[None], x0, ts,
-                                              keyed_stream(seed, data.name, "tracking", name, "fusion"),
-                                              trackers=list(fus.trackers),
-                                              with_divergence=True)
-            flags.update(fused_flags)
+            for t in fus.trackers:
+                fused[t], flags[t] = run_fusion(sc, t, np.asarray(rss[None], float), x0, ts.P0, ukf_alpha=ts.ukf_alpha)
         runs = np.broadcast_to(rss, (particle_runs,) + rss.shape)
         est["particle"] = run_trackers(sc, runs, np.repeat(x0, particle_runs, axis=0), ts,
                                        keyed_stream(seed, data.name, "tracking", name, "particle"),

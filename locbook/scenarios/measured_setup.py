@@ -211,7 +211,7 @@ class TestEpochs:
         return cls(ep.rss_dbm[known], ep.position_m[known, :2], ep.time_s[known], point)
 
 
-def crlb_m(data: Dataset, model: PathLossModel, positions_m, rss_dbm=None):
+def crlb_m(data: Dataset, model: PathLossModel, positions_m, rss_dbm=None) -> np.ndarray:
     """``sqrt(trace(J^-1))`` of the plan position for the fitted per-anchor channel at plan positions ``(..., 2)``,
     the tag at the data set's known height (3-D distances; the 2-D bound of :func:`locbook.rss_crlb_m`). With the
     epochs' readings ``rss_dbm (..., m)`` the information of each epoch is that of the anchors it heard (an anchor

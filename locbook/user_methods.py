@@ -207,25 +207,6 @@ class UserMethod:
     name: str
     kind: str
     function: str
-    recording: str
-    error: str
-    traceback: str
-
-    def line(self) -> str:
-        where = f" on {self.recording}" if self.recording else ""
-        return f"user method {self.name!r} ({self.kind}, {self.function}) failed{where}: {self.error}"
-
-
-@dataclass(frozen=True)
-class UserMethod:
-    """One registered method: ``name`` (its rows' and legends' name), ``kind`` (:data:`METHOD_KINDS`), ``function``
-    (the spec as given), the importable ``module`` or the absolute ``path`` of its file, the ``attribute`` (the
-    function's name in it, dotted for an attribute of an attribute), and ``source`` (``"manifest"`` or
-    ``"command line"``). :meth:`parse` checks a spec; :meth:`load` imports the function."""
-
-    name: str
-    kind: str
-    function: str
     module: str | None
     path: Path | None
     attribute: str

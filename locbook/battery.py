@@ -16,6 +16,7 @@ import numpy as np
 
 from .bounds.pcrlb import posterior_crlb, position_bound_m, rss_state_information
 from .bounds.crlb import check_position_information, rss_position_information
+from .errors import ParameterError
 from .geometry import grid_in_outline, outline_box
 from .models.channel import PathLossModel
 from .models.motion import constant_velocity
@@ -359,7 +360,7 @@ def initial_states(sc: TrackingScenario, ts: TrackerSettings, n_runs: int, rng: 
 KF_FIX_MIN_ANCHORS = 3
 
 
-def _ml_fixes(sc, rss, ts=None):
+def ml_fixes(sc, rss, ts=None):
     """The ``rss_ml`` method's fixes ``(..., 2)`` (grid-ML start at the scenario's pitch, the floor's box), NaN where
     an epoch heard fewer than :data:`KF_FIX_MIN_ANCHORS` anchors: what ``kf_on_ml`` filters."""
     flat = _flat(rss)
@@ -376,7 +377,7 @@ def _fix_cov(sc, ts, rng):
     if sc.fix_cov_m2 is not None:
         return np.asarray(sc.fix_cov_m2, float)
     rss = sc.rss_dbm(200, rng)
-    fixes = _ml_fixes(sc, rss, ts)
+    fixes = ml_fixes(sc, rss, ts)
     ok = np.isfinite(fixes).all(axis=-1)
     return fix_error_covariance(fixes[ok], np.broadcast_to(sc.truth_m, fixes.shape)[ok])
 
@@ -418,20 +419,23 @@ def run_trackers(sc: TrackingScenario, rss_dbm, x0, ts: TrackerSettings, rng: np
                  trackers=None, with_divergence: bool = False):
     """Every declared tracker on readings ``(R, T, m)`` from initial states ``(R, 4)`` -> positions ``(R, T, 2)``.
     ``with_divergence=True`` returns ``(positions, {tracker: flags})``, the NIS guard per run of each Kalman-family
-    tracker (:class:`locbook.tracking.divergence.DivergenceFlags`, steps of the scenario's clock). ``trackers`` may
-    name the fusion trackers (:data:`locbook.inertial_trackers.FUSION_TRACKERS`) of a scenario with an inertial
-    stream (``sc.inertial``); the default runs :data:`TRACKERS` only."""
-    from .inertial_trackers import FUSION_TRACKERS, run_fusion
+    tracker (:class:`locbook.tracking.divergence.DivergenceFlags`, steps of the scenario's clock). ``trackers``: names
+    of :data:`TRACKERS` (default: all of them); the fusion trackers of a track with an inertial stream are run by
+    :func:`locbook.inertial_trackers.run_fusion`, which builds on this module."""
     rss = np.asarray(rss_dbm, float)
     rng_cov, rng_pf = rng.spawn(2)
     chosen = tuple(TRACKERS if trackers is None else trackers)
+    unknown = [t for t in chosen if t not in TRACKERS]
+    if unknown:
+        raise ParameterError(f"run_trackers runs the battery's trackers {TRACKERS}, got {unknown}; the fusion "
+                             "trackers are locbook.inertial_trackers.run_fusion's")
     motion = constant_velocity(sc.dt_s, ts.q, dim=2)
     P0 = np.broadcast_to(ts.P0, (len(x0), 4, 4))
     idx = np.array([0, 1])
     out, flags = {}, {}
     if "kf_on_ml" in chosen:
         H = np.hstack([np.eye(2), np.zeros((2, 2))])
-        fixes = _ml_fixes(sc, rss, ts)
+        fixes = ml_fixes(sc, rss, ts)
         res = extended_kalman_filter(motion.F, motion.Q, x0, P0, [LinearMeasurement(fixes, H, _fix_cov(sc, ts, rng_cov))])
         out["kf_on_ml"], flags["kf_on_ml"] = res.position_m([0, 1]), DivergenceFlags.of(res)
     for name, mode in (("ekf", "parallel"), ("ekf_serial", "serial")):
@@ -458,9 +462,6 @@ def run_trackers(sc: TrackingScenario, rss_dbm, x0, ts: TrackerSettings, rng: np
         cells = grid_in_outline(sc.outline_m, sc.grid_spacing_m)
         out["grid_bayes"] = grid_bayes_filter(rss, model, cells, sc.spread_m,
                                               initial_belief=_gaussian_belief(cells, x0, ts.P0[:2, :2])).mean
-    for name in chosen:
-        if name in FUSION_TRACKERS:
-            out[name], flags[name] = run_fusion(sc, name, rss, x0, ts.P0, ukf_alpha=ts.ukf_alpha)
     out = {k: out[k] for k in chosen}
     return (out, flags) if with_divergence else out
 

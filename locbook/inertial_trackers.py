@@ -43,12 +43,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .battery import ml_fixes
 from .data.inertial import InertialGrid
 from .errors import ParameterError
-from .models.imu import InertialMeasurement, body_to_world
+from .models.imu import InertialMeasurement, body_to_world, stationary_bias
 from .models.motion import HeadingKinematicModel, KinematicModel
+from .scenarios.gudipati import WalkSettings
 from .tracking.divergence import DivergenceFlags
 from .tracking.kalman import extended_kalman_filter
+from .tracking.noise import fit_noise_ml
 from .tracking.streams import LinearMeasurement, RssMeasurement, Stream
 from .tracking.unscented import unscented_kalman_filter
 
@@ -126,7 +129,6 @@ class ImuNoise:
 def default_noise(with_gyro: bool) -> ImuNoise:
     """No stationary samples: the noise of :class:`locbook.scenarios.gudipati.WalkSettings` (locbook's assumption of
     a MEMS IMU, per sample), no bias removed."""
-    from .scenarios.gudipati import WalkSettings
     s = WalkSettings()
     return ImuNoise(np.zeros(2), np.full(2, s.accel_sigma_m_s2**2), 0.0 if with_gyro else None,
                     s.gyro_sigma_rad_s**2 if with_gyro else None, 0,
@@ -143,7 +145,6 @@ def stationary_noise(recordings, *, with_gyro: bool) -> ImuNoise:
     pooled within-dwell variance (each dwell's own mean removed: ``sum (s - mean_dwell)^2 / (N - dwells)``, so a
     tilt that differs between dwells is not counted as noise). Fewer than :data:`MIN_STATIONARY_SAMPLES`:
     :func:`default_noise`."""
-    from .models.imu import stationary_bias
     values, groups, names = [], [], []
     g0 = 0
     for readings, samples in recordings:
@@ -294,7 +295,6 @@ def fit_fusion(sc, grid: InertialGrid, noise: ImuNoise, P0) -> FusionInputs:
     ekf_rss_acc over the candidates (a gyroscope only), then ``q_acc`` and, with a gyroscope, ``(q, q_angular)``
     by :func:`locbook.fit_noise_ml` of ekf_rss_acc's and ekf_rss_imu's innovations on the track's readings (the
     scenario ``sc``: its measured readings and start state; ``P0`` the RSS trackers' (4, 4) start covariance)."""
-    from .tracking.noise import fit_noise_ml
     rss = np.asarray(sc.measured_rss_dbm, float)[None]
     x0 = np.asarray(sc.start_state, float)[None]
     fus = FusionInputs(grid, noise, None, Q_ACC_START, None)
@@ -349,12 +349,11 @@ def run_fusion(sc, name: str, rss_dbm, x0, P0, *, ukf_alpha: float):
     rss = np.asarray(rss_dbm, float)
     record = fus.grid.rss_steps
     if name == "kf_acc":         # Dogan's KF (MLE): the rss_ml fixes in place of the raw RSS, one Q for both
-        from .battery import _ml_fixes
         if sc.fix_cov_m2 is None:
             raise ParameterError("kf_acc needs the scenario's fix covariance (fix_cov_m2): the rss_ml fixes' R")
         model, x, P, streams = _acc_setup(sc, fus, rss, x0, P0, fus.q_acc,
                                           fus.heading_rad if fus.heading_rad is not None else 0.0)
-        fixes = fus.grid.on_grid(_ml_fixes(sc, rss))
+        fixes = fus.grid.on_grid(ml_fixes(sc, rss))
         streams = [streams[0], LinearMeasurement(np.broadcast_to(fixes, (streams[0].z.shape[0],) + fixes.shape[1:]),
                                                  model.position_measurement_matrix(),
                                                  np.asarray(sc.fix_cov_m2, float))]

@@ -61,30 +61,69 @@ class MethodInput:
     scored recording (every static recording, and every track with a true position per epoch, on those epochs); each
     epoch is located on its own, as the battery's static methods do. A **tracker** (``kind = "tracker"``,
     ``--tracker``) is called once per track, its epochs in time order on the track's clock (a tick without readings
-    is all NaN: predict through it).
+    is all NaN: predict through it). Every array is a read-only copy.
 
-    - ``rss_dbm`` ``(E, m)``: the readings (dBm) of the ``E`` epochs at the ``m`` anchors, NaN where the anchor did
-      not hear the tag; each device's receiver offset already removed (as for every method of the battery);
-    - ``time_s`` ``(E,)``: the epochs' times (s), increasing;
-    - ``recording``: the recording's name in the manifest; ``kind``: its role, ``"static"`` or ``"track"``;
-    - ``tag_height_m``: the tag's known height (m), or None for a 2-D data set;
-    - ``anchors_m`` ``(m, 2)`` (2-D) or ``(m, 3)`` (with the anchors' heights), in the order of the columns;
-    - ``channel``: the fitted :class:`~locbook.models.channel.PathLossModel` (per-anchor ``P_0``, ``n`` and shadowing
-      sigma, fitted on the calibration recordings only); ``model``: the one
-      :class:`~locbook.models.rss.RssModel` built from it, ``RssModel(anchors_m, channel, tag_height_m=...)``, whose
-      ``mean_rss_dbm`` and ``log_likelihood`` the battery's likelihood methods evaluate;
-    - ``outline_m`` ``(V, 2)``: the floor outline (its vertices, m);
-    - ``rng``: a generator of your own, keyed by the data set, the recording and the method's name (a randomised
-      method draws the same numbers on every page of a run);
-    - ``range_m`` ``(E, m)`` and ``range_std_m`` ``(E, m)``: where the recording has ranges (``ranges = "FILE"``,
-      :mod:`locbook.data.ranges`), each epoch's range to each anchor (m; NaN = not measured) and its sigma (the
-      reported std of the window's mean, else the data set's fitted rule; NaN where there is no range), on the same
-      epochs as ``rss_dbm``; None without ranges.
+    Attributes
+    ----------
+    rss_dbm : ndarray, shape (E, m)
+        The readings (dBm) of the ``E`` epochs at the ``m`` anchors, NaN where the anchor did not hear the tag; each
+        device's receiver offset already removed (as for every method of the battery).
+    time_s : ndarray, shape (E,)
+        The epochs' times (s), increasing.
+    recording : str
+        The recording's name in the manifest.
+    kind : str
+        The recording's role, ``"static"`` or ``"track"``.
+    tag_height_m : float or None
+        The tag's known height (m), or None for a 2-D data set.
+    anchors_m : ndarray, shape (m, 2) or (m, 3)
+        The anchors (with their heights for a 3-D data set), in the order of the columns.
+    channel : PathLossModel
+        The fitted :class:`~locbook.models.channel.PathLossModel` (per-anchor ``P_0``, ``n`` and shadowing sigma,
+        fitted on the calibration recordings only).
+    model : RssModel
+        The one :class:`~locbook.models.rss.RssModel` built from it, ``RssModel(anchors_m, channel,
+        tag_height_m=...)``, whose ``mean_rss_dbm`` and ``log_likelihood`` the battery's likelihood methods evaluate.
+    outline_m : ndarray, shape (V, 2)
+        The floor outline (its vertices, m).
+    rng : numpy.random.Generator or None
+        A generator of your own, keyed by the data set, the recording and the method's name (a randomised method
+        draws the same numbers on every page of a run).
+    range_m, range_std_m : ndarray, shape (E, m), or None
+        Where the recording has ranges (``ranges = "FILE"``, :mod:`locbook.data.ranges`): each epoch's range to each
+        anchor (m; NaN = not measured) and its sigma (the reported std of the window's mean, else the data set's
+        fitted rule; NaN where there is no range), on the same epochs as ``rss_dbm``; None without ranges.
 
-    Every array is a read-only copy. The function returns the positions ``(E, 2)`` in metres (a NaN row: no fix at
-    that epoch; a list or any array-like is taken), or the tuple ``(positions (E, 2), covariances (E, 2, 2))`` with a
-    symmetric positive semi-definite covariance (m^2) per fix. Anything else (another shape, inf, half a position,
-    complex values, None, text) fails the method with one line naming it and what it returned (:func:`check_output`).
+    Notes
+    -----
+    The function returns the positions ``(E, 2)`` in metres (a NaN row: no fix at that epoch; a list or any
+    array-like is taken), or the tuple ``(positions (E, 2), covariances (E, 2, 2))`` with a symmetric positive
+    semi-definite covariance (m^2) per fix. Anything else (another shape, inf, half a position, complex values, None,
+    text) fails the method with one line naming it and what it returned (:func:`check_output`).
+
+    Examples
+    --------
+    A static method that puts each epoch at the anchor heard loudest, called as the protocol calls it:
+
+    >>> import numpy as np
+    >>> from locbook import MethodInput
+    >>> from locbook.models.channel import PathLossModel
+    >>> from locbook.models.rss import RssModel
+    >>> from locbook.user_methods import check_output
+    >>> anchors_m = np.array([[0.0, 0.0], [10.0, 0.0], [0.0, 10.0], [10.0, 10.0]])
+    >>> channel = PathLossModel(-40.0, 2.0, 4.0)        # P_0 at 1 m (dBm), exponent n, shadowing sigma (dB)
+    >>> inp = MethodInput(rss_dbm=np.array([[-47.0, -59.3, -58.1, -61.6], [-61.6, -58.1, np.nan, -47.0]]),
+    ...                   time_s=np.array([0.0, 1.0]), recording="walk", kind="static", tag_height_m=None,
+    ...                   anchors_m=anchors_m, channel=channel, model=RssModel(anchors_m, channel),
+    ...                   outline_m=np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]]))
+    >>> def strongest_anchor(inp):
+    ...     return inp.anchors_m[np.nanargmax(inp.rss_dbm, axis=1)]     # NaN: an anchor not heard
+    >>> positions, covariances = check_output("strongest", strongest_anchor(inp), inp.n_epochs)
+    >>> print(positions)
+    [[ 0.  0.]
+     [10. 10.]]
+    >>> print(covariances)
+    None
     """
 
     rss_dbm: np.ndarray
@@ -124,10 +163,46 @@ class MethodFailure:
 
 @dataclass(frozen=True)
 class UserMethod:
-    """One registered method: ``name`` (its rows' and legends' name), ``kind`` (:data:`METHOD_KINDS`), ``function``
-    (the spec as given), the importable ``module`` or the absolute ``path`` of its file, the ``attribute`` (the
-    function's name in it, dotted for an attribute of an attribute), and ``source`` (``"manifest"`` or
-    ``"command line"``). :meth:`parse` checks a spec; :meth:`load` imports the function."""
+    """One registered method: a function of your own and how the reports name it.
+
+    :meth:`parse` checks a spec; :meth:`load` imports the function; :func:`run_method` calls it on each
+    :class:`MethodInput`.
+
+    Attributes
+    ----------
+    name : str
+        Its rows' and legends' name.
+    kind : str
+        One of :data:`METHOD_KINDS` (``"static"`` or ``"tracker"``).
+    function : str
+        The spec as given, ``package.module:function`` or ``path/to/file.py:function``.
+    module : str or None
+        The importable module of a module spec.
+    path : pathlib.Path or None
+        The absolute path of a file spec's file.
+    attribute : str
+        The function's name in it, dotted for an attribute of an attribute.
+    source : str
+        ``"manifest"`` or ``"command line"``.
+
+    Examples
+    --------
+    >>> from locbook import UserMethod
+    >>> m = UserMethod.parse("strongest", "my_methods:strongest_anchor", "static", base=".")
+    >>> m.module, m.attribute, m.path
+    ('my_methods', 'strongest_anchor', None)
+    >>> m.option()
+    'strongest=my_methods:strongest_anchor'
+    >>> m.described
+    'user method my_methods:strongest_anchor'
+
+    A battery method's name is refused, in one line:
+
+    >>> UserMethod.parse("lls", "my_methods:strongest_anchor", "static", base=".")  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    locbook.errors.ParameterError: method name 'lls' is a battery method's (...): give yours another name
+    """
 
     name: str
     kind: str
@@ -260,6 +335,8 @@ def method_name_problem(name) -> str:
     if not isinstance(name, str) or not _NAME.fullmatch(name) or len(name) > MAX_METHOD_NAME_CHARS:
         return (f"method name {_shown(name)} must be letters, digits, '_' and '-', starting with a letter, at most "
                 f"{MAX_METHOD_NAME_CHARS} characters")
+    # lazy for start-up time, not for a circle: the battery's modules take seconds to import (numba), and a data
+    # set's manifest is checked without running any method
     from .battery import STATIC_METHODS, TRACKERS
     from .inertial_trackers import FUSION_TRACKERS
     from .scenarios.measured_ranges import RANGE_METHOD_NAMES

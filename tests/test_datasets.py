@@ -369,14 +369,14 @@ def test_motion_fit_is_the_maximum_likelihood_of_each_motion_model_and_starts_wh
     """measured.fit_motion: q maximises the EKF's log-likelihood of the track's readings (an EKF rerun at the fitted q
     gives at least the likelihood at the start value, and nearby q give less), from the state every tracker starts
     at (the first rss_ml fix, at rest); the random walk maximises a KF (F = I) on the rss_ml fixes likewise."""
-    from locbook.battery import _ml_fixes
+    from locbook.battery import ml_fixes
     ds = me.load("danis2022")
     model = me.channel(me.calibrate(ds))
     name = "straight_01"
     fix_cov = me.fix_covariance_from_calibration(ds, model, grid_spacing_m=0.1)
     fit = me.fit_motion(ds, model, name, grid_spacing_m=0.1, fix_cov_m2=fix_cov)
     sc = me.tracking_scenario(ds, model, name, grid_spacing_m=0.1, q=fit["q"], spread_m=fit["spread_m"])
-    fixes = _ml_fixes(sc, sc.measured_rss_dbm)
+    fixes = ml_fixes(sc, sc.measured_rss_dbm)
     first = np.flatnonzero(np.isfinite(fixes).all(axis=1))[0]
     np.testing.assert_array_equal(sc.start_state, np.r_[fixes[first], 0.0, 0.0])
     P0 = np.zeros((4, 4))

@@ -149,8 +149,8 @@ def test_table_plan_covers_every_printed_cell():
 
 def test_channel_runs_are_reproducible_and_subset_invariant():
     tr = dg.walk_trajectory(waypoints_m=((1, 1), (1, 4), (4, 4)), speed_m_s=0.6)
-    a = dg.run_tables(tr, 6, seed=5, channels=[(5, 3.0), (4, 3.0)])
-    b = dg.run_tables(tr, 6, seed=5, channels=[(4, 3.0)])
+    a = dg.run_channels(tr, 6, seed=5, channels=[(5, 3.0), (4, 3.0)])
+    b = dg.run_channels(tr, 6, seed=5, channels=[(4, 3.0)])
     for key, err in b[(4, 3.0)].errors.items():
         np.testing.assert_array_equal(err, a[(4, 3.0)].errors[key])
     rows = dg.table_rows(a)

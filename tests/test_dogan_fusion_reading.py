@@ -131,25 +131,25 @@ def test_the_default_reading_is_eq_3_24s_constant_q_for_any_sigma_acc(sigma_acc)
     assert abs(np.sqrt(dg.filter_noise(dg.DEFAULT_NOISE_READING, sigma_acc)[0]) - sd.value) <= sd.rounding
 
 
-def test_fitted_readings_names_exactly_the_readings_fitted_to_output():
+def test_calibrated_from_text_names_exactly_the_readings_fitted_to_output():
     """Issue 45's rule for the four (start, noise reading) pairs: rest + printed is the text's own reading (no
     calibration); the moving start, which no text supports, is fitted with the speed fitted to Fig. 3.2 under it,
     'sigma_acc' the Q fitted to Table 3.9, and both together name both; under another speed the moving start is still
     fitted (the speed itself is then an assumption)."""
-    assert dg.fitted_readings("rest", "printed") == ""
-    moving = dg.fitted_readings("moving", "printed")
+    assert dg.calibrated_from_text("rest", "printed") == ""
+    moving = dg.calibrated_from_text("moving", "printed")
     assert "Fig. 3.2" in moving and "24 meter" in moving and "Table 3.9" not in moving
-    scaled = dg.fitted_readings("rest", "sigma_acc")
+    scaled = dg.calibrated_from_text("rest", "sigma_acc")
     assert "Table 3.9" in scaled and "sigma_acc" in scaled and "Fig. 3.2" not in scaled
-    both = dg.fitted_readings("moving", "sigma_acc")
+    both = dg.calibrated_from_text("moving", "sigma_acc")
     assert both == f"{moving}; {scaled}"
-    other_speed = dg.fitted_readings("moving", "printed", speed_mps=0.5)
+    other_speed = dg.calibrated_from_text("moving", "printed", speed_mps=0.5)
     assert other_speed == dg.MOVING_START_FITTED and "no text" in other_speed and dg.SPEED_CALIBRATED_FROM not in other_speed
-    assert dg.fitted_readings() == ""                                    # the defaults are the text's readings
+    assert dg.calibrated_from_text() == ""                                    # the defaults are the text's readings
     with pytest.raises(lb.ParameterError, match="start"):
-        dg.fitted_readings("running", "printed")
+        dg.calibrated_from_text("running", "printed")
     with pytest.raises(lb.ParameterError, match="noise_reading"):
-        dg.fitted_readings("rest", "guessed")
+        dg.calibrated_from_text("rest", "guessed")
 
 
 def test_the_printed_reading_does_not_see_sigma_acc_in_q():

@@ -178,5 +178,5 @@ def test_record_testbed_records_each_printed_walk_value_with_its_flags_and_the_b
     tb.record_testbed(report, rows, run, 0.5, start="moving", noise_reading="sigma_acc")
     by_id = {r["printed_id"]: r for r in report.numbers}
     fused = by_id[tb.PRINTED_TESTBED_RMSE[("serial_ekf", "fusion")].id]
-    assert fused["kind"] == "calibrated" and fused["calibrated_from"] == dg.fitted_readings("moving", "sigma_acc")
+    assert fused["kind"] == "calibrated" and fused["calibrated_from"] == dg.calibrated_from_text("moving", "sigma_acc")
     assert by_id[tb.PRINTED_TESTBED_RMSE[("static_mle", None)].id]["kind"] == "reproduction"

@@ -331,7 +331,7 @@ def test_wrong_shapes_name_the_argument(which, axis, size):
 
 def test_ozkaya_setting_streams_are_keyed_by_values_not_their_spelling():
     from dataclasses import replace
-    from locbook.scenarios import ozkaya as oz
+    from locbook.scenarios import ozkaya as oz, ozkaya_simulation as ozs
     case = next(row[-1] for row in oz.simulation_cases() if row[-1].method != "nn")
     entropy = lambda c: oz.case_seed_sequence(2011, c).entropy
     base = replace(case, sigma0_db=0.30000000000000004)
@@ -340,7 +340,7 @@ def test_ozkaya_setting_streams_are_keyed_by_values_not_their_spelling():
     assert entropy(replace(base, rt=float(base.rt))) == entropy(base)                       # 10 and 10.0: one value
     assert entropy(replace(base, k_nn=base.k_nn + 1)) == entropy(base)     # estimator only: common random numbers
     assert entropy(replace(base, rt=base.rt + 1)) != entropy(base)         # more steps: another stream
-    assert entropy(base) == [2011, lb.seed_from_values({f: getattr(base, f) for f in oz._TRUTH_FIELDS} | {"steps": base.rt})]
+    assert entropy(base) == [2011, lb.seed_from_values({f: getattr(base, f) for f in ozs._TRUTH_FIELDS} | {"steps": base.rt})]
 
 
 # --- issue 26, items 9 and 10: a fit's batch is isolated; an empty batch is an empty answer in every mode ---------

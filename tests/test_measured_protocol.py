@@ -8,7 +8,7 @@ import pytest
 import locbook as lb
 from locbook import battery
 from locbook.data.example import write_example_dataset
-from locbook.scenarios import measured as me
+from locbook.scenarios import measured as me, measured_setup
 
 
 @pytest.fixture(scope="module")
@@ -38,7 +38,7 @@ def test_knn_k_is_the_leave_one_point_out_minimum(example):
     k, how, table = me.choose_knn_k(ds, model)
     xy, fingerprints, _ = me.radio_map(ds, model)
     _, _, rss = me.calibration_set(ds)
-    groups = me._cv_groups(ds, xy)
+    groups = measured_setup._cv_groups(ds, xy)
     means = {}
     for cand in (1, 3, k):
         err = []
@@ -57,7 +57,7 @@ def test_knn_k_is_the_leave_one_point_out_minimum(example):
 def test_grid_pitch_is_coarsened_only_past_the_cell_limit(example, monkeypatch):
     ds, _ = example
     assert me.grid_pitch_m(ds) == (me.GRID_SPACING_M, f"rule: {me.GRID_SPACING_M:g} m")
-    monkeypatch.setattr(me, "MAX_GRID_CELLS", 1000)              # the hall's 240 m^2 at 0.1 m is 24,000 cells
+    monkeypatch.setattr(measured_setup, "MAX_GRID_CELLS", 1000)            # the hall's 240 m^2 at 0.1 m is 24,000 cells
     pitch, how = me.grid_pitch_m(ds)
     assert pitch > me.GRID_SPACING_M and "coarsened" in how
     assert lb.grid_in_outline(ds.outline_m, pitch).shape[0] <= 1000 * 1.1

@@ -10,7 +10,7 @@ import pytest
 import locbook as lb
 from locbook.errors import ParameterError
 from locbook.reproduce.readings import readings
-from locbook.scenarios import ozkaya as oz
+from locbook.scenarios import ozkaya as oz, ozkaya_simulation as ozs
 
 
 @pytest.fixture
@@ -316,9 +316,9 @@ def test_every_wall_handling_keeps_a_mobile_target_in_the_room(handling):
 def test_clip_stops_a_step_at_the_wall_it_crosses():
     lo, hi = np.zeros(2), np.array([5.0, 8.0])
     case = oz.SimCase("grid", "mobile", wall_handling="clip")
-    got = oz._step_inside(np.array([[4.5, 1.0]]), np.array([[1.0, -2.0]]), lo, hi, case, np.random.default_rng(0))
+    got = ozs._step_inside(np.array([[4.5, 1.0]]), np.array([[1.0, -2.0]]), lo, hi, case, np.random.default_rng(0))
     np.testing.assert_allclose(got, [[5.0, 0.0]])
-    reflected = oz._step_inside(np.array([[4.5, 1.0]]), np.array([[1.0, -2.0]]), lo, hi,
+    reflected = ozs._step_inside(np.array([[4.5, 1.0]]), np.array([[1.0, -2.0]]), lo, hi,
                                 replace(case, wall_handling="reflect"), np.random.default_rng(0))
     np.testing.assert_allclose(reflected, [[4.5, 1.0]])      # 5.5 -> 4.5 and -1 -> 1: mirrored at both walls
 
@@ -346,11 +346,11 @@ def test_the_large_room_readers_are_its_corners_with_twice_the_separations():
 def test_a_known_initial_location_is_exact_or_spread_by_d():
     case = oz.SimCase("grid", "mobile", rt=1, known_initial=True)
     truth, rss = oz.simulate_truth_and_rss(case, 5, np.random.default_rng(3))
-    assert oz._initial_sd_m(case) == 0.0 and oz._initial_sd_m(replace(case, known_initial=False)) == 0.0
-    assert oz._initial_sd_m(replace(case, initial_location="gaussian_d", spread_m=0.7)) == 0.7
-    assert oz._initial_sd_m(replace(case, initial_location="gaussian_d", spread_m=np.inf)) == 0.0
+    assert ozs._initial_sd_m(case) == 0.0 and ozs._initial_sd_m(replace(case, known_initial=False)) == 0.0
+    assert ozs._initial_sd_m(replace(case, initial_location="gaussian_d", spread_m=0.7)) == 0.7
+    assert ozs._initial_sd_m(replace(case, initial_location="gaussian_d", spread_m=np.inf)) == 0.0
     with pytest.raises(ParameterError, match="known_initial_location"):
-        oz._initial_sd_m(replace(case, initial_location="roughly"))
+        ozs._initial_sd_m(replace(case, initial_location="roughly"))
     assert oz.with_readings(case, {"known_initial_location": "gaussian_d"}).initial_location == "gaussian_d"
 
 

@@ -566,3 +566,16 @@ def test_a_data_run_scores_a_users_methods_in_every_report_and_a_failing_one_fai
     assert {k: v["status"] for k, v in status.items()} == {
         "measured-calibration": "cached", "measured-localization": "ok", "measured-tracking": "cached",
         "benchmark-cross-document": "ok"}
+
+
+def test_the_entry_points_examples_run_as_printed():
+    """MethodInput's and UserMethod's Examples sections (numpydoc, ``>>>``) give exactly the output they show."""
+    import doctest
+
+    import locbook.user_methods as um
+    finder = doctest.DocTestFinder()
+    for obj in (um.MethodInput, um.UserMethod):
+        (test,) = [t for t in finder.find(obj, obj.__name__, module=um) if t.name == obj.__name__]
+        assert test.examples, obj.__name__
+        result = doctest.DocTestRunner(optionflags=doctest.ELLIPSIS).run(test)
+        assert result.failed == 0 and result.attempted == len(test.examples), obj.__name__

@@ -27,7 +27,7 @@ from ..montecarlo import single_run_interval
 from ..reproduce.scoring import Ambiguity
 from ..tracking.divergence import divergence_note
 from .dogan import (ANCHORS_M, DEFAULT_NOISE_READING, DEFAULT_START, DT_S, FILTERS, PRINTED, SPEED_MPS, ChannelRun,
-                    fitted_readings, scored_errors)
+                    calibrated_from_text, scored_errors)
 
 __all__ = [
     "TESTBED_REF_POWER_DBM", "TESTBED_PATH_LOSS_EXP", "TESTBED_FIT_SIGMA_DB", "TESTBED_SIGMA_DB", "TESTBED_RSS_EVERY",
@@ -245,10 +245,10 @@ def record_testbed(report, rows: list[dict], run: ChannelRun, sigma_acc_mps2: fl
     one walk's value, its standard error the Monte-Carlo one, and 2 sd of single walks the named ambiguity
     (:data:`ONE_WALK_SOURCE`). The MLE row is a ``reproduction``; the filter rows are ``calibrated`` exactly when
     ``run`` used a reading fitted to printed output (``start``, ``noise_reading``, ``speed_mps`` as run; named by
-    :func:`~locbook.scenarios.dogan.fitted_readings`), else ``reproduction``. A miss says why (:data:`BENIGN_CHANNEL_NOTE`); every note counts
+    :func:`~locbook.scenarios.dogan.calibrated_from_text`), else ``reproduction``. A miss says why (:data:`BENIGN_CHANNEL_NOTE`); every note counts
     the runs the NIS guard flagged (:func:`testbed_flags`). The per-filter reductions derived from printed pairs
     (``printed_value`` None) are table rows only."""
-    fitted = fitted_readings(start, noise_reading, speed_mps=speed_mps)
+    fitted = calibrated_from_text(start, noise_reading, speed_mps=speed_mps)
     for r in rows:
         p = r["printed_value"]
         if p is None:

@@ -39,6 +39,7 @@ from ..tracking.streams import LinearMeasurement, NonlinearMeasurement, RssMeasu
 from ..tracking.unscented import unscented_kalman_filter
 from ..montecarlo import mc_standard_error
 from ..tracking.divergence import DivergenceFlags, divergence_note
+from ..tracking.noise import fit_noise_ml
 
 __all__ = [
     "DOCUMENT", "PRINTED", "ROOM_M", "ANCHOR_IDS", "ANCHOR_LAYOUTS", "DEFAULT_ANCHOR_LAYOUT", "ANCHOR_POSITIONS_M",
@@ -469,7 +470,6 @@ def noise_fit(walk: Walk, method: str = "ekf", *, ukf_alpha: float = UKF_ALPHA, 
     through this model. Returns a dict with, for each quantity, the hand-set value, the pooled ML value and the
     per-walk ML values (None without ``per_walk``), and the mean error over walks at the report points
     (:func:`walk_errors`) under each; ``at_bound`` names the multipliers that ended at their bound."""
-    from ..tracking.noise import fit_noise_ml
     if method not in ("ekf", "ukf"):
         raise ValueError(f"noise_fit fits the fused EKF or UKF, got {method!r}")
     s = walk.settings

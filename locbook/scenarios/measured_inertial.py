@@ -12,6 +12,7 @@ from ..inertial_trackers import (FUSION_TRACKERS, HEADING_CANDIDATES_DEG, HEADIN
                                  NO_GYRO_FRAME, Q_ACC_START, Q_ANGULAR_START, Q_IMU_START, START_ACCELERATION_SD_M_S2,
                                  FusionInputs, ImuNoise, fit_fusion, stationary_noise)
 from ..models.channel import PathLossModel
+from .measured_setup import tracker_settings, tracking_scenario
 
 __all__ = ["inertial_tracks", "imu_noise", "inertial_grid", "fusion_inputs", "fusion_choices", "fusion_knobs"]
 
@@ -50,12 +51,11 @@ def fusion_inputs(data: Dataset, model: PathLossModel, recording: str, *, grid_s
     (:func:`locbook.inertial_trackers.fit_fusion`: heading start and q by maximum likelihood, the calibration of
     :func:`imu_noise`), from the RSS trackers' start and its covariance (``q``: the RSS trackers', for their P_0).
     None when no accelerometer sample falls within the track's epochs (the files do not overlap in time: no fusion)."""
-    from .measured import _settings, tracking_scenario
     sc = tracking_scenario(data, model, recording, grid_spacing_m=grid_spacing_m, q=q, spread_m=1.0)
     grid = inertial_grid(data, recording, sc.time_s, sc.dt_s)
     if not grid.counts.any():
         return None
-    return fit_fusion(sc, grid, imu_noise(data), _settings(q, 1, 1.0, fix_cov_m2).P0)
+    return fit_fusion(sc, grid, imu_noise(data), tracker_settings(q, 1, 1.0, fix_cov_m2).P0)
 
 
 def fusion_choices(name: str, fus: FusionInputs | None, *, first: bool = True) -> list[dict]:

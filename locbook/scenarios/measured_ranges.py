@@ -41,6 +41,7 @@ from ..tracking.divergence import DivergenceFlags
 from ..tracking.kalman import extended_kalman_filter
 from ..tracking.streams import RssMeasurement, Stream
 from ..tracking.unscented import unscented_kalman_filter
+from ..models.motion import constant_velocity
 
 __all__ = ["RANGE_STATIC_METHODS", "RANGE_TRACKERS", "RANGE_TRACKER_PRIORS", "RANGE_METHOD_NAMES",
            "RANGE_BOUND_NAME", "RANGE_TRACKING_BOUND_NAME", "range_tracking_bound_m", "range_noise", "recording_ranges", "range_choices", "static_range_results",
@@ -222,7 +223,6 @@ def run_range_trackers(data: Dataset, name: str, sc: TrackingScenario, ep, ticks
     """``(positions {tracker: (1, T, 2)}, flags {tracker: DivergenceFlags})`` of the fusion trackers on one track:
     the battery's EKF and UKF (constant velocity at ``ts.q``, from ``x0``, ``ts.P0``) with the RSS stream of ``ekf``
     and the track's range stream (:func:`track_ranges`, a sigma per tick)."""
-    from ..models.motion import constant_velocity
     rss = sc.measured_rss_dbm[None]
     z, sigma = track_ranges(data, name, ep, ticks, rss.shape[1])
     idx = np.array([0, 1])

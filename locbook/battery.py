@@ -14,8 +14,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .bounds.pcrlb import posterior_crlb, position_bound_m, rss_state_information
 from .bounds.crlb import check_position_information, rss_position_information
+from .bounds.pcrlb import position_bound_m, posterior_crlb, rss_state_information
 from .errors import ParameterError
 from .geometry import grid_in_outline, outline_box
 from .models.channel import PathLossModel
@@ -23,8 +23,7 @@ from .models.motion import constant_velocity
 from .models.rss import RssModel
 from .static.calibration import fix_error_covariance
 from .static.fingerprint import knn_position, model_fingerprints
-from .static.localization import (grid_ml_position, lateration_box_ls, lateration_ls, lateration_wls,
-                                   rss_ml_position)
+from .static.localization import grid_ml_position, lateration_box_ls, lateration_ls, lateration_wls, rss_ml_position
 from .tracking.bayes import grid_bayes_filter
 from .tracking.divergence import DivergenceFlags
 from .tracking.imm import imm_filter

@@ -7,20 +7,36 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..models.channel import PathLossModel
-from ..reproduce.scoring import Ambiguity
-from ..metrics import rmse_m
-from ..montecarlo import replicate_standard_error
+from ..bounds.pcrlb import linear_measurement_information, position_bound_m, posterior_crlb, rss_state_information
 from ..errors import ParameterError
+from ..metrics import rmse_m
+from ..models.channel import PathLossModel
 from ..models.motion import KinematicModel, simulate_states
 from ..models.rss import RssModel
 from ..models.trajectory import Trajectory
-from ..bounds.pcrlb import linear_measurement_information, position_bound_m, posterior_crlb, rss_state_information
-from .dogan_protocol import (ANCHORS_M, corner_anchors, DEFAULT_NOISE_READING, DEFAULT_RSS_ONLY_STEP, DT_S,
-                             filter_grid, filter_noise, FILTERS, initial_state, MC_RUNS, motion_model, P00_ACC_VAR,
-                             P00_VEL_VAR, PATH_LOSS_EXP, ROOM_M, room_sides_m, RSS_EVERY, SIGMA_ACC_MPS2,
-                             trajectory_step_s)
-
+from ..montecarlo import replicate_standard_error
+from ..reproduce.scoring import Ambiguity
+from .dogan_protocol import (
+    ANCHORS_M,
+    DEFAULT_NOISE_READING,
+    DEFAULT_RSS_ONLY_STEP,
+    DT_S,
+    FILTERS,
+    MC_RUNS,
+    P00_ACC_VAR,
+    P00_VEL_VAR,
+    PATH_LOSS_EXP,
+    ROOM_M,
+    RSS_EVERY,
+    SIGMA_ACC_MPS2,
+    corner_anchors,
+    filter_grid,
+    filter_noise,
+    initial_state,
+    motion_model,
+    room_sides_m,
+    trajectory_step_s,
+)
 
 #: ``"smc"``: Eq. (4.22), the RSS information averaged over simulated CA trajectories (Figs 4.1/4.3);
 #: ``"linear"``: MLE fixes as linear measurements with R = diag(MSE_MLE) (Figs 4.2/4.4, trajectory-free);

@@ -11,20 +11,19 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..models.channel import PathLossModel, pairwise_distance_m
-from ..reproduce.printed_values import printed
 from ..errors import ParameterError
+from ..models.channel import PathLossModel, pairwise_distance_m
+from ..models.motion import KinematicModel, constant_acceleration
+from ..models.rss import RssModel
+from ..models.trajectory import POLYLINE_STARTS, Trajectory, polyline_trajectory
+from ..reproduce.printed_values import printed
+from ..static.localization import grid_ml_position, rss_ml_position
+from ..tracking.divergence import DivergenceFlags
 from ..tracking.kalman import extended_kalman_filter
 from ..tracking.noise import fit_noise_ml
 from ..tracking.results import KalmanResult
 from ..tracking.streams import LinearMeasurement, RssMeasurement
 from ..tracking.transition import per_step
-from ..static.localization import grid_ml_position, rss_ml_position
-from ..models.motion import KinematicModel, constant_acceleration
-from ..models.rss import RssModel
-from ..models.trajectory import POLYLINE_STARTS, Trajectory, polyline_trajectory
-from ..tracking.divergence import DivergenceFlags
-
 
 #: Everything the thesis prints (locbook/data/printed/dogan2015.csv).
 PRINTED = printed("dogan2015")

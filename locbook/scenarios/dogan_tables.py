@@ -8,15 +8,28 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..reproduce.scoring import Ambiguity, score
-from ..metrics import reduction_pct, rmse_m
-from ..montecarlo import jackknife_standard_error
 from ..errors import ParameterError
+from ..metrics import reduction_pct, rmse_m
 from ..models.trajectory import Trajectory
+from ..montecarlo import jackknife_standard_error
+from ..reproduce.scoring import Ambiguity, score
 from ..tracking.divergence import divergence_note, divergence_rows
-from .dogan_protocol import (ANCHORS_M, ChannelRun, DEFAULT_NOISE_READING, DEFAULT_START, DT_S, FILTERS,
-                             calibrated_from_text, PATH_LOSS_EXP, PRINTED, printed_number, run_channel, scored_errors,
-                             SIGMA_RSS_DB, SPEED_MPS)
+from .dogan_protocol import (
+    ANCHORS_M,
+    DEFAULT_NOISE_READING,
+    DEFAULT_START,
+    DT_S,
+    FILTERS,
+    PATH_LOSS_EXP,
+    PRINTED,
+    SIGMA_RSS_DB,
+    SPEED_MPS,
+    ChannelRun,
+    calibrated_from_text,
+    printed_number,
+    run_channel,
+    scored_errors,
+)
 
 
 @dataclass(frozen=True)

@@ -19,15 +19,25 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..static.calibration import PathLossFit, calibrate_path_loss
-from ..models.channel import PathLossModel, pairwise_distance_m, quantize_db
 from ..errors import ParameterError
 from ..metrics import reduction_pct, rmse_m
+from ..models.channel import PathLossModel, pairwise_distance_m, quantize_db
 from ..montecarlo import single_run_interval
 from ..reproduce.scoring import Ambiguity
+from ..static.calibration import PathLossFit, calibrate_path_loss
 from ..tracking.divergence import divergence_note
-from .dogan import (ANCHORS_M, DEFAULT_NOISE_READING, DEFAULT_START, DT_S, FILTERS, PRINTED, SPEED_MPS, ChannelRun,
-                    calibrated_from_text, scored_errors)
+from .dogan import (
+    ANCHORS_M,
+    DEFAULT_NOISE_READING,
+    DEFAULT_START,
+    DT_S,
+    FILTERS,
+    PRINTED,
+    SPEED_MPS,
+    ChannelRun,
+    calibrated_from_text,
+    scored_errors,
+)
 
 __all__ = [
     "TESTBED_REF_POWER_DBM", "TESTBED_PATH_LOSS_EXP", "TESTBED_FIT_SIGMA_DB", "TESTBED_SIGMA_DB", "TESTBED_RSS_EVERY",

@@ -16,16 +16,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..static.calibration import calibrate_path_loss, fix_error_covariance
-from ..models.channel import PathLossModel, pairwise_distance_m
-from ..tracking.kalman import KF_VARIANTS, kalman_filter
 from .._deprecation import RENAMED_KF_VARIANTS, check_variant
-from ..tracking.streams import LinearMeasurement
-from ..static.localization import lateration_ls
-from ..reproduce.printed_values import printed
 from ..metrics import mean_error_m, position_error_m
+from ..models.channel import PathLossModel, pairwise_distance_m
 from ..models.motion import constant_velocity
+from ..reproduce.printed_values import printed
+from ..static.calibration import calibrate_path_loss, fix_error_covariance
+from ..static.localization import lateration_ls
 from ..tracking.divergence import DivergenceFlags
+from ..tracking.kalman import KF_VARIANTS, kalman_filter
+from ..tracking.streams import LinearMeasurement
 
 __all__ = [
     "ANCHORS_M", "CORRIDOR_SIZE_M", "PRINTED", "PRINTED_N", "PRINTED_C_RAW", "PRINTED_C_KF",

@@ -18,28 +18,40 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from .._deprecation import renamed_keyword
 from .._validate import check_choice, check_scalar
 from ..bounds.crlb import rss_crlb_m
-from .._deprecation import renamed_keyword
 from ..bounds.pcrlb import position_bound_m, posterior_crlb, rss_state_information
-from ..reproduce.printed_values import printed
 from ..metrics import position_error_m
-from ..models.channel import (PathLossModel, correlated_shadowing_db, log_distance_gradient, pairwise_distance_m,
-                              quantize_db)
-from ..models.imu import (InertialMeasurement, accelerometer_readings, body_to_world, dead_reckon, gyroscope_readings,
-                          integrate, inertial_measurement_jacobian)
+from ..models.channel import (
+    PathLossModel,
+    correlated_shadowing_db,
+    log_distance_gradient,
+    pairwise_distance_m,
+    quantize_db,
+)
+from ..models.imu import (
+    InertialMeasurement,
+    accelerometer_readings,
+    body_to_world,
+    dead_reckon,
+    gyroscope_readings,
+    inertial_measurement_jacobian,
+    integrate,
+)
 from ..models.motion import HeadingKinematicModel, KinematicModel
 from ..models.rss import RssModel
 from ..models.trajectory import Trajectory, waypoint_trajectory
+from ..montecarlo import mc_standard_error
+from ..reproduce.printed_values import printed
 from ..static.calibration import fix_error_covariance
 from ..static.localization import lateration_box_ls, lateration_ls
+from ..tracking.divergence import DivergenceFlags, divergence_note
 from ..tracking.fusion import fuse_estimates
 from ..tracking.kalman import extended_kalman_filter
+from ..tracking.noise import fit_noise_ml
 from ..tracking.streams import LinearMeasurement, NonlinearMeasurement, RssMeasurement, Stream
 from ..tracking.unscented import unscented_kalman_filter
-from ..montecarlo import mc_standard_error
-from ..tracking.divergence import DivergenceFlags, divergence_note
-from ..tracking.noise import fit_noise_ml
 
 __all__ = [
     "DOCUMENT", "PRINTED", "ROOM_M", "ANCHOR_IDS", "ANCHOR_LAYOUTS", "DEFAULT_ANCHOR_LAYOUT", "ANCHOR_POSITIONS_M",

@@ -38,9 +38,18 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..battery import (STATIC_METHODS as BATTERY_STATIC, TRACKER_PRIORS, StaticScenario, TrackerSettings,
-                       TrackingScenario, initial_states, run_trackers, static_bound_checked,
-                       static_fixes as battery_static_fixes, tracking_bound_m)
+from ..battery import STATIC_METHODS as BATTERY_STATIC
+from ..battery import (
+    TRACKER_PRIORS,
+    StaticScenario,
+    TrackerSettings,
+    TrackingScenario,
+    initial_states,
+    run_trackers,
+    static_bound_checked,
+    tracking_bound_m,
+)
+from ..battery import static_fixes as battery_static_fixes
 from ..bounds.summary import error_bound_ratio, summarize_bound
 from ..data.dataset import Dataset
 from ..inertial_trackers import FUSION_PRIORS, FUSION_TRACKERS, run_fusion
@@ -50,14 +59,47 @@ from ..models.rss import RssModel
 from ..user_methods import MethodFailure, MethodInput, UserMethod, frozen, registered_methods, run_method
 from . import measured_ranges as ranging
 from .measured_inertial import fusion_choices, fusion_inputs, fusion_knobs, inertial_tracks
-from .measured_setup import (PATH_LOSS_EXP_BOUNDS, REF_POWER_BOUNDS_DBM, HUBER_DELTA_DB, NEAR_FIELD_M, STATIC_METHODS,
-                             TRACKERS, GRID_SPACING_M, MAX_GRID_CELLS, KNN_CANDIDATES, KNN_CV_CELL_M, Q_START,
-                             START_VELOCITY_SD_M_S, load, geometry_text, device_offsets_db, device_corrected,
-                             calibration_set, calibrate, channel, ranging_errors, radio_map, scored_recordings,
-                             TestEpochs, crlb_m, epoch_s, bayes_measurement_model, outside_fraction,
-                             calibration_block_bootstrap, record_dataset, keyed_stream, grid_pitch_m, choose_knn_k,
-                             SPREAD_START_M, fit_motion, tracker_settings, static_scenario,
-                             fix_covariance_from_calibration, track_epochs, tracking_scenario)
+from .measured_setup import (
+    GRID_SPACING_M,
+    HUBER_DELTA_DB,
+    KNN_CANDIDATES,
+    KNN_CV_CELL_M,
+    MAX_GRID_CELLS,
+    NEAR_FIELD_M,
+    PATH_LOSS_EXP_BOUNDS,
+    Q_START,
+    REF_POWER_BOUNDS_DBM,
+    SPREAD_START_M,
+    START_VELOCITY_SD_M_S,
+    STATIC_METHODS,
+    TRACKERS,
+    TestEpochs,
+    bayes_measurement_model,
+    calibrate,
+    calibration_block_bootstrap,
+    calibration_set,
+    channel,
+    choose_knn_k,
+    crlb_m,
+    device_corrected,
+    device_offsets_db,
+    epoch_s,
+    fit_motion,
+    fix_covariance_from_calibration,
+    geometry_text,
+    grid_pitch_m,
+    keyed_stream,
+    load,
+    outside_fraction,
+    radio_map,
+    ranging_errors,
+    record_dataset,
+    scored_recordings,
+    static_scenario,
+    track_epochs,
+    tracker_settings,
+    tracking_scenario,
+)
 
 __all__ = ["PATH_LOSS_EXP_BOUNDS", "REF_POWER_BOUNDS_DBM", "HUBER_DELTA_DB", "NEAR_FIELD_M", "STATIC_METHODS",
            "TRACKERS", "GRID_SPACING_M", "MAX_GRID_CELLS", "KNN_CANDIDATES", "KNN_CV_CELL_M", "Q_START",

@@ -8,9 +8,21 @@ import numpy as np
 
 from ..data.dataset import Dataset
 from ..data.inertial import MAX_SUB_STEPS, align
-from ..inertial_trackers import (FUSION_TRACKERS, HEADING_CANDIDATES_DEG, HEADING_REFINE_DEG, HEADING_START_SD_RAD,
-                                 NO_GYRO_FRAME, Q_ACC_START, Q_ANGULAR_START, Q_IMU_START, START_ACCELERATION_SD_M_S2,
-                                 FusionInputs, ImuNoise, fit_fusion, stationary_noise)
+from ..inertial_trackers import (
+    FUSION_TRACKERS,
+    HEADING_CANDIDATES_DEG,
+    HEADING_REFINE_DEG,
+    HEADING_START_SD_RAD,
+    NO_GYRO_FRAME,
+    Q_ACC_START,
+    Q_ANGULAR_START,
+    Q_IMU_START,
+    START_ACCELERATION_SD_M_S2,
+    FusionInputs,
+    ImuNoise,
+    fit_fusion,
+    stationary_noise,
+)
 from ..models.channel import PathLossModel
 from .measured_setup import tracker_settings, tracking_scenario
 

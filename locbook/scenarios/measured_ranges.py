@@ -30,18 +30,17 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..battery import Method, TRACKER_PRIORS, TrackerSettings, TrackingScenario
-from ..battery import tracking_bound_m
+from ..battery import TRACKER_PRIORS, Method, TrackerSettings, TrackingScenario, tracking_bound_m
 from ..bounds.crlb import range_crlb_checked_m, range_position_information
 from ..data.dataset import Dataset
 from ..data.ranges import align_ranges
+from ..models.motion import constant_velocity
 from ..models.range import RangeModel
 from ..static.ranging import range_nls_position
 from ..tracking.divergence import DivergenceFlags
 from ..tracking.kalman import extended_kalman_filter
 from ..tracking.streams import RssMeasurement, Stream
 from ..tracking.unscented import unscented_kalman_filter
-from ..models.motion import constant_velocity
 
 __all__ = ["RANGE_STATIC_METHODS", "RANGE_TRACKERS", "RANGE_TRACKER_PRIORS", "RANGE_METHOD_NAMES",
            "RANGE_BOUND_NAME", "RANGE_TRACKING_BOUND_NAME", "range_tracking_bound_m", "range_noise", "recording_ranges", "range_choices", "static_range_results",

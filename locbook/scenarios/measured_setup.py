@@ -10,30 +10,34 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..battery import (STATIC_METHODS as BATTERY_STATIC, TRACKERS as BATTERY_TRACKERS,
-                       ProtocolChoice, StaticScenario, TrackerSettings, TrackingScenario, channel_settings,
-                       KF_FIX_MIN_ANCHORS, ml_fixes)
+from ..battery import (
+    KF_FIX_MIN_ANCHORS,
+    ProtocolChoice,
+    StaticScenario,
+    TrackerSettings,
+    TrackingScenario,
+    channel_settings,
+    ml_fixes,
+)
+from ..battery import STATIC_METHODS as BATTERY_STATIC
+from ..battery import TRACKERS as BATTERY_TRACKERS
 from ..bounds.crlb import rss_crlb_m
-from ..data.dataset import Dataset, load_dataset
+from ..data.dataset import Dataset, dataset_summary, load_dataset
+from ..data.floors import require_one_floor
+from ..data.measured import epochs as make_epochs
 from ..data.measured import regular_epochs
+from ..data.selection import select
 from ..errors import ConvergenceError, ParameterError
 from ..geometry import inside_outline, outline_box
+from ..metrics import MIN_BLOCKS
 from ..models.channel import PathLossModel
 from ..models.motion import constant_velocity
 from ..models.rss import RssModel
-from ..montecarlo import seed_from_values
-from ..static.calibration import PathLossFit, calibrate_path_loss, fix_error_covariance
+from ..montecarlo import circular_block_indices, seed_from_values
+from ..static.calibration import PathLossFit, calibrate_path_loss, calibrate_path_loss_devices, fix_error_covariance
 from ..static.fingerprint import knn_position
-from ..data.selection import select
-from ..static.calibration import calibrate_path_loss_devices
-from ..data.floors import require_one_floor
-from ..metrics import MIN_BLOCKS
-from ..montecarlo import circular_block_indices
-from ..data.dataset import dataset_summary
 from ..tracking.noise import fit_noise_ml
 from ..tracking.streams import LinearMeasurement, RssMeasurement
-from ..data.measured import epochs as make_epochs
-
 
 PATH_LOSS_EXP_BOUNDS = (1.0, 6.0)
 REF_POWER_BOUNDS_DBM = (-90.0, -20.0)

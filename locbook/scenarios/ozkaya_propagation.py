@@ -3,7 +3,6 @@ bed's geometry and synthetic calibration campaigns (:func:`synthetic_campaign`).
 """
 from __future__ import annotations
 
-
 import numpy as np
 
 from ..models.channel import PathLossModel, quantize_db

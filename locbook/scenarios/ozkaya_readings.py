@@ -8,11 +8,19 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..reproduce.readings import readings as declared_readings
 from ..errors import ParameterError
-from .ozkaya_simulation import (check_reading, HALF_SEPARATION_LAYOUTS, LAYOUTS, PATH_LOSS_EXP, ROOM_M, run_case,
-                                SIM_READINGS, SimCase, summarize)
-
+from ..reproduce.readings import readings as declared_readings
+from .ozkaya_simulation import (
+    HALF_SEPARATION_LAYOUTS,
+    LAYOUTS,
+    PATH_LOSS_EXP,
+    ROOM_M,
+    SIM_READINGS,
+    SimCase,
+    check_reading,
+    run_case,
+    summarize,
+)
 
 #: The values that nothing in the text supports and that were chosen because they fit printed output (issue 45,
 #: readings CSV column ``fitted``): reading name -> the fitted value. Rows computed under one are calibrations. The

@@ -9,19 +9,25 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from ..bounds.crlb import crlb_rms_over_area_m, rss_crlb_m
+from ..errors import ParameterError
+from ..metrics import (
+    error_std_m,
+    mean_error_m,
+    median_error_m,
+    percentile_error_m,
+    position_error_m,
+    rmse_m,
+    rmse_standard_error_m,
+)
+from ..models.channel import PathLossModel
+from ..models.motion import reflect_into_box
 from ..models.rss import RssModel
+from ..montecarlo import bootstrap_standard_error, seed_from_values
+from ..reproduce.printed_values import printed
+from ..static.fingerprint import knn_position, model_fingerprints
 from ..tracking.bayes import grid_bayes_filter
 from ..tracking.particle import particle_filter
-from ..bounds.crlb import crlb_rms_over_area_m, rss_crlb_m
-from ..static.fingerprint import knn_position, model_fingerprints
-from ..models.channel import PathLossModel
-from ..reproduce.printed_values import printed
-from ..metrics import (error_std_m, mean_error_m, median_error_m, percentile_error_m, position_error_m, rmse_m,
-                       rmse_standard_error_m)
-from ..montecarlo import bootstrap_standard_error, seed_from_values
-from ..models.motion import reflect_into_box
-from ..errors import ParameterError
-
 
 PRINTED = printed("ozkaya2011")
 

@@ -11,11 +11,27 @@ from functools import lru_cache
 import numpy as np
 
 from ..reproduce.scoring import Ambiguity, score
-from .ozkaya_simulation import (case_seed_sequence, check_reading, HALF_SEPARATION_LAYOUTS, PATH_LOSS_EXP, PRINTED,
-                                printed_cell, SIM_READINGS, SimCase, STATISTICS, thesis_crlb_m)
-from .ozkaya_readings import (fitted_calibrated_from, fitted_readings, LAYOUTS_OF_HALF, run_summary, sim_readings,
-                              text_reading_note, with_readings)
-
+from .ozkaya_readings import (
+    LAYOUTS_OF_HALF,
+    fitted_calibrated_from,
+    fitted_readings,
+    run_summary,
+    sim_readings,
+    text_reading_note,
+    with_readings,
+)
+from .ozkaya_simulation import (
+    HALF_SEPARATION_LAYOUTS,
+    PATH_LOSS_EXP,
+    PRINTED,
+    SIM_READINGS,
+    STATISTICS,
+    SimCase,
+    case_seed_sequence,
+    check_reading,
+    printed_cell,
+    thesis_crlb_m,
+)
 
 # -- the printed simulation tables as cases -----------------------------------------------------------
 _NN, _GRID, _SIR = SimCase("nn"), SimCase("grid", "mobile"), SimCase("sir", "mobile")

@@ -10,19 +10,23 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from .._deprecation import RENAMED_CRLB_FORMS, check_variant, renamed_keyword
+from ..bounds.crlb import CRLB_VARIANTS, crlb_rms_over_area_m, rss_crlb_m
+from ..metrics import error_summary_per_run, position_error_m
+from ..models.channel import (
+    PathLossModel,
+    attenuation_bursts_db,
+    correlated_shadowing_db,
+    pairwise_distance_m,
+    quantize_db,
+)
 from ..models.rss import RssModel
+from ..reproduce.scoring import Ambiguity
+from ..static.fingerprint import knn_position, model_fingerprints
+from ..static.reference_tags import calibrate_from_reference_tags, smooth_rssi
 from ..tracking.bayes import grid_bayes_filter
 from ..tracking.particle import particle_filter
-from ..bounds.crlb import CRLB_VARIANTS, crlb_rms_over_area_m, rss_crlb_m
-from .._deprecation import RENAMED_CRLB_FORMS, check_variant, renamed_keyword
-from ..models.channel import (PathLossModel, attenuation_bursts_db, correlated_shadowing_db, pairwise_distance_m,
-                              quantize_db)
-from ..static.fingerprint import knn_position, model_fingerprints
-from ..metrics import error_summary_per_run, position_error_m
-from ..static.reference_tags import calibrate_from_reference_tags, smooth_rssi
-from ..reproduce.scoring import Ambiguity
 from . import ozkaya as oz
-
 
 #: The statistics of the thesis's test-bed tables (columns of Tables 7.26-7.44).
 STATISTICS = ("rmse_m", "mean_m", "median_m", "p90_m", "std_m")

@@ -14,16 +14,16 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .._validate import check_choice
-from ..reproduce.printed_values import printed
+from ..models.base import per_step
 from ..models.channel import PathLossModel, correct_range_bias, log_distance_gradient
+from ..models.rss import RssModel
+from ..reproduce.printed_values import printed
 from ..static.least_squares import recursive_least_squares
 from ..static.localization import lateration_ls, lateration_system
-from ..tracking.kalman import extended_kalman_filter
-from ..tracking.streams import NonlinearMeasurement, RssMeasurement
 from ..tracking.divergence import DivergenceFlags
-from ..models.base import per_step
-from ..models.rss import RssModel
+from ..tracking.kalman import extended_kalman_filter
 from ..tracking.particle import kernel_map_estimate, particle_filter
+from ..tracking.streams import NonlinearMeasurement, RssMeasurement
 
 __all__ = [
     "DOCUMENT", "PRINTED", "SIGMA1_DB", "ETA", "SIGMA2_M", "SIGMA3_M", "N_LOCATIONS", "AREA_M", "Setup",

@@ -29,9 +29,9 @@ def solver_bound(lam_min, f, tol, scale):
     """How far a solution that Clarabel accepted can be from the exact optimum ``p*`` of ``min |A p - b|^2`` over a
     box: the objective exceeds its minimum by at least ``lambda_min(A^T A) |p - p*|^2`` (strong convexity, and the
     optimality condition at ``p*`` makes the linear term non-negative over the box), and the solver stops within
-    the duality gap ``max(tol_gap_abs, tol_gap_rel f)`` of it (Clarabel's stopping rule), so ``|p - p*| <= sqrt(gap / lambda_min)``; plus
-    the feasibility tolerance times the data's scale (the box may be violated by that much). ``f``: the objective
-    whose relative gap the solver controls (the problem's own, or the sum of a stacked solve's)."""
+    the duality gap ``max(tol_gap_abs, tol_gap_rel f)`` of it (Clarabel's stopping rule), so ``|p - p*| <= sqrt(gap /
+    lambda_min)``; plus the feasibility tolerance times the data's scale (the box may be violated by that much). ``f``:
+    the objective whose relative gap the solver controls (the problem's own, or the sum of a stacked solve's)."""
     gap = np.maximum(tol["tol_gap_abs"], tol["tol_gap_rel"] * f)
     return np.sqrt(gap / lam_min) + tol["tol_feas"] * (1.0 + scale)
 

@@ -17,10 +17,10 @@ alternates with its reference in one process (``hx.compare``: medians of CPU and
 
 Agreement, from the results of the same calls, each with its tolerance (a disagreement beyond it is a DISAGREE row):
 the position (parameter) difference to cvxpy, over the problems Clarabel solved to "optimal" for the loop, within
-the distance its gap and feasibility tolerances allow (`_tolerances.solver_bound`: strong convexity of the objective), and
-the exact objective never above cvxpy's; for the closed form, that the box solution equals it bit for bit where the
-unconstrained fix is inside the box. The millisecond calls are repeated more (``FAST_REPEATS``
-pairs) so that their medians mean something on a shared machine.
+the distance its gap and feasibility tolerances allow (`_tolerances.solver_bound`: strong convexity of the objective),
+and the exact objective never above cvxpy's; for the closed form, that the box solution equals it bit for bit where the
+unconstrained fix is inside the box. The millisecond calls are repeated more (``FAST_REPEATS`` pairs) so that their
+medians mean something on a shared machine.
 """
 from __future__ import annotations
 
@@ -54,7 +54,8 @@ def _box_workload(dim, n, rng):
         anchors = np.array([[0.2, 0.3, 2.8], [9.8, 0.2, 2.7], [9.7, 7.8, 2.9], [0.3, 7.7, 2.6],
                             [5.0, 4.0, 0.2], [2.0, 6.0, 1.0]])
     size = hi - lo
-    truth = np.where(rng.random((n, 1)) < 0.8, rng.uniform(lo, hi, (n, dim)), rng.uniform(lo - size, hi + size, (n, dim)))
+    truth = np.where(rng.random((n, 1)) < 0.8, rng.uniform(lo, hi, (n, dim)),
+                     rng.uniform(lo - size, hi + size, (n, dim)))
     d = lb.pairwise_distance_m(truth, anchors) * rng.uniform(0.75, 1.25, (n, anchors.shape[0]))
     return anchors, d, lo, hi
 

@@ -10,8 +10,8 @@ peak resident memory of each call); the many k-NN queries, the Huber fit and the
 (``hx.once``). No reference: the figure beside the
 time is the mean error against the robot's truth, from the timed calls. It has no tolerance: nothing independent
 says what error a method must reach on these measurements (the data's authors print no figure for our methods, and
-a bound such as the CRLB assumes the model these readings only approximate), so it is shown, not checked. The grid Bayes filter is
-shown on the flat at ``--spacing`` with the separable transition; ``--dense-check`` also runs the dense C x C
+a bound such as the CRLB assumes the model these readings only approximate), so it is shown, not checked. The grid Bayes
+filter is shown on the flat at ``--spacing`` with the separable transition; ``--dense-check`` also runs the dense C x C
 transition (its matrix alone is 8 C^2 bytes) for comparison. The k-NN radio map is the 4,104 calibration points;
 ``--knn-queries`` (10,000 at full size: 100,000 took 12 s) repeats the drive's queries to show that its memory stays
 bounded (64 MiB blocks) whatever the batch.
@@ -56,14 +56,15 @@ def measure(spacing: float = 0.1, particles: int = 3000, knn_queries: int = 10_0
     queries = np.resize(rss, (knn_queries, rss.shape[1]))
     ml_fixes = np.full((len(reg.time_s), 2), np.nan)             # the KF's input: RSS-ML fixes on the clock
     rss_model = lb.RssModel(anchors, model, tag_height_m=h)      # the static estimators' model
-    ml_fixes[ticks] = lb.rss_ml_position(rss, rss_model, lb.grid_ml_position(rss, rss_model, grid).position_m).position_m
+    grid_fixes = lb.grid_ml_position(rss, rss_model, grid).position_m
+    ml_fixes[ticks] = lb.rss_ml_position(rss, rss_model, grid_fixes).position_m
 
     cases = [("fit per anchor (closed form)", "4,104 points x 6 anchors", lambda: ko.calibrate(data), None)]
     if cvxpy_fits:
-        cases += [("fit per anchor (bounded, cvxpy)", "4,104 points x 6 anchors", lambda: ko.calibrate(data, fit="bounded"),
-                   None),
-                  ("fit per anchor (Huber, cvxpy)", "4,104 points x 6 anchors", lambda: ko.calibrate(data, fit="huber"),
-                   "once")]
+        cases += [("fit per anchor (bounded, cvxpy)", "4,104 points x 6 anchors",
+                   lambda: ko.calibrate(data, fit="bounded"), None),
+                  ("fit per anchor (Huber, cvxpy)", "4,104 points x 6 anchors",
+                   lambda: ko.calibrate(data, fit="huber"), "once")]
     cases += [
         ("LLS", "719 epochs", lambda: lb.lateration_ls(anchors, ranges, tag_height_m=h).position_m, "fix"),
         ("box-LS", "719 epochs", lambda: lb.lateration_box_ls(anchors, ranges, lower, upper,
@@ -73,7 +74,8 @@ def measure(spacing: float = 0.1, particles: int = 3000, knn_queries: int = 10_0
         ("RSS ML (LM from grid ML)", "719 epochs",
          lambda: lb.rss_ml_position(rss, rss_model, lb.grid_ml_position(rss, rss_model, grid).position_m).position_m,
          "fix"),
-        ("k-NN (k = 5)", f"719 epochs x {len(cells)} map points", lambda: lb.knn_position(rss, fingerprints, cells, 5), "fix"),
+        ("k-NN (k = 5)", f"719 epochs x {len(cells)} map points",
+         lambda: lb.knn_position(rss, fingerprints, cells, 5), "fix"),
         ("k-NN (k = 5), many queries", f"{knn_queries:,} queries x {len(cells)} map points",
          lambda: lb.knn_position(queries, fingerprints, cells, 5), "once"),
         ("KF on ML fixes", f"{len(reg.time_s)} ticks",

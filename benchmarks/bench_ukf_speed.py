@@ -10,8 +10,8 @@ scaled to the full count; a step with some RSS readings missing updates filterpy
 and R, locbook's rule for missing readings), so every run is compared. At the thesis's alpha = 1e-3 the sigma-point
 weights are -1e6 and 6e4 and two correct implementations differ by round-off amplified to about 1e-8; at alpha = 0.5
 or 1 they agree to about 1e-13. The tolerance is that rounding bound, of one weighted sum over the 17 sigma points:
-17 eps sum |W_i| (`_tolerances.sigma_sum_round_off`, 7.5e-9 at alpha = 1e-3) times the largest |x| (|P|) entry; beyond it
-the row is a disagreement.
+17 eps sum |W_i| (`_tolerances.sigma_sum_round_off`, 7.5e-9 at alpha = 1e-3) times the largest |x| (|P|) entry; beyond
+it the row is a disagreement.
 
 Rows (benchmarks/_harness.py): 500 runs and 10 runs against filterpy on a subset of the runs (its time scaled by the
 number of runs), goals 200x and 20x on the CPU-time ratio (issue 31), with the agreement max |x - filterpy| and
@@ -109,8 +109,9 @@ def _first_steps(st: dict, steps: int) -> dict:
 
 def _filterpy_agreement(n: int, steps: int, alpha: float):
     """The agreement figure of the harness: max |x - filterpy|, |P - filterpy| on the first ``n`` runs and ``steps``
-    steps (where filterpy ran); the tolerance, the rounding bound of one sigma-point sum (`_tolerances.sigma_sum_round_off`)
-    times the largest |x| (|P|) entry of filterpy's: two implementations of the same arithmetic in another order."""
+    steps (where filterpy ran); the tolerance, the rounding bound of one sigma-point sum
+    (`_tolerances.sigma_sum_round_off`) times the largest |x| (|P|) entry of filterpy's: two implementations of the same
+    arithmetic in another order."""
     rel = sigma_sum_round_off(8, alpha)
 
     def agree(ours, ref):
@@ -243,8 +244,9 @@ def run(size: str = "full"):
                                f"measured {ns:.0f} ns per run-step, floor {fl['floor_ns']:.0f} ns "
                                f"({ns / fl['floor_ns']:.1f}x)"))
     yield hx.row("UKF (inertial + RSS), compiled, vs its arithmetic floor", f"U-path, {runs} runs x {T} steps (n = 8, "
-                 "17 sigma points, m = 3 + 6)", floor, f"arithmetic floor at {r['flop_per_ns']:.2f} FLOP/ns ({r['lanes']} "
-                 f"lanes, measured) + log {r['log_ns']:.1f} ns, sin + cos {r['sincos_ns']:.1f} ns", goal=0.2,
+                 "17 sigma points, m = 3 + 6)", floor,
+                 f"arithmetic floor at {r['flop_per_ns']:.2f} FLOP/ns ({r['lanes']} lanes, measured) "
+                 f"+ log {r['log_ns']:.1f} ns, sin + cos {r['sincos_ns']:.1f} ns", goal=0.2,
                  note=f"ratio = floor / locbook; the rate at its best lane width (FLOP/ns by lanes: {r['by_lanes']}); "
                       f"at 1 FLOP/ns the floor would be {fl['floor_1flop_ns']:.0f} ns")
 

@@ -33,9 +33,8 @@ from .tracking.streams import LinearMeasurement, RssMeasurement
 from .tracking.unscented import unscented_kalman_filter
 
 __all__ = ["ProtocolChoice", "StaticScenario", "TrackingScenario", "Method", "STATIC_METHODS", "TRACKERS",
-           "TrackerSettings", "static_fixes", "static_bound_m", "static_bound_checked", "run_trackers", "tracking_bound_m",
-           "initial_states", "channel_settings", "TRACKER_PRIORS",
-           "KF_FIX_MIN_ANCHORS"]
+           "TrackerSettings", "static_fixes", "static_bound_m", "static_bound_checked", "run_trackers",
+           "tracking_bound_m", "initial_states", "channel_settings", "TRACKER_PRIORS", "KF_FIX_MIN_ANCHORS"]
 
 
 @dataclass(frozen=True)
@@ -291,8 +290,9 @@ def static_fixes(sc: StaticScenario, rss_dbm, *, knn_k: int = 4, knn_map_spacing
 
 def _information(sc, positions_m, heard=None):
     ch = sc.channel
+    # the bound's model: anchors (heights over the tag), n, sigma, clamp
     model = RssModel(sc.anchors_m, PathLossModel(0.0, ch.path_loss_exp, ch.sigma_db, min_distance_m=ch.min_distance_m),
-                     tag_height_m=sc.tag_height_m)    # the bound's model: anchors (heights over the tag), n, sigma, clamp
+                     tag_height_m=sc.tag_height_m)
     return rss_position_information(positions_m, model, heard=heard)
 
 
@@ -435,7 +435,8 @@ def run_trackers(sc: TrackingScenario, rss_dbm, x0, ts: TrackerSettings, rng: np
     if "kf_on_ml" in chosen:
         H = np.hstack([np.eye(2), np.zeros((2, 2))])
         fixes = ml_fixes(sc, rss, ts)
-        res = extended_kalman_filter(motion.F, motion.Q, x0, P0, [LinearMeasurement(fixes, H, _fix_cov(sc, ts, rng_cov))])
+        res = extended_kalman_filter(motion.F, motion.Q, x0, P0,
+                                     [LinearMeasurement(fixes, H, _fix_cov(sc, ts, rng_cov))])
         out["kf_on_ml"], flags["kf_on_ml"] = res.position_m([0, 1]), DivergenceFlags.of(res)
     for name, mode in (("ekf", "parallel"), ("ekf_serial", "serial")):
         if name in chosen:

@@ -21,12 +21,13 @@ one rule for missing readings: NaN); other columns are ignored.
 
 **Time.** The time column has the readings' unit (``[units] time``) and their time axis: a unit that is not seconds
 is shifted by the origin of the recording's readings file (its first time,
-:func:`~locbook.data.measured.file_time_origin`), never by the inertial file's own first time, so that the two streams keep their offset (integer times are shifted as integers,
-as the readings' are, so no digit of a nanosecond clock is lost). The times are strictly increasing after the data
-set's ``backward_time`` rule (``refuse``: a time that does not increase is refused naming its line; ``sort``:
-the rows are sorted, stably, counted and noted, and a time that still repeats is refused). The sampling interval is
-the median spacing of the times; a spacing of more than :data:`GAP_INTERVALS` intervals is a gap, counted and noted
-(the sub-steps it covers have no reading: the filters predict through them).
+:func:`~locbook.data.measured.file_time_origin`), never by the inertial file's own first time, so that the two streams
+keep their offset (integer times are shifted as integers, as the readings' are, so no digit of a nanosecond clock is
+lost). The times are strictly increasing after the data set's ``backward_time`` rule (``refuse``: a time that does not
+increase is refused naming its line; ``sort``: the rows are sorted, stably, counted and noted, and a time that still
+repeats is refused). The sampling interval is the median spacing of the times; a spacing of more than
+:data:`GAP_INTERVALS` intervals is a gap, counted and noted (the sub-steps it covers have no reading: the filters
+predict through them).
 
 **Limits.** Values beyond :data:`MAX_ACCELERATION_M_S2` (16 g, the largest full scale of a MEMS accelerometer in a
 phone or tag) or :data:`MAX_ANGULAR_RATE_RAD_S` (2000 deg/s, a MEMS gyroscope's largest full scale) are unit errors
@@ -142,8 +143,9 @@ def read_inertial(path, *, time_scale: float = 1.0, time_origin=None, accelerati
 
     ``time_scale``: seconds per unit of the time column (``[units] time``); with a unit that is not seconds,
     ``time_origin`` is the origin of the recording's readings file
-    (:func:`~locbook.data.measured.file_time_origin` of its raw time column), the times being shifted by it. ``acceleration`` and ``angular_rate``: the ``[units]`` of the columns.
-    ``sort``: the data set's ``backward_time = "sort"``."""
+    (:func:`~locbook.data.measured.file_time_origin` of its raw time column), the times being shifted by it.
+    ``acceleration`` and ``angular_rate``: the ``[units]`` of the columns. ``sort``: the data set's ``backward_time =
+    "sort"``."""
     if acceleration not in ACCELERATION_UNITS:
         raise ParameterError(f"acceleration unit must be one of {sorted(ACCELERATION_UNITS)}, got {acceleration!r}")
     if angular_rate not in ANGULAR_RATE_UNITS:

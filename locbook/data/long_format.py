@@ -99,8 +99,8 @@ def check_time_unit(time_s: np.ndarray, raw: pd.Series, source: str, lines) -> N
 
 
 def file_time_origin(raw_time):
-    """The origin a readings file's times are shifted by when ``[units] time`` is not seconds (the rule of
-    :func:`locbook.data.dataset._convert`), from its time column as written: the smallest time, an ``int`` where
+    """The origin a readings file's times are shifted by when ``[units] time`` is not seconds (the loader shifts the
+    readings by it, see :func:`shifted_seconds`), from its time column as written: the smallest time, an ``int`` where
     every field is an integer (so that nanoseconds since 1970 keep every digit), else a float; None where no time is
     a number. A recording's other files (ranges, inertial samples) are shifted by the same origin, so they stay on
     its readings' clock."""

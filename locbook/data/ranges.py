@@ -74,7 +74,8 @@ def validate_ranges(table: pd.DataFrame, *, source: str, lines=None, anchor_ids,
         other = ~out["transmitter"].isin(senders).to_numpy()
         if other.any():
             i = int(np.flatnonzero(other)[0])
-            raise DataFormatError(f"{source}, line {lines[i]}, column 'transmitter': {shown(out['transmitter'].iloc[i])}"
+            raise DataFormatError(f"{source}, line {lines[i]}, column 'transmitter': "
+                                  f"{shown(out['transmitter'].iloc[i])}"
                                   f" has no readings in the recording's readings file (its transmitters: "
                                   f"{shown_names(sorted(senders))}); ranges are aligned with a transmitter's RSS "
                                   "epochs")
@@ -82,7 +83,8 @@ def validate_ranges(table: pd.DataFrame, *, source: str, lines=None, anchor_ids,
     negative = rng < 0                                          # NaN compares False
     if negative.any():
         i = int(np.flatnonzero(negative)[0])
-        raise DataFormatError(f"{source}, line {lines[i]}, column 'range_m': {shown(str(text['range_m'].iloc[i]).strip())}"
+        raise DataFormatError(f"{source}, line {lines[i]}, column 'range_m': "
+                              f"{shown(str(text['range_m'].iloc[i]).strip())}"
                               f" is negative ({int(negative.sum())} such value(s)); a range is a distance (>= 0 m): "
                               "a device that reports negative ranges near an anchor needs them clipped, or left empty "
                               "(not measured)")

@@ -62,8 +62,8 @@ def kalman_filter(F, Q, x0, P0, measurements, *, B=None, u=None, record=None, pr
     outputs : optional fields to keep at those steps, among
         ``("x_pred", "P_pred", "P_cross", "innovation", "S")`` (:class:`~locbook.tracking.results.KalmanResult`).
     variant : ``"corrected"`` (the standard recursion) or ``"literal_george"`` (Eqs. (11)-(13) of George and
-        Vadivukkarasi as printed: each update starts from the previous posterior; ``x_pred`` and ``P_pred`` are then that
-        posterior).
+        Vadivukkarasi as printed: each update starts from the previous posterior; ``x_pred`` and ``P_pred`` are then
+        that posterior).
     joseph : the Joseph-form covariance update (keeps P symmetric positive definite); False: ``(I - K H) P``.
     divergence_window, divergence_probability : the consistency guard (:mod:`locbook.tracking.results`): a run whose
         NIS exceeds ``chi2.ppf(divergence_probability, dof)`` at ``divergence_window`` consecutive updates is flagged

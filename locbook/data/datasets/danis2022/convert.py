@@ -15,11 +15,11 @@ trk/ and LICENSE.md); only these source files are read, none is changed:
   file ``sensorNN_X_Y_Z.mbd`` holds one receiver's readings of the beacon standing still at (X, Y, Z) metres, one
   line ``timestamp,sensorMAC,beaconMAC,RSSI`` per packet (timestamp: seconds since 1970, UTC; RSSI: dBm) for about
   30 minutes. **Cut:** only the lines less than ``CUT_S`` (20 s) after the file's first line are kept (the rest
-  of each file, about 99 % of the 5.2 million lines, is dropped: 30 s would make the folder larger than 6 MB). The points are
-  named ``S1-01``.. and ``S2-01``.. in the order of their first reading (the ``point`` column); X, Y, Z of the file
-  name become ``x_m, y_m, z_m`` (Z is the beacon's height). The file's sensor MAC must be the alias's MAC
-  (checked). **Sorted:** a set's rows are put in time order (ties: by receiver id), which also puts them point by
-  point, as the points were recorded one after the other (checked: no two points overlap in time).
+  of each file, about 99 % of the 5.2 million lines, is dropped: 30 s would make the folder larger than 6 MB). The
+  points are named ``S1-01``.. and ``S2-01``.. in the order of their first reading (the ``point`` column); X, Y, Z of
+  the file name become ``x_m, y_m, z_m`` (Z is the beacon's height). The file's sensor MAC must be the alias's MAC
+  (checked). **Sorted:** a set's rows are put in time order (ties: by receiver id), which also puts them point by point,
+  as the points were recorded one after the other (checked: no two points overlap in time).
 - ``trk/<track>_all_sensors.mbd`` (9 tracks) -> ``<track>.csv``. Each line is
   ``timestamp,sensorMAC,beaconMAC,RSSI,x,y,z,R11,..,R33``: a packet and the camera rig's pose at that time
   (position in metres, 3x3 orientation matrix). The rows keep the source order (the merge of the 12 receivers'

@@ -22,8 +22,8 @@ Guarantees (docs/running.md, "Interrupts, concurrent runs and the cache"):
 - each experiment runs in its own worker process; a worker that dies fails only its experiment (retried
   once, as is a kernel that dies on start); every other experiment finishes;
 - a finished experiment is validated (notebook readable, every file in its manifest present, numbers.csv
-  well formed; a bracket point's figures are captions only) and then promoted by renames; only then is its cache record written, so a failed,
-  interrupted or concurrent run never replaces or corrupts a good report;
+  well formed; a bracket point's figures are captions only) and then promoted by renames; only then is its cache
+  record written, so a failed, interrupted or concurrent run never replaces or corrupts a good report;
 - SIGINT / SIGTERM: no new experiment starts, running ones are stopped (worker and kernel), finished ones
   are kept, and :class:`SuiteRun` says what ran and what did not;
 - a full disk (ENOSPC, or the quota) is not a kernel failure: the run stops as on an interrupt, without
@@ -54,14 +54,21 @@ from pathlib import Path
 
 from ..reproduce.report import NUMBER_COLUMNS
 from . import cachekey, notebook_html
-from .cachekey import (cache_key, data_hashes, data_unchanged, dependency_versions, links_unchanged, locbook_version,
-                       package_dir)
+from .cachekey import (
+    cache_key,
+    data_hashes,
+    data_unchanged,
+    dependency_versions,
+    links_unchanged,
+    locbook_version,
+    package_dir,
+)
+from .executors import make_executor
 from .files import machine_label, read_json, write_text_atomic
 from .params import read_notebook
-from .executors import make_executor
-from .worker import disk_full_path
 from .progress import expected_seconds, make_progress
 from .spec import PROFILES, Experiment, Suite, SuiteError
+from .worker import disk_full_path
 
 __all__ = ["KERNEL_NAME", "run_tasks", "Task", "cache_key", "Outcome", "SuiteRun", "check_options", "report_cached"]
 
@@ -109,7 +116,8 @@ class SuiteRun:
     #: why the executor could run nothing more (a lost Dask scheduler); the run stopped there
     executor_error: str = ""
     #: a data run: the selected experiments left out because the data set does not meet their
-    #: ``[experiment.data_run] needs``, each with why (:func:`locbook.suite.run.select_for_data`); they are no outcome of the run
+    #: ``[experiment.data_run] needs``, each with why (:func:`locbook.suite.run.select_for_data`); they are no
+    #: outcome of the run
     left_out: dict[str, str] = field(default_factory=dict)
 
     def count(self, status: str) -> int:

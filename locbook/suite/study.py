@@ -28,9 +28,11 @@ with ``u ~ U[0, 1)``; a ``lhs`` column is ``(permutation(samples) + U[0, 1)) / s
 gives the same points. Only ``float`` parameters can be drawn.
 
 Everything is checked before anything runs (:class:`~locbook.suite.spec.SuiteError`, naming the study and what is
-wrong): unknown keys, experiments and samplers, parameters an experiment does not declare, the number of runs
-(experiments x the product of the block sizes x replicates, at most :data:`MAX_STUDY_RUNS`, counted before anything
-is drawn), two points with the same checked values, and every value of every point against the parameter's type
+wrong; the keys and values by the schema, the pydantic models ``_StudyTable``, ``_Sampler`` and ``_Range``, then the
+rules against each experiment's notebook): unknown keys, experiments and samplers, parameters an experiment does
+not declare, the number of runs (experiments x the product of the block sizes x replicates, at most
+:data:`MAX_STUDY_RUNS`, counted before anything is drawn), two points with the same checked values, and every
+value of every point against the parameter's type
 and declared rule (``[parameter_rules]``).
 
 Each point (experiment x parameter point x replicate) is one task of :func:`locbook.suite.runner.run_tasks`, all

@@ -1,7 +1,8 @@
 """The notebook suite: experiment list, typed parameters, papermill execution and reports.
 
 Names are imported on first use (PEP 562): a notebook needs none of the suite (its ``Report`` lives in
-:mod:`locbook.reproduce`), and the runner's dependencies (papermill, nbformat, jinja2) would cost every kernel seconds at start-up.
+:mod:`locbook.reproduce`), and the runner's dependencies (papermill, nbformat, jinja2) would cost every kernel
+seconds at start-up.
 """
 from .._lazy import lazy_exports
 

@@ -10,8 +10,8 @@ and for a numeric range both ends ``low`` and ``high`` (rounded for an ``int`` p
 profile's value are not run again (except a reading's default under the values its ``requires`` column names,
 which runs with them); an experiment's ``[experiment.bracket]`` parameters (the experiment list)
 are set at every point, the default one included (never a reading's parameter; e.g. a notebook's own sweep of
-readings the bracket runs as points anyway); two readings that name the same parameter value share one point. When two or
-more readings name values fitted to printed output (the ``fitted`` column), one more point sets them all at once,
+readings the bracket runs as points anyway); two readings that name the same parameter value share one point. When
+two or more readings name values fitted to printed output (the ``fitted`` column), one more point sets them all at once,
 as they were chosen together (``fitted readings together [fitted]: ...``). Every value
 is checked against the parameter's type and rule before anything runs (a readings file that names a value the
 notebook refuses is a :class:`~locbook.suite.spec.SuiteError`). Readings act one at a time: a printed number
@@ -83,17 +83,32 @@ from ..errors import ParameterError
 from ..reproduce.printed_values import printed_number
 from ..reproduce.readings import Reading, load_reading_file, readings_for
 from ..reproduce.scoring import BRACKETS
+from .bracket_table import (
+    BRACKET_COLUMNS,
+    BRACKET_ROW_COLUMNS,
+    DEFAULT_POINT,
+    POINT_COLUMNS,
+    SITE_NUMBER_COLUMNS,
+    VALUE_COLUMNS,
+    NoBracket,
+    bracket_of_rows,
+    brackets_root,
+    counts,
+    find_row,
+    index_rows,
+    is_scored,
+    load_bracket,
+    load_values,
+)
 from .files import point_key, point_text, read_csv, write_text_atomic
 from .params import check_value
-from .spec import Experiment, Suite, SuiteError, finite_float
-from .bracket_table import (BRACKET_COLUMNS, BRACKET_ROW_COLUMNS, DEFAULT_POINT, POINT_COLUMNS, SITE_NUMBER_COLUMNS,
-                            VALUE_COLUMNS, NoBracket, find_row, index_rows, is_scored, bracket_of_rows, brackets_root, counts,
-                            load_bracket, load_values)
 from .runner import Task
+from .spec import Experiment, Suite, SuiteError, finite_float
 from .sweep import Aggregate, current_points, run_sweep
 
 __all__ = ["BracketPoint", "find_experiment", "brackets_root", "SITE_NUMBER_COLUMNS", "BRACKET_ROW_COLUMNS",
-           "experiment_readings", "bracket_settings", "counts", "VALUE_COLUMNS", "load_values", "read_readings_option", "bracket_points", "bracket_gaps", "run_bracket", "bracket_folder", "bracket_rows",
+           "experiment_readings", "bracket_settings", "counts", "VALUE_COLUMNS", "load_values", "read_readings_option",
+           "bracket_points", "bracket_gaps", "run_bracket", "bracket_folder", "bracket_rows",
            "bracket_of_rows", "load_bracket", "NoBracket", "BRACKETS", "BRACKET_COLUMNS", "POINT_COLUMNS"]
 
 
@@ -144,7 +159,8 @@ class BracketPoint:
         if self.together and self.combined:
             return "readings together: " + ", ".join(f"{k}={_text(v)}" for k, v in self.together.items())
         if self.together:
-            return "fitted readings together [fitted]: " + ", ".join(f"{k}={_text(v)}" for k, v in self.together.items())
+            return "fitted readings together [fitted]: " + ", ".join(f"{k}={_text(v)}"
+                                                                    for k, v in self.together.items())
         names = ", ".join(r.name + (" [fitted]" if r.is_fitted(self.reading_values.get(r.name, self.value)) else "")
                           for r in self.readings)
         extra = "".join(f" with {k}={_text(v)}" for k, v in self.requires.items())

@@ -17,7 +17,8 @@ from .files import read_csv
 from .spec import PROFILES, finite_float
 
 __all__ = ["BRACKET_ROW_COLUMNS", "SITE_NUMBER_COLUMNS", "BRACKET_COLUMNS", "VALUE_COLUMNS", "POINT_COLUMNS",
-           "DEFAULT_POINT", "index_rows", "find_row", "is_scored", "SAME_RESULT_RTOL", "same_number", "four_digits", "bracket_of_rows", "brackets_root",
+           "DEFAULT_POINT", "index_rows", "find_row", "is_scored", "SAME_RESULT_RTOL", "same_number", "four_digits",
+           "bracket_of_rows", "brackets_root",
            "NoBracket", "read_table", "load_bracket", "load_values", "counts"]
 
 

@@ -49,7 +49,8 @@ def _print_summary(run, progress: str = "plain", see: Path | None = None, rebuil
     index and numbers.csv; a study's or bracket's :class:`~locbook.suite.sweep.Aggregate`), said after a stop."""
     names = {"ok": "executed", "cached": "cached", "failed": "failed", "interrupted": "interrupted",
              "not run": "not started"}
-    counts = ", ".join(f"{run.count(s)} {w}" for s, w in names.items() if run.count(s) or s in ("ok", "cached", "failed"))
+    counts = ", ".join(f"{run.count(s)} {w}" for s, w in names.items()
+                       if run.count(s) or s in ("ok", "cached", "failed"))
     from .progress import print_scoreboard
     print_scoreboard(run, progress)
     print(f"done: {counts}; see {see or run.report_dir / 'index.html'}")
@@ -146,7 +147,8 @@ def main(argv: list[str] | None = None) -> int:
     run = sub.add_parser("run", help="execute experiments and write reports/<profile>/")
     run.add_argument("ids", nargs="*", help="experiment ids or document keys (default: all)")
     run.add_argument("--profile", choices=("quick", "full"), default="quick", help=PROFILE_HELP)
-    run.add_argument("--jobs", "-j", type=lambda t: _positive(int, t), default=2, help="notebooks run in parallel processes (default 2)")
+    run.add_argument("--jobs", "-j", type=lambda t: _positive(int, t), default=2,
+                     help="notebooks run in parallel processes (default 2)")
     run.add_argument("--force", action="store_true", help="execute even when a cached report is up to date")
     run.add_argument("-p", "--parameter", action="append", default=[], metavar="NAME=VALUE",
                      help="override a notebook parameter (a TOML value, checked against its type and range); "
@@ -237,11 +239,12 @@ def main(argv: list[str] | None = None) -> int:
                       help="check: also import this static method of your own (as for run)")
     data.add_argument("--tracker", dest="trackers", action="append", default=[], metavar="NAME=SPEC",
                       help="check: also import this tracker of your own (as for run)")
-    for command in (lst, show, nbs, run, study, bracket, data):   # --suite after the command too; SUPPRESS keeps one given before it
+    # --suite after the command too; SUPPRESS keeps one given before it
+    for command in (lst, show, nbs, run, study, bracket, data):
         command.add_argument("--suite", type=Path, default=argparse.SUPPRESS, help=suite_help)
     args = parser.parse_args(argv)
 
-    from .spec import load_suite   # each command imports what it needs: `locbook list` loads no numpy
+    from .spec import load_suite  # each command imports what it needs: `locbook list` loads no numpy
 
     try:
         suite = load_suite(args.suite)
@@ -253,8 +256,8 @@ def main(argv: list[str] | None = None) -> int:
         if args.command == "data":
             if args.action == "example":
                 import numpy as np
-                from ..data.example import write_example_dataset
-                from ..data.example import EXAMPLE_ROLES
+
+                from ..data.example import EXAMPLE_ROLES, write_example_dataset
                 folder = write_example_dataset(args.dataset, np.random.default_rng(args.seed), seed_note=args.seed,
                                                name=args.name, force=args.force, speed_m_s=args.speed,
                                                roles=args.roles or EXAMPLE_ROLES, two_d=args.two_d,
@@ -481,7 +484,8 @@ def _dataset_text(path: str, suite=None) -> str:
     lo, hi = ds.outline_m.min(axis=0), ds.outline_m.max(axis=0)
     lines = [f"data set {ds.name!r}: {ds.title}", f"  folder: {ds.root}", f"  licence: {ds.license}",
              f"  attribution: {ds.attribution}",
-             f"  anchors: {len(ds.anchor_ids)} ({', '.join(ds.anchor_ids[:12])}{', ...' if len(ds.anchor_ids) > 12 else ''})",
+             f"  anchors: {len(ds.anchor_ids)} ({', '.join(ds.anchor_ids[:12])}"
+             f"{', ...' if len(ds.anchor_ids) > 12 else ''})",
              *([f"  run anchors: {len(ds.run_anchors)} of {len(ds.anchor_ids)} ({', '.join(ds.run_anchors)}; "
                 f"[run] anchors: a run ignores the other anchors' readings, -p anchors=... replaces it)"]
                if getattr(ds, "run_anchors", ()) else []),

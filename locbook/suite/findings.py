@@ -100,7 +100,8 @@ def findings_markdown(document: str, authors: str, year, doc_rows: list[dict], p
     b = tier_counts(doc_rows) or {"n": 0, **{t: 0 for t in _tiers()}, "none": 0}
     scored = scored_rows(doc_rows)
     lines = [f"# Findings: {md_cell(authors)} ({year}), `{document}`", "",
-             (f"Profile `{profile}`. " if profile else "") + f"Scored rows: {b['n']}: " + "; ".join(f"{_SHORT[t]} {b[t]}" for t in _tiers())
+             (f"Profile `{profile}`. " if profile else "") + f"Scored rows: {b['n']}: "
+             + "; ".join(f"{_SHORT[t]} {b[t]}" for t in _tiers())
              + f"; not bracketed {b['none']}. These counts are those of numbers.csv and of the index (one table).",
              ""]
     if leniency_note(profile):
@@ -242,7 +243,8 @@ def one_screen_markdown(answers: list[dict], profile: str) -> list[str]:
     if leniency_note(profile):
         lines += [leniency_note(profile), ""]
     for a in answers:
-        lines += [f"- **{md_cell(a['authors'])} ({a['year']})**, `{a['key']}`: " + markdown_text(" ".join(a["sentences"]))]
+        lines += [f"- **{md_cell(a['authors'])} ({a['year']})**, `{a['key']}`: "
+                  + markdown_text(" ".join(a["sentences"]))]
     lines += ["", "| document | scored | " + " | ".join(_SHORT[t] for t in _tiers()) + " |",
               "|---|---|" + "---|" * len(_tiers())]
     lines += [f"| `{a['key']}` | {a['n']} | " + " | ".join(str(a["counts"][t]) for t in _tiers()) + " |"

@@ -73,9 +73,8 @@ class ParameterRule:
         for key, value in raw.items():   # checked here: a bad bound would otherwise fail inside pydantic later
             kind = (bool if key == "allow_inf" else int if key.endswith("_items") else numbers.Real)
             if not isinstance(value, kind) or (kind is not bool and isinstance(value, bool)):
-                raise ParameterError(f"{where}: the rule for {name!r} needs {key} to be "
-                                     f"{'true or false' if kind is bool else 'a whole number' if kind is int else 'a number'}"
-                                     f", got {value!r}")
+                wanted = 'true or false' if kind is bool else 'a whole number' if kind is int else 'a number'
+                raise ParameterError(f"{where}: the rule for {name!r} needs {key} to be {wanted}, got {value!r}")
         return cls(**raw)
 
     def describe(self) -> str:
@@ -102,7 +101,7 @@ def _parameters_cell(nb):
 def read_notebook(notebook_path: str | Path):
     """The notebook, or a :class:`ParameterError` naming the file if it is missing or not a notebook."""
     try:
-        import nbformat   # here, not at import: nbformat's schema checks cost a notebook kernel a second
+        import nbformat  # here, not at import: nbformat's schema checks cost a notebook kernel a second
         return nbformat.read(str(notebook_path), as_version=4)
     except FileNotFoundError:
         raise ParameterError(f"{notebook_path}: notebook does not exist") from None
@@ -193,7 +192,7 @@ def _adapter(annotation: str, rule: ParameterRule | None):
     import typing
     from typing import Annotated, Literal
 
-    from pydantic import AfterValidator, Field, Strict, TypeAdapter   # here: `locbook list` never needs pydantic
+    from pydantic import AfterValidator, Field, Strict, TypeAdapter  # here: `locbook list` never needs pydantic
 
     checks = rule or ParameterRule(allow_inf=True)
     bounds = {"ge": checks.ge, "gt": checks.gt, "le": checks.le, "lt": checks.lt}

@@ -17,8 +17,8 @@ import sys
 import time
 from pathlib import Path
 
-from .files import read_csv, read_json
 from ..reproduce.scoring import KINDS, scoreboard_counts
+from .files import read_csv, read_json
 
 __all__ = ["MODES", "make_progress", "expected_seconds", "scoreboard_rows", "scoreboard_text", "print_scoreboard"]
 

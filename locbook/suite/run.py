@@ -15,7 +15,6 @@ import re
 from pathlib import Path
 
 from ..errors import ParameterError
-
 from . import runner
 from .files import read_json, write_text_atomic
 from .progress import make_progress
@@ -190,8 +189,8 @@ def run_suite(suite: Suite, experiments: list[Experiment], profile: str, *, jobs
     run = run_tasks(suite, tasks, profile, report_dir, jobs=jobs, force=force, timeout_s=timeout_s,
                     retries=retries, kernel_name=kernel_name, progress=progress, executor=executor,
                     scheduler=scheduler, data_roots=data_roots,
-                    write_reports=lambda folder, _outcomes: _write_reports(suite, folder, custom_folder,
-                                                                           dataset_name is not None and out_dir is None))
+                    write_reports=lambda folder, _outcomes: _write_reports(
+                        suite, folder, custom_folder, dataset_name is not None and out_dir is None))
     run.left_out = dict(left_out)
     return run
 

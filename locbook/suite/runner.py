@@ -22,8 +22,8 @@ Guarantees (docs/running.md, "Interrupts, concurrent runs and the cache"):
 - each experiment runs in its own worker process; a worker that dies fails only its experiment (retried
   once, as is a kernel that dies on start); every other experiment finishes;
 - a finished experiment is validated (notebook readable, every file in its manifest present, numbers.csv
-  well formed; a bracket point's figures are captions only) and then promoted by renames; only then is its cache record written, so a failed,
-  interrupted or concurrent run never replaces or corrupts a good report;
+  well formed; a bracket point's figures are captions only) and then promoted by renames; only then is its cache
+  record written, so a failed, interrupted or concurrent run never replaces or corrupts a good report;
 - SIGINT / SIGTERM: no new experiment starts, running ones are stopped (worker and kernel), finished ones
   are kept, and :class:`SuiteRun` says what ran and what did not;
 - a full disk (ENOSPC, or the quota) is not a kernel failure: the run stops as on an interrupt, without
@@ -54,14 +54,21 @@ from pathlib import Path
 
 from ..reproduce.report import NUMBER_COLUMNS
 from . import cachekey, notebook_html
-from .cachekey import (cache_key, data_hashes, data_unchanged, dependency_versions, links_unchanged, locbook_version,
-                       package_dir)
+from .cachekey import (
+    cache_key,
+    data_hashes,
+    data_unchanged,
+    dependency_versions,
+    links_unchanged,
+    locbook_version,
+    package_dir,
+)
+from .executors import make_executor
 from .files import machine_label, read_json, write_text_atomic
 from .params import read_notebook
-from .executors import make_executor
-from .worker import disk_full_path
 from .progress import expected_seconds, make_progress
 from .spec import PROFILES, Experiment, Suite, SuiteError
+from .worker import disk_full_path
 
 __all__ = ["KERNEL_NAME", "run_tasks", "Task", "cache_key", "Outcome", "SuiteRun", "check_options", "report_cached"]
 
@@ -109,7 +116,8 @@ class SuiteRun:
     #: why the executor could run nothing more (a lost Dask scheduler); the run stopped there
     executor_error: str = ""
     #: a data run: the selected experiments left out because the data set does not meet their
-    #: ``[experiment.data_run] needs``, each with why (:func:`locbook.suite.run.select_for_data`); they are no outcome of the run
+    #: ``[experiment.data_run] needs``, each with why (:func:`locbook.suite.run.select_for_data`); they are no
+    #: outcome of the run
     left_out: dict[str, str] = field(default_factory=dict)
 
     def count(self, status: str) -> int:
@@ -408,58 +416,79 @@ def _longest_first(report_dir: Path, profile: str, ids):
 
 def _run_locked(suite, tasks, profile, report_dir, data_roots, force, timeout_s, retries, kernel_name,
                 write_reports, write_pages, stop, run, progress, pool):
-    source, versions = cachekey.runner_fingerprint(), dependency_versions()
-    rev, dirty = _git_state(suite.repository)
-    stamp = locbook_version() + (f" (source {rev}{' + uncommitted changes' if dirty else ''})" if rev else "")
-    status_path = report_dir / "status.json"
-    status = read_json(status_path, {})
-    by_id = {t.key: t for t in tasks}
-    keys = {t.key: cache_key(t.experiment, profile, t.parameters, source=source, versions=versions,
-                             figures=t.figures) for t in tasks}
+    """Run ``tasks`` with the folder's lock held: :class:`_Scheduler` (its docstring)."""
+    _Scheduler(suite, tasks, profile, report_dir, data_roots, force, timeout_s, retries, kernel_name, write_reports,
+               write_pages, stop, run, progress, pool).run()
 
-    def disk_full(path) -> None:
+
+class _Scheduler:
+    """One locked session of the runner: the cached tasks finished, the rest queued longest first, launched up to
+    the executor's capacity, each result validated and promoted (or retried once, or kept under ``.failed/``), and
+    at the end, whatever stopped it, every running task stopped, every task given an outcome, the staging removed
+    and the suite files rebuilt. Its state: ``queue`` ((id, attempt) to launch), ``running`` (id -> (executor
+    handle, staging, attempt, started or None)), ``abandoned`` ((handle, staging) of lost tasks asked to stop,
+    which may still be running), and ``status`` (``status.json``)."""
+
+    def __init__(self, suite, tasks, profile, report_dir, data_roots, force, timeout_s, retries, kernel_name,
+                 write_reports, write_pages, stop, run, progress, pool):
+        self.profile, self.report_dir, self.data_roots = profile, report_dir, data_roots
+        self.timeout_s, self.retries, self.kernel_name = timeout_s, retries, kernel_name
+        self.write_reports, self.write_pages = write_reports, write_pages
+        self.stop, self.suite_run, self.progress, self.pool = stop, run, progress, pool
+        source, versions = cachekey.runner_fingerprint(), dependency_versions()
+        rev, dirty = _git_state(suite.repository)
+        self.stamp = locbook_version() + (f" (source {rev}{' + uncommitted changes' if dirty else ''})" if rev else "")
+        self.status_path = report_dir / "status.json"
+        self.status = read_json(self.status_path, {})
+        self.by_id = {t.key: t for t in tasks}
+        self.keys = {t.key: cache_key(t.experiment, profile, t.parameters, source=source, versions=versions,
+                                      figures=t.figures) for t in tasks}
+        queue: deque = deque()
+        for t in tasks:
+            cached, damaged = ((False, "") if force else
+                               report_cached(report_dir / t.key, t.experiment, self.keys[t.key], t.figures))
+            if cached:
+                self.finish(Outcome(t.key, "cached", 0.0))
+            else:
+                if damaged:
+                    progress.message(f"{t.key}: the cached report is damaged ({damaged}); executing it again")
+                queue.append((t.key, 1))
+        self.queue = deque(sorted(queue, key=_longest_first(report_dir, profile, [eid for eid, _ in queue])))
+        self.staging_root = report_dir / ".staging" / f"{os.getpid()}-{uuid.uuid4().hex[:8]}"
+        self.running: dict[str, tuple] = {}
+        self.abandoned: list[tuple] = []
+
+    def disk_full(self, path) -> None:
         """A write failed for lack of space: the run stops (no retry, no new experiment)."""
-        if run.disk_full is None:
-            run.disk_full = str(path)
-            progress.message(f"no space left on device writing {path}; stopping the run")
+        if self.suite_run.disk_full is None:
+            self.suite_run.disk_full = str(path)
+            self.progress.message(f"no space left on device writing {path}; stopping the run")
 
-    def halted() -> bool:
-        return stop.signum is not None or run.disk_full is not None or bool(run.executor_error)
+    def halted(self) -> bool:
+        run = self.suite_run
+        return self.stop.signum is not None or run.disk_full is not None or bool(run.executor_error)
 
-    def finish(outcome: Outcome):
-        run.outcomes.append(outcome)
+    def finish(self, outcome: Outcome):
+        self.suite_run.outcomes.append(outcome)
         if outcome.status != "not run":
-            status[outcome.id] = {"status": outcome.status, "seconds": round(outcome.seconds, 2),
-                                  "error": outcome.error}
+            self.status[outcome.id] = {"status": outcome.status, "seconds": round(outcome.seconds, 2),
+                                       "error": outcome.error}
             try:
-                write_text_atomic(status_path, json.dumps(status, indent=1, sort_keys=True))
+                write_text_atomic(self.status_path, json.dumps(self.status, indent=1, sort_keys=True))
             except OSError as exc:
-                path = disk_full_path(exc, str(status_path))
+                path = disk_full_path(exc, str(self.status_path))
                 if path is None:
                     raise
-                disk_full(path)    # the record of this attempt is lost; the reports are not
-        progress.finished(outcome)
+                self.disk_full(path)    # the record of this attempt is lost; the reports are not
+        self.progress.finished(outcome)
 
-    queue: deque = deque()
-    for t in tasks:
-        cached, damaged = (False, "") if force else report_cached(report_dir / t.key, t.experiment, keys[t.key], t.figures)
-        if cached:
-            finish(Outcome(t.key, "cached", 0.0))
-        else:
-            if damaged:
-                progress.message(f"{t.key}: the cached report is damaged ({damaged}); executing it again")
-            queue.append((t.key, 1))
-    queue = deque(sorted(queue, key=_longest_first(report_dir, profile, [eid for eid, _ in queue])))
-    staging_root = report_dir / ".staging" / f"{os.getpid()}-{uuid.uuid4().hex[:8]}"
-    running: dict[str, tuple] = {}     # id -> (executor handle, staging, attempt, started or None)
-    abandoned: list[tuple] = []        # (handle, staging) of lost tasks asked to stop, which may still be running
-
-    def launch(eid: str, attempt: int):
-        staging = staging_root / f"{eid}-{attempt}"
-        exp = by_id[eid].experiment
-        task = {"id": exp.id, "notebook": str(exp.notebook), "parameters": by_id[eid].parameters,
-                "staging": str(staging), "timeout": timeout_s, "kernel": kernel_name,
-                "data_roots": data_roots, "runner_pid": os.getpid(), "figures": by_id[eid].figures}
+    def launch(self, eid: str, attempt: int):
+        pool = self.pool
+        staging = self.staging_root / f"{eid}-{attempt}"
+        exp = self.by_id[eid].experiment
+        task = {"id": exp.id, "notebook": str(exp.notebook), "parameters": self.by_id[eid].parameters,
+                "staging": str(staging), "timeout": self.timeout_s, "kernel": self.kernel_name,
+                "data_roots": self.data_roots, "runner_pid": os.getpid(), "figures": self.by_id[eid].figures}
         writing = staging
         try:
             staging.mkdir(parents=True)
@@ -467,27 +496,29 @@ def _run_locked(suite, tasks, profile, report_dir, data_roots, force, timeout_s,
             writing.write_text(json.dumps(task))
             handle = pool.submit(eid, staging / ".task.json")
         except Exception as exc:   # a full disk, or an executor that lost its cluster: this one has not started
-            queue.appendleft((eid, attempt))
+            self.queue.appendleft((eid, attempt))
             shutil.rmtree(staging, ignore_errors=True)
             path = disk_full_path(exc, str(writing))
             if path is not None:
-                disk_full(path)
+                self.disk_full(path)
             elif pool.broken():
-                run.executor_error = pool.broken()
+                self.suite_run.executor_error = pool.broken()
             else:
                 raise
             return
-        running[eid] = (handle, staging, attempt, None)
+        self.running[eid] = (handle, staging, attempt, None)
 
-    def mark_started():
+    def mark_started(self):
         """An experiment is running once its worker has made its runtime folder (on a cluster, a submitted
         task may wait for a free worker); the elapsed time counts from then."""
+        running = self.running
         for eid, (handle, staging, attempt, started) in running.items():
-            if started is None and (pool.is_local or (staging / ".runtime").exists()):
+            if started is None and (self.pool.is_local or (staging / ".runtime").exists()):
                 running[eid] = (handle, staging, attempt, time.perf_counter())
-                progress.started(eid, attempt)
+                self.progress.started(eid, attempt)
 
-    def complete(eid: str, handle, staging: Path, attempt: int, started: float | None):
+    def complete(self, eid: str, handle, staging: Path, attempt: int, started: float | None):
+        pool, run, progress, by_id, report_dir = self.pool, self.suite_run, self.progress, self.by_id, self.report_dir
         seconds = time.perf_counter() - started if started is not None else 0.0
         result = read_json(staging / ".result.json", None)
         if not isinstance(result, dict):
@@ -499,14 +530,14 @@ def _run_locked(suite, tasks, profile, report_dir, data_roots, force, timeout_s,
             # the executor gave up on the task, which may still be running where it was sent: ask it to stop,
             # and leave its staging folder in place (removed with the run's) so that nothing writes elsewhere
             pool.stop(handle, staging)
-            abandoned.append((handle, staging))
+            self.abandoned.append((handle, staging))
             if pool.broken():
                 run.executor_error = pool.broken()
         if result.get("disk_full"):
-            disk_full(result["disk_full"])
-        elif (result["error"] and result.get("kernel_failure") and attempt <= retries and not halted()):
+            self.disk_full(result["disk_full"])
+        elif (result["error"] and result.get("kernel_failure") and attempt <= self.retries and not self.halted()):
             progress.message(f"{eid}: {result['error']}; retrying once")
-            queue.appendleft((eid, attempt + 1))
+            self.queue.appendleft((eid, attempt + 1))
             return
         error = result["error"] or _validate_report(staging, by_id[eid].experiment.id, by_id[eid].figures)
         if not error:
@@ -515,8 +546,8 @@ def _run_locked(suite, tasks, profile, report_dir, data_roots, force, timeout_s,
                 kind = "a symbolic link" if final.is_symlink() else "a file"
                 progress.message(f"{eid}: {final} was {kind}, not a report folder; replaced by the new report")
             try:
-                changed = _promote(by_id[eid].experiment, profile, by_id[eid].parameters, staging, report_dir / eid,
-                                   stamp, keys[eid], result, write_pages)
+                changed = _promote(by_id[eid].experiment, self.profile, by_id[eid].parameters, staging,
+                                   report_dir / eid, self.stamp, self.keys[eid], result, self.write_pages)
                 if changed:
                     more = f" (and {len(changed) - 1} more)" if len(changed) > 1 else ""
                     progress.message(f"{eid}: {changed[0]}{more} changed while it ran, after its kernel read it; the "
@@ -524,7 +555,7 @@ def _run_locked(suite, tasks, profile, report_dir, data_roots, force, timeout_s,
             except OSError as exc:
                 path = disk_full_path(exc, str(staging))
                 if path is not None:
-                    disk_full(path)
+                    self.disk_full(path)
                     error = f"no space left on device writing {path}"
                 else:
                     error = f"could not write the report: {exc.strerror or exc}"
@@ -534,29 +565,37 @@ def _run_locked(suite, tasks, profile, report_dir, data_roots, force, timeout_s,
                     _keep_failed(staging, report_dir / ".failed" / eid)
                 except OSError:
                     pass
-            finish(Outcome(eid, "failed", result["seconds"], error, attempt))
+            self.finish(Outcome(eid, "failed", result["seconds"], error, attempt))
         else:
-            finish(Outcome(eid, "ok", result["seconds"], "", attempt))
+            self.finish(Outcome(eid, "ok", result["seconds"], "", attempt))
 
-    try:
-        while queue or running:
-            if halted():
-                break
-            while queue and len(running) < pool.capacity and not halted():
-                launch(*queue.popleft())
-            mark_started()
-            time.sleep(0.1)
-            for eid in [e for e, (h, *_rest) in running.items() if pool.done(h)]:
-                handle, staging, attempt, started = running.pop(eid)
-                if started is None:
-                    progress.started(eid, attempt)
-                complete(eid, handle, staging, attempt, started)
-            if not run.executor_error and pool.broken():
-                run.executor_error = pool.broken()
-    finally:
-        # an interrupt, a full disk, a lost cluster (or an unexpected error here): stop the workers, keep
-        # everything finished. Each step runs whatever the one before it met (an executor's error is held until the
-        # end), so every experiment gets its outcome, the staging is always removed and the suite files rebuilt.
+    def run(self):
+        """Launch, poll and complete until the queue and the running tasks are empty or the run halts; then
+        :meth:`shut_down`, whatever happened."""
+        pool, run, queue, running = self.pool, self.suite_run, self.queue, self.running
+        try:
+            while queue or running:
+                if self.halted():
+                    break
+                while queue and len(running) < pool.capacity and not self.halted():
+                    self.launch(*queue.popleft())
+                self.mark_started()
+                time.sleep(0.1)
+                for eid in [e for e, (h, *_rest) in running.items() if pool.done(h)]:
+                    handle, staging, attempt, started = running.pop(eid)
+                    if started is None:
+                        self.progress.started(eid, attempt)
+                    self.complete(eid, handle, staging, attempt, started)
+                if not run.executor_error and pool.broken():
+                    run.executor_error = pool.broken()
+        finally:
+            self.shut_down()
+
+    def shut_down(self):
+        """An interrupt, a full disk, a lost cluster (or an unexpected error in :meth:`run`): stop the workers, keep
+        everything finished. Each step runs whatever the one before it met (an executor's error is held until the
+        end), so every experiment gets its outcome, the staging is always removed and the suite files rebuilt."""
+        pool, run, stop, running, report_dir = self.pool, self.suite_run, self.stop, self.running, self.report_dir
         held: list[BaseException] = []
 
         def guarded(call, *args):
@@ -576,20 +615,20 @@ def _run_locked(suite, tasks, profile, report_dir, data_roots, force, timeout_s,
             why = f"stopped: {run.executor_error}" if run.executor_error else "stopped"
         for eid, (handle, staging, attempt, started) in running.items():
             guarded(pool.wait_or_kill, handle, staging, max(0.0, deadline - time.perf_counter()))
-            finish(Outcome(eid, "interrupted", time.perf_counter() - started if started is not None else 0.0,
-                           why, attempt))
-        for handle, staging in abandoned:     # their staging goes only once they have ended (or their time is up)
+            self.finish(Outcome(eid, "interrupted", time.perf_counter() - started if started is not None else 0.0,
+                                why, attempt))
+        for handle, staging in self.abandoned:     # their staging goes only once they have ended (or their time is up)
             guarded(pool.wait_or_kill, handle, staging, max(0.0, deadline - time.perf_counter()))
-        for eid, _attempt in queue:
-            finish(Outcome(eid, "not run", 0.0))
-        _remove_staging(staging_root)
+        for eid, _attempt in self.queue:
+            self.finish(Outcome(eid, "not run", 0.0))
+        _remove_staging(self.staging_root)
         try:
-            write_reports(report_dir, run.outcomes)
+            self.write_reports(report_dir, run.outcomes)
         except OSError as exc:
             path = disk_full_path(exc, str(report_dir))
             if path is None:
                 raise
-            disk_full(path)        # the previous index and numbers.csv stay as they were
+            self.disk_full(path)        # the previous index and numbers.csv stay as they were
         if held:
             raise held[0]          # an executor's own error (not a lost cluster: that is guarded there), after clean-up
 

@@ -36,15 +36,42 @@ from .bracket_table import SITE_NUMBER_COLUMNS, bracket_of_rows, brackets_root, 
 from .cachekey import locbook_version
 from .conclusions import CONCLUSIONS_SUFFIX, write_conclusions
 from .files import read_csv, read_json, write_text_atomic
-from .findings import (bracket_headline, by_document, findings_links, first_clause, leniency_note, md_cell,
-                       one_screen, one_screen_markdown, profile_of, tier_counts, write_findings)
-from .pages import (bracket_chips, caption_md, experiment_line, first_file, index_entry, number_text, page_outputs,
-                    render)
-from .site_data import (data_index_html, data_index_markdown, data_page, dataset_credit, dataset_record,
-                        dataset_sections, dataset_title)
+from .findings import (
+    bracket_headline,
+    by_document,
+    findings_links,
+    first_clause,
+    leniency_note,
+    md_cell,
+    one_screen,
+    one_screen_markdown,
+    profile_of,
+    tier_counts,
+    write_findings,
+)
+from .pages import (
+    bracket_chips,
+    caption_md,
+    experiment_line,
+    first_file,
+    index_entry,
+    number_text,
+    page_outputs,
+    render,
+)
+from .site_data import (
+    data_index_html,
+    data_index_markdown,
+    data_page,
+    dataset_credit,
+    dataset_record,
+    dataset_sections,
+    dataset_title,
+)
 from .spec import PROFILES, Suite, finite_float
 
-__all__ = ["write_suite_reports", "write_experiment_pages", "VERDICT_COLUMNS", "scoreboard_counts", "summary_markdown", "page_markdown", "page_html",
+__all__ = ["write_suite_reports", "write_experiment_pages", "VERDICT_COLUMNS", "scoreboard_counts", "summary_markdown",
+           "page_markdown", "page_html",
            "index_markdown", "index_html", "double_counted", "dataset_record", "data_page", "data_index_markdown",
            "data_index_html", "dataset_sections"]
 
@@ -101,7 +128,8 @@ def _reasons(rows) -> list[dict]:
             groups[(r["experiment"], r["verdict"], r.get("note") or "(no note)")].append(r)
     out = []
     for (exp, verdict, note), members in groups.items():
-        where = "; ".join(m["where"] for m in members[:3]) + (f"; and {len(members) - 3} more" if len(members) > 3 else "")
+        more = f"; and {len(members) - 3} more" if len(members) > 3 else ""
+        where = "; ".join(m["where"] for m in members[:3]) + more
         out.append({"experiment": exp, "verdict": verdict, "rows": len(members), "reason": note, "where": where})
     order = {"miss": 0, "inconsistent": 1, "loose": 2}
     return sorted(out, key=lambda g: (g["experiment"], order[g["verdict"]], -g["rows"]))
@@ -174,10 +202,12 @@ def summary_markdown(exp, profile: str, numbers: list[dict], stamp: str, dataset
         reasons = _reasons(numbers)
         if reasons:
             lines += ["## Misses and loose rows, by reason", "",
-                      Table([{k: g[k] for k in ("verdict", "rows", "reason", "where")} for g in reasons]).to_markdown(), ""]
+                      Table([{k: g[k] for k in ("verdict", "rows", "reason", "where")}
+                             for g in reasons]).to_markdown(), ""]
     else:
         lines += ["The source prints no number for this experiment; its figures are qualitative.", ""]
-    lines += ["Every row with its window and note, the parameters, assumptions and figures: [report.md](report.md).", ""]
+    lines += ["Every row with its window and note, the parameters, assumptions and figures: [report.md](report.md).",
+              ""]
     return "\n".join(lines)
 
 
@@ -195,7 +225,8 @@ def _page_columns(numbers: list[dict]) -> tuple[str, ...]:
 
 def _set_by(exp, name: str, params: dict, dataset: dict | None) -> str:
     """Who set a parameter, for a page's parameters table: the notebook's default, a data run (``data`` from
-    ``--data``; a value of ``[experiment.data_run] parameters``, unless ``-p`` gave another), or the profile / ``-p``."""
+    ``--data``; a value of ``[experiment.data_run] parameters``, unless ``-p`` gave another), or the profile /
+    ``-p``."""
     if name not in params:
         return "notebook default"
     if dataset:
@@ -349,7 +380,8 @@ def _footnotes(shown: list[dict]) -> list[dict]:
             if text:
                 n = numbered.setdefault(text, len(numbered) + 1)
                 row[c] = Markup(f'<a class="fn" href="#fn-{n}" title="{escape(first_clause(text, 200))}">[{n}]</a>')
-    return [{"n": n, "text": t, "head": first_clause(t, 160) if len(t) > _FOLD_CHARS else ""} for t, n in numbered.items()]
+    return [{"n": n, "text": t, "head": first_clause(t, 160) if len(t) > _FOLD_CHARS else ""}
+            for t, n in numbered.items()]
 
 
 def page_html(exp, profile: str, params: dict, folder: Path, numbers: list[dict], stamp: str,
@@ -546,8 +578,8 @@ def write_suite_reports(suite: Suite, report_dir: Path, *, list_all: bool = True
     profile = profile_of(report_dir)
     if report_dir.name in PROFILES:
         write_findings(report_dir, entries, rows, profile, lambda path, text: write_text_atomic(path, text))
-    conclusions = write_conclusions(report_dir, suite, entries, rows,
-                                    lambda path, text: write_text_atomic(path, text)) if report_dir.name in PROFILES else {}
+    conclusions = (write_conclusions(report_dir, suite, entries, rows, lambda path, text: write_text_atomic(path, text))
+                   if report_dir.name in PROFILES else {})
     write_text_atomic(report_dir / "index.html", index_html(report_dir, entries, rows, locbook_version(),
                                                              conclusions))
     write_text_atomic(report_dir / "index.md", index_markdown(report_dir, entries, rows, conclusions))

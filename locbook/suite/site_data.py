@@ -162,7 +162,7 @@ def data_page(report_dir: Path, entries, record: dict) -> dict:
     report_dir = Path(report_dir)
     status = read_json(report_dir / "status.json", {})
     by_id = {e["exp"].id: e for e in entries}
-    results, lines = [], []
+    results = []
     for eid, kind, heading in DATA_RESULTS:
         state, why = _state_of(eid, record, status, report_dir)
         rows = _result_rows(report_dir / eid / "results.csv", kind) if state not in ("left out", "not run") else []
@@ -207,7 +207,8 @@ def data_page(report_dir: Path, entries, record: dict) -> dict:
                 (x["profile"] for x in experiments if x["profile"]), ""),
             "answer": _answer_text(results), "results": results, "figures": figures,
             "fits": [{c: r.get(c) or "" for c in fit_columns} for r in shown_fits], "fit_columns": fit_columns,
-            "fit_used": used if shown_fits is not fits else "", "fits_link": first_file(report_dir, f"{fit_id}/{fit_file}"),
+            "fit_used": used if shown_fits is not fits else "",
+            "fits_link": first_file(report_dir, f"{fit_id}/{fit_file}"),
             "fits_missing": "" if fits else _missing_line(fit_id, state, why, "fits table (fits.csv)"),
             "experiments": experiments}
 

@@ -28,9 +28,11 @@ with ``u ~ U[0, 1)``; a ``lhs`` column is ``(permutation(samples) + U[0, 1)) / s
 gives the same points. Only ``float`` parameters can be drawn.
 
 Everything is checked before anything runs (:class:`~locbook.suite.spec.SuiteError`, naming the study and what is
-wrong): unknown keys, experiments and samplers, parameters an experiment does not declare, the number of runs
-(experiments x the product of the block sizes x replicates, at most :data:`MAX_STUDY_RUNS`, counted before anything
-is drawn), two points with the same checked values, and every value of every point against the parameter's type
+wrong; the keys and values by the schema, the pydantic models ``_StudyTable``, ``_Sampler`` and ``_Range``, then the
+rules against each experiment's notebook): unknown keys, experiments and samplers, parameters an experiment does
+not declare, the number of runs (experiments x the product of the block sizes x replicates, at most
+:data:`MAX_STUDY_RUNS`, counted before anything is drawn), two points with the same checked values, and every
+value of every point against the parameter's type
 and declared rule (``[parameter_rules]``).
 
 Each point (experiment x parameter point x replicate) is one task of :func:`locbook.suite.runner.run_tasks`, all
@@ -61,8 +63,11 @@ import os
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Annotated, Any
 
 import numpy as np
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, ValidationInfo, model_validator
+from pydantic_core import PydanticCustomError
 
 from ..errors import ParameterError
 from .files import atomic_write, point_key, point_text, read_csv, read_json
@@ -74,8 +79,6 @@ from .sweep import Aggregate, current_points, run_sweep
 __all__ = ["Study", "StudyPoint", "Aggregate", "load_study", "load_studies", "expand_study", "run_study",
            "study_size", "current_points", "check_claim", "STUDY_COLUMNS", "MAX_STUDY_RUNS"]
 
-_KEYS = {"name", "experiments", "profile", "replicates", "seed_parameter", "samples", "sample_seed", "collect",
-         "parameters"}
 _SAMPLERS = ("grid", "list", "random", "lhs")
 #: study.csv columns before the swept parameters, then after them
 _LEAD = ("study", "experiment", "point", "replicate", "replicate_seed")
@@ -122,88 +125,221 @@ def _err(study: str, where: Path, text: str) -> SuiteError:
     return SuiteError(f"{where}: study {study!r}: {text}")
 
 
-def _whole(raw, key, default, name, where, least):
-    value = raw.get(key, default)
-    if not isinstance(value, int) or isinstance(value, bool) or value < least:
-        raise _err(name, where, f"{key} must be a whole number >= {least}, got {value!r}")
+# -- the schema: pydantic models of a [[study]] table ------------------------------------------------------------
+def _refuse(kind: str, text: str = ""):
+    """A rule's refusal inside a model; :func:`_one_line` puts the file, the study and the place in front."""
+    raise PydanticCustomError(kind, "{text}", {"text": text})
+
+
+def _whole(key: str, least: int):
+    """A validator: a whole number >= ``least`` (not a boolean)."""
+    def check(value):
+        if not isinstance(value, int) or isinstance(value, bool) or value < least:
+            _refuse("study", f"{key} must be a whole number >= {least}, got {value!r}")
+        return value
+    return AfterValidator(check)
+
+
+def _name(value):
+    if not isinstance(value, str) or not SAFE_NAME.match(value):
+        _refuse("study_name")
     return value
 
 
-def _range(spec, sampler, pname, name, where) -> dict:
-    if not isinstance(spec, dict) or set(spec) - {"low", "high", "log"} or not {"low", "high"} <= set(spec):
-        raise _err(name, where, f"parameter {pname!r}: {sampler} needs a table {{ low = ..., high = ..., "
-                                f"log = false }}, got {spec!r}")
-    low, high, log = spec["low"], spec["high"], spec.get("log", False)
-    if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in (low, high)):
-        raise _err(name, where, f"parameter {pname!r}: {sampler} low and high must be finite numbers")
-    if not isinstance(log, bool):
-        raise _err(name, where, f"parameter {pname!r}: log must be true or false, got {log!r}")
-    if not low < high:
-        raise _err(name, where, f"parameter {pname!r}: {sampler} needs low < high, got {low} and {high}")
-    if log and not low > 0:
-        raise _err(name, where, f"parameter {pname!r}: log = true needs low > 0, got {low}")
-    return {"low": float(low), "high": float(high), "log": log}
+def _experiments(ids, info: ValidationInfo):
+    """The experiment ids, as the suite's experiments (``info.context["suite"]``)."""
+    if not isinstance(ids, list) or not ids or not all(isinstance(i, str) for i in ids):
+        _refuse("study", "experiments must be a non-empty list of experiment ids")
+    by_id = {e.id: e for e in info.context["suite"].experiments}
+    missing = [i for i in ids if i not in by_id]
+    if missing:
+        _refuse("study", f"unknown experiment(s) {', '.join(missing)}; `locbook list` shows the ids")
+    if len(set(ids)) != len(ids):
+        _refuse("study", "an experiment is listed twice")
+    return tuple(by_id[i] for i in ids)
+
+
+def _profile(profile, info: ValidationInfo):
+    experiments = info.data.get("experiments", ())     # absent: their own error comes first
+    if not isinstance(profile, str) or any(profile not in e.profiles for e in experiments):
+        _refuse("study", f"profile {profile!r} is not a profile of every experiment (quick, full)")
+    return profile
+
+
+def _seed_parameter(value):
+    if not isinstance(value, str):
+        _refuse("study", f"seed_parameter must be a parameter name, got {value!r}")
+    return value
+
+
+def _collect(value):
+    if not isinstance(value, list) or not all(isinstance(c, str) for c in value):
+        _refuse("study", "collect must be a list of quantities or printed ids (numbers.csv columns)")
+    return tuple(value)
+
+
+def _finite(value):
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        _refuse("range_finite")
+    return value
+
+
+def _log(value):
+    if not isinstance(value, bool):
+        _refuse("range_log", f"log must be true or false, got {value!r}")
+    return value
+
+
+class _Table(BaseModel):
+    """A table of the declaration: no key but its fields (extra="forbid"); values as TOML gives them."""
+    model_config = ConfigDict(extra="forbid")
+
+
+class _Range(_Table):
+    """``{ low = ..., high = ..., log = false }`` of a ``random`` or ``lhs`` sampler (module docstring)."""
+    low: Annotated[Any, AfterValidator(_finite)]
+    high: Annotated[Any, AfterValidator(_finite)]
+    log: Annotated[Any, AfterValidator(_log)] = False
+
+    @model_validator(mode="after")
+    def _ordered(self):
+        if not self.low < self.high:
+            _refuse("range_order", f"needs low < high, got {self.low} and {self.high}")
+        if self.log and not self.low > 0:
+            _refuse("range_log", f"log = true needs low > 0, got {self.low}")
+        return self
+
+    def spec(self) -> dict:
+        return {"low": float(self.low), "high": float(self.high), "log": self.log}
+
+
+#: the field of a sampler whose name is a Python builtin's
+_FIELD = {"list": "list_"}
+
+
+class _Sampler(_Table):
+    """``{ grid = [...] }``, ``{ list = [...] }``, ``{ random = {...} }`` or ``{ lhs = {...} }``: exactly one."""
+    grid: Annotated[list, Field(min_length=1, strict=True)] = None      # type: ignore[assignment]
+    list_: Annotated[list, Field(min_length=1, strict=True, alias="list")] = None    # type: ignore[assignment]
+    random: _Range = None           # type: ignore[assignment]
+    lhs: _Range = None              # type: ignore[assignment]
+
+    @model_validator(mode="before")
+    @classmethod
+    def _one(cls, spec):
+        # one of four keys: the one rule here that field types cannot say (checked first, as it names the sampler)
+        if not isinstance(spec, dict) or len(spec) != 1 or next(iter(spec)) not in _SAMPLERS:
+            _refuse("sampler")
+        return spec
+
+    def declared(self) -> tuple[str, object]:
+        """(sampler, values) or (sampler, range as :meth:`_Range.spec`)."""
+        sampler = next(k for k in _SAMPLERS if _FIELD.get(k, k) in self.model_fields_set)
+        value = getattr(self, _FIELD.get(sampler, sampler))
+        return sampler, value.spec() if isinstance(value, _Range) else value
+
+
+class _StudyTable(_Table):
+    """One ``[[study]]`` (module docstring); the field order is the order its rules are checked in."""
+    model_config = ConfigDict(extra="forbid", validate_default=True)    # the default profile is checked too
+    name: Annotated[Any, AfterValidator(_name)]
+    experiments: Annotated[Any, AfterValidator(_experiments)]
+    profile: Annotated[Any, AfterValidator(_profile)] = "quick"
+    replicates: Annotated[Any, _whole("replicates", 1)] = 1
+    samples: Annotated[Any, _whole("samples", 0)] = 0
+    sample_seed: Annotated[Any, _whole("sample_seed", 0)] = 0
+    seed_parameter: Annotated[Any, AfterValidator(_seed_parameter)] = "seed"
+    collect: Annotated[Any, AfterValidator(_collect)] = []
+    parameters: dict[str, _Sampler] = {}
+
+    @model_validator(mode="after")
+    def _together(self):
+        """The rules between keys: paired lists, draws and samples, seeds, the number of runs."""
+        parameters = self.declared_parameters()
+        lists = {p: len(v) for p, (s, v) in parameters.items() if s == "list"}
+        if len(set(lists.values())) > 1:
+            _refuse("study", f"list parameters are paired element-wise and need equal lengths, got {lists}")
+        drawn = [p for p, (s, _v) in parameters.items() if s in ("random", "lhs")]
+        if drawn and self.samples < 1:
+            _refuse("study", f"random / lhs parameters ({', '.join(drawn)}) need samples >= 1")
+        if self.samples and not drawn:
+            _refuse("study", "samples is set but no parameter is random or lhs")
+        if self.replicates > 1 and self.seed_parameter in parameters:
+            _refuse("study", f"{self.seed_parameter!r} is swept and also set by the replicates; do one of them")
+        factors = _factors(len(self.experiments), parameters, self.samples, self.replicates)
+        if math.prod(n for _key, n in factors) > MAX_STUDY_RUNS:
+            _refuse("study", _too_many(factors))
+        return self
+
+    def declared_parameters(self) -> dict[str, tuple[str, object]]:
+        return {p: s.declared() for p, s in self.parameters.items()}
+
+
+_SHAPE = {"model_type", "missing", "extra_forbidden", "dict_type"}
+
+
+def _rank(error: dict, index: int, table: dict) -> tuple:
+    """The order the rules are checked in (the first broken one is reported): the name, unknown keys, then the
+    keys in field order (pydantic's), a sampler's shape before its values."""
+    loc, kind = error["loc"], error["type"]
+    if loc[:1] == ("name",):
+        return (0, index)
+    if kind == "extra_forbidden" and len(loc) == 1:
+        return (1, index)
+    if loc[:1] == ("parameters",) and len(loc) > 1:
+        names = list(table.get("parameters", {}))
+        return (2, 1, names.index(loc[1]) if loc[1] in names else -1, 0 if kind in _SHAPE else 1, index)
+    return (2, 0, index)
+
+
+def _one_line(exc: ValidationError, table: dict, where: Path) -> str:
+    """The first broken rule of a ``[[study]]`` (:func:`_rank`), in the house words: the file, the study, what."""
+    errors = exc.errors()
+    error = min(enumerate(errors), key=lambda e: _rank(e[1], e[0], table))[1]
+    loc, kind = error["loc"], error["type"]
+    name = table.get("name")
+    if loc[:1] == ("name",):      # a name that breaks its rule, or none
+        return (f"{where}: study name {name!r} must be lower-case letters, digits and hyphens ([a-z0-9-]); it names "
+                "reports/studies/<name>/")
+    if kind == "extra_forbidden" and len(loc) == 1:
+        unknown = sorted(e["loc"][0] for e in errors if e["type"] == kind and len(e["loc"]) == 1)
+        text = f"unknown key(s) {unknown}; allowed: {', '.join(sorted(_StudyTable.model_fields))}"
+    elif kind == "missing" and len(loc) == 1:      # experiments (the name's own rule names a missing name)
+        text = "experiments must be a non-empty list of experiment ids"
+    elif loc == ("parameters",):
+        text = "[study.parameters] must be a table of parameter = { sampler = ... }"
+    elif loc[:1] == ("parameters",):
+        pname, spec = loc[1], table["parameters"][loc[1]]
+        sampler = "list" if loc[2:3] == ("list",) else loc[2] if len(loc) > 2 else ""
+        if kind == "sampler" or len(loc) == 2:
+            text = (f"parameter {pname!r} needs exactly one sampler of {', '.join(_SAMPLERS)} (e.g. {{ grid = "
+                    f"[1.0, 2.0] }}), got {spec!r}")
+        elif sampler in ("grid", "list"):
+            text = f"parameter {pname!r}: {sampler} needs a non-empty list of values"
+        elif kind in _SHAPE:
+            text = (f"parameter {pname!r}: {sampler} needs a table {{ low = ..., high = ..., log = false }}, got "
+                    f"{spec[sampler]!r}")
+        elif kind == "range_finite":
+            text = f"parameter {pname!r}: {sampler} low and high must be finite numbers"
+        elif kind == "range_order":
+            text = f"parameter {pname!r}: {sampler} {error['ctx']['text']}"
+        else:                                       # range_log
+            text = f"parameter {pname!r}: {error['ctx']['text']}"
+    else:
+        text = error.get("ctx", {}).get("text") or error["msg"]
+    return f"{where}: study {name!r}: {text}"
 
 
 def _parse(raw: dict, suite: Suite, where: Path) -> Study:
     if not isinstance(raw, dict):
         raise SuiteError(f"{where}: a [[study]] must be a table")
-    name = raw.get("name")
-    if not isinstance(name, str) or not SAFE_NAME.match(name):
-        raise SuiteError(f"{where}: study name {name!r} must be lower-case letters, digits and hyphens ([a-z0-9-]); "
-                         "it names reports/studies/<name>/")
-    unknown = set(raw) - _KEYS
-    if unknown:
-        raise _err(name, where, f"unknown key(s) {sorted(unknown)}; allowed: {', '.join(sorted(_KEYS))}")
-    ids = raw.get("experiments")
-    if not isinstance(ids, list) or not ids or not all(isinstance(i, str) for i in ids):
-        raise _err(name, where, "experiments must be a non-empty list of experiment ids")
-    by_id = {e.id: e for e in suite.experiments}
-    missing = [i for i in ids if i not in by_id]
-    if missing:
-        raise _err(name, where, f"unknown experiment(s) {', '.join(missing)}; `locbook list` shows the ids")
-    if len(set(ids)) != len(ids):
-        raise _err(name, where, "an experiment is listed twice")
-    experiments = tuple(by_id[i] for i in ids)
-    profile = raw.get("profile", "quick")
-    if not isinstance(profile, str) or any(profile not in e.profiles for e in experiments):
-        raise _err(name, where, f"profile {profile!r} is not a profile of every experiment (quick, full)")
-    replicates = _whole(raw, "replicates", 1, name, where, 1)
-    samples = _whole(raw, "samples", 0, name, where, 0)
-    sample_seed = _whole(raw, "sample_seed", 0, name, where, 0)
-    seed_parameter = raw.get("seed_parameter", "seed")
-    if not isinstance(seed_parameter, str):
-        raise _err(name, where, f"seed_parameter must be a parameter name, got {seed_parameter!r}")
-    collect = raw.get("collect", [])
-    if not isinstance(collect, list) or not all(isinstance(c, str) for c in collect):
-        raise _err(name, where, "collect must be a list of quantities or printed ids (numbers.csv columns)")
-    table = raw.get("parameters", {})
-    if not isinstance(table, dict):
-        raise _err(name, where, "[study.parameters] must be a table of parameter = { sampler = ... }")
-    parameters = {}
-    for pname, spec in table.items():
-        if not isinstance(spec, dict) or len(spec) != 1 or next(iter(spec)) not in _SAMPLERS:
-            raise _err(name, where, f"parameter {pname!r} needs exactly one sampler of {', '.join(_SAMPLERS)} "
-                                    f"(e.g. {{ grid = [1.0, 2.0] }}), got {spec!r}")
-        sampler, value = next(iter(spec.items()))
-        if sampler in ("grid", "list"):
-            if not isinstance(value, list) or not value:
-                raise _err(name, where, f"parameter {pname!r}: {sampler} needs a non-empty list of values")
-        else:
-            value = _range(value, sampler, pname, name, where)
-        parameters[pname] = (sampler, value)
-    lists = {p: len(v) for p, (s, v) in parameters.items() if s == "list"}
-    if len(set(lists.values())) > 1:
-        raise _err(name, where, f"list parameters are paired element-wise and need equal lengths, got {lists}")
+    try:
+        table = _StudyTable.model_validate(raw, context={"suite": suite})
+    except ValidationError as exc:
+        raise SuiteError(_one_line(exc, raw, where)) from None
+    name, experiments, parameters = table.name, table.experiments, table.declared_parameters()
     drawn = [p for p, (s, _v) in parameters.items() if s in ("random", "lhs")]
-    if drawn and samples < 1:
-        raise _err(name, where, f"random / lhs parameters ({', '.join(drawn)}) need samples >= 1")
-    if samples and not drawn:
-        raise _err(name, where, "samples is set but no parameter is random or lhs")
-    if replicates > 1 and seed_parameter in parameters:
-        raise _err(name, where, f"{seed_parameter!r} is swept and also set by the replicates; do one of them")
-    _check_size(name, where, len(experiments), parameters, samples, replicates)
-    for exp in experiments:
+    for exp in experiments:        # the rules against each experiment's notebook (its declared parameters)
         declared = exp.declared_parameters()
         for pname in parameters:
             if pname not in declared:
@@ -213,11 +349,12 @@ def _parse(raw: dict, suite: Suite, where: Path) -> Study:
             if declared[pname].annotation != "float":
                 raise _err(name, where, f"parameter {pname!r} of {exp.id!r} is {declared[pname].annotation}; "
                                         "only float parameters can be drawn (use grid or list)")
-        if replicates > 1 and (seed_parameter not in declared or declared[seed_parameter].annotation != "int"):
-            raise _err(name, where, f"replicates need an int parameter {seed_parameter!r} in {exp.id!r} "
+        if table.replicates > 1 and (table.seed_parameter not in declared
+                                     or declared[table.seed_parameter].annotation != "int"):
+            raise _err(name, where, f"replicates need an int parameter {table.seed_parameter!r} in {exp.id!r} "
                                     "(set seed_parameter)")
-    return Study(name, experiments, profile, replicates, seed_parameter, samples, sample_seed, tuple(collect),
-                 parameters, where)
+    return Study(name, experiments, table.profile, table.replicates, table.seed_parameter, table.samples,
+                 table.sample_seed, tuple(table.collect), parameters, where)
 
 
 def _factors(n_experiments: int, parameters: dict, samples: int, replicates: int) -> list[tuple[str, int]]:
@@ -239,15 +376,19 @@ def study_size(study: Study) -> int:
                                                study.replicates))
 
 
+def _too_many(factors: list[tuple[str, int]]) -> str:
+    """Why a study of more than :data:`MAX_STUDY_RUNS` runs is refused, naming its factors."""
+    runs = math.prod(n for _key, n in factors)
+    largest = max(factors, key=lambda f: f[1])[0]
+    return (f"{' x '.join(f'{n} {key}' for key, n in factors)} = {runs} runs, more than the limit of "
+            f"{MAX_STUDY_RUNS} (each run is one notebook execution); reduce {largest} or split the study")
+
+
 def _check_size(name: str, where: Path, n_experiments: int, parameters: dict, samples: int, replicates: int) -> None:
     """Refuse a study of more than :data:`MAX_STUDY_RUNS` runs, naming its factors (before anything is drawn)."""
     factors = _factors(n_experiments, parameters, samples, replicates)
-    runs = math.prod(n for _key, n in factors)
-    if runs > MAX_STUDY_RUNS:
-        largest = max(factors, key=lambda f: f[1])[0]
-        raise _err(name, where, f"{' x '.join(f'{n} {key}' for key, n in factors)} = {runs} runs, more than the "
-                                f"limit of {MAX_STUDY_RUNS} (each run is one notebook execution); reduce "
-                                f"{largest} or split the study")
+    if math.prod(n for _key, n in factors) > MAX_STUDY_RUNS:
+        raise _err(name, where, _too_many(factors))
 
 
 def load_studies(suite: Suite, path: Path | None = None) -> dict[str, Study]:

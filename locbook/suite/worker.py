@@ -26,7 +26,7 @@ import threading
 import time
 from pathlib import Path
 
-import psutil   # at import, not in the SIGTERM handler: an import there could wait on the import lock
+import psutil  # at import, not in the SIGTERM handler: an import there could wait on the import lock
 from threadpoolctl import threadpool_limits
 
 from .files import machine_label, write_text_atomic
@@ -111,7 +111,8 @@ def execute(task: dict) -> dict:
     try:
         pm.execute_notebook(task["notebook"], str(out_nb), parameters=task["parameters"],
                             kernel_name=task["kernel"], cwd=str(Path(task["notebook"]).parent),
-                            progress_bar=False, log_output=False, execution_timeout=math.ceil(task["timeout"]))   # nbclient wants whole seconds
+                            # nbclient wants whole seconds
+                            progress_bar=False, log_output=False, execution_timeout=math.ceil(task["timeout"]))
     except pm.PapermillExecutionError as exc:
         error = f"{exc.ename}: {exc.evalue}"
         disk_full = _disk_full_in_text(error, str(staging))

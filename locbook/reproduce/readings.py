@@ -52,10 +52,11 @@ One CSV per document, ``locbook/data/readings/<document>.csv`` (package data, be
 
 Rules (:func:`readings` raises :class:`ReadingsError` naming the file, the line and the problem): the
 columns exactly as above; a known basis; a unique snake_case name; at least one experiment; ``parameter`` or
-``where``; every TOML value parses (``alternatives`` and ``fitted`` as arrays); the default is not among the alternatives, and every fitted value is;
-``requires`` a table of parameter names other than the reading's own (and only with a ``parameter``);
-``low <= high``, both numbers, and a numeric default inside ``[low, high]``; a ``fitted`` reading names at
-least one alternative or a range, so that a sweep can test the printed numbers under a reading not chosen from them.
+``where``; every TOML value parses (``alternatives`` and ``fitted`` as arrays); the default is not among the
+alternatives, and every fitted value is; ``requires`` a table of parameter names other than the reading's own (and only
+with a ``parameter``); ``low <= high``, both numbers, and a numeric default inside ``[low, high]``; a ``fitted`` reading
+names at least one alternative or a range, so that a sweep can test the printed numbers under a reading not chosen from
+them.
 
 This module only declares and validates; it imports nothing from the suite (the suite's tests check each
 ``parameter`` against the notebooks, ``tests/test_readings.py``).

@@ -124,7 +124,8 @@ NOISE_CALIBRATED_FROM = ("noise reading 'sigma_acc' (Q = sigma_ACC^2/10 I_6, P_0
 Q_PER_ACC_VARIANCE = 0.1
 #: KF (MLE)'s R = diag(MSE_MLE) (Eq. (3.21); constant or per epoch is not stated): ``"constant"``, the MSE per
 #: axis averaged over runs and epochs ("averaging Mean Squared Error (MSE) of static localization over 500 Monte
-#: Carlo runs", Sec. 3.5; default), or ``"per_epoch"``, averaged over runs at each epoch (Table 4.1 indexes R_{RSS-MLE,k+1} by time; variant).
+#: Carlo runs", Sec. 3.5; default), or ``"per_epoch"``, averaged over runs at each epoch (Table 4.1 indexes
+#R_{RSS-MLE,k+1} by time; variant).
 MLE_R_READINGS = ("constant", "per_epoch")
 #: Filter columns of Tables 3.7-3.12.
 FILTERS = ("parallel_ekf", "serial_ekf", "kalman_filter")
@@ -446,10 +447,10 @@ def _per_epoch_kf(model, x0, P0, acc_streams, z, mse, at, steps, n_steps, every_
 class ChannelRun:
     """All filters for one channel setting (sigma_RSS, alpha): errors ``(runs, E)`` at the RSS epochs, keyed
     ``"static_mle"`` and ``(filter, sigma_acc or None)``; ``mse_mle_m2`` the per-axis MSE used for R and P_0;
-    ``divergence``: the NIS guard's :class:`~locbook.tracking.divergence.DivergenceFlags` of every filter case, keyed like
-    ``errors`` (the errors keep every run: the thesis averaged all its runs); ``mse_mle_epoch_m2`` ``(E, 2)`` the MSE
-    per axis and RSS epoch (over runs). With ``rmse_epochs="every_step"`` the filter cases' errors at every grid step
-    from the first RSS epoch are kept too, keyed ``("every_step", filter, sigma_acc)`` (:func:`scored_errors`)."""
+    ``divergence``: the NIS guard's :class:`~locbook.tracking.divergence.DivergenceFlags` of every filter case, keyed
+    like ``errors`` (the errors keep every run: the thesis averaged all its runs); ``mse_mle_epoch_m2`` ``(E, 2)`` the
+    MSE per axis and RSS epoch (over runs). With ``rmse_epochs="every_step"`` the filter cases' errors at every grid
+    step from the first RSS epoch are kept too, keyed ``("every_step", filter, sigma_acc)`` (:func:`scored_errors`)."""
 
     sigma_rss_db: float
     path_loss_exp: float

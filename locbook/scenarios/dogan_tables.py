@@ -356,8 +356,8 @@ def ordering_rows(rows) -> list[dict]:
 
 def tail_rows(runs: dict, threshold_m: float = 4.0) -> list[dict]:
     """For every filter case of every channel: the RMSE, the median (typical-run) and 90th percentile of the
-    per-run RMS error (:func:`~locbook.metrics.rmse_m` over epochs), the fraction of runs beyond ``threshold_m``, the worst run, and the
-    runs the NIS guard flagged diverged (blank for the MLE)."""
+    per-run RMS error (:func:`~locbook.metrics.rmse_m` over epochs), the fraction of runs beyond ``threshold_m``, the
+    worst run, and the runs the NIS guard flagged diverged (blank for the MLE)."""
     out = []
     for (sigma, ple), run in runs.items():
         for key, err in run.errors.items():

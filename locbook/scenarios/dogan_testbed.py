@@ -255,9 +255,9 @@ def record_testbed(report, rows: list[dict], run: ChannelRun, sigma_acc_mps2: fl
     one walk's value, its standard error the Monte-Carlo one, and 2 sd of single walks the named ambiguity
     (:data:`ONE_WALK_SOURCE`). The MLE row is a ``reproduction``; the filter rows are ``calibrated`` exactly when
     ``run`` used a reading fitted to printed output (``start``, ``noise_reading``, ``speed_mps`` as run; named by
-    :func:`~locbook.scenarios.dogan.calibrated_from_text`), else ``reproduction``. A miss says why (:data:`BENIGN_CHANNEL_NOTE`); every note counts
-    the runs the NIS guard flagged (:func:`testbed_flags`). The per-filter reductions derived from printed pairs
-    (``printed_value`` None) are table rows only."""
+    :func:`~locbook.scenarios.dogan.calibrated_from_text`), else ``reproduction``. A miss says why
+    (:data:`BENIGN_CHANNEL_NOTE`); every note counts the runs the NIS guard flagged (:func:`testbed_flags`). The
+    per-filter reductions derived from printed pairs (``printed_value`` None) are table rows only."""
     fitted = calibrated_from_text(start, noise_reading, speed_mps=speed_mps)
     for r in rows:
         p = r["printed_value"]

@@ -387,7 +387,8 @@ def ins_drift_covariance(walk: Walk) -> np.ndarray:
 def position_fusion(walk: Walk, fix_covariance) -> tuple[np.ndarray, np.ndarray]:
     """The "position" reading of Eqs. (4.8)-(4.9) (ours, as in :mod:`~locbook.tracking.fusion`): at each report
     point, the RSS-only fix (covariance ``fix_covariance``) fused with the dead-reckoned position (covariance
-    :func:`ins_drift_covariance`, growing with the time since the start). Returns the fused positions ``(R, K, 2)`` and covariances ``(K, 2, 2)``."""
+    :func:`ins_drift_covariance`, growing with the time since the start). Returns the fused positions ``(R, K, 2)`` and
+    covariances ``(K, 2, 2)``."""
     ins = inertial_only(walk)[:, walk.report_steps]
     z, R = fuse_estimates(rss_only_fixes(walk), np.asarray(fix_covariance, float), ins, ins_drift_covariance(walk))
     return z, R[0] if R.ndim == 4 else R
@@ -416,13 +417,13 @@ def track(walk: Walk, method: str, *, fix_covariance=None, ukf_alpha: float = UK
       the thesis's alpha, beta = 2, kappa = 0 and the corrected equations of Sec. 3.6
       (``ukf_variant="literal_gudipati2017"``, ``ukf_weights=`` before issue 47: deprecated,
       and ``ukf_innovation_noise=False``: the printed Eqs. (3.22) and (3.26), flagged; ``rss_sign="printed_3_12"``:
-      h with the printed leading minus, flagged; ``state_model="literal_gudipati2017"``: the 8-D state as printed, theta_x and
-      theta_y random walks, with Z^2 = [a_x, a_y, theta_x, theta_y] a linear measurement and the readings taken as
-      world-frame (the gyroscope's yaw rate as theta_x, theta_y never measured), flagged).
+      h with the printed leading minus, flagged; ``state_model="literal_gudipati2017"``: the 8-D state as printed,
+      theta_x and theta_y random walks, with Z^2 = [a_x, a_y, theta_x, theta_y] a linear measurement and the readings
+      taken as world-frame (the gyroscope's yaw rate as theta_x, theta_y never measured), flagged).
 
     ``with_divergence=True`` returns ``(estimates, flags)``: for ``kf``, ``ekf`` and ``ukf`` the filter's NIS guard
-    per walk (:class:`locbook.tracking.divergence.DivergenceFlags`, steps of the walk's filter grid ``walk.truth.time_s``), None
-    for the methods that run no Kalman-family filter.
+    per walk (:class:`locbook.tracking.divergence.DivergenceFlags`, steps of the walk's filter grid
+    ``walk.truth.time_s``), None for the methods that run no Kalman-family filter.
     """
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
@@ -704,10 +705,11 @@ def record_ch6(report, errors: dict, flags: dict, *, headline_anchors: int, shad
     ``errors[(path, n_anchors, method)]`` is a :class:`WalkErrors` and ``flags`` the NIS guard's
     :class:`DivergenceFlags` (None for a method without one) on the same keys; ``near_turn`` marks the U-path's
     report points at the turns. The fused headline values are compared with ``fused_method`` (one of
-    :data:`FUSED_METHODS`; default the UKF, the best method of Fig. 5.4). Each claim is checked as stated on paired differences of per-walk mean errors (the same walks for both
-    methods), so its standard error is that of the difference; where a claim names several panels, the smallest
-    margin over them is recorded. Headline rows are ``calibrated`` when the shadowing was chosen from the printed
-    linear-path RSS-only error (``calibrated``), and name it."""
+    :data:`FUSED_METHODS`; default the UKF, the best method of Fig. 5.4). Each claim is checked as stated on paired
+    differences of per-walk mean errors (the same walks for both methods), so its standard error is that of the
+    difference; where a claim names several panels, the smallest margin over them is recorded. Headline rows are
+    ``calibrated`` when the shadowing was chosen from the printed linear-path RSS-only error (``calibrated``), and name
+    it."""
     check_choice("fused_method", fused_method, FUSED_METHODS)
     ha = headline_anchors
     label = METHOD_LABELS

@@ -440,8 +440,8 @@ def tracking_results(data: Dataset, model: PathLossModel, proto: Protocol, *, se
     with a true position and pooled over them (:func:`result_row`; the posterior CRLB of the constant-velocity model
     at the track's fitted ``q`` from the trackers' start). The Kalman-family trackers and grid Bayes are
     deterministic (one run); the particle filter runs ``particle_runs`` times on independent streams and is scored
-    over all its runs. ``recordings``: the tracks to run (default every one). None without a track. Returns ``{"tracks": {name: (scenario, {tracker: (R, T, 2)}, flags,
-    bound (T,))}, "rows"}``.
+    over all its runs. ``recordings``: the tracks to run (default every one). None without a track. Returns ``{"tracks":
+    {name: (scenario, {tracker: (R, T, 2)}, flags, bound (T,))}, "rows"}``.
 
     ``user_methods``: as for :func:`static_results`; its trackers run once on each track (every tick of its clock,
     in time order: :func:`method_input`), one run, no NIS guard, after the battery, with the same bound and rows

@@ -380,8 +380,8 @@ def fit_motion(data: Dataset, model: PathLossModel, recording: str, *, grid_spac
     """Every tracker's motion setting from the track's own readings, by one rule: the maximum-likelihood value of the
     motion model's innovations (:func:`locbook.fit_noise_ml`; no truth is used).
 
-    - ``q`` (m^2/s^4), the white-acceleration variance per step of the Kalman-family trackers: the EKF on the raw readings,
-      the channel (sigma per anchor) kept as calibrated, a multiplier of ``q_start``'s Q fitted;
+    - ``q`` (m^2/s^4), the white-acceleration variance per step of the Kalman-family trackers: the EKF on the raw
+      readings, the channel (sigma per anchor) kept as calibrated, a multiplier of ``q_start``'s Q fitted;
     - ``spread_m`` (m per epoch), the random walk ``L_t = L_t-1 + N(0, s^2 I)`` of the particle and grid Bayes
       filters: the same walk as a Kalman filter (F = I) on the fixes ``kf_on_ml`` filters (``rss_ml``, epochs that heard
       at least 3 anchors) with their calibrated covariance ``fix_cov_m2``, a multiplier of :data:`SPREAD_START_M`'s

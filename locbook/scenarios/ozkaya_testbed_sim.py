@@ -102,7 +102,8 @@ class TestbedChannel:
     """The synthetic test bed's RSSI (dBm) for reader j at position p, step t (all values ASSUMED unless noted).
 
     ``RSSI = alpha_j - 10 n_j log10(d) - n_W WAF + S_j(p) + O_j + e_jt + b_jt - L_j``, quantised to
-    ``resolution_db`` (None: not quantised) and floored at ``floor_dbm`` (Sec. 6.2: 1 dB resolution, -90 dBm sensitivity), where
+    ``resolution_db`` (None: not quantised) and floored at ``floor_dbm`` (Sec. 6.2: 1 dB resolution, -90 dBm
+    sensitivity), where
 
     * ``alpha_j, n_j, WAF``: Table 6.1 (offline calibration; the most careful measurement in the thesis);
     * ``S_j(p)``: static shadowing, a Gaussian field per reader with exponential correlation

@@ -9,8 +9,16 @@ import re
 import numpy as np
 import pytest
 
-from locbook.bounds import (MAX_BOUND_CONDITION, MIN_ANCHORS_FOR_BOUND, TRIM_FRACTION, BoundSummary,
-                            check_position_information, error_bound_ratio, rss_crlb_checked_m, summarize_bound)
+from locbook.bounds import (
+    MAX_BOUND_CONDITION,
+    MIN_ANCHORS_FOR_BOUND,
+    TRIM_FRACTION,
+    BoundSummary,
+    check_position_information,
+    error_bound_ratio,
+    rss_crlb_checked_m,
+    summarize_bound,
+)
 from locbook.bounds.crlb import rss_crlb_m
 from locbook.errors import ParameterError
 from locbook.models.channel import PathLossModel

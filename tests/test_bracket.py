@@ -8,8 +8,16 @@ import pytest
 
 from locbook.reproduce.readings import READING_COLUMNS, load_reading_file, readings_for
 from locbook.suite import SuiteError, load_suite
-from locbook.suite.bracket import (BRACKET_COLUMNS, SITE_NUMBER_COLUMNS, bracket_gaps, bracket_of_rows,
-                                   bracket_points, bracket_rows, experiment_readings, find_experiment)
+from locbook.suite.bracket import (
+    BRACKET_COLUMNS,
+    SITE_NUMBER_COLUMNS,
+    bracket_gaps,
+    bracket_of_rows,
+    bracket_points,
+    bracket_rows,
+    experiment_readings,
+    find_experiment,
+)
 from locbook.suite.cli import main
 from test_study import stoy  # noqa: F401  (a fixture: the toy repository with george-study, quick seed = 3)
 from test_suite import toy  # noqa: F401
@@ -142,7 +150,7 @@ def test_a_toy_bracket_gives_each_row_its_verdict_and_the_site_shows_it(stoy, tm
     assert (rows["twice"]["band_low"], rows["twice"]["band_high"]) == ("0", "4")
     points = _table(folder / "points.csv")
     assert [p["status"] for p in points] == ["ok"] * 5 and points[1]["value"] == "1.3"
-    import json     # the points ran without figures (only their numbers are read); the suite's own run with them
+    import json  # the points ran without figures (only their numbers are read); the suite's own run with them
     assert json.loads((folder / "george-study-default" / "manifest.json").read_text())["figures_saved"] is False
     assert "figures_saved" not in json.loads((stoy / "reports" / "quick" / "george-study" / "manifest.json").read_text())
     # every scored row under every point, for the conclusions pages
@@ -294,8 +302,8 @@ def test_a_damaged_bracket_file_labels_nothing(tmp_path):
 
 
 def test_int_range_ends_are_the_whole_numbers_inside_the_range():
-    from locbook.suite.bracket import _sweep_values
     from locbook.reproduce.readings import Reading
+    from locbook.suite.bracket import _sweep_values
     r = Reading("d", "n", ("e",), "k", "", 1, (), 0.5, 2.5, "assumed", "s", "r")
     assert _sweep_values(r, "int") == [1, 2] and _sweep_values(r, "int | None") == [1, 2]
     assert _sweep_values(r, "float") == [0.5, 2.5]
@@ -369,6 +377,7 @@ def _figure_report(tmp_path, monkeypatch, off):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+
     import locbook as lb
     monkeypatch.setenv("LOCBOOK_OUTPUT_DIR", str(tmp_path))
     if off:
@@ -385,6 +394,7 @@ def _figure_report(tmp_path, monkeypatch, off):
 
 def test_figures_off_records_the_caption_saves_no_file_and_the_report_still_validates(tmp_path, monkeypatch):
     import json
+
     from locbook.suite.runner import _validate_report
     fig, plt = _figure_report(tmp_path, monkeypatch, off=True)
     manifest = json.loads((tmp_path / "manifest.json").read_text())
@@ -526,7 +536,7 @@ def test_outside_needs_the_printed_value_beyond_both_monte_carlo_errors(stoy, tm
     margin = 0.05 + 2 * float(se) * 2 ** 0.5
     assert (1.4 <= margin) == (tier == "open")          # the fact the verdict must follow
     assert row["bracket"] == tier, row
-    assert f"1.4 from slope: a=1.3 (14.6)" in (row["outside_margin"] or row["open_readings"])
+    assert "1.4 from slope: a=1.3 (14.6)" in (row["outside_margin"] or row["open_readings"])
 
 
 def test_an_implausible_value_is_named_and_left_out_of_the_band(stoy, tmp_path):

@@ -5,8 +5,7 @@ from scipy.optimize import lsq_linear
 
 import locbook as lb
 from locbook.models.channel import AT86RF230_ED_OFFSET_DB
-from locbook.static.calibration import CALIBRATION_MODES
-from locbook.static.calibration import path_loss_design_matrix
+from locbook.static.calibration import CALIBRATION_MODES, path_loss_design_matrix
 
 
 def test_mean_power_and_range_inversion():

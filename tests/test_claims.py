@@ -5,8 +5,7 @@ import re
 
 import pytest
 
-from locbook.reproduce.claims import (CLAIM_COLUMNS, CLAIMS_DIR, ClaimsError, Value, claims, evaluate,
-                                      load_claims_file)
+from locbook.reproduce.claims import CLAIM_COLUMNS, CLAIMS_DIR, ClaimsError, Value, claims, evaluate, load_claims_file
 
 DOCUMENTS = ("dogan2015", "gudipati2017", "palvai2008", "george", "ozkaya2011")
 

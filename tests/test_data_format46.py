@@ -12,8 +12,15 @@ import pytest
 
 from locbook.data.dataset import load_dataset
 from locbook.data.example import EXAMPLE_ROLES, EXAMPLE_SITE, write_example_dataset
-from locbook.data.measured import (DataFormatError, Epochs, LINK_DIRECTION_RULE, epochs, read_anchors,
-                                   scan_interval_s, validate_readings)
+from locbook.data.measured import (
+    LINK_DIRECTION_RULE,
+    DataFormatError,
+    Epochs,
+    epochs,
+    read_anchors,
+    scan_interval_s,
+    validate_readings,
+)
 from locbook.errors import DegenerateGeometryError, ParameterError
 from locbook.static.calibration import calibrate_path_loss, calibrate_path_loss_devices
 

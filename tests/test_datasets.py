@@ -8,13 +8,12 @@ import pandas as pd
 import pytest
 
 import locbook as lb
+from builders import ANCHORS, MANIFEST, TRACK, calibration_csv
 from locbook.data.dataset import datasets_dir, load_dataset, shipped_datasets
 from locbook.data.example import EXAMPLE_SITE, write_example_dataset
 from locbook.data.measured import DataFormatError, epochs, validate_readings
 from locbook.errors import ParameterError
 from locbook.scenarios import measured as me
-
-from builders import ANCHORS, MANIFEST, TRACK, calibration_csv
 
 CAL = calibration_csv()
 

@@ -14,15 +14,14 @@ import pytest
 from scipy.stats import chi2
 
 import locbook as lb
-from locbook.tracking.divergence import DivergenceFlags, divergence_note, divergence_rows
 from locbook import benchmark as bm
 from locbook.scenarios import dogan as dg
 from locbook.scenarios import george
 from locbook.scenarios import gudipati as gu
 from locbook.scenarios import measured as ko
 from locbook.scenarios import palvai as pv
+from locbook.tracking.divergence import DivergenceFlags, divergence_note, divergence_rows
 from locbook.tracking.results import DIVERGENCE_PROBABILITY, DIVERGENCE_WINDOW
-
 
 # ------------------------------------------------------------------------------------------------ the helper
 

@@ -301,7 +301,8 @@ def test_every_step_rmse_scores_the_filters_at_every_grid_step(mle_r):
     equal the RSS-epoch run's, and the table RMSE is the root mean square over runs and every step; the MLE column
     stays at the RSS epochs."""
     tr = dg.walk_trajectory(waypoints_m=((1.0, 1.0), (1.0, 4.0), (4.0, 4.0)), speed_m_s=0.5)
-    # every filter on the 20 Hz grid (an ONLY-RSS filter at the RSS rate has only the RSS epochs: test_dogan_rss_only_step)
+    # every filter on the 20 Hz grid (an ONLY-RSS filter at the RSS rate has only the RSS epochs:
+    # test_dogan_rss_only_step)
     kw = dict(sigma_acc_values=(0.0075,), mle_r=mle_r, rss_only_step="imu_rate")
     a = dg.run_channel(tr, 6.0, 3.0, 5, np.random.default_rng(4), **kw)
     b = dg.run_channel(tr, 6.0, 3.0, 5, np.random.default_rng(4), rmse_epochs="every_step", **kw)

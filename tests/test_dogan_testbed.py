@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 
 import locbook as lb
-from locbook.tracking.divergence import DivergenceFlags
 from locbook.scenarios import dogan as dg
 from locbook.scenarios import dogan_testbed as tb
+from locbook.tracking.divergence import DivergenceFlags
 
 
 def test_eq24_cost_is_the_rss_likelihood_scaled_and_has_the_grid_ml_minimiser():

@@ -324,10 +324,10 @@ def test_steadystate_standard_half():
     unobservable combinations (1e12 at step 40, 2e16 at step 90) while the innovation variance S = H P H^T + R stays
     near 320, a difference of terms 1e14 times larger. From about step 50 both filters compute S from round-off:
     filterpy's P gets negative eigenvalues before step 100 (and with some numpy builds its S falls below 0, a negative
-    variance), locbook stops with a SingularCovarianceError naming the step (asserted). So the first 40 steps are compared,
-    x and P each to 1e-9 of its largest entry (x about 40, P 1e12; measured: 7e-11 and 1e-14 of it at step 40, the
-    gap growing with the conditioning). The second half (predict_steadystate /
-    update_steadystate, a frozen gain) has no counterpart in locbook, whose filters always compute the gain from P."""
+    variance), locbook stops with a SingularCovarianceError naming the step (asserted). So the first 40 steps are
+    compared, x and P each to 1e-9 of its largest entry (x about 40, P 1e12; measured: 7e-11 and 1e-14 of it at step 40,
+    the gap growing with the conditioning). The second half (predict_steadystate / update_steadystate, a frozen gain)
+    has no counterpart in locbook, whose filters always compute the gain from P."""
     cv = filterpy_common.kinematic_kf(dim=7, order=5)
     cv.x[1] = 1.0
     x0, F, H, Q, R, P0 = cv.x[:, 0].copy(), cv.F.copy(), cv.H.copy(), cv.Q.copy(), cv.R.copy(), cv.P.copy()

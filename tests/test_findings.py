@@ -8,8 +8,14 @@ from pathlib import Path
 import pytest
 
 from locbook.suite.bracket import BRACKETS
-from locbook.suite.findings import (TIER_WORDS, bracket_headline, findings_markdown, leniency_note, scored_rows,
-                                    tier_counts)
+from locbook.suite.findings import (
+    TIER_WORDS,
+    bracket_headline,
+    findings_markdown,
+    leniency_note,
+    scored_rows,
+    tier_counts,
+)
 
 FULL = Path(__file__).resolve().parents[1] / "reports" / "full"
 SHORT = {"default": "default", "other_reading": "other reading", "fitted_only": "fitted only", "between": "between",

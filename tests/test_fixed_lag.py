@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import locbook as lb
-from locbook.tracking.fixed_lag import FixedLagResult, OnlineFixedLagSmoother, fixed_lag_smoother
+from locbook.tracking.fixed_lag import OnlineFixedLagSmoother, fixed_lag_smoother
 
 filterpy_kalman = pytest.importorskip("filterpy.kalman")
 

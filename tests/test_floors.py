@@ -10,8 +10,14 @@ import pytest
 
 import locbook as lb
 from locbook.data import floors as fl
-from locbook.data.example import (EXAMPLE_SITE, FLOOR_ATTENUATION_DB, FLOOR_HEIGHT_M, PLAN_FLOOR_RGB, PLAN_WALL_RGB,
-                                  write_example_dataset)
+from locbook.data.example import (
+    EXAMPLE_SITE,
+    FLOOR_ATTENUATION_DB,
+    FLOOR_HEIGHT_M,
+    PLAN_FLOOR_RGB,
+    PLAN_WALL_RGB,
+    write_example_dataset,
+)
 from locbook.data.measured import DataFormatError
 from locbook.scenarios import measured as me
 
@@ -355,6 +361,7 @@ def test_the_map_layout_follows_the_rooms_aspect():
 
 def test_the_track_figure_draws_every_tracker_yours_included(building):
     import matplotlib.pyplot as plt
+
     from locbook.plotting import map_view_m, tracks_figure
     ds = lb.load_dataset(building, floor="F2")
     t = np.linspace(0, 1, 30)

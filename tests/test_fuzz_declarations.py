@@ -26,13 +26,13 @@ import pytest
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
+from builders import toml_key
+from builders import toml_value as toml
 from locbook.reproduce.readings import READING_COLUMNS, ReadingsError, load_reading_file
 from locbook.suite import SuiteError, load_suite
-from locbook.suite.bracket import bracket_points, experiment_readings, find_experiment
 from locbook.suite import study as study_module
+from locbook.suite.bracket import bracket_points, experiment_readings, find_experiment
 from locbook.suite.study import expand_study, load_studies
-
-from builders import toml_key, toml_value as toml
 
 pytestmark = pytest.mark.fuzz
 

@@ -22,9 +22,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import locbook as lb
-from locbook.tracking.resampling import RESAMPLING_METHODS
 from locbook.errors import LocbookError
 from locbook.tracking import _compiled as K
+from locbook.tracking.resampling import RESAMPLING_METHODS
 
 pytestmark = pytest.mark.fuzz
 

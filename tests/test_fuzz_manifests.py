@@ -34,10 +34,9 @@ import locbook as lb
 import locbook.data.csvfile as csvfile
 import locbook.data.measured as measured
 import locbook.data.readings_file as fast_reader
+from builders import ANCHORS, TRACK, calibration_csv, toml_document
 from locbook.data.dataset import load_dataset
 from locbook.data.measured import RSSI_RANGE_DBM, read_anchors, read_readings, validate_readings
-
-from builders import ANCHORS, TRACK, calibration_csv, toml_document
 
 pytestmark = pytest.mark.fuzz
 

@@ -24,13 +24,13 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
+from scipy.stats import chi2
 
 import locbook as lb
 from locbook.static.calibration import CALIBRATION_MODES, FIT_PROBLEM_STATUSES
 from locbook.static.checks import GOODNESS_OF_FIT_ALPHA
 from locbook.static.lateration import LATERATION_PAIRS
 from locbook.static.result import LOCALIZATION_STATUSES
-from scipy.stats import chi2
 
 pytestmark = pytest.mark.fuzz
 

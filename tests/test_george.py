@@ -1,5 +1,6 @@
 """George and Vadivukkarasi (locbook.scenarios.george): runs whose calibration failed have no fixes and are left out
-of the notebooks' statistics and counted (docs/filters.md, "Missing readings and bad input"), never averaged in as NaN."""
+of the notebooks' statistics and counted (docs/filters.md, "Missing readings and bad input"), never averaged in as
+NaN."""
 import numpy as np
 import pytest
 

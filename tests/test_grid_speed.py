@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 import locbook as lb
-from locbook.tracking import _compiled, bayes
 from locbook.models.rss import _table_log_likelihood
+from locbook.tracking import _compiled, bayes
 from locbook.tracking.bayes import _BandedLattice, grid_bayes_filter, grid_transition_matrix
 
 pytestmark = pytest.mark.compiled

@@ -4,9 +4,19 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
-from locbook import (PathLossModel, constant_velocity, RssMeasurement, RssModel,
-                     extended_kalman_filter, grid_ml_position, lateration_box_ls, lateration_ls, lateration_wls,
-                     rss_ml_position, rss_position_information)
+from locbook import (
+    PathLossModel,
+    RssMeasurement,
+    RssModel,
+    constant_velocity,
+    extended_kalman_filter,
+    grid_ml_position,
+    lateration_box_ls,
+    lateration_ls,
+    lateration_wls,
+    rss_ml_position,
+    rss_position_information,
+)
 
 ANCHORS = np.array([[5.48, 2.41, 2.08], [0.79, 6.75, 2.62], [3.03, 0.14, 2.38], [3.79, 7.06, 1.85],
                     [5.99, 0.43, 2.31], [8.66, 6.59, 2.41]])       # the Kolakowski (2021) anchors

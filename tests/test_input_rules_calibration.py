@@ -14,8 +14,8 @@ from hypothesis import strategies as st
 from scipy.optimize import least_squares
 
 import locbook as lb
-from locbook.static.calibration import CALIBRATION_MODES
 from locbook.static import calibration, reference_tags
+from locbook.static.calibration import CALIBRATION_MODES
 
 
 def _samples(n=60, seed=2, outliers=0):
@@ -331,7 +331,9 @@ def test_wrong_shapes_name_the_argument(which, axis, size):
 
 def test_ozkaya_setting_streams_are_keyed_by_values_not_their_spelling():
     from dataclasses import replace
-    from locbook.scenarios import ozkaya as oz, ozkaya_simulation as ozs
+
+    from locbook.scenarios import ozkaya as oz
+    from locbook.scenarios import ozkaya_simulation as ozs
     case = next(row[-1] for row in oz.simulation_cases() if row[-1].method != "nn")
     entropy = lambda c: oz.case_seed_sequence(2011, c).entropy
     base = replace(case, sigma0_db=0.30000000000000004)

@@ -14,8 +14,8 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 import locbook as lb
-from locbook.static.result import LOCALIZATION_STATUSES
 from locbook.static import box_ls, checks, grid_ml, result, rss_ml
+from locbook.static.result import LOCALIZATION_STATUSES
 
 ANCHORS = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 8.0], [0.0, 8.0], [5.0, 12.0]])
 MODEL = lb.PathLossModel(-45.0, 2.5, 4.0)
@@ -543,9 +543,9 @@ def test_nearly_collinear_heard_anchors_fail_their_problem_alone():
 def _scenario_layouts() -> dict:
     """Every anchor layout of the scenarios and the shipped data, as plan positions ``(m, 2)`` (the estimators judge
     the geometry of anchors with heights on their plan positions)."""
+    from locbook import benchmark
     from locbook.data.dataset import datasets_dir
     from locbook.data.measured import read_anchors
-    from locbook import benchmark
     from locbook.scenarios import dogan, george, gudipati, ozkaya
     layouts = {"george": george.ANCHORS_M, "dogan": dogan.ANCHORS_M,
                "ozkaya testbed": np.array(ozkaya.TESTBED_READERS_M, float),

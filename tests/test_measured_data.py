@@ -4,8 +4,15 @@ column (one test per rule). Data sets and their manifests: tests/test_datasets.p
 import numpy as np
 import pytest
 
-from locbook.data.measured import (DataFormatError, epochs, read_anchors, read_outline, read_path_segments,
-                                   read_readings, regular_epochs)
+from locbook.data.measured import (
+    DataFormatError,
+    epochs,
+    read_anchors,
+    read_outline,
+    read_path_segments,
+    read_readings,
+    regular_epochs,
+)
 
 GOOD = """time_s,transmitter,receiver,rssi_dbm,x_m,y_m
 0.0,tag,A,-60.5,1.0,2.0

@@ -9,8 +9,15 @@ import pandas as pd
 import pytest
 
 from locbook.data.dataset import load_dataset
-from locbook.data.measured import (DataFormatError, Epochs, MeasuredDataWarning, epochs, read_anchors,
-                                   read_readings, regular_epochs)
+from locbook.data.measured import (
+    DataFormatError,
+    Epochs,
+    MeasuredDataWarning,
+    epochs,
+    read_anchors,
+    read_readings,
+    regular_epochs,
+)
 from locbook.errors import ParameterError
 
 HEADER = "time_s,transmitter,receiver,rssi_dbm\n"
@@ -201,7 +208,8 @@ def test_a_manifest_passes_the_reading_options(tmp_path):
     write(tmp_path, """name = "s"\ntitle = "t"\nlicense = "CC0"\nattribution = "test"\ntag_height_m = 1.0
 [readings]\ninvalid_values_dbm = [0, 2, 4]\n[geometry]\nanchors = "anchors.csv"\ntag_height_m = 1.0
 [epochs]\nwindow_s = 0.5\n[[recording]]\nname = "cal"\nfile = "cal.csv"\nrole = "calibration"
-[[recording]]\nname = "r"\nfile = "track.csv"\nrole = "track"\n""".replace('tag_height_m = 1.0\n[readings]', '[readings]'),
+[[recording]]\nname = "r"\nfile = "track.csv"\nrole = "track"\n""".replace('tag_height_m = 1.0\n[readings]',
+'[readings]'),
           "dataset.toml")
     data = load_dataset(tmp_path)
     assert np.isnan(data.epochs("r").rss_dbm).sum() == 6 - 2

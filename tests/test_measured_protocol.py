@@ -8,7 +8,8 @@ import pytest
 import locbook as lb
 from locbook import battery
 from locbook.data.example import write_example_dataset
-from locbook.scenarios import measured as me, measured_setup
+from locbook.scenarios import measured as me
+from locbook.scenarios import measured_setup
 
 
 @pytest.fixture(scope="module")
@@ -196,6 +197,7 @@ def _reports_with_benchmark():
 def _data_set_of(report_dir, experiment):
     """The data set an experiment's report was computed from: its recorded parameter, else the notebook's default."""
     import json
+
     from locbook.suite import load_suite
     params = json.loads((report_dir / experiment / "report.json").read_text())["parameters"]
     if "data" in params:

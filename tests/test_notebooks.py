@@ -6,9 +6,8 @@ from pathlib import Path
 import pytest
 
 import locbook
-
-from locbook.suite.bracket import SITE_NUMBER_COLUMNS
 from locbook.suite import load_suite, read_parameters, run_suite
+from locbook.suite.bracket import SITE_NUMBER_COLUMNS
 
 SUITE = load_suite()
 pytestmark = pytest.mark.notebooks

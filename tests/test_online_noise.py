@@ -322,6 +322,7 @@ def test_a_pooled_fit_whose_line_search_ends_abnormal_at_the_optimum_is_accepted
     numpy summation orders flip the flag at one point): one restart that cannot lower the objective confirms it and
     the fit equals the unforced one; a restart that keeps moving and fails is the error."""
     import scipy.optimize
+
     from locbook.errors import ConvergenceError
     rng = np.random.default_rng(8)
     model, H, _, truth, z = _cv_runs(rng, runs=4, T=80, q=0.05, r=0.5)

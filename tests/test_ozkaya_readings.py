@@ -10,7 +10,8 @@ import pytest
 import locbook as lb
 from locbook.errors import ParameterError
 from locbook.reproduce.readings import readings
-from locbook.scenarios import ozkaya as oz, ozkaya_simulation as ozs
+from locbook.scenarios import ozkaya as oz
+from locbook.scenarios import ozkaya_simulation as ozs
 
 
 @pytest.fixture

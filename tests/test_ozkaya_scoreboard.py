@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 import locbook as lb
-from locbook.scenarios import ozkaya as oz, ozkaya_tables as ozt
+from locbook.scenarios import ozkaya as oz
+from locbook.scenarios import ozkaya_tables as ozt
 
 
 def test_simulation_channel_and_calibration_constants_come_from_tables_6_1_and_6_2():
@@ -23,7 +24,8 @@ def test_simulation_channel_and_calibration_constants_come_from_tables_6_1_and_6
 
 def test_repeated_settings_link_to_their_first_printing():
     """Table 7.5's 'Default (5 m, 8 m)' NN (k = 14) is Table 7.1's 28-cell row; Table 7.45's offline NN repeats it;
-    Table 7.3's 5.2 dB row is Table 7.2's 3-reader default; Table 7.46's grid filter is Table 7.7's MMSE column at 5.2 dB."""
+    Table 7.3's 5.2 dB row is Table 7.2's 3-reader default; Table 7.46's grid filter is Table 7.7's MMSE column at 5.2
+    dB."""
     first = ozt._first_printings()
     cases = {(t, r): c for t, r, col, c in oz.simulation_cases() if col is None}
     assert first[(cases[("7.5", "Default (5 m, 8 m)")], "rmse_m")].id == "Table 7.1 | 28 | rmse_m"

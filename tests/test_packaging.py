@@ -47,6 +47,7 @@ def test_version_list_and_show(capsys):
 def test_list_says_which_machine_each_profiles_times_came_from(tmp_path):
     """Issue 32: `locbook list` showed full faster than quick with times from two machines, unlabelled."""
     import json
+
     from locbook.suite.catalog import machine_label
     suite = load_suite(REPO / "notebooks" / "experiments.toml")
     for profile, eid, seconds, machine in (("quick", "george-crlb", 4.0, machine_label()),

@@ -143,7 +143,7 @@ def test_alignment_equals_an_independent_groupby_on_the_same_windows(tmp_path):
 
 def test_native_scans_align_at_equal_times_and_units_shift_with_the_readings_clock(tmp_path):
     ds = lb.load_dataset(_tiny(tmp_path / "n", GOOD, window="0"))
-    ep, (ranges, _) = ds.epochs("walk"), ds.ranges("walk")
+    _, (ranges, _) = ds.epochs("walk"), ds.ranges("walk")
     assert np.isnan(ranges).all() and ds.ranges("walk").unaligned == 7          # no range at a scan's time
     scans = "time_s,transmitter,receiver,range_m\n0.1,tag,A,3.0\n1.1,tag,B,7.0\n1.15,tag,B,7.5\n"
     ds = lb.load_dataset(_tiny(tmp_path / "m", scans, window="0"))

@@ -12,8 +12,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from locbook.reproduce.readings import (BASES, READING_COLUMNS, READINGS_DIR, Reading, ReadingsError,
-                                        load_reading_file, readings, readings_for)
+from locbook.reproduce.readings import (
+    BASES,
+    READING_COLUMNS,
+    READINGS_DIR,
+    Reading,
+    ReadingsError,
+    load_reading_file,
+    readings,
+    readings_for,
+)
 from locbook.suite import load_suite, read_parameters
 from locbook.suite.params import check_value
 

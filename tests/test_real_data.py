@@ -118,7 +118,8 @@ def test_block_bootstrap_widens_the_interval_of_correlated_errors():
 def test_a_calibration_that_cannot_fit_an_anchor_names_it(monkeypatch):
     """An anchor that heard nothing on the calibration points is named with its status, not blamed on the solver."""
     from locbook.errors import ConvergenceError
-    from locbook.scenarios import measured as k, measured_setup
+    from locbook.scenarios import measured as k
+    from locbook.scenarios import measured_setup
     data = k.load("kolakowski2021")
     xy, distance, rss = k.calibration_set(data)
     rss = rss.copy()

@@ -21,14 +21,18 @@ from nbformat.v4 import new_notebook
 
 from locbook.reproduce.readings import ReadingsError, load_reading_file
 from locbook.reproduce.report import NUMBER_COLUMNS, Table
-from locbook.suite import SuiteError, load_suite
-from locbook.suite import runner, site
-from locbook.suite.bracket import (BRACKET_COLUMNS, SITE_NUMBER_COLUMNS, bracket_points, experiment_readings,
-                                   find_experiment, write_bracket_outputs)
-from locbook.suite.findings import findings_markdown
-from locbook.suite.cli import main
-from locbook.suite.runner import Outcome, SuiteRun, cache_key
+from locbook.suite import SuiteError, load_suite, runner, site
 from locbook.suite import study as study_module
+from locbook.suite.bracket import (
+    SITE_NUMBER_COLUMNS,
+    bracket_points,
+    experiment_readings,
+    find_experiment,
+    write_bracket_outputs,
+)
+from locbook.suite.cli import main
+from locbook.suite.findings import findings_markdown
+from locbook.suite.runner import Outcome, SuiteRun, cache_key
 from locbook.suite.study import expand_study, load_studies, load_study, study_folder, write_study_outputs
 from test_bracket import HEADER, READINGS
 from test_study import stoy  # noqa: F401  (a fixture: the toy repository with george-study, quick seed = 3)

@@ -8,16 +8,22 @@ import tracemalloc
 import numpy as np
 import pytest
 
-import locbook.data.dataset as dataset_module
 import locbook.data.csvfile as csvfile
+import locbook.data.dataset as dataset_module
 import locbook.data.measured as measured
 import locbook.data.readings_file as fast_reader
+from builders import ANCHORS, MANIFEST, TRACK, calibration_csv
 from locbook.data.dataset import load_dataset
 from locbook.data.example import write_example_dataset
-from locbook.data.measured import DataFormatError, epochs, read_anchors, read_readings, read_readings_table, validate_readings
+from locbook.data.measured import (
+    DataFormatError,
+    epochs,
+    read_anchors,
+    read_readings,
+    read_readings_table,
+    validate_readings,
+)
 from locbook.errors import ParameterError
-
-from builders import ANCHORS, MANIFEST, TRACK, calibration_csv
 
 # the limits, read where parametrize needs them at collection (getattr: the module still collects without them)
 MAX_COORDINATE_M = getattr(measured, "MAX_COORDINATE_M", 1e7)

@@ -6,8 +6,8 @@ from pathlib import Path
 import pytest
 
 import locbook as lb
-from locbook.suite import load_suite
 from locbook.reproduce.scoring import JUDGED_KINDS, KINDS, WITHIN_LIMIT
+from locbook.suite import load_suite
 from locbook.suite.bracket import BRACKETS, SITE_NUMBER_COLUMNS, load_bracket
 from locbook.suite.site import double_counted
 
@@ -112,6 +112,7 @@ def test_every_experiment_with_compared_numbers_gets_printed_versus_ours_figures
     rows gets at least one figure, one without gets none. The count is the scoreboard's, not the figure code's."""
     import re
     from collections import Counter
+
     from locbook.suite.site import printed_versus_ours
 
     by_experiment = {}
@@ -135,6 +136,7 @@ def test_the_index_opens_with_findings_generated_from_the_rows(rows):
     """Issue 32: per document, a few sentences from its rows: the counts of the scoreboard and the notes of the most
     missed rows."""
     from collections import Counter
+
     from locbook.suite.site import findings_summary
     suite = load_suite(Path(__file__).resolve().parents[1] / "notebooks" / "experiments.toml")
     entries = [{"exp": e, "numbers": [r for r in rows if r["experiment"] == e.id]} for e in suite.experiments]
@@ -155,6 +157,7 @@ def test_a_pages_repeated_notes_are_shown_once_and_every_reference_resolves(rows
     """Issue 32: the windows' bases and the notes, repeated on every row, are numbered once below the table; each
     cell links to its note, long ones folded."""
     import re
+
     from locbook.suite import site
     suite = load_suite(Path(__file__).resolve().parents[1] / "notebooks" / "experiments.toml")
     exp = next(e for e in suite.experiments if e.id == "dogan2015-tracking")

@@ -1,9 +1,9 @@
 """Resampling schemes: unbiased offspring counts (E[count_j] = N w_j), the residual scheme's closed-form count
 distribution, and systematic / stratified / multinomial against filterpy's implementations in distribution (filterpy's
 uniforms come from a seeded Generator injected in its module, never from the global RNG)."""
+import filterpy.monte_carlo.resampling as fp_resampling
 import numpy as np
 import pytest
-import filterpy.monte_carlo.resampling as fp_resampling
 
 import locbook as lb
 from locbook.tracking.resampling import RESAMPLING_METHODS

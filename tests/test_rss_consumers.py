@@ -4,13 +4,14 @@ with RssModel's mean and Jacobian, the UKF's h is RssModel's mean, the static bo
 cost, and the compiled row kernel is the numpy formula, also inside the near-field clamp (where the clamped mean is
 flat: its derivative, its information and the anchor-sigma inflation are 0)."""
 import dataclasses
+
 import numpy as np
 import pytest
 from filterpy.kalman import ExtendedKalmanFilter
 
 import locbook as lb
-from locbook.tracking import _kernels, unscented
 from locbook.models.rss import rss_mean_jacobian
+from locbook.tracking import _kernels
 
 ANCHORS = np.array([[0.0, 0.0], [8.0, 0.5], [1.0, 7.0], [7.5, 6.0]])
 CHANNEL = lb.PathLossModel(np.array([-44.0, -47.0, -50.0, -46.0]), np.array([2.0, 2.4, 2.8, 1.9]), 3.0)

@@ -174,6 +174,7 @@ def test_model_inputs_are_checked_and_named():
 def test_resampling_module_imports_no_filter():
     import ast
     import inspect
+
     from locbook.tracking import resampling
     tree = ast.parse(inspect.getsource(resampling))
     imported = {node.module for node in ast.walk(tree) if isinstance(node, ast.ImportFrom)}

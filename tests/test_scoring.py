@@ -6,8 +6,8 @@ import pytest
 
 import locbook as lb
 from locbook.reproduce.printed_values import PRINTED_DIR, printed_number, printed_rounding
-from locbook.suite import site
 from locbook.reproduce.scoring import WITHIN_LIMIT, score
+from locbook.suite import site
 
 
 @pytest.mark.parametrize("text, value, rounding", [
@@ -161,6 +161,7 @@ def test_ozkaya_settling_reading_moves_with_the_tolerance_as_counted_by_hand():
 def test_index_cells_are_shaded_by_the_share_of_each_verdict():
     """Issue 32: 120 within and 15 missed shades a cell 88.9 % green and 11.1 % red, not solid red."""
     from collections import Counter
+
     from locbook.suite.pages import verdict_shares as _shares
     style = _shares(Counter(within=120, miss=15))
     assert style == "background: linear-gradient(to right, var(--within) 0.0% 88.9%, var(--miss) 88.9% 100.0%)"

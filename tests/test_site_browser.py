@@ -19,7 +19,7 @@ from pathlib import Path
 import pytest
 
 from locbook.suite import load_suite, run_suite
-from test_suite import _notebook   # the toy notebook writer of the suite tests
+from test_suite import _notebook  # the toy notebook writer of the suite tests
 
 pytestmark = [pytest.mark.notebooks, pytest.mark.browser]   # executes (toy) notebooks with papermill
 
@@ -279,6 +279,7 @@ def test_a_data_sets_page_shows_its_results_table_first(browser, tmp_path):
     """Issue 46: a data set's page (reports/<profile>/data-<name>/index.html) opens with the answer: the first table
     a reader sees is the results table, and every link and image of the page resolves."""
     from selenium.webdriver.common.by import By
+
     from test_data_runs import example, write_data_folder
 
     folder = example(tmp_path / "set", ("calibration", "static"), name="mine")

@@ -17,7 +17,7 @@ import pytest
 from locbook.data.dataset import load_dataset
 from locbook.data.example import write_example_dataset
 from locbook.data.measured import DataFormatError
-from locbook.data.selection import (MIN_SUBSET_ANCHORS, select, with_anchors, with_calibration)
+from locbook.data.selection import MIN_SUBSET_ANCHORS, select, with_anchors, with_calibration
 from locbook.errors import ParameterError
 from locbook.scenarios import measured as me
 from locbook.static.calibration import calibrate_path_loss

@@ -5,12 +5,11 @@ A small throw-away suite of toy notebooks keeps these tests fast; tests/test_not
 import csv
 import hashlib
 import json
-import textwrap
-
 import os
 import signal
 import subprocess
 import sys
+import textwrap
 import time
 from pathlib import Path
 
@@ -19,9 +18,9 @@ import psutil
 import pytest
 from nbformat.v4 import new_code_cell, new_notebook
 
-from locbook.suite.cli import main
 from locbook.errors import ParameterError
 from locbook.suite import SuiteError, load_suite, read_parameters, run_suite
+from locbook.suite.cli import main
 from locbook.suite.runner import _validate_report
 
 pytestmark = pytest.mark.notebooks   # these tests execute (toy) notebooks with papermill

@@ -189,6 +189,7 @@ class _LostTask(_CancelledFuture):
 
     def _task(self):
         import time
+
         from locbook.suite.executors import _mark_ended
         deadline = time.monotonic() + 30
         while not (self.staging / ".stop").exists() and self.staging.exists() and time.monotonic() < deadline:
@@ -482,6 +483,7 @@ def test_a_staging_folder_a_straggler_writes_in_is_removed_on_a_second_pass(tmp_
     """The end of a run removes its staging folder even when a worker that was told to stop writes a last file while
     the folder is being removed (the removal of the folder then fails once: here simulated)."""
     import shutil
+
     import locbook.suite.runner as runner
     real_rmtree = shutil.rmtree
     staging = tmp_path / ".staging" / "123-abcdef00"

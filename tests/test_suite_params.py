@@ -11,8 +11,15 @@ from nbformat.v4 import new_code_cell, new_notebook
 from papermill.translators import PythonTranslator
 
 from locbook.errors import ParameterError
-from locbook.suite.params import (NotebookParameter, ParameterRule, check_value, is_numeric_annotation,
-                                  parse_cli_value, read_parameters, resolve_parameters)
+from locbook.suite.params import (
+    NotebookParameter,
+    ParameterRule,
+    check_value,
+    is_numeric_annotation,
+    parse_cli_value,
+    read_parameters,
+    resolve_parameters,
+)
 
 
 def param(annotation, name="x"):

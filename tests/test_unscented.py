@@ -219,6 +219,7 @@ def _stonesoup_ukf(z, x0, P0, anchors, channel, alpha, dt=1.0, q=0.05):
     """Stone Soup's UnscentedKalmanPredictor + UnscentedKalmanUpdater on the same RSS scenario (axis-major CV
     model from Stone Soup itself); returns its F, Q and the posterior means and covariances."""
     from datetime import datetime, timedelta
+
     from stonesoup.models.measurement.nonlinear import NonLinearGaussianMeasurement
     from stonesoup.models.transition.linear import CombinedLinearGaussianTransitionModel, ConstantVelocity
     from stonesoup.predictor.kalman import UnscentedKalmanPredictor

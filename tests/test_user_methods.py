@@ -12,7 +12,6 @@ from __future__ import annotations
 import csv
 import json
 import shutil
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -26,8 +25,15 @@ from locbook.errors import ParameterError
 from locbook.scenarios import measured as me
 from locbook.suite import cachekey, runner
 from locbook.suite import run as suite_run
-from locbook.user_methods import (MethodFailure, UserMethod, check_output, method_name_problem, parse_method_option,
-                                  registered_methods, run_method, user_traceback)
+from locbook.user_methods import (
+    MethodFailure,
+    UserMethod,
+    check_output,
+    method_name_problem,
+    parse_method_option,
+    registered_methods,
+    run_method,
+)
 
 HERE = Path(__file__).resolve().parent
 EXAMPLES = HERE / "user_method_examples.py"
@@ -485,8 +491,8 @@ def test_a_data_run_scores_a_users_methods_in_every_report_and_a_failing_one_fai
     every report that scores methods (measured-localization, measured-tracking, the benchmark's data column), equal
     to their own output scored by locbook.metrics; a second, raising static method changes no other row and no
     figure, its rows say it failed, the command line names it and exits 1."""
-    from locbook.suite.cli import main
     import user_method_examples as ex
+    from locbook.suite.cli import main
     folder = example(tmp_path / "set", name="users")
     shutil.copy(EXAMPLES, folder / "mine.py")
     with_methods(folder, '[[method]]\nname = "smooth"\nfunction = "mine.py:smoothed_centroid"\nkind = "tracker"\n')

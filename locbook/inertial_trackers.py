@@ -28,7 +28,7 @@ so its positions ``(R, T, 2)`` are on the same clock as every other tracker's.
 The settings (:func:`fit_fusion`), each by a stated rule: the sensors' bias and noise variance from the calibration
 recordings' samples while the tag dwells at a point (Gudipati 2017, Sec. 3.3,
 :func:`locbook.models.imu.stationary_bias`;
-:func:`stationary_noise`), else the defaults of :class:`locbook.scenarios.gudipati.WalkSettings` with no bias removed;
+:func:`stationary_noise`), else locbook's assumed MEMS noise (:func:`default_noise`) with no bias removed;
 the initial heading ``psi_0`` (unknown to a method: the truth's heading is never used) by maximum likelihood of
 ``ekf_rss_acc``'s innovations over :data:`HEADING_CANDIDATES_DEG` then :data:`HEADING_REFINE_DEG` around the best;
 ``q`` (and ``q_angular``) by maximum likelihood of the fusion EKF's innovations (:func:`locbook.fit_noise_ml`, the
@@ -46,9 +46,14 @@ import numpy as np
 from .battery import ml_fixes
 from .data.inertial import InertialGrid
 from .errors import ParameterError
-from .models.imu import InertialMeasurement, body_to_world, stationary_bias
+from .models.imu import (
+    MEMS_ACCEL_SIGMA_M_S2,
+    MEMS_GYRO_SIGMA_RAD_S,
+    InertialMeasurement,
+    body_to_world,
+    stationary_bias,
+)
 from .models.motion import HeadingKinematicModel, KinematicModel
-from .scenarios.gudipati import WalkSettings
 from .tracking.divergence import DivergenceFlags
 from .tracking.kalman import extended_kalman_filter
 from .tracking.noise import fit_noise_ml
@@ -127,14 +132,16 @@ class ImuNoise:
 
 
 def default_noise(with_gyro: bool) -> ImuNoise:
-    """No stationary samples: the noise of :class:`locbook.scenarios.gudipati.WalkSettings` (locbook's assumption of
-    a MEMS IMU, per sample), no bias removed."""
-    s = WalkSettings()
-    return ImuNoise(np.zeros(2), np.full(2, s.accel_sigma_m_s2**2), 0.0 if with_gyro else None,
-                    s.gyro_sigma_rad_s**2 if with_gyro else None, 0,
+    """No stationary samples: locbook's assumption of a MEMS IMU's noise per sample
+    (:data:`locbook.models.imu.MEMS_ACCEL_SIGMA_M_S2`, :data:`~locbook.models.imu.MEMS_GYRO_SIGMA_RAD_S`), no bias
+    removed."""
+    acc_sd, gyro_sd = MEMS_ACCEL_SIGMA_M_S2, MEMS_GYRO_SIGMA_RAD_S
+    return ImuNoise(np.zeros(2), np.full(2, acc_sd**2), 0.0 if with_gyro else None,
+                    gyro_sd**2 if with_gyro else None, 0,
                     f"default: no calibration recording has inertial samples at rest; accelerometer sd "
-                    f"{s.accel_sigma_m_s2:g} m/s^2, gyroscope sd {s.gyro_sigma_rad_s:.3g} rad/s per sample "
-                    "(locbook.scenarios.gudipati.WalkSettings, locbook's assumption), no bias removed")
+                    f"{acc_sd:g} m/s^2, gyroscope sd {gyro_sd:.3g} rad/s per sample "
+                    "(locbook.models.imu.MEMS_ACCEL_SIGMA_M_S2 and MEMS_GYRO_SIGMA_RAD_S, locbook's assumption), "
+                    "no bias removed")
 
 
 def stationary_noise(recordings, *, with_gyro: bool) -> ImuNoise:

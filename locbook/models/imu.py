@@ -28,6 +28,11 @@ __all__ = ["InertialMeasurement", "IMU_FRAMES", "INTEGRATION_RULES", "rotation_2
            "inertial_measurement_function", "inertial_measurement_jacobian"]
 
 IMU_FRAMES = ("body", "world")
+#: locbook's assumption of a MEMS IMU's white noise per sample (about 50 Hz), where nothing measured gives it: the
+#: accelerometer's sd (m/s^2) and the gyroscope's (0.2 deg/s, in rad/s); Gudipati 2017 prints neither, so its
+#: simulation assumes these too (locbook.scenarios.gudipati.WalkSettings)
+MEMS_ACCEL_SIGMA_M_S2 = 0.05
+MEMS_GYRO_SIGMA_RAD_S = float(np.deg2rad(0.2))
 INTEGRATION_RULES = ("trapezoid", "euler")
 
 

@@ -31,6 +31,8 @@ from ..models.channel import (
     quantize_db,
 )
 from ..models.imu import (
+    MEMS_ACCEL_SIGMA_M_S2,
+    MEMS_GYRO_SIGMA_RAD_S,
     InertialMeasurement,
     accelerometer_readings,
     body_to_world,
@@ -195,8 +197,8 @@ class WalkSettings:
     decorrelation_m: float = 1.0
     fast_sigma_db: float = 1.0
     imu_rate_hz: float = 50.0
-    accel_sigma_m_s2: float = 0.05
-    gyro_sigma_rad_s: float = float(np.deg2rad(0.2))
+    accel_sigma_m_s2: float = MEMS_ACCEL_SIGMA_M_S2
+    gyro_sigma_rad_s: float = MEMS_GYRO_SIGMA_RAD_S
     accel_residual_bias_m_s2: float = 0.02
     gyro_residual_bias_rad_s: float = float(np.deg2rad(0.5))
     q: float = 0.1 * 0.1

@@ -25,9 +25,8 @@ from __future__ import annotations
 import ast
 import functools
 import math
-import numbers
 import tomllib
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -63,19 +62,10 @@ class ParameterRule:
 
     @classmethod
     def from_toml(cls, name: str, raw, where: str) -> "ParameterRule":
-        keys = [f.name for f in fields(cls)]
-        if not isinstance(raw, dict):
-            raise ParameterError(f"{where}: the rule for {name!r} must be a table such as {{ ge = 0 }}, got {raw!r}")
-        unknown = set(raw) - set(keys)
-        if unknown:
-            raise ParameterError(f"{where}: the rule for {name!r} has unknown key(s) {sorted(unknown)}; "
-                                 f"allowed: {', '.join(keys)}")
-        for key, value in raw.items():   # checked here: a bad bound would otherwise fail inside pydantic later
-            kind = (bool if key == "allow_inf" else int if key.endswith("_items") else numbers.Real)
-            if not isinstance(value, kind) or (kind is not bool and isinstance(value, bool)):
-                wanted = 'true or false' if kind is bool else 'a whole number' if kind is int else 'a number'
-                raise ParameterError(f"{where}: the rule for {name!r} needs {key} to be {wanted}, got {value!r}")
-        return cls(**raw)
+        """The rule ``raw`` (a TOML table) for parameter ``name``, checked by the experiment list's schema; a
+        :class:`ParameterError` of one line naming ``where``, the parameter, the key and the value."""
+        from .spec_schema import rule_from_toml  # here: the schema imports this module, and pydantic
+        return rule_from_toml(name, raw, where)
 
     def describe(self) -> str:
         parts = [f"{op} {v}" for op, v in ((">=", self.ge), (">", self.gt), ("<=", self.le), ("<", self.lt))

@@ -32,7 +32,9 @@ Schema::
 
     [[study]]                     # optional: parameter studies, read by locbook.suite.study (its docstring)
 
-Experiment ids are ``[a-z0-9-]`` only (they name folders under ``reports/``).
+Experiment ids are ``[a-z0-9-]`` only (they name folders under ``reports/``). The file is checked by its schema,
+the pydantic models of :mod:`locbook.suite.spec_schema` (keys, types and the rules between them); the first broken
+rule is a :class:`SuiteError` of one line naming the file, the table or experiment, the key and the value.
 """
 from __future__ import annotations
 

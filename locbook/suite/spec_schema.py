@@ -82,7 +82,7 @@ def rule_from_toml(name: str, raw, where: str) -> ParameterRule:
     try:
         return _Rule.model_validate(raw).rule()
     except ValidationError as exc:
-        raise ParameterError(f"{where}: {_rule_text(name, raw, exc.errors())}") from None
+        raise ParameterError(f"{where}: {_rule_text(name, raw, _errors(exc))}") from None
 
 
 # -- [documents.<key>] --------------------------------------------------------------------------------------------
@@ -178,6 +178,12 @@ class _DataRun(_Table):
 
 
 # -- [[experiment]] -----------------------------------------------------------------------------------------------
+def _context(info: ValidationInfo) -> dict:
+    """What :meth:`SuiteFile.read` passes: the file's folder, the declared document keys, the ids seen so far."""
+    assert info.context is not None, "the schema is validated by SuiteFile.read"
+    return info.context
+
+
 def _id(value):
     if not isinstance(value, str) or not SAFE_NAME.match(value):
         _refuse(f"experiment id {value!r} must be lower-case letters, digits and hyphens ([a-z0-9-], e.g. "
@@ -188,16 +194,16 @@ def _id(value):
 def _document(key, info: ValidationInfo):
     """Declared, its key prefixes the id, and the id is new (these three in this order, after the id's own rule,
     before the other keys: a duplicate is found as the experiments are read, in file order)."""
-    eid = info.data.get("id")
+    eid, context = info.data.get("id"), _context(info)
     if eid is None:            # the id's own error comes first
         return key
-    if not isinstance(key, str) or key not in info.context["documents"]:
+    if not isinstance(key, str) or key not in context["documents"]:
         _refuse(f"experiment {eid!r} names undeclared document {key!r}", "whole")
     if not eid.startswith(key + "-"):
         _refuse(f"experiment id {eid!r} must start with its document key '{key}-'", "whole")
-    if eid in info.context["seen"]:
+    if eid in context["seen"]:
         _refuse(f"duplicate experiment id {eid!r}", "whole")
-    info.context["seen"].add(eid)
+    context["seen"].add(eid)
     return key
 
 
@@ -213,7 +219,7 @@ def _profiles(value, info: ValidationInfo):
 def _notebook(value, info: ValidationInfo):
     if not isinstance(value, str):
         _refuse(f"notebook must be a path relative to the experiment list, got {value!r}")
-    notebook = (info.context["folder"] / value).resolve()
+    notebook = (_context(info)["folder"] / value).resolve()
     if not notebook.is_file():
         _refuse(f"notebook {value} does not exist")
     return notebook
@@ -251,6 +257,10 @@ class SuiteFile(BaseModel):
 
 
 # -- the first broken rule, in words ------------------------------------------------------------------------------
+def _errors(exc: ValidationError) -> list[dict[str, Any]]:
+    return [dict(e) for e in exc.errors()]
+
+
 def _text(error: dict) -> str:
     return error.get("ctx", {}).get("text") or error["msg"]
 
@@ -266,7 +276,7 @@ def _rank(error: dict, data: dict) -> tuple:
     top = _position(list(SuiteFile.model_fields), loc[0])
     if len(loc) == 1:
         return (top, -1)
-    table = data.get(loc[0])
+    table = data[loc[0]]       # present: a default is not validated
     where = loc[1] if isinstance(loc[1], int) else _position(list(table), loc[1])
     rest = loc[2:]
     if loc[0] == "parameter_rules":
@@ -300,7 +310,7 @@ def _rule_rank(rest: tuple, kind: str, raw) -> tuple:
 
 def one_line(exc: ValidationError, data: dict, path: Path) -> str:
     """The first broken rule (:func:`_rank`) as the house's line: the file, the table or experiment, the key."""
-    errors = exc.errors()
+    errors = _errors(exc)
     error = min(enumerate(errors), key=lambda e: (_rank(e[1], data), e[0]))[1]
     loc, kind = error["loc"], error["type"]
     same = [e for e in errors if e["loc"][:2] == loc[:2]]     # the errors of the same table

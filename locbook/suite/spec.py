@@ -39,30 +39,20 @@ rule is a :class:`SuiteError` of one line naming the file, the table or experime
 from __future__ import annotations
 
 import math
-import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from pydantic import ValidationError
+
 from ..errors import ParameterError
 from .params import NotebookParameter, ParameterRule, is_numeric_annotation, read_parameters, resolve_parameters
+from .spec_schema import DATA_KINDS, DOCUMENT_KEYS, PROFILES, SuiteFile, one_line
 
 __all__ = ["Suite", "Experiment", "Document", "DataRun", "PROFILES", "DOCUMENT_KEYS", "DATA_KINDS", "load_suite",
            "find_suite_file", "packaged_suite_file"]
 
-PROFILES = ("quick", "full")
-#: the five source documents, the measured data sets (any data set: ``locbook run --data``), and the cross-document
-#: benchmark (issue 16)
-DOCUMENT_KEYS = ("dogan2015", "gudipati2017", "palvai2008", "george", "ozkaya2011", "measured", "benchmark")
 SUITE_FILE = Path("notebooks") / "experiments.toml"
-#: experiment ids and report folder names: lower-case letters, digits and single hyphens
-SAFE_NAME = re.compile(r"^[a-z0-9]+(-[a-z0-9]+)*$")
-#: what a data set can hold, as ``[experiment.data_run] needs`` names it: a recording of each role of
-#: :data:`locbook.data.dataset.ROLES`, and "scored": a recording the static methods are scored on (a static one, or a
-#: track with a true position per epoch: :func:`locbook.scenarios.measured.scored_recordings`)
-DATA_KINDS = {"calibration": "calibration recording", "static": "static recording", "track": "track recording",
-              "scored": "scored recording (a static recording, or a track with a true position per epoch)"}
-
 
 class SuiteError(ParameterError):
     """The experiment list (or a study, a bracket) is malformed; the message is one line (a value's line breaks
@@ -228,9 +218,6 @@ def load_suite(path: Path | None = None) -> Suite:
     """The experiment list at ``path`` (default: :func:`find_suite_file`), checked by its schema
     (:mod:`locbook.suite.spec_schema`): a :class:`SuiteError` of one line naming the file, the table or experiment,
     the key and the value."""
-    from pydantic import ValidationError
-
-    from .spec_schema import SuiteFile, one_line  # here: the modules importing this one for its names skip pydantic
     path = Path(path) if path else find_suite_file()
     data = read_toml(path, "the experiment list")
     try:

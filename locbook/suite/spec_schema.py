@@ -3,24 +3,34 @@ its tables, and the one line of the first broken rule (:func:`one_line`), in the
 documents, the suite's ``[parameter_rules]``, then each experiment in file order, its keys in field order.
 
 Values are kept as TOML gives them (``Any`` with a check): a rule's integer bound stays an ``int``, which
-:func:`locbook.suite.params._whole_bounds` relies on. Imported by :func:`locbook.suite.spec.load_suite` only, so
-that the modules importing :mod:`~locbook.suite.spec` for its names do not load pydantic.
+:func:`locbook.suite.params._whole_bounds` relies on. A rule is :class:`locbook.suite.params.RuleTable`
+(:meth:`~locbook.suite.params.ParameterRule.from_toml` checks by it too).
 """
 from __future__ import annotations
 
 import math
-import numbers
+import re
 from pathlib import Path
 from typing import Annotated, Any
 
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, ValidationInfo, model_validator
 from pydantic_core import PydanticCustomError
 
-from ..errors import ParameterError
-from .params import ParameterRule
-from .spec import DATA_KINDS, DOCUMENT_KEYS, PROFILES, SAFE_NAME
+from .params import RuleTable, rule_errors_text
 
-__all__ = ["SuiteFile", "one_line", "rule_from_toml"]
+__all__ = ["SuiteFile", "one_line", "PROFILES", "DOCUMENT_KEYS", "DATA_KINDS", "SAFE_NAME"]
+
+PROFILES = ("quick", "full")
+#: the five source documents, the measured data sets (any data set: ``locbook run --data``), and the cross-document
+#: benchmark (issue 16)
+DOCUMENT_KEYS = ("dogan2015", "gudipati2017", "palvai2008", "george", "ozkaya2011", "measured", "benchmark")
+#: experiment ids and report folder names: lower-case letters, digits and single hyphens
+SAFE_NAME = re.compile(r"^[a-z0-9]+(-[a-z0-9]+)*$")
+#: what a data set can hold, as ``[experiment.data_run] needs`` names it: a recording of each role of
+#: :data:`locbook.data.dataset.ROLES`, and "scored": a recording the static methods are scored on (a static one, or a
+#: track with a true position per epoch: :func:`locbook.scenarios.measured.scored_recordings`)
+DATA_KINDS = {"calibration": "calibration recording", "static": "static recording", "track": "track recording",
+              "scored": "scored recording (a static recording, or a track with a true position per epoch)"}
 
 
 def _refuse(text: str, kind: str = "part"):
@@ -32,57 +42,6 @@ def _refuse(text: str, kind: str = "part"):
 class _Table(BaseModel):
     """A table of the file: no key but its fields; values as TOML gives them."""
     model_config = ConfigDict(extra="forbid")
-
-
-# -- [parameter_rules] entries -----------------------------------------------------------------------------------
-def _rule_value(key: str):
-    kind = bool if key == "allow_inf" else int if key.endswith("_items") else numbers.Real
-    wanted = "true or false" if kind is bool else "a whole number" if kind is int else "a number"
-
-    def check(value):
-        if not isinstance(value, kind) or (kind is not bool and isinstance(value, bool)):
-            _refuse(f"needs {key} to be {wanted}, got {value!r}")
-        return value
-    return AfterValidator(check)
-
-
-class _Rule(_Table):
-    """One parameter's rule, ``{ ge = 0 }`` (:class:`~locbook.suite.params.ParameterRule`)."""
-    ge: Annotated[Any, _rule_value("ge")] = None
-    gt: Annotated[Any, _rule_value("gt")] = None
-    le: Annotated[Any, _rule_value("le")] = None
-    lt: Annotated[Any, _rule_value("lt")] = None
-    allow_inf: Annotated[Any, _rule_value("allow_inf")] = False
-    min_items: Annotated[Any, _rule_value("min_items")] = None
-    max_items: Annotated[Any, _rule_value("max_items")] = None
-
-    def rule(self) -> ParameterRule:
-        return ParameterRule(**self.model_dump(exclude_unset=True))
-
-
-_RULES = dict[str, _Rule]
-
-
-def _rule_text(name: str, raw, errors: list[dict]) -> str:
-    """The words for the first broken rule of one rule table (its errors): the table, unknown keys, then the keys
-    in the order written."""
-    if any(e["type"] == "model_type" for e in errors):
-        return f"the rule for {name!r} must be a table such as {{ ge = 0 }}, got {raw!r}"
-    unknown = sorted(e["loc"][-1] for e in errors if e["type"] == "extra_forbidden")
-    if unknown:
-        return (f"the rule for {name!r} has unknown key(s) {unknown}; allowed: "
-                f"{', '.join(_Rule.model_fields)}")
-    keys = list(raw)
-    first = min(errors, key=lambda e: keys.index(e["loc"][-1]) if e["loc"][-1] in keys else len(keys))
-    return f"the rule for {name!r} {_text(first)}"
-
-
-def rule_from_toml(name: str, raw, where: str) -> ParameterRule:
-    """:meth:`ParameterRule.from_toml`: ``raw`` checked by the schema, a :class:`ParameterError` naming ``where``."""
-    try:
-        return _Rule.model_validate(raw).rule()
-    except ValidationError as exc:
-        raise ParameterError(f"{where}: {_rule_text(name, raw, _errors(exc))}") from None
 
 
 # -- [documents.<key>] --------------------------------------------------------------------------------------------
@@ -233,7 +192,7 @@ class _Experiment(_Table):
     section: Annotated[Any, _string("section")]
     profiles: Annotated[Any, AfterValidator(_profiles)]
     notebook: Annotated[Any, AfterValidator(_notebook)]
-    parameter_rules: _RULES = {}
+    parameter_rules: dict[str, RuleTable] = {}
     bracket: _Bracket = _Bracket()
     data_run: _DataRun | None = None
 
@@ -245,7 +204,7 @@ class SuiteFile(BaseModel):
     """The whole file. Keys of its own it ignores: ``[[study]]`` is :mod:`locbook.suite.study`'s."""
     model_config = ConfigDict(extra="allow")
     documents: dict[Annotated[str, AfterValidator(_document_key)], _Document] = {}
-    parameter_rules: _RULES = {}
+    parameter_rules: dict[str, RuleTable] = {}
     experiment: list[_Experiment] = []
 
     @classmethod
@@ -321,7 +280,7 @@ def one_line(exc: ValidationError, data: dict, path: Path) -> str:
     if loc == ("experiment",):
         return f"{path}: experiments are [[experiment]] tables (an array of tables), got {data['experiment']!r}"
     if loc[0] == "parameter_rules":
-        return f"{path}: [parameter_rules]: {_rule_text(loc[1], data['parameter_rules'][loc[1]], same)}"
+        return f"{path}: [parameter_rules]: {rule_errors_text(loc[1], data['parameter_rules'][loc[1]], same)}"
     if loc[0] == "documents":
         key, doc = loc[1], data["documents"][loc[1]]
         if kind == "whole":
@@ -354,7 +313,7 @@ def one_line(exc: ValidationError, data: dict, path: Path) -> str:
         if not sub:
             return f"{path}: experiment {eid!r} must be a table of rules by parameter name"
         inner = [e for e in same if e["loc"][2:4] == (key, sub[0])]
-        return f"{path}: experiment {eid!r}: {_rule_text(sub[0], raw[key][sub[0]], inner)}"
+        return f"{path}: experiment {eid!r}: {rule_errors_text(sub[0], raw[key][sub[0]], inner)}"
     if key == "bracket" and (kind in ("model_type", "extra_forbidden") or sub == ("parameters",)):
         return f"{path}: experiment {eid!r}: {_BRACKET_SHAPE}"
     if key == "data_run" and kind == "model_type":

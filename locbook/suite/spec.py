@@ -48,6 +48,7 @@ from pydantic import ValidationError
 from ..errors import ParameterError
 from .params import NotebookParameter, ParameterRule, is_numeric_annotation, read_parameters, resolve_parameters
 from .spec_schema import DATA_KINDS, DOCUMENT_KEYS, PROFILES, SuiteFile, one_line
+from .spec_schema import SAFE_NAME as SAFE_NAME  # re-exported: study, bracket and the tests import it from here
 
 __all__ = ["Suite", "Experiment", "Document", "DataRun", "PROFILES", "DOCUMENT_KEYS", "DATA_KINDS", "load_suite",
            "find_suite_file", "packaged_suite_file"]

@@ -197,11 +197,9 @@ class _Experiment(_Table):
     data_run: _DataRun | None = None
 
 
-_REQUIRED = [name for name, f in _Experiment.model_fields.items() if f.is_required()]
-
-
 class SuiteFile(BaseModel):
-    """The whole file. Keys of its own it ignores: ``[[study]]`` is :mod:`locbook.suite.study`'s."""
+    """The whole file. Its other top-level keys are left alone: ``[[study]]`` is :mod:`locbook.suite.study`'s to
+    check (a study file of its own holds no experiments), and today's files hold no others."""
     model_config = ConfigDict(extra="allow")
     documents: dict[Annotated[str, AfterValidator(_document_key)], _Document] = {}
     parameter_rules: dict[str, RuleTable] = {}

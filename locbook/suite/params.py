@@ -27,9 +27,12 @@ import functools
 import math
 import numbers
 import tomllib
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
+
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, Strict, TypeAdapter, ValidationError
+from pydantic_core import PydanticCustomError
 
 from ..errors import ParameterError
 
@@ -63,19 +66,12 @@ class ParameterRule:
 
     @classmethod
     def from_toml(cls, name: str, raw, where: str) -> "ParameterRule":
-        keys = [f.name for f in fields(cls)]
-        if not isinstance(raw, dict):
-            raise ParameterError(f"{where}: the rule for {name!r} must be a table such as {{ ge = 0 }}, got {raw!r}")
-        unknown = set(raw) - set(keys)
-        if unknown:
-            raise ParameterError(f"{where}: the rule for {name!r} has unknown key(s) {sorted(unknown)}; "
-                                 f"allowed: {', '.join(keys)}")
-        for key, value in raw.items():   # checked here: a bad bound would otherwise fail inside pydantic later
-            kind = (bool if key == "allow_inf" else int if key.endswith("_items") else numbers.Real)
-            if not isinstance(value, kind) or (kind is not bool and isinstance(value, bool)):
-                wanted = 'true or false' if kind is bool else 'a whole number' if kind is int else 'a number'
-                raise ParameterError(f"{where}: the rule for {name!r} needs {key} to be {wanted}, got {value!r}")
-        return cls(**raw)
+        """The rule ``raw`` (a TOML table) for parameter ``name``, checked by :class:`RuleTable`; a
+        :class:`ParameterError` of one line naming ``where``, the parameter, the key and the value."""
+        try:
+            return RuleTable.model_validate(raw).rule()
+        except ValidationError as exc:
+            raise ParameterError(f"{where}: {rule_errors_text(name, raw, [dict(e) for e in exc.errors()])}") from None
 
     def describe(self) -> str:
         parts = [f"{op} {v}" for op, v in ((">=", self.ge), (">", self.gt), ("<=", self.le), ("<", self.lt))
@@ -89,6 +85,48 @@ class ParameterRule:
 
 
 FINITE = ParameterRule()
+
+
+def _rule_value(key: str):
+    """A key's check: ``allow_inf`` true or false, ``*_items`` a whole number, a bound a number (never a boolean)."""
+    kind = bool if key == "allow_inf" else int if key.endswith("_items") else numbers.Real
+    wanted = "true or false" if kind is bool else "a whole number" if kind is int else "a number"
+
+    def check(value):
+        if not isinstance(value, kind) or (kind is not bool and isinstance(value, bool)):
+            raise PydanticCustomError("rule", "{text}", {"text": f"needs {key} to be {wanted}, got {value!r}"})
+        return value
+    return AfterValidator(check)
+
+
+class RuleTable(BaseModel):
+    """The schema of a rule's TOML table, ``{ ge = 0 }`` (:class:`ParameterRule`); values kept as written (an
+    integer bound stays an ``int``, :func:`_whole_bounds`). The experiment list's schema uses it for
+    ``[parameter_rules]`` (:mod:`locbook.suite.spec_schema`)."""
+    model_config = ConfigDict(extra="forbid")
+    ge: Annotated[Any, _rule_value("ge")] = None
+    gt: Annotated[Any, _rule_value("gt")] = None
+    le: Annotated[Any, _rule_value("le")] = None
+    lt: Annotated[Any, _rule_value("lt")] = None
+    allow_inf: Annotated[Any, _rule_value("allow_inf")] = False
+    min_items: Annotated[Any, _rule_value("min_items")] = None
+    max_items: Annotated[Any, _rule_value("max_items")] = None
+
+    def rule(self) -> ParameterRule:
+        return ParameterRule(**self.model_dump(exclude_unset=True))
+
+
+def rule_errors_text(name: str, raw, errors: list[dict]) -> str:
+    """The first broken rule of one rule table (:class:`RuleTable`'s ``errors``) in words: the table, unknown keys,
+    then the keys in the order written."""
+    if any(e["type"] == "model_type" for e in errors):
+        return f"the rule for {name!r} must be a table such as {{ ge = 0 }}, got {raw!r}"
+    unknown = sorted(e["loc"][-1] for e in errors if e["type"] == "extra_forbidden")
+    if unknown:
+        return f"the rule for {name!r} has unknown key(s) {unknown}; allowed: {', '.join(RuleTable.model_fields)}"
+    keys = list(raw)
+    first = min(errors, key=lambda e: keys.index(e["loc"][-1]) if e["loc"][-1] in keys else len(keys))
+    return f"the rule for {name!r} {first.get('ctx', {}).get('text') or first['msg']}"
 
 
 def _parameters_cell(nb):
@@ -158,7 +196,6 @@ def is_numeric_annotation(annotation: str) -> bool:
 
 def _not_nan(value: float) -> float:
     if math.isnan(value):
-        from pydantic_core import PydanticCustomError
         raise PydanticCustomError("not_a_number", "NaN is not a value")
     return value
 
@@ -190,9 +227,7 @@ def _adapter(annotation: str, rule: ParameterRule | None):
     (``None``: the type alone, any float including NaN and infinities)."""
     import types
     import typing
-    from typing import Annotated, Literal
-
-    from pydantic import AfterValidator, Field, Strict, TypeAdapter  # here: `locbook list` never needs pydantic
+    from typing import Literal
 
     checks = rule or ParameterRule(allow_inf=True)
     bounds = {"ge": checks.ge, "gt": checks.gt, "le": checks.le, "lt": checks.lt}
@@ -261,8 +296,6 @@ def check_value(param: NotebookParameter, value, rule: ParameterRule | None = No
     """Return ``value`` as pydantic validated it (ints become floats where floats are declared, tuples lists)
     if it matches the parameter's annotation and rule, else raise a :class:`ParameterError` naming the
     parameter, the value and what is allowed."""
-    from pydantic import ValidationError
-
     try:
         _adapter(param.annotation, None).validate_python(value)    # the type first, then the rule
     except ValidationError:

@@ -32,36 +32,28 @@ Schema::
 
     [[study]]                     # optional: parameter studies, read by locbook.suite.study (its docstring)
 
-Experiment ids are ``[a-z0-9-]`` only (they name folders under ``reports/``).
+Experiment ids are ``[a-z0-9-]`` only (they name folders under ``reports/``). The file is checked by its schema,
+the pydantic models of :mod:`locbook.suite.spec_schema` (keys, types and the rules between them); the first broken
+rule is a :class:`SuiteError` of one line naming the file, the table or experiment, the key and the value.
 """
 from __future__ import annotations
 
 import math
-import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from pydantic import ValidationError
+
 from ..errors import ParameterError
 from .params import NotebookParameter, ParameterRule, is_numeric_annotation, read_parameters, resolve_parameters
+from .spec_schema import DATA_KINDS, DOCUMENT_KEYS, PROFILES, SuiteFile, one_line
+from .spec_schema import SAFE_NAME as SAFE_NAME  # re-exported: study, bracket and the tests import it from here
 
 __all__ = ["Suite", "Experiment", "Document", "DataRun", "PROFILES", "DOCUMENT_KEYS", "DATA_KINDS", "load_suite",
            "find_suite_file", "packaged_suite_file"]
 
-PROFILES = ("quick", "full")
-#: the five source documents, the measured data sets (any data set: ``locbook run --data``), and the cross-document
-#: benchmark (issue 16)
-DOCUMENT_KEYS = ("dogan2015", "gudipati2017", "palvai2008", "george", "ozkaya2011", "measured", "benchmark")
 SUITE_FILE = Path("notebooks") / "experiments.toml"
-#: experiment ids and report folder names: lower-case letters, digits and single hyphens
-SAFE_NAME = re.compile(r"^[a-z0-9]+(-[a-z0-9]+)*$")
-#: what a data set can hold, as ``[experiment.data_run] needs`` names it: a recording of each role of
-#: :data:`locbook.data.dataset.ROLES`, and "scored": a recording the static methods are scored on (a static one, or a
-#: track with a true position per epoch: :func:`locbook.scenarios.measured.scored_recordings`)
-DATA_KINDS = {"calibration": "calibration recording", "static": "static recording", "track": "track recording",
-              "scored": "scored recording (a static recording, or a track with a true position per epoch)"}
-_DATA_RUN_KEYS = ("needs", "parameters")
-
 
 class SuiteError(ParameterError):
     """The experiment list (or a study, a bracket) is malformed; the message is one line (a value's line breaks
@@ -69,9 +61,6 @@ class SuiteError(ParameterError):
 
     def __init__(self, message: str):
         super().__init__(str(message).replace("\r\n", "\\n").replace("\n", "\\n").replace("\r", "\\r"))
-
-
-_DOCUMENT_FIELDS = {"title", "authors", "year", "source"}
 
 
 @dataclass(frozen=True)
@@ -202,12 +191,6 @@ def find_suite_file(start: Path | None = None) -> Path:
     return packaged_suite_file()
 
 
-def _rules(raw: dict, where: str) -> dict[str, ParameterRule]:
-    if not isinstance(raw, dict):
-        raise SuiteError(f"{where} must be a table of rules by parameter name")
-    return {name: ParameterRule.from_toml(name, rule, where) for name, rule in raw.items()}
-
-
 def read_toml(path: Path, what: str) -> dict:
     """The TOML file ``path`` (``what`` names it in the error: unreadable, or not TOML with its line)."""
     from ..reproduce.readings import read_declaration
@@ -232,98 +215,24 @@ def finite_float(value) -> float | None:
     return x if math.isfinite(x) else None
 
 
-def _data_run(raw, where: str) -> DataRun | None:
-    """``[experiment.data_run]`` checked (one line naming the file, the experiment and the key), or None."""
-    if raw is None:
-        return None
-    if not isinstance(raw, dict):
-        raise SuiteError(f"{where}: [experiment.data_run] must be a table with the keys {', '.join(_DATA_RUN_KEYS)}")
-    unknown = sorted(set(raw) - set(_DATA_RUN_KEYS))
-    if unknown:
-        raise SuiteError(f"{where}: [experiment.data_run] has unknown key {unknown[0]!r}; expected "
-                         f"{', '.join(_DATA_RUN_KEYS)}")
-    needs = raw.get("needs")
-    if not isinstance(needs, list) or not needs or not all(isinstance(k, str) for k in needs) \
-            or len(set(needs)) != len(needs):
-        raise SuiteError(f"{where}: [experiment.data_run] needs must list one or more distinct kinds of "
-                         f"{', '.join(DATA_KINDS)}, got {needs!r}")
-    bad = [k for k in needs if k not in DATA_KINDS]
-    if bad:
-        raise SuiteError(f"{where}: [experiment.data_run] needs: unknown kind {bad[0]!r}; expected one of "
-                         f"{', '.join(DATA_KINDS)}")
-    parameters = raw.get("parameters", {})
-    if not isinstance(parameters, dict):
-        raise SuiteError(f"{where}: [experiment.data_run] parameters must be a table of parameter values")
-    if "data" in parameters:
-        raise SuiteError(f"{where}: [experiment.data_run] parameters cannot set 'data' (the run's data set sets it)")
-    return DataRun(tuple(needs), dict(parameters))
-
-
 def load_suite(path: Path | None = None) -> Suite:
+    """The experiment list at ``path`` (default: :func:`find_suite_file`), checked by its schema
+    (:mod:`locbook.suite.spec_schema`): a :class:`SuiteError` of one line naming the file, the table or experiment,
+    the key and the value."""
     path = Path(path) if path else find_suite_file()
     data = read_toml(path, "the experiment list")
-    documents = {}
-    for key, doc in data.get("documents", {}).items():
-        if key not in DOCUMENT_KEYS:
-            raise SuiteError(f"{path}: unknown document key {key!r}; expected one of {DOCUMENT_KEYS}")
-        missing, unknown = _DOCUMENT_FIELDS - set(doc), set(doc) - _DOCUMENT_FIELDS
-        if missing:
-            raise SuiteError(f"{path}: document {key!r} lacks {sorted(missing)}")
-        if unknown:
-            raise SuiteError(f"{path}: document {key!r} has unknown fields {sorted(unknown)}; "
-                             f"expected {sorted(_DOCUMENT_FIELDS)}")
-        documents[key] = Document(key, doc["title"], doc["authors"], str(doc["year"]), doc["source"])
-    suite_rules = _rules(data.get("parameter_rules", {}), f"{path}: [parameter_rules]")
-    experiments, seen = [], set()
-    for raw in data.get("experiment", []):
-        missing = {"id", "document", "title", "section", "notebook", "profiles"} - set(raw)
-        if missing:
-            raise SuiteError(f"{path}: experiment {raw.get('id', '?')!r} lacks {sorted(missing)}")
-        eid, dkey = raw["id"], raw["document"]
-        if not isinstance(eid, str) or not SAFE_NAME.match(eid):
-            raise SuiteError(f"{path}: experiment id {eid!r} must be lower-case letters, digits and hyphens "
-                             "([a-z0-9-], e.g. 'george-tracking'); it names a folder under reports/")
-        if dkey not in documents:
-            raise SuiteError(f"{path}: experiment {eid!r} names undeclared document {dkey!r}")
-        if not eid.startswith(dkey + "-"):
-            raise SuiteError(f"{path}: experiment id {eid!r} must start with its document key '{dkey}-'")
-        if eid in seen:
-            raise SuiteError(f"{path}: duplicate experiment id {eid!r}")
-        seen.add(eid)
-        if set(raw["profiles"]) != set(PROFILES):
-            raise SuiteError(f"{path}: experiment {eid!r} must define exactly the profiles {PROFILES}")
-        notebook = (path.parent / raw["notebook"]).resolve()
-        if not notebook.is_file():
-            raise SuiteError(f"{path}: experiment {eid!r}: notebook {raw['notebook']} does not exist")
-        rules = {**suite_rules, **_rules(raw.get("parameter_rules", {}), f"{path}: experiment {eid!r}")}
-        bracket = raw.get("bracket", {})
-        if not isinstance(bracket, dict) or set(bracket) - {"parameters", "reason", "factorial", "largest_error_m",
-                                                             "largest_error_reason"} \
-                or not isinstance(bracket.get("parameters", {}), dict):
-            raise SuiteError(f"{path}: experiment {eid!r}: [experiment.bracket] takes a table 'parameters', a "
-                             "string 'reason', a list 'factorial' of reading names, and 'largest_error_m' (a "
-                             "positive number) with 'largest_error_reason'")
-        factorial = bracket.get("factorial", [])
-        if not isinstance(factorial, list) or not all(isinstance(n, str) and n for n in factorial) \
-                or len(set(factorial)) != len(factorial) or len(factorial) == 1:
-            raise SuiteError(f"{path}: experiment {eid!r}: [experiment.bracket] factorial must list two or more "
-                             f"distinct reading names, got {factorial!r}")
-        largest = bracket.get("largest_error_m")
-        if largest is not None and (isinstance(largest, bool) or not isinstance(largest, (int, float))
-                                    or not math.isfinite(largest) or largest <= 0):
-            raise SuiteError(f"{path}: experiment {eid!r}: [experiment.bracket] largest_error_m must be a positive "
-                             f"number of metres, got {largest!r}")
-        if (largest is None) != (not str(bracket.get("largest_error_reason", "")).strip()):
-            raise SuiteError(f"{path}: experiment {eid!r}: [experiment.bracket] largest_error_m and "
-                             "largest_error_reason go together (the reason says where the area is printed)")
-        if not isinstance(bracket.get("reason", ""), str):
-            raise SuiteError(f"{path}: experiment {eid!r}: [experiment.bracket] reason must be a string")
-        if bracket.get("parameters") and not bracket.get("reason", "").strip():
-            raise SuiteError(f"{path}: experiment {eid!r}: [experiment.bracket] sets parameters without a 'reason'")
-        experiments.append(Experiment(eid, documents[dkey], raw["title"], raw["section"], notebook,
-                                      {p: dict(raw["profiles"][p]) for p in PROFILES}, rules,
-                                      dict(bracket.get("parameters", {})), str(bracket.get("reason", "")).strip(),
-                                      tuple(factorial), None if largest is None else float(largest),
-                                      str(bracket.get("largest_error_reason", "")).strip(),
-                                      _data_run(raw.get("data_run"), f"{path}: experiment {eid!r}")))
+    try:
+        spec = SuiteFile.read(data, path.parent)
+    except ValidationError as exc:
+        raise SuiteError(one_line(exc, data, path)) from None
+    documents = {key: Document(key, d.title, d.authors, d.year, d.source) for key, d in spec.documents.items()}
+    suite_rules = {name: rule.rule() for name, rule in spec.parameter_rules.items()}
+    experiments = []
+    for e in spec.experiment:
+        bracket, run = e.bracket, e.data_run
+        experiments.append(Experiment(
+            e.id, documents[e.document], e.title, e.section, e.notebook, e.profiles,
+            {**suite_rules, **{name: rule.rule() for name, rule in e.parameter_rules.items()}},
+            dict(bracket.parameters), bracket.reason.strip(), tuple(bracket.factorial), bracket.largest_error_m,
+            bracket.largest_error_reason.strip(), None if run is None else DataRun(run.needs, run.parameters)))
     return Suite(path.resolve(), documents, experiments)

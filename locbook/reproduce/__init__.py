@@ -15,6 +15,7 @@
 Scenarios may import this layer; it imports nothing from the suite (the suite imports it). Names load on first use,
 so that ``import locbook.reproduce.printed_values`` does not pay for the report's numpy.
 """
+from .._deprecation import renamed_names
 from .._lazy import lazy_exports
 
 _EXPORTS = {
@@ -34,11 +35,4 @@ RENAMED = {"Reading": "Interpretation", "ReadingsError": "InterpretationsError",
            "READINGS_DIR": "INTERPRETATIONS_DIR", "READING_COLUMNS": "INTERPRETATION_COLUMNS"}
 __all__ = list(_EXPORTS)
 _getattr, __dir__ = lazy_exports(__name__, _EXPORTS)
-
-
-def __getattr__(name: str):
-    if name in RENAMED:
-        from .._deprecation import warn_deprecated
-        warn_deprecated(f"locbook.reproduce.{name}", f"locbook.reproduce.{RENAMED[name]}")
-        return _getattr(RENAMED[name])
-    return _getattr(name)
+__getattr__ = renamed_names(__name__, RENAMED, fallback=_getattr)

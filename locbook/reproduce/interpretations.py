@@ -1,4 +1,5 @@
-"""Every document's unprinted assumptions and contested interpretations, declared as data (issue 28, "Interpretation brackets").
+"""Every document's unprinted assumptions and contested interpretations, declared as data (issue 28, "Interpretation
+brackets").
 
 One CSV per document, ``locbook/data/interpretations/<document>.csv`` (package data, beside the printed values of
 :mod:`.printed_values`), lines starting with ``#`` being comments. One row per interpretation, with the columns
@@ -23,8 +24,8 @@ One CSV per document, ``locbook/data/interpretations/<document>.csv`` (package d
     a TOML array of those alternatives that nothing in the text supports and that were chosen because they fit
     printed results (empty: none); rows computed under one are calibrations, and a bracket marks it ``[fitted]``
     where it reaches a row. Every other alternative has the basis :meth:`Interpretation.alternative_basis` gives:
-    ``textual`` (another interpretation the text supports) unless the interpretation is ``assumed`` (the text is silent: a
-    plausible value).
+    ``textual`` (another interpretation the text supports) unless the interpretation is ``assumed`` (the text is silent:
+    a plausible value).
 ``low``, ``high``
     a plausible range of a numeric interpretation (both or neither).
 ``basis``
@@ -53,10 +54,10 @@ One CSV per document, ``locbook/data/interpretations/<document>.csv`` (package d
 Rules (:func:`interpretations` raises :class:`InterpretationsError` naming the file, the line and the problem): the
 columns exactly as above; a known basis; a unique snake_case name; at least one experiment; ``parameter`` or
 ``where``; every TOML value parses (``alternatives`` and ``fitted`` as arrays); the default is not among the
-alternatives, and every fitted value is; ``requires`` a table of parameter names other than the interpretation's own (and only
-with a ``parameter``); ``low <= high``, both numbers, and a numeric default inside ``[low, high]``; a ``fitted`` interpretation
-names at least one alternative or a range, so that a sweep can test the printed numbers under an interpretation not chosen from
-them.
+alternatives, and every fitted value is; ``requires`` a table of parameter names other than the interpretation's own
+(and only with a ``parameter``); ``low <= high``, both numbers, and a numeric default inside ``[low, high]``; a
+``fitted`` interpretation names at least one alternative or a range, so that a sweep can test the printed numbers under
+an interpretation not chosen from them.
 
 This module only declares and validates; it imports nothing from the suite (the suite's tests check each
 ``parameter`` against the notebooks, ``tests/test_readings.py``).
@@ -77,31 +78,31 @@ from typing import Any
 from .._text import decode_utf8
 from ..errors import LocbookError
 
-__all__ = ["Interpretation", "InterpretationsError", "interpretations", "interpretations_for", "load_interpretation_file", "INTERPRETATIONS_DIR",
-           "INTERPRETATION_COLUMNS", "OPTIONAL_INTERPRETATION_COLUMNS", "BASES", "utf8_text", "read_declaration",
-           "MAX_DECLARATION_BYTES"]
+__all__ = ["Interpretation", "InterpretationsError", "interpretations", "interpretations_for",
+           "load_interpretation_file", "INTERPRETATIONS_DIR", "INTERPRETATION_COLUMNS",
+           "OPTIONAL_INTERPRETATION_COLUMNS", "BASES", "utf8_text", "read_declaration", "MAX_DECLARATION_BYTES"]
 
 INTERPRETATIONS_DIR = Path(__file__).resolve().parents[1] / "data" / "interpretations"    # package data of locbook.data
-INTERPRETATION_COLUMNS = ("name", "experiments", "parameter", "where", "default", "alternatives", "fitted", "low", "high",
-                   "basis", "source", "quotes", "reason")
+INTERPRETATION_COLUMNS = ("name", "experiments", "parameter", "where", "default", "alternatives", "fitted", "low",
+                          "high", "basis", "source", "quotes", "reason")
 #: columns an interpretations file may add after :data:`INTERPRETATION_COLUMNS`
 OPTIONAL_INTERPRETATION_COLUMNS = ("requires",)
-#: The basis of an interpretation's default: printed by the source, supported by its text, assumed where the text is silent,
-#: or fitted to the source's printed output with no textual support.
+#: The basis of an interpretation's default: printed by the source, supported by its text, assumed where the text is
+#: silent, or fitted to the source's printed output with no textual support.
 BASES = ("printed", "textual", "assumed", "fitted")
 
 
 
 class InterpretationsError(LocbookError, ValueError):
-    """An interpretations file that breaks a rule of the declaration; the message names the file, the line and the problem,
-    on one line (a cell's line breaks are shown as ``\\n``)."""
+    """An interpretations file that breaks a rule of the declaration; the message names the file, the line and the
+    problem, on one line (a cell's line breaks are shown as ``\\n``)."""
 
     def __init__(self, message: str):
         super().__init__(str(message).replace("\r\n", "\\n").replace("\n", "\\n").replace("\r", "\\r"))
 
 
-#: The largest declaration file read (an interpretations CSV, a study or experiment list TOML): the packaged ones are tens of
-#: kilobytes, so more is not a declaration (``--suite /dev/zero``, a data file given by mistake).
+#: The largest declaration file read (an interpretations CSV, a study or experiment list TOML): the packaged ones are
+#: tens of kilobytes, so more is not a declaration (``--suite /dev/zero``, a data file given by mistake).
 MAX_DECLARATION_BYTES = 16 * 2 ** 20
 
 
@@ -194,7 +195,7 @@ def _toml_value(text: str, where: str, column: str):
         return tomllib.loads(f"v = {text}")["v"]
     except tomllib.TOMLDecodeError as exc:
         raise InterpretationsError(f"{where}: {column} {text!r} is not a TOML value ({exc}); strings need quotes, "
-                            f"e.g. 'rest'") from None
+                                   f"e.g. 'rest'") from None
 
 
 def _number(text: str, where: str, column: str) -> float | None:
@@ -227,7 +228,8 @@ def _interpretation(document: str, row: dict, where: str) -> Interpretation:
     cells = {k: (row.get(k) or "").strip() for k in INTERPRETATION_COLUMNS + OPTIONAL_INTERPRETATION_COLUMNS}
     name = cells["name"]
     if not _NAME.match(name):
-        raise InterpretationsError(f"{where}: name {name!r} must be snake_case (lower-case letters, digits, underscores)")
+        raise InterpretationsError(f"{where}: name {name!r} must be snake_case (lower-case letters, digits, "
+                                   "underscores)")
     where = f"{where} ({name})"
     if cells["basis"] == "fitted_to_output":      # the name before issue 45, in a file of one's own
         cells["basis"] = "fitted"
@@ -235,17 +237,18 @@ def _interpretation(document: str, row: dict, where: str) -> Interpretation:
         raise InterpretationsError(f"{where}: unknown basis {cells['basis']!r}; allowed: {', '.join(BASES)}")
     experiments = tuple(cells["experiments"].split())
     if not experiments:
-        raise InterpretationsError(f"{where}: experiments is empty; list the experiment ids the interpretation applies to")
+        raise InterpretationsError(f"{where}: experiments is empty; list the experiment ids the interpretation "
+                                   "applies to")
     if len(set(experiments)) != len(experiments):
         raise InterpretationsError(f"{where}: experiments lists an experiment twice: {cells['experiments']!r}")
     if not cells["parameter"] and not cells["where"]:
-        raise InterpretationsError(f"{where}: needs a parameter or, if no notebook parameter sets it, where (the module "
-                            f"attribute that holds it)")
+        raise InterpretationsError(f"{where}: needs a parameter or, if no notebook parameter sets it, where (the "
+                                   f"module attribute that holds it)")
     if cells["parameter"] and not cells["parameter"].isidentifier():
         raise InterpretationsError(f"{where}: parameter {cells['parameter']!r} is not a Python name")
     if cells["where"] and not _WHERE.match(cells["where"]):
         raise InterpretationsError(f"{where}: where {cells['where']!r} must be a dotted path such as "
-                            f"locbook.scenarios.dogan.Q_PER_STEP")
+                                   f"locbook.scenarios.dogan.Q_PER_STEP")
     for column in ("source", "reason"):
         if not cells[column]:
             raise InterpretationsError(f"{where}: {column} is empty")
@@ -254,7 +257,7 @@ def _interpretation(document: str, row: dict, where: str) -> Interpretation:
                                                                                 "alternatives")
     if not isinstance(alternatives, (list, tuple)):
         raise InterpretationsError(f"{where}: alternatives must be a TOML array such as ['moving'] or [0.5, 1.0], "
-                            f"got {cells['alternatives']!r}")
+                                   f"got {cells['alternatives']!r}")
     alternatives = tuple(alternatives)
     keys = [_key(a) for a in alternatives]
     if default is not None and _key(default) in keys:
@@ -267,7 +270,7 @@ def _interpretation(document: str, row: dict, where: str) -> Interpretation:
     stray = [f for f in fitted if _key(f) not in keys]
     if stray:
         raise InterpretationsError(f"{where}: fitted names {stray}, which are not among the alternatives "
-                            f"{cells['alternatives'] or '[]'}")
+                                   f"{cells['alternatives'] or '[]'}")
     low, high = _number(cells["low"], where, "low"), _number(cells["high"], where, "high")
     if (low is None) != (high is None):
         raise InterpretationsError(f"{where}: give both low and high, or neither")
@@ -278,21 +281,22 @@ def _interpretation(document: str, row: dict, where: str) -> Interpretation:
             raise InterpretationsError(f"{where}: a range [low, high] needs a numeric default, got {cells['default']}")
         if default is not None and not low <= default <= high:
             raise InterpretationsError(f"{where}: the default {cells['default']} is outside [low, high] = "
-                                f"[{cells['low']}, {cells['high']}]")
+                                       f"[{cells['low']}, {cells['high']}]")
     if cells["basis"] == "fitted" and not alternatives and low is None:
         raise InterpretationsError(f"{where}: a fitted interpretation needs at least one alternative or a range "
-                            f"[low, high], so that a sweep can test the printed numbers under an interpretation not chosen "
-                            f"from them")
+                                   f"[low, high], so that a sweep can test the printed numbers under an interpretation "
+                                   f"not chosen from them")
     requires = {} if cells["requires"] == "" else _toml_value(cells["requires"], where, "requires")
     if not isinstance(requires, dict) or not all(k.isidentifier() for k in requires):
         raise InterpretationsError(f"{where}: requires must be a TOML inline table of parameter names, such as "
-                            f"{{ r_mode = 'isotropic' }}, got {cells['requires']!r}")
+                                   f"{{ r_mode = 'isotropic' }}, got {cells['requires']!r}")
     if requires and not cells["parameter"]:
         raise InterpretationsError(f"{where}: requires needs the interpretation's own parameter (a gap is not swept)")
     if cells["parameter"] in requires:
         raise InterpretationsError(f"{where}: requires names the interpretation's own parameter {cells['parameter']!r}")
-    return Interpretation(document, name, experiments, cells["parameter"], cells["where"], default, alternatives, low, high,
-                   cells["basis"], cells["source"], cells["reason"], tuple(fitted), cells["quotes"], dict(requires))
+    return Interpretation(document, name, experiments, cells["parameter"], cells["where"], default, alternatives, low,
+                          high, cells["basis"], cells["source"], cells["reason"], tuple(fitted), cells["quotes"],
+                          dict(requires))
 
 
 def load_interpretation_file(path: str | Path, document: str | None = None) -> tuple[Interpretation, ...]:
@@ -315,8 +319,9 @@ def load_interpretation_file(path: str | Path, document: str | None = None) -> t
     unquoted = tuple(c for c in INTERPRETATION_COLUMNS if c != "quotes")
     if columns not in (INTERPRETATION_COLUMNS, INTERPRETATION_COLUMNS + OPTIONAL_INTERPRETATION_COLUMNS, unquoted,
                        unquoted + OPTIONAL_INTERPRETATION_COLUMNS):
-        raise InterpretationsError(f"{path}, line {lines[0][0]}: columns must be {', '.join(INTERPRETATION_COLUMNS)} (then "
-                            f"optionally {', '.join(OPTIONAL_INTERPRETATION_COLUMNS)}); got {', '.join(columns)}")
+        raise InterpretationsError(f"{path}, line {lines[0][0]}: columns must be "
+                                   f"{', '.join(INTERPRETATION_COLUMNS)} (then optionally "
+                                   f"{', '.join(OPTIONAL_INTERPRETATION_COLUMNS)}); got {', '.join(columns)}")
     out, seen = [], {}
     rows = iter(reader)
     while True:
@@ -335,11 +340,11 @@ def load_interpretation_file(path: str | Path, document: str | None = None) -> t
         where = f"{path}, line {number}"
         if None in row or any(v is None for v in row.values()):
             raise InterpretationsError(f"{where}: expected {len(columns)} fields ({', '.join(columns)})")
-        interpretation = _interpretation(document, row, where)
-        if interpretation.name in seen:
-            raise InterpretationsError(f"{where}: duplicate name {interpretation.name!r} (first on line {seen[interpretation.name]})")
-        seen[interpretation.name] = number
-        out.append(interpretation)
+        interp = _interpretation(document, row, where)
+        if interp.name in seen:
+            raise InterpretationsError(f"{where}: duplicate name {interp.name!r} (first on line {seen[interp.name]})")
+        seen[interp.name] = number
+        out.append(interp)
     return tuple(out)
 
 

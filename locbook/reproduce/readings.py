@@ -18,7 +18,7 @@ from .interpretations import (
 
 # the import statement's line is the caller, past the import machinery's frames
 warn_deprecated("locbook.reproduce.readings", "locbook.reproduce.interpretations",
-                skip=("importlib._bootstrap", "importlib._bootstrap_external"))
+                skip=(__name__, "importlib", "importlib._bootstrap", "importlib._bootstrap_external"))
 
 Reading = Interpretation
 ReadingsError = InterpretationsError

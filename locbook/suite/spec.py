@@ -15,9 +15,9 @@ Schema::
     [experiment.profiles.full]
     [experiment.parameter_rules]  # optional: rules for this experiment's parameters (override the suite's)
     [experiment.bracket]          # optional: parameters every point of ``locbook bracket`` sets (never a scored
-    parameters = { ... }          # quantity's input, never a declared reading), and the reason, shown with the
-    reason = "..."                # bracket's findings (e.g. a notebook's own sweep of readings the bracket runs)
-    factorial = ["a", "b"]        # optional: readings that interact; the bracket also runs their combinations
+    parameters = { ... }          # quantity's input, never a declared interpretation), and the reason, shown with the
+    reason = "..."                # bracket's findings (e.g. a notebook's own sweep of interpretations the bracket runs)
+    factorial = ["a", "b"]        # optional: interpretations that interact; the bracket also runs their combinations
     largest_error_m = 9.43        # optional: the largest plausible error in metres (the area's diagonal) and
     largest_error_reason = "..."  # where the area is printed: a point whose error exceeds it is implausible
     [experiment.data_run]         # an experiment that takes a data set (a ``data`` parameter; ``locbook run --data``)
@@ -112,7 +112,7 @@ class Experiment:
     #: ``[experiment.bracket]``: parameter -> value set at every bracket point, and why (empty: none)
     bracket_parameters: dict = field(default_factory=dict, hash=False)
     bracket_reason: str = ""
-    #: ``[experiment.bracket] factorial``: the readings whose textual values the bracket also runs in combination
+    #: ``[experiment.bracket] factorial``: the interpretations whose textual values the bracket also runs in combination
     bracket_factorial: tuple = ()
     #: ``[experiment.bracket] largest_error_m``: the largest plausible error (m; None: not declared), and its source
     largest_error_m: float | None = None
@@ -210,7 +210,7 @@ def _rules(raw: dict, where: str) -> dict[str, ParameterRule]:
 
 def read_toml(path: Path, what: str) -> dict:
     """The TOML file ``path`` (``what`` names it in the error: unreadable, or not TOML with its line)."""
-    from ..reproduce.readings import read_declaration
+    from ..reproduce.interpretations import read_declaration
     try:    # decoded here: tomllib's own UnicodeDecodeError names no file or line; and read only up to a limit
         text = read_declaration(path, SuiteError, what)
     except OSError as exc:
@@ -301,13 +301,13 @@ def load_suite(path: Path | None = None) -> Suite:
                                                              "largest_error_reason"} \
                 or not isinstance(bracket.get("parameters", {}), dict):
             raise SuiteError(f"{path}: experiment {eid!r}: [experiment.bracket] takes a table 'parameters', a "
-                             "string 'reason', a list 'factorial' of reading names, and 'largest_error_m' (a "
+                             "string 'reason', a list 'factorial' of interpretation names, and 'largest_error_m' (a "
                              "positive number) with 'largest_error_reason'")
         factorial = bracket.get("factorial", [])
         if not isinstance(factorial, list) or not all(isinstance(n, str) and n for n in factorial) \
                 or len(set(factorial)) != len(factorial) or len(factorial) == 1:
             raise SuiteError(f"{path}: experiment {eid!r}: [experiment.bracket] factorial must list two or more "
-                             f"distinct reading names, got {factorial!r}")
+                             f"distinct interpretation names, got {factorial!r}")
         largest = bracket.get("largest_error_m")
         if largest is not None and (isinstance(largest, bool) or not isinstance(largest, (int, float))
                                     or not math.isfinite(largest) or largest <= 0):

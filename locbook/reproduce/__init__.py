@@ -15,7 +15,6 @@
 Scenarios may import this layer; it imports nothing from the suite (the suite imports it). Names load on first use,
 so that ``import locbook.reproduce.printed_values`` does not pay for the report's numpy.
 """
-from .._deprecation import renamed_names
 from .._lazy import lazy_exports
 
 _EXPORTS = {
@@ -35,4 +34,12 @@ RENAMED = {"Reading": "Interpretation", "ReadingsError": "InterpretationsError",
            "READINGS_DIR": "INTERPRETATIONS_DIR", "READING_COLUMNS": "INTERPRETATION_COLUMNS"}
 __all__ = list(_EXPORTS)
 _getattr, __dir__ = lazy_exports(__name__, _EXPORTS)
-__getattr__ = renamed_names(__name__, RENAMED, fallback=_getattr)
+
+
+def __getattr__(name: str):
+    if name in RENAMED:
+        # imported here: locbook._deprecation loads numpy, which `locbook --version` and `locbook list` never need
+        from .._deprecation import warn_deprecated
+        warn_deprecated(f"{__name__}.{name}", f"{__name__}.{RENAMED[name]}")
+        return _getattr(RENAMED[name])
+    return _getattr(name)

@@ -1,15 +1,16 @@
-"""Reading brackets: how long ``locbook bracket`` takes for every experiment of one document, at the quick profile.
+"""Interpretation brackets: how long ``locbook bracket`` takes for every experiment of one document, at the quick
+profile.
 
-Issue 28's target: a bracket of one document (every experiment of it that declares readings) runs within
+Issue 28's target: a bracket of one document (every experiment of it that declares interpretations) runs within
 10 minutes on 2 cores at the quick profile. Each experiment is bracketed with ``--jobs 2 --force`` into a fresh
 temporary reports folder (nothing cached), one after the other, as a user would run them; the row of a document
 gives the total wall time (and the CPU time of the process and its workers), the points run and whether the target
 is met, and the note the time of each experiment. Each bracket runs once (minutes of work: never repeated).
 Reports measured figures; not a test.
 
-    python benchmarks/bench_bracket.py                      # full: every reading of one small experiment
+    python benchmarks/bench_bracket.py                      # full: every interpretation of one small experiment
     python benchmarks/bench_bracket.py --document dogan2015 # issue 28's figure for one document ('all': every one)
-    python benchmarks/bench_bracket.py tiny                 # one reading of one fast George experiment
+    python benchmarks/bench_bracket.py tiny                 # one interpretation of one fast George experiment
 """
 from __future__ import annotations
 
@@ -28,10 +29,11 @@ import _harness as hx  # noqa: E402
 
 #: seconds a bracket of one document may take at the quick profile on 2 cores (issue 28)
 TARGET_S = 600.0
-#: the full size's experiment: two readings, about 16 s (a document's bracket takes minutes: ``--document``)
+#: the full size's experiment: two interpretations, about 16 s (a document's bracket takes minutes: ``--document``)
 FULL_EXPERIMENT = "dogan2015-models"
-TINY_READINGS = ("name,experiments,parameter,where,default,alternatives,fitted,low,high,basis,source,reason\n"
-                 "shadowing,george-rssi-vs-distance,sigma_indoor_db,,,[3.0],,,,assumed,benchmark,one alternative\n")
+TINY_INTERPRETATIONS = (
+    "name,experiments,parameter,where,default,alternatives,fitted,low,high,basis,source,reason\n"
+    "shadowing,george-rssi-vs-distance,sigma_indoor_db,,,[3.0],,,,assumed,benchmark,one alternative\n")
 
 
 def _children_cpu_s() -> float:
@@ -39,15 +41,15 @@ def _children_cpu_s() -> float:
     return usage.ru_utime + usage.ru_stime
 
 
-def _bracket(experiment: str, reports: Path, readings: Path | None = None) -> tuple[hx.Measurement, int, str]:
+def _bracket(experiment: str, reports: Path, interpretations: Path | None = None) -> tuple[hx.Measurement, int, str]:
     """``(measurement, points run, counts line)`` of ``locbook bracket experiment --jobs 2 --force``, run once: wall
     time, CPU time of this process and of its workers (``RUSAGE_CHILDREN``), peak resident memory of this process
     (``hx.call``; the workers' memory is not in it)."""
     from locbook.suite.cli import main
 
     args = ["bracket", experiment, "--jobs", "2", "--force", "--reports", str(reports), "--progress", "quiet"]
-    if readings is not None:
-        args += ["--readings", str(readings)]
+    if interpretations is not None:
+        args += ["--interpretations", str(interpretations)]
     out = io.StringIO()
     load0, children = _load(), _children_cpu_s()
     with contextlib.redirect_stdout(out):
@@ -74,12 +76,12 @@ def _load() -> float | None:
 
 
 def _documents() -> dict[str, list[str]]:
-    from locbook.reproduce.readings import readings_for
+    from locbook.reproduce.interpretations import interpretations_for
     from locbook.suite import load_suite
 
     docs: dict[str, list[str]] = {}
     for exp in load_suite().experiments:
-        if readings_for(exp.id):
+        if interpretations_for(exp.id):
             docs.setdefault(exp.document.key, []).append(exp.id)
     return docs
 
@@ -92,21 +94,22 @@ def _sum(parts: list[hx.Measurement]) -> hx.Measurement:
 
 
 def run(size: str = "full", documents: list[str] | None = None):
-    """tiny: one reading of george-rssi-vs-distance; full: every reading of ``FULL_EXPERIMENT`` (the suite's time
-    budget holds one small experiment, not a document); ``documents``: issue 28's figure, every experiment of each
-    document named (``"all"``: every document with readings), one row per document."""
+    """tiny: one interpretation of george-rssi-vs-distance; full: every interpretation of ``FULL_EXPERIMENT`` (the
+    suite's time budget holds one small experiment, not a document); ``documents``: issue 28's figure, every experiment
+    of each document named (``"all"``: every document with interpretations), one row per document."""
     hx.check_size(size)
     with tempfile.TemporaryDirectory(prefix="locbook-bench-bracket-") as tmp:
         if size == "tiny" and not documents:
-            readings = Path(tmp) / "tiny.csv"
-            readings.write_text(TINY_READINGS)
-            m, points, note = _bracket("george-rssi-vs-distance", Path(tmp) / "r", readings)
+            interpretations = Path(tmp) / "tiny.csv"
+            interpretations.write_text(TINY_INTERPRETATIONS)
+            m, points, note = _bracket("george-rssi-vs-distance", Path(tmp) / "r", interpretations)
             yield hx.row("locbook bracket (quick, --jobs 2)", f"george-rssi-vs-distance, {points} points", m,
                          note=note + "; CPU includes the workers")
             return
         if not documents:
             m, points, note = _bracket(FULL_EXPERIMENT, Path(tmp) / "r")
-            yield hx.row("locbook bracket (quick, --jobs 2)", f"{FULL_EXPERIMENT}: every reading, {points} points", m,
+            what = f"{FULL_EXPERIMENT}: every interpretation, {points} points"
+            yield hx.row("locbook bracket (quick, --jobs 2)", what, m,
                          note=note + "; CPU includes the workers; a whole document's bracket (issue 28: <= "
                                      f"{TARGET_S:.0f} s) is `bench_bracket.py --document NAME`")
             return
@@ -130,7 +133,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("size", nargs="?", choices=hx.SIZES, default="full")
     parser.add_argument("--document", action="append",
-                        help="every experiment of this document (repeatable; 'all': every document with readings)")
+                        help="every experiment of this document (repeatable; 'all': every document with "
+                             "interpretations)")
     args = parser.parse_args()
     hx.print_rows(run(args.size, args.document))
 

@@ -38,7 +38,7 @@ def setting(runs: int, seed: int = 1, steps: int | None = None) -> dict:
     if steps is not None:
         tr = tr.head(steps)
     sigma_acc = dg.TABLE_SIGMA_ACC_MPS2
-    q, p0_acc = dg.filter_noise(dg.DEFAULT_NOISE_READING, sigma_acc)
+    q, p0_acc = dg.filter_noise(dg.DEFAULT_NOISE_INTERPRETATION, sigma_acc)
     model = dg.motion_model(dg.DT_S, q)
     rng = np.random.default_rng(seed)
     channel = lb.PathLossModel(dg.REF_POWER_DBM, dg.PATH_LOSS_EXP, dg.SIGMA_RSS_DB)

@@ -22,7 +22,8 @@ import numpy as np
 from ._validate import check_choice
 
 __all__ = ["RENAMED_CRLB_FORMS", "RENAMED_KF_VARIANTS", "warn_deprecated", "check_variant",
-           "renamed_keyword", "old_keyword", "old_form", "keyword_rng", "past_wrappers"]
+           "renamed_keyword", "old_keyword", "old_form", "keyword_rng", "past_wrappers", "renamed_constants",
+           "renamed_names"]
 
 #: the bounds' ``form=`` values before issue 47 and their variants (:data:`locbook.bounds.crlb.CRLB_VARIANTS`)
 RENAMED_CRLB_FORMS = {"correct": "corrected", "ozkaya_printed": "literal_ozkaya2011"}
@@ -36,7 +37,9 @@ def warn_deprecated(old: str, new: str, *, skip=()) -> None:
     skip = {__name__, *skip}
     level, frame = 2, sys._getframe(1)
     while frame is not None and frame.f_globals.get("__name__") in skip:
-        level, frame = level + 1, frame.f_back
+        # warnings.warn does not count the import machinery's frames (an old module's import runs through them)
+        internal = "importlib" in frame.f_code.co_filename and "_bootstrap" in frame.f_code.co_filename
+        level, frame = level + (not internal), frame.f_back
     warnings.warn(f"{old} is deprecated: use {new}", DeprecationWarning, stacklevel=level)
 
 
@@ -163,5 +166,20 @@ def renamed_constants(module: str, renamed: dict):
             new, value = renamed[name]
             warnings.warn(f"{module}.{name} is deprecated: use {module}.{new}", DeprecationWarning, stacklevel=2)
             return value
+        raise AttributeError(f"module {module!r} has no attribute {name!r}")
+    return __getattr__
+
+
+def renamed_names(module: str, renamed: dict, fallback=None):
+    """A module ``__getattr__`` that gives each old name of ``renamed`` (``{old: new}``, a function, class or
+    constant of the module ``module``) for one release, with a DeprecationWarning naming the new one (attributed to
+    the line that asks for it); ``fallback(name)`` answers any other name (an ``AttributeError`` without one)."""
+    def __getattr__(name):
+        if name in renamed:
+            new = renamed[name]
+            warn_deprecated(f"{module}.{name}", f"{module}.{new}")
+            return getattr(sys.modules[module], new)
+        if fallback is not None:
+            return fallback(name)
         raise AttributeError(f"module {module!r} has no attribute {name!r}")
     return __getattr__

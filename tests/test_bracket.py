@@ -91,12 +91,12 @@ def test_a_shared_point_keeps_its_own_key_when_a_later_reading_names_it_again(st
 def test_a_reading_value_the_notebook_refuses_is_an_error_before_anything_runs(stoy, tmp_path):
     exp = find_experiment(_suite(stoy), "george-study")
     bad = load_reading_file(_readings(tmp_path, f"{HEADER}\nslope,george-study,a,,1.0,[7.0],,,,assumed,s,r\n"))
-    with pytest.raises(SuiteError, match=r"reading george/slope of 'george-study'.*'a' = 7.0 is not allowed"):
+    with pytest.raises(SuiteError, match=r"interpretation george/slope of 'george-study'.*'a' = 7.0 is not allowed"):
         bracket_points(exp, "quick", bad)
     unknown = load_reading_file(_readings(tmp_path, f"{HEADER}\nslope,george-study,nope,,1.0,[2.0],,,,assumed,s,r\n"))
     with pytest.raises(SuiteError, match="names parameter 'nope', which 'george-study' does not declare"):
         bracket_points(exp, "quick", unknown)
-    with pytest.raises(SuiteError, match="no readings are declared for experiment 'george-study'"):
+    with pytest.raises(SuiteError, match="no interpretations are declared for experiment 'george-study'"):
         experiment_readings(exp, load_reading_file(_readings(tmp_path, OFFSET_ONLY.replace("george-study", "x-y"))))
 
 
@@ -132,15 +132,15 @@ def test_a_toy_bracket_gives_each_row_its_verdict_and_the_site_shows_it(stoy, tm
                  str(stoy / "reports"), "--progress", "plain"]) == 0
     assert bracket(stoy, _readings(tmp_path, READINGS), "--jobs", "2") == 0
     out = capsys.readouterr().out
-    assert "5 executed" in out and "bracket of george-study: 0 default, 1 other_reading, 0 fitted_only, 0 between, 0 outside, 0 open, 1 loose" in out
+    assert "5 executed" in out and "bracket of george-study: 0 default, 1 other_interpretation, 0 fitted_only, 0 between, 0 outside, 0 open, 1 loose" in out
     folder = stoy / "reports" / "brackets" / "george-study"
     rows = {r["quantity"]: r for r in _table(folder / "bracket.csv")}
     assert tuple(_table(folder / "bracket.csv")[0]) == BRACKET_COLUMNS
     # value = 10 a + b + 3: 13 by default (window 16 +- (0.05 + 2 x 0.375 + 1) = 14.2 .. 17.8: a miss), 16 at
     # a = 1.3; over the points a = 1.3, 0, 2 and b = 0.5 it spans 3 .. 23
     value = rows["value"]
-    assert value["verdict"] == "miss" and value["bracket"] == "other_reading"
-    assert value["reached_by"] == "slope: a=1.3" and value["closest_reading"] == "slope: a=1.3"
+    assert value["verdict"] == "miss" and value["bracket"] == "other_interpretation"
+    assert value["reached_by"] == "slope: a=1.3" and value["closest_interpretation"] == "slope: a=1.3"
     assert float(value["band_low"]) == pytest.approx(3.0) and float(value["band_high"]) == pytest.approx(23.0)
     assert float(value["closest"]) == pytest.approx(16.0) and value["points"] == "5"
     # twice = 2 a against 3.0 +- 1.05: a window of +-35 % is loose whatever a is, so no reading makes it within;
@@ -167,12 +167,12 @@ def test_a_toy_bracket_gives_each_row_its_verdict_and_the_site_shows_it(stoy, tm
     site = _table(stoy / "reports" / "quick" / "numbers.csv")
     assert tuple(site[0]) == SITE_NUMBER_COLUMNS
     by = {r["quantity"]: r for r in site}
-    assert (by["value"]["bracket"], by["value"]["bracket_readings"]) == ("other_reading", "at quick: slope: a=1.3")
-    assert (by["twice"]["bracket"], by["twice"]["bracket_readings"]) == (
+    assert (by["value"]["bracket"], by["value"]["bracket_interpretations"]) == ("other_interpretation", "at quick: slope: a=1.3")
+    assert (by["twice"]["bracket"], by["twice"]["bracket_interpretations"]) == (
         "loose", "this report; at quick: slope: a=1.3; slope: a=2.0; offset: b=0.5")
     # the experiment's page (rendered when it ran, after the bracket) shows each row's bracket beside its verdict
     page = (stoy / "reports" / "quick" / "george-study" / "report.md").read_text()
-    assert "| verdict | bracket | bracket_readings |" in page and "| other_reading | at quick: slope: a=1.3 |" in page
+    assert "| verdict | bracket | bracket_interpretations |" in page and "| other_interpretation | at quick: slope: a=1.3 |" in page
     index = (stoy / "reports" / "quick" / "index.md").read_text()
     assert ("Reading brackets of the 2 scored rows (`quick` profile): 0 reproduced under the default reading; 1 "
             "reproduced only under another textual (or assumed) reading; 0 reached only under a reading fitted") in index
@@ -194,16 +194,16 @@ def test_a_toy_bracket_gives_each_row_its_verdict_and_the_site_shows_it(stoy, tm
     # a gap that names other values leaves it open, naming the gap
     assert bracket(stoy, _readings(tmp_path, WITH_GAP), reports="gap") == 0
     value = {r["quantity"]: r for r in _table(stoy / "gap" / "brackets" / "george-study" / "bracket.csv")}["value"]
-    assert value["bracket"] == "open" and value["open_readings"] == "hidden (gap: locbook.toy.HIDDEN)"
+    assert value["bracket"] == "open" and value["open_interpretations"] == "hidden (gap: locbook.toy.HIDDEN)"
 
 
 def test_the_site_bracket_of_a_row_follows_its_own_verdict_first():
     """bracket_of_rows: a row within in this report is 'default' whatever the bracket's profile said; otherwise
     the bracket's other readings decide; unscored and unmatched rows have none."""
-    bracket = [{"printed_id": "p", "quantity": "q", "where": "w", "bracket": "other_reading", "reached_by": "r: x=1",
-                "open_readings": "", "band_low": "1", "band_high": "2", "points": "3", "profile": "quick"},
+    bracket = [{"printed_id": "p", "quantity": "q", "where": "w", "bracket": "other_interpretation", "reached_by": "r: x=1",
+                "open_interpretations": "", "band_low": "1", "band_high": "2", "points": "3", "profile": "quick"},
                {"printed_id": "o", "quantity": "q (500 runs)", "where": "w", "bracket": "outside", "reached_by": "",
-                "open_readings": "", "band_low": "1", "band_high": "2", "points": "3", "profile": "quick"}]
+                "open_interpretations": "", "band_low": "1", "band_high": "2", "points": "3", "profile": "quick"}]
     row = {"printed_id": "p", "quantity": "q", "where": "w", "kind": "reproduction"}
     out = bracket_of_rows([{**row, "verdict": "within"}, {**row, "verdict": "miss"},
                            {**row, "verdict": "consistent", "kind": "arithmetic"},
@@ -212,27 +212,27 @@ def test_the_site_bracket_of_a_row_follows_its_own_verdict_first():
                            # loose here: at worst loose, whatever the bracket's own runs gave
                            {**row, "printed_id": "o", "quantity": "q (20 runs)", "verdict": "loose"},
                            {**row, "printed_id": "z", "verdict": "miss"}], bracket)
-    assert [(r["bracket"], r["bracket_readings"]) for r in out] == [
-        ("default", ""), ("other_reading", "at quick: r: x=1"), ("", ""), ("outside", "at quick: band 1 .. 2 over 3 runs"),
+    assert [(r["bracket"], r["bracket_interpretations"]) for r in out] == [
+        ("default", ""), ("other_interpretation", "at quick: r: x=1"), ("", ""), ("outside", "at quick: band 1 .. 2 over 3 runs"),
         ("loose", "this report"), ("", "")]
     # within under the default at the bracket's profile, a miss here (another profile's window): open, not outside,
     # and not reachable either (the other readings were judged by the wider windows too)
     for b in ({**bracket[1], "bracket": "default"}, {**bracket[0], "bracket": "default"}):
         (row,) = bracket_of_rows([{**row, "printed_id": b["printed_id"], "quantity": "q", "verdict": "miss"}], [b])
-        assert row["bracket"] == "open" and "within at quick under the default reading, not here" in \
-            row["bracket_readings"]
+        assert row["bracket"] == "open" and "within at quick under the default interpretation, not here" in \
+            row["bracket_interpretations"]
     # at the bracket's own profile a value other than its default run's means a stale bracket: open, named so
     b = {**bracket[0], "ours": "1.5"}
     same, other, fine = bracket_of_rows([{**row, "verdict": "miss", "reproduced": "1.5000000000001"},
                                          {**row, "verdict": "miss", "reproduced": "1.6"},
                                          {**row, "verdict": "within", "reproduced": "1.6"}], [b], "quick")
-    assert same["bracket"] == "other_reading"
-    assert other["bracket"] == "open" and other["bracket_readings"] == (
+    assert same["bracket"] == "other_interpretation"
+    assert other["bracket"] == "open" and other["bracket_interpretations"] == (
         "this report and its quick bracket disagree: the bracket's default run gave 1.5, this report 1.6 (made by "
         "other code or parameters; run the older of the two again)")
     assert fine["bracket"] == "default"                 # within here whatever the bracket says
     (full,) = bracket_of_rows([{**row, "verdict": "miss", "reproduced": "1.6"}], [b], "full")
-    assert full["bracket"] == "other_reading"               # another profile's run: values differ by design
+    assert full["bracket"] == "other_interpretation"               # another profile's run: values differ by design
 
 
 # -- verdicts from hand-written point reports (no notebook) ---------------------------------------------------
@@ -263,7 +263,7 @@ def test_a_range_whose_runs_straddle_the_printed_value_is_open_not_outside(stoy,
     for p, value in zip(points, ("13", "3", "23")):        # 10 a + 3: a miss everywhere, 16 lies between a = 1 and 2
         _numbers(folder / p.key, {"reproduced": value, "verdict": "miss"})
     (row,) = bracket_rows(exp, points, folder, {p.key: "ok" for p in points}, [], "quick")
-    assert row["bracket"] == "open" and row["open_readings"].startswith("slope between a=1 and 2 (ours 13 .. 23")
+    assert row["bracket"] == "open" and row["open_interpretations"].startswith("slope between a=1 and 2 (ours 13 .. 23")
     # the same runs on one side of the printed value: every reading misses it
     for p, value in zip(points, ("13", "3", "15")):
         (folder / p.key / "numbers.csv").unlink()
@@ -279,9 +279,9 @@ def test_a_point_that_failed_or_did_not_produce_the_row_leaves_it_open(stoy, tmp
     _numbers(folder / points[0].key, {"reproduced": "13", "verdict": "miss"})
     _numbers(folder / points[1].key, {"printed_id": "renamed", "reproduced": "13.5", "verdict": "miss"})
     (row,) = bracket_rows(exp, points, folder, {p.key: "ok" for p in points}, [], "quick")
-    assert (row["bracket"], row["open_readings"]) == ("open", "offset: b=0.5 (row not produced)")
+    assert (row["bracket"], row["open_interpretations"]) == ("open", "offset: b=0.5 (row not produced)")
     (row,) = bracket_rows(exp, points, folder, {points[0].key: "ok", points[1].key: "failed"}, [], "quick")
-    assert (row["bracket"], row["open_readings"]) == ("open", "offset: b=0.5 (failed)")
+    assert (row["bracket"], row["open_interpretations"]) == ("open", "offset: b=0.5 (failed)")
     # no default point, no bracket: an earlier bracket.csv is kept as it was
     (folder / "bracket.csv").write_text("kept\n")
     from locbook.suite.bracket import write_bracket_outputs
@@ -323,7 +323,7 @@ def test_values_fitted_together_get_one_joint_point(stoy, tmp_path):
             f"offset,george-study,b,,0.0,[0.5],[0.5],,,assumed,s,r\n")
     points = bracket_points(exp, "quick", load_reading_file(_readings(tmp_path, text)))
     assert [p.label for p in points] == ["default", "slope [fitted]: a=1.3", "slope: a=2.0", "offset [fitted]: b=0.5",
-                                         "fitted readings together [fitted]: a=1.3, b=0.5"]
+                                         "fitted interpretations together [fitted]: a=1.3, b=0.5"]
     assert points[-1].parameters == {"seed": 3, "a": 1.3, "b": 0.5}
     # one fitted reading alone is its own one-at-a-time point: nothing joint
     single = bracket_points(exp, "quick", load_reading_file(_readings(tmp_path, text.replace("[0.5],[0.5]", "[0.5],"))))
@@ -348,14 +348,14 @@ def test_bracket_settings_are_set_at_every_point_and_checked(stoy, tmp_path):
 def test_a_bracket_setting_may_not_touch_what_the_readings_sweep(stoy, tmp_path):
     exp_a = find_experiment(_with_bracket_table(stoy, '[experiment.bracket]\nparameters = { a = 2.0 }\nreason = "x"\n'),
                             "george-study")
-    with pytest.raises(SuiteError, match="sets 'a', a parameter its readings sweep"):
+    with pytest.raises(SuiteError, match="sets 'a', a parameter its interpretations sweep"):
         bracket_points(exp_a, "quick", load_reading_file(_readings(tmp_path, READINGS)))
 
 
 @pytest.mark.parametrize("table, message", [
     ('[experiment.bracket]\nparameters = { tag = "q" }\n', r"sets parameters without a 'reason'"),
     ('[experiment.bracket]\nparams = { tag = "q" }\nreason = "x"\n', r"takes a table 'parameters', a string 'reason'"),
-    ('[experiment.bracket]\nfactorial = ["a"]\n', r"factorial must list two or more distinct reading names"),
+    ('[experiment.bracket]\nfactorial = ["a"]\n', r"factorial must list two or more distinct interpretation names"),
     ('[experiment.bracket]\nlargest_error_m = -1.0\nlargest_error_reason = "x"\n', r"largest_error_m must be a positive"),
     ('[experiment.bracket]\nlargest_error_m = 9.4\n', r"largest_error_m and largest_error_reason go together"),
 ])
@@ -453,7 +453,7 @@ def test_a_reading_with_requires_keeps_its_own_default_run_in_the_range_check(st
     for p, value in zip(points, ("13", "20", "8")):
         _numbers(folder / p.key, {"reproduced": value, "verdict": "miss"})
     (row,) = bracket_rows(exp, points, folder, {p.key: "ok" for p in points}, [], "quick")
-    assert row["bracket"] == "open" and row["open_readings"].startswith("slope_p between a=0.5 and 1 (ours 8 .. 20")
+    assert row["bracket"] == "open" and row["open_interpretations"].startswith("slope_p between a=0.5 and 1 (ours 8 .. 20")
 
 
 def test_the_fitted_together_point_is_not_a_run_of_one_range_reading(stoy, tmp_path):
@@ -467,8 +467,8 @@ def test_the_fitted_together_point_is_not_a_run_of_one_range_reading(stoy, tmp_p
         _numbers(folder / p.key, {"reproduced": value, "verdict": "miss"})
     (row,) = bracket_rows(exp, points, folder, {p.key: "ok" for p in points}, [], "quick")
     # no crossing of one range reading is claimed; the printed 16 lies between the runs 14.5 and 30
-    assert row["bracket"] == "between" and row["open_readings"] == "", row
-    assert row["between"] == "slope: a=2.0 (14.5) and fitted readings together [fitted]: a=1.3, b=0.5 (30)"
+    assert row["bracket"] == "between" and row["open_interpretations"] == "", row
+    assert row["between"] == "slope: a=2.0 (14.5) and fitted interpretations together [fitted]: a=1.3, b=0.5 (30)"
 
 
 def test_a_bracket_setting_a_profile_sets_is_refused(stoy, tmp_path):
@@ -489,7 +489,7 @@ def test_the_factorial_runs_every_combination_of_the_textual_values(stoy, tmp_pa
     exp = find_experiment(suite, "george-study")
     points = bracket_points(exp, "quick", load_reading_file(_readings(tmp_path, text)))
     assert [p.label for p in points] == ["default", "slope: a=1.3", "slope [fitted]: a=2.0", "offset: b=0.5",
-                                         "readings together: a=1.3, b=0.5"]
+                                         "interpretations together: a=1.3, b=0.5"]
     joint = points[-1]
     assert joint.parameters == {"seed": 3, "a": 1.3, "b": 0.5} and not joint.fitted and joint.basis == "textual"
     assert points[2].fitted and points[2].basis == "fitted" and points[0].basis == "default"
@@ -497,7 +497,7 @@ def test_the_factorial_runs_every_combination_of_the_textual_values(stoy, tmp_pa
     toml = stoy / "notebooks" / "experiments.toml"
     toml.write_text(toml.read_text().replace('factorial = ["slope", "offset"]', 'factorial = ["slope", "nope"]'))
     unknown = _suite(stoy)
-    with pytest.raises(SuiteError, match="factorial of 'george-study' names 'nope', which is not a reading"):
+    with pytest.raises(SuiteError, match="factorial of 'george-study' names 'nope', which is not an interpretation"):
         bracket_points(find_experiment(unknown, "george-study"), "quick",
                        load_reading_file(_readings(tmp_path, text)))
 
@@ -508,7 +508,7 @@ def _tier_points(stoy, tmp_path):
 
 
 @pytest.mark.parametrize("values, verdicts, tier", [
-    (("13", "16", "16.1"), ("miss", "within", "within"), "other_reading"),   # a textual point reaches it
+    (("13", "16", "16.1"), ("miss", "within", "within"), "other_interpretation"),   # a textual point reaches it
     (("13", "14", "16.1"), ("miss", "miss", "within"), "fitted_only"),       # only the fitted point does
     (("13", "19", "25"), ("miss", "miss", "miss"), "between"),               # 16 lies inside the band 13 .. 25
 ])
@@ -536,7 +536,7 @@ def test_outside_needs_the_printed_value_beyond_both_monte_carlo_errors(stoy, tm
     margin = 0.05 + 2 * float(se) * 2 ** 0.5
     assert (1.4 <= margin) == (tier == "open")          # the fact the verdict must follow
     assert row["bracket"] == tier, row
-    assert "1.4 from slope: a=1.3 (14.6)" in (row["outside_margin"] or row["open_readings"])
+    assert "1.4 from slope: a=1.3 (14.6)" in (row["outside_margin"] or row["open_interpretations"])
 
 
 def test_an_implausible_value_is_named_and_left_out_of_the_band(stoy, tmp_path):
@@ -555,7 +555,7 @@ def test_an_implausible_value_is_named_and_left_out_of_the_band(stoy, tmp_path):
     (site,) = bracket_of_rows([{"printed_id": row["printed_id"], "quantity": row["quantity"], "where": row["where"],
                                 "kind": "reproduction", "verdict": "miss", "reproduced": "3"}], [row])
     assert site["bracket"] == "outside" and "implausible, left out of the band: slope: a=1.3 gave 45.6 m" in \
-        site["bracket_readings"]
+        site["bracket_interpretations"]
 
 
 def test_an_implausible_default_run_neither_hides_a_reading_nor_makes_a_crossing(stoy, tmp_path):
@@ -569,14 +569,14 @@ def test_an_implausible_default_run_neither_hides_a_reading_nor_makes_a_crossing
     for p, value, verdict in zip(points, ("20", "4.0", "3"), ("miss", "within", "miss")):
         _numbers(folder / p.key, {"reproduced": value, "verdict": verdict, "unit": "m", "printed": "4.0"})
     (row,) = bracket_rows(exp, points, folder, {p.key: "ok" for p in points}, [], "quick")
-    assert row["bracket"] == "other_reading" and row["reached_by"] == "slope: a=1.3", row
+    assert row["bracket"] == "other_interpretation" and row["reached_by"] == "slope: a=1.3", row
     ranged = f"{HEADER}\nslope,george-study,a,,1.0,[],,0.5,2.0,printed,s,r\n"
     points = bracket_points(exp, "quick", load_reading_file(_readings(tmp_path, ranged)))
     folder = tmp_path / "c"
     for p, value in zip(points, ("3", "2", "45")):          # default 3, a = 0.5 gives 2, a = 2 gives 45 m
         _numbers(folder / p.key, {"reproduced": value, "verdict": "miss", "unit": "m", "printed": "4.0"})
     (row,) = bracket_rows(exp, points, folder, {p.key: "ok" for p in points}, [], "quick")
-    assert row["open_readings"] == "" and row["bracket"] == "outside" and "45 m" in row["implausible"], row
+    assert row["open_interpretations"] == "" and row["bracket"] == "outside" and "45 m" in row["implausible"], row
 
 
 def test_a_row_no_run_gave_a_value_is_open_not_outside(stoy, tmp_path):
@@ -585,7 +585,7 @@ def test_a_row_no_run_gave_a_value_is_open_not_outside(stoy, tmp_path):
     for p in points:
         _numbers(folder / p.key, {"reproduced": "nan", "verdict": "miss"})
     (row,) = bracket_rows(exp, points, folder, {p.key: "ok" for p in points}, [], "quick")
-    assert row["bracket"] == "open" and row["open_readings"] == "no plausible run produced a value"
+    assert row["bracket"] == "open" and row["open_interpretations"] == "no plausible run produced a value"
 
 
 def test_the_margin_counts_the_sources_monte_carlo_error_once():

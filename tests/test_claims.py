@@ -112,26 +112,26 @@ def test_a_claim_is_judged_on_printed_values_on_ours_and_under_every_other_readi
                                                      "kind": "reproduction", "verdict": "within"}}
     values = {"doc-sim": [
         # a textual reading under which MAP is no worse; a fitted one under which it still is
-        {"point": "p1", "reading": "noise: n='x'", "basis": "textual", "printed_id": "Table 1 | MAP | rmse_m",
+        {"point": "p1", "interpretation": "noise: n='x'", "basis": "textual", "printed_id": "Table 1 | MAP | rmse_m",
          "ours": "1.10", "mc_std_error": "0.01", "verdict": "miss"},
-        {"point": "p2", "reading": "noise [fitted]: n='y'", "basis": "fitted", "printed_id": "Table 1 | MAP | rmse_m",
+        {"point": "p2", "interpretation": "noise [fitted]: n='y'", "basis": "fitted", "printed_id": "Table 1 | MAP | rmse_m",
          "ours": "1.50", "mc_std_error": "0.01", "verdict": "miss"},
-        {"point": "p0", "reading": "default", "basis": "default", "printed_id": "Table 1 | MAP | rmse_m",
+        {"point": "p0", "interpretation": "default", "basis": "default", "printed_id": "Table 1 | MAP | rmse_m",
          "ours": "1.40", "mc_std_error": "0.01", "verdict": "miss"}]}
     # values.csv holds every scored row under every point: MMSE too, unchanged here
-    values["doc-sim"] += [{"point": p, "reading": r, "basis": b, "printed_id": "Table 1 | MMSE | rmse_m",
+    values["doc-sim"] += [{"point": p, "interpretation": r, "basis": b, "printed_id": "Table 1 | MMSE | rmse_m",
                            "ours": "1.20", "mc_std_error": "0.01", "verdict": "within"}
                           for p, r, b in (("p1", "noise: n='x'", "textual"), ("p2", "noise [fitted]: n='y'", "fitted"),
                                           ("p0", "default", "default"))]
     j = judge_claim(c, rows, values)
-    assert (j["printed"], j["ours"], j["readings"]) == (True, True, 2)      # 1.30 > 1.22 as printed; 1.40 > 1.20
+    assert (j["printed"], j["ours"], j["interpretations"]) == (True, True, 2)      # 1.30 > 1.22 as printed; 1.40 > 1.20
     assert j["changed_by"] == ["doc-sim, noise: n='x' [textual]: fails"]
     page = conclusions_markdown("doc", "A. Author", 2011, [j], "full")
     assert "1 hold, 0 fail and 0 are undecidable" in page and "changes under doc-sim, noise: n='x' [textual]: fails" in page
     # a bracket whose default run is not this report's (another profile, other code) judges no other reading
     stale = {k: {**v, "reproduced": "1.41"} if "MAP" in k[1] else v for k, v in rows.items()}
     j3 = judge_claim(c, stale, values)
-    assert j3["readings"] == 0 and "its bracket's default run differs from this report" in j3["not_judged"][0]
+    assert j3["interpretations"] == 0 and "its bracket's default run differs from this report" in j3["not_judged"][0]
     # a linked evidence row follows its master's value under each reading
     linked = {**rows, ("doc-sim", "Table 2 | MAP | rmse_m"): {**rows[("doc-sim", "Table 1 | MAP | rmse_m")],
                                                                "printed_id": "Table 2 | MAP | rmse_m",

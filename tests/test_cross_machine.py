@@ -92,14 +92,14 @@ def test_a_bracket_made_on_another_machine_of_the_same_kind_is_not_called_stale(
     the same result, so the bracket's verdict stands; a value 1e-4 away is another result (a stale bracket)."""
     from locbook.suite.bracket import bracket_of_rows
 
-    b = {"printed_id": "p", "quantity": "q", "where": "w", "bracket": "other_reading", "reached_by": "r: x=1",
-         "open_readings": "", "band_low": "1", "band_high": "2", "points": "3", "profile": "full",
+    b = {"printed_id": "p", "quantity": "q", "where": "w", "bracket": "other_interpretation", "reached_by": "r: x=1",
+         "open_interpretations": "", "band_low": "1", "band_high": "2", "points": "3", "profile": "full",
          "ours": "2.833613392"}
     row = {"printed_id": "p", "quantity": "q", "where": "w", "kind": "reproduction", "verdict": "miss"}
     other_machine, stale = bracket_of_rows([{**row, "reproduced": "2.833613412"},
                                             {**row, "reproduced": "2.833896753"}], [b], "full")
-    assert other_machine["bracket"] == "other_reading"
-    assert stale["bracket"] == "open" and "disagree" in stale["bracket_readings"]
+    assert other_machine["bracket"] == "other_interpretation"
+    assert stale["bracket"] == "open" and "disagree" in stale["bracket_interpretations"]
 
 
 def test_the_kernel_map_candidates_of_tied_weights_are_taken_by_particle_index():

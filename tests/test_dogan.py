@@ -222,7 +222,7 @@ def test_readings_summary_counts_fusion_cells_within_the_tolerance_per_reading()
     rows.append({"table": "3.10", "row": "x", "column": "kalman_filter", "printed": 1.0, "reproduced": 9.0})
     variants[("3.10", "x", "kalman_filter")] = {"R per epoch": 9.0}          # one reading only: left out
     assert ("3.9", "sigma_acc=0.015") in dg.REPEATED_ROWS
-    out = {(s["reading"], s["filters"]): s for s in dg.readings_summary(rows, variants, "chosen", ["A", "B"])}
+    out = {(s["interpretation"], s["filters"]): s for s in dg.readings_summary(rows, variants, "chosen", ["A", "B"])}
     assert [k for k in out] == [(r, f) for r in ("chosen", "A", "B") for f in ("EKFs", "KF (MLE)")]
     expect = {("chosen", "EKFs"): (2, 1, 18.75), ("chosen", "KF (MLE)"): (1, 0, 25.0),
               ("A", "EKFs"): (2, 1, 12.5), ("A", "KF (MLE)"): (1, 1, 12.5),

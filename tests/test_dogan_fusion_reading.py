@@ -148,7 +148,7 @@ def test_calibrated_from_text_names_exactly_the_readings_fitted_to_output():
     assert dg.calibrated_from_text() == ""                                    # the defaults are the text's readings
     with pytest.raises(lb.ParameterError, match="start"):
         dg.calibrated_from_text("running", "printed")
-    with pytest.raises(lb.ParameterError, match="noise_reading"):
+    with pytest.raises(lb.ParameterError, match="noise_interpretation"):
         dg.calibrated_from_text("rest", "guessed")
 
 

@@ -18,7 +18,7 @@ from locbook.suite.findings import (
 )
 
 FULL = Path(__file__).resolve().parents[1] / "reports" / "full"
-SHORT = {"default": "default", "other_reading": "other reading", "fitted_only": "fitted only", "between": "between",
+SHORT = {"default": "default", "other_interpretation": "other interpretation", "fitted_only": "fitted only", "between": "between",
          "outside": "outside", "open": "open", "loose": "loose"}
 
 
@@ -29,7 +29,7 @@ def _counter(rows):
 
 
 def _headline_counts(text: str) -> dict:
-    line = next(l for l in text.splitlines() if l.startswith("**Reading brackets of the"))
+    line = next(l for l in text.splitlines() if l.startswith("**Interpretation brackets of the"))
     out = {"n": int(re.search(r"of the (\d+) scored rows", line).group(1))}
     for tier in BRACKETS:
         out[tier] = int(re.search(r"(\d+) " + re.escape(TIER_WORDS[tier]), line).group(1))
@@ -51,7 +51,7 @@ def _rows(n_each=2):
         for k in range(n_each + i % 2):
             rows.append({"experiment": "doc-x", "document": "doc", "printed_id": f"T | {tier} | {k}", "kind":
                          "reproduction", "same_as": "", "verdict": "within" if tier == "default" else "miss",
-                         "bracket": tier, "bracket_readings": f"at full: r{k}: p={k}" if tier else "",
+                         "bracket": tier, "bracket_interpretations": f"at full: r{k}: p={k}" if tier else "",
                          "printed": "1.0", "reproduced": "1.5", "note": ""})
     # not scored: a linked repeat and an arithmetic row
     rows.append({**rows[0], "same_as": "T | default | 0", "verdict": ""})
@@ -66,9 +66,9 @@ def test_the_headline_and_the_findings_page_count_the_same_rows():
     assert tier_counts(rows) == want and len(scored_rows(rows)) == want["n"]
     assert sum(want[t] for t in BRACKETS) + want["none"] == want["n"]
     # a retired tier name (an older numbers.csv) counts as not bracketed: the parts still add up
-    old = [{**r, "bracket": "reachable"} if r["bracket"] == "other_reading" else r for r in rows]
+    old = [{**r, "bracket": "reachable"} if r["bracket"] == "other_interpretation" else r for r in rows]
     got = tier_counts(old)
-    assert got["other_reading"] == 0 and got["none"] == want["none"] + want["other_reading"]
+    assert got["other_interpretation"] == 0 and got["none"] == want["none"] + want["other_interpretation"]
     assert sum(got[t] for t in BRACKETS) + got["none"] == got["n"]
     assert _headline_counts(bracket_headline(rows, "full")) == want
     page = findings_markdown("doc", "A. Author", 2011, rows, "full")

@@ -264,12 +264,12 @@ def test_the_readings_a_miss_note_names_are_those_that_can_move_the_case():
 def test_text_reading_note_names_the_readings_the_side_and_the_bracket():
     text = oz.sim_readings()
     note = oz.text_reading_note(text, oz.SimCase("nn"), "ozkaya2011-nn-sim", 1.5, 1.95)
-    assert note.startswith("under the readings run (noise independent per reader) ours is below")
-    assert ("the other textual reading (common-mode noise on the transmit power) is an alternative: "
+    assert note.startswith("under the interpretations run (noise independent per reader) ours is below")
+    assert ("the other textual interpretation (common-mode noise on the transmit power) is an alternative: "
             "locbook bracket ozkaya2011-nn-sim runs it") in note
     both = oz.text_reading_note(text, oz.SimCase("sir", "mobile"), "ozkaya2011-sir-sim", 1.3, 1.14)
     assert "ours is above" in both and "at recursion rt" in both and "over every recursion" in both
-    assert "other textual readings" in both and "are alternatives" in both and "runs them" in both
+    assert "other textual interpretations" in both and "are alternatives" in both and "runs them" in both
     # under the alternative the default is named as the other reading; nothing to say where no reading moves the case
     alt = oz.text_reading_note({**text, "reader_noise": "common_mode"}, oz.SimCase("nn"), "x", 1.0, 2.0)
     assert "(common-mode noise on the transmit power) ours" in alt and "(noise independent per reader) is" in alt

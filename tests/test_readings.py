@@ -80,7 +80,7 @@ def test_readings_ship_as_package_data():
     pyproject = tomllib.loads((Path(__file__).resolve().parents[1] / "pyproject.toml").read_text(encoding="utf-8"))
     patterns = pyproject["tool"]["setuptools"]["package-data"]["locbook.data"]
     for path in READINGS_DIR.glob("*.csv"):
-        assert any(fnmatch.fnmatch(f"readings/{path.name}", p) for p in patterns), path
+        assert any(fnmatch.fnmatch(f"interpretations/{path.name}", p) for p in patterns), path
     assert {p.stem for p in READINGS_DIR.glob("*.csv")} == set(DOCUMENTS)
 
 
@@ -141,17 +141,17 @@ def test_readings_for_collects_across_files():
 
 def test_the_readings_issue_28_names_are_declared():
     names = {d: {r.name for r in readings(d)} for d in DOCUMENTS}
-    assert {"noise_reading", "start", "walking_speed", "accelerometer_role", "pcrlb_horizon",
+    assert {"noise_interpretation", "start", "walking_speed", "accelerometer_role", "pcrlb_horizon",
             "pcrlb_process_noise", "pcrlb_sigma_acc_values"} <= names["dogan2015"]
     assert {"tracking_shadowing", "process_noise", "report_spacing", "anchor_layout",
-            "fusion_reading"} <= names["gudipati2017"]
+            "fusion_interpretation"} <= names["gudipati2017"]
     assert {"percentile_convention", "target_sampling", "nn_weights"} <= names["ozkaya2011"]
     assert {"shadowing", "trajectory", "process_noise", "step"} <= names["george"]
 
 
 def test_dogan_q_reading_offers_the_printed_constant():
     from locbook.scenarios import dogan
-    noise = {r.name: r for r in readings("dogan2015")}["noise_reading"]
+    noise = {r.name: r for r in readings("dogan2015")}["noise_interpretation"]
     # issue 28: the default is the text's constant; the reading fitted to Table 3.9 is a named alternative
     assert not noise.is_calibration and noise.default == "printed" == dogan.DEFAULT_NOISE_READING
     assert "sigma_acc" in noise.alternatives and set(noise.values) <= set(dogan.NOISE_READINGS)
@@ -312,9 +312,9 @@ def test_requires_is_an_optional_last_column_of_other_parameters(tmp_path):
     (plain,) = load_reading_file(_write(tmp_path, GOOD, header=header))      # empty: none
     assert plain.requires == {}
     for bad, problem in [("['mode']", "requires must be a TOML inline table"),
-                         ("{ speed_mps = 1.0 }", "requires names the reading's own parameter 'speed_mps'")]:
+                         ("{ speed_mps = 1.0 }", "requires names the interpretation's own parameter 'speed_mps'")]:
         with pytest.raises(ReadingsError, match=re.escape(problem)):
             load_reading_file(_write(tmp_path, {**GOOD, "requires": bad}, header=header))
-    with pytest.raises(ReadingsError, match="requires needs the reading's own parameter"):
+    with pytest.raises(ReadingsError, match="requires needs the interpretation's own parameter"):
         load_reading_file(_write(tmp_path, {**GOOD, "parameter": "", "where": "a.b", "requires": "{ m = 1 }"},
                                  header=header))

@@ -200,7 +200,7 @@ def test_an_interrupted_forced_bracket_keeps_its_band(stoy, tmp_path, monkeypatc
     (before,) = [r for r in _table(folder / "bracket.csv") if r["quantity"] == "value"]
     assert (float(before["band_low"]), float(before["band_high"]), int(before["points"])) == \
         (values[0], values[-1], len(points))
-    assert before["bracket"] == "other_reading" and before["reached_by"] == "slope: a=1.3"
+    assert before["bracket"] == "other_interpretation" and before["reached_by"] == "slope: a=1.3"
     monkeypatch.setattr(runner, "run_tasks", _fake_run_tasks(finished=1))
     code = main(["--suite", str(stoy / "notebooks" / "experiments.toml"), "bracket", "george-study", "--readings",
                  str(readings_path), "--force", "--reports", str(stoy / "reports"), "--progress", "quiet"])
@@ -210,7 +210,7 @@ def test_an_interrupted_forced_bracket_keeps_its_band(stoy, tmp_path, monkeypatc
     assert [r["status"] for r in _table(folder / "points.csv")] == ["ok"] + ["cached"] * (len(points) - 1)
     out, err = capsys.readouterr()
     assert f"bracket.csv was rebuilt from the {len(points)} of {len(points)} points" in err
-    assert "bracket of george-study: 0 default, 1 other_reading" in out
+    assert "bracket of george-study: 0 default, 1 other_interpretation" in out
 
 
 def test_a_bracket_whose_default_point_was_interrupted_is_rebuilt_from_its_earlier_report(stoy, tmp_path):
@@ -283,7 +283,7 @@ def test_a_declaration_file_too_large_is_refused_before_it_is_read_whole(stoy, t
     assert main(["--suite", str(big), "list"]) == 2
     assert f"{big}: the experiment list is 64.0 MiB, over the limit" in _one_line(capsys)
     csv_path = big.rename(tmp_path / "george.csv")
-    with pytest.raises(ReadingsError, match="a readings file is 64.0 MiB, over the limit of 16 MiB"):
+    with pytest.raises(ReadingsError, match="an interpretations file is 64.0 MiB, over the limit of 16 MiB"):
         load_reading_file(csv_path)
     from locbook.reproduce.readings import MAX_DECLARATION_BYTES
     assert MAX_DECLARATION_BYTES == 16 * 2 ** 20         # the limit the messages state
@@ -344,13 +344,13 @@ def test_a_copy_without_its_brackets_keeps_every_rows_bracket_columns(toy):
         for eid, value in (("george-one", "0.5"), ("george-two", "0.125")):
             writer.writerow({"experiment": eid, "document": "george", "printed_id": "Table 1 | mean | ",
                              "quantity": "mean", "where": "Table 1", "kind": "reproduction", "printed": "0.0",
-                             "reproduced": value, "verdict": "miss", "bracket": "other_reading",
-                             "bracket_readings": "at quick: offset: b=0.5"})
+                             "reproduced": value, "verdict": "miss", "bracket": "other_interpretation",
+                             "bracket_interpretations": "at quick: offset: b=0.5"})
     site.write_suite_reports(suite, report_dir)
     rows = {r["experiment"]: r for r in _table(report_dir / "numbers.csv")}
-    assert (rows["george-one"]["bracket"], rows["george-one"]["bracket_readings"]) == \
-        ("other_reading", "at quick: offset: b=0.5")
-    assert (rows["george-two"]["bracket"], rows["george-two"]["bracket_readings"]) == ("", "")   # 0.125 -> 0.25
+    assert (rows["george-one"]["bracket"], rows["george-one"]["bracket_interpretations"]) == \
+        ("other_interpretation", "at quick: offset: b=0.5")
+    assert (rows["george-two"]["bracket"], rows["george-two"]["bracket_interpretations"]) == ("", "")   # 0.125 -> 0.25
     assert "1 reproduced only under another textual" in (report_dir / "index.md").read_text()
 
 
@@ -434,8 +434,8 @@ def test_figure_and_table_captions_are_text_in_markdown(tmp_path, stoy):
 
 def test_findings_and_markdown_tables_show_html_as_text():
     row = {"experiment": "george-study", "printed_id": "T | <b>v</b>", "printed": "16.0", "reproduced": "13",
-           "verdict": "miss", "kind": "reproduction", "bracket": "other_reading",
-           "bracket_readings": "at quick: slope: tag='<script>alert(1)</script>'", "note": "<iframe src=x>"}
+           "verdict": "miss", "kind": "reproduction", "bracket": "other_interpretation",
+           "bracket_interpretations": "at quick: slope: tag='<script>alert(1)</script>'", "note": "<iframe src=x>"}
     md = findings_markdown("george", "A <i>B</i>", 2015, [row], "quick")
     assert "<script" not in md and "<b>" not in md and "<i>" not in md
     assert "&lt;script>alert(1)&lt;/script>" in md

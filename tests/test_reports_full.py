@@ -75,7 +75,7 @@ def test_every_miss_and_loose_reproduction_or_calibrated_row_has_a_bracket_verdi
     for r in rows:
         if r["kind"] in ("reproduction", "calibrated") and r["verdict"] in ("miss", "loose") and not r["same_as"]:
             assert r["bracket"] in BRACKETS and r["bracket"] != "default", r
-            assert r["bracket_readings"].strip(), r
+            assert r["bracket_interpretations"].strip(), r
         if r["bracket"] == "default":
             assert r["verdict"] == "within", r
 
@@ -91,7 +91,7 @@ def test_the_committed_brackets_are_complete_and_from_committed_code():
         assert points and points[0]["status"] in ("ok", "cached"), points_csv        # the default point ran
         assert all(p["generated_by"] and "uncommitted" not in p["generated_by"]
                    for p in points if p["status"] in ("ok", "cached")), points_csv
-        assert not any(p["readings_file"] for p in points), points_csv     # the packaged readings only
+        assert not any(p["interpretations_file"] for p in points), points_csv     # the packaged readings only
         # issue 45: every point at the full profile's run count, so a verdict survives its Monte-Carlo error
         assert {b["profile"] for b in load_bracket(points_csv.parent)} <= {"full"}, points_csv
         assert (points_csv.parent / "values.csv").is_file(), points_csv
@@ -163,7 +163,7 @@ def test_a_pages_repeated_notes_are_shown_once_and_every_reference_resolves(rows
     exp = next(e for e in suite.experiments if e.id == "dogan2015-tracking")
     numbers = [r for r in rows if r["experiment"] == exp.id]
     page = site.page_html(exp, "full", {}, FULL / exp.id, numbers, "test")
-    columns = ("ambiguity_basis", "calibrated_from", "bracket_readings", "note")
+    columns = ("ambiguity_basis", "calibrated_from", "bracket_interpretations", "note")
     texts = {r[c].strip() for r in numbers for c in columns if r[c].strip()}
     notes = re.findall(r'<li id="fn-(\d+)" value="\1">', page)
     assert sorted(map(int, notes)) == list(range(1, len(texts) + 1))

@@ -6,9 +6,11 @@
   :class:`Ambiguity`) and verdict (:func:`score`);
 - :mod:`.report`: :class:`Report`, whose :meth:`Report.number` applies those rules (window, verdict and note),
   so that a notebook never computes a window itself;
-- :mod:`.readings`: each document's unprinted assumptions and contested readings (package data
-  ``locbook/data/readings``): the default, the plausible alternatives or range, the basis (printed, assumed, or
-  fitted to printed output) and the source, as :class:`Reading` (:func:`readings`, :func:`readings_for`).
+- :mod:`.interpretations`: each document's unprinted assumptions and contested interpretations (package data
+  ``locbook/data/interpretations``): the default, the plausible alternatives or range, the basis (printed, assumed,
+  or fitted to printed output) and the source, as :class:`Interpretation` (:func:`interpretations`,
+  :func:`interpretations_for`). The old names (``Reading``, ``readings``, ... of ``locbook.reproduce.readings``)
+  work for one release with a DeprecationWarning (:data:`RENAMED`).
 
 Scenarios may import this layer; it imports nothing from the suite (the suite imports it). Names load on first use,
 so that ``import locbook.reproduce.printed_values`` does not pay for the report's numpy.
@@ -22,8 +24,22 @@ _EXPORTS = {
                      "score", "SCORED_VERDICTS", "VERDICT_COLUMNS", "BRACKETS", "verdict_column",
                      "scoreboard_counts"), "scoring"),
     **dict.fromkeys(("Report", "Table", "NUMBER_COLUMNS"), "report"),
-    **dict.fromkeys(("Reading", "ReadingsError", "readings", "readings_for", "load_reading_file", "READINGS_DIR",
-                     "READING_COLUMNS", "BASES"), "readings"),
+    **dict.fromkeys(("Interpretation", "InterpretationsError", "interpretations", "interpretations_for",
+                     "load_interpretation_file", "INTERPRETATIONS_DIR", "INTERPRETATION_COLUMNS", "BASES"),
+                    "interpretations"),
 }
+#: the names before "reading" meant only a sensor measurement: old -> new (deprecated aliases for one release)
+RENAMED = {"Reading": "Interpretation", "ReadingsError": "InterpretationsError", "readings": "interpretations",
+           "readings_for": "interpretations_for", "load_reading_file": "load_interpretation_file",
+           "READINGS_DIR": "INTERPRETATIONS_DIR", "READING_COLUMNS": "INTERPRETATION_COLUMNS"}
 __all__ = list(_EXPORTS)
-__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)
+_getattr, __dir__ = lazy_exports(__name__, _EXPORTS)
+
+
+def __getattr__(name: str):
+    if name in RENAMED:
+        # imported here: locbook._deprecation loads numpy, which `locbook --version` and `locbook list` never need
+        from .._deprecation import warn_deprecated
+        warn_deprecated(f"{__name__}.{name}", f"{__name__}.{RENAMED[name]}")
+        return _getattr(RENAMED[name])
+    return _getattr(name)

@@ -22,15 +22,15 @@ by the locbook authors, with the columns :data:`CLAIM_COLUMNS`:
     ``+ - * /``, ``abs()``, comparisons (chains allowed), ``and``/``or``/``not``, ``increasing(...)`` /
     ``decreasing(...)`` (strictly, in the order given), ``verdict(name)`` (a ``claim`` row's own verdict).
 ``ambiguity``, ``alt_test``
-    why the wording admits another reading, and the test under it (both or neither).
+    why the wording admits another interpretation, and the test under it (both or neither).
 ``inconsistency``
     an inconsistency inside the source that bears on the claim or its rows.
 ``note``
     what a reader needs besides.
 
 A test is judged three ways (:func:`evaluate`): on the printed values (does the source's own table support its
-claim?), on our values under the default reading, and on our values under each other reading a bracket ran. Our
-values carry their Monte-Carlo standard errors: a comparison is decided only where the difference clears two
+claim?), on our values under the default interpretation, and on our values under each other interpretation a bracket
+ran. Our values carry their Monte-Carlo standard errors: a comparison is decided only where the difference clears two
 standard errors of the difference (else it is undecidable); printed values are compared as printed.
 """
 from __future__ import annotations
@@ -46,7 +46,7 @@ from functools import lru_cache
 from pathlib import Path
 
 from ..errors import LocbookError
-from .readings import read_declaration
+from .interpretations import read_declaration
 
 __all__ = ["Claim", "ClaimsError", "CLAIM_COLUMNS", "CLAIM_KINDS", "CLAIMS_DIR", "claims", "load_claims_file",
            "Value", "evaluate", "HOLDS", "FAILS", "UNDECIDABLE", "outcome_word"]
@@ -304,7 +304,7 @@ def _claim(document: str, row: dict, where: str) -> Claim:
                 raise ClaimsError(f"{where}: {column} {cells[column]!r} is a number, not a statement that holds or "
                                   "fails (compare it)")
     if bool(cells["ambiguity"]) != bool(cells["alt_test"]) and cells["test"]:
-        raise ClaimsError(f"{where}: ambiguity and alt_test go together (the test under the other reading)")
+        raise ClaimsError(f"{where}: ambiguity and alt_test go together (the test under the other interpretation)")
     return Claim(document, cells["id"], cells["location"], cells["claim"], cells["kind"], evidence, cells["test"],
                  cells["ambiguity"], cells["alt_test"], cells["inconsistency"], cells["note"])
 

@@ -57,11 +57,12 @@ SCORED_VERDICTS = ("within", "loose", "miss")
 #: verdict columns of the kind-by-verdict tables ("linked": repeats of a quantity compared elsewhere)
 VERDICT_COLUMNS = ("within", "loose", "miss", "consistent", "inconsistent", "no verdict", "linked")
 #: The bracket verdicts (issue 45's tiers), in the order the headline counts them: reproduced under the default
-#: reading; under another textual (or, where the text is silent, assumed) reading; only under a reading fitted to
-#: printed output; between readings (the printed value inside the band of our values, no single reading within);
-#: outside every reading (beyond the band widened by both Monte-Carlo errors); open (a setting that could matter not
-#: swept, a point not run, or a margin Monte-Carlo error could close); loose (a window too wide to decide).
-BRACKETS = ("default", "other_reading", "fitted_only", "between", "outside", "open", "loose")
+#: interpretation; under another textual (or, where the text is silent, assumed) interpretation; only under an
+#: interpretation fitted to printed output; between interpretations (the printed value inside the band of our values, no
+#: single interpretation within); outside every interpretation (beyond the band widened by both Monte-Carlo errors);
+#: open (a setting that could matter not swept, a point not run, or a margin Monte-Carlo error could close); loose (a
+#: window too wide to decide).
+BRACKETS = ("default", "other_interpretation", "fitted_only", "between", "outside", "open", "loose")
 
 
 def verdict_column(row: dict) -> str:
@@ -109,11 +110,11 @@ class Ambiguity:
 
     @classmethod
     def spread(cls, values, centre: float, what: str, source: str) -> "Ambiguity":
-        """A quantity the source leaves undefined, whose plausible readings give ``values``: the window widens by
-        the largest distance of any of them from ``centre`` (our number's reading)."""
+        """A quantity the source leaves undefined, whose plausible interpretations give ``values``: the window widens by
+        the largest distance of any of them from ``centre`` (our number's interpretation)."""
         values = np.asarray(values, dtype=float).ravel()
         if values.size == 0:
-            raise ValueError("a spread ambiguity needs at least one value of the alternative readings")
+            raise ValueError("a spread ambiguity needs at least one value of the alternative interpretations")
         return cls(float(np.max(np.abs(values - centre))), what, source)
 
 

@@ -14,12 +14,12 @@ for the fused filters with RSS at every 10th step (Table 3.5), the ONLY-RSS filt
 (:data:`RSS_ONLY_STEPS`; the 20 Hz grid is the declared alternative), and the MLE an unconstrained grid +
 Levenberg-Marquardt search (the thesis names no solver).
 
-The fusion reading (how the filter's Q and P_0 relate to sigma_ACC, and how the node starts) is a named option,
-:data:`NOISE_READINGS` and :data:`START_MODES`. The defaults follow the printed text (issue 28's rule): Q and
-P_0,acc as the constants of Eqs. (3.20), (3.24) and a node starting from rest, as the thesis's own x_0. A reading
-chosen because it fits printed output (Q scaled with sigma_ACC, fitted to Table 3.9; the moving start with its
-walking speed, fitted to Fig. 3.2) is a named alternative, and every row computed under it is ``calibrated`` and names
-it (:func:`calibrated_from_text`).
+The fusion interpretation (how the filter's Q and P_0 relate to sigma_ACC, and how the node starts) is a named option,
+:data:`NOISE_INTERPRETATIONS` and :data:`START_MODES`. The defaults follow the printed text (issue 28's rule): Q and
+P_0,acc as the constants of Eqs. (3.20), (3.24) and a node starting from rest, as the thesis's own x_0. An
+interpretation chosen because it fits printed output (Q scaled with sigma_ACC, fitted to Table 3.9; the moving start
+with its walking speed, fitted to Fig. 3.2) is a named alternative, and every row computed under it is ``calibrated``
+and names it (:func:`calibrated_from_text`).
 
 The code lives along the protocol's seams: :mod:`locbook.scenarios.dogan_protocol` (the printed constants, the walk,
 the draws, the MLE and the filters of Table 3.5, the noise fit), :mod:`locbook.scenarios.dogan_tables` (Tables
@@ -28,6 +28,7 @@ public names, the namespace the notebooks and :mod:`locbook.scenarios.dogan_test
 """
 from __future__ import annotations
 
+from .._deprecation import renamed_names
 from .dogan_bounds import (
     BOUND_KINDS,
     HORIZON_SOURCE,
@@ -40,7 +41,7 @@ from .dogan_bounds import (
 )
 from .dogan_protocol import (
     ANCHORS_M,
-    DEFAULT_NOISE_READING,
+    DEFAULT_NOISE_INTERPRETATION,
     DEFAULT_RSS_ONLY_STEP,
     DEFAULT_START,
     DT_S,
@@ -49,11 +50,11 @@ from .dogan_protocol import (
     MLE_BOUNDS,
     MLE_GRID_MARGIN_M,
     MLE_GRID_STEP_M,
-    MLE_R_READINGS,
+    MLE_R_INTERPRETATIONS,
     MLE_ROOM_INSET_M,
     MOVING_START_FITTED,
     NOISE_CALIBRATED_FROM,
-    NOISE_READINGS,
+    NOISE_INTERPRETATIONS,
     P00_ACC_VAR,
     P00_VEL_VAR,
     PATH_LOSS_EXP,
@@ -111,11 +112,11 @@ from .dogan_tables import (
     divergence_table,
     fusion_gain_pct,
     fusion_reduction_rows,
+    interpretations_summary,
     mean_rmse_m,
     ordering_rows,
     printed_fusion_gains_pct,
     printed_tables,
-    readings_summary,
     record_tables,
     run_channels,
     table_channels,
@@ -128,8 +129,8 @@ from .dogan_tables import (
 __all__ = ["PRINTED", "printed_number", "ROOM_M", "room_sides_m", "corner_anchors", "ANCHORS_M", "STATE_LAYOUT",
     "REF_POWER_DBM", "PATH_LOSS_EXP", "SIGMA_RSS_DB", "SIGMA_ACC_MPS2", "Q_PER_STEP", "DT_S", "RSS_EVERY",
     "P00_VEL_VAR", "P00_ACC_VAR", "WAYPOINTS_M", "SPEED_MPS", "SPEED_CALIBRATED_FROM", "SPEED_ASSUMED", "MC_RUNS",
-    "START_MODES", "DEFAULT_START", "MOVING_START_FITTED", "NOISE_READINGS", "DEFAULT_NOISE_READING",
-    "NOISE_CALIBRATED_FROM", "Q_PER_ACC_VARIANCE", "MLE_R_READINGS", "FILTERS", "MLE_GRID_STEP_M",
+    "START_MODES", "DEFAULT_START", "MOVING_START_FITTED", "NOISE_INTERPRETATIONS", "DEFAULT_NOISE_INTERPRETATION",
+    "NOISE_CALIBRATED_FROM", "Q_PER_ACC_VARIANCE", "MLE_R_INTERPRETATIONS", "FILTERS", "MLE_GRID_STEP_M",
     "MLE_GRID_MARGIN_M", "MLE_BOUNDS", "MLE_ROOM_INSET_M", "RMSE_EPOCHS", "PCRLB_MSE_MLE", "RSS_ONLY_STEPS",
     "DEFAULT_RSS_ONLY_STEP", "filter_noise", "calibrated_from_text", "speed_reason", "room_waypoints",
     "walk_trajectory", "rss_grid", "filter_grid", "trajectory_step_s", "motion_model", "simulate_rss",
@@ -137,7 +138,11 @@ __all__ = ["PRINTED", "printed_number", "ROOM_M", "room_sides_m", "corner_anchor
     "ChannelRun", "scored_errors", "run_channel", "noise_fit", "only_acc_errors", "TableSetting", "RMSE_TABLES",
     "TABLE_SETTINGS", "TABLE_36_CHANNEL", "SIGMA_ACC_SWEEP_CHANNELS", "TABLE_SIGMA_ACC_MPS2", "printed_tables",
     "table_channels", "CHANNELS", "run_channels", "table_rows", "REPEATED_ROWS", "thesis_repeat_error",
-    "record_tables", "readings_summary", "fusion_reduction_rows", "fusion_gain_pct", "mean_rmse_m",
+    "record_tables", "interpretations_summary", "fusion_reduction_rows", "fusion_gain_pct", "mean_rmse_m",
     "printed_fusion_gains_pct", "ordering_rows", "tail_rows", "divergence_table", "table_view", "BOUND_KINDS",
     "smc_trajectories", "smc_trajectory", "pcrlb_m", "bound_rows", "HORIZON_SOURCE", "BoundStudy",
     "horizon_ambiguity"]
+
+
+# the names before "reading" meant only a sensor measurement (deprecated for one release)
+__getattr__ = renamed_names(__name__, {"NOISE_READINGS": "NOISE_INTERPRETATIONS", "DEFAULT_NOISE_READING": "DEFAULT_NOISE_INTERPRETATION", "MLE_R_READINGS": "MLE_R_INTERPRETATIONS", "readings_summary": "interpretations_summary"})

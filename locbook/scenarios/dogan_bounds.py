@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .._deprecation import renamed_keyword
 from ..bounds.pcrlb import linear_measurement_information, position_bound_m, posterior_crlb, rss_state_information
 from ..errors import ParameterError
 from ..metrics import rmse_m
@@ -18,7 +19,7 @@ from ..montecarlo import replicate_standard_error
 from ..reproduce.scoring import Ambiguity
 from .dogan_protocol import (
     ANCHORS_M,
-    DEFAULT_NOISE_READING,
+    DEFAULT_NOISE_INTERPRETATION,
     DEFAULT_RSS_ONLY_STEP,
     DT_S,
     FILTERS,
@@ -130,19 +131,20 @@ def pcrlb_m(kind: str, *, fusion: bool, sigma_rss_db: float, mse_mle_m2, n_steps
     return position_bound_m(info, idx)
 
 
-def bound_rows(runs: dict, trajectory: Trajectory, *, noise_reading: str = DEFAULT_NOISE_READING,
+@renamed_keyword("noise_reading", "noise_interpretation")
+def bound_rows(runs: dict, trajectory: Trajectory, *, noise_interpretation: str = DEFAULT_NOISE_INTERPRETATION,
                anchors_m=ANCHORS_M, rss_only_step: str = DEFAULT_RSS_ONLY_STEP) -> list[dict]:
     """Every filter's RMSE beside the truth-conditioned PCRLB of its own information (ONLY RSS or fused, same
-    trajectory, Q, R and P_0 as the filter under ``noise_reading``), both as the RMS over the RSS epochs; KF (MLE)
-    also beside the linear bound. An ONLY-RSS filter's bound uses its own grid and Q per step (:func:`filter_grid` of
-    ``rss_only_step``)."""
+    trajectory, Q, R and P_0 as the filter under ``noise_interpretation``), both as the RMS over the RSS epochs; KF
+    (MLE) also beside the linear bound. An ONLY-RSS filter's bound uses its own grid and Q per step
+    (:func:`filter_grid` of ``rss_only_step``)."""
     out = []
     for (sigma, ple), run in runs.items():
         for key, err in run.errors.items():
             if not (isinstance(key, tuple) and key[0] in FILTERS):
                 continue
             name, sigma_acc = key
-            q, p0_acc = filter_noise(noise_reading, sigma_acc)
+            q, p0_acc = filter_noise(noise_interpretation, sigma_acc)
             grid = filter_grid(trajectory, sigma_acc is not None, rss_only_step)
             common = dict(fusion=sigma_acc is not None, sigma_rss_db=sigma, path_loss_exp=ple,
                           sigma_acc_mps2=sigma_acc or SIGMA_ACC_MPS2, mse_mle_m2=run.mse_mle_m2, n_steps=grid.time_s.size,

@@ -3,7 +3,7 @@ static MLE, the filters of Table 3.5 run per channel (:func:`run_channel`) and t
 
 The tables built on these runs are in :mod:`locbook.scenarios.dogan_tables`, the bounds of Ch. 4 in
 :mod:`locbook.scenarios.dogan_bounds`; :mod:`locbook.scenarios.dogan` gathers all three (the notebooks' namespace)
-and explains the readings.
+and explains the interpretations.
 """
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from .._deprecation import renamed_keyword, renamed_names
 from ..errors import ParameterError
 from ..models.channel import PathLossModel, pairwise_distance_m
 from ..models.motion import KinematicModel, constant_acceleration
@@ -90,7 +91,7 @@ SPEED_ASSUMED = ("not printed: an open assumption under the start from rest (no 
 #: Monte-Carlo runs (Sec. 3.5).
 MC_RUNS = int(printed_number("Sec. 3.5 text", "Monte Carlo runs"))
 #: The true node's initial motion (not printed).
-#: ``"rest"``: it starts from rest and accelerates uniformly to SPEED_MPS over ``ramp_s``: the reading of the
+#: ``"rest"``: it starts from rest and accelerates uniformly to SPEED_MPS over ``ramp_s``: the interpretation of the
 #: thesis's own initialisation, Eqs. (3.19)-(3.20), x_0 with zero velocity and velocity variance 0.0065 (sd
 #: 0.08 m/s), which a node walking at 0.3 m/s would violate by 3.7 sd. Default.
 #: ``"moving"``: it walks at SPEED_MPS from t = 0 (a labelled alternative): the start under which SPEED_MPS was
@@ -101,7 +102,7 @@ DEFAULT_START = "rest"
 #: How the filter's process noise and the acceleration variance of P_{0|0} relate to sigma_ACC.
 #: ``"printed"``: Q = 0.000023 I_6 per step and P_{0|0,acc} = 0.00023 whatever sigma_ACC: Eqs. (3.20), (3.24) as
 #: the text prints them, constants, and Sec. 4.1.2's "the standard deviation of the process noise is 0.0048 in our
-#: system" (0.0048^2 = 2.3e-5) while sigma_ACC is swept. Default (issue 28: the default reading is what the text
+#: system" (0.0048^2 = 2.3e-5) while sigma_ACC is swept. Default (issue 28: the default interpretation is what the text
 #: prints).
 #: ``"sigma_acc"``: Q = sigma_ACC^2 / 10 I_6 per step and P_{0|0,acc} = sigma_ACC^2, for the sigma_ACC of the row
 #: (Table 3.6's 0.0152 for ONLY RSS); a labelled alternative fitted to output (:data:`NOISE_CALIBRATED_FROM`). The
@@ -109,24 +110,24 @@ DEFAULT_START = "rest"
 #: 0.00023 = 0.0152^2, tested), and the printed KF (MLE), a linear filter that never diverges, falls 1.34 -> 1.02 ->
 #: 0.98 -> 0.96 m with sigma_ACC in Table 3.9, which no fixed-Q filter does (the isotropic Q adds about 40x more
 #: velocity uncertainty per step than the accelerometer noise). Measured trade-off (dogan2015-tracking,
-#: readings_summary): it brings KF (MLE) to within about 1-2 % of the printed sigma_ACC <= 0.0075 cells, but with Q
-#: this small a few EKF runs lock onto a wrong position, which inflates the EKFs' RMSE.
+#: interpretations_summary): it brings KF (MLE) to within about 1-2 % of the printed sigma_ACC <= 0.0075 cells, but with
+#: Q this small a few EKF runs lock onto a wrong position, which inflates the EKFs' RMSE.
 MOVING_START_FITTED = ("start 'moving' (the node walks from t = 0) chosen because, at the walking speed 0.3 m/s, its "
                        "unobserved initial velocity gives Fig. 3.2's 'reaches to 24 meter after 80 seconds'; no text "
                        "supports a moving start (Eqs. (3.19)-(3.20) start the filter at zero velocity, and Fig. 3.2's text "
                        "blames 'the error of the acceleration')")
-NOISE_READINGS = ("printed", "sigma_acc")
-DEFAULT_NOISE_READING = "printed"
-NOISE_CALIBRATED_FROM = ("noise reading 'sigma_acc' (Q = sigma_ACC^2/10 I_6, P_0,acc = sigma_ACC^2 per row) chosen "
+NOISE_INTERPRETATIONS = ("printed", "sigma_acc")
+DEFAULT_NOISE_INTERPRETATION = "printed"
+NOISE_CALIBRATED_FROM = ("noise interpretation 'sigma_acc' (Q = sigma_ACC^2/10 I_6, P_0,acc = sigma_ACC^2 per row) chosen "
                          "because it fits the printed KF (MLE) fall with sigma_ACC of Table 3.9 (the text prints Q and "
                          "P_0,acc as constants, Eqs. (3.20), (3.24))")
-#: Q per step over sigma_ACC^2 in the ``"sigma_acc"`` reading (0.000023 / 0.0152^2 = 0.0996).
+#: Q per step over sigma_ACC^2 in the ``"sigma_acc"`` interpretation (0.000023 / 0.0152^2 = 0.0996).
 Q_PER_ACC_VARIANCE = 0.1
 #: KF (MLE)'s R = diag(MSE_MLE) (Eq. (3.21); constant or per epoch is not stated): ``"constant"``, the MSE per
 #: axis averaged over runs and epochs ("averaging Mean Squared Error (MSE) of static localization over 500 Monte
 #: Carlo runs", Sec. 3.5; default), or ``"per_epoch"``, averaged over runs at each epoch (Table 4.1 indexes
 #R_{RSS-MLE,k+1} by time; variant).
-MLE_R_READINGS = ("constant", "per_epoch")
+MLE_R_INTERPRETATIONS = ("constant", "per_epoch")
 #: Filter columns of Tables 3.7-3.12.
 FILTERS = ("parallel_ekf", "serial_ekf", "kalman_filter")
 #: MLE search grid (the thesis names no solver): the room +- 3 m at 0.5 m, then Levenberg-Marquardt, unconstrained.
@@ -134,7 +135,7 @@ MLE_GRID_STEP_M = 0.5
 MLE_GRID_MARGIN_M = 3.0
 #: The MLE's domain (Sec. 2.3.1 names no solver, start or bounds): ``"unconstrained"`` (default), or ``"room"``: the
 #: unconstrained fix projected onto the room inset by :data:`MLE_ROOM_INSET_M` (each coordinate clipped), the simplest
-#: reading of a fix known to lie in the room (not the box-constrained minimiser of Eq. (2.4)).
+#: interpretation of a fix known to lie in the room (not the box-constrained minimiser of Eq. (2.4)).
 MLE_BOUNDS = ("unconstrained", "room")
 #: Inset of the ``"room"`` bound from the walls: a fix clipped into a corner would sit on an anchor, where the RSS
 #: model (Eq. (2.2)) is singular and an EKF started there cannot linearise; 0.1 m keeps it off (our choice).
@@ -159,14 +160,14 @@ RSS_ONLY_STEPS = ("rss_rate", "imu_rate")
 DEFAULT_RSS_ONLY_STEP = "rss_rate"
 
 
-def filter_noise(reading: str, sigma_acc_mps2: float | None) -> tuple[float, float]:
-    """``(q_per_step, p0_acc_var)`` of the filter under a :data:`NOISE_READINGS` reading.
+def filter_noise(interpretation: str, sigma_acc_mps2: float | None) -> tuple[float, float]:
+    """``(q_per_step, p0_acc_var)`` of the filter under a :data:`NOISE_INTERPRETATIONS` interpretation.
 
     ``"sigma_acc"``: ``(Q_PER_ACC_VARIANCE sigma^2, sigma^2)`` with sigma the row's sigma_ACC, or Table 3.6's
     sigma_ACC for ONLY RSS (``None``); ``"printed"``: Eq. (3.24)'s Q and Eq. (3.20)'s acceleration variance."""
-    if reading not in NOISE_READINGS:
-        raise ParameterError(f"noise reading must be one of {NOISE_READINGS}, got {reading!r}")
-    if reading == "printed":
+    if interpretation not in NOISE_INTERPRETATIONS:
+        raise ParameterError(f"noise interpretation must be one of {NOISE_INTERPRETATIONS}, got {interpretation!r}")
+    if interpretation == "printed":
         return Q_PER_STEP, P00_ACC_VAR
     sigma = SIGMA_ACC_MPS2 if sigma_acc_mps2 is None else float(sigma_acc_mps2)
     if not sigma > 0:
@@ -174,26 +175,27 @@ def filter_noise(reading: str, sigma_acc_mps2: float | None) -> tuple[float, flo
     return Q_PER_ACC_VARIANCE * sigma**2, sigma**2
 
 
-def calibrated_from_text(start: str = DEFAULT_START, noise_reading: str = DEFAULT_NOISE_READING, *,
+@renamed_keyword("noise_reading", "noise_interpretation")
+def calibrated_from_text(start: str = DEFAULT_START, noise_interpretation: str = DEFAULT_NOISE_INTERPRETATION, *,
                     speed_mps: float = SPEED_MPS) -> str:
-    """The readings fitted to printed output that a row computed under ``start`` and ``noise_reading`` used, as the
-    row's ``calibrated_from`` text, ``"; "``-joined; ``""`` when none (the row is then a ``reproduction``).
+    """The interpretations fitted to printed output that a row computed under ``start`` and ``noise_interpretation``
+    used, as the row's ``calibrated_from`` text, ``"; "``-joined; ``""`` when none (the row is then a ``reproduction``).
 
     Issue 45's rule (fitted: no text supports it and it was chosen because it fits): the ``"moving"`` start
     (:data:`MOVING_START_FITTED`), with the walking speed :data:`SPEED_MPS` fitted to Fig. 3.2's drift under it
-    (:data:`SPEED_CALIBRATED_FROM`), and the ``"sigma_acc"`` noise reading fitted to Table 3.9
-    (:data:`NOISE_CALIBRATED_FROM`); the ``"rest"`` start and the ``"printed"`` reading are the text's own
+    (:data:`SPEED_CALIBRATED_FROM`), and the ``"sigma_acc"`` noise interpretation fitted to Table 3.9
+    (:data:`NOISE_CALIBRATED_FROM`); the ``"rest"`` start and the ``"printed"`` interpretation are the text's own
     (Eqs. (3.19)-(3.20), (3.24)). The ONLY-RSS step (:data:`RSS_ONLY_STEPS`) is textual either way."""
     if start not in START_MODES:
         raise ParameterError(f"start must be one of {START_MODES}, got {start!r}")
-    if noise_reading not in NOISE_READINGS:
-        raise ParameterError(f"noise_reading must be one of {NOISE_READINGS}, got {noise_reading!r}")
+    if noise_interpretation not in NOISE_INTERPRETATIONS:
+        raise ParameterError(f"noise_interpretation must be one of {NOISE_INTERPRETATIONS}, got {noise_interpretation!r}")
     used = []
     if start == "moving":               # issue 45: no text supports it; it was declared for Fig. 3.2's drift
         used.append(MOVING_START_FITTED)
         if float(speed_mps) == SPEED_MPS:
             used.append(SPEED_CALIBRATED_FROM)
-    if noise_reading == "sigma_acc":
+    if noise_interpretation == "sigma_acc":
         used.append(NOISE_CALIBRATED_FROM)
     return "; ".join(used)
 
@@ -315,7 +317,7 @@ def mle_cost_eq24(points_m, rss_dbm, channel: PathLossModel, anchors_m=ANCHORS_M
 def initial_state(first_fix_m, mse_mle_m2, *, vel_var: float = P00_VEL_VAR, acc_var: float = P00_ACC_VAR):
     """Eqs. (3.19)-(3.20): ``x_0 = [x_MLE, 0, 0, y_MLE, 0, 0]`` and
     ``P_0 = diag(MSE_x, vel_var, acc_var, MSE_y, vel_var, acc_var)`` (printed: 0.0065 and 0.00023; the
-    ``"sigma_acc"`` reading sets ``acc_var = sigma_ACC^2``, :func:`filter_noise`)."""
+    ``"sigma_acc"`` interpretation sets ``acc_var = sigma_ACC^2``, :func:`filter_noise`)."""
     first_fix_m = np.asarray(first_fix_m, dtype=float)
     x0 = np.zeros(first_fix_m.shape[:-1] + (6,))
     x0[..., 0], x0[..., 3] = first_fix_m[..., 0], first_fix_m[..., 1]
@@ -375,8 +377,8 @@ def run_filter(name: str, trajectory: Trajectory, rss_dbm, mle_fix_m, mse_mle_m2
     and ``"serial_ekf"`` use the raw RSS with R = sigma^2 I (Eq. (3.22)). With ``acc_mps2`` ``(..., T, 2)`` the
     accelerometer updates every step before the RSS (Table 3.5, R_acc = sigma_acc^2 I, Eq. (3.23)). ``model``
     carries Q (:func:`motion_model`), ``p0_acc_var`` the acceleration variance of P_0 (:func:`filter_noise`).
-    ``mse_mle_m2`` is ``(2,)`` (one MSE per axis, the default reading of Eq. (3.21)) or ``(E, 2)``: one per RSS
-    epoch, Table 4.1's R_{k+1} (the other reading; KF (MLE) only, P_0 from the first epoch's).
+    ``mse_mle_m2`` is ``(2,)`` (one MSE per axis, the default interpretation of Eq. (3.21)) or ``(E, 2)``: one per RSS
+    epoch, Table 4.1's R_{k+1} (the other interpretation; KF (MLE) only, P_0 from the first epoch's).
 
     With ``every_step`` the estimates are recorded at every grid step from the first RSS epoch (``steps`` of the
     result: ``rss_steps[0] .. T - 1``) instead of at the RSS epochs only (the same recursion).
@@ -481,10 +483,11 @@ def _simulate_channel(trajectory: Trajectory, channel: PathLossModel, n_runs: in
     return truth, rss, mle, np.mean((mle.position_m - truth) ** 2, axis=(0, 1))
 
 
+@renamed_keyword("noise_reading", "noise_interpretation")
 def run_channel(trajectory: Trajectory, sigma_rss_db: float, path_loss_exp: float, n_runs: int,
                 rng: np.random.Generator, *, sigma_acc_values=(), only_rss: bool = True, filters=FILTERS,
                 ref_power_dbm: float = REF_POWER_DBM, serial_order: str = "descending",
-                noise_reading: str = DEFAULT_NOISE_READING, anchors_m=ANCHORS_M, mle_r: str = "constant",
+                noise_interpretation: str = DEFAULT_NOISE_INTERPRETATION, anchors_m=ANCHORS_M, mle_r: str = "constant",
                 keep_estimates: bool = False, room_m=ROOM_M, mle_grid_step_m: float = MLE_GRID_STEP_M,
                 mle_bounds: str = "unconstrained", rmse_epochs: str = "rss_epochs",
                 rss_only_step: str = DEFAULT_RSS_ONLY_STEP) -> ChannelRun:
@@ -492,9 +495,9 @@ def run_channel(trajectory: Trajectory, sigma_rss_db: float, path_loss_exp: floa
     accelerometer of each ``sigma_acc_values``; all cases share the same RSS draws (common random numbers, so
     the fusion gain is measured on identical RSS). The MLE's per-axis MSE sets R and P_0 of KF (MLE) and
     P_0 of every filter (Eqs. (3.20), (3.21)). Each case's Q and P_0 acceleration variance follow
-    ``noise_reading`` (:func:`filter_noise`); the filter grid is the trajectory's. ``mle_r`` (:data:`MLE_R_READINGS`):
-    KF (MLE)'s R from the MSE per axis over runs and epochs (``"constant"``) or per epoch over runs
-    (``"per_epoch"``). The MLE (:func:`mle_positions`) searches ``room_m`` (with ``anchors_m``) at
+    ``noise_interpretation`` (:func:`filter_noise`); the filter grid is the trajectory's. ``mle_r``
+    (:data:`MLE_R_INTERPRETATIONS`): KF (MLE)'s R from the MSE per axis over runs and epochs (``"constant"``) or per
+    epoch over runs (``"per_epoch"``). The MLE (:func:`mle_positions`) searches ``room_m`` (with ``anchors_m``) at
     ``mle_grid_step_m``, bounded by ``mle_bounds``; ``rmse_epochs="every_step"`` also keeps every filter's errors at
     every grid step (:func:`scored_errors`). The ONLY-RSS filters step on :func:`filter_grid` of ``rss_only_step``
     (:data:`RSS_ONLY_STEPS`): under ``"rss_rate"`` once per RSS epoch, so their "every step" errors are those at the
@@ -503,8 +506,8 @@ def run_channel(trajectory: Trajectory, sigma_rss_db: float, path_loss_exp: floa
         raise ParameterError(f"rmse_epochs must be one of {RMSE_EPOCHS}, got {rmse_epochs!r}")
     if rss_only_step not in RSS_ONLY_STEPS:
         raise ParameterError(f"rss_only_step must be one of {RSS_ONLY_STEPS}, got {rss_only_step!r}")
-    if mle_r not in MLE_R_READINGS:
-        raise ParameterError(f"mle_r must be one of {MLE_R_READINGS}, got {mle_r!r}")
+    if mle_r not in MLE_R_INTERPRETATIONS:
+        raise ParameterError(f"mle_r must be one of {MLE_R_INTERPRETATIONS}, got {mle_r!r}")
     channel = PathLossModel(ref_power_dbm, path_loss_exp, sigma_rss_db)
     truth, rss, mle, mse = _simulate_channel(trajectory, channel, n_runs, rng, anchors_m, room_m, mle_grid_step_m,
                                              mle_bounds)
@@ -519,7 +522,7 @@ def run_channel(trajectory: Trajectory, sigma_rss_db: float, path_loss_exp: floa
     cases = ([None] if only_rss else []) + list(sigma_acc_values)
     for sigma_acc in cases:
         acc = None if sigma_acc is None else trajectory.acceleration_m_s2 + sigma_acc * unit_noise
-        q, p0_acc = filter_noise(noise_reading, sigma_acc)
+        q, p0_acc = filter_noise(noise_interpretation, sigma_acc)
         grid = filter_grid(trajectory, sigma_acc is not None, rss_only_step)
         model = motion_model(trajectory_step_s(grid), q)          # Q of Eq. (3.24) per step of this filter's grid
         for name in filters:
@@ -543,8 +546,9 @@ def run_channel(trajectory: Trajectory, sigma_rss_db: float, path_loss_exp: floa
     return out
 
 
+@renamed_keyword("noise_reading", "noise_interpretation")
 def noise_fit(trajectory: Trajectory, sigma_rss_db: float, path_loss_exp: float, n_runs: int,
-              rng: np.random.Generator, *, name: str = "parallel_ekf", noise_reading: str = DEFAULT_NOISE_READING,
+              rng: np.random.Generator, *, name: str = "parallel_ekf", noise_interpretation: str = DEFAULT_NOISE_INTERPRETATION,
               ref_power_dbm: float = REF_POWER_DBM, anchors_m=ANCHORS_M, room_m=ROOM_M,
               mle_grid_step_m: float = MLE_GRID_STEP_M, mle_bounds: str = "unconstrained",
               rss_only_step: str = DEFAULT_RSS_ONLY_STEP) -> dict:
@@ -569,7 +573,7 @@ def noise_fit(trajectory: Trajectory, sigma_rss_db: float, path_loss_exp: float,
     trajectory = filter_grid(trajectory, False, rss_only_step)     # an ONLY-RSS filter's grid (RSS_ONLY_STEPS)
     dt_s = trajectory_step_s(trajectory)
     fix = mle.position_m
-    q, p0_acc = filter_noise(noise_reading, None)
+    q, p0_acc = filter_noise(noise_interpretation, None)
     model = motion_model(dt_s, q)
     x0, P0, measurements, at = filter_inputs(name, trajectory, rss, fix, mse, channel, model=model,
                                              p0_acc_var=p0_acc, anchors_m=anchors_m)
@@ -594,8 +598,9 @@ def noise_fit(trajectory: Trajectory, sigma_rss_db: float, path_loss_exp: float,
             "at_bound": bool(np.any(pooled.at_bound) or np.any(each.at_bound))}   # any multiplier of any fit
 
 
+@renamed_keyword("noise_reading", "noise_interpretation")
 def only_acc_errors(trajectory: Trajectory, sigma_acc_mps2: float, n_runs: int, rng: np.random.Generator, *,
-                    noise_reading: str = DEFAULT_NOISE_READING, with_divergence: bool = False):
+                    noise_interpretation: str = DEFAULT_NOISE_INTERPRETATION, with_divergence: bool = False):
     """Fig. 3.2, tracking with ONLY ACC: the KF of Table 3.5 with the accelerometer alone (Eq. (3.18),
     R_acc = sigma_ACC^2 I), started at the true position with zero velocity and acceleration (Eq. (3.19) with a
     perfect position). Returns the position error ``(n_runs, T - 1)`` at steps 1 .. T-1; with ``with_divergence``
@@ -603,7 +608,7 @@ def only_acc_errors(trajectory: Trajectory, sigma_acc_mps2: float, n_runs: int, 
     trajectory's grid). The guard sees the accelerometer's innovations only: the position is not observed, so its
     drift is no inconsistency of the filter."""
     dt_s = float(trajectory.time_s[1] - trajectory.time_s[0])
-    q, p0_acc = filter_noise(noise_reading, sigma_acc_mps2)
+    q, p0_acc = filter_noise(noise_interpretation, sigma_acc_mps2)
     model = motion_model(dt_s, q)
     acc = simulate_acceleration(trajectory, sigma_acc_mps2, n_runs, rng)
     x0 = model.state_from(trajectory.position_m[0])
@@ -612,3 +617,7 @@ def only_acc_errors(trajectory: Trajectory, sigma_acc_mps2: float, n_runs: int, 
         acc[:, 1:], model.derivative_measurement_matrix(2), sigma_acc_mps2**2 * np.eye(2))])
     err = np.linalg.norm(track.position_m(model.position_index) - trajectory.position_m[1:], axis=-1)
     return (err, DivergenceFlags.of(track, step_offset=1)) if with_divergence else err
+
+
+# the names before "reading" meant only a sensor measurement (deprecated for one release)
+__getattr__ = renamed_names(__name__, {"NOISE_READINGS": "NOISE_INTERPRETATIONS", "DEFAULT_NOISE_READING": "DEFAULT_NOISE_INTERPRETATION", "MLE_R_READINGS": "MLE_R_INTERPRETATIONS"})

@@ -8,6 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .._deprecation import renamed_keyword, renamed_names
 from ..errors import ParameterError
 from ..metrics import reduction_pct, rmse_m
 from ..models.trajectory import Trajectory
@@ -16,7 +17,7 @@ from ..reproduce.scoring import Ambiguity, score
 from ..tracking.divergence import divergence_note, divergence_rows
 from .dogan_protocol import (
     ANCHORS_M,
-    DEFAULT_NOISE_READING,
+    DEFAULT_NOISE_INTERPRETATION,
     DEFAULT_START,
     DT_S,
     FILTERS,
@@ -103,8 +104,9 @@ def table_channels(settings=None) -> dict:
 CHANNELS = tuple(table_channels())
 
 
+@renamed_keyword("noise_reading", "noise_interpretation")
 def run_channels(trajectory: Trajectory, n_runs: int, seed: int, *, channels=None, filters=FILTERS,
-               serial_order: str = "descending", noise_reading: str = DEFAULT_NOISE_READING,
+               serial_order: str = "descending", noise_interpretation: str = DEFAULT_NOISE_INTERPRETATION,
                anchors_m=ANCHORS_M, mle_r: str = "constant", **mle_options) -> dict:
     """Every channel setting of Tables 3.7-3.12 (or the ``channels`` subset of :data:`CHANNELS`), each with its
     own random stream spawned from ``seed``; returns ``{(sigma_RSS, alpha): ChannelRun}``. ``mle_options``: ``room_m``,
@@ -120,7 +122,7 @@ def run_channels(trajectory: Trajectory, n_runs: int, seed: int, *, channels=Non
         only, accs = plan[key]
         rng = np.random.default_rng(children[CHANNELS.index(key)])
         out[key] = run_channel(trajectory, key[0], key[1], n_runs, rng, sigma_acc_values=accs, only_rss=only,
-                               filters=filters, serial_order=serial_order, noise_reading=noise_reading,
+                               filters=filters, serial_order=serial_order, noise_interpretation=noise_interpretation,
                                anchors_m=anchors_m, mle_r=mle_r, **mle_options)
     return out
 
@@ -171,22 +173,23 @@ def thesis_repeat_error() -> float:
     return float(np.sqrt(np.mean(np.square(rel)) / 2.0))
 
 
+@renamed_keyword("noise_reading", "noise_interpretation")
 def record_tables(report, rows, *, variants: dict | None = None, label: str = "", start: str = DEFAULT_START,
-                  noise_reading: str = DEFAULT_NOISE_READING, speed_mps: float = SPEED_MPS) -> dict:
+                  noise_interpretation: str = DEFAULT_NOISE_INTERPRETATION, speed_mps: float = SPEED_MPS) -> dict:
     """Record every printed cell of Tables 3.7-3.12 (one row per distinct printed quantity; the repeats of
     :data:`REPEATED_ROWS` link to the cell they repeat with ``same_as``) and return the verdict counts.
 
     Kinds: the STATIC (MLE) column is a ``reproduction`` (positions along the assumed path only); a filter column
-    is ``calibrated`` exactly when ``rows`` were computed under a reading fitted to printed output (``start``,
-    ``noise_reading`` and ``speed_mps`` as run; :func:`calibrated_from_text` names them in ``calibrated_from``), else a
-    ``reproduction``. Window: printed rounding + 2 Monte-Carlo standard errors (from per-run values)
+    is ``calibrated`` exactly when ``rows`` were computed under an interpretation fitted to printed output (``start``,
+    ``noise_interpretation`` and ``speed_mps`` as run; :func:`calibrated_from_text` names them in ``calibrated_from``),
+    else a ``reproduction``. Window: printed rounding + 2 Monte-Carlo standard errors (from per-run values)
     + the thesis's own Monte-Carlo error (:func:`thesis_repeat_error`, 2 standard errors of the printed cell).
-    ``variants`` maps ``(table, row, column)`` to ``{reading: value}``: what the other readings give, quoted in
-    the note of every miss (the reading was tested before the miss is attributed). Loose rows keep the automatic
-    note (which part of the window is wide). A filter cell whose runs the NIS guard flagged says how many in its note
-    (the RMSE keeps them, as the thesis averaged every run)."""
+    ``variants`` maps ``(table, row, column)`` to ``{interpretation: value}``: what the other interpretations give,
+    quoted in the note of every miss (the interpretation was tested before the miss is attributed). Loose rows keep the
+    automatic note (which part of the window is wide). A filter cell whose runs the NIS guard flagged says how many in
+    its note (the RMSE keeps them, as the thesis averaged every run)."""
     rel = thesis_repeat_error()
-    fitted = calibrated_from_text(start, noise_reading, speed_mps=speed_mps)
+    fitted = calibrated_from_text(start, noise_interpretation, speed_mps=speed_mps)
     by_key = {(r["table"], r["row"], r["column"]): r for r in rows}
     counts: dict = {}
     for r in rows:
@@ -200,7 +203,7 @@ def record_tables(report, rows, *, variants: dict | None = None, label: str = ""
         verdict = score(kind, p.text, r["reproduced"], mc_std_error=r["mc_se"], ambiguity=amb,
                         linked=same is not None).verdict
         note = (_miss_reason(r, (variants or {}).get((r["table"], r["row"], r["column"]), {}), start=start,
-                             noise_reading=noise_reading) if verdict == "miss" else "")
+                             noise_interpretation=noise_interpretation) if verdict == "miss" else "")
         note = divergence_note(note, r.get("divergence"))
         row = report.number(f"RMSE {r['column']}{label}", p, r["reproduced"], kind=kind, mc_std_error=r["mc_se"],
                             ambiguity=amb, calibrated_from=fitted if kind == "calibrated" else "",
@@ -209,15 +212,15 @@ def record_tables(report, rows, *, variants: dict | None = None, label: str = ""
     return counts
 
 
-def readings_summary(rows, variants: dict, chosen: str, others, *, tolerance: float = 0.2) -> list[dict]:
-    """How close each reading comes to the printed fusion cells of the 6 and 3 dB channels (Tables 3.8-3.10, the
-    repeats of :data:`REPEATED_ROWS` left out, only cells run under more than one reading): per reading and filter
-    family (the EKFs, KF (MLE)), the number of cells, how many lie within ``tolerance`` (relative) of the printed
-    value, ``|ours / printed - 1| <= tolerance``, and the median of ``100 |ours / printed - 1|``.
+def interpretations_summary(rows, variants: dict, chosen: str, others, *, tolerance: float = 0.2) -> list[dict]:
+    """How close each interpretation comes to the printed fusion cells of the 6 and 3 dB channels (Tables 3.8-3.10, the
+    repeats of :data:`REPEATED_ROWS` left out, only cells run under more than one interpretation): per interpretation
+    and filter family (the EKFs, KF (MLE)), the number of cells, how many lie within ``tolerance`` (relative) of the
+    printed value, ``|ours / printed - 1| <= tolerance``, and the median of ``100 |ours / printed - 1|``.
 
-    ``rows``: :func:`table_rows` of the chosen reading (named ``chosen``); ``variants``: ``(table, row, column) ->
-    {reading: value}`` as for :func:`record_tables`; ``others``: the names of the other readings to summarise.
-    A summary of the readings table, not a scored comparison (no window, no verdict)."""
+    ``rows``: :func:`table_rows` of the chosen interpretation (named ``chosen``); ``variants``: ``(table, row, column)
+    -> {interpretation: value}`` as for :func:`record_tables`; ``others``: the names of the other interpretations to
+    summarise. A summary of the interpretations table, not a scored comparison (no window, no verdict)."""
     if not 0.0 < tolerance < 1.0:
         raise ParameterError(f"tolerance must be a fraction in (0, 1), got {tolerance!r}")
     ours = {(r["table"], r["row"], r["column"]): r["reproduced"] for r in rows}
@@ -231,19 +234,19 @@ def readings_summary(rows, variants: dict, chosen: str, others, *, tolerance: fl
         for family, cols in [("EKFs", ("parallel_ekf", "serial_ekf")), ("KF (MLE)", ("kalman_filter",))]:
             keys = [k for k in fusion_keys if k[2] in cols]
             deviation = [abs(values[k] / printed_of[k] - 1) for k in keys]
-            summary.append({"reading": name, "filters": family, "cells": len(keys),
+            summary.append({"interpretation": name, "filters": family, "cells": len(keys),
                             within: sum(d <= tolerance for d in deviation),
                             "median_abs_deviation_pct": float(np.median([100 * d for d in deviation]))})
     return summary
 
 
-def _miss_reason(row, variants: dict, *, start: str = DEFAULT_START, noise_reading: str = DEFAULT_NOISE_READING) -> str:
-    """The likely reason of a missed Table 3.7-3.12 cell computed under ``start`` and ``noise_reading``, with what the
-    other readings ``variants`` (``{label: value}``) give for the same cell."""
+def _miss_reason(row, variants: dict, *, start: str = DEFAULT_START, noise_interpretation: str = DEFAULT_NOISE_INTERPRETATION) -> str:
+    """The likely reason of a missed Table 3.7-3.12 cell computed under ``start`` and ``noise_interpretation``, with
+    what the other interpretations ``variants`` (``{label: value}``) give for the same cell."""
     s = TABLE_SETTINGS[(row["table"], row["row"])]
     tested = "; ".join(f"{k}: {v:.3f}" for k, v in variants.items())
-    tested = (f" Tested readings of the same cell: {tested}." if tested else
-              " The other readings were run on the 6 dB and 3 dB channels (the readings table), not on this one.")
+    tested = (f" Tested interpretations of the same cell: {tested}." if tested else
+              " The other interpretations were run on the 6 dB and 3 dB channels (the interpretations table), not on this one.")
     ours, printed_value = row["reproduced"], row["printed"]
     if row["column"] == "static_mle":
         return ("STATIC (MLE): the room is the inferred test-bed room and the MLE an unbounded search (neither is "
@@ -252,32 +255,32 @@ def _miss_reason(row, variants: dict, *, start: str = DEFAULT_START, noise_readi
     if s.sigma_acc_mps2 is None:
         if row["column"] == "kalman_filter" and s.path_loss_exp <= 2.5:
             return ("KF (MLE) at low alpha: far-out MLE fixes make R = diag(MSE_MLE) large and our KF beats the "
-                    "printed one; R per epoch (Table 4.1's R_k+1, the other reading of Eq. (3.21)) beats it too, and "
+                    "printed one; R per epoch (Table 4.1's R_k+1, the other interpretation of Eq. (3.21)) beats it too, and "
                     "any bound on the MLE is not printed." + tested)
         return ("ONLY RSS filters: they depend on the unprinted path, speed and start through how often the "
-                "constant-acceleration model meets a turn; the fusion readings barely change ONLY RSS, and for KF "
+                "constant-acceleration model meets a turn; the fusion interpretations barely change ONLY RSS, and for KF "
                 "(MLE) R per epoch (Table 4.1's R_k+1) moves it further from the printed value." + tested)
     if s.sigma_acc_mps2 >= TABLE_SIGMA_ACC_MPS2:
         side = "better" if ours < printed_value else "worse"
-        return (f"sigma_ACC = 0.015: our fused filter ({start} start) is {side} than printed, and no reading tried "
-                "reproduces this row (start from rest or moving, Q printed or from sigma_ACC; at 0.015 both Q readings "
+        return (f"sigma_ACC = 0.015: our fused filter ({start} start) is {side} than printed, and no interpretation tried "
+                "reproduces this row (start from rest or moving, Q printed or from sigma_ACC; at 0.015 both Q interpretations "
                 "coincide): the start, which the thesis does not print, moves it most (the moving start makes the "
                 "EKFs diverge in a tail of runs)." + tested)
-    if noise_reading == "printed":
+    if noise_interpretation == "printed":
         if ours > printed_value:
             return ("fused filter at sigma_ACC below 0.015 with Q printed as a constant (Eq. (3.24)): the process noise, "
                     "not the accelerometer, limits the filter, so our error barely falls with sigma_ACC while the "
                     "printed one does (KF (MLE) 1.34 -> 0.96 m, Table 3.9); only Q scaled with sigma_ACC (the "
-                    "'sigma_acc' reading, fitted to that fall) follows it, so the printed tables were likely run with "
+                    "'sigma_acc' interpretation, fitted to that fall) follows it, so the printed tables were likely run with "
                     "a Q other than the one printed." + tested)
         return ("fused filter at sigma_ACC below 0.015 with Q printed as a constant (Eq. (3.24)): our filter is better "
                 "than printed; the gap is the unprinted path and start." + tested)
     if row["column"] != "kalman_filter" and ours > printed_value:
-        return ("fused EKF at sigma_ACC below 0.015 with Q = sigma_ACC^2/10 (the 'sigma_acc' reading, fitted to "
+        return ("fused EKF at sigma_ACC below 0.015 with Q = sigma_ACC^2/10 (the 'sigma_acc' interpretation, fitted to "
                 "Table 3.9): the typical run improves with sigma_ACC as printed (see the median table), but with so "
                 "small a Q a few runs lock onto a wrong position and never recover (fraction beyond 4 m in the tail "
                 "table), which the RMSE weighs; the thesis's EKFs show no such tail." + tested)
-    return ("fused filter below 0.015 with Q = sigma_ACC^2/10 (the 'sigma_acc' reading, fitted to Table 3.9's KF "
+    return ("fused filter below 0.015 with Q = sigma_ACC^2/10 (the 'sigma_acc' interpretation, fitted to Table 3.9's KF "
             "(MLE) fall with sigma_ACC): the remaining gap is the unprinted path and start." + tested)
 
 
@@ -393,3 +396,7 @@ def table_view(rows, table: str) -> list[dict]:
         if r["table"] == table:
             out.setdefault(r["row"], {"row": r["row"]})[r["column"]] = f"{r['printed']:.3f} / {r['reproduced']:.3f}"
     return list(out.values())
+
+
+# the names before "reading" meant only a sensor measurement (deprecated for one release)
+__getattr__ = renamed_names(__name__, {"readings_summary": "interpretations_summary"})

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .._deprecation import renamed_keyword
 from ..errors import ParameterError
 from ..metrics import reduction_pct, rmse_m
 from ..models.channel import PathLossModel, pairwise_distance_m, quantize_db
@@ -28,7 +29,7 @@ from ..static.calibration import PathLossFit, calibrate_path_loss
 from ..tracking.divergence import divergence_note
 from .dogan import (
     ANCHORS_M,
-    DEFAULT_NOISE_READING,
+    DEFAULT_NOISE_INTERPRETATION,
     DEFAULT_START,
     DT_S,
     FILTERS,
@@ -246,19 +247,20 @@ def testbed_flags(row: dict, run: ChannelRun, sigma_acc_mps2: float) -> dict | N
     return {f"{n} {'ONLY RSS' if c is None else 'RSS/IMU'}": run.divergence[(n, c)] for n in names for c in cases}
 
 
+@renamed_keyword("noise_reading", "noise_interpretation")
 def record_testbed(report, rows: list[dict], run: ChannelRun, sigma_acc_mps2: float, *, start: str = DEFAULT_START,
-                   noise_reading: str = DEFAULT_NOISE_READING, speed_mps: float = SPEED_MPS) -> None:
+                   noise_interpretation: str = DEFAULT_NOISE_INTERPRETATION, speed_mps: float = SPEED_MPS) -> None:
     """Record Sec. 5.4's printed single-walk values (Figs. 5.8-5.11) from :func:`testbed_rows`, then the mean of the
     three printed reductions (arithmetic) and the "accuracy 1 m" claim on the best tracking filter.
 
     Each printed RMSE (and the 15 % reduction) is one measured walk: our value is the mean over simulated walks of
     one walk's value, its standard error the Monte-Carlo one, and 2 sd of single walks the named ambiguity
     (:data:`ONE_WALK_SOURCE`). The MLE row is a ``reproduction``; the filter rows are ``calibrated`` exactly when
-    ``run`` used a reading fitted to printed output (``start``, ``noise_reading``, ``speed_mps`` as run; named by
-    :func:`~locbook.scenarios.dogan.calibrated_from_text`), else ``reproduction``. A miss says why
+    ``run`` used an interpretation fitted to printed output (``start``, ``noise_interpretation``, ``speed_mps`` as run;
+    named by :func:`~locbook.scenarios.dogan.calibrated_from_text`), else ``reproduction``. A miss says why
     (:data:`BENIGN_CHANNEL_NOTE`); every note counts the runs the NIS guard flagged (:func:`testbed_flags`). The
     per-filter reductions derived from printed pairs (``printed_value`` None) are table rows only."""
-    fitted = calibrated_from_text(start, noise_reading, speed_mps=speed_mps)
+    fitted = calibrated_from_text(start, noise_interpretation, speed_mps=speed_mps)
     for r in rows:
         p = r["printed_value"]
         if p is None:

@@ -58,7 +58,7 @@ CC2420_PA_LEVEL_DBM = {31: 0.0, 27: -1.0, 23: -3.0, 19: -5.0, 15: -7.0, 11: -10.
 
 #: The shadowing sigma (dB) of a per-point mean power at which C without filter is close to the printed 2.2867 m:
 #: FITTED (no sentence of the paper gives a sigma), so rows computed under it are calibrations. The declared default
-#: is the assumed 3 dB (locbook/data/readings/george.csv).
+#: is the assumed 3 dB (locbook/data/interpretations/george.csv).
 SIGMA_FITTED_DB = 1.83
 
 #: Five calibration points (not printed). Chosen off the corridor centre, where all four anchor

@@ -79,8 +79,8 @@ ANCHOR_IDS = tuple(p.item for p in PRINTED.where("Table 5.2", statistic="S"))
 #: Table 5.2: S (dBm at 1 m) and C per anchor, in ANCHOR_IDS order.
 REF_POWER_DBM = np.array([PRINTED.get("Table 5.2", i, "S").value for i in ANCHOR_IDS])
 PATH_LOSS_EXP = np.array([PRINTED.get("Table 5.2", i, "C").value for i in ANCHOR_IDS])
-#: ASSUMED anchor coordinates (m) per reading of Sec. 5.1: 12-15 at the corners ("four anchor nodes were placed in
-#: the four corners"; which ID at which corner is not said), 16 and 17 ("two more anchor nodes were added", positions
+#: ASSUMED anchor coordinates (m) per interpretation of Sec. 5.1: 12-15 at the corners ("four anchor nodes were placed
+#: in the four corners"; which ID at which corner is not said), 16 and 17 ("two more anchor nodes were added", positions
 #: not given) at the mid-points of the long walls (y = 0 and y = 10 m; the default) or of the short walls (x = 0 and
 #: x = 30 m, where the linear path along the middle starts and ends).
 _CORNERS_M = {"12": (0.0, 0.0), "13": (ROOM_M[0], 0.0), "14": ROOM_M, "15": (0.0, ROOM_M[1])}
@@ -161,7 +161,8 @@ def channel_model(anchor_ids, sigma_db: float = 0.0) -> PathLossModel:
 
 
 def anchors_m(anchor_ids, layout: str = DEFAULT_ANCHOR_LAYOUT) -> np.ndarray:
-    """Coordinates ``(m, 2)`` of ``anchor_ids`` under one of :data:`ANCHOR_LAYOUTS` (Sec. 5.1 places only the corners)."""
+    """Coordinates ``(m, 2)`` of ``anchor_ids`` under one of :data:`ANCHOR_LAYOUTS` (Sec. 5.1 places only the
+    corners)."""
     check_choice("anchor_layout", layout, tuple(ANCHOR_LAYOUTS))
     return np.array([ANCHOR_LAYOUTS[layout][i] for i in anchor_ids], dtype=float)
 
@@ -224,8 +225,8 @@ class WalkSettings:
 
 def filter_step_s(dt_s: float | None, speed_m_s: float) -> float:
     """The filter step (s): ``dt_s``, or for None one step per report point, the time to travel
-    :data:`REPORT_SPACING_M` at ``speed_m_s`` (the text's reading: the measurement is "the average received power"
-    (Sec. 3.4, line 264), "computed at each position" and sent "at every 1m distance" (Sec. 5.3, line 500))."""
+    :data:`REPORT_SPACING_M` at ``speed_m_s`` (the text's interpretation: the measurement is "the average received
+    power" (Sec. 3.4, line 264), "computed at each position" and sent "at every 1m distance" (Sec. 5.3, line 500))."""
     if dt_s is None:
         check_scalar("speed_m_s", speed_m_s, gt=0)
         return float(REPORT_SPACING_M / speed_m_s)
@@ -387,7 +388,7 @@ def ins_drift_covariance(walk: Walk) -> np.ndarray:
 
 
 def position_fusion(walk: Walk, fix_covariance) -> tuple[np.ndarray, np.ndarray]:
-    """The "position" reading of Eqs. (4.8)-(4.9) (ours, as in :mod:`~locbook.tracking.fusion`): at each report
+    """The "position" interpretation of Eqs. (4.8)-(4.9) (ours, as in :mod:`~locbook.tracking.fusion`): at each report
     point, the RSS-only fix (covariance ``fix_covariance``) fused with the dead-reckoned position (covariance
     :func:`ins_drift_covariance`, growing with the time since the start). Returns the fused positions ``(R, K, 2)`` and
     covariances ``(K, 2, 2)``."""
@@ -678,13 +679,13 @@ METHOD_LABELS = {"rss_only": "RSS only", "inertial_only": "inertial only", "posi
                  "kf": "KF", "ekf": "EKF", "ukf": "UKF"}
 #: The methods Ch. VI's fused headline (0.8 m, 1.01 m) may refer to: the text ties it to no filter (Ch. VI; Fig. 5.4
 #: finds the UKF best, the default); the linear KF, the EKF and the position fusion of Eqs. (4.8)-(4.9) are the
-#: other readings.
+#: other interpretations.
 FUSED_METHODS = ("ukf", "kf", "ekf", "position_fusion")
 NOTE_FUSED = ("the fused error depends on every unprinted setting (shadowing level and correlation, residual IMU biases, "
               "q, the filter step) and on the 'dynamic' sensor weights of Ch. I, which the text never defines (not "
               "modelled: DYNAMIC_WEIGHTING); see the sensitivity tables below")
 NOTE_LINEAR_RSS = ("the RSS-only error is set almost wholly by the shadowing level, which the thesis does not print: "
-                   "under the assumed 3 dB (reading tracking_shadowing) the fixes over the 30 m hall err far more "
+                   "under the assumed 3 dB (interpretation tracking_shadowing) the fixes over the 30 m hall err far more "
                    "than printed; the bracket runs the other levels")
 NOTE_U_RSS = ("the U-path's RSS-only error follows from the declared shadowing and the assumed U geometry (u_path); the "
               "antenna-orientation change at the turns that Sec. 5.3 blames is not modelled (ORIENTATION_LOSS_DB)")

@@ -9,6 +9,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from .._deprecation import renamed_names
 from ..bounds.crlb import crlb_rms_over_area_m, rss_crlb_m
 from ..errors import ParameterError
 from ..metrics import (
@@ -44,7 +45,7 @@ STATISTICS = ("rmse_m", "mean_m", "median_m", "p90_m", "std_m")
 #: "half3": the half-separation layout of Fig. 7.6 (separations 2.5 m and 4 m, "to inner region of the
 #: environment", Sec. 7.2.2.1 E); its positions are not printed: the corner triangle scaled by 1/2 about the room's
 #: centre. "half3_centroid": the same triangle moved so that its centroid is the room's centre
-#: (:data:`HALF_SEPARATION_LAYOUTS`, the reading ``half_separation_layout``).
+#: (:data:`HALF_SEPARATION_LAYOUTS`, the interpretation ``half_separation_layout``).
 #: "large3"/"large4": the 10 m x 16 m room's corners (separations "twice of the default", Sec. 7.2.2.1 F).
 LAYOUTS = {
     "corners3": ((0.0, 0.0), (5.0, 0.0), (0.0, 8.0)),
@@ -60,16 +61,16 @@ LAYOUTS = {
 CELL_PATTERNS = {6: (2, 3), 8: (2, 4), 16: (4, 4), 28: (4, 7), 56: (7, 8), 98: (7, 14), 112: (8, 14), 135: (9, 15)}
 #: The cells tile the room shrunk by this margin on every side (Fig. 7.2: 28 cells at x 1..4, y 1..7).
 CELL_MARGIN_M = 0.5
-#: The reading ``half_separation_layout`` -> the layout of :data:`LAYOUTS` it places Table 7.5's half-separation
+#: The interpretation ``half_separation_layout`` -> the layout of :data:`LAYOUTS` it places Table 7.5's half-separation
 #: readers at.
 HALF_SEPARATION_LAYOUTS = {"scaled_about_centre": "half3", "centroid_at_centre": "half3_centroid"}
 #: How a mobile target's Gaussian step that would leave the room is handled (not printed): mirrored at the wall,
 #: stopped at the wall, or drawn again until it lands inside.
 WALL_HANDLINGS = ("reflect", "clip", "redraw")
 
-#: The contested readings of the Sec. 7.2 simulations (locbook/data/readings/ozkaya2011.csv): reading name -> its
-#: values, the first being the default. Each is a notebook parameter of the same name.
-SIM_READINGS = {
+#: The contested interpretations of the Sec. 7.2 simulations (locbook/data/interpretations/ozkaya2011.csv):
+#: interpretation name -> its values, the first being the default. Each is a notebook parameter of the same name.
+SIM_INTERPRETATIONS = {
     # how the median and 90th percentile are taken: from the same errors as the RMSE, mean and std (Sec. 7.2.1,
     # 'From total estimation error data ... using CDF plot'), or two per-run summaries the text does not describe
     "percentile_convention": ("pooled", "per_run_then_averaged", "over_run_rmses"),
@@ -211,10 +212,10 @@ def case_seed_sequence(seed: int, case: SimCase) -> np.random.SeedSequence:
     """The stream of a setting, keyed by what draws the truth and the RSSI (target protocol, layout, noise,
     steps). Settings that differ only in the estimator (k_NN, cells, D, N, resampling, weights) therefore see
     the same targets and noise: common random numbers, so a sweep's rows differ by the method alone, as the
-    thesis's repeated rows do. Adding a setting never shifts another's numbers. The noise readings
+    thesis's repeated rows do. Adding a setting never shifts another's numbers. The noise interpretations
     (``reader_noise``, ``fixed_target_noise``) and the wall handling are left out of the key on purpose: the targets'
-    steps are drawn before the noise, so a setting under another noise reading sees the same targets, and one under
-    another wall handling the same steps (``"redraw"`` then draws more)."""
+    steps are drawn before the noise, so a setting under another noise interpretation sees the same targets, and one
+    under another wall handling the same steps (``"redraw"`` then draws more)."""
     key = {f: getattr(case, f) for f in _TRUTH_FIELDS}
     key["steps"] = 1 if case.method == "nn" else case.rt
     return np.random.SeedSequence([seed, seed_from_values(key)])
@@ -226,9 +227,9 @@ def simulate_truth_and_rss(case: SimCase, n_runs: int, rng: np.random.Generator)
     Noise: ``N(0, sigma0^2)`` per run, step and reader; ``reader_noise="common_mode"`` draws one value per run and
     step for every reader (noise on the target's transmit power), ``fixed_target_noise="frozen_per_run"`` one per
     run for a fixed target (the same vector at every recursion)."""
-    check_reading("reader_noise", case.reader_noise)
-    check_reading("fixed_target_noise", case.fixed_target_noise)
-    check_reading("wall_handling", case.wall_handling)
+    check_interpretation("reader_noise", case.reader_noise)
+    check_interpretation("fixed_target_noise", case.fixed_target_noise)
+    check_interpretation("wall_handling", case.wall_handling)
     room = room_for(case.layout)
     readers = readers_for(case.layout)
     lo, hi = _region(case.target_region, room)
@@ -278,7 +279,7 @@ def resample_fraction(case: SimCase) -> float | None:
     """The SIR's N_eff threshold as the fraction of N that :func:`~locbook.tracking.particle.particle_filter` takes:
     ``resample_threshold`` itself under ``"fraction_of_n"``, ``resample_threshold / N`` under ``"absolute"`` (Table
     7.24's ``N_eff < 0.5`` read literally: since N_eff >= 1 it never resamples); None (every step) stays None."""
-    check_reading("resample_threshold", case.resample_threshold_unit)
+    check_interpretation("resample_threshold", case.resample_threshold_unit)
     if case.resample_threshold is None or case.resample_threshold_unit == "fraction_of_n":
         return case.resample_threshold
     return case.resample_threshold / case.n_particles
@@ -301,7 +302,7 @@ def run_case(case: SimCase, n_runs: int, seed: int, *, return_all: bool = False)
         velocity = (0.0, case.velocity_m) if case.known_velocity else None
         initial = None
         if case.known_initial:
-            check_reading("known_initial_location", case.initial_location)
+            check_interpretation("known_initial_location", case.initial_location)
             if case.initial_location == "exact":
                 initial = np.zeros((n_runs, cells.shape[0]))
                 initial[np.arange(n_runs), np.argmin(np.sum((cells[None] - truth[:, :1]) ** 2, -1), -1)] = 1.0
@@ -332,7 +333,7 @@ def _initial_sd_m(case: SimCase) -> float:
     ``initial_location="exact"``, the filter's D under ``"gaussian_d"``; 0 when the start is not known."""
     if not case.known_initial:
         return 0.0
-    check_reading("known_initial_location", case.initial_location)
+    check_interpretation("known_initial_location", case.initial_location)
     return float(case.spread_m) if case.initial_location == "gaussian_d" and np.isfinite(case.spread_m) else 0.0
 
 
@@ -373,13 +374,13 @@ def summarize(errors, rng: np.random.Generator | None = None, *,
     recursion rt). All five statistics come from the same errors (Sec. 7.2.1: 'From total estimation error data we
     calculate the mean ..., RMSE, and std. ... using CDF plot we give median ... and 90 percentile error'): recursion
     rt of every run, or with ``over_recursions`` every recursion of every run (the ``"mean_over_recursions"``
-    mobile protocol). ``percentile_convention`` (:data:`SIM_READINGS`, :func:`_percentile_over_runs`) is
-    ``"pooled"`` by default; its two per-run alternatives are kept for exploration, not declared as readings.
+    mobile protocol). ``percentile_convention`` (:data:`SIM_INTERPRETATIONS`, :func:`_percentile_over_runs`) is
+    ``"pooled"`` by default; its two per-run alternatives are kept for exploration, not declared as interpretations.
 
     Standard errors: the delta method for the RMSE (over the runs' mean squared errors) and the bootstrap over
     whole runs for the rest (a run's recursions are not independent).
     """
-    check_reading("percentile_convention", percentile_convention)
+    check_interpretation("percentile_convention", percentile_convention)
     errors = np.asarray(errors, float)
     if errors.ndim not in (1, 2):
         raise ParameterError(f"errors must be (runs,) or (runs, recursions), got shape {errors.shape}")
@@ -429,9 +430,9 @@ def thesis_crlb_m(layout: str, sigma_db: float, path_loss_exp: float = PATH_LOSS
     default with the simulations' n = 2.3 (Sec. 7.2.1) and as the RMS over the room ("Square root of (A.13) is used in
     the thesis to compare with RMS error", Appendix A): 0.711 / 0.557 m for 3 / 4 corner readers at 5.2 dB.
 
-    Which exponent and which averaging over target positions gave the printed CRLB columns is not stated. The readings
-    fitted to them (:data:`FITTED_VALUES`, named alternatives) are n = 2 and ``"cells_mean"``, the mean of the
-    per-position bound over the 1 m grid cells of the layout's room (28 cells in 5 x 8 m): 0.7999 / 0.6392 m at
+    Which exponent and which averaging over target positions gave the printed CRLB columns is not stated. The
+    interpretations fitted to them (:data:`FITTED_VALUES`, named alternatives) are n = 2 and ``"cells_mean"``, the mean
+    of the per-position bound over the 1 m grid cells of the layout's room (28 cells in 5 x 8 m): 0.7999 / 0.6392 m at
     5.2 dB and 0.1538 m per dB, i.e. every printed value 0.15 / 0.46 / 0.80 / 1.08 / 1.38 / 1.70. The printed
     bound is proportional to sigma / n (Eqs. A.10-A.12 scale as (n / sigma)^2).
     """
@@ -452,6 +453,13 @@ def correct_crlb_m(layout: str, sigma_db: float, path_loss_exp: float = PATH_LOS
                                                                                               sigma_db)))
 
 
-def check_reading(name: str, value) -> None:
-    if value not in SIM_READINGS[name]:
-        raise ParameterError(f"{name} must be one of {SIM_READINGS[name]}, got {value!r}")
+def check_interpretation(name: str, value) -> None:
+    if value not in SIM_INTERPRETATIONS[name]:
+        raise ParameterError(f"{name} must be one of {SIM_INTERPRETATIONS[name]}, got {value!r}")
+
+
+# the names before "reading" meant only a sensor measurement (deprecated for one release)
+__getattr__ = renamed_names(__name__, {
+    "SIM_READINGS": "SIM_INTERPRETATIONS",
+    "check_reading": "check_interpretation",
+})

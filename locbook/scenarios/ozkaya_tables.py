@@ -10,25 +10,26 @@ from functools import lru_cache
 
 import numpy as np
 
+from .._deprecation import renamed_keyword, renamed_names
 from ..reproduce.scoring import Ambiguity, score
-from .ozkaya_readings import (
+from .ozkaya_interpretations import (
     LAYOUTS_OF_HALF,
     fitted_calibrated_from,
-    fitted_readings,
+    fitted_interpretations,
     run_summary,
-    sim_readings,
-    text_reading_note,
-    with_readings,
+    sim_interpretations,
+    text_interpretation_note,
+    with_interpretations,
 )
 from .ozkaya_simulation import (
     HALF_SEPARATION_LAYOUTS,
     PATH_LOSS_EXP,
     PRINTED,
-    SIM_READINGS,
+    SIM_INTERPRETATIONS,
     STATISTICS,
     SimCase,
     case_seed_sequence,
-    check_reading,
+    check_interpretation,
     printed_cell,
     thesis_crlb_m,
 )
@@ -134,7 +135,7 @@ def thesis_monte_carlo_ambiguity(standard_error: float, n_runs: int) -> Ambiguit
 #: Why a printed simulation cell is expected to be missed.
 KNOWN_MISSES = {
     ("7.5", "Half of default (2.5 m, 4 m)"): (
-        "reader positions of Fig. 7.6 are not printed: the reading half_separation_layout declares two assumed "
+        "reader positions of Fig. 7.6 are not printed: the interpretation half_separation_layout declares two assumed "
         "placements (the corner triangle halved about the room's centre, or with its centroid there); the thesis's "
         "may be neither"),
     ("7.19", "Uniform over the area"): (
@@ -145,11 +146,11 @@ KNOWN_MISSES = {
         "a separate pilot simulation of ours gets the same 1.6 m"),
     ("7.20", "Gaussian, mean = known velocity, D = 0.5 / const. vel."): (
         "constant-velocity protocol not fully stated (a separate pilot simulation: about 0.97 m with the same "
-        "reading)"),
+        "interpretation)"),
     ("7.21", "Gaussian, mean = known velocity, D = 0.5 / const. vel."): (
         "same case as Table 7.20 row 1 (constant-velocity protocol not fully stated)"),
     ("7.21", "same + initial location known / const. vel."): (
-        "constant-velocity protocol not fully stated; with a known start this reading beats the thesis"),
+        "constant-velocity protocol not fully stated; with a known start this interpretation beats the thesis"),
 }
 _NN_LARGE_K = ("weighted-centroid NN with many neighbours: our error rises with k faster than the thesis's (the "
                "thesis's curve is flat beyond k = 10). Target sampling (whole room; the cell core gives the opposite "
@@ -185,16 +186,18 @@ def _first_printings() -> dict:
     return first
 
 
-def run_tables(tables, n_runs: int, seed: int, *, readings: dict | None = None, **overrides) -> list[dict]:
+@renamed_keyword("readings", "interpretations")
+def run_tables(tables, n_runs: int, seed: int, *, interpretations: dict | None = None, **overrides) -> list[dict]:
     """Run every case of the given tables (e.g. ``["7.1", "7.2"]``) and return long-form rows ``table, row,
     column, printed`` (the :class:`~locbook.reproduce.Printed`), ``reproduced, se_m, case, first_printed`` for every
     printed statistic; CRLB cells carry ``reproduced`` = the thesis-form bound and ``se_m`` None. Identical
     settings are simulated once. ``first_printed`` is the first printing of the same setting and statistic
     in the thesis (the row itself if it is the first). ``overrides`` replace :class:`SimCase` fields in every
-    case (e.g. ``n_particles=500``); fields a case does not use are ignored by it. ``readings``: the simulation
-    readings (:func:`sim_readings`; omitted ones at their defaults), applied by :func:`with_readings` and
+    case (e.g. ``n_particles=500``); fields a case does not use are ignored by it. ``interpretations``: the simulation
+    interpretations (:func:`sim_interpretations`; omitted ones at their defaults), applied by
+    :func:`with_interpretations` and
     :func:`run_summary`."""
-    readings = sim_readings(**(readings or {}))
+    interpretations = sim_interpretations(**(interpretations or {}))
     wanted = {str(t) for t in tables}
     first = _first_printings()
     cache: dict = {}
@@ -202,17 +205,17 @@ def run_tables(tables, n_runs: int, seed: int, *, readings: dict | None = None, 
     for table, row, column, base_case in simulation_cases():
         if table not in wanted:
             continue
-        case = replace(with_readings(base_case, readings), **overrides)
+        case = replace(with_interpretations(base_case, interpretations), **overrides)
         if case not in cache:
             bootstrap_rng = np.random.default_rng(case_seed_sequence(seed, case).spawn(1)[0])
-            cache[case] = run_summary(case, n_runs, seed, readings, bootstrap_rng)
+            cache[case] = run_summary(case, n_runs, seed, interpretations, bootstrap_rng)
         res = cache[case]
         columns = [column] if column else [c for c in STATISTICS if printed_cell(table, row, c) is not None]
         for col in columns:
             stat = _statistic(col)
             rows.append({"table": table, "row": row, "column": col, "printed": printed_cell(table, row, col),
                          "reproduced": res[stat], "se_m": res[stat + "_se"], "case": case,
-                         "first_printed": first[(base_case, stat)], "readings": readings})
+                         "first_printed": first[(base_case, stat)], "interpretations": interpretations})
         crlb = printed_cell(table, row, "crlb_m")
         if crlb is not None:
             rows.append({"table": table, "row": row, "column": "crlb_m", "printed": crlb,
@@ -234,10 +237,10 @@ def is_crlb_row(row: dict) -> bool:
 
 def record_tables(report, rows, n_runs: int) -> None:
     """Record every printed error statistic of ``rows`` (from :func:`run_tables`) as a ``reproduction``, or as
-    ``calibrated`` when a reading fitted to the printed tables moves it (:func:`fitted_calibrated_from`; no simulation
-    reading is: each value of theirs is textual). A miss or loose row names the contested readings it was computed
-    under and the other readings the bracket runs (:func:`text_reading_note`), then the known cause
-    (:data:`KNOWN_MISSES`) or a generic one.
+    ``calibrated`` when an interpretation fitted to the printed tables moves it (:func:`fitted_calibrated_from`; no
+    simulation interpretation is: each value of theirs is textual). A miss or loose row names the contested
+    interpretations it was computed under and the other interpretations the bracket runs
+    (:func:`text_interpretation_note`), then the known cause (:data:`KNOWN_MISSES`) or a generic one.
 
     Window: the printed rounding, 2 of our standard errors and the thesis's own Monte-Carlo error
     (:func:`thesis_monte_carlo_ambiguity`). A setting the thesis prints again with the same value is compared
@@ -250,15 +253,15 @@ def record_tables(report, rows, n_runs: int) -> None:
         p, first = r["printed"], r["first_printed"]
         same_as = first if first.id != p.id and first.value == p.value else None
         ambiguity = thesis_monte_carlo_ambiguity(r["se_m"], n_runs)
-        calibrated_from = fitted_calibrated_from(r.get("readings") or sim_readings(), r["case"])
+        calibrated_from = fitted_calibrated_from(r.get("interpretations") or sim_interpretations(), r["case"])
         kind = "calibrated" if calibrated_from else "reproduction"
         judged = score(kind, p.text, r["reproduced"], mc_std_error=r["se_m"], ambiguity=ambiguity,
                        linked=same_as is not None)
         note = ""
-        text_note = text_reading_note(r.get("readings") or sim_readings(), r["case"], report.experiment,
-                                      r["reproduced"], p.value) if judged.verdict in ("miss", "loose") else ""
+        text_note = text_interpretation_note(r.get("interpretations") or sim_interpretations(), r["case"], report.experiment,
+                                             r["reproduced"], p.value) if judged.verdict in ("miss", "loose") else ""
         if text_note:
-            # the readings are the first suspect; a known cause is named after them
+            # the interpretations are the first suspect; a known cause is named after them
             known = KNOWN_MISSES.get((r["table"], r["row"]), "")
             note = f"{text_note}. Also: {known}" if known else text_note
         elif judged.verdict in ("miss", "loose"):
@@ -335,17 +338,17 @@ def crlb_rows() -> list[dict]:
 
 
 def record_crlb(report, path_loss_exp: float = PATH_LOSS_EXP, average: str = "area_rms",
-                half_separation_layout: str = SIM_READINGS["half_separation_layout"][0]) -> None:
+                half_separation_layout: str = SIM_INTERPRETATIONS["half_separation_layout"][0]) -> None:
     """Record every printed CRLB cell (:func:`crlb_rows`, each compared once) against :func:`thesis_crlb_m` under
-    the readings ``crlb_exponent`` = ``path_loss_exp`` and ``crlb_average`` = ``average``: ``calibrated`` when either
-    is the value fitted to the printed columns (:data:`FITTED_VALUES`), naming it; else a ``reproduction`` whose miss
-    says the fitted readings are the alternatives the bracket runs (:func:`text_reading_note`). Table 7.5's
-    half-separation bound is taken with the readers the reading ``half_separation_layout`` places
+    the interpretations ``crlb_exponent`` = ``path_loss_exp`` and ``crlb_average`` = ``average``: ``calibrated`` when
+    either is the value fitted to the printed columns (:data:`FITTED_VALUES`), naming it; else a ``reproduction`` whose
+    miss says the fitted interpretations are the alternatives the bracket runs (:func:`text_interpretation_note`). Table
+    7.5's half-separation bound is taken with the readers the interpretation ``half_separation_layout`` places
     (:data:`HALF_SEPARATION_LAYOUTS`). The layouts the scale-invariant printed formula cannot give keep their own note
     (:data:`CRLB_NOT_FROM_FORMULA`)."""
-    check_reading("half_separation_layout", half_separation_layout)
+    check_interpretation("half_separation_layout", half_separation_layout)
     chosen = {"crlb_exponent": path_loss_exp, "crlb_average": average}
-    fitted = fitted_readings(chosen)
+    fitted = fitted_interpretations(chosen)
     what = {"crlb_exponent": f"n = {path_loss_exp:g} (not the simulations' {PATH_LOSS_EXP:g})",
             "crlb_average": "the mean over the 1 m cells"}
     chosen_because = ", both chosen because they reproduce" if len(fitted) == 2 else ", chosen because it reproduces"
@@ -355,7 +358,7 @@ def record_crlb(report, path_loss_exp: float = PATH_LOSS_EXP, average: str = "ar
         p = r["printed"]
         layout = HALF_SEPARATION_LAYOUTS[half_separation_layout] if r["layout"] in LAYOUTS_OF_HALF else r["layout"]
         ours = thesis_crlb_m(layout, r["sigma_db"], path_loss_exp, average=average)
-        miss_note = "" if r["layout"] in ("half3", "large3", "large4") else text_reading_note(
+        miss_note = "" if r["layout"] in ("half3", "large3", "large4") else text_interpretation_note(
             chosen, None, report.experiment, ours, p.value, fitted_to="the printed CRLB columns")
         report.number("CRLB (thesis form)", p, ours, kind="calibrated" if fitted else "reproduction",
                       calibrated_from=calibrated_from, same_as=r["same_as"], note=r["note"], miss_note=miss_note,
@@ -383,7 +386,7 @@ def settling_step(mean_error_m, tolerance_m: float = 0.1) -> int:
     return int(outside[-1] + 2) if outside.size else 1
 
 
-def settling_reading(mean_error_m, tolerance_m: float, source: str) -> tuple[int, Ambiguity]:
+def settling_interpretation(mean_error_m, tolerance_m: float, source: str) -> tuple[int, Ambiguity]:
     """Our settling recursion (:func:`settling_step` at ``tolerance_m``) and the ambiguity of the undefined
     "settles": how far it moves when the tolerance is halved or doubled (:meth:`Ambiguity.spread`); ``source`` the
     thesis passage that reads the settling off its figure."""
@@ -392,3 +395,9 @@ def settling_reading(mean_error_m, tolerance_m: float, source: str) -> tuple[int
     return settled, Ambiguity.spread(moved, settled, "settling is not defined; ours is the first recursion within "
                                      f"{tolerance_m} m of the final mean error, and the ambiguity is how far it moves "
                                      "when that tolerance is halved or doubled", source)
+
+
+# the names before "reading" meant only a sensor measurement (deprecated for one release)
+__getattr__ = renamed_names(__name__, {
+    "settling_reading": "settling_interpretation",
+})

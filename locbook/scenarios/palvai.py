@@ -165,7 +165,7 @@ EKF_SCHEDULES = ("sequential", "batch")
 def ekf_path(setup: Setup, anchors_m, rss_dbm, x0, P0, *, process_sd_m: float = SIGMA2_M,
              variant: str = "corrected", inflate: bool = False, schedule: str = "sequential",
              with_divergence: bool = False):
-    """The EKF of Sec. 4.3 over the sequential schedule (our reading of its "time": step k assimilates
+    """The EKF of Sec. 4.3 over the sequential schedule (our interpretation of its "time": step k assimilates
     location k): random-walk state ``X_k = X_{k-1} + w``, ``Q = sigma_2^2 I`` (Eq. (4.25); the true target is
     static); measurement (4.28). ``variant="corrected"``: the nonlinear innovation, the corrected Jacobian and
     ``R = sigma_1^2`` (optionally ``inflate``d for the GPS noise sigma_3, an extension); ``"literal_palvai2008"``

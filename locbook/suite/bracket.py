@@ -1,58 +1,62 @@
-"""Reading brackets: does ANY plausible reading of what a source left unprinted reproduce a printed number?
+"""Interpretation brackets: does ANY plausible interpretation of what a source left unprinted reproduce a printed
+number?
 
-``locbook bracket EXPERIMENT`` runs the experiment under its declared readings (:mod:`locbook.reproduce.readings`,
-``locbook/data/readings/<document>.csv``) and gives every scored row a bracket verdict beside its verdict.
+``locbook bracket EXPERIMENT`` runs the experiment under its declared interpretations
+(:mod:`locbook.reproduce.interpretations`,
+``locbook/data/interpretations/<document>.csv``) and gives every scored row a bracket verdict beside its verdict.
 
 Points (each one task of :func:`locbook.suite.runner.run_tasks`, so lock, staging, validation, retries, interrupts,
 Dask and the cache per point are the runner's): the ``default`` point (the profile's own parameters), then, one
-reading at a time, a point per other value of each reading that a notebook parameter sets: every alternative,
-and for a numeric range both ends ``low`` and ``high`` (rounded for an ``int`` parameter). Values equal to the
-profile's value are not run again (except a reading's default under the values its ``requires`` column names,
-which runs with them); an experiment's ``[experiment.bracket]`` parameters (the experiment list)
-are set at every point, the default one included (never a reading's parameter; e.g. a notebook's own sweep of
-readings the bracket runs as points anyway); two readings that name the same parameter value share one point. When
-two or more readings name values fitted to printed output (the ``fitted`` column), one more point sets them all at once,
-as they were chosen together (``fitted readings together [fitted]: ...``). Every value
-is checked against the parameter's type and rule before anything runs (a readings file that names a value the
-notebook refuses is a :class:`~locbook.suite.spec.SuiteError`). Readings act one at a time: a printed number
-that only a combination of readings reaches is not found (declare the combination as a reading of its own).
+interpretation at a time, a point per other value of each interpretation that a notebook parameter sets: every
+alternative, and for a numeric range both ends ``low`` and ``high`` (rounded for an ``int`` parameter). Values equal to
+the profile's value are not run again (except an interpretation's default under the values its ``requires`` column
+names, which runs with them); an experiment's ``[experiment.bracket]`` parameters (the experiment list)
+are set at every point, the default one included (never an interpretation's parameter; e.g. a notebook's own sweep of
+interpretations the bracket runs as points anyway); two interpretations that name the same parameter value share one
+point. When two or more interpretations name values fitted to printed output (the ``fitted`` column), one more point
+sets them all at once, as they were chosen together (``fitted interpretations together [fitted]: ...``). Every value
+is checked against the parameter's type and rule before anything runs (an interpretations file that names a value the
+notebook refuses is a :class:`~locbook.suite.spec.SuiteError`). Interpretations act one at a time: a printed number
+that only a combination of interpretations reaches is not found (declare the combination as an interpretation of its
+own).
 
-The points also include, for the readings an experiment's ``[experiment.bracket] factorial`` names, every
-combination of their non-fitted values in which two or more differ from the default (``readings together: ...``):
-readings that interact are judged together, not only one at a time.
+The points also include, for the interpretations an experiment's ``[experiment.bracket] factorial`` names, every
+combination of their non-fitted values in which two or more differ from the default (``interpretations together: ...``):
+interpretations that interact are judged together, not only one at a time.
 
 The bracket verdict of a scored row (kind ``reproduction``, ``calibrated`` or ``claim`` with a within / loose /
 miss verdict; arithmetic, shown and linked rows have none), issue 45's tiers (:data:`BRACKETS`), decided in this
 order:
 
 ``default``
-    within under the default reading;
-``other_reading``
-    within under another declared reading that is not fitted (textual, or assumed where the text is silent):
-    ``reached_by`` names each (``reading: parameter=value``);
+    within under the default interpretation;
+``other_interpretation``
+    within under another declared interpretation that is not fitted (textual, or assumed where the text is silent):
+    ``reached_by`` names each (``interpretation: parameter=value``);
 ``fitted_only``
     within only under a value fitted to printed output (``[fitted]``: rows under it are calibrations);
 ``open``
-    not reached, and a reading that could matter was not swept: a gap (a reading no notebook parameter sets yet,
-    with alternatives or a range), a point that failed, a range whose runs straddle the printed value
-    (``open_readings`` names them), or a printed value beyond every run but within the Monte-Carlo margin of the
+    not reached, and an interpretation that could matter was not swept: a gap (an interpretation no notebook parameter
+    sets yet, with alternatives or a range), a point that failed, a range whose runs straddle the printed value
+    (``open_interpretations`` names them), or a printed value beyond every run but within the Monte-Carlo margin of the
     nearest (below);
 ``loose``
-    under at least one reading the printed value lies inside a window wider than +-25 % (``loose_under``): the
+    under at least one interpretation the printed value lies inside a window wider than +-25 % (``loose_under``): the
     comparison cannot decide;
 ``between``
     no run within, but the printed value lies inside the band of our values: ``between`` names the two runs on
-    either side (a reading in between, not declared, might reach it);
+    either side (an interpretation in between, not declared, might reach it);
 ``outside``
     beyond the band, and beyond the nearest run by more than its margin (``outside_margin``): the rounding, the
     ambiguity and two standard errors of the difference between two runs of that error, ours and the source's
-    (:data:`SOURCE_SE_FACTOR`): the printed number disagrees with every plausible reading of its description.
+    (:data:`SOURCE_SE_FACTOR`): the printed number disagrees with every plausible interpretation of its description.
 
 A run whose error exceeds the experiment's ``largest_error_m`` (``[experiment.bracket]``, the diagonal of the area
 the source prints) is implausible: it is named in ``implausible`` and counts for nothing (neither band nor
 verdict). "Within" is the point's own verdict, i.e. under that run's window (rounding, 2 Monte-Carlo standard errors
 at the bracket's profile, the named ambiguity). ``band_low`` / ``band_high`` are the smallest and largest of our
-plausible values over every point, ``closest`` the value nearest the printed one and ``closest_reading`` its point.
+plausible values over every point, ``closest`` the value nearest the printed one and ``closest_interpretation`` its
+point.
 
 Outputs in ``<reports>/brackets/<experiment>/``: ``bracket.csv`` (:data:`BRACKET_COLUMNS`, one row per scored
 row of the default point), ``values.csv`` (:data:`VALUE_COLUMNS`: every scored row under every point, with the
@@ -61,7 +65,7 @@ ended) and one report folder per point. The site (index, pages, ``numbers.csv``,
 conclusions pages: :mod:`locbook.suite.findings`, :mod:`locbook.suite.conclusions`) shows the bracket of each row
 (:func:`bracket_of_rows`) in the folders of a profile (``reports/quick``, ``reports/full``; not a ``-p`` run's
 folder), rebuilt by the next ``locbook run`` (a cached run costs nothing): ``default`` when the row is within in
-that report, else what the bracket's other readings gave, named with the bracket's profile; where no bracket.csv
+that report, else what the bracket's other interpretations gave, named with the bracket's profile; where no bracket.csv
 exists at all, a row keeps the bracket columns the folder's numbers.csv gave it while its value and verdict are
 unchanged. After every bracket run, also an interrupted or failed one, bracket.csv, values.csv and points.csv are
 rebuilt from every point with an up-to-date report, this run's and earlier ones
@@ -79,9 +83,10 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from .._deprecation import renamed_keyword, renamed_names, warn_deprecated
 from ..errors import ParameterError
+from ..reproduce.interpretations import Interpretation, interpretations_for, load_interpretation_file
 from ..reproduce.printed_values import printed_number
-from ..reproduce.readings import Reading, load_reading_file, readings_for
 from ..reproduce.scoring import BRACKETS
 from .bracket_table import (
     BRACKET_COLUMNS,
@@ -107,62 +112,78 @@ from .spec import Experiment, Suite, SuiteError, finite_float
 from .sweep import Aggregate, current_points, run_sweep
 
 __all__ = ["BracketPoint", "find_experiment", "brackets_root", "SITE_NUMBER_COLUMNS", "BRACKET_ROW_COLUMNS",
-           "experiment_readings", "bracket_settings", "counts", "VALUE_COLUMNS", "load_values", "read_readings_option",
-           "bracket_points", "bracket_gaps", "run_bracket", "bracket_folder", "bracket_rows",
-           "bracket_of_rows", "load_bracket", "NoBracket", "BRACKETS", "BRACKET_COLUMNS", "POINT_COLUMNS"]
+           "experiment_interpretations", "bracket_settings", "counts", "VALUE_COLUMNS", "load_values",
+           "read_interpretations_option", "bracket_points", "bracket_gaps", "run_bracket", "bracket_folder",
+           "bracket_rows", "bracket_of_rows", "load_bracket", "NoBracket", "BRACKETS", "BRACKET_COLUMNS",
+           "POINT_COLUMNS"]
 
 
 @dataclass(frozen=True)
 class BracketPoint:
-    """One run of a bracket: ``parameter`` set to ``value`` (``None`` for the default point) for ``readings``
-    (the declared readings that name this value); ``parameters`` every value the notebook gets."""
+    """One run of a bracket: ``parameter`` set to ``value`` (``None`` for the default point) for ``interpretations``
+    (the declared interpretations that name this value); ``parameters`` every value the notebook gets."""
 
     key: str
     experiment: Experiment
-    readings: tuple[Reading, ...]
+    interpretations: tuple[Interpretation, ...]
     parameter: str
     value: object
     parameters: dict = field(hash=False)
     #: the joint point of the fitted values: parameter -> value (``parameter`` is then empty)
     together: dict = field(default_factory=dict, hash=False)
-    #: other parameters set with ``value`` because the reading acts only together with them (its ``requires``)
+    #: other parameters set with ``value`` because the interpretation acts only together with them (its ``requires``)
     requires: dict = field(default_factory=dict, hash=False)
-    #: each reading's own value at this point (reading name -> value; a shared point holds several)
-    reading_values: dict = field(default_factory=dict, hash=False)
-    #: a joint point of the ``factorial`` readings (``together`` then holds its values; not fitted)
+    #: each interpretation's own value at this point (interpretation name -> value; a shared point holds several)
+    interpretation_values: dict = field(default_factory=dict, hash=False)
+    #: a joint point of the ``factorial`` interpretations (``together`` then holds its values; not fitted)
     combined: bool = False
+
+    @property
+    def readings(self) -> tuple[Interpretation, ...]:
+        """Deprecated name of :attr:`interpretations`."""
+        warn_deprecated("BracketPoint.readings", "BracketPoint.interpretations", skip=(__name__,))
+        return self.interpretations
+
+    @property
+    def reading_values(self) -> dict:
+        """Deprecated name of :attr:`interpretation_values`."""
+        warn_deprecated("BracketPoint.reading_values", "BracketPoint.interpretation_values", skip=(__name__,))
+        return self.interpretation_values
 
     @property
     def fitted(self) -> bool:
         """True when a value of this point was fitted to printed results (rows under it are calibrations)."""
         if self.together and not self.combined:
             return True
-        return any(r.is_fitted(self.reading_values.get(r.name, self.value)) for r in self.readings)
+        return any(r.is_fitted(self.interpretation_values.get(r.name, self.value)) for r in self.interpretations)
 
     @property
     def basis(self) -> str:
-        """``default``, ``fitted`` (a fitted value), ``assumed`` (every value a reading the text is silent on), or
-        ``textual`` (:meth:`~locbook.reproduce.readings.Reading.alternative_basis` of its values)."""
-        if not self.readings:
+        """``default``, ``fitted`` (a fitted value), ``assumed`` (every value an interpretation the text is silent on),
+        or
+        ``textual`` (:meth:`~locbook.reproduce.interpretations.Interpretation.alternative_basis` of its values)."""
+        if not self.interpretations:
             return DEFAULT_POINT
         if self.fitted:
             return "fitted"
-        bases = {r.alternative_basis(self.reading_values.get(r.name, self.value)) for r in self.readings}
+        bases = {r.alternative_basis(self.interpretation_values.get(r.name, self.value)) for r in self.interpretations}
         return "assumed" if bases == {"assumed"} else "textual"
 
     @property
     def label(self) -> str:
-        """``reading: parameter=value`` (``[fitted]`` after a reading whose value was fitted to printed results),
-        ``fitted readings together [fitted]: p=v, q=w``, or ``default``."""
-        if not self.readings:
+        """``interpretation: parameter=value`` (``[fitted]`` after an interpretation whose value was fitted to printed
+        results),
+        ``fitted interpretations together [fitted]: p=v, q=w``, or ``default``."""
+        if not self.interpretations:
             return DEFAULT_POINT
         if self.together and self.combined:
-            return "readings together: " + ", ".join(f"{k}={_text(v)}" for k, v in self.together.items())
+            return "interpretations together: " + ", ".join(f"{k}={_text(v)}" for k, v in self.together.items())
         if self.together:
-            return "fitted readings together [fitted]: " + ", ".join(f"{k}={_text(v)}"
+            return "fitted interpretations together [fitted]: " + ", ".join(f"{k}={_text(v)}"
                                                                     for k, v in self.together.items())
-        names = ", ".join(r.name + (" [fitted]" if r.is_fitted(self.reading_values.get(r.name, self.value)) else "")
-                          for r in self.readings)
+        values = self.interpretation_values
+        names = ", ".join(r.name + (" [fitted]" if r.is_fitted(values.get(r.name, self.value)) else "")
+                          for r in self.interpretations)
         extra = "".join(f" with {k}={_text(v)}" for k, v in self.requires.items())
         return f"{names}: {self.parameter}={_text(self.value)}{extra}"
 
@@ -175,13 +196,13 @@ def _text(value) -> str:
     return repr(value)
 
 
-def _sweep_values(reading: Reading, annotation: str) -> list:
-    values = list(reading.alternatives)
-    if reading.low is not None:
+def _sweep_values(interp: Interpretation, annotation: str) -> list:
+    values = list(interp.alternatives)
+    if interp.low is not None:
         if annotation.replace(" ", "").split("|")[0] == "int":   # int, int | None: the whole numbers inside
-            values += [math.ceil(reading.low), math.floor(reading.high)]
+            values += [math.ceil(interp.low), math.floor(interp.high)]
         else:
-            values += [reading.low, reading.high]
+            values += [interp.low, interp.high]
     return values
 
 
@@ -208,23 +229,26 @@ def find_experiment(suite: Suite, experiment_id: str) -> Experiment:
     raise SuiteError(f"unknown experiment {experiment_id!r}; a bracket takes one experiment id (`locbook list`)")
 
 
-def experiment_readings(exp: Experiment, readings: tuple[Reading, ...] | None = None) -> tuple[Reading, ...]:
-    """The readings of ``exp``: those given (any that list it), else the declared ones of the package."""
-    found = readings_for(exp.id) if readings is None else tuple(r for r in readings if exp.id in r.experiments)
+def experiment_interpretations(exp: Experiment, interpretations: tuple[Interpretation, ...] | None = None
+                               ) -> tuple[Interpretation, ...]:
+    """The interpretations of ``exp``: those given (any that list it), else the declared ones of the package."""
+    found = interpretations_for(exp.id) if interpretations is None else \
+        tuple(r for r in interpretations if exp.id in r.experiments)
     if not found:
-        raise SuiteError(f"no readings are declared for experiment {exp.id!r}, so there is nothing to bracket "
-                         "(locbook/data/readings/<document>.csv, or give a readings file with --readings)")
+        raise SuiteError(f"no interpretations are declared for experiment {exp.id!r}, so there is nothing to bracket "
+                         "(locbook/data/interpretations/<document>.csv, or give an interpretations file with "
+                         "--interpretations)")
     return found
 
 
-def bracket_gaps(readings: tuple[Reading, ...]) -> list[Reading]:
-    """The readings that could move a row but cannot be swept: no notebook parameter sets them, and they name
+def bracket_gaps(interpretations: tuple[Interpretation, ...]) -> list[Interpretation]:
+    """The interpretations that could move a row but cannot be swept: no notebook parameter sets them, and they name
     alternatives or a range."""
-    return [r for r in readings if r.is_gap and (r.alternatives or r.low is not None)]
+    return [r for r in interpretations if r.is_gap and (r.alternatives or r.low is not None)]
 
 
 def _declared(exp: Experiment, declared: dict, name: str, who: str) -> None:
-    """``who`` (e.g. ``reading george/x names parameter``) names a parameter the notebook must declare."""
+    """``who`` (e.g. ``interpretation george/x names parameter``) names a parameter the notebook must declare."""
     if name not in declared:
         raise SuiteError(f"{who} {name!r}, which {exp.id!r} does not declare (known: {', '.join(sorted(declared))})")
 
@@ -238,85 +262,87 @@ def _checked(exp: Experiment, declared: dict, name: str, value, who: str):
         raise SuiteError(f"{who}: {exc}") from None
 
 
-def bracket_settings(exp: Experiment, readings: tuple[Reading, ...]) -> dict:
+def bracket_settings(exp: Experiment, interpretations: tuple[Interpretation, ...]) -> dict:
     """The experiment's ``[experiment.bracket]`` parameters, checked: declared by the notebook, valid, and none
-    of them a reading's parameter (they must not change what the bracket sweeps)."""
+    of them an interpretation's parameter (they must not change what the bracket sweeps)."""
     declared = exp.declared_parameters()
-    swept = {r.parameter for r in readings if not r.is_gap} | {k for r in readings for k in r.requires}
+    swept = {r.parameter for r in interpretations if not r.is_gap} | {k for r in interpretations for k in r.requires}
     profiled = {k for values in exp.profiles.values() for k in values}
     settings = {}
     who = f"[experiment.bracket] of {exp.id!r}"
     for name, value in exp.bracket_parameters.items():
         _declared(exp, declared, name, f"{who} sets")
         if name in swept:
-            raise SuiteError(f"[experiment.bracket] of {exp.id!r} sets {name!r}, a parameter its readings sweep")
+            raise SuiteError(f"[experiment.bracket] of {exp.id!r} sets {name!r}, a parameter its interpretations sweep")
         if name in profiled:     # the default point must stay the profile's run (the site compares the two)
             raise SuiteError(f"[experiment.bracket] of {exp.id!r} sets {name!r}, which a profile sets")
         settings[name] = _checked(exp, declared, name, value, who)
     return settings
 
 
-def _required(exp: Experiment, reading: Reading, declared: dict, base: dict) -> dict:
-    """The values of ``reading.requires`` that differ from ``base``, checked (a reading of the packaged files or
-    of ``--readings``: an unknown parameter or a refused value is a :class:`SuiteError`)."""
+def _required(exp: Experiment, interp: Interpretation, declared: dict, base: dict) -> dict:
+    """The values of ``interp.requires`` that differ from ``base``, checked (an interpretation of the packaged
+    files or of ``--interpretations``: an unknown parameter or a refused value is a :class:`SuiteError`)."""
     out = {}
-    for name, value in reading.requires.items():
-        _declared(exp, declared, name, f"reading {reading.document}/{reading.name} requires parameter")
-        checked = _checked(exp, declared, name, value, f"reading {reading.document}/{reading.name} of {exp.id!r} "
+    for name, value in interp.requires.items():
+        _declared(exp, declared, name, f"interpretation {interp.document}/{interp.name} requires parameter")
+        checked = _checked(exp, declared, name, value, f"interpretation {interp.document}/{interp.name} of {exp.id!r} "
                                                        "(requires)")
         if not _same(checked, base.get(name, declared[name].default)):
             out[name] = checked
     return out
 
 
-def bracket_points(exp: Experiment, profile: str, readings: tuple[Reading, ...]) -> list[BracketPoint]:
-    """The default point, then one point per other value of each sweepable reading (module docstring), every
+def bracket_points(exp: Experiment, profile: str, interpretations: tuple[Interpretation, ...]) -> list[BracketPoint]:
+    """The default point, then one point per other value of each sweepable interpretation (module docstring), every
     value checked against the parameter's type and rule."""
     declared = exp.declared_parameters()
-    base = {**exp.parameters(profile), **bracket_settings(exp, readings)}
+    base = {**exp.parameters(profile), **bracket_settings(exp, interpretations)}
     points = [BracketPoint(f"{exp.id}-{DEFAULT_POINT}", exp, (), "", None, base)]
     by_value: dict[str, int] = {}       # the values a point changes (canonical text) -> its index
     taken: dict[str, str] = {}          # folder key -> the values it holds
-    for reading in readings:
-        if reading.is_gap:
+    for interp in interpretations:
+        if interp.is_gap:
             continue
-        _declared(exp, declared, reading.parameter, f"reading {reading.document}/{reading.name} names parameter")
-        param = declared[reading.parameter]
-        profiled = base.get(reading.parameter, param.default)
-        if reading.default is not None and not _same(profiled, reading.default):
-            raise SuiteError(f"reading {reading.document}/{reading.name}: the {profile} profile of {exp.id!r} sets "
-                             f"{reading.parameter} = {profiled!r}, not the declared default {reading.default!r}; the "
-                             "bracket's default point would not be the default reading")
-        requires = _required(exp, reading, declared, base)
-        values = _sweep_values(reading, param.annotation)
-        if requires and reading.default is not None:
-            values = [reading.default, *values]     # the default too acts differently under what it requires
+        _declared(exp, declared, interp.parameter, f"interpretation {interp.document}/{interp.name} names parameter")
+        param = declared[interp.parameter]
+        profiled = base.get(interp.parameter, param.default)
+        if interp.default is not None and not _same(profiled, interp.default):
+            raise SuiteError(f"interpretation {interp.document}/{interp.name}: the {profile} profile of {exp.id!r} "
+                             f"sets {interp.parameter} = {profiled!r}, not the declared default {interp.default!r}; "
+                             "the bracket's default point would not be the default interpretation")
+        requires = _required(exp, interp, declared, base)
+        values = _sweep_values(interp, param.annotation)
+        if requires and interp.default is not None:
+            values = [interp.default, *values]     # the default too acts differently under what it requires
         for value in values:
-            checked = _checked(exp, declared, reading.parameter, value,
-                               f"reading {reading.document}/{reading.name} of {exp.id!r}")
+            checked = _checked(exp, declared, interp.parameter, value,
+                               f"interpretation {interp.document}/{interp.name} of {exp.id!r}")
             change = {**requires}
-            if not _same(checked, base.get(reading.parameter, param.default)):
-                change[reading.parameter] = checked
+            if not _same(checked, base.get(interp.parameter, param.default)):
+                change[interp.parameter] = checked
             if not change:
                 continue       # the profile's own value: the default point
             text = point_text(change)
-            if text in by_value:   # another reading names the same values: one run serves both
+            if text in by_value:   # another interpretation names the same values: one run serves both
                 i = by_value[text]
-                if reading not in points[i].readings:
-                    points[i] = BracketPoint(points[i].key, exp, (*points[i].readings, reading), points[i].parameter,
+                if interp not in points[i].interpretations:
+                    points[i] = BracketPoint(points[i].key, exp, (*points[i].interpretations, interp),
+                                             points[i].parameter,
                                              points[i].value, points[i].parameters, requires=points[i].requires,
-                                             reading_values={**points[i].reading_values, reading.name: checked})
+                                             interpretation_values={**points[i].interpretation_values,
+                                                                    interp.name: checked})
                 continue
             key = _point_key(exp, change, taken)
             taken[key] = text
             by_value[text] = len(points)
-            points.append(BracketPoint(key, exp, (reading,), reading.parameter, checked, {**base, **change},
-                                       requires=requires, reading_values={reading.name: checked}))
+            points.append(BracketPoint(key, exp, (interp,), interp.parameter, checked, {**base, **change},
+                                       requires=requires, interpretation_values={interp.name: checked}))
     # values fitted to printed output were chosen together: one more run sets them all at once
-    fitted: dict[str, tuple[Reading, object]] = {}
-    for reading in readings:
-        if not reading.is_gap and reading.fitted:
-            fitted.setdefault(reading.parameter, (reading, reading.fitted[0]))
+    fitted: dict[str, tuple[Interpretation, object]] = {}
+    for interp in interpretations:
+        if not interp.is_gap and interp.fitted:
+            fitted.setdefault(interp.parameter, (interp, interp.fitted[0]))
     if len(fitted) >= 2:
         together = {p: check_value(declared[p], v, exp.rules.get(p)) for p, (_r, v) in fitted.items()}
         key = _point_key(exp, together, taken)
@@ -324,31 +350,33 @@ def bracket_points(exp: Experiment, profile: str, readings: tuple[Reading, ...])
         by_value[point_text(together)] = len(points)
         points.append(BracketPoint(key, exp, tuple(r for r, _v in fitted.values()), "", None,
                                    {**base, **together}, together))
-    points += _factorial_points(exp, readings, declared, base, by_value, taken)
+    points += _factorial_points(exp, interpretations, declared, base, by_value, taken)
     return points
 
 
-def _factorial_points(exp: Experiment, readings: tuple[Reading, ...], declared: dict, base: dict,
+def _factorial_points(exp: Experiment, interpretations: tuple[Interpretation, ...], declared: dict, base: dict,
                       by_value: dict, taken: dict) -> list[BracketPoint]:
-    """The joint points of ``[experiment.bracket] factorial``: every combination of the named readings' values that
-    are not fitted (the default, the textual or assumed alternatives, a range's ends) in which two or more differ
-    from the default (one alone is a single reading's point); combinations that repeat a point are not run twice."""
+    """The joint points of ``[experiment.bracket] factorial``: every combination of the named interpretations' values
+    that are not fitted (the default, the textual or assumed alternatives, a range's ends) in which two or more differ
+    from the default (one alone is a single interpretation's point); combinations that repeat a point are not run
+    twice."""
     import itertools
     if not exp.bracket_factorial:
         return []
-    by_name = {r.name: r for r in readings}
+    by_name = {r.name: r for r in interpretations}
     chosen = []
     for name in exp.bracket_factorial:
-        reading = by_name.get(name)
-        if reading is None or reading.is_gap:
-            raise SuiteError(f"[experiment.bracket] factorial of {exp.id!r} names {name!r}, which is not a reading "
-                             f"of it that a notebook parameter sets (its readings: {', '.join(sorted(by_name))})")
-        param = declared[reading.parameter]
-        profiled = base.get(reading.parameter, param.default)
-        values = [v for v in _sweep_values(reading, param.annotation) if not reading.is_fitted(v)]
-        checked = [_checked(exp, declared, reading.parameter, v, f"reading {reading.document}/{reading.name} of "
+        interp = by_name.get(name)
+        if interp is None or interp.is_gap:
+            raise SuiteError(f"[experiment.bracket] factorial of {exp.id!r} names {name!r}, which is not an "
+                             f"interpretation of it that a notebook parameter sets (its interpretations: "
+                             f"{', '.join(sorted(by_name))})")
+        param = declared[interp.parameter]
+        profiled = base.get(interp.parameter, param.default)
+        values = [v for v in _sweep_values(interp, param.annotation) if not interp.is_fitted(v)]
+        checked = [_checked(exp, declared, interp.parameter, v, f"interpretation {interp.document}/{interp.name} of "
                             f"{exp.id!r}") for v in values]
-        chosen.append((reading, [profiled] + [v for v in checked if not _same(v, profiled)]))
+        chosen.append((interp, [profiled] + [v for v in checked if not _same(v, profiled)]))
     out = []
     for combo in itertools.product(*(values for _r, values in chosen)):
         change = {r.parameter: v for (r, values), v in zip(chosen, combo) if not _same(v, values[0])}
@@ -359,10 +387,10 @@ def _factorial_points(exp: Experiment, readings: tuple[Reading, ...], declared: 
             continue
         key = _point_key(exp, change, taken)
         taken[key] = text
-        by_value[text] = -1          # run once (a joint point is never shared by a later reading)
+        by_value[text] = -1          # run once (a joint point is never shared by a later interpretation)
         values = {r.name: v for (r, _values), v in zip(chosen, combo) if r.parameter in change}
         out.append(BracketPoint(key, exp, tuple(r for r, _v in chosen if r.parameter in change), "", None,
-                                {**base, **change}, dict(change), reading_values=values, combined=True))
+                                {**base, **change}, dict(change), interpretation_values=values, combined=True))
     return out
 
 
@@ -371,36 +399,36 @@ def _factorial_points(exp: Experiment, readings: tuple[Reading, ...], declared: 
 
 
 def _crossings(printed: float | None, points: list[BracketPoint], values: dict[str, tuple]) -> list[str]:
-    """The range readings with two neighbouring runs (the default and the range ends, in parameter order) that miss
-    the printed value on opposite sides: in between it may be reached, and nothing ran there. (A run inside its
-    window, loose, already puts the printed value inside: the reading is judged by those runs.) ``values``: point
+    """The range interpretations with two neighbouring runs (the default and the range ends, in parameter order) that
+    miss the printed value on opposite sides: in between it may be reached, and nothing ran there. (A run inside its
+    window, loose, already puts the printed value inside: the interpretation is judged by those runs.) ``values``: point
     key -> (our value, verdict)."""
     if printed is None:
         return []
     out = []
-    by_reading: dict[str, list[tuple[float, float, str]]] = {}
+    by_interpretation: dict[str, list[tuple[float, float, str]]] = {}
     for p in points[1:]:
-        if p.together:          # other readings changed too: not a run of one reading
+        if p.together:          # other interpretations changed too: not a run of one interpretation
             continue
         v, verdict = values.get(p.key, (None, ""))
-        for reading in p.readings:
-            x = p.reading_values.get(reading.name)       # this reading's value at the point (shared points too)
-            if reading.low is not None and v is not None and isinstance(x, (int, float)) and not isinstance(x, bool):
-                by_reading.setdefault(reading.name, []).append((float(x), v, verdict))
+        for interp in p.interpretations:
+            x = p.interpretation_values.get(interp.name)       # its value at the point (shared points too)
+            if interp.low is not None and v is not None and isinstance(x, (int, float)) and not isinstance(x, bool):
+                by_interpretation.setdefault(interp.name, []).append((float(x), v, verdict))
     default_v, default_verdict = values.get(points[0].key, (None, ""))
-    for reading in {r.name: r for p in points[1:] for r in p.readings}.values():
-        runs = by_reading.get(reading.name, [])
-        if reading.low is None or not runs:
+    for interp in {r.name: r for p in points[1:] for r in p.interpretations}.values():
+        runs = by_interpretation.get(interp.name, [])
+        if interp.low is None or not runs:
             continue
-        base = points[0].parameters.get(reading.parameter, reading.default)
-        # a reading whose required values the default point lacks has its own run at its default instead
-        satisfied = all(_same(points[0].parameters.get(k), v) for k, v in reading.requires.items())
+        base = points[0].parameters.get(interp.parameter, interp.default)
+        # an interpretation whose required values the default point lacks has its own run at its default instead
+        satisfied = all(_same(points[0].parameters.get(k), v) for k, v in interp.requires.items())
         if default_v is not None and isinstance(base, (int, float)) and satisfied:
             runs = [*runs, (float(base), default_v, default_verdict)]
         runs.sort()
         for (x0, y0, v0), (x1, y1, v1) in zip(runs, runs[1:]):
             if v0 == v1 == "miss" and (y0 - printed) * (y1 - printed) < 0:
-                out.append(f"{reading.name} between {reading.parameter}={x0:g} and {x1:g} (ours {y0:.4g} .. "
+                out.append(f"{interp.name} between {interp.parameter}={x0:g} and {x1:g} (ours {y0:.4g} .. "
                            f"{y1:.4g} straddles the printed value; not run in between)")
                 break
     return out
@@ -441,21 +469,21 @@ _EXTREME = re.compile(r"\b(worst|max|maximum|largest)\b", re.IGNORECASE)
 
 
 def _implausible(exp: Experiment, row: dict, value: float | None) -> bool:
-    """A value no plausible reading gives: a typical error in metres (not a worst case or maximum, which may leave
-    the area) over the experiment's ``largest_error_m`` (the area's diagonal, ``[experiment.bracket]``)."""
+    """A value no plausible interpretation gives: a typical error in metres (not a worst case or maximum, which may
+    leave the area) over the experiment's ``largest_error_m`` (the area's diagonal, ``[experiment.bracket]``)."""
     return (exp.largest_error_m is not None and value is not None and row.get("unit") == "m"
             and not _EXTREME.search(f"{row.get('quantity', '')} {row.get('printed_id', '')}")
             and value > exp.largest_error_m)
 
 
 def bracket_rows(exp: Experiment, points: list[BracketPoint], folder: Path, status: dict[str, str],
-                 gaps: list[Reading], profile: str, values_out: list | None = None) -> list[dict]:
+                 gaps: list[Interpretation], profile: str, values_out: list | None = None) -> list[dict]:
     """The bracket.csv rows: one per scored row of the default point (none if the default point did not run).
 
     ``status``: each point's outcome (``ok``, ``cached``, ``failed``, ``interrupted``, ``not run``). A point that did
     not finish, or finished without producing the row (renamed, linked, damaged numbers.csv), leaves the row
-    ``open``, as does a range reading whose runs straddle the printed value (:func:`_crossings`). The verdict, in
-    :data:`BRACKETS` order: ``default``; ``other_reading`` (within under a point with no fitted value);
+    ``open``, as does a range interpretation whose runs straddle the printed value (:func:`_crossings`). The verdict, in
+    :data:`BRACKETS` order: ``default``; ``other_interpretation`` (within under a point with no fitted value);
     ``fitted_only``; then, reached by none: ``open``; ``loose``; ``between`` (the printed value inside the band of
     our plausible values: ``between`` names the two points either side); ``outside`` when the printed value
     also clears the band's nearest edge by :func:`_margin` (else ``open``: Monte-Carlo error could close the gap).
@@ -488,7 +516,7 @@ def bracket_rows(exp: Experiment, points: list[BracketPoint], folder: Path, stat
             by_key[p.key] = (value, alt["verdict"])
         if values_out is not None:
             values_out += [{"experiment": exp.id, "printed_id": r["printed_id"], "quantity": r["quantity"],
-                            "where": r["where"], "point": p.key, "reading": label, "basis": p.basis,
+                            "where": r["where"], "point": p.key, "interpretation": label, "basis": p.basis,
                             "ours": row.get("reproduced", ""), "mc_std_error": row.get("mc_std_error", ""),
                             "verdict": row.get("verdict", "")} for label, _v, row, p in runs]
         implausible = [f"{label} gave {v:.4g} m, over the largest plausible error {exp.largest_error_m:g} m "
@@ -521,7 +549,7 @@ def bracket_rows(exp: Experiment, points: list[BracketPoint], folder: Path, stat
         if r["verdict"] == "within" and not _implausible(exp, r, ours):
             verdict = "default"
         elif reached_textual:
-            verdict = "other_reading"
+            verdict = "other_interpretation"
         elif reached:
             verdict = "fitted_only"
         elif not finite:
@@ -544,13 +572,13 @@ def bracket_rows(exp: Experiment, points: list[BracketPoint], folder: Path, stat
                      "where": r["where"], "unit": r["unit"], "kind": r["kind"], "printed": r["printed"],
                      "ours": r["reproduced"], "verdict": r["verdict"], "bracket": verdict,
                      "reached_by": "; ".join(reached),
-                     "open_readings": "; ".join(open_names) if verdict == "open" else "",
+                     "open_interpretations": "; ".join(open_names) if verdict == "open" else "",
                      "loose_under": "; ".join(inside) if not reached else "",
                      "between": between if verdict == "between" else "",
                      "band_low": _fmt(low[1] if low else None), "band_high": _fmt(high[1] if high else None),
                      "outside_margin": margin_note if verdict in ("outside", "open") else "",
                      "implausible": "; ".join(implausible),
-                     "closest": _fmt(closest[1]), "closest_reading": closest[0], "points": len(finite),
+                     "closest": _fmt(closest[1]), "closest_interpretation": closest[0], "points": len(finite),
                      "profile": profile})
     return rows
 
@@ -575,8 +603,9 @@ def _write_table(path: Path, columns, rows) -> None:
     write_text_atomic(path, out.getvalue())
 
 
-def write_bracket_outputs(exp: Experiment, points: list[BracketPoint], folder: Path, outcomes, gaps: list[Reading],
-                          profile: str, suite: Suite, readings_file: str = "", wrote: list | None = None) -> Aggregate:
+def write_bracket_outputs(exp: Experiment, points: list[BracketPoint], folder: Path, outcomes,
+                          gaps: list[Interpretation], profile: str, suite: Suite, interpretations_file: str = "",
+                          wrote: list | None = None) -> Aggregate:
     """bracket.csv, values.csv and points.csv, from every point with an up-to-date report (this
     run's and earlier ones: :func:`~locbook.suite.sweep.current_points`), so an interrupted or failed run never
     drops a point that still holds; a row is ``open`` while a point it needs has none. Without an up-to-date default
@@ -598,11 +627,11 @@ def write_bracket_outputs(exp: Experiment, points: list[BracketPoint], folder: P
     if wrote is not None:
         wrote.append(aggregate)
     _write_table(folder / "points.csv", POINT_COLUMNS, [
-        {"point": i, "readings": ", ".join(r.name for r in p.readings),
+        {"point": i, "interpretations": ", ".join(r.name for r in p.interpretations),
          "parameter": ", ".join(p.together) if p.together else p.parameter,
          "value": ", ".join(_text(v) for v in p.together.values()) if p.together
          else "" if not p.parameter else _text(p.value), "status": status.get(p.key, "not run"),
-         "folder": p.key, "generated_by": _stamp(folder / p.key), "readings_file": readings_file,
+         "folder": p.key, "generated_by": _stamp(folder / p.key), "interpretations_file": interpretations_file,
          # [experiment.bracket] as this bracket ran it (the findings page names it from here, not from today's file)
          "settings": "" if not exp.bracket_parameters else
          ", ".join(f"{k}={_text(v)}" for k, v in exp.bracket_parameters.items()) + f" ({exp.bracket_reason})"}
@@ -618,16 +647,18 @@ def _stamp(folder: Path) -> str:
         return ""
 
 
-def run_bracket(suite: Suite, exp: Experiment, *, profile: str = "quick", readings: tuple[Reading, ...] | None = None,
-                report_root: Path | None = None, jobs: int = 1, force: bool = False, timeout_s: float = 1800,
-                retries: int = 1, progress="plain", executor: str = "local", scheduler: str | None = None,
-                kernel_name: str | None = None):
-    """Run the bracket of ``exp`` (module docstring) into ``<report_root>/brackets/<experiment>/``. ``readings``:
-    the readings to sweep (default: those the package declares for ``exp``). Returns the runner's
-    :class:`~locbook.suite.runner.SuiteRun` (one outcome per point, by folder key)."""
-    found = experiment_readings(exp, readings)
-    # a readings file of one's own is named in points.csv (the packaged ones: empty)
-    readings_file = "" if readings is None else "; ".join(sorted({r.document for r in found})) + " (--readings)"
+@renamed_keyword("readings", "interpretations")
+def run_bracket(suite: Suite, exp: Experiment, *, profile: str = "quick",
+                interpretations: tuple[Interpretation, ...] | None = None, report_root: Path | None = None,
+                jobs: int = 1, force: bool = False, timeout_s: float = 1800, retries: int = 1, progress="plain",
+                executor: str = "local", scheduler: str | None = None, kernel_name: str | None = None):
+    """Run the bracket of ``exp`` (module docstring) into ``<report_root>/brackets/<experiment>/``.
+    ``interpretations``: the interpretations to sweep (default: those the package declares for ``exp``). Returns the
+    runner's :class:`~locbook.suite.runner.SuiteRun` (one outcome per point, by folder key)."""
+    found = experiment_interpretations(exp, interpretations)
+    # an interpretations file of one's own is named in points.csv (the packaged ones: empty)
+    interpretations_file = "" if interpretations is None else \
+        "; ".join(sorted({r.document for r in found})) + " (--interpretations)"
     points = bracket_points(exp, profile, found)      # every value checked before anything runs
     gaps = bracket_gaps(found)
     folder = bracket_folder(suite, exp, report_root)
@@ -636,13 +667,17 @@ def run_bracket(suite: Suite, exp: Experiment, *, profile: str = "quick", readin
     # failed write)
     return run_sweep(suite, tasks, profile, folder,
                      lambda where, outcomes, wrote: write_bracket_outputs(exp, points, where, outcomes, gaps, profile,
-                                                                          suite, readings_file, wrote),
+                                                                          suite, interpretations_file, wrote),
                      folder / "bracket.csv", jobs=jobs, force=force, timeout_s=timeout_s, retries=retries,
                      kernel_name=kernel_name, progress=progress, executor=executor, scheduler=scheduler)
 
 
-def read_readings_option(path: Path | None) -> tuple[Reading, ...] | None:
-    """``--readings FILE``: a readings CSV of one's own (the columns of locbook/data/readings), else None."""
-    return None if path is None else load_reading_file(path)
+def read_interpretations_option(path: Path | None) -> tuple[Interpretation, ...] | None:
+    """``--interpretations FILE``: an interpretations CSV of one's own (the columns of locbook/data/interpretations),
+    else None."""
+    return None if path is None else load_interpretation_file(path)
 
 
+# the names before "reading" meant only a sensor measurement (deprecated for one release)
+__getattr__ = renamed_names(__name__, {"experiment_readings": "experiment_interpretations",
+                                       "read_readings_option": "read_interpretations_option"})

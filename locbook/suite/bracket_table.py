@@ -1,5 +1,5 @@
-"""A reading bracket's tables, as written and as read back: the columns of bracket.csv, values.csv and points.csv,
-loading them (a damaged file or another layout reads as none), and each numbers.csv row's bracket verdict
+"""An interpretation bracket's tables, as written and as read back: the columns of bracket.csv, values.csv and
+points.csv, loading them (a damaged file or another layout reads as none), and each numbers.csv row's bracket verdict
 (:func:`bracket_of_rows`, which the suite's reports apply).
 
 Below :mod:`locbook.suite.bracket` (which runs a bracket and writes these tables) and used by the site, findings and
@@ -23,25 +23,25 @@ __all__ = ["BRACKET_ROW_COLUMNS", "SITE_NUMBER_COLUMNS", "BRACKET_COLUMNS", "VAL
 
 
 #: the columns a suite's numbers.csv adds to an experiment's (:data:`~locbook.reproduce.report.NUMBER_COLUMNS`)
-BRACKET_ROW_COLUMNS = ("bracket", "bracket_readings")
+BRACKET_ROW_COLUMNS = ("bracket", "bracket_interpretations")
 
 
 SITE_NUMBER_COLUMNS = (*NUMBER_COLUMNS, *BRACKET_ROW_COLUMNS)
 
 
 BRACKET_COLUMNS = ("experiment", "printed_id", "quantity", "where", "unit", "kind", "printed", "ours", "verdict",
-                   "bracket", "reached_by", "open_readings", "loose_under", "between", "band_low", "band_high",
-                   "outside_margin", "implausible", "closest", "closest_reading", "points", "profile")
+                   "bracket", "reached_by", "open_interpretations", "loose_under", "between", "band_low", "band_high",
+                   "outside_margin", "implausible", "closest", "closest_interpretation", "points", "profile")
 
 
 #: the columns of a bracket's values.csv: every scored row under every point (the conclusions pages judge each
-#: claim under every reading from it)
-VALUE_COLUMNS = ("experiment", "printed_id", "quantity", "where", "point", "reading", "basis", "ours",
+#: claim under every interpretation from it)
+VALUE_COLUMNS = ("experiment", "printed_id", "quantity", "where", "point", "interpretation", "basis", "ours",
                  "mc_std_error", "verdict")
 
 
-POINT_COLUMNS = ("point", "readings", "parameter", "value", "status", "folder", "generated_by", "readings_file",
-                 "settings")
+POINT_COLUMNS = ("point", "interpretations", "parameter", "value", "status", "folder", "generated_by",
+                 "interpretations_file", "settings")
 
 
 DEFAULT_POINT = "default"
@@ -89,12 +89,12 @@ def same_number(a, b) -> bool:
 
 
 def bracket_of_rows(rows: list[dict], bracket: list[dict], profile: str | None = None) -> list[dict]:
-    """``rows`` (numbers.csv rows of one experiment) with ``bracket`` and ``bracket_readings`` set from that
+    """``rows`` (numbers.csv rows of one experiment) with ``bracket`` and ``bracket_interpretations`` set from that
     experiment's ``bracket`` rows: ``default`` when the row itself is within here, else what the bracket's other
-    readings gave (other_reading / fitted_only / open / between / loose / outside, each reading named with the
-    bracket's profile, e.g.
+    interpretations gave (other_interpretation / fitted_only / open / between / loose / outside, each interpretation
+    named with the bracket's profile, e.g.
     ``at quick: ...``). A row loose here is at worst ``loose``; a row the bracket had within under the default but
-    that is not within here (another profile's window) is ``open`` whatever the other readings gave there: they
+    that is not within here (another profile's window) is ``open`` whatever the other interpretations gave there: they
     were not run at this profile. ``profile``: the report's; where it is the bracket's, a row whose value here
     differs from the bracket's default run is ``open``: the bracket is stale (made by other code or parameters).
     Empty for rows the bracket does not cover or does not score. Where no bracket.csv exists at all (``bracket`` a
@@ -102,44 +102,44 @@ def bracket_of_rows(rows: list[dict], bracket: list[dict], profile: str | None =
     there are the same (:func:`_previous_columns`): a missing bracket is no new verdict."""
     if isinstance(bracket, NoBracket):
         kept = _previous_columns(bracket.folder, profile)
-        return [{**r, **kept.get(_site_key(r), {"bracket": "", "bracket_readings": ""})} for r in rows]
+        return [{**r, **kept.get(_site_key(r), {"bracket": "", "bracket_interpretations": ""})} for r in rows]
     indexed = index_rows(bracket)
     out = []
     for r in rows:
         b = find_row(indexed, r) if is_scored(r) else None
         if b is None:
-            out.append({**r, "bracket": "", "bracket_readings": ""})
+            out.append({**r, "bracket": "", "bracket_interpretations": ""})
             continue
         at = f"at {b.get('profile') or '?'}: "
         if r["verdict"] == "within" and not (b.get("implausible") or "").startswith(DEFAULT_POINT + " gave"):
-            verdict, readings = "default", ""
+            verdict, interpretations = "default", ""
         elif profile is not None and profile == b.get("profile") and not same_number(r.get("reproduced"),
                                                                                        b.get("ours")):
-            verdict, readings = "open", (f"this report and its {profile} bracket disagree: the bracket's default "
-                                         f"run gave {b.get('ours')}, this report {r.get('reproduced')} (made by "
-                                         "other code or parameters; run the older of the two again)")
+            verdict, interpretations = "open", (f"this report and its {profile} bracket disagree: the bracket's "
+                                                f"default run gave {b.get('ours')}, this report {r.get('reproduced')} "
+                                                "(made by other code or parameters; run the older of the two again)")
         elif b.get("bracket") == "default":
-            # within under the default at the bracket's profile (a wider window), not here: the other readings'
+            # within under the default at the bracket's profile (a wider window), not here: the other interpretations'
             # verdicts there say nothing about this report's window
-            verdict, readings = "open", (f"within {at[:-2]} under the default reading, not here: the readings were "
-                                         "not run at this profile")
-        elif b.get("bracket") in ("other_reading", "fitted_only"):
-            verdict, readings = b["bracket"], at + b["reached_by"]
-        elif b.get("open_readings") or b.get("bracket") == "open":
-            verdict, readings = "open", at + (b.get("open_readings") or "")
+            verdict, interpretations = "open", (f"within {at[:-2]} under the default interpretation, not here: the "
+                                                "interpretations were not run at this profile")
+        elif b.get("bracket") in ("other_interpretation", "fitted_only"):
+            verdict, interpretations = b["bracket"], at + b["reached_by"]
+        elif b.get("open_interpretations") or b.get("bracket") == "open":
+            verdict, interpretations = "open", at + (b.get("open_interpretations") or "")
         elif b.get("bracket") == "between":
-            verdict, readings = "between", f"{at}between {b.get('between')}"
+            verdict, interpretations = "between", f"{at}between {b.get('between')}"
         elif r["verdict"] == "loose" or b.get("loose_under"):
             under = [x for x in (b.get("loose_under") or "").split("; ") if x and x != DEFAULT_POINT]
-            verdict, readings = "loose", "; ".join((["this report"] if r["verdict"] == "loose" else [])
-                                                   + ([at + "; ".join(under)] if under else []))
+            verdict, interpretations = "loose", "; ".join((["this report"] if r["verdict"] == "loose" else [])
+                                                          + ([at + "; ".join(under)] if under else []))
         else:
-            verdict, readings = "outside", (f"{at}band {four_digits(b.get('band_low', ''))} .. "
-                                            f"{four_digits(b.get('band_high', ''))} over {b.get('points')} runs"
-                                            + (f"; {b['outside_margin']}" if b.get("outside_margin") else ""))
+            verdict, interpretations = "outside", (f"{at}band {four_digits(b.get('band_low', ''))} .. "
+                                                   f"{four_digits(b.get('band_high', ''))} over {b.get('points')} runs"
+                                                   + (f"; {b['outside_margin']}" if b.get("outside_margin") else ""))
         if b.get("implausible"):
-            readings += f" (implausible, left out of the band: {b['implausible']})"
-        out.append({**r, "bracket": verdict, "bracket_readings": readings})
+            interpretations += f" (implausible, left out of the band: {b['implausible']})"
+        out.append({**r, "bracket": verdict, "bracket_interpretations": interpretations})
     return out
 
 
@@ -158,10 +158,10 @@ def _previous_columns(bracket_folder: Path, profile: str | None) -> dict[tuple, 
     rows = read_csv(Path(bracket_folder).parent.parent / profile / "numbers.csv")
     out = {}
     for r in rows:
-        if None in r or r.get("bracket") is None or r.get("bracket_readings") is None:
+        if None in r or r.get("bracket") is None or r.get("bracket_interpretations") is None:
             return {}      # another layout, or a short row
         if r["bracket"] in BRACKETS:         # a retired tier name (an older numbers.csv) is no verdict of today's
-            out[_site_key(r)] = {"bracket": r["bracket"], "bracket_readings": r["bracket_readings"]}
+            out[_site_key(r)] = {"bracket": r["bracket"], "bracket_interpretations": r["bracket_interpretations"]}
     return out
 
 
@@ -211,7 +211,7 @@ def load_values(folder: Path) -> list[dict]:
 
 
 def four_digits(text: str) -> str:
-    """A number of bracket.csv to 4 significant digits for a row's bracket_readings (text as it is)."""
+    """A number of bracket.csv to 4 significant digits for a row's bracket_interpretations (text as it is)."""
     value = finite_float(text)
     return text if value is None else f"{value:.4g}"
 

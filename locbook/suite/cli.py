@@ -1,4 +1,4 @@
-"""``locbook`` command line: list the experiments, run the notebook suite, run a study or a reading bracket.
+"""``locbook`` command line: list the experiments, run the notebook suite, run a study or an interpretation bracket.
 
 Exit status of ``run``, ``study`` and ``bracket`` (docs/running.md, "Interrupts, concurrent runs and the cache"): 0 all
 good; 1 some experiment failed (or the Dask scheduler was lost), or a method of your own (``--method``, ``--tracker``, a
@@ -15,7 +15,7 @@ import sys
 from pathlib import Path
 
 from ..errors import LocbookError, ParameterError
-from ..reproduce.readings import ReadingsError
+from ..reproduce.interpretations import InterpretationsError
 
 #: exit statuses of ``locbook run`` (module docstring)
 EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_DISK_FULL = 0, 1, 2, 3
@@ -31,6 +31,16 @@ def _parse_overrides(items: list[str]) -> dict[str, str]:
             raise ParameterError(f"-p expects NAME=VALUE (VALUE a TOML value, e.g. q_grid=[0.1, 0.2]), got {item!r}")
         out[name.strip()] = value
     return out
+
+
+def _interpretations_option(args):
+    """``--interpretations CSV``, or the same file given by its old spelling ``--readings`` (deprecated, not shown in
+    the help; silent, so that a bad file is still one line on stderr); both is an error."""
+    if args.old_readings is None:
+        return args.interpretations
+    if args.interpretations is not None:
+        raise ParameterError("give --interpretations only (--readings is its deprecated spelling)")
+    return args.old_readings
 
 
 def _positive(kind, text: str):
@@ -196,14 +206,16 @@ def main(argv: list[str] | None = None) -> int:
                        help="anchor-density: the subset sizes (default 3..m, at most 4 evenly spaced, m included)")
     study.add_argument("--sample-seed", type=int, default=0,
                        help="anchor-density: the seed of the subsets' draws (default 0)")
-    bracket = sub.add_parser("bracket", help="run an experiment under each declared reading of what its source left "
-                                             "unprinted and give every scored row a bracket verdict "
+    bracket = sub.add_parser("bracket", help="run an experiment under each declared interpretation of what its source "
+                                             "left unprinted and give every scored row a bracket verdict "
                                              "(reports/brackets/<experiment>/)")
     bracket.add_argument("experiment", help="an experiment id (`locbook list`)")
     bracket.add_argument("--profile", choices=("quick", "full"), default="quick", help=PROFILE_HELP)
-    bracket.add_argument("--readings", type=Path, metavar="CSV",
-                         help="a readings file of your own (the columns of locbook/data/readings/*.csv) instead of "
-                              "the declared readings")
+    bracket.add_argument("--interpretations", type=Path, metavar="CSV",
+                         help="an interpretations file of your own (the columns of "
+                              "locbook/data/interpretations/*.csv) instead of the declared interpretations")
+    # the option's name before "reading" meant only a sensor measurement: still taken, not shown
+    bracket.add_argument("--readings", type=Path, dest="old_readings", help=argparse.SUPPRESS)
     _point_options(bracket, "the bracket writes <reports>/brackets/<experiment>/")
     data = sub.add_parser("data", help="measured data sets: check one (`check DIR`), or write the synthetic "
                                        "example (`example DIR`)")
@@ -303,10 +315,11 @@ def main(argv: list[str] | None = None) -> int:
                                timeout_s=args.timeout, progress=args.progress, executor=args.executor,
                                scheduler=args.scheduler)
         elif args.command == "bracket":
-            from .bracket import bracket_folder, find_experiment, read_readings_option, run_bracket
+            from .bracket import bracket_folder, find_experiment, read_interpretations_option, run_bracket
             exp = find_experiment(suite, args.experiment)
             see = bracket_folder(suite, exp, args.reports) / "bracket.csv"
-            result = run_bracket(suite, exp, profile=args.profile, readings=read_readings_option(args.readings),
+            result = run_bracket(suite, exp, profile=args.profile,
+                                 interpretations=read_interpretations_option(_interpretations_option(args)),
                                  report_root=args.reports, jobs=args.jobs, force=args.force,
                                  timeout_s=args.timeout, progress=args.progress, executor=args.executor,
                                  scheduler=args.scheduler)
@@ -354,7 +367,7 @@ def main(argv: list[str] | None = None) -> int:
                                    data=one if args.data is not None else None, requested=requested,
                                    methods=methods, trackers=trackers)
                 floor_results.append((one, result))
-    except (ParameterError, ReadingsError, LocbookError) as exc:   # LocbookError: a malformed data set too
+    except (ParameterError, InterpretationsError, LocbookError) as exc:   # LocbookError: a malformed data set too
         print("locbook: error: " + " ".join(str(exc).split("\n")), file=sys.stderr)   # one line, whatever raised it
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:  # before the run started its own handling (loading, checking parameters)

@@ -2,9 +2,10 @@
 :mod:`locbook.reproduce.claims`) judged from the rows of a reports folder (issue 45).
 
 Per claim: does the source's own printed table support it; does it hold, fail or stay undecidable on our values
-under the default reading; and does that verdict hold under every other reading its brackets ran (each point's
-values from ``<reports>/brackets/<experiment>/values.csv``), naming the readings that change it. Ambiguous wording
-(with the test under the other reading) and the source's own inconsistencies are shown beside the claim.
+under the default interpretation; and does that verdict hold under every other interpretation its brackets ran (each
+point's values from ``<reports>/brackets/<experiment>/values.csv``), naming the interpretations that change it.
+Ambiguous wording (with the test under the other interpretation) and the source's own inconsistencies are shown beside
+the claim.
 """
 from __future__ import annotations
 
@@ -74,10 +75,11 @@ def _primary(rows) -> dict[tuple[str, str], tuple[str, str]]:
 def judge_claim(claim: Claim, by_id: dict, values_by_experiment: dict[str, list[dict]],
                 primary: dict | None = None) -> dict:
     """The verdicts of one claim: ``printed`` and ``ours`` (True / False / None), ``why`` (when it cannot be
-    judged), ``alt`` (ours under the other reading of ambiguous wording), ``readings`` (how many other bracket
-    points were judged) and ``changed_by`` (the points whose verdict differs from the default's, with their basis)."""
-    out = {"claim": claim, "printed": None, "ours": None, "why": "", "alt": None, "readings": 0, "changed_by": [],
-           "printed_na": False, "not_judged": []}
+    judged), ``alt`` (ours under the other interpretation of ambiguous wording), ``interpretations`` (how many other
+    bracket points were judged) and ``changed_by`` (the points whose verdict differs from the default's, with their
+    basis)."""
+    out = {"claim": claim, "printed": None, "ours": None, "why": "", "alt": None, "interpretations": 0,
+           "changed_by": [], "printed_na": False, "not_judged": []}
     if not claim.testable:
         out["why"] = claim.note or "no row measures it"
         return out
@@ -90,7 +92,7 @@ def judge_claim(claim: Claim, by_id: dict, values_by_experiment: dict[str, list[
     if isinstance(ours_env, str):
         out["why"] = ours_env
         return out
-    # under each other reading: the evidence rows take the point's values, a linked row (same_as) its master's,
+    # under each other interpretation: the evidence rows take the point's values, a linked row (same_as) its master's,
     # wherever the master was compared (another experiment of the document); a point that lacks one of the rows
     # does not judge the claim
     primary = primary if primary is not None else _primary(by_id.values())
@@ -110,7 +112,7 @@ def judge_claim(claim: Claim, by_id: dict, values_by_experiment: dict[str, list[
         if any(master(row) in default and not same_number(default[master(row)]["ours"], row.get("reproduced"))
                for row in mine):
             out["not_judged"].append(f"{exp}: its bracket's default run differs from this report (another profile "
-                                     "or other code), so the other readings are not judged here")
+                                     "or other code), so the other interpretations are not judged here")
             continue
         points = defaultdict(dict)
         labels = {}
@@ -118,7 +120,7 @@ def judge_claim(claim: Claim, by_id: dict, values_by_experiment: dict[str, list[
             if v["basis"] == "default":
                 continue
             points[v["point"]][(exp, v["printed_id"])] = v
-            labels[v["point"]] = (v["reading"], v["basis"])
+            labels[v["point"]] = (v["interpretation"], v["basis"])
         for point, table in points.items():
             if any(master(row) not in table for row in mine):
                 continue
@@ -130,7 +132,7 @@ def judge_claim(claim: Claim, by_id: dict, values_by_experiment: dict[str, list[
                 return _ours({"reproduced": alt["ours"], "mc_std_error": alt["mc_std_error"],
                               "verdict": alt["verdict"], "kind": row.get("kind", "")})
             outcome = _outcome(claim.test, _env(claim, by_id, pick))
-            out["readings"] += 1
+            out["interpretations"] += 1
             if outcome != out["ours"]:
                 label, basis = labels[point]
                 out["changed_by"].append(f"{exp}, {label} [{basis}]: {outcome_word(outcome)}")
@@ -138,13 +140,13 @@ def judge_claim(claim: Claim, by_id: dict, values_by_experiment: dict[str, list[
 
 
 def _robust(j: dict) -> str:
-    if j["ours"] is None and not j["readings"]:
+    if j["ours"] is None and not j["interpretations"]:
         return "-"
-    if not j["readings"]:
+    if not j["interpretations"]:
         return "no bracket ran"
     textual = [c for c in j["changed_by"] if "[fitted]" not in c]
     if not textual:
-        return f"same under all {j['readings']} other readings" + (
+        return f"same under all {j['interpretations']} other interpretations" + (
             "" if not j["changed_by"] else f" but {len(j['changed_by'])} fitted")
     return "changes under " + "; ".join(textual)
 
@@ -157,16 +159,16 @@ def conclusions_markdown(document: str, authors: str, year, judged: list[dict], 
              (f"Profile `{profile}`. " if profile else "")
              + f"{len(judged)} claims and conclusions of the source, each judged from the rows of numbers.csv: "
              f"{holds} hold, {fails} fail and {len(judged) - holds - fails} are undecidable under the default "
-             "reading (a comparison is decided only beyond two standard errors of the difference of our values; "
+             "interpretation (a comparison is decided only beyond two standard errors of the difference of our values; "
              "the printed column applies the same test to the source's own printed numbers). The last column says "
-             "whether the verdict survives every other reading the brackets ran.", "",
-             "| claim | where | kind | printed numbers | ours (default) | under the other readings | notes |",
+             "whether the verdict survives every other interpretation the brackets ran.", "",
+             "| claim | where | kind | printed numbers | ours (default) | under the other interpretations | notes |",
              "|---|---|---|---|---|---|---|"]
     for j in judged:
         c = j["claim"]
         notes = []
         if c.ambiguity:
-            notes.append(f"**ambiguous**: {c.ambiguity} (other reading: {outcome_word(j['alt'])})")
+            notes.append(f"**ambiguous**: {c.ambiguity} (other interpretation: {outcome_word(j['alt'])})")
         if c.inconsistency:
             notes.append(f"**source inconsistent**: {c.inconsistency}")
         if j["why"]:

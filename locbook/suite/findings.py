@@ -1,10 +1,10 @@
-"""What the reading brackets found, counted once: the tier tally, the findings page of each document, the
+"""What the interpretation brackets found, counted once: the tier tally, the findings page of each document, the
 one-screen answer at the top of an index (issue 45, "one tally everywhere").
 
 Everything here is computed from the rows of a reports folder's ``numbers.csv`` (the experiments' rows with the
-``bracket`` and ``bracket_readings`` columns :func:`locbook.suite.bracket.bracket_of_rows` gave them), so the index,
-the findings pages and numbers.csv give the same counts by construction (``tests/test_findings.py`` reads all three
-back and compares them). The tiers are :data:`locbook.reproduce.scoring.BRACKETS`.
+``bracket`` and ``bracket_interpretations`` columns :func:`locbook.suite.bracket.bracket_of_rows` gave them), so the
+index, the findings pages and numbers.csv give the same counts by construction (``tests/test_findings.py`` reads all
+three back and compares them). The tiers are :data:`locbook.reproduce.scoring.BRACKETS`.
 """
 from __future__ import annotations
 
@@ -24,16 +24,17 @@ FINDINGS_SUFFIX = "-findings.md"
 
 #: How the headline and the pages name each tier (:data:`~locbook.reproduce.scoring.BRACKETS`).
 TIER_WORDS = {
-    "default": "reproduced under the default reading",
-    "other_reading": "reproduced only under another textual (or assumed) reading",
-    "fitted_only": "reached only under a reading fitted to printed output (a calibration, not a reproduction)",
-    "between": "between readings (the printed value inside the band of our values, no single reading within)",
-    "outside": "outside every declared reading (beyond the band by more than both Monte-Carlo errors)",
+    "default": "reproduced under the default interpretation",
+    "other_interpretation": "reproduced only under another textual (or assumed) interpretation",
+    "fitted_only": "reached only under an interpretation fitted to printed output (a calibration, not a reproduction)",
+    "between": "between interpretations (the printed value inside the band of our values, no single interpretation "
+               "within)",
+    "outside": "outside every declared interpretation (beyond the band by more than both Monte-Carlo errors)",
     "open": "open (a setting that could matter is not swept, a point did not run, or Monte-Carlo error could "
             "close the gap)",
-    "loose": "loose under every reading (a window too wide to decide)",
+    "loose": "loose under every interpretation (a window too wide to decide)",
 }
-_SHORT = {"default": "default", "other_reading": "other reading", "fitted_only": "fitted only",
+_SHORT = {"default": "default", "other_interpretation": "other interpretation", "fitted_only": "fitted only",
           "between": "between", "outside": "outside", "open": "open", "loose": "loose"}
 
 
@@ -75,22 +76,22 @@ def bracket_headline(rows, profile: str = "full") -> str:
     if b is None:
         return ""
     parts = [f"{b[t]} {TIER_WORDS[t]}" for t in _tiers()]
-    return (f"**Reading brackets of the {b['n']} scored rows" + (f" (`{profile}` profile)" if profile else "") + ": "
-            + "; ".join(parts)
-            + f"; {b['none']} not bracketed.** Each reading is judged by its own run (`locbook bracket`), named in "
-            "the `bracket_readings` column of numbers.csv; the findings page of each document lists the rows of "
-            "every tier.")
+    return (f"**Interpretation brackets of the {b['n']} scored rows" + (f" (`{profile}` profile)" if profile else "")
+            + ": " + "; ".join(parts)
+            + f"; {b['none']} not bracketed.** Each interpretation is judged by its own run (`locbook bracket`), named "
+            "in the `bracket_interpretations` column of numbers.csv; the findings page of each document lists the rows "
+            "of every tier.")
 
 
 def md_cell(text) -> str:
-    """Text in one Markdown table cell or heading: HTML shown as text (a claims or readings file may be anyone's),
-    on one line, "|" escaped."""
+    """Text in one Markdown table cell or heading: HTML shown as text (a claims or interpretations file may be
+    anyone's), on one line, "|" escaped."""
     return markdown_text(str(text)).replace("\r", " ").replace("\n", " ").replace("|", "\\|")
 
 
 def _reason_of(row: dict) -> str:
     """The text a row's tier rests on, without the run profile prefix (rows sharing it are listed together)."""
-    text = row.get("bracket_readings", "") or "(no reading named)"
+    text = row.get("bracket_interpretations", "") or "(no interpretation named)"
     return re.sub(r"^at [a-z]+: ", "", text)
 
 
@@ -152,9 +153,9 @@ def findings_links(report_dir: Path) -> list[tuple[str, str]]:
     return [(p.name[:-len(FINDINGS_SUFFIX)], p.name) for p in sorted(Path(report_dir).glob(f"*{FINDINGS_SUFFIX}"))]
 
 
-def _reading_names(text: str) -> list[str]:
-    """The readings a ``bracket_readings`` text of a reached row names, each as ``parameter=value`` (a joint
-    point as its label)."""
+def _interpretation_names(text: str) -> list[str]:
+    """The interpretations a ``bracket_interpretations`` text of a reached row names, each as ``parameter=value`` (a
+    joint point as its label)."""
     text = re.sub(r"^at [a-z]+: ", "", text or "")
     names = []
     for part in text.split("; "):
@@ -207,19 +208,20 @@ def one_screen(entries, rows, conclusions: dict | None = None) -> list[dict]:
             sentences.append(f"{within} of {n} scored printed numbers are within their window (no bracket ran).")
         else:
             sentences.append(f"Of {n} scored printed numbers, {counts['default']} are reproduced under the default "
-                             f"reading and {counts['other_reading']} more under another textual (or assumed) reading; "
-                             f"{counts['fitted_only']} only under a fitted one, {counts['between']} lie between "
-                             f"readings, {counts['outside']} outside every reading, {counts['open']} are open, "
-                             f"{counts['loose']} loose and {b['none']} not bracketed.")
+                             f"interpretation and {counts['other_interpretation']} more under another textual (or "
+                             f"assumed) interpretation; {counts['fitted_only']} only under a fitted one, "
+                             f"{counts['between']} lie between interpretations, {counts['outside']} outside every "
+                             f"interpretation, {counts['open']} are open, {counts['loose']} loose and {b['none']} not "
+                             "bracketed.")
         rest = [r for r in scored if r.get("bracket") not in ("default", "")] if b else \
             [r for r in scored if r["verdict"] != "within"]
-        reached = Counter(name for r in rest if r.get("bracket") in ("other_reading", "fitted_only")
-                          for name in dict.fromkeys(_reading_names(r.get("bracket_readings", ""))))
+        reached = Counter(name for r in rest if r.get("bracket") in ("other_interpretation", "fitted_only")
+                          for name in dict.fromkeys(_interpretation_names(r.get("bracket_interpretations", ""))))
         notes = Counter(first_clause(r.get("note", ""), 140) for r in rest if (r.get("note") or "").strip())
         if reached and reached.most_common(1)[0][1] >= max(notes.most_common(1)[0][1] if notes else 0, 1):
             name, k = reached.most_common(1)[0]
-            sentences.append(f"The reading that reaches the most of the rest: {name} ({k} of the {len(rest)} rows "
-                             "not reproduced by default).")
+            sentences.append(f"The interpretation that reaches the most of the rest: {name} ({k} of the {len(rest)} "
+                             "rows not reproduced by default).")
         elif notes:
             why, k = notes.most_common(1)[0]
             sentences.append(f"The reason given most often for the rest ({k} of {len(rest)} rows): {why}.")

@@ -30,7 +30,7 @@ _TEMPLATES = Path(__file__).with_name("templates")
 
 
 #: verdicts whose cells are coloured (site.css, ``.v-<verdict>``); "no verdict" and "linked" stay plain
-_COLORED = ("within", "loose", "miss", "consistent", "inconsistent", "default", "other_reading", "fitted_only",
+_COLORED = ("within", "loose", "miss", "consistent", "inconsistent", "default", "other_interpretation", "fitted_only",
             "between", "open", "outside")
 
 

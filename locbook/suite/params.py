@@ -37,7 +37,7 @@ from pydantic_core import PydanticCustomError
 from ..errors import ParameterError
 
 __all__ = ["NotebookParameter", "ParameterRule", "read_parameters", "check_value", "parse_cli_value",
-           "resolve_parameters", "is_numeric_annotation"]
+           "resolve_parameters", "is_numeric_annotation", "RENAMED_PARAMETERS"]
 
 
 @dataclass(frozen=True)
@@ -331,6 +331,11 @@ def parse_cli_value(param: NotebookParameter, text: str, rule: ParameterRule | N
     return check_value(param, value, rule)
 
 
+#: notebook parameters renamed when "reading" came to mean only a sensor measurement: old name -> new name (an old
+#: name is refused with the new one named)
+RENAMED_PARAMETERS = {"noise_reading": "noise_interpretation", "other_readings": "other_interpretations"}
+
+
 def resolve_parameters(notebook_path, declared: dict[str, NotebookParameter], profile_values: dict,
                        cli_values: dict[str, str], context: str,
                        rules: dict[str, ParameterRule] | None = None) -> dict:
@@ -339,6 +344,9 @@ def resolve_parameters(notebook_path, declared: dict[str, NotebookParameter], pr
     resolved = {}
 
     def known(name):
+        if name not in declared and RENAMED_PARAMETERS.get(name) in declared:
+            raise ParameterError(f"{context}: parameter {name!r} was renamed {RENAMED_PARAMETERS[name]!r} (not in "
+                                 f"{Path(notebook_path).name}); give -p {RENAMED_PARAMETERS[name]}=...")
         if name not in declared:
             raise ParameterError(f"{context}: unknown parameter {name!r} (not in {Path(notebook_path).name}); "
                                  f"known: {', '.join(sorted(declared))}")

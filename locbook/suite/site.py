@@ -216,11 +216,11 @@ _PAGE_COLUMNS = ("quantity", "where", "unit", "kind", "printed", "reproduced", "
 
 
 def _page_columns(numbers: list[dict]) -> tuple[str, ...]:
-    """The page's columns: the bracket verdict and its readings after the verdict when a bracket was run."""
+    """The page's columns: the bracket verdict and its interpretations after the verdict when a bracket was run."""
     if not any(r.get("bracket") for r in numbers):
         return _PAGE_COLUMNS
     at = _PAGE_COLUMNS.index("verdict") + 1
-    return (*_PAGE_COLUMNS[:at], "bracket", "bracket_readings", *_PAGE_COLUMNS[at:])
+    return (*_PAGE_COLUMNS[:at], "bracket", "bracket_interpretations", *_PAGE_COLUMNS[at:])
 
 
 def _set_by(exp, name: str, params: dict, dataset: dict | None) -> str:
@@ -316,8 +316,8 @@ def _scored_point(row: dict):
 def printed_versus_ours(numbers: list[dict]) -> list[dict]:
     """One inline SVG per printed table (the rows' ``location``, and unit): each scored number a point at (printed,
     ours) with its window as a vertical bar, in its verdict's class (a ring marks a row whose bracket reached it
-    under another reading), and the line ours = printed. Rows without a verdict are left out; a table with none gets
-    no figure. Returns ``[{"title", "svg", "n"}]`` in the order the tables first appear."""
+    under another interpretation), and the line ours = printed. Rows without a verdict are left out; a table with none
+    gets no figure. Returns ``[{"title", "svg", "n"}]`` in the order the tables first appear."""
     groups: dict[tuple, list] = {}
     for r in numbers:
         point = _scored_point(r)
@@ -358,14 +358,14 @@ def printed_versus_ours(numbers: list[dict]) -> list[dict]:
                          f'x2="{x(printed)}" y2="{y(high)}" class="window"/>'
                          f'<circle cx="{x(printed)}" cy="{y(ours)}" r="3.5" class="ours"/>'
                          + (f'<circle cx="{x(printed)}" cy="{y(ours)}" r="6" class="reached"/>'
-                            if r.get("bracket") in ("other_reading", "fitted_only") else "") + '</g>')
+                            if r.get("bracket") in ("other_interpretation", "fitted_only") else "") + '</g>')
         parts.append("</svg>")
         out.append({"title": location + (f" ({unit})" if unit else ""), "svg": "".join(parts), "n": len(items)})
     return out
 
 
 #: the page's columns whose long texts repeat from row to row: shown once, below the table, as numbered notes
-_FOOTNOTE_COLUMNS = ("ambiguity_basis", "calibrated_from", "bracket_readings", "note")
+_FOOTNOTE_COLUMNS = ("ambiguity_basis", "calibrated_from", "bracket_interpretations", "note")
 _FOLD_CHARS = 240          # a note longer than this is folded (<details>), its first sentence shown
 
 
@@ -523,7 +523,7 @@ def write_experiment_pages(exp, profile: str, params: dict, staging: Path, folde
     """``summary.md``, ``report.md`` and ``report.html`` of one validated report in ``staging`` (to become
     ``folder``), from its numbers.csv: the runner's ``write_pages`` (:func:`locbook.suite.runner.run_tasks`)."""
     numbers = read_csv(staging / "numbers.csv")
-    # the pages show each row's reading bracket when the experiment was bracketed (<reports>/brackets/<id>/)
+    # the pages show each row's interpretation bracket when the experiment was bracketed (<reports>/brackets/<id>/)
     bracket = load_bracket(brackets_root(folder.parent) / exp.id) if folder.parent.name in PROFILES else []
     if bracket:
         numbers = bracket_of_rows(numbers, bracket, profile)
@@ -538,7 +538,7 @@ def write_experiment_pages(exp, profile: str, params: dict, staging: Path, folde
 
 def write_suite_reports(suite: Suite, report_dir: Path, *, list_all: bool = True) -> None:
     """Rebuild ``numbers.csv``, ``index.html`` and ``index.md`` from the experiment folders present (and the
-    reading brackets in ``<reports>/brackets/``: :mod:`locbook.suite.bracket`); in a profile's folder also each
+    interpretation brackets in ``<reports>/brackets/``: :mod:`locbook.suite.bracket`); in a profile's folder also each
     document's findings page (:mod:`locbook.suite.findings`) and conclusions page (:mod:`locbook.suite.conclusions`),
     from the same rows.
 
@@ -556,8 +556,8 @@ def write_suite_reports(suite: Suite, report_dir: Path, *, list_all: bool = True
         if not listed:
             continue
         numbers = read_csv(folder / "numbers.csv") if present else []
-        # each row's reading bracket, from <reports>/brackets/<id>/bracket.csv when one was run (else empty); not
-        # for a -p run's folder, whose rows were computed under other readings than the bracket's default
+        # each row's interpretation bracket, from <reports>/brackets/<id>/bracket.csv when one was run (else empty); not
+        # for a -p run's folder, whose rows were computed under other interpretations than the bracket's default
         bracket = load_bracket(brackets_root(report_dir) / exp.id) if report_dir.name in PROFILES else []
         numbers = bracket_of_rows(numbers, bracket, read_json(folder / "report.json", {}).get("profile"))
         rows += numbers

@@ -15,9 +15,9 @@ Schema::
     [experiment.profiles.full]
     [experiment.parameter_rules]  # optional: rules for this experiment's parameters (override the suite's)
     [experiment.bracket]          # optional: parameters every point of ``locbook bracket`` sets (never a scored
-    parameters = { ... }          # quantity's input, never a declared reading), and the reason, shown with the
-    reason = "..."                # bracket's findings (e.g. a notebook's own sweep of readings the bracket runs)
-    factorial = ["a", "b"]        # optional: readings that interact; the bracket also runs their combinations
+    parameters = { ... }          # quantity's input, never a declared interpretation), and the reason, shown with the
+    reason = "..."                # bracket's findings (e.g. a notebook's own sweep of interpretations the bracket runs)
+    factorial = ["a", "b"]        # optional: interpretations that interact; the bracket also runs their combinations
     largest_error_m = 9.43        # optional: the largest plausible error in metres (the area's diagonal) and
     largest_error_reason = "..."  # where the area is printed: a point whose error exceeds it is implausible
     [experiment.data_run]         # an experiment that takes a data set (a ``data`` parameter; ``locbook run --data``)
@@ -101,7 +101,7 @@ class Experiment:
     #: ``[experiment.bracket]``: parameter -> value set at every bracket point, and why (empty: none)
     bracket_parameters: dict = field(default_factory=dict, hash=False)
     bracket_reason: str = ""
-    #: ``[experiment.bracket] factorial``: the readings whose textual values the bracket also runs in combination
+    #: ``[experiment.bracket] factorial``: the interpretations whose textual values the bracket also runs in combination
     bracket_factorial: tuple = ()
     #: ``[experiment.bracket] largest_error_m``: the largest plausible error (m; None: not declared), and its source
     largest_error_m: float | None = None
@@ -193,7 +193,7 @@ def find_suite_file(start: Path | None = None) -> Path:
 
 def read_toml(path: Path, what: str) -> dict:
     """The TOML file ``path`` (``what`` names it in the error: unreadable, or not TOML with its line)."""
-    from ..reproduce.readings import read_declaration
+    from ..reproduce.interpretations import read_declaration
     try:    # decoded here: tomllib's own UnicodeDecodeError names no file or line; and read only up to a limit
         text = read_declaration(path, SuiteError, what)
     except OSError as exc:

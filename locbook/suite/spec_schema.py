@@ -76,7 +76,7 @@ class _Document(_Table):
 def _factorial(value):
     if not isinstance(value, list) or not all(isinstance(n, str) and n for n in value) \
             or len(set(value)) != len(value) or len(value) == 1:
-        _refuse(f"[experiment.bracket] factorial must list two or more distinct reading names, got {value!r}")
+        _refuse(f"[experiment.bracket] factorial must list two or more distinct interpretation names, got {value!r}")
     return tuple(value)
 
 
@@ -107,8 +107,8 @@ class _Bracket(_Table):
         return self
 
 
-_BRACKET_SHAPE = ("[experiment.bracket] takes a table 'parameters', a string 'reason', a list 'factorial' of reading "
-                  "names, and 'largest_error_m' (a positive number) with 'largest_error_reason'")
+_BRACKET_SHAPE = ("[experiment.bracket] takes a table 'parameters', a string 'reason', a list 'factorial' of "
+                  "interpretation names, and 'largest_error_m' (a positive number) with 'largest_error_reason'")
 
 
 def _needs(value):

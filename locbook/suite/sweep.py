@@ -1,8 +1,8 @@
-"""The sweep engine under studies and reading brackets: many parameter points of experiments run in one runner
+"""The sweep engine under studies and interpretation brackets: many parameter points of experiments run in one runner
 session into one folder, then an aggregate table rebuilt from every point whose report is up to date.
 
 Two front ends declare the points: :mod:`locbook.suite.study` (grids, paired lists, random and Latin-hypercube draws,
-replicates: ``locbook study``) and :mod:`locbook.suite.bracket` (each declared reading of a document: ``locbook
+replicates: ``locbook study``) and :mod:`locbook.suite.bracket` (each declared interpretation of a document: ``locbook
 bracket``); the anchor-density study of :mod:`locbook.suite.splits` is a study. Each front end gives its tasks and
 the function that writes its aggregate; :func:`run_sweep` runs them and says what the aggregate holds
 (:class:`Aggregate`); :func:`current_points` is the status of every point the aggregate is built from.

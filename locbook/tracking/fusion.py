@@ -7,8 +7,8 @@ the covariance-weighted (minimum-variance) combination, which equals ``R (R_1^{-
 
 The thesis applies (4.8) to the RSS powers ``Z^1`` (N values) and the inertial readings ``Z^2`` (accelerations and
 rates), which are different quantities of different sizes, so it cannot be applied literally (our finding; the
-section's title, "Fusing the Position Estimates", supports the first reading). Two readings are implemented and
-labelled:
+section's title, "Fusing the Position Estimates", supports the first interpretation). Two interpretations are
+implemented and labelled:
 
 - ``"position"``: fuse two 2-D position estimates (the RSS trilateration fix and the inertial dead-reckoned
   position) with :func:`fuse_estimates`, and give the fused position to a KF/EKF/UKF as a position measurement;
@@ -20,11 +20,14 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._deprecation import renamed_constants
 from .._validate import as_array
 
-__all__ = ["FUSION_READINGS", "fuse_estimates"]
+__all__ = ["FUSION_INTERPRETATIONS", "fuse_estimates"]
 
-FUSION_READINGS = ("position", "stacked")
+FUSION_INTERPRETATIONS = ("position", "stacked")
+# the name before "reading" meant only a sensor measurement (deprecated for one release)
+__getattr__ = renamed_constants(__name__, {"FUSION_READINGS": ("FUSION_INTERPRETATIONS", FUSION_INTERPRETATIONS)})
 
 
 def fuse_estimates(z1, R1, z2, R2):

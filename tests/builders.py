@@ -1,10 +1,17 @@
 """What several test modules build: TOML text from Python values (tomllib only reads) and the tiny measured data set
-(four anchors on a 6 m square, a calibration walk, a track). Imported by name (``from builders import ...``): pytest
-puts this folder on ``sys.path`` for its test modules."""
+(four anchors on a 6 m square, a calibration walk, a track), and where the repository lies. Imported by name
+(``from builders import ...``): pyproject's ``pythonpath`` puts this folder on ``sys.path`` for every test module,
+whichever subfolder it lives in."""
 import math
 import re
+from pathlib import Path
 
 import numpy as np
+
+#: the repository's root (the clone), whatever folder pytest runs from and however deep a test module lives
+REPO_ROOT = Path(__file__).resolve().parents[1]
+#: this folder: the test modules' helper files (user_method_examples.py) live here
+TESTS_DIR = Path(__file__).resolve().parent
 
 # -- TOML text ------------------------------------------------------------------------------------------------------
 

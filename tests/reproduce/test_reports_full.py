@@ -1,17 +1,17 @@
 """The committed scoreboard (reports/full) follows the rules of locbook/reproduce/scoring.py (issue 13)."""
 import csv
 import json
-from pathlib import Path
 
 import pytest
 
 import locbook as lb
+from builders import REPO_ROOT
 from locbook.reproduce.scoring import JUDGED_KINDS, KINDS, WITHIN_LIMIT
 from locbook.suite import load_suite
 from locbook.suite.bracket import BRACKETS, SITE_NUMBER_COLUMNS, load_bracket
 from locbook.suite.site import double_counted
 
-FULL = Path(__file__).resolve().parents[1] / "reports" / "full"
+FULL = REPO_ROOT / "reports" / "full"
 
 
 @pytest.fixture(scope="module")
@@ -138,7 +138,7 @@ def test_the_index_opens_with_findings_generated_from_the_rows(rows):
     from collections import Counter
 
     from locbook.suite.site import findings_summary
-    suite = load_suite(Path(__file__).resolve().parents[1] / "notebooks" / "experiments.toml")
+    suite = load_suite(REPO_ROOT / "notebooks" / "experiments.toml")
     entries = [{"exp": e, "numbers": [r for r in rows if r["experiment"] == e.id]} for e in suite.experiments]
     found = {f["key"]: f["text"] for f in findings_summary(entries, rows)}
     assert set(found) == {"george", "ozkaya2011", "dogan2015", "gudipati2017", "palvai2008"}
@@ -159,7 +159,7 @@ def test_a_pages_repeated_notes_are_shown_once_and_every_reference_resolves(rows
     import re
 
     from locbook.suite import site
-    suite = load_suite(Path(__file__).resolve().parents[1] / "notebooks" / "experiments.toml")
+    suite = load_suite(REPO_ROOT / "notebooks" / "experiments.toml")
     exp = next(e for e in suite.experiments if e.id == "dogan2015-tracking")
     numbers = [r for r in rows if r["experiment"] == exp.id]
     page = site.page_html(exp, "full", {}, FULL / exp.id, numbers, "test")

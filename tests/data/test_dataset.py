@@ -1,14 +1,13 @@
 """Data sets: the manifest (dataset.toml) and its rules, raw packets -> epochs, the shipped data sets, the synthetic
 example, and the whole battery on a new data set with one command."""
 import csv
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
 
 import locbook as lb
-from builders import ANCHORS, MANIFEST, TRACK, calibration_csv
+from builders import ANCHORS, MANIFEST, REPO_ROOT, TRACK, calibration_csv
 from locbook.data.dataset import datasets_dir, load_dataset, shipped_datasets
 from locbook.data.example import EXAMPLE_SITE, write_example_dataset
 from locbook.data.measured import DataFormatError, epochs, validate_readings
@@ -189,7 +188,7 @@ def test_kolakowski_long_files_keep_every_empty_cell_as_not_heard():
     assert np.all(robot.position_m[:, 2] == 1.3)
 
 
-SOURCE = Path(__file__).resolve().parents[2] / "shared" / "data" / "kolakowski2021"
+SOURCE = REPO_ROOT.parent / "shared" / "data" / "kolakowski2021"
 
 
 @pytest.mark.skipif(not (SOURCE / "calibration_df.csv").is_file(), reason="the published source files are not here")

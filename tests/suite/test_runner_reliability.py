@@ -11,8 +11,7 @@ import time
 from pathlib import Path
 
 import pytest
-
-from test_suite import alive, cli, processes_mentioning, run, set_profile, toy, wait_for  # noqa: F401 (toy: fixture)
+from test_run import alive, cli, processes_mentioning, run, set_profile, toy, wait_for  # noqa: F401 (toy: fixture)
 
 
 @pytest.fixture(autouse=True)

@@ -3,10 +3,10 @@ tier counts, read back from the files themselves."""
 import csv
 import re
 from collections import Counter
-from pathlib import Path
 
 import pytest
 
+from builders import REPO_ROOT
 from locbook.suite.bracket import BRACKETS
 from locbook.suite.findings import (
     TIER_WORDS,
@@ -17,7 +17,7 @@ from locbook.suite.findings import (
     tier_counts,
 )
 
-FULL = Path(__file__).resolve().parents[1] / "reports" / "full"
+FULL = REPO_ROOT / "reports" / "full"
 SHORT = {"default": "default", "other_reading": "other reading", "fitted_only": "fitted only", "between": "between",
          "outside": "outside", "open": "open", "loose": "loose"}
 

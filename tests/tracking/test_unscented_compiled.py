@@ -8,16 +8,16 @@ where it cannot update (the numpy loop's errors, unchanged).
 """
 import sys
 import warnings
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 import locbook as lb
+from builders import REPO_ROOT
 from locbook.tracking import _compiled as K
 from locbook.tracking import unscented as U
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+sys.path.insert(0, str(REPO_ROOT / "benchmarks"))
 import bench_ukf_speed as bu  # noqa: E402
 
 pytestmark = pytest.mark.compiled

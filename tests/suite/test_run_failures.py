@@ -12,10 +12,10 @@ from pathlib import Path
 from types import SimpleNamespace
 
 import pytest
+from test_run import alive, processes_mentioning, run, set_profile, toy, wait_for  # noqa: F401 (toy: fixture)
 
 from locbook.suite import executors, load_suite, run_suite
 from locbook.suite.cli import main
-from test_suite import alive, processes_mentioning, run, set_profile, toy, wait_for  # noqa: F401 (toy: fixture)
 
 pytestmark = pytest.mark.notebooks
 
@@ -98,7 +98,7 @@ STRING_PARAM = 'label: str = "plain"  # free text\n'
 
 
 def test_string_parameters_are_escaped_in_report_md(toy):
-    from test_suite import PARAMS, _notebook
+    from test_run import PARAMS, _notebook
     _notebook(toy / "notebooks" / "one.ipynb", PARAMS + STRING_PARAM)
     payload = "<script>alert(1)</script><img src=x onerror=alert(2)>&amp;"
     assert run(toy, "george-one", "-p", f"label={json.dumps(payload)}") == 0
@@ -394,7 +394,7 @@ def test_disk_full_while_promoting_stops_the_run_with_its_own_status(toy, monkey
 
 def test_a_kernel_that_meets_a_full_disk_is_not_retried(toy, capsys):
     """ENOSPC raised inside the kernel (a write to /dev/full, which always fails that way)."""
-    from test_suite import GOOD, PARAMS, _notebook
+    from test_run import GOOD, PARAMS, _notebook
     assert run(toy) == 0
     folder = toy / "reports" / "quick"
     good = {eid: _report_files(folder, eid) for eid in ("george-one", "george-two")}

@@ -10,6 +10,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from builders import REPO_ROOT
 from locbook.data.dataset import load_dataset
 from locbook.data.example import EXAMPLE_ROLES, EXAMPLE_SITE, write_example_dataset
 from locbook.data.measured import (
@@ -471,7 +472,7 @@ def test_the_example_refuses_bad_variants(tmp_path):
 
 # -- 8. the documented 2-D example loads ---------------------------------------------------------------------------
 def test_the_documented_2d_example_loads(tmp_path):
-    doc = Path(__file__).resolve().parents[1] / "docs" / "data-format.md"
+    doc = REPO_ROOT / "docs" / "data-format.md"
     if not doc.exists():
         pytest.skip("the docs are not beside the tests (an installed package)")
     section = doc.read_text(encoding="utf-8").split("## 2-D data sets", 1)[1].split("\n## ", 1)[0]

@@ -4,11 +4,12 @@ writes the Markdown table, reporting a failing benchmark as an error row instead
 table intact while a run is under way. The harness's paired measurement is checked on two calls of known cost."""
 import math
 import sys
-from pathlib import Path
 
 import pytest
 
-BENCH = Path(__file__).resolve().parents[1] / "benchmarks"
+from builders import REPO_ROOT
+
+BENCH = REPO_ROOT / "benchmarks"
 sys.path.insert(0, str(BENCH))
 import _harness as harness  # noqa: E402
 import run_all  # noqa: E402

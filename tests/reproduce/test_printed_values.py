@@ -5,12 +5,12 @@ import ast
 import io
 import json
 import tokenize
-from pathlib import Path
 
 import locbook as lb
+from builders import REPO_ROOT
 from locbook.reproduce.printed_values import PRINTED_DIR
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = REPO_ROOT
 
 
 def _significant_digits(text: str) -> int:

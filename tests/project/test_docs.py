@@ -1,11 +1,12 @@
 """Issue 32: README.md and the docs/ pages link only to files of the repository that exist, and nothing a user reads
 cites the developers' notes outside it."""
 import re
-from pathlib import Path
 
 import pytest
 
-REPO = Path(__file__).resolve().parents[1]
+from builders import REPO_ROOT
+
+REPO = REPO_ROOT
 # not the build's copies under docs/_build
 PAGES = [REPO / "README.md", *sorted(p for p in (REPO / "docs").rglob("*.md")
                                        if "_build" not in p.relative_to(REPO / "docs").parts)]

@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 from setuptools import find_packages
 
+from builders import REPO_ROOT
 from locbook import __version__
 from locbook.suite import load_suite
 from locbook.suite.catalog import copy_notebooks, list_text, show_text
@@ -18,7 +19,7 @@ from locbook.suite.spec import SuiteError
 
 pytestmark = pytest.mark.installed
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = REPO_ROOT
 
 
 def test_the_package_list_is_every_package_on_disk_plus_the_notebooks():

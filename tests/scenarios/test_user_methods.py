@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 import locbook as lb
+from builders import TESTS_DIR
 from locbook.data.dataset import load_dataset
 from locbook.data.example import write_example_dataset
 from locbook.data.measured import DataFormatError
@@ -35,7 +36,7 @@ from locbook.user_methods import (
     run_method,
 )
 
-HERE = Path(__file__).resolve().parent
+HERE = TESTS_DIR                     # user_method_examples.py's folder
 EXAMPLES = HERE / "user_method_examples.py"
 CENTROID = f"{EXAMPLES}:weighted_centroid"
 STATS = ("mean_m", "median_m", "p90_m", "ce95_m", "rmse_m", "coverage")

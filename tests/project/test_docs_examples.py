@@ -20,8 +20,9 @@ import numpy as np
 import pytest
 
 import locbook
+from builders import REPO_ROOT
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = REPO_ROOT
 DOCS = REPO / "docs"
 GENERATED = ("_build", "api")                 # the build's output and its generated API pages (docs/conf.py)
 PAGES = sorted(p for p in DOCS.rglob("*.md") if not set(p.relative_to(DOCS).parts) & set(GENERATED)) \

@@ -12,7 +12,9 @@ from pathlib import Path
 
 import pytest
 
-REPO = Path(__file__).resolve().parents[1]
+from builders import REPO_ROOT
+
+REPO = REPO_ROOT
 README = REPO / "README.md"
 SUITE = REPO / "notebooks" / "experiments.toml"
 

@@ -6,14 +6,14 @@ vocabulary of the filters."""
 import importlib
 import inspect
 import re
-from pathlib import Path
 from typing import NamedTuple
 
 import pytest
 
 import locbook
+from builders import REPO_ROOT
 
-API_DOC = Path(__file__).resolve().parents[1] / "docs" / "architecture.md"
+API_DOC = REPO_ROOT / "docs" / "architecture.md"
 
 
 def public_api_section() -> str:

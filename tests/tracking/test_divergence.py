@@ -7,7 +7,6 @@ UKF scenarios of the issue (sigma = 1e-3 dB, Q = 1e4, alpha = 1; a run that lost
 the readings missing) are flagged while the EKF on the same data is not; numpy and the compiled EKF agree on the
 flags; the window rule is checked against a plain per-run loop.
 """
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,6 +14,7 @@ from filterpy.kalman import KalmanFilter
 from scipy.stats import chi2
 
 import locbook as lb
+from builders import REPO_ROOT
 from locbook.tracking import _compiled as K
 
 try:
@@ -209,7 +209,7 @@ DEFAULT_WINDOW, DEFAULT_PROBABILITY = lb.tracking.results.DIVERGENCE_WINDOW, lb.
 
 def _documented_table():
     """The table of docs/filters.md ("What the guard flags"): {row label: [values per dof]} and the dofs."""
-    page = Path(__file__).resolve().parents[1] / "docs" / "filters.md"
+    page = REPO_ROOT / "docs" / "filters.md"
     if not page.exists():
         pytest.skip("the docs are not beside the tests (an installed package)")
     doc = page.read_text(encoding="utf-8")

@@ -18,6 +18,9 @@ from pathlib import Path
 import nbformat
 import pytest
 from nbformat.v4 import new_notebook
+from test_bracket import HEADER, READINGS
+from test_run import toy  # noqa: F401
+from test_study import stoy  # noqa: F401  (a fixture: the toy repository with george-study, quick seed = 3)
 
 from locbook.reproduce.readings import ReadingsError, load_reading_file
 from locbook.reproduce.report import NUMBER_COLUMNS, Table
@@ -34,9 +37,6 @@ from locbook.suite.cli import main
 from locbook.suite.findings import findings_markdown
 from locbook.suite.runner import Outcome, SuiteRun, cache_key
 from locbook.suite.study import expand_study, load_studies, load_study, study_folder, write_study_outputs
-from test_bracket import HEADER, READINGS
-from test_study import stoy  # noqa: F401  (a fixture: the toy repository with george-study, quick seed = 3)
-from test_suite import toy  # noqa: F401
 
 INTERRUPTED = f"interrupted by {signal.SIGINT.name}"
 

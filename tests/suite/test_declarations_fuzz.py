@@ -74,7 +74,7 @@ notebook = "fuzz.ipynb"
 
 @pytest.fixture(scope="module")
 def repo(tmp_path_factory):
-    from test_suite import _notebook
+    from test_run import _notebook
     root = tmp_path_factory.mktemp("fuzz-declarations")
     (root / "notebooks").mkdir()
     _notebook(root / "notebooks" / "fuzz.ipynb", PARAMS, body="x = 1\n")

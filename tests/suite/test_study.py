@@ -10,11 +10,11 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from test_run import _notebook, set_profile, toy, wait_for  # noqa: F401  (toy is a fixture)
 
 from locbook.suite import SuiteError, load_suite
 from locbook.suite.cli import main
 from locbook.suite.study import _draw, expand_study, load_studies, load_study
-from test_suite import _notebook, set_profile, toy, wait_for  # noqa: F401  (toy is a fixture)
 
 STUDY_PARAMS = ('seed: int = 1  # seed\na: float = 1.0  # slope input\nb: float = 0.0  # offset\n'
                 'tag: str = "x"  # a label\nsleep_s: float = 0.0  # wait\n')

@@ -9,17 +9,17 @@ cannot update).
 """
 import sys
 import warnings
-from pathlib import Path
 
 import numpy as np
 import pytest
 from filterpy.kalman import KalmanFilter
 
 import locbook as lb
+from builders import REPO_ROOT
 from locbook.tracking import _compiled as K
 from locbook.tracking import _loop
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+sys.path.insert(0, str(REPO_ROOT / "benchmarks"))
 import bench_dogan_filters as bd  # noqa: E402
 import bench_ukf_speed as bu  # noqa: E402
 

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 import locbook as lb
+from builders import REPO_ROOT
 from locbook import battery
 from locbook.data.example import write_example_dataset
 from locbook.scenarios import measured as me
@@ -188,8 +189,7 @@ def test_a_2d_set_and_native_scans_run_the_whole_battery(tmp_path, variant):
 
 
 def _reports_with_benchmark():
-    from pathlib import Path
-    root = Path(__file__).resolve().parents[1] / "reports"
+    root = REPO_ROOT / "reports"
     return sorted(p.parent.parent for p in root.glob("*/benchmark-cross-document/benchmark.csv")) + \
         sorted(p.parent.parent for p in root.glob("*/data-*/benchmark-cross-document/benchmark.csv"))
 
@@ -259,8 +259,7 @@ def test_native_scans_with_jittered_times_run_on_their_median_clock(tmp_path):
 def test_the_python_example_of_docs_your_data_runs():
     """docs/your-data.md's code block, run as written (fewer resamples and particles)."""
     import re
-    from pathlib import Path
-    page = Path(__file__).resolve().parents[1] / "docs" / "your-data.md"
+    page = REPO_ROOT / "docs" / "your-data.md"
     if not page.exists():
         pytest.skip("the docs are not beside the tests (an installed package)")
     code = re.findall(r"```python\n(.*?)```", page.read_text(encoding="utf-8"), flags=re.S)[0]

@@ -5,6 +5,8 @@ import csv
 import textwrap
 
 import pytest
+from test_run import toy  # noqa: F401
+from test_study import stoy  # noqa: F401  (a fixture: the toy repository with george-study, quick seed = 3)
 
 from locbook.reproduce.readings import READING_COLUMNS, load_reading_file, readings_for
 from locbook.suite import SuiteError, load_suite
@@ -19,8 +21,6 @@ from locbook.suite.bracket import (
     find_experiment,
 )
 from locbook.suite.cli import main
-from test_study import stoy  # noqa: F401  (a fixture: the toy repository with george-study, quick seed = 3)
-from test_suite import toy  # noqa: F401
 
 HEADER = ",".join(c for c in READING_COLUMNS if c != "quotes")   # a file without quotes loads
 #: a = 1.3 gives value 16.0 (printed, within); b never reaches value; twice's window is always loose

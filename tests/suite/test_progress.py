@@ -5,10 +5,10 @@ import io
 import json
 
 import pytest
+from test_run import run, set_profile, toy  # noqa: F401  (toy is a fixture)
 
 from locbook.suite import load_suite, run_suite
 from locbook.suite.progress import LiveProgress, make_progress
-from test_suite import run, set_profile, toy  # noqa: F401  (toy is a fixture)
 
 pytestmark = pytest.mark.notebooks
 

@@ -6,6 +6,7 @@ import pytest
 from filterpy.kalman import ExtendedKalmanFilter, KalmanFilter, MerweScaledSigmaPoints, UnscentedKalmanFilter
 
 import locbook as lb
+from builders import REPO_ROOT
 from locbook.models.base import MeasurementModel
 
 ANCHORS = np.array([[0.0, 0.0], [10.0, 0.0], [0.0, 8.0]])
@@ -218,8 +219,7 @@ def test_a_model_without_a_jacobian_runs_in_the_ukf_and_is_refused_by_the_ekf_by
 
 def test_the_architecture_pages_sensor_example_runs():
     """docs/architecture.md's 'Adding a sensor' example, executed (skipped where the docs are not beside the tests)."""
-    from pathlib import Path
-    page = Path(__file__).resolve().parents[1] / "docs" / "architecture.md"
+    page = REPO_ROOT / "docs" / "architecture.md"
     if not page.exists():
         pytest.skip("docs/architecture.md is not beside the tests")
     text = page.read_text()

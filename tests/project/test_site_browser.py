@@ -17,13 +17,14 @@ import urllib.request
 from pathlib import Path
 
 import pytest
+from test_run import _notebook  # the toy notebook writer of the suite tests
 
+from builders import REPO_ROOT
 from locbook.suite import load_suite, run_suite
-from test_suite import _notebook  # the toy notebook writer of the suite tests
 
 pytestmark = [pytest.mark.notebooks, pytest.mark.browser]   # executes (toy) notebooks with papermill
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = REPO_ROOT
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 CHROMEDRIVER = shutil.which("chromedriver")
 
@@ -279,7 +280,6 @@ def test_a_data_sets_page_shows_its_results_table_first(browser, tmp_path):
     """Issue 46: a data set's page (reports/<profile>/data-<name>/index.html) opens with the answer: the first table
     a reader sees is the results table, and every link and image of the page resolves."""
     from selenium.webdriver.common.by import By
-
     from test_data_runs import example, write_data_folder
 
     folder = example(tmp_path / "set", ("calibration", "static"), name="mine")
@@ -315,11 +315,11 @@ def test_a_floor_plan_is_drawn_under_the_map_on_a_data_sets_page(browser, tmp_pa
     import matplotlib.pyplot as plt
     import numpy as np
     from selenium.webdriver.common.by import By
+    from test_data_runs import write_data_folder
 
     import locbook as lb
     from locbook.data.example import PLAN_FLOOR_RGB, write_example_dataset
     from locbook.plotting import draw_floor, map_panels
-    from test_data_runs import write_data_folder
 
     folder = write_example_dataset(tmp_path / "set", np.random.default_rng(3), name="mine", walk_s=30.0,
                                    roles=("calibration", "static"), floor_plan=True)

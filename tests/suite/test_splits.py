@@ -14,6 +14,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from builders import REPO_ROOT
 from locbook.data.dataset import load_dataset
 from locbook.data.example import write_example_dataset
 from locbook.data.measured import DataFormatError
@@ -25,7 +26,7 @@ from locbook.suite import splits
 from locbook.suite.cli import main
 from locbook.suite.runner import Outcome
 
-SUITE = Path(__file__).resolve().parents[1] / "notebooks" / "experiments.toml"
+SUITE = REPO_ROOT / "notebooks" / "experiments.toml"
 WALK_S = 40.0              # short walks: every fast test here runs the static battery in seconds
 
 

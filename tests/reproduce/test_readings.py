@@ -7,11 +7,11 @@ import fnmatch
 import importlib
 import re
 import tomllib
-from pathlib import Path
 
 import numpy as np
 import pytest
 
+from builders import REPO_ROOT
 from locbook.reproduce.readings import (
     BASES,
     READING_COLUMNS,
@@ -77,7 +77,7 @@ def test_every_document_declares_readings_that_load(document):
 
 
 def test_readings_ship_as_package_data():
-    pyproject = tomllib.loads((Path(__file__).resolve().parents[1] / "pyproject.toml").read_text(encoding="utf-8"))
+    pyproject = tomllib.loads((REPO_ROOT / "pyproject.toml").read_text(encoding="utf-8"))
     patterns = pyproject["tool"]["setuptools"]["package-data"]["locbook.data"]
     for path in READINGS_DIR.glob("*.csv"):
         assert any(fnmatch.fnmatch(f"readings/{path.name}", p) for p in patterns), path

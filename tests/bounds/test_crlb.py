@@ -194,7 +194,7 @@ def test_the_bound_of_the_anchors_heard_is_the_bound_of_that_subset():
     assert got[2] == np.inf
 
 
-# -- the bounds' one RssModel (issue 47): what a bound cannot honour is refused by name ----------------------------
+# -- the bounds' one RssModel: what a bound cannot honour is refused by name ----------------------------
 @pytest.mark.parametrize("model, message", [
     (lb.PathLossModel(0.0, 2.0, 4.0), r"takes model = RssModel\(anchors_m, channel\).*got PathLossModel"),
     (SQUARE, r"takes model = RssModel\(anchors_m, channel\).*got ndarray"),
@@ -228,7 +228,7 @@ def test_the_literal_form_uses_the_models_exponent_sigma_and_clamp():
         lb.rss_crlb_m(p, rss(SQUARE, n, sigma), variant="printed")
 
 
-# -- the call forms before issue 47: one test each, the warning at the caller's line and the same numbers ----------
+# -- the call forms before the readings-first convention: one test each, the warning at the caller's line and the same numbers ----------
 A3 = np.array([[0.0, 0.0, 2.8], [8.0, 0.5, 2.5], [7.5, 6.0, 2.9], [0.3, 6.2, 2.6], [4.0, 3.1, 3.0]])
 N5, S5 = np.array([2.0, 2.2, 2.5, 1.8, 2.1]), np.array([4.0, 5.0, 6.0, 4.5, 5.5])
 P_XY = np.array([[1.0, 1.5], [5.0, 2.0], [3.0, 4.0], [6.5, 5.5]])

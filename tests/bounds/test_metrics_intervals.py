@@ -1,4 +1,4 @@
-"""Bootstrap intervals of :func:`locbook.accuracy_metrics` (issue 46): the circular block bootstrap weights every
+"""Bootstrap intervals of :func:`locbook.accuracy_metrics`: the circular block bootstrap weights every
 epoch equally, too few blocks give no interval, an interval that excludes its estimate says so, and the i.i.d.
 bootstrap keeps its numbers."""
 import warnings
@@ -153,8 +153,8 @@ def test_an_interval_that_excludes_its_estimate_is_flagged(monkeypatch):
         assert (m[s + "_note"] == "") == held
 
 
-def test_the_moving_block_bias_of_the_issue_is_flagged_and_the_circular_bootstrap_has_none(monkeypatch):
-    """The report of issue 46 in miniature: errors of 5 m in the first and last 50 of 1000 epochs, 1 m between
+def test_the_moving_block_bias_is_flagged_and_the_circular_bootstrap_has_none(monkeypatch):
+    """The reported moving-block bias in miniature: errors of 5 m in the first and last 50 of 1000 epochs, 1 m between
     (mean exactly 1.4 m), 10 blocks of 100. The moving-block resamples under-weight both ends, so their means fall
     below 1.4 and the interval misses it: flagged, with the block count named. The circular resamples hold it."""
     e = np.ones(1000)
@@ -171,7 +171,7 @@ def test_the_moving_block_bias_of_the_issue_is_flagged_and_the_circular_bootstra
 
 
 def _old_accuracy_metrics(e, rng, n_bootstrap, level):
-    """The i.i.d. bootstrap as it was before issue 46 (block_length 1): indices rng.integers(0, n, (B, n)), NaN-aware
+    """The i.i.d. bootstrap as it was before the block bootstrap (block_length 1): indices rng.integers(0, n, (B, n)), NaN-aware
     statistics, percentile interval."""
     n = e.size
     idx = rng.integers(0, n, size=(n_bootstrap, n))

@@ -1,4 +1,4 @@
-"""Issue 46, "your own data, judged fairly": the data format without guesses. 2-D data sets (anchors without z),
+"""Your own data, judged fairly: the data format without guesses. 2-D data sets (anchors without z),
 native scans (window_s = 0) and their clock, the truth a windowed epoch gets, the link direction named when the
 columns are swapped, devices (a device column, the notes, the joint per-device offset fit), calibration-only data
 sets and the example generator's variants. Every fixture is written in tmp_path; expected numbers come from the
@@ -53,7 +53,7 @@ CAL_POINTS = [(1.0, 1.0), (2.0, 4.0), (4.0, 2.0), (5.0, 5.0), (3.0, 3.0)]
 
 
 def manifest(recordings, *, window="1.0", geometry_extra="", name="fmt46"):
-    text = (f'name = "{name}"\ntitle = "issue 46 test set"\nlicense = "CC0 1.0"\nattribution = "test"\n'
+    text = (f'name = "{name}"\ntitle = "format test set"\nlicense = "CC0 1.0"\nattribution = "test"\n'
             f'[geometry]\nanchors = "anchors.csv"\n{geometry_extra}[epochs]\nwindow_s = {window}\n')
     for rname, (role, _, extra) in recordings.items():
         text += f'[[recording]]\nname = "{rname}"\nfile = "{rname}.csv"\nrole = "{role}"\n{extra}'

@@ -1,4 +1,4 @@
-"""Issue 44, data sets and loaders (items 4, 5, 7, 8, 12): links out of the data set's folder, readers that ended in
+"""Data sets and loaders: links out of the data set's folder, readers that ended in
 a raw traceback, size guards computed before reading, manifests that loaded and made every report wrong, and the
 dBm options and the example's name that were accepted unchecked. Every failure is one DataFormatError (or
 ParameterError) line naming the file, line, column or key."""
@@ -65,7 +65,7 @@ def readings_file(path, rows=6, body=None):
     return path
 
 
-# -- item 4: links out of the data set's folder ---------------------------------------------------------------
+# -- links out of the data set's folder ---------------------------------------------------------------
 def test_a_link_out_of_the_folder_is_refused_naming_link_and_target_and_never_read(tmp_path):
     secret = tmp_path / "elsewhere" / "environ"
     secret.parent.mkdir()
@@ -107,7 +107,7 @@ def test_messages_never_echo_a_large_or_binary_file(tmp_path):
     assert len(message) < 1000, len(message)
 
 
-# -- item 5: readers that ended in a raw traceback --------------------------------------------------------------
+# -- readers that ended in a raw traceback --------------------------------------------------------------
 def test_a_manifest_that_is_not_utf8_names_its_line_and_byte(tmp_path):
     root = make(tmp_path / "set", manifest=MANIFEST.encode().replace(b'"test"', b'"M\xfcller"'))
     refused(root, "dataset.toml", "line 4", "0xfc is not UTF-8")
@@ -153,7 +153,7 @@ def test_a_line_over_the_limit_is_refused_by_either_reader_naming_it(tmp_path):
             read_readings(path)
 
 
-# -- item 7: size guards before reading -----------------------------------------------------------------------------
+# -- size guards before reading -----------------------------------------------------------------------------
 def test_a_quoted_field_keeps_a_large_file_on_the_fast_reader(tmp_path, monkeypatch):
     rows = "".join(f"{t},tag,A,-{50 + t % 40},P{t}\n" for t in range(300))
     path = readings_file(tmp_path / "r.csv", body=rows.replace(",P7\n", ',"P,7"\n').replace(",P9\n", ',"P""9"\n'))
@@ -226,7 +226,7 @@ def test_a_large_file_names_the_line_of_a_field_that_is_not_a_number(tmp_path, m
         read_readings(path)
 
 
-# -- item 8: manifests that loaded and made every report wrong ----------------------------------------------------
+# -- manifests that loaded and made every report wrong ----------------------------------------------------
 def test_an_outline_around_nothing_of_the_site_is_refused(tmp_path):
     far = "x,y\n1000,1000\n1010,1000\n1010,1010\n1000,1010\n"
     manifest = MANIFEST.replace("tag_height_m", 'outline = "outline.csv"\ntag_height_m')
@@ -364,7 +364,7 @@ def test_names_longer_than_a_file_name_allows_are_refused_at_load(tmp_path):
     assert long not in refused(make(tmp_path / "rec", manifest=manifest), "[[recording]] 2", "MAX_NAME_CHARS")
 
 
-# -- item 12: dBm options, the text True, the example's name ----------------------------------------------------
+# -- dBm options, the text True, the example's name ----------------------------------------------------
 @pytest.mark.parametrize("line,key", [('invalid_values_dbm = "0"', "invalid_values_dbm"),
                                       ("invalid_values_dbm = [true]", "invalid_values_dbm"),
                                       ('invalid_values_dbm = ["0"]', "invalid_values_dbm"),

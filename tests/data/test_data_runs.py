@@ -1,4 +1,4 @@
-"""A data run runs the data (issue 46): which experiments a data set can run, the data run's own parameters, the
+"""A data run runs the data: which experiments a data set can run, the data run's own parameters, the
 console line and exit status of a data run, and a data set's page (results first, its own attribution, no
 reproduction vocabulary).
 
@@ -8,7 +8,6 @@ slow test runs `locbook run --data` on a static-only set end to end.
 """
 from __future__ import annotations
 
-import csv
 import json
 import re
 from pathlib import Path
@@ -19,11 +18,12 @@ import pandas as pd
 import pytest
 
 from locbook.data.dataset import load_dataset
-from locbook.data.example import EXAMPLE_ROLES, write_example_dataset
+from locbook.data.example import write_example_dataset
 from locbook.errors import ParameterError
 from locbook.suite import load_suite, runner, site
 from locbook.suite import run as suite_run
 from locbook.suite.spec import SuiteError
+from toy_suite import STATIC_ROWS, example, write_data_folder
 
 #: the reproduction vocabulary no page about a data set may use (words, so "within" but not "withinness")
 BANNED = re.compile(r"\b(reproduc\w*|within|loose|miss|missed|printed|calibrated within)\b", re.I)
@@ -36,19 +36,6 @@ NEEDS = {"measured-calibration": ("calibration",), "measured-localization": ("sc
 @pytest.fixture(scope="module")
 def suite():
     return load_suite()
-
-
-def example(folder: Path, roles=EXAMPLE_ROLES, *, truth: bool = True, name: str = "mine") -> Path:
-    """A small example data set holding ``roles``; ``truth=False`` drops the tracks' true positions (a track with a
-    reference path only, as many real walks are)."""
-    out = write_example_dataset(folder, np.random.default_rng(3), name=name, walk_s=30.0, roles=roles)
-    if not truth:
-        ds = load_dataset(out)
-        for rec in ds.recordings_with("track"):
-            path = ds.recording(rec).file
-            table = pd.read_csv(path)
-            table.drop(columns=[c for c in ("x_m", "y_m", "z_m") if c in table]).to_csv(path, index=False)
-    return out
 
 
 def visible_text(html: str) -> str:
@@ -296,65 +283,6 @@ def test_data_example_takes_the_generators_options_and_check_reads_a_2d_set(tmp_
 
 
 # -- a data set's page ------------------------------------------------------------------------------------------
-
-def _row(kind, recording, method, mean, **more) -> dict:
-    from locbook.scenarios.measured import RESULT_COLUMNS
-    row = {c: "" for c in RESULT_COLUMNS}
-    row.update(kind=kind, recording=recording, method=method, settings=f"{method} settings", epochs="40", runs="1",
-               coverage="1", mean_m=mean, median_m="0.9", p90_m="2.1", ce95_m="2.6", rmse_m="1.3", mean_low_m="0.8",
-               mean_high_m="1.4", bound="CRLB (fitted channel, anchors heard)", bound_median_m="1.25",
-               bound_rms_m="1.3", ratio="1.05", ratio_note="")
-    row.update(more)
-    return row
-
-
-def _write_rows(path: Path, rows: list[dict]) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "w", newline="", encoding="utf-8") as fh:
-        writer = csv.DictWriter(fh, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
-
-
-#: the hand-written static results: recordings listed before their pooled row, a degenerate bound, and a method
-#: scored on one recording only (its pooled row is that recording)
-STATIC_ROWS = [("points", "lls", "3.1"), ("pooled", "lls", "3.0"), ("walk_a", "lls", "2.9"),
-               ("pooled", "grid_ml", "1.2"), ("points", "grid_ml", "1.3"), ("walk_a", "grid_ml", "1.1"),
-               ("points", "knn", "1.5"), ("pooled", "knn", "1.5")]
-
-
-def write_data_folder(report_dir: Path, folder: Path, suite) -> dict:
-    """A data set's reports folder from hand-written files: dataset.json as a data run claims it (the data set at
-    ``folder``, static-only: tracking left out), measured-localization's results.csv and cdf.png, measured-
-    calibration's fits.csv; then its pages (site.write_suite_reports). Returns the dataset.json record."""
-    ds = load_dataset(folder)
-    identity = str(ds.root)
-    suite_run.claim_dataset_folder(report_dir, ds.name, identity,
-                                 suite_run._dataset_facts(ds, identity, suite, suite_run.data_kinds(ds)))
-    loc = report_dir / "measured-localization"
-    rows = [_row("static", r, m, mean) for r, m, mean in STATIC_ROWS]
-    rows[1].update(ratio="", ratio_note="n/a: the bound is degenerate at 2 of 40 epochs")
-    rows[3].update(ratio="0.94", ratio_note="below 1: it searches only inside the floor outline")
-    _write_rows(loc / "results.csv", rows)
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    fig, ax = plt.subplots(figsize=(3, 2))
-    ax.plot([0, 1], [0, 1])
-    fig.savefig(loc / "cdf.png")
-    plt.close(fig)
-    (loc / "summary.md").write_text("# summary\n")
-    cal = report_dir / "measured-calibration"
-    fits = [{"mode": "per_anchor", "fit": f, "anchor": a, "P_0 (dBm)": "-45", "n": "2.2", "residual sigma (dB)": "2.5",
-             "samples": "300", "status": "ok"} for f in ("closed_form", "huber") for a in ("A1", "A2")]
-    fits += [{"mode": "pooled", "fit": f, "anchor": "all", "P_0 (dBm)": "-44", "n": "2.3",
-              "residual sigma (dB)": "3.1", "samples": "600", "status": "ok"} for f in ("closed_form", "huber")]
-    _write_rows(cal / "fits.csv", fits)
-    (cal / "summary.md").write_text("# summary\n")
-    (report_dir / "status.json").write_text(json.dumps({"measured-calibration": {"status": "cached", "seconds": 0},
-                                                        "measured-localization": {"status": "ok", "seconds": 3.2}}))
-    site.write_suite_reports(suite, report_dir, list_all=False)
-    return json.loads((report_dir / "dataset.json").read_text())
 
 
 @pytest.fixture(scope="module")

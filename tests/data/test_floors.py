@@ -1,4 +1,4 @@
-"""Floors (zones, scenes) of a data set, placeholder anchors and the floor plan under the maps (issue 48):
+"""Floors (zones, scenes) of a data set, placeholder anchors and the floor plan under the maps:
 locbook.data.floors, the loader's hooks, the example's building, and locbook.plotting's map figures."""
 import io
 import re

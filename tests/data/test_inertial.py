@@ -1,4 +1,4 @@
-"""Inertial streams of a measured data set (issue 48): the file and its units, the shared time origin, the sub-step
+"""Inertial streams of a measured data set: the file and its units, the shared time origin, the sub-step
 alignment, the fusion trackers on generated data with known truth, and a data set without inertial files unchanged."""
 import hashlib
 import math
@@ -227,7 +227,7 @@ def test_without_inertial_files_nothing_changes(fused, tmp_path):
 
 
 # --------------------------------------------------------------------------------------------- the example's bytes
-#: SHA-256 of the default example (seed 1, walk_s 20) as written before inertial streams existed (issue 48's base)
+#: SHA-256 of the default example (seed 1, walk_s 20) as written before inertial streams existed (the base of the streams' work)
 _DEFAULT_BYTES = {
     "anchors.csv": "d2301b3eec8dc61ad6d5ccc13ee772cc79883ba99755c60ae8f785bd82fa306a",
     "dataset.toml": "9204526f49b710c7f795f9c588fa8982c41215984bfe775e2b1a330de0534425",

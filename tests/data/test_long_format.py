@@ -119,7 +119,7 @@ def test_epoch_with_two_true_positions(tmp_path):
 
 
 def test_anchor_rules(tmp_path):
-    # issue 46: no z column is a 2-D anchors file (tests/test_data_format46.py); a z column needs every height
+    # no z column is a 2-D anchors file (tests/test_data_format46.py); a z column needs every height
     refuses(tmp_path, ANCHORS.replace(",z", ""), "line 2", "4 fields, the header 3", reader=read_anchors)
     refuses(tmp_path, rows(ANCHORS, 3, "B,5,0,"), "line 3", "'z'", "the height is empty", "no z column",
             reader=read_anchors)

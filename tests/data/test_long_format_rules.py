@@ -1,4 +1,4 @@
-"""The long format's rules on hostile files (issue 26, items 4 and 8): every malformed row is refused with a
+"""The long format's rules on hostile files: every malformed row is refused with a
 message naming file, line and column (or field count, or byte), ids are text, sentinel values are declared
 not heard, and a recording with a clock jump is refused before anything large is allocated."""
 import re
@@ -270,7 +270,7 @@ def test_time_going_back_is_checked_per_transmitter(tmp_path):
     refused(write(tmp_path, bad, "bad.csv"), "line 5", "transmitter 'u'", "0.25 s after 0.5 s on line 3")
 
 
-# -- issue 26 follow-up: clear messages for a header's trailing comma, CR-only files, huge tick counts -----------
+# -- clear messages for a header's trailing comma, CR-only files, huge tick counts -----------
 def test_a_trailing_comma_on_the_header_only_is_named(tmp_path):
     """'...,rssi_dbm,' over 4-field rows was refused as "column(s) ['']: ... missing", naming a column nobody wrote."""
     path = write(tmp_path, HEADER.rstrip("\n") + ",\n0,t,A1,-60\n0.5,t,A2,-61\n")

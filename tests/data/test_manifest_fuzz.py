@@ -1,4 +1,4 @@
-"""Property-based fuzzing of the data-set manifest (``dataset.toml``) and the long-format readers (issue 44).
+"""Property-based fuzzing of the data-set manifest (``dataset.toml``) and the long-format readers.
 
 Inputs: a valid small data set whose manifest gets random edits (any key set to a value of any type: text, huge
 integers, 1e300, NaN, infinities, bools, lists, tables; keys deleted; unknown keys), whose files are deleted,

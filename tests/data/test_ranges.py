@@ -1,4 +1,4 @@
-"""Range streams (issue 48): the ranges file of a recording (reader, checks, alignment on the RSS epochs), the range
+"""Range streams: the ranges file of a recording (reader, checks, alignment on the RSS epochs), the range
 measurement model on the protocol (hand distances, finite differences, filterpy's EKF and UKF), range-only lateration
 and its CRLB (noiseless truth, a Monte-Carlo at high SNR, the outline), and the range methods in the measured battery
 on the example data set with ranges (known truth), which leave every other number as it was."""
@@ -358,7 +358,7 @@ def _digest(folder, names=None) -> str:
 def test_the_default_example_is_byte_for_byte_what_it_was(tmp_path):
     plain = write_example_dataset(tmp_path / "plain", np.random.default_rng(1), seed_note=1)
     ranged = write_example_dataset(tmp_path / "ranged", np.random.default_rng(1), seed_note=1, ranges=True)
-    # the digest of `locbook data example DIR` (seed 1) as main wrote it before the range streams (issue 48)
+    # the digest of `locbook data example DIR` (seed 1) as main wrote it before the range streams
     assert _digest(plain) == "586f73adc36fecef29afcfa62b0caf1925efd9dc86d7fc9c301cf4528f3aa617"
     names = [p.name for p in plain.iterdir()]
     for name in names:

@@ -48,7 +48,7 @@ def test_jacobian_equals_central_differences(name, model):
 def test_jacobian_inside_the_clamp_is_the_derivative_of_the_clamped_mean():
     """Within d_min the clamped mean P_0 - 10 n log10(d_min / d0) is flat: its derivative (central differences,
     the oracle) is 0 for that anchor and the usual one for the others, and the reading adds no Fisher information
-    (the same as the model without that anchor). Replaces the earlier capped-extension convention (issue 27)."""
+    (the same as the model without that anchor). Replaces the earlier capped-extension convention."""
     model = lb.RssModel(ANCHORS, lb.PathLossModel(-45.0, 2.3, 4.0, min_distance_m=0.5))
     p = np.array([[0.1, 0.2]])                                  # 0.22 m from anchor 0
     jac = model.jacobian(p)[0, 0]

@@ -1,4 +1,4 @@
-"""Every RSS consumer agrees with the one measurement model (issue 27): the EKF stream's update is filterpy's EKF update
+"""Every RSS consumer agrees with the one measurement model: the EKF stream's update is filterpy's EKF update
 with RssModel's mean and Jacobian, the UKF's h is RssModel's mean, the static bound is RssModel's Fisher information
 (closed form of Patwari et al. 2003, Eq. (5) as the oracle), the RSS ML fix is a stationary point of the model's
 cost, and the compiled row kernel is the numpy formula, also inside the near-field clamp (where the clamped mean is

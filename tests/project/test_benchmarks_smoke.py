@@ -1,4 +1,4 @@
-"""Every benchmark module keeps working (issues 18, 31): each ``benchmarks/bench_*.py`` (discovered, so none rots) runs
+"""Every benchmark module keeps working: each ``benchmarks/bench_*.py`` (discovered, so none rots) runs
 its ``run("tiny")`` and yields rows of the harness's protocol with finite positive times, and ``benchmarks/run_all.py``
 writes the Markdown table, reporting a failing benchmark as an error row instead of stopping, and keeps a complete
 table intact while a run is under way. The harness's paired measurement is checked on two calls of known cost."""

@@ -1,4 +1,4 @@
-"""`locbook --version` and `locbook list` answer at once: they import only what they need (issue 27).
+"""`locbook --version` and `locbook list` answer at once: they import only what they need.
 The times themselves are measured by benchmarks/bench_startup.py, not asserted here."""
 import subprocess
 import sys
@@ -38,7 +38,7 @@ def test_import_locbook_loads_no_submodule_but_the_data_audit_hook():
 
 def test_show_and_the_worker_skip_jsonschemas_iri_grammar_but_still_validate_notebooks():
     """``locbook show`` reads a notebook (nbformat, hence jsonschema) without building rfc3987_syntax's grammar
-    (2-3 s of every worker's start-up, issue 28's bracket benchmark); nbformat still refuses a broken notebook."""
+    (2-3 s of every worker's start-up, the bracket benchmark); nbformat still refuses a broken notebook."""
     shown = _modules_after("import contextlib, io\nfrom locbook.suite.cli import main\n"
                            "with contextlib.redirect_stdout(io.StringIO()):\n    assert main(['show', 'george-tracking']) == 0\n"
                            "import nbformat, pytest\nnb = nbformat.v4.new_notebook()\nnb.cells = [{'cell_type': 'code'}]\n"

@@ -1,4 +1,4 @@
-"""Results that must not depend on the machine's vector code (issue 44, item 9; docs/reports.md, "Across machines").
+"""Results that must not depend on the machine's vector code (docs/reports.md, "Across machines").
 
 Two causes made committed numbers move between machines of one kind: iterations stopped midway by a cap (where a
 walk stops depends on the last bits of every step) and choices among exact ties (``np.argpartition`` returns ties in

@@ -1,4 +1,4 @@
-"""The call forms before issue 47's argument convention (``rng`` positional; the grid filter's cells before its
+"""The call forms before the readings-first argument convention (``rng`` positional; the grid filter's cells before its
 model) work for one release: one DeprecationWarning line naming the new call, attributed to the caller's line, then
 the same numbers as the new form. One test per deprecated form; and a wrapped public function's own warnings (the
 collapse of some runs) still point at the caller."""

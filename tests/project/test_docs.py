@@ -1,4 +1,4 @@
-"""Issue 32: README.md and the docs/ pages link only to files of the repository that exist, and nothing a user reads
+"""README.md and the docs/ pages link only to files of the repository that exist, and nothing a user reads
 cites the developers' notes outside it."""
 import re
 

@@ -83,7 +83,7 @@ def test_numbers_csv_holds_the_printed_numbers(quick_reports):
     assert rows[("george-tracking", "mean error C with Kalman filter")]["printed"] == "1.0378"
     assert rows[("george-tracking", "error reduction")]["printed"] == "54.62"
     assert rows[("george-tracking", "error reduction (abstract)")]["printed"] == "more than 50%"
-    # issue 45: sigma is an assumed 3 dB by default, not chosen from the printed C (1.83 dB, fitted, is an
+    # sigma is an assumed 3 dB by default, not chosen from the printed C (1.83 dB, fitted, is an
     # alternative): the rows are reproductions and name no calibration
     assert c_raw["kind"] == "reproduction" and c_raw["calibrated_from"] == ""
     assert rows[("george-tracking", "error reduction (abstract)")]["kind"] == "claim"

@@ -1,4 +1,4 @@
-"""A real package (issue 17): the wheel ships the notebooks, the experiment list and the data; an installed
+"""A real package: the wheel ships the notebooks, the experiment list and the data; an installed
 locbook runs its experiments from any folder, copies its notebooks out, and tells its version and parameters."""
 import os
 import subprocess
@@ -46,7 +46,7 @@ def test_version_list_and_show(capsys):
 
 
 def test_list_says_which_machine_each_profiles_times_came_from(tmp_path):
-    """Issue 32: `locbook list` showed full faster than quick with times from two machines, unlabelled."""
+    """`locbook list` showed full faster than quick with times from two machines, unlabelled."""
     import json
 
     from locbook.suite.catalog import machine_label
@@ -138,7 +138,7 @@ def test_the_data_log_tracks_the_imported_packages_own_data_wherever_it_is_insta
     source tree): the data files of the locbook it imports are still logged, so the cache notices them.
 
     The package is the one the subprocess imports, which it reports: this test process may import another (the clone's
-    source tree, when the tests run from a clone beside a non-editable install; issue 44, item 12)."""
+    source tree, when the tests run from a clone beside a non-editable install)."""
     import hashlib
     import json
     log = tmp_path / "read.log"

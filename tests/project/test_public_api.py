@@ -1,5 +1,5 @@
-"""The curated top-level API (issue 27): one home module per name, listed in docs/architecture.md's table, constants left in their
-modules, every name importable and defined where the table says. And its one argument convention (issue 47): readings
+"""The curated top-level API: one home module per name, listed in docs/architecture.md's table, constants left in their
+modules, every name importable and defined where the table says. And its one argument convention: readings
 first, then the model, then keyword-only options, ``rng`` keyword-only everywhere; the families of functions that share
 a call form, listed in docs/architecture.md's "Call forms" table, each with its result type and the one result
 vocabulary of the filters."""
@@ -72,7 +72,7 @@ def test_an_unknown_name_is_an_attribute_error_naming_it():
         locbook.kalman_filtre
 
 
-# -- the call forms (issue 47) --------------------------------------------------------------------------------------
+# -- the call forms --------------------------------------------------------------------------------------
 
 class Family(NamedTuple):
     """Public functions (or classes) called the same way: ``leading`` their first positional parameters, ``keywords``

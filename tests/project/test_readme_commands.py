@@ -1,4 +1,4 @@
-"""Issue 32: every command README.md shows is executed here, in the order written, as a user of a clone would type it
+"""Every command README.md shows is executed here, in the order written, as a user of a clone would type it
 (the reports in a temporary folder instead of the clone's `reports/`), and must succeed. The install line and the
 test commands are what `.ci/run` itself runs (checked to be there); `jupyter lab` opens a server, so its notebook is
 checked to exist and JupyterLab to be installed. README's Python blocks run as written, and a block a command's

@@ -17,10 +17,10 @@ import urllib.request
 from pathlib import Path
 
 import pytest
-from test_run import _notebook  # the toy notebook writer of the suite tests
 
 from builders import REPO_ROOT
 from locbook.suite import load_suite, run_suite
+from toy_suite import _notebook, example, write_data_folder
 
 pytestmark = [pytest.mark.notebooks, pytest.mark.browser]   # executes (toy) notebooks with papermill
 
@@ -201,14 +201,14 @@ def test_every_link_and_image_of_the_site_resolves(browser, site_dir, tmp_path):
     assert visited == {"index.html", "george-good/report.html", "george-good/george-good.html"}
     for name in ("index.html", "george-good/report.html"):             # the site itself never leaves the machine
         assert pages[(site_dir / name).resolve()][1] == [], name
-    # issue 32: no page loads a script or style sheet from the network (the notebook page's math is SVG, not MathJax)
+    # no page loads a script or style sheet from the network (the notebook page's math is SVG, not MathJax)
     for page in pages:
         browser.get(page.as_uri())
         remote = [e.get_attribute("src") or e.get_attribute("href") for e in
                   browser.find_elements(By.CSS_SELECTOR, "script[src], link[href]")
                   if (e.get_attribute("src") or e.get_attribute("href") or "").startswith(("http:", "https:"))]
         assert remote == [], page
-    # issue 32: every experiment page with compared numbers shows ours against printed (an inline SVG per table)
+    # every experiment page with compared numbers shows ours against printed (an inline SVG per table)
     for page in pages:
         if page.name == "report.html":
             browser.get(page.as_uri())
@@ -224,7 +224,7 @@ def test_every_link_and_image_of_the_site_resolves(browser, site_dir, tmp_path):
     shots = [tmp_path / "site-index.png", _screenshot_dir() / "site-index.png"]
     for shot in shots:
         assert browser.save_screenshot(str(shot)) and shot.stat().st_size > 0
-    # issue 32: generated from the rows (the answer per document, issue 45, is a list of its own above)
+    # generated from the rows (the answer per document is a list of its own above)
     findings = browser.find_elements(By.CSS_SELECTOR, "ul.findings:not(.answer) li")
     answers = browser.find_elements(By.CSS_SELECTOR, "ul.answer li")
     assert len(answers) == 1 and answers[0].text.startswith("A. Author (2015), george: 0 of 1 scored printed numbers")
@@ -277,10 +277,9 @@ def test_every_link_and_image_of_the_site_resolves(browser, site_dir, tmp_path):
 
 
 def test_a_data_sets_page_shows_its_results_table_first(browser, tmp_path):
-    """Issue 46: a data set's page (reports/<profile>/data-<name>/index.html) opens with the answer: the first table
+    """A data set's page (reports/<profile>/data-<name>/index.html) opens with the answer: the first table
     a reader sees is the results table, and every link and image of the page resolves."""
     from selenium.webdriver.common.by import By
-    from test_data_runs import example, write_data_folder
 
     folder = example(tmp_path / "set", ("calibration", "static"), name="mine")
     report_dir = tmp_path / "reports" / "quick" / "data-mine"
@@ -305,7 +304,7 @@ def test_a_data_sets_page_shows_its_results_table_first(browser, tmp_path):
 
 
 def test_a_floor_plan_is_drawn_under_the_map_on_a_data_sets_page(browser, tmp_path):
-    """Issue 48: on a data run whose data set has a floor plan, the page's map image loads and shows the plan: the
+    """On a data run whose data set has a floor plan, the page's map image loads and shows the plan: the
     plan's floor tint fills most of the map as the browser draws it (a screenshot of the image element)."""
     import io
 
@@ -315,7 +314,6 @@ def test_a_floor_plan_is_drawn_under_the_map_on_a_data_sets_page(browser, tmp_pa
     import matplotlib.pyplot as plt
     import numpy as np
     from selenium.webdriver.common.by import By
-    from test_data_runs import write_data_folder
 
     import locbook as lb
     from locbook.data.example import PLAN_FLOOR_RGB, write_example_dataset

@@ -1,4 +1,4 @@
-"""The claims declared per document (locbook/data/claims/*.csv, issue 45) and their evaluation: a three-valued test
+"""The claims declared per document (locbook/data/claims/*.csv) and their evaluation: a three-valued test
 decided only beyond two standard errors of a difference, on printed values as printed."""
 import math
 import re

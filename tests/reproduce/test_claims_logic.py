@@ -1,4 +1,4 @@
-"""Claim and ambiguity logic that the notebooks used to define in their cells (issue 27): the replicate standard error,
+"""Claim and ambiguity logic that the notebooks used to define in their cells: the replicate standard error,
 Dogan's Ch. 4 bound study and horizon ambiguity, Gudipati's Ch. VI rows and the Ozkaya simulations' assumptions."""
 import json
 

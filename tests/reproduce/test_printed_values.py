@@ -1,5 +1,5 @@
 """Printed numbers live only in locbook/data/printed/<document>.csv: none is typed into Python code or a notebook
-cell (issue 13). Numeric literals of the package and the notebooks' code cells are compared with every printed
+cell. Numeric literals of the package and the notebooks' code cells are compared with every printed
 number of at least four significant digits (shorter ones, such as 1.87, collide with ordinary constants)."""
 import ast
 import io

@@ -1,4 +1,4 @@
-"""The declared readings (locbook/data/readings/*.csv, issue 28): every row loads, every notebook parameter it names
+"""The declared readings (locbook/data/readings/*.csv): every row loads, every notebook parameter it names
 exists in each listed experiment with the declared default (so the declaration cannot drift from the notebooks), every
 alternative and range end is a value that parameter accepts, every module attribute it names exists (and holds the
 declared default when it is a plain value), and the loader refuses each kind of broken row naming file, line and
@@ -139,7 +139,7 @@ def test_readings_for_collects_across_files():
     assert readings_for("no-such-experiment") == ()
 
 
-def test_the_readings_issue_28_names_are_declared():
+def test_the_readings_opened_as_notebook_parameters_are_declared():
     names = {d: {r.name for r in readings(d)} for d in DOCUMENTS}
     assert {"noise_reading", "start", "walking_speed", "accelerometer_role", "pcrlb_horizon",
             "pcrlb_process_noise", "pcrlb_sigma_acc_values"} <= names["dogan2015"]
@@ -152,7 +152,7 @@ def test_the_readings_issue_28_names_are_declared():
 def test_dogan_q_reading_offers_the_printed_constant():
     from locbook.scenarios import dogan
     noise = {r.name: r for r in readings("dogan2015")}["noise_reading"]
-    # issue 28: the default is the text's constant; the reading fitted to Table 3.9 is a named alternative
+    # the default is the text's constant; the reading fitted to Table 3.9 is a named alternative
     assert not noise.is_calibration and noise.default == "printed" == dogan.DEFAULT_NOISE_READING
     assert "sigma_acc" in noise.alternatives and set(noise.values) <= set(dogan.NOISE_READINGS)
     # the printed reading is Eq. (3.24)'s constant: the same Q whatever sigma_ACC, the square of Sec. 4.1.2's sd
@@ -176,20 +176,20 @@ _PLACE = re.compile(r"\b(Sec|Secs|Section|Ch|Chapter|Table|Tables|Eq|Eqs|Fig|Fig
 
 @pytest.mark.parametrize("reading", [r for r in ALL if r.basis in ("printed", "textual")], ids=_id)
 def test_a_printed_or_textual_reading_quotes_the_text_it_rests_on(reading):
-    # issue 45: the default is the reading the text supports best, argued from quotes (section, and line)
+    # the default is the reading the text supports best, argued from quotes (section, and line)
     assert _QUOTED.search(reading.quotes), f"{reading.document}:{reading.name}: quotes holds no quoted passage"
     assert _PLACE.search(reading.quotes), f"{reading.document}:{reading.name}: quotes names no section or table"
 
 
 @pytest.mark.parametrize("reading", ALL, ids=_id)
 def test_every_reading_says_where_the_text_stands_on_it(reading):
-    # issue 45: an assumed reading too says what the text says around the gap (section, line), so a reader can check
+    # an assumed reading too says what the text says around the gap (section, line), so a reader can check
     assert reading.quotes.strip() and _PLACE.search(reading.quotes), f"{reading.document}:{reading.name}"
 
 
 @pytest.mark.parametrize("reading", [r for r in ALL if r.basis == "fitted" or r.fitted], ids=_id)
 def test_a_fitted_value_says_why_no_text_supports_it(reading):
-    # issue 45: `fitted` means only that nothing in the text supports it and it was chosen because it fits
+    # `fitted` means only that nothing in the text supports it and it was chosen because it fits
     assert re.search(r"no (?:text|word|sentence|passage)|not supported by the text|the text (?:does not|never)",
                      reading.reason), f"{reading.document}:{reading.name}: the reason does not say why no text supports it"
 

@@ -1,4 +1,4 @@
-"""Report.number decides a row's note from the scoring rules' closed form (issue 27): the miss note appears exactly
+"""Report.number decides a row's note from the scoring rules' closed form: the miss note appears exactly
 when our value lies outside printed +- (rounding + 2 SE + ambiguity) or a claim fails; the loose note exactly when the
 value is inside a window wider than +-25 % of the printed value, or a claim holds but not beyond 2 SE."""
 import math

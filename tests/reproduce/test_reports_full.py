@@ -1,4 +1,4 @@
-"""The committed scoreboard (reports/full) follows the rules of locbook/reproduce/scoring.py (issue 13)."""
+"""The committed scoreboard (reports/full) follows the rules of locbook/reproduce/scoring.py."""
 import csv
 import json
 
@@ -70,7 +70,7 @@ def test_committed_reports_are_stamped_with_a_commit_and_never_from_a_dirty_tree
 
 
 def test_every_miss_and_loose_reproduction_or_calibrated_row_has_a_bracket_verdict(rows):
-    """Issue 28: the committed brackets (reports/brackets) cover every reproduction or calibrated row that is not
+    """The committed brackets (reports/brackets) cover every reproduction or calibrated row that is not
     within, each verdict naming its evidence; a within row is 'default' wherever a bracket covers it."""
     for r in rows:
         if r["kind"] in ("reproduction", "calibrated") and r["verdict"] in ("miss", "loose") and not r["same_as"]:
@@ -92,13 +92,13 @@ def test_the_committed_brackets_are_complete_and_from_committed_code():
         assert all(p["generated_by"] and "uncommitted" not in p["generated_by"]
                    for p in points if p["status"] in ("ok", "cached")), points_csv
         assert not any(p["readings_file"] for p in points), points_csv     # the packaged readings only
-        # issue 45: every point at the full profile's run count, so a verdict survives its Monte-Carlo error
+        # every point at the full profile's run count, so a verdict survives its Monte-Carlo error
         assert {b["profile"] for b in load_bracket(points_csv.parent)} <= {"full"}, points_csv
         assert (points_csv.parent / "values.csv").is_file(), points_csv
 
 
 def test_no_outside_row_rests_on_a_margin_monte_carlo_error_could_close(rows):
-    """Issue 45: an outside row names its margin, and the printed value clears it."""
+    """An outside row names its margin, and the printed value clears it."""
     folder = FULL.parent / "brackets"
     for bracket_csv in sorted(folder.glob("*/bracket.csv")):
         for b in load_bracket(bracket_csv.parent):
@@ -107,7 +107,7 @@ def test_no_outside_row_rests_on_a_margin_monte_carlo_error_could_close(rows):
 
 
 def test_every_experiment_with_compared_numbers_gets_printed_versus_ours_figures(rows):
-    """Issue 32: an experiment page shows, per printed table, ours against printed: one point per scored number (a
+    """An experiment page shows, per printed table, ours against printed: one point per scored number (a
     reproduction or calibrated row with a verdict, repeats left out), in its verdict's class; an experiment with such
     rows gets at least one figure, one without gets none. The count is the scoreboard's, not the figure code's."""
     import re
@@ -133,7 +133,7 @@ def test_every_experiment_with_compared_numbers_gets_printed_versus_ours_figures
 
 
 def test_the_index_opens_with_findings_generated_from_the_rows(rows):
-    """Issue 32: per document, a few sentences from its rows: the counts of the scoreboard and the notes of the most
+    """Per document, a few sentences from its rows: the counts of the scoreboard and the notes of the most
     missed rows."""
     from collections import Counter
 
@@ -154,7 +154,7 @@ def test_the_index_opens_with_findings_generated_from_the_rows(rows):
 
 
 def test_a_pages_repeated_notes_are_shown_once_and_every_reference_resolves(rows):
-    """Issue 32: the windows' bases and the notes, repeated on every row, are numbered once below the table; each
+    """The windows' bases and the notes, repeated on every row, are numbered once below the table; each
     cell links to its note, long ones folded."""
     import re
 

@@ -159,7 +159,7 @@ def test_ozkaya_settling_reading_moves_with_the_tolerance_as_counted_by_hand():
 
 
 def test_index_cells_are_shaded_by_the_share_of_each_verdict():
-    """Issue 32: 120 within and 15 missed shades a cell 88.9 % green and 11.1 % red, not solid red."""
+    """120 within and 15 missed shades a cell 88.9 % green and 11.1 % red, not solid red."""
     from collections import Counter
 
     from locbook.suite.pages import verdict_shares as _shares

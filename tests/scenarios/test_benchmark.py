@@ -1,4 +1,4 @@
-"""The cross-document benchmark (issue 16) and the library pieces it added: the Fisher information of the anchors
+"""The cross-document benchmark and the library pieces it added: the Fisher information of the anchors
 heard, the particle filter's Gaussian start, per-reader sigma in the grid/particle likelihood. Checked against
 closed forms, scipy and an independent covariance-form Kalman recursion."""
 from dataclasses import replace

@@ -1,4 +1,4 @@
-"""The NIS guard's divergence flags reach the scenarios' callers (issue 26): every scenario function that runs a
+"""The NIS guard's divergence flags reach the scenarios' callers: every scenario function that runs a
 Kalman-family filter returns the per-run flags on request, combined correctly where it filters a subset of runs or
 in segments, and the notebooks' summary helpers count them.
 

@@ -236,7 +236,7 @@ def test_readings_summary_counts_fusion_cells_within_the_tolerance_per_reading()
         dg.readings_summary(rows, variants, "chosen", ["A"], tolerance=20)
 
 
-# -- readings opened as notebook parameters (issue 28) --------------------------------------------------------------
+# -- readings opened as notebook parameters --------------------------------------------------------------
 def test_mle_bounds_room_projects_the_fix_onto_the_room():
     """'room': every fix inside the room inset by MLE_ROOM_INSET_M (off the corner anchors); a fix the unconstrained MLE
     put there is unchanged, one outside moves to the nearest point of that box (no point of a 1 cm grid over it is

@@ -132,7 +132,7 @@ def test_the_default_reading_is_eq_3_24s_constant_q_for_any_sigma_acc(sigma_acc)
 
 
 def test_calibrated_from_text_names_exactly_the_readings_fitted_to_output():
-    """Issue 45's rule for the four (start, noise reading) pairs: rest + printed is the text's own reading (no
+    """The basis rule for the four (start, noise reading) pairs: rest + printed is the text's own reading (no
     calibration); the moving start, which no text supports, is fitted with the speed fitted to Fig. 3.2 under it,
     'sigma_acc' the Q fitted to Table 3.9, and both together name both; under another speed the moving start is still
     fitted (the speed itself is then an assumption)."""

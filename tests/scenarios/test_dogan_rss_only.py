@@ -1,4 +1,4 @@
-"""The ONLY-RSS filters' step (issue 45, reading ``rss_only_step`` of locbook/data/readings/dogan2015.csv): under
+"""The ONLY-RSS filters' step (the reading ``rss_only_step`` of locbook/data/readings/dogan2015.csv): under
 ``"rss_rate"`` they predict once per RSS period with Q of Eq. (3.24), under ``"imu_rate"`` ten times on the 20 Hz grid.
 Checked against closed forms: the KF's covariance after one RSS period, and the PCRLB's information over the steps
 without RSS; the fused filters do not depend on the reading."""

@@ -104,7 +104,7 @@ def test_the_setup_agrees_with_the_numbers_the_paper_prints():
 
 
 def test_no_george_default_is_fitted_and_the_fitted_sigma_is_only_an_alternative():
-    # issue 45: 1.83 dB was chosen from the printed C without filter; the default is the assumed sigma
+    # 1.83 dB was chosen from the printed C without filter; the default is the assumed sigma
     from locbook.reproduce.readings import readings
     rows = {r.name: r for r in readings("george")}
     assert all(r.basis != "fitted" for r in rows.values())
@@ -117,7 +117,7 @@ def test_no_george_default_is_fitted_and_the_fitted_sigma_is_only_an_alternative
 
 
 def test_track_with_kalman_old_standard_variant_warns_at_the_caller_and_gives_the_same_numbers():
-    """``variant="standard"`` (before issue 47) is ``"corrected"`` for one release."""
+    """``variant="standard"`` (the earlier keyword) is ``"corrected"`` for one release."""
     truth = george.trajectory_m("centerline")
     fixes = truth + np.random.default_rng(2).standard_normal((4,) + truth.shape)
     with pytest.warns(DeprecationWarning, match=r"track_with_kalman\(variant='standard'\) is deprecated: use "

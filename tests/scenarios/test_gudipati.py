@@ -161,7 +161,7 @@ def test_printed_sign_stream_jacobian_and_the_ins_drift_covariance():
     np.testing.assert_allclose(z, ref_z)
 
 
-# -- the readings opened as notebook parameters (issue 28) -----------------------------------------------------------
+# -- the readings opened as notebook parameters -----------------------------------------------------------
 
 def test_anchor_layouts_place_16_and_17_at_the_wall_midpoints_and_the_walk_uses_them():
     L, W = gu.ROOM_M
@@ -262,7 +262,7 @@ def test_imu_frame_world_takes_the_readings_as_world_accelerations():
     assert not np.allclose(gu.inertial_only(replace(body, gyro_rad_s=body.gyro_rad_s + 0.3)), gu.inertial_only(body))
 
 
-# -- issue 45: the readings under the rule, the path geometry and the filter step ------------------------------------
+# -- the readings under the rule, the path geometry and the filter step ------------------------------------
 
 def test_no_gudipati_default_is_fitted_and_the_fitted_shadowing_is_an_alternative():
     from locbook.reproduce.readings import readings
@@ -317,7 +317,7 @@ def test_the_default_filter_step_is_one_step_per_report_point(speed):
 
 
 def test_track_old_ukf_weights_keyword_warns_at_the_caller_and_gives_the_same_numbers():
-    """``ukf_weights=`` (before issue 47) is ``ukf_variant=`` for one release."""
+    """``ukf_weights=`` (the earlier keyword) is ``ukf_variant=`` for one release."""
     w = gu.simulate_walk("linear", 4, gu.WalkSettings(), 1, np.random.default_rng(8))
     with pytest.warns(DeprecationWarning, match=r"track\(ukf_weights='corrected'\) is deprecated: use "
                                                 r"track\(ukf_variant='corrected'\)") as caught:

@@ -1,5 +1,5 @@
 """The Ozkaya (2011) simulation readings (locbook/data/readings/ozkaya2011.csv) as library options: each alternative
-checked against what it means (an independent computation or an invariant). Issue 45: every default is the reading the
+checked against what it means (an independent computation or an invariant). Every default is the reading the
 text supports best (the readings file quotes it); only the values no text supports and that were chosen because they fit
 (the CRLB columns' n = 2 and mean over the cells) are ``fitted``, and only rows computed under them are calibrated."""
 from dataclasses import replace
@@ -36,7 +36,7 @@ def _numpy_statistics(sample):
 
 
 def test_all_five_statistics_come_from_one_population_under_each_protocol(per_step):
-    """Issue 45: the text computes every statistic 'from total estimation error data'. The fixture's recursions
+    """The text computes every statistic 'from total estimation error data'. The fixture's recursions
     differ (the error falls by 1 m over the run), so the errors at rt and those of every recursion give different
     statistics: each protocol must take all five from its own sample."""
     at_rt, every = per_step[:, -1], per_step.ravel()
@@ -169,7 +169,7 @@ def test_every_simulation_reading_is_declared_with_the_librarys_values():
     for name, values in oz.SIM_READINGS.items():
         r = declared[name]
         # every declared value is one the library knows; library options the text does not support (the per-run
-        # percentile conventions, 1 m in from the walls outside Table 7.22) are not declared (issue 45)
+        # percentile conventions, 1 m in from the walls outside Table 7.22) are not declared
         assert r.parameter == name and r.default == values[0] and set(r.values) <= set(values)
         assert set(r.values) == set(values) or name in ("percentile_convention", "target_sampling")
     assert declared["percentile_convention"].values == ("pooled",)
@@ -177,7 +177,7 @@ def test_every_simulation_reading_is_declared_with_the_librarys_values():
     assert set(declared["crlb_average"].values) == {"cells_mean", "area_rms"}
 
 
-# -- the rule for a reading's basis (issue 45) ----------------------------------------------------------------------
+# -- the rule for a reading's basis ----------------------------------------------------------------------
 def test_no_default_is_fitted_and_fitted_values_are_the_library_s():
     declared = {r.name: r for r in readings("ozkaya2011")}
     assert not any(r.is_calibration for r in declared.values())           # no default may be fitted
@@ -287,7 +287,7 @@ def test_rows_under_the_default_readings_are_reproductions_and_misses_name_the_a
     assert misses and all("locbook bracket ozkaya2011-nn-sim" in r["note"] for r in misses)
 
 
-# -- the readings declared for issue 45 -------------------------------------------------------------------------
+# -- the readings declared with a basis -------------------------------------------------------------------------
 def test_frozen_noise_cannot_be_averaged_away_while_fresh_noise_can():
     """Without noise the grid filter settles on a fixed target; with the noise frozen per run its error stays that of
     one noisy measurement, larger than under fresh noise, which the recursions average (the invariant that makes the

@@ -238,7 +238,7 @@ def test_testbed_crlb_fitted_form_is_the_printed_form_bound_averaged_over_the_ce
 
 
 def test_testbed_crlb_default_is_the_rms_over_the_area_with_table_6_1_exponents():
-    """Issue 45: the default bound is that of 'the experimented system setup' (Table 6.1's n per reader) as the RMS
+    """The default bound is that of 'the experimented system setup' (Table 6.1's n per reader) as the RMS
     over the area (Appendix A compares it with RMS errors), not the readings fitted to the simulation columns."""
     assert tb.TESTBED_CRLB_PATH_LOSS_EXP == tuple(lb.printed("ozkaya2011").get("Table 6.1", f"Reader {j}",
                                                                                 "path_loss_exp").value for j in (1, 2, 3))
@@ -334,7 +334,7 @@ def test_a_repeat_printed_with_another_text_is_compared_and_says_so(tmp_path, mo
 
 @pytest.mark.parametrize("old, new", [("correct", "corrected"), ("ozkaya_printed", "literal_ozkaya2011")])
 def test_testbed_crlb_old_form_keyword_warns_at_the_caller_and_gives_the_same_number(old, new):
-    """``form=`` (before issue 47) is ``variant=`` for one release, its values mapped."""
+    """``form=`` (the earlier keyword) is ``variant=`` for one release, its values mapped."""
     with pytest.warns(DeprecationWarning, match=fr"testbed_crlb_m\(form='{old}'\) is deprecated: use "
                                                 fr"testbed_crlb_m\(variant='{new}'\)") as caught:
         got = tb.testbed_crlb_m(2.0, form=old, average="cells_mean")

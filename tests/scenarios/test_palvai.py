@@ -55,7 +55,7 @@ def test_particle_filter_schedules_run_and_concentrate(schedule):
         pv.pf_run(setup, loc, z, rng, n_particles=10, n_iterations=21, schedule="sequential")
 
 
-# -- the readings opened as notebook parameters (issue 28) ---------------------------------------------------------
+# -- the readings opened as notebook parameters ---------------------------------------------------------
 def test_area_centre_draws_nothing_and_uniform_per_run_draws_one_target_per_run_inside_the_area():
     setup = pv.Setup(dim=3)
     rng = np.random.default_rng(7)
@@ -161,7 +161,7 @@ def test_the_sequential_schedule_runs_one_iteration_per_location_and_the_others_
 
 
 def test_fig7_default_exact_locations_without_shadowing_give_the_exact_batch_fix():
-    # issue 45: Fig. 7 is Fig. 8 without shadowing, with the locations known exactly (Sec. 2.6): the differenced
+    # Fig. 7 is Fig. 8 without shadowing, with the locations known exactly (Sec. 2.6): the differenced
     # system of Eqs. (2.27)-(2.29) is then consistent and its least-squares solution is the target itself
     rng = np.random.default_rng(3)
     setup = pv.Setup(dim=3, sigma_db=0.0, receiver_sigma_m=0.0)

@@ -1,4 +1,4 @@
-"""Your own method beside the battery (issue 48): registered in the manifest (``[[method]]``) or on the command line
+"""Your own method beside the battery: registered in the manifest (``[[method]]``) or on the command line
 (``--method`` / ``--tracker``), run on the same epochs as the battery, scored by the same rows and bound, and failing
 alone.
 

@@ -1,4 +1,4 @@
-"""Exact solvers for the small bounded least-squares problems (issue 18).
+"""Exact solvers for the small bounded least-squares problems.
 
 - :func:`lb.lateration_box_ls` (``solver="exact"``, the default): KKT active-set enumeration, vectorized over
   problems, 2-D and 3-D;

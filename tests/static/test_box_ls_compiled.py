@@ -1,4 +1,4 @@
-"""The compiled box-LS search (issue 31: box-LS within 2x of the closed-form linear LS).
+"""The compiled box-LS search (the aim: box-LS within 2x of the closed-form linear LS).
 
 :func:`locbook.static._box_kernels._nb_box_ls` runs the KKT active-set search of
 :func:`locbook.static.box_ls._box_active_set_search` problem by problem in numba. It must give the numpy

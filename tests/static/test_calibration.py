@@ -1,5 +1,5 @@
 """Path-loss fitting (closed form by default, cvxpy for bounded and robust fits, status reported),
-channel input checks and canonical seeds (issue 12).
+channel input checks and canonical seeds.
 
 Independent oracles: numpy's lstsq, scipy's least_squares with its Huber loss (the same function as cvxpy's
 huber: r^2 within delta, 2 delta |r| - delta^2 beyond), closed-form facts about float encodings.
@@ -345,7 +345,7 @@ def test_ozkaya_setting_streams_are_keyed_by_values_not_their_spelling():
     assert entropy(base) == [2011, lb.seed_from_values({f: getattr(base, f) for f in ozs._TRUTH_FIELDS} | {"steps": base.rt})]
 
 
-# --- issue 26, items 9 and 10: a fit's batch is isolated; an empty batch is an empty answer in every mode ---------
+# --- a fit's batch is isolated; an empty batch is an empty answer in every mode ---------
 FIT_MODES = {
     "closed_form": {},
     "exact": {"path_loss_exp_bounds": (1.5, 2.2)},

@@ -1,4 +1,4 @@
-"""Issue 47, stage 2: the static RSS estimators take the readings first, then the one RSS model (:class:`locbook.RssModel`:
+"""Stage 2: the static RSS estimators take the readings first, then the one RSS model (:class:`locbook.RssModel`:
 anchors, channel, tag height, walls), then keyword-only options. The forms before it (anchors, readings, a
 PathLossModel, ``tag_height_m=``; ``grid_m=``) stay one release: one DeprecationWarning each, naming the new call and
 attributed to the caller's line, and the same numbers bit for bit. What an estimator cannot honour in a model is refused

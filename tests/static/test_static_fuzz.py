@@ -1,4 +1,4 @@
-"""Property-based fuzzing of every public static estimator and calibration fit (issue 26).
+"""Property-based fuzzing of every public static estimator and calibration fit.
 
 Inputs: NaN, +-inf, huge (1e300), tiny (1e-300) and +500 dBm values; one, two, collinear, nearly collinear and
 coincident anchors; layouts scaled to 1e-300 and 1e300; empty batches; int and float32 dtypes; non-contiguous
@@ -46,7 +46,7 @@ MODEL = lb.PathLossModel(-45.0, 2.2, 3.0)
 EXTRA_NAMES = ("model.ref_power_dbm", "model.path_loss_exp", "model.sigma_db")
 
 
-#: ValueErrors that name no argument of the function they come from (none left: issue 26 follow-up named them)
+#: ValueErrors that name no argument of the function they come from (none left: each now names its argument)
 KNOWN_UNNAMED: dict[str, str] = {}
 
 
@@ -534,7 +534,7 @@ def test_messages_found_naming_no_argument_now_name_one(case):
     assert names_an_argument(str(info.value), tuple(inspect.signature(fn).parameters) + EXTRA_NAMES), str(info.value)
 
 
-# -- issue 44, item 6: a masked reading is a reading not heard ---------------------------------------------------------
+# -- a masked reading is a reading not heard ---------------------------------------------------------
 MASK_ANCHORS = np.array([[0.0, 0.0], [20.0, 0.0], [0.0, 20.0], [20.0, 20.0], [10.0, -5.0]])
 MASK_GRID = np.stack(np.meshgrid(np.arange(0.0, 20.5, 1.0), np.arange(0.0, 20.5, 1.0)), -1).reshape(-1, 2)
 MASK_ESTIMATORS = {

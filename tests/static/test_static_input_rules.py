@@ -1,4 +1,4 @@
-"""The missing-reading rule and input checks of the static estimators (issue 12).
+"""The missing-reading rule and input checks of the static estimators.
 
 Independent facts used: a problem with a missing anchor equals the same estimator run on the heard anchors
 only; problems of a batch are independent, so a NaN in one (or a failure in one) leaves the others bit-identical;
@@ -461,7 +461,7 @@ def test_property_box_random_masks(mask):
             and np.all(res.position_m[i] <= np.array(BOX[1]) + 1e-7)
 
 
-# -- issue 26, item 7: no confident answer from garbage ----------------------------------------------------------
+# -- no confident answer from garbage ----------------------------------------------------------
 SQUARE = np.array([[0.0, 0.0], [10.0, 0.0], [0.0, 10.0], [10.0, 10.0]])
 SQUARE_MODEL = lb.PathLossModel(-40.0, 2.0, 4.0)
 
@@ -597,7 +597,7 @@ def test_a_single_overflowing_range_gives_nan_not_infinity(name):
     assert res.status == "solver_failed" and not res.converged and np.isnan(res.position_m).all()
 
 
-# -- issue 26 follow-up: readings impossible together, a goodness-of-fit status ----------------------------------
+# -- readings impossible together, a goodness-of-fit status ----------------------------------
 SQUARE_GRID = np.stack(np.meshgrid(np.arange(0, 10.25, 0.25), np.arange(0, 10.25, 0.25)), -1).reshape(-1, 2)
 ML_ESTIMATORS = {"ml": lambda a, p, model, **kw: lb.rss_ml_position(p, lb.RssModel(a, model), **kw),
                  "grid": lambda a, p, model, **kw: lb.grid_ml_position(p, lb.RssModel(a, model), SQUARE_GRID, **kw)}

@@ -1,4 +1,4 @@
-"""Issue 44, round 4: the aggregates of studies and brackets (study.csv, bracket.csv, the index and numbers.csv) never
+"""The aggregates of studies and brackets (study.csv, bracket.csv, the index and numbers.csv) never
 hold less than before because a run was interrupted, failed or ran partially; reader errors of study, suite and
 readings files are one line (exit status 2); studies too large to run are refused before anything is drawn; study
 points have collision-free keys and one folder per declaration; the Markdown writers show HTML as text.
@@ -18,9 +18,6 @@ from pathlib import Path
 import nbformat
 import pytest
 from nbformat.v4 import new_notebook
-from test_bracket import HEADER, READINGS
-from test_run import toy  # noqa: F401
-from test_study import stoy  # noqa: F401  (a fixture: the toy repository with george-study, quick seed = 3)
 
 from locbook.reproduce.readings import ReadingsError, load_reading_file
 from locbook.reproduce.report import NUMBER_COLUMNS, Table
@@ -37,6 +34,7 @@ from locbook.suite.cli import main
 from locbook.suite.findings import findings_markdown
 from locbook.suite.runner import Outcome, SuiteRun, cache_key
 from locbook.suite.study import expand_study, load_studies, load_study, study_folder, write_study_outputs
+from toy_suite import HEADER, READINGS
 
 INTERRUPTED = f"interrupted by {signal.SIGINT.name}"
 

@@ -5,10 +5,8 @@ import csv
 import textwrap
 
 import pytest
-from test_run import toy  # noqa: F401
-from test_study import stoy  # noqa: F401  (a fixture: the toy repository with george-study, quick seed = 3)
 
-from locbook.reproduce.readings import READING_COLUMNS, load_reading_file, readings_for
+from locbook.reproduce.readings import load_reading_file, readings_for
 from locbook.suite import SuiteError, load_suite
 from locbook.suite.bracket import (
     BRACKET_COLUMNS,
@@ -21,13 +19,8 @@ from locbook.suite.bracket import (
     find_experiment,
 )
 from locbook.suite.cli import main
+from toy_suite import HEADER, READINGS
 
-HEADER = ",".join(c for c in READING_COLUMNS if c != "quotes")   # a file without quotes loads
-#: a = 1.3 gives value 16.0 (printed, within); b never reaches value; twice's window is always loose
-READINGS = f"""{HEADER}
-slope,george-study,a,,1.0,[1.3],,0.0,2.0,assumed,Table 9,toy slope
-offset,george-study,b,,0.0,[0.5],,,,printed,Table 9,toy offset
-"""
 OFFSET_ONLY = f"""{HEADER}
 offset,george-study,b,,0.0,[0.5],,,,printed,Table 9,toy offset
 """
@@ -80,7 +73,7 @@ def test_a_value_equal_to_the_profile_is_not_run_twice_and_shared_values_share_a
 
 def test_a_shared_point_keeps_its_own_key_when_a_later_reading_names_it_again(stoy, tmp_path):
     # 'same' names a = 2.0, which 'slope' made its first alternative point, not its last: the merged point must keep
-    # its own folder (key), not the key of the point appended last (review of issue 44: two points shared a folder)
+    # its own folder (key), not the key of the point appended last (found in review: two points shared a folder)
     exp = find_experiment(_suite(stoy), "george-study")
     text = f"{HEADER}\nslope,george-study,a,,1.0,\"[2.0, 1.3]\",,,,assumed,s,r\nsame,george-study,a,,,[2.0],,,,assumed,s,r\n"
     points = bracket_points(exp, "quick", load_reading_file(_readings(tmp_path, text)))
@@ -441,7 +434,7 @@ def test_a_reading_that_requires_another_value_runs_each_of_its_values_with_it(s
 
 def test_a_reading_with_requires_keeps_its_own_default_run_in_the_range_check(stoy, tmp_path):
     """The default value under what a reading requires runs on a point shared with the reading that sets only
-    that value; the range check must see it there (review of issue 28): 10 a + 3 misses 16 at a = 0.5 (8) and
+    that value; the range check must see it there (found in review: ): 10 a + 3 misses 16 at a = 0.5 (8) and
     at a = 1.0 under tag p (here 20 by hand), straddling it: open, not outside."""
     text = (f"{HEADER},requires\nlabel,george-study,tag,,'x',['p'],,,,assumed,s,r,\n"
             f"slope_p,george-study,a,,1.0,,,0.5,1.0,assumed,s,r,{{ tag = 'p' }}\n")
@@ -479,7 +472,7 @@ def test_a_bracket_setting_a_profile_sets_is_refused(stoy, tmp_path):
         bracket_points(exp, "quick", load_reading_file(_readings(tmp_path, OFFSET_ONLY)))
 
 
-# -- issue 45: tiers, combinations, Monte-Carlo margins, implausible values -------------------------------------
+# -- tiers, combinations, Monte-Carlo margins, implausible values -------------------------------------
 
 def test_the_factorial_runs_every_combination_of_the_textual_values(stoy, tmp_path):
     # a = 1.0 (default) or 1.3 (textual) or 2.0 (fitted); b = 0.0 or 0.5: the fitted value is never combined
@@ -559,7 +552,7 @@ def test_an_implausible_value_is_named_and_left_out_of_the_band(stoy, tmp_path):
 
 
 def test_an_implausible_default_run_neither_hides_a_reading_nor_makes_a_crossing(stoy, tmp_path):
-    """Review of issue 45: the default run being implausible must not drop the first other reading, and an
+    """Found in review: the default run being implausible must not drop the first other reading, and an
     implausible range end must not make the row open by 'straddling' the printed value."""
     suite = _with_bracket_table(stoy, '[experiment.bracket]\nlargest_error_m = 9.43\nlargest_error_reason = "room"\n')
     exp = find_experiment(suite, "george-study")

@@ -1,5 +1,5 @@
 """Property-based fuzzing of the declarations a user writes: studies (``[[study]]`` TOML) and reading brackets
-(readings CSV files) (issue 44, the house style of tests/test_fuzz_static.py).
+(readings CSV files) (the house style of tests/static/test_static_fuzz.py).
 
 Inputs: study tables with every key of the schema, each given a value of a plausible or a wrong type (numbers,
 NaN, +-inf, 10^9 and 2^70 sizes, strings, booleans, arrays, tables, empty ones), unknown keys and samplers, grids,
@@ -33,6 +33,7 @@ from locbook.suite import SuiteError, load_suite
 from locbook.suite import study as study_module
 from locbook.suite.bracket import bracket_points, experiment_readings, find_experiment
 from locbook.suite.study import expand_study, load_studies
+from toy_suite import _notebook
 
 pytestmark = pytest.mark.fuzz
 
@@ -74,7 +75,6 @@ notebook = "fuzz.ipynb"
 
 @pytest.fixture(scope="module")
 def repo(tmp_path_factory):
-    from test_run import _notebook
     root = tmp_path_factory.mktemp("fuzz-declarations")
     (root / "notebooks").mkdir()
     _notebook(root / "notebooks" / "fuzz.ipynb", PARAMS, body="x = 1\n")

@@ -1,4 +1,4 @@
-"""One tally everywhere (issue 45): the findings pages, numbers.csv and the index of a reports folder give the same
+"""One tally everywhere: the findings pages, numbers.csv and the index of a reports folder give the same
 tier counts, read back from the files themselves."""
 import csv
 import re

@@ -1,4 +1,4 @@
-"""Issue 32: the executed notebook's HTML page needs nothing from the network: its math is drawn to SVG by matplotlib's
+"""The executed notebook's HTML page needs nothing from the network: its math is drawn to SVG by matplotlib's
 mathtext (the TeX kept as the image's alt text), and the page loads no script from a CDN (nbconvert's lab template
 loads MathJax, require.js and mermaid from cdnjs)."""
 import base64

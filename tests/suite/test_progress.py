@@ -5,10 +5,10 @@ import io
 import json
 
 import pytest
-from test_run import run, set_profile, toy  # noqa: F401  (toy is a fixture)
 
 from locbook.suite import load_suite, run_suite
 from locbook.suite.progress import LiveProgress, make_progress
+from toy_suite import run, set_profile
 
 pytestmark = pytest.mark.notebooks
 
@@ -109,7 +109,7 @@ def test_suite_option_after_the_command_and_a_malformed_scheduler(toy, capsys):
 
 
 def test_the_live_view_keeps_the_running_clock_at_the_finish(monkeypatch):
-    """Issue 32: a row showed 35 s while running and then 22 s (the notebook's own execution time, without the
+    """A row showed 35 s while running and then 22 s (the notebook's own execution time, without the
     worker and kernel start and the export); its clock now stops where it was."""
     import locbook.suite.progress as progress
     from locbook.suite.runner import Outcome

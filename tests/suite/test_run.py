@@ -8,103 +8,18 @@ import json
 import os
 import signal
 import subprocess
-import sys
-import textwrap
 import time
 from pathlib import Path
 
-import nbformat
-import psutil
 import pytest
-from nbformat.v4 import new_code_cell, new_notebook
 
 from locbook.errors import ParameterError
 from locbook.suite import SuiteError, load_suite, read_parameters, run_suite
 from locbook.suite.cli import main
 from locbook.suite.runner import _validate_report
+from toy_suite import GOOD, PARAMS, _notebook, alive, cli, processes_mentioning, run, set_profile, wait_for
 
 pytestmark = pytest.mark.notebooks   # these tests execute (toy) notebooks with papermill
-
-GOOD = """\
-import os, time
-import numpy as np
-import locbook as lb
-report = lb.Report("toy")
-offset = float(open("../../shared/data/offset.csv").read().split()[-1]) if read_data else 0.0
-x = lb.streams(seed, "a")["a"].normal(size=n)
-printed = lb.Printed("george", "Table 1", "mean", "", "", repr(offset))
-report.number("mean", printed, float(x.mean()) + offset, kind="reproduction",
-              ambiguity=lb.Ambiguity(1.0, "test window", "toy Sec. 1"))
-time.sleep(sleep_s)
-if kill_worker:
-    os.kill(os.getppid(), 9)          # the kernel's parent is the worker process: simulate an OOM kill
-if fail:
-    raise RuntimeError("deliberate failure")
-"""
-
-
-def _notebook(path, params_src, body=GOOD):
-    nb = new_notebook()
-    nb.metadata["kernelspec"] = {"name": "python3", "display_name": "Python 3", "language": "python"}
-    params = new_code_cell(params_src)
-    params.metadata["tags"] = ["parameters"]
-    nb.cells = [new_code_cell("from typing import Literal"), params, new_code_cell(body)]
-    nbformat.write(nb, str(path))
-
-
-PARAMS = ('seed: int = 1  # seed\nn: int = 10  # samples\nfail: bool = False  # raise\n'
-          'mode: Literal["a", "b"] = "a"  # a mode\nsleep_s: float = 0.0  # wait\n'
-          'kill_worker: bool = False  # die\nread_data: bool = False  # read ../shared/data/offset.csv\n'
-          'weights: list[float] = [1.0]  # a list\n')
-
-
-@pytest.fixture
-def toy(tmp_path):
-    """A repository at tmp_path/repo with two toy notebooks, and tmp_path/shared/data beside it."""
-    (tmp_path / "shared" / "data").mkdir(parents=True)
-    (tmp_path / "shared" / "data" / "offset.csv").write_text("offset\n0.0\n")
-    tmp_path = tmp_path / "repo"
-    nbdir = tmp_path / "notebooks"
-    nbdir.mkdir(parents=True)
-    # a clone: notebooks/ beside a locbook package, so the suite knows its repository (git checks, default reports)
-    (tmp_path / "locbook").mkdir()
-    (tmp_path / "locbook" / "__init__.py").write_text("")
-    params = PARAMS
-    _notebook(nbdir / "one.ipynb", params)
-    _notebook(nbdir / "two.ipynb", params)
-    (nbdir / "experiments.toml").write_text(textwrap.dedent("""
-        [documents.george]
-        title = "t"
-        authors = "a"
-        year = "2015"
-        source = "s"
-        [[experiment]]
-        id = "george-one"
-        document = "george"
-        title = "one"
-        section = "Table 1"
-        notebook = "one.ipynb"
-        [experiment.profiles.quick]
-        n = 5
-        [experiment.profiles.full]
-        n = 50
-        [[experiment]]
-        id = "george-two"
-        document = "george"
-        title = "two"
-        section = "Table 2"
-        notebook = "two.ipynb"
-        [experiment.profiles.quick]
-        [experiment.profiles.full]
-        [parameter_rules]
-        n = { ge = 1 }
-        sleep_s = { ge = 0 }
-        """))
-    return tmp_path
-
-
-def run(toy, *args):
-    return main(["--suite", str(toy / "notebooks" / "experiments.toml"), "run", "--reports", str(toy / "reports"), *args])
 
 
 def test_parameters_are_read_with_types(toy):
@@ -148,7 +63,7 @@ def test_bad_parameter_stops_before_execution(toy, capsys, override, message):
 
 
 def test_a_parameter_on_several_experiments_goes_to_those_that_declare_it(toy, capsys):
-    """Issue 32: `locbook run george -p NAME=VALUE` where only some of the selected experiments declare NAME runs
+    """`locbook run george -p NAME=VALUE` where only some of the selected experiments declare NAME runs
     those with it and says which were left out; a name none declares is refused before anything runs."""
     nb = toy / "notebooks" / "two.ipynb"
     _notebook(nb, PARAMS.replace("weights: list[float] = [1.0]  # a list\n", ""))     # george-two: no `weights`
@@ -220,71 +135,6 @@ def test_cli_values_are_toml(toy):
     values = exp.parameters("quick", {"weights": "[0.1, 2]", "sleep_s": "3", "mode": "b", "fail": "true"})
     assert values == {"n": 5, "weights": [0.1, 2.0], "sleep_s": 3.0, "mode": "b", "fail": True}
     assert type(values["sleep_s"]) is float and type(values["weights"][1]) is float
-
-
-# -- processes: concurrency, data files, dying workers, signals --------------------------------------------
-def cli(toy, *args):
-    return subprocess.Popen([sys.executable, "-m", "locbook.suite.cli", "--suite", str(toy / "notebooks" / "experiments.toml"),
-                             "run", "--reports", str(toy / "reports"), *args],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-
-
-def processes_mentioning(text: str) -> dict[int, str]:
-    """Live processes whose command line or environment mentions ``text`` (the runner and its workers carry the
-    toy's paths; kernels inherit LOCBOOK_OUTPUT_DIR), and all their descendants."""
-    chosen = {}
-    for proc in psutil.process_iter():
-        if proc.pid == os.getpid():
-            continue
-        try:
-            if proc.status() == psutil.STATUS_ZOMBIE:
-                continue
-            cmd = " ".join(proc.cmdline())
-            if text in cmd or any(text in v for v in proc.environ().values()):
-                chosen[proc.pid] = proc
-        except psutil.Error:          # gone, or not ours to read
-            continue
-    for proc in list(chosen.values()):
-        try:
-            chosen.update({c.pid: c for c in proc.children(recursive=True) if c.status() != psutil.STATUS_ZOMBIE})
-        except psutil.Error:
-            pass
-    out = {}
-    for pid, proc in sorted(chosen.items()):
-        try:
-            out[pid] = " ".join(proc.cmdline())
-        except psutil.Error:
-            pass
-    return out
-
-
-def alive(pids) -> list[int]:
-    """The pids of ``pids`` still running (zombies count as gone)."""
-    out = []
-    for pid in pids:
-        try:
-            if psutil.Process(pid).status() != psutil.STATUS_ZOMBIE:
-                out.append(pid)
-        except psutil.Error:
-            pass
-    return out
-
-
-def wait_for(predicate, timeout_s: float):
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if predicate():
-            return True
-        time.sleep(0.1)
-    return predicate()
-
-
-def set_profile(toy, experiment: str, text: str):
-    toml = toy / "notebooks" / "experiments.toml"
-    marker = f'id = "{experiment}"'
-    head, tail = toml.read_text().split(marker)
-    tail = tail.replace("[experiment.profiles.quick]\n", "[experiment.profiles.quick]\n" + text + "\n", 1)
-    toml.write_text(head + marker + tail)
 
 
 def test_concurrent_runs_leave_every_report_complete(toy):
@@ -511,7 +361,7 @@ def test_the_kernel_runs_blas_on_one_thread(toy, tmp_path):
 
 
 def test_the_longest_experiments_are_launched_first(tmp_path):
-    """Launch order (issue 31): the last run times in this folder, longest first; an experiment this folder never
+    """Launch order: the last run times in this folder, longest first; an experiment this folder never
     timed takes the other profile's time; one never timed anywhere goes first; ties keep the suite's order."""
     from locbook.suite.runner import _longest_first
 

@@ -1,4 +1,4 @@
-"""Failures that adversarial use of the suite found (issue 26): relative report paths, corrupt cached reports,
+"""Failures that adversarial use of the suite found: relative report paths, corrupt cached reports,
 a lost Dask scheduler, a full disk, raw parameter values in report.md and file modes. Runs on the toy suite of
 tests/test_suite.py."""
 import csv
@@ -12,10 +12,10 @@ from pathlib import Path
 from types import SimpleNamespace
 
 import pytest
-from test_run import alive, processes_mentioning, run, set_profile, toy, wait_for  # noqa: F401 (toy: fixture)
 
 from locbook.suite import executors, load_suite, run_suite
 from locbook.suite.cli import main
+from toy_suite import GOOD, PARAMS, _notebook, alive, processes_mentioning, run, set_profile, wait_for
 
 pytestmark = pytest.mark.notebooks
 
@@ -31,7 +31,7 @@ def _suite_args(toy):
     return ["--suite", str(toy / "notebooks" / "experiments.toml")]
 
 
-# -- item 1: relative --reports / --out ---------------------------------------------------------------------
+# -- relative --reports / --out ---------------------------------------------------------------------
 
 def test_relative_reports_and_out_folders_work_from_any_cwd(toy, tmp_path, monkeypatch, capsys):
     work = tmp_path / "elsewhere"
@@ -51,7 +51,7 @@ def test_relative_reports_and_out_folders_work_from_any_cwd(toy, tmp_path, monke
     assert result.report_dir.is_absolute() and result.count("ok") == 1, result.outcomes
 
 
-# -- item 3: corrupt cached reports are not cached ----------------------------------------------------------
+# -- corrupt cached reports are not cached ----------------------------------------------------------
 
 def test_non_utf8_numbers_csv_is_not_served_and_does_not_crash_the_run(toy, capsys):
     assert run(toy) == 0
@@ -92,13 +92,12 @@ def test_a_corrupt_report_json_is_not_served_as_cached(toy, capsys, damage):
     assert record["experiment"] == "george-one"
 
 
-# -- item 12: report.md escapes parameter values; kernel-stderr.log is not executable ----------------------
+# -- report.md escapes parameter values; kernel-stderr.log is not executable ----------------------
 
 STRING_PARAM = 'label: str = "plain"  # free text\n'
 
 
 def test_string_parameters_are_escaped_in_report_md(toy):
-    from test_run import PARAMS, _notebook
     _notebook(toy / "notebooks" / "one.ipynb", PARAMS + STRING_PARAM)
     payload = "<script>alert(1)</script><img src=x onerror=alert(2)>&amp;"
     assert run(toy, "george-one", "-p", f"label={json.dumps(payload)}") == 0
@@ -121,7 +120,7 @@ def test_kernel_stderr_log_has_the_mode_of_the_other_report_files(toy):
     assert mode("kernel-stderr.log") == mode("numbers.csv") == mode("report.md") == 0o644
 
 
-# -- item 5: a lost Dask scheduler stops the experiments' workers and kernels -------------------------------
+# -- a lost Dask scheduler stops the experiments' workers and kernels -------------------------------
 
 def _cli(toy, *args):
     return subprocess.Popen([sys.executable, "-m", "locbook.suite.cli", *_suite_args(toy), "run", "--reports",
@@ -214,7 +213,7 @@ class _LostCluster(executors.DaskExecutor):
 
 class _ClosedClientFuture(_CancelledFuture):
     """A future of a client that gave up reconnecting and closed (a scheduler killed with SIGKILL): asking it anything
-    that needs the scheduler raises distributed's ClosedClientError, cancel() included (issue 44, item 2)."""
+    that needs the scheduler raises distributed's ClosedClientError, cancel() included."""
 
     def _closed(self, *args, **kwargs):
         from distributed.client import ClosedClientError
@@ -257,7 +256,7 @@ def test_a_lost_task_still_stopping_leaves_no_staging_behind(toy, monkeypatch):
 
 @pytest.mark.parametrize("future", [_ClosedClientFuture, _FinishedOnAClosedClient])
 def test_a_closed_dask_client_ends_the_run_with_the_scoreboard_and_no_traceback(toy, monkeypatch, capsys, future):
-    """Issue 44, item 2: the client of a scheduler killed with SIGKILL closes, and from then on cancel() and result()
+    """The client of a scheduler killed with SIGKILL closes, and from then on cancel() and result()
     raise ClosedClientError. The run still ends as for any lost cluster: the scoreboard, one line naming the
     scheduler, the lost experiments failed as lost (status.json updated), exit status 1, no staging left."""
     pytest.importorskip("distributed")
@@ -339,7 +338,7 @@ def test_a_stopping_dask_run_waits_for_its_lost_tasks_within_one_budget(toy, mon
     assert not list((toy / "reports" / "quick" / ".staging").glob("*"))
 
 
-# -- item 6: a full disk --------------------------------------------------------------------------------------
+# -- a full disk --------------------------------------------------------------------------------------
 
 DISK_FULL_EXIT = 3
 
@@ -394,7 +393,6 @@ def test_disk_full_while_promoting_stops_the_run_with_its_own_status(toy, monkey
 
 def test_a_kernel_that_meets_a_full_disk_is_not_retried(toy, capsys):
     """ENOSPC raised inside the kernel (a write to /dev/full, which always fails that way)."""
-    from test_run import GOOD, PARAMS, _notebook
     assert run(toy) == 0
     folder = toy / "reports" / "quick"
     good = {eid: _report_files(folder, eid) for eid in ("george-one", "george-two")}

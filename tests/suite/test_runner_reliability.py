@@ -1,4 +1,4 @@
-"""Issue 44 (reliability, round 4), the runner's part: a Dask scheduler killed with SIGKILL mid-run, data files edited
+"""The runner's part: a Dask scheduler killed with SIGKILL mid-run, data files edited
 or re-pointed while their experiment runs, a plain file where a report folder should be. Runs on the toy suite of
 tests/test_suite.py (the tests that execute notebooks are marked so)."""
 import hashlib
@@ -11,7 +11,8 @@ import time
 from pathlib import Path
 
 import pytest
-from test_run import alive, cli, processes_mentioning, run, set_profile, toy, wait_for  # noqa: F401 (toy: fixture)
+
+from toy_suite import alive, cli, processes_mentioning, run, set_profile, wait_for
 
 
 @pytest.fixture(autouse=True)
@@ -24,7 +25,7 @@ def _sha256(path) -> str:
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
-# -- item 2: an external scheduler killed with SIGKILL ---------------------------------------------------------
+# -- an external scheduler killed with SIGKILL ---------------------------------------------------------
 
 @pytest.mark.slow
 @pytest.mark.notebooks
@@ -70,7 +71,7 @@ def test_a_scheduler_killed_with_sigkill_ends_the_run_with_its_scoreboard(toy, t
     assert wait_for(lambda: not alive(started), 15), [started[p] for p in alive(started)]
 
 
-# -- item 12: a plain file where a report folder should be -----------------------------------------------------
+# -- a plain file where a report folder should be -----------------------------------------------------
 
 def _report(folder: Path, text="new") -> Path:
     folder.mkdir(parents=True)
@@ -127,7 +128,7 @@ def test_a_plain_file_where_a_report_folder_should_be_is_replaced_by_the_report(
     assert not list(folder.glob(".old-*")) and not (folder / ".failed").exists()
 
 
-# -- item 3: files are hashed as the kernel reads them; a symbolic link's target is part of the record ----------
+# -- files are hashed as the kernel reads them; a symbolic link's target is part of the record ----------
 
 _READ_THEN_EDIT = """
 import os, sys

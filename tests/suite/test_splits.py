@@ -1,4 +1,4 @@
-"""Issue 48, splits and anchor subsets: -p calibration (which recordings the channel is fitted on), -p anchors and the
+"""Splits and anchor subsets: -p calibration (which recordings the channel is fitted on), -p anchors and the
 manifest's [run] anchors (a subset of the anchors), leave-one-recording-out (--split loro) and the anchor-density
 study. The fast tests call the library on the generated example data set and check against independent constructions
 (a fit done directly by locbook.static.calibration, CSV files filtered with pandas, numpy's statistics); the slow one

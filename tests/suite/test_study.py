@@ -10,56 +10,11 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from test_run import _notebook, set_profile, toy, wait_for  # noqa: F401  (toy is a fixture)
 
 from locbook.suite import SuiteError, load_suite
 from locbook.suite.cli import main
 from locbook.suite.study import _draw, expand_study, load_studies, load_study
-
-STUDY_PARAMS = ('seed: int = 1  # seed\na: float = 1.0  # slope input\nb: float = 0.0  # offset\n'
-                'tag: str = "x"  # a label\nsleep_s: float = 0.0  # wait\n')
-#: value = 10 a + b + seed against a printed 16.0 (rounding 0.05: half a unit of its last digit); twice = 2 a
-STUDY_BODY = """\
-import time
-import locbook as lb
-report = lb.Report("toy")
-report.number("value", lb.Printed("george", "Table 9", "value", "", "m", "16.0"), 10 * a + b + seed,
-              kind="reproduction", mc_std_error=0.125 * seed, ambiguity=lb.Ambiguity(1.0, "test window", "toy"))
-report.number("twice", lb.Printed("george", "Table 9", "twice", "", "m", "3.0"), 2 * a, kind="reproduction",
-              ambiguity=lb.Ambiguity(1.0, "test window", "toy"))
-time.sleep(sleep_s)
-"""
-TOY_STUDY = """
-[[experiment]]
-id = "george-study"
-document = "george"
-title = "study"
-section = "Table 9"
-notebook = "study.ipynb"
-[experiment.parameter_rules]
-a = { ge = 0, le = 5 }
-[experiment.profiles.quick]
-seed = 3
-[experiment.profiles.full]
-
-[[study]]
-name = "toy"
-experiments = ["george-study"]
-replicates = 2
-collect = ["value"]
-[study.parameters]
-a = { grid = [1.0, 1.5] }
-b = { list = [0.25, 0.5] }
-tag = { list = ["p", "q"] }
-"""
-
-
-@pytest.fixture
-def stoy(toy):
-    _notebook(toy / "notebooks" / "study.ipynb", STUDY_PARAMS, body=STUDY_BODY)
-    with open(toy / "notebooks" / "experiments.toml", "a") as fh:
-        fh.write(TOY_STUDY)
-    return toy
+from toy_suite import set_profile, wait_for
 
 
 def _suite(toy):

@@ -1,4 +1,4 @@
-"""The suite's modules import one another without a circle (issue 49: the suite as a DAG).
+"""The suite's modules import one another without a circle (the suite as a DAG).
 
 Every module of locbook/suite is parsed with `ast` (nothing is imported); each import of a locbook.suite module,
 at module level or inside a function, is an edge. A cycle means some module must dodge it with a function-level

@@ -1,4 +1,4 @@
-"""The grid Bayes filter checked from outside (issue 30): against an independent dense implementation of the
+"""The grid Bayes filter checked from outside: against an independent dense implementation of the
 recursion, against closed forms of its transition kernel, and against the exact (Kalman) posterior of a
 linear-Gaussian model.
 
@@ -401,7 +401,7 @@ def test_rss_model_needs_its_readings():
         grid_bayes_filter(np.full((1, 3, 4), -60.0), model, _l_shaped_grid(1.0), 0.5, n_steps=3)
 
 
-# -- size guard (issue 44, item 7) ------------------------------------------------------------------------------------
+# -- size guard ------------------------------------------------------------------------------------
 def _guard_model():
     return lb.RssModel(np.array([[0.0, 0.0], [10.0, 0.0], [0.0, 10.0]]),
                        lb.PathLossModel(-40.0, 2.0, 4.0, min_distance_m=0.1))

@@ -1,4 +1,4 @@
-"""The fast grid Bayes filter (issue 31) computes the previous arithmetic: the dense transition matrix of
+"""The fast grid Bayes filter computes the previous arithmetic: the dense transition matrix of
 grid_transition_matrix and RssModel.log_likelihood at every step, recursed here in plain numpy in the log domain
 (the filter's rule: log(max(b, 1e-300)) + ll, normalised). The fixed-cell likelihood table, the banded separable
 prediction and the compiled update (numba on, and numba off) must give the same posterior means and covariances to

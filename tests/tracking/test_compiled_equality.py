@@ -1,4 +1,4 @@
-"""Issue 18: the fast filters give the numbers of a per-run filterpy loop (not a timing test).
+"""The fast filters give the numbers of a per-run filterpy loop (not a timing test).
 
 On small instances of the two benchmark settings, the Dogan (2015) fusion setting (benchmarks/bench_dogan_filters.py:
 KF (MLE), parallel and serial EKF) and Gudipati's UKF U-path (benchmarks/bench_ukf_speed.py), locbook's batched output

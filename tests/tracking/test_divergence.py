@@ -1,4 +1,4 @@
-"""Issue 26, item 2: the consistency guard of every Kalman-family filter.
+"""The consistency guard of every Kalman-family filter.
 
 The normalised innovation squared NIS = nu^T S^{-1} nu is checked against filterpy (its ``mahalanobis`` is
 sqrt(NIS)); on a linear-Gaussian model simulated from the filter's own model NIS ~ chi^2(dof) and the false-alarm
@@ -289,7 +289,7 @@ def test_a_nan_nis_at_an_update_neither_counts_nor_breaks_the_streak():
 
 
 def _ukf_scenario_1(runs=6, steps=60, seed=0):
-    """Issue 26: sigma = 1e-3 dB, a random walk with Q = 1e4 I, 4 anchors; the UKF at alpha = 1."""
+    """Sigma = 1e-3 dB, a random walk with Q = 1e4 I, 4 anchors; the UKF at alpha = 1."""
     rng = np.random.default_rng(seed)
     ch = lb.PathLossModel(-40.0, 2.0, 1e-3)
     pos = 5 + np.cumsum(0.05 * rng.standard_normal((runs, steps, 2)), axis=1)

@@ -1,4 +1,4 @@
-"""Issue 26: property-based fuzzing of every public filter (bounded example counts: the module runs in well under a
+"""Property-based fuzzing of every public filter (bounded example counts: the module runs in well under a
 minute).
 
 Inputs: NaN / inf / huge / tiny values placed in z, F, Q, R, x0, P0 (one entry, or a symmetric pair), the readings
@@ -397,7 +397,7 @@ def test_fuzz_systematic_resample(n, bad, u):
     assert np.all((idx >= 0) & (idx < n))
 
 
-# -- issue 44, item 6: a masked reading is a missing reading -----------------------------------------------------------
+# -- a masked reading is a missing reading -----------------------------------------------------------
 @settings(max_examples=60, **SETTINGS)
 @given(seed=st.integers(0, 10_000), batch=st.sampled_from([(), (3,), (70,)]), share=st.sampled_from([0.1, 0.4]),
        garbage=st.sampled_from([0.0, 1e3, np.inf, np.nan]), filt=st.sampled_from(["kf", "ekf", "ukf"]),

@@ -1,4 +1,4 @@
-"""Missing components, singular covariances and input checks of the filters (issue 12).
+"""Missing components, singular covariances and input checks of the filters.
 
 Independent references: filterpy's KalmanFilter updated with the rows present (H and R reduced by hand),
 and the RSS likelihood recomputed with the silent reader removed.
@@ -213,7 +213,7 @@ def test_uniform_proposal_starts_from_equal_weights():
 
 
 # ---------------------------------------------------------------------------------------------------------------
-# Issue 26, item 10: covariances checked up front, zero steps, run axes on F, H and Q
+# covariances checked up front, zero steps, run axes on F, H and Q
 # ---------------------------------------------------------------------------------------------------------------
 ANCHORS = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]])
 CHANNEL = lb.PathLossModel(-40.0, 2.0, 2.0)
@@ -315,7 +315,7 @@ def test_run_axes_that_do_not_broadcast_are_named():
 
 
 # ---------------------------------------------------------------------------------------------------------------
-# Issue 26 review: the covariance check's tolerance follows the input's precision and each variance's own scale
+# Found in review: the covariance check's tolerance follows the input's precision and each variance's own scale
 # ---------------------------------------------------------------------------------------------------------------
 def _float32_sample_covariance(seed=0):
     """The sample covariance, in float32, of two perfectly correlated components: singular, with a round-off

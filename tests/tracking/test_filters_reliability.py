@@ -1,4 +1,4 @@
-"""Issue 44, items 6, 11 and 12 (the filters' and static estimators' inputs): garbage from a user function, masked
+"""Garbage from a user function, masked
 readings, peer-style calls (filterpy, pykalman) and complex or NaN motion. Each case gets a correct answer (checked
 against a closed form or an independent library: filterpy, pykalman) or one line naming the function, argument and
 step, never numpy's raw message and never a finite answer from NaN or masked input."""
@@ -17,7 +17,7 @@ R = np.array([[0.5, 0.1], [0.1, 0.8]])
 X0, P0 = np.array([0.0, 0.0, 1.0, 0.5]), np.eye(4)
 T = 12
 
-# numpy's own texts that must never reach the user (issue 44, "Why", items 6 and 11)
+# numpy's own texts that must never reach the user 
 NUMPY_TEXTS = ("operands could not be broadcast", "matmul", "inhomogeneous", "Casting complex", "setting an array "
                "element", "gufunc", "could not convert")
 
@@ -48,7 +48,7 @@ EKF = lb.extended_kalman_filter
 UKF = lb.unscented_kalman_filter
 
 
-# -- item 6: a user function's NaN is an error naming it (EKF and UKF alike), never a missing reading ------------------
+# -- a user function's NaN is an error naming it (EKF and UKF alike), never a missing reading ------------------
 def _nan_like(shape):
     return np.full(shape, np.nan)
 
@@ -108,7 +108,7 @@ def test_a_complex_h_is_refused_not_cut_to_its_real_part(filt):
     _one_line(exc, "fix: h returned complex values")
 
 
-# -- item 6: a masked reading is a reading not heard, in the one converter -------------------------------------------
+# -- a masked reading is a reading not heard, in the one converter -------------------------------------------
 def _masked(z, where):
     """``z`` masked at ``where``, with garbage under the mask (it must never be used)."""
     data = np.where(where, 1e3, z)
@@ -213,7 +213,7 @@ def test_a_mask_where_no_reading_is_accepted_is_an_error_naming_the_argument():
     _one_line(exc, "LinearMeasurement.H must not be masked")
 
 
-# -- item 11: peer-style calls ----------------------------------------------------------------------------------------
+# -- peer-style calls ----------------------------------------------------------------------------------------
 def _varying_F(steps=T):
     rng = np.random.default_rng(5)
     return [MODEL.F + 0.02 * rng.normal(size=(4, 4)) for _ in range(steps)]
@@ -356,7 +356,7 @@ def test_a_list_with_none_is_a_step_without_a_reading_and_a_ragged_one_says_to_u
                                rtol=0, atol=1e-9)
 
 
-# -- item 12: complex or NaN motion -----------------------------------------------------------------------------------
+# -- complex or NaN motion -----------------------------------------------------------------------------------
 @pytest.mark.parametrize("filt", [EKF, UKF], ids=["ekf", "ukf"])
 def test_a_complex_motion_f_is_refused(filt):
     motion = lb.NonlinearMotion(lambda x: x @ MODEL.F.T + 1e-3j, jacobian=lambda x: MODEL.F, name="cv")

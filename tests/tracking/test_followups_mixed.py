@@ -1,4 +1,4 @@
-"""Issue 44 follow-ups (items 6, 7, 11): grid ML's memory guard, masked arrays in the metrics, peer-style calls of
+"""Follow-ups of the reliability work: grid ML's memory guard, masked arrays in the metrics, peer-style calls of
 the nonlinear stream and of fit_noise_ml, and the smoother on a run of no steps."""
 import numpy as np
 import pytest

@@ -1,4 +1,4 @@
-"""One result and one argument order for the Kalman family (issue 27): the functional predict / update against filterpy's
+"""One result and one argument order for the Kalman family: the functional predict / update against filterpy's
 functions, the per-step Gaussian log-likelihood and S against scipy and filterpy's KalmanFilter, and the layout of the
 innovations and S of several streams and serial updates, checked by exact identities of the Gaussian model (the chain
 rule of densities: sequential updates with independent noises give the joint density of the stacked readings)."""
@@ -214,7 +214,7 @@ def test_literal_george_records_the_previous_posterior_as_its_prior():
 
 
 def test_the_old_standard_variant_warns_at_the_caller_and_gives_the_same_numbers():
-    """``variant="standard"`` (before issue 47) is ``"corrected"`` for one release; the result says ``"corrected"``."""
+    """``variant="standard"`` (the earlier keyword) is ``"corrected"`` for one release; the result says ``"corrected"``."""
     z, R, x0, P0 = _problem(batch=3, steps=8)
     with pytest.warns(DeprecationWarning, match=r"kalman_filter\(variant='standard'\) is deprecated: use "
                                                 r"kalman_filter\(variant='corrected'\)") as caught:

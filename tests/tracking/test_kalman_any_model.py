@@ -1,4 +1,4 @@
-"""Filters for any model (issue 30): time-varying F, Q, H, R, control input and measurement offsets, nonlinear motion
+"""Filters for any model: time-varying F, Q, H, R, control input and measurement offsets, nonlinear motion
 (EKF with its Jacobian, UKF with f alone), state-dependent R, residual and mean functions, sigma-point sets and the
 RTS / unscented RTS smoother, each against an independent implementation run through its own API: pykalman on its
 robot data (filtered and smoothed moments and the log-likelihood), filterpy's KalmanFilter, ExtendedKalmanFilter and

@@ -1,4 +1,4 @@
-"""filterpy's own Kalman-family test scenarios, run through locbook's public API (issue 30, "Done when" item 1).
+"""filterpy's own Kalman-family test scenarios, run through locbook's public API.
 
 Each test builds the model and data of one scenario of rlabbe/filterpy's test suite (filterpy/kalman/tests/, master
 3b51149; the data drawn from ``np.random.default_rng(seed)`` instead of the global RNG, several runs at once), runs

@@ -1,4 +1,4 @@
-"""Issue 44: property-based fuzzing of the smoother, the noise fits and the online filter (bounded example counts:
+"""Property-based fuzzing of the smoother, the noise fits and the online filter (bounded example counts:
 the module runs in well under a minute).
 
 Inputs: random linear-Gaussian models of 1-3 states and 0-2 readings per step whose covariances have any rank (0

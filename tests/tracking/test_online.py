@@ -1,4 +1,4 @@
-"""Online filtering, NEES and noise estimation (issue 30).
+"""Online filtering, NEES and noise estimation.
 
 - OnlineFilter, fed one step at a time, gives the batch filter's numbers (KF with a time-varying model and a control
   input, the RSS EKF and UKF, the EKF and UKF with a step-aware nonlinear motion) and the batch call's divergence flags;

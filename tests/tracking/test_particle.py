@@ -67,7 +67,7 @@ def test_kernel_map_finds_the_mode_and_neff_triggers_resampling():
 
 
 # ---------------------------------------------------------------------------------------------------------------
-# Issue 26, item 9: a run whose likelihoods all collapse is isolated (flagged, NaN from that step), not fatal
+# a run whose likelihoods all collapse is isolated (flagged, NaN from that step), not fatal
 # ---------------------------------------------------------------------------------------------------------------
 READERS = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]])
 BAYES_MODEL = lb.RssModel(READERS, lb.PathLossModel(-40.0, 2.0, 3.0, min_distance_m=0.1))
@@ -170,7 +170,7 @@ def test_sir_without_particles_is_a_clear_error():
 
 
 # ---------------------------------------------------------------------------------------------------------------
-# Issue 26 review: a collapse is not silent. Every run collapsed: an error; some runs: one RuntimeWarning
+# Found in review: a collapse is not silent. Every run collapsed: an error; some runs: one RuntimeWarning
 # ---------------------------------------------------------------------------------------------------------------
 def _grid_cells():
     return np.stack(np.meshgrid(np.arange(0.5, 10, 1.0), np.arange(0.5, 10, 1.0)), -1).reshape(-1, 2)
@@ -238,7 +238,7 @@ def test_some_runs_collapsing_give_one_warning_with_the_count_and_the_first_run_
                                   initial_particles_m=np.zeros((0, 5, 2))).n_diverged == 0   # no runs: nothing collapsed
 
 
-# -- size guard (issue 44, item 7) ------------------------------------------------------------------------------------
+# -- size guard ------------------------------------------------------------------------------------
 def _guard_model():
     return lb.RssModel(np.array([[0.0, 0.0], [10.0, 0.0], [0.0, 10.0]]),
                        lb.PathLossModel(-40.0, 2.0, 4.0, min_distance_m=0.1))

@@ -1,4 +1,4 @@
-"""The particle filter for any model (issue 30): resampling to another count and from log-weights against Stone Soup's
+"""The particle filter for any model: resampling to another count and from log-weights against Stone Soup's
 resamplers (the same uniforms, so the same indices, where its API lets us give them; the closed-form count
 distribution where it does not), one run without the run axis, kinematic motion x = F x + w (the process noise drawn
 has covariance Q, singular or not; the posterior of a linear-Gaussian problem is the Kalman filter's), mirror

@@ -1,4 +1,4 @@
-"""The particle filter's compiled path (issue 31): the fused RSS log-likelihood equals the model's numpy
+"""The particle filter's compiled path: the fused RSS log-likelihood equals the model's numpy
 log-likelihood (and a closed form) across the model's options, its building blocks equal numpy's (the pairwise sum bit
 for bit, log10 within 2 ulp), the filter gives the same particles, decisions and estimates with numba on and off for a
 fixed seed, and the compiled filter allocates no temporary of the size of the readings times the particles."""

@@ -1,4 +1,4 @@
-"""Issue 44 follow-ups in the particle filter and the motion model (items 6 and 12): a masked reading of a single
+"""Follow-ups in the particle filter and the motion model: a masked reading of a single
 run is not heard, and a complex motion output is refused by the model's own methods too."""
 import numpy as np
 import pytest

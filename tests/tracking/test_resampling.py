@@ -71,7 +71,7 @@ SIZES = sorted(set(range(1, 300)) | {20, 49, 500, 999, 1000, 1024, 2000, 4096, 1
 
 
 def test_residual_resampling_of_uniform_weights_is_deterministic_like_filterpy(monkeypatch):
-    """Issue 26, item 11: with equal weights every particle gets exactly floor(N w) = 1 copy and nothing is drawn.
+    """With equal weights every particle gets exactly floor(N w) = 1 copy and nothing is drawn.
     N w computed in floating point can land one ulp under 1 (N = 20, 49, 1000, ...), which made the scheme draw at
     random; filterpy's residual_resample (given weights that do sum to 1) and Stone Soup copy each particle once."""
     gen = np.random.default_rng(5)
@@ -102,7 +102,7 @@ def test_residual_resampling_counts_never_exceed_n_near_integers():
 
 
 def test_the_effective_sample_size_of_no_weights_is_refused():
-    """1 / sum(w^2) over no weights is 1 / 0 = inf: a confident number from empty input (issue 44)."""
+    """1 / sum(w^2) over no weights is 1 / 0 = inf: a confident number from empty input."""
     from locbook.tracking.resampling import effective_sample_size
     with pytest.raises(ValueError, match=r"^weights must hold at least one weight along the last axis"):
         effective_sample_size(np.zeros((3, 0)))

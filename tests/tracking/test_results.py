@@ -1,4 +1,4 @@
-"""One result vocabulary for every filter (issue 47): the Kalman family, the smoothers, the particle and grid filters
+"""One result vocabulary for every filter: the Kalman family, the smoothers, the particle and grid filters
 all return ``mean``, ``cov``, ``steps``, ``log_likelihood``, ``diverged``, ``diverged_step``, ``n_diverged`` and
 ``position_m``, checked here against written-out closed forms (a 2-D random walk observed directly: one scalar
 Kalman filter and RTS smoother per axis; a grid posterior under a uniform transition; the particle filter's first,

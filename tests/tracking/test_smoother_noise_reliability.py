@@ -1,4 +1,4 @@
-"""Issue 44, items 5 and 6 (smoothers and noise fitting): singular covariances, EM's round-off iterates, empty and
+"""Singular covariances, EM's round-off iterates, empty and
 all-missing readings. Every answer is checked against pykalman (an independent implementation whose smoother and
 filter use pseudo-inverses), a closed form or an invariant; every refusal is one line naming what is wrong."""
 import warnings

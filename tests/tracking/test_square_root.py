@@ -1,4 +1,4 @@
-"""The square-root (Cholesky-factor) Kalman / extended Kalman filter (issue 47): equal to the covariance-form KF and EKF
+"""The square-root (Cholesky-factor) Kalman / extended Kalman filter: equal to the covariance-form KF and EKF
 (x, P, log-likelihood, NIS, the optional outputs) on linear streams with missing components, the RSS EKF (parallel
 and serial), nonlinear and time-varying motion and batched runs with per-run priors; equal to filterpy's
 SquareRootKalmanFilter run by run; and the point of the form, the ill-conditioned measurement of Grewal and Andrews'

@@ -30,7 +30,7 @@ def test_printed_weight_of_eq_3_22_sums_to_2n_over_n_plus_lambda():
 
 
 def test_the_old_weights_keyword_warns_at_the_caller_and_gives_the_same_numbers():
-    """``weights=`` (before issue 47) is ``variant=`` for one release: one DeprecationWarning naming it, the same run."""
+    """``weights=`` (the earlier keyword) is ``variant=`` for one release: one DeprecationWarning naming it, the same run."""
     model = lb.constant_velocity(1.0, 0.05)
     z = np.random.default_rng(2).normal(size=(3, 8, 2)) + np.arange(8)[:, None]
     args = (model.F, model.Q, np.zeros(4), np.eye(4), lb.LinearMeasurement(z, model.position_measurement_matrix(),
@@ -205,7 +205,7 @@ def test_printed_innovation_covariance_without_r_is_singular_with_four_anchors()
 def test_a_covariance_that_is_not_positive_definite_is_named():
     rng = np.random.default_rng(4)
     model, channel, start, z = _rss_data(rng)
-    # a P0 that is no covariance is refused up front, naming P0 (issue 26, item 10)
+    # a P0 that is no covariance is refused up front, naming P0
     with pytest.raises(ValueError, match="P0 must be positive semi-definite.*-1"):
         lb.unscented_kalman_filter(np.eye(4), np.zeros((4, 4)), start, np.diag([2.0, -1.0, 0.5, 0.5]),
                                    [lb.RssMeasurement(z, ANCHORS, channel, model.position_index)])

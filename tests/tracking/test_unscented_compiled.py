@@ -1,4 +1,4 @@
-"""Issue 31: the compiled UKF (locbook/tracking/_ukf_kernels.py) gives the numbers of the numpy UKF and of filterpy.
+"""The compiled UKF (locbook/tracking/_ukf_kernels.py) gives the numbers of the numpy UKF and of filterpy.
 
 The compiled path runs when numba is enabled and the problem is large enough (``_NUMBA_MIN_WORK`` run-steps); here the
 threshold is set to 0 and ``_NUMBA_ENABLED`` switched to compare the two paths on every option the kernel covers

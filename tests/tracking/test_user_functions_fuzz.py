@@ -1,4 +1,4 @@
-"""Issue 44: property-based fuzzing of the functions a user hands to the filters (bounded example counts: the module
+"""Property-based fuzzing of the functions a user hands to the filters (bounded example counts: the module
 runs in seconds).
 
 A NonlinearMeasurement (``h``, ``jacobian``, ``residual``, ``mean``, ``R(x)``) and a NonlinearMotion (``f`` and its

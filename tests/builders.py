@@ -66,7 +66,8 @@ def calibration_csv(points: bool = False) -> str:
     (d the 3-D distance to each anchor); with ``points`` a ``point`` column P0..P3."""
     head = "time_s,transmitter,receiver,rssi_dbm,x_m,y_m" + (",point" if points else "") + "\n"
     return head + "".join(
-        f"{t},tag,{a},{round(-40 - 20 * np.log10(np.hypot(np.hypot(1 + t - ANCHOR_XYZ_M[a][0], 2 - ANCHOR_XYZ_M[a][1]), 1.5)))},"
+        f"{t},tag,{a},"
+        f"{round(-40 - 20 * np.log10(np.hypot(np.hypot(1 + t - ANCHOR_XYZ_M[a][0], 2 - ANCHOR_XYZ_M[a][1]), 1.5)))},"
         f"{1 + t},2" + (f",P{t}" if points else "") + "\n" for t in range(4) for a in "ABCD")
 
 

@@ -61,12 +61,14 @@ PARAMS = ('seed: int = 1  # seed\nn: int = 10  # samples\nfail: bool = False  # 
 
 
 def run(toy, *args):
-    return main(["--suite", str(toy / "notebooks" / "experiments.toml"), "run", "--reports", str(toy / "reports"), *args])
+    return main(["--suite", str(toy / "notebooks" / "experiments.toml"), "run", "--reports", str(toy / "reports"),
+                 *args])
 
 
 # -- processes: concurrency, data files, dying workers, signals --------------------------------------------
 def cli(toy, *args):
-    return subprocess.Popen([sys.executable, "-m", "locbook.suite.cli", "--suite", str(toy / "notebooks" / "experiments.toml"),
+    return subprocess.Popen([sys.executable, "-m", "locbook.suite.cli", "--suite",
+                             str(toy / "notebooks" / "experiments.toml"),
                              "run", "--reports", str(toy / "reports"), *args],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 

@@ -42,12 +42,14 @@ def test_ml_attains_bound_at_high_snr():
     assert abs(err2.mean() - bound**2) < 4 * se + 0.02 * bound**2
 
 
-@pytest.mark.parametrize("anchors, printed", [([[0, 0], [5, 0], [0, 8]], 0.80), ([[0, 0], [5, 0], [0, 8], [5, 8]], 0.64)])
+@pytest.mark.parametrize("anchors, printed",
+                         [([[0, 0], [5, 0], [0, 8]], 0.80), ([[0, 0], [5, 0], [0, 8], [5, 8]], 0.64)])
 def test_ozkaya_printed_form_reproduces_thesis_crlb(anchors, printed):
     # Ozkaya (2011), Fig. 7.1 / Appendix A: 5 m x 8 m room, sigma 5.2 dB, printed 1/d^2 form with n = 2
     xs, ys = np.meshgrid(np.linspace(0.025, 4.975, 100), np.linspace(0.025, 7.975, 160))
     pts = np.stack([xs.ravel(), ys.ravel()], -1)
-    assert lb.crlb_rms_over_area_m(pts, rss(anchors, 2.0, 5.2), variant="literal_ozkaya2011") == pytest.approx(printed, abs=0.02)
+    bound = lb.crlb_rms_over_area_m(pts, rss(anchors, 2.0, 5.2), variant="literal_ozkaya2011")
+    assert bound == pytest.approx(printed, abs=0.02)
 
 
 def test_crlb_at_anchor_raises():
@@ -61,7 +63,8 @@ def test_metrics():
     assert lb.rmse_m(e) ** 2 == pytest.approx(lb.mean_error_m(e) ** 2 + lb.error_std_m(e) ** 2, rel=1e-12)
     assert lb.mean_error_m(lb.position_error_m([[3.0, 4.0], [0.0, 1.0]], [[0.0, 0.0], [0.0, 0.0]])) == 3.0
     x, f = lb.empirical_cdf([3.0, 1.0, 2.0])
-    np.testing.assert_array_equal(x, [1, 2, 3]); np.testing.assert_allclose(f, [1 / 3, 2 / 3, 1])
+    np.testing.assert_array_equal(x, [1, 2, 3])
+    np.testing.assert_allclose(f, [1 / 3, 2 / 3, 1])
     assert lb.percentile_error_m(np.arange(11.0), 90) == 9.0
 
 
@@ -90,7 +93,8 @@ def test_metrics_by_hand():
     est, truth = [[1.0, 2.0, 2.0], [3.0, 3.0, 6.0]], [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]
     np.testing.assert_allclose(lb.position_error_m(est, truth), [3.0, 7.0], rtol=1e-15)
     x, f = lb.empirical_cdf(np.array([[2.0, 2.0], [1.0, 4.0]]))
-    np.testing.assert_array_equal(x, [1.0, 2.0, 2.0, 4.0]); np.testing.assert_allclose(f, [0.25, 0.5, 0.75, 1.0])
+    np.testing.assert_array_equal(x, [1.0, 2.0, 2.0, 4.0])
+    np.testing.assert_allclose(f, [0.25, 0.5, 0.75, 1.0])
 
 
 def test_rmse_standard_error_matches_the_spread_of_the_rmse():
@@ -200,12 +204,14 @@ def test_the_bound_of_the_anchors_heard_is_the_bound_of_that_subset():
     (SQUARE, r"takes model = RssModel\(anchors_m, channel\).*got ndarray"),
     (lb.RssModel(SQUARE, lb.PathLossModel(0.0, 2.0, 4.0, wall_attenuation_db=3.0), walls_m=[[1.0, -1.0], [1.0, 5.0]]),
      r"cannot honour the model's walls \(walls_m\).*replace\(model, walls_m=None\)"),
-    (lb.RssModel(np.stack([SQUARE, SQUARE + 0.1]), lb.PathLossModel(0.0, 2.0, 4.0)), r"anchors_m \(2, 4, 2\) per run or step"),
+    (lb.RssModel(np.stack([SQUARE, SQUARE + 0.1]), lb.PathLossModel(0.0, 2.0, 4.0)),
+     r"anchors_m \(2, 4, 2\) per run or step"),
     (lb.RssModel(SQUARE, lb.PathLossModel(0.0, np.full((1, 3, 4), 2.0), 4.0), per_step_channel=True),
      r"channel.path_loss_exp \(1, 3, 4\) per run or step"),
     (lb.RssModel(SQUARE, lb.PathLossModel(0.0, 2.0, np.full((2, 3, 1), 4.0)), per_step_channel=True),
      r"channel.sigma_db \(2, 3, 1\) per run or step"),
-    (lb.RssModel(SQUARE, lb.PathLossModel(0.0, 2.0, np.full((2, 1), 4.0))), r"channel.sigma_db \(2, 1\) per run or step"),
+    (lb.RssModel(SQUARE, lb.PathLossModel(0.0, 2.0, np.full((2, 1), 4.0))),
+     r"channel.sigma_db \(2, 1\) per run or step"),
 ])
 def test_a_bound_refuses_what_it_cannot_honour_by_name(model, message):
     for call in (lambda: lb.rss_crlb_m([1.0, 2.0], model), lambda: lb.rss_position_information([1.0, 2.0], model),
@@ -228,7 +234,8 @@ def test_the_literal_form_uses_the_models_exponent_sigma_and_clamp():
         lb.rss_crlb_m(p, rss(SQUARE, n, sigma), variant="printed")
 
 
-# -- the call forms before the readings-first convention: one test each, the warning at the caller's line and the same numbers ----------
+# -- the call forms before the readings-first convention: one test each, the warning at the caller's line and the
+# same numbers ------------------------------------------------------------------------------------------------------
 A3 = np.array([[0.0, 0.0, 2.8], [8.0, 0.5, 2.5], [7.5, 6.0, 2.9], [0.3, 6.2, 2.6], [4.0, 3.1, 3.0]])
 N5, S5 = np.array([2.0, 2.2, 2.5, 1.8, 2.1]), np.array([4.0, 5.0, 6.0, 4.5, 5.5])
 P_XY = np.array([[1.0, 1.5], [5.0, 2.0], [3.0, 4.0], [6.5, 5.5]])

@@ -171,8 +171,8 @@ def test_the_moving_block_bias_is_flagged_and_the_circular_bootstrap_has_none(mo
 
 
 def _old_accuracy_metrics(e, rng, n_bootstrap, level):
-    """The i.i.d. bootstrap as it was before the block bootstrap (block_length 1): indices rng.integers(0, n, (B, n)), NaN-aware
-    statistics, percentile interval."""
+    """The i.i.d. bootstrap as it was before the block bootstrap (block_length 1): indices rng.integers(0, n, (B, n)),
+    NaN-aware statistics, percentile interval."""
     n = e.size
     idx = rng.integers(0, n, size=(n_bootstrap, n))
     with warnings.catch_warnings():
@@ -224,7 +224,8 @@ def test_circular_block_one_draws_as_the_ordinary_bootstrap():
 
 
 @pytest.mark.parametrize("kwargs, match", [({"min_blocks": 0}, "min_blocks"), ({"min_blocks": np.nan}, "min_blocks"),
-                                           ({"block_length": 0}, "block_length"), ({"block_length": 2.5}, "block_length")])
+                                           ({"block_length": 0}, "block_length"),
+                                           ({"block_length": 2.5}, "block_length")])
 def test_bad_interval_options_name_the_argument(kwargs, match):
     with pytest.raises(ValueError, match=match):
         accuracy_metrics(np.ones(30), rng=np.random.default_rng(0), **kwargs)

@@ -75,7 +75,8 @@ def test_truth_conditioned_rss_bound_equals_stonesoup():
     truth = np.zeros((steps + 1, 6))
     truth[:, 0], truth[:, 3] = np.linspace(1.0, 3.0, steps + 1), np.linspace(1.5, 6.0, steps + 1)
     prior = np.diag([4.9, 0.0065, 0.00023, 4.9, 0.0065, 0.00023])
-    jz = lb.rss_state_information(truth[1:], lb.RssModel(anchors, lb.PathLossModel(0.0, 3.0, sigma)), model.position_index)
+    jz = lb.rss_state_information(truth[1:], lb.RssModel(anchors, lb.PathLossModel(0.0, 3.0, sigma)),
+                                  model.position_index)
     info = lb.posterior_crlb(np.linalg.inv(prior), model.F, Q, jz)
 
     class _CA:            # a transition model Stone Soup can use: our F and Q
@@ -98,7 +99,8 @@ def test_tichavsky_form_equals_riccati_form_and_the_kf_covariance():
     rng = np.random.default_rng(0)
     model = lb.constant_acceleration(0.05, 0.0, layout="axis_major")
     Q = 2.3e-5 * np.eye(6)
-    H = np.zeros((2, 6)); H[0, 2] = H[1, 5] = 1.0                       # accelerometer, Dogan Eq. (3.18)
+    H = np.zeros((2, 6))
+    H[0, 2] = H[1, 5] = 1.0                                             # accelerometer, Dogan Eq. (3.18)
     steps = 60
     jz = np.zeros((steps, 6, 6))
     jz[:] = lb.linear_measurement_information(H, 0.0152**2 * np.eye(2))
@@ -119,7 +121,8 @@ def test_tichavsky_form_equals_riccati_form_and_the_kf_covariance():
 
 def test_rss_information_regularisations():
     idx = np.array([0, 3])
-    state = np.zeros(6); state[[0, 3]] = [0.3, 0.4]                     # 0.5 m from the anchor at the origin
+    state = np.zeros(6)
+    state[[0, 3]] = [0.3, 0.4]                                          # 0.5 m from the anchor at the origin
     anchors = np.array([[0.0, 0.0]])
 
     def rss(min_distance_m=0.0, height_m=None):        # the anchor, height_m above the tag
@@ -139,7 +142,8 @@ def test_rss_information_regularisations():
     channel = lb.PathLossModel(-40.0, 3.0, min_distance_m=1.0)
     eps = 1e-6
     for e in np.eye(2) * eps:
-        assert channel.mean_rss_dbm(np.linalg.norm(state[idx] + e)) == channel.mean_rss_dbm(np.linalg.norm(state[idx] - e))
+        assert (channel.mean_rss_dbm(np.linalg.norm(state[idx] + e))
+                == channel.mean_rss_dbm(np.linalg.norm(state[idx] - e)))
     np.testing.assert_array_equal(lb.rss_state_information(state, rss(0.4), idx), plain)
     np.testing.assert_array_equal(lb.rss_state_information(np.zeros(6), rss(1.0), idx), 0.0)
     lifted = lb.rss_state_information(state, rss(height_m=1.2), idx)

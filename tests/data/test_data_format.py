@@ -283,15 +283,15 @@ def _joint_design(distance, rss, device, names, ref_distance_m=1.0):
     built independently of the library."""
     n_loc, m = rss.shape
     rows, y, anchor = [], [], []
-    for l in range(n_loc):
+    for i in range(n_loc):
         for a in range(m):
-            if np.isfinite(rss[l, a]):
+            if np.isfinite(rss[i, a]):
                 row = np.zeros(2 * m + len(names) - 1)
                 row[a] = 1.0
-                row[m + a] = -10.0 * np.log10(distance[l, a] / ref_distance_m)
-                if device[l] != names[0]:
-                    row[2 * m + names.index(device[l]) - 1] = 1.0
-                rows.append(row), y.append(rss[l, a]), anchor.append(a)
+                row[m + a] = -10.0 * np.log10(distance[i, a] / ref_distance_m)
+                if device[i] != names[0]:
+                    row[2 * m + names.index(device[i]) - 1] = 1.0
+                rows.append(row), y.append(rss[i, a]), anchor.append(a)
     return np.array(rows), np.array(y), np.array(anchor)
 
 

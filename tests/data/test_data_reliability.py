@@ -129,7 +129,8 @@ def test_point_column_must_name_an_extra_column(tmp_path, column):
 
 @pytest.mark.parametrize("where,edit", [
     ("anchors file", lambda files: files.update(anchors_csv=ANCHORS.replace("A,0,0,2.5", "A,1e300,0,2.5"))),
-    ("anchors file", lambda files: files.update(anchors_csv=ANCHORS.replace("D,6,6,2.5", f"D,6,{MAX_COORDINATE_M},2.5"))),
+    ("anchors file",
+     lambda files: files.update(anchors_csv=ANCHORS.replace("D,6,6,2.5", f"D,6,{MAX_COORDINATE_M},2.5"))),
     ("readings file", lambda files: files.update(walk_csv=TRACK.replace(",2,3\n", ",2,-1e300\n", 1))),
 ])
 def test_coordinates_beyond_any_site_are_refused_with_the_limit(tmp_path, where, edit):
@@ -279,9 +280,11 @@ def test_min_readings_no_window_holds_is_refused_at_load_and_by_data_check(tmp_p
     assert "min_readings = 100,000" in err and len(err.splitlines()) == 1, err
     # a min_readings that some window meets loads (windows of 2 readings, the others not heard)
     twice = TRACK.splitlines(keepends=True)[0] + "".join(
-        "".join(f"{0.5 * t},tag,{a},-{55 + j},{t},3\n" for j, a in enumerate("ABCD")) + f"{0.5 * t + 0.1},tag,A,-60,{t},3\n"
+        "".join(f"{0.5 * t},tag,{a},-{55 + j},{t},3\n" for j, a in enumerate("ABCD"))
+        + f"{0.5 * t + 0.1},tag,A,-60,{t},3\n"
         for t in range(6))
-    ok = load_dataset(make(tmp_path / "ok", manifest=MANIFEST.replace("window_s = 0.5", "window_s = 0.5\nmin_readings = 2"),
+    ok = load_dataset(make(tmp_path / "ok",
+                           manifest=MANIFEST.replace("window_s = 0.5", "window_s = 0.5\nmin_readings = 2"),
                            walk_csv=twice))
     assert np.isfinite(ok.epochs("walk").rss_dbm[:, 0]).all() and np.isnan(ok.epochs("walk").rss_dbm[:, 1:]).all()
 
@@ -347,7 +350,8 @@ def test_a_tag_height_from_the_true_heights_is_checked_too(tmp_path):
 
 
 def test_min_readings_beyond_any_window_is_refused_at_load_and_by_epochs(tmp_path):
-    refused(make(tmp_path / "set", manifest=MANIFEST.replace("window_s = 0.5", f"window_s = 0.5\nmin_readings = {2**70}")),
+    refused(make(tmp_path / "set",
+                 manifest=MANIFEST.replace("window_s = 0.5", f"window_s = 0.5\nmin_readings = {2**70}")),
             "[epochs] min_readings", "MAX_MIN_READINGS")
     table = validate_readings(__import__("pandas").DataFrame(
         {"time_s": [0.0], "transmitter": ["t"], "receiver": ["A"], "rssi_dbm": [-50.0]}), source="t")
@@ -379,7 +383,8 @@ def test_readings_options_that_are_not_dbm_numbers_are_refused(tmp_path, line, k
 def test_the_python_api_refuses_the_same_readings_options():
     import pandas as pd
     table = pd.DataFrame({"time_s": [0.0], "transmitter": ["t"], "receiver": ["A"], "rssi_dbm": [-50.0]})
-    for kwargs in ({"invalid_values_dbm": "0"}, {"invalid_values_dbm": [True]}, {"invalid_values_dbm": np.array([True])},
+    for kwargs in ({"invalid_values_dbm": "0"}, {"invalid_values_dbm": [True]},
+                   {"invalid_values_dbm": np.array([True])},
                    {"valid_range_dbm": (-np.inf, np.inf)}, {"valid_range_dbm": (-100.0, 0.0, 5.0)}):
         with pytest.raises(ParameterError, match=next(iter(kwargs))):
             validate_readings(table, source="t", **kwargs)

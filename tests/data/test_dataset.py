@@ -114,7 +114,8 @@ def test_sentinels_become_not_heard_and_the_range_refuses(tmp_path):
     manifest = MANIFEST + "[readings]\ninvalid_values_dbm = [4]\nvalid_range_dbm = [-100, -30]\n"
     ds = load_dataset(make(tmp_path, manifest=manifest, track=track))
     assert np.isnan(ds.epochs("walk").rss_dbm[0, 0]) and "invalid readings" in ds.notes
-    refused(tmp_path, "walk.csv, line 2", "outside [-100, -30]", manifest=manifest, track=track.replace(",4,", ",-20,", 1))
+    refused(tmp_path, "walk.csv, line 2", "outside [-100, -30]", manifest=manifest,
+            track=track.replace(",4,", ",-20,", 1))
 
 
 # -- raw packets -> epochs ------------------------------------------------------------------------------------

@@ -227,7 +227,8 @@ def test_without_inertial_files_nothing_changes(fused, tmp_path):
 
 
 # --------------------------------------------------------------------------------------------- the example's bytes
-#: SHA-256 of the default example (seed 1, walk_s 20) as written before inertial streams existed (the base of the streams' work)
+#: SHA-256 of the default example (seed 1, walk_s 20) as written before inertial streams existed (the base of the
+#: streams' work)
 _DEFAULT_BYTES = {
     "anchors.csv": "d2301b3eec8dc61ad6d5ccc13ee772cc79883ba99755c60ae8f785bd82fa306a",
     "dataset.toml": "9204526f49b710c7f795f9c588fa8982c41215984bfe775e2b1a330de0534425",

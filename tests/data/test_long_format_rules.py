@@ -313,7 +313,8 @@ def test_the_fast_reader_and_the_exact_reader_agree(tmp_path):
     with a blank line go through the exact reader. All give the same checked table, ids, missing values and extra
     columns included."""
     from locbook.data.measured import read_readings_table
-    body = ("time_s,transmitter,receiver,rssi_dbm,x_m,y_m,point\n0.25,tag, A1,-60.5,1.0,2.0,P1\n0.25,tag,A2,,1.0,2.0,P1\n"
+    body = ("time_s,transmitter,receiver,rssi_dbm,x_m,y_m,point\n0.25,tag, A1,-60.5,1.0,2.0,P1\n"
+            "0.25,tag,A2,,1.0,2.0,P1\n"
             "0.5,NA,A1,NaN,N/A,,P2\n0.75,tag,A3,-70,3,4, P2\n")
     fast_path = write(tmp_path, body, "fast.csv")
     quoted_path = write(tmp_path, body.replace(",P1\n0.25", ',"P1"\n0.25', 1), "quoted.csv")

@@ -368,7 +368,8 @@ def test_the_default_example_is_byte_for_byte_what_it_was(tmp_path):
                                                                        ("survey", "points", "walk_a", "walk_b")])
     text = (ranged / "dataset.toml").read_text()
     stripped = "".join(line for line in text.splitlines(keepends=True) if not line.startswith("ranges = "))
-    assert text.count("ranges = ") == 4 and stripped.replace(", ranges (0.3 m)", "") == (plain / "dataset.toml").read_text()
+    assert (text.count("ranges = ") == 4
+            and stripped.replace(", ranges (0.3 m)", "") == (plain / "dataset.toml").read_text())
 
 
 def test_the_examples_ranges_are_the_true_distance_plus_the_stated_noise(tmp_path):
@@ -524,7 +525,8 @@ def test_a_method_of_your_own_gets_the_ranges_on_its_epochs(ranged, tmp_path):
     code = tmp_path / "tri.py"
     code.write_text("import numpy as np\nimport locbook as lb\n\n\ndef tri(inp):\n"
                     "    if inp.range_m is None:\n        return np.full((inp.n_epochs, 2), np.nan)\n"
-                    "    return lb.lateration_ls(inp.anchors_m, inp.range_m, tag_height_m=inp.tag_height_m).position_m\n")
+                    "    return lb.lateration_ls(inp.anchors_m, inp.range_m,"
+                    " tag_height_m=inp.tag_height_m).position_m\n")
     ds, proto, st, tr = ranged["with"]
     model = me.channel(me.calibrate(ds))
     user = registered_methods(methods=[f"tri={code}:tri"], trackers=[f"tri_track={code}:tri"])

@@ -1,5 +1,5 @@
-"""Measured data end to end: the NaN rules hold on the real Kolakowski (2021) readings (the shipped data set), the floor geometry and
-the accuracy table agree with independent computations."""
+"""Measured data end to end: the NaN rules hold on the real Kolakowski (2021) readings (the shipped data set), the floor
+geometry and the accuracy table agree with independent computations."""
 import numpy as np
 import pytest
 

@@ -70,7 +70,8 @@ def test_noise_free_imu_readings_are_the_rotated_truth_and_calibration_removes_t
     np.testing.assert_allclose(lb.body_to_world(acc, tr.heading_rad), tr.acceleration_m_s2, atol=1e-12)
     # stationary calibration: 1000 samples at rest estimate -b within 4 sigma / sqrt(N)
     bias, sigma, n = np.array([0.05, -0.03]), 0.02, 1000
-    rest = lb.accelerometer_readings(np.zeros((200, n, 2)), np.zeros((200, n)), bias_m_s2=bias, sigma_m_s2=sigma, rng=rng)
+    rest = lb.accelerometer_readings(np.zeros((200, n, 2)), np.zeros((200, n)), bias_m_s2=bias, sigma_m_s2=sigma,
+                                     rng=rng)
     est = lb.stationary_bias(rest)
     assert est.shape == (200, 1, 2)
     np.testing.assert_allclose(est.mean(axis=0)[0], -bias, atol=4 * sigma / np.sqrt(200 * n))

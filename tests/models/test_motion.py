@@ -18,10 +18,10 @@ def test_transition_is_matrix_exponential_of_the_derivative_chain():
 def test_continuous_q_equals_van_loan():
     model = lb.constant_velocity(0.4, 2.5, layout="axis_major", noise="continuous")
     a = np.kron(np.eye(2), np.eye(2, 2, 1))
-    l = np.kron(np.eye(2), np.array([[0.0], [1.0]]))
+    g = np.kron(np.eye(2), np.array([[0.0], [1.0]]))            # the noise input matrix
     n = a.shape[0]
     big = np.zeros((2 * n, 2 * n))
-    big[:n, :n], big[:n, n:], big[n:, n:] = -a, l @ l.T * 2.5, a.T
+    big[:n, :n], big[:n, n:], big[n:, n:] = -a, g @ g.T * 2.5, a.T
     e = expm(big * 0.4)
     np.testing.assert_allclose(model.Q, e[n:, n:].T @ e[:n, n:], atol=1e-12)   # Van Loan (1978)
 
@@ -58,7 +58,8 @@ def test_kalman_equals_filterpy(joseph):
         for zz in z[b]:
             kf.predict()
             kf.update(zz)
-            xs.append(kf.x.copy()); ps.append(kf.P.copy())
+            xs.append(kf.x.copy())
+            ps.append(kf.P.copy())
         np.testing.assert_allclose(res.mean[b], xs, atol=1e-10)
         np.testing.assert_allclose(res.cov[b], ps, atol=1e-10)
 
@@ -69,13 +70,16 @@ def test_batched_per_run_R_equals_loop():
     P0 = np.eye(4)
     batched = lb.kalman_filter(model.F, model.Q, x0, P0, lb.LinearMeasurement(z, H, Rs)).mean
     for b in range(4):
-        np.testing.assert_allclose(batched[b], lb.kalman_filter(model.F, model.Q, x0, P0, lb.LinearMeasurement(z[b], H, Rs[b])).mean, atol=1e-13)
+        np.testing.assert_allclose(batched[b],
+                                   lb.kalman_filter(model.F, model.Q, x0, P0,
+                                                    lb.LinearMeasurement(z[b], H, Rs[b])).mean, atol=1e-13)
 
 
 def test_static_model_filter_is_recursive_least_squares():
     # F = I, Q = 0, flat prior: the filtered state is the batch least-squares mean of all measurements
     z = np.random.default_rng(3).normal(size=(40, 2))
-    res = lb.kalman_filter(np.eye(2), np.zeros((2, 2)), np.zeros(2), 1e12 * np.eye(2), lb.LinearMeasurement(z, np.eye(2), np.eye(2)), predict_first=False)
+    res = lb.kalman_filter(np.eye(2), np.zeros((2, 2)), np.zeros(2), 1e12 * np.eye(2),
+                           lb.LinearMeasurement(z, np.eye(2), np.eye(2)), predict_first=False)
     np.testing.assert_allclose(res.mean, np.cumsum(z, 0) / np.arange(1, 41)[:, None], atol=1e-9)
     np.testing.assert_allclose(res.cov[-1], np.eye(2) / 40, atol=1e-12)
 
@@ -110,7 +114,12 @@ def test_literal_george_variant_is_running_average():
     # Eqs. (11)-(13) as printed drop the prediction: P shrinks as 1/k and x is the running mean
     z = np.random.default_rng(7).normal(size=(20, 2)) + 5.0
     model = lb.constant_velocity(1.0, 1.0)
-    res = lb.kalman_filter(model.F, model.Q, np.r_[z[0], 0, 0], np.diag([1.0, 1.0, 1.0, 1.0]), lb.LinearMeasurement(z, model.position_measurement_matrix(), np.eye(2)), variant="literal_george")
+    res = lb.kalman_filter(model.F,
+                           model.Q,
+                           np.r_[z[0], 0, 0],
+                           np.diag([1.0, 1.0, 1.0, 1.0]),
+                           lb.LinearMeasurement(z, model.position_measurement_matrix(), np.eye(2)),
+                           variant="literal_george")
     k = np.arange(2, 22)[:, None]
     np.testing.assert_allclose(res.mean[:, :2], (z[0] + np.cumsum(z, 0)) / k, atol=1e-12)
 
@@ -173,4 +182,6 @@ def test_batched_process_noise_equals_loop():
     batched = lb.kalman_filter(model.F, Qs, x0, P0, lb.LinearMeasurement(z[0], H, R)).mean
     assert batched.shape == (3, z.shape[1], 4)
     for i, Q in enumerate(Qs):
-        np.testing.assert_allclose(batched[i], lb.kalman_filter(model.F, Q, x0, P0, lb.LinearMeasurement(z[0], H, R)).mean, atol=1e-13)
+        np.testing.assert_allclose(batched[i],
+                                   lb.kalman_filter(model.F, Q, x0, P0, lb.LinearMeasurement(z[0], H, R)).mean,
+                                   atol=1e-13)

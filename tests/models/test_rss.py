@@ -139,7 +139,8 @@ def test_run_blocks_change_no_bit(monkeypatch):
         whole = model.log_likelihood(rss, pos, step)
         monkeypatch.setattr(rss_module, "LIKELIHOOD_BLOCK_VALUES", 1)          # one run per block
         np.testing.assert_array_equal(model.log_likelihood(rss, pos, step), whole)
-        np.testing.assert_array_equal(model.log_likelihood(rss, pos[0], step), model.log_likelihood(rss, pos[[0, 0]], step))
+        np.testing.assert_array_equal(model.log_likelihood(rss, pos[0], step),
+                                      model.log_likelihood(rss, pos[[0, 0]], step))
         monkeypatch.undo()
 
 

@@ -40,8 +40,10 @@ def test_show_and_the_worker_skip_jsonschemas_iri_grammar_but_still_validate_not
     """``locbook show`` reads a notebook (nbformat, hence jsonschema) without building rfc3987_syntax's grammar
     (2-3 s of every worker's start-up, the bracket benchmark); nbformat still refuses a broken notebook."""
     shown = _modules_after("import contextlib, io\nfrom locbook.suite.cli import main\n"
-                           "with contextlib.redirect_stdout(io.StringIO()):\n    assert main(['show', 'george-tracking']) == 0\n"
-                           "import nbformat, pytest\nnb = nbformat.v4.new_notebook()\nnb.cells = [{'cell_type': 'code'}]\n"
+                           "with contextlib.redirect_stdout(io.StringIO()):\n"
+                           "    assert main(['show', 'george-tracking']) == 0\n"
+                           "import nbformat, pytest\nnb = nbformat.v4.new_notebook()\n"
+                           "nb.cells = [{'cell_type': 'code'}]\n"
                            "with pytest.raises(nbformat.ValidationError):\n    nbformat.validate(nb)")
     assert "nbformat" in shown and "jsonschema" in shown
     assert "lark" not in shown       # the parser rfc3987_syntax builds its grammar with (its key is present, None)

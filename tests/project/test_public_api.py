@@ -48,7 +48,8 @@ def render_table() -> str:
 
 
 def test_readme_lists_exactly_the_public_api():
-    assert readme_table_rows() == expected_rows(), "docs/architecture.md's Public API table should read:\n" + render_table()
+    assert readme_table_rows() == expected_rows(), ("docs/architecture.md's Public API table should read:\n"
+                                                    + render_table())
 
 
 def test_every_public_name_has_one_home_and_is_defined_there():

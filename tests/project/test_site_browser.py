@@ -234,7 +234,8 @@ def test_every_link_and_image_of_the_site_resolves(browser, site_dir, tmp_path):
     assert [c.text for c in counts.find_elements(By.CSS_SELECTOR, "thead th")] == ["kind", "loose", "rows"]
     reproduction = counts.find_element(By.XPATH, ".//tr[th='reproduction']")
     assert "v-loose" in reproduction.find_element(By.TAG_NAME, "td").get_attribute("class")
-    assert "Independent reproductions: 0 within, 1 loose, 0 missed, of 1" in browser.find_element(By.TAG_NAME, "body").text
+    body = browser.find_element(By.TAG_NAME, "body").text
+    assert "Independent reproductions: 0 within, 1 loose, 0 missed, of 1" in body
     rows = {r.get_attribute("id"): r for r in browser.find_elements(By.CSS_SELECTOR, "table.experiments tbody tr")}
     assert list(rows) == ["george-good", "george-failed", "george-absent"]
     good = [a.get_attribute("href") for a in rows["george-good"].find_elements(By.TAG_NAME, "a")]

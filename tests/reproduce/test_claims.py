@@ -127,7 +127,8 @@ def test_a_claim_is_judged_on_printed_values_on_ours_and_under_every_other_readi
     assert (j["printed"], j["ours"], j["readings"]) == (True, True, 2)      # 1.30 > 1.22 as printed; 1.40 > 1.20
     assert j["changed_by"] == ["doc-sim, noise: n='x' [textual]: fails"]
     page = conclusions_markdown("doc", "A. Author", 2011, [j], "full")
-    assert "1 hold, 0 fail and 0 are undecidable" in page and "changes under doc-sim, noise: n='x' [textual]: fails" in page
+    assert ("1 hold, 0 fail and 0 are undecidable" in page
+            and "changes under doc-sim, noise: n='x' [textual]: fails" in page)
     # a bracket whose default run is not this report's (another profile, other code) judges no other reading
     stale = {k: {**v, "reproduced": "1.41"} if "MAP" in k[1] else v for k, v in rows.items()}
     j3 = judge_claim(c, stale, values)

@@ -171,7 +171,8 @@ def test_every_calibration_reading_can_be_swept_away_from_its_fit():
 
 #: a quoted passage of the source: at least three words between quotation marks ('...', "..." or curly quotes)
 _QUOTED = re.compile(r"""(?:'[^']*\w+\W+\w+\W+\w+[^']*'|"[^"]*\w+\W+\w+\W+\w+[^"]*"|“[^”]*\w+\W+\w+\W+\w+[^”]*”)""")
-_PLACE = re.compile(r"\b(Sec|Secs|Section|Ch|Chapter|Table|Tables|Eq|Eqs|Fig|Figs|Figure|Appendix|Abstract|Algorithm|line)\b")
+_PLACE = re.compile(r"\b(Sec|Secs|Section|Ch|Chapter|Table|Tables|Eq|Eqs|Fig|Figs|Figure|Appendix|Abstract|Algorithm"
+                    r"|line)\b")
 
 
 @pytest.mark.parametrize("reading", [r for r in ALL if r.basis in ("printed", "textual")], ids=_id)
@@ -191,7 +192,8 @@ def test_every_reading_says_where_the_text_stands_on_it(reading):
 def test_a_fitted_value_says_why_no_text_supports_it(reading):
     # `fitted` means only that nothing in the text supports it and it was chosen because it fits
     assert re.search(r"no (?:text|word|sentence|passage)|not supported by the text|the text (?:does not|never)",
-                     reading.reason), f"{reading.document}:{reading.name}: the reason does not say why no text supports it"
+                     reading.reason), (f"{reading.document}:{reading.name}: the reason does not say why no text "
+                                       "supports it")
 
 
 def test_the_basis_of_each_value():

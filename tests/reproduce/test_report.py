@@ -57,7 +57,8 @@ def test_miss_note_comes_before_the_note_and_after_nothing_when_within(report):
     row = report.number("rmse", p, p.value + 1.0, kind="reproduction", miss_note=MISS, loose_note=LOOSE,
                         note="3 runs flagged")
     assert row["verdict"] == "miss" and row["note"] == f"{MISS}; 3 runs flagged"
-    row = report.number("rmse", p, p.value, kind="reproduction", miss_note=MISS, loose_note=LOOSE, note="3 runs flagged")
+    row = report.number("rmse", p, p.value, kind="reproduction", miss_note=MISS, loose_note=LOOSE,
+                        note="3 runs flagged")
     assert row["verdict"] == "within" and row["note"] == "3 runs flagged"
 
 

@@ -37,7 +37,8 @@ def test_heard_mask_equals_leaving_the_anchors_out():
 
 def test_particle_filter_gaussian_start():
     rng = np.random.default_rng(1)
-    model = lb.RssModel(np.array([[0.0, 0.0], [20.0, 0.0], [0.0, 20.0]]), lb.PathLossModel(-40.0, 2.0, 4.0, min_distance_m=0.1))
+    model = lb.RssModel(np.array([[0.0, 0.0], [20.0, 0.0], [0.0, 20.0]]),
+                        lb.PathLossModel(-40.0, 2.0, 4.0, min_distance_m=0.1))
     runs = 4000
     nothing_heard = np.full((runs, 1, 3), np.nan)                  # flat likelihood: the estimate is the particle
     start = np.array([10.0, 8.0])
@@ -80,7 +81,8 @@ def test_static_bound_is_the_closed_form_crlb(key):
 def test_noise_free_readings_give_the_truth(key):
     sc = bm.static_scenario(key)
     ch = sc.channel
-    sc = replace(sc, channel=lb.PathLossModel(ch.ref_power_dbm, ch.path_loss_exp, 0.0, min_distance_m=ch.min_distance_m))
+    sc = replace(sc,
+                 channel=lb.PathLossModel(ch.ref_power_dbm, ch.path_loss_exp, 0.0, min_distance_m=ch.min_distance_m))
     rss = sc.rss_dbm(1, np.random.default_rng(2))
     fixes = bm.static_fixes(sc, rss, methods=["lls", "wls", "box_ls", "grid_ml", "rss_ml"])
     for name in ("lls", "wls", "box_ls", "rss_ml"):
@@ -154,7 +156,8 @@ def test_every_declared_method_gives_a_cell_and_a_new_scenario_a_column(monkeypa
     rows = []
     for key in ("ozkaya2011-room", "test-room-4"):
         sc = bm.static_scenario(key)
-        rows += bm.static_cells(sc, 3, bm.scenario_rng(0, "static", key), knn_k=4, knn_map_spacing_m=0.5, n_bootstrap=10)
+        rows += bm.static_cells(sc, 3, bm.scenario_rng(0, "static", key), knn_k=4, knn_map_spacing_m=0.5,
+                                n_bootstrap=10)
     assert [(r["scenario"], r["method"]) for r in rows] == [(k, m) for k in ("ozkaya2011-room", "test-room-4")
                                                             for m in bm.STATIC_METHODS]
     assert all(r["settings"] and np.isfinite(r["ratio"]) for r in rows)

@@ -247,7 +247,8 @@ def test_dogan_table_rows_and_notes_carry_the_flags():
     assert "2 of 4 runs flagged diverged by the NIS guard" in notes["RMSE parallel_ekf"]
     assert "flagged" not in notes["RMSE serial_ekf"] and "flagged" not in notes["RMSE static_mle"]
     table = dg.divergence_table(runs, dt_s=0.05)
-    assert [(r["filter"], r["runs flagged"], r["runs"]) for r in table] == [("parallel_ekf", 2, 4), ("serial_ekf", 0, 4),
+    assert [(r["filter"], r["runs flagged"], r["runs"]) for r in table] == [("parallel_ekf", 2, 4),
+                                                                            ("serial_ekf", 0, 4),
                                                                            ("kalman_filter", 0, 4)]
     assert table[0]["median first time (s)"] == pytest.approx(2.0)
     tails = {t["filter"]: t for t in dg.tail_rows(runs)}

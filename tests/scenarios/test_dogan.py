@@ -132,7 +132,8 @@ def test_default_trajectory():
     path = np.sum(np.linalg.norm(np.diff(tr.position_m, axis=0), axis=1))
     assert abs(path - (24.0 - 0.3 * dg.DT_S)) < 0.02          # corners are cut by at most one step
     rest = dg.walk_trajectory()                                # the default start: from rest, 2 s ramp
-    assert rest.start == "rest" and rest.time_s.size == 1620 and rest.velocity_m_s[0, 0] == 0.0 and rest.velocity_m_s[0, 1] == 0.0
+    assert (rest.start == "rest" and rest.time_s.size == 1620 and rest.velocity_m_s[0, 0] == 0.0
+            and rest.velocity_m_s[0, 1] == 0.0)
     np.testing.assert_allclose(rest.acceleration_m_s2[1:40, 1], 0.15, atol=1e-9)
     with pytest.raises(lb.ParameterError, match="start"):
         dg.walk_trajectory(start="standing")
@@ -182,9 +183,11 @@ def test_record_tables_kinds_repeats_and_miss_notes(tmp_path, monkeypatch, start
     report = lb.Report("x")
     cells = {(c["table"], c["row"], c["column"]): c for c in dg.printed_tables()}
     keys = [("3.7", "sigma_rss_db=6", "static_mle"), ("3.8", "sigma_rss_db=6", "serial_ekf"),
-            ("3.9", "sigma_acc=0.015", "serial_ekf"), ("3.11", "ple=3", "static_mle"), ("3.9", "sigma_acc=0.0015", "kalman_filter")]
+            ("3.9", "sigma_acc=0.015", "serial_ekf"), ("3.11", "ple=3", "static_mle"),
+            ("3.9", "sigma_acc=0.0015", "kalman_filter")]
     rows = [dict(table=k[0], row=k[1], column=k[2], printed=cells[k]["value"], printed_value=cells[k]["printed"],
-                 reproduced=cells[k]["value"] * (2.0 if k[1] == "sigma_acc=0.0015" else 1.0), mc_se=0.001) for k in keys]
+                 reproduced=cells[k]["value"] * (2.0 if k[1] == "sigma_acc=0.0015" else 1.0),
+                 mc_se=0.001) for k in keys]
     counts = dg.record_tables(report, rows, variants={keys[-1]: {"start moving, Q printed": 1.5}}, start=start,
                               noise_reading=noise_reading)
     out = {r["where"]: r for r in report.numbers}
@@ -297,9 +300,9 @@ def test_room_sets_the_corner_anchors_the_scaled_path_and_the_smc_starts():
 
 @pytest.mark.parametrize("mle_r", ["constant", "per_epoch"])
 def test_every_step_rmse_scores_the_filters_at_every_grid_step(mle_r):
-    """'every_step' records the same recursion at every 20 Hz step from the first RSS epoch: its errors at the RSS epochs
-    equal the RSS-epoch run's, and the table RMSE is the root mean square over runs and every step; the MLE column
-    stays at the RSS epochs."""
+    """'every_step' records the same recursion at every 20 Hz step from the first RSS epoch: its errors at the RSS
+    epochs equal the RSS-epoch run's, and the table RMSE is the root mean square over runs and every step; the MLE
+    column stays at the RSS epochs."""
     tr = dg.walk_trajectory(waypoints_m=((1.0, 1.0), (1.0, 4.0), (4.0, 4.0)), speed_m_s=0.5)
     # every filter on the 20 Hz grid (an ONLY-RSS filter at the RSS rate has only the RSS epochs:
     # test_dogan_rss_only_step)
@@ -313,7 +316,8 @@ def test_every_step_rmse_scores_the_filters_at_every_grid_step(mle_r):
         np.testing.assert_allclose(b.errors[key], a.errors[key], rtol=0, atol=1e-12)
         assert dg.scored_errors(b, key, "every_step") is every
     runs = {(6.0, 3.0): b}
-    rows = {r["column"]: r for r in dg.table_rows(runs, "every_step") if r["table"] == "3.7" and r["row"] == "sigma_rss_db=6"}
+    rows = {r["column"]: r for r in dg.table_rows(runs,
+                                                  "every_step") if r["table"] == "3.7" and r["row"] == "sigma_rss_db=6"}
     every = b.errors[("every_step", "serial_ekf", None)]
     assert rows["serial_ekf"]["reproduced"] == pytest.approx(np.sqrt(np.mean(every**2)), rel=1e-12)
     assert rows["static_mle"]["reproduced"] == pytest.approx(np.sqrt(np.mean(b.errors["static_mle"] ** 2)), rel=1e-12)

@@ -144,7 +144,8 @@ def test_calibrated_from_text_names_exactly_the_readings_fitted_to_output():
     both = dg.calibrated_from_text("moving", "sigma_acc")
     assert both == f"{moving}; {scaled}"
     other_speed = dg.calibrated_from_text("moving", "printed", speed_mps=0.5)
-    assert other_speed == dg.MOVING_START_FITTED and "no text" in other_speed and dg.SPEED_CALIBRATED_FROM not in other_speed
+    assert (other_speed == dg.MOVING_START_FITTED and "no text" in other_speed
+            and dg.SPEED_CALIBRATED_FROM not in other_speed)
     assert dg.calibrated_from_text() == ""                                    # the defaults are the text's readings
     with pytest.raises(lb.ParameterError, match="start"):
         dg.calibrated_from_text("running", "printed")
@@ -158,7 +159,8 @@ def test_the_printed_reading_does_not_see_sigma_acc_in_q():
     q_printed = {s: dg.filter_noise("printed", s)[0] for s in (0.015, 0.0075, 0.0015)}
     q_scaled = {s: dg.filter_noise("sigma_acc", s)[0] for s in (0.015, 0.0075, 0.0015)}
     assert len(set(q_printed.values())) == 1
-    assert q_scaled[0.015] / q_scaled[0.0075] == pytest.approx(4.0) and q_scaled[0.0075] / q_scaled[0.0015] == pytest.approx(25.0)
+    assert (q_scaled[0.015] / q_scaled[0.0075] == pytest.approx(4.0)
+            and q_scaled[0.0075] / q_scaled[0.0015] == pytest.approx(25.0))
 
 
 def test_thesis_repeat_error_from_the_printed_re_runs():
@@ -167,7 +169,8 @@ def test_thesis_repeat_error_from_the_printed_re_runs():
     cells = {(p.location, p.item, p.statistic): p.value for p in P}
     pairs = [(("Table 3.11", "ple=3"), ("Table 3.7", "sigma_rss_db=6"), c)
              for c in ("static_mle", "parallel_ekf", "serial_ekf", "kalman_filter")]
-    pairs += [(("Table 3.12", "ple=3"), ("Table 3.8", "sigma_rss_db=6"), c) for c in ("parallel_ekf", "serial_ekf", "kalman_filter")]
+    pairs += [(("Table 3.12", "ple=3"), ("Table 3.8", "sigma_rss_db=6"), c)
+              for c in ("parallel_ekf", "serial_ekf", "kalman_filter")]
     rel = [(cells[a + (c,)] - cells[b + (c,)]) / ((cells[a + (c,)] + cells[b + (c,)]) / 2) for a, b, c in pairs]
     assert dg.thesis_repeat_error() == pytest.approx(np.sqrt(np.mean(np.square(rel)) / 2), rel=1e-12)
     assert 0.005 < dg.thesis_repeat_error() < 0.02                       # 0.2-2.7 % differences (Tables 3.7-3.12)

@@ -29,7 +29,7 @@ def test_rss_grid_keeps_the_epochs_and_steps_at_the_rss_period():
     np.testing.assert_array_equal(grid.position_m, walk.position_m[walk.rss_steps])
     np.testing.assert_array_equal(grid.rss_steps, np.arange(walk.rss_steps.size))
     np.testing.assert_allclose(np.diff(grid.time_s), dg.RSS_EVERY * dg.DT_S)          # 0.5 s at Sec. 3.5's rates
-    assert dg.filter_grid(walk, True, "rss_rate") is walk                          # a fused filter keeps Table 3.5's grid
+    assert dg.filter_grid(walk, True, "rss_rate") is walk            # a fused filter keeps Table 3.5's grid
     assert dg.filter_grid(walk, False, "imu_rate") is walk
 
 
@@ -60,7 +60,8 @@ def test_the_two_steps_differ_by_the_process_noise_of_the_skipped_predictions():
     """Ten predictions with Q add sum_i F^i Q F^i' (0.05 s) per RSS period, one adds Q: the 20 Hz reading carries
     more position uncertainty into each update (Q per step, Eq. (3.24))."""
     F = dg.motion_model(dg.DT_S).F
-    q10 = sum(np.linalg.matrix_power(F, i) @ np.linalg.matrix_power(F, i).T for i in range(dg.RSS_EVERY)) * dg.Q_PER_STEP
+    q10 = sum(np.linalg.matrix_power(F, i) @ np.linalg.matrix_power(F, i).T
+              for i in range(dg.RSS_EVERY)) * dg.Q_PER_STEP
     assert q10[0, 0] > 10 * dg.Q_PER_STEP and np.all(np.diag(q10) >= 10 * dg.Q_PER_STEP - 1e-15)
 
 

@@ -154,7 +154,8 @@ def test_record_testbed_records_each_printed_walk_value_with_its_flags_and_the_b
     rows = tb.testbed_rows(run, 0.5)
     assert tb.testbed_flags(rows[0], run, 0.5) is None                                      # the MLE has no guard
     mean_row = next(r for r in rows if r["filter"] == "mean of the three")
-    assert set(tb.testbed_flags(mean_row, run, 0.5)) == {f"{n} {c}" for n in dg.FILTERS for c in ("ONLY RSS", "RSS/IMU")}
+    assert set(tb.testbed_flags(mean_row, run, 0.5)) == {f"{n} {c}" for n in dg.FILTERS
+                                                         for c in ("ONLY RSS", "RSS/IMU")}
     report = lb.Report("test")
     tb.record_testbed(report, rows, run, 0.5)
     recorded = report.numbers
@@ -167,7 +168,7 @@ def test_record_testbed_records_each_printed_walk_value_with_its_flags_and_the_b
     fused = by_id[tb.PRINTED_TESTBED_RMSE[("serial_ekf", "fusion")].id]
     assert fused["kind"] == "reproduction" and "2 of 21 runs flagged diverged" in fused["note"]   # the text's readings
     assert "flagged" not in by_id[tb.PRINTED_TESTBED_RMSE[("serial_ekf", None)].id]["note"]
-    assert "2 of 21" in by_id[tb.PRINTED_FUSION_REDUCTION.id]["note"]                       # the mean covers every filter
+    assert "2 of 21" in by_id[tb.PRINTED_FUSION_REDUCTION.id]["note"]       # the mean covers every filter
     arithmetic = by_id[tb.PRINTED_FUSION_REDUCTION_CH6.id]
     assert arithmetic["reproduced"] == pytest.approx(np.mean(list(tb.printed_reductions_pct().values())), rel=1e-12)
     claim = by_id[tb.PRINTED_ACCURACY.id]                                                   # best: parallel EKF fused

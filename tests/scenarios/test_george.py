@@ -72,7 +72,7 @@ def test_at_6_db_the_only_runs_without_c_are_those_whose_fitted_exponent_is_belo
     runs = george.simulate_corridor(300, truth, lb.PathLossModel(-45.0, george.PRINTED_N.value, 6.0),
                                     rng_calibration=rng["calibration"], rng_tracking=rng["tracking"])
     x = -10.0 * np.log10(lb.pairwise_distance_m(np.asarray(george.DEFAULT_CALIBRATION_POINTS_M), george.ANCHORS_M))
-    n_hand = np.array([[np.polyfit(x[l], runs.calibration_rss_dbm[r, l], 1)[0] for l in range(x.shape[0])]
+    n_hand = np.array([[np.polyfit(x[i], runs.calibration_rss_dbm[r, i], 1)[0] for i in range(x.shape[0])]
                        for r in range(300)]).mean(axis=1)
     c_all = lb.mean_error_m(runs.fix_error_m, axis=-1)
     np.testing.assert_array_equal(~np.isfinite(c_all), n_hand < george.MIN_PLAUSIBLE_PATH_LOSS_EXP)

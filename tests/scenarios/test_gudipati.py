@@ -270,7 +270,8 @@ def test_no_gudipati_default_is_fitted_and_the_fitted_shadowing_is_an_alternativ
     assert all(r.basis != "fitted" for r in rows.values())
     shadow = rows["tracking_shadowing"]
     assert shadow.fitted and all(v in shadow.alternatives for v in shadow.fitted)
-    assert shadow.default == gu.WalkSettings().shadowing_sigma_db      # one assumed channel with the calibration notebook
+    # one assumed channel with the calibration notebook
+    assert shadow.default == gu.WalkSettings().shadowing_sigma_db
     assert shadow.default == rows["calibration_shadowing"].default
 
 

@@ -149,7 +149,8 @@ def test_absolute_resample_threshold_never_resamples():
                                                                      min_distance_m=0.1))
     region = (np.zeros(2), np.array(oz.ROOM_M))
     results = {c.resample_threshold_unit: lb.particle_filter(rss, model, rng=np.random.default_rng(9), n_particles=200,
-                                                             region_m=region, resample_threshold=oz.resample_fraction(c))
+                                                             region_m=region,
+                                                             resample_threshold=oz.resample_fraction(c))
                for c in (base, absolute)}
     assert results["fraction_of_n"].resampled.any() and not results["absolute"].resampled.any()
     assert np.all(results["absolute"].n_eff >= 1 - 1e-9)
@@ -200,7 +201,8 @@ def test_the_quotes_are_the_thesis_s_words_at_the_lines_they_name():
     are copied from the thesis, Secs. 7.2.1-7.2.2.3 and Appendix A)."""
     declared = {r.name: r for r in readings("ozkaya2011")}
     for name, line, words in (
-            ("reader_noise", 1137, "zero mean Gaussian noise added"), ("reader_noise", 1309, "added on the transmit power"),
+            ("reader_noise", 1137, "zero mean Gaussian noise added"),
+            ("reader_noise", 1309, "added on the transmit power"),
             ("fixed_target_noise", 1323, "worst case scenario"), ("fixed_target_noise", 1415, "drastically increases"),
             ("fixed_target_noise", 1543, "if the measurement is erroneous"),
             ("mobile_protocol", 1373, "wait for a sufficient recursion time for the filter to settle"),

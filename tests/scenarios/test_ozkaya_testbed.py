@@ -75,7 +75,8 @@ def test_noise_free_online_calibration_recovers_the_channel_and_absorbs_an_obstr
     cal = lb.calibrate_from_reference_tags(tags, oz.REFERENCE_TAGS_M, oz.TESTBED_READERS_M,
                                            walls_m=oz.TESTBED_WALLS_M, wall_attenuation_db=oz.WAF_DB)
     alpha = np.asarray(oz.OFFLINE_PARAMETERS["alpha_dbm"]) - extra                # still inside [-55, -40]
-    np.testing.assert_allclose(cal.ref_power_dbm, np.broadcast_to(alpha[:, None, None], cal.ref_power_dbm.shape), atol=1e-4)
+    np.testing.assert_allclose(cal.ref_power_dbm, np.broadcast_to(alpha[:, None, None], cal.ref_power_dbm.shape),
+                               atol=1e-4)
     np.testing.assert_allclose(cal.path_loss_exp, np.broadcast_to(oz.OFFLINE_PARAMETERS["path_loss_exp"],
                                                                   cal.path_loss_exp.shape), atol=1e-5)
     np.testing.assert_allclose(cal.sigma_db, 0.0, atol=1e-4)
@@ -241,7 +242,8 @@ def test_testbed_crlb_default_is_the_rms_over_the_area_with_table_6_1_exponents(
     """The default bound is that of 'the experimented system setup' (Table 6.1's n per reader) as the RMS
     over the area (Appendix A compares it with RMS errors), not the readings fitted to the simulation columns."""
     assert tb.TESTBED_CRLB_PATH_LOSS_EXP == tuple(lb.printed("ozkaya2011").get("Table 6.1", f"Reader {j}",
-                                                                                "path_loss_exp").value for j in (1, 2, 3))
+                                                                               "path_loss_exp").value
+                                                  for j in (1, 2, 3))
     step = 0.05
     xs, ys = np.arange(step / 2, 9.0, step), np.arange(step / 2, 4.0, step)
     points = np.stack(np.meshgrid(xs, ys, indexing="ij"), -1).reshape(-1, 2)
@@ -317,7 +319,8 @@ def test_recorded_rows_have_kinds_links_windows_and_notes(tmp_path, monkeypatch)
     # the window is wide (about 0.9 m): most statistics near 1.5 m are loose, none of them "within"
     assert any(n["verdict"] == "loose" for n in recorded)
     # a monopole scale named as calibrated from a fit makes its rows calibrated
-    again = tb.record_table_rows(report, [r for r in rows if r["experiment"] == "monopole"], monopole_calibrated_from="x")
+    again = tb.record_table_rows(report, [r for r in rows if r["experiment"] == "monopole"],
+                                 monopole_calibrated_from="x")
     assert again and all(n["kind"] == "calibrated" and n["calibrated_from"] == "x" for n in again)
 
 

@@ -83,7 +83,8 @@ def test_a_manifest_registers_methods_by_file_and_module(tmp_path):
     ('name = "my method"\nfunction = "m:f"\nkind = "static"\n', ["method name 'my method' must be letters"]),
     ('name = "x"\nfunction = "m.f"\nkind = "static"\n', ["function must be package.module:function"]),
     ('name = "x"\nfunction = "m:1f"\nkind = "static"\n', ["'1f' after the last ':'"]),
-    ('name = "x"\nfunction = "gone.py:f"\nkind = "static"\n', ["[[method]] 'x': function: file 'gone.py' does not exist"]),
+    ('name = "x"\nfunction = "gone.py:f"\nkind = "static"\n',
+     ["[[method]] 'x': function: file 'gone.py' does not exist"]),
     ('name = "x"\nfunction = "../out.py:f"\nkind = "static"\n', ["must be a file inside the data set's folder"]),
 ])
 def test_a_bad_method_table_is_one_line_naming_the_key(tmp_path, table, needles):
@@ -126,7 +127,8 @@ def test_a_file_spec_is_relative_to_the_current_folder_on_the_command_line(tmp_p
     (tmp_path / "m.py").write_text("def f(inp):\n    return None\n")
     monkeypatch.chdir(tmp_path)
     m = parse_method_option("mine=m.py:f", "tracker")
-    assert (m.path, m.attribute, m.option()) == ((tmp_path / "m.py").resolve(), "f", f"mine={(tmp_path / 'm.py').resolve()}:f")
+    assert (m.path, m.attribute, m.option()) == ((tmp_path / "m.py").resolve(), "f",
+                                                 f"mine={(tmp_path / 'm.py').resolve()}:f")
     assert method_name_problem("my_method-2") == ""
 
 
@@ -182,7 +184,8 @@ def test_a_raising_method_fails_with_its_own_traceback_and_not_locbooks():
     assert (got.name, got.recording, got.error) == ("b", "points", "ZeroDivisionError: division by zero")
     lines = got.traceback.splitlines()
     assert lines[0] == "Traceback (most recent call last):" and lines[-1] == "ZeroDivisionError: division by zero"
-    assert 'user_method_examples.py", line' in got.traceback and "in boom" in got.traceback and "in _divide" in got.traceback
+    assert ('user_method_examples.py", line' in got.traceback and "in boom" in got.traceback
+            and "in _divide" in got.traceback)
     assert "locbook" not in got.traceback.replace(str(HERE), "")         # no frame of locbook's (the tests path aside)
     assert got.line().startswith(f"user method 'b' (static, user method {EXAMPLES}:boom (sha256 ")
     assert got.line().endswith(") failed on points: ZeroDivisionError: division by zero")
@@ -255,9 +258,11 @@ TRACK_RUN = dict(seed=11, n_particles=100, particle_runs=2, n_bootstrap=30, bloc
 @pytest.fixture(scope="module")
 def results(measured):
     ds, model, proto = measured
-    good = registered_methods(methods=[f"centroid={CENTROID}"], trackers=["smooth=user_method_examples:smoothed_centroid"])
+    good = registered_methods(methods=[f"centroid={CENTROID}"],
+                              trackers=["smooth=user_method_examples:smoothed_centroid"])
     bad = registered_methods(methods=[f"centroid={CENTROID}", "boom=user_method_examples:boom"],
-                             trackers=["smooth=user_method_examples:smoothed_centroid", "shape=user_method_examples:wrong_shape"])
+                             trackers=["smooth=user_method_examples:smoothed_centroid",
+                                       "shape=user_method_examples:wrong_shape"])
     out = {}
     for key, user in (("none", ()), ("good", good), ("bad", bad)):
         out[key] = (me.static_results(ds, model, proto, user_methods=user, **RUN),
@@ -269,7 +274,8 @@ def _rows(res, method=None):
     return [r for r in res["rows"] if method is None or r["method"] == method]
 
 
-def test_a_user_method_is_scored_like_the_battery_and_equals_its_own_output_scored_by_locbook_metrics(measured, results):
+def test_a_user_method_is_scored_like_the_battery_and_equals_its_own_output_scored_by_locbook_metrics(
+        measured, results):
     ds, model, proto = measured
     import user_method_examples as ex
     st, tr = results["good"]
@@ -287,7 +293,8 @@ def test_a_user_method_is_scored_like_the_battery_and_equals_its_own_output_scor
     for label, e in [("pooled", np.concatenate(list(errors.values()))), *errors.items()]:
         r = rows[label]
         ok = e[np.isfinite(e)]
-        direct = {"mean_m": lb.mean_error_m(ok), "median_m": lb.median_error_m(ok), "p90_m": lb.percentile_error_m(ok, 90),
+        direct = {"mean_m": lb.mean_error_m(ok), "median_m": lb.median_error_m(ok),
+                  "p90_m": lb.percentile_error_m(ok, 90),
                   "ce95_m": lb.percentile_error_m(ok, 95), "rmse_m": lb.rmse_m(ok), "coverage": ok.size / e.size}
         for k in STATS:
             assert r[k] == round(direct[k], 3), (label, k, r[k], direct[k])
@@ -400,7 +407,8 @@ def test_the_command_line_passes_each_method_to_the_reports_that_take_its_kind(t
     shutil.copy(EXAMPLES, tmp_path / "m.py")
     monkeypatch.chdir(tmp_path)
     assert main(["run", "--data", str(folder), "--reports", str(tmp_path / "r"), "--quiet",
-                 "--method", "centroid=m.py:weighted_centroid", "--tracker", "smooth=user_method_examples:smoothed_centroid"]) == 0
+                 "--method", "centroid=m.py:weighted_centroid", "--tracker",
+                 "smooth=user_method_examples:smoothed_centroid"]) == 0
     tasks = no_execution["tasks"]
     file = (tmp_path / "m.py").resolve()
     assert tasks["measured-localization"]["methods"] == [f"centroid={file}:weighted_centroid"]
@@ -473,7 +481,8 @@ def test_the_data_page_shows_a_failed_method_as_failed():
     cells, _notes = _result_table([{"method": "boom", "recording": "pooled", "mean_m": "", "ratio": "",
                                     "failure": "failed: ZeroDivisionError: division by zero"},
                                    {"method": "lls", "recording": "pooled", "mean_m": "1.2", "ratio": "1.1"}])
-    assert (cells[0]["mean (m)"], cells[0]["mean interval (m)"]) == ("failed", "failed: ZeroDivisionError: division by zero")
+    assert (cells[0]["mean (m)"], cells[0]["mean interval (m)"]) == ("failed",
+                                                                     "failed: ZeroDivisionError: division by zero")
     assert cells[1]["mean (m)"] == "1.2"
 
 

@@ -211,7 +211,8 @@ def test_missing_anchors_and_overflow_keep_their_rules_with_the_exact_solver():
     keep = np.setdiff1d(np.arange(30), [4, 7, 9])
     np.testing.assert_array_equal(res.position_m[keep], full.position_m[keep])    # no solver tolerance now
     heard = np.setdiff1d(np.arange(anchors.shape[0]), [1])
-    np.testing.assert_array_equal(res.position_m[4], lb.lateration_box_ls(anchors[heard], d[4:5, heard], lo, hi).position_m[0])
+    np.testing.assert_array_equal(res.position_m[4],
+                                  lb.lateration_box_ls(anchors[heard], d[4:5, heard], lo, hi).position_m[0])
     assert res.status[7] == "too_few_anchors" and res.status[9] == "solver_failed"
     assert np.isnan(res.position_m[[7, 9]]).all() and not res.converged[[7, 9]].any()
 

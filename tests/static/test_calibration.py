@@ -214,7 +214,8 @@ def test_register_conversions_keep_missing_readings():
     (lambda: lb.reduction_pct([1.0, 2.0], [1.0, 2.0, 3.0]), r"before \(2,\) and after \(3,\) must have the same shape"),
     (lambda: lb.reduction_pct(0.0, 1.0), "before must be non-zero"),
     (lambda: lb.position_error_m([[1.0, 2.0]], [[0.0, 0.0, 0.0]]), "must end in the same dimension"),
-    (lambda: lb.position_error_m(np.zeros((3, 2)), np.zeros((4, 2))), r"estimate_m \(3, 2\) and truth_m \(4, 2\) do not pair up"),
+    (lambda: lb.position_error_m(np.zeros((3, 2)), np.zeros((4, 2))),
+     r"estimate_m \(3, 2\) and truth_m \(4, 2\) do not pair up"),
     (lambda: lb.position_error_m([[np.inf, 0.0]], [[0.0, 0.0]]), "estimate_m must be finite"),
 ])
 def test_metric_inputs_are_checked(call, message):
@@ -295,7 +296,8 @@ def test_smoothing_distances_over_fewer_readers_are_rescaled():
     np.testing.assert_allclose(got, target - 32 / 57 * np.array([1.0, 2.0]), rtol=1e-14)
     # the nearest tag missed reader 1, which the target heard: that component is left as it is. Tag 0 (1, -, 1):
     # E^2 = 2 * 3 / 2 = 3; tag 1 (5, 5, 5): E^2 = 75; weights (25, 1) / 26; tag 0's errors (1, -, 1)
-    got, nearest, applied = lb.smooth_rssi(np.zeros(3), np.array([[1.0, np.nan, 1.0], [5.0, 5.0, 5.0]]), np.zeros((2, 3)))
+    got, nearest, applied = lb.smooth_rssi(np.zeros(3), np.array([[1.0, np.nan, 1.0], [5.0, 5.0, 5.0]]),
+                                           np.zeros((2, 3)))
     assert nearest == 0 and applied
     np.testing.assert_allclose(got, [-25 / 26, 0.0, -25 / 26], rtol=1e-14)
 
@@ -342,7 +344,8 @@ def test_ozkaya_setting_streams_are_keyed_by_values_not_their_spelling():
     assert entropy(replace(base, rt=float(base.rt))) == entropy(base)                       # 10 and 10.0: one value
     assert entropy(replace(base, k_nn=base.k_nn + 1)) == entropy(base)     # estimator only: common random numbers
     assert entropy(replace(base, rt=base.rt + 1)) != entropy(base)         # more steps: another stream
-    assert entropy(base) == [2011, lb.seed_from_values({f: getattr(base, f) for f in ozs._TRUTH_FIELDS} | {"steps": base.rt})]
+    assert entropy(base) == [2011,
+                             lb.seed_from_values({f: getattr(base, f) for f in ozs._TRUTH_FIELDS} | {"steps": base.rt})]
 
 
 # --- a fit's batch is isolated; an empty batch is an empty answer in every mode ---------

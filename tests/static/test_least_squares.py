@@ -140,7 +140,8 @@ def test_first_and_last_pairs_re_pick_a_reference_that_was_not_heard_as_the_refe
     assert list(res.status) == ["ok"] * 5 + ["too_few_anchors"]
     np.testing.assert_allclose(res.position_m[:5], ref.position_m[:5], rtol=1e-9)
     kept = [0, 4]                                             # heard the reference: unchanged by the others
-    np.testing.assert_array_equal(res.position_m[kept], lb.lateration_ls(anchors, noisy[kept], pairs="first").position_m)
+    np.testing.assert_array_equal(res.position_m[kept],
+                                  lb.lateration_ls(anchors, noisy[kept], pairs="first").position_m)
 
 
 def test_degenerate_geometry_is_reported_alike_on_the_reference_and_pair_paths():

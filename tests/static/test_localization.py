@@ -24,7 +24,8 @@ def test_lateration_system_matches_paper_numbers():
     a_mat, b = lb.lateration_system(ANCHORS, np.zeros(4))
     np.testing.assert_allclose(a_mat, [[-4.2, 0.0], [0.0, -15.6], [-4.2, -15.6]])      # Eq. (8), 2 (x_1 - x_i)
     np.testing.assert_allclose(b, [-4.41, -60.84, -65.25])
-    np.testing.assert_allclose(np.linalg.pinv(a_mat), [[-0.15873, 0.07937, -0.07937], [0.02137, -0.04274, -0.02137]], atol=1e-5)
+    np.testing.assert_allclose(np.linalg.pinv(a_mat), [[-0.15873, 0.07937, -0.07937], [0.02137, -0.04274, -0.02137]],
+                               atol=1e-5)
 
 
 def test_wls_unit_weights_is_ls_and_weights_match_lstsq(points):
@@ -107,7 +108,8 @@ def test_rss_ml_converged_means_a_stationary_point_of_the_cost(ml_problems):
     power = ml_problems["power"]
     ml = lb.rss_ml_position(power, lb.RssModel(ANCHORS, ML_MODEL))
     assert ml.converged.all()
-    cost = lambda p: np.sum((power - ML_MODEL.mean_rss_dbm(lb.pairwise_distance_m(p[:, None, :], ANCHORS)[:, 0])) ** 2, -1)
+    cost = lambda p: np.sum((power - ML_MODEL.mean_rss_dbm(lb.pairwise_distance_m(p[:, None, :], ANCHORS)[:, 0])) ** 2,
+                            -1)
     h = 1e-6
     for axis in (0, 1):
         step = np.zeros(2)

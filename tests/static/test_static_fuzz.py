@@ -548,7 +548,8 @@ MASK_ESTIMATORS = {
 
 
 @FUZZ
-@given(name=st.sampled_from(sorted(MASK_ESTIMATORS)), seed=st.integers(0, 10_000), share=st.sampled_from([0.0, 0.2, 0.5]),
+@given(name=st.sampled_from(sorted(MASK_ESTIMATORS)), seed=st.integers(0, 10_000),
+       share=st.sampled_from([0.0, 0.2, 0.5]),
        garbage=st.sampled_from([0.0, 1e3, -1.0, np.inf, np.nan]))
 def test_property_masked_readings_equal_nan_readings_whatever_lies_under_the_mask(name, seed, share, garbage):
     """The result on a masked array (any value under the mask, even inf) equals the result with NaN there, position

@@ -35,8 +35,9 @@ ESTIMATORS = {
     "wls": lambda a, p, **kw: lb.lateration_wls(a, MODEL.range_m(p), np.arange(1.0, a.shape[0]), **kw),
     "box": lambda a, p, **kw: lb.lateration_box_ls(a, MODEL.range_m(p), *BOX, **kw),
     "ml": lambda a, p, **kw: lb.rss_ml_position(p, lb.RssModel(a, MODEL), **kw),
-    "grid": lambda a, p, **kw: lb.grid_ml_position(p, lb.RssModel(a, MODEL), np.stack(np.meshgrid(np.arange(0, 10.5, 0.5),
-                                                                                         np.arange(0, 12.5, 0.5)), -1).reshape(-1, 2), **kw),
+    "grid": lambda a, p, **kw: lb.grid_ml_position(
+        p, lb.RssModel(a, MODEL),
+        np.stack(np.meshgrid(np.arange(0, 10.5, 0.5), np.arange(0, 12.5, 0.5)), -1).reshape(-1, 2), **kw),
 }
 
 
@@ -105,7 +106,8 @@ def test_wls_keeps_the_weights_of_the_heard_anchors():
     holed[0, 2] = np.nan
     res = lb.lateration_wls(ANCHORS, holed, w)
     heard = [0, 1, 3, 4]
-    np.testing.assert_allclose(res.position_m, lb.lateration_wls(ANCHORS[heard], d[:, heard], [1.0, 3.0, 4.0]).position_m,
+    np.testing.assert_allclose(res.position_m,
+                               lb.lateration_wls(ANCHORS[heard], d[:, heard], [1.0, 3.0, 4.0]).position_m,
                                atol=1e-12)
 
 
@@ -137,11 +139,15 @@ def test_one_failing_box_problem_does_not_cost_its_batch(monkeypatch):
     (lambda: lb.lateration_ls(np.r_[ANCHORS, [[np.nan, 1.0]]], np.ones(6)), "anchors_m must be finite"),
     (lambda: lb.lateration_ls(np.r_[ANCHORS, [[10.0, 8.0]]], np.ones(6)), "anchors 2 and 5 coincide"),
     (lambda: lb.lateration_wls(ANCHORS, np.ones(5), np.ones(3)), r"weights must have shape \(\.\.\., 4\)"),
-    (lambda: lb.lateration_wls(ANCHORS, np.ones((2, 5)), 1.0), r"weights must have shape \(\.\.\., 4\).*got shape \(\)"),
-    (lambda: lb.lateration_wls(ANCHORS, np.ones((2, 5)), np.ones((2, 1))), r"weights must have shape.*got shape \(2, 1\)"),
-    (lambda: lb.lateration_wls(ANCHORS, np.ones((2, 5)), np.ones((3, 4))), r"weights must have shape.*got shape \(3, 4\)"),
+    (lambda: lb.lateration_wls(ANCHORS, np.ones((2, 5)), 1.0),
+     r"weights must have shape \(\.\.\., 4\).*got shape \(\)"),
+    (lambda: lb.lateration_wls(ANCHORS, np.ones((2, 5)), np.ones((2, 1))),
+     r"weights must have shape.*got shape \(2, 1\)"),
+    (lambda: lb.lateration_wls(ANCHORS, np.ones((2, 5)), np.ones((3, 4))),
+     r"weights must have shape.*got shape \(3, 4\)"),
     (lambda: lb.lateration_wls(ANCHORS, np.ones(5), [1.0, -1.0, 1.0, 1.0]), "weights must be non-negative, got -1.0"),
-    (lambda: lb.lateration_ls(ANCHORS, np.ones(5), min_anchors=6), r"min_anchors must be <= the number of anchors \(5\)"),
+    (lambda: lb.lateration_ls(ANCHORS, np.ones(5), min_anchors=6),
+     r"min_anchors must be <= the number of anchors \(5\)"),
     (lambda: lb.lateration_box_ls(ANCHORS, np.ones(5), 0.0, 10.0, min_anchors=3.5), "min_anchors must be an integer"),
     (lambda: lb.rss_ml_position(-60 * np.ones((2, 5)), RSS_MODEL, initial_m=[[np.nan, 1.0], [2.0, 2.0]]),
      r"initial_m must be finite, or all NaN.*\[nan, 1.0\]"),
@@ -149,9 +155,12 @@ def test_one_failing_box_problem_does_not_cost_its_batch(monkeypatch):
     (lambda: lb.grid_ml_position(-60 * np.ones(5), RSS_MODEL, [[1.0, np.nan]]), "cells_m must be finite"),
     (lambda: lb.knn_position(np.zeros((5, 4)), np.zeros((3, 10, 4)), np.zeros((10, 2)), 2),
      r"batch axes of rss_dbm \(5,\).*fingerprints_dbm \(3,\)"),
-    (lambda: lb.knn_position(np.zeros(3), np.zeros((10, 4)), np.zeros((10, 2)), 2), r"rss_dbm must have shape \(\.\.\., 4\)"),
-    (lambda: lb.knn_position(np.zeros(4), np.zeros((10, 4)), np.zeros((9, 2)), 2), "fingerprints_dbm has 10 cells.*cells_m has 9"),
-    (lambda: lb.model_fingerprints(np.zeros((5, 3)), RSS_MODEL), r"cells_m must have shape \(\.\.\., 2\), got \(5, 3\)"),
+    (lambda: lb.knn_position(np.zeros(3), np.zeros((10, 4)), np.zeros((10, 2)), 2),
+     r"rss_dbm must have shape \(\.\.\., 4\)"),
+    (lambda: lb.knn_position(np.zeros(4), np.zeros((10, 4)), np.zeros((9, 2)), 2),
+     "fingerprints_dbm has 10 cells.*cells_m has 9"),
+    (lambda: lb.model_fingerprints(np.zeros((5, 3)), RSS_MODEL),
+     r"cells_m must have shape \(\.\.\., 2\), got \(5, 3\)"),
     (lambda: lb.model_fingerprints(np.zeros((5, 2)), MODEL), r"model must be an RssModel.*got PathLossModel"),
     (lambda: lb.model_fingerprints(np.zeros((5, 2)), lb.RssModel(ANCHORS, MODEL, np.full((1, 2, 2), np.nan))),
      "walls_m must be finite"),
@@ -160,11 +169,15 @@ def test_one_failing_box_problem_does_not_cost_its_batch(monkeypatch):
     (lambda: lb.pattern_fingerprints(np.full((6, 40, 4), np.inf)), "rss_dbm must be finite"),
     (lambda: lb.rss_crlb_m(np.zeros((4, 3)), lb.RssModel(ANCHORS, MODEL)), r"position_m must have shape \(\.\.\., 2\)"),
     (lambda: lb.rss_crlb_m([1.0, np.nan], lb.RssModel(ANCHORS, MODEL)), "position_m must be finite"),
-    (lambda: lb.rss_crlb_m([1.0, 1.0], lb.RssModel(ANCHORS, lb.PathLossModel(0.0, [2.0, 2.0], 4.0))), r"channel.path_loss_exp must be a scalar or end in \(1,\) or \(5,\)"),
+    (lambda: lb.rss_crlb_m([1.0, 1.0], lb.RssModel(ANCHORS, lb.PathLossModel(0.0, [2.0, 2.0], 4.0))),
+     r"channel.path_loss_exp must be a scalar or end in \(1,\) or \(5,\)"),
     (lambda: lb.crlb_rms_over_area_m(np.zeros((0, 2)), lb.RssModel(ANCHORS, MODEL)), "points_m must hold at least one"),
-    (lambda: lb.lateration_box_ls(ANCHORS, np.ones(5), [0, 0, 0], [1, 1]), r"lower_m must be a scalar or have shape \(2,\)"),
-    (lambda: lb.rss_ml_position(np.ones(5), MODEL), r"model must be an RssModel.*pass rss_ml_position\(rss_dbm, RssModel"),
-    (lambda: lb.grid_ml_position(np.ones(5), MODEL, ANCHORS), r"model must be an RssModel.*pass grid_ml_position\(rss_dbm, Rss"),
+    (lambda: lb.lateration_box_ls(ANCHORS, np.ones(5), [0, 0, 0], [1, 1]),
+     r"lower_m must be a scalar or have shape \(2,\)"),
+    (lambda: lb.rss_ml_position(np.ones(5), MODEL),
+     r"model must be an RssModel.*pass rss_ml_position\(rss_dbm, RssModel"),
+    (lambda: lb.grid_ml_position(np.ones(5), MODEL, ANCHORS),
+     r"model must be an RssModel.*pass grid_ml_position\(rss_dbm, Rss"),
     (lambda: lb.rss_ml_position(-60 * np.ones(5), RSS_MODEL, initial_m=np.zeros(3)), "initial_m must broadcast"),
     (lambda: lb.grid_ml_position(-60 * np.ones(5), RSS_MODEL, np.zeros((4, 3))), r"cells_m must have shape"),
     (lambda: lb.rss_ml_position(-60 * np.ones(5), RSS_MODEL, min_anchors=2), "min_anchors must be >= 3"),

@@ -64,7 +64,8 @@ def test_points_are_the_default_then_each_other_value_one_reading_at_a_time(stoy
 
 def test_a_value_equal_to_the_profile_is_not_run_twice_and_shared_values_share_a_point(stoy, tmp_path):
     exp = find_experiment(_suite(stoy), "george-study")
-    text = f"{HEADER}\nslope,george-study,a,,1.0,[1.3],,1.0,2.0,assumed,s,r\nsame,george-study,a,,,[2.0],[2.0],,,assumed,s,r\n"
+    text = (f"{HEADER}\nslope,george-study,a,,1.0,[1.3],,1.0,2.0,assumed,s,r\n"
+            "same,george-study,a,,,[2.0],[2.0],,,assumed,s,r\n")
     points = bracket_points(exp, "quick", load_reading_file(_readings(tmp_path, text)))
     # the range's low end equals the default (1.0): skipped; a = 2.0 is named by both readings: one point, marked
     # fitted for the reading that declares it so
@@ -75,7 +76,8 @@ def test_a_shared_point_keeps_its_own_key_when_a_later_reading_names_it_again(st
     # 'same' names a = 2.0, which 'slope' made its first alternative point, not its last: the merged point must keep
     # its own folder (key), not the key of the point appended last (found in review: two points shared a folder)
     exp = find_experiment(_suite(stoy), "george-study")
-    text = f"{HEADER}\nslope,george-study,a,,1.0,\"[2.0, 1.3]\",,,,assumed,s,r\nsame,george-study,a,,,[2.0],,,,assumed,s,r\n"
+    text = (f"{HEADER}\nslope,george-study,a,,1.0,\"[2.0, 1.3]\",,,,assumed,s,r\n"
+            "same,george-study,a,,,[2.0],,,,assumed,s,r\n")
     points = bracket_points(exp, "quick", load_reading_file(_readings(tmp_path, text)))
     assert [p.label for p in points] == ["default", "slope, same: a=2.0", "slope: a=1.3"]
     assert len({p.key for p in points}) == len(points)
@@ -125,7 +127,8 @@ def test_a_toy_bracket_gives_each_row_its_verdict_and_the_site_shows_it(stoy, tm
                  str(stoy / "reports"), "--progress", "plain"]) == 0
     assert bracket(stoy, _readings(tmp_path, READINGS), "--jobs", "2") == 0
     out = capsys.readouterr().out
-    assert "5 executed" in out and "bracket of george-study: 0 default, 1 other_reading, 0 fitted_only, 0 between, 0 outside, 0 open, 1 loose" in out
+    assert "5 executed" in out and ("bracket of george-study: 0 default, 1 other_reading, 0 fitted_only, 0 between, "
+                                    "0 outside, 0 open, 1 loose") in out
     folder = stoy / "reports" / "brackets" / "george-study"
     rows = {r["quantity"]: r for r in _table(folder / "bracket.csv")}
     assert tuple(_table(folder / "bracket.csv")[0]) == BRACKET_COLUMNS
@@ -145,7 +148,8 @@ def test_a_toy_bracket_gives_each_row_its_verdict_and_the_site_shows_it(stoy, tm
     assert [p["status"] for p in points] == ["ok"] * 5 and points[1]["value"] == "1.3"
     import json  # the points ran without figures (only their numbers are read); the suite's own run with them
     assert json.loads((folder / "george-study-default" / "manifest.json").read_text())["figures_saved"] is False
-    assert "figures_saved" not in json.loads((stoy / "reports" / "quick" / "george-study" / "manifest.json").read_text())
+    manifest = json.loads((stoy / "reports" / "quick" / "george-study" / "manifest.json").read_text())
+    assert "figures_saved" not in manifest
     # every scored row under every point, for the conclusions pages
     values = _table(folder / "values.csv")
     assert len(values) == 2 * 5 and {v["basis"] for v in values} == {"default", "assumed", "textual"}
@@ -168,7 +172,8 @@ def test_a_toy_bracket_gives_each_row_its_verdict_and_the_site_shows_it(stoy, tm
     assert "| verdict | bracket | bracket_readings |" in page and "| other_reading | at quick: slope: a=1.3 |" in page
     index = (stoy / "reports" / "quick" / "index.md").read_text()
     assert ("Reading brackets of the 2 scored rows (`quick` profile): 0 reproduced under the default reading; 1 "
-            "reproduced only under another textual (or assumed) reading; 0 reached only under a reading fitted") in index
+            "reproduced only under another textual (or assumed) reading; 0 reached only under a reading "
+            "fitted") in index
     assert "[george](george-findings.md)" in index and "This is the `quick` profile" in index
     # the findings page is written from the same rows as numbers.csv and the index
     findings = (stoy / "reports" / "quick" / "george-findings.md").read_text()
@@ -206,7 +211,8 @@ def test_the_site_bracket_of_a_row_follows_its_own_verdict_first():
                            {**row, "printed_id": "o", "quantity": "q (20 runs)", "verdict": "loose"},
                            {**row, "printed_id": "z", "verdict": "miss"}], bracket)
     assert [(r["bracket"], r["bracket_readings"]) for r in out] == [
-        ("default", ""), ("other_reading", "at quick: r: x=1"), ("", ""), ("outside", "at quick: band 1 .. 2 over 3 runs"),
+        ("default", ""), ("other_reading", "at quick: r: x=1"), ("", ""),
+        ("outside", "at quick: band 1 .. 2 over 3 runs"),
         ("loose", "this report"), ("", "")]
     # within under the default at the bracket's profile, a miss here (another profile's window): open, not outside,
     # and not reachable either (the other readings were judged by the wider windows too)
@@ -349,7 +355,8 @@ def test_a_bracket_setting_may_not_touch_what_the_readings_sweep(stoy, tmp_path)
     ('[experiment.bracket]\nparameters = { tag = "q" }\n', r"sets parameters without a 'reason'"),
     ('[experiment.bracket]\nparams = { tag = "q" }\nreason = "x"\n', r"takes a table 'parameters', a string 'reason'"),
     ('[experiment.bracket]\nfactorial = ["a"]\n', r"factorial must list two or more distinct reading names"),
-    ('[experiment.bracket]\nlargest_error_m = -1.0\nlargest_error_reason = "x"\n', r"largest_error_m must be a positive"),
+    ('[experiment.bracket]\nlargest_error_m = -1.0\nlargest_error_reason = "x"\n',
+     r"largest_error_m must be a positive"),
     ('[experiment.bracket]\nlargest_error_m = 9.4\n', r"largest_error_m and largest_error_reason go together"),
 ])
 def test_a_malformed_bracket_table_is_refused(stoy, table, message):

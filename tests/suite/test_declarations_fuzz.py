@@ -188,7 +188,8 @@ def runs(study) -> int:
     samplers = [s for s, _v in study.parameters.values()]
     lists = [len(v) for s, v in study.parameters.values() if s == "list"]
     return (len(study.experiments) * math.prod(len(v) for v in _grid_values(study).values())
-            * (lists[0] if lists else 1) * (study.samples if {"random", "lhs"} & set(samplers) else 1) * study.replicates)
+            * (lists[0] if lists else 1) * (study.samples if {"random",
+                                                              "lhs"} & set(samplers) else 1) * study.replicates)
 
 
 # -- studies ---------------------------------------------------------------------------------------------------

@@ -29,7 +29,7 @@ def _counter(rows):
 
 
 def _headline_counts(text: str) -> dict:
-    line = next(l for l in text.splitlines() if l.startswith("**Reading brackets of the"))
+    line = next(s for s in text.splitlines() if s.startswith("**Reading brackets of the"))
     out = {"n": int(re.search(r"of the (\d+) scored rows", line).group(1))}
     for tier in BRACKETS:
         out[tier] = int(re.search(r"(\d+) " + re.escape(TIER_WORDS[tier]), line).group(1))
@@ -38,7 +38,7 @@ def _headline_counts(text: str) -> dict:
 
 
 def _page_counts(text: str) -> dict:
-    line = next(l for l in text.splitlines() if "Scored rows:" in l)
+    line = next(s for s in text.splitlines() if "Scored rows:" in s)
     out = {"n": int(re.search(r"Scored rows: (\d+)", line).group(1))}
     for tier in BRACKETS:
         out[tier] = int(re.search(re.escape(SHORT[tier]) + r" (\d+)", line).group(1))
@@ -104,6 +104,6 @@ def test_the_committed_index_findings_and_numbers_agree():
         assert _page_counts(page.read_text(encoding="utf-8")) == \
             {"n": sum(mine.values()), **{t: mine[t] for t in BRACKETS}}, document
         # the one-screen answer's table row of the document
-        row = next(l for l in index.splitlines() if l.startswith(f"| `{document}` |"))
+        row = next(s for s in index.splitlines() if s.startswith(f"| `{document}` |"))
         cells = [c.strip() for c in row.strip("|").split("|")]
         assert [int(c) for c in cells[1:]] == [sum(mine.values())] + [mine[t] for t in BRACKETS], document

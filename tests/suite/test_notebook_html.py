@@ -15,7 +15,8 @@ def test_inline_and_display_math_become_svg_images_and_code_keeps_its_dollars():
     out = render_math("The mean $\\bar s_j = \\alpha - 10\\,n\\log_{10} d_j$ and\n$$\\sigma_\\mathrm{ACC}^2 \\le 1$$"
                       " but `cost = $5` stays.")
     images = re.findall(r'<img class="math[^"]*" alt="([^"]*)" src="data:image/svg\+xml;base64,([^"]+)">', out)
-    assert [alt for alt, _ in images] == ["\\bar s_j = \\alpha - 10\\,n\\log_{10} d_j", "\\sigma_\\mathrm{ACC}^2 \\le 1"]
+    assert [alt for alt, _ in images] == ["\\bar s_j = \\alpha - 10\\,n\\log_{10} d_j",
+                                          "\\sigma_\\mathrm{ACC}^2 \\le 1"]
     for _, data in images:
         assert base64.b64decode(data).lstrip().startswith((b"<?xml", b"<svg"))
     assert 'class="math math-display"' in out.split("<img")[2]      # $$...$$ on its own line

@@ -253,8 +253,10 @@ def test_partial_run_keeps_the_other_experiments_rows(toy):
     set_profile(toy, "george-one", "seed = 5")
     assert run(toy, "george-one") == 0
     after = [r for r in csv.DictReader((folder / "numbers.csv").read_text().splitlines())]
-    assert [r for r in after if r["experiment"] == "george-two"] == [r for r in before if r["experiment"] == "george-two"]
-    assert [r for r in after if r["experiment"] == "george-one"] != [r for r in before if r["experiment"] == "george-one"]
+    assert ([r for r in after if r["experiment"] == "george-two"]
+            == [r for r in before if r["experiment"] == "george-two"])
+    assert ([r for r in after if r["experiment"] == "george-one"]
+            != [r for r in before if r["experiment"] == "george-one"])
     index = (folder / "index.md").read_text()
     assert "not run" not in index and "[summary](george-two/summary.md)" in index
 
@@ -271,7 +273,8 @@ def test_override_run_writes_its_own_folder(toy, capsys):
     out = capsys.readouterr().out
     assert snapshot(toy / "reports" / "quick") == before
     made = [p.name for p in (toy / "reports").iterdir() if p.name.startswith("quick-")]
-    assert len(made) == 1 and made[0].startswith("quick-n-7-") and f"reports of this run: {toy / 'reports' / made[0]}" in out
+    assert (len(made) == 1 and made[0].startswith("quick-n-7-")
+            and f"reports of this run: {toy / 'reports' / made[0]}" in out)
     index = (toy / "reports" / made[0] / "index.md").read_text()
     assert "george-one" in index and "george-two" not in index
     assert run(toy, "george-one", "-p", "n=7", "--out", str(toy / "reports" / "My_Run")) == 2

@@ -43,15 +43,19 @@ def _study_file(tmp_path, text):
      "parameter 'a' needs exactly one sampler of grid, list, random, lhs"),
     ('name = "s"\nexperiments = ["george-study"]\n[study.parameters]\na = { grid = [] }',
      "parameter 'a': grid needs a non-empty list"),
-    ('name = "s"\nexperiments = ["george-study"]\nsamples = 3\n[study.parameters]\na = { random = { low = 2, high = 1 } }',
+    ('name = "s"\nexperiments = ["george-study"]\nsamples = 3\n[study.parameters]\n'
+     'a = { random = { low = 2, high = 1 } }',
      "parameter 'a': random needs low < high"),
-    ('name = "s"\nexperiments = ["george-study"]\nsamples = 3\n[study.parameters]\na = { lhs = { low = 0, high = 1, log = true } }',
+    ('name = "s"\nexperiments = ["george-study"]\nsamples = 3\n[study.parameters]\n'
+     'a = { lhs = { low = 0, high = 1, log = true } }',
      "log = true needs low > 0"),
     ('name = "s"\nexperiments = ["george-study"]\n[study.parameters]\na = { random = { low = 0, high = 1 } }',
      "random / lhs parameters (a) need samples >= 1"),
-    ('name = "s"\nexperiments = ["george-study"]\nsamples = 2\n[study.parameters]\nseed = { lhs = { low = 0, high = 9 } }',
+    ('name = "s"\nexperiments = ["george-study"]\nsamples = 2\n[study.parameters]\n'
+     'seed = { lhs = { low = 0, high = 9 } }',
      "parameter 'seed' of 'george-study' is int; only float parameters can be drawn"),
-    ('name = "s"\nexperiments = ["george-study"]\n[study.parameters]\nb = { list = [1.0] }\ntag = { list = ["p", "q"] }',
+    ('name = "s"\nexperiments = ["george-study"]\n[study.parameters]\nb = { list = [1.0] }\n'
+     'tag = { list = ["p", "q"] }',
      "list parameters are paired element-wise and need equal lengths"),
     ('name = "s"\nexperiments = ["george-study"]\nreplicates = 0', "replicates must be a whole number >= 1"),
     ('name = "s"\nexperiments = ["george-study"]\nreplicates = 2\n[study.parameters]\nseed = { grid = [1, 2] }',

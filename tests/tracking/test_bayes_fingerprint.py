@@ -104,7 +104,8 @@ def test_log_likelihood_is_the_gaussian_log_density_up_to_a_constant_per_run():
     alpha = rng.uniform(-55.0, -40.0, (R, T, 3))
     sigma = rng.uniform(3.0, 7.0, (R, T, 1))                                # pooled per run and step
     n = np.array([2.1, 2.6, 1.9])
-    model = lb.RssModel(READERS, lb.PathLossModel(alpha, n, sigma, wall_attenuation_db=3.5, min_distance_m=0.1), walls_m=walls,
+    model = lb.RssModel(READERS, lb.PathLossModel(alpha, n, sigma, wall_attenuation_db=3.5, min_distance_m=0.1),
+                        walls_m=walls,
                         per_step_channel=True)
     pos = rng.uniform([0.0, 0.0], [5.0, 8.0], (R, P, 2))
     pos[0, 0] = READERS[0] + [0.03, 0.04]                                   # 0.05 m from reader 0
@@ -177,7 +178,8 @@ def test_systematic_resample_matches_table_4_2_loop_and_filterpy(monkeypatch):
 
 def test_systematic_resample_rows_are_independent_and_literal_cdf_is_shifted():
     w = np.array([[0.5, 0.25, 0.25], [0.1, 0.1, 0.8]])
-    np.testing.assert_array_equal(lb.systematic_resample(w, [0.0, 0.5]), [[0, 0, 1], [1, 2, 2]])   # u = 1/6, 1/2, 5/6 against c = .1, .2, 1
+    np.testing.assert_array_equal(lb.systematic_resample(w, [0.0, 0.5]),
+                                  [[0, 0, 1], [1, 2, 2]])   # u = 1/6, 1/2, 5/6 against c = .1, .2, 1
     # printed CDF: c = (0, 0.25, 0.5): u = 0, 1/3, 2/3 -> first c_j >= u_i: 0, 2, past the end (clipped)
     np.testing.assert_array_equal(lb.systematic_resample(w[0], 0.0, cdf="literal_ozkaya2011"), [0, 2, 2])
 
@@ -254,7 +256,8 @@ def test_online_calibration_equals_brute_force_grid_search():
             assert ours <= cost[best] + 1e-6                                 # never worse than the grid
             assert abs(cal.ref_power_dbm[s, j] - alpha[best]) <= 0.02
             assert abs(cal.path_loss_exp[s, j] - n[best]) <= 0.002
-            assert -55 - 1e-7 <= cal.ref_power_dbm[s, j] <= -40 + 1e-7 and 1.5 - 1e-7 <= cal.path_loss_exp[s, j] <= 3 + 1e-7
+            assert (-55 - 1e-7 <= cal.ref_power_dbm[s, j] <= -40 + 1e-7
+                    and 1.5 - 1e-7 <= cal.path_loss_exp[s, j] <= 3 + 1e-7)
     resid = obs - cal.expected_dbm
     np.testing.assert_allclose(cal.sigma_db, np.sqrt((resid**2).sum(axis=(-2, -1)) / 12))   # Eq. (6.7)
 

@@ -219,7 +219,8 @@ def _case(kind, rng, B=5):
         streams = [lb.RssMeasurement(power, lb.per_step(moving), ch, model.position_index, anchor_sigma_m=0.2),
                    lb.RssMeasurement(power, lb.per_step(moving), ch, model.position_index, mode="serial")]
     elif kind == "record_and_no_predict_first":
-        streams = [lb.LinearMeasurement(fixes, H, np.eye(2)), lb.RssMeasurement(power, anchors, ch, model.position_index)]
+        streams = [lb.LinearMeasurement(fixes, H, np.eye(2)),
+                   lb.RssMeasurement(power, anchors, ch, model.position_index)]
         kw = dict(record=[0, 7, 30, 59], predict_first=False)
     elif kind == "batched_P0_multidim_batch":
         streams = [lb.RssMeasurement(power.reshape(1, B, T, 5), anchors, ch, model.position_index, mode="serial")]

@@ -402,7 +402,8 @@ def test_window_rule_equals_a_per_run_loop():
     with pytest.raises(ValueError, match="divergence_probability"):
         lb.tracking.results.nis_divergence(nis, dof, 3, 1.0)
     with pytest.raises(ValueError, match="divergence_window"):
-        lb.kalman_filter(MODEL.F, MODEL.Q, np.zeros(4), np.eye(4), lb.LinearMeasurement(np.zeros((3, 2)), H, R), divergence_window=2.5)
+        lb.kalman_filter(MODEL.F, MODEL.Q, np.zeros(4), np.eye(4), lb.LinearMeasurement(np.zeros((3, 2)), H, R),
+                         divergence_window=2.5)
 
 
 def _guard_by_loop(nis, dof, window, probability):

@@ -382,7 +382,8 @@ def test_fuzz_resampling(n, rows, bad, method, dtype, is_strided, where):
 
 
 @settings(max_examples=30, **SETTINGS)
-@given(n=st.sampled_from([0, 1, 5]), bad=st.sampled_from([None, *SPECIAL]), u=st.sampled_from([0.0, 0.5, 0.999, 1.0, -0.1,
+@given(n=st.sampled_from([0, 1, 5]), bad=st.sampled_from([None, *SPECIAL]),
+       u=st.sampled_from([0.0, 0.5, 0.999, 1.0, -0.1,
                                                                                               np.nan]))
 def test_fuzz_systematic_resample(n, bad, u):
     w = np.linspace(1.0, 2.0, n)

@@ -117,8 +117,10 @@ _BAYES = lb.RssModel(_READERS, lb.PathLossModel(-52.0, 2.3, sigma_db=3.0, min_di
 
 
 @pytest.mark.parametrize("call, message", [
-    (lambda: lb.kalman_filter(MODEL.F, MODEL.Q, X0, P0, lb.LinearMeasurement(_track(), H[:, :3], R)), r"H must have shape \(m, 4\)"),
-    (lambda: lb.kalman_filter(MODEL.F, MODEL.Q, X0, np.ones(4), lb.LinearMeasurement(_track(), H, R)), r"P0 must have shape \(4, 4\)"),
+    (lambda: lb.kalman_filter(MODEL.F, MODEL.Q, X0, P0, lb.LinearMeasurement(_track(), H[:, :3], R)),
+     r"H must have shape \(m, 4\)"),
+    (lambda: lb.kalman_filter(MODEL.F, MODEL.Q, X0, np.ones(4), lb.LinearMeasurement(_track(), H, R)),
+     r"P0 must have shape \(4, 4\)"),
     (lambda: lb.extended_kalman_filter(MODEL.F, MODEL.Q, X0, P0, [lb.LinearMeasurement(_track(), H, R)], record=[20]),
      r"record must be distinct integer step indices in \[0, 15\)"),
     (lambda: lb.RssMeasurement(np.zeros((3, 3)), _READERS, lb.PathLossModel(-40.0, 2.0, sigma_db=[3.0, 4.0]), [0, 1]),
@@ -134,8 +136,10 @@ _BAYES = lb.RssModel(_READERS, lb.PathLossModel(-52.0, 2.3, sigma_db=3.0, min_di
     (lambda: lb.particle_filter(np.zeros((2, 3, 3)), _BAYES, rng=np.random.default_rng(0), n_particles=10,
                                 region_m=([0, 0], [8, 6]), initial_position_m=[1.0, 1.0]),
      r"initial_position_m must have shape \(runs, 2\)"),
-    (lambda: lb.grid_bayes_filter(np.zeros((2, 3, 3)), _BAYES, np.zeros((5, 3))), r"cells_m must have shape \(\.\.\., \*, 2\)"),
-    (lambda: lb.grid_bayes_filter(np.zeros((2, 3, 3)), _BAYES, np.zeros((5, 2)), float("nan")), "spread_m must be finite"),
+    (lambda: lb.grid_bayes_filter(np.zeros((2, 3, 3)), _BAYES, np.zeros((5, 3))),
+     r"cells_m must have shape \(\.\.\., \*, 2\)"),
+    (lambda: lb.grid_bayes_filter(np.zeros((2, 3, 3)), _BAYES, np.zeros((5, 2)), float("nan")),
+     "spread_m must be finite"),
     (lambda: lb.grid_bayes_filter(np.zeros((2, 3, 3)), _BAYES, np.zeros((5, 2)), velocity_m=np.zeros((4, 2))),
      r"velocity_m must have shape \(2,\) or \(steps, 2\)"),
     (lambda: lb.grid_bayes_filter(np.zeros((2, 3, 3)), _BAYES, np.zeros((5, 2)), initial_belief=np.ones(4)),
@@ -157,24 +161,34 @@ def test_bad_input_names_the_argument_more(call, message):
 
 
 @pytest.mark.parametrize("call, message", [
-    (lambda: lb.kalman_filter(MODEL.F, np.ones(4), X0, P0, lb.LinearMeasurement(_track(), H, R)), r"Q must have shape \(4, 4\)"),
-    (lambda: lb.kalman_filter(MODEL.F, MODEL.Q, X0, P0, lb.LinearMeasurement(_track(), H, np.ones(2))), r"R must have shape \(2, 2\)"),
+    (lambda: lb.kalman_filter(MODEL.F, np.ones(4), X0, P0, lb.LinearMeasurement(_track(), H, R)),
+     r"Q must have shape \(4, 4\)"),
+    (lambda: lb.kalman_filter(MODEL.F, MODEL.Q, X0, P0, lb.LinearMeasurement(_track(), H, np.ones(2))),
+     r"R must have shape \(2, 2\)"),
     (lambda: lb.kalman_filter(MODEL.F, MODEL.Q, X0[:3], P0, lb.LinearMeasurement(_track(), H, R)), "x0 must end in"),
-    (lambda: lb.kalman_filter(MODEL.F * np.nan, MODEL.Q, X0, P0, lb.LinearMeasurement(_track(), H, R)), "F must be finite"),
-    (lambda: lb.kalman_filter(MODEL.F, MODEL.Q, X0, P0, lb.LinearMeasurement(np.full((3, 2), np.inf), H, R)), "z must be finite"),
+    (lambda: lb.kalman_filter(MODEL.F * np.nan, MODEL.Q, X0, P0, lb.LinearMeasurement(_track(), H, R)),
+     "F must be finite"),
+    (lambda: lb.kalman_filter(MODEL.F, MODEL.Q, X0, P0, lb.LinearMeasurement(np.full((3, 2), np.inf), H, R)),
+     "z must be finite"),
     (lambda: lb.extended_kalman_filter(MODEL.F, np.ones(4), X0, P0, [lb.LinearMeasurement(_track(), H, R)]),
      r"Q must have shape \(4, 4\)"),
     (lambda: lb.LinearMeasurement(_track(), H[:1], R), "H must have 2 rows"),
-    (lambda: lb.RssMeasurement(np.zeros((3, 4)), np.zeros((3, 2)), lb.PathLossModel(-40.0, 2.0), [0, 1]), "has 4 anchors"),
+    (lambda: lb.RssMeasurement(np.zeros((3, 4)), np.zeros((3, 2)), lb.PathLossModel(-40.0, 2.0), [0, 1]),
+     "has 4 anchors"),
     (lambda: lb.constant_velocity(float("nan"), 1.0), "dt_s must be finite"),
     (lambda: lb.constant_velocity(1.0, float("nan")), "process noise q must be finite"),
     (lambda: lb.grid_transition_matrix(np.zeros((3, 2)), float("nan")), "spread_m must be finite"),
-    (lambda: lb.RssModel(np.zeros((3, 2)), lb.PathLossModel(ref_power_dbm=np.nan, path_loss_exp=2.3, sigma_db=5.0)), "ref_power_dbm must be finite"),
-    (lambda: lb.RssModel(np.zeros((3, 2)), lb.PathLossModel(-52.0, path_loss_exp=[2.0, np.nan, 2.0], sigma_db=5.0)), "path_loss_exp must be finite"),
-    (lambda: lb.RssModel(np.zeros((3, 2)), lb.PathLossModel(-52.0, 2.3, sigma_db=-1.0)), "sigma_db must be (a )?non-negative"),
-    (lambda: lb.RssModel(np.ones((3, 2)), lb.PathLossModel(-52.0, 2.3, sigma_db=0.0)).log_likelihood(np.zeros((1, 3)), np.zeros((2, 2))),
+    (lambda: lb.RssModel(np.zeros((3, 2)), lb.PathLossModel(ref_power_dbm=np.nan, path_loss_exp=2.3, sigma_db=5.0)),
+     "ref_power_dbm must be finite"),
+    (lambda: lb.RssModel(np.zeros((3, 2)), lb.PathLossModel(-52.0, path_loss_exp=[2.0, np.nan, 2.0], sigma_db=5.0)),
+     "path_loss_exp must be finite"),
+    (lambda: lb.RssModel(np.zeros((3, 2)), lb.PathLossModel(-52.0, 2.3, sigma_db=-1.0)),
+     "sigma_db must be (a )?non-negative"),
+    (lambda: lb.RssModel(np.ones((3, 2)), lb.PathLossModel(-52.0, 2.3, sigma_db=0.0)).log_likelihood(
+        np.zeros((1, 3)), np.zeros((2, 2))),
      "the likelihood needs sigma_db > 0"),
-    (lambda: lb.grid_bayes_filter(np.zeros((2, 3, 4)), lb.RssModel(np.zeros((3, 2)), lb.PathLossModel(-52.0, 2.3, 5.0)), np.zeros((5, 2))),
+    (lambda: lb.grid_bayes_filter(np.zeros((2, 3, 4)), lb.RssModel(np.zeros((3, 2)), lb.PathLossModel(-52.0, 2.3, 5.0)),
+                                  np.zeros((5, 2))),
      r"rss_dbm must have shape \(runs, steps, 3\)"),
     (lambda: lb.simulate_states(MODEL.F, np.diag([1.0, 1.0, -1.0, 1.0]), X0, 3, rng=np.random.default_rng(0)),
      "Q must be positive semi-definite"),
@@ -187,7 +201,8 @@ def test_bad_input_names_the_argument(call, message):
 
 def test_likelihood_leaves_out_a_silent_reader_only():
     readers = np.array([[0.0, 0.0], [8.0, 0.0], [0.0, 6.0], [8.0, 6.0]])
-    model = lb.RssModel(readers, lb.PathLossModel(ref_power_dbm=[-50.0, -52.0, -51.0, -49.0], path_loss_exp=2.2, sigma_db=4.0))
+    model = lb.RssModel(readers,
+                        lb.PathLossModel(ref_power_dbm=[-50.0, -52.0, -51.0, -49.0], path_loss_exp=2.2, sigma_db=4.0))
     cells = np.array([[1.0, 1.0], [4.0, 3.0], [7.0, 5.0]])
     rss = np.array([[-60.0, np.nan, -63.0, -65.0]])
     reduced = lb.RssModel(readers[[0, 2, 3]], lb.PathLossModel(ref_power_dbm=[-50.0, -51.0, -49.0], path_loss_exp=2.2,
@@ -348,7 +363,8 @@ def test_a_singular_float32_sample_covariance_is_accepted():
         assert np.all(np.isfinite(call().mean))
     # float32 precision is no licence for a real negative eigenvalue
     with pytest.raises(ValueError, match="R must be positive semi-definite"):
-        lb.kalman_filter(MODEL.F, MODEL.Q, X0, P0, lb.LinearMeasurement(z, H, R32 - np.float32(1e-3) * np.eye(2, dtype=np.float32)))
+        lb.kalman_filter(MODEL.F, MODEL.Q, X0, P0,
+                         lb.LinearMeasurement(z, H, R32 - np.float32(1e-3) * np.eye(2, dtype=np.float32)))
 
 
 @pytest.mark.parametrize("P, message", [
@@ -397,8 +413,10 @@ def _overflowing_filters():
     power = CHANNEL.sample_rss_dbm(np.linalg.norm(5 + rng.normal(size=(3, 8, 1, 2)) - ANCHORS, axis=-1), rng=rng)
     power[1, 2:] = 1.5e308
     x0 = MODEL.state_from(np.array([5.0, 5.0]))
-    yield "kalman_filter (one covariance)", lambda: lb.kalman_filter(MODEL.F, MODEL.Q, x0, P0, lb.LinearMeasurement(z, H, R))
-    yield "kalman_filter (batched)", lambda: lb.kalman_filter(MODEL.F, MODEL.Q, x0, P0, lb.LinearMeasurement(uneven, H, R))
+    yield "kalman_filter (one covariance)", lambda: lb.kalman_filter(MODEL.F, MODEL.Q, x0, P0,
+                                                                     lb.LinearMeasurement(z, H, R))
+    yield "kalman_filter (batched)", lambda: lb.kalman_filter(MODEL.F, MODEL.Q, x0, P0,
+                                                              lb.LinearMeasurement(uneven, H, R))
     diag = np.diag(np.diag(R))
     for flt in (lb.extended_kalman_filter, lb.unscented_kalman_filter):
         kw = {} if flt is lb.extended_kalman_filter else dict(alpha=1.0)

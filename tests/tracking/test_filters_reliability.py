@@ -17,7 +17,7 @@ R = np.array([[0.5, 0.1], [0.1, 0.8]])
 X0, P0 = np.array([0.0, 0.0, 1.0, 0.5]), np.eye(4)
 T = 12
 
-# numpy's own texts that must never reach the user 
+# numpy's own texts that must never reach the user
 NUMPY_TEXTS = ("operands could not be broadcast", "matmul", "inhomogeneous", "Casting complex", "setting an array "
                "element", "gufunc", "could not convert")
 

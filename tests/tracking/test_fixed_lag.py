@@ -148,7 +148,8 @@ def test_filterpy_fixed_lag_smoother_is_not_exact_where_ours_matches_the_oracle(
     gap = np.abs(theirs[rows] - ours[rows]).max()
     gap_oracle = np.abs(theirs[rows] - oracle[rows]).max()
     print(f"filterpy FixedLagSmoother(N={lag + 1}) vs exact x_(j|j+{lag}): max |difference| {gap:.3g} "
-          f"(vs the augmented oracle {gap_oracle:.3g}); the filter itself is {np.abs(run.mean[0] - ours)[rows].max():.3g} "
+          f"(vs the augmented oracle {gap_oracle:.3g}); the filter itself is "
+          f"{np.abs(run.mean[0] - ours)[rows].max():.3g} "
           "from the exact answer")
     assert gap > 0.1 and gap_oracle > 0.1
 

@@ -152,8 +152,8 @@ def test_serial_updates_and_several_streams_give_the_joint_density():
 
 
 def test_ukf_and_numba_ekf_log_likelihood_equal_the_kf():
-    """On a linear model the UKF is the KF (its unscented transform is exact), log-likelihood, innovation and S included;
-    the compiled EKF gives the numpy EKF's log-likelihood (to round-off)."""
+    """On a linear model the UKF is the KF (its unscented transform is exact), log-likelihood, innovation and S
+    included; the compiled EKF gives the numpy EKF's log-likelihood (to round-off)."""
     z, R, x0, P0 = _problem(batch=3)
     z[1, 4, 0] = np.nan
     z[:, 7] = np.nan
@@ -214,7 +214,8 @@ def test_literal_george_records_the_previous_posterior_as_its_prior():
 
 
 def test_the_old_standard_variant_warns_at_the_caller_and_gives_the_same_numbers():
-    """``variant="standard"`` (the earlier keyword) is ``"corrected"`` for one release; the result says ``"corrected"``."""
+    """``variant="standard"`` (the earlier keyword) is ``"corrected"`` for one release; the result says
+    ``"corrected"``."""
     z, R, x0, P0 = _problem(batch=3, steps=8)
     with pytest.warns(DeprecationWarning, match=r"kalman_filter\(variant='standard'\) is deprecated: use "
                                                 r"kalman_filter\(variant='corrected'\)") as caught:
@@ -223,7 +224,8 @@ def test_the_old_standard_variant_warns_at_the_caller_and_gives_the_same_numbers
     new = lb.kalman_filter(MODEL.F, MODEL.Q, x0, P0, lb.LinearMeasurement(z, H, R))
     np.testing.assert_array_equal(old.mean, new.mean)
     np.testing.assert_array_equal(old.cov, new.cov)
-    assert old.variant == new.variant == "corrected" and lb.tracking.kalman.KF_VARIANTS == ("corrected", "literal_george")
+    assert (old.variant == new.variant == "corrected"
+            and lb.tracking.kalman.KF_VARIANTS == ("corrected", "literal_george"))
     with pytest.raises(ValueError, match=r"variant must be one of \('corrected', 'literal_george'\)"):
         lb.kalman_filter(MODEL.F, MODEL.Q, x0, P0, lb.LinearMeasurement(z, H, R), variant="literal_george2015")
 

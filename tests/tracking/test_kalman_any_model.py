@@ -386,7 +386,8 @@ def test_motion_and_stream_inputs_are_checked_by_name():
         lb.unscented_kalman_filter(lb.NonlinearMotion(lambda x: x[..., :1]), np.eye(2), np.zeros(2), np.eye(2),
                                    lb.LinearMeasurement(z, H, R))
     with pytest.raises(ValueError, match="x0 and P0 are the prior"):
-        lb.kalman_filter(np.eye(2), np.eye(2), np.zeros(2), lb.per_step(np.ones((5, 2, 2))), lb.LinearMeasurement(z, H, R))
+        lb.kalman_filter(np.eye(2), np.eye(2), np.zeros(2), lb.per_step(np.ones((5, 2, 2))),
+                         lb.LinearMeasurement(z, H, R))
     with pytest.raises(ValueError, match="per_step R is for a LinearMeasurement"):
         lb.NonlinearMeasurement(z, lambda x: x, lb.per_step(np.ones((5, 2, 2))))
     with pytest.raises(ValueError, match="R\\(x\\) must be positive semi-definite|R\\(x\\) must be symmetric"):

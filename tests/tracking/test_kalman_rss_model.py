@@ -60,5 +60,6 @@ def test_the_factorys_forms():
     with pytest.raises(ValueError, match=r"RssMeasurement takes \(rss_dbm, model\) with model an RssModel .* got "
                                          r"PathLossModel as the model$"):
         lb.RssMeasurement(z, channel, position_index=[0, 1])
-    with pytest.raises(ValueError, match=r"a Kalman-family stream reads the state.s position components: give position_index"):
+    with pytest.raises(ValueError,
+                       match=r"a Kalman-family stream reads the state.s position components: give position_index"):
         lb.RssMeasurement(z, lb.RssModel(ANCHORS, channel))

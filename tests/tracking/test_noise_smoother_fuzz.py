@@ -152,7 +152,8 @@ def test_fuzz_rts_smoother(problem, predict_first):
     assert np.all(_min_eig(run.cov - sm.cov) >= -1e-9 * scale), "smoothing added uncertainty"
     flat = lambda a, tail: a.reshape((-1,) + a.shape[a.ndim - tail:])
     for r, (x, P, xp, Pp, D, xs, Ps) in enumerate(zip(*(flat(a, t) for a, t in (
-            (run.mean, 2), (run.cov, 3), (run.x_pred, 2), (run.P_pred, 3), (run.P_cross, 3), (sm.mean, 2), (sm.cov, 3))))):
+            (run.mean, 2), (run.cov, 3), (run.x_pred, 2), (run.P_pred, 3), (run.P_cross, 3), (sm.mean, 2),
+            (sm.cov, 3))))):
         ref_x, ref_P = _reference_rts(x, P, xp, Pp, D)
         tol = 1e-6 * max(1.0, float(np.abs(ref_x).max()), scale)
         np.testing.assert_allclose(xs, ref_x, rtol=0, atol=tol, err_msg=f"run {r}")

@@ -220,7 +220,8 @@ def test_per_run_ml_equals_separate_fits_and_recovers_the_simulated_noise():
         assert abs(est.mean() - true) < 4 * est.std(ddof=1) / np.sqrt(est.size)
     pooled = lb.fit_noise_ml(model.F, 0.1 * model.Q, x0, P0, meas, per_run=False)
     assert pooled.q_scale.shape == (1,)
-    assert abs(np.log(pooled.q_scale[0]) - np.log(10.0)) < 0.2 and abs(np.log(pooled.r_scale[0][0]) - np.log(0.25)) < 0.1
+    assert (abs(np.log(pooled.q_scale[0]) - np.log(10.0)) < 0.2
+            and abs(np.log(pooled.r_scale[0][0]) - np.log(0.25)) < 0.1)
 
 
 @pytest.mark.slow
@@ -314,7 +315,8 @@ def test_per_run_noise_fit_converges_under_the_dogan_readings_that_broke_it(spee
                       anchors_m=dg.corner_anchors(room), room_m=room)
     per_run = fits[-1]
     assert np.all(np.isfinite(ml["q_ml_runs"])) and np.asarray(ml["q_ml_runs"]).size == 100
-    assert np.all(per_run.log_likelihood >= per_run.initial_log_likelihood - 1e-9 * np.abs(per_run.initial_log_likelihood))
+    assert np.all(per_run.log_likelihood
+                  >= per_run.initial_log_likelihood - 1e-9 * np.abs(per_run.initial_log_likelihood))
 
 
 def test_a_pooled_fit_whose_line_search_ends_abnormal_at_the_optimum_is_accepted_and_a_real_failure_is_not(monkeypatch):

@@ -178,8 +178,8 @@ def _grid_cells():
 
 def _bayes_filters():
     """particle_filter and grid_bayes_filter on the same readings."""
-    yield "particle_filter", lambda rss: lb.particle_filter(rss, BAYES_MODEL, rng=np.random.default_rng(7), n_particles=200,
-                                                            region_m=([0.0, 0.0], [10.0, 10.0]))
+    yield "particle_filter", lambda rss: lb.particle_filter(rss, BAYES_MODEL, rng=np.random.default_rng(7),
+                                                            n_particles=200, region_m=([0.0, 0.0], [10.0, 10.0]))
     yield "grid_bayes_filter", lambda rss: lb.grid_bayes_filter(rss, BAYES_MODEL, _grid_cells(), 1.0)
 
 
@@ -235,7 +235,8 @@ def test_some_runs_collapsing_give_one_warning_with_the_count_and_the_first_run_
         for name, call in _bayes_filters():
             call(_rss_runs())
         assert lb.particle_filter(None, lambda x, k: np.zeros(x.shape[:2]), rng=np.random.default_rng(0), n_steps=2,
-                                  initial_particles_m=np.zeros((0, 5, 2))).n_diverged == 0   # no runs: nothing collapsed
+                                  initial_particles_m=np.zeros((0, 5,
+                                                                2))).n_diverged == 0   # no runs: nothing collapsed
 
 
 # -- size guard ------------------------------------------------------------------------------------
@@ -270,11 +271,13 @@ def test_the_particle_size_limit_is_the_stated_bytes_of_runs_x_particles_x_state
     R, N, d = 3, 1000, 2
     rss = np.full((R, 4, 3), -60.0)
     monkeypatch.setattr(bayes, "MAX_ARRAY_BYTES", 8 * R * N * d)             # exactly one cloud: allowed
-    res = lb.particle_filter(rss, _guard_model(), rng=np.random.default_rng(0), n_particles=N, region_m=((0, 0), (10, 10)))
+    res = lb.particle_filter(rss, _guard_model(), rng=np.random.default_rng(0), n_particles=N,
+                             region_m=((0, 0), (10, 10)))
     assert res.particles_m.shape == (R, N, d)
     monkeypatch.setattr(bayes, "MAX_ARRAY_BYTES", 8 * R * N * d - 1)
     with pytest.raises(ValueError, match="^n_particles: a particle cloud"):
-        lb.particle_filter(rss, _guard_model(), rng=np.random.default_rng(0), n_particles=N, region_m=((0, 0), (10, 10)))
+        lb.particle_filter(rss, _guard_model(), rng=np.random.default_rng(0), n_particles=N,
+                           region_m=((0, 0), (10, 10)))
     with pytest.raises(ValueError, match="^initial_particles_m: a particle cloud"):
         lb.particle_filter(rss, _guard_model(), rng=np.random.default_rng(0), initial_particles_m=np.ones((R, N, d)))
 

@@ -32,7 +32,8 @@ def test_a_function_of_one_state_is_refused_by_name_and_per_state_makes_it_one_o
     x0 = np.zeros((3, 2))
     jac = lambda x: np.broadcast_to(H, x.shape[:-1] + (1, 2))          # noqa: E731
     with pytest.raises(ValueError, match=r"nonlinear measurement: h works on one state \(n,\) but not on states"):
-        lb.extended_kalman_filter(F, Q, x0, np.eye(2), lb.NonlinearMeasurement(z, _per_state_h, np.eye(1), jacobian=jac))
+        lb.extended_kalman_filter(F, Q, x0, np.eye(2),
+                                  lb.NonlinearMeasurement(z, _per_state_h, np.eye(1), jacobian=jac))
     with pytest.raises(ValueError, match="wrap it with locbook.per_state"):
         lb.unscented_kalman_filter(F, Q, x0, np.eye(2), lb.NonlinearMeasurement(z, _per_state_h, np.eye(1)))
     wrapped = lb.extended_kalman_filter(F, Q, x0, np.eye(2), lb.NonlinearMeasurement(
@@ -45,8 +46,8 @@ def test_a_motion_of_one_state_is_refused_by_name():
     fx = lambda x: np.array([x[0] + x[1], x[1]])                         # noqa: E731 - indexes the first axis
     z = np.zeros((3, 5, 1))
     with pytest.raises(ValueError, match=r"motion: f works on one state \(n,\)"):
-        lb.unscented_kalman_filter(lb.NonlinearMotion(fx), Q, np.zeros((3, 2)), np.eye(2), lb.LinearMeasurement(z, H,
-                                                                                                              np.eye(1)))
+        lb.unscented_kalman_filter(lb.NonlinearMotion(fx), Q, np.zeros((3, 2)), np.eye(2),
+                                   lb.LinearMeasurement(z, H, np.eye(1)))
     ok = lb.unscented_kalman_filter(lb.NonlinearMotion(lb.per_state(fx)), Q, np.zeros((3, 2)), np.eye(2),
                                     lb.LinearMeasurement(z, H, np.eye(1)))
     ref = lb.kalman_filter(F, Q, np.zeros((3, 2)), np.eye(2), lb.LinearMeasurement(z, H, np.eye(1)))

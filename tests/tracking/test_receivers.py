@@ -36,7 +36,8 @@ def test_receivers_repeated_over_steps_equal_fixed_anchors():
     anchors = rng.uniform(0, 50, (5, 3))
     z = CH.sample_rss_dbm(np.broadcast_to(np.linalg.norm(anchors - 20.0, axis=-1), (2, 7, 5)), rng=rng)
     F, Q = _static()
-    fixed = lb.extended_kalman_filter(F, Q, np.full(3, 25.0), 100 * np.eye(3), [lb.RssMeasurement(z, anchors, CH, np.arange(3))])
+    fixed = lb.extended_kalman_filter(F, Q, np.full(3, 25.0), 100 * np.eye(3),
+                                      [lb.RssMeasurement(z, anchors, CH, np.arange(3))])
     per_step = lb.extended_kalman_filter(F, Q, np.full(3, 25.0), 100 * np.eye(3),
                                          [lb.RssMeasurement(z, lb.per_step(np.broadcast_to(anchors, (2, 7, 5, 3))), CH,
                                                             np.arange(3))])
@@ -52,7 +53,8 @@ def test_variance_inflation_is_the_first_order_propagation_of_the_receiver_error
     z = np.array([[-70.0, -72.0]])
     sig3 = 5.0
     inflated = lb.extended_kalman_filter(np.eye(3), np.zeros((3, 3)), x0, P0,
-                                         [lb.RssMeasurement(z, s, CH, np.arange(3), anchor_sigma_m=sig3)], predict_first=False)
+                                         [lb.RssMeasurement(z, s, CH, np.arange(3), anchor_sigma_m=sig3)],
+                                         predict_first=False)
     d = np.linalg.norm(x0 - s, axis=-1)
     var = CH.sigma_db**2 + (40 / np.log(10)) ** 2 * sig3**2 / d**2
     H = -(40 / np.log(10)) * (x0 - s) / d[:, None] ** 2

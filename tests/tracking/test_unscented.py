@@ -30,14 +30,15 @@ def test_printed_weight_of_eq_3_22_sums_to_2n_over_n_plus_lambda():
 
 
 def test_the_old_weights_keyword_warns_at_the_caller_and_gives_the_same_numbers():
-    """``weights=`` (the earlier keyword) is ``variant=`` for one release: one DeprecationWarning naming it, the same run."""
+    """``weights=`` (the earlier keyword) is ``variant=`` for one release: one DeprecationWarning naming it, the same
+    run."""
     model = lb.constant_velocity(1.0, 0.05)
     z = np.random.default_rng(2).normal(size=(3, 8, 2)) + np.arange(8)[:, None]
-    args = (model.F, model.Q, np.zeros(4), np.eye(4), lb.LinearMeasurement(z, model.position_measurement_matrix(),
-                                                                            np.eye(2)))
-    with pytest.warns(DeprecationWarning, match=r"unscented_kalman_filter\(weights='literal_gudipati2017'\) is "
-                                                r"deprecated: use unscented_kalman_filter\(variant='literal_gudipati2017'\)") \
-            as caught:
+    args = (model.F, model.Q, np.zeros(4), np.eye(4),
+            lb.LinearMeasurement(z, model.position_measurement_matrix(), np.eye(2)))
+    with pytest.warns(DeprecationWarning,
+                      match=r"unscented_kalman_filter\(weights='literal_gudipati2017'\) is "
+                            r"deprecated: use unscented_kalman_filter\(variant='literal_gudipati2017'\)") as caught:
         old = lb.unscented_kalman_filter(*args, alpha=1.0, weights="literal_gudipati2017")
     assert len(caught) == 1 and caught[0].filename == __file__
     new = lb.unscented_kalman_filter(*args, alpha=1.0, variant="literal_gudipati2017")
@@ -147,7 +148,8 @@ def test_rss_ukf_batched_equals_runs_one_by_one_and_a_nan_drops_that_anchor():
     keep = [0, 1, 3]
     three = lb.PathLossModel(channel.ref_power_dbm[keep], channel.path_loss_exp[keep], channel.sigma_db)
     alone = lb.unscented_kalman_filter(np.eye(4), np.zeros((4, 4)), x_prior, P_prior,
-                                       [lb.RssMeasurement(z[1, 5:6][:, keep], ANCHORS[keep], three, model.position_index)])
+                                       [lb.RssMeasurement(z[1, 5:6][:, keep], ANCHORS[keep], three,
+                                                          model.position_index)])
     np.testing.assert_allclose(batched.mean[1, 5], alone.mean[0], atol=1e-9)
     np.testing.assert_allclose(batched.cov[1, 5], alone.cov[0], atol=1e-9)
 
@@ -190,7 +192,8 @@ def test_nonlinear_measurement_stream_equals_the_rss_stream():
         np.testing.assert_allclose(a.mean, b.mean, atol=1e-9)
         np.testing.assert_allclose(a.cov, b.cov, atol=1e-9)
     with pytest.raises(ValueError, match="rss as a function: the EKF needs its jacobian"):
-        lb.extended_kalman_filter(model.F, model.Q, start, P0, [lb.NonlinearMeasurement(z, h, np.eye(4), name="rss as a function")])
+        lb.extended_kalman_filter(model.F, model.Q, start, P0,
+                                  [lb.NonlinearMeasurement(z, h, np.eye(4), name="rss as a function")])
 
 
 def test_printed_innovation_covariance_without_r_is_singular_with_four_anchors():
@@ -241,7 +244,8 @@ def _stonesoup_ukf(z, x0, P0, anchors, channel, alpha, dt=1.0, q=0.05):
             return StateVector(out) if out.shape[1] == 1 else StateVectors(out)
 
     transition = CombinedLinearGaussianTransitionModel([ConstantVelocity(q), ConstantVelocity(q)])
-    meas = Rss(ndim_state=4, mapping=(0, 2), noise_covar=CovarianceMatrix(channel.sigma_db**2 * np.eye(anchors.shape[0])))
+    meas = Rss(ndim_state=4, mapping=(0, 2),
+               noise_covar=CovarianceMatrix(channel.sigma_db**2 * np.eye(anchors.shape[0])))
     predictor = UnscentedKalmanPredictor(transition, alpha=alpha, beta=2.0, kappa=0.0)
     updater = UnscentedKalmanUpdater(meas, alpha=alpha, beta=2.0, kappa=0.0)
     t0 = datetime(2026, 1, 1)

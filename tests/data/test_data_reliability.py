@@ -429,7 +429,7 @@ def test_the_example_writes_its_values_as_toml_strings(tmp_path):
 
 
 def test_the_fast_reader_keeps_ids_as_written(tmp_path):
-    """Found by tests/test_fuzz_manifests.py: pandas' C reader turned categories that all look like numbers or bools
+    """Found by tests/data/test_manifest_fuzz.py: pandas' C reader turned categories that all look like numbers or bools
     into numbers or bools, so receiver ``01`` became 1 (not the anchor ``01``), points ``1.50`` and ``1.5`` one
     point, and transmitter ``true`` ``True``; the exact reader keeps the text."""
     body = "0,true,01,-50,1.50\n1,true,02,-51,1.5\n2,false,01,-52,1.50\n"

@@ -58,7 +58,7 @@ def test_a_minimal_data_set_loads(tmp_path):
     (lambda m: m.replace('role = "track"', 'role = "walking"'), ["role must be one of", "'walking'"]),
     (lambda m: m.replace('file = "walk.csv"', 'file = "../walk.csv"'), ["inside the data set's folder"]),
     (lambda m: m.replace('file = "walk.csv"', 'file = "nowhere.csv"'), ["'nowhere.csv' does not exist"]),
-    # a track without a window is native scans (tests/test_data_format46.py); too long a window refused
+    # a track without a window is native scans (tests/data/test_data_format.py); too long a window refused
     (lambda m: m.replace("window_s = 0.5", "window_s = 10"), ["a track needs at least 2 epochs", "window_s = 10 s"]),
     (lambda m: m.replace("[geometry]", '[units]\ntime = "min"\n[geometry]'), ["[units] time must be one of"]),
     (lambda m: m.replace("[geometry]", '[units]\nrssi = "mW"\n[geometry]'), ["rssi must be 'dBm'"]),

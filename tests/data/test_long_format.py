@@ -1,5 +1,5 @@
 """The long format of measured data: every rule refuses a malformed file with a message naming file, line and
-column (one test per rule). Data sets and their manifests: tests/test_datasets.py."""
+column (one test per rule). Data sets and their manifests: tests/data/test_dataset.py."""
 
 import numpy as np
 import pytest
@@ -119,7 +119,7 @@ def test_epoch_with_two_true_positions(tmp_path):
 
 
 def test_anchor_rules(tmp_path):
-    # no z column is a 2-D anchors file (tests/test_data_format46.py); a z column needs every height
+    # no z column is a 2-D anchors file (tests/data/test_data_format.py); a z column needs every height
     refuses(tmp_path, ANCHORS.replace(",z", ""), "line 2", "4 fields, the header 3", reader=read_anchors)
     refuses(tmp_path, rows(ANCHORS, 3, "B,5,0,"), "line 3", "'z'", "the height is empty", "no z column",
             reader=read_anchors)

@@ -1,6 +1,6 @@
 """Range and inertial streams on one data set, and what a building (floors) does with streams: the three features of
-of the streams work that touch one recording, checked together (each alone: tests/test_range_streams.py,
-tests/test_inertial_streams.py, tests/test_floors.py).
+of the streams work that touch one recording, checked together (each alone: tests/data/test_ranges.py,
+tests/data/test_inertial.py, tests/data/test_floors.py).
 
 Truth is the generated data set's: ranges of 0.3 m against 4 dB shadowing, a 50 Hz IMU against 1 s RSS epochs."""
 from __future__ import annotations

@@ -136,7 +136,8 @@ def test_compiled_row_kernel_is_the_numpy_model():
     for w in range(3):
         h, grad, d2 = rss_mean_jacobian(x[:2, w] - ANCHORS[j], p0, ple, min_distance_m=clamp)
         d = np.sqrt(d2)
-        # the logarithm is musl's (vectorised) against numpy's: within 2 ulp of each other (tests/test_vecmath.py)
+        # the logarithm is musl's (vectorised) against numpy's: within 2 ulp of each other
+        # (tests/tracking/test_vecmath.py)
         assert abs(nu[0, w] - (z[w] - h)) <= 4 * np.spacing(abs(h))
         # the kernel may fuse a multiply and an add (one rounding instead of two): a few ulp
         np.testing.assert_allclose(Hr[0, :2, w], grad, rtol=8 * np.finfo(float).eps, atol=0)

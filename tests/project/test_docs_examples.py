@@ -4,8 +4,8 @@ are run, the Examples section of every public name's docstring (``locbook._API``
 the Sphinx build passes with warnings as errors.
 
 A block that cannot run here is fenced ```python no-run: REASON (the reason is required). README's commands and
-Python blocks are run by tests/test_readme_commands.py, and docs/your-data.md's by tests/test_measured_protocol.py (with
-fewer resamples), not again here."""
+Python blocks are run by tests/project/test_readme_commands.py, and docs/your-data.md's by
+tests/scenarios/test_measured.py (with fewer resamples), not again here."""
 import argparse
 import doctest
 import importlib
@@ -30,7 +30,7 @@ PAGES = sorted(p for p in DOCS.rglob("*.md") if not set(p.relative_to(DOCS).part
 FENCE = re.compile(r"^```([^\n]*)\n(.*?)^```", re.S | re.M)
 #: pages whose blocks another test runs (the whole measured-data protocol takes minutes as written: that test runs it
 #: with fewer resamples)
-RUN_ELSEWHERE = {"your-data.md": "tests/test_measured_protocol.py::test_the_python_example_of_docs_your_data_runs"}
+RUN_ELSEWHERE = {"your-data.md": "tests/scenarios/test_measured.py::test_the_python_example_of_docs_your_data_runs"}
 #: `locbook` commands cheap enough to run as written (in a temporary folder)
 CHEAP = re.compile(r"^locbook (--help|--version|list\b|show \S+$|data example )")
 

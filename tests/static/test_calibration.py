@@ -456,8 +456,8 @@ def test_reference_tags_a_reader_that_heard_one_tag_is_named():
 
 @pytest.mark.parametrize("mode", CALIBRATION_MODES)
 def test_calibrating_an_empty_batch_is_an_empty_calibration(mode):
-    """Found by tests/test_fuzz_static.py: the pooled mode reshaped an empty batch with -1 (numpy: 'cannot reshape
-    array of size 0 into shape (0,newaxis)')."""
+    """Found by tests/static/test_static_fuzz.py: the pooled mode reshaped an empty batch with -1 (numpy: 'cannot
+    reshape array of size 0 into shape (0,newaxis)')."""
     cal = lb.calibrate_path_loss(np.ones((0, 3, 4)), np.zeros((0, 3, 4)), mode)
     assert cal.ref_power_dbm.shape == ((0, 4) if mode == "per_anchor" else (0,)) and cal.ok
 
@@ -465,8 +465,8 @@ def test_calibrating_an_empty_batch_is_an_empty_calibration(mode):
 @pytest.mark.parametrize("mode", ["cvxpy", "huber"])
 @pytest.mark.parametrize("value", [-1e300, 1e150])
 def test_a_problem_the_solver_cannot_handle_fails_alone_in_a_stacked_fit(mode, value):
-    """Found by tests/test_fuzz_static.py: one problem with powers of -1e300 dBm made the stacked cvxpy solve fail
-    and every problem of the batch came back NaN with status solver_failed. Now a problem whose data overflow the
+    """Found by tests/static/test_static_fuzz.py: one problem with powers of -1e300 dBm made the stacked cvxpy solve
+    fail and every problem of the batch came back NaN with status solver_failed. Now a problem whose data overflow the
     objective is not_finite before the solve, and a failed stacked solve is halved until the failing problems are
     alone (as the box-constrained lateration does); the others are their own fits."""
     d, p = _samples(n=12, seed=7)

@@ -88,7 +88,7 @@ def test_log_normal_range_moments_against_monte_carlo_and_the_note():
 
 @pytest.mark.parametrize("n", [0, 1])
 def test_too_few_receivers_names_the_argument(n):
-    """Found by tests/test_fuzz_static.py: the message said "lateration needs at least two receiver positions"
+    """Found by tests/static/test_static_fuzz.py: the message said "lateration needs at least two receiver positions"
     without naming the argument or its shape."""
     with pytest.raises(ValueError, match=rf"anchors_m must hold at least two anchor positions.*\(3, {n}, 2\)"):
         lb.lateration_ls(np.zeros((3, n, 2)), np.ones((3, n)), pairs="consecutive")

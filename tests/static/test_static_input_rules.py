@@ -601,7 +601,7 @@ def test_the_notebooks_anchor_layouts_are_far_from_the_conditioning_bound():
 
 @pytest.mark.parametrize("name", ["ls", "wls"])
 def test_a_single_overflowing_range_gives_nan_not_infinity(name):
-    """Found by tests/test_fuzz_static.py: one range of 1e300 m squares to inf; the fix came out (inf, -inf) with
+    """Found by tests/static/test_static_fuzz.py: one range of 1e300 m squares to inf; the fix came out (inf, -inf) with
     status solver_failed, a failed problem with a position. A failed problem's position is NaN."""
     d = lb.pairwise_distance_m(np.array([3.0, 4.0]), ANCHORS)
     d[1] = 1e300

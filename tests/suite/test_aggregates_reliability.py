@@ -6,7 +6,7 @@ points have collision-free keys and one folder per declaration; the Markdown wri
 No notebook executes here: a point's report is written as the runner promotes one (the files
 :func:`locbook.suite.runner.report_cached` checks, with the cache key of the point), and a "run" is a stand-in for
 :func:`locbook.suite.runner.run_tasks` that writes this run's reports and then the aggregates, as the runner does.
-The toy notebook's arithmetic is known (value = 10 a + b + seed, tests/test_study.py), so every row is checked
+The toy notebook's arithmetic is known (value = 10 a + b + seed, tests/suite/test_study.py), so every row is checked
 against it."""
 import csv
 import json
@@ -44,7 +44,7 @@ def _suite(repo):
 
 
 def _value(parameters: dict) -> float:
-    """The toy notebook's value (tests/test_study.py, STUDY_BODY): 10 a + b + seed, with the notebook's defaults."""
+    """The toy notebook's value (tests/toy_suite.py, STUDY_BODY): 10 a + b + seed, with the notebook's defaults."""
     return 10 * parameters.get("a", 1.0) + parameters.get("b", 0.0) + parameters.get("seed", 1)
 
 

@@ -1,5 +1,5 @@
 """The run's views (live, plain, quiet; the end scoreboard) and the Dask executor, on the toy suite of
-tests/test_suite.py."""
+tests/suite/test_run.py."""
 import csv
 import io
 import json

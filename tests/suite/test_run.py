@@ -1,6 +1,6 @@
 """The notebook suite: parameter checks, caching, failure isolation and reproducibility.
 
-A small throw-away suite of toy notebooks keeps these tests fast; tests/test_notebooks.py runs the real one.
+A small throw-away suite of toy notebooks keeps these tests fast; tests/project/test_notebooks.py runs the real one.
 """
 import csv
 import hashlib

@@ -1,6 +1,6 @@
 """Failures that adversarial use of the suite found: relative report paths, corrupt cached reports,
 a lost Dask scheduler, a full disk, raw parameter values in report.md and file modes. Runs on the toy suite of
-tests/test_suite.py."""
+tests/suite/test_run.py."""
 import csv
 import errno
 import json

@@ -43,7 +43,7 @@ Ported (filterpy test function -> test here):
   test_sensor_fusion.
 
 Not ported: test_sigma_plot, test_scaled_weights (weights and a plot; the Merwe weights are checked against filterpy in
-tests/test_unscented.py), test_simplex_sigma_points_1D/2D (locbook has no simplex sigma points), test_1d_vel (a
+tests/tracking/test_unscented.py), test_simplex_sigma_points_1D/2D (locbook has no simplex sigma points), test_1d_vel (a
 hand-written recursion that zeroes the covariance's off-diagonal before the gain: not a Kalman filter and not
 filterpy's), test_z_dim, test_z_checks, test_default_dims (filterpy's handling of input shapes), test_update_correlated
 (correlated process and measurement noise: locbook's filters take no cross-covariance M) and the steady-state half of

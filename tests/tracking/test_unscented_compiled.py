@@ -191,7 +191,7 @@ def test_compiled_ukf_on_the_u_path_equals_numpy_and_filterpy(upath, alpha):
 def test_compiled_ukf_at_alpha_1e_3_agrees_to_the_amplified_round_off(upath):
     """At the thesis's alpha = 1e-3 the weights are about -1e6 and 6e4: round-off (1e-16 relative) is amplified some
     1e6 times in the sigma-point sums, so two correct implementations differ by about 1e-8 (filterpy vs numpy: the
-    tolerance of tests/test_filter_speed_equality.py)."""
+    tolerance of tests/tracking/test_compiled_equality.py)."""
     m = upath["model"]
     a, b, compiled = _both(m.F, m.Q, upath["x0"], upath["P0"], [upath["imu"], upath["rss"]], alpha=1e-3)
     assert compiled
@@ -202,7 +202,7 @@ def test_compiled_ukf_at_alpha_1e_3_agrees_to_the_amplified_round_off(upath):
 
 def test_the_compiled_path_keeps_the_numpy_errors(monkeypatch):
     """Where an update fails the kernel gives way and the numpy loop raises its error (the one of
-    tests/test_unscented.py), and the compiled path stays on for the session."""
+    tests/tracking/test_unscented.py), and the compiled path stays on for the session."""
     rng = np.random.default_rng(4)
     model = lb.constant_velocity(1.0, 0.05)
     ch = lb.PathLossModel(-40.0, 2.5, 3.0)

@@ -13,6 +13,7 @@ from hypothesis import given, settings
 from hypothesis.extra.numpy import arrays
 
 import locbook as lb
+from oracles import filterpy_kalman
 
 MODEL = lb.constant_velocity(1.0, 0.05)
 H = MODEL.position_measurement_matrix()
@@ -22,17 +23,7 @@ X0, P0 = np.array([0.0, 0.0, 1.0, 0.5]), np.eye(4)
 
 def filterpy_reference(z):
     """filterpy, updating at every step with only the components present (reduced H and R)."""
-    kf = KalmanFilter(dim_x=4, dim_z=2)
-    kf.F, kf.Q, kf.x, kf.P = MODEL.F, MODEL.Q, X0.copy(), P0.copy()
-    xs, Ps = [], []
-    for zk in z:
-        kf.predict()
-        keep = np.isfinite(zk)
-        if keep.any():
-            kf.update(zk[keep], R=R[np.ix_(keep, keep)], H=H[keep])
-        xs.append(kf.x.copy())
-        Ps.append(kf.P.copy())
-    return np.array(xs), np.array(Ps)
+    return filterpy_kalman(MODEL.F, MODEL.Q, H, R, z, X0, P0, components=True)
 
 
 def _track(seed=0, T=15):
@@ -291,15 +282,7 @@ def test_kalman_filter_with_zero_steps_returns_an_empty_result():
 
 def _per_run_filterpy(z, Fs, Hs, Qs, x0, P):
     """filterpy's KalmanFilter, one filter per run with that run's F, H and Q."""
-    out = np.empty(z.shape[:-1] + (4,))
-    for b in range(z.shape[0]):
-        kf = KalmanFilter(dim_x=4, dim_z=2)
-        kf.F, kf.H, kf.Q, kf.R, kf.x, kf.P = Fs[b], Hs[b], Qs[b], R, x0.copy(), P.copy()
-        for k in range(z.shape[1]):
-            kf.predict()
-            kf.update(z[b, k])
-            out[b, k] = kf.x
-    return out
+    return filterpy_kalman(Fs, Qs, Hs, R, z, x0, P, per_run=("F", "Q", "H"))[0]
 
 
 def test_run_axes_on_F_H_and_Q_equal_one_filter_per_run():
@@ -348,15 +331,9 @@ def test_a_singular_float32_sample_covariance_is_accepted():
     assert R32.dtype == np.float32 and np.linalg.eigvalsh(R32.astype(float))[0] < 0      # the case reported
     R64 = R32.astype(float)
     z = _track()
-    kf = KalmanFilter(dim_x=4, dim_z=2)
-    kf.F, kf.H, kf.Q, kf.R, kf.x, kf.P = MODEL.F, H, MODEL.Q, R64, X0.copy(), P0.copy()
-    ref = []
-    for zk in z:
-        kf.predict()
-        kf.update(zk)
-        ref.append(kf.x.copy())
+    ref, _ = filterpy_kalman(MODEL.F, MODEL.Q, H, R64, z, X0, P0)
     res = lb.kalman_filter(MODEL.F, MODEL.Q, X0, P0, lb.LinearMeasurement(z, H, R32))
-    np.testing.assert_allclose(res.mean, np.array(ref), rtol=0, atol=1e-9)
+    np.testing.assert_allclose(res.mean, ref, rtol=0, atol=1e-9)
     for call in _every_filter(R_=R32):
         assert np.all(np.isfinite(call().mean))
     for call in _every_filter(Q=np.kron(np.eye(2, dtype=np.float32), R32) * np.float32(0.01)):     # a float32 Q alike

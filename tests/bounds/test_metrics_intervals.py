@@ -8,6 +8,7 @@ import pytest
 from scipy.signal import lfilter
 from scipy.stats import norm
 
+import locbook as lb
 import locbook.metrics as metrics
 from locbook.metrics import ACCURACY_STATISTICS, MIN_BLOCKS, accuracy_metrics
 from locbook.montecarlo import circular_block_indices, moving_block_indices
@@ -250,3 +251,30 @@ def test_values_per_epoch_resamples_whole_epochs():
     assert three["n"] == 180
     with pytest.raises(ValueError, match="values_per_epoch"):
         accuracy_metrics(np.ones(7), rng=np.random.default_rng(0), values_per_epoch=3)
+
+
+MASKED = np.ma.array([1.0, 2.0, 3.0, 1000.0], mask=[0, 0, 0, 1])
+
+
+
+@pytest.mark.parametrize("fn", [metrics.mean_error_m, metrics.rmse_m, metrics.median_error_m, metrics.error_std_m,
+                                metrics.percentile_error_m, metrics.rmse_standard_error_m, lb.mc_standard_error])
+def test_a_masked_error_is_a_nan_in_every_metric(fn):
+    assert np.isnan(fn(MASKED))
+    assert np.isnan(fn(np.array([1.0, 2.0, 3.0, np.nan])))
+    full = fn(np.ma.array([1.0, 2.0, 3.0, 4.0], mask=False))     # nothing masked: the plain array's value
+    assert full == fn(np.array([1.0, 2.0, 3.0, 4.0]))
+
+
+
+def test_masked_errors_in_summaries_and_the_cdf():
+    s = metrics.error_summary(MASKED)                            # was numpy's "output array is read-only"
+    assert s["n"] == 4 and all(np.isnan(s[k]) for k in ("mean_m", "rmse_m", "median_m", "p90_m", "std_m"))
+    x, p = metrics.empirical_cdf(MASKED)
+    assert not np.ma.isMaskedArray(x) and np.isnan(x[-1]) and np.array_equal(x[:3], [1, 2, 3])
+    assert np.array_equal(p, [0.25, 0.5, 0.75, 1.0])
+    per_run = metrics.error_summary_per_run(np.ma.array([[1.0, 2.0], [3.0, 4.0]], mask=[[0, 1], [0, 0]]))
+    assert np.isnan(per_run["rmse_m"][0]) and per_run["rmse_m"][1] == np.sqrt(12.5)
+    r = metrics.reduction_pct(np.ma.array([2.0, 4.0], mask=[0, 1]), 1.0)
+    assert r[0] == 50.0 and np.isnan(r[1])
+    assert lb.mc_standard_error([1.0, 3.0]) == 1.0                 # std(ddof=1) sqrt(2) / sqrt(2)

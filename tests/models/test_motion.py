@@ -179,3 +179,14 @@ def test_batched_process_noise_equals_loop():
         np.testing.assert_allclose(batched[i],
                                    lb.kalman_filter(model.F, Q, x0, P0, lb.LinearMeasurement(z[0], H, R)).mean,
                                    atol=1e-13)
+
+
+def test_a_motion_whose_f_or_jacobian_is_complex_is_refused_by_its_own_methods():
+    motion = lb.NonlinearMotion(lambda x: x * (1 + 1j), lambda x: np.eye(2) * (1 + 0j), name="spin")
+    with pytest.raises(ValueError, match="spin: f returned complex values"):
+        motion.apply(np.zeros((3, 2)), 0)
+    with pytest.raises(ValueError, match="spin: jacobian returned complex values"):
+        motion.jacobian_at(np.zeros((3, 2)), 0)
+    plain = lb.NonlinearMotion(lambda x: 2 * x, lambda x: 2 * np.eye(2))
+    np.testing.assert_array_equal(plain.apply(np.ones((3, 2)), 0), 2 * np.ones((3, 2)))
+    np.testing.assert_array_equal(plain.jacobian_at(np.ones((3, 2)), 0), 2 * np.eye(2))

@@ -320,3 +320,11 @@ def test_requires_is_an_optional_last_column_of_other_parameters(tmp_path):
     with pytest.raises(ReadingsError, match="requires needs the reading's own parameter"):
         load_reading_file(_write(tmp_path, {**GOOD, "parameter": "", "where": "a.b", "requires": "{ m = 1 }"},
                                  header=header))
+
+
+def test_a_bad_reading_after_a_blank_line_is_named_by_its_own_line(tmp_path):
+    from locbook.reproduce.readings import READING_COLUMNS, ReadingsError, load_reading_file
+    path = tmp_path / "r.csv"
+    path.write_text(",".join(READING_COLUMNS) + "\n\n" + "slope,george-study,a,,1.0,[1.0],,,,assumed,s,,r\n")
+    with pytest.raises(ReadingsError, match=r"r\.csv, line 3 \(slope\)"):
+        load_reading_file(path)

@@ -160,3 +160,16 @@ def test_degenerate_geometry_is_reported_alike_on_the_reference_and_pair_paths()
         assert list(res.status) == ["degenerate_geometry", "too_few_anchors", "ok"], pairs
         assert np.isnan(res.position_m[:2]).all() and not res.converged[:2].any()
         np.testing.assert_allclose(res.position_m[2], [4.0, 3.0], atol=1e-9)
+
+
+def test_a_list_of_masked_rows_keeps_every_rows_mask():
+    # np.asarray of a list of masked arrays drops their masks: the 1e3 under the mask was used (a fix 8 km off)
+    anchors = np.array([[0.0, 0.0], [10.0, 0.0], [0.0, 10.0], [10.0, 10.0]])
+    d = np.linalg.norm(anchors - [3.0, 4.0], axis=1)
+    bad = d.copy()
+    bad[1] = 1e3
+    rows = [np.ma.array(bad, mask=[0, 1, 0, 0]), np.ma.array(d)]
+    for given in (rows, [rows]):
+        np.testing.assert_allclose(lb.lateration_ls(anchors, given).position_m.reshape(-1, 2), [[3.0, 4.0]] * 2)
+    with pytest.raises(ValueError, match="distance_m must be a rectangular array"):
+        lb.lateration_ls(anchors, [rows[0], d[:3]])

@@ -393,3 +393,44 @@ def test_motion_and_stream_inputs_are_checked_by_name():
     with pytest.raises(ValueError, match="R\\(x\\) must be positive semi-definite|R\\(x\\) must be symmetric"):
         lb.extended_kalman_filter(np.eye(2), np.eye(2), np.zeros(2), np.eye(2),
                                   lb.NonlinearMeasurement(z, lambda x: x, lambda x: -np.eye(2), lambda x: np.eye(2)))
+
+
+def test_a_scalar_h_of_a_one_component_reading_equals_the_vector_h():
+    # m = 1, one run: the EKF calls h on one state, and a scalar can only mean that one component (the refusal is for
+    # m > 1, where it would broadcast). The UKF calls h on all sigma points at once: there h must keep their axis.
+    filt = lb.extended_kalman_filter
+    model = lb.constant_velocity(1.0, 0.05)
+    z = np.linspace(0.0, 3.0, 10)[:, None]
+    R = np.array([[0.5]])
+    jac = lambda x: np.array([[1.0, 0.0, 0.0, 0.0]])
+    x0, P0 = np.zeros(4), np.eye(4)
+    scalar = filt(model.F, model.Q, x0, P0, lb.NonlinearMeasurement(z, lambda x: x[0], R, jacobian=jac))
+    vector = filt(model.F, model.Q, x0, P0, lb.NonlinearMeasurement(z, lambda x: x[:1], R, jacobian=jac))
+    np.testing.assert_array_equal(scalar.mean, vector.mean)
+
+
+def test_a_column_z_of_a_nonlinear_stream_gets_the_column_hint():
+    z = np.zeros((12, 2, 1))
+    with pytest.raises(ValueError, match=r"column of 2 readings per step .*z\[\.\.\., 0\] of shape \(12, 2\)"):
+        lb.NonlinearMeasurement(z, lambda x: x, np.eye(2))
+
+
+
+def _ekf(h):
+    z = np.ones((5, 2))
+    jac = lambda x: np.broadcast_to(np.eye(2), np.shape(x)[:-1] + (2, 2))
+    meas = lb.NonlinearMeasurement(z, h, np.eye(2), jacobian=jac)
+    return lb.extended_kalman_filter(np.eye(2), 0.01 * np.eye(2), np.zeros(2), np.eye(2), [meas])
+
+
+
+def test_a_filterpy_style_h_with_a_second_argument_gets_a_hint_not_a_bare_type_error():
+    with pytest.raises(ValueError, match=r"h cannot be called as h\(x\).*write lambda x: h\(x, arg\)") as e:
+        _ekf(lambda x, arg: x)
+    assert "\n" not in str(e.value)
+
+    def broken(x):                      # a TypeError raised inside a correct function is its own
+        return len(3)
+    with pytest.raises(TypeError, match="has no len"):
+        _ekf(broken)
+    assert np.allclose(_ekf(lambda x: x).mean[-1], 1.0, atol=0.5)

@@ -357,3 +357,12 @@ def test_a_pooled_fit_whose_line_search_ends_abnormal_at_the_optimum_is_accepted
     monkeypatch.setattr(scipy.optimize, "minimize", always_abnormal_and_far)
     with pytest.raises(ConvergenceError, match="L-BFGS-B"):
         lb.fit_noise_ml(*args, per_run=False)
+
+
+def test_fit_noise_ml_names_an_option_its_filter_kind_does_not_take():
+    meas = lb.LinearMeasurement(np.ones((6, 2)), np.eye(2), np.eye(2))
+    args = (np.eye(2), 0.01 * np.eye(2), np.zeros(2), np.eye(2), [meas])
+    with pytest.raises(ValueError, match=r"^fit_noise_ml: the 'kf' filter has no option 'alpha': only kind='ukf'"):
+        lb.fit_noise_ml(*args, kind="kf", alpha=0.5)
+    with pytest.raises(ValueError, match=r"no option 'alpah': no filter kind takes it"):
+        lb.fit_noise_ml(*args, kind="ukf", alpah=0.5)

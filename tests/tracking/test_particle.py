@@ -323,3 +323,20 @@ def test_kernel_map_estimate_of_no_particles_is_one_line():
     """Before: numpy's "attempt to get argmax of an empty sequence"."""
     with pytest.raises(ValueError, match=r"^particles_m \(R, N, dim\) must hold at least one particle per run"):
         lb.kernel_map_estimate(np.zeros((1, 0, 2)), np.zeros((1, 0)))
+
+
+#: the masked-reading test's readers (the corners in another order than READERS) and model
+MASKED_READERS = np.array([[0.0, 0.0], [10.0, 0.0], [0.0, 10.0], [10.0, 10.0]])
+MASKED_MODEL = lb.RssModel(MASKED_READERS, lb.PathLossModel(-40.0, 2.0, 3.0, min_distance_m=0.1))
+
+
+def test_a_single_runs_masked_reading_is_not_heard_in_the_particle_filter():
+    truth = np.stack([np.linspace(1, 9, 8), np.linspace(2, 8, 8)], -1)
+    power = MASKED_MODEL.mean_rss_dbm(truth[None])[0] + np.random.default_rng(3).normal(0, 3, (8, 4))
+    where = np.zeros(power.shape, bool)
+    where[::2, 1] = True
+    masked = np.ma.array(np.where(where, 1e3, power), mask=where)      # 1e3 dBm under the mask: never read
+    kw = dict(n_particles=200, region_m=([0.0, 0.0], [10.0, 10.0]))
+    got = lb.particle_filter(masked, MASKED_MODEL, rng=np.random.default_rng(7), **kw)
+    ref = lb.particle_filter(np.where(where, np.nan, power), MASKED_MODEL, rng=np.random.default_rng(7), **kw)
+    np.testing.assert_array_equal(got.mean, ref.mean)

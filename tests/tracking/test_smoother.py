@@ -76,3 +76,11 @@ def test_one_covariance_for_every_run_gives_the_per_run_smoother():
         np.testing.assert_allclose(smooth.mean[r], alone.mean, atol=1e-12)
         np.testing.assert_allclose(smooth.cov[r], alone.cov, atol=1e-12)
         np.testing.assert_allclose(smooth.gain[r], alone.gain, atol=1e-12)
+
+
+def test_rts_smoother_of_a_run_with_no_steps_is_empty():
+    meas = lb.LinearMeasurement(np.zeros((0, 2)), np.eye(2), np.eye(2))
+    run = lb.kalman_filter(np.eye(2), 0.01 * np.eye(2), np.zeros(2), np.eye(2), [meas],
+                           outputs=("x_pred", "P_pred", "P_cross"))
+    s = lb.rts_smoother(run)
+    assert s.mean.shape == (0, 2) and s.cov.shape == (0, 2, 2) and s.gain.shape == (0, 2, 2)

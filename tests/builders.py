@@ -93,3 +93,21 @@ name = "walk"
 file = "walk.csv"
 role = "track"
 """
+
+
+# -- masked readings ------------------------------------------------------------------------------------------------
+
+#: five anchors around a 20 m square: the masked-reading tests' layout (any four heard ones fix a position exactly)
+MASKED_ANCHORS = np.array([[0.0, 0.0], [20.0, 0.0], [0.0, 20.0], [20.0, 20.0], [10.0, -5.0]])
+
+
+def exact_distances(seed=3, problems=6):
+    """Random true positions inside the square and their exact distances to :data:`MASKED_ANCHORS`."""
+    truth = np.random.default_rng(seed).uniform(2, 18, (problems, 2))
+    return truth, np.linalg.norm(truth[:, None] - MASKED_ANCHORS, axis=-1)
+
+
+def masked(z, where):
+    """``z`` masked at ``where``, with garbage under the mask (it must never be used)."""
+    data = np.where(where, 1e3, z)
+    return np.ma.array(data, mask=where)

@@ -14,6 +14,7 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 import locbook as lb
+from builders import MASKED_ANCHORS, exact_distances, masked
 from locbook.static import box_ls, checks, grid_ml, result, rss_ml
 from locbook.static.result import LOCALIZATION_STATUSES
 
@@ -731,3 +732,36 @@ def test_the_degenerate_geometry_message_says_plane_in_3d():
     with pytest.raises(lb.DegenerateGeometryError) as info:
         lb.check_anchor_geometry(np.c_[np.arange(4.0), np.zeros(4)])     # 2-D: on the x axis
     assert "collinear" in str(info.value) and "across the line" in str(info.value)
+
+
+# -- a masked reading is a reading not heard --------------------------------------------------------------------
+@pytest.mark.parametrize("solve", [
+    lambda d: lb.lateration_ls(MASKED_ANCHORS, d),
+    lambda d: lb.lateration_ls(MASKED_ANCHORS, d, pairs="first"),
+    lambda d: lb.lateration_wls(MASKED_ANCHORS, d, np.ones(4)),
+    lambda d: lb.lateration_box_ls(MASKED_ANCHORS, d, -100.0, 100.0),
+], ids=["ls", "ls_pairs", "wls", "box_ls"])
+def test_lateration_with_masked_distances_uses_the_heard_anchors_only(solve):
+    # exact distances: any four heard anchors (not collinear) give the true position exactly
+    truth, d = exact_distances()
+    where = np.zeros(d.shape, bool)
+    where[1, 0] = where[2, 3] = where[4, 1] = True
+    res = solve(masked(d, where))
+    np.testing.assert_allclose(res.position_m, truth, rtol=0, atol=1e-8)
+    assert (res.status == "ok").all()
+
+
+
+def test_rss_estimators_with_masked_powers_equal_the_nan_readings():
+    truth, d = exact_distances(4)
+    model = lb.PathLossModel(-40.0, 2.0, 2.0)
+    power = -40.0 - 20 * np.log10(d)
+    where = np.zeros(d.shape, bool)
+    where[0, 2] = where[3, 4] = True
+    grid = np.stack(np.meshgrid(np.arange(0.0, 20.5, 0.5), np.arange(0.0, 20.5, 0.5)), -1).reshape(-1, 2)
+    for solve in (lambda p: lb.rss_ml_position(p, lb.RssModel(MASKED_ANCHORS, model)),
+                  lambda p: lb.grid_ml_position(p, lb.RssModel(MASKED_ANCHORS, model), grid)):
+        got = solve(masked(power, where))
+        np.testing.assert_array_equal(got.position_m, solve(np.where(where, np.nan, power)).position_m)
+    np.testing.assert_allclose(lb.rss_ml_position(masked(power, where), lb.RssModel(MASKED_ANCHORS, model)).position_m,
+                               truth, atol=1e-5)

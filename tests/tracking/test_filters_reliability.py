@@ -10,6 +10,9 @@ import numpy as np
 import pytest
 
 import locbook as lb
+from builders import MASKED_ANCHORS as ANCHORS
+from builders import exact_distances as _distances
+from builders import masked as _masked
 
 MODEL = lb.constant_velocity(1.0, 0.05)
 H = MODEL.position_measurement_matrix()
@@ -108,13 +111,7 @@ def test_a_complex_h_is_refused_not_cut_to_its_real_part(filt):
     _one_line(exc, "fix: h returned complex values")
 
 
-# -- a masked reading is a reading not heard, in the one converter -------------------------------------------
-def _masked(z, where):
-    """``z`` masked at ``where``, with garbage under the mask (it must never be used)."""
-    data = np.where(where, 1e3, z)
-    return np.ma.array(data, mask=where)
-
-
+# -- a masked reading is a reading not heard, in the one converter (the static estimators': tests/static/)
 @pytest.mark.parametrize("filt", [lb.kalman_filter, EKF, UKF], ids=["kf", "ekf", "ukf"])
 def test_masked_readings_are_missing_readings_in_every_kalman_filter(filt):
     z = _track(2)
@@ -161,45 +158,6 @@ def test_pykalman_robot_masked_observations_agree_with_pykalman():
     np.testing.assert_allclose(run.mean, means, rtol=0, atol=1e-9)
     np.testing.assert_allclose(run.cov, covs, rtol=0, atol=1e-9)
     np.testing.assert_allclose(run.mean[:500], d.filtered_state_means[:500], rtol=0, atol=1e-9)
-
-
-ANCHORS = np.array([[0.0, 0.0], [20.0, 0.0], [0.0, 20.0], [20.0, 20.0], [10.0, -5.0]])
-
-
-def _distances(seed=3, problems=6):
-    truth = np.random.default_rng(seed).uniform(2, 18, (problems, 2))
-    return truth, np.linalg.norm(truth[:, None] - ANCHORS, axis=-1)
-
-
-@pytest.mark.parametrize("solve", [
-    lambda d: lb.lateration_ls(ANCHORS, d),
-    lambda d: lb.lateration_ls(ANCHORS, d, pairs="first"),
-    lambda d: lb.lateration_wls(ANCHORS, d, np.ones(4)),
-    lambda d: lb.lateration_box_ls(ANCHORS, d, -100.0, 100.0),
-], ids=["ls", "ls_pairs", "wls", "box_ls"])
-def test_lateration_with_masked_distances_uses_the_heard_anchors_only(solve):
-    # exact distances: any four heard anchors (not collinear) give the true position exactly
-    truth, d = _distances()
-    where = np.zeros(d.shape, bool)
-    where[1, 0] = where[2, 3] = where[4, 1] = True
-    res = solve(_masked(d, where))
-    np.testing.assert_allclose(res.position_m, truth, rtol=0, atol=1e-8)
-    assert (res.status == "ok").all()
-
-
-def test_rss_estimators_with_masked_powers_equal_the_nan_readings():
-    truth, d = _distances(4)
-    model = lb.PathLossModel(-40.0, 2.0, 2.0)
-    power = -40.0 - 20 * np.log10(d)
-    where = np.zeros(d.shape, bool)
-    where[0, 2] = where[3, 4] = True
-    grid = np.stack(np.meshgrid(np.arange(0.0, 20.5, 0.5), np.arange(0.0, 20.5, 0.5)), -1).reshape(-1, 2)
-    for solve in (lambda p: lb.rss_ml_position(p, lb.RssModel(ANCHORS, model)),
-                  lambda p: lb.grid_ml_position(p, lb.RssModel(ANCHORS, model), grid)):
-        got = solve(_masked(power, where))
-        np.testing.assert_array_equal(got.position_m, solve(np.where(where, np.nan, power)).position_m)
-    np.testing.assert_allclose(lb.rss_ml_position(_masked(power, where), lb.RssModel(ANCHORS, model)).position_m,
-                               truth, atol=1e-5)
 
 
 def test_a_mask_where_no_reading_is_accepted_is_an_error_naming_the_argument():

@@ -43,7 +43,6 @@ if fail:
 """
 
 
-
 def _notebook(path, params_src, body=GOOD):
     nb = new_notebook()
     nb.metadata["kernelspec"] = {"name": "python3", "display_name": "Python 3", "language": "python"}
@@ -59,7 +58,6 @@ PARAMS = ('seed: int = 1  # seed\nn: int = 10  # samples\nfail: bool = False  # 
           'weights: list[float] = [1.0]  # a list\n')
 
 
-
 def run(toy, *args):
     return main(["--suite", str(toy / "notebooks" / "experiments.toml"), "run", "--reports", str(toy / "reports"),
                  *args])
@@ -71,7 +69,6 @@ def cli(toy, *args):
                              str(toy / "notebooks" / "experiments.toml"),
                              "run", "--reports", str(toy / "reports"), *args],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-
 
 
 def processes_mentioning(text: str) -> dict[int, str]:
@@ -103,7 +100,6 @@ def processes_mentioning(text: str) -> dict[int, str]:
     return out
 
 
-
 def alive(pids) -> list[int]:
     """The pids of ``pids`` still running (zombies count as gone)."""
     out = []
@@ -116,7 +112,6 @@ def alive(pids) -> list[int]:
     return out
 
 
-
 def wait_for(predicate, timeout_s: float):
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
@@ -124,7 +119,6 @@ def wait_for(predicate, timeout_s: float):
             return True
         time.sleep(0.1)
     return predicate()
-
 
 
 def set_profile(toy, experiment: str, text: str):
@@ -200,7 +194,6 @@ def example(folder: Path, roles=EXAMPLE_ROLES, *, truth: bool = True, name: str 
     return out
 
 
-
 def _row(kind, recording, method, mean, **more) -> dict:
     from locbook.scenarios.measured import RESULT_COLUMNS
     row = {c: "" for c in RESULT_COLUMNS}
@@ -210,7 +203,6 @@ def _row(kind, recording, method, mean, **more) -> dict:
                bound_rms_m="1.3", ratio="1.05", ratio_note="")
     row.update(more)
     return row
-
 
 
 def _write_rows(path: Path, rows: list[dict]) -> None:
@@ -226,7 +218,6 @@ def _write_rows(path: Path, rows: list[dict]) -> None:
 STATIC_ROWS = [("points", "lls", "3.1"), ("pooled", "lls", "3.0"), ("walk_a", "lls", "2.9"),
                ("pooled", "grid_ml", "1.2"), ("points", "grid_ml", "1.3"), ("walk_a", "grid_ml", "1.1"),
                ("points", "knn", "1.5"), ("pooled", "knn", "1.5")]
-
 
 
 def write_data_folder(report_dir: Path, folder: Path, suite) -> dict:

@@ -256,7 +256,6 @@ def test_values_per_epoch_resamples_whole_epochs():
 MASKED = np.ma.array([1.0, 2.0, 3.0, 1000.0], mask=[0, 0, 0, 1])
 
 
-
 @pytest.mark.parametrize("fn", [metrics.mean_error_m, metrics.rmse_m, metrics.median_error_m, metrics.error_std_m,
                                 metrics.percentile_error_m, metrics.rmse_standard_error_m, lb.mc_standard_error])
 def test_a_masked_error_is_a_nan_in_every_metric(fn):
@@ -264,7 +263,6 @@ def test_a_masked_error_is_a_nan_in_every_metric(fn):
     assert np.isnan(fn(np.array([1.0, 2.0, 3.0, np.nan])))
     full = fn(np.ma.array([1.0, 2.0, 3.0, 4.0], mask=False))     # nothing masked: the plain array's value
     assert full == fn(np.array([1.0, 2.0, 3.0, 4.0]))
-
 
 
 def test_masked_errors_in_summaries_and_the_cdf():

@@ -427,7 +427,6 @@ def test_the_example_writes_its_values_as_toml_strings(tmp_path):
     assert load_dataset(folder).name == "my-set"
 
 
-
 def test_the_fast_reader_keeps_ids_as_written(tmp_path):
     """Found by tests/data/test_manifest_fuzz.py: pandas' C reader turned categories that all look like numbers or bools
     into numbers or bools, so receiver ``01`` became 1 (not the anchor ``01``), points ``1.50`` and ``1.5`` one

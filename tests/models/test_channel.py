@@ -240,3 +240,21 @@ def test_nan_padded_distances_fit_each_ragged_problem_as_its_own_samples():
     bad[0, 3] = -55.0
     with pytest.raises(ValueError, match="NaN where rss_dbm holds a reading"):
         lb.fit_path_loss(d, bad)
+
+
+# -- walls and small-scale fading ------------------------------------------------------------------------
+def test_wall_crossings_counts_a_wall_between_rooms():
+    walls = [[[3.0, 0.0], [3.0, 4.0]]]
+    readers = np.array([[0.0, 0.0], [9.0, 4.0]])
+    pts = np.array([[1.0, 1.0], [5.0, 2.0], [3.0, 5.0]])       # small room, large room, beyond the wall's end
+    np.testing.assert_array_equal(lb.wall_crossings(pts, readers, walls), [[0, 1], [1, 0], [0, 0]])
+
+
+def test_small_scale_fading_has_unit_mean_power_and_deep_fades():
+    rng = np.random.default_rng(12)
+    x = np.linspace(0, 50, 20000)
+    rayleigh = lb.small_scale_fading_db(x, 0.33, rng=rng)
+    assert np.mean(10 ** (rayleigh / 10)) == pytest.approx(1.0, abs=0.1)
+    assert rayleigh.min() < -20.0                      # Rayleigh: fades beyond 20 dB over many wavelengths
+    rician = lb.small_scale_fading_db(x, 0.33, rng=rng, k_factor=10.0)
+    assert rician.min() > rayleigh.min()

@@ -190,3 +190,10 @@ def test_a_motion_whose_f_or_jacobian_is_complex_is_refused_by_its_own_methods()
     plain = lb.NonlinearMotion(lambda x: 2 * x, lambda x: 2 * np.eye(2))
     np.testing.assert_array_equal(plain.apply(np.ones((3, 2)), 0), 2 * np.ones((3, 2)))
     np.testing.assert_array_equal(plain.jacobian_at(np.ones((3, 2)), 0), 2 * np.eye(2))
+
+
+def test_reflect_into_box_folds_long_steps():
+    lo, hi = np.zeros(2), np.array([5.0, 8.0])
+    p = np.array([[-1.0, 9.0], [11.5, -17.0], [2.0, 3.0]])
+    # -1 -> 1; 9 -> 7; 11.5 -> 10 - 11.5 = -1.5 -> 1.5; -17 -> 17 - 16 = 1 (period 16)
+    np.testing.assert_allclose(lb.reflect_into_box(p, lo, hi), [[1.0, 7.0], [1.5, 1.0], [2.0, 3.0]])

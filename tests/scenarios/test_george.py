@@ -102,7 +102,6 @@ def test_the_setup_agrees_with_the_numbers_the_paper_prints():
                                        value("Sec. 2.C", "TX power level", "highest"))
 
 
-
 def test_no_george_default_is_fitted_and_the_fitted_sigma_is_only_an_alternative():
     # 1.83 dB was chosen from the printed C without filter; the default is the assumed sigma
     from locbook.reproduce.readings import readings

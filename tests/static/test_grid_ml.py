@@ -17,7 +17,6 @@ def _grid_problem(n_problems=41, n_cells=301, seed=3):
     return anchors, -40.0 - 25.0 * np.log10(d) + rng.normal(0, 4, d.shape), model, grid
 
 
-
 def test_grid_ml_result_does_not_depend_on_chunk_or_the_block_limit(monkeypatch):
     anchors, rss, model, grid = _grid_problem()
     ref = lb.grid_ml_position(rss, lb.RssModel(anchors, model), grid)
@@ -31,7 +30,6 @@ def test_grid_ml_result_does_not_depend_on_chunk_or_the_block_limit(monkeypatch)
     monkeypatch.setattr(grid_ml, "GRID_ML_BLOCK_BYTES", 8 * grid.shape[0] * 3)   # blocks of 3 problems
     got = lb.grid_ml_position(rss, lb.RssModel(anchors, model), grid)
     assert np.array_equal(got.position_m, ref.position_m) and np.array_equal(got.cost, ref.cost)
-
 
 
 def test_grid_ml_refuses_a_grid_whose_smallest_block_is_over_the_limit_before_allocating(monkeypatch):

@@ -751,7 +751,6 @@ def test_lateration_with_masked_distances_uses_the_heard_anchors_only(solve):
     assert (res.status == "ok").all()
 
 
-
 def test_rss_estimators_with_masked_powers_equal_the_nan_readings():
     truth, d = exact_distances(4)
     model = lb.PathLossModel(-40.0, 2.0, 2.0)

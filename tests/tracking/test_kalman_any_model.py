@@ -415,13 +415,11 @@ def test_a_column_z_of_a_nonlinear_stream_gets_the_column_hint():
         lb.NonlinearMeasurement(z, lambda x: x, np.eye(2))
 
 
-
 def _ekf(h):
     z = np.ones((5, 2))
     jac = lambda x: np.broadcast_to(np.eye(2), np.shape(x)[:-1] + (2, 2))
     meas = lb.NonlinearMeasurement(z, h, np.eye(2), jacobian=jac)
     return lb.extended_kalman_filter(np.eye(2), 0.01 * np.eye(2), np.zeros(2), np.eye(2), [meas])
-
 
 
 def test_a_filterpy_style_h_with_a_second_argument_gets_a_hint_not_a_bare_type_error():

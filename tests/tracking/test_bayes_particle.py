@@ -1,5 +1,5 @@
-"""Fingerprinting, grid Bayes and particle filters, reference-tag calibration and smoothing (document 004),
-against closed forms, brute force, independent loops and filterpy's resampler."""
+"""Grid Bayes and particle filters (document 004) against closed forms, independent loops and filterpy's resampler.
+Fingerprinting and the reference tags: tests/static/test_fingerprint.py, tests/static/test_reference_tags.py."""
 import numpy as np
 import pytest
 from scipy.stats import norm
@@ -14,62 +14,6 @@ def _cells(step):
     xs, ys = np.arange(step / 2, 5.0, step), np.arange(step / 2, 8.0, step)
     gx, gy = np.meshgrid(xs, ys, indexing="ij")
     return np.column_stack([gx.ravel(), gy.ravel()])
-
-
-# -- geometry helpers ----------------------------------------------------------------------------------
-def test_wall_crossings_counts_a_wall_between_rooms():
-    walls = [[[3.0, 0.0], [3.0, 4.0]]]
-    readers = np.array([[0.0, 0.0], [9.0, 4.0]])
-    pts = np.array([[1.0, 1.0], [5.0, 2.0], [3.0, 5.0]])       # small room, large room, beyond the wall's end
-    np.testing.assert_array_equal(lb.wall_crossings(pts, readers, walls), [[0, 1], [1, 0], [0, 0]])
-
-
-def test_reflect_into_box_folds_long_steps():
-    lo, hi = np.zeros(2), np.array([5.0, 8.0])
-    p = np.array([[-1.0, 9.0], [11.5, -17.0], [2.0, 3.0]])
-    # -1 -> 1; 9 -> 7; 11.5 -> 10 - 11.5 = -1.5 -> 1.5; -17 -> 17 - 16 = 1 (period 16)
-    np.testing.assert_allclose(lb.reflect_into_box(p, lo, hi), [[1.0, 7.0], [1.5, 1.0], [2.0, 3.0]])
-
-
-# -- nearest neighbour ---------------------------------------------------------------------------------
-def test_knn_inverse_square_weights_by_hand():
-    cells = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [5.0, 5.0]])
-    fp = np.array([[-50.0, -60.0], [-52.0, -60.0], [-50.0, -63.0], [-80.0, -80.0]])
-    s = np.array([-51.0, -60.0])
-    # E^2 = 1, 1, 10, ...: weights (1, 1, 0.1) / 2.1
-    expected = (cells[0] + cells[1] + 0.1 * cells[2]) / 2.1
-    np.testing.assert_allclose(lb.knn_position(s, fp, cells, k=3), expected, rtol=1e-12)
-    # k = 1 with a tie (E^2 = 1 for cells 0 and 1): exactly one of the tied cells, not a blend or another cell
-    assert lb.knn_position(s, fp, cells, k=1).tolist() in (cells[0].tolist(), cells[1].tolist())
-    # k = 1 without a tie is the nearest cell itself (E^2 = 2.25, 0.25, 11.25, ...)
-    np.testing.assert_array_equal(lb.knn_position(np.array([-51.5, -60.0]), fp, cells, k=1), cells[1])
-    np.testing.assert_array_equal(lb.knn_position(np.array([-50.0, -62.0]), fp, cells, k=1), cells[2])
-    # k = 2: cells 1 and 0 with weights (1/0.25, 1/2.25) normalised = (0.9, 0.1)
-    np.testing.assert_allclose(lb.knn_position(np.array([-51.5, -60.0]), fp, cells, k=2),
-                               0.9 * cells[1] + 0.1 * cells[0], rtol=1e-12)
-    # literal Eq. (3.3): (1/E^2) / sum E^2 = (1, 1, 0.1) / 12
-    np.testing.assert_allclose(lb.knn_position(s, fp, cells, k=3, weighting="literal_ozkaya2011"), 2.1 * expected / 12)
-
-
-def test_knn_exact_match_and_batched_maps():
-    cells = np.array([[0.0, 0.0], [1.0, 2.0], [3.0, 1.0]])
-    fp = np.array([[-40.0, -50.0], [-45.0, -55.0], [-60.0, -45.0]])
-    np.testing.assert_allclose(lb.knn_position(fp[1], fp, cells, k=3), cells[1])
-    maps = np.stack([fp, fp[::-1]])                    # one map per batch entry
-    out = lb.knn_position(np.stack([fp[0], fp[0]]), maps, cells, k=1)
-    np.testing.assert_allclose(out, [cells[0], cells[2]])
-    with pytest.raises(ValueError, match="k must be"):
-        lb.knn_position(fp[0], fp, cells, k=4)
-
-
-def test_model_fingerprints_match_path_loss_model():
-    model = lb.PathLossModel(np.array([-42.0, -52.0, -45.0]), np.array([2.3, 2.3, 2.5]), wall_attenuation_db=2.0)
-    cells = np.array([[1.0, 1.0], [4.0, 3.0]])
-    walls = [[[3.0, -1.0], [3.0, 9.0]]]
-    fp = lb.model_fingerprints(cells, lb.RssModel(READERS, model, walls))
-    expected = model.mean_rss_dbm(lb.pairwise_distance_m(cells, READERS),
-                                    lb.wall_crossings(cells, READERS, walls))
-    np.testing.assert_allclose(fp, expected)
 
 
 # -- grid Bayes ----------------------------------------------------------------------------------------
@@ -233,76 +177,3 @@ def test_particle_filter_options_and_invariants():
         lb.particle_filter(rss, model, rng=np.random.default_rng(1), resample_threshold=5.0, **kw)
 
 
-# -- reference tags --------------------------------------------------------------------------------------
-TAGS = np.array([[1.5, 1.5], [2.0, 3.0], [4.5, 1.5], [5.0, 3.0]])
-TB_READERS = np.array([[0.0, 0.0], [9.0, 4.0], [9.0, 0.0]])
-WALL = [[[3.0, 0.0], [3.0, 4.0]]]
-
-
-def test_online_calibration_equals_brute_force_grid_search():
-    rng = np.random.default_rng(10)
-    d = lb.pairwise_distance_m(TAGS, TB_READERS)
-    nw = lb.wall_crossings(TAGS, TB_READERS, WALL)
-    truth = np.array([-45.0, -49.0, -42.0]) - 10 * np.array([2.3, 2.7, 2.5]) * np.log10(d) - 2.0 * nw
-    obs = np.round(truth + rng.normal(0, 5.2, (3,) + truth.shape))              # 3 steps, 1 dB readers
-    cal = lb.calibrate_from_reference_tags(obs, TAGS, TB_READERS, walls_m=WALL, wall_attenuation_db=2.0)
-    alpha, n = np.meshgrid(np.arange(-55, -40 + 1e-9, 0.01), np.arange(1.5, 3 + 1e-9, 0.001), indexing="ij")
-    for s in range(3):
-        for j in range(3):
-            y = obs[s, :, j] + 2.0 * nw[:, j]
-            cost = ((y[None, None, :] - (alpha[..., None] - 10 * n[..., None] * np.log10(d[:, j]))) ** 2).sum(-1)
-            best = np.unravel_index(np.argmin(cost), cost.shape)
-            ours = ((y - (cal.ref_power_dbm[s, j] - 10 * cal.path_loss_exp[s, j] * np.log10(d[:, j]))) ** 2).sum()
-            assert ours <= cost[best] + 1e-6                                 # never worse than the grid
-            assert abs(cal.ref_power_dbm[s, j] - alpha[best]) <= 0.02
-            assert abs(cal.path_loss_exp[s, j] - n[best]) <= 0.002
-            assert (-55 - 1e-7 <= cal.ref_power_dbm[s, j] <= -40 + 1e-7
-                    and 1.5 - 1e-7 <= cal.path_loss_exp[s, j] <= 3 + 1e-7)
-    resid = obs - cal.expected_dbm
-    np.testing.assert_allclose(cal.sigma_db, np.sqrt((resid**2).sum(axis=(-2, -1)) / 12))   # Eq. (6.7)
-
-
-def test_unbounded_online_calibration_is_the_closed_form():
-    d = lb.pairwise_distance_m(TAGS, TB_READERS)
-    obs = -50.0 - 22.0 * np.log10(d) + np.random.default_rng(11).normal(0, 3.0, d.shape)
-    cal = lb.calibrate_from_reference_tags(obs, TAGS, TB_READERS, ref_power_bounds_dbm=None, path_loss_exp_bounds=None)
-    cf = lb.fit_path_loss_closed_form(d.T, obs.T)
-    np.testing.assert_allclose(cal.ref_power_dbm, cf.ref_power_dbm, atol=1e-6)
-    np.testing.assert_allclose(cal.path_loss_exp, cf.path_loss_exp, atol=1e-6)
-
-
-def test_smooth_rssi_by_hand():
-    s = np.array([-60.0, -70.0, -65.0])
-    refs = np.array([[-60.0, -71.0, -65.0], [-80.0, -50.0, -70.0], [-75.0, -75.0, -75.0]])
-    expected = refs - np.array([[2.0, -1.0, 0.5], [0.0, 0.0, 0.0], [1.0, 1.0, 1.0]])
-    inv = 1.0 / np.array([1.0, 400 + 400 + 25, 225 + 25 + 100])
-    w = inv / inv.sum()
-    out, nearest, applied = lb.smooth_rssi(s, refs, expected)
-    assert nearest == 0 and applied
-    np.testing.assert_allclose(out, s - w[0] * np.array([2.0, -1.0, 0.5]))
-    same, _, applied = lb.smooth_rssi(s, refs, expected, threshold=0.999)
-    assert not applied
-    np.testing.assert_array_equal(same, s)
-
-
-# -- document 004 scenario facts ---------------------------------------------------------------------------
-def test_thesis_crlb_sweep_reproduces_every_printed_value():
-    from locbook.scenarios import ozkaya as oz
-    printed = {1.0: 0.15, 3.0: 0.46, 5.2: 0.80, 7.0: 1.08, 9.0: 1.38, 11.0: 1.70}
-    for sigma, value in printed.items():
-        # the printed columns come from the thesis's formula with n = 2 and the mean over the 1 m cells: the
-        # reading fitted to them (the defaults are the text's n = 2.3 and the RMS over the room)
-        assert abs(oz.thesis_crlb_m("corners3", sigma, 2.0, "cells_mean") - value) <= 0.02
-    assert abs(oz.thesis_crlb_m("corners4", 5.2, 2.0, "cells_mean") - 0.64) <= 0.02
-    # the correct bound (1/d^4) is several times larger
-    assert 3.0 < oz.correct_crlb_m("corners3", 5.2) < 4.0
-
-
-def test_small_scale_fading_has_unit_mean_power_and_deep_fades():
-    rng = np.random.default_rng(12)
-    x = np.linspace(0, 50, 20000)
-    rayleigh = lb.small_scale_fading_db(x, 0.33, rng=rng)
-    assert np.mean(10 ** (rayleigh / 10)) == pytest.approx(1.0, abs=0.1)
-    assert rayleigh.min() < -20.0                      # Rayleigh: fades beyond 20 dB over many wavelengths
-    rician = lb.small_scale_fading_db(x, 0.33, rng=rng, k_factor=10.0)
-    assert rician.min() > rayleigh.min()

@@ -1,4 +1,5 @@
-"""CRLB against a closed form, numerical Fisher information and the printed thesis values; metrics; RNG."""
+"""CRLB against a closed form, numerical Fisher information and the printed thesis values (the metrics:
+tests/bounds/test_metrics.py; the random streams and standard errors: tests/bounds/test_montecarlo.py)."""
 import numpy as np
 import pytest
 
@@ -55,112 +56,6 @@ def test_ozkaya_printed_form_reproduces_thesis_crlb(anchors, printed):
 def test_crlb_at_anchor_raises():
     with pytest.raises(lb.DegenerateGeometryError):
         lb.rss_crlb_m([0.0, 0.0], rss(SQUARE, 2.0, 4.0))
-
-
-def test_metrics():
-    assert round(float(lb.reduction_pct(2.2867, 1.0378)), 2) == 54.62      # document 003's three numbers agree
-    e = np.random.default_rng(0).rayleigh(size=1000)
-    assert lb.rmse_m(e) ** 2 == pytest.approx(lb.mean_error_m(e) ** 2 + lb.error_std_m(e) ** 2, rel=1e-12)
-    assert lb.mean_error_m(lb.position_error_m([[3.0, 4.0], [0.0, 1.0]], [[0.0, 0.0], [0.0, 0.0]])) == 3.0
-    x, f = lb.empirical_cdf([3.0, 1.0, 2.0])
-    np.testing.assert_array_equal(x, [1, 2, 3])
-    np.testing.assert_allclose(f, [1 / 3, 2 / 3, 1])
-    assert lb.percentile_error_m(np.arange(11.0), 90) == 9.0
-
-
-def test_metrics_by_hand():
-    # errors 1, 2, 2, 5 (sum 10, sum of squares 34): every statistic written out, not derived from another one
-    e = np.array([1.0, 2.0, 2.0, 5.0])
-    assert lb.mean_error_m(e) == 2.5
-    assert lb.rmse_m(e) == pytest.approx(np.sqrt(34 / 4), rel=1e-15)
-    assert lb.error_std_m(e) == pytest.approx(1.5, rel=1e-15)                        # sqrt(34/4 - 2.5^2)
-    assert lb.error_std_m(e, ddof=1) == pytest.approx(np.sqrt(9 / 3), rel=1e-15)      # squared deviations 9 in all
-    assert lb.median_error_m(e) == 2.0
-    assert lb.percentile_error_m(e, 90) == pytest.approx(4.1, rel=1e-15)            # rank 0.9 * 3 = 2.7: 2 + 0.7 * 3
-    assert lb.percentile_error_m(e, 25) == pytest.approx(1.75, rel=1e-15)           # rank 0.75: 1 + 0.75 * 1
-    # delta method: squared errors 1, 4, 4, 25 (mean 8.5, sample variance 369 / 3 = 123)
-    assert lb.rmse_standard_error_m(e) == pytest.approx(np.sqrt(123 / 4) / (2 * np.sqrt(8.5)), rel=1e-14)
-    assert lb.reduction_pct(4.0, 3.0) == 25.0 and lb.reduction_pct(2.0, 3.0) == -50.0
-    summary = lb.error_summary(e.reshape(2, 2))
-    assert summary == pytest.approx({"mean_m": 2.5, "rmse_m": np.sqrt(8.5), "median_m": 2.0, "p90_m": 4.1,
-                                     "std_m": 1.5, "n": 4}, rel=1e-15)
-    # axis: one value per row of a (runs, steps) array
-    two = np.array([[3.0, 4.0], [0.0, 2.0]])
-    np.testing.assert_allclose(lb.rmse_m(two, axis=-1), [np.sqrt(12.5), np.sqrt(2.0)], rtol=1e-15)
-    np.testing.assert_allclose(lb.mean_error_m(two, axis=0), [1.5, 3.0], rtol=1e-15)
-    np.testing.assert_allclose(lb.error_std_m(two, axis=1), [0.5, 1.0], rtol=1e-15)
-    # 3-D Euclidean error, batched: |(1, 2, 2)| = 3, |(2, 3, 6)| = 7
-    est, truth = [[1.0, 2.0, 2.0], [3.0, 3.0, 6.0]], [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]
-    np.testing.assert_allclose(lb.position_error_m(est, truth), [3.0, 7.0], rtol=1e-15)
-    x, f = lb.empirical_cdf(np.array([[2.0, 2.0], [1.0, 4.0]]))
-    np.testing.assert_array_equal(x, [1.0, 2.0, 2.0, 4.0])
-    np.testing.assert_allclose(f, [0.25, 0.5, 0.75, 1.0])
-
-
-def test_rmse_standard_error_matches_the_spread_of_the_rmse():
-    # the delta-method SE must be the actual Monte-Carlo spread of the RMSE of n errors
-    rng = np.random.default_rng(21)
-    n = 400
-    samples = rng.rayleigh(size=(4000, n))
-    spread = np.std(lb.rmse_m(samples, axis=-1), ddof=1)
-    se = lb.rmse_standard_error_m(samples, axis=-1)
-    assert np.mean(se) == pytest.approx(spread, rel=0.05)       # SE of a sample sd over 4000 repeats is ~1.1 %
-
-
-def test_streams_are_reproducible_independent_and_prefix_stable():
-    a, b = lb.streams(5, "calibration", "tracking"), lb.streams(5, "calibration", "tracking")
-    np.testing.assert_array_equal(a["tracking"].normal(size=10), b["tracking"].normal(size=10))
-    c = lb.streams(5, "calibration", "tracking")
-    assert not np.allclose(c["calibration"].normal(size=10), c["tracking"].normal(size=10))
-    small = lb.streams(1, "x")["x"].standard_normal((3, 4))
-    big = lb.streams(1, "x")["x"].standard_normal((10, 4))
-    np.testing.assert_array_equal(small, big[:3])     # run i's draws do not depend on the number of runs
-    assert lb.mc_standard_error(np.array([1.0, 3.0])) == pytest.approx(1.0)
-
-
-def test_bootstrap_standard_error_matches_closed_forms():
-    """Averaged over 20 Gaussian samples, the bootstrap SE of the mean equals sigma / sqrt(n) and that of the
-    median the asymptotic sqrt(pi / 2) sigma / sqrt(n) (a single sample's bootstrap SE of a median scatters by
-    about 10 %, so one sample is not a test)."""
-    n, sigma = 1000, 2.0
-    ratios = {np.mean: [], np.median: []}
-    closed = {np.mean: sigma / np.sqrt(n), np.median: np.sqrt(np.pi / 2) * sigma / np.sqrt(n)}
-    for k in range(20):
-        x = np.random.default_rng(k).normal(3.0, sigma, n)
-        for stat in ratios:
-            se = lb.bootstrap_standard_error(x, stat, rng=np.random.default_rng(1000 + k), n_resamples=400)
-            ratios[stat].append(se / closed[stat])
-    assert np.mean(ratios[np.mean]) == pytest.approx(1.0, abs=0.04)
-    assert np.mean(ratios[np.median]) == pytest.approx(1.0, abs=0.08)
-    with pytest.raises(ValueError, match="two"):
-        lb.bootstrap_standard_error([1.0], np.mean, rng=np.random.default_rng(0))
-
-
-def test_jackknife_standard_error_closed_forms():
-    """For the mean the delete-one jackknife SE is s / sqrt(n) exactly (Efron and Tibshirani 1993, Sec. 11.2); for a
-    difference of means of paired runs it is that of the paired differences."""
-    rng = np.random.default_rng(0)
-    x, y = rng.normal(size=50), rng.normal(size=50)
-    assert lb.jackknife_standard_error(np.mean, x) == pytest.approx(x.std(ddof=1) / np.sqrt(x.size), rel=1e-12)
-    d = x - y
-    assert lb.jackknife_standard_error(lambda a, b: a.mean() - b.mean(), x, y) == pytest.approx(
-        d.std(ddof=1) / np.sqrt(d.size), rel=1e-12)
-    with pytest.raises(lb.ParameterError, match="per_run"):
-        lb.jackknife_standard_error(np.mean, x, y[:10])
-    with pytest.raises(lb.ParameterError, match="per_run"):
-        lb.jackknife_standard_error(np.mean, [1.0])
-
-
-def test_single_run_interval_is_the_central_sample_quantile_range():
-    from scipy.stats.mstats import mquantiles
-    lo, hi = lb.single_run_interval(np.linspace(0, 1, 100001), 0.9)
-    assert (lo, hi) == pytest.approx((0.05, 0.95), abs=1e-12)
-    x = np.random.default_rng(3).gamma(2.0, size=37)
-    # numpy's linear percentile is Hyndman-Fan type 7, scipy's mquantiles with alphap = betap = 1
-    np.testing.assert_allclose(lb.single_run_interval(x, 0.8), mquantiles(x, [0.1, 0.9], alphap=1, betap=1),
-                               rtol=1e-12)
-    with pytest.raises(lb.ParameterError, match="coverage"):
-        lb.single_run_interval(x, 1.0)
 
 
 def test_rss_crlb_with_a_known_tag_height_is_the_xy_block_of_the_3d_information():

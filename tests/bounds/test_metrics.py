@@ -1,6 +1,6 @@
-"""Bootstrap intervals of :func:`locbook.accuracy_metrics`: the circular block bootstrap weights every
-epoch equally, too few blocks give no interval, an interval that excludes its estimate says so, and the i.i.d.
-bootstrap keeps its numbers."""
+"""The error metrics (locbook.metrics) by hand and against closed forms, masked errors, and the bootstrap intervals of
+:func:`locbook.accuracy_metrics`: the circular block bootstrap weights every epoch equally, too few blocks give no
+interval, an interval that excludes its estimate says so, and the i.i.d. bootstrap keeps its numbers."""
 import warnings
 
 import numpy as np
@@ -276,3 +276,65 @@ def test_masked_errors_in_summaries_and_the_cdf():
     r = metrics.reduction_pct(np.ma.array([2.0, 4.0], mask=[0, 1]), 1.0)
     assert r[0] == 50.0 and np.isnan(r[1])
     assert lb.mc_standard_error([1.0, 3.0]) == 1.0                 # std(ddof=1) sqrt(2) / sqrt(2)
+
+
+def test_metrics():
+    assert round(float(lb.reduction_pct(2.2867, 1.0378)), 2) == 54.62      # document 003's three numbers agree
+    e = np.random.default_rng(0).rayleigh(size=1000)
+    assert lb.rmse_m(e) ** 2 == pytest.approx(lb.mean_error_m(e) ** 2 + lb.error_std_m(e) ** 2, rel=1e-12)
+    assert lb.mean_error_m(lb.position_error_m([[3.0, 4.0], [0.0, 1.0]], [[0.0, 0.0], [0.0, 0.0]])) == 3.0
+    x, f = lb.empirical_cdf([3.0, 1.0, 2.0])
+    np.testing.assert_array_equal(x, [1, 2, 3])
+    np.testing.assert_allclose(f, [1 / 3, 2 / 3, 1])
+    assert lb.percentile_error_m(np.arange(11.0), 90) == 9.0
+
+
+def test_metrics_by_hand():
+    # errors 1, 2, 2, 5 (sum 10, sum of squares 34): every statistic written out, not derived from another one
+    e = np.array([1.0, 2.0, 2.0, 5.0])
+    assert lb.mean_error_m(e) == 2.5
+    assert lb.rmse_m(e) == pytest.approx(np.sqrt(34 / 4), rel=1e-15)
+    assert lb.error_std_m(e) == pytest.approx(1.5, rel=1e-15)                        # sqrt(34/4 - 2.5^2)
+    assert lb.error_std_m(e, ddof=1) == pytest.approx(np.sqrt(9 / 3), rel=1e-15)      # squared deviations 9 in all
+    assert lb.median_error_m(e) == 2.0
+    assert lb.percentile_error_m(e, 90) == pytest.approx(4.1, rel=1e-15)            # rank 0.9 * 3 = 2.7: 2 + 0.7 * 3
+    assert lb.percentile_error_m(e, 25) == pytest.approx(1.75, rel=1e-15)           # rank 0.75: 1 + 0.75 * 1
+    # delta method: squared errors 1, 4, 4, 25 (mean 8.5, sample variance 369 / 3 = 123)
+    assert lb.rmse_standard_error_m(e) == pytest.approx(np.sqrt(123 / 4) / (2 * np.sqrt(8.5)), rel=1e-14)
+    assert lb.reduction_pct(4.0, 3.0) == 25.0 and lb.reduction_pct(2.0, 3.0) == -50.0
+    summary = lb.error_summary(e.reshape(2, 2))
+    assert summary == pytest.approx({"mean_m": 2.5, "rmse_m": np.sqrt(8.5), "median_m": 2.0, "p90_m": 4.1,
+                                     "std_m": 1.5, "n": 4}, rel=1e-15)
+    # axis: one value per row of a (runs, steps) array
+    two = np.array([[3.0, 4.0], [0.0, 2.0]])
+    np.testing.assert_allclose(lb.rmse_m(two, axis=-1), [np.sqrt(12.5), np.sqrt(2.0)], rtol=1e-15)
+    np.testing.assert_allclose(lb.mean_error_m(two, axis=0), [1.5, 3.0], rtol=1e-15)
+    np.testing.assert_allclose(lb.error_std_m(two, axis=1), [0.5, 1.0], rtol=1e-15)
+    # 3-D Euclidean error, batched: |(1, 2, 2)| = 3, |(2, 3, 6)| = 7
+    est, truth = [[1.0, 2.0, 2.0], [3.0, 3.0, 6.0]], [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]
+    np.testing.assert_allclose(lb.position_error_m(est, truth), [3.0, 7.0], rtol=1e-15)
+    x, f = lb.empirical_cdf(np.array([[2.0, 2.0], [1.0, 4.0]]))
+    np.testing.assert_array_equal(x, [1.0, 2.0, 2.0, 4.0])
+    np.testing.assert_allclose(f, [0.25, 0.5, 0.75, 1.0])
+
+
+def test_rmse_standard_error_matches_the_spread_of_the_rmse():
+    # the delta-method SE must be the actual Monte-Carlo spread of the RMSE of n errors
+    rng = np.random.default_rng(21)
+    n = 400
+    samples = rng.rayleigh(size=(4000, n))
+    spread = np.std(lb.rmse_m(samples, axis=-1), ddof=1)
+    se = lb.rmse_standard_error_m(samples, axis=-1)
+    assert np.mean(se) == pytest.approx(spread, rel=0.05)       # SE of a sample sd over 4000 repeats is ~1.1 %
+
+
+def test_single_run_interval_is_the_central_sample_quantile_range():
+    from scipy.stats.mstats import mquantiles
+    lo, hi = lb.single_run_interval(np.linspace(0, 1, 100001), 0.9)
+    assert (lo, hi) == pytest.approx((0.05, 0.95), abs=1e-12)
+    x = np.random.default_rng(3).gamma(2.0, size=37)
+    # numpy's linear percentile is Hyndman-Fan type 7, scipy's mquantiles with alphap = betap = 1
+    np.testing.assert_allclose(lb.single_run_interval(x, 0.8), mquantiles(x, [0.1, 0.9], alphap=1, betap=1),
+                               rtol=1e-12)
+    with pytest.raises(lb.ParameterError, match="coverage"):
+        lb.single_run_interval(x, 1.0)

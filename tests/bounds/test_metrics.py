@@ -338,3 +338,12 @@ def test_single_run_interval_is_the_central_sample_quantile_range():
                                rtol=1e-12)
     with pytest.raises(lb.ParameterError, match="coverage"):
         lb.single_run_interval(x, 1.0)
+
+
+def test_fix_error_covariance_is_numpy_cov_of_the_errors_per_run():
+    rng = np.random.default_rng(11)
+    truth = rng.uniform(0, 5, size=(40, 2))
+    fixes = truth + rng.normal(size=(3, 40, 2)) * [0.5, 2.0] + [1.0, -1.0]     # a bias does not enter
+    R = lb.fix_error_covariance(fixes, truth)
+    for k in range(3):
+        np.testing.assert_allclose(R[k], np.cov((fixes[k] - truth).T), rtol=1e-12)

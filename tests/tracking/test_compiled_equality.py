@@ -12,12 +12,12 @@ import warnings
 
 import numpy as np
 import pytest
-from filterpy.kalman import KalmanFilter
 
 import locbook as lb
 from builders import REPO_ROOT
 from locbook.tracking import _compiled as K
 from locbook.tracking import _loop
+from oracles import filterpy_kalman
 
 sys.path.insert(0, str(REPO_ROOT / "benchmarks"))
 import bench_dogan_filters as bd  # noqa: E402
@@ -94,17 +94,7 @@ def test_a_covariance_shared_by_many_runs_stays_in_numpy(monkeypatch):
 
 def _kf_reference(z, F, H, Q, R, x0, P0):
     """filterpy's KalmanFilter per run, updating with the components present (reduced H and R)."""
-    xs, Ps = np.empty(z.shape[:-1] + (F.shape[0],)), np.empty(z.shape[:-1] + F.shape)
-    for b in range(z.shape[0]):
-        f = KalmanFilter(dim_x=F.shape[0], dim_z=H.shape[0])
-        f.F, f.Q, f.x, f.P = F, Q, x0[b].copy(), P0.copy()
-        for k in range(z.shape[1]):
-            f.predict()
-            keep = np.isfinite(z[b, k])
-            if keep.any():
-                f.update(z[b, k, keep], R=R[np.ix_(keep, keep)], H=H[keep])
-            xs[b, k], Ps[b, k] = f.x, f.P
-    return xs, Ps
+    return filterpy_kalman(F, Q, H, R, z, x0, P0, per_run=("x0",), components=True)
 
 
 @pytest.mark.parametrize("uniform", [True, False])

@@ -1,6 +1,6 @@
-"""The runner's part: a Dask scheduler killed with SIGKILL mid-run, data files edited
-or re-pointed while their experiment runs, a plain file where a report folder should be. Runs on the toy suite of
-tests/suite/test_run.py (the tests that execute notebooks are marked so)."""
+"""The runner (locbook.suite.runner) under adversity: a Dask scheduler killed with SIGKILL mid-run, data files edited
+or re-pointed while their experiment runs, a plain file where a report folder should be. Runs on the toy suite
+(tests/toy_suite.py; the tests that execute notebooks are marked so)."""
 import hashlib
 import json
 import os

@@ -132,7 +132,7 @@ def _head(result, n: int):
 
 
 #: the same arithmetic in another order: round-off, relative to the largest entry (at least 1), as the filterpy
-#: comparisons of tests/test_filter_speed_equality.py (the UKF here has alpha = 0.5, weights -3 and 0.5 for n = 4:
+#: comparisons of tests/tracking/test_compiled_equality.py (the UKF here has alpha = 0.5, weights -3 and 0.5 for n = 4:
 #: no amplification of the round-off)
 TOL = 1e-9
 

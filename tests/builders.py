@@ -1,10 +1,17 @@
 """What several test modules build: TOML text from Python values (tomllib only reads) and the tiny measured data set
-(four anchors on a 6 m square, a calibration walk, a track). Imported by name (``from builders import ...``): pytest
-puts this folder on ``sys.path`` for its test modules."""
+(four anchors on a 6 m square, a calibration walk, a track), and where the repository lies. Imported by name
+(``from builders import ...``): pyproject's ``pythonpath`` puts this folder on ``sys.path`` for every test module,
+whichever subfolder it lives in."""
 import math
 import re
+from pathlib import Path
 
 import numpy as np
+
+#: the repository's root (the clone), whatever folder pytest runs from and however deep a test module lives
+REPO_ROOT = Path(__file__).resolve().parents[1]
+#: this folder: the test modules' helper files (user_method_examples.py) live here
+TESTS_DIR = Path(__file__).resolve().parent
 
 # -- TOML text ------------------------------------------------------------------------------------------------------
 
@@ -59,7 +66,8 @@ def calibration_csv(points: bool = False) -> str:
     (d the 3-D distance to each anchor); with ``points`` a ``point`` column P0..P3."""
     head = "time_s,transmitter,receiver,rssi_dbm,x_m,y_m" + (",point" if points else "") + "\n"
     return head + "".join(
-        f"{t},tag,{a},{round(-40 - 20 * np.log10(np.hypot(np.hypot(1 + t - ANCHOR_XYZ_M[a][0], 2 - ANCHOR_XYZ_M[a][1]), 1.5)))},"
+        f"{t},tag,{a},"
+        f"{round(-40 - 20 * np.log10(np.hypot(np.hypot(1 + t - ANCHOR_XYZ_M[a][0], 2 - ANCHOR_XYZ_M[a][1]), 1.5)))},"
         f"{1 + t},2" + (f",P{t}" if points else "") + "\n" for t in range(4) for a in "ABCD")
 
 
@@ -85,3 +93,21 @@ name = "walk"
 file = "walk.csv"
 role = "track"
 """
+
+
+# -- masked readings ------------------------------------------------------------------------------------------------
+
+#: five anchors around a 20 m square: the masked-reading tests' layout (any four heard ones fix a position exactly)
+MASKED_ANCHORS = np.array([[0.0, 0.0], [20.0, 0.0], [0.0, 20.0], [20.0, 20.0], [10.0, -5.0]])
+
+
+def exact_distances(seed=3, problems=6):
+    """Random true positions inside the square and their exact distances to :data:`MASKED_ANCHORS`."""
+    truth = np.random.default_rng(seed).uniform(2, 18, (problems, 2))
+    return truth, np.linalg.norm(truth[:, None] - MASKED_ANCHORS, axis=-1)
+
+
+def masked(z, where):
+    """``z`` masked at ``where``, with garbage under the mask (it must never be used)."""
+    data = np.where(where, 1e3, z)
+    return np.ma.array(data, mask=where)

@@ -9,7 +9,7 @@ off (``locbook.tracking._compiled._NUMBA_ENABLED``, and ``LOCBOOK_NUMBA=0`` for 
   with the switch as the environment sets it (on by default), and switch it themselves where they compare the paths;
 - tests marked ``notebooks``: the notebooks run as a user runs them, compiled where the problem is large enough.
 
-The numpy path and the compiled path agree to round-off (tests/test_filter_speed_equality.py and the other
+The numpy path and the compiled path agree to round-off (tests/tracking/test_compiled_equality.py and the other
 ``compiled`` tests), so no other test's assertion depends on the path. docs/testing.md lists the markers.
 """
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Methods of one's own for the tests of issue 48 (tests/test_user_methods.py): registered by file
+"""Methods of one's own for the tests of user methods (tests/scenarios/test_user_methods.py): registered by file
 (``tests/user_method_examples.py:weighted_centroid``) or by module (``user_method_examples:weighted_centroid``, the
 tests folder being on pytest's path). Each takes one ``locbook.MethodInput``."""
 import numpy as np

@@ -1,0 +1,103 @@
+"""Report.number decides a row's note from the scoring rules' closed form: the miss note appears exactly
+when our value lies outside printed +- (rounding + 2 SE + ambiguity) or a claim fails; the loose note exactly when the
+value is inside a window wider than +-25 % of the printed value, or a claim holds but not beyond 2 SE."""
+import math
+
+import pytest
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
+
+import locbook as lb
+
+MISS = "the likely reason"
+LOOSE = "why agreement says little here"
+
+
+@pytest.fixture
+def report(tmp_path, monkeypatch):
+    monkeypatch.setenv("LOCBOOK_OUTPUT_DIR", str(tmp_path))
+    monkeypatch.setenv("LOCBOOK_EXPERIMENT", "ozkaya2011-testbed")
+    return lb.Report()
+
+
+def _quantity():
+    return lb.printed("ozkaya2011").get("Table 7.1", "28", "rmse_m")      # printed in metres, two decimals
+
+
+@settings(max_examples=200, deadline=None)
+@given(offset=st.floats(-3.0, 3.0), se=st.floats(0.0, 0.3), amb=st.floats(0.0, 0.5))
+def test_miss_note_appears_exactly_outside_rounding_plus_two_se_plus_ambiguity(tmp_path_factory, offset, se, amb):
+    import os
+    os.environ["LOCBOOK_OUTPUT_DIR"] = str(tmp_path_factory.mktemp("r"))
+    try:
+        report = lb.Report("ozkaya2011-testbed")
+    finally:
+        del os.environ["LOCBOOK_OUTPUT_DIR"]
+    p = _quantity()
+    half = p.rounding + 2 * se + amb                # the window's closed form (scoring module docstring)
+    assume(abs(abs(offset) - half) > 1e-9)          # not on the boundary
+    ambiguity = lb.Ambiguity(amb, "cell layout", "Ozkaya 2011 Sec. 7.2.1") if amb > 0 else None
+    row = report.number("rmse", p, p.value + offset, kind="reproduction", mc_std_error=se, ambiguity=ambiguity,
+                        miss_note=MISS, loose_note=LOOSE)
+    outside = abs(offset) > half
+    wide = half / p.value > lb.reproduce.WITHIN_LIMIT
+    assert (row["verdict"] == "miss") == outside
+    assert (MISS in row["note"]) == outside
+    assert (LOOSE in row["note"]) == (not outside and wide)
+    if outside:
+        assert row["note"] == MISS                  # nothing else to say about a miss
+    elif wide:                                      # why it is loose comes first
+        assert row["verdict"] == "loose" and row["note"].startswith("the window is") and row["note"].endswith(LOOSE)
+    else:
+        assert row["verdict"] == "within" and row["note"] == ""
+
+
+def test_miss_note_comes_before_the_note_and_after_nothing_when_within(report):
+    p = _quantity()
+    row = report.number("rmse", p, p.value + 1.0, kind="reproduction", miss_note=MISS, loose_note=LOOSE,
+                        note="3 runs flagged")
+    assert row["verdict"] == "miss" and row["note"] == f"{MISS}; 3 runs flagged"
+    row = report.number("rmse", p, p.value, kind="reproduction", miss_note=MISS, loose_note=LOOSE,
+                        note="3 runs flagged")
+    assert row["verdict"] == "within" and row["note"] == "3 runs flagged"
+
+
+@pytest.mark.parametrize("relation", [">", ">=", "<", "<="])
+@pytest.mark.parametrize("offset_in_se", [-3.0, -1.0, 1.0, 3.0])
+def test_a_claims_notes_follow_whether_it_holds_and_whether_beyond_two_standard_errors(report, relation, offset_in_se):
+    p = lb.printed("gudipati2017").get("Fig. 5.4 caption", "fusion versus individual sensors", "claim")
+    se = 0.1
+    ours = offset_in_se * se                         # against the threshold 0
+    above = relation.startswith(">")
+    holds = ours > 0 if above else ours < 0
+    held_with_margin = (ours - 2 * se > 0) if above else (ours + 2 * se < 0)
+    row = report.number("gain", p, ours, kind="claim", relation=relation, threshold=0.0, mc_std_error=se,
+                        miss_note=MISS, loose_note=LOOSE)
+    assert (MISS in row["note"]) == (not holds)
+    assert (LOOSE in row["note"]) == (holds and not held_with_margin)
+    assert (row["verdict"] == "within") == held_with_margin and (row["verdict"] == "miss") == (not holds)
+    if row["verdict"] == "loose":                   # why it is loose comes first
+        assert row["note"] == f"the claim holds for our estimate but not beyond 2 Monte-Carlo standard errors; {LOOSE}"
+
+
+def test_an_inconsistent_arithmetic_row_takes_the_miss_note_and_a_linked_row_never_does(report):
+    p = _quantity()
+    row = report.number("mean", p, p.value + 2 * p.rounding, kind="arithmetic", miss_note=MISS, loose_note=LOOSE)
+    assert row["verdict"] == "inconsistent" and row["note"] == MISS
+    row = report.number("mean", p, p.value + 0.5 * p.rounding, kind="arithmetic", miss_note=MISS, loose_note=LOOSE)
+    assert row["verdict"] == "consistent" and row["note"] == ""
+    again = lb.printed("ozkaya2011").get("Table 7.5", "Default (5 m, 8 m)", "rmse_m")
+    row = report.number("rmse", again, again.value + 5.0, kind="reproduction", same_as=p, miss_note=MISS,
+                        loose_note=LOOSE)
+    assert row["verdict"] == "" and row["note"] == f"the source prints this quantity again at {p.where}; compared there"
+    assert math.isnan(row["window_high"])
+
+
+def test_report_never_makes_the_runners_output_folder_again(tmp_path, monkeypatch):
+    """Under locbook run the output folder is the run's staging, made by the runner and removed when it stops; a
+    kernel that starts late must fail there, not make the folder (and the run's staging) again."""
+    gone = tmp_path / "staging" / "george-one-1"
+    monkeypatch.setenv("LOCBOOK_OUTPUT_DIR", str(gone))
+    with pytest.raises(FileNotFoundError, match="not an existing folder"):
+        lb.Report("toy")
+    assert not (tmp_path / "staging").exists()

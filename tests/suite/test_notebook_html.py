@@ -1,0 +1,56 @@
+"""The executed notebook's HTML page needs nothing from the network: its math is drawn to SVG by matplotlib's
+mathtext (the TeX kept as the image's alt text), and the page loads no script from a CDN (nbconvert's lab template
+loads MathJax, require.js and mermaid from cdnjs)."""
+import base64
+import re
+
+import nbformat
+import pytest
+from nbformat.v4 import new_code_cell, new_markdown_cell, new_notebook
+
+from locbook.suite.notebook_html import _rewrite, export_html, render_math
+
+
+def test_inline_and_display_math_become_svg_images_and_code_keeps_its_dollars():
+    out = render_math("The mean $\\bar s_j = \\alpha - 10\\,n\\log_{10} d_j$ and\n$$\\sigma_\\mathrm{ACC}^2 \\le 1$$"
+                      " but `cost = $5` stays.")
+    images = re.findall(r'<img class="math[^"]*" alt="([^"]*)" src="data:image/svg\+xml;base64,([^"]+)">', out)
+    assert [alt for alt, _ in images] == ["\\bar s_j = \\alpha - 10\\,n\\log_{10} d_j",
+                                          "\\sigma_\\mathrm{ACC}^2 \\le 1"]
+    for _, data in images:
+        assert base64.b64decode(data).lstrip().startswith((b"<?xml", b"<svg"))
+    assert 'class="math math-display"' in out.split("<img")[2]      # $$...$$ on its own line
+    assert "`cost = $5` stays." in out
+
+
+def test_tex_mathtext_cannot_read_is_rewritten_or_shown_as_code():
+    assert _rewrite("\\sigma_\\mathrm{ACC} \\ge \\tfrac34 \\Big( \\mathcal N \\Big)") == \
+        "\\sigma_{\\mathrm{ACC}} \\geq \\frac{3}{4} ( \\mathcal{N} )"
+    out = render_math("$\\begin{bmatrix} 1 & 0 \\end{bmatrix}$")
+    assert out == "<code>\\begin{bmatrix} 1 &amp; 0 \\end{bmatrix}</code>"
+
+
+@pytest.mark.installed
+def test_the_exported_page_loads_nothing_from_the_network(tmp_path):
+    nb = new_notebook()
+    nb.metadata["kernelspec"] = {"name": "python3", "display_name": "Python 3", "language": "python"}
+    nb.cells = [new_markdown_cell("The bound $J(p) = \\sum_j u_j u_j^\\top / d_j^2$."), new_code_cell("1 + 1")]
+    path = tmp_path / "t.ipynb"
+    nbformat.write(nb, str(path))
+    page = export_html(path)
+    assert re.findall(r'<script[^>]+src="https?://', page) == [] and "cdnjs" not in page and "MathJax" not in page
+    images = re.findall(r"<img [^>]*>", page)
+    assert len(images) == 1 and 'class="math"' in images[0] and 'src="data:image/svg+xml;base64,' in images[0]
+    assert "img.math {" in page and "The bound" in page
+
+
+def test_math_drawing_leaves_the_callers_matplotlib_backend_alone():
+    """The runner draws the pages' math in its own process, which may be a user's Jupyter session: the pyplot
+    backend stays whatever it was (run in a fresh interpreter, whose backend is chosen by MPLBACKEND)."""
+    import subprocess
+    import sys
+    code = ("import matplotlib.pyplot\nfrom locbook.suite.notebook_html import math_svg\n"
+            "assert math_svg('x^2') is not None\nimport matplotlib\nprint(matplotlib.get_backend())")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         env={**__import__("os").environ, "MPLBACKEND": "svg"}, check=True).stdout
+    assert out.strip().lower() == "svg"

@@ -13,7 +13,7 @@ from ._lazy import lazy_exports
 
 # (role, home module, names): the names a user calls, each imported on first use from its one home (PEP 562), so
 # that `import locbook` loads no submodule. Constants (variant lists, defaults, limits) stay in their modules.
-# docs/architecture.md's "Public API" table lists exactly this (tests/test_public_api.py).
+# docs/architecture.md's "Public API" table lists exactly this (tests/project/test_public_api.py).
 _API = (
     ("channel", "models.channel", ("PathLossModel", "register_to_dbm", "dbm_to_register", "quantize_db",
         "pairwise_distance_m", "correlated_shadowing_db", "wall_crossings", "small_scale_fading_db",

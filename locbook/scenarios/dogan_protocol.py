@@ -429,7 +429,7 @@ def _per_epoch_kf(model, x0, P0, acc_streams, z, mse, at, steps, n_steps, every_
     """KF (MLE) with R = diag(MSE_MLE) of each epoch (Table 4.1's R_{k+1}): the multi-rate filter
     (:func:`locbook.extended_kalman_filter`) with the fixes' R given per step, each inter-epoch segment the R of the
     epoch that ends it (the steps after the last epoch: the last epoch's). The same recursion as running one segment at
-    a time from the previous segment's posterior (tests/test_dogan_fusion_reading.py compares the two), in one call;
+    a time from the previous segment's posterior (tests/scenarios/test_dogan_fusion.py compares the two), in one call;
     the guard judges the whole NIS as one filter's."""
     H = model.position_measurement_matrix()
     grid = z.shape[-2]

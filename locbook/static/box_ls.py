@@ -122,7 +122,7 @@ def _box_ls_exact(a_mat, b, lower, upper):
     With numba (:func:`_box_kernel_module`: enabled, at least ``_BOX_NUMBA_MIN_PROBLEMS`` problems) the same search
     runs problem by problem in one compiled loop (:func:`locbook.static._box_kernels._nb_box_ls`): the same sets in
     the same order, acceptance rule, tolerance and fallback, so the same answers up to the rounding of the products
-    (1e-12, ``tests/test_box_ls_speed.py``); a problem inside the box keeps ``p*`` bit for bit either way.
+    (1e-12, ``tests/static/test_box_ls_compiled.py``); a problem inside the box keeps ``p*`` bit for bit either way.
     """
     key = tuple(map(tuple, a_mat.tolist()))
     pinv_t, levels = _box_active_sets(key, lower, upper)
@@ -329,15 +329,15 @@ def lateration_box_ls(anchors_m, distance_m, lower_m, upper_m, ref_index: int = 
     box, so they are computed once per anchors and box (cached). From 256 problems on, one compiled loop (numba;
     ``LOCBOOK_NUMBA=0`` turns it off) tries the active sets problem by problem, stopping at the first that passes;
     otherwise numpy evaluates them with matrix products over many problems at once (blocks of about a thousand).
-    Both give the same answers (to 1e-12; tests/test_box_ls_speed.py). The answer is the candidate that is feasible
-    and meets the KKT sign conditions (gradient ``A^T (A p - b)`` >= 0 at a lower bound, <= 0 at an upper one, 0 on
-    free coordinates); for this strictly convex QP it is unique (:func:`_box_ls_exact`).
+    Both give the same answers (to 1e-12; tests/static/test_box_ls_compiled.py). The answer is the candidate that is
+    feasible and meets the KKT sign conditions (gradient ``A^T (A p - b)`` >= 0 at a lower bound, <= 0 at an upper
+    one, 0 on free coordinates); for this strictly convex QP it is unique (:func:`_box_ls_exact`).
 
     ``solver="cvxpy"``: all problems are stacked into one QP, built once per (batch size, anchors, box) with the
     right-hand sides as a Parameter and re-solved by setting its value; if the solve fails, the batch is halved
     until the failing problems are alone. It agrees with the exact solver to Clarabel's tolerance, which is
     relative to the stacked objective: about 1e-6 m for a few problems, up to about 1e-3 m for thousands stacked
-    (one problem per solve at tighter tolerances agrees to 1e-7 m; ``tests/test_exact_solvers.py``).
+    (one problem per solve at tighter tolerances agrees to 1e-7 m; ``tests/static/test_box_ls.py``).
 
     References
     ----------

@@ -3,8 +3,8 @@ one-screen answer at the top of an index (issue 45, "one tally everywhere").
 
 Everything here is computed from the rows of a reports folder's ``numbers.csv`` (the experiments' rows with the
 ``bracket`` and ``bracket_interpretations`` columns :func:`locbook.suite.bracket.bracket_of_rows` gave them), so the
-index, the findings pages and numbers.csv give the same counts by construction (``tests/test_findings.py`` reads all
-three back and compares them). The tiers are :data:`locbook.reproduce.scoring.BRACKETS`.
+index, the findings pages and numbers.csv give the same counts by construction (``tests/suite/test_findings.py``
+reads all three back and compares them). The tiers are :data:`locbook.reproduce.scoring.BRACKETS`.
 """
 from __future__ import annotations
 

@@ -18,7 +18,7 @@ The HTML pages render from the Jinja2 templates in ``templates/`` (autoescaped; 
 stylesheet, ``site.css``, so that a page opened from file:// needs nothing beside it). Cells are coloured by
 verdict, never by how a run went (the run status is text). A page links only to files present in its folder
 (the executed notebook as HTML, else as .ipynb; figures and tables of the manifest), so the site has no broken
-link; tests/test_site_browser.py opens it in headless Chromium to check that.
+link; tests/project/test_site_browser.py opens it in headless Chromium to check that.
 """
 from __future__ import annotations
 

@@ -8,7 +8,7 @@ either the covariance differs between runs or the batch is at most one block of 
 is updated once per step by the numpy loop instead). The kernel takes linear streams (H and R constant, per run or
 per step), RSS streams and the inertial stream of :mod:`locbook.models.imu` with its Jacobian; other nonlinear
 streams, F with run axes or per step (Q may differ per run), walls and outputs beyond x and P run in numpy. Either way
-the results are the same to round-off (tests/test_filter_speed_equality.py), and every error is raised by the numpy
+the results are the same to round-off (tests/tracking/test_compiled_equality.py), and every error is raised by the numpy
 loop.
 """
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """Elementary functions written so that LLVM vectorises the loops that call them (numba compiles a call to the C
 library's ``exp`` or ``log`` as a scalar call per element, which was most of the time of the kernels that use them).
-Each is within 2 ulp of numpy's value on its stated domain (tests/test_vecmath.py); the kernels inline them.
+Each is within 2 ulp of numpy's value on its stated domain (tests/tracking/test_vecmath.py); the kernels inline them.
 Without numba they are plain Python (the same arithmetic)."""
 from __future__ import annotations
 

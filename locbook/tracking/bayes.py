@@ -536,8 +536,8 @@ def grid_bayes_filter(rss_dbm, model, cells_m, spread_m: float = 0.5, *, n_steps
     run the update (likelihood, posterior, moments, MAP, ``n_eff`` in a few passes per run) and, on a lattice whose
     distinct coordinates are evenly spaced per axis (up to three axes; possibly masked), the separable prediction as
     a banded correlation truncated where a kernel entry is below 2^-53 of its column's largest (``|u| > 8.57 D`` away
-    from the edges; :class:`_BandedLattice`). Their results equal the numpy path's to about 1e-14 (tests/
-    test_grid_speed.py), except where the posterior lies in the far tail of the prediction (readings contradicting
+    from the edges; :class:`_BandedLattice`). Their results equal the numpy path's to about 1e-14 (tests/tracking/
+    test_bayes_compiled.py), except where the posterior lies in the far tail of the prediction (readings contradicting
     the motion model by more than about 8 D), where the truncated entries, negligible against their columns, are not
     negligible against the tail.
 

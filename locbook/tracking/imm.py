@@ -35,7 +35,7 @@ constant-velocity mode in a constant-acceleration state, whose acceleration it k
 the turn rate as a state (X. R. Li and V. P. Jilkov, "Survey of maneuvering target tracking. Part I: Dynamic models",
 IEEE Trans. Aerospace and Electronic Systems 39(4), 2003, the coordinated-turn model with unknown turn rate) is a
 :class:`~locbook.tracking.transition.NonlinearMotion` with its Jacobian; the constant-velocity mode beside it embeds
-the 4-state model and keeps the turn rate at 0 (tests/test_imm.py builds the pair).
+the 4-state model and keeps the turn rate at 0 (tests/tracking/test_imm.py builds the pair).
 
 Vectorization. The modes are a leading axis of the filters' arrays (``(r,) + batch + (n,)`` inside; the results put
 them after the run axes), so every update is one call for all runs and modes, and the measurement models' own run axes

@@ -47,7 +47,7 @@ normalisation's sum (numpy's pairwise sum) and the systematic ancestors given th
 weights differ from numpy's in the last bits (the likelihood's log10 and the normalisation's exp are within 2 ulp of
 numpy's, the sum over the anchors is in order), so the weights agree to about 1e-14 relative, the resampling decisions
 and particles are the numpy path's unless a sample point falls within that of a cumulative weight, and the estimates
-agree to round-off (tests/test_particle_speed.py).
+agree to round-off (tests/tracking/test_particle_compiled.py).
 """
 from __future__ import annotations
 

@@ -39,7 +39,7 @@ recursion runs compiled on blocks of runs
 (:mod:`locbook.tracking._ukf_kernels`); anything it cannot do (a covariance that is not positive definite, the
 eigenvalue guard on a multi-reading update, a state that overflows) sends the problem back to the numpy loop, which
 raises the library's error or applies the guard. Both paths give the same numbers to round-off
-(tests/test_ukf_compiled.py).
+(tests/tracking/test_unscented_compiled.py).
 """
 from __future__ import annotations
 

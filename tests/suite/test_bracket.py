@@ -174,14 +174,14 @@ def test_a_toy_bracket_gives_each_row_its_verdict_and_the_site_shows_it(stoy, tm
     assert "| verdict | bracket | bracket_interpretations |" in page
     assert "| other_interpretation | at quick: slope: a=1.3 |" in page
     index = (stoy / "reports" / "quick" / "index.md").read_text()
-    assert ("Reading brackets of the 2 scored rows (`quick` profile): 0 reproduced under the default reading; 1 "
-            "reproduced only under another textual (or assumed) reading; 0 reached only under a reading "
-            "fitted") in index
+    assert ("Interpretation brackets of the 2 scored rows (`quick` profile): 0 reproduced under the default "
+            "interpretation; 1 reproduced only under another textual (or assumed) interpretation; 0 reached only "
+            "under an interpretation fitted") in index
     assert "[george](george-findings.md)" in index and "This is the `quick` profile" in index
     # the findings page is written from the same rows as numbers.csv and the index
     findings = (stoy / "reports" / "quick" / "george-findings.md").read_text()
-    assert "default 0; other reading 1; fitted only 0; between 0; outside 0; open 0; loose 1" in findings
-    assert "## Other reading (1)" in findings and "slope: a=1.3" in findings
+    assert "default 0; other interpretation 1; fitted only 0; between 0; outside 0; open 0; loose 1" in findings
+    assert "## Other interpretation (1)" in findings and "slope: a=1.3" in findings
 
     # a -p run's rows were computed under another reading than the bracket's default: no bracket there
     assert main(["--suite", str(stoy / "notebooks" / "experiments.toml"), "run", "george-study", "--reports",

@@ -20,7 +20,7 @@ from nbformat.v4 import new_code_cell, new_notebook
 
 from locbook.data.dataset import load_dataset
 from locbook.data.example import EXAMPLE_ROLES, write_example_dataset
-from locbook.reproduce.readings import READING_COLUMNS
+from locbook.reproduce.interpretations import READING_COLUMNS
 from locbook.suite import run as suite_run
 from locbook.suite import site
 from locbook.suite.cli import main

@@ -16,8 +16,8 @@ from locbook.reproduce.interpretations import (
     BASES,
     INTERPRETATION_COLUMNS,
     INTERPRETATIONS_DIR,
+    Interpretation,
     InterpretationsError,
-    Reading,
     interpretations,
     interpretations_for,
     load_interpretation_file,
@@ -70,7 +70,7 @@ def _resolve(where: str):
 @pytest.mark.parametrize("document", DOCUMENTS)
 def test_every_document_declares_readings_that_load(document):
     rows = interpretations(document)
-    assert rows and all(isinstance(r, Reading) and r.document == document for r in rows)
+    assert rows and all(isinstance(r, Interpretation) and r.document == document for r in rows)
     assert len({r.name for r in rows}) == len(rows)
     assert all(r.basis in BASES for r in rows)
     assert interpretations(document) is rows            # cached
@@ -197,13 +197,13 @@ def test_a_fitted_value_says_why_no_text_supports_it(reading):
 
 
 def test_the_basis_of_each_value():
-    r = Reading("doc", "x", ("e",), "p", "", "a", ("b", "c"), None, None, "textual", "Sec. 1", "why", ("c",),
+    r = Interpretation("doc", "x", ("e",), "p", "", "a", ("b", "c"), None, None, "textual", "Sec. 1", "why", ("c",),
                 "Sec. 1: 'the words of the text'")
     assert (r.alternative_basis("a"), r.alternative_basis("b"), r.alternative_basis("c")) == \
         ("textual", "textual", "fitted")
-    silent = Reading("doc", "y", ("e",), "p", "", 1.0, (2.0,), 0.5, 3.0, "assumed", "Sec. 1", "why")
+    silent = Interpretation("doc", "y", ("e",), "p", "", 1.0, (2.0,), 0.5, 3.0, "assumed", "Sec. 1", "why")
     assert silent.alternative_basis(2) == "assumed" and silent.alternative_basis(1.0) == "assumed"
-    fit = Reading("doc", "z", ("e",), "p", "", 1.0, (2.0,), None, None, "fitted", "Sec. 1", "why")
+    fit = Interpretation("doc", "z", ("e",), "p", "", 1.0, (2.0,), None, None, "fitted", "Sec. 1", "why")
     assert fit.alternative_basis(1.0) == "fitted" and fit.alternative_basis(2.0) == "textual"
 
 

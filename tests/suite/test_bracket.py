@@ -307,9 +307,9 @@ def test_a_damaged_bracket_file_labels_nothing(tmp_path):
 
 
 def test_int_range_ends_are_the_whole_numbers_inside_the_range():
-    from locbook.reproduce.interpretations import Reading
+    from locbook.reproduce.interpretations import Interpretation
     from locbook.suite.bracket import _sweep_values
-    r = Reading("d", "n", ("e",), "k", "", 1, (), 0.5, 2.5, "assumed", "s", "r")
+    r = Interpretation("d", "n", ("e",), "k", "", 1, (), 0.5, 2.5, "assumed", "s", "r")
     assert _sweep_values(r, "int") == [1, 2] and _sweep_values(r, "int | None") == [1, 2]
     assert _sweep_values(r, "float") == [0.5, 2.5]
 

@@ -20,7 +20,7 @@ from nbformat.v4 import new_code_cell, new_notebook
 
 from locbook.data.dataset import load_dataset
 from locbook.data.example import EXAMPLE_ROLES, write_example_dataset
-from locbook.reproduce.readings import READING_COLUMNS
+from locbook.reproduce.interpretations import INTERPRETATION_COLUMNS
 from locbook.suite import run as suite_run
 from locbook.suite import site
 from locbook.suite.cli import main
@@ -171,7 +171,7 @@ tag = { list = ["p", "q"] }
 """
 
 
-HEADER = ",".join(c for c in READING_COLUMNS if c != "quotes")   # a file without quotes loads
+HEADER = ",".join(c for c in INTERPRETATION_COLUMNS if c != "quotes")   # a file without quotes loads
 
 
 #: a = 1.3 gives value 16.0 (printed, within); b never reaches value; twice's window is always loose

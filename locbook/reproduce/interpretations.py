@@ -40,9 +40,9 @@ One CSV per document, ``locbook/data/interpretations/<document>.csv`` (package d
 ``quotes`` (a file written before issue 45 loads: without this column its quotes are empty, and its basis
 ``fitted_to_output`` reads as ``fitted``)
     the words of the source the default and the alternatives rest on, quoted, each with its section (and, where
-    useful, the line of the text): required for a ``printed`` or ``textual`` basis (``tests/reproduce/test_readings.py``
-    checks that each such interpretation quotes the text); for ``assumed``, what the text says around the gap, if
-    anything.
+    useful, the line of the text): required for a ``printed`` or ``textual`` basis
+    (``tests/reproduce/test_interpretations.py`` checks that each such interpretation quotes the text); for
+    ``assumed``, what the text says around the gap, if anything.
 ``reason``
     why the default and why the alternatives, argued from the quotes (required); where two interpretations are equally
     textual, it says so and names the field's standard model the default follows.
@@ -60,7 +60,7 @@ alternatives, and every fitted value is; ``requires`` a table of parameter names
 an interpretation not chosen from them.
 
 This module only declares and validates; it imports nothing from the suite (the suite's tests check each
-``parameter`` against the notebooks, ``tests/reproduce/test_readings.py``).
+``parameter`` against the notebooks, ``tests/reproduce/test_interpretations.py``).
 """
 from __future__ import annotations
 

@@ -130,12 +130,12 @@ def test_record_ch6_gives_the_reason_when_a_claim_fails(report):
 
 # -- Ozkaya, Sec. 7.2 ---------------------------------------------------------------------------------------------
 def test_the_simulations_share_one_assumption_block(report):
-    oz.record_simulation_assumptions(report, oz.sim_readings())
+    oz.record_simulation_assumptions(report, oz.sim_interpretations())
     recorded = {a["name"]: a["value"] for a in report.assumptions}
     # the shared protocol, then every declared simulation reading (data/readings/ozkaya2011.csv) by its name
     assert set(recorded) == {"room_m", "anchors_m", "target_protocol", "cells", "min_distance_m",
-                             "thesis_crlb_average", *oz.sim_readings()}
+                             "thesis_crlb_average", *oz.sim_interpretations()}
     assert {name: json.loads(recorded[name]) if recorded[name].startswith('"') else recorded[name]
-            for name in oz.sim_readings()} == oz.sim_readings()
+            for name in oz.sim_interpretations()} == oz.sim_interpretations()
     assert np.allclose(json.loads(recorded["anchors_m"]), oz.LAYOUTS["corners3"])
     assert all(a["reason"] for a in report.assumptions)

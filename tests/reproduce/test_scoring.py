@@ -154,7 +154,7 @@ def test_ozkaya_settling_reading_moves_with_the_tolerance_as_counted_by_hand():
     from locbook.scenarios import ozkaya as oz
     curve = [5.0, 3.0, 1.0, 0.35, 0.18, 0.12, 0.1, 0.1, 0.1]     # final value 0.1
     # within 0.1 of 0.1 from 0.18 (recursion 5); within 0.05 from 0.12 (6); within 0.2 also from 0.18 (5)
-    settled, amb = oz.settling_reading(curve, 0.1, "Sec. 7.2.2.2")
+    settled, amb = oz.settling_interpretation(curve, 0.1, "Sec. 7.2.2.2")
     assert settled == 5 and amb.size == 1.0 and amb.source == "Sec. 7.2.2.2" and "0.1 m" in amb.what
 
 

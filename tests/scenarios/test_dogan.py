@@ -172,9 +172,9 @@ def test_mle_reaches_the_grid_optimum():
     assert np.all(cost <= best.cost + 1e-9) and np.all(est.converged)
 
 
-@pytest.mark.parametrize("start, noise_reading", [("rest", "printed"), ("moving", "printed"), ("rest", "sigma_acc"),
-                                                 ("moving", "sigma_acc")])
-def test_record_tables_kinds_repeats_and_miss_notes(tmp_path, monkeypatch, start, noise_reading):
+@pytest.mark.parametrize("start, noise_interpretation", [("rest", "printed"), ("moving", "printed"),
+                                                        ("rest", "sigma_acc"), ("moving", "sigma_acc")])
+def test_record_tables_kinds_repeats_and_miss_notes(tmp_path, monkeypatch, start, noise_interpretation):
     """The MLE column is a reproduction; a filter column is calibrated exactly when the rows were computed under a
     reading fitted to output (the moving start's speed from Fig. 3.2, Q from sigma_ACC fitted to Table 3.9), naming
     each, else a reproduction; the repeats of one setting link to the cell they repeat and get no verdict; a miss
@@ -189,17 +189,17 @@ def test_record_tables_kinds_repeats_and_miss_notes(tmp_path, monkeypatch, start
                  reproduced=cells[k]["value"] * (2.0 if k[1] == "sigma_acc=0.0015" else 1.0),
                  mc_se=0.001) for k in keys]
     counts = dg.record_tables(report, rows, variants={keys[-1]: {"start moving, Q printed": 1.5}}, start=start,
-                              noise_reading=noise_reading)
+                              noise_interpretation=noise_interpretation)
     out = {r["where"]: r for r in report.numbers}
     mle = out["Table 3.7, sigma_rss_db=6, static_mle"]
     assert mle["kind"] == "reproduction" and mle["verdict"] == "within" and not mle["calibrated_from"]
     serial = out["Table 3.8, sigma_rss_db=6, serial_ekf"]
-    if (start, noise_reading) == ("rest", "printed"):
+    if (start, noise_interpretation) == ("rest", "printed"):
         assert serial["kind"] == "reproduction" and serial["calibrated_from"] == ""
     else:
         assert serial["kind"] == "calibrated"
         assert ("24 meter" in serial["calibrated_from"]) == (start == "moving")
-        assert ("Table 3.9" in serial["calibrated_from"]) == (noise_reading == "sigma_acc")
+        assert ("Table 3.9" in serial["calibrated_from"]) == (noise_interpretation == "sigma_acc")
     # the thesis's Monte-Carlo error widens the window: 2 x its relative standard error of the printed value
     assert serial["ambiguity"] == pytest.approx(2 * dg.thesis_repeat_error() * 1.47114, rel=1e-12)
     repeat = out["Table 3.9, sigma_acc=0.015, serial_ekf"]
@@ -207,11 +207,11 @@ def test_record_tables_kinds_repeats_and_miss_notes(tmp_path, monkeypatch, start
     assert out["Table 3.11, ple=3, static_mle"]["same_as"] == "Table 3.7 | sigma_rss_db=6 | static_mle"
     miss = out["Table 3.9, sigma_acc=0.0015, kalman_filter"]
     assert miss["verdict"] == "miss" and "start moving, Q printed: 1.500" in miss["note"]
-    assert ("Q printed as a constant" in miss["note"]) == (noise_reading == "printed")
+    assert ("Q printed as a constant" in miss["note"]) == (noise_interpretation == "printed")
     assert counts == {"within": 2, "linked": 2, "miss": 1}
 
 
-def test_readings_summary_counts_fusion_cells_within_the_tolerance_per_reading():
+def test_interpretations_summary_counts_fusion_cells_within_the_tolerance_per_interpretation():
     # hand-made deviations |ours / printed - 1| (exact in binary): the chosen reading from rows, others from variants
     cells = {  # key: (printed, chosen, A, B)
         ("3.8", "sigma_rss_db=3", "parallel_ekf"): (4.0, 4.5, 5.0, 3.0),     # 0.125, 0.25, 0.25
@@ -225,7 +225,8 @@ def test_readings_summary_counts_fusion_cells_within_the_tolerance_per_reading()
     rows.append({"table": "3.10", "row": "x", "column": "kalman_filter", "printed": 1.0, "reproduced": 9.0})
     variants[("3.10", "x", "kalman_filter")] = {"R per epoch": 9.0}          # one reading only: left out
     assert ("3.9", "sigma_acc=0.015") in dg.REPEATED_ROWS
-    out = {(s["interpretation"], s["filters"]): s for s in dg.readings_summary(rows, variants, "chosen", ["A", "B"])}
+    out = {(s["interpretation"], s["filters"]): s
+           for s in dg.interpretations_summary(rows, variants, "chosen", ["A", "B"])}
     assert [k for k in out] == [(r, f) for r in ("chosen", "A", "B") for f in ("EKFs", "KF (MLE)")]
     expect = {("chosen", "EKFs"): (2, 1, 18.75), ("chosen", "KF (MLE)"): (1, 0, 25.0),
               ("A", "EKFs"): (2, 1, 12.5), ("A", "KF (MLE)"): (1, 1, 12.5),
@@ -233,10 +234,10 @@ def test_readings_summary_counts_fusion_cells_within_the_tolerance_per_reading()
     for key, (n, within, median) in expect.items():
         assert (out[key]["cells"], out[key]["within_20_pct"]) == (n, within)
         assert out[key]["median_abs_deviation_pct"] == pytest.approx(median, rel=1e-12)
-    wide = dg.readings_summary(rows, variants, "chosen", ["A"], tolerance=0.25)     # the bound is inclusive
+    wide = dg.interpretations_summary(rows, variants, "chosen", ["A"], tolerance=0.25)     # the bound is inclusive
     assert [s["within_25_pct"] for s in wide] == [2, 1, 2, 1]
     with pytest.raises(ValueError, match="tolerance"):
-        dg.readings_summary(rows, variants, "chosen", ["A"], tolerance=20)
+        dg.interpretations_summary(rows, variants, "chosen", ["A"], tolerance=20)
 
 
 # -- readings opened as notebook parameters --------------------------------------------------------------

@@ -98,12 +98,12 @@ def test_each_reading_equals_an_independent_filterpy_implementation(name, readin
     the MLE fixes and the accelerometer noise are replayed from the same seed in run_channel's order (RSS, then one
     unit accelerometer noise draw scaled per sigma_ACC). Q and P_0,acc come from the printed constants ('printed')
     or from sigma_ACC ('sigma_acc'), written here, not from filter_noise."""
-    assert (dg.DEFAULT_START, dg.DEFAULT_NOISE_READING) == ("rest", "printed")
+    assert (dg.DEFAULT_START, dg.DEFAULT_NOISE_INTERPRETATION) == ("rest", "printed")
     tr = dg.walk_trajectory(waypoints_m=((1.0, 1.0), (1.0, 4.0), (4.0, 4.0)), speed_m_s=0.5)
     assert tr.start == "rest" and np.all(tr.velocity_m_s[0] == 0.0)
     n_runs, sigmas = 3, (0.0075, 0.0015)
     run = dg.run_channel(tr, 6.0, 3.0, n_runs, np.random.default_rng(11), sigma_acc_values=sigmas, only_rss=False,
-                         filters=(name,), keep_estimates=True, noise_reading=reading)
+                         filters=(name,), keep_estimates=True, noise_interpretation=reading)
     q_printed = P.get("Eq. (3.24)", "process noise covariance Q", "per-step variance (Q = value x I_6)").value
     acc_printed = P.get("Eq. (3.20)", "P_0|0", "acceleration variance").value
     rng = np.random.default_rng(11)
@@ -126,9 +126,9 @@ def test_the_default_reading_is_eq_3_24s_constant_q_for_any_sigma_acc(sigma_acc)
     (Eq. (3.20)) whatever sigma_ACC; Sec. 4.1.2's process-noise sd 0.0048 is its square root to the printed digits."""
     q = P.get("Eq. (3.24)", "process noise covariance Q", "per-step variance (Q = value x I_6)")
     p0 = P.get("Eq. (3.20)", "P_0|0", "acceleration variance")
-    assert dg.filter_noise(dg.DEFAULT_NOISE_READING, sigma_acc) == (q.value, p0.value) == (0.000023, 0.00023)
+    assert dg.filter_noise(dg.DEFAULT_NOISE_INTERPRETATION, sigma_acc) == (q.value, p0.value) == (0.000023, 0.00023)
     sd = P.get("Sec. 4.1.2 text", "process noise", "standard deviation")
-    assert abs(np.sqrt(dg.filter_noise(dg.DEFAULT_NOISE_READING, sigma_acc)[0]) - sd.value) <= sd.rounding
+    assert abs(np.sqrt(dg.filter_noise(dg.DEFAULT_NOISE_INTERPRETATION, sigma_acc)[0]) - sd.value) <= sd.rounding
 
 
 def test_calibrated_from_text_names_exactly_the_readings_fitted_to_output():

@@ -7,7 +7,7 @@ import pytest
 
 import locbook as lb
 from locbook.bounds.pcrlb import linear_measurement_information, position_bound_m, posterior_crlb
-from locbook.reproduce.readings import readings
+from locbook.reproduce.interpretations import interpretations
 from locbook.scenarios import dogan as dg
 
 
@@ -16,7 +16,7 @@ def _walk():
 
 
 def test_the_declared_reading_is_the_library_default_and_its_values_run():
-    reading = {r.name: r for r in readings("dogan2015")}["rss_only_step"]
+    reading = {r.name: r for r in interpretations("dogan2015")}["rss_only_step"]
     assert reading.default == dg.DEFAULT_RSS_ONLY_STEP and set(reading.values) == set(dg.RSS_ONLY_STEPS)
     assert reading.basis == "textual" and not reading.fitted
     with pytest.raises(lb.ParameterError, match="rss_only_step"):

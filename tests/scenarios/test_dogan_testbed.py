@@ -176,7 +176,7 @@ def test_record_testbed_records_each_printed_walk_value_with_its_flags_and_the_b
     assert claim["reproduced"] == pytest.approx(0.9 * (1.0 + 0.05 * 10), rel=1e-12)
     # a walk run under a reading fitted to output makes every filter row a calibration naming it; the MLE stays
     report = lb.Report("test2")
-    tb.record_testbed(report, rows, run, 0.5, start="moving", noise_reading="sigma_acc")
+    tb.record_testbed(report, rows, run, 0.5, start="moving", noise_interpretation="sigma_acc")
     by_id = {r["printed_id"]: r for r in report.numbers}
     fused = by_id[tb.PRINTED_TESTBED_RMSE[("serial_ekf", "fusion")].id]
     assert fused["kind"] == "calibrated" and fused["calibrated_from"] == dg.calibrated_from_text("moving", "sigma_acc")

@@ -104,8 +104,8 @@ def test_the_setup_agrees_with_the_numbers_the_paper_prints():
 
 def test_no_george_default_is_fitted_and_the_fitted_sigma_is_only_an_alternative():
     # 1.83 dB was chosen from the printed C without filter; the default is the assumed sigma
-    from locbook.reproduce.readings import readings
-    rows = {r.name: r for r in readings("george")}
+    from locbook.reproduce.interpretations import interpretations
+    rows = {r.name: r for r in interpretations("george")}
     assert all(r.basis != "fitted" for r in rows.values())
     for name in ("shadowing", "crlb_shadowing"):
         r = rows[name]

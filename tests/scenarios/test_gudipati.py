@@ -265,8 +265,8 @@ def test_imu_frame_world_takes_the_readings_as_world_accelerations():
 # -- the readings under the rule, the path geometry and the filter step ------------------------------------
 
 def test_no_gudipati_default_is_fitted_and_the_fitted_shadowing_is_an_alternative():
-    from locbook.reproduce.readings import readings
-    rows = {r.name: r for r in readings("gudipati2017")}
+    from locbook.reproduce.interpretations import interpretations
+    rows = {r.name: r for r in interpretations("gudipati2017")}
     assert all(r.basis != "fitted" for r in rows.values())
     shadow = rows["tracking_shadowing"]
     assert shadow.fitted and all(v in shadow.alternatives for v in shadow.fitted)

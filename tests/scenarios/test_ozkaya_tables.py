@@ -48,7 +48,7 @@ def test_record_tables_compares_each_printed_value_once(tmp_path, monkeypatch):
     n_runs = 60
     # every simulation reading is supported by the text: rows computed under either noise reading are
     # reproductions
-    rows = oz.run_tables(["7.2", "7.3", "7.6"], n_runs, 5, readings={"reader_noise": "common_mode"})
+    rows = oz.run_tables(["7.2", "7.3", "7.6"], n_runs, 5, interpretations={"reader_noise": "common_mode"})
     oz.record_tables(report, rows, n_runs)
     recorded = report.numbers
     assert all(r["kind"] == "reproduction" and not r["calibrated_from"] for r in recorded)

@@ -171,6 +171,6 @@ def test_fig7_default_exact_locations_without_shadowing_give_the_exact_batch_fix
     np.testing.assert_array_equal(seen, loc)
     est = pv.lsf_by_count(setup, seen, z, [5, 10, 20])
     assert pv.errors_m(est, setup.target).max() < 1e-6
-    from locbook.reproduce.readings import readings
-    fig7 = {r.name: r for r in readings("palvai2008")}["fig7_gps_noise"]
+    from locbook.reproduce.interpretations import interpretations
+    fig7 = {r.name: r for r in interpretations("palvai2008")}["fig7_gps_noise"]
     assert fig7.default == 0.0 and pv.SIGMA3_M in fig7.alternatives

@@ -19,14 +19,14 @@ import nbformat
 import pytest
 from nbformat.v4 import new_notebook
 
-from locbook.reproduce.readings import ReadingsError, load_reading_file
+from locbook.reproduce.interpretations import InterpretationsError, load_interpretation_file
 from locbook.reproduce.report import NUMBER_COLUMNS, Table
 from locbook.suite import SuiteError, load_suite, runner, site
 from locbook.suite import study as study_module
 from locbook.suite.bracket import (
     SITE_NUMBER_COLUMNS,
     bracket_points,
-    experiment_readings,
+    experiment_interpretations,
     find_experiment,
     write_bracket_outputs,
 )
@@ -183,7 +183,7 @@ def _complete_bracket(repo, tmp_path):
     exp = find_experiment(suite, "george-study")
     readings_path = tmp_path / "george.csv"
     readings_path.write_text(READINGS)
-    points = bracket_points(exp, "quick", experiment_readings(exp, load_reading_file(readings_path)))
+    points = bracket_points(exp, "quick", experiment_interpretations(exp, load_interpretation_file(readings_path)))
     folder = repo / "reports" / "brackets" / exp.id
     for p in points:
         _promoted(folder / p.key, exp, "quick", p.parameters, figures=False)
@@ -200,8 +200,9 @@ def test_an_interrupted_forced_bracket_keeps_its_band(stoy, tmp_path, monkeypatc
         (values[0], values[-1], len(points))
     assert before["bracket"] == "other_interpretation" and before["reached_by"] == "slope: a=1.3"
     monkeypatch.setattr(runner, "run_tasks", _fake_run_tasks(finished=1))
-    code = main(["--suite", str(stoy / "notebooks" / "experiments.toml"), "bracket", "george-study", "--readings",
-                 str(readings_path), "--force", "--reports", str(stoy / "reports"), "--progress", "quiet"])
+    code = main(["--suite", str(stoy / "notebooks" / "experiments.toml"), "bracket", "george-study",
+                 "--interpretations", str(readings_path), "--force", "--reports", str(stoy / "reports"),
+                 "--progress", "quiet"])
     assert code == 128 + signal.SIGINT
     (after,) = [r for r in _table(folder / "bracket.csv") if r["quantity"] == "value"]
     assert after == before
@@ -253,22 +254,22 @@ def test_a_suite_file_that_is_not_utf8_is_one_line(toy, tmp_path, capsys):
 def test_a_readings_file_that_cannot_be_read_is_one_line(stoy, tmp_path, capsys, data, message):
     path = tmp_path / "george.csv"
     path.write_bytes(data)
-    with pytest.raises(ReadingsError, match=str(path).replace(".", r"\.") + ", " + message.replace("(", r"\(")):
-        load_reading_file(path)
-    assert main(["--suite", str(stoy / "notebooks" / "experiments.toml"), "bracket", "george-study", "--readings",
-                 str(path), "--reports", str(tmp_path / "r")]) == 2
+    with pytest.raises(InterpretationsError, match=str(path).replace(".", r"\.") + ", " + message.replace("(", r"\(")):
+        load_interpretation_file(path)
+    assert main(["--suite", str(stoy / "notebooks" / "experiments.toml"), "bracket", "george-study",
+                 "--interpretations", str(path), "--reports", str(tmp_path / "r")]) == 2
     assert message in _one_line(capsys)
 
 
 def test_a_line_break_inside_a_cell_stays_on_the_error_line(tmp_path):
     path = tmp_path / "george.csv"
     path.write_text(HEADER.replace("experiments", '"exp\neriments"') + "\n")       # a quoted header cell
-    with pytest.raises(ReadingsError) as info:
-        load_reading_file(path)
+    with pytest.raises(InterpretationsError) as info:
+        load_interpretation_file(path)
     assert "\n" not in str(info.value) and "got name, exp\\neriments, parameter" in str(info.value)
     path.write_text(HEADER + '\nslope,george-study,a,,1.0,"[2.0,\n2.0]",,,,assumed,s,r\n')     # rows start on line 2
-    with pytest.raises(ReadingsError, match=r"line 2 \(slope\): alternatives repeat a value: \[2\.0,\\n2\.0\]$"):
-        load_reading_file(path)
+    with pytest.raises(InterpretationsError, match=r"line 2 \(slope\): alternatives repeat a value: \[2\.0,\\n2\.0\]$"):
+        load_interpretation_file(path)
 
 
 def test_a_declaration_file_too_large_is_refused_before_it_is_read_whole(stoy, tmp_path, capsys):
@@ -281,9 +282,9 @@ def test_a_declaration_file_too_large_is_refused_before_it_is_read_whole(stoy, t
     assert main(["--suite", str(big), "list"]) == 2
     assert f"{big}: the experiment list is 64.0 MiB, over the limit" in _one_line(capsys)
     csv_path = big.rename(tmp_path / "george.csv")
-    with pytest.raises(ReadingsError, match="an interpretations file is 64.0 MiB, over the limit of 16 MiB"):
-        load_reading_file(csv_path)
-    from locbook.reproduce.readings import MAX_DECLARATION_BYTES
+    with pytest.raises(InterpretationsError, match="an interpretations file is 64.0 MiB, over the limit of 16 MiB"):
+        load_interpretation_file(csv_path)
+    from locbook.reproduce.interpretations import MAX_DECLARATION_BYTES
     assert MAX_DECLARATION_BYTES == 16 * 2 ** 20         # the limit the messages state
 
 

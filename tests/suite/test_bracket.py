@@ -6,7 +6,7 @@ import textwrap
 
 import pytest
 
-from locbook.reproduce.readings import load_reading_file, readings_for
+from locbook.reproduce.interpretations import interpretations_for, load_interpretation_file
 from locbook.suite import SuiteError, load_suite
 from locbook.suite.bracket import (
     BRACKET_COLUMNS,
@@ -15,7 +15,7 @@ from locbook.suite.bracket import (
     bracket_of_rows,
     bracket_points,
     bracket_rows,
-    experiment_readings,
+    experiment_interpretations,
     find_experiment,
 )
 from locbook.suite.cli import main
@@ -41,7 +41,7 @@ def _suite(toy):
 
 
 def bracket(toy, readings, *args, reports="reports"):
-    return main(["--suite", str(toy / "notebooks" / "experiments.toml"), "bracket", "george-study", "--readings",
+    return main(["--suite", str(toy / "notebooks" / "experiments.toml"), "bracket", "george-study", "--interpretations",
                  str(readings), "--reports", str(toy / reports), "--progress", "plain", *args])
 
 
@@ -54,7 +54,7 @@ def _table(path):
 
 def test_points_are_the_default_then_each_other_value_one_reading_at_a_time(stoy, tmp_path):
     exp = find_experiment(_suite(stoy), "george-study")
-    found = experiment_readings(exp, load_reading_file(_readings(tmp_path, READINGS)))
+    found = experiment_interpretations(exp, load_interpretation_file(_readings(tmp_path, READINGS)))
     points = bracket_points(exp, "quick", found)
     assert [p.label for p in points] == ["default", "slope: a=1.3", "slope: a=0.0", "slope: a=2.0", "offset: b=0.5"]
     assert points[0].parameters == {"seed": 3}                           # the profile's own values
@@ -66,7 +66,7 @@ def test_a_value_equal_to_the_profile_is_not_run_twice_and_shared_values_share_a
     exp = find_experiment(_suite(stoy), "george-study")
     text = (f"{HEADER}\nslope,george-study,a,,1.0,[1.3],,1.0,2.0,assumed,s,r\n"
             "same,george-study,a,,,[2.0],[2.0],,,assumed,s,r\n")
-    points = bracket_points(exp, "quick", load_reading_file(_readings(tmp_path, text)))
+    points = bracket_points(exp, "quick", load_interpretation_file(_readings(tmp_path, text)))
     # the range's low end equals the default (1.0): skipped; a = 2.0 is named by both readings: one point, marked
     # fitted for the reading that declares it so
     assert [p.label for p in points] == ["default", "slope: a=1.3", "slope, same [fitted]: a=2.0"]
@@ -78,28 +78,30 @@ def test_a_shared_point_keeps_its_own_key_when_a_later_reading_names_it_again(st
     exp = find_experiment(_suite(stoy), "george-study")
     text = (f"{HEADER}\nslope,george-study,a,,1.0,\"[2.0, 1.3]\",,,,assumed,s,r\n"
             "same,george-study,a,,,[2.0],,,,assumed,s,r\n")
-    points = bracket_points(exp, "quick", load_reading_file(_readings(tmp_path, text)))
+    points = bracket_points(exp, "quick", load_interpretation_file(_readings(tmp_path, text)))
     assert [p.label for p in points] == ["default", "slope, same: a=2.0", "slope: a=1.3"]
     assert len({p.key for p in points}) == len(points)
 
 
 def test_a_reading_value_the_notebook_refuses_is_an_error_before_anything_runs(stoy, tmp_path):
     exp = find_experiment(_suite(stoy), "george-study")
-    bad = load_reading_file(_readings(tmp_path, f"{HEADER}\nslope,george-study,a,,1.0,[7.0],,,,assumed,s,r\n"))
+    bad = load_interpretation_file(_readings(tmp_path, f"{HEADER}\nslope,george-study,a,,1.0,[7.0],,,,assumed,s,r\n"))
     with pytest.raises(SuiteError, match=r"interpretation george/slope of 'george-study'.*'a' = 7.0 is not allowed"):
         bracket_points(exp, "quick", bad)
-    unknown = load_reading_file(_readings(tmp_path, f"{HEADER}\nslope,george-study,nope,,1.0,[2.0],,,,assumed,s,r\n"))
+    unknown = load_interpretation_file(
+        _readings(tmp_path, f"{HEADER}\nslope,george-study,nope,,1.0,[2.0],,,,assumed,s,r\n"))
     with pytest.raises(SuiteError, match="names parameter 'nope', which 'george-study' does not declare"):
         bracket_points(exp, "quick", unknown)
     with pytest.raises(SuiteError, match="no interpretations are declared for experiment 'george-study'"):
-        experiment_readings(exp, load_reading_file(_readings(tmp_path, OFFSET_ONLY.replace("george-study", "x-y"))))
+        other = OFFSET_ONLY.replace("george-study", "x-y")
+        experiment_interpretations(exp, load_interpretation_file(_readings(tmp_path, other)))
 
 
 def test_gaps_are_the_unswept_readings_that_name_other_values(tmp_path):
-    found = load_reading_file(_readings(tmp_path, WITH_GAP))
+    found = load_interpretation_file(_readings(tmp_path, WITH_GAP))
     assert [r.name for r in bracket_gaps(found)] == ["hidden"]
     # a gap with nothing else to try cannot move a row
-    assert bracket_gaps(load_reading_file(_readings(tmp_path, WITH_GAP.replace("[2]", "[]")))) == []
+    assert bracket_gaps(load_interpretation_file(_readings(tmp_path, WITH_GAP.replace("[2]", "[]")))) == []
 
 
 def test_a_bad_readings_file_is_one_line_and_exit_status_2(stoy, tmp_path, capsys):
@@ -113,7 +115,7 @@ def test_the_declared_readings_of_every_experiment_give_valid_points():
     """Every packaged reading names a parameter and values its notebook accepts (checked as a bracket would)."""
     suite = load_suite()
     for exp in suite.experiments:
-        found = readings_for(exp.id)
+        found = interpretations_for(exp.id)
         if found:
             points = bracket_points(exp, "quick", found)
             assert points[0].label == "default"
@@ -253,7 +255,7 @@ def _numbers(folder, *rows):
 
 def _hand_points(stoy, tmp_path, text):
     exp = find_experiment(_suite(stoy), "george-study")
-    return exp, bracket_points(exp, "quick", load_reading_file(_readings(tmp_path, text)))
+    return exp, bracket_points(exp, "quick", load_interpretation_file(_readings(tmp_path, text)))
 
 
 RANGE_ONLY = f"{HEADER}\nslope,george-study,a,,1.0,[],,0.0,2.0,assumed,s,r\n"
@@ -305,9 +307,9 @@ def test_a_damaged_bracket_file_labels_nothing(tmp_path):
 
 
 def test_int_range_ends_are_the_whole_numbers_inside_the_range():
-    from locbook.reproduce.readings import Reading
+    from locbook.reproduce.interpretations import Interpretation
     from locbook.suite.bracket import _sweep_values
-    r = Reading("d", "n", ("e",), "k", "", 1, (), 0.5, 2.5, "assumed", "s", "r")
+    r = Interpretation("d", "n", ("e",), "k", "", 1, (), 0.5, 2.5, "assumed", "s", "r")
     assert _sweep_values(r, "int") == [1, 2] and _sweep_values(r, "int | None") == [1, 2]
     assert _sweep_values(r, "float") == [0.5, 2.5]
 
@@ -317,19 +319,20 @@ def test_a_profile_that_sets_a_reading_off_its_default_is_refused(stoy, tmp_path
     text = f"{HEADER}\nseed_reading,george-study,seed,,7,[8],,,,assumed,s,r\n"     # the quick profile sets seed = 3
     with pytest.raises(SuiteError, match="the quick profile of 'george-study' sets seed = 3, not the declared "
                                          "default 7"):
-        bracket_points(exp, "quick", load_reading_file(_readings(tmp_path, text)))
+        bracket_points(exp, "quick", load_interpretation_file(_readings(tmp_path, text)))
 
 
 def test_values_fitted_together_get_one_joint_point(stoy, tmp_path):
     exp = find_experiment(_suite(stoy), "george-study")
     text = (f"{HEADER}\nslope,george-study,a,,1.0,\"[1.3, 2.0]\",[1.3],,,assumed,s,r\n"
             f"offset,george-study,b,,0.0,[0.5],[0.5],,,assumed,s,r\n")
-    points = bracket_points(exp, "quick", load_reading_file(_readings(tmp_path, text)))
+    points = bracket_points(exp, "quick", load_interpretation_file(_readings(tmp_path, text)))
     assert [p.label for p in points] == ["default", "slope [fitted]: a=1.3", "slope: a=2.0", "offset [fitted]: b=0.5",
                                          "fitted interpretations together [fitted]: a=1.3, b=0.5"]
     assert points[-1].parameters == {"seed": 3, "a": 1.3, "b": 0.5}
     # one fitted reading alone is its own one-at-a-time point: nothing joint
-    single = bracket_points(exp, "quick", load_reading_file(_readings(tmp_path, text.replace("[0.5],[0.5]", "[0.5],"))))
+    alone = load_interpretation_file(_readings(tmp_path, text.replace("[0.5],[0.5]", "[0.5],")))
+    single = bracket_points(exp, "quick", alone)
     assert not any(p.together for p in single)
 
 
@@ -343,7 +346,7 @@ def _with_bracket_table(toy, table):
 def test_bracket_settings_are_set_at_every_point_and_checked(stoy, tmp_path):
     suite = _with_bracket_table(stoy, '[experiment.bracket]\nparameters = { tag = "q" }\nreason = "toy: not scored"\n')
     exp = find_experiment(suite, "george-study")
-    points = bracket_points(exp, "quick", load_reading_file(_readings(tmp_path, READINGS)))
+    points = bracket_points(exp, "quick", load_interpretation_file(_readings(tmp_path, READINGS)))
     assert [p.parameters.get("tag") for p in points] == ["q"] * 5          # the default point too
     assert points[0].parameters == {"seed": 3, "tag": "q"}
 
@@ -352,7 +355,7 @@ def test_a_bracket_setting_may_not_touch_what_the_readings_sweep(stoy, tmp_path)
     exp_a = find_experiment(_with_bracket_table(stoy, '[experiment.bracket]\nparameters = { a = 2.0 }\nreason = "x"\n'),
                             "george-study")
     with pytest.raises(SuiteError, match="sets 'a', a parameter its interpretations sweep"):
-        bracket_points(exp_a, "quick", load_reading_file(_readings(tmp_path, READINGS)))
+        bracket_points(exp_a, "quick", load_interpretation_file(_readings(tmp_path, READINGS)))
 
 
 @pytest.mark.parametrize("table, message", [
@@ -372,7 +375,7 @@ def test_a_bracket_setting_the_notebook_does_not_declare_is_refused(stoy, tmp_pa
     exp = find_experiment(_with_bracket_table(stoy, '[experiment.bracket]\nparameters = { nope = 1 }\nreason = "x"\n'),
                           "george-study")
     with pytest.raises(SuiteError, match="sets 'nope', which 'george-study' does not declare"):
-        bracket_points(exp, "quick", load_reading_file(_readings(tmp_path, READINGS)))
+        bracket_points(exp, "quick", load_interpretation_file(_readings(tmp_path, READINGS)))
 
 
 # -- bracket points run without figures ------------------------------------------------------------------------
@@ -433,14 +436,14 @@ def test_a_reading_that_requires_another_value_runs_each_of_its_values_with_it(s
     exp = find_experiment(_suite(stoy), "george-study")
     text = (f"{HEADER},requires\nlabel,george-study,tag,,'x',['p'],,,,assumed,s,r,\n"
             f"slope_p,george-study,a,,1.0,,,0.5,2.0,assumed,s,r,{{ tag = 'p' }}\n")
-    points = bracket_points(exp, "quick", load_reading_file(_readings(tmp_path, text)))
+    points = bracket_points(exp, "quick", load_interpretation_file(_readings(tmp_path, text)))
     # a = 1.0 under tag p is the point of tag = 'p' itself: shared; both range ends run with tag = 'p'
     assert [p.label for p in points] == ["default", "label, slope_p: tag='p'", "slope_p: a=0.5 with tag='p'",
                                          "slope_p: a=2.0 with tag='p'"]
     assert points[2].parameters == {"seed": 3, "a": 0.5, "tag": "p"}
     bad = f"{HEADER},requires\nslope_p,george-study,a,,1.0,,,0.5,2.0,assumed,s,r,{{ zz = 1 }}\n"
     with pytest.raises(SuiteError, match="requires parameter 'zz', which 'george-study' does not declare"):
-        bracket_points(exp, "quick", load_reading_file(_readings(tmp_path, bad)))
+        bracket_points(exp, "quick", load_interpretation_file(_readings(tmp_path, bad)))
 
 
 def test_a_reading_with_requires_keeps_its_own_default_run_in_the_range_check(stoy, tmp_path):
@@ -452,7 +455,7 @@ def test_a_reading_with_requires_keeps_its_own_default_run_in_the_range_check(st
     exp, points = _hand_points(stoy, tmp_path, text)
     # the range's high end is the default: one point, the reading listed once
     assert [p.label for p in points] == ["default", "label, slope_p: tag='p'", "slope_p: a=0.5 with tag='p'"]
-    assert points[1].reading_values == {"label": "p", "slope_p": 1.0}
+    assert points[1].interpretation_values == {"label": "p", "slope_p": 1.0}
     folder = tmp_path / "b"
     for p, value in zip(points, ("13", "20", "8")):
         _numbers(folder / p.key, {"reproduced": value, "verdict": "miss"})
@@ -481,7 +484,7 @@ def test_a_bracket_setting_a_profile_sets_is_refused(stoy, tmp_path):
     exp = find_experiment(_with_bracket_table(stoy, '[experiment.bracket]\nparameters = { seed = 4 }\nreason = "x"\n'),
                           "george-study")
     with pytest.raises(SuiteError, match="sets 'seed', which a profile sets"):
-        bracket_points(exp, "quick", load_reading_file(_readings(tmp_path, OFFSET_ONLY)))
+        bracket_points(exp, "quick", load_interpretation_file(_readings(tmp_path, OFFSET_ONLY)))
 
 
 # -- tiers, combinations, Monte-Carlo margins, implausible values -------------------------------------
@@ -492,7 +495,7 @@ def test_the_factorial_runs_every_combination_of_the_textual_values(stoy, tmp_pa
             f"offset,george-study,b,,0.0,[0.5],,,,printed,s,r\n")
     suite = _with_bracket_table(stoy, '[experiment.bracket]\nfactorial = ["slope", "offset"]\n')
     exp = find_experiment(suite, "george-study")
-    points = bracket_points(exp, "quick", load_reading_file(_readings(tmp_path, text)))
+    points = bracket_points(exp, "quick", load_interpretation_file(_readings(tmp_path, text)))
     assert [p.label for p in points] == ["default", "slope: a=1.3", "slope [fitted]: a=2.0", "offset: b=0.5",
                                          "interpretations together: a=1.3, b=0.5"]
     joint = points[-1]
@@ -504,7 +507,7 @@ def test_the_factorial_runs_every_combination_of_the_textual_values(stoy, tmp_pa
     unknown = _suite(stoy)
     with pytest.raises(SuiteError, match="factorial of 'george-study' names 'nope', which is not an interpretation"):
         bracket_points(find_experiment(unknown, "george-study"), "quick",
-                       load_reading_file(_readings(tmp_path, text)))
+                       load_interpretation_file(_readings(tmp_path, text)))
 
 
 def _tier_points(stoy, tmp_path):
@@ -548,7 +551,7 @@ def test_an_implausible_value_is_named_and_left_out_of_the_band(stoy, tmp_path):
     suite = _with_bracket_table(stoy, '[experiment.bracket]\nlargest_error_m = 9.43\n'
                                       'largest_error_reason = "the 5 m x 8 m room\'s diagonal"\n')
     exp = find_experiment(suite, "george-study")
-    points = bracket_points(exp, "quick", load_reading_file(_readings(
+    points = bracket_points(exp, "quick", load_interpretation_file(_readings(
         tmp_path, f"{HEADER}\nslope,george-study,a,,1.0,\"[1.3, 2.0]\",,,,printed,s,r\n")))
     folder = tmp_path / "b"
     # printed 16 m: the 45.6 m point would put it between; it is implausible (over 9.43 m), so nothing reaches 16
@@ -569,14 +572,14 @@ def test_an_implausible_default_run_neither_hides_a_reading_nor_makes_a_crossing
     suite = _with_bracket_table(stoy, '[experiment.bracket]\nlargest_error_m = 9.43\nlargest_error_reason = "room"\n')
     exp = find_experiment(suite, "george-study")
     text = f"{HEADER}\nslope,george-study,a,,1.0,\"[1.3, 2.0]\",,,,printed,s,r\n"
-    points = bracket_points(exp, "quick", load_reading_file(_readings(tmp_path, text)))
+    points = bracket_points(exp, "quick", load_interpretation_file(_readings(tmp_path, text)))
     folder = tmp_path / "b"
     for p, value, verdict in zip(points, ("20", "4.0", "3"), ("miss", "within", "miss")):
         _numbers(folder / p.key, {"reproduced": value, "verdict": verdict, "unit": "m", "printed": "4.0"})
     (row,) = bracket_rows(exp, points, folder, {p.key: "ok" for p in points}, [], "quick")
     assert row["bracket"] == "other_interpretation" and row["reached_by"] == "slope: a=1.3", row
     ranged = f"{HEADER}\nslope,george-study,a,,1.0,[],,0.5,2.0,printed,s,r\n"
-    points = bracket_points(exp, "quick", load_reading_file(_readings(tmp_path, ranged)))
+    points = bracket_points(exp, "quick", load_interpretation_file(_readings(tmp_path, ranged)))
     folder = tmp_path / "c"
     for p, value in zip(points, ("3", "2", "45")):          # default 3, a = 0.5 gives 2, a = 2 gives 45 m
         _numbers(folder / p.key, {"reproduced": value, "verdict": "miss", "unit": "m", "printed": "4.0"})

@@ -13,9 +13,9 @@ damaged bytes. The rule every call must keep:
   swept values of each task are the declared ones; a bracket's points have distinct keys, the first is the
   default point and every other changes at least one parameter; or
 - it is refused with the project's error: a :class:`~locbook.suite.spec.SuiteError` or
-  :class:`~locbook.reproduce.readings.ReadingsError` of ONE line that starts with the file's path (for a bracket's
-  values, that names the reading); never a raw exception from tomllib, csv, pydantic or numpy (UnicodeDecodeError,
-  ``_csv.Error``, ValidationError, TypeError, KeyError, MemoryError ...).
+  :class:`~locbook.reproduce.interpretations.InterpretationsError` of ONE line that starts with the file's path (for a
+  bracket's values, that names the interpretation); never a raw exception from tomllib, csv, pydantic or numpy
+  (UnicodeDecodeError, ``_csv.Error``, ValidationError, TypeError, KeyError, MemoryError ...).
 
 Example counts are bounded (``max_examples``) so that the module runs in well under a minute.
 """
@@ -28,10 +28,10 @@ from hypothesis import strategies as st
 
 from builders import toml_key
 from builders import toml_value as toml
-from locbook.reproduce.readings import READING_COLUMNS, ReadingsError, load_reading_file
+from locbook.reproduce.interpretations import INTERPRETATION_COLUMNS, InterpretationsError, load_interpretation_file
 from locbook.suite import SuiteError, load_suite
 from locbook.suite import study as study_module
-from locbook.suite.bracket import bracket_points, experiment_readings, find_experiment
+from locbook.suite.bracket import bracket_points, experiment_interpretations, find_experiment
 from locbook.suite.study import expand_study, load_studies
 from toy_suite import _notebook
 
@@ -172,7 +172,7 @@ def damaged(draw, text: str) -> bytes:
 def refused(exc: Exception, path) -> str:
     """The project's one-line error naming ``path``; anything else fails the test."""
     message = str(exc)
-    assert isinstance(exc, (SuiteError, ReadingsError)), f"a raw {type(exc).__name__} escaped: {exc!r}"
+    assert isinstance(exc, (SuiteError, InterpretationsError)), f"a raw {type(exc).__name__} escaped: {exc!r}"
     assert "\n" not in message and message.startswith(str(path)), f"not one line naming the file: {message!r}"
     return message
 
@@ -291,7 +291,7 @@ def csv_cell(text: str) -> str:
 @st.composite
 def readings_files(draw) -> str:
     optional = draw(st.booleans())
-    columns = list(READING_COLUMNS) + (["requires"] if optional else [])
+    columns = list(INTERPRETATION_COLUMNS) + (["requires"] if optional else [])
     if draw(st.integers(0, 4)) == 0:
         columns.remove("quotes")            # a file of one's own written before the quotes column
     if draw(st.integers(0, 9)) == 0:
@@ -313,13 +313,13 @@ def test_a_readings_file_loads_or_is_one_line_and_its_points_are_consistent(suit
     path = tmp_path_factory.mktemp("readings") / "george.csv"
     path.write_bytes(data.draw(damaged(text), label="bytes"))
     try:
-        readings = load_reading_file(path)
+        readings = load_interpretation_file(path)
     except Exception as exc:   # noqa: BLE001
         event(f"refused: {refused(exc, path)[len(str(path)):][:40]}")
         return
     exp = find_experiment(suite, "george-fuzz")
     try:
-        points = bracket_points(exp, "quick", experiment_readings(exp, readings))
+        points = bracket_points(exp, "quick", experiment_interpretations(exp, readings))
     except Exception as exc:   # noqa: BLE001
         assert isinstance(exc, SuiteError), f"a raw {type(exc).__name__} escaped: {exc!r}"
         assert "\n" not in str(exc)

@@ -9,7 +9,7 @@ import pytest
 
 import locbook as lb
 from locbook.errors import ParameterError
-from locbook.reproduce.readings import readings
+from locbook.reproduce.interpretations import interpretations
 from locbook.scenarios import ozkaya as oz
 from locbook.scenarios import ozkaya_simulation as ozs
 
@@ -81,7 +81,7 @@ def test_unknown_readings_are_refused_naming_them():
     with pytest.raises(ParameterError, match="percentile_convention"):
         oz.summarize(np.ones(5), percentile_convention="pooled_last_recursion")
     with pytest.raises(ParameterError, match="no_such_reading"):
-        oz.sim_readings(no_such_reading="x")
+        oz.sim_interpretations(no_such_reading="x")
     with pytest.raises(ParameterError, match="reader_noise"):
         oz.simulate_truth_and_rss(oz.SimCase("nn", reader_noise="shared"), 3, np.random.default_rng(0))
 
@@ -113,7 +113,7 @@ def test_fixed_target_noise_frozen_or_fresh():
 
 
 def test_cell_cores_sampling_stays_in_the_area_the_cells_tile():
-    case = oz.with_readings(oz.SimCase("nn"), {"target_sampling": "cell_cores"})
+    case = oz.with_interpretations(oz.SimCase("nn"), {"target_sampling": "cell_cores"})
     truth, _ = oz.simulate_truth_and_rss(case, 5000, np.random.default_rng(5))
     xy = truth[:, 0]
     cells = oz.cell_centres(oz.ROOM_M, 4, 7)
@@ -121,14 +121,14 @@ def test_cell_cores_sampling_stays_in_the_area_the_cells_tile():
     assert np.all(xy >= cells.min(0) - half) and np.all(xy <= cells.max(0) + half)
     assert np.allclose(xy.min(0), 0.5, atol=0.01) and np.allclose(xy.max(0), np.array(oz.ROOM_M) - 0.5, atol=0.01)
     # a region the thesis prints for a row (Table 7.22: 1 m from the walls) is kept under any sampling
-    assert oz.with_readings(oz.SimCase("sir", target_region="inner"), {"target_sampling": "cell_cores"}) \
+    assert oz.with_interpretations(oz.SimCase("sir", target_region="inner"), {"target_sampling": "cell_cores"}) \
         .target_region == "inner"
 
 
 def test_uniform_nn_weights_over_every_cell_give_the_cells_centroid():
     """With k = every cell and plain averaging, the estimate is the centroid of the 28 cells whatever the RSSI, so
     the error is the distance from the target to (2.5, 4)."""
-    case = oz.with_readings(oz.SimCase("nn", k_nn=28), {"nn_weights": "uniform"})
+    case = oz.with_interpretations(oz.SimCase("nn", k_nn=28), {"nn_weights": "uniform"})
     last, _, truth, estimate = oz.run_case(case, 30, 7, return_all=True)
     np.testing.assert_allclose(estimate[:, 0], np.broadcast_to([2.5, 4.0], (30, 2)), atol=1e-12)
     np.testing.assert_allclose(last, np.linalg.norm(truth[:, 0] - [2.5, 4.0], axis=-1), atol=1e-12)
@@ -158,16 +158,16 @@ def test_absolute_resample_threshold_never_resamples():
 
 def test_run_tables_defaults_equal_explicit_default_readings():
     a = oz.run_tables(["7.2"], 30, 3)
-    b = oz.run_tables(["7.2"], 30, 3, readings=oz.sim_readings())
+    b = oz.run_tables(["7.2"], 30, 3, interpretations=oz.sim_interpretations())
     assert [r["reproduced"] for r in a] == [r["reproduced"] for r in b]
-    c = oz.run_tables(["7.2"], 30, 3, readings={"reader_noise": "common_mode"})
+    c = oz.run_tables(["7.2"], 30, 3, interpretations={"reader_noise": "common_mode"})
     assert [r["reproduced"] for r in a if r["column"] == "rmse_m"] != \
         [r["reproduced"] for r in c if r["column"] == "rmse_m"]
 
 
 def test_every_simulation_reading_is_declared_with_the_librarys_values():
-    declared = {r.name: r for r in readings("ozkaya2011")}
-    for name, values in oz.SIM_READINGS.items():
+    declared = {r.name: r for r in interpretations("ozkaya2011")}
+    for name, values in oz.SIM_INTERPRETATIONS.items():
         r = declared[name]
         # every declared value is one the library knows; library options the text does not support (the per-run
         # percentile conventions, 1 m in from the walls outside Table 7.22) are not declared
@@ -180,7 +180,7 @@ def test_every_simulation_reading_is_declared_with_the_librarys_values():
 
 # -- the rule for a reading's basis ----------------------------------------------------------------------
 def test_no_default_is_fitted_and_fitted_values_are_the_library_s():
-    declared = {r.name: r for r in readings("ozkaya2011")}
+    declared = {r.name: r for r in interpretations("ozkaya2011")}
     assert not any(r.is_calibration for r in declared.values())           # no default may be fitted
     fitted = {(r.name, v) for r in declared.values() for v in r.fitted}
     assert fitted == {(n, v) for n, v in oz.FITTED_VALUES.items()} | {("testbed_crlb_exponent", 2.0),
@@ -199,7 +199,7 @@ def test_no_default_is_fitted_and_fitted_values_are_the_library_s():
 def test_the_quotes_are_the_thesis_s_words_at_the_lines_they_name():
     """Each quoted passage of the re-judged readings is in the thesis text at the line given (the words checked here
     are copied from the thesis, Secs. 7.2.1-7.2.2.3 and Appendix A)."""
-    declared = {r.name: r for r in readings("ozkaya2011")}
+    declared = {r.name: r for r in interpretations("ozkaya2011")}
     for name, line, words in (
             ("reader_noise", 1137, "zero mean Gaussian noise added"),
             ("reader_noise", 1309, "added on the transmit power"),
@@ -214,12 +214,12 @@ def test_the_quotes_are_the_thesis_s_words_at_the_lines_they_name():
 
 def test_library_defaults_equal_the_declared_defaults():
     """Every Ozkaya reading the library holds has the readings CSV's default: the simulation readings (their first
-    value, sim_readings(), the SimCase fields they set), the CRLB readings (thesis_crlb_m's defaults) and the
+    value, sim_interpretations(), the SimCase fields they set), the CRLB readings (thesis_crlb_m's defaults) and the
     record_crlb defaults."""
     import inspect
-    declared = {r.name: r for r in readings("ozkaya2011")}
-    defaults = oz.sim_readings()
-    for name, values in oz.SIM_READINGS.items():
+    declared = {r.name: r for r in interpretations("ozkaya2011")}
+    defaults = oz.sim_interpretations()
+    for name, values in oz.SIM_INTERPRETATIONS.items():
         assert values[0] == defaults[name] == declared[name].default, name
     case = oz.SimCase("grid")
     assert case.reader_noise == declared["reader_noise"].default
@@ -236,7 +236,7 @@ def test_library_defaults_equal_the_declared_defaults():
     assert inspect.signature(oz.record_crlb).parameters["half_separation_layout"].default == \
         declared["half_separation_layout"].default
     assert declared["crlb_exponent"].default == oz.PATH_LOSS_EXP          # the simulations' n of Sec. 7.2.1
-    assert oz.fitted_readings(defaults) == ()
+    assert oz.fitted_interpretations(defaults) == ()
     # under the defaults a mobile run's statistics are those of recursion rt (run_summary passes no over_recursions)
     mobile = oz.SimCase("grid", "mobile", rt=4)
     last, per_step, _, _ = oz.run_case(mobile, 20, 3, return_all=True)
@@ -246,43 +246,43 @@ def test_library_defaults_equal_the_declared_defaults():
 
 
 def test_no_simulation_reading_makes_a_row_calibrated():
-    every = [dict(zip(oz.SIM_READINGS, values)) for values in
-             [tuple(v[i % len(v)] for v in oz.SIM_READINGS.values()) for i in range(3)]]
+    every = [dict(zip(oz.SIM_INTERPRETATIONS, values)) for values in
+             [tuple(v[i % len(v)] for v in oz.SIM_INTERPRETATIONS.values()) for i in range(3)]]
     for chosen in every:
         for case in (oz.SimCase("nn"), oz.SimCase("grid", "fixed"), oz.SimCase("sir", "mobile")):
-            assert oz.fitted_readings(chosen, case) == () and oz.fitted_calibrated_from(chosen, case) == ""
-    assert oz.fitted_readings({"crlb_exponent": 2.0, "crlb_average": "area_rms"}) == ("crlb_exponent",)
+            assert oz.fitted_interpretations(chosen, case) == () and oz.fitted_calibrated_from(chosen, case) == ""
+    assert oz.fitted_interpretations({"crlb_exponent": 2.0, "crlb_average": "area_rms"}) == ("crlb_exponent",)
     assert "crlb_average = 'cells_mean'" in oz.fitted_calibrated_from({"crlb_average": "cells_mean"})
 
 
 def test_the_readings_a_miss_note_names_are_those_that_can_move_the_case():
-    text = oz.sim_readings()
-    assert oz.unfitted_readings(text, oz.SimCase("nn")) == ("reader_noise",)              # one shot, no recursions
-    assert oz.unfitted_readings(text, oz.SimCase("grid", "fixed")) == ("reader_noise", "fixed_target_noise")
-    assert oz.unfitted_readings(text, oz.SimCase("sir", "mobile")) == ("reader_noise", "mobile_protocol")
-    assert oz.unfitted_readings(text, oz.SimCase("grid", "fixed", sigma0_db=0.0)) == ()   # no noise to read
+    text = oz.sim_interpretations()
+    assert oz.unfitted_interpretations(text, oz.SimCase("nn")) == ("reader_noise",)   # one shot, no recursions
+    assert oz.unfitted_interpretations(text, oz.SimCase("grid", "fixed")) == ("reader_noise", "fixed_target_noise")
+    assert oz.unfitted_interpretations(text, oz.SimCase("sir", "mobile")) == ("reader_noise", "mobile_protocol")
+    assert oz.unfitted_interpretations(text, oz.SimCase("grid", "fixed", sigma0_db=0.0)) == ()   # no noise to read
 
 
 def test_text_reading_note_names_the_readings_the_side_and_the_bracket():
-    text = oz.sim_readings()
-    note = oz.text_reading_note(text, oz.SimCase("nn"), "ozkaya2011-nn-sim", 1.5, 1.95)
+    text = oz.sim_interpretations()
+    note = oz.text_interpretation_note(text, oz.SimCase("nn"), "ozkaya2011-nn-sim", 1.5, 1.95)
     assert note.startswith("under the interpretations run (noise independent per reader) ours is below")
     assert ("the other textual interpretation (common-mode noise on the transmit power) is an alternative: "
             "locbook bracket ozkaya2011-nn-sim runs it") in note
-    both = oz.text_reading_note(text, oz.SimCase("sir", "mobile"), "ozkaya2011-sir-sim", 1.3, 1.14)
+    both = oz.text_interpretation_note(text, oz.SimCase("sir", "mobile"), "ozkaya2011-sir-sim", 1.3, 1.14)
     assert "ours is above" in both and "at recursion rt" in both and "over every recursion" in both
     assert "other textual interpretations" in both and "are alternatives" in both and "runs them" in both
     # under the alternative the default is named as the other reading; nothing to say where no reading moves the case
-    alt = oz.text_reading_note({**text, "reader_noise": "common_mode"}, oz.SimCase("nn"), "x", 1.0, 2.0)
+    alt = oz.text_interpretation_note({**text, "reader_noise": "common_mode"}, oz.SimCase("nn"), "x", 1.0, 2.0)
     assert "(common-mode noise on the transmit power) ours" in alt and "(noise independent per reader) is" in alt
-    assert oz.text_reading_note(text, oz.SimCase("grid", "fixed", sigma0_db=0.0), "x", 1.0, 2.0) == ""
+    assert oz.text_interpretation_note(text, oz.SimCase("grid", "fixed", sigma0_db=0.0), "x", 1.0, 2.0) == ""
 
 
 def test_rows_under_the_default_readings_are_reproductions_and_misses_name_the_alternative(tmp_path, monkeypatch):
     monkeypatch.setenv("LOCBOOK_OUTPUT_DIR", str(tmp_path))
     monkeypatch.setenv("LOCBOOK_EXPERIMENT", "ozkaya2011-nn-sim")
     report = lb.Report()
-    rows = oz.run_tables(["7.2", "7.3"], 60, 5, readings={"reader_noise": "common_mode"})
+    rows = oz.run_tables(["7.2", "7.3"], 60, 5, interpretations={"reader_noise": "common_mode"})
     oz.record_tables(report, rows, 60)
     assert report.numbers and all(r["kind"] == "reproduction" and not r["calibrated_from"] for r in report.numbers)
     misses = [r for r in report.numbers if r["verdict"] in ("miss", "loose")]
@@ -334,9 +334,10 @@ def test_half_separation_layouts_have_the_printed_separations_inside_the_room():
         assert np.all(r > 0) and np.all(r < np.array(oz.ROOM_M))
     np.testing.assert_allclose(oz.readers_for("half3"), (oz.readers_for("corners3") - [2.5, 4.0]) / 2 + [2.5, 4.0])
     np.testing.assert_allclose(oz.readers_for("half3_centroid").mean(0), [2.5, 4.0])
-    case = oz.with_readings(oz.SimCase("nn", layout="half3"), {"half_separation_layout": "centroid_at_centre"})
+    case = oz.with_interpretations(oz.SimCase("nn", layout="half3"), {"half_separation_layout": "centroid_at_centre"})
     assert case.layout == "half3_centroid"
-    assert oz.with_readings(oz.SimCase("nn"), {"half_separation_layout": "centroid_at_centre"}).layout == "corners3"
+    centred = oz.with_interpretations(oz.SimCase("nn"), {"half_separation_layout": "centroid_at_centre"})
+    assert centred.layout == "corners3"
 
 
 def test_the_large_room_readers_are_its_corners_with_twice_the_separations():
@@ -354,7 +355,7 @@ def test_a_known_initial_location_is_exact_or_spread_by_d():
     assert ozs._initial_sd_m(replace(case, initial_location="gaussian_d", spread_m=np.inf)) == 0.0
     with pytest.raises(ParameterError, match="known_initial_location"):
         ozs._initial_sd_m(replace(case, initial_location="roughly"))
-    assert oz.with_readings(case, {"known_initial_location": "gaussian_d"}).initial_location == "gaussian_d"
+    assert oz.with_interpretations(case, {"known_initial_location": "gaussian_d"}).initial_location == "gaussian_d"
 
 
 def test_crlb_exponent_scales_the_printed_bound_as_one_over_n():

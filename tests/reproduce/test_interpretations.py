@@ -12,15 +12,15 @@ import numpy as np
 import pytest
 
 from builders import REPO_ROOT
-from locbook.reproduce.readings import (
+from locbook.reproduce.interpretations import (
     BASES,
-    READING_COLUMNS,
-    READINGS_DIR,
-    Reading,
-    ReadingsError,
-    load_reading_file,
-    readings,
-    readings_for,
+    INTERPRETATION_COLUMNS,
+    INTERPRETATIONS_DIR,
+    Interpretation,
+    InterpretationsError,
+    interpretations,
+    interpretations_for,
+    load_interpretation_file,
 )
 from locbook.suite import load_suite, read_parameters
 from locbook.suite.params import check_value
@@ -28,7 +28,7 @@ from locbook.suite.params import check_value
 DOCUMENTS = ("dogan2015", "gudipati2017", "palvai2008", "george", "ozkaya2011")
 SUITE = load_suite()
 EXPERIMENTS = {e.id: e for e in SUITE.experiments}
-ALL = [r for d in DOCUMENTS for r in readings(d)]
+ALL = [r for d in DOCUMENTS for r in interpretations(d)]
 WITH_PARAMETER = [(r, e) for r in ALL if r.parameter for e in r.experiments]
 GAPS = [r for r in ALL if r.is_gap]
 #: Monte-Carlo counts whose help says "not printed": they set precision, not a reading of the source.
@@ -69,19 +69,19 @@ def _resolve(where: str):
 
 @pytest.mark.parametrize("document", DOCUMENTS)
 def test_every_document_declares_readings_that_load(document):
-    rows = readings(document)
-    assert rows and all(isinstance(r, Reading) and r.document == document for r in rows)
+    rows = interpretations(document)
+    assert rows and all(isinstance(r, Interpretation) and r.document == document for r in rows)
     assert len({r.name for r in rows}) == len(rows)
     assert all(r.basis in BASES for r in rows)
-    assert readings(document) is rows            # cached
+    assert interpretations(document) is rows            # cached
 
 
-def test_readings_ship_as_package_data():
+def test_interpretations_ship_as_package_data():
     pyproject = tomllib.loads((REPO_ROOT / "pyproject.toml").read_text(encoding="utf-8"))
     patterns = pyproject["tool"]["setuptools"]["package-data"]["locbook.data"]
-    for path in READINGS_DIR.glob("*.csv"):
+    for path in INTERPRETATIONS_DIR.glob("*.csv"):
         assert any(fnmatch.fnmatch(f"interpretations/{path.name}", p) for p in patterns), path
-    assert {p.stem for p in READINGS_DIR.glob("*.csv")} == set(DOCUMENTS)
+    assert {p.stem for p in INTERPRETATIONS_DIR.glob("*.csv")} == set(DOCUMENTS)
 
 
 @pytest.mark.parametrize("reading", ALL, ids=_id)
@@ -125,22 +125,22 @@ def test_every_unprinted_notebook_parameter_is_declared():
     for exp in SUITE.experiments:
         if exp.document.key not in DOCUMENTS:
             continue
-        declared = {r.parameter for r in readings_for(exp.id)}
+        declared = {r.parameter for r in interpretations_for(exp.id)}
         for p in read_parameters(exp.notebook).values():
             if "not printed" in p.help.lower() and p.name not in declared and (exp.id, p.name) not in COUNTS:
                 missing.append(f"{exp.id}:{p.name}")
     assert missing == []
 
 
-def test_readings_for_collects_across_files():
-    got = readings_for("dogan2015-pcrlb")
+def test_interpretations_for_collects_across_files():
+    got = interpretations_for("dogan2015-pcrlb")
     assert got and all("dogan2015-pcrlb" in r.experiments for r in got)
-    assert {r.name for r in got} == {r.name for r in readings("dogan2015") if "dogan2015-pcrlb" in r.experiments}
-    assert readings_for("no-such-experiment") == ()
+    assert {r.name for r in got} == {r.name for r in interpretations("dogan2015") if "dogan2015-pcrlb" in r.experiments}
+    assert interpretations_for("no-such-experiment") == ()
 
 
 def test_the_readings_opened_as_notebook_parameters_are_declared():
-    names = {d: {r.name for r in readings(d)} for d in DOCUMENTS}
+    names = {d: {r.name for r in interpretations(d)} for d in DOCUMENTS}
     assert {"noise_interpretation", "start", "walking_speed", "accelerometer_role", "pcrlb_horizon",
             "pcrlb_process_noise", "pcrlb_sigma_acc_values"} <= names["dogan2015"]
     assert {"tracking_shadowing", "process_noise", "report_spacing", "anchor_layout",
@@ -151,10 +151,10 @@ def test_the_readings_opened_as_notebook_parameters_are_declared():
 
 def test_dogan_q_reading_offers_the_printed_constant():
     from locbook.scenarios import dogan
-    noise = {r.name: r for r in readings("dogan2015")}["noise_interpretation"]
+    noise = {r.name: r for r in interpretations("dogan2015")}["noise_interpretation"]
     # the default is the text's constant; the reading fitted to Table 3.9 is a named alternative
-    assert not noise.is_calibration and noise.default == "printed" == dogan.DEFAULT_NOISE_READING
-    assert "sigma_acc" in noise.alternatives and set(noise.values) <= set(dogan.NOISE_READINGS)
+    assert not noise.is_calibration and noise.default == "printed" == dogan.DEFAULT_NOISE_INTERPRETATION
+    assert "sigma_acc" in noise.alternatives and set(noise.values) <= set(dogan.NOISE_INTERPRETATIONS)
     # the printed reading is Eq. (3.24)'s constant: the same Q whatever sigma_ACC, the square of Sec. 4.1.2's sd
     assert dogan.filter_noise("printed", 0.005) == dogan.filter_noise("printed", 0.15)
     sd = dogan.PRINTED.get("Sec. 4.1.2 text", "process noise", "standard deviation")
@@ -197,13 +197,13 @@ def test_a_fitted_value_says_why_no_text_supports_it(reading):
 
 
 def test_the_basis_of_each_value():
-    r = Reading("doc", "x", ("e",), "p", "", "a", ("b", "c"), None, None, "textual", "Sec. 1", "why", ("c",),
+    r = Interpretation("doc", "x", ("e",), "p", "", "a", ("b", "c"), None, None, "textual", "Sec. 1", "why", ("c",),
                 "Sec. 1: 'the words of the text'")
     assert (r.alternative_basis("a"), r.alternative_basis("b"), r.alternative_basis("c")) == \
         ("textual", "textual", "fitted")
-    silent = Reading("doc", "y", ("e",), "p", "", 1.0, (2.0,), 0.5, 3.0, "assumed", "Sec. 1", "why")
+    silent = Interpretation("doc", "y", ("e",), "p", "", 1.0, (2.0,), 0.5, 3.0, "assumed", "Sec. 1", "why")
     assert silent.alternative_basis(2) == "assumed" and silent.alternative_basis(1.0) == "assumed"
-    fit = Reading("doc", "z", ("e",), "p", "", 1.0, (2.0,), None, None, "fitted", "Sec. 1", "why")
+    fit = Interpretation("doc", "z", ("e",), "p", "", 1.0, (2.0,), None, None, "fitted", "Sec. 1", "why")
     assert fit.alternative_basis(1.0) == "fitted" and fit.alternative_basis(2.0) == "textual"
 
 
@@ -213,7 +213,7 @@ GOOD = {"name": "speed", "experiments": "x-a x-b", "parameter": "speed_mps", "wh
         "reason": "not printed"}
 
 
-def _write(tmp_path, *rows, header=READING_COLUMNS):
+def _write(tmp_path, *rows, header=INTERPRETATION_COLUMNS):
     import csv
     path = tmp_path / "doc.csv"
     with open(path, "w", newline="", encoding="utf-8") as fh:
@@ -226,13 +226,13 @@ def _write(tmp_path, *rows, header=READING_COLUMNS):
 
 
 def test_a_good_file_loads(tmp_path):
-    (r,) = load_reading_file(_write(tmp_path, GOOD))
+    (r,) = load_interpretation_file(_write(tmp_path, GOOD))
     assert (r.document, r.name, r.experiments, r.default, r.alternatives, r.low, r.high) == \
         ("doc", "speed", ("x-a", "x-b"), 0.3, (0.5,), 0.2, 1.5)
     assert r.values == (0.3, 0.5) and not r.is_gap and not r.is_calibration
-    (none,) = load_reading_file(_write(tmp_path, {**GOOD, "default": "", "low": "", "high": ""}))
+    (none,) = load_interpretation_file(_write(tmp_path, {**GOOD, "default": "", "low": "", "high": ""}))
     assert none.default is None
-    (fit,) = load_reading_file(_write(tmp_path, {**GOOD, "alternatives": "[0.5, 1]", "fitted": "[1.0]"}))
+    (fit,) = load_interpretation_file(_write(tmp_path, {**GOOD, "alternatives": "[0.5, 1]", "fitted": "[1.0]"}))
     assert fit.fitted == (1.0,) and fit.is_fitted(1) and not fit.is_fitted(0.5) and not r.is_fitted(0.5)
 
 
@@ -261,34 +261,34 @@ def test_a_good_file_loads(tmp_path):
 def test_a_broken_row_is_refused_naming_file_line_and_problem(tmp_path, change, problem):
     path = _write(tmp_path, {**GOOD, "name": "other", "default": "0.4", "alternatives": "", "low": "", "high": ""},
                   {**GOOD, **change})
-    with pytest.raises(ReadingsError) as err:
-        load_reading_file(path)
+    with pytest.raises(InterpretationsError) as err:
+        load_interpretation_file(path)
     message = str(err.value)
     assert str(path) in message and "line 4" in message     # comment, header, a good row, then the broken one
     assert problem in message
 
 
 def test_true_and_one_are_different_alternatives(tmp_path):
-    (r,) = load_reading_file(_write(tmp_path, {**GOOD, "default": "true", "alternatives": "[1]", "low": "",
+    (r,) = load_interpretation_file(_write(tmp_path, {**GOOD, "default": "true", "alternatives": "[1]", "low": "",
                                                "high": ""}))
     assert r.default is True and r.alternatives == (1,)
 
 
 def test_a_duplicate_name_is_refused(tmp_path):
     path = _write(tmp_path, GOOD, {**GOOD, "default": "0.4"})
-    with pytest.raises(ReadingsError, match=r"line 4: duplicate name 'speed' \(first on line 3\)"):
-        load_reading_file(path)
+    with pytest.raises(InterpretationsError, match=r"line 4: duplicate name 'speed' \(first on line 3\)"):
+        load_interpretation_file(path)
 
 
 def test_wrong_columns_are_refused(tmp_path):
-    path = _write(tmp_path, GOOD, header=READING_COLUMNS[:-1])
-    with pytest.raises(ReadingsError, match=re.escape(f"{path}, line 2: columns must be")):
-        load_reading_file(path)
+    path = _write(tmp_path, GOOD, header=INTERPRETATION_COLUMNS[:-1])
+    with pytest.raises(InterpretationsError, match=re.escape(f"{path}, line 2: columns must be")):
+        load_interpretation_file(path)
 
 
 def test_an_unknown_document_names_the_known_ones():
     with pytest.raises(KeyError, match="dogan2015"):
-        readings("no_such_document")
+        interpretations("no_such_document")
 
 
 def test_labelled_function_readings_match_the_functions_defaults():
@@ -296,7 +296,7 @@ def test_labelled_function_readings_match_the_functions_defaults():
 
     from locbook.scenarios import ozkaya
     from locbook.static import fingerprint
-    declared = {r.name: r for r in readings("ozkaya2011")}
+    declared = {r.name: r for r in interpretations("ozkaya2011")}
     weights = declared["nn_weights"]
     assert inspect.signature(fingerprint.knn_position).parameters["weighting"].default == weights.default
     assert set(weights.values) == set(fingerprint.KNN_WEIGHTINGS)
@@ -307,24 +307,24 @@ def test_labelled_function_readings_match_the_functions_defaults():
 
 
 def test_requires_is_an_optional_last_column_of_other_parameters(tmp_path):
-    from locbook.reproduce.readings import OPTIONAL_READING_COLUMNS
-    header = READING_COLUMNS + OPTIONAL_READING_COLUMNS
-    (r,) = load_reading_file(_write(tmp_path, {**GOOD, "requires": "{ mode = 'iso', k = 2 }"}, header=header))
+    from locbook.reproduce.interpretations import OPTIONAL_INTERPRETATION_COLUMNS
+    header = INTERPRETATION_COLUMNS + OPTIONAL_INTERPRETATION_COLUMNS
+    (r,) = load_interpretation_file(_write(tmp_path, {**GOOD, "requires": "{ mode = 'iso', k = 2 }"}, header=header))
     assert r.requires == {"mode": "iso", "k": 2}
-    (plain,) = load_reading_file(_write(tmp_path, GOOD, header=header))      # empty: none
+    (plain,) = load_interpretation_file(_write(tmp_path, GOOD, header=header))      # empty: none
     assert plain.requires == {}
     for bad, problem in [("['mode']", "requires must be a TOML inline table"),
                          ("{ speed_mps = 1.0 }", "requires names the interpretation's own parameter 'speed_mps'")]:
-        with pytest.raises(ReadingsError, match=re.escape(problem)):
-            load_reading_file(_write(tmp_path, {**GOOD, "requires": bad}, header=header))
-    with pytest.raises(ReadingsError, match="requires needs the interpretation's own parameter"):
-        load_reading_file(_write(tmp_path, {**GOOD, "parameter": "", "where": "a.b", "requires": "{ m = 1 }"},
+        with pytest.raises(InterpretationsError, match=re.escape(problem)):
+            load_interpretation_file(_write(tmp_path, {**GOOD, "requires": bad}, header=header))
+    with pytest.raises(InterpretationsError, match="requires needs the interpretation's own parameter"):
+        load_interpretation_file(_write(tmp_path, {**GOOD, "parameter": "", "where": "a.b", "requires": "{ m = 1 }"},
                                  header=header))
 
 
 def test_a_bad_reading_after_a_blank_line_is_named_by_its_own_line(tmp_path):
-    from locbook.reproduce.readings import READING_COLUMNS, ReadingsError, load_reading_file
+    from locbook.reproduce.interpretations import INTERPRETATION_COLUMNS, InterpretationsError, load_interpretation_file
     path = tmp_path / "r.csv"
-    path.write_text(",".join(READING_COLUMNS) + "\n\n" + "slope,george-study,a,,1.0,[1.0],,,,assumed,s,,r\n")
-    with pytest.raises(ReadingsError, match=r"r\.csv, line 3 \(slope\)"):
-        load_reading_file(path)
+    path.write_text(",".join(INTERPRETATION_COLUMNS) + "\n\n" + "slope,george-study,a,,1.0,[1.0],,,,assumed,s,,r\n")
+    with pytest.raises(InterpretationsError, match=r"r\.csv, line 3 \(slope\)"):
+        load_interpretation_file(path)

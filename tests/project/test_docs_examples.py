@@ -4,7 +4,7 @@ are run, the Examples section of every public name's docstring (``locbook._API``
 the Sphinx build passes with warnings as errors.
 
 A block that cannot run here is fenced ```python no-run: REASON (the reason is required). README's commands and
-Python blocks are run by tests/project/test_readme_commands.py, and docs/your-data.md's by
+Python blocks are run by tests/project/test_notebooks.py, and docs/your-data.md's by
 tests/scenarios/test_measured.py (with fewer resamples), not again here."""
 import argparse
 import doctest

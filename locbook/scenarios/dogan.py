@@ -145,4 +145,9 @@ __all__ = ["PRINTED", "printed_number", "ROOM_M", "room_sides_m", "corner_anchor
 
 
 # the names before "reading" meant only a sensor measurement (deprecated for one release)
-__getattr__ = renamed_names(__name__, {"NOISE_READINGS": "NOISE_INTERPRETATIONS", "DEFAULT_NOISE_READING": "DEFAULT_NOISE_INTERPRETATION", "MLE_R_READINGS": "MLE_R_INTERPRETATIONS", "readings_summary": "interpretations_summary"})
+__getattr__ = renamed_names(__name__, {
+    "NOISE_READINGS": "NOISE_INTERPRETATIONS",
+    "DEFAULT_NOISE_READING": "DEFAULT_NOISE_INTERPRETATION",
+    "MLE_R_READINGS": "MLE_R_INTERPRETATIONS",
+    "readings_summary": "interpretations_summary",
+})

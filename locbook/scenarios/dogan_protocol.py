@@ -114,13 +114,13 @@ DEFAULT_START = "rest"
 #: Q this small a few EKF runs lock onto a wrong position, which inflates the EKFs' RMSE.
 MOVING_START_FITTED = ("start 'moving' (the node walks from t = 0) chosen because, at the walking speed 0.3 m/s, its "
                        "unobserved initial velocity gives Fig. 3.2's 'reaches to 24 meter after 80 seconds'; no text "
-                       "supports a moving start (Eqs. (3.19)-(3.20) start the filter at zero velocity, and Fig. 3.2's text "
-                       "blames 'the error of the acceleration')")
+                       "supports a moving start (Eqs. (3.19)-(3.20) start the filter at zero velocity, and Fig. 3.2's "
+                       "text blames 'the error of the acceleration')")
 NOISE_INTERPRETATIONS = ("printed", "sigma_acc")
 DEFAULT_NOISE_INTERPRETATION = "printed"
-NOISE_CALIBRATED_FROM = ("noise interpretation 'sigma_acc' (Q = sigma_ACC^2/10 I_6, P_0,acc = sigma_ACC^2 per row) chosen "
-                         "because it fits the printed KF (MLE) fall with sigma_ACC of Table 3.9 (the text prints Q and "
-                         "P_0,acc as constants, Eqs. (3.20), (3.24))")
+NOISE_CALIBRATED_FROM = ("noise interpretation 'sigma_acc' (Q = sigma_ACC^2/10 I_6, P_0,acc = sigma_ACC^2 per row) "
+                         "chosen because it fits the printed KF (MLE) fall with sigma_ACC of Table 3.9 (the text "
+                         "prints Q and P_0,acc as constants, Eqs. (3.20), (3.24))")
 #: Q per step over sigma_ACC^2 in the ``"sigma_acc"`` interpretation (0.000023 / 0.0152^2 = 0.0996).
 Q_PER_ACC_VARIANCE = 0.1
 #: KF (MLE)'s R = diag(MSE_MLE) (Eq. (3.21); constant or per epoch is not stated): ``"constant"``, the MSE per
@@ -189,7 +189,8 @@ def calibrated_from_text(start: str = DEFAULT_START, noise_interpretation: str =
     if start not in START_MODES:
         raise ParameterError(f"start must be one of {START_MODES}, got {start!r}")
     if noise_interpretation not in NOISE_INTERPRETATIONS:
-        raise ParameterError(f"noise_interpretation must be one of {NOISE_INTERPRETATIONS}, got {noise_interpretation!r}")
+        raise ParameterError(f"noise_interpretation must be one of {NOISE_INTERPRETATIONS}, got "
+                             f"{noise_interpretation!r}")
     used = []
     if start == "moving":               # issue 45: no text supports it; it was declared for Fig. 3.2's drift
         used.append(MOVING_START_FITTED)
@@ -548,7 +549,8 @@ def run_channel(trajectory: Trajectory, sigma_rss_db: float, path_loss_exp: floa
 
 @renamed_keyword("noise_reading", "noise_interpretation")
 def noise_fit(trajectory: Trajectory, sigma_rss_db: float, path_loss_exp: float, n_runs: int,
-              rng: np.random.Generator, *, name: str = "parallel_ekf", noise_interpretation: str = DEFAULT_NOISE_INTERPRETATION,
+              rng: np.random.Generator, *, name: str = "parallel_ekf",
+              noise_interpretation: str = DEFAULT_NOISE_INTERPRETATION,
               ref_power_dbm: float = REF_POWER_DBM, anchors_m=ANCHORS_M, room_m=ROOM_M,
               mle_grid_step_m: float = MLE_GRID_STEP_M, mle_bounds: str = "unconstrained",
               rss_only_step: str = DEFAULT_RSS_ONLY_STEP) -> dict:
@@ -620,4 +622,8 @@ def only_acc_errors(trajectory: Trajectory, sigma_acc_mps2: float, n_runs: int, 
 
 
 # the names before "reading" meant only a sensor measurement (deprecated for one release)
-__getattr__ = renamed_names(__name__, {"NOISE_READINGS": "NOISE_INTERPRETATIONS", "DEFAULT_NOISE_READING": "DEFAULT_NOISE_INTERPRETATION", "MLE_R_READINGS": "MLE_R_INTERPRETATIONS"})
+__getattr__ = renamed_names(__name__, {
+    "NOISE_READINGS": "NOISE_INTERPRETATIONS",
+    "DEFAULT_NOISE_READING": "DEFAULT_NOISE_INTERPRETATION",
+    "MLE_R_READINGS": "MLE_R_INTERPRETATIONS",
+})

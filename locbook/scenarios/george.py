@@ -230,7 +230,8 @@ def track_with_kalman(fixes_m, truth_m, *, q: float, dt_s: float = 1.0, r_mode: 
         # the filter's step k is marked point k + 1 (point 0 is the first fix)
         return (out, DivergenceFlags.of(res, step_offset=1)) if with_divergence else out
     x0 = model.state_from(np.broadcast_to(np.asarray(truth_m, float)[0], fixes_m.shape[:-2] + (2,)))
-    res = kalman_filter(model.F, model.Q, x0, P0, LinearMeasurement(fixes_m, H, R), predict_first=False, variant=variant)
+    res = kalman_filter(model.F, model.Q, x0, P0, LinearMeasurement(fixes_m, H, R), predict_first=False,
+                        variant=variant)
     out = model.position(res.mean)
     return (out, DivergenceFlags.of(res)) if with_divergence else out
 

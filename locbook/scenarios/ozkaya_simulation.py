@@ -292,7 +292,8 @@ def run_case(case: SimCase, n_runs: int, seed: int, *, return_all: bool = False)
     truth, rss = simulate_truth_and_rss(case, n_runs, rng)
     room = room_for(case.layout)
     readers = readers_for(case.layout)
-    filter_model = RssModel(readers, PathLossModel(case.alpha_dbm, case.path_loss_exp, case.sigma_db, min_distance_m=0.1))
+    filter_model = RssModel(readers, PathLossModel(case.alpha_dbm, case.path_loss_exp, case.sigma_db,
+                                                   min_distance_m=0.1))
     if case.method in ("nn", "grid"):
         cells = cell_centres(room, *CELL_PATTERNS[case.k_cell])
     if case.method == "nn":

@@ -102,7 +102,7 @@ DEFAULT_START = "rest"
 #: How the filter's process noise and the acceleration variance of P_{0|0} relate to sigma_ACC.
 #: ``"printed"``: Q = 0.000023 I_6 per step and P_{0|0,acc} = 0.00023 whatever sigma_ACC: Eqs. (3.20), (3.24) as
 #: the text prints them, constants, and Sec. 4.1.2's "the standard deviation of the process noise is 0.0048 in our
-#: system" (0.0048^2 = 2.3e-5) while sigma_ACC is swept. Default (issue 28: the default interpretation is what the text
+#: system" (0.0048^2 = 2.3e-5) while sigma_ACC is swept. Default (a default is what the text
 #: prints).
 #: ``"sigma_acc"``: Q = sigma_ACC^2 / 10 I_6 per step and P_{0|0,acc} = sigma_ACC^2, for the sigma_ACC of the row
 #: (Table 3.6's 0.0152 for ONLY RSS); a labelled alternative fitted to output (:data:`NOISE_CALIBRATED_FROM`). The
@@ -181,7 +181,7 @@ def calibrated_from_text(start: str = DEFAULT_START, noise_interpretation: str =
     """The interpretations fitted to printed output that a row computed under ``start`` and ``noise_interpretation``
     used, as the row's ``calibrated_from`` text, ``"; "``-joined; ``""`` when none (the row is then a ``reproduction``).
 
-    Issue 45's rule (fitted: no text supports it and it was chosen because it fits): the ``"moving"`` start
+    Fitted (no text supports them and they were chosen because they fit): the ``"moving"`` start
     (:data:`MOVING_START_FITTED`), with the walking speed :data:`SPEED_MPS` fitted to Fig. 3.2's drift under it
     (:data:`SPEED_CALIBRATED_FROM`), and the ``"sigma_acc"`` noise interpretation fitted to Table 3.9
     (:data:`NOISE_CALIBRATED_FROM`); the ``"rest"`` start and the ``"printed"`` interpretation are the text's own
@@ -192,7 +192,7 @@ def calibrated_from_text(start: str = DEFAULT_START, noise_interpretation: str =
         raise ParameterError(f"noise_interpretation must be one of {NOISE_INTERPRETATIONS}, got "
                              f"{noise_interpretation!r}")
     used = []
-    if start == "moving":               # issue 45: no text supports it; it was declared for Fig. 3.2's drift
+    if start == "moving":               # fitted: no text supports it; it was declared for Fig. 3.2's drift
         used.append(MOVING_START_FITTED)
         if float(speed_mps) == SPEED_MPS:
             used.append(SPEED_CALIBRATED_FROM)

@@ -420,7 +420,7 @@ def track(walk: Walk, method: str, *, fix_covariance=None, ukf_alpha: float = UK
     - ``ekf`` / ``ukf``: the 8-D model with heading and yaw rate (:class:`HeadingKinematicModel`), the RSS of every
       packet (Eq. (3.12) sign corrected) and the inertial readings (body frame) stacked at every step; the UKF with
       the thesis's alpha, beta = 2, kappa = 0 and the corrected equations of Sec. 3.6
-      (``ukf_variant="literal_gudipati2017"``, ``ukf_weights=`` before issue 47: deprecated,
+      (``ukf_variant="literal_gudipati2017"``, the earlier ``ukf_weights=``: deprecated,
       and ``ukf_innovation_noise=False``: the printed Eqs. (3.22) and (3.26), flagged; ``rss_sign="printed_3_12"``:
       h with the printed leading minus, flagged; ``state_model="literal_gudipati2017"``: the 8-D state as printed,
       theta_x and theta_y random walks, with Z^2 = [a_x, a_y, theta_x, theta_y] a linear measurement and the readings

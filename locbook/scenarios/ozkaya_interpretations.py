@@ -23,8 +23,8 @@ from .ozkaya_simulation import (
     summarize,
 )
 
-#: The values that nothing in the text supports and that were chosen because they fit printed output (issue 45,
-#: interpretations CSV column ``fitted``): interpretation name -> the fitted value. Rows computed under one are
+#: The values that nothing in the text supports and that were chosen because they fit printed output (basis
+#: ``fitted`` in the interpretations CSV): interpretation name -> the fitted value. Rows computed under one are
 #: calibrations. The simulation interpretations are not here: each of their values is supported by the text
 #: (interpretations CSV, ``quotes``).
 FITTED_VALUES = {"crlb_average": "cells_mean", "crlb_exponent": 2.0}

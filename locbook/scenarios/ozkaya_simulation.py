@@ -344,7 +344,7 @@ _PERCENTILES = {"median_m": 50.0, "p90_m": 90.0}
 
 
 def _sample(errors_m, over_recursions: bool):
-    """The errors every statistic of a table is taken from (issue 45: one population): of every recursion of every
+    """The errors every statistic of a table is taken from (one population for all): of every recursion of every
     run ``(..., R*T)`` when ``over_recursions``, else of recursion rt of every run ``(..., R)``; ``errors_m`` is
     ``(..., R, T)``."""
     if over_recursions:

@@ -504,7 +504,7 @@ def testbed_crlb_m(path_loss_exp=TESTBED_CRLB_PATH_LOSS_EXP, sigma_db: float = T
     and sigma = 5.2 dB (Sec. 7.3.1.3), as the RMS over the area ("Square root of (A.13) is used in the thesis to
     compare with RMS error", Appendix A): ``average="area_rms"`` over a 5 cm lattice of the 9 m x 4 m plan, or
     ``"cells_mean"``, the mean of the per-cell bound over the 36 cells (with n = 2: the readings fitted to the
-    simulation CRLB columns). ``variant="corrected"`` gives the correct bound (1/d^4) (``form=`` before issue 47:
+    simulation CRLB columns). ``variant="corrected"`` gives the correct bound (1/d^4) (the earlier ``form=``:
     deprecated)."""
     variant = check_variant(variant, CRLB_VARIANTS, where="testbed_crlb_m", renamed=RENAMED_CRLB_FORMS)
     model = RssModel(oz.TESTBED_READERS_M, PathLossModel(0.0, path_loss_exp, sigma_db))

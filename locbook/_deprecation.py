@@ -1,4 +1,4 @@
-"""The library's deprecation machinery (issue 47): an old call form keeps working for one release, with one
+"""The library's deprecation machinery: an old call form keeps working for one release, with one
 ``DeprecationWarning`` line naming the new form (attributed to the caller's line), then the same result.
 
 - One spelling of a source's literal form: the keyword ``variant=``, the default ``"corrected"``, and
@@ -25,9 +25,9 @@ __all__ = ["RENAMED_CRLB_FORMS", "RENAMED_KF_VARIANTS", "warn_deprecated", "chec
            "renamed_keyword", "old_keyword", "old_form", "keyword_rng", "past_wrappers", "renamed_constants",
            "renamed_names"]
 
-#: the bounds' ``form=`` values before issue 47 and their variants (:data:`locbook.bounds.crlb.CRLB_VARIANTS`)
+#: the bounds' earlier ``form=`` values and their variants (:data:`locbook.bounds.crlb.CRLB_VARIANTS`)
 RENAMED_CRLB_FORMS = {"correct": "corrected", "ozkaya_printed": "literal_ozkaya2011"}
-#: the Kalman filter's ``variant=`` value before issue 47 (:data:`locbook.tracking.kalman.KF_VARIANTS`)
+#: the Kalman filter's earlier ``variant=`` value (:data:`locbook.tracking.kalman.KF_VARIANTS`)
 RENAMED_KF_VARIANTS = {"standard": "corrected"}
 
 
@@ -115,7 +115,7 @@ def old_form(old_call):
 
 
 def keyword_rng(index: int, *after: str):
-    """:func:`old_form` of a function that took ``rng`` positionally before issue 47, at position ``index`` (counting
+    """:func:`old_form` of a function that took ``rng`` positionally in an earlier form, at position ``index`` (counting
     ``self`` for a method), followed by the positional parameters ``after``, all keyword-only now (``f(..., *, rng,
     ...)``). A call with more than ``index`` positional arguments is the old form: its argument ``index`` is ``rng``
     and the next ones are ``after``'s, passed by name; giving one of them twice is a TypeError, as it was. A value

@@ -1,4 +1,4 @@
-"""Your own method beside the battery (issue 48): a static estimator or a tracker registered as ``module:function``,
+"""Your own method beside the battery: a static estimator or a tracker registered as ``module:function``,
 run by the measured-data protocol (:mod:`locbook.scenarios.measured`) on the same epochs as the battery's methods
 (:mod:`locbook.battery`) and scored by the same rows, bound and figures, under the name you give it.
 

@@ -26,7 +26,7 @@ On measured data each epoch hears its own anchors: :func:`rss_crlb_checked_m` gi
 and NaN with a reason elsewhere (fewer than :data:`MIN_ANCHORS_FOR_BOUND` anchors heard, or a condition number above
 :data:`MAX_BOUND_CONDITION`), so that no near-singular epoch (a bound of 1e8 m) swamps an RMS over a recording.
 
-The call forms before issue 47 (``rss_crlb_m(position_m, anchors_m, path_loss_exp, sigma_db, form="correct", ...)``,
+The earlier call forms (``rss_crlb_m(position_m, anchors_m, path_loss_exp, sigma_db, form="correct", ...)``,
 told apart by an array in the second place) still work for one release, with a ``DeprecationWarning`` naming the new
 call; so do the old ``form=`` values ``"correct"`` and ``"ozkaya_printed"`` given as ``variant=``.
 """
@@ -79,7 +79,7 @@ def _variant(variant, who: str) -> str:
 
 
 def _old_form(old):
-    """Decorator: a call whose second argument is an array (the anchors: the form before issue 47) goes to ``old``,
+    """Decorator: a call whose second argument is an array (the anchors: the earlier, deprecated form) goes to ``old``,
     which warns and calls the new form; an RssModel (or anything else, refused by :func:`_bound_model`) to the new."""
     old_signature = inspect.signature(old)
 

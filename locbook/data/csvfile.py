@@ -20,17 +20,17 @@ __all__ = ["DataFormatError", "MAX_COORDINATE_M", "MAX_LINE_BYTES", "MAX_EXACT_R
 
 #: anchor, outline, path and true-position coordinates of this magnitude (m) or more are refused: no site is larger
 #: (projected map coordinates, e.g. UTM northings, stay below 1e7 m); beyond it is a unit error, and distances
-#: of 1e300 overflow (issue 44)
+#: of 1e300 overflow
 MAX_COORDINATE_M = 1e7
 #: a line of a CSV longer than this (bytes) is refused: no row of the long format is that long, it is a file
 #: without line ends or not a CSV at all (the csv module's own field limit, ``csv.field_size_limit()``, is 128 KiB)
 MAX_LINE_BYTES = 128 << 10
 #: the largest file the exact reader (``read_text_table``) takes: it holds every field as a Python string, about
-#: :data:`EXACT_READER_BYTES_PER_BYTE` bytes of memory per byte of file (issue 29: 800 bytes per reading), so
+#: :data:`EXACT_READER_BYTES_PER_BYTE` bytes of memory per byte of file (measured: 800 bytes per reading), so
 #: 64 MiB of CSV take about 1.5 GiB; larger files must be one record per line (the fast reader) or are refused
 MAX_EXACT_READ_BYTES = 64 << 20
 #: peak memory of the exact reader per byte of file (measured: 10^6 readings, 30 MiB of CSV, peaked at 0.99 GB;
-#: issue 29: 4.1 M readings, about 140 MiB, at 2.84 GB)
+#: 4.1 M readings, about 140 MiB, at 2.84 GB)
 EXACT_READER_BYTES_PER_BYTE = 24
 #: characters of a file's text an error message quotes at most (a field, a header, a line): a message never echoes
 #: a file (a symlink to /proc/self/environ, a binary file)

@@ -27,8 +27,8 @@ __all__ = ["MAX_READINGS_FILE_BYTES", "FAST_READER_BYTES_PER_BYTE", "read_readin
            "read_readings"]
 
 #: the largest readings file (bytes) read at all: the fast reader takes about
-#: :data:`FAST_READER_BYTES_PER_BYTE` bytes of memory per byte of file (issue 29: 10^7 readings, 336 MiB of CSV,
-#: peaked at 2.2 GiB; issue 44: 10^6 readings, 31 MB, 200 MB above the interpreter, 3 x 10^6 623 MB, one quoted field
+#: :data:`FAST_READER_BYTES_PER_BYTE` bytes of memory per byte of file (measured: 10^7 readings, 336 MiB of CSV,
+#: peaked at 2.2 GiB; 10^6 readings, 31 MB, 200 MB above the interpreter, 3 x 10^6 623 MB, one quoted field
 #: or none), so 1 GiB of CSV (about 3 x 10^7 readings) take about 7 GiB; split larger recordings
 MAX_READINGS_FILE_BYTES = 1 << 30
 FAST_READER_BYTES_PER_BYTE = 7

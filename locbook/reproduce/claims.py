@@ -1,5 +1,4 @@
-"""The claims and conclusions each source states about its results, declared as data and judged from the rows
-(issue 45, "the documents' conclusions").
+"""The claims and conclusions each source states about its results, declared as data and judged from the rows.
 
 One CSV per document, ``locbook/data/claims/<document>.csv`` (package data; ``#`` lines are comments), transcribed
 by the locbook authors, with the columns :data:`CLAIM_COLUMNS`:

@@ -1,5 +1,4 @@
-"""Every document's unprinted assumptions and contested interpretations, declared as data (issue 28, "Interpretation
-brackets").
+"""Every document's unprinted assumptions and contested interpretations, declared as data.
 
 One CSV per document, ``locbook/data/interpretations/<document>.csv`` (package data, beside the printed values of
 :mod:`.printed_values`), lines starting with ``#`` being comments. One row per interpretation, with the columns
@@ -29,7 +28,7 @@ One CSV per document, ``locbook/data/interpretations/<document>.csv`` (package d
 ``low``, ``high``
     a plausible range of a numeric interpretation (both or neither).
 ``basis``
-    one of :data:`BASES`, the basis of the default (issue 45, "the rule for an interpretation's basis"):
+    one of :data:`BASES`, the basis of the default:
     ``printed`` (the text prints the value), ``textual`` (not printed as a value, but the text supports it: the
     ``quotes`` say which words), ``assumed`` (the text says nothing that decides it: our choice, the field's
     standard model or a plausible range, as ``reason`` says), ``fitted`` (nothing in the text supports it and it was
@@ -37,8 +36,8 @@ One CSV per document, ``locbook/data/interpretations/<document>.csv`` (package d
     is never an argument for or against an interpretation.
 ``source``
     where the source prints the value or leaves it open (section, equation, table).
-``quotes`` (a file written before issue 45 loads: without this column its quotes are empty, and its basis
-``fitted_to_output`` reads as ``fitted``)
+``quotes`` (a file written before this column existed still loads: its quotes are empty, and its basis
+``fitted_to_output``, the earlier name, reads as ``fitted``)
     the words of the source the default and the alternatives rest on, quoted, each with its section (and, where
     useful, the line of the text): required for a ``printed`` or ``textual`` basis
     (``tests/reproduce/test_interpretations.py`` checks that each such interpretation quotes the text); for
@@ -231,7 +230,7 @@ def _interpretation(document: str, row: dict, where: str) -> Interpretation:
         raise InterpretationsError(f"{where}: name {name!r} must be snake_case (lower-case letters, digits, "
                                    "underscores)")
     where = f"{where} ({name})"
-    if cells["basis"] == "fitted_to_output":      # the name before issue 45, in a file of one's own
+    if cells["basis"] == "fitted_to_output":      # the earlier name, in a file of one's own
         cells["basis"] = "fitted"
     if cells["basis"] not in BASES:
         raise InterpretationsError(f"{where}: unknown basis {cells['basis']!r}; allowed: {', '.join(BASES)}")
@@ -315,7 +314,7 @@ def load_interpretation_file(path: str | Path, document: str | None = None) -> t
         columns = tuple(reader.fieldnames or ())
     except csv.Error as exc:
         raise InterpretationsError(f"{path}, line {lines[0][0]}: not a well-formed CSV header ({exc})") from None
-    # a file of one's own written before the quotes column (issue 45) still loads: its quotes are empty
+    # a file of one's own written before the quotes column still loads: its quotes are empty
     unquoted = tuple(c for c in INTERPRETATION_COLUMNS if c != "quotes")
     if columns not in (INTERPRETATION_COLUMNS, INTERPRETATION_COLUMNS + OPTIONAL_INTERPRETATION_COLUMNS, unquoted,
                        unquoted + OPTIONAL_INTERPRETATION_COLUMNS):

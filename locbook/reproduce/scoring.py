@@ -56,7 +56,7 @@ WITHIN_LIMIT = 0.25
 SCORED_VERDICTS = ("within", "loose", "miss")
 #: verdict columns of the kind-by-verdict tables ("linked": repeats of a quantity compared elsewhere)
 VERDICT_COLUMNS = ("within", "loose", "miss", "consistent", "inconsistent", "no verdict", "linked")
-#: The bracket verdicts (issue 45's tiers), in the order the headline counts them: reproduced under the default
+#: The bracket verdicts (the tiers), in the order the headline counts them: reproduced under the default
 #: interpretation; under another textual (or, where the text is silent, assumed) interpretation; only under an
 #: interpretation fitted to printed output; between interpretations (the printed value inside the band of our values, no
 #: single interpretation within); outside every interpretation (beyond the band widened by both Monte-Carlo errors);

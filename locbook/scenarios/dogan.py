@@ -15,7 +15,7 @@ for the fused filters with RSS at every 10th step (Table 3.5), the ONLY-RSS filt
 Levenberg-Marquardt search (the thesis names no solver).
 
 The fusion interpretation (how the filter's Q and P_0 relate to sigma_ACC, and how the node starts) is a named option,
-:data:`NOISE_INTERPRETATIONS` and :data:`START_MODES`. The defaults follow the printed text (issue 28's rule): Q and
+:data:`NOISE_INTERPRETATIONS` and :data:`START_MODES`. The defaults follow the printed text: Q and
 P_0,acc as the constants of Eqs. (3.20), (3.24) and a node starting from rest, as the thesis's own x_0. An
 interpretation chosen because it fits printed output (Q scaled with sigma_ACC, fitted to Table 3.9; the moving start
 with its walking speed, fitted to Fig. 3.2) is a named alternative, and every row computed under it is ``calibrated``
@@ -145,4 +145,9 @@ __all__ = ["PRINTED", "printed_number", "ROOM_M", "room_sides_m", "corner_anchor
 
 
 # the names before "reading" meant only a sensor measurement (deprecated for one release)
-__getattr__ = renamed_names(__name__, {"NOISE_READINGS": "NOISE_INTERPRETATIONS", "DEFAULT_NOISE_READING": "DEFAULT_NOISE_INTERPRETATION", "MLE_R_READINGS": "MLE_R_INTERPRETATIONS", "readings_summary": "interpretations_summary"})
+__getattr__ = renamed_names(__name__, {
+    "NOISE_READINGS": "NOISE_INTERPRETATIONS",
+    "DEFAULT_NOISE_READING": "DEFAULT_NOISE_INTERPRETATION",
+    "MLE_R_READINGS": "MLE_R_INTERPRETATIONS",
+    "readings_summary": "interpretations_summary",
+})

@@ -95,8 +95,8 @@ def pcrlb_m(kind: str, *, fusion: bool, sigma_rss_db: float, mse_mle_m2, n_steps
     per_epoch = mse.ndim == 2
     rss_steps = np.arange(rss_every, n_steps, rss_every)
     if per_epoch and (mse.shape[-1] != 2 or mse.shape[0] < rss_steps.size + 1):
-        raise ParameterError(f"a per-epoch mse_mle_m2 must be (epochs, 2) with at least {rss_steps.size + 1} epochs for "
-                             f"{n_steps} steps, got shape {mse.shape}")
+        raise ParameterError(f"a per-epoch mse_mle_m2 must be (epochs, 2) with at least {rss_steps.size + 1} epochs "
+                             f"for {n_steps} steps, got shape {mse.shape}")
     _, P0 = initial_state(np.zeros(2), mse[0] if per_epoch else mse, acc_var=p0_acc_var)
     jz = np.zeros((n_steps - 1, 6, 6))
     if fusion:
@@ -147,7 +147,8 @@ def bound_rows(runs: dict, trajectory: Trajectory, *, noise_interpretation: str 
             q, p0_acc = filter_noise(noise_interpretation, sigma_acc)
             grid = filter_grid(trajectory, sigma_acc is not None, rss_only_step)
             common = dict(fusion=sigma_acc is not None, sigma_rss_db=sigma, path_loss_exp=ple,
-                          sigma_acc_mps2=sigma_acc or SIGMA_ACC_MPS2, mse_mle_m2=run.mse_mle_m2, n_steps=grid.time_s.size,
+                          sigma_acc_mps2=sigma_acc or SIGMA_ACC_MPS2, mse_mle_m2=run.mse_mle_m2,
+                          n_steps=grid.time_s.size,
                           model=motion_model(trajectory_step_s(grid), q), p0_acc_var=p0_acc,
                           rss_every=int(np.diff(grid.rss_steps[:2])[0]), anchors_m=anchors_m)
             bound = pcrlb_m("truth", trajectory=grid, **common)[grid.rss_steps]

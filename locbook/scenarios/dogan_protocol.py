@@ -102,7 +102,7 @@ DEFAULT_START = "rest"
 #: How the filter's process noise and the acceleration variance of P_{0|0} relate to sigma_ACC.
 #: ``"printed"``: Q = 0.000023 I_6 per step and P_{0|0,acc} = 0.00023 whatever sigma_ACC: Eqs. (3.20), (3.24) as
 #: the text prints them, constants, and Sec. 4.1.2's "the standard deviation of the process noise is 0.0048 in our
-#: system" (0.0048^2 = 2.3e-5) while sigma_ACC is swept. Default (issue 28: the default interpretation is what the text
+#: system" (0.0048^2 = 2.3e-5) while sigma_ACC is swept. Default (a default is what the text
 #: prints).
 #: ``"sigma_acc"``: Q = sigma_ACC^2 / 10 I_6 per step and P_{0|0,acc} = sigma_ACC^2, for the sigma_ACC of the row
 #: (Table 3.6's 0.0152 for ONLY RSS); a labelled alternative fitted to output (:data:`NOISE_CALIBRATED_FROM`). The
@@ -114,13 +114,13 @@ DEFAULT_START = "rest"
 #: Q this small a few EKF runs lock onto a wrong position, which inflates the EKFs' RMSE.
 MOVING_START_FITTED = ("start 'moving' (the node walks from t = 0) chosen because, at the walking speed 0.3 m/s, its "
                        "unobserved initial velocity gives Fig. 3.2's 'reaches to 24 meter after 80 seconds'; no text "
-                       "supports a moving start (Eqs. (3.19)-(3.20) start the filter at zero velocity, and Fig. 3.2's text "
-                       "blames 'the error of the acceleration')")
+                       "supports a moving start (Eqs. (3.19)-(3.20) start the filter at zero velocity, and Fig. 3.2's "
+                       "text blames 'the error of the acceleration')")
 NOISE_INTERPRETATIONS = ("printed", "sigma_acc")
 DEFAULT_NOISE_INTERPRETATION = "printed"
-NOISE_CALIBRATED_FROM = ("noise interpretation 'sigma_acc' (Q = sigma_ACC^2/10 I_6, P_0,acc = sigma_ACC^2 per row) chosen "
-                         "because it fits the printed KF (MLE) fall with sigma_ACC of Table 3.9 (the text prints Q and "
-                         "P_0,acc as constants, Eqs. (3.20), (3.24))")
+NOISE_CALIBRATED_FROM = ("noise interpretation 'sigma_acc' (Q = sigma_ACC^2/10 I_6, P_0,acc = sigma_ACC^2 per row) "
+                         "chosen because it fits the printed KF (MLE) fall with sigma_ACC of Table 3.9 (the text "
+                         "prints Q and P_0,acc as constants, Eqs. (3.20), (3.24))")
 #: Q per step over sigma_ACC^2 in the ``"sigma_acc"`` interpretation (0.000023 / 0.0152^2 = 0.0996).
 Q_PER_ACC_VARIANCE = 0.1
 #: KF (MLE)'s R = diag(MSE_MLE) (Eq. (3.21); constant or per epoch is not stated): ``"constant"``, the MSE per
@@ -181,7 +181,7 @@ def calibrated_from_text(start: str = DEFAULT_START, noise_interpretation: str =
     """The interpretations fitted to printed output that a row computed under ``start`` and ``noise_interpretation``
     used, as the row's ``calibrated_from`` text, ``"; "``-joined; ``""`` when none (the row is then a ``reproduction``).
 
-    Issue 45's rule (fitted: no text supports it and it was chosen because it fits): the ``"moving"`` start
+    Fitted (no text supports them and they were chosen because they fit): the ``"moving"`` start
     (:data:`MOVING_START_FITTED`), with the walking speed :data:`SPEED_MPS` fitted to Fig. 3.2's drift under it
     (:data:`SPEED_CALIBRATED_FROM`), and the ``"sigma_acc"`` noise interpretation fitted to Table 3.9
     (:data:`NOISE_CALIBRATED_FROM`); the ``"rest"`` start and the ``"printed"`` interpretation are the text's own
@@ -189,9 +189,10 @@ def calibrated_from_text(start: str = DEFAULT_START, noise_interpretation: str =
     if start not in START_MODES:
         raise ParameterError(f"start must be one of {START_MODES}, got {start!r}")
     if noise_interpretation not in NOISE_INTERPRETATIONS:
-        raise ParameterError(f"noise_interpretation must be one of {NOISE_INTERPRETATIONS}, got {noise_interpretation!r}")
+        raise ParameterError(f"noise_interpretation must be one of {NOISE_INTERPRETATIONS}, got "
+                             f"{noise_interpretation!r}")
     used = []
-    if start == "moving":               # issue 45: no text supports it; it was declared for Fig. 3.2's drift
+    if start == "moving":               # fitted: no text supports it; it was declared for Fig. 3.2's drift
         used.append(MOVING_START_FITTED)
         if float(speed_mps) == SPEED_MPS:
             used.append(SPEED_CALIBRATED_FROM)
@@ -548,7 +549,8 @@ def run_channel(trajectory: Trajectory, sigma_rss_db: float, path_loss_exp: floa
 
 @renamed_keyword("noise_reading", "noise_interpretation")
 def noise_fit(trajectory: Trajectory, sigma_rss_db: float, path_loss_exp: float, n_runs: int,
-              rng: np.random.Generator, *, name: str = "parallel_ekf", noise_interpretation: str = DEFAULT_NOISE_INTERPRETATION,
+              rng: np.random.Generator, *, name: str = "parallel_ekf",
+              noise_interpretation: str = DEFAULT_NOISE_INTERPRETATION,
               ref_power_dbm: float = REF_POWER_DBM, anchors_m=ANCHORS_M, room_m=ROOM_M,
               mle_grid_step_m: float = MLE_GRID_STEP_M, mle_bounds: str = "unconstrained",
               rss_only_step: str = DEFAULT_RSS_ONLY_STEP) -> dict:
@@ -620,4 +622,8 @@ def only_acc_errors(trajectory: Trajectory, sigma_acc_mps2: float, n_runs: int, 
 
 
 # the names before "reading" meant only a sensor measurement (deprecated for one release)
-__getattr__ = renamed_names(__name__, {"NOISE_READINGS": "NOISE_INTERPRETATIONS", "DEFAULT_NOISE_READING": "DEFAULT_NOISE_INTERPRETATION", "MLE_R_READINGS": "MLE_R_INTERPRETATIONS"})
+__getattr__ = renamed_names(__name__, {
+    "NOISE_READINGS": "NOISE_INTERPRETATIONS",
+    "DEFAULT_NOISE_READING": "DEFAULT_NOISE_INTERPRETATION",
+    "MLE_R_READINGS": "MLE_R_INTERPRETATIONS",
+})

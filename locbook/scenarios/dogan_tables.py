@@ -71,8 +71,8 @@ RMSE_TABLES = tuple(f"Table 3.{i}" for i in range(7, 13))
 TABLE_SETTINGS = _table_settings()
 #: The channel (sigma_RSS, alpha) of Table 3.6, and the channels of the sigma_ACC sweeps (Tables 3.9 and 3.10).
 TABLE_36_CHANNEL = (SIGMA_RSS_DB, PATH_LOSS_EXP)
-SIGMA_ACC_SWEEP_CHANNELS = tuple(dict.fromkeys((st.sigma_rss_db, st.path_loss_exp) for (t, _), st in TABLE_SETTINGS.items()
-                                               if t in ("3.9", "3.10")))
+SIGMA_ACC_SWEEP_CHANNELS = tuple(dict.fromkeys((st.sigma_rss_db, st.path_loss_exp)
+                                               for (t, _), st in TABLE_SETTINGS.items() if t in ("3.9", "3.10")))
 #: sigma_ACC of the fused rows of Tables 3.8, 3.11-3.12 as the captions write it (Table 3.6: 0.0152).
 TABLE_SIGMA_ACC_MPS2 = TABLE_SETTINGS[("3.8", "sigma_rss_db=6")].sigma_acc_mps2
 
@@ -240,13 +240,15 @@ def interpretations_summary(rows, variants: dict, chosen: str, others, *, tolera
     return summary
 
 
-def _miss_reason(row, variants: dict, *, start: str = DEFAULT_START, noise_interpretation: str = DEFAULT_NOISE_INTERPRETATION) -> str:
+def _miss_reason(row, variants: dict, *, start: str = DEFAULT_START,
+                 noise_interpretation: str = DEFAULT_NOISE_INTERPRETATION) -> str:
     """The likely reason of a missed Table 3.7-3.12 cell computed under ``start`` and ``noise_interpretation``, with
     what the other interpretations ``variants`` (``{label: value}``) give for the same cell."""
     s = TABLE_SETTINGS[(row["table"], row["row"])]
     tested = "; ".join(f"{k}: {v:.3f}" for k, v in variants.items())
     tested = (f" Tested interpretations of the same cell: {tested}." if tested else
-              " The other interpretations were run on the 6 dB and 3 dB channels (the interpretations table), not on this one.")
+              " The other interpretations were run on the 6 dB and 3 dB channels (the interpretations table), not on "
+              "this one.")
     ours, printed_value = row["reproduced"], row["printed"]
     if row["column"] == "static_mle":
         return ("STATIC (MLE): the room is the inferred test-bed room and the MLE an unbounded search (neither is "
@@ -255,24 +257,24 @@ def _miss_reason(row, variants: dict, *, start: str = DEFAULT_START, noise_inter
     if s.sigma_acc_mps2 is None:
         if row["column"] == "kalman_filter" and s.path_loss_exp <= 2.5:
             return ("KF (MLE) at low alpha: far-out MLE fixes make R = diag(MSE_MLE) large and our KF beats the "
-                    "printed one; R per epoch (Table 4.1's R_k+1, the other interpretation of Eq. (3.21)) beats it too, and "
-                    "any bound on the MLE is not printed." + tested)
+                    "printed one; R per epoch (Table 4.1's R_k+1, the other interpretation of Eq. (3.21)) beats it "
+                    "too, and any bound on the MLE is not printed." + tested)
         return ("ONLY RSS filters: they depend on the unprinted path, speed and start through how often the "
-                "constant-acceleration model meets a turn; the fusion interpretations barely change ONLY RSS, and for KF "
-                "(MLE) R per epoch (Table 4.1's R_k+1) moves it further from the printed value." + tested)
+                "constant-acceleration model meets a turn; the fusion interpretations barely change ONLY RSS, and for "
+                "KF (MLE) R per epoch (Table 4.1's R_k+1) moves it further from the printed value." + tested)
     if s.sigma_acc_mps2 >= TABLE_SIGMA_ACC_MPS2:
         side = "better" if ours < printed_value else "worse"
-        return (f"sigma_ACC = 0.015: our fused filter ({start} start) is {side} than printed, and no interpretation tried "
-                "reproduces this row (start from rest or moving, Q printed or from sigma_ACC; at 0.015 both Q interpretations "
-                "coincide): the start, which the thesis does not print, moves it most (the moving start makes the "
-                "EKFs diverge in a tail of runs)." + tested)
+        return (f"sigma_ACC = 0.015: our fused filter ({start} start) is {side} than printed, and no interpretation "
+                "tried reproduces this row (start from rest or moving, Q printed or from sigma_ACC; at 0.015 both Q "
+                "interpretations coincide): the start, which the thesis does not print, moves it most (the moving "
+                "start makes the EKFs diverge in a tail of runs)." + tested)
     if noise_interpretation == "printed":
         if ours > printed_value:
-            return ("fused filter at sigma_ACC below 0.015 with Q printed as a constant (Eq. (3.24)): the process noise, "
-                    "not the accelerometer, limits the filter, so our error barely falls with sigma_ACC while the "
-                    "printed one does (KF (MLE) 1.34 -> 0.96 m, Table 3.9); only Q scaled with sigma_ACC (the "
-                    "'sigma_acc' interpretation, fitted to that fall) follows it, so the printed tables were likely run with "
-                    "a Q other than the one printed." + tested)
+            return ("fused filter at sigma_ACC below 0.015 with Q printed as a constant (Eq. (3.24)): the process "
+                    "noise, not the accelerometer, limits the filter, so our error barely falls with sigma_ACC while "
+                    "the printed one does (KF (MLE) 1.34 -> 0.96 m, Table 3.9); only Q scaled with sigma_ACC (the "
+                    "'sigma_acc' interpretation, fitted to that fall) follows it, so the printed tables were likely "
+                    "run with a Q other than the one printed." + tested)
         return ("fused filter at sigma_ACC below 0.015 with Q printed as a constant (Eq. (3.24)): our filter is better "
                 "than printed; the gap is the unprinted path and start." + tested)
     if row["column"] != "kalman_filter" and ours > printed_value:
@@ -280,8 +282,8 @@ def _miss_reason(row, variants: dict, *, start: str = DEFAULT_START, noise_inter
                 "Table 3.9): the typical run improves with sigma_ACC as printed (see the median table), but with so "
                 "small a Q a few runs lock onto a wrong position and never recover (fraction beyond 4 m in the tail "
                 "table), which the RMSE weighs; the thesis's EKFs show no such tail." + tested)
-    return ("fused filter below 0.015 with Q = sigma_ACC^2/10 (the 'sigma_acc' interpretation, fitted to Table 3.9's KF "
-            "(MLE) fall with sigma_ACC): the remaining gap is the unprinted path and start." + tested)
+    return ("fused filter below 0.015 with Q = sigma_ACC^2/10 (the 'sigma_acc' interpretation, fitted to Table 3.9's "
+            "KF (MLE) fall with sigma_ACC): the remaining gap is the unprinted path and start." + tested)
 
 
 def fusion_reduction_rows(runs: dict) -> list[dict]:
@@ -311,7 +313,8 @@ def fusion_gain_pct(run: ChannelRun, sigma_acc_mps2: float, filters=FILTERS,
            for c in (None, sigma_acc_mps2)}
 
     def mean_gain(*per_run):
-        parts = [100.0 * (1.0 - np.sqrt(per_run[2 * i + 1].mean() / per_run[2 * i].mean())) for i in range(len(filters))]
+        parts = [100.0 * (1.0 - np.sqrt(per_run[2 * i + 1].mean() / per_run[2 * i].mean()))
+                 for i in range(len(filters))]
         return float(np.mean(parts))
 
     arrays = [mse[(f, c)] for f in filters for c in (None, sigma_acc_mps2)]

@@ -90,7 +90,8 @@ ORIENTATION_SAMPLES = int(PRINTED.get("Sec. 5.3", "antenna test", "measurements 
 #: Where the thesis says that one walk was measured (the source of the single-walk ambiguity).
 ONE_WALK_SOURCE = "Dogan 2015 Sec. 5.4 (one experimental walk; Figs. 5.8-5.11 print its RMSE)"
 
-_FIGURE = {"static_mle": "Fig. 5.8", "serial_ekf": "Fig. 5.9", "parallel_ekf": "Fig. 5.10", "kalman_filter": "Fig. 5.11"}
+_FIGURE = {"static_mle": "Fig. 5.8", "serial_ekf": "Fig. 5.9", "parallel_ekf": "Fig. 5.10",
+           "kalman_filter": "Fig. 5.11"}
 
 
 def calibration_points_m(x_m=CALIBRATION_X_M, y_m=CALIBRATION_Y_M) -> np.ndarray:
@@ -228,8 +229,8 @@ def testbed_rows(run: ChannelRun, sigma_acc_mps2: float, *, coverage: float = 0.
 
 #: Why the synthetic walks miss the measured one.
 BENIGN_CHANNEL_NOTE = ("the experiment's MLE is better than i.i.d. 6 dB shadowing at alpha 1.8 allows (static CRLB RMS "
-                       "over the room about 5 m); the real errors were smaller or more benign, so the synthetic ONLY-RSS "
-                       "walks are worse")
+                       "over the room about 5 m); the real errors were smaller or more benign, so the synthetic "
+                       "ONLY-RSS walks are worse")
 _MISS_NOTES = {"ONLY RSS": BENIGN_CHANNEL_NOTE, "RSS/IMU": "the fused filter misses for the same reason as ONLY RSS"}
 _REDUCTION_MISS = ("the simulated walks gain more from fusion than the measured one (the measured channel is more "
                    "benign than i.i.d. 6 dB shadowing)")
@@ -265,7 +266,8 @@ def record_testbed(report, rows: list[dict], run: ChannelRun, sigma_acc_mps2: fl
         p = r["printed_value"]
         if p is None:
             continue
-        amb = Ambiguity(2 * r["sd_single_walk"], "one measured walk: 2 sd of the value of one simulated walk", ONE_WALK_SOURCE)
+        amb = Ambiguity(2 * r["sd_single_walk"], "one measured walk: 2 sd of the value of one simulated walk",
+                        ONE_WALK_SOURCE)
         kind = "calibrated" if fitted and r["filter"] != "static_mle" else "reproduction"
         name = (f"test-bed RMSE {r['filter']} {r['case']}, mean of one walk" if r["case"] != "reduction %" else
                 "fusion reduction, mean of the three filters, mean of one walk")

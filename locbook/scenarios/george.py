@@ -90,7 +90,7 @@ def trajectory_m(kind: str = "centerline", n_points: int = N_MARKED_POINTS) -> n
 
 #: A calibration whose fitted exponent falls below this has failed: shadowing swamped the 1-8 m spread of the
 #: calibration distances (weaker decay than free space, or an inverted slope), and its ranges overflow. Such a
-#: run's fixes are NaN and counted, never averaged in (issue 12: a 6 dB sweep had averaged fixes of 1e121 m).
+#: run's fixes are NaN and counted, never averaged in (a 6 dB sweep once averaged fixes of 1e121 m).
 MIN_PLAUSIBLE_PATH_LOSS_EXP = 1.0
 
 
@@ -192,7 +192,7 @@ def track_with_kalman(fixes_m, truth_m, *, q: float, dt_s: float = 1.0, r_mode: 
     P0 = diag(R_xx, R_yy, v, v). With the first-fix start the first output is that fix.
 
     ``variant``: the KF's (:func:`locbook.kalman_filter`): ``"corrected"`` or the printed update
-    ``"literal_george"`` (``"standard"`` before issue 47: deprecated).
+    ``"literal_george"`` (``"standard"``, its earlier name: deprecated).
 
     ``with_divergence=True`` returns ``(positions, flags)``, ``flags`` the KF's NIS guard per run
     (:class:`locbook.tracking.divergence.DivergenceFlags`, steps indexed by marked point): runs without fixes (failed
@@ -230,7 +230,8 @@ def track_with_kalman(fixes_m, truth_m, *, q: float, dt_s: float = 1.0, r_mode: 
         # the filter's step k is marked point k + 1 (point 0 is the first fix)
         return (out, DivergenceFlags.of(res, step_offset=1)) if with_divergence else out
     x0 = model.state_from(np.broadcast_to(np.asarray(truth_m, float)[0], fixes_m.shape[:-2] + (2,)))
-    res = kalman_filter(model.F, model.Q, x0, P0, LinearMeasurement(fixes_m, H, R), predict_first=False, variant=variant)
+    res = kalman_filter(model.F, model.Q, x0, P0, LinearMeasurement(fixes_m, H, R), predict_first=False,
+                        variant=variant)
     out = model.position(res.mean)
     return (out, DivergenceFlags.of(res)) if with_divergence else out
 

@@ -62,9 +62,10 @@ __all__ = [
     "DEFAULT_U_PATH", "path_waypoints_m", "FIGURE_PATHS", "ORIENTATION_LOSS_DB", "DYNAMIC_WEIGHTING", "FUSION_SCHEME",
     "filter_step_s", "UKF_ALPHA", "UKF_BETA", "CALIBRATION_STEP_M",
     "CALIBRATION_SPAN_M", "CALIBRATION_SAMPLES", "CALIBRATION_TERMS", "WalkSettings", "channel_model",
-    "path_trajectory", "Walk", "simulate_walk", "rss_only_fixes", "METHODS", "track", "noise_fit", "WalkErrors", "walk_errors",
-    "table_5_1", "calibration_distances_m", "ed_register_dbm", "simulate_calibration_walk", "rss_only_mean_error", "calibrate_shadowing",
-    "fix_covariance_from", "inertial_only", "anchors_m", "ins_drift_covariance", "position_fusion", "RSS_SIGNS", "STATE_MODELS",
+    "path_trajectory", "Walk", "simulate_walk", "rss_only_fixes", "METHODS", "track", "noise_fit", "WalkErrors",
+    "walk_errors", "table_5_1", "calibration_distances_m", "ed_register_dbm", "simulate_calibration_walk",
+    "rss_only_mean_error", "calibrate_shadowing", "fix_covariance_from", "inertial_only", "anchors_m",
+    "ins_drift_covariance", "position_fusion", "RSS_SIGNS", "STATE_MODELS",
     "posterior_crlb_m", "crlb_map_m", "METHOD_LABELS", "record_ch6",
 ]
 
@@ -364,7 +365,8 @@ def _rss_stream(walk: Walk, model, sign: str = "corrected"):
         return -ch.mean_rss_dbm(np.linalg.norm(x[..., None, idx] - a, axis=-1))
 
     def jacobian(x):
-        grad = log_distance_gradient(x[..., None, idx] - a, ch.path_loss_exp)     # the model's dh/dp (no clamp, as printed)
+        # the model's dh/dp (no clamp, as printed)
+        grad = log_distance_gradient(x[..., None, idx] - a, ch.path_loss_exp)
         H = np.zeros(x.shape[:-1] + (a.shape[0], x.shape[-1]))
         H[..., idx] = -grad
         return H
@@ -418,7 +420,7 @@ def track(walk: Walk, method: str, *, fix_covariance=None, ukf_alpha: float = UK
     - ``ekf`` / ``ukf``: the 8-D model with heading and yaw rate (:class:`HeadingKinematicModel`), the RSS of every
       packet (Eq. (3.12) sign corrected) and the inertial readings (body frame) stacked at every step; the UKF with
       the thesis's alpha, beta = 2, kappa = 0 and the corrected equations of Sec. 3.6
-      (``ukf_variant="literal_gudipati2017"``, ``ukf_weights=`` before issue 47: deprecated,
+      (``ukf_variant="literal_gudipati2017"``, the earlier ``ukf_weights=``: deprecated,
       and ``ukf_innovation_noise=False``: the printed Eqs. (3.22) and (3.26), flagged; ``rss_sign="printed_3_12"``:
       h with the printed leading minus, flagged; ``state_model="literal_gudipati2017"``: the 8-D state as printed,
       theta_x and theta_y random walks, with Z^2 = [a_x, a_y, theta_x, theta_y] a linear measurement and the readings
@@ -453,12 +455,14 @@ def track(walk: Walk, method: str, *, fix_covariance=None, ukf_alpha: float = UK
         return (res.position_m([0, 1]), DivergenceFlags.of(res)) if with_divergence else res.position_m([0, 1])
     if state_model not in STATE_MODELS:
         raise ValueError(f"state_model must be one of {STATE_MODELS}, got {state_model!r}")
-    model = HeadingKinematicModel(s.dt_s, s.q, s.q_angular, heading="yaw_rate" if state_model == "heading" else "literal_gudipati2017")
+    model = HeadingKinematicModel(s.dt_s, s.q, s.q_angular,
+                                  heading="yaw_rate" if state_model == "heading" else "literal_gudipati2017")
     x0, P0 = _initial(walk, model, 8)
     if state_model == "heading":
         imu = _imu_stream(walk, method == "ekf")
     else:
-        z = np.concatenate([walk.acc_m_s2, walk.gyro_rad_s[..., None], np.full(walk.gyro_rad_s.shape + (1,), np.nan)], -1)
+        z = np.concatenate([walk.acc_m_s2, walk.gyro_rad_s[..., None],
+                            np.full(walk.gyro_rad_s.shape + (1,), np.nan)], -1)
         H = np.zeros((4, 8))
         H[np.arange(4), [4, 5, 6, 7]] = 1.0
         r3 = np.diag(_imu_stream(walk, False).R)
@@ -675,20 +679,20 @@ def calibrate_shadowing(target_mean_error_m: float, path: str, n_anchors: int, s
 
 # -- Ch. VI: the headline numbers and the claims of Sec. 5.3 --------------------------------------------------------
 #: Display names of :data:`METHODS`.
-METHOD_LABELS = {"rss_only": "RSS only", "inertial_only": "inertial only", "position_fusion": "position fusion (4.8)-(4.9)",
-                 "kf": "KF", "ekf": "EKF", "ukf": "UKF"}
+METHOD_LABELS = {"rss_only": "RSS only", "inertial_only": "inertial only",
+                 "position_fusion": "position fusion (4.8)-(4.9)", "kf": "KF", "ekf": "EKF", "ukf": "UKF"}
 #: The methods Ch. VI's fused headline (0.8 m, 1.01 m) may refer to: the text ties it to no filter (Ch. VI; Fig. 5.4
 #: finds the UKF best, the default); the linear KF, the EKF and the position fusion of Eqs. (4.8)-(4.9) are the
 #: other interpretations.
 FUSED_METHODS = ("ukf", "kf", "ekf", "position_fusion")
-NOTE_FUSED = ("the fused error depends on every unprinted setting (shadowing level and correlation, residual IMU biases, "
-              "q, the filter step) and on the 'dynamic' sensor weights of Ch. I, which the text never defines (not "
-              "modelled: DYNAMIC_WEIGHTING); see the sensitivity tables below")
+NOTE_FUSED = ("the fused error depends on every unprinted setting (shadowing level and correlation, residual IMU "
+              "biases, q, the filter step) and on the 'dynamic' sensor weights of Ch. I, which the text never defines "
+              "(not modelled: DYNAMIC_WEIGHTING); see the sensitivity tables below")
 NOTE_LINEAR_RSS = ("the RSS-only error is set almost wholly by the shadowing level, which the thesis does not print: "
-                   "under the assumed 3 dB (interpretation tracking_shadowing) the fixes over the 30 m hall err far more "
-                   "than printed; the bracket runs the other levels")
-NOTE_U_RSS = ("the U-path's RSS-only error follows from the declared shadowing and the assumed U geometry (u_path); the "
-              "antenna-orientation change at the turns that Sec. 5.3 blames is not modelled (ORIENTATION_LOSS_DB)")
+                   "under the assumed 3 dB (interpretation tracking_shadowing) the fixes over the 30 m hall err far "
+                   "more than printed; the bracket runs the other levels")
+NOTE_U_RSS = ("the U-path's RSS-only error follows from the declared shadowing and the assumed U geometry (u_path); "
+              "the antenna-orientation change at the turns that Sec. 5.3 blames is not modelled (ORIENTATION_LOSS_DB)")
 
 
 def _unproven(reason: str) -> dict:
@@ -717,8 +721,8 @@ def record_ch6(report, errors: dict, flags: dict, *, headline_anchors: int, shad
     ha = headline_anchors
     label = METHOD_LABELS
     printed_rss_linear = PRINTED.get("Ch. VI text", "linear path", "without fusion")
-    sigma_from = (f"shadowing sigma {shadowing_sigma_db:.3f} dB chosen by bisection so that the linear-path RSS-only mean "
-                  f"error equals the printed {printed_rss_linear.text} ({ha} anchors)")
+    sigma_from = (f"shadowing sigma {shadowing_sigma_db:.3f} dB chosen by bisection so that the linear-path RSS-only "
+                  f"mean error equals the printed {printed_rss_linear.text} ({ha} anchors)")
     kind = "calibrated" if calibrated else "reproduction"
     calibrated_from = sigma_from if calibrated else ""
 
@@ -746,17 +750,20 @@ def record_ch6(report, errors: dict, flags: dict, *, headline_anchors: int, shad
     gains = {(i, f): paired(*fig54, i, f) for i in ("rss_only", "inertial_only") for f in ("kf", "ekf", "ukf")}
     weakest = min(gains, key=lambda k: gains[k][0])
     report.number(f"Fig. 5.4: smallest margin of a fusion filter over an individual sensor ({label[weakest[0]]} minus "
-                  f"{label[weakest[1]]}) (m)", PRINTED.get("Fig. 5.4 caption", "fusion versus individual sensors", "claim"),
+                  f"{label[weakest[1]]}) (m)",
+                  PRINTED.get("Fig. 5.4 caption", "fusion versus individual sensors", "claim"),
                   gains[weakest][0], mc_std_error=gains[weakest][1], **claim, **_unproven(
-                      "the linear KF follows the gyro-rotated accelerations between fixes; their residual biases are not "
-                      "in its model (the sensitivity table, 6 anchors, shows the KF without them)"))
+                      "the linear KF follows the gyro-rotated accelerations between fixes; their residual biases are "
+                      "not in its model (the sensitivity table, 6 anchors, shows the KF without them)"))
     # "least when using the UKF" (Fig. 5.4: 4 anchors, linear path): the closest competitor minus the UKF
     diffs = {m: paired(*fig54, m, "ukf") for m in ("rss_only", "position_fusion", "kf", "ekf")}
     closest = min(diffs, key=lambda m: diffs[m][0])
     report.number(f"Fig. 5.4: mean error of the closest other method ({label[closest]}) minus the UKF's (m)",
-                  PRINTED.get("Sec. 5.3 text", "Fig. 5.4, UKF", "claim"), diffs[closest][0], mc_std_error=diffs[closest][1],
-                  **claim, **_unproven(f"at alpha = {ukf_alpha:g} the sigma points sit within {ukf_alpha * np.sqrt(8):.1g} "
-                  "standard deviations of the mean, so the UKF is numerically the EKF's linearisation" if closest == "ekf" else ""))
+                  PRINTED.get("Sec. 5.3 text", "Fig. 5.4, UKF", "claim"), diffs[closest][0],
+                  mc_std_error=diffs[closest][1], **claim, **_unproven(
+                      f"at alpha = {ukf_alpha:g} the sigma points sit within {ukf_alpha * np.sqrt(8):.1g} "
+                      "standard deviations of the mean, so the UKF is numerically the EKF's linearisation"
+                      if closest == "ekf" else ""))
     kf_gap = min((paired(path, na, "kf", m) for path in PATHS for na in ANCHOR_SETS for m in ("ekf", "ukf")),
                  key=lambda t: t[0])
     report.number("smallest gap, KF minus EKF or UKF, over paths and anchor sets (m)",
@@ -772,15 +779,16 @@ def record_ch6(report, errors: dict, flags: dict, *, headline_anchors: int, shad
                   mc_std_error=six[least][1], **claim)
     gap = min((paired("linear", na, "inertial_only", "rss_only") for na in ANCHOR_SETS), key=lambda t: t[0])
     report.number("inertial only minus RSS only, linear path, smaller over the anchor sets (m)",
-                  PRINTED.get("Sec. 5.3 text", "Fig. 5.6, inertial sensors alone", "claim"), gap[0], mc_std_error=gap[1],
-                  **claim, note="'acceptable' is read as: worse than RSS without fusion")
+                  PRINTED.get("Sec. 5.3 text", "Fig. 5.6, inertial sensors alone", "claim"), gap[0],
+                  mc_std_error=gap[1], **claim, note="'acceptable' is read as: worse than RSS without fusion")
     near_turn = np.asarray(near_turn, bool)
     turns = {}
     for m in ("rss_only", "kf", "ekf", "ukf"):
         pp = errors[("u", ha, m)].per_point_m
         turns[m] = _mean_se(pp[:, near_turn].mean(axis=1) - pp[:, ~near_turn].mean(axis=1))
     low = min(turns, key=lambda m: turns[m][0])
-    report.number(f"U-path ({ha} anchors): mean error at the turns minus elsewhere, smallest over the methods ({label[low]}) (m)",
+    report.number(f"U-path ({ha} anchors): mean error at the turns minus elsewhere, smallest over the methods "
+                  f"({label[low]}) (m)",
                   PRINTED.get("Sec. 5.3 text", "Fig. 5.7, U-path turns", "claim"), turns[low][0],
                   mc_std_error=turns[low][1], **claim, **_unproven(
                       "per method: " + ", ".join(f"{label[m]} {v:+.2f} m" for m, (v, _) in turns.items()) +

@@ -6,7 +6,8 @@ parameters are positional (their names may differ per document, ``runs`` or ``re
 signature ends in ``*settings, **options``, by the document's own settings; a signature without them admits only
 optional extra parameters. Where two modules' functions differ in meaning they have different names
 (``dogan.run_channels`` returns runs per channel, ``ozkaya.run_tables`` scored rows;
-``dogan.calibrated_from_text`` returns a row's ``calibrated_from`` text, ``ozkaya.fitted_interpretations`` interpretation names).
+``dogan.calibrated_from_text`` returns a row's ``calibrated_from`` text, ``ozkaya.fitted_interpretations``
+interpretation names).
 tests/scenarios/test_interface.py checks every module against this class with :func:`inspect.signature`.
 """
 from __future__ import annotations

@@ -161,8 +161,8 @@ def protocol(data: Dataset, model: PathLossModel, *, fit: str = "closed_form", g
                 f"rule: maximum likelihood of the EKF's innovations on this track's readings (log-likelihood +"
                 f"{m['log_likelihood_gain']:.1f} over q = {Q_START:g}{'; at the fit bound' if m['at_bound'] else ''})")
             s_how = "given (-p spread_m)" if spread_m is not None else (
-                "rule: maximum likelihood of the random walk's innovations on this track's rss_ml fixes (log-likelihood "
-                f"+{m['spread_log_likelihood_gain']:.1f} over {SPREAD_START_M:g} m"
+                "rule: maximum likelihood of the random walk's innovations on this track's rss_ml fixes "
+                f"(log-likelihood +{m['spread_log_likelihood_gain']:.1f} over {SPREAD_START_M:g} m"
                 f"{'; at the fit bound' if m.get('spread_at_bound') else ''}"
                 f"{'; raised to half the grid pitch' if m.get('spread_floor') else ''})")
             choices += [{"method": "kf_on_ml, ekf, ekf_serial, ukf, imm (its quiet mode)",
@@ -250,7 +250,8 @@ def result_row(kind: str, recording: str, method: str, errors_m, bound_m, reason
     notes = [m.get("interval_note", "")] + [m.get(f"{s}_note", "") for s in ("mean_m", "rmse_m")]
     row = {"kind": kind, "recording": recording, "method": method, "settings": settings, "epochs": int(e.shape[0]),
             "runs": int(e.shape[1]), "coverage": _r(m["coverage"]), "mean_m": _r(m["mean_m"]),
-            "median_m": _r(m["median_m"]), "p90_m": _r(m["p90_m"]), "ce95_m": _r(m["ce95_m"]), "rmse_m": _r(m["rmse_m"]),
+            "median_m": _r(m["median_m"]), "p90_m": _r(m["p90_m"]), "ce95_m": _r(m["ce95_m"]),
+            "rmse_m": _r(m["rmse_m"]),
             "mean_low_m": _r(m["mean_m_low"]), "mean_high_m": _r(m["mean_m_high"]), "rmse_low_m": _r(m["rmse_m_low"]),
             "rmse_high_m": _r(m["rmse_m_high"]), "interval": m.get("interval", ""),
             "interval_note": "; ".join(dict.fromkeys(n for n in notes if n)), "bound": bound_name,
@@ -540,8 +541,8 @@ def tracking_results(data: Dataset, model: PathLossModel, proto: Protocol, *, se
                              bound_name=ranging.RANGE_TRACKING_BOUND_NAME if ranged_row else bound_name,
                              outside=outside_fraction(data, np.concatenate([per[n]["est"][tracker].reshape(-1, 2)
                                                                             for n in members])))
-            rows.append(row if tracker in TRACKER_PRIORS or tracker in ranging.RANGE_TRACKERS or tracker in FUSION_PRIORS
-                        else {**row, FAILURE_COLUMN: ""})
+            rows.append(row if tracker in TRACKER_PRIORS or tracker in ranging.RANGE_TRACKERS
+                        or tracker in FUSION_PRIORS else {**row, FAILURE_COLUMN: ""})
     return {"tracks": out, "rows": rows, "battery": [*TRACKERS, *stream, *fusion], "fusion": fusion, "user": user,
             "described": described,
             "failures": failures, "covariances": {n: {k: v[n] for k, v in covariances.items()} for n in names}}

@@ -43,7 +43,8 @@ from ..tracking.streams import RssMeasurement, Stream
 from ..tracking.unscented import unscented_kalman_filter
 
 __all__ = ["RANGE_STATIC_METHODS", "RANGE_TRACKERS", "RANGE_TRACKER_PRIORS", "RANGE_METHOD_NAMES",
-           "RANGE_BOUND_NAME", "RANGE_TRACKING_BOUND_NAME", "range_tracking_bound_m", "range_noise", "recording_ranges", "range_choices", "static_range_results",
+           "RANGE_BOUND_NAME", "RANGE_TRACKING_BOUND_NAME", "range_tracking_bound_m", "range_noise", "recording_ranges",
+           "range_choices", "static_range_results",
            "run_range_trackers", "range_tracker_knobs", "ranged", "user_ranges", "track_ranges"]
 
 #: the static method the ranges add (:class:`locbook.battery.Method`: what, settings, prior)
@@ -153,7 +154,8 @@ def range_choices(data: Dataset) -> list[dict]:
         source = _sigma_source(data, name)
         if source == "reported":
             std = data.ranges(name)[1]
-            value = f"reported, median {float(np.nanmedian(std)):.3g} m per epoch" if np.isfinite(std).any() else "reported"
+            value = (f"reported, median {float(np.nanmedian(std)):.3g} m per epoch" if np.isfinite(std).any()
+                     else "reported")
             how = ("the ranges file's range_std_m; an epoch's range is the mean of its window's ranges, its std "
                    "sqrt(mean(std^2) / n)")
         elif source == "fitted":

@@ -357,16 +357,16 @@ def choose_knn_k(data: Dataset, model: PathLossModel, requested: int | None = No
     best = int(np.nanargmin(mean))
     table = [{"k": k, "mean error (m), leave-one-point-out": round(float(m), 3)} for k, m in zip(candidates, mean)]
     how = (f"rule: leave-one-point-out cross-validation on the calibration map ({n_groups} groups), k = 1-"
-           f"{candidates[-1]}: mean error {mean[best]:.2f} m" + (" (the largest candidate)" if best == len(candidates) - 1
-                                                                   else ""))
+           f"{candidates[-1]}: mean error {mean[best]:.2f} m" +
+           (" (the largest candidate)" if best == len(candidates) - 1 else ""))
     return candidates[best], how, table
 
 
 def _start(data: Dataset, recording: str, first_fix) -> np.ndarray:
     fixed = np.flatnonzero(np.isfinite(first_fix).all(axis=1))
     if fixed.size == 0:
-        raise ParameterError(f"recording {recording!r} of {data.name!r}: no epoch heard the {KF_FIX_MIN_ANCHORS} anchors "
-                             "an rss_ml fix to start the trackers from needs")
+        raise ParameterError(f"recording {recording!r} of {data.name!r}: no epoch heard the {KF_FIX_MIN_ANCHORS} "
+                             "anchors an rss_ml fix to start the trackers from needs")
     return np.r_[first_fix[fixed[0]], 0.0, 0.0]
 
 
@@ -456,8 +456,9 @@ def fix_covariance_from_calibration(data: Dataset, model: PathLossModel, *, grid
     that heard at least 3 anchors) over the calibration epochs (the set the channel was fitted on, never a scored
     recording)."""
     xy, _, rss = calibration_set(data)
-    sc = StaticScenario("calibration", data.name, "calibration", data.anchors_m, model, np.asarray(data.outline_m, float),
-                        xy, grid_spacing_m, (), tag_height_m=data.tag_height_m, measured_rss_dbm=rss)
+    sc = StaticScenario("calibration", data.name, "calibration", data.anchors_m, model,
+                        np.asarray(data.outline_m, float), xy, grid_spacing_m, (), tag_height_m=data.tag_height_m,
+                        measured_rss_dbm=rss)
     fixes = ml_fixes(sc, rss)
     ok = np.isfinite(fixes).all(axis=1)
     return fix_error_covariance(fixes[ok], xy[ok])

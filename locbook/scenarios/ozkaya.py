@@ -109,12 +109,14 @@ __all__ = ["PRINTED", "ROOM_M", "LARGE_ROOM_M", "ALPHA_DBM", "PATH_LOSS_EXP", "S
     "CELL_PATTERNS", "CELL_MARGIN_M", "HALF_SEPARATION_LAYOUTS", "WALL_HANDLINGS", "SIM_INTERPRETATIONS", "room_for",
     "readers_for", "cell_centres", "printed_tables", "printed_cell", "printed_value", "SimCase", "case_seed_sequence",
     "simulate_truth_and_rss", "resample_fraction", "run_case", "summarize", "thesis_crlb_m", "correct_crlb_m",
-    "check_interpretation", "FITTED_VALUES", "fitted_interpretations", "fitted_calibrated_from", "unfitted_interpretations",
-    "text_interpretation_note", "sim_interpretations", "with_interpretations", "LAYOUTS_OF_HALF", "run_summary", "record_interpretations",
+    "check_interpretation", "FITTED_VALUES", "fitted_interpretations", "fitted_calibrated_from",
+    "unfitted_interpretations", "text_interpretation_note", "sim_interpretations", "with_interpretations",
+    "LAYOUTS_OF_HALF", "run_summary", "record_interpretations",
     "record_simulation_assumptions", "GRID_RT_BY_SIGMA", "SIR_RT_BY_SIGMA", "simulation_cases", "THESIS_RUNS",
     "thesis_monte_carlo_ambiguity", "KNOWN_MISSES", "run_tables", "is_crlb_row", "record_tables",
     "CRLB_NOT_FROM_FORMULA", "TEXT_CRLB", "crlb_rows", "record_crlb", "table_view", "settling_step",
-    "settling_interpretation", "literature_table", "OFFLINE_PARAMETERS", "AUTO_PARAMETERS", "R3_CALIBRATION_DISTANCES_M",
+    "settling_interpretation", "literature_table", "OFFLINE_PARAMETERS", "AUTO_PARAMETERS",
+    "R3_CALIBRATION_DISTANCES_M",
     "READER_SENSITIVITY_DBM", "WAF_DB", "synthetic_campaign", "TESTBED_SIZE_M", "TESTBED_WALLS_M",
     "TESTBED_READERS_M", "REFERENCE_TAGS_M"]
 

@@ -23,8 +23,8 @@ from .ozkaya_simulation import (
     summarize,
 )
 
-#: The values that nothing in the text supports and that were chosen because they fit printed output (issue 45,
-#: interpretations CSV column ``fitted``): interpretation name -> the fitted value. Rows computed under one are
+#: The values that nothing in the text supports and that were chosen because they fit printed output (basis
+#: ``fitted`` in the interpretations CSV): interpretation name -> the fitted value. Rows computed under one are
 #: calibrations. The simulation interpretations are not here: each of their values is supported by the text
 #: (interpretations CSV, ``quotes``).
 FITTED_VALUES = {"crlb_average": "cells_mean", "crlb_exponent": 2.0}
@@ -87,8 +87,8 @@ def _other_values(name: str, value) -> list:
     return [v for v in _INTERPRETATION_WORDS[name] if v != value]
 
 
-def text_interpretation_note(chosen: dict, case: SimCase | None, experiment: str, reproduced: float, printed_value: float,
-                             *, fitted_to: str = "the printed tables") -> str:
+def text_interpretation_note(chosen: dict, case: SimCase | None, experiment: str, reproduced: float,
+                             printed_value: float, *, fitted_to: str = "the printed tables") -> str:
     """One line saying which contested interpretations a missed row was computed under
     (:func:`unfitted_interpretations`: those that can move ``case``), where our value falls, and which other
     interpretations ``locbook bracket <experiment>`` runs: each named ``textual`` (another interpretation the text
@@ -105,8 +105,8 @@ def text_interpretation_note(chosen: dict, case: SimCase | None, experiment: str
     if textual:
         parts.append(f"the other textual interpretation{'s' if len(textual) > 1 else ''} ({' and '.join(textual)})")
     if fitted:
-        parts.append(f"the interpretation{'s' if len(fitted) > 1 else ''} fitted to {fitted_to}, which no text supports "
-                     f"({' and '.join(fitted)})")
+        parts.append(f"the interpretation{'s' if len(fitted) > 1 else ''} fitted to {fitted_to}, which no text "
+                     f"supports ({' and '.join(fitted)})")
     many = len(textual) + len(fitted) > 1
     return (f"under the interpretations run ({ours}) ours is {side} the printed value; " + " and ".join(parts)
             + (" are alternatives" if many else " is an alternative")
@@ -177,10 +177,10 @@ def record_simulation_assumptions(report, interpretations: dict | None = None) -
         ("anchors_m", LAYOUTS["corners3"], "three corners (separations 5 m and 8 m, Sec. 7.2.1); which three is not "
          "printed and is equivalent by symmetry"),
         ("target_protocol", "mobile: uniform start, Gaussian steps kept in the room per wall_handling, fresh noise "
-         "each step; fixed: uniform position", "not fully printed (Sec. 7.2.1); the contested parts are the interpretations "
-         "below"),
-        ("cells", "nx x ny partition of the room shrunk by 0.5 m", "gives the printed 28 cells at x 1..4, y 1..7 and the "
-         "0.5 m and 2 m grids; the 6/16/56/98 patterns are not printed"),
+         "each step; fixed: uniform position", "not fully printed (Sec. 7.2.1); the contested parts are the "
+         "interpretations below"),
+        ("cells", "nx x ny partition of the room shrunk by 0.5 m", "gives the printed 28 cells at x 1..4, y 1..7 and "
+         "the 0.5 m and 2 m grids; the 6/16/56/98 patterns are not printed"),
         ("min_distance_m", 0.1, "avoids log10(0) at a reader (ours)"),
         ("thesis_crlb_average", f"RMS over the room, printed form (1/d^2), n = {PATH_LOSS_EXP:g}",
          "the CRLB column shown beside the tables (compared in ozkaya2011-crlb): the text's exponent and the RMS "

@@ -26,7 +26,8 @@ def literature_table(table: str) -> list[dict]:
 
 
 #: Table 6.1, offline calibration per reader: alpha (dBm), n, WAF (dB), sigma (dB).
-OFFLINE_PARAMETERS = {"alpha_dbm": _per_reader("6.1", "alpha_dbm"), "path_loss_exp": _per_reader("6.1", "path_loss_exp"),
+OFFLINE_PARAMETERS = {"alpha_dbm": _per_reader("6.1", "alpha_dbm"),
+                      "path_loss_exp": _per_reader("6.1", "path_loss_exp"),
                       "waf_db": PRINTED.get("Sec. 6.1 text", "WAF", "waf_db").value,
                       "sigma_db": _per_reader("6.1", "sigma_db")}
 #: Table 6.2, automatic calibration with the reference tags (static environment): one pooled sigma.
@@ -60,7 +61,8 @@ def synthetic_campaign(reader: int, n_campaigns: int, rng: np.random.Generator, 
                          wall_attenuation_db=P["waf_db"]).mean_rss_dbm(distances_m, walls)
     read_sd = np.sqrt(read_var)
     offs = location_sigma_db * rng.standard_normal((n_campaigns, distances_m.size, locations_per_distance, 1))
-    noise = read_sd * rng.standard_normal((n_campaigns, distances_m.size, locations_per_distance, readings_per_location))
+    noise = read_sd * rng.standard_normal((n_campaigns, distances_m.size, locations_per_distance,
+                                           readings_per_location))
     return quantize_db(mean[:, None, None] + offs + noise, 1.0, READER_SENSITIVITY_DBM)
 
 

@@ -292,7 +292,8 @@ def run_case(case: SimCase, n_runs: int, seed: int, *, return_all: bool = False)
     truth, rss = simulate_truth_and_rss(case, n_runs, rng)
     room = room_for(case.layout)
     readers = readers_for(case.layout)
-    filter_model = RssModel(readers, PathLossModel(case.alpha_dbm, case.path_loss_exp, case.sigma_db, min_distance_m=0.1))
+    filter_model = RssModel(readers, PathLossModel(case.alpha_dbm, case.path_loss_exp, case.sigma_db,
+                                                   min_distance_m=0.1))
     if case.method in ("nn", "grid"):
         cells = cell_centres(room, *CELL_PATTERNS[case.k_cell])
     if case.method == "nn":
@@ -343,7 +344,7 @@ _PERCENTILES = {"median_m": 50.0, "p90_m": 90.0}
 
 
 def _sample(errors_m, over_recursions: bool):
-    """The errors every statistic of a table is taken from (issue 45: one population): of every recursion of every
+    """The errors every statistic of a table is taken from (one population for all): of every recursion of every
     run ``(..., R*T)`` when ``over_recursions``, else of recursion rt of every run ``(..., R)``; ``errors_m`` is
     ``(..., R, T)``."""
     if over_recursions:

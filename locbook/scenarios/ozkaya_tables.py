@@ -160,7 +160,8 @@ for _k in ("15", "20", "23", "25", "28"):
 for _s in ("3", "5.2", "7", "9"):
     KNOWN_MISSES[("7.3", _s)] = ("parameter-based NN errors come out 0.05-0.15 m below the thesis's at every sigma_0 "
                                  "(a separate pilot simulation found the same: 1.36/1.87/2.19/2.49 vs "
-                                 "1.38/1.95/2.29/2.57); the thesis's NN has some extra error source that is not described")
+                                 "1.38/1.95/2.29/2.57); the thesis's NN has some extra error source that is not "
+                                 "described")
 for _k in ("1", "2", "3", "4", "5", "6", "7"):
     KNOWN_MISSES[("7.4", _k)] = ("few-neighbour NN errors come out 0.1-0.2 m below the thesis's (a separate pilot "
                                   "simulation: k = 1 gives 1.97 vs 2.17); the cause is not known")
@@ -258,8 +259,9 @@ def record_tables(report, rows, n_runs: int) -> None:
         judged = score(kind, p.text, r["reproduced"], mc_std_error=r["se_m"], ambiguity=ambiguity,
                        linked=same_as is not None)
         note = ""
-        text_note = text_interpretation_note(r.get("interpretations") or sim_interpretations(), r["case"], report.experiment,
-                                             r["reproduced"], p.value) if judged.verdict in ("miss", "loose") else ""
+        text_note = (text_interpretation_note(r.get("interpretations") or sim_interpretations(), r["case"],
+                                              report.experiment, r["reproduced"], p.value)
+                     if judged.verdict in ("miss", "loose") else "")
         if text_note:
             # the interpretations are the first suspect; a known cause is named after them
             known = KNOWN_MISSES.get((r["table"], r["row"]), "")
@@ -281,8 +283,8 @@ def record_tables(report, rows, n_runs: int) -> None:
 
 
 #: Note of a printed CRLB of a layout whose bound the printed formula cannot give (half-separation and large room).
-CRLB_NOT_FROM_FORMULA = ("not reproducible: the printed CRLB formula is scale-invariant (doubling the room and the reader "
-                         "separations leaves it unchanged), so this value cannot come from it; the layout or "
+CRLB_NOT_FROM_FORMULA = ("not reproducible: the printed CRLB formula is scale-invariant (doubling the room and the "
+                         "reader separations leaves it unchanged), so this value cannot come from it; the layout or "
                          "the formula behind it is not printed")
 
 
@@ -326,7 +328,8 @@ def crlb_rows() -> list[dict]:
     for location, item, sigma in TEXT_CRLB:
         p = PRINTED.get(location, item, "crlb_m")
         first.setdefault(("corners3", sigma), p)
-        rows.append({"printed": p, "layout": "corners3", "sigma_db": sigma, "first_printed": first[("corners3", sigma)]})
+        rows.append({"printed": p, "layout": "corners3", "sigma_db": sigma,
+                     "first_printed": first[("corners3", sigma)]})
     for r in rows:
         p, again = r["printed"], r["first_printed"]
         r["same_as"] = again if again.id != p.id and again.value == p.value else None

@@ -88,7 +88,8 @@ __all__ = ["STATISTICS", "TESTBED_SIGMA_DB", "TESTBED_CELLS_M", "FIXED_POINTS_M"
 
 
 _ROW_METHOD = {
-    "Pattern-based NN": "pattern_nn", "Offline parameter-based NN": "offline_nn", "Parameter-based offline NN": "offline_nn",
+    "Pattern-based NN": "pattern_nn", "Offline parameter-based NN": "offline_nn",
+    "Parameter-based offline NN": "offline_nn",
     "Offline NN": "offline_nn", "Online NN": "online_nn", "Parameter-based online NN": "online_nn",
     "Grid-based Bayesian": "grid", "Grid Bayes": "grid", "Improved SIR": "sir", "Grid Bayes + auto σ": "grid_sigma",
     "Grid Bayes + RSSI smoothing": "grid_smoothing", "Grid Bayes + smoothing": "grid_smoothing",
@@ -259,8 +260,9 @@ def ranking_rows(results: dict[str, ExperimentResult]) -> list[dict]:
             if key in patch and key in mono:
                 printed = _printed_stat("monopole", key, "rmse_m") - _printed_stat("mobile", key, "rmse_m")
                 # different test beds: unpaired difference
-                rows.append(_ranking_row("Table 7.40 (antenna)", f"patch < monopole, {METHOD_LABELS[key]}", "mobile vs monopole",
-                                         "rmse_m", printed, mono[key]["rmse_m"][:, None] - patch[key]["rmse_m"][None, :]))
+                rows.append(_ranking_row("Table 7.40 (antenna)", f"patch < monopole, {METHOD_LABELS[key]}",
+                                         "mobile vs monopole", "rmse_m", printed,
+                                         mono[key]["rmse_m"][:, None] - patch[key]["rmse_m"][None, :]))
     return rows
 
 
@@ -286,23 +288,24 @@ def _pt(table: str, row: str, column: str) -> str:
 _FILTER_FIXED = (f"fixed target: the thesis's Bayesian filters are its worst fixed-target methods (grid Bayes "
                  f"{_pt('7.29', 'Grid-based Bayesian', 'rmse_m')} m RMSE), while here they average the readings of a "
                  "whole visit with fresh dynamic noise and beat NN. A real home's static errors are not a log-distance "
-                 "mean plus a smooth Gaussian field (furniture, multipath nulls, orientation), so the filters' fixed-sigma "
-                 "Gaussian likelihood accumulates evidence for a wrong cell; the synthetic channel has no such model "
-                 "error. Whether the thesis restarted the filter at each point is not stated either")
-_FILTER_MOVING = ("Bayesian filter on the synthetic test bed: the path's x, the number of passes, the obstruction points "
-                  "and whether a filter restarts are assumed (none is printed), and the model error that hurts the "
-                  "thesis's fixed-target filters (a real home is not a log-distance mean plus a smooth Gaussian field) "
-                  "acts here too; the synthetic channel has none of it")
+                 "mean plus a smooth Gaussian field (furniture, multipath nulls, orientation), so the filters' "
+                 "fixed-sigma Gaussian likelihood accumulates evidence for a wrong cell; the synthetic channel has no "
+                 "such model error. Whether the thesis restarted the filter at each point is not stated either")
+_FILTER_MOVING = ("Bayesian filter on the synthetic test bed: the path's x, the number of passes, the obstruction "
+                  "points and whether a filter restarts are assumed (none is printed), and the model error that hurts "
+                  "the thesis's fixed-target filters (a real home is not a log-distance mean plus a smooth Gaussian "
+                  "field) acts here too; the synthetic channel has none of it")
 _SMALL_K = (f"few neighbours: the thesis's k = 4 and 18 errors have heavy tails (90 % at {_pt('7.27', '4', 'p90_m')} / "
-            f"{_pt('7.27', '18', 'p90_m')} m) that the synthetic Gaussian-plus-burst noise does not produce; one outlying "
-            "link moves a few-neighbour estimate to a wrong cell")
+            f"{_pt('7.27', '18', 'p90_m')} m) that the synthetic Gaussian-plus-burst noise does not produce; one "
+            "outlying link moves a few-neighbour estimate to a wrong cell")
 _PATTERN = (f"pattern NN median {_pt('7.26', 'Pattern-based NN', 'median_m')} m against a mean of "
-            f"{_pt('7.26', 'Pattern-based NN', 'mean_m')} m means many estimates land on a training location; a weighted "
-            "centroid over all 32 locations (k_NN = 36 capped at 32) cannot do that. The thesis may have used fewer "
-            "neighbours for the pattern method")
-_NEAR_TAGS = (f"points near the reference tags: the thesis's grid Bayes is worse there ({_pt('7.36', 'Grid Bayes', 'mean_m')} "
-              f"m) than overall ({_pt('7.29', 'Grid-based Bayesian', 'mean_m')} m mean), ours is not; the tag and test-point "
-              "coordinates are assumed, and the filters' fixed-target gap applies as well")
+            f"{_pt('7.26', 'Pattern-based NN', 'mean_m')} m means many estimates land on a training location; a "
+            "weighted centroid over all 32 locations (k_NN = 36 capped at 32) cannot do that. The thesis may have used "
+            "fewer neighbours for the pattern method")
+_NEAR_TAGS = ("points near the reference tags: the thesis's grid Bayes is worse there "
+              f"({_pt('7.36', 'Grid Bayes', 'mean_m')} m) than overall ({_pt('7.29', 'Grid-based Bayesian', 'mean_m')} "
+              "m mean), ours is not; the tag and test-point coordinates are assumed, and the filters' fixed-target gap "
+              "applies as well")
 _MONOPOLE = (f"monopole antennas are modelled only by scaling the noise ({MONOPOLE_SIGMA_PRINTED.text} / "
              f"{PATCH_SIGMA_PRINTED.text}); the real change (vertical polarisation, more multipath, different pattern) "
              "is not a scaled copy of the patch channel")
@@ -339,25 +342,25 @@ def miss_note(experiment: str, method: str, column: str) -> str:
 
 _RANKING_NOTES = (
     ("Table 7.27", "here the error is lowest near k = 18 (about k_CELL / 2), as in the thesis's own simulations; the "
-                   "thesis's test bed found k = 36 slightly better, and the thesis itself remarks that this contradicts "
-                   "its simulation"),
-    ("Table 7.28", "the synthetic home's mean channel is Table 6.1 itself, so the offline map is exact and the per-step "
-                   "4-tag fits only add noise; online calibration wins where reader-wide offsets occur (dynamic noise, "
-                   "obstruction). The thesis's home differed from its offline calibration (Tables 6.2 and 6.1 differ by "
-                   "several dB per reader): see the sensitivity run with the home set to Table 6.2"),
+                   "thesis's test bed found k = 36 slightly better, and the thesis itself remarks that this "
+                   "contradicts its simulation"),
+    ("Table 7.28", "the synthetic home's mean channel is Table 6.1 itself, so the offline map is exact and the "
+                   "per-step 4-tag fits only add noise; online calibration wins where reader-wide offsets occur "
+                   "(dynamic noise, obstruction). The thesis's home differed from its offline calibration (Tables 6.2 "
+                   "and 6.1 differ by several dB per reader): see the sensitivity run with the home set to Table 6.2"),
     ("Table 7.29", _FILTER_FIXED),
-    ("Table 7.30", "grid Bayes and improved SIR are within a few centimetres here; the thesis's own simulations also rank "
-                   f"improved SIR behind grid Bayes for a mobile target ({_pt('7.46', 'Improved SIR', 'rmse_m')} vs "
-                   f"{_pt('7.46', 'Grid-based Bayesian', 'rmse_m')} m, Table 7.46), so this ranking is not reproduced in "
-                   "simulation by the thesis either"),
+    ("Table 7.30", "grid Bayes and improved SIR are within a few centimetres here; the thesis's own simulations also "
+                   f"rank improved SIR behind grid Bayes for a mobile target ({_pt('7.46', 'Improved SIR', 'rmse_m')} "
+                   f"vs {_pt('7.46', 'Grid-based Bayesian', 'rmse_m')} m, Table 7.46), so this ranking is not "
+                   "reproduced in simulation by the thesis either"),
     ("Table 7.31", "within a few centimetres here (see Table 7.30); " + _DYNAMIC),
     ("Table 7.32", _SIGMA), ("Table 7.33", _SIGMA), ("Table 7.34", _SIGMA), ("Table 7.39", _SIGMA),
-    ("Table 7.40 (monopole)", _SIGMA + "; with the monopole the synthetic spread is scaled up, yet Eq. (6.7) stays close "
-                              "to the fixed sigma, so online sigma gains little"),
+    ("Table 7.40 (monopole)", _SIGMA + "; with the monopole the synthetic spread is scaled up, yet Eq. (6.7) stays "
+                              "close to the fixed sigma, so online sigma gains little"),
     ("Table 7.42", _SIGMA),
-    ("Table 7.35", "smoothing subtracts a nearby tag's error; the error a target shares with a tag here is the static field "
-                   "(correlation exp(-d / decorrelation_m)) and reader-wide bursts. The thesis's gains imply errors shared "
-                   "far more strongly near the tags than this model has"),
+    ("Table 7.35", "smoothing subtracts a nearby tag's error; the error a target shares with a tag here is the static "
+                   "field (correlation exp(-d / decorrelation_m)) and reader-wide bursts. The thesis's gains imply "
+                   "errors shared far more strongly near the tags than this model has"),
 )
 
 

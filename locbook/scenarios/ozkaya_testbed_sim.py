@@ -37,7 +37,8 @@ TESTBED_SIGMA_DB = oz.PRINTED.get("Sec. 7.3.1.3 text", "test bed methods", "sigm
 TESTBED_CELLS_M = oz.cell_centres(oz.TESTBED_SIZE_M, 9, 4, margin_m=0.0)
 #: 25 fixed test points "starting 1 m from the surrounding walls" (Fig. 7.21, not printed): ASSUMED 5 x 5 lattice
 #: x in {1, 2.75, 4.5, 6.25, 8}, y in {1, 1.5, 2, 2.5, 3}.
-FIXED_POINTS_M = np.stack(np.meshgrid(np.linspace(1.0, 8.0, 5), np.linspace(1.0, 3.0, 5), indexing="ij"), -1).reshape(-1, 2)
+FIXED_POINTS_M = np.stack(np.meshgrid(np.linspace(1.0, 8.0, 5), np.linspace(1.0, 3.0, 5), indexing="ij"),
+                          -1).reshape(-1, 2)
 #: The pattern map has 32 "furniture-dependent" locations about 1 m apart (Sec. 6.3): ASSUMED the 36 cell
 #: centres less four furniture-occupied cells spread over both rooms.
 PATTERN_EXCLUDED_CELLS_M = ((0.5, 3.5), (2.5, 0.5), (5.5, 3.5), (8.5, 1.5))
@@ -329,8 +330,9 @@ def _estimate(method: Method, rss, tags, calibration, settings: MethodSettings, 
         alpha, n = calibration.ref_power_dbm, calibration.path_loss_exp                # (R, T, m)
     per_step = method.online_sigma or method.parameters != "offline"           # the online calibration's (R, T) axes
     if method.estimator == "nn":
-        fp = model_fingerprints(TESTBED_CELLS_M, RssModel(readers, PathLossModel(alpha, n, wall_attenuation_db=oz.WAF_DB),
-                                                          walls, per_step_channel=per_step))
+        fp = model_fingerprints(TESTBED_CELLS_M,
+                                RssModel(readers, PathLossModel(alpha, n, wall_attenuation_db=oz.WAF_DB), walls,
+                                         per_step_channel=per_step))
         return knn_position(rss, fp, TESTBED_CELLS_M, min(k, TESTBED_CELLS_M.shape[0]))
     sigma = calibration.sigma_db[..., None] if method.online_sigma else settings.sigma_db          # (R, T, 1): pooled
     model = RssModel(readers, PathLossModel(alpha, n, sigma, wall_attenuation_db=oz.WAF_DB, min_distance_m=0.1), walls,
@@ -502,7 +504,7 @@ def testbed_crlb_m(path_loss_exp=TESTBED_CRLB_PATH_LOSS_EXP, sigma_db: float = T
     and sigma = 5.2 dB (Sec. 7.3.1.3), as the RMS over the area ("Square root of (A.13) is used in the thesis to
     compare with RMS error", Appendix A): ``average="area_rms"`` over a 5 cm lattice of the 9 m x 4 m plan, or
     ``"cells_mean"``, the mean of the per-cell bound over the 36 cells (with n = 2: the readings fitted to the
-    simulation CRLB columns). ``variant="corrected"`` gives the correct bound (1/d^4) (``form=`` before issue 47:
+    simulation CRLB columns). ``variant="corrected"`` gives the correct bound (1/d^4) (the earlier ``form=``:
     deprecated)."""
     variant = check_variant(variant, CRLB_VARIANTS, where="testbed_crlb_m", renamed=RENAMED_CRLB_FORMS)
     model = RssModel(oz.TESTBED_READERS_M, PathLossModel(0.0, path_loss_exp, sigma_db))

@@ -27,8 +27,9 @@ from ..tracking.streams import NonlinearMeasurement, RssMeasurement
 
 __all__ = [
     "DOCUMENT", "PRINTED", "SIGMA1_DB", "ETA", "SIGMA2_M", "SIGMA3_M", "N_LOCATIONS", "AREA_M", "Setup",
-    "TARGETS", "with_target", "draw_locations", "measure", "observed_locations", "lsf_by_count", "rlsf_path", "ekf_path", "EKF_VARIANTS", "EKF_SCHEDULES",
-    "SCHEDULES", "SHADOWING", "pf_iterations", "pf_run", "PF_ESTIMATES", "pf_estimate_m", "printed_jacobian", "corrected_jacobian", "crlb_m", "errors_m",
+    "TARGETS", "with_target", "draw_locations", "measure", "observed_locations", "lsf_by_count", "rlsf_path",
+    "ekf_path", "EKF_VARIANTS", "EKF_SCHEDULES", "SCHEDULES", "SHADOWING", "pf_iterations", "pf_run", "PF_ESTIMATES",
+    "pf_estimate_m", "printed_jacobian", "corrected_jacobian", "crlb_m", "errors_m",
 ]
 
 DOCUMENT = "palvai2008"

@@ -36,12 +36,12 @@ KNN_WEIGHTINGS = ("inverse_square", "literal_ozkaya2011", "uniform")
 
 
 def _model_fingerprints_v1(cells_m, anchors_m, model, walls_m=None, min_distance_m=None):
-    """The signature of :func:`model_fingerprints` before issue 47 (deprecated calls are bound to it)."""
+    """The earlier signature of :func:`model_fingerprints`, the anchors second (deprecated calls are bound to it)."""
 
 
 def _old_fingerprints_call(args, kwargs):
-    """:func:`~locbook.static.rss_form.accepts_old_form`'s ``old_call`` of :func:`model_fingerprints`: the form
-    before issue 47 (cells, anchors, a PathLossModel, walls) goes to the same arithmetic, :func:`_fingerprints`,
+    """:func:`~locbook.static.rss_form.accepts_old_form`'s ``old_call`` of :func:`model_fingerprints`: the earlier
+    form (cells, anchors, a PathLossModel, walls; deprecated) goes to the same arithmetic, :func:`_fingerprints`,
     directly (its parameters may carry any batch axes ``(..., m)``, more than an RssModel holds)."""
     if not is_old_form(args, kwargs, ("cells_m", "anchors_m")):
         if "walls_m" in kwargs:
@@ -65,7 +65,7 @@ def model_fingerprints(cells_m, model: RssModel, *, min_distance_m: float = 0.1)
     ``min_distance_m`` (> 0) are clipped (a cell centre on a reader; the channel's own ``min_distance_m`` if larger).
     The cells must be finite. Per-run anchors and a tag height are refused by name.
 
-    The form before issue 47, ``model_fingerprints(cells_m, anchors_m, channel, walls_m=None, min_distance_m=0.1)`` (a
+    The earlier form, ``model_fingerprints(cells_m, anchors_m, channel, walls_m=None, min_distance_m=0.1)`` (a
     :class:`~locbook.PathLossModel` third), is deprecated: it warns and gives the same map.
     """
     anchors_m, channel, _ = rss_model_parts(model, "model_fingerprints", walls=True, per_step=True, heights=False,

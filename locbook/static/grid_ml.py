@@ -19,7 +19,7 @@ __all__ = ["grid_ml_position", "GRID_ML_BLOCK_BYTES"]
 
 
 def _grid_ml_position_v1(anchors_m, rss_dbm, model, grid_m, *, chunk=None, min_anchors=None, tag_height_m=None):
-    """The signature of :func:`grid_ml_position` before issue 47 (deprecated calls are bound to it)."""
+    """The earlier signature of :func:`grid_ml_position`, the anchors first (deprecated calls are bound to it)."""
 
 
 #: memory of one block of grid costs in :func:`grid_ml_position` (problems x cells doubles; the arithmetic that makes
@@ -95,7 +95,7 @@ def grid_ml_position(rss_dbm, model: RssModel, cells_m, *,
 
     Notes
     -----
-    The form before issue 47, ``grid_ml_position(anchors_m, rss_dbm, channel, grid_m, ..., tag_height_m=...)`` (a
+    The earlier form, ``grid_ml_position(anchors_m, rss_dbm, channel, grid_m, ..., tag_height_m=...)`` (a
     :class:`~locbook.PathLossModel` third), is deprecated: it warns and builds the :class:`~locbook.RssModel`;
     ``grid_m=`` is the old spelling of ``cells_m=`` (deprecated too).
 

@@ -12,7 +12,7 @@ The estimators now live along their seams (import from there in new code):
 - :mod:`locbook.static.box_ls`: ``lateration_box_ls`` and its active-set solver (``BOX_LS_SOLVERS``);
 - :mod:`locbook.static.rss_ml`: ``rss_ml_position``;
 - :mod:`locbook.static.grid_ml`: ``grid_ml_position`` (``GRID_ML_BLOCK_BYTES``);
-- :mod:`locbook.static.rss_form`: the RSS estimators' call form (one RssModel; the form before issue 47).
+- :mod:`locbook.static.rss_form`: the RSS estimators' call form (one RssModel; the earlier, deprecated form).
 """
 from .box_ls import BOX_LS_SOLVERS, lateration_box_ls
 from .checks import (

@@ -1,6 +1,6 @@
-"""The call form of the RSS estimators (issue 47): the readings first, then one :class:`~locbook.RssModel`; what an
-estimator cannot honour in that model is refused by name (:func:`rss_model_parts`), and the form before issue 47
-(anchors, readings, a :class:`~locbook.PathLossModel`) is accepted for one release with a warning
+"""The call form of the RSS estimators: the readings first, then one :class:`~locbook.RssModel`; what an
+estimator cannot honour in that model is refused by name (:func:`rss_model_parts`), and the earlier form
+(anchors, readings, a :class:`~locbook.PathLossModel`; deprecated) is accepted for one release with a warning
 (:func:`accepts_old_form`). Used by :mod:`locbook.static.rss_ml`, :mod:`locbook.static.grid_ml` and
 :mod:`locbook.static.fingerprint`.
 """
@@ -44,7 +44,7 @@ def rss_model_parts(model, who: str, *, form: str | None = None, walls: bool = F
 
 
 def is_old_form(args, kwargs, leading) -> bool:
-    """Whether a call is in the form before issue 47: a :class:`~locbook.PathLossModel` third (positionally, or as
+    """Whether a call is in the earlier, deprecated form: a :class:`~locbook.PathLossModel` third (positionally, or as
     ``model=`` after the two ``leading`` arguments), or ``anchors_m=`` given; an RssModel second is the new form."""
     model = kwargs["model"] if "model" in kwargs else (args[2] if len(args) > 2 else None)
     return "anchors_m" in kwargs or (isinstance(model, PathLossModel)
@@ -59,7 +59,7 @@ def accepts_old_form(old_call):
 
 
 def old_estimator_call(args, kwargs, who: str, v1):
-    """:func:`accepts_old_form`'s ``old_call`` of the RSS ML estimators: the form before issue 47 (anchors, readings,
+    """:func:`accepts_old_form`'s ``old_call`` of the RSS ML estimators: the earlier form (anchors, readings,
     a PathLossModel, ..., ``tag_height_m=``) builds the RssModel; ``grid_m=`` is the old spelling of ``cells_m=``."""
     if is_old_form(args, kwargs, ("anchors_m", "rss_dbm")):
         given = inspect.signature(v1).bind(*args, **kwargs).arguments      # a TypeError as the old function gave

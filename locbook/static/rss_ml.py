@@ -23,7 +23,7 @@ __all__ = ["rss_ml_position"]
 
 def _rss_ml_position_v1(anchors_m, rss_dbm, model, initial_m=None, *, max_iter=None, tol_m=None, min_distance_m=None,
                         raise_on_failure=None, min_anchors=None, tag_height_m=None, region_m=None):
-    """The signature of :func:`rss_ml_position` before issue 47 (deprecated calls are bound to it)."""
+    """The earlier signature of :func:`rss_ml_position`, the anchors first (deprecated calls are bound to it)."""
 
 
 def _raise_if_failed(res: LocalizationResult, raise_on_failure: bool) -> LocalizationResult:
@@ -190,7 +190,7 @@ def rss_ml_position(rss_dbm, model: RssModel, initial_m=None, *,
     problem whose cost over ``sigma^2`` exceeds ``chi2.ppf(1 - alpha, m_heard - dim)``,
     :data:`~locbook.static.checks.GOODNESS_OF_FIT_ALPHA` (model with ``sigma_db > 0`` only).
 
-    The form before issue 47, ``rss_ml_position(anchors_m, rss_dbm, channel, initial_m, ..., tag_height_m=...)`` (a
+    The earlier form, ``rss_ml_position(anchors_m, rss_dbm, channel, initial_m, ..., tag_height_m=...)`` (a
     :class:`~locbook.PathLossModel` third), is deprecated: it warns and builds the :class:`~locbook.RssModel`.
 
     References

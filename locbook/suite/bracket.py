@@ -25,7 +25,7 @@ combination of their non-fitted values in which two or more differ from the defa
 interpretations that interact are judged together, not only one at a time.
 
 The bracket verdict of a scored row (kind ``reproduction``, ``calibrated`` or ``claim`` with a within / loose /
-miss verdict; arithmetic, shown and linked rows have none), issue 45's tiers (:data:`BRACKETS`), decided in this
+miss verdict; arithmetic, shown and linked rows have none), one of the tiers :data:`BRACKETS`, decided in this
 order:
 
 ``default``

@@ -1,5 +1,5 @@
 """Each document's conclusions page: every claim it states (``locbook/data/claims/<document>.csv``,
-:mod:`locbook.reproduce.claims`) judged from the rows of a reports folder (issue 45).
+:mod:`locbook.reproduce.claims`) judged from the rows of a reports folder.
 
 Per claim: does the source's own printed table support it; does it hold, fail or stay undecidable on our values
 under the default interpretation; and does that verdict hold under every other interpretation its brackets ran (each

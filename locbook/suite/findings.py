@@ -1,5 +1,5 @@
 """What the interpretation brackets found, counted once: the tier tally, the findings page of each document, the
-one-screen answer at the top of an index (issue 45, "one tally everywhere").
+one-screen answer at the top of an index.
 
 Everything here is computed from the rows of a reports folder's ``numbers.csv`` (the experiments' rows with the
 ``bracket`` and ``bracket_interpretations`` columns :func:`locbook.suite.bracket.bracket_of_rows` gave them), so the

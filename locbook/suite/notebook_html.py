@@ -1,4 +1,4 @@
-"""The executed notebook as an HTML page that needs nothing from the network (issue 32).
+"""The executed notebook as an HTML page that needs nothing from the network.
 
 nbconvert's JupyterLab template loads MathJax, require.js and mermaid from a CDN, so a report opened offline showed
 its formulas as raw TeX. Here the math of every Markdown cell (``$...$`` and ``$$...$$``) is drawn to SVG by

@@ -140,7 +140,7 @@ def _plural(n: int, noun: str) -> str:
 
 
 def findings_summary(entries, rows) -> list[dict]:
-    """A few sentences per document, generated from its rows (issue 32): what is reproduced, what is only
+    """A few sentences per document, generated from its rows: what is reproduced, what is only
     calibrated, what misses and the likely reasons of the most missed rows (their notes, the most frequent first).
     ``[{"key", "authors", "year", "text"}]`` for the documents with scored rows."""
     out = []

@@ -22,7 +22,7 @@ __all__ = ["SuiteFile", "one_line", "PROFILES", "DOCUMENT_KEYS", "DATA_KINDS", "
 
 PROFILES = ("quick", "full")
 #: the five source documents, the measured data sets (any data set: ``locbook run --data``), and the cross-document
-#: benchmark (issue 16)
+#: benchmark
 DOCUMENT_KEYS = ("dogan2015", "gudipati2017", "palvai2008", "george", "ozkaya2011", "measured", "benchmark")
 #: experiment ids and report folder names: lower-case letters, digits and single hyphens
 SAFE_NAME = re.compile(r"^[a-z0-9]+(-[a-z0-9]+)*$")

@@ -3,7 +3,7 @@ prediction (:func:`_predictor`: linear, per-step or nonlinear motion with the co
 the UKF's unscented prediction) and the streams' updates in the given order, each from the previous one's posterior,
 with the outputs of :class:`locbook.tracking.results.KalmanResult` recorded as asked.
 
-Speed (issue 18). While the covariance recursion is the same in every run (P0, F and Q without batch axes, linear
+Speed. While the covariance recursion is the same in every run (P0, F and Q without batch axes, linear
 streams whose H and R have none and whose missing components are the same in every run) the covariance is kept
 unbatched and updated once per step; the first update that differs between runs broadcasts it and continues batched.
 """

@@ -77,7 +77,7 @@ class BayesFilterResult(FilterResult):
     probabilities); ``resampled`` ``(R, T)`` (always False for the grid); ``particles_m`` ``(R, N, dim)`` and
     ``weights`` ``(R, N)``: the final posterior as weighted points (the particles, or the cells and their belief);
     ``clouds``: the particles after the update, before resampling, at the steps asked for, ``{t: (R, N, dim)}``.
-    ``mean_m``, ``covariance_m2``, ``degenerate``, ``degenerate_step`` and ``n_degenerate`` (before issue 47) are
+    ``mean_m``, ``covariance_m2``, ``degenerate``, ``degenerate_step`` and ``n_degenerate`` (the earlier names) are
     deprecated aliases of ``mean``, ``cov``, ``diverged``, ``diverged_step`` and ``n_diverged``."""
 
     _RENAMED = {"mean_m": "mean", "covariance_m2": "cov", "degenerate": "diverged",
@@ -482,8 +482,8 @@ def _is_likelihood(value) -> bool:
 
 
 def _old_grid_order(function, args, kwargs):
-    """:func:`~locbook._deprecation.old_form`'s detector of :func:`grid_bayes_filter`: the order before issue 47, the
-    cells second (an array, not a model or a callable) and the model or callable third (positionally or as
+    """:func:`~locbook._deprecation.old_form`'s detector of :func:`grid_bayes_filter`: the earlier, deprecated
+    order, the cells second (an array, not a model or a callable) and the model or callable third (positionally or as
     ``model=``), is swapped into the new one."""
     if len(args) < 2 or _is_likelihood(args[1]):
         return None
@@ -515,7 +515,7 @@ def grid_bayes_filter(rss_dbm, model, cells_m, spread_m: float = 0.5, *, n_steps
     ``rss_dbm=None`` and ``n_steps`` given, the cells ``(C, dim)`` of any dimension, the number of runs that of its
     output. ``velocity_m``: a known displacement per step, ``(dim,)`` or ``(T, dim)`` (the mean of the process model
     in the thesis's constant-velocity experiment). ``initial_belief``: ``(C,)`` or ``(R, C)``; uniform if None.
-    The model comes second, as in every RSS filter and estimator; the order before issue 47, ``(rss_dbm, cells_m,
+    The model comes second, as in every RSS filter and estimator; the earlier order, ``(rss_dbm, cells_m,
     model, ...)``, is deprecated (one release: a DeprecationWarning, the same result).
 
     ``transition``: ``"dense"`` builds the ``C x C`` matrix (memory quadratic in the cells: its construction peaks
@@ -527,7 +527,7 @@ def grid_bayes_filter(rss_dbm, model, cells_m, spread_m: float = 0.5, *, n_steps
     is checked against :data:`MAX_ARRAY_BYTES` before it is allocated: beyond it, a ValueError naming ``cells_m`` (or
     the readings).
 
-    Speed (issue 31). With an :class:`~locbook.models.rss.RssModel` whose mean does not change with the step (no
+    Speed. With an :class:`~locbook.models.rss.RssModel` whose mean does not change with the step (no
     per-step ``ref_power_dbm``, ``path_loss_exp`` or ``sigma_db``; walls allowed), the cell-by-anchor mean table is
     computed once per call (per run for per-run anchors, up to :data:`locbook.models.rss.TABLE_MAX_VALUES` values)
     and each step's log-likelihood from it, by the same arithmetic as :meth:`RssModel.log_likelihood

@@ -1,4 +1,4 @@
-"""The NIS guard's flags over the runs of a Monte-Carlo study, and how a report states them (issue 26).
+"""The NIS guard's flags over the runs of a Monte-Carlo study, and how a report states them.
 
 Every Kalman-family filter flags a run ``diverged`` when its normalised innovation squared stays beyond a chi-square
 bound for a window of consecutive updates (:mod:`locbook.tracking.results`, module docstring). The scenario functions

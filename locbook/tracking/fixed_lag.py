@@ -42,7 +42,7 @@ class FixedLagResult(FilterResult):
     """The fixed-lag estimates of a run with T steps and state size n (``batch``: the run's leading axes).
 
     - ``mean`` ``batch + (R, n)``, ``cov`` ``batch + (R, n, n)``: row i is the estimate of step ``steps[i]`` given the
-      readings of steps 0 .. ``given_to[i]`` (``x`` and ``P`` before issue 47: deprecated aliases);
+      readings of steps 0 .. ``given_to[i]`` (``x`` and ``P``, the earlier names: deprecated aliases);
     - ``steps`` ``(R,)``: the step each row estimates (for :func:`fixed_lag_smoother` every step, ``0 .. T - 1``);
     - ``given_to`` ``(R,)``: the last step whose readings the row uses, ``min(steps + lag, T - 1)``;
     - ``lag``: the lag L asked for (a lag of T - 1 or more gives the full-interval smoother);

@@ -13,9 +13,9 @@ Document 003 (George and Vadivukkarasi, Eqs. (9)-(13)) prints the update with ``
 ``P_{k-1}`` in place of the predicted quantities, so the prediction of Eqs. (9)-(10) is computed and
 then discarded. That literal form is available as ``variant="literal_george"`` (flagged; the paper prints no
 year, so the name has none): it reduces to a running average of the measurements. The default is
-``variant="corrected"`` (``"standard"`` before issue 47: accepted for one release with a ``DeprecationWarning``).
+``variant="corrected"`` (``"standard"``, its earlier name, is accepted for one release with a ``DeprecationWarning``).
 
-The module's layout (issue 27): the streams and their updates in :mod:`locbook.tracking.streams`, the functional
+The module's layout: the streams and their updates in :mod:`locbook.tracking.streams`, the functional
 predict / update in :mod:`locbook.tracking.functional`, the shared time loop in ``_loop``, the compiled EKF in
 ``_compiled`` / ``_kernels``, the result and the consistency guard (NIS, divergence flags, batch isolation) in
 :mod:`locbook.tracking.results`.

@@ -27,7 +27,7 @@ One run may be given without the run axis (readings ``(T, m)``, or with a callab
 ``(N, dim)`` or the start ``(dim,)``): the callables then see ``(N, dim)`` and return ``(N,)`` / ``(N, dim)``, and
 every output of the result loses its leading run axis.
 
-A collapsed run is isolated (issue 26): where a run's log-likelihood is -inf for every particle (no particle
+A collapsed run is isolated: where a run's log-likelihood is -inf for every particle (no particle
 explains the reading), or NaN or +inf for any particle (garbage), its weights cannot be normalised. That run is
 flagged ``diverged`` with the first such step (``diverged_step``, -1 elsewhere), its estimates are NaN from that
 step on and its final particles and weights are NaN; the other runs go on as if that run were sane (its particles are
@@ -37,7 +37,7 @@ A collapse is never silent: the call emits one ``RuntimeWarning`` with the numbe
 (run, step); when EVERY run collapses (nothing can be estimated: typically a units bug, or a likelihood that overflows)
 it raises a ValueError naming the likelihood and the first step and run instead of returning NaN.
 
-Compiled path (issue 31): from :data:`_NUMBA_MIN_PARTICLES` particles in all (runs x N) on, with numba installed and
+Compiled path: from :data:`_NUMBA_MIN_PARTICLES` particles in all (runs x N) on, with numba installed and
 not turned off (``LOCBOOK_NUMBA=0``), the kernels of :mod:`locbook.tracking._particle_kernels` run the hot loop with
 no temporaries of the size of the cloud: an RssModel's log-likelihood in one pass over the particles
 (:func:`_fused_rss_log_likelihood`, walls included), the default random walk in place, and,

@@ -132,7 +132,7 @@ class KalmanResult(FilterResult):
     """Output of every Kalman-family filter (module docstring); ``batch`` the runs' axes, ``R`` recorded steps.
 
     - ``mean`` ``batch + (R, n)``, ``cov`` ``batch + (R, n, n)``: posterior means and covariances at ``steps``
-      ``(R,)`` (``x`` and ``P`` before issue 47: deprecated aliases);
+      ``(R,)`` (``x`` and ``P``, the earlier names: deprecated aliases);
     - ``x_pred``, ``P_pred``: the prior each step's update starts from (the one-step prediction; for the KF's
       ``literal_george`` variant the previous posterior, which the printed update uses); ``innovation``
       ``batch + (R, M)`` and ``S`` ``batch + (R, M, M)``: the readings' innovations and their covariance, block

@@ -35,7 +35,7 @@ PINV_RTOL = 1e-12
 @dataclass(frozen=True)
 class SmoothedResult(FilterResult):
     """``mean`` ``batch + (T, n)`` and ``cov`` ``batch + (T, n, n)``: the smoothed means and covariances at every
-    step (``x`` and ``P`` before issue 47: deprecated aliases); ``gain`` ``batch + (T - 1, n, n)``: the smoother gains
+    step (``x`` and ``P``, earlier names: deprecated aliases); ``gain`` ``batch + (T - 1, n, n)``: the smoother gains
     ``C_k = P_k F^T P_{k+1|k}^{-1}``. The rest of the result vocabulary
     (:class:`~locbook.tracking.results.FilterResult`) is the filter run's, carried over: ``steps`` (every step),
     ``log_likelihood`` (the readings' likelihood is that of the filter: smoothing conditions on the same readings),

@@ -26,13 +26,13 @@ semi-definite whenever ``R~`` is. ``R~`` is symmetrised and its eigenvalues floo
 of floored updates is returned, so a run can show it is rarely or never needed.
 
 The thesis-literal forms are flagged variants: ``variant="literal_gudipati2017"`` (Eq. (3.22) as printed; the weights
-then sum to ``2n / (n + lambda)``; the filter's ``weights=`` before issue 47, deprecated) and ``innovation_noise=False``
+then sum to ``2n / (n + lambda)``; the filter's earlier ``weights=``, deprecated) and ``innovation_noise=False``
 (Eq. (3.26) without R). Eq. (3.30) as printed cannot
 be evaluated (an ``n x m`` times ``n x m`` product) and has no variant.
 
 Missing readings follow the library's rule: a NaN component is left out of the update (zero gain column).
 
-Speed (issue 31). With numba installed and enabled (``LOCBOOK_NUMBA``, :mod:`locbook.tracking._compiled`), linear
+Speed. With numba installed and enabled (``LOCBOOK_NUMBA``, :mod:`locbook.tracking._compiled`), linear
 motion (F without run axes; Q may differ per run) and streams of the library's linear, RSS and inertial models
 (:class:`~locbook.models.imu.InertialMeasurement`; the compiled registry, :mod:`locbook.tracking._compiled`), the same
 recursion runs compiled on blocks of runs
@@ -425,7 +425,7 @@ def unscented_kalman_filter(F, Q, x0, P0, measurements, *, B=None, u=None, alpha
 
     ``alpha``, ``beta``, ``kappa``: sigma-point spread; defaults are the thesis's (alpha = 1e-3, beta = 2,
     kappa = 0). ``variant``: ``"corrected"`` or the flagged ``"literal_gudipati2017"`` (Eq. (3.22) as printed; the
-    keyword was ``weights=`` before issue 47: accepted for one release with a DeprecationWarning).
+    earlier keyword ``weights=`` is accepted for one release with a DeprecationWarning).
     ``innovation_noise=False``: Eq. (3.26) as printed, without R (flagged: with more measurements than the
     state's spread can explain, P_zz is singular and the update stops with a clear error).
 

@@ -9,7 +9,7 @@ pytestmark = pytest.mark.installed
 
 HEAVY = ("numpy", "scipy", "pandas", "matplotlib", "cvxpy", "pydantic", "papermill", "nbformat", "jinja2", "rich")
 #: what `locbook list` may import beyond `locbook --version`: the experiment list is checked by its pydantic schema
-#: (locbook.suite.spec_schema), about 0.05 s of a start-up that stays well under a second (issue 27's target;
+#: (locbook.suite.spec_schema), about 0.05 s of a start-up that stays well under a second (the target;
 #: benchmarks/bench_startup.py measures it). pydantic and its own dependencies only.
 LIST_MAY_IMPORT = {"pydantic", "pydantic_core", "typing_extensions", "annotated_types", "typing_inspection"}
 

@@ -1,8 +1,11 @@
 """tests/ mirrors locbook/: every test module lives in a folder named after a locbook subpackage (tests/tracking/ for
 locbook/tracking/, ...) or in tests/project/ (packaging, docs, the CLI's start-up, notebooks, the site), and no test
 module imports another one: what several modules share is a fixture in a conftest.py or a helper in a module of
-tests/ that is not a test module (builders.py, toy_suite.py, oracles.py). docs/testing.md, "Where tests live"."""
+tests/ that is not a test module (builders.py, toy_suite.py, oracles.py). docs/testing.md, "Where tests live".
+No comment or docstring of locbook/, tests/ or a notebook's code cites this project's tracker by number."""
 import ast
+import json
+import re
 
 from builders import REPO_ROOT, TESTS_DIR
 
@@ -54,3 +57,45 @@ def test_the_layout_check_sees_a_test_module_import(tmp_path):
     path = tmp_path / "test_x.py"
     path.write_text("def f():\n    from test_other import helper\nimport conftest\nfrom builders import REPO_ROOT\n")
     assert sorted(_imported(path)) == ["builders", "conftest", "test_other"]
+
+
+#: "issue NN", "issues NN, MM", "issue #NN" with digits: a tracker number says nothing to a reader of the package
+ISSUE_REFERENCE = re.compile(r"[Ii]ssues? ?#?[0-9]+")
+#: the third-party projects whose trackers may be cited, as "<project> issue NN" (a filterpy test's origin)
+THIRD_PARTY_TRACKERS = {"filterpy"}
+
+
+def _issue_references(text):
+    """The "issue NN" references in ``text`` that name no tracker of :data:`THIRD_PARTY_TRACKERS`, with their line."""
+    for m in ISSUE_REFERENCE.finditer(text):
+        before = re.search(r"([\w.-]+)\s+$", text[:m.start()])
+        if before is None or before.group(1).lower() not in THIRD_PARTY_TRACKERS:
+            yield text.count("\n", 0, m.start()) + 1, m.group()
+
+
+def _scanned_texts():
+    """(label, text) of every .py file of locbook/ and tests/ and every code cell of the notebooks."""
+    for folder in ("locbook", "tests"):
+        for path in sorted((REPO_ROOT / folder).rglob("*.py")):
+            yield str(path.relative_to(REPO_ROOT)), path.read_text(encoding="utf-8")
+    for folder in ("locbook", "notebooks"):
+        for path in sorted((REPO_ROOT / folder).rglob("*.ipynb")):
+            cells = json.loads(path.read_text(encoding="utf-8"))["cells"]
+            for i, cell in enumerate(cells):
+                if cell["cell_type"] == "code":
+                    yield f"{path.relative_to(REPO_ROOT)} cell {i}", "".join(cell["source"])
+
+
+def test_no_issue_numbers_in_the_package_the_tests_or_the_notebooks():
+    texts = list(_scanned_texts())
+    assert sum(label.startswith("locbook/") for label, _ in texts) > 100      # the walk found the package
+    assert sum(".ipynb cell" in label for label, _ in texts) > 50               # and the notebooks' code cells
+    found = [f"{label}:{line}: {ref}" for label, text in texts for line, ref in _issue_references(text)]
+    assert found == [], f"tracker numbers (say what is meant instead): {found}"
+
+
+def test_the_issue_check_sees_a_reference_and_allows_a_third_party_tracker():
+    # the numbers in braces, so that this file's source passes its own check
+    text = (f"# before issue {47}\n# filterpy issue {172}: a 1-D walk\n# Issues {28}, 45\n# see issue #{3}\n"
+            "# reissued 2 times\n")
+    assert list(_issue_references(text)) == [(1, f"issue {47}"), (3, f"Issues {28}"), (4, f"issue #{3}")]

@@ -124,7 +124,6 @@ def _commands() -> list[str]:
 
 
 def _in_clone() -> bool:
-    import locbook
     return README.exists() and Path(locbook.__file__).resolve().parent == REPO / "locbook"
 
 
@@ -180,9 +179,8 @@ def test_every_readme_command_runs(clone, quick_reports, tmp_path):
             proc = subprocess.run([sys.executable, "-m", "locbook", *args[1:], *extra], cwd=tmp_path,
                                   capture_output=True, text=True, timeout=1800)
             assert proc.returncode == 0, f"{command}\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}"
-            if args[1:] == ["run"]:
-                n = len(load_suite(SUITE_FILE).experiments)
-                assert f"0 executed, {n} cached, 0 failed" in proc.stdout, proc.stdout[-3000:]
+            if args[1:] == ["run"]:         # SUITE is this clone's suite file (load_suite's default)
+                assert f"0 executed, {len(SUITE.experiments)} cached, 0 failed" in proc.stdout, proc.stdout[-3000:]
             ran.append(command)
         else:
             pytest.fail(f"README shows a command this test does not know how to run: {command}")

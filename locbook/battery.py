@@ -10,6 +10,7 @@ protocol (:mod:`locbook.scenarios.measured`) both call these, so one name is one
 """
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -359,15 +360,42 @@ def initial_states(sc: TrackingScenario, ts: TrackerSettings, n_runs: int, rng: 
 KF_FIX_MIN_ANCHORS = 3
 
 
+#: the fixes of the latest :func:`ml_fixes` calls, by a digest of everything they depend on: one track's fixes are
+#: asked for by the motion fit, the tracker start, the KF on fixes and the fusion trackers, and solving them is the
+#: dearest step of a measured battery
+_ML_FIXES_MEMO: dict[bytes, np.ndarray] = {}
+_ML_FIXES_MEMO_SIZE = 16
+
+
+def _ml_fixes_key(sc, flat: np.ndarray) -> bytes:
+    """A digest of ``rss_ml``'s inputs: the readings, anchors, channel, tag height, the floor's box and grid."""
+    digest = hashlib.blake2b(digest_size=20)
+    ch = sc.channel
+    parts = (flat, sc.anchors_m, sc.box_m[0], sc.box_m[1], sc.grid_m(), ch.ref_power_dbm, ch.path_loss_exp,
+             ch.sigma_db, ch.ref_distance_m, ch.wall_attenuation_db, ch.min_distance_m,
+             np.nan if sc.tag_height_m is None else sc.tag_height_m)
+    for part in parts:
+        a = np.ascontiguousarray(part, dtype=float)
+        digest.update(repr(a.shape).encode())
+        digest.update(a.tobytes())
+    return digest.digest()
+
+
 def ml_fixes(sc, rss, ts=None):
     """The ``rss_ml`` method's fixes ``(..., 2)`` (grid-ML start at the scenario's pitch, the floor's box), NaN where
-    an epoch heard fewer than :data:`KF_FIX_MIN_ANCHORS` anchors: what ``kf_on_ml`` filters."""
+    an epoch heard fewer than :data:`KF_FIX_MIN_ANCHORS` anchors: what ``kf_on_ml`` filters. The latest calls' fixes
+    are kept (by a digest of every input) and handed out again as copies: the same bits, solved once."""
     flat = _flat(rss)
-    heard = (~np.isnan(flat)).sum(axis=-1) >= KF_FIX_MIN_ANCHORS
-    out = np.full((flat.shape[0], 2), np.nan)
-    if heard.any():
-        out[heard] = _rss_ml(sc, flat[heard], {})
-    return out.reshape(rss.shape[:-1] + (2,))
+    key = _ml_fixes_key(sc, flat)
+    if key not in _ML_FIXES_MEMO:
+        heard = (~np.isnan(flat)).sum(axis=-1) >= KF_FIX_MIN_ANCHORS
+        out = np.full((flat.shape[0], 2), np.nan)
+        if heard.any():
+            out[heard] = _rss_ml(sc, flat[heard], {})
+        while len(_ML_FIXES_MEMO) >= _ML_FIXES_MEMO_SIZE:
+            _ML_FIXES_MEMO.pop(next(iter(_ML_FIXES_MEMO)))
+        _ML_FIXES_MEMO[key] = out
+    return _ML_FIXES_MEMO[key].reshape(np.shape(rss)[:-1] + (2,)).copy()
 
 
 def _fix_cov(sc, ts, rng):

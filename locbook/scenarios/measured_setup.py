@@ -35,7 +35,7 @@ from ..models.motion import constant_velocity
 from ..models.rss import RssModel
 from ..montecarlo import circular_block_indices, seed_from_values
 from ..static.calibration import PathLossFit, calibrate_path_loss, calibrate_path_loss_devices, fix_error_covariance
-from ..static.fingerprint import knn_position
+from ..static.fingerprint import knn_position_per_k
 from ..tracking.noise import fit_noise_ml
 from ..tracking.streams import LinearMeasurement, RssMeasurement
 
@@ -350,9 +350,8 @@ def choose_knn_k(data: Dataset, model: PathLossModel, requested: int | None = No
         keep = ~out
         if keep.sum() < max(candidates):
             continue
-        for i, k in enumerate(candidates):
-            est = knn_position(rss[out], fingerprints[keep], xy[keep], k)
-            errors[i, out] = np.linalg.norm(est - xy[out], axis=-1)
+        est = knn_position_per_k(rss[out], fingerprints[keep], xy[keep], candidates)    # (k, points, 2)
+        errors[:, out] = np.linalg.norm(est - xy[out], axis=-1)
     mean = np.nanmean(errors, axis=1)
     best = int(np.nanargmin(mean))
     table = [{"k": k, "mean error (m), leave-one-point-out": round(float(m), 3)} for k, m in zip(candidates, mean)]

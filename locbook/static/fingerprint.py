@@ -193,6 +193,26 @@ def knn_position(rss_dbm, fingerprints_dbm, cells_m, k: int, weighting: str = "i
     >>> print(np.round(lb.knn_position(query, fingerprints, cells, 1), 2))
     [3.5 4.5]
     """
+    rss_dbm, fingerprints_dbm, cells_m = _checked_knn_inputs(rss_dbm, fingerprints_dbm, cells_m, (k,), weighting,
+                                                             min_anchors, chunk)
+    return _knn_per_k(rss_dbm, fingerprints_dbm, cells_m, (k,), weighting, int(min_anchors), chunk)[0]
+
+
+def knn_position_per_k(rss_dbm, fingerprints_dbm, cells_m, ks, weighting: str = "inverse_square", *,
+                       min_anchors: int = 3, chunk: int | None = None) -> np.ndarray:
+    """:func:`knn_position` for every ``k`` of ``ks`` at once: shape ``(len(ks), ..., 2)``, each ``[i]`` equal to
+    ``knn_position(..., ks[i], ...)`` bit for bit. The RSSI-space distances (Eq. (3.1) of Ozkaya 2011) are computed
+    once for all the ``k``, which is what choosing ``k`` by cross-validation needs."""
+    ks = tuple(ks)
+    if not ks:
+        raise ValueError("ks must hold at least one k")
+    rss_dbm, fingerprints_dbm, cells_m = _checked_knn_inputs(rss_dbm, fingerprints_dbm, cells_m, ks, weighting,
+                                                             min_anchors, chunk)
+    return _knn_per_k(rss_dbm, fingerprints_dbm, cells_m, ks, weighting, int(min_anchors), chunk)
+
+
+def _checked_knn_inputs(rss_dbm, fingerprints_dbm, cells_m, ks, weighting, min_anchors, chunk):
+    """The arguments of :func:`knn_position` checked (one line naming the argument), as arrays."""
     check_choice("weighting", weighting, KNN_WEIGHTINGS)
     fingerprints_dbm = as_array("fingerprints_dbm", fingerprints_dbm, min_ndim=2, nan_ok=True)
     _check_complete_map(fingerprints_dbm)
@@ -209,14 +229,20 @@ def knn_position(rss_dbm, fingerprints_dbm, cells_m, k: int, weighting: str = "i
         raise ValueError(f"the batch axes of rss_dbm {rss_dbm.shape[:-1]} (shape {rss_dbm.shape}) and of "
                          f"fingerprints_dbm {fingerprints_dbm.shape[:-2]} (shape {fingerprints_dbm.shape}) must "
                          "broadcast against each other") from None
-    if isinstance(k, (bool, np.bool_)) or not isinstance(k, (int, np.integer)) or not 1 <= k <= n_cells:
-        raise ValueError(f"k must be between 1 and the number of cells ({n_cells}), got {k}")
+    for k in ks:
+        if isinstance(k, (bool, np.bool_)) or not isinstance(k, (int, np.integer)) or not 1 <= k <= n_cells:
+            raise ValueError(f"k must be between 1 and the number of cells ({n_cells}), got {k}")
     check_scalar("min_anchors", min_anchors, ge=1, integer=True)
     if chunk is not None:
         check_scalar("chunk", chunk, ge=1, integer=True)
+    return rss_dbm, fingerprints_dbm, cells_m
+
+
+def _knn_per_k(rss_dbm, fingerprints_dbm, cells_m, ks, weighting, min_anchors, chunk):
+    """Checked inputs -> positions ``(len(ks), ..., 2)``: in blocks of queries, or by pattern of heard readers."""
+    m, n_cells = fingerprints_dbm.shape[-1], cells_m.shape[0]
     if np.isnan(rss_dbm).any():
-        return _knn_by_heard_readers(rss_dbm, fingerprints_dbm, cells_m, k, weighting, min(int(min_anchors), m),
-                                     chunk)
+        return _knn_by_heard_readers(rss_dbm, fingerprints_dbm, cells_m, ks, weighting, min(min_anchors, m), chunk)
     batch = np.broadcast_shapes(rss_dbm.shape[:-1], fingerprints_dbm.shape[:-2])
     n_queries = int(np.prod(batch, dtype=np.int64))
     block = int(chunk) if chunk is not None else max(1, KNN_BLOCK_BYTES // (8 * n_cells * max(m, 1)))
@@ -224,12 +250,12 @@ def knn_position(rss_dbm, fingerprints_dbm, cells_m, k: int, weighting: str = "i
     maps = (fingerprints_dbm if fingerprints_dbm.ndim == 2 else
             np.broadcast_to(fingerprints_dbm, batch + fingerprints_dbm.shape[-2:])
             .reshape((-1,) + fingerprints_dbm.shape[-2:]))
-    out = np.empty((n_queries, cells_m.shape[1]))
+    out = np.empty((len(ks), n_queries, cells_m.shape[1]))
     for start in range(0, n_queries, block):
         stop = min(start + block, n_queries)
-        out[start:stop] = _knn_block(queries[start:stop], maps if maps.ndim == 2 else maps[start:stop], cells_m, k,
-                                     weighting)
-    return out.reshape(batch + (cells_m.shape[1],))
+        out[:, start:stop] = _knn_block(queries[start:stop], maps if maps.ndim == 2 else maps[start:stop], cells_m,
+                                        ks, weighting)
+    return out.reshape((len(ks),) + batch + (cells_m.shape[1],))
 
 
 def _k_nearest(dist2, k: int):
@@ -252,11 +278,17 @@ def _k_nearest(dist2, k: int):
     return np.sort(flat_nn, axis=-1).reshape(nearest.shape)
 
 
-def _knn_block(rss_dbm, fingerprints_dbm, cells_m, k, weighting):
-    """Eqs. (3.1)-(3.3) for queries ``(Q, m)`` against a map ``(C, m)`` or ``(Q, C, m)``, no missing readings."""
-    n_cells = cells_m.shape[0]
+def _knn_block(rss_dbm, fingerprints_dbm, cells_m, ks, weighting):
+    """Eqs. (3.1)-(3.3) for queries ``(Q, m)`` against a map ``(C, m)`` or ``(Q, C, m)``, no missing readings: the
+    positions ``(len(ks), Q, 2)``, one distance computation for every ``k``."""
     diff = fingerprints_dbm - rss_dbm[..., None, :]
     dist2 = np.einsum("...ci,...ci->...c", diff, diff)                  # E_j^2, (..., C)
+    return np.stack([_knn_weighted(dist2, cells_m, k, weighting) for k in ks])
+
+
+def _knn_weighted(dist2, cells_m, k, weighting):
+    """Eqs. (3.2)-(3.3): the weighted centroid of the ``k`` cells nearest in RSSI space (``dist2`` = E_j^2)."""
+    n_cells = cells_m.shape[0]
     nearest = _k_nearest(dist2, k) if k < n_cells else np.broadcast_to(np.arange(n_cells), dist2.shape)
     e2 = np.take_along_axis(dist2, nearest, axis=-1)
     if weighting == "uniform":
@@ -281,15 +313,16 @@ def _check_complete_map(fingerprints_dbm: np.ndarray) -> None:
                          "entries a reader never heard (e.g. with its sensitivity floor) or drop that reader")
 
 
-def _knn_by_heard_readers(rss_dbm, fingerprints_dbm, cells_m, k, weighting, min_anchors, chunk):
-    """Group the queries by their pattern of heard readers and compare each group over those readers."""
+def _knn_by_heard_readers(rss_dbm, fingerprints_dbm, cells_m, ks, weighting, min_anchors, chunk):
+    """Group the queries by their pattern of heard readers and compare each group over those readers (every ``k``
+    of ``ks``: positions ``(len(ks), ..., 2)``)."""
     m = rss_dbm.shape[-1]
     batch = np.broadcast_shapes(rss_dbm.shape[:-1], fingerprints_dbm.shape[:-2])
     flat = np.broadcast_to(rss_dbm, batch + (m,)).reshape(-1, m)
     maps = (None if fingerprints_dbm.ndim == 2 else
             np.broadcast_to(fingerprints_dbm, batch + fingerprints_dbm.shape[-2:])
             .reshape((-1,) + fingerprints_dbm.shape[-2:]))
-    out = np.full((flat.shape[0], cells_m.shape[1]), np.nan)
+    out = np.full((len(ks), flat.shape[0], cells_m.shape[1]), np.nan)
     patterns, inverse = np.unique(~np.isnan(flat), axis=0, return_inverse=True)
     inverse = inverse.reshape(-1)
     for g, heard in enumerate(patterns):
@@ -297,6 +330,5 @@ def _knn_by_heard_readers(rss_dbm, fingerprints_dbm, cells_m, k, weighting, min_
             continue
         sel = np.flatnonzero(inverse == g)
         group_maps = fingerprints_dbm[:, heard] if fingerprints_dbm.ndim == 2 else maps[sel][..., heard]
-        out[sel] = knn_position(flat[np.ix_(sel, heard)], group_maps, cells_m, k, weighting, min_anchors=min_anchors,
-                                chunk=chunk)
-    return out.reshape(batch + (cells_m.shape[1],))
+        out[:, sel] = _knn_per_k(flat[np.ix_(sel, heard)], group_maps, cells_m, ks, weighting, min_anchors, chunk)
+    return out.reshape((len(ks),) + batch + (cells_m.shape[1],))

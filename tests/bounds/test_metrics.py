@@ -347,3 +347,20 @@ def test_fix_error_covariance_is_numpy_cov_of_the_errors_per_run():
     R = lb.fix_error_covariance(fixes, truth)
     for k in range(3):
         np.testing.assert_allclose(R[k], np.cov((fixes[k] - truth).T), rtol=1e-12)
+
+
+def test_the_bootstraps_percentiles_equal_numpys_nanpercentile_bit_for_bit():
+    """The resamples' percentiles are taken for all rows at once (metrics._nan_percentiles); numpy's nanpercentile,
+    one row at a time, is the oracle: equal to the last bit, with ties, all-NaN rows, one-value rows, q = 0 and 100."""
+    rng = np.random.default_rng(7)
+    for trial in range(300):
+        rows, cols = rng.integers(1, 40), rng.integers(1, 200)
+        e = rng.gamma(2.0, 1.0, (rows, cols)) * rng.choice([1e-3, 1.0, 1e3])
+        e[rng.random((rows, cols)) < rng.random()] = np.nan
+        e[0] = np.nan if trial % 7 == 0 else e[0]
+        e = np.round(e, 1) if trial % 5 == 0 else e
+        q = [75, 90, 95] if trial % 2 else [0.0, *rng.uniform(0, 100, 3), 50.0, 100.0]
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)       # numpy warns on an all-NaN row
+            expected = np.nanpercentile(e, q, axis=-1)
+        np.testing.assert_array_equal(metrics._nan_percentiles(e, q), expected)

@@ -48,3 +48,25 @@ def test_model_fingerprints_match_path_loss_model():
     expected = model.mean_rss_dbm(lb.pairwise_distance_m(cells, READERS),
                                     lb.wall_crossings(cells, READERS, walls))
     np.testing.assert_allclose(fp, expected)
+
+
+def test_knn_for_several_k_at_once_equals_one_call_per_k_bit_for_bit():
+    """knn_position_per_k computes the RSSI-space distances once for every k; each of its rows must be the single-k
+    knn_position of that k, to the last bit: integer fingerprints (ties at the k-th distance), readers not heard,
+    every weighting, blocks of any size."""
+    from locbook.static.fingerprint import knn_position_per_k
+    rng = np.random.default_rng(1)
+    for trial in range(60):
+        cells_n, readers, queries = rng.integers(2, 60), rng.integers(3, 7), rng.integers(1, 50)
+        fingerprints = np.round(rng.normal(-60.0, 8.0, (cells_n, readers)))
+        cells = rng.uniform(0.0, 10.0, (cells_n, 2))
+        rss = np.round(rng.normal(-60.0, 8.0, (queries, readers)))
+        rss[rng.random(rss.shape) < 0.25] = np.nan
+        ks = [k for k in (1, 2, 3, 5, 8, 20, 50) if k <= cells_n]
+        for weighting in ("inverse_square", "uniform"):
+            every = knn_position_per_k(rss, fingerprints, cells, ks, weighting, chunk=int(rng.integers(1, 20)))
+            assert every.shape == (len(ks), queries, 2)
+            for row, k in zip(every, ks):
+                np.testing.assert_array_equal(row, lb.knn_position(rss, fingerprints, cells, k, weighting))
+    with pytest.raises(ValueError, match="k must be between 1 and the number of cells"):
+        knn_position_per_k(rss, fingerprints, cells, [1, cells_n + 1])

@@ -174,7 +174,7 @@ def measure(runs: int, T: int, filterpy_runs: int, ukf_runs: int, ukf_T: int, uk
 
 def run(size: str = "full"):
     """full: 500 runs x 500 steps (filterpy on 5), UKF 250 runs x 200 steps (filterpy on 3), about 25 s with the
-    repeats; tiny: a few runs. (Issue 30's figures were 2000 runs and 1000 UKF runs, timed once: reduced to fit the
+    repeats; tiny: a few runs. (The first figures were 2000 runs and 1000 UKF runs, timed once: reduced to fit the
     suite's time budget with 5 alternated repeats; the work is per run, so the ratio hardly depends on the count.)"""
     if hx.check_size(size) == "tiny":
         return measure(runs=20, T=30, filterpy_runs=3, ukf_runs=10, ukf_T=20, ukf_filterpy_runs=2)

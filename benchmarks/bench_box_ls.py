@@ -1,10 +1,10 @@
-"""Box-constrained lateration and bounded path-loss fits: the exact solvers against cvxpy (issues 18 and 31).
+"""Box-constrained lateration and bounded path-loss fits: the exact solvers against cvxpy.
 
     python benchmarks/bench_box_ls.py [full|tiny]
 
 Workloads (full): 10,000 box-LS problems in 2-D (the corridor of document 003, 4 anchors) and in 3-D (a
 10 x 8 x 3 m room, 6 anchors), tags in the room and beyond it so that the box binds on 0 .. dim coordinates;
-2,000 bounded path-loss fits of 24 samples (Ozkaya's bounds; 5,000 before issue 31, reduced so that the five
+2,000 bounded path-loss fits of 24 samples (Ozkaya's bounds; 5,000 at first, reduced so that the five
 stacked cvxpy solves fit the suite's time budget). Every locbook call does the whole workload and
 alternates with its reference in one process (``hx.compare``: medians of CPU and wall time, at least 5 pairs):
 
@@ -12,7 +12,7 @@ alternates with its reference in one process (``hx.compare``: medians of CPU and
   (the fastest way to loop with cvxpy), Clarabel at tight tolerances; run on a subset of the problems and scaled
   (the reference text says how many);
 - the stacked cvxpy problem of the library (``solver="cvxpy"``);
-- the closed-form unconstrained LLS (:func:`locbook.lateration_ls`): issue 31 asks the exact box solver to stay
+- the closed-form unconstrained LLS (:func:`locbook.lateration_ls`): the goal asks the exact box solver to stay
   within 2x of it (goal ratio 0.5 on the CPU time).
 
 Agreement, from the results of the same calls, each with its tolerance (a disagreement beyond it is a DISAGREE row):
@@ -140,7 +140,7 @@ def _box_rows(dim, cfg, rng):
     m = hx.compare(exact, lambda: lb.lateration_ls(anchors, d).position_m, repeats=cfg["fast_repeats"],
                    agree=vs_closed)
     yield hx.row(method + " vs closed-form LLS", workload, m, "closed-form LLS (lateration_ls, unconstrained)",
-                 goal=0.5, note="issue 31: box-LS within 2x of the closed-form linear LS")
+                 goal=0.5, note="goal: box-LS within 2x of the closed-form linear LS")
 
 
 def _fit_rows(cfg, rng):

@@ -1,7 +1,7 @@
 """Interpretation brackets: how long ``locbook bracket`` takes for every experiment of one document, at the quick
 profile.
 
-Issue 28's target: a bracket of one document (every experiment of it that declares interpretations) runs within
+The target: a bracket of one document (every experiment of it that declares interpretations) runs within
 10 minutes on 2 cores at the quick profile. Each experiment is bracketed with ``--jobs 2 --force`` into a fresh
 temporary reports folder (nothing cached), one after the other, as a user would run them; the row of a document
 gives the total wall time (and the CPU time of the process and its workers), the points run and whether the target
@@ -9,7 +9,7 @@ is met, and the note the time of each experiment. Each bracket runs once (minute
 Reports measured figures; not a test.
 
     python benchmarks/bench_bracket.py                      # full: every interpretation of one small experiment
-    python benchmarks/bench_bracket.py --document dogan2015 # issue 28's figure for one document ('all': every one)
+    python benchmarks/bench_bracket.py --document dogan2015 # one document's figure ('all': every one)
     python benchmarks/bench_bracket.py tiny                 # one interpretation of one fast George experiment
 """
 from __future__ import annotations
@@ -27,7 +27,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import _harness as hx  # noqa: E402
 
-#: seconds a bracket of one document may take at the quick profile on 2 cores (issue 28)
+#: seconds a bracket of one document may take at the quick profile on 2 cores (the goal)
 TARGET_S = 600.0
 #: the full size's experiment: two interpretations, about 16 s (a document's bracket takes minutes: ``--document``)
 FULL_EXPERIMENT = "dogan2015-models"
@@ -95,8 +95,8 @@ def _sum(parts: list[hx.Measurement]) -> hx.Measurement:
 
 def run(size: str = "full", documents: list[str] | None = None):
     """tiny: one interpretation of george-rssi-vs-distance; full: every interpretation of ``FULL_EXPERIMENT`` (the
-    suite's time budget holds one small experiment, not a document); ``documents``: issue 28's figure, every experiment
-    of each document named (``"all"``: every document with interpretations), one row per document."""
+    suite's time budget holds one small experiment, not a document); ``documents``: a figure per document, every
+    experiment of each document named (``"all"``: every document with interpretations), one row per document."""
     hx.check_size(size)
     with tempfile.TemporaryDirectory(prefix="locbook-bench-bracket-") as tmp:
         if size == "tiny" and not documents:
@@ -110,7 +110,7 @@ def run(size: str = "full", documents: list[str] | None = None):
             m, points, note = _bracket(FULL_EXPERIMENT, Path(tmp) / "r")
             what = f"{FULL_EXPERIMENT}: every interpretation, {points} points"
             yield hx.row("locbook bracket (quick, --jobs 2)", what, m,
-                         note=note + "; CPU includes the workers; a whole document's bracket (issue 28: <= "
+                         note=note + "; CPU includes the workers; a whole document's bracket (goal: <= "
                                      f"{TARGET_S:.0f} s) is `bench_bracket.py --document NAME`")
             return
         for document, experiments in _documents().items():

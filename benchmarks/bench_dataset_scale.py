@@ -10,7 +10,7 @@ Each stage runs in a fresh Python process and reports its wall time and the proc
 (``ru_maxrss``: everything the process held, Python objects, pandas and numpy included, not only traced
 allocations); the target is 4 GiB for each. Each stage is timed once (one process each; the harness's ``once`` in
 spirit, with the child's own clocks: wall, CPU, peak RSS). The suite's full size is 2 x 10^5 readings (the
-battery's trackers step through every tick in Python: 10^7 readings take about 15 minutes); issue 29's figure is
+battery's trackers step through every tick in Python: 10^7 readings take about 15 minutes); the goal's figure is
 ``--readings 10000000``.
 """
 from __future__ import annotations
@@ -30,7 +30,7 @@ import _harness as hx  # noqa: E402
 
 #: readings per second of walking in the example (both walks together): 8 anchors x 4 Hz x 2 walks, ~88 % kept
 _READINGS_PER_WALK_S = 8 * 4.0 * 2 * 0.88
-#: readings of the full size (issue 29's 10^7 take about 15 minutes: ``--readings 10000000``)
+#: readings of the full size (the goal's 10^7 take about 15 minutes: ``--readings 10000000``)
 FULL_READINGS = 200_000
 #: readings of the example's survey and static points (independent of the walks)
 _FIXED_READINGS = 11_700
@@ -88,7 +88,7 @@ def _once(seconds: float, cpu_s: float, peak_mb: float, load) -> hx.Measurement:
 
 
 def run(size: str = "full", readings: int | None = None):
-    """full: 2 x 10^5 readings (10^7, issue 29's figure, takes about 15 minutes: ``--readings 10000000``); tiny: 3 x
+    """full: 2 x 10^5 readings (10^7, the goal's figure, takes about 15 minutes: ``--readings 10000000``); tiny: 3 x
     10^4. Each stage timed once, in its own process."""
     hx.check_size(size)
     import numpy as np

@@ -1,4 +1,4 @@
-"""How far the compiled filters are from their arithmetic floor (issue 31: "EKF and UKF within 5x of their
+"""How far the compiled filters are from their arithmetic floor (the goal: "EKF and UKF within 5x of their
 arithmetic floor per run-step").
 
     python benchmarks/bench_floor.py [full|tiny]

@@ -1,4 +1,4 @@
-"""The grid Bayes filter near its floor (issue 31): locbook against a plain numpy + scipy.ndimage grid filter.
+"""The grid Bayes filter near its floor: locbook against a plain numpy + scipy.ndimage grid filter.
 
     python benchmarks/bench_grid.py [full|tiny]
 
@@ -14,7 +14,7 @@ only where a tap is below 2^-53 of its column's largest, 8.6 sigma) and at the w
 grid and renormalises the whole belief (locbook renormalises each source cell's kernel over the cells, Ozkaya's
 truncated transition): the agreement figure is that difference, in metres.
 
-Rows: locbook against that reference (goal: 3x the CPU time, issue 31); locbook against its own dense-transition path
+Rows: locbook against that reference (goal: 3x the CPU time); locbook against its own dense-transition path
 (the ``C x C`` matrix and the model's log-likelihood per step, numba off: the previous arithmetic) on a 4,000-cell grid
 of the same room, with the agreement of the posterior means and covariances; and the Ozkaya Table 7.16 setting (28
 cells, 1000 runs) with the compiled kernels against the numpy path.

@@ -1,4 +1,4 @@
-"""Time the SIR particle filter (issue 31) against a plain vectorized numpy SIR on the same readings.
+"""Time the SIR particle filter against a plain vectorized numpy SIR on the same readings.
 
     python benchmarks/bench_particle.py [full|tiny]
 

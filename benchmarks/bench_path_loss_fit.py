@@ -1,6 +1,6 @@
 """Path-loss fit on many samples: the closed form (default) at 10 million samples, time and peak memory.
 
-Issue 12 target: memory linear in the samples, well under 1 GB at 10^7 (the cvxpy path needed 5.2 GB at
+The target: memory linear in the samples, well under 1 GB at 10^7 (the cvxpy path needed 5.2 GB at
 3.3 * 10^6 and then stopped at optimal_inaccurate). No reference (nothing else fits 10^7 samples in that memory);
 the accuracy figure is the fit against the parameters the samples were drawn with, from the timed calls
 (``hx.repeat``: 5 calls, medians of CPU and wall time, the peak resident-set increase of each call). Tolerance: each

@@ -1,6 +1,6 @@
 """Start-up: what ``import locbook`` adds to ``import numpy, scipy``, and how fast the CLI answers.
 
-Issue 27's target: ``import locbook`` takes less than 0.3 s more than ``import numpy, scipy`` on the same machine,
+The target: ``import locbook`` takes less than 0.3 s more than ``import numpy, scipy`` on the same machine,
 and ``locbook --version`` / ``locbook list`` answer in well under a second. Every figure is the median over fresh
 interpreters (each import is timed once per process: a second import in the same process is a dictionary
 look-up). Reports measured figures; not a test.
@@ -32,7 +32,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import _harness as hx  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
-#: the added start-up issue 27 allows ``import locbook`` over ``import numpy, scipy``
+#: the added start-up the goal allows ``import locbook`` over ``import numpy, scipy``
 IMPORT_BUDGET_S = 0.3
 _IMPORTS = ("import resource, time\n"
             "def rss(): return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss\n"
@@ -100,7 +100,7 @@ def measure(repeat: int = hx.MIN_REPEATS, cli=("--version", "list")):
     m, _ = _imports(repeat)
     verdict = "within" if m.locbook_wall_s < IMPORT_BUDGET_S else "OVER"
     yield hx.row("import locbook", f"after import numpy, scipy; {runs}", m, "import numpy, scipy (same interpreter)",
-                 note=f"{verdict} the {IMPORT_BUDGET_S} s budget over numpy and scipy (issue 27); peak = the "
+                 note=f"{verdict} the {IMPORT_BUDGET_S} s budget over numpy and scipy; peak = the "
                       "interpreter's ru_maxrss increase")
     for command in cli:
         name, args = f"locbook {command}", ["-m", "locbook", command]

@@ -1,6 +1,6 @@
 """Time Gudipati's fusion UKF over many Monte-Carlo runs of the U-path with locbook's UKF (the compiled kernel of
 locbook/tracking/_ukf_kernels.py when numba is enabled) and with a per-run filterpy UnscentedKalmanFilter loop on the
-same inputs, and compare its time per run-step with the UKF's arithmetic floor (issue 31).
+same inputs, and compare its time per run-step with the UKF's arithmetic floor.
 
     python benchmarks/bench_ukf_speed.py [full | tiny]
 
@@ -14,7 +14,7 @@ or 1 they agree to about 1e-13. The tolerance is that rounding bound, of one wei
 it the row is a disagreement.
 
 Rows (benchmarks/_harness.py): 500 runs and 10 runs against filterpy on a subset of the runs (its time scaled by the
-number of runs), goals 200x and 20x on the CPU-time ratio (issue 31), with the agreement max |x - filterpy| and
+number of runs), goals 200x and 20x on the CPU-time ratio, with the agreement max |x - filterpy| and
 |P - filterpy| on that subset; then the time per run-step against the floor of :func:`floor_per_run_step` (goal: within
 5x; a time against a computed floor: no results compared, no tolerance).
 

@@ -6,6 +6,9 @@ No comment or docstring of locbook/, tests/ or a notebook's code cites this proj
 import ast
 import json
 import re
+import tomllib
+
+import yaml
 
 from builders import REPO_ROOT, TESTS_DIR
 
@@ -74,10 +77,16 @@ def _issue_references(text):
 
 
 def _scanned_texts():
-    """(label, text) of every .py file of locbook/ and tests/, every page of docs/ and README, and every code cell of
-    the notebooks. benchmarks/RESULTS.md is a log of measurements by the work that made them, and stays out."""
-    for folder in ("locbook", "tests"):
+    """(label, text) of every .py file of locbook/, tests/ and benchmarks/, pyproject.toml, the suite file, the
+    package's data tables (.csv, .toml), every page of docs/ and README, and every code cell of the notebooks.
+    benchmarks/RESULTS.md is a log of measurements by the work that made them, and stays out."""
+    for folder in ("locbook", "tests", "benchmarks"):
         for path in sorted((REPO_ROOT / folder).rglob("*.py")):
+            yield str(path.relative_to(REPO_ROOT)), path.read_text(encoding="utf-8")
+    for name in ("pyproject.toml", "notebooks/experiments.toml"):
+        yield name, (REPO_ROOT / name).read_text(encoding="utf-8")
+    for pattern in ("*.csv", "*.toml"):
+        for path in sorted((REPO_ROOT / "locbook" / "data").rglob(pattern)):
             yield str(path.relative_to(REPO_ROOT)), path.read_text(encoding="utf-8")
     for path in [REPO_ROOT / "README.md", *sorted((REPO_ROOT / "docs").rglob("*.md"))]:
         yield str(path.relative_to(REPO_ROOT)), path.read_text(encoding="utf-8")
@@ -103,3 +112,18 @@ def test_the_issue_check_sees_a_reference_and_allows_a_third_party_tracker():
     text = (f"# before issue {47}\n# filterpy issue {172}: a 1-D walk\n# Issues {28}, 45\n# see issue #{3}\n"
             "# reissued 2 times\n")
     assert list(_issue_references(text)) == [(1, f"issue {47}"), (3, f"Issues {28}"), (4, f"issue #{3}")]
+
+
+def test_the_licence_and_the_citation_file_agree_with_pyproject():
+    """LICENSE is the licence pyproject declares, CITATION.cff (Citation File Format 1.2.0) names the same version
+    and licence, and README and docs/sources.md say how to cite locbook."""
+    project = tomllib.loads((REPO_ROOT / "pyproject.toml").read_text(encoding="utf-8"))["project"]
+    assert project["license"] == {"text": "MIT"}
+    assert (REPO_ROOT / "LICENSE").read_text(encoding="utf-8").startswith("MIT License\n")
+    cff = yaml.safe_load((REPO_ROOT / "CITATION.cff").read_text(encoding="utf-8"))
+    assert cff["cff-version"] == "1.2.0" and cff["type"] == "software"
+    assert str(cff["version"]) == project["version"] and cff["license"] == "MIT"
+    assert cff["title"].startswith("locbook") and cff["authors"] and cff["message"]
+    assert "CITATION.cff" in (REPO_ROOT / "README.md").read_text(encoding="utf-8")
+    sources = (REPO_ROOT / "docs" / "sources.md").read_text(encoding="utf-8")
+    assert "## Citing locbook" in sources and f"version = {{{project['version']}}}" in sources

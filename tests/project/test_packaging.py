@@ -163,3 +163,4 @@ def test_the_docs_state_every_exit_status_of_locbook_run():
                              str(cli.EXIT_DISK_FULL), "130 / 143"}
     assert "no space left" in statuses[str(cli.EXIT_DISK_FULL)] and "bad input" in statuses[str(cli.EXIT_BAD_INPUT)]
     assert len({cli.EXIT_OK, cli.EXIT_FAILED, cli.EXIT_BAD_INPUT, cli.EXIT_DISK_FULL, 130, 143}) == 6
+

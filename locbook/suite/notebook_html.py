@@ -10,8 +10,10 @@ shown as its TeX source in a ``<code>`` element, never dropped.
 from __future__ import annotations
 
 import base64
+import hashlib
 import html
 import io
+import os
 import re
 from pathlib import Path
 
@@ -65,17 +67,65 @@ def _rewrite(tex: str) -> str:
     return tex
 
 
+#: the drawn formulas of this process, by :func:`_math_key`
+_MATH_MEMO: dict[str, bytes | None] = {}
+
+
+def math_cache_dir() -> Path:
+    """Where drawn formulas are kept between runs: ``$LOCBOOK_CACHE_DIR/math``, else ``$XDG_CACHE_HOME/locbook/math``
+    (``~/.cache/locbook/math``). Drawing one takes about 50 ms, and every page of a run draws the same ones again."""
+    root = os.environ.get("LOCBOOK_CACHE_DIR")
+    if root:
+        return Path(root) / "math"
+    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "locbook" / "math"
+
+
+def _math_key(tex: str) -> str:
+    """The drawing's inputs: the TeX mathtext reads, matplotlib's version and this module's settings."""
+    import matplotlib
+    return hashlib.sha256(f"svg dpi=72 matplotlib={matplotlib.__version__}\n{tex}".encode()).hexdigest()
+
+
+def _drawn_svg(tex: str) -> bytes | None:
+    """The SVG mathtext draws for ``tex`` (already rewritten), None when it cannot read it: from this process's memo,
+    else the cache folder (:func:`math_cache_dir`), else drawn and kept in both. A cache that cannot be read or
+    written is drawn around, never an error."""
+    key = _math_key(tex)
+    if key in _MATH_MEMO:
+        return _MATH_MEMO[key]
+    cached = math_cache_dir() / f"{key}.svg"
+    try:
+        svg = cached.read_bytes()
+    except OSError:
+        svg = None
+    if not svg or not svg.startswith(b"<?xml"):
+        # math_to_image draws on a Figure of its own: no pyplot backend is chosen (this runs in the runner's
+        # process, which may be the user's Jupyter session)
+        from matplotlib.mathtext import math_to_image
+        buf = io.BytesIO()
+        try:
+            math_to_image(f"${tex}$", buf, format="svg", dpi=72)
+        except Exception:               # noqa: BLE001 - mathtext's parse errors have no common base
+            _MATH_MEMO[key] = None
+            return None
+        svg = buf.getvalue()
+        try:
+            cached.parent.mkdir(parents=True, exist_ok=True)
+            tmp = cached.with_name(f".{key}.{os.getpid()}.tmp")
+            tmp.write_bytes(svg)
+            os.replace(tmp, cached)         # whole or absent: a concurrent run reads one or the other
+        except OSError:
+            pass
+    _MATH_MEMO[key] = svg
+    return svg
+
+
 def math_svg(tex: str, display: bool = False) -> str | None:
     """``tex`` drawn by mathtext as an ``<img>`` holding the SVG (None when mathtext cannot read it)."""
-    # math_to_image draws on a Figure of its own: no pyplot backend is chosen (this runs in the runner's process,
-    # which may be the user's Jupyter session)
-    from matplotlib.mathtext import math_to_image
-    buf = io.BytesIO()
-    try:
-        math_to_image(f"${_rewrite(tex.strip())}$", buf, format="svg", dpi=72)
-    except Exception:               # noqa: BLE001 - mathtext's parse errors have no common base
+    svg = _drawn_svg(_rewrite(tex.strip()))
+    if svg is None:
         return None
-    data = base64.b64encode(buf.getvalue()).decode("ascii")
+    data = base64.b64encode(svg).decode("ascii")
     # classes, not a style attribute: nbconvert's sanitiser keeps classes (the template's CSS places them)
     return (f'<img class="{"math math-display" if display else "math"}" alt="{html.escape(tex.strip(), quote=True)}" '
             f'src="data:image/svg+xml;base64,{data}">')

@@ -44,13 +44,42 @@ def test_the_exported_page_loads_nothing_from_the_network(tmp_path):
     assert "img.math {" in page and "The bound" in page
 
 
-def test_math_drawing_leaves_the_callers_matplotlib_backend_alone():
+def test_math_drawing_leaves_the_callers_matplotlib_backend_alone(tmp_path):
     """The runner draws the pages' math in its own process, which may be a user's Jupyter session: the pyplot
-    backend stays whatever it was (run in a fresh interpreter, whose backend is chosen by MPLBACKEND)."""
+    backend stays whatever it was (run in a fresh interpreter, whose backend is chosen by MPLBACKEND; an empty cache
+    folder, so the formula is drawn, not read)."""
     import subprocess
     import sys
     code = ("import matplotlib.pyplot\nfrom locbook.suite.notebook_html import math_svg\n"
             "assert math_svg('x^2') is not None\nimport matplotlib\nprint(matplotlib.get_backend())")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         env={**__import__("os").environ, "MPLBACKEND": "svg"}, check=True).stdout
+    env = {**__import__("os").environ, "MPLBACKEND": "svg", "LOCBOOK_CACHE_DIR": str(tmp_path)}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True).stdout
     assert out.strip().lower() == "svg"
+    assert len(list((tmp_path / "math").glob("*.svg"))) == 1          # and kept for the next run
+
+
+def test_a_drawn_formula_is_kept_and_a_broken_or_unwritable_cache_is_drawn_around(tmp_path, monkeypatch):
+    """A formula drawn once is read back from the cache folder by the next process (here: the memo emptied); a cached
+    file that is not an SVG is drawn again and replaced; a cache folder that cannot be written changes nothing but
+    the time (the formula is still drawn)."""
+    import locbook.suite.notebook_html as nh
+    monkeypatch.setenv("LOCBOOK_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setattr(nh, "_MATH_MEMO", {})
+    drawn = nh.math_svg("\\alpha_{k}^2")
+    files = list((tmp_path / "cache" / "math").glob("*.svg"))
+    assert drawn is not None and len(files) == 1 and files[0].read_bytes().startswith(b"<?xml")
+    marker = files[0].read_bytes().replace(b"</svg>", b"<!-- kept --></svg>")
+    files[0].write_bytes(marker)
+    monkeypatch.setattr(nh, "_MATH_MEMO", {})
+    kept = nh.math_svg("\\alpha_{k}^2")
+    assert base64.b64decode(re.search(r'base64,([^"]+)"', kept).group(1)) == marker     # read, not drawn
+    files[0].write_bytes(b"truncated")
+    monkeypatch.setattr(nh, "_MATH_MEMO", {})
+    again = nh.math_svg("\\alpha_{k}^2")
+    assert base64.b64decode(re.search(r'base64,([^"]+)"', again).group(1)).startswith(b"<?xml")
+    assert files[0].read_bytes().startswith(b"<?xml")                       # replaced by the drawing
+    blocked = tmp_path / "blocked"
+    blocked.write_text("a file where the cache folder would be")
+    monkeypatch.setenv("LOCBOOK_CACHE_DIR", str(blocked))
+    monkeypatch.setattr(nh, "_MATH_MEMO", {})
+    assert nh.math_svg("\\beta") is not None

@@ -18,6 +18,12 @@ import os
 
 import pytest
 
+from locbook._lazy import skip_iri_format_checker
+
+# what the locbook command and its workers do (locbook/_lazy.py): the test modules read notebooks with nbformat, and
+# each test process would otherwise build rfc3987_syntax's grammar at import (3-4 s of CPU per process)
+skip_iri_format_checker()
+
 #: the markers whose tests keep the compiled paths as the environment sets them
 _COMPILED_MARKERS = ("compiled", "notebooks")
 

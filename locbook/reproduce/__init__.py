@@ -22,7 +22,7 @@ _EXPORTS = {
                      "PRINTED_COLUMNS"), "printed_values"),
     **dict.fromkeys(("KINDS", "JUDGED_KINDS", "VERDICTS", "CLAIM_RELATIONS", "WITHIN_LIMIT", "Ambiguity", "Score",
                      "score", "SCORED_VERDICTS", "VERDICT_COLUMNS", "BRACKETS", "verdict_column",
-                     "scoreboard_counts"), "scoring"),
+                     "scoreboard_counts", "verdict_counts_text"), "scoring"),
     **dict.fromkeys(("Report", "Table", "NUMBER_COLUMNS"), "report"),
     **dict.fromkeys(("Interpretation", "InterpretationsError", "interpretations", "interpretations_for",
                      "load_interpretation_file", "INTERPRETATIONS_DIR", "INTERPRETATION_COLUMNS", "BASES"),

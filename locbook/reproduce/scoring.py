@@ -43,7 +43,8 @@ import numpy as np
 from .printed_values import printed_number, printed_rounding
 
 __all__ = ["KINDS", "VERDICTS", "JUDGED_KINDS", "CLAIM_RELATIONS", "WITHIN_LIMIT", "Ambiguity", "Score",
-           "score", "SCORED_VERDICTS", "VERDICT_COLUMNS", "BRACKETS", "verdict_column", "scoreboard_counts"]
+           "score", "SCORED_VERDICTS", "VERDICT_COLUMNS", "BRACKETS", "verdict_column", "scoreboard_counts",
+           "verdict_counts_text"]
 
 KINDS = ("reproduction", "calibrated", "arithmetic", "claim", "shown")
 #: kinds that get within / loose / miss
@@ -70,6 +71,12 @@ def verdict_column(row: dict) -> str:
     if row.get("same_as"):
         return "linked"
     return row.get("verdict") or "no verdict"
+
+
+def verdict_counts_text(counter) -> str:
+    """One kind's rows by verdict column, ``"3 within, 1 loose, 2 miss"``: in :data:`VERDICT_COLUMNS` order, the same
+    on every line and every run (not by size), columns without rows left out."""
+    return ", ".join(f"{counter[v]} {v}" for v in VERDICT_COLUMNS if counter.get(v))
 
 
 def scoreboard_counts(rows) -> dict[str, Counter]:

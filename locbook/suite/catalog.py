@@ -52,12 +52,8 @@ def last_result(exp: Experiment, reports_root: Path, profile: str, *, counts: bo
 def _counts_text(counts) -> str:
     if not counts:
         return "no printed numbers"
-    from ..reproduce.scoring import VERDICT_COLUMNS  # here: as scoreboard_counts in last_result (numpy)
-    parts = []
-    for kind, c in counts.items():
-        inner = ", ".join(f"{c[v]} {v}" for v in VERDICT_COLUMNS if c.get(v))
-        parts.append(f"{kind}: {inner}")
-    return "; ".join(parts)
+    from ..reproduce.scoring import verdict_counts_text  # here: as scoreboard_counts in last_result (numpy)
+    return "; ".join(f"{kind}: {verdict_counts_text(c)}" for kind, c in counts.items())
 
 
 def _seconds_text(result: dict) -> str:

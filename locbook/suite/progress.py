@@ -17,7 +17,7 @@ import sys
 import time
 from pathlib import Path
 
-from ..reproduce.scoring import KINDS, scoreboard_counts
+from ..reproduce.scoring import KINDS, scoreboard_counts, verdict_counts_text
 from .files import read_csv, read_json
 
 __all__ = ["MODES", "make_progress", "expected_seconds", "scoreboard_rows", "scoreboard_text", "print_scoreboard"]
@@ -42,10 +42,6 @@ def _fmt_s(seconds: float | None) -> str:
     return f"{seconds:.0f} s" if seconds < 120 else f"{seconds / 60:.1f} min"
 
 
-def _counts_text(counts) -> str:
-    return ", ".join(f"{n} {verdict}" for verdict, n in counts.most_common() if n)
-
-
 def scoreboard_rows(run) -> list[dict]:
     """One row per experiment of a :class:`~locbook.suite.runner.SuiteRun`: id, status, time and, for each
     kind, its rows counted by verdict (read from the experiment's numbers.csv in the report folder; a failed
@@ -61,7 +57,7 @@ def scoreboard_rows(run) -> list[dict]:
         if o.status in ("failed", "interrupted") and numbers:
             status += " (last good report kept)"
         rows.append({"experiment": o.id, "status": status, "time": _fmt_s(seconds),
-                     **{kind: _counts_text(c) for kind, c in counts.items()}})
+                     **{kind: verdict_counts_text(c) for kind, c in counts.items()}})
     return rows
 
 

@@ -167,3 +167,15 @@ def test_index_cells_are_shaded_by_the_share_of_each_verdict():
     assert style == "background: linear-gradient(to right, var(--within) 0.0% 88.9%, var(--miss) 88.9% 100.0%)"
     assert _shares(Counter()) == ""
     assert _shares(Counter(loose=1)) == "background: linear-gradient(to right, var(--loose) 0.0% 100.0%)"
+
+
+def test_verdict_counts_read_in_one_fixed_order_not_by_size():
+    """The scoreboard and `locbook list` count a kind's rows in VERDICT_COLUMNS order whatever the sizes: two runs
+    whose counts differ read column by column (a miss never jumps ahead of within because it is more common)."""
+    from collections import Counter
+
+    from locbook.reproduce.scoring import VERDICT_COLUMNS, verdict_counts_text
+    assert VERDICT_COLUMNS[:3] == ("within", "loose", "miss")
+    assert verdict_counts_text(Counter({"miss": 5, "within": 1, "no verdict": 2})) == "1 within, 5 miss, 2 no verdict"
+    assert verdict_counts_text(Counter({"within": 5, "miss": 1, "linked": 0})) == "5 within, 1 miss"
+    assert verdict_counts_text(Counter()) == ""

@@ -76,7 +76,9 @@ def list_text(suite: Suite, reports_root: Path) -> str:
                  "('-': not run there yet). `locbook show ID` lists an experiment's parameters.")
     for p in PROFILES:           # the times compare only on one machine: say where each profile's came from
         if machines[p]:
-            where = "; ".join(sorted(m + (" (this machine)" if m == here else "") for m in machines[p]))
+            # a label names a CPU model, not a machine: a committed report may come from another of that model
+            same = " (the CPU model of this machine)"
+            where = "; ".join(sorted(m + (same if m == here else "") for m in machines[p]))
             lines.append(f"{p} times measured on: {where}")
     return "\n".join(lines)
 

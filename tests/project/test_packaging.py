@@ -46,7 +46,9 @@ def test_version_list_and_show(capsys):
 
 
 def test_list_says_which_machine_each_profiles_times_came_from(tmp_path):
-    """`locbook list` showed full faster than quick with times from two machines, unlabelled."""
+    """`locbook list` showed full faster than quick with times from two machines, unlabelled. A label equal to this
+    machine's says only that the CPU model is the same (a committed report may come from another machine of that
+    model, under another load), never "this machine"."""
     import json
 
     from locbook.suite.catalog import machine_label
@@ -61,7 +63,8 @@ def test_list_says_which_machine_each_profiles_times_came_from(tmp_path):
             record["machine"] = machine
         (folder / "report.json").write_text(json.dumps(record))
     text = list_text(suite, tmp_path)
-    assert f"quick times measured on: {machine_label()} (this machine)" in text
+    assert f"quick times measured on: {machine_label()} (the CPU model of this machine)" in text
+    assert "(this machine)" not in text
     assert "full times measured on: Some CPU, 64 CPUs; a machine not recorded" in text
 
 

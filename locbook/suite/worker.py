@@ -177,12 +177,43 @@ def _run(task: dict, staging: Path) -> int:
     # the kernel inherits stderr: keep its chatter in a log beside the report
     # read-write for all before the umask, as open() creates every other report file (os.open's default
     # also sets the execute bits)
-    log_fd = os.open(staging / "kernel-stderr.log", os.O_WRONLY | os.O_CREAT | os.O_TRUNC, _FILE_MODE)
+    log = staging / "kernel-stderr.log"
+    log_fd = os.open(log, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, _FILE_MODE)
     os.dup2(log_fd, 2)
     os.close(log_fd)
     result = execute(task)
+    _drop_kernel_chatter(log)
     _write_result(staging, result)
     return EXIT_DISK_FULL if result["disk_full"] else 0
+
+
+#: lines of kernel-stderr.log that say nothing about the notebook: papermill's parser of the parameters cell, which
+#: reads no annotated line (``seed: int = 1``; locbook reads the cell itself); papermill on a value the notebook
+#: does not declare (locbook checks every -p against the declared parameters first); ipykernel's note on the
+#: local TCP transport of every kernel
+KERNEL_CHATTER = (re.compile(r"Unable to parse line \d+ "), re.compile(r"Passed unknown parameter: "),
+                  re.compile(r"\[IPKernelApp\] WARNING \| Kernel is running over TCP without encryption\."))
+
+
+def _drop_kernel_chatter(log: Path, fd: int = 2) -> None:
+    """Rewrite ``log`` (open as ``fd``: this process's stderr) without the :data:`KERNEL_CHATTER` lines, in place:
+    ``fd`` stays on the same file for anything written later. A log that cannot be read is left as it is."""
+    try:
+        lines = log.read_text(encoding="utf-8", errors="replace").splitlines(keepends=True)
+    except OSError:
+        return
+    kept = [line for line in lines if not any(p.match(line) for p in KERNEL_CHATTER)]
+    if len(kept) == len(lines):
+        return
+    try:
+        if fd == 2:
+            sys.stderr.flush()
+        os.lseek(fd, 0, os.SEEK_SET)
+        os.ftruncate(fd, 0)
+        with open(fd, "wb", closefd=False) as fh:
+            fh.write("".join(kept).encode("utf-8"))
+    except OSError:                 # a full disk: the report's own files say so; the log is only for diagnosis
+        pass
 
 
 if __name__ == "__main__":

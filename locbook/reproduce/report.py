@@ -3,7 +3,8 @@
 A notebook creates one :class:`Report` and calls :meth:`Report.number`, :meth:`Report.figure`,
 :meth:`Report.table` and :meth:`Report.assumption`. Under ``locbook run`` the files go to the
 experiment's staging folder (environment variable ``LOCBOOK_OUTPUT_DIR``); run interactively they go to
-a scratch folder in the system's temporary directory, so exploring never touches ``reports/``.
+a scratch folder of the session (one per process) in the system's temporary directory, so exploring never touches
+``reports/``.
 
 Each number row compares one printed quantity (:class:`locbook.reproduce.Printed`, read from the document's
 printed-values file) with our number, under the rules of :mod:`locbook.reproduce.scoring`: its ``kind``
@@ -18,6 +19,7 @@ import math
 import os
 import re
 import tempfile
+import time
 from html import escape
 from pathlib import Path
 
@@ -103,6 +105,21 @@ def _user() -> str:
     return re.sub(r"[^A-Za-z0-9_.-]", "_", name)
 
 
+#: this process's scratch folder (one Jupyter session, one kernel), made on its first Report
+_SESSION_DIR: Path | None = None
+
+
+def _session_dir() -> Path:
+    """``<tmp>/locbook-interactive-<user>/session-<date>-<time>-<random>/``: made once per process, so two sessions
+    (two kernels, two users) never write into each other's files, and a session's folders sort by their start."""
+    global _SESSION_DIR
+    if _SESSION_DIR is None or not _SESSION_DIR.is_dir():
+        base = Path(tempfile.gettempdir()) / f"locbook-interactive-{_user()}"
+        base.mkdir(parents=True, exist_ok=True)
+        _SESSION_DIR = Path(tempfile.mkdtemp(prefix=time.strftime("session-%Y%m%d-%H%M%S-"), dir=base))
+    return _SESSION_DIR
+
+
 def _figures_on() -> bool:
     """False where the environment sets ``LOCBOOK_FIGURES=off`` (:meth:`Report.figure`)."""
     return os.environ.get("LOCBOOK_FIGURES", "").strip().lower() != "off"
@@ -124,8 +141,8 @@ class Report:
                                         "the run that made it has stopped and removed it; set it to an "
                                         "existing folder, or unset it to write to a scratch folder")
         else:
-            # one scratch folder per user: a shared machine's users never write into each other's
-            self.output_dir = (Path(tempfile.gettempdir()) / f"locbook-interactive-{_user()}" / self.experiment)
+            # one scratch folder per session (process): no other session or user writes into it
+            self.output_dir = _session_dir() / self.experiment
             self.output_dir.mkdir(parents=True, exist_ok=True)
         self.numbers: list[dict] = []
         self.figures: list[dict] = []

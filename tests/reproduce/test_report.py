@@ -2,6 +2,7 @@
 when our value lies outside printed +- (rounding + 2 SE + ambiguity) or a claim fails; the loose note exactly when the
 value is inside a window wider than +-25 % of the printed value, or a claim holds but not beyond 2 SE."""
 import math
+from pathlib import Path
 
 import pytest
 from hypothesis import assume, given, settings
@@ -101,3 +102,27 @@ def test_report_never_makes_the_runners_output_folder_again(tmp_path, monkeypatc
     with pytest.raises(FileNotFoundError, match="not an existing folder"):
         lb.Report("toy")
     assert not (tmp_path / "staging").exists()
+
+
+def test_an_interactive_session_writes_to_its_own_scratch_folder(tmp_path, monkeypatch):
+    """Without LOCBOOK_OUTPUT_DIR (a notebook run in Jupyter) a Report writes under the system's temporary folder, in
+    a folder of this session: two experiments of one session share it, another process (a second kernel) gets its
+    own, and neither is under reports/."""
+    import subprocess
+    import sys
+    import tempfile
+
+    import locbook.reproduce.report as report_module
+    monkeypatch.delenv("LOCBOOK_OUTPUT_DIR", raising=False)
+    monkeypatch.delenv("LOCBOOK_EXPERIMENT", raising=False)
+    monkeypatch.setenv("TMPDIR", str(tmp_path))
+    monkeypatch.setattr(tempfile, "tempdir", None)          # gettempdir() reads TMPDIR again
+    monkeypatch.setattr(report_module, "_SESSION_DIR", None)
+    a, b = lb.Report("exp-a"), lb.Report("exp-b")
+    assert a.output_dir.parent == b.output_dir.parent and a.output_dir.name == "exp-a"
+    session = a.output_dir.parent
+    assert session.parent.parent == tmp_path and session.parent.name.startswith("locbook-interactive-")
+    assert session.name.startswith("session-") and (a.output_dir / "manifest.json").is_file()
+    other = subprocess.run([sys.executable, "-c", "import locbook as lb; print(lb.Report('exp-a').output_dir)"],
+                           capture_output=True, text=True, check=True).stdout.strip()
+    assert Path(other).parent.parent == session.parent and Path(other).parent != session

@@ -200,3 +200,25 @@ def test_heat_map_colours_log2_of_the_ratio_and_hatches_what_does_not_apply():
     assert [t.get_text() for t in ax.texts] == ["2.00", "100.00", "0.50", "n/a"]
     assert sum(isinstance(p, Rectangle) and p.get_hatch() == "//" for p in ax.patches) == 1
     plt.close(fig)
+
+
+def test_ml_fixes_kept_from_an_earlier_call_equal_a_fresh_solve_and_follow_every_input(monkeypatch):
+    """battery.ml_fixes keeps its latest results: a repeated call equals a solve with the memo emptied (bit for bit),
+    hands out a copy (changing it changes nothing kept), and readings or a channel that differ are solved again."""
+    import locbook.battery as battery
+    sc = bm.tracking_scenario(next(iter(bm.TRACKING_SCENARIOS)))
+    rss = sc.rss_dbm(2, np.random.default_rng(3))
+    monkeypatch.setattr(battery, "_ML_FIXES_MEMO", {})
+    first = battery.ml_fixes(sc, rss)
+    first[...] = 0.0                                            # the caller's copy
+    again = battery.ml_fixes(sc, rss)
+    monkeypatch.setattr(battery, "_ML_FIXES_MEMO", {})
+    np.testing.assert_array_equal(again, battery.ml_fixes(sc, rss))
+    assert np.isfinite(again).any() and not (again == 0.0).all()
+    other = replace(sc, channel=replace(sc.channel, path_loss_exp=np.asarray(sc.channel.path_loss_exp) + 0.5))
+    monkeypatch.setattr(battery, "_ML_FIXES_MEMO", {})
+    fresh_other = battery.ml_fixes(other, rss)
+    monkeypatch.setattr(battery, "_ML_FIXES_MEMO", {})
+    battery.ml_fixes(sc, rss)
+    np.testing.assert_array_equal(battery.ml_fixes(other, rss), fresh_other)
+    assert not np.array_equal(fresh_other, again, equal_nan=True)

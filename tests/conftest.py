@@ -7,7 +7,10 @@ off (``locbook.tracking._compiled._NUMBA_ENABLED``, and ``LOCBOOK_NUMBA=0`` for 
 
 - tests marked ``compiled`` (the compiled-versus-numpy equality tests and the compiled path's own rules): they run
   with the switch as the environment sets it (on by default), and switch it themselves where they compare the paths;
-- tests marked ``notebooks``: the notebooks run as a user runs them, compiled where the problem is large enough.
+- tests marked ``notebooks``: the notebooks run as a user runs them, compiled where the problem is large enough;
+- tests marked ``slow``: they run in CI's second pass, after README's command has compiled and cached every kernel,
+  on the path a user gets at their size (the long recursions, the data runs, the noise fits of whole studies: on the
+  numpy path they took about 450 s of that pass, on the compiled path about 130 s).
 
 The numpy path and the compiled path agree to round-off (tests/tracking/test_compiled_equality.py and the other
 ``compiled`` tests), so no other test's assertion depends on the path. docs/testing.md lists the markers.
@@ -20,12 +23,19 @@ import pytest
 
 from locbook._lazy import skip_iri_format_checker
 
+# CI's installed pass (.ci/run) sets this where it has checked that its process imports the installed package: every
+# xdist worker checks it again for itself
+if os.environ.get("LOCBOOK_TEST_INSTALLED") == "1":
+    import locbook
+    if "site-packages" not in locbook.__file__:
+        raise pytest.UsageError(f"the installed pass imported locbook from {locbook.__file__}, not site-packages")
+
 # what the locbook command and its workers do (locbook/_lazy.py): the test modules read notebooks with nbformat, and
 # each test process would otherwise build rfc3987_syntax's grammar at import (3-4 s of CPU per process)
 skip_iri_format_checker()
 
 #: the markers whose tests keep the compiled paths as the environment sets them
-_COMPILED_MARKERS = ("compiled", "notebooks")
+_COMPILED_MARKERS = ("compiled", "notebooks", "slow")
 
 
 @pytest.hookimpl(hookwrapper=True)

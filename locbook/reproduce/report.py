@@ -125,6 +125,26 @@ def _figures_on() -> bool:
     return os.environ.get("LOCBOOK_FIGURES", "").strip().lower() != "off"
 
 
+def _show_saved_png(fig, png: Path, dpi: int) -> bool:
+    """Under ``locbook run`` (``LOCBOOK_OUTPUT_DIR`` set) in a kernel drawing with matplotlib's inline backend:
+    show the PNG just saved as the cell's output and close the figure, so the inline backend does not draw it a
+    second time (drawing is most of a light notebook's time). The page then shows the report's own file, at the
+    size the inline backend would give it (``figure.dpi``). False (nothing shown) anywhere else: an interactive
+    session keeps its live figures."""
+    if not os.environ.get("LOCBOOK_OUTPUT_DIR"):
+        return False
+    import matplotlib
+    if "inline" not in matplotlib.get_backend():
+        return False
+    import matplotlib.pyplot as plt
+    from IPython.display import Image, display
+    data = png.read_bytes()
+    width_px = int.from_bytes(data[16:20], "big")          # the IHDR chunk's width: PNG's first 8 + 8 bytes
+    display(Image(data=data, format="png", width=max(1, round(width_px * fig.dpi / dpi))))
+    plt.close(fig)
+    return True
+
+
 class Report:
     """Collects one experiment's outputs. ``experiment`` defaults to ``LOCBOOK_EXPERIMENT``."""
 
@@ -240,7 +260,8 @@ class Report:
 
     # -- figures, tables, assumptions -------------------------------------------------------------
     def figure(self, fig, name: str, caption: str = "", dpi: int = 110) -> Path:
-        """Save a matplotlib figure as ``<name>.png``; the caption says what it reproduces. Where the environment
+        """Save a matplotlib figure as ``<name>.png``; the caption says what it reproduces. Under ``locbook run`` the
+        cell shows that file and the figure is closed (drawn once, :func:`_show_saved_png`). Where the environment
         sets ``LOCBOOK_FIGURES=off`` (the points of ``locbook bracket``, whose numbers are all that is read of
         them) the figure is closed unsaved and the manifest lists its caption without a file."""
         self._check_name(name)
@@ -248,6 +269,7 @@ class Report:
         if _figures_on():
             # fixed metadata keeps PNG bytes identical between identical runs
             fig.savefig(path, dpi=dpi, bbox_inches="tight", metadata={"Software": None})
+            _show_saved_png(fig, path, dpi)
         else:
             import matplotlib.pyplot as plt
             plt.close(fig)

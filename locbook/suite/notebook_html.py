@@ -143,14 +143,25 @@ def render_math(markdown: str) -> str:
     return "".join(p if i % 2 else _MATH.sub(one, p) for i, p in enumerate(parts))
 
 
+#: this process's exporter: its compiled templates are kept for the next page (nbconvert's own command reuses one
+#: exporter for every notebook it converts)
+_EXPORTER = None
+
+
+def _exporter():
+    global _EXPORTER
+    if _EXPORTER is None:
+        from nbconvert import HTMLExporter
+        _EXPORTER = HTMLExporter(template_name=TEMPLATE_NAME, extra_template_basedirs=[str(TEMPLATES)])
+    return _EXPORTER
+
+
 def export_html(notebook_path) -> str:
     """The executed notebook ``notebook_path`` as one self-contained HTML page (module docstring)."""
     import nbformat
-    from nbconvert import HTMLExporter
     nb = nbformat.read(str(notebook_path), as_version=4)
     for cell in nb.cells:
         if cell.cell_type == "markdown" and "$" in cell.source:
             cell.source = render_math(cell.source)
-    exporter = HTMLExporter(template_name=TEMPLATE_NAME, extra_template_basedirs=[str(TEMPLATES)])
-    body, _ = exporter.from_notebook_node(nb)
+    body, _ = _exporter().from_notebook_node(nb)
     return body

@@ -126,3 +126,49 @@ def test_an_interactive_session_writes_to_its_own_scratch_folder(tmp_path, monke
     other = subprocess.run([sys.executable, "-c", "import locbook as lb; print(lb.Report('exp-a').output_dir)"],
                            capture_output=True, text=True, check=True).stdout.strip()
     assert Path(other).parent.parent == session.parent and Path(other).parent != session
+
+
+_SHOW_CODE = """
+import json, os, sys
+import matplotlib.pyplot as plt
+import IPython.display
+shown = []
+IPython.display.display = lambda *objs, **kw: shown.extend(objs)
+import locbook as lb
+report = lb.Report("figure-check")
+fig, ax = plt.subplots(figsize=(4, 3))
+ax.plot([0, 1], [1, 0])
+path = report.figure(fig, "line", "a line", dpi=110)
+png = path.read_bytes()
+print(json.dumps({"shown": [(type(o).__name__, o.data == png, o.width) for o in shown],
+                  "open": plt.get_fignums(), "png_width": int.from_bytes(png[16:20], "big"),
+                  "fig_dpi": fig.dpi, "backend": plt.get_backend()}))
+"""
+
+
+@pytest.mark.parametrize("under_runner", [True, False])
+def test_under_the_runner_a_figure_is_drawn_once_and_the_cell_shows_the_saved_file(tmp_path, under_runner):
+    """With matplotlib's inline backend (a kernel) and LOCBOOK_OUTPUT_DIR set (locbook run), Report.figure shows the
+    PNG it saved, bytes for bytes, at the inline backend's displayed size (figure.dpi / dpi of its pixels), and closes
+    the figure, so the inline backend draws nothing more; an interactive session keeps its figure open and shows
+    nothing itself."""
+    import json
+    import os
+    import subprocess
+    import sys
+    env = {**os.environ, "MPLBACKEND": "module://matplotlib_inline.backend_inline"}
+    env.pop("LOCBOOK_OUTPUT_DIR", None)
+    env.pop("LOCBOOK_EXPERIMENT", None)
+    env["TMPDIR"] = str(tmp_path)
+    if under_runner:
+        env["LOCBOOK_OUTPUT_DIR"] = str(tmp_path)
+    out = subprocess.run([sys.executable, "-c", _SHOW_CODE], capture_output=True, text=True, env=env, cwd=tmp_path)
+    assert out.returncode == 0, out.stderr[-2000:]
+    got = json.loads(out.stdout.strip().splitlines()[-1])
+    assert "inline" in got["backend"]
+    if under_runner:
+        assert got["png_width"] > 300
+        assert got["shown"] == [["Image", True, round(got["png_width"] * got["fig_dpi"] / 110)]]
+        assert got["open"] == []
+    else:
+        assert got["shown"] == [] and got["open"] == [1]

@@ -83,3 +83,39 @@ def test_a_drawn_formula_is_kept_and_a_broken_or_unwritable_cache_is_drawn_aroun
     monkeypatch.setenv("LOCBOOK_CACHE_DIR", str(blocked))
     monkeypatch.setattr(nh, "_MATH_MEMO", {})
     assert nh.math_svg("\\beta") is not None
+
+
+def test_code_cells_skip_a_sanitiser_pass_that_changes_nothing_and_a_reused_exporter_gives_the_same_page(tmp_path):
+    """locbook's template writes a code cell's highlighted source without the lab template's bleach pass: nbconvert's
+    own ``clean_html`` returns pygments' HTML of every code cell of every notebook unchanged (so the page is the
+    same), and it would not if the source reached the page unescaped. A page exported by the process's kept
+    exporter equals one from a fresh exporter."""
+    from nbconvert import HTMLExporter
+    from nbconvert.filters.highlight import Highlight2HTML
+    from nbconvert.filters.strings import clean_html
+
+    from builders import REPO_ROOT
+    from locbook.suite import notebook_html as nh
+    highlight = Highlight2HTML(pygments_lexer="ipython3")
+    notebooks = sorted((REPO_ROOT / "notebooks").glob("*/*.ipynb"))
+    cells = [c.source for p in notebooks for c in nbformat.read(str(p), as_version=4).cells if c.cell_type == "code"]
+    assert len(cells) > 100
+    for source in cells + ["x = '<b>&amp;</b>'  # \"quoted\" <script>alert(1)</script>"]:
+        html_code = highlight(source)
+        assert clean_html(html_code) == html_code, source[:80]
+    assert "<script>" not in highlight("<script>alert(1)</script>")           # escaped by pygments itself
+    nb = new_notebook()
+    nb.metadata["kernelspec"] = {"name": "python3", "display_name": "Python 3", "language": "python"}
+    nb.cells = [new_code_cell("s = '<i>x</i>' & y  # <tag>"), new_markdown_cell("Text with $x^2$.")]
+    path = tmp_path / "t.ipynb"
+    nbformat.write(nb, str(path))
+    first, again = export_html(path), export_html(path)
+    assert first == again and nh._EXPORTER is not None
+    fresh = nbformat.read(str(path), as_version=4)
+    fresh.cells[1].source = nh.render_math(fresh.cells[1].source)
+    page, _ = HTMLExporter(template_name=nh.TEMPLATE_NAME,
+                           extra_template_basedirs=[str(nh.TEMPLATES)]).from_notebook_node(fresh)
+    assert page == first
+    lab, _ = HTMLExporter(template_name="lab").from_notebook_node(fresh)
+    code = re.compile(r'<div class="cm-editor cm-s-jupyter">.*?</div>', re.S)
+    assert code.findall(page) == code.findall(lab)        # the code cells exactly as the lab template writes them

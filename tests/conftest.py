@@ -23,13 +23,6 @@ import pytest
 
 from locbook._lazy import skip_iri_format_checker
 
-# CI's installed pass (.ci/run) sets this where it has checked that its process imports the installed package: every
-# xdist worker checks it again for itself
-if os.environ.get("LOCBOOK_TEST_INSTALLED") == "1":
-    import locbook
-    if "site-packages" not in locbook.__file__:
-        raise pytest.UsageError(f"the installed pass imported locbook from {locbook.__file__}, not site-packages")
-
 # what the locbook command and its workers do (locbook/_lazy.py): the test modules read notebooks with nbformat, and
 # each test process would otherwise build rfc3987_syntax's grammar at import (3-4 s of CPU per process)
 skip_iri_format_checker()

@@ -125,24 +125,23 @@ def _figures_on() -> bool:
     return os.environ.get("LOCBOOK_FIGURES", "").strip().lower() != "off"
 
 
-def _show_saved_png(fig, png: Path, dpi: int) -> bool:
+def _show_saved_png(fig, png: Path, dpi: int) -> None:
     """Under ``locbook run`` (``LOCBOOK_OUTPUT_DIR`` set) in a kernel drawing with matplotlib's inline backend:
     show the PNG just saved as the cell's output and close the figure, so the inline backend does not draw it a
     second time (drawing is most of a light notebook's time). The page then shows the report's own file, at the
-    size the inline backend would give it (``figure.dpi``). False (nothing shown) anywhere else: an interactive
-    session keeps its live figures."""
+    size the inline backend would give it (``figure.dpi``). Anywhere else nothing is shown: an interactive session
+    keeps its live figures."""
     if not os.environ.get("LOCBOOK_OUTPUT_DIR"):
-        return False
+        return
     import matplotlib
     if "inline" not in matplotlib.get_backend():
-        return False
+        return
     import matplotlib.pyplot as plt
     from IPython.display import Image, display
     data = png.read_bytes()
     width_px = int.from_bytes(data[16:20], "big")          # the IHDR chunk's width: PNG's first 8 + 8 bytes
     display(Image(data=data, format="png", width=max(1, round(width_px * fig.dpi / dpi))))
     plt.close(fig)
-    return True
 
 
 class Report:

@@ -18,6 +18,7 @@ import pandas as pd
 import psutil
 from nbformat.v4 import new_code_cell, new_notebook
 
+from builders import toml_key, toml_value
 from locbook.data.dataset import load_dataset
 from locbook.data.example import EXAMPLE_ROLES, write_example_dataset
 from locbook.reproduce.interpretations import INTERPRETATION_COLUMNS
@@ -41,6 +42,46 @@ if kill_worker:
 if fail:
     raise RuntimeError("deliberate failure")
 """
+
+
+# -- a toy suite's experiments.toml --------------------------------------------------------------------------------
+
+
+def _spaced(value) -> str:
+    """A TOML value, inline tables written ``{ a = 1 }`` as the files people write them (tests edit that text)."""
+    if isinstance(value, dict):
+        return "{ " + ", ".join(f"{toml_key(k)} = {_spaced(v)}" for k, v in value.items()) + " }"
+    return toml_value(value)
+
+
+def _toml_table(header: str, values: dict | None) -> str:
+    return f"[{header}]\n" + "".join(f"{toml_key(k)} = {_spaced(v)}\n" for k, v in (values or {}).items())
+
+
+def document_toml(name: str = "george", *, year: str = "2015", title: str = "t", authors: str = "a") -> str:
+    """A ``[documents.<name>]`` table (``source = "s"``)."""
+    return _toml_table(f"documents.{name}", {"title": title, "authors": authors, "year": year, "source": "s"})
+
+
+def experiment_toml(id: str, notebook: str, *, title: str, section: str = "Table 1", document: str = "george",
+                    quick: dict | None = None, full: dict | None = None, rules: dict | None = None,
+                    extra: str = "") -> str:
+    """One ``[[experiment]]``: its keys, its ``parameter_rules`` (``rules``, a name -> inline-table dict), ``extra``
+    TOML text (e.g. a data_run table) and its quick and full profiles' parameters."""
+    text = "[[experiment]]\n" + "".join(f"{k} = {toml_value(v)}\n" for k, v in (
+        ("id", id), ("document", document), ("title", title), ("section", section), ("notebook", notebook)))
+    if rules:
+        text += _toml_table("experiment.parameter_rules", rules)
+    if extra:
+        text += extra.rstrip("\n") + "\n"
+    return text + _toml_table("experiment.profiles.quick", quick) + _toml_table("experiment.profiles.full", full)
+
+
+def suite_toml(*experiments: str, document: str | None = None, rules: dict | None = None) -> str:
+    """A toy suite's experiments.toml: george's document table (or ``document``), the experiments
+    (:func:`experiment_toml`) and the suite-wide ``[parameter_rules]``."""
+    text = (document if document is not None else document_toml()) + "".join(experiments)
+    return text + (_toml_table("parameter_rules", rules) if rules else "")
 
 
 def _notebook(path, params_src, body=GOOD):
@@ -146,19 +187,8 @@ time.sleep(sleep_s)
 """
 
 
-TOY_STUDY = """
-[[experiment]]
-id = "george-study"
-document = "george"
-title = "study"
-section = "Table 9"
-notebook = "study.ipynb"
-[experiment.parameter_rules]
-a = { ge = 0, le = 5 }
-[experiment.profiles.quick]
-seed = 3
-[experiment.profiles.full]
-
+TOY_STUDY = "\n" + experiment_toml("george-study", "study.ipynb", title="study", section="Table 9",
+                                   rules={"a": {"ge": 0, "le": 5}}, quick={"seed": 3}) + """
 [[study]]
 name = "toy"
 experiments = ["george-study"]

@@ -23,7 +23,7 @@ from locbook.errors import ParameterError
 from locbook.suite import load_suite, runner, site
 from locbook.suite import run as suite_run
 from locbook.suite.spec import SuiteError
-from toy_suite import STATIC_ROWS, example, write_data_folder
+from toy_suite import STATIC_ROWS, document_toml, example, experiment_toml, suite_toml, write_data_folder
 
 #: the reproduction vocabulary no page about a data set may use (words, so "within" but not "withinness")
 BANNED = re.compile(r"\b(reproduc\w*|within|loose|miss|missed|printed|calibrated within)\b", re.I)
@@ -83,32 +83,10 @@ def _toy_suite(root: Path, data_run: str) -> Path:
     cell.metadata["tags"] = ["parameters"]
     nb.cells = [cell, nbformat.v4.new_code_cell("pass")]
     nbformat.write(nb, nbdir / "toy.ipynb")
-    toml = f'''
-[parameter_rules]
-n = {{ ge = 1 }}
-[documents.measured]
-title = "t"
-authors = "a"
-year = "2021"
-source = "s"
-[[experiment]]
-id = "measured-one"
-document = "measured"
-title = "one"
-section = "s"
-notebook = "toy.ipynb"
-{data_run}
-[experiment.profiles.quick]
-[experiment.profiles.full]
-[[experiment]]
-id = "measured-two"
-document = "measured"
-title = "two"
-section = "s"
-notebook = "toy.ipynb"
-[experiment.profiles.quick]
-[experiment.profiles.full]
-'''
+    toml = suite_toml(
+        experiment_toml("measured-one", "toy.ipynb", title="one", section="s", document="measured", extra=data_run),
+        experiment_toml("measured-two", "toy.ipynb", title="two", section="s", document="measured"),
+        document=document_toml("measured", year="2021"), rules={"n": {"ge": 1}})
     (nbdir / "experiments.toml").write_text(toml)
     return nbdir / "experiments.toml"
 

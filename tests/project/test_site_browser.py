@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import os
 import shutil
-import textwrap
 import urllib.parse
 import urllib.request
 from pathlib import Path
@@ -20,7 +19,7 @@ import pytest
 
 from builders import REPO_ROOT
 from locbook.suite import load_suite, run_suite
-from toy_suite import _notebook, example, write_data_folder
+from toy_suite import _notebook, document_toml, example, experiment_toml, suite_toml, write_data_folder
 
 pytestmark = [pytest.mark.notebooks, pytest.mark.browser]   # executes (toy) notebooks with papermill
 
@@ -47,48 +46,19 @@ report.assumption("n", n, "small, to keep the test fast")
 if fail:
     raise RuntimeError("deliberate failure")
 """
-TOML = """
-[documents.george]
-title = "A toy document"
-authors = "A. Author"
-year = "2015"
-source = "s"
-[[experiment]]
-id = "george-good"
-document = "george"
-title = "A good experiment"
-section = "Table 1"
-notebook = "toy.ipynb"
-[experiment.profiles.quick]
-[experiment.profiles.full]
-[[experiment]]
-id = "george-failed"
-document = "george"
-title = "A failing experiment"
-section = "Table 2"
-notebook = "toy.ipynb"
-[experiment.profiles.quick]
-fail = true
-[experiment.profiles.full]
-fail = true
-[[experiment]]
-id = "george-absent"
-document = "george"
-title = "An experiment not run"
-section = "Table 3"
-notebook = "toy.ipynb"
-[experiment.profiles.quick]
-[experiment.profiles.full]
-[parameter_rules]
-n = { ge = 1 }
-"""
+TOML = "\n" + suite_toml(
+    experiment_toml("george-good", "toy.ipynb", title="A good experiment", section="Table 1"),
+    experiment_toml("george-failed", "toy.ipynb", title="A failing experiment", section="Table 2",
+                    quick={"fail": True}, full={"fail": True}),
+    experiment_toml("george-absent", "toy.ipynb", title="An experiment not run", section="Table 3"),
+    document=document_toml(title="A toy document", authors="A. Author"), rules={"n": {"ge": 1}})
 
 
 def _toy_suite(root: Path):
     nbdir = root / "notebooks"
     nbdir.mkdir(parents=True)
     _notebook(nbdir / "toy.ipynb", PARAMS, BODY)
-    (nbdir / "experiments.toml").write_text(textwrap.dedent(TOML))
+    (nbdir / "experiments.toml").write_text(TOML)
     return load_suite(nbdir / "experiments.toml")
 
 

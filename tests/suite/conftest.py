@@ -1,9 +1,7 @@
 """The toy suite's fixtures (the helpers they use are in tests/toy_suite.py)."""
-import textwrap
-
 import pytest
 
-from toy_suite import PARAMS, STUDY_BODY, STUDY_PARAMS, TOY_STUDY, _notebook
+from toy_suite import PARAMS, STUDY_BODY, STUDY_PARAMS, TOY_STUDY, _notebook, experiment_toml, suite_toml
 
 
 @pytest.fixture
@@ -20,34 +18,10 @@ def toy(tmp_path):
     params = PARAMS
     _notebook(nbdir / "one.ipynb", params)
     _notebook(nbdir / "two.ipynb", params)
-    (nbdir / "experiments.toml").write_text(textwrap.dedent("""
-        [documents.george]
-        title = "t"
-        authors = "a"
-        year = "2015"
-        source = "s"
-        [[experiment]]
-        id = "george-one"
-        document = "george"
-        title = "one"
-        section = "Table 1"
-        notebook = "one.ipynb"
-        [experiment.profiles.quick]
-        n = 5
-        [experiment.profiles.full]
-        n = 50
-        [[experiment]]
-        id = "george-two"
-        document = "george"
-        title = "two"
-        section = "Table 2"
-        notebook = "two.ipynb"
-        [experiment.profiles.quick]
-        [experiment.profiles.full]
-        [parameter_rules]
-        n = { ge = 1 }
-        sleep_s = { ge = 0 }
-        """))
+    (nbdir / "experiments.toml").write_text("\n" + suite_toml(
+        experiment_toml("george-one", "one.ipynb", title="one", section="Table 1", quick={"n": 5}, full={"n": 50}),
+        experiment_toml("george-two", "two.ipynb", title="two", section="Table 2"),
+        rules={"n": {"ge": 1}, "sleep_s": {"ge": 0}}))
     return tmp_path
 
 

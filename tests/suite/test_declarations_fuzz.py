@@ -33,7 +33,7 @@ from locbook.suite import SuiteError, load_suite
 from locbook.suite import study as study_module
 from locbook.suite.bracket import bracket_points, experiment_interpretations, find_experiment
 from locbook.suite.study import expand_study, load_studies
-from toy_suite import _notebook
+from toy_suite import _notebook, experiment_toml, suite_toml
 
 pytestmark = pytest.mark.fuzz
 
@@ -44,33 +44,10 @@ FUZZ = settings(max_examples=300, deadline=None, derandomize=True,
 #: the toy notebook's parameters (their types are what the declarations are checked against)
 PARAMS = ('seed: int = 1  # seed\na: float = 1.0  # slope input\nb: float = 0.0  # offset\n'
           'tag: str = "x"  # a label\nn: int = 3  # a count\nweights: list[float] = [1.0]  # a list\n')
-SUITE = """
-[documents.george]
-title = "t"
-authors = "a"
-year = "2015"
-source = "s"
-[[experiment]]
-id = "george-fuzz"
-document = "george"
-title = "fuzz"
-section = "Table 9"
-notebook = "fuzz.ipynb"
-[experiment.parameter_rules]
-a = { ge = 0, le = 5 }
-n = { ge = 1, le = 10 }
-[experiment.profiles.quick]
-seed = 3
-[experiment.profiles.full]
-[[experiment]]
-id = "george-other"
-document = "george"
-title = "other"
-section = "Table 9"
-notebook = "fuzz.ipynb"
-[experiment.profiles.quick]
-[experiment.profiles.full]
-"""
+SUITE = "\n" + suite_toml(
+    experiment_toml("george-fuzz", "fuzz.ipynb", title="fuzz", section="Table 9",
+                    rules={"a": {"ge": 0, "le": 5}, "n": {"ge": 1, "le": 10}}, quick={"seed": 3}),
+    experiment_toml("george-other", "fuzz.ipynb", title="other", section="Table 9"))
 
 
 @pytest.fixture(scope="module")

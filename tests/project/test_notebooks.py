@@ -41,6 +41,25 @@ def test_every_notebook_declares_typed_parameters_and_is_committed_without_outpu
         assert all(not c.get("outputs") for c in nb.cells if c.cell_type == "code"), exp.id
 
 
+def test_every_notebooks_own_defaults_are_its_quick_profile():
+    """'Run all' in Jupyter gives the quick report: every value the quick profile sets equals the default written in
+    the notebook's parameters cell (read from the notebook's text, not through the suite's resolver)."""
+    import ast
+
+    import nbformat
+    differ = []
+    for exp in SUITE.experiments:
+        nb = nbformat.read(str(exp.notebook), as_version=4)
+        cell, = [c for c in nb.cells if "parameters" in c.metadata.get("tags", [])]
+        written = {node.target.id: ast.literal_eval(node.value) for node in ast.parse(cell.source).body
+                   if isinstance(node, ast.AnnAssign)}
+        quick = exp.profiles["quick"]
+        assert quick, exp.id                               # a quick profile that sets nothing would pass vacuously
+        differ += [(exp.id, name, written.get(name), value) for name, value in quick.items()
+                   if written.get(name) != value or type(written.get(name)) is not type(value)]
+    assert differ == [], differ
+
+
 @pytest.mark.installed
 def test_one_notebook_per_document_runs_from_the_package_and_reads_its_own_data(tmp_path):
     """The installed pass's notebook check (docs/testing.md): the first experiment of every document, run at the

@@ -38,7 +38,7 @@ def test_version_list_and_show(capsys):
     assert all(exp.id in text for exp in suite.experiments)
     shown = show_text(suite, "george-tracking", REPO / "reports")
     # the type, the default, the profile values, the rule of experiments.toml and the cell's comment
-    assert "n_monte_carlo: int = 200   [quick 300, full 10000]   allowed: >= 2, finite" in shown
+    assert "n_monte_carlo: int = 300   [quick 300, full 10000]   allowed: >= 2, finite" in shown
     assert "repetitions of the whole experiment" in shown
     assert "trajectory: Literal['centerline', 'zigzag']" in shown
     with pytest.raises(SuiteError, match="unknown experiment"):

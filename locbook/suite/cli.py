@@ -87,6 +87,15 @@ def _print_summary(run, progress: str = "plain", see: Path | None = None, rebuil
         print(f"  {rebuilt}", file=sys.stderr)
 
 
+def _reports_folder(text: str, reports: Path) -> Path:
+    """``locbook compare``'s BASE or VARIANT: a folder as given, else the folder of that name in ``reports`` (a
+    profile, a ``-p`` run's folder)."""
+    path = Path(text)
+    if not path.exists() and path.name == text and (Path(reports) / text).is_dir():
+        return Path(reports) / text
+    return path
+
+
 METHOD_HELP = ("a static method of your own beside the battery's (repeatable): NAME=SPEC, SPEC package.module:function "
                "or path/to/file.py:function (relative to this folder); the signature: locbook.MethodInput")
 TRACKER_HELP = "a tracker of your own beside the battery's (repeatable): NAME=SPEC as for --method"
@@ -151,6 +160,14 @@ def main(argv: list[str] | None = None) -> int:
                                        "its last result")
     show.add_argument("key", help="an experiment id or document key")
     show.add_argument("--reports", type=Path, help="reports folder the last results are read from")
+    cmp = sub.add_parser("compare", help="two runs side by side: every printed number in each, the difference, its "
+                                         "standard error and whether the change exceeds it (compare-<BASE>.html, .csv)")
+    cmp.add_argument("base", metavar="BASE", help="a reports folder (a path, or a folder name in --reports: quick, "
+                                                  "full, a -p run's folder)")
+    cmp.add_argument("variant", metavar="VARIANT", help="the run compared with BASE, given as BASE is")
+    cmp.add_argument("--reports", type=Path, help="reports folder a folder name is looked up in (default: "
+                                                  "<repository>/reports)")
+    cmp.add_argument("--out", type=Path, help="write compare-<BASE>.html and .csv here (default: VARIANT's folder)")
     nbs = sub.add_parser("notebooks", help="copy the notebooks and the experiment list to DEST for Jupyter")
     nbs.add_argument("dest", type=Path, help="destination folder (created)")
     nbs.add_argument("--force", action="store_true", help="overwrite notebooks already in DEST")
@@ -252,7 +269,7 @@ def main(argv: list[str] | None = None) -> int:
     data.add_argument("--tracker", dest="trackers", action="append", default=[], metavar="NAME=SPEC",
                       help="check: also import this tracker of your own (as for run)")
     # --suite after the command too; SUPPRESS keeps one given before it
-    for command in (lst, show, nbs, run, study, bracket, data):
+    for command in (lst, show, cmp, nbs, run, study, bracket, data):
         command.add_argument("--suite", type=Path, default=argparse.SUPPRESS, help=suite_help)
     args = parser.parse_args(argv)
 
@@ -264,6 +281,13 @@ def main(argv: list[str] | None = None) -> int:
             from .catalog import list_text, show_text
             reports = args.reports or suite.default_reports()
             print(show_text(suite, args.key, reports) if args.key else list_text(suite, reports))
+            return 0
+        if args.command == "compare":
+            from .compare import compare_folders, write_comparison
+            reports = args.reports or suite.default_reports()
+            comparison = write_comparison(compare_folders(_reports_folder(args.base, reports),
+                                                          _reports_folder(args.variant, reports), suite), args.out)
+            print(f"{comparison.summary()}; see {comparison.written[0]}")
             return 0
         if args.command == "data":
             if args.action == "example":

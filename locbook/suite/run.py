@@ -173,6 +173,9 @@ def run_suite(suite: Suite, experiments: list[Experiment], profile: str, *, jobs
                                               data_run=data is not None))
              for exp in experiments]  # validation first
     custom_folder = bool(overrides) or out_dir is not None or dataset_name is not None
+    # the run a -p (or --out) run is compared with: the profile's own folder (of the same data set)
+    base_dir = root / profile / (f"data-{dataset_name}" if dataset_name is not None else "")
+    compare_with = base_dir if base_dir != report_dir else None
     if isinstance(progress, str):
         progress = make_progress(progress)
     for eid, why in left_out.items():
@@ -190,7 +193,7 @@ def run_suite(suite: Suite, experiments: list[Experiment], profile: str, *, jobs
                     retries=retries, kernel_name=kernel_name, progress=progress, executor=executor,
                     scheduler=scheduler, data_roots=data_roots,
                     write_reports=lambda folder, _outcomes: _write_reports(
-                        suite, folder, custom_folder, dataset_name is not None and out_dir is None))
+                        suite, folder, custom_folder, dataset_name is not None and out_dir is None, compare_with))
     run.left_out = dict(left_out)
     return run
 
@@ -262,8 +265,9 @@ def select_for_data(experiments: list[Experiment], kinds, requested=None) -> tup
     return kept, left_out
 
 
-def _write_reports(suite: Suite, folder: Path, custom_folder: bool, nested: bool) -> None:
-    write_suite_reports(suite, folder, list_all=not custom_folder)
+def _write_reports(suite: Suite, folder: Path, custom_folder: bool, nested: bool,
+                   compare_with: Path | None = None) -> None:
+    write_suite_reports(suite, folder, list_all=not custom_folder, compare_with=compare_with)
     parent = folder.parent
     if nested and (parent / "index.html").is_file():     # the profile's index links its data-<name>/ folders
         from filelock import FileLock, Timeout

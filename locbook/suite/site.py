@@ -34,6 +34,7 @@ from ..reproduce.report import Table, markdown_text
 from ..reproduce.scoring import SCORED_VERDICTS, VERDICT_COLUMNS, scoreboard_counts
 from .bracket_table import SITE_NUMBER_COLUMNS, bracket_of_rows, brackets_root, load_bracket
 from .cachekey import locbook_version
+from .compare import compare_folders, write_comparison
 from .conclusions import CONCLUSIONS_SUFFIX, write_conclusions
 from .files import read_csv, read_json, write_text_atomic
 from .findings import (
@@ -444,6 +445,9 @@ def index_markdown(report_dir: Path, entries, rows, conclusions: dict | None = N
         if _findings(report_dir):
             lines += ["Findings per document: " + ", ".join(f"[{doc}]({link})" for doc, link in _findings(report_dir)),
                       ""]
+    if comparison_pages(report_dir):
+        lines += ["Compared with: " + ", ".join(f"[{base}]({link})" for base, link in comparison_pages(report_dir))
+                  + " (every printed number in both runs, the difference and its standard error).", ""]
     if _conclusion_pages(report_dir):
         lines += ["Conclusions per document (each claim of the source judged from the rows): " + ", ".join(
             f"[{doc}]({link})" for doc, link in _conclusion_pages(report_dir)), ""]
@@ -498,11 +502,16 @@ def index_html(report_dir: Path, entries, rows, version: str, conclusions: dict 
         headline=_headline_counts(rows), brackets=_bracket_counts(rows), findings=_findings(report_dir),
         bracket_headline=_bracket_headline(rows, profile_of(report_dir)),
         answers=_one_screen(entries, rows, conclusions), leniency=_leniency(report_dir),
-        conclusion_pages=_conclusion_pages(report_dir),
+        conclusion_pages=_conclusion_pages(report_dir), comparisons=comparison_pages(report_dir),
         twice=double_counted(rows), datasets=dataset_sections(report_dir),
         total=_counts_table(scoreboard_counts(rows)) if rows else None, documents=documents,
         experiments=experiments, n_present=sum(1 for e in entries if e["present"]), reasons=reasons,
         summary=findings_summary(entries, rows))
+
+
+def comparison_pages(report_dir: Path) -> list[tuple[str, str]]:
+    """(base folder, file name) of the comparisons in a reports folder (``compare-<base>.html``)."""
+    return [(p.stem[len("compare-"):], p.name) for p in sorted(Path(report_dir).glob("compare-*.html"))]
 
 
 def _conclusion_pages(report_dir: Path) -> list[tuple[str, str]]:
@@ -536,7 +545,8 @@ def write_experiment_pages(exp, profile: str, params: dict, staging: Path, folde
                                          encoding="utf-8")
 
 
-def write_suite_reports(suite: Suite, report_dir: Path, *, list_all: bool = True) -> None:
+def write_suite_reports(suite: Suite, report_dir: Path, *, list_all: bool = True,
+                        compare_with: Path | None = None) -> None:
     """Rebuild ``numbers.csv``, ``index.html`` and ``index.md`` from the experiment folders present (and the
     interpretation brackets in ``<reports>/brackets/``: :mod:`locbook.suite.bracket`); in a profile's folder also each
     document's findings page (:mod:`locbook.suite.findings`) and conclusions page (:mod:`locbook.suite.conclusions`),
@@ -544,7 +554,8 @@ def write_suite_reports(suite: Suite, report_dir: Path, *, list_all: bool = True
 
     An experiment's rows come from its own folder, whatever run wrote it, so a partial run leaves the
     others' results as they were. ``list_all=False`` (folders of ``-p`` runs) lists only the experiments
-    present."""
+    present. ``compare_with``: the base run of a ``-p`` (or ``--out``) run, the profile's own folder: when it holds
+    reports, the comparison with it (:mod:`locbook.suite.compare`) is written beside the index, which links it."""
     status = read_json(report_dir / "status.json", {})
     dataset = dataset_record(report_dir)       # a data run's folder: the data set's page, not the scoreboard
     rows, entries = [], []
@@ -570,6 +581,8 @@ def write_suite_reports(suite: Suite, report_dir: Path, *, list_all: bool = True
     for r in rows:
         writer.writerow({c: r.get(c, "") for c in SITE_NUMBER_COLUMNS})
     write_text_atomic(report_dir / "numbers.csv", out.getvalue())
+    if compare_with is not None and Path(compare_with) != Path(report_dir) and (compare_with / "numbers.csv").is_file():
+        write_comparison(compare_folders(compare_with, report_dir, suite))
     if dataset is not None:
         write_text_atomic(report_dir / "index.html", data_index_html(report_dir, entries, dataset, locbook_version()))
         write_text_atomic(report_dir / "index.md", data_index_markdown(report_dir, entries, dataset))

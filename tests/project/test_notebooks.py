@@ -195,6 +195,8 @@ def test_every_readme_command_runs(clone, quick_reports, tmp_path):
             extra = ["--suite", str(SUITE_FILE)]
             if args[1] in ("run", "study", "bracket"):
                 extra += ["--reports", str(reports), "--progress", "plain"]
+            elif args[1] == "compare":
+                extra += ["--reports", str(reports)]
             proc = subprocess.run([sys.executable, "-m", "locbook", *args[1:], *extra], cwd=tmp_path,
                                   capture_output=True, text=True, timeout=1800)
             assert proc.returncode == 0, f"{command}\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}"

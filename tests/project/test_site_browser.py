@@ -316,3 +316,37 @@ def test_a_floor_plan_is_drawn_under_the_map_on_a_data_sets_page(browser, tmp_pa
     assert tint.mean() > 0.3                    # the hall's floor tint: the plan is under the map
     for target in (tmp_path / "data-floor-plan.png", _screenshot_dir() / "data-floor-plan.png"):
         assert img.screenshot(str(target))
+
+
+def test_a_p_runs_index_links_its_comparison_with_the_base(browser, site_dir, tmp_path):
+    """A ``-p`` run beside the toy site's quick run: its index links ``compare-quick.html``, whose every link
+    resolves (back to both runs' indexes and to its CSV) and whose table shows the one printed number in both runs
+    with the difference."""
+    from selenium.webdriver.common.by import By
+
+    suite = load_suite(site_dir.parents[1] / "repo" / "notebooks" / "experiments.toml")
+    good = [e for e in suite.experiments if e.id == "george-good"]
+    variant = run_suite(suite, good, "quick", overrides={"n": "30"}, report_root=site_dir.parent, jobs=1,
+                        progress="quiet")
+    assert [o.status for o in variant.outcomes] == ["ok"]
+    pages = crawl(browser, variant.report_dir / "index.html", variant.report_dir)
+    compare_page = (variant.report_dir / "compare-quick.html").resolve()
+    assert compare_page in pages
+    for page, (broken, external) in pages.items():
+        assert broken == [] and external == [], (page, broken, external)
+    browser.get(compare_page.as_uri())
+    assert "against" in browser.find_element(By.TAG_NAME, "h1").text
+    hrefs = {a.get_attribute("href") for a in browser.find_elements(By.CSS_SELECTOR, "a[href]")}
+    assert (site_dir / "index.html").resolve().as_uri() in hrefs            # the base run's index
+    changed = [td.text for td in browser.find_element(By.XPATH, "//h2[text()='Parameters that differ']"
+                                                          "/following::table[1]//tbody/tr").find_elements(
+        By.TAG_NAME, "td")]
+    assert changed == ["george-good", "quick", "n", "12 (the notebook's default)", "30"]
+    table = browser.find_element(By.CSS_SELECTOR, "table.compare")
+    head = [th.text for th in table.find_elements(By.CSS_SELECTOR, "thead th")]
+    assert head[:6] == ["quantity", "where", "printed", "base", "variant", "difference"]
+    first = [td.text for td in table.find_element(By.CSS_SELECTOR, "tbody tr").find_elements(By.TAG_NAME, "td")]
+    assert first[0].startswith("mean") and first[3] != first[4]              # n = 12 against n = 30: other draws
+    assert float(first[5]) == pytest.approx(float(first[4]) - float(first[3]), abs=2e-3)   # 4 digits shown
+    for shot in (tmp_path / "site-compare.png", _screenshot_dir() / "site-compare.png"):
+        assert browser.save_screenshot(str(shot)) and shot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

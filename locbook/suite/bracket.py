@@ -105,7 +105,7 @@ from .bracket_table import (
     load_bracket,
     load_values,
 )
-from .files import point_key, point_text, read_csv, write_text_atomic
+from .files import point_key, point_text, read_csv, value_text, write_text_atomic
 from .params import check_value
 from .runner import Task
 from .spec import Experiment, Suite, SuiteError, finite_float
@@ -188,12 +188,7 @@ class BracketPoint:
         return f"{names}: {self.parameter}={_text(self.value)}{extra}"
 
 
-def _text(value) -> str:
-    if isinstance(value, str):
-        return f"'{value}'"
-    if isinstance(value, bool):
-        return str(value).lower()
-    return repr(value)
+_text = value_text
 
 
 def _sweep_values(interp: Interpretation, annotation: str) -> list:
@@ -662,7 +657,7 @@ def run_bracket(suite: Suite, exp: Experiment, *, profile: str = "quick",
     points = bracket_points(exp, profile, found)      # every value checked before anything runs
     gaps = bracket_gaps(found)
     folder = bracket_folder(suite, exp, report_root)
-    tasks = [Task(p.key, exp, p.parameters, figures=False) for p in points]   # only their numbers are read
+    tasks = [Task(p.key, exp, p.parameters, figures=False, label=p.label) for p in points]   # numbers only
     # run.aggregate: what bracket.csv holds now, for the CLI to say (not rewritten: no up-to-date default point, or a
     # failed write)
     return run_sweep(suite, tasks, profile, folder,

@@ -70,12 +70,12 @@ def _print_summary(run, progress: str = "plain", see: Path | None = None, rebuil
             print(f"interrupted by {sig}: finished reports are kept" + (f"; {rebuilt}" if rebuilt else "") + ".",
                   file=sys.stderr)
         for status in ("interrupted", "not run"):
-            ids = [o.id for o in run.outcomes if o.status == status]
+            ids = [run.name(o.id) for o in run.outcomes if o.status == status]
             if ids:
                 print(f"  {names[status]}: {', '.join(ids)}", file=sys.stderr)
     failed = [o for o in run.outcomes if o.status == "failed"]
     if failed:
-        print("failed: " + ", ".join(f"{o.id} ({o.error})" for o in failed), file=sys.stderr)
+        print("failed: " + ", ".join(f"{run.name(o.id)} ({o.error})" for o in failed), file=sys.stderr)
     if run.executor_error:
         print(f"locbook: error: {run.executor_error}; the run stopped, and its experiments on the cluster were "
               "asked to stop", file=sys.stderr)

@@ -15,7 +15,8 @@ import os
 from collections.abc import Callable
 from pathlib import Path
 
-__all__ = ["read_json", "read_csv", "atomic_write", "write_text_atomic", "point_text", "point_key", "machine_label"]
+__all__ = ["read_json", "read_csv", "atomic_write", "write_text_atomic", "point_text", "point_key", "value_text",
+           "machine_label"]
 
 
 def read_json(path: Path, default):
@@ -72,6 +73,15 @@ def point_key(experiment_id: str, values: dict, digits: int = 64, taken: dict[st
     digest = hashlib.sha256(text.encode()).hexdigest()
     key = f"{experiment_id}-{digest[:digits]}"
     return key if (taken or {}).get(key, text) == text else f"{experiment_id}-{digest}"
+
+
+def value_text(value) -> str:
+    """A parameter value as a person reads it in a point's name: ``'zigzag'``, ``true``, ``1.5``, ``[0.1, 0.2]``."""
+    if isinstance(value, str):
+        return f"'{value}'"
+    if isinstance(value, bool):
+        return str(value).lower()
+    return repr(value)
 
 
 @functools.lru_cache(maxsize=1)

@@ -56,7 +56,7 @@ def scoreboard_rows(run) -> list[dict]:
         status = o.status
         if o.status in ("failed", "interrupted") and numbers:
             status += " (last good report kept)"
-        rows.append({"experiment": o.id, "status": status, "time": _fmt_s(seconds),
+        rows.append({"experiment": run.name(o.id), "status": status, "time": _fmt_s(seconds),
                      **{kind: verdict_counts_text(c) for kind, c in counts.items()}})
     return rows
 
@@ -114,6 +114,11 @@ class _Base:
         self.total = 0
         self.done = 0
         self.expected: dict[str, float] = {}
+        #: key -> what a person reads for it (a sweep point's settings); the runner sets it before :meth:`begin`
+        self.labels: dict[str, str] = {}
+
+    def name(self, key: str) -> str:
+        return self.labels.get(key) or key
 
     def begin(self, ids, expected: dict[str, float]):
         self.total, self.expected = len(ids), expected
@@ -132,7 +137,7 @@ class _Base:
 
     def _finished_line(self, o) -> str:
         timing = f" in {o.seconds:.1f} s" if o.status in ("ok", "failed") else ""
-        return (f"[{self.done}/{self.total}] {o.id}: {o.status}{timing}"
+        return (f"[{self.done}/{self.total}] {self.name(o.id)}: {o.status}{timing}"
                 f" (elapsed {time.perf_counter() - self.start:.0f} s){'  ' + o.error if o.error else ''}")
 
 
@@ -141,7 +146,7 @@ class PlainProgress(_Base):
 
     def started(self, eid, attempt):
         expected = self.expected.get(eid)
-        print(f"running {eid}{f' (attempt {attempt})' if attempt > 1 else ''}"
+        print(f"running {self.name(eid)}{f' (attempt {attempt})' if attempt > 1 else ''}"
               f"{f' (last run {_fmt_s(expected)})' if expected else ''} ...", file=self.stream, flush=True)
 
     def finished(self, outcome):
@@ -185,7 +190,7 @@ class LiveProgress(_Base):
             else:
                 elapsed = _fmt_s(s["seconds"]) if s["seconds"] is not None else ""
             label = s["status"] + (f" (attempt {s['attempt']})" if s["attempt"] > 1 else "")
-            table.add_row(eid, f"[{style.get(s['status'], '')}]{label}[/]", elapsed,
+            table.add_row(self.name(eid), f"[{style.get(s['status'], '')}]{label}[/]", elapsed,
                           _fmt_s(self.expected.get(eid)))
         return table
 
@@ -208,7 +213,7 @@ class LiveProgress(_Base):
             seconds = time.perf_counter() - state["since"]
         state.update(status=outcome.status, seconds=seconds)
         if outcome.error and self.live is not None:
-            self.live.console.print(f"{outcome.id}: {outcome.status}: {outcome.error}", markup=False,
+            self.live.console.print(f"{self.name(outcome.id)}: {outcome.status}: {outcome.error}", markup=False,
                                     highlight=False)
 
     def end(self, run):

@@ -92,6 +92,9 @@ class Task:
     #: False: the notebook's figures are neither drawn nor saved (matplotlib's Agg backend, :meth:`Report.figure`
     #: records the caption only): the points of a bracket, whose numbers are all that is read of them
     figures: bool = True
+    #: what a person reads for this task in the live view and the scoreboard (a sweep point by its settings,
+    #: ``sigma_db=1.5 rep 0``); empty: the key
+    label: str = field(default="", hash=False)
 
 
 @dataclass
@@ -119,9 +122,15 @@ class SuiteRun:
     #: ``[experiment.data_run] needs``, each with why (:func:`locbook.suite.run.select_for_data`); they are no
     #: outcome of the run
     left_out: dict[str, str] = field(default_factory=dict)
+    #: key -> the task's label (:attr:`Task.label`), where it has one
+    labels: dict[str, str] = field(default_factory=dict)
 
     def count(self, status: str) -> int:
         return sum(o.status == status for o in self.outcomes)
+
+    def name(self, key: str) -> str:
+        """What a person reads for the task of ``key``: its label, else the key."""
+        return self.labels.get(key) or key
 
 
 def _git_state(root: Path | None) -> tuple[str, str]:
@@ -377,7 +386,7 @@ def run_tasks(suite: Suite, tasks: list[Task], profile: str, report_dir: Path, *
         raise SuiteError(f"cannot write to the reports folder {report_dir}: {exc.strerror}") from None
     # data files read under these folders are hashed into the cache record (a changed file reruns the report)
     data_roots = [str(package_dir()), str(suite.root.parent / "shared"), *(data_roots or [])]
-    run = SuiteRun([], report_dir)
+    run = SuiteRun([], report_dir, labels={t.key: t.label for t in tasks if t.label})
     with _Stop() as stop:
         lock = FileLock(str(report_dir / ".lock"))
         if not _acquire(lock, report_dir, stop, progress):
@@ -387,6 +396,7 @@ def run_tasks(suite: Suite, tasks: list[Task], profile: str, report_dir: Path, *
         try:
             _recover(report_dir)
             keys = [t.key for t in tasks]
+            progress.labels = dict(run.labels)      # the views name a sweep's points by their settings
             progress.begin(keys, expected_seconds(report_dir, keys))
             try:
                 with make_executor(executor, jobs, scheduler) as pool:

@@ -49,7 +49,7 @@ from .progress import make_progress
 from .run import claim_dataset_folder, data_kinds, load_data_argument, run_suite, run_tasks
 from .runner import Task
 from .spec import Suite, SuiteError
-from .study import Study, expand_study
+from .study import Study, expand_study, point_labels
 from .sweep import Aggregate, current_points
 
 __all__ = ["LORO_EXPERIMENTS", "DENSITY_EXPERIMENT", "DENSITY_SUBSETS", "DENSITY_MAX_SIZES", "SPLIT_MODES",
@@ -403,7 +403,8 @@ def run_density(suite: Suite, data: str, *, profile: str = "quick", subsets: int
     folder = _data_folder(suite, report_root, profile, name) / "anchor-density"
     folder.parent.mkdir(parents=True, exist_ok=True)
     claim_dataset_folder(folder.parent, name, identity)
-    tasks = [Task(p.key, p.experiment, p.parameters) for p in points]
+    labels = point_labels(points)           # anchors='A1,A2,A3' rep 0 (the data set, the same for all, left out)
+    tasks = [Task(p.key, p.experiment, p.parameters, label=labels[p.key]) for p in points]
     wrote: list = []
 
     def write(where: Path, outcomes) -> None:

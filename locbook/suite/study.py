@@ -70,7 +70,7 @@ from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationErr
 from pydantic_core import PydanticCustomError
 
 from ..errors import ParameterError
-from .files import atomic_write, point_key, point_text, read_csv, read_json
+from .files import atomic_write, point_key, point_text, read_csv, read_json, value_text
 from .params import check_value
 from .runner import Task
 from .spec import SAFE_NAME, Experiment, Suite, SuiteError, finite_float, read_toml
@@ -456,6 +456,22 @@ def _parameter_points(study: Study) -> list[dict]:
     return [{k: v for part in combo for k, v in part.items()} for combo in itertools.product(*blocks)]
 
 
+def point_labels(points: list[StudyPoint]) -> dict[str, str]:
+    """What a person reads for each point of a study (key -> label): the swept values that differ between its
+    points (all of them where none differ), the replicate, and the experiment where the study runs several:
+    ``sigma_db=1.5 rep 0``. The folder keeps the hash key; the live view, the scoreboard and the pages show this."""
+    seen: dict[str, set] = {}
+    for p in points:
+        for name, value in p.values.items():
+            seen.setdefault(name, set()).add(point_text({"v": value}))
+    varying = [name for name, texts in seen.items() if len(texts) > 1] or list(seen)
+    several = len({p.experiment.id for p in points}) > 1
+    return {p.key: " ".join(part for part in (
+        p.experiment.id if several else "",
+        ", ".join(f"{name}={value_text(p.values[name])}" for name in varying if name in p.values),
+        f"rep {p.replicate}") if part) for p in points}
+
+
 def expand_study(study: Study) -> list[StudyPoint]:
     """Every task of the study (experiment x parameter point x replicate), each value checked against the
     parameter's type and rule; raises a SuiteError naming the point and the value otherwise."""
@@ -654,7 +670,8 @@ def run_study(suite: Suite, study: Study, *, report_root: Path | None = None, jo
     points = expand_study(study)     # every value checked before anything runs
     folder = study_folder(suite, study, report_root)
     check_claim(study, folder)       # another study of this name: refused before anything runs
-    tasks = [Task(p.key, p.experiment, p.parameters) for p in points]
+    labels = point_labels(points)
+    tasks = [Task(p.key, p.experiment, p.parameters, label=labels[p.key]) for p in points]
     # run.aggregate: what study.csv holds now, for the CLI to say (not rewritten: none up to date, or its write failed)
     return run_sweep(suite, tasks, study.profile, folder,
                      lambda where, outcomes, wrote: write_study_outputs(study, points, where, outcomes, wrote),

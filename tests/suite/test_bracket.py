@@ -2,6 +2,7 @@
 (value = 10 a + b + seed against a printed 16.0; twice = 2 a against a printed 3.0), the findings page, and the
 bracket columns of the suite's numbers.csv."""
 import csv
+import re
 import textwrap
 
 import pytest
@@ -129,6 +130,10 @@ def test_a_toy_bracket_gives_each_row_its_verdict_and_the_site_shows_it(stoy, tm
                  str(stoy / "reports"), "--progress", "plain"]) == 0
     assert bracket(stoy, _readings(tmp_path, READINGS), "--jobs", "2") == 0
     out = capsys.readouterr().out
+    # the live lines and the scoreboard name each point by its interpretation and value, never by its folder's hash
+    assert re.findall(r"george-study-[0-9a-f]{6,}", out) == []
+    for label in ("default", "slope: a=1.3", "slope: a=0.0", "slope: a=2.0", "offset: b=0.5"):
+        assert f"running {label} ..." in out and re.search(rf"^{re.escape(label)}\s+ok\b", out, re.M), label
     assert "5 executed" in out and ("bracket of george-study: 0 default, 1 other_interpretation, 0 fitted_only, "
                                     "0 between, "
                                     "0 outside, 0 open, 1 loose") in out

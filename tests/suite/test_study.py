@@ -2,6 +2,7 @@
 whose arithmetic is known (value = 10 a + b + seed), through the same runner as ``locbook run``."""
 import csv
 import math
+import re
 import signal
 import subprocess
 import sys
@@ -155,7 +156,16 @@ def _rows(toy, reports="reports"):
 @pytest.mark.notebooks
 def test_a_toy_study_writes_the_expected_rows_then_is_cached(stoy, capsys):
     assert study(stoy, "--jobs", "2") == 0
-    assert "8 executed, 0 cached, 0 failed" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "8 executed, 0 cached, 0 failed" in out
+    # points named by their settings in the live lines and the scoreboard (a = 1.0 / 1.5 crossed with the paired
+    # b and tag lists, 2 replicates), never by their folders' hashes
+    assert re.findall(r"george-study-[0-9a-f]{6,}", out) == []
+    for a in ("1.0", "1.5"):
+        for b, tag in (("0.25", "p"), ("0.5", "q")):
+            for rep in (0, 1):
+                label = f"a={a}, b={b}, tag='{tag}' rep {rep}"
+                assert f"running {label} ..." in out and re.search(rf"^{re.escape(label)}\s+ok\b", out, re.M), label
     rows = _rows(stoy)
     assert len(rows) == 8 and {r["quantity"] for r in rows} == {"value"}     # collect keeps "value" only
     assert list(rows[0])[:8] == ["study", "experiment", "point", "replicate", "replicate_seed", "a", "b", "tag"]

@@ -3,9 +3,31 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["draw_room", "draw_path", "mean_with_band", "error_cdf", "heat_map", "heat_map_notes", "map_view_m",
+__all__ = ["HOUSE_COLORS", "HOUSE_STYLE", "use_house_style",
+           "draw_room", "draw_path", "mean_with_band", "error_cdf", "heat_map", "heat_map_notes", "map_view_m",
            "map_layout", "map_panels", "draw_floor", "MAP_MARGIN_M", "MAP_FIGURE_WIDTH_IN", "MAP_FIGURE_ASPECT",
            "MAP_PANEL_PAD_IN", "MAP_MAX_PANEL_HEIGHT_IN", "tracks_figure"]
+
+
+#: the colour cycle of every report figure: Okabe and Ito's palette for colour-blind readers (blue, vermillion,
+#: bluish green, reddish purple, orange, sky blue, black, yellow), distinct also in greyscale pairs
+HOUSE_COLORS = ("#0072B2", "#D55E00", "#009E73", "#CC79A7", "#E69F00", "#56B4E9", "#000000", "#F0E442")
+
+#: matplotlib settings of the house style (:func:`use_house_style`) beside the palette: legends that fit (smaller
+#: text, a translucent frame, placed where they cover least), lines and markers one size everywhere
+HOUSE_STYLE = {
+    "legend.fontsize": "small", "legend.framealpha": 0.85, "legend.loc": "best", "legend.borderaxespad": 0.4,
+    "lines.linewidth": 1.6, "lines.markersize": 5,
+}
+
+
+def use_house_style() -> None:
+    """Set the house style (:data:`HOUSE_STYLE`) in matplotlib's rcParams: every figure drawn afterwards in this
+    process uses it. :class:`locbook.Report` calls it when a notebook makes its report, so every report figure
+    shares one palette and one look; a colour a notebook passes explicitly still wins."""
+    import matplotlib
+    from cycler import cycler
+    matplotlib.rcParams.update({**HOUSE_STYLE, "axes.prop_cycle": cycler(color=list(HOUSE_COLORS))})
 
 
 def draw_room(ax, size_m, anchors_m=None, *, label_anchors: bool = True, margin_m: float = 0.0):

@@ -59,8 +59,25 @@ def _fmt(value, digits=4):
     return str(value)
 
 
+#: LaTeX's special characters and what stands for each in text
+_LATEX = {"\\": r"\textbackslash{}", "&": r"\&", "%": r"\%", "$": r"\$", "#": r"\#", "_": r"\_", "{": r"\{",
+          "}": r"\}", "~": r"\textasciitilde{}", "^": r"\textasciicircum{}"}
+
+
+def _latex(text) -> str:
+    """``text`` as LaTeX text: each special character escaped, a line break a space."""
+    return "".join(_LATEX.get(ch, ch) for ch in " ".join(str(text).split("\n")))
+
+
+def _is_number(text: str) -> bool:
+    try:
+        return math.isfinite(float(text))
+    except ValueError:
+        return False
+
+
 class Table:
-    """Rows of a table (list of dicts) that display as HTML in Jupyter and save as CSV."""
+    """Rows of a table (list of dicts) that display as HTML in Jupyter and save as CSV and LaTeX."""
 
     def __init__(self, rows: list[dict], caption: str = ""):
         self.rows = [dict(r) for r in rows]
@@ -84,6 +101,22 @@ class Table:
         for r in self.rows:
             lines.append("| " + " | ".join(cell(_fmt(r.get(c, ""))) for c in self.columns) + " |")
         return "\n".join(lines)
+
+    def to_latex(self) -> str:
+        """A LaTeX ``tabular`` in booktabs style (``\\toprule``, ``\\midrule``, ``\\bottomrule``; the paper's preamble
+        needs ``\\usepackage{booktabs}``): columns whose every value is a number right-aligned, the values as the CSV
+        writes them, LaTeX's special characters escaped; the caption a comment line above it."""
+        cells = [[_fmt(r.get(c, ""), 10) for c in self.columns] for r in self.rows]
+        numeric = [bool(self.rows) and all(_is_number(row[i]) or row[i] == "" for row in cells)
+                   for i in range(len(self.columns))]
+        lines = [f"% {_latex(' '.join(self.caption.split()))}"] if self.caption else []
+        lines += [f"\\begin{{tabular}}{{{''.join('r' if n else 'l' for n in numeric) or 'l'}}}", "\\toprule",
+                  " & ".join(_latex(c) for c in self.columns) + " \\\\", "\\midrule"]
+        lines += [" & ".join(_latex(v) for v in row) + " \\\\" for row in cells]
+        return "\n".join(lines + ["\\bottomrule", "\\end{tabular}", ""])
+
+    def write_latex(self, path: Path):
+        Path(path).write_text(self.to_latex(), encoding="utf-8")
 
     def write_csv(self, path: Path):
         with open(path, "w", newline="", encoding="utf-8") as fh:    # as the runner reads it, whatever the locale
@@ -118,6 +151,11 @@ def _session_dir() -> Path:
         base.mkdir(parents=True, exist_ok=True)
         _SESSION_DIR = Path(tempfile.mkdtemp(prefix=time.strftime("session-%Y%m%d-%H%M%S-"), dir=base))
     return _SESSION_DIR
+
+
+#: the vector formats every saved figure is also written in, with the metadata that keeps their bytes fixed (no
+#: creation date)
+FIGURE_EXPORTS = {"pdf": {"CreationDate": None}, "svg": {"Date": None}}
 
 
 def _figures_on() -> bool:
@@ -163,6 +201,8 @@ class Report:
             # one scratch folder per session (process): no other session or user writes into it
             self.output_dir = _session_dir() / self.experiment
             self.output_dir.mkdir(parents=True, exist_ok=True)
+        from ..plotting import use_house_style
+        use_house_style()              # every report figure in one palette and one look
         self.numbers: list[dict] = []
         self.figures: list[dict] = []
         self.tables: list[dict] = []
@@ -259,21 +299,29 @@ class Report:
 
     # -- figures, tables, assumptions -------------------------------------------------------------
     def figure(self, fig, name: str, caption: str = "", dpi: int = 110) -> Path:
-        """Save a matplotlib figure as ``<name>.png``; the caption says what it reproduces. Under ``locbook run`` the
-        cell shows that file and the figure is closed (drawn once, :func:`_show_saved_png`). Where the environment
-        sets ``LOCBOOK_FIGURES=off`` (the points of ``locbook bracket``, whose numbers are all that is read of
-        them) the figure is closed unsaved and the manifest lists its caption without a file."""
+        """Save a matplotlib figure as ``<name>.png``, and for a paper as ``<name>.pdf`` and ``<name>.svg`` (vector;
+        every format's bytes equal between identical runs); the caption says what it reproduces. Under
+        ``locbook run`` the cell shows that file and the figure is closed (drawn once, :func:`_show_saved_png`).
+        Where the environment sets ``LOCBOOK_FIGURES=off`` (the points of ``locbook bracket``, whose numbers are all
+        that is read of them) the figure is closed unsaved and the manifest lists its caption without a file."""
         self._check_name(name)
         path = self.output_dir / f"{name}.png"
         if _figures_on():
-            # fixed metadata keeps PNG bytes identical between identical runs
+            # fixed metadata (and SVG's id salt) keep the bytes identical between identical runs
             fig.savefig(path, dpi=dpi, bbox_inches="tight", metadata={"Software": None})
+            import matplotlib
+            with matplotlib.rc_context({"svg.hashsalt": f"locbook-{name}"}):
+                for fmt, metadata in FIGURE_EXPORTS.items():
+                    fig.savefig(path.with_suffix(f".{fmt}"), dpi=dpi, bbox_inches="tight", metadata=metadata)
             _show_saved_png(fig, path, dpi)
         else:
             import matplotlib.pyplot as plt
             plt.close(fig)
         self.figures = [f for f in self.figures if f["name"] != name]
-        self.figures.append({"name": name, "file": path.name if _figures_on() else "", "caption": caption})
+        entry = {"name": name, "file": path.name if _figures_on() else "", "caption": caption}
+        if _figures_on():
+            entry["exports"] = [f"{name}.{fmt}" for fmt in FIGURE_EXPORTS]
+        self.figures.append(entry)
         self._save_manifest()
         return path
 
@@ -282,8 +330,9 @@ class Report:
         self._check_name(name)
         table = Table(rows, caption)
         table.write_csv(self.output_dir / f"{name}.csv")
+        table.write_latex(self.output_dir / f"{name}.tex")
         self.tables = [t for t in self.tables if t["name"] != name]
-        self.tables.append({"name": name, "file": f"{name}.csv", "caption": caption})
+        self.tables.append({"name": name, "file": f"{name}.csv", "caption": caption, "exports": [f"{name}.tex"]})
         self._save_manifest()
         return table
 

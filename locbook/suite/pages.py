@@ -34,6 +34,10 @@ _COLORED = ("within", "loose", "miss", "consistent", "inconsistent", "default", 
             "between", "open", "outside")
 
 
+#: the formats a figure or table is also saved in (:meth:`locbook.reproduce.report.Report.figure` and ``table``)
+EXPORT_SUFFIXES = ("pdf", "svg", "tex")
+
+
 #: a table a notebook saved is shown inline up to this many rows (longer ones: the link to the CSV file)
 _INLINE_TABLE_ROWS = 200
 
@@ -95,6 +99,9 @@ def page_outputs(folder: Path, manifest: dict) -> tuple[list[dict], list[dict]]:
     for item in figures + tables:
         item.setdefault("name", Path(item["file"]).stem)
         item["caption"] = item.get("caption") or ""
+        # the copies for a paper (PDF, SVG, LaTeX) present beside it, whatever the manifest lists
+        item["exports"] = [f"{item['name']}.{ext}" for ext in EXPORT_SUFFIXES
+                           if (folder / f"{item['name']}.{ext}").is_file()]
     for t in tables:
         rows = read_csv(folder / t["file"])
         t["columns"] = list(dict.fromkeys(k for r in rows for k in r if k is not None))

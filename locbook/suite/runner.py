@@ -221,8 +221,9 @@ def _validate_report(folder: Path, exp_id: str, figures: bool = True) -> str:
         return "its figures were not saved (LOCBOOK_FIGURES=off), but this run asked for them"
     drawn = [f for f in manifest.get("figures", []) if not (unsaved and f.get("file") == "")]
     for item in drawn + manifest.get("tables", []):
-        if not (folder / item["file"]).is_file():
-            return f"{item['file']} is listed in the manifest but missing"
+        for name in [item["file"], *item.get("exports", [])]:       # the PDF, SVG and LaTeX copies too
+            if not (folder / name).is_file():
+                return f"{name} is listed in the manifest but missing"
     numbers = folder / "numbers.csv"
     if numbers.exists():
         try:

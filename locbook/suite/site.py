@@ -277,10 +277,13 @@ def page_markdown(exp, profile: str, params: dict, folder: Path, numbers: list[d
             if not fig.get("file"):     # a bracket point: figures are not drawn
                 lines += [f"*{caption or caption_md(fig['name'])}* (not drawn: a bracket point)", ""]
                 continue
-            lines += [f"![{caption or fig['name']}]({fig['file']})", "", f"*{caption}*", ""]
+            copies = ", ".join(f"[{e.rsplit('.', 1)[1].upper()}]({e})" for e in fig.get("exports", []))
+            lines += [f"![{caption or fig['name']}]({fig['file']})", "",
+                      f"*{caption}*" + (f" ({copies})" if copies else ""), ""]
     if manifest.get("tables"):
         lines += ["## Tables", ""]
-        lines += [f"- [{t['file']}]({t['file']}): {caption_md(t.get('caption') or '')}" for t in manifest["tables"]]
+        lines += [f"- [{t['file']}]({t['file']})" + "".join(f" ([LaTeX]({e}))" for e in t.get("exports", []))
+                  + f": {caption_md(t.get('caption') or '')}" for t in manifest["tables"]]
         lines.append("")
     return "\n".join(lines)
 
@@ -528,6 +531,19 @@ def _leniency(report_dir: Path) -> str:
     return leniency_note(profile_of(report_dir)).replace("**", "")
 
 
+#: numbers.tex's columns (from numbers.csv): what a paper's table of printed against reproduced values needs
+PAPER_COLUMNS = ("quantity", "where", "unit", "kind", "printed", "reproduced", "window_low", "window_high", "verdict")
+
+
+def numbers_for_paper(numbers: list[dict]) -> list[dict]:
+    """numbers.csv's rows cut to :data:`PAPER_COLUMNS`, each number at 4 significant digits (the pages' digits)."""
+    def four(text):
+        value = finite_float(text)
+        return text if value is None else f"{value:.4g}"
+    return [{c: (four(r.get(c, "")) if c in ("reproduced", "window_low", "window_high") else r.get(c, ""))
+             for c in PAPER_COLUMNS} for r in numbers]
+
+
 def write_experiment_pages(exp, profile: str, params: dict, staging: Path, folder: Path, stamp: str) -> None:
     """``summary.md``, ``report.md`` and ``report.html`` of one validated report in ``staging`` (to become
     ``folder``), from its numbers.csv: the runner's ``write_pages`` (:func:`locbook.suite.runner.run_tasks`)."""
@@ -543,6 +559,11 @@ def write_experiment_pages(exp, profile: str, params: dict, staging: Path, folde
                                        encoding="utf-8")
     (staging / "report.html").write_text(page_html(exp, profile, params, staging, numbers, stamp, dataset),
                                          encoding="utf-8")
+    if numbers:           # the printed numbers beside ours, for a paper (booktabs LaTeX)
+        Table(numbers_for_paper(numbers)).write_latex(staging / "numbers.tex")
+    assumptions = read_csv(staging / "assumptions.csv")
+    if assumptions:
+        Table(assumptions).write_latex(staging / "assumptions.tex")
 
 
 def write_suite_reports(suite: Suite, report_dir: Path, *, list_all: bool = True,

@@ -172,3 +172,78 @@ def test_under_the_runner_a_figure_is_drawn_once_and_the_cell_shows_the_saved_fi
         assert got["open"] == []
     else:
         assert got["shown"] == [] and got["open"] == [1]
+
+
+def _draw_and_save(folder: Path, monkeypatch):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    monkeypatch.setenv("LOCBOOK_OUTPUT_DIR", str(folder))
+    report = lb.Report("exports")
+    fig, ax = plt.subplots(figsize=(3, 2))
+    ax.plot([0, 1, 2], [1, 0, 2], label="a")
+    ax.plot([0, 1, 2], [2, 1, 0], label="b")
+    ax.legend()
+    report.figure(fig, "lines", "two lines")
+    report.table("values", [{"name": "x_1", "value_m": 1.5, "note": "50% & $y$ {z} #1 ~ ^ \\"},
+                            {"name": "y", "value_m": 2, "note": ""}], "values\nof things")
+    plt.close(fig)
+    return report
+
+
+def test_every_figure_is_also_pdf_and_svg_with_the_same_bytes_from_identical_runs(tmp_path, monkeypatch):
+    import json
+    import xml.etree.ElementTree as ET
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    _draw_and_save(tmp_path / "a", monkeypatch)
+    _draw_and_save(tmp_path / "b", monkeypatch)
+    for ext in ("png", "pdf", "svg"):
+        first, second = (tmp_path / "a" / f"lines.{ext}").read_bytes(), (tmp_path / "b" / f"lines.{ext}").read_bytes()
+        assert first == second and len(first) > 500, ext
+    pdf = (tmp_path / "a" / "lines.pdf").read_bytes()
+    assert pdf.startswith(b"%PDF-") and pdf.rstrip().endswith(b"%%EOF") and b"CreationDate" not in pdf
+    root = ET.parse(tmp_path / "a" / "lines.svg").getroot()
+    assert root.tag == "{http://www.w3.org/2000/svg}svg"
+    manifest = json.loads((tmp_path / "a" / "manifest.json").read_text())
+    assert manifest["figures"][0]["exports"] == ["lines.pdf", "lines.svg"]
+    assert manifest["tables"][0]["exports"] == ["values.tex"]
+
+
+def _unlatex(cell: str) -> str:
+    """The inverse of LaTeX's escapes of its ten special characters (written out here, not taken from locbook)."""
+    for escaped, char in ((r"\textbackslash{}", "\\"), (r"\textasciitilde{}", "~"), (r"\textasciicircum{}", "^"),
+                          (r"\&", "&"), (r"\%", "%"), (r"\$", "$"), (r"\#", "#"), (r"\_", "_"), (r"\{", "{"),
+                          (r"\}", "}")):
+        cell = cell.replace(escaped, char)
+    return cell
+
+
+def test_every_table_is_also_a_booktabs_latex_tabular_holding_the_csv_cells(tmp_path, monkeypatch):
+    import csv
+    _draw_and_save(tmp_path, monkeypatch)
+    lines = (tmp_path / "values.tex").read_text(encoding="utf-8").splitlines()
+    assert lines[0] == "% values of things"
+    assert lines[1] == r"\begin{tabular}{lrl}"            # the all-number column right-aligned
+    assert (lines[2], lines[4], lines[-2], lines[-1]) == (r"\toprule", r"\midrule", r"\bottomrule", r"\end{tabular}")
+    body = [line.removesuffix(r" \\") for line in lines[5:-2]]
+    # no unescaped special character is left: every &, %, $, #, _, {, } in a cell is preceded by a backslash
+    for line in [lines[3], *body]:
+        for i, ch in enumerate(line):
+            if ch in "%$#_" or (ch == "&" and line[i - 1:i + 2] != " & "):
+                assert line[i - 1] == "\\", (line, i)
+    with open(tmp_path / "values.csv", newline="", encoding="utf-8") as fh:
+        table = list(csv.reader(fh))
+    parsed = [[_unlatex(c) for c in row.split(" & ")] for row in [lines[3].removesuffix(r" \\"), *body]]
+    assert parsed == table
+
+
+def test_a_report_draws_in_the_house_style_okabe_ito_palette(tmp_path, monkeypatch):
+    import matplotlib
+    monkeypatch.setenv("LOCBOOK_OUTPUT_DIR", str(tmp_path))
+    lb.Report("style")
+    # Okabe & Ito (2008), "Color Universal Design": the eight colours' sRGB values
+    okabe_ito = {(0, 114, 178), (213, 94, 0), (0, 158, 115), (204, 121, 167), (230, 159, 0), (86, 180, 233),
+                 (0, 0, 0), (240, 228, 66)}
+    cycle = [matplotlib.colors.to_rgb(c["color"]) for c in matplotlib.rcParams["axes.prop_cycle"]]
+    assert {tuple(round(255 * v) for v in rgb) for rgb in cycle} == okabe_ito and len(cycle) == 8

@@ -110,6 +110,7 @@ from .params import check_value
 from .runner import Task
 from .spec import Experiment, Suite, SuiteError, finite_float
 from .sweep import Aggregate, current_points, run_sweep
+from .sweep_pages import write_bracket_page
 
 __all__ = ["BracketPoint", "find_experiment", "brackets_root", "SITE_NUMBER_COLUMNS", "BRACKET_ROW_COLUMNS",
            "experiment_interpretations", "bracket_settings", "counts", "VALUE_COLUMNS", "load_values",
@@ -631,6 +632,7 @@ def write_bracket_outputs(exp: Experiment, points: list[BracketPoint], folder: P
          "settings": "" if not exp.bracket_parameters else
          ", ".join(f"{k}={_text(v)}" for k, v in exp.bracket_parameters.items()) + f" ({exp.bracket_reason})"}
         for i, p in enumerate(points)])
+    write_bracket_page(exp, rows, values, folder, profile)
     return aggregate
 
 

@@ -75,6 +75,7 @@ from .params import check_value
 from .runner import Task
 from .spec import SAFE_NAME, Experiment, Suite, SuiteError, finite_float, read_toml
 from .sweep import Aggregate, current_points, run_sweep
+from .sweep_pages import write_study_page
 
 __all__ = ["Study", "StudyPoint", "Aggregate", "load_study", "load_studies", "expand_study", "run_study",
            "study_size", "current_points", "check_claim", "STUDY_COLUMNS", "MAX_STUDY_RUNS"]
@@ -548,8 +549,17 @@ def _slug(text: str, limit: int = 50) -> str:
     return re.sub(r"[^a-z0-9]+", "-", text.lower()).strip("-")[:limit].strip("-")
 
 
-def _write_plots(study: Study, rows: list[dict], plots: Path) -> list[Path]:
-    """One PNG per (experiment, printed quantity with a numeric printed value, numeric swept parameter)."""
+def _mean_se(values: list[float], row: dict) -> float:
+    """The standard error of the mean of a point's replicates: their sample standard deviation over sqrt(R) for
+    R >= 2, else the one run's Monte-Carlo standard error (0 where it has none)."""
+    if len(values) >= 2:
+        return float(np.std(values, ddof=1) / np.sqrt(len(values)))
+    return finite_float(row["mc_std_error"]) or 0.0
+
+
+def _write_plots(study: Study, rows: list[dict], plots: Path) -> list[tuple[Path, str]]:
+    """One PNG per (experiment, printed quantity with a numeric printed value, numeric swept parameter); returns
+    each file with its caption."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -568,12 +578,25 @@ def _write_plots(study: Study, rows: list[dict], plots: Path) -> list[Path]:
             if any(x is None for x in xs):
                 continue    # a list- or text-valued parameter has no axis
             ys = np.array([finite_float(r["ours"]) for r in group])
-            se = np.array([finite_float(r["mc_std_error"]) or 0.0 for r in group])
             fig, ax = plt.subplots(figsize=(6, 4))
-            ax.axhspan(printed - rounding, printed + rounding, color="tab:orange", alpha=0.25,
+            ax.axhspan(printed - rounding, printed + rounding, color="#E69F00", alpha=0.25,
                        label=f"printed {group[0]['printed']} +- rounding {rounding:g}")
-            ax.axhline(printed, color="tab:orange", lw=1)
-            ax.errorbar(xs, ys, yerr=2 * se, fmt="o", ms=4, capsize=2, label="ours (+- 2 standard errors)")
+            ax.axhline(printed, color="#E69F00", lw=1)
+            # each point's replicates joined by their mean and its standard error (sweep_pages.study_table's rule)
+            joined = {}
+            for r, x_value, y_value in zip(group, xs, ys):
+                joined.setdefault(r["point"], (x_value, [], r))[1].append(y_value)
+            means = sorted((x_value, float(np.mean(v)), _mean_se(v, r)) for x_value, v, r in joined.values())
+            mx, my, mse = (np.array(c) for c in zip(*means))
+            if len(joined) < len(group):
+                ax.plot(xs, ys, "o", ms=3, color="#0072B2", alpha=0.35, label="each replicate")
+            if len(set(mx.tolist())) == len(mx):      # one point per value: a line with its band
+                ax.plot(mx, my, "o-", ms=4, color="#0072B2", label="mean of the replicates")
+                ax.fill_between(mx, my - 2 * mse, my + 2 * mse, color="#0072B2", alpha=0.2,
+                                label="+- 2 standard errors of the mean")
+            else:                                      # other parameters vary too: one error bar per point
+                ax.errorbar(mx, my, yerr=2 * mse, fmt="o", ms=4, capsize=2, color="#0072B2",
+                            label="mean of the replicates (+- 2 standard errors)")
             sampler, spec = study.parameters[pname]
             if sampler in ("random", "lhs") and spec["log"]:
                 ax.set_xscale("log")
@@ -586,9 +609,9 @@ def _write_plots(study: Study, rows: list[dict], plots: Path) -> list[Path]:
             path = plots / f"{eid}-{_slug(printed_id)}-{digest}-{_slug(pname)}.png"
             atomic_write(path, lambda tmp: fig.savefig(tmp, format="png", dpi=100))
             plt.close(fig)
-            written.append(path)
+            written.append((path, f"{eid}: {group[0]['quantity']} ({group[0]['where']}) against {pname}"))
     for old in plots.glob("*.png"):    # plots of quantities or parameters the study no longer has
-        if old not in written:
+        if old not in {p for p, _caption in written}:
             old.unlink(missing_ok=True)
     return written
 
@@ -615,7 +638,8 @@ def write_study_outputs(study: Study, points: list[StudyPoint], folder: Path, ou
     aggregate = Aggregate(csv_path, len(done), len(points))
     if wrote is not None:
         wrote.append(aggregate)
-    _write_plots(study, rows, folder / "plots")
+    plots = _write_plots(study, rows, folder / "plots")
+    write_study_page(study, rows, folder, point_labels(points), plots)
     return aggregate
 
 

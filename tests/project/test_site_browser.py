@@ -19,7 +19,18 @@ import pytest
 
 from builders import REPO_ROOT
 from locbook.suite import load_suite, run_suite
-from toy_suite import _notebook, document_toml, example, experiment_toml, suite_toml, write_data_folder
+from toy_suite import (
+    READINGS,
+    STUDY_BODY,
+    STUDY_PARAMS,
+    TOY_STUDY,
+    _notebook,
+    document_toml,
+    example,
+    experiment_toml,
+    suite_toml,
+    write_data_folder,
+)
 
 pytestmark = [pytest.mark.notebooks, pytest.mark.browser]   # executes (toy) notebooks with papermill
 
@@ -350,3 +361,65 @@ def test_a_p_runs_index_links_its_comparison_with_the_base(browser, site_dir, tm
     assert float(first[5]) == pytest.approx(float(first[4]) - float(first[3]), abs=2e-3)   # 4 digits shown
     for shot in (tmp_path / "site-compare.png", _screenshot_dir() / "site-compare.png"):
         assert browser.save_screenshot(str(shot)) and shot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.fixture(scope="module")
+def sweeps(tmp_path_factory):
+    """The toy study (8 points) and a toy bracket (5 points) of one toy repository, run through the CLI."""
+    from locbook.suite.cli import main
+    root = tmp_path_factory.mktemp("sweeps")
+    nbdir = root / "repo" / "notebooks"
+    nbdir.mkdir(parents=True)
+    _notebook(nbdir / "study.ipynb", STUDY_PARAMS, STUDY_BODY)
+    (nbdir / "experiments.toml").write_text(suite_toml(document=document_toml()) + TOY_STUDY)
+    (root / "interpretations.csv").write_text(READINGS)
+    common = ["--suite", str(nbdir / "experiments.toml")]
+    assert main([*common, "study", "toy", "--reports", str(root / "reports"), "--progress", "quiet"]) == 0
+    assert main([*common, "bracket", "george-study", "--interpretations", str(root / "interpretations.csv"),
+                 "--reports", str(root / "reports"), "--progress", "quiet"]) == 0
+    return root / "reports"
+
+
+def test_a_studys_page_shows_its_points_by_their_settings_and_its_plots(browser, sweeps, tmp_path):
+    from selenium.webdriver.common.by import By
+    page = sweeps / "studies" / "toy" / "index.html"
+    broken, external, _pages = check_page(browser, page)
+    assert broken == [] and external == []
+    images = browser.find_elements(By.CSS_SELECTOR, ".plots img")
+    assert len(images) == 2                      # the collected value, against a and against b
+    rows = [[td.text for td in tr.find_elements(By.TAG_NAME, "td")]
+            for tr in browser.find_elements(By.CSS_SELECTOR, "table tbody tr")]
+    assert len(rows) == 4                        # 4 points, the 2 replicates of each joined
+    value = {r[2]: r for r in rows if r[1].startswith("value")}
+    # value = 10 a + b + seed, seeds 3 and 4: the replicates' mean 10 a + b + 3.5, its SE 0.5 / sqrt(2) x sqrt(2)/2
+    # (two values 1 apart: sample sd 0.7071, over sqrt(2): 0.5)
+    row = value["a=1.5, b=0.5, tag=q"]
+    assert float(row[4]) == pytest.approx(15 + 0.5 + 3.5) and float(row[5]) == pytest.approx(0.5)
+    assert row[6] == "2"
+    body = browser.find_element(By.TAG_NAME, "body").text
+    assert "george-study-" not in body and "built-in method" not in body     # no hash, no Python repr
+    assert "a (grid [1.0, 1.5])" in body
+    for shot in (tmp_path / "site-study.png", _screenshot_dir() / "site-study.png"):
+        assert browser.save_screenshot(str(shot))
+
+
+def test_a_brackets_page_draws_a_strip_per_printed_number(browser, sweeps, tmp_path):
+    from selenium.webdriver.common.by import By
+    page = sweeps / "brackets" / "george-study" / "index.html"
+    broken, external, _pages = check_page(browser, page)
+    assert broken == [] and external == []
+    strips = browser.find_elements(By.CSS_SELECTOR, "svg.strip")
+    assert len(strips) == 2                      # value and twice
+    for strip in strips:                          # every one of the 5 points a dot on its window
+        assert len(strip.find_elements(By.CSS_SELECTOR, "circle.ours")) == 5
+        assert len(strip.find_elements(By.CSS_SELECTOR, "line.window")) == 5
+        assert len(strip.find_elements(By.CSS_SELECTOR, "line.printed")) == 1
+    labels = [e.text for e in strips[0].find_elements(By.CSS_SELECTOR, "text.label")]
+    assert labels == ["default", "slope: a=1.3", "slope: a=0.0", "slope: a=2.0", "offset: b=0.5"]
+    # value = 10 a + b + 3 against 16.0: a = 1.3 gives 16, within; the default (a = 1) gives 13, a miss
+    classes = [g.get_attribute("class") for g in strips[0].find_elements(By.CSS_SELECTOR, "g")]
+    assert classes[0] == "v-miss default" and classes[1] == "v-within"
+    assert "george-study-" not in browser.find_element(By.TAG_NAME, "body").text
+    strips[0].screenshot(str(_screenshot_dir() / "site-bracket-strip.png"))
+    for shot in (tmp_path / "site-bracket.png", _screenshot_dir() / "site-bracket.png"):
+        assert browser.save_screenshot(str(shot))

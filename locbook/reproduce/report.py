@@ -158,6 +158,35 @@ def _session_dir() -> Path:
 FIGURE_EXPORTS = {"pdf": {"CreationDate": None}, "svg": {"Date": None}}
 
 
+#: an artist with more vertices or markers than this is drawn as an embedded image in the PDF and SVG copies (its
+#: axes, ticks and text stay vector): a map or a cloud of 10^5 points would otherwise make files of megabytes
+DENSE_VERTICES = 3000
+#: the resolution of those embedded images (dots per inch)
+VECTOR_RASTER_DPI = 200
+
+
+def _vertex_count(artist) -> int:
+    """How many vertices or markers an artist draws (0 for one that is not data: text, spines, legends)."""
+    from matplotlib.collections import Collection
+    from matplotlib.lines import Line2D
+    if isinstance(artist, Line2D):
+        return len(artist.get_xydata())
+    if isinstance(artist, Collection):
+        offsets = len(artist.get_offsets()) if artist.get_offsets() is not None else 0
+        vertices = sum(len(p.vertices) for p in artist.get_paths())
+        return max(offsets, vertices)
+    return 0
+
+
+def _rasterize_dense(fig) -> None:
+    """Mark each data artist of ``fig`` with more than :data:`DENSE_VERTICES` vertices as rasterized, for its vector
+    copies (the PNG is saved before)."""
+    for ax in fig.axes:
+        for artist in ax.get_children():
+            if _vertex_count(artist) > DENSE_VERTICES:
+                artist.set_rasterized(True)
+
+
 def _figures_on() -> bool:
     """False where the environment sets ``LOCBOOK_FIGURES=off`` (:meth:`Report.figure`)."""
     return os.environ.get("LOCBOOK_FIGURES", "").strip().lower() != "off"
@@ -310,9 +339,11 @@ class Report:
             # fixed metadata (and SVG's id salt) keep the bytes identical between identical runs
             fig.savefig(path, dpi=dpi, bbox_inches="tight", metadata={"Software": None})
             import matplotlib
+            _rasterize_dense(fig)
             with matplotlib.rc_context({"svg.hashsalt": f"locbook-{name}"}):
                 for fmt, metadata in FIGURE_EXPORTS.items():
-                    fig.savefig(path.with_suffix(f".{fmt}"), dpi=dpi, bbox_inches="tight", metadata=metadata)
+                    fig.savefig(path.with_suffix(f".{fmt}"), dpi=VECTOR_RASTER_DPI, bbox_inches="tight",
+                                metadata=metadata)
             _show_saved_png(fig, path, dpi)
         else:
             import matplotlib.pyplot as plt

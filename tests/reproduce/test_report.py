@@ -247,3 +247,24 @@ def test_a_report_draws_in_the_house_style_okabe_ito_palette(tmp_path, monkeypat
                  (0, 0, 0), (240, 228, 66)}
     cycle = [matplotlib.colors.to_rgb(c["color"]) for c in matplotlib.rcParams["axes.prop_cycle"]]
     assert {tuple(round(255 * v) for v in rgb) for rgb in cycle} == okabe_ito and len(cycle) == 8
+
+
+def test_a_dense_cloud_is_an_image_inside_the_vector_copies_and_a_sparse_one_stays_vector(tmp_path, monkeypatch):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    from locbook.reproduce.report import DENSE_VERTICES
+    monkeypatch.setenv("LOCBOOK_OUTPUT_DIR", str(tmp_path))
+    report = lb.Report("dense")
+    for name, n in (("dense", 20 * DENSE_VERTICES), ("sparse", 10)):
+        fig, ax = plt.subplots()
+        ax.scatter(*np.random.default_rng(0).normal(size=(2, n)), s=2)
+        ax.set_xlabel("x (m)")
+        report.figure(fig, name)
+        plt.close(fig)
+    dense, sparse = (tmp_path / "dense.svg").read_text(), (tmp_path / "sparse.svg").read_text()
+    assert "<image" in dense and len(dense) < 400_000     # 60,000 markers would take megabytes as paths
+    assert "<image" not in sparse
+    assert "x (m)" in dense or "<g id=\"text_" in dense   # the axes' text stays vector (glyph paths)

@@ -170,3 +170,27 @@ def test_a_pages_repeated_notes_are_shown_once_and_every_reference_resolves(rows
     assert set(re.findall(r'href="#fn-(\d+)"', page)) <= set(notes)
     assert len(re.findall(r'class="fn"', page)) == sum(1 for r in numbers for c in columns if r[c].strip())
     assert "<details><summary>" in page                       # the long notes are folded
+
+
+def test_every_committed_figure_is_png_pdf_and_svg_and_every_table_csv_and_latex():
+    """reports/full holds what a paper takes: each figure as PNG, PDF and SVG, each table as CSV and LaTeX (a report
+    folder is one holding report.md, also those of the committed data set's experiments)."""
+    import xml.etree.ElementTree as ET
+    folders = sorted(p.parent for p in FULL.rglob("report.md"))
+    assert len(folders) >= len(load_suite(REPO_ROOT / "notebooks" / "experiments.toml").experiments)
+    missing, figures, tables = [], 0, 0
+    for folder in folders:
+        for png in folder.glob("*.png"):
+            figures += 1
+            missing += [str(png.with_suffix(s).relative_to(FULL)) for s in (".pdf", ".svg")
+                        if not png.with_suffix(s).is_file()]
+        for table in folder.glob("*.csv"):
+            tables += 1
+            if not table.with_suffix(".tex").is_file():
+                missing.append(str(table.with_suffix(".tex").relative_to(FULL)))
+    assert missing == [] and figures >= 80 and tables >= 200, (missing[:10], figures, tables)
+    some = next(iter(sorted(FULL.rglob("*.pdf"))))
+    assert some.read_bytes().startswith(b"%PDF-")
+    assert ET.parse(some.with_suffix(".svg")).getroot().tag == "{http://www.w3.org/2000/svg}svg"
+    tex = (FULL / "george-tracking" / "numbers.tex").read_text(encoding="utf-8")
+    assert tex.count(r"\toprule") == tex.count(r"\bottomrule") == 1 and "\\begin{tabular}" in tex

@@ -389,15 +389,15 @@ def _footnotes(shown: list[dict]) -> list[dict]:
 
 
 def page_html(exp, profile: str, params: dict, folder: Path, numbers: list[dict], stamp: str,
-              dataset: dict | None = None) -> str:
+              dataset: dict | None = None, bracket_page: str | None = None) -> str:
     """``<id>/report.html``, rendered in ``folder`` (the staging folder, before it is promoted): links to the
     files present there and to ``../index.html``, which every run (re)writes. ``dataset`` as for
-    :func:`summary_markdown`."""
+    :func:`summary_markdown`; ``bracket_page``: the link to the experiment's bracket page, where one exists."""
     folder = Path(folder)
     shown, parameters, assumptions, manifest = _page_parts(exp, params, folder, numbers, dataset)
     for row in shown:
         for c in ("window_low", "window_high"):
-            row[c] = number_text(row[c], 6)
+            row[c] = number_text(row[c], 4)            # the digits of `reproduced` beside them
         for c in _page_columns(numbers):
             row[c] = "" if row[c] is None else row[c]
     footnotes = _footnotes(shown)
@@ -409,9 +409,12 @@ def page_html(exp, profile: str, params: dict, folder: Path, numbers: list[dict]
         if notebook.endswith(".html") and first_file(folder, f"{exp.id}.ipynb"):
             links.append(("notebook file (.ipynb)", f"{exp.id}.ipynb"))
     for label, name in (("summary (Markdown)", "summary.md"), ("this page in Markdown", "report.md"),
-                        ("numbers.csv", "numbers.csv"), ("assumptions.csv", "assumptions.csv")):
+                        ("numbers.csv", "numbers.csv"), ("numbers in LaTeX", "numbers.tex"),
+                        ("assumptions.csv", "assumptions.csv")):
         if first_file(folder, name):
             links.append((label, name))
+    if bracket_page:
+        links.append(("interpretation bracket (strip charts)", bracket_page))
     assumption_columns = list(dict.fromkeys(k for r in assumptions for k in r if k is not None))
     return render(
         "report.html", version=stamp, exp=exp, doc=exp.document, profile=profile, stamp=stamp,
@@ -553,17 +556,19 @@ def write_experiment_pages(exp, profile: str, params: dict, staging: Path, folde
     if bracket:
         numbers = bracket_of_rows(numbers, bracket, profile)
     dataset = dataset_record(folder.parent)       # a data run's pages name the data set, not the document
-    (staging / "summary.md").write_text(summary_markdown(exp, profile, numbers, stamp, dataset),
-                                        encoding="utf-8")
-    (staging / "report.md").write_text(page_markdown(exp, profile, params, staging, numbers, stamp, dataset),
-                                       encoding="utf-8")
-    (staging / "report.html").write_text(page_html(exp, profile, params, staging, numbers, stamp, dataset),
-                                         encoding="utf-8")
-    if numbers:           # the printed numbers beside ours, for a paper (booktabs LaTeX)
+    if numbers:           # the printed numbers beside ours, for a paper (booktabs LaTeX); before the pages link it
         Table(numbers_for_paper(numbers)).write_latex(staging / "numbers.tex")
     assumptions = read_csv(staging / "assumptions.csv")
     if assumptions:
         Table(assumptions).write_latex(staging / "assumptions.tex")
+    (staging / "summary.md").write_text(summary_markdown(exp, profile, numbers, stamp, dataset),
+                                        encoding="utf-8")
+    (staging / "report.md").write_text(page_markdown(exp, profile, params, staging, numbers, stamp, dataset),
+                                       encoding="utf-8")
+    page = brackets_root(folder.parent) / exp.id / "index.html"
+    (staging / "report.html").write_text(page_html(exp, profile, params, staging, numbers, stamp, dataset,
+                                                   f"../../brackets/{exp.id}/index.html" if bracket and page.is_file()
+                                                   else None), encoding="utf-8")
 
 
 def write_suite_reports(suite: Suite, report_dir: Path, *, list_all: bool = True,

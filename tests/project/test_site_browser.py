@@ -254,8 +254,16 @@ def test_every_link_and_image_of_the_site_resolves(browser, site_dir, tmp_path):
     verdict = browser.find_element(By.XPATH, "//h2[text()='Reproduced versus printed']/following::table[1]"
                                              "//td[text()='loose']")
     assert "v-loose" in verdict.get_attribute("class")
+    # parameters and assumptions are folded below the results: closed until a reader opens them
+    assert "small, to keep the test fast" not in text
+    browser.execute_script("document.querySelectorAll('details.folded').forEach(d => d.open = true)")
+    text = browser.find_element(By.TAG_NAME, "body").text
     assert "test window (toy Sec. 1)" in text and "small, to keep the test fast" in text
-    assert "samples.csv" in links
+    # the results lead: the printed-versus-ours plot and the figures come before the parameters
+    order = browser.execute_script("return Array.from(document.querySelectorAll('h2'), h => h.textContent)")
+    assert order.index("Reproduced versus printed") < order.index("Figures") < order.index(
+        "Parameters and assumptions")
+    assert "samples.csv" in links and "numbers in LaTeX" in links
 
 
 def test_a_data_sets_page_shows_its_results_table_first(browser, tmp_path):

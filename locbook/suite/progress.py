@@ -66,13 +66,43 @@ def _columns(rows) -> list[str]:
     return ["experiment", "status", "time", *kinds]
 
 
-def scoreboard_text(run) -> str:
-    """The end-of-run scoreboard as plain aligned text (no control characters)."""
+#: the widest line of the plain scoreboard
+SCOREBOARD_WIDTH = 100
+
+
+def scoreboard_text(run, width: int = SCOREBOARD_WIDTH) -> str:
+    """The end-of-run scoreboard as plain aligned text (no control characters), at most ``width`` columns: one
+    column per kind where that fits, else each row's counts as ``kind: counts; ...`` wrapped under its own column."""
     rows = scoreboard_rows(run)
     cols = _columns(rows)
     widths = {c: max(len(c), *(len(str(r.get(c, ""))) for r in rows)) if rows else len(c) for c in cols}
     line = lambda r: "  ".join(str(r.get(c, "")).ljust(widths[c]) for c in cols).rstrip()
-    return "\n".join([line({c: c for c in cols}), line({c: "-" * widths[c] for c in cols}), *map(line, rows)])
+    table = [line({c: c for c in cols}), line({c: "-" * widths[c] for c in cols}), *map(line, rows)]
+    if max(map(len, table)) <= width:
+        return "\n".join(table)
+    import textwrap
+    lead, kinds = cols[:3], cols[3:]
+    prefix = lambda r: "  ".join(str(r.get(c, "")).ljust(widths[c]) for c in lead) + "  "
+    indent = len(prefix({}))
+    if width - indent < 30:          # long names: the counts go on lines of their own
+        indent = 4
+    title = "numbers by kind and verdict"
+    head = prefix({c: c for c in lead})
+    out = [head + title] if len(head) + len(title) <= width else [head.rstrip(), " " * indent + title]
+    out.append(prefix({c: "-" * widths[c] for c in lead}).rstrip())
+    for r in rows:
+        # a count ("28 no verdict") is never split across lines: its spaces are held until the wrap is done
+        text = "; ".join(f"{k}: " + ", ".join(c.replace(" ", "\0") for c in r[k].split(", "))
+                         for k in kinds if r.get(k)) or "-"
+        first, *rest = [piece.replace("\0", " ") for piece in textwrap.wrap(text, width - indent)] or [""]
+        head = prefix(r)
+        if len(head) + len(first) > width:
+            out.append(head.rstrip())
+            rest = [first, *rest]
+        else:
+            out.append(head + first)
+        out += [" " * indent + piece for piece in rest]
+    return "\n".join(out)
 
 
 def print_scoreboard(run, mode: str = "auto", stream=None) -> None:
@@ -206,11 +236,8 @@ class LiveProgress(_Base):
     def finished(self, outcome):
         super().finished(outcome)
         state = self.state.setdefault(outcome.id, {"attempt": 1})
+        # the runner's clock (Outcome.seconds: from the start this row showed to the finish), the scoreboard's too
         seconds = outcome.seconds if outcome.status in ("ok", "failed", "interrupted") else None
-        if seconds is not None and state.get("since") is not None:
-            # the clock the row showed while it ran (worker and kernel start, export included) stops here, so the
-            # time does not drop at the finish to the notebook's own execution time
-            seconds = time.perf_counter() - state["since"]
         state.update(status=outcome.status, seconds=seconds)
         if outcome.error and self.live is not None:
             self.live.console.print(f"{self.name(outcome.id)}: {outcome.status}: {outcome.error}", markup=False,

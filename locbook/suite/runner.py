@@ -551,6 +551,9 @@ class _Scheduler:
             self.queue.appendleft((eid, attempt + 1))
             return
         error = result["error"] or _validate_report(staging, by_id[eid].experiment.id, by_id[eid].figures)
+        # the outcome's time is the live view's clock: from the start the row showed to now, the page export and
+        # the promotion included (report.json keeps the notebook's own execution time, the next run's estimate)
+        wall = time.perf_counter() - started if started is not None else result["seconds"]
         if not error:
             final = report_dir / eid
             if os.path.lexists(final) and not _is_folder(final):     # no report: the new one takes its place
@@ -576,9 +579,9 @@ class _Scheduler:
                     _keep_failed(staging, report_dir / ".failed" / eid)
                 except OSError:
                     pass
-            self.finish(Outcome(eid, "failed", result["seconds"], error, attempt))
+            self.finish(Outcome(eid, "failed", wall, error, attempt))
         else:
-            self.finish(Outcome(eid, "ok", result["seconds"], "", attempt))
+            self.finish(Outcome(eid, "ok", wall, "", attempt))
 
     def run(self):
         """Launch, poll and complete until the queue and the running tasks are empty or the run halts; then

@@ -108,9 +108,9 @@ def test_suite_option_after_the_command_and_a_malformed_scheduler(toy, capsys):
     assert "Traceback" not in err
 
 
-def test_the_live_view_keeps_the_running_clock_at_the_finish(monkeypatch):
-    """A row showed 35 s while running and then 22 s (the notebook's own execution time, without the
-    worker and kernel start and the export); its clock now stops where it was."""
+def test_the_live_view_shows_the_outcomes_time(monkeypatch):
+    """One clock: a finished row shows the runner's time of the outcome (the scoreboard's), whatever its own clock
+    said while it ran."""
     import locbook.suite.progress as progress
     from locbook.suite.runner import Outcome
     clock = [100.0]
@@ -120,7 +120,50 @@ def test_the_live_view_keeps_the_running_clock_at_the_finish(monkeypatch):
     view.start, view.total, view.done = 100.0, 1, 0
     view.started("a", 1)
     clock[0] = 135.0
-    view.finished(Outcome("a", "ok", 22.0))
-    assert view.state["a"]["seconds"] == 35.0
+    view.finished(Outcome("a", "ok", 34.5))
+    assert view.state["a"]["seconds"] == 34.5
     view.finished(Outcome("b", "cached", 0.0))                       # a cached one shows no time
     assert view.state["b"]["seconds"] is None
+
+
+def test_the_outcomes_time_runs_from_start_to_finish_and_the_scoreboard_shows_it(toy, capsys):
+    """The outcome's seconds (the live view's and the scoreboard's) count the worker's and kernel's start and the
+    export too: at least the notebook's own execution time in report.json, and at least its 1.5 s sleep."""
+    from locbook.suite.progress import scoreboard_rows
+    set_profile(toy, "george-one", "sleep_s = 1.5")
+    suite = load_suite(toy / "notebooks" / "experiments.toml")
+    done = run_suite(suite, [e for e in suite.experiments if e.id == "george-one"], "quick",
+                     report_root=toy / "reports", progress="quiet")
+    outcome, = done.outcomes
+    notebook_s = json.loads((_folder(toy) / "george-one" / "report.json").read_text())["seconds"]
+    assert outcome.seconds >= notebook_s >= 1.5
+    assert scoreboard_rows(done)[0]["time"] == f"{outcome.seconds:.0f} s"
+
+
+@pytest.mark.parametrize("name", ["ozkaya2011-comparison-sim", "an-experiment-id-of-sixty-characters-" + "x" * 23])
+def test_the_plain_scoreboard_fits_100_columns_and_keeps_every_count(tmp_path, name):
+    """A suite whose rows count many kinds and verdicts: every line at most 100 characters, and every count a row
+    holds is still there, in the fixed verdict order."""
+    from locbook.reproduce.report import NUMBER_COLUMNS
+    from locbook.suite.progress import scoreboard_rows, scoreboard_text
+    from locbook.suite.runner import Outcome, SuiteRun
+    folder = tmp_path / name
+    folder.mkdir()
+    (folder / "summary.md").write_text("x")
+    rows = [{**{c: "" for c in NUMBER_COLUMNS}, "experiment": name, "printed_id": f"p{i}", "kind": kind,
+             "verdict": verdict}
+            for i, (kind, verdict) in enumerate([(k, v) for k in ("reproduction", "calibrated", "claim")
+                                                 for v in ("within", "loose", "miss") for _ in range(12)]
+                                                + [("arithmetic", "consistent"), ("arithmetic", "inconsistent")])]
+    with open(folder / "numbers.csv", "w", newline="") as fh:
+        writer = csv.DictWriter(fh, fieldnames=NUMBER_COLUMNS)
+        writer.writeheader()
+        writer.writerows(rows)
+    run = SuiteRun([Outcome(name, "ok", 12.0)], tmp_path)
+    text = scoreboard_text(run)
+    assert max(len(line) for line in text.splitlines()) <= 100, text
+    flat = " ".join(text.split())
+    for kind, counts in scoreboard_rows(run)[0].items():
+        if kind not in ("experiment", "status", "time") and counts:
+            assert " ".join(counts.split()) in flat, (kind, counts)
+    assert "12 within, 12 loose, 12 miss" in flat

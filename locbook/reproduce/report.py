@@ -158,7 +158,7 @@ def _session_dir() -> Path:
 FIGURE_EXPORTS = {"pdf": {"CreationDate": None}, "svg": {"Date": None}}
 
 
-#: an axes whose data draw more vertices or markers than this has them drawn as an embedded image in the PDF and SVG
+#: a figure whose data draw more vertices or markers than this has them drawn as an embedded image in the PDF and SVG
 #: copies (its ticks and text stay vector): a map or a cloud of 10^5 points would otherwise make files of megabytes
 DENSE_VERTICES = 3000
 #: the resolution of those embedded images (dots per inch)
@@ -179,15 +179,14 @@ def _vertex_count(artist) -> int:
 
 
 def _rasterize_dense(fig) -> None:
-    """For the vector copies (the PNG is saved before): in each axes whose data artists draw more than
-    :data:`DENSE_VERTICES` vertices or markers together (one cloud, or many small ones), mark every data artist of
-    more than 100 of them as rasterized; lines and markers of a sparse axes stay vector."""
-    for ax in fig.axes:
-        counts = [(artist, _vertex_count(artist)) for artist in ax.get_children()]
-        if sum(n for _a, n in counts) > DENSE_VERTICES:
-            for artist, n in counts:
-                if n > 100:
-                    artist.set_rasterized(True)
+    """For the vector copies (the PNG is saved before): in a figure whose data artists draw more than
+    :data:`DENSE_VERTICES` vertices or markers together (one cloud, or a small cloud in each of many panels), mark
+    every data artist of more than 500 of them as rasterized; a sparse figure, and short lines, stay vector."""
+    counts = [(artist, _vertex_count(artist)) for ax in fig.axes for artist in ax.get_children()]
+    if sum(n for _a, n in counts) > DENSE_VERTICES:
+        for artist, n in counts:
+            if n > 500:
+                artist.set_rasterized(True)
 
 
 def _figures_on() -> bool:

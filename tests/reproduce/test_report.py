@@ -268,3 +268,13 @@ def test_a_dense_cloud_is_an_image_inside_the_vector_copies_and_a_sparse_one_sta
     assert "<image" in dense and len(dense) < 400_000     # 60,000 markers would take megabytes as paths
     assert "<image" not in sparse
     assert "x (m)" in dense or "<g id=\"text_" in dense   # the axes' text stays vector (glyph paths)
+    # a small cloud in each of 16 panels (each under the limit, together over it) is an image too; a short line
+    # (200 vertices) beside it stays vector
+    fig, axes = plt.subplots(4, 4)
+    for ax in axes.flat:
+        ax.scatter(*np.random.default_rng(1).normal(size=(2, DENSE_VERTICES // 4)), s=2)
+        ax.plot(np.linspace(0, 1, 200), "r-")
+    report.figure(fig, "panels")
+    plt.close(fig)
+    panels = (tmp_path / "panels.svg").read_text()
+    assert panels.count("<image") == 16 and len(panels) < 400_000

@@ -263,6 +263,10 @@ def page_markdown(exp, profile: str, params: dict, folder: Path, numbers: list[d
     lines = _header(exp, profile, stamp, dataset) + ["[Summary](summary.md).", ""]
     if shown or not dataset:
         lines += ["## Reproduced versus printed", ""]
+        plots = [(PVO_FILE.format(i), p["title"]) for i, p in enumerate(printed_versus_ours(numbers), start=1)]
+        for name, title in plots:
+            if (Path(folder) / name).is_file():
+                lines += [f"![{caption_md(title)}: ours against printed]({name})", ""]
         lines += [Table(shown).to_markdown() if shown else "No printed number is compared here.", ""]
     # a -p value is any text the user typed: escaped, so a Markdown viewer shows it instead of rendering it as HTML
     escaped = [{**p, "value": html.escape(p["value"], quote=False)} for p in parameters]
@@ -317,6 +321,51 @@ def _scored_point(row: dict):
     return None if any(v is None for v in values) else (printed, *values)
 
 
+#: the printed-versus-ours plots as files beside report.md (which embeds them: the committed reports show them)
+PVO_FILE = "printed-versus-ours-{}.svg"
+
+
+def write_pvo_files(numbers: list[dict], folder: Path) -> list[tuple[str, str]]:
+    """Each printed-versus-ours plot (:func:`printed_versus_ours`) as a standalone SVG file in ``folder``, its
+    style (site.css's ``.pvo`` rules) and a white ground inside it; returns ``(file name, title)`` per plot."""
+    from .pages import _TEMPLATES
+    css = " ".join(line for line in (_TEMPLATES / "site.css").read_text(encoding="utf-8").splitlines()
+                   if line.startswith(".pvo"))
+    css += " .pvo text { font-family: sans-serif; fill: #1d232a; }"
+    out = []
+    for i, plot in enumerate(printed_versus_ours(numbers), start=1):
+        head, sep, rest = plot["svg"].partition('class="pvo">')
+        svg = head + sep + f'<style>{css}</style><rect width="100%" height="100%" fill="#fff"/>' + rest
+        name = PVO_FILE.format(i)
+        (Path(folder) / name).write_text(svg + "\n", encoding="utf-8")
+        out.append((name, plot["title"]))
+    return out
+
+
+#: a printed-versus-ours plot of at most this many points labels each beside it
+_LABELLED_POINTS = 3
+
+
+def _short_quantity(row: dict) -> str:
+    text = str(row.get("quantity") or row.get("printed_id") or "")
+    return text if len(text) <= 28 else text[:27] + "\u2026"
+
+
+def nice_ticks(lo: float, hi: float, most: int = 5) -> list[float]:
+    """Round tick values inside ``[lo, hi]``: multiples of 1, 2, 2.5 or 5 times a power of ten, at most ``most``
+    of them and at least two (the ends, when the span is too narrow for a round step)."""
+    import math
+    span = hi - lo
+    if not span > 0 or not math.isfinite(span):
+        return [lo]
+    raw = span / (most - 1)
+    power = 10 ** math.floor(math.log10(raw))
+    step = next(m * power for m in (1, 2, 2.5, 5, 10) if m * power >= raw)
+    first = math.ceil(lo / step) * step
+    ticks = [round(first + i * step, 12) for i in range(int((hi - first) / step + 1e-9) + 1)]
+    return ticks if len(ticks) >= 2 else [lo, hi]
+
+
 def printed_versus_ours(numbers: list[dict]) -> list[dict]:
     """One inline SVG per printed table (the rows' ``location``, and unit): each scored number a point at (printed,
     ours) with its window as a vertical bar, in its verdict's class (a ring marks a row whose bracket reached it
@@ -346,9 +395,11 @@ def printed_versus_ours(numbers: list[dict]) -> list[dict]:
                  f'role="img" class="pvo"><title>{html.escape(location)}: ours against printed</title>',
                  f'<rect x="{pad}" y="{top}" width="{inner}" height="{inner}" class="frame"/>',
                  f'<line x1="{x(lo)}" y1="{y(lo)}" x2="{x(hi)}" y2="{y(hi)}" class="diagonal"/>']
-        for v in (data_lo, data_hi):                                         # the data's ends as tick labels
+        for v in nice_ticks(lo, hi):                       # round ticks on both axes, with their marks
+            parts.append(f'<line x1="{x(v)}" y1="{top + inner}" x2="{x(v)}" y2="{top + inner + 4}" class="frame"/>'
+                         f'<line x1="{pad - 4}" y1="{y(v)}" x2="{pad}" y2="{y(v)}" class="frame"/>')
             parts.append(f'<text x="{x(v)}" y="{size - 2}" font-size="10" text-anchor="middle">{v:.3g}</text>')
-            parts.append(f'<text x="{pad - 3}" y="{y(v) + 3}" font-size="10" text-anchor="end">{v:.3g}</text>')
+            parts.append(f'<text x="{pad - 6}" y="{y(v) + 3}" font-size="10" text-anchor="end">{v:.3g}</text>')
         parts.append(f'<text x="{pad + inner / 2}" y="{size - 14}" font-size="11" text-anchor="middle">printed'
                      f'{" (" + html.escape(unit) + ")" if unit else ""}</text>')
         parts.append(f'<text x="10" y="{top + inner / 2}" font-size="11" text-anchor="middle" '
@@ -358,11 +409,16 @@ def printed_versus_ours(numbers: list[dict]) -> list[dict]:
             label = html.escape(f'{r.get("printed_id")}: printed {r.get("printed")}, ours {ours:.4g}, window '
                                 f'[{low:.4g}, {high:.4g}], {verdict}'
                                 + (f', bracket {r["bracket"]}' if r.get("bracket") else ""))
+            # a small table's points say what they are beside them too (not only on hover)
+            visible = (f'<text x="{min(x(printed) + 7, size - 4)}" y="{y(ours) - 6}" font-size="10" '
+                       f'text-anchor="{"start" if x(printed) < pad + inner * 0.6 else "end"}" class="point-label">'
+                       f'{html.escape(_short_quantity(r))}: {verdict}</text>' if len(items) <= _LABELLED_POINTS else "")
             parts.append(f'<g class="v-{verdict}"><title>{label}</title><line x1="{x(printed)}" y1="{y(low)}" '
                          f'x2="{x(printed)}" y2="{y(high)}" class="window"/>'
                          f'<circle cx="{x(printed)}" cy="{y(ours)}" r="3.5" class="ours"/>'
                          + (f'<circle cx="{x(printed)}" cy="{y(ours)}" r="6" class="reached"/>'
-                            if r.get("bracket") in ("other_interpretation", "fitted_only") else "") + '</g>')
+                            if r.get("bracket") in ("other_interpretation", "fitted_only") else "")
+                         + visible + '</g>')
         parts.append("</svg>")
         out.append({"title": location + (f" ({unit})" if unit else ""), "svg": "".join(parts), "n": len(items)})
     return out
@@ -561,6 +617,7 @@ def write_experiment_pages(exp, profile: str, params: dict, staging: Path, folde
     assumptions = read_csv(staging / "assumptions.csv")
     if assumptions:
         Table(assumptions).write_latex(staging / "assumptions.tex")
+    write_pvo_files(numbers, staging)           # before report.md, which embeds them
     (staging / "summary.md").write_text(summary_markdown(exp, profile, numbers, stamp, dataset),
                                         encoding="utf-8")
     (staging / "report.md").write_text(page_markdown(exp, profile, params, staging, numbers, stamp, dataset),

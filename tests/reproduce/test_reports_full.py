@@ -194,3 +194,15 @@ def test_every_committed_figure_is_png_pdf_and_svg_and_every_table_csv_and_latex
     assert ET.parse(some.with_suffix(".svg")).getroot().tag == "{http://www.w3.org/2000/svg}svg"
     tex = (FULL / "george-tracking" / "numbers.tex").read_text(encoding="utf-8")
     assert tex.count(r"\toprule") == tex.count(r"\bottomrule") == 1 and "\\begin{tabular}" in tex
+
+
+def test_the_committed_markdown_pages_show_their_plots(rows):
+    """A reader of the repository sees the plots: every image a committed report.md embeds is committed beside it,
+    and each experiment with scored rows embeds its printed-versus-ours plots."""
+    import re
+    scored = {r["experiment"] for r in rows if r["verdict"] in ("within", "loose", "miss")}
+    for page in sorted(FULL.rglob("report.md")):
+        images = re.findall(r"!\[[^\]]*\]\(([^)]+)\)", page.read_text(encoding="utf-8"))
+        assert all((page.parent / name).is_file() for name in images), (page, images)
+        if page.parent.name in scored and page.parent.parent == FULL:
+            assert "printed-versus-ours-1.svg" in images, page

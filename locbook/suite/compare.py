@@ -25,6 +25,7 @@ from pathlib import Path
 from ..errors import ParameterError
 from .files import read_csv, read_json, write_text_atomic
 from .pages import number_text, render
+from .spec import finite_float
 
 __all__ = ["COMPARE_COLUMNS", "CHANGES", "Comparison", "compare_rows", "parameter_changes", "compare_folders",
            "write_comparison", "comparison_name"]
@@ -40,17 +41,9 @@ CHANGES = ("changed", "within 2 SE", "identical", "only in base", "only in varia
 SE_MULTIPLE = 2.0
 
 
-def _number(text) -> float | None:
-    try:
-        x = float(text)
-    except (TypeError, ValueError):
-        return None
-    return x if math.isfinite(x) else None
-
-
 def _se(text) -> float:
     """A row's Monte-Carlo standard error; a blank one (no Monte-Carlo error) is 0."""
-    x = _number(text)
+    x = finite_float(text)
     return abs(x) if x is not None else 0.0
 
 
@@ -60,7 +53,7 @@ def _change(base: dict | None, variant: dict | None) -> tuple[str, float | None,
         return "only in variant", None, None
     if variant is None:
         return "only in base", None, None
-    b, v = _number(base.get("reproduced")), _number(variant.get("reproduced"))
+    b, v = finite_float(base.get("reproduced")), finite_float(variant.get("reproduced"))
     if b is None or v is None:
         tb, tv = str(base.get("reproduced", "")).strip(), str(variant.get("reproduced", "")).strip()
         if not tb and not tv:

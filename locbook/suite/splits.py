@@ -48,7 +48,7 @@ from .files import atomic_write, write_text_atomic
 from .progress import make_progress
 from .run import claim_dataset_folder, data_kinds, load_data_argument, run_suite, run_tasks
 from .runner import Task
-from .spec import Suite, SuiteError
+from .spec import Suite, SuiteError, finite_float
 from .study import Study, expand_study, point_labels
 from .sweep import Aggregate, current_points
 
@@ -82,14 +82,6 @@ def spread(values) -> dict:
 
 def _r(x) -> float:
     return round(float(x), 4)
-
-
-def _number(text) -> float | None:
-    try:
-        x = float(text)
-    except (TypeError, ValueError):
-        return None
-    return x if math.isfinite(x) else None
 
 
 def _read_rows(path: Path) -> list[dict]:
@@ -265,8 +257,8 @@ def loro_tables(data, splits) -> tuple[list[dict], list[dict]]:
                 per_split.append({"split": held, "role": data.recording(held).role,
                                   "calibration": ",".join(calibration), "kind": r.get("kind", ""),
                                   "method": r.get("method", ""), "epochs": r.get("epochs", ""),
-                                  "coverage": r.get("coverage", ""), "mean_m": _number(r.get("mean_m")),
-                                  "median_m": _number(r.get("median_m")), "rmse_m": _number(r.get("rmse_m")),
+                                  "coverage": r.get("coverage", ""), "mean_m": finite_float(r.get("mean_m")),
+                                  "median_m": finite_float(r.get("median_m")), "rmse_m": finite_float(r.get("rmse_m")),
                                   "ratio": r.get("ratio", ""), "failure": r.get("failure", ""),
                                   "report": str(run.report_dir / eid)})
     table = []
@@ -442,8 +434,8 @@ def density_tables(points, folder: Path, done, anchor_ids) -> tuple[list[dict], 
             if r.get("recording") != "pooled":
                 continue
             rows.append({"k": k, "subset": subset, "method": r.get("method", ""), "epochs": r.get("epochs", ""),
-                         "coverage": r.get("coverage", ""), "mean_m": _number(r.get("mean_m")),
-                         "median_m": _number(r.get("median_m")), "rmse_m": _number(r.get("rmse_m")),
+                         "coverage": r.get("coverage", ""), "mean_m": finite_float(r.get("mean_m")),
+                         "median_m": finite_float(r.get("median_m")), "rmse_m": finite_float(r.get("rmse_m")),
                          "ratio": r.get("ratio", ""), "folder": p.key})
     table = []
     methods = list(dict.fromkeys(r["method"] for r in rows))

@@ -75,7 +75,7 @@ from .params import check_value
 from .runner import Task
 from .spec import SAFE_NAME, Experiment, Suite, SuiteError, finite_float, read_toml
 from .sweep import Aggregate, current_points, run_sweep
-from .sweep_pages import write_study_page
+from .sweep_pages import replicate_mean_se, write_study_page
 
 __all__ = ["Study", "StudyPoint", "Aggregate", "load_study", "load_studies", "expand_study", "run_study",
            "study_size", "current_points", "check_claim", "STUDY_COLUMNS", "MAX_STUDY_RUNS"]
@@ -549,14 +549,6 @@ def _slug(text: str, limit: int = 50) -> str:
     return re.sub(r"[^a-z0-9]+", "-", text.lower()).strip("-")[:limit].strip("-")
 
 
-def _mean_se(values: list[float], row: dict) -> float:
-    """The standard error of the mean of a point's replicates: their sample standard deviation over sqrt(R) for
-    R >= 2, else the one run's Monte-Carlo standard error (0 where it has none)."""
-    if len(values) >= 2:
-        return float(np.std(values, ddof=1) / np.sqrt(len(values)))
-    return finite_float(row["mc_std_error"]) or 0.0
-
-
 def _write_plots(study: Study, rows: list[dict], plots: Path) -> list[tuple[Path, str]]:
     """One PNG per (experiment, printed quantity with a numeric printed value, numeric swept parameter); returns
     each file with its caption."""
@@ -582,11 +574,12 @@ def _write_plots(study: Study, rows: list[dict], plots: Path) -> list[tuple[Path
             ax.axhspan(printed - rounding, printed + rounding, color="#E69F00", alpha=0.25,
                        label=f"printed {group[0]['printed']} +- rounding {rounding:g}")
             ax.axhline(printed, color="#E69F00", lw=1)
-            # each point's replicates joined by their mean and its standard error (sweep_pages.study_table's rule)
+            # each point's replicates joined by their mean and its standard error (the study page's rule)
             joined = {}
             for r, x_value, y_value in zip(group, xs, ys):
                 joined.setdefault(r["point"], (x_value, [], r))[1].append(y_value)
-            means = sorted((x_value, float(np.mean(v)), _mean_se(v, r)) for x_value, v, r in joined.values())
+            means = sorted((x_value, float(np.mean(v)), replicate_mean_se(v, r["mc_std_error"]))
+                           for x_value, v, r in joined.values())
             mx, my, mse = (np.array(c) for c in zip(*means))
             if len(joined) < len(group):
                 ax.plot(xs, ys, "o", ms=3, color="#0072B2", alpha=0.35, label="each replicate")

@@ -18,10 +18,20 @@ from .files import read_csv, write_text_atomic
 from .pages import number_text, render
 from .spec import finite_float
 
-__all__ = ["study_table", "write_study_page", "strip_svg", "bracket_strips", "write_bracket_page"]
+__all__ = ["replicate_mean_se", "study_table", "write_study_page", "strip_svg", "bracket_strips", "write_bracket_page"]
 
 
 # -- a study ------------------------------------------------------------------------------------------------------
+
+def replicate_mean_se(values: list[float], mc_std_error) -> float:
+    """The standard error of the mean of a point's replicate values: their sample standard deviation over sqrt(R)
+    for R >= 2, else the one run's Monte-Carlo standard error (0 where it has none)."""
+    n = len(values)
+    if n >= 2:
+        mean = sum(values) / n
+        return math.sqrt(sum((v - mean) ** 2 for v in values) / (n - 1) / n)
+    return finite_float(mc_std_error) or 0.0
+
 
 def study_table(rows: list[dict], parameters: list[str], labels: dict[str, str]) -> list[dict]:
     """One row per (experiment, printed quantity, parameter point) of study.csv's ``rows``: the point's label
@@ -34,14 +44,8 @@ def study_table(rows: list[dict], parameters: list[str], labels: dict[str, str])
     out = []
     for (eid, _pid, point), group in groups.items():
         values = [v for v in (finite_float(r["ours"]) for r in group) if v is not None]
-        n = len(values)
-        mean = sum(values) / n if n else None
-        if n >= 2:
-            se = math.sqrt(sum((v - mean) ** 2 for v in values) / (n - 1) / n)
-        elif n == 1:
-            se = finite_float(group[0]["mc_std_error"])
-        else:
-            se = None
+        mean = sum(values) / len(values) if values else None
+        se = replicate_mean_se(values, group[0]["mc_std_error"]) if values else None
         first = group[0]
         settings = ", ".join(f"{p}={first[p]}" for p in parameters if p in first)
         verdicts = Counter(r["verdict"] for r in group if r["verdict"])

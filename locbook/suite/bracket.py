@@ -659,7 +659,9 @@ def run_bracket(suite: Suite, exp: Experiment, *, profile: str = "quick",
     points = bracket_points(exp, profile, found)      # every value checked before anything runs
     gaps = bracket_gaps(found)
     folder = bracket_folder(suite, exp, report_root)
-    tasks = [Task(p.key, exp, p.parameters, figures=False, label=p.label) for p in points]   # numbers only
+    # numbers only; the point of the default interpretations is the profile's own report: reused when up to date
+    tasks = [Task(p.key, exp, p.parameters, figures=False, label=p.label,
+                  reuse=folder.parent.parent / profile / exp.id) for p in points]
     # run.aggregate: what bracket.csv holds now, for the CLI to say (not rewritten: no up-to-date default point, or a
     # failed write)
     return run_sweep(suite, tasks, profile, folder,

@@ -95,6 +95,11 @@ class Task:
     #: what a person reads for this task in the live view and the scoreboard (a sweep point by its settings,
     #: ``sigma_db=1.5 rep 0``); empty: the key
     label: str = field(default="", hash=False)
+    #: a report folder that may already hold this very run (a sweep point equal to the profile's own report of the
+    #: experiment, ``<reports>/<profile>/<experiment>``): when it is up to date under this task's cache key (a report
+    #: with figures also serves a task without), it is copied in, its pages written for this folder, instead of
+    #: executing the notebook again (:meth:`_Session.reuse`)
+    reuse: Path | None = field(default=None, hash=False)
 
 
 @dataclass
@@ -269,6 +274,19 @@ def _validate_promoted(folder: Path, exp_id: str, figures: bool = True) -> str:
         except OSError as exc:
             return f"{name} unreadable ({exc.strerror or exc})"
     return ""
+
+
+def _same_run(exp: Experiment, a: dict, b: dict) -> bool:
+    """``a`` and ``b`` (checked parameters of ``exp``) run the notebook alike: every declared parameter, absent ones
+    at the notebook's default, equal in value and type (an explicit ``a = 1.0`` is the default ``a: float = 1.0``)."""
+    declared = exp.declared_parameters()
+    if set(a) - set(declared) or set(b) - set(declared):
+        return False
+    for name, p in declared.items():
+        x, y = a.get(name, p.default), b.get(name, p.default)
+        if type(x) is not type(y) or x != y:
+            return False
+    return True
 
 
 def report_cached(folder: Path, exp: Experiment, key: str, figures: bool = True) -> tuple[bool, str]:
@@ -454,20 +472,70 @@ class _Scheduler:
         self.by_id = {t.key: t for t in tasks}
         self.keys = {t.key: cache_key(t.experiment, profile, t.parameters, source=source, versions=versions,
                                       figures=t.figures) for t in tasks}
+        self.fingerprint = {"source": source, "versions": versions}
+        self.staging_root = report_dir / ".staging" / f"{os.getpid()}-{uuid.uuid4().hex[:8]}"
         queue: deque = deque()
         for t in tasks:
             cached, damaged = ((False, "") if force else
                                report_cached(report_dir / t.key, t.experiment, self.keys[t.key], t.figures))
             if cached:
                 self.finish(Outcome(t.key, "cached", 0.0))
+            elif not force and t.reuse is not None and self.reuse(t):
+                progress.message(f"{run.name(t.key)}: the same run as {t.reuse}: its report reused")
+                self.finish(Outcome(t.key, "cached", 0.0))
             else:
                 if damaged:
                     progress.message(f"{t.key}: the cached report is damaged ({damaged}); executing it again")
                 queue.append((t.key, 1))
         self.queue = deque(sorted(queue, key=_longest_first(report_dir, profile, [eid for eid, _ in queue])))
-        self.staging_root = report_dir / ".staging" / f"{os.getpid()}-{uuid.uuid4().hex[:8]}"
         self.running: dict[str, tuple] = {}
         self.abandoned: list[tuple] = []
+
+    def reuse(self, t: Task) -> bool:
+        """Serve ``t`` from the report in ``t.reuse`` when that report is the same run (its parameters, every one
+        the notebook declares filled in with its default, equal ``t``'s in value and type) and up to date under its
+        own record's key (with figures: a report with them serves a task without): copied into staging under that
+        folder's lock (not waited for: a folder being written is not read), checked again on the copy, its pages
+        written for this folder (a study's page links no bracket) and its records for this task, then promoted like
+        a run. False (the task is executed) when there is nothing to reuse or anything fails."""
+        from filelock import FileLock, Timeout
+
+        exp = t.experiment
+        theirs = read_json(t.reuse / "report.json", {}).get("parameters")
+        if not isinstance(theirs, dict) or not _same_run(exp, theirs, t.parameters):
+            return False
+        source_key = cache_key(exp, self.profile, theirs, **self.fingerprint)
+        staging = self.staging_root / f"{t.key}-reused"
+        try:
+            lock = FileLock(str(t.reuse.parent / ".lock"))
+            lock.acquire(timeout=0)
+        except (Timeout, OSError):
+            return False
+        try:
+            if not report_cached(t.reuse, exp, source_key)[0]:
+                return False
+            staging.parent.mkdir(parents=True, exist_ok=True)
+            shutil.copytree(t.reuse, staging, symlinks=True)
+        except OSError:
+            _remove(staging, ignore_errors=True)
+            return False
+        finally:
+            lock.release()
+        try:
+            if not report_cached(staging, exp, source_key)[0]:
+                raise OSError("the copy is not the report it was copied from")
+            record = read_json(staging / "report.json", {})
+            self.write_pages(exp, self.profile, t.parameters, staging, self.report_dir / t.key,
+                             str(record.get("locbook", self.stamp)))
+            (staging / "report.json").write_text(json.dumps({**record, "parameters": t.parameters}, indent=1,
+                                                            sort_keys=True) + "\n")
+            run = read_json(staging / "run.json", {})
+            (staging / "run.json").write_text(json.dumps({**run, "cache_key": self.keys[t.key]}, indent=1))
+            _replace_dir(staging, self.report_dir / t.key)
+        except Exception:       # anything amiss: the notebook is executed instead, as without a report to reuse
+            _remove(staging, ignore_errors=True)
+            return False
+        return True
 
     def disk_full(self, path) -> None:
         """A write failed for lack of space: the run stops (no retry, no new experiment)."""

@@ -38,7 +38,9 @@ and declared rule (``[parameter_rules]``).
 Each point (experiment x parameter point x replicate) is one task of :func:`locbook.suite.runner.run_tasks`, all
 in one runner session (``--jobs`` runs points in parallel; lock, staging, validation, retries, interrupts and the
 cache per point are the runner's). A point's folder is ``<experiment>-<SHA-256 of its values>`` (all 64 hex
-digits), so a finished point is cached across reruns and edits of the study that keep it. ``study.json`` in the
+digits), so a finished point is cached across reruns and edits of the study that keep it; a point that is the same
+run as the profile's own report (``<reports>/<profile>/<experiment>``, up to date) is copied from there, not executed
+(:attr:`~locbook.suite.runner.Task.reuse`). ``study.json`` in the
 folder records the file that declared the study and its declaration's fingerprint: another declaration of the same
 name from another file is refused (:func:`check_claim`). After every run, also an interrupted or failed one, the
 aggregates are rebuilt from every point with an up-to-date report, this run's and earlier ones
@@ -688,7 +690,10 @@ def run_study(suite: Suite, study: Study, *, report_root: Path | None = None, jo
     folder = study_folder(suite, study, report_root)
     check_claim(study, folder)       # another study of this name: refused before anything runs
     labels = point_labels(points)
-    tasks = [Task(p.key, p.experiment, p.parameters, label=labels[p.key]) for p in points]
+    # a point with the profile's own values (replicate 0 of an unswept default) is that report: reused, not rerun
+    profile_folder = folder.parent.parent / study.profile
+    tasks = [Task(p.key, p.experiment, p.parameters, label=labels[p.key], reuse=profile_folder / p.experiment.id)
+             for p in points]
     # run.aggregate: what study.csv holds now, for the CLI to say (not rewritten: none up to date, or its write failed)
     return run_sweep(suite, tasks, study.profile, folder,
                      lambda where, outcomes, wrote: write_study_outputs(study, points, where, outcomes, wrote),

@@ -132,9 +132,12 @@ def test_a_toy_bracket_gives_each_row_its_verdict_and_the_site_shows_it(stoy, tm
     out = capsys.readouterr().out
     # the live lines and the scoreboard name each point by its interpretation and value, never by its folder's hash
     assert re.findall(r"george-study-[0-9a-f]{6,}", out) == []
-    for label in ("default", "slope: a=1.3", "slope: a=0.0", "slope: a=2.0", "offset: b=0.5"):
+    for label in ("slope: a=1.3", "slope: a=0.0", "slope: a=2.0", "offset: b=0.5"):
         assert f"running {label} ..." in out and re.search(rf"^{re.escape(label)}\s+ok\b", out, re.M), label
-    assert "5 executed" in out and ("bracket of george-study: 0 default, 1 other_interpretation, 0 fitted_only, "
+    assert re.search(r"^default\s+cached\b", out, re.M)
+    # the default point is the quick report run just before: reused, not executed again
+    assert "4 executed, 1 cached" in out and "default: the same run as" in out
+    assert ("bracket of george-study: 0 default, 1 other_interpretation, 0 fitted_only, "
                                     "0 between, "
                                     "0 outside, 0 open, 1 loose") in out
     folder = stoy / "reports" / "brackets" / "george-study"
@@ -153,11 +156,13 @@ def test_a_toy_bracket_gives_each_row_its_verdict_and_the_site_shows_it(stoy, tm
     assert rows["twice"]["loose_under"] == "default; slope: a=1.3; slope: a=2.0; offset: b=0.5"
     assert (rows["twice"]["band_low"], rows["twice"]["band_high"]) == ("0", "4")
     points = _table(folder / "points.csv")
-    assert [p["status"] for p in points] == ["ok"] * 5 and points[1]["value"] == "1.3"
-    import json  # the points ran without figures (only their numbers are read); the suite's own run with them
-    assert json.loads((folder / "george-study-default" / "manifest.json").read_text())["figures_saved"] is False
-    manifest = json.loads((stoy / "reports" / "quick" / "george-study" / "manifest.json").read_text())
-    assert "figures_saved" not in manifest
+    assert [p["status"] for p in points] == ["cached"] + ["ok"] * 4 and points[1]["value"] == "1.3"
+    import json  # the points ran without figures (only their numbers are read); the reused default with them
+    for point in folder.glob("george-study-*"):
+        saved = json.loads((point / "manifest.json").read_text()).get("figures_saved", True)
+        assert saved is (point.name == "george-study-default"), point.name
+    assert (folder / "george-study-default" / "george-study.ipynb").read_bytes() == \
+        (stoy / "reports" / "quick" / "george-study" / "george-study.ipynb").read_bytes()
     # every scored row under every point, for the conclusions pages
     values = _table(folder / "values.csv")
     assert len(values) == 2 * 5 and {v["basis"] for v in values} == {"default", "assumed", "textual"}

@@ -1,6 +1,7 @@
 """``locbook study``: the declaration's checks, the expansion of points and seeds, and study runs of a toy notebook
 whose arithmetic is known (value = 10 a + b + seed), through the same runner as ``locbook run``."""
 import csv
+import json
 import math
 import re
 import signal
@@ -186,6 +187,46 @@ def test_a_toy_study_writes_the_expected_rows_then_is_cached(stoy, capsys):
     assert study(stoy) == 0
     assert "0 executed, 8 cached" in capsys.readouterr().out
     assert (folder / "study.csv").read_bytes() == before
+
+
+@pytest.mark.notebooks
+def test_a_point_equal_to_the_profiles_own_report_is_reused_not_executed(stoy, tmp_path, capsys):
+    """Replicate 0 of the profile's own values (a = 1.0 is the default, seed 3 the quick profile's) is the quick
+    report of the experiment: copied from reports/quick, not executed again; the other points run."""
+    path = _study_file(tmp_path, """
+        [[study]]
+        name = "own"
+        experiments = ["george-study"]
+        replicates = 2
+        [study.parameters]
+        a = { grid = [1.0, 1.5] }
+        """)
+    toml = str(stoy / "notebooks" / "experiments.toml")
+    assert main(["--suite", toml, "run", "george-study", "--reports", str(stoy / "reports"),
+                 "--progress", "plain"]) == 0
+    quick = stoy / "reports" / "quick" / "george-study"
+    assert main(["--suite", toml, "study", str(path), "--reports", str(stoy / "reports"), "--progress", "plain"]) == 0
+    out = capsys.readouterr().out
+    assert "3 executed, 1 cached, 0 failed" in out, out
+    assert "a=1.0 rep 0: the same run as" in out
+    folder = stoy / "reports" / "studies" / "own"
+    rows = {(r["a"], r["replicate"]): r for r in csv.DictReader(open(folder / "study.csv", newline=""))
+            if r["quantity"] == "value"}
+    own = rows[("1.0", "0")]
+    # the reused report is the quick one (the executed notebook itself, 10 a + b + seed = 13), recorded with this
+    # point's parameters
+    assert float(own["ours"]) == pytest.approx(13.0, rel=1e-12)
+    assert (folder / own["folder"] / "george-study.ipynb").read_bytes() == (quick / "george-study.ipynb").read_bytes()
+    assert json.loads((folder / own["folder"] / "report.json").read_text())["parameters"] == {"a": 1.0, "seed": 3}
+    assert float(rows[("1.5", "0")]["ours"]) == pytest.approx(18.0, rel=1e-12)
+    assert float(rows[("1.0", "1")]["ours"]) == pytest.approx(14.0, rel=1e-12)
+    # a second study run serves all four from its own folder
+    assert main(["--suite", toml, "study", str(path), "--reports", str(stoy / "reports"), "--progress", "plain"]) == 0
+    assert "0 executed, 4 cached" in capsys.readouterr().out
+    # with --force nothing is reused: every point is executed
+    assert main(["--suite", toml, "study", str(path), "--reports", str(stoy / "reports"), "--progress", "plain",
+                 "--force"]) == 0
+    assert "4 executed, 0 cached" in capsys.readouterr().out
 
 
 def study_cli(toy, reports, *args):

@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["HOUSE_COLORS", "HOUSE_STYLE", "use_house_style",
-           "draw_room", "draw_path", "mean_with_band", "error_cdf", "heat_map", "heat_map_notes", "map_view_m",
+           "draw_room", "draw_path", "points_view_m", "mark_beyond_view", "map_row", "mean_with_band", "error_cdf", "heat_map", "heat_map_notes", "map_view_m",
            "map_layout", "map_panels", "draw_floor", "MAP_MARGIN_M", "MAP_FIGURE_WIDTH_IN", "MAP_FIGURE_ASPECT",
            "MAP_PANEL_PAD_IN", "MAP_MAX_PANEL_HEIGHT_IN", "tracks_figure"]
 
@@ -55,6 +55,62 @@ def draw_path(ax, path_m, *, numbered: bool = False, **style):
     if numbered:
         for i, (x, y) in enumerate(path_m, start=1):
             ax.annotate(str(i), (x, y), textcoords="offset points", xytext=(4, -3), fontsize=7)
+
+
+def points_view_m(view_m, points_m, *, reach_m: float, pad_m: float = 0.3) -> tuple[float, float, float, float]:
+    """The view ``(x0, x1, y0, y1)`` (m) widened to hold every finite point of ``points_m`` (N, 2) that lies within
+    ``reach_m`` of ``view_m`` (``pad_m`` beyond the farthest): estimates that leave a room are seen, not clipped by a
+    view drawn around the room. Points farther out stay outside (:func:`mark_beyond_view` marks them)."""
+    pts = np.asarray(points_m, float).reshape(-1, 2)
+    pts = pts[np.all(np.isfinite(pts), axis=1)]
+    x0, x1, y0, y1 = (float(v) for v in view_m)
+    lo, hi = np.array([x0, y0]), np.array([x1, y1])
+    near = pts[np.linalg.norm(np.maximum(np.maximum(lo - pts, pts - hi), 0.0), axis=1) <= reach_m]
+    if near.size:
+        lo, hi = np.minimum(lo, near.min(axis=0) - pad_m), np.maximum(hi, near.max(axis=0) + pad_m)
+    return float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1])
+
+
+def mark_beyond_view(ax, points_m, *, color="0.25") -> int:
+    """Mark every finite point of ``points_m`` (N, 2) outside the view of ``ax`` on the view's edge, in its direction
+    from the view's centre (an open diamond), with a note in the lower corner: how many, and how far beyond the view
+    the farthest lies. Returns how many. Call it once the view is set."""
+    pts = np.asarray(points_m, float).reshape(-1, 2)
+    pts = pts[np.all(np.isfinite(pts), axis=1)]
+    (x0, x1), (y0, y1) = ax.get_xlim(), ax.get_ylim()
+    lo, hi = np.array([x0, y0]), np.array([x1, y1])
+    beyond = np.linalg.norm(np.maximum(np.maximum(lo - pts, pts - hi), 0.0), axis=1)
+    far = pts[beyond > 0]
+    if far.size:
+        centre = (lo + hi) / 2
+        with np.errstate(divide="ignore"):   # the segment from the centre to the point meets the edge at this scale
+            scale = np.min((hi - centre) / np.abs(far - centre), axis=1)
+        edge = centre + (far - centre) * scale[:, None]
+        ax.plot(edge[:, 0], edge[:, 1], "D", mfc="none", mec=color, ms=6, clip_on=False)
+        ax.annotate(f"{len(far)} beyond the view (on its edge), the farthest {beyond.max():.1f} m out",
+                    (0.02, 0.02), xycoords="axes fraction", fontsize=7, color=color)
+    return int(len(far))
+
+
+def map_row(views_m, *, height_in: float, pad_in: float = 1.5, max_width_in: float = 15.0):
+    """A figure of one row of map panels at one scale, ``(fig, axes)``: panel i shows the view ``views_m[i]``
+    ``(x0, x1, y0, y1)`` (m) at equal scale on both axes, its width in proportion to its x range (a view widened
+    by :func:`points_view_m` is not shrunk beside its neighbours); the figure ``height_in`` high (``pad_in`` of it
+    for the titles, labels and legend) and as wide as the panels need (at most ``max_width_in``)."""
+    import matplotlib.pyplot as plt
+    views = [tuple(float(v) for v in view) for view in views_m]
+    widths = [x1 - x0 for x0, x1, _, _ in views]
+    tallest = max(y1 - y0 for _, _, y0, y1 in views)
+    scale = (height_in - pad_in) / tallest                 # inches per metre
+    width_in = min(max_width_in, sum(widths) * scale + pad_in * (1 + 0.5 * len(views)))
+    fig, axes = plt.subplots(1, len(views), figsize=(width_in, height_in), squeeze=False,
+                             gridspec_kw={"width_ratios": widths})
+    axes = list(axes[0])
+    for ax, (x0, x1, y0, y1) in zip(axes, views):
+        ax.set_xlim(x0, x1)
+        ax.set_ylim(y0, y1)
+        ax.set_aspect("equal")
+    return fig, axes
 
 
 def mean_with_band(ax, x, samples, *, axis: int = 0, z: float = 1.96, label: str = "", omit_nan: bool = False,

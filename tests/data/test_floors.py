@@ -359,6 +359,33 @@ def test_the_map_layout_follows_the_rooms_aspect():
     assert map_layout((0, 27, 0, 10), 9)[1] == 2 and map_layout((0, 11, 0, 11), 9)[1] >= 3
 
 
+def test_a_view_widens_to_the_estimates_that_leave_the_room_and_marks_the_farther_ones():
+    import matplotlib.pyplot as plt
+
+    from locbook.plotting import map_row, mark_beyond_view, points_view_m
+    room = (-1.0, 3.0, -1.0, 9.0)
+    pts = np.array([[1.0, 4.0], [-4.0, 2.0], [2.0, 12.5], [30.0, 4.0], [np.nan, 0.0], [1.0, -20.0]])
+    # within 5 m of the view: (-4, 2) 3 m left, (2, 12.5) 3.5 m above; (30, 4) 27 m and (1, -20) 19 m out stay out
+    view = points_view_m(room, pts, reach_m=5.0, pad_m=0.5)
+    assert view == pytest.approx((-4.5, 3.0, -1.0, 13.0))
+    assert points_view_m(room, pts[:1], reach_m=5.0) == pytest.approx(room)        # inside: the view as it was
+    fig, (left, right) = map_row([view, (-1.0, 3.0, view[2], view[3])], height_in=6.0)
+    try:
+        assert left.get_xlim() == pytest.approx((-4.5, 3.0)) and right.get_ylim() == pytest.approx((-1.0, 13.0))
+        # one scale: the panels' widths are in proportion to their x ranges (7.5 m against 4 m)
+        fig.canvas.draw()
+        w_left, w_right = (ax.get_position().width for ax in (left, right))
+        assert w_left / w_right == pytest.approx(7.5 / 4.0, rel=0.02)
+        assert mark_beyond_view(left, pts) == 2
+        line = left.lines[-1]
+        edge = np.column_stack([line.get_xdata(), line.get_ydata()])
+        # on the view's edge, each in its direction from the centre (-0.75, 6): (30, 4) at x = 3, (1, -20) at y = -1
+        assert edge[0] == pytest.approx([3.0, 6.0 - 2.0 * 3.75 / 30.75]) and edge[1][1] == pytest.approx(-1.0)
+        assert "2 beyond the view" in left.texts[-1].get_text() and "27.0 m out" in left.texts[-1].get_text()
+    finally:
+        plt.close(fig)
+
+
 def test_the_track_figure_draws_every_tracker_yours_included(building):
     import matplotlib.pyplot as plt
 

@@ -4,7 +4,8 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["HOUSE_COLORS", "HOUSE_STYLE", "use_house_style",
-           "draw_room", "draw_path", "points_view_m", "mark_beyond_view", "map_row", "mean_with_band", "error_cdf", "heat_map", "heat_map_notes", "map_view_m",
+           "draw_room", "draw_path", "points_view_m", "mark_beyond_view", "map_row", "mean_with_band", "error_cdf",
+           "heat_map", "heat_map_notes", "map_view_m",
            "map_layout", "map_panels", "draw_floor", "MAP_MARGIN_M", "MAP_FIGURE_WIDTH_IN", "MAP_FIGURE_ASPECT",
            "MAP_PANEL_PAD_IN", "MAP_MAX_PANEL_HEIGHT_IN", "tracks_figure"]
 

@@ -68,6 +68,40 @@ def _change(base: dict | None, variant: dict | None) -> tuple[str, float | None,
     return "changed", diff, se
 
 
+#: a data run's statistics compared (its experiments' results.csv): (column, interval low, interval high, name)
+DATA_STATISTICS = (("rmse_m", "rmse_low_m", "rmse_high_m", "RMSE"), ("mean_m", "mean_low_m", "mean_high_m",
+                                                                        "mean error"))
+#: the two-sided normal quantile of the results' bootstrap intervals (95 %: locbook.metrics.accuracy_metrics)
+DATA_INTERVAL_Z = 1.959963984540054
+
+
+def data_rows(folder: Path) -> list[dict]:
+    """A data run's results (``<experiment>/results.csv`` of a folder holding ``dataset.json``) as rows like
+    numbers.csv's, for :func:`compare_rows`: one per experiment, recording, method and statistic of
+    :data:`DATA_STATISTICS` (kind ``data``, no printed value), its ``mc_std_error`` the bootstrap interval's
+    half-width over :data:`DATA_INTERVAL_Z` (the uncertainty over the recording's epochs). Not a data run: []."""
+    folder = Path(folder)
+    if not (folder / "dataset.json").is_file():
+        return []
+    out = []
+    for results in sorted(folder.glob("*/results.csv")):
+        for r in read_csv(results):
+            if not r.get("method") or not r.get("recording"):
+                continue
+            for column, low, high, name in DATA_STATISTICS:
+                if column not in r:
+                    continue
+                lo, hi = finite_float(r.get(low)), finite_float(r.get(high))
+                se = (hi - lo) / (2 * DATA_INTERVAL_Z) if lo is not None and hi is not None else None
+                out.append({"experiment": results.parent.name,
+                            "printed_id": f"{r.get('kind', '')}: {r['recording']}: {r['method']}: {column}",
+                            "quantity": f"{r['method']} {name}", "where": "; ".join(
+                                part for part in (r["recording"], r.get("settings", "")) if part),
+                            "unit": "m", "kind": "data", "printed": "", "reproduced": r[column],
+                            "mc_std_error": "" if se is None else repr(se), "verdict": ""})
+    return out
+
+
 def compare_rows(base_rows: list[dict], variant_rows: list[dict]) -> list[dict]:
     """One row of :data:`COMPARE_COLUMNS` per printed quantity of either run (numbers.csv rows), in the variant's
     order, then the base's rows the variant does not hold. Numbers as written in numbers.csv; the difference and
@@ -148,7 +182,8 @@ class Comparison:
         counts = ", ".join(f"{v} {k}" for k, v in self.counts().items()) or "nothing to compare"
         verdicts = self.verdict_changes()
         moved = sum(v for _a, _b, v in verdicts)
-        return (f"{n} printed number{'s' if n != 1 else ''} compared: {counts}; "
+        what = "number" if any(r["kind"] == "data" for r in self.rows) else "printed number"
+        return (f"{n} {what}{'s' if n != 1 else ''} compared: {counts}; "
                 + (f"{moved} verdict{'s' if moved != 1 else ''} changed" if moved else "no verdict changed"))
 
 
@@ -168,7 +203,8 @@ def compare_folders(base_dir: Path, variant_dir: Path, suite=None) -> Comparison
     notebooks' defaults name the value of a parameter a run did not set."""
     base_dir = _report_folder(base_dir, "base")
     variant_dir = _report_folder(variant_dir, "variant")
-    rows = compare_rows(read_csv(base_dir / "numbers.csv"), read_csv(variant_dir / "numbers.csv"))
+    rows = compare_rows(read_csv(base_dir / "numbers.csv") + data_rows(base_dir),
+                        read_csv(variant_dir / "numbers.csv") + data_rows(variant_dir))
     experiments = list(dict.fromkeys(r["experiment"] for r in rows))
     defaults = {}
     if suite is not None:
@@ -184,6 +220,11 @@ def compare_folders(base_dir: Path, variant_dir: Path, suite=None) -> Comparison
 def comparison_name(base_dir: Path) -> str:
     """The file stem of a comparison with ``base_dir``: ``compare-<its folder name>``."""
     return f"compare-{Path(base_dir).name}"
+
+
+def comparison_pages(report_dir: Path) -> list[tuple[str, str]]:
+    """(base folder, file name) of the comparisons in a reports folder (``compare-<base>.html``), for its index."""
+    return [(p.stem[len("compare-"):], p.name) for p in sorted(Path(report_dir).glob("compare-*.html"))]
 
 
 def _csv_text(rows: list[dict]) -> str:
@@ -220,7 +261,8 @@ def comparison_html(comparison: Comparison, out_dir: Path, version: str, csv_nam
                   variant_link=_relative(comparison.variant_dir / "index.html", out_dir),
                   counts=comparison.counts(), verdicts=comparison.verdict_changes(),
                   parameters=comparison.parameters, by_experiment=by_experiment, csv_name=csv_name,
-                  summary=comparison.summary(), se_multiple=SE_MULTIPLE)
+                  summary=comparison.summary(), se_multiple=SE_MULTIPLE,
+                  data=any(r["kind"] == "data" for r in comparison.rows))
 
 
 def write_comparison(comparison: Comparison, out_dir: Path | None = None) -> Comparison:

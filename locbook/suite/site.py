@@ -34,7 +34,7 @@ from ..reproduce.report import Table, markdown_text
 from ..reproduce.scoring import SCORED_VERDICTS, VERDICT_COLUMNS, scoreboard_counts
 from .bracket_table import SITE_NUMBER_COLUMNS, bracket_of_rows, brackets_root, load_bracket
 from .cachekey import locbook_version
-from .compare import compare_folders, write_comparison
+from .compare import compare_folders, comparison_pages, write_comparison
 from .conclusions import CONCLUSIONS_SUFFIX, write_conclusions
 from .files import read_csv, read_json, write_text_atomic
 from .findings import (
@@ -569,11 +569,6 @@ def index_html(report_dir: Path, entries, rows, version: str, conclusions: dict 
         total=_counts_table(scoreboard_counts(rows)) if rows else None, documents=documents,
         experiments=experiments, n_present=sum(1 for e in entries if e["present"]), reasons=reasons,
         summary=findings_summary(entries, rows))
-
-
-def comparison_pages(report_dir: Path) -> list[tuple[str, str]]:
-    """(base folder, file name) of the comparisons in a reports folder (``compare-<base>.html``)."""
-    return [(p.stem[len("compare-"):], p.name) for p in sorted(Path(report_dir).glob("compare-*.html"))]
 
 
 def _conclusion_pages(report_dir: Path) -> list[tuple[str, str]]:

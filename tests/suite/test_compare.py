@@ -90,3 +90,49 @@ def test_a_p_run_writes_and_links_its_comparison_with_the_base_and_the_command_a
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "is not a folder" in err and "Traceback" not in err
     assert math.isfinite(float(one["difference"]))
+
+
+# -- a data run's results ----------------------------------------------------------------------------------------
+
+RESULTS_HEADER = "kind,recording,method,settings,rmse_m,rmse_low_m,rmse_high_m,mean_m,mean_low_m,mean_high_m\n"
+
+
+def _data_folder(path, lines):
+    """A data run's folder: dataset.json, an empty numbers.csv (a data set prints nothing) and one results.csv."""
+    (path / "measured-tracking").mkdir(parents=True)
+    (path / "dataset.json").write_text('{"name": "toy"}')
+    (path / "numbers.csv").write_text("experiment,printed_id,reproduced,mc_std_error,verdict\n")
+    (path / "measured-tracking" / "results.csv").write_text(RESULTS_HEADER + "".join(lines))
+    return path
+
+
+def test_a_data_run_is_compared_on_each_methods_errors_with_the_bootstrap_intervals(tmp_path):
+    from locbook.suite.compare import DATA_INTERVAL_Z, write_comparison
+    from locbook.suite.site_data import data_index_markdown
+    base = _data_folder(tmp_path / "data-toy", [
+        "tracking,pooled,kf,q fitted,2.0,1.8,2.2,1.5,1.4,1.6\n",
+        "tracking,walk_1,kf,q fitted,3.0,2.0,4.0,2.5,2.0,3.0\n"])
+    variant = _data_folder(tmp_path / "data-toy-p", [
+        "tracking,pooled,kf,q = 0.1,2.5,2.3,2.7,1.5,1.4,1.6\n",
+        "tracking,walk_1,kf,q = 0.1,3.1,2.1,4.1,2.5,2.0,3.0\n"])
+    comparison = compare_folders(base, variant)
+    rows = {(r["where"].split(";")[0], r["quantity"]): r for r in comparison.rows}
+    assert len(comparison.rows) == 4 and {r["kind"] for r in comparison.rows} == {"data"}
+    pooled = rows[("pooled", "kf RMSE")]
+    # SE of each: the 95 % interval's half-width over z: 0.2 / z on both sides, so sqrt(2) 0.2 / z = 0.144 m
+    se = math.hypot(0.2 / DATA_INTERVAL_Z, 0.2 / DATA_INTERVAL_Z)
+    assert pooled["difference"] == pytest.approx(0.5) and pooled["difference_se"] == pytest.approx(se)
+    assert pooled["change"] == "changed"                                   # 0.5 m > 2 x 0.144 m
+    walk = rows[("walk_1", "kf RMSE")]
+    assert walk["difference"] == pytest.approx(0.1) and walk["change"] == "within 2 SE"   # 1 m half-widths
+    assert rows[("pooled", "kf mean error")]["change"] == "identical"
+    assert comparison.summary().startswith("4 numbers compared: 1 changed")
+    write_comparison(comparison)
+    html = (variant / "compare-data-toy.html").read_text()
+    assert "bootstrap interval" in html and "Every number" in html
+    # the data set's index links the comparison
+    record = {"name": "toy"}
+    assert "[data-toy](compare-data-toy.html)" in data_index_markdown(variant, [], record)
+    # a folder that is not a data run has no such rows
+    (base / "dataset.json").unlink()
+    assert [r["change"] for r in compare_folders(base, variant).rows] == ["only in variant"] * 4

@@ -78,7 +78,7 @@ def mark_beyond_view(ax, points_m, *, color="0.25") -> int:
     the farthest lies. Returns how many. Call it once the view is set."""
     pts = np.asarray(points_m, float).reshape(-1, 2)
     pts = pts[np.all(np.isfinite(pts), axis=1)]
-    (x0, x1), (y0, y1) = ax.get_xlim(), ax.get_ylim()
+    (x0, x1), (y0, y1) = sorted(ax.get_xlim()), sorted(ax.get_ylim())     # an inverted axis too
     lo, hi = np.array([x0, y0]), np.array([x1, y1])
     beyond = np.linalg.norm(np.maximum(np.maximum(lo - pts, pts - hi), 0.0), axis=1)
     far = pts[beyond > 0]

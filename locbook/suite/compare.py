@@ -85,6 +85,8 @@ def data_rows(folder: Path) -> list[dict]:
         return []
     out = []
     for results in sorted(folder.glob("*/results.csv")):
+        if results.parent.name.startswith("."):      # a crash's .old-<id> or another run's staging
+            continue
         for r in read_csv(results):
             if not r.get("method") or not r.get("recording"):
                 continue

@@ -282,11 +282,18 @@ def _same_run(exp: Experiment, a: dict, b: dict) -> bool:
     declared = exp.declared_parameters()
     if set(a) - set(declared) or set(b) - set(declared):
         return False
-    for name, p in declared.items():
-        x, y = a.get(name, p.default), b.get(name, p.default)
-        if type(x) is not type(y) or x != y:
-            return False
-    return True
+    return all(_same_value(a.get(name, p.default), b.get(name, p.default)) for name, p in declared.items())
+
+
+def _same_value(x, y) -> bool:
+    """Equal in value and in type at every level (a default ``[0, 5]`` of a ``list[float]`` is not ``[0.0, 5.0]``)."""
+    if type(x) is not type(y):
+        return False
+    if isinstance(x, (list, tuple)):
+        return len(x) == len(y) and all(map(_same_value, x, y))
+    if isinstance(x, dict):
+        return x.keys() == y.keys() and all(_same_value(x[k], y[k]) for k in x)
+    return bool(x == y)
 
 
 def report_cached(folder: Path, exp: Experiment, key: str, figures: bool = True) -> tuple[bool, str]:
@@ -480,7 +487,7 @@ class _Scheduler:
                                report_cached(report_dir / t.key, t.experiment, self.keys[t.key], t.figures))
             if cached:
                 self.finish(Outcome(t.key, "cached", 0.0))
-            elif not force and t.reuse is not None and self.reuse(t):
+            elif not force and t.reuse is not None and stop.signum is None and self.reuse(t):
                 progress.message(f"{run.name(t.key)}: the same run as {t.reuse}: its report reused")
                 self.finish(Outcome(t.key, "cached", 0.0))
             else:

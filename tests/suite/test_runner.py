@@ -263,3 +263,12 @@ def test_re_pointing_a_symlinked_data_file_invalidates_the_report(toy, capsys):
     assert record["links"] == {str(data.resolve() / "offset.csv"): str((data / "a.csv").resolve())}
     record = json.loads((toy / "reports" / "quick" / "george-one" / "run.json").read_text())
     assert record["links"] == {str(data.resolve() / "offset.csv"): str((data / "b.csv").resolve())}
+
+
+def test_a_reused_report_must_match_in_value_and_type_at_every_level():
+    from locbook.suite.runner import _same_value
+    assert _same_value([0.0, 5.0], [0.0, 5.0]) and _same_value({"a": [1]}, {"a": [1]}) and _same_value(None, None)
+    # a float list's default written [0, 5] runs the notebook with ints: not the run of [0.0, 5.0]
+    assert not _same_value([0, 5], [0.0, 5.0]) and not _same_value(1, 1.0) and not _same_value(True, 1)
+    assert not _same_value([1.0], [1.0, 2.0]) and not _same_value((1.0,), [1.0])
+    assert not _same_value(float("nan"), float("nan"))          # never assumed equal

@@ -10,7 +10,7 @@ writes it there); the "warm cache" process reuses that folder. Inside each proce
 timed), then the calls are timed one by one (wall: ``perf_counter``; CPU: ``process_time``). The workloads are the
 benchmarks' own (bench_dogan_filters' parallel EKF at 500 runs, bench_ukf_speed's U-path UKF at 500 runs,
 bench_particle's filter at 100 runs x 10,000 particles x 10 steps, bench_grid's grid filter at 36,000 cells). The
-goal of issue 51: a first call within 10 s wall with an empty cache and within 0.5 s with a warm one, the second call
+goal: a first call within 10 s wall with an empty cache and within 0.5 s with a warm one, the second call
 at the steady state.
 """
 from __future__ import annotations

@@ -167,6 +167,11 @@ class Comparison:
     parameters: list[dict]
     written: list[Path] = field(default_factory=list)
 
+    @property
+    def has_data_rows(self) -> bool:
+        """Whether any row is a data set's result (:func:`data_rows`), not a printed number."""
+        return any(r["kind"] == "data" for r in self.rows)
+
     def counts(self) -> dict[str, int]:
         c = Counter(r["change"] for r in self.rows)
         return {name: c[name] for name in CHANGES if c[name]}
@@ -184,7 +189,7 @@ class Comparison:
         counts = ", ".join(f"{v} {k}" for k, v in self.counts().items()) or "nothing to compare"
         verdicts = self.verdict_changes()
         moved = sum(v for _a, _b, v in verdicts)
-        what = "number" if any(r["kind"] == "data" for r in self.rows) else "printed number"
+        what = "number" if self.has_data_rows else "printed number"
         return (f"{n} {what}{'s' if n != 1 else ''} compared: {counts}; "
                 + (f"{moved} verdict{'s' if moved != 1 else ''} changed" if moved else "no verdict changed"))
 
@@ -264,7 +269,7 @@ def comparison_html(comparison: Comparison, out_dir: Path, version: str, csv_nam
                   counts=comparison.counts(), verdicts=comparison.verdict_changes(),
                   parameters=comparison.parameters, by_experiment=by_experiment, csv_name=csv_name,
                   summary=comparison.summary(), se_multiple=SE_MULTIPLE,
-                  data=any(r["kind"] == "data" for r in comparison.rows))
+                  data=comparison.has_data_rows)
 
 
 def write_comparison(comparison: Comparison, out_dir: Path | None = None) -> Comparison:

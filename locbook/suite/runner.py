@@ -96,9 +96,9 @@ class Task:
     #: ``sigma_db=1.5 rep 0``); empty: the key
     label: str = field(default="", hash=False)
     #: a report folder that may already hold this very run (a sweep point equal to the profile's own report of the
-    #: experiment, ``<reports>/<profile>/<experiment>``): when it is up to date under this task's cache key (a report
-    #: with figures also serves a task without), it is copied in, its pages written for this folder, instead of
-    #: executing the notebook again (:meth:`_Session.reuse`)
+    #: experiment, ``<reports>/<profile>/<experiment>``): when that report is the same run and up to date under its own
+    #: record (a report with figures also serves a task without), it is copied in, its pages written for this
+    #: folder, instead of executing the notebook again (:meth:`_Scheduler.reuse`)
     reuse: Path | None = field(default=None, hash=False)
 
 

@@ -110,6 +110,14 @@ def _side_by_side(streams) -> np.ndarray:
     return Z
 
 
+def _present(kinds) -> tuple:
+    """Which kinds of stream a kernel call has: (linear, RSS, inertial), each 1 or None (a kernel compiled for None
+    leaves that kind's code out: numba prunes the branch by the argument's type, so a call compiles what it uses)."""
+    kinds = set(np.asarray(kinds).tolist())
+    return tuple(1 if kinds & set(group) else None
+                 for group in ((_LINEAR_PARALLEL, _LINEAR_SERIAL), (_RSS_PARALLEL, _RSS_SERIAL), (_INERTIAL,)))
+
+
 def _pack_linear(meas, batch, B, n, T):
     """A linear stream (:class:`~locbook.models.base.LinearGaussian`): its H and R, per run and step."""
     model, m = meas.model, meas.model.n_readings
@@ -294,7 +302,7 @@ def _compiled_ekf(setup: _Setup, measurements, predict_first: bool):
     args = (Fi.astype(np.int64), Fj.astype(np.int64), np.ascontiguousarray(F[Fi, Fj]), _leading(Q, batch, B, (n, n)),
             np.ascontiguousarray(setup.x.reshape(B, n)), np.ascontiguousarray(P0), bool(predict_first),
             setup.slot.astype(np.int64), np.array(setup.active, dtype=np.bool_).reshape(-1, T), *packed, iner, out_x,
-            out_P, out_nis, out_dof, out_ll, _block_width(B))
+            out_P, out_nis, out_dof, out_ll, _block_width(B), *_present(packed[0]))
     from . import _kernels  # lazy: numba loads only when the compiled path runs
     status = _call_kernel(_kernels._nb_ekf, args, "EKF")
     if status is None or status:

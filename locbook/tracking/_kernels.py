@@ -349,13 +349,15 @@ def _descending_order(Z, run, k, c0, m, sel, key):
 @_jit_fma
 def _nb_ekf(Fi, Fj, Fv, Q, x0, P0, predict_first, slot, active, kind, col, nz, nnz, Z, H, R, A, P0c, PLE, SIG, dims,
             ref_d, clamp, anchor_sigma, tag_h, pidx, npos, descending, iner, out_x, out_P, out_nis, out_dof,
-            out_ll, W):
+            out_ll, W, lin, rss, ine):
     """The EKF time loop of :func:`locbook.tracking._loop._run` with :func:`locbook.tracking.streams._ekf_update`, over
     blocks of ``W`` runs (the last block padded with copies of the last run), with each run's NIS, its dof and
     log-likelihood at every step (``out_nis``, ``out_dof``, ``out_ll`` ``(B, T)``; NaN, 0 and NaN where no update).
     Stream kinds: 0/1 linear parallel/serial, 2/3 RSS parallel/serial, 4 inertial (parallel, :func:`_nb_inertial_row`
     with the parameters ``iner[s]``). Returns 0, or 1 + a run whose update failed (the caller then redoes the filter in
-    numpy, which raises the library's error)."""
+    numpy, which raises the library's error). ``lin``, ``rss``, ``ine``: 1 where the call has streams of that kind,
+    None where not (:func:`locbook.tracking._compiled._present`): numba prunes a None kind's branch, so a kernel
+    compiles only the kinds it is called with (a KF's first call skips the RSS rows' compile)."""
     B, T, n, ns = Z.shape[0], Z.shape[1], x0.shape[1], kind.shape[0]
     mmax = 1
     for s in range(ns):
@@ -408,7 +410,7 @@ def _nb_ekf(Fi, Fj, Fv, Q, x0, P0, predict_first, slot, active, kind, col, nz, n
                 for u in range(m if serial else 1):       # serial: one scalar update per reading
                     rows = 1 if serial else m
                     present = False
-                    if kd <= 1:                           # linear rows: no branch per lane (selects vectorise)
+                    if lin is not None and kd <= 1:       # linear rows: no branch per lane (selects vectorise)
                         th, hb = min(k, H.shape[1] - 1), H.shape[0]
                         for r in range(rows):
                             j = u if serial else r
@@ -438,7 +440,7 @@ def _nb_ekf(Fi, Fj, Fv, Q, x0, P0, predict_first, slot, active, kind, col, nz, n
                                 col_e = nz[s, e]
                                 for w in range(W):
                                     Hr[r, col_e, w] = Hr[r, col_e, w] if valid[r, w] else 0.0
-                    elif kd == _INERTIAL:                 # inertial rows, lane by lane
+                    elif ine is not None and kd == _INERTIAL:     # inertial rows, lane by lane
                         for r in range(rows):
                             for w in range(W):
                                 zj = Z[run[w], k, c0 + r]
@@ -452,7 +454,7 @@ def _nb_ekf(Fi, Fj, Fv, Q, x0, P0, predict_first, slot, active, kind, col, nz, n
                                 present = True
                                 dof[w] += 1
                                 nu[r, w] = _nb_inertial_row(x, w, r, iner[s], zj, Hr[r])
-                    else:                                 # RSS rows, every lane at once
+                    elif rss is not None:                 # RSS rows, every lane at once
                         for r in range(rows):
                             for w in range(W):
                                 jrow[w] = (sel[u, w] if sort else u) if serial else r

@@ -119,15 +119,16 @@ def _nb_predict(Fi, Fj, Fv, Q, x, P, xt, T1, n, W):
 
 @_jit
 def _nb_h(kd, rows, Xp, Yi, used, nused, Hr, ar, dim, pidx, npos, tag_h, p0r, pler, ref_d, clamp, ib, cs, sn,
-          trig, W):
+          trig, W, lin, rss, ine):
     """The stream's readings ``Yi[:rows]`` at the point ``Xp`` (only its ``used`` components are read). Linear: the
     rows ``Hr`` (their entries at the used components); RSS: the one RSS model's mean,
     :func:`locbook.models.channel.log_distance_mean_dbm` with the clamp (its log10 through ln), at the anchors ``ar``
     (``p0r``, ``pler`` per row and lane); inertial:
     :func:`locbook.models.imu.inertial_measurement_function` (``ib``: body frame, acceleration indices, heading, yaw
     rate), with the heading's cosine and sine in ``cs``, ``sn`` (computed here when ``trig``). False when a point
-    lies on an anchor of a channel without a clamp (the mean is infinite there)."""
-    if kd <= 1:
+    lies on an anchor of a channel without a clamp (the mean is infinite there). A kind whose flag (``lin``, ``rss``,
+    ``ine``) is None is left out of the compiled code."""
+    if lin is not None and kd <= 1:
         for r in range(rows):
             for w in range(W):
                 Yi[r, w] = 0.0
@@ -136,7 +137,7 @@ def _nb_h(kd, rows, Xp, Yi, used, nused, Hr, ar, dim, pidx, npos, tag_h, p0r, pl
                 for w in range(W):
                     Yi[r, w] += Hr[r, e, w] * Xp[u, w]
         return True
-    if kd <= 3:
+    if rss is not None and kd <= 3:
         on = 0
         for r in range(rows):
             for w in range(W):
@@ -161,6 +162,8 @@ def _nb_h(kd, rows, Xp, Yi, used, nused, Hr, ar, dim, pidx, npos, tag_h, p0r, pl
                 # 10 log10(v) as (10 / ln 10) ln(v): libm's log is twice as fast as its log10 (round-off: an ulp)
                 Yi[r, w] = p0r[r, w] - pler[r, w] * (_TEN_OVER_LN10 * np.log(d / ref_d))
         return on == 0
+    if ine is None:
+        return True
     if ib[0]:
         if trig:
             for w in range(W):
@@ -182,7 +185,7 @@ def _nb_h(kd, rows, Xp, Yi, used, nused, Hr, ar, dim, pidx, npos, tag_h, p0r, pl
 @_jit
 def _nb_ukf_update(x, P, n, rows, kd, used, nused, umax, Hr, ar, dim, pidx, npos, tag_h, p0r, pler, ref_d, clamp, ib,
                    zr, valid, Rr, Wm, Wc, c, innovation_noise, buf, Lp, Xp, Y, zh, Pzz, D, S, LS, A2, Pxz, KT, nu, Yn,
-                   Mm, Rt, t, t2, cs, sn, nis, hld, floored, W):
+                   Mm, Rt, t, t2, cs, sn, nis, hld, floored, W, lin, rss, ine):
     """One unscented update of the lanes in place (the numpy UKF's ``_ukf_update``): sigma points from the Cholesky
     factor of ``c P`` (``c = n + lambda``), readings ``Y`` at them, ``z^ = sum W_m Y``, ``S = sum W_c dv dv^T (+ R)``,
     ``P_xz = L D``, ``K = P_xz S^{-1}`` (Cholesky of S), ``x += K nu``, and the Joseph form ``P = M M^T / c + K R~ K^T``
@@ -201,8 +204,9 @@ def _nb_ukf_update(x, P, n, rows, kd, used, nused, umax, Hr, ar, dim, pidx, npos
         u = used[e]
         for w in range(W):
             Xp[u, w] = x[u, w]
+    centre = W > 0                                       # True, typed bool (a literal True would compile _nb_h twice)
     if not _nb_h(kd, m, Xp, Y[0], used, nused, Hr, ar, dim, pidx, npos, tag_h, p0r, pler, ref_d, clamp, ib, cs, sn,
-                 True, W):
+                 centre, W, lin, rss, ine):
         return FAIL_ANCHOR
     hd = ib[3]
     for i in range(n - 1, -1, -1):                        # the pairs x +- column i of L (last first: see trig)
@@ -225,7 +229,7 @@ def _nb_ukf_update(x, P, n, rows, kd, used, nused, umax, Hr, ar, dim, pidx, npos
                     for w in range(W):
                         Xp[u, w] = x[u, w] - Lp[u, i, w]
             if not _nb_h(kd, m, Xp, Y[k], used, nused, Hr, ar, dim, pidx, npos, tag_h, p0r, pler, ref_d, clamp, ib,
-                         cs, sn, trig, W):
+                         cs, sn, trig, W, lin, rss, ine):
                 return FAIL_ANCHOR
     for r in range(m):                                    # z^ = sum W_m Y (Eq. (3.25)), dv = Y - z^
         for w in range(W):
@@ -380,12 +384,13 @@ def _nb_ukf_update(x, P, n, rows, kd, used, nused, umax, Hr, ar, dim, pidx, npos
 @_jit
 def _nb_ukf(Fi, Fj, Fv, Q, x0, P0, predict_first, slot, active, kind, col, nz, nnz, Z, H, R, A, P0c, PLE, SIG, dims,
             ref_d, clamp, anchor_sigma, tag_h, pidx, npos, descending, iner, umax, Wm, Wc, c, innovation_noise, W,
-            out_x, out_P, out_nis, out_dof, out_ll, out_floored):
+            out_x, out_P, out_nis, out_dof, out_ll, out_floored, lin, rss, ine):
     """The UKF time loop of :func:`locbook.tracking._loop._run` with the numpy UKF's updates (serial streams one
     reading at a time, each with fresh sigma points; serial RSS in descending order of RSS when asked), over blocks of
     ``W`` runs (the last block padded with copies of the last run); each run's NIS, dof and log-likelihood at every
     step and its number of floored updates. Returns ``(status, block start)``: status 0, or a FAIL_ code (the caller
-    then redoes the filter in numpy, which raises the library's error or applies the eigenvalue guard)."""
+    then redoes the filter in numpy, which raises the library's error or applies the eigenvalue guard). ``lin``,
+    ``rss``, ``ine``: the kinds present, as for :func:`locbook.tracking._kernels._nb_ekf`."""
     B, T, n, ns = Z.shape[0], Z.shape[1], x0.shape[1], kind.shape[0]
     N = 2 * n + 1
     mmax = 1
@@ -489,7 +494,7 @@ def _nb_ukf(Fi, Fj, Fv, Q, x0, P0, predict_first, slot, active, kind, col, nz, n
                     status = _nb_ukf_update(x, P, n, rows, kd, nz[s], nnz[s], umax[s], Hr, ar, dims[s], pidx[s],
                                             npos[s], tag_h[s], p0r, pler, ref_d[s], clamp[s], iner[s], zr, valid, Rr,
                                             Wm, Wc, c, innovation_noise, buf, Lp, Xp, Y, zh, Pzz, D, S, LS, A2, Pxz,
-                                            KT, nu, Yn, Mm, Rt, t, t2, cs, sn, nis, hld, floored, W)
+                                            KT, nu, Yn, Mm, Rt, t, t2, cs, sn, nis, hld, floored, W, lin, rss, ine)
                     if status:
                         return status, b0
             for w in range(W):                            # a state or covariance that overflowed: numpy names it

@@ -522,7 +522,7 @@ def _compiled_ukf(setup, measurements, predict_first: bool, weights: UnscentedWe
             setup.slot.astype(np.int64), np.array(setup.active, dtype=np.bool_).reshape(-1, T), *packed, iner, umax,
             np.ascontiguousarray(weights.mean, dtype=float), np.ascontiguousarray(weights.cov, dtype=float),
             float(n + weights.lam), bool(innovation_noise),
-            lanes, out_x, out_P, out_nis, out_dof, out_ll, out_floored)
+            lanes, out_x, out_P, out_nis, out_dof, out_ll, out_floored, *_compiled._present(packed[0]))
     from . import _ukf_kernels  # lazy: numba loads only when the compiled path runs
     done = _compiled._call_kernel(_ukf_kernels._nb_ukf, args, "UKF")
     if done is None or done[0]:     # (status, block): a failed update, the numpy loop redoes the filter
